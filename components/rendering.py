@@ -1,0 +1,138 @@
+"""What an entity looks like: its mesh and the material properties the shader reads."""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any
+
+import glm
+
+from components.tracking import ComponentValueError, TrackedComponent, choice, color, finite
+
+if TYPE_CHECKING:
+    from engine.mesh import Mesh
+    from engine.texture_data import TextureData
+
+
+@dataclass(eq=False)
+class MeshRef(TrackedComponent):
+    """The mesh an entity draws. Many entities may share one Mesh: they are instanced."""
+
+    mesh: Mesh
+    visible: bool = True
+
+    def _validate(self, name: str, value: Any) -> Any:
+        from engine.mesh import Mesh
+
+        if name == "mesh" and not isinstance(value, Mesh):
+            raise ComponentValueError(f"MeshRef.mesh must be an engine.mesh.Mesh, got {type(value).__name__}")
+        return value
+
+
+@dataclass(eq=False)
+class Material(TrackedComponent):
+    """Surface parameters, linear colour space.
+
+    ``texture`` multiplies ``color``; ``metallic`` and ``roughness`` drive the GGX
+    specular; ``alpha`` in ``color`` is used by refraction (how much shows through).
+    """
+
+    color: Any = field(default_factory=lambda: glm.vec4(0.8, 0.8, 0.8, 1.0))
+    texture: TextureData | None = None
+    metallic: float = 0.0
+    roughness: float = 0.5
+
+    def _validate(self, name: str, value: Any) -> Any:
+        if name == "color":
+            return color(self, name, value)
+        if name in ("metallic", "roughness"):
+            return finite(self, name, value, low=0.0, high=1.0)
+        if name == "texture" and value is not None:
+            from engine.texture_data import TextureData
+
+            if not isinstance(value, TextureData):
+                raise ComponentValueError(
+                    f"Material.texture must be an engine.texture_data.TextureData, got {type(value).__name__}")
+        return value
+
+
+@dataclass(eq=False)
+class Emissive(TrackedComponent):
+    """The surface emits ``power`` x its diffuse colour (seed 002, part 1)."""
+
+    power: float = 1.0
+
+    def _validate(self, name: str, value: Any) -> Any:
+        if name == "power":
+            return finite(self, name, value, low=0.0)
+        return value
+
+
+REFLECT_MODES = ("skybox", "planar", "cube", "portal")
+
+
+@dataclass(eq=False)
+class Reflective(TrackedComponent):
+    """The surface reflects its environment.
+
+    ``mix`` is how much of the final colour is the reflection: None means 1.0 for an
+    untextured surface (chrome) and ``0.5`` for a textured one (seed 004's 50/50 mix).
+    ``tint`` multiplies the reflected light.
+    """
+
+    mode: str = "skybox"
+    mix: float | None = None
+    tint: Any = field(default_factory=lambda: glm.vec4(1.0))
+
+    def _validate(self, name: str, value: Any) -> Any:
+        if name == "mode":
+            return choice(self, name, value, REFLECT_MODES)
+        if name == "mix" and value is not None:
+            return finite(self, name, value, low=0.0, high=1.0)
+        if name == "tint":
+            return color(self, name, value)
+        return value
+
+
+@dataclass(eq=False)
+class Refractive(TrackedComponent):
+    """Light from behind bends through the surface (seed 002, part 2).
+
+    The environment seen along the refracted ray is weighted by Fresnel transmittance and
+    blended with the surface colour by the material's alpha (alpha 0 = clear glass).
+    """
+
+    ior: float = 1.5
+
+    def _validate(self, name: str, value: Any) -> Any:
+        if name == "ior":
+            return finite(self, name, value, low=1.0, high=4.0)
+        return value
+
+
+@dataclass(eq=False)
+class Skybox(TrackedComponent):
+    """The world's background cube map: six face images, or a generated gradient sky.
+
+    ``faces`` is None (generate from the colours below) or six HxWx3 float arrays in GL
+    face order +X, -X, +Y, -Y, +Z, -Z, linear colour.
+    """
+
+    zenith: Any = field(default_factory=lambda: glm.vec4(0.10, 0.25, 0.65, 1.0))
+    horizon: Any = field(default_factory=lambda: glm.vec4(0.65, 0.75, 0.90, 1.0))
+    ground: Any = field(default_factory=lambda: glm.vec4(0.18, 0.14, 0.10, 1.0))
+    sun_direction: Any = field(default_factory=lambda: glm.vec3(0.4, 0.6, -0.7))
+    sun_color: Any = field(default_factory=lambda: glm.vec4(6.0, 5.4, 4.2, 1.0))
+    face_size: int = 128
+    faces: Any = None
+
+    def _validate(self, name: str, value: Any) -> Any:
+        if name in ("zenith", "horizon", "ground", "sun_color"):
+            return color(self, name, value)
+        if name == "sun_direction":
+            from components.tracking import vec3
+
+            return glm.normalize(vec3(self, name, value, nonzero=True))
+        if name == "face_size":
+            if not isinstance(value, int) or not 4 <= value <= 2048:
+                raise ComponentValueError(f"Skybox.face_size must be an int in [4, 2048], got {value!r}")
+        return value

@@ -1,0 +1,108 @@
+"""Change tracking shared by every component.
+
+Systems must not scan 10,000 entities a frame to find the few that changed, so each
+component reports its own field writes to the world that owns it.  A component is still
+plain data: a dataclass whose ``__setattr__`` validates the value and, once the component
+belongs to a world, adds its entity to that world's change set for its type.
+
+In-place edits of a mutable field (``t.position.x = 1``) cannot be seen; assign the
+field (``t.position = ...``, ``t.position += ...``) or call :meth:`touch`.
+"""
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import glm
+
+
+class ComponentValueError(ValueError):
+    """A component field was given a value it cannot hold (NaN, negative, wrong kind)."""
+
+
+class TrackedComponent:
+    """Base of all components: validates fields and reports writes to its world."""
+
+    # Set by engine.world.World when the component is attached; never by users.
+    _sink: set[int] | None = None
+    _entity: int = 0
+
+    def __setattr__(self, name: str, value: Any) -> None:
+        if not name.startswith("_"):
+            value = self._validate(name, value)
+        object.__setattr__(self, name, value)
+        sink = self._sink
+        if sink is not None and not name.startswith("_"):
+            sink.add(self._entity)
+
+    def touch(self) -> None:
+        """Report an in-place edit the component could not see by itself."""
+        if self._sink is not None:
+            self._sink.add(self._entity)
+
+    def _validate(self, name: str, value: Any) -> Any:  # overridden per component
+        return value
+
+
+# --- validators used by the component classes -------------------------------------------
+
+def _fail(owner: object, name: str, value: Any, why: str) -> ComponentValueError:
+    return ComponentValueError(f"{type(owner).__name__}.{name} {why}, got {value!r}")
+
+
+def finite(owner: object, name: str, value: Any, *, low: float | None = None,
+           high: float | None = None, positive: bool = False) -> float:
+    """A finite float inside [low, high] (and > 0 when ``positive``)."""
+    try:
+        number = float(value)
+    except (TypeError, ValueError):
+        raise _fail(owner, name, value, "must be a number") from None
+    if not math.isfinite(number):
+        raise _fail(owner, name, value, "must be finite")
+    if positive and number <= 0.0:
+        raise _fail(owner, name, value, "must be > 0")
+    if low is not None and number < low:
+        raise _fail(owner, name, value, f"must be >= {low}")
+    if high is not None and number > high:
+        raise _fail(owner, name, value, f"must be <= {high}")
+    return number
+
+
+def vec3(owner: object, name: str, value: Any, *, low: float | None = None,
+         nonzero: bool = False) -> glm.vec3:
+    """A glm.vec3 of finite components (each >= low when given)."""
+    try:
+        v = glm.vec3(value) if not isinstance(value, (int, float)) else glm.vec3(float(value))
+    except (TypeError, ValueError):
+        raise _fail(owner, name, value, "must be three numbers") from None
+    for c in v:
+        if not math.isfinite(c):
+            raise _fail(owner, name, value, "must be finite")
+        if low is not None and c < low:
+            raise _fail(owner, name, value, f"must have every component >= {low}")
+    if nonzero and glm.length(v) == 0.0:
+        raise _fail(owner, name, value, "must not be the zero vector")
+    return v
+
+
+def color(owner: object, name: str, value: Any) -> glm.vec4:
+    """A linear RGBA colour; RGB given alone gets alpha 1. Components in [0, inf), alpha <= 1."""
+    try:
+        items = [float(c) for c in value]
+    except (TypeError, ValueError):
+        raise _fail(owner, name, value, "must be 3 or 4 numbers") from None
+    if len(items) == 3:
+        items.append(1.0)
+    if len(items) != 4:
+        raise _fail(owner, name, value, "must be 3 or 4 numbers")
+    if not all(math.isfinite(c) and c >= 0.0 for c in items):
+        raise _fail(owner, name, value, "must have finite components >= 0")
+    if items[3] > 1.0:
+        raise _fail(owner, name, value, "must have alpha <= 1")
+    return glm.vec4(*items)
+
+
+def choice(owner: object, name: str, value: Any, options: tuple[str, ...]) -> str:
+    if value not in options:
+        raise _fail(owner, name, value, f"must be one of {options}")
+    return value

@@ -1,0 +1,63 @@
+"""Frames, id images and scene exports written to disk, for debugging and verification."""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import glm
+import numpy as np
+
+from components import Camera, MeshRef, Transform
+from engine.world import World
+
+
+def save_png(rgb: np.ndarray, path: str | Path) -> None:
+    from PIL import Image
+
+    Image.fromarray(rgb).save(path)
+
+
+def save_ids(ids: np.ndarray, path: str | Path) -> None:
+    """The entity seen at each pixel (uint32, 0 = sky), row 0 at the top like the PNG."""
+    np.save(path, ids.astype(np.uint32))
+
+
+def export_scene(world: World, path: str | Path, camera_entity: int, size: tuple[int, int]) -> Path:
+    """Write world-space geometry (one GLB node per renderable entity, named by its id) and,
+    beside it, a JSON of the camera and of each entity's component types."""
+    import trimesh
+
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    scene = trimesh.Scene()
+    for entity, (mesh_ref, transform) in world.query(MeshRef, Transform):
+        mesh = mesh_ref.mesh
+        matrix = np.array(transform.world.to_list(), np.float64).T  # glm is column-major
+        positions = mesh.positions @ matrix[:3, :3].T + matrix[:3, 3]
+        geometry = trimesh.Trimesh(positions, mesh.indices, process=False)
+        scene.add_geometry(geometry, node_name=str(entity), geom_name=str(entity))
+    scene.export(str(path), file_type="glb")
+
+    camera = world.get(camera_entity, Camera)
+    cam_world = world.get(camera_entity, Transform).world
+    forward = glm.normalize(glm.vec3(cam_world * glm.vec4(0, 0, -1, 0)))
+    up = glm.normalize(glm.vec3(cam_world * glm.vec4(0, 1, 0, 0)))
+    info = {
+        "camera": {
+            "entity": camera_entity,
+            "position": list(glm.vec3(cam_world[3])),
+            "forward": list(forward),
+            "up": list(up),
+            "fov_y_deg": camera.fov_y,
+            "aspect": size[0] / size[1],
+            "near": camera.near,
+            "far": camera.far,
+            "image_size": list(size),
+        },
+        "entities": {
+            str(entity): sorted(type(c).__name__ for c in world.components_of(entity))
+            for entity in world.entities()
+        },
+    }
+    path.with_suffix(".json").write_text(json.dumps(info, indent=1))
+    return path

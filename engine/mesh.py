@@ -1,0 +1,239 @@
+"""Mesh data on the CPU, the built-in primitives, and loading mesh files through trimesh.
+
+A Mesh is plain arrays; the renderer uploads it once and shares it between every entity
+whose MeshRef points at it.
+"""
+from __future__ import annotations
+
+import itertools
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import glm
+import numpy as np
+
+from engine.errors import AssetError
+from engine.texture_data import TextureData
+
+_mesh_ids = itertools.count(1)
+
+
+@dataclass(eq=False)
+class Mesh:
+    """Indexed triangles: positions, normals (unit), uvs, and int32 triangle indices."""
+
+    positions: np.ndarray
+    normals: np.ndarray
+    uvs: np.ndarray
+    indices: np.ndarray
+    name: str = "mesh"
+    id: int = field(default_factory=lambda: next(_mesh_ids))
+
+    def __post_init__(self) -> None:
+        self.positions = np.ascontiguousarray(self.positions, np.float32).reshape(-1, 3)
+        self.normals = np.ascontiguousarray(self.normals, np.float32).reshape(-1, 3)
+        self.uvs = np.ascontiguousarray(self.uvs, np.float32).reshape(-1, 2)
+        self.indices = np.ascontiguousarray(self.indices, np.int32).reshape(-1, 3)
+        n = len(self.positions)
+        if n == 0 or len(self.indices) == 0:
+            raise AssetError(f"mesh {self.name!r}: has no triangles")
+        if len(self.normals) != n or len(self.uvs) != n:
+            raise AssetError(f"mesh {self.name!r}: {n} positions but {len(self.normals)} normals and "
+                             f"{len(self.uvs)} uvs")
+        if not (np.isfinite(self.positions).all() and np.isfinite(self.normals).all()
+                and np.isfinite(self.uvs).all()):
+            raise AssetError(f"mesh {self.name!r}: has NaN or infinite vertex data")
+        if self.indices.min() < 0 or self.indices.max() >= n:
+            raise AssetError(f"mesh {self.name!r}: triangle index out of range 0..{n - 1}")
+
+    @property
+    def bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        """Model-space AABB (min, max)."""
+        return self.positions.min(axis=0), self.positions.max(axis=0)
+
+    def interleaved(self) -> np.ndarray:
+        """Vertex buffer contents: position, normal, uv per vertex (8 floats)."""
+        return np.hstack([self.positions, self.normals, self.uvs]).astype(np.float32)
+
+    @classmethod
+    def from_trimesh(cls, tm, name: str = "mesh") -> Mesh:
+        """Convert a trimesh.Trimesh (its UVs are used when it has them)."""
+        uv = getattr(getattr(tm, "visual", None), "uv", None)
+        positions = np.asarray(tm.vertices, np.float32)
+        if len(positions) == 0 or len(tm.faces) == 0:
+            raise AssetError(f"mesh {name!r}: has no triangles")
+        if uv is None or len(uv) != len(positions):
+            uv = np.zeros((len(positions), 2), np.float32)
+        return cls(positions, np.asarray(tm.vertex_normals, np.float32), uv, np.asarray(tm.faces), name=name)
+
+
+# --- primitives --------------------------------------------------------------------------
+
+def box(size: tuple[float, float, float] = (1.0, 1.0, 1.0), name: str = "box") -> Mesh:
+    """An axis-aligned box centred on the origin, flat normals, 0..1 UVs per face."""
+    hx, hy, hz = (s * 0.5 for s in size)
+    positions, normals, uvs, indices = [], [], [], []
+    faces = [  # normal, u axis, v axis
+        ((1, 0, 0), (0, 0, -1), (0, 1, 0)), ((-1, 0, 0), (0, 0, 1), (0, 1, 0)),
+        ((0, 1, 0), (1, 0, 0), (0, 0, -1)), ((0, -1, 0), (1, 0, 0), (0, 0, 1)),
+        ((0, 0, 1), (1, 0, 0), (0, 1, 0)), ((0, 0, -1), (-1, 0, 0), (0, 1, 0)),
+    ]
+    half = np.array([hx, hy, hz])
+    for n, u, v in faces:
+        n, u, v = np.array(n, float), np.array(u, float), np.array(v, float)
+        base = len(positions)
+        for su, sv in ((-1, -1), (1, -1), (1, 1), (-1, 1)):
+            positions.append((n + su * u + sv * v) * half)
+            normals.append(n)
+            uvs.append(((su + 1) / 2, (sv + 1) / 2))
+        indices += [(base, base + 1, base + 2), (base, base + 2, base + 3)]
+    return Mesh(np.array(positions), np.array(normals), np.array(uvs), np.array(indices), name=name)
+
+
+def plane(width: float = 1.0, depth: float = 1.0, uv_repeat: float = 1.0, name: str = "plane") -> Mesh:
+    """A flat rectangle in the XZ plane facing +Y."""
+    hw, hd = width / 2, depth / 2
+    positions = np.array([(-hw, 0, hd), (hw, 0, hd), (hw, 0, -hd), (-hw, 0, -hd)])
+    normals = np.tile((0.0, 1.0, 0.0), (4, 1))
+    uvs = np.array([(0, 0), (1, 0), (1, 1), (0, 1)]) * uv_repeat
+    return Mesh(positions, normals, uvs, np.array([(0, 1, 2), (0, 2, 3)]), name=name)
+
+
+def quad(width: float = 1.0, height: float = 1.0, name: str = "quad") -> Mesh:
+    """A flat rectangle in the XY plane facing +Z (mirrors and portals use it)."""
+    hw, hh = width / 2, height / 2
+    positions = np.array([(-hw, -hh, 0), (hw, -hh, 0), (hw, hh, 0), (-hw, hh, 0)])
+    normals = np.tile((0.0, 0.0, 1.0), (4, 1))
+    uvs = np.array([(0, 0), (1, 0), (1, 1), (0, 1)])
+    return Mesh(positions, normals, uvs, np.array([(0, 1, 2), (0, 2, 3)]), name=name)
+
+
+def sphere(radius: float = 0.5, segments: int = 48, rings: int = 24, name: str = "sphere") -> Mesh:
+    """A UV sphere with smooth normals."""
+    theta = np.linspace(0.0, np.pi, rings + 1)          # from +Y down
+    phi = np.linspace(0.0, 2.0 * np.pi, segments + 1)
+    t, p = np.meshgrid(theta, phi, indexing="ij")
+    normals = np.stack([np.sin(t) * np.sin(p), np.cos(t), np.sin(t) * np.cos(p)], axis=-1).reshape(-1, 3)
+    uvs = np.stack([p / (2 * np.pi), 1.0 - t / np.pi], axis=-1).reshape(-1, 2)
+    row = segments + 1
+    i, j = np.meshgrid(np.arange(rings), np.arange(segments), indexing="ij")
+    a = (i * row + j).ravel()
+    b, c, d = a + row, a + row + 1, a + 1
+    indices = np.concatenate([np.stack([a, b, c], 1), np.stack([a, c, d], 1)])
+    return Mesh(normals * radius, normals, uvs, indices, name=name)
+
+
+# --- loading files -----------------------------------------------------------------------
+
+@dataclass
+class ModelPart:
+    """One mesh of a loaded file with the material the file gave it."""
+
+    mesh: Mesh
+    local: glm.mat4
+    color: tuple[float, float, float, float] = (0.8, 0.8, 0.8, 1.0)
+    texture: TextureData | None = None
+    metallic: float = 0.0
+    roughness: float = 0.5
+    emissive_factor: float = 0.0   # seed 002: emissive colour / diffuse colour
+    reflectivity: float = 0.0
+
+
+SUPPORTED_SUFFIXES = (".obj", ".glb", ".gltf", ".ply", ".stl", ".off")
+
+
+def load_model(path: str | Path) -> list[ModelPart]:
+    """Load every mesh of a file with trimesh; errors name the file and the reason."""
+    import trimesh
+
+    path = Path(path)
+    if not path.is_file():
+        raise AssetError(f"mesh file {str(path)!r}: no such file")
+    if path.suffix.lower() not in SUPPORTED_SUFFIXES:
+        raise AssetError(f"mesh file {str(path)!r}: unsupported type {path.suffix!r} "
+                         f"(supported: {', '.join(SUPPORTED_SUFFIXES)})")
+    try:
+        loaded = trimesh.load(str(path), force="scene", process=False)
+    except Exception as exc:  # trimesh raises many kinds for corrupt files
+        raise AssetError(f"mesh file {str(path)!r}: cannot be parsed ({type(exc).__name__}: {exc})") from exc
+    parts: list[ModelPart] = []
+    try:
+        for node in loaded.graph.nodes_geometry:
+            matrix, geom_name = loaded.graph[node]
+            tm = loaded.geometry[geom_name]
+            if not isinstance(tm, trimesh.Trimesh) or len(tm.faces) == 0:
+                continue
+            mesh = Mesh.from_trimesh(tm, name=f"{path.name}:{geom_name}")
+            part = ModelPart(mesh=mesh, local=glm.mat4(*np.asarray(matrix, np.float32).T.ravel()))
+            _read_material(tm, part, path)
+            parts.append(part)
+    except AssetError as exc:
+        raise AssetError(f"mesh file {str(path)!r}: {exc}") from exc
+    if not parts:
+        raise AssetError(f"mesh file {str(path)!r}: contains no triangle meshes")
+    return parts
+
+
+def _read_material(tm, part: ModelPart, path: Path) -> None:
+    """Fill colour, texture, PBR factors and the emissive factor from trimesh's visual."""
+    visual = getattr(tm, "visual", None)
+    material = getattr(visual, "material", None)
+    if material is None:
+        colors = getattr(visual, "vertex_colors", None)
+        if colors is not None and len(colors):
+            mean = np.asarray(colors, np.float32).mean(axis=0) / 255.0
+            part.color = tuple(float(_srgb_to_linear(c)) for c in mean[:3]) + (float(mean[3]),)
+        return
+    if hasattr(material, "baseColorFactor"):  # glTF PBR
+        base = material.baseColorFactor
+        if base is not None:
+            base = np.asarray(base, np.float32)
+            base = base / 255.0 if base.max() > 1.0 else base
+            part.color = tuple(float(c) for c in base[:4]) if len(base) == 4 else (*map(float, base[:3]), 1.0)
+        image = material.baseColorTexture
+        part.metallic = float(material.metallicFactor if material.metallicFactor is not None else 0.0)
+        part.roughness = float(material.roughnessFactor if material.roughnessFactor is not None else 0.5)
+        emissive = material.emissiveFactor
+        part.reflectivity = part.metallic
+    else:  # OBJ/MTL SimpleMaterial
+        diffuse = np.asarray(material.diffuse, np.float32) / 255.0
+        part.color = tuple(float(c) for c in diffuse[:4])
+        image = material.image
+        extra = getattr(material, "kwargs", {}) or {}
+        emissive = _floats(extra.get("ke"))
+        part.metallic = _first(extra.get("pm"), 0.0)
+        part.roughness = _first(extra.get("pr"), 0.5)
+        part.reflectivity = max(part.metallic, _first(extra.get("refl"), 0.0))
+    if emissive is not None and len(emissive) >= 1 and max(emissive[:3]) > 0.0:
+        # Seed 002: the file stores emissive as a multiple of diffuse; the factor is their
+        # ratio (taken on the strongest channel, so a pure-blue lamp still works).
+        channel = int(np.argmax(part.color[:3]))
+        diffuse = max(part.color[channel], 1e-6)
+        part.emissive_factor = float(np.clip(emissive[min(channel, len(emissive) - 1)] / diffuse, 0.0, 1e4))
+    if image is not None:
+        try:
+            part.texture = TextureData(np.asarray(image.convert("RGBA")), name=f"{path.name}:texture")
+        except Exception as exc:
+            raise AssetError(f"texture of {str(path)!r} cannot be decoded ({exc})") from exc
+    for name in ("metallic", "roughness"):
+        if not 0.0 <= getattr(part, name) <= 1.0:
+            raise AssetError(f"material {name} {getattr(part, name)} is outside 0..1")
+
+
+def _floats(value) -> list[float] | None:
+    if value is None:
+        return None
+    try:
+        return [float(v) for v in (value if isinstance(value, (list, tuple, np.ndarray)) else [value])]
+    except (TypeError, ValueError):
+        return None
+
+
+def _first(value, default: float) -> float:
+    numbers = _floats(value)
+    return numbers[0] if numbers else default
+
+
+def _srgb_to_linear(c: float) -> float:
+    c = float(c)
+    return c / 12.92 if c <= 0.04045 else ((c + 0.055) / 1.055) ** 2.4

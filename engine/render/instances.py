@@ -1,0 +1,144 @@
+"""Instance records of one (mesh, texture) pair, kept in a numpy array and uploaded by rows.
+
+One batch is one instanced draw, so draw calls grow with distinct meshes, not entities.
+Rows are packed (a removed entity's row is filled with the last row), and only rows
+written since the last upload are sent again: a frame where nothing changed uploads
+nothing.
+"""
+from __future__ import annotations
+
+import moderngl
+import numpy as np
+
+INSTANCE_DTYPE = np.dtype([
+    ("model", "<f4", (16,)),          # column-major mat4
+    ("normal_matrix", "<f4", (9,)),   # column-major mat3
+    ("color", "<f4", (4,)),
+    ("surface", "<f4", (4,)),         # metallic, roughness, emissive power, -
+    ("reflect", "<f4", (4,)),         # reflection mix, refraction ior, -, -
+    ("tint", "<f4", (4,)),
+    ("slots", "<u4", (4,)),           # emissive, refract, reflect variants, entity id
+])
+INSTANCE_FORMAT = "16f 9f 4f 4f 4f 4f 4u/i"
+INSTANCE_ATTRIBUTES = ("in_model", "in_normal_matrix", "in_color", "in_surface", "in_reflect", "in_tint",
+                       "in_slots")
+VERTEX_FORMAT = "3f 3f 2f"
+VERTEX_ATTRIBUTES = ("in_position", "in_normal", "in_uv")
+
+# Past this many separate dirty runs one span write is cheaper than many small ones.
+_MAX_WRITE_RUNS = 32
+
+
+class GpuMesh:
+    """Vertex and index buffers of one Mesh, shared by every batch that draws it."""
+
+    def __init__(self, ctx: moderngl.Context, mesh) -> None:
+        self.vertices = ctx.buffer(mesh.interleaved().tobytes())
+        self.indices = ctx.buffer(mesh.indices.astype(np.uint32).tobytes())
+        self.index_count = mesh.indices.size
+
+    def release(self) -> None:
+        self.vertices.release()
+        self.indices.release()
+
+
+class InstanceBatch:
+    """The instances of one (mesh, texture) pair."""
+
+    def __init__(self, ctx: moderngl.Context, mesh: GpuMesh, texture: moderngl.Texture | None,
+                 capacity: int = 16) -> None:
+        self.ctx = ctx
+        self.mesh = mesh
+        self.texture = texture
+        self.rows = np.zeros(capacity, INSTANCE_DTYPE)
+        self.count = 0
+        self.row_of: dict[int, int] = {}
+        self.entity_at: list[int] = []
+        self._dirty: set[int] = set()
+        self._buffer = ctx.buffer(reserve=capacity * INSTANCE_DTYPE.itemsize)
+        self._buffer_rows = capacity
+        self._vaos: dict[int, moderngl.VertexArray] = {}
+
+    # --- rows ----------------------------------------------------------------------------
+    def add(self, entity: int) -> np.void:
+        """A new zeroed row for ``entity``; the caller fills it."""
+        if self.count == len(self.rows):
+            grown = np.zeros(len(self.rows) * 2, INSTANCE_DTYPE)
+            grown[: self.count] = self.rows[: self.count]
+            self.rows = grown
+        row = self.count
+        self.count += 1
+        self.row_of[entity] = row
+        self.entity_at.append(entity)
+        self._dirty.add(row)
+        return self.rows[row]
+
+    def row(self, entity: int) -> np.void:
+        """The writable row of ``entity``, marked for upload."""
+        index = self.row_of[entity]
+        self._dirty.add(index)
+        return self.rows[index]
+
+    def remove(self, entity: int) -> None:
+        index = self.row_of.pop(entity)
+        last = self.count - 1
+        if index != last:
+            moved = self.entity_at[last]
+            self.rows[index] = self.rows[last]
+            self.entity_at[index] = moved
+            self.row_of[moved] = index
+            self._dirty.add(index)
+        self.entity_at.pop()
+        self.count = last
+        self._dirty.discard(last)
+
+    # --- GPU -----------------------------------------------------------------------------
+    def upload(self) -> int:
+        """Send rows written since the last upload; returns the bytes sent."""
+        size = INSTANCE_DTYPE.itemsize
+        if self._buffer_rows < len(self.rows):
+            self._buffer.orphan(len(self.rows) * size)
+            self._buffer_rows = len(self.rows)
+            self._dirty = set(range(self.count))
+        if not self._dirty:
+            return 0
+        dirty = np.fromiter(self._dirty, np.int64, len(self._dirty))
+        dirty.sort()
+        self._dirty.clear()
+        breaks = np.flatnonzero(np.diff(dirty) != 1) + 1
+        starts = np.concatenate([[dirty[0]], dirty[breaks]])
+        ends = np.concatenate([dirty[breaks - 1], [dirty[-1]]]) + 1
+        if len(starts) > _MAX_WRITE_RUNS:
+            starts, ends = starts[:1], ends[-1:]
+        sent = 0
+        for start, end in zip(starts.tolist(), ends.tolist()):
+            self._buffer.write(self.rows[start:end].tobytes(), offset=start * size)
+            sent += (end - start) * size
+        return sent
+
+    def vao(self, program: moderngl.Program) -> moderngl.VertexArray:
+        """This batch's vertex array for ``program`` (made once per program and buffer)."""
+        key = program.glo
+        vao = self._vaos.get(key)
+        if vao is None:
+            vao = self.ctx.vertex_array(
+                program,
+                [(self.mesh.vertices, VERTEX_FORMAT, *VERTEX_ATTRIBUTES),
+                 (self._buffer, INSTANCE_FORMAT, *INSTANCE_ATTRIBUTES)],
+                index_buffer=self.mesh.indices,
+                index_element_size=4,
+                skip_errors=True,
+            )
+            self._vaos[key] = vao
+        return vao
+
+    def draw(self, program: moderngl.Program) -> None:
+        if self.count:
+            self.vao(program).render(moderngl.TRIANGLES, vertices=self.mesh.index_count,
+                                     instances=self.count)
+
+    def release(self) -> None:
+        for vao in self._vaos.values():
+            vao.release()
+        self._vaos.clear()
+        self._buffer.release()

@@ -1,0 +1,201 @@
+"""GL resources of one world's rendering and the passes that draw them.
+
+The RenderSystem decides what is drawn; this class owns how: programs, uniform blocks,
+shared meshes and textures (reference counted, released when the last user goes), the
+instance batches, the sky cube map and the render targets.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import moderngl
+
+from engine.gl_context import GLCapabilities
+from engine.mesh import Mesh
+from engine.render.instances import GpuMesh, InstanceBatch
+from engine.render.sky import flat_cube, upload_cube
+from engine.render.targets import RenderTargets
+from engine.render.views import CAMERA_BLOCK_BYTES, LIGHTS_BLOCK_BYTES, View
+from engine.shader_library import ShaderLibrary
+from engine.texture_data import TextureData
+
+CAMERA_BINDING = 0
+LIGHTS_BINDING = 1
+ALBEDO_UNIT = 0
+SKY_UNIT = 1
+GL_SRGB8_ALPHA8 = 0x8C43
+BACKGROUND = (0.05, 0.05, 0.06)
+
+
+@dataclass
+class RenderStats:
+    """What the last frame cost: read by tests and benchmarks."""
+
+    passes: int = 0
+    draw_calls: int = 0
+    uploaded_bytes: int = 0
+    instances: int = 0
+
+
+class _Shared:
+    """A GL object shared by reference count."""
+
+    __slots__ = ("obj", "users")
+
+    def __init__(self, obj) -> None:
+        self.obj = obj
+        self.users = 0
+
+
+class Renderer:
+    def __init__(self, ctx: moderngl.Context, caps: GLCapabilities) -> None:
+        self.ctx = ctx
+        self.caps = caps
+        self.shaders = ShaderLibrary(ctx)
+        self.scene_program = self.shaders.program("scene.vert", "scene.frag")
+        self.sky_program = self.shaders.program("sky.vert", "sky.frag")
+        self.present_program = self.shaders.program("present.vert", "present.frag")
+        for program in (self.scene_program, self.sky_program):
+            program["Camera"].binding = CAMERA_BINDING
+        self.scene_program["Lights"].binding = LIGHTS_BINDING
+        self.scene_program["albedo_map"].value = ALBEDO_UNIT
+        self.scene_program["sky_map"].value = SKY_UNIT
+        self.sky_program["sky_map"].value = SKY_UNIT
+        self.present_program["hdr_image"].value = 0
+        self.camera_ubo = ctx.buffer(reserve=CAMERA_BLOCK_BYTES)
+        self.lights_ubo = ctx.buffer(reserve=LIGHTS_BLOCK_BYTES)
+        self.fullscreen_sky = ctx.vertex_array(self.sky_program, [])
+        self.fullscreen_present = ctx.vertex_array(self.present_program, [])
+        self._meshes: dict[int, _Shared] = {}
+        self._textures: dict[int, _Shared] = {}
+        self.batches: dict[tuple[int, int], InstanceBatch] = {}
+        self.sky = flat_cube(ctx, BACKGROUND)
+        self.targets: RenderTargets | None = None
+        self.stats = RenderStats()
+        self.exposure = 1.0
+
+    # --- shared resources ------------------------------------------------------------------
+    def batch_for(self, mesh: Mesh, texture: TextureData | None) -> InstanceBatch:
+        key = (mesh.id, id(texture) if texture is not None else 0)
+        batch = self.batches.get(key)
+        if batch is None:
+            gpu_mesh = self._acquire(self._meshes, mesh.id, lambda: GpuMesh(self.ctx, mesh))
+            gpu_texture = None
+            if texture is not None:
+                gpu_texture = self._acquire(self._textures, id(texture), lambda: self._upload_texture(texture))
+            batch = self.batches[key] = InstanceBatch(self.ctx, gpu_mesh, gpu_texture)
+            batch.key = key
+        return batch
+
+    def drop_batch_if_empty(self, batch: InstanceBatch) -> None:
+        if batch.count:
+            return
+        del self.batches[batch.key]
+        batch.release()
+        mesh_id, texture_id = batch.key
+        self._release(self._meshes, mesh_id)
+        if texture_id:
+            self._release(self._textures, texture_id)
+
+    @staticmethod
+    def _acquire(table: dict[int, _Shared], key: int, make):
+        shared = table.get(key)
+        if shared is None:
+            shared = table[key] = _Shared(make())
+        shared.users += 1
+        return shared.obj
+
+    @staticmethod
+    def _release(table: dict[int, _Shared], key: int) -> None:
+        shared = table[key]
+        shared.users -= 1
+        if shared.users == 0:
+            shared.obj.release()
+            del table[key]
+
+    def _upload_texture(self, texture: TextureData) -> moderngl.Texture:
+        w, h = texture.size
+        # Image rows are top-first, GL's are bottom-first: flip so v=0 is the bottom.
+        gl_texture = self.ctx.texture((w, h), 4, texture.pixels[::-1].tobytes(), internal_format=GL_SRGB8_ALPHA8)
+        gl_texture.build_mipmaps()
+        gl_texture.filter = (moderngl.LINEAR_MIPMAP_LINEAR, moderngl.LINEAR)
+        gl_texture.anisotropy = min(8.0, self.ctx.max_anisotropy)
+        return gl_texture
+
+    def set_sky_faces(self, faces) -> None:
+        old = self.sky
+        self.sky = upload_cube(self.ctx, faces) if faces is not None else flat_cube(self.ctx, BACKGROUND)
+        old.release()
+
+    def resource_counts(self) -> dict[str, int]:
+        """Live GL objects this renderer owns (tests check that they go back to zero)."""
+        return {"meshes": len(self._meshes), "textures": len(self._textures), "batches": len(self.batches)}
+
+    # --- frame -----------------------------------------------------------------------------
+    def ensure_targets(self, size: tuple[int, int]) -> RenderTargets:
+        if self.targets is None or self.targets.size != size:
+            if self.targets is not None:
+                self.targets.release()
+            self.targets = RenderTargets(self.ctx, size)
+        return self.targets
+
+    def upload_instances(self) -> int:
+        sent = sum(batch.upload() for batch in self.batches.values())
+        self.stats.uploaded_bytes += sent
+        return sent
+
+    def set_lights(self, block: bytes) -> None:
+        self.lights_ubo.write(block)
+
+    def render_view(self, view: View, framebuffer: moderngl.Framebuffer) -> None:
+        """Draw every batch, then the sky behind it, from ``view`` into ``framebuffer``."""
+        ctx = self.ctx
+        framebuffer.use()
+        ctx.viewport = (0, 0, *view.size)
+        ctx.enable(moderngl.DEPTH_TEST | moderngl.CULL_FACE)
+        ctx.depth_func = "<"
+        framebuffer.clear(depth=1.0)
+        self.camera_ubo.write(view.camera_block())
+        self.camera_ubo.bind_to_uniform_block(CAMERA_BINDING)
+        self.lights_ubo.bind_to_uniform_block(LIGHTS_BINDING)
+        self.sky.use(SKY_UNIT)
+        has_map = self.scene_program["has_albedo_map"]
+        for batch in self.batches.values():
+            if not batch.count:
+                continue
+            if batch.texture is not None:
+                batch.texture.use(ALBEDO_UNIT)
+            has_map.value = batch.texture is not None
+            batch.draw(self.scene_program)
+            self.stats.draw_calls += 1
+            self.stats.instances += batch.count
+        ctx.depth_func = "<="
+        ctx.disable(moderngl.CULL_FACE)
+        self.fullscreen_sky.render(moderngl.TRIANGLES, vertices=3)
+        self.stats.draw_calls += 1
+        self.stats.passes += 1
+
+    def present(self, output: moderngl.Framebuffer, size: tuple[int, int]) -> None:
+        """Encode the HDR image to sRGB into ``output`` (a window's or a capture target)."""
+        assert self.targets is not None
+        output.use()
+        self.ctx.viewport = (0, 0, *size)
+        self.ctx.disable(moderngl.DEPTH_TEST | moderngl.CULL_FACE)
+        self.targets.color.use(0)
+        self.present_program["exposure"].value = self.exposure
+        self.fullscreen_present.render(moderngl.TRIANGLES, vertices=3)
+
+    def release(self) -> None:
+        for batch in list(self.batches.values()):
+            batch.release()
+        self.batches.clear()
+        for table in (self._meshes, self._textures):
+            for shared in table.values():
+                shared.obj.release()
+            table.clear()
+        if self.targets is not None:
+            self.targets.release()
+            self.targets = None
+        for obj in (self.sky, self.camera_ubo, self.lights_ubo, self.fullscreen_sky, self.fullscreen_present):
+            obj.release()
+        self.shaders.release()

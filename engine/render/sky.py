@@ -1,0 +1,74 @@
+"""The sky cube map: generated from a Skybox's colours (nothing is downloaded) or given faces.
+
+``sky_radiance`` is the generated sky as a function of direction; tests use it to know
+what colour a reflected ray must show.  ``face_directions`` follows GL's cube-map face
+convention (the faces are left-handed: see the OpenGL spec's cube map table).
+"""
+from __future__ import annotations
+
+import moderngl
+import numpy as np
+
+FACE_ORDER = ("+X", "-X", "+Y", "-Y", "+Z", "-Z")
+SEAMLESS_CUBE_MAP = 0x884F  # GL_TEXTURE_CUBE_MAP_SEAMLESS, core since 3.2
+
+
+def face_directions(face: int, size: int) -> np.ndarray:
+    """Unit directions of the texel centres of one face, shape (size, size, 3), row = t."""
+    c = (np.arange(size, dtype=np.float64) + 0.5) / size * 2.0 - 1.0
+    t, s = np.meshgrid(c, c, indexing="ij")
+    one = np.ones_like(s)
+    d = {
+        0: (one, -t, -s), 1: (-one, -t, s),
+        2: (s, one, t), 3: (s, -one, -t),
+        4: (s, -t, one), 5: (-s, -t, -one),
+    }[face]
+    v = np.stack(d, axis=-1)
+    return v / np.linalg.norm(v, axis=-1, keepdims=True)
+
+
+def sky_radiance(skybox, directions: np.ndarray) -> np.ndarray:
+    """Linear RGB of the generated sky along each unit direction (..., 3)."""
+    d = np.asarray(directions, np.float64)
+    d = d / np.linalg.norm(d, axis=-1, keepdims=True)
+    y = d[..., 1:2]
+    zenith = np.array(skybox.zenith)[:3]
+    horizon = np.array(skybox.horizon)[:3]
+    ground = np.array(skybox.ground)[:3]
+    up = np.clip(y, 0.0, 1.0) ** 0.6
+    down = np.clip(-y * 4.0, 0.0, 1.0)
+    color = np.where(y >= 0.0, horizon + (zenith - horizon) * up, horizon + (ground - horizon) * down)
+    # A warm band around the sun's azimuth so that left and right of the sky differ.
+    sun = np.array(skybox.sun_direction, np.float64)
+    cos_sun = np.clip((d * sun).sum(axis=-1, keepdims=True), -1.0, 1.0)
+    glow = 0.25 * np.clip(cos_sun, 0.0, 1.0) ** 4 * np.array([1.0, 0.55, 0.25])
+    disc = np.clip((cos_sun - 0.9990) / 0.0005, 0.0, 1.0) * np.array(skybox.sun_color)[:3]
+    return color + glow + disc
+
+
+def build_faces(skybox) -> np.ndarray:
+    """Six faces (6, size, size, 3) float32 in GL order, from ``skybox.faces`` or generated."""
+    if skybox.faces is not None:
+        faces = np.asarray(skybox.faces, np.float32)
+        if faces.ndim != 4 or faces.shape[0] != 6 or faces.shape[1] != faces.shape[2] or faces.shape[3] != 3:
+            raise ValueError(f"Skybox.faces must be six square HxWx3 images, got shape {faces.shape}")
+        if not np.isfinite(faces).all() or faces.min() < 0:
+            raise ValueError("Skybox.faces must hold finite linear colours >= 0")
+        return faces
+    n = skybox.face_size
+    return np.stack([sky_radiance(skybox, face_directions(f, n)) for f in range(6)]).astype(np.float32)
+
+
+def upload_cube(ctx: moderngl.Context, faces: np.ndarray) -> moderngl.TextureCube:
+    """A mipmapped RGB16F cube map with seamless filtering (reflections sample its mips)."""
+    size = faces.shape[1]
+    cube = ctx.texture_cube((size, size), 3, faces.astype(np.float16).tobytes(), dtype="f2")
+    cube.build_mipmaps()
+    cube.filter = (moderngl.LINEAR_MIPMAP_LINEAR, moderngl.LINEAR)
+    ctx.enable_direct(SEAMLESS_CUBE_MAP)
+    return cube
+
+
+def flat_cube(ctx: moderngl.Context, color: tuple[float, float, float]) -> moderngl.TextureCube:
+    """A one-colour cube map: the background of a world without a Skybox."""
+    return upload_cube(ctx, np.tile(np.asarray(color, np.float32), (6, 4, 4, 1)))

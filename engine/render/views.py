@@ -1,0 +1,62 @@
+"""Views as data: what a pass renders from (the main camera now; mirror, portal and cube-face
+views later), and the std140 packing of the Camera and Lights uniform blocks."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import glm
+import numpy as np
+
+CAMERA_BLOCK_BYTES = 4 * 64 + 2 * 16
+MAX_DIRECTIONAL_LIGHTS = 4
+MAX_POINT_LIGHTS = 16
+LIGHTS_BLOCK_BYTES = 16 + 16 + 2 * 16 * MAX_DIRECTIONAL_LIGHTS + 2 * 16 * MAX_POINT_LIGHTS
+
+
+@dataclass
+class View:
+    """A camera pose and projection for one pass."""
+
+    view: glm.mat4
+    proj: glm.mat4
+    eye: glm.vec3
+    size: tuple[int, int]
+    name: str = "main"
+
+    @property
+    def view_proj(self) -> glm.mat4:
+        return self.proj * self.view
+
+    def camera_block(self) -> bytes:
+        vp = self.view_proj
+        w, h = self.size
+        return b"".join([
+            self.view.to_bytes(), self.proj.to_bytes(), vp.to_bytes(), glm.inverse(vp).to_bytes(),
+            glm.vec4(self.eye, 1.0).to_bytes(), glm.vec4(0.0, 0.0, w, h).to_bytes(),
+        ])
+
+
+def camera_view(world_matrix: glm.mat4, fov_y_deg: float, near: float, far: float,
+                size: tuple[int, int], name: str = "main") -> View:
+    """The view of a camera whose model-to-world matrix is ``world_matrix`` (looks down -Z)."""
+    w, h = size
+    proj = glm.perspective(glm.radians(fov_y_deg), w / max(h, 1), near, far)
+    return View(view=glm.inverse(world_matrix), proj=proj, eye=glm.vec3(world_matrix[3]), size=size, name=name)
+
+
+def lights_block(ambient, directional: list[tuple], point: list[tuple]) -> bytes:
+    """Pack lights: directional = [(direction, rgb)], point = [(position, range, rgb)]."""
+    data = np.zeros(LIGHTS_BLOCK_BYTES // 4, np.float32)
+    data[0:3] = ambient[:3]
+    counts = np.array([min(len(directional), MAX_DIRECTIONAL_LIGHTS), min(len(point), MAX_POINT_LIGHTS), 0, 0],
+                      np.int32)
+    data[4:8] = counts.view(np.float32)
+    base = 8
+    for i, (direction, rgb) in enumerate(directional[:MAX_DIRECTIONAL_LIGHTS]):
+        data[base + 4 * i: base + 4 * i + 3] = direction
+        data[base + 4 * (MAX_DIRECTIONAL_LIGHTS + i): base + 4 * (MAX_DIRECTIONAL_LIGHTS + i) + 3] = rgb
+    base += 8 * MAX_DIRECTIONAL_LIGHTS
+    for i, (position, light_range, rgb) in enumerate(point[:MAX_POINT_LIGHTS]):
+        data[base + 4 * i: base + 4 * i + 4] = (*position, light_range)
+        data[base + 4 * (MAX_POINT_LIGHTS + i): base + 4 * (MAX_POINT_LIGHTS + i) + 3] = rgb
+    return data.tobytes()

@@ -1,0 +1,62 @@
+"""Image data for textures, kept on the CPU; the renderer uploads it when first drawn."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from engine.errors import AssetError
+
+
+@dataclass(eq=False)
+class TextureData:
+    """RGBA8 pixels, sRGB encoded, row 0 at the top (as image files store them)."""
+
+    pixels: np.ndarray
+    name: str = "texture"
+
+    def __post_init__(self) -> None:
+        p = np.asarray(self.pixels)
+        if p.ndim != 3 or p.shape[2] not in (3, 4) or p.shape[0] < 1 or p.shape[1] < 1:
+            raise AssetError(f"texture {self.name!r}: pixels must be HxWx3 or HxWx4, got shape {p.shape}")
+        if p.dtype != np.uint8:
+            raise AssetError(f"texture {self.name!r}: pixels must be uint8, got {p.dtype}")
+        if p.shape[2] == 3:
+            p = np.concatenate([p, np.full(p.shape[:2] + (1,), 255, np.uint8)], axis=2)
+        self.pixels = np.ascontiguousarray(p)
+
+    @property
+    def size(self) -> tuple[int, int]:
+        return self.pixels.shape[1], self.pixels.shape[0]
+
+    @property
+    def has_alpha(self) -> bool:
+        return bool((self.pixels[..., 3] < 255).any())
+
+
+def load_texture(path: str | Path) -> TextureData:
+    """Read an image file (PNG, JPEG, ...) with Pillow."""
+    from PIL import Image, UnidentifiedImageError
+
+    path = Path(path)
+    if not path.is_file():
+        raise AssetError(f"texture file {str(path)!r}: no such file")
+    try:
+        with Image.open(path) as image:
+            pixels = np.asarray(image.convert("RGBA"))
+    except (UnidentifiedImageError, OSError) as exc:
+        raise AssetError(f"texture file {str(path)!r}: cannot be read as an image ({exc})") from exc
+    return TextureData(pixels, name=path.name)
+
+
+def checker_texture(size: int = 256, squares: int = 8, a: tuple[int, int, int] = (230, 230, 230),
+                    b: tuple[int, int, int] = (40, 40, 48), name: str = "checker") -> TextureData:
+    """A procedural checkerboard (the benchmark ground and the samples use it)."""
+    cell = max(1, size // squares)
+    yy, xx = np.mgrid[0:size, 0:size]
+    mask = ((xx // cell + yy // cell) % 2).astype(bool)
+    pixels = np.empty((size, size, 3), np.uint8)
+    pixels[~mask] = a
+    pixels[mask] = b
+    return TextureData(pixels, name=name)

@@ -1,0 +1,99 @@
+"""The windowed shell: a moderngl-window WindowConfig that drives an Engine.
+
+WASD + mouse fly camera (Q/E down/up, Shift faster), Esc quits, F12 writes a screenshot.
+The same class runs under moderngl-window's headless window, which the tests use.
+"""
+from __future__ import annotations
+
+import argparse
+import time
+from pathlib import Path
+
+import moderngl_window as mglw
+import numpy as np
+
+from engine.app import Engine, Game
+from engine.capture import save_png
+from systems import Input, Output
+
+_MOVE_KEYS = {"W": "w", "A": "a", "S": "s", "D": "d", "Q": "q", "E": "e"}
+
+
+def make_window_config(game: Game, args: argparse.Namespace | None = None) -> type[mglw.WindowConfig]:
+    """A WindowConfig class bound to ``game`` (moderngl-window instantiates it itself)."""
+
+    class SpeculumWindow(mglw.WindowConfig):
+        gl_version = (4, 1)
+        title = game.title
+        window_size = args.size if args else game.size
+        aspect_ratio = None
+        resizable = True
+        vsync = True
+
+        def __init__(self, **kwargs) -> None:
+            super().__init__(**kwargs)
+            self.engine = Engine(game, self.ctx)
+            if args is not None and args.camera:
+                self.engine.place_camera(*args.camera)
+            self.input: Input = self.engine.world.resources[Input]
+            self.screenshots = Path(args.out) if args is not None and args.out else Path("screenshots")
+            self.mouse_captured = False
+
+        def on_render(self, time_s: float, frametime: float) -> None:
+            size = self.wnd.buffer_size
+            self.engine.frame(min(frametime, 0.1), Output(self.wnd.fbo, size))
+
+        def on_resize(self, width: int, height: int) -> None:
+            pass  # the render system sizes its targets from the framebuffer each frame; 0x0 skips
+
+        def on_key_event(self, key, action, modifiers) -> None:
+            keys = self.wnd.keys
+            name = next((v for k, v in _MOVE_KEYS.items() if key == getattr(keys, k, None)), None)
+            if action == keys.ACTION_PRESS:
+                if name:
+                    self.input.held.add(name)
+                elif key == getattr(keys, "F12", None):
+                    self.screenshot()
+                elif key == keys.ESCAPE:
+                    self.wnd.close()
+            elif action == keys.ACTION_RELEASE and name:
+                self.input.held.discard(name)
+            if modifiers.shift:
+                self.input.held.add("shift")
+            else:
+                self.input.held.discard("shift")
+
+        def on_mouse_press_event(self, x: int, y: int, button: int) -> None:
+            self.mouse_captured = True
+            self.wnd.mouse_exclusivity = True
+            self.wnd.cursor = False
+
+        def on_mouse_position_event(self, x: int, y: int, dx: int, dy: int) -> None:
+            if self.mouse_captured:
+                self.input.mouse_dx += dx
+                self.input.mouse_dy += dy
+
+        def on_mouse_drag_event(self, x: int, y: int, dx: int, dy: int) -> None:
+            self.input.mouse_dx += dx
+            self.input.mouse_dy += dy
+
+        def screenshot(self) -> Path:
+            w, h = self.wnd.buffer_size
+            data = np.frombuffer(self.wnd.fbo.read(components=3), np.uint8).reshape(h, w, 3)
+            self.screenshots.mkdir(parents=True, exist_ok=True)
+            path = self.screenshots / f"screenshot_{time.strftime('%Y%m%d_%H%M%S')}.png"
+            save_png(np.flipud(data).copy(), path)
+            print(f"speculum: screenshot {path}")
+            return path
+
+        def on_close(self) -> None:
+            self.engine.close()
+
+    return SpeculumWindow
+
+
+def run_windowed(game: Game, args: argparse.Namespace) -> None:
+    w, h = args.size
+    config_cls = make_window_config(game, args)
+    config = mglw.create_window_config_instance(config_cls, args=["--size", f"{w}x{h}"])
+    mglw.run_window_config_instance(config)

@@ -1,0 +1,183 @@
+"""One game's ECS world: an esper world of its own plus the change sets systems read.
+
+esper 3 keeps worlds as module-level state selected by name; every method here switches to
+this world first, so two games (or two tests) never see each other's entities.  All
+structural changes go through this wrapper so it can record them: systems then work on
+what changed this frame instead of scanning every entity.
+"""
+from __future__ import annotations
+
+import itertools
+from collections import defaultdict
+from dataclasses import dataclass, field
+from typing import Any, TypeVar
+
+import esper
+
+from components.tracking import TrackedComponent
+
+C = TypeVar("C")
+_world_ids = itertools.count(1)
+
+
+@dataclass
+class FrameEvents:
+    """What the TransformSystem saw this frame, for later systems (probes, renderer)."""
+
+    moved: set[int] = field(default_factory=set)
+    added: set[int] = field(default_factory=set)
+    removed: set[int] = field(default_factory=set)
+
+
+class World:
+    """A named esper world with change tracking and a resource table.
+
+    ``resources`` holds per-world singletons that are not components (the renderer, the
+    input state, the frame's pass statistics), keyed by type.
+    """
+
+    def __init__(self, name: str | None = None) -> None:
+        self.name = f"{name or 'world'}#{next(_world_ids)}"
+        self.resources: dict[type, Any] = {}
+        self.frame = FrameEvents()
+        self.frame_index = 0
+        self._changed: dict[type, set[int]] = defaultdict(set)
+        self._deleted: set[int] = set()
+        self._systems: list[esper.Processor] = []
+        self._closed = False
+        self._use()
+
+    # --- context -------------------------------------------------------------------------
+    def _use(self) -> None:
+        if self._closed:
+            raise RuntimeError(f"world {self.name} was closed")
+        if esper.current_world != self.name:
+            esper.switch_world(self.name)
+
+    def close(self) -> None:
+        """Delete every entity (systems release their GPU resources) and drop the world."""
+        if self._closed:
+            return
+        self._use()
+        for entity in list(esper.get_entities()):
+            self.delete_entity(entity)
+        esper.clear_dead_entities()
+        for system in reversed(self._systems):
+            close = getattr(system, "close", None)
+            if close is not None:
+                close()
+        esper.switch_world("default")
+        esper.delete_world(self.name)
+        self._closed = True
+
+    def __enter__(self) -> World:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    # --- entities and components ----------------------------------------------------------
+    def spawn(self, *components: Any) -> int:
+        """Create an entity with these components and return its id."""
+        self._use()
+        entity = esper.create_entity()
+        for component in components:
+            self.add_component(entity, component)
+        return entity
+
+    def add_component(self, entity: int, component: Any) -> None:
+        self._use()
+        kind = type(component)
+        if esper.has_component(entity, kind):
+            self._detach(esper.component_for_entity(entity, kind))
+        esper.add_component(entity, component)
+        if isinstance(component, TrackedComponent):
+            object.__setattr__(component, "_entity", entity)
+            object.__setattr__(component, "_sink", self._changed[kind])
+        self._changed[kind].add(entity)
+
+    def remove_component(self, entity: int, kind: type[C]) -> C | None:
+        self._use()
+        if not esper.has_component(entity, kind):
+            return None
+        component = esper.remove_component(entity, kind)
+        self._detach(component)
+        self._changed[kind].add(entity)
+        return component
+
+    def delete_entity(self, entity: int) -> None:
+        """Delete at the start of the next step; systems see it in ``deleted()`` then."""
+        self._use()
+        if not esper.entity_exists(entity) or entity in self._deleted:
+            return
+        for component in esper.components_for_entity(entity):
+            self._detach(component)
+            self._changed[type(component)].add(entity)
+        self._deleted.add(entity)
+        esper.delete_entity(entity)
+
+    @staticmethod
+    def _detach(component: Any) -> None:
+        if isinstance(component, TrackedComponent):
+            object.__setattr__(component, "_sink", None)
+
+    def exists(self, entity: int) -> bool:
+        self._use()
+        return esper.entity_exists(entity) and entity not in self._deleted
+
+    def has(self, entity: int, kind: type) -> bool:
+        self._use()
+        return esper.has_component(entity, kind)
+
+    def get(self, entity: int, kind: type[C]) -> C:
+        self._use()
+        return esper.component_for_entity(entity, kind)
+
+    def try_get(self, entity: int, kind: type[C]) -> C | None:
+        self._use()
+        return esper.try_component(entity, kind)
+
+    def query(self, *kinds: type) -> list[tuple[int, tuple[Any, ...]]]:
+        self._use()
+        return esper.get_components(*kinds)
+
+    def query_one(self, kind: type[C]) -> list[tuple[int, C]]:
+        self._use()
+        return esper.get_component(kind)
+
+    def components_of(self, entity: int) -> tuple[Any, ...]:
+        self._use()
+        return esper.components_for_entity(entity)
+
+    def entities(self) -> list[int]:
+        self._use()
+        return [e for e in esper.get_entities() if e not in self._deleted]
+
+    # --- change sets -----------------------------------------------------------------------
+    def changed(self, kind: type) -> set[int]:
+        """Entities whose ``kind`` component was added, removed or written since last step."""
+        return self._changed.get(kind, set())
+
+    def deleted(self) -> set[int]:
+        """Entities deleted since the last step (their components are gone now)."""
+        return self._deleted
+
+    # --- systems ---------------------------------------------------------------------------
+    def add_system(self, system: esper.Processor, priority: int) -> None:
+        """Systems run from high to low priority; see ARCHITECTURE.md for the order."""
+        self._use()
+        esper.add_processor(system, priority=priority)
+        self._systems.append(system)
+
+    def get_system(self, kind: type[C]) -> C | None:
+        self._use()
+        return esper.get_processor(kind)
+
+    def step(self, dt: float) -> None:
+        """Run every system once, then forget this frame's changes."""
+        self._use()
+        esper.process(dt)
+        self.frame_index += 1
+        for entities in self._changed.values():
+            entities.clear()
+        self._deleted = set()

@@ -1,0 +1,59 @@
+"""Hall of mirrors: a checkered floor, a few objects, an emissive lamp, a chrome sphere that
+reflects only the sky and a textured crate that mixes its texture with the sky (seed 004)."""
+from __future__ import annotations
+
+import glm
+
+from components import (
+    DirectionalLight, Emissive, Material, MeshRef, PointLight, Reflective, Skybox, Transform,
+)
+from engine import Game, World, spawn_camera
+from engine.mesh import box, plane, sphere
+from engine.texture_data import checker_texture
+
+
+class Spin:
+    """Marks an entity that turns about +Y at ``speed`` degrees per second."""
+
+    def __init__(self, speed: float) -> None:
+        self.speed = speed
+
+
+class HallOfMirrors(Game):
+    title = "Speculum: hall of mirrors"
+    size = (960, 540)
+
+    def build(self, world: World) -> None:
+        spawn_camera(world, position=(0.0, 1.7, 6.5), yaw=0.0, pitch=-8.0)
+        world.spawn(Skybox())
+        world.spawn(DirectionalLight(direction=(-0.4, -1.0, -0.5), color=(1.0, 0.96, 0.9), intensity=2.6))
+
+        floor_texture = checker_texture(256, 16, name="floor")
+        world.spawn(Transform(), MeshRef(plane(40.0, 40.0, uv_repeat=10.0)),
+                    Material(color=(1.0, 1.0, 1.0), texture=floor_texture, roughness=0.8))
+
+        crate = box((1.0, 1.0, 1.0))
+        for x, z, c in ((-3.2, -1.5, (0.75, 0.12, 0.1)), (3.0, -2.0, (0.1, 0.35, 0.8)),
+                        (-1.6, -3.8, (0.2, 0.6, 0.2))):
+            world.spawn(Transform(position=(x, 0.5, z)), MeshRef(crate), Material(color=c, roughness=0.6),
+                        Spin(20.0))
+
+        # The lamp: emissive globe on a post, with a point light at its centre.
+        world.spawn(Transform(position=(2.0, 0.75, 0.5)), MeshRef(box((0.12, 1.5, 0.12))),
+                    Material(color=(0.2, 0.2, 0.22), metallic=0.8, roughness=0.3))
+        world.spawn(Transform(position=(2.0, 1.7, 0.5)), MeshRef(sphere(0.22)),
+                    Material(color=(1.0, 0.75, 0.35)), Emissive(2.5),
+                    PointLight(color=(1.0, 0.75, 0.4), intensity=6.0, range=8.0))
+
+        # Seed 004's task: one object that reflects only the sky, one that mixes texture and sky.
+        world.spawn(Transform(position=(-0.9, 1.0, 0.0)), MeshRef(sphere(0.8)),
+                    Material(color=(1.0, 1.0, 1.0), metallic=1.0, roughness=0.05), Reflective("skybox"))
+        world.spawn(Transform(position=(0.9, 0.6, 1.2), rotation=glm.angleAxis(glm.radians(30), glm.vec3(0, 1, 0))),
+                    MeshRef(box((1.2, 1.2, 1.2))),
+                    Material(texture=checker_texture(128, 4, (200, 150, 60), (90, 50, 20), name="crate"),
+                             color=(1.0, 1.0, 1.0), roughness=0.5),
+                    Reflective("skybox"))
+
+    def update(self, world: World, dt: float) -> None:
+        for _, (spin, transform) in world.query(Spin, Transform):
+            transform.rotation = glm.angleAxis(glm.radians(spin.speed * dt), glm.vec3(0, 1, 0)) * transform.rotation

@@ -1,0 +1,9 @@
+// The view being rendered (main camera, and later mirror, portal and cube-face views).
+layout(std140) uniform Camera {
+    mat4 view;
+    mat4 proj;
+    mat4 view_proj;
+    mat4 inv_view_proj;
+    vec4 eye;        // xyz: world-space eye position
+    vec4 viewport;   // x, y, width, height in pixels of the target
+} camera;

@@ -1,0 +1,46 @@
+// GGX microfacet specular (seed 002): Schlick Fresnel, GGX distribution, Smith visibility.
+const float PI = 3.14159265358979;
+
+vec3 schlick_fresnel(vec3 l, vec3 h, vec3 f0) {
+    float lh = clamp(dot(l, h), 0.0, 1.0);
+    return f0 + (1.0 - f0) * pow(1.0 - lh, 5.0);
+}
+
+float ggx_distribution(vec3 n, vec3 h, float roughness) {
+    float a2 = max(roughness * roughness, 1e-4);
+    a2 *= a2;
+    float nh = max(dot(n, h), 0.0);
+    float d = nh * nh * (a2 - 1.0) + 1.0;
+    return a2 / (PI * d * d);
+}
+
+// Smith-GGX visibility, already divided by 4 (n.l)(n.v).
+float ggx_visibility(vec3 n, vec3 l, vec3 v, float roughness) {
+    float a2 = max(roughness * roughness, 1e-4);
+    a2 *= a2;
+    float nl = max(dot(n, l), 1e-4);
+    float nv = max(dot(n, v), 1e-4);
+    float gl = nl + sqrt(a2 + (1.0 - a2) * nl * nl);
+    float gv = nv + sqrt(a2 + (1.0 - a2) * nv * nv);
+    return 1.0 / (gl * gv);
+}
+
+// Specular radiance reflected towards v from light arriving along l (both unit, away from surface).
+vec3 ggx_specular(vec3 n, vec3 l, vec3 v, vec3 f0, float roughness) {
+    vec3 h = normalize(l + v);
+    return schlick_fresnel(l, h, f0) * ggx_distribution(n, h, roughness) * ggx_visibility(n, l, v, roughness);
+}
+
+// Seed 002's GGXReflect: radiance arriving along the reflection direction r, weighted by
+// Fresnel and visibility (the distribution term is folded into the pre-filtered sample).
+vec3 ggx_reflect(vec3 n, vec3 r, vec3 v, vec3 radiance, vec3 f0, float roughness) {
+    vec3 f = schlick_fresnel(r, n, f0);
+    float vis = ggx_visibility(n, r, v, roughness);
+    return f * vis * (4.0 * max(dot(v, n), 0.0)) * max(dot(n, r), 0.0) * radiance;
+}
+
+// Seed 002's mip bias for a reflection sampled with roughness m: lod += 2/(1-m)^2 - 1.
+float roughness_lod_bias(float m) {
+    float gloss = max(1.0 - m, 0.05);
+    return 2.0 / (gloss * gloss) - 1.0;
+}

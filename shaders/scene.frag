@@ -1,0 +1,136 @@
+#version 410 core
+// Scene shading: lights, then the material slots in seed 002's order
+// (reflect, refract, emissive). Each slot switches on the instance's variant index.
+#include "camera.glsl"
+#include "lights.glsl"
+#include "ggx.glsl"
+
+uniform sampler2D albedo_map;
+uniform bool has_albedo_map;
+uniform samplerCube sky_map;
+
+in vec3 v_world_pos;
+in vec3 v_normal;
+in vec2 v_uv;
+flat in vec4 v_color;
+flat in vec4 v_surface;
+flat in vec4 v_reflect;
+flat in vec4 v_tint;
+flat in uvec4 v_slots;
+
+layout(location = 0) out vec4 out_color;
+layout(location = 1) out uint out_entity;
+
+struct Surface {
+    vec3 position;
+    vec3 normal;      // unit, facing the viewer
+    vec3 to_eye;      // unit, surface -> eye
+    vec3 albedo;
+    float alpha;
+    float metallic;
+    float roughness;
+    vec3 f0;
+};
+
+vec3 direct_lighting(Surface s) {
+    vec3 diffuse = s.albedo * (1.0 - s.metallic) / PI;
+    vec3 total = lights.ambient.rgb * s.albedo;
+    for (int i = 0; i < lights.counts.x; ++i) {
+        vec3 l = -lights.directional_dir[i].xyz;
+        float nl = max(dot(s.normal, l), 0.0);
+        if (nl > 0.0) {
+            total += (diffuse + ggx_specular(s.normal, l, s.to_eye, s.f0, s.roughness))
+                     * lights.directional_color[i].rgb * nl;
+        }
+    }
+    for (int i = 0; i < lights.counts.y; ++i) {
+        vec3 d = lights.point_pos[i].xyz - s.position;
+        float dist = length(d);
+        float range = lights.point_pos[i].w;
+        vec3 l = d / max(dist, 1e-4);
+        float nl = max(dot(s.normal, l), 0.0);
+        float fade = clamp(1.0 - pow(dist / range, 4.0), 0.0, 1.0);
+        float falloff = fade * fade / (dist * dist + 1.0);
+        if (nl > 0.0 && falloff > 0.0) {
+            total += (diffuse + ggx_specular(s.normal, l, s.to_eye, s.f0, s.roughness))
+                     * lights.point_color[i].rgb * nl * falloff;
+        }
+    }
+    return total;
+}
+
+// --- Reflect slot ---------------------------------------------------------------------
+vec3 sample_environment(vec3 direction, float roughness) {
+    float lod = textureQueryLod(sky_map, direction).y + roughness_lod_bias(roughness);
+    return textureLod(sky_map, direction, lod).rgb;
+}
+
+vec3 reflect_skybox(vec3 color, Surface s) {
+    // Seed 004: sample the sky along reflect(view, normal); mix by the instance's amount.
+    vec3 r = reflect(-s.to_eye, s.normal);
+    vec3 env = sample_environment(r, s.roughness) * v_tint.rgb;
+    return mix(color, env, v_reflect.x);
+}
+
+vec3 apply_reflect(uint variant, vec3 color, Surface s) {
+    switch (variant) {
+        case REFLECT_SKYBOX:
+        // Planar, cube and portal variants land with their issues; until then they show
+        // the sky, which is what those surfaces reflect when nothing else is there.
+        case REFLECT_PLANAR:
+        case REFLECT_CUBE:
+        case REFLECT_PORTAL:
+            return reflect_skybox(color, s);
+        default:
+            return color;
+    }
+}
+
+// --- Refract slot ---------------------------------------------------------------------
+vec3 refract_environment(vec3 color, Surface s) {
+    // Seed 002 part 2: environment seen along the refracted ray, weighted by Fresnel
+    // transmittance, blended with the surface colour by alpha (alpha 0 = clear).
+    float ior = v_reflect.y;
+    vec3 t = refract(-s.to_eye, s.normal, 1.0 / ior);
+    float f0 = pow((ior - 1.0) / (ior + 1.0), 2.0);
+    vec3 transmittance = vec3(1.0) - schlick_fresnel(s.to_eye, s.normal, vec3(f0));
+    vec3 transmitted = transmittance * s.albedo * sample_environment(t, s.roughness);
+    return mix(transmitted, color, s.alpha);
+}
+
+vec3 apply_refract(uint variant, vec3 color, Surface s) {
+    switch (variant) {
+        case REFRACT_ENVIRONMENT: return refract_environment(color, s);
+        default: return color;
+    }
+}
+
+// --- Emissive slot --------------------------------------------------------------------
+vec3 apply_emissive(uint variant, vec3 color, Surface s) {
+    switch (variant) {
+        case EMISSIVE_EMISSIVE: return color + v_surface.z * s.albedo;  // seed 002 part 1
+        default: return color;
+    }
+}
+
+void main() {
+    Surface s;
+    s.position = v_world_pos;
+    s.to_eye = normalize(camera.eye.xyz - v_world_pos);
+    s.normal = normalize(v_normal);
+    if (!gl_FrontFacing) s.normal = -s.normal;
+    vec4 base = v_color;
+    if (has_albedo_map) base *= texture(albedo_map, v_uv);
+    s.albedo = base.rgb;
+    s.alpha = base.a;
+    s.metallic = v_surface.x;
+    s.roughness = v_surface.y;
+    s.f0 = mix(vec3(0.04), s.albedo, s.metallic);
+
+    vec3 color = direct_lighting(s);
+    color = apply_reflect(v_slots.z, color, s);
+    color = apply_refract(v_slots.y, color, s);
+    color = apply_emissive(v_slots.x, color, s);
+    out_color = vec4(color, 1.0);
+    out_entity = v_slots.w;
+}

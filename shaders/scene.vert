@@ -1,0 +1,37 @@
+#version 410 core
+// Instanced scene geometry: per-vertex mesh data, per-instance transform and material record.
+#include "camera.glsl"
+
+in vec3 in_position;
+in vec3 in_normal;
+in vec2 in_uv;
+
+in mat4 in_model;          // model -> world
+in mat3 in_normal_matrix;  // inverse-transpose of the model's upper 3x3
+in vec4 in_color;          // linear base colour, alpha
+in vec4 in_surface;        // metallic, roughness, emissive power, -
+in vec4 in_reflect;        // reflection mix, refraction ior, -, -
+in vec4 in_tint;           // reflection tint
+in uvec4 in_slots;         // emissive variant, refract variant, reflect variant, entity id
+
+out vec3 v_world_pos;
+out vec3 v_normal;
+out vec2 v_uv;
+flat out vec4 v_color;
+flat out vec4 v_surface;
+flat out vec4 v_reflect;
+flat out vec4 v_tint;
+flat out uvec4 v_slots;
+
+void main() {
+    vec4 world = in_model * vec4(in_position, 1.0);
+    v_world_pos = world.xyz;
+    v_normal = in_normal_matrix * in_normal;
+    v_uv = in_uv;
+    v_color = in_color;
+    v_surface = in_surface;
+    v_reflect = in_reflect;
+    v_tint = in_tint;
+    v_slots = in_slots;
+    gl_Position = camera.view_proj * world;
+}

@@ -1,0 +1,6 @@
+"""Systems: the only place behaviour lives. Each is an esper processor run once a frame."""
+from systems.fly_camera_system import FlyCameraSystem, Input
+from systems.render_system import Output, RenderSystem
+from systems.transform_system import TransformSystem
+
+__all__ = ["FlyCameraSystem", "Input", "Output", "RenderSystem", "TransformSystem"]

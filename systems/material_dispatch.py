@@ -1,0 +1,52 @@
+"""Choosing each instance's material variants from its components (seed 002's subroutine
+selection, done on the CPU once per change instead of once per draw)."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import glm
+
+from components import Emissive, Material, Reflective, Refractive
+from engine.material_slots import EmissiveVariant, ReflectVariant, RefractVariant
+
+_REFLECT_MODES = {
+    "skybox": ReflectVariant.SKYBOX, "planar": ReflectVariant.PLANAR,
+    "cube": ReflectVariant.CUBE, "portal": ReflectVariant.PORTAL,
+}
+DEFAULT_MATERIAL = Material()
+
+
+@dataclass(frozen=True)
+class MaterialChoice:
+    """One instance's variant per slot and the numbers those variants read."""
+
+    emissive: EmissiveVariant
+    refract: RefractVariant
+    reflect: ReflectVariant
+    color: glm.vec4
+    surface: tuple[float, float, float, float]  # metallic, roughness, emissive power, -
+    reflect_params: tuple[float, float, float, float]  # reflection mix, ior, -, -
+    tint: glm.vec4
+
+
+def choose_material(material: Material | None, emissive: Emissive | None,
+                    reflective: Reflective | None, refractive: Refractive | None) -> MaterialChoice:
+    material = material or DEFAULT_MATERIAL
+    emissive_variant = EmissiveVariant.EMISSIVE if emissive is not None and emissive.power > 0 else \
+        EmissiveVariant.NONE
+    reflect_variant = _REFLECT_MODES[reflective.mode] if reflective is not None else ReflectVariant.NONE
+    mix = 0.0
+    tint = glm.vec4(1.0)
+    if reflective is not None:
+        # Seed 004: a textured surface mixes its texture and the reflection 50/50 unless told.
+        mix = reflective.mix if reflective.mix is not None else (0.5 if material.texture is not None else 1.0)
+        tint = reflective.tint
+    return MaterialChoice(
+        emissive=emissive_variant,
+        refract=RefractVariant.ENVIRONMENT if refractive is not None else RefractVariant.NONE,
+        reflect=reflect_variant,
+        color=material.color,
+        surface=(material.metallic, material.roughness, emissive.power if emissive else 0.0, 0.0),
+        reflect_params=(mix, refractive.ior if refractive else 1.0, 0.0, 0.0),
+        tint=tint,
+    )

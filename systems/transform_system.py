@@ -1,0 +1,96 @@
+"""World matrices, recomputed only for transforms that changed (or whose parent did)."""
+from __future__ import annotations
+
+import esper
+import glm
+
+from components import Transform
+from engine.world import FrameEvents, World
+
+
+class TransformSystem(esper.Processor):
+    """Updates ``Transform.world`` for changed entities and their descendants.
+
+    Publishes ``world.frame`` (moved / added / removed entity sets) for later systems:
+    the renderer re-uploads only moved instances and probes will re-render only when
+    something near them moved.
+    """
+
+    def __init__(self, world: World) -> None:
+        self.world = world
+        self._parent_of: dict[int, int | None] = {}
+        self._children: dict[int, set[int]] = {}
+
+    def process(self, dt: float) -> None:
+        world = self.world
+        events = FrameEvents()
+        changed = world.changed(Transform)
+        if not changed:
+            world.frame = events
+            return
+        dirty: set[int] = set()
+        for entity in changed:
+            transform = world.try_get(entity, Transform) if world.exists(entity) else None
+            if transform is None:
+                if entity in self._parent_of:
+                    events.removed.add(entity)
+                    self._unlink(entity)
+                    dirty.update(self._children.pop(entity, ()))  # orphans become roots
+                continue
+            if entity in self._parent_of:
+                events.moved.add(entity)
+            else:
+                events.added.add(entity)
+            self._link(entity, transform.parent)
+            dirty.add(entity)
+        self._expand(dirty)
+        for entity in dirty:
+            parent = self._parent_of.get(entity)
+            if parent is None or parent not in dirty:
+                self._update_subtree(entity)
+        events.moved |= dirty - events.added
+        world.frame = events
+
+    def _link(self, entity: int, parent: int | None) -> None:
+        old = self._parent_of.get(entity)
+        if old is not None and old != parent:
+            self._children.get(old, set()).discard(entity)
+        if parent is not None:
+            ancestor = parent
+            while ancestor is not None:
+                if ancestor == entity:
+                    raise ValueError(f"Transform.parent of entity {entity} makes a cycle through {parent}")
+                ancestor = self._parent_of.get(ancestor)
+            self._children.setdefault(parent, set()).add(entity)
+        self._parent_of[entity] = parent
+
+    def _unlink(self, entity: int) -> None:
+        parent = self._parent_of.pop(entity, None)
+        if parent is not None:
+            self._children.get(parent, set()).discard(entity)
+
+    def _expand(self, dirty: set[int]) -> None:
+        stack = list(dirty)
+        while stack:
+            for child in self._children.get(stack.pop(), ()):
+                if child not in dirty:
+                    dirty.add(child)
+                    stack.append(child)
+
+    def _update_subtree(self, root: int) -> None:
+        world = self.world
+        stack = [root]
+        while stack:
+            entity = stack.pop()
+            transform = world.try_get(entity, Transform)
+            if transform is None:
+                continue
+            parent = self._parent_of.get(entity)
+            parent_t = world.try_get(parent, Transform) if parent is not None else None
+            local = transform.local_matrix()
+            object.__setattr__(transform, "_world", parent_t.world * local if parent_t is not None else local)
+            stack.extend(self._children.get(entity, ()))
+
+
+def world_position(transform: Transform) -> glm.vec3:
+    return glm.vec3(transform.world[3])
