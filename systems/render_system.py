@@ -16,7 +16,15 @@ import moderngl
 import numpy as np
 
 from components import (
-    Camera, DirectionalLight, Emissive, Material, MeshRef, PointLight, Reflective, Refractive, Skybox,
+    Camera,
+    DirectionalLight,
+    Emissive,
+    Material,
+    MeshRef,
+    PointLight,
+    Reflective,
+    Refractive,
+    Skybox,
     Transform,
 )
 from engine.render.instances import InstanceBatch

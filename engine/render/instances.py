@@ -111,7 +111,7 @@ class InstanceBatch:
         if len(starts) > _MAX_WRITE_RUNS:
             starts, ends = starts[:1], ends[-1:]
         sent = 0
-        for start, end in zip(starts.tolist(), ends.tolist()):
+        for start, end in zip(starts.tolist(), ends.tolist(), strict=True):
             self._buffer.write(self.rows[start:end].tobytes(), offset=start * size)
             sent += (end - start) * size
         return sent

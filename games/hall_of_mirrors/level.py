@@ -5,7 +5,14 @@ from __future__ import annotations
 import glm
 
 from components import (
-    DirectionalLight, Emissive, Material, MeshRef, PointLight, Reflective, Skybox, Transform,
+    DirectionalLight,
+    Emissive,
+    Material,
+    MeshRef,
+    PointLight,
+    Reflective,
+    Skybox,
+    Transform,
 )
 from engine import Game, World, spawn_camera
 from engine.mesh import box, plane, sphere
