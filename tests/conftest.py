@@ -1,0 +1,41 @@
+"""One EGL context for the whole test session (as moderngl's own tests do); every test gets
+its own world and must leave the context without a GL error."""
+from __future__ import annotations
+
+import pytest
+
+from engine.gl_context import create_headless_context
+from tests.support import SceneRunner
+
+
+@pytest.fixture(scope="session")
+def ctx():
+    context = create_headless_context()
+    yield context
+    context.release()
+
+
+@pytest.fixture(autouse=True)
+def _no_gl_error(request):
+    if "ctx" not in request.fixturenames:
+        yield
+        return
+    context = request.getfixturevalue("ctx")
+    assert context.error == "GL_NO_ERROR"
+    yield
+    assert context.error == "GL_NO_ERROR"
+
+
+@pytest.fixture
+def scene(ctx):
+    """``scene(build, size=(w, h))`` -> a SceneRunner; closed (world and GL objects) after the test."""
+    runners: list[SceneRunner] = []
+
+    def make(build, size=(160, 120)) -> SceneRunner:
+        runner = SceneRunner(ctx, build, size)
+        runners.append(runner)
+        return runner
+
+    yield make
+    for runner in runners:
+        runner.close()

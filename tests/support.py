@@ -1,0 +1,72 @@
+"""Helpers shared by the system tests: run a level on the test context, read pixels back."""
+from __future__ import annotations
+
+import glm
+import numpy as np
+
+from engine.app import Engine, Game
+from engine.render.targets import CaptureTarget
+from systems import Output
+
+
+class FunctionGame(Game):
+    """A Game whose level is one function (and an optional per-frame update)."""
+
+    def __init__(self, build, update=None) -> None:
+        self._build = build
+        self._update = update
+
+    def build(self, world) -> None:
+        self._build(world)
+
+    def update(self, world, dt: float) -> None:
+        if self._update:
+            self._update(world, dt)
+
+
+class SceneRunner:
+    """An Engine rendering into an RGBA8 capture target of ``size``."""
+
+    def __init__(self, ctx, build, size=(160, 120), update=None) -> None:
+        self.ctx = ctx
+        self.size = size
+        self.engine = Engine(FunctionGame(build, update), ctx)
+        self.world = self.engine.world
+        self.capture = CaptureTarget(ctx, size)
+        self._closed = False
+
+    def frame(self, dt: float = 1.0 / 60.0) -> np.ndarray:
+        """Render one frame; sRGB uint8 (h, w, 3), row 0 at the top."""
+        self.engine.frame(dt, Output(self.capture.framebuffer, self.size))
+        return self.capture.read_rgb()
+
+    def ids(self) -> np.ndarray:
+        return self.engine.renderer.targets.read_ids()
+
+    @property
+    def stats(self):
+        return self.engine.renderer.stats
+
+    def project(self, point) -> tuple[int, int]:
+        """Pixel (column, row from the top) where world ``point`` lands in the main view."""
+        view = self.engine.render_system.main_view
+        clip = view.view_proj * glm.vec4(glm.vec3(point), 1.0)
+        ndc = glm.vec3(clip) / clip.w
+        w, h = self.size
+        return int((ndc.x * 0.5 + 0.5) * w), int((1.0 - (ndc.y * 0.5 + 0.5)) * h)
+
+    def close(self) -> None:
+        if not self._closed:
+            self.capture.release()
+            self.engine.close()
+            self._closed = True
+
+
+def srgb_to_linear(values) -> np.ndarray:
+    c = np.asarray(values, np.float64) / 255.0
+    return np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
+
+
+def linear_to_srgb8(values) -> np.ndarray:
+    c = np.clip(np.asarray(values, np.float64), 0.0, 1.0)
+    return np.where(c <= 0.0031308, c * 12.92, 1.055 * c ** (1 / 2.4) - 0.055) * 255.0
