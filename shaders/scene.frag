@@ -8,6 +8,7 @@
 uniform sampler2D albedo_map;
 uniform bool has_albedo_map;
 uniform samplerCube sky_map;
+uniform float sky_face_size;   // texels across one face of sky_map
 
 in vec3 v_world_pos;
 in vec3 v_normal;
@@ -30,7 +31,19 @@ struct Surface {
     float metallic;
     float roughness;
     vec3 f0;
+    vec3 reflect_dir;   // unit, eye ray reflected about the normal
+    float reflect_lod;  // sky mip level that matches the pixel footprint of reflect_dir
+    vec3 refract_dir;
+    float refract_lod;
 };
+
+// Mip level of a cube map of face size n for a direction that changes across the pixel.
+// Computed from derivatives in main (uniform control flow), not with textureQueryLod,
+// whose cube-map answer differs between drivers (llvmpipe's is unusable).
+float cube_lod(vec3 direction, float n) {
+    float footprint = max(length(dFdx(direction)), length(dFdy(direction))) * n * 0.5;
+    return log2(max(footprint, 1e-6));
+}
 
 vec3 direct_lighting(Surface s) {
     vec3 diffuse = s.albedo * (1.0 - s.metallic) / PI;
@@ -60,15 +73,13 @@ vec3 direct_lighting(Surface s) {
 }
 
 // --- Reflect slot ---------------------------------------------------------------------
-vec3 sample_environment(vec3 direction, float roughness) {
-    float lod = textureQueryLod(sky_map, direction).y + roughness_lod_bias(roughness);
-    return textureLod(sky_map, direction, lod).rgb;
+vec3 sample_environment(vec3 direction, float lod, float roughness) {
+    return textureLod(sky_map, direction, lod + roughness_lod_bias(roughness)).rgb;
 }
 
 vec3 reflect_skybox(vec3 color, Surface s) {
     // Seed 004: sample the sky along reflect(view, normal); mix by the instance's amount.
-    vec3 r = reflect(-s.to_eye, s.normal);
-    vec3 env = sample_environment(r, s.roughness) * v_tint.rgb;
+    vec3 env = sample_environment(s.reflect_dir, s.reflect_lod, s.roughness) * v_tint.rgb;
     return mix(color, env, v_reflect.x);
 }
 
@@ -91,10 +102,9 @@ vec3 refract_environment(vec3 color, Surface s) {
     // Seed 002 part 2: environment seen along the refracted ray, weighted by Fresnel
     // transmittance, blended with the surface colour by alpha (alpha 0 = clear).
     float ior = v_reflect.y;
-    vec3 t = refract(-s.to_eye, s.normal, 1.0 / ior);
     float f0 = pow((ior - 1.0) / (ior + 1.0), 2.0);
     vec3 transmittance = vec3(1.0) - schlick_fresnel(s.to_eye, s.normal, vec3(f0));
-    vec3 transmitted = transmittance * s.albedo * sample_environment(t, s.roughness);
+    vec3 transmitted = transmittance * s.albedo * sample_environment(s.refract_dir, s.refract_lod, s.roughness);
     return mix(transmitted, color, s.alpha);
 }
 
@@ -126,6 +136,10 @@ void main() {
     s.metallic = v_surface.x;
     s.roughness = v_surface.y;
     s.f0 = mix(vec3(0.04), s.albedo, s.metallic);
+    s.reflect_dir = reflect(-s.to_eye, s.normal);
+    s.reflect_lod = cube_lod(s.reflect_dir, sky_face_size);
+    s.refract_dir = refract(-s.to_eye, s.normal, 1.0 / max(v_reflect.y, 1.0));
+    s.refract_lod = cube_lod(s.refract_dir, sky_face_size);
 
     vec3 color = direct_lighting(s);
     color = apply_reflect(v_slots.z, color, s);

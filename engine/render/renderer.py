@@ -70,6 +70,7 @@ class Renderer:
         self._textures: dict[int, _Shared] = {}
         self.batches: dict[tuple[int, int], InstanceBatch] = {}
         self.sky = flat_cube(ctx, BACKGROUND)
+        self.scene_program["sky_face_size"].value = self.sky.size[0]
         self.targets: RenderTargets | None = None
         self.stats = RenderStats()
         self.exposure = 1.0
@@ -125,6 +126,7 @@ class Renderer:
     def set_sky_faces(self, faces) -> None:
         old = self.sky
         self.sky = upload_cube(self.ctx, faces) if faces is not None else flat_cube(self.ctx, BACKGROUND)
+        self.scene_program["sky_face_size"].value = self.sky.size[0]
         old.release()
 
     def resource_counts(self) -> dict[str, int]:

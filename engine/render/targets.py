@@ -5,6 +5,16 @@ import moderngl
 import numpy as np
 
 
+def release_framebuffer(framebuffer: moderngl.Framebuffer) -> None:
+    """Release a framebuffer, first binding framebuffer 0 if it is the bound one: moderngl
+    re-binds its remembered framebuffer after creating another, and binding a deleted
+    name is GL_INVALID_OPERATION."""
+    ctx = framebuffer.ctx
+    if ctx.fbo is framebuffer:
+        ctx.detect_framebuffer(0).use()
+    framebuffer.release()
+
+
 class RenderTargets:
     """HDR colour (RGBA16F), entity id (R32UI) and depth of one size."""
 
@@ -24,7 +34,7 @@ class RenderTargets:
         return np.flipud(data.reshape(h, w)).copy()
 
     def release(self) -> None:
-        self.framebuffer.release()
+        release_framebuffer(self.framebuffer)
         for texture in (self.color, self.ids, self.depth):
             texture.release()
 
@@ -44,5 +54,5 @@ class CaptureTarget:
         return np.flipud(data).copy()
 
     def release(self) -> None:
-        self.framebuffer.release()
+        release_framebuffer(self.framebuffer)
         self.texture.release()

@@ -1,0 +1,297 @@
+"""System tests of the foundation renderer: real frames on llvmpipe, facts about pixels."""
+from __future__ import annotations
+
+import glm
+import numpy as np
+import pytest
+
+from components import (
+    Camera, DirectionalLight, Emissive, Material, MeshRef, Reflective, Skybox, Transform,
+)
+from engine.material_slots import EmissiveVariant, ReflectVariant
+from engine.mesh import box, plane, sphere
+from engine.render.sky import sky_radiance
+from engine.texture_data import checker_texture
+from tests.support import srgb_to_linear
+
+SIZE = (160, 120)
+EYE = glm.vec3(0.0, 0.0, 5.0)
+
+
+def camera(world, eye=EYE, fov=60.0):
+    return world.spawn(Transform(position=eye), Camera(fov_y=fov))
+
+
+def pixel_ray(runner, col: int, row: int) -> np.ndarray:
+    """World direction through the centre of pixel (col, row from top), from the camera math."""
+    view = runner.engine.render_system.main_view
+    w, h = runner.size
+    ndc = glm.vec4((col + 0.5) / w * 2 - 1, 1 - (row + 0.5) / h * 2, 1.0, 1.0)
+    far = glm.inverse(view.view_proj) * ndc
+    d = glm.normalize(glm.vec3(far) / far.w - view.eye)
+    return np.array(d)
+
+
+def test_frame_is_lit_and_not_black(scene):
+    def build(world):
+        camera(world)
+        world.spawn(DirectionalLight(direction=(0, 0, -1), intensity=2.0))
+        world.spawn(Transform(), MeshRef(box()), Material(color=(0.8, 0.2, 0.2)))
+
+    runner = scene(build, SIZE)
+    rgb = runner.frame()
+    col, row = runner.project((0, 0, 0.5))
+    r, g, b = rgb[row, col].astype(int)
+    assert r > 100 and r > g + 40 and r > b + 40, rgb[row, col]
+    assert rgb.std() > 5.0  # not one flat colour
+
+
+def test_emissive_adds_power_times_diffuse(scene):
+    diffuse = (0.2, 0.1, 0.05)
+    power = 1.5
+
+    def build(world):
+        camera(world)
+        world.spawn(DirectionalLight(direction=(0, 0, -1), intensity=1.0))
+        world.spawn(Transform(position=(-1.2, 0, 0)), MeshRef(box()), Material(color=diffuse))
+        world.spawn(Transform(position=(1.2, 0, 0)), MeshRef(box()), Material(color=diffuse), Emissive(power))
+
+    runner = scene(build, SIZE)
+    rgb = runner.frame()
+    plain = srgb_to_linear(rgb[runner.project((-1.2, 0, 0.5))[::-1]])
+    glowing = srgb_to_linear(rgb[runner.project((1.2, 0, 0.5))[::-1]])
+    np.testing.assert_allclose(glowing - plain, np.array(diffuse) * power, atol=0.012)
+
+
+def test_toggling_emissive_changes_slot_and_pixels_next_frame(scene):
+    entity = {}
+
+    def build(world):
+        camera(world)
+        world.spawn(DirectionalLight(direction=(0, 0, -1)))
+        entity["box"] = world.spawn(Transform(), MeshRef(box()), Material(color=(0.3, 0.3, 0.1)))
+
+    runner = scene(build, SIZE)
+    runner.frame()
+    px = runner.project((0, 0, 0.5))
+    before = runner.frame()[px[::-1]].astype(int)
+    batch = runner.engine.render_system._batch_of[entity["box"]]
+    assert batch.rows[batch.row_of[entity["box"]]]["slots"][0] == EmissiveVariant.NONE
+
+    runner.world.add_component(entity["box"], Emissive(2.0))
+    lit = runner.frame()[px[::-1]].astype(int)
+    assert batch.rows[batch.row_of[entity["box"]]]["slots"][0] == EmissiveVariant.EMISSIVE
+    assert (lit - before).min() > 40
+
+    runner.world.remove_component(entity["box"], Emissive)
+    after = runner.frame()[px[::-1]].astype(int)
+    assert batch.rows[batch.row_of[entity["box"]]]["slots"][0] == EmissiveVariant.NONE
+    assert np.abs(after - before).max() <= 1
+
+
+def _sphere_hit(origin, direction, centre, radius):
+    oc = origin - centre
+    b = np.dot(oc, direction)
+    c = np.dot(oc, oc) - radius * radius
+    disc = b * b - c
+    if disc < 0:
+        return None
+    return origin + direction * (-b - np.sqrt(disc))
+
+
+def test_chrome_sphere_shows_sky_along_the_reflected_direction(scene):
+    sky = Skybox()
+    eye = glm.vec3(0.0, 2.5, 4.0)  # from above, so the centre reflects the smooth upper sky
+
+    def build(world):
+        from components import look_rotation
+
+        world.spawn(Transform(position=eye, rotation=look_rotation(-eye)), Camera(fov_y=40.0))
+        world.spawn(sky)
+        world.spawn(Transform(), MeshRef(sphere(1.0, 96, 48)), Material(roughness=0.0), Reflective("skybox"))
+
+    runner = scene(build, SIZE)
+    rgb = runner.frame()
+    cx, cy = runner.project((0, 0, 0))
+    radius_px = abs(cx - runner.project((1.0, 0, 0))[0])
+    checked = 0
+    # The centre, and points near the rim whose reflections go up into the smooth part of the
+    # sky (towards the horizon line the footprint blur is legitimately large).
+    for dx, dy in ((0, 0), (0, 0.85), (0.6, 0.6), (-0.6, 0.6), (0.0, 0.5)):
+        col, row = int(cx + dx * radius_px), int(cy - dy * radius_px)
+        d = pixel_ray(runner, col, row)
+        hit = _sphere_hit(np.array(eye), d, np.zeros(3), 1.0)
+        assert hit is not None
+        n = hit / np.linalg.norm(hit)
+        r = d - 2 * np.dot(d, n) * n
+        expected = sky_radiance(sky, r)
+        got = srgb_to_linear(rgb[row, col])
+        np.testing.assert_allclose(got, expected, atol=0.03, err_msg=f"pixel {(col, row)} reflect {r}")
+        checked += 1
+    assert checked == 5
+    # And the background: each corner shows the sky along its own view ray.
+    for col, row in ((2, 2), (SIZE[0] - 3, 2), (2, SIZE[1] - 3), (SIZE[0] - 3, SIZE[1] - 3)):
+        expected = sky_radiance(sky, pixel_ray(runner, col, row))
+        np.testing.assert_allclose(srgb_to_linear(rgb[row, col]), expected, atol=0.02)
+
+
+def test_sky_faces_are_oriented(scene):
+    """Looking along each axis shows the sky of that axis (a wrong face order fails this)."""
+    sky = Skybox(zenith=(0.0, 0.0, 0.9), horizon=(0.5, 0.5, 0.5), ground=(0.0, 0.6, 0.0),
+                 sun_direction=(1.0, 0.2, 0.0))
+    cam = {}
+
+    def build(world):
+        cam["e"] = camera(world, eye=glm.vec3(0.0), fov=30.0)
+        world.spawn(sky)
+
+    runner = scene(build, (32, 32))
+    from components import look_rotation
+
+    for axis in ((1, 0, 0), (-1, 0, 0), (0, 1, 0.001), (0, -1, 0.001), (0, 0, 1), (0, 0, -1)):
+        runner.world.get(cam["e"], Transform).rotation = look_rotation(axis)
+        rgb = runner.frame()
+        expected = sky_radiance(sky, np.array(axis, float))
+        np.testing.assert_allclose(srgb_to_linear(rgb[16, 16]), expected, atol=0.03, err_msg=str(axis))
+
+
+def test_textured_reflector_is_the_average_of_texture_and_sky(scene):
+    sky = Skybox()
+    texture = checker_texture(64, 1, (180, 120, 60), (180, 120, 60))  # one flat colour
+    entity = {}
+
+    def build(world):
+        camera(world, eye=glm.vec3(0, 0, 3))
+        world.spawn(sky)
+        world.spawn(DirectionalLight(direction=(0, 0, -1), intensity=1.5))
+        entity["quad"] = world.spawn(Transform(rotation=glm.angleAxis(glm.radians(90), glm.vec3(1, 0, 0))),
+                                     MeshRef(plane(2, 2)),
+                                     Material(color=(1, 1, 1), texture=texture, roughness=0.0))
+
+    runner = scene(build, SIZE)
+    runner.frame()
+    col, row = runner.project((0.3, 0.2, 0))
+    plain = srgb_to_linear(runner.frame()[row, col])
+    runner.world.add_component(entity["quad"], Reflective("skybox"))
+    mixed = srgb_to_linear(runner.frame()[row, col])
+    d = pixel_ray(runner, col, row)
+    r = d - 2 * np.dot(d, [0, 0, 1]) * np.array([0, 0, 1])
+    expected = 0.5 * plain + 0.5 * sky_radiance(sky, r)
+    np.testing.assert_allclose(mixed, expected, atol=0.02)
+    batch = runner.engine.render_system._batch_of[entity["quad"]]
+    assert batch.rows[batch.row_of[entity["quad"]]]["slots"][2] == ReflectVariant.SKYBOX
+
+
+def test_id_image_marks_the_visible_entity(scene):
+    ids = {}
+
+    def build(world):
+        camera(world)
+        ids["left"] = world.spawn(Transform(position=(-1.5, 0, 0)), MeshRef(box()), Material())
+        ids["right"] = world.spawn(Transform(position=(1.5, 0, 0)), MeshRef(sphere()), Material())
+        ids["front"] = world.spawn(Transform(position=(1.5, 0, 1.5), scale=(0.3, 0.3, 0.3)), MeshRef(box()),
+                                   Material())
+
+    runner = scene(build, SIZE)
+    runner.frame()
+    image = runner.ids()
+    assert image.shape == (SIZE[1], SIZE[0]) and image.dtype == np.uint32
+    assert image[runner.project((-1.5, 0, 0.5))[::-1]] == ids["left"]
+    assert image[runner.project((1.5, 0.4, 0.3))[::-1]] == ids["right"]
+    assert image[runner.project((1.5, 0, 1.65))[::-1]] == ids["front"]  # in front of the sphere
+    assert image[2, 2] == 0  # sky
+    assert set(np.unique(image)) == {0, ids["left"], ids["right"], ids["front"]}
+    # Oriented like the PNG: the top row is above the objects, i.e. sky.
+    assert (image[0] == 0).all()
+
+
+def test_static_frame_uploads_nothing_and_draws_per_mesh(scene):
+    moving = {}
+
+    def build(world):
+        camera(world, eye=glm.vec3(0, 0, 30))
+        crate = box((0.5, 0.5, 0.5))
+        ball = sphere(0.3, 12, 6)
+        for i in range(200):
+            e = world.spawn(Transform(position=(i % 20 - 10, i // 20 - 5, 0)), MeshRef(crate if i % 2 else ball),
+                            Material())
+            if i == 7:
+                moving["e"] = e
+
+    runner = scene(build, SIZE)
+    runner.frame()
+    assert runner.stats.uploaded_bytes > 0
+    assert runner.stats.draw_calls == 3  # two meshes + sky
+    runner.frame()
+    assert runner.stats.uploaded_bytes == 0
+    runner.world.get(moving["e"], Transform).position += glm.vec3(0, 0, 1)
+    runner.frame()
+    from engine.render.instances import INSTANCE_DTYPE
+
+    assert runner.stats.uploaded_bytes == INSTANCE_DTYPE.itemsize
+
+
+def test_moving_a_parent_moves_its_child(scene):
+    ents = {}
+
+    def build(world):
+        camera(world)
+        ents["parent"] = world.spawn(Transform(position=(-1.5, 0, 0)))
+        ents["child"] = world.spawn(Transform(position=(0, 0, 0), parent=ents["parent"], scale=(0.6, 0.6, 0.6)),
+                                    MeshRef(box()), Material(color=(0.9, 0.9, 0.1)))
+
+    runner = scene(build, SIZE)
+    runner.frame()
+    assert runner.ids()[runner.project((-1.5, 0, 0.3))[::-1]] == ents["child"]
+    runner.world.get(ents["parent"], Transform).position = (1.5, 0, 0)
+    runner.frame()
+    assert ents["child"] in runner.world.frame.moved
+    image = runner.ids()
+    assert image[runner.project((1.5, 0, 0.3))[::-1]] == ents["child"]
+    assert image[runner.project((-1.5, 0, 0.3))[::-1]] == 0
+
+
+def test_entities_release_their_gpu_resources(scene):
+    def build(world):
+        camera(world)
+
+    runner = scene(build, (32, 32))
+    renderer = runner.engine.renderer
+    texture = checker_texture(16, 2)
+    for cycle in range(3):
+        spawned = [runner.world.spawn(Transform(position=(i, 0, 0)), MeshRef(box() if i % 2 else sphere(0.3, 8, 4)),
+                                      Material(texture=texture if i % 3 == 0 else None))
+                   for i in range(12)]
+        runner.frame()
+        counts = renderer.resource_counts()
+        assert counts["meshes"] == 12 and counts["textures"] == 1 and counts["batches"] == 12
+        for e in spawned:
+            runner.world.delete_entity(e)
+        runner.frame()
+        assert renderer.resource_counts() == {"meshes": 0, "textures": 0, "batches": 0}, cycle
+
+
+def test_minimised_output_renders_nothing_and_does_not_crash(scene, ctx):
+    from systems import Output
+
+    def build(world):
+        camera(world)
+        world.spawn(Transform(), MeshRef(box()), Material())
+
+    runner = scene(build, SIZE)
+    runner.engine.frame(1 / 60, Output(runner.capture.framebuffer, (0, 0)))
+    assert runner.stats.passes == 0
+    runner.frame()
+    assert runner.stats.passes == 1
+
+
+@pytest.mark.parametrize("size", [(64, 48), (97, 31)])
+def test_resizing_follows_the_output_size(scene, size):
+    def build(world):
+        camera(world)
+        world.spawn(Transform(), MeshRef(box()), Material())
+
+    runner = scene(build, size)
+    runner.frame()
+    assert runner.engine.renderer.targets.size == size
+    assert runner.ids().shape == (size[1], size[0])
