@@ -1,0 +1,101 @@
+"""The command line and the windowed shell, run as a user runs them."""
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+from PIL import Image
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def run_level(*args: str, env_extra: dict | None = None) -> subprocess.CompletedProcess:
+    env = {**os.environ, **(env_extra or {})}
+    return subprocess.run([sys.executable, "-m", "games.hall_of_mirrors", *args], cwd=ROOT, env=env,
+                          capture_output=True, text=True, timeout=300)
+
+
+def test_sample_level_headless_writes_frames_ids_and_scene(tmp_path):
+    out = tmp_path / "frames"
+    scene_file = tmp_path / "scene.glb"
+    result = run_level("--headless", "--frames", "2", "--size", "160x90", "--out", str(out), "--ids",
+                       "--export-scene", str(scene_file), "--camera", "0,1.7,6.5,0,-8")
+    assert result.returncode == 0, result.stderr
+    frames = sorted(out.glob("frame_*.png"))
+    assert [f.name for f in frames] == ["frame_0000.png", "frame_0001.png"]
+    image = np.asarray(Image.open(frames[-1]))
+    assert image.shape == (90, 160, 3)
+    assert image.std() > 20  # a real picture, not a flat or black frame
+    ids = np.load(out / "ids_0001.npy")
+    assert ids.shape == (90, 160) and ids.dtype == np.uint32
+    assert (ids[0] == 0).all()  # top row is sky
+
+    info = json.loads(scene_file.with_suffix(".json").read_text())
+    cam = info["camera"]
+    assert cam["image_size"] == [160, 90] and abs(cam["aspect"] - 160 / 90) < 1e-6
+    np.testing.assert_allclose(cam["position"], [0, 1.7, 6.5], atol=1e-5)
+    assert cam["forward"][2] < -0.9 and cam["forward"][1] < 0  # looking down -Z, a little down
+    renderable = {e for e, kinds in info["entities"].items() if "MeshRef" in kinds}
+    seen = {str(v) for v in np.unique(ids) if v}
+    assert seen and seen <= renderable  # the id image names renderable entities only
+
+    import trimesh
+
+    loaded = trimesh.load(str(scene_file), force="scene")
+    assert set(loaded.graph.nodes_geometry) == renderable  # one node per renderable entity
+    floor = loaded.geometry[min(renderable, key=int)]
+    assert np.ptp(floor.vertices[:, 0]) > 39  # world-space: the 40 m floor is 40 m wide
+
+
+def test_no_display_goes_headless_and_says_so(tmp_path):
+    env = {"DISPLAY": "", "WAYLAND_DISPLAY": ""}
+    result = run_level("--frames", "1", "--size", "64x36", "--out", str(tmp_path), env_extra=env)
+    assert result.returncode == 0, result.stderr
+    assert "running headless" in result.stderr
+    assert (tmp_path / "frame_0000.png").is_file()
+
+
+def test_bad_arguments_give_clear_errors(tmp_path):
+    result = run_level("--headless", "--size", "big", "--out", str(tmp_path))
+    assert result.returncode != 0 and "--size must look like 640x360" in result.stderr
+    result = run_level("--headless", "--camera", "1,2", "--out", str(tmp_path))
+    assert result.returncode != 0 and "--camera must be x,y,z,yaw,pitch" in result.stderr
+
+
+def test_window_shell_runs_under_moderngl_window_headless(tmp_path):
+    """The WindowConfig used for windowed runs, driven by moderngl-window's EGL headless window."""
+    import moderngl_window as mglw
+
+    from engine.window import make_window_config
+    from games.hall_of_mirrors import HallOfMirrors
+
+    config_cls = make_window_config(HallOfMirrors())
+    config = mglw.create_window_config_instance(
+        config_cls, args=["--window", "headless", "--backend", "egl", "--size", "96x54"])
+    try:
+        keys = config.wnd.keys
+        config.screenshots = tmp_path
+        config.on_render(0.0, 1 / 60)
+        cam = config.engine.render_system.active_camera()[2]
+        start = cam.position.z
+
+        class Mods:
+            shift = False
+
+        config.on_key_event(keys.W, keys.ACTION_PRESS, Mods())
+        for _ in range(10):
+            config.on_render(0.0, 1 / 30)
+        config.on_key_event(keys.W, keys.ACTION_RELEASE, Mods())
+        assert cam.position.z < start - 0.5  # W flew the camera forward (-Z)
+        config.on_mouse_drag_event(0, 0, 40, 0)
+        config.on_render(0.0, 1 / 60)
+        shot = config.screenshot()
+        assert np.asarray(Image.open(shot)).std() > 10
+        config.on_resize(0, 0)
+    finally:
+        config.on_close()
+        config.wnd.destroy()
