@@ -10,10 +10,13 @@ field (``t.position = ...``, ``t.position += ...``) or call :meth:`touch`.
 """
 from __future__ import annotations
 
+import dataclasses
 import math
+from numbers import Integral
 from typing import Any
 
 import glm
+import numpy as np
 
 
 class ComponentValueError(ValueError):
@@ -29,6 +32,11 @@ class TrackedComponent:
 
     def __setattr__(self, name: str, value: Any) -> None:
         if not name.startswith("_"):
+            fields = _field_names(type(self))
+            if fields is not None and name not in fields:
+                # A typo (``light.intesity = 5``) would otherwise be silently ignored.
+                raise AttributeError(f"{type(self).__name__} has no field {name!r} "
+                                     f"(fields: {', '.join(sorted(fields))})")
             value = self._validate(name, value)
         object.__setattr__(self, name, value)
         sink = self._sink
@@ -44,7 +52,24 @@ class TrackedComponent:
         return value
 
 
+_FIELDS: dict[type, frozenset[str] | None] = {}
+
+
+def _field_names(cls: type) -> frozenset[str] | None:
+    """The dataclass fields of a component class (None for a non-dataclass subclass)."""
+    try:
+        return _FIELDS[cls]
+    except KeyError:
+        names = frozenset(f.name for f in dataclasses.fields(cls)) if dataclasses.is_dataclass(cls) else None
+        _FIELDS[cls] = names
+        return names
+
+
 # --- validators used by the component classes -------------------------------------------
+
+def _not_a_number(value: Any) -> bool:
+    """Kinds ``float()`` would accept but a numeric field must not: text and booleans."""
+    return isinstance(value, (str, bytes, bool, np.bool_))
 
 def _fail(owner: object, name: str, value: Any, why: str) -> ComponentValueError:
     return ComponentValueError(f"{type(owner).__name__}.{name} {why}, got {value!r}")
@@ -53,6 +78,8 @@ def _fail(owner: object, name: str, value: Any, why: str) -> ComponentValueError
 def finite(owner: object, name: str, value: Any, *, low: float | None = None,
            high: float | None = None, positive: bool = False) -> float:
     """A finite float inside [low, high] (and > 0 when ``positive``)."""
+    if _not_a_number(value):
+        raise _fail(owner, name, value, "must be a number")
     try:
         number = float(value)
     except (TypeError, ValueError):
@@ -71,6 +98,8 @@ def finite(owner: object, name: str, value: Any, *, low: float | None = None,
 def vec3(owner: object, name: str, value: Any, *, low: float | None = None,
          nonzero: bool = False) -> glm.vec3:
     """A glm.vec3 of finite components (each >= low when given)."""
+    if _not_a_number(value) or isinstance(value, dict) or any(_not_a_number(c) for c in _items(value)):
+        raise _fail(owner, name, value, "must be three numbers")
     try:
         v = glm.vec3(value) if not isinstance(value, (int, float)) else glm.vec3(float(value))
     except (TypeError, ValueError):
@@ -87,8 +116,11 @@ def vec3(owner: object, name: str, value: Any, *, low: float | None = None,
 
 def color(owner: object, name: str, value: Any) -> glm.vec4:
     """A linear RGBA colour; RGB given alone gets alpha 1. Components in [0, inf), alpha <= 1."""
+    parts = [] if _not_a_number(value) or isinstance(value, dict) else _items(value)
+    if not parts or any(_not_a_number(c) for c in parts):
+        raise _fail(owner, name, value, "must be 3 or 4 numbers")
     try:
-        items = [float(c) for c in value]
+        items = [float(c) for c in parts]
     except (TypeError, ValueError):
         raise _fail(owner, name, value, "must be 3 or 4 numbers") from None
     if len(items) == 3:
@@ -102,7 +134,28 @@ def color(owner: object, name: str, value: Any) -> glm.vec4:
     return glm.vec4(*items)
 
 
+def boolean(owner: object, name: str, value: Any) -> bool:
+    """True or False (not 1, "yes" or None)."""
+    if not isinstance(value, (bool, np.bool_)):
+        raise _fail(owner, name, value, "must be True or False")
+    return bool(value)
+
+
+def integer(owner: object, name: str, value: Any, *, low: int, high: int) -> int:
+    """An int (Python or numpy, not bool) inside [low, high]."""
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, Integral) or not low <= value <= high:
+        raise _fail(owner, name, value, f"must be an int in [{low}, {high}]")
+    return int(value)
+
+
+def _items(value: Any) -> list[Any]:
+    try:
+        return list(value)
+    except TypeError:
+        return []
+
+
 def choice(owner: object, name: str, value: Any, options: tuple[str, ...]) -> str:
-    if value not in options:
+    if not isinstance(value, str) or value not in options:
         raise _fail(owner, name, value, f"must be one of {options}")
     return value

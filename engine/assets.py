@@ -5,7 +5,8 @@ from pathlib import Path
 
 import glm
 
-from components import Emissive, Material, MeshRef, Reflective, Transform
+from components import ComponentValueError, Emissive, Material, MeshRef, Reflective, Transform
+from engine.errors import AssetError
 from engine.mesh import load_model
 from engine.world import World
 
@@ -16,21 +17,40 @@ def spawn_model(world: World, path: str | Path, position=(0.0, 0.0, 0.0), rotati
 
     The file's material decides the components (seed 002): an emissive colour gives
     Emissive(emissive / diffuse); reflectivity > 0 gives Reflective.  The file is fully
-    loaded before anything is spawned, so a bad file leaves the world untouched.
+    loaded and every component built (so validated) before anything is spawned, so a bad
+    file leaves the world untouched.
     """
+    root_transform = Transform(position=position, rotation=rotation if rotation is not None else glm.quat(),
+                               scale=scale)
     parts = load_model(path)
-    root = world.spawn(Transform(position=position, rotation=rotation or glm.quat(), scale=scale))
-    for part in parts:
-        scale_v, rotation_q, translation, _skew, _persp = glm.vec3(), glm.quat(), glm.vec3(), glm.vec3(), glm.vec4()
-        glm.decompose(part.local, scale_v, rotation_q, translation, _skew, _persp)
-        components = [
-            Transform(position=translation, rotation=rotation_q, scale=scale_v, parent=root),
-            MeshRef(part.mesh),
-            Material(color=part.color, texture=part.texture, metallic=part.metallic, roughness=part.roughness),
-        ]
-        if part.emissive_factor > 0.0:
-            components.append(Emissive(part.emissive_factor))
-        if part.reflectivity > 0.0:
-            components.append(Reflective(mode="skybox", mix=part.reflectivity))
-        world.spawn(*components)
+    part_components = []
+    try:
+        for part in parts:
+            scale_v, rotation_q, translation = glm.vec3(), glm.quat(), glm.vec3()
+            if not glm.decompose(part.local, scale_v, rotation_q, translation, glm.vec3(), glm.vec4()):
+                raise ComponentValueError(f"node transform of {part.mesh.name!r} cannot be decomposed")
+            components = [
+                Transform(position=translation, rotation=rotation_q, scale=scale_v),  # parent set below
+                MeshRef(part.mesh),
+                Material(color=part.color, texture=part.texture, metallic=part.metallic, roughness=part.roughness),
+            ]
+            if part.emissive_factor > 0.0:
+                components.append(Emissive(part.emissive_factor))
+            if part.reflectivity > 0.0:
+                components.append(Reflective(mode="skybox", mix=part.reflectivity))
+            part_components.append(components)
+    except ComponentValueError as exc:
+        raise AssetError(f"mesh file {str(path)!r}: {exc}") from exc
+
+    spawned: list[int] = []
+    try:
+        root = world.spawn(root_transform)
+        spawned.append(root)
+        for components in part_components:
+            components[0].parent = root
+            spawned.append(world.spawn(*components))
+    except BaseException:
+        for entity in reversed(spawned):
+            world.delete_entity(entity)
+        raise
     return root

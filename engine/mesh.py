@@ -64,7 +64,31 @@ class Mesh:
             raise AssetError(f"mesh {name!r}: has no triangles")
         if uv is None or len(uv) != len(positions):
             uv = np.zeros((len(positions), 2), np.float32)
-        return cls(positions, np.asarray(tm.vertex_normals, np.float32), uv, np.asarray(tm.faces), name=name)
+        if not np.isfinite(positions).all():
+            raise AssetError(f"mesh {name!r}: has NaN or infinite vertex data")
+        return cls(positions, _unit_normals(tm), uv, np.asarray(tm.faces), name=name)
+
+
+def _unit_normals(tm) -> np.ndarray:
+    """The file's vertex normals made unit length; zero or broken ones are recomputed from the faces."""
+    normals = np.asarray(tm.vertex_normals, np.float64)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        length = np.linalg.norm(normals, axis=1)
+        bad = ~np.isfinite(length) | (length < 1e-12)
+        normals = normals / np.where(bad, 1.0, length)[:, None]
+    if bad.any():
+        import trimesh
+
+        faces = np.asarray(tm.faces)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            face_normals, valid = trimesh.triangles.normals(np.asarray(tm.vertices, np.float64)[faces])
+        fallback = np.zeros((len(faces), 3))
+        fallback[valid] = face_normals
+        computed = trimesh.geometry.mean_vertex_normals(len(normals), faces, fallback)
+        normals[bad] = computed[bad]
+        still_bad = ~np.isfinite(normals).all(axis=1) | (np.linalg.norm(normals, axis=1) < 1e-6)
+        normals[still_bad] = (0.0, 0.0, 1.0)  # vertices of degenerate triangles only
+    return normals.astype(np.float32)
 
 
 # --- primitives --------------------------------------------------------------------------
@@ -152,6 +176,8 @@ def load_model(path: str | Path) -> list[ModelPart]:
     if path.suffix.lower() not in SUPPORTED_SUFFIXES:
         raise AssetError(f"mesh file {str(path)!r}: unsupported type {path.suffix!r} "
                          f"(supported: {', '.join(SUPPORTED_SUFFIXES)})")
+    if path.stat().st_size == 0:
+        raise AssetError(f"mesh file {str(path)!r}: file is empty")
     try:
         loaded = trimesh.load(str(path), force="scene", process=False)
     except Exception as exc:  # trimesh raises many kinds for corrupt files
@@ -163,61 +189,94 @@ def load_model(path: str | Path) -> list[ModelPart]:
             tm = loaded.geometry[geom_name]
             if not isinstance(tm, trimesh.Trimesh) or len(tm.faces) == 0:
                 continue
+            matrix = np.asarray(matrix, np.float64)
+            if not np.isfinite(matrix).all():
+                raise AssetError(f"node {node!r} has a NaN or infinite transform")
             mesh = Mesh.from_trimesh(tm, name=f"{path.name}:{geom_name}")
-            part = ModelPart(mesh=mesh, local=glm.mat4(*np.asarray(matrix, np.float32).T.ravel()))
+            part = ModelPart(mesh=mesh, local=glm.mat4(*matrix.astype(np.float32).T.ravel()))
             _read_material(tm, part, path)
             parts.append(part)
     except AssetError as exc:
         raise AssetError(f"mesh file {str(path)!r}: {exc}") from exc
+    except Exception as exc:  # trimesh computing normals/visuals of malformed data
+        raise AssetError(f"mesh file {str(path)!r}: holds malformed mesh data "
+                         f"({type(exc).__name__}: {exc})") from exc
     if not parts:
         raise AssetError(f"mesh file {str(path)!r}: contains no triangle meshes")
     return parts
 
 
+def _unit_color(value) -> np.ndarray:
+    """A colour from trimesh (uint8 0..255 or float 0..1) as float RGBA."""
+    c = np.asarray(value)
+    c = c.astype(np.float64) / 255.0 if c.dtype.kind in "ui" else c.astype(np.float64)
+    if len(c) == 3:
+        c = np.append(c, 1.0)
+    return c[:4]
+
+
 def _read_material(tm, part: ModelPart, path: Path) -> None:
     """Fill colour, texture, PBR factors and the emissive factor from trimesh's visual."""
+    from trimesh.visual.material import SimpleMaterial
+
     visual = getattr(tm, "visual", None)
     material = getattr(visual, "material", None)
+    if isinstance(material, SimpleMaterial) and not (material.kwargs or getattr(material, "_name", None)):
+        # trimesh's placeholder for UVs without any material (a 2x2 grey image): the file has
+        # no material, so the engine's defaults apply.
+        material = None
     if material is None:
-        colors = getattr(visual, "vertex_colors", None)
-        if colors is not None and len(colors):
-            mean = np.asarray(colors, np.float32).mean(axis=0) / 255.0
+        if getattr(visual, "kind", None) in ("vertex", "face"):
+            mean = np.asarray(visual.vertex_colors, np.float64).mean(axis=0) / 255.0
             part.color = tuple(float(_srgb_to_linear(c)) for c in mean[:3]) + (float(mean[3]),)
         return
     if hasattr(material, "baseColorFactor"):  # glTF PBR
         base = material.baseColorFactor
         if base is not None:
-            base = np.asarray(base, np.float32)
-            base = base / 255.0 if base.max() > 1.0 else base
-            part.color = tuple(float(c) for c in base[:4]) if len(base) == 4 else (*map(float, base[:3]), 1.0)
+            part.color = tuple(float(c) for c in _unit_color(base))
         image = material.baseColorTexture
+        # glTF's defaults are 1.0; trimesh reports an absent factor as None.  The engine
+        # keeps its own defaults (dielectric, 0.5) for a file that says nothing.
         part.metallic = float(material.metallicFactor if material.metallicFactor is not None else 0.0)
         part.roughness = float(material.roughnessFactor if material.roughnessFactor is not None else 0.5)
-        emissive = material.emissiveFactor
+        emissive = _floats(material.emissiveFactor)
         part.reflectivity = part.metallic
     else:  # OBJ/MTL SimpleMaterial
-        diffuse = np.asarray(material.diffuse, np.float32) / 255.0
-        part.color = tuple(float(c) for c in diffuse[:4])
+        extra = {str(k).lower(): v for k, v in (getattr(material, "kwargs", {}) or {}).items()}
+        kd = _floats(extra.get("kd"))  # the file's exact floats (material.diffuse is quantized to uint8)
+        color = _unit_color(material.diffuse)
+        if kd is not None and len(kd) >= 3:
+            color[:3] = kd[:3]
+        if extra.get("d") is not None:
+            color[3] = _first(extra.get("d"), 1.0)
+        elif extra.get("tr") is not None:
+            color[3] = 1.0 - _first(extra.get("tr"), 0.0)
+        part.color = tuple(float(c) for c in color)
         image = material.image
-        extra = getattr(material, "kwargs", {}) or {}
         emissive = _floats(extra.get("ke"))
         part.metallic = _first(extra.get("pm"), 0.0)
         part.roughness = _first(extra.get("pr"), 0.5)
         part.reflectivity = max(part.metallic, _first(extra.get("refl"), 0.0))
-    if emissive is not None and len(emissive) >= 1 and max(emissive[:3]) > 0.0:
-        # Seed 002: the file stores emissive as a multiple of diffuse; the factor is their
-        # ratio (taken on the strongest channel, so a pure-blue lamp still works).
-        channel = int(np.argmax(part.color[:3]))
-        diffuse = max(part.color[channel], 1e-6)
-        part.emissive_factor = float(np.clip(emissive[min(channel, len(emissive) - 1)] / diffuse, 0.0, 1e4))
+    if not all(np.isfinite(c) and c >= 0.0 for c in part.color) or part.color[3] > 1.0:
+        raise AssetError(f"material diffuse colour {part.color} must be finite, >= 0, alpha <= 1")
+    if emissive is not None and len(emissive) >= 1:
+        if not all(np.isfinite(e) and e >= 0.0 for e in emissive[:3]):
+            raise AssetError(f"material emissive colour {emissive[:3]} must be finite and >= 0")
+        if max(emissive[:3]) > 0.0:
+            # Seed 002: the file stores emissive as a multiple of diffuse; the factor is their
+            # ratio (taken on the strongest channel, so a pure-blue lamp still works).
+            channel = int(np.argmax(part.color[:3]))
+            diffuse = max(part.color[channel], 1e-6)
+            part.emissive_factor = float(np.clip(emissive[min(channel, len(emissive) - 1)] / diffuse, 0.0, 1e4))
     if image is not None:
         try:
             part.texture = TextureData(np.asarray(image.convert("RGBA")), name=f"{path.name}:texture")
         except Exception as exc:
             raise AssetError(f"texture of {str(path)!r} cannot be decoded ({exc})") from exc
-    for name in ("metallic", "roughness"):
-        if not 0.0 <= getattr(part, name) <= 1.0:
-            raise AssetError(f"material {name} {getattr(part, name)} is outside 0..1")
+    for name in ("metallic", "roughness", "reflectivity"):
+        value = getattr(part, name)
+        if not (np.isfinite(value) and 0.0 <= value <= 1.0):
+            raise AssetError(f"material {name} {value} is outside 0..1")
 
 
 def _floats(value) -> list[float] | None:

@@ -1,0 +1,11 @@
+"""Speculum benchmarks: ``python -m benchmarks <name> [--json]``.
+
+Each benchmark is a module of this package with ``add_arguments(parser)`` and
+``main(args) -> int``; ``SUITES`` names them (``mirrors`` and ``portals`` come later).
+"""
+from __future__ import annotations
+
+# name -> (module, one-line description)
+SUITES: dict[str, tuple[str, str]] = {
+    "ecs": ("benchmarks.ecs", "ECS systems + instance upload per frame at 100 / 1,000 / 10,000 entities"),
+}

@@ -1,0 +1,45 @@
+"""A planar mirror on the entity's flat mesh (or on an explicit plane)."""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import glm
+
+from components.tracking import ComponentValueError, TrackedComponent, color, finite, vec3
+
+
+@dataclass(eq=False)
+class Mirror(TrackedComponent):
+    """Reflects the scene in the plane of its flat mesh (seed 000, 002 part 3, 003).
+
+    ``color`` tints the reflection, ``reflect_rate`` mixes it with the mirror's own shading,
+    ``roughness`` blurs it (seed 002's mip bias), ``max_depth`` limits mirrors seen in
+    mirrors.  ``plane_point``/``plane_normal`` (model space) override the plane found from
+    the mesh; a non-flat mesh without them is an error.
+    """
+
+    color: Any = field(default_factory=lambda: glm.vec4(1.0))
+    reflect_rate: float = 1.0
+    roughness: float = 0.0
+    resolution_scale: float = 1.0
+    max_depth: int = 3
+    enabled: bool = True
+    plane_point: Any = None
+    plane_normal: Any = None
+
+    def _validate(self, name: str, value: Any) -> Any:
+        if name == "color":
+            return color(self, name, value)
+        if name in ("reflect_rate", "roughness"):
+            return finite(self, name, value, low=0.0, high=1.0)
+        if name == "resolution_scale":
+            return finite(self, name, value, low=0.05, high=1.0)
+        if name == "max_depth":
+            if not isinstance(value, int) or isinstance(value, bool) or not 0 <= value <= 16:
+                raise ComponentValueError(f"Mirror.max_depth must be an int in [0, 16], got {value!r}")
+        if name == "plane_point" and value is not None:
+            return vec3(self, name, value)
+        if name == "plane_normal" and value is not None:
+            return glm.normalize(vec3(self, name, value, nonzero=True))
+        return value
