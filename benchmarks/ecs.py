@@ -19,7 +19,7 @@ back to back without drawing; that cost is real for a frame and is left in.
 Each size runs ``--warmup`` frames (the first uploads every instance), then ``--frames``
 timed frames with the movers moving, then ``--frames`` frames where nothing is assigned:
 ``static_uploaded_bytes`` is the most any of those uploaded and must be 0 (the exit status
-is 1 otherwise).  ``draw_calls``,
+is 1 otherwise) and ``static_cpu_ms_median`` is their cost.  ``draw_calls``,
 ``uploaded_bytes`` and ``instances`` are medians of ``engine.renderer.stats`` over the
 timed moving frames.
 

@@ -6,7 +6,7 @@ from typing import Any
 
 import glm
 
-from components.tracking import ComponentValueError, TrackedComponent, color, finite, vec3
+from components.tracking import ComponentValueError, TrackedComponent, boolean, color, finite, vec3
 
 
 @dataclass(eq=False)
@@ -22,12 +22,17 @@ class Camera(TrackedComponent):
         if name == "fov_y":
             return finite(self, name, value, low=1.0, high=179.0)
         if name in ("near", "far"):
-            return finite(self, name, value, positive=True)
+            value = finite(self, name, value, positive=True)
+            # Checked on every write, not only at construction (the other plane is in
+            # __dict__ once set; during __init__ ``near`` comes first).
+            near = value if name == "near" else self.__dict__.get("near")
+            far = value if name == "far" else self.__dict__.get("far")
+            if near is not None and far is not None and far <= near:
+                raise ComponentValueError(f"Camera.{name} must keep far > near, got near={near} far={far}")
+            return value
+        if name == "active":
+            return boolean(self, name, value)
         return value
-
-    def __post_init__(self) -> None:
-        if self.far <= self.near:
-            raise ComponentValueError(f"Camera.far must be > near, got near={self.near} far={self.far}")
 
 
 @dataclass(eq=False)

@@ -5,8 +5,9 @@ from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
 import glm
+import numpy as np
 
-from components.tracking import ComponentValueError, TrackedComponent, choice, color, finite
+from components.tracking import ComponentValueError, TrackedComponent, boolean, choice, color, finite, integer
 
 if TYPE_CHECKING:
     from engine.mesh import Mesh
@@ -25,6 +26,8 @@ class MeshRef(TrackedComponent):
 
         if name == "mesh" and not isinstance(value, Mesh):
             raise ComponentValueError(f"MeshRef.mesh must be an engine.mesh.Mesh, got {type(value).__name__}")
+        if name == "visible":
+            return boolean(self, name, value)
         return value
 
 
@@ -133,6 +136,23 @@ class Skybox(TrackedComponent):
 
             return glm.normalize(vec3(self, name, value, nonzero=True))
         if name == "face_size":
-            if not isinstance(value, int) or not 4 <= value <= 2048:
-                raise ComponentValueError(f"Skybox.face_size must be an int in [4, 2048], got {value!r}")
+            return integer(self, name, value, low=4, high=2048)
+        if name == "faces" and value is not None:
+            return _sky_faces(value)
         return value
+
+
+def _sky_faces(value: Any) -> np.ndarray:
+    """Six square HxWx3 linear images as one (6, n, n, 3) float32 array (checked here, not at render)."""
+    try:
+        faces = np.asarray(value, np.float32)
+    except (TypeError, ValueError):
+        raise ComponentValueError(
+            f"Skybox.faces must be six square HxWx3 float images, got {type(value).__name__}") from None
+    if faces.ndim != 4 or faces.shape[0] != 6 or faces.shape[1] != faces.shape[2] or faces.shape[3] != 3 \
+            or not 1 <= faces.shape[1] <= 2048:
+        raise ComponentValueError(
+            f"Skybox.faces must be six square HxWx3 images (side 1..2048), got shape {faces.shape}")
+    if not np.isfinite(faces).all() or faces.min() < 0.0 or faces.max() > 65504.0:
+        raise ComponentValueError("Skybox.faces must hold finite linear colours in [0, 65504] (half floats)")
+    return faces

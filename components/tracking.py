@@ -71,6 +71,7 @@ def _not_a_number(value: Any) -> bool:
     """Kinds ``float()`` would accept but a numeric field must not: text and booleans."""
     return isinstance(value, (str, bytes, bool, np.bool_))
 
+
 def _fail(owner: object, name: str, value: Any, why: str) -> ComponentValueError:
     return ComponentValueError(f"{type(owner).__name__}.{name} {why}, got {value!r}")
 

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from numbers import Integral
 from typing import Any
 
 import glm
@@ -50,8 +51,10 @@ class Transform(TrackedComponent):
             if glm.length(q) == 0.0:
                 raise ComponentValueError("Transform.rotation must not be the zero quaternion")
             return glm.normalize(q)
-        if name == "parent" and value is not None and (not isinstance(value, int) or value <= 0):
-            raise ComponentValueError(f"Transform.parent must be an entity id or None, got {value!r}")
+        if name == "parent" and value is not None:
+            if isinstance(value, bool) or not isinstance(value, Integral) or value <= 0:
+                raise ComponentValueError(f"Transform.parent must be an entity id or None, got {value!r}")
+            return int(value)
         return value
 
 

@@ -8,13 +8,16 @@ from components import Camera, FlyController, Transform, yaw_pitch_rotation
 from engine.gl_context import prepare_context
 from engine.render.renderer import Renderer
 from engine.world import World
-from systems import FlyCameraSystem, Output, RenderSystem, TransformSystem
+from systems import FlyCameraSystem, Output, PresentSystem, RenderSystem, TransformSystem
+from systems.reflection_system import ReflectionSystem
 
 # System order, high priority first (see ARCHITECTURE.md).
 PRIORITY_GAME = 100
 PRIORITY_INPUT = 90
 PRIORITY_TRANSFORM = 50
 PRIORITY_RENDER = 0
+PRIORITY_REFLECT = -10
+PRIORITY_PRESENT = -100
 
 
 class Game:
@@ -53,6 +56,9 @@ class Engine:
         self.world.add_system(FlyCameraSystem(self.world), PRIORITY_INPUT)
         self.world.add_system(TransformSystem(self.world), PRIORITY_TRANSFORM)
         self.world.add_system(self.render_system, PRIORITY_RENDER)
+        self.reflection_system = ReflectionSystem(self.world, self.render_system, self.renderer)
+        self.world.add_system(self.reflection_system, PRIORITY_REFLECT)
+        self.world.add_system(PresentSystem(self.render_system, self.renderer), PRIORITY_PRESENT)
         try:
             game.build(self.world)
         except BaseException:

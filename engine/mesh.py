@@ -192,6 +192,9 @@ def load_model(path: str | Path) -> list[ModelPart]:
             matrix = np.asarray(matrix, np.float64)
             if not np.isfinite(matrix).all():
                 raise AssetError(f"node {node!r} has a NaN or infinite transform")
+            singular = np.linalg.svd(matrix[:3, :3], compute_uv=False)
+            if singular[-1] <= 1e-9 * singular[0] or singular[0] == 0.0:
+                continue  # scaled to nothing (files hide nodes this way): it would draw nothing
             mesh = Mesh.from_trimesh(tm, name=f"{path.name}:{geom_name}")
             part = ModelPart(mesh=mesh, local=glm.mat4(*matrix.astype(np.float32).T.ravel()))
             _read_material(tm, part, path)

@@ -19,8 +19,15 @@ flat in vec4 v_reflect;
 flat in vec4 v_tint;
 flat in uvec4 v_slots;
 
+// Reflection levels draw only the pixels of their own view (see mirror_mask.frag).
+uniform bool masked;
+uniform usampler2D node_map;
+uniform uint node_index;
+
 layout(location = 0) out vec4 out_color;
-layout(location = 1) out uint out_entity;
+layout(location = 1) out uint out_surface;  // the entity drawn here
+layout(location = 2) out uint out_seen;     // the entity finally seen here (reflections overwrite)
+layout(location = 3) out uint out_node;
 
 struct Surface {
     vec3 position;
@@ -86,12 +93,14 @@ vec3 reflect_skybox(vec3 color, Surface s) {
 vec3 apply_reflect(uint variant, vec3 color, Surface s) {
     switch (variant) {
         case REFLECT_SKYBOX:
-        // Planar, cube and portal variants land with their issues; until then they show
-        // the sky, which is what those surfaces reflect when nothing else is there.
-        case REFLECT_PLANAR:
+        // Cube and portal variants land with their issues; until then they show the sky,
+        // which is what those surfaces reflect when nothing else is there.
         case REFLECT_CUBE:
         case REFLECT_PORTAL:
             return reflect_skybox(color, s);
+        case REFLECT_PLANAR:
+            // A mirror keeps its own shading here; the ReflectionSystem blends its
+            // reflection over these pixels once the reflection has been rendered.
         default:
             return color;
     }
@@ -124,6 +133,7 @@ vec3 apply_emissive(uint variant, vec3 color, Surface s) {
 }
 
 void main() {
+    if (masked && texelFetch(node_map, ivec2(gl_FragCoord.xy), 0).r != node_index) discard;
     Surface s;
     s.position = v_world_pos;
     s.to_eye = normalize(camera.eye.xyz - v_world_pos);
@@ -146,5 +156,7 @@ void main() {
     color = apply_refract(v_slots.y, color, s);
     color = apply_emissive(v_slots.x, color, s);
     out_color = vec4(color, 1.0);
-    out_entity = v_slots.w;
+    out_surface = v_slots.w;
+    out_seen = v_slots.w;
+    out_node = node_index;
 }

@@ -34,4 +34,5 @@ void main() {
     v_tint = in_tint;
     v_slots = in_slots;
     gl_Position = camera.view_proj * world;
+    gl_ClipDistance[0] = dot(world, camera.clip_plane);
 }

@@ -1,6 +1,7 @@
 """Systems: the only place behaviour lives. Each is an esper processor run once a frame."""
 from systems.fly_camera_system import FlyCameraSystem, Input
+from systems.present_system import PresentSystem
 from systems.render_system import Output, RenderSystem
 from systems.transform_system import TransformSystem
 
-__all__ = ["FlyCameraSystem", "Input", "Output", "RenderSystem", "TransformSystem"]
+__all__ = ["FlyCameraSystem", "Input", "Output", "PresentSystem", "RenderSystem", "TransformSystem"]

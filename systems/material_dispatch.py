@@ -6,7 +6,7 @@ from dataclasses import dataclass
 
 import glm
 
-from components import Emissive, Material, Reflective, Refractive
+from components import Emissive, Material, Mirror, Reflective, Refractive
 from engine.material_slots import EmissiveVariant, ReflectVariant, RefractVariant
 
 _REFLECT_MODES = {
@@ -30,7 +30,8 @@ class MaterialChoice:
 
 
 def choose_material(material: Material | None, emissive: Emissive | None,
-                    reflective: Reflective | None, refractive: Refractive | None) -> MaterialChoice:
+                    reflective: Reflective | None, refractive: Refractive | None,
+                    mirror: Mirror | None = None) -> MaterialChoice:
     material = material or DEFAULT_MATERIAL
     emissive_variant = EmissiveVariant.EMISSIVE if emissive is not None and emissive.power > 0 else \
         EmissiveVariant.NONE
@@ -41,6 +42,11 @@ def choose_material(material: Material | None, emissive: Emissive | None,
         # Seed 004: a textured surface mixes its texture and the reflection 50/50 unless told.
         mix = reflective.mix if reflective.mix is not None else (0.5 if material.texture is not None else 1.0)
         tint = reflective.tint
+    if mirror is not None and mirror.enabled:
+        # The ReflectionSystem blends the mirror's image over its own shading afterwards.
+        reflect_variant = ReflectVariant.PLANAR
+    elif reflect_variant == ReflectVariant.PLANAR:
+        reflect_variant = ReflectVariant.SKYBOX  # planar needs a Mirror; the sky is the fallback
     return MaterialChoice(
         emissive=emissive_variant,
         refract=RefractVariant.ENVIRONMENT if refractive is not None else RefractVariant.NONE,

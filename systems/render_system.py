@@ -3,7 +3,8 @@
 Phases of a frame (see ARCHITECTURE.md):
   extract  - instance records of entities whose mesh, material or transform changed
   prepare  - upload changed instance rows, lights, the sky when the Skybox changed
-  render   - one pass per view (the main camera now), then present to the output
+  render   - the main camera's view into level-0 targets (reflections and present follow
+             in their own systems)
 Nothing here writes game state.
 """
 from __future__ import annotations
@@ -21,6 +22,7 @@ from components import (
     Emissive,
     Material,
     MeshRef,
+    Mirror,
     PointLight,
     Reflective,
     Refractive,
@@ -34,7 +36,7 @@ from engine.render.views import View, camera_view, lights_block
 from engine.world import World
 from systems.material_dispatch import choose_material
 
-MATERIAL_KINDS = (MeshRef, Material, Emissive, Reflective, Refractive)
+MATERIAL_KINDS = (MeshRef, Material, Emissive, Reflective, Refractive, Mirror)
 AMBIENT = (0.03, 0.03, 0.035)
 
 
@@ -89,7 +91,7 @@ class RenderSystem(esper.Processor):
         else:
             row = batch.row(entity)
         choice = choose_material(material, world.try_get(entity, Emissive), world.try_get(entity, Reflective),
-                                 world.try_get(entity, Refractive))
+                                 world.try_get(entity, Refractive), world.try_get(entity, Mirror))
         row["color"] = choice.color
         row["surface"] = choice.surface
         row["reflect"] = choice.reflect_params
@@ -135,10 +137,9 @@ class RenderSystem(esper.Processor):
             self.main_view = None  # minimised window or nothing to look through
             return
         _, cam, cam_t = camera
-        targets = renderer.ensure_targets(output.size)
+        targets = renderer.level_targets(0, output.size)
         self.main_view = camera_view(cam_t.world, cam.fov_y, cam.near, cam.far, output.size)
-        renderer.render_view(self.main_view, targets.framebuffer)
-        renderer.present(output.framebuffer, output.size)
+        renderer.render_view(self.main_view, targets)
 
     def close(self) -> None:
         for entity, batch in list(self._batch_of.items()):

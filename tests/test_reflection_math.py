@@ -6,7 +6,12 @@ import numpy as np
 import pytest
 
 from engine.reflection_math import (
-    MIRROR_X, mirrored_view, oblique_projection, plane_from_point_normal, reflect_camera, reflection_matrix,
+    MIRROR_X,
+    mirrored_view,
+    oblique_projection,
+    plane_from_point_normal,
+    reflect_camera,
+    reflection_matrix,
     transform_plane,
 )
 

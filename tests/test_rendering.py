@@ -6,7 +6,14 @@ import numpy as np
 import pytest
 
 from components import (
-    Camera, DirectionalLight, Emissive, Material, MeshRef, Reflective, Skybox, Transform,
+    Camera,
+    DirectionalLight,
+    Emissive,
+    Material,
+    MeshRef,
+    Reflective,
+    Skybox,
+    Transform,
 )
 from engine.material_slots import EmissiveVariant, ReflectVariant
 from engine.mesh import box, plane, sphere

@@ -23,7 +23,9 @@ CAMERA_BINDING = 0
 LIGHTS_BINDING = 1
 ALBEDO_UNIT = 0
 SKY_UNIT = 1
+NODE_UNIT = 2
 GL_SRGB8_ALPHA8 = 0x8C43
+GL_CLIP_DISTANCE0 = 0x3000
 BACKGROUND = (0.05, 0.05, 0.06)
 
 
@@ -35,6 +37,7 @@ class RenderStats:
     draw_calls: int = 0
     uploaded_bytes: int = 0
     instances: int = 0
+    reflection_views: int = 0
 
 
 class _Shared:
@@ -60,6 +63,7 @@ class Renderer:
         self.scene_program["Lights"].binding = LIGHTS_BINDING
         self.scene_program["albedo_map"].value = ALBEDO_UNIT
         self.scene_program["sky_map"].value = SKY_UNIT
+        self.scene_program["node_map"].value = NODE_UNIT
         self.sky_program["sky_map"].value = SKY_UNIT
         self.present_program["hdr_image"].value = 0
         self.camera_ubo = ctx.buffer(reserve=CAMERA_BLOCK_BYTES)
@@ -71,9 +75,10 @@ class Renderer:
         self.batches: dict[tuple[int, int], InstanceBatch] = {}
         self.sky = flat_cube(ctx, BACKGROUND)
         self.scene_program["sky_face_size"].value = self.sky.size[0]
-        self.targets: RenderTargets | None = None
+        self.levels: list[RenderTargets] = []   # [0] is the main view; more for reflections
         self.stats = RenderStats()
         self.exposure = 1.0
+        ctx.enable_direct(GL_CLIP_DISTANCE0)
 
     # --- shared resources ------------------------------------------------------------------
     def batch_for(self, mesh: Mesh, texture: TextureData | None) -> InstanceBatch:
@@ -134,12 +139,20 @@ class Renderer:
         return {"meshes": len(self._meshes), "textures": len(self._textures), "batches": len(self.batches)}
 
     # --- frame -----------------------------------------------------------------------------
-    def ensure_targets(self, size: tuple[int, int]) -> RenderTargets:
-        if self.targets is None or self.targets.size != size:
-            if self.targets is not None:
-                self.targets.release()
-            self.targets = RenderTargets(self.ctx, size)
-        return self.targets
+    @property
+    def targets(self) -> RenderTargets | None:
+        """The main view's targets (level 0)."""
+        return self.levels[0] if self.levels else None
+
+    def level_targets(self, level: int, size: tuple[int, int]) -> RenderTargets:
+        """The targets of a reflection level (0 = main view), made on first use, remade on resize."""
+        if self.levels and self.levels[0].size != size:
+            for targets in self.levels:
+                targets.release()
+            self.levels.clear()
+        while len(self.levels) <= level:
+            self.levels.append(RenderTargets(self.ctx, size))
+        return self.levels[level]
 
     def upload_instances(self) -> int:
         sent = sum(batch.upload() for batch in self.batches.values())
@@ -149,16 +162,32 @@ class Renderer:
     def set_lights(self, block: bytes) -> None:
         self.lights_ubo.write(block)
 
-    def render_view(self, view: View, framebuffer: moderngl.Framebuffer) -> None:
-        """Draw every batch, then the sky behind it, from ``view`` into ``framebuffer``."""
-        ctx = self.ctx
-        framebuffer.use()
-        ctx.viewport = (0, 0, *view.size)
-        ctx.enable(moderngl.DEPTH_TEST | moderngl.CULL_FACE)
-        ctx.depth_func = "<"
-        framebuffer.clear(depth=1.0)
+    def bind_view(self, view: View) -> None:
+        """Make ``view`` the Camera block every program reads."""
         self.camera_ubo.write(view.camera_block())
         self.camera_ubo.bind_to_uniform_block(CAMERA_BINDING)
+
+    def render_view(self, view: View, targets: RenderTargets, mask: RenderTargets | None = None) -> None:
+        """Draw every batch from ``view`` into ``targets``.
+
+        The main view clears and draws the sky behind the geometry.  A reflection view
+        (``mask`` given) draws only where its level's node image names it, over a depth
+        buffer the mask pass prepared, and leaves the sky to the composite.
+        """
+        ctx = self.ctx
+        targets.framebuffer.use()
+        ctx.viewport = (0, 0, *view.size)
+        ctx.scissor = view.scissor
+        ctx.enable(moderngl.DEPTH_TEST | moderngl.CULL_FACE)
+        ctx.front_face = "cw" if view.mirrored else "ccw"
+        ctx.depth_func = "<"
+        if mask is None:
+            targets.framebuffer.clear(depth=1.0)
+        else:
+            mask.node.use(NODE_UNIT)
+        self.scene_program["masked"].value = mask is not None
+        self.scene_program["node_index"].value = view.node
+        self.bind_view(view)
         self.lights_ubo.bind_to_uniform_block(LIGHTS_BINDING)
         self.sky.use(SKY_UNIT)
         has_map = self.scene_program["has_albedo_map"]
@@ -171,16 +200,20 @@ class Renderer:
             batch.draw(self.scene_program)
             self.stats.draw_calls += 1
             self.stats.instances += batch.count
-        ctx.depth_func = "<="
-        ctx.disable(moderngl.CULL_FACE)
-        self.fullscreen_sky.render(moderngl.TRIANGLES, vertices=3)
-        self.stats.draw_calls += 1
+        if mask is None:
+            ctx.depth_func = "<="
+            ctx.disable(moderngl.CULL_FACE)
+            self.fullscreen_sky.render(moderngl.TRIANGLES, vertices=3)
+            self.stats.draw_calls += 1
+        ctx.front_face = "ccw"
+        ctx.scissor = None
         self.stats.passes += 1
 
     def present(self, output: moderngl.Framebuffer, size: tuple[int, int]) -> None:
         """Encode the HDR image to sRGB into ``output`` (a window's or a capture target)."""
         assert self.targets is not None
         output.use()
+        self.ctx.scissor = None
         self.ctx.viewport = (0, 0, *size)
         self.ctx.disable(moderngl.DEPTH_TEST | moderngl.CULL_FACE)
         self.targets.color.use(0)
@@ -195,9 +228,9 @@ class Renderer:
             for shared in table.values():
                 shared.obj.release()
             table.clear()
-        if self.targets is not None:
-            self.targets.release()
-            self.targets = None
+        for targets in self.levels:
+            targets.release()
+        self.levels.clear()
         for obj in (self.sky, self.camera_ubo, self.lights_ubo, self.fullscreen_sky, self.fullscreen_present):
             obj.release()
         self.shaders.release()

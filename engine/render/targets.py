@@ -1,8 +1,15 @@
-"""Render targets of the main view: linear HDR colour, entity ids, depth."""
+"""Render targets: one screen-sized set per reflection level, and the capture target.
+
+Level 0 is the main view; level L+1 holds what mirrors seen at level L reflect.  Every
+level has the same size as the screen, so a pixel at any level lines up with the screen
+pixel it will be composited into, and the regions of different mirrors never overlap.
+"""
 from __future__ import annotations
 
 import moderngl
 import numpy as np
+
+NO_NODE = 0xFFFFFFFF
 
 
 def release_framebuffer(framebuffer: moderngl.Framebuffer) -> None:
@@ -16,26 +23,51 @@ def release_framebuffer(framebuffer: moderngl.Framebuffer) -> None:
 
 
 class RenderTargets:
-    """HDR colour (RGBA16F), entity id (R32UI) and depth of one size."""
+    """One level: HDR colour (alpha = something was drawn), and three uint images:
+    ``surface`` - the entity whose surface is at the pixel (masks of the next level),
+    ``seen``    - the entity finally seen there, following reflections (the --ids image),
+    ``node``    - which view of this level drew the pixel."""
 
     def __init__(self, ctx: moderngl.Context, size: tuple[int, int]) -> None:
         self.size = size
         self.color = ctx.texture(size, 4, dtype="f2")
         self.color.filter = (moderngl.LINEAR, moderngl.LINEAR)
-        self.ids = ctx.texture(size, 1, dtype="u4")
-        self.ids.filter = (moderngl.NEAREST, moderngl.NEAREST)
+        self.surface = ctx.texture(size, 1, dtype="u4")
+        self.seen = ctx.texture(size, 1, dtype="u4")
+        self.node = ctx.texture(size, 1, dtype="u4")
+        for texture in (self.surface, self.seen, self.node):
+            texture.filter = (moderngl.NEAREST, moderngl.NEAREST)
         self.depth = ctx.depth_texture(size)
-        self.framebuffer = ctx.framebuffer([self.color, self.ids], self.depth)
+        self.framebuffer = ctx.framebuffer([self.color, self.surface, self.seen, self.node], self.depth)
+        # Composites write the reflection's colour and seen-id only (they read surface and node).
+        self.composite_framebuffer = ctx.framebuffer([self.color, self.seen])
+        self._mipmapped = False
+
+    def use_mipmaps(self, enabled: bool) -> None:
+        """Build the colour mip chain (rough mirrors read it), or go back to one level."""
+        if enabled:
+            self.color.build_mipmaps()
+            self.color.filter = (moderngl.LINEAR_MIPMAP_LINEAR, moderngl.LINEAR)
+        elif self._mipmapped:
+            self.color.filter = (moderngl.LINEAR, moderngl.LINEAR)
+        self._mipmapped = enabled
 
     def read_ids(self) -> np.ndarray:
-        """Entity ids as uint32 (height, width), row 0 at the top like the PNG."""
+        """Entity finally seen at each pixel, uint32 (height, width), row 0 at the top."""
+        return self._read(self.seen)
+
+    def read_surface_ids(self) -> np.ndarray:
+        return self._read(self.surface)
+
+    def _read(self, texture: moderngl.Texture) -> np.ndarray:
         w, h = self.size
-        data = np.frombuffer(self.framebuffer.read(attachment=1, components=1, dtype="u4"), np.uint32)
+        data = np.frombuffer(texture.read(), np.uint32)
         return np.flipud(data.reshape(h, w)).copy()
 
     def release(self) -> None:
+        release_framebuffer(self.composite_framebuffer)
         release_framebuffer(self.framebuffer)
-        for texture in (self.color, self.ids, self.depth):
+        for texture in (self.color, self.surface, self.seen, self.node, self.depth):
             texture.release()
 
 

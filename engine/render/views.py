@@ -2,12 +2,13 @@
 views later), and the std140 packing of the Camera and Lights uniform blocks."""
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import glm
 import numpy as np
 
-CAMERA_BLOCK_BYTES = 4 * 64 + 2 * 16
+CAMERA_BLOCK_BYTES = 4 * 64 + 3 * 16
+NO_CLIP = glm.vec4(0.0, 0.0, 0.0, 1.0)
 MAX_DIRECTIONAL_LIGHTS = 4
 MAX_POINT_LIGHTS = 16
 LIGHTS_BLOCK_BYTES = 16 + 16 + 2 * 16 * MAX_DIRECTIONAL_LIGHTS + 2 * 16 * MAX_POINT_LIGHTS
@@ -15,13 +16,22 @@ LIGHTS_BLOCK_BYTES = 16 + 16 + 2 * 16 * MAX_DIRECTIONAL_LIGHTS + 2 * 16 * MAX_PO
 
 @dataclass
 class View:
-    """A camera pose and projection for one pass."""
+    """A camera pose and projection for one pass.
+
+    ``clip_plane`` (world space) discards what lies behind it through gl_ClipDistance;
+    ``mirrored`` views wind front faces clockwise; ``scissor`` limits the pass to the
+    pixels that can show it; ``node`` is the index written to the level's node image.
+    """
 
     view: glm.mat4
     proj: glm.mat4
     eye: glm.vec3
     size: tuple[int, int]
     name: str = "main"
+    clip_plane: glm.vec4 = field(default_factory=lambda: glm.vec4(NO_CLIP))
+    mirrored: bool = False
+    scissor: tuple[int, int, int, int] | None = None
+    node: int = 0
 
     @property
     def view_proj(self) -> glm.mat4:
@@ -32,7 +42,7 @@ class View:
         w, h = self.size
         return b"".join([
             self.view.to_bytes(), self.proj.to_bytes(), vp.to_bytes(), glm.inverse(vp).to_bytes(),
-            glm.vec4(self.eye, 1.0).to_bytes(), glm.vec4(0.0, 0.0, w, h).to_bytes(),
+            glm.vec4(self.eye, 1.0).to_bytes(), glm.vec4(0.0, 0.0, w, h).to_bytes(), self.clip_plane.to_bytes(),
         ])
 
 

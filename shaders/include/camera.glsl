@@ -6,4 +6,5 @@ layout(std140) uniform Camera {
     mat4 inv_view_proj;
     vec4 eye;        // xyz: world-space eye position
     vec4 viewport;   // x, y, width, height in pixels of the target
+    vec4 clip_plane; // world-space plane; geometry behind it is clipped (mirror views)
 } camera;

@@ -1,0 +1,139 @@
+"""The per-pixel passes of planar reflections: visibility query, level mask, composite.
+
+All three are a full-screen triangle limited by a scissor rectangle; they read the uint
+images of a level (which view drew a pixel, which entity's surface is there).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import glm
+import moderngl
+import numpy as np
+
+from engine.render.renderer import CAMERA_BINDING, SKY_UNIT, Renderer
+from engine.render.targets import RenderTargets, release_framebuffer
+
+MAX_LEVEL_VIEWS = 32
+_SELECT_UNITS = (3, 4)
+_REFLECTION_UNITS = (3, 4, 5)
+
+
+@dataclass
+class CompositeParams:
+    view_index: int
+    tint: glm.vec4
+    reflect_rate: float
+    roughness: float
+    normal: glm.vec3
+
+
+def _shared_samples_query(ctx: moderngl.Context) -> moderngl.Query:
+    """One samples-passed query per context: moderngl 5.13 cannot release a Query, so
+    engines made and closed on one context (tests, editors) share one instead of leaking."""
+    if not isinstance(ctx.extra, dict):
+        ctx.extra = {}
+    query = ctx.extra.get("speculum.samples_query")
+    if query is None:
+        query = ctx.extra["speculum.samples_query"] = ctx.query(samples=True)
+    return query
+
+
+class MirrorPasses:
+    def __init__(self, renderer: Renderer) -> None:
+        self.renderer = renderer
+        ctx = renderer.ctx
+        self.ctx = ctx
+        shaders = renderer.shaders
+        self.select = shaders.program("fullscreen.vert", "mirror_select.frag")
+        self.mask = shaders.program("fullscreen.vert", "mirror_mask.frag")
+        self.composite = shaders.program("fullscreen.vert", "mirror_composite.frag")
+        self.select["parent_node_map"].value, self.select["parent_surface_map"].value = _SELECT_UNITS
+        self.mask["parent_node_map"].value, self.mask["parent_surface_map"].value = _SELECT_UNITS
+        self.composite["Camera"].binding = CAMERA_BINDING
+        units = dict(zip(("reflection", "reflection_seen", "reflection_nodes"), _REFLECTION_UNITS, strict=True))
+        for name, unit in units.items():
+            self.composite[name].value = unit
+        self.composite["sky_map"].value = SKY_UNIT
+        self._select_vao = ctx.vertex_array(self.select, [])
+        self._mask_vao = ctx.vertex_array(self.mask, [])
+        self._composite_vao = ctx.vertex_array(self.composite, [])
+        self._query = _shared_samples_query(ctx)
+        self._query_target: moderngl.Framebuffer | None = None
+
+    def visible_pixels(self, parent: RenderTargets, parent_node: int, mirror: int,
+                       rect: tuple[int, int, int, int]) -> int:
+        """Pixels inside ``rect`` where view ``parent_node`` shows the surface of ``mirror``."""
+        ctx = self.ctx
+        if self._query_target is None or self._query_target.size != parent.size:
+            if self._query_target is not None:
+                release_framebuffer(self._query_target)
+            self._query_target = ctx.empty_framebuffer(parent.size)  # fragments, no writes
+        self._query_target.use()
+        ctx.disable(moderngl.DEPTH_TEST | moderngl.BLEND | moderngl.CULL_FACE)
+        ctx.viewport = (0, 0, *parent.size)
+        ctx.scissor = rect
+        parent.node.use(_SELECT_UNITS[0])
+        parent.surface.use(_SELECT_UNITS[1])
+        self.select["parent_node"].value = parent_node
+        self.select["mirror_id"].value = mirror
+        with self._query:
+            self._select_vao.render(moderngl.TRIANGLES, vertices=3)
+        ctx.scissor = None
+        return self._query.samples
+
+    def prepare_level(self, level: RenderTargets, parent: RenderTargets,
+                      views: list[tuple[int, int, int]], scissor: tuple[int, int, int, int]) -> None:
+        """Write ``level``'s node image and depth mask for views (parent view, mirror, index)."""
+        if len(views) > MAX_LEVEL_VIEWS:
+            raise ValueError(f"{len(views)} mirror views in one level; at most {MAX_LEVEL_VIEWS}")
+        ctx = self.ctx
+        level.framebuffer.use()
+        ctx.viewport = (0, 0, *level.size)
+        ctx.scissor = scissor
+        ctx.enable(moderngl.DEPTH_TEST)
+        ctx.disable(moderngl.BLEND | moderngl.CULL_FACE)
+        ctx.depth_func = "1"  # always: the mask pass writes every pixel's depth
+        parent.node.use(_SELECT_UNITS[0])
+        parent.surface.use(_SELECT_UNITS[1])
+        table = np.zeros((MAX_LEVEL_VIEWS, 4), np.uint32)
+        table[: len(views), :3] = views
+        self.mask["views"].write(table.tobytes())
+        self.mask["view_count"].value = len(views)
+        self._mask_vao.render(moderngl.TRIANGLES, vertices=3)
+        ctx.depth_func = "<"
+        ctx.scissor = None
+
+    def composite_view(self, parent: RenderTargets, level: RenderTargets, params: CompositeParams,
+                       rect: tuple[int, int, int, int]) -> None:
+        """Blend view ``params.view_index`` of ``level`` into the mirror's pixels of ``parent``.
+
+        The Camera block must hold the parent view (``Renderer.bind_view``).
+        """
+        ctx = self.ctx
+        parent.composite_framebuffer.use()
+        ctx.viewport = (0, 0, *parent.size)
+        ctx.scissor = rect
+        ctx.disable(moderngl.DEPTH_TEST | moderngl.CULL_FACE)
+        ctx.enable(moderngl.BLEND)
+        # Colour: reflection x rate + own x (1 - rate); alpha (coverage) is kept.
+        ctx.blend_func = (moderngl.SRC_ALPHA, moderngl.ONE_MINUS_SRC_ALPHA, moderngl.ZERO, moderngl.ONE)
+        for texture, unit in zip((level.color, level.seen, level.node), _REFLECTION_UNITS, strict=True):
+            texture.use(unit)
+        self.renderer.sky.use(SKY_UNIT)
+        program = self.composite
+        program["view_index"].value = params.view_index
+        program["tint"].value = tuple(params.tint)
+        program["reflect_rate"].value = params.reflect_rate
+        program["roughness"].value = params.roughness
+        program["mirror_normal"].value = tuple(params.normal)
+        self._composite_vao.render(moderngl.TRIANGLES, vertices=3)
+        ctx.disable(moderngl.BLEND)
+        ctx.blend_func = moderngl.DEFAULT_BLENDING
+        ctx.scissor = None
+
+    def release(self) -> None:
+        for obj in (self._select_vao, self._mask_vao, self._composite_vao):
+            obj.release()
+        if self._query_target is not None:
+            release_framebuffer(self._query_target)

@@ -1,0 +1,256 @@
+"""Planar reflections: the ReflectionSystem schedules one view per visible (mirror, path).
+
+Per frame, after the main view is drawn into level 0:
+  1. cull   - for each view of level L and each mirror: skip it if disabled, too deep,
+              facing away, behind the view's own mirror, or off the view's rectangle;
+  2. query  - count the pixels where level L actually shows the mirror (samples query);
+  3. mask   - level L+1's node image and depth mask: each view owns only its mirror's pixels;
+  4. render - each view: mirrored camera, oblique near plane (or clip distance close up),
+              scissored to the mirror's rectangle, front faces clockwise;
+  5. repeat for mirrors seen in those reflections, up to the depth limits;
+  6. composite, deepest level first: blend each view into its mirror's pixels one level up.
+Levels are screen-sized, so memory is (levels x one screen), however many mirrors.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import esper
+import glm
+import numpy as np
+
+from components import MeshRef, Mirror, Transform
+from engine.reflection_math import (
+    mirrored_view,
+    oblique_is_safe,
+    oblique_projection,
+    plane_from_point_normal,
+    reflection_matrix,
+    signed_distance,
+    transform_plane,
+)
+from engine.render.mirror_passes import MAX_LEVEL_VIEWS, CompositeParams, MirrorPasses
+from engine.render.renderer import Renderer
+from engine.render.views import View
+from engine.world import World
+from systems.render_system import RenderSystem
+
+# Mirrors clip a hair in front of their plane, so their own surface never shows in them.
+CLIP_OFFSET = 1e-3
+FLATNESS = 1e-4
+
+
+class MirrorError(ValueError):
+    """A Mirror component on something that cannot be a mirror."""
+
+
+@dataclass
+class MirrorState:
+    """What the passes need of one mirror, refreshed when it moves or changes."""
+
+    entity: int
+    mirror: Mirror
+    plane: glm.vec4 = field(default_factory=glm.vec4)      # world, normal = front
+    corners: np.ndarray = field(default_factory=lambda: np.zeros((0, 4)))  # world, homogeneous
+
+
+@dataclass
+class ReflectionView:
+    """One node of the view tree: a view at some level, looking into one mirror."""
+
+    index: int
+    level: int
+    view: View
+    rect: tuple[int, int, int, int]
+    mirror: MirrorState | None = None
+    parent: ReflectionView | None = None
+
+
+def mesh_plane(positions: np.ndarray, normals: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+    """Seed 002's test: a mesh is planar when one extent of its AABB is ~0; the plane's
+    normal is the mesh's (mean) normal along that axis. None when the mesh is not flat."""
+    lo, hi = positions.min(axis=0), positions.max(axis=0)
+    extent = hi - lo
+    axis = int(np.argmin(extent))
+    if extent[axis] > FLATNESS * max(float(extent.max()), 1e-9):
+        return None
+    normal = normals.mean(axis=0)
+    if abs(normal[axis]) < 0.5 * np.linalg.norm(normal) or np.linalg.norm(normal) < 1e-6:
+        return None
+    direction = np.zeros(3)
+    direction[axis] = np.sign(normal[axis])
+    return (lo + hi) / 2.0, direction
+
+
+class ReflectionSystem(esper.Processor):
+    """Renders and composites mirror reflections after the main view, before present."""
+
+    def __init__(self, world: World, render_system: RenderSystem, renderer: Renderer,
+                 max_depth_cap: int = 3) -> None:
+        self.world = world
+        self.render_system = render_system
+        self.renderer = renderer
+        self.passes = MirrorPasses(renderer)
+        self.max_depth_cap = max_depth_cap
+        self.mirrors: dict[int, MirrorState] = {}
+        self.views: list[ReflectionView] = []   # last frame's view tree, level order
+
+    # --- extract ---------------------------------------------------------------------------
+    def _refresh_mirrors(self) -> None:
+        world = self.world
+        touched = world.changed(Mirror) | world.changed(MeshRef)
+        touched |= {e for e in world.frame.moved | world.frame.added if e in self.mirrors or e in touched}
+        for entity in touched:
+            mirror = world.try_get(entity, Mirror) if world.exists(entity) else None
+            if mirror is None:
+                self.mirrors.pop(entity, None)
+                continue
+            mesh_ref = world.try_get(entity, MeshRef)
+            transform = world.try_get(entity, Transform)
+            if mesh_ref is None or transform is None:
+                raise MirrorError(f"entity {entity}: a Mirror needs a MeshRef and a Transform")
+            state = self.mirrors.get(entity) or MirrorState(entity, mirror)
+            state.mirror = mirror
+            self._place(state, mesh_ref, transform)
+            self.mirrors[entity] = state
+
+    @staticmethod
+    def _place(state: MirrorState, mesh_ref: MeshRef, transform: Transform) -> None:
+        mesh = mesh_ref.mesh
+        mirror = state.mirror
+        if mirror.plane_normal is not None:
+            point = np.array(mirror.plane_point if mirror.plane_point is not None else (0.0, 0.0, 0.0))
+            normal = np.array(mirror.plane_normal)
+        else:
+            found = mesh_plane(mesh.positions, mesh.normals)
+            if found is None:
+                lo, hi = mesh.bounds
+                raise MirrorError(
+                    f"entity {state.entity}: Mirror on mesh {mesh.name!r} which is not flat (model-space "
+                    f"extents {np.round(hi - lo, 4).tolist()}); give the mirror a flat mesh or plane_normal")
+            point, normal = found
+        model = transform.world
+        local_plane = plane_from_point_normal(tuple(float(v) for v in point), tuple(float(v) for v in normal))
+        state.plane = transform_plane(model, local_plane)
+        lo, hi = mesh.bounds
+        corners = np.array([(x, y, z, 1.0) for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
+        state.corners = corners @ np.array(model.to_list(), np.float64)  # rows: world corners
+
+    # --- schedule and render -----------------------------------------------------------------
+    def process(self, dt: float) -> None:
+        self._refresh_mirrors()
+        self.views = []
+        main = self.render_system.main_view
+        if main is None:
+            return
+        renderer = self.renderer
+        root = ReflectionView(0, 0, main, (0, 0, *main.size))
+        levels = [[root]]
+        self.views = [root]
+        for level in range(self.max_depth_cap):
+            parent_targets = renderer.level_targets(level, main.size)
+            children = self._visible_children(levels[level], parent_targets, main)
+            if not children:
+                break
+            targets = renderer.level_targets(level + 1, main.size)
+            self.passes.prepare_level(targets, parent_targets,
+                                      [(c.parent.index, c.mirror.entity, c.index) for c in children],
+                                      _union(c.rect for c in children))
+            for child in children:
+                renderer.render_view(child.view, targets, mask=targets)
+            levels.append(children)
+            self.views.extend(children)
+        for level in range(len(levels) - 1, 0, -1):
+            parent_targets = renderer.levels[level - 1]
+            targets = renderer.levels[level]
+            targets.use_mipmaps(any(c.mirror.mirror.roughness > 0.0 for c in levels[level]))
+            for child in levels[level]:
+                renderer.bind_view(child.parent.view)
+                mirror = child.mirror.mirror
+                self.passes.composite_view(parent_targets, targets, CompositeParams(
+                    child.index, mirror.color, mirror.reflect_rate, mirror.roughness,
+                    glm.vec3(child.mirror.plane)), child.rect)
+        renderer.stats.reflection_views = len(self.views) - 1
+
+    def _visible_children(self, parents: list[ReflectionView], parent_targets, main: View) -> list[ReflectionView]:
+        children: list[ReflectionView] = []
+        for parent in parents:
+            for state in self.mirrors.values():
+                rect = self._cull(parent, state, main)
+                if rect is None:
+                    continue
+                if self.passes.visible_pixels(parent_targets, parent.index, state.entity, rect) == 0:
+                    continue
+                if len(children) == MAX_LEVEL_VIEWS:
+                    return children
+                index = len(self.views) + len(children)
+                view = self._mirror_view(parent, state, main, index)
+                view.scissor = rect
+                children.append(ReflectionView(index, parent.level + 1, view, rect, state, parent))
+        return children
+
+    def _cull(self, parent: ReflectionView, state: MirrorState, main: View) -> tuple[int, int, int, int] | None:
+        """The screen rectangle where ``parent`` can see ``state``'s mirror, or None."""
+        mirror = state.mirror
+        depth = parent.level + 1
+        if not mirror.enabled or depth > min(mirror.max_depth, self.max_depth_cap):
+            return None
+        if parent.mirror is not None and parent.mirror.entity == state.entity:
+            return None  # a mirror does not see itself
+        if signed_distance(state.plane, parent.view.eye) <= 0.0:
+            return None  # facing away from this view (seed 000's tip)
+        if parent.mirror is not None:
+            distances = state.corners[:, :3] @ np.array(glm.vec3(parent.mirror.plane)) + parent.mirror.plane.w
+            if (distances <= CLIP_OFFSET).all():
+                return None  # entirely behind the mirror this view looks out of
+        view_proj = np.array((main.proj * parent.view.view).to_list(), np.float64)
+        clip = state.corners @ view_proj
+        w = clip[:, 3]
+        for axis in range(3):  # all corners beyond one side of the frustum
+            if (clip[:, axis] > w).all() or (clip[:, axis] < -w).all():
+                return None
+        px0, py0, pw, ph = parent.rect
+        if (w <= 1e-6).any():
+            return parent.rect  # straddles the eye plane: be conservative
+        ndc = clip[:, :2] / w[:, None]
+        width, height = main.size
+        x0 = int(np.floor((ndc[:, 0].min() * 0.5 + 0.5) * width)) - 1
+        x1 = int(np.ceil((ndc[:, 0].max() * 0.5 + 0.5) * width)) + 1
+        y0 = int(np.floor((ndc[:, 1].min() * 0.5 + 0.5) * height)) - 1
+        y1 = int(np.ceil((ndc[:, 1].max() * 0.5 + 0.5) * height)) + 1
+        x0, y0 = max(x0, px0), max(y0, py0)
+        x1, y1 = min(x1, px0 + pw), min(y1, py0 + ph)
+        if x1 <= x0 or y1 <= y0:
+            return None
+        return x0, y0, x1 - x0, y1 - y0
+
+    @staticmethod
+    def _mirror_view(parent: ReflectionView, state: MirrorState, main: View, index: int) -> View:
+        plane = state.plane
+        eye = glm.vec3(reflection_matrix(plane) * glm.vec4(parent.view.eye, 1.0))
+        view = mirrored_view(parent.view.view, plane)
+        clip_plane = glm.vec4(glm.vec3(plane), plane.w - CLIP_OFFSET)
+        proj = main.proj
+        near = _near_distance(main.proj)
+        if oblique_is_safe(parent.view.eye, plane, near):
+            proj = oblique_projection(main.proj, transform_plane(view, clip_plane))
+        return View(view=view, proj=proj, eye=eye, size=main.size, name=f"mirror {state.entity}",
+                    clip_plane=clip_plane, mirrored=not parent.view.mirrored, scissor=None, node=index)
+
+    def close(self) -> None:
+        self.passes.release()
+
+
+def _near_distance(proj: glm.mat4) -> float:
+    """The near-plane distance of a standard GL perspective matrix."""
+    a, b = proj[2][2], proj[3][2]
+    return b / (a - 1.0)
+
+
+def _union(rects) -> tuple[int, int, int, int]:
+    rects = list(rects)
+    x0 = min(r[0] for r in rects)
+    y0 = min(r[1] for r in rects)
+    x1 = max(r[0] + r[2] for r in rects)
+    y1 = max(r[1] + r[3] for r in rects)
+    return x0, y0, x1 - x0, y1 - y0

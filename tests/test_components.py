@@ -1,0 +1,313 @@
+"""Component values are checked where they are written, and writes are tracked by the world."""
+from __future__ import annotations
+
+import math
+
+import glm
+import numpy as np
+import pytest
+
+from components import (
+    Camera,
+    ComponentValueError,
+    DirectionalLight,
+    Emissive,
+    FlyController,
+    Material,
+    MeshRef,
+    PointLight,
+    Reflective,
+    Refractive,
+    Skybox,
+    Transform,
+)
+from engine.mesh import box
+from engine.world import World
+
+NAN = float("nan")
+INF = float("inf")
+
+
+@pytest.fixture
+def world():
+    w = World("test")
+    try:
+        yield w
+    finally:
+        w.close()
+
+
+# --- bad values at construction ------------------------------------------------------------
+
+BAD_CONSTRUCTIONS = [
+    # (class, kwargs, field the message must name)
+    (Transform, {"scale": (1.0, 0.0, 1.0)}, "scale"),
+    (Transform, {"scale": 0}, "scale"),
+    (Transform, {"position": (NAN, 0.0, 0.0)}, "position"),
+    (Transform, {"position": (0.0, INF, 0.0)}, "position"),
+    (Transform, {"position": (1.0, 2.0)}, "position"),
+    (Transform, {"position": "abc"}, "position"),
+    (Transform, {"rotation": glm.quat(NAN, 0.0, 0.0, 0.0)}, "rotation"),
+    (Transform, {"rotation": glm.quat(0.0, 0.0, 0.0, 0.0)}, "rotation"),
+    (Transform, {"rotation": "abc"}, "rotation"),
+    (Transform, {"parent": -3}, "parent"),
+    (Transform, {"parent": 1.5}, "parent"),
+    (Transform, {"parent": True}, "parent"),
+    (Material, {"roughness": 2.0}, "roughness"),
+    (Material, {"roughness": NAN}, "roughness"),
+    (Material, {"metallic": -0.1}, "metallic"),
+    (Material, {"metallic": "0.5"}, "metallic"),
+    (Material, {"metallic": True}, "metallic"),
+    (Material, {"color": (NAN, 0.5, 0.5)}, "color"),
+    (Material, {"color": (0.5, INF, 0.5)}, "color"),
+    (Material, {"color": (-0.5, 0.5, 0.5)}, "color"),
+    (Material, {"color": (0.5, 0.5, 0.5, 1.5)}, "color"),
+    (Material, {"color": (0.5, 0.5)}, "color"),
+    (Material, {"color": "123"}, "color"),
+    (Material, {"color": 0.5}, "color"),
+    (Material, {"texture": np.zeros((2, 2, 4), np.uint8)}, "texture"),
+    (Emissive, {"power": -1.0}, "power"),
+    (Emissive, {"power": NAN}, "power"),
+    (Emissive, {"power": INF}, "power"),
+    (Emissive, {"power": None}, "power"),
+    (Emissive, {"power": "2"}, "power"),
+    (Camera, {"fov_y": 0.0}, "fov_y"),
+    (Camera, {"fov_y": 180.0}, "fov_y"),
+    (Camera, {"fov_y": NAN}, "fov_y"),
+    (Camera, {"near": 0.0}, "near"),
+    (Camera, {"near": -1.0}, "near"),
+    (Camera, {"near": 10.0, "far": 1.0}, "far"),
+    (Camera, {"near": 1.0, "far": 1.0}, "far"),
+    (Camera, {"far": INF}, "far"),
+    (Camera, {"active": "yes"}, "active"),
+    (PointLight, {"range": 0.0}, "range"),
+    (PointLight, {"range": -2.0}, "range"),
+    (PointLight, {"intensity": -1.0}, "intensity"),
+    (PointLight, {"color": (1.0, NAN, 1.0)}, "color"),
+    (DirectionalLight, {"direction": (0.0, 0.0, 0.0)}, "direction"),
+    (DirectionalLight, {"intensity": NAN}, "intensity"),
+    (Reflective, {"mode": "bogus"}, "mode"),
+    (Reflective, {"mode": ["skybox"]}, "mode"),
+    (Reflective, {"mix": 1.5}, "mix"),
+    (Reflective, {"tint": (1.0, -1.0, 1.0)}, "tint"),
+    (Refractive, {"ior": 0.5}, "ior"),
+    (Refractive, {"ior": NAN}, "ior"),
+    (Skybox, {"face_size": 0}, "face_size"),
+    (Skybox, {"face_size": 3}, "face_size"),
+    (Skybox, {"face_size": 4096}, "face_size"),
+    (Skybox, {"face_size": 64.0}, "face_size"),
+    (Skybox, {"face_size": True}, "face_size"),
+    (Skybox, {"sun_direction": (0.0, 0.0, 0.0)}, "sun_direction"),
+    (Skybox, {"zenith": (NAN, 0.0, 0.0)}, "zenith"),
+    (Skybox, {"faces": [1, 2]}, "faces"),
+    (Skybox, {"faces": np.zeros((6, 8, 4, 3), np.float32)}, "faces"),
+    (Skybox, {"faces": np.full((6, 4, 4, 3), NAN, np.float32)}, "faces"),
+    (Skybox, {"faces": np.full((6, 4, 4, 3), -1.0, np.float32)}, "faces"),
+    (FlyController, {"speed": -1.0}, "speed"),
+    (FlyController, {"yaw": NAN}, "yaw"),
+    (MeshRef, {"mesh": None}, "mesh"),
+    (MeshRef, {"mesh": "box.obj"}, "mesh"),
+]
+
+
+def _case_id(case) -> str:
+    cls, kwargs, _ = case
+    def show(v):
+        return f"array{v.shape}" if isinstance(v, np.ndarray) else repr(v)[:24]
+
+    return f"{cls.__name__}-" + "-".join(f"{k}={show(v)}" for k, v in kwargs.items())
+
+
+@pytest.mark.parametrize("cls, kwargs, field", BAD_CONSTRUCTIONS, ids=[_case_id(c) for c in BAD_CONSTRUCTIONS])
+def test_bad_value_at_construction_names_class_and_field(cls, kwargs, field):
+    if cls is MeshRef:
+        kwargs = {"mesh": kwargs["mesh"]}
+    with pytest.raises(ComponentValueError, match=rf"\b{cls.__name__}\.{field}\b"):
+        cls(**kwargs)
+
+
+def test_component_value_error_is_a_value_error():
+    assert issubclass(ComponentValueError, ValueError)
+
+
+# --- bad values assigned later --------------------------------------------------------------
+
+BAD_ASSIGNMENTS = [
+    (Transform, "scale", (0.0, 1.0, 1.0)),
+    (Transform, "position", (NAN, 0.0, 0.0)),
+    (Transform, "rotation", glm.quat(0.0, 0.0, 0.0, 0.0)),
+    (Material, "roughness", 2.0),
+    (Material, "color", (NAN, NAN, NAN)),
+    (Emissive, "power", -1.0),
+    (Camera, "fov_y", 0.0),
+    (Camera, "far", 0.01),     # below the default near (0.05)
+    (Camera, "near", 500.0),   # beyond the default far (200)
+    (PointLight, "range", 0.0),
+    (Reflective, "mode", "bogus"),
+    (Skybox, "face_size", 1),
+    (Skybox, "faces", np.zeros((5, 4, 4, 3), np.float32)),
+    (MeshRef, "visible", "no"),
+]
+
+
+@pytest.mark.parametrize("cls, field, value", BAD_ASSIGNMENTS,
+                         ids=[f"{c.__name__}.{f}" for c, f, _ in BAD_ASSIGNMENTS])
+def test_bad_value_assigned_later_is_rejected_and_old_value_kept(cls, field, value):
+    component = cls(box()) if cls is MeshRef else cls()
+    before = getattr(component, field)
+    with pytest.raises(ComponentValueError, match=rf"\b{cls.__name__}\.{field}\b"):
+        setattr(component, field, value)
+    after = getattr(component, field)
+    if isinstance(before, np.ndarray) or before is None:
+        assert after is before
+    else:
+        assert after == before
+
+
+def test_camera_planes_can_move_together_in_a_valid_order():
+    cam = Camera(near=300.0, far=1000.0)   # near beyond the *default* far is fine when far is larger
+    assert (cam.near, cam.far) == (300.0, 1000.0)
+    cam.far = 2000.0
+    cam.near = 1500.0
+    assert (cam.near, cam.far) == (1500.0, 2000.0)
+
+
+def test_misspelt_field_is_an_error_not_silently_ignored():
+    light = PointLight()
+    with pytest.raises(AttributeError, match="intesity"):
+        light.intesity = 5.0
+    assert not hasattr(light, "intesity")
+
+
+# --- good values are normalised to the kinds systems expect ---------------------------------
+
+def test_good_values_are_converted():
+    t = Transform(position=[1, 2, 3], rotation=glm.quat(2.0, 0.0, 0.0, 0.0), scale=2.0, parent=np.int64(4))
+    assert isinstance(t.position, glm.vec3) and t.position == glm.vec3(1, 2, 3)
+    assert t.scale == glm.vec3(2.0)
+    assert math.isclose(glm.length(t.rotation), 1.0, rel_tol=1e-6)   # normalised
+    assert t.parent == 4 and type(t.parent) is int
+
+    m = Material(color=(0.5, 0.25, 0.125), metallic=np.float32(0.25), roughness=1)
+    assert m.color == glm.vec4(0.5, 0.25, 0.125, 1.0)
+    assert m.metallic == 0.25 and isinstance(m.metallic, float)
+    assert Material(color=np.array([0.1, 0.2, 0.3, 0.4])).color.w == pytest.approx(0.4)
+
+    d = DirectionalLight(direction=(0.0, -3.0, 0.0))
+    assert d.direction == glm.vec3(0.0, -1.0, 0.0)
+
+    sky = Skybox(face_size=np.int64(32), faces=[np.ones((4, 4, 3))] * 6)
+    assert sky.face_size == 32 and type(sky.face_size) is int
+    assert sky.faces.shape == (6, 4, 4, 3) and sky.faces.dtype == np.float32
+
+    assert Reflective(mix=None).mix is None
+    assert Emissive(0).power == 0.0
+
+
+# --- change tracking ------------------------------------------------------------------------
+
+def test_field_writes_are_reported_to_the_world(world):
+    e = world.spawn(Transform(), Material())
+    world.step(0.0)                       # forget the spawn itself
+    assert world.changed(Transform) == set() and world.changed(Material) == set()
+
+    world.get(e, Transform).position = (1.0, 2.0, 3.0)
+    assert world.changed(Transform) == {e}
+    assert world.changed(Material) == set()   # per type
+
+    world.step(0.0)
+    assert world.changed(Transform) == set()
+    mat = world.get(e, Material)
+    mat.color.x = 0.1                     # in-place edit is invisible ...
+    assert world.changed(Material) == set()
+    mat.touch()                           # ... until touched
+    assert world.changed(Material) == {e}
+
+
+def test_failed_write_is_not_reported(world):
+    e = world.spawn(Emissive(1.0))
+    world.step(0.0)
+    with pytest.raises(ComponentValueError):
+        world.get(e, Emissive).power = -1.0
+    assert world.changed(Emissive) == set()
+    assert world.get(e, Emissive).power == 1.0
+
+
+def test_spawn_add_and_remove_are_changes(world):
+    e = world.spawn(Transform())
+    assert e in world.changed(Transform)
+    world.step(0.0)
+    world.add_component(e, Emissive(2.0))
+    assert world.changed(Emissive) == {e}
+    world.step(0.0)
+    removed = world.remove_component(e, Emissive)
+    assert isinstance(removed, Emissive) and world.changed(Emissive) == {e}
+    assert world.remove_component(e, Emissive) is None
+
+
+def test_removed_component_is_detached(world):
+    e = world.spawn(Transform(), Emissive(1.0))
+    emissive = world.remove_component(e, Emissive)
+    world.step(0.0)
+    emissive.power = 3.0                  # no longer part of the world
+    assert world.changed(Emissive) == set()
+    emissive.touch()
+    assert world.changed(Emissive) == set()
+
+
+def test_replaced_component_is_detached(world):
+    e = world.spawn(Emissive(1.0))
+    old = world.get(e, Emissive)
+    world.add_component(e, Emissive(2.0))
+    world.step(0.0)
+    old.power = 5.0
+    assert world.changed(Emissive) == set()
+    world.get(e, Emissive).power = 4.0
+    assert world.changed(Emissive) == {e}
+
+
+def test_deleted_entity_components_are_detached(world):
+    keep = world.spawn(Transform())
+    gone = world.spawn(Transform())
+    transform = world.get(gone, Transform)
+    world.step(0.0)
+    world.delete_entity(gone)
+    assert gone in world.deleted() and gone in world.changed(Transform)
+    assert not world.exists(gone) and world.exists(keep)
+    assert world.entities() == [keep]
+    world.step(0.0)
+    transform.position = (5.0, 5.0, 5.0)
+    assert world.changed(Transform) == set()
+    assert world.deleted() == set()
+
+
+def test_two_worlds_do_not_see_each_other():
+    a, b = World("a"), World("b")
+    try:
+        ea = a.spawn(Transform(position=(1.0, 0.0, 0.0)), Emissive(1.0))
+        eb = b.spawn(Transform(position=(2.0, 0.0, 0.0)))
+        assert [e for e, _ in a.query_one(Emissive)] == [ea]
+        assert b.query_one(Emissive) == []
+        assert a.get(ea, Transform).position.x == 1.0
+        assert b.get(eb, Transform).position.x == 2.0
+        assert len(a.entities()) == 1 and len(b.entities()) == 1
+        b.step(0.0)
+        a.get(ea, Transform).position = (3.0, 0.0, 0.0)   # reported to a only
+        assert a.changed(Transform) == {ea}
+        assert b.changed(Transform) == set()
+    finally:
+        a.close()
+        b.close()
+
+
+def test_close_detaches_everything_and_refuses_further_use():
+    w = World("closing")
+    t = Transform()
+    w.spawn(t, Material())
+    w.close()
+    w.close()                              # idempotent
+    t.position = (1.0, 1.0, 1.0)           # detached: reports to nobody, raises nothing
+    with pytest.raises(RuntimeError, match="closed"):
+        w.spawn(Transform())
+    with World("after") as fresh:          # a new world starts empty
+        assert fresh.entities() == []
