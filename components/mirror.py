@@ -22,7 +22,6 @@ class Mirror(TrackedComponent):
     color: Any = field(default_factory=lambda: glm.vec4(1.0))
     reflect_rate: float = 1.0
     roughness: float = 0.0
-    resolution_scale: float = 1.0
     max_depth: int = 3
     enabled: bool = True
     plane_point: Any = None
@@ -33,8 +32,6 @@ class Mirror(TrackedComponent):
             return color(self, name, value)
         if name in ("reflect_rate", "roughness"):
             return finite(self, name, value, low=0.0, high=1.0)
-        if name == "resolution_scale":
-            return finite(self, name, value, low=0.05, high=1.0)
         if name == "max_depth":
             if not isinstance(value, int) or isinstance(value, bool) or not 0 <= value <= 16:
                 raise ComponentValueError(f"Mirror.max_depth must be an int in [0, 16], got {value!r}")

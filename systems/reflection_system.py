@@ -237,6 +237,14 @@ class ReflectionSystem(esper.Processor):
         return View(view=view, proj=proj, eye=eye, size=main.size, name=f"mirror {state.entity}",
                     clip_plane=clip_plane, mirrored=not parent.view.mirrored, scissor=None, node=index)
 
+    def mirror_planes(self) -> dict[int, tuple[list[float], list[float]]]:
+        """Each mirror's world plane as (point on it, unit normal towards its front)."""
+        planes = {}
+        for entity, state in self.mirrors.items():
+            n = glm.vec3(state.plane)
+            planes[entity] = (list(-state.plane.w * n), list(n))
+        return planes
+
     def close(self) -> None:
         self.passes.release()
 
