@@ -184,6 +184,7 @@ def load_model(path: str | Path) -> list[ModelPart]:
         raise AssetError(f"mesh file {str(path)!r}: cannot be parsed ({type(exc).__name__}: {exc})") from exc
     parts: list[ModelPart] = []
     try:
+        texture_refs = _mtl_texture_refs(path) if path.suffix.lower() == ".obj" else {}
         for node in loaded.graph.nodes_geometry:
             matrix, geom_name = loaded.graph[node]
             tm = loaded.geometry[geom_name]
@@ -197,7 +198,7 @@ def load_model(path: str | Path) -> list[ModelPart]:
                 continue  # scaled to nothing (files hide nodes this way): it would draw nothing
             mesh = Mesh.from_trimesh(tm, name=f"{path.name}:{geom_name}")
             part = ModelPart(mesh=mesh, local=glm.mat4(*matrix.astype(np.float32).T.ravel()))
-            _read_material(tm, part, path)
+            _read_material(tm, part, path, texture_refs)
             parts.append(part)
     except AssetError as exc:
         raise AssetError(f"mesh file {str(path)!r}: {exc}") from exc
@@ -218,7 +219,30 @@ def _unit_color(value) -> np.ndarray:
     return c[:4]
 
 
-def _read_material(tm, part: ModelPart, path: Path) -> None:
+def _mtl_texture_refs(obj_path: Path) -> dict[str, Path]:
+    """``map_Kd`` files of the MTL libraries an OBJ names, by material name.
+
+    trimesh drops a missing or undecodable texture silently (the model would render
+    untextured); knowing what the MTL asked for lets the loader say so instead.
+    """
+    refs: dict[str, Path] = {}
+    with open(obj_path, "rb") as f:
+        libraries = [line[6:].strip().decode("utf-8", "replace") for line in f if line.startswith(b"mtllib")]
+    for library in libraries:
+        mtl_path = obj_path.parent / library
+        if not mtl_path.is_file():
+            continue
+        material = None
+        for line in mtl_path.read_text(encoding="utf-8", errors="replace").splitlines():
+            words = line.split()
+            if len(words) >= 2 and words[0] == "newmtl":
+                material = " ".join(words[1:])
+            elif len(words) >= 2 and words[0].lower() == "map_kd" and material is not None:
+                refs[material] = mtl_path.parent / words[-1]
+    return refs
+
+
+def _read_material(tm, part: ModelPart, path: Path, texture_refs: dict[str, Path] | None = None) -> None:
     """Fill colour, texture, PBR factors and the emissive factor from trimesh's visual."""
     from trimesh.visual.material import SimpleMaterial
 
@@ -256,6 +280,10 @@ def _read_material(tm, part: ModelPart, path: Path) -> None:
             color[3] = 1.0 - _first(extra.get("tr"), 0.0)
         part.color = tuple(float(c) for c in color)
         image = material.image
+        wanted = (texture_refs or {}).get(getattr(material, "_name", None) or "")
+        if image is None and wanted is not None:
+            why = "cannot be decoded as an image" if wanted.is_file() else "no such file"
+            raise AssetError(f"texture {str(wanted)!r} of material {material.name!r}: {why}")
         emissive = _floats(extra.get("ke"))
         part.metallic = _first(extra.get("pm"), 0.0)
         part.roughness = _first(extra.get("pr"), 0.5)

@@ -19,6 +19,7 @@ from components import ComponentValueError, Emissive, Material, MeshRef, Reflect
 from engine.assets import spawn_model
 from engine.errors import AssetError
 from engine.mesh import Mesh, box, load_model
+from engine.texture_data import TextureData, load_texture
 from engine.world import World
 from tests.support import srgb_to_linear
 
@@ -368,6 +369,65 @@ def test_mesh_rejects_nan_and_bad_indices_directly():
         Mesh(good.positions, good.normals, good.uvs, good.indices + 100, name="far")
     with pytest.raises(AssetError, match="no triangles"):
         Mesh(np.zeros((0, 3)), np.zeros((0, 3)), np.zeros((0, 2)), np.zeros((0, 3)), name="none")
+
+
+@pytest.mark.parametrize("texture_bytes, reason", [(None, "no such file"), (b"", "cannot be decoded"),
+                                                   (GARBAGE, "cannot be decoded")], ids=["missing", "empty", "garbage"])
+def test_obj_texture_that_cannot_be_read_is_named(tmp_path, world, texture_bytes, reason):
+    path = write_obj(tmp_path, "skin", "Kd 1 1 1\nmap_Kd -s 1 1 1 skin_tex.png")
+    if texture_bytes is not None:
+        (tmp_path / "skin_tex.png").write_bytes(texture_bytes)
+    with pytest.raises(AssetError, match=rf"skin\.obj.*skin_tex\.png.*{reason}"):
+        spawn_model(world, path)
+    assert world.entities() == []
+
+
+# --- texture files --------------------------------------------------------------------------
+
+def test_load_texture_keeps_pixels_and_alpha(tmp_path):
+    Image.fromarray(TEXTURE).save(tmp_path / "rgba.png")
+    tex = load_texture(tmp_path / "rgba.png")
+    np.testing.assert_array_equal(tex.pixels, TEXTURE)
+    assert tex.has_alpha and tex.size == (2, 2) and tex.name == "rgba.png"
+
+    grey = np.array([[0, 64, 128], [255, 32, 16]], np.uint8)      # 3 wide, 2 high, mode L
+    Image.fromarray(grey).save(tmp_path / "grey.png")
+    tex = load_texture(tmp_path / "grey.png")
+    assert tex.size == (3, 2) and not tex.has_alpha
+    np.testing.assert_array_equal(tex.pixels[..., 0], grey)
+    np.testing.assert_array_equal(tex.pixels[..., 3], 255)
+
+
+@pytest.mark.parametrize("name, contents, reason", [
+    ("missing.png", None, "no such file"),
+    ("empty.png", b"", "cannot be read as an image"),
+    ("garbage.png", GARBAGE, "cannot be read as an image"),
+    ("truncated.png", "truncate", "cannot be read as an image"),
+])
+def test_bad_texture_file_is_an_asset_error(tmp_path, name, contents, reason):
+    path = tmp_path / name
+    if contents == "truncate":
+        noise = np.random.default_rng(1).integers(0, 256, (64, 64, 3), dtype=np.uint8)
+        Image.fromarray(noise).save(path)
+        path.write_bytes(path.read_bytes()[:200])
+    elif contents is not None:
+        path.write_bytes(contents)
+    with pytest.raises(AssetError) as info:
+        load_texture(path)
+    assert str(path) in str(info.value) and reason in str(info.value)
+
+
+@pytest.mark.parametrize("pixels", [np.zeros((2, 2), np.uint8), np.zeros((2, 2, 2), np.uint8),
+                                    np.zeros((0, 2, 4), np.uint8), np.zeros((2, 2, 4), np.float32)],
+                         ids=["2d", "two-channels", "empty", "float"])
+def test_texture_data_rejects_bad_pixels(pixels):
+    with pytest.raises(AssetError, match="texture 'bad'"):
+        TextureData(pixels, name="bad")
+
+
+def test_texture_data_adds_opaque_alpha():
+    tex = TextureData(np.full((1, 2, 3), 7, np.uint8))
+    assert tex.pixels.shape == (1, 2, 4) and (tex.pixels[..., 3] == 255).all() and not tex.has_alpha
 
 
 # --- rendering ------------------------------------------------------------------------------

@@ -1,0 +1,294 @@
+"""System tests of planar mirrors: real frames, facts about pixels, ids and pass counts."""
+from __future__ import annotations
+
+import glm
+import numpy as np
+import pytest
+
+from components import Camera, DirectionalLight, Emissive, Material, MeshRef, Mirror, Skybox, Transform, look_rotation
+from engine.mesh import box, plane, quad, sphere
+from engine.reflection_math import plane_from_point_normal, reflection_matrix
+from engine.render.sky import sky_radiance
+from engine.texture_data import checker_texture
+from systems.reflection_system import MirrorError
+from tests.support import srgb_to_linear
+
+SIZE = (200, 150)
+FACING_BACK = glm.angleAxis(glm.pi(), glm.vec3(0, 1, 0))
+
+
+def look_from(world, eye, target=(0, 1.5, 0), fov=60.0):
+    eye = glm.vec3(eye)
+    return world.spawn(Transform(position=eye, rotation=look_rotation(glm.vec3(target) - eye)), Camera(fov_y=fov))
+
+
+def mirror_wall(world, position=(0, 1.5, -2), size=(4, 3), rotation=None, **mirror):
+    return world.spawn(Transform(position=position, rotation=rotation or glm.quat()), MeshRef(quad(*size)),
+                       Material(color=(0.1, 0.1, 0.1)), Mirror(**mirror))
+
+
+def base_scene(world):
+    world.spawn(DirectionalLight(direction=(0.2, -1.0, -0.5), intensity=2.0))
+    world.spawn(Skybox())
+
+
+def reflected_pixel(runner, point, mirror_point=(0, 1.5, -2), normal=(0, 0, 1)):
+    """Where the mirror image of ``point`` lands on screen (pure math, no renderer)."""
+    m = reflection_matrix(plane_from_point_normal(mirror_point, normal))
+    return runner.project(glm.vec3(m * glm.vec4(glm.vec3(point), 1.0)))
+
+
+def test_box_in_front_appears_where_its_reflection_projects(scene):
+    ents = {}
+
+    def build(world):
+        base_scene(world)
+        look_from(world, (1.5, 1.8, 5.0))
+        ents["mirror"] = mirror_wall(world)
+        ents["box"] = world.spawn(Transform(position=(-1.0, 1.2, 0.0), scale=(0.6, 0.6, 0.6)), MeshRef(box()),
+                                  Material(color=(0.9, 0.05, 0.05)), Emissive(0.8))
+
+    runner = scene(build, SIZE)
+    rgb = runner.frame()
+    col, row = reflected_pixel(runner, (-1.0, 1.2, 0.0))
+    ids = runner.ids()
+    assert runner.engine.renderer.targets.read_surface_ids()[row, col] == ents["mirror"]  # it is a mirror pixel
+    assert ids[row, col] == ents["box"]  # the id follows the reflection to the box
+    r, g, b = rgb[row, col].astype(int)
+    assert r > 90 and r > 2 * g and r > 2 * b, rgb[row, col]
+    assert runner.stats.reflection_views == 1 and runner.stats.passes == 2
+
+
+def test_nothing_behind_the_mirror_shows_in_it(scene):
+    ents = {}
+
+    def build(world):
+        base_scene(world)
+        look_from(world, (0.0, 1.5, 5.0))
+        ents["mirror"] = mirror_wall(world)
+        # Green box straddling the plane far behind it, and one just behind the glass.
+        ents["behind"] = world.spawn(Transform(position=(0.0, 1.5, -2.6)), MeshRef(box()),
+                                     Material(color=(0.05, 0.9, 0.05)))
+        ents["touching"] = world.spawn(Transform(position=(1.0, 1.0, -2.3), scale=(0.5, 0.5, 0.5)), MeshRef(box()),
+                                       Material(color=(0.05, 0.9, 0.05)))
+
+    runner = scene(build, SIZE)
+    rgb = runner.frame()
+    ids = runner.ids()
+    surface = runner.engine.renderer.targets.read_surface_ids()
+    in_mirror = surface == ents["mirror"]
+    assert in_mirror.sum() > 2000
+    assert not np.isin(ids[in_mirror], [ents["behind"], ents["touching"]]).any()
+    pixels = rgb[in_mirror].astype(int)
+    assert not ((pixels[:, 1] > pixels[:, 0] + 40) & (pixels[:, 1] > pixels[:, 2] + 40)).any()  # no green
+
+
+def test_camera_close_to_the_mirror_uses_a_clip_plane_and_still_hides_what_is_behind(scene):
+    ents = {}
+
+    def build(world):
+        base_scene(world)
+        look_from(world, (0.3, 1.5, -1.9), target=(0.3, 1.5, -3))  # 10 cm from the glass
+        ents["mirror"] = mirror_wall(world)
+        ents["behind"] = world.spawn(Transform(position=(0.3, 1.5, -2.5)), MeshRef(box()),
+                                     Material(color=(0.05, 0.9, 0.05)))
+
+    runner = scene(build, SIZE)
+    runner.frame()
+    view = runner.engine.reflection_system.views[1].view
+    assert view.proj == runner.engine.render_system.main_view.proj  # oblique was not safe: plain + clip
+    assert ents["behind"] not in runner.ids()
+    assert (runner.engine.renderer.targets.read_surface_ids() == ents["mirror"]).mean() > 0.9  # all mirror
+
+
+def test_mirror_facing_away_offscreen_or_hidden_costs_no_pass(scene):
+    ents = {}
+
+    def build(world):
+        base_scene(world)
+        look_from(world, (0.0, 1.5, 5.0))
+        ents["away"] = mirror_wall(world, position=(-2.5, 1.5, -2), size=(2, 2), rotation=FACING_BACK)
+        ents["offscreen"] = mirror_wall(world, position=(30, 1.5, -2), size=(2, 2))
+        ents["hidden"] = mirror_wall(world, position=(2.5, 1.5, -4), size=(2, 2))
+        ents["wall"] = world.spawn(Transform(position=(2.5, 1.5, -2)), MeshRef(box((3, 3, 0.2))), Material())
+
+    runner = scene(build, SIZE)
+    runner.frame()
+    assert runner.stats.passes == 1 and runner.stats.reflection_views == 0
+    # Uncover the hidden one: now exactly one reflection pass.
+    runner.world.get(ents["wall"], Transform).position = (2.5, 10.0, -2)
+    runner.frame()
+    assert runner.stats.reflection_views == 1 and runner.stats.passes == 2
+    assert runner.engine.reflection_system.views[1].mirror.entity == ents["hidden"]
+
+
+def test_reflection_work_is_limited_to_the_mirror_footprint(scene):
+    def build(world):
+        base_scene(world)
+        look_from(world, (0.0, 1.5, 6.0))
+        mirror_wall(world, position=(1.5, 1.5, -2), size=(1, 1))
+
+    runner = scene(build, SIZE)
+    runner.frame()
+    x, y, w, h = runner.engine.reflection_system.views[1].rect
+    assert w * h < 0.05 * SIZE[0] * SIZE[1]
+    assert x > SIZE[0] // 2  # on the right, where the mirror is
+
+
+def test_adjacent_mirrors_do_not_bleed(scene):
+    def build(world):
+        base_scene(world)
+        look_from(world, (0.0, 1.5, 5.0))
+        world.spawn(Transform(), MeshRef(plane(20, 20, uv_repeat=8)), Material(texture=checker_texture(64, 8)))
+        mirror_wall(world, position=(-1.0, 1.5, -2), size=(2, 3), color=(1.0, 0.0, 0.0))
+        mirror_wall(world, position=(1.0, 1.5, -2), size=(2, 3), color=(0.0, 0.0, 1.0))
+
+    runner = scene(build, SIZE)
+    rgb = runner.frame()
+    col, row = runner.project((0.0, 1.0, -2.0))
+    left = rgb[row - 10:row + 10, col - 4:col - 1].reshape(-1, 3).astype(int)
+    right = rgb[row - 10:row + 10, col + 2:col + 5].reshape(-1, 3).astype(int)
+    assert (left[:, 0] > left[:, 2] + 30).all()
+    assert (right[:, 2] > right[:, 0] + 30).all()
+    assert runner.stats.reflection_views == 2
+
+
+def test_higher_roughness_lowers_local_contrast(scene):
+    ents = {}
+
+    def build(world):
+        base_scene(world)
+        look_from(world, (0.0, 1.5, 4.0))
+        # A self-lit checker wall behind the camera, facing the mirror.
+        world.spawn(Transform(position=(0, 1.5, 5.5), rotation=glm.angleAxis(glm.radians(-90), glm.vec3(1, 0, 0))),
+                    MeshRef(plane(12, 12, uv_repeat=6)), Material(texture=checker_texture(64, 8)), Emissive(1.0))
+        ents["mirror"] = mirror_wall(world, roughness=0.0)
+
+    runner = scene(build, SIZE)
+    runner.frame()
+    surface = runner.engine.renderer.targets.read_surface_ids()
+    region = surface == ents["mirror"]
+
+    def contrast(rgb):
+        lum = srgb_to_linear(rgb).mean(axis=2)
+        local = np.abs(np.diff(lum, axis=1))[region[:, 1:] & region[:, :-1]]
+        return local.mean()
+
+    sharp = contrast(runner.frame())
+    runner.world.get(ents["mirror"], Mirror).roughness = 0.6
+    blurred = contrast(runner.frame())
+    assert sharp > 0.02  # the checker is visible in the sharp mirror
+    assert blurred < 0.6 * sharp
+
+
+def test_sky_shows_where_the_mirror_reflects_nothing(scene):
+    sky = Skybox()
+
+    def build(world):
+        world.spawn(sky)
+        look_from(world, (0.0, 1.0, 4.0), target=(0.0, 2.0, -2.0))
+        mirror_wall(world, position=(0, 2.0, -2), size=(6, 6))
+
+    runner = scene(build, SIZE)
+    rgb = runner.frame()
+    col, row = runner.project((0.5, 2.5, -2.0))
+    view = runner.engine.render_system.main_view
+    w, h = SIZE
+    ndc = glm.vec4((col + 0.5) / w * 2 - 1, 1 - (row + 0.5) / h * 2, 1, 1)
+    far = glm.inverse(view.view_proj) * ndc
+    d = np.array(glm.normalize(glm.vec3(far) / far.w - view.eye))
+    r = d * np.array([1, 1, -1])  # reflected in the z = -2 plane
+    np.testing.assert_allclose(srgb_to_linear(rgb[row, col]), sky_radiance(sky, r), atol=0.03)
+    assert runner.ids()[row, col] == 0  # the reflection ends in the sky
+
+
+@pytest.mark.parametrize("rate", [0.0, 0.5])
+def test_reflect_rate_mixes_with_the_mirrors_own_shading(scene, rate):
+    def build(world):
+        base_scene(world)
+        look_from(world, (0.0, 1.5, 4.0))
+        world.spawn(Transform(position=(0, 1.5, 6.0), scale=(8, 8, 0.1)), MeshRef(box()),
+                    Material(color=(0.9, 0.9, 0.1)))  # behind the camera: what the mirror shows
+        world.spawn(Transform(position=(0, 1.5, -2)), MeshRef(quad(4, 3)), Material(color=(0.1, 0.1, 0.9)),
+                    Mirror(reflect_rate=rate))
+
+    runner = scene(build, SIZE)
+    rgb = runner.frame()
+    col, row = runner.project((0.3, 1.5, -2.0))
+    mixed = srgb_to_linear(rgb[row, col])
+    runner.world.get(5, Mirror).reflect_rate = 0.0
+    own = srgb_to_linear(runner.frame()[row, col])
+    runner.world.get(5, Mirror).reflect_rate = 1.0
+    full = srgb_to_linear(runner.frame()[row, col])
+    assert own[2] > own[0] + 0.05  # the mirror's own blue
+    assert full[0] > full[2] + 0.05  # the reflected yellow wall
+    np.testing.assert_allclose(mixed, (1 - rate) * own + rate * full, atol=0.02)
+
+
+def test_facing_mirrors_show_nested_images_of_decreasing_size(scene):
+    ents = {}
+
+    def build(world):
+        base_scene(world)
+        look_from(world, (-0.6, 1.6, 3.5), target=(0.0, 1.5, -4.0), fov=50.0)
+        mirror_wall(world, position=(0, 1.5, -4), size=(4, 3))
+        mirror_wall(world, position=(0, 1.5, 4), size=(4, 3), rotation=FACING_BACK, color=(0.9, 0.95, 0.9))
+        ents["ball"] = world.spawn(Transform(position=(0.8, 1.5, 0.0)), MeshRef(sphere(0.35)),
+                                   Material(color=(0.9, 0.5, 0.1)))
+
+    runner = scene(build, (240, 160))
+    runner.frame()
+    ids = runner.ids()
+    assert runner.stats.reflection_views == 3  # the depth cap
+    # Copies of the ball: the direct one, and one per reflection level that shows it.
+    from scipy import ndimage
+
+    labels, count = ndimage.label(ids == ents["ball"])
+    sizes = sorted(np.bincount(labels.ravel())[1:], reverse=True)
+    assert count >= 3, sizes
+    assert all(a > b for a, b in zip(sizes, sizes[1:], strict=False))
+    rects = [v.rect for v in runner.engine.reflection_system.views[1:]]
+    areas = [w * h for _, _, w, h in rects]
+    assert areas == sorted(areas, reverse=True) and areas[0] > areas[-1]
+
+
+def test_facing_mirrors_keep_memory_bounded(scene):
+    def build(world):
+        base_scene(world)
+        look_from(world, (0.4, 1.6, 3.5), target=(0.0, 1.5, -4.0))
+        mirror_wall(world, position=(0, 1.5, -4), size=(4, 3), max_depth=8)
+        mirror_wall(world, position=(0, 1.5, 4), size=(4, 3), rotation=FACING_BACK, max_depth=8)
+
+    runner = scene(build, (96, 64))
+    runner.engine.reflection_system.max_depth_cap = 6
+    for _ in range(5):
+        runner.frame()
+    assert runner.stats.reflection_views == 6
+    assert len(runner.engine.renderer.levels) == 7  # one screen-sized set per level, reused
+
+
+def test_a_mirror_on_a_mesh_that_is_not_flat_is_a_clear_error(scene):
+    def build(world):
+        look_from(world, (0, 1.5, 5))
+        world.spawn(Transform(), MeshRef(box(name="crate")), Material(), Mirror())
+
+    runner = scene(build, (32, 32))
+    with pytest.raises(MirrorError, match=r"Mirror on mesh 'crate' which is not flat"):
+        runner.frame()
+
+
+def test_explicit_plane_turns_any_mesh_into_a_mirror(scene):
+    ents = {}
+
+    def build(world):
+        base_scene(world)
+        look_from(world, (1.5, 1.8, 5.0))
+        world.spawn(Transform(position=(0, 1.5, -2.05)), MeshRef(box((4, 3, 0.1))), Material(),
+                    Mirror(plane_point=(0, 0, 0.05), plane_normal=(0, 0, 1)))
+        ents["box"] = world.spawn(Transform(position=(-1.0, 1.2, 0.0), scale=(0.6, 0.6, 0.6)), MeshRef(box()),
+                                  Material(color=(0.9, 0.05, 0.05)))
+
+    runner = scene(build, SIZE)
+    runner.frame()
+    col, row = reflected_pixel(runner, (-1.0, 1.2, 0.0))
+    assert runner.ids()[row, col] == ents["box"]
