@@ -5,9 +5,9 @@ from pathlib import Path
 
 import glm
 
-from components import ComponentValueError, Emissive, Material, MeshRef, Reflective, Transform
+from components import ComponentValueError, Emissive, Material, MeshRef, Mirror, Reflective, Transform
 from engine.errors import AssetError
-from engine.mesh import load_model
+from engine.mesh import flat_plane, load_model
 from engine.world import World
 
 
@@ -16,7 +16,8 @@ def spawn_model(world: World, path: str | Path, position=(0.0, 0.0, 0.0), rotati
     """Load ``path`` and spawn it; returns the root entity.
 
     The file's material decides the components (seed 002): an emissive colour gives
-    Emissive(emissive / diffuse); reflectivity > 0 gives Reflective.  The file is fully
+    Emissive(emissive / diffuse); reflectivity > 0 gives a Mirror on a flat mesh and
+    Reflective (sky) on any other.  The file is fully
     loaded and every component built (so validated) before anything is spawned, so a bad
     file leaves the world untouched.
     """
@@ -37,7 +38,11 @@ def spawn_model(world: World, path: str | Path, position=(0.0, 0.0, 0.0), rotati
             if part.emissive_factor > 0.0:
                 components.append(Emissive(part.emissive_factor))
             if part.reflectivity > 0.0:
-                components.append(Reflective(mode="skybox", mix=part.reflectivity))
+                # Seed 002: a flat reflective surface is a planar mirror, anything else reflects the sky.
+                if flat_plane(part.mesh) is not None:
+                    components.append(Mirror(reflect_rate=part.reflectivity, roughness=part.roughness))
+                else:
+                    components.append(Reflective(mode="skybox", mix=part.reflectivity))
             part_components.append(components)
     except ComponentValueError as exc:
         raise AssetError(f"mesh file {str(path)!r}: {exc}") from exc

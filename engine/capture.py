@@ -22,9 +22,11 @@ def save_ids(ids: np.ndarray, path: str | Path) -> None:
     np.save(path, ids.astype(np.uint32))
 
 
-def export_scene(world: World, path: str | Path, camera_entity: int, size: tuple[int, int]) -> Path:
+def export_scene(world: World, path: str | Path, camera_entity: int, size: tuple[int, int],
+                 mirror_planes: dict[int, tuple[list[float], list[float]]] | None = None) -> Path:
     """Write world-space geometry (one GLB node per renderable entity, named by its id) and,
-    beside it, a JSON of the camera and of each entity's component types."""
+    beside it, a JSON of the camera, each entity's component types, and each mirror's
+    world plane (a point on it and its unit normal, towards the reflecting side)."""
     import trimesh
 
     path = Path(path)
@@ -57,6 +59,10 @@ def export_scene(world: World, path: str | Path, camera_entity: int, size: tuple
         "entities": {
             str(entity): sorted(type(c).__name__ for c in world.components_of(entity))
             for entity in world.entities()
+        },
+        "mirrors": {
+            str(entity): {"point": [float(v) for v in point], "normal": [float(v) for v in normal]}
+            for entity, (point, normal) in sorted((mirror_planes or {}).items())
         },
     }
     path.with_suffix(".json").write_text(json.dumps(info, indent=1))

@@ -91,6 +91,26 @@ def _unit_normals(tm) -> np.ndarray:
     return normals.astype(np.float32)
 
 
+FLATNESS = 1e-4  # an AABB extent below this fraction of the largest counts as flat
+
+
+def flat_plane(mesh: Mesh) -> tuple[np.ndarray, np.ndarray] | None:
+    """Seed 002's test: a mesh is planar when one extent of its AABB is ~0; the plane's
+    normal is the mesh's (mean) normal along that axis. None when the mesh is not flat."""
+    positions, normals = mesh.positions, mesh.normals
+    lo, hi = positions.min(axis=0), positions.max(axis=0)
+    extent = hi - lo
+    axis = int(np.argmin(extent))
+    if extent[axis] > FLATNESS * max(float(extent.max()), 1e-9):
+        return None
+    normal = normals.mean(axis=0)
+    if abs(normal[axis]) < 0.5 * np.linalg.norm(normal) or np.linalg.norm(normal) < 1e-6:
+        return None
+    direction = np.zeros(3)
+    direction[axis] = np.sign(normal[axis])
+    return (lo + hi) / 2.0, direction
+
+
 # --- primitives --------------------------------------------------------------------------
 
 def box(size: tuple[float, float, float] = (1.0, 1.0, 1.0), name: str = "box") -> Mesh:

@@ -103,7 +103,8 @@ def run_headless(game: Game, args: argparse.Namespace) -> int:
         if args.export_scene:
             camera = engine.render_system.active_camera()
             if camera is not None:
-                export_scene(engine.world, args.export_scene, camera[0], args.size)
+                export_scene(engine.world, args.export_scene, camera[0], args.size,
+                             engine.reflection_system.mirror_planes())
     finally:
         if capture is not None:
             capture.release()

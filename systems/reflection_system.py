@@ -20,6 +20,7 @@ import glm
 import numpy as np
 
 from components import MeshRef, Mirror, Transform
+from engine.mesh import flat_plane
 from engine.reflection_math import (
     mirrored_view,
     oblique_is_safe,
@@ -37,7 +38,6 @@ from systems.render_system import RenderSystem
 
 # Mirrors clip a hair in front of their plane, so their own surface never shows in them.
 CLIP_OFFSET = 1e-3
-FLATNESS = 1e-4
 
 
 class MirrorError(ValueError):
@@ -64,22 +64,6 @@ class ReflectionView:
     rect: tuple[int, int, int, int]
     mirror: MirrorState | None = None
     parent: ReflectionView | None = None
-
-
-def mesh_plane(positions: np.ndarray, normals: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
-    """Seed 002's test: a mesh is planar when one extent of its AABB is ~0; the plane's
-    normal is the mesh's (mean) normal along that axis. None when the mesh is not flat."""
-    lo, hi = positions.min(axis=0), positions.max(axis=0)
-    extent = hi - lo
-    axis = int(np.argmin(extent))
-    if extent[axis] > FLATNESS * max(float(extent.max()), 1e-9):
-        return None
-    normal = normals.mean(axis=0)
-    if abs(normal[axis]) < 0.5 * np.linalg.norm(normal) or np.linalg.norm(normal) < 1e-6:
-        return None
-    direction = np.zeros(3)
-    direction[axis] = np.sign(normal[axis])
-    return (lo + hi) / 2.0, direction
 
 
 class ReflectionSystem(esper.Processor):
@@ -122,7 +106,7 @@ class ReflectionSystem(esper.Processor):
             point = np.array(mirror.plane_point if mirror.plane_point is not None else (0.0, 0.0, 0.0))
             normal = np.array(mirror.plane_normal)
         else:
-            found = mesh_plane(mesh.positions, mesh.normals)
+            found = flat_plane(mesh)
             if found is None:
                 lo, hi = mesh.bounds
                 raise MirrorError(

@@ -15,7 +15,7 @@ from PIL import Image
 from trimesh.visual import TextureVisuals
 from trimesh.visual.material import PBRMaterial
 
-from components import ComponentValueError, Emissive, Material, MeshRef, Reflective, Transform
+from components import ComponentValueError, Emissive, Material, MeshRef, Mirror, Reflective, Transform
 from engine.assets import spawn_model
 from engine.errors import AssetError
 from engine.mesh import Mesh, box, load_model
@@ -120,12 +120,25 @@ def test_obj_without_emission_or_metal_spawns_plain_entity(tmp_path, world):
     assert not world.has(child, Emissive) and not world.has(child, Reflective)
 
 
-def test_obj_metallic_spawns_reflective_with_that_mix(tmp_path, world):
-    root = spawn_model(world, write_obj(tmp_path, "chrome", "Kd 0.9 0.9 0.9\nPm 0.6\nPr 0.1"))
+def test_flat_reflective_obj_becomes_a_mirror(tmp_path, world):
+    """Seed 002: reflectivity > 0 on a flat mesh means a planar mirror."""
+    root = spawn_model(world, write_obj(tmp_path, "glass", "Kd 0.9 0.9 0.9\nPm 0.6\nPr 0.1"))
+    (child,) = children(world, root)
+    mirror = world.get(child, Mirror)
+    assert mirror.reflect_rate == pytest.approx(0.6) and mirror.roughness == pytest.approx(0.1)
+    assert not world.has(child, Reflective)
+    assert world.get(child, Material).metallic == pytest.approx(0.6)
+
+
+def test_reflective_obj_that_is_not_flat_reflects_the_sky(tmp_path, world):
+    path = tmp_path / "chrome.obj"
+    (tmp_path / "chrome.mtl").write_text("newmtl m\nKd 0.9 0.9 0.9\nPm 0.6\nPr 0.1\n")
+    path.write_text("mtllib chrome.mtl\n" + mesh_obj_text(box()))
+    root = spawn_model(world, path)
     (child,) = children(world, root)
     reflective = world.get(child, Reflective)
     assert reflective.mode == "skybox" and reflective.mix == pytest.approx(0.6)
-    assert world.get(child, Material).metallic == pytest.approx(0.6)
+    assert not world.has(child, Mirror)
     assert world.get(child, Material).roughness == pytest.approx(0.1)
 
 

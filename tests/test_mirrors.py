@@ -208,7 +208,7 @@ def test_reflect_rate_mixes_with_the_mirrors_own_shading(scene, rate):
         base_scene(world)
         look_from(world, (0.0, 1.5, 4.0))
         world.spawn(Transform(position=(0, 1.5, 6.0), scale=(8, 8, 0.1)), MeshRef(box()),
-                    Material(color=(0.9, 0.9, 0.1)))  # behind the camera: what the mirror shows
+                    Material(color=(0.9, 0.9, 0.1)), Emissive(0.5))  # behind the camera: what the mirror shows
         world.spawn(Transform(position=(0, 1.5, -2)), MeshRef(quad(4, 3)), Material(color=(0.1, 0.1, 0.9)),
                     Mirror(reflect_rate=rate))
 
@@ -230,10 +230,10 @@ def test_facing_mirrors_show_nested_images_of_decreasing_size(scene):
 
     def build(world):
         base_scene(world)
-        look_from(world, (-0.6, 1.6, 3.5), target=(0.0, 1.5, -4.0), fov=50.0)
+        look_from(world, (-1.5, 1.6, 3.5), target=(0.0, 1.5, -4.0), fov=50.0)
         mirror_wall(world, position=(0, 1.5, -4), size=(4, 3))
         mirror_wall(world, position=(0, 1.5, 4), size=(4, 3), rotation=FACING_BACK, color=(0.9, 0.95, 0.9))
-        ents["ball"] = world.spawn(Transform(position=(0.8, 1.5, 0.0)), MeshRef(sphere(0.35)),
+        ents["ball"] = world.spawn(Transform(position=(1.2, 1.5, 1.5)), MeshRef(sphere(0.2)),
                                    Material(color=(0.9, 0.5, 0.1)))
 
     runner = scene(build, (240, 160))
