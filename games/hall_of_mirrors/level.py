@@ -1,11 +1,14 @@
 """Hall of mirrors: a checkered floor, a few objects, an emissive lamp, a chrome sphere that
-reflects only the sky and a textured crate that mixes its texture with the sky (seed 004)."""
+reflects only the sky, a textured crate that mixes its texture with the sky (seed 004), a
+wall of mirrors with different tints and roughness, and a facing pair (the wall's centre
+mirror and one behind the camera) that shows a corridor of reflections."""
 from __future__ import annotations
 
 import glm
 
 from components import (
     DirectionalLight,
+    Mirror,
     Emissive,
     Material,
     MeshRef,
@@ -15,7 +18,7 @@ from components import (
     Transform,
 )
 from engine import Game, World, spawn_camera
-from engine.mesh import box, plane, sphere
+from engine.mesh import box, plane, quad, sphere
 from engine.texture_data import checker_texture
 
 
@@ -60,6 +63,25 @@ class HallOfMirrors(Game):
                     Material(texture=checker_texture(128, 4, (200, 150, 60), (90, 50, 20), name="crate"),
                              color=(1.0, 1.0, 1.0), roughness=0.5),
                     Reflective("skybox"))
+
+        self._mirrors(world)
+
+    @staticmethod
+    def _mirrors(world: World) -> None:
+        frame = Material(color=(0.15, 0.12, 0.1), roughness=0.4)
+        glass = Material(color=(0.05, 0.05, 0.05))
+        # The wall: (x, width, tint, roughness). The centre one faces the mirror behind the camera.
+        wall = ((-5.2, 2.0, (1.0, 0.85, 0.85), 0.0), (-2.9, 2.0, (0.8, 0.9, 1.0), 0.25),
+                (0.0, 3.2, (0.95, 0.97, 0.95), 0.0), (2.9, 2.0, (0.9, 1.0, 0.85), 0.5),
+                (5.2, 2.0, (1.0, 0.95, 0.75), 0.1))
+        for x, width, tint, roughness in wall:
+            world.spawn(Transform(position=(x, 1.6, -6.0)), MeshRef(quad(width, 2.8)), glass,
+                        Mirror(color=tint, roughness=roughness))
+            world.spawn(Transform(position=(x, 1.6, -6.06)), MeshRef(box((width + 0.2, 3.0, 0.1))), frame)
+        back = glm.angleAxis(glm.pi(), glm.vec3(0, 1, 0))
+        world.spawn(Transform(position=(0.0, 1.6, 11.0), rotation=back), MeshRef(quad(4.0, 3.0)), glass,
+                    Mirror(color=(0.95, 0.95, 1.0)))
+        world.spawn(Transform(position=(0.0, 1.6, 11.06), rotation=back), MeshRef(box((4.2, 3.2, 0.1))), frame)
 
     def update(self, world: World, dt: float) -> None:
         for _, (spin, transform) in world.query(Spin, Transform):
