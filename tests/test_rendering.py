@@ -302,3 +302,22 @@ def test_resizing_follows_the_output_size(scene, size):
     runner.frame()
     assert runner.engine.renderer.targets.size == size
     assert runner.ids().shape == (size[1], size[0])
+
+
+def test_scattered_movers_in_one_batch_upload_only_their_rows(scene):
+    from engine.render.instances import INSTANCE_DTYPE
+
+    spawned = []
+
+    def build(world):
+        camera(world, eye=glm.vec3(0, 0, 40))
+        crate = box((0.3, 0.3, 0.3))
+        spawned.extend(world.spawn(Transform(position=(i % 20 - 10, i // 20 - 10, 0)), MeshRef(crate), Material())
+                       for i in range(400))
+
+    runner = scene(build, (32, 32))
+    runner.frame()
+    for e in spawned[::100]:
+        runner.world.get(e, Transform).position += glm.vec3(0, 0, 0.5)
+    runner.frame()
+    assert runner.stats.uploaded_bytes == 4 * INSTANCE_DTYPE.itemsize

@@ -25,8 +25,10 @@ INSTANCE_ATTRIBUTES = ("in_model", "in_normal_matrix", "in_color", "in_surface",
 VERTEX_FORMAT = "3f 3f 2f"
 VERTEX_ATTRIBUTES = ("in_position", "in_normal", "in_uv")
 
-# Past this many separate dirty runs one span write is cheaper than many small ones.
-_MAX_WRITE_RUNS = 32
+# Many separate dirty runs are sent as one span when the span is not much bigger than the
+# rows themselves (one write call beats many); otherwise run by run, so scattered movers
+# in a big batch do not resend everything between them.
+_SPAN_SLACK = 4
 
 
 class GpuMesh:
@@ -108,7 +110,7 @@ class InstanceBatch:
         breaks = np.flatnonzero(np.diff(dirty) != 1) + 1
         starts = np.concatenate([[dirty[0]], dirty[breaks]])
         ends = np.concatenate([dirty[breaks - 1], [dirty[-1]]]) + 1
-        if len(starts) > _MAX_WRITE_RUNS:
+        if len(starts) > 1 and (ends[-1] - starts[0]) <= _SPAN_SLACK * len(dirty):
             starts, ends = starts[:1], ends[-1:]
         sent = 0
         for start, end in zip(starts.tolist(), ends.tolist(), strict=True):
