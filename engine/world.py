@@ -90,6 +90,9 @@ class World:
         kind = type(component)
         if esper.has_component(entity, kind):
             self._detach(esper.component_for_entity(entity, kind))
+        check = getattr(component, "check_attach", None)
+        if check is not None:
+            check(entity)
         esper.add_component(entity, component)
         if isinstance(component, TrackedComponent):
             object.__setattr__(component, "_entity", entity)

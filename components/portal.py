@@ -1,0 +1,67 @@
+"""Paired portals (seed 001's "magic mirrors") and the things that travel through them."""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import glm
+
+from components.tracking import ComponentValueError, TrackedComponent, color, finite, vec3
+
+
+@dataclass(eq=False)
+class Portal(TrackedComponent):
+    """A rectangular window onto the partner portal.
+
+    The rectangle is ``size`` (width, height) in the entity's local XY plane, facing local
+    +Z; looking into its front shows what lies in front of the partner.  ``closed_color``
+    is what it shows when it has no working partner (deleted, disabled) or past the
+    recursion limit.
+    """
+
+    partner: int | None = None
+    size: Any = (2.0, 3.0)
+    max_depth: int = 4
+    enabled: bool = True
+    closed_color: Any = field(default_factory=lambda: glm.vec4(0.02, 0.02, 0.03, 1.0))
+
+    def check_attach(self, entity: int) -> None:
+        """Called by the world before the component joins ``entity``."""
+        if self.partner == entity:
+            raise ComponentValueError(f"Portal on entity {entity} is paired with itself")
+
+    def _validate(self, name: str, value: Any) -> Any:
+        if name == "partner" and value is not None and value == self._entity and self._sink is not None:
+            raise ComponentValueError(f"Portal on entity {value} is paired with itself")
+        if name == "partner" and value is not None:
+            if not isinstance(value, int) or isinstance(value, bool) or value <= 0:
+                raise ComponentValueError(f"Portal.partner must be an entity id, got {value!r}")
+        if name == "size":
+            try:
+                w, h = (finite(self, name, v, positive=True) for v in value)
+            except (TypeError, ValueError) as exc:
+                if isinstance(exc, ComponentValueError):
+                    raise
+                raise ComponentValueError(f"Portal.size must be (width, height) > 0, got {value!r}") from None
+            return (w, h)
+        if name == "max_depth":
+            if not isinstance(value, int) or isinstance(value, bool) or not 0 <= value <= 16:
+                raise ComponentValueError(f"Portal.max_depth must be an int in [0, 16], got {value!r}")
+        if name == "enabled" and not isinstance(value, bool):
+            raise ComponentValueError(f"Portal.enabled must be True or False, got {value!r}")
+        if name == "closed_color":
+            return color(self, name, value)
+        return value
+
+
+@dataclass(eq=False)
+class Traveller(TrackedComponent):
+    """An entity that goes through portals; ``velocity`` (world, m/s) moves it each frame
+    and is turned with it when it travels."""
+
+    velocity: Any = field(default_factory=glm.vec3)
+
+    def _validate(self, name: str, value: Any) -> Any:
+        if name == "velocity":
+            return vec3(self, name, value)
+        return value
