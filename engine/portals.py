@@ -16,6 +16,7 @@ def spawn_portal_pair(world: World, position_a, rotation_a, position_b, rotation
     a = world.spawn(Transform(position=position_a, rotation=rotation_a or glm.quat()), MeshRef(mesh), surface,
                     Portal(size=size, max_depth=max_depth))
     b = world.spawn(Transform(position=position_b, rotation=rotation_b or glm.quat()), MeshRef(mesh),
-                    Material(color=(0.02, 0.02, 0.03), roughness=1.0), Portal(partner=a, size=size, max_depth=max_depth))
+                    Material(color=(0.02, 0.02, 0.03), roughness=1.0),
+                    Portal(partner=a, size=size, max_depth=max_depth))
     world.get(a, Portal).partner = b
     return a, b

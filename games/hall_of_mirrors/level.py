@@ -8,10 +8,10 @@ import glm
 
 from components import (
     DirectionalLight,
-    Mirror,
     Emissive,
     Material,
     MeshRef,
+    Mirror,
     PointLight,
     Reflective,
     Skybox,
