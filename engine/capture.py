@@ -7,7 +7,8 @@ from pathlib import Path
 import glm
 import numpy as np
 
-from components import Camera, MeshRef, Transform
+from components import Camera, MeshRef, Portal, Transform
+from engine.portal_math import pair_transform
 from engine.world import World
 
 
@@ -60,6 +61,7 @@ def export_scene(world: World, path: str | Path, camera_entity: int, size: tuple
             str(entity): sorted(type(c).__name__ for c in world.components_of(entity))
             for entity in world.entities()
         },
+        "portals": _portal_pairs(world),
         "mirrors": {
             str(entity): {"point": [float(v) for v in point], "normal": [float(v) for v in normal]}
             for entity, (point, normal) in sorted((mirror_planes or {}).items())
@@ -67,3 +69,17 @@ def export_scene(world: World, path: str | Path, camera_entity: int, size: tuple
     }
     path.with_suffix(".json").write_text(json.dumps(info, indent=1))
     return path
+
+
+def _portal_pairs(world: World) -> dict[str, dict]:
+    """Per portal: its partner and the column-major 4x4 that carries points at it to the partner."""
+    pairs = {}
+    for entity, (portal, transform) in world.query(Portal, Transform):
+        partner = portal.partner
+        partner_t = world.try_get(partner, Transform) if partner is not None and world.exists(partner) else None
+        carry = pair_transform(transform.world, partner_t.world) if partner_t is not None else None
+        pairs[str(entity)] = {
+            "partner": partner if partner_t is not None else None,
+            "to_partner": [float(v) for column in carry.to_list() for v in column] if carry is not None else None,
+        }
+    return pairs
