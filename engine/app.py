@@ -8,12 +8,13 @@ from components import Camera, FlyController, Transform, yaw_pitch_rotation
 from engine.gl_context import prepare_context
 from engine.render.renderer import Renderer
 from engine.world import World
-from systems import FlyCameraSystem, Output, PresentSystem, RenderSystem, TransformSystem
+from systems import FlyCameraSystem, Output, PortalTravelSystem, PresentSystem, RenderSystem, TransformSystem
 from systems.reflection_system import ReflectionSystem
 
 # System order, high priority first (see ARCHITECTURE.md).
 PRIORITY_GAME = 100
 PRIORITY_INPUT = 90
+PRIORITY_TRAVEL = 70  # after input moved the camera, before world matrices
 PRIORITY_TRANSFORM = 50
 PRIORITY_RENDER = 0
 PRIORITY_REFLECT = -10
@@ -54,6 +55,7 @@ class Engine:
         self.render_system = RenderSystem(self.world, self.renderer)
         self.world.add_system(_GameUpdateSystem(game, self.world), PRIORITY_GAME)
         self.world.add_system(FlyCameraSystem(self.world), PRIORITY_INPUT)
+        self.world.add_system(PortalTravelSystem(self.world, self.render_system), PRIORITY_TRAVEL)
         self.world.add_system(TransformSystem(self.world), PRIORITY_TRANSFORM)
         self.world.add_system(self.render_system, PRIORITY_RENDER)
         self.reflection_system = ReflectionSystem(self.world, self.render_system, self.renderer)

@@ -29,3 +29,29 @@ def inside_rectangle(world: glm.mat4, size: tuple[float, float], point) -> bool:
     """Whether ``point`` (on or near the portal plane) lies within its rectangle."""
     local = glm.vec3(glm.inverse(world) * glm.vec4(glm.vec3(point), 1.0))
     return abs(local.x) <= size[0] / 2 and abs(local.y) <= size[1] / 2
+
+
+def pair_rotation(carry: glm.mat4) -> glm.quat:
+    """The rotation part of a pair transform (columns normalised, so scaled portals work)."""
+    m = glm.mat3(carry)
+    return glm.normalize(glm.quat_cast(glm.mat3(glm.normalize(m[0]), glm.normalize(m[1]), glm.normalize(m[2]))))
+
+
+def near_plane_corners(position, rotation: glm.quat, fov_y_deg: float, near: float,
+                       aspect: float) -> list[glm.vec3]:
+    """World corners of a camera's near-plane rectangle (the camera looks down its -Z)."""
+    half_h = near * glm.tan(glm.radians(fov_y_deg) / 2.0)
+    half_w = half_h * aspect
+    eye = glm.vec3(position)
+    return [eye + rotation * glm.vec3(sx * half_w, sy * half_h, -near)
+            for sx, sy in ((-1, -1), (1, -1), (1, 1), (-1, 1))]
+
+
+def front_to_back_crossing(plane: glm.vec4, start, end) -> float | None:
+    """Where along ``start -> end`` (0..1) the segment goes from the plane's front (>= 0)
+    to its back (< 0); None when it does not."""
+    d0 = glm.dot(glm.vec3(plane), glm.vec3(start)) + plane.w
+    d1 = glm.dot(glm.vec3(plane), glm.vec3(end)) + plane.w
+    if d0 < 0.0 or d1 >= 0.0:
+        return None
+    return d0 / (d0 - d1)

@@ -22,7 +22,17 @@ flat in uvec4 v_slots;
 // Reflection levels draw only the pixels of their own view (see mirror_mask.frag).
 uniform bool masked;
 uniform usampler2D node_map;
+#ifdef BATCHED_VIEWS
+// The batched mirror program draws every view of a level in one draw: scene_batched.geom
+// says which view (node index and eye) each triangle was emitted for.
+flat in uint v_node;
+flat in vec3 v_eye;
+#define node_index v_node
+#define VIEW_EYE v_eye
+#else
 uniform uint node_index;
+#define VIEW_EYE camera.eye.xyz
+#endif
 
 layout(location = 0) out vec4 out_color;
 layout(location = 1) out uint out_surface;  // the entity drawn here
@@ -93,11 +103,14 @@ vec3 reflect_skybox(vec3 color, Surface s) {
 vec3 apply_reflect(uint variant, vec3 color, Surface s) {
     switch (variant) {
         case REFLECT_SKYBOX:
-        // Cube and portal variants land with their issues; until then they show the sky,
-        // which is what those surfaces reflect when nothing else is there.
+        // The cube variant lands with probes; until then it shows the sky, which is what
+        // the surface reflects when nothing else is there.
         case REFLECT_CUBE:
-        case REFLECT_PORTAL:
             return reflect_skybox(color, s);
+        case REFLECT_PORTAL:
+            // A portal's closed look (no partner, or past the recursion limit): flat, unlit.
+            // An open portal's view is composited over it by the ReflectionSystem.
+            return v_tint.rgb;
         case REFLECT_PLANAR:
             // A mirror keeps its own shading here; the ReflectionSystem blends its
             // reflection over these pixels once the reflection has been rendered.
@@ -136,7 +149,7 @@ void main() {
     if (masked && texelFetch(node_map, ivec2(gl_FragCoord.xy), 0).r != node_index) discard;
     Surface s;
     s.position = v_world_pos;
-    s.to_eye = normalize(camera.eye.xyz - v_world_pos);
+    s.to_eye = normalize(VIEW_EYE - v_world_pos);
     s.normal = normalize(v_normal);
     if (!gl_FrontFacing) s.normal = -s.normal;
     vec4 base = v_color;

@@ -2,6 +2,20 @@
 // Instanced scene geometry: per-vertex mesh data, per-instance transform and material record.
 #include "camera.glsl"
 
+#ifdef BATCHED_VIEWS
+// The batched mirror program (engine/render/batched_mirrors.py): scene_batched.geom projects
+// each triangle once per view, reading these outputs under their g_ names and writing the
+// v_ names scene.frag reads.
+#define v_world_pos g_world_pos
+#define v_normal g_normal
+#define v_uv g_uv
+#define v_color g_color
+#define v_surface g_surface
+#define v_reflect g_reflect
+#define v_tint g_tint
+#define v_slots g_slots
+#endif
+
 in vec3 in_position;
 in vec3 in_normal;
 in vec2 in_uv;
@@ -33,6 +47,8 @@ void main() {
     v_reflect = in_reflect;
     v_tint = in_tint;
     v_slots = in_slots;
+#ifndef BATCHED_VIEWS
     gl_Position = camera.view_proj * world;
     gl_ClipDistance[0] = dot(world, camera.clip_plane);
+#endif
 }

@@ -6,7 +6,7 @@ from dataclasses import dataclass
 
 import glm
 
-from components import Emissive, Material, Mirror, Reflective, Refractive
+from components import Emissive, Material, Mirror, Portal, Reflective, Refractive
 from engine.material_slots import EmissiveVariant, ReflectVariant, RefractVariant
 
 _REFLECT_MODES = {
@@ -31,7 +31,7 @@ class MaterialChoice:
 
 def choose_material(material: Material | None, emissive: Emissive | None,
                     reflective: Reflective | None, refractive: Refractive | None,
-                    mirror: Mirror | None = None) -> MaterialChoice:
+                    mirror: Mirror | None = None, portal: Portal | None = None) -> MaterialChoice:
     material = material or DEFAULT_MATERIAL
     emissive_variant = EmissiveVariant.EMISSIVE if emissive is not None and emissive.power > 0 else \
         EmissiveVariant.NONE
@@ -42,7 +42,11 @@ def choose_material(material: Material | None, emissive: Emissive | None,
         # Seed 004: a textured surface mixes its texture and the reflection 50/50 unless told.
         mix = reflective.mix if reflective.mix is not None else (0.5 if material.texture is not None else 1.0)
         tint = reflective.tint
-    if mirror is not None and mirror.enabled:
+    if portal is not None:
+        # Drawn flat in its closed colour; an open portal's view is composited over it.
+        reflect_variant = ReflectVariant.PORTAL
+        tint = portal.closed_color
+    elif mirror is not None and mirror.enabled:
         # The ReflectionSystem blends the mirror's image over its own shading afterwards.
         reflect_variant = ReflectVariant.PLANAR
     elif reflect_variant == ReflectVariant.PLANAR:

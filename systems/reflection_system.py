@@ -19,10 +19,10 @@ import esper
 import glm
 import numpy as np
 
-from components import MeshRef, Mirror, Transform
+from components import MeshRef, Mirror, Portal, Transform
 from engine.mesh import flat_plane
+from engine.portal_math import pair_transform, portal_plane
 from engine.reflection_math import (
-    mirrored_view,
     oblique_is_safe,
     oblique_projection,
     plane_from_point_normal,
@@ -30,6 +30,7 @@ from engine.reflection_math import (
     signed_distance,
     transform_plane,
 )
+from engine.render.batched_mirrors import BatchedMirrors, choose_path
 from engine.render.mirror_passes import MAX_LEVEL_VIEWS, CompositeParams, MirrorPasses
 from engine.render.renderer import Renderer
 from engine.render.views import View
@@ -45,24 +46,32 @@ class MirrorError(ValueError):
 
 
 @dataclass
-class MirrorState:
-    """What the passes need of one mirror, refreshed when it moves or changes."""
+class SurfaceState:
+    """A mirror or a portal as the passes see it: where it is and where its view goes."""
 
     entity: int
-    mirror: Mirror
-    plane: glm.vec4 = field(default_factory=glm.vec4)      # world, normal = front
-    corners: np.ndarray = field(default_factory=lambda: np.zeros((0, 4)))  # world, homogeneous
+    kind: str                    # "mirror" or "portal"
+    plane: glm.vec4              # world; its normal points to the side it is seen from
+    corners: np.ndarray          # world corners, homogeneous rows
+    carry: glm.mat4              # takes the parent camera to this surface's view (a reflection, or the pair)
+    exit_plane: glm.vec4         # what the view keeps: the mirror's front, or the look-out portal's front
+    exit_entity: int             # the surface the view looks out of: the mirror itself, or the partner
+    max_depth: int
+    enabled: bool = True
+    tint: glm.vec4 = field(default_factory=lambda: glm.vec4(1.0))
+    reflect_rate: float = 1.0
+    roughness: float = 0.0
 
 
 @dataclass
 class ReflectionView:
-    """One node of the view tree: a view at some level, looking into one mirror."""
+    """One node of the view tree: a view at some level, looking into one mirror or portal."""
 
     index: int
     level: int
     view: View
     rect: tuple[int, int, int, int]
-    mirror: MirrorState | None = None
+    surface: SurfaceState | None = None
     parent: ReflectionView | None = None
 
 
@@ -70,14 +79,20 @@ class ReflectionSystem(esper.Processor):
     """Renders and composites mirror reflections after the main view, before present."""
 
     def __init__(self, world: World, render_system: RenderSystem, renderer: Renderer,
-                 max_depth_cap: int = 3) -> None:
+                 max_depth_cap: int = 8) -> None:
         self.world = world
         self.render_system = render_system
         self.renderer = renderer
         self.passes = MirrorPasses(renderer)
         self.max_depth_cap = max_depth_cap
-        self.mirrors: dict[int, MirrorState] = {}
+        self.mirrors: dict[int, SurfaceState] = {}
+        self.portals: dict[int, SurfaceState] = {}
         self.views: list[ReflectionView] = []   # last frame's view tree, level order
+        # How a level's views are drawn: "per_mirror" (one render_view each), "batched" (one
+        # draw per mesh for the whole level, engine/render/batched_mirrors.py) or "auto"
+        # (chosen per level by view count; the rule and its numbers: choose_path).
+        self.path = "auto"
+        self.batched = BatchedMirrors(renderer)
 
     # --- extract ---------------------------------------------------------------------------
     def _refresh_mirrors(self) -> None:
@@ -93,15 +108,28 @@ class ReflectionSystem(esper.Processor):
             transform = world.try_get(entity, Transform)
             if mesh_ref is None or transform is None:
                 raise MirrorError(f"entity {entity}: a Mirror needs a MeshRef and a Transform")
-            state = self.mirrors.get(entity) or MirrorState(entity, mirror)
-            state.mirror = mirror
-            self._place(state, mesh_ref, transform)
-            self.mirrors[entity] = state
+            self.mirrors[entity] = self._mirror_state(entity, mirror, mesh_ref, transform)
+
+    def _refresh_portals(self) -> None:
+        """Portals depend on their partner's pose too; there are few, so all are redone."""
+        world = self.world
+        self.portals = {}
+        for entity, (portal, transform) in world.query(Portal, Transform):
+            partner = portal.partner
+            out = world.try_get(partner, Transform) if partner is not None and world.exists(partner) else None
+            if out is None or not world.has(partner, Portal):
+                continue  # closed: the scene shader shows its closed colour
+            w, h = portal.size
+            corners = np.array([(x, y, 0.0, 1.0) for x in (-w / 2, w / 2) for y in (-h / 2, h / 2)])
+            self.portals[entity] = SurfaceState(
+                entity, "portal", portal_plane(transform.world),
+                corners @ np.array(transform.world.to_list(), np.float64),
+                pair_transform(transform.world, out.world), portal_plane(out.world), partner,
+                portal.max_depth, portal.enabled)
 
     @staticmethod
-    def _place(state: MirrorState, mesh_ref: MeshRef, transform: Transform) -> None:
+    def _mirror_state(entity: int, mirror: Mirror, mesh_ref: MeshRef, transform: Transform) -> SurfaceState:
         mesh = mesh_ref.mesh
-        mirror = state.mirror
         if mirror.plane_normal is not None:
             point = np.array(mirror.plane_point if mirror.plane_point is not None else (0.0, 0.0, 0.0))
             normal = np.array(mirror.plane_normal)
@@ -110,19 +138,22 @@ class ReflectionSystem(esper.Processor):
             if found is None:
                 lo, hi = mesh.bounds
                 raise MirrorError(
-                    f"entity {state.entity}: Mirror on mesh {mesh.name!r} which is not flat (model-space "
+                    f"entity {entity}: Mirror on mesh {mesh.name!r} which is not flat (model-space "
                     f"extents {np.round(hi - lo, 4).tolist()}); give the mirror a flat mesh or plane_normal")
             point, normal = found
         model = transform.world
         local_plane = plane_from_point_normal(tuple(float(v) for v in point), tuple(float(v) for v in normal))
-        state.plane = transform_plane(model, local_plane)
+        plane = transform_plane(model, local_plane)
         lo, hi = mesh.bounds
         corners = np.array([(x, y, z, 1.0) for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
-        state.corners = corners @ np.array(model.to_list(), np.float64)  # rows: world corners
+        return SurfaceState(entity, "mirror", plane, corners @ np.array(model.to_list(), np.float64),
+                            reflection_matrix(plane), plane, entity, mirror.max_depth, mirror.enabled,
+                            mirror.color, mirror.reflect_rate, mirror.roughness)
 
     # --- schedule and render -----------------------------------------------------------------
     def process(self, dt: float) -> None:
         self._refresh_mirrors()
+        self._refresh_portals()
         self.views = []
         main = self.render_system.main_view
         if main is None:
@@ -131,6 +162,7 @@ class ReflectionSystem(esper.Processor):
         root = ReflectionView(0, 0, main, (0, 0, *main.size))
         levels = [[root]]
         self.views = [root]
+        paths = set()
         for level in range(self.max_depth_cap):
             parent_targets = renderer.level_targets(level, main.size)
             children = self._visible_children(levels[level], parent_targets, main)
@@ -138,28 +170,35 @@ class ReflectionSystem(esper.Processor):
                 break
             targets = renderer.level_targets(level + 1, main.size)
             self.passes.prepare_level(targets, parent_targets,
-                                      [(c.parent.index, c.mirror.entity, c.index) for c in children],
+                                      [(c.parent.index, c.surface.entity, c.index) for c in children],
                                       _union(c.rect for c in children))
-            for child in children:
-                renderer.render_view(child.view, targets, mask=targets)
+            path = choose_path(self.path, len(children))
+            paths.add(path)
+            if path == "batched":
+                self.batched.render_level([c.view for c in children], targets)
+            else:
+                for child in children:
+                    renderer.render_view(child.view, targets, mask=targets)
             levels.append(children)
             self.views.extend(children)
         for level in range(len(levels) - 1, 0, -1):
             parent_targets = renderer.levels[level - 1]
             targets = renderer.levels[level]
-            targets.use_mipmaps(any(c.mirror.mirror.roughness > 0.0 for c in levels[level]))
+            targets.use_mipmaps(any(c.surface.roughness > 0.0 for c in levels[level]))
             for child in levels[level]:
                 renderer.bind_view(child.parent.view)
-                mirror = child.mirror.mirror
+                surface = child.surface
                 self.passes.composite_view(parent_targets, targets, CompositeParams(
-                    child.index, mirror.color, mirror.reflect_rate, mirror.roughness,
-                    glm.vec3(child.mirror.plane)), child.rect)
+                    child.index, surface.tint, surface.reflect_rate, surface.roughness, glm.vec3(surface.plane),
+                    portal=surface.kind == "portal", carry=glm.mat3(surface.carry)), child.rect)
         renderer.stats.reflection_views = len(self.views) - 1
+        renderer.stats.reflection_path = paths.pop() if len(paths) == 1 else ("mixed" if paths else "")
 
     def _visible_children(self, parents: list[ReflectionView], parent_targets, main: View) -> list[ReflectionView]:
         children: list[ReflectionView] = []
+        surfaces = [*self.mirrors.values(), *self.portals.values()]
         for parent in parents:
-            for state in self.mirrors.values():
+            for state in surfaces:
                 rect = self._cull(parent, state, main)
                 if rect is None:
                     continue
@@ -168,25 +207,25 @@ class ReflectionSystem(esper.Processor):
                 if len(children) == MAX_LEVEL_VIEWS:
                     return children
                 index = len(self.views) + len(children)
-                view = self._mirror_view(parent, state, main, index)
+                view = self._surface_view(parent, state, main, index)
                 view.scissor = rect
                 children.append(ReflectionView(index, parent.level + 1, view, rect, state, parent))
         return children
 
-    def _cull(self, parent: ReflectionView, state: MirrorState, main: View) -> tuple[int, int, int, int] | None:
-        """The screen rectangle where ``parent`` can see ``state``'s mirror, or None."""
-        mirror = state.mirror
+    def _cull(self, parent: ReflectionView, state: SurfaceState, main: View) -> tuple[int, int, int, int] | None:
+        """The screen rectangle where ``parent`` can see ``state``'s surface, or None."""
         depth = parent.level + 1
-        if not mirror.enabled or depth > min(mirror.max_depth, self.max_depth_cap):
+        if not state.enabled or depth > min(state.max_depth, self.max_depth_cap):
             return None
-        if parent.mirror is not None and parent.mirror.entity == state.entity:
-            return None  # a mirror does not see itself
+        if parent.surface is not None and parent.surface.exit_entity == state.entity:
+            return None  # a view does not see the surface it looks out of
         if signed_distance(state.plane, parent.view.eye) <= 0.0:
             return None  # facing away from this view (seed 000's tip)
-        if parent.mirror is not None:
-            distances = state.corners[:, :3] @ np.array(glm.vec3(parent.mirror.plane)) + parent.mirror.plane.w
-            if (distances <= CLIP_OFFSET).all():
-                return None  # entirely behind the mirror this view looks out of
+        if parent.surface is not None:
+            clip = parent.view.clip_plane
+            distances = state.corners[:, :3] @ np.array(glm.vec3(clip)) + clip.w
+            if (distances <= 0.0).all():
+                return None  # entirely behind the plane this view looks out of
         view_proj = np.array((main.proj * parent.view.view).to_list(), np.float64)
         clip = state.corners @ view_proj
         w = clip[:, 3]
@@ -209,17 +248,20 @@ class ReflectionSystem(esper.Processor):
         return x0, y0, x1 - x0, y1 - y0
 
     @staticmethod
-    def _mirror_view(parent: ReflectionView, state: MirrorState, main: View, index: int) -> View:
-        plane = state.plane
-        eye = glm.vec3(reflection_matrix(plane) * glm.vec4(parent.view.eye, 1.0))
-        view = mirrored_view(parent.view.view, plane)
-        clip_plane = glm.vec4(glm.vec3(plane), plane.w - CLIP_OFFSET)
+    def _surface_view(parent: ReflectionView, state: SurfaceState, main: View, index: int) -> View:
+        """The parent's camera carried through the surface (for a mirror: ``mirrored_view``;
+        for a portal: seed 001's look-out x half turn x inverse(look-in)), clipped at the
+        plane it looks out of, with an oblique near plane there unless the eye is too close."""
+        eye = glm.vec3(state.carry * glm.vec4(parent.view.eye, 1.0))
+        view = parent.view.view * glm.inverse(state.carry)
+        exit_plane = state.exit_plane
+        clip_plane = glm.vec4(glm.vec3(exit_plane), exit_plane.w - CLIP_OFFSET)
         proj = main.proj
-        near = _near_distance(main.proj)
-        if oblique_is_safe(parent.view.eye, plane, near):
+        if oblique_is_safe(eye, exit_plane, _near_distance(main.proj)):
             proj = oblique_projection(main.proj, transform_plane(view, clip_plane))
-        return View(view=view, proj=proj, eye=eye, size=main.size, name=f"mirror {state.entity}",
-                    clip_plane=clip_plane, mirrored=not parent.view.mirrored, scissor=None, node=index)
+        mirrored = parent.view.mirrored != (state.kind == "mirror")
+        return View(view=view, proj=proj, eye=eye, size=main.size, name=f"{state.kind} {state.entity}",
+                    clip_plane=clip_plane, mirrored=mirrored, scissor=None, node=index)
 
     def mirror_planes(self) -> dict[int, tuple[list[float], list[float]]]:
         """Each mirror's world plane as (point on it, unit normal towards its front)."""
@@ -231,6 +273,7 @@ class ReflectionSystem(esper.Processor):
 
     def close(self) -> None:
         self.passes.release()
+        self.batched.release()
 
 
 def _near_distance(proj: glm.mat4) -> float:

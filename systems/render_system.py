@@ -24,6 +24,7 @@ from components import (
     MeshRef,
     Mirror,
     PointLight,
+    Portal,
     Reflective,
     Refractive,
     Skybox,
@@ -36,7 +37,7 @@ from engine.render.views import View, camera_view, lights_block
 from engine.world import World
 from systems.material_dispatch import choose_material
 
-MATERIAL_KINDS = (MeshRef, Material, Emissive, Reflective, Refractive, Mirror)
+MATERIAL_KINDS = (MeshRef, Material, Emissive, Reflective, Refractive, Mirror, Portal)
 AMBIENT = (0.03, 0.03, 0.035)
 
 
@@ -91,7 +92,8 @@ class RenderSystem(esper.Processor):
         else:
             row = batch.row(entity)
         choice = choose_material(material, world.try_get(entity, Emissive), world.try_get(entity, Reflective),
-                                 world.try_get(entity, Refractive), world.try_get(entity, Mirror))
+                                 world.try_get(entity, Refractive), world.try_get(entity, Mirror),
+                                 world.try_get(entity, Portal))
         row["color"] = choice.color
         row["surface"] = choice.surface
         row["reflect"] = choice.reflect_params

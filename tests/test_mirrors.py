@@ -119,7 +119,7 @@ def test_mirror_facing_away_offscreen_or_hidden_costs_no_pass(scene):
     runner.world.get(ents["wall"], Transform).position = (2.5, 10.0, -2)
     runner.frame()
     assert runner.stats.reflection_views == 1 and runner.stats.passes == 2
-    assert runner.engine.reflection_system.views[1].mirror.entity == ents["hidden"]
+    assert runner.engine.reflection_system.views[1].surface.entity == ents["hidden"]
 
 
 def test_reflection_work_is_limited_to_the_mirror_footprint(scene):

@@ -5,7 +5,7 @@ images of a level (which view drew a pixel, which entity's surface is there).
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import glm
 import moderngl
@@ -26,6 +26,8 @@ class CompositeParams:
     reflect_rate: float
     roughness: float
     normal: glm.vec3
+    portal: bool = False                                       # a plain window: no Fresnel, no tint
+    carry: glm.mat3 = field(default_factory=lambda: glm.mat3(1.0))  # turns directions into the view's world
 
 
 def _shared_samples_query(ctx: moderngl.Context) -> moderngl.Query:
@@ -127,6 +129,8 @@ class MirrorPasses:
         program["reflect_rate"].value = params.reflect_rate
         program["roughness"].value = params.roughness
         program["mirror_normal"].value = tuple(params.normal)
+        program["is_portal"].value = params.portal
+        program["carry"].write(params.carry.to_bytes())
         self._composite_vao.render(moderngl.TRIANGLES, vertices=3)
         ctx.disable(moderngl.BLEND)
         ctx.blend_func = moderngl.DEFAULT_BLENDING

@@ -38,6 +38,9 @@ class RenderStats:
     uploaded_bytes: int = 0
     instances: int = 0
     reflection_views: int = 0
+    # How reflection levels were drawn: "per_mirror", "batched", "mixed" (auto chose both in
+    # one frame), or "" when no reflection view was drawn (ReflectionSystem.path).
+    reflection_path: str = ""
 
 
 class _Shared:

@@ -1,0 +1,229 @@
+"""Mirrors benchmark: whole-frame cost of planar reflections, per-mirror vs batched path.
+
+The scene: a 40 x 40 ground with a checker texture, 20 boxes of size 1-2 scattered within
+radius 8 (fixed seed; one shared box mesh, so one batch), 5 of them spinning, a directional
+and a point light, and N mirrors of 4 x 3 on a ring of radius 9 facing the centre.  The
+camera orbits at radius 14, height 3, looking at the centre (0.5 degrees a frame, the
+same angles for every run).  Output 640 x 360 into a capture target.  For each N in
+0, 1, 2, 4, 8, 16 and each ``ReflectionSystem.path`` (per_mirror, batched, auto) the
+benchmark runs ``--warmup`` frames, then ``--frames`` timed frames.
+
+Frame time is wall clock around ``Engine.frame`` plus ``ctx.finish()`` (every system, every
+draw, present), so it includes the GPU work; on llvmpipe (a software rasteriser) GPU timer
+queries do not measure anything useful.  ``passes``, ``draw_calls`` and
+``reflection_views`` are medians of ``engine.renderer.stats`` over the timed frames;
+``chosen`` counts the frames by ``stats.reflection_path`` (what auto picked).  The last
+line is the ratio of the auto path's 8-mirror median frame to its 0-mirror median frame.
+
+    python -m benchmarks mirrors               # table
+    python -m benchmarks mirrors --json        # one JSON object per line
+    python -m benchmarks mirrors --frames 20 --mirrors 0,8
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import statistics
+import sys
+import time
+from collections import Counter
+from dataclasses import asdict, dataclass, field
+
+import glm
+import numpy as np
+
+from components import (
+    Camera,
+    DirectionalLight,
+    Material,
+    MeshRef,
+    Mirror,
+    PointLight,
+    Skybox,
+    Transform,
+    look_rotation,
+)
+from engine.app import Engine, Game
+from engine.gl_context import create_headless_context
+from engine.mesh import box, plane, quad
+from engine.render.targets import CaptureTarget
+from engine.texture_data import checker_texture
+from engine.world import World
+from systems import Output
+
+MIRROR_COUNTS = (0, 1, 2, 4, 8, 16)
+PATHS = ("per_mirror", "batched", "auto")
+OUTPUT_SIZE = (640, 360)
+DT = 1.0 / 60.0
+SEED = 7
+BOXES = 20
+SPINNING = 5
+ORBIT_RADIUS = 14.0
+ORBIT_HEIGHT = 3.0
+ORBIT_STEP = math.radians(0.5)   # per frame
+RING_RADIUS = 9.0
+CENTRE = glm.vec3(0.0, 1.0, 0.0)
+
+
+class MirrorRing(Game):
+    """The benchmark scene with ``mirrors`` mirrors on the ring."""
+
+    title = "benchmark: mirrors"
+
+    def __init__(self, mirrors: int) -> None:
+        self.mirrors = mirrors
+        self.camera: Transform | None = None
+        self.spinning: list[tuple[Transform, float]] = []
+        self.angle = 0.0
+        self.time = 0.0
+
+    def build(self, world: World) -> None:
+        rng = np.random.default_rng(SEED)
+        world.spawn(DirectionalLight(direction=(-0.4, -1.0, -0.3), intensity=1.5))
+        world.spawn(Transform(position=(0.0, 4.0, 0.0)), PointLight(color=(1.0, 0.85, 0.6), intensity=6.0,
+                                                                     range=16.0))
+        world.spawn(Skybox())
+        world.spawn(Transform(), MeshRef(plane(40, 40, uv_repeat=10)), Material(texture=checker_texture(256, 8)))
+        cube = box(name="bench box")
+        for i in range(BOXES):
+            radius = 8.0 * math.sqrt(rng.uniform(0.0, 1.0))
+            theta = rng.uniform(0.0, 2.0 * math.pi)
+            size = glm.vec3(*rng.uniform(1.0, 2.0, 3))
+            transform = Transform(position=(radius * math.cos(theta), size.y / 2, radius * math.sin(theta)),
+                                  rotation=glm.angleAxis(float(rng.uniform(0, math.pi)), glm.vec3(0, 1, 0)),
+                                  scale=size)
+            world.spawn(transform, MeshRef(cube), Material(color=tuple(rng.uniform(0.2, 0.9, 3)),
+                                                           roughness=float(rng.uniform(0.2, 0.8))))
+            if i < SPINNING:
+                self.spinning.append((transform, float(rng.uniform(0.5, 1.5))))
+        glass = quad(4, 3, name="mirror")
+        for i in range(self.mirrors):
+            a = 2.0 * math.pi * i / self.mirrors
+            outward = glm.vec3(math.cos(a), 0.0, math.sin(a))
+            world.spawn(Transform(position=RING_RADIUS * outward + glm.vec3(0.0, 1.5, 0.0),
+                                  rotation=look_rotation(outward)),  # +Z (the glass's front) to the centre
+                        MeshRef(glass), Material(color=(0.1, 0.1, 0.1)), Mirror(color=(0.95, 0.97, 1.0)))
+        self.camera = Transform()
+        world.spawn(self.camera, Camera(fov_y=60.0, near=0.1, far=100.0))
+        self._place_camera()
+
+    def _place_camera(self) -> None:
+        eye = glm.vec3(ORBIT_RADIUS * math.cos(self.angle), ORBIT_HEIGHT, ORBIT_RADIUS * math.sin(self.angle))
+        self.camera.position = eye
+        self.camera.rotation = look_rotation(CENTRE - eye)
+
+    def update(self, world: World, dt: float) -> None:
+        self.time += dt
+        self.angle += ORBIT_STEP
+        self._place_camera()
+        for transform, speed in self.spinning:
+            transform.rotation = glm.angleAxis(self.time * speed, glm.vec3(0, 1, 0))
+
+
+@dataclass
+class Result:
+    n_mirrors: int
+    path: str
+    frame_ms_median: float
+    frame_ms_p95: float
+    passes: int
+    draw_calls: int
+    reflection_views: int
+    frames: int
+    chosen: dict[str, int] = field(default_factory=dict)
+
+
+def _percentile(values: list[float], q: float) -> float:
+    ordered = sorted(values)
+    return ordered[min(len(ordered) - 1, max(0, math.ceil(q * len(ordered)) - 1))]
+
+
+def run_scene(ctx, mirrors: int, path: str, frames: int, warmup: int) -> Result:
+    engine = Engine(MirrorRing(mirrors), ctx)
+    engine.reflection_system.path = path
+    capture = CaptureTarget(ctx, OUTPUT_SIZE)
+    output = Output(capture.framebuffer, OUTPUT_SIZE)
+    try:
+        for _ in range(warmup):
+            engine.frame(DT, output)
+            ctx.finish()
+        times, stats = [], []
+        for _ in range(frames):
+            start = time.perf_counter()
+            engine.frame(DT, output)
+            ctx.finish()
+            times.append((time.perf_counter() - start) * 1e3)
+            stats.append(engine.renderer.stats)
+        if ctx.error != "GL_NO_ERROR":
+            raise RuntimeError(f"OpenGL error with {mirrors} mirrors, path {path}: {ctx.error}")
+        return Result(
+            n_mirrors=mirrors,
+            path=path,
+            frame_ms_median=round(statistics.median(times), 2),
+            frame_ms_p95=round(_percentile(times, 0.95), 2),
+            passes=round(statistics.median(s.passes for s in stats)),
+            draw_calls=round(statistics.median(s.draw_calls for s in stats)),
+            reflection_views=round(statistics.median(s.reflection_views for s in stats)),
+            frames=frames,
+            chosen=dict(Counter(s.reflection_path or "none" for s in stats)),
+        )
+    finally:
+        capture.release()
+        engine.close()
+
+
+def _ints(text: str) -> tuple[int, ...]:
+    return tuple(int(v) for v in text.split(","))
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--mirrors", type=_ints, default=MIRROR_COUNTS,
+                        help="comma-separated mirror counts (default 0,1,2,4,8,16)")
+    parser.add_argument("--paths", type=lambda text: tuple(text.split(",")), default=PATHS,
+                        help="comma-separated paths (default per_mirror,batched,auto)")
+    parser.add_argument("--frames", type=int, default=30, help="timed frames per run (default 30)")
+    parser.add_argument("--warmup", type=int, default=3, help="untimed frames first (default 3)")
+
+
+COLUMNS = (("n_mirrors", "mirrors", 8), ("path", "path", 11), ("frame_ms_median", "ms med", 8),
+           ("frame_ms_p95", "ms p95", 8), ("passes", "passes", 7), ("draw_calls", "draws", 6),
+           ("reflection_views", "views", 6))
+
+
+def main(args: argparse.Namespace) -> int:
+    if args.frames < 1 or args.warmup < 0 or any(n < 0 for n in args.mirrors):
+        raise SystemExit("--frames must be >= 1, --warmup and --mirrors >= 0")
+    unknown = set(args.paths) - set(PATHS)
+    if unknown:
+        raise SystemExit(f"unknown paths {sorted(unknown)}; choose from {PATHS}")
+    ctx = create_headless_context()
+    results: list[Result] = []
+    try:
+        if not args.json:
+            print(f"Mirrors: whole frame incl. ctx.finish() at {OUTPUT_SIZE[0]}x{OUTPUT_SIZE[1]} "
+                  f"({ctx.info.get('GL_RENDERER', '?')}, {args.frames} frames after {args.warmup} warm-up)")
+            print(" ".join(f"{title:>{width}}" for _, title, width in COLUMNS) + "  chosen")
+        for mirrors in args.mirrors:
+            for path in args.paths:
+                result = run_scene(ctx, mirrors, path, args.frames, args.warmup)
+                results.append(result)
+                if args.json:
+                    print(json.dumps(asdict(result)), flush=True)
+                else:
+                    row = asdict(result)
+                    print(" ".join(f"{row[key]:>{width}}" for key, _, width in COLUMNS)
+                          + f"  {result.chosen}", flush=True)
+    finally:
+        ctx.release()
+    auto = {r.n_mirrors: r for r in results if r.path == "auto"}
+    if 0 in auto and 8 in auto:
+        ratio = round(auto[8].frame_ms_median / auto[0].frame_ms_median, 2)
+        chosen = max(auto[8].chosen, key=auto[8].chosen.get)
+        if args.json:
+            print(json.dumps({"ratio_auto_8_to_0": ratio, "auto_8_chosen": auto[8].chosen}), flush=True)
+        else:
+            print(f"auto path ({chosen}) with 8 mirrors / no mirror: {ratio}x")
+    elif "auto" in args.paths:
+        print("(the 8-to-0 ratio needs --mirrors with 0 and 8)", file=sys.stderr)
+    return 0

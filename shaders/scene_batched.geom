@@ -1,0 +1,119 @@
+#version 410 core
+// Batched mirror views (seed 000): one draw per mesh draws every view of a reflection level.
+// Each invocation takes VIEWS_PER_INVOCATION views and emits, for each view that can see
+// the triangle, the triangle as that view's reflected camera sees it (its view_proj holds
+// the oblique near plane).  Per view: triangles wholly outside the view's frustum or screen
+// rectangle, or behind its mirror plane, are culled here; the rest get gl_ClipDistance for
+// the mirror plane (0) and the rectangle's four sides (1-4), which stands in for the
+// per-view scissor of the per-mirror path.  A mirrored view (odd reflection count) emits
+// its vertices in reverse order, so with front faces counter-clockwise the same faces are
+// culled and gl_FrontFacing matches the per-mirror path's clockwise front faces.
+// scene.frag (compiled with BATCHED_VIEWS) discards pixels whose node image names another
+// view and shades with the view's eye from here.
+//
+// Built with MAX_LEVEL_VIEWS, VIEWS_PER_INVOCATION, GS_INVOCATIONS and GS_MAX_VERTICES defines
+// (engine/render/batched_mirrors.py; layout qualifiers take literals only before GLSL 4.40).
+
+layout(triangles, invocations = GS_INVOCATIONS) in;
+layout(triangle_strip, max_vertices = GS_MAX_VERTICES) out;  // 3 x VIEWS_PER_INVOCATION
+
+struct MirrorView {
+    mat4 view_proj;   // the reflected camera's projection x view
+    vec4 clip_plane;  // world-space mirror plane, offset; geometry behind it is clipped
+    vec4 eye;         // xyz: world-space eye; w: 1 if mirrored (front faces clockwise)
+    vec4 rect;        // the view's screen rectangle in NDC: x0, y0, x1, y1
+    uvec4 node;       // x: the view's index in the node image
+};
+
+layout(std140) uniform Views {
+    ivec4 view_count;  // x: views in this level
+    MirrorView views[MAX_LEVEL_VIEWS];
+};
+
+in vec3 g_world_pos[];
+in vec3 g_normal[];
+in vec2 g_uv[];
+flat in vec4 g_color[];
+flat in vec4 g_surface[];
+flat in vec4 g_reflect[];
+flat in vec4 g_tint[];
+flat in uvec4 g_slots[];
+
+out float gl_ClipDistance[5];
+out vec3 v_world_pos;
+out vec3 v_normal;
+out vec2 v_uv;
+flat out vec4 v_color;
+flat out vec4 v_surface;
+flat out vec4 v_reflect;
+flat out vec4 v_tint;
+flat out uvec4 v_slots;
+flat out uint v_node;
+flat out vec3 v_eye;
+
+// All three points on the outer side of plane a.p < 0.
+bool outside(vec4 a, vec4 p0, vec4 p1, vec4 p2) {
+    return dot(a, p0) < 0.0 && dot(a, p1) < 0.0 && dot(a, p2) < 0.0;
+}
+
+void emit_corner(int c, vec4 position, MirrorView v) {
+    gl_Position = position;
+    vec4 world = vec4(g_world_pos[c], 1.0);
+    gl_ClipDistance[0] = dot(world, v.clip_plane);
+    gl_ClipDistance[1] = position.x - v.rect.x * position.w;
+    gl_ClipDistance[2] = v.rect.z * position.w - position.x;
+    gl_ClipDistance[3] = position.y - v.rect.y * position.w;
+    gl_ClipDistance[4] = v.rect.w * position.w - position.y;
+    v_world_pos = g_world_pos[c];
+    v_normal = g_normal[c];
+    v_uv = g_uv[c];
+    v_color = g_color[c];
+    v_surface = g_surface[c];
+    v_reflect = g_reflect[c];
+    v_tint = g_tint[c];
+    v_slots = g_slots[c];
+    v_node = v.node.x;
+    v_eye = v.eye.xyz;
+    EmitVertex();
+}
+
+void main() {
+    vec4 w0 = vec4(g_world_pos[0], 1.0);
+    vec4 w1 = vec4(g_world_pos[1], 1.0);
+    vec4 w2 = vec4(g_world_pos[2], 1.0);
+    for (int k = 0; k < VIEWS_PER_INVOCATION; ++k) {
+        int i = gl_InvocationID * VIEWS_PER_INVOCATION + k;
+        if (i >= view_count.x) return;
+        MirrorView v = views[i];
+#ifdef EXP_FETCHONLY
+        if (w0.x + w1.y + w2.z < 1e30) continue;
+#endif
+#ifdef EXP_PLANEONLY
+        if (outside(v.clip_plane, w0, w1, w2) || v.node.y == 0u) continue;
+#endif
+#ifdef EXP_MATONLY
+        vec4 q0 = v.view_proj * w0; vec4 q1 = v.view_proj * w1; vec4 q2 = v.view_proj * w2;
+        if (q0.x + q1.y + q2.z < 1e30) continue;
+#endif
+        if (outside(v.clip_plane, w0, w1, w2)) continue;  // behind the mirror
+        vec4 p0 = v.view_proj * w0;
+        vec4 p1 = v.view_proj * w1;
+        vec4 p2 = v.view_proj * w2;
+        // Frustum near / far planes, then the four sides of the view's rectangle (planes
+        // through the eye in clip space: x >= x0 w, x <= x1 w, y >= y0 w, y <= y1 w).
+        if (outside(vec4(0.0, 0.0, 1.0, 1.0), p0, p1, p2) || outside(vec4(0.0, 0.0, -1.0, 1.0), p0, p1, p2)
+            || outside(vec4(1.0, 0.0, 0.0, -v.rect.x), p0, p1, p2)
+            || outside(vec4(-1.0, 0.0, 0.0, v.rect.z), p0, p1, p2)
+            || outside(vec4(0.0, 1.0, 0.0, -v.rect.y), p0, p1, p2)
+            || outside(vec4(0.0, -1.0, 0.0, v.rect.w), p0, p1, p2)) continue;
+        emit_corner(0, p0, v);
+        if (v.eye.w > 0.5) {
+            emit_corner(2, p2, v);
+            emit_corner(1, p1, v);
+        } else {
+            emit_corner(1, p1, v);
+            emit_corner(2, p2, v);
+        }
+        EndPrimitive();
+    }
+}

@@ -1,0 +1,253 @@
+"""Travel through portals: move travellers, detect front-to-back crossings, carry them across.
+
+Runs after input (the fly camera has moved) and before the TransformSystem (which then
+publishes the teleported poses), so every rendered frame shows a traveller on one side only.
+
+Who travels: every entity with a ``Traveller`` and the active camera (``Camera.active``,
+lowest id; it needs no Traveller).  Travellers are expected to be roots: one whose
+Transform has a parent is moved by its velocity but never teleported (its pose is relative
+to something that does not travel with it).
+
+A crossing is the segment from where the traveller was at the end of the last frame to where
+it is now going from a portal's front (local +Z) to its back inside its rectangle.  The
+portal must be enabled and have a live, enabled partner with a Portal; a portal whose
+partner was deleted or disabled is just a quad.  The new pose is ``pair_transform(in, out)``
+applied to the old one (position and orientation; scale is kept); the Traveller's velocity
+turns with it and a FlyController's yaw / pitch are recomputed from the new orientation.
+
+Near plane: the camera sees nothing closer than its near plane, so a portal quad that cut the
+frustum between the eye and the near rectangle would be clipped and show what lies behind
+it.  The camera therefore goes through as soon as the tip of its frustum (the pyramid from
+the eye to the near-plane rectangle) touches the portal plane inside the rectangle, while
+the eye is still in front; then it is carried and pushed along the exit portal's normal just
+far enough that the whole pyramid is in front of the exit portal (``CLEAR`` x near), so it
+comes out just in front of it, facing away.  The push is at most about the pyramid's depth
+(near / cos of the half-diagonal angle, ~0.08 m for near 0.05), which is the only
+difference between the image seen through the portal and the image after the teleport.
+The near-rectangle aspect comes from the render system's output (the frame's size) when the
+system is given one, else ``aspect`` (16:9 by default).
+
+Ping-pong: an entity that just came out of a portal cannot cross that exit portal again in
+the very next frame.  Each frame's crossings are published as ``world.resources[PortalCrossings]``
+(a fresh list every frame).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import esper
+import glm
+
+from components import Camera, FlyController, Portal, Transform, Traveller
+from engine.portal_math import near_plane_corners, pair_rotation, pair_transform, portal_plane
+from engine.reflection_math import signed_distance
+from engine.world import World
+
+DEFAULT_ASPECT = 16.0 / 9.0
+TOUCH = 0.02  # the frustum tip "touches" a portal within TOUCH x near of its plane
+CLEAR = 0.1  # after a teleport the whole tip is at least CLEAR x near in front of the exit
+# Edges of the frustum tip: points are [eye, corner 0..3] (corners go round the rectangle).
+_TIP_EDGES = ((0, 1), (0, 2), (0, 3), (0, 4), (1, 2), (2, 3), (3, 4), (4, 1))
+_MAX_PARENT_HOPS = 256
+
+
+@dataclass(frozen=True)
+class PortalCrossing:
+    """``entity`` went into ``from_portal`` and came out of ``to_portal``."""
+
+    entity: int
+    from_portal: int
+    to_portal: int
+
+
+class PortalCrossings(list):
+    """The crossings of the latest frame, in the order they happened (list of PortalCrossing)."""
+
+
+@dataclass
+class _Gate:
+    """One usable portal this frame, with everything a crossing test needs."""
+
+    entity: int
+    partner: int
+    to_local: glm.mat4
+    plane: glm.vec4
+    half: tuple[float, float]
+    carry: glm.mat4
+    turn: glm.quat
+    exit_plane: glm.vec4
+
+
+class PortalTravelSystem(esper.Processor):
+    """Moves travellers by their velocity and carries them (and the camera) through portals.
+
+    ``render_system`` (optional) supplies the frame size for the camera's near-plane aspect.
+    """
+
+    def __init__(self, world: World, render_system: Any = None, aspect: float = DEFAULT_ASPECT) -> None:
+        self.world = world
+        self.render_system = render_system
+        self.aspect = aspect
+        self._last: dict[int, glm.vec3] = {}  # world position at the end of the last frame
+        self._exited: dict[int, int] = {}  # entity -> portal it came out of last frame
+        world.resources[PortalCrossings] = PortalCrossings()
+
+    # --- frame -----------------------------------------------------------------------------
+    def process(self, dt: float) -> None:
+        world = self.world
+        crossings = PortalCrossings()
+        world.resources[PortalCrossings] = crossings
+        movers: dict[int, tuple[Transform, Camera | None]] = {}
+        start: dict[int, glm.vec3] = {}
+        for entity, (traveller, transform) in world.query(Traveller, Transform):
+            if not world.exists(entity):
+                continue
+            movers[entity] = (transform, None)
+            start[entity] = glm.vec3(transform.position)
+            v = traveller.velocity
+            if v.x or v.y or v.z:
+                transform.position = transform.position + v * dt
+        camera = self._active_camera()
+        if camera is not None:
+            entity, cam, transform = camera
+            movers[entity] = (transform, cam)
+            start.setdefault(entity, glm.vec3(transform.position))
+
+        gates = self._gates()
+        last, exited = self._last, self._exited
+        self._last, self._exited = {}, {}
+        for entity, (transform, cam) in movers.items():
+            if transform.parent is None and gates:
+                before = last.get(entity, start[entity])
+                gate = self._crossed(gates, before, transform, cam, exited.get(entity))
+                if gate is not None:
+                    self._carry(entity, transform, cam, gate)
+                    crossings.append(PortalCrossing(entity, gate.entity, gate.partner))
+                    self._exited[entity] = gate.partner
+            self._last[entity] = glm.vec3(transform.position)
+
+    def _active_camera(self) -> tuple[int, Camera, Transform] | None:
+        cameras = [(e, c, t) for e, (c, t) in self.world.query(Camera, Transform)
+                   if c.active and self.world.exists(e)]
+        return min(cameras, key=lambda item: item[0]) if cameras else None
+
+    def near_aspect(self) -> float:
+        """Aspect of the camera's near rectangle: the frame being rendered, else ``aspect``."""
+        output = getattr(self.render_system, "output", None)
+        if output is not None and output.size[0] > 0 and output.size[1] > 0:
+            return output.size[0] / output.size[1]
+        return self.aspect
+
+    # --- portals -----------------------------------------------------------------------------
+    def _gates(self) -> list[_Gate]:
+        world = self.world
+        portals = {e: (p, t) for e, (p, t) in world.query(Portal, Transform) if world.exists(e)}
+        gates = []
+        for entity, (portal, transform) in portals.items():
+            out = portals.get(portal.partner) if portal.partner is not None else None
+            if not portal.enabled or out is None or not out[0].enabled or portal.partner == entity:
+                continue
+            look_in = self._world_matrix(transform)
+            look_out = self._world_matrix(out[1])
+            carry = pair_transform(look_in, look_out)
+            gates.append(_Gate(entity, portal.partner, glm.inverse(look_in), portal_plane(look_in),
+                               (portal.size[0] / 2, portal.size[1] / 2), carry, pair_rotation(carry),
+                               portal_plane(look_out)))
+        return gates
+
+    def _world_matrix(self, transform: Transform) -> glm.mat4:
+        """This frame's model-to-world matrix (``Transform.world`` is last frame's until the
+        TransformSystem runs, and identity for a portal spawned this frame)."""
+        world = self.world
+        matrix = transform.local_matrix()
+        parent = transform.parent
+        for _ in range(_MAX_PARENT_HOPS):
+            if parent is None or not world.exists(parent):
+                break
+            parent_t = world.try_get(parent, Transform)
+            if parent_t is None:
+                break  # as the TransformSystem does: a parent without a Transform is no parent
+            matrix = parent_t.local_matrix() * matrix
+            parent = parent_t.parent
+        return matrix
+
+    # --- crossing tests ------------------------------------------------------------------------
+    def _crossed(self, gates: list[_Gate], before: glm.vec3, transform: Transform, cam: Camera | None,
+                 skip: int | None) -> _Gate | None:
+        """The portal this traveller went into this frame (the earliest along its path)."""
+        now = glm.vec3(transform.position)
+        tip = None
+        best: tuple[float, float, _Gate] | None = None
+        for gate in gates:
+            if gate.entity == skip:
+                continue
+            d0 = signed_distance(gate.plane, before)
+            d1 = signed_distance(gate.plane, now)
+            if d0 < 0.0:
+                continue  # came from behind (or walks behind it): no travel
+            if d1 < 0.0:
+                t = d0 / (d0 - d1)
+                if self._inside(gate, glm.mix(before, now, t), 0.0):
+                    key = (t, 0.0)
+                else:
+                    continue
+            elif cam is not None and d1 <= d0 + 1e-9:  # not while backing away from its front
+                if tip is None:
+                    tip = [now, *near_plane_corners(now, transform.rotation, cam.fov_y, cam.near,
+                                                    self.near_aspect())]
+                if not self._tip_touches(gate, tip, TOUCH * cam.near):
+                    continue
+                key = (1.0, d1)
+            else:
+                continue
+            if best is None or key < best[:2]:
+                best = (*key, gate)
+        return best[2] if best is not None else None
+
+    @staticmethod
+    def _inside(gate: _Gate, point: glm.vec3, margin: float) -> bool:
+        local = gate.to_local * glm.vec4(point, 1.0)
+        return abs(local.x) <= gate.half[0] + margin and abs(local.y) <= gate.half[1] + margin
+
+    def _tip_touches(self, gate: _Gate, tip: list[glm.vec3], touch: float) -> bool:
+        """Whether the frustum tip reaches within ``touch`` of the portal plane inside its
+        rectangle: its cross-section with that (offset) plane overlaps the rectangle."""
+        s = [signed_distance(gate.plane, p) - touch for p in tip]
+        if min(s) >= 0.0:
+            return False
+        if s[0] <= 0.0:
+            section = tip  # the eye itself is within ``touch``: the whole tip is at the plane
+        else:
+            section = [glm.mix(tip[a], tip[b], s[a] / (s[a] - s[b]))
+                       for a, b in _TIP_EDGES if (s[a] < 0.0) != (s[b] < 0.0)]
+        local = [gate.to_local * glm.vec4(p, 1.0) for p in section]
+        xs = [p.x for p in local]
+        ys = [p.y for p in local]
+        hw, hh = gate.half[0] + touch, gate.half[1] + touch
+        return min(xs) <= hw and max(xs) >= -hw and min(ys) <= hh and max(ys) >= -hh
+
+    # --- teleport ------------------------------------------------------------------------------
+    def _carry(self, entity: int, transform: Transform, cam: Camera | None, gate: _Gate) -> None:
+        world = self.world
+        position = glm.vec3(gate.carry * glm.vec4(transform.position, 1.0))
+        rotation = glm.normalize(gate.turn * transform.rotation)
+        if cam is not None:
+            tip = [position, *near_plane_corners(position, rotation, cam.fov_y, cam.near, self.near_aspect())]
+            lowest = min(signed_distance(gate.exit_plane, p) for p in tip)
+            clear = CLEAR * cam.near
+            if lowest < clear:
+                position += glm.vec3(gate.exit_plane) * (clear - lowest)
+        transform.position = position
+        transform.rotation = rotation
+        traveller = world.try_get(entity, Traveller)
+        if traveller is not None:
+            traveller.velocity = gate.turn * traveller.velocity
+        fly = world.try_get(entity, FlyController)
+        if fly is not None:
+            forward = rotation * glm.vec3(0.0, 0.0, -1.0)
+            if abs(forward.y) < 0.9999:  # straight up or down keeps the old yaw
+                yaw = math.degrees(math.atan2(-forward.x, -forward.z))
+                fly.yaw = fly.yaw + (yaw - fly.yaw + 180.0) % 360.0 - 180.0  # nearest turn: no jump
+            fly.pitch = max(-89.0, min(89.0, math.degrees(math.asin(max(-1.0, min(1.0, forward.y))))))
