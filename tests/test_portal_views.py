@@ -1,0 +1,148 @@
+"""System tests of portal views: what a portal shows, recursion, fill, composition with mirrors."""
+from __future__ import annotations
+
+import glm
+import numpy as np
+
+from components import (
+    Camera, DirectionalLight, Emissive, Material, MeshRef, Mirror, Portal, Skybox, Transform, look_rotation,
+)
+from engine.mesh import box, quad
+from engine.portals import spawn_portal_pair
+from tests.support import srgb_to_linear
+
+SIZE = (200, 150)
+TURN_Y_90 = glm.angleAxis(glm.radians(90), glm.vec3(0, 1, 0))
+HALF_TURN = glm.angleAxis(glm.pi(), glm.vec3(0, 1, 0))
+
+
+def look_from(world, eye, target, fov=60.0):
+    eye = glm.vec3(eye)
+    return world.spawn(Transform(position=eye, rotation=look_rotation(glm.vec3(target) - eye)), Camera(fov_y=fov))
+
+
+def lit(world):
+    world.spawn(Skybox())
+    world.spawn(DirectionalLight(direction=(0.3, -1.0, -0.4), intensity=2.0))
+
+
+def glowing_box(world, position, color, size=0.6):
+    return world.spawn(Transform(position=position, scale=(size, size, size)), MeshRef(box()), Material(color=color),
+                       Emissive(1.0))
+
+
+def test_box_beyond_the_look_out_portal_shows_where_the_math_says(scene):
+    ents = {}
+
+    def build(world):
+        lit(world)
+        look_from(world, (0.5, 1.6, 6.0), (0, 1.5, 0))
+        # A at the origin facing +Z; B at x = 10 facing +X (turned 90 degrees about Y).
+        ents["a"], ents["b"] = spawn_portal_pair(world, (0, 1.5, 0), None, (10, 1.5, 0), TURN_Y_90)
+        ents["green"] = glowing_box(world, (13.0, 1.2, 0.4), (0.1, 0.9, 0.1))      # in front of B
+        ents["magenta"] = glowing_box(world, (8.5, 1.5, 0.0), (0.9, 0.1, 0.9))     # between B and the virtual eye
+
+    runner = scene(build, SIZE)
+    rgb = runner.frame()
+    # By hand: B's front is +X; a point d in front of B and s to B's right maps to d in
+    # front of A... A's front is +Z, seen through from its front, so green at B + (3, -0.3, 0.4)
+    # appears as if at A + (0.4 * -1 ..): carry^-1 of (13, 1.2, 0.4) = (0.4, 1.2, -3.0).
+    col, row = runner.project((0.4, 1.2, -3.0))
+    assert runner.ids()[row, col] == ents["green"]
+    r, g, b = rgb[row, col].astype(int)
+    assert g > 120 and g > r + 60 and g > b + 60
+    assert ents["magenta"] not in runner.ids()  # behind the look-out plane: never through the portal
+    view = runner.engine.reflection_system.views[1]
+    assert view.surface.kind == "portal" and not view.view.mirrored
+
+
+def test_facing_portals_recurse_to_max_depth_then_fill(scene):
+    def build(world):
+        lit(world)
+        look_from(world, (0.0, 1.5, 2.5), (0, 1.5, 0))
+        spawn_portal_pair(world, (0, 1.5, 0), None, (0, 1.5, 5), HALF_TURN, size=(2.0, 2.0), max_depth=4)
+        for x in (-1.5, 1.5):  # posts beside A, so each nested image has something in it
+            glowing_box(world, (x, 1.5, 0.0), (0.9, 0.6, 0.1), size=0.5)
+
+    runner = scene(build, SIZE)
+    rgb = runner.frame()
+    views = runner.engine.reflection_system.views[1:]
+    assert len(views) == 4 and [v.level for v in views] == [1, 2, 3, 4]
+    areas = [w * h for _, _, w, h in (v.rect for v in views)]
+    assert all(a > b for a, b in zip(areas, areas[1:], strict=False))
+    # Past the limit the innermost portal shows its closed colour, flat.
+    closed = np.array(Portal().closed_color)[:3]
+    cx, cy = SIZE[0] // 2, SIZE[1] // 2
+    np.testing.assert_allclose(srgb_to_linear(rgb[cy, cx]), closed, atol=0.01)
+    # Eight levels work too.
+    for entity, (portal,) in [(e, (p,)) for e, p in runner.world.query_one(Portal)]:
+        portal.max_depth = 8
+    runner.engine.reflection_system.max_depth_cap = 8
+    runner.frame()
+    assert runner.stats.reflection_views == 8 and len(runner.engine.renderer.levels) == 9
+
+
+def test_deleting_one_portal_closes_the_other_and_keeps_running(scene):
+    ents = {}
+
+    def build(world):
+        lit(world)
+        look_from(world, (0.0, 1.5, 5.0), (0, 1.5, 0))
+        ents["a"], ents["b"] = spawn_portal_pair(world, (0, 1.5, 0), None, (10, 1.5, 0), TURN_Y_90)
+
+    runner = scene(build, SIZE)
+    runner.frame()
+    assert runner.stats.reflection_views == 1
+    runner.world.delete_entity(ents["b"])
+    rgb = runner.frame()
+    assert runner.stats.reflection_views == 0
+    col, row = runner.project((0.2, 1.5, 0.0))
+    assert runner.ids()[row, col] == ents["a"]
+    np.testing.assert_allclose(srgb_to_linear(rgb[row, col]), np.array(Portal().closed_color)[:3], atol=0.01)
+    runner.frame()
+
+
+def test_a_mirror_seen_through_a_portal_and_a_portal_seen_in_a_mirror(scene):
+    ents = {}
+
+    def build(world):
+        lit(world)
+        look_from(world, (0.0, 1.5, 6.0), (0, 1.5, 0))
+        ents["a"], ents["b"] = spawn_portal_pair(world, (0, 1.5, 0), None, (20, 1.5, 0), None)
+        # Beyond B (in front of it, +Z): a mirror facing back at B, and a red box beside B that
+        # only the mirror shows from where the portal's view stands.
+        ents["mirror"] = world.spawn(Transform(position=(20, 1.5, 6), rotation=HALF_TURN), MeshRef(quad(6, 4)),
+                                     Material(color=(0.1, 0.1, 0.1)), Mirror())
+        ents["red"] = glowing_box(world, (21.5, 1.5, 1.0), (0.9, 0.1, 0.1))
+
+    runner = scene(build, SIZE)
+    runner.frame()
+    kinds = [(v.level, v.surface.kind) for v in runner.engine.reflection_system.views[1:]]
+    assert (1, "portal") in kinds and (2, "mirror") in kinds
+    assert ents["red"] in runner.ids()  # the red box, seen in the mirror, seen through the portal
+    # By hand: the box's mirror image is at (21.5, 1.5, 11); back through the pair (minus B,
+    # half turn about Y, plus A) that is (-1.5, 1.5, -11) as seen through A.
+    col, row = runner.project((-1.5, 1.5, -11.0))
+    assert runner.ids()[row, col] == ents["red"]
+
+
+def test_a_portal_seen_in_a_mirror(scene):
+    ents = {}
+
+    def build(world):
+        lit(world)
+        look_from(world, (0.3, 1.5, 4.0), (0, 1.5, 0))
+        world.spawn(Transform(position=(0, 1.5, 0)), MeshRef(quad(6, 4)), Material(color=(0.1, 0.1, 0.1)), Mirror())
+        # A behind the camera, facing the mirror; B far away; a green box in front of B.
+        ents["a"], ents["b"] = spawn_portal_pair(world, (0, 1.5, 8), HALF_TURN, (20, 1.5, 0), None, size=(3, 3))
+        ents["green"] = glowing_box(world, (20.3, 1.5, 3.0), (0.1, 0.9, 0.1))
+
+    runner = scene(build, SIZE)
+    runner.frame()
+    kinds = [(v.level, v.surface.kind) for v in runner.engine.reflection_system.views[1:]]
+    assert kinds[:2] == [(1, "mirror"), (2, "portal")]
+    # By hand: green is B + (0.3, 0, 3); back through the pair (minus B, half turn, then A's
+    # own half turn, plus A) that is A + (0.3, 0, 3) = (0.3, 1.5, 11), behind A as seen from
+    # its front; the mirror at z = 0 shows that at (0.3, 1.5, -11).
+    col, row = runner.project((0.3, 1.5, -11.0))
+    assert runner.ids()[row, col] == ents["green"]
