@@ -4,9 +4,11 @@ The scene: a 40 x 40 ground with a checker texture, 20 boxes of size 1-2 scatter
 radius 8 (fixed seed; one shared box mesh, so one batch), 5 of them spinning, a directional
 and a point light, and N mirrors of 4 x 3 on a ring of radius 9 facing the centre.  The
 camera orbits at radius 14, height 3, looking at the centre (0.5 degrees a frame, the
-same angles for every run).  Output 640 x 360 into a capture target.  For each N in
-0, 1, 2, 4, 8, 16 and each ``ReflectionSystem.path`` (per_mirror, batched, auto) the
-benchmark runs ``--warmup`` frames, then ``--frames`` timed frames.
+same angles for every path), starting across the ring from the first mirror.  Output
+640 x 360 into a capture target.  For each N in 0, 1, 2, 4, 8, 16 there is one engine per
+``ReflectionSystem.path`` (per_mirror, batched, auto); they run ``--warmup`` frames, then
+``--frames`` timed frames, interleaved frame by frame so that other load on the machine
+(this is a 2-core box shared with other work) falls on every path alike.
 
 Frame time is wall clock around ``Engine.frame`` plus ``ctx.finish()`` (every system, every
 draw, present), so it includes the GPU work; on llvmpipe (a software rasteriser) GPU timer
@@ -62,6 +64,7 @@ SPINNING = 5
 ORBIT_RADIUS = 14.0
 ORBIT_HEIGHT = 3.0
 ORBIT_STEP = math.radians(0.5)   # per frame
+START_ANGLE = math.radians(170.0)  # across the ring from the first mirror, which faces the camera
 RING_RADIUS = 9.0
 CENTRE = glm.vec3(0.0, 1.0, 0.0)
 
@@ -75,7 +78,7 @@ class MirrorRing(Game):
         self.mirrors = mirrors
         self.camera: Transform | None = None
         self.spinning: list[tuple[Transform, float]] = []
-        self.angle = 0.0
+        self.angle = START_ANGLE
         self.time = 0.0
 
     def build(self, world: World) -> None:
@@ -139,38 +142,45 @@ def _percentile(values: list[float], q: float) -> float:
     return ordered[min(len(ordered) - 1, max(0, math.ceil(q * len(ordered)) - 1))]
 
 
-def run_scene(ctx, mirrors: int, path: str, frames: int, warmup: int) -> Result:
-    engine = Engine(MirrorRing(mirrors), ctx)
-    engine.reflection_system.path = path
-    capture = CaptureTarget(ctx, OUTPUT_SIZE)
-    output = Output(capture.framebuffer, OUTPUT_SIZE)
+def run_scenes(ctx, mirrors: int, paths: tuple[str, ...], frames: int, warmup: int) -> list[Result]:
+    """One engine per path on the same scene, their frames interleaved (frame i of every path,
+    then frame i + 1), so load from outside the benchmark lands on every path alike."""
+    engines, captures = [], []
     try:
-        for _ in range(warmup):
-            engine.frame(DT, output)
-            ctx.finish()
-        times, stats = [], []
-        for _ in range(frames):
-            start = time.perf_counter()
-            engine.frame(DT, output)
-            ctx.finish()
-            times.append((time.perf_counter() - start) * 1e3)
-            stats.append(engine.renderer.stats)
+        for path in paths:
+            engine = Engine(MirrorRing(mirrors), ctx)
+            engine.reflection_system.path = path
+            engines.append(engine)
+            captures.append(CaptureTarget(ctx, OUTPUT_SIZE))
+        outputs = [Output(capture.framebuffer, OUTPUT_SIZE) for capture in captures]
+        times: list[list[float]] = [[] for _ in paths]
+        stats: list[list] = [[] for _ in paths]
+        for frame in range(warmup + frames):
+            for i, (engine, output) in enumerate(zip(engines, outputs, strict=True)):
+                start = time.perf_counter()
+                engine.frame(DT, output)
+                ctx.finish()
+                if frame >= warmup:
+                    times[i].append((time.perf_counter() - start) * 1e3)
+                    stats[i].append(engine.renderer.stats)
         if ctx.error != "GL_NO_ERROR":
-            raise RuntimeError(f"OpenGL error with {mirrors} mirrors, path {path}: {ctx.error}")
-        return Result(
+            raise RuntimeError(f"OpenGL error with {mirrors} mirrors: {ctx.error}")
+        return [Result(
             n_mirrors=mirrors,
             path=path,
-            frame_ms_median=round(statistics.median(times), 2),
-            frame_ms_p95=round(_percentile(times, 0.95), 2),
-            passes=round(statistics.median(s.passes for s in stats)),
-            draw_calls=round(statistics.median(s.draw_calls for s in stats)),
-            reflection_views=round(statistics.median(s.reflection_views for s in stats)),
+            frame_ms_median=round(statistics.median(times[i]), 2),
+            frame_ms_p95=round(_percentile(times[i], 0.95), 2),
+            passes=round(statistics.median(s.passes for s in stats[i])),
+            draw_calls=round(statistics.median(s.draw_calls for s in stats[i])),
+            reflection_views=round(statistics.median(s.reflection_views for s in stats[i])),
             frames=frames,
-            chosen=dict(Counter(s.reflection_path or "none" for s in stats)),
-        )
+            chosen=dict(Counter(s.reflection_path or "none" for s in stats[i])),
+        ) for i, path in enumerate(paths)]
     finally:
-        capture.release()
-        engine.close()
+        for capture in captures:
+            capture.release()
+        for engine in engines:
+            engine.close()
 
 
 def _ints(text: str) -> tuple[int, ...]:
@@ -205,8 +215,7 @@ def main(args: argparse.Namespace) -> int:
                   f"({ctx.info.get('GL_RENDERER', '?')}, {args.frames} frames after {args.warmup} warm-up)")
             print(" ".join(f"{title:>{width}}" for _, title, width in COLUMNS) + "  chosen")
         for mirrors in args.mirrors:
-            for path in args.paths:
-                result = run_scene(ctx, mirrors, path, args.frames, args.warmup)
+            for result in run_scenes(ctx, mirrors, args.paths, args.frames, args.warmup):
                 results.append(result)
                 if args.json:
                     print(json.dumps(asdict(result)), flush=True)

@@ -1,14 +1,14 @@
 """Components: plain data attached to entities. Behaviour lives in ``systems``."""
 from components.camera import Camera, DirectionalLight, FlyController, PointLight
 from components.mirror import Mirror
-from components.portal import Portal, Traveller
+from components.portal import Portal, PortalClone, Slice, Traveller
 from components.rendering import Emissive, Material, MeshRef, Reflective, Refractive, Skybox
 from components.tracking import ComponentValueError, TrackedComponent
 from components.transform import Transform, look_rotation, yaw_pitch_rotation
 
 __all__ = [
     "Camera", "ComponentValueError", "DirectionalLight", "Emissive", "FlyController", "Material",
-    "MeshRef", "Mirror", "PointLight", "Portal", "Reflective", "Refractive", "Skybox", "TrackedComponent",
-    "Transform", "Traveller",
+    "MeshRef", "Mirror", "PointLight", "Portal", "PortalClone", "Reflective", "Refractive", "Skybox", "Slice",
+    "TrackedComponent", "Transform", "Traveller",
     "look_rotation", "yaw_pitch_rotation",
 ]

@@ -65,3 +65,34 @@ class Traveller(TrackedComponent):
         if name == "velocity":
             return vec3(self, name, value)
         return value
+
+
+@dataclass(eq=False)
+class Slice(TrackedComponent):
+    """Draw only the part of the entity in front of ``plane`` (world n.x + d >= 0).
+
+    Written by the PortalSliceSystem on things that straddle a portal (seed 001's open
+    problem); the render system turns it into a per-instance clip plane.
+    """
+
+    plane: Any = field(default_factory=lambda: glm.vec4(0.0, 0.0, 0.0, 1.0))
+
+    def _validate(self, name: str, value: Any) -> Any:
+        if name == "plane":
+            try:
+                p = glm.vec4(value)
+            except TypeError:
+                raise ComponentValueError(f"Slice.plane must be 4 numbers, got {value!r}") from None
+            for c in p:
+                finite(self, name, c)
+            return p
+        return value
+
+
+@dataclass(eq=False)
+class PortalClone(TrackedComponent):
+    """Marks the stand-in drawn at the partner portal for the part of ``source`` that went
+    through ``portal``; the id image reports it as ``source``."""
+
+    source: int = 0
+    portal: int = 0

@@ -9,12 +9,14 @@ from engine.gl_context import prepare_context
 from engine.render.renderer import Renderer
 from engine.world import World
 from systems import FlyCameraSystem, Output, PortalTravelSystem, PresentSystem, RenderSystem, TransformSystem
+from systems.portal_slice_system import PortalSliceSystem
 from systems.reflection_system import ReflectionSystem
 
 # System order, high priority first (see ARCHITECTURE.md).
 PRIORITY_GAME = 100
 PRIORITY_INPUT = 90
 PRIORITY_TRAVEL = 70  # after input moved the camera, before world matrices
+PRIORITY_SLICE = 60  # things partly through portals: after travel, before world matrices
 PRIORITY_TRANSFORM = 50
 PRIORITY_RENDER = 0
 PRIORITY_REFLECT = -10
@@ -57,6 +59,7 @@ class Engine:
         self.world.add_system(FlyCameraSystem(self.world), PRIORITY_INPUT)
         self.world.add_system(PortalTravelSystem(self.world, self.render_system), PRIORITY_TRAVEL)
         self.world.add_system(TransformSystem(self.world), PRIORITY_TRANSFORM)
+        self.world.add_system(PortalSliceSystem(self.world), PRIORITY_SLICE)
         self.world.add_system(self.render_system, PRIORITY_RENDER)
         self.reflection_system = ReflectionSystem(self.world, self.render_system, self.renderer)
         self.world.add_system(self.reflection_system, PRIORITY_REFLECT)

@@ -61,7 +61,7 @@ REQUIREMENTS: tuple[tuple[str, int, str], ...] = (
     ("max_uniform_block_size", 16384, "camera, light and mirror uniform blocks"),
     ("max_vertex_attribs", 16, "per-instance model matrix and material record"),
     ("max_geometry_output_vertices", 256, "batched mirror and layered cube-map passes"),
-    ("max_clip_distances", 1, "clip planes for mirror and portal views"),
+    ("max_clip_distances", 6, "clip planes: view plane, batched mirror rectangles, portal slices"),
 )
 
 

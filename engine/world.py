@@ -141,12 +141,15 @@ class World:
         return esper.try_component(entity, kind)
 
     def query(self, *kinds: type) -> list[tuple[int, tuple[Any, ...]]]:
+        """Entities with all of ``kinds`` (not those deleted and awaiting the next step)."""
         self._use()
-        return esper.get_components(*kinds)
+        found = esper.get_components(*kinds)
+        return [item for item in found if item[0] not in self._deleted] if self._deleted else found
 
     def query_one(self, kind: type[C]) -> list[tuple[int, C]]:
         self._use()
-        return esper.get_component(kind)
+        found = esper.get_component(kind)
+        return [item for item in found if item[0] not in self._deleted] if self._deleted else found
 
     def components_of(self, entity: int) -> tuple[Any, ...]:
         self._use()
@@ -180,6 +183,7 @@ class World:
         """Run every system once, then forget this frame's changes."""
         self._use()
         esper.process(dt)
+        esper.clear_dead_entities()  # what systems deleted this frame is gone before the next
         self.frame_index += 1
         for entities in self._changed.values():
             entities.clear()

@@ -2,6 +2,10 @@
 // Instanced scene geometry: per-vertex mesh data, per-instance transform and material record.
 #include "camera.glsl"
 
+// Clip distances: 0 is the view's plane (mirror and portal views), 1-4 the batched mirror
+// path's per-view rectangle (scene_batched.geom), SLICE_CLIP the instance's slice plane.
+#define SLICE_CLIP 5
+
 #ifdef BATCHED_VIEWS
 // The batched mirror program (engine/render/batched_mirrors.py): scene_batched.geom projects
 // each triangle once per view, reading these outputs under their g_ names and writing the
@@ -26,6 +30,7 @@ in vec4 in_color;          // linear base colour, alpha
 in vec4 in_surface;        // metallic, roughness, emissive power, -
 in vec4 in_reflect;        // reflection mix, refraction ior, -, -
 in vec4 in_tint;           // reflection tint
+in vec4 in_slice;          // world plane: only its front is drawn (things partly through a portal)
 in uvec4 in_slots;         // emissive variant, refract variant, reflect variant, entity id
 
 out vec3 v_world_pos;
@@ -47,6 +52,7 @@ void main() {
     v_reflect = in_reflect;
     v_tint = in_tint;
     v_slots = in_slots;
+    gl_ClipDistance[SLICE_CLIP] = dot(world, in_slice);
 #ifndef BATCHED_VIEWS
     gl_Position = camera.view_proj * world;
     gl_ClipDistance[0] = dot(world, camera.clip_plane);

@@ -85,16 +85,6 @@ void main() {
         int i = gl_InvocationID * VIEWS_PER_INVOCATION + k;
         if (i >= view_count.x) return;
         MirrorView v = views[i];
-#ifdef EXP_FETCHONLY
-        if (w0.x + w1.y + w2.z < 1e30) continue;
-#endif
-#ifdef EXP_PLANEONLY
-        if (outside(v.clip_plane, w0, w1, w2) || v.node.y == 0u) continue;
-#endif
-#ifdef EXP_MATONLY
-        vec4 q0 = v.view_proj * w0; vec4 q1 = v.view_proj * w1; vec4 q2 = v.view_proj * w2;
-        if (q0.x + q1.y + q2.z < 1e30) continue;
-#endif
         if (outside(v.clip_plane, w0, w1, w2)) continue;  // behind the mirror
         vec4 p0 = v.view_proj * w0;
         vec4 p1 = v.view_proj * w1;

@@ -13,17 +13,20 @@ it is now going from a portal's front (local +Z) to its back inside its rectangl
 portal must be enabled and have a live, enabled partner with a Portal; a portal whose
 partner was deleted or disabled is just a quad.  The new pose is ``pair_transform(in, out)``
 applied to the old one (position and orientation; scale is kept); the Traveller's velocity
-turns with it and a FlyController's yaw / pitch are recomputed from the new orientation.
+turns with it and a FlyController's yaw / pitch are recomputed from the new orientation (a
+pair not related by a turn about the vertical leaves a roll in the Transform, which the fly
+camera drops at the next mouse move, as it keeps no roll).
 
 Near plane: the camera sees nothing closer than its near plane, so a portal quad that cut the
 frustum between the eye and the near rectangle would be clipped and show what lies behind
 it.  The camera therefore goes through as soon as the tip of its frustum (the pyramid from
 the eye to the near-plane rectangle) touches the portal plane inside the rectangle, while
-the eye is still in front; then it is carried and pushed along the exit portal's normal just
-far enough that the whole pyramid is in front of the exit portal (``CLEAR`` x near), so it
-comes out just in front of it, facing away.  The push is at most about the pyramid's depth
-(near / cos of the half-diagonal angle, ~0.08 m for near 0.05), which is the only
-difference between the image seen through the portal and the image after the teleport.
+the eye is still in front and not backing away from it; then it is carried and pushed along
+the exit portal's normal just far enough that the whole pyramid is in front of the exit
+portal (``CLEAR`` x near), so it comes out just in front of it, facing away.  The push is the
+only difference between the image seen through the portal and the image after the teleport:
+the eye's distance to the look-in plane when flying straight in (about near, 0.05-0.07 m in
+the tests), at most twice the eye-to-near-corner reach when looking along the portal.
 The near-rectangle aspect comes from the render system's output (the frame's size) when the
 system is given one, else ``aspect`` (16:9 by default).
 
@@ -44,13 +47,13 @@ from components import Camera, FlyController, Portal, Transform, Traveller
 from engine.portal_math import near_plane_corners, pair_rotation, pair_transform, portal_plane
 from engine.reflection_math import signed_distance
 from engine.world import World
+from systems.transform_system import current_world_matrix
 
 DEFAULT_ASPECT = 16.0 / 9.0
 TOUCH = 0.02  # the frustum tip "touches" a portal within TOUCH x near of its plane
 CLEAR = 0.1  # after a teleport the whole tip is at least CLEAR x near in front of the exit
 # Edges of the frustum tip: points are [eye, corner 0..3] (corners go round the rectangle).
 _TIP_EDGES = ((0, 1), (0, 2), (0, 3), (0, 4), (1, 2), (2, 3), (3, 4), (4, 1))
-_MAX_PARENT_HOPS = 256
 
 
 @dataclass(frozen=True)
@@ -119,8 +122,8 @@ class PortalTravelSystem(esper.Processor):
         last, exited = self._last, self._exited
         self._last, self._exited = {}, {}
         for entity, (transform, cam) in movers.items():
-            if transform.parent is None and gates:
-                before = last.get(entity, start[entity])
+            before = last.get(entity, start[entity])
+            if transform.parent is None and gates and (cam is not None or before != transform.position):
                 gate = self._crossed(gates, before, transform, cam, exited.get(entity))
                 if gate is not None:
                     self._carry(entity, transform, cam, gate)
@@ -158,20 +161,7 @@ class PortalTravelSystem(esper.Processor):
         return gates
 
     def _world_matrix(self, transform: Transform) -> glm.mat4:
-        """This frame's model-to-world matrix (``Transform.world`` is last frame's until the
-        TransformSystem runs, and identity for a portal spawned this frame)."""
-        world = self.world
-        matrix = transform.local_matrix()
-        parent = transform.parent
-        for _ in range(_MAX_PARENT_HOPS):
-            if parent is None or not world.exists(parent):
-                break
-            parent_t = world.try_get(parent, Transform)
-            if parent_t is None:
-                break  # as the TransformSystem does: a parent without a Transform is no parent
-            matrix = parent_t.local_matrix() * matrix
-            parent = parent_t.parent
-        return matrix
+        return current_world_matrix(self.world, transform)
 
     # --- crossing tests ------------------------------------------------------------------------
     def _crossed(self, gates: list[_Gate], before: glm.vec3, transform: Transform, cam: Camera | None,

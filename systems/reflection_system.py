@@ -30,7 +30,7 @@ from engine.reflection_math import (
     signed_distance,
     transform_plane,
 )
-from engine.render.batched_mirrors import BatchedMirrors, choose_path
+from engine.render.batched_mirrors import BatchedMirrors, choose_path, submitted_triangles
 from engine.render.mirror_passes import MAX_LEVEL_VIEWS, CompositeParams, MirrorPasses
 from engine.render.renderer import Renderer
 from engine.render.views import View
@@ -90,7 +90,7 @@ class ReflectionSystem(esper.Processor):
         self.views: list[ReflectionView] = []   # last frame's view tree, level order
         # How a level's views are drawn: "per_mirror" (one render_view each), "batched" (one
         # draw per mesh for the whole level, engine/render/batched_mirrors.py) or "auto"
-        # (chosen per level by view count; the rule and its numbers: choose_path).
+        # (chosen per level by view and triangle count; the rule and its numbers: choose_path).
         self.path = "auto"
         self.batched = BatchedMirrors(renderer)
 
@@ -172,7 +172,7 @@ class ReflectionSystem(esper.Processor):
             self.passes.prepare_level(targets, parent_targets,
                                       [(c.parent.index, c.surface.entity, c.index) for c in children],
                                       _union(c.rect for c in children))
-            path = choose_path(self.path, len(children))
+            path = choose_path(self.path, len(children), submitted_triangles(renderer))
             paths.add(path)
             if path == "batched":
                 self.batched.render_level([c.view for c in children], targets)

@@ -25,9 +25,11 @@ from components import (
     Mirror,
     PointLight,
     Portal,
+    PortalClone,
     Reflective,
     Refractive,
     Skybox,
+    Slice,
     Transform,
 )
 from engine.render.instances import InstanceBatch
@@ -37,7 +39,8 @@ from engine.render.views import View, camera_view, lights_block
 from engine.world import World
 from systems.material_dispatch import choose_material
 
-MATERIAL_KINDS = (MeshRef, Material, Emissive, Reflective, Refractive, Mirror, Portal)
+MATERIAL_KINDS = (MeshRef, Material, Emissive, Reflective, Refractive, Mirror, Portal, Slice, PortalClone)
+NO_SLICE = (0.0, 0.0, 0.0, 1.0)
 AMBIENT = (0.03, 0.03, 0.035)
 
 
@@ -98,7 +101,10 @@ class RenderSystem(esper.Processor):
         row["surface"] = choice.surface
         row["reflect"] = choice.reflect_params
         row["tint"] = choice.tint
-        row["slots"] = (choice.emissive, choice.refract, choice.reflect, entity)
+        slice_ = world.try_get(entity, Slice)
+        row["slice"] = slice_.plane if slice_ is not None else NO_SLICE
+        clone = world.try_get(entity, PortalClone)
+        row["slots"] = (choice.emissive, choice.refract, choice.reflect, clone.source if clone else entity)
 
     def _remove_instance(self, entity: int, batch: InstanceBatch) -> None:
         batch.remove(entity)

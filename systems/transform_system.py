@@ -92,5 +92,17 @@ class TransformSystem(esper.Processor):
             stack.extend(self._children.get(entity, ()))
 
 
-def world_position(transform: Transform) -> glm.vec3:
-    return glm.vec3(transform.world[3])
+def current_world_matrix(world: World, transform: Transform, max_hops: int = 64) -> glm.mat4:
+    """This frame's model-to-world matrix, for systems that run before the TransformSystem
+    (``Transform.world`` is last frame's until it runs, and identity for a new entity)."""
+    matrix = transform.local_matrix()
+    parent = transform.parent
+    for _ in range(max_hops):
+        if parent is None or not world.exists(parent):
+            break
+        parent_t = world.try_get(parent, Transform)
+        if parent_t is None:
+            break  # as the TransformSystem does: a parent without a Transform is no parent
+        matrix = parent_t.local_matrix() * matrix
+        parent = parent_t.parent
+    return matrix

@@ -5,7 +5,16 @@ import glm
 import numpy as np
 
 from components import (
-    Camera, DirectionalLight, Emissive, Material, MeshRef, Mirror, Portal, Skybox, Transform, look_rotation,
+    Camera,
+    DirectionalLight,
+    Emissive,
+    Material,
+    MeshRef,
+    Mirror,
+    Portal,
+    Skybox,
+    Transform,
+    look_rotation,
 )
 from engine.mesh import box, quad
 from engine.portals import spawn_portal_pair
@@ -75,7 +84,7 @@ def test_facing_portals_recurse_to_max_depth_then_fill(scene):
     cx, cy = SIZE[0] // 2, SIZE[1] // 2
     np.testing.assert_allclose(srgb_to_linear(rgb[cy, cx]), closed, atol=0.01)
     # Eight levels work too.
-    for entity, (portal,) in [(e, (p,)) for e, p in runner.world.query_one(Portal)]:
+    for _, portal in runner.world.query_one(Portal):
         portal.max_depth = 8
     runner.engine.reflection_system.max_depth_cap = 8
     runner.frame()

@@ -32,9 +32,9 @@ from engine.render.views import View
 
 PATHS = ("auto", "per_mirror", "batched")
 VIEWS_BINDING = 2
-# Views per geometry-shader invocation.  One view is 3 vertices of 45 output components; 4
-# keeps 12 vertices under GL 4.1's 1024 total components, and 8 invocations x 4 views cover
-# MAX_LEVEL_VIEWS (at most 32 invocations are guaranteed).
+# Views per geometry-shader invocation.  One view is 3 vertices of 41 output components (48
+# where whole vec4 slots count); 4 keeps 12 vertices under GL 4.1's 1024 total output
+# components, and 8 invocations x 4 views cover MAX_LEVEL_VIEWS (32 invocations guaranteed).
 VIEWS_PER_INVOCATION = 4
 # The rectangle's four sides are clip distances 1-4 (0 is the mirror plane).
 RECT_CLIP_DISTANCES = range(GL_CLIP_DISTANCE0 + 1, GL_CLIP_DISTANCE0 + 5)
@@ -50,21 +50,52 @@ _VIEW_DTYPE = np.dtype([
 ])
 VIEWS_BLOCK_BYTES = 16 + MAX_LEVEL_VIEWS * _VIEW_DTYPE.itemsize
 
-# The "auto" rule, measured on llvmpipe (Mesa, 2 cores) with ``python -m benchmarks mirrors``:
-# see the table in ``choose_path``.
-AUTO_BATCHED_MIN_VIEWS = 4
+# The "auto" rule: batched when a level has at least AUTO_MIN_VIEWS views and the scene
+# submits at most AUTO_TRIANGLES_BASE + AUTO_TRIANGLES_X_VIEWS / views triangles (every
+# batch's mesh triangles x instances: what each path pushes through geometry per view).
+#
+# Measured on llvmpipe (Mesa 23, LLVM 15, 2 cores) in the benchmarks/mirrors.py scene at
+# 640x360, with the boxes swapped for coarser and finer meshes; ctx.finish() around each
+# level's draws, median ms of one level's geometry pass, per_mirror -> batched:
+#
+#   triangles   1 view       3 views      5-8 views     11-12 views    28-32 views
+#     ~260      0.35 -> 0.65  2.4 -> 2.2   4.3 -> 3.8    16.0 -> 13.1   14.5 -> 11.1
+#     ~500      0.38 -> 0.64  2.6 -> 2.2   5.0 -> 3.8    16.0 -> 16.9   12.5 -> 16.8
+#     ~740      0.58 -> 0.99  3.4 -> 2.7   4.3 -> 4.2    13.7 -> 14.7   11.8 -> 16.1
+#    ~1300      0.57 -> 1.13  3.0 -> 2.9   4.3 -> 8.9    20.0 -> 23.5   17.5 -> 28.0
+#   ~20500      2.27 -> 7.33  7.7 -> 14.7  15.7 -> 68.1  34.3 -> 111.7  48.5 -> 270.3
+#
+# Batching saves the per-view fixed cost of a pass (~0.3-0.5 ms here: state, camera block,
+# one draw per batch), but on llvmpipe a geometry shader costs ~0.2 us per input triangle
+# per invocation before it does anything, and ~0.35 us per triangle and view in all, against
+# ~0.06 us per triangle and view in the per-mirror path's vertex stage.  So batched wins
+# only for light geometry, by less as views (and invocations) grow; at 2 views the two are
+# within noise (0.79-1.20), at 1 view batched always loses.  A least-squares fit of the
+# difference over 672 levels gives batched - per_mirror ~ -0.62 - 0.071 V + 0.35e-3 T V ms,
+# zero at T ~ 200 + 1800 / V; the constants below are that line rounded up a little (their
+# summed cost over the sweep is within 0.1% of the best rule of this form, 1.6% above
+# choosing each level's faster path after the fact, 2.2% below always per_mirror).
+# A GPU with fast geometry shaders would move the line; re-measure before trusting it there.
+AUTO_MIN_VIEWS = 3
+AUTO_TRIANGLES_BASE = 300
+AUTO_TRIANGLES_X_VIEWS = 2000
 
 
-def choose_path(setting: str, view_count: int) -> str:
-    """The path that draws a level of ``view_count`` views: ``setting`` unless it is "auto".
-
-    "auto": batched when the level has at least AUTO_BATCHED_MIN_VIEWS views.
-    """
+def choose_path(setting: str, view_count: int, triangles: int) -> str:
+    """The path that draws a level of ``view_count`` views of a scene submitting
+    ``triangles`` triangles a view: ``setting`` unless it is "auto" (the rule above)."""
     if setting not in PATHS:
         raise ValueError(f"ReflectionSystem.path must be one of {PATHS}, got {setting!r}")
     if setting != "auto":
         return setting
-    return "batched" if view_count >= AUTO_BATCHED_MIN_VIEWS else "per_mirror"
+    if view_count >= AUTO_MIN_VIEWS and triangles <= AUTO_TRIANGLES_BASE + AUTO_TRIANGLES_X_VIEWS / view_count:
+        return "batched"
+    return "per_mirror"
+
+
+def submitted_triangles(renderer: Renderer) -> int:
+    """Triangles one scene pass submits: each batch's mesh triangles x its instances."""
+    return sum(batch.mesh.index_count // 3 * batch.count for batch in renderer.batches.values())
 
 
 def views_block(views: Sequence[View]) -> bytes:

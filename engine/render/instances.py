@@ -17,11 +17,12 @@ INSTANCE_DTYPE = np.dtype([
     ("surface", "<f4", (4,)),         # metallic, roughness, emissive power, -
     ("reflect", "<f4", (4,)),         # reflection mix, refraction ior, -, -
     ("tint", "<f4", (4,)),
+    ("slice", "<f4", (4,)),           # world plane; only its front is drawn ((0,0,0,1): all)
     ("slots", "<u4", (4,)),           # emissive, refract, reflect variants, entity id
 ])
-INSTANCE_FORMAT = "16f 9f 4f 4f 4f 4f 4u/i"
+INSTANCE_FORMAT = "16f 9f 4f 4f 4f 4f 4f 4u/i"
 INSTANCE_ATTRIBUTES = ("in_model", "in_normal_matrix", "in_color", "in_surface", "in_reflect", "in_tint",
-                       "in_slots")
+                       "in_slice", "in_slots")
 VERTEX_FORMAT = "3f 3f 2f"
 VERTEX_ATTRIBUTES = ("in_position", "in_normal", "in_uv")
 

@@ -25,7 +25,8 @@ ALBEDO_UNIT = 0
 SKY_UNIT = 1
 NODE_UNIT = 2
 GL_SRGB8_ALPHA8 = 0x8C43
-GL_CLIP_DISTANCE0 = 0x3000
+GL_CLIP_DISTANCE0 = 0x3000  # the view's clip plane (mirror and portal views)
+GL_CLIP_DISTANCE_SLICE = 0x3005  # the instance's slice plane (SLICE_CLIP in scene.vert)
 BACKGROUND = (0.05, 0.05, 0.06)
 
 
@@ -82,6 +83,7 @@ class Renderer:
         self.stats = RenderStats()
         self.exposure = 1.0
         ctx.enable_direct(GL_CLIP_DISTANCE0)
+        ctx.enable_direct(GL_CLIP_DISTANCE_SLICE)
 
     # --- shared resources ------------------------------------------------------------------
     def batch_for(self, mesh: Mesh, texture: TextureData | None) -> InstanceBatch:

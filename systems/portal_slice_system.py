@@ -1,0 +1,107 @@
+"""Things partly through a portal (seed 001's open problem): sliced, with a clone beyond.
+
+A Traveller whose bounds straddle an open portal's rectangle is drawn only in front of
+that portal (a Slice clip plane), and a clone, carried by the pair transform, draws the
+part that went through in front of the partner.  Clones are made when straddling starts
+and deleted when it ends, so entities are not spawned every frame.  It runs before the
+TransformSystem (on this frame's poses) so clones get their world matrices this frame.
+"""
+from __future__ import annotations
+
+from dataclasses import replace
+
+import esper
+import glm
+import numpy as np
+
+from components import Material, MeshRef, Portal, PortalClone, Slice, Transform, Traveller
+from engine.portal_math import pair_transform, portal_plane
+from engine.world import World
+from systems.transform_system import current_world_matrix
+
+
+class PortalSliceSystem(esper.Processor):
+    def __init__(self, world: World) -> None:
+        self.world = world
+        self.clones: dict[int, int] = {}   # source entity -> its clone
+
+    def process(self, dt: float) -> None:
+        world = self.world
+        portals = self._open_portals()
+        for entity, (_, mesh_ref, transform) in world.query(Traveller, MeshRef, Transform):
+            straddled = self._straddled(mesh_ref, current_world_matrix(world, transform), portals) if portals else None
+            if straddled is None:
+                self._release(entity)
+                continue
+            plane, carry, exit_plane, portal = straddled
+            self._slice(entity, plane)
+            clone = self.clones.get(entity)
+            if clone is None or not world.exists(clone):
+                clone = self.clones[entity] = self._spawn_clone(entity, mesh_ref, portal)
+            clone_t = world.get(clone, Transform)
+            position, rotation, scale = _decompose(carry * current_world_matrix(world, transform))
+            clone_t.position, clone_t.rotation, clone_t.scale = position, rotation, scale
+            self._slice(clone, exit_plane)
+        for source in [s for s in self.clones if not world.exists(s) or not world.has(s, Traveller)]:
+            self._release(source)
+
+    def _open_portals(self) -> list[tuple[int, Portal, glm.mat4, glm.mat4]]:
+        world = self.world
+        found = []
+        for entity, (portal, transform) in world.query(Portal, Transform):
+            partner = portal.partner
+            if portal.enabled and partner is not None and world.exists(partner) and world.has(partner, Portal):
+                found.append((entity, portal, current_world_matrix(world, transform),
+                              current_world_matrix(world, world.get(partner, Transform))))
+        return found
+
+    @staticmethod
+    def _straddled(mesh_ref: MeshRef, model: glm.mat4, portals):
+        """(slice plane, carry, partner's plane, portal) of the first portal cutting the bounds."""
+        lo, hi = mesh_ref.mesh.bounds
+        corners = np.array([(x, y, z, 1.0) for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
+        world_corners = corners @ np.array(model.to_list(), np.float64)
+        for entity, portal, in_world, out_world in portals:
+            plane = portal_plane(in_world)
+            distances = world_corners[:, :3] @ np.array(glm.vec3(plane)) + plane.w
+            if distances.min() >= 0.0 or distances.max() <= 0.0:
+                continue
+            local = world_corners @ np.array(glm.inverse(in_world).to_list(), np.float64)
+            w, h = portal.size
+            if local[:, 0].max() < -w / 2 or local[:, 0].min() > w / 2 or local[:, 1].max() < -h / 2 \
+                    or local[:, 1].min() > h / 2:
+                continue  # passes beside the rectangle, not through it
+            return plane, pair_transform(in_world, out_world), portal_plane(out_world), entity
+        return None
+
+    def _slice(self, entity: int, plane: glm.vec4) -> None:
+        current = self.world.try_get(entity, Slice)
+        if current is None:
+            self.world.add_component(entity, Slice(plane))
+        elif current.plane != plane:
+            current.plane = plane
+
+    def _spawn_clone(self, source: int, mesh_ref: MeshRef, portal: int) -> int:
+        world = self.world
+        material = world.try_get(source, Material)
+        components = [Transform(), MeshRef(mesh_ref.mesh), PortalClone(source=source, portal=portal)]
+        if material is not None:
+            components.append(replace(material))  # its own copy: components belong to one entity
+        return world.spawn(*components)
+
+    def _release(self, source: int) -> None:
+        world = self.world
+        clone = self.clones.pop(source, None)
+        if clone is not None and world.exists(clone):
+            world.delete_entity(clone)
+        if world.exists(source) and world.has(source, Slice):
+            world.remove_component(source, Slice)
+
+    def close(self) -> None:
+        self.clones.clear()
+
+
+def _decompose(matrix: glm.mat4) -> tuple[glm.vec3, glm.quat, glm.vec3]:
+    scale, rotation, translation = glm.vec3(), glm.quat(), glm.vec3()
+    glm.decompose(matrix, scale, rotation, translation, glm.vec3(), glm.vec4())
+    return translation, rotation, scale

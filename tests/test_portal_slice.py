@@ -1,0 +1,77 @@
+"""Things partly through a portal: sliced at the portal, the rest drawn beyond the partner."""
+from __future__ import annotations
+
+import glm
+
+from components import (
+    Camera,
+    DirectionalLight,
+    Emissive,
+    Material,
+    MeshRef,
+    PortalClone,
+    Skybox,
+    Slice,
+    Transform,
+    Traveller,
+    look_rotation,
+)
+from engine.mesh import box
+from engine.portals import spawn_portal_pair
+
+SIZE = (200, 150)
+
+
+def build_pair(world, ents, eye, target):
+    world.spawn(Skybox())
+    world.spawn(DirectionalLight(direction=(0.3, -1.0, -0.4), intensity=2.0))
+    eye = glm.vec3(eye)
+    ents["camera"] = world.spawn(Transform(position=eye, rotation=look_rotation(glm.vec3(target) - eye)), Camera())
+    # A at x = -3 and B at x = +3, both facing +Z: what goes into A comes out of B.
+    ents["a"], ents["b"] = spawn_portal_pair(world, (-3, 1.5, 0), None, (3, 1.5, 0), None)
+    # A long bar pushed halfway into A: z from -1 to +1.
+    ents["bar"] = world.spawn(Transform(position=(-2.8, 1.5, 0.0)), MeshRef(box((0.4, 0.4, 2.0))),
+                              Material(color=(0.9, 0.5, 0.1)), Emissive(1.0), Traveller())
+
+
+def test_a_box_halfway_through_shows_both_halves(scene):
+    ents = {}
+    runner = scene(lambda world: build_pair(world, ents, (0, 3.0, 7.0), (0, 1.5, 0)), SIZE)
+    runner.frame()
+    ids = runner.ids()
+    # The half still in front of A, where it is.
+    col, row = runner.project((-2.8, 1.7, 0.6))
+    assert ids[row, col] == ents["bar"]
+    # The half that went in comes out in front of B: B + half turn of (0.2, 0, -0.6) = (2.8, 1.5, 0.6).
+    col, row = runner.project((2.8, 1.7, 0.6))
+    assert ids[row, col] == ents["bar"]
+    world = runner.world
+    assert world.get(ents["bar"], Slice).plane == glm.vec4(0, 0, 1, 0)  # A's front is kept
+    (clone, _), = world.query_one(PortalClone)
+    assert world.get(clone, PortalClone).source == ents["bar"]
+    assert abs(world.get(clone, Slice).plane.w - 0.0) < 1e-6 and world.get(clone, Slice).plane.z > 0.99
+
+
+def test_the_part_behind_the_portal_is_not_drawn_there(scene):
+    ents = {}
+    # From the side, A is seen edge-on: an unsliced bar would show its back half at z < 0.
+    runner = scene(lambda world: build_pair(world, ents, (-7.0, 1.6, -0.5), (-2.8, 1.5, -0.5)), SIZE)
+    runner.frame()
+    ids = runner.ids()
+    col, row = runner.project((-2.8, 1.5, 0.6))
+    assert ids[row, col] == ents["bar"]          # the front half is there
+    col, row = runner.project((-2.8, 1.5, -0.6))
+    assert ids[row, col] != ents["bar"]          # the back half is not
+
+
+def test_slice_and_clone_go_when_the_box_is_through(scene):
+    ents = {}
+    runner = scene(lambda world: build_pair(world, ents, (0, 3.0, 7.0), (0, 1.5, 0)), SIZE)
+    runner.frame()
+    assert runner.world.query_one(PortalClone)
+    runner.world.get(ents["bar"], Transform).position = (-2.8, 1.5, 3.0)  # pulled back out
+    runner.frame()
+    assert not runner.world.query_one(PortalClone)  # deleted (gone from queries at once)
+    runner.frame()
+    assert not runner.world.has(ents["bar"], Slice)
+    assert runner.engine.renderer.resource_counts()["batches"] >= 1

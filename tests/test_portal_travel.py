@@ -1,0 +1,382 @@
+"""Travel through portals: crossings, the carried pose, near-plane protection, dead partners.
+
+The pair used throughout: A at (0, 1.5, 0) facing +Z, B at (10, 1.5, 0) turned 90 deg about Y
+(facing +X).  By hand, going into A's front and out of B's front maps
+    a point (x, y, z)  ->  (10 - z, y, x)        a direction (x, y, z)  ->  (-z, y, x)
+(A-local, half turn about up, turn 90 deg about Y, move to B) and turns orientations by
+-90 deg about Y.
+"""
+from __future__ import annotations
+
+import math
+
+import glm
+import numpy as np
+import pytest
+
+from components import (
+    Camera,
+    DirectionalLight,
+    Emissive,
+    FlyController,
+    Material,
+    MeshRef,
+    Portal,
+    Skybox,
+    Transform,
+    Traveller,
+    yaw_pitch_rotation,
+)
+from engine.app import spawn_camera
+from engine.mesh import box, sphere
+from engine.portals import spawn_portal_pair
+from engine.world import World
+from systems import Input, PortalCrossing, PortalCrossings, PortalTravelSystem, TransformSystem
+
+TURN_Y_90 = glm.angleAxis(glm.radians(90), glm.vec3(0, 1, 0))
+A_POS, B_POS = (0.0, 1.5, 0.0), (10.0, 1.5, 0.0)
+SIZE = (2.0, 3.0)
+ASPECT = 16 / 9
+DT = 1 / 60
+
+
+def carry_point(p):
+    x, y, z = p
+    return glm.vec3(10 - z, y, x)
+
+
+def carry_dir(d):
+    x, y, z = d
+    return glm.vec3(-z, y, x)
+
+
+def forward(rotation):
+    return rotation * glm.vec3(0, 0, -1)
+
+
+@pytest.fixture
+def world():
+    w = World("travel-test")
+    w.add_system(PortalTravelSystem(w, aspect=ASPECT), 70)
+    w.add_system(TransformSystem(w), 50)
+    yield w
+    w.close()
+
+
+def pair(world):
+    return spawn_portal_pair(world, A_POS, None, B_POS, TURN_Y_90, size=SIZE)
+
+
+def crossings(world) -> list[PortalCrossing]:
+    return list(world.resources[PortalCrossings])
+
+
+# --- geometry the tests check independently of the system ----------------------------------------
+def near_corners(position, rotation, fov_y, near, aspect):
+    hh = near * math.tan(math.radians(fov_y) / 2)
+    hw = hh * aspect
+    return [glm.vec3(position) + rotation * glm.vec3(sx * hw, sy * hh, -near)
+            for sx, sy in ((-1, -1), (1, -1), (1, 1), (-1, 1))]
+
+
+def near_plane_cuts_quad(corners, quad_world, size) -> bool:
+    """Whether the near-plane rectangle meets the portal quad (a rectangle in local XY)."""
+    inv = glm.inverse(quad_world)
+    local = [glm.vec3(inv * glm.vec4(c, 1.0)) for c in corners]
+    hits = []
+    for a, b in zip(local, local[1:] + local[:1], strict=True):
+        if a.z == 0.0:
+            hits.append(a)
+        elif (a.z < 0) != (b.z < 0) and b.z != 0.0:
+            hits.append(a + (b - a) * (a.z / (a.z - b.z)))
+    if not hits:
+        return False
+    start, end = hits[0], hits[-1]
+    for t in np.linspace(0.0, 1.0, 401):
+        p = start + (end - start) * float(t)
+        if abs(p.x) <= size[0] / 2 and abs(p.y) <= size[1] / 2:
+            return True
+    return False
+
+
+def camera_cuts_a_portal(world, cam, aspect, portals) -> bool:
+    t = world.get(cam, Transform)
+    c = world.get(cam, Camera)
+    corners = near_corners(t.position, t.rotation, c.fov_y, c.near, aspect)
+    return any(near_plane_cuts_quad(corners, world.get(p, Transform).world, SIZE) for p in portals)
+
+
+# --- (a) the carried pose -----------------------------------------------------------------------
+def test_traveller_walking_into_a_comes_out_of_b_with_turned_pose_velocity_and_yaw(world):
+    a, b = pair(world)
+    mover = world.spawn(Transform(position=(0.3, 2.0, 1.0), rotation=yaw_pitch_rotation(0.0, 20.0)),
+                        Traveller(velocity=(0, 0, -6)), FlyController(yaw=0.0, pitch=20.0))
+    world.step(0.1)  # z 1.0 -> 0.4
+    assert crossings(world) == []
+    world.step(0.1)  # z 0.4 -> -0.2: 0.2 behind A, inside its rectangle
+    assert crossings(world) == [PortalCrossing(mover, a, b)]
+    t = world.get(mover, Transform)
+    # 0.2 m behind A comes out 0.2 m in front of B: (10 - (-0.2), 2.0, 0.3).
+    np.testing.assert_allclose(t.position, (10.2, 2.0, 0.3), atol=1e-5)
+    np.testing.assert_allclose(world.get(mover, Traveller).velocity, (6, 0, 0), atol=1e-5)  # out of B's front
+    # Looking down -Z pitched up 20 deg now looks down +X pitched up 20 deg; up stays up-ish.
+    s, c = math.sin(math.radians(20)), math.cos(math.radians(20))
+    np.testing.assert_allclose(forward(t.rotation), (c, s, 0), atol=1e-5)
+    np.testing.assert_allclose(t.rotation * glm.vec3(0, 1, 0), (-s, c, 0), atol=1e-5)
+    np.testing.assert_allclose(t.scale, (1, 1, 1))
+    fly = world.get(mover, FlyController)
+    assert fly.yaw == pytest.approx(-90.0) and fly.pitch == pytest.approx(20.0)
+    # Mouse look rebuilds the same orientation from yaw / pitch: no jump on the next mouse move.
+    np.testing.assert_allclose(forward(yaw_pitch_rotation(fly.yaw, fly.pitch)), (c, s, 0), atol=1e-5)
+    world.step(0.1)  # walks on away from B, no second crossing
+    assert crossings(world) == []
+    np.testing.assert_allclose(world.get(mover, Transform).position, (10.8, 2.0, 0.3), atol=1e-5)
+    np.testing.assert_allclose(world.get(mover, Transform).world[3].xyz, (10.8, 2.0, 0.3), atol=1e-5)
+
+
+def test_a_traveller_spawned_with_a_velocity_crosses_in_its_first_frame(world):
+    a, b = pair(world)
+    mover = world.spawn(Transform(position=(0, 1.5, 0.1)), Traveller(velocity=(0, 0, -3)))
+    world.step(0.1)
+    assert crossings(world) == [PortalCrossing(mover, a, b)]
+    np.testing.assert_allclose(world.get(mover, Transform).position, carry_point((0, 1.5, -0.2)), atol=1e-5)
+
+
+# --- (b) what does not travel ---------------------------------------------------------------------
+@pytest.mark.parametrize("start, velocity", [
+    ((1.3, 1.5, 1.0), (0, 0, -6)),   # beside the rectangle (half width 1)
+    ((0.0, 3.2, 1.0), (0, 0, -6)),   # above it (top at 1.5 + 1.5)
+    ((0.0, 1.5, -1.0), (0, 0, 6)),   # from the back to the front
+    ((0.0, 1.5, 1.0), (0, 0, 6)),    # walking away from the front
+])
+def test_passing_outside_the_rectangle_or_from_behind_does_not_travel(world, start, velocity):
+    pair(world)
+    mover = world.spawn(Transform(position=start), Traveller(velocity=velocity))
+    for _ in range(4):
+        world.step(0.1)
+        assert crossings(world) == []
+    np.testing.assert_allclose(world.get(mover, Transform).position,
+                               glm.vec3(start) + 0.4 * glm.vec3(velocity), atol=1e-5)
+
+
+@pytest.mark.parametrize("which", ["in", "out"])
+def test_a_disabled_portal_or_partner_does_not_travel(world, which):
+    a, b = pair(world)
+    world.get(a if which == "in" else b, Portal).enabled = False
+    mover = world.spawn(Transform(position=(0, 1.5, 1.0)), Traveller(velocity=(0, 0, -6)))
+    for _ in range(3):
+        world.step(0.1)
+        assert crossings(world) == []
+    assert world.get(mover, Transform).position.z == pytest.approx(-0.8)
+
+
+def test_no_ping_pong_through_the_exit_in_the_next_frame_but_later_travel_works(world):
+    a, b = pair(world)
+    mover = world.spawn(Transform(position=(0, 1.5, 0.4)), Traveller(velocity=(0, 0, -6)))
+    world.step(0.1)
+    assert crossings(world) == [PortalCrossing(mover, a, b)]
+    world.get(mover, Traveller).velocity = (-6, 0, 0)  # straight back across B at once
+    world.step(0.1)
+    assert crossings(world) == []
+    world.get(mover, Transform).position = (10.7, 1.5, 0.3)  # back in front of B (from its back: no travel)
+    world.step(0.1)
+    assert crossings(world) == []
+    world.step(0.1)  # 10.1 -> 9.5: into B's front, out of A's front
+    assert crossings(world) == [PortalCrossing(mover, b, a)]
+    # 0.5 m behind B is 0.5 m in front of A; -X becomes +Z.
+    np.testing.assert_allclose(world.get(mover, Transform).position, (0.3, 1.5, 0.5), atol=1e-5)
+    np.testing.assert_allclose(world.get(mover, Traveller).velocity, (0, 0, 6), atol=1e-5)
+
+
+def test_a_parented_traveller_moves_but_does_not_teleport(world):
+    pair(world)
+    root = world.spawn(Transform())
+    mover = world.spawn(Transform(position=(0, 1.5, 1.0), parent=root), Traveller(velocity=(0, 0, -6)))
+    for _ in range(3):
+        world.step(0.1)
+        assert crossings(world) == []
+    assert world.get(mover, Transform).position.z == pytest.approx(-0.8)
+
+
+# --- (c) the camera: near-plane protection --------------------------------------------------------
+@pytest.mark.parametrize("yaw, pitch, offset, move", [
+    (0.0, 0.0, (0.2, 0.1), "forward"),      # straight in
+    (35.0, -20.0, (0.6, 1.0), "forward"),   # diagonally, looking down
+    (-60.0, 10.0, (-0.5, -0.8), "forward"),
+    (180.0, 0.0, (0.0, 0.0), "backward"),   # backing into the portal, looking away from it
+    (90.0, 0.0, (0.3, 0.0), "sideways"),    # looking along the portal, stepping into it
+])
+def test_the_camera_goes_through_before_its_near_plane_cuts_either_portal(world, yaw, pitch, offset, move):
+    a, b = pair(world)
+    rotation = yaw_pitch_rotation(yaw, pitch)
+    direction = {"forward": forward(rotation), "backward": -forward(rotation),
+                 "sideways": glm.vec3(0, 0, -1)}[move]
+    # Start 0.6 m before the point of A the path goes through.
+    target = glm.vec3(offset[0], 1.5 + offset[1], 0.0)
+    start = target - glm.normalize(direction) * 0.6
+    velocity = glm.normalize(direction) * 1.5
+    cam = world.spawn(Transform(position=start, rotation=rotation), Camera(fov_y=70.0, near=0.05),
+                      Traveller(velocity=velocity))
+    seen = []
+    for _ in range(50):
+        before = glm.vec3(world.get(cam, Transform).position)
+        world.step(DT)
+        assert not camera_cuts_a_portal(world, cam, ASPECT, (a, b)), f"frame {world.frame_index}"
+        seen += crossings(world)
+        t = world.get(cam, Transform)
+        if crossings(world):
+            moved = before + velocity * DT
+            assert moved.z > 0.0  # went through while the eye was still in front of A
+            expected = carry_point(moved)
+            # Carried, then pushed straight out of B (+X): at most the eye's distance in front of A
+            # plus the near pyramid's reach (eye to a near corner), plus a little.
+            np.testing.assert_allclose((t.position.y, t.position.z), (expected.y, expected.z), atol=1e-5)
+            c = world.get(cam, Camera)
+            hh = c.near * math.tan(math.radians(c.fov_y / 2))
+            reach = math.sqrt(c.near ** 2 + hh ** 2 + (hh * ASPECT) ** 2)
+            assert 0.0 <= t.position.x - expected.x <= 2 * reach + 0.01
+            assert t.position.x > 10.0  # in front of B
+            np.testing.assert_allclose(forward(t.rotation), carry_dir(forward(rotation)), atol=1e-5)
+            np.testing.assert_allclose(t.rotation * glm.vec3(0, 1, 0), carry_dir(rotation * glm.vec3(0, 1, 0)),
+                                       atol=1e-5)
+            np.testing.assert_allclose(world.get(cam, Traveller).velocity, carry_dir(velocity), atol=1e-5)
+    assert seen == [PortalCrossing(cam, a, b)]
+    assert world.get(cam, Transform).position.x > 10.2  # kept going, out of B
+
+
+def test_the_camera_passing_beside_a_portal_stays_on_its_side(world):
+    a, b = pair(world)
+    cam = world.spawn(Transform(position=(1.25, 1.5, 0.5)), Camera(near=0.05), Traveller(velocity=(0, 0, -1.5)))
+    for _ in range(40):
+        world.step(DT)
+        assert crossings(world) == []
+        assert not camera_cuts_a_portal(world, cam, ASPECT, (a, b))
+    assert world.get(cam, Transform).position.z < -0.4
+
+
+MAGENTA_WALL = (0.0, 1.5, -0.15)
+
+
+def portal_scene(ents, speed=1.0):
+    def build(world):
+        world.spawn(DirectionalLight(direction=(0.2, -1.0, -0.5), intensity=2.0))
+        world.spawn(Skybox())
+        ents["a"], ents["b"] = pair(world)
+        # Magenta right behind A, a little smaller than it: hidden by A from anywhere in front of
+        # it on this path, so it shows only if A's quad is clipped or seen through from behind.
+        ents["wall"] = world.spawn(Transform(position=MAGENTA_WALL), MeshRef(box((1.8, 2.8, 0.1))),
+                                   Material(color=(1.0, 0.0, 1.0)), Emissive(1.0))
+        ents["ball"] = world.spawn(Transform(position=(13, 1.5, 0.3)), MeshRef(sphere(0.4)),
+                                   Material(color=(0.9, 0.6, 0.1)))
+        ents["cam"] = spawn_camera(world, position=(0.2, 1.6, 0.45), yaw=0.0)
+        world.get(ents["cam"], FlyController).speed = speed
+        world.resources[Input].held = {"w"}
+
+    return build
+
+
+def magenta(rgb) -> np.ndarray:
+    px = rgb.astype(int)
+    return (px[..., 0] > 120) & (px[..., 2] > 120) & (px[..., 1] < 0.5 * np.minimum(px[..., 0], px[..., 2]))
+
+
+def test_flying_the_camera_through_a_never_shows_its_back_or_a_clipped_portal(scene):
+    ents = {}
+    frame_size = (160, 120)
+    runner = scene(portal_scene(ents), frame_size)
+    world, cam = runner.world, ents["cam"]
+    crossed_at = None
+    for i in range(40):  # 1 m/s at 60 fps from 0.45 m: the near plane reaches A at frame ~24
+        before = glm.vec3(world.get(cam, Transform).position)
+        rgb = runner.frame(DT)
+        assert not magenta(rgb).any(), f"frame {i} shows what is behind portal A"
+        assert not camera_cuts_a_portal(world, cam, frame_size[0] / frame_size[1], (ents["a"], ents["b"]))
+        if crossings(world):
+            assert crossings(world) == [PortalCrossing(cam, ents["a"], ents["b"])] and crossed_at is None
+            crossed_at = i
+            moved_z = before.z - DT  # the fly camera's step before the teleport
+            assert 0.0 < moved_z < 0.05 + 0.01  # went through once the near plane (0.05) reached A
+            t = world.get(cam, Transform)
+            # Carried (10 - z, y, x), then out to just in front of B, looking down +X.
+            np.testing.assert_allclose((t.position.y, t.position.z), (1.6, 0.2), atol=1e-5)
+            assert 10.0 < t.position.x < 10.0 + 0.01
+            np.testing.assert_allclose(forward(t.rotation), (1, 0, 0), atol=1e-5)
+            assert world.get(cam, FlyController).yaw == pytest.approx(-90.0)
+        elif crossed_at is None:
+            assert world.get(cam, Transform).position.z > 0.0  # the eye stays in front of A until then
+    assert crossed_at is not None and crossed_at < 35
+    # The fly camera carries on along its new heading, out of B.
+    assert world.get(cam, Transform).position.x > 10.0 + 0.05
+    assert runner.ids()[frame_size[1] // 2, frame_size[0] // 2] == ents["ball"]  # ahead of B, on +X
+    # The detector works: magenta in front of the camera is seen.
+    world.get(ents["wall"], Transform).position = (12.0, 1.6, 0.2)
+    assert magenta(runner.frame(DT)).sum() > 100
+
+
+def test_without_travel_the_near_plane_cuts_the_portal_and_shows_what_is_behind(scene):
+    """The control for the test above: the magenta wall is there to be seen."""
+    ents = {}
+    runner = scene(portal_scene(ents), (160, 120))
+    import esper
+
+    runner.world._use()
+    esper.remove_processor(PortalTravelSystem)
+    shown = []
+    for _ in range(30):
+        shown.append(magenta(runner.frame(DT)).any())
+    assert any(shown) and not shown[0]
+
+
+# --- (d) a partner deleted at run time ------------------------------------------------------------
+def test_deleting_a_portal_at_run_time_keeps_running_and_stops_travel(scene):
+    ents = {}
+
+    def build(world):
+        world.spawn(DirectionalLight())
+        ents["a"], ents["b"] = pair(world)
+        ents["ball"] = world.spawn(Transform(position=(0.0, 1.5, 0.5)), MeshRef(sphere(0.2)), Material(),
+                                   Traveller(velocity=(0, 0, -3)))
+        ents["cam"] = spawn_camera(world, position=(0.0, 1.6, 4.0), fly=False)
+
+    runner = scene(build, (64, 48))
+    world = runner.world
+    for _ in range(12):
+        runner.frame(DT)
+        if crossings(world):
+            break
+    assert crossings(world) == [PortalCrossing(ents["ball"], ents["a"], ents["b"])]
+    world.delete_entity(ents["b"])
+    world.get(ents["ball"], Transform).position = (0.0, 1.5, 0.5)  # in front of A again
+    world.get(ents["ball"], Traveller).velocity = (0, 0, -3)
+    for _ in range(20):
+        runner.frame(DT)
+        assert crossings(world) == []
+    assert world.get(ents["ball"], Transform).position.z < -0.4  # walked through A's quad: no partner
+    assert world.get(ents["a"], Portal).partner == ents["b"]  # dangling, harmless
+    # The camera flying into the partnerless portal does not travel either.
+    world.get(ents["cam"], Transform).position = (0.0, 1.6, 0.3)
+    world.get(ents["cam"], Camera).near = 0.05
+    world.add_component(ents["cam"], Traveller(velocity=(0, 0, -2)))
+    for _ in range(20):
+        runner.frame(DT)
+        assert crossings(world) == []
+    assert world.get(ents["cam"], Transform).position.z < 0.0
+    world.delete_entity(ents["a"])
+    runner.frame(DT)
+
+
+def test_the_image_through_the_portal_matches_the_image_after_the_teleport(scene):
+    """Needs the ReflectionSystem's portal views: the last frame before the teleport looks
+    through A at B's side, the first one after is rendered there directly."""
+    ents = {}
+    runner = scene(portal_scene(ents), (160, 120))
+    frames = []
+    for _ in range(30):
+        frames.append(runner.frame(DT).astype(int))
+        if crossings(runner.world):
+            break
+        views = runner.stats.reflection_views
+    assert crossings(runner.world) and views >= 1  # the frame before looked through a portal view
+    diff = np.abs(frames[-1] - frames[-2])
+    assert diff.mean() < 1.5 and np.percentile(diff, 99) < 12, (diff.mean(), np.percentile(diff, 99))
+    assert np.abs(frames[-2] - frames[0]).mean() < 5  # the whole approach showed B's side through A
