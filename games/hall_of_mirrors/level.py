@@ -1,7 +1,9 @@
 """Hall of mirrors: a checkered floor, a few objects, an emissive lamp, a chrome sphere that
 reflects only the sky, a textured crate that mixes its texture with the sky (seed 004), a
 wall of mirrors with different tints and roughness, and a facing pair (the wall's centre
-mirror and one behind the camera) that shows a corridor of reflections."""
+mirror and one behind the camera) that shows a corridor of reflections; a portal pair (the
+left doorway opens far across the hall, where a crate stands half in it and half out of
+its partner), and a facing pair of portals on the right that shows a tunnel."""
 from __future__ import annotations
 
 import glm
@@ -16,9 +18,11 @@ from components import (
     Reflective,
     Skybox,
     Transform,
+    Traveller,
 )
 from engine import Game, World, spawn_camera
 from engine.mesh import box, plane, quad, sphere
+from engine.portals import spawn_portal_pair
 from engine.texture_data import checker_texture
 
 
@@ -65,6 +69,7 @@ class HallOfMirrors(Game):
                     Reflective("skybox"))
 
         self._mirrors(world)
+        self._portals(world)
 
     @staticmethod
     def _mirrors(world: World) -> None:
@@ -82,6 +87,35 @@ class HallOfMirrors(Game):
         world.spawn(Transform(position=(0.0, 1.6, 11.0), rotation=back), MeshRef(quad(4.0, 3.0)), glass,
                     Mirror(color=(0.95, 0.95, 1.0)))
         world.spawn(Transform(position=(0.0, 1.6, 11.06), rotation=back), MeshRef(box((4.2, 3.2, 0.1))), frame)
+
+    @staticmethod
+    def _portals(world: World) -> None:
+        frame = Material(color=(0.35, 0.3, 0.5), roughness=0.3)
+
+        def doorway(portal: int, width: float, height: float) -> None:
+            for x in (-width / 2 - 0.05, width / 2 + 0.05):
+                world.spawn(Transform(position=(x, 0.05, 0.0), parent=portal),
+                            MeshRef(box((0.1, height + 0.1, 0.1))), frame)
+            world.spawn(Transform(position=(0.0, height / 2 + 0.05, 0.0), parent=portal),
+                        MeshRef(box((width + 0.2, 0.1, 0.1))), frame)
+
+        def yaw(degrees: float) -> glm.quat:
+            return glm.angleAxis(glm.radians(degrees), glm.vec3(0, 1, 0))
+
+        # The doorway on the left opens far across the hall (the partner stands at x = 16).
+        door, _ = spawn_portal_pair(world, (-5.5, 1.25, -0.5), yaw(38), (16.0, 1.25, -9.0), yaw(-90),
+                                    size=(1.6, 2.5))
+        doorway(door, 1.6, 2.5)
+        # Beyond the partner: a lantern to look at, and a crate pushed half through it.
+        world.spawn(Transform(position=(13.5, 0.5, -8.4)), MeshRef(box((0.8, 1.0, 0.8))),
+                    Material(color=(0.9, 0.2, 0.6)), Emissive(0.6))
+        world.spawn(Transform(position=(16.0, 0.4, -9.2)), MeshRef(box((0.8, 0.8, 0.8))),
+                    Material(color=(0.2, 0.7, 0.9)), Traveller())
+        # The tunnel on the right: two portals facing each other across the camera, each
+        # showing the other smaller and smaller, to the recursion limit.
+        tunnel, _ = spawn_portal_pair(world, (5.5, 1.25, -0.5), yaw(-38), (-0.68, 1.25, 7.36), yaw(142),
+                                      size=(1.6, 2.5), max_depth=4)
+        doorway(tunnel, 1.6, 2.5)
 
     def update(self, world: World, dt: float) -> None:
         for _, (spin, transform) in world.query(Spin, Transform):
