@@ -1,12 +1,13 @@
 """Speculum benchmarks: ``python -m benchmarks <name> [--json]``.
 
 Each benchmark is a module of this package with ``add_arguments(parser)`` and
-``main(args) -> int``; ``SUITES`` names them (``portals`` comes later).
+``main(args) -> int``; ``SUITES`` names them.
 """
 from __future__ import annotations
 
 # name -> (module, one-line description)
 SUITES: dict[str, tuple[str, str]] = {
     "ecs": ("benchmarks.ecs", "ECS systems + instance upload per frame at 100 / 1,000 / 10,000 entities"),
+    "portals": ("benchmarks.portals", "whole frame of a facing portal pair at recursion depth 0-8"),
     "mirrors": ("benchmarks.mirrors", "whole frame with 0-16 mirrors on a ring, per-mirror vs batched vs auto path"),
 }

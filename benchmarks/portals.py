@@ -1,0 +1,94 @@
+"""Portal benchmark: a facing pair of portals, recursion depth 0 to 8.
+
+Two 2 x 2.5 m portals face each other 6 m apart over a checkered floor with a few boxes
+between them; the camera stands between them looking into one, so every level of
+recursion shows the other one again, smaller.  For each depth limit the whole frame is
+timed (``Engine.frame`` then ``ctx.finish()``, wall clock: llvmpipe's GPU timers are not
+usable), 640x360.  ``passes`` counts scene renders (1 main + 1 per portal view).
+
+    python -m benchmarks portals            # table
+    python -m benchmarks portals --json     # one JSON object per depth
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import statistics
+import time
+
+import glm
+
+from components import DirectionalLight, Material, MeshRef, Portal, Skybox, Transform
+from engine.app import Engine, Game
+from engine.gl_context import create_headless_context
+from engine.mesh import box, plane
+from engine.portals import spawn_portal_pair
+from engine.render.targets import CaptureTarget
+from engine.texture_data import checker_texture
+from engine.world import World
+from systems import Output
+
+SIZE = (640, 360)
+DEPTHS = range(0, 9)
+
+
+class FacingPortals(Game):
+    title = "portal benchmark"
+
+    def build(self, world: World) -> None:
+        from engine.app import spawn_camera
+
+        spawn_camera(world, position=(0.3, 1.5, 3.0), yaw=3.0, pitch=-2.0, fly=False)
+        world.spawn(Skybox())
+        world.spawn(DirectionalLight(direction=(-0.3, -1.0, -0.4), intensity=2.5))
+        world.spawn(Transform(), MeshRef(plane(40, 40, uv_repeat=10)), Material(texture=checker_texture(128, 8)))
+        back = glm.angleAxis(glm.pi(), glm.vec3(0, 1, 0))
+        spawn_portal_pair(world, (0, 1.25, 0), None, (0, 1.25, 6), back, size=(2.0, 2.5), max_depth=8)
+        crate = box((0.5, 0.5, 0.5))
+        for i, (x, z) in enumerate(((-0.6, 1.0), (0.7, 2.0), (-0.3, 4.5), (0.5, 5.2))):
+            world.spawn(Transform(position=(x, 0.25, z)), MeshRef(crate),
+                        Material(color=(0.2 + 0.2 * i, 0.5, 0.9 - 0.2 * i)))
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--frames", type=int, default=30, help="timed frames per depth")
+    parser.add_argument("--warmup", type=int, default=3)
+
+
+def main(args: argparse.Namespace) -> int:
+    ctx = create_headless_context()
+    engine = Engine(FacingPortals(), ctx)
+    capture = CaptureTarget(ctx, SIZE)
+    output = Output(capture.framebuffer, SIZE)
+    rows = []
+    try:
+        for depth in DEPTHS:
+            for _, portal in engine.world.query_one(Portal):
+                portal.max_depth = depth
+            engine.reflection_system.max_depth_cap = max(depth, 1)
+            times = []
+            for i in range(args.warmup + args.frames):
+                start = time.perf_counter()
+                engine.frame(1 / 60, output)
+                ctx.finish()
+                if i >= args.warmup:
+                    times.append((time.perf_counter() - start) * 1000.0)
+            times.sort()
+            rows.append({"depth": depth, "frame_ms_median": round(statistics.median(times), 2),
+                         "frame_ms_p95": round(times[min(len(times) - 1, int(0.95 * len(times)))], 2),
+                         "passes": engine.renderer.stats.passes})
+    finally:
+        capture.release()
+        engine.close()
+        ctx.release()
+    base = rows[0]["frame_ms_median"]
+    for row in rows:
+        row["ratio_to_depth_0"] = round(row["frame_ms_median"] / base, 2)
+        if args.json:
+            print(json.dumps(row))
+    if not args.json:
+        print(f"{'depth':>5} {'median ms':>10} {'p95 ms':>8} {'passes':>6} {'x depth 0':>9}")
+        for row in rows:
+            print(f"{row['depth']:>5} {row['frame_ms_median']:>10} {row['frame_ms_p95']:>8} {row['passes']:>6} "
+                  f"{row['ratio_to_depth_0']:>9}")
+    return 0
