@@ -90,8 +90,9 @@ def test_camera_close_to_the_mirror_uses_a_clip_plane_and_still_hides_what_is_be
         base_scene(world)
         look_from(world, (0.3, 1.5, -1.9), target=(0.3, 1.5, -3))  # 10 cm from the glass
         ents["mirror"] = mirror_wall(world)
-        ents["behind"] = world.spawn(Transform(position=(0.3, 1.5, -2.5)), MeshRef(box()),
-                                     Material(color=(0.05, 0.9, 0.05)))
+        # A thin plate just behind the glass: between it and the reflected eye (10 cm behind).
+        ents["behind"] = world.spawn(Transform(position=(0.3, 1.5, -2.02), scale=(1.0, 1.0, 0.01)),
+                                     MeshRef(box()), Material(color=(0.05, 0.9, 0.05)))
 
     runner = scene(build, SIZE)
     runner.frame()
