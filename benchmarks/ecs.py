@@ -36,7 +36,7 @@ import sys
 import time
 from dataclasses import asdict, dataclass
 
-import glm
+from pyglm import glm
 
 from components import DirectionalLight, Material, MeshRef, Transform
 from engine.app import Engine, Game, spawn_camera

@@ -16,7 +16,7 @@ import json
 import statistics
 import time
 
-import glm
+from pyglm import glm
 
 from components import DirectionalLight, Material, MeshRef, Portal, Skybox, Transform
 from engine.app import Engine, Game

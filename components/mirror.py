@@ -4,7 +4,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any
 
-import glm
+from pyglm import glm
 
 from components.tracking import ComponentValueError, TrackedComponent, color, finite, vec3
 

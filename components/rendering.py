@@ -4,8 +4,8 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
-import glm
 import numpy as np
+from pyglm import glm
 
 from components.tracking import ComponentValueError, TrackedComponent, boolean, choice, color, finite, integer
 

@@ -15,8 +15,8 @@ import math
 from numbers import Integral
 from typing import Any
 
-import glm
 import numpy as np
+from pyglm import glm
 
 
 class ComponentValueError(ValueError):

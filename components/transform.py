@@ -5,7 +5,7 @@ from dataclasses import dataclass, field
 from numbers import Integral
 from typing import Any
 
-import glm
+from pyglm import glm
 
 from components.tracking import ComponentValueError, TrackedComponent, finite, vec3
 

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import glm
+from pyglm import glm
 
 from components import ComponentValueError, Emissive, Material, MeshRef, Mirror, Reflective, Transform
 from engine.errors import AssetError

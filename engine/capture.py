@@ -4,8 +4,8 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-import glm
 import numpy as np
+from pyglm import glm
 
 from components import Camera, MeshRef, Portal, Transform
 from engine.portal_math import pair_transform

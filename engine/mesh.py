@@ -9,8 +9,8 @@ import itertools
 from dataclasses import dataclass, field
 from pathlib import Path
 
-import glm
 import numpy as np
+from pyglm import glm
 
 from engine.errors import AssetError
 from engine.texture_data import TextureData

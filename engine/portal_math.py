@@ -1,7 +1,7 @@
 """Math of paired portals: the transform that carries things from one portal to its partner."""
 from __future__ import annotations
 
-import glm
+from pyglm import glm
 
 from engine.reflection_math import plane_from_point_normal
 

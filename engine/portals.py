@@ -1,7 +1,7 @@
 """Spawning portal pairs: two quads whose Portal components name each other."""
 from __future__ import annotations
 
-import glm
+from pyglm import glm
 
 from components import Material, MeshRef, Portal, Transform
 from engine.mesh import quad

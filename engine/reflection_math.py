@@ -4,7 +4,7 @@ Planes are glm.vec4 (n.x, n.y, n.z, d) with unit n: a point x is in front when n
 """
 from __future__ import annotations
 
-import glm
+from pyglm import glm
 
 
 def plane_from_point_normal(point, normal) -> glm.vec4:

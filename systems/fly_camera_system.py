@@ -4,7 +4,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import esper
-import glm
+from pyglm import glm
 
 from components import FlyController, Transform, yaw_pitch_rotation
 from engine.world import World

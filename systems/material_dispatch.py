@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-import glm
+from pyglm import glm
 
 from components import Emissive, Material, Mirror, Portal, Reflective, Refractive
 from engine.material_slots import EmissiveVariant, ReflectVariant, RefractVariant

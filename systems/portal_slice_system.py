@@ -11,8 +11,8 @@ from __future__ import annotations
 from dataclasses import replace
 
 import esper
-import glm
 import numpy as np
+from pyglm import glm
 
 from components import Material, MeshRef, Portal, PortalClone, Slice, Transform, Traveller
 from engine.portal_math import pair_transform, portal_plane

@@ -41,7 +41,7 @@ from dataclasses import dataclass
 from typing import Any
 
 import esper
-import glm
+from pyglm import glm
 
 from components import Camera, FlyController, Portal, Transform, Traveller
 from engine.portal_math import near_plane_corners, pair_rotation, pair_transform, portal_plane

@@ -16,8 +16,8 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import esper
-import glm
 import numpy as np
+from pyglm import glm
 
 from components import MeshRef, Mirror, Portal, Transform
 from engine.mesh import flat_plane

@@ -12,9 +12,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import esper
-import glm
 import moderngl
 import numpy as np
+from pyglm import glm
 
 from components import (
     Camera,

@@ -2,7 +2,7 @@
 from __future__ import annotations
 
 import esper
-import glm
+from pyglm import glm
 
 from components import Transform
 from engine.world import FrameEvents, World

@@ -1,8 +1,8 @@
 """Helpers shared by the system tests: run a level on the test context, read pixels back."""
 from __future__ import annotations
 
-import glm
 import numpy as np
+from pyglm import glm
 
 from engine.app import Engine, Game
 from engine.render.targets import CaptureTarget

@@ -7,11 +7,11 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import glm
 import numpy as np
 import pytest
 import trimesh
 from PIL import Image
+from pyglm import glm
 from trimesh.visual import TextureVisuals
 from trimesh.visual.material import PBRMaterial
 

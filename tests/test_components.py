@@ -3,9 +3,9 @@ from __future__ import annotations
 
 import math
 
-import glm
 import numpy as np
 import pytest
+from pyglm import glm
 
 from components import (
     Camera,

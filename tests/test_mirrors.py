@@ -1,9 +1,9 @@
 """System tests of planar mirrors: real frames, facts about pixels, ids and pass counts."""
 from __future__ import annotations
 
-import glm
 import numpy as np
 import pytest
+from pyglm import glm
 
 from components import Camera, DirectionalLight, Emissive, Material, MeshRef, Mirror, Skybox, Transform, look_rotation
 from engine.mesh import box, plane, quad, sphere

@@ -1,7 +1,7 @@
 """Things partly through a portal: sliced at the portal, the rest drawn beyond the partner."""
 from __future__ import annotations
 
-import glm
+from pyglm import glm
 
 from components import (
     Camera,

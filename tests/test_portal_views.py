@@ -1,8 +1,8 @@
 """System tests of portal views: what a portal shows, recursion, fill, composition with mirrors."""
 from __future__ import annotations
 
-import glm
 import numpy as np
+from pyglm import glm
 
 from components import (
     Camera,

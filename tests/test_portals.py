@@ -3,9 +3,9 @@ from __future__ import annotations
 
 import json
 
-import glm
 import numpy as np
 import pytest
+from pyglm import glm
 
 from components import ComponentValueError, Portal, Transform
 from engine.capture import export_scene

@@ -1,9 +1,9 @@
 """Reflection and oblique-projection math against independent derivations."""
 from __future__ import annotations
 
-import glm
 import numpy as np
 import pytest
+from pyglm import glm
 
 from engine.reflection_math import (
     MIRROR_X,

@@ -1,9 +1,9 @@
 """System tests of the foundation renderer: real frames on llvmpipe, facts about pixels."""
 from __future__ import annotations
 
-import glm
 import numpy as np
 import pytest
+from pyglm import glm
 
 from components import (
     Camera,

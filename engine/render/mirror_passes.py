@@ -7,9 +7,9 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-import glm
 import moderngl
 import numpy as np
+from pyglm import glm
 
 from engine.render.renderer import CAMERA_BINDING, SKY_UNIT, Renderer
 from engine.render.targets import RenderTargets, release_framebuffer

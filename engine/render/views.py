@@ -4,8 +4,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-import glm
 import numpy as np
+from pyglm import glm
 
 CAMERA_BLOCK_BYTES = 4 * 64 + 3 * 16
 NO_CLIP = glm.vec4(0.0, 0.0, 0.0, 1.0)

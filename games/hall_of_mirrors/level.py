@@ -6,7 +6,7 @@ left doorway opens far across the hall, where a crate stands half in it and half
 its partner), and a facing pair of portals on the right that shows a tunnel."""
 from __future__ import annotations
 
-import glm
+from pyglm import glm
 
 from components import (
     DirectionalLight,
