@@ -6,9 +6,14 @@ batch once per level: ``shaders/scene_batched.geom`` emits every triangle once f
 view of the level that can see it, reading the views from the ``Views`` uniform block
 (std140, up to MAX_LEVEL_VIEWS), and ``scene.frag`` (built with BATCHED_VIEWS) takes the
 view's node index and eye from the geometry shader.  The pixels drawn and their values are
-those of the per-mirror path: the same view_proj, clip plane, eye, node mask and faces.
+those of the per-mirror path: the same view_proj, clip plane, eye, node mask and faces
+(tests/test_mirror_paths.py).  The geometry shader culls, per view, triangles behind the
+mirror or outside the view's frustum or screen rectangle, and clips the rest to that
+rectangle with clip distances (the per-mirror path's scissor).
 
-Which path a level takes is ``choose_path`` (``ReflectionSystem.path``).
+Which path a level takes is ``choose_path`` (``ReflectionSystem.path``).  On llvmpipe the
+batched path is rarely faster (see the measurements above AUTO_MIN_VIEWS), so "auto" takes
+it only for the lightest scenes there.
 """
 from __future__ import annotations
 
@@ -51,34 +56,37 @@ _VIEW_DTYPE = np.dtype([
 VIEWS_BLOCK_BYTES = 16 + MAX_LEVEL_VIEWS * _VIEW_DTYPE.itemsize
 
 # The "auto" rule: batched when a level has at least AUTO_MIN_VIEWS views and the scene
-# submits at most AUTO_TRIANGLES_BASE + AUTO_TRIANGLES_X_VIEWS / views triangles (every
-# batch's mesh triangles x instances: what each path pushes through geometry per view).
+# submits at most AUTO_MAX_TRIANGLES triangles (each batch's mesh triangles x instances,
+# what both paths push through geometry once per view); per_mirror otherwise.
 #
-# Measured on llvmpipe (Mesa 23, LLVM 15, 2 cores) in the benchmarks/mirrors.py scene at
-# 640x360, with the boxes swapped for coarser and finer meshes; ctx.finish() around each
-# level's draws, median ms of one level's geometry pass, per_mirror -> batched:
+# Measured on llvmpipe (Mesa 22.3, LLVM 15, 2 cores, 640x360; the machine was shared, so
+# the paths ran interleaved frame by frame).  Whole frames of ``python -m benchmarks
+# mirrors`` (incl. ctx.finish(), median ms, per_mirror / batched):
 #
-#   triangles   1 view       3 views      5-8 views     11-12 views    28-32 views
-#     ~260      0.35 -> 0.65  2.4 -> 2.2   4.3 -> 3.8    16.0 -> 13.1   14.5 -> 11.1
-#     ~500      0.38 -> 0.64  2.6 -> 2.2   5.0 -> 3.8    16.0 -> 16.9   12.5 -> 16.8
-#     ~740      0.58 -> 0.99  3.4 -> 2.7   4.3 -> 4.2    13.7 -> 14.7   11.8 -> 16.1
-#    ~1300      0.57 -> 1.13  3.0 -> 2.9   4.3 -> 8.9    20.0 -> 23.5   17.5 -> 28.0
-#   ~20500      2.27 -> 7.33  7.7 -> 14.7  15.7 -> 68.1  34.3 -> 111.7  48.5 -> 270.3
+#   scene (triangles)                   4 mirrors      8 mirrors      16 mirrors
+#   benchmark, 20 boxes (~260)          57.0 / 57.6    70.3 / 73.1    120.7 / 126.4
+#   boxes as 20 meshes (22 batches)     35.6 / 38.3    49.0 / 51.4     99.2 / 111.4
+#   no boxes (18-34)                         -         47.2 / 44.8    106.5 / 107.7
 #
-# Batching saves the per-view fixed cost of a pass (~0.3-0.5 ms here: state, camera block,
-# one draw per batch), but on llvmpipe a geometry shader costs ~0.2 us per input triangle
-# per invocation before it does anything, and ~0.35 us per triangle and view in all, against
-# ~0.06 us per triangle and view in the per-mirror path's vertex stage.  So batched wins
-# only for light geometry, by less as views (and invocations) grow; at 2 views the two are
-# within noise (0.79-1.20), at 1 view batched always loses.  A least-squares fit of the
-# difference over 672 levels gives batched - per_mirror ~ -0.62 - 0.071 V + 0.35e-3 T V ms,
-# zero at T ~ 200 + 1800 / V; the constants below are that line rounded up a little (their
-# summed cost over the sweep is within 0.1% of the best rule of this form, 1.6% above
-# choosing each level's faster path after the fact, 2.2% below always per_mirror).
-# A GPU with fast geometry shaders would move the line; re-measure before trusting it there.
+# Per level, the app-thread time of the level's draws (where the paths differ: both
+# rasterise the same pixels), mean ms per_mirror / batched:
+#
+#   triangles     1 view       2 views      3-8 views    11-12 views   28-32 views
+#     <= 34       0.32 / 0.37  0.83 / 0.89  2.43 / 2.29  3.75 / 3.75   3.71 / 3.40
+#     60-95       0.39 / 0.51  0.72 / 0.70  2.12 / 2.25  3.74 / 3.83   3.69 / 4.63
+#     120-155     0.40 / 0.51  0.78 / 0.94  2.41 / 2.56  4.54 / 4.96   4.91 / 5.87
+#     250-274          -       0.73 / 0.91  2.06 / 2.59  5.78 / 7.14   6.29 / 9.29
+#     ~1300            -       1.17 / 2.03  3.17 / 3.64  5.15 / 12.95  5.93 / 21.28
+#
+# A per-mirror view costs ~0.1 ms of its own (state, camera block, ~7 us a draw).  The
+# batched draw's geometry shader runs on llvmpipe's app thread: with the lightest geometry
+# a 28-32 view level still costs ~1 ms a draw (8 invocations), and each triangle adds
+# ~0.4 us per view against ~0.06 us in the per-mirror vertex stage.  So batching pays only
+# for the lightest geometry with several views, and there by ~5-8% of the level's draw
+# time, a few percent of a frame.  On a GPU, where geometry amplification is cheap and a
+# pass's CPU overhead is the bottleneck, the balance is likely the other way: re-measure.
 AUTO_MIN_VIEWS = 3
-AUTO_TRIANGLES_BASE = 300
-AUTO_TRIANGLES_X_VIEWS = 2000
+AUTO_MAX_TRIANGLES = 40
 
 
 def choose_path(setting: str, view_count: int, triangles: int) -> str:
@@ -88,7 +96,7 @@ def choose_path(setting: str, view_count: int, triangles: int) -> str:
         raise ValueError(f"ReflectionSystem.path must be one of {PATHS}, got {setting!r}")
     if setting != "auto":
         return setting
-    if view_count >= AUTO_MIN_VIEWS and triangles <= AUTO_TRIANGLES_BASE + AUTO_TRIANGLES_X_VIEWS / view_count:
+    if view_count >= AUTO_MIN_VIEWS and triangles <= AUTO_MAX_TRIANGLES:
         return "batched"
     return "per_mirror"
 
@@ -174,8 +182,6 @@ class BatchedMirrors:
         ctx.enable(moderngl.DEPTH_TEST | moderngl.CULL_FACE)
         ctx.front_face = "ccw"  # mirrored views reverse their vertices in the geometry shader
         ctx.depth_func = "<"
-        for cap in RECT_CLIP_DISTANCES:
-            ctx.enable_direct(cap)
         targets.node.use(NODE_UNIT)
         renderer.lights_ubo.bind_to_uniform_block(LIGHTS_BINDING)
         renderer.sky.use(SKY_UNIT)
@@ -184,18 +190,22 @@ class BatchedMirrors:
             sky_size.value = renderer.sky.size[0]
         has_map = program["has_albedo_map"]
         stats = renderer.stats
-        for batch in renderer.batches.values():
-            if not batch.count:
-                continue
-            if batch.texture is not None:
-                batch.texture.use(ALBEDO_UNIT)
-            has_map.value = batch.texture is not None
-            batch.draw(program)
-            stats.draw_calls += 1
-            stats.instances += batch.count
         for cap in RECT_CLIP_DISTANCES:
-            ctx.disable_direct(cap)
-        ctx.scissor = None
+            ctx.enable_direct(cap)
+        try:
+            for batch in renderer.batches.values():
+                if not batch.count:
+                    continue
+                if batch.texture is not None:
+                    batch.texture.use(ALBEDO_UNIT)
+                has_map.value = batch.texture is not None
+                batch.draw(program)
+                stats.draw_calls += 1
+                stats.instances += batch.count
+        finally:
+            for cap in RECT_CLIP_DISTANCES:  # every other pass writes clip distance 0 only
+                ctx.disable_direct(cap)
+            ctx.scissor = None
         stats.passes += 1
 
     def release(self) -> None:

@@ -1,0 +1,179 @@
+"""The two ways of drawing a reflection level give the same frame: one render_view per view
+("per_mirror") and one geometry-shader draw per mesh for all views ("batched", seed 000)."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from pyglm import glm
+
+from components import (
+    Camera,
+    DirectionalLight,
+    Emissive,
+    Material,
+    MeshRef,
+    Mirror,
+    PointLight,
+    Skybox,
+    Transform,
+    look_rotation,
+)
+from engine.mesh import box, plane, quad, sphere
+from engine.render.batched_mirrors import AUTO_MAX_TRIANGLES, AUTO_MIN_VIEWS, choose_path, submitted_triangles
+from engine.texture_data import checker_texture
+
+SIZE = (200, 150)
+
+
+def yaw(degrees: float) -> glm.quat:
+    return glm.angleAxis(glm.radians(degrees), glm.vec3(0, 1, 0))
+
+
+def hall(ents, eye=(-1.2, 1.7, 2.5), target=(0.3, 1.3, -4.0), sphere_detail=(16, 8)):
+    """Three mirror panels on the back wall, a wide mirror facing them behind the camera,
+    two side mirrors, and a box, a sphere and a lit post in front on a checker floor:
+    levels of 5, 5 and 9 views, mirrored (levels 1, 3) and not (level 2).  Without the
+    sphere (``sphere_detail=None``) the scene is 38 triangles."""
+
+    def build(world):
+        world.spawn(DirectionalLight(direction=(0.3, -1.0, -0.4), intensity=2.0))
+        world.spawn(Transform(position=(0, 3, 0)), PointLight(intensity=4.0, range=12))
+        world.spawn(Skybox())
+        look = glm.vec3(target) - glm.vec3(eye)
+        world.spawn(Transform(position=eye, rotation=look_rotation(look)), Camera(fov_y=75.0))
+        world.spawn(Transform(), MeshRef(plane(20, 20, uv_repeat=8)), Material(texture=checker_texture(64, 8)))
+        panel = quad(1.8, 2.6)
+        ents["mirrors"] = [
+            world.spawn(Transform(position=(x, 1.4, -4), rotation=yaw(12 * (1 - i))), MeshRef(panel),
+                        Material(color=(0.1, 0.1, 0.1)), Mirror(color=(1.0, 0.95 - 0.05 * i, 0.9 + 0.05 * i)))
+            for i, x in enumerate((-2.0, 0.0, 2.0))]
+        ents["mirrors"].append(world.spawn(Transform(position=(0, 1.5, 4.5), rotation=yaw(180)), MeshRef(quad(6, 3)),
+                                           Material(color=(0.1, 0.1, 0.1)), Mirror(color=(0.9, 0.95, 0.9))))
+        small = quad(2, 2)
+        for x, turn, tint in ((4, -70, (1.0, 0.8, 0.8)), (-4, 70, (0.8, 0.8, 1.0))):
+            ents["mirrors"].append(world.spawn(Transform(position=(x, 1.2, -1), rotation=yaw(turn)), MeshRef(small),
+                                               Material(), Mirror(color=tint)))
+        ents["box"] = world.spawn(
+            Transform(position=(1.0, 1.3, 0.5), rotation=glm.angleAxis(0.5, glm.normalize(glm.vec3(1, 1, 0))),
+                      scale=(0.6, 0.6, 0.6)), MeshRef(box()), Material(color=(0.9, 0.1, 0.1)))
+        if sphere_detail is not None:
+            ents["ball"] = world.spawn(Transform(position=(-0.8, 0.8, -0.5)), MeshRef(sphere(0.5, *sphere_detail)),
+                                       Material(color=(0.1, 0.8, 0.2), roughness=0.3))
+        ents["post"] = world.spawn(Transform(position=(0.5, 0.5, -2.0), scale=(0.5, 1, 0.5)), MeshRef(box()),
+                                   Material(color=(0.9, 0.8, 0.1)), Emissive(0.5))
+
+    return build
+
+
+def render(scene, build, path, size=SIZE):
+    runner = scene(build, size)
+    runner.engine.reflection_system.path = path
+    rgb = runner.frame()
+    views = runner.engine.reflection_system.views
+    return {
+        "rgb": rgb,
+        "ids": runner.ids(),
+        "surface": runner.engine.renderer.targets.read_surface_ids(),
+        "stats": runner.stats,
+        "levels": [sum(v.level == level for v in views) for level in range(1, 1 + max(v.level for v in views))],
+        "views": [(v.level, v.rect, v.view.node, v.view.mirrored) for v in views],
+        "runner": runner,
+    }
+
+
+def assert_same_frame(a, b):
+    diff = np.abs(a["rgb"].astype(int) - b["rgb"].astype(int))
+    assert diff.mean() < 0.5 and np.percentile(diff, 99) <= 2, (diff.mean(), np.percentile(diff, 99))
+    assert (a["ids"] == b["ids"]).mean() >= 0.99
+    assert a["stats"].reflection_views == b["stats"].reflection_views
+    assert a["views"] == b["views"]  # same view tree: levels, rectangles, node indices, handedness
+
+
+def test_batched_draws_the_per_mirror_frame_in_fewer_passes(scene):
+    ents = {}
+    build = hall(ents)
+    per_mirror = render(scene, build, "per_mirror")
+    batched = render(scene, build, "batched")
+    # The frame is not empty: a lit floor, and reflections of the objects inside the mirrors.
+    rgb = batched["rgb"].astype(int)
+    assert rgb.mean() > 60 and rgb.std() > 25
+    in_mirrors = np.isin(batched["surface"], ents["mirrors"])
+    assert in_mirrors.mean() > 0.1
+    reflected = batched["ids"][in_mirrors]
+    for name in ("box", "ball", "post"):
+        assert (reflected == ents[name]).sum() > 20, name
+    assert batched["levels"] == [5, 5, 9]  # 2 and 4 geometry-shader invocations; mirrored and not
+    assert {m for _, _, _, m in batched["views"][1:]} == {True, False}
+
+    assert_same_frame(per_mirror, batched)
+    views = batched["stats"].reflection_views
+    assert views == 19
+    assert per_mirror["stats"].passes == 1 + views  # one render_view per view
+    assert batched["stats"].passes == 1 + 3         # one pass per level
+    batches = len(batched["runner"].engine.renderer.batches)
+    assert batched["stats"].draw_calls == (batches + 1) + 3 * batches  # main view (+ sky), then one per batch
+    assert per_mirror["stats"].draw_calls == (batches + 1) + views * batches
+    assert per_mirror["stats"].reflection_path == "per_mirror"
+    assert batched["stats"].reflection_path == "batched"
+
+
+def test_paths_agree_with_the_camera_close_to_a_mirror(scene):
+    """Within 4 x near of the glass the views use a clip distance instead of an oblique near plane."""
+    ents = {}
+    build = hall(ents, eye=(0.0, 1.4, -3.9), target=(0.2, 1.3, -5.0))
+    per_mirror = render(scene, build, "per_mirror")
+    batched = render(scene, build, "batched")
+    main_proj = per_mirror["runner"].engine.render_system.main_view.proj
+    first = per_mirror["runner"].engine.reflection_system.views[1]
+    assert first.view.proj == main_proj  # the clip-distance case
+    assert np.isin(batched["surface"], ents["mirrors"]).mean() > 0.8
+    assert batched["rgb"].astype(int).std() > 15
+    assert_same_frame(per_mirror, batched)
+
+
+def test_auto_rule_boundaries():
+    assert choose_path("per_mirror", 32, 10) == "per_mirror"
+    assert choose_path("batched", 1, 10**6) == "batched"
+    assert choose_path("auto", AUTO_MIN_VIEWS - 1, 10) == "per_mirror"
+    assert choose_path("auto", AUTO_MIN_VIEWS, AUTO_MAX_TRIANGLES) == "batched"
+    assert choose_path("auto", 32, AUTO_MAX_TRIANGLES) == "batched"
+    assert choose_path("auto", 32, AUTO_MAX_TRIANGLES + 1) == "per_mirror"
+    with pytest.raises(ValueError, match="ReflectionSystem.path must be one of"):
+        choose_path("fast", 3, 10)
+
+
+def test_auto_follows_the_rule_each_level_and_reports_it(scene):
+    light = render(scene, hall({}, sphere_detail=None), "auto")
+    assert submitted_triangles(light["runner"].engine.renderer) <= AUTO_MAX_TRIANGLES
+    assert light["levels"] == [5, 5, 9]
+    assert light["stats"].reflection_path == "batched" and light["stats"].passes == 1 + 3
+
+    heavier = render(scene, hall({}), "auto")  # the sphere: 224 more triangles
+    assert submitted_triangles(heavier["runner"].engine.renderer) > AUTO_MAX_TRIANGLES
+    assert heavier["stats"].reflection_path == "per_mirror" and heavier["stats"].passes == 1 + 19
+
+    # Close to the middle panel: levels of 1, 2 and 6 views, the first two under AUTO_MIN_VIEWS.
+    build = hall({}, eye=(0.0, 1.4, -3.9), target=(0.2, 1.3, -5.0), sphere_detail=None)
+    mixed = render(scene, build, "auto")
+    assert mixed["levels"] == [1, 2, 6]
+    assert mixed["stats"].reflection_path == "mixed" and mixed["stats"].passes == 1 + 1 + 2 + 1
+    assert_same_frame(render(scene, build, "per_mirror"), mixed)
+
+
+def test_no_reflection_view_reports_no_path(scene):
+    def build(world):
+        world.spawn(DirectionalLight())
+        world.spawn(Transform(position=(0, 1.5, 5)), Camera())
+        world.spawn(Transform(position=(0, 1.5, -2), rotation=yaw(180)), MeshRef(quad(2, 2)), Material(), Mirror())
+
+    runner = scene(build, (64, 48))
+    runner.engine.reflection_system.path = "batched"
+    runner.frame()
+    assert runner.stats.reflection_views == 0 and runner.stats.reflection_path == ""
+
+
+def test_an_unknown_path_is_a_clear_error(scene):
+    runner = scene(hall({}), (64, 48))
+    runner.engine.reflection_system.path = "fastest"
+    with pytest.raises(ValueError, match="must be one of"):
+        runner.frame()
