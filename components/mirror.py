@@ -14,14 +14,17 @@ class Mirror(TrackedComponent):
     """Reflects the scene in the plane of its flat mesh (seed 000, 002 part 3, 003).
 
     ``color`` tints the reflection, ``reflect_rate`` mixes it with the mirror's own shading,
-    ``roughness`` blurs it (seed 002's mip bias), ``max_depth`` limits mirrors seen in
-    mirrors.  ``plane_point``/``plane_normal`` (model space) override the plane found from
-    the mesh; a non-flat mesh without them is an error.
+    ``roughness`` blurs it (seed 002's mip bias), ``resolution_scale`` renders its reflection
+    at a fraction of the screen's resolution (a level takes the largest scale among the
+    mirrors it draws), ``max_depth`` limits mirrors seen in mirrors.  ``plane_point`` and
+    ``plane_normal`` (model space) override the plane found from the mesh; a non-flat mesh
+    without them is an error.
     """
 
     color: Any = field(default_factory=lambda: glm.vec4(1.0))
     reflect_rate: float = 1.0
     roughness: float = 0.0
+    resolution_scale: float = 1.0
     max_depth: int = 3
     enabled: bool = True
     plane_point: Any = None
@@ -32,6 +35,8 @@ class Mirror(TrackedComponent):
             return color(self, name, value)
         if name in ("reflect_rate", "roughness"):
             return finite(self, name, value, low=0.0, high=1.0)
+        if name == "resolution_scale":
+            return finite(self, name, value, low=0.1, high=1.0)
         if name == "max_depth":
             if not isinstance(value, int) or isinstance(value, bool) or not 0 <= value <= 16:
                 raise ComponentValueError(f"Mirror.max_depth must be an int in [0, 16], got {value!r}")

@@ -8,6 +8,7 @@ uniform sampler2D reflection;        // premultiplied: alpha 0 where nothing was
 uniform usampler2D reflection_seen;
 uniform usampler2D reflection_nodes;
 uniform uint view_index;
+uniform vec2 to_reflection;          // this level's pixels -> the reflection level's (resolution scales)
 uniform samplerCube sky_map;
 uniform vec4 tint;
 uniform float reflect_rate;
@@ -20,7 +21,7 @@ layout(location = 0) out vec4 out_color;  // blended: rgb x reflect_rate + own x
 layout(location = 1) out uint out_seen;
 
 void main() {
-    ivec2 px = ivec2(gl_FragCoord.xy);
+    ivec2 px = ivec2(gl_FragCoord.xy * to_reflection);
     if (texelFetch(reflection_nodes, px, 0).r != view_index) discard;
     vec2 ndc = gl_FragCoord.xy / camera.viewport.zw * 2.0 - 1.0;
     // A point on the near plane along this pixel's ray (for an oblique projection that is
@@ -28,7 +29,7 @@ void main() {
     vec4 near_point = camera.inv_view_proj * vec4(ndc, -1.0, 1.0);
     vec3 view_dir = normalize(near_point.xyz / near_point.w - camera.eye.xyz);
     if (is_portal) {
-        vec4 through = texelFetch(reflection, px, 0);
+        vec4 through = textureLod(reflection, gl_FragCoord.xy / camera.viewport.zw, 0.0);
         vec3 beyond = textureLod(sky_map, carry * view_dir, 0.0).rgb;
         out_color = vec4(through.rgb + beyond * (1.0 - through.a), 1.0);
         out_seen = texelFetch(reflection_seen, px, 0).r;

@@ -10,6 +10,7 @@ uniform usampler2D parent_node_map;
 uniform usampler2D parent_surface_map;
 uniform uvec4 views[MAX_LEVEL_VIEWS];   // x: parent view, y: mirror entity, z: this view's index
 uniform int view_count;
+uniform vec2 to_parent;                 // this level's pixels -> the parent level's (resolution scales)
 
 layout(location = 0) out vec4 out_color;
 layout(location = 1) out uint out_surface;
@@ -17,7 +18,7 @@ layout(location = 2) out uint out_seen;
 layout(location = 3) out uint out_node;
 
 void main() {
-    ivec2 px = ivec2(gl_FragCoord.xy);
+    ivec2 px = ivec2(gl_FragCoord.xy * to_parent);
     uint parent = texelFetch(parent_node_map, px, 0).r;
     uint surface = texelFetch(parent_surface_map, px, 0).r;
     uint node = NO_NODE;

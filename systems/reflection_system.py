@@ -6,10 +6,12 @@ Per frame, after the main view is drawn into level 0:
   2. query  - count the pixels where level L actually shows the mirror (samples query);
   3. mask   - level L+1's node image and depth mask: each view owns only its mirror's pixels;
   4. render - each view: mirrored camera, oblique near plane (or clip distance close up),
-              scissored to the mirror's rectangle, front faces clockwise;
+              scissored to the mirror's rectangle, front faces clockwise; one render_view
+              per view, or the whole level in one draw per mesh (the batched path);
   5. repeat for mirrors seen in those reflections, up to the depth limits;
   6. composite, deepest level first: blend each view into its mirror's pixels one level up.
-Levels are screen-sized, so memory is (levels x one screen), however many mirrors.
+Levels are screen-sized (times the largest resolution_scale of their mirrors), so memory
+is bounded by (levels x one screen), however many mirrors.
 """
 from __future__ import annotations
 
@@ -61,6 +63,7 @@ class SurfaceState:
     tint: glm.vec4 = field(default_factory=lambda: glm.vec4(1.0))
     reflect_rate: float = 1.0
     roughness: float = 0.0
+    resolution_scale: float = 1.0
 
 
 @dataclass
@@ -70,7 +73,7 @@ class ReflectionView:
     index: int
     level: int
     view: View
-    rect: tuple[int, int, int, int]
+    rect: tuple[int, int, int, int]   # where it shows, in screen (level 0) pixels
     surface: SurfaceState | None = None
     parent: ReflectionView | None = None
 
@@ -148,7 +151,7 @@ class ReflectionSystem(esper.Processor):
         corners = np.array([(x, y, z, 1.0) for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
         return SurfaceState(entity, "mirror", plane, corners @ np.array(model.to_list(), np.float64),
                             reflection_matrix(plane), plane, entity, mirror.max_depth, mirror.enabled,
-                            mirror.color, mirror.reflect_rate, mirror.roughness)
+                            mirror.color, mirror.reflect_rate, mirror.roughness, mirror.resolution_scale)
 
     # --- schedule and render -----------------------------------------------------------------
     def process(self, dt: float) -> None:
@@ -164,14 +167,19 @@ class ReflectionSystem(esper.Processor):
         self.views = [root]
         paths = set()
         for level in range(self.max_depth_cap):
-            parent_targets = renderer.level_targets(level, main.size)
+            parent_targets = renderer.levels[level]
             children = self._visible_children(levels[level], parent_targets, main)
             if not children:
                 break
-            targets = renderer.level_targets(level + 1, main.size)
+            scale = max(c.surface.resolution_scale for c in children)
+            size = (max(1, round(main.size[0] * scale)), max(1, round(main.size[1] * scale)))
+            targets = renderer.level_targets(level + 1, size)
+            for child in children:
+                child.view.size = size
+                child.view.scissor = _to_level(child.rect, main.size, size)
             self.passes.prepare_level(targets, parent_targets,
                                       [(c.parent.index, c.surface.entity, c.index) for c in children],
-                                      _union(c.rect for c in children))
+                                      _union(c.view.scissor for c in children))
             path = choose_path(self.path, len(children), submitted_triangles(renderer))
             paths.add(path)
             if path == "batched":
@@ -190,7 +198,8 @@ class ReflectionSystem(esper.Processor):
                 surface = child.surface
                 self.passes.composite_view(parent_targets, targets, CompositeParams(
                     child.index, surface.tint, surface.reflect_rate, surface.roughness, glm.vec3(surface.plane),
-                    portal=surface.kind == "portal", carry=glm.mat3(surface.carry)), child.rect)
+                    portal=surface.kind == "portal", carry=glm.mat3(surface.carry)),
+                    _to_level(child.rect, main.size, parent_targets.size))
         renderer.stats.reflection_views = len(self.views) - 1
         renderer.stats.reflection_path = paths.pop() if len(paths) == 1 else ("mixed" if paths else "")
 
@@ -202,13 +211,13 @@ class ReflectionSystem(esper.Processor):
                 rect = self._cull(parent, state, main)
                 if rect is None:
                     continue
-                if self.passes.visible_pixels(parent_targets, parent.index, state.entity, rect) == 0:
+                query_rect = _to_level(rect, main.size, parent_targets.size)
+                if self.passes.visible_pixels(parent_targets, parent.index, state.entity, query_rect) == 0:
                     continue
                 if len(children) == MAX_LEVEL_VIEWS:
                     return children
                 index = len(self.views) + len(children)
                 view = self._surface_view(parent, state, main, index)
-                view.scissor = rect
                 children.append(ReflectionView(index, parent.level + 1, view, rect, state, parent))
         return children
 
@@ -280,6 +289,18 @@ def _near_distance(proj: glm.mat4) -> float:
     """The near-plane distance of a standard GL perspective matrix."""
     a, b = proj[2][2], proj[3][2]
     return b / (a - 1.0)
+
+
+def _to_level(rect: tuple[int, int, int, int], screen: tuple[int, int],
+              level: tuple[int, int]) -> tuple[int, int, int, int]:
+    """A screen-pixel rectangle in the pixels of a level of another size (rounded outwards)."""
+    if level == screen:
+        return rect
+    sx, sy = level[0] / screen[0], level[1] / screen[1]
+    x0, y0 = int(rect[0] * sx), int(rect[1] * sy)
+    x1 = min(level[0], int(np.ceil((rect[0] + rect[2]) * sx)))
+    y1 = min(level[1], int(np.ceil((rect[1] + rect[3]) * sy)))
+    return x0, y0, max(1, x1 - x0), max(1, y1 - y0)
 
 
 def _union(rects) -> tuple[int, int, int, int]:

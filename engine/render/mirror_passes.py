@@ -101,6 +101,7 @@ class MirrorPasses:
         table = np.zeros((MAX_LEVEL_VIEWS, 4), np.uint32)
         table[: len(views), :3] = views
         self.mask["views"].write(table.tobytes())
+        self.mask["to_parent"].value = (parent.size[0] / level.size[0], parent.size[1] / level.size[1])
         self.mask["view_count"].value = len(views)
         self._mask_vao.render(moderngl.TRIANGLES, vertices=3)
         ctx.depth_func = "<"
@@ -125,6 +126,7 @@ class MirrorPasses:
         self.renderer.sky.use(SKY_UNIT)
         program = self.composite
         program["view_index"].value = params.view_index
+        program["to_reflection"].value = (level.size[0] / parent.size[0], level.size[1] / parent.size[1])
         program["tint"].value = tuple(params.tint)
         program["reflect_rate"].value = params.reflect_rate
         program["roughness"].value = params.roughness

@@ -150,14 +150,16 @@ class Renderer:
         return self.levels[0] if self.levels else None
 
     def level_targets(self, level: int, size: tuple[int, int]) -> RenderTargets:
-        """The targets of a reflection level (0 = main view), made on first use, remade on resize."""
-        if self.levels and self.levels[0].size != size:
-            for targets in self.levels:
-                targets.release()
-            self.levels.clear()
+        """The targets of a reflection level (0 = main view), made on first use and remade
+        when the level's size changes (a resize, or another resolution scale)."""
         while len(self.levels) <= level:
-            self.levels.append(RenderTargets(self.ctx, size))
-        return self.levels[level]
+            self.levels.append(None)
+        targets = self.levels[level]
+        if targets is None or targets.size != size:
+            if targets is not None:
+                targets.release()
+            targets = self.levels[level] = RenderTargets(self.ctx, size)
+        return targets
 
     def upload_instances(self) -> int:
         sent = sum(batch.upload() for batch in self.batches.values())
@@ -234,7 +236,8 @@ class Renderer:
                 shared.obj.release()
             table.clear()
         for targets in self.levels:
-            targets.release()
+            if targets is not None:
+                targets.release()
         self.levels.clear()
         for obj in (self.sky, self.camera_ubo, self.lights_ubo, self.fullscreen_sky, self.fullscreen_present):
             obj.release()
