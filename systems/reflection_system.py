@@ -204,21 +204,25 @@ class ReflectionSystem(esper.Processor):
         renderer.stats.reflection_path = paths.pop() if len(paths) == 1 else ("mixed" if paths else "")
 
     def _visible_children(self, parents: list[ReflectionView], parent_targets, main: View) -> list[ReflectionView]:
-        children: list[ReflectionView] = []
         surfaces = [*self.mirrors.values(), *self.portals.values()]
+        candidates = []
         for parent in parents:
             for state in surfaces:
                 rect = self._cull(parent, state, main)
-                if rect is None:
-                    continue
-                query_rect = _to_level(rect, main.size, parent_targets.size)
-                if self.passes.visible_pixels(parent_targets, parent.index, state.entity, query_rect) == 0:
-                    continue
-                if len(children) == MAX_LEVEL_VIEWS:
-                    return children
-                index = len(self.views) + len(children)
-                view = self._surface_view(parent, state, main, index)
-                children.append(ReflectionView(index, parent.level + 1, view, rect, state, parent))
+                if rect is not None:
+                    candidates.append((parent, state, rect))
+        pixels = self.passes.visible_pixels(
+            parent_targets, [(parent.index, state.entity, _to_level(rect, main.size, parent_targets.size))
+                             for parent, state, rect in candidates])
+        children: list[ReflectionView] = []
+        for (parent, state, rect), count in zip(candidates, pixels, strict=True):
+            if count == 0:
+                continue
+            if len(children) == MAX_LEVEL_VIEWS:
+                break
+            index = len(self.views) + len(children)
+            view = self._surface_view(parent, state, main, index)
+            children.append(ReflectionView(index, parent.level + 1, view, rect, state, parent))
         return children
 
     def _cull(self, parent: ReflectionView, state: SurfaceState, main: View) -> tuple[int, int, int, int] | None:

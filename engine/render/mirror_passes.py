@@ -30,15 +30,16 @@ class CompositeParams:
     carry: glm.mat3 = field(default_factory=lambda: glm.mat3(1.0))  # turns directions into the view's world
 
 
-def _shared_samples_query(ctx: moderngl.Context) -> moderngl.Query:
-    """One samples-passed query per context: moderngl 5.13 cannot release a Query, so
-    engines made and closed on one context (tests, editors) share one instead of leaking."""
+def _shared_samples_queries(ctx: moderngl.Context, count: int) -> list[moderngl.Query]:
+    """At least ``count`` samples-passed queries, shared by every engine on the context:
+    moderngl 5.13 cannot release a Query, so engines made and closed on one context (tests,
+    editors) reuse one pool instead of leaking (it grows to the most candidates a level had)."""
     if not isinstance(ctx.extra, dict):
         ctx.extra = {}
-    query = ctx.extra.get("speculum.samples_query")
-    if query is None:
-        query = ctx.extra["speculum.samples_query"] = ctx.query(samples=True)
-    return query
+    pool = ctx.extra.setdefault("speculum.samples_queries", [])
+    while len(pool) < count:
+        pool.append(ctx.query(samples=True))
+    return pool
 
 
 class MirrorPasses:
@@ -60,12 +61,15 @@ class MirrorPasses:
         self._select_vao = ctx.vertex_array(self.select, [])
         self._mask_vao = ctx.vertex_array(self.mask, [])
         self._composite_vao = ctx.vertex_array(self.composite, [])
-        self._query = _shared_samples_query(ctx)
         self._query_target: moderngl.Framebuffer | None = None
 
-    def visible_pixels(self, parent: RenderTargets, parent_node: int, mirror: int,
-                       rect: tuple[int, int, int, int]) -> int:
-        """Pixels inside ``rect`` where view ``parent_node`` shows the surface of ``mirror``."""
+    def visible_pixels(self, parent: RenderTargets,
+                       candidates: list[tuple[int, int, tuple[int, int, int, int]]]) -> list[int]:
+        """For each (parent view, surface entity, rect): the pixels inside rect where that
+        view of ``parent`` shows that surface.  All queries are issued before any result is
+        read, so the CPU waits for the GPU once per level, not once per candidate."""
+        if not candidates:
+            return []
         ctx = self.ctx
         if self._query_target is None or self._query_target.size != parent.size:
             if self._query_target is not None:
@@ -74,15 +78,17 @@ class MirrorPasses:
         self._query_target.use()
         ctx.disable(moderngl.DEPTH_TEST | moderngl.BLEND | moderngl.CULL_FACE)
         ctx.viewport = (0, 0, *parent.size)
-        ctx.scissor = rect
         parent.node.use(_SELECT_UNITS[0])
         parent.surface.use(_SELECT_UNITS[1])
-        self.select["parent_node"].value = parent_node
-        self.select["mirror_id"].value = mirror
-        with self._query:
-            self._select_vao.render(moderngl.TRIANGLES, vertices=3)
+        queries = _shared_samples_queries(ctx, len(candidates))
+        for query, (parent_node, surface, rect) in zip(queries, candidates, strict=False):
+            ctx.scissor = rect
+            self.select["parent_node"].value = parent_node
+            self.select["mirror_id"].value = surface
+            with query:
+                self._select_vao.render(moderngl.TRIANGLES, vertices=3)
         ctx.scissor = None
-        return self._query.samples
+        return [query.samples for query in queries[: len(candidates)]]
 
     def prepare_level(self, level: RenderTargets, parent: RenderTargets,
                       views: list[tuple[int, int, int]], scissor: tuple[int, int, int, int]) -> None:
