@@ -35,7 +35,7 @@ from engine.reflection_math import (
 from engine.render.batched_mirrors import BatchedMirrors, choose_path, submitted_triangles
 from engine.render.mirror_passes import MAX_LEVEL_VIEWS, CompositeParams, MirrorPasses
 from engine.render.renderer import Renderer
-from engine.render.views import View
+from engine.render.views import View, union_rect
 from engine.world import World
 from systems.render_system import RenderSystem
 
@@ -179,7 +179,7 @@ class ReflectionSystem(esper.Processor):
                 child.view.scissor = _to_level(child.rect, main.size, size)
             self.passes.prepare_level(targets, parent_targets,
                                       [(c.parent.index, c.surface.entity, c.index) for c in children],
-                                      _union(c.view.scissor for c in children))
+                                      union_rect(c.view.scissor for c in children))
             path = choose_path(self.path, len(children), submitted_triangles(renderer))
             paths.add(path)
             if path == "batched":
@@ -306,11 +306,3 @@ def _to_level(rect: tuple[int, int, int, int], screen: tuple[int, int],
     y1 = min(level[1], int(np.ceil((rect[1] + rect[3]) * sy)))
     return x0, y0, max(1, x1 - x0), max(1, y1 - y0)
 
-
-def _union(rects) -> tuple[int, int, int, int]:
-    rects = list(rects)
-    x0 = min(r[0] for r in rects)
-    y0 = min(r[1] for r in rects)
-    x1 = max(r[0] + r[2] for r in rects)
-    y1 = max(r[1] + r[3] for r in rects)
-    return x0, y0, x1 - x0, y1 - y0

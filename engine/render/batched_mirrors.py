@@ -33,7 +33,7 @@ from engine.render.renderer import (
     Renderer,
 )
 from engine.render.targets import RenderTargets
-from engine.render.views import View
+from engine.render.views import View, union_rect
 
 PATHS = ("auto", "per_mirror", "batched")
 VIEWS_BINDING = 2
@@ -178,30 +178,16 @@ class BatchedMirrors:
         self._ubo.bind_to_uniform_block(VIEWS_BINDING)
         targets.framebuffer.use()
         ctx.viewport = (0, 0, *views[0].size)
-        ctx.scissor = _union([v.scissor or (0, 0, *v.size) for v in views])
+        ctx.scissor = union_rect([v.scissor or (0, 0, *v.size) for v in views])
         ctx.enable(moderngl.DEPTH_TEST | moderngl.CULL_FACE)
         ctx.front_face = "ccw"  # mirrored views reverse their vertices in the geometry shader
         ctx.depth_func = "<"
         targets.node.use(NODE_UNIT)
-        renderer.lights_ubo.bind_to_uniform_block(LIGHTS_BINDING)
-        renderer.sky.use(SKY_UNIT)
-        sky_size = program.get("sky_face_size", None)
-        if sky_size is not None:
-            sky_size.value = renderer.sky.size[0]
-        has_map = program["has_albedo_map"]
         stats = renderer.stats
         for cap in RECT_CLIP_DISTANCES:
             ctx.enable_direct(cap)
         try:
-            for batch in renderer.batches.values():
-                if not batch.count:
-                    continue
-                if batch.texture is not None:
-                    batch.texture.use(ALBEDO_UNIT)
-                has_map.value = batch.texture is not None
-                batch.draw(program)
-                stats.draw_calls += 1
-                stats.instances += batch.count
+            renderer.draw_batches(program)
         finally:
             for cap in RECT_CLIP_DISTANCES:  # every other pass writes clip distance 0 only
                 ctx.disable_direct(cap)
@@ -214,11 +200,3 @@ class BatchedMirrors:
             self._ubo = None
         self._programs.clear()  # the renderer's shader library owns and releases them
 
-
-def _union(rects) -> tuple[int, int, int, int]:
-    rects = list(rects)
-    x0 = min(r[0] for r in rects)
-    y0 = min(r[1] for r in rects)
-    x1 = max(r[0] + r[2] for r in rects)
-    y1 = max(r[1] + r[3] for r in rects)
-    return x0, y0, x1 - x0, y1 - y0

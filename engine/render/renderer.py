@@ -78,7 +78,6 @@ class Renderer:
         self._textures: dict[int, _Shared] = {}
         self.batches: dict[tuple[int, int], InstanceBatch] = {}
         self.sky = flat_cube(ctx, BACKGROUND)
-        self.scene_program["sky_face_size"].value = self.sky.size[0]
         self.levels: list[RenderTargets] = []   # [0] is the main view; more for reflections
         self.stats = RenderStats()
         self.exposure = 1.0
@@ -136,7 +135,6 @@ class Renderer:
     def set_sky_faces(self, faces) -> None:
         old = self.sky
         self.sky = upload_cube(self.ctx, faces) if faces is not None else flat_cube(self.ctx, BACKGROUND)
-        self.scene_program["sky_face_size"].value = self.sky.size[0]
         old.release()
 
     def resource_counts(self) -> dict[str, int]:
@@ -195,18 +193,7 @@ class Renderer:
         self.scene_program["masked"].value = mask is not None
         self.scene_program["node_index"].value = view.node
         self.bind_view(view)
-        self.lights_ubo.bind_to_uniform_block(LIGHTS_BINDING)
-        self.sky.use(SKY_UNIT)
-        has_map = self.scene_program["has_albedo_map"]
-        for batch in self.batches.values():
-            if not batch.count:
-                continue
-            if batch.texture is not None:
-                batch.texture.use(ALBEDO_UNIT)
-            has_map.value = batch.texture is not None
-            batch.draw(self.scene_program)
-            self.stats.draw_calls += 1
-            self.stats.instances += batch.count
+        self.draw_batches(self.scene_program)
         if mask is None:
             ctx.depth_func = "<="
             ctx.disable(moderngl.CULL_FACE)
@@ -215,6 +202,23 @@ class Renderer:
         ctx.front_face = "ccw"
         ctx.scissor = None
         self.stats.passes += 1
+
+    def draw_batches(self, program: moderngl.Program) -> None:
+        """One instanced draw per non-empty batch with a scene-shading ``program`` (lights,
+        sky and albedo map bound here; the Camera block and targets are the caller's)."""
+        self.lights_ubo.bind_to_uniform_block(LIGHTS_BINDING)
+        self.sky.use(SKY_UNIT)
+        program["sky_face_size"].value = self.sky.size[0]
+        has_map = program["has_albedo_map"]
+        for batch in self.batches.values():
+            if not batch.count:
+                continue
+            if batch.texture is not None:
+                batch.texture.use(ALBEDO_UNIT)
+            has_map.value = batch.texture is not None
+            batch.draw(program)
+            self.stats.draw_calls += 1
+            self.stats.instances += batch.count
 
     def present(self, output: moderngl.Framebuffer, size: tuple[int, int]) -> None:
         """Encode the HDR image to sRGB into ``output`` (a window's or a capture target)."""

@@ -70,3 +70,13 @@ def lights_block(ambient, directional: list[tuple], point: list[tuple]) -> bytes
         data[base + 4 * i: base + 4 * i + 4] = (*position, light_range)
         data[base + 4 * (MAX_POINT_LIGHTS + i): base + 4 * (MAX_POINT_LIGHTS + i) + 3] = rgb
     return data.tobytes()
+
+
+def union_rect(rects) -> tuple[int, int, int, int]:
+    """The smallest (x, y, width, height) rectangle holding all of ``rects``."""
+    rects = list(rects)
+    x0 = min(r[0] for r in rects)
+    y0 = min(r[1] for r in rects)
+    x1 = max(r[0] + r[2] for r in rects)
+    y1 = max(r[1] + r[3] for r in rects)
+    return x0, y0, x1 - x0, y1 - y0
