@@ -99,6 +99,12 @@ def finite(owner: object, name: str, value: Any, *, low: float | None = None,
 def vec3(owner: object, name: str, value: Any, *, low: float | None = None,
          nonzero: bool = False) -> glm.vec3:
     """A glm.vec3 of finite components (each >= low when given)."""
+    if type(value) is glm.vec3 and low is None and not nonzero:
+        # The per-frame case (``t.position += step``): a glm vector needs only the finite test.
+        x, y, z = value
+        if math.isfinite(x) and math.isfinite(y) and math.isfinite(z):
+            return glm.vec3(value)
+        raise _fail(owner, name, value, "must be finite")
     if _not_a_number(value) or isinstance(value, dict) or any(_not_a_number(c) for c in _items(value)):
         raise _fail(owner, name, value, "must be three numbers")
     try:

@@ -1,13 +1,14 @@
 """Where an entity is: local pose relative to an optional parent entity."""
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from numbers import Integral
 from typing import Any
 
 from pyglm import glm
 
-from components.tracking import ComponentValueError, TrackedComponent, finite, vec3
+from components.tracking import ComponentValueError, TrackedComponent, vec3
 
 
 @dataclass(eq=False)
@@ -46,8 +47,8 @@ class Transform(TrackedComponent):
                 q = glm.quat(value)
             except TypeError:
                 raise ComponentValueError(f"Transform.rotation must be a glm.quat, got {value!r}") from None
-            for c in (q.w, q.x, q.y, q.z):
-                finite(self, name, c)
+            if not (math.isfinite(q.w) and math.isfinite(q.x) and math.isfinite(q.y) and math.isfinite(q.z)):
+                raise ComponentValueError(f"Transform.rotation must be finite, got {value!r}")
             if glm.length(q) == 0.0:
                 raise ComponentValueError("Transform.rotation must not be the zero quaternion")
             return glm.normalize(q)
