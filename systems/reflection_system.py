@@ -35,7 +35,7 @@ from engine.reflection_math import (
 from engine.render.batched_mirrors import BatchedMirrors, choose_path, submitted_triangles
 from engine.render.mirror_passes import MAX_LEVEL_VIEWS, CompositeParams, MirrorPasses
 from engine.render.renderer import Renderer
-from engine.render.views import View, union_rect
+from engine.render.views import View
 from engine.world import World
 from systems.render_system import RenderSystem
 
@@ -179,7 +179,7 @@ class ReflectionSystem(esper.Processor):
                 child.view.scissor = _to_level(child.rect, main.size, size)
             self.passes.prepare_level(targets, parent_targets,
                                       [(c.parent.index, c.surface.entity, c.index) for c in children],
-                                      union_rect(c.view.scissor for c in children))
+                                      [c.view.scissor for c in children])
             path = choose_path(self.path, len(children), submitted_triangles(renderer))
             paths.add(path)
             if path == "batched":

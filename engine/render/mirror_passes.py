@@ -91,14 +91,14 @@ class MirrorPasses:
         return [query.samples for query in queries[: len(candidates)]]
 
     def prepare_level(self, level: RenderTargets, parent: RenderTargets,
-                      views: list[tuple[int, int, int]], scissor: tuple[int, int, int, int]) -> None:
-        """Write ``level``'s node image and depth mask for views (parent view, mirror, index)."""
+                      views: list[tuple[int, int, int]], rects: list[tuple[int, int, int, int]]) -> None:
+        """Write ``level``'s node image and depth mask for views (parent view, mirror, index)
+        inside each view's rectangle (nothing outside them is read or drawn this frame)."""
         if len(views) > MAX_LEVEL_VIEWS:
             raise ValueError(f"{len(views)} mirror views in one level; at most {MAX_LEVEL_VIEWS}")
         ctx = self.ctx
         level.framebuffer.use()
         ctx.viewport = (0, 0, *level.size)
-        ctx.scissor = scissor
         ctx.enable(moderngl.DEPTH_TEST)
         ctx.disable(moderngl.BLEND | moderngl.CULL_FACE)
         ctx.depth_func = "1"  # always: the mask pass writes every pixel's depth
@@ -109,7 +109,9 @@ class MirrorPasses:
         self.mask["views"].write(table.tobytes())
         self.mask["to_parent"].value = (parent.size[0] / level.size[0], parent.size[1] / level.size[1])
         self.mask["view_count"].value = len(views)
-        self._mask_vao.render(moderngl.TRIANGLES, vertices=3)
+        for rect in rects:
+            ctx.scissor = rect
+            self._mask_vao.render(moderngl.TRIANGLES, vertices=3)
         ctx.depth_func = "<"
         ctx.scissor = None
 
