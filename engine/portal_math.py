@@ -14,21 +14,10 @@ def pair_transform(look_in: glm.mat4, look_out: glm.mat4) -> glm.mat4:
     return look_out * HALF_TURN * glm.inverse(look_in)
 
 
-def portal_view(view: glm.mat4, look_in: glm.mat4, look_out: glm.mat4) -> glm.mat4:
-    """The view seen through the look-in portal: the camera carried to the look-out side."""
-    return view * glm.inverse(pair_transform(look_in, look_out))
-
-
 def portal_plane(world: glm.mat4) -> glm.vec4:
     """World plane of a portal (local XY plane, normal local +Z = its front)."""
     normal = glm.normalize(glm.vec3(glm.transpose(glm.inverse(glm.mat3(world))) * glm.vec3(0, 0, 1)))
     return plane_from_point_normal(glm.vec3(world[3]), normal)
-
-
-def inside_rectangle(world: glm.mat4, size: tuple[float, float], point) -> bool:
-    """Whether ``point`` (on or near the portal plane) lies within its rectangle."""
-    local = glm.vec3(glm.inverse(world) * glm.vec4(glm.vec3(point), 1.0))
-    return abs(local.x) <= size[0] / 2 and abs(local.y) <= size[1] / 2
 
 
 def pair_rotation(carry: glm.mat4) -> glm.quat:
@@ -45,13 +34,3 @@ def near_plane_corners(position, rotation: glm.quat, fov_y_deg: float, near: flo
     eye = glm.vec3(position)
     return [eye + rotation * glm.vec3(sx * half_w, sy * half_h, -near)
             for sx, sy in ((-1, -1), (1, -1), (1, 1), (-1, 1))]
-
-
-def front_to_back_crossing(plane: glm.vec4, start, end) -> float | None:
-    """Where along ``start -> end`` (0..1) the segment goes from the plane's front (>= 0)
-    to its back (< 0); None when it does not."""
-    d0 = glm.dot(glm.vec3(plane), glm.vec3(start)) + plane.w
-    d1 = glm.dot(glm.vec3(plane), glm.vec3(end)) + plane.w
-    if d0 < 0.0 or d1 >= 0.0:
-        return None
-    return d0 / (d0 - d1)
