@@ -33,6 +33,9 @@ in vec4 in_tint;           // reflection tint
 in vec4 in_slice;          // world plane: only its front is drawn (things partly through a portal)
 in uvec4 in_slots;         // emissive variant, refract variant, reflect variant, entity id
 
+#ifdef BATCHED_VIEWS
+out float g_slice_distance;  // the geometry shader re-emits it as gl_ClipDistance[SLICE_CLIP]
+#endif
 out vec3 v_world_pos;
 out vec3 v_normal;
 out vec2 v_uv;
@@ -53,6 +56,9 @@ void main() {
     v_tint = in_tint;
     v_slots = in_slots;
     gl_ClipDistance[SLICE_CLIP] = dot(world, in_slice);
+#ifdef BATCHED_VIEWS
+    g_slice_distance = dot(world, in_slice);
+#endif
 #ifndef BATCHED_VIEWS
     gl_Position = camera.view_proj * world;
     gl_ClipDistance[0] = dot(world, camera.clip_plane);

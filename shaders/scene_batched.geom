@@ -39,7 +39,9 @@ flat in vec4 g_reflect[];
 flat in vec4 g_tint[];
 flat in uvec4 g_slots[];
 
-out float gl_ClipDistance[5];
+in float g_slice_distance[];
+
+out float gl_ClipDistance[6];  // 0: mirror plane, 1-4: the view's rectangle, 5: the instance's slice
 out vec3 v_world_pos;
 out vec3 v_normal;
 out vec2 v_uv;
@@ -64,6 +66,7 @@ void emit_corner(int c, vec4 position, MirrorView v) {
     gl_ClipDistance[2] = v.rect.z * position.w - position.x;
     gl_ClipDistance[3] = position.y - v.rect.y * position.w;
     gl_ClipDistance[4] = v.rect.w * position.w - position.y;
+    gl_ClipDistance[5] = g_slice_distance[c];  // SLICE_CLIP in scene.vert
     v_world_pos = g_world_pos[c];
     v_normal = g_normal[c];
     v_uv = g_uv[c];
