@@ -12,6 +12,7 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
+from components import ComponentValueError
 from engine.app import Engine, Game
 from engine.capture import export_scene, save_ids, save_png
 from engine.errors import SpeculumError
@@ -74,7 +75,9 @@ def main(game: Game, argv: Sequence[str] | None = None) -> int:
             from engine.window import run_windowed
 
             run_windowed(game, args)
-    except SpeculumError as exc:
+    except (SpeculumError, ComponentValueError) as exc:
+        # Bad input (a level's mesh file, component value, mirror, missing GL feature):
+        # one line naming the thing and the reason, and a clean exit.
         print(f"speculum: error: {exc}", file=sys.stderr)
         return 2
     return 0

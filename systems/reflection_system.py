@@ -22,6 +22,7 @@ import numpy as np
 from pyglm import glm
 
 from components import MeshRef, Mirror, Portal, Transform
+from engine.errors import SpeculumError
 from engine.mesh import flat_plane
 from engine.portal_math import pair_transform, portal_plane
 from engine.reflection_math import (
@@ -43,7 +44,7 @@ from systems.render_system import RenderSystem
 CLIP_OFFSET = 1e-3
 
 
-class MirrorError(ValueError):
+class MirrorError(SpeculumError, ValueError):
     """A Mirror component on something that cannot be a mirror."""
 
 

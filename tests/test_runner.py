@@ -99,3 +99,23 @@ def test_window_shell_runs_under_moderngl_window_headless(tmp_path):
     finally:
         config.on_close()
         config.wnd.destroy()
+
+
+def test_a_bad_level_stops_cleanly_with_one_line(tmp_path):
+    """A level whose mirror sits on a box: the runner names it and exits 2, no traceback."""
+    level = tmp_path / "bad_level.py"
+    level.write_text(
+        "from components import Material, MeshRef, Mirror, Transform\n"
+        "from engine import Game, run, spawn_camera\n"
+        "from engine.mesh import box\n"
+        "class Bad(Game):\n"
+        "    def build(self, world):\n"
+        "        spawn_camera(world)\n"
+        "        world.spawn(Transform(), MeshRef(box(name='crate')), Material(), Mirror())\n"
+        "run(Bad())\n")
+    result = subprocess.run([sys.executable, str(level), "--headless", "--frames", "1", "--size", "32x32",
+                             "--out", str(tmp_path)], cwd=ROOT, env={**os.environ, "PYTHONPATH": str(ROOT)},
+                            capture_output=True, text=True, timeout=120)
+    assert result.returncode == 2
+    assert "speculum: error: entity" in result.stderr and "'crate' which is not flat" in result.stderr
+    assert "Traceback" not in result.stderr
