@@ -4,6 +4,7 @@ from __future__ import annotations
 import numpy as np
 from pyglm import glm
 
+from components import Camera, Transform, look_rotation
 from engine.app import Engine, Game
 from engine.render.targets import CaptureTarget
 from systems import Output
@@ -70,3 +71,9 @@ def srgb_to_linear(values) -> np.ndarray:
 def linear_to_srgb8(values) -> np.ndarray:
     c = np.clip(np.asarray(values, np.float64), 0.0, 1.0)
     return np.where(c <= 0.0031308, c * 12.92, 1.055 * c ** (1 / 2.4) - 0.055) * 255.0
+
+
+def look_from(world, eye, target=(0, 1.5, 0), fov: float = 60.0) -> int:
+    """A camera entity at ``eye`` looking at ``target``."""
+    eye = glm.vec3(eye)
+    return world.spawn(Transform(position=eye, rotation=look_rotation(glm.vec3(target) - eye)), Camera(fov_y=fov))

@@ -5,21 +5,16 @@ import numpy as np
 import pytest
 from pyglm import glm
 
-from components import Camera, DirectionalLight, Emissive, Material, MeshRef, Mirror, Skybox, Transform, look_rotation
+from components import DirectionalLight, Emissive, Material, MeshRef, Mirror, Skybox, Transform
 from engine.mesh import box, plane, quad, sphere
 from engine.reflection_math import plane_from_point_normal, reflection_matrix
 from engine.render.sky import sky_radiance
 from engine.texture_data import checker_texture
 from systems.reflection_system import MirrorError
-from tests.support import srgb_to_linear
+from tests.support import look_from, srgb_to_linear
 
 SIZE = (200, 150)
 FACING_BACK = glm.angleAxis(glm.pi(), glm.vec3(0, 1, 0))
-
-
-def look_from(world, eye, target=(0, 1.5, 0), fov=60.0):
-    eye = glm.vec3(eye)
-    return world.spawn(Transform(position=eye, rotation=look_rotation(glm.vec3(target) - eye)), Camera(fov_y=fov))
 
 
 def mirror_wall(world, position=(0, 1.5, -2), size=(4, 3), rotation=None, **mirror):

@@ -5,7 +5,6 @@ import numpy as np
 from pyglm import glm
 
 from components import (
-    Camera,
     DirectionalLight,
     Emissive,
     Material,
@@ -14,20 +13,14 @@ from components import (
     Portal,
     Skybox,
     Transform,
-    look_rotation,
 )
 from engine.mesh import box, quad
 from engine.portals import spawn_portal_pair
-from tests.support import srgb_to_linear
+from tests.support import look_from, srgb_to_linear
 
 SIZE = (200, 150)
 TURN_Y_90 = glm.angleAxis(glm.radians(90), glm.vec3(0, 1, 0))
 HALF_TURN = glm.angleAxis(glm.pi(), glm.vec3(0, 1, 0))
-
-
-def look_from(world, eye, target, fov=60.0):
-    eye = glm.vec3(eye)
-    return world.spawn(Transform(position=eye, rotation=look_rotation(glm.vec3(target) - eye)), Camera(fov_y=fov))
 
 
 def lit(world):
