@@ -15,6 +15,7 @@ import moderngl
 from engine.errors import GLCapabilityError
 
 REQUIRED_VERSION = 410
+SOFTWARE_RENDERERS = ("llvmpipe", "softpipe", "swrast", "swiftshader", "software rasterizer")
 
 
 @dataclass(frozen=True)
@@ -32,6 +33,12 @@ class GLCapabilities:
     max_geometry_output_vertices: int
     max_clip_distances: int
     extensions: frozenset[str]
+
+    @property
+    def software(self) -> bool:
+        """A software rasteriser (llvmpipe, softpipe, SwiftShader): shading is CPU time."""
+        name = self.renderer.lower()
+        return any(word in name for word in SOFTWARE_RENDERERS)
 
     @classmethod
     def read(cls, ctx: moderngl.Context) -> GLCapabilities:

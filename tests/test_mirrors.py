@@ -313,3 +313,27 @@ def test_resolution_scale_renders_the_reflection_smaller_and_still_right(scene):
     surface = runner.engine.renderer.targets.read_surface_ids() == ents["mirror"]
     diff = np.abs(full.astype(int) - half.astype(int))[surface]
     assert np.median(diff) <= 3 and diff.mean() < 10  # the same picture, a little softer
+
+
+def test_reflection_filtering_changes_only_the_mirrors_pixels(scene):
+    """reflection_anisotropy applies inside reflection views and nowhere else: a checker
+    ground seen at a grazing angle in a mirror changes with it, the direct view does not."""
+    ents = {}
+
+    def build(world):
+        base_scene(world)
+        look_from(world, (0.0, 1.0, 6.0), target=(0.0, 1.0, 0.0))
+        world.spawn(Transform(), MeshRef(plane(60, 60, uv_repeat=30)), Material(texture=checker_texture(64, 8)))
+        ents["mirror"] = mirror_wall(world, position=(0, 1.5, -2), size=(4, 3),
+                                     rotation=glm.angleAxis(glm.radians(35.0), glm.vec3(0, 1, 0)))
+
+    runner = scene(build, SIZE)
+    renderer = runner.engine.renderer
+    renderer.reflection_anisotropy = renderer.texture_anisotropy
+    sharp = runner.frame().astype(int)
+    renderer.reflection_anisotropy = 1.0
+    trilinear = runner.frame().astype(int)
+    mirror = runner.engine.renderer.targets.read_surface_ids() == ents["mirror"]
+    changed = np.abs(sharp - trilinear).max(axis=2) > 0
+    assert mirror.sum() > 2000 and (changed & mirror).sum() > 50
+    assert not (changed & ~mirror).any()

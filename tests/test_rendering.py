@@ -321,3 +321,40 @@ def test_scattered_movers_in_one_batch_upload_only_their_rows(scene):
         runner.world.get(e, Transform).position += glm.vec3(0, 0, 0.5)
     runner.frame()
     assert runner.stats.uploaded_bytes == 4 * INSTANCE_DTYPE.itemsize
+
+
+def test_big_surfaces_draw_last_so_hidden_pixels_are_not_shaded(scene, ctx):
+    """A ground spawned first, boxes standing on it: the boxes draw first, so no ground
+    pixel under a box passes the depth test. A samples-passed query around the main view
+    counts every fragment that was shaded and written (the sky fills where depth is far):
+    with no overdraw that is exactly one per pixel."""
+    def build(world):
+        world.spawn(Transform(position=(0, 2, 8), rotation=glm.angleAxis(-0.3, glm.vec3(1, 0, 0))), Camera())
+        world.spawn(Transform(), MeshRef(plane(40, 40)), Material(texture=checker_texture(64, 8)))
+        crate = box()
+        for x in (-2.0, 0.0, 2.0):
+            world.spawn(Transform(position=(x, 0.5, 0)), MeshRef(crate), Material(color=(0.7, 0.3, 0.2)))
+
+    runner = scene(build, SIZE)
+    runner.frame()
+    renderer = runner.engine.renderer
+    assert [b.mesh.radius < 2 for b in renderer._draw_order] == [True, False]
+    query = ctx.query(samples=True)
+    with query:
+        renderer.render_view(runner.engine.render_system.main_view, renderer.targets)
+    ids = runner.ids()
+    boxes = (ids != 0).sum() - (ids == ids[-1, SIZE[0] // 2]).sum()
+    assert boxes > 500  # the boxes cover ground
+    assert query.samples == SIZE[0] * SIZE[1]
+
+
+def test_a_software_rasteriser_filters_reflections_trilinearly(scene, ctx):
+    from engine.gl_context import GLCapabilities
+
+    def build(world):
+        camera(world)
+
+    runner = scene(build, (16, 16))
+    renderer = runner.engine.renderer
+    assert GLCapabilities.read(ctx).software  # the tests run on llvmpipe
+    assert renderer.texture_anisotropy > 1.0 and renderer.reflection_anisotropy == 1.0

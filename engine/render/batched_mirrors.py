@@ -176,7 +176,7 @@ class BatchedMirrors:
         program = self.program(len(views))
         self._ubo.write(views_block(views))
         self._ubo.bind_to_uniform_block(VIEWS_BINDING)
-        targets.framebuffer.use()
+        targets.view_framebuffer.use()  # reads the node image, so does not write it
         ctx.viewport = (0, 0, *views[0].size)
         ctx.scissor = union_rect([v.scissor or (0, 0, *v.size) for v in views])
         ctx.enable(moderngl.DEPTH_TEST | moderngl.CULL_FACE)
@@ -187,7 +187,7 @@ class BatchedMirrors:
         for cap in RECT_CLIP_DISTANCES:
             ctx.enable_direct(cap)
         try:
-            renderer.draw_batches(program)
+            renderer.draw_batches(program, reflection=True)
         finally:
             for cap in RECT_CLIP_DISTANCES:  # every other pass writes clip distance 0 only
                 ctx.disable_direct(cap)

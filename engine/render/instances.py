@@ -39,6 +39,8 @@ class GpuMesh:
         self.vertices = ctx.buffer(mesh.interleaved().tobytes())
         self.indices = ctx.buffer(mesh.indices.astype(np.uint32).tobytes())
         self.index_count = mesh.indices.size
+        # Model-space radius about the origin (what an instance's scale stretches).
+        self.radius = float(np.linalg.norm(mesh.positions, axis=1).max()) if len(mesh.positions) else 0.0
 
     def release(self) -> None:
         self.vertices.release()
@@ -61,6 +63,8 @@ class InstanceBatch:
         self._buffer = ctx.buffer(reserve=capacity * INSTANCE_DTYPE.itemsize)
         self._buffer_rows = capacity
         self._vaos: dict[int, moderngl.VertexArray] = {}
+        self._max_scale = 0.0
+        self._rescale = False
 
     # --- rows ----------------------------------------------------------------------------
     def add(self, entity: int) -> np.void:
@@ -94,8 +98,21 @@ class InstanceBatch:
         self.entity_at.pop()
         self.count = last
         self._dirty.discard(last)
+        self._rescale = True  # the largest instance may have gone: measure all rows again
 
     # --- GPU -----------------------------------------------------------------------------
+    @property
+    def extent(self) -> float:
+        """About the world radius of this batch's largest instance (mesh radius x largest
+        axis scale, as of the last upload; it may overestimate after a shrink)."""
+        return self.mesh.radius * self._max_scale
+
+    def _grow_scale(self, rows: np.ndarray) -> None:
+        model = self.rows["model"][rows]
+        if len(model):
+            squares = [np.einsum("ij,ij->i", model[:, c:c + 3], model[:, c:c + 3]).max() for c in (0, 4, 8)]
+            self._max_scale = max(self._max_scale, float(np.sqrt(max(squares))))
+
     def upload(self) -> int:
         """Send rows written since the last upload; returns the bytes sent."""
         size = INSTANCE_DTYPE.itemsize
@@ -103,11 +120,15 @@ class InstanceBatch:
             self._buffer.orphan(len(self.rows) * size)
             self._buffer_rows = len(self.rows)
             self._dirty = set(range(self.count))
+        if self._rescale:
+            self._max_scale, self._rescale = 0.0, False
+            self._grow_scale(np.arange(self.count))
         if not self._dirty:
             return 0
         dirty = np.fromiter(self._dirty, np.int64, len(self._dirty))
         dirty.sort()
         self._dirty.clear()
+        self._grow_scale(dirty)
         breaks = np.flatnonzero(np.diff(dirty) != 1) + 1
         starts = np.concatenate([[dirty[0]], dirty[breaks]])
         ends = np.concatenate([dirty[breaks - 1], [dirty[-1]]]) + 1

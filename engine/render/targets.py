@@ -39,6 +39,8 @@ class RenderTargets:
             texture.filter = (moderngl.NEAREST, moderngl.NEAREST)
         self.depth = ctx.depth_texture(size)
         self.framebuffer = ctx.framebuffer([self.color, self.surface, self.seen, self.node], self.depth)
+        # Reflection views read the node image (which view owns a pixel) and do not write it.
+        self.view_framebuffer = ctx.framebuffer([self.color, self.surface, self.seen], self.depth)
         # Composites write the reflection's colour and seen-id only (they read surface and node).
         self.composite_framebuffer = ctx.framebuffer([self.color, self.seen])
         self._mipmapped = False
@@ -66,6 +68,7 @@ class RenderTargets:
 
     def release(self) -> None:
         release_framebuffer(self.composite_framebuffer)
+        release_framebuffer(self.view_framebuffer)
         release_framebuffer(self.framebuffer)
         for texture in (self.color, self.surface, self.seen, self.node, self.depth):
             texture.release()
