@@ -30,7 +30,6 @@ from engine.reflection_math import (
     oblique_projection,
     plane_from_point_normal,
     reflection_matrix,
-    signed_distance,
     transform_plane,
 )
 from engine.render.batched_mirrors import BatchedMirrors, choose_path, submitted_triangles
@@ -167,9 +166,10 @@ class ReflectionSystem(esper.Processor):
         levels = [[root]]
         self.views = [root]
         paths = set()
+        surfaces = SurfaceTable([*self.mirrors.values(), *self.portals.values()])
         for level in range(self.max_depth_cap):
             parent_targets = renderer.levels[level]
-            children = self._visible_children(levels[level], parent_targets, main)
+            children = self._visible_children(surfaces, levels[level], parent_targets, main)
             if not children:
                 break
             scale = max(c.surface.resolution_scale for c in children)
@@ -204,14 +204,9 @@ class ReflectionSystem(esper.Processor):
         renderer.stats.reflection_views = len(self.views) - 1
         renderer.stats.reflection_path = paths.pop() if len(paths) == 1 else ("mixed" if paths else "")
 
-    def _visible_children(self, parents: list[ReflectionView], parent_targets, main: View) -> list[ReflectionView]:
-        surfaces = [*self.mirrors.values(), *self.portals.values()]
-        candidates = []
-        for parent in parents:
-            for state in surfaces:
-                rect = self._cull(parent, state, main)
-                if rect is not None:
-                    candidates.append((parent, state, rect))
+    def _visible_children(self, surfaces: SurfaceTable, parents: list[ReflectionView], parent_targets,
+                          main: View) -> list[ReflectionView]:
+        candidates = surfaces.cull(parents, main, self.max_depth_cap)
         pixels = self.passes.visible_pixels(
             parent_targets, [(parent.index, state.entity, _to_level(rect, main.size, parent_targets.size))
                              for parent, state, rect in candidates])
@@ -225,41 +220,6 @@ class ReflectionSystem(esper.Processor):
             view = self._surface_view(parent, state, main, index)
             children.append(ReflectionView(index, parent.level + 1, view, rect, state, parent))
         return children
-
-    def _cull(self, parent: ReflectionView, state: SurfaceState, main: View) -> tuple[int, int, int, int] | None:
-        """The screen rectangle where ``parent`` can see ``state``'s surface, or None."""
-        depth = parent.level + 1
-        if not state.enabled or depth > min(state.max_depth, self.max_depth_cap):
-            return None
-        if parent.surface is not None and parent.surface.exit_entity == state.entity:
-            return None  # a view does not see the surface it looks out of
-        if signed_distance(state.plane, parent.view.eye) <= 0.0:
-            return None  # facing away from this view (seed 000's tip)
-        if parent.surface is not None:
-            clip = parent.view.clip_plane
-            distances = state.corners[:, :3] @ np.array(glm.vec3(clip)) + clip.w
-            if (distances <= 0.0).all():
-                return None  # entirely behind the plane this view looks out of
-        view_proj = np.array((main.proj * parent.view.view).to_list(), np.float64)
-        clip = state.corners @ view_proj
-        w = clip[:, 3]
-        for axis in range(3):  # all corners beyond one side of the frustum
-            if (clip[:, axis] > w).all() or (clip[:, axis] < -w).all():
-                return None
-        px0, py0, pw, ph = parent.rect
-        if (w <= 1e-6).any():
-            return parent.rect  # straddles the eye plane: be conservative
-        ndc = clip[:, :2] / w[:, None]
-        width, height = main.size
-        x0 = int(np.floor((ndc[:, 0].min() * 0.5 + 0.5) * width)) - 1
-        x1 = int(np.ceil((ndc[:, 0].max() * 0.5 + 0.5) * width)) + 1
-        y0 = int(np.floor((ndc[:, 1].min() * 0.5 + 0.5) * height)) - 1
-        y1 = int(np.ceil((ndc[:, 1].max() * 0.5 + 0.5) * height)) + 1
-        x0, y0 = max(x0, px0), max(y0, py0)
-        x1, y1 = min(x1, px0 + pw), min(y1, py0 + ph)
-        if x1 <= x0 or y1 <= y0:
-            return None
-        return x0, y0, x1 - x0, y1 - y0
 
     @staticmethod
     def _surface_view(parent: ReflectionView, state: SurfaceState, main: View, index: int) -> View:
@@ -288,6 +248,71 @@ class ReflectionSystem(esper.Processor):
     def close(self) -> None:
         self.passes.release()
         self.batched.release()
+
+
+class SurfaceTable:
+    """Every mirror and portal as arrays, so one view culls them all with a few numpy
+    operations (the per-surface Python loop was most of the reflection system's CPU time)."""
+
+    def __init__(self, states: list[SurfaceState]) -> None:
+        self.states = states
+        count = len(states)
+        self.planes = np.array([tuple(s.plane) for s in states], np.float64).reshape(count, 4)
+        # Corner rows padded to 8 per surface (a portal has 4) by repeating its first corner.
+        self.corners = np.zeros((count, 8, 4))
+        for i, state in enumerate(states):
+            rows = state.corners
+            self.corners[i] = np.concatenate([rows, np.repeat(rows[:1], 8 - len(rows), axis=0)])
+        self.enabled = np.array([s.enabled for s in states], bool)
+        self.max_depth = np.array([s.max_depth for s in states], np.int64)
+        self.entities = np.array([s.entity for s in states], np.int64)
+
+    def cull(self, parents: list[ReflectionView], main: View,
+             depth_cap: int) -> list[tuple[ReflectionView, SurfaceState, tuple[int, int, int, int]]]:
+        """Each (parent, surface) where the parent view can see the surface, with the screen
+        rectangle where it can show: enabled and within its depth, not the surface the view
+        looks out of, facing the view's eye (seed 000's tip), not wholly behind the view's
+        clip plane, inside the frustum and overlapping the parent's rectangle.  All parents
+        are one level deep."""
+        if not self.states or not parents:
+            return []
+        depth = parents[0].level + 1
+        eyes = np.array([tuple(p.view.eye) for p in parents], np.float64)                 # P x 3
+        clips = np.array([tuple(p.view.clip_plane) for p in parents], np.float64)         # P x 4
+        exits = np.array([p.surface.exit_entity if p.surface else -1 for p in parents])   # P
+        keep = (self.enabled & (depth <= np.minimum(self.max_depth, depth_cap)))[None, :]
+        keep = keep & (exits[:, None] != self.entities[None, :])
+        keep &= eyes @ self.planes[:, :3].T + self.planes[:, 3] > 0.0
+        behind = np.einsum("scj,pj->psc", self.corners[:, :, :3], clips[:, :3]) + clips[:, None, None, 3] <= 0.0
+        keep &= ~behind.all(axis=2)
+        pairs = np.argwhere(keep)
+        if not len(pairs):
+            return []
+        view_projs = np.array([(main.proj * p.view.view).to_list() for p in parents], np.float64)  # P x 4 x 4
+        clip = np.einsum("kci,kij->kcj", self.corners[pairs[:, 1]], view_projs[pairs[:, 0]])     # K x 8 x 4
+        w = clip[:, :, 3]
+        outside = np.zeros(len(pairs), bool)
+        for axis in range(3):  # all corners beyond one side of the frustum
+            outside |= (clip[:, :, axis] > w).all(axis=1) | (clip[:, :, axis] < -w).all(axis=1)
+        straddles = (w <= 1e-6).any(axis=1)  # corners behind the eye: be conservative
+        ndc = clip[:, :, :2] / np.where(straddles[:, None], 1.0, w)[:, :, None]
+        size = np.array(main.size, np.float64)
+        lo = np.floor((ndc.min(axis=1) * 0.5 + 0.5) * size).astype(np.int64) - 1
+        hi = np.ceil((ndc.max(axis=1) * 0.5 + 0.5) * size).astype(np.int64) + 1
+        found = []
+        for k, (p, i) in enumerate(pairs.tolist()):
+            if outside[k]:
+                continue
+            parent = parents[p]
+            if straddles[k]:
+                found.append((parent, self.states[i], parent.rect))
+                continue
+            px0, py0, pw, ph = parent.rect
+            x0, y0 = max(int(lo[k, 0]), px0), max(int(lo[k, 1]), py0)
+            x1, y1 = min(int(hi[k, 0]), px0 + pw), min(int(hi[k, 1]), py0 + ph)
+            if x1 > x0 and y1 > y0:
+                found.append((parent, self.states[i], (x0, y0, x1 - x0, y1 - y0)))
+        return found
 
 
 def _near_distance(proj: glm.mat4) -> float:
