@@ -33,7 +33,7 @@ from engine.reflection_math import (
     transform_plane,
 )
 from engine.render.batched_mirrors import BatchedMirrors, choose_path, submitted_triangles
-from engine.render.mirror_passes import MAX_LEVEL_VIEWS, CompositeParams, MirrorPasses
+from engine.render.mirror_passes import MAX_LEVEL_VIEWS, Claim, CompositeParams, MirrorPasses
 from engine.render.renderer import Renderer
 from engine.render.views import View
 from engine.world import World
@@ -167,20 +167,26 @@ class ReflectionSystem(esper.Processor):
         self.views = [root]
         paths = set()
         surfaces = SurfaceTable([*self.mirrors.values(), *self.portals.values()])
+        next_index = 1
         for level in range(self.max_depth_cap):
-            parent_targets = renderer.levels[level]
-            children = self._visible_children(surfaces, levels[level], parent_targets, main)
-            if not children:
+            candidates = surfaces.cull(levels[level], main, self.max_depth_cap)
+            if not candidates:
                 break
-            scale = max(c.surface.resolution_scale for c in children)
+            scale = max(state.resolution_scale for _, state, _ in candidates)
             size = (max(1, round(main.size[0] * scale)), max(1, round(main.size[1] * scale)))
             targets = renderer.level_targets(level + 1, size)
-            for child in children:
-                child.view.size = size
-                child.view.scissor = _to_level(child.rect, main.size, size)
-            self.passes.prepare_level(targets, parent_targets,
-                                      [(c.parent.index, c.surface.entity, c.index) for c in children],
-                                      [c.view.scissor for c in children])
+            claims = [Claim(parent.index, state.entity, next_index + k, _to_level(rect, main.size, size))
+                      for k, (parent, state, rect) in enumerate(candidates)]
+            next_index += len(claims)
+            pixels = self.passes.prepare_level(targets, renderer.levels[level], claims)
+            children = []
+            for (parent, state, rect), claim, count in zip(candidates, claims, pixels, strict=True):
+                if count and len(children) < MAX_LEVEL_VIEWS:
+                    view = self._surface_view(parent, state, main, claim.index)
+                    view.size, view.scissor = size, claim.rect
+                    children.append(ReflectionView(claim.index, level + 1, view, rect, state, parent))
+            if not children:
+                break
             path = choose_path(self.path, len(children), submitted_triangles(renderer))
             paths.add(path)
             if path == "batched":
@@ -203,23 +209,6 @@ class ReflectionSystem(esper.Processor):
                     _to_level(child.rect, main.size, parent_targets.size))
         renderer.stats.reflection_views = len(self.views) - 1
         renderer.stats.reflection_path = paths.pop() if len(paths) == 1 else ("mixed" if paths else "")
-
-    def _visible_children(self, surfaces: SurfaceTable, parents: list[ReflectionView], parent_targets,
-                          main: View) -> list[ReflectionView]:
-        candidates = surfaces.cull(parents, main, self.max_depth_cap)
-        pixels = self.passes.visible_pixels(
-            parent_targets, [(parent.index, state.entity, _to_level(rect, main.size, parent_targets.size))
-                             for parent, state, rect in candidates])
-        children: list[ReflectionView] = []
-        for (parent, state, rect), count in zip(candidates, pixels, strict=True):
-            if count == 0:
-                continue
-            if len(children) == MAX_LEVEL_VIEWS:
-                break
-            index = len(self.views) + len(children)
-            view = self._surface_view(parent, state, main, index)
-            children.append(ReflectionView(index, parent.level + 1, view, rect, state, parent))
-        return children
 
     @staticmethod
     def _surface_view(parent: ReflectionView, state: SurfaceState, main: View, index: int) -> View:

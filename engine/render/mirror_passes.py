@@ -1,21 +1,25 @@
-"""The per-pixel passes of planar reflections: visibility query, level mask, composite.
+"""The per-pixel passes of planar reflections: preparing a level (reset, then claims with
+their visibility queries) and the composite.
 
-All three are a full-screen triangle limited by a scissor rectangle; they read the uint
-images of a level (which view drew a pixel, which entity's surface is there).
+Each is a full-screen triangle limited by a scissor rectangle; they read the uint images
+of a level (which view drew a pixel, which entity's surface is there).  The claim does the
+work of a visibility query and a mask at once: its samples-passed count is the number of
+pixels a candidate view owns.  (A mask pass that found each pixel's owner by looping over
+a table of the level's views cost ~100 ns a pixel on llvmpipe, the loop's uniform-array
+reads; a claim per view costs a few ns a pixel.)
 """
 from __future__ import annotations
 
 from dataclasses import dataclass, field
 
 import moderngl
-import numpy as np
 from pyglm import glm
 
 from engine.render.renderer import CAMERA_BINDING, SKY_UNIT, Renderer
-from engine.render.targets import RenderTargets, release_framebuffer
+from engine.render.targets import RenderTargets
 
 MAX_LEVEL_VIEWS = 32
-_SELECT_UNITS = (3, 4)
+_PARENT_UNITS = (3, 4)
 _REFLECTION_UNITS = (3, 4, 5)
 
 
@@ -42,78 +46,68 @@ def _shared_samples_queries(ctx: moderngl.Context, count: int) -> list[moderngl.
     return pool
 
 
+@dataclass(frozen=True)
+class Claim:
+    """A candidate view of a reflection level: ``surface`` seen from view ``parent`` of the
+    level above, drawn as view ``index`` inside ``rect`` (this level's pixels)."""
+
+    parent: int
+    surface: int
+    index: int
+    rect: tuple[int, int, int, int]
+
+
 class MirrorPasses:
     def __init__(self, renderer: Renderer) -> None:
         self.renderer = renderer
         ctx = renderer.ctx
         self.ctx = ctx
         shaders = renderer.shaders
-        self.select = shaders.program("fullscreen.vert", "mirror_select.frag")
-        self.mask = shaders.program("fullscreen.vert", "mirror_mask.frag")
+        self.reset = shaders.program("fullscreen.vert", "mirror_reset.frag")
+        self.claim = shaders.program("fullscreen.vert", "mirror_claim.frag")
         self.composite = shaders.program("fullscreen.vert", "mirror_composite.frag")
-        self.select["parent_node_map"].value, self.select["parent_surface_map"].value = _SELECT_UNITS
-        self.mask["parent_node_map"].value, self.mask["parent_surface_map"].value = _SELECT_UNITS
+        self.claim["parent_node_map"].value, self.claim["parent_surface_map"].value = _PARENT_UNITS
         self.composite["Camera"].binding = CAMERA_BINDING
         units = dict(zip(("reflection", "reflection_seen", "reflection_nodes"), _REFLECTION_UNITS, strict=True))
         for name, unit in units.items():
             self.composite[name].value = unit
         self.composite["sky_map"].value = SKY_UNIT
-        self._select_vao = ctx.vertex_array(self.select, [])
-        self._mask_vao = ctx.vertex_array(self.mask, [])
+        self._reset_vao = ctx.vertex_array(self.reset, [])
+        self._claim_vao = ctx.vertex_array(self.claim, [])
         self._composite_vao = ctx.vertex_array(self.composite, [])
-        self._query_target: moderngl.Framebuffer | None = None
 
-    def visible_pixels(self, parent: RenderTargets,
-                       candidates: list[tuple[int, int, tuple[int, int, int, int]]]) -> list[int]:
-        """For each (parent view, surface entity, rect): the pixels inside rect where that
-        view of ``parent`` shows that surface.  All queries are issued before any result is
-        read, so the CPU waits for the GPU once per level, not once per candidate."""
-        if not candidates:
+    def prepare_level(self, level: RenderTargets, parent: RenderTargets, claims: list[Claim]) -> list[int]:
+        """Write ``level``'s node image and depth mask for the candidate views ``claims`` and
+        return, for each, how many pixels it got (0: the surface is hidden there, or off the
+        pixels its parent view drew).  Outside the claims' rectangles nothing is written or
+        read this frame.  The queries are all issued before any result is read, so the CPU
+        waits for the GPU once per level."""
+        if not claims:
             return []
-        ctx = self.ctx
-        if self._query_target is None or self._query_target.size != parent.size:
-            if self._query_target is not None:
-                release_framebuffer(self._query_target)
-            self._query_target = ctx.empty_framebuffer(parent.size)  # fragments, no writes
-        self._query_target.use()
-        ctx.disable(moderngl.DEPTH_TEST | moderngl.BLEND | moderngl.CULL_FACE)
-        ctx.viewport = (0, 0, *parent.size)
-        parent.node.use(_SELECT_UNITS[0])
-        parent.surface.use(_SELECT_UNITS[1])
-        queries = _shared_samples_queries(ctx, len(candidates))
-        for query, (parent_node, surface, rect) in zip(queries, candidates, strict=False):
-            ctx.scissor = rect
-            self.select["parent_node"].value = parent_node
-            self.select["mirror_id"].value = surface
-            with query:
-                self._select_vao.render(moderngl.TRIANGLES, vertices=3)
-        ctx.scissor = None
-        return [query.samples for query in queries[: len(candidates)]]
-
-    def prepare_level(self, level: RenderTargets, parent: RenderTargets,
-                      views: list[tuple[int, int, int]], rects: list[tuple[int, int, int, int]]) -> None:
-        """Write ``level``'s node image and depth mask for views (parent view, mirror, index)
-        inside each view's rectangle (nothing outside them is read or drawn this frame)."""
-        if len(views) > MAX_LEVEL_VIEWS:
-            raise ValueError(f"{len(views)} mirror views in one level; at most {MAX_LEVEL_VIEWS}")
         ctx = self.ctx
         level.framebuffer.use()
         ctx.viewport = (0, 0, *level.size)
         ctx.enable(moderngl.DEPTH_TEST)
         ctx.disable(moderngl.BLEND | moderngl.CULL_FACE)
-        ctx.depth_func = "1"  # always: the mask pass writes every pixel's depth
-        parent.node.use(_SELECT_UNITS[0])
-        parent.surface.use(_SELECT_UNITS[1])
-        table = np.zeros((MAX_LEVEL_VIEWS, 4), np.uint32)
-        table[: len(views), :3] = views
-        self.mask["views"].write(table.tobytes())
-        self.mask["to_parent"].value = (parent.size[0] / level.size[0], parent.size[1] / level.size[1])
-        self.mask["view_count"].value = len(views)
-        for rect in rects:
+        ctx.depth_func = "1"  # always: both passes set every depth they touch
+        for rect in dict.fromkeys(claim.rect for claim in claims):
             ctx.scissor = rect
-            self._mask_vao.render(moderngl.TRIANGLES, vertices=3)
+            self._reset_vao.render(moderngl.TRIANGLES, vertices=3)
+        parent.node.use(_PARENT_UNITS[0])
+        parent.surface.use(_PARENT_UNITS[1])
+        program = self.claim
+        program["to_parent"].value = (parent.size[0] / level.size[0], parent.size[1] / level.size[1])
+        queries = _shared_samples_queries(ctx, len(claims))
+        for query, claim in zip(queries, claims, strict=False):
+            ctx.scissor = claim.rect
+            program["parent_node"].value = claim.parent
+            program["surface_id"].value = claim.surface
+            program["view_index"].value = claim.index
+            with query:
+                self._claim_vao.render(moderngl.TRIANGLES, vertices=3)
         ctx.depth_func = "<"
         ctx.scissor = None
+        return [query.samples for query in queries[: len(claims)]]
 
     def composite_view(self, parent: RenderTargets, level: RenderTargets, params: CompositeParams,
                        rect: tuple[int, int, int, int]) -> None:
@@ -147,7 +141,5 @@ class MirrorPasses:
         ctx.scissor = None
 
     def release(self) -> None:
-        for obj in (self._select_vao, self._mask_vao, self._composite_vao):
+        for obj in (self._reset_vao, self._claim_vao, self._composite_vao):
             obj.release()
-        if self._query_target is not None:
-            release_framebuffer(self._query_target)
