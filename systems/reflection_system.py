@@ -33,7 +33,7 @@ from engine.reflection_math import (
     transform_plane,
 )
 from engine.render.batched_mirrors import BatchedMirrors, choose_path, submitted_triangles
-from engine.render.mirror_passes import MAX_LEVEL_VIEWS, Claim, CompositeParams, MirrorPasses
+from engine.render.mirror_passes import MAX_LEVEL_VIEWS, Claim, Composite, MirrorPasses
 from engine.render.renderer import Renderer
 from engine.render.views import View
 from engine.world import World
@@ -200,13 +200,11 @@ class ReflectionSystem(esper.Processor):
             parent_targets = renderer.levels[level - 1]
             targets = renderer.levels[level]
             targets.use_mipmaps(any(c.surface.roughness > 0.0 for c in levels[level]))
-            for child in levels[level]:
-                renderer.bind_view(child.parent.view)
-                surface = child.surface
-                self.passes.composite_view(parent_targets, targets, CompositeParams(
-                    child.index, surface.tint, surface.reflect_rate, surface.roughness, glm.vec3(surface.plane),
-                    portal=surface.kind == "portal", carry=glm.mat3(surface.carry)),
-                    _to_level(child.rect, main.size, parent_targets.size))
+            self.passes.composite_level(parent_targets, targets, [Composite(
+                child.index, _to_level(child.rect, main.size, parent_targets.size), child.parent.view,
+                child.surface.tint, child.surface.reflect_rate, child.surface.roughness,
+                glm.vec3(child.surface.plane), portal=child.surface.kind == "portal",
+                carry=glm.mat3(child.surface.carry)) for child in levels[level]])
         renderer.stats.reflection_views = len(self.views) - 1
         renderer.stats.reflection_path = paths.pop() if len(paths) == 1 else ("mixed" if paths else "")
 

@@ -13,10 +13,12 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import moderngl
+import numpy as np
 from pyglm import glm
 
-from engine.render.renderer import CAMERA_BINDING, SKY_UNIT, Renderer
+from engine.render.renderer import SKY_UNIT, Renderer
 from engine.render.targets import RenderTargets
+from engine.render.views import View
 
 MAX_LEVEL_VIEWS = 32
 _PARENT_UNITS = (3, 4)
@@ -24,14 +26,52 @@ _REFLECTION_UNITS = (3, 4, 5)
 
 
 @dataclass
-class CompositeParams:
+class Composite:
+    """One view of a reflection level as its composite sees it."""
+
     view_index: int
+    rect: tuple[int, int, int, int]                            # in the parent level's pixels
+    parent_view: View                                          # the view that sees the surface
     tint: glm.vec4
     reflect_rate: float
     roughness: float
-    normal: glm.vec3
+    normal: glm.vec3                                           # world, facing the parent eye
     portal: bool = False                                       # a plain window: no Fresnel, no tint
     carry: glm.mat3 = field(default_factory=lambda: glm.mat3(1.0))  # turns directions into the view's world
+
+
+# One row per composite instance (mirror_composite.vert's attributes, in order).
+_COMPOSITE_DTYPE = np.dtype([
+    ("rect", "<f4", (4,)),
+    ("inv_view_proj", "<f4", (16,)),
+    ("eye", "<f4", (4,)),
+    ("tint", "<f4", (4,)),
+    ("params", "<f4", (4,)),
+    ("normal", "<f4", (4,)),
+    ("carry", "<f4", (9,)),
+    ("view", "<u4"),
+])
+_COMPOSITE_FORMAT = "4f 16f 4f 4f 4f 4f 9f 1u/i"
+_COMPOSITE_ATTRIBUTES = ("in_rect", "in_inv_view_proj", "in_eye", "in_tint", "in_params", "in_normal",
+                         "in_carry", "in_view")
+
+
+def composite_rows(composites: list[Composite], size: tuple[int, int]) -> np.ndarray:
+    """The instance rows of ``composites`` drawn into a level of ``size`` pixels."""
+    rows = np.zeros(len(composites), _COMPOSITE_DTYPE)
+    width, height = size
+    for row, c in zip(rows, composites, strict=True):
+        x, y, w, h = c.rect
+        row["rect"] = (2.0 * x / width - 1.0, 2.0 * y / height - 1.0,
+                       2.0 * (x + w) / width - 1.0, 2.0 * (y + h) / height - 1.0)
+        row["inv_view_proj"] = np.frombuffer(glm.inverse(c.parent_view.view_proj).to_bytes(), np.float32)
+        row["eye"][:3] = tuple(c.parent_view.eye)
+        row["tint"] = tuple(c.tint)
+        row["params"] = (c.reflect_rate, c.roughness, 1.0 if c.portal else 0.0, 0.0)
+        row["normal"][:3] = tuple(c.normal)
+        row["carry"] = np.frombuffer(c.carry.to_bytes(), np.float32)
+        row["view"] = c.view_index
+    return rows
 
 
 def _shared_samples_queries(ctx: moderngl.Context, count: int) -> list[moderngl.Query]:
@@ -65,16 +105,16 @@ class MirrorPasses:
         shaders = renderer.shaders
         self.reset = shaders.program("fullscreen.vert", "mirror_reset.frag")
         self.claim = shaders.program("fullscreen.vert", "mirror_claim.frag")
-        self.composite = shaders.program("fullscreen.vert", "mirror_composite.frag")
+        self.composite = shaders.program("mirror_composite.vert", "mirror_composite.frag")
         self.claim["parent_node_map"].value, self.claim["parent_surface_map"].value = _PARENT_UNITS
-        self.composite["Camera"].binding = CAMERA_BINDING
         units = dict(zip(("reflection", "reflection_seen", "reflection_nodes"), _REFLECTION_UNITS, strict=True))
         for name, unit in units.items():
             self.composite[name].value = unit
         self.composite["sky_map"].value = SKY_UNIT
         self._reset_vao = ctx.vertex_array(self.reset, [])
         self._claim_vao = ctx.vertex_array(self.claim, [])
-        self._composite_vao = ctx.vertex_array(self.composite, [])
+        self._composite_rows: moderngl.Buffer | None = None       # instance rows, grown as needed
+        self._composite_vao: moderngl.VertexArray | None = None
 
     def prepare_level(self, level: RenderTargets, parent: RenderTargets, claims: list[Claim]) -> list[int]:
         """Write ``level``'s node image and depth mask for the candidate views ``claims`` and
@@ -109,16 +149,25 @@ class MirrorPasses:
         ctx.scissor = None
         return [query.samples for query in queries[: len(claims)]]
 
-    def composite_view(self, parent: RenderTargets, level: RenderTargets, params: CompositeParams,
-                       rect: tuple[int, int, int, int]) -> None:
-        """Blend view ``params.view_index`` of ``level`` into the mirror's pixels of ``parent``.
-
-        The Camera block must hold the parent view (``Renderer.bind_view``).
-        """
+    def composite_level(self, parent: RenderTargets, level: RenderTargets, composites: list[Composite]) -> None:
+        """Blend every view of ``level`` into its surface's pixels of ``parent``: one instanced
+        draw, a quad per view over its rectangle (each pixel belongs to one view, so the
+        quads never blend over each other's pixels)."""
+        if not composites:
+            return
         ctx = self.ctx
+        rows = composite_rows(composites, parent.size)
+        if self._composite_rows is None or self._composite_rows.size < rows.nbytes:
+            if self._composite_vao is not None:
+                self._composite_vao.release()
+                self._composite_rows.release()
+            self._composite_rows = ctx.buffer(reserve=max(rows.nbytes, 16 * _COMPOSITE_DTYPE.itemsize))
+            self._composite_vao = ctx.vertex_array(
+                self.composite, [(self._composite_rows, _COMPOSITE_FORMAT, *_COMPOSITE_ATTRIBUTES)])
+        self._composite_rows.write(rows.tobytes())
         parent.composite_framebuffer.use()
         ctx.viewport = (0, 0, *parent.size)
-        ctx.scissor = rect
+        ctx.scissor = None
         ctx.disable(moderngl.DEPTH_TEST | moderngl.CULL_FACE)
         ctx.enable(moderngl.BLEND)
         # Colour: reflection x rate + own x (1 - rate); alpha (coverage) is kept.
@@ -127,19 +176,13 @@ class MirrorPasses:
             texture.use(unit)
         self.renderer.sky.use(SKY_UNIT)
         program = self.composite
-        program["view_index"].value = params.view_index
+        program["parent_size"].value = parent.size
         program["to_reflection"].value = (level.size[0] / parent.size[0], level.size[1] / parent.size[1])
-        program["tint"].value = tuple(params.tint)
-        program["reflect_rate"].value = params.reflect_rate
-        program["roughness"].value = params.roughness
-        program["mirror_normal"].value = tuple(params.normal)
-        program["is_portal"].value = params.portal
-        program["carry"].write(params.carry.to_bytes())
-        self._composite_vao.render(moderngl.TRIANGLES, vertices=3)
+        self._composite_vao.render(moderngl.TRIANGLE_STRIP, vertices=4, instances=len(composites))
         ctx.disable(moderngl.BLEND)
         ctx.blend_func = moderngl.DEFAULT_BLENDING
-        ctx.scissor = None
 
     def release(self) -> None:
-        for obj in (self._reset_vao, self._claim_vao, self._composite_vao):
-            obj.release()
+        for obj in (self._reset_vao, self._claim_vao, self._composite_vao, self._composite_rows):
+            if obj is not None:
+                obj.release()
