@@ -7,8 +7,10 @@ camera orbits at radius 14, height 3, looking at the centre (0.5 degrees a frame
 same angles for every path), starting across the ring from the first mirror.  Output
 640 x 360 into a capture target.  For each N in 0, 1, 2, 4, 8, 16 there is one engine per
 ``ReflectionSystem.path`` (per_mirror, batched, auto); they run ``--warmup`` frames, then
-``--frames`` timed frames, interleaved frame by frame so that other load on the machine
-falls on every path alike.  The default run takes about 1.5 minutes on 2 llvmpipe cores.
+``--frames`` timed frames; every (N, path) engine runs interleaved frame by frame with all
+the others, so other load on the machine falls on every one alike and the ratios between
+them hold even when absolute times drift.  The default run takes about 1.5 minutes on 2
+llvmpipe cores.
 
 Frame time is wall clock around ``Engine.frame`` plus ``ctx.finish()`` (every system, every
 draw, present), so it includes the GPU work; on llvmpipe (a software rasteriser) GPU timer
@@ -142,19 +144,22 @@ def _percentile(values: list[float], q: float) -> float:
     return ordered[min(len(ordered) - 1, max(0, math.ceil(q * len(ordered)) - 1))]
 
 
-def run_scenes(ctx, mirrors: int, paths: tuple[str, ...], frames: int, warmup: int) -> list[Result]:
-    """One engine per path on the same scene, their frames interleaved (frame i of every path,
-    then frame i + 1), so load from outside the benchmark lands on every path alike."""
+def run_scenes(ctx, mirror_counts: tuple[int, ...], paths: tuple[str, ...], frames: int,
+               warmup: int) -> list[Result]:
+    """One engine per (mirror count, path) on the same scene, their frames interleaved (frame
+    i of every engine, then frame i + 1), so load from outside the benchmark, and the drift
+    of a shared machine, land on every engine alike and the ratios between them hold."""
+    cases = [(mirrors, path) for mirrors in mirror_counts for path in paths]
     engines, captures = [], []
     try:
-        for path in paths:
+        for mirrors, path in cases:
             engine = Engine(MirrorRing(mirrors), ctx)
             engine.reflection_system.path = path
             engines.append(engine)
             captures.append(CaptureTarget(ctx, OUTPUT_SIZE))
         outputs = [Output(capture.framebuffer, OUTPUT_SIZE) for capture in captures]
-        times: list[list[float]] = [[] for _ in paths]
-        stats: list[list] = [[] for _ in paths]
+        times: list[list[float]] = [[] for _ in cases]
+        stats: list[list] = [[] for _ in cases]
         for frame in range(warmup + frames):
             for i, (engine, output) in enumerate(zip(engines, outputs, strict=True)):
                 start = time.perf_counter()
@@ -164,7 +169,7 @@ def run_scenes(ctx, mirrors: int, paths: tuple[str, ...], frames: int, warmup: i
                     times[i].append((time.perf_counter() - start) * 1e3)
                     stats[i].append(engine.renderer.stats)
         if ctx.error != "GL_NO_ERROR":
-            raise RuntimeError(f"OpenGL error with {mirrors} mirrors: {ctx.error}")
+            raise RuntimeError(f"OpenGL error: {ctx.error}")
         return [Result(
             n_mirrors=mirrors,
             path=path,
@@ -175,7 +180,7 @@ def run_scenes(ctx, mirrors: int, paths: tuple[str, ...], frames: int, warmup: i
             reflection_views=round(statistics.median(s.reflection_views for s in stats[i])),
             frames=frames,
             chosen=dict(Counter(s.reflection_path or "none" for s in stats[i])),
-        ) for i, path in enumerate(paths)]
+        ) for i, (mirrors, path) in enumerate(cases)]
     finally:
         for capture in captures:
             capture.release()
@@ -214,15 +219,14 @@ def main(args: argparse.Namespace) -> int:
             print(f"Mirrors: whole frame incl. ctx.finish() at {OUTPUT_SIZE[0]}x{OUTPUT_SIZE[1]} "
                   f"({ctx.info.get('GL_RENDERER', '?')}, {args.frames} frames after {args.warmup} warm-up)")
             print(" ".join(f"{title:>{width}}" for _, title, width in COLUMNS) + "  chosen")
-        for mirrors in args.mirrors:
-            for result in run_scenes(ctx, mirrors, args.paths, args.frames, args.warmup):
-                results.append(result)
-                if args.json:
-                    print(json.dumps(asdict(result)), flush=True)
-                else:
-                    row = asdict(result)
-                    print(" ".join(f"{row[key]:>{width}}" for key, _, width in COLUMNS)
-                          + f"  {result.chosen}", flush=True)
+        for result in run_scenes(ctx, args.mirrors, args.paths, args.frames, args.warmup):
+            results.append(result)
+            if args.json:
+                print(json.dumps(asdict(result)), flush=True)
+            else:
+                row = asdict(result)
+                print(" ".join(f"{row[key]:>{width}}" for key, _, width in COLUMNS)
+                      + f"  {result.chosen}", flush=True)
     finally:
         ctx.release()
     auto = {r.n_mirrors: r for r in results if r.path == "auto"}
