@@ -10,7 +10,8 @@ uniform samplerCube sky_map;
 uniform vec2 parent_size;            // pixels of the level composited into
 uniform vec2 to_reflection;          // those pixels -> the reflection level's (resolution scales)
 
-noperspective in vec4 v_near;
+flat in vec4 v_rect;
+flat in mat4 v_inv_view_proj;
 flat in vec3 v_eye;
 flat in vec4 v_tint;
 flat in vec4 v_params;
@@ -22,12 +23,17 @@ layout(location = 0) out vec4 out_color;  // blended: rgb x reflect_rate + own x
 layout(location = 1) out uint out_seen;
 
 void main() {
+    // Only this frame's claims wrote the node image, inside the views' rectangles.
+    if (any(lessThan(gl_FragCoord.xy, v_rect.xy)) || any(greaterThanEqual(gl_FragCoord.xy, v_rect.zw))) discard;
     ivec2 px = ivec2(gl_FragCoord.xy * to_reflection);
     if (texelFetch(reflection_nodes, px, 0).r != v_view) discard;
     float reflect_rate = v_params.x;
     float roughness = v_params.y;
-    vec3 view_dir = normalize(v_near.xyz / v_near.w - v_eye);
     vec2 uv = gl_FragCoord.xy / parent_size;
+    // A point on the near plane along this pixel's ray (for an oblique projection that is
+    // the parent mirror's plane: still in front of the eye, unlike its tilted far plane).
+    vec4 near = v_inv_view_proj * vec4(uv * 2.0 - 1.0, -1.0, 1.0);
+    vec3 view_dir = normalize(near.xyz / near.w - v_eye);
     out_seen = texelFetch(reflection_seen, px, 0).r;
     if (v_params.z > 0.5) {  // a portal: a plain window onto its view
         vec4 through = textureLod(reflection, uv, 0.0);

@@ -41,6 +41,9 @@ from systems.render_system import RenderSystem
 
 # Mirrors clip a hair in front of their plane, so their own surface never shows in them.
 CLIP_OFFSET = 1e-3
+# A mirror mesh thinner than this fraction of its size composites over its outline quad;
+# anything thicker (a mirror plane given explicitly on a solid mesh) over its rectangle.
+FLAT_OUTLINE_TOLERANCE = 1e-3
 
 
 class MirrorError(SpeculumError, ValueError):
@@ -55,6 +58,7 @@ class SurfaceState:
     kind: str                    # "mirror" or "portal"
     plane: glm.vec4              # world; its normal points to the side it is seen from
     corners: np.ndarray          # world corners, homogeneous rows
+    outline: np.ndarray | None   # for a flat surface: its 4 world corners as a 2 x 2 grid (a quad), else None
     carry: glm.mat4              # takes the parent camera to this surface's view (a reflection, or the pair)
     exit_plane: glm.vec4         # what the view keeps: the mirror's front, or the look-out portal's front
     exit_entity: int             # the surface the view looks out of: the mirror itself, or the partner
@@ -124,9 +128,9 @@ class ReflectionSystem(esper.Processor):
                 continue  # closed: the scene shader shows its closed colour
             w, h = portal.size
             corners = np.array([(x, y, 0.0, 1.0) for x in (-w / 2, w / 2) for y in (-h / 2, h / 2)])
+            corners = corners @ np.array(transform.world.to_list(), np.float64)
             self.portals[entity] = SurfaceState(
-                entity, "portal", portal_plane(transform.world),
-                corners @ np.array(transform.world.to_list(), np.float64),
+                entity, "portal", portal_plane(transform.world), corners, corners,
                 pair_transform(transform.world, out.world), portal_plane(out.world), partner,
                 portal.max_depth, portal.enabled)
 
@@ -149,7 +153,15 @@ class ReflectionSystem(esper.Processor):
         plane = transform_plane(model, local_plane)
         lo, hi = mesh.bounds
         corners = np.array([(x, y, z, 1.0) for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
-        return SurfaceState(entity, "mirror", plane, corners @ np.array(model.to_list(), np.float64),
+        corners = corners @ np.array(model.to_list(), np.float64)
+        # A flat mesh's box has its corners in pairs across the flat axis: one of each pair is
+        # the mesh's outline on its plane (what the composite covers instead of the rectangle).
+        extents = hi - lo
+        flat_axis = int(np.argmin(extents))
+        outline = None
+        if extents[flat_axis] <= FLAT_OUTLINE_TOLERANCE * max(float(extents.max()), 1e-9):
+            outline = corners[[i for i in range(8) if not (i >> (2 - flat_axis)) & 1]]
+        return SurfaceState(entity, "mirror", plane, corners, outline,
                             reflection_matrix(plane), plane, entity, mirror.max_depth, mirror.enabled,
                             mirror.color, mirror.reflect_rate, mirror.roughness, mirror.resolution_scale)
 
@@ -202,6 +214,7 @@ class ReflectionSystem(esper.Processor):
             targets.use_mipmaps(any(c.surface.roughness > 0.0 for c in levels[level]))
             self.passes.composite_level(parent_targets, targets, [Composite(
                 child.index, _to_level(child.rect, main.size, parent_targets.size), child.parent.view,
+                child.surface.outline,
                 child.surface.tint, child.surface.reflect_rate, child.surface.roughness,
                 glm.vec3(child.surface.plane), portal=child.surface.kind == "portal",
                 carry=glm.mat3(child.surface.carry)) for child in levels[level]])

@@ -32,6 +32,7 @@ class Composite:
     view_index: int
     rect: tuple[int, int, int, int]                            # in the parent level's pixels
     parent_view: View                                          # the view that sees the surface
+    outline: np.ndarray | None                                 # 4 world corners (2 x 2 grid) or None: the rect
     tint: glm.vec4
     reflect_rate: float
     roughness: float
@@ -42,6 +43,7 @@ class Composite:
 
 # One row per composite instance (mirror_composite.vert's attributes, in order).
 _COMPOSITE_DTYPE = np.dtype([
+    ("corners", "<f4", (4, 4)),
     ("rect", "<f4", (4,)),
     ("inv_view_proj", "<f4", (16,)),
     ("eye", "<f4", (4,)),
@@ -49,11 +51,10 @@ _COMPOSITE_DTYPE = np.dtype([
     ("params", "<f4", (4,)),
     ("normal", "<f4", (4,)),
     ("carry", "<f4", (9,)),
-    ("view", "<u4"),
 ])
-_COMPOSITE_FORMAT = "4f 16f 4f 4f 4f 4f 9f 1u/i"
-_COMPOSITE_ATTRIBUTES = ("in_rect", "in_inv_view_proj", "in_eye", "in_tint", "in_params", "in_normal",
-                         "in_carry", "in_view")
+_COMPOSITE_FORMAT = "16f 4f 16f 4f 4f 4f 4f 9f/i"
+_COMPOSITE_ATTRIBUTES = ("in_corners", "in_rect", "in_inv_view_proj", "in_eye", "in_tint", "in_params", "in_normal",
+                         "in_carry")
 
 
 def composite_rows(composites: list[Composite], size: tuple[int, int]) -> np.ndarray:
@@ -62,15 +63,25 @@ def composite_rows(composites: list[Composite], size: tuple[int, int]) -> np.nda
     width, height = size
     for row, c in zip(rows, composites, strict=True):
         x, y, w, h = c.rect
-        row["rect"] = (2.0 * x / width - 1.0, 2.0 * y / height - 1.0,
-                       2.0 * (x + w) / width - 1.0, 2.0 * (y + h) / height - 1.0)
+        row["rect"] = (x, y, x + w, y + h)
+        if c.outline is not None:
+            # The surface's own quad in the parent's clip space.  z = 0 keeps every depth
+            # (an oblique near plane would cut the quad) while clipping still drops w <= 0.
+            clip = c.outline @ np.array(c.parent_view.view_proj.to_list(), np.float64)
+            clip[:, 2] = 0.0
+            row["corners"] = clip
+        else:
+            x0, y0, x1, y1 = 2.0 * x / width - 1.0, 2.0 * y / height - 1.0, 2.0 * (x + w) / width - 1.0, \
+                2.0 * (y + h) / height - 1.0
+            row["corners"] = ((x0, y0, 0.0, 1.0), (x0, y1, 0.0, 1.0), (x1, y0, 0.0, 1.0), (x1, y1, 0.0, 1.0))
         row["inv_view_proj"] = np.frombuffer(glm.inverse(c.parent_view.view_proj).to_bytes(), np.float32)
         row["eye"][:3] = tuple(c.parent_view.eye)
         row["tint"] = tuple(c.tint)
-        row["params"] = (c.reflect_rate, c.roughness, 1.0 if c.portal else 0.0, 0.0)
+        # The view index rides as a float (exact below 2**24; a vertex shader has 16 attribute
+        # slots and the rest of the row fills them).
+        row["params"] = (c.reflect_rate, c.roughness, 1.0 if c.portal else 0.0, float(c.view_index))
         row["normal"][:3] = tuple(c.normal)
         row["carry"] = np.frombuffer(c.carry.to_bytes(), np.float32)
-        row["view"] = c.view_index
     return rows
 
 
