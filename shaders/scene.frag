@@ -55,7 +55,7 @@ struct Surface {
 };
 
 // Mip level of a cube map of face size n for a direction that changes across the pixel.
-// Computed from derivatives in main (uniform control flow), not with textureQueryLod,
+// Computed from derivatives (where the branch is uniform per primitive), not with textureQueryLod,
 // whose cube-map answer differs between drivers (llvmpipe's is unusable).
 float cube_lod(vec3 direction, float n) {
     float footprint = max(length(dFdx(direction)), length(dFdy(direction))) * n * 0.5;
@@ -160,9 +160,14 @@ void main() {
     s.roughness = v_surface.y;
     s.f0 = mix(vec3(0.04), s.albedo, s.metallic);
     s.reflect_dir = reflect(-s.to_eye, s.normal);
-    s.reflect_lod = cube_lod(s.reflect_dir, sky_face_size);
     s.refract_dir = refract(-s.to_eye, s.normal, 1.0 / max(v_reflect.y, 1.0));
-    s.refract_lod = cube_lod(s.refract_dir, sky_face_size);
+    // The sky LODs only where a slot samples the sky: about a sixth of a frame's shading on
+    // llvmpipe otherwise. The variants are flat per instance, so every pixel of a 2 x 2 quad
+    // (one primitive) takes the same branch and the derivatives stay defined.
+    s.reflect_lod = 0.0;
+    if (v_slots.z == REFLECT_SKYBOX || v_slots.z == REFLECT_CUBE) s.reflect_lod = cube_lod(s.reflect_dir, sky_face_size);
+    s.refract_lod = 0.0;
+    if (v_slots.y == REFRACT_ENVIRONMENT) s.refract_lod = cube_lod(s.refract_dir, sky_face_size);
 
     vec3 color = direct_lighting(s);
     color = apply_reflect(v_slots.z, color, s);
