@@ -1,15 +1,19 @@
 """Planar reflections: the ReflectionSystem schedules one view per visible (mirror, path).
 
 Per frame, after the main view is drawn into level 0:
-  1. cull   - for each view of level L and each mirror: skip it if disabled, too deep,
-              facing away, behind the view's own mirror, or off the view's rectangle;
-  2. query  - count the pixels where level L actually shows the mirror (samples query);
-  3. mask   - level L+1's node image and depth mask: each view owns only its mirror's pixels;
-  4. render - each view: mirrored camera, oblique near plane (or clip distance close up),
-              scissored to the mirror's rectangle, front faces clockwise; one render_view
-              per view, or the whole level in one draw per mesh (the batched path);
-  5. repeat for mirrors seen in those reflections, up to the depth limits;
-  6. composite, deepest level first: blend each view into its mirror's pixels one level up.
+  1. cull   - for every view of level L and every mirror or portal at once (SurfaceTable):
+              skip it if disabled, too deep, facing away, behind the view's own mirror,
+              outside the frustum or off the view's rectangle;
+  2. claim  - each candidate takes, in level L+1's node image and depth mask, the pixels
+              where level L shows it; a samples query counts them, and a candidate with
+              none gets no view (MirrorPasses.prepare_level);
+  3. render - each view: mirrored camera, oblique near plane (or clip distance close up),
+              scissored to the mirror's rectangle, front faces clockwise; one draw per
+              mesh per view (Renderer.render_reflection_views), or the whole level in one
+              draw per mesh (the batched path);
+  4. repeat for mirrors seen in those reflections, up to the depth limits;
+  5. composite, deepest level first: blend each level's views into their mirrors' pixels
+              one level up (one instanced draw per level).
 Levels are screen-sized (times the largest resolution_scale of their mirrors), so memory
 is bounded by (levels x one screen), however many mirrors.
 """
@@ -95,7 +99,7 @@ class ReflectionSystem(esper.Processor):
         self.mirrors: dict[int, SurfaceState] = {}
         self.portals: dict[int, SurfaceState] = {}
         self.views: list[ReflectionView] = []   # last frame's view tree, level order
-        # How a level's views are drawn: "per_mirror" (one render_view each), "batched" (one
+        # How a level's views are drawn: "per_mirror" (each view its own draws), "batched" (one
         # draw per mesh for the whole level, engine/render/batched_mirrors.py) or "auto"
         # (chosen per level by view and triangle count; the rule and its numbers: choose_path).
         self.path = "auto"
@@ -204,8 +208,7 @@ class ReflectionSystem(esper.Processor):
             if path == "batched":
                 self.batched.render_level([c.view for c in children], targets)
             else:
-                for child in children:
-                    renderer.render_view(child.view, targets, mask=targets)
+                renderer.render_reflection_views([c.view for c in children], targets)
             levels.append(children)
             self.views.extend(children)
         for level in range(len(levels) - 1, 0, -1):

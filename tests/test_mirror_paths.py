@@ -1,4 +1,4 @@
-"""The two ways of drawing a reflection level give the same frame: one render_view per view
+"""The two ways of drawing a reflection level give the same frame: each view its own draws
 ("per_mirror") and one geometry-shader draw per mesh for all views ("batched", seed 000)."""
 from __future__ import annotations
 
@@ -108,7 +108,7 @@ def test_batched_draws_the_per_mirror_frame_in_fewer_passes(scene):
     assert_same_frame(per_mirror, batched)
     views = batched["stats"].reflection_views
     assert views == 19
-    assert per_mirror["stats"].passes == 1 + views  # one render_view per view
+    assert per_mirror["stats"].passes == 1 + views  # one pass per view
     assert batched["stats"].passes == 1 + 3         # one pass per level
     batches = len(batched["runner"].engine.renderer.batches)
     assert batched["stats"].draw_calls == (batches + 1) + 3 * batches  # main view (+ sky), then one per batch

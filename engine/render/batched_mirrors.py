@@ -1,6 +1,6 @@
 """The batched mirror path (seed 000): one draw per mesh for every view of a reflection level.
 
-The per-mirror path draws a level with one ``Renderer.render_view`` per view: every batch
+The per-mirror path draws a level with ``Renderer.render_reflection_views``: every batch
 once per view, each with its own camera block and scissor.  The batched path draws each
 batch once per level: ``shaders/scene_batched.geom`` emits every triangle once for each
 view of the level that can see it, reading the views from the ``Views`` uniform block
@@ -186,9 +186,12 @@ class BatchedMirrors:
         stats = renderer.stats
         for cap in RECT_CLIP_DISTANCES:
             ctx.enable_direct(cap)
+        sampler = renderer.bind_scene_inputs(program, reflection=True)
         try:
-            renderer.draw_batches(program, reflection=True)
+            renderer.draw_batches(program)
         finally:
+            if sampler is not None:
+                sampler.clear(ALBEDO_UNIT)
             for cap in RECT_CLIP_DISTANCES:  # every other pass writes clip distance 0 only
                 ctx.disable_direct(cap)
             ctx.scissor = None

@@ -193,50 +193,77 @@ class Renderer:
         self.camera_ubo.write(view.camera_block())
         self.camera_ubo.bind_to_uniform_block(CAMERA_BINDING)
 
-    def render_view(self, view: View, targets: RenderTargets, mask: RenderTargets | None = None) -> None:
-        """Draw every batch from ``view`` into ``targets``.
-
-        The main view clears and draws the sky behind the geometry.  A reflection view
-        (``mask`` given) draws only where its level's node image names it, over a depth
-        buffer the mask pass prepared, and leaves the sky to the composite.
-        """
+    def render_view(self, view: View, targets: RenderTargets) -> None:
+        """Draw the main view into ``targets``: clear, every batch, then the sky behind them."""
         ctx = self.ctx
-        # A reflection view reads its level's node image and so must not also write it.
-        framebuffer = targets.framebuffer if mask is None else mask.view_framebuffer
-        framebuffer.use()
+        targets.framebuffer.use()
         ctx.viewport = (0, 0, *view.size)
         ctx.scissor = view.scissor
         ctx.enable(moderngl.DEPTH_TEST | moderngl.CULL_FACE)
         ctx.front_face = "cw" if view.mirrored else "ccw"
         ctx.depth_func = "<"
-        if mask is None:
-            targets.framebuffer.clear(depth=1.0)
-        else:
-            mask.node.use(NODE_UNIT)
-        self.scene_program["masked"].value = mask is not None
-        self.scene_program["node_index"].value = view.node
+        targets.framebuffer.clear(depth=1.0)
+        program = self.scene_program
+        program["masked"].value = False
+        program["node_index"].value = view.node
         self.bind_view(view)
-        self.draw_batches(self.scene_program, reflection=mask is not None)
-        if mask is None:
-            ctx.depth_func = "<="
-            ctx.disable(moderngl.CULL_FACE)
-            self.fullscreen_sky.render(moderngl.TRIANGLES, vertices=3)
-            self.stats.draw_calls += 1
+        self.bind_scene_inputs(program)
+        self.draw_batches(program)
+        ctx.depth_func = "<="
+        ctx.disable(moderngl.CULL_FACE)
+        self.fullscreen_sky.render(moderngl.TRIANGLES, vertices=3)
+        self.stats.draw_calls += 1
         ctx.front_face = "ccw"
         ctx.scissor = None
         self.stats.passes += 1
 
-    def draw_batches(self, program: moderngl.Program, reflection: bool = False) -> None:
-        """One instanced draw per non-empty batch with a scene-shading ``program`` (lights,
-        sky and albedo map bound here; the Camera block and targets are the caller's).
-        ``reflection``: a mirror or portal view, filtered with ``reflection_anisotropy``."""
+    def render_reflection_views(self, views: list[View], level: RenderTargets) -> None:
+        """Draw every batch from each of ``views`` into reflection ``level``: each only where
+        the level's node image names it (over the depth mask ``MirrorPasses.prepare_level``
+        wrote), scissored to its rectangle.  The sky is left to the composite.  State shared
+        by the views is set once: per view there is a scissor, a winding, a camera and the
+        draws (on llvmpipe the Python and driver cost per view is on the frame's critical path)."""
+        if not views:
+            return
+        ctx = self.ctx
+        level.view_framebuffer.use()  # reads the node image, so must not also write it
+        ctx.viewport = (0, 0, *level.size)
+        ctx.enable(moderngl.DEPTH_TEST | moderngl.CULL_FACE)
+        ctx.depth_func = "<"
+        level.node.use(NODE_UNIT)
+        program = self.scene_program
+        program["masked"].value = True
+        node_index = program["node_index"]
+        sampler = self.bind_scene_inputs(program, reflection=True)
+        for view in views:
+            ctx.scissor = view.scissor
+            ctx.front_face = "cw" if view.mirrored else "ccw"
+            node_index.value = view.node
+            self.bind_view(view)
+            self.draw_batches(program)
+            self.stats.passes += 1
+        if sampler is not None:
+            sampler.clear(ALBEDO_UNIT)
+        ctx.front_face = "ccw"
+        ctx.scissor = None
+
+    def bind_scene_inputs(self, program: moderngl.Program, reflection: bool = False) -> moderngl.Sampler | None:
+        """Bind what every scene draw reads besides the camera: lights, sky, and for a
+        reflection view the albedo sampler of ``reflection_anisotropy`` (returned, to be
+        cleared after the draws; None when reflections filter like the main view)."""
         self.lights_ubo.bind_to_uniform_block(LIGHTS_BINDING)
         self.sky.use(SKY_UNIT)
         program["sky_face_size"].value = self.sky.size[0]
-        has_map = program["has_albedo_map"]
         sampler = self._sampler_for_reflections() if reflection else None
         if sampler is not None:
             sampler.use(ALBEDO_UNIT)  # a bound sampler object overrides the texture's own filter
+        return sampler
+
+    def draw_batches(self, program: moderngl.Program) -> None:
+        """One instanced draw per non-empty batch, smallest first, with a scene-shading
+        ``program`` (albedo maps bound here; camera, lights, sky and targets are the caller's,
+        see ``bind_scene_inputs``)."""
+        has_map = program["has_albedo_map"]
         if self._order_stale:
             self._draw_order = sorted((b for b in self.batches.values() if b.count), key=lambda b: b.extent)
             self._order_stale = False
@@ -249,8 +276,6 @@ class Renderer:
             batch.draw(program)
             self.stats.draw_calls += 1
             self.stats.instances += batch.count
-        if sampler is not None:
-            sampler.clear(ALBEDO_UNIT)
 
     def _sampler_for_reflections(self) -> moderngl.Sampler | None:
         """The albedo sampler of reflection views, or None when they filter like the main view."""
