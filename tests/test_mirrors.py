@@ -337,3 +337,38 @@ def test_reflection_filtering_changes_only_the_mirrors_pixels(scene):
     changed = np.abs(sharp - trilinear).max(axis=2) > 0
     assert mirror.sum() > 2000 and (changed & mirror).sum() > 50
     assert not (changed & ~mirror).any()
+
+
+def test_composite_covers_a_flat_mirrors_outline_and_a_solid_ones_rectangle(scene):
+    """The composite of a flat mirror is its own quad (the mesh outline on its plane); a mirror
+    plane given on a solid mesh has no such outline and composites over its rectangle. Either
+    way the reflection lands on the mirror's pixels and nowhere else."""
+    ents = {}
+
+    def build(world):
+        base_scene(world)
+        look_from(world, (1.5, 1.8, 5.0))
+        ents["flat"] = mirror_wall(world, position=(-1.2, 1.5, -2), size=(2, 3),
+                                   rotation=glm.angleAxis(glm.radians(20.0), glm.vec3(0, 1, 0)))
+        ents["solid"] = world.spawn(Transform(position=(1.3, 1.5, -2.05)), MeshRef(box((2, 3, 0.1))),
+                                    Material(color=(0.1, 0.1, 0.1)),
+                                    Mirror(plane_point=(0, 0, 0.05), plane_normal=(0, 0, 1)))
+        world.spawn(Transform(position=(0.0, 1.2, 0.5), scale=(0.8, 0.8, 0.8)), MeshRef(box()),
+                    Material(color=(0.9, 0.05, 0.05)), Emissive(0.8))
+
+    runner = scene(build, SIZE)
+    runner.frame()
+    mirrors = runner.engine.reflection_system.mirrors
+    outline = mirrors[ents["flat"]].outline
+    assert outline.shape == (4, 4)
+    plane = np.array(tuple(mirrors[ents["flat"]].plane))
+    assert np.abs(outline @ plane).max() < 1e-5  # all four corners on the mirror's plane
+    assert mirrors[ents["solid"]].outline is None
+    surface = runner.engine.renderer.targets.read_surface_ids()
+    seen = runner.ids()
+    for entity in (ents["flat"], ents["solid"]):
+        changed = (surface == entity) & (seen != entity)
+        assert changed.sum() > 300  # the reflection shows across the mirror
+    # Outside the mirrors every pixel shows what is there.
+    outside = (surface != ents["flat"]) & (surface != ents["solid"])
+    assert (seen[outside] == surface[outside]).all()
