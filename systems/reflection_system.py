@@ -194,13 +194,15 @@ class ReflectionSystem(esper.Processor):
             claims = [Claim(parent.index, state.entity, next_index + k, _to_level(rect, main.size, size))
                       for k, (parent, state, rect) in enumerate(candidates)]
             next_index += len(claims)
+            # Every candidate's camera is worked out before the claims: the CPU does it while
+            # the GPU still draws the level above (the claims wait for that), not after.
+            views = [self._surface_view(parent, state, main, claim.index, size, claim.rect)
+                     for (parent, state, _), claim in zip(candidates, claims, strict=True)]
             pixels = self.passes.prepare_level(targets, renderer.levels[level], claims)
             children = []
-            for (parent, state, rect), claim, count in zip(candidates, claims, pixels, strict=True):
+            for (parent, state, rect), view, count in zip(candidates, views, pixels, strict=True):
                 if count and len(children) < MAX_LEVEL_VIEWS:
-                    view = self._surface_view(parent, state, main, claim.index)
-                    view.size, view.scissor = size, claim.rect
-                    children.append(ReflectionView(claim.index, level + 1, view, rect, state, parent))
+                    children.append(ReflectionView(view.node, level + 1, view, rect, state, parent))
             if not children:
                 break
             path = choose_path(self.path, len(children), submitted_triangles(renderer))
@@ -225,7 +227,8 @@ class ReflectionSystem(esper.Processor):
         renderer.stats.reflection_path = paths.pop() if len(paths) == 1 else ("mixed" if paths else "")
 
     @staticmethod
-    def _surface_view(parent: ReflectionView, state: SurfaceState, main: View, index: int) -> View:
+    def _surface_view(parent: ReflectionView, state: SurfaceState, main: View, index: int,
+                      size: tuple[int, int], scissor: tuple[int, int, int, int]) -> View:
         """The parent's camera carried through the surface (for a mirror: ``mirrored_view``;
         for a portal: seed 001's look-out x half turn x inverse(look-in)), clipped at the
         plane it looks out of, with an oblique near plane there unless the eye is too close."""
@@ -237,8 +240,8 @@ class ReflectionSystem(esper.Processor):
         if oblique_is_safe(eye, exit_plane, _near_distance(main.proj)):
             proj = oblique_projection(main.proj, transform_plane(view, clip_plane))
         mirrored = parent.view.mirrored != (state.kind == "mirror")
-        return View(view=view, proj=proj, eye=eye, size=main.size, name=f"{state.kind} {state.entity}",
-                    clip_plane=clip_plane, mirrored=mirrored, scissor=None, node=index)
+        return View(view=view, proj=proj, eye=eye, size=size, name=f"{state.kind} {state.entity}",
+                    clip_plane=clip_plane, mirrored=mirrored, scissor=scissor, node=index)
 
     def mirror_planes(self) -> dict[int, tuple[list[float], list[float]]]:
         """Each mirror's world plane as (point on it, unit normal towards its front)."""
