@@ -191,6 +191,8 @@ class ReflectionSystem(esper.Processor):
             scale = max(state.resolution_scale for _, state, _ in candidates)
             size = (max(1, round(main.size[0] * scale)), max(1, round(main.size[1] * scale)))
             targets = renderer.level_targets(level + 1, size)
+            if any(state.roughness > 0.0 for _, state, _ in candidates):
+                targets.clear_color()  # rough mirrors read mips far beyond this frame's rectangles
             claims = [Claim(parent.index, state.entity, next_index + k, _to_level(rect, main.size, size))
                       for k, (parent, state, rect) in enumerate(candidates)]
             next_index += len(claims)

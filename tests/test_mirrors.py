@@ -372,3 +372,31 @@ def test_composite_covers_a_flat_mirrors_outline_and_a_solid_ones_rectangle(scen
     # Outside the mirrors every pixel shows what is there.
     outside = (surface != ents["flat"]) & (surface != ents["solid"])
     assert (seen[outside] == surface[outside]).all()
+
+
+def test_a_rough_mirror_does_not_blur_in_what_an_earlier_frame_left(scene):
+    """A rough mirror reads wide mips of its level. Pixels of that level outside this frame's
+    claimed rectangles hold whatever an earlier frame (or another mirror) left there. They
+    must not leak in: garbage written there changes nothing in the next frame."""
+    ents = {}
+
+    def build(world):
+        base_scene(world)
+        look_from(world, (0.0, 1.5, 4.0))
+        world.spawn(Transform(position=(0, 0, 0)), MeshRef(plane(12, 12, uv_repeat=6)),
+                    Material(texture=checker_texture(64, 8)))
+        ents["mirror"] = mirror_wall(world, size=(1.5, 1.2), roughness=0.7)
+
+    runner = scene(build, SIZE)
+    runner.frame()
+    clean = runner.frame().astype(int)
+    level = runner.engine.renderer.levels[1]
+    w, h = level.size
+    garbage = np.zeros((h, w, 4), np.float16)
+    garbage[..., 0] = 40.0  # bright red, fully "reflected"
+    garbage[..., 3] = 1.0
+    level.color.write(garbage.tobytes())
+    polluted = runner.frame().astype(int)
+    mirror = runner.engine.renderer.targets.read_surface_ids() == ents["mirror"]
+    assert mirror.sum() > 300
+    assert np.abs(polluted - clean)[mirror].max() <= 1
