@@ -9,13 +9,15 @@ uniform usampler2D reflection_nodes;
 uniform samplerCube sky_map;
 uniform vec2 parent_size;            // pixels of the level composited into
 uniform vec2 to_reflection;          // those pixels -> the reflection level's (resolution scales)
+uniform sampler2D rough_atlas;       // rough views' own blur sources (engine/render/rough_atlas.py)
+uniform vec2 atlas_size;
 
 flat in vec4 v_rect;
 flat in mat4 v_inv_view_proj;
-flat in vec3 v_eye;
+flat in vec4 v_eye;        // w: tile x
 flat in vec4 v_tint;
 flat in vec4 v_params;
-flat in vec3 v_normal;
+flat in vec4 v_normal;     // w: tile y
 flat in mat3 v_carry;
 flat in uint v_view;
 
@@ -24,8 +26,9 @@ layout(location = 1) out uint out_seen;
 
 void main() {
     // Only this frame's claims wrote the node image, inside the views' rectangles.
-    if (any(lessThan(gl_FragCoord.xy, v_rect.xy)) || any(greaterThanEqual(gl_FragCoord.xy, v_rect.zw))) discard;
-    ivec2 px = ivec2(gl_FragCoord.xy * to_reflection);
+    vec2 level_px = gl_FragCoord.xy * to_reflection;
+    if (any(lessThan(level_px, v_rect.xy)) || any(greaterThanEqual(level_px, v_rect.zw))) discard;
+    ivec2 px = ivec2(level_px);
     if (texelFetch(reflection_nodes, px, 0).r != v_view) discard;
     float reflect_rate = v_params.x;
     float roughness = v_params.y;
@@ -33,7 +36,7 @@ void main() {
     // A point on the near plane along this pixel's ray (for an oblique projection that is
     // the parent mirror's plane: still in front of the eye, unlike its tilted far plane).
     vec4 near = v_inv_view_proj * vec4(uv * 2.0 - 1.0, -1.0, 1.0);
-    vec3 view_dir = normalize(near.xyz / near.w - v_eye);
+    vec3 view_dir = normalize(near.xyz / near.w - v_eye.xyz);
     out_seen = texelFetch(reflection_seen, px, 0).r;
     if (v_params.z > 0.5) {  // a portal: a plain window onto its view
         vec4 through = textureLod(reflection, uv, 0.0);
@@ -41,12 +44,23 @@ void main() {
         out_color = vec4(through.rgb + beyond * (1.0 - through.a), 1.0);
         return;
     }
-    vec3 r = reflect(view_dir, v_normal);
-    // A perfect mirror reads its image 1:1; a rough one reads the blurred mips.
+    vec3 normal = v_normal.xyz;
+    vec3 r = reflect(view_dir, normal);
+    // A perfect mirror reads its image 1:1; a rough one reads the blurred mips of its own
+    // tile (the level's would mix in its neighbours' reflections).
     float lod = roughness > 0.0 ? roughness_lod_bias(roughness) : 0.0;
-    vec4 seen = textureLod(reflection, uv, lod);
+    vec4 seen;
+    float scale = v_tint.a;
+    if (scale > 0.0) {
+        float tile_lod = clamp(lod + log2(scale), 0.0, log2(ROUGH_TILE));
+        float inset = 0.5 * exp2(ceil(tile_lod));  // keep every tap of that mip inside the tile
+        vec2 local = clamp((level_px - v_rect.xy) * scale, vec2(inset), vec2(ROUGH_TILE - inset));
+        seen = textureLod(rough_atlas, (vec2(v_eye.w, v_normal.w) + local) / atlas_size, tile_lod);
+    } else {
+        seen = textureLod(reflection, uv, 0.0);
+    }
     vec3 environment = textureLod(sky_map, r, lod).rgb;
     vec3 radiance = seen.rgb + environment * (1.0 - seen.a);
-    vec3 reflected = ggx_reflect(v_normal, r, -view_dir, radiance, v_tint.rgb, roughness);
+    vec3 reflected = ggx_reflect(normal, r, -view_dir, radiance, v_tint.rgb, roughness);
     out_color = vec4(reflected, reflect_rate);
 }

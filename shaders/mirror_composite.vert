@@ -3,20 +3,20 @@
 // parent view's clip space, or its screen rectangle), carrying the view's composite
 // parameters to mirror_composite.frag. All views of a level composite in one draw.
 in mat4 in_corners;          // 4 clip-space corners as a 2 x 2 grid (a triangle strip)
-in vec4 in_rect;             // the view's rectangle in the parent level's pixels: x0, y0, x1, y1
+in vec4 in_rect;             // the view's rectangle in its own level's pixels: x0, y0, x1, y1
 in mat4 in_inv_view_proj;    // the parent view's
-in vec4 in_eye;              // xyz: the parent view's eye
-in vec4 in_tint;
+in vec4 in_eye;              // xyz: the parent view's eye; w: a rough view's tile, first texel x
+in vec4 in_tint;             // rgb: tint; a: a rough view's tile scale (0: no tile, read the level)
 in vec4 in_params;           // reflect_rate, roughness, is_portal (0/1), the view's index
-in vec4 in_normal;           // xyz: the mirror's normal, world, facing the parent eye
+in vec4 in_normal;           // xyz: the mirror's normal, world, facing the parent eye; w: tile y
 in mat3 in_carry;            // a portal's rotation: directions here -> beyond the partner
 
 flat out vec4 v_rect;
 flat out mat4 v_inv_view_proj;
-flat out vec3 v_eye;
+flat out vec4 v_eye;
 flat out vec4 v_tint;
 flat out vec4 v_params;
-flat out vec3 v_normal;
+flat out vec4 v_normal;
 flat out mat3 v_carry;
 flat out uint v_view;        // the view's index (its pixels in the level's node image)
 
@@ -24,10 +24,10 @@ void main() {
     gl_Position = in_corners[gl_VertexID];
     v_rect = in_rect;
     v_inv_view_proj = in_inv_view_proj;
-    v_eye = in_eye.xyz;
+    v_eye = in_eye;
     v_tint = in_tint;
     v_params = in_params;
-    v_normal = in_normal.xyz;
+    v_normal = in_normal;
     v_carry = in_carry;
     v_view = uint(in_params.w + 0.5);
 }

@@ -191,8 +191,6 @@ class ReflectionSystem(esper.Processor):
             scale = max(state.resolution_scale for _, state, _ in candidates)
             size = (max(1, round(main.size[0] * scale)), max(1, round(main.size[1] * scale)))
             targets = renderer.level_targets(level + 1, size)
-            if any(state.roughness > 0.0 for _, state, _ in candidates):
-                targets.clear_color()  # rough mirrors read mips far beyond this frame's rectangles
             claims = [Claim(parent.index, state.entity, next_index + k, _to_level(rect, main.size, size))
                       for k, (parent, state, rect) in enumerate(candidates)]
             next_index += len(claims)
@@ -218,9 +216,9 @@ class ReflectionSystem(esper.Processor):
         for level in range(len(levels) - 1, 0, -1):
             parent_targets = renderer.levels[level - 1]
             targets = renderer.levels[level]
-            targets.use_mipmaps(any(c.surface.roughness > 0.0 for c in levels[level]))
             self.passes.composite_level(parent_targets, targets, [Composite(
-                child.index, _to_level(child.rect, main.size, parent_targets.size), child.parent.view,
+                child.index, _to_level(child.rect, main.size, parent_targets.size), child.view.scissor,
+                child.parent.view,
                 child.surface.outline,
                 child.surface.tint, child.surface.reflect_rate, child.surface.roughness,
                 glm.vec3(child.surface.plane), portal=child.surface.kind == "portal",

@@ -400,3 +400,34 @@ def test_a_rough_mirror_does_not_blur_in_what_an_earlier_frame_left(scene):
     mirror = runner.engine.renderer.targets.read_surface_ids() == ents["mirror"]
     assert mirror.sum() > 300
     assert np.abs(polluted - clean)[mirror].max() <= 1
+
+
+@pytest.mark.parametrize("roughness", [0.25, 0.6])
+def test_a_rough_mirror_blurs_only_its_own_reflection(scene, roughness):
+    """Two mirrors side by side; a red lamp is seen in the right one only. The left one, rough,
+    blurs its own reflection (ground and sky): none of its neighbour's red gets in, however
+    wide its blur (at 0.6 the bias reaches the coarsest mip of the reflection)."""
+    ents = {}
+
+    def build(world):
+        base_scene(world)
+        look_from(world, (0.0, 1.5, 5.0))
+        world.spawn(Transform(), MeshRef(plane(20, 20, uv_repeat=8)), Material(texture=checker_texture(64, 8)))
+        ents["rough"] = mirror_wall(world, position=(-1.0, 1.5, -2), size=(2, 3), roughness=0.0)
+        ents["sharp"] = mirror_wall(world, position=(1.0, 1.5, -2), size=(2, 3))
+        ents["lamp"] = world.spawn(Transform(position=(2.2, 1.5, 1.0), scale=(0.8, 2.5, 0.8)), MeshRef(box()),
+                                   Material(color=(1.0, 0.0, 0.0)), Emissive(3.0))
+
+    runner = scene(build, SIZE)
+    runner.frame()
+    surface = runner.engine.renderer.targets.read_surface_ids()
+    left, right = surface == ents["rough"], surface == ents["sharp"]
+    seen = runner.ids()
+    assert not (seen[left] == ents["lamp"]).any() and (seen[right] == ents["lamp"]).sum() > 100
+    runner.world.get(ents["rough"], Mirror).roughness = roughness
+    with_lamp = runner.frame().astype(int)
+    redness = with_lamp[..., 0] - (with_lamp[..., 1] + with_lamp[..., 2]) / 2
+    assert redness[right].max() > 150  # the lamp, sharp in the right mirror
+    runner.world.get(ents["lamp"], Transform).position = (2.2, -10.0, 1.0)  # under the ground
+    without_lamp = runner.frame().astype(int)
+    assert np.abs(with_lamp - without_lamp)[left].max() <= 2  # the lamp changes nothing on the left

@@ -17,12 +17,14 @@ import numpy as np
 from pyglm import glm
 
 from engine.render.renderer import SKY_UNIT, Renderer
+from engine.render.rough_atlas import TILE, RoughAtlas, Tile
 from engine.render.targets import RenderTargets
 from engine.render.views import View
 
 MAX_LEVEL_VIEWS = 32
 _PARENT_UNITS = (3, 4)
 _REFLECTION_UNITS = (3, 4, 5)
+_ATLAS_UNIT = 6
 
 
 @dataclass
@@ -31,6 +33,7 @@ class Composite:
 
     view_index: int
     rect: tuple[int, int, int, int]                            # in the parent level's pixels
+    level_rect: tuple[int, int, int, int]                      # the same, in the view's level (its claim)
     parent_view: View                                          # the view that sees the surface
     outline: np.ndarray | None                                 # 4 world corners (2 x 2 grid) or None: the rect
     tint: glm.vec4
@@ -39,6 +42,7 @@ class Composite:
     normal: glm.vec3                                           # world, facing the parent eye
     portal: bool = False                                       # a plain window: no Fresnel, no tint
     carry: glm.mat3 = field(default_factory=lambda: glm.mat3(1.0))  # turns directions into the view's world
+    tile: Tile | None = None                                   # a rough view's blur source (RoughAtlas)
 
 
 # One row per composite instance (mirror_composite.vert's attributes, in order).
@@ -62,7 +66,7 @@ def composite_rows(composites: list[Composite], size: tuple[int, int]) -> np.nda
     rows = np.zeros(len(composites), _COMPOSITE_DTYPE)
     width, height = size
     for row, c in zip(rows, composites, strict=True):
-        x, y, w, h = c.rect
+        x, y, w, h = c.level_rect
         row["rect"] = (x, y, x + w, y + h)
         if c.outline is not None:
             # The surface's own quad in the parent's clip space.  z = 0 keeps every depth
@@ -71,16 +75,19 @@ def composite_rows(composites: list[Composite], size: tuple[int, int]) -> np.nda
             clip[:, 2] = 0.0
             row["corners"] = clip
         else:
+            x, y, w, h = c.rect
             x0, y0, x1, y1 = 2.0 * x / width - 1.0, 2.0 * y / height - 1.0, 2.0 * (x + w) / width - 1.0, \
                 2.0 * (y + h) / height - 1.0
             row["corners"] = ((x0, y0, 0.0, 1.0), (x0, y1, 0.0, 1.0), (x1, y0, 0.0, 1.0), (x1, y1, 0.0, 1.0))
         row["inv_view_proj"] = np.frombuffer(glm.inverse(c.parent_view.view_proj).to_bytes(), np.float32)
-        row["eye"][:3] = tuple(c.parent_view.eye)
-        row["tint"] = tuple(c.tint)
+        # The tile rides in the spare w components (a vertex shader has 16 attribute slots).
+        tile = c.tile or Tile(0, 0, 0.0)
+        row["eye"] = (*c.parent_view.eye, tile.x)
+        row["tint"] = (*glm.vec3(c.tint), tile.scale)
         # The view index rides as a float (exact below 2**24; a vertex shader has 16 attribute
         # slots and the rest of the row fills them).
         row["params"] = (c.reflect_rate, c.roughness, 1.0 if c.portal else 0.0, float(c.view_index))
-        row["normal"][:3] = tuple(c.normal)
+        row["normal"] = (*c.normal, tile.y)
         row["carry"] = np.frombuffer(c.carry.to_bytes(), np.float32)
     return rows
 
@@ -116,12 +123,15 @@ class MirrorPasses:
         shaders = renderer.shaders
         self.reset = shaders.program("fullscreen.vert", "mirror_reset.frag")
         self.claim = shaders.program("fullscreen.vert", "mirror_claim.frag")
-        self.composite = shaders.program("mirror_composite.vert", "mirror_composite.frag")
+        self.composite = shaders.program("mirror_composite.vert", "mirror_composite.frag",
+                                         defines={"ROUGH_TILE": f"{TILE}.0"})
         self.claim["parent_node_map"].value, self.claim["parent_surface_map"].value = _PARENT_UNITS
         units = dict(zip(("reflection", "reflection_seen", "reflection_nodes"), _REFLECTION_UNITS, strict=True))
         for name, unit in units.items():
             self.composite[name].value = unit
         self.composite["sky_map"].value = SKY_UNIT
+        self.composite["rough_atlas"].value = _ATLAS_UNIT
+        self.rough_atlas = RoughAtlas(renderer)
         self._reset_vao = ctx.vertex_array(self.reset, [])
         self._claim_vao = ctx.vertex_array(self.claim, [])
         self._composite_rows: moderngl.Buffer | None = None       # instance rows, grown as needed
@@ -162,11 +172,16 @@ class MirrorPasses:
 
     def composite_level(self, parent: RenderTargets, level: RenderTargets, composites: list[Composite]) -> None:
         """Blend every view of ``level`` into its surface's pixels of ``parent``: one instanced
-        draw, a quad per view over its rectangle (each pixel belongs to one view, so the
-        quads never blend over each other's pixels)."""
+        draw, a quad per view over its surface (each pixel belongs to one view, so the quads
+        never blend over each other's pixels).  Rough views first get their own blur source
+        (``RoughAtlas``)."""
         if not composites:
             return
         ctx = self.ctx
+        tiles = self.rough_atlas.isolate(level, [(c.view_index, c.level_rect) for c in composites
+                                                 if c.roughness > 0.0 and not c.portal])
+        for c in composites:
+            c.tile = tiles.get(c.view_index)
         rows = composite_rows(composites, parent.size)
         if self._composite_rows is None or self._composite_rows.size < rows.nbytes:
             if self._composite_vao is not None:
@@ -187,6 +202,9 @@ class MirrorPasses:
             texture.use(unit)
         self.renderer.sky.use(SKY_UNIT)
         program = self.composite
+        if tiles:
+            self.rough_atlas.texture.use(_ATLAS_UNIT)
+            program["atlas_size"].value = self.rough_atlas.texture.size
         program["parent_size"].value = parent.size
         program["to_reflection"].value = (level.size[0] / parent.size[0], level.size[1] / parent.size[1])
         self._composite_vao.render(moderngl.TRIANGLE_STRIP, vertices=4, instances=len(composites))
@@ -197,3 +215,4 @@ class MirrorPasses:
         for obj in (self._reset_vao, self._claim_vao, self._composite_vao, self._composite_rows):
             if obj is not None:
                 obj.release()
+        self.rough_atlas.release()

@@ -41,25 +41,8 @@ class RenderTargets:
         self.framebuffer = ctx.framebuffer([self.color, self.surface, self.seen, self.node], self.depth)
         # Reflection views read the node image (which view owns a pixel) and do not write it.
         self.view_framebuffer = ctx.framebuffer([self.color, self.surface, self.seen], self.depth)
-        self._color_only = ctx.framebuffer([self.color])
         # Composites write the reflection's colour and seen-id only (they read surface and node).
         self.composite_framebuffer = ctx.framebuffer([self.color, self.seen])
-        self._mipmapped = False
-
-    def clear_color(self) -> None:
-        """Empty the whole colour image (alpha 0: nothing reflected).  A level whose mips a
-        rough mirror reads needs it: the mips average pixels far outside this frame's
-        rectangles, which otherwise hold what earlier frames left."""
-        self._color_only.clear(0.0, 0.0, 0.0, 0.0)
-
-    def use_mipmaps(self, enabled: bool) -> None:
-        """Build the colour mip chain (rough mirrors read it), or go back to one level."""
-        if enabled:
-            self.color.build_mipmaps()
-            self.color.filter = (moderngl.LINEAR_MIPMAP_LINEAR, moderngl.LINEAR)
-        elif self._mipmapped:
-            self.color.filter = (moderngl.LINEAR, moderngl.LINEAR)
-        self._mipmapped = enabled
 
     def read_ids(self) -> np.ndarray:
         """Entity finally seen at each pixel, uint32 (height, width), row 0 at the top."""
@@ -76,7 +59,6 @@ class RenderTargets:
     def release(self) -> None:
         release_framebuffer(self.composite_framebuffer)
         release_framebuffer(self.view_framebuffer)
-        release_framebuffer(self._color_only)
         release_framebuffer(self.framebuffer)
         for texture in (self.color, self.surface, self.seen, self.node, self.depth):
             texture.release()

@@ -1,0 +1,113 @@
+"""Per-view blur sources for rough mirrors: each rough view of a level gets its own tile.
+
+A rough mirror samples its reflection with a mip bias (seed 002: ``lod += 2/(1-m)^2 - 1``).
+Seed 002 renders each mirror into its own texture, so the coarse mips average that mirror's
+reflection only.  Here the views of a level share one screen-sized image, whose coarse mips
+would average every mirror's reflection (and pixels no view owns): a rough mirror next to
+another would show its neighbour's colours.  So before a level is composited, each of its
+rough views is copied into its own T x T tile of an atlas - its own pixels only, everything
+else empty - and the atlas is mipmapped.  Tiles sit on a power-of-two grid, so up to mip
+log2(T) no texel straddles two tiles; the composite keeps its samples half a texel inside.
+A rectangle larger than T is scaled down into its tile (a rough mirror is blurred anyway).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import moderngl
+import numpy as np
+
+from engine.render.renderer import Renderer
+from engine.render.targets import RenderTargets, release_framebuffer
+
+TILE = 256
+COLUMNS = 8
+
+_ROW_DTYPE = np.dtype([("tile", "<f4", (4,)), ("source", "<f4", (4,)), ("place", "<f4", (2,)),
+                       ("scale", "<f4"), ("view", "<f4")])
+_FORMAT = "4f 4f 2f 1f 1f/i"
+_ATTRIBUTES = ("in_tile", "in_source", "in_place", "in_scale", "in_view")
+_LEVEL_UNITS = (3, 5)
+
+
+@dataclass(frozen=True)
+class Tile:
+    """Where a rough view's blur source is: its first texel in the atlas and the scale from
+    its level's pixels to tile texels (<= 1)."""
+
+    x: int
+    y: int
+    scale: float
+
+
+class RoughAtlas:
+    def __init__(self, renderer: Renderer) -> None:
+        self.ctx = renderer.ctx
+        self.program = renderer.shaders.program("rough_isolate.vert", "rough_isolate.frag")
+        self.program["level_color"].value, self.program["level_nodes"].value = _LEVEL_UNITS
+        self.texture: moderngl.Texture | None = None
+        self._framebuffer: moderngl.Framebuffer | None = None
+        self._rows: moderngl.Buffer | None = None
+        self._vao: moderngl.VertexArray | None = None
+
+    def isolate(self, level: RenderTargets, views: list[tuple[int, tuple[int, int, int, int]]]) -> dict[int, Tile]:
+        """Copy each (view index, rectangle in ``level``'s pixels) into its own tile and
+        build the atlas mips; returns each view's tile.  One instanced draw."""
+        if not views:
+            return {}
+        ctx = self.ctx
+        rows_needed = -(-len(views) // COLUMNS)
+        self._ensure_size(COLUMNS * TILE, rows_needed * TILE)
+        width, height = self.texture.size
+        rows = np.zeros(len(views), _ROW_DTYPE)
+        tiles = {}
+        for i, (row, (view, (x, y, w, h))) in enumerate(zip(rows, views, strict=True)):
+            tx, ty = (i % COLUMNS) * TILE, (i // COLUMNS) * TILE
+            scale = min(1.0, TILE / max(w, h))
+            row["tile"] = (2.0 * tx / width - 1.0, 2.0 * ty / height - 1.0,
+                           2.0 * (tx + TILE) / width - 1.0, 2.0 * (ty + TILE) / height - 1.0)
+            row["source"] = (x, y, w, h)
+            row["place"] = (tx, ty)
+            row["scale"] = scale
+            row["view"] = float(view)
+            tiles[view] = Tile(tx, ty, scale)
+        if self._rows is None or self._rows.size < rows.nbytes:
+            if self._vao is not None:
+                self._vao.release()
+                self._rows.release()
+            self._rows = ctx.buffer(reserve=max(rows.nbytes, 32 * _ROW_DTYPE.itemsize))
+            self._vao = ctx.vertex_array(self.program, [(self._rows, _FORMAT, *_ATTRIBUTES)])
+        self._rows.write(rows.tobytes())
+        self._framebuffer.use()
+        ctx.viewport = (0, 0, width, height)
+        ctx.scissor = None
+        ctx.disable(moderngl.DEPTH_TEST | moderngl.CULL_FACE | moderngl.BLEND)
+        level.color.use(_LEVEL_UNITS[0])
+        level.node.use(_LEVEL_UNITS[1])
+        self._vao.render(moderngl.TRIANGLE_STRIP, vertices=4, instances=len(views))
+        self.texture.build_mipmaps(0, int(np.log2(TILE)))
+        return tiles
+
+    def _ensure_size(self, width: int, height: int) -> None:
+        if self.texture is not None and self.texture.size[0] >= width and self.texture.size[1] >= height:
+            return
+        self._release_texture()
+        self.texture = self.ctx.texture((width, height), 4, dtype="f2")
+        self.texture.filter = (moderngl.LINEAR_MIPMAP_LINEAR, moderngl.LINEAR)
+        self.texture.repeat_x = self.texture.repeat_y = False
+        self._framebuffer = self.ctx.framebuffer([self.texture])
+
+    def _release_texture(self) -> None:
+        if self._framebuffer is not None:
+            release_framebuffer(self._framebuffer)
+            self._framebuffer = None
+        if self.texture is not None:
+            self.texture.release()
+            self.texture = None
+
+    def release(self) -> None:
+        self._release_texture()
+        for obj in (self._vao, self._rows):
+            if obj is not None:
+                obj.release()
+        self._vao = self._rows = None
