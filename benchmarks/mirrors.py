@@ -9,7 +9,7 @@ same angles for every path), starting across the ring from the first mirror.  Ou
 ``ReflectionSystem.path`` (per_mirror, batched, auto); they run ``--warmup`` frames, then
 ``--frames`` timed frames; every (N, path) engine runs interleaved frame by frame with all
 the others, so other load on the machine falls on every one alike and the ratios between
-them hold even when absolute times drift.  The default run takes about 1.5 minutes on 2
+them hold even when absolute times drift.  The default run takes about 30 seconds on 2
 llvmpipe cores.
 
 Frame time is wall clock around ``Engine.frame`` plus ``ctx.finish()`` (every system, every
