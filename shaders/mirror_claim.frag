@@ -7,9 +7,7 @@
 // never overlap and their order does not matter.
 uniform usampler2D parent_node_map;
 uniform usampler2D parent_surface_map;
-uniform uint parent_node;
-uniform uint surface_id;
-uniform uint view_index;
+uniform uvec3 claim;            // the parent view's node index, the surface's entity, this view's index
 uniform vec2 to_parent;        // this level's pixels -> the parent level's (resolution scales)
 
 layout(location = 0) out vec4 out_color;
@@ -19,11 +17,11 @@ layout(location = 3) out uint out_node;
 
 void main() {
     ivec2 px = ivec2(gl_FragCoord.xy * to_parent);
-    if (texelFetch(parent_node_map, px, 0).r != parent_node ||
-        texelFetch(parent_surface_map, px, 0).r != surface_id) discard;
+    if (texelFetch(parent_node_map, px, 0).r != claim.x ||
+        texelFetch(parent_surface_map, px, 0).r != claim.y) discard;
     out_color = vec4(0.0);
     out_surface = 0u;
     out_seen = 0u;
-    out_node = view_index;
+    out_node = claim.z;
     gl_FragDepth = 1.0;
 }

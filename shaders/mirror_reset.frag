@@ -1,5 +1,6 @@
 #version 410 core
-// First half of preparing a reflection level, drawn over every candidate view's rectangle:
+// First half of preparing a reflection level, drawn over every candidate view's rectangle
+// (one draw, rects.vert):
 // no view owns the pixel yet, nothing is reflected there (alpha 0), and depth is the near
 // plane, so scene fragments fail the depth test here unless a claim (mirror_claim.frag)
 // takes the pixel.

@@ -279,45 +279,44 @@ class SurfaceTable:
         rectangle where it can show: enabled and within its depth, not the surface the view
         looks out of, facing the view's eye (seed 000's tip), not wholly behind the view's
         clip plane, inside the frustum and overlapping the parent's rectangle.  All parents
-        are one level deep."""
+        are one level deep.  Every (parent, surface) pair goes through the same few array
+        operations: in a frame, after the rasteriser has run, each numpy call costs several
+        times what it does in a warm loop, so their number is what counts here."""
         if not self.states or not parents:
             return []
         depth = parents[0].level + 1
-        eyes = np.array([tuple(p.view.eye) for p in parents], np.float64)                 # P x 3
-        clips = np.array([tuple(p.view.clip_plane) for p in parents], np.float64)         # P x 4
-        exits = np.array([p.surface.exit_entity if p.surface else -1 for p in parents])   # P
-        keep = (self.enabled & (depth <= np.minimum(self.max_depth, depth_cap)))[None, :]
-        keep = keep & (exits[:, None] != self.entities[None, :])
-        keep &= eyes @ self.planes[:, :3].T + self.planes[:, 3] > 0.0
-        behind = np.einsum("scj,pj->psc", self.corners[:, :, :3], clips[:, :3]) + clips[:, None, None, 3] <= 0.0
-        keep &= ~behind.all(axis=2)
-        pairs = np.argwhere(keep)
-        if not len(pairs):
-            return []
+        # Per parent: eye (3), clip plane (4), rectangle (4) and exit entity; and its
+        # view-projection with the main projection (the rectangle is in screen pixels), a
+        # glm column per row, so that corner rows @ it are the corners in clip space.
+        rows = np.array([(*p.view.eye, *p.view.clip_plane, *p.rect, p.surface.exit_entity if p.surface else -1)
+                         for p in parents], np.float64)
+        eyes, clips, rects, exits = rows[:, 0:3], rows[:, 3:7], rows[:, 7:11], rows[:, 11]
         view_projs = np.array([(main.proj * p.view.view).to_list() for p in parents], np.float64)  # P x 4 x 4
-        clip = np.einsum("kci,kij->kcj", self.corners[pairs[:, 1]], view_projs[pairs[:, 0]])     # K x 8 x 4
-        w = clip[:, :, 3]
-        outside = np.zeros(len(pairs), bool)
-        for axis in range(3):  # all corners beyond one side of the frustum
-            outside |= (clip[:, :, axis] > w).all(axis=1) | (clip[:, :, axis] < -w).all(axis=1)
-        straddles = (w <= 1e-6).any(axis=1)  # corners behind the eye: be conservative
-        ndc = clip[:, :, :2] / np.where(straddles[:, None], 1.0, w)[:, :, None]
+        keep = self.enabled & (depth <= np.minimum(self.max_depth, depth_cap))
+        keep = keep[None, :] & (exits[:, None] != self.entities[None, :])
+        keep &= eyes @ self.planes[:, :3].T + self.planes[:, 3] > 0.0
+        clip = self.corners.reshape(1, -1, 4) @ view_projs                  # P x (S x 8) x 4
+        clip = clip.reshape(len(parents), len(self.states), 8, 4)
+        side = self.corners.reshape(-1, 4) @ clips.T                        # (S x 8) x P: clip-plane side
+        keep &= (side.reshape(len(self.states), 8, -1) > 0.0).any(axis=1).T
+        w = clip[..., 3]
+        xyz = clip[..., :3]
+        outside = ((xyz > w[..., None]).all(axis=2) | (xyz < -w[..., None]).all(axis=2)).any(axis=2)
+        keep &= ~outside
+        straddles = (w <= 1e-6).any(axis=2)  # corners behind the eye: be conservative
+        ndc = clip[..., :2] / np.where(straddles[..., None], 1.0, w)[..., None]
         size = np.array(main.size, np.float64)
-        lo = np.floor((ndc.min(axis=1) * 0.5 + 0.5) * size).astype(np.int64) - 1
-        hi = np.ceil((ndc.max(axis=1) * 0.5 + 0.5) * size).astype(np.int64) + 1
+        lo = np.floor((ndc.min(axis=2) * 0.5 + 0.5) * size) - 1.0             # P x S x 2
+        hi = np.ceil((ndc.max(axis=2) * 0.5 + 0.5) * size) + 1.0
+        lo = np.where(straddles[..., None], -np.inf, lo)
+        hi = np.where(straddles[..., None], np.inf, hi)
+        x0y0 = np.maximum(lo, rects[:, None, 0:2])
+        x1y1 = np.minimum(hi, rects[:, None, 0:2] + rects[:, None, 2:4])
+        keep &= (x1y1 > x0y0).all(axis=2)
         found = []
-        for k, (p, i) in enumerate(pairs.tolist()):
-            if outside[k]:
-                continue
-            parent = parents[p]
-            if straddles[k]:
-                found.append((parent, self.states[i], parent.rect))
-                continue
-            px0, py0, pw, ph = parent.rect
-            x0, y0 = max(int(lo[k, 0]), px0), max(int(lo[k, 1]), py0)
-            x1, y1 = min(int(hi[k, 0]), px0 + pw), min(int(hi[k, 1]), py0 + ph)
-            if x1 > x0 and y1 > y0:
-                found.append((parent, self.states[i], (x0, y0, x1 - x0, y1 - y0)))
+        for p, i in np.argwhere(keep).tolist():
+            x0, y0 = int(x0y0[p, i, 0]), int(x0y0[p, i, 1])
+            found.append((parents[p], self.states[i], (x0, y0, int(x1y1[p, i, 0]) - x0, int(x1y1[p, i, 1]) - y0)))
         return found
 
 

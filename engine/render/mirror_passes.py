@@ -122,7 +122,7 @@ class MirrorPasses:
         ctx = renderer.ctx
         self.ctx = ctx
         shaders = renderer.shaders
-        self.reset = shaders.program("fullscreen.vert", "mirror_reset.frag")
+        self.reset = shaders.program("rects.vert", "mirror_reset.frag")
         self.claim = shaders.program("fullscreen.vert", "mirror_claim.frag")
         self.composite = shaders.program("mirror_composite.vert", "mirror_composite.frag",
                                          defines={"ROUGH_TILE": f"{TILE}.0"})
@@ -133,7 +133,8 @@ class MirrorPasses:
         self.composite["sky_map"].value = SKY_UNIT
         self.composite["rough_atlas"].value = _ATLAS_UNIT
         self.rough_atlas = RoughAtlas(renderer)
-        self._reset_vao = ctx.vertex_array(self.reset, [])
+        self._reset_rects: moderngl.Buffer | None = None          # clip-space triangles, grown as needed
+        self._reset_vao: moderngl.VertexArray | None = None
         self._claim_vao = ctx.vertex_array(self.claim, [])
         self._composite_rows: moderngl.Buffer | None = None       # instance rows, grown as needed
         self._composite_vao: moderngl.VertexArray | None = None
@@ -152,24 +153,39 @@ class MirrorPasses:
         ctx.enable(moderngl.DEPTH_TEST)
         ctx.disable(moderngl.BLEND | moderngl.CULL_FACE)
         ctx.depth_func = "1"  # always: both passes set every depth they touch
-        for rect in dict.fromkeys(claim.rect for claim in claims):
-            ctx.scissor = rect
-            self._reset_vao.render(moderngl.TRIANGLES, vertices=3)
+        ctx.scissor = None
+        self._draw_resets(dict.fromkeys(claim.rect for claim in claims), level.size)
         parent.node.use(_PARENT_UNITS[0])
         parent.surface.use(_PARENT_UNITS[1])
         program = self.claim
         program["to_parent"].value = (parent.size[0] / level.size[0], parent.size[1] / level.size[1])
+        claim_ids = program["claim"]
         queries = _shared_samples_queries(ctx, len(claims))
         for query, claim in zip(queries, claims, strict=False):
             ctx.scissor = claim.rect
-            program["parent_node"].value = claim.parent
-            program["surface_id"].value = claim.surface
-            program["view_index"].value = claim.index
+            claim_ids.value = (claim.parent, claim.surface, claim.index)
             with query:
                 self._claim_vao.render(moderngl.TRIANGLES, vertices=3)
         ctx.depth_func = "<"
         ctx.scissor = None
         return [query.samples for query in queries[: len(claims)]]
+
+    def _draw_resets(self, rects, size: tuple[int, int]) -> None:
+        """The reset over every rectangle in one draw (two clip-space triangles each)."""
+        rects = np.array(list(rects), np.float32).reshape(-1, 4)
+        x0 = rects[:, 0] * (2.0 / size[0]) - 1.0
+        y0 = rects[:, 1] * (2.0 / size[1]) - 1.0
+        x1 = (rects[:, 0] + rects[:, 2]) * (2.0 / size[0]) - 1.0
+        y1 = (rects[:, 1] + rects[:, 3]) * (2.0 / size[1]) - 1.0
+        corners = np.stack([x0, y0, x1, y0, x1, y1, x0, y0, x1, y1, x0, y1], axis=1).astype(np.float32)
+        if self._reset_rects is None or self._reset_rects.size < corners.nbytes:
+            if self._reset_vao is not None:
+                self._reset_vao.release()
+                self._reset_rects.release()
+            self._reset_rects = self.ctx.buffer(reserve=max(corners.nbytes, 64 * 48))
+            self._reset_vao = self.ctx.vertex_array(self.reset, [(self._reset_rects, "2f", "in_position")])
+        self._reset_rects.write(corners.tobytes())
+        self._reset_vao.render(moderngl.TRIANGLES, vertices=6 * len(rects))
 
     def composite_level(self, parent: RenderTargets, level: RenderTargets, composites: list[Composite]) -> None:
         """Blend every view of ``level`` into its surface's pixels of ``parent``: one instanced
@@ -213,7 +229,7 @@ class MirrorPasses:
         ctx.blend_func = moderngl.DEFAULT_BLENDING
 
     def release(self) -> None:
-        for obj in (self._reset_vao, self._claim_vao, self._composite_vao, self._composite_rows):
+        for obj in (self._reset_vao, self._reset_rects, self._claim_vao, self._composite_vao, self._composite_rows):
             if obj is not None:
                 obj.release()
         self.rough_atlas.release()

@@ -267,12 +267,15 @@ class Renderer:
         if self._order_stale:
             self._draw_order = sorted((b for b in self.batches.values() if b.count), key=lambda b: b.extent)
             self._order_stale = False
+        textured = None  # the uniform is written only when it changes (a write costs as much as a small draw's setup)
         for batch in self._draw_order:
             if not batch.count:
                 continue
             if batch.texture is not None:
                 batch.texture.use(ALBEDO_UNIT)
-            has_map.value = batch.texture is not None
+            if textured != (batch.texture is not None):
+                textured = batch.texture is not None
+                has_map.value = textured
             batch.draw(program)
             self.stats.draw_calls += 1
             self.stats.instances += batch.count
