@@ -1,5 +1,5 @@
 #version 410 core
-// A full-screen triangle for passes that work per pixel of a level (mask, query, composite).
+// A full-screen triangle for passes that work per pixel of a level, limited by a scissor (the claims).
 #include "fullscreen.glsl"
 
 void main() {

@@ -19,7 +19,7 @@ flat in vec4 v_reflect;
 flat in vec4 v_tint;
 flat in uvec4 v_slots;
 
-// Reflection levels draw only the pixels of their own view (see mirror_mask.frag).
+// Reflection levels draw only the pixels of their own view (the node image mirror_claim.frag wrote).
 uniform bool masked;
 uniform usampler2D node_map;
 #ifdef BATCHED_VIEWS

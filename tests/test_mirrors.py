@@ -431,3 +431,32 @@ def test_a_rough_mirror_blurs_only_its_own_reflection(scene, roughness):
     runner.world.get(ents["lamp"], Transform).position = (2.2, -10.0, 1.0)  # under the ground
     without_lamp = runner.frame().astype(int)
     assert np.abs(with_lamp - without_lamp)[left].max() <= 2  # the lamp changes nothing on the left
+
+
+def test_pixels_a_mirror_owned_last_frame_are_not_reflected_into_once_something_hides_them(scene):
+    """A level's node image and depth mask keep what the last frame's claims wrote. When a
+    box moves in front of the mirror, the pixels it now covers must lose their reflection:
+    the frame is the one a fresh engine draws with the box already there."""
+    ents = {}
+
+    def build_with(box_position):
+        def build(world):
+            base_scene(world)
+            look_from(world, (0.0, 1.5, 4.0))
+            world.spawn(Transform(position=(0, 0, 0)), MeshRef(plane(12, 12, uv_repeat=6)),
+                        Material(texture=checker_texture(64, 8)))
+            mirror_wall(world, size=(2.0, 1.5))
+            ents["box"] = world.spawn(Transform(position=box_position, scale=(0.8, 0.8, 0.8)), MeshRef(box()),
+                                      Material(color=(0.1, 0.8, 0.1)))
+        return build
+
+    in_front = (0.0, 1.5, 1.0)
+    moving = scene(build_with((30.0, 1.5, 30.0)), SIZE)
+    moving.frame()
+    occluder = ents["box"]
+    moving.world.get(occluder, Transform).position = glm.vec3(in_front)
+    moved = moving.frame().astype(int)
+    fresh = scene(build_with(in_front), SIZE).frame().astype(int)
+    col, row = moving.project(in_front)
+    assert moving.ids()[row, col] == occluder
+    assert np.abs(moved - fresh).max() <= 1

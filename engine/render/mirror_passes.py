@@ -1,8 +1,9 @@
 """The per-pixel passes of planar reflections: preparing a level (reset, then claims with
 their visibility queries) and the composite.
 
-Reset and claims are full-screen triangles limited by a scissor rectangle; the composite is
-one instanced draw per level, a quad per view over its surface.  They read the uint images
+The reset is one draw over every candidate's rectangle (rects.vert); each claim is a
+full-screen triangle limited by a scissor rectangle; the composite is one instanced draw
+per level, a quad per view over its surface.  They read the uint images
 of a level (which view drew a pixel, which entity's surface is there).  The claim does the
 work of a visibility query and a mask at once: its samples-passed count is the number of
 pixels a candidate view owns.  (A mask pass that found each pixel's owner by looping over
