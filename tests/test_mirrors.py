@@ -445,12 +445,12 @@ def test_pixels_a_mirror_owned_last_frame_are_not_reflected_into_once_something_
             look_from(world, (0.0, 1.5, 4.0))
             world.spawn(Transform(position=(0, 0, 0)), MeshRef(plane(12, 12, uv_repeat=6)),
                         Material(texture=checker_texture(64, 8)))
-            mirror_wall(world, size=(2.0, 1.5))
-            ents["box"] = world.spawn(Transform(position=box_position, scale=(0.8, 0.8, 0.8)), MeshRef(box()),
+            ents["mirror"] = mirror_wall(world, size=(2.0, 1.5))
+            ents["box"] = world.spawn(Transform(position=box_position, scale=(0.4, 0.4, 0.4)), MeshRef(box()),
                                       Material(color=(0.1, 0.8, 0.1)))
         return build
 
-    in_front = (0.0, 1.5, 1.0)
+    in_front = (-0.4, 1.4, 1.0)
     moving = scene(build_with((30.0, 1.5, 30.0)), SIZE)
     moving.frame()
     occluder = ents["box"]
@@ -459,4 +459,6 @@ def test_pixels_a_mirror_owned_last_frame_are_not_reflected_into_once_something_
     fresh = scene(build_with(in_front), SIZE).frame().astype(int)
     col, row = moving.project(in_front)
     assert moving.ids()[row, col] == occluder
+    surface = moving.engine.renderer.targets.read_surface_ids()
+    assert (surface == ents["mirror"]).sum() > 1000  # most of the mirror still shows, reflecting
     assert np.abs(moved - fresh).max() <= 1
