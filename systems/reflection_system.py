@@ -272,6 +272,7 @@ class SurfaceTable:
         self.enabled = np.array([s.enabled for s in states], bool)
         self.max_depth = np.array([s.max_depth for s in states], np.int64)
         self.entities = np.array([s.entity for s in states], np.int64)
+        self.deepest = int(self.max_depth[self.enabled].max()) if self.enabled.any() else 0
 
     def cull(self, parents: list[ReflectionView], main: View,
              depth_cap: int) -> list[tuple[ReflectionView, SurfaceState, tuple[int, int, int, int]]]:
@@ -282,34 +283,31 @@ class SurfaceTable:
         are one level deep.  Every (parent, surface) pair goes through the same few array
         operations: in a frame, after the rasteriser has run, each numpy call costs about
         twice what it does in a warm loop (measured), so their number is what counts here."""
-        if not self.states or not parents:
-            return []
-        depth = parents[0].level + 1
-        # Per parent: eye (3), clip plane (4), rectangle (4) and exit entity; and its
-        # view-projection with the main projection (the rectangle is in screen pixels), a
-        # glm column per row, so that corner rows @ it are the corners in clip space.
-        rows = np.array([(*p.view.eye, *p.view.clip_plane, *p.rect, p.surface.exit_entity if p.surface else -1)
+        depth = parents[0].level + 1 if parents else 0
+        if not parents or depth > min(self.deepest, depth_cap):
+            return []  # nothing enabled may be seen this deep (also: no surfaces at all)
+        # Per parent: eye (homogeneous, 4), rectangle (4) and exit entity.
+        rows = np.array([(*p.view.eye, 1.0, *p.rect, p.surface.exit_entity if p.surface else -1)
                          for p in parents], np.float64)
-        eyes, clips, rects, exits = rows[:, 0:3], rows[:, 3:7], rows[:, 7:11], rows[:, 11]
-        view_projs = np.array([(main.proj * p.view.view).to_list() for p in parents], np.float64)  # P x 4 x 4
-        keep = self.enabled & (depth <= np.minimum(self.max_depth, depth_cap))
-        keep = keep[None, :] & (exits[:, None] != self.entities[None, :])
-        keep &= eyes @ self.planes[:, :3].T + self.planes[:, 3] > 0.0
-        clip = self.corners.reshape(1, -1, 4) @ view_projs                  # P x (S x 8) x 4
-        clip = clip.reshape(len(parents), len(self.states), 8, 4)
-        side = self.corners.reshape(-1, 4) @ clips.T                        # (S x 8) x P: clip-plane side
-        keep &= (side.reshape(len(self.states), 8, -1) > 0.0).any(axis=1).T
-        w = clip[..., 3]
+        eyes, rects, exits = rows[:, 0:4], rows[:, 4:8], rows[:, 8]
+        # Per parent, one 4 x 5 matrix: corner rows @ it give the corners in clip space (the
+        # view-projection with the main projection, as the rectangle is in screen pixels)
+        # and, in the fifth column, which side of the parent's clip plane they are on.
+        to_clip = np.frombuffer(b"".join(glm.transpose(main.proj * p.view.view).to_bytes()
+                                         + p.view.clip_plane.to_bytes() for p in parents),
+                                np.float32).reshape(len(parents), 5, 4)
+        clip = self.corners.reshape(1, -1, 4) @ to_clip.transpose(0, 2, 1)      # P x (S x 8) x 5
+        clip = clip.reshape(len(parents), len(self.states), 8, 5)
+        keep = (self.enabled & (depth <= np.minimum(self.max_depth, depth_cap)))[None, :]
+        keep = keep & (exits[:, None] != self.entities) & (eyes @ self.planes.T > 0.0)
+        keep &= (clip[..., 4] > 0.0).any(axis=2)
+        w = clip[..., 3:4]
         xyz = clip[..., :3]
-        outside = ((xyz > w[..., None]).all(axis=2) | (xyz < -w[..., None]).all(axis=2)).any(axis=2)
-        keep &= ~outside
-        straddles = (w <= 1e-6).any(axis=2)  # corners behind the eye: be conservative
-        ndc = clip[..., :2] / np.where(straddles[..., None], 1.0, w)[..., None]
-        size = np.array(main.size, np.float64)
-        lo = np.floor((ndc.min(axis=2) * 0.5 + 0.5) * size) - 1.0             # P x S x 2
-        hi = np.ceil((ndc.max(axis=2) * 0.5 + 0.5) * size) + 1.0
-        lo = np.where(straddles[..., None], -np.inf, lo)
-        hi = np.where(straddles[..., None], np.inf, hi)
+        keep &= ~((xyz > w).all(axis=2) | (xyz < -w).all(axis=2)).any(axis=2)
+        straddles = (w <= 1e-6).any(axis=(2, 3))  # corners behind the eye: be conservative
+        pixels = (clip[..., :2] / np.where(straddles[..., None, None], 1.0, w) + 1.0) * (0.5 * np.array(main.size))
+        lo = np.where(straddles[..., None], -np.inf, np.floor(pixels.min(axis=2)) - 1.0)     # P x S x 2
+        hi = np.where(straddles[..., None], np.inf, np.ceil(pixels.max(axis=2)) + 1.0)
         x0y0 = np.maximum(lo, rects[:, None, 0:2])
         x1y1 = np.minimum(hi, rects[:, None, 0:2] + rects[:, None, 2:4])
         keep &= (x1y1 > x0y0).all(axis=2)
