@@ -178,6 +178,10 @@ class ReflectionSystem(esper.Processor):
         if main is None:
             return
         renderer = self.renderer
+        if self.mirrors or self.portals:
+            # The main view rasterises while the CPU culls and works out the first level's
+            # cameras; the same after each level's views (engine/raw_gl.py says why).
+            renderer.flush()
         root = ReflectionView(0, 0, main, (0, 0, *main.size))
         levels = [[root]]
         self.views = [root]
@@ -211,6 +215,7 @@ class ReflectionSystem(esper.Processor):
                 self.batched.render_level([c.view for c in children], targets)
             else:
                 renderer.render_reflection_views([c.view for c in children], targets)
+            renderer.flush()
             levels.append(children)
             self.views.extend(children)
         for level in range(len(levels) - 1, 0, -1):

@@ -12,6 +12,7 @@ import moderngl
 
 from engine.gl_context import GLCapabilities
 from engine.mesh import Mesh
+from engine.raw_gl import RawGL
 from engine.render.instances import GpuMesh, InstanceBatch
 from engine.render.sky import flat_cube, upload_cube
 from engine.render.targets import RenderTargets
@@ -59,6 +60,7 @@ class Renderer:
     def __init__(self, ctx: moderngl.Context, caps: GLCapabilities) -> None:
         self.ctx = ctx
         self.caps = caps
+        self.raw_gl = RawGL(ctx)
         self.shaders = ShaderLibrary(ctx)
         self.scene_program = self.shaders.program("scene.vert", "scene.frag")
         self.sky_program = self.shaders.program("sky.vert", "sky.frag")
@@ -291,6 +293,10 @@ class Renderer:
             sampler = self._reflection_sampler = self.ctx.sampler(
                 filter=(moderngl.LINEAR_MIPMAP_LINEAR, moderngl.LINEAR), anisotropy=self.reflection_anisotropy)
         return sampler
+
+    def flush(self) -> None:
+        """Start the GPU on the passes queued so far, before CPU-only work (``RawGL.flush``)."""
+        self.raw_gl.flush()
 
     def present(self, output: moderngl.Framebuffer, size: tuple[int, int]) -> None:
         """Encode the HDR image to sRGB into ``output`` (a window's or a capture target)."""
