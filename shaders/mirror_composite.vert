@@ -20,8 +20,21 @@ flat out vec4 v_normal;
 flat out mat3 v_carry;
 flat out uint v_view;        // the view's index (its pixels in the level's node image)
 
+uniform vec2 parent_size;     // pixels of the level composited into
+uniform vec2 to_reflection;   // those pixels -> the reflection level's
+
 void main() {
-    gl_Position = in_corners[gl_VertexID];
+    vec4 position = in_corners[gl_VertexID];
+    gl_Position = position;
+    // Clip distances 1-4 trim the quad to the view's rectangle, so the pixels of the
+    // surface outside it (hidden by the parent's own rectangle) are never shaded.
+    vec4 ndc_rect = in_rect / vec4(to_reflection, to_reflection) / vec4(parent_size, parent_size) * 2.0 - 1.0;
+    gl_ClipDistance[0] = 1.0;
+    gl_ClipDistance[1] = position.x - ndc_rect.x * position.w;
+    gl_ClipDistance[2] = ndc_rect.z * position.w - position.x;
+    gl_ClipDistance[3] = position.y - ndc_rect.y * position.w;
+    gl_ClipDistance[4] = ndc_rect.w * position.w - position.y;
+    gl_ClipDistance[5] = 1.0;
     v_rect = in_rect;
     v_inv_view_proj = in_inv_view_proj;
     v_eye = in_eye;

@@ -26,9 +26,9 @@ from engine.render.mirror_passes import MAX_LEVEL_VIEWS
 from engine.render.renderer import (
     ALBEDO_UNIT,
     CAMERA_BINDING,
-    GL_CLIP_DISTANCE0,
     LIGHTS_BINDING,
     NODE_UNIT,
+    RECT_CLIP_DISTANCES,
     SKY_UNIT,
     Renderer,
 )
@@ -41,9 +41,6 @@ VIEWS_BINDING = 2
 # where whole vec4 slots count); 4 keeps 12 vertices under GL 4.1's 1024 total output
 # components, and 8 invocations x 4 views cover MAX_LEVEL_VIEWS (32 invocations guaranteed).
 VIEWS_PER_INVOCATION = 4
-# The rectangle's four sides are clip distances 1-4 (0 is the mirror plane).
-RECT_CLIP_DISTANCES = range(GL_CLIP_DISTANCE0 + 1, GL_CLIP_DISTANCE0 + 5)
-
 # std140 layout of the Views block: ivec4 count, then per view (128 bytes)
 # mat4 view_proj, vec4 clip_plane, vec4 eye (w: mirrored), vec4 rect (NDC), uvec4 node.
 _VIEW_DTYPE = np.dtype([

@@ -18,7 +18,7 @@ import moderngl
 import numpy as np
 from pyglm import glm
 
-from engine.render.renderer import SKY_UNIT, Renderer
+from engine.render.renderer import RECT_CLIP_DISTANCES, SKY_UNIT, Renderer
 from engine.render.rough_atlas import TILE, RoughAtlas, Tile
 from engine.render.targets import RenderTargets
 from engine.render.views import View
@@ -236,7 +236,11 @@ class MirrorPasses:
             program["atlas_size"].value = self.rough_atlas.texture.size
         program["parent_size"].value = parent.size
         program["to_reflection"].value = (level.size[0] / parent.size[0], level.size[1] / parent.size[1])
+        for cap in RECT_CLIP_DISTANCES:
+            ctx.enable_direct(cap)
         self._composite_vao.render(moderngl.TRIANGLE_STRIP, vertices=4, instances=len(composites))
+        for cap in RECT_CLIP_DISTANCES:
+            ctx.disable_direct(cap)
         ctx.disable(moderngl.BLEND)
         ctx.blend_func = moderngl.DEFAULT_BLENDING
 

@@ -29,6 +29,9 @@ GL_SRGB8_ALPHA8 = 0x8C43
 TEXTURE_ANISOTROPY = 8.0
 GL_CLIP_DISTANCE0 = 0x3000  # the view's clip plane (mirror and portal views)
 GL_CLIP_DISTANCE_SLICE = 0x3005  # the instance's slice plane (SLICE_CLIP in scene.vert)
+# Clip distances 1-4: a rectangle, for passes that draw many views or quads in one draw
+# (the batched mirror path, the composite); enabled only around those draws.
+RECT_CLIP_DISTANCES = range(GL_CLIP_DISTANCE0 + 1, GL_CLIP_DISTANCE0 + 5)
 BACKGROUND = (0.05, 0.05, 0.06)
 
 
