@@ -58,9 +58,55 @@ _COMPOSITE_DTYPE = np.dtype([
     ("normal", "<f4", (4,)),
     ("carry", "<f4", (9,)),
 ])
-_COMPOSITE_FORMAT = "16f 4f 16f 4f 4f 4f 4f 9f/i"
 _COMPOSITE_ATTRIBUTES = ("in_corners", "in_rect", "in_inv_view_proj", "in_eye", "in_tint", "in_params", "in_normal",
                          "in_carry")
+# The composite's variants (mirror_composite.frag); a level's views are drawn grouped by them.
+COMPOSITE_VARIANTS = {"sharp": {}, "rough": {"COMPOSITE_ROUGH": "1"}, "portal": {"COMPOSITE_PORTAL": "1"}}
+
+
+def composite_variant(composite: Composite) -> str:
+    if composite.portal:
+        return "portal"
+    return "rough" if composite.roughness > 0.0 else "sharp"
+
+
+def _instance_format(program: moderngl.Program) -> tuple[str, list[str]]:
+    """The composite rows' vertex format for ``program``: a variant's shader may not read
+    every column, and the linker drops those attributes, so they are skipped as padding."""
+    parts, names = [], []
+    for name in _COMPOSITE_ATTRIBUTES:
+        count = _COMPOSITE_DTYPE[name.removeprefix("in_")].itemsize // 4
+        if name in program:
+            parts.append(f"{count}f")
+            names.append(name)
+        else:
+            parts.append(f"{4 * count}x")
+    return " ".join(parts) + "/i", names
+
+
+class _CompositeDraw:
+    """One variant of the composite: its program and its instance rows."""
+
+    def __init__(self, ctx: moderngl.Context, program: moderngl.Program) -> None:
+        self.ctx = ctx
+        self.program = program
+        self.format, self.attributes = _instance_format(program)
+        self.rows: moderngl.Buffer | None = None     # grown as needed
+        self.vao: moderngl.VertexArray | None = None
+
+    def draw(self, rows: np.ndarray) -> None:
+        if self.rows is None or self.rows.size < rows.nbytes:
+            self.release()
+            self.rows = self.ctx.buffer(reserve=max(rows.nbytes, 16 * _COMPOSITE_DTYPE.itemsize))
+            self.vao = self.ctx.vertex_array(self.program, [(self.rows, self.format, *self.attributes)])
+        self.rows.write(rows.tobytes())
+        self.vao.render(moderngl.TRIANGLE_STRIP, vertices=4, instances=len(rows))
+
+    def release(self) -> None:
+        for obj in (self.vao, self.rows):
+            if obj is not None:
+                obj.release()
+        self.vao = self.rows = None
 
 
 def composite_rows(composites: list[Composite], size: tuple[int, int]) -> np.ndarray:
@@ -136,20 +182,21 @@ class MirrorPasses:
         shaders = renderer.shaders
         self.reset = shaders.program("rects.vert", "mirror_reset.frag")
         self.claim = shaders.program("fullscreen.vert", "mirror_claim.frag")
-        self.composite = shaders.program("mirror_composite.vert", "mirror_composite.frag",
-                                         defines={"ROUGH_TILE": f"{TILE}.0"})
         self.claim["parent_node_map"].value, self.claim["parent_surface_map"].value = _PARENT_UNITS
-        units = dict(zip(("reflection", "reflection_seen", "reflection_nodes"), _REFLECTION_UNITS, strict=True))
-        for name, unit in units.items():
-            self.composite[name].value = unit
-        self.composite["sky_map"].value = SKY_UNIT
-        self.composite["rough_atlas"].value = _ATLAS_UNIT
+        self.composites: dict[str, _CompositeDraw] = {}
+        units = {**dict(zip(("reflection", "reflection_seen", "reflection_nodes"), _REFLECTION_UNITS, strict=True)),
+                 "sky_map": SKY_UNIT, "rough_atlas": _ATLAS_UNIT}
+        for variant, defines in COMPOSITE_VARIANTS.items():
+            program = shaders.program("mirror_composite.vert", "mirror_composite.frag",
+                                      defines={"ROUGH_TILE": f"{TILE}.0", **defines})
+            for name, unit in units.items():
+                if name in program:
+                    program[name].value = unit
+            self.composites[variant] = _CompositeDraw(ctx, program)
         self.rough_atlas = RoughAtlas(renderer)
         self._reset_rects: moderngl.Buffer | None = None          # clip-space triangles, grown as needed
         self._reset_vao: moderngl.VertexArray | None = None
         self._claim_vao = ctx.vertex_array(self.claim, [])
-        self._composite_rows: moderngl.Buffer | None = None       # instance rows, grown as needed
-        self._composite_vao: moderngl.VertexArray | None = None
 
     def prepare_level(self, level: RenderTargets, parent: RenderTargets, claims: list[Claim]) -> list[int]:
         """Write ``level``'s node image and depth mask for the candidate views ``claims`` and
@@ -201,25 +248,20 @@ class MirrorPasses:
 
     def composite_level(self, parent: RenderTargets, level: RenderTargets, composites: list[Composite]) -> None:
         """Blend every view of ``level`` into its surface's pixels of ``parent``: one instanced
-        draw, a quad per view over its surface (each pixel belongs to one view, so the quads
-        never blend over each other's pixels).  Rough views first get their own blur source
-        (``RoughAtlas``)."""
+        draw per composite variant present, a quad per view over its surface (each pixel
+        belongs to one view, so the quads never blend over each other's pixels).  Rough
+        views first get their own blur source (``RoughAtlas``).  The draws are flushed: the
+        CPU prepares the next level's composite while the GPU blends this one."""
         if not composites:
             return
         ctx = self.ctx
         tiles = self.rough_atlas.isolate(level, [(c.view_index, c.level_rect) for c in composites
                                                  if c.roughness > 0.0 and not c.portal])
+        groups: dict[str, list[Composite]] = {}
         for c in composites:
             c.tile = tiles.get(c.view_index)
-        rows = composite_rows(composites, parent.size)
-        if self._composite_rows is None or self._composite_rows.size < rows.nbytes:
-            if self._composite_vao is not None:
-                self._composite_vao.release()
-                self._composite_rows.release()
-            self._composite_rows = ctx.buffer(reserve=max(rows.nbytes, 16 * _COMPOSITE_DTYPE.itemsize))
-            self._composite_vao = ctx.vertex_array(
-                self.composite, [(self._composite_rows, _COMPOSITE_FORMAT, *_COMPOSITE_ATTRIBUTES)])
-        self._composite_rows.write(rows.tobytes())
+            groups.setdefault(composite_variant(c), []).append(c)
+        rows = {variant: composite_rows(group, parent.size) for variant, group in groups.items()}
         parent.composite_framebuffer.use()
         ctx.viewport = (0, 0, *parent.size)
         ctx.scissor = None
@@ -230,22 +272,28 @@ class MirrorPasses:
         for texture, unit in zip((level.color, level.seen, level.node), _REFLECTION_UNITS, strict=True):
             texture.use(unit)
         self.renderer.sky.use(SKY_UNIT)
-        program = self.composite
         if tiles:
             self.rough_atlas.texture.use(_ATLAS_UNIT)
-            program["atlas_size"].value = self.rough_atlas.texture.size
-        program["parent_size"].value = parent.size
-        program["to_reflection"].value = (level.size[0] / parent.size[0], level.size[1] / parent.size[1])
         for cap in RECT_CLIP_DISTANCES:
             ctx.enable_direct(cap)
-        self._composite_vao.render(moderngl.TRIANGLE_STRIP, vertices=4, instances=len(composites))
+        for variant, variant_rows in rows.items():
+            draw = self.composites[variant]
+            program = draw.program
+            if variant == "rough":
+                program["atlas_size"].value = self.rough_atlas.texture.size
+            program["parent_size"].value = parent.size
+            program["to_reflection"].value = (level.size[0] / parent.size[0], level.size[1] / parent.size[1])
+            draw.draw(variant_rows)
         for cap in RECT_CLIP_DISTANCES:
             ctx.disable_direct(cap)
         ctx.disable(moderngl.BLEND)
         ctx.blend_func = moderngl.DEFAULT_BLENDING
+        self.renderer.flush()
 
     def release(self) -> None:
-        for obj in (self._reset_vao, self._reset_rects, self._claim_vao, self._composite_vao, self._composite_rows):
+        for obj in (self._reset_vao, self._reset_rects, self._claim_vao):
             if obj is not None:
                 obj.release()
+        for draw in self.composites.values():
+            draw.release()
         self.rough_atlas.release()
