@@ -37,7 +37,7 @@ from engine.reflection_math import (
     transform_plane,
 )
 from engine.render.batched_mirrors import BatchedMirrors, choose_path, submitted_triangles
-from engine.render.mirror_passes import MAX_LEVEL_VIEWS, Claim, Composite, MirrorPasses
+from engine.render.mirror_passes import MAX_LEVEL_VIEWS, Claim, Composite, MirrorPasses, PreparedComposites
 from engine.render.renderer import Renderer
 from engine.render.views import View
 from engine.world import World
@@ -186,6 +186,7 @@ class ReflectionSystem(esper.Processor):
         levels = [[root]]
         self.views = [root]
         paths = set()
+        composites: list[PreparedComposites] = []
         surfaces = SurfaceTable([*self.mirrors.values(), *self.portals.values()])
         next_index = 1
         for level in range(self.max_depth_cap):
@@ -202,6 +203,8 @@ class ReflectionSystem(esper.Processor):
             # the GPU still draws the level above (the claims wait for that), not after.
             views = [self._surface_view(parent, state, main, claim.index, size, claim.rect)
                      for (parent, state, _), claim in zip(candidates, claims, strict=True)]
+            for view in views:
+                view.camera_block()  # packed now, not on the critical path of the views' draws
             pixels = self.passes.prepare_level(targets, renderer.levels[level], claims)
             children = []
             for (parent, state, rect), view, count in zip(candidates, views, pixels, strict=True):
@@ -216,20 +219,25 @@ class ReflectionSystem(esper.Processor):
             else:
                 renderer.render_reflection_views([c.view for c in children], targets)
             renderer.flush()
+            # While the GPU draws the views: their composite's rows.
+            composites.append(self._prepare_composite(children, main, renderer.levels[level].size))
             levels.append(children)
             self.views.extend(children)
         for level in range(len(levels) - 1, 0, -1):
-            parent_targets = renderer.levels[level - 1]
-            targets = renderer.levels[level]
-            self.passes.composite_level(parent_targets, targets, [Composite(
-                child.index, _to_level(child.rect, main.size, parent_targets.size), child.view.scissor,
-                child.parent.view,
-                child.surface.outline,
-                child.surface.tint, child.surface.reflect_rate, child.surface.roughness,
-                glm.vec3(child.surface.plane), portal=child.surface.kind == "portal",
-                carry=glm.mat3(child.surface.carry)) for child in levels[level]])
+            self.passes.composite_level(renderer.levels[level - 1], renderer.levels[level], composites[level - 1])
         renderer.stats.reflection_views = len(self.views) - 1
         renderer.stats.reflection_path = paths.pop() if len(paths) == 1 else ("mixed" if paths else "")
+
+    def _prepare_composite(self, children: list[ReflectionView], main: View,
+                           parent_size: tuple[int, int]) -> PreparedComposites:
+        """The composite of a level's views into the level above (``parent_size`` pixels)."""
+        return self.passes.prepare_composites([Composite(
+            child.index, _to_level(child.rect, main.size, parent_size), child.view.scissor,
+            child.parent.view,
+            child.surface.outline,
+            child.surface.tint, child.surface.reflect_rate, child.surface.roughness,
+            glm.vec3(child.surface.plane), portal=child.surface.kind == "portal",
+            carry=glm.mat3(child.surface.carry)) for child in children], parent_size)
 
     @staticmethod
     def _surface_view(parent: ReflectionView, state: SurfaceState, main: View, index: int,

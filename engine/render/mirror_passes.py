@@ -19,7 +19,7 @@ import numpy as np
 from pyglm import glm
 
 from engine.render.renderer import RECT_CLIP_DISTANCES, SKY_UNIT, Renderer
-from engine.render.rough_atlas import TILE, RoughAtlas, Tile
+from engine.render.rough_atlas import TILE, RoughAtlas, Tile, place_tiles
 from engine.render.targets import RenderTargets
 from engine.render.views import View
 
@@ -45,6 +45,14 @@ class Composite:
     portal: bool = False                                       # a plain window: no Fresnel, no tint
     carry: glm.mat3 = field(default_factory=lambda: glm.mat3(1.0))  # turns directions into the view's world
     tile: Tile | None = None                                   # a rough view's blur source (RoughAtlas)
+
+
+@dataclass
+class PreparedComposites:
+    """A level's composite, ready to draw (``MirrorPasses.prepare_composites``)."""
+
+    rough: list[tuple[int, tuple[int, int, int, int]]]   # rough views to copy into the atlas
+    rows: dict[str, np.ndarray]                          # instance rows per composite variant
 
 
 # One row per composite instance (mirror_composite.vert's attributes, in order).
@@ -246,22 +254,30 @@ class MirrorPasses:
         self._reset_rects.write(corners.tobytes())
         self._reset_vao.render(moderngl.TRIANGLES, vertices=6 * len(rects))
 
-    def composite_level(self, parent: RenderTargets, level: RenderTargets, composites: list[Composite]) -> None:
+    def prepare_composites(self, composites: list[Composite], parent_size: tuple[int, int]) -> PreparedComposites:
+        """The CPU half of compositing a level into a parent of ``parent_size`` pixels: rough
+        views' atlas tiles and each variant's instance rows.  Needs no pixels, so the
+        ReflectionSystem does it while the GPU still draws the level."""
+        rough = [(c.view_index, c.level_rect) for c in composites if composite_variant(c) == "rough"]
+        tiles = place_tiles(rough)
+        groups: dict[str, list[Composite]] = {}
+        for c in composites:
+            c.tile = tiles.get(c.view_index)
+            groups.setdefault(composite_variant(c), []).append(c)
+        rows = {variant: composite_rows(group, parent_size) for variant, group in groups.items()}
+        return PreparedComposites(rough, rows)
+
+    def composite_level(self, parent: RenderTargets, level: RenderTargets, prepared: PreparedComposites) -> None:
         """Blend every view of ``level`` into its surface's pixels of ``parent``: one instanced
         draw per composite variant present, a quad per view over its surface (each pixel
         belongs to one view, so the quads never blend over each other's pixels).  Rough
         views first get their own blur source (``RoughAtlas``).  The draws are flushed: the
         CPU prepares the next level's composite while the GPU blends this one."""
-        if not composites:
+        if not prepared.rows:
             return
         ctx = self.ctx
-        tiles = self.rough_atlas.isolate(level, [(c.view_index, c.level_rect) for c in composites
-                                                 if c.roughness > 0.0 and not c.portal])
-        groups: dict[str, list[Composite]] = {}
-        for c in composites:
-            c.tile = tiles.get(c.view_index)
-            groups.setdefault(composite_variant(c), []).append(c)
-        rows = {variant: composite_rows(group, parent.size) for variant, group in groups.items()}
+        if prepared.rough:
+            self.rough_atlas.isolate(level, prepared.rough)
         parent.composite_framebuffer.use()
         ctx.viewport = (0, 0, *parent.size)
         ctx.scissor = None
@@ -272,11 +288,11 @@ class MirrorPasses:
         for texture, unit in zip((level.color, level.seen, level.node), _REFLECTION_UNITS, strict=True):
             texture.use(unit)
         self.renderer.sky.use(SKY_UNIT)
-        if tiles:
+        if prepared.rough:
             self.rough_atlas.texture.use(_ATLAS_UNIT)
         for cap in RECT_CLIP_DISTANCES:
             ctx.enable_direct(cap)
-        for variant, variant_rows in rows.items():
+        for variant, variant_rows in prepared.rows.items():
             draw = self.composites[variant]
             program = draw.program
             if variant == "rough":

@@ -40,6 +40,13 @@ class Tile:
     scale: float
 
 
+def place_tiles(views: list[tuple[int, tuple[int, int, int, int]]]) -> dict[int, Tile]:
+    """Each (view index, rectangle) its tile, in list order on the atlas grid (no GL: the
+    composite's rows are built from this before the level's pixels are ready)."""
+    return {view: Tile((i % COLUMNS) * TILE, (i // COLUMNS) * TILE, min(1.0, TILE / max(w, h)))
+            for i, (view, (_, _, w, h)) in enumerate(views)}
+
+
 class RoughAtlas:
     def __init__(self, renderer: Renderer) -> None:
         self.ctx = renderer.ctx
@@ -60,17 +67,15 @@ class RoughAtlas:
         self._ensure_size(COLUMNS * TILE, rows_needed * TILE)
         width, height = self.texture.size
         rows = np.zeros(len(views), _ROW_DTYPE)
-        tiles = {}
-        for i, (row, (view, (x, y, w, h))) in enumerate(zip(rows, views, strict=True)):
-            tx, ty = (i % COLUMNS) * TILE, (i // COLUMNS) * TILE
-            scale = min(1.0, TILE / max(w, h))
-            row["tile"] = (2.0 * tx / width - 1.0, 2.0 * ty / height - 1.0,
-                           2.0 * (tx + TILE) / width - 1.0, 2.0 * (ty + TILE) / height - 1.0)
-            row["source"] = (x, y, w, h)
-            row["place"] = (tx, ty)
-            row["scale"] = scale
+        tiles = place_tiles(views)
+        for row, (view, rect) in zip(rows, views, strict=True):
+            tile = tiles[view]
+            row["tile"] = (2.0 * tile.x / width - 1.0, 2.0 * tile.y / height - 1.0,
+                           2.0 * (tile.x + TILE) / width - 1.0, 2.0 * (tile.y + TILE) / height - 1.0)
+            row["source"] = rect
+            row["place"] = (tile.x, tile.y)
+            row["scale"] = tile.scale
             row["view"] = float(view)
-            tiles[view] = Tile(tx, ty, scale)
         if self._rows is None or self._rows.size < rows.nbytes:
             if self._vao is not None:
                 self._vao.release()

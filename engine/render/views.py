@@ -32,18 +32,23 @@ class View:
     mirrored: bool = False
     scissor: tuple[int, int, int, int] | None = None
     node: int = 0
+    _block: bytes | None = field(default=None, init=False, repr=False, compare=False)
 
     @property
     def view_proj(self) -> glm.mat4:
         return self.proj * self.view
 
     def camera_block(self) -> bytes:
-        vp = self.view_proj
-        w, h = self.size
-        return b"".join([
-            self.view.to_bytes(), self.proj.to_bytes(), vp.to_bytes(), glm.inverse(vp).to_bytes(),
-            glm.vec4(self.eye, 1.0).to_bytes(), glm.vec4(0.0, 0.0, w, h).to_bytes(), self.clip_plane.to_bytes(),
-        ])
+        """The Camera uniform block of this view, packed once: a View is made for one pass
+        and not changed after (the ReflectionSystem packs its views while the GPU is busy)."""
+        if self._block is None:
+            vp = self.view_proj
+            w, h = self.size
+            self._block = b"".join([
+                self.view.to_bytes(), self.proj.to_bytes(), vp.to_bytes(), glm.inverse(vp).to_bytes(),
+                glm.vec4(self.eye, 1.0).to_bytes(), glm.vec4(0.0, 0.0, w, h).to_bytes(), self.clip_plane.to_bytes(),
+            ])
+        return self._block
 
 
 def camera_view(world_matrix: glm.mat4, fov_y_deg: float, near: float, far: float,
