@@ -14,8 +14,9 @@ from components import (
     Skybox,
     Transform,
 )
-from engine.mesh import box, quad
+from engine.mesh import box, plane, quad
 from engine.portals import spawn_portal_pair
+from engine.texture_data import checker_texture
 from tests.support import look_from, srgb_to_linear
 
 SIZE = (200, 150)
@@ -148,3 +149,46 @@ def test_a_portal_seen_in_a_mirror(scene):
     # its front; the mirror at z = 0 shows that at (0.3, 1.5, -11).
     col, row = runner.project((0.3, 1.5, -11.0))
     assert runner.ids()[row, col] == ents["green"]
+
+
+def test_sharp_rough_and_portal_views_in_one_level_composite_as_they_do_alone(scene):
+    """One level holding all three composite variants (mirror_composite.frag: sharp mirror,
+    rough mirror, portal), drawn as separate groups: each surface's pixels must be what they
+    are when it is the only surface in the level."""
+    def build(world):
+        lit(world)
+        look_from(world, (0.0, 2.2, 5.0), (0.0, 1.2, -2.0))
+        world.spawn(Transform(), MeshRef(plane(80, 20, uv_repeat=20)), Material(texture=checker_texture(64, 8)))
+        world.spawn(Transform(position=(-2.2, 1.5, -2.0)), MeshRef(quad(1.8, 2.0)), Material(color=(0.1, 0.1, 0.1)),
+                    Mirror())
+        world.spawn(Transform(position=(0.0, 1.5, -2.0)), MeshRef(quad(1.8, 2.0)), Material(color=(0.1, 0.1, 0.1)),
+                    Mirror(roughness=0.4))
+        spawn_portal_pair(world, (2.2, 1.5, -2.0), None, (30.0, 1.5, 0.0), HALF_TURN, size=(1.8, 2.0))
+        for x, color in ((-2.2, (0.9, 0.1, 0.1)), (0.0, (0.1, 0.2, 0.9))):
+            glowing_box(world, (x, 0.5, -0.8), color)
+        glowing_box(world, (30.0, 1.5, -3.0), (0.1, 0.9, 0.2))  # beyond the look-out portal
+
+    def surfaces(runner):
+        world = runner.world
+        mirrors = sorted(e for e, _ in world.query_one(Mirror))
+        portals = sorted(e for e, _ in world.query_one(Portal))
+        return {"sharp": [mirrors[0]], "rough": [mirrors[1]], "portal": portals}
+
+    runner = scene(build, SIZE)
+    mixed = runner.frame().astype(int)
+    owner = runner.engine.renderer.targets.read_surface_ids()
+    groups = surfaces(runner)
+    level_one = {view.surface.entity for view in runner.engine.reflection_system.views if view.level == 1}
+    assert {groups["sharp"][0], groups["rough"][0], groups["portal"][0]} <= level_one
+    for kind, keep in groups.items():
+        alone = scene(build, SIZE)
+        for other, entities in groups.items():
+            if other != kind:
+                for entity in entities:
+                    alone.world.delete_entity(entity)
+        single = alone.frame().astype(int)
+        assert {v.surface.entity for v in alone.engine.reflection_system.views if v.level == 1} == {keep[0]}
+        pixels = owner == keep[0]
+        assert pixels.sum() > 500, kind
+        assert np.abs(mixed[pixels] - single[pixels]).max() <= 2, kind
+        assert mixed[pixels].std() > 5, kind  # a reflection or a view, not a flat fill
