@@ -21,7 +21,7 @@ from pyglm import glm
 from engine.render.renderer import RECT_CLIP_DISTANCES, SKY_UNIT, Renderer
 from engine.render.rough_atlas import TILE, RoughAtlas, Tile, place_tiles
 from engine.render.targets import RenderTargets
-from engine.render.views import View
+from engine.render.views import CAMERA_BLOCK_BYTES, View
 
 MAX_LEVEL_VIEWS = 32
 _PARENT_UNITS = (3, 4)
@@ -117,6 +117,12 @@ class _CompositeDraw:
         self.vao = self.rows = None
 
 
+# Columns of a packed Camera block (views.py): view, proj, view_proj, inverse view_proj, eye, ...
+_BLOCK_VIEW_PROJ = slice(32, 48)
+_BLOCK_INVERSE = slice(48, 64)
+_BLOCK_EYE = slice(64, 67)
+
+
 def composite_rows(composites: list[Composite], size: tuple[int, int]) -> np.ndarray:
     """The instance rows of ``composites`` drawn into a level of ``size`` pixels.
 
@@ -134,28 +140,29 @@ def composite_rows(composites: list[Composite], size: tuple[int, int]) -> np.nda
     zero, one = np.zeros(count), np.ones(count)
     corners = np.stack([x0, y0, zero, one, x0, y1, zero, one, x1, y0, zero, one, x1, y1, zero, one],
                        axis=1).reshape(count, 4, 4)
+    # The parent views' packed camera blocks (drawn already) hold their view-projection, its
+    # inverse and the eye: no matrix work per composite here (views.py, CAMERA_BLOCK_BYTES).
+    blocks = np.frombuffer(b"".join(c.parent_view.camera_block() for c in composites),
+                           np.float32).reshape(count, CAMERA_BLOCK_BYTES // 4)
     outlined = [i for i, c in enumerate(composites) if c.outline is not None]
     if outlined:
         # The surface's own quad in the parent's clip space.  z = 0 keeps every depth
         # (an oblique near plane would cut the quad) while clipping still drops w <= 0.
         outlines = np.stack([composites[i].outline for i in outlined])
-        view_projs = np.frombuffer(b"".join(composites[i].parent_view.view_proj.to_bytes() for i in outlined),
-                                   np.float32).reshape(-1, 4, 4)
-        clip = outlines @ view_projs
+        clip = outlines @ blocks[outlined, _BLOCK_VIEW_PROJ].reshape(-1, 4, 4)
         clip[..., 2] = 0.0
         corners[outlined] = clip
-    inverse = np.frombuffer(b"".join(glm.inverse(c.parent_view.view_proj).to_bytes() for c in composites),
-                            np.float32).reshape(count, 16)
     carry = np.frombuffer(b"".join(c.carry.to_bytes() for c in composites), np.float32).reshape(count, 9)
     # The tile rides in the spare w components, and the view index as a float (exact below
     # 2**24): a vertex shader has 16 attribute slots and the rest of the row fills them.
     no_tile = Tile(0, 0, 0.0)
-    scalars = np.array([(*c.parent_view.eye, (c.tile or no_tile).x,
-                         *glm.vec3(c.tint), (c.tile or no_tile).scale,
-                         c.reflect_rate, c.roughness, 1.0 if c.portal else 0.0, float(c.view_index),
-                         *c.normal, (c.tile or no_tile).y) for c in composites], np.float64).reshape(count, 16)
-    flat = np.concatenate([corners.reshape(count, 16), rects[:, :2], rects[:, :2] + rects[:, 2:], inverse,
-                           scalars, carry], axis=1, dtype=np.float32)
+    tiles = [c.tile or no_tile for c in composites]
+    own = np.array([(t.x, c.tint.x, c.tint.y, c.tint.z, t.scale, c.reflect_rate, c.roughness,
+                     1.0 if c.portal else 0.0, float(c.view_index), c.normal.x, c.normal.y, c.normal.z, t.y)
+                    for c, t in zip(composites, tiles, strict=True)], np.float64).reshape(count, 13)
+    scalars = np.concatenate([blocks[:, _BLOCK_EYE], own], axis=1)
+    flat = np.concatenate([corners.reshape(count, 16), rects[:, :2], rects[:, :2] + rects[:, 2:],
+                           blocks[:, _BLOCK_INVERSE], scalars, carry], axis=1, dtype=np.float32)
     return flat.view(_COMPOSITE_DTYPE).reshape(count)
 
 
