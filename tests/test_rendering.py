@@ -358,3 +358,24 @@ def test_a_software_rasteriser_filters_reflections_trilinearly(scene, ctx):
     renderer = runner.engine.renderer
     assert GLCapabilities.read(ctx).software  # the tests run on llvmpipe
     assert renderer.texture_anisotropy > 1.0 and renderer.reflection_anisotropy == 1.0
+
+
+def test_camera_block_columns_named_in_views_hold_what_they_say():
+    """composite_rows reads the view-projection, its inverse and the eye straight out of a
+    packed Camera block by these column ranges; the block's layout must match them."""
+    from engine.render.views import (
+        CAMERA_BLOCK_BYTES,
+        CAMERA_BLOCK_EYE,
+        CAMERA_BLOCK_INVERSE,
+        CAMERA_BLOCK_VIEW_PROJ,
+        camera_view,
+    )
+
+    world_matrix = glm.translate(glm.vec3(1.0, 2.0, 3.0)) * glm.mat4_cast(glm.angleAxis(0.4, glm.vec3(0, 1, 0)))
+    view = camera_view(world_matrix, 60.0, 0.1, 50.0, (320, 200))
+    block = np.frombuffer(view.camera_block(), np.float32)
+    assert block.size * 4 == CAMERA_BLOCK_BYTES
+    vp = np.array(view.view_proj.to_list(), np.float32).reshape(16)  # column-major, as packed
+    assert np.allclose(block[CAMERA_BLOCK_VIEW_PROJ], vp)
+    assert np.allclose(block[CAMERA_BLOCK_INVERSE].reshape(4, 4).T @ vp.reshape(4, 4).T, np.eye(4), atol=1e-4)
+    assert np.allclose(block[CAMERA_BLOCK_EYE], (1.0, 2.0, 3.0))

@@ -21,7 +21,13 @@ from pyglm import glm
 from engine.render.renderer import RECT_CLIP_DISTANCES, SKY_UNIT, Renderer
 from engine.render.rough_atlas import TILE, RoughAtlas, Tile, place_tiles
 from engine.render.targets import RenderTargets
-from engine.render.views import CAMERA_BLOCK_BYTES, View
+from engine.render.views import (
+    CAMERA_BLOCK_BYTES,
+    CAMERA_BLOCK_EYE,
+    CAMERA_BLOCK_INVERSE,
+    CAMERA_BLOCK_VIEW_PROJ,
+    View,
+)
 
 MAX_LEVEL_VIEWS = 32
 _PARENT_UNITS = (3, 4)
@@ -73,6 +79,7 @@ COMPOSITE_VARIANTS = {"sharp": {}, "rough": {"COMPOSITE_ROUGH": "1"}, "portal": 
 
 
 def composite_variant(composite: Composite) -> str:
+    """Which build of mirror_composite.frag draws ``composite``."""
     if composite.portal:
         return "portal"
     return "rough" if composite.roughness > 0.0 else "sharp"
@@ -117,11 +124,6 @@ class _CompositeDraw:
         self.vao = self.rows = None
 
 
-# Columns of a packed Camera block (views.py): view, proj, view_proj, inverse view_proj, eye, ...
-_BLOCK_VIEW_PROJ = slice(32, 48)
-_BLOCK_INVERSE = slice(48, 64)
-_BLOCK_EYE = slice(64, 67)
-
 
 def composite_rows(composites: list[Composite], size: tuple[int, int]) -> np.ndarray:
     """The instance rows of ``composites`` drawn into a level of ``size`` pixels.
@@ -149,7 +151,7 @@ def composite_rows(composites: list[Composite], size: tuple[int, int]) -> np.nda
         # The surface's own quad in the parent's clip space.  z = 0 keeps every depth
         # (an oblique near plane would cut the quad) while clipping still drops w <= 0.
         outlines = np.stack([composites[i].outline for i in outlined])
-        clip = outlines @ blocks[outlined, _BLOCK_VIEW_PROJ].reshape(-1, 4, 4)
+        clip = outlines @ blocks[outlined, CAMERA_BLOCK_VIEW_PROJ].reshape(-1, 4, 4)
         clip[..., 2] = 0.0
         corners[outlined] = clip
     carry = np.frombuffer(b"".join(c.carry.to_bytes() for c in composites), np.float32).reshape(count, 9)
@@ -160,9 +162,9 @@ def composite_rows(composites: list[Composite], size: tuple[int, int]) -> np.nda
     own = np.array([(t.x, c.tint.x, c.tint.y, c.tint.z, t.scale, c.reflect_rate, c.roughness,
                      1.0 if c.portal else 0.0, float(c.view_index), c.normal.x, c.normal.y, c.normal.z, t.y)
                     for c, t in zip(composites, tiles, strict=True)], np.float64).reshape(count, 13)
-    scalars = np.concatenate([blocks[:, _BLOCK_EYE], own], axis=1)
+    scalars = np.concatenate([blocks[:, CAMERA_BLOCK_EYE], own], axis=1)
     flat = np.concatenate([corners.reshape(count, 16), rects[:, :2], rects[:, :2] + rects[:, 2:],
-                           blocks[:, _BLOCK_INVERSE], scalars, carry], axis=1, dtype=np.float32)
+                           blocks[:, CAMERA_BLOCK_INVERSE], scalars, carry], axis=1, dtype=np.float32)
     return flat.view(_COMPOSITE_DTYPE).reshape(count)
 
 

@@ -8,6 +8,11 @@ import numpy as np
 from pyglm import glm
 
 CAMERA_BLOCK_BYTES = 4 * 64 + 3 * 16
+# Float columns of a packed Camera block (View.camera_block; camera.glsl): view 0-15,
+# proj 16-31, then these, then viewport and clip plane.
+CAMERA_BLOCK_VIEW_PROJ = slice(32, 48)
+CAMERA_BLOCK_INVERSE = slice(48, 64)
+CAMERA_BLOCK_EYE = slice(64, 67)
 NO_CLIP = glm.vec4(0.0, 0.0, 0.0, 1.0)
 MAX_DIRECTIONAL_LIGHTS = 4
 MAX_POINT_LIGHTS = 16
