@@ -37,7 +37,15 @@ from engine.reflection_math import (
     transform_plane,
 )
 from engine.render.batched_mirrors import BatchedMirrors, choose_path, submitted_triangles
-from engine.render.mirror_passes import MAX_LEVEL_VIEWS, Claim, Composite, MirrorPasses, PreparedComposites
+from engine.render.mirror_passes import (
+    MAX_LEVEL_VIEWS,
+    Claim,
+    Composite,
+    CompositeSurface,
+    MirrorPasses,
+    PreparedComposites,
+    composite_surface,
+)
 from engine.render.renderer import Renderer
 from engine.render.views import View
 from engine.world import World
@@ -72,6 +80,12 @@ class SurfaceState:
     reflect_rate: float = 1.0
     roughness: float = 0.0
     resolution_scale: float = 1.0
+    look: CompositeSurface | None = None   # what its composite reads (tint, rate, outline...), packed once
+
+    def __post_init__(self) -> None:
+        if self.look is None:
+            self.look = composite_surface(self.tint, self.reflect_rate, self.roughness, glm.vec3(self.plane),
+                                          self.outline, portal=self.kind == "portal", carry=glm.mat3(self.carry))
 
 
 @dataclass
@@ -232,12 +246,8 @@ class ReflectionSystem(esper.Processor):
                            parent_size: tuple[int, int]) -> PreparedComposites:
         """The composite of a level's views into the level above (``parent_size`` pixels)."""
         return self.passes.prepare_composites([Composite(
-            child.index, _to_level(child.rect, main.size, parent_size), child.view.scissor,
-            child.parent.view,
-            child.surface.outline,
-            child.surface.tint, child.surface.reflect_rate, child.surface.roughness,
-            glm.vec3(child.surface.plane), portal=child.surface.kind == "portal",
-            carry=glm.mat3(child.surface.carry)) for child in children], parent_size)
+            child.index, _to_level(child.rect, main.size, parent_size), child.view.scissor, child.parent.view,
+            child.surface.look) for child in children], parent_size)
 
     @staticmethod
     def _surface_view(parent: ReflectionView, state: SurfaceState, main: View, index: int,

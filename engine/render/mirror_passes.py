@@ -12,7 +12,8 @@ reads; a claim per view costs a few ns a pixel.)
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+import struct
+from dataclasses import dataclass
 
 import moderngl
 import numpy as np
@@ -22,7 +23,6 @@ from engine.render.renderer import RECT_CLIP_DISTANCES, SKY_UNIT, Renderer
 from engine.render.rough_atlas import TILE, RoughAtlas, Tile, place_tiles
 from engine.render.targets import RenderTargets
 from engine.render.views import (
-    CAMERA_BLOCK_BYTES,
     CAMERA_BLOCK_EYE,
     CAMERA_BLOCK_INVERSE,
     CAMERA_BLOCK_VIEW_PROJ,
@@ -35,7 +35,34 @@ _REFLECTION_UNITS = (3, 4, 5)
 _ATLAS_UNIT = 6
 
 
-@dataclass
+@dataclass(frozen=True)
+class CompositeSurface:
+    """What a surface's composite reads that stays put while the surface does, packed once
+    (``composite_surface``) so a level's rows are joins of bytes, not numpy work."""
+
+    variant: str                 # the build of mirror_composite.frag (COMPOSITE_VARIANTS)
+    roughness: float
+    reflect_rate: float
+    portal: float                # 1.0: a plain window (no Fresnel, no tint)
+    outline: glm.mat4 | None     # its 4 world corners as columns (a 2 x 2 grid), or None: the rect
+    tint: bytes                  # 3 floats
+    normal: bytes                # 3 floats: world, facing the side it is seen from
+    carry: bytes                 # a column-major mat3: directions here -> the view's world
+
+
+def composite_surface(tint: glm.vec4, reflect_rate: float, roughness: float, normal: glm.vec3,
+                      outline: np.ndarray | None = None, portal: bool = False,
+                      carry: glm.mat3 | None = None) -> CompositeSurface:
+    """A surface's composite parameters; ``outline`` is its 4 world corners as homogeneous
+    rows in 2 x 2 grid order (None: composite over its screen rectangle)."""
+    variant = "portal" if portal else ("rough" if roughness > 0.0 else "sharp")
+    columns = None if outline is None else glm.mat4(*(glm.vec4(*map(float, row)) for row in outline))
+    return CompositeSurface(variant, float(roughness), float(reflect_rate), 1.0 if portal else 0.0, columns,
+                            glm.vec3(tint).to_bytes(), glm.vec3(normal).to_bytes(),
+                            (carry if carry is not None else glm.mat3(1.0)).to_bytes())
+
+
+@dataclass(slots=True)
 class Composite:
     """One view of a reflection level as its composite sees it."""
 
@@ -43,13 +70,7 @@ class Composite:
     rect: tuple[int, int, int, int]                            # in the parent level's pixels
     level_rect: tuple[int, int, int, int]                      # the same, in the view's level (its claim)
     parent_view: View                                          # the view that sees the surface
-    outline: np.ndarray | None                                 # 4 world corners (2 x 2 grid) or None: the rect
-    tint: glm.vec4
-    reflect_rate: float
-    roughness: float
-    normal: glm.vec3                                           # world, facing the parent eye
-    portal: bool = False                                       # a plain window: no Fresnel, no tint
-    carry: glm.mat3 = field(default_factory=lambda: glm.mat3(1.0))  # turns directions into the view's world
+    surface: CompositeSurface
     tile: Tile | None = None                                   # a rough view's blur source (RoughAtlas)
 
 
@@ -58,39 +79,34 @@ class PreparedComposites:
     """A level's composite, ready to draw (``MirrorPasses.prepare_composites``)."""
 
     rough: list[tuple[int, tuple[int, int, int, int]]]   # rough views to copy into the atlas
-    rows: dict[str, np.ndarray]                          # instance rows per composite variant
+    rows: dict[str, bytes]                               # packed instance rows per composite variant
 
 
-# One row per composite instance (mirror_composite.vert's attributes, in order).
-_COMPOSITE_DTYPE = np.dtype([
-    ("corners", "<f4", (4, 4)),
-    ("rect", "<f4", (4,)),
-    ("inv_view_proj", "<f4", (16,)),
-    ("eye", "<f4", (4,)),
-    ("tint", "<f4", (4,)),
-    ("params", "<f4", (4,)),
-    ("normal", "<f4", (4,)),
-    ("carry", "<f4", (9,)),
-])
-_COMPOSITE_ATTRIBUTES = ("in_corners", "in_rect", "in_inv_view_proj", "in_eye", "in_tint", "in_params", "in_normal",
-                         "in_carry")
+# One row per composite instance (mirror_composite.vert's attributes, in order): the 4 clip
+# corners, the view's rectangle in its level, the parent's inverse view-projection, then
+# eye.xyz + tile x, tint.rgb + tile scale, (reflect_rate, roughness, is_portal, view index),
+# normal.xyz + tile y, carry.  The tile and the index ride in spare components: a vertex
+# shader has 16 attribute slots and the rest of the row fills them.
+_COMPOSITE_ROW = struct.Struct("<64s4f64s12sf12sf4f12sf36s")
+_COMPOSITE_COLUMNS = (("in_corners", 16), ("in_rect", 4), ("in_inv_view_proj", 16), ("in_eye", 4), ("in_tint", 4),
+                      ("in_params", 4), ("in_normal", 4), ("in_carry", 9))
+# The parts of a packed Camera block (views.py) a composite row copies, in bytes.
+_BLOCK_VIEW_PROJ = slice(4 * CAMERA_BLOCK_VIEW_PROJ.start, 4 * CAMERA_BLOCK_VIEW_PROJ.stop)
+_BLOCK_INVERSE = slice(4 * CAMERA_BLOCK_INVERSE.start, 4 * CAMERA_BLOCK_INVERSE.stop)
+_BLOCK_EYE = slice(4 * CAMERA_BLOCK_EYE.start, 4 * CAMERA_BLOCK_EYE.stop)
+# Flattens clip-space corners onto z = 0: every depth is kept (an oblique near plane would
+# cut the quad) while clipping still drops w <= 0.
+_FLATTEN_Z = glm.mat4(1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0)
+_NO_TILE = Tile(0, 0, 0.0)
 # The composite's variants (mirror_composite.frag); a level's views are drawn grouped by them.
 COMPOSITE_VARIANTS = {"sharp": {}, "rough": {"COMPOSITE_ROUGH": "1"}, "portal": {"COMPOSITE_PORTAL": "1"}}
-
-
-def composite_variant(composite: Composite) -> str:
-    """Which build of mirror_composite.frag draws ``composite``."""
-    if composite.portal:
-        return "portal"
-    return "rough" if composite.roughness > 0.0 else "sharp"
 
 
 def _instance_format(program: moderngl.Program) -> tuple[str, list[str]]:
     """The composite rows' vertex format for ``program``: a variant's shader may not read
     every column, and the linker drops those attributes, so they are skipped as padding."""
     parts, names = [], []
-    for name in _COMPOSITE_ATTRIBUTES:
-        count = _COMPOSITE_DTYPE[name.removeprefix("in_")].itemsize // 4
+    for name, count in _COMPOSITE_COLUMNS:
         if name in program:
             parts.append(f"{count}f")
             names.append(name)
@@ -109,13 +125,13 @@ class _CompositeDraw:
         self.rows: moderngl.Buffer | None = None     # grown as needed
         self.vao: moderngl.VertexArray | None = None
 
-    def draw(self, rows: np.ndarray) -> None:
-        if self.rows is None or self.rows.size < rows.nbytes:
+    def draw(self, rows: bytes) -> None:
+        if self.rows is None or self.rows.size < len(rows):
             self.release()
-            self.rows = self.ctx.buffer(reserve=max(rows.nbytes, 16 * _COMPOSITE_DTYPE.itemsize))
+            self.rows = self.ctx.buffer(reserve=max(len(rows), 16 * _COMPOSITE_ROW.size))
             self.vao = self.ctx.vertex_array(self.program, [(self.rows, self.format, *self.attributes)])
-        self.rows.write(rows.tobytes())
-        self.vao.render(moderngl.TRIANGLE_STRIP, vertices=4, instances=len(rows))
+        self.rows.write(rows)
+        self.vao.render(moderngl.TRIANGLE_STRIP, vertices=4, instances=len(rows) // _COMPOSITE_ROW.size)
 
     def release(self) -> None:
         for obj in (self.vao, self.rows):
@@ -125,47 +141,32 @@ class _CompositeDraw:
 
 
 
-def composite_rows(composites: list[Composite], size: tuple[int, int]) -> np.ndarray:
-    """The instance rows of ``composites`` drawn into a level of ``size`` pixels.
+def composite_rows(composites: list[Composite], size: tuple[int, int]) -> bytes:
+    """The packed instance rows of ``composites`` drawn into a level of ``size`` pixels.
 
-    Built a block of columns at a time (a few numpy calls per level, not per view: per-row
-    assignment was a tenth of the main thread's time in an 8-mirror frame)."""
-    count = len(composites)
-    width, height = size
-    rects = np.array([c.level_rect for c in composites], np.float64).reshape(count, 4)
-    screen = np.array([c.rect for c in composites], np.float64).reshape(count, 4)
-    # Without an outline, the quad is the rectangle in the parent's clip space.
-    x0 = 2.0 * screen[:, 0] / width - 1.0
-    y0 = 2.0 * screen[:, 1] / height - 1.0
-    x1 = 2.0 * (screen[:, 0] + screen[:, 2]) / width - 1.0
-    y1 = 2.0 * (screen[:, 1] + screen[:, 3]) / height - 1.0
-    zero, one = np.zeros(count), np.ones(count)
-    corners = np.stack([x0, y0, zero, one, x0, y1, zero, one, x1, y0, zero, one, x1, y1, zero, one],
-                       axis=1).reshape(count, 4, 4)
-    # The parent views' packed camera blocks (drawn already) hold their view-projection, its
-    # inverse and the eye: no matrix work per composite here (views.py, CAMERA_BLOCK_BYTES).
-    blocks = np.frombuffer(b"".join(c.parent_view.camera_block() for c in composites),
-                           np.float32).reshape(count, CAMERA_BLOCK_BYTES // 4)
-    outlined = [i for i, c in enumerate(composites) if c.outline is not None]
-    if outlined:
-        # The surface's own quad in the parent's clip space.  z = 0 keeps every depth
-        # (an oblique near plane would cut the quad) while clipping still drops w <= 0.
-        outlines = np.stack([composites[i].outline for i in outlined])
-        clip = outlines @ blocks[outlined, CAMERA_BLOCK_VIEW_PROJ].reshape(-1, 4, 4)
-        clip[..., 2] = 0.0
-        corners[outlined] = clip
-    carry = np.frombuffer(b"".join(c.carry.to_bytes() for c in composites), np.float32).reshape(count, 9)
-    # The tile rides in the spare w components, and the view index as a float (exact below
-    # 2**24): a vertex shader has 16 attribute slots and the rest of the row fills them.
-    no_tile = Tile(0, 0, 0.0)
-    tiles = [c.tile or no_tile for c in composites]
-    own = np.array([(t.x, c.tint.x, c.tint.y, c.tint.z, t.scale, c.reflect_rate, c.roughness,
-                     1.0 if c.portal else 0.0, float(c.view_index), c.normal.x, c.normal.y, c.normal.z, t.y)
-                    for c, t in zip(composites, tiles, strict=True)], np.float64).reshape(count, 13)
-    scalars = np.concatenate([blocks[:, CAMERA_BLOCK_EYE], own], axis=1)
-    flat = np.concatenate([corners.reshape(count, 16), rects[:, :2], rects[:, :2] + rects[:, 2:],
-                           blocks[:, CAMERA_BLOCK_INVERSE], scalars, carry], axis=1, dtype=np.float32)
-    return flat.view(_COMPOSITE_DTYPE).reshape(count)
+    A row is one struct pack of pieces packed earlier (the surface's, the parent view's
+    camera block) and one matrix product for an outlined surface: in a frame, after the
+    rasteriser has run, the numpy version of this cost ~0.27 ms a level (measured on
+    llvmpipe), several times its warm cost, for a handful of rows."""
+    sx, sy = 2.0 / size[0], 2.0 / size[1]
+    rows = []
+    for c in composites:
+        surface = c.surface
+        block = c.parent_view.camera_block()
+        if surface.outline is not None:
+            # The surface's own quad in the parent's clip space, flattened onto z = 0.
+            corners = (_FLATTEN_Z * glm.mat4.from_bytes(block[_BLOCK_VIEW_PROJ]) * surface.outline).to_bytes()
+        else:
+            x, y, w, h = c.rect
+            x0, y0, x1, y1 = x * sx - 1.0, y * sy - 1.0, (x + w) * sx - 1.0, (y + h) * sy - 1.0
+            corners = struct.pack("<16f", x0, y0, 0.0, 1.0, x0, y1, 0.0, 1.0, x1, y0, 0.0, 1.0, x1, y1, 0.0, 1.0)
+        lx, ly, lw, lh = c.level_rect
+        tile = c.tile or _NO_TILE
+        rows.append(_COMPOSITE_ROW.pack(
+            corners, lx, ly, lx + lw, ly + lh, block[_BLOCK_INVERSE], block[_BLOCK_EYE], tile.x,
+            surface.tint, tile.scale, surface.reflect_rate, surface.roughness, surface.portal, float(c.view_index),
+            surface.normal, tile.y, surface.carry))
+    return b"".join(rows)
 
 
 def _shared_samples_queries(ctx: moderngl.Context, count: int) -> list[moderngl.Query]:
@@ -267,12 +268,12 @@ class MirrorPasses:
         """The CPU half of compositing a level into a parent of ``parent_size`` pixels: rough
         views' atlas tiles and each variant's instance rows.  Needs no pixels, so the
         ReflectionSystem does it while the GPU still draws the level."""
-        rough = [(c.view_index, c.level_rect) for c in composites if composite_variant(c) == "rough"]
+        rough = [(c.view_index, c.level_rect) for c in composites if c.surface.variant == "rough"]
         tiles = place_tiles(rough)
         groups: dict[str, list[Composite]] = {}
         for c in composites:
             c.tile = tiles.get(c.view_index)
-            groups.setdefault(composite_variant(c), []).append(c)
+            groups.setdefault(c.surface.variant, []).append(c)
         rows = {variant: composite_rows(group, parent_size) for variant, group in groups.items()}
         return PreparedComposites(rough, rows)
 
