@@ -379,3 +379,42 @@ def test_camera_block_columns_named_in_views_hold_what_they_say():
     assert np.allclose(block[CAMERA_BLOCK_VIEW_PROJ], vp)
     assert np.allclose(block[CAMERA_BLOCK_INVERSE].reshape(4, 4).T @ vp.reshape(4, 4).T, np.eye(4), atol=1e-4)
     assert np.allclose(block[CAMERA_BLOCK_EYE], (1.0, 2.0, 3.0))
+
+
+def test_composite_rows_hold_each_views_quad_and_parameters_where_the_shader_reads_them():
+    """composite_rows packs a row per view with struct (mirror_composite.vert's attributes,
+    in order); checked here against numpy arithmetic done independently: the outline's
+    corners in the parent's clip space flattened onto z = 0, a rectangle's corners in NDC,
+    the parent's inverse view-projection and eye, and the surface's and tile's numbers."""
+    from engine.render.mirror_passes import Composite, composite_rows, composite_surface
+    from engine.render.rough_atlas import Tile
+    from engine.render.views import camera_view
+
+    parent = camera_view(glm.translate(glm.vec3(0.5, 1.0, 6.0)), 60.0, 0.1, 50.0, (200, 100))
+    outline = np.array([(x, y, 0.0, 1.0) for x in (-1.0, 1.0) for y in (0.0, 1.5)])
+    mirror = composite_surface(glm.vec4(0.9, 0.8, 0.7, 1.0), 0.75, 0.5, glm.vec3(0.0, 0.0, 1.0), outline)
+    carry = glm.mat3(glm.rotate(0.3, glm.vec3(0, 1, 0)))
+    portal = composite_surface(glm.vec4(1.0), 1.0, 0.0, glm.vec3(1.0, 0.0, 0.0), None, portal=True, carry=carry)
+    rows = composite_rows([
+        Composite(7, (10, 20, 30, 40), (11, 21, 31, 41), parent, mirror, Tile(256, 512, 0.5)),
+        Composite(9, (50, 60, 20, 10), (50, 60, 20, 10), parent, portal),
+    ], (200, 100))
+    table = np.frombuffer(rows, np.float32).reshape(2, 61)
+    corners, rect, inverse = table[:, 0:16].reshape(2, 4, 4), table[:, 16:20], table[:, 20:36].reshape(2, 4, 4)
+    eye, tint, params, normal = (table[:, i:i + 4] for i in (36, 40, 44, 48))
+    carried = table[:, 52:61]
+
+    view_proj = np.array(parent.view_proj.to_list(), np.float64)       # rows = columns of the GL matrix
+    expected = outline @ view_proj
+    expected[:, 2] = 0.0
+    assert np.allclose(corners[0], expected, atol=1e-5)
+    x0, y0, x1, y1 = 2 * 50 / 200 - 1, 2 * 60 / 100 - 1, 2 * 70 / 200 - 1, 2 * 70 / 100 - 1
+    assert np.allclose(corners[1], [(x0, y0, 0, 1), (x0, y1, 0, 1), (x1, y0, 0, 1), (x1, y1, 0, 1)])
+    assert np.allclose(rect, [(11, 21, 42, 62), (50, 60, 70, 70)])
+    assert np.allclose(inverse[0] @ view_proj, np.eye(4), atol=1e-4) and np.allclose(inverse[1], inverse[0])
+    assert np.allclose(eye[:, :3], (0.5, 1.0, 6.0))
+    assert np.allclose(eye[:, 3], (256, 0)) and np.allclose(normal[:, 3], (512, 0))   # tile x, y
+    assert np.allclose(tint, [(0.9, 0.8, 0.7, 0.5), (1.0, 1.0, 1.0, 0.0)])           # rgb, tile scale
+    assert np.allclose(params, [(0.75, 0.5, 0.0, 7.0), (1.0, 0.0, 1.0, 9.0)])        # rate, roughness, portal, index
+    assert np.allclose(normal[:, :3], [(0, 0, 1), (1, 0, 0)])
+    assert np.allclose(carried[0], np.eye(3).ravel()) and np.allclose(carried[1], np.array(carry.to_list()).ravel())
