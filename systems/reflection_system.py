@@ -100,6 +100,17 @@ class ReflectionView:
     parent: ReflectionView | None = None
 
 
+@dataclass
+class LevelCandidates:
+    """The views a reflection level may have, before its claims say which have pixels."""
+
+    found: list[tuple[ReflectionView, SurfaceState, tuple[int, int, int, int]]]  # (parent, surface, screen rect)
+    size: tuple[int, int]          # the level's pixels
+    claims: list[Claim]
+    views: list[View]              # each candidate's camera, in claim order
+    next_index: int                # the first view index the level after may use
+
+
 class ReflectionSystem(esper.Processor):
     """Renders and composites mirror reflections after the main view, before present."""
 
@@ -202,26 +213,14 @@ class ReflectionSystem(esper.Processor):
         paths = set()
         composites: list[PreparedComposites] = []
         surfaces = SurfaceTable([*self.mirrors.values(), *self.portals.values()])
-        next_index = 1
+        candidates = self._candidates(surfaces, [root], main, 1)
         for level in range(self.max_depth_cap):
-            candidates = surfaces.cull(levels[level], main, self.max_depth_cap)
-            if not candidates:
+            if candidates is None:
                 break
-            scale = max(state.resolution_scale for _, state, _ in candidates)
-            size = (max(1, round(main.size[0] * scale)), max(1, round(main.size[1] * scale)))
-            targets = renderer.level_targets(level + 1, size)
-            claims = [Claim(parent.index, state.entity, next_index + k, _to_level(rect, main.size, size))
-                      for k, (parent, state, rect) in enumerate(candidates)]
-            next_index += len(claims)
-            # Every candidate's camera is worked out before the claims: the CPU does it while
-            # the GPU still draws the level above (the claims wait for that), not after.
-            views = [self._surface_view(parent, state, main, claim.index, size, claim.rect)
-                     for (parent, state, _), claim in zip(candidates, claims, strict=True)]
-            for view in views:
-                view.camera_block()  # packed now, not on the critical path of the views' draws
-            pixels = self.passes.prepare_level(targets, renderer.levels[level], claims)
+            targets = renderer.level_targets(level + 1, candidates.size)
+            pixels = self.passes.prepare_level(targets, renderer.levels[level], candidates.claims)
             children = []
-            for (parent, state, rect), view, count in zip(candidates, views, pixels, strict=True):
+            for (parent, state, rect), view, count in zip(candidates.found, candidates.views, pixels, strict=True):
                 if count and len(children) < MAX_LEVEL_VIEWS:
                     children.append(ReflectionView(view.node, level + 1, view, rect, state, parent))
             if not children:
@@ -233,14 +232,34 @@ class ReflectionSystem(esper.Processor):
             else:
                 renderer.render_reflection_views([c.view for c in children], targets)
             renderer.flush()
-            # While the GPU draws the views: their composite's rows.
-            composites.append(self._prepare_composite(children, main, renderer.levels[level].size))
             levels.append(children)
             self.views.extend(children)
+            # While the GPU draws the views: the next level's cull and cameras (measured: on
+            # the critical path when done after the views finish), then their composite rows.
+            candidates = self._candidates(surfaces, children, main, candidates.next_index)
+            composites.append(self._prepare_composite(children, main, renderer.levels[level].size))
         for level in range(len(levels) - 1, 0, -1):
             self.passes.composite_level(renderer.levels[level - 1], renderer.levels[level], composites[level - 1])
         renderer.stats.reflection_views = len(self.views) - 1
         renderer.stats.reflection_path = paths.pop() if len(paths) == 1 else ("mixed" if paths else "")
+
+    def _candidates(self, surfaces: SurfaceTable, parents: list[ReflectionView], main: View,
+                    first_index: int) -> LevelCandidates | None:
+        """The next level's candidate views: every (parent, surface) the cull keeps, its claim
+        (view indices from ``first_index``) and its camera, packed; None when there are none.
+        Needs no pixels, so it is done while the GPU draws the parents."""
+        found = surfaces.cull(parents, main, self.max_depth_cap)
+        if not found:
+            return None
+        scale = max(state.resolution_scale for _, state, _ in found)
+        size = (max(1, round(main.size[0] * scale)), max(1, round(main.size[1] * scale)))
+        claims = [Claim(parent.index, state.entity, first_index + k, _to_level(rect, main.size, size))
+                  for k, (parent, state, rect) in enumerate(found)]
+        views = [self._surface_view(parent, state, main, claim.index, size, claim.rect)
+                 for (parent, state, _), claim in zip(found, claims, strict=True)]
+        for view in views:
+            view.camera_block()  # packed now, not on the critical path of the views' draws
+        return LevelCandidates(found, size, claims, views, first_index + len(claims))
 
     def _prepare_composite(self, children: list[ReflectionView], main: View,
                            parent_size: tuple[int, int]) -> PreparedComposites:
