@@ -315,6 +315,15 @@ class SurfaceTable:
         self.max_depth = np.array([s.max_depth for s in states], np.int64)
         self.entities = np.array([s.entity for s in states], np.int64)
         self.deepest = int(self.max_depth[self.enabled].max()) if self.enabled.any() else 0
+        self._allowed_at: dict[tuple[int, int], np.ndarray] = {}
+
+    def _allowed(self, depth: int, depth_cap: int) -> np.ndarray:
+        """Which surfaces may be seen at ``depth`` (enabled, within their and the cap's depth)."""
+        allowed = self._allowed_at.get((depth, depth_cap))
+        if allowed is None:
+            allowed = self._allowed_at[(depth, depth_cap)] = self.enabled & (
+                depth <= np.minimum(self.max_depth, depth_cap))
+        return allowed
 
     def cull(self, parents: list[ReflectionView], main: View,
              depth_cap: int) -> list[tuple[ReflectionView, SurfaceState, tuple[int, int, int, int]]]:
@@ -328,36 +337,48 @@ class SurfaceTable:
         depth = parents[0].level + 1 if parents else 0
         if not parents or depth > min(self.deepest, depth_cap):
             return []  # nothing enabled may be seen this deep (also: no surfaces at all)
-        # Per parent: eye (homogeneous, 4), rectangle (4) and exit entity.
-        rows = np.array([(*p.view.eye, 1.0, *p.rect, p.surface.exit_entity if p.surface else -1)
-                         for p in parents], np.float64)
+        # Per parent: eye (homogeneous, 4), rectangle corners (x0, y0, x1, y1) and exit entity.
+        rows = np.array([(*p.view.eye, 1.0, p.rect[0], p.rect[1], p.rect[0] + p.rect[2], p.rect[1] + p.rect[3],
+                          p.surface.exit_entity if p.surface else -1) for p in parents], np.float64)
         eyes, rects, exits = rows[:, 0:4], rows[:, 4:8], rows[:, 8]
-        # Per parent, one 4 x 5 matrix: corner rows @ it give the corners in clip space (the
-        # view-projection with the main projection, as the rectangle is in screen pixels)
-        # and, in the fifth column, which side of the parent's clip plane they are on.
-        to_clip = np.frombuffer(b"".join(glm.transpose(main.proj * p.view.view).to_bytes()
+        # Per parent, one 4 x 11 matrix: corner rows @ it give the corners in clip space (the
+        # view-projection with the main projection, as the rectangle is in screen pixels),
+        # then six values that are > 0 outside each side of the frustum (x > w, x < -w, ...)
+        # and the corner's side of the parent's clip plane.
+        rows_in = np.frombuffer(b"".join(glm.transpose(main.proj * p.view.view).to_bytes()
                                          + p.view.clip_plane.to_bytes() for p in parents),
                                 np.float32).reshape(len(parents), 5, 4)
-        clip = self.corners.reshape(1, -1, 4) @ to_clip.transpose(0, 2, 1)      # P x (S x 8) x 5
-        clip = clip.reshape(len(parents), len(self.states), 8, 5)
-        keep = (self.enabled & (depth <= np.minimum(self.max_depth, depth_cap)))[None, :]
-        keep = keep & (exits[:, None] != self.entities) & (eyes @ self.planes.T > 0.0)
-        keep &= (clip[..., 4] > 0.0).any(axis=2)
-        w = clip[..., 3:4]
-        xyz = clip[..., :3]
-        keep &= ~((xyz > w).all(axis=2) | (xyz < -w).all(axis=2)).any(axis=2)
-        straddles = (w <= 1e-6).any(axis=(2, 3))  # corners behind the eye: be conservative
-        pixels = (clip[..., :2] / np.where(straddles[..., None, None], 1.0, w) + 1.0) * (0.5 * np.array(main.size))
-        lo = np.where(straddles[..., None], -np.inf, np.floor(pixels.min(axis=2)) - 1.0)     # P x S x 2
-        hi = np.where(straddles[..., None], np.inf, np.ceil(pixels.max(axis=2)) + 1.0)
+        to_clip = _CULL_ROWS @ rows_in
+        clip = (self.corners.reshape(1, -1, 4) @ to_clip.transpose(0, 2, 1)).reshape(len(parents), -1, 8, 11)
+        keep = self._allowed(depth, depth_cap) & (exits[:, None] != self.entities) & (eyes @ self.planes.T > 0.0)
+        # Culled: every corner outside one side of the frustum, or every corner behind the clip plane.
+        outside = np.concatenate([clip[..., 4:10] > 0.0, clip[..., 10:11] <= 0.0], axis=3)
+        keep &= ~outside.all(axis=2).any(axis=2)
+        w = clip[..., 3]
+        behind = w <= 1e-6
+        straddles = behind.any(axis=2)  # corners behind the eye: be conservative
+        ndc = clip[..., :2] / np.where(behind, 1.0, w)[..., None]
+        half = 0.5 * np.array(main.size)
+        lo = np.where(straddles[..., None], -np.inf, np.floor((ndc.min(axis=2) + 1.0) * half) - 1.0)  # P x S x 2
+        hi = np.where(straddles[..., None], np.inf, np.ceil((ndc.max(axis=2) + 1.0) * half) + 1.0)
         x0y0 = np.maximum(lo, rects[:, None, 0:2])
-        x1y1 = np.minimum(hi, rects[:, None, 0:2] + rects[:, None, 2:4])
+        x1y1 = np.minimum(hi, rects[:, None, 2:4])
         keep &= (x1y1 > x0y0).all(axis=2)
         found = []
         for p, i in np.argwhere(keep).tolist():
             x0, y0 = int(x0y0[p, i, 0]), int(x0y0[p, i, 1])
             found.append((parents[p], self.states[i], (x0, y0, int(x1y1[p, i, 0]) - x0, int(x1y1[p, i, 1]) - y0)))
         return found
+
+
+# From the rows of a view-projection (x, y, z, w) and a clip plane, the rows SurfaceTable.cull
+# applies to every corner: x, y, z, w, then x - w, y - w, z - w, -x - w, -y - w, -z - w (each
+# > 0 outside one side of the frustum), then the clip plane.
+_CULL_ROWS = np.array([
+    [1, 0, 0, 0, 0], [0, 1, 0, 0, 0], [0, 0, 1, 0, 0], [0, 0, 0, 1, 0],
+    [1, 0, 0, -1, 0], [0, 1, 0, -1, 0], [0, 0, 1, -1, 0],
+    [-1, 0, 0, -1, 0], [0, -1, 0, -1, 0], [0, 0, -1, -1, 0],
+    [0, 0, 0, 0, 1]], np.float32)
 
 
 def _near_distance(proj: glm.mat4) -> float:
