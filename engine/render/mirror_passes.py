@@ -98,6 +98,7 @@ _BLOCK_EYE = slice(4 * CAMERA_BLOCK_EYE.start, 4 * CAMERA_BLOCK_EYE.stop)
 # cut the quad) while clipping still drops w <= 0.
 _FLATTEN_Z = glm.mat4(1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0)
 _NO_TILE = Tile(0, 0, 0.0)
+_RESET_RECT = struct.Struct("<12f")   # a rectangle as two clip-space triangles (the reset's vertices)
 # The composite's variants (mirror_composite.frag); a level's views are drawn grouped by them.
 COMPOSITE_VARIANTS = {"sharp": {}, "rough": {"COMPOSITE_ROUGH": "1"}, "portal": {"COMPOSITE_PORTAL": "1"}}
 
@@ -249,20 +250,20 @@ class MirrorPasses:
 
     def _draw_resets(self, rects, size: tuple[int, int]) -> None:
         """The reset over every rectangle in one draw (two clip-space triangles each)."""
-        rects = np.array(list(rects), np.float32).reshape(-1, 4)
-        x0 = rects[:, 0] * (2.0 / size[0]) - 1.0
-        y0 = rects[:, 1] * (2.0 / size[1]) - 1.0
-        x1 = (rects[:, 0] + rects[:, 2]) * (2.0 / size[0]) - 1.0
-        y1 = (rects[:, 1] + rects[:, 3]) * (2.0 / size[1]) - 1.0
-        corners = np.stack([x0, y0, x1, y0, x1, y1, x0, y0, x1, y1, x0, y1], axis=1).astype(np.float32)
-        if self._reset_rects is None or self._reset_rects.size < corners.nbytes:
+        sx, sy = 2.0 / size[0], 2.0 / size[1]
+        triangles = []
+        for x, y, w, h in rects:
+            x0, y0, x1, y1 = x * sx - 1.0, y * sy - 1.0, (x + w) * sx - 1.0, (y + h) * sy - 1.0
+            triangles.append(_RESET_RECT.pack(x0, y0, x1, y0, x1, y1, x0, y0, x1, y1, x0, y1))
+        corners = b"".join(triangles)
+        if self._reset_rects is None or self._reset_rects.size < len(corners):
             if self._reset_vao is not None:
                 self._reset_vao.release()
                 self._reset_rects.release()
-            self._reset_rects = self.ctx.buffer(reserve=max(corners.nbytes, 64 * 48))
+            self._reset_rects = self.ctx.buffer(reserve=max(len(corners), 64 * _RESET_RECT.size))
             self._reset_vao = self.ctx.vertex_array(self.reset, [(self._reset_rects, "2f", "in_position")])
-        self._reset_rects.write(corners.tobytes())
-        self._reset_vao.render(moderngl.TRIANGLES, vertices=6 * len(rects))
+        self._reset_rects.write(corners)
+        self._reset_vao.render(moderngl.TRIANGLES, vertices=6 * len(triangles))
 
     def prepare_composites(self, composites: list[Composite], parent_size: tuple[int, int]) -> PreparedComposites:
         """The CPU half of compositing a level into a parent of ``parent_size`` pixels: rough
