@@ -80,12 +80,11 @@ class SurfaceState:
     reflect_rate: float = 1.0
     roughness: float = 0.0
     resolution_scale: float = 1.0
-    look: CompositeSurface | None = None   # what its composite reads (tint, rate, outline...), packed once
+    look: CompositeSurface = field(init=False, repr=False)  # what its composite reads, packed once
 
     def __post_init__(self) -> None:
-        if self.look is None:
-            self.look = composite_surface(self.tint, self.reflect_rate, self.roughness, glm.vec3(self.plane),
-                                          self.outline, portal=self.kind == "portal", carry=glm.mat3(self.carry))
+        self.look = composite_surface(self.tint, self.reflect_rate, self.roughness, glm.vec3(self.plane),
+                                      self.outline, portal=self.kind == "portal", carry=glm.mat3(self.carry))
 
 
 @dataclass
@@ -315,15 +314,6 @@ class SurfaceTable:
         self.max_depth = np.array([s.max_depth for s in states], np.int64)
         self.entities = np.array([s.entity for s in states], np.int64)
         self.deepest = int(self.max_depth[self.enabled].max()) if self.enabled.any() else 0
-        self._allowed_at: dict[tuple[int, int], np.ndarray] = {}
-
-    def _allowed(self, depth: int, depth_cap: int) -> np.ndarray:
-        """Which surfaces may be seen at ``depth`` (enabled, within their and the cap's depth)."""
-        allowed = self._allowed_at.get((depth, depth_cap))
-        if allowed is None:
-            allowed = self._allowed_at[(depth, depth_cap)] = self.enabled & (
-                depth <= np.minimum(self.max_depth, depth_cap))
-        return allowed
 
     def cull(self, parents: list[ReflectionView], main: View,
              depth_cap: int) -> list[tuple[ReflectionView, SurfaceState, tuple[int, int, int, int]]]:
@@ -350,7 +340,8 @@ class SurfaceTable:
                                 np.float32).reshape(len(parents), 5, 4)
         to_clip = _CULL_ROWS @ rows_in
         clip = (self.corners.reshape(1, -1, 4) @ to_clip.transpose(0, 2, 1)).reshape(len(parents), -1, 8, 11)
-        keep = self._allowed(depth, depth_cap) & (exits[:, None] != self.entities) & (eyes @ self.planes.T > 0.0)
+        keep = self.enabled & (depth <= np.minimum(self.max_depth, depth_cap))
+        keep = keep & (exits[:, None] != self.entities) & (eyes @ self.planes.T > 0.0)
         # Culled: every corner outside one side of the frustum, or every corner behind the clip plane.
         outside = np.concatenate([clip[..., 4:10] > 0.0, clip[..., 10:11] <= 0.0], axis=3)
         keep &= ~outside.all(axis=2).any(axis=2)

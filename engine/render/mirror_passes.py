@@ -149,7 +149,6 @@ def composite_rows(composites: list[Composite], size: tuple[int, int]) -> bytes:
     camera block) and one matrix product for an outlined surface: in a frame, after the
     rasteriser has run, the numpy version of this cost ~0.27 ms a level (measured on
     llvmpipe), several times its warm cost, for a handful of rows."""
-    sx, sy = 2.0 / size[0], 2.0 / size[1]
     rows = []
     for c in composites:
         surface = c.surface
@@ -158,8 +157,7 @@ def composite_rows(composites: list[Composite], size: tuple[int, int]) -> bytes:
             # The surface's own quad in the parent's clip space, flattened onto z = 0.
             corners = (_FLATTEN_Z * glm.mat4.from_bytes(block[_BLOCK_VIEW_PROJ]) * surface.outline).to_bytes()
         else:
-            x, y, w, h = c.rect
-            x0, y0, x1, y1 = x * sx - 1.0, y * sy - 1.0, (x + w) * sx - 1.0, (y + h) * sy - 1.0
+            x0, y0, x1, y1 = _ndc_rect(c.rect, size)
             corners = struct.pack("<16f", x0, y0, 0.0, 1.0, x0, y1, 0.0, 1.0, x1, y0, 0.0, 1.0, x1, y1, 0.0, 1.0)
         lx, ly, lw, lh = c.level_rect
         tile = c.tile or _NO_TILE
@@ -168,6 +166,13 @@ def composite_rows(composites: list[Composite], size: tuple[int, int]) -> bytes:
             surface.tint, tile.scale, surface.reflect_rate, surface.roughness, surface.portal, float(c.view_index),
             surface.normal, tile.y, surface.carry))
     return b"".join(rows)
+
+
+def _ndc_rect(rect: tuple[int, int, int, int], size: tuple[int, int]) -> tuple[float, float, float, float]:
+    """A pixel rectangle (x, y, width, height) of a ``size`` target as NDC x0, y0, x1, y1."""
+    x, y, w, h = rect
+    sx, sy = 2.0 / size[0], 2.0 / size[1]
+    return x * sx - 1.0, y * sy - 1.0, (x + w) * sx - 1.0, (y + h) * sy - 1.0
 
 
 def _shared_samples_queries(ctx: moderngl.Context, count: int) -> list[moderngl.Query]:
@@ -250,10 +255,9 @@ class MirrorPasses:
 
     def _draw_resets(self, rects, size: tuple[int, int]) -> None:
         """The reset over every rectangle in one draw (two clip-space triangles each)."""
-        sx, sy = 2.0 / size[0], 2.0 / size[1]
         triangles = []
-        for x, y, w, h in rects:
-            x0, y0, x1, y1 = x * sx - 1.0, y * sy - 1.0, (x + w) * sx - 1.0, (y + h) * sy - 1.0
+        for rect in rects:
+            x0, y0, x1, y1 = _ndc_rect(rect, size)
             triangles.append(_RESET_RECT.pack(x0, y0, x1, y0, x1, y1, x0, y0, x1, y1, x0, y1))
         corners = b"".join(triangles)
         if self._reset_rects is None or self._reset_rects.size < len(corners):
