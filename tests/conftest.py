@@ -39,3 +39,8 @@ def scene(ctx):
     yield make
     for runner in runners:
         runner.close()
+
+
+def pytest_addoption(parser):
+    parser.addoption("--update-golden", action="store_true",
+                     help="rewrite tests/golden/ from the frames rendered now (say why in the commit)")
