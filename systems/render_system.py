@@ -70,9 +70,11 @@ class RenderSystem(esper.Processor):
             touched |= world.changed(kind)
         for entity in touched:
             self._refresh_instance(entity)
+        # Every moved entity, touched or not: a refresh writes the transform only when the
+        # entity joins a batch (a Slice removed in the frame it moved left it stale).
         for entity in world.frame.moved | world.frame.added:
             batch = self._batch_of.get(entity)
-            if batch is not None and entity not in touched:
+            if batch is not None:
                 _write_transform(batch.row(entity), world.get(entity, Transform))
 
     def _refresh_instance(self, entity: int) -> None:

@@ -1,6 +1,7 @@
 """Things partly through a portal: sliced at the portal, the rest drawn beyond the partner."""
 from __future__ import annotations
 
+import numpy as np
 from pyglm import glm
 
 from components import (
@@ -64,7 +65,10 @@ def test_the_part_behind_the_portal_is_not_drawn_there(scene):
     assert ids[row, col] != ents["bar"]          # the back half is not
 
 
-def test_slice_and_clone_go_when_the_box_is_through(scene):
+def test_slice_and_clone_go_when_the_box_is_pulled_back_out(scene):
+    """Pulled back out of the portal, the bar is whole again and its clone beyond the
+    partner is gone: the frame (ids and colours) and the live GPU objects are those of a
+    fresh scene where the bar never touched the portal."""
     ents = {}
     runner = scene(lambda world: build_pair(world, ents, (0, 3.0, 7.0), (0, 1.5, 0)), SIZE)
     runner.frame()
@@ -72,6 +76,19 @@ def test_slice_and_clone_go_when_the_box_is_through(scene):
     runner.world.get(ents["bar"], Transform).position = (-2.8, 1.5, 3.0)  # pulled back out
     runner.frame()
     assert not runner.world.query_one(PortalClone)  # deleted (gone from queries at once)
-    runner.frame()
+    rgb = runner.frame()
     assert not runner.world.has(ents["bar"], Slice)
-    assert runner.engine.renderer.resource_counts()["batches"] >= 1
+
+    fresh_ents = {}
+
+    def fresh(world):
+        build_pair(world, fresh_ents, (0, 3.0, 7.0), (0, 1.5, 0))
+        world.get(fresh_ents["bar"], Transform).position = (-2.8, 1.5, 3.0)
+
+    never_through = scene(fresh, SIZE)
+    expected_rgb = never_through.frame()
+    ids = runner.ids()
+    assert fresh_ents["bar"] == ents["bar"] and (ids == ents["bar"]).sum() > 100
+    np.testing.assert_array_equal(ids, never_through.ids())
+    assert np.abs(rgb.astype(int) - expected_rgb).max() <= 1
+    assert runner.engine.renderer.resource_counts() == never_through.engine.renderer.resource_counts()
