@@ -126,8 +126,33 @@ def test_bad_value_at_construction_names_class_and_field(cls, kwargs, field):
         cls(**kwargs)
 
 
-def test_component_value_error_is_a_value_error():
-    assert issubclass(ComponentValueError, ValueError)
+def test_a_bad_component_value_in_a_level_stops_the_runner_with_one_line(tmp_path):
+    """What a user sees of a ComponentValueError raised while a level builds: one line naming
+    the class and the field, exit status 2, no traceback, and no frame written."""
+    import os
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1]
+    level = tmp_path / "rough_level.py"
+    level.write_text(
+        "from components import Material, MeshRef, Transform\n"
+        "from engine import Game, run, spawn_camera\n"
+        "from engine.mesh import box\n"
+        "class Rough(Game):\n"
+        "    def build(self, world):\n"
+        "        spawn_camera(world)\n"
+        "        world.spawn(Transform(), MeshRef(box()), Material(roughness=2.0))\n"
+        "run(Rough())\n")
+    out = tmp_path / "frames"
+    result = subprocess.run([sys.executable, str(level), "--headless", "--frames", "1", "--size", "32x32",
+                             "--out", str(out)], cwd=root, env={**os.environ, "PYTHONPATH": str(root)},
+                            capture_output=True, text=True, timeout=120)
+    assert result.returncode == 2, result.stderr
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("speculum: error: Material.roughness"), result.stderr
+    assert not list(out.glob("*.png"))
 
 
 # --- bad values assigned later --------------------------------------------------------------

@@ -80,6 +80,16 @@ def test_prepare_context_checks_and_returns_capabilities(ctx):
     assert ctx.gc_mode is None
 
 
-def test_capabilities_are_immutable():
-    with pytest.raises(dataclasses.FrozenInstanceError):
-        GOOD.version_code = 460
+def test_capabilities_are_what_the_context_reports(ctx):
+    """Each limit is read from its own GL query (a swapped or misspelt name would read 0 or
+    another limit's value, and the start-up check would then judge the wrong number)."""
+    caps = GLCapabilities.read(ctx)
+    info = ctx.info
+    assert caps.version_code == ctx.version_code
+    assert caps.renderer == info["GL_RENDERER"]
+    for name in ("max_texture_size", "max_cube_map_size", "max_color_attachments", "max_draw_buffers",
+                 "max_uniform_block_size", "max_vertex_attribs", "max_geometry_output_vertices",
+                 "max_clip_distances"):
+        gl_name = "GL_MAX_CUBE_MAP_TEXTURE_SIZE" if name == "max_cube_map_size" else f"GL_{name.upper()}"
+        assert getattr(caps, name) == info[gl_name] > 0, name
+    assert caps.extensions == frozenset(ctx.extensions)

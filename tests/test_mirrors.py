@@ -198,25 +198,32 @@ def test_sky_shows_where_the_mirror_reflects_nothing(scene):
     assert runner.ids()[row, col] == 0  # the reflection ends in the sky
 
 
-@pytest.mark.parametrize("rate", [0.0, 0.5])
+@pytest.mark.parametrize("rate", [0.0, 0.25, 0.5])
 def test_reflect_rate_mixes_with_the_mirrors_own_shading(scene, rate):
-    def build(world):
-        base_scene(world)
-        look_from(world, (0.0, 1.5, 4.0))
-        world.spawn(Transform(position=(0, 1.5, 6.0), scale=(8, 8, 0.1)), MeshRef(box()),
-                    Material(color=(0.9, 0.9, 0.1)), Emissive(0.5))  # behind the camera: what the mirror shows
-        world.spawn(Transform(position=(0, 1.5, -2)), MeshRef(quad(4, 3)), Material(color=(0.1, 0.1, 0.9)),
-                    Mirror(reflect_rate=rate))
+    """A mirror shows (1 - rate) x its own shading + rate x the reflection.  Its own shading
+    comes from a second scene where the same quad is no mirror at all, the full reflection
+    from a third where the rate is 1: neither shares a frame with the one under test."""
+    def build(mirror):
+        def level(world):
+            base_scene(world)
+            look_from(world, (0.0, 1.5, 4.0))
+            world.spawn(Transform(position=(0, 1.5, 6.0), scale=(8, 8, 0.1)), MeshRef(box()),
+                        Material(color=(0.9, 0.9, 0.1)), Emissive(0.5))  # behind the camera: what the mirror shows
+            extra = (mirror,) if mirror is not None else ()
+            world.spawn(Transform(position=(0, 1.5, -2)), MeshRef(quad(4, 3)), Material(color=(0.1, 0.1, 0.9)),
+                        *extra)
+        return level
 
-    runner = scene(build, SIZE)
-    rgb = runner.frame()
-    col, row = runner.project((0.3, 1.5, -2.0))
-    mixed = srgb_to_linear(rgb[row, col])
-    runner.world.get(5, Mirror).reflect_rate = 0.0
-    own = srgb_to_linear(runner.frame()[row, col])
-    runner.world.get(5, Mirror).reflect_rate = 1.0
-    full = srgb_to_linear(runner.frame()[row, col])
-    assert own[2] > own[0] + 0.05  # the mirror's own blue
+    def pixel(mirror):
+        runner = scene(build(mirror), SIZE)
+        rgb = runner.frame()
+        col, row = runner.project((0.3, 1.5, -2.0))
+        return srgb_to_linear(rgb[row, col])
+
+    own = pixel(None)
+    full = pixel(Mirror(reflect_rate=1.0))
+    mixed = pixel(Mirror(reflect_rate=rate))
+    assert own[2] > own[0] + 0.05  # the quad's own blue
     assert full[0] > full[2] + 0.05  # the reflected yellow wall
     np.testing.assert_allclose(mixed, (1 - rate) * own + rate * full, atol=0.02)
 
