@@ -70,6 +70,13 @@ def _portal_depth(depth: int) -> Callable[[Engine], None]:
     return setup
 
 
+def _partner_disabled(engine: Engine) -> None:
+    """The portal the camera looks into keeps its Portal; its partner is switched off."""
+    portals = sorted(engine.world.query_one(Portal), key=lambda item: item[0])
+    _, looked_into = portals[0]
+    engine.world.get(looked_into.partner, Portal).enabled = False
+
+
 def readme_games() -> list[tuple[str, Callable[[], Game]]]:
     """Every Game subclass a ```python block of README.md defines, by class name."""
     text = (REPO / "README.md").read_text()
@@ -104,5 +111,6 @@ def cases() -> list[GoldenCase]:
     found += [GoldenCase(f"mirror_ring_8_{path}", _mirror_ring(8), setup=_path(path))
               for path in ("per_mirror", "batched")]
     found += [GoldenCase(f"portals_depth_{d}", _facing_portals, setup=_portal_depth(d)) for d in (0, 4, 8)]
+    found += [GoldenCase("portals_partner_disabled", _facing_portals, setup=_partner_disabled)]
     found += [GoldenCase("ecs_grid_1000", _grid)]
     return found
