@@ -7,7 +7,7 @@ grid, spread over four shared meshes, so a frame is 4 instanced draws plus the s
 
 What is timed (``cpu_ms``): one ``Engine.frame(dt, output)`` call, i.e. ``World.step`` -
 game update, fly camera, TransformSystem, RenderSystem extract + prepare (instance upload,
-lights) - *minus* the time spent inside ``Renderer.render_view`` and ``Renderer.present``
+lights) - *minus* the time spent inside ``ScenePass.draw`` and ``Renderer.present``
 (the draw submission, which on a software rasteriser is GPU work done on the CPU).
 ``ctx.finish()`` runs after every frame, outside the timed span, so one frame's drawing
 never stalls the next frame's upload.  The output is a 64x36 capture target, as in the
@@ -115,12 +115,12 @@ class Result:
 
 
 class _DrawClock:
-    """Accumulates the wall time spent in the renderer's draw calls (render_view, present)."""
+    """Accumulates the wall time spent in the renderer's draw calls (the scene pass, present)."""
 
     def __init__(self, renderer) -> None:
         self.seconds = 0.0
-        for name in ("render_view", "present"):
-            setattr(renderer, name, self._timed(getattr(renderer, name)))
+        for owner, name in ((renderer.scene_pass, "draw"), (renderer, "present")):
+            setattr(owner, name, self._timed(getattr(owner, name)))
 
     def _timed(self, method):
         def timed(*args, **kwargs):

@@ -147,9 +147,9 @@ class RenderSystem(esper.Processor):
             self.main_view = None  # minimised window or nothing to look through
             return
         _, cam, cam_t = camera
-        targets = renderer.level_targets(0, output.size)
+        targets = renderer.levels.get(0, output.size)
         self.main_view = camera_view(cam_t.world, cam.fov_y, cam.near, cam.far, output.size)
-        renderer.render_view(self.main_view, targets)
+        renderer.scene_pass.draw([self.main_view], targets)
 
     def close(self) -> None:
         for entity, batch in list(self._batch_of.items()):

@@ -352,7 +352,7 @@ def test_big_surfaces_draw_last_so_hidden_pixels_are_not_shaded(scene, ctx):
     renderer = runner.engine.renderer
     query = ctx.query(samples=True)
     with query:
-        renderer.render_view(runner.engine.render_system.main_view, renderer.targets)
+        renderer.scene_pass.draw([runner.engine.render_system.main_view], renderer.targets)
     ids = runner.ids()
     boxes = (ids != 0).sum() - (ids == ids[-1, SIZE[0] // 2]).sum()
     assert boxes > 500  # the boxes cover ground

@@ -1,15 +1,17 @@
-"""The batched mirror path (seed 000): one draw per mesh for every view of a reflection level.
+"""The batched mirror path's rule and data: which path draws a reflection level, and the
+table of views the geometry shader reads.
 
-The per-mirror path draws a level with ``Renderer.render_reflection_views``: every batch
-once per view, each with its own camera block and scissor.  The batched path draws each
-batch once per level: ``shaders/scene_batched.geom`` emits every triangle once for each
-view of the level that can see it, reading the views from the ``Views`` uniform block
-(std140, up to MAX_LEVEL_VIEWS), and ``scene.frag`` (built with BATCHED_VIEWS) takes the
-view's node index and eye from the geometry shader.  The pixels drawn and their values are
-those of the per-mirror path: the same view_proj, clip plane, eye, node mask and faces
-(tests/test_mirror_paths.py).  The geometry shader culls, per view, triangles behind the
-mirror or outside the view's frustum or screen rectangle, and clips the rest to that
-rectangle with clip distances (the per-mirror path's scissor).
+The per-mirror path draws a level with ``ScenePass.draw`` view by view: every batch once
+per view, each with its own camera block and scissor.  The batched path (the same pass with
+``SceneOptions.batched``) draws each batch once per level: ``shaders/scene_batched.geom``
+emits every triangle once for each view of the level that can see it, reading the views
+from the ``Views`` uniform block (std140, up to MAX_BATCHED_VIEWS), and ``scene.frag``
+(built with BATCHED_VIEWS) takes the view's node index and eye from the geometry shader.
+The pixels drawn and their values are those of the per-mirror path: the same view_proj,
+clip plane, eye, node mask and faces (tests/test_mirror_paths.py).  The geometry shader
+culls, per view, triangles behind the mirror or outside the view's frustum or screen
+rectangle, and clips the rest to that rectangle with clip distances (the per-mirror
+path's scissor).  This is the one-draw technique of the "Multiple Mirrors" OpenGL project.
 
 Which path a level takes is ``choose_path`` (``ReflectionSystem.path``).  On llvmpipe the
 batched path is rarely faster (see the measurements above AUTO_MIN_VIEWS), so "auto" takes
@@ -19,27 +21,17 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
-import moderngl
 import numpy as np
 
-from engine.render.mirror_passes import MAX_LEVEL_VIEWS
-from engine.render.renderer import (
-    ALBEDO_UNIT,
-    CAMERA_BINDING,
-    LIGHTS_BINDING,
-    NODE_UNIT,
-    RECT_CLIP_DISTANCES,
-    SKY_UNIT,
-    Renderer,
-)
-from engine.render.targets import RenderTargets
-from engine.render.views import View, union_rect
+from engine.render.views import View
 
 PATHS = ("auto", "per_mirror", "batched")
-VIEWS_BINDING = 2
+# Views one batched draw takes (a level with more is drawn in groups of this many).  The
+# Views block is 16 + 128 bytes a view, well under GL 4.1's 16 KiB minimum block size.
+MAX_BATCHED_VIEWS = 32
 # Views per geometry-shader invocation.  One view is 3 vertices of 41 output components (48
 # where whole vec4 slots count); 4 keeps 12 vertices under GL 4.1's 1024 total output
-# components, and 8 invocations x 4 views cover MAX_LEVEL_VIEWS (32 invocations guaranteed).
+# components, and 8 invocations x 4 views cover MAX_BATCHED_VIEWS (32 invocations guaranteed).
 VIEWS_PER_INVOCATION = 4
 # std140 layout of the Views block: ivec4 count, then per view (128 bytes)
 # mat4 view_proj, vec4 clip_plane, vec4 eye (w: mirrored), vec4 rect (NDC), uvec4 node.
@@ -50,7 +42,7 @@ _VIEW_DTYPE = np.dtype([
     ("rect", "<f4", (4,)),
     ("node", "<u4", (4,)),
 ])
-VIEWS_BLOCK_BYTES = 16 + MAX_LEVEL_VIEWS * _VIEW_DTYPE.itemsize
+VIEWS_BLOCK_BYTES = 16 + MAX_BATCHED_VIEWS * _VIEW_DTYPE.itemsize
 
 # The "auto" rule: batched when a level has at least AUTO_MIN_VIEWS views and the scene
 # submits at most AUTO_MAX_TRIANGLES triangles (each batch's mesh triangles x instances,
@@ -98,16 +90,16 @@ def choose_path(setting: str, view_count: int, triangles: int) -> str:
     return "per_mirror"
 
 
-def submitted_triangles(renderer: Renderer) -> int:
+def submitted_triangles(renderer) -> int:
     """Triangles one scene pass submits: each batch's mesh triangles x its instances."""
     return sum(batch.mesh.index_count // 3 * batch.count for batch in renderer.batches.values())
 
 
 def views_block(views: Sequence[View]) -> bytes:
-    """The Views uniform block for ``views`` (at most MAX_LEVEL_VIEWS)."""
-    if len(views) > MAX_LEVEL_VIEWS:
-        raise ValueError(f"{len(views)} mirror views in one level; at most {MAX_LEVEL_VIEWS}")
-    table = np.zeros(MAX_LEVEL_VIEWS, _VIEW_DTYPE)
+    """The Views uniform block for ``views`` (at most MAX_BATCHED_VIEWS)."""
+    if len(views) > MAX_BATCHED_VIEWS:
+        raise ValueError(f"{len(views)} mirror views in one level; at most {MAX_BATCHED_VIEWS}")
+    table = np.zeros(MAX_BATCHED_VIEWS, _VIEW_DTYPE)
     for row, view in zip(table, views, strict=False):
         width, height = view.size
         x, y, w, h = view.scissor if view.scissor is not None else (0, 0, width, height)
@@ -119,84 +111,3 @@ def views_block(views: Sequence[View]) -> bytes:
         row["node"] = (view.node, 0, 0, 0)
     count = np.array([len(views), 0, 0, 0], np.int32)
     return count.tobytes() + table.tobytes()
-
-
-class BatchedMirrors:
-    """Draws all views of a reflection level with one draw per instance batch."""
-
-    def __init__(self, renderer: Renderer) -> None:
-        self.renderer = renderer
-        self.ctx = renderer.ctx
-        self._programs: dict[int, moderngl.Program] = {}  # by geometry-shader invocations
-        self._ubo: moderngl.Buffer | None = None
-
-    def program(self, view_count: int) -> moderngl.Program:
-        """The batched scene program for a level of ``view_count`` views, built on first use.
-
-        Its geometry shader runs ceil(view_count / VIEWS_PER_INVOCATION) invocations rounded
-        up to a power of two: invocations with no view still cost a pass over the triangles.
-        """
-        needed = -(-view_count // VIEWS_PER_INVOCATION)
-        invocations = min(1 << max(0, needed - 1).bit_length(), -(-MAX_LEVEL_VIEWS // VIEWS_PER_INVOCATION))
-        program = self._programs.get(invocations)
-        if program is None:
-            program = self.renderer.shaders.program("scene.vert", "scene.frag", "scene_batched.geom", defines={
-                "BATCHED_VIEWS": "1",
-                "MAX_LEVEL_VIEWS": str(MAX_LEVEL_VIEWS),
-                "VIEWS_PER_INVOCATION": str(VIEWS_PER_INVOCATION),
-                "GS_INVOCATIONS": str(invocations),
-                "GS_MAX_VERTICES": str(3 * VIEWS_PER_INVOCATION),
-            })
-            program["Views"].binding = VIEWS_BINDING
-            program["Lights"].binding = LIGHTS_BINDING
-            if "Camera" in program:  # the batched stages read their cameras from Views
-                program["Camera"].binding = CAMERA_BINDING
-            program["albedo_map"].value = ALBEDO_UNIT
-            program["sky_map"].value = SKY_UNIT
-            program["node_map"].value = NODE_UNIT
-            program["masked"].value = True
-            self._programs[invocations] = program
-        if self._ubo is None:
-            self._ubo = self.ctx.buffer(reserve=VIEWS_BLOCK_BYTES)
-        return program
-
-    def render_level(self, views: Sequence[View], targets: RenderTargets) -> None:
-        """Draw every batch once for all ``views`` into ``targets``, a reflection level whose
-        node image and depth mask ``MirrorPasses.prepare_level`` wrote.
-
-        Counts one pass, and one draw call per batch, in the renderer's stats.
-        """
-        if not views:
-            return
-        renderer = self.renderer
-        ctx = self.ctx
-        program = self.program(len(views))
-        self._ubo.write(views_block(views))
-        self._ubo.bind_to_uniform_block(VIEWS_BINDING)
-        targets.view_framebuffer.use()  # reads the node image, so does not write it
-        ctx.viewport = (0, 0, *views[0].size)
-        ctx.scissor = union_rect([v.scissor or (0, 0, *v.size) for v in views])
-        ctx.enable(moderngl.DEPTH_TEST | moderngl.CULL_FACE)
-        ctx.front_face = "ccw"  # mirrored views reverse their vertices in the geometry shader
-        ctx.depth_func = "<"
-        targets.node.use(NODE_UNIT)
-        stats = renderer.stats
-        for cap in RECT_CLIP_DISTANCES:
-            ctx.enable_direct(cap)
-        sampler = renderer.bind_scene_inputs(program, reflection=True)
-        try:
-            renderer.draw_batches(program)
-        finally:
-            if sampler is not None:
-                sampler.clear(ALBEDO_UNIT)
-            for cap in RECT_CLIP_DISTANCES:  # every other pass writes clip distance 0 only
-                ctx.disable_direct(cap)
-            ctx.scissor = None
-        stats.passes += 1
-
-    def release(self) -> None:
-        if self._ubo is not None:
-            self._ubo.release()
-            self._ubo = None
-        self._programs.clear()  # the renderer's shader library owns and releases them
-

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import moderngl
 import numpy as np
+from pyglm import glm
 
 INSTANCE_DTYPE = np.dtype([
     ("model", "<f4", (16,)),          # column-major mat4
@@ -65,6 +66,9 @@ class InstanceBatch:
         self._vaos: dict[int, moderngl.VertexArray] = {}
         self._max_scale = 0.0
         self._rescale = False
+        # Drawn in the scene pass's transparent slot (blended, farthest first) instead of
+        # with the opaque batches.  Nothing sets it yet: transparent materials come with refraction.
+        self.transparent = False
 
     # --- rows ----------------------------------------------------------------------------
     def add(self, entity: int) -> np.void:
@@ -106,6 +110,12 @@ class InstanceBatch:
         """About the world radius of this batch's largest instance (mesh radius x largest
         axis scale, as of the last upload; it may overestimate after a shrink)."""
         return self.mesh.radius * self._max_scale
+
+    def centre(self) -> glm.vec3:
+        """The mean world position of the instances (what back-to-front sorting compares)."""
+        if not self.count:
+            return glm.vec3()
+        return glm.vec3(*self.rows["model"][: self.count, 12:15].mean(axis=0).tolist())
 
     def _grow_scale(self, rows: np.ndarray) -> None:
         model = self.rows["model"][rows]

@@ -19,7 +19,17 @@ import moderngl
 import numpy as np
 from pyglm import glm
 
-from engine.render.renderer import RECT_CLIP_DISTANCES, SKY_UNIT, Renderer
+from engine.render.bindings import (
+    ATLAS_UNIT,
+    BLEND_COMPOSITE,
+    PARENT_NODE_UNIT,
+    PARENT_SURFACE_UNIT,
+    RECT_CLIPS,
+    REFLECTION_UNITS,
+    SKY_UNIT,
+    PassState,
+    apply_pass_state,
+)
 from engine.render.rough_atlas import TILE, RoughAtlas, Tile, place_tiles
 from engine.render.targets import RenderTargets
 from engine.render.views import (
@@ -29,10 +39,10 @@ from engine.render.views import (
     View,
 )
 
-MAX_LEVEL_VIEWS = 32
-_PARENT_UNITS = (3, 4)
-_REFLECTION_UNITS = (3, 4, 5)
-_ATLAS_UNIT = 6
+# The claims and the reset write every depth they touch (depth test "always"); the
+# composite blends quads trimmed to their rectangles by clip distances 1-4.
+_CLAIM = PassState(depth_func="1")
+_COMPOSITE = PassState(blend=BLEND_COMPOSITE, clips=RECT_CLIPS)
 
 
 @dataclass(frozen=True)
@@ -199,17 +209,18 @@ class Claim:
 
 
 class MirrorPasses:
-    def __init__(self, renderer: Renderer) -> None:
+    def __init__(self, renderer) -> None:
         self.renderer = renderer
         ctx = renderer.ctx
         self.ctx = ctx
         shaders = renderer.shaders
         self.reset = shaders.program("rects.vert", "mirror_reset.frag")
         self.claim = shaders.program("fullscreen.vert", "mirror_claim.frag")
-        self.claim["parent_node_map"].value, self.claim["parent_surface_map"].value = _PARENT_UNITS
+        self.claim["parent_node_map"].value = PARENT_NODE_UNIT
+        self.claim["parent_surface_map"].value = PARENT_SURFACE_UNIT
         self.composites: dict[str, _CompositeDraw] = {}
-        units = {**dict(zip(("reflection", "reflection_seen", "reflection_nodes"), _REFLECTION_UNITS, strict=True)),
-                 "sky_map": SKY_UNIT, "rough_atlas": _ATLAS_UNIT}
+        units = {**dict(zip(("reflection", "reflection_seen", "reflection_nodes"), REFLECTION_UNITS, strict=True)),
+                 "sky_map": SKY_UNIT, "rough_atlas": ATLAS_UNIT}
         for variant, defines in COMPOSITE_VARIANTS.items():
             program = shaders.program("mirror_composite.vert", "mirror_composite.frag",
                                       defines={"ROUGH_TILE": f"{TILE}.0", **defines})
@@ -232,14 +243,10 @@ class MirrorPasses:
             return []
         ctx = self.ctx
         level.framebuffer.use()
-        ctx.viewport = (0, 0, *level.size)
-        ctx.enable(moderngl.DEPTH_TEST)
-        ctx.disable(moderngl.BLEND | moderngl.CULL_FACE)
-        ctx.depth_func = "1"  # always: both passes set every depth they touch
-        ctx.scissor = None
+        apply_pass_state(ctx, _CLAIM, (0, 0, *level.size))
         self._draw_resets(dict.fromkeys(claim.rect for claim in claims), level.size)
-        parent.node.use(_PARENT_UNITS[0])
-        parent.surface.use(_PARENT_UNITS[1])
+        parent.node.use(PARENT_NODE_UNIT)
+        parent.surface.use(PARENT_SURFACE_UNIT)
         program = self.claim
         program["to_parent"].value = (parent.size[0] / level.size[0], parent.size[1] / level.size[1])
         claim_ids = program["claim"]
@@ -249,8 +256,6 @@ class MirrorPasses:
             claim_ids.value = (claim.parent, claim.surface, claim.index)
             with query:
                 self._claim_vao.render(moderngl.TRIANGLES, vertices=3)
-        ctx.depth_func = "<"
-        ctx.scissor = None
         return [query.samples for query in queries[: len(claims)]]
 
     def _draw_resets(self, rects, size: tuple[int, int]) -> None:
@@ -294,19 +299,13 @@ class MirrorPasses:
         if prepared.rough:
             self.rough_atlas.isolate(level, prepared.rough)
         parent.composite_framebuffer.use()
-        ctx.viewport = (0, 0, *parent.size)
-        ctx.scissor = None
-        ctx.disable(moderngl.DEPTH_TEST | moderngl.CULL_FACE)
-        ctx.enable(moderngl.BLEND)
         # Colour: reflection x rate + own x (1 - rate); alpha (coverage) is kept.
-        ctx.blend_func = (moderngl.SRC_ALPHA, moderngl.ONE_MINUS_SRC_ALPHA, moderngl.ZERO, moderngl.ONE)
-        for texture, unit in zip((level.color, level.seen, level.node), _REFLECTION_UNITS, strict=True):
+        apply_pass_state(ctx, _COMPOSITE, (0, 0, *parent.size))
+        for texture, unit in zip((level.color, level.seen, level.node), REFLECTION_UNITS, strict=True):
             texture.use(unit)
         self.renderer.sky.use(SKY_UNIT)
         if prepared.rough:
-            self.rough_atlas.texture.use(_ATLAS_UNIT)
-        for cap in RECT_CLIP_DISTANCES:
-            ctx.enable_direct(cap)
+            self.rough_atlas.texture.use(ATLAS_UNIT)
         for variant, variant_rows in prepared.rows.items():
             draw = self.composites[variant]
             program = draw.program
@@ -315,10 +314,6 @@ class MirrorPasses:
             program["parent_size"].value = parent.size
             program["to_reflection"].value = (level.size[0] / parent.size[0], level.size[1] / parent.size[1])
             draw.draw(variant_rows)
-        for cap in RECT_CLIP_DISTANCES:
-            ctx.disable_direct(cap)
-        ctx.disable(moderngl.BLEND)
-        ctx.blend_func = moderngl.DEFAULT_BLENDING
         self.renderer.flush()
 
     def release(self) -> None:

@@ -17,7 +17,7 @@ from dataclasses import dataclass
 import moderngl
 import numpy as np
 
-from engine.render.renderer import Renderer
+from engine.render.bindings import LEVEL_UNITS, PassState, apply_pass_state
 from engine.render.targets import RenderTargets, release_framebuffer
 
 TILE = 256
@@ -26,8 +26,8 @@ COLUMNS = 8
 _ROW_DTYPE = np.dtype([("tile", "<f4", (4,)), ("source", "<f4", (4,)), ("place", "<f4", (2,)),
                        ("scale", "<f4"), ("view", "<f4")])
 _FORMAT = "4f 4f 2f 1f 1f/i"
+_COPY = PassState()  # no depth, cull, blend or clip distances
 _ATTRIBUTES = ("in_tile", "in_source", "in_place", "in_scale", "in_view")
-_LEVEL_UNITS = (3, 5)
 
 
 @dataclass(frozen=True)
@@ -48,10 +48,10 @@ def place_tiles(views: list[tuple[int, tuple[int, int, int, int]]]) -> dict[int,
 
 
 class RoughAtlas:
-    def __init__(self, renderer: Renderer) -> None:
+    def __init__(self, renderer) -> None:
         self.ctx = renderer.ctx
         self.program = renderer.shaders.program("rough_isolate.vert", "rough_isolate.frag")
-        self.program["level_color"].value, self.program["level_nodes"].value = _LEVEL_UNITS
+        self.program["level_color"].value, self.program["level_nodes"].value = LEVEL_UNITS
         self.texture: moderngl.Texture | None = None
         self._framebuffer: moderngl.Framebuffer | None = None
         self._rows: moderngl.Buffer | None = None
@@ -84,11 +84,9 @@ class RoughAtlas:
             self._vao = ctx.vertex_array(self.program, [(self._rows, _FORMAT, *_ATTRIBUTES)])
         self._rows.write(rows.tobytes())
         self._framebuffer.use()
-        ctx.viewport = (0, 0, width, height)
-        ctx.scissor = None
-        ctx.disable(moderngl.DEPTH_TEST | moderngl.CULL_FACE | moderngl.BLEND)
-        level.color.use(_LEVEL_UNITS[0])
-        level.node.use(_LEVEL_UNITS[1])
+        apply_pass_state(ctx, _COPY, (0, 0, width, height))
+        level.color.use(LEVEL_UNITS[0])
+        level.node.use(LEVEL_UNITS[1])
         self._vao.render(moderngl.TRIANGLE_STRIP, vertices=4, instances=len(views))
         self.texture.build_mipmaps(0, int(np.log2(TILE)))
         return tiles

@@ -64,6 +64,41 @@ class RenderTargets:
             texture.release()
 
 
+class LevelStack:
+    """The render targets of one view tree: ``[0]`` is its root view's, ``[L]`` reflection
+    level L's.  Each is made on first use and remade when its size changes (a resize, or
+    another resolution scale); they are kept between frames."""
+
+    def __init__(self, ctx: moderngl.Context) -> None:
+        self.ctx = ctx
+        self._levels: list[RenderTargets | None] = []
+
+    def get(self, level: int, size: tuple[int, int]) -> RenderTargets:
+        while len(self._levels) <= level:
+            self._levels.append(None)
+        targets = self._levels[level]
+        if targets is None or targets.size != size:
+            if targets is not None:
+                targets.release()
+            targets = self._levels[level] = RenderTargets(self.ctx, size)
+        return targets
+
+    def __getitem__(self, level: int) -> RenderTargets:
+        targets = self._levels[level]
+        if targets is None:
+            raise IndexError(f"level {level} has no targets yet")
+        return targets
+
+    def __len__(self) -> int:
+        return len(self._levels)
+
+    def release(self) -> None:
+        for targets in self._levels:
+            if targets is not None:
+                targets.release()
+        self._levels.clear()
+
+
 class CaptureTarget:
     """An RGBA8 target the present pass writes to when there is no window (headless runs)."""
 
