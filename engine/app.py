@@ -6,6 +6,7 @@ import moderngl
 
 from components import Camera, FlyController, Transform, yaw_pitch_rotation
 from engine.gl_context import prepare_context
+from engine.raw_gl import make_current
 from engine.render.renderer import Renderer
 from engine.world import World
 from systems import FlyCameraSystem, Output, PortalTravelSystem, PresentSystem, RenderSystem, TransformSystem
@@ -49,6 +50,7 @@ class Engine:
     """Owns a game's world and renderer on a given GL context."""
 
     def __init__(self, game: Game, ctx: moderngl.Context) -> None:
+        make_current(ctx)  # everything below makes GL objects on it
         caps = prepare_context(ctx)
         self.game = game
         self.ctx = ctx
@@ -71,8 +73,13 @@ class Engine:
             raise
 
     def frame(self, dt: float, output: Output | None) -> None:
-        """Run every system once; the render system draws into ``output``."""
+        """Run every system once; the render system draws into ``output``.
+
+        The engine's context is made current first (``raw_gl.make_current``): another GL
+        context made in the process (a window, a tool's) would otherwise receive this
+        engine's draws."""
         self.render_system.output = output
+        make_current(self.ctx)
         self.world.step(dt)
         error = self.ctx.error
         if error != "GL_NO_ERROR":
@@ -92,6 +99,7 @@ class Engine:
 
     def close(self) -> None:
         """Delete every entity, release every GL resource, drop the world."""
+        make_current(self.ctx)
         self.world.close()
         self.renderer.release()
 

@@ -1,6 +1,12 @@
 """The OpenGL calls moderngl 5.13 does not make, in one place.
 
-Only ``glFlush`` so far.  moderngl has ``finish`` (wait for everything) but no flush (start
+``make_current``: moderngl has no call that just makes a context current.  Its context's
+``__enter__`` does (and remembers the previous context for ``__exit__``, which restores
+it); the engine enters and never exits, so its context stays current after a frame, as a
+program expects of its own renderer, whatever other context (a window, a tool's) was
+made current in between.
+
+``glFlush``.  moderngl has ``finish`` (wait for everything) but no flush (start
 the GPU on what is queued, without waiting).  On llvmpipe that difference is frame time:
 draws are binned on the calling thread and rasterised only at a flush, a framebuffer
 switch or a wait, so CPU-only work after a pass (culling the next level) leaves the
@@ -18,6 +24,11 @@ import ctypes
 import moderngl
 
 _VOID_CALL = ctypes.CFUNCTYPE(None)
+
+
+def make_current(ctx: moderngl.Context) -> None:
+    """Make ``ctx`` the calling thread's current context."""
+    ctx.__enter__()
 
 
 class RawGL:

@@ -11,6 +11,8 @@ the depth cap.
 """
 from __future__ import annotations
 
+from dataclasses import replace
+
 import esper
 import numpy as np
 from pyglm import glm
@@ -47,17 +49,43 @@ class ReflectionSystem(esper.Processor):
         self.render_system = render_system
         self.renderer = renderer
         self.tree = ViewTree(renderer)
-        # The main view tree's limits (TreeSettings): levels below the main view, at most
-        # MAX_TREE_DEPTH, and the most views a level draws (None: all with pixels).
-        self.max_depth_cap = max_depth_cap
-        self.level_budget: int | None = None
+        self.settings = TreeSettings(max_depth_cap)
         self.mirrors: dict[int, SurfaceState] = {}
         self.portals: dict[int, SurfaceState] = {}
         self.views: list[ReflectionView] = []   # last frame's view tree, level order
-        # How a level's views are drawn: "per_mirror" (each view its own draws), "batched" (one
-        # draw per mesh for the whole level, engine/render/batched_mirrors.py) or "auto"
-        # (chosen per level by view and triangle count; the rule and its numbers: choose_path).
-        self.path = "auto"
+
+    # --- the main tree's settings, checked when they are set --------------------------------------
+    @property
+    def max_depth_cap(self) -> int:
+        """Levels of mirrors and portals below the main view, whatever the surfaces' own
+        ``max_depth`` (default 8, at most MAX_TREE_DEPTH = 16; each level is one more set of
+        screen-sized targets).  Reaching it shows in ``RenderStats.reflection_depth_capped``."""
+        return self.settings.depth_cap
+
+    @max_depth_cap.setter
+    def max_depth_cap(self, value: int) -> None:
+        self.settings = replace(self.settings, depth_cap=value)
+
+    @property
+    def level_budget(self) -> int | None:
+        """The most views a level draws, keeping those with the most pixels (None: every view
+        with pixels).  Views left out show in ``RenderStats.reflection_views_dropped``."""
+        return self.settings.level_budget
+
+    @level_budget.setter
+    def level_budget(self, value: int | None) -> None:
+        self.settings = replace(self.settings, level_budget=value)
+
+    @property
+    def path(self) -> str:
+        """How a level's views are drawn: "per_mirror" (each view its own draws), "batched"
+        (one geometry-shader draw per mesh for the whole level) or "auto" (chosen per level
+        by view and triangle count; the rule and its numbers: batched_mirrors.choose_path)."""
+        return self.settings.path
+
+    @path.setter
+    def path(self, value: str) -> None:
+        self.settings = replace(self.settings, path=value)
 
     # --- extract ---------------------------------------------------------------------------
     def _refresh_mirrors(self) -> None:
@@ -136,7 +164,7 @@ class ReflectionSystem(esper.Processor):
             # The main view rasterises while the CPU culls and works out the first level's
             # cameras; the same after each level's views (engine/raw_gl.py says why).
             renderer.flush()
-        settings = TreeSettings(self.max_depth_cap, self.level_budget, self.path)
+        settings = self.settings
         surfaces = SurfaceTable([*self.mirrors.values(), *self.portals.values()])
         result = self.tree.render(main, renderer.levels, surfaces, settings)
         self.views = result.views

@@ -173,7 +173,10 @@ def test_no_reflection_view_reports_no_path(scene):
 
 
 def test_an_unknown_path_is_a_clear_error(scene):
+    """Refused when it is set (not frames later inside the system), keeping the old path."""
     runner = scene(hall({}), (64, 48))
-    runner.engine.reflection_system.path = "fastest"
-    with pytest.raises(ValueError, match="must be one of"):
-        runner.frame()
+    with pytest.raises(ValueError, match="path must be one of"):
+        runner.engine.reflection_system.path = "fastest"
+    assert runner.engine.reflection_system.path == "auto"
+    runner.frame()
+    assert runner.stats.reflection_views > 0

@@ -441,3 +441,28 @@ def test_composite_rows_hold_each_views_quad_and_parameters_where_the_shader_rea
     assert np.allclose(params, [(0.75, 0.5, 0.0, 7.0), (1.0, 0.0, 1.0, 9.0)])        # rate, roughness, portal, index
     assert np.allclose(normal[:, :3], [(0, 0, 1), (1, 0, 0)])
     assert np.allclose(carried[0], np.eye(3).ravel()) and np.allclose(carried[1], np.array(carry.to_list()).ravel())
+
+
+def test_another_context_made_current_does_not_take_the_engines_draws(scene, ctx):
+    """A window or a tool may make its own GL context current between two frames (or before
+    the engine is built): the engine draws on its own context, the same picture."""
+    import moderngl
+
+    def build(world):
+        camera(world)
+        world.spawn(DirectionalLight(direction=(0, 0, -1), intensity=2.0))
+        world.spawn(Transform(), MeshRef(box()), Material(color=(0.8, 0.2, 0.2)))
+
+    first = scene(build, SIZE)
+    before = first.frame()
+    other = moderngl.create_standalone_context(backend="egl")  # current from now on
+    try:
+        after = first.frame()
+        other.__enter__()  # current again before the next engine is built
+        built_later = scene(build, SIZE).frame()
+        assert ctx.error == "GL_NO_ERROR"
+    finally:
+        other.release()
+        ctx.__enter__()  # the test session's context, for the tests that follow
+    np.testing.assert_array_equal(after, before)
+    np.testing.assert_array_equal(built_later, before)

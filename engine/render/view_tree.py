@@ -32,7 +32,7 @@ import numpy as np
 from pyglm import glm
 
 from engine.reflection_math import oblique_is_safe, oblique_projection, transform_plane
-from engine.render.batched_mirrors import choose_path, submitted_triangles
+from engine.render.batched_mirrors import PATHS, choose_path, submitted_triangles
 from engine.render.mirror_passes import (
     Claim,
     Composite,
@@ -62,10 +62,13 @@ class TreeSettings:
     path: str = "auto"                 # "per_mirror", "batched" or "auto" (batched_mirrors.choose_path)
 
     def __post_init__(self) -> None:
-        if not isinstance(self.depth_cap, int) or not 0 <= self.depth_cap <= MAX_TREE_DEPTH:
+        if not isinstance(self.depth_cap, int) or isinstance(self.depth_cap, bool) \
+                or not 0 <= self.depth_cap <= MAX_TREE_DEPTH:
             raise ValueError(f"view tree depth_cap must be an int in [0, {MAX_TREE_DEPTH}], got {self.depth_cap!r}")
         if self.level_budget is not None and (not isinstance(self.level_budget, int) or self.level_budget < 1):
             raise ValueError(f"view tree level_budget must be None or an int >= 1, got {self.level_budget!r}")
+        if self.path not in PATHS:
+            raise ValueError(f"view tree path must be one of {PATHS}, got {self.path!r}")
 
 
 @dataclass

@@ -1,0 +1,126 @@
+"""The view tree's limits: every view with pixels is drawn, a budget keeps the biggest and
+says what it dropped, and the depth cap is a setting that agrees with the components'."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from pyglm import glm
+
+from components import ComponentValueError, DirectionalLight, Emissive, Material, MeshRef, Mirror, Portal, Transform
+from engine.mesh import box, quad, sphere
+from engine.render.view_tree import MAX_TREE_DEPTH
+from tests.support import look_from
+
+FACING_BACK = glm.angleAxis(glm.pi(), glm.vec3(0, 1, 0))
+
+
+def mirror_grid(ents, columns=10, rows=6):
+    """``columns`` x ``rows`` small mirrors on a wall facing the camera (sizes vary by
+    column), and a large emissive red panel behind the camera that each of them reflects."""
+    def build(world):
+        world.spawn(DirectionalLight(direction=(0.2, -1.0, -0.5), intensity=2.0))
+        look_from(world, (0.0, 1.5, 4.0), target=(0.0, 1.5, -2.0), fov=70.0)
+        ents["mirrors"] = []
+        for c in range(columns):
+            for r in range(rows):
+                size = 0.25 + 0.03 * c + 0.01 * r
+                ents["mirrors"].append(world.spawn(
+                    Transform(position=(-3.6 + 0.8 * c, 0.2 + 0.55 * r, -2.0)), MeshRef(quad(size, size * 0.8)),
+                    Material(color=(0.1, 0.1, 0.1)), Mirror()))
+        ents["panel"] = world.spawn(Transform(position=(0, 1.5, 9.0), scale=(40, 20, 0.1)), MeshRef(box()),
+                                    Material(color=(0.9, 0.1, 0.1)), Emissive(1.0))
+    return build
+
+
+def test_sixty_mirrors_each_get_their_view(scene):
+    """More views than a level used to hold (32): every mirror with pixels shows its
+    reflection (the red panel), none shows its own surface."""
+    ents = {}
+    runner = scene(mirror_grid(ents), (320, 200))
+    runner.frame()
+    surface = runner.engine.renderer.targets.read_surface_ids()
+    seen = runner.ids()
+    visible = [m for m in ents["mirrors"] if (surface == m).any()]
+    assert len(visible) == 60
+    assert runner.stats.reflection_views == 60 and runner.stats.reflection_views_dropped == 0
+    for mirror in visible:
+        on_it = surface == mirror
+        assert (seen[on_it] == ents["panel"]).mean() > 0.9, f"mirror {mirror} does not show the panel"
+
+
+def test_a_level_budget_keeps_the_views_with_the_most_pixels_and_reports_the_rest(scene):
+    ents = {}
+    runner = scene(mirror_grid(ents), (320, 200))
+    runner.engine.reflection_system.level_budget = 10
+    runner.frame()
+    surface = runner.engine.renderer.targets.read_surface_ids()
+    seen = runner.ids()
+    pixels = {m: int((surface == m).sum()) for m in ents["mirrors"]}
+    tenth = sorted(pixels.values(), reverse=True)[9]
+    assert runner.stats.reflection_views == 10 and runner.stats.reflection_views_dropped == 50
+    shows_panel = {m for m in ents["mirrors"] if (seen[surface == m] == ents["panel"]).mean() > 0.9}
+    assert len(shows_panel) == 10
+    assert {m for m in pixels if pixels[m] > tenth} <= shows_panel  # every bigger one is kept
+    assert all(pixels[m] >= tenth for m in shows_panel)  # and none smaller (ties at the tenth may go either way)
+
+
+def facing_pair(ents, depth):
+    def build(world):
+        world.spawn(DirectionalLight(direction=(0.2, -1.0, -0.5), intensity=2.0))
+        look_from(world, (0.3, 1.5, 2.0), target=(0.0, 1.5, -4.0), fov=50.0)
+        for z, turn in ((-4.0, None), (4.0, FACING_BACK)):
+            ents.setdefault("mirrors", []).append(world.spawn(
+                Transform(position=(0, 1.5, z), rotation=turn or glm.quat()), MeshRef(quad(4, 3)),
+                Material(color=(0.1, 0.1, 0.1)), Mirror(max_depth=depth)))
+        ents["ball"] = world.spawn(Transform(position=(0.8, 1.2, 0.0)), MeshRef(sphere(0.3)),
+                                   Material(color=(0.1, 0.8, 0.2)), Emissive(0.5))
+    return build
+
+
+def test_a_depth_12_facing_pair_with_the_cap_at_12_shows_12_nested_images(scene):
+    ents = {}
+    runner = scene(facing_pair(ents, 12), (320, 240))
+    runner.engine.reflection_system.max_depth_cap = 12
+    runner.frame()
+    views = runner.engine.reflection_system.views[1:]
+    assert [v.level for v in views] == list(range(1, 13))
+    assert runner.stats.reflection_views == 12 and runner.stats.reflection_depth_capped == 0
+    for outer, inner in zip(views, views[1:], strict=False):  # each image inside the one before
+        ox, oy, ow, oh = outer.rect
+        ix, iy, iw, ih = inner.rect
+        assert ox <= ix and oy <= iy and ix + iw <= ox + ow and iy + ih <= oy + oh and iw * ih < ow * oh
+    # The innermost image shows the ball's copy: reflections go all the way down.
+    x, y, w, h = views[-1].rect
+    seen = runner.ids()
+    rows = slice(seen.shape[0] - (y + h), seen.shape[0] - y)  # rects count rows from the bottom
+    assert (seen[rows, x:x + w] == ents["ball"]).any()
+
+
+def test_reaching_the_cap_is_reported(scene):
+    ents = {}
+    runner = scene(facing_pair(ents, 12), (160, 120))
+    runner.engine.reflection_system.max_depth_cap = 5
+    runner.frame()
+    assert runner.stats.reflection_views == 5
+    assert runner.stats.reflection_depth_capped == 1  # the mirrors' own limit allowed a sixth
+
+
+def test_the_cap_and_the_components_depth_limits_agree():
+    Mirror(max_depth=MAX_TREE_DEPTH)
+    Portal(max_depth=MAX_TREE_DEPTH)
+    with pytest.raises(ComponentValueError, match="Mirror.max_depth"):
+        Mirror(max_depth=MAX_TREE_DEPTH + 1)
+    with pytest.raises(ComponentValueError, match="Portal.max_depth"):
+        Portal(max_depth=MAX_TREE_DEPTH + 1)
+
+
+def test_a_cap_beyond_the_limit_is_refused_when_set(scene):
+    runner = scene(lambda world: look_from(world, (0, 1.5, 3)), (32, 32))
+    system = runner.engine.reflection_system
+    system.max_depth_cap = MAX_TREE_DEPTH
+    with pytest.raises(ValueError, match=r"depth_cap must be an int in \[0, 16\]"):
+        system.max_depth_cap = MAX_TREE_DEPTH + 1
+    with pytest.raises(ValueError, match="level_budget"):
+        system.level_budget = 0
+    assert system.max_depth_cap == MAX_TREE_DEPTH and system.level_budget is None
+    assert np.asarray(runner.frame()).shape == (32, 32, 3)
