@@ -1,0 +1,100 @@
+"""Each pass sets the GL state it needs when it starts: run after any other pass, or after
+any state at all, it draws the same pixels.
+
+Checked by breaking ``apply_pass_state``: leaving flags enabled (``enable`` instead of
+``enable_only``) or the depth function unset fails here.  Two breakages pass on llvmpipe
+and are not observable by this test: an unset viewport (moderngl's ``Framebuffer.use``
+sets it) and clip distances left enabled that a pass's shader does not write (llvmpipe
+reads them as 0, which clips nothing; a GPU may not)."""
+from __future__ import annotations
+
+import random
+
+import moderngl
+import numpy as np
+
+from engine.render.targets import CaptureTarget
+from games.hall_of_mirrors.level import HallOfMirrors
+from systems import Output
+from tests.support import SceneRunner
+
+SIZE = (192, 108)
+CAMERAS = ((0.0, 1.7, 6.5, 0.0, -8.0), (-1.5, 1.6, -1.0, 10.0, 0.0), (2.5, 1.5, 2.0, -50.0, -5.0))
+
+
+def hall(ctx) -> SceneRunner:
+    level = HallOfMirrors()
+    return SceneRunner(ctx, level.build, SIZE, update=level.update)
+
+
+def frames(runner: SceneRunner) -> list[tuple[np.ndarray, np.ndarray]]:
+    shots = []
+    for camera in CAMERAS:
+        runner.engine.place_camera(*camera)
+        shots.append((runner.frame(), runner.ids()))
+    return shots
+
+
+def scrambled(ctx, rng: random.Random, other: SceneRunner, scratch: CaptureTarget):
+    """Before each pass: another engine's pass (its scene pass or its present), then GL
+    state set at random (flags, depth and blend functions, winding, clip distances,
+    scissor, viewport, bound framebuffer)."""
+    def before():
+        if rng.random() < 0.5:
+            if other.engine.render_system.main_view is not None:
+                other.engine.renderer.scene_pass.draw([other.engine.render_system.main_view],
+                                                      other.engine.renderer.targets)
+        else:
+            other.engine.renderer.present(scratch.framebuffer, scratch.size)
+        flags = moderngl.NOTHING
+        for flag in (moderngl.DEPTH_TEST, moderngl.CULL_FACE, moderngl.BLEND):
+            if rng.random() < 0.5:
+                flags |= flag
+        ctx.enable_only(flags)
+        ctx.depth_func = rng.choice(["<", "<=", ">", "1", "0"])
+        ctx.blend_func = rng.choice([moderngl.ADDITIVE_BLENDING, moderngl.PREMULTIPLIED_ALPHA,
+                                     (moderngl.ONE, moderngl.ZERO)])
+        ctx.front_face = rng.choice(["cw", "ccw"])
+        for index in range(6):
+            (ctx.enable_direct if rng.random() < 0.5 else ctx.disable_direct)(0x3000 + index)
+        ctx.scissor = (rng.randrange(50), rng.randrange(30), rng.randrange(1, 60), rng.randrange(1, 40))
+        ctx.viewport = (rng.randrange(20), rng.randrange(20), rng.randrange(1, 100), rng.randrange(1, 60))
+        scratch.framebuffer.use()
+
+    def wrap(owner, name):
+        method = getattr(owner, name)
+
+        def wrapped(*args, **kwargs):
+            before()
+            return method(*args, **kwargs)
+        setattr(owner, name, wrapped)
+    return wrap
+
+
+def test_passes_draw_the_same_pixels_whatever_ran_before_them(ctx):
+    plain = hall(ctx)
+    try:
+        expected = frames(plain)
+    finally:
+        plain.close()
+
+    shuffled, other = hall(ctx), hall(ctx)
+    scratch = CaptureTarget(ctx, (64, 48))
+    try:
+        other.engine.place_camera(*CAMERAS[1])
+        other.engine.frame(1 / 60, Output(other.capture.framebuffer, SIZE))
+        wrap = scrambled(ctx, random.Random(7), other, scratch)
+        renderer = shuffled.engine.renderer
+        passes = shuffled.engine.reflection_system.tree.passes
+        for owner, name in ((renderer.scene_pass, "draw"), (passes, "prepare_level"), (passes, "composite_level"),
+                            (passes.rough_atlas, "isolate"), (renderer, "present")):
+            wrap(owner, name)
+        got = frames(shuffled)
+    finally:
+        scratch.release()
+        other.close()
+        shuffled.close()
+    assert shuffled.stats.reflection_views > 0
+    for (rgb, ids), (want_rgb, want_ids) in zip(got, expected, strict=True):
+        np.testing.assert_array_equal(ids, want_ids)
+        np.testing.assert_array_equal(rgb, want_rgb)
