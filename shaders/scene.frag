@@ -34,6 +34,20 @@ uniform uint node_index;
 #define VIEW_EYE camera.eye.xyz
 #endif
 
+// The variant of each slot: the instance's own (v_slots), or, in a program specialised for a
+// batch whose instances all use the same variants, a constant (FIXED_*, defined by
+// engine/render/scene_pass.py), so the compiler drops every other case of the switches:
+// llvmpipe runs both sides of a branch, even one no pixel takes.
+#ifdef FIXED_EMISSIVE
+#define SLOT_EMISSIVE FIXED_EMISSIVE
+#define SLOT_REFRACT FIXED_REFRACT
+#define SLOT_REFLECT FIXED_REFLECT
+#else
+#define SLOT_EMISSIVE v_slots.x
+#define SLOT_REFRACT v_slots.y
+#define SLOT_REFLECT v_slots.z
+#endif
+
 layout(location = 0) out vec4 out_color;
 layout(location = 1) out uint out_surface;  // the entity drawn here
 layout(location = 2) out uint out_seen;     // the entity finally seen here (reflections overwrite)
@@ -165,14 +179,14 @@ void main() {
     // llvmpipe otherwise. The variants are flat per instance, so every pixel of a 2 x 2 quad
     // (one primitive) takes the same branch and the derivatives stay defined.
     s.reflect_lod = 0.0;
-    if (v_slots.z == REFLECT_SKYBOX || v_slots.z == REFLECT_CUBE) s.reflect_lod = cube_lod(s.reflect_dir, sky_face_size);
+    if (SLOT_REFLECT == REFLECT_SKYBOX || SLOT_REFLECT == REFLECT_CUBE) s.reflect_lod = cube_lod(s.reflect_dir, sky_face_size);
     s.refract_lod = 0.0;
-    if (v_slots.y == REFRACT_ENVIRONMENT) s.refract_lod = cube_lod(s.refract_dir, sky_face_size);
+    if (SLOT_REFRACT == REFRACT_ENVIRONMENT) s.refract_lod = cube_lod(s.refract_dir, sky_face_size);
 
     vec3 color = direct_lighting(s);
-    color = apply_reflect(v_slots.z, color, s);
-    color = apply_refract(v_slots.y, color, s);
-    color = apply_emissive(v_slots.x, color, s);
+    color = apply_reflect(SLOT_REFLECT, color, s);
+    color = apply_refract(SLOT_REFRACT, color, s);
+    color = apply_emissive(SLOT_EMISSIVE, color, s);
     out_color = vec4(color, 1.0);
     out_surface = v_slots.w;
     out_seen = v_slots.w;

@@ -107,6 +107,7 @@ class RenderSystem(esper.Processor):
         row["slice"] = slice_.plane if slice_ is not None else NO_SLICE
         clone = world.try_get(entity, PortalClone)
         row["slots"] = (choice.emissive, choice.refract, choice.reflect, clone.source if clone else entity)
+        batch.variants_changed()
 
     def _remove_instance(self, entity: int, batch: InstanceBatch) -> None:
         batch.remove(entity)

@@ -66,6 +66,8 @@ class InstanceBatch:
         self._vaos: dict[int, moderngl.VertexArray] = {}
         self._max_scale = 0.0
         self._rescale = False
+        self._variants: tuple[int, int, int] | None = None
+        self._variants_stale = True
         # Drawn in the scene pass's transparent slot (blended, farthest first) instead of
         # with the opaque batches.  Nothing sets it yet: transparent materials come with refraction.
         self.transparent = False
@@ -82,6 +84,7 @@ class InstanceBatch:
         self.row_of[entity] = row
         self.entity_at.append(entity)
         self._dirty.add(row)
+        self._variants_stale = True
         return self.rows[row]
 
     def row(self, entity: int) -> np.void:
@@ -103,6 +106,22 @@ class InstanceBatch:
         self.count = last
         self._dirty.discard(last)
         self._rescale = True  # the largest instance may have gone: measure all rows again
+        self._variants_stale = True
+
+    def variants_changed(self) -> None:
+        """Say that some row's material variants (``slots`` 0-2) were written."""
+        self._variants_stale = True
+
+    @property
+    def variants(self) -> tuple[int, int, int] | None:
+        """The (emissive, refract, reflect) variants every instance uses, or None when they
+        differ: the scene pass draws a uniform batch with a program built for its variants."""
+        if self._variants_stale:
+            slots = self.rows["slots"][: self.count, :3]
+            same = self.count and bool((slots == slots[0]).all())
+            self._variants = tuple(int(v) for v in slots[0]) if same else None
+            self._variants_stale = False
+        return self._variants
 
     # --- GPU -----------------------------------------------------------------------------
     @property

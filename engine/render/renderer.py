@@ -15,7 +15,7 @@ import moderngl
 from engine.gl_context import GLCapabilities
 from engine.mesh import Mesh
 from engine.raw_gl import RawGL
-from engine.render.bindings import ALBEDO_UNIT, CAMERA_BINDING, PRESENT_UNIT, PassState, apply_pass_state
+from engine.render.bindings import CAMERA_BINDING, PRESENT_UNIT, PassState, apply_pass_state
 from engine.render.instances import GpuMesh, InstanceBatch
 from engine.render.scene_pass import ScenePass
 from engine.render.sky import flat_cube, upload_cube
@@ -183,23 +183,6 @@ class Renderer:
         """Non-empty batches drawn in the scene pass's transparent slot (none until a
         material is transparent: refraction fills the slot)."""
         return [b for b in self.batches.values() if b.count and b.transparent]
-
-    def draw_batches(self, program: moderngl.Program, batches: list[InstanceBatch]) -> None:
-        """One instanced draw per batch with a scene-shading ``program`` (albedo maps bound
-        here; camera, lights, sky and targets are the scene pass's)."""
-        has_map = program["has_albedo_map"]
-        textured = None  # the flag is written only when it changes: one call fewer per draw in a view loop
-        for batch in batches:
-            if not batch.count:
-                continue
-            if batch.texture is not None:
-                batch.texture.use(ALBEDO_UNIT)
-            if textured != (batch.texture is not None):
-                textured = batch.texture is not None
-                has_map.value = textured
-            batch.draw(program)
-            self.stats.draw_calls += 1
-            self.stats.instances += batch.count
 
     def flush(self) -> None:
         """Start the GPU on the passes queued so far, before CPU-only work (``RawGL.flush``)."""

@@ -9,6 +9,12 @@ level, and (next) each face of a cube-map probe.  For each view it draws
   3. the transparent slot: batches marked transparent, farthest first, blended over what
      is there.  No material is transparent yet; refraction (glass) fills this slot.
 
+Programs are specialised: a batch whose instances all use the same material variants is
+drawn with a build of ``scene.frag`` whose slots are those variants as constants (the
+other cases of each slot's switch compile away; llvmpipe would otherwise run every case
+of every slot for every pixel), compiled on first use and cached; a batch of mixed
+variants uses the build that switches per instance.
+
 ``SceneOptions`` says how: clear the target first (a root view) or keep the depth mask a
 reflection level's claims wrote; draw only the pixels the target's node image gives each
 view (the claimed-pixels mask); draw the sky or leave it to the composite; write the node
@@ -25,6 +31,7 @@ from dataclasses import dataclass
 import moderngl
 from pyglm import glm
 
+from engine.material_slots import SLOTS
 from engine.render.batched_mirrors import MAX_BATCHED_VIEWS, VIEWS_BLOCK_BYTES, VIEWS_PER_INVOCATION, views_block
 from engine.render.bindings import (
     ALBEDO_UNIT,
@@ -70,23 +77,73 @@ class ScenePass:
         self.renderer = renderer
         self.ctx = renderer.ctx
         shaders = renderer.shaders
-        self.program = shaders.program("scene.vert", "scene.frag")
         self.sky_program = shaders.program("sky.vert", "sky.frag")
-        for program in (self.program, self.sky_program):
-            program["Camera"].binding = CAMERA_BINDING
-            program["sky_map"].value = SKY_UNIT
-        self._setup_scene_program(self.program)
+        self.sky_program["Camera"].binding = CAMERA_BINDING
+        self.sky_program["sky_map"].value = SKY_UNIT
         self._sky = self.ctx.vertex_array(self.sky_program, [])
-        self._batched: dict[int, moderngl.Program] = {}  # by geometry-shader invocations
+        # Scene programs by (geometry-shader invocations or 0, the batch's variants or None).
+        self._programs: dict[tuple[int, tuple[int, int, int] | None], moderngl.Program] = {}
         self._views_ubo: moderngl.Buffer | None = None
         self._reflection_sampler: moderngl.Sampler | None = None
 
-    @staticmethod
-    def _setup_scene_program(program: moderngl.Program) -> None:
-        program["Lights"].binding = LIGHTS_BINDING
-        program["albedo_map"].value = ALBEDO_UNIT
-        program["sky_map"].value = SKY_UNIT
-        program["node_map"].value = NODE_UNIT
+    def program(self, variants: tuple[int, int, int] | None = None, invocations: int = 0) -> moderngl.Program:
+        """The scene program for a batch of ``variants`` (None: mixed, switched per
+        instance), plain or batched (``invocations`` > 0: the geometry shader's), built once."""
+        key = (invocations, variants)
+        program = self._programs.get(key)
+        if program is None:
+            defines = {}
+            if variants is not None:
+                defines = {f"FIXED_{slot}": f"{value}u" for slot, value in zip(SLOTS, variants, strict=True)}
+            geometry = None
+            if invocations:
+                geometry = "scene_batched.geom"
+                defines.update({
+                    "BATCHED_VIEWS": "1",
+                    "MAX_LEVEL_VIEWS": str(MAX_BATCHED_VIEWS),
+                    "VIEWS_PER_INVOCATION": str(VIEWS_PER_INVOCATION),
+                    "GS_INVOCATIONS": str(invocations),
+                    "GS_MAX_VERTICES": str(3 * VIEWS_PER_INVOCATION),
+                })
+            program = self.renderer.shaders.program("scene.vert", "scene.frag", geometry, defines=defines)
+            if "Camera" in program:  # the batched stages read their cameras from Views
+                program["Camera"].binding = CAMERA_BINDING
+            if invocations:
+                program["Views"].binding = VIEWS_BINDING
+            # A build may not read every input (the linker drops what a variant never uses).
+            for name, unit in (("albedo_map", ALBEDO_UNIT), ("sky_map", SKY_UNIT), ("node_map", NODE_UNIT)):
+                if name in program:
+                    program[name].value = unit
+            if "Lights" in program:
+                program["Lights"].binding = LIGHTS_BINDING
+            self._programs[key] = program
+        return program
+
+    def _draw_batches(self, batches, invocations: int, masked: bool, node: int) -> None:
+        """One instanced draw per batch, each with the program of its variants; a program's
+        per-view uniforms are written the first time the view uses it."""
+        renderer = self.renderer
+        stats = renderer.stats
+        sky_size = renderer.sky.size[0]
+        ready: dict[int, list] = {}  # program -> [has_albedo_map uniform, its last value]
+        for batch in batches:
+            if not batch.count:
+                continue
+            program = self.program(batch.variants, invocations)
+            state = ready.get(program.glo)
+            if state is None:
+                for name, value in (("masked", masked), ("sky_face_size", sky_size), ("node_index", node)):
+                    if name in program:
+                        program[name].value = value
+                state = ready[program.glo] = [program.get("has_albedo_map", None), None]
+            textured = batch.texture is not None
+            if textured:
+                batch.texture.use(ALBEDO_UNIT)
+            if state[1] != textured and state[0] is not None:  # written only when it changes
+                state[0].value = state[1] = textured
+            batch.draw(program)
+            stats.draw_calls += 1
+            stats.instances += batch.count
 
     # --- the pass ------------------------------------------------------------------------------
     def draw(self, views: Sequence[View], targets: RenderTargets, options: SceneOptions = ROOT_VIEW) -> None:
@@ -123,17 +180,12 @@ class ScenePass:
         per view is on the frame's critical path)."""
         ctx = self.ctx
         renderer = self.renderer
-        program = self.program
-        program["masked"].value = options.masked
-        program["sky_face_size"].value = renderer.sky.size[0]
-        node_index = program["node_index"]
         transparent = renderer.transparent_batches()
         for view in views:
             ctx.scissor = view.scissor
             ctx.front_face = "cw" if view.mirrored else "ccw"
-            node_index.value = view.node
             renderer.bind_view(view)
-            renderer.draw_batches(program, renderer.opaque_batches())
+            self._draw_batches(renderer.opaque_batches(), 0, options.masked, view.node)
             if options.sky:
                 apply_pass_state(ctx, _SKY, viewport, view.scissor)
                 self._sky.render(moderngl.TRIANGLES, vertices=3)
@@ -141,7 +193,7 @@ class ScenePass:
             if transparent:
                 apply_pass_state(ctx, _TRANSPARENT, viewport, view.scissor)
                 ctx.front_face = "cw" if view.mirrored else "ccw"
-                renderer.draw_batches(program, _back_to_front(transparent, view.eye))
+                self._draw_batches(_back_to_front(transparent, view.eye), 0, options.masked, view.node)
             if options.sky or transparent:
                 apply_pass_state(ctx, _SCENE, viewport)
             renderer.stats.passes += 1
@@ -152,39 +204,14 @@ class ScenePass:
         rectangle by clip distances 1-4 (the per-view scissor of ``_draw_each``)."""
         renderer = self.renderer
         ctx = self.ctx
-        program = self.batched_program(len(views))
-        program["masked"].value = options.masked
-        program["sky_face_size"].value = renderer.sky.size[0]
+        if self._views_ubo is None:
+            self._views_ubo = ctx.buffer(reserve=VIEWS_BLOCK_BYTES)
         self._views_ubo.write(views_block(views))
         self._views_ubo.bind_to_uniform_block(VIEWS_BINDING)
         ctx.scissor = union_rect([v.scissor or (0, 0, *v.size) for v in views])
         ctx.front_face = "ccw"  # mirrored views reverse their vertices in the geometry shader
-        renderer.draw_batches(program, renderer.opaque_batches())
+        self._draw_batches(renderer.opaque_batches(), geometry_invocations(len(views)), options.masked, 0)
         renderer.stats.passes += 1
-
-    def batched_program(self, view_count: int) -> moderngl.Program:
-        """The batched scene program for ``view_count`` views, built on first use.  Its
-        geometry shader runs ceil(view_count / VIEWS_PER_INVOCATION) invocations rounded up
-        to a power of two: invocations with no view still cost a pass over the triangles."""
-        needed = -(-view_count // VIEWS_PER_INVOCATION)
-        invocations = min(1 << max(0, needed - 1).bit_length(), -(-MAX_BATCHED_VIEWS // VIEWS_PER_INVOCATION))
-        program = self._batched.get(invocations)
-        if program is None:
-            program = self.renderer.shaders.program("scene.vert", "scene.frag", "scene_batched.geom", defines={
-                "BATCHED_VIEWS": "1",
-                "MAX_LEVEL_VIEWS": str(MAX_BATCHED_VIEWS),
-                "VIEWS_PER_INVOCATION": str(VIEWS_PER_INVOCATION),
-                "GS_INVOCATIONS": str(invocations),
-                "GS_MAX_VERTICES": str(3 * VIEWS_PER_INVOCATION),
-            })
-            program["Views"].binding = VIEWS_BINDING
-            if "Camera" in program:  # the batched stages read their cameras from Views
-                program["Camera"].binding = CAMERA_BINDING
-            self._setup_scene_program(program)
-            self._batched[invocations] = program
-        if self._views_ubo is None:
-            self._views_ubo = self.ctx.buffer(reserve=VIEWS_BLOCK_BYTES)
-        return program
 
     def _reflection_filter(self) -> moderngl.Sampler | None:
         """The albedo sampler of reflection views, or None when they filter like the main view."""
@@ -204,7 +231,15 @@ class ScenePass:
             if obj is not None:
                 obj.release()
         self._views_ubo = self._reflection_sampler = None
-        self._batched.clear()  # the shader library owns and releases the programs
+        self._programs.clear()  # the shader library owns and releases the programs
+
+
+def geometry_invocations(view_count: int) -> int:
+    """Invocations of the batched geometry shader for ``view_count`` views:
+    ceil(view_count / VIEWS_PER_INVOCATION) rounded up to a power of two (invocations with
+    no view still cost a pass over the triangles; the rounding bounds the programs built)."""
+    needed = -(-view_count // VIEWS_PER_INVOCATION)
+    return min(1 << max(0, needed - 1).bit_length(), -(-MAX_BATCHED_VIEWS // VIEWS_PER_INVOCATION))
 
 
 def _back_to_front(batches, eye: glm.vec3) -> list:
