@@ -19,10 +19,10 @@ layout(triangle_strip, max_vertices = GS_MAX_VERTICES) out;  // 3 x VIEWS_PER_IN
 
 struct MirrorView {
     mat4 view_proj;   // the reflected camera's projection x view
-    vec4 clip_plane;  // world-space mirror plane, offset; geometry behind it is clipped
+    vec4 clip_plane;  // world-space mirror plane; geometry behind it is clipped
     vec4 eye;         // xyz: world-space eye; w: 1 if mirrored (front faces clockwise)
     vec4 rect;        // the view's screen rectangle in NDC: x0, y0, x1, y1
-    uvec4 node;       // x: the view's index in the node image
+    uvec4 node;       // x: the view's index in the node image; y: the entity it never draws (its surface)
 };
 
 layout(std140) uniform Views {
@@ -88,6 +88,7 @@ void main() {
         int i = gl_InvocationID * VIEWS_PER_INVOCATION + k;
         if (i >= view_count.x) return;
         MirrorView v = views[i];
+        if (g_slots[0].w == v.node.y) continue;  // the surface the view looks out of
         if (outside(v.clip_plane, w0, w1, w2)) continue;  // behind the mirror
         vec4 p0 = v.view_proj * w0;
         vec4 p1 = v.view_proj * w1;

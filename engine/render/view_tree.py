@@ -45,8 +45,6 @@ from engine.render.scene_pass import REFLECTION_LEVEL, SceneOptions
 from engine.render.targets import LevelStack
 from engine.render.views import View
 
-# Mirrors clip a hair in front of their plane, so their own surface never shows in them.
-CLIP_OFFSET = 1e-3
 # The deepest a tree may go (each level is one more set of root-sized targets); the depth
 # limits of Mirror and Portal components take values up to this.
 MAX_TREE_DEPTH = 16
@@ -213,14 +211,16 @@ class ViewTree:
         pixel for pixel."""
         eye = glm.vec3(state.carry * glm.vec4(parent.view.eye, 1.0))
         view = parent.view.view * glm.inverse(state.carry)
-        exit_plane = state.exit_plane
-        clip_plane = glm.vec4(glm.vec3(exit_plane), exit_plane.w - CLIP_OFFSET)
+        # Clipped exactly at the plane it looks out of (what touches a mirror meets its
+        # reflection without a crack); the surface on that plane is left out by entity.
+        clip_plane = state.exit_plane
         proj = root.proj
-        if oblique_is_safe(eye, exit_plane, _near_distance(root.proj)):
+        if oblique_is_safe(eye, clip_plane, _near_distance(root.proj)):
             proj = oblique_projection(root.proj, transform_plane(view, clip_plane))
         mirrored = parent.view.mirrored != (state.kind == "mirror")
         return View(view=view, proj=proj, eye=eye, size=size, name=f"{state.kind} {state.entity}",
-                    clip_plane=clip_plane, mirrored=mirrored, scissor=scissor, node=index)
+                    clip_plane=clip_plane, mirrored=mirrored, scissor=scissor, node=index,
+                    skip=state.exit_entity)
 
     def release(self) -> None:
         self.passes.release()

@@ -7,7 +7,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from pyglm import glm
 
-CAMERA_BLOCK_BYTES = 4 * 64 + 3 * 16
+CAMERA_BLOCK_BYTES = 4 * 64 + 4 * 16
 # Float columns of a packed Camera block (View.camera_block; camera.glsl): view 0-15,
 # proj 16-31, then these, then viewport and clip plane.
 CAMERA_BLOCK_VIEW_PROJ = slice(32, 48)
@@ -37,6 +37,7 @@ class View:
     mirrored: bool = False
     scissor: tuple[int, int, int, int] | None = None
     node: int = 0
+    skip: int = 0
     _block: bytes | None = field(default=None, init=False, repr=False, compare=False)
 
     @property
@@ -52,6 +53,7 @@ class View:
             self._block = b"".join([
                 self.view.to_bytes(), self.proj.to_bytes(), vp.to_bytes(), glm.inverse(vp).to_bytes(),
                 glm.vec4(self.eye, 1.0).to_bytes(), glm.vec4(0.0, 0.0, w, h).to_bytes(), self.clip_plane.to_bytes(),
+                glm.uvec4(self.skip, 0, 0, 0).to_bytes(),
             ])
         return self._block
 
