@@ -40,11 +40,11 @@ from pyglm import glm
 
 from components import DirectionalLight, Material, MeshRef, Transform
 from engine.app import Engine, Game, spawn_camera
+from engine.frame_io import Output
 from engine.gl_context import create_headless_context
 from engine.mesh import box, sphere
 from engine.render.targets import CaptureTarget
 from engine.world import World
-from systems import Output
 
 SIZES = (100, 1_000, 10_000)
 MOVING_FRACTION = 0.01

@@ -49,12 +49,12 @@ from components import (
     look_rotation,
 )
 from engine.app import Engine, Game
+from engine.frame_io import Output
 from engine.gl_context import create_headless_context
 from engine.mesh import box, plane, quad
 from engine.render.targets import CaptureTarget
 from engine.texture_data import checker_texture
 from engine.world import World
-from systems import Output
 
 MIRROR_COUNTS = (0, 1, 2, 4, 8, 16)
 PATHS = ("per_mirror", "batched", "auto")

@@ -20,13 +20,13 @@ from pyglm import glm
 
 from components import DirectionalLight, Material, MeshRef, Portal, Skybox, Transform
 from engine.app import Engine, Game
+from engine.frame_io import Output
 from engine.gl_context import create_headless_context
 from engine.mesh import box, plane
 from engine.portals import spawn_portal_pair
 from engine.render.targets import CaptureTarget
 from engine.texture_data import checker_texture
 from engine.world import World
-from systems import Output
 
 SIZE = (640, 360)
 DEPTHS = range(0, 9)

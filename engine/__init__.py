@@ -1,4 +1,9 @@
-"""Speculum's engine: context, world, renderer helpers, runner.
+"""Speculum's engine: world, math, assets, GPU helpers, and the app shell that runs a game.
+
+The core (``engine.world``, ``engine.render``, assets and math) never imports ``systems``;
+the app shell (``engine.app``: Game, Engine; ``engine.runner``; ``engine.window``) wires the
+systems into a world.  So that ``import systems`` works first, this package loads the shell
+only when one of its names is asked for.
 
 A tiny game::
 
@@ -18,9 +23,22 @@ from __future__ import annotations
 
 import sys
 from collections.abc import Sequence
+from typing import TYPE_CHECKING, Any
 
-from engine.app import Engine, Game, spawn_camera
 from engine.world import World
+
+if TYPE_CHECKING:
+    from engine.app import Engine, Game, spawn_camera
+
+_SHELL = ("Engine", "Game", "spawn_camera")
+
+
+def __getattr__(name: str) -> Any:
+    if name in _SHELL:
+        import engine.app
+
+        return getattr(engine.app, name)
+    raise AttributeError(f"module 'engine' has no attribute {name!r}")
 
 
 def run(game: Game, argv: Sequence[str] | None = None) -> None:

@@ -1,27 +1,38 @@
-"""A game and the engine that runs it: one world, its systems in order, one renderer."""
+"""The app shell's core: a game and the engine that runs it (one world, its systems in
+stage order, one renderer).  The shell is the one place systems are wired into a world;
+the rest of ``engine`` never imports ``systems``.
+
+A frame is ``FRAME_STAGES`` in order, one system each (ARCHITECTURE.md says what each
+does and where its code is).  A new stage is a new entry here; what a later stage needs
+from an earlier one is a world resource (``Output``, ``FrameViews``, ``RenderStats``,
+``PortalCrossings``), never a reference to the other system.
+"""
 from __future__ import annotations
+
+from collections.abc import Callable
 
 import esper
 import moderngl
 
-from components import Camera, FlyController, Transform, yaw_pitch_rotation
+from components import FlyController, yaw_pitch_rotation
+from engine.frame_io import Output
 from engine.gl_context import prepare_context
 from engine.raw_gl import make_current
 from engine.render.renderer import Renderer
+from engine.render.views import FrameViews, View
 from engine.world import World
-from systems import FlyCameraSystem, Output, PortalTravelSystem, PresentSystem, RenderSystem, TransformSystem
+from systems import (
+    ExtractSystem,
+    FlyCameraSystem,
+    MainViewSystem,
+    PortalTravelSystem,
+    PrepareSystem,
+    PresentSystem,
+    ReflectionSystem,
+    TransformSystem,
+    active_camera,
+)
 from systems.portal_slice_system import PortalSliceSystem
-from systems.reflection_system import ReflectionSystem
-
-# System order, high priority first (see ARCHITECTURE.md).
-PRIORITY_GAME = 100
-PRIORITY_INPUT = 90
-PRIORITY_TRAVEL = 70  # after input moved the camera, before world matrices
-PRIORITY_SLICE = 60  # things partly through portals: after travel, before world matrices
-PRIORITY_TRANSFORM = 50
-PRIORITY_RENDER = 0
-PRIORITY_REFLECT = -10
-PRIORITY_PRESENT = -100
 
 
 class Game:
@@ -37,13 +48,30 @@ class Game:
         pass
 
 
-class _GameUpdateSystem(esper.Processor):
+class GameUpdateSystem(esper.Processor):
+    """The game stage: the game's own ``update``."""
+
     def __init__(self, game: Game, world: World) -> None:
         self.game = game
         self.world = world
 
     def process(self, dt: float) -> None:
         self.game.update(self.world, dt)
+
+
+# (stage, what makes its system from the engine).  Order is execution order.
+FRAME_STAGES: tuple[tuple[str, Callable[[Engine], esper.Processor]], ...] = (
+    ("game", lambda e: GameUpdateSystem(e.game, e.world)),
+    ("input", lambda e: FlyCameraSystem(e.world)),
+    ("travel", lambda e: PortalTravelSystem(e.world)),
+    ("slice", lambda e: PortalSliceSystem(e.world)),
+    ("transform", lambda e: TransformSystem(e.world)),
+    ("extract", lambda e: ExtractSystem(e.world, e.renderer)),
+    ("prepare", lambda e: PrepareSystem(e.world, e.renderer)),
+    ("main", lambda e: MainViewSystem(e.world, e.renderer)),
+    ("reflect", lambda e: ReflectionSystem(e.world, e.renderer)),
+    ("present", lambda e: PresentSystem(e.world, e.renderer)),
+)
 
 
 class Engine:
@@ -56,38 +84,50 @@ class Engine:
         self.ctx = ctx
         self.world = World(game.title)
         self.renderer = Renderer(ctx, caps)
-        self.render_system = RenderSystem(self.world, self.renderer)
-        self.world.add_system(_GameUpdateSystem(game, self.world), PRIORITY_GAME)
-        self.world.add_system(FlyCameraSystem(self.world), PRIORITY_INPUT)
-        self.world.add_system(PortalTravelSystem(self.world, self.render_system), PRIORITY_TRAVEL)
-        self.world.add_system(TransformSystem(self.world), PRIORITY_TRANSFORM)
-        self.world.add_system(PortalSliceSystem(self.world), PRIORITY_SLICE)
-        self.world.add_system(self.render_system, PRIORITY_RENDER)
-        self.reflection_system = ReflectionSystem(self.world, self.render_system, self.renderer)
-        self.world.add_system(self.reflection_system, PRIORITY_REFLECT)
-        self.world.add_system(PresentSystem(self.render_system, self.renderer), PRIORITY_PRESENT)
+        self.stages: dict[str, esper.Processor] = {}
+        for order, (name, make) in enumerate(FRAME_STAGES):
+            system = self.stages[name] = make(self)
+            self.world.add_system(system, priority=len(FRAME_STAGES) - order)
         try:
             game.build(self.world)
         except BaseException:
             self.close()
             raise
 
+    @property
+    def reflection_system(self) -> ReflectionSystem:
+        """The reflect stage (its settings are the main view tree's limits and path)."""
+        return self.stages["reflect"]
+
+    @property
+    def main_view(self) -> View | None:
+        """The last frame's main view (None before the first frame, or with no camera)."""
+        views = self.world.resources.get(FrameViews)
+        return views.main if views is not None else None
+
     def frame(self, dt: float, output: Output | None) -> None:
-        """Run every system once; the render system draws into ``output``.
+        """Run every stage once; the frame is drawn into ``output``.
 
         The engine's context is made current first (``raw_gl.make_current``): another GL
         context made in the process (a window, a tool's) would otherwise receive this
         engine's draws."""
-        self.render_system.output = output
+        if output is None:
+            self.world.resources.pop(Output, None)
+        else:
+            self.world.resources[Output] = output
         make_current(self.ctx)
         self.world.step(dt)
         error = self.ctx.error
         if error != "GL_NO_ERROR":
             raise RuntimeError(f"OpenGL error after frame {self.world.frame_index}: {error}")
 
+    def active_camera(self):
+        """(entity, Camera, Transform) of the camera the main view looks through, or None."""
+        return active_camera(self.world)
+
     def place_camera(self, x: float, y: float, z: float, yaw: float, pitch: float) -> None:
         """Move the active camera (``--camera``); yaw 0 looks down -Z, degrees."""
-        active = self.render_system.active_camera()
+        active = self.active_camera()
         if active is None:
             raise ValueError("--camera given but the level has no active Camera")
         entity, _, transform = active
@@ -107,6 +147,8 @@ class Engine:
 def spawn_camera(world: World, position=(0.0, 1.6, 6.0), yaw: float = 0.0, pitch: float = 0.0,
                  fov_y: float = 60.0, fly: bool = True) -> int:
     """A camera entity, with fly controls for windowed runs unless ``fly`` is False."""
+    from components import Camera, Transform
+
     components = [Transform(position=position, rotation=yaw_pitch_rotation(yaw, pitch)), Camera(fov_y=fov_y)]
     if fly:
         components.append(FlyController(yaw=yaw, pitch=pitch))

@@ -16,9 +16,9 @@ from components import ComponentValueError
 from engine.app import Engine, Game
 from engine.capture import export_scene, save_ids, save_png
 from engine.errors import SpeculumError
+from engine.frame_io import Output
 from engine.gl_context import create_headless_context, have_display
 from engine.render.targets import CaptureTarget
-from systems import Output
 
 HEADLESS_DT = 1.0 / 60.0
 
@@ -104,7 +104,7 @@ def run_headless(game: Game, args: argparse.Namespace) -> int:
             if args.ids:
                 save_ids(engine.renderer.targets.read_ids(), args.out / f"ids_{index:04d}.npy")
         if args.export_scene:
-            camera = engine.render_system.active_camera()
+            camera = engine.active_camera()
             if camera is not None:
                 export_scene(engine.world, args.export_scene, camera[0], args.size,
                              engine.reflection_system.mirror_planes())

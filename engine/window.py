@@ -14,7 +14,7 @@ import numpy as np
 
 from engine.app import Engine, Game
 from engine.capture import save_png
-from systems import Input, Output
+from engine.frame_io import Input, Output
 
 _MOVE_KEYS = {"W": "w", "A": "a", "S": "s", "D": "d", "Q": "q", "E": "e"}
 

@@ -1,11 +1,15 @@
-"""Systems: the only place behaviour lives. Each is an esper processor run once a frame."""
-from systems.fly_camera_system import FlyCameraSystem, Input
+"""Systems: the only place behaviour lives. Each is an esper processor run once a frame, in
+the stage order of ``engine.app.FRAME_STAGES`` (ARCHITECTURE.md)."""
+from systems.extract_system import ExtractSystem
+from systems.fly_camera_system import FlyCameraSystem
+from systems.main_view_system import MainViewSystem, active_camera
 from systems.portal_travel_system import PortalCrossing, PortalCrossings, PortalTravelSystem
+from systems.prepare_system import PrepareSystem
 from systems.present_system import PresentSystem
-from systems.render_system import Output, RenderSystem
+from systems.reflection_system import ReflectionSystem
 from systems.transform_system import TransformSystem
 
 __all__ = [
-    "FlyCameraSystem", "Input", "Output", "PortalCrossing", "PortalCrossings", "PortalTravelSystem", "PresentSystem",
-    "RenderSystem", "TransformSystem",
+    "ExtractSystem", "FlyCameraSystem", "MainViewSystem", "PortalCrossing", "PortalCrossings", "PortalTravelSystem",
+    "PrepareSystem", "PresentSystem", "ReflectionSystem", "TransformSystem", "active_camera",
 ]

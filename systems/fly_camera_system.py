@@ -1,22 +1,12 @@
 """WASD + mouse fly camera for windowed runs: reads the Input resource, writes the Transform."""
 from __future__ import annotations
 
-from dataclasses import dataclass, field
-
 import esper
 from pyglm import glm
 
 from components import FlyController, Transform, yaw_pitch_rotation
+from engine.frame_io import Input
 from engine.world import World
-
-
-@dataclass
-class Input:
-    """Keys held (by name: 'w', 'a', 's', 'd', 'q', 'e', 'shift') and mouse motion this frame."""
-
-    held: set[str] = field(default_factory=set)
-    mouse_dx: float = 0.0
-    mouse_dy: float = 0.0
 
 
 class FlyCameraSystem(esper.Processor):

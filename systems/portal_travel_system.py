@@ -27,8 +27,8 @@ portal (``CLEAR`` x near), so it comes out just in front of it, facing away.  Th
 only difference between the image seen through the portal and the image after the teleport:
 the eye's distance to the look-in plane when flying straight in (about near, 0.05-0.07 m in
 the tests), at most twice the eye-to-near-corner reach when looking along the portal.
-The near-rectangle aspect comes from the render system's output (the frame's size) when the
-system is given one, else ``aspect`` (16:9 by default).
+The near-rectangle aspect comes from the frame's ``Output`` resource (its size) when there is
+one, else ``aspect`` (16:9 by default).
 
 Ping-pong: an entity that just came out of a portal cannot cross that exit portal again in
 the very next frame.  Each frame's crossings are published as ``world.resources[PortalCrossings]``
@@ -38,12 +38,12 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any
 
 import esper
 from pyglm import glm
 
 from components import Camera, FlyController, Portal, Transform, Traveller
+from engine.frame_io import Output
 from engine.portal_math import near_plane_corners, pair_rotation, pair_transform, portal_plane
 from engine.reflection_math import signed_distance
 from engine.world import World
@@ -86,12 +86,12 @@ class _Gate:
 class PortalTravelSystem(esper.Processor):
     """Moves travellers by their velocity and carries them (and the camera) through portals.
 
-    ``render_system`` (optional) supplies the frame size for the camera's near-plane aspect.
+    The frame's ``Output`` resource supplies the camera's near-plane aspect (``aspect`` when
+    there is none).
     """
 
-    def __init__(self, world: World, render_system: Any = None, aspect: float = DEFAULT_ASPECT) -> None:
+    def __init__(self, world: World, aspect: float = DEFAULT_ASPECT) -> None:
         self.world = world
-        self.render_system = render_system
         self.aspect = aspect
         self._last: dict[int, glm.vec3] = {}  # world position at the end of the last frame
         self._exited: dict[int, int] = {}  # entity -> portal it came out of last frame
@@ -138,7 +138,7 @@ class PortalTravelSystem(esper.Processor):
 
     def near_aspect(self) -> float:
         """Aspect of the camera's near rectangle: the frame being rendered, else ``aspect``."""
-        output = getattr(self.render_system, "output", None)
+        output = self.world.resources.get(Output)
         if output is not None and output.size[0] > 0 and output.size[1] > 0:
             return output.size[0] / output.size[1]
         return self.aspect

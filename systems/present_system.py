@@ -3,16 +3,19 @@ from __future__ import annotations
 
 import esper
 
+from engine.frame_io import Output
 from engine.render.renderer import Renderer
-from systems.render_system import RenderSystem
+from engine.render.views import FrameViews
+from engine.world import World
 
 
 class PresentSystem(esper.Processor):
-    def __init__(self, render_system: RenderSystem, renderer: Renderer) -> None:
-        self.render_system = render_system
+    def __init__(self, world: World, renderer: Renderer) -> None:
+        self.world = world
         self.renderer = renderer
 
     def process(self, dt: float) -> None:
-        output = self.render_system.output
-        if self.render_system.main_view is not None and output is not None:
+        output: Output | None = self.world.resources.get(Output)
+        views: FrameViews | None = self.world.resources.get(FrameViews)
+        if output is not None and views is not None and views.main is not None:
             self.renderer.present(output.framebuffer, output.size)

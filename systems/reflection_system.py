@@ -28,8 +28,8 @@ from engine.reflection_math import (
 )
 from engine.render.renderer import Renderer
 from engine.render.view_tree import ReflectionView, SurfaceState, SurfaceTable, TreeSettings, ViewTree
+from engine.render.views import FrameViews
 from engine.world import World
-from systems.render_system import RenderSystem
 
 # A mirror mesh thinner than this fraction of its size composites over its outline quad;
 # anything thicker (a mirror plane given explicitly on a solid mesh) over its rectangle.
@@ -43,10 +43,8 @@ class MirrorError(SpeculumError, ValueError):
 class ReflectionSystem(esper.Processor):
     """Renders and composites mirror reflections after the main view, before present."""
 
-    def __init__(self, world: World, render_system: RenderSystem, renderer: Renderer,
-                 max_depth_cap: int = 8) -> None:
+    def __init__(self, world: World, renderer: Renderer, max_depth_cap: int = 8) -> None:
         self.world = world
-        self.render_system = render_system
         self.renderer = renderer
         self.tree = ViewTree(renderer)
         self.settings = TreeSettings(max_depth_cap)
@@ -155,7 +153,8 @@ class ReflectionSystem(esper.Processor):
     def process(self, dt: float) -> None:
         self._refresh_mirrors()
         self._refresh_portals()
-        main = self.render_system.main_view
+        views = self.world.resources.get(FrameViews)
+        main = views.main if views is not None else None
         renderer = self.renderer
         if main is None:
             self.views = []

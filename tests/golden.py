@@ -24,8 +24,8 @@ import numpy as np
 from PIL import Image
 
 from engine.app import Engine
+from engine.frame_io import Output
 from engine.render.targets import CaptureTarget
-from systems import Output
 from tests.golden_scenes import SIZE, GoldenCase
 
 GOLDEN_DIR = Path(__file__).resolve().parent / "golden"

@@ -6,8 +6,8 @@ from pyglm import glm
 
 from components import Camera, Transform, look_rotation
 from engine.app import Engine, Game
+from engine.frame_io import Output
 from engine.render.targets import CaptureTarget
-from systems import Output
 
 
 class FunctionGame(Game):
@@ -50,7 +50,7 @@ class SceneRunner:
 
     def project(self, point) -> tuple[int, int]:
         """Pixel (column, row from the top) where world ``point`` lands in the main view."""
-        view = self.engine.render_system.main_view
+        view = self.engine.main_view
         clip = view.view_proj * glm.vec4(glm.vec3(point), 1.0)
         ndc = glm.vec3(clip) / clip.w
         w, h = self.size

@@ -92,7 +92,7 @@ def test_camera_close_to_the_mirror_uses_a_clip_plane_and_still_hides_what_is_be
     runner = scene(build, SIZE)
     runner.frame()
     view = runner.engine.reflection_system.views[1].view
-    assert view.proj == runner.engine.render_system.main_view.proj  # oblique was not safe: plain + clip
+    assert view.proj == runner.engine.main_view.proj  # oblique was not safe: plain + clip
     assert ents["behind"] not in runner.ids()
     assert (runner.engine.renderer.targets.read_surface_ids() == ents["mirror"]).mean() > 0.9  # all mirror
 
@@ -188,7 +188,7 @@ def test_sky_shows_where_the_mirror_reflects_nothing(scene):
     runner = scene(build, SIZE)
     rgb = runner.frame()
     col, row = runner.project((0.5, 2.5, -2.0))
-    view = runner.engine.render_system.main_view
+    view = runner.engine.main_view
     w, h = SIZE
     ndc = glm.vec4((col + 0.5) / w * 2 - 1, 1 - (row + 0.5) / h * 2, 1, 1)
     far = glm.inverse(view.view_proj) * ndc

@@ -13,9 +13,9 @@ import random
 import moderngl
 import numpy as np
 
+from engine.frame_io import Output
 from engine.render.targets import CaptureTarget
 from games.hall_of_mirrors.level import HallOfMirrors
-from systems import Output
 from tests.support import SceneRunner
 
 SIZE = (192, 108)
@@ -41,8 +41,8 @@ def scrambled(ctx, rng: random.Random, other: SceneRunner, scratch: CaptureTarge
     scissor, viewport, bound framebuffer)."""
     def before():
         if rng.random() < 0.5:
-            if other.engine.render_system.main_view is not None:
-                other.engine.renderer.scene_pass.draw([other.engine.render_system.main_view],
+            if other.engine.main_view is not None:
+                other.engine.renderer.scene_pass.draw([other.engine.main_view],
                                                       other.engine.renderer.targets)
         else:
             other.engine.renderer.present(scratch.framebuffer, scratch.size)

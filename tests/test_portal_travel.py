@@ -28,10 +28,11 @@ from components import (
     yaw_pitch_rotation,
 )
 from engine.app import spawn_camera
+from engine.frame_io import Input
 from engine.mesh import box, sphere
 from engine.portals import spawn_portal_pair
 from engine.world import World
-from systems import Input, PortalCrossing, PortalCrossings, PortalTravelSystem, TransformSystem
+from systems import PortalCrossing, PortalCrossings, PortalTravelSystem, TransformSystem
 
 TURN_Y_90 = glm.angleAxis(glm.radians(90), glm.vec3(0, 1, 0))
 A_POS, B_POS = (0.0, 1.5, 0.0), (10.0, 1.5, 0.0)

@@ -30,7 +30,7 @@ def camera(world, eye=EYE, fov=60.0):
 
 def pixel_ray(runner, col: int, row: int) -> np.ndarray:
     """World direction through the centre of pixel (col, row from top), from the camera math."""
-    view = runner.engine.render_system.main_view
+    view = runner.engine.main_view
     w, h = runner.size
     ndc = glm.vec4((col + 0.5) / w * 2 - 1, 1 - (row + 0.5) / h * 2, 1.0, 1.0)
     far = glm.inverse(view.view_proj) * ndc
@@ -273,7 +273,7 @@ def test_entities_release_their_gpu_resources(scene):
 
 
 def test_minimised_output_renders_nothing_and_does_not_crash(scene, ctx):
-    from systems import Output
+    from engine.frame_io import Output
 
     def build(world):
         camera(world)
@@ -352,7 +352,7 @@ def test_big_surfaces_draw_last_so_hidden_pixels_are_not_shaded(scene, ctx):
     renderer = runner.engine.renderer
     query = ctx.query(samples=True)
     with query:
-        renderer.scene_pass.draw([runner.engine.render_system.main_view], renderer.targets)
+        renderer.scene_pass.draw([runner.engine.main_view], renderer.targets)
     ids = runner.ids()
     boxes = (ids != 0).sum() - (ids == ids[-1, SIZE[0] // 2]).sum()
     assert boxes > 500  # the boxes cover ground

@@ -80,7 +80,7 @@ def test_window_shell_runs_under_moderngl_window_headless(tmp_path):
         keys = config.wnd.keys
         config.screenshots = tmp_path
         config.on_render(0.0, 1 / 60)
-        cam = config.engine.render_system.active_camera()[2]
+        cam = config.engine.active_camera()[2]
         start = cam.position.z
 
         class Mods:

@@ -1,0 +1,40 @@
+"""Main: the active camera's view, drawn by the scene pass into the main view tree's level 0.
+
+It publishes the view as ``world.resources[FrameViews].main`` (None when there is no
+active camera or the output has no pixels, a minimised window): the reflect stage roots
+its view tree there and the present stage presents it.
+"""
+from __future__ import annotations
+
+import esper
+
+from components import Camera, Transform
+from engine.frame_io import Output
+from engine.render.renderer import Renderer
+from engine.render.views import FrameViews, camera_view
+from engine.world import World
+
+
+def active_camera(world: World) -> tuple[int, Camera, Transform] | None:
+    """The active Camera with a Transform and the lowest entity id, or None."""
+    cameras = [(e, c, t) for e, (c, t) in world.query(Camera, Transform) if c.active]
+    return min(cameras, key=lambda item: item[0]) if cameras else None
+
+
+class MainViewSystem(esper.Processor):
+    def __init__(self, world: World, renderer: Renderer) -> None:
+        self.world = world
+        self.renderer = renderer
+        world.resources[FrameViews] = FrameViews()
+
+    def process(self, dt: float) -> None:
+        world = self.world
+        views = world.resources[FrameViews] = FrameViews()
+        output: Output | None = world.resources.get(Output)
+        camera = active_camera(world)
+        if output is None or camera is None or output.size[0] <= 0 or output.size[1] <= 0:
+            return  # minimised window or nothing to look through
+        _, cam, cam_t = camera
+        targets = self.renderer.levels.get(0, output.size)
+        views.main = camera_view(cam_t.world, cam.fov_y, cam.near, cam.far, output.size)
+        self.renderer.scene_pass.draw([views.main], targets)
