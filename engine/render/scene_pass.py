@@ -17,10 +17,10 @@ variants uses the build that switches per instance.
 
 ``SceneOptions`` says how: clear the target first (a root view) or keep the depth mask a
 reflection level's claims wrote; draw only the pixels the target's node image gives each
-view (the claimed-pixels mask); draw the sky or leave it to the composite; write the node
-image or only colour and ids; and whether a level's views are drawn each with their own
-draws or all at once through the geometry shader (``batched``: each triangle is emitted
-once per view that can see it, seed "Multiple Mirrors"' one-draw path; at most
+view (the claimed-pixels mask); draw the sky or leave it to the composite; and whether a
+level's views are drawn each with their own draws or all at once through the geometry
+shader (``batched``: each triangle is emitted once per view that can see it, the one-draw
+path of the "Multiple Mirrors" OpenGL project; at most
 ``MAX_BATCHED_VIEWS`` views a draw, more are drawn in groups of that many).
 """
 from __future__ import annotations
@@ -56,13 +56,13 @@ class SceneOptions:
     clear: bool = True          # clear colour, ids and depth first; False keeps a level's claim mask
     masked: bool = False        # only pixels whose node image names the view (the claimed pixels)
     sky: bool = True            # the sky behind; reflection views leave it to their composite
-    write_node: bool = True     # also write the node image (a masked pass reads it instead)
     batched: bool = False       # all views in one draw per batch (the geometry-shader path)
     reflection_filter: bool = False  # albedo filtered as reflections are (Renderer.reflection_anisotropy)
 
 
 ROOT_VIEW = SceneOptions()
-REFLECTION_LEVEL = SceneOptions(clear=False, masked=True, sky=False, write_node=False, reflection_filter=True)
+REFLECTION_LEVEL = SceneOptions(clear=False, masked=True, sky=False, reflection_filter=True)
+_PER_DRAW_UNIFORMS = ("masked", "sky_face_size", "node_index", "has_albedo_map")
 _SCENE = PassState(depth_func="<", cull=True, clips=SCENE_CLIPS)
 _BATCHED_SCENE = PassState(depth_func="<", cull=True, clips=BATCHED_SCENE_CLIPS)
 _SKY = PassState(depth_func="<=", clips=SCENE_CLIPS)
@@ -83,6 +83,9 @@ class ScenePass:
         self._sky = self.ctx.vertex_array(self.sky_program, [])
         # Scene programs by (geometry-shader invocations or 0, the batch's variants or None).
         self._programs: dict[tuple[int, tuple[int, int, int] | None], moderngl.Program] = {}
+        self._uniforms: dict[int, tuple] = {}  # program -> its _PER_DRAW_UNIFORMS (None where dropped)
+        self._written: dict[int, list] = {}  # program -> the values last written in this pass
+        self._sky_size = 0
         self._views_ubo: moderngl.Buffer | None = None
         self._reflection_sampler: moderngl.Sampler | None = None
 
@@ -117,30 +120,29 @@ class ScenePass:
             if "Lights" in program:
                 program["Lights"].binding = LIGHTS_BINDING
             self._programs[key] = program
+            self._uniforms[program.glo] = tuple(program.get(name, None) for name in _PER_DRAW_UNIFORMS)
         return program
 
     def _draw_batches(self, batches, invocations: int, masked: bool, node: int) -> None:
-        """One instanced draw per batch, each with the program of its variants; a program's
-        per-view uniforms are written the first time the view uses it."""
-        renderer = self.renderer
-        stats = renderer.stats
-        sky_size = renderer.sky.size[0]
-        ready: dict[int, list] = {}  # program -> [has_albedo_map uniform, its last value]
+        """One instanced draw per batch, each with the program of its variants.  A program's
+        uniforms are written only when their value changes (``self._written``, reset at the
+        start of each pass): on llvmpipe each call is CPU time on a view's critical path."""
+        stats = self.renderer.stats
+        written = self._written
         for batch in batches:
             if not batch.count:
                 continue
             program = self.program(batch.variants, invocations)
-            state = ready.get(program.glo)
-            if state is None:
-                for name, value in (("masked", masked), ("sky_face_size", sky_size), ("node_index", node)):
-                    if name in program:
-                        program[name].value = value
-                state = ready[program.glo] = [program.get("has_albedo_map", None), None]
+            uniforms = self._uniforms[program.glo]
+            values = written.get(program.glo)
+            if values is None:
+                values = written[program.glo] = [None, None, None, None]
             textured = batch.texture is not None
             if textured:
                 batch.texture.use(ALBEDO_UNIT)
-            if state[1] != textured and state[0] is not None:  # written only when it changes
-                state[0].value = state[1] = textured
+            for i, value in enumerate((masked, self._sky_size, node, textured)):
+                if values[i] != value and uniforms[i] is not None:
+                    uniforms[i].value = values[i] = value
             batch.draw(program)
             stats.draw_calls += 1
             stats.instances += batch.count
@@ -151,12 +153,17 @@ class ScenePass:
         if not views:
             return
         renderer = self.renderer
-        framebuffer = targets.framebuffer if options.write_node else targets.view_framebuffer
-        framebuffer.use()
+        self._written = {}  # uniforms are written again in each pass (another pass may share a program)
+        self._sky_size = renderer.sky.size[0]
         viewport = (0, 0, *targets.size)
-        apply_pass_state(self.ctx, _BATCHED_SCENE if options.batched else _SCENE, viewport)
         if options.clear:
-            framebuffer.clear(depth=1.0)
+            # Every image: colour and alpha 0, ids 0, the node image 0 (a root is view 0 of
+            # its tree), depth far.  The views then write colour and ids, never the node image.
+            targets.framebuffer.use()
+            apply_pass_state(self.ctx, _SCENE, viewport)
+            targets.framebuffer.clear(depth=1.0)
+        targets.view_framebuffer.use()  # colour, surface and seen ids, depth
+        apply_pass_state(self.ctx, _BATCHED_SCENE if options.batched else _SCENE, viewport)
         if options.masked:
             targets.node.use(NODE_UNIT)
         renderer.lights_ubo.bind_to_uniform_block(LIGHTS_BINDING)
@@ -169,12 +176,13 @@ class ScenePass:
                 for first in range(0, len(views), MAX_BATCHED_VIEWS):
                     self._draw_batched(views[first:first + MAX_BATCHED_VIEWS], options)
             else:
-                self._draw_each(views, viewport, options)
+                self._draw_each(views, targets, viewport, options)
         finally:
             if sampler is not None:
                 sampler.clear(ALBEDO_UNIT)
 
-    def _draw_each(self, views: Sequence[View], viewport: tuple[int, int, int, int], options: SceneOptions) -> None:
+    def _draw_each(self, views: Sequence[View], targets: RenderTargets, viewport: tuple[int, int, int, int],
+                   options: SceneOptions) -> None:
         """Each view its own draws: state shared by the views is set once; per view there is
         a scissor, a winding, a camera and the draws (on llvmpipe the Python and driver cost
         per view is on the frame's critical path)."""
@@ -187,9 +195,12 @@ class ScenePass:
             renderer.bind_view(view)
             self._draw_batches(renderer.opaque_batches(), 0, options.masked, view.node)
             if options.sky:
+                # Colour only: the clear already put id 0 (nothing) where the sky shows.
+                targets.sky_framebuffer.use()
                 apply_pass_state(ctx, _SKY, viewport, view.scissor)
                 self._sky.render(moderngl.TRIANGLES, vertices=3)
                 renderer.stats.draw_calls += 1
+                targets.view_framebuffer.use()
             if transparent:
                 apply_pass_state(ctx, _TRANSPARENT, viewport, view.scissor)
                 ctx.front_face = "cw" if view.mirrored else "ccw"

@@ -39,8 +39,10 @@ class RenderTargets:
             texture.filter = (moderngl.NEAREST, moderngl.NEAREST)
         self.depth = ctx.depth_texture(size)
         self.framebuffer = ctx.framebuffer([self.color, self.surface, self.seen, self.node], self.depth)
-        # Reflection views read the node image (which view owns a pixel) and do not write it.
+        # Views write colour and ids but never the node image (the claims write it; a root's
+        # is cleared to 0), which masked views read; the sky writes colour only.
         self.view_framebuffer = ctx.framebuffer([self.color, self.surface, self.seen], self.depth)
+        self.sky_framebuffer = ctx.framebuffer([self.color], self.depth)
         # Composites write the reflection's colour and seen-id only (they read surface and node).
         self.composite_framebuffer = ctx.framebuffer([self.color, self.seen])
 
@@ -58,6 +60,7 @@ class RenderTargets:
 
     def release(self) -> None:
         release_framebuffer(self.composite_framebuffer)
+        release_framebuffer(self.sky_framebuffer)
         release_framebuffer(self.view_framebuffer)
         release_framebuffer(self.framebuffer)
         for texture in (self.color, self.surface, self.seen, self.node, self.depth):

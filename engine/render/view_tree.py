@@ -48,7 +48,7 @@ from engine.render.views import View
 # The deepest a tree may go (each level is one more set of root-sized targets); the depth
 # limits of Mirror and Portal components take values up to this.
 MAX_TREE_DEPTH = 16
-_BATCHED = SceneOptions(clear=False, masked=True, sky=False, write_node=False, batched=True, reflection_filter=True)
+_BATCHED = SceneOptions(clear=False, masked=True, sky=False, batched=True, reflection_filter=True)
 
 
 @dataclass(frozen=True)
