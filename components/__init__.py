@@ -2,13 +2,15 @@
 from components.camera import Camera, DirectionalLight, FlyController, PointLight
 from components.mirror import Mirror
 from components.portal import Portal, PortalClone, Slice, Traveller
+from components.probe import ReflectionProbe
 from components.rendering import Emissive, Material, MeshRef, Reflective, Refractive, Skybox
 from components.tracking import ComponentValueError, TrackedComponent
 from components.transform import Transform, look_rotation, yaw_pitch_rotation
 
 __all__ = [
     "Camera", "ComponentValueError", "DirectionalLight", "Emissive", "FlyController", "Material",
-    "MeshRef", "Mirror", "PointLight", "Portal", "PortalClone", "Reflective", "Refractive", "Skybox", "Slice",
+    "MeshRef", "Mirror", "PointLight", "Portal", "PortalClone", "ReflectionProbe", "Reflective", "Refractive",
+    "Skybox", "Slice",
     "TrackedComponent", "Transform", "Traveller",
     "look_rotation", "yaw_pitch_rotation",
 ]

@@ -33,6 +33,7 @@ from systems import (
     active_camera,
 )
 from systems.portal_slice_system import PortalSliceSystem
+from systems.probe_system import ProbeSystem
 
 
 class Game:
@@ -68,6 +69,7 @@ FRAME_STAGES: tuple[tuple[str, Callable[[Engine], esper.Processor]], ...] = (
     ("transform", lambda e: TransformSystem(e.world)),
     ("extract", lambda e: ExtractSystem(e.world, e.renderer)),
     ("prepare", lambda e: PrepareSystem(e.world, e.renderer)),
+    ("probes", lambda e: ProbeSystem(e.world, e.renderer)),
     ("main", lambda e: MainViewSystem(e.world, e.renderer)),
     ("reflect", lambda e: ReflectionSystem(e.world, e.renderer)),
     ("present", lambda e: PresentSystem(e.world, e.renderer)),

@@ -6,6 +6,13 @@ it); the engine enters and never exits, so its context stays current after a fra
 program expects of its own renderer, whatever other context (a window, a tool's) was
 made current in between.
 
+``glCopyTexSubImage2D`` into a cube-map face: moderngl cannot attach a cube-map face to a
+framebuffer, so a probe face is drawn into an ordinary 2D target and copied into its face
+(``copy_to_cube_face``).  The copy reads the bound framebuffer and writes the cube bound
+on the active texture unit; both are bound through moderngl first (``Framebuffer.use``,
+``TextureCube.use`` on a unit no program reads), so moderngl's idea of the state stays
+true.  Where the loader is not reachable the copy goes through client memory instead.
+
 ``glFlush``.  moderngl has ``finish`` (wait for everything) but no flush (start
 the GPU on what is queued, without waiting).  On llvmpipe that difference is frame time:
 draws are binned on the calling thread and rasterised only at a flush, a framebuffer
@@ -24,6 +31,9 @@ import ctypes
 import moderngl
 
 _VOID_CALL = ctypes.CFUNCTYPE(None)
+_COPY_TEX_SUB_IMAGE_2D = ctypes.CFUNCTYPE(None, ctypes.c_uint, ctypes.c_int, ctypes.c_int, ctypes.c_int,
+                                          ctypes.c_int, ctypes.c_int, ctypes.c_int, ctypes.c_int)
+GL_TEXTURE_CUBE_MAP_POSITIVE_X = 0x8515
 
 
 def make_current(ctx: moderngl.Context) -> None:
@@ -37,6 +47,7 @@ class RawGL:
     def __init__(self, ctx: moderngl.Context) -> None:
         self.ctx = ctx
         self._flush = _load(ctx, "glFlush", _VOID_CALL)
+        self._copy_tex_sub_image = _load(ctx, "glCopyTexSubImage2D", _COPY_TEX_SUB_IMAGE_2D)
 
     @property
     def can_flush(self) -> bool:
@@ -46,6 +57,20 @@ class RawGL:
         """Start the GPU (or llvmpipe's rasteriser threads) on every queued command."""
         if self._flush is not None:
             self._flush()
+
+
+    def copy_to_cube_face(self, source: moderngl.Framebuffer, cube: moderngl.TextureCube, face: int,
+                          unit: int) -> None:
+        """Copy ``source``'s first colour attachment (the cube's face size) into ``face``
+        (0-5: +X, -X, +Y, -Y, +Z, -Z) of ``cube``'s base level, binding ``cube`` on ``unit``."""
+        size = cube.size
+        source.use()
+        if self._copy_tex_sub_image is None:
+            pixels = source.read(components=cube.components, dtype=cube.dtype)
+            cube.write(face, pixels)
+            return
+        cube.use(unit)
+        self._copy_tex_sub_image(GL_TEXTURE_CUBE_MAP_POSITIVE_X + face, 0, 0, 0, 0, 0, size[0], size[1])
 
 
 def _load(ctx: moderngl.Context, name: str, prototype):

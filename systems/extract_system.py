@@ -18,17 +18,20 @@ from components import (
     Mirror,
     Portal,
     PortalClone,
+    ReflectionProbe,
     Reflective,
     Refractive,
     Slice,
     Transform,
 )
+from engine.probe_rules import probe_for
 from engine.render.instances import InstanceBatch
 from engine.render.renderer import Renderer, RenderStats
 from engine.world import World
 from systems.material_dispatch import choose_material
 
-MATERIAL_KINDS = (MeshRef, Material, Emissive, Reflective, Refractive, Mirror, Portal, Slice, PortalClone)
+MATERIAL_KINDS = (MeshRef, Material, Emissive, Reflective, Refractive, Mirror, Portal, Slice, PortalClone,
+                  ReflectionProbe)
 NO_SLICE = (0.0, 0.0, 0.0, 1.0)
 
 
@@ -37,6 +40,7 @@ class ExtractSystem(esper.Processor):
         self.world = world
         self.renderer = renderer
         self._batch_of: dict[int, InstanceBatch] = {}
+        self._probe_owners: set[int] = set()
         world.resources[Renderer] = renderer
 
     def process(self, dt: float) -> None:
@@ -46,6 +50,11 @@ class ExtractSystem(esper.Processor):
         touched: set[int] = set()
         for kind in MATERIAL_KINDS:
             touched |= world.changed(kind)
+        if world.changed(ReflectionProbe) or self._probe_owners & (world.frame.moved | world.deleted()):
+            # A probe came, went, changed or moved: which probe each cube-reflective object
+            # samples (an influence box) may change with it.
+            touched |= {e for e, r in world.query_one(Reflective) if r.mode == "cube"}
+        self._probe_owners = {e for e, _ in world.query_one(ReflectionProbe)}
         for entity in touched:
             self._refresh_instance(entity)
         # Every moved entity, touched or not: a refresh writes the transform only when the
@@ -65,7 +74,8 @@ class ExtractSystem(esper.Processor):
                 self._remove_instance(entity, old)
             return
         material = world.try_get(entity, Material)
-        batch = self.renderer.batch_for(mesh_ref.mesh, material.texture if material else None)
+        probe = probe_for(world, entity)
+        batch = self.renderer.batch_for(mesh_ref.mesh, material.texture if material else None, probe)
         if old is not batch:
             if old is not None:
                 self._remove_instance(entity, old)
@@ -76,7 +86,7 @@ class ExtractSystem(esper.Processor):
             row = batch.row(entity)
         choice = choose_material(material, world.try_get(entity, Emissive), world.try_get(entity, Reflective),
                                  world.try_get(entity, Refractive), world.try_get(entity, Mirror),
-                                 world.try_get(entity, Portal))
+                                 world.try_get(entity, Portal), probe=bool(probe))
         row["color"] = choice.color
         row["surface"] = choice.surface
         row["reflect"] = choice.reflect_params

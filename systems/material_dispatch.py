@@ -31,7 +31,10 @@ class MaterialChoice:
 
 def choose_material(material: Material | None, emissive: Emissive | None,
                     reflective: Reflective | None, refractive: Refractive | None,
-                    mirror: Mirror | None = None, portal: Portal | None = None) -> MaterialChoice:
+                    mirror: Mirror | None = None, portal: Portal | None = None,
+                    probe: bool = False) -> MaterialChoice:
+    """``probe``: a reflection probe serves the object (``engine/probe_rules.py``); without
+    one, ``Reflective("cube")`` reflects the sky."""
     material = material or DEFAULT_MATERIAL
     emissive_variant = EmissiveVariant.EMISSIVE if emissive is not None and emissive.power > 0 else \
         EmissiveVariant.NONE
@@ -51,6 +54,8 @@ def choose_material(material: Material | None, emissive: Emissive | None,
         reflect_variant = ReflectVariant.PLANAR
     elif reflect_variant == ReflectVariant.PLANAR:
         reflect_variant = ReflectVariant.SKYBOX  # planar needs a Mirror; the sky is the fallback
+    elif reflect_variant == ReflectVariant.CUBE and not probe:
+        reflect_variant = ReflectVariant.SKYBOX
     return MaterialChoice(
         emissive=emissive_variant,
         refract=RefractVariant.ENVIRONMENT if refractive is not None else RefractVariant.NONE,

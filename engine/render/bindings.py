@@ -29,6 +29,8 @@ REFLECTION_UNITS = (3, 4, 5)  # composite: the level's colour, seen-id and node 
 ATLAS_UNIT = 6           # composite (rough variant): the rough-reflection atlas
 LEVEL_UNITS = (3, 5)     # rough-atlas copy: a level's colour and node images (the composite's units for them)
 PRESENT_UNIT = 0         # present: the HDR image
+PROBE_UNIT = 7           # scene: the cube map of the batch's reflection probe
+SCRATCH_UNIT = 15        # raw-GL copies bind their target here; no program reads it
 
 # --- uniform-block binding points ----------------------------------------------------------
 CAMERA_BINDING = 0

@@ -66,6 +66,7 @@ class InstanceBatch:
         self._vaos: dict[int, moderngl.VertexArray] = {}
         self._max_scale = 0.0
         self._rescale = False
+        self.probe = 0  # the entity owning the reflection probe its instances sample (0: none)
         self._variants: tuple[int, int, int] | None = None
         self._variants_stale = True
         # Drawn in the scene pass's transparent slot (blended, farthest first) instead of

@@ -17,6 +17,7 @@ from engine.mesh import Mesh
 from engine.raw_gl import RawGL
 from engine.render.bindings import CAMERA_BINDING, PRESENT_UNIT, PassState, apply_pass_state
 from engine.render.instances import GpuMesh, InstanceBatch
+from engine.render.probes import ProbeCaptures
 from engine.render.scene_pass import ScenePass
 from engine.render.sky import flat_cube, upload_cube
 from engine.render.targets import LevelStack, RenderTargets
@@ -39,6 +40,8 @@ class RenderStats:
     uploaded_bytes: int = 0
     instances: int = 0
     reflection_views: int = 0
+    probe_captures: int = 0   # probes that captured at least one face this frame
+    probe_faces: int = 0      # cube faces captured this frame
     reflection_views_dropped: int = 0   # views with pixels a level's view budget left out
     reflection_depth_capped: int = 0    # views the surfaces' own depth limits allowed below the tree's cap
     # How reflection levels were drawn: "per_mirror", "batched", "mixed" (auto chose both in
@@ -69,7 +72,7 @@ class Renderer:
         self.fullscreen_present = ctx.vertex_array(self.present_program, [])
         self._meshes: dict[int, _Shared] = {}
         self._textures: dict[int, _Shared] = {}
-        self.batches: dict[tuple[int, int], InstanceBatch] = {}
+        self.batches: dict[tuple[int, int, int], InstanceBatch] = {}
         self._draw_order: list[InstanceBatch] = []   # non-empty batches, smallest extent first
         self._order_stale = True
         self.sky = flat_cube(ctx, BACKGROUND)
@@ -83,10 +86,12 @@ class Renderer:
         # filters them like the main view.  Set it to texture_anisotropy for equal quality.
         self.reflection_anisotropy = 1.0 if caps.software else self.texture_anisotropy
         self.scene_pass = ScenePass(self)
+        self.probes = ProbeCaptures(self)
 
     # --- shared resources ------------------------------------------------------------------
-    def batch_for(self, mesh: Mesh, texture: TextureData | None) -> InstanceBatch:
-        key = (mesh.id, id(texture) if texture is not None else 0)
+    def batch_for(self, mesh: Mesh, texture: TextureData | None, probe: int = 0) -> InstanceBatch:
+        """The batch of (mesh, texture, the probe its instances sample; 0: none)."""
+        key = (mesh.id, id(texture) if texture is not None else 0, probe)
         batch = self.batches.get(key)
         if batch is None:
             gpu_mesh = self._acquire(self._meshes, mesh.id, lambda: GpuMesh(self.ctx, mesh))
@@ -95,6 +100,7 @@ class Renderer:
                 gpu_texture = self._acquire(self._textures, id(texture), lambda: self._upload_texture(texture))
             batch = self.batches[key] = InstanceBatch(self.ctx, gpu_mesh, gpu_texture)
             batch.key = key
+            batch.probe = probe
             self._order_stale = True
         return batch
 
@@ -104,7 +110,7 @@ class Renderer:
         del self.batches[batch.key]
         self._order_stale = True
         batch.release()
-        mesh_id, texture_id = batch.key
+        mesh_id, texture_id, _ = batch.key
         self._release(self._meshes, mesh_id)
         if texture_id:
             self._release(self._textures, texture_id)
@@ -207,6 +213,7 @@ class Renderer:
             table.clear()
         self.levels.release()
         self._draw_order.clear()
+        self.probes.release()
         self.scene_pass.release()
         for obj in (self.sky, self.camera_ubo, self.lights_ubo, self.fullscreen_present):
             obj.release()

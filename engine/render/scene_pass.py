@@ -39,6 +39,7 @@ from engine.render.bindings import (
     CAMERA_BINDING,
     LIGHTS_BINDING,
     NODE_UNIT,
+    PROBE_UNIT,
     SCENE_CLIPS,
     SKY_UNIT,
     VIEWS_BINDING,
@@ -62,7 +63,7 @@ class SceneOptions:
 
 ROOT_VIEW = SceneOptions()
 REFLECTION_LEVEL = SceneOptions(clear=False, masked=True, sky=False, reflection_filter=True)
-_PER_DRAW_UNIFORMS = ("masked", "sky_face_size", "node_index", "has_albedo_map")
+_PER_DRAW_UNIFORMS = ("masked", "sky_face_size", "node_index", "has_albedo_map", "probe_face_size")
 _SCENE = PassState(depth_func="<", cull=True, clips=SCENE_CLIPS)
 _BATCHED_SCENE = PassState(depth_func="<", cull=True, clips=BATCHED_SCENE_CLIPS)
 _SKY = PassState(depth_func="<=", clips=SCENE_CLIPS)
@@ -114,7 +115,8 @@ class ScenePass:
             if invocations:
                 program["Views"].binding = VIEWS_BINDING
             # A build may not read every input (the linker drops what a variant never uses).
-            for name, unit in (("albedo_map", ALBEDO_UNIT), ("sky_map", SKY_UNIT), ("node_map", NODE_UNIT)):
+            for name, unit in (("albedo_map", ALBEDO_UNIT), ("sky_map", SKY_UNIT), ("node_map", NODE_UNIT),
+                               ("probe_map", PROBE_UNIT)):
                 if name in program:
                     program[name].value = unit
             if "Lights" in program:
@@ -128,6 +130,7 @@ class ScenePass:
         uniforms are written only when their value changes (``self._written``, reset at the
         start of each pass): on llvmpipe each call is CPU time on a view's critical path."""
         stats = self.renderer.stats
+        cubes = self.renderer.probes.cubes
         written = self._written
         for batch in batches:
             if not batch.count:
@@ -136,11 +139,17 @@ class ScenePass:
             uniforms = self._uniforms[program.glo]
             values = written.get(program.glo)
             if values is None:
-                values = written[program.glo] = [None, None, None, None]
+                values = written[program.glo] = [None] * len(_PER_DRAW_UNIFORMS)
             textured = batch.texture is not None
             if textured:
                 batch.texture.use(ALBEDO_UNIT)
-            for i, value in enumerate((masked, self._sky_size, node, textured)):
+            probe_size = 0
+            if batch.probe:
+                cube = cubes.get(batch.probe)
+                if cube is not None:
+                    cube.texture.use(PROBE_UNIT)
+                    probe_size = cube.face_size
+            for i, value in enumerate((masked, self._sky_size, node, textured, probe_size)):
                 if values[i] != value and uniforms[i] is not None:
                     uniforms[i].value = values[i] = value
             batch.draw(program)

@@ -1,0 +1,74 @@
+"""Cube-map reflection probes: what a curved shiny object (or glass) sees around it."""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+from components.tracking import ComponentValueError, TrackedComponent, boolean, choice, finite, integer, vec3
+
+REFRESH_MODES = ("once", "on_change", "every_frame", "every_n", "scripted")
+TIME_SLICING = ("all_faces", "one_face_per_frame")
+MIN_PROBE_RESOLUTION = 8
+MAX_PROBE_RESOLUTION = 2048  # also checked against the context's cube-map limit when the probe is made
+
+
+@dataclass(eq=False)
+class ReflectionProbe(TrackedComponent):
+    """A cube map captured at the entity's position (its Transform), of the scene around it.
+
+    ``resolution`` texels across a face (a power of two), ``near`` / ``far`` the capture
+    range.  ``refresh``: ``once`` (captured the first frame only), ``on_change`` (the
+    default: captured the first frame, then only the faces whose view holds something that
+    was added, removed, moved or changed its material), ``every_frame``, ``every_n``
+    (every ``every_n`` frames) or ``scripted`` (only after ``request()``).
+    ``time_slicing`` spreads a capture over six frames (one face each) instead of one.
+    ``influence`` is the size of a box around the probe: objects inside it that reflect a
+    cube map sample this probe (None: the probe serves only its own entity).
+    ``box_projection`` corrects lookups for the box's walls (parallax-corrected, as Unity's
+    and Godot's probes do).  ``depth`` is how many levels of mirrors and portals a face
+    sees (0: mirrors show their own surface).
+    """
+
+    resolution: int = 128
+    near: float = 0.05
+    far: float = 100.0
+    refresh: str = "on_change"
+    every_n: int = 1
+    time_slicing: str = "all_faces"
+    influence: Any = None
+    box_projection: bool = False
+    depth: int = 1
+    _requested: bool = field(default=False, init=False, repr=False, compare=False)
+
+    def request(self) -> None:
+        """Ask a ``scripted`` probe (or any other) for a capture of every face next frame."""
+        self._requested = True
+        self.touch()
+
+    def _validate(self, name: str, value: Any) -> Any:
+        if name == "resolution":
+            value = integer(self, name, value, low=MIN_PROBE_RESOLUTION, high=MAX_PROBE_RESOLUTION)
+            if value & (value - 1):
+                raise ComponentValueError(f"ReflectionProbe.resolution must be a power of two, got {value!r}")
+            return value
+        if name in ("near", "far"):
+            value = finite(self, name, value, positive=True, high=1e6)
+            # Both given (the constructor sets near before far): far must lie beyond near.
+            near = value if name == "near" else self.__dict__.get("near")
+            far = value if name == "far" else self.__dict__.get("far")
+            if near is not None and far is not None and not far > near * 1.001:
+                raise ComponentValueError(f"ReflectionProbe.{name}: far ({far}) must be greater than near ({near})")
+            return value
+        if name == "refresh":
+            return choice(self, name, value, REFRESH_MODES)
+        if name == "every_n":
+            return integer(self, name, value, low=1, high=1_000_000)
+        if name == "time_slicing":
+            return choice(self, name, value, TIME_SLICING)
+        if name == "influence" and value is not None:
+            return vec3(self, name, value, low=0.0, nonzero=True)
+        if name == "box_projection":
+            return boolean(self, name, value)
+        if name == "depth":
+            return integer(self, name, value, low=0, high=16)
+        return value

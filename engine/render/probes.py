@@ -1,0 +1,148 @@
+"""Cube-map probe captures: six views from a point, each drawn by the scene pass (with the
+mirrors and portals it sees, through a view tree rooted at the face) and copied into a
+face of the probe's mipmapped cube map.
+
+Face views follow GL's cube-map convention: face i looks along +X, -X, +Y, -Y, +Z, -Z with
+up -Y, -Y, +Z, -Z, -Y, -Y, a 90 degree square frustum, so a face rendered the usual way
+(bottom row first) is the face's texture rows in order (``sky.face_directions`` gives the
+direction of each texel; tests/test_probes.py checks one labelled direction per face).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import moderngl
+import numpy as np
+from pyglm import glm
+
+from engine.render.bindings import SCRATCH_UNIT
+from engine.render.scene_pass import ROOT_VIEW
+from engine.render.targets import LevelStack
+from engine.render.view_tree import SurfaceTable, TreeSettings, ViewTree
+from engine.render.views import View
+
+# (looking along, up) per face, in GL's face order.
+FACE_AXES = (
+    ((1.0, 0.0, 0.0), (0.0, -1.0, 0.0)),
+    ((-1.0, 0.0, 0.0), (0.0, -1.0, 0.0)),
+    ((0.0, 1.0, 0.0), (0.0, 0.0, 1.0)),
+    ((0.0, -1.0, 0.0), (0.0, 0.0, -1.0)),
+    ((0.0, 0.0, 1.0), (0.0, -1.0, 0.0)),
+    ((0.0, 0.0, -1.0), (0.0, -1.0, 0.0)),
+)
+ALL_FACES = frozenset(range(6))
+
+
+def face_view(face: int, position: glm.vec3, near: float, far: float, size: int, skip: int = 0) -> View:
+    """The view of cube face ``face`` from ``position`` (``skip``: the entity left out, the
+    probe's own object)."""
+    forward, up = FACE_AXES[face]
+    eye = glm.vec3(position)
+    view = glm.lookAt(eye, eye + glm.vec3(forward), glm.vec3(up))
+    proj = glm.perspective(glm.radians(90.0), 1.0, near, far)
+    return View(view=view, proj=proj, eye=eye, size=(size, size), name=f"probe face {face}", skip=skip)
+
+
+def face_planes(position: glm.vec3, face: int) -> np.ndarray:
+    """The four side planes of a face's frustum as rows (a, b, c, d): a point p is inside
+    the face's pyramid when every row . (p, 1) >= 0."""
+    axis = int(np.argmax(np.abs(FACE_AXES[face][0])))
+    sign = FACE_AXES[face][0][axis]
+    rows = []
+    for other in range(3):
+        if other == axis:
+            continue
+        for side in (1.0, -1.0):
+            n = np.zeros(3)
+            n[axis] = sign
+            n[other] = -side  # sign * d[axis] - side * d[other] >= 0
+            rows.append((*n, -float(np.dot(n, np.array(position)))))
+    return np.array(rows)
+
+
+def faces_touched(position: glm.vec3, far: float, lo: np.ndarray, hi: np.ndarray) -> set[int]:
+    """Faces whose frustum (from ``position`` out to ``far``) a world box [lo, hi] may touch
+    (conservative: a box is left out only when all its corners are outside one plane)."""
+    centre = np.array(position)
+    nearest = np.clip(centre, lo, hi)
+    if np.linalg.norm(nearest - centre) > far:
+        return set()
+    corners = np.array([(x, y, z, 1.0) for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
+    touched = set()
+    for face in range(6):
+        inside = corners @ face_planes(position, face).T >= 0.0  # corners x planes
+        if not (~inside).all(axis=0).any():
+            touched.add(face)
+    return touched
+
+
+@dataclass
+class ProbeCube:
+    """One probe's cube map (RGBA16F, mipmapped, seamless) and what was captured into it."""
+
+    texture: moderngl.TextureCube
+    resolution: int
+
+    @property
+    def face_size(self) -> int:
+        return self.resolution
+
+
+class ProbeCaptures:
+    """The GPU side of every probe: cube maps by probe key, and the targets faces draw into
+    (one LevelStack per resolution, shared by all probes: captures run one after another)."""
+
+    def __init__(self, renderer) -> None:
+        self.renderer = renderer
+        self.ctx = renderer.ctx
+        self.cubes: dict[int, ProbeCube] = {}
+        self._stacks: dict[int, LevelStack] = {}
+        self.tree = ViewTree(renderer)
+
+    def cube(self, key: int, resolution: int) -> ProbeCube:
+        """The cube map of probe ``key`` at ``resolution`` (made, or remade at a new size)."""
+        cube = self.cubes.get(key)
+        if cube is None or cube.resolution != resolution:
+            if cube is not None:
+                cube.texture.release()
+            texture = self.ctx.texture_cube((resolution, resolution), 4, dtype="f2")
+            texture.filter = (moderngl.LINEAR_MIPMAP_LINEAR, moderngl.LINEAR)
+            cube = self.cubes[key] = ProbeCube(texture, resolution)
+        return cube
+
+    def capture(self, key: int, views: dict[int, View], surfaces: SurfaceTable | None, depth: int) -> None:
+        """Draw each face view of ``views`` (face -> view, all of the probe's resolution) and
+        copy it into the probe's cube, then rebuild the cube's mips."""
+        renderer = self.renderer
+        resolution = next(iter(views.values())).size[0]
+        cube = self.cube(key, resolution)
+        levels = self._stacks.setdefault(resolution, LevelStack(self.ctx))
+        for face, view in sorted(views.items()):
+            targets = levels.get(0, view.size)
+            renderer.scene_pass.draw([view], targets, ROOT_VIEW)
+            if surfaces is not None and depth > 0:
+                self.tree.render(view, levels, surfaces, TreeSettings(depth_cap=depth))
+            renderer.raw_gl.copy_to_cube_face(targets.framebuffer, cube.texture, face, SCRATCH_UNIT)
+            renderer.stats.probe_faces += 1
+        cube.texture.build_mipmaps()
+
+    def read_face(self, key: int, face: int) -> np.ndarray:
+        """Face ``face`` of probe ``key``'s cube map, linear RGB float32 (rows in texture order:
+        row t of ``sky.face_directions``)."""
+        cube = self.cubes[key]
+        n = cube.resolution
+        data = np.frombuffer(cube.texture.read(face), np.float16).reshape(n, n, 4)
+        return data[..., :3].astype(np.float32)
+
+    def drop(self, key: int) -> None:
+        cube = self.cubes.pop(key, None)
+        if cube is not None:
+            cube.texture.release()
+
+    def release(self) -> None:
+        for key in list(self.cubes):
+            self.drop(key)
+        for levels in self._stacks.values():
+            levels.release()
+        self._stacks.clear()
+        self.tree.release()

@@ -1,0 +1,160 @@
+"""Probes: capture the reflection probes that need it, before the main view samples them.
+
+Every ``ReflectionProbe`` (at its entity's position) and every automatic probe (a
+cube-reflective mesh that is not flat, at its bounding box's centre; ``engine/probe_rules.py``)
+has a ``ProbeState``.  What is captured each frame, per probe:
+
+  - the first frame it exists: all six faces;
+  - ``on_change`` (the default): only the faces whose frustum holds the old or the new
+    bounds of an entity that was added, removed or moved (the transform stage's frame sets)
+    or whose material changed, within the probe's range; all six when the probe itself
+    moved or its settings changed, or a light or the sky changed;
+  - ``every_frame``: all six; ``every_n``: all six every n frames; ``once``: nothing more;
+    ``scripted``: all six after ``ReflectionProbe.request()``;
+  - with ``time_slicing="one_face_per_frame"`` the waiting faces go one a frame.
+
+The probe's own object is never in its capture (each face view skips it).  Counters per
+probe (``ProbeState.captures``: frames with a capture, ``faces_captured``) are the API;
+``RenderStats.probe_captures`` and ``probe_faces`` count this frame's.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import esper
+import numpy as np
+from pyglm import glm
+
+from components import (
+    DirectionalLight,
+    Emissive,
+    Material,
+    MeshRef,
+    Mirror,
+    PointLight,
+    Portal,
+    ReflectionProbe,
+    Reflective,
+    Refractive,
+    Skybox,
+    Transform,
+)
+from engine.probe_rules import has_own_probe, world_bounds
+from engine.render.probes import ALL_FACES, face_view, faces_touched
+from engine.render.renderer import Renderer
+from engine.world import World
+
+LOOK_KINDS = (Material, MeshRef, Emissive, Reflective, Refractive, Mirror, Portal)  # what changes a look
+LIGHTING_KINDS = (DirectionalLight, PointLight, Skybox)  # what changes every face
+
+
+@dataclass
+class ProbeState:
+    """One probe as the probes stage keeps it."""
+
+    owner: int
+    settings: ReflectionProbe
+    automatic: bool
+    position: glm.vec3
+    pending: set[int] = field(default_factory=lambda: set(ALL_FACES))
+    captures: int = 0
+    faces_captured: int = 0
+    frames: int = 0
+
+
+class ProbeSystem(esper.Processor):
+    def __init__(self, world: World, renderer: Renderer) -> None:
+        self.world = world
+        self.renderer = renderer
+        self.probes: dict[int, ProbeState] = {}
+        self._bounds: dict[int, tuple[np.ndarray, np.ndarray]] = {}  # entity -> last world box
+
+    def process(self, dt: float) -> None:
+        world = self.world
+        boxes = self._changed_boxes()
+        self._refresh_probes()
+        everything = any(world.changed(kind) for kind in LIGHTING_KINDS)
+        for state in self.probes.values():
+            self._schedule(state, boxes, everything)
+            faces = state.pending
+            if state.settings.time_slicing == "one_face_per_frame" and faces:
+                faces = {min(faces)}
+            if faces:
+                self._capture(state, faces)
+                state.pending = state.pending - faces
+
+    # --- which probes -------------------------------------------------------------------------
+    def _refresh_probes(self) -> None:
+        world = self.world
+        found: dict[int, tuple[ReflectionProbe, glm.vec3, bool]] = {}
+        for owner, (probe, transform) in world.query(ReflectionProbe, Transform):
+            found[owner] = (probe, glm.vec3(transform.world[3]), False)
+        for owner, (reflective, mesh_ref, transform) in world.query(Reflective, MeshRef, Transform):
+            if reflective.mode == "cube" and has_own_probe(world, owner):
+                lo, hi = world_bounds(mesh_ref.mesh, transform.world)
+                found[owner] = (None, glm.vec3(*((lo + hi) / 2.0)), True)
+        for owner in [o for o in self.probes if o not in found]:
+            del self.probes[owner]
+            self.renderer.probes.drop(owner)
+        changed = world.changed(ReflectionProbe)
+        for owner, (probe, position, automatic) in found.items():
+            state = self.probes.get(owner)
+            if state is None or state.automatic != automatic:
+                state = self.probes[owner] = ProbeState(owner, probe or ReflectionProbe(), automatic, position)
+                continue
+            if probe is not None:
+                state.settings = probe
+            if owner in changed or position != state.position:
+                state.position = position
+                state.pending = set(ALL_FACES)
+
+    # --- what to capture ----------------------------------------------------------------------
+    def _changed_boxes(self) -> dict[int, list[tuple[np.ndarray, np.ndarray]]]:
+        """The old and new world boxes of every entity that moved, came, went or changed its look."""
+        world = self.world
+        frame = world.frame
+        entities = set(frame.moved) | set(frame.added) | set(frame.removed) | world.deleted()
+        for kind in LOOK_KINDS:
+            entities |= world.changed(kind)
+        boxes: dict[int, list] = {}
+        for entity in entities:
+            found = []
+            old = self._bounds.pop(entity, None)
+            if old is not None:
+                found.append(old)
+            mesh_ref = world.try_get(entity, MeshRef) if world.exists(entity) else None
+            transform = world.try_get(entity, Transform) if mesh_ref is not None else None
+            if transform is not None:
+                new = self._bounds[entity] = world_bounds(mesh_ref.mesh, transform.world)
+                found.append(new)
+            if found:
+                boxes[entity] = found
+        return boxes
+
+    def _schedule(self, state: ProbeState, boxes, everything: bool) -> None:
+        settings = state.settings
+        state.frames += 1
+        if settings._requested:
+            settings._requested = False
+            state.pending |= ALL_FACES
+        mode = settings.refresh
+        if mode == "every_frame" or (mode == "every_n" and state.frames % settings.every_n == 0):
+            state.pending |= ALL_FACES
+        elif mode == "on_change":
+            if everything:
+                state.pending |= ALL_FACES
+                return
+            for entity, found in boxes.items():
+                if entity == state.owner:
+                    continue
+                for lo, hi in found:
+                    state.pending |= faces_touched(state.position, settings.far, lo, hi)
+
+    def _capture(self, state: ProbeState, faces: set[int]) -> None:
+        settings = state.settings
+        views = {face: face_view(face, state.position, settings.near, settings.far, settings.resolution,
+                                 skip=state.owner) for face in faces}
+        self.renderer.probes.capture(state.owner, views, None, settings.depth)
+        state.captures += 1
+        state.faces_captured += len(faces)
+        self.renderer.stats.probe_captures += 1

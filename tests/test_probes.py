@@ -1,0 +1,194 @@
+"""Cube-map reflection probes: faces in GL's convention, captures driven by what moved, and
+a chrome sphere that shows the room around it."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from pyglm import glm
+
+from components import (
+    ComponentValueError,
+    DirectionalLight,
+    Emissive,
+    Material,
+    MeshRef,
+    ReflectionProbe,
+    Reflective,
+    Skybox,
+    Transform,
+)
+from engine.mesh import box, quad, sphere
+from engine.render.sky import face_directions
+from tests.support import look_from, srgb_to_linear
+
+AXES = [np.array(a, float) for a in ((1, 0, 0), (-1, 0, 0), (0, 1, 0), (0, -1, 0), (0, 0, 1), (0, 0, -1))]
+MARKER_COLOURS = [(1, 0, 0), (0, 1, 0), (0, 0, 1), (1, 1, 0), (0, 1, 1), (1, 0, 1)]
+
+
+def probe_stage(runner):
+    return runner.engine.stages["probes"]
+
+
+def offset(face: int) -> np.ndarray:
+    """A direction off face ``face``'s centre, to the side of its two other axes."""
+    others = [a for a in AXES[::2] if abs(a @ AXES[face]) < 0.5]
+    return AXES[face] + 0.45 * others[0] + 0.25 * others[1]
+
+
+def test_each_face_follows_the_gl_cube_map_convention(scene):
+    """A coloured marker per face, placed off the face's centre in a known direction: each
+    shows in the face texel whose direction (GL's cube-map table) points at it, and not in
+    the texel mirrored across the face's centre."""
+    ents = {}
+
+    def build(world):
+        look_from(world, (0, 0, 8), target=(0, 0, 0))
+        ents["probe"] = world.spawn(Transform(), ReflectionProbe(resolution=64, refresh="once"))
+        for face, colour in enumerate(MARKER_COLOURS):
+            world.spawn(Transform(position=tuple(3.0 * offset(face))), MeshRef(box((0.5, 0.5, 0.5))),
+                        Material(color=colour), Emissive(2.0))
+
+    runner = scene(build, (32, 32))
+    runner.frame()
+    for face, colour in enumerate(MARKER_COLOURS):
+        image = runner.engine.renderer.probes.read_face(ents["probe"], face)
+        directions = face_directions(face, 64)
+        for target, expect in ((offset(face), True), (2 * AXES[face] - offset(face), False)):
+            target = target / np.linalg.norm(target)
+            row, col = np.unravel_index(np.argmax(directions @ target), (64, 64))
+            seen = image[row, col]
+            shows = all((seen[c] > 1.0) == bool(colour[c]) for c in range(3))
+            assert shows == expect, (face, expect, seen)
+
+
+def chrome_scene(ents, refresh="on_change"):
+    def build(world):
+        world.spawn(Skybox())
+        world.spawn(DirectionalLight(direction=(0.2, -1.0, -0.4), intensity=1.0))
+        look_from(world, (0.0, 0.0, 4.0), target=(0.0, 0.0, 0.0), fov=40.0)
+        ents["sphere"] = world.spawn(Transform(), MeshRef(sphere(0.6, 48, 24)),
+                                     Material(color=(1, 1, 1), metallic=1.0, roughness=0.0), Reflective("cube"))
+        # A red wall on the sphere's +X side, facing it.
+        ents["wall"] = world.spawn(Transform(position=(1.6, 0.0, 0.0),
+                                             rotation=glm.angleAxis(-glm.pi() / 2, glm.vec3(0, 1, 0))),
+                                   MeshRef(quad(12, 12)), Material(color=(0.9, 0.05, 0.05)), Emissive(1.5))
+    return build
+
+
+def test_a_chrome_sphere_shows_the_red_wall_on_its_side_and_the_sky_on_the_other(scene):
+    """Each sphere pixel: its reflected ray (from the camera math, followed from the probe at
+    the sphere's centre) either meets the wall (x = 1.6, |y|, |z| < 6) or turns away from
+    it; the pixel is red where it meets it, not red where it turns away."""
+    ents = {}
+    runner = scene(chrome_scene(ents), (160, 120))
+    rgb = runner.frame()
+    assert runner.stats.probe_captures == 1 and runner.stats.probe_faces == 6
+    ids = runner.ids()
+    view = runner.engine.main_view
+    inverse = glm.inverse(view.view_proj)
+    eye = np.array(view.eye)
+    hits = {True: [], False: []}
+    for row, col in np.argwhere(ids == ents["sphere"])[::3]:
+        ndc = glm.vec4((col + 0.5) / 160 * 2 - 1, 1 - (row + 0.5) / 120 * 2, 1.0, 1.0)
+        far = inverse * ndc
+        d = np.array(glm.normalize(glm.vec3(far) / far.w - view.eye))
+        b = d @ eye
+        t = -b - np.sqrt(b * b - (eye @ eye - 0.36))  # the camera ray meets the sphere
+        normal = (eye + t * d) / 0.6
+        r = d - 2 * (d @ normal) * normal
+        if -(d @ normal) < 0.3:
+            continue  # near the sphere's outline: too few texels to call
+        s = 1.6 / r[0] if r[0] > 0 else np.inf  # from the probe (the sphere's centre) along r
+        if r[0] > 0.3 and abs(s * r[1]) < 4.5 and abs(s * r[2]) < 4.5:
+            meets = True  # well inside the wall (|y|, |z| < 6)
+        elif r[0] < -0.15:
+            meets = False  # away from it
+        else:
+            continue  # near the wall's plane or its edges: a few texels' blur decides
+        colour = srgb_to_linear(rgb[row, col])
+        hits[meets].append(colour[0] > colour[1] + 0.15 and colour[0] > colour[2] + 0.15)
+    assert len(hits[True]) > 50 and len(hits[False]) > 50
+    assert np.mean(hits[True]) > 0.95 and np.mean(hits[False]) < 0.05
+
+
+def test_a_static_probe_captures_once_in_a_hundred_frames(scene):
+    ents = {}
+    runner = scene(chrome_scene(ents), (64, 48))
+    for _ in range(100):
+        runner.frame()
+    state = probe_stage(runner).probes[ents["sphere"]]
+    assert (state.captures, state.faces_captured) == (1, 6)
+
+
+def test_a_box_moving_on_the_probes_plus_x_side_recaptures_only_that_face(scene):
+    ents = {}
+
+    def build(world):
+        chrome_scene(ents)(world)
+        ents["box"] = world.spawn(Transform(position=(1.0, 0.0, 0.0)), MeshRef(box((0.2, 0.2, 0.2))),
+                                  Material(color=(0.2, 0.9, 0.2)))
+        ents["far box"] = world.spawn(Transform(position=(0.0, 0.0, -150.0)), MeshRef(box((0.2, 0.2, 0.2))),
+                                      Material())
+
+    runner = scene(build, (64, 48))
+    runner.frame()
+    state = probe_stage(runner).probes[ents["sphere"]]
+    assert (state.captures, state.faces_captured) == (1, 6)
+    runner.world.get(ents["box"], Transform).position = (1.0, 0.1, 0.0)
+    runner.frame()
+    assert (state.captures, state.faces_captured) == (2, 7)  # the +X face only
+    runner.world.get(ents["far box"], Transform).position = (0.0, 0.0, -160.0)  # beyond the range (far = 100)
+    for _ in range(3):
+        runner.frame()
+    assert (state.captures, state.faces_captured) == (2, 7)
+
+
+def test_time_slicing_captures_one_face_a_frame(scene):
+    ents = {}
+
+    def build(world):
+        chrome_scene(ents)(world)
+        world.add_component(ents["sphere"], ReflectionProbe(resolution=32, time_slicing="one_face_per_frame"))
+
+    runner = scene(build, (64, 48))
+    state = None
+    for frame in range(1, 9):
+        runner.frame()
+        state = probe_stage(runner).probes[ents["sphere"]]
+        assert state.faces_captured == min(frame, 6)
+
+
+def test_a_scripted_probe_captures_when_asked(scene):
+    ents = {}
+
+    def build(world):
+        chrome_scene(ents)(world)
+        world.add_component(ents["sphere"], ReflectionProbe(resolution=32, refresh="scripted"))
+
+    runner = scene(build, (64, 48))
+    runner.frame()
+    state = probe_stage(runner).probes[ents["sphere"]]
+    runner.world.get(ents["wall"], Transform).position = (1.7, 0.0, 0.0)
+    for _ in range(3):
+        runner.frame()
+    assert state.faces_captured == 6
+    runner.world.get(ents["sphere"], ReflectionProbe).request()
+    runner.frame()
+    assert (state.captures, state.faces_captured) == (2, 12)
+
+
+def test_a_deleted_probe_gives_its_cube_map_back(scene):
+    ents = {}
+    runner = scene(chrome_scene(ents), (64, 48))
+    runner.frame()
+    assert ents["sphere"] in runner.engine.renderer.probes.cubes
+    runner.world.delete_entity(ents["sphere"])
+    runner.frame()
+    assert not runner.engine.renderer.probes.cubes and not probe_stage(runner).probes
+
+
+@pytest.mark.parametrize("field, value", [("resolution", 100), ("resolution", 4), ("near", -1.0),
+                                          ("refresh", "sometimes"), ("every_n", 0), ("influence", (0, 0, 0))])
+def test_bad_probe_settings_name_the_field(field, value):
+    with pytest.raises(ComponentValueError, match=rf"ReflectionProbe\.{field}"):
+        ReflectionProbe(**{field: value})
