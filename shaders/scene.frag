@@ -9,6 +9,8 @@ uniform sampler2D albedo_map;
 uniform bool has_albedo_map;
 uniform samplerCube sky_map;
 uniform float sky_face_size;   // texels across one face of sky_map
+uniform samplerCube probe_map;  // the batch's reflection probe (Reflect = cube)
+uniform float probe_face_size;
 
 in vec3 v_world_pos;
 in vec3 v_normal;
@@ -114,13 +116,18 @@ vec3 reflect_skybox(vec3 color, Surface s) {
     return mix(color, env, v_reflect.x);
 }
 
+vec3 reflect_probe(vec3 color, Surface s) {
+    // A cube map captured around the object (engine/render/probes.py), sampled like the sky.
+    vec3 env = textureLod(probe_map, s.reflect_dir, s.reflect_lod + roughness_lod_bias(s.roughness)).rgb;
+    return mix(color, env * v_tint.rgb, v_reflect.x);
+}
+
 vec3 apply_reflect(uint variant, vec3 color, Surface s) {
     switch (variant) {
         case REFLECT_SKYBOX:
-        // The cube variant lands with probes; until then it shows the sky, which is what
-        // the surface reflects when nothing else is there.
-        case REFLECT_CUBE:
             return reflect_skybox(color, s);
+        case REFLECT_CUBE:
+            return reflect_probe(color, s);
         case REFLECT_PORTAL:
             // A portal's closed look (no partner, or past the recursion limit): flat, unlit.
             // An open portal's view is composited over it by the ReflectionSystem.
@@ -179,7 +186,8 @@ void main() {
     // llvmpipe otherwise. The variants are flat per instance, so every pixel of a 2 x 2 quad
     // (one primitive) takes the same branch and the derivatives stay defined.
     s.reflect_lod = 0.0;
-    if (SLOT_REFLECT == REFLECT_SKYBOX || SLOT_REFLECT == REFLECT_CUBE) s.reflect_lod = cube_lod(s.reflect_dir, sky_face_size);
+    if (SLOT_REFLECT == REFLECT_SKYBOX) s.reflect_lod = cube_lod(s.reflect_dir, sky_face_size);
+    if (SLOT_REFLECT == REFLECT_CUBE) s.reflect_lod = cube_lod(s.reflect_dir, probe_face_size);
     s.refract_lod = 0.0;
     if (SLOT_REFRACT == REFRACT_ENVIRONMENT) s.refract_lod = cube_lod(s.refract_dir, sky_face_size);
 
