@@ -1,7 +1,8 @@
 """Which reflection probe an object samples: worked out from components alone (no GL), so
 the extract stage (which builds instance rows) and the probes stage (which captures) agree.
 
-An object with ``Reflective("cube")`` samples:
+An object with ``Reflective("cube")`` or ``Refractive`` (glass refracts what the probe
+saw behind it) samples:
   - its own probe, when it has a ``ReflectionProbe`` component;
   - else, when its mesh is not flat, a probe of its own at its bounding box's centre (made
     by the probes stage; the chrome-sphere case: material detection as in the OpenGL 4
@@ -16,7 +17,7 @@ from __future__ import annotations
 import numpy as np
 from pyglm import glm
 
-from components import MeshRef, ReflectionProbe, Reflective, Transform
+from components import MeshRef, ReflectionProbe, Reflective, Refractive, Transform
 from engine.mesh import Mesh, flat_plane
 from engine.world import World
 
@@ -30,12 +31,17 @@ def is_flat(mesh: Mesh) -> bool:
     return flat
 
 
-def has_own_probe(world: World, entity: int) -> bool:
-    """An automatic probe: a cube-reflective, non-flat mesh without a ReflectionProbe."""
+def samples_a_probe(world: World, entity: int) -> bool:
+    """Cube-reflective or refractive: what looks up a probe when one serves it."""
     reflective = world.try_get(entity, Reflective)
+    return (reflective is not None and reflective.mode == "cube") or world.has(entity, Refractive)
+
+
+def has_own_probe(world: World, entity: int) -> bool:
+    """An automatic probe: a non-flat mesh that samples a probe and has no ReflectionProbe."""
     mesh_ref = world.try_get(entity, MeshRef)
-    return (reflective is not None and reflective.mode == "cube" and mesh_ref is not None
-            and not world.has(entity, ReflectionProbe) and not is_flat(mesh_ref.mesh))
+    return (mesh_ref is not None and samples_a_probe(world, entity) and not world.has(entity, ReflectionProbe)
+            and not is_flat(mesh_ref.mesh))
 
 
 def world_bounds(mesh: Mesh, model: glm.mat4) -> tuple[np.ndarray, np.ndarray]:
@@ -48,8 +54,7 @@ def world_bounds(mesh: Mesh, model: glm.mat4) -> tuple[np.ndarray, np.ndarray]:
 
 def probe_for(world: World, entity: int) -> int:
     """The entity owning the probe ``entity`` samples, or 0 (the sky)."""
-    reflective = world.try_get(entity, Reflective)
-    if reflective is None or reflective.mode != "cube":
+    if not samples_a_probe(world, entity):
         return 0
     if world.has(entity, ReflectionProbe) or has_own_probe(world, entity):
         return entity

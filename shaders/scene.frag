@@ -147,7 +147,11 @@ vec3 refract_environment(vec3 color, Surface s) {
     float ior = v_reflect.y;
     float f0 = pow((ior - 1.0) / (ior + 1.0), 2.0);
     vec3 transmittance = vec3(1.0) - schlick_fresnel(s.to_eye, s.normal, vec3(f0));
-    vec3 transmitted = transmittance * s.albedo * sample_environment(s.refract_dir, s.refract_lod, s.roughness);
+    // What lies behind: the probe's capture when one serves the object, else the sky.
+    vec3 behind = probe_face_size > 0.0
+        ? textureLod(probe_map, s.refract_dir, s.refract_lod + roughness_lod_bias(s.roughness)).rgb
+        : sample_environment(s.refract_dir, s.refract_lod, s.roughness);
+    vec3 transmitted = transmittance * s.albedo * behind;
     return mix(transmitted, color, s.alpha);
 }
 
@@ -189,7 +193,8 @@ void main() {
     if (SLOT_REFLECT == REFLECT_SKYBOX) s.reflect_lod = cube_lod(s.reflect_dir, sky_face_size);
     if (SLOT_REFLECT == REFLECT_CUBE) s.reflect_lod = cube_lod(s.reflect_dir, probe_face_size);
     s.refract_lod = 0.0;
-    if (SLOT_REFRACT == REFRACT_ENVIRONMENT) s.refract_lod = cube_lod(s.refract_dir, sky_face_size);
+    if (SLOT_REFRACT == REFRACT_ENVIRONMENT)
+        s.refract_lod = cube_lod(s.refract_dir, probe_face_size > 0.0 ? probe_face_size : sky_face_size);
 
     vec3 color = direct_lighting(s);
     color = apply_reflect(SLOT_REFLECT, color, s);

@@ -54,6 +54,7 @@ class ExtractSystem(esper.Processor):
             # A probe came, went, changed or moved: which probe each cube-reflective object
             # samples (an influence box) may change with it.
             touched |= {e for e, r in world.query_one(Reflective) if r.mode == "cube"}
+            touched |= {e for e, _ in world.query_one(Refractive)}
         self._probe_owners = {e for e, _ in world.query_one(ReflectionProbe)}
         for entity in touched:
             self._refresh_instance(entity)

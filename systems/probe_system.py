@@ -89,8 +89,8 @@ class ProbeSystem(esper.Processor):
         found: dict[int, tuple[ReflectionProbe, glm.vec3, bool]] = {}
         for owner, (probe, transform) in world.query(ReflectionProbe, Transform):
             found[owner] = (probe, glm.vec3(transform.world[3]), False)
-        for owner, (reflective, mesh_ref, transform) in world.query(Reflective, MeshRef, Transform):
-            if reflective.mode == "cube" and has_own_probe(world, owner):
+        for owner, (mesh_ref, transform) in world.query(MeshRef, Transform):
+            if has_own_probe(world, owner):
                 lo, hi = world_bounds(mesh_ref.mesh, transform.world)
                 found[owner] = (None, glm.vec3(*((lo + hi) / 2.0)), True)
         for owner in [o for o in self.probes if o not in found]:

@@ -14,6 +14,7 @@ from components import (
     MeshRef,
     ReflectionProbe,
     Reflective,
+    Refractive,
     Skybox,
     Transform,
 )
@@ -192,3 +193,54 @@ def test_a_deleted_probe_gives_its_cube_map_back(scene):
 def test_bad_probe_settings_name_the_field(field, value):
     with pytest.raises(ComponentValueError, match=rf"ReflectionProbe\.{field}"):
         ReflectionProbe(**{field: value})
+
+
+def refract(i: np.ndarray, n: np.ndarray, eta: float) -> np.ndarray:
+    """GLSL's refract()."""
+    cos = n @ i
+    k = 1.0 - eta * eta * (1.0 - cos * cos)
+    return eta * i - (eta * cos + np.sqrt(k)) * n
+
+
+def test_a_glass_sphere_refracts_what_its_probe_sees_behind_it(scene):
+    """Clear glass (alpha 0, ior 1.5) in front of a wall that is red left of x = 0 and blue
+    right of it.  At pixels where refract() bends the ray to the other half of the wall than
+    the straight line would reach, the pixel shows the colour refract() predicts."""
+    ents = {}
+
+    def build(world):
+        world.spawn(Skybox())
+        look_from(world, (0.0, 0.0, 4.0), target=(0.0, 0.0, 0.0), fov=40.0)
+        ents["glass"] = world.spawn(Transform(), MeshRef(sphere(0.6, 48, 24)),
+                                    Material(color=(1, 1, 1, 0), roughness=0.0), Refractive(ior=1.5))
+        for x, colour in ((-3.0, (0.9, 0.05, 0.05)), (3.0, (0.05, 0.05, 0.9))):
+            world.spawn(Transform(position=(x, 0.0, -3.0)), MeshRef(quad(6, 8)), Material(color=colour), Emissive(1.5))
+
+    runner = scene(build, (160, 120))
+    rgb = runner.frame()
+    ids = runner.ids()
+    view = runner.engine.main_view
+    inverse = glm.inverse(view.view_proj)
+    eye = np.array(view.eye)
+    checked = []
+    for row, col in np.argwhere(ids == ents["glass"]):
+        ndc = glm.vec4((col + 0.5) / 160 * 2 - 1, 1 - (row + 0.5) / 120 * 2, 1.0, 1.0)
+        far = inverse * ndc
+        d = np.array(glm.normalize(glm.vec3(far) / far.w - view.eye))
+        b = d @ eye
+        t = -b - np.sqrt(b * b - (eye @ eye - 0.36))
+        p = eye + t * d
+        n = p / 0.6
+        if -(d @ n) < 0.4:
+            continue  # near the outline
+        r = refract(d, n, 1.0 / 1.5)
+        bent_x = -3.0 * r[0] / r[2]  # from the probe (the sphere's centre) to the wall at z = -3
+        straight_x = p[0] + d[0] * (-3.0 - p[2]) / d[2]
+        if abs(bent_x) < 0.4 or np.sign(bent_x) == np.sign(straight_x):
+            continue
+        colour = srgb_to_linear(rgb[row, col])
+        red = colour[0] > colour[2] + 0.2
+        blue = colour[2] > colour[0] + 0.2
+        checked.append(red if bent_x < 0 else blue)
+    assert len(checked) > 40
+    assert np.mean(checked) > 0.95
