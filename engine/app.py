@@ -34,6 +34,7 @@ from systems import (
 )
 from systems.portal_slice_system import PortalSliceSystem
 from systems.probe_system import ProbeSystem
+from systems.surface_system import SurfaceSystem
 
 
 class Game:
@@ -67,6 +68,7 @@ FRAME_STAGES: tuple[tuple[str, Callable[[Engine], esper.Processor]], ...] = (
     ("travel", lambda e: PortalTravelSystem(e.world)),
     ("slice", lambda e: PortalSliceSystem(e.world)),
     ("transform", lambda e: TransformSystem(e.world)),
+    ("surfaces", lambda e: SurfaceSystem(e.world)),
     ("extract", lambda e: ExtractSystem(e.world, e.renderer)),
     ("prepare", lambda e: PrepareSystem(e.world, e.renderer)),
     ("probes", lambda e: ProbeSystem(e.world, e.renderer)),

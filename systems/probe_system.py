@@ -42,6 +42,7 @@ from components import (
 from engine.probe_rules import has_own_probe, world_bounds
 from engine.render.probes import ALL_FACES, face_view, faces_touched
 from engine.render.renderer import Renderer
+from engine.render.view_tree import Surfaces
 from engine.world import World
 
 LOOK_KINDS = (Material, MeshRef, Emissive, Reflective, Refractive, Mirror, Portal)  # what changes a look
@@ -154,7 +155,8 @@ class ProbeSystem(esper.Processor):
         settings = state.settings
         views = {face: face_view(face, state.position, settings.near, settings.far, settings.resolution,
                                  skip=state.owner) for face in faces}
-        self.renderer.probes.capture(state.owner, views, None, settings.depth)
+        surfaces = self.world.resources.get(Surfaces)
+        self.renderer.probes.capture(state.owner, views, surfaces.table if surfaces else None, settings.depth)
         state.captures += 1
         state.faces_captured += len(faces)
         self.renderer.stats.probe_captures += 1

@@ -9,6 +9,7 @@ from components import DirectionalLight, Emissive, Material, MeshRef, Mirror, Sk
 from engine.mesh import box, plane, quad, sphere
 from engine.reflection_math import plane_from_point_normal, reflection_matrix
 from engine.render.sky import sky_radiance
+from engine.render.view_tree import Surfaces
 from engine.texture_data import checker_texture
 from systems.reflection_system import MirrorError
 from tests.support import look_from, srgb_to_linear
@@ -365,7 +366,7 @@ def test_composite_covers_a_flat_mirrors_outline_and_a_solid_ones_rectangle(scen
 
     runner = scene(build, SIZE)
     runner.frame()
-    mirrors = runner.engine.reflection_system.mirrors
+    mirrors = runner.world.resources[Surfaces].mirrors
     outline = mirrors[ents["flat"]].outline
     assert outline.shape == (4, 4)
     plane = np.array(tuple(mirrors[ents["flat"]].plane))

@@ -244,3 +244,32 @@ def test_a_glass_sphere_refracts_what_its_probe_sees_behind_it(scene):
         checked.append(red if bent_x < 0 else blue)
     assert len(checked) > 40
     assert np.mean(checked) > 0.95
+
+
+@pytest.mark.parametrize("depth", [0, 1])
+def test_a_probe_face_sees_a_mirror_reflect_what_the_probe_cannot_see_directly(scene, depth):
+    """A mirror at z = -2 faces the probe; a red box behind the probe (z = +2, up 1.5) has its
+    mirror image at (0, 1.5, -6).  With ``depth`` 1 the -Z face shows red in the direction of
+    that image (the face roots a view tree of its own); with 0 the mirror shows its glass."""
+    from components import Mirror
+    from engine.mesh import quad as quad_mesh
+
+    ents = {}
+
+    def build(world):
+        world.spawn(Skybox())
+        look_from(world, (3.0, 0.5, 3.0), target=(0.0, 0.0, 0.0))
+        ents["probe"] = world.spawn(Transform(), ReflectionProbe(resolution=64, refresh="once", depth=depth))
+        world.spawn(Transform(position=(0, 0, -2)), MeshRef(quad_mesh(6, 6)), Material(color=(0.05, 0.05, 0.05)),
+                    Mirror())
+        world.spawn(Transform(position=(0, 1.5, 2)), MeshRef(box((0.8, 0.8, 0.8))), Material(color=(0.9, 0.05, 0.05)),
+                    Emissive(2.0))
+
+    runner = scene(build, (64, 48))
+    runner.frame()
+    face = runner.engine.renderer.probes.read_face(ents["probe"], 5)  # -Z
+    target = np.array([0.0, 1.5, -6.0]) / np.linalg.norm([0.0, 1.5, -6.0])
+    row, col = np.unravel_index(np.argmax(face_directions(5, 64) @ target), (64, 64))
+    seen = face[row, col]
+    is_red = seen[0] > 1.0 and seen[0] > 4 * max(seen[1], seen[2])
+    assert is_red == bool(depth), seen

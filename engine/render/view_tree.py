@@ -105,6 +105,30 @@ class SurfaceState:
 
 
 @dataclass
+class Surfaces:
+    """This frame's mirrors and portals by entity (a world resource, from the surfaces stage)."""
+
+    mirrors: dict[int, SurfaceState]
+    portals: dict[int, SurfaceState]
+    _table: SurfaceTable | None = field(default=None, init=False, repr=False)
+
+    @property
+    def table(self) -> SurfaceTable:
+        """All of them as the arrays a tree culls with (built once a frame, on first use)."""
+        if self._table is None:
+            self._table = SurfaceTable([*self.mirrors.values(), *self.portals.values()])
+        return self._table
+
+    def mirror_planes(self) -> dict[int, tuple[list[float], list[float]]]:
+        """Each mirror's world plane as (point on it, unit normal towards its front)."""
+        planes = {}
+        for entity, state in self.mirrors.items():
+            n = glm.vec3(state.plane)
+            planes[entity] = (list(-state.plane.w * n), list(n))
+        return planes
+
+
+@dataclass
 class ReflectionView:
     """One node of the view tree: a view at some level, looking into one mirror or portal."""
 
