@@ -117,9 +117,12 @@ vec3 reflect_skybox(vec3 color, Surface s) {
 }
 
 vec3 reflect_probe(vec3 color, Surface s) {
-    // A cube map captured around the object (engine/render/probes.py), sampled like the sky.
+    // A cube map captured around the object (engine/render/probes.py), its mips blurred by
+    // roughness and weighted by GGXReflect with the material's F0: a metal tints what it
+    // reflects (brass is golden), a dielectric reflects most at grazing angles.
     vec3 env = textureLod(probe_map, s.reflect_dir, s.reflect_lod + roughness_lod_bias(s.roughness)).rgb;
-    return mix(color, env * v_tint.rgb, v_reflect.x);
+    vec3 reflected = ggx_reflect(s.normal, s.reflect_dir, s.to_eye, env, s.f0, s.roughness);
+    return mix(color, reflected * v_tint.rgb, v_reflect.x);
 }
 
 vec3 apply_reflect(uint variant, vec3 color, Surface s) {

@@ -3,7 +3,9 @@ reflects only the sky, a textured crate that mixes its texture with the sky (see
 wall of mirrors with different tints and roughness, and a facing pair (the wall's centre
 mirror and one behind the camera) that shows a corridor of reflections; a portal pair (the
 left doorway opens far across the hall, where a crate stands half in it and half out of
-its partner), and a facing pair of portals on the right that shows a tunnel."""
+its partner), and a facing pair of portals on the right that shows a tunnel; a chrome ball
+with a probe captured every frame by the mirror wall, a brass statue whose probe follows
+what moves near it, and a glass ball in front of a red crate (cube-map probes)."""
 from __future__ import annotations
 
 from pyglm import glm
@@ -15,7 +17,9 @@ from components import (
     MeshRef,
     Mirror,
     PointLight,
+    ReflectionProbe,
     Reflective,
+    Refractive,
     Skybox,
     Transform,
     Traveller,
@@ -68,8 +72,26 @@ class HallOfMirrors(Game):
                              color=(1.0, 1.0, 1.0), roughness=0.5),
                     Reflective("skybox"))
 
+        self._probes(world)
         self._mirrors(world)
         self._portals(world)
+
+    @staticmethod
+    def _probes(world: World) -> None:
+        """Things that reflect or refract the room through cube-map probes: a chrome ball by
+        the mirror wall whose probe is captured every frame (the crates spin), a brass
+        statue on a plinth whose probe is recaptured only where something moved, and a
+        glass ball in front of the red crate."""
+        world.spawn(Transform(position=(1.5, 0.65, -3.9)), MeshRef(sphere(0.65)),
+                    Material(color=(0.95, 0.95, 0.95), metallic=1.0, roughness=0.02), Reflective("cube"),
+                    ReflectionProbe(resolution=128, refresh="every_frame"))
+        world.spawn(Transform(position=(-2.3, 0.3, 1.8)), MeshRef(box((0.7, 0.6, 0.7))),
+                    Material(color=(0.3, 0.28, 0.26), roughness=0.7))
+        world.spawn(Transform(position=(-2.3, 1.25, 1.8), scale=(0.32, 0.65, 0.32)), MeshRef(sphere(1.0)),
+                    Material(color=(1.0, 0.71, 0.29), metallic=1.0, roughness=0.25), Reflective("cube"),
+                    ReflectionProbe(resolution=64))
+        world.spawn(Transform(position=(-2.6, 0.55, -0.2)), MeshRef(sphere(0.5)),
+                    Material(color=(0.95, 1.0, 0.97, 0.05), roughness=0.0), Refractive(ior=1.5))
 
     @staticmethod
     def _mirrors(world: World) -> None:
