@@ -11,6 +11,9 @@ uniform samplerCube sky_map;
 uniform float sky_face_size;   // texels across one face of sky_map
 uniform samplerCube probe_map;  // the batch's reflection probe (Reflect = cube)
 uniform float probe_face_size;
+uniform vec4 probe_position;    // xyz: where the probe was captured
+uniform vec4 probe_box_min;     // xyz: its influence box; w = 1: box projection on
+uniform vec4 probe_box_max;
 
 in vec3 v_world_pos;
 in vec3 v_normal;
@@ -116,11 +119,22 @@ vec3 reflect_skybox(vec3 color, Surface s) {
     return mix(color, env, v_reflect.x);
 }
 
+// Box projection (parallax correction, as Unity's and Godot's probes do): follow the ray
+// from the shaded point to the wall of the probe's box and look that point up from where
+// the probe was captured; without a box, the ray's direction is looked up as it is.
+vec3 probe_direction(vec3 position, vec3 ray) {
+    if (probe_box_min.w < 0.5) return ray;
+    vec3 wall = mix(probe_box_min.xyz, probe_box_max.xyz, step(vec3(0.0), ray));
+    vec3 t = (wall - position) / ray;
+    return position + ray * min(min(t.x, t.y), t.z) - probe_position.xyz;
+}
+
 vec3 reflect_probe(vec3 color, Surface s) {
     // A cube map captured around the object (engine/render/probes.py), its mips blurred by
     // roughness and weighted by GGXReflect with the material's F0: a metal tints what it
     // reflects (brass is golden), a dielectric reflects most at grazing angles.
-    vec3 env = textureLod(probe_map, s.reflect_dir, s.reflect_lod + roughness_lod_bias(s.roughness)).rgb;
+    vec3 env = textureLod(probe_map, probe_direction(s.position, s.reflect_dir),
+                          s.reflect_lod + roughness_lod_bias(s.roughness)).rgb;
     vec3 reflected = ggx_reflect(s.normal, s.reflect_dir, s.to_eye, env, s.f0, s.roughness);
     return mix(color, reflected * v_tint.rgb, v_reflect.x);
 }
@@ -152,7 +166,8 @@ vec3 refract_environment(vec3 color, Surface s) {
     vec3 transmittance = vec3(1.0) - schlick_fresnel(s.to_eye, s.normal, vec3(f0));
     // What lies behind: the probe's capture when one serves the object, else the sky.
     vec3 behind = probe_face_size > 0.0
-        ? textureLod(probe_map, s.refract_dir, s.refract_lod + roughness_lod_bias(s.roughness)).rgb
+        ? textureLod(probe_map, probe_direction(s.position, s.refract_dir),
+                     s.refract_lod + roughness_lod_bias(s.roughness)).rgb
         : sample_environment(s.refract_dir, s.refract_lod, s.roughness);
     vec3 transmitted = transmittance * s.albedo * behind;
     return mix(transmitted, color, s.alpha);

@@ -157,6 +157,12 @@ class ProbeSystem(esper.Processor):
                                  skip=state.owner) for face in faces}
         surfaces = self.world.resources.get(Surfaces)
         self.renderer.probes.capture(state.owner, views, surfaces.table if surfaces else None, settings.depth)
+        cube = self.renderer.probes.cubes[state.owner]
+        cube.position = tuple(state.position)
+        cube.box = None
+        if settings.box_projection and settings.influence is not None:
+            half = glm.vec3(settings.influence) / 2.0
+            cube.box = (tuple(state.position - half), tuple(state.position + half))
         state.captures += 1
         state.faces_captured += len(faces)
         self.renderer.stats.probe_captures += 1

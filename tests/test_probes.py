@@ -273,3 +273,65 @@ def test_a_probe_face_sees_a_mirror_reflect_what_the_probe_cannot_see_directly(s
     seen = face[row, col]
     is_red = seen[0] > 1.0 and seen[0] > 4 * max(seen[1], seen[2])
     assert is_red == bool(depth), seen
+
+
+def test_box_projection_puts_a_walls_reflection_where_the_math_says(scene):
+    """A chrome floor tile off the probe's centre, inside its influence box (8 x 4 x 8 about
+    (0, 1, 0)), with a red panel on the box's +X wall.  Each tile pixel's reflected ray,
+    followed from the tile to the box's wall, meets the panel or not; at the pixels where
+    looking the ray up from the probe's centre (no correction) would say otherwise, the
+    picture follows the box-projected answer."""
+    ents = {}
+
+    def build(world):
+        world.spawn(Skybox())
+        look_from(world, (-1.5, 2.2, 2.5), target=(2.0, 0.0, 0.0), fov=50.0)
+        world.spawn(Transform(position=(0.0, 1.0, 0.0)),
+                    ReflectionProbe(resolution=128, refresh="once", influence=(8, 4, 8), box_projection=True))
+        ents["tile"] = world.spawn(Transform(position=(2.0, 0.0, 0.0), rotation=glm.angleAxis(-glm.pi() / 2,
+                                                                                         glm.vec3(1, 0, 0))),
+                                   MeshRef(quad(3, 3)), Material(color=(1, 1, 1), metallic=1.0, roughness=0.0),
+                                   Reflective("cube"))
+        world.spawn(Transform(position=(4.0, 1.0, 0.0), rotation=glm.angleAxis(-glm.pi() / 2, glm.vec3(0, 1, 0))),
+                    MeshRef(quad(2.0, 1.2)), Material(color=(0.9, 0.05, 0.05)), Emissive(1.5))
+
+    runner = scene(build, (160, 120))
+    rgb = runner.frame()
+    ids = runner.ids()
+    view = runner.engine.main_view
+    inverse = glm.inverse(view.view_proj)
+    eye = np.array(view.eye)
+    centre, lo, hi = np.array([0.0, 1.0, 0.0]), np.array([-4.0, -1.0, -4.0]), np.array([4.0, 3.0, 4.0])
+
+    def on_panel(direction_from_centre):
+        d = direction_from_centre
+        if d[0] <= 1e-6:
+            return False
+        hit = centre + d * (4.0 - centre[0]) / d[0]
+        return abs(hit[1] - 1.0) < 0.6 and abs(hit[2]) < 1.0
+
+    checked, margin_skipped = [], 0
+    for row, col in np.argwhere(ids == ents["tile"]):
+        ndc = glm.vec4((col + 0.5) / 160 * 2 - 1, 1 - (row + 0.5) / 120 * 2, 1.0, 1.0)
+        far = inverse * ndc
+        d = np.array(glm.normalize(glm.vec3(far) / far.w - view.eye))
+        p = eye + d * (-eye[1] / d[1])  # on the tile (y = 0)
+        r = d * np.array([1.0, -1.0, 1.0])
+        walls = np.where(r > 0, hi, lo)
+        with np.errstate(divide="ignore"):
+            t = np.min((walls - p) / r)
+        corrected = on_panel(p + r * t - centre)
+        plain = on_panel(r)
+        if corrected == plain:
+            continue
+        # Stay clear of the panel's edges, where a texel's blur decides.
+        shifted = [on_panel(p + (r + e) * t - centre) for e in (np.array([0, 0.06, 0]), np.array([0, -0.06, 0]),
+                                                                 np.array([0, 0, 0.06]), np.array([0, 0, -0.06]))]
+        if any(s != corrected for s in shifted):
+            margin_skipped += 1
+            continue
+        colour = srgb_to_linear(rgb[row, col])
+        red = colour[0] > colour[1] + 0.2 and colour[0] > colour[2] + 0.2
+        checked.append(red == corrected)
+    assert len(checked) > 30, (len(checked), margin_skipped)
+    assert np.mean(checked) > 0.95

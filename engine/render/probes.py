@@ -78,10 +78,23 @@ def faces_touched(position: glm.vec3, far: float, lo: np.ndarray, hi: np.ndarray
 
 @dataclass
 class ProbeCube:
-    """One probe's cube map (RGBA16F, mipmapped, seamless) and what was captured into it."""
+    """One probe's cube map (RGBA16F, mipmapped, seamless) and where it was captured from.
+
+    ``box`` (world min, max corners), when set, makes lookups parallax-corrected: the
+    reflected ray is followed from the shaded point to the box's wall and the cube is
+    sampled towards that point from ``position`` (box projection)."""
 
     texture: moderngl.TextureCube
     resolution: int
+    position: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    box: tuple[tuple[float, float, float], tuple[float, float, float]] | None = None
+
+    def lookup(self) -> tuple[tuple[float, ...], tuple[float, ...], tuple[float, ...]]:
+        """The scene shader's probe_position, probe_box_min (w: 1 = box projection on) and
+        probe_box_max uniforms."""
+        if self.box is None:
+            return (*self.position, 0.0), (0.0, 0.0, 0.0, 0.0), (0.0, 0.0, 0.0, 0.0)
+        return (*self.position, 0.0), (*self.box[0], 1.0), (*self.box[1], 0.0)
 
     @property
     def face_size(self) -> int:

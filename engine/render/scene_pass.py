@@ -63,7 +63,9 @@ class SceneOptions:
 
 ROOT_VIEW = SceneOptions()
 REFLECTION_LEVEL = SceneOptions(clear=False, masked=True, sky=False, reflection_filter=True)
-_PER_DRAW_UNIFORMS = ("masked", "sky_face_size", "node_index", "has_albedo_map", "probe_face_size")
+_PER_DRAW_UNIFORMS = ("masked", "sky_face_size", "node_index", "has_albedo_map", "probe_face_size",
+                      "probe_position", "probe_box_min", "probe_box_max")
+_NO_PROBE = ((0.0, 0.0, 0.0, 0.0),) * 3
 _SCENE = PassState(depth_func="<", cull=True, clips=SCENE_CLIPS)
 _BATCHED_SCENE = PassState(depth_func="<", cull=True, clips=BATCHED_SCENE_CLIPS)
 _SKY = PassState(depth_func="<=", clips=SCENE_CLIPS)
@@ -143,13 +145,13 @@ class ScenePass:
             textured = batch.texture is not None
             if textured:
                 batch.texture.use(ALBEDO_UNIT)
-            probe_size = 0
+            probe_size, lookup = 0, _NO_PROBE
             if batch.probe:
                 cube = cubes.get(batch.probe)
                 if cube is not None:
                     cube.texture.use(PROBE_UNIT)
-                    probe_size = cube.face_size
-            for i, value in enumerate((masked, self._sky_size, node, textured, probe_size)):
+                    probe_size, lookup = cube.face_size, cube.lookup()
+            for i, value in enumerate((masked, self._sky_size, node, textured, probe_size, *lookup)):
                 if values[i] != value and uniforms[i] is not None:
                     uniforms[i].value = values[i] = value
             batch.draw(program)
