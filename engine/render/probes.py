@@ -16,7 +16,7 @@ import numpy as np
 from pyglm import glm
 
 from engine.render.bindings import SCRATCH_UNIT
-from engine.render.scene_pass import ROOT_VIEW
+from engine.render.scene_pass import SceneOptions
 from engine.render.targets import LevelStack
 from engine.render.view_tree import SurfaceTable, TreeSettings, ViewTree
 from engine.render.views import View
@@ -31,6 +31,10 @@ FACE_AXES = (
     ((0.0, 0.0, -1.0), (0.0, -1.0, 0.0)),
 )
 ALL_FACES = frozenset(range(6))
+# A face is a root view; its textures filter as reflections do (trilinear on a software
+# rasteriser, where anisotropic filtering is most of a view's cost: a probe is a
+# reflection, seen blurred by its mips and through a curved surface).
+FACE = SceneOptions(reflection_filter=True)
 
 
 def face_view(face: int, position: glm.vec3, near: float, far: float, size: int, skip: int = 0) -> View:
@@ -132,7 +136,7 @@ class ProbeCaptures:
         levels = self._stacks.setdefault(resolution, LevelStack(self.ctx))
         for face, view in sorted(views.items()):
             targets = levels.get(0, view.size)
-            renderer.scene_pass.draw([view], targets, ROOT_VIEW)
+            renderer.scene_pass.draw([view], targets, FACE)
             if surfaces is not None and depth > 0:
                 self.tree.render(view, levels, surfaces, TreeSettings(depth_cap=depth))
             renderer.raw_gl.copy_to_cube_face(targets.framebuffer, cube.texture, face, SCRATCH_UNIT)

@@ -1,0 +1,138 @@
+"""Probes benchmark: the cost of cube-map reflection probes on the mirror benchmark's scene.
+
+The scene is ``benchmarks.mirrors.MirrorRing`` with no mirrors (a textured ground, 20
+boxes of which 5 spin, two lights, the orbiting camera) plus a chrome sphere (radius 1) at
+the ring's centre, 640 x 360.
+
+Capture rows (``path``, ``culled``, ``size``, ``capture_ms_median``, ``primitives``): all six
+faces of the sphere's probe captured ``--frames`` times at 128 and 512 texels a face, each
+timed with ``ctx.finish()`` around it (wall clock: llvmpipe's GPU timers are not usable),
+with a primitives-generated query around the capture.  ``face_primitives`` is the same
+query around the main view's scene pass (one view of the scene), the yardstick for how much
+geometry six faces push.  Only the six-pass path exists so far (each face a view through
+the scene pass); the layered one-pass path is to come.
+
+Frame rows (``probe``, ``frame_ms_median``): whole frames (``Engine.frame`` + ``finish``)
+of four engines interleaved frame by frame: ``none`` (the sphere reflects the sky),
+``once`` (a probe captured on the first frame only), ``static`` (``on_change``: the faces
+that see a spinning box are recaptured), ``dynamic`` (``every_frame`` at 128).  Ratios are
+to ``none``.
+
+    python -m benchmarks probes            # table
+    python -m benchmarks probes --json     # one JSON object per line
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import statistics
+import time
+
+import moderngl
+
+from benchmarks.mirrors import DT, OUTPUT_SIZE, MirrorRing
+from components import Material, MeshRef, ReflectionProbe, Reflective, Transform
+from engine.app import Engine
+from engine.frame_io import Output
+from engine.gl_context import create_headless_context
+from engine.mesh import sphere
+from engine.render.probes import face_view
+from engine.render.targets import CaptureTarget
+
+MODES = {"none": None, "once": "once", "static": "on_change", "dynamic": "every_frame"}
+
+
+class ProbeRing(MirrorRing):
+    """The mirror benchmark's scene without mirrors, with a chrome sphere at the centre."""
+
+    title = "benchmark: probes"
+
+    def __init__(self, refresh: str | None, resolution: int = 128) -> None:
+        super().__init__(0)
+        self.refresh = refresh
+        self.resolution = resolution
+
+    def build(self, world) -> None:
+        super().build(world)
+        components = [Transform(position=(0.0, 1.0, 0.0)), MeshRef(sphere(1.0)),
+                      Material(color=(0.95, 0.95, 0.95), metallic=1.0, roughness=0.05)]
+        if self.refresh is None:
+            components.append(Reflective("skybox"))
+        else:
+            components += [Reflective("cube"), ReflectionProbe(resolution=self.resolution, refresh=self.refresh)]
+        self.sphere = world.spawn(*components)
+
+
+def capture_rows(ctx, frames: int) -> list[dict]:
+    rows = []
+    for size in (128, 512):
+        engine = Engine(ProbeRing("scripted", size), ctx)
+        capture = CaptureTarget(ctx, OUTPUT_SIZE)
+        try:
+            engine.frame(DT, Output(capture.framebuffer, OUTPUT_SIZE))
+            query = ctx.query(primitives=True)
+            with query:
+                engine.renderer.scene_pass.draw([engine.main_view], engine.renderer.targets)
+            face_primitives = query.primitives
+            owner = engine.stages["probes"].probes[engine.game.sphere].owner
+            position = engine.stages["probes"].probes[owner].position
+            views = {face: face_view(face, position, 0.05, 100.0, size, skip=owner) for face in range(6)}
+            times = []
+            for _ in range(frames):
+                ctx.finish()
+                start = time.perf_counter()
+                with query:
+                    engine.renderer.probes.capture(owner, views, None, 0)
+                ctx.finish()
+                times.append((time.perf_counter() - start) * 1e3)
+            rows.append({"path": "six_pass", "culled": False, "size": size,
+                         "capture_ms_median": round(statistics.median(times), 2),
+                         "primitives": query.primitives, "face_primitives": face_primitives})
+        finally:
+            capture.release()
+            engine.close()
+    return rows
+
+
+def frame_rows(ctx, frames: int, warmup: int) -> list[dict]:
+    engines, captures = [], []
+    try:
+        for refresh in MODES.values():
+            engines.append(Engine(ProbeRing(refresh), ctx))
+            captures.append(CaptureTarget(ctx, OUTPUT_SIZE))
+        outputs = [Output(c.framebuffer, OUTPUT_SIZE) for c in captures]
+        times: list[list[float]] = [[] for _ in engines]
+        faces: list[int] = [0 for _ in engines]
+        for frame in range(warmup + frames):
+            for i, (engine, output) in enumerate(zip(engines, outputs, strict=True)):
+                start = time.perf_counter()
+                engine.frame(DT, output)
+                ctx.finish()
+                if frame >= warmup:
+                    times[i].append((time.perf_counter() - start) * 1e3)
+                    faces[i] += engine.renderer.stats.probe_faces
+        base = statistics.median(times[0])
+        return [{"probe": name, "frame_ms_median": round(statistics.median(times[i]), 2),
+                 "ratio_to_none": round(statistics.median(times[i]) / base, 3),
+                 "faces_per_frame": round(faces[i] / frames, 2)} for i, name in enumerate(MODES)]
+    finally:
+        for capture in captures:
+            capture.release()
+        for engine in engines:
+            engine.close()
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--frames", type=int, default=30, help="timed frames (default 30)")
+    parser.add_argument("--warmup", type=int, default=3)
+
+
+def main(args: argparse.Namespace) -> int:
+    ctx: moderngl.Context = create_headless_context()
+    try:
+        rows = capture_rows(ctx, args.frames) + frame_rows(ctx, args.frames, args.warmup)
+    finally:
+        ctx.release()
+    for row in rows:
+        print(json.dumps(row) if args.json else "  ".join(f"{k}={v}" for k, v in row.items()), flush=True)
+    return 0
