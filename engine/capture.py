@@ -26,8 +26,9 @@ def save_ids(ids: np.ndarray, path: str | Path) -> None:
 def export_scene(world: World, path: str | Path, camera_entity: int, size: tuple[int, int],
                  mirror_planes: dict[int, tuple[list[float], list[float]]] | None = None) -> Path:
     """Write world-space geometry (one GLB node per renderable entity, named by its id) and,
-    beside it, a JSON of the camera, each entity's component types, and each mirror's
-    world plane (a point on it and its unit normal, towards the reflecting side)."""
+    beside it, a JSON of the camera, each entity's component types, each mirror's world
+    plane (a point on it and its unit normal, towards the reflecting side), each portal's
+    partner, each reflection probe and which probe each entity samples."""
     import trimesh
 
     path = Path(path)
@@ -66,9 +67,34 @@ def export_scene(world: World, path: str | Path, camera_entity: int, size: tuple
             str(entity): {"point": [float(v) for v in point], "normal": [float(v) for v in normal]}
             for entity, (point, normal) in sorted((mirror_planes or {}).items())
         },
+        **_probes(world),
     }
     path.with_suffix(".json").write_text(json.dumps(info, indent=1))
     return path
+
+
+def _probes(world: World) -> dict[str, dict]:
+    """Each reflection probe (by the entity owning it: a ReflectionProbe's, or an object's own
+    automatic one) with where and how it captures, and which probe each entity samples."""
+    from engine.probe_rules import probe_for
+    from engine.render.probes import ProbeStates
+
+    states = world.resources.get(ProbeStates, {})
+    probes = {}
+    for owner, state in sorted(states.items()):
+        settings = state.settings
+        probes[str(owner)] = {
+            "position": [float(v) for v in state.position],
+            "automatic": state.automatic,
+            "influence": None if settings.influence is None else [float(v) for v in settings.influence],
+            "box_projection": settings.box_projection,
+            "resolution": settings.resolution,
+            "refresh": settings.refresh,
+            "captures": state.captures,
+            "faces_captured": state.faces_captured,
+        }
+    samples = {str(e): probe_for(world, e) for e in world.entities() if probe_for(world, e)}
+    return {"probes": probes, "samples_probe": samples}
 
 
 def _portal_pairs(world: World) -> dict[str, dict]:

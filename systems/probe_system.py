@@ -40,7 +40,7 @@ from components import (
     Transform,
 )
 from engine.probe_rules import has_own_probe, world_bounds
-from engine.render.probes import ALL_FACES, face_view, faces_touched
+from engine.render.probes import ALL_FACES, ProbeStates, face_view, faces_touched
 from engine.render.renderer import Renderer
 from engine.render.view_tree import Surfaces
 from engine.world import World
@@ -67,7 +67,7 @@ class ProbeSystem(esper.Processor):
     def __init__(self, world: World, renderer: Renderer) -> None:
         self.world = world
         self.renderer = renderer
-        self.probes: dict[int, ProbeState] = {}
+        self.probes = world.resources[ProbeStates] = ProbeStates()
         self._bounds: dict[int, tuple[np.ndarray, np.ndarray]] = {}  # entity -> last world box
 
     def process(self, dt: float) -> None:

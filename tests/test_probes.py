@@ -335,3 +335,32 @@ def test_box_projection_puts_a_walls_reflection_where_the_math_says(scene):
         checked.append(red == corrected)
     assert len(checked) > 30, (len(checked), margin_skipped)
     assert np.mean(checked) > 0.95
+
+
+def test_the_exported_scene_lists_each_probe_and_what_samples_it(scene, tmp_path):
+    import json
+
+    from engine.capture import export_scene
+
+    ents = {}
+
+    def build(world):
+        chrome_scene(ents)(world)
+        ents["room probe"] = world.spawn(Transform(position=(0.0, 0.5, 3.0)),
+                                         ReflectionProbe(resolution=32, influence=(4, 4, 4), refresh="once"))
+        ents["tile"] = world.spawn(Transform(position=(0.5, 0.0, 3.5)), MeshRef(quad(1, 1)), Material(),
+                                   Reflective("cube"))
+
+    runner = scene(build, (64, 48))
+    runner.frame()
+    camera = runner.engine.active_camera()[0]
+    path = export_scene(runner.world, tmp_path / "scene.glb", camera, (64, 48))
+    info = json.loads(path.with_suffix(".json").read_text())
+    sphere_probe = info["probes"][str(ents["sphere"])]
+    assert sphere_probe["automatic"] and sphere_probe["resolution"] == 128 and sphere_probe["refresh"] == "on_change"
+    np.testing.assert_allclose(sphere_probe["position"], [0, 0, 0], atol=1e-6)  # the sphere's box centre
+    room = info["probes"][str(ents["room probe"])]
+    assert room == {"position": [0.0, 0.5, 3.0], "automatic": False, "influence": [4.0, 4.0, 4.0],
+                    "box_projection": False, "resolution": 32, "refresh": "once", "captures": 1, "faces_captured": 6}
+    # The sphere samples its own probe; the flat tile the room probe whose box holds it.
+    assert info["samples_probe"] == {str(ents["sphere"]): ents["sphere"], str(ents["tile"]): ents["room probe"]}

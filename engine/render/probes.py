@@ -80,6 +80,10 @@ def faces_touched(position: glm.vec3, far: float, lo: np.ndarray, hi: np.ndarray
     return touched
 
 
+class ProbeStates(dict):
+    """World resource: every probe the probes stage keeps, by owning entity (``ProbeState``)."""
+
+
 @dataclass
 class ProbeCube:
     """One probe's cube map (RGBA16F, mipmapped, seamless) and where it was captured from.
