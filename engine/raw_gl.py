@@ -13,6 +13,13 @@ on the active texture unit; both are bound through moderngl first (``Framebuffer
 ``TextureCube.use`` on a unit no program reads), so moderngl's idea of the state stays
 true.  Where the loader is not reachable the copy goes through client memory instead.
 
+A layered cube-map target (``LayeredCubeTarget``): moderngl cannot attach a whole cube map
+either, so the one-pass probe capture (a geometry shader choosing each triangle's face with
+``gl_Layer``) draws into a framebuffer made here: the probe's cube map (moderngl's) as its
+colour attachment and a depth cube map of its own.  It is bound with raw calls for the
+pass; the next moderngl ``Framebuffer.use`` binds moderngl's again (it always binds), and
+the calls are checked with ``glGetError`` so a failure is named where it happens.
+
 ``glFlush``.  moderngl has ``finish`` (wait for everything) but no flush (start
 the GPU on what is queued, without waiting).  On llvmpipe that difference is frame time:
 draws are binned on the calling thread and rasterised only at a flush, a framebuffer
@@ -34,6 +41,38 @@ _VOID_CALL = ctypes.CFUNCTYPE(None)
 _COPY_TEX_SUB_IMAGE_2D = ctypes.CFUNCTYPE(None, ctypes.c_uint, ctypes.c_int, ctypes.c_int, ctypes.c_int,
                                           ctypes.c_int, ctypes.c_int, ctypes.c_int, ctypes.c_int)
 GL_TEXTURE_CUBE_MAP_POSITIVE_X = 0x8515
+GL_TEXTURE_CUBE_MAP = 0x8513
+GL_TEXTURE_2D = 0x0DE1
+GL_FRAMEBUFFER = 0x8D40
+GL_COLOR_ATTACHMENT0 = 0x8CE0
+GL_DEPTH_ATTACHMENT = 0x8D00
+GL_FRAMEBUFFER_COMPLETE = 0x8CD5
+GL_DEPTH_COMPONENT = 0x1902
+GL_DEPTH_COMPONENT24 = 0x81A6
+GL_UNSIGNED_INT = 0x1405
+GL_TEXTURE_MIN_FILTER = 0x2801
+GL_TEXTURE_MAG_FILTER = 0x2800
+GL_NEAREST = 0x2600
+GL_COLOR = 0x1800
+GL_DEPTH = 0x1801
+_u = ctypes.c_uint
+_i = ctypes.c_int
+_SIGNATURES = {
+    "glGenTextures": (None, _i, ctypes.POINTER(_u)),
+    "glDeleteTextures": (None, _i, ctypes.POINTER(_u)),
+    "glBindTexture": (None, _u, _u),
+    "glTexImage2D": (None, _u, _i, _i, _i, _i, _i, _u, _u, ctypes.c_void_p),
+    "glTexParameteri": (None, _u, _u, _i),
+    "glGenFramebuffers": (None, _i, ctypes.POINTER(_u)),
+    "glDeleteFramebuffers": (None, _i, ctypes.POINTER(_u)),
+    "glBindFramebuffer": (None, _u, _u),
+    "glFramebufferTexture": (None, _u, _u, _u, _i),
+    "glCheckFramebufferStatus": (_u, _u),
+    "glDrawBuffers": (None, _i, ctypes.POINTER(_u)),
+    "glClearBufferfv": (None, _u, _i, ctypes.POINTER(ctypes.c_float)),
+    "glViewport": (None, _i, _i, _i, _i),
+    "glGetError": (_u,),
+}
 
 
 def make_current(ctx: moderngl.Context) -> None:
@@ -71,6 +110,70 @@ class RawGL:
             return
         cube.use(unit)
         self._copy_tex_sub_image(GL_TEXTURE_CUBE_MAP_POSITIVE_X + face, 0, 0, 0, 0, 0, size[0], size[1])
+
+
+class LayeredCubeTarget:
+    """A framebuffer drawing into every face of ``cube`` at once (``gl_Layer`` = face), with a
+    depth cube map of its own (raw GL; see the module's docstring)."""
+
+    def __init__(self, ctx: moderngl.Context, cube: moderngl.TextureCube) -> None:
+        self.ctx = ctx
+        self.cube = cube
+        self.size = cube.size[0]
+        self.gl = {name: _load(ctx, name, ctypes.CFUNCTYPE(*sig)) for name, sig in _SIGNATURES.items()}
+        missing = [name for name, fn in self.gl.items() if fn is None]
+        if missing:
+            raise RuntimeError(f"layered cube-map capture needs GL entry points the loader lacks: {missing}")
+        gl = self.gl
+        gl["glGetError"]()  # start clean: what follows is checked
+        name = _u(0)
+        gl["glGenTextures"](1, ctypes.byref(name))
+        self.depth = name.value
+        gl["glBindTexture"](GL_TEXTURE_CUBE_MAP, self.depth)
+        for face in range(6):
+            gl["glTexImage2D"](GL_TEXTURE_CUBE_MAP_POSITIVE_X + face, 0, GL_DEPTH_COMPONENT24, self.size, self.size,
+                               0, GL_DEPTH_COMPONENT, GL_UNSIGNED_INT, None)
+        gl["glTexParameteri"](GL_TEXTURE_CUBE_MAP, GL_TEXTURE_MIN_FILTER, GL_NEAREST)
+        gl["glTexParameteri"](GL_TEXTURE_CUBE_MAP, GL_TEXTURE_MAG_FILTER, GL_NEAREST)
+        gl["glBindTexture"](GL_TEXTURE_CUBE_MAP, 0)
+        gl["glGenFramebuffers"](1, ctypes.byref(name))
+        self.framebuffer = name.value
+        gl["glBindFramebuffer"](GL_FRAMEBUFFER, self.framebuffer)
+        gl["glFramebufferTexture"](GL_FRAMEBUFFER, GL_COLOR_ATTACHMENT0, cube.glo, 0)
+        gl["glFramebufferTexture"](GL_FRAMEBUFFER, GL_DEPTH_ATTACHMENT, self.depth, 0)
+        buffers = (_u * 1)(GL_COLOR_ATTACHMENT0)
+        gl["glDrawBuffers"](1, buffers)
+        status = gl["glCheckFramebufferStatus"](GL_FRAMEBUFFER)
+        error = gl["glGetError"]()
+        self.unbind()
+        if status != GL_FRAMEBUFFER_COMPLETE or error:
+            self.release()
+            raise RuntimeError(f"layered cube-map target of {self.size}: framebuffer status 0x{status:x}, "
+                               f"GL error 0x{error:x}")
+
+    def bind(self) -> None:
+        """Draw into all six faces from now on (until a moderngl framebuffer is used)."""
+        self.gl["glBindFramebuffer"](GL_FRAMEBUFFER, self.framebuffer)
+        self.gl["glViewport"](0, 0, self.size, self.size)
+
+    def unbind(self) -> None:
+        """Back to the framebuffer moderngl thinks is bound."""
+        self.gl["glBindFramebuffer"](GL_FRAMEBUFFER, 0)
+        if self.ctx.fbo is not None:
+            self.ctx.fbo.use()
+
+    def clear(self) -> None:
+        """Colour 0 and depth far on every face (the target must be bound)."""
+        self.gl["glClearBufferfv"](GL_COLOR, 0, (ctypes.c_float * 4)(0.0, 0.0, 0.0, 0.0))
+        self.gl["glClearBufferfv"](GL_DEPTH, 0, (ctypes.c_float * 1)(1.0))
+
+    def release(self) -> None:
+        if self.framebuffer:
+            self.gl["glDeleteFramebuffers"](1, ctypes.byref(_u(self.framebuffer)))
+            self.framebuffer = 0
+        if self.depth:
+            self.gl["glDeleteTextures"](1, ctypes.byref(_u(self.depth)))
+            self.depth = 0
 
 
 def _load(ctx: moderngl.Context, name: str, prototype):

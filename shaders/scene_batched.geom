@@ -12,7 +12,13 @@
 // view and shades with the view's eye from here.
 //
 // Built with MAX_LEVEL_VIEWS, VIEWS_PER_INVOCATION, GS_INVOCATIONS and GS_MAX_VERTICES defines
-// (engine/render/batched_mirrors.py; layout qualifiers take literals only before GLSL 4.40).
+// (engine/render/scene_pass.py; layout qualifiers take literals only before GLSL 4.40).
+//
+// With LAYERED it captures the six faces of a cube-map probe in one pass (the OpenGL 4 course
+// chapter "Texture Effects"' one-pass cube map): invocation i is face i and writes gl_Layer = i
+// into a layered cube-map target; the per-view frustum tests are then per-face culling (a
+// triangle goes only to the faces it can be seen in), unless NO_FACE_CULLING (the naive
+// capture, six copies of every triangle, kept to measure the culling against).
 
 layout(triangles, invocations = GS_INVOCATIONS) in;
 layout(triangle_strip, max_vertices = GS_MAX_VERTICES) out;  // 3 x VIEWS_PER_INVOCATION
@@ -77,6 +83,9 @@ void emit_corner(int c, vec4 position, MirrorView v) {
     v_slots = g_slots[c];
     v_node = v.node.x;
     v_eye = v.eye.xyz;
+#ifdef LAYERED
+    gl_Layer = int(v.node.x);  // the face (a face view's node index is its face)
+#endif
     EmitVertex();
 }
 
@@ -89,10 +98,11 @@ void main() {
         if (i >= view_count.x) return;
         MirrorView v = views[i];
         if (g_slots[0].w == v.node.y) continue;  // the surface the view looks out of
-        if (outside(v.clip_plane, w0, w1, w2)) continue;  // behind the mirror
         vec4 p0 = v.view_proj * w0;
         vec4 p1 = v.view_proj * w1;
         vec4 p2 = v.view_proj * w2;
+#ifndef NO_FACE_CULLING
+        if (outside(v.clip_plane, w0, w1, w2)) continue;  // behind the mirror
         // Frustum near / far planes, then the four sides of the view's rectangle (planes
         // through the eye in clip space: x >= x0 w, x <= x1 w, y >= y0 w, y <= y1 w).
         if (outside(vec4(0.0, 0.0, 1.0, 1.0), p0, p1, p2) || outside(vec4(0.0, 0.0, -1.0, 1.0), p0, p1, p2)
@@ -100,6 +110,7 @@ void main() {
             || outside(vec4(-1.0, 0.0, 0.0, v.rect.z), p0, p1, p2)
             || outside(vec4(0.0, 1.0, 0.0, -v.rect.y), p0, p1, p2)
             || outside(vec4(0.0, -1.0, 0.0, v.rect.w), p0, p1, p2)) continue;
+#endif
         emit_corner(0, p0, v);
         if (v.eye.w > 0.5) {
             emit_corner(2, p2, v);

@@ -13,12 +13,22 @@ has a ``ProbeState``.  What is captured each frame, per probe:
     ``scripted``: all six after ``ReflectionProbe.request()``;
   - with ``time_slicing="one_face_per_frame"`` the waiting faces go one a frame.
 
+Two paths draw a capture: ``six_pass`` (each face a view through the scene pass, with a
+view tree of the mirrors and portals it sees) and ``layered`` (all six faces in one pass, a
+geometry shader choosing each triangle's faces; no view trees).  ``ProbeSystem.path``
+``auto`` (the default) times both with ``finish()`` on the first full capture that either
+could draw, keeps the faster for the rest of the run and says which (``chosen_path``,
+``RenderStats.probe_path``, a log line).  A capture of some faces only, or of a probe
+whose faces see mirrors or portals, takes the six-pass path.
+
 The probe's own object is never in its capture (each face view skips it).  Counters per
 probe (``ProbeState.captures``: frames with a capture, ``faces_captured``) are the API;
 ``RenderStats.probe_captures`` and ``probe_faces`` count this frame's.
 """
 from __future__ import annotations
 
+import logging
+import time
 from dataclasses import dataclass, field
 
 import esper
@@ -45,6 +55,8 @@ from engine.render.renderer import Renderer
 from engine.render.view_tree import Surfaces
 from engine.world import World
 
+PATHS = ("auto", "six_pass", "layered")
+LOG = logging.getLogger("speculum")
 LOOK_KINDS = (Material, MeshRef, Emissive, Reflective, Refractive, Mirror, Portal)  # what changes a look
 LIGHTING_KINDS = (DirectionalLight, PointLight, Skybox)  # what changes every face
 
@@ -68,6 +80,9 @@ class ProbeSystem(esper.Processor):
         self.world = world
         self.renderer = renderer
         self.probes = world.resources[ProbeStates] = ProbeStates()
+        self.path = "auto"
+        self.chosen_path: str | None = None  # what "auto" settled on, once it has timed both
+        self.timings: dict[str, float] = {}  # ms of the timed captures
         self._bounds: dict[int, tuple[np.ndarray, np.ndarray]] = {}  # entity -> last world box
 
     def process(self, dt: float) -> None:
@@ -156,8 +171,21 @@ class ProbeSystem(esper.Processor):
         views = {face: face_view(face, state.position, settings.near, settings.far, settings.resolution,
                                  skip=state.owner) for face in faces}
         surfaces = self.world.resources.get(Surfaces)
-        self.renderer.probes.capture(state.owner, views, surfaces.table if surfaces else None, settings.depth)
-        cube = self.renderer.probes.cubes[state.owner]
+        sees_surfaces = settings.depth > 0 and surfaces is not None and (surfaces.mirrors or surfaces.portals)
+        path = self._path(len(faces) == 6 and not sees_surfaces)
+        probes = self.renderer.probes
+        if path == "time both":
+            self.timings = {"six_pass": self._timed(lambda: probes.capture(state.owner, views, None, 0)),
+                            "layered": self._timed(lambda: probes.capture_layered(state.owner, views))}
+            self.chosen_path = min(self.timings, key=self.timings.get)
+            LOG.info("probe capture path: %s (six_pass %.2f ms, layered %.2f ms for %d-texel faces)",
+                     self.chosen_path, self.timings["six_pass"], self.timings["layered"], settings.resolution)
+        elif path == "layered":
+            probes.capture_layered(state.owner, views)
+        else:
+            probes.capture(state.owner, views, surfaces.table if sees_surfaces else None, settings.depth)
+        self.renderer.stats.probe_path = self.chosen_path or (path if path != "time both" else "")
+        cube = probes.cubes[state.owner]
         cube.position = tuple(state.position)
         cube.box = None
         if settings.box_projection and settings.influence is not None:
@@ -166,3 +194,20 @@ class ProbeSystem(esper.Processor):
         state.captures += 1
         state.faces_captured += len(faces)
         self.renderer.stats.probe_captures += 1
+
+    def _path(self, layered_possible: bool) -> str:
+        if self.path not in PATHS:
+            raise ValueError(f"ProbeSystem.path must be one of {PATHS}, got {self.path!r}")
+        if not layered_possible or self.path == "six_pass":
+            return "six_pass"
+        if self.path == "layered":
+            return "layered"
+        return self.chosen_path or "time both"
+
+    def _timed(self, capture) -> float:
+        ctx = self.renderer.ctx
+        ctx.finish()
+        start = time.perf_counter()
+        capture()
+        ctx.finish()
+        return (time.perf_counter() - start) * 1e3

@@ -76,14 +76,17 @@ def chrome_scene(ents, refresh="on_change"):
     return build
 
 
-def test_a_chrome_sphere_shows_the_red_wall_on_its_side_and_the_sky_on_the_other(scene):
+@pytest.mark.parametrize("path", ["six_pass", "layered"])
+def test_a_chrome_sphere_shows_the_red_wall_on_its_side_and_the_sky_on_the_other(scene, path):
     """Each sphere pixel: its reflected ray (from the camera math, followed from the probe at
     the sphere's centre) either meets the wall (x = 1.6, |y|, |z| < 6) or turns away from
     it; the pixel is red where it meets it, not red where it turns away."""
     ents = {}
     runner = scene(chrome_scene(ents), (160, 120))
+    probe_stage(runner).path = path
     rgb = runner.frame()
     assert runner.stats.probe_captures == 1 and runner.stats.probe_faces == 6
+    assert runner.stats.probe_path == path
     ids = runner.ids()
     view = runner.engine.main_view
     inverse = glm.inverse(view.view_proj)
@@ -364,3 +367,58 @@ def test_the_exported_scene_lists_each_probe_and_what_samples_it(scene, tmp_path
                     "box_projection": False, "resolution": 32, "refresh": "once", "captures": 1, "faces_captured": 6}
     # The sphere samples its own probe; the flat tile the room probe whose box holds it.
     assert info["samples_probe"] == {str(ents["sphere"]): ents["sphere"], str(ents["tile"]): ents["room probe"]}
+
+
+def test_the_layered_and_six_pass_captures_agree_face_by_face_and_culling_cuts_primitives(scene, ctx):
+    """The one-pass capture (a geometry shader choosing each triangle's faces) against six
+    views through the scene pass: the same cube, face by face, within half-float rounding;
+    with per-face culling it emits at most twice the primitives one face's view of the
+    scene has, without it six times as many."""
+    from engine.render.probes import face_view
+
+    ents = {}
+
+    def build(world):
+        chrome_scene(ents)(world)
+        for face, colour in enumerate(MARKER_COLOURS):
+            world.spawn(Transform(position=tuple(3.0 * offset(face))), MeshRef(box((0.5, 0.5, 0.5))),
+                        Material(color=colour), Emissive(2.0))
+
+    runner = scene(build, (64, 48))
+    runner.frame()
+    probes = runner.engine.renderer.probes
+    owner = ents["sphere"]
+    position = probe_stage(runner).probes[owner].position
+    views = {face: face_view(face, position, 0.05, 100.0, 64, skip=owner) for face in range(6)}
+    probes.capture(owner, views, None, 0)
+    six_pass = [probes.read_face(owner, face) for face in range(6)]
+    query = ctx.query(primitives=True)
+    with query:
+        probes.capture_layered(owner, views, culled=True)
+    culled = query.primitives
+    layered = [probes.read_face(owner, face) for face in range(6)]
+    for face in range(6):
+        np.testing.assert_allclose(layered[face], six_pass[face], atol=2e-3)
+    with query:
+        probes.capture_layered(owner, views, culled=False)
+    naive = query.primitives
+    one_face = 12 * 6 + 2 + 1  # six marker boxes, the wall and the sky (the sphere is the probe's own)
+    assert naive == 6 * one_face
+    assert culled <= 2 * one_face
+
+
+def test_auto_times_both_paths_once_and_keeps_the_faster(scene):
+    ents = {}
+
+    def build(world):
+        chrome_scene(ents)(world)
+        ents["other"] = world.spawn(Transform(position=(-2.0, 0.0, -1.0)), MeshRef(sphere(0.4)),
+                                    Material(color=(1, 1, 1), metallic=1.0), Reflective("cube"))
+
+    runner = scene(build, (64, 48))
+    runner.frame()
+    stage = probe_stage(runner)
+    assert set(stage.timings) == {"six_pass", "layered"} and stage.chosen_path == min(stage.timings,
+                                                                                       key=stage.timings.get)
+    assert runner.stats.probe_path == stage.chosen_path
+    assert runner.stats.probe_faces == 12 + 6  # both paths for the first probe, the chosen one for the second

@@ -15,6 +15,7 @@ import moderngl
 import numpy as np
 from pyglm import glm
 
+from engine.raw_gl import LayeredCubeTarget
 from engine.render.bindings import SCRATCH_UNIT
 from engine.render.scene_pass import SceneOptions
 from engine.render.targets import LevelStack
@@ -44,7 +45,7 @@ def face_view(face: int, position: glm.vec3, near: float, far: float, size: int,
     eye = glm.vec3(position)
     view = glm.lookAt(eye, eye + glm.vec3(forward), glm.vec3(up))
     proj = glm.perspective(glm.radians(90.0), 1.0, near, far)
-    return View(view=view, proj=proj, eye=eye, size=(size, size), name=f"probe face {face}", skip=skip)
+    return View(view=view, proj=proj, eye=eye, size=(size, size), name=f"probe face {face}", node=face, skip=skip)
 
 
 def face_planes(position: glm.vec3, face: int) -> np.ndarray:
@@ -117,6 +118,7 @@ class ProbeCaptures:
         self.renderer = renderer
         self.ctx = renderer.ctx
         self.cubes: dict[int, ProbeCube] = {}
+        self._layered: dict[int, LayeredCubeTarget] = {}  # the one-pass path's targets, by probe
         self._stacks: dict[int, LevelStack] = {}
         self.tree = ViewTree(renderer)
 
@@ -147,6 +149,20 @@ class ProbeCaptures:
             renderer.stats.probe_faces += 1
         cube.texture.build_mipmaps()
 
+    def capture_layered(self, key: int, views: dict[int, View], culled: bool = True) -> None:
+        """All six faces in one pass (``ScenePass.draw_layered``) straight into the cube map,
+        then its mips.  No view trees: mirrors and portals show their own surface."""
+        resolution = views[0].size[0]
+        cube = self.cube(key, resolution)
+        target = self._layered.get(key)
+        if target is None or target.cube is not cube.texture:
+            if target is not None:
+                target.release()
+            target = self._layered[key] = LayeredCubeTarget(self.ctx, cube.texture)
+        self.renderer.scene_pass.draw_layered([views[face] for face in range(6)], target, culled)
+        cube.texture.build_mipmaps()
+        self.renderer.stats.probe_faces += 6
+
     def read_face(self, key: int, face: int) -> np.ndarray:
         """Face ``face`` of probe ``key``'s cube map, linear RGB float32 (rows in texture order:
         row t of ``sky.face_directions``)."""
@@ -156,6 +172,9 @@ class ProbeCaptures:
         return data[..., :3].astype(np.float32)
 
     def drop(self, key: int) -> None:
+        target = self._layered.pop(key, None)
+        if target is not None:
+            target.release()
         cube = self.cubes.pop(key, None)
         if cube is not None:
             cube.texture.release()

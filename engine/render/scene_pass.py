@@ -32,6 +32,7 @@ import moderngl
 from pyglm import glm
 
 from engine.material_slots import SLOTS
+from engine.raw_gl import LayeredCubeTarget
 from engine.render.batched_mirrors import MAX_BATCHED_VIEWS, VIEWS_BLOCK_BYTES, VIEWS_PER_INVOCATION, views_block
 from engine.render.bindings import (
     ALBEDO_UNIT,
@@ -69,6 +70,8 @@ _NO_PROBE = ((0.0, 0.0, 0.0, 0.0),) * 3
 _SCENE = PassState(depth_func="<", cull=True, clips=SCENE_CLIPS)
 _BATCHED_SCENE = PassState(depth_func="<", cull=True, clips=BATCHED_SCENE_CLIPS)
 _SKY = PassState(depth_func="<=", clips=SCENE_CLIPS)
+_LAYERED_SCENE = PassState(depth_func="<", cull=True, clips=BATCHED_SCENE_CLIPS)
+_LAYERED_SKY = PassState(depth_func="<=")
 _TRANSPARENT = PassState(depth_func="<", cull=True, clips=SCENE_CLIPS,
                          blend=(moderngl.SRC_ALPHA, moderngl.ONE_MINUS_SRC_ALPHA, moderngl.ZERO, moderngl.ONE))
 
@@ -89,13 +92,16 @@ class ScenePass:
         self._uniforms: dict[int, tuple] = {}  # program -> its _PER_DRAW_UNIFORMS (None where dropped)
         self._written: dict[int, list] = {}  # program -> the values last written in this pass
         self._sky_size = 0
+        self._sky_layered: moderngl.VertexArray | None = None
         self._views_ubo: moderngl.Buffer | None = None
         self._reflection_sampler: moderngl.Sampler | None = None
 
-    def program(self, variants: tuple[int, int, int] | None = None, invocations: int = 0) -> moderngl.Program:
+    def program(self, variants: tuple[int, int, int] | None = None, invocations: int = 0,
+                layered: str = "") -> moderngl.Program:
         """The scene program for a batch of ``variants`` (None: mixed, switched per
-        instance), plain or batched (``invocations`` > 0: the geometry shader's), built once."""
-        key = (invocations, variants)
+        instance): plain, batched (``invocations`` > 0: the geometry shader's) or a one-pass
+        cube-map capture (``layered`` "culled" or "naive"), built once."""
+        key = (invocations, layered, variants)
         program = self._programs.get(key)
         if program is None:
             defines = {}
@@ -104,13 +110,18 @@ class ScenePass:
             geometry = None
             if invocations:
                 geometry = "scene_batched.geom"
+                per_invocation = 1 if layered else VIEWS_PER_INVOCATION
                 defines.update({
                     "BATCHED_VIEWS": "1",
                     "MAX_LEVEL_VIEWS": str(MAX_BATCHED_VIEWS),
-                    "VIEWS_PER_INVOCATION": str(VIEWS_PER_INVOCATION),
+                    "VIEWS_PER_INVOCATION": str(per_invocation),
                     "GS_INVOCATIONS": str(invocations),
-                    "GS_MAX_VERTICES": str(3 * VIEWS_PER_INVOCATION),
+                    "GS_MAX_VERTICES": str(3 * per_invocation),
                 })
+                if layered:
+                    defines["LAYERED"] = "1"
+                if layered == "naive":
+                    defines["NO_FACE_CULLING"] = "1"
             program = self.renderer.shaders.program("scene.vert", "scene.frag", geometry, defines=defines)
             if "Camera" in program:  # the batched stages read their cameras from Views
                 program["Camera"].binding = CAMERA_BINDING
@@ -127,7 +138,7 @@ class ScenePass:
             self._uniforms[program.glo] = tuple(program.get(name, None) for name in _PER_DRAW_UNIFORMS)
         return program
 
-    def _draw_batches(self, batches, invocations: int, masked: bool, node: int) -> None:
+    def _draw_batches(self, batches, invocations: int, masked: bool, node: int, layered: str = "") -> None:
         """One instanced draw per batch, each with the program of its variants.  A program's
         uniforms are written only when their value changes (``self._written``, reset at the
         start of each pass): on llvmpipe each call is CPU time on a view's critical path."""
@@ -137,7 +148,7 @@ class ScenePass:
         for batch in batches:
             if not batch.count:
                 continue
-            program = self.program(batch.variants, invocations)
+            program = self.program(batch.variants, invocations, layered)
             uniforms = self._uniforms[program.glo]
             values = written.get(program.glo)
             if values is None:
@@ -235,6 +246,49 @@ class ScenePass:
         self._draw_batches(renderer.opaque_batches(), geometry_invocations(len(views)), options.masked, 0)
         renderer.stats.passes += 1
 
+    def draw_layered(self, views: Sequence[View], target: LayeredCubeTarget, culled: bool = True) -> None:
+        """The six faces of a cube map in one pass (``views[i]`` is face i, node i): every
+        batch drawn once through the geometry shader with six invocations, each triangle
+        emitted to the faces whose frustum it touches (``culled``) or to all six, then the
+        sky behind, per face.  Colour only: a layered face has no ids, so it cannot root a
+        view tree (faces that must see mirrors and portals take the six-pass path)."""
+        renderer = self.renderer
+        ctx = self.ctx
+        self._written = {}
+        self._sky_size = renderer.sky.size[0]
+        if self._views_ubo is None:
+            self._views_ubo = ctx.buffer(reserve=VIEWS_BLOCK_BYTES)
+        self._views_ubo.write(views_block(views))
+        self._views_ubo.bind_to_uniform_block(VIEWS_BINDING)
+        renderer.lights_ubo.bind_to_uniform_block(LIGHTS_BINDING)
+        renderer.sky.use(SKY_UNIT)
+        renderer.bind_view(views[0])  # the shared eye, for what reads the Camera block
+        target.bind()
+        size = (0, 0, target.size, target.size)
+        apply_pass_state(ctx, _LAYERED_SCENE, size)
+        target.clear()
+        sampler = self._reflection_filter()
+        if sampler is not None:
+            sampler.use(ALBEDO_UNIT)
+        try:
+            self._draw_batches(renderer.opaque_batches(), 6, False, 0, "culled" if culled else "naive")
+            apply_pass_state(ctx, _LAYERED_SKY, size)
+            self._layered_sky().render(moderngl.TRIANGLES, vertices=3)
+        finally:
+            if sampler is not None:
+                sampler.clear(ALBEDO_UNIT)
+            target.unbind()
+        renderer.stats.passes += 1
+
+    def _layered_sky(self) -> moderngl.VertexArray:
+        if self._sky_layered is None:
+            program = self.renderer.shaders.program("sky.vert", "sky.frag", "sky_layered.geom",
+                                                    defines={"LAYERED": "1", "MAX_LEVEL_VIEWS": str(MAX_BATCHED_VIEWS)})
+            program["Views"].binding = VIEWS_BINDING
+            program["sky_map"].value = SKY_UNIT
+            self._sky_layered = self.ctx.vertex_array(program, [])
+        return self._sky_layered
+
     def _reflection_filter(self) -> moderngl.Sampler | None:
         """The albedo sampler of reflection views, or None when they filter like the main view."""
         renderer = self.renderer
@@ -249,10 +303,10 @@ class ScenePass:
         return sampler
 
     def release(self) -> None:
-        for obj in (self._sky, self._views_ubo, self._reflection_sampler):
+        for obj in (self._sky, self._sky_layered, self._views_ubo, self._reflection_sampler):
             if obj is not None:
                 obj.release()
-        self._views_ubo = self._reflection_sampler = None
+        self._views_ubo = self._reflection_sampler = self._sky_layered = None
         self._programs.clear()  # the shader library owns and releases the programs
 
 
