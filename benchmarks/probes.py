@@ -9,8 +9,10 @@ faces of the sphere's probe captured ``--frames`` times at 128 and 512 texels a 
 timed with ``ctx.finish()`` around it (wall clock: llvmpipe's GPU timers are not usable),
 with a primitives-generated query around the capture.  ``face_primitives`` is the same
 query around the main view's scene pass (one view of the scene), the yardstick for how much
-geometry six faces push.  Only the six-pass path exists so far (each face a view through
-the scene pass); the layered one-pass path is to come.
+geometry six faces push.  Paths: ``six_pass`` (each face a view through the scene pass;
+the primitives count includes the probe's own sphere, which each face view clips),
+``layered`` with ``culled`` true (one pass, each triangle sent to the faces it touches) and
+false (to all six faces).
 
 Frame rows (``probe``, ``frame_ms_median``): whole frames (``Engine.frame`` + ``finish``)
 of four engines interleaved frame by frame: ``none`` (the sphere reflects the sky),
@@ -27,6 +29,7 @@ import argparse
 import json
 import statistics
 import time
+from functools import partial
 
 import moderngl
 
@@ -74,20 +77,31 @@ def capture_rows(ctx, frames: int) -> list[dict]:
             with query:
                 engine.renderer.scene_pass.draw([engine.main_view], engine.renderer.targets)
             face_primitives = query.primitives
+            engine.stages["probes"].path = "six_pass"
             owner = engine.stages["probes"].probes[engine.game.sphere].owner
             position = engine.stages["probes"].probes[owner].position
             views = {face: face_view(face, position, 0.05, 100.0, size, skip=owner) for face in range(6)}
-            times = []
+            probes = engine.renderer.probes
+            captures = {
+                ("six_pass", False): partial(probes.capture, owner, views, None, 0),
+                ("layered", True): partial(probes.capture_layered, owner, views, culled=True),
+                ("layered", False): partial(probes.capture_layered, owner, views, culled=False),
+            }
+            times = {key: [] for key in captures}
+            primitives = {}
             for _ in range(frames):
-                ctx.finish()
-                start = time.perf_counter()
-                with query:
-                    engine.renderer.probes.capture(owner, views, None, 0)
-                ctx.finish()
-                times.append((time.perf_counter() - start) * 1e3)
-            rows.append({"path": "six_pass", "culled": False, "size": size,
-                         "capture_ms_median": round(statistics.median(times), 2),
-                         "primitives": query.primitives, "face_primitives": face_primitives})
+                for key, run in captures.items():  # interleaved, so drift falls on every path alike
+                    ctx.finish()
+                    start = time.perf_counter()
+                    with query:
+                        run()
+                    ctx.finish()
+                    times[key].append((time.perf_counter() - start) * 1e3)
+                    primitives[key] = query.primitives
+            for (path, culled), samples in times.items():
+                rows.append({"path": path, "culled": culled, "size": size,
+                             "capture_ms_median": round(statistics.median(samples), 2),
+                             "primitives": primitives[(path, culled)], "face_primitives": face_primitives})
         finally:
             capture.release()
             engine.close()
