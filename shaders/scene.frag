@@ -9,6 +9,7 @@ uniform sampler2D albedo_map;
 uniform bool has_albedo_map;
 uniform samplerCube sky_map;
 uniform float sky_face_size;   // texels across one face of sky_map
+uniform bool transparent;       // the transparent slot: alpha is the material's, for blending
 uniform samplerCube probe_map;  // the batch's reflection probe (Reflect = cube)
 uniform float probe_face_size;
 uniform vec4 probe_position;    // xyz: where the probe was captured
@@ -218,7 +219,7 @@ void main() {
     color = apply_reflect(SLOT_REFLECT, color, s);
     color = apply_refract(SLOT_REFRACT, color, s);
     color = apply_emissive(SLOT_EMISSIVE, color, s);
-    out_color = vec4(color, 1.0);
+    out_color = vec4(color, transparent ? s.alpha : 1.0);
     out_surface = v_slots.w;
     out_seen = v_slots.w;
     out_node = node_index;

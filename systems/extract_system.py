@@ -76,7 +76,11 @@ class ExtractSystem(esper.Processor):
             return
         material = world.try_get(entity, Material)
         probe = probe_for(world, entity)
-        batch = self.renderer.batch_for(mesh_ref.mesh, material.texture if material else None, probe)
+        # A material whose alpha is below 1 is see-through: blended in the transparent slot
+        # (glass, whose alpha weighs the refracted view, stays opaque).
+        transparent = material is not None and material.color.w < 1.0 and not world.has(entity, Refractive)
+        batch = self.renderer.batch_for(mesh_ref.mesh, material.texture if material else None, probe,
+                                        entity if transparent else 0)
         if old is not batch:
             if old is not None:
                 self._remove_instance(entity, old)

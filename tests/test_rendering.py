@@ -15,7 +15,7 @@ from components import (
     Skybox,
     Transform,
 )
-from engine.mesh import box, plane, sphere
+from engine.mesh import box, plane, quad, sphere
 from engine.render.sky import sky_radiance
 from engine.texture_data import checker_texture
 from tests.support import srgb_to_linear
@@ -466,3 +466,36 @@ def test_another_context_made_current_does_not_take_the_engines_draws(scene, ctx
         ctx.__enter__()  # the test session's context, for the tests that follow
     np.testing.assert_array_equal(after, before)
     np.testing.assert_array_equal(built_later, before)
+
+
+def test_see_through_materials_blend_over_what_is_behind_them_farthest_first(scene):
+    """Two half-transparent quads (alpha 0.5) in front of an emissive wall, the nearer one
+    spawned first: where both cover the wall, the linear colour is
+    0.5 near + 0.5 (0.5 far + 0.5 wall), each term taken from a scene that draws it alone
+    and opaque; where only the far quad covers it, 0.5 far + 0.5 wall."""
+    def quads(alpha, which=("near", "far")):
+        def build(world):
+            camera(world)
+            world.spawn(Transform(position=(0, 0, -3)), MeshRef(quad(10, 10)), Material(color=(0.1, 0.1, 0.8)),
+                        Emissive(1.0))
+            if "near" in which:
+                world.spawn(Transform(position=(0.5, 0, 1)), MeshRef(quad(2, 2)),
+                            Material(color=(0.1, 0.7, 0.1, alpha)), Emissive(0.5))
+            if "far" in which:
+                world.spawn(Transform(position=(-0.5, 0, 0)), MeshRef(quad(2, 2)),
+                            Material(color=(0.8, 0.1, 0.1, alpha)), Emissive(0.5))
+        return build
+
+    def colours(build):
+        runner = scene(build, SIZE)
+        rgb = runner.frame()
+        both = runner.project((0.0, 0.0, 1.0))  # covered by both (and the wall)
+        far_only = runner.project((-1.2, 0.0, 0.0))
+        return srgb_to_linear(rgb[both[::-1]]), srgb_to_linear(rgb[far_only[::-1]])
+
+    both, far_only = colours(quads(0.5))
+    wall, _ = colours(quads(1.0, ()))
+    near_opaque, _ = colours(quads(1.0, ("near",)))
+    far_opaque, far_opaque_alone = colours(quads(1.0, ("far",)))
+    np.testing.assert_allclose(both, 0.5 * near_opaque + 0.5 * (0.5 * far_opaque + 0.5 * wall), atol=0.02)
+    np.testing.assert_allclose(far_only, 0.5 * far_opaque_alone + 0.5 * wall, atol=0.02)

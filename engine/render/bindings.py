@@ -49,8 +49,9 @@ BATCHED_SCENE_CLIPS = SCENE_CLIPS | frozenset(CLIP_RECT)
 RECT_CLIPS = frozenset(CLIP_RECT)
 NO_CLIPS: frozenset[int] = frozenset()
 
-# Blending: the composite's (reflection x rate + own x (1 - rate), alpha kept).
-BLEND_COMPOSITE = (moderngl.SRC_ALPHA, moderngl.ONE_MINUS_SRC_ALPHA, moderngl.ZERO, moderngl.ONE)
+# Blending "over", alpha kept: the composite's (reflection x rate + own x (1 - rate)) and the
+# transparent slot's.
+BLEND_OVER = (moderngl.SRC_ALPHA, moderngl.ONE_MINUS_SRC_ALPHA, moderngl.ZERO, moderngl.ONE)
 
 
 @dataclass(frozen=True)

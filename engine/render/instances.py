@@ -70,7 +70,7 @@ class InstanceBatch:
         self._variants: tuple[int, int, int] | None = None
         self._variants_stale = True
         # Drawn in the scene pass's transparent slot (blended, farthest first) instead of
-        # with the opaque batches.  Nothing sets it yet: transparent materials come with refraction.
+        # with the opaque batches: a material whose alpha is below 1 (Renderer.batch_for).
         self.transparent = False
 
     # --- rows ----------------------------------------------------------------------------

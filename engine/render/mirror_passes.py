@@ -21,7 +21,7 @@ from pyglm import glm
 
 from engine.render.bindings import (
     ATLAS_UNIT,
-    BLEND_COMPOSITE,
+    BLEND_OVER,
     PARENT_NODE_UNIT,
     PARENT_SURFACE_UNIT,
     RECT_CLIPS,
@@ -42,7 +42,7 @@ from engine.render.views import (
 # The claims and the reset write every depth they touch (depth test "always"); the
 # composite blends quads trimmed to their rectangles by clip distances 1-4.
 _CLAIM = PassState(depth_func="1")
-_COMPOSITE = PassState(blend=BLEND_COMPOSITE, clips=RECT_CLIPS)
+_COMPOSITE = PassState(blend=BLEND_OVER, clips=RECT_CLIPS)
 
 
 @dataclass(frozen=True)

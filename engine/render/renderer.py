@@ -73,7 +73,7 @@ class Renderer:
         self.fullscreen_present = ctx.vertex_array(self.present_program, [])
         self._meshes: dict[int, _Shared] = {}
         self._textures: dict[int, _Shared] = {}
-        self.batches: dict[tuple[int, int, int], InstanceBatch] = {}
+        self.batches: dict[tuple[int, int, int, int], InstanceBatch] = {}
         self._draw_order: list[InstanceBatch] = []   # non-empty batches, smallest extent first
         self._order_stale = True
         self.sky = flat_cube(ctx, BACKGROUND)
@@ -90,9 +90,12 @@ class Renderer:
         self.probes = ProbeCaptures(self)
 
     # --- shared resources ------------------------------------------------------------------
-    def batch_for(self, mesh: Mesh, texture: TextureData | None, probe: int = 0) -> InstanceBatch:
-        """The batch of (mesh, texture, the probe its instances sample; 0: none)."""
-        key = (mesh.id, id(texture) if texture is not None else 0, probe)
+    def batch_for(self, mesh: Mesh, texture: TextureData | None, probe: int = 0,
+                  transparent_entity: int = 0) -> InstanceBatch:
+        """The batch of (mesh, texture, the probe its instances sample; 0: none).  A
+        transparent entity gets a batch of its own (``transparent_entity``): transparent
+        things are drawn one by one, farthest first."""
+        key = (mesh.id, id(texture) if texture is not None else 0, probe, transparent_entity)
         batch = self.batches.get(key)
         if batch is None:
             gpu_mesh = self._acquire(self._meshes, mesh.id, lambda: GpuMesh(self.ctx, mesh))
@@ -102,6 +105,7 @@ class Renderer:
             batch = self.batches[key] = InstanceBatch(self.ctx, gpu_mesh, gpu_texture)
             batch.key = key
             batch.probe = probe
+            batch.transparent = bool(transparent_entity)
             self._order_stale = True
         return batch
 
@@ -111,7 +115,7 @@ class Renderer:
         del self.batches[batch.key]
         self._order_stale = True
         batch.release()
-        mesh_id, texture_id, _ = batch.key
+        mesh_id, texture_id, _, _ = batch.key
         self._release(self._meshes, mesh_id)
         if texture_id:
             self._release(self._textures, texture_id)

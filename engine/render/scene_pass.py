@@ -37,6 +37,7 @@ from engine.render.batched_mirrors import MAX_BATCHED_VIEWS, VIEWS_BLOCK_BYTES, 
 from engine.render.bindings import (
     ALBEDO_UNIT,
     BATCHED_SCENE_CLIPS,
+    BLEND_OVER,
     CAMERA_BINDING,
     LIGHTS_BINDING,
     NODE_UNIT,
@@ -64,16 +65,17 @@ class SceneOptions:
 
 ROOT_VIEW = SceneOptions()
 REFLECTION_LEVEL = SceneOptions(clear=False, masked=True, sky=False, reflection_filter=True)
-_PER_DRAW_UNIFORMS = ("masked", "sky_face_size", "node_index", "has_albedo_map", "probe_face_size",
-                      "probe_position", "probe_box_min", "probe_box_max")
+_PER_DRAW_UNIFORMS = ("masked", "sky_face_size", "node_index", "has_albedo_map", "transparent",
+                      "probe_face_size", "probe_position", "probe_box_min", "probe_box_max")
 _NO_PROBE = ((0.0, 0.0, 0.0, 0.0),) * 3
 _SCENE = PassState(depth_func="<", cull=True, clips=SCENE_CLIPS)
 _BATCHED_SCENE = PassState(depth_func="<", cull=True, clips=BATCHED_SCENE_CLIPS)
 _SKY = PassState(depth_func="<=", clips=SCENE_CLIPS)
 _LAYERED_SCENE = PassState(depth_func="<", cull=True, clips=BATCHED_SCENE_CLIPS)
 _LAYERED_SKY = PassState(depth_func="<=")
-_TRANSPARENT = PassState(depth_func="<", cull=True, clips=SCENE_CLIPS,
-                         blend=(moderngl.SRC_ALPHA, moderngl.ONE_MINUS_SRC_ALPHA, moderngl.ZERO, moderngl.ONE))
+_BATCHED_TRANSPARENT = PassState(depth_func="<", cull=True, clips=BATCHED_SCENE_CLIPS, blend=BLEND_OVER)
+_LAYERED_TRANSPARENT = _BATCHED_TRANSPARENT
+_TRANSPARENT = PassState(depth_func="<", cull=True, clips=SCENE_CLIPS, blend=BLEND_OVER)
 
 
 class ScenePass:
@@ -162,7 +164,8 @@ class ScenePass:
                 if cube is not None:
                     cube.texture.use(PROBE_UNIT)
                     probe_size, lookup = cube.face_size, cube.lookup()
-            for i, value in enumerate((masked, self._sky_size, node, textured, probe_size, *lookup)):
+            for i, value in enumerate((masked, self._sky_size, node, textured, batch.transparent, probe_size,
+                                       *lookup)):
                 if values[i] != value and uniforms[i] is not None:
                     uniforms[i].value = values[i] = value
             batch.draw(program)
@@ -224,9 +227,14 @@ class ScenePass:
                 renderer.stats.draw_calls += 1
                 targets.view_framebuffer.use()
             if transparent:
+                # Blended over what is there, farthest first, testing depth but not writing it.
+                targets.view_framebuffer.depth_mask = False
+                targets.view_framebuffer.use()
                 apply_pass_state(ctx, _TRANSPARENT, viewport, view.scissor)
                 ctx.front_face = "cw" if view.mirrored else "ccw"
                 self._draw_batches(_back_to_front(transparent, view.eye), 0, options.masked, view.node)
+                targets.view_framebuffer.depth_mask = True
+                targets.view_framebuffer.use()
             if options.sky or transparent:
                 apply_pass_state(ctx, _SCENE, viewport)
             renderer.stats.passes += 1
@@ -241,9 +249,17 @@ class ScenePass:
             self._views_ubo = ctx.buffer(reserve=VIEWS_BLOCK_BYTES)
         self._views_ubo.write(views_block(views))
         self._views_ubo.bind_to_uniform_block(VIEWS_BINDING)
-        ctx.scissor = union_rect([v.scissor or (0, 0, *v.size) for v in views])
+        scissor = union_rect([v.scissor or (0, 0, *v.size) for v in views])
+        ctx.scissor = scissor
         ctx.front_face = "ccw"  # mirrored views reverse their vertices in the geometry shader
-        self._draw_batches(renderer.opaque_batches(), geometry_invocations(len(views)), options.masked, 0)
+        invocations = geometry_invocations(len(views))
+        self._draw_batches(renderer.opaque_batches(), invocations, options.masked, 0)
+        transparent = renderer.transparent_batches()
+        if transparent:  # farthest from the first view's eye first (the views of a level are close)
+            viewport = (0, 0, *views[0].size)
+            apply_pass_state(ctx, _BATCHED_TRANSPARENT, viewport, scissor)
+            self._draw_batches(_back_to_front(transparent, views[0].eye), invocations, options.masked, 0)
+            apply_pass_state(ctx, _BATCHED_SCENE, viewport)
         renderer.stats.passes += 1
 
     def draw_layered(self, views: Sequence[View], target: LayeredCubeTarget, culled: bool = True) -> None:
@@ -271,7 +287,12 @@ class ScenePass:
         if sampler is not None:
             sampler.use(ALBEDO_UNIT)
         try:
-            self._draw_batches(renderer.opaque_batches(), 6, False, 0, "culled" if culled else "naive")
+            layered = "culled" if culled else "naive"
+            self._draw_batches(renderer.opaque_batches(), 6, False, 0, layered)
+            transparent = renderer.transparent_batches()
+            if transparent:
+                apply_pass_state(ctx, _LAYERED_TRANSPARENT, size)
+                self._draw_batches(_back_to_front(transparent, views[0].eye), 6, False, 0, layered)
             apply_pass_state(ctx, _LAYERED_SKY, size)
             self._layered_sky().render(moderngl.TRIANGLES, vertices=3)
         finally:
