@@ -7,6 +7,7 @@ import pytest
 from pyglm import glm
 
 from components import (
+    Camera,
     ComponentValueError,
     DirectionalLight,
     Emissive,
@@ -17,6 +18,7 @@ from components import (
     Refractive,
     Skybox,
     Transform,
+    look_rotation,
 )
 from engine.mesh import box, quad, sphere
 from engine.render.sky import face_directions
@@ -422,3 +424,54 @@ def test_auto_times_both_paths_once_and_keeps_the_faster(scene):
                                                                                        key=stage.timings.get)
     assert runner.stats.probe_path == stage.chosen_path
     assert runner.stats.probe_faces == 12 + 6  # both paths for the first probe, the chosen one for the second
+
+
+def test_a_probes_own_object_never_appears_in_its_capture(scene):
+    """A red panel 1 m in front of its own probe (a quad mesh offset from the entity's
+    origin, facing the probe): absent from that probe's -Z face, present in the same face of
+    a second probe at the same place."""
+    from engine.mesh import Mesh
+
+    panel = quad(1.0, 1.0)
+    offset_panel = Mesh(panel.positions + np.array([0.0, 0.0, -1.0], np.float32), panel.normals, panel.uvs,
+                        panel.indices, name="panel in front")
+    ents = {}
+
+    def build(world):
+        world.spawn(Skybox())
+        look_from(world, (3, 0, 3), target=(0, 0, 0))
+        ents["own"] = world.spawn(Transform(), MeshRef(offset_panel), Material(color=(0.9, 0.05, 0.05)), Emissive(2.0),
+                                  ReflectionProbe(resolution=32, refresh="once"))
+        ents["other"] = world.spawn(Transform(), ReflectionProbe(resolution=32, refresh="once"))
+
+    runner = scene(build, (32, 32))
+    runner.frame()
+    probes = runner.engine.renderer.probes
+    centre = [probes.read_face(key, 5)[16, 16] for key in (ents["own"], ents["other"])]
+    assert not centre[0][0] > 1.0 and centre[1][0] > 1.0 and centre[1][0] > 4 * centre[1][2]
+
+
+def test_a_chrome_sphere_seen_in_a_mirror_shows_its_cube_map(scene):
+    """Through a mirror, the sphere's pixels carry its probe's picture (the red wall on its
+    +X side), as the scene pass draws every view the same way."""
+    from components import Mirror
+
+    ents = {}
+
+    def build(world):
+        chrome_scene(ents)(world)
+        for entity, _ in world.query_one(Camera):
+            world.get(entity, Transform).position = (-1.5, 0.3, 3.0)
+            world.get(entity, Transform).rotation = look_rotation(glm.vec3(0.4, -0.05, -1.0))
+        world.spawn(Transform(position=(0, 0, -2.5)), MeshRef(quad(8, 6)), Material(color=(0.05, 0.05, 0.05)),
+                    Mirror())
+
+    runner = scene(build, (160, 120))
+    rgb = runner.frame()
+    surface = runner.engine.renderer.targets.read_surface_ids()
+    seen = runner.ids()
+    in_mirror = (seen == ents["sphere"]) & (surface != ents["sphere"])
+    assert in_mirror.sum() > 100
+    colours = srgb_to_linear(rgb[in_mirror])
+    red = (colours[:, 0] > colours[:, 1] + 0.15) & (colours[:, 0] > colours[:, 2] + 0.15)
+    assert 0.1 < red.mean() < 0.9  # the wall's side of the sphere, and not all of it
