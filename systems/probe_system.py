@@ -87,8 +87,14 @@ class ProbeSystem(esper.Processor):
 
     def process(self, dt: float) -> None:
         world = self.world
-        boxes = self._changed_boxes()
+        had_probes = bool(self.probes)
         self._refresh_probes()
+        if not self.probes:
+            self._bounds.clear()  # nothing to keep boxes for (a world without probes pays nothing)
+            return
+        # Where every drawable was when the first probe came (its first capture saw them
+        # there); after that, only what changed is looked at.
+        boxes = self._changed_boxes() if had_probes else self._all_boxes()
         everything = any(world.changed(kind) for kind in LIGHTING_KINDS)
         for state in self.probes.values():
             self._schedule(state, boxes, everything)
@@ -105,8 +111,13 @@ class ProbeSystem(esper.Processor):
         found: dict[int, tuple[ReflectionProbe, glm.vec3, bool]] = {}
         for owner, (probe, transform) in world.query(ReflectionProbe, Transform):
             found[owner] = (probe, glm.vec3(transform.world[3]), False)
-        for owner, (mesh_ref, transform) in world.query(MeshRef, Transform):
-            if has_own_probe(world, owner):
+        # Automatic probes: only cube-reflective and refractive things can have one (a few,
+        # not every drawable: a 10,000-entity world must not pay for them).
+        candidates = {e for e, r in world.query_one(Reflective) if r.mode == "cube"}
+        candidates |= {e for e, _ in world.query_one(Refractive)}
+        for owner in candidates:
+            if has_own_probe(world, owner) and world.has(owner, Transform):
+                mesh_ref, transform = world.get(owner, MeshRef), world.get(owner, Transform)
                 lo, hi = world_bounds(mesh_ref.mesh, transform.world)
                 found[owner] = (None, glm.vec3(*((lo + hi) / 2.0)), True)
         for owner in [o for o in self.probes if o not in found]:
@@ -146,6 +157,11 @@ class ProbeSystem(esper.Processor):
             if found:
                 boxes[entity] = found
         return boxes
+
+    def _all_boxes(self) -> dict[int, list[tuple[np.ndarray, np.ndarray]]]:
+        self._bounds = {entity: world_bounds(mesh_ref.mesh, transform.world)
+                        for entity, (mesh_ref, transform) in self.world.query(MeshRef, Transform)}
+        return {entity: [box] for entity, box in self._bounds.items()}
 
     def _schedule(self, state: ProbeState, boxes, everything: bool) -> None:
         settings = state.settings
