@@ -79,7 +79,8 @@ _TRANSPARENT = PassState(depth_func="<", cull=True, clips=SCENE_CLIPS, blend=BLE
 
 
 class ScenePass:
-    """The scene programs (plain and batched) and the one ``draw`` every view goes through."""
+    """The scene programs and the one ``draw`` every view goes through (``draw_layered``
+    is the same scene for the six faces of a cube map at once)."""
 
     def __init__(self, renderer) -> None:
         self.renderer = renderer
@@ -89,8 +90,9 @@ class ScenePass:
         self.sky_program["Camera"].binding = CAMERA_BINDING
         self.sky_program["sky_map"].value = SKY_UNIT
         self._sky = self.ctx.vertex_array(self.sky_program, [])
-        # Scene programs by (geometry-shader invocations or 0, the batch's variants or None).
-        self._programs: dict[tuple[int, tuple[int, int, int] | None], moderngl.Program] = {}
+        # Scene programs by (geometry-shader invocations or 0, "" / "culled" / "naive" for a
+        # layered capture, the batch's variants or None).
+        self._programs: dict[tuple[int, str, tuple[int, int, int] | None], moderngl.Program] = {}
         self._uniforms: dict[int, tuple] = {}  # program -> its _PER_DRAW_UNIFORMS (None where dropped)
         self._written: dict[int, list] = {}  # program -> the values last written in this pass
         self._sky_size = 0
