@@ -15,6 +15,7 @@ import esper
 import moderngl
 
 from components import FlyController, yaw_pitch_rotation
+from engine.errors import GLPassError
 from engine.frame_io import Output
 from engine.gl_context import prepare_context
 from engine.raw_gl import make_current
@@ -120,6 +121,11 @@ class Engine:
         else:
             self.world.resources[Output] = output
         make_current(self.ctx)
+        pending = self.ctx.error
+        if pending != "GL_NO_ERROR":
+            # Not this engine's: left by code that used the context since the last frame.
+            raise GLPassError(f"OpenGL error {pending} was pending before frame {self.world.frame_index + 1} "
+                              "(left by other code on this context, not by the engine)")
         self.world.step(dt)
         error = self.ctx.error
         if error != "GL_NO_ERROR":

@@ -13,5 +13,13 @@ class GLCapabilityError(SpeculumError):
     """The OpenGL context lacks a version or feature the engine needs."""
 
 
+class GLLimitError(GLCapabilityError):
+    """A texture, target or probe larger than this context's limits (named, with the limit)."""
+
+
+class GLPassError(SpeculumError):
+    """An OpenGL error raised by a named pass (seen in debug mode, ``Renderer.debug``)."""
+
+
 class ShaderError(SpeculumError):
     """A shader failed to load, include, compile or link."""

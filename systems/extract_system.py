@@ -24,6 +24,7 @@ from components import (
     Slice,
     Transform,
 )
+from engine.errors import GLLimitError
 from engine.probe_rules import probe_for
 from engine.render.instances import InstanceBatch
 from engine.render.renderer import Renderer, RenderStats
@@ -79,8 +80,11 @@ class ExtractSystem(esper.Processor):
         # A material whose alpha is below 1 is see-through: blended in the transparent slot
         # (glass, whose alpha weighs the refracted view, stays opaque).
         transparent = material is not None and material.color.w < 1.0 and not world.has(entity, Refractive)
-        batch = self.renderer.batch_for(mesh_ref.mesh, material.texture if material else None, probe,
-                                        entity if transparent else 0)
+        try:
+            batch = self.renderer.batch_for(mesh_ref.mesh, material.texture if material else None, probe,
+                                            entity if transparent else 0)
+        except GLLimitError as exc:
+            raise GLLimitError(f"entity {entity}: Material.texture: {exc}") from None
         if old is not batch:
             if old is not None:
                 self._remove_instance(entity, old)

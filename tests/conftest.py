@@ -2,7 +2,13 @@
 its own world and must leave the context without a GL error."""
 from __future__ import annotations
 
+import os
+
 import pytest
+
+# Debug mode in every engine the tests make (and in their subprocesses): each pass checks
+# for a GL error when it ends and names itself (engine.render.renderer.Renderer.checkpoint).
+os.environ.setdefault("SPECULUM_DEBUG", "1")
 
 from engine.gl_context import create_headless_context
 from tests.support import SceneRunner

@@ -256,6 +256,7 @@ class MirrorPasses:
             claim_ids.value = (claim.parent, claim.surface, claim.index)
             with query:
                 self._claim_vao.render(moderngl.TRIANGLES, vertices=3)
+        self.renderer.checkpoint("claims")
         return [query.samples for query in queries[: len(claims)]]
 
     def _draw_resets(self, rects, size: tuple[int, int]) -> None:
@@ -314,6 +315,7 @@ class MirrorPasses:
             program["parent_size"].value = parent.size
             program["to_reflection"].value = (level.size[0] / parent.size[0], level.size[1] / parent.size[1])
             draw.draw(variant_rows)
+        self.renderer.checkpoint("composite")
         self.renderer.flush()
 
     def release(self) -> None:

@@ -15,6 +15,7 @@ import moderngl
 import numpy as np
 from pyglm import glm
 
+from engine.errors import GLLimitError
 from engine.raw_gl import LayeredCubeTarget
 from engine.render.bindings import SCRATCH_UNIT
 from engine.render.scene_pass import SceneOptions
@@ -126,6 +127,10 @@ class ProbeCaptures:
         """The cube map of probe ``key`` at ``resolution`` (made, or remade at a new size)."""
         cube = self.cubes.get(key)
         if cube is None or cube.resolution != resolution:
+            limit = self.renderer.caps.max_cube_map_size
+            if resolution > limit:
+                raise GLLimitError(f"reflection probe of entity {key}: ReflectionProbe.resolution {resolution} is "
+                                   f"over this OpenGL's GL_MAX_CUBE_MAP_TEXTURE_SIZE {limit}")
             if cube is not None:
                 cube.texture.release()
             texture = self.ctx.texture_cube((resolution, resolution), 4, dtype="f2")
@@ -146,6 +151,7 @@ class ProbeCaptures:
             if surfaces is not None and depth > 0:
                 self.tree.render(view, levels, surfaces, TreeSettings(depth_cap=depth))
             renderer.raw_gl.copy_to_cube_face(targets.framebuffer, cube.texture, face, SCRATCH_UNIT)
+            renderer.checkpoint(f"probe face {face} copy")
             renderer.stats.probe_faces += 1
         cube.texture.build_mipmaps()
 

@@ -8,10 +8,12 @@ is drawn.
 """
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass
 
 import moderngl
 
+from engine.errors import GLLimitError, GLPassError
 from engine.gl_context import GLCapabilities
 from engine.mesh import Mesh
 from engine.raw_gl import RawGL
@@ -86,6 +88,9 @@ class Renderer:
         # llvmpipe, benchmarks/mirrors.py), so there reflections filter trilinearly; a GPU
         # filters them like the main view.  Set it to texture_anisotropy for equal quality.
         self.reflection_anisotropy = 1.0 if caps.software else self.texture_anisotropy
+        # Debug mode: every pass checks for an OpenGL error when it ends and names itself
+        # (checkpoint); glGetError is cheap on the CPU but makes no sense to pay in a game.
+        self.debug = os.environ.get("SPECULUM_DEBUG", "") not in ("", "0")
         self.scene_pass = ScenePass(self)
         self.probes = ProbeCaptures(self)
 
@@ -98,6 +103,8 @@ class Renderer:
         key = (mesh.id, id(texture) if texture is not None else 0, probe, transparent_entity)
         batch = self.batches.get(key)
         if batch is None:
+            if texture is not None:
+                self.check_texture(texture)  # before anything is made: nothing half-built
             gpu_mesh = self._acquire(self._meshes, mesh.id, lambda: GpuMesh(self.ctx, mesh))
             gpu_texture = None
             if texture is not None:
@@ -135,6 +142,14 @@ class Renderer:
         if shared.users == 0:
             shared.obj.release()
             del table[key]
+
+    def check_texture(self, texture: TextureData) -> None:
+        """Refuse a texture this context cannot hold, naming it and the limit."""
+        w, h = texture.size
+        limit = self.caps.max_texture_size
+        if w > limit or h > limit:
+            raise GLLimitError(f"texture {texture.name!r} is {w}x{h}: this OpenGL ({self.caps.renderer}) takes "
+                               f"textures of at most {limit}x{limit} (GL_MAX_TEXTURE_SIZE); scale the image down")
 
     def _upload_texture(self, texture: TextureData) -> moderngl.Texture:
         w, h = texture.size
@@ -195,6 +210,13 @@ class Renderer:
         material is transparent: refraction fills the slot)."""
         return [b for b in self.batches.values() if b.count and b.transparent]
 
+    def checkpoint(self, name: str) -> None:
+        """In debug mode, raise ``GLPassError`` naming pass ``name`` if it left a GL error."""
+        if self.debug:
+            error = self.ctx.error
+            if error != "GL_NO_ERROR":
+                raise GLPassError(f"OpenGL error {error} in the {name} pass")
+
     def flush(self) -> None:
         """Start the GPU on the passes queued so far, before CPU-only work (``RawGL.flush``)."""
         self.raw_gl.flush()
@@ -207,6 +229,7 @@ class Renderer:
         self.targets.color.use(PRESENT_UNIT)
         self.present_program["exposure"].value = self.exposure
         self.fullscreen_present.render(moderngl.TRIANGLES, vertices=3)
+        self.checkpoint("present")
 
     def release(self) -> None:
         for batch in list(self.batches.values()):

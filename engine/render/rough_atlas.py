@@ -49,6 +49,7 @@ def place_tiles(views: list[tuple[int, tuple[int, int, int, int]]]) -> dict[int,
 
 class RoughAtlas:
     def __init__(self, renderer) -> None:
+        self.renderer = renderer
         self.ctx = renderer.ctx
         self.program = renderer.shaders.program("rough_isolate.vert", "rough_isolate.frag")
         self.program["level_color"].value, self.program["level_nodes"].value = LEVEL_UNITS
@@ -89,6 +90,7 @@ class RoughAtlas:
         level.node.use(LEVEL_UNITS[1])
         self._vao.render(moderngl.TRIANGLE_STRIP, vertices=4, instances=len(views))
         self.texture.build_mipmaps(0, int(np.log2(TILE)))
+        self.renderer.checkpoint("rough atlas")
         return tiles
 
     def _ensure_size(self, width: int, height: int) -> None:

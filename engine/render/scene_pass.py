@@ -207,6 +207,7 @@ class ScenePass:
         finally:
             if sampler is not None:
                 sampler.clear(ALBEDO_UNIT)
+        renderer.checkpoint(f"scene ({views[0].name}{' and others' if len(views) > 1 else ''})")
 
     def _draw_each(self, views: Sequence[View], targets: RenderTargets, viewport: tuple[int, int, int, int],
                    options: SceneOptions) -> None:
@@ -302,6 +303,7 @@ class ScenePass:
                 sampler.clear(ALBEDO_UNIT)
             target.unbind()
         renderer.stats.passes += 1
+        renderer.checkpoint("layered cube-map capture")
 
     def _layered_sky(self) -> moderngl.VertexArray:
         if self._sky_layered is None:

@@ -9,7 +9,21 @@ from __future__ import annotations
 import moderngl
 import numpy as np
 
+from engine.errors import GLLimitError
+
 NO_NODE = 0xFFFFFFFF
+
+
+def check_target_size(ctx: moderngl.Context, size: tuple[int, int], what: str) -> None:
+    """Refuse a render target this context cannot make (before any GL object is made, so no
+    error is left pending): both sides within GL_MAX_TEXTURE_SIZE and the viewport limits."""
+    info = ctx.info
+    limit = min(int(info.get("GL_MAX_TEXTURE_SIZE", 0) or 1 << 30),
+                *(int(v) for v in (info.get("GL_MAX_VIEWPORT_DIMS") or (1 << 30, 1 << 30))))
+    w, h = size
+    if not (1 <= w <= limit and 1 <= h <= limit):
+        raise GLLimitError(f"{what} of {w}x{h} pixels: this OpenGL ({info.get('GL_RENDERER', '?')}) makes "
+                           f"targets of at most {limit}x{limit} (GL_MAX_TEXTURE_SIZE / GL_MAX_VIEWPORT_DIMS)")
 
 
 def release_framebuffer(framebuffer: moderngl.Framebuffer) -> None:
@@ -29,6 +43,7 @@ class RenderTargets:
     ``node``    - which view of this level drew the pixel."""
 
     def __init__(self, ctx: moderngl.Context, size: tuple[int, int]) -> None:
+        check_target_size(ctx, size, "a render target")
         self.size = size
         self.color = ctx.texture(size, 4, dtype="f2")
         self.color.filter = (moderngl.LINEAR, moderngl.LINEAR)
@@ -106,6 +121,7 @@ class CaptureTarget:
     """An RGBA8 target the present pass writes to when there is no window (headless runs)."""
 
     def __init__(self, ctx: moderngl.Context, size: tuple[int, int]) -> None:
+        check_target_size(ctx, size, "an output (capture target)")
         self.size = size
         self.texture = ctx.texture(size, 4)
         self.framebuffer = ctx.framebuffer([self.texture])
