@@ -9,7 +9,7 @@ HALF_TURN = glm.rotate(glm.pi(), glm.vec3(0.0, 1.0, 0.0))
 
 
 def pair_transform(look_in: glm.mat4, look_out: glm.mat4) -> glm.mat4:
-    """Seed 001: into the look-in portal's local space, a half turn about its up, out of the
+    """The portal pair transform: into the look-in portal's local space, a half turn about its up, out of the
     look-out portal.  Carries points (and cameras) at ``look_in`` to ``look_out``."""
     return look_out * HALF_TURN * glm.inverse(look_in)
 

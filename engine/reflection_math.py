@@ -35,7 +35,7 @@ def reflection_matrix(plane: glm.vec4) -> glm.mat4:
 
 
 def reflect_camera(eye, forward, up, plane: glm.vec4) -> tuple[glm.vec3, glm.vec3, glm.vec3]:
-    """Seed 003's virtual camera: reflect its position, its look direction and its up vector.
+    """The classic planar-mirror virtual camera: reflect its position, its look direction and its up vector.
 
     The result is an ordinary (right-handed) camera behind the mirror; what it sees is the
     mirrored scene, but the image it makes is left-right swapped compared with the mirror.
@@ -52,7 +52,7 @@ MIRROR_X = glm.scale(glm.vec3(-1.0, 1.0, 1.0))
 def mirrored_view(view: glm.mat4, plane: glm.vec4) -> glm.mat4:
     """View matrix of the reflection, pixel-aligned with the mirror as seen by ``view``.
 
-    Equal to ``MIRROR_X * lookAt(reflect_camera(...))``: seed 003's camera with its image
+    Equal to ``MIRROR_X * lookAt(reflect_camera(...))``: the virtual camera of ``reflect_camera`` with its image
     swapped back, so a mirror pixel reads its reflection at the same screen position.
     Handedness flips, so front faces wind clockwise in this view.
     """

@@ -1,6 +1,6 @@
 #version 410 core
-// Blends a mirror's reflection (or a portal's view) into the level above (seed 000's final
-// mix, seed 002's GGXReflect and roughness mip bias). mirror_composite.vert sends the view.
+// Blends a mirror's reflection (or a portal's view) into the level above (the reflection mixed
+// over the surface, weighted by the GGX specular term, blurred by a roughness mip bias). mirror_composite.vert sends the view.
 //
 // Built in three variants, one program each (MirrorPasses draws each level's views grouped
 // by variant), so a pixel runs only its own path: a software rasteriser such as llvmpipe

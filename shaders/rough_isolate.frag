@@ -2,7 +2,7 @@
 // Copies one rough view's pixels of its level into the view's own atlas tile, and nothing
 // else: pixels of the level that other views own, or that no view owns this frame, become
 // empty (alpha 0: nothing reflected). The tile's mips then blur this view's reflection
-// only (seed 002 gives each mirror its own texture; the level is shared by many).
+// only (a level's image is shared by many mirrors, so each rough one needs its own tile).
 uniform sampler2D level_color;
 uniform usampler2D level_nodes;
 

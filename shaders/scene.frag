@@ -1,5 +1,5 @@
 #version 410 core
-// Scene shading: lights, then the material slots in seed 002's order
+// Scene shading: lights, then the material slots in order (reflect, refract, emissive)
 // (reflect, refract, emissive). Each slot switches on the instance's variant index.
 #include "camera.glsl"
 #include "lights.glsl"
@@ -115,7 +115,7 @@ vec3 sample_environment(vec3 direction, float lod, float roughness) {
 }
 
 vec3 reflect_skybox(vec3 color, Surface s) {
-    // Seed 004: sample the sky along reflect(view, normal); mix by the instance's amount.
+    // Sample the sky along reflect(view, normal); mix by the instance's amount.
     vec3 env = sample_environment(s.reflect_dir, s.reflect_lod, s.roughness) * v_tint.rgb;
     return mix(color, env, v_reflect.x);
 }
@@ -160,7 +160,7 @@ vec3 apply_reflect(uint variant, vec3 color, Surface s) {
 
 // --- Refract slot ---------------------------------------------------------------------
 vec3 refract_environment(vec3 color, Surface s) {
-    // Seed 002 part 2: environment seen along the refracted ray, weighted by Fresnel
+    // Refraction: environment seen along the refracted ray, weighted by Fresnel
     // transmittance, blended with the surface colour by alpha (alpha 0 = clear).
     float ior = v_reflect.y;
     float f0 = pow((ior - 1.0) / (ior + 1.0), 2.0);
@@ -184,7 +184,7 @@ vec3 apply_refract(uint variant, vec3 color, Surface s) {
 // --- Emissive slot --------------------------------------------------------------------
 vec3 apply_emissive(uint variant, vec3 color, Surface s) {
     switch (variant) {
-        case EMISSIVE_EMISSIVE: return color + v_surface.z * s.albedo;  // seed 002 part 1
+        case EMISSIVE_EMISSIVE: return color + v_surface.z * s.albedo;  // emissive = power x diffuse
         default: return color;
     }
 }

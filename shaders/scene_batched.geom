@@ -1,5 +1,5 @@
 #version 410 core
-// Batched mirror views (seed 000): one draw per mesh draws every view of a reflection level.
+// Batched mirror views (geometry-shader instancing of views): one draw per mesh draws every view of a reflection level.
 // Each invocation takes VIEWS_PER_INVOCATION views and emits, for each view that can see
 // the triangle, the triangle as that view's reflected camera sees it (its view_proj holds
 // the oblique near plane).  Per view: triangles wholly outside the view's frustum or screen

@@ -1,5 +1,5 @@
-"""Choosing each instance's material variants from its components (seed 002's subroutine
-selection, done on the CPU once per change instead of once per draw)."""
+"""Choosing each instance's material variants from its components (what GLSL subroutine
+selection would do, done on the CPU once per change instead of once per draw)."""
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -42,7 +42,7 @@ def choose_material(material: Material | None, emissive: Emissive | None,
     mix = 0.0
     tint = glm.vec4(1.0)
     if reflective is not None:
-        # Seed 004: a textured surface mixes its texture and the reflection 50/50 unless told.
+        # A textured surface mixes its texture and the reflection 50/50 unless told.
         mix = reflective.mix if reflective.mix is not None else (0.5 if material.texture is not None else 1.0)
         tint = reflective.tint
     if portal is not None:

@@ -1,4 +1,4 @@
-"""Things partly through a portal (seed 001's open problem): sliced, with a clone beyond.
+"""Things partly through a portal (the visible seam where an object crosses a portal): sliced, with a clone beyond.
 
 A Traveller whose bounds straddle an open portal's rectangle is drawn only in front of
 that portal (a Slice clip plane), and a clone, carried by the pair transform, draws the

@@ -97,7 +97,7 @@ def test_obj_transparency_given_as_tr(tmp_path):
 
 
 @pytest.mark.parametrize("kd, ke, factor", [
-    ((0.5, 0.5, 0.5), (1.0, 1.0, 1.0), 2.0),            # seed 002's example
+    ((0.5, 0.5, 0.5), (1.0, 1.0, 1.0), 2.0),            # emissive = 2 x diffuse
     ((0.2, 0.4, 0.1), (0.6, 1.2, 0.3), 3.0),            # coloured: ratio on the strongest channel
     ((0.0, 0.0, 0.8), (0.0, 0.0, 0.4), 0.5),            # a pure-blue lamp
 ])

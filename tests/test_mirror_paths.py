@@ -1,5 +1,6 @@
 """The two ways of drawing a reflection level give the same frame: each view its own draws
-("per_mirror") and one geometry-shader draw per mesh for all views ("batched", seed 000)."""
+("per_mirror") and one draw per mesh for all views ("batched": a geometry shader emits each
+triangle once per view)."""
 from __future__ import annotations
 
 import numpy as np

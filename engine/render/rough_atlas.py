@@ -1,10 +1,11 @@
 """Per-view blur sources for rough mirrors: each rough view of a level gets its own tile.
 
-A rough mirror samples its reflection with a mip bias (seed 002: ``lod += 2/(1-m)^2 - 1``).
-Seed 002 renders each mirror into its own texture, so the coarse mips average that mirror's
-reflection only.  Here the views of a level share one screen-sized image, whose coarse mips
-would average every mirror's reflection (and pixels no view owns): a rough mirror next to
-another would show its neighbour's colours.  So before a level is composited, each of its
+A rough mirror samples its reflection with a roughness mip bias (``lod += 2/(1-m)^2 - 1``,
+see ``roughness_lod_bias`` in shaders/include/ggx.glsl).  If each mirror rendered into its
+own texture, the coarse mips would average that mirror's reflection only.  Here the views
+of a level share one screen-sized image, whose coarse mips would average every mirror's
+reflection (and pixels no view owns): a rough mirror next to another would show its
+neighbour's colours.  So before a level is composited, each of its
 rough views is copied into its own T x T tile of an atlas - its own pixels only, everything
 else empty - and the atlas is mipmapped.  Tiles sit on a power-of-two grid, so up to mip
 log2(T) no texel straddles two tiles; the composite keeps its samples half a texel inside.

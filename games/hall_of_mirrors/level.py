@@ -1,5 +1,5 @@
 """Hall of mirrors: a checkered floor, a few objects, an emissive lamp, a chrome sphere that
-reflects only the sky, a textured crate that mixes its texture with the sky (seed 004), a
+reflects only the sky, a textured crate that mixes its texture with the sky (50/50), a
 wall of mirrors with different tints and roughness, and a facing pair (the wall's centre
 mirror and one behind the camera) that shows a corridor of reflections; a portal pair (the
 left doorway opens far across the hall, where a crate stands half in it and half out of
@@ -63,7 +63,7 @@ class HallOfMirrors(Game):
                     Material(color=(1.0, 0.75, 0.35)), Emissive(2.5),
                     PointLight(color=(1.0, 0.75, 0.4), intensity=6.0, range=8.0))
 
-        # Seed 004's task: one object that reflects only the sky, one that mixes texture and sky.
+        # One object that reflects only the sky, one that mixes texture and sky.
         world.spawn(Transform(position=(-0.9, 1.0, 0.0)), MeshRef(sphere(0.8)),
                     Material(color=(1.0, 1.0, 1.0), metallic=1.0, roughness=0.05), Reflective("skybox"))
         world.spawn(Transform(position=(0.9, 0.6, 1.2), rotation=glm.angleAxis(glm.radians(30), glm.vec3(0, 1, 0))),

@@ -1,4 +1,5 @@
-// GGX microfacet specular (seed 002): Schlick Fresnel, GGX distribution, Smith visibility.
+// GGX microfacet specular (Walter et al. 2007, "Microfacet Models for Refraction through Rough
+// Surfaces"): Schlick Fresnel, GGX distribution, Smith visibility.
 const float PI = 3.14159265358979;
 
 vec3 schlick_fresnel(vec3 l, vec3 h, vec3 f0) {
@@ -31,7 +32,7 @@ vec3 ggx_specular(vec3 n, vec3 l, vec3 v, vec3 f0, float roughness) {
     return schlick_fresnel(l, h, f0) * ggx_distribution(n, h, roughness) * ggx_visibility(n, l, v, roughness);
 }
 
-// Seed 002's GGXReflect: radiance arriving along the reflection direction r, weighted by
+// GGX reflection of one pre-filtered sample: radiance arriving along the reflection direction r, weighted by
 // Fresnel and visibility (the distribution term is folded into the pre-filtered sample).
 vec3 ggx_reflect(vec3 n, vec3 r, vec3 v, vec3 radiance, vec3 f0, float roughness) {
     vec3 f = schlick_fresnel(r, n, f0);
@@ -39,7 +40,7 @@ vec3 ggx_reflect(vec3 n, vec3 r, vec3 v, vec3 radiance, vec3 f0, float roughness
     return f * vis * (4.0 * max(dot(v, n), 0.0)) * max(dot(n, r), 0.0) * radiance;
 }
 
-// Seed 002's mip bias for a reflection sampled with roughness m: lod += 2/(1-m)^2 - 1.
+// Roughness-to-mip bias for a reflection sampled with roughness m: lod += 2/(1-m)^2 - 1.
 float roughness_lod_bias(float m) {
     float gloss = max(1.0 - m, 0.05);
     return 2.0 / (gloss * gloss) - 1.0;
