@@ -269,7 +269,8 @@ def test_entities_release_their_gpu_resources(scene):
         for e in spawned:
             runner.world.delete_entity(e)
         runner.frame()
-        assert renderer.resource_counts() == {"meshes": 0, "textures": 0, "batches": 0}, cycle
+        counts = renderer.resource_counts()
+        assert (counts["meshes"], counts["textures"], counts["batches"]) == (0, 0, 0), cycle
 
 
 def test_minimised_output_renders_nothing_and_does_not_crash(scene, ctx):

@@ -166,8 +166,12 @@ class Renderer:
         old.release()
 
     def resource_counts(self) -> dict[str, int]:
-        """Live GL objects this renderer owns (tests check that they go back to zero)."""
-        return {"meshes": len(self._meshes), "textures": len(self._textures), "batches": len(self.batches)}
+        """Live GL resources this renderer owns, by kind (soak and churn runs check that they
+        come back to their baseline; tests that they go back to zero)."""
+        return {"meshes": len(self._meshes), "textures": len(self._textures), "batches": len(self.batches),
+                "probe_cubes": len(self.probes.cubes), "layered_targets": len(self.probes._layered),
+                "levels": len(self.levels), "probe_levels": sum(len(s) for s in self.probes._stacks.values()),
+                "programs": len(self.shaders._programs)}
 
     # --- frame -----------------------------------------------------------------------------
     @property

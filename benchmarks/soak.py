@@ -1,0 +1,110 @@
+"""Soak: the sample level on a camera tour for many frames; the engine's GL resources and
+the process's memory, printed as it goes, must stay flat.
+
+The camera circles the hall (radius 4.5 m about (0, 1.6, -1), once every 600 frames, a
+slow bob up and down) at 320 x 180, so views of mirrors, portals and probes come and go.
+Printed at the start, every ``--every`` frames and at the end (one JSON object a line with
+``--json``): the frame, the renderer's live GL resources by kind (``resource_counts``), the
+resident memory (MiB) and the median frame time since the last line.  The exit status is 1
+when a resource count or the memory grew between the first report after warm-up and the
+last (memory by more than ``--rss-slack`` MiB).
+
+    python -m benchmarks soak --frames 10000
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import statistics
+import time
+
+from components import Transform, yaw_pitch_rotation
+from engine.app import Engine
+from engine.frame_io import Output
+from engine.gl_context import create_headless_context
+from engine.render.targets import CaptureTarget
+from games.hall_of_mirrors.level import HallOfMirrors
+
+SIZE = (320, 180)
+DT = 1.0 / 60.0
+
+
+def resident_mib() -> float:
+    """Resident set size of this process (Linux /proc; 0 elsewhere)."""
+    try:
+        with open("/proc/self/statm") as statm:
+            pages = int(statm.read().split()[1])
+    except OSError:
+        return 0.0
+    import resource
+
+    return pages * resource.getpagesize() / 2**20
+
+
+def tour(engine: Engine, frame: int) -> None:
+    """Place the camera on the tour for ``frame``."""
+    angle = 2.0 * math.pi * frame / 600.0
+    camera = engine.active_camera()
+    if camera is None:
+        return
+    transform: Transform = camera[2]
+    transform.position = (4.5 * math.sin(angle), 1.6 + 0.3 * math.sin(3 * angle), -1.0 + 4.5 * math.cos(angle))
+    transform.rotation = yaw_pitch_rotation(math.degrees(angle), -5.0)
+
+
+def run(frames: int, every: int, warmup: int = 60) -> list[dict]:
+    ctx = create_headless_context()
+    engine = Engine(HallOfMirrors(), ctx)
+    capture = CaptureTarget(ctx, SIZE)
+    output = Output(capture.framebuffer, SIZE)
+    rows, times = [], []
+    try:
+        for frame in range(frames + 1):
+            if frame % every == 0 or frame == frames or frame == warmup:
+                rows.append({"frame": frame, "gl_resources": engine.renderer.resource_counts(),
+                             "rss_mib": round(resident_mib(), 1),
+                             "frame_ms_median": round(statistics.median(times), 2) if times else None})
+                times = []
+            if frame == frames:
+                break
+            tour(engine, frame)
+            start = time.perf_counter()
+            engine.frame(DT, output)
+            ctx.finish()
+            times.append((time.perf_counter() - start) * 1e3)
+    finally:
+        capture.release()
+        engine.close()
+        ctx.release()
+    return rows
+
+
+def grew(rows: list[dict], warmup: int, rss_slack: float) -> list[str]:
+    """What grew between the report at the end of warm-up and the last one."""
+    base = next(row for row in rows if row["frame"] >= warmup)
+    last = rows[-1]
+    found = [f"{kind} {base['gl_resources'][kind]} -> {count}" for kind, count in last["gl_resources"].items()
+             if count > base["gl_resources"][kind]]
+    if last["rss_mib"] - base["rss_mib"] > rss_slack:
+        found.append(f"resident memory {base['rss_mib']} -> {last['rss_mib']} MiB")
+    return found
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--frames", type=int, default=10_000)
+    parser.add_argument("--every", type=int, default=1000, help="frames between reports")
+    parser.add_argument("--rss-slack", type=float, default=20.0, help="MiB of growth tolerated (allocator noise)")
+
+
+def main(args: argparse.Namespace) -> int:
+    warmup = min(60, args.frames)
+    rows = run(args.frames, args.every, warmup)
+    for row in rows:
+        print(json.dumps(row) if args.json else
+              f"frame {row['frame']:>6}  rss {row['rss_mib']:>7} MiB  ms {row['frame_ms_median']}  "
+              f"{row['gl_resources']}", flush=True)
+    problems = grew(rows, warmup, args.rss_slack)
+    print(json.dumps({"grew": problems}) if args.json else ("grew: " + "; ".join(problems) if problems
+                                                              else "nothing grew"))
+    return 1 if problems else 0
