@@ -11,6 +11,10 @@ from components import Camera, MeshRef, Portal, Transform
 from engine.portal_math import pair_transform
 from engine.world import World
 
+# What --export-scene writes, by the file's extension: binary glTF, or JSON glTF with its
+# buffer embedded (one file either way).
+SCENE_FORMATS = (".glb", ".gltf")
+
 
 def save_png(rgb: np.ndarray, path: str | Path) -> None:
     from PIL import Image
@@ -28,10 +32,13 @@ def export_scene(world: World, path: str | Path, camera_entity: int, size: tuple
     """Write world-space geometry (one GLB node per renderable entity, named by its id) and,
     beside it, a JSON of the camera, each entity's component types, each mirror's world
     plane (a point on it and its unit normal, towards the reflecting side), each portal's
-    partner, each reflection probe and which probe each entity samples."""
+    partner, each reflection probe and which probe each entity samples.  The geometry's
+    format follows the extension (``SCENE_FORMATS``); any other is refused."""
     import trimesh
 
     path = Path(path)
+    if path.suffix.lower() not in SCENE_FORMATS:
+        raise ValueError(f"export_scene: {str(path)!r} must end in {' or '.join(SCENE_FORMATS)}")
     path.parent.mkdir(parents=True, exist_ok=True)
     scene = trimesh.Scene()
     for entity, (mesh_ref, transform) in world.query(MeshRef, Transform):
@@ -40,7 +47,10 @@ def export_scene(world: World, path: str | Path, camera_entity: int, size: tuple
         positions = mesh.positions @ matrix[:3, :3].T + matrix[:3, 3]
         geometry = trimesh.Trimesh(positions, mesh.indices, process=False)
         scene.add_geometry(geometry, node_name=str(entity), geom_name=str(entity))
-    scene.export(str(path), file_type="glb")
+    if path.suffix.lower() == ".glb":
+        scene.export(str(path), file_type="glb")
+    else:
+        path.write_bytes(trimesh.exchange.gltf.export_gltf(scene, embed_buffers=True)["model.gltf"])
 
     camera = world.get(camera_entity, Camera)
     cam_world = world.get(camera_entity, Transform).world

@@ -1,20 +1,21 @@
 """Command line of every game: windowed through moderngl-window, or headless on EGL.
 
   python -m games.<name> [--headless] [--frames N] [--size WxH] [--out DIR]
-                         [--ids] [--export-scene FILE.glb] [--camera x,y,z,yaw,pitch]
+                         [--ids] [--export-scene FILE.glb|FILE.gltf] [--camera x,y,z,yaw,pitch]
 
 With no display the runner goes headless by itself and says so.
 """
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 from collections.abc import Sequence
 from pathlib import Path
 
 from components import ComponentValueError
 from engine.app import Engine, Game
-from engine.capture import export_scene, save_ids, save_png
+from engine.capture import SCENE_FORMATS, export_scene, save_ids, save_png
 from engine.errors import SpeculumError
 from engine.frame_io import Output
 from engine.gl_context import create_headless_context, have_display
@@ -33,8 +34,9 @@ def parse_args(game: Game, argv: Sequence[str] | None) -> argparse.Namespace:
     parser.add_argument("--size", type=_size, default=game.size, help="WxH, e.g. 1280x720")
     parser.add_argument("--out", type=Path, default=None, help="folder for frame_NNNN.png (headless)")
     parser.add_argument("--ids", action="store_true", help="also write ids_NNNN.npy per frame")
-    parser.add_argument("--export-scene", type=Path, default=None,
-                        help="write FILE.glb (world geometry) and FILE.json (camera, components) at the end")
+    parser.add_argument("--export-scene", type=_scene_path, default=None,
+                        help="write FILE.glb or FILE.gltf (world geometry) and FILE.json (camera, components) "
+                             "at the end")
     parser.add_argument("--camera", type=_pose, default=None, help="start pose x,y,z,yaw,pitch (degrees)")
     args = parser.parse_args(argv)
     if args.frames is not None and args.frames < 1:
@@ -50,6 +52,14 @@ def _size(text: str) -> tuple[int, int]:
     if not (1 <= w <= 8192 and 1 <= h <= 8192):
         raise argparse.ArgumentTypeError(f"--size must be between 1x1 and 8192x8192, got {text!r}")
     return w, h
+
+
+def _scene_path(text: str) -> Path:
+    path = Path(text)
+    if path.suffix.lower() not in SCENE_FORMATS:
+        raise argparse.ArgumentTypeError(
+            f"--export-scene must end in {' or '.join(SCENE_FORMATS)} (the format written), got {text!r}")
+    return path
 
 
 def _pose(text: str) -> tuple[float, ...]:
@@ -69,26 +79,67 @@ def main(game: Game, argv: Sequence[str] | None = None) -> int:
             print("speculum: no display found (DISPLAY/WAYLAND_DISPLAY unset); running headless", file=sys.stderr)
             args.headless = True
         if args.headless:
+            if args.out is None:
+                args.out = Path("out") / type(game).__name__.lower()
+            prepare_out(args.out)
+            if args.export_scene is not None:
+                prepare_out(args.export_scene.parent, "--export-scene folder")
             written = run_headless(game, args)
-            print(f"speculum: wrote {written} frame(s) to {args.out}")
+            frames = sum(1 for path in written if path.name.startswith("frame_"))
+            print(f"speculum: wrote {frames} frame(s): {describe_written(written)}")
         else:
             from engine.window import run_windowed
 
+            if args.out is not None:
+                prepare_out(args.out)
             run_windowed(game, args)
     except (SpeculumError, ComponentValueError) as exc:
-        # Bad input (a level's mesh file, component value, mirror, missing GL feature):
-        # one line naming the thing and the reason, and a clean exit.
+        # Bad input (a level's mesh file, component value, mirror, missing GL feature, an
+        # output folder that cannot be written): one line naming the thing and the reason.
         print(f"speculum: error: {exc}", file=sys.stderr)
         return 2
     return 0
 
 
-def run_headless(game: Game, args: argparse.Namespace) -> int:
-    """Render ``args.frames`` frames offscreen and write them (and ids) to ``args.out``."""
+class OutputPathError(SpeculumError):
+    """An output folder that is a file, or cannot be made or written."""
+
+
+def prepare_out(folder: Path, what: str = "--out") -> None:
+    """Make ``folder`` and check it can be written before any rendering, so a bad path is one
+    clear line up front instead of a traceback after the first frame."""
+    if folder.exists() and not folder.is_dir():
+        raise OutputPathError(f"{what} {str(folder)!r} is an existing file, not a folder")
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise OutputPathError(f"{what} {str(folder)!r} cannot be made: {exc.strerror or exc}") from None
+    if not os.access(folder, os.W_OK | os.X_OK):
+        raise OutputPathError(f"{what} {str(folder)!r} is not writable")
+
+
+def describe_written(written: Sequence[Path]) -> str:
+    """Every file written, by name; a run of numbered files (frame_0000.png ...) longer than
+    three as its first and last name and a count."""
+    runs: dict[tuple, list[Path]] = {}
+    for path in written:
+        prefix, _, number = path.stem.rpartition("_")
+        key = (path.parent, prefix, path.suffix) if prefix and number.isdigit() else (path,)
+        runs.setdefault(key, []).append(path)
+    parts = []
+    for paths in runs.values():
+        if len(paths) <= 3:
+            parts.extend(str(p) for p in paths)
+        else:
+            parts.append(f"{paths[0]} .. {paths[-1].name} ({len(paths)} files)")
+    return ", ".join(parts)
+
+
+def run_headless(game: Game, args: argparse.Namespace) -> list[Path]:
+    """Render ``args.frames`` frames offscreen and write them (and ids, and the scene) to
+    ``args.out``; returns every file written, in order."""
     frames = args.frames or 4
-    if args.out is None:
-        args.out = Path("out") / type(game).__name__.lower()
-    args.out.mkdir(parents=True, exist_ok=True)
+    written: list[Path] = []
     ctx = create_headless_context()
     engine = None
     capture = None
@@ -100,18 +151,33 @@ def run_headless(game: Game, args: argparse.Namespace) -> int:
         output = Output(capture.framebuffer, args.size)
         for index in range(frames):
             engine.frame(HEADLESS_DT, output)
-            save_png(capture.read_rgb(), args.out / f"frame_{index:04d}.png")
+            written.append(_write(save_png, capture.read_rgb(), args.out / f"frame_{index:04d}.png"))
             if args.ids:
-                save_ids(engine.renderer.targets.read_ids(), args.out / f"ids_{index:04d}.npy")
+                written.append(_write(save_ids, engine.renderer.targets.read_ids(), args.out / f"ids_{index:04d}.npy"))
         if args.export_scene:
             camera = engine.active_camera()
-            if camera is not None:
-                export_scene(engine.world, args.export_scene, camera[0], args.size,
-                             engine.reflection_system.mirror_planes())
+            if camera is None:
+                raise SpeculumError(f"--export-scene {str(args.export_scene)!r}: the world has no active camera "
+                                    "(spawn one with engine.spawn_camera), so there is no view to export")
+            try:
+                geometry = export_scene(engine.world, args.export_scene, camera[0], args.size,
+                                        engine.reflection_system.mirror_planes())
+                written += [geometry, geometry.with_suffix(".json")]
+            except OSError as exc:
+                raise OutputPathError(f"--export-scene {str(args.export_scene)!r} cannot be written: "
+                                      f"{exc.strerror or exc}") from None
     finally:
         if capture is not None:
             capture.release()
         if engine is not None:
             engine.close()
         ctx.release()
-    return frames
+    return written
+
+
+def _write(save, data, path: Path) -> Path:
+    try:
+        save(data, path)
+    except OSError as exc:
+        raise OutputPathError(f"cannot write {str(path)!r}: {exc.strerror or exc}") from None
+    return path

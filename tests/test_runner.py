@@ -119,3 +119,72 @@ def test_a_bad_level_stops_cleanly_with_one_line(tmp_path):
     assert result.returncode == 2
     assert "speculum: error: entity" in result.stderr and "'crate' which is not flat" in result.stderr
     assert "Traceback" not in result.stderr
+
+
+def one_error_line(result: subprocess.CompletedProcess) -> str:
+    """The run failed as bad input does: exit 2 and a single ``speculum: error:`` line."""
+    assert result.returncode == 2, (result.returncode, result.stderr)
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("speculum: error: "), result.stderr
+    return lines[0]
+
+
+def test_an_out_that_is_a_file_or_cannot_be_made_is_one_error_line(tmp_path):
+    a_file = tmp_path / "taken"
+    a_file.write_text("not a folder")
+    line = one_error_line(run_level("--headless", "--frames", "1", "--size", "32x32", "--out", str(a_file)))
+    assert repr(str(a_file)) in line and "existing file" in line
+    line = one_error_line(run_level("--headless", "--frames", "1", "--size", "32x32", "--out", str(a_file / "sub")))
+    assert repr(str(a_file / "sub")) in line and "cannot be made" in line
+    assert a_file.read_text() == "not a folder"
+    if os.geteuid() != 0:  # root writes anywhere, so a read-only folder is tested only as a user
+        locked = tmp_path / "locked"
+        locked.mkdir(mode=0o500)
+        line = one_error_line(run_level("--headless", "--frames", "1", "--size", "32x32", "--out", str(locked)))
+        assert "not writable" in line
+
+
+def test_export_scene_writes_the_format_its_extension_says_and_the_closing_line_names_every_file(tmp_path):
+    out = tmp_path / "frames"
+    result = run_level("--headless", "--frames", "5", "--size", "64x36", "--ids", "--out", str(out),
+                       "--export-scene", str(tmp_path / "scene.obj"))
+    assert result.returncode == 2 and ".glb or .gltf" in result.stderr and "'" in result.stderr
+    assert not out.exists() and not list(tmp_path.iterdir())  # refused before anything was written
+
+    result = run_level("--headless", "--frames", "5", "--size", "64x36", "--ids", "--out", str(out),
+                       "--export-scene", str(tmp_path / "scene.gltf"))
+    assert result.returncode == 0, result.stderr
+    gltf = json.loads((tmp_path / "scene.gltf").read_text())  # JSON glTF, buffer embedded
+    assert gltf["asset"]["version"] == "2.0" and gltf["buffers"][0]["uri"].startswith("data:")
+    import trimesh
+
+    loaded = trimesh.load(str(tmp_path / "scene.gltf"), force="scene")
+    info = json.loads((tmp_path / "scene.json").read_text())
+    assert set(loaded.graph.nodes_geometry) == {e for e, kinds in info["entities"].items() if "MeshRef" in kinds}
+
+    written = sorted(p for p in tmp_path.rglob("*") if p.is_file())
+    assert len(written) == 5 + 5 + 2
+    closing = result.stdout.strip().splitlines()[-1]
+    assert closing == (f"speculum: wrote 5 frame(s): {out / 'frame_0000.png'} .. frame_0004.png (5 files), "
+                       f"{out / 'ids_0000.npy'} .. ids_0004.npy (5 files), "
+                       f"{tmp_path / 'scene.gltf'}, {tmp_path / 'scene.json'}")
+
+
+def test_export_scene_without_a_camera_is_an_error_not_silence(tmp_path):
+    level = tmp_path / "no_camera.py"
+    level.write_text(
+        "from components import Material, MeshRef, Transform\n"
+        "from engine import Game, run\n"
+        "from engine.mesh import box\n"
+        "class NoCamera(Game):\n"
+        "    def build(self, world):\n"
+        "        world.spawn(Transform(), MeshRef(box()), Material())\n"
+        "run(NoCamera())\n")
+    scene_file = tmp_path / "scene.glb"
+    result = subprocess.run([sys.executable, str(level), "--headless", "--frames", "1", "--size", "32x32",
+                             "--out", str(tmp_path / "frames"), "--export-scene", str(scene_file)],
+                            cwd=ROOT, env={**os.environ, "PYTHONPATH": str(ROOT)},
+                            capture_output=True, text=True, timeout=120)
+    line = one_error_line(result)
+    assert "camera" in line
+    assert not scene_file.exists() and not scene_file.with_suffix(".json").exists()
