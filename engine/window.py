@@ -10,11 +10,12 @@ import time
 from pathlib import Path
 
 import moderngl_window as mglw
-import numpy as np
 
 from engine.app import Engine, Game
 from engine.capture import save_png
+from engine.errors import SpeculumError
 from engine.frame_io import Input, Output
+from engine.render.targets import CaptureTarget
 
 _MOVE_KEYS = {"W": "w", "A": "a", "S": "s", "D": "d", "Q": "q", "E": "e"}
 
@@ -78,12 +79,30 @@ def make_window_config(game: Game, args: argparse.Namespace | None = None) -> ty
             self.input.mouse_dy += dy
 
         def screenshot(self) -> Path:
-            w, h = self.wnd.buffer_size
-            data = np.frombuffer(self.wnd.fbo.read(components=3), np.uint8).reshape(h, w, 3)
+            """Write the last frame drawn to a PNG, by presenting it again into an offscreen
+            capture target (the headless runs' path).  Why not read the window: moderngl reads
+            a framebuffer through GL_COLOR_ATTACHMENT0, which a window's default framebuffer
+            does not have, so under a real window (GLX) that read leaves GL_INVALID_OPERATION
+            behind and the next frame's error check fails."""
+            renderer = self.engine.renderer
+            if renderer.targets is None:
+                raise SpeculumError("screenshot: no frame has been drawn yet")
+            size = renderer.targets.size
+            capture = CaptureTarget(self.ctx, size)
+            try:
+                renderer.present(capture.framebuffer, size)
+                rgb = capture.read_rgb()
+            finally:
+                capture.release()
             self.screenshots.mkdir(parents=True, exist_ok=True)
-            path = self.screenshots / f"screenshot_{time.strftime('%Y%m%d_%H%M%S')}.png"
-            save_png(np.flipud(data).copy(), path)
-            print(f"speculum: screenshot {path}")
+            stamp = time.strftime("%Y%m%d_%H%M%S")
+            path = self.screenshots / f"screenshot_{stamp}.png"
+            n = 1
+            while path.exists():  # two presses within a second keep both pictures
+                path = self.screenshots / f"screenshot_{stamp}_{n}.png"
+                n += 1
+            save_png(rgb, path)
+            print(f"speculum: screenshot {path}", flush=True)
             return path
 
         def on_close(self) -> None:

@@ -1,0 +1,108 @@
+"""The windowed shell in a real X window (Xvfb, moderngl-window's pyglet backend): F12 writes
+the frame on screen to a PNG and the frames after it run with no GL error.
+
+The test starts its own Xvfb and runs the window in a subprocess (pyglet and a GLX context
+stay out of the test process).  It is skipped, saying why, only when Xvfb or pyglet is
+missing (``apt-get install xvfb``; pyglet comes with moderngl-window's extras)."""
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from PIL import Image
+
+ROOT = Path(__file__).resolve().parents[1]
+SIZE = (160, 90)
+FRAMES_BEFORE = 3
+
+WINDOW_SCRIPT = r'''
+import json, sys
+from pathlib import Path
+
+import moderngl_window as mglw
+import pyglet
+
+from engine.window import make_window_config
+from games.hall_of_mirrors import HallOfMirrors
+
+shots, before, after, size = Path(sys.argv[1]), int(sys.argv[2]), int(sys.argv[3]), sys.argv[4]
+config = mglw.create_window_config_instance(make_window_config(HallOfMirrors()),
+                                            args=["--window", "pyglet", "--size", size])
+errors = []
+
+def frame():
+    config.on_render(0.0, 1 / 60)  # the engine's debug mode raises on any GL error here
+    config.wnd.swap_buffers()
+    errors.append(config.ctx.error)
+
+config.screenshots = shots
+for _ in range(before):
+    frame()
+# Press F12 as the X server would deliver it: through pyglet's event queue and
+# moderngl-window's key handler to the shell's on_key_event.
+config.wnd._window.dispatch_event("on_key_press", pyglet.window.key.F12, 0)
+config.wnd._window.dispatch_events()
+written = sorted(str(p) for p in shots.glob("*.png"))
+for _ in range(after):
+    frame()
+print(json.dumps({"errors": errors, "screenshots": written, "buffer_size": list(config.wnd.buffer_size),
+                  "renderer": config.ctx.info["GL_RENDERER"]}))
+config.on_close()
+config.wnd.destroy()
+'''
+
+
+@pytest.fixture(scope="module")
+def x_display():
+    """A private Xvfb display for this module (any DISPLAY the machine has is left alone)."""
+    xvfb = shutil.which("Xvfb")
+    if xvfb is None:
+        pytest.skip("Xvfb is not installed (apt-get install xvfb): no X server to open a real window on")
+    try:
+        import pyglet  # noqa: F401
+    except ImportError:
+        pytest.skip("pyglet is not installed: moderngl-window has no windowed backend")
+    read_fd, write_fd = os.pipe()
+    server = subprocess.Popen([xvfb, "-displayfd", str(write_fd), "-screen", "0", "640x480x24", "-nolisten", "tcp"],
+                              pass_fds=(write_fd,), stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    os.close(write_fd)
+    with os.fdopen(read_fd) as pipe:
+        number = pipe.readline().strip()  # Xvfb writes its display number once it is ready
+    if not number:
+        server.kill()
+        pytest.skip("Xvfb did not start")
+    yield f":{number}"
+    server.terminate()
+    server.wait(timeout=10)
+
+
+def test_f12_in_a_real_window_writes_the_frame_and_later_frames_have_no_gl_error(x_display, tmp_path):
+    shots, reference = tmp_path / "shots", tmp_path / "headless"
+    size = f"{SIZE[0]}x{SIZE[1]}"
+    env = {**os.environ, "DISPLAY": x_display, "PYTHONPATH": str(ROOT), "SPECULUM_DEBUG": "1"}
+    result = subprocess.run([sys.executable, "-c", WINDOW_SCRIPT, str(shots), str(FRAMES_BEFORE), "10", size],
+                            cwd=tmp_path, env=env, capture_output=True, text=True, timeout=120)
+    assert result.returncode == 0, result.stderr[-3000:]
+    report = json.loads(result.stdout.strip().splitlines()[-1])
+    assert report["buffer_size"] == list(SIZE)
+    assert report["errors"] == ["GL_NO_ERROR"] * (FRAMES_BEFORE + 10), report["errors"]
+    assert len(report["screenshots"]) == 1, report
+    shot = np.asarray(Image.open(report["screenshots"][0]))
+    assert shot.shape == (SIZE[1], SIZE[0], 3)
+    assert shot.mean() > 20 and shot.std() > 20  # a picture, not a black or flat frame
+
+    # The same frame rendered headless (same size, same number of 1/60 s steps) is the
+    # picture the window showed when F12 was pressed.
+    headless = subprocess.run([sys.executable, "-m", "games.hall_of_mirrors", "--headless", "--frames",
+                               str(FRAMES_BEFORE), "--size", size, "--out", str(reference)],
+                              cwd=ROOT, capture_output=True, text=True, timeout=120)
+    assert headless.returncode == 0, headless.stderr
+    expected = np.asarray(Image.open(reference / f"frame_{FRAMES_BEFORE - 1:04d}.png"))
+    difference = np.abs(shot.astype(int) - expected.astype(int))
+    assert difference.max() <= 2 and (difference > 0).mean() < 0.001, (difference.max(), (difference > 0).mean())
