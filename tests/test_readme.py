@@ -1,0 +1,84 @@
+"""Every README code example runs: each ```python block as the program a reader would save
+and run (headless, one frame), and every engine name the prose calls exists with the
+keyword arguments it shows."""
+from __future__ import annotations
+
+import importlib
+import inspect
+import os
+import re
+import subprocess
+import sys
+from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
+
+import numpy as np
+from PIL import Image
+
+ROOT = Path(__file__).resolve().parents[1]
+README = (ROOT / "README.md").read_text()
+PYTHON_BLOCKS = re.findall(r"^```python\n(.*?)^```", README, flags=re.S | re.M)
+# Where the prose's bare names live, searched in order.
+NAMESPACES = ("components", "engine", "engine.mesh", "engine.texture_data", "engine.portals", "engine.assets")
+NOT_PYTHON = {"layout"}  # GLSL's layout(binding=), named under Requirements
+
+
+def test_the_readme_has_its_python_examples():
+    assert len(PYTHON_BLOCKS) >= 2  # the tiny game and the mirror/portal/probe game
+
+
+def run_block(index: int, code: str, tmp_path: Path) -> tuple[subprocess.CompletedProcess, Path]:
+    script = tmp_path / f"readme_block_{index}.py"
+    script.write_text(code)
+    out = tmp_path / f"out_{index}"
+    result = subprocess.run([sys.executable, str(script), "--headless", "--frames", "1", "--size", "160x90",
+                             "--out", str(out)], cwd=tmp_path, env={**os.environ, "PYTHONPATH": str(ROOT)},
+                            capture_output=True, text=True, timeout=120)
+    return result, out
+
+
+def test_every_readme_python_block_runs_and_renders_a_picture(tmp_path):
+    """Each block is a whole program (a Game and ``run``): saved as a file and run the way its
+    own first line says, it exits 0 and writes a frame with something in it."""
+    for index, code in enumerate(PYTHON_BLOCKS):
+        assert 'if __name__ == "__main__":' in code and "run(" in code, \
+            f"README python block {index} is not a runnable program:\n{code[:200]}"
+    with ThreadPoolExecutor(max_workers=len(PYTHON_BLOCKS)) as pool:
+        runs = list(pool.map(lambda item: run_block(*item, tmp_path), enumerate(PYTHON_BLOCKS)))
+    for index, (result, out) in enumerate(runs):
+        assert result.returncode == 0, f"README python block {index} failed:\n{result.stderr[-2000:]}"
+        frame = np.asarray(Image.open(out / "frame_0000.png")).astype(float)
+        assert frame.shape == (90, 160, 3)
+        assert frame.mean() > 20 and frame.std() > 10, f"README python block {index} rendered a blank frame"
+
+
+def resolve(name: str):
+    """The object a README name such as ``look_rotation`` or ``engine.assets.spawn_model`` means."""
+    if "." in name:
+        module, _, attr = name.rpartition(".")
+        return getattr(importlib.import_module(module), attr)
+    for namespace in NAMESPACES:
+        found = getattr(importlib.import_module(namespace), name, None)
+        if found is not None:
+            return found
+    raise AssertionError(f"README names {name!r}, which none of {NAMESPACES} has")
+
+
+def test_every_call_the_readme_prose_shows_exists_with_its_keywords():
+    from components import Transform
+
+    calls = re.findall(r"`([A-Za-z_][\w.]*)\(([^`]*)\)`", README)
+    named = {name for name, _ in calls} | set(re.findall(r"`(checker_texture|load_texture)`", README))
+    assert {"look_rotation", "yaw_pitch_rotation", "checker_texture", "engine.texture_data.load_texture"} <= named
+    for name, arguments in calls:
+        if name in NOT_PYTHON:
+            continue
+        if name.startswith("t."):  # a Transform in the example: t.touch()
+            assert callable(getattr(Transform, name[2:], None)), f"README calls Transform.{name[2:]}()"
+            continue
+        target = resolve(name)
+        parameters = inspect.signature(target).parameters
+        for keyword in re.findall(r"\b(\w+)=", arguments):
+            assert keyword in parameters, f"README shows {name}({keyword}=...), which it does not take"
+    for name in named - {name for name, _ in calls}:
+        resolve(name)
