@@ -1,8 +1,11 @@
 """Frames, id images and scene exports written to disk, for debugging and verification."""
 from __future__ import annotations
 
+import dataclasses
 import json
+import math
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from pyglm import glm
@@ -30,7 +33,8 @@ def save_ids(ids: np.ndarray, path: str | Path) -> None:
 def export_scene(world: World, path: str | Path, camera_entity: int, size: tuple[int, int],
                  mirror_planes: dict[int, tuple[list[float], list[float]]] | None = None) -> Path:
     """Write world-space geometry (one GLB node per renderable entity, named by its id) and,
-    beside it, a JSON of the camera, each entity's component types, each mirror's world
+    beside it, a JSON of the camera, each entity's component types and their field values
+    (``component_values``: enough to rebuild the scene), each mirror's world
     plane (a point on it and its unit normal, towards the reflecting side), each portal's
     partner, each reflection probe and which probe each entity samples.  The geometry's
     format follows the extension (``SCENE_FORMATS``); any other is refused."""
@@ -72,6 +76,7 @@ def export_scene(world: World, path: str | Path, camera_entity: int, size: tuple
             str(entity): sorted(type(c).__name__ for c in world.components_of(entity))
             for entity in world.entities()
         },
+        **component_values(world),
         "portals": _portal_pairs(world),
         "mirrors": {
             str(entity): {"point": [float(v) for v in point], "normal": [float(v) for v in normal]}
@@ -119,3 +124,99 @@ def _portal_pairs(world: World) -> dict[str, dict]:
             "to_partner": [float(v) for column in carry.to_list() for v in column] if carry is not None else None,
         }
     return pairs
+
+
+# How component field values are written to scene.json (``component_values``).  Every kind
+# is plain JSON; ``VALUE_KINDS`` goes into the file so a tool reading it needs nothing else.
+VALUE_KINDS = {
+    "null": "no value (None)",
+    "bool": "true / false",
+    "int": "an integer (Transform.parent, Portal.partner, PortalClone.source/.portal: an entity id)",
+    "float": "a number; inf, -inf and nan are written as those strings",
+    "str": "a string",
+    "vec2": "[x, y]", "vec3": "[x, y, z]", "vec4": "[x, y, z, w] (colours: [r, g, b, a])",
+    "quat": "[w, x, y, z]: a unit quaternion, w first (glm.quat(w, x, y, z))",
+    "mat4": "16 numbers, column by column (glm's order)",
+    "list": "a list of values, each written by these rules",
+    "array": "{'shape': [...], 'dtype': ..., 'values': nested lists} (a numpy array of up to 64 values)",
+    "array_summary": "{'shape': [...], 'dtype': ...} (a larger numpy array, e.g. generated sky faces)",
+    "mesh": "{'name', 'id', 'vertices', 'triangles', 'bounds': [min xyz, max xyz] local}: entities with "
+            "the same id share one mesh; the entity's geometry is node <entity id> of the .glb/.gltf beside "
+            "this file, in world space (its Transform's world matrix undoes it)",
+    "texture": "{'name', 'size': [width, height]}: pixels by name, not embedded",
+    "object": "an object's public fields, each written by these rules",
+}
+_GLM_KIND = {glm.vec2: "vec2", glm.vec3: "vec3", glm.vec4: "vec4", glm.quat: "quat", glm.mat4: "mat4"}
+_ARRAY_VALUES_MAX = 64
+
+
+def json_value(value: Any) -> tuple[Any, str]:
+    """``value`` as plain JSON and the kind it was written as (a key of ``VALUE_KINDS``)."""
+    from engine.mesh import Mesh
+    from engine.texture_data import TextureData
+
+    if value is None:
+        return None, "null"
+    if isinstance(value, bool | np.bool_):
+        return bool(value), "bool"
+    if isinstance(value, int | np.integer):
+        return int(value), "int"
+    if isinstance(value, float | np.floating):
+        return _number(value), "float"
+    if isinstance(value, str):
+        return value, "str"
+    kind = _GLM_KIND.get(type(value))
+    if kind == "quat":
+        return [_number(v) for v in (value.w, value.x, value.y, value.z)], kind
+    if kind == "mat4":
+        return [_number(v) for column in value.to_list() for v in column], kind
+    if kind is not None:
+        return [_number(v) for v in value], kind
+    if isinstance(value, Mesh):
+        low, high = value.positions.min(axis=0), value.positions.max(axis=0)
+        return {"name": value.name, "id": value.id, "vertices": len(value.positions),
+                "triangles": len(value.indices), "bounds": [[_number(v) for v in low], [_number(v) for v in high]]}, \
+            "mesh"
+    if isinstance(value, TextureData):
+        height, width = np.asarray(value.pixels).shape[:2]
+        return {"name": value.name, "size": [int(width), int(height)]}, "texture"
+    if isinstance(value, np.ndarray):
+        summary = {"shape": list(value.shape), "dtype": str(value.dtype)}
+        if value.size > _ARRAY_VALUES_MAX:
+            return summary, "array_summary"
+        return {**summary, "values": json.loads(json.dumps(value.tolist(), default=str))}, "array"
+    if isinstance(value, list | tuple):
+        return [json_value(v)[0] for v in value], "list"
+    return {name: json_value(v)[0] for name, v in _public_fields(value).items()}, "object"
+
+
+def _number(value: Any) -> float | str:
+    value = float(value)
+    return value if math.isfinite(value) else str(value)
+
+
+def _public_fields(component: Any) -> dict[str, Any]:
+    """The fields a component is made from: a dataclass's init fields, else its public attributes."""
+    if dataclasses.is_dataclass(component):
+        return {f.name: getattr(component, f.name) for f in dataclasses.fields(component)
+                if f.init and not f.name.startswith("_")}
+    return {name: v for name, v in vars(component).items() if not name.startswith("_")}
+
+
+def component_values(world: World) -> dict[str, Any]:
+    """Per entity, each component's field values (``components``), and per component type
+    where its class is and the kind each field is written as (``component_types``), so a tool
+    can import the class and call it with the decoded fields."""
+    values: dict[str, dict[str, dict[str, Any]]] = {}
+    types: dict[str, dict[str, Any]] = {}
+    for entity in world.entities():
+        row = values[str(entity)] = {}
+        for component in sorted(world.components_of(entity), key=lambda c: type(c).__name__):
+            cls = type(component)
+            info = types.setdefault(cls.__name__, {"class": f"{cls.__module__}.{cls.__qualname__}", "fields": {}})
+            fields = row[cls.__name__] = {}
+            for name, value in _public_fields(component).items():
+                fields[name], kind = json_value(value)
+                if kind != "null" or name not in info["fields"]:
+                    info["fields"][name] = kind
+    return {"components": values, "component_types": dict(sorted(types.items())), "value_kinds": VALUE_KINDS}
