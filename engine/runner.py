@@ -10,8 +10,10 @@ from __future__ import annotations
 import argparse
 import os
 import sys
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
+
+import numpy as np
 
 from components import ComponentValueError
 from engine.app import Engine, Game
@@ -175,7 +177,8 @@ def run_headless(game: Game, args: argparse.Namespace) -> list[Path]:
     return written
 
 
-def _write(save, data, path: Path) -> Path:
+def _write(save: Callable[[np.ndarray, Path], None], data: np.ndarray, path: Path) -> Path:
+    """``save(data, path)``, a disk error (full, removed folder) as one line naming the file."""
     try:
         save(data, path)
     except OSError as exc:
