@@ -5,12 +5,12 @@ from components.portal import Portal, PortalClone, Slice, Traveller
 from components.probe import ReflectionProbe
 from components.rendering import Emissive, Material, MeshRef, Reflective, Refractive, Skybox
 from components.tracking import ComponentValueError, TrackedComponent
-from components.transform import Transform, look_rotation, yaw_pitch_rotation
+from components.transform import Transform, euler_rotation, look_rotation, yaw_pitch_rotation
 
 __all__ = [
     "Camera", "ComponentValueError", "DirectionalLight", "Emissive", "FlyController", "Material",
     "MeshRef", "Mirror", "PointLight", "Portal", "PortalClone", "ReflectionProbe", "Reflective", "Refractive",
     "Skybox", "Slice",
     "TrackedComponent", "Transform", "Traveller",
-    "look_rotation", "yaw_pitch_rotation",
+    "euler_rotation", "look_rotation", "yaw_pitch_rotation",
 ]

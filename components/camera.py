@@ -6,29 +6,47 @@ from typing import Any
 
 from pyglm import glm
 
-from components.tracking import ComponentValueError, TrackedComponent, boolean, color, finite, vec3
+from components.tracking import HALF_MAX, ComponentValueError, TrackedComponent, boolean, color, finite, vec3
+
+# Depth range the 24-bit depth buffer still resolves: far / near up to 1e7 keeps surfaces a
+# few percent of their distance apart distinct at the far end; beyond, entity pixels vanish.
+MIN_NEAR = 1e-4
+MAX_FAR = 1e7
+MAX_DEPTH_RATIO = 1e7
+_DEFAULT_FAR = 200.0
 
 
 @dataclass(eq=False)
 class Camera(TrackedComponent):
     """A perspective camera. The active camera with the lowest entity id renders."""
 
+    SHAREABLE = False  # one entity's own state: see components.tracking
     fov_y: float = 60.0
     near: float = 0.05
-    far: float = 200.0
+    far: float = _DEFAULT_FAR
     active: bool = True
 
     def _validate(self, name: str, value: Any) -> Any:
         if name == "fov_y":
             return finite(self, name, value, low=1.0, high=179.0)
         if name in ("near", "far"):
-            value = finite(self, name, value, positive=True)
+            value = finite(self, name, value, positive=True, high=MAX_FAR if name == "far" else None)
+            if name == "near" and value < MIN_NEAR:
+                raise ComponentValueError(f"Camera.near must be >= {MIN_NEAR} (depth precision), got {value!r}")
             # Checked on every write, not only at construction (the other plane is in
             # __dict__ once set; during __init__ ``near`` comes first).
             near = value if name == "near" else self.__dict__.get("near")
             far = value if name == "far" else self.__dict__.get("far")
             if near is not None and far is not None and far <= near:
-                raise ComponentValueError(f"Camera.{name} must keep far > near, got near={near} far={far}")
+                # Blame the field the user set: during construction (far not yet in __dict__)
+                # Camera(near=500) is wrong about near, not about the default far.
+                # (both given, as in Camera(near=10, far=1), the later one, far, is blamed).
+                blamed = "near" if name == "far" and "far" not in self.__dict__ and value == _DEFAULT_FAR else name
+                raise ComponentValueError(f"Camera.{blamed} must keep far > near, got near={near} far={far}")
+            if near is not None and far is not None and far / near > MAX_DEPTH_RATIO:
+                raise ComponentValueError(
+                    f"Camera.{name} must keep far / near <= {MAX_DEPTH_RATIO:.0e} (beyond it the depth buffer "
+                    f"cannot tell surfaces apart), got near={near} far={far}")
             return value
         if name == "active":
             return boolean(self, name, value)
@@ -39,16 +57,20 @@ class Camera(TrackedComponent):
 class FlyController(TrackedComponent):
     """WASD + mouse fly controls for the entity's Transform (used by windowed runs)."""
 
+    SHAREABLE = False  # one entity's own state: see components.tracking
     speed: float = 4.0
     mouse_sensitivity: float = 0.15
     yaw: float = 0.0
     pitch: float = 0.0
 
     def _validate(self, name: str, value: Any) -> Any:
-        if name in ("speed", "mouse_sensitivity"):
-            return finite(self, name, value, low=0.0)
+        if name == "speed":
+            # Bounded so speed x dt x Shift can never carry the camera past float32.
+            return finite(self, name, value, low=0.0, high=1e6)
+        if name == "mouse_sensitivity":
+            return finite(self, name, value, low=0.0, high=1e3)
         if name in ("yaw", "pitch"):
-            return finite(self, name, value)
+            return finite(self, name, value, low=-1e6, high=1e6)
         return value
 
 
@@ -66,7 +88,7 @@ class DirectionalLight(TrackedComponent):
         if name == "color":
             return color(self, name, value)
         if name == "intensity":
-            return finite(self, name, value, low=0.0)
+            return finite(self, name, value, low=0.0, high=HALF_MAX)  # lit colour lands in half floats
         return value
 
 
@@ -82,7 +104,7 @@ class PointLight(TrackedComponent):
         if name == "color":
             return color(self, name, value)
         if name == "intensity":
-            return finite(self, name, value, low=0.0)
+            return finite(self, name, value, low=0.0, high=HALF_MAX)  # lit colour lands in half floats
         if name == "range":
             return finite(self, name, value, positive=True)
         return value

@@ -6,7 +6,7 @@ from typing import Any
 
 from pyglm import glm
 
-from components.tracking import ComponentValueError, TrackedComponent, color, finite, vec3
+from components.tracking import ComponentValueError, TrackedComponent, boolean, color, finite, vec3
 
 
 @dataclass(eq=False)
@@ -40,6 +40,8 @@ class Mirror(TrackedComponent):
         if name == "max_depth":
             if not isinstance(value, int) or isinstance(value, bool) or not 0 <= value <= 16:
                 raise ComponentValueError(f"Mirror.max_depth must be an int in [0, 16], got {value!r}")
+        if name == "enabled":
+            return boolean(self, name, value)
         if name == "plane_point" and value is not None:
             return vec3(self, name, value)
         if name == "plane_normal" and value is not None:

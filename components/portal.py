@@ -6,7 +6,7 @@ from typing import Any
 
 from pyglm import glm
 
-from components.tracking import ComponentValueError, TrackedComponent, color, finite, vec3
+from components.tracking import ComponentValueError, TrackedComponent, color, finite, integer, vec3
 
 
 @dataclass(eq=False)
@@ -19,6 +19,7 @@ class Portal(TrackedComponent):
     recursion limit.
     """
 
+    SHAREABLE = False  # one entity's own state: see components.tracking
     partner: int | None = None
     size: Any = (2.0, 3.0)
     max_depth: int = 4
@@ -54,16 +55,24 @@ class Portal(TrackedComponent):
         return value
 
 
+MAX_SPEED = 1e6  # m/s; a Traveller faster than this leaves float32 range within a game's lifetime
+
+
 @dataclass(eq=False)
 class Traveller(TrackedComponent):
     """An entity that goes through portals; ``velocity`` (world, m/s) moves it each frame
     and is turned with it when it travels."""
 
+    SHAREABLE = False  # one entity's own state: see components.tracking
     velocity: Any = field(default_factory=glm.vec3)
 
     def _validate(self, name: str, value: Any) -> Any:
         if name == "velocity":
-            return vec3(self, name, value)
+            v = vec3(self, name, value)
+            if glm.length(v) > MAX_SPEED:
+                # 3e38 m/s would overflow the position float32 frames later, far from the cause.
+                raise ComponentValueError(f"Traveller.velocity must be at most {MAX_SPEED:.0e} m/s long, got {value!r}")
+            return v
         return value
 
 
@@ -75,6 +84,7 @@ class Slice(TrackedComponent):
     problem); the render system turns it into a per-instance clip plane.
     """
 
+    SHAREABLE = False  # one entity's own state: see components.tracking
     plane: Any = field(default_factory=lambda: glm.vec4(0.0, 0.0, 0.0, 1.0))
 
     def _validate(self, name: str, value: Any) -> Any:
@@ -94,5 +104,11 @@ class PortalClone(TrackedComponent):
     """Marks the stand-in drawn at the partner portal for the part of ``source`` that went
     through ``portal``; the id image reports it as ``source``."""
 
+    SHAREABLE = False  # one entity's own state: see components.tracking
     source: int = 0
     portal: int = 0
+
+    def _validate(self, name: str, value: Any) -> Any:
+        if name in ("source", "portal"):
+            return integer(self, name, value, low=0, high=2**31 - 1)  # an entity id (it goes into the id image)
+        return value

@@ -7,7 +7,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from pyglm import glm
 
-from components.tracking import ComponentValueError, TrackedComponent, boolean, choice, color, finite, integer
+from components.tracking import HALF_MAX, ComponentValueError, TrackedComponent, boolean, choice, color, finite, integer
 
 if TYPE_CHECKING:
     from engine.mesh import Mesh
@@ -66,7 +66,7 @@ class Emissive(TrackedComponent):
 
     def _validate(self, name: str, value: Any) -> Any:
         if name == "power":
-            return finite(self, name, value, low=0.0)
+            return finite(self, name, value, low=0.0, high=HALF_MAX)  # emitted colour lands in half floats
         return value
 
 

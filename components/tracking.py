@@ -7,13 +7,24 @@ belongs to a world, adds its entity to that world's change set for its type.
 
 In-place edits of a mutable field (``t.position.x = 1``) cannot be seen; assign the
 field (``t.position = ...``, ``t.position += ...``) or call :meth:`touch`.
+
+**Sharing one component object between entities.**  Components that are plain data about
+how something looks (Material, MeshRef, Mirror, Emissive, Reflective, Refractive, lights,
+probes, Skybox) may be given to several entities on purpose: the component keeps the set of
+entities holding it, and a field write marks every one of them changed (three boxes sharing
+a Material all turn green; deleting one leaves the others updating).  Components that
+describe one entity's own state (``SHAREABLE = False``: Transform with its parent and the
+travel writes, Camera, FlyController, Portal with its partner, Traveller, Slice, PortalClone)
+are refused on a second entity with an error naming the class and both entities: give each
+entity its own object (``dataclasses.replace(c)`` copies one).  A component belongs to one
+world at a time.
 """
 from __future__ import annotations
 
 import dataclasses
 import math
 from numbers import Integral
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 from pyglm import glm
@@ -28,7 +39,10 @@ class TrackedComponent:
 
     # Set by engine.world.World when the component is attached; never by users.
     _sink: set[int] | None = None
-    _entity: int = 0
+    _entity: int = 0                      # the entity it last joined
+    _entities: frozenset[int] = frozenset()  # every entity holding it (one unless shared)
+    # False for components that are one entity's own state (see the module docstring).
+    SHAREABLE: ClassVar[bool] = True
 
     def __setattr__(self, name: str, value: Any) -> None:
         if not name.startswith("_"):
@@ -41,12 +55,12 @@ class TrackedComponent:
         object.__setattr__(self, name, value)
         sink = self._sink
         if sink is not None and not name.startswith("_"):
-            sink.add(self._entity)
+            sink.update(self._entities)
 
     def touch(self) -> None:
         """Report an in-place edit the component could not see by itself."""
         if self._sink is not None:
-            self._sink.add(self._entity)
+            self._sink.update(self._entities)
 
     def _validate(self, name: str, value: Any) -> Any:  # overridden per component
         return value
@@ -76,6 +90,12 @@ def _fail(owner: object, name: str, value: Any, why: str) -> ComponentValueError
     return ComponentValueError(f"{type(owner).__name__}.{name} {why}, got {value!r}")
 
 
+# What the GPU formats hold: float32 for positions, sizes and parameters; float16 (largest
+# finite 65504) for anything that lands in the HDR colour targets (colours, intensities).
+FLOAT32_MAX = 3.4028234663852886e38
+HALF_MAX = 65504.0
+
+
 def finite(owner: object, name: str, value: Any, *, low: float | None = None,
            high: float | None = None, positive: bool = False) -> float:
     """A finite float inside [low, high] (and > 0 when ``positive``)."""
@@ -83,10 +103,14 @@ def finite(owner: object, name: str, value: Any, *, low: float | None = None,
         raise _fail(owner, name, value, "must be a number")
     try:
         number = float(value)
+    except OverflowError:
+        raise _fail(owner, name, value, "must be finite (too large for a float)") from None
     except (TypeError, ValueError):
         raise _fail(owner, name, value, "must be a number") from None
     if not math.isfinite(number):
         raise _fail(owner, name, value, "must be finite")
+    if abs(number) > FLOAT32_MAX:
+        raise _fail(owner, name, value, "must fit in a 32-bit float (|x| <= 3.4e38)")
     if positive and number <= 0.0:
         raise _fail(owner, name, value, "must be > 0")
     if low is not None and number < low:
@@ -108,7 +132,14 @@ def vec3(owner: object, name: str, value: Any, *, low: float | None = None,
     if _not_a_number(value) or isinstance(value, dict) or any(_not_a_number(c) for c in _items(value)):
         raise _fail(owner, name, value, "must be three numbers")
     try:
-        v = glm.vec3(value) if not isinstance(value, (int, float)) else glm.vec3(float(value))
+        parts = _items(value)
+        if len(parts) == 3:
+            # Through float() first: glm wraps ints >= 2**63 silently ((2**64 + 5, 0, 0) -> 5).
+            v = glm.vec3(*(float(c) for c in parts))
+        else:
+            v = glm.vec3(value) if not isinstance(value, (int, float)) else glm.vec3(float(value))
+    except OverflowError:
+        raise _fail(owner, name, value, "must be finite (too large for a float)") from None
     except (TypeError, ValueError):
         raise _fail(owner, name, value, "must be three numbers") from None
     for c in v:
@@ -128,6 +159,8 @@ def color(owner: object, name: str, value: Any) -> glm.vec4:
         raise _fail(owner, name, value, "must be 3 or 4 numbers")
     try:
         items = [float(c) for c in parts]
+    except OverflowError:
+        raise _fail(owner, name, value, "must have finite components (too large for a float)") from None
     except (TypeError, ValueError):
         raise _fail(owner, name, value, "must be 3 or 4 numbers") from None
     if len(items) == 3:
@@ -138,6 +171,8 @@ def color(owner: object, name: str, value: Any) -> glm.vec4:
         raise _fail(owner, name, value, "must have finite components >= 0")
     if items[3] > 1.0:
         raise _fail(owner, name, value, "must have alpha <= 1")
+    if max(items) > HALF_MAX:
+        raise _fail(owner, name, value, "must have components <= 65504 (the half-float colour targets' limit)")
     return glm.vec4(*items)
 
 

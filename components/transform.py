@@ -19,6 +19,7 @@ class Transform(TrackedComponent):
     model-to-world matrix as of the last frame.
     """
 
+    SHAREABLE = False  # one entity's own state: see components.tracking
     position: Any = field(default_factory=glm.vec3)
     rotation: Any = field(default_factory=glm.quat)
     scale: Any = field(default_factory=lambda: glm.vec3(1.0))
@@ -43,20 +44,81 @@ class Transform(TrackedComponent):
                 raise ComponentValueError(f"Transform.scale must have no zero component, got {value!r}")
             return v
         if name == "rotation":
-            try:
-                q = glm.quat(value)
-            except TypeError:
-                raise ComponentValueError(f"Transform.rotation must be a glm.quat, got {value!r}") from None
-            if not (math.isfinite(q.w) and math.isfinite(q.x) and math.isfinite(q.y) and math.isfinite(q.z)):
-                raise ComponentValueError(f"Transform.rotation must be finite, got {value!r}")
-            if glm.length(q) == 0.0:
-                raise ComponentValueError("Transform.rotation must not be the zero quaternion")
-            return glm.normalize(q)
+            return rotation(value)
         if name == "parent" and value is not None:
             if isinstance(value, bool) or not isinstance(value, Integral) or value <= 0:
                 raise ComponentValueError(f"Transform.parent must be an entity id or None, got {value!r}")
+            if self._sink is not None and value in self._entities:
+                raise ComponentValueError(f"Transform.parent of entity {value} is the entity itself, got {value!r}")
+            if self._sink is not None and self._parent_cycle(int(value)):
+                raise ComponentValueError(f"Transform.parent {value!r} would make a cycle (that entity descends "
+                                          f"from entity {self._entity})")
             return int(value)
         return value
+
+    def _parent_cycle(self, parent: int) -> bool:
+        """Whether ``parent`` is this entity or one of its descendants (walks up from parent)."""
+        world = getattr(self, "_world_ref", None)
+        if world is None:
+            return False
+        seen: set[int] = set()
+        entity: int | None = parent
+        while entity is not None and entity not in seen:
+            if entity in self._entities:
+                return True
+            seen.add(entity)
+            other = world.try_get(entity, Transform) if world.exists(entity) else None
+            entity = other.parent if other is not None else None
+        return False
+
+
+def rotation(value: Any) -> glm.quat:
+    """A unit quaternion from a glm.quat or (w, x, y, z); normalised in double precision.
+
+    A 3-tuple is refused: glm reads it as Euler angles in radians, which is rarely what a
+    caller meant; :func:`euler_rotation` takes degrees by name.
+    """
+    if isinstance(value, (glm.vec3, glm.dvec3)) or (not isinstance(value, (glm.quat, glm.dquat))
+                                                    and len(_parts(value)) == 3):
+        raise ComponentValueError(
+            f"Transform.rotation must be a quaternion (glm.quat or (w, x, y, z)); for angles use "
+            f"euler_rotation(pitch_deg, yaw_deg, roll_deg), yaw_pitch_rotation or look_rotation, got {value!r}")
+    if isinstance(value, (glm.quat, glm.dquat)):
+        parts = [value.w, value.x, value.y, value.z]
+    else:
+        parts = _parts(value)
+    if len(parts) != 4 or any(isinstance(c, (str, bytes, bool)) for c in parts):
+        raise ComponentValueError(f"Transform.rotation must be a glm.quat or (w, x, y, z), got {value!r}")
+    try:
+        w, x, y, z = (float(c) for c in parts)
+    except (TypeError, ValueError, OverflowError):
+        raise ComponentValueError(f"Transform.rotation must be four finite numbers, got {value!r}") from None
+    if not all(math.isfinite(c) for c in (w, x, y, z)):
+        raise ComponentValueError(f"Transform.rotation must be finite, got {value!r}")
+    norm = math.sqrt(w * w + x * x + y * y + z * z)  # in double: quat(1e20, ...) keeps its direction
+    if norm == 0.0 or not math.isfinite(norm):
+        raise ComponentValueError(f"Transform.rotation must not be the zero quaternion, got {value!r}")
+    return glm.quat(w / norm, x / norm, y / norm, z / norm)
+
+
+def _parts(value: Any) -> list[Any]:
+    try:
+        return list(value)
+    except TypeError:
+        return []
+
+
+def euler_rotation(pitch_deg: float, yaw_deg: float, roll_deg: float = 0.0) -> glm.quat:
+    """The rotation of Euler angles in **degrees**: roll about Z, then pitch about X, then yaw about Y.
+
+    Named so that angles are never mistaken for a quaternion or for radians.
+    """
+    for name, v in (("pitch_deg", pitch_deg), ("yaw_deg", yaw_deg), ("roll_deg", roll_deg)):
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(float(v)):
+            raise ComponentValueError(f"euler_rotation {name} must be a finite number of degrees, got {v!r}")
+    return (glm.angleAxis(glm.radians(float(yaw_deg)), glm.vec3(0, 1, 0))
+            * glm.angleAxis(glm.radians(float(pitch_deg)), glm.vec3(1, 0, 0))
+            * glm.angleAxis(glm.radians(float(roll_deg)), glm.vec3(0, 0, 1)))
 
 
 def look_rotation(forward: Any, up: Any = (0.0, 1.0, 0.0)) -> glm.quat:

@@ -14,7 +14,7 @@ from typing import Any, TypeVar
 
 import esper
 
-from components.tracking import TrackedComponent
+from components.tracking import ComponentValueError, TrackedComponent
 
 C = TypeVar("C")
 _world_ids = itertools.count(1)
@@ -78,33 +78,80 @@ class World:
 
     # --- entities and components ----------------------------------------------------------
     def spawn(self, *components: Any) -> int:
-        """Create an entity with these components and return its id."""
+        """Create an entity with these components and return its id.
+
+        All or nothing: if any component is refused, the entity and the components already
+        attached are taken out again, so no half-built entity stays in the world.
+        """
         self._use()
         entity = esper.create_entity()
-        for component in components:
-            self.add_component(entity, component)
+        try:
+            for component in components:
+                self.add_component(entity, component)
+        except BaseException:
+            for component in esper.components_for_entity(entity):
+                self._detach(component, entity)
+                self._changed[type(component)].discard(entity)
+            esper.delete_entity(entity, immediate=True)
+            raise
         return entity
 
     def add_component(self, entity: int, component: Any) -> None:
+        """Attach ``component`` (replacing one of its type); see components.tracking on sharing."""
         self._use()
         kind = type(component)
-        if esper.has_component(entity, kind):
-            self._detach(esper.component_for_entity(entity, kind))
+        if isinstance(component, TrackedComponent):
+            self._check_sharing(entity, component)
         check = getattr(component, "check_attach", None)
         if check is not None:
             check(entity)
+        parent = getattr(component, "parent", None) if kind.__name__ == "Transform" else None
+        if parent is not None:
+            if parent == entity:
+                raise ComponentValueError(f"Transform.parent of entity {entity} is the entity itself, got {parent!r}")
+            if not self.exists(parent):
+                raise ComponentValueError(f"Transform.parent of entity {entity} names no entity in this world, "
+                                          f"got {parent!r}")
+            walk, seen = parent, set()
+            while walk is not None and walk not in seen:
+                seen.add(walk)
+                above = esper.try_component(walk, kind) if esper.entity_exists(walk) else None
+                walk = above.parent if above is not None else None
+                if walk == entity:
+                    raise ComponentValueError(f"Transform.parent {parent!r} of entity {entity} would make a "
+                                              f"cycle (entity {parent} descends from entity {entity})")
+        if esper.has_component(entity, kind):
+            old = esper.component_for_entity(entity, kind)
+            if old is not component:
+                self._detach(old, entity)
         esper.add_component(entity, component)
         if isinstance(component, TrackedComponent):
             object.__setattr__(component, "_entity", entity)
+            object.__setattr__(component, "_entities", component._entities | {entity})
             object.__setattr__(component, "_sink", self._changed[kind])
+            object.__setattr__(component, "_world_ref", self)
         self._changed[kind].add(entity)
+
+    def _check_sharing(self, entity: int, component: TrackedComponent) -> None:
+        """Refuse a component of another world, or a per-entity one already held elsewhere."""
+        holders = component._entities - {entity}
+        if component._sink is None or not holders:
+            return
+        name = type(component).__name__
+        if component._sink is not self._changed[type(component)]:
+            raise ComponentValueError(f"{name} given to entity {entity} already belongs to entity "
+                                      f"{min(holders)} of another world; give each its own {name}")
+        if not component.SHAREABLE:
+            raise ComponentValueError(
+                f"{name} given to entity {entity} already belongs to entity {min(holders)}; a {name} "
+                f"is one entity's own state, give each entity its own (dataclasses.replace copies one)")
 
     def remove_component(self, entity: int, kind: type[C]) -> C | None:
         self._use()
         if not esper.has_component(entity, kind):
             return None
         component = esper.remove_component(entity, kind)
-        self._detach(component)
+        self._detach(component, entity)
         self._changed[kind].add(entity)
         return component
 
@@ -114,15 +161,23 @@ class World:
         if not esper.entity_exists(entity) or entity in self._deleted:
             return
         for component in esper.components_for_entity(entity):
-            self._detach(component)
+            self._detach(component, entity)
             self._changed[type(component)].add(entity)
         self._deleted.add(entity)
         esper.delete_entity(entity)
 
     @staticmethod
-    def _detach(component: Any) -> None:
+    def _detach(component: Any, entity: int) -> None:
+        """``entity`` lets go of ``component``; others sharing it keep reporting their writes."""
         if isinstance(component, TrackedComponent):
-            object.__setattr__(component, "_sink", None)
+            rest = component._entities - {entity}
+            object.__setattr__(component, "_entities", rest)
+            if rest:
+                if component._entity == entity:
+                    object.__setattr__(component, "_entity", min(rest))
+            else:
+                object.__setattr__(component, "_sink", None)
+                object.__setattr__(component, "_world_ref", None)
 
     def exists(self, entity: int) -> bool:
         self._use()
@@ -162,11 +217,18 @@ class World:
     # --- change sets -----------------------------------------------------------------------
     def changed(self, kind: type) -> set[int]:
         """Entities whose ``kind`` component was added, removed or written since last step."""
+        self._check_open()
         return self._changed.get(kind, set())
 
     def deleted(self) -> set[int]:
         """Entities deleted since the last step (their components are gone now)."""
+        self._check_open()
         return self._deleted
+
+    def _check_open(self) -> None:
+        # A closed world's sets are stale: answering them would hide a use after close.
+        if self._closed:
+            raise RuntimeError(f"world {self.name} was closed")
 
     # --- systems ---------------------------------------------------------------------------
     def add_system(self, system: esper.Processor, priority: int) -> None:

@@ -1,0 +1,201 @@
+"""Robustness of component data: sharing, values the GPU cannot hold, all-or-nothing spawn.
+
+Each test renders real frames (or checks the exact error) and states what it expects from
+independent facts: a shared Material written once changes every holder's pixels, a refused
+value names ``Class.field``, a refused spawn leaves no entity behind.
+"""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from pyglm import glm
+
+from components import (
+    Camera,
+    ComponentValueError,
+    DirectionalLight,
+    Emissive,
+    FlyController,
+    Material,
+    MeshRef,
+    Mirror,
+    PointLight,
+    Portal,
+    PortalClone,
+    Reflective,
+    Skybox,
+    Transform,
+    Traveller,
+    euler_rotation,
+)
+from engine.mesh import box, quad
+from engine.world import World
+from tests.support import look_from
+
+
+@pytest.fixture
+def world():
+    w = World("reliability")
+    try:
+        yield w
+    finally:
+        w.close()
+
+
+def _three_boxes(shared: Material):
+    def build(world):
+        look_from(world, (0, 0, 6), target=(0, 0, 0))
+        world.spawn(DirectionalLight(direction=(0, 0, -1), intensity=2.0))
+        for x in (-1.5, 0.0, 1.5):
+            world.spawn(Transform(position=(x, 0, 0)), MeshRef(box((1, 1, 1))), shared)
+    return build
+
+
+def _greenish(pixel) -> bool:
+    r, g, b = (int(c) for c in pixel)
+    return g > r + 40 and g > b + 40
+
+
+# --- 1. shared components -------------------------------------------------------------------
+
+def test_a_shared_material_written_once_turns_every_holder_green_even_after_one_is_deleted(scene):
+    shared = Material(color=(0.8, 0.1, 0.1))
+    run = scene(_three_boxes(shared))
+    run.frame()
+    points = [(-1.5, 0, 0.5), (0, 0, 0.5), (1.5, 0, 0.5)]
+    shared.color = (0.1, 0.8, 0.1)
+    img = run.frame()
+    for p in points:
+        col, row = run.project(p)
+        assert _greenish(img[row, col]), (p, img[row, col])
+    boxes = [e for e, _ in run.world.query(Material)]
+    run.world.delete_entity(boxes[-1])
+    run.frame()
+    shared.color = (0.1, 0.1, 0.8)  # the two left must still follow the shared object
+    img = run.frame()
+    for p in points[:2]:
+        col, row = run.project(p)
+        r, g, b = (int(c) for c in img[row, col])
+        assert b > r + 40 and b > g + 40, (p, img[row, col])
+
+
+def test_a_shared_mirror_disabled_once_is_off_on_every_entity(world):
+    mirror = Mirror()
+    a = world.spawn(Transform(), MeshRef(quad(1, 1)), Material(), mirror)
+    b = world.spawn(Transform(position=(3, 0, 0)), MeshRef(quad(1, 1)), Material(), mirror)
+    world._changed[Mirror].clear()
+    mirror.enabled = False
+    assert world.changed(Mirror) == {a, b}
+
+
+def test_per_entity_components_refuse_a_second_entity_naming_both(world):
+    t = Transform()
+    a = world.spawn(t)
+    with pytest.raises(ComponentValueError, match=rf"Transform given to entity \d+ already belongs to entity {a}"):
+        world.spawn(t)
+    for component in (Camera(), FlyController(), Traveller(), PortalClone(source=1, portal=1)):
+        first = world.spawn(component)
+        with pytest.raises(ComponentValueError, match=type(component).__name__):
+            world.spawn(component)
+        with pytest.raises(ComponentValueError, match=str(first)):
+            world.add_component(world.spawn(), component)
+
+
+def test_removing_one_holder_keeps_the_others_tracked(world):
+    m = Material()
+    a = world.spawn(m)
+    b = world.spawn(m)
+    world.remove_component(a, Material)
+    world._changed[Material].clear()
+    m.color = (0, 1, 0)
+    assert world.changed(Material) == {b}
+
+
+# --- 2. values the GPU formats cannot hold ----------------------------------------------------
+
+@pytest.mark.parametrize("make, field", [
+    (lambda: Material(color=(1e39, 0, 0)), "Material.color"),
+    (lambda: Material(color=(7e4, 0, 0)), "Material.color"),
+    (lambda: DirectionalLight(intensity=1e39), "DirectionalLight.intensity"),
+    (lambda: PointLight(intensity=1e6), "PointLight.intensity"),
+    (lambda: Mirror(color=(1, 1e39, 1)), "Mirror.color"),
+    (lambda: Portal(closed_color=(1e5, 0, 0)), "Portal.closed_color"),
+    (lambda: Emissive(power=1e39), "Emissive.power"),
+    (lambda: Reflective(tint=(1e5, 1, 1)), "Reflective.tint"),
+    (lambda: Skybox(zenith=(1e5, 0, 0)), "Skybox.zenith"),
+    (lambda: Camera(far=1e39), "Camera.far"),
+    (lambda: Camera(far=3.4e38), "Camera.far"),
+    (lambda: Camera(near=1e-30), "Camera.near"),
+    (lambda: Camera(near=500), "Camera.near"),
+    (lambda: Transform(position=(10**400, 0, 0)), "Transform.position"),
+    (lambda: Camera(fov_y=10**400), "Camera.fov_y"),
+    (lambda: Transform(rotation=(0, 90, 0)), "Transform.rotation"),
+    (lambda: Transform(rotation=glm.vec3(0, 1, 0)), "Transform.rotation"),
+    (lambda: Mirror(enabled="yes"), "Mirror.enabled"),
+    (lambda: Mirror(enabled=None), "Mirror.enabled"),
+    (lambda: Mirror(enabled=[]), "Mirror.enabled"),
+    (lambda: PortalClone(source=-1), "PortalClone.source"),
+    (lambda: PortalClone(source="x"), "PortalClone.source"),
+    (lambda: PortalClone(source=None), "PortalClone.source"),
+    (lambda: FlyController(speed=3.4e38), "FlyController.speed"),
+    (lambda: Traveller(velocity=(3e38, 0, 0)), "Traveller.velocity"),
+])
+def test_values_the_gpu_or_the_simulation_cannot_hold_are_refused_naming_the_field(make, field):
+    with pytest.raises(ComponentValueError, match=field.replace(".", r"\.")):
+        make()
+
+
+def test_a_huge_int_is_kept_as_its_float_not_wrapped_by_glm():
+    assert Transform(position=(2**64 + 5, 0, 0)).position.x == pytest.approx(float(2**64))
+    with pytest.raises(ComponentValueError, match=r"Transform\.position"):
+        Transform(position=(2**200, 0, 0))  # finite in Python, not in float32
+
+
+def test_an_unnormalisable_looking_quaternion_is_normalised_in_double_precision():
+    t = Transform(rotation=glm.quat(1e20, 0, 1e20, 0))
+    expected = 2 ** -0.5
+    assert abs(t.rotation.w - expected) < 1e-6 and abs(t.rotation.y - expected) < 1e-6
+    assert abs(glm.length(t.rotation) - 1.0) < 1e-6
+
+
+def test_euler_rotation_takes_degrees_by_name():
+    q = euler_rotation(0, 90, 0)
+    forward = q * glm.vec3(0, 0, -1)
+    assert np.allclose(list(forward), [-1, 0, 0], atol=1e-6)
+
+
+# --- 4. spawn is all or nothing ----------------------------------------------------------------
+
+def test_a_refused_spawn_leaves_no_entity_in_the_world(world):
+    before = set(world.entities())
+    with pytest.raises(ComponentValueError, match="paired with itself"):
+        world.spawn(Transform(), MeshRef(quad()), Material(), Portal(partner=len(before) + 1))
+    assert set(world.entities()) == before
+    assert not world.query(Transform)
+    assert not world.changed(Transform)
+
+
+# --- 5 and 7. parents ---------------------------------------------------------------------------
+
+def test_parent_self_cycle_and_missing_are_refused_at_the_write(world):
+    a = world.spawn(Transform())
+    b = world.spawn(Transform(parent=a))
+    with pytest.raises(ComponentValueError, match=r"Transform\.parent"):
+        world.get(a, Transform).parent = a
+    with pytest.raises(ComponentValueError, match=r"Transform\.parent.*cycle"):
+        world.get(a, Transform).parent = b
+    assert world.get(a, Transform).parent is None
+    with pytest.raises(ComponentValueError, match=r"Transform\.parent of entity \d+ names no entity"):
+        world.spawn(Transform(parent=999))
+
+
+# --- 8. a closed world --------------------------------------------------------------------------
+
+def test_a_closed_world_does_not_answer_change_sets():
+    w = World("closed")
+    w.spawn(Transform())
+    w.close()
+    with pytest.raises(RuntimeError, match="closed"):
+        w.changed(Transform)
+    with pytest.raises(RuntimeError, match="closed"):
+        w.deleted()
