@@ -6,6 +6,9 @@ whose MeshRef points at it.
 from __future__ import annotations
 
 import itertools
+import json
+import os
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -190,6 +193,8 @@ def load_model(path: str | Path) -> list[ModelPart]:
     """Load every mesh of a file with trimesh; errors name the file and the reason."""
     import trimesh
 
+    if isinstance(path, bytes) or not isinstance(path, (str, os.PathLike)):
+        raise AssetError(f"mesh file path must be a str or pathlib.Path, got {type(path).__name__} {path!r}")
     path = Path(path)
     if not path.is_file():
         raise AssetError(f"mesh file {str(path)!r}: no such file")
@@ -198,6 +203,10 @@ def load_model(path: str | Path) -> list[ModelPart]:
                          f"(supported: {', '.join(SUPPORTED_SUFFIXES)})")
     if path.stat().st_size == 0:
         raise AssetError(f"mesh file {str(path)!r}: file is empty")
+    if path.suffix.lower() == ".gltf":
+        _check_gltf_json(path)
+    elif path.suffix.lower() == ".obj":
+        _check_obj_text(path)
     try:
         loaded = trimesh.load(str(path), force="scene", process=False)
     except Exception as exc:  # trimesh raises many kinds for corrupt files
@@ -216,6 +225,10 @@ def load_model(path: str | Path) -> list[ModelPart]:
             singular = np.linalg.svd(matrix[:3, :3], compute_uv=False)
             if singular[-1] <= 1e-9 * singular[0] or singular[0] == 0.0:
                 continue  # scaled to nothing (files hide nodes this way): it would draw nothing
+            if np.abs(matrix).max() > 1e18:
+                # Past float32 once multiplied out (vertex x scale x parents): refuse here, by node.
+                raise AssetError(f"node {node!r} has a transform too large for float32 rendering "
+                                 f"(largest entry {np.abs(matrix).max():.3g}, limit 1e18)")
             mesh = Mesh.from_trimesh(tm, name=f"{path.name}:{geom_name}")
             part = ModelPart(mesh=mesh, local=glm.mat4(*matrix.astype(np.float32).T.ravel()))
             _read_material(tm, part, path, texture_refs)
@@ -228,6 +241,45 @@ def load_model(path: str | Path) -> list[ModelPart]:
     if not parts:
         raise AssetError(f"mesh file {str(path)!r}: contains no triangle meshes")
     return parts
+
+
+def _check_gltf_json(path: Path) -> None:
+    """A .gltf is JSON; say so plainly instead of trimesh's guess at a missing buffer file."""
+    try:
+        doc = json.loads(path.read_bytes().decode("utf-8"))
+    except (UnicodeDecodeError, ValueError) as exc:
+        raise AssetError(f"mesh file {str(path)!r}: is not a JSON glTF file ({type(exc).__name__})") from None
+    if not isinstance(doc, dict) or "asset" not in doc:
+        raise AssetError(f"mesh file {str(path)!r}: is not a glTF document (no 'asset' object)")
+
+
+def _check_obj_text(path: Path) -> None:
+    """What trimesh accepts silently in an OBJ: a face index 0, a missing MTL, a non-numeric Kd."""
+    with path.open("rb") as f:
+        for number, raw in enumerate(f, 1):
+            line = raw.strip()
+            if line.startswith(b"f ") and any(tok.split(b"/")[0] in (b"0", b"-0") for tok in line.split()[1:]):
+                raise AssetError(f"mesh file {str(path)!r}: line {number}: face index 0 (OBJ indices start at 1)")
+            if line.startswith(b"mtllib"):
+                for name in line[6:].decode("utf-8", "replace").split():
+                    library = path.parent / name
+                    if not library.is_file():
+                        warnings.warn(f"mesh file {str(path)!r}: material library {name!r} not found; "
+                                      f"default material used", stacklevel=3)
+                        continue
+                    _check_mtl_numbers(library)
+
+
+def _check_mtl_numbers(library: Path) -> None:
+    for number, raw in enumerate(library.read_bytes().splitlines(), 1):
+        parts = raw.split()
+        if parts and parts[0] in (b"Kd", b"Ka", b"Ks", b"Ke", b"Ns", b"d", b"Tr", b"Ni"):
+            try:
+                [float(v) for v in parts[1:]]
+            except ValueError:
+                text = raw.decode("utf-8", "replace")
+                raise AssetError(f"material library {str(library)!r}: line {number}: "
+                                 f"{parts[0].decode()} must be numbers, got {text!r}") from None
 
 
 def _unit_color(value) -> np.ndarray:
@@ -308,10 +360,11 @@ def _read_material(tm, part: ModelPart, path: Path, texture_refs: dict[str, Path
         part.metallic = _first(extra.get("pm"), 0.0)
         part.roughness = _first(extra.get("pr"), 0.5)
         part.reflectivity = max(part.metallic, _first(extra.get("refl"), 0.0))
-    if not all(np.isfinite(c) and c >= 0.0 for c in part.color) or part.color[3] > 1.0:
-        raise AssetError(f"material diffuse colour {part.color} must be finite, >= 0, alpha <= 1")
+    if not all(np.isfinite(c) and 0.0 <= c <= 65504.0 for c in part.color) or part.color[3] > 1.0:
+        raise AssetError(f"material diffuse colour {part.color} must be finite, in [0, 65504] (half floats), "
+                         f"alpha <= 1")
     if emissive is not None and len(emissive) >= 1:
-        if not all(np.isfinite(e) and e >= 0.0 for e in emissive[:3]):
+        if not all(np.isfinite(e) and 0.0 <= e <= 65504.0 for e in emissive[:3]):
             raise AssetError(f"material emissive colour {emissive[:3]} must be finite and >= 0")
         if max(emissive[:3]) > 0.0:
             # Seed 002: the file stores emissive as a multiple of diffuse; the factor is their

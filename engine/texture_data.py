@@ -1,6 +1,7 @@
 """Image data for textures, kept on the CPU; the renderer uploads it when first drawn."""
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -39,6 +40,8 @@ def load_texture(path: str | Path) -> TextureData:
     """Read an image file (PNG, JPEG, ...) with Pillow."""
     from PIL import Image, UnidentifiedImageError
 
+    if isinstance(path, bytes) or not isinstance(path, (str, os.PathLike)):
+        raise AssetError(f"texture file path must be a str or pathlib.Path, got {type(path).__name__} {path!r}")
     path = Path(path)
     if not path.is_file():
         raise AssetError(f"texture file {str(path)!r}: no such file")

@@ -8,11 +8,13 @@ what changed this frame instead of scanning every entity.
 from __future__ import annotations
 
 import itertools
+import warnings
 from collections import defaultdict
 from dataclasses import dataclass, field
 from typing import Any, TypeVar
 
 import esper
+import numpy as np
 
 from components.tracking import ComponentValueError, TrackedComponent
 
@@ -88,6 +90,7 @@ class World:
         try:
             for component in components:
                 self.add_component(entity, component)
+            self._check_whole(entity, components)
         except BaseException:
             for component in esper.components_for_entity(entity):
                 self._detach(component, entity)
@@ -131,6 +134,23 @@ class World:
             object.__setattr__(component, "_sink", self._changed[kind])
             object.__setattr__(component, "_world_ref", self)
         self._changed[kind].add(entity)
+
+    def _check_whole(self, entity: int, components: tuple[Any, ...]) -> None:
+        """Checks that need the entity's components together, so they fail at spawn, not frame 1."""
+        names = {type(c).__name__: c for c in components}
+        mirror, mesh_ref = names.get("Mirror"), names.get("MeshRef")
+        if mirror is not None and mesh_ref is not None and getattr(mirror, "plane_normal", None) is None:
+            mesh = mesh_ref.mesh
+            tri = mesh.positions[mesh.indices]
+            area = float(np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1).sum())
+            if not area > 0.0:
+                raise ComponentValueError(f"Mirror on entity {entity}: its MeshRef.mesh {mesh.name!r} has no area "
+                                          f"(a mirror needs a flat mesh of non-zero size), got area {area}")
+        if mesh_ref is not None and "Material" in names and "Transform" not in names \
+                and esper.has_component(entity, type(mesh_ref)) is not False:
+            if not any(type(c).__name__ == "Transform" for c in esper.components_for_entity(entity)):
+                warnings.warn(f"entity {entity} has MeshRef and Material but no Transform: it is not drawn "
+                              f"until one is added", stacklevel=3)
 
     def _check_sharing(self, entity: int, component: TrackedComponent) -> None:
         """Refuse a component of another world, or a per-entity one already held elsewhere."""

@@ -28,7 +28,9 @@ from components import (
     Traveller,
     euler_rotation,
 )
-from engine.mesh import box, quad
+from engine.errors import AssetError
+from engine.mesh import box, load_model, quad
+from engine.texture_data import load_texture
 from engine.world import World
 from tests.support import look_from
 
@@ -199,3 +201,64 @@ def test_a_closed_world_does_not_answer_change_sets():
         w.changed(Transform)
     with pytest.raises(RuntimeError, match="closed"):
         w.deleted()
+
+
+# --- 5 and 7. whole-entity checks at spawn ---------------------------------------------------------
+
+def test_a_mirror_on_a_mesh_with_no_area_is_refused_at_spawn_naming_entity_and_field(world):
+    with pytest.raises(ComponentValueError, match=r"Mirror on entity \d+: its MeshRef\.mesh 'quad' has no area"):
+        world.spawn(Transform(), MeshRef(quad(0, 0)), Material(), Mirror())
+    assert not world.entities()
+
+
+def test_a_renderable_without_a_transform_gets_a_one_line_warning(world):
+    with pytest.warns(UserWarning, match=r"entity \d+ has MeshRef and Material but no Transform"):
+        world.spawn(MeshRef(box()), Material())
+
+
+# --- 6. files and paths ----------------------------------------------------------------------------
+
+def _obj(tmp_path, name, text):
+    path = tmp_path / name
+    path.write_text(text)
+    return path
+
+
+TRIANGLE = "v 0 0 0\nv 1 0 0\nv 0 1 0\n"
+
+
+@pytest.mark.parametrize("bad", [None, 5, b"model.obj"])
+def test_a_load_path_of_the_wrong_type_is_a_clear_error(bad):
+    with pytest.raises(AssetError, match="path must be a str or pathlib.Path"):
+        load_model(bad)
+    with pytest.raises(AssetError, match="path must be a str or pathlib.Path"):
+        load_texture(bad)
+
+
+def test_bad_files_are_named_with_the_reason(tmp_path):
+    noise = tmp_path / "noise.gltf"
+    noise.write_bytes(bytes(np.random.default_rng(1).integers(0, 256, 300, dtype=np.uint8)))
+    with pytest.raises(AssetError, match="is not a JSON glTF file"):
+        load_model(noise)
+    with pytest.raises(AssetError, match="face index 0"):
+        load_model(_obj(tmp_path, "zero.obj", TRIANGLE + "f 0 1 2\n"))
+    _obj(tmp_path, "words.mtl", "newmtl a\nKd x y z\n")
+    with pytest.raises(AssetError, match=r"line 2: Kd must be numbers"):
+        load_model(_obj(tmp_path, "words.obj", "mtllib words.mtl\nusemtl a\n" + TRIANGLE + "f 1 2 3\n"))
+    _obj(tmp_path, "hot.mtl", "newmtl a\nKd 1e39 1 1\n")
+    with pytest.raises(AssetError, match=r"65504"):
+        load_model(_obj(tmp_path, "hot.obj", "mtllib hot.mtl\nusemtl a\n" + TRIANGLE + "f 1 2 3\n"))
+    with pytest.warns(UserWarning, match="material library 'gone.mtl' not found"):
+        parts = load_model(_obj(tmp_path, "gone.obj", "mtllib gone.mtl\n" + TRIANGLE + "f 1 2 3\n"))
+    assert len(parts) == 1
+
+
+def test_a_glb_node_scaled_past_float32_is_named(tmp_path):
+    import trimesh
+
+    scene = trimesh.Scene()
+    scene.add_geometry(trimesh.creation.box(), node_name="huge", transform=np.diag([1e30, 1e30, 1e30, 1.0]))
+    path = tmp_path / "huge.glb"
+    path.write_bytes(scene.export(file_type="glb"))
+    with pytest.raises(AssetError, match=r"node 'huge' has a transform too large for float32"):
+        load_model(path)
