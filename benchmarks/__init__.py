@@ -12,5 +12,6 @@ SUITES: dict[str, tuple[str, str]] = {
     "mirrors": ("benchmarks.mirrors", "whole frame with 0-16 mirrors on a ring, per-mirror vs batched vs auto path"),
     "soak": ("benchmarks.soak", "the sample level on a camera tour: GL resources and memory must stay flat"),
     "churn": ("benchmarks.churn", "mirrors, portals, probes, meshes and textures made and deleted in waves"),
+    "fuzz": ("benchmarks.fuzz", "adversarial component values: each refused naming Class.field or drawn clean"),
     "probes": ("benchmarks.probes", "probe captures at 128 / 512; whole frames with no / static / dynamic probe"),
 }

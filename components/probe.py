@@ -57,7 +57,9 @@ class ReflectionProbe(TrackedComponent):
             near = value if name == "near" else self.__dict__.get("near")
             far = value if name == "far" else self.__dict__.get("far")
             if near is not None and far is not None and not far > near * 1.001:
-                raise ComponentValueError(f"ReflectionProbe.{name}: far ({far}) must be greater than near ({near})")
+                # ReflectionProbe(near=100) alone is wrong about near, not about the default far.
+                blamed = "near" if name == "far" and "far" not in self.__dict__ and value == 100.0 else name
+                raise ComponentValueError(f"ReflectionProbe.{blamed}: far ({far}) must be greater than near ({near})")
             return value
         if name == "refresh":
             return choice(self, name, value, REFRESH_MODES)

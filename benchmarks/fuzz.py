@@ -1,0 +1,256 @@
+"""Fuzz: every component's fields given adversarial values, one case a frame.
+
+Each case builds one component with one to three fields drawn from a pool of awkward
+values (NaN, infinities, numbers past float32 and float16, huge ints, wrong kinds, zero
+vectors, Euler-looking tuples), attaches it to an entity of a small lit scene (a box, a
+quad for surfaces, the camera entity for Camera and FlyController, the sky entity for the
+Skybox) and renders one 48 x 32 frame.  A case passes when either the component is refused
+with a ``ComponentValueError`` that names ``Class.field`` (or the entity, for checks on the
+whole entity), or the frame renders with no NaN in the HDR colour target and ``ctx.error``
+clean.  Any other exception, above all one raised from inside a system, is a failure.
+
+    python -m benchmarks fuzz --cases 5000
+"""
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import random
+import traceback
+import warnings
+from typing import Any
+
+import numpy as np
+from pyglm import glm
+
+from components import (
+    Camera,
+    ComponentValueError,
+    DirectionalLight,
+    Emissive,
+    FlyController,
+    Material,
+    MeshRef,
+    Mirror,
+    PointLight,
+    Portal,
+    PortalClone,
+    ReflectionProbe,
+    Reflective,
+    Refractive,
+    Skybox,
+    Slice,
+    Transform,
+    Traveller,
+    look_rotation,
+)
+from engine.app import Engine, Game
+from engine.frame_io import Output
+from engine.mesh import box, quad, sphere
+from engine.render.targets import CaptureTarget
+from engine.texture_data import checker_texture
+
+SIZE = (48, 32)
+CLASSES: tuple[type, ...] = (Transform, MeshRef, Material, Emissive, Reflective, Refractive, Mirror, Portal,
+                             Traveller, Slice, PortalClone, ReflectionProbe, Camera, FlyController,
+                             DirectionalLight, PointLight, Skybox)
+
+_NUMBERS: list[Any] = [0, 1, -1, 0.5, 2.0, 1e-30, 1e-4, 3.0, 16, 100.0, 1e5, 65504.0, 65505.0, 1e7, 1e20,
+                       3.4e38, 1e39, float("nan"), float("inf"), -float("inf"), 10 ** 400, 2 ** 63, 2 ** 64 + 5,
+                       -(2 ** 63), 179.0, 0.1]
+_OTHER: list[Any] = [None, True, False, "x", "skybox", "cube", "on_change", b"1", [], {}, (), object()]
+
+
+def _vectors(rng: random.Random) -> Any:
+    n = rng.choice((2, 3, 3, 4, 4, 5))
+    return tuple(rng.choice(_NUMBERS) for _ in range(n))
+
+
+def random_value(rng: random.Random) -> Any:
+    """One adversarial value for any field (kinds mixed on purpose)."""
+    roll = rng.random()
+    if roll < 0.35:
+        return rng.choice(_NUMBERS)
+    if roll < 0.65:
+        return _vectors(rng)
+    if roll < 0.75:
+        return rng.choice(_OTHER)
+    if roll < 0.82:
+        return rng.choice((glm.quat(1e20, 0, 1e20, 0), glm.quat(0, 0, 0, 0), glm.quat(), (0, 90, 0),
+                           glm.vec3(1e39, 0, 0), glm.vec3(0), glm.vec4(1, 1, 1, 1)))
+    if roll < 0.88:
+        return rng.choice((box(), quad(0, 0), quad(1, 1), sphere(0.5, 8, 4), checker_texture(8, 2)))
+    if roll < 0.94:
+        return rng.choice(("skybox", "planar", "cube", "portal", "once", "every_frame", "never"))
+    return rng.uniform(-10, 10)
+
+
+@dataclasses.dataclass
+class Case:
+    cls: type
+    values: dict[str, Any]
+
+    def describe(self) -> str:
+        return f"{self.cls.__name__}({', '.join(f'{k}={v!r}' for k, v in self.values.items())})"
+
+
+def random_case(rng: random.Random) -> Case:
+    cls = rng.choice(CLASSES)
+    names = [f.name for f in dataclasses.fields(cls) if f.init and not f.name.startswith("_")]
+    chosen = rng.sample(names, rng.randint(1, min(3, len(names))))
+    values = {name: random_value(rng) for name in chosen}
+    if cls is MeshRef and "mesh" not in values:
+        values["mesh"] = box()
+    return Case(cls, values)
+
+
+class _Scene(Game):
+    title = "fuzz"
+
+    def build(self, world) -> None:
+        eye = glm.vec3(0, 1.5, 5)
+        self.camera = world.spawn(Transform(position=eye, rotation=look_rotation(-eye + glm.vec3(0, 0.5, 0))),
+                                  Camera())
+        self.sky = world.spawn(Skybox(face_size=8))
+        world.spawn(DirectionalLight(direction=(-0.3, -1, -0.5), intensity=2.0))
+        world.spawn(Transform(position=(0, 0, -1.5)), MeshRef(box((3, 2, 0.2))), Material())
+
+
+class Fuzzer:
+    """One engine; each case is attached, rendered once, checked and taken away."""
+
+    def __init__(self, ctx) -> None:
+        self.ctx = ctx
+        self.game = _Scene()
+        self.engine = Engine(self.game, ctx)
+        self.world = self.engine.world
+        self.capture = CaptureTarget(ctx, SIZE)
+        self.frame()
+
+    def frame(self) -> None:
+        self.engine.frame(1.0 / 60.0, Output(self.capture.framebuffer, SIZE))
+
+    def close(self) -> None:
+        self.capture.release()
+        self.engine.close()
+
+    def run(self, case: Case) -> str | None:
+        """None when the case passed, else why it failed."""
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                component = case.cls(**case.values)
+        except ComponentValueError as exc:
+            return self._named(case, exc)
+        except Exception as exc:  # noqa: BLE001 - any other kind is what the fuzz is looking for
+            return f"construction raised {type(exc).__name__}: {exc}"
+        world, restore, spawned = self.world, None, None
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                if case.cls in (Camera, FlyController):
+                    restore = (self.game.camera, world.try_get(self.game.camera, case.cls))
+                    world.add_component(self.game.camera, component)
+                elif case.cls is Skybox:
+                    restore = (self.game.sky, world.get(self.game.sky, Skybox))
+                    world.add_component(self.game.sky, component)
+                elif case.cls in (DirectionalLight, PointLight):
+                    spawned = world.spawn(Transform(position=(0, 2, 1)), component)
+                else:
+                    flat = case.cls in (Mirror, Portal)
+                    parts: dict[type, Any] = {Transform: Transform(position=(0, 0.5, 0)),
+                                              MeshRef: MeshRef(quad(1.5, 1.5) if flat else box()),
+                                              Material: Material()}
+                    parts[case.cls] = component
+                    spawned = world.spawn(*parts.values())
+        except ComponentValueError as exc:
+            return self._named(case, exc)
+        except Exception as exc:  # noqa: BLE001
+            return f"attach raised {type(exc).__name__}: {exc}"
+        try:
+            self.frame()
+            problem = self._check_pixels()
+        except Exception as exc:  # noqa: BLE001
+            problem = f"frame raised {type(exc).__name__}: {exc}\n{traceback.format_exc(limit=-3)}"
+        finally:
+            self._undo(restore, spawned, case.cls)
+        return problem
+
+    def _undo(self, restore, spawned, cls) -> None:
+        world = self.world
+        try:
+            if spawned is not None:
+                world.delete_entity(spawned)
+            if restore is not None:
+                entity, old = restore
+                if old is None:
+                    world.remove_component(entity, cls)
+                else:
+                    world.add_component(entity, dataclasses.replace(old))
+            self.frame()
+        except Exception:  # noqa: BLE001 - a case that breaks the engine: start a fresh one
+            self.close()
+            self.__init__(self.ctx)
+
+    def _check_pixels(self) -> str | None:
+        error = self.ctx.error
+        if error != "GL_NO_ERROR":
+            return f"ctx.error {error}"
+        hdr = np.frombuffer(self.engine.renderer.targets.color.read(), np.float16)
+        if not np.isfinite(hdr).all():
+            return f"{int((~np.isfinite(hdr)).sum())} non-finite values in the HDR colour target"
+        return None
+
+    @staticmethod
+    def _named(case: Case, exc: ComponentValueError) -> str | None:
+        text = str(exc)
+        name = case.cls.__name__
+        if any(f"{name}.{field}" in text for field in case.values) or f"{name} on entity" in text \
+                or "Transform.parent" in text or f"{name} given to entity" in text:
+            return None
+        return f"refused without naming {name}.<field>: {text}"
+
+
+def fuzz(ctx, cases: int, seed: int = 0, report=None) -> tuple[int, list[tuple[str, str]]]:
+    """Run ``cases`` cases; the count run and the failures (case, why)."""
+    rng = random.Random(seed)
+    fuzzer = Fuzzer(ctx)
+    failures: list[tuple[str, str]] = []
+    try:
+        for index in range(cases):
+            case = random_case(rng)
+            why = fuzzer.run(case)
+            if why is not None:
+                failures.append((case.describe(), why))
+                if report is not None:
+                    report(index, case, why)
+    finally:
+        fuzzer.close()
+    return cases, failures
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--cases", type=int, default=1000, help="how many cases to run (default 1000)")
+    parser.add_argument("--seed", type=int, default=0, help="random seed (the cases are reproducible)")
+
+
+def main(args: argparse.Namespace) -> int:
+    from engine.gl_context import create_headless_context
+
+    ctx = create_headless_context()
+    try:
+        def report(index: int, case: Case, why: str) -> None:
+            if not args.json:
+                print(f"case {index}: {case.describe()}\n  {why.strip().splitlines()[0]}")
+
+        ran, failures = fuzz(ctx, args.cases, args.seed, report)
+    finally:
+        ctx.release()
+    if args.json:
+        print(json.dumps({"cases": ran, "failed": len(failures), "failures": failures[:50]}))
+    else:
+        print(f"fuzz: {ran} cases ran, {len(failures)} failed (seed {args.seed})")
+    return 1 if failures else 0
+
+
