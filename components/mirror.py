@@ -11,10 +11,11 @@ from components.tracking import ComponentValueError, TrackedComponent, boolean, 
 
 @dataclass(eq=False)
 class Mirror(TrackedComponent):
-    """Reflects the scene in the plane of its flat mesh (seed 000, 002 part 3, 003).
+    """Reflects the scene in the plane of its flat mesh (a virtual camera reflected in the plane,
+    with an oblique near plane on it, as in Lengyel's "Oblique View Frustum" 2005).
 
     ``color`` tints the reflection, ``reflect_rate`` mixes it with the mirror's own shading,
-    ``roughness`` blurs it (seed 002's mip bias), ``resolution_scale`` renders its reflection
+    ``roughness`` blurs it (a mip bias on the reflection image), ``resolution_scale`` renders its reflection
     at a fraction of the screen's resolution (a level takes the largest scale among the
     mirrors it draws), ``max_depth`` limits mirrors seen in mirrors.  ``plane_point`` and
     ``plane_normal`` (model space) override the plane found from the mesh; a non-flat mesh

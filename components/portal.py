@@ -1,4 +1,5 @@
-"""Paired portals (seed 001's "magic mirrors") and the things that travel through them."""
+"""Paired portals (each a window onto its partner: the view is carried by
+the pair's relative transform) and the things that travel through them."""
 from __future__ import annotations
 
 from dataclasses import dataclass, field
@@ -80,8 +81,8 @@ class Traveller(TrackedComponent):
 class Slice(TrackedComponent):
     """Draw only the part of the entity in front of ``plane`` (world n.x + d >= 0).
 
-    Written by the PortalSliceSystem on things that straddle a portal (seed 001's open
-    problem); the render system turns it into a per-instance clip plane.
+    Written by the PortalSliceSystem on things that straddle a portal (so the part
+    already through does not show at the entry side); the render system turns it into a per-instance clip plane.
     """
 
     SHAREABLE = False  # one entity's own state: see components.tracking

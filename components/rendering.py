@@ -60,7 +60,7 @@ class Material(TrackedComponent):
 
 @dataclass(eq=False)
 class Emissive(TrackedComponent):
-    """The surface emits ``power`` x its diffuse colour (seed 002, part 1)."""
+    """The surface emits ``power`` x its diffuse colour (an emissive term added after lighting)."""
 
     power: float = 1.0
 
@@ -78,7 +78,7 @@ class Reflective(TrackedComponent):
     """The surface reflects its environment.
 
     ``mix`` is how much of the final colour is the reflection: None means 1.0 for an
-    untextured surface (chrome) and ``0.5`` for a textured one (seed 004's 50/50 mix).
+    untextured surface (chrome) and ``0.5`` for a textured one (a 50/50 texture/reflection mix).
     ``tint`` multiplies the reflected light.
     """
 
@@ -98,7 +98,7 @@ class Reflective(TrackedComponent):
 
 @dataclass(eq=False)
 class Refractive(TrackedComponent):
-    """Light from behind bends through the surface (seed 002, part 2).
+    """Light from behind bends through the surface (Snell's law with Schlick's Fresnel approximation).
 
     The environment seen along the refracted ray is weighted by Fresnel transmittance and
     blended with the surface colour by the material's alpha (alpha 0 = clear glass).

@@ -15,7 +15,7 @@ def spawn_model(world: World, path: str | Path, position=(0.0, 0.0, 0.0), rotati
                 scale=(1.0, 1.0, 1.0)) -> int:
     """Load ``path`` and spawn it; returns the root entity.
 
-    The file's material decides the components (seed 002): an emissive colour gives
+    The file's material decides the components : an emissive colour gives
     Emissive(emissive / diffuse); reflectivity > 0 gives a Mirror on a flat mesh and
     Reflective (sky) on any other.  The file is fully
     loaded and every component built (so validated) before anything is spawned, so a bad
@@ -38,7 +38,7 @@ def spawn_model(world: World, path: str | Path, position=(0.0, 0.0, 0.0), rotati
             if part.emissive_factor > 0.0:
                 components.append(Emissive(part.emissive_factor))
             if part.reflectivity > 0.0:
-                # Seed 002: a flat reflective surface is a planar mirror, anything else reflects the sky.
+                # A flat reflective surface is a planar mirror, anything else reflects the sky.
                 if flat_plane(part.mesh) is not None:
                     components.append(Mirror(reflect_rate=part.reflectivity, roughness=part.roughness))
                 else:

@@ -98,7 +98,7 @@ FLATNESS = 1e-4  # an AABB extent below this fraction of the largest counts as f
 
 
 def flat_plane(mesh: Mesh) -> tuple[np.ndarray, np.ndarray] | None:
-    """Seed 002's test: a mesh is planar when one extent of its AABB is ~0; the plane's
+    """The flatness test: a mesh is planar when one extent of its AABB is ~0; the plane's
     normal is the mesh's (mean) normal along that axis. None when the mesh is not flat."""
     positions, normals = mesh.positions, mesh.normals
     lo, hi = positions.min(axis=0), positions.max(axis=0)
@@ -182,7 +182,7 @@ class ModelPart:
     texture: TextureData | None = None
     metallic: float = 0.0
     roughness: float = 0.5
-    emissive_factor: float = 0.0   # seed 002: emissive colour / diffuse colour
+    emissive_factor: float = 0.0   # emissive colour / diffuse colour
     reflectivity: float = 0.0
 
 
@@ -367,7 +367,7 @@ def _read_material(tm, part: ModelPart, path: Path, texture_refs: dict[str, Path
         if not all(np.isfinite(e) and 0.0 <= e <= 65504.0 for e in emissive[:3]):
             raise AssetError(f"material emissive colour {emissive[:3]} must be finite and >= 0")
         if max(emissive[:3]) > 0.0:
-            # Seed 002: the file stores emissive as a multiple of diffuse; the factor is their
+            # The file stores emissive as a multiple of diffuse; the factor is their
             # ratio (taken on the strongest channel, so a pure-blue lamp still works).
             channel = int(np.argmax(part.color[:3]))
             diffuse = max(part.color[channel], 1e-6)

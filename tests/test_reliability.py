@@ -262,3 +262,14 @@ def test_a_glb_node_scaled_past_float32_is_named(tmp_path):
     path.write_bytes(scene.export(file_type="glb"))
     with pytest.raises(AssetError, match=r"node 'huge' has a transform too large for float32"):
         load_model(path)
+
+
+def test_spawn_portal_pair_refuses_euler_looking_rotations_naming_the_argument_and_spawns_nothing(world):
+    from engine.portals import spawn_portal_pair
+
+    with pytest.raises(ComponentValueError, match=r"spawn_portal_pair rotation_b: Transform\.rotation must be a "
+                                                  r"quaternion.*euler_rotation"):
+        spawn_portal_pair(world, (0, 1, 0), None, (3, 1, 0), (0, 90, 0))
+    assert not world.entities()
+    a, b = spawn_portal_pair(world, (0, 1, 0), euler_rotation(0, 90, 0), (3, 1, 0), None)
+    assert abs(glm.dot(world.get(a, Transform).rotation, euler_rotation(0, 90, 0))) > 0.9999
