@@ -69,6 +69,13 @@ def _vectors(rng: random.Random) -> Any:
 
 def random_value(rng: random.Random) -> Any:
     """One adversarial value for any field (kinds mixed on purpose)."""
+    if rng.random() < 0.35:
+        # Plausible values too, so a good share of cases get as far as a frame.
+        return rng.choice((rng.uniform(0.0, 1.0), rng.randint(1, 8), rng.random() < 0.5,
+                           tuple(rng.uniform(0.0, 1.0) for _ in range(3)),
+                           tuple(rng.uniform(0.0, 1.0) for _ in range(4)),
+                           (1.0, rng.uniform(-1, 1), rng.uniform(-1, 1), rng.uniform(-1, 1)),
+                           rng.choice((64, 128)), rng.uniform(1.0, 3.0)))
     roll = rng.random()
     if roll < 0.35:
         return rng.choice(_NUMBERS)
@@ -127,6 +134,7 @@ class Fuzzer:
         self.world = self.engine.world
         self.capture = CaptureTarget(ctx, SIZE)
         self.frame()
+        self.refused = self.rendered = 0  # passing cases of each kind, for the report
 
     def frame(self) -> None:
         self.engine.frame(1.0 / 60.0, Output(self.capture.framebuffer, SIZE))
@@ -142,7 +150,7 @@ class Fuzzer:
                 warnings.simplefilter("ignore")
                 component = case.cls(**case.values)
         except ComponentValueError as exc:
-            return self._named(case, exc)
+            return self._refused(case, exc)
         except Exception as exc:  # noqa: BLE001 - any other kind is what the fuzz is looking for
             return f"construction raised {type(exc).__name__}: {exc}"
         world, restore, spawned = self.world, None, None
@@ -165,7 +173,7 @@ class Fuzzer:
                     parts[case.cls] = component
                     spawned = world.spawn(*parts.values())
         except ComponentValueError as exc:
-            return self._named(case, exc)
+            return self._refused(case, exc)
         except Exception as exc:  # noqa: BLE001
             return f"attach raised {type(exc).__name__}: {exc}"
         try:
@@ -175,7 +183,15 @@ class Fuzzer:
             problem = f"frame raised {type(exc).__name__}: {exc}\n{traceback.format_exc(limit=-3)}"
         finally:
             self._undo(restore, spawned, case.cls)
+        if problem is None:
+            self.rendered += 1
         return problem
+
+    def _refused(self, case: Case, exc: ComponentValueError) -> str | None:
+        why = self._named(case, exc)
+        if why is None:
+            self.refused += 1
+        return why
 
     def _undo(self, restore, spawned, cls) -> None:
         world = self.world
@@ -212,8 +228,8 @@ class Fuzzer:
         return f"refused without naming {name}.<field>: {text}"
 
 
-def fuzz(ctx, cases: int, seed: int = 0, report=None) -> tuple[int, list[tuple[str, str]]]:
-    """Run ``cases`` cases; the count run and the failures (case, why)."""
+def fuzz(ctx, cases: int, seed: int = 0, report=None) -> tuple[int, list[tuple[str, str]], dict[str, int]]:
+    """Run ``cases`` cases; the count run, the failures (case, why) and passes by kind."""
     rng = random.Random(seed)
     fuzzer = Fuzzer(ctx)
     failures: list[tuple[str, str]] = []
@@ -225,9 +241,10 @@ def fuzz(ctx, cases: int, seed: int = 0, report=None) -> tuple[int, list[tuple[s
                 failures.append((case.describe(), why))
                 if report is not None:
                     report(index, case, why)
+        passes = {"refused": fuzzer.refused, "rendered": fuzzer.rendered}
     finally:
         fuzzer.close()
-    return cases, failures
+    return cases, failures, passes
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -244,13 +261,14 @@ def main(args: argparse.Namespace) -> int:
             if not args.json:
                 print(f"case {index}: {case.describe()}\n  {why.strip().splitlines()[0]}")
 
-        ran, failures = fuzz(ctx, args.cases, args.seed, report)
+        ran, failures, passes = fuzz(ctx, args.cases, args.seed, report)
     finally:
         ctx.release()
     if args.json:
-        print(json.dumps({"cases": ran, "failed": len(failures), "failures": failures[:50]}))
+        print(json.dumps({"cases": ran, "failed": len(failures), **passes, "failures": failures[:50]}))
     else:
-        print(f"fuzz: {ran} cases ran, {len(failures)} failed (seed {args.seed})")
+        print(f"fuzz: {ran} cases ran, {len(failures)} failed ({passes['refused']} refused naming the field, "
+              f"{passes['rendered']} rendered clean; seed {args.seed})")
     return 1 if failures else 0
 
 

@@ -145,8 +145,9 @@ class Skybox(TrackedComponent):
 def _sky_faces(value: Any) -> np.ndarray:
     """Six square HxWx3 linear images as one (6, n, n, 3) float32 array (checked here, not at render)."""
     try:
-        faces = np.asarray(value, np.float32)
-    except (TypeError, ValueError):
+        with np.errstate(over="ignore"):  # past float32 becomes inf, refused just below
+            faces = np.asarray(value, np.float32)
+    except (TypeError, ValueError, OverflowError):
         raise ComponentValueError(
             f"Skybox.faces must be six square HxWx3 float images, got {type(value).__name__}") from None
     if faces.ndim != 4 or faces.shape[0] != 6 or faces.shape[1] != faces.shape[2] or faces.shape[3] != 3 \

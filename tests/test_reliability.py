@@ -273,3 +273,9 @@ def test_spawn_portal_pair_refuses_euler_looking_rotations_naming_the_argument_a
     assert not world.entities()
     a, b = spawn_portal_pair(world, (0, 1, 0), euler_rotation(0, 90, 0), (3, 1, 0), None)
     assert abs(glm.dot(world.get(a, Transform).rotation, euler_rotation(0, 90, 0))) > 0.9999
+
+
+def test_sky_faces_with_an_int_past_float_range_name_the_field():
+    # Found by `python -m benchmarks fuzz --cases 5000` (seed 0): it raised OverflowError.
+    with pytest.raises(ComponentValueError, match=r"Skybox\.faces"):
+        Skybox(faces=(1e39, 10 ** 400, 100.0))
