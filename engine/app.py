@@ -33,6 +33,7 @@ from systems import (
     TransformSystem,
     active_camera,
 )
+from systems.frame_rules_system import FrameRulesSystem
 from systems.portal_slice_system import PortalSliceSystem
 from systems.probe_system import ProbeSystem
 from systems.surface_system import SurfaceSystem
@@ -65,6 +66,7 @@ class GameUpdateSystem(esper.Processor):
 # (stage, what makes its system from the engine).  Order is execution order.
 FRAME_STAGES: tuple[tuple[str, Callable[[Engine], esper.Processor]], ...] = (
     ("game", lambda e: GameUpdateSystem(e.game, e.world)),
+    ("rules", lambda e: FrameRulesSystem(e.world)),  # open portal pairs, active camera: FrameRules
     ("input", lambda e: FlyCameraSystem(e.world)),
     ("travel", lambda e: PortalTravelSystem(e.world)),
     ("slice", lambda e: PortalSliceSystem(e.world)),

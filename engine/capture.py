@@ -11,6 +11,7 @@ import numpy as np
 from pyglm import glm
 
 from components import Camera, MeshRef, Portal, Transform
+from engine.frame_rules import frame_rules
 from engine.portal_math import pair_transform
 from engine.world import World
 
@@ -113,11 +114,13 @@ def _probes(world: World) -> dict[str, dict]:
 
 
 def _portal_pairs(world: World) -> dict[str, dict]:
-    """Per portal: its partner and the column-major 4x4 that carries points at it to the partner."""
+    """Per portal: its partner and the column-major 4x4 that carries points at it to the
+    partner; both None when the pair is closed (``engine.frame_rules.open_portal_pairs``)."""
     pairs = {}
-    for entity, (portal, transform) in world.query(Portal, Transform):
-        partner = portal.partner
-        partner_t = world.try_get(partner, Transform) if partner is not None and world.exists(partner) else None
+    open_portals = frame_rules(world).open_portals
+    for entity, (_, transform) in world.query(Portal, Transform):
+        partner = open_portals.get(entity)
+        partner_t = world.get(partner, Transform) if partner is not None else None
         carry = pair_transform(transform.world, partner_t.world) if partner_t is not None else None
         pairs[str(entity)] = {
             "partner": partner if partner_t is not None else None,

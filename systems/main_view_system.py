@@ -10,15 +10,17 @@ import esper
 
 from components import Camera, Transform
 from engine.frame_io import Output
+from engine.frame_rules import frame_rules
 from engine.render.renderer import Renderer
 from engine.render.views import FrameViews, camera_view
 from engine.world import World
 
 
 def active_camera(world: World) -> tuple[int, Camera, Transform] | None:
-    """The active Camera with a Transform and the lowest entity id, or None."""
-    cameras = [(e, c, t) for e, (c, t) in world.query(Camera, Transform) if c.active]
-    return min(cameras, key=lambda item: item[0]) if cameras else None
+    """The active Camera with a Transform and the lowest entity id, or None (the rule is
+    ``engine.frame_rules.active_camera``, the camera travel carries too)."""
+    entity = frame_rules(world).active_camera
+    return None if entity is None else (entity, world.get(entity, Camera), world.get(entity, Transform))
 
 
 class MainViewSystem(esper.Processor):

@@ -1,6 +1,8 @@
 """Things partly through a portal (the visible seam where an object crosses a portal): sliced, with a clone beyond.
 
-A Traveller whose bounds straddle an open portal's rectangle is drawn only in front of
+A Traveller whose bounds straddle an open portal's rectangle (open as
+``engine.frame_rules.open_portal_pairs`` says, the rule travel and the views use: a portal
+with a disabled, deleted or Transform-less partner slices nothing) is drawn only in front of
 that portal (a Slice clip plane), and a clone, carried by the pair transform, draws the
 part that went through in front of the partner.  Clones are made when straddling starts
 and deleted when it ends, so entities are not spawned every frame.  It runs before the
@@ -15,6 +17,7 @@ import numpy as np
 from pyglm import glm
 
 from components import Material, MeshRef, Portal, PortalClone, Slice, Transform, Traveller
+from engine.frame_rules import frame_rules, world_corners
 from engine.portal_math import pair_transform, portal_plane
 from engine.world import World
 from systems.transform_system import current_world_matrix
@@ -46,27 +49,22 @@ class PortalSliceSystem(esper.Processor):
             self._release(source)
 
     def _open_portals(self) -> list[tuple[int, Portal, glm.mat4, glm.mat4]]:
+        """(portal, its Portal, its world matrix, its partner's) of every open pair."""
         world = self.world
-        found = []
-        for entity, (portal, transform) in world.query(Portal, Transform):
-            partner = portal.partner
-            if portal.enabled and partner is not None and world.exists(partner) and world.has(partner, Portal):
-                found.append((entity, portal, current_world_matrix(world, transform),
-                              current_world_matrix(world, world.get(partner, Transform))))
-        return found
+        return [(entity, world.get(entity, Portal), current_world_matrix(world, world.get(entity, Transform)),
+                 current_world_matrix(world, world.get(partner, Transform)))
+                for entity, partner in frame_rules(world).open_portals.items()]
 
     @staticmethod
     def _straddled(mesh_ref: MeshRef, model: glm.mat4, portals):
         """(slice plane, carry, partner's plane, portal) of the first portal cutting the bounds."""
-        lo, hi = mesh_ref.mesh.bounds
-        corners = np.array([(x, y, z, 1.0) for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
-        world_corners = corners @ np.array(model.to_list(), np.float64)
+        corners = world_corners(mesh_ref.mesh, model)
         for entity, portal, in_world, out_world in portals:
             plane = portal_plane(in_world)
-            distances = world_corners[:, :3] @ np.array(glm.vec3(plane)) + plane.w
+            distances = corners[:, :3] @ np.array(glm.vec3(plane)) + plane.w
             if distances.min() >= 0.0 or distances.max() <= 0.0:
                 continue
-            local = world_corners @ np.array(glm.inverse(in_world).to_list(), np.float64)
+            local = corners @ np.array(glm.inverse(in_world).to_list(), np.float64)
             w, h = portal.size
             if local[:, 0].max() < -w / 2 or local[:, 0].min() > w / 2 or local[:, 1].max() < -h / 2 \
                     or local[:, 1].min() > h / 2:

@@ -4,14 +4,16 @@ Runs after input (the fly camera has moved) and before the TransformSystem (whic
 publishes the teleported poses), so every rendered frame shows a traveller on one side only.
 
 Who travels: every entity with a ``Traveller`` and the active camera (``Camera.active``,
-lowest id; it needs no Traveller).  Travellers are expected to be roots: one whose
-Transform has a parent is moved by its velocity but never teleported (its pose is relative
-to something that does not travel with it).
+lowest id, with a Transform: ``engine.frame_rules.active_camera``; it needs no Traveller).
+Travellers are expected to be roots: one whose Transform has a parent is moved by its
+velocity but never teleported (its pose is relative to something that does not travel
+with it).
 
 A crossing is the segment from where the traveller was at the end of the last frame to where
-it is now going from a portal's front (local +Z) to its back inside its rectangle.  The
-portal must be enabled and have a live, enabled partner with a Portal; a portal whose
-partner was deleted or disabled is just a quad.  The new pose is ``pair_transform(in, out)``
+it is now going from a portal's front (local +Z) to its back inside its rectangle.  Only
+open pairs count (``engine.frame_rules.open_portal_pairs``, the rule the views and slicing
+use too): a portal that is disabled, or whose partner is deleted, disabled or has no
+Portal or Transform, is just a quad.  The new pose is ``pair_transform(in, out)``
 applied to the old one (position and orientation; scale is kept); the Traveller's velocity
 turns with it and a FlyController's yaw / pitch are recomputed from the new orientation (a
 pair not related by a turn about the vertical leaves a roll in the Transform, which the fly
@@ -37,6 +39,7 @@ the very next frame.  Each frame's crossings are published as ``world.resources[
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass
 
 import esper
@@ -44,6 +47,7 @@ from pyglm import glm
 
 from components import Camera, FlyController, Portal, Transform, Traveller
 from engine.frame_io import Output
+from engine.frame_rules import frame_rules
 from engine.portal_math import near_plane_corners, pair_rotation, pair_transform, portal_plane
 from engine.reflection_math import signed_distance
 from engine.world import World
@@ -112,13 +116,14 @@ class PortalTravelSystem(esper.Processor):
             v = traveller.velocity
             if v.x or v.y or v.z:
                 transform.position = transform.position + v * dt
-        camera = self._active_camera()
-        if camera is not None:
-            entity, cam, transform = camera
-            movers[entity] = (transform, cam)
+        rules = frame_rules(world)
+        if rules.active_camera is not None:
+            entity = rules.active_camera
+            transform = world.get(entity, Transform)
+            movers[entity] = (transform, world.get(entity, Camera))
             start.setdefault(entity, glm.vec3(transform.position))
 
-        gates = self._gates()
+        gates = self._gates(rules.open_portals)
         last, exited = self._last, self._exited
         self._last, self._exited = {}, {}
         for entity, (transform, cam) in movers.items():
@@ -131,11 +136,6 @@ class PortalTravelSystem(esper.Processor):
                     self._exited[entity] = gate.partner
             self._last[entity] = glm.vec3(transform.position)
 
-    def _active_camera(self) -> tuple[int, Camera, Transform] | None:
-        cameras = [(e, c, t) for e, (c, t) in self.world.query(Camera, Transform)
-                   if c.active and self.world.exists(e)]
-        return min(cameras, key=lambda item: item[0]) if cameras else None
-
     def near_aspect(self) -> float:
         """Aspect of the camera's near rectangle: the frame being rendered, else ``aspect``."""
         output = self.world.resources.get(Output)
@@ -144,18 +144,16 @@ class PortalTravelSystem(esper.Processor):
         return self.aspect
 
     # --- portals -----------------------------------------------------------------------------
-    def _gates(self) -> list[_Gate]:
+    def _gates(self, open_portals: Mapping[int, int]) -> list[_Gate]:
+        """A gate for each open pair (entry portal -> the partner it looks out of)."""
         world = self.world
-        portals = {e: (p, t) for e, (p, t) in world.query(Portal, Transform) if world.exists(e)}
         gates = []
-        for entity, (portal, transform) in portals.items():
-            out = portals.get(portal.partner) if portal.partner is not None else None
-            if not portal.enabled or out is None or not out[0].enabled or portal.partner == entity:
-                continue
-            look_in = self._world_matrix(transform)
-            look_out = self._world_matrix(out[1])
+        for entity, partner in open_portals.items():
+            portal = world.get(entity, Portal)
+            look_in = self._world_matrix(world.get(entity, Transform))
+            look_out = self._world_matrix(world.get(partner, Transform))
             carry = pair_transform(look_in, look_out)
-            gates.append(_Gate(entity, portal.partner, glm.inverse(look_in), portal_plane(look_in),
+            gates.append(_Gate(entity, partner, glm.inverse(look_in), portal_plane(look_in),
                                (portal.size[0] / 2, portal.size[1] / 2), carry, pair_rotation(carry),
                                portal_plane(look_out)))
         return gates

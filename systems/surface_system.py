@@ -14,6 +14,7 @@ import numpy as np
 
 from components import MeshRef, Mirror, Portal, Transform
 from engine.errors import SpeculumError
+from engine.frame_rules import frame_rules, world_corners
 from engine.mesh import flat_plane
 from engine.portal_math import pair_transform, portal_plane
 from engine.reflection_math import plane_from_point_normal, reflection_matrix, transform_plane
@@ -59,11 +60,12 @@ class SurfaceSystem(esper.Processor):
         """Portals depend on their partner's pose too; there are few, so all are redone."""
         world = self.world
         self.portals = {}
+        open_portals = frame_rules(world).open_portals  # the rule travel and slicing use too
         for entity, (portal, transform) in world.query(Portal, Transform):
-            partner = portal.partner
-            out = world.try_get(partner, Transform) if partner is not None and world.exists(partner) else None
-            if out is None or not world.has(partner, Portal):
+            partner = open_portals.get(entity)
+            if partner is None:
                 continue  # closed: the scene shader shows its closed colour
+            out = world.get(partner, Transform)
             w, h = portal.size
             corners = np.array([(x, y, 0.0, 1.0) for x in (-w / 2, w / 2) for y in (-h / 2, h / 2)])
             corners = corners @ np.array(transform.world.to_list(), np.float64)
@@ -90,8 +92,7 @@ class SurfaceSystem(esper.Processor):
         local_plane = plane_from_point_normal(tuple(float(v) for v in point), tuple(float(v) for v in normal))
         plane = transform_plane(model, local_plane)
         lo, hi = mesh.bounds
-        corners = np.array([(x, y, z, 1.0) for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
-        corners = corners @ np.array(model.to_list(), np.float64)
+        corners = world_corners(mesh, model)  # x, then y, then z: the outline below picks by bit
         # A flat mesh's box has its corners in pairs across the flat axis: one of each pair is
         # the mesh's outline on its plane (what the composite covers instead of the rectangle).
         extents = hi - lo
