@@ -11,7 +11,8 @@ has a ``ProbeState``.  What is captured each frame, per probe:
     moved or its settings changed, or a light or the sky changed;
   - ``every_frame``: all six; ``every_n``: all six every n frames; ``once``: nothing more;
     ``scripted``: all six after ``ReflectionProbe.request()``;
-  - with ``time_slicing="one_face_per_frame"`` the waiting faces go one a frame.
+  - with ``time_slicing="one_face_per_frame"`` the waiting faces go one a frame (after a
+    first capture of all six, so an object never shows a cube map with faces missing).
 
 Two paths draw a capture: ``six_pass`` (each face a view through the scene pass, with a
 view tree of the mirrors and portals it sees) and ``layered`` (all six faces in one pass, a
@@ -99,8 +100,8 @@ class ProbeSystem(esper.Processor):
         for state in self.probes.values():
             self._schedule(state, boxes, everything)
             faces = state.pending
-            if state.settings.time_slicing == "one_face_per_frame" and faces:
-                faces = {min(faces)}
+            if state.settings.time_slicing == "one_face_per_frame" and faces and state.captures:
+                faces = {min(faces)}  # the first capture is whole: nothing is shown half-made
             if faces:
                 self._capture(state, faces)
                 state.pending = state.pending - faces

@@ -149,7 +149,7 @@ def test_a_box_moving_on_the_probes_plus_x_side_recaptures_only_that_face(scene)
     assert (state.captures, state.faces_captured) == (2, 7)
 
 
-def test_time_slicing_captures_one_face_a_frame(scene):
+def test_time_slicing_captures_one_face_a_frame_after_a_whole_first_capture(scene):
     ents = {}
 
     def build(world):
@@ -157,11 +157,18 @@ def test_time_slicing_captures_one_face_a_frame(scene):
         world.add_component(ents["sphere"], ReflectionProbe(resolution=32, time_slicing="one_face_per_frame"))
 
     runner = scene(build, (64, 48))
-    state = None
-    for frame in range(1, 9):
+    runner.frame()
+    state = probe_stage(runner).probes[ents["sphere"]]
+    assert state.faces_captured == 6  # the first capture is whole
+    # The 12 m wall 1.6 m away reaches into (at least) the five faces other than -X.
+    runner.world.get(ents["wall"], Transform).position = (1.6, 0.0, 0.3)
+    steps = []
+    for _ in range(8):
+        before = state.faces_captured
         runner.frame()
-        state = probe_stage(runner).probes[ents["sphere"]]
-        assert state.faces_captured == min(frame, 6)
+        steps.append(state.faces_captured - before)
+    waiting = sum(steps)
+    assert 5 <= waiting <= 6 and steps == [1] * waiting + [0] * (8 - waiting)
 
 
 def test_a_scripted_probe_captures_when_asked(scene):
