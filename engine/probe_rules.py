@@ -18,6 +18,7 @@ import numpy as np
 from pyglm import glm
 
 from components import MeshRef, ReflectionProbe, Reflective, Refractive, Transform
+from engine.frame_rules import world_corners
 from engine.mesh import Mesh, flat_plane
 from engine.world import World
 
@@ -45,10 +46,8 @@ def has_own_probe(world: World, entity: int) -> bool:
 
 
 def world_bounds(mesh: Mesh, model: glm.mat4) -> tuple[np.ndarray, np.ndarray]:
-    """The world AABB of ``mesh`` placed by ``model``."""
-    lo, hi = mesh.bounds
-    corners = np.array([(x, y, z, 1.0) for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
-    world = corners @ np.array(model.to_list(), np.float64)
+    """The world AABB of ``mesh`` placed by ``model`` (from ``frame_rules.world_corners``)."""
+    world = world_corners(mesh, model)
     return world[:, :3].min(axis=0), world[:, :3].max(axis=0)
 
 
