@@ -16,7 +16,7 @@ import moderngl
 
 from components import FlyController, yaw_pitch_rotation
 from engine.errors import GLPassError
-from engine.frame_io import Output
+from engine.frame_io import Input, Output
 from engine.gl_context import prepare_context
 from engine.raw_gl import make_current
 from engine.render.renderer import Renderer
@@ -90,6 +90,7 @@ class Engine:
         self.game = game
         self.ctx = ctx
         self.world = World(game.title)
+        self.world.resources[Input] = Input()  # the shell fills it, systems and the game read it
         self.renderer = Renderer(ctx, caps)
         self.stages: dict[str, esper.Processor] = {}
         for order, (name, make) in enumerate(FRAME_STAGES):
@@ -129,6 +130,7 @@ class Engine:
             raise GLPassError(f"OpenGL error {pending} was pending before frame {self.world.frame_index + 1} "
                               "(left by other code on this context, not by the engine)")
         self.world.step(dt)
+        self.world.resources[Input].end_frame()
         error = self.ctx.error
         if error != "GL_NO_ERROR":
             raise RuntimeError(f"OpenGL error after frame {self.world.frame_index}: {error}")

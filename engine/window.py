@@ -17,7 +17,19 @@ from engine.errors import SpeculumError
 from engine.frame_io import Input, Output
 from engine.render.targets import CaptureTarget
 
-_MOVE_KEYS = {"W": "w", "A": "a", "S": "s", "D": "d", "Q": "q", "E": "e"}
+_NAMED_KEYS = {"SPACE": "space", "ENTER": "enter", "TAB": "tab", "BACKSPACE": "backspace", "LEFT": "left",
+               "RIGHT": "right", "UP": "up", "DOWN": "down", **{f"F{n}": f"f{n}" for n in range(1, 12)},
+               **{chr(c): chr(c).lower() for c in range(ord("A"), ord("Z") + 1)},
+               **{f"NUMBER_{n}": str(n) for n in range(10)}}
+_BUTTONS = {1: "left", 2: "right", 3: "middle"}
+
+
+def key_names(keys) -> dict:
+    """moderngl-window key code -> the ``Input`` name of that key (the backend's codes differ).
+    The headless backend has no key codes (every one reads "undefined"): there a key is sent
+    by its attribute name ("W", "SPACE"), as the tests do."""
+    codes = {attr: getattr(keys, attr, None) for attr in _NAMED_KEYS}
+    return {code if isinstance(code, int) else attr: _NAMED_KEYS[attr] for attr, code in codes.items()}
 
 
 def make_window_config(game: Game, args: argparse.Namespace | None = None) -> type[mglw.WindowConfig]:
@@ -39,6 +51,7 @@ def make_window_config(game: Game, args: argparse.Namespace | None = None) -> ty
             self.input: Input = self.engine.world.resources[Input]
             self.screenshots = Path(args.out) if args is not None and args.out else Path("screenshots")
             self.mouse_captured = False
+            self.key_names = key_names(self.wnd.keys)
 
         def on_render(self, time_s: float, frametime: float) -> None:
             size = self.wnd.buffer_size
@@ -49,32 +62,37 @@ def make_window_config(game: Game, args: argparse.Namespace | None = None) -> ty
 
         def on_key_event(self, key, action, modifiers) -> None:
             keys = self.wnd.keys
-            name = next((v for k, v in _MOVE_KEYS.items() if key == getattr(keys, k, None)), None)
+            name = self.key_names.get(key)
             if action == keys.ACTION_PRESS:
                 if name:
-                    self.input.held.add(name)
+                    self.input.press(name)
                 elif key == getattr(keys, "F12", None):
                     self.screenshot()
                 elif key == keys.ESCAPE:
                     self.wnd.close()
             elif action == keys.ACTION_RELEASE and name:
-                self.input.held.discard(name)
-            if modifiers.shift:
-                self.input.held.add("shift")
-            else:
-                self.input.held.discard("shift")
+                self.input.release(name)
+            for modifier in ("shift", "ctrl"):
+                if getattr(modifiers, modifier, False):
+                    self.input.held.add(modifier)
+                else:
+                    self.input.held.discard(modifier)
 
         def on_mouse_press_event(self, x: int, y: int, button: int) -> None:
+            self.input.clicks.add(_BUTTONS.get(button, str(button)))
+            self.input.mouse = (float(x), float(y))
             self.mouse_captured = True
             self.wnd.mouse_exclusivity = True
             self.wnd.cursor = False
 
         def on_mouse_position_event(self, x: int, y: int, dx: int, dy: int) -> None:
+            self.input.mouse = (float(x), float(y))
             if self.mouse_captured:
                 self.input.mouse_dx += dx
                 self.input.mouse_dy += dy
 
         def on_mouse_drag_event(self, x: int, y: int, dx: int, dy: int) -> None:
+            self.input.mouse = (float(x), float(y))
             self.input.mouse_dx += dx
             self.input.mouse_dy += dy
 

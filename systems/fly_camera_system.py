@@ -26,4 +26,3 @@ class FlyCameraSystem(esper.Processor):
             if glm.length(move) > 0.0:
                 speed = fly.speed * (3.0 if "shift" in state.held else 1.0)
                 transform.position += transform.rotation * glm.normalize(move) * speed * dt
-        state.mouse_dx = state.mouse_dy = 0.0
