@@ -7,7 +7,8 @@ the ring's centre, 640 x 360.
 Capture rows (``path``, ``culled``, ``size``, ``capture_ms_median``, ``primitives``): all six
 faces of the sphere's probe captured ``--frames`` times at 128 and 512 texels a face, each
 timed with ``ctx.finish()`` around it (wall clock: llvmpipe's GPU timers are not usable),
-with a primitives-generated query around the capture.  ``face_primitives`` is the same
+with a primitives-generated query around the capture (less the mip pass's six triangles a
+level).  ``face_primitives`` is the same
 query around the main view's scene pass (one view of the scene), the yardstick for how much
 geometry six faces push.  Paths: ``six_pass`` (each face a view through the scene pass;
 the primitives count includes the probe's own sphere, which each face view clips),
@@ -97,7 +98,7 @@ def capture_rows(ctx, frames: int) -> list[dict]:
                         run()
                     ctx.finish()
                     times[key].append((time.perf_counter() - start) * 1e3)
-                    primitives[key] = query.primitives
+                    primitives[key] = query.primitives - probes.mips.primitives(size)
             for (path, culled), samples in times.items():
                 rows.append({"path": path, "culled": culled, "size": size,
                              "capture_ms_median": round(statistics.median(samples), 2),

@@ -20,6 +20,13 @@ colour attachment and a depth cube map of its own.  It is bound with raw calls f
 pass; the next moderngl ``Framebuffer.use`` binds moderngl's again (it always binds), and
 the calls are checked with ``glGetError`` so a failure is named where it happens.
 
+A cube map's mip levels drawn by the engine (``CubeMipTarget``): ``glGenerateMipmap`` on a
+cube map is six blits a level, each with a draw's fixed cost, which on llvmpipe is most of
+a small probe's capture; a layered target on one mip level takes a level's six faces in
+one draw.  Meanwhile the cube's base and max level are limited to the level above (raw
+``glTexParameteri``; moderngl keeps no copy of them, and ``build_mipmaps`` sets them
+itself), so the level written is never one the draw reads.
+
 ``glFlush``.  moderngl has ``finish`` (wait for everything) but no flush (start
 the GPU on what is queued, without waiting).  On llvmpipe that difference is frame time:
 draws are binned on the calling thread and rasterised only at a flush, a framebuffer
@@ -53,6 +60,9 @@ GL_UNSIGNED_INT = 0x1405
 GL_TEXTURE_MIN_FILTER = 0x2801
 GL_TEXTURE_MAG_FILTER = 0x2800
 GL_NEAREST = 0x2600
+GL_TEXTURE_BASE_LEVEL = 0x813C
+GL_TEXTURE_MAX_LEVEL = 0x813D
+GL_MAX_LEVEL_DEFAULT = 1000
 GL_COLOR = 0x1800
 GL_DEPTH = 0x1801
 _u = ctypes.c_uint
@@ -174,6 +184,57 @@ class LayeredCubeTarget:
         if self.depth:
             self.gl["glDeleteTextures"](1, ctypes.byref(_u(self.depth)))
             self.depth = 0
+
+
+class CubeMipTarget:
+    """A framebuffer drawing into every face of one mip level of ``cube`` at a time, for the
+    probe's mip pass (see the module's docstring)."""
+
+    def __init__(self, ctx: moderngl.Context, cube: moderngl.TextureCube) -> None:
+        self.ctx = ctx
+        self.cube = cube
+        self.gl = {name: _load(ctx, name, ctypes.CFUNCTYPE(*sig)) for name, sig in _SIGNATURES.items()}
+        missing = [name for name, fn in self.gl.items() if fn is None]
+        if missing:
+            raise RuntimeError(f"cube-map mip pass needs GL entry points the loader lacks: {missing}")
+        name = _u(0)
+        self.gl["glGenFramebuffers"](1, ctypes.byref(name))
+        self.framebuffer = name.value
+
+    def bind_level(self, level: int, unit: int) -> int:
+        """Draw into mip ``level`` (>= 1) of every face, reading only level ``level - 1``
+        through ``unit``; returns the level's face size."""
+        gl = self.gl
+        gl["glGetError"]()  # start clean: what follows is checked
+        gl["glBindFramebuffer"](GL_FRAMEBUFFER, self.framebuffer)
+        gl["glFramebufferTexture"](GL_FRAMEBUFFER, GL_COLOR_ATTACHMENT0, self.cube.glo, level)
+        gl["glDrawBuffers"](1, (_u * 1)(GL_COLOR_ATTACHMENT0))
+        status = gl["glCheckFramebufferStatus"](GL_FRAMEBUFFER)
+        self.cube.use(unit)
+        gl["glTexParameteri"](GL_TEXTURE_CUBE_MAP, GL_TEXTURE_BASE_LEVEL, level - 1)
+        gl["glTexParameteri"](GL_TEXTURE_CUBE_MAP, GL_TEXTURE_MAX_LEVEL, level - 1)
+        size = max(1, self.cube.size[0] >> level)
+        gl["glViewport"](0, 0, size, size)
+        error = gl["glGetError"]()
+        if status != GL_FRAMEBUFFER_COMPLETE or error:
+            self.done(unit)
+            raise RuntimeError(f"cube-map mip level {level} of {self.cube.size[0]}: framebuffer status "
+                               f"0x{status:x}, GL error 0x{error:x}")
+        return size
+
+    def done(self, unit: int) -> None:
+        """Every level readable again; back to the framebuffer moderngl thinks is bound."""
+        self.cube.use(unit)
+        self.gl["glTexParameteri"](GL_TEXTURE_CUBE_MAP, GL_TEXTURE_BASE_LEVEL, 0)
+        self.gl["glTexParameteri"](GL_TEXTURE_CUBE_MAP, GL_TEXTURE_MAX_LEVEL, GL_MAX_LEVEL_DEFAULT)
+        self.gl["glBindFramebuffer"](GL_FRAMEBUFFER, 0)
+        if self.ctx.fbo is not None:
+            self.ctx.fbo.use()
+
+    def release(self) -> None:
+        if self.framebuffer:
+            self.gl["glDeleteFramebuffers"](1, ctypes.byref(_u(self.framebuffer)))
+            self.framebuffer = 0
 
 
 def _load(ctx: moderngl.Context, name: str, prototype):

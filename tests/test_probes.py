@@ -412,8 +412,10 @@ def test_the_layered_and_six_pass_captures_agree_face_by_face_and_culling_cuts_p
         probes.capture_layered(owner, views, culled=False)
     naive = query.primitives
     one_face = 12 * 6 + 2 + 1  # six marker boxes, the wall and the sky (the sphere is the probe's own)
-    assert naive == 6 * one_face
-    assert culled <= 2 * one_face
+    mips = 6 * (64 .bit_length() - 1)  # the mip pass: a triangle per face per level below the first
+    assert mips == probes.mips.primitives(64)
+    assert naive == 6 * one_face + mips
+    assert culled - mips <= 2 * one_face
 
 
 def test_auto_times_both_paths_once_and_keeps_the_faster(scene):
@@ -482,3 +484,48 @@ def test_a_chrome_sphere_seen_in_a_mirror_shows_its_cube_map(scene):
     colours = srgb_to_linear(rgb[in_mirror])
     red = (colours[:, 0] > colours[:, 1] + 0.15) & (colours[:, 0] > colours[:, 2] + 0.15)
     assert 0.1 < red.mean() < 0.9  # the wall's side of the sphere, and not all of it
+
+
+def read_cube_level(ctx, cube, face: int, level: int) -> np.ndarray:
+    """Face ``face`` of mip ``level`` of ``cube``, RGBA float32 (glGetTexImage: moderngl reads level 0 only)."""
+    import ctypes
+
+    from engine.raw_gl import GL_TEXTURE_CUBE_MAP_POSITIVE_X, _load
+    get_tex_image = _load(ctx, "glGetTexImage", ctypes.CFUNCTYPE(None, ctypes.c_uint, ctypes.c_int, ctypes.c_uint,
+                                                                   ctypes.c_uint, ctypes.c_void_p))
+    n = max(1, cube.size[0] >> level)
+    out = np.zeros((n, n, 4), np.float32)
+    cube.use(15)
+    get_tex_image(GL_TEXTURE_CUBE_MAP_POSITIVE_X + face, level, 0x1908, 0x1406, out.ctypes.data)  # RGBA, FLOAT
+    assert ctx.error == "GL_NO_ERROR"
+    return out
+
+
+def test_the_mip_pass_builds_the_chain_glGenerateMipmap_builds(scene, ctx):
+    """The probe's mip chain, drawn one layered draw a level, equals ``build_mipmaps``'s (a
+    2x2 box filter) on every face and level, within half-float rounding: a face or its
+    orientation mixed up, or a level filtered from the wrong one above, fails."""
+    ents = {}
+
+    def build(world):
+        chrome_scene(ents)(world)
+        for face, colour in enumerate(MARKER_COLOURS):
+            world.spawn(Transform(position=tuple(3.0 * offset(face))), MeshRef(box((0.5, 0.5, 0.5))),
+                        Material(color=colour), Emissive(2.0))
+
+    runner = scene(build, (64, 48))
+    runner.frame()
+    probes = runner.engine.renderer.probes
+    assert probes.mips.layered  # the raw GL calls are reachable here: the pass itself is tested
+    cube = probes.cubes[ents["sphere"]].texture
+    levels = cube.size[0].bit_length()
+    probes.mips.build(ents["sphere"], cube)
+    drawn = [[read_cube_level(ctx, cube, face, level) for level in range(levels)] for face in range(6)]
+    cube.build_mipmaps()
+    reference = [[read_cube_level(ctx, cube, face, level) for level in range(levels)] for face in range(6)]
+    for face in range(6):
+        for level in range(1, levels):
+            ref = reference[face][level]
+            assert ref.std() > 0.0 or level > 3  # the markers make the upper levels far from flat
+            np.testing.assert_allclose(drawn[face][level], ref, atol=4e-3 * max(1.0, float(ref.max())),
+                                       err_msg=f"face {face} level {level}")

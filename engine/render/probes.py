@@ -16,8 +16,8 @@ import numpy as np
 from pyglm import glm
 
 from engine.errors import GLLimitError
-from engine.raw_gl import LayeredCubeTarget
-from engine.render.bindings import SCRATCH_UNIT
+from engine.raw_gl import CubeMipTarget, LayeredCubeTarget
+from engine.render.bindings import CUBE_MIP_UNIT, SCRATCH_UNIT, PassState, apply_pass_state
 from engine.render.scene_pass import SceneOptions
 from engine.render.targets import LevelStack
 from engine.render.view_tree import SurfaceTable, TreeSettings, ViewTree
@@ -111,6 +111,79 @@ class ProbeCube:
         return self.resolution
 
 
+class CubeMipPass:
+    """Rebuilds a cube map's mip chain with one layered draw a level (``cube_mip.geom`` and
+    ``.frag``: a 2x2 box filter, as ``glGenerateMipmap``'s), where ``build_mipmaps`` costs six
+    blits a level (42 for a 128 cube: most of a small probe's capture on llvmpipe).  Where
+    the raw GL calls it needs are not reachable it uses ``build_mipmaps``."""
+
+    STATE = PassState()  # no depth test, no blending, no clip distances
+
+    def __init__(self, renderer) -> None:
+        self.renderer = renderer
+        self.ctx = renderer.ctx
+        self._targets: dict[int, CubeMipTarget] = {}  # by probe key
+        self._vao: moderngl.VertexArray | None = None
+        self.layered = True  # False once the raw calls turned out unreachable
+
+    @staticmethod
+    def primitives(size: int) -> int:
+        """Primitives the pass emits for a cube of ``size`` (a primitives-generated query
+        around a capture counts them too)."""
+        return 6 * (size.bit_length() - 1)
+
+    def build(self, key: int, cube: moderngl.TextureCube) -> None:
+        """Levels 1.. of ``cube`` from its level 0."""
+        target = self._target(key, cube)
+        if target is None:
+            cube.build_mipmaps()
+            return
+        vao = self._program_vao()
+        apply_pass_state(self.ctx, self.STATE, (0, 0, *cube.size))
+        level = 1
+        try:
+            while cube.size[0] >> level:
+                vao.program["level_size"].value = float(target.bind_level(level, CUBE_MIP_UNIT))
+                vao.render(moderngl.TRIANGLES, vertices=3)
+                level += 1
+        finally:
+            target.done(CUBE_MIP_UNIT)
+        self.renderer.checkpoint("probe mip chain")
+
+    def _target(self, key: int, cube: moderngl.TextureCube) -> CubeMipTarget | None:
+        if not self.layered:
+            return None
+        target = self._targets.get(key)
+        if target is None or target.cube is not cube:
+            self.drop(key)
+            cube.build_mipmaps()  # allocates levels 1.. (a level must exist to be attached)
+            try:
+                target = self._targets[key] = CubeMipTarget(self.ctx, cube)
+            except RuntimeError:
+                self.layered = False
+                return None
+        return target
+
+    def _program_vao(self) -> moderngl.VertexArray:
+        if self._vao is None:
+            program = self.renderer.shaders.program("fullscreen.vert", "cube_mip.frag", "cube_mip.geom")
+            program["source"].value = CUBE_MIP_UNIT
+            self._vao = self.ctx.vertex_array(program, [])
+        return self._vao
+
+    def drop(self, key: int) -> None:
+        target = self._targets.pop(key, None)
+        if target is not None:
+            target.release()
+
+    def release(self) -> None:
+        for key in list(self._targets):
+            self.drop(key)
+        if self._vao is not None:
+            self._vao.release()
+            self._vao = None
+
+
 class ProbeCaptures:
     """The GPU side of every probe: cube maps by probe key, and the targets faces draw into
     (one LevelStack per resolution, shared by all probes: captures run one after another)."""
@@ -122,6 +195,7 @@ class ProbeCaptures:
         self._layered: dict[int, LayeredCubeTarget] = {}  # the one-pass path's targets, by probe
         self._stacks: dict[int, LevelStack] = {}
         self.tree = ViewTree(renderer)
+        self.mips = CubeMipPass(renderer)
 
     def cube(self, key: int, resolution: int) -> ProbeCube:
         """The cube map of probe ``key`` at ``resolution`` (made, or remade at a new size)."""
@@ -153,7 +227,7 @@ class ProbeCaptures:
             renderer.raw_gl.copy_to_cube_face(targets.framebuffer, cube.texture, face, SCRATCH_UNIT)
             renderer.checkpoint(f"probe face {face} copy")
             renderer.stats.probe_faces += 1
-        cube.texture.build_mipmaps()
+        self.mips.build(key, cube.texture)
 
     def capture_layered(self, key: int, views: dict[int, View], culled: bool = True) -> None:
         """All six faces in one pass (``ScenePass.draw_layered``) straight into the cube map,
@@ -166,7 +240,7 @@ class ProbeCaptures:
                 target.release()
             target = self._layered[key] = LayeredCubeTarget(self.ctx, cube.texture)
         self.renderer.scene_pass.draw_layered([views[face] for face in range(6)], target, culled)
-        cube.texture.build_mipmaps()
+        self.mips.build(key, cube.texture)
         self.renderer.stats.probe_faces += 6
 
     def read_face(self, key: int, face: int) -> np.ndarray:
@@ -178,6 +252,7 @@ class ProbeCaptures:
         return data[..., :3].astype(np.float32)
 
     def drop(self, key: int) -> None:
+        self.mips.drop(key)
         target = self._layered.pop(key, None)
         if target is not None:
             target.release()
@@ -192,3 +267,4 @@ class ProbeCaptures:
             levels.release()
         self._stacks.clear()
         self.tree.release()
+        self.mips.release()
