@@ -18,7 +18,9 @@ Two paths draw a capture: ``six_pass`` (each face a view through the scene pass,
 view tree of the mirrors and portals it sees) and ``layered`` (all six faces in one pass, a
 geometry shader choosing each triangle's faces; no view trees).  ``ProbeSystem.path``
 ``auto`` (the default) times both with ``finish()`` on the first full capture that either
-could draw, keeps the faster for the rest of the run and says which (``chosen_path``,
+could draw (each drawn once untimed first, so neither pays for building its programs, then
+``AUTO_TIMED_CAPTURES`` times each, alternating, and the medians compared), keeps the
+faster for the rest of the run and says which (``chosen_path``, ``timings``,
 ``RenderStats.probe_path``, a log line).  A capture of some faces only, or of a probe
 whose faces see mirrors or portals, takes the six-pass path.
 
@@ -29,6 +31,7 @@ probe (``ProbeState.captures``: frames with a capture, ``faces_captured``) are t
 from __future__ import annotations
 
 import logging
+import statistics
 import time
 from dataclasses import dataclass, field
 
@@ -57,6 +60,7 @@ from engine.render.view_tree import Surfaces
 from engine.world import World
 
 PATHS = ("auto", "six_pass", "layered")
+AUTO_TIMED_CAPTURES = 3  # timed captures of each path before "auto" chooses (medians compared)
 LOG = logging.getLogger("speculum")
 LOOK_KINDS = (Material, MeshRef, Emissive, Reflective, Refractive, Mirror, Portal)  # what changes a look
 LIGHTING_KINDS = (DirectionalLight, PointLight, Skybox)  # what changes every face
@@ -83,7 +87,8 @@ class ProbeSystem(esper.Processor):
         self.probes = world.resources[ProbeStates] = ProbeStates()
         self.path = "auto"
         self.chosen_path: str | None = None  # what "auto" settled on, once it has timed both
-        self.timings: dict[str, float] = {}  # ms of the timed captures
+        self.timings: dict[str, float] = {}  # median ms of the timed captures, by path
+        self.path_used = ""  # the path of the last capture (RenderStats.probe_path, every frame with probes)
         self._bounds: dict[int, tuple[np.ndarray, np.ndarray]] = {}  # entity -> last world box
 
     def process(self, dt: float) -> None:
@@ -105,6 +110,8 @@ class ProbeSystem(esper.Processor):
             if faces:
                 self._capture(state, faces)
                 state.pending = state.pending - faces
+        # The path in use, every frame there are probes (the overlay and frame stats show it).
+        self.renderer.stats.probe_path = self.path_used
 
     # --- which probes -------------------------------------------------------------------------
     def _refresh_probes(self) -> None:
@@ -192,8 +199,15 @@ class ProbeSystem(esper.Processor):
         path = self._path(len(faces) == 6 and not sees_surfaces)
         probes = self.renderer.probes
         if path == "time both":
-            self.timings = {"six_pass": self._timed(lambda: probes.capture(state.owner, views, None, 0)),
-                            "layered": self._timed(lambda: probes.capture_layered(state.owner, views))}
+            paths = {"six_pass": lambda: probes.capture(state.owner, views, None, 0),
+                     "layered": lambda: probes.capture_layered(state.owner, views)}
+            for capture in paths.values():
+                capture()  # untimed: programs built, targets made
+            samples: dict[str, list[float]] = {name: [] for name in paths}
+            for _ in range(AUTO_TIMED_CAPTURES):
+                for name, capture in paths.items():
+                    samples[name].append(self._timed(capture))
+            self.timings = {name: statistics.median(times) for name, times in samples.items()}
             self.chosen_path = min(self.timings, key=self.timings.get)
             LOG.info("probe capture path: %s (six_pass %.2f ms, layered %.2f ms for %d-texel faces)",
                      self.chosen_path, self.timings["six_pass"], self.timings["layered"], settings.resolution)
@@ -201,7 +215,7 @@ class ProbeSystem(esper.Processor):
             probes.capture_layered(state.owner, views)
         else:
             probes.capture(state.owner, views, surfaces.table if sees_surfaces else None, settings.depth)
-        self.renderer.stats.probe_path = self.chosen_path or (path if path != "time both" else "")
+        self.path_used = self.chosen_path if path == "time both" else path
         cube = probes.cubes[state.owner]
         cube.position = tuple(state.position)
         cube.box = None

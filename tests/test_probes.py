@@ -419,6 +419,10 @@ def test_the_layered_and_six_pass_captures_agree_face_by_face_and_culling_cuts_p
 
 
 def test_auto_times_both_paths_once_and_keeps_the_faster(scene):
+    """On the first full capture ``auto`` draws each path once untimed, then times each
+    AUTO_TIMED_CAPTURES times and keeps the faster median; later probes and frames use it."""
+    from systems.probe_system import AUTO_TIMED_CAPTURES
+
     ents = {}
 
     def build(world):
@@ -432,7 +436,10 @@ def test_auto_times_both_paths_once_and_keeps_the_faster(scene):
     assert set(stage.timings) == {"six_pass", "layered"} and stage.chosen_path == min(stage.timings,
                                                                                        key=stage.timings.get)
     assert runner.stats.probe_path == stage.chosen_path
-    assert runner.stats.probe_faces == 12 + 6  # both paths for the first probe, the chosen one for the second
+    # both paths (once untimed, then timed) for the first probe, the chosen one for the second
+    assert runner.stats.probe_faces == 2 * 6 * (1 + AUTO_TIMED_CAPTURES) + 6
+    runner.frame()
+    assert runner.stats.probe_path == stage.chosen_path and runner.stats.probe_faces == 0  # still: no capture
 
 
 def test_a_probes_own_object_never_appears_in_its_capture(scene):

@@ -44,7 +44,7 @@ class RenderStats:
     reflection_views: int = 0
     probe_captures: int = 0   # probes that captured at least one face this frame
     probe_faces: int = 0      # cube faces captured this frame
-    probe_path: str = ""      # how probes were captured: "six_pass" or "layered" (ProbeSystem.path)
+    probe_path: str = ""      # the path of the last probe capture: "six_pass" or "layered" (while there are probes)
     reflection_views_dropped: int = 0   # views with pixels a level's view budget left out
     reflection_depth_capped: int = 0    # views the surfaces' own depth limits allowed below the tree's cap
     # How reflection levels were drawn: "per_mirror", "batched", "mixed" (auto chose both in
