@@ -26,6 +26,10 @@ class MeshRef(TrackedComponent):
 
         if name == "mesh" and not isinstance(value, Mesh):
             raise ComponentValueError(f"MeshRef.mesh must be an engine.mesh.Mesh, got {type(value).__name__}")
+        world = getattr(self, "_world_ref", None)
+        if name == "mesh" and world is not None:
+            for entity in self._entities:  # a mirror's new mesh must have area, as at spawn
+                world._check_mirror_mesh(entity, mesh=value)
         if name == "visible":
             return boolean(self, name, value)
         return value

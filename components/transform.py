@@ -10,6 +10,12 @@ from pyglm import glm
 
 from components.tracking import ComponentValueError, TrackedComponent, vec3
 
+# Bounds a pose must keep for its matrices to stay meaningful in float32: past a billion
+# metres a float32 position steps by 64 m, and a scale far from 1 drives the normal matrix
+# (the inverse transpose) towards 0 or infinity, where normalising gives NaN.
+POSITION_MAX = 1e9
+SCALE_RANGE = (1e-6, 1e6)
+
 
 @dataclass(eq=False)
 class Transform(TrackedComponent):
@@ -37,11 +43,19 @@ class Transform(TrackedComponent):
 
     def _validate(self, name: str, value: Any) -> Any:
         if name == "position":
-            return vec3(self, name, value)
+            v = vec3(self, name, value)
+            if max(abs(v.x), abs(v.y), abs(v.z)) > POSITION_MAX:
+                raise ComponentValueError(f"Transform.position must be within {POSITION_MAX:g} m of the origin on "
+                                          f"each axis (float32 precision), got {value!r}")
+            return v
         if name == "scale":
             v = vec3(self, name, value)
             if min(abs(v.x), abs(v.y), abs(v.z)) == 0.0:
                 raise ComponentValueError(f"Transform.scale must have no zero component, got {value!r}")
+            low, high = SCALE_RANGE
+            if not all(low <= abs(c) <= high for c in v):
+                raise ComponentValueError(f"Transform.scale components must be {low:g} to {high:g} in size "
+                                          f"(the normal matrix is their inverse), got {value!r}")
             return v
         if name == "rotation":
             return rotation(value)

@@ -123,6 +123,8 @@ class World:
                 if walk == entity:
                     raise ComponentValueError(f"Transform.parent {parent!r} of entity {entity} would make a "
                                               f"cycle (entity {parent} descends from entity {entity})")
+        if kind.__name__ in ("Mirror", "MeshRef"):
+            self._check_mirror_mesh(entity, component)
         if esper.has_component(entity, kind):
             old = esper.component_for_entity(entity, kind)
             if old is not component:
@@ -138,19 +140,34 @@ class World:
     def _check_whole(self, entity: int, components: tuple[Any, ...]) -> None:
         """Checks that need the entity's components together, so they fail at spawn, not frame 1."""
         names = {type(c).__name__: c for c in components}
-        mirror, mesh_ref = names.get("Mirror"), names.get("MeshRef")
-        if mirror is not None and mesh_ref is not None and getattr(mirror, "plane_normal", None) is None:
-            mesh = mesh_ref.mesh
-            tri = mesh.positions[mesh.indices]
-            area = float(np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1).sum())
-            if not area > 0.0:
-                raise ComponentValueError(f"Mirror on entity {entity}: its MeshRef.mesh {mesh.name!r} has no area "
-                                          f"(a mirror needs a flat mesh of non-zero size), got area {area}")
+        mesh_ref = names.get("MeshRef")
         if mesh_ref is not None and "Material" in names and "Transform" not in names \
                 and esper.has_component(entity, type(mesh_ref)) is not False:
             if not any(type(c).__name__ == "Transform" for c in esper.components_for_entity(entity)):
                 warnings.warn(f"entity {entity} has MeshRef and Material but no Transform: it is not drawn "
                               f"until one is added", stacklevel=3)
+
+    def _check_mirror_mesh(self, entity: int, joining: Any = None, mesh: Any = None) -> None:
+        """A mirror needs a mesh with area (its plane comes from it, unless ``plane_normal``
+        gives one): checked when a Mirror or MeshRef joins an entity holding the other, and
+        when a mirror's ``MeshRef.mesh`` is replaced, so the refusal comes then, not on the
+        next frame inside the surfaces stage."""
+        held = {type(c).__name__: c for c in esper.components_for_entity(entity)} if esper.entity_exists(entity) \
+            else {}
+        if joining is not None:
+            held[type(joining).__name__] = joining
+        mirror, mesh_ref = held.get("Mirror"), held.get("MeshRef")
+        if mirror is None or getattr(mirror, "plane_normal", None) is not None:
+            return
+        if mesh is None:
+            if mesh_ref is None:
+                return
+            mesh = mesh_ref.mesh
+        tri = mesh.positions[mesh.indices]
+        area = float(np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1).sum())
+        if not area > 0.0:
+            raise ComponentValueError(f"Mirror on entity {entity}: its MeshRef.mesh {mesh.name!r} has no area "
+                                      f"(a mirror needs a flat mesh of non-zero size), got area {area}")
 
     def _check_sharing(self, entity: int, component: TrackedComponent) -> None:
         """Refuse a component of another world, or a per-entity one already held elsewhere."""

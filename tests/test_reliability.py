@@ -148,7 +148,13 @@ def test_values_the_gpu_or_the_simulation_cannot_hold_are_refused_naming_the_fie
 
 
 def test_a_huge_int_is_kept_as_its_float_not_wrapped_by_glm():
-    assert Transform(position=(2**64 + 5, 0, 0)).position.x == pytest.approx(float(2**64))
+    from components import PointLight
+
+    # glm would wrap (2**64 + 5) to 5; a float32 field keeps it as its float
+    assert PointLight(range=2**64 + 5).range == pytest.approx(float(2**64))
+    assert Transform(position=(10**8 + 5, 0, 0)).position.x == pytest.approx(1e8)
+    with pytest.raises(ComponentValueError, match=r"Transform\.position"):
+        Transform(position=(2**64 + 5, 0, 0))  # past the position bound, not silently 5
     with pytest.raises(ComponentValueError, match=r"Transform\.position"):
         Transform(position=(2**200, 0, 0))  # finite in Python, not in float32
 
@@ -279,3 +285,37 @@ def test_sky_faces_with_an_int_past_float_range_name_the_field():
     # Found by `python -m benchmarks fuzz --cases 5000` (seed 0): it raised OverflowError.
     with pytest.raises(ComponentValueError, match=r"Skybox\.faces"):
         Skybox(faces=(1e39, 10 ** 400, 100.0))
+
+
+def test_a_mirrors_mesh_without_area_is_refused_whenever_it_comes(world):
+    """At spawn, when a Mirror joins an entity with a flat-less mesh later, and when a
+    mirror's MeshRef.mesh is replaced: refused then (naming the entity and MeshRef.mesh),
+    the old state kept, not a failure inside the surfaces stage on the next frame."""
+    from components import Mirror
+    from engine.mesh import quad
+
+    with pytest.raises(ComponentValueError, match=r"Mirror on entity \d+: its MeshRef\.mesh 'quad' has no area"):
+        world.spawn(Transform(), MeshRef(quad(0, 0)), Material(), Mirror())
+    assert not world.entities()
+    mirror = world.spawn(Transform(), MeshRef(quad(1, 1)), Material(), Mirror())
+    good = world.get(mirror, MeshRef).mesh
+    with pytest.raises(ComponentValueError, match=rf"Mirror on entity {mirror}: its MeshRef\.mesh 'quad' has no area"):
+        world.get(mirror, MeshRef).mesh = quad(2, 0)
+    assert world.get(mirror, MeshRef).mesh is good
+    plain = world.spawn(Transform(), MeshRef(quad(0, 1)), Material())
+    with pytest.raises(ComponentValueError, match=rf"Mirror on entity {plain}"):
+        world.add_component(plain, Mirror())
+    assert not world.has(plain, Mirror)
+
+
+@pytest.mark.parametrize("field, value, message", [
+    ("position", (2**64 + 5, 0, 0), r"Transform\.position must be within 1e\+09 m"),
+    ("position", (0, -3e38, 0), r"Transform\.position must be within 1e\+09 m"),
+    ("scale", (1e30, 1, 1), r"Transform\.scale components must be 1e-06 to 1e\+06"),
+    ("scale", (1, 1e-9, 1), r"Transform\.scale components must be 1e-06 to 1e\+06"),
+])
+def test_a_pose_float32_cannot_hold_is_refused_naming_the_field(field, value, message):
+    with pytest.raises(ComponentValueError, match=message):
+        Transform(**{field: value})
+    t = Transform(position=(1e8, 0, -1e8), scale=(1e-5, 2e5, -1))  # within the bounds: kept as given
+    assert t.position.x == 1e8 and t.scale.y == 2e5
