@@ -15,6 +15,11 @@ the primitives count includes the probe's own sphere, which each face view clips
 ``layered`` with ``culled`` true (one pass, each triangle sent to the faces it touches) and
 false (to all six faces).
 
+Prefilter rows (``prefilter``, ``size``, ``prefilter_ms_median``): the mip chain of a
+captured cube rebuilt, box-filtered (``mips``, the default) or GGX-convolved level by
+level (``ggx``, ``ReflectionProbe.prefilter``), and ``build_mipmaps`` (glGenerateMipmap)
+for comparison; interleaved.
+
 Frame rows (``probe``, ``frame_ms_median``): whole frames (``Engine.frame`` + ``finish``)
 of four engines interleaved frame by frame: ``none`` (the sphere reflects the sky),
 ``once`` (a probe captured on the first frame only), ``static`` (``on_change``: the faces
@@ -109,6 +114,35 @@ def capture_rows(ctx, frames: int) -> list[dict]:
     return rows
 
 
+def prefilter_rows(ctx, frames: int) -> list[dict]:
+    rows = []
+    for size in (128, 512):
+        engine = Engine(ProbeRing("scripted", size), ctx)
+        capture = CaptureTarget(ctx, OUTPUT_SIZE)
+        try:
+            engine.frame(DT, Output(capture.framebuffer, OUTPUT_SIZE))
+            owner = engine.stages["probes"].probes[engine.game.sphere].owner
+            probes = engine.renderer.probes
+            cube = probes.cubes[owner].texture
+            runs = {"mips": partial(probes.mips.build, owner, cube, "mips"),
+                    "ggx": partial(probes.mips.build, owner, cube, "ggx"),
+                    "build_mipmaps": cube.build_mipmaps}
+            times = {name: [] for name in runs}
+            for _ in range(frames):
+                for name, run in runs.items():
+                    ctx.finish()
+                    start = time.perf_counter()
+                    run()
+                    ctx.finish()
+                    times[name].append((time.perf_counter() - start) * 1e3)
+            rows += [{"prefilter": name, "size": size, "prefilter_ms_median": round(statistics.median(samples), 2)}
+                     for name, samples in times.items()]
+        finally:
+            capture.release()
+            engine.close()
+    return rows
+
+
 def frame_rows(ctx, frames: int, warmup: int) -> list[dict]:
     engines, captures = [], []
     try:
@@ -145,7 +179,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def main(args: argparse.Namespace) -> int:
     ctx: moderngl.Context = create_headless_context()
     try:
-        rows = capture_rows(ctx, args.frames) + frame_rows(ctx, args.frames, args.warmup)
+        rows = capture_rows(ctx, args.frames) + prefilter_rows(ctx, min(args.frames, 10)) + \
+            frame_rows(ctx, args.frames, args.warmup)
     finally:
         ctx.release()
     for row in rows:

@@ -8,6 +8,7 @@ from components.tracking import ComponentValueError, TrackedComponent, boolean, 
 
 REFRESH_MODES = ("once", "on_change", "every_frame", "every_n", "scripted")
 TIME_SLICING = ("all_faces", "one_face_per_frame")
+PREFILTERS = ("mips", "ggx")
 MIN_PROBE_RESOLUTION = 8
 MAX_PROBE_RESOLUTION = 2048  # also checked against the context's cube-map limit when the probe is made
 
@@ -26,7 +27,11 @@ class ReflectionProbe(TrackedComponent):
     cube map sample this probe (None: the probe serves only its own entity).
     ``box_projection`` corrects lookups for the box's walls (parallax-corrected, as Unity's
     and Godot's probes do).  ``depth`` is how many levels of mirrors and portals a face
-    sees (0: mirrors show their own surface).
+    sees (0: mirrors show their own surface).  ``prefilter``: how rough materials blur
+    what the probe saw: ``mips`` (the default: a box-filtered mip chain, sampled with a
+    roughness bias) or ``ggx`` (each level convolved with a GGX lobe of its own roughness,
+    as three.js's PMREM and Unity's probe convolution do: closer to the light's true spread,
+    and dearer to capture).
     """
 
     resolution: int = 128
@@ -38,6 +43,7 @@ class ReflectionProbe(TrackedComponent):
     influence: Any = None
     box_projection: bool = False
     depth: int = 1
+    prefilter: str = "mips"
     _requested: bool = field(default=False, init=False, repr=False, compare=False)
 
     def request(self) -> None:
@@ -67,6 +73,8 @@ class ReflectionProbe(TrackedComponent):
             return integer(self, name, value, low=1, high=1_000_000)
         if name == "time_slicing":
             return choice(self, name, value, TIME_SLICING)
+        if name == "prefilter":
+            return choice(self, name, value, PREFILTERS)
         if name == "influence" and value is not None:
             return vec3(self, name, value, low=0.0, nonzero=True)
         if name == "box_projection":

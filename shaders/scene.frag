@@ -12,7 +12,7 @@ uniform float sky_face_size;   // texels across one face of sky_map
 uniform bool transparent;       // the transparent slot: alpha is the material's, for blending
 uniform samplerCube probe_map;  // the batch's reflection probe (Reflect = cube)
 uniform float probe_face_size;
-uniform vec4 probe_position;    // xyz: where the probe was captured
+uniform vec4 probe_position;    // xyz: where the probe was captured; w: top level of a GGX-prefiltered chain (0: box mips)
 uniform vec4 probe_box_min;     // xyz: its influence box; w = 1: box projection on
 uniform vec4 probe_box_max;
 
@@ -130,12 +130,20 @@ vec3 probe_direction(vec3 position, vec3 ray) {
     return position + ray * min(min(t.x, t.y), t.z) - probe_position.xyz;
 }
 
+// The probe's mip level for a lookup: a box-filtered chain is blurred by a roughness bias
+// on the pixel's footprint; a GGX-prefiltered one (probe_position.w = its top level) holds
+// roughness L / top at level L, never sharper than the footprint.
+float probe_lod(float footprint_lod, float roughness) {
+    if (probe_position.w > 0.0) return max(footprint_lod, roughness * probe_position.w);
+    return footprint_lod + roughness_lod_bias(roughness);
+}
+
 vec3 reflect_probe(vec3 color, Surface s) {
-    // A cube map captured around the object (engine/render/probes.py), its mips blurred by
-    // roughness and weighted by GGXReflect with the material's F0: a metal tints what it
-    // reflects (brass is golden), a dielectric reflects most at grazing angles.
+    // A cube map captured around the object (engine/render/probes.py), blurred by roughness
+    // and weighted by GGXReflect with the material's F0: a metal tints what it reflects
+    // (brass is golden), a dielectric reflects most at grazing angles.
     vec3 env = textureLod(probe_map, probe_direction(s.position, s.reflect_dir),
-                          s.reflect_lod + roughness_lod_bias(s.roughness)).rgb;
+                          probe_lod(s.reflect_lod, s.roughness)).rgb;
     vec3 reflected = ggx_reflect(s.normal, s.reflect_dir, s.to_eye, env, s.f0, s.roughness);
     return mix(color, reflected * v_tint.rgb, v_reflect.x);
 }
@@ -168,7 +176,7 @@ vec3 refract_environment(vec3 color, Surface s) {
     // What lies behind: the probe's capture when one serves the object, else the sky.
     vec3 behind = probe_face_size > 0.0
         ? textureLod(probe_map, probe_direction(s.position, s.refract_dir),
-                     s.refract_lod + roughness_lod_bias(s.roughness)).rgb
+                     probe_lod(s.refract_lod, s.roughness)).rgb
         : sample_environment(s.refract_dir, s.refract_lod, s.roughness);
     vec3 transmitted = transmittance * s.albedo * behind;
     return mix(transmitted, color, s.alpha);

@@ -199,8 +199,8 @@ class ProbeSystem(esper.Processor):
         path = self._path(len(faces) == 6 and not sees_surfaces)
         probes = self.renderer.probes
         if path == "time both":
-            paths = {"six_pass": lambda: probes.capture(state.owner, views, None, 0),
-                     "layered": lambda: probes.capture_layered(state.owner, views)}
+            paths = {"six_pass": lambda: probes.capture(state.owner, views, None, 0, settings.prefilter),
+                     "layered": lambda: probes.capture_layered(state.owner, views, prefilter=settings.prefilter)}
             for capture in paths.values():
                 capture()  # untimed: programs built, targets made
             samples: dict[str, list[float]] = {name: [] for name in paths}
@@ -212,9 +212,10 @@ class ProbeSystem(esper.Processor):
             LOG.info("probe capture path: %s (six_pass %.2f ms, layered %.2f ms for %d-texel faces)",
                      self.chosen_path, self.timings["six_pass"], self.timings["layered"], settings.resolution)
         elif path == "layered":
-            probes.capture_layered(state.owner, views)
+            probes.capture_layered(state.owner, views, prefilter=settings.prefilter)
         else:
-            probes.capture(state.owner, views, surfaces.table if sees_surfaces else None, settings.depth)
+            probes.capture(state.owner, views, surfaces.table if sees_surfaces else None, settings.depth,
+                           settings.prefilter)
         self.path_used = self.chosen_path if path == "time both" else path
         cube = probes.cubes[state.owner]
         cube.position = tuple(state.position)

@@ -9,6 +9,7 @@ direction of each texel; tests/test_probes.py checks one labelled direction per 
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import moderngl
@@ -98,13 +99,21 @@ class ProbeCube:
     resolution: int
     position: tuple[float, float, float] = (0.0, 0.0, 0.0)
     box: tuple[tuple[float, float, float], tuple[float, float, float]] | None = None
+    prefilter: str = "mips"
+
+    @property
+    def roughness_levels(self) -> float:
+        """For a GGX-prefiltered chain, its top level (level L holds roughness L / this);
+        0 for box mips (sampled with a roughness bias instead)."""
+        return float(self.resolution.bit_length() - 1) if self.prefilter == "ggx" else 0.0
 
     def lookup(self) -> tuple[tuple[float, ...], tuple[float, ...], tuple[float, ...]]:
-        """The scene shader's probe_position, probe_box_min (w: 1 = box projection on) and
-        probe_box_max uniforms."""
+        """The scene shader's probe_position (w: ``roughness_levels``), probe_box_min (w: 1 =
+        box projection on) and probe_box_max uniforms."""
+        position = (*self.position, self.roughness_levels)
         if self.box is None:
-            return (*self.position, 0.0), (0.0, 0.0, 0.0, 0.0), (0.0, 0.0, 0.0, 0.0)
-        return (*self.position, 0.0), (*self.box[0], 1.0), (*self.box[1], 0.0)
+            return position, (0.0, 0.0, 0.0, 0.0), (0.0, 0.0, 0.0, 0.0)
+        return position, (*self.box[0], 1.0), (*self.box[1], 0.0)
 
     @property
     def face_size(self) -> int:
@@ -123,7 +132,7 @@ class CubeMipPass:
         self.renderer = renderer
         self.ctx = renderer.ctx
         self._targets: dict[int, CubeMipTarget] = {}  # by probe key
-        self._vao: moderngl.VertexArray | None = None
+        self._vaos: dict[bool, moderngl.VertexArray] = {}  # by GGX prefiltering or not
         self.layered = True  # False once the raw calls turned out unreachable
 
     @staticmethod
@@ -132,20 +141,29 @@ class CubeMipPass:
         around a capture counts them too)."""
         return 6 * (size.bit_length() - 1)
 
-    def build(self, key: int, cube: moderngl.TextureCube) -> None:
-        """Levels 1.. of ``cube`` from its level 0."""
+    def build(self, key: int, cube: moderngl.TextureCube, prefilter: str = "mips") -> None:
+        """Levels 1.. of ``cube`` from its level 0: box-filtered (``mips``), or each level the
+        one above convolved with a GGX lobe so that level L holds roughness L / top level
+        (``ggx``; ``ProbeCube.roughness_levels``)."""
+        ggx = prefilter == "ggx"
         target = self._target(key, cube)
         if target is None:
+            if ggx:
+                raise GLLimitError(f"reflection probe of entity {key}: ReflectionProbe.prefilter 'ggx' needs "
+                                   "layered framebuffer calls this OpenGL loader does not give")
             cube.build_mipmaps()
             return
-        vao = self._program_vao()
+        vao = self._program_vao(ggx)
+        program = vao.program
         apply_pass_state(self.ctx, self.STATE, (0, 0, *cube.size))
-        level = 1
+        top = cube.size[0].bit_length() - 1
         try:
-            while cube.size[0] >> level:
-                vao.program["level_size"].value = float(target.bind_level(level, CUBE_MIP_UNIT))
+            for level in range(1, top + 1):
+                program["level_size"].value = float(target.bind_level(level, CUBE_MIP_UNIT))
+                if ggx:
+                    alpha, above = (level / top) ** 2, ((level - 1) / top) ** 2
+                    program["alpha"].value = math.sqrt(alpha * alpha - above * above)
                 vao.render(moderngl.TRIANGLES, vertices=3)
-                level += 1
         finally:
             target.done(CUBE_MIP_UNIT)
         self.renderer.checkpoint("probe mip chain")
@@ -164,12 +182,14 @@ class CubeMipPass:
                 return None
         return target
 
-    def _program_vao(self) -> moderngl.VertexArray:
-        if self._vao is None:
-            program = self.renderer.shaders.program("fullscreen.vert", "cube_mip.frag", "cube_mip.geom")
+    def _program_vao(self, ggx: bool) -> moderngl.VertexArray:
+        vao = self._vaos.get(ggx)
+        if vao is None:
+            program = self.renderer.shaders.program("fullscreen.vert", "cube_mip.frag", "cube_mip.geom",
+                                                    defines={"GGX_PREFILTER": "1"} if ggx else None)
             program["source"].value = CUBE_MIP_UNIT
-            self._vao = self.ctx.vertex_array(program, [])
-        return self._vao
+            vao = self._vaos[ggx] = self.ctx.vertex_array(program, [])
+        return vao
 
     def drop(self, key: int) -> None:
         target = self._targets.pop(key, None)
@@ -179,9 +199,9 @@ class CubeMipPass:
     def release(self) -> None:
         for key in list(self._targets):
             self.drop(key)
-        if self._vao is not None:
-            self._vao.release()
-            self._vao = None
+        for vao in self._vaos.values():
+            vao.release()
+        self._vaos.clear()
 
 
 class ProbeCaptures:
@@ -212,7 +232,8 @@ class ProbeCaptures:
             cube = self.cubes[key] = ProbeCube(texture, resolution)
         return cube
 
-    def capture(self, key: int, views: dict[int, View], surfaces: SurfaceTable | None, depth: int) -> None:
+    def capture(self, key: int, views: dict[int, View], surfaces: SurfaceTable | None, depth: int,
+                prefilter: str = "mips") -> None:
         """Draw each face view of ``views`` (face -> view, all of the probe's resolution) and
         copy it into the probe's cube, then rebuild the cube's mips."""
         renderer = self.renderer
@@ -227,9 +248,10 @@ class ProbeCaptures:
             renderer.raw_gl.copy_to_cube_face(targets.framebuffer, cube.texture, face, SCRATCH_UNIT)
             renderer.checkpoint(f"probe face {face} copy")
             renderer.stats.probe_faces += 1
-        self.mips.build(key, cube.texture)
+        cube.prefilter = prefilter
+        self.mips.build(key, cube.texture, prefilter)
 
-    def capture_layered(self, key: int, views: dict[int, View], culled: bool = True) -> None:
+    def capture_layered(self, key: int, views: dict[int, View], culled: bool = True, prefilter: str = "mips") -> None:
         """All six faces in one pass (``ScenePass.draw_layered``) straight into the cube map,
         then its mips.  No view trees: mirrors and portals show their own surface."""
         resolution = views[0].size[0]
@@ -240,7 +262,8 @@ class ProbeCaptures:
                 target.release()
             target = self._layered[key] = LayeredCubeTarget(self.ctx, cube.texture)
         self.renderer.scene_pass.draw_layered([views[face] for face in range(6)], target, culled)
-        self.mips.build(key, cube.texture)
+        cube.prefilter = prefilter
+        self.mips.build(key, cube.texture, prefilter)
         self.renderer.stats.probe_faces += 6
 
     def read_face(self, key: int, face: int) -> np.ndarray:
