@@ -1,0 +1,405 @@
+"""Mirror beam: turn the mirrors so a beam of light bounces onto the target.
+
+A level file places a source (the beam leaves it along its -Z, the way a camera looks), a
+target, mirrors and walls; its ``[rules]`` say which mirrors turn and by what step.  Every
+frame the game stage runs three small systems, in order:
+
+* ``input_system``: tab / number keys / a click pick a mirror, left and right turn it about
+  the vertical axis by the rules' step, 'r' puts the level back as it started;
+* ``beam_system``: traces the beam through this frame's ``Surfaces`` (the renderer's planes,
+  outlines and reflection matrices, ``games.mirror_beam.beam``) and re-poses the beam's
+  segments (thin emissive boxes, ordinary entities, so mirrors show them) when it changed;
+* ``win_system``: a beam that ends on the target records a ``BeamEvent('win')`` once and
+  makes the target glow.
+
+``Surfaces`` is published by the surfaces stage, after the game stage, so the beam traced in
+a frame follows the mirrors as they were drawn in the frame before: a turn shows in the beam
+one frame later, and in the frame of a turn or a restart the beam is not traced again.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from pyglm import glm
+
+from components import Camera, Emissive, Material, MeshRef, Mirror, Transform, look_rotation
+from engine.app import Game, spawn_camera
+from engine.errors import SpeculumError
+from engine.frame_io import Input, Output
+from engine.mesh import box
+from engine.render.view_tree import Surfaces
+from engine.render.views import FrameViews
+from engine.world import World
+from games.mirror_beam.beam import BeamPath, Solid, hit_mirror, trace_beam
+
+LEVEL_DIR = Path(__file__).parent / "levels"
+BEAM_WIDTH = 0.07
+BEAM_COLOR = (1.0, 0.04, 0.02, 1.0)
+BEAM_POWER = 2.0
+WIN_GLOW = 1.2
+MAX_BOUNCES_CAP = 16
+FRAME_DEPTH = 0.04
+DEFAULT_CAMERA = {"position": [0.0, 7.5, 7.5], "look_at": [0.0, 0.5, 0.0]}
+
+
+class LevelRulesError(SpeculumError, ValueError):
+    """A level's [rules] table that the game cannot play (names the file, the rule and why)."""
+
+
+def levels() -> list[Path]:
+    """The shipped level files, in play order."""
+    return sorted(LEVEL_DIR.glob("*.toml"))
+
+
+# --- plain data ---------------------------------------------------------------------------
+
+@dataclass
+class BeamRules:
+    """A level's rules, checked: entity ids of the source, target and turnable mirrors."""
+
+    source: int
+    target: int
+    rotatable: list[int]
+    step: float = 15.0
+    max_bounces: int = 8
+    solution: dict[int, int] = field(default_factory=dict)  # mirror -> steps (+ left, - right)
+    camera: dict[str, list[float]] = field(default_factory=lambda: dict(DEFAULT_CAMERA))
+
+
+@dataclass
+class BeamSegment:
+    """Marks one of the beam's segment entities (``index`` along the path)."""
+
+    index: int
+
+
+@dataclass
+class MirrorFrame:
+    """Marks the backing the game puts behind a mirror (``mirror`` is its entity)."""
+
+    mirror: int
+
+
+@dataclass
+class SelectionMarker:
+    """Marks the small light that hovers over the selected mirror."""
+
+
+@dataclass
+class BeamEvent:
+    """Something the game did, for scripts and tests: 'win', 'restart', 'turn', 'select'."""
+
+    kind: str
+    frame: int
+    detail: Any = None
+
+
+@dataclass
+class BeamState:
+    """The puzzle's state (a world resource): selection, the beam, won or not, the events."""
+
+    rules: BeamRules
+    level_name: str
+    start_rotations: dict[int, glm.quat]
+    target_glow: float
+    selected: int = 0
+    path: BeamPath | None = None
+    won: bool = False
+    frame: int = 0
+    events: list[BeamEvent] = field(default_factory=list)
+
+    def wins(self) -> list[BeamEvent]:
+        return [e for e in self.events if e.kind == "win"]
+
+
+# --- rules --------------------------------------------------------------------------------
+
+RULE_KEYS = ("source", "target", "rotatable", "step", "max_bounces", "solution", "camera")
+
+
+def parse_rules(rules: dict[str, Any], names: dict[str, int], world: World, where: str) -> BeamRules:
+    """Check a level's rules against its entities; every problem is a ``LevelRulesError``
+    naming ``where`` (the level file), the rule and the reason."""
+
+    def fail(rule: str, why: str) -> LevelRulesError:
+        return LevelRulesError(f"{where}: rules.{rule} {why}")
+
+    def entity(rule: str, name: Any) -> int:
+        if not isinstance(name, str):
+            raise fail(rule, f"must be an entity name (a string), got {name!r}")
+        if name not in names:
+            known = ", ".join(sorted(names)) or "none"
+            raise fail(rule, f"names {name!r}, which is no entity of the level (its entities: {known})")
+        return names[name]
+
+    unknown = sorted(set(rules) - set(RULE_KEYS))
+    if unknown:
+        raise fail(unknown[0], f"is not a mirror_beam rule (known: {', '.join(RULE_KEYS)})")
+    for required in ("source", "target", "rotatable"):
+        if required not in rules:
+            raise fail(required, "is missing")
+    source, target = entity("source", rules["source"]), entity("target", rules["target"])
+    for rule, ent in (("source", source), ("target", target)):
+        if world.try_get(ent, Transform) is None:
+            raise fail(rule, f"names {rules[rule]!r}, which has no Transform")
+    if world.try_get(target, MeshRef) is None:
+        raise fail("target", f"names {rules['target']!r}, which has no MeshRef (the beam needs something to hit)")
+    if source == target:
+        raise fail("target", "is the source itself")
+    rotatable = rules["rotatable"]
+    if not isinstance(rotatable, list) or not rotatable:
+        raise fail("rotatable", f"must be a non-empty list of mirror names, got {rotatable!r}")
+    if len(rotatable) > 9:
+        raise fail("rotatable", f"lists {len(rotatable)} mirrors; at most 9 (keys 1-9 select them)")
+    turnable = []
+    for name in rotatable:
+        ent = entity("rotatable", name)
+        if world.try_get(ent, Mirror) is None or world.try_get(ent, Transform) is None:
+            raise fail("rotatable", f"names {name!r}, which is not a mirror (needs Mirror and Transform)")
+        if ent in turnable:
+            raise fail("rotatable", f"names {name!r} twice")
+        turnable.append(ent)
+    step = rules.get("step", 15.0)
+    if isinstance(step, bool) or not isinstance(step, (int, float)) or not 0.0 < step <= 180.0:
+        raise fail("step", f"must be degrees in (0, 180], got {step!r}")
+    limit = rules.get("max_bounces", 8)
+    if isinstance(limit, bool) or not isinstance(limit, int) or not 1 <= limit <= MAX_BOUNCES_CAP:
+        raise fail("max_bounces", f"must be an int in [1, {MAX_BOUNCES_CAP}], got {limit!r}")
+    solution_table = rules.get("solution", {})
+    if not isinstance(solution_table, dict):
+        raise fail("solution", f"must be a table of mirror name = steps, got {solution_table!r}")
+    solution = {}
+    for name, steps in solution_table.items():
+        ent = entity("solution", name)
+        if ent not in turnable:
+            raise fail("solution", f"turns {name!r}, which is not in rules.rotatable")
+        if isinstance(steps, bool) or not isinstance(steps, int):
+            raise fail("solution", f"{name} must be a whole number of steps, got {steps!r}")
+        solution[ent] = steps
+    camera = rules.get("camera", DEFAULT_CAMERA)
+    if not isinstance(camera, dict) or set(camera) != {"position", "look_at"} or not all(
+            isinstance(v, list) and len(v) == 3 and all(isinstance(c, (int, float)) for c in v)
+            for v in camera.values()):
+        raise fail("camera", f"must be {{ position = [x, y, z], look_at = [x, y, z] }}, got {camera!r}")
+    return BeamRules(source, target, turnable, float(step), limit, solution, camera)
+
+
+# --- systems ------------------------------------------------------------------------------
+
+def input_system(world: World, state: BeamState) -> bool:
+    """Selection, turning and restart from the ``Input`` resource; True when a mirror moved."""
+    keys = world.resources[Input]
+    rules = state.rules
+    if "r" in keys.pressed:
+        restart(world, state)
+        return True
+    if state.won:
+        return False  # solved: the mirrors stay put until a restart
+    count = len(rules.rotatable)
+    if "tab" in keys.pressed:
+        select(state, (state.selected + 1) % count)
+    for digit in range(1, count + 1):
+        if str(digit) in keys.pressed:
+            select(state, digit - 1)
+    turn = ("left" in keys.pressed) - ("right" in keys.pressed)
+    if keys.clicks & {"left", "right"}:
+        picked = pick_mirror(world, rules.rotatable, keys.mouse)
+        if picked is not None:
+            select(state, rules.rotatable.index(picked))
+            turn += ("left" in keys.clicks) - ("right" in keys.clicks)
+    if turn:
+        mirror = rules.rotatable[state.selected]
+        transform = world.get(mirror, Transform)
+        transform.rotation = glm.angleAxis(glm.radians(turn * rules.step), glm.vec3(0, 1, 0)) * transform.rotation
+        state.events.append(BeamEvent("turn", state.frame, (mirror, turn)))
+    return bool(turn)
+
+
+def select(state: BeamState, index: int) -> None:
+    if index != state.selected:
+        state.selected = index
+        state.events.append(BeamEvent("select", state.frame, state.rules.rotatable[index]))
+
+
+def restart(world: World, state: BeamState) -> None:
+    """The level as it started: mirror rotations, selection, target glow, not won."""
+    for mirror, rotation in state.start_rotations.items():
+        world.get(mirror, Transform).rotation = glm.quat(rotation)
+    state.selected = 0
+    state.won = False
+    world.get(state.rules.target, Emissive).power = state.target_glow
+    state.events.append(BeamEvent("restart", state.frame))
+
+
+def pick_mirror(world: World, mirrors: list[int], mouse: tuple[float, float]) -> int | None:
+    """The turnable mirror under the pointer (window pixels, y down) in the last frame's main
+    view: the nearest outline the pointer's ray crosses, front or back."""
+    views = world.resources.get(FrameViews)
+    output = world.resources.get(Output)
+    surfaces = world.resources.get(Surfaces)
+    if views is None or views.main is None or output is None or surfaces is None:
+        return None
+    w, h = output.size
+    x, y = 2.0 * mouse[0] / w - 1.0, 1.0 - 2.0 * mouse[1] / h
+    inverse = glm.inverse(views.main.view_proj)
+    near, far = inverse * glm.vec4(x, y, -1.0, 1.0), inverse * glm.vec4(x, y, 1.0, 1.0)
+    origin = glm.vec3(near) / near.w
+    direction = glm.normalize(glm.vec3(far) / far.w - origin)
+    best, best_t = None, float("inf")
+    for mirror in mirrors:
+        found = surfaces.mirrors.get(mirror)
+        hit = hit_mirror(found, origin, direction) if found is not None else None
+        if hit is not None and hit[0] < best_t:
+            best, best_t = mirror, hit[0]
+    return best
+
+
+def level_solids(world: World, state: BeamState) -> list[Solid]:
+    """Everything drawn that is not a mirror or part of the beam's own display."""
+    solids = []
+    for entity, (mesh_ref, transform) in world.query(MeshRef, Transform):
+        if not mesh_ref.visible or world.has(entity, Mirror) or world.has(entity, BeamSegment) \
+                or world.has(entity, SelectionMarker):
+            continue
+        lo, hi = mesh_ref.mesh.bounds
+        solids.append(Solid(entity, glm.mat4(transform.world), lo, hi))
+    return solids
+
+
+def beam_system(world: World, state: BeamState) -> None:
+    """Trace the beam through the renderer's mirror states and re-pose its segments."""
+    surfaces = world.resources.get(Surfaces)
+    if surfaces is None:
+        return  # before the first surfaces stage: nothing to bounce off yet
+    rules = state.rules
+    source = world.get(rules.source, Transform).world
+    origin = glm.vec3(source[3])
+    direction = glm.vec3(source * glm.vec4(0.0, 0.0, -1.0, 0.0))
+    path = trace_beam(origin, direction, surfaces.mirrors.values(), level_solids(world, state), rules.target,
+                      rules.max_bounces, skip=rules.source)
+    if path.same_as(state.path):
+        return
+    state.path = path
+    for _, (segment, transform, mesh_ref) in world.query(BeamSegment, Transform, MeshRef):
+        if segment.index >= len(path.points) - 1:
+            if mesh_ref.visible:
+                mesh_ref.visible = False
+            continue
+        a, b = path.points[segment.index], path.points[segment.index + 1]
+        length = max(glm.distance(a, b), 1e-4)
+        transform.position = (a + b) * 0.5
+        transform.rotation = look_rotation(b - a)
+        transform.scale = (BEAM_WIDTH, BEAM_WIDTH, length)
+        if not mesh_ref.visible:
+            mesh_ref.visible = True
+
+
+def win_system(world: World, state: BeamState) -> None:
+    """The beam on the target: the win event (once until a restart) and the target glows."""
+    if state.won or state.path is None or state.path.end != "target":
+        return
+    state.won = True
+    world.get(state.rules.target, Emissive).power = WIN_GLOW
+    state.events.append(BeamEvent("win", state.frame, {"level": state.level_name,
+                                                       "bounces": len(state.path.bounces)}))
+
+
+def marker_system(world: World, state: BeamState) -> None:
+    """The selection light hovers over the selected mirror (hidden once solved)."""
+    mirror = state.rules.rotatable[state.selected]
+    transform = world.get(mirror, Transform)
+    top = float(world.get(mirror, MeshRef).mesh.bounds[1][1] * transform.scale.y)
+    for _, (_, marker_t, marker_mesh) in world.query(SelectionMarker, Transform, MeshRef):
+        position = transform.position + glm.vec3(0.0, top + 0.2, 0.0)
+        if marker_t.position != position:
+            marker_t.position = position
+        if marker_mesh.visible == state.won:
+            marker_mesh.visible = not state.won
+
+
+# --- the game -----------------------------------------------------------------------------
+
+def solution_script(rules: BeamRules, interval: int = 1) -> list[list[str]]:
+    """The key presses that solve a level from its start, one frame each, ``interval`` frames
+    apart: a mirror's number key, then its turns (left for + steps, right for - steps)."""
+    script: list[list[str]] = [[] for _ in range(interval)]
+    for mirror, steps in rules.solution.items():
+        for keys in [[str(rules.rotatable.index(mirror) + 1)]] + [["left" if steps > 0 else "right"]] * abs(steps):
+            script.append(keys)
+            script.extend([] for _ in range(interval - 1))
+    return script
+
+
+class MirrorBeam(Game):
+    """The puzzle on one level file (``level``; the first shipped level by default).
+
+    ``autopilot`` plays the level's ``rules.solution`` through the ``Input`` resource, one
+    key every ``interval`` frames, as a scripted player would (headless runs show the puzzle
+    being solved)."""
+
+    title = "Speculum: mirror beam"
+    size = (960, 540)
+
+    def __init__(self, level: str | Path | None = None, autopilot: bool = False, interval: int = 1) -> None:
+        self.level_path = Path(level) if level is not None else levels()[0]
+        self.autopilot = autopilot
+        self.interval = max(1, int(interval))
+        self.state: BeamState | None = None
+        self.names: dict[str, int] = {}
+        self.script: list[list[str]] = []
+
+    def build(self, world: World) -> None:
+        from games.mirror_beam.level import load
+
+        level = load(self.level_path)
+        names = self.names = level.spawn(world)
+        rules = parse_rules(level.rules, names, world, f"level file {str(self.level_path)!r}")
+        if not world.query_one(Camera):
+            eye, at = glm.vec3(rules.camera["position"]), glm.vec3(rules.camera["look_at"])
+            forward = glm.normalize(at - eye)
+            yaw = glm.degrees(glm.atan(-forward.x, -forward.z))
+            pitch = glm.degrees(glm.asin(forward.y))
+            spawn_camera(world, position=eye, yaw=yaw, pitch=pitch, fly=False)
+        target = world.try_get(rules.target, Emissive)
+        if target is None:
+            target = Emissive(0.0)
+            world.add_component(rules.target, target)
+        frame_look = Material(color=(0.12, 0.12, 0.14, 1.0), metallic=0.5, roughness=0.4)
+        for entity, (_, mesh_ref) in world.query(Mirror, MeshRef):
+            # A dark frame just behind each mirror: a quad has one side (the back is culled), so
+            # without it a mirror seen from behind would vanish; the beam stops at it.
+            lo, hi = mesh_ref.mesh.bounds
+            w, h = float(hi[0] - lo[0]), float(hi[1] - lo[1])
+            world.spawn(Transform(position=(0.0, 0.0, -FRAME_DEPTH / 2 - 0.005), parent=entity),
+                        MeshRef(box((w + 0.08, h + 0.08, FRAME_DEPTH), name="mirror frame")), frame_look,
+                        MirrorFrame(entity))
+        unit = box((1.0, 1.0, 1.0), name="beam")
+        look = Material(color=BEAM_COLOR, roughness=1.0)
+        glow = Emissive(BEAM_POWER)
+        for index in range(rules.max_bounces + 1):
+            world.spawn(Transform(scale=(BEAM_WIDTH, BEAM_WIDTH, 1.0)), MeshRef(unit, visible=False), look, glow,
+                        BeamSegment(index))
+        world.spawn(Transform(), MeshRef(box((0.3, 0.06, 0.3), name="marker")),
+                    Material(color=(1.0, 0.85, 0.2, 1.0)), Emissive(2.0), SelectionMarker())
+        self.state = BeamState(rules, level.name,
+                               {m: glm.quat(world.get(m, Transform).rotation) for m in rules.rotatable},
+                               target.power)
+        world.resources[BeamState] = self.state
+        self.script = solution_script(rules, self.interval) if self.autopilot else []
+
+    def update(self, world: World, dt: float) -> None:
+        state = self.state
+        keys = world.resources[Input]
+        if 0 < state.frame <= len(self.script):
+            keys.release(*self.script[state.frame - 1])
+        if state.frame < len(self.script):
+            keys.press(*self.script[state.frame])
+        if not input_system(world, state):
+            # A mirror that moved this frame is in ``Surfaces`` from the next frame on: until
+            # then the beam keeps the path drawn last frame (and cannot win on a stale one).
+            beam_system(world, state)
+            win_system(world, state)
+        marker_system(world, state)
+        state.frame += 1

@@ -1,0 +1,336 @@
+"""games/mirror_beam: every shipped level solved from scripted key presses (the win event),
+the beam's path against plain vector math and the renderer's reflection matrix, the beam on
+screen and inside a mirror (pixels and entity ids), restart, click picking, walls and the
+bounce limit, and bad rules as clear errors.  Frames are real llvmpipe renders."""
+from __future__ import annotations
+
+import math
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from pyglm import glm
+
+from components import Emissive, Transform
+from engine.app import Engine
+from engine.capture import save_png
+from engine.frame_io import Input, Output
+from engine.reflection_math import plane_from_point_normal, reflection_matrix
+from engine.render.targets import CaptureTarget
+from games.mirror_beam import BeamState, LevelRulesError, MirrorBeam, levels
+from games.mirror_beam.game import BeamSegment
+
+try:
+    import tomllib
+except ImportError:  # Python 3.10
+    import tomli as tomllib
+
+ROOT = Path(__file__).resolve().parents[1]
+LEVELS = levels()
+BOUNCES = {"01_one_bounce": 1, "02_two_bounces": 2, "03_sixty_degrees": 2, "04_around_the_wall": 3,
+           "05_four_bounces": 4}
+FRAMES_DIR = Path(os.environ.get("MIRROR_BEAM_FRAMES", "")) if os.environ.get("MIRROR_BEAM_FRAMES") else None
+
+
+class BeamRun:
+    """A MirrorBeam level on the test context: press keys, render a frame, read it back."""
+
+    def __init__(self, ctx, level: Path, size=(96, 54)) -> None:
+        self.game = MirrorBeam(level)
+        self.engine = Engine(self.game, ctx)
+        self.world = self.engine.world
+        self.size = size
+        self.capture = CaptureTarget(ctx, size)
+
+    @property
+    def state(self) -> BeamState:
+        return self.world.resources[BeamState]
+
+    def frame(self, *keys: str, clicks=(), mouse=None) -> np.ndarray:
+        inp = self.world.resources[Input]
+        inp.press(*keys)
+        inp.clicks.update(clicks)
+        if mouse is not None:
+            inp.mouse = mouse
+        self.engine.frame(1 / 60, Output(self.capture.framebuffer, self.size))
+        inp.release(*keys)
+        return self.capture.read_rgb()
+
+    def project(self, point) -> tuple[float, float]:
+        clip = self.engine.main_view.view_proj * glm.vec4(glm.vec3(point), 1.0)
+        ndc = glm.vec3(clip) / clip.w
+        w, h = self.size
+        return (ndc.x * 0.5 + 0.5) * w, (1.0 - (ndc.y * 0.5 + 0.5)) * h
+
+    def close(self) -> None:
+        self.capture.release()
+        self.engine.close()
+
+
+@pytest.fixture
+def run(ctx):
+    runs: list[BeamRun] = []
+
+    def make(level: Path, size=(96, 54)) -> BeamRun:
+        runs.append(BeamRun(ctx, level, size))
+        return runs[-1]
+
+    yield make
+    for r in runs:
+        r.close()
+
+
+def level_file(stem: str) -> Path:
+    return next(p for p in LEVELS if p.stem == stem)
+
+
+def solution_keys(path: Path) -> list[str]:
+    """The level's solution as key presses, read from the file (mirror's number, then turns)."""
+    rules = tomllib.loads(path.read_text())["rules"]
+    keys = []
+    for name, steps in rules["solution"].items():
+        keys.append(str(rules["rotatable"].index(name) + 1))
+        keys += ["left" if steps > 0 else "right"] * abs(steps)
+    return keys
+
+
+def mirror_pose(path: Path, name: str) -> tuple[glm.vec3, float]:
+    """(position, yaw degrees after the solution) of a mirror, from the level file alone."""
+    data = tomllib.loads(path.read_text())
+    table = next(e for e in data["entity"] if e["name"] == name)
+    steps = data["rules"].get("solution", {}).get(name, 0)
+    yaw = table["Transform"]["rotation"]["yaw"] + steps * data["rules"]["step"]
+    return glm.vec3(table["Transform"]["position"]), yaw
+
+
+def test_five_levels_ship_and_rise_in_bounces():
+    assert [p.stem for p in LEVELS] == list(BOUNCES)
+
+
+@pytest.mark.parametrize("stem", list(BOUNCES))
+def test_each_level_is_won_by_its_scripted_key_presses(run, stem, tmp_path):
+    path = level_file(stem)
+    r = run(path)
+    r.frame()
+    r.frame()
+    assert r.state.path is not None and r.state.path.end != "target", "the level starts unsolved"
+    keys = solution_keys(path)
+    for key in keys:
+        r.frame(key)
+        assert not r.state.wins(), f"won before the last key of {keys}"
+    first = r.frame()
+    last = r.frame()
+    wins = r.state.wins()
+    assert len(wins) == 1 and wins[0].detail["level"].startswith("Mirror beam")
+    assert r.state.path.end == "target" and len(r.state.path.bounces) == BOUNCES[stem]
+    assert r.world.get(r.state.rules.target, Emissive).power > 1.0, "the target glows"
+    # A won level keeps still: further arrows do nothing, the win is recorded once.
+    r.frame("left")
+    r.frame()
+    assert len(r.state.wins()) == 1 and r.state.path.end == "target"
+    for name, image in (("won_a", first), ("won_b", last)):
+        save_png(image, (FRAMES_DIR or tmp_path) / f"{stem}_{name}.png")
+
+
+def test_beam_bounces_as_plain_vector_math_and_the_renderers_reflection_matrix(run):
+    """Level 4 solved: each bounce point is the line-plane intersection with the mirror as
+    the file places it, each outgoing direction is d - 2(d.n)n, and the renderer's reflection
+    matrix of that plane takes the previous corner of the path onto the outgoing ray's
+    backward extension (the mirror image the renderer draws lies on the reflected beam)."""
+    path = level_file("04_around_the_wall")
+    r = run(path)
+    for key in [None, *solution_keys(path), None, None]:
+        r.frame(*([key] if key else []))
+    beam = r.state.path
+    assert beam.end == "target"
+    names = {entity: name for name, entity in r.game.names.items()}
+    o = glm.vec3(-4.0, 1.0, 2.0)  # the laser's position in the file
+    d = glm.vec3(1.0, 0.0, 0.0)   # it looks along +X
+    for bounce in beam.bounces:
+        p, yaw = mirror_pose(path, names[bounce.mirror])
+        n = glm.vec3(math.sin(math.radians(yaw)), 0.0, math.cos(math.radians(yaw)))
+        t = glm.dot(p - o, n) / glm.dot(d, n)
+        hit = o + t * d
+        assert glm.distance(hit, bounce.point) < 1e-4
+        out = d - 2.0 * glm.dot(d, n) * n
+        assert glm.distance(out, bounce.outgoing) < 1e-5
+        m = reflection_matrix(plane_from_point_normal(p, n))
+        image = glm.vec3(m * glm.vec4(o, 1.0))
+        assert glm.distance(glm.normalize(hit - image), out) < 1e-4
+        assert glm.distance(glm.vec3(m * glm.vec4(hit, 1.0)), hit) < 1e-4
+        o, d = hit, out
+    # Three bounces, then straight onto the target's box (0.6 wide at (3.5, 1, 2)): its near face.
+    assert [names[b.mirror] for b in beam.bounces] == ["m1", "m2", "m3"]
+    assert glm.distance(beam.points[-1], glm.vec3(3.5, 1.0, 2.0 - 0.3)) < 1e-4
+
+
+def test_a_wall_stops_the_beam_and_the_bounce_limit_is_kept(run, tmp_path):
+    r = run(level_file("04_around_the_wall"))
+    for key in [None, "left", "left", "left", "left", "left", "left", None, None]:
+        r.frame(*([key] if key else []))  # m1 from -90 to 0 degrees: edge-on, the beam passes it
+    beam = r.state.path
+    assert beam.end == "solid" and beam.stopped_by == r.game.names["wall"]
+    assert not beam.bounces
+    assert abs(beam.points[-1].x - 0.8) < 1e-4  # the wall's face: x = 1.0 - 0.4 / 2
+
+    text = level_file("02_two_bounces").read_text().replace("max_bounces = 8", "max_bounces = 1")
+    limited = tmp_path / "limited.toml"
+    limited.write_text(text)
+    r = run(limited)
+    for key in [None, *solution_keys(limited), None, None]:
+        r.frame(*([key] if key else []))
+    assert r.state.path.end == "limit" and len(r.state.path.bounces) == 1 and not r.state.wins()
+    assert r.state.path.stopped_by == r.game.names["m2"]
+
+
+def red(pixel) -> bool:
+    r, g, b = (int(c) for c in pixel)
+    return r > 150 and r - g > 70 and r - b > 70
+
+
+def test_the_beam_is_drawn_emissive_and_seen_inside_a_mirror(run):
+    """Level 1 solved, 320x180: where each beam segment projects the frame is the beam's red
+    and the id image names a beam segment; and inside m1 (its outline, seen from the front)
+    the reflection of the incoming segment is red too, with m1 as the surface id and a beam
+    segment as the entity seen: the beam is in the mirror's picture, not only in the room."""
+    path = level_file("01_one_bounce")
+    r = run(path, size=(320, 180))
+    for key in [None, *solution_keys(path), None]:
+        image = r.frame(*([key] if key else []))
+    ids, surfaces = r.engine.renderer.targets.read_ids(), r.engine.renderer.targets.read_surface_ids()
+    segments = {e for e, _ in r.world.query_one(BeamSegment)}
+    beam = r.state.path
+    direct = 0
+    for a, b in zip(beam.points[:-1], beam.points[1:], strict=True):
+        for f in np.linspace(0.2, 0.8, 7):
+            x, y = r.project(a + float(f) * (b - a))
+            near = [(int(y) + dy, int(x) + dx) for dy in (-1, 0, 1) for dx in (-1, 0, 1)]
+            assert any(red(image[p]) for p in near), f"no beam colour near {x:.0f},{y:.0f}"
+            assert any(ids[p] in segments for p in near)
+            direct += 1
+    assert direct == 14
+    # The incoming segment's mirror image through m1's plane, sampled where it shows inside m1.
+    m1 = r.game.names["m1"]
+    p, yaw = mirror_pose(path, "m1")
+    n = glm.vec3(math.sin(math.radians(yaw)), 0.0, math.cos(math.radians(yaw)))
+    eye = r.engine.main_view.eye
+    assert glm.dot(eye - p, n) > 0, "the camera sees m1's front"
+    m = reflection_matrix(plane_from_point_normal(p, n))
+    seen = 0
+    for f in np.linspace(0.5, 0.97, 24):
+        point = beam.points[0] + float(f) * (beam.points[1] - beam.points[0])
+        image_point = glm.vec3(m * glm.vec4(point, 1.0))
+        crossing = eye + (image_point - eye) * (glm.dot(p - eye, n) / glm.dot(image_point - eye, n))
+        local = crossing - p
+        if abs(local.y) > 0.45 or glm.length(local - glm.vec3(0, local.y, 0)) > 0.55:
+            continue  # outside the mirror's 1.2 x 1.0 outline (with a margin)
+        x, y = r.project(image_point)
+        near = [(int(y) + dy, int(x) + dx) for dy in (-1, 0, 1) for dx in (-1, 0, 1)]
+        if all(surfaces[q] != m1 for q in near):
+            continue
+        assert any(red(image[q]) and surfaces[q] == m1 and ids[q] in segments for q in near), \
+            f"the beam's reflection is not at {x:.0f},{y:.0f} inside m1"
+        seen += 1
+    assert seen >= 3, "too few samples of the beam's reflection land inside m1"
+
+
+def test_restart_puts_the_level_back_as_it_started(run):
+    path = level_file("02_two_bounces")
+    r = run(path)
+    r.frame()
+    start = r.frame()
+    rotations = {e: glm.quat(r.world.get(e, Transform).rotation) for e in r.state.rules.rotatable}
+    glow = r.world.get(r.state.rules.target, Emissive).power
+    start_path = [glm.vec3(v) for v in r.state.path.points]
+    for key in solution_keys(path) + [None]:
+        r.frame(*([key] if key else []))
+    assert r.state.won and r.state.selected == 1
+    won = r.frame()
+    r.frame("r")
+    r.frame()
+    after = r.frame()
+    assert not r.state.won and r.state.selected == 0
+    assert [e.kind for e in r.state.events].count("restart") == 1
+    for e, q in rotations.items():
+        assert abs(glm.dot(r.world.get(e, Transform).rotation, q)) > 1 - 1e-6
+    assert r.world.get(r.state.rules.target, Emissive).power == glow
+    assert all(glm.distance(a, b) < 1e-5 for a, b in zip(r.state.path.points, start_path, strict=True))
+    assert np.abs(after.astype(int) - start.astype(int)).max() <= 2, "the frame after restart is the first one"
+    assert np.abs(won.astype(int) - start.astype(int)).max() > 50
+    # And the level can be won again after a restart.
+    for key in solution_keys(path) + [None]:
+        r.frame(*([key] if key else []))
+    assert len(r.state.wins()) == 2
+
+
+def test_a_click_on_a_mirror_selects_and_turns_it(run):
+    path = level_file("02_two_bounces")
+    r = run(path, size=(192, 108))
+    r.frame()
+    r.frame()
+    m2 = r.game.names["m2"]
+    before = glm.quat(r.world.get(m2, Transform).rotation)
+    x, y = r.project(glm.vec3(-1.0, 1.0, 1.5))
+    r.frame(clicks={"left"}, mouse=(x, y))
+    assert r.state.rules.rotatable[r.state.selected] == m2
+    turned = r.world.get(m2, Transform).rotation
+    assert abs(glm.dot(turned, glm.angleAxis(glm.radians(15.0), glm.vec3(0, 1, 0)) * before)) > 1 - 1e-6
+    r.frame(clicks={"right"}, mouse=(x, y))
+    assert abs(glm.dot(r.world.get(m2, Transform).rotation, before)) > 1 - 1e-6
+    r.frame(clicks={"left"}, mouse=(2.0, 2.0))  # the sky: nothing picked, nothing turns
+    assert abs(glm.dot(r.world.get(m2, Transform).rotation, before)) > 1 - 1e-6
+
+
+def bad_level(tmp_path: Path, old: str, new: str) -> Path:
+    text = level_file("02_two_bounces").read_text()
+    assert old in text
+    path = tmp_path / "bad.toml"
+    path.write_text(text.replace(old, new))
+    return path
+
+
+@pytest.mark.parametrize(("old", "new", "words"), [
+    ('target = "target"', 'target = "nowhere"', ["rules.target", "'nowhere'", "no entity"]),
+    ('rotatable = ["m1", "m2"]', 'rotatable = ["m1", "floor"]', ["rules.rotatable", "'floor'", "not a mirror"]),
+    ("step = 15", "step = 0", ["rules.step", "(0, 180]"]),
+    ("max_bounces = 8", "max_bounces = 99", ["rules.max_bounces", "99"]),
+    ("solution = { m1 = 3", "solution = { sun = 3", ["rules.solution", "'sun'", "not in rules.rotatable"]),
+    ('source = "laser"', 'source = "laser"\ncolour = 3', ["rules.colour", "not a mirror_beam rule"]),
+])
+def test_bad_rules_are_errors_naming_the_file_and_the_rule(ctx, tmp_path, old, new, words):
+    path = bad_level(tmp_path, old, new)
+    with pytest.raises(LevelRulesError) as error:
+        Engine(MirrorBeam(path), ctx)
+    message = str(error.value)
+    assert str(path) in message
+    for word in words:
+        assert word in message
+    assert ctx.error == "GL_NO_ERROR"
+
+
+def test_command_line_autopilot_writes_frames_of_the_level_solved(tmp_path):
+    """The headless command plays the solution: the last frame shows the target lit; a bad
+    --level is one 'speculum: error:' line and exit 2."""
+    out = tmp_path / "frames"
+    done = subprocess.run([sys.executable, "-m", "games.mirror_beam", "--headless", "--frames", "7",
+                           "--size", "96x54", "--out", str(out), "--level", str(level_file("01_one_bounce"))],
+                          cwd=ROOT, capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr
+    frames = sorted(out.glob("frame_*.png"))
+    assert len(frames) == 7
+    from PIL import Image
+
+    first, last = (np.asarray(Image.open(f).convert("RGB")).astype(int) for f in (frames[1], frames[-1]))
+    green = lambda im: int(((im[..., 1] > 200) & (im[..., 0] < 200)).sum())  # noqa: E731
+    assert green(last) > green(first) + 10, "the target lights up once the autopilot has solved the level"
+
+    bad = bad_level(tmp_path, 'target = "target"', 'target = "nowhere"')
+    done = subprocess.run([sys.executable, "-m", "games.mirror_beam", "--headless", "--frames", "1",
+                           "--out", str(tmp_path / "bad"), "--level", str(bad)],
+                          cwd=ROOT, capture_output=True, text=True, timeout=120)
+    assert done.returncode == 2
+    assert done.stderr.strip().splitlines()[-1].startswith("speculum: error:")
+    assert "rules.target" in done.stderr and "Traceback" not in done.stderr
