@@ -23,3 +23,7 @@ class GLPassError(SpeculumError):
 
 class ShaderError(SpeculumError):
     """A shader failed to load, include, compile or link."""
+
+
+class NoCameraWarning(UserWarning):
+    """Frames are drawn with no active camera: they show nothing (said once until one comes)."""

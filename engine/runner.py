@@ -10,6 +10,7 @@ from __future__ import annotations
 import argparse
 import os
 import sys
+import warnings
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
@@ -76,6 +77,18 @@ def _pose(text: str) -> tuple[float, ...]:
 
 def main(game: Game, argv: Sequence[str] | None = None) -> int:
     args = parse_args(game, argv)
+    with warnings.catch_warnings():
+        warnings.showwarning = _one_line_warning
+        return _main(game, args)
+
+
+def _one_line_warning(message, category, filename, lineno, file=None, line=None) -> None:
+    """Warnings (no camera, a drawable without a Transform, a missing material library) as
+    one line, like errors: what is wrong, not where in the engine it was noticed."""
+    print(f"speculum: warning: {message}", file=sys.stderr if file is None else file)
+
+
+def _main(game: Game, args: argparse.Namespace) -> int:
     try:
         if not args.headless and not have_display():
             print("speculum: no display found (DISPLAY/WAYLAND_DISPLAY unset); running headless", file=sys.stderr)

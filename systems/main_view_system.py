@@ -6,9 +6,12 @@ its view tree there and the present stage presents it.
 """
 from __future__ import annotations
 
+import warnings
+
 import esper
 
 from components import Camera, Transform
+from engine.errors import NoCameraWarning
 from engine.frame_io import Output
 from engine.frame_rules import frame_rules
 from engine.render.renderer import Renderer
@@ -28,12 +31,19 @@ class MainViewSystem(esper.Processor):
         self.world = world
         self.renderer = renderer
         world.resources[FrameViews] = FrameViews()
+        self._said_no_camera = False
 
     def process(self, dt: float) -> None:
         world = self.world
         views = world.resources[FrameViews] = FrameViews()
         output: Output | None = world.resources.get(Output)
         camera = active_camera(world)
+        if camera is None and output is not None and not self._said_no_camera:
+            # A black frame with no word is the worst answer to a forgotten camera.
+            warnings.warn(NoCameraWarning(
+                f"frame {world.frame_index + 1}: the world has no active camera (a Camera with a Transform and "
+                "active=True; engine.spawn_camera makes one): frames show nothing until there is one"), stacklevel=2)
+        self._said_no_camera = camera is None
         if output is None or camera is None or output.size[0] <= 0 or output.size[1] <= 0:
             return  # minimised window or nothing to look through
         _, cam, cam_t = camera

@@ -186,6 +186,51 @@ def test_export_scene_without_a_camera_is_an_error_not_silence(tmp_path):
                              "--out", str(tmp_path / "frames"), "--export-scene", str(scene_file)],
                             cwd=ROOT, env={**os.environ, "PYTHONPATH": str(ROOT)},
                             capture_output=True, text=True, timeout=120)
-    line = one_error_line(result)
+    # The frame drawn first says there is no camera (a warning line); the export then fails.
+    warned = [line for line in result.stderr.splitlines() if line.startswith("speculum: warning: ")]
+    assert len(warned) == 1 and "no active camera" in warned[0]
+    line = one_error_line(subprocess.CompletedProcess(result.args, result.returncode, result.stdout,
+                                                      result.stderr.replace(warned[0] + "\n", "")))
     assert "camera" in line
     assert not scene_file.exists() and not scene_file.with_suffix(".json").exists()
+
+
+def test_no_camera_is_said_once_and_again_when_it_goes_away(ctx):
+    """Frames without an active camera are black: the main stage says so (NoCameraWarning)
+    on the first such frame, not on every one, and again after a camera came and went."""
+    import warnings
+
+    from components import Camera, Skybox
+    from engine.errors import NoCameraWarning
+    from tests.support import SceneRunner, look_from
+
+    scene = SceneRunner(ctx, lambda world: world.spawn(Skybox()), size=(16, 12))
+    try:
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            scene.frame()
+            scene.frame()
+            said = [w for w in caught if issubclass(w.category, NoCameraWarning)]
+            assert len(said) == 1 and "frame 1: the world has no active camera" in str(said[0].message)
+            camera = look_from(scene.world, (0, 1, 4))
+            rgb = scene.frame()
+            assert rgb.std() > 0 or rgb.mean() > 0  # the sky shows once there is a camera
+            scene.world.get(camera, Camera).active = False
+            scene.frame()
+            said = [w for w in caught if issubclass(w.category, NoCameraWarning)]
+            assert len(said) == 2 and "frame 4:" in str(said[1].message)
+    finally:
+        scene.close()
+
+
+def test_the_runner_says_no_camera_in_one_line(tmp_path):
+    level = tmp_path / "no_camera.py"
+    level.write_text("from components import Skybox\nfrom engine import Game, run\n"
+                     "class Empty(Game):\n    def build(self, world):\n        world.spawn(Skybox())\nrun(Empty())\n")
+    result = subprocess.run([sys.executable, str(level), "--headless", "--frames", "2", "--size", "16x12",
+                             "--out", str(tmp_path / "out")], cwd=ROOT, env={**os.environ, "PYTHONPATH": str(ROOT)},
+                            capture_output=True, text=True, timeout=120)
+    assert result.returncode == 0, result.stderr
+    assert result.stderr.strip().splitlines() == [
+        "speculum: warning: frame 1: the world has no active camera (a Camera with a Transform and active=True; "
+        "engine.spawn_camera makes one): frames show nothing until there is one"]
