@@ -20,8 +20,10 @@ from engine.capture import save_png
 from engine.frame_io import Input, Output
 from engine.reflection_math import plane_from_point_normal, reflection_matrix
 from engine.render.targets import CaptureTarget
+from engine.render.view_tree import Surfaces
 from games.mirror_beam import BeamState, LevelRulesError, MirrorBeam, levels
-from games.mirror_beam.game import BeamSegment
+from games.mirror_beam.beam import trace_beam
+from games.mirror_beam.game import BeamSegment, MirrorFrame
 
 try:
     import tomllib
@@ -175,6 +177,16 @@ def test_a_wall_stops_the_beam_and_the_bounce_limit_is_kept(run, tmp_path):
     assert beam.end == "solid" and beam.stopped_by == r.game.names["wall"]
     assert not beam.bounces
     assert abs(beam.points[-1].x - 0.8) < 1e-4  # the wall's face: x = 1.0 - 0.4 / 2
+
+    for key in ["left"] * 6 + [None, None]:
+        r.frame(*([key] if key else []))  # m1 at 90 degrees: its back to the laser
+    m1 = r.game.names["m1"]
+    beam = r.state.path
+    assert beam.end == "solid" and not beam.bounces and beam.stopped_by != m1  # the frame behind m1
+    assert r.world.get(beam.stopped_by, MirrorFrame).mirror == m1
+    bare = trace_beam(glm.vec3(-4.0, 1.0, 2.0), glm.vec3(1.0, 0.0, 0.0), r.world.resources[Surfaces].mirrors.values(),
+                      [], r.state.rules.target, 8)
+    assert bare.end == "back" and bare.stopped_by == m1 and abs(bare.points[-1].x + 2.0) < 1e-4
 
     text = level_file("02_two_bounces").read_text().replace("max_bounces = 8", "max_bounces = 1")
     limited = tmp_path / "limited.toml"
