@@ -185,7 +185,7 @@ def test_a_wall_stops_the_beam_and_the_bounce_limit_is_kept(run, tmp_path):
     assert beam.end == "solid" and not beam.bounces and beam.stopped_by != m1  # the frame behind m1
     assert r.world.get(beam.stopped_by, MirrorFrame).mirror == m1
     bare = trace_beam(glm.vec3(-4.0, 1.0, 2.0), glm.vec3(1.0, 0.0, 0.0), r.world.resources[Surfaces].mirrors.values(),
-                      [], r.state.rules.target, 8)
+                      lambda origin, direction, leave_out: None, r.state.rules.target, 8)
     assert bare.end == "back" and bare.stopped_by == m1 and abs(bare.points[-1].x + 2.0) < 1e-4
 
     text = level_file("02_two_bounces").read_text().replace("max_bounces = 8", "max_bounces = 1")

@@ -8,17 +8,15 @@ the outline, coming from the front (the side the plane's normal points to); the 
 the incoming ray carried by the same matrix, so the beam turns exactly as the picture in
 the mirror does.  A ray that reaches a mirror's back is stopped there, like any solid.
 
-Solids are tested as oriented boxes: the ray is taken into the mesh's model space (the
-inverse of its world matrix; an affine map keeps the ray parameter) and clipped against the
-mesh's bounds with the slab method (Kay and Kajiya).  This is the plain version of a scene
-ray cast, local to the game.
+Solids (walls, the target, mirror frames) are found by a callable, in the game the engine's
+ray cast against world triangles (``engine.raycast``, Möller–Trumbore), so the beam stops
+where the visible geometry is.
 """
 from __future__ import annotations
 
-from collections.abc import Iterable, Sequence
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 
-import numpy as np
 from pyglm import glm
 
 from engine.render.view_tree import SurfaceState
@@ -30,16 +28,6 @@ EPSILON = 1e-5
 # |cos| between the beam and a mirror's normal below which the beam runs along the mirror
 # (edge-on, in float32 rounding) and passes it.
 GRAZING = 1e-5
-
-
-@dataclass(frozen=True)
-class Solid:
-    """Something the beam stops at: an entity's mesh bounds (model space) and its world matrix."""
-
-    entity: int
-    world: glm.mat4
-    lo: np.ndarray
-    hi: np.ndarray
 
 
 @dataclass(frozen=True)
@@ -93,32 +81,17 @@ def hit_mirror(state: SurfaceState, origin: glm.vec3, direction: glm.vec3) -> tu
     return t, denom < 0.0
 
 
-def hit_solid(solid: Solid, origin: glm.vec3, direction: glm.vec3) -> float | None:
-    """The ray parameter where the ray enters the solid's box (slab method), or None."""
-    inverse = glm.inverse(solid.world)
-    o = glm.vec3(inverse * glm.vec4(origin, 1.0))
-    d = glm.vec3(inverse * glm.vec4(direction, 0.0))
-    t_near, t_far = -np.inf, np.inf
-    for axis in range(3):
-        lo, hi = float(solid.lo[axis]), float(solid.hi[axis])
-        if abs(d[axis]) < 1e-12:
-            if o[axis] < lo - 1e-9 or o[axis] > hi + 1e-9:
-                return None
-            continue
-        a, b = (lo - o[axis]) / d[axis], (hi - o[axis]) / d[axis]
-        t_near, t_far = max(t_near, min(a, b)), min(t_far, max(a, b))
-    if t_near > t_far or t_far <= EPSILON:
-        return None
-    return t_near if t_near > EPSILON else EPSILON  # a ray starting inside a solid stops at once
-
-
 def reflect_ray(state: SurfaceState, point: glm.vec3, direction: glm.vec3) -> glm.vec3:
     """The bounce direction: the incoming direction carried by the mirror's reflection matrix
     (the matrix the renderer reflects its camera with; directions are w = 0)."""
     return glm.normalize(glm.vec3(state.carry * glm.vec4(direction, 0.0)))
 
 
-def trace_beam(origin, direction, mirrors: Iterable[SurfaceState], solids: Sequence[Solid], target: int,
+# (origin, unit direction, entity to leave out) -> (distance, entity) of the first solid, or None
+FirstSolid = Callable[[glm.vec3, glm.vec3, "int | None"], "tuple[float, int] | None"]
+
+
+def trace_beam(origin, direction, mirrors: Iterable[SurfaceState], first_solid: FirstSolid, target: int,
                max_bounces: int, skip: int | None = None) -> BeamPath:
     """Follow the beam from ``origin`` along ``direction``: at each step the nearest enabled
     mirror (front: bounce; back: stop) or solid (the target: win; else stop); after
@@ -130,19 +103,16 @@ def trace_beam(origin, direction, mirrors: Iterable[SurfaceState], solids: Seque
     path = BeamPath(points=[glm.vec3(o)])
     last = skip
     while True:
-        best_t, best_mirror, best_front, best_solid = np.inf, None, False, None
+        best_t, best_mirror, best_front, best_solid = float("inf"), None, False, None
         for state in live:
             if state.entity == last:
                 continue
             found = hit_mirror(state, o, d)
             if found is not None and found[0] < best_t:
                 best_t, best_mirror, best_front, best_solid = found[0], state, found[1], None
-        for solid in solids:
-            if solid.entity == last:
-                continue
-            t = hit_solid(solid, o, d)
-            if t is not None and t < best_t:
-                best_t, best_mirror, best_solid = t, None, solid
+        solid = first_solid(o, d, last)
+        if solid is not None and solid[0] < best_t:
+            best_t, best_mirror, best_solid = solid[0], None, solid[1]
         if best_mirror is None and best_solid is None:
             path.points.append(o + OPEN_LENGTH * d)
             path.end = "open"
@@ -150,8 +120,8 @@ def trace_beam(origin, direction, mirrors: Iterable[SurfaceState], solids: Seque
         point = o + best_t * d
         path.points.append(point)
         if best_solid is not None:
-            path.end = "target" if best_solid.entity == target else "solid"
-            path.stopped_by = best_solid.entity
+            path.end = "target" if best_solid == target else "solid"
+            path.stopped_by = best_solid
             return path
         if not best_front or len(path.bounces) >= max_bounces:
             path.end = "back" if not best_front else "limit"

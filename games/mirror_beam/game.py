@@ -29,10 +29,11 @@ from engine.app import Game, spawn_camera
 from engine.errors import SpeculumError
 from engine.frame_io import Input, Output
 from engine.mesh import box
+from engine.raycast import raycast
 from engine.render.view_tree import Surfaces
 from engine.render.views import FrameViews
 from engine.world import World
-from games.mirror_beam.beam import BeamPath, Solid, hit_mirror, trace_beam
+from games.mirror_beam.beam import BeamPath, FirstSolid, hit_mirror, trace_beam
 
 LEVEL_DIR = Path(__file__).parent / "levels"
 BEAM_WIDTH = 0.07
@@ -256,16 +257,20 @@ def pick_mirror(world: World, mirrors: list[int], mouse: tuple[float, float]) ->
     return best
 
 
-def level_solids(world: World, state: BeamState) -> list[Solid]:
-    """Everything drawn that is not a mirror or part of the beam's own display."""
-    solids = []
-    for entity, (mesh_ref, transform) in world.query(MeshRef, Transform):
-        if not mesh_ref.visible or world.has(entity, Mirror) or world.has(entity, BeamSegment) \
-                or world.has(entity, SelectionMarker):
-            continue
-        lo, hi = mesh_ref.mesh.bounds
-        solids.append(Solid(entity, glm.mat4(transform.world), lo, hi))
-    return solids
+def first_solid(world: World) -> FirstSolid:
+    """The first thing drawn that is not a mirror or the beam's own display, by the engine's
+    ray cast against world triangles (mirror frames, walls, the target, the source)."""
+
+    def solid(entity: int) -> bool:
+        mesh_ref = world.try_get(entity, MeshRef)
+        return mesh_ref is not None and mesh_ref.visible and not (
+            world.has(entity, Mirror) or world.has(entity, BeamSegment) or world.has(entity, SelectionMarker))
+
+    def cast(origin: glm.vec3, direction: glm.vec3, leave_out: int | None) -> tuple[float, int] | None:
+        hit = raycast(world, origin, direction, where=solid, ignore=() if leave_out is None else (leave_out,))
+        return None if hit is None else (hit.distance, hit.entity)
+
+    return cast
 
 
 def beam_system(world: World, state: BeamState) -> None:
@@ -277,7 +282,7 @@ def beam_system(world: World, state: BeamState) -> None:
     source = world.get(rules.source, Transform).world
     origin = glm.vec3(source[3])
     direction = glm.vec3(source * glm.vec4(0.0, 0.0, -1.0, 0.0))
-    path = trace_beam(origin, direction, surfaces.mirrors.values(), level_solids(world, state), rules.target,
+    path = trace_beam(origin, direction, surfaces.mirrors.values(), first_solid(world), rules.target,
                       rules.max_bounces, skip=rules.source)
     if path.same_as(state.path):
         return
