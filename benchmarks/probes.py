@@ -72,13 +72,19 @@ class ProbeRing(MirrorRing):
         self.sphere = world.spawn(*components)
 
 
+def captured_ring(ctx, size: int) -> tuple[Engine, CaptureTarget]:
+    """A scripted-probe ring of ``size``-texel faces after its first frame (probe captured)."""
+    engine = Engine(ProbeRing("scripted", size), ctx)
+    capture = CaptureTarget(ctx, OUTPUT_SIZE)
+    engine.frame(DT, Output(capture.framebuffer, OUTPUT_SIZE))
+    return engine, capture
+
+
 def capture_rows(ctx, frames: int) -> list[dict]:
     rows = []
     for size in (128, 512):
-        engine = Engine(ProbeRing("scripted", size), ctx)
-        capture = CaptureTarget(ctx, OUTPUT_SIZE)
+        engine, capture = captured_ring(ctx, size)
         try:
-            engine.frame(DT, Output(capture.framebuffer, OUTPUT_SIZE))
             query = ctx.query(primitives=True)
             with query:
                 engine.renderer.scene_pass.draw([engine.main_view], engine.renderer.targets)
@@ -117,10 +123,8 @@ def capture_rows(ctx, frames: int) -> list[dict]:
 def prefilter_rows(ctx, frames: int) -> list[dict]:
     rows = []
     for size in (128, 512):
-        engine = Engine(ProbeRing("scripted", size), ctx)
-        capture = CaptureTarget(ctx, OUTPUT_SIZE)
+        engine, capture = captured_ring(ctx, size)
         try:
-            engine.frame(DT, Output(capture.framebuffer, OUTPUT_SIZE))
             owner = engine.stages["probes"].probes[engine.game.sphere].owner
             probes = engine.renderer.probes
             cube = probes.cubes[owner].texture

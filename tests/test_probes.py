@@ -78,6 +78,16 @@ def chrome_scene(ents, refresh="on_change"):
     return build
 
 
+def marked_chrome_scene(ents):
+    """The chrome scene with an emissive box of its own colour off each face's centre."""
+    def build(world):
+        chrome_scene(ents)(world)
+        for face, colour in enumerate(MARKER_COLOURS):
+            world.spawn(Transform(position=tuple(3.0 * offset(face))), MeshRef(box((0.5, 0.5, 0.5))),
+                        Material(color=colour), Emissive(2.0))
+    return build
+
+
 @pytest.mark.parametrize("path", ["six_pass", "layered"])
 def test_a_chrome_sphere_shows_the_red_wall_on_its_side_and_the_sky_on_the_other(scene, path):
     """Each sphere pixel: its reflected ray (from the camera math, followed from the probe at
@@ -386,14 +396,7 @@ def test_the_layered_and_six_pass_captures_agree_face_by_face_and_culling_cuts_p
     from engine.render.probes import face_view
 
     ents = {}
-
-    def build(world):
-        chrome_scene(ents)(world)
-        for face, colour in enumerate(MARKER_COLOURS):
-            world.spawn(Transform(position=tuple(3.0 * offset(face))), MeshRef(box((0.5, 0.5, 0.5))),
-                        Material(color=colour), Emissive(2.0))
-
-    runner = scene(build, (64, 48))
+    runner = scene(marked_chrome_scene(ents), (64, 48))
     runner.frame()
     probes = runner.engine.renderer.probes
     owner = ents["sphere"]
@@ -513,14 +516,7 @@ def test_the_mip_pass_builds_the_chain_glGenerateMipmap_builds(scene, ctx):
     2x2 box filter) on every face and level, within half-float rounding: a face or its
     orientation mixed up, or a level filtered from the wrong one above, fails."""
     ents = {}
-
-    def build(world):
-        chrome_scene(ents)(world)
-        for face, colour in enumerate(MARKER_COLOURS):
-            world.spawn(Transform(position=tuple(3.0 * offset(face))), MeshRef(box((0.5, 0.5, 0.5))),
-                        Material(color=colour), Emissive(2.0))
-
-    runner = scene(build, (64, 48))
+    runner = scene(marked_chrome_scene(ents), (64, 48))
     runner.frame()
     probes = runner.engine.renderer.probes
     assert probes.mips.layered  # the raw GL calls are reachable here: the pass itself is tested
@@ -569,12 +565,9 @@ def test_a_ggx_prefiltered_probe_holds_each_roughness_at_its_level(scene, ctx):
     ents = {}
 
     def build(world):
-        chrome_scene(ents)(world)
+        marked_chrome_scene(ents)(world)
         world.get(ents["sphere"], Material).roughness = 0.5
         world.add_component(ents["sphere"], ReflectionProbe(resolution=32, prefilter="ggx"))
-        for face, colour in enumerate(MARKER_COLOURS):
-            world.spawn(Transform(position=tuple(3.0 * offset(face))), MeshRef(box((0.5, 0.5, 0.5))),
-                        Material(color=colour), Emissive(2.0))
 
     runner = scene(build, (96, 72))
     ggx_frame = runner.frame().astype(float)
