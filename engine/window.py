@@ -11,6 +11,7 @@ from pathlib import Path
 
 import moderngl_window as mglw
 
+from components import FlyController
 from engine.app import Engine, Game
 from engine.capture import save_png
 from engine.errors import SpeculumError
@@ -81,9 +82,10 @@ def make_window_config(game: Game, args: argparse.Namespace | None = None) -> ty
         def on_mouse_press_event(self, x: int, y: int, button: int) -> None:
             self.input.clicks.add(_BUTTONS.get(button, str(button)))
             self.input.mouse = (float(x), float(y))
-            self.mouse_captured = True
-            self.wnd.mouse_exclusivity = True
-            self.wnd.cursor = False
+            if self.engine.world.query_one(FlyController):  # mouse look; a game without it keeps the pointer
+                self.mouse_captured = True
+                self.wnd.mouse_exclusivity = True
+                self.wnd.cursor = False
 
         def on_mouse_position_event(self, x: int, y: int, dx: int, dy: int) -> None:
             self.input.mouse = (float(x), float(y))

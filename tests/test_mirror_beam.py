@@ -4,8 +4,10 @@ screen and inside a mirror (pixels and entity ids), restart, click picking, wall
 bounce limit, and bad rules as clear errors.  Frames are real llvmpipe renders."""
 from __future__ import annotations
 
+import json
 import math
 import os
+import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -348,3 +350,91 @@ def test_command_line_autopilot_writes_frames_of_the_level_solved(tmp_path):
     assert done.returncode == 2
     assert done.stderr.strip().splitlines()[-1].startswith("speculum: error:")
     assert "rules.target" in done.stderr and "Traceback" not in done.stderr
+
+
+WINDOW_SCRIPT = r'''
+import json, sys
+
+import moderngl_window as mglw
+import pyglet
+from pyglet.window import key, mouse
+from pyglm import glm
+
+from components import Transform
+from engine.window import make_window_config
+from games.mirror_beam import BeamState, MirrorBeam
+
+config = mglw.create_window_config_instance(make_window_config(MirrorBeam(sys.argv[1])),
+                                            args=["--window", "pyglet", "--size", "192x108"])
+window = config.wnd._window
+world = config.engine.world
+errors = []
+
+def frame():
+    config.on_render(0.0, 1 / 60)
+    config.wnd.swap_buffers()
+    errors.append(config.ctx.error)
+
+def tap(symbol):
+    # As the X server delivers a key: through pyglet's queue to the shell's on_key_event.
+    window.dispatch_event("on_key_press", symbol, 0)
+    window.dispatch_event("on_key_release", symbol, 0)
+    window.dispatch_events()
+    frame()
+
+frame()
+frame()
+state = world.resources[BeamState]
+m2 = state.rules.rotatable[1]
+before = glm.quat(world.get(m2, Transform).rotation)
+clip = config.engine.main_view.view_proj * glm.vec4(world.get(m2, Transform).position, 1.0)
+w, h = config.wnd.size
+x, y = (clip.x / clip.w * 0.5 + 0.5) * w, (clip.y / clip.w * 0.5 + 0.5) * h  # pyglet: y up
+window.dispatch_event("on_mouse_press", int(x), int(y), mouse.LEFT, 0)
+window.dispatch_event("on_mouse_release", int(x), int(y), mouse.LEFT, 0)
+window.dispatch_events()
+frame()
+clicked = {"selected": state.selected, "turned_deg": glm.degrees(glm.angle(world.get(m2, Transform).rotation
+                                                                            * glm.inverse(before))),
+           "captured": config.mouse_captured}
+for symbol in [key._1, key.LEFT, key.LEFT, key.LEFT, key._2] + [key.RIGHT] * 4 + [None, None]:
+    if symbol is None:
+        frame()
+    else:
+        tap(symbol)
+print(json.dumps({"errors": errors, "clicked": clicked, "wins": len(state.wins()), "end": state.path.end}))
+config.on_close()
+config.wnd.destroy()
+'''
+
+
+def test_played_in_a_real_window_with_keys_and_a_click(tmp_path):
+    """Level 2 in an X window (Xvfb, pyglet): a click on m2 selects and turns it one step and
+    leaves the pointer free (no fly camera here); then the number and arrow keys, delivered
+    through pyglet's event queue, solve it; no GL error in any frame.  Skipped, saying why,
+    without Xvfb or pyglet."""
+    xvfb = shutil.which("Xvfb")
+    if xvfb is None:
+        pytest.skip("Xvfb is not installed (apt-get install xvfb)")
+    pytest.importorskip("pyglet", reason="moderngl-window has no windowed backend without pyglet")
+    read_fd, write_fd = os.pipe()
+    server = subprocess.Popen([xvfb, "-displayfd", str(write_fd), "-screen", "0", "640x480x24", "-nolisten", "tcp"],
+                              pass_fds=(write_fd,), stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    os.close(write_fd)
+    try:
+        with os.fdopen(read_fd) as pipe:
+            number = pipe.readline().strip()
+        if not number:
+            pytest.skip("Xvfb did not start")
+        env = {**os.environ, "DISPLAY": f":{number}", "PYTHONPATH": str(ROOT), "SPECULUM_DEBUG": "1"}
+        result = subprocess.run([sys.executable, "-c", WINDOW_SCRIPT, str(level_file("02_two_bounces"))],
+                                cwd=tmp_path, env=env, capture_output=True, text=True, timeout=120)
+    finally:
+        server.terminate()
+        server.wait(timeout=10)
+    assert result.returncode == 0, result.stderr[-3000:]
+    report = json.loads(result.stdout.strip().splitlines()[-1])
+    assert set(report["errors"]) == {"GL_NO_ERROR"}
+    assert report["clicked"]["selected"] == 1 and abs(report["clicked"]["turned_deg"] - 15.0) < 1e-3
+    assert report["clicked"]["captured"] is False
+    assert report["wins"] == 1 and report["end"] == "target"
