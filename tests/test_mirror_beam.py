@@ -352,6 +352,35 @@ def test_command_line_autopilot_writes_frames_of_the_level_solved(tmp_path):
     assert "rules.target" in done.stderr and "Traceback" not in done.stderr
 
 
+def test_n_after_a_win_plays_the_next_level_in_the_same_world(run):
+    """Level 1 won, 'n': every entity of level 1 goes, level 2 is built in the same world and
+    engine (its mirrors are the renderer's surfaces, the frame shows none of level 1's ids) and
+    is won by its own keys; 'n' before a win does nothing; after the last level comes the first."""
+    r = run(level_file("01_one_bounce"))
+    r.frame("n")
+    assert r.game.level_path == level_file("01_one_bounce")
+    for key in [None, *solution_keys(level_file("01_one_bounce")), None]:
+        r.frame(*([key] if key else []))
+    assert r.state.won
+    old = set(r.world.entities())
+    r.frame("n")
+    r.frame()
+    r.frame()
+    assert r.game.level_path == level_file("02_two_bounces") and r.state.level_name == "Mirror beam 2: two bounces"
+    assert not r.state.won and not r.state.wins()
+    assert not old & set(r.world.entities())
+    mirrors = set(r.world.resources[Surfaces].mirrors)
+    assert mirrors == {r.game.names["m1"], r.game.names["m2"]}
+    seen = set(np.unique(r.engine.renderer.targets.read_ids()).tolist())
+    assert not seen & old and seen & set(r.game.names.values())
+    for key in [*solution_keys(level_file("02_two_bounces")), None]:
+        r.frame(*([key] if key else []))
+    assert len(r.state.wins()) == 1
+
+    r.game.level_path = level_file("05_four_bounces")
+    assert r.game.next_level() == level_file("01_one_bounce").resolve()
+
+
 WINDOW_SCRIPT = r'''
 import json, sys
 

@@ -90,7 +90,8 @@ class SelectionMarker:
 
 @dataclass
 class BeamEvent:
-    """Something the game did, for scripts and tests: 'win', 'restart', 'turn', 'select'."""
+    """Something the game did, for scripts and tests: 'win', 'restart', 'turn', 'select', 'next'
+    (the next level asked for)."""
 
     kind: str
     frame: int
@@ -108,6 +109,7 @@ class BeamState:
     selected: int = 0
     path: BeamPath | None = None
     won: bool = False
+    next_asked: bool = False
     frame: int = 0
     events: list[BeamEvent] = field(default_factory=list)
 
@@ -197,7 +199,10 @@ def input_system(world: World, state: BeamState) -> bool:
         restart(world, state)
         return True
     if state.won:
-        return False  # solved: the mirrors stay put until a restart
+        if "n" in keys.pressed:
+            state.next_asked = True
+            state.events.append(BeamEvent("next", state.frame))
+        return False  # solved: the mirrors stay put until a restart or the next level
     count = len(rules.rotatable)
     if "tab" in keys.pressed:
         select(state, (state.selected + 1) % count)
@@ -394,6 +399,21 @@ class MirrorBeam(Game):
         world.resources[BeamState] = self.state
         self.script = solution_script(rules, self.interval) if self.autopilot else []
 
+    def next_level(self) -> Path | None:
+        """The shipped level after this one (the first after the last); None for a level file
+        from elsewhere."""
+        shipped = [p.resolve() for p in levels()]
+        here = self.level_path.resolve()
+        return shipped[(shipped.index(here) + 1) % len(shipped)] if here in shipped else None
+
+    def load(self, world: World, level: Path) -> None:
+        """Replace the level being played: every entity goes (deleted at the next step, and
+        left out of queries until then) and ``level`` is built in the same world."""
+        for entity in world.entities():
+            world.delete_entity(entity)
+        self.level_path = Path(level)
+        self.build(world)
+
     def update(self, world: World, dt: float) -> None:
         state = self.state
         keys = world.resources[Input]
@@ -401,7 +421,14 @@ class MirrorBeam(Game):
             keys.release(*self.script[state.frame - 1])
         if state.frame < len(self.script):
             keys.press(*self.script[state.frame])
-        if not input_system(world, state):
+        moved = input_system(world, state)
+        if state.next_asked:
+            state.next_asked = False
+            following = self.next_level()
+            if following is not None:
+                self.load(world, following)  # its beam is traced from its first full frame on
+                return
+        if not moved:
             # A mirror that moved this frame is in ``Surfaces`` from the next frame on: until
             # then the beam keeps the path drawn last frame (and cannot win on a stale one).
             beam_system(world, state)
