@@ -162,6 +162,8 @@ def test_beam_bounces_as_plain_vector_math_and_the_renderers_reflection_matrix(r
         out = d - 2.0 * glm.dot(d, n) * n
         assert glm.distance(out, bounce.outgoing) < 1e-5
         m = reflection_matrix(plane_from_point_normal(p, n))
+        drawn = r.world.resources[Surfaces].mirrors[bounce.mirror].carry  # what the renderer reflects with
+        assert max(abs(drawn[c][k] - m[c][k]) for c in range(4) for k in range(4)) < 1e-5
         image = glm.vec3(m * glm.vec4(o, 1.0))
         assert glm.distance(glm.normalize(hit - image), out) < 1e-4
         assert glm.distance(glm.vec3(m * glm.vec4(hit, 1.0)), hit) < 1e-4

@@ -15,6 +15,9 @@ def main(argv: list[str]) -> None:
     parser.add_argument("--interval", type=int, default=1, help="autopilot: frames between key presses")
     parser.add_argument("--headless", action="store_true")
     ours, rest = parser.parse_known_args(argv)
+    if "-h" in rest or "--help" in rest:
+        print("mirror beam options: --level FILE (a level file; default the first shipped level), "
+              "--interval N (headless autopilot: frames between key presses)\n")
     if ours.headless:
         rest.append("--headless")
     run(MirrorBeam(ours.level, autopilot=ours.headless, interval=ours.interval), rest)
