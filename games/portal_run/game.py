@@ -1,0 +1,548 @@
+"""Portal run: a first-person walk to an exit that cannot be reached on foot, through two
+portals the player shoots onto the level's walls.
+
+A level file places the room (every entity with a mesh is solid unless the rules say not),
+the exit pad, and says in ``[rules]`` where the player starts, which walls take portals and
+how big portals are (``load_rules`` lists them all).  Each frame the game stage runs, in
+order:
+
+* ``restart``: 'r' (or falling below ``kill_y``) deletes everything and builds the level
+  again from its file;
+* ``travelled``: a crossing the travel stage made last frame (``PortalCrossings``) turned the
+  player's camera; the game turns the player's velocity by the same rotation and reads its
+  heading back from the new orientation, so momentum goes out of the exit portal;
+* ``look and move``: mouse look, WASD on the ground (air control in the air), gravity and
+  jumping, then the body (an AABB, ``games.portal_run.physics``) is moved through the level's
+  solids; the wall a portal sits on lets the body through while it is in front of the
+  portal's opening, so the camera can reach the portal plane;
+* ``place portals``: a left / right click casts a ray from the eye (``engine.raycast``) and
+  places portal A / B on the wall it hits, or refuses it (a red marker flashes at the hit
+  and a 'refused' event names the reason);
+* ``win``: the body touching the exit pad records a 'win' event once and lights the pad.
+
+The engine's portal travel system carries the camera (the player) through an open pair in
+the same frame, before anything is drawn, so there is no frame with the player on both
+sides; the game never teleports the player itself.
+"""
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from pyglm import glm
+
+from components import (
+    Camera,
+    ComponentValueError,
+    Emissive,
+    Material,
+    MeshRef,
+    Portal,
+    Transform,
+    look_rotation,
+    yaw_pitch_rotation,
+)
+from engine.app import Game
+from engine.errors import SpeculumError
+from engine.frame_io import Input
+from engine.mesh import box, quad
+from engine.portals import spawn_portal_pair
+from engine.raycast import RayCaster
+from engine.world import World
+from games.portal_run.autopilot import Autopilot, ScriptError, parse_script
+from games.portal_run.level import load
+from games.portal_run.physics import BodyShape, Solid, move_body
+from systems.portal_travel_system import PortalCrossings
+
+LEVEL_DIR = Path(__file__).parent / "levels"
+
+# Body and motion (metres, seconds).
+HALF_WIDTH = 0.3
+HEIGHT = 1.8
+EYE_HEIGHT = 1.6
+WALK_SPEED = 4.5
+AIR_ACCEL = 8.0
+GRAVITY = 15.0
+JUMP_SPEED = 5.5  # about a metre high: no ledge in the levels is that low
+EXIT_SPEED = 2.0  # m/s: the least speed out of an exit portal until the body is clear of its wall
+MOUSE_SENSITIVITY = 0.15  # degrees per pixel
+
+# Portals.
+REACH = 60.0  # m: how far a portal shot goes
+PORTAL_OFFSET = 0.01  # m off the wall, so the portal never fights the wall for depth
+RIM = 0.08  # m of coloured frame round a placed portal
+CORNER_INSET = 0.03  # m: the fit test's probe points are this far inside the portal's edges
+WALL_SLOPE = 0.05  # |normal.y| above this is a floor, ceiling or slope: no portals
+PORTAL_COLORS = ((0.15, 0.45, 1.0), (1.0, 0.45, 0.05))  # A blue, B orange
+REFUSED_FRAMES = 40
+REFUSED_COLOR = (1.0, 0.05, 0.03)
+WIN_GLOW = 4.0
+DEFAULT_PORTAL_SIZE = (1.2, 2.0)
+
+
+class LevelRulesError(SpeculumError, ValueError):
+    """A level's [rules] table that the game cannot play (names the file, the rule and why)."""
+
+
+def levels() -> list[Path]:
+    """The shipped level files, easiest first."""
+    return sorted(LEVEL_DIR.glob("*.toml"))
+
+
+# --- plain data ---------------------------------------------------------------------------
+
+@dataclass
+class RunRules:
+    """A level's rules, checked (``load_rules``)."""
+
+    exit: str
+    start: tuple[float, float, float]  # the player's feet
+    yaw: float = 0.0
+    pitch: float = 0.0
+    portal_walls: tuple[str, ...] | None = None  # None: every solid wall
+    not_solid: tuple[str, ...] = ()
+    portal_size: tuple[float, float] = DEFAULT_PORTAL_SIZE
+    kill_y: float = -20.0
+    solution: tuple[str, ...] = ()
+
+
+@dataclass
+class PlayerBody:
+    """The player's own state (the camera entity carries it): heading, velocity, contact."""
+
+    yaw: float = 0.0
+    pitch: float = 0.0
+    velocity: Any = field(default_factory=lambda: np.zeros(3))
+    on_ground: bool = False
+    rotation: Any = field(default_factory=glm.quat)  # the orientation the game last wrote
+    exit_portal: int | None = None  # index of the portal just come out of, while the body is still in its wall
+    mouse_sensitivity: float = MOUSE_SENSITIVITY
+
+
+@dataclass
+class PlacedPortal:
+    """Where a portal sits: its wall, centre on the wall's face, and its axes."""
+
+    host: int
+    center: np.ndarray
+    right: np.ndarray
+    up: np.ndarray
+    normal: np.ndarray
+
+
+@dataclass(frozen=True)
+class RunEvent:
+    """Something that happened: 'placed', 'refused', 'travelled', 'win', 'restart', 'fell'."""
+
+    kind: str
+    frame: int
+    detail: str = ""
+    portal: int | None = None  # 0 for A, 1 for B
+    point: tuple[float, float, float] | None = None
+
+
+# --- rules ----------------------------------------------------------------------------------
+
+def load_rules(rules: dict[str, Any], names: dict[str, int], where: str) -> RunRules:
+    """Check a level's [rules]: every name must be an entity of the level, numbers finite.
+
+    Rules: ``exit`` (entity name, required), ``start`` ([x, y, z] of the feet, required),
+    ``yaw`` / ``pitch`` (degrees), ``portal_walls`` (entity names, or "all"), ``not_solid``
+    (entity names the body passes through), ``portal_size`` ([w, h] m), ``kill_y`` (falling
+    below it restarts), ``solution`` (autopilot commands that win the level)."""
+    def fail(rule: str, why: str) -> LevelRulesError:
+        return LevelRulesError(f"{where}: rule {rule!r} {why}")
+
+    known = {"exit", "start", "yaw", "pitch", "portal_walls", "not_solid", "portal_size", "kill_y", "solution"}
+    unknown = sorted(set(rules) - known)
+    if unknown:
+        raise fail(unknown[0], f"is not a portal_run rule (known: {', '.join(sorted(known))})")
+
+    def number(rule: str, value: Any, low: float = -1e6, high: float = 1e6) -> float:
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) \
+                or not low <= value <= high:
+            raise fail(rule, f"must be a number in [{low:g}, {high:g}], got {value!r}")
+        return float(value)
+
+    def vector(rule: str, value: Any, n: int, low: float = -1e6, high: float = 1e6) -> tuple[float, ...]:
+        if not isinstance(value, list) or len(value) != n:
+            raise fail(rule, f"must be a list of {n} numbers, got {value!r}")
+        return tuple(number(rule, v, low, high) for v in value)
+
+    def entity_names(rule: str, value: Any) -> tuple[str, ...]:
+        if not isinstance(value, list) or not all(isinstance(v, str) for v in value):
+            raise fail(rule, f"must be a list of entity names, got {value!r}")
+        for name in value:
+            if name not in names:
+                raise fail(rule, f"names {name!r}, which is no entity of the level")
+        return tuple(value)
+
+    if "exit" not in rules:
+        raise fail("exit", "is missing (the name of the exit pad entity)")
+    exit_name = rules["exit"]
+    if not isinstance(exit_name, str) or exit_name not in names:
+        raise fail("exit", f"must name an entity of the level, got {exit_name!r}")
+    if "start" not in rules:
+        raise fail("start", "is missing ([x, y, z] where the player's feet start)")
+    out = RunRules(exit=exit_name, start=vector("start", rules["start"], 3))
+    if "yaw" in rules:
+        out.yaw = number("yaw", rules["yaw"], -360.0, 360.0)
+    if "pitch" in rules:
+        out.pitch = number("pitch", rules["pitch"], -89.0, 89.0)
+    walls = rules.get("portal_walls", "all")
+    out.portal_walls = None if walls == "all" else entity_names("portal_walls", walls)
+    out.not_solid = entity_names("not_solid", rules.get("not_solid", []))
+    if "portal_size" in rules:
+        out.portal_size = vector("portal_size", rules["portal_size"], 2, 0.5 + 2 * CORNER_INSET, 20.0)
+        if out.portal_size[0] < 2 * HALF_WIDTH + 0.1 or out.portal_size[1] < HEIGHT + 0.1:
+            raise fail("portal_size", f"must let the player through (at least {2 * HALF_WIDTH + 0.1:g} x "
+                                      f"{HEIGHT + 0.1:g} m), got {rules['portal_size']!r}")
+    if "kill_y" in rules:
+        out.kill_y = number("kill_y", rules["kill_y"])
+    if out.kill_y >= out.start[1]:
+        raise fail("kill_y", f"must be below the start ({out.start[1]:g}), got {out.kill_y:g}")
+    try:
+        out.solution = tuple(s for s in rules.get("solution", []))
+        parse_script(list(out.solution), f"{where}: rule 'solution'")
+    except (ScriptError, TypeError) as exc:
+        raise LevelRulesError(str(exc)) from None
+    return out
+
+
+# --- the game ---------------------------------------------------------------------------------
+
+class PortalRun(Game):
+    """One level of portal run, from a level file.
+
+    ``autopilot=True`` plays the level's ``solution`` (headless runs with no person);
+    ``events`` lists every RunEvent since the game was built (restarts included)."""
+
+    title = "portal run"
+    size = (1280, 720)
+
+    def __init__(self, level: str | Path | None = None, autopilot: bool = False,
+                 script: Sequence[str] | None = None, verbose: bool = True) -> None:
+        self.level_path = Path(level) if level is not None else levels()[0]
+        self.level = load(self.level_path)
+        self.title = f"portal run: {self.level.name}"
+        self.verbose = verbose
+        self.events: list[RunEvent] = []
+        self.pilot: Autopilot | None = None
+        self._want_pilot = autopilot
+        self._script = script
+        self.won = False
+        self.frame = 0
+
+    # --- build / restart -----------------------------------------------------------------------
+    def build(self, world: World) -> None:
+        self.world = world
+        where = f"level file {str(self.level_path)!r}"
+        try:
+            self.names = self.level.spawn(world)
+        except (ComponentValueError, KeyError, TypeError, ValueError) as exc:
+            raise LevelRulesError(f"{where}: {exc}") from None
+        self.rules = load_rules(dict(self.level.rules), self.names, where)
+        if self._want_pilot and self.pilot is None:
+            self.pilot = Autopilot(self._script if self._script is not None else self.rules.solution,
+                                   f"{where}: rule 'solution'")
+        self.caster = world.resources.get(RayCaster)
+        if self.caster is None or self.caster.world is not world:
+            self.caster = world.resources[RayCaster] = RayCaster(world)
+        level_entities = set(self.names.values())
+        skip = {self.names[n] for n in self.rules.not_solid}
+        self.solids = {e for e in level_entities if world.has(e, MeshRef) and world.has(e, Transform)} - skip
+        self.portal_walls = self.solids if self.rules.portal_walls is None else \
+            {self.names[n] for n in self.rules.portal_walls}
+        self.exit = self.names[self.rules.exit]
+        self.shape = BodyShape.standing(HALF_WIDTH, HEIGHT, EYE_HEIGHT)
+        r = self.rules
+        body = PlayerBody(yaw=r.yaw, pitch=r.pitch, rotation=yaw_pitch_rotation(r.yaw, r.pitch))
+        eye = (r.start[0], r.start[1] + EYE_HEIGHT, r.start[2])
+        self.player = world.spawn(Transform(position=eye, rotation=body.rotation), Camera(fov_y=70.0, near=0.05),
+                                  body)
+        w, h = r.portal_size
+        hidden = (0.0, -1000.0, 0.0)
+        self.portals = spawn_portal_pair(world, hidden, None, (5.0, -1000.0, 0.0), None, size=(w, h))
+        self.rims = []
+        for portal, rgb in zip(self.portals, PORTAL_COLORS, strict=True):
+            p = world.get(portal, Portal)
+            p.enabled = False
+            p.closed_color = (*(0.35 * c for c in rgb), 1.0)
+            world.get(portal, MeshRef).visible = False
+            self.rims.append(world.spawn(Transform(position=(0.0, 0.0, -0.4 * PORTAL_OFFSET), parent=portal),
+                                         MeshRef(quad(w + 2 * RIM, h + 2 * RIM, name="portal_rim"), visible=False),
+                                         Material(color=(*rgb, 1.0), roughness=1.0), Emissive(1.5)))
+        self.placed: list[PlacedPortal | None] = [None, None]
+        self.marker = world.spawn(Transform(position=hidden), MeshRef(box((0.5, 0.5, 0.5)), visible=False),
+                                  Material(color=(*REFUSED_COLOR, 1.0), roughness=1.0), Emissive(3.0))
+        self.marker_frames = 0
+        self._exit_glow = world.try_get(self.exit, Emissive)
+        self._exit_power = self._exit_glow.power if self._exit_glow is not None else None
+        self.won = False
+        self.travels = 0
+
+    def restart(self, world: World, why: str = "restart") -> None:
+        """Delete everything and build the level again from its file (the autopilot goes on)."""
+        for entity in world.entities():
+            world.delete_entity(entity)
+        self.level = load(self.level_path)
+        self.build(world)
+        self._event(why, "level reloaded")
+
+    # --- per frame ---------------------------------------------------------------------------
+    def update(self, world: World, dt: float) -> None:
+        self.frame += 1
+        state: Input = world.resources[Input]
+        self._travelled(world)  # first: this frame's turning starts from the heading the portal gave
+        if self.pilot is not None:
+            self.pilot.fill(state, self)
+        if "r" in state.pressed:
+            self.restart(world)
+            return
+        self._look_and_move(world, state, dt)
+        if world.get(self.player, Transform).position.y < self.rules.kill_y:
+            self.restart(world, "fell")
+            return
+        for index, button in enumerate(("left", "right")):
+            if button in state.clicks:
+                self.place(world, index)
+        self._flash(world)
+        self._check_win(world)
+
+    # --- Pilotable ----------------------------------------------------------------------------
+    def player_view(self) -> tuple[tuple[float, float, float], float, float, float]:
+        eye = self.world.get(self.player, Transform).position
+        body = self.world.get(self.player, PlayerBody)
+        return (eye.x, eye.y, eye.z), body.yaw, body.pitch, body.mouse_sensitivity
+
+    def travel_count(self) -> int:
+        return self.travels
+
+    # --- travel ---------------------------------------------------------------------------------
+    def _travelled(self, world: World) -> None:
+        """Follow a crossing the travel stage made last frame: turn the velocity as the camera
+        was turned (the rotation it now has over the one the game wrote), and read the
+        heading back, dropping any roll."""
+        crossings = world.resources.get(PortalCrossings) or ()
+        body = world.get(self.player, PlayerBody)
+        transform = world.get(self.player, Transform)
+        for crossing in crossings:
+            if crossing.entity != self.player:
+                continue
+            turn = transform.rotation * glm.inverse(body.rotation)
+            v = turn * glm.vec3(*body.velocity)
+            body.velocity = np.array([v.x, v.y, v.z])
+            forward = transform.rotation * glm.vec3(0.0, 0.0, -1.0)
+            body.yaw = math.degrees(math.atan2(-forward.x, -forward.z))
+            body.pitch = max(-89.0, min(89.0, math.degrees(math.asin(max(-1.0, min(1.0, forward.y))))))
+            body.rotation = yaw_pitch_rotation(body.yaw, body.pitch)
+            transform.rotation = body.rotation
+            self.travels += 1
+            if crossing.to_portal in self.portals:
+                body.exit_portal = self.portals.index(crossing.to_portal)
+            self._event("travelled", f"through portal {'AB'[self.portals.index(crossing.from_portal)]}",
+                        portal=self.portals.index(crossing.from_portal))
+
+    # --- moving -----------------------------------------------------------------------------------
+    def solid_boxes(self) -> list[Solid]:
+        """The level's solids as world AABBs (from the ray caster's cached triangles)."""
+        boxes = []
+        for entity in sorted(self.solids):
+            tris = self.caster.triangles(entity).reshape(-1, 3)
+            boxes.append(Solid(entity, tris.min(axis=0), tris.max(axis=0)))
+        return boxes
+
+    def _look_and_move(self, world: World, state: Input, dt: float) -> None:
+        body = world.get(self.player, PlayerBody)
+        transform = world.get(self.player, Transform)
+        if state.mouse_dx or state.mouse_dy:
+            body.yaw = (body.yaw - state.mouse_dx * body.mouse_sensitivity + 180.0) % 360.0 - 180.0
+            body.pitch = max(-89.0, min(89.0, body.pitch - state.mouse_dy * body.mouse_sensitivity))
+        body.rotation = yaw_pitch_rotation(body.yaw, body.pitch)
+        transform.rotation = body.rotation
+        if dt <= 0.0:
+            return
+        yaw = math.radians(body.yaw)
+        forward = np.array([-math.sin(yaw), 0.0, -math.cos(yaw)])
+        right = np.array([math.cos(yaw), 0.0, -math.sin(yaw)])
+        held = state.held
+        wish = forward * (("w" in held) - ("s" in held)) + right * (("d" in held) - ("a" in held))
+        length = float(np.linalg.norm(wish))
+        wish = wish / length if length > 0 else wish
+        v = np.array(body.velocity, np.float64)
+        if body.on_ground:
+            v[0], v[2] = wish[0] * WALK_SPEED, wish[2] * WALK_SPEED
+            if "space" in state.pressed:
+                v[1] = JUMP_SPEED
+        elif length > 0:
+            before = math.hypot(v[0], v[2])
+            v[0] += wish[0] * AIR_ACCEL * dt
+            v[2] += wish[2] * AIR_ACCEL * dt
+            after = math.hypot(v[0], v[2])
+            cap = max(before, WALK_SPEED)
+            if after > cap:
+                v[0], v[2] = v[0] * cap / after, v[2] * cap / after
+        eye = transform.position
+        self._step_out(body, v, np.array(eye, np.float64))
+        v[1] -= GRAVITY * dt
+        moved = move_body((eye.x, eye.y, eye.z), v, dt, self.shape, self.solid_boxes(), self._passable)
+        body.velocity = moved.velocity
+        body.on_ground = moved.on_ground
+        transform.position = tuple(moved.position)
+
+    def _step_out(self, body: PlayerBody, v: np.ndarray, eye: np.ndarray) -> None:
+        """Just out of a portal the body is still partly inside the exit's wall (the camera
+        came out, the body behind it did not): keep it moving out along the portal's normal
+        at ``EXIT_SPEED`` at least until it is clear, so a player who stops or turns on
+        arrival does not stand in the opening (where turning the view would touch the
+        portal again and carry the camera back)."""
+        placed = self.placed[body.exit_portal] if body.exit_portal is not None else None
+        if placed is None:
+            body.exit_portal = None
+            return
+        tris = self.caster.triangles(placed.host).reshape(-1, 3)
+        if not (np.all(eye + self.shape.lo < tris.max(axis=0)) and np.all(eye + self.shape.hi > tris.min(axis=0))):
+            body.exit_portal = None
+            return
+        out = float(v @ placed.normal)
+        if out < EXIT_SPEED:
+            v += placed.normal * (EXIT_SPEED - out)
+
+    def _passable(self, entity: int, lo: np.ndarray, hi: np.ndarray) -> bool:
+        """A wall with a portal on it lets the body through while the body is in front of the
+        portal (the eye not behind its plane) and fits inside its opening."""
+        w, h = self.rules.portal_size
+        center = (lo + hi) / 2.0
+        half = (hi - lo) / 2.0
+        eye = center + np.array([0.0, (self.shape.hi[1] + self.shape.lo[1]) / -2.0, 0.0])
+        for placed in self.placed:
+            if placed is None or placed.host != entity or None in self.placed:
+                continue  # a lone portal is closed: its wall stays solid
+            offset = center - placed.center
+            if float((eye - placed.center) @ placed.normal) < -0.02:
+                continue
+            reach_u = float(np.abs(placed.right) @ half)
+            if abs(float(offset @ placed.right)) + reach_u > w / 2 + 0.05:
+                continue
+            v = float(offset @ placed.up)
+            reach_v = float(np.abs(placed.up) @ half)
+            if abs(v) + reach_v <= h / 2 + 0.15:
+                return True
+        return False
+
+    # --- placing portals -----------------------------------------------------------------------
+    def place(self, world: World, index: int) -> bool:
+        """Shoot portal ``index`` (0 = A, 1 = B) along the player's view; True if it was placed."""
+        transform = world.get(self.player, Transform)
+        eye = np.array(transform.position, np.float64)
+        view = transform.rotation * glm.vec3(0.0, 0.0, -1.0)
+        hit = self.caster.cast(eye, (view.x, view.y, view.z), REACH, where=self.solids.__contains__)
+        if hit is None:
+            return self._refuse(world, index, "the shot hit nothing", None, None)
+        point = np.array(hit.point, np.float64)
+        normal = np.array(hit.normal, np.float64)
+        if hit.entity not in self.portal_walls:
+            return self._refuse(world, index, f"{self._name(hit.entity)} does not take portals", point, normal)
+        if abs(normal[1]) > WALL_SLOPE:
+            return self._refuse(world, index, f"{self._name(hit.entity)} is not a wall there (portals go on "
+                                              "upright faces)", point, normal)
+        normal[1] = 0.0
+        normal /= np.linalg.norm(normal)
+        up = np.array([0.0, 1.0, 0.0])
+        right = np.cross(up, normal)
+        w, h = self.rules.portal_size
+        # The face: the wall's triangles in the hit plane; the portal slides to lie inside it.
+        tris = self.caster.triangles(hit.entity)
+        n = np.cross(tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0])
+        n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-12)
+        coplanar = (np.abs(n @ normal) > 0.999) & (np.abs((tris[:, 0] - point) @ normal) < 1e-3)
+        corners = tris[coplanar].reshape(-1, 3) - point
+        us, vs = corners @ right, corners @ up
+        center = point.copy()
+        for axis, values, size, name in ((right, us, w, "wide"), (up, vs, h, "high")):
+            lo, hi = float(values.min()), float(values.max())
+            if hi - lo < size:
+                return self._refuse(world, index, f"{self._name(hit.entity)} is {hi - lo:.2f} m {name} there, the "
+                                                  f"portal needs {size:g} m", point, normal)
+            shift = min(max(0.0, lo + size / 2), hi - size / 2)
+            center = center + axis * shift
+        # Nothing in front of the face at the portal's corners, edges and centre.
+        a, b = w / 2 - CORNER_INSET, h / 2 - CORNER_INSET
+        for su, sv in ((0, 0), (-1, -1), (1, -1), (1, 1), (-1, 1), (0, -1), (0, 1), (-1, 0), (1, 0)):
+            probe = center + right * su * a + up * sv * b + normal * 0.25
+            got = self.caster.cast(probe, -normal, 0.5, where=self.solids.__contains__)
+            if got is None or got.entity != hit.entity or abs(got.distance - 0.25) > 2e-3:
+                return self._refuse(world, index, f"the portal does not fit on {self._name(hit.entity)} there "
+                                                  "(something covers or the face ends)", point, normal)
+        other = self.placed[1 - index]
+        if other is not None and other.host == hit.entity and abs(float((center - other.center) @ normal)) < 0.05:
+            d = center - other.center
+            if abs(float(d @ right)) < w and abs(float(d @ up)) < h:
+                return self._refuse(world, index, "it would overlap the other portal", point, normal)
+        self._put(world, index, PlacedPortal(hit.entity, center, right, up, normal))
+        self._event("placed", f"portal {'AB'[index]} on {self._name(hit.entity)}", index,
+                    tuple(float(c) for c in center))
+        return True
+
+    def _put(self, world: World, index: int, placed: PlacedPortal) -> None:
+        portal = self.portals[index]
+        transform = world.get(portal, Transform)
+        transform.position = tuple(placed.center + placed.normal * PORTAL_OFFSET)
+        transform.rotation = look_rotation(tuple(-placed.normal), (0.0, 1.0, 0.0))
+        world.get(portal, Portal).enabled = True
+        world.get(portal, MeshRef).visible = True
+        world.get(self.rims[index], MeshRef).visible = True
+        self.placed[index] = placed
+
+    def _refuse(self, world: World, index: int, why: str, point: np.ndarray | None,
+                normal: np.ndarray | None) -> bool:
+        if point is not None:
+            world.get(self.marker, Transform).position = tuple(point + normal * 0.3)
+            world.get(self.marker, MeshRef).visible = True
+            self.marker_frames = REFUSED_FRAMES
+        self._event("refused", f"portal {'AB'[index]}: {why}", index,
+                    tuple(float(c) for c in point) if point is not None else None)
+        return False
+
+    def _flash(self, world: World) -> None:
+        if self.marker_frames > 0:
+            self.marker_frames -= 1
+            if self.marker_frames == 0:
+                world.get(self.marker, MeshRef).visible = False
+
+    # --- winning -------------------------------------------------------------------------------
+    def _check_win(self, world: World) -> None:
+        if self.won:
+            return
+        eye = np.array(world.get(self.player, Transform).position, np.float64)
+        lo, hi = eye + self.shape.lo, eye + self.shape.hi
+        tris = self.caster.triangles(self.exit).reshape(-1, 3)
+        pad_lo, pad_hi = tris.min(axis=0), tris.max(axis=0) + np.array([0.0, 0.05, 0.0])
+        if np.all(lo <= pad_hi) and np.all(hi >= pad_lo):
+            self.won = True
+            if self._exit_glow is None:
+                self._exit_glow = Emissive(WIN_GLOW)
+                world.add_component(self.exit, self._exit_glow)
+            else:
+                self._exit_glow.power = WIN_GLOW
+            self._event("win", f"reached {self.rules.exit}")
+            if self.verbose:
+                print(f"portal_run: level complete: {self.level.name} (frame {self.frame}; press r to restart)")
+
+    # --- helpers ----------------------------------------------------------------------------------
+    def _name(self, entity: int) -> str:
+        for name, e in self.names.items():
+            if e == entity:
+                return name
+        return f"entity {entity}"
+
+    def _event(self, kind: str, detail: str = "", portal: int | None = None,
+               point: tuple[float, float, float] | None = None) -> None:
+        self.events.append(RunEvent(kind, self.frame, detail, portal, point))
+
+    def event_kinds(self) -> list[str]:
+        return [e.kind for e in self.events]
