@@ -145,6 +145,14 @@ class RunEvent:
     point: tuple[float, float, float] | None = None
 
 
+def heading(rotation: glm.quat) -> tuple[float, float]:
+    """(yaw, pitch) in degrees of the direction an orientation looks (its -Z); roll is dropped."""
+    forward = rotation * glm.vec3(0.0, 0.0, -1.0)
+    yaw = math.degrees(math.atan2(-forward.x, -forward.z))
+    pitch = math.degrees(math.asin(max(-1.0, min(1.0, forward.y))))
+    return yaw, max(-89.0, min(89.0, pitch))
+
+
 # --- rules ----------------------------------------------------------------------------------
 
 def load_rules(rules: dict[str, Any], names: dict[str, int], where: str) -> RunRules:
@@ -278,12 +286,13 @@ class PortalRun(Game):
                                          Material(color=(*rgb, 1.0), roughness=1.0), Emissive(1.5)))
         self.placed: list[PlacedPortal | None] = [None, None]
         self.marker = world.spawn(Transform(position=hidden), MeshRef(box((0.5, 0.5, 0.5)), visible=False),
-                                  Material(color=(*REFUSED_COLOR, 1.0), roughness=1.0), Emissive(3.0))
+                                  Material(color=(*REFUSED_COLOR, 1.0), roughness=1.0), Emissive(1.2))
         self.marker_frames = 0
         self._exit_glow = world.try_get(self.exit, Emissive)
         self._exit_power = self._exit_glow.power if self._exit_glow is not None else None
         self.won = False
         self.travels = 0
+        self._consumed: object = None  # the PortalCrossings list already taken in
 
     def restart(self, world: World, why: str = "restart") -> None:
         """Delete everything and build the level again from its file (the autopilot goes on)."""
@@ -315,12 +324,19 @@ class PortalRun(Game):
 
     # --- Pilotable ----------------------------------------------------------------------------
     def player_view(self) -> tuple[tuple[float, float, float], float, float, float]:
-        eye = self.world.get(self.player, Transform).position
-        body = self.world.get(self.player, PlayerBody)
-        return (eye.x, eye.y, eye.z), body.yaw, body.pitch, body.mouse_sensitivity
+        """Eye, heading (read from the camera's orientation, which a portal may have turned
+        since the game last wrote it) and mouse sensitivity, for a scripted player."""
+        transform = self.world.get(self.player, Transform)
+        eye = transform.position
+        yaw, pitch = heading(transform.rotation)
+        return (eye.x, eye.y, eye.z), yaw, pitch, self.world.get(self.player, PlayerBody).mouse_sensitivity
 
     def travel_count(self) -> int:
-        return self.travels
+        """Crossings so far, counting one the travel stage made last frame that this frame's
+        update has not taken in yet (a script filling the input before the frame sees it)."""
+        crossings = self.world.resources.get(PortalCrossings) or ()
+        pending = crossings is not self._consumed and any(c.entity == self.player for c in crossings)
+        return self.travels + int(pending)
 
     # --- travel ---------------------------------------------------------------------------------
     def _travelled(self, world: World) -> None:
@@ -328,6 +344,9 @@ class PortalRun(Game):
         was turned (the rotation it now has over the one the game wrote), and read the
         heading back, dropping any roll."""
         crossings = world.resources.get(PortalCrossings) or ()
+        if crossings is self._consumed:
+            return
+        self._consumed = crossings
         body = world.get(self.player, PlayerBody)
         transform = world.get(self.player, Transform)
         for crossing in crossings:
@@ -336,9 +355,8 @@ class PortalRun(Game):
             turn = transform.rotation * glm.inverse(body.rotation)
             v = turn * glm.vec3(*body.velocity)
             body.velocity = np.array([v.x, v.y, v.z])
-            forward = transform.rotation * glm.vec3(0.0, 0.0, -1.0)
-            body.yaw = math.degrees(math.atan2(-forward.x, -forward.z))
-            body.pitch = max(-89.0, min(89.0, math.degrees(math.asin(max(-1.0, min(1.0, forward.y))))))
+            body.yaw, body.pitch = heading(transform.rotation)
+            body.on_ground = False  # the contact was on the other side: the next move finds the new one
             body.rotation = yaw_pitch_rotation(body.yaw, body.pitch)
             transform.rotation = body.rotation
             self.travels += 1
