@@ -184,11 +184,10 @@ class ProbeSystem(esper.Processor):
             if everything:
                 state.pending |= ALL_FACES
                 return
-            for entity, found in boxes.items():
-                if entity == state.owner:
-                    continue
-                for lo, hi in found:
-                    state.pending |= faces_touched(state.position, settings.far, lo, hi)
+            found = [box for entity, boxes_of in boxes.items() if entity != state.owner for box in boxes_of]
+            if found:
+                lo, hi = zip(*found, strict=True)
+                state.pending |= faces_touched(state.position, settings.far, np.array(lo), np.array(hi))
 
     def _capture(self, state: ProbeState, faces: set[int]) -> None:
         settings = state.settings

@@ -594,3 +594,26 @@ def test_a_ggx_prefiltered_probe_holds_each_roughness_at_its_level(scene, ctx):
     assert np.abs(ggx_frame - mips_frame).max() > 20  # the sphere's blur differs between the modes
     with pytest.raises(ComponentValueError, match=r"ReflectionProbe\.prefilter"):
         ReflectionProbe(prefilter="pmrem")
+
+
+def test_faces_touched_holds_every_face_a_point_of_the_boxes_lies_in():
+    """Conservative and batched: for random boxes, every face whose pyramid holds a sampled
+    point of a box (the point's largest axis, GL's face choice) is among the faces found,
+    for one box at a time and for all boxes at once (their union); a box out of range
+    touches none."""
+    from engine.render.probes import faces_touched
+
+    rng = np.random.default_rng(7)
+    centre = np.array([0.5, -0.25, 1.0])
+    los = rng.uniform(-6, 6, (40, 3)) + centre
+    his = los + rng.uniform(0.05, 3, (40, 3))
+    union = set()
+    for lo, hi in zip(los, his, strict=True):
+        found = faces_touched(glm.vec3(*centre), 100.0, lo, hi)
+        points = rng.uniform(lo, hi, (200, 3)) - centre
+        axis = np.argmax(np.abs(points), axis=1)
+        faces = {int(2 * a + (p[a] < 0)) for a, p in zip(axis, points, strict=True)}
+        assert faces <= found, (lo, hi, faces, found)
+        union |= found
+    assert faces_touched(glm.vec3(*centre), 100.0, los, his) == union
+    assert faces_touched(glm.vec3(*centre), 1.0, centre + 5.0, centre + 6.0) == set()

@@ -50,9 +50,8 @@ def face_view(face: int, position: glm.vec3, near: float, far: float, size: int,
     return View(view=view, proj=proj, eye=eye, size=(size, size), name=f"probe face {face}", node=face, skip=skip)
 
 
-def face_planes(position: glm.vec3, face: int) -> np.ndarray:
-    """The four side planes of a face's frustum as rows (a, b, c, d): a point p is inside
-    the face's pyramid when every row . (p, 1) >= 0."""
+def _side_normals(face: int) -> np.ndarray:
+    """The inward normals of a face's four side planes (through the probe's centre)."""
     axis = int(np.argmax(np.abs(FACE_AXES[face][0])))
     sign = FACE_AXES[face][0][axis]
     rows = []
@@ -63,24 +62,37 @@ def face_planes(position: glm.vec3, face: int) -> np.ndarray:
             n = np.zeros(3)
             n[axis] = sign
             n[other] = -side  # sign * d[axis] - side * d[other] >= 0
-            rows.append((*n, -float(np.dot(n, np.array(position)))))
+            rows.append(n)
     return np.array(rows)
 
 
+_SIDE_NORMALS = np.stack([_side_normals(face) for face in range(6)])  # (face, plane, xyz)
+
+
+def face_planes(position: glm.vec3, face: int) -> np.ndarray:
+    """The four side planes of a face's frustum as rows (a, b, c, d): a point p is inside
+    the face's pyramid when every row . (p, 1) >= 0."""
+    normals = _SIDE_NORMALS[face]
+    return np.concatenate([normals, -(normals @ np.array(position))[:, None]], axis=1)
+
+
 def faces_touched(position: glm.vec3, far: float, lo: np.ndarray, hi: np.ndarray) -> set[int]:
-    """Faces whose frustum (from ``position`` out to ``far``) a world box [lo, hi] may touch
-    (conservative: a box is left out only when all its corners are outside one plane)."""
-    centre = np.array(position)
-    nearest = np.clip(centre, lo, hi)
-    if np.linalg.norm(nearest - centre) > far:
+    """Faces whose frustum (from ``position`` out to ``far``) any of the world boxes [lo, hi]
+    may touch (``lo``, ``hi``: one box's corners, or rows of several).  Conservative: a box
+    is left out of a face only when all its corners are outside one of the face's planes.
+    All boxes and faces in a few array operations: a probe may see many movers a frame."""
+    centre = np.array(position, dtype=np.float64)
+    lo = np.atleast_2d(np.asarray(lo, dtype=np.float64))
+    hi = np.atleast_2d(np.asarray(hi, dtype=np.float64))
+    in_range = np.linalg.norm(np.clip(centre, lo, hi) - centre, axis=1) <= far
+    if not in_range.any():
         return set()
-    corners = np.array([(x, y, z, 1.0) for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
-    touched = set()
-    for face in range(6):
-        inside = corners @ face_planes(position, face).T >= 0.0  # corners x planes
-        if not (~inside).all(axis=0).any():
-            touched.add(face)
-    return touched
+    lo, hi = lo[in_range] - centre, hi[in_range] - centre  # planes through the centre: d = 0
+    pick = np.array([(x, y, z) for x in (0, 1) for y in (0, 1) for z in (0, 1)], dtype=bool)  # (8, 3)
+    corners = np.where(pick[None], hi[:, None, :], lo[:, None, :])  # (box, corner, xyz)
+    inside = np.einsum("bck,fpk->bcfp", corners, _SIDE_NORMALS) >= 0.0  # (box, corner, face, plane)
+    outside_one_plane = (~inside).all(axis=1).any(axis=2)  # (box, face)
+    return {int(face) for face in np.flatnonzero((~outside_one_plane).any(axis=0))}
 
 
 class ProbeStates(dict):
