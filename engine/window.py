@@ -80,8 +80,15 @@ def make_window_config(game: Game, args: argparse.Namespace | None = None) -> ty
                     self.input.held.discard(modifier)
 
         def on_mouse_press_event(self, x: int, y: int, button: int) -> None:
-            self.input.clicks.add(_BUTTONS.get(button, str(button)))
             self.input.mouse = (float(x), float(y))
+            if getattr(game, "mouse_look", False) and not self.mouse_captured:
+                # A game that looks with the mouse (its own controller, no FlyController):
+                # the click that takes the pointer is not a game click (no portal fired).
+                self.mouse_captured = True
+                self.wnd.mouse_exclusivity = True
+                self.wnd.cursor = False
+                return
+            self.input.clicks.add(_BUTTONS.get(button, str(button)))
             if self.engine.world.query_one(FlyController):  # mouse look; a game without it keeps the pointer
                 self.mouse_captured = True
                 self.wnd.mouse_exclusivity = True

@@ -4,6 +4,9 @@ the turned velocity out of a portal at right angles, restart, the rules' errors 
 command line.  Some frames are written to out/portal_run/ to look at."""
 from __future__ import annotations
 
+import json
+import os
+import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -326,3 +329,88 @@ def test_level_files_are_in_rising_order_and_ship_a_solution():
         assert solution, path
         clicks.append(sum(step.startswith("click") for step in solution))
     assert clicks == sorted(clicks) and clicks[0] < clicks[-1]  # more shots as the levels go
+
+
+WINDOW_SCRIPT = r'''
+import json, sys
+
+import moderngl_window as mglw
+from pyglet.window import key, mouse
+
+from components import Transform
+from engine.window import make_window_config
+from games.portal_run import PortalRun
+
+game = PortalRun(sys.argv[1], verbose=False)
+config = mglw.create_window_config_instance(make_window_config(game), args=["--window", "pyglet", "--size", "192x108"])
+window = config.wnd._window
+world = config.engine.world
+errors = []
+
+def frame():
+    config.on_render(0.0, 1 / 60)
+    config.wnd.swap_buffers()
+    errors.append(config.ctx.error)
+
+def click(button):
+    # As the X server delivers it: through pyglet's queue to the shell.
+    window.dispatch_event("on_mouse_press", 96, 54, button, 0)
+    window.dispatch_event("on_mouse_release", 96, 54, button, 0)
+    window.dispatch_events()
+    frame()
+
+frame()
+frame()
+click(mouse.LEFT)  # takes the pointer for mouse look; fires nothing
+first = {"captured": config.mouse_captured, "events": len(game.events)}
+window.dispatch_event("on_mouse_motion", 96, 54, 1200, 0)  # 1200 px at 0.15 degrees a pixel: half a turn
+window.dispatch_events()
+frame()
+yaw = game.player_view()[1]
+click(mouse.LEFT)  # portal A where the player looks: the front wall behind the start
+placed = [e.detail for e in game.events if e.kind == "placed"]
+z0 = world.get(game.player, Transform).position.z
+window.dispatch_event("on_key_press", key.W, 0)
+window.dispatch_events()
+for _ in range(30):
+    frame()
+window.dispatch_event("on_key_release", key.W, 0)
+window.dispatch_events()
+frame()
+z1 = world.get(game.player, Transform).position.z
+print(json.dumps({"errors": errors, "first": first, "yaw": yaw, "placed": placed, "walked": z1 - z0}))
+config.on_close()
+config.wnd.destroy()
+'''
+
+
+def test_played_in_a_real_window_with_mouse_look_clicks_and_keys(tmp_path):
+    """Level 1 in an X window (Xvfb, pyglet): the first click only takes the pointer, mouse
+    motion turns the player half round, the next click puts portal A on the wall it looks
+    at, W walks; no GL error in any frame.  Skipped, saying why, without Xvfb or pyglet."""
+    xvfb = shutil.which("Xvfb")
+    if xvfb is None:
+        pytest.skip("Xvfb is not installed (apt-get install xvfb)")
+    pytest.importorskip("pyglet", reason="moderngl-window has no windowed backend without pyglet")
+    read_fd, write_fd = os.pipe()
+    server = subprocess.Popen([xvfb, "-displayfd", str(write_fd), "-screen", "0", "640x480x24", "-nolisten", "tcp"],
+                              pass_fds=(write_fd,), stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    os.close(write_fd)
+    try:
+        with os.fdopen(read_fd) as pipe:
+            number = pipe.readline().strip()
+        if not number:
+            pytest.skip("Xvfb did not start")
+        env = {**os.environ, "DISPLAY": f":{number}", "PYTHONPATH": str(ROOT), "SPECULUM_DEBUG": "1"}
+        result = subprocess.run([sys.executable, "-c", WINDOW_SCRIPT, str(LEVELS[0])], cwd=tmp_path, env=env,
+                                capture_output=True, text=True, timeout=120)
+    finally:
+        server.terminate()
+        server.wait(timeout=10)
+    assert result.returncode == 0, result.stderr[-3000:]
+    report = json.loads(result.stdout.strip().splitlines()[-1])
+    assert set(report["errors"]) == {"GL_NO_ERROR"}
+    assert report["first"] == {"captured": True, "events": 0}
+    assert abs(abs(report["yaw"]) - 180.0) < 1e-3
+    assert report["placed"] == ["portal A on front_wall"]
+    assert report["walked"] == pytest.approx(WALK_SPEED * 30 / 60, abs=0.1)

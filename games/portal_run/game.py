@@ -231,6 +231,7 @@ class PortalRun(Game):
 
     title = "portal run"
     size = (1280, 720)
+    mouse_look = True  # the window shell captures the pointer on the first click (engine/window.py)
 
     def __init__(self, level: str | Path | None = None, autopilot: bool = False,
                  script: Sequence[str] | None = None, verbose: bool = True) -> None:
