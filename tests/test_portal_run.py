@@ -173,7 +173,7 @@ def test_a_portal_on_a_too_narrow_wall_is_refused_with_a_red_marker(play):
     hit = np.array(refused[0].point)
     assert hit[2] == pytest.approx(1.6, abs=1e-4) and -1.4 <= hit[0] <= -0.6
     marker = glm.vec3(p.world.get(p.game.marker, Transform).position)
-    column, row = p.pixel(marker)
+    column, row = p.pixel(marker + glm.vec3(0.12, -0.12, 0.0))  # in the 0.5 m marker, off the crosshair
     r, g, b = frames[-1][row, column].astype(int)
     _save(frames[-1], "refused_pillar.png")
     assert r > 150 and g < 90 and b < 90, (r, g, b)
@@ -213,12 +213,13 @@ def test_a_lone_portal_is_closed_and_a_pair_shows_the_other_side(play):
     p = play(level, ["aim 0 1 8", "click left", "wait 1"])
     p.run_script()
     a, b = p.game.portals
-    column, row = p.pixel(p.world.get(a, Transform).position)
+    below = glm.vec3(0.0, -0.4, 0.0)  # a point on A below its centre, where the crosshair is not
+    column, row = p.pixel(p.world.get(a, Transform).position + below)
     assert p.engine.renderer.targets.read_ids()[row, column] == a  # closed: the portal itself
     p.pilot = Autopilot(["aim 0 3.8 -8", "click right", "aim 0 1 8", "wait 1"])
     p.run_script()
     ids = p.engine.renderer.targets.read_ids()
-    column, row = p.pixel(p.world.get(a, Transform).position)
+    column, row = p.pixel(p.world.get(a, Transform).position + below)
     seen = int(ids[row, column])
     beyond = {p.game.names[n] for n in ("ledge", "floor", "exit_pad", "front_wall", "left_wall", "right_wall")}
     assert seen in beyond, seen  # through A: what stands in front of B

@@ -82,6 +82,8 @@ REFUSED_FRAMES = 40
 REFUSED_COLOR = (1.0, 0.05, 0.03)
 WIN_GLOW = 4.0
 DEFAULT_PORTAL_SIZE = (1.2, 2.0)
+CROSSHAIR_DISTANCE = 0.06  # m in front of the eye (the camera's near plane is 0.05)
+CROSSHAIR_SIZE = 0.0012  # m: about 1.5% of the view's height at that distance
 
 
 class LevelRulesError(SpeculumError, ValueError):
@@ -273,6 +275,10 @@ class PortalRun(Game):
         eye = (r.start[0], r.start[1] + EYE_HEIGHT, r.start[2])
         self.player = world.spawn(Transform(position=eye, rotation=body.rotation), Camera(fov_y=70.0, near=0.05),
                                   body)
+        # A crosshair: a small bright dot just past the near plane, a child of the camera.
+        self.crosshair = world.spawn(Transform(position=(0.0, 0.0, -CROSSHAIR_DISTANCE), parent=self.player),
+                                     MeshRef(quad(CROSSHAIR_SIZE, CROSSHAIR_SIZE, name="crosshair")),
+                                     Material(color=(1.0, 1.0, 1.0, 1.0), roughness=1.0), Emissive(1.0))
         w, h = r.portal_size
         hidden = (0.0, -1000.0, 0.0)
         self.portals = spawn_portal_pair(world, hidden, None, (5.0, -1000.0, 0.0), None, size=(w, h))
