@@ -415,3 +415,73 @@ def test_played_in_a_real_window_with_mouse_look_clicks_and_keys(tmp_path):
     assert abs(abs(report["yaw"]) - 180.0) < 1e-3
     assert report["placed"] == ["portal A on front_wall"]
     assert report["walked"] == pytest.approx(WALK_SPEED * 30 / 60, abs=0.1)
+
+
+SMALL_LEVEL = """
+[level]
+name = "test: a wall, a crate, a pit"
+game = "portal_run"
+[rules]
+exit = "pad"
+start = [0, 0, 0]
+portal_walls = ["wall"]
+kill_y = -5
+[[entity]]
+name = "sun"
+[entity.DirectionalLight]
+direction = [-0.4, -1.0, -0.3]
+intensity = 2.5
+[[entity]]
+name = "floor"
+[entity.Transform]
+position = [0, -0.1, -2]
+[entity.MeshRef]
+mesh = { box = [8, 0.2, 8] }
+[entity.Material]
+color = [0.7, 0.7, 0.7, 1.0]
+[[entity]]
+name = "wall"
+[entity.Transform]
+position = [0, 2, -6.2]
+[entity.MeshRef]
+mesh = { box = [8, 4, 0.4] }
+[entity.Material]
+color = [0.8, 0.8, 0.8, 1.0]
+[[entity]]
+name = "crate"
+[entity.Transform]
+position = [0, 0.5, -5.5]
+[entity.MeshRef]
+mesh = { box = [1, 1, 1] }
+[entity.Material]
+color = [0.6, 0.4, 0.2, 1.0]
+[[entity]]
+name = "pad"
+[entity.Transform]
+position = [0, 3.05, -20]
+[entity.MeshRef]
+mesh = { box = [1, 0.1, 1] }
+[entity.Material]
+color = [0.1, 0.9, 0.3, 1.0]
+"""
+
+
+def test_a_portal_over_a_crate_is_refused_and_falling_off_the_level_restarts(play, tmp_path):
+    level = tmp_path / "small.toml"
+    level.write_text(SMALL_LEVEL)
+    # Aimed at the wall just above the crate: the portal (2 m high, slid onto the face from
+    # y = 0) would have its lower corners behind the crate, whose front is 0.5 m off the wall.
+    p = play(level, ["aim 0 1.4 -6", "click left", "aim 3 1.4 -6", "click left"])
+    p.run_script(render=False)
+    kinds = [(e.kind, e.detail) for e in p.game.events]
+    assert kinds[0] == ("refused", "portal A: crate is in front of wall there"), kinds
+    assert kinds[1] == ("placed", "portal A on wall")  # clear of the crate, it fits
+    # Walk off the floor's edge (z = 2): below kill_y the level restarts, the player at the start.
+    p.pilot = Autopilot(["look 180 0", "hold w 300"])
+    for _ in range(300):
+        p.frame(render=False)
+        if p.game.events[-1].kind == "fell":
+            break
+    assert p.game.events[-1].kind == "fell"
+    assert p.game.placed == [None, None]
+    assert glm.length(p.eye - glm.vec3(0, EYE_HEIGHT, 0)) < 0.5

@@ -76,6 +76,7 @@ REACH = 60.0  # m: how far a portal shot goes
 PORTAL_OFFSET = 0.01  # m off the wall, so the portal never fights the wall for depth
 RIM = 0.08  # m of coloured frame round a placed portal
 CORNER_INSET = 0.03  # m: the fit test's probe points are this far inside the portal's edges
+FRONT_CLEARANCE = 0.3  # m in front of a portal that must be free of solids
 WALL_SLOPE = 0.05  # |normal.y| above this is a floor, ceiling or slope: no portals
 PORTAL_COLORS = ((0.15, 0.45, 1.0), (1.0, 0.45, 0.05))  # A blue, B orange
 REFUSED_FRAMES = 40
@@ -503,6 +504,15 @@ class PortalRun(Game):
             if got is None or got.entity != hit.entity or abs(got.distance - 0.25) > 2e-3:
                 return self._refuse(world, index, f"the portal does not fit on {self._name(hit.entity)} there "
                                                   "(something covers or the face ends)", point, normal)
+        # Nothing standing in the space just in front of the portal (a crate flush with the
+        # wall meets the probes at the wall's own distance, so it is found by its box).
+        slab = np.array([center + right * su * a + up * sv * b + normal * depth
+                         for su in (-1, 1) for sv in (-1, 1) for depth in (0.002, FRONT_CLEARANCE)])
+        slab_lo, slab_hi = slab.min(axis=0), slab.max(axis=0)
+        for solid in self.solid_boxes():
+            if solid.entity != hit.entity and np.all(slab_lo < solid.hi) and np.all(slab_hi > solid.lo):
+                return self._refuse(world, index, f"{self._name(solid.entity)} is in front of "
+                                                  f"{self._name(hit.entity)} there", point, normal)
         other = self.placed[1 - index]
         if other is not None and other.host == hit.entity and abs(float((center - other.center) @ normal)) < 0.05:
             d = center - other.center
