@@ -261,16 +261,15 @@ def test_restart_puts_everything_back(play):
     frame = p.frame()
     assert p.game.event_kinds()[-1] == "restart"
     start = p.game.rules.start
-    assert p.eye == glm.vec3(start[0], start[1] + EYE_HEIGHT, start[2])
+    assert glm.length(p.eye - glm.vec3(start[0], start[1] + EYE_HEIGHT, start[2])) < 1e-3  # standing at the start
     assert not p.game.won and p.game.placed == [None, None]
     for portal in p.game.portals:
         assert not p.world.get(portal, Portal).enabled and not p.world.get(portal, MeshRef).visible
     assert len(p.world.entities()) == len(fresh.world.entities())
-    # The frame after the restart is the first frame of a fresh game (a few texels of the
-    # checker floor differ by a few levels between a fresh engine and a reloaded level).
+    # The frame after the restart is the first frame of a fresh game.
     diff = np.abs(frame.astype(int) - first.astype(int))
     _save(np.concatenate([first, frame, (diff * 40).clip(0, 255).astype(np.uint8)], axis=1), "restart_diff.png")
-    assert diff.max() <= 8 and (diff.max(axis=2) > 2).mean() < 0.01, (diff.max(), (diff.max(axis=2) > 2).mean())
+    assert diff.max() <= 2, diff.max()
     # And the level plays again from there.
     p.pilot = Autopilot(p.game.rules.solution)
     p.run_script(render=False)

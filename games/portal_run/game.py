@@ -16,8 +16,8 @@ order:
   solids; the wall a portal sits on lets the body through while it is in front of the
   portal's opening, so the camera can reach the portal plane;
 * ``place portals``: a left / right click casts a ray from the eye (``engine.raycast``) and
-  places portal A / B on the wall it hits, or refuses it (a red marker flashes at the hit
-  and a 'refused' event names the reason);
+  places portal A / B on the wall (or, where the rules allow, the floor) it hits, or refuses
+  it (a red marker flashes at the hit and a 'refused' event names the reason);
 * ``win``: the body touching the exit pad records a 'win' event once and lights the pad.
 
 The engine's portal travel system carries the camera (the player) through an open pair in
@@ -107,6 +107,7 @@ class RunRules:
     yaw: float = 0.0
     pitch: float = 0.0
     portal_walls: tuple[str, ...] | None = None  # None: every solid wall
+    portal_floors: bool = False  # portals also go on floors (upward faces) of those walls
     not_solid: tuple[str, ...] = ()
     portal_size: tuple[float, float] = DEFAULT_PORTAL_SIZE
     kill_y: float = -20.0
@@ -162,13 +163,15 @@ def load_rules(rules: dict[str, Any], names: dict[str, int], where: str) -> RunR
     """Check a level's [rules]: every name must be an entity of the level, numbers finite.
 
     Rules: ``exit`` (entity name, required), ``start`` ([x, y, z] of the feet, required),
-    ``yaw`` / ``pitch`` (degrees), ``portal_walls`` (entity names, or "all"), ``not_solid``
+    ``yaw`` / ``pitch`` (degrees), ``portal_walls`` (entity names, or "all"), ``portal_floors``
+    (true: their upward faces take portals too), ``not_solid``
     (entity names the body passes through), ``portal_size`` ([w, h] m), ``kill_y`` (falling
     below it restarts), ``solution`` (autopilot commands that win the level)."""
     def fail(rule: str, why: str) -> LevelRulesError:
         return LevelRulesError(f"{where}: rule {rule!r} {why}")
 
-    known = {"exit", "start", "yaw", "pitch", "portal_walls", "not_solid", "portal_size", "kill_y", "solution"}
+    known = {"exit", "start", "yaw", "pitch", "portal_walls", "portal_floors", "not_solid", "portal_size", "kill_y",
+             "solution"}
     unknown = sorted(set(rules) - known)
     if unknown:
         raise fail(unknown[0], f"is not a portal_run rule (known: {', '.join(sorted(known))})")
@@ -207,6 +210,10 @@ def load_rules(rules: dict[str, Any], names: dict[str, int], where: str) -> RunR
     walls = rules.get("portal_walls", "all")
     out.portal_walls = None if walls == "all" else entity_names("portal_walls", walls)
     out.not_solid = entity_names("not_solid", rules.get("not_solid", []))
+    floors = rules.get("portal_floors", False)
+    if not isinstance(floors, bool):
+        raise fail("portal_floors", f"must be true or false, got {floors!r}")
+    out.portal_floors = floors
     if "portal_size" in rules:
         out.portal_size = vector("portal_size", rules["portal_size"], 2, 0.5 + 2 * CORNER_INSET, 20.0)
         if out.portal_size[0] < 2 * HALF_WIDTH + 0.1 or out.portal_size[1] < HEIGHT + 0.1:
@@ -301,6 +308,7 @@ class PortalRun(Game):
         self.won = False
         self.travels = 0
         self._consumed: object = None  # the PortalCrossings list already taken in
+        self._exiting: int | None = None  # the portal the body is coming out of, during a move
 
     def restart(self, world: World, why: str = "restart") -> None:
         """Delete everything and build the level again from its file (the autopilot goes on)."""
@@ -319,10 +327,11 @@ class PortalRun(Game):
             self.pilot.fill(state, self)
         if "r" in state.pressed:
             self.restart(world)
-            return
+            state = Input()  # the rebuilt level's first frame runs as a fresh game's does, with no input
         self._look_and_move(world, state, dt)
         if world.get(self.player, Transform).position.y < self.rules.kill_y:
             self.restart(world, "fell")
+            self._look_and_move(world, Input(), dt)
             return
         for index, button in enumerate(("left", "right")):
             if button in state.clicks:
@@ -414,6 +423,7 @@ class PortalRun(Game):
                 v[0], v[2] = v[0] * cap / after, v[2] * cap / after
         eye = transform.position
         self._step_out(body, v, np.array(eye, np.float64))
+        self._exiting = body.exit_portal
         v[1] -= GRAVITY * dt
         moved = move_body((eye.x, eye.y, eye.z), v, dt, self.shape, self.solid_boxes(), self._passable)
         body.velocity = moved.velocity
@@ -445,12 +455,18 @@ class PortalRun(Game):
         center = (lo + hi) / 2.0
         half = (hi - lo) / 2.0
         eye = center + np.array([0.0, (self.shape.hi[1] + self.shape.lo[1]) / -2.0, 0.0])
-        for placed in self.placed:
+        for index, placed in enumerate(self.placed):
             if placed is None or placed.host != entity or None in self.placed:
                 continue  # a lone portal is closed: its wall stays solid
             offset = center - placed.center
             if float((eye - placed.center) @ placed.normal) < -0.02:
                 continue
+            if index == self._exiting:
+                # Just come out of it: the camera (the eye) is through the opening, the rest of
+                # the body follows it out wherever it hangs past the opening's edges.
+                eye_offset = eye - placed.center
+                if abs(float(eye_offset @ placed.right)) <= w / 2 and abs(float(eye_offset @ placed.up)) <= h / 2:
+                    return True
             reach_u = float(np.abs(placed.right) @ half)
             if abs(float(offset @ placed.right)) + reach_u > w / 2 + 0.05:
                 continue
@@ -473,12 +489,25 @@ class PortalRun(Game):
         normal = np.array(hit.normal, np.float64)
         if hit.entity not in self.portal_walls:
             return self._refuse(world, index, f"{self._name(hit.entity)} does not take portals", point, normal)
-        if abs(normal[1]) > WALL_SLOPE:
+        if abs(normal[1]) <= WALL_SLOPE:  # a wall: the portal stands upright
+            normal[1] = 0.0
+            normal /= np.linalg.norm(normal)
+            up = np.array([0.0, 1.0, 0.0])
+            length_word = "high"
+        elif normal[1] >= 1.0 - WALL_SLOPE and self.rules.portal_floors:
+            # A floor: the portal lies flat, its top edge away from the player along the level's
+            # nearest axis (so it lines up with the floor's edges and slides to fit them).
+            normal = np.array([0.0, 1.0, 0.0])
+            yaw = math.radians(world.get(self.player, PlayerBody).yaw)
+            ahead = np.array([-math.sin(yaw), 0.0, -math.cos(yaw)])
+            axis = 0 if abs(ahead[0]) >= abs(ahead[2]) else 2
+            up = np.zeros(3)
+            up[axis] = math.copysign(1.0, ahead[axis])
+            length_word = "long"
+        else:
+            faces = "upright faces and floors" if self.rules.portal_floors else "upright faces"
             return self._refuse(world, index, f"{self._name(hit.entity)} is not a wall there (portals go on "
-                                              "upright faces)", point, normal)
-        normal[1] = 0.0
-        normal /= np.linalg.norm(normal)
-        up = np.array([0.0, 1.0, 0.0])
+                                              f"{faces})", point, normal)
         right = np.cross(up, normal)
         w, h = self.rules.portal_size
         # The face: the wall's triangles in the hit plane; the portal slides to lie inside it.
@@ -489,7 +518,7 @@ class PortalRun(Game):
         corners = tris[coplanar].reshape(-1, 3) - point
         us, vs = corners @ right, corners @ up
         center = point.copy()
-        for axis, values, size, name in ((right, us, w, "wide"), (up, vs, h, "high")):
+        for axis, values, size, name in ((right, us, w, "wide"), (up, vs, h, length_word)):
             lo, hi = float(values.min()), float(values.max())
             if hi - lo < size:
                 return self._refuse(world, index, f"{self._name(hit.entity)} is {hi - lo:.2f} m {name} there, the "
@@ -527,7 +556,7 @@ class PortalRun(Game):
         portal = self.portals[index]
         transform = world.get(portal, Transform)
         transform.position = tuple(placed.center + placed.normal * PORTAL_OFFSET)
-        transform.rotation = look_rotation(tuple(-placed.normal), (0.0, 1.0, 0.0))
+        transform.rotation = look_rotation(tuple(-placed.normal), tuple(placed.up))
         world.get(portal, Portal).enabled = True
         world.get(portal, MeshRef).visible = True
         world.get(self.rims[index], MeshRef).visible = True
