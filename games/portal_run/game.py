@@ -309,6 +309,7 @@ class PortalRun(Game):
         self.travels = 0
         self._consumed: object = None  # the PortalCrossings list already taken in
         self._exiting: int | None = None  # the portal the body is coming out of, during a move
+        self._in_front: set[int] = set()  # portals the eye was in front of when the move started
 
     def restart(self, world: World, why: str = "restart") -> None:
         """Delete everything and build the level again from its file (the autopilot goes on)."""
@@ -424,6 +425,12 @@ class PortalRun(Game):
         eye = transform.position
         self._step_out(body, v, np.array(eye, np.float64))
         self._exiting = body.exit_portal
+        start = np.array(eye, np.float64)
+        # Which portals the eye is in front of as the move starts: their walls may let the body
+        # through. (Decided once: within the move the eye may pass a portal's plane, the travel
+        # stage then carries it through, and the wall must not close on the body half way.)
+        self._in_front = {index for index, placed in enumerate(self.placed)
+                          if placed is not None and float((start - placed.center) @ placed.normal) >= -0.02}
         v[1] -= GRAVITY * dt
         moved = move_body((eye.x, eye.y, eye.z), v, dt, self.shape, self.solid_boxes(), self._passable)
         body.velocity = moved.velocity
@@ -449,8 +456,9 @@ class PortalRun(Game):
             v += placed.normal * (EXIT_SPEED - out)
 
     def _passable(self, entity: int, lo: np.ndarray, hi: np.ndarray) -> bool:
-        """A wall with a portal on it lets the body through while the body is in front of the
-        portal (the eye not behind its plane) and fits inside its opening."""
+        """A wall with a portal on it lets the body through while the body came at it from the
+        front (the eye not behind the portal's plane when the move started) and fits inside
+        its opening."""
         w, h = self.rules.portal_size
         center = (lo + hi) / 2.0
         half = (hi - lo) / 2.0
@@ -459,8 +467,8 @@ class PortalRun(Game):
             if placed is None or placed.host != entity or None in self.placed:
                 continue  # a lone portal is closed: its wall stays solid
             offset = center - placed.center
-            if float((eye - placed.center) @ placed.normal) < -0.02:
-                continue
+            if index not in self._in_front:
+                continue  # from behind a wall there is no way in
             if index == self._exiting:
                 # Just come out of it: the camera (the eye) is through the opening, the rest of
                 # the body follows it out wherever it hangs past the opening's edges.
