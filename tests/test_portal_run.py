@@ -316,6 +316,19 @@ def test_bad_rules_are_named(rules, words):
     assert words in str(info.value) and "x.toml" in str(info.value)
 
 
+@pytest.mark.parametrize("change, words", [
+    (('exit = "pad"', 'exit = "sun"'), "rule 'exit' names 'sun', which has no MeshRef"),
+    (('portal_walls = ["wall"]', 'portal_walls = ["wall", "pad"]\nnot_solid = ["pad"]'),
+     "rule 'portal_walls' names 'pad', which is not solid"),
+])
+def test_rules_that_need_the_spawned_level_are_named(ctx, tmp_path, change, words):
+    level = tmp_path / "bad.toml"
+    level.write_text(SMALL_LEVEL.replace(*change))
+    with pytest.raises(LevelRulesError) as info:
+        Engine(PortalRun(level, verbose=False), ctx)
+    assert words in str(info.value) and "bad.toml" in str(info.value)
+
+
 def test_bad_script_steps_are_named():
     with pytest.raises(ScriptError, match="step 2 'hold w 0'"):
         Autopilot(["wait 1", "hold w 0"])

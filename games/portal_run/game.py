@@ -276,7 +276,14 @@ class PortalRun(Game):
         self.solids = {e for e in level_entities if world.has(e, MeshRef) and world.has(e, Transform)} - skip
         self.portal_walls = self.solids if self.rules.portal_walls is None else \
             {self.names[n] for n in self.rules.portal_walls}
+        for name in self.rules.portal_walls or ():
+            if self.names[name] not in self.solids:
+                raise LevelRulesError(f"{where}: rule 'portal_walls' names {name!r}, which is not solid (it needs a "
+                                      "MeshRef and a Transform and must not be in not_solid)")
         self.exit = self.names[self.rules.exit]
+        if not (world.has(self.exit, MeshRef) and world.has(self.exit, Transform)):
+            raise LevelRulesError(f"{where}: rule 'exit' names {self.rules.exit!r}, which has no MeshRef and "
+                                  "Transform (the pad is where its mesh is)")
         self.shape = BodyShape.standing(HALF_WIDTH, HEIGHT, EYE_HEIGHT)
         r = self.rules
         body = PlayerBody(yaw=r.yaw, pitch=r.pitch, rotation=yaw_pitch_rotation(r.yaw, r.pitch))
@@ -304,7 +311,6 @@ class PortalRun(Game):
                                   Material(color=(*REFUSED_COLOR, 1.0), roughness=1.0), Emissive(1.2))
         self.marker_frames = 0
         self._exit_glow = world.try_get(self.exit, Emissive)
-        self._exit_power = self._exit_glow.power if self._exit_glow is not None else None
         self.won = False
         self.travels = 0
         self._consumed: object = None  # the PortalCrossings list already taken in
