@@ -316,6 +316,7 @@ class PortalRun(Game):
         self._consumed: object = None  # the PortalCrossings list already taken in
         self._exiting: int | None = None  # the portal the body is coming out of, during a move
         self._in_front: set[int] = set()  # portals the eye was in front of when the move started
+        self._boxes: tuple[int, list[Solid]] | None = None  # (frame, solid boxes) of the latest frame
 
     def restart(self, world: World, why: str = "restart") -> None:
         """Delete everything and build the level again from its file (the autopilot goes on)."""
@@ -391,12 +392,15 @@ class PortalRun(Game):
 
     # --- moving -----------------------------------------------------------------------------------
     def solid_boxes(self) -> list[Solid]:
-        """The level's solids as world AABBs (from the ray caster's cached triangles)."""
-        boxes = []
-        for entity in sorted(self.solids):
-            tris = self.caster.triangles(entity).reshape(-1, 3)
-            boxes.append(Solid(entity, tris.min(axis=0), tris.max(axis=0)))
-        return boxes
+        """The level's solids as world AABBs (from the ray caster's cached triangles), worked
+        out once a frame."""
+        if self._boxes is None or self._boxes[0] != self.frame:
+            boxes = []
+            for entity in sorted(self.solids):
+                tris = self.caster.triangles(entity).reshape(-1, 3)
+                boxes.append(Solid(entity, tris.min(axis=0), tris.max(axis=0)))
+            self._boxes = (self.frame, boxes)
+        return self._boxes[1]
 
     def _look_and_move(self, world: World, state: Input, dt: float) -> None:
         body = world.get(self.player, PlayerBody)
