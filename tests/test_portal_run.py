@@ -515,3 +515,23 @@ def test_a_portal_over_a_crate_is_refused_and_falling_off_the_level_restarts(pla
     assert p.game.events[-1].kind == "fell"
     assert p.game.placed == [None, None]
     assert glm.length(p.eye - glm.vec3(0, EYE_HEIGHT, 0)) < 0.5
+
+
+def test_a_fast_body_does_not_tunnel_through_a_thin_wall_and_rests_on_a_floor():
+    from games.portal_run.physics import BodyShape, Solid, move_body
+
+    shape = BodyShape.standing(HALF_WIDTH, 1.8, EYE_HEIGHT)
+    wall = Solid(1, np.array([2.0, -5.0, -5.0]), np.array([2.05, 5.0, 5.0]))  # 5 cm thick, face at x = 2
+    floor = Solid(2, np.array([-50.0, -1.0, -50.0]), np.array([50.0, 0.0, 50.0]))
+    # 150 m/s for one frame is 2.5 m: past the wall in one step without sub-steps.
+    moved = move_body((0.0, EYE_HEIGHT + 0.5, 0.0), (150.0, 0.0, 0.0), 1 / 60, shape, [wall, floor])
+    assert moved.position[0] + HALF_WIDTH == pytest.approx(2.0, abs=1e-3) and moved.velocity[0] == 0.0
+    assert moved.blocked == {1} and not moved.on_ground
+    # Falling onto the floor: the feet stop at its top, the fall's speed is gone, on the ground.
+    moved = move_body((0.0, EYE_HEIGHT + 0.05, 0.0), (0.0, -20.0, 0.0), 1 / 60, shape, [wall, floor])
+    assert moved.position[1] - EYE_HEIGHT == pytest.approx(0.0, abs=1e-3)
+    assert moved.velocity[1] == 0.0 and moved.on_ground
+    # A wall that is passable (a portal's opening) lets it through.
+    moved = move_body((0.0, EYE_HEIGHT + 0.5, 0.0), (150.0, 0.0, 0.0), 1 / 60, shape, [wall, floor],
+                      passable=lambda entity, lo, hi: entity == 1)
+    assert moved.position[0] == pytest.approx(2.5, abs=1e-6)
