@@ -18,10 +18,14 @@ queries do not measure anything useful.  ``passes``, ``draw_calls`` and
 ``reflection_views`` are medians of ``engine.renderer.stats`` over the timed frames;
 ``chosen`` counts the frames by ``stats.reflection_path`` (what auto picked).  The last
 line is the ratio of the auto path's 8-mirror median frame to its 0-mirror median frame.
+``--aa fxaa,off`` runs every case once per anti-aliasing mode (``Renderer.antialias``),
+interleaved like the rest, and ends with each case's ratio of the two medians: the cost
+of the FXAA pass.
 
     python -m benchmarks mirrors               # table
     python -m benchmarks mirrors --json        # one JSON object per line
     python -m benchmarks mirrors --frames 20 --mirrors 0,8
+    python -m benchmarks mirrors --mirrors 0,8 --paths auto --aa fxaa,off --frames 200
 """
 from __future__ import annotations
 
@@ -52,6 +56,7 @@ from engine.app import Engine, Game
 from engine.frame_io import Output
 from engine.gl_context import create_headless_context
 from engine.mesh import box, plane, quad
+from engine.render.present import ANTIALIAS_MODES
 from engine.render.targets import CaptureTarget
 from engine.texture_data import checker_texture
 from engine.world import World
@@ -136,6 +141,7 @@ class Result:
     draw_calls: int
     reflection_views: int
     frames: int
+    aa: str = "fxaa"
     chosen: dict[str, int] = field(default_factory=dict)
 
 
@@ -145,16 +151,18 @@ def _percentile(values: list[float], q: float) -> float:
 
 
 def run_scenes(ctx, mirror_counts: tuple[int, ...], paths: tuple[str, ...], frames: int,
-               warmup: int) -> list[Result]:
-    """One engine per (mirror count, path) on the same scene, their frames interleaved (frame
-    i of every engine, then frame i + 1), so load from outside the benchmark, and the drift
-    of a shared machine, land on every engine alike and the ratios between them hold."""
-    cases = [(mirrors, path) for mirrors in mirror_counts for path in paths]
+               warmup: int, aa_modes: tuple[str, ...] = ("fxaa",)) -> list[Result]:
+    """One engine per (mirror count, path, anti-aliasing mode) on the same scene, their
+    frames interleaved (frame i of every engine, then frame i + 1), so load from outside the
+    benchmark, and the drift of a shared machine, land on every engine alike and the ratios
+    between them hold."""
+    cases = [(mirrors, path, aa) for mirrors in mirror_counts for path in paths for aa in aa_modes]
     engines, captures = [], []
     try:
-        for mirrors, path in cases:
+        for mirrors, path, aa in cases:
             engine = Engine(MirrorRing(mirrors), ctx)
             engine.reflection_system.path = path
+            engine.renderer.antialias = aa
             engines.append(engine)
             captures.append(CaptureTarget(ctx, OUTPUT_SIZE))
         outputs = [Output(capture.framebuffer, OUTPUT_SIZE) for capture in captures]
@@ -179,8 +187,9 @@ def run_scenes(ctx, mirror_counts: tuple[int, ...], paths: tuple[str, ...], fram
             draw_calls=round(statistics.median(s.draw_calls for s in stats[i])),
             reflection_views=round(statistics.median(s.reflection_views for s in stats[i])),
             frames=frames,
+            aa=aa,
             chosen=dict(Counter(s.reflection_path or "none" for s in stats[i])),
-        ) for i, (mirrors, path) in enumerate(cases)]
+        ) for i, (mirrors, path, aa) in enumerate(cases)]
     finally:
         for capture in captures:
             capture.release()
@@ -199,9 +208,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="comma-separated paths (default per_mirror,batched,auto)")
     parser.add_argument("--frames", type=int, default=40, help="timed frames per path and mirror count (default 40)")
     parser.add_argument("--warmup", type=int, default=3, help="untimed frames first (default 3)")
+    parser.add_argument("--aa", type=lambda text: tuple(text.split(",")), default=("fxaa",),
+                        help="comma-separated anti-aliasing modes (default fxaa; fxaa,off measures its cost)")
 
 
-COLUMNS = (("n_mirrors", "mirrors", 8), ("path", "path", 11), ("frame_ms_median", "ms med", 8),
+COLUMNS = (("n_mirrors", "mirrors", 8), ("path", "path", 11), ("aa", "aa", 5), ("frame_ms_median", "ms med", 8),
            ("frame_ms_p95", "ms p95", 8), ("passes", "passes", 7), ("draw_calls", "draws", 6),
            ("reflection_views", "views", 6))
 
@@ -212,6 +223,9 @@ def main(args: argparse.Namespace) -> int:
     unknown = set(args.paths) - set(PATHS)
     if unknown:
         raise SystemExit(f"unknown paths {sorted(unknown)}; choose from {PATHS}")
+    unknown = set(args.aa) - set(ANTIALIAS_MODES)
+    if unknown:
+        raise SystemExit(f"unknown --aa modes {sorted(unknown)}; choose from {ANTIALIAS_MODES}")
     ctx = create_headless_context()
     results: list[Result] = []
     try:
@@ -219,7 +233,7 @@ def main(args: argparse.Namespace) -> int:
             print(f"Mirrors: whole frame incl. ctx.finish() at {OUTPUT_SIZE[0]}x{OUTPUT_SIZE[1]} "
                   f"({ctx.info.get('GL_RENDERER', '?')}, {args.frames} frames after {args.warmup} warm-up)")
             print(" ".join(f"{title:>{width}}" for _, title, width in COLUMNS) + "  chosen")
-        for result in run_scenes(ctx, args.mirrors, args.paths, args.frames, args.warmup):
+        for result in run_scenes(ctx, args.mirrors, args.paths, args.frames, args.warmup, args.aa):
             results.append(result)
             if args.json:
                 print(json.dumps(asdict(result)), flush=True)
@@ -229,7 +243,17 @@ def main(args: argparse.Namespace) -> int:
                       + f"  {result.chosen}", flush=True)
     finally:
         ctx.release()
-    auto = {r.n_mirrors: r for r in results if r.path == "auto"}
+    if "fxaa" in args.aa and "off" in args.aa:
+        off = {(r.n_mirrors, r.path): r.frame_ms_median for r in results if r.aa == "off"}
+        for r in results:
+            if r.aa == "fxaa":
+                ratio = round(r.frame_ms_median / off[r.n_mirrors, r.path], 3)
+                if args.json:
+                    print(json.dumps({"n_mirrors": r.n_mirrors, "path": r.path, "ratio_fxaa_to_off": ratio}))
+                else:
+                    print(f"fxaa / off, {r.n_mirrors} mirrors, {r.path}: {ratio}x "
+                          f"({r.frame_ms_median - off[r.n_mirrors, r.path]:+.2f} ms)")
+    auto = {r.n_mirrors: r for r in results if r.path == "auto" and r.aa == args.aa[0]}
     if 0 in auto and 8 in auto:
         ratio = round(auto[8].frame_ms_median / auto[0].frame_ms_median, 2)
         chosen = max(auto[8].chosen, key=auto[8].chosen.get)

@@ -2,6 +2,7 @@
 
   python -m games.<name> [--headless] [--frames N] [--size WxH] [--out DIR]
                          [--ids] [--export-scene FILE.glb|FILE.gltf] [--camera x,y,z,yaw,pitch]
+                         [--aa fxaa|off]
 
 With no display the runner goes headless by itself and says so.
 """
@@ -22,6 +23,7 @@ from engine.capture import SCENE_FORMATS, export_scene, save_ids, save_png
 from engine.errors import SpeculumError
 from engine.frame_io import Output
 from engine.gl_context import create_headless_context, have_display
+from engine.render.present import ANTIALIAS_MODES
 from engine.render.targets import CaptureTarget
 
 HEADLESS_DT = 1.0 / 60.0
@@ -41,6 +43,8 @@ def parse_args(game: Game, argv: Sequence[str] | None) -> argparse.Namespace:
                         help="write FILE.glb or FILE.gltf (world geometry) and FILE.json (camera, components) "
                              "at the end")
     parser.add_argument("--camera", type=_pose, default=None, help="start pose x,y,z,yaw,pitch (degrees)")
+    parser.add_argument("--aa", choices=ANTIALIAS_MODES, default="fxaa",
+                        help="anti-aliasing of the final image (default fxaa; ids are never affected)")
     args = parser.parse_args(argv)
     if args.frames is not None and args.frames < 1:
         parser.error("--frames must be >= 1")
@@ -160,6 +164,7 @@ def run_headless(game: Game, args: argparse.Namespace) -> list[Path]:
     capture = None
     try:
         engine = Engine(game, ctx)
+        engine.renderer.antialias = args.aa
         if args.camera:
             engine.place_camera(*args.camera)
         capture = CaptureTarget(ctx, args.size)

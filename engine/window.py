@@ -47,6 +47,8 @@ def make_window_config(game: Game, args: argparse.Namespace | None = None) -> ty
         def __init__(self, **kwargs) -> None:
             super().__init__(**kwargs)
             self.engine = Engine(game, self.ctx)
+            if args is not None:
+                self.engine.renderer.antialias = args.aa
             if args is not None and args.camera:
                 self.engine.place_camera(*args.camera)
             self.input: Input = self.engine.world.resources[Input]

@@ -332,7 +332,8 @@ def test_command_line_autopilot_writes_frames_of_the_level_solved(tmp_path):
     --level is one 'speculum: error:' line and exit 2."""
     out = tmp_path / "frames"
     done = subprocess.run([sys.executable, "-m", "games.mirror_beam", "--headless", "--frames", "7",
-                           "--size", "96x54", "--out", str(out), "--level", str(level_file("01_one_bounce"))],
+                           "--size", "96x54", "--out", str(out), "--level", str(level_file("01_one_bounce")),
+                           "--aa", "off"],  # the colours of a 20-pixel target, not its blended rim
                           cwd=ROOT, capture_output=True, text=True, timeout=120)
     assert done.returncode == 0, done.stderr
     frames = sorted(out.glob("frame_*.png"))

@@ -17,8 +17,9 @@ from engine.errors import GLLimitError, GLPassError
 from engine.gl_context import GLCapabilities
 from engine.mesh import Mesh
 from engine.raw_gl import RawGL
-from engine.render.bindings import CAMERA_BINDING, PRESENT_UNIT, PassState, apply_pass_state
+from engine.render.bindings import CAMERA_BINDING
 from engine.render.instances import GpuMesh, InstanceBatch
+from engine.render.present import ANTIALIAS_MODES, PresentPass
 from engine.render.probes import ProbeCaptures
 from engine.render.scene_pass import ScenePass
 from engine.render.sky import flat_cube, upload_cube
@@ -30,7 +31,6 @@ from engine.texture_data import TextureData
 GL_SRGB8_ALPHA8 = 0x8C43
 TEXTURE_ANISOTROPY = 8.0
 BACKGROUND = (0.05, 0.05, 0.06)
-_PRESENT = PassState()
 
 
 @dataclass
@@ -68,11 +68,9 @@ class Renderer:
         self.caps = caps
         self.raw_gl = RawGL(ctx)
         self.shaders = ShaderLibrary(ctx)
-        self.present_program = self.shaders.program("present.vert", "present.frag")
-        self.present_program["hdr_image"].value = PRESENT_UNIT
+        self.present_pass = PresentPass(ctx, self.shaders, caps.software)
         self.camera_ubo = ctx.buffer(reserve=CAMERA_BLOCK_BYTES)
         self.lights_ubo = ctx.buffer(reserve=LIGHTS_BLOCK_BYTES)
-        self.fullscreen_present = ctx.vertex_array(self.present_program, [])
         self._meshes: dict[int, _Shared] = {}
         self._textures: dict[int, _Shared] = {}
         self.batches: dict[tuple[int, int, int, int], InstanceBatch] = {}
@@ -82,6 +80,7 @@ class Renderer:
         self.levels = LevelStack(ctx)   # the main view tree's: [0] the main view, then its reflection levels
         self.stats = RenderStats()
         self.exposure = 1.0
+        self._antialias = "fxaa"
         self.texture_anisotropy = min(TEXTURE_ANISOTROPY, ctx.max_anisotropy)
         # Texture filtering inside mirror and portal views.  A software rasteriser spends
         # about 60% of a reflection view's time in the anisotropic filter (measured on
@@ -93,6 +92,18 @@ class Renderer:
         self.debug = os.environ.get("SPECULUM_DEBUG", "") not in ("", "0")
         self.scene_pass = ScenePass(self)
         self.probes = ProbeCaptures(self)
+
+    @property
+    def antialias(self) -> str:
+        """Anti-aliasing of the presented frame: "fxaa" (the default: a filter on the final
+        colour; ids, mirrors and portals untouched; ``engine/render/present.py``) or "off"."""
+        return self._antialias
+
+    @antialias.setter
+    def antialias(self, mode: str) -> None:
+        if mode not in ANTIALIAS_MODES:
+            raise ValueError(f"antialias must be one of {', '.join(map(repr, ANTIALIAS_MODES))}, got {mode!r}")
+        self._antialias = mode
 
     # --- shared resources ------------------------------------------------------------------
     def batch_for(self, mesh: Mesh, texture: TextureData | None, probe: int = 0,
@@ -226,13 +237,10 @@ class Renderer:
         self.raw_gl.flush()
 
     def present(self, output: moderngl.Framebuffer, size: tuple[int, int]) -> None:
-        """Encode the HDR image to sRGB into ``output`` (a window's or a capture target)."""
+        """Encode the HDR image to sRGB into ``output`` (a window's or a capture target),
+        anti-aliased unless ``antialias`` is "off"."""
         assert self.targets is not None
-        output.use()
-        apply_pass_state(self.ctx, _PRESENT, (0, 0, *size))
-        self.targets.color.use(PRESENT_UNIT)
-        self.present_program["exposure"].value = self.exposure
-        self.fullscreen_present.render(moderngl.TRIANGLES, vertices=3)
+        self.present_pass.draw(self.targets.color, self.exposure, self._antialias, output, size)
         self.checkpoint("present")
 
     def release(self) -> None:
@@ -247,6 +255,7 @@ class Renderer:
         self._draw_order.clear()
         self.probes.release()
         self.scene_pass.release()
-        for obj in (self.sky, self.camera_ubo, self.lights_ubo, self.fullscreen_present):
+        self.present_pass.release()
+        for obj in (self.sky, self.camera_ubo, self.lights_ubo):
             obj.release()
         self.shaders.release()

@@ -118,12 +118,14 @@ class LevelStack:
 
 
 class CaptureTarget:
-    """An RGBA8 target the present pass writes to when there is no window (headless runs)."""
+    """An RGBA8 target the present pass writes to: the output when there is no window
+    (headless runs), and the encoded frame the FXAA pass reads (clamped to the edge)."""
 
     def __init__(self, ctx: moderngl.Context, size: tuple[int, int]) -> None:
         check_target_size(ctx, size, "an output (capture target)")
         self.size = size
         self.texture = ctx.texture(size, 4)
+        self.texture.repeat_x = self.texture.repeat_y = False
         self.framebuffer = ctx.framebuffer([self.texture])
 
     def read_rgb(self) -> np.ndarray:
