@@ -121,7 +121,8 @@ def test_obj_without_emission_or_metal_spawns_plain_entity(tmp_path, world):
 
 
 def test_flat_reflective_obj_becomes_a_mirror(tmp_path, world):
-    """Seed 002: reflectivity > 0 on a flat mesh means a planar mirror."""
+    """Material detection from the asset: reflectivity > 0 on a flat mesh (a flat bounding
+    box) means a planar mirror."""
     root = spawn_model(world, write_obj(tmp_path, "glass", "Kd 0.9 0.9 0.9\nPm 0.6\nPr 0.1"))
     (child,) = children(world, root)
     mirror = world.get(child, Mirror)

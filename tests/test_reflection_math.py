@@ -40,15 +40,18 @@ def test_reflecting_a_view_twice_gives_the_original(plane):
 
 
 @pytest.mark.parametrize("plane", PLANES)
-def test_mirrored_view_is_seed_003_camera_with_image_swapped(plane):
+def test_mirrored_view_is_the_reflected_look_at_camera_with_image_swapped(plane):
+    """The other way to build a mirror's camera: reflect the eye, the look-at target and the
+    up vector about the plane and look from there (a camera of the mirrored scene, not a
+    mirrored camera); mirrored_view equals it with the image's x flipped."""
     eye = glm.vec3(1, 2, 6)
     fwd = glm.normalize(glm.vec3(-0.2, -0.3, -1))
     up = glm.normalize(glm.cross(glm.cross(fwd, glm.vec3(0, 1, 0)), fwd))
     view = glm.lookAt(eye, eye + fwd, up)
     r_eye, r_fwd, r_up = reflect_camera(eye, fwd, up, plane)
-    seed003 = glm.lookAt(r_eye, r_eye + r_fwd, r_up)
+    reflected_look_at = glm.lookAt(r_eye, r_eye + r_fwd, r_up)
     np.testing.assert_allclose(np.array(mirrored_view(view, plane).to_list()),
-                               np.array((MIRROR_X * seed003).to_list()), atol=1e-4)
+                               np.array((MIRROR_X * reflected_look_at).to_list()), atol=1e-4)
     # The reflected eye is the mirror image of the eye; forward and up are reflected vectors.
     n = np.array(glm.vec3(plane))
     np.testing.assert_allclose(r_eye, np.array(eye) - 2 * (n @ np.array(eye) + plane.w) * n, atol=1e-5)
