@@ -12,11 +12,27 @@ library rewrites that as ``include/ggx.glsl:8:5``.  The file is carried in the l
 not in GLSL's source-string number, because Mesa drops the latter from semantic errors
 (an undeclared name is reported in source 0).  Mesa writes ``S:L(C)``, NVIDIA ``S(L)``,
 AMD and Apple ``ERROR: S:L:``; all three are rewritten.  File 0 is the generated header
-(the defines).
+(the defines).  The numbering is resumed after every ``#else``, ``#elif`` and ``#endif``
+too: the preprocessor skips a ``#line`` inside a branch it drops but still counts that
+branch's lines, so an ``#include`` inside an ``#ifdef`` a variant leaves undefined would
+otherwise shift every later line of that variant.
+
+Hot reload (windowed runs): ``ShaderLibrary.poll`` looks at the files every program was
+built from (size and modification time, then the text) at most every ``POLL_INTERVAL``
+seconds, and rebuilds the programs that used a changed file.  A rebuild that fails keeps
+the old program drawing and records the error (``ShaderLibrary.errors``, file:line as
+above).  One that builds is swapped in under the old program's own GL name: the new
+shaders are attached to the old program object and it is relinked, with each vertex input
+bound to its old location, so every vertex array, cached program and uniform a pass holds
+keeps working without knowing of the reload; moderngl's uniform objects get their new
+locations, and the values the engine set once (sampler units, uniform-block bindings) are
+written back.
 """
 from __future__ import annotations
 
+import ctypes
 import re
+import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -25,8 +41,11 @@ import moderngl
 import shaders
 from engine.errors import ShaderError
 from engine.material_slots import glsl_defines
+from engine.raw_gl import _load as load_gl_function
 
 _INCLUDE = re.compile(r'^\s*#include\s+"([^"]+)"\s*$')
+_BRANCH = re.compile(r"^\s*#\s*(else|elif|endif)\b")  # after these the line numbering is resumed
+POLL_INTERVAL = 0.5  # seconds between two looks at the shader files (hot reload)
 _VERSION = "#version 410 core"
 HEADER = "(generated defines)"
 LINE_STRIDE = 100_000  # file k's line n is reported as line k x LINE_STRIDE + n
@@ -101,6 +120,8 @@ def _expand(name: str, stack: tuple[str, ...], root: Path, files: SourceFiles) -
         match = _INCLUDE.match(line)
         if match is None:
             out.append(line)
+            if _BRANCH.match(line):
+                out.append(_line(index + 1, number))
             continue
         included = f"include/{match.group(1)}"
         out.append(_line(1, files.number(included)))
@@ -109,32 +130,313 @@ def _expand(name: str, stack: tuple[str, ...], root: Path, files: SourceFiles) -
     return "\n".join(out)
 
 
+ProgramKey = tuple  # (vertex, fragment, geometry, sorted defines)
+
+
 class ShaderLibrary:
-    """Compiled programs of one context, cached by (files, defines)."""
+    """Compiled programs of one context, cached by (files, defines), rebuilt in place when
+    a file they were built from changes (``poll``)."""
 
     def __init__(self, ctx: moderngl.Context, root: Path | None = None) -> None:
         self.ctx = ctx
         self.root = root
-        self._programs: dict[tuple, moderngl.Program] = {}
+        self._programs: dict[ProgramKey, moderngl.Program] = {}
+        self._uses: dict[ProgramKey, set[str]] = {}       # the files each program was built from
+        self._seen: dict[str, tuple] = {}                # file -> (mtime_ns, size, text) when last read
+        self._remembered: dict[ProgramKey, dict[str, tuple]] = {}  # values set once, kept across rebuilds
+        self._inputs: dict[ProgramKey, dict[str, int]] = {}  # vertex input locations, kept across rebuilds
+        self.errors: dict[ProgramKey, str] = {}          # programs whose edited files do not build
+        self.reloads = 0                                  # programs rebuilt by poll
+        self._next_poll = 0.0
+        self._gl: _RelinkGL | None = None
 
     def program(self, vertex: str, fragment: str, geometry: str | None = None,
                 defines: dict[str, str] | None = None) -> moderngl.Program:
         key = (vertex, fragment, geometry, tuple(sorted((defines or {}).items())))
         program = self._programs.get(key)
         if program is None:
-            files = SourceFiles()  # one numbering for every stage, so a log line names one file
-            sources = {stage: load_source(name, defines, root=self.root, files=files) if name else None
+            program, files = self._build(key)
+            self._programs[key] = program
+            self._uses[key] = set(files.names[1:])
+        return program
+
+    def _build(self, key: ProgramKey) -> tuple[moderngl.Program, SourceFiles]:
+        vertex, fragment, geometry, defines = key
+        files = SourceFiles()  # one numbering for every stage, so a log line names one file
+        try:
+            sources = {stage: load_source(name, dict(defines), root=self.root, files=files) if name else None
                        for stage, name in (("vertex_shader", vertex), ("fragment_shader", fragment),
                                            ("geometry_shader", geometry))}
+        finally:
+            for name in files.names[1:]:
+                self._remember_file(name)
+        try:
+            return self.ctx.program(**sources), files
+        except moderngl.Error as exc:
+            names = ", ".join(f for f in (vertex, geometry, fragment) if f)
+            raise ShaderError(f"shader program ({names}) failed to build:\n{files.readable(str(exc))}") from exc
+
+    # --- hot reload ---------------------------------------------------------------------------
+    def _path(self, name: str) -> Path:
+        return (self.root or shader_dir()) / name
+
+    def _remember_file(self, name: str) -> None:
+        if name not in self._seen:
+            self._seen[name] = self._read(name)
+
+    def _read(self, name: str) -> tuple:
+        path = self._path(name)
+        try:
+            stat = path.stat()
+            return stat.st_mtime_ns, stat.st_size, path.read_text()
+        except OSError:
+            return None, None, None  # gone (an editor saving by rename): rebuilt, and refused, until it is back
+
+    def changed_files(self) -> set[str]:
+        """Files some program was built from whose text changed since it was last read (the
+        size and modification time are looked at first, so an unchanged file is not read)."""
+        changed = set()
+        for name, (mtime, size, text) in list(self._seen.items()):
             try:
-                program = self.ctx.program(**sources)
-            except moderngl.Error as exc:
-                names = ", ".join(f for f in (vertex, geometry, fragment) if f)
-                raise ShaderError(f"shader program ({names}) failed to build:\n{files.readable(str(exc))}") from exc
-            self._programs[key] = program
-        return program
+                stat = self._path(name).stat()
+                if (stat.st_mtime_ns, stat.st_size) == (mtime, size):
+                    continue
+            except OSError:
+                if text is None:
+                    continue
+            now = self._read(name)
+            self._seen[name] = now
+            if now[2] != text:
+                changed.add(name)
+        return changed
+
+    def poll(self, now: float | None = None) -> list[str]:
+        """Rebuild the programs whose files changed, at most every ``POLL_INTERVAL`` seconds
+        (the window shell calls it each frame).  Returns one message per rebuild or new
+        error, so each change is reported once."""
+        now = time.monotonic() if now is None else now
+        if now < self._next_poll:
+            return []
+        self._next_poll = now + POLL_INTERVAL
+        return self.reload(self.changed_files())
+
+    def reload(self, changed: set[str]) -> list[str]:
+        """Rebuild every program built from one of ``changed``; a program whose new build
+        fails keeps drawing with its old one and its error goes to ``errors``."""
+        messages = []
+        for key, program in list(self._programs.items()):
+            if not self._uses[key] & changed:
+                continue
+            try:
+                built, files = self._build(key)
+            except ShaderError as exc:
+                self.errors[key] = str(exc)
+                messages.append(f"shader error, the previous program keeps drawing: {exc}")
+                continue
+            self._uses[key] = set(files.names[1:])
+            try:
+                self._swap_in(key, program, built)
+            except ShaderError as exc:
+                self.errors[key] = str(exc)
+                messages.append(f"shader error, the previous program keeps drawing: {exc}")
+                continue
+            self.errors.pop(key, None)
+            self.reloads += 1
+            names = ", ".join(f for f in key[:3] if f)
+            messages.append(f"shader reloaded: {names}" + (f" {dict(key[3])}" if key[3] else ""))
+        return messages
+
+    def _swap_in(self, key: ProgramKey, program: moderngl.Program, built: moderngl.Program) -> None:
+        """Relink ``program``'s GL object with ``built``'s shaders (see the module's docstring)
+        and make moderngl's view of it (uniforms, blocks, vertex inputs) the new build's."""
+        if self._gl is None:
+            self._gl = _RelinkGL(self.ctx)
+        gl = self._gl
+        remembered = self._remembered.setdefault(key, {})
+        for name, member in program._members.items():
+            if _is_uniform(member) and member.location >= 0:
+                try:
+                    remembered[name] = ("uniform", member.gl_type, member.array_length, member.value)
+                except Exception:  # noqa: BLE001 - a type moderngl cannot read back: the passes write it again
+                    pass
+            elif _is_block(member):
+                remembered[name] = ("block", member.binding)
+        # Vertex inputs stay where the first build put them (the vertex arrays were made for
+        # those), also through a build that dropped one: it may come back.
+        inputs = self._inputs.setdefault(key, {})
+        inputs.update({name: at for name, at in program._attribute_locations.items() if at >= 0 and name not in inputs})
+        glo = program.glo
+        try:
+            gl.relink(glo, built.glo, inputs)
+        except ShaderError:
+            built.release()
+            self._locate(program)  # the old shaders were linked again: their values start from 0
+            self._restore(program, remembered)
+            raise
+        members = {}
+        for name, member in built._members.items():
+            target = program._members.get(name)
+            if target is None or type(target) is not type(member):
+                target = member
+            else:
+                extra = target.extra
+                target.__dict__.update(member.__dict__)
+                target.extra = extra
+            target.program_obj = glo
+            members[name] = target
+        for name, member in program._members.items():
+            if name not in members and (_is_uniform(member) or _is_block(member)):
+                members[name] = member  # the new build dropped it: _locate makes it harmless
+        program._members = members
+        program._geom, program._subroutines = built._geom, built._subroutines
+        self._locate(program)
+        self._restore(program, remembered)
+        built.release()  # its shaders stay alive attached to the relinked program
+
+    def _locate(self, program: moderngl.Program) -> None:
+        """Read every uniform's location, block's index and vertex input's location of the
+        (relinked) ``program`` into moderngl's objects; a uniform it no longer has gets -1,
+        whose writes GL ignores."""
+        gl, glo = self._gl, program.glo
+        for name, member in program._members.items():
+            if _is_uniform(member):
+                member.location = gl.uniform_location(glo, name)
+            elif _is_block(member):
+                index = gl.block_index(glo, name)
+                if index < 0:
+                    program._members[name] = _DroppedBlock(name)
+                else:
+                    member.index = index
+            elif _is_attribute(member):
+                member.location = gl.attribute_location(glo, name)
+        inputs = [m for m in program._members.values() if _is_attribute(m) and m.location >= 0]
+        program._attribute_locations = {m.name: m.location for m in inputs}
+        program._attribute_types = {m.location: m for m in inputs}
+
+    @staticmethod
+    def _restore(program: moderngl.Program, remembered: dict[str, tuple]) -> None:
+        """Write back the values of ``remembered`` (what the engine set, even in a build that
+        dropped the uniform) into the uniforms and blocks of the same name and type."""
+        for name, member in program._members.items():
+            value = remembered.get(name)
+            if value is None:
+                continue
+            if value[0] == "uniform" and _is_uniform(member) and member.location >= 0 \
+                    and (member.gl_type, member.array_length) == value[1:3]:
+                member.value = value[3]
+            elif value[0] == "block" and _is_block(member):
+                member.binding = value[1]
 
     def release(self) -> None:
         for program in self._programs.values():
             program.release()
         self._programs.clear()
+        self._uses.clear()
+        self._seen.clear()
+
+
+def _is_uniform(member) -> bool:
+    return type(member).__name__ == "Uniform"
+
+
+def _is_attribute(member) -> bool:
+    return type(member).__name__ == "Attribute"
+
+
+def _is_block(member) -> bool:
+    return type(member).__name__ == "UniformBlock"
+
+
+class _DroppedBlock:
+    """Stands for a uniform block a rebuilt program no longer has: binding it does nothing
+    (as GL does with a uniform at location -1), so the pass that binds it keeps running."""
+
+    def __init__(self, name: str) -> None:
+        self.name = name
+        self.binding = 0
+        self.value = 0
+        self.extra = None
+
+
+_u = ctypes.c_uint
+_i = ctypes.c_int
+_RELINK_SIGNATURES = {
+    "glCreateProgram": (_u,),
+    "glDeleteProgram": (None, _u),
+    "glAttachShader": (None, _u, _u),
+    "glDetachShader": (None, _u, _u),
+    "glGetAttachedShaders": (None, _u, _i, ctypes.POINTER(_i), ctypes.POINTER(_u)),
+    "glBindAttribLocation": (None, _u, _u, ctypes.c_char_p),
+    "glLinkProgram": (None, _u),
+    "glGetProgramiv": (None, _u, _u, ctypes.POINTER(_i)),
+    "glGetProgramInfoLog": (None, _u, _i, ctypes.POINTER(_i), ctypes.c_char_p),
+    "glGetUniformLocation": (_i, _u, ctypes.c_char_p),
+    "glGetUniformBlockIndex": (_u, _u, ctypes.c_char_p),
+    "glGetAttribLocation": (_i, _u, ctypes.c_char_p),
+}
+GL_LINK_STATUS = 0x8B82
+GL_INVALID_INDEX = 0xFFFFFFFF
+
+
+class _RelinkGL:
+    """The raw GL calls of a relink (moderngl can only make new programs)."""
+
+    def __init__(self, ctx: moderngl.Context) -> None:
+        self.gl = {name: load_gl_function(ctx, name, ctypes.CFUNCTYPE(*sig))
+                   for name, sig in _RELINK_SIGNATURES.items()}
+        missing = [name for name, fn in self.gl.items() if fn is None]
+        if missing:
+            raise ShaderError(f"shader hot reload needs GL entry points the loader lacks: {missing}")
+
+    def attached(self, program: int) -> list[int]:
+        count, names = _i(0), (_u * 8)()
+        self.gl["glGetAttachedShaders"](program, 8, ctypes.byref(count), names)
+        return list(names)[:count.value]
+
+    def relink(self, program: int, source: int, attributes: dict[str, int]) -> None:
+        """Give ``program`` the shaders of ``source`` and link it, each of ``attributes`` at its
+        old location; if that link fails the old shaders are put back and relinked."""
+        gl = self.gl
+        old, new = self.attached(program), self.attached(source)
+        holder = gl["glCreateProgram"]()  # keeps the old shaders alive (moderngl flagged them for deletion)
+        try:
+            for shader in old:
+                gl["glAttachShader"](holder, shader)
+                gl["glDetachShader"](program, shader)
+            for shader in new:
+                gl["glAttachShader"](program, shader)
+            for name, location in attributes.items():
+                gl["glBindAttribLocation"](program, location, name.encode())
+            gl["glLinkProgram"](program)
+            if self._linked(program):
+                return
+            log = self._log(program)
+            for shader in new:
+                gl["glDetachShader"](program, shader)
+            for shader in old:
+                gl["glAttachShader"](program, shader)
+            gl["glLinkProgram"](program)
+            raise ShaderError(f"shader program could not keep its vertex inputs at their locations "
+                              f"(restart to use the new build): {log}")
+        finally:
+            gl["glDeleteProgram"](holder)
+
+    def _linked(self, program: int) -> bool:
+        status = _i(0)
+        self.gl["glGetProgramiv"](program, GL_LINK_STATUS, ctypes.byref(status))
+        return bool(status.value)
+
+    def _log(self, program: int) -> str:
+        text = ctypes.create_string_buffer(4096)
+        self.gl["glGetProgramInfoLog"](program, len(text), None, text)
+        return text.value.decode(errors="replace").strip()
+
+    def uniform_location(self, program: int, name: str) -> int:
+        return self.gl["glGetUniformLocation"](program, name.encode())
+
+    def block_index(self, program: int, name: str) -> int:
+        index = self.gl["glGetUniformBlockIndex"](program, name.encode())
+        return -1 if index == GL_INVALID_INDEX else index
+
+    def attribute_location(self, program: int, name: str) -> int:
+        return self.gl["glGetAttribLocation"](program, name.encode())
