@@ -145,11 +145,10 @@ def test_an_include_inside_a_dropped_branch_does_not_shift_later_lines(ctx, tmp_
     (tmp_path / "include").mkdir()
     (tmp_path / "include" / "long.glsl").write_text("".join(f"float f{i}() {{ return {i}.0; }}\n" for i in range(30)))
     (tmp_path / "main.vert").write_text("#version 410 core\nvoid main() { gl_Position = vec4(0.0); }\n")
-    (tmp_path / "main.frag").write_text('#version 410 core\n#ifdef UNSET\n#include "long.glsl"\n#else\n'
-                                        '#include "long.glsl"\n#endif\nout vec4 c;\n'
-                                        "void main() { c = vec4(missing_name); }\n")
+    (tmp_path / "main.frag").write_text('#version 410 core\n#ifdef UNSET\n#include "long.glsl"\n#endif\n'
+                                        "out vec4 c;\nvoid main() { c = vec4(missing_name); }\n")
     library = ShaderLibrary(ctx, tmp_path)
-    with pytest.raises(ShaderError, match=r"main\.frag:8:\d+: .*missing_name"):
+    with pytest.raises(ShaderError, match=r"main\.frag:6:\d+: .*missing_name"):
         library.program("main.vert", "main.frag")
     library.release()
 
@@ -165,6 +164,15 @@ def every_program_scene(world) -> None:
                 ReflectionProbe(resolution=16, refresh="every_frame", prefilter="ggx"))
 
 
+def probe_scene(world) -> None:
+    look_from(world, (0.0, 1.0, 3.0), (0.0, 0.5, 0.0))
+    world.spawn(Skybox())
+    world.spawn(DirectionalLight(direction=(-0.3, -1.0, -0.5), intensity=2.0))
+    world.spawn(Transform(position=BOX_AT), MeshRef(box((0.6, 0.6, 0.6))), Material(color=(0.2, 0.6, 0.2)))
+    world.spawn(Transform(position=(-0.5, 0.5, 0.0)), MeshRef(sphere(0.4)), Material(metallic=1.0, roughness=0.0),
+                ReflectionProbe(resolution=16, refresh="every_frame"))
+
+
 PROBE = "hot_reload_line_probe_"
 
 
@@ -173,13 +181,17 @@ def test_every_program_the_engine_builds_reports_errors_at_the_edited_file_and_l
     log must name that file and line for every error, and every file of every stage must
     be reached (files of a stage that compiled are probed again until none is left)."""
     runner = scene(every_program_scene, (64, 48))
-    for path in ("six_pass", "layered"):
-        runner.engine.stages["probes"].path = path
-        runner.frame()
+    runner.engine.stages["probes"].path = "six_pass"
     runner.engine.reflection_system.path = "batched"
     runner.frame()
-    programs = list(runner.engine.renderer.shaders._programs)
-    assert any(key[2] for key in programs) and any(key[3] for key in programs)  # geometry shaders, defines
+    layered = scene(probe_scene, (64, 48))  # a probe that sees no mirror or portal can take the layered path
+    layered.engine.stages["probes"].path = "layered"
+    layered.frame()
+    programs = list(dict.fromkeys([*runner.engine.renderer.shaders._programs,
+                                   *layered.engine.renderer.shaders._programs]))
+    geometry = {key[2] for key in programs}
+    assert {"scene_batched.geom", "sky_layered.geom", "cube_mip.geom"} <= geometry, geometry
+    assert any(key[3] for key in programs)  # specialised with defines
     originals = {p.relative_to(shader_copy).as_posix(): p.read_text()
                  for p in shader_copy.rglob("*") if p.suffix in (".vert", ".frag", ".geom", ".glsl")}
     checked = 0
