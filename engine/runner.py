@@ -2,7 +2,7 @@
 
   python -m games.<name> [--headless] [--frames N] [--size WxH] [--out DIR]
                          [--ids] [--export-scene FILE.glb|FILE.gltf] [--camera x,y,z,yaw,pitch]
-                         [--aa fxaa|off]
+                         [--aa fxaa|off] [--overlay]
 
 With no display the runner goes headless by itself and says so.
 """
@@ -11,6 +11,7 @@ from __future__ import annotations
 import argparse
 import os
 import sys
+import time
 import warnings
 from collections.abc import Callable, Sequence
 from pathlib import Path
@@ -45,6 +46,9 @@ def parse_args(game: Game, argv: Sequence[str] | None) -> argparse.Namespace:
     parser.add_argument("--camera", type=_pose, default=None, help="start pose x,y,z,yaw,pitch (degrees)")
     parser.add_argument("--aa", choices=ANTIALIAS_MODES, default="fxaa",
                         help="anti-aliasing of the final image (default fxaa; ids are never affected)")
+    parser.add_argument("--overlay", action="store_true",
+                        help="draw the debug overlay (frame rate, passes, draw calls, views, probe captures, "
+                             "paths) into the frames; windowed: shown from the start (F1 toggles it)")
     args = parser.parse_args(argv)
     if args.frames is not None and args.frames < 1:
         parser.error("--frames must be >= 1")
@@ -162,6 +166,7 @@ def run_headless(game: Game, args: argparse.Namespace) -> list[Path]:
     ctx = create_headless_context()
     engine = None
     capture = None
+    overlay = None
     try:
         engine = Engine(game, ctx)
         engine.renderer.antialias = args.aa
@@ -169,8 +174,16 @@ def run_headless(game: Game, args: argparse.Namespace) -> list[Path]:
             engine.place_camera(*args.camera)
         capture = CaptureTarget(ctx, args.size)
         output = Output(capture.framebuffer, args.size)
+        if args.overlay:
+            from engine.overlay import DebugOverlay
+
+            overlay = DebugOverlay(ctx)
         for index in range(frames):
+            start = time.perf_counter()
             engine.frame(HEADLESS_DT, output)
+            if overlay is not None:  # over the presented frame, numbers of this frame
+                overlay.record(time.perf_counter() - start)
+                overlay.draw(engine, capture.framebuffer, args.size)
             written.append(_write(save_png, capture.read_rgb(), args.out / f"frame_{index:04d}.png"))
             if args.ids:
                 written.append(_write(save_ids, engine.renderer.targets.read_ids(), args.out / f"ids_{index:04d}.npy"))
@@ -187,6 +200,8 @@ def run_headless(game: Game, args: argparse.Namespace) -> list[Path]:
                 raise OutputPathError(f"--export-scene {str(args.export_scene)!r} cannot be written: "
                                       f"{exc.strerror or exc}") from None
     finally:
+        if overlay is not None:
+            overlay.release()
         if capture is not None:
             capture.release()
         if engine is not None:

@@ -1,11 +1,16 @@
 """The windowed shell: a moderngl-window WindowConfig that drives an Engine.
 
-WASD + mouse fly camera (Q/E down/up, Shift faster), Esc quits, F12 writes a screenshot.
-The same class runs under moderngl-window's headless window, which the tests use.
+WASD + mouse fly camera (Q/E down/up, Shift faster), Esc quits, F12 writes a screenshot,
+F1 shows or hides the debug overlay (``engine/overlay.py``; the mouse is the overlay's while
+it is over it).  Each frame the shell also polls the shader library, so an edited file
+under ``shaders/`` is rebuilt while the game runs (hot reload; errors printed once and shown
+in the overlay).  The same class runs under moderngl-window's headless window, which the
+tests use.
 """
 from __future__ import annotations
 
 import argparse
+import sys
 import time
 from pathlib import Path
 
@@ -16,6 +21,7 @@ from engine.app import Engine, Game
 from engine.capture import save_png
 from engine.errors import SpeculumError
 from engine.frame_io import Input, Output
+from engine.overlay import DebugOverlay
 from engine.render.targets import CaptureTarget
 
 _NAMED_KEYS = {"SPACE": "space", "ENTER": "enter", "TAB": "tab", "BACKSPACE": "backspace", "LEFT": "left",
@@ -55,10 +61,15 @@ def make_window_config(game: Game, args: argparse.Namespace | None = None) -> ty
             self.screenshots = Path(args.out) if args is not None and args.out else Path("screenshots")
             self.mouse_captured = False
             self.key_names = key_names(self.wnd.keys)
+            self.overlay = DebugOverlay(self.ctx, visible=bool(getattr(args, "overlay", False)))
 
         def on_render(self, time_s: float, frametime: float) -> None:
             size = self.wnd.buffer_size
+            for message in self.engine.renderer.shaders.poll():  # hot reload: at most every 0.5 s
+                print(f"speculum: {message}", file=sys.stderr, flush=True)
+            self.overlay.record(frametime)
             self.engine.frame(min(frametime, 0.1), Output(self.wnd.fbo, size))
+            self.overlay.draw(self.engine, self.wnd.fbo, size)
 
         def on_resize(self, width: int, height: int) -> None:
             pass  # the render system sizes its targets from the framebuffer each frame; 0x0 skips
@@ -66,6 +77,14 @@ def make_window_config(game: Game, args: argparse.Namespace | None = None) -> ty
         def on_key_event(self, key, action, modifiers) -> None:
             keys = self.wnd.keys
             name = self.key_names.get(key)
+            if name == "f1":  # the overlay's key, not the game's
+                if action == keys.ACTION_PRESS:
+                    self.overlay.toggle()
+                    if self.overlay.visible and self.mouse_captured:  # give the pointer back to use it
+                        self.mouse_captured = False
+                        self.wnd.mouse_exclusivity = False
+                        self.wnd.cursor = True
+                return
             if action == keys.ACTION_PRESS:
                 if name:
                     self.input.press(name)
@@ -82,6 +101,11 @@ def make_window_config(game: Game, args: argparse.Namespace | None = None) -> ty
                     self.input.held.discard(modifier)
 
         def on_mouse_press_event(self, x: int, y: int, button: int) -> None:
+            if self.overlay.visible:
+                self.overlay.mouse_moved(x, y)
+                self.overlay.mouse_button(button, True)
+                if self.overlay.wants_mouse:
+                    return
             self.input.mouse = (float(x), float(y))
             if getattr(game, "mouse_look", False) and not self.mouse_captured:
                 # A game that looks with the mouse (its own controller, no FlyController):
@@ -96,13 +120,24 @@ def make_window_config(game: Game, args: argparse.Namespace | None = None) -> ty
                 self.wnd.mouse_exclusivity = True
                 self.wnd.cursor = False
 
+        def on_mouse_release_event(self, x: int, y: int, button: int) -> None:
+            if self.overlay.visible:
+                self.overlay.mouse_moved(x, y)
+                self.overlay.mouse_button(button, False)
+
         def on_mouse_position_event(self, x: int, y: int, dx: int, dy: int) -> None:
+            if self.overlay.visible and not self.mouse_captured:
+                self.overlay.mouse_moved(x, y)
             self.input.mouse = (float(x), float(y))
             if self.mouse_captured:
                 self.input.mouse_dx += dx
                 self.input.mouse_dy += dy
 
         def on_mouse_drag_event(self, x: int, y: int, dx: int, dy: int) -> None:
+            if self.overlay.visible:
+                self.overlay.mouse_moved(x, y)
+                if self.overlay.wants_mouse:  # dragging the depth-cap slider, not looking around
+                    return
             self.input.mouse = (float(x), float(y))
             self.input.mouse_dx += dx
             self.input.mouse_dy += dy
@@ -135,6 +170,7 @@ def make_window_config(game: Game, args: argparse.Namespace | None = None) -> ty
             return path
 
         def on_close(self) -> None:
+            self.overlay.release()
             self.engine.close()
 
     return SpeculumWindow

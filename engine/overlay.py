@@ -1,0 +1,267 @@
+"""The debug overlay: frame rate and a frame-time graph, what the last frame cost (passes,
+draw calls, views per reflection level, probe captures), the reflection and probe capture
+paths in use, toggles for them, and shader errors from hot reload.
+
+It is an immediate-mode GUI (Dear ImGui, through imgui-bundle) drawn by moderngl-window's
+moderngl renderer for it, after the present stage, over the finished frame in the output
+framebuffer (a window's, or the headless capture target for ``--overlay`` PNGs).  Nothing is
+drawn by hand: the overlay only reads the engine's own numbers (``RenderStats``, the
+reflect stage's settings and view tree, the probes stage's path) and writes the settings
+its toggles change.
+
+No window is needed: the overlay owns its ImGui context and sets the display size and time
+step itself each frame; input comes only when a shell forwards it (``engine/window.py``).
+moderngl-window 3.1's renderer still uploads the font the way ImGui did before 1.92; ImGui
+1.92 (imgui-bundle 1.93) hands the backend its textures to create, update and destroy
+(``RendererHasTextures``), which ``OverlayRenderer`` does with moderngl textures.
+
+The overlay changes GL state (blending, scissor, texture unit 0, the bound framebuffer);
+every engine pass applies its whole state when it starts (``bindings.PassState``), so the
+next frame is drawn as if no overlay had been (``tests/test_overlay.py`` checks it).
+"""
+from __future__ import annotations
+
+import ctypes
+import time
+from collections import Counter, deque
+from collections.abc import Sequence
+
+import moderngl
+import numpy as np
+from imgui_bundle import imgui
+from moderngl_window.integrations.imgui_bundle import ModernGLRenderer
+
+FRAME_HISTORY = 120             # frames in the frame-time graph and the frame rate's average
+POSITION = (8, 8)               # the overlay window's top-left corner, in pixels from the top-left
+REFLECTION_PATHS = ("per_mirror", "batched", "auto")
+PROBE_PATHS = ("auto", "six_pass", "layered")
+MAX_DEPTH_CAP = 16
+
+
+def overlay_lines(engine, frame_times: Sequence[float]) -> list[str]:
+    """The overlay's text, from the engine's last frame: the one place it is worded, shared by
+    the overlay and the tests that check its numbers against ``RenderStats``."""
+    stats = engine.renderer.stats
+    reflect = engine.reflection_system
+    probes = engine.stages["probes"]
+    seconds = sum(frame_times) / len(frame_times) if frame_times else 0.0
+    fps = 1.0 / seconds if seconds > 0 else 0.0
+    levels = Counter(view.level for view in reflect.views)
+    per_level = " / ".join(str(levels[level]) for level in range(max(levels) + 1)) if levels else "-"
+    budget = "none" if reflect.level_budget is None else str(reflect.level_budget)
+    chosen = f", chose {probes.chosen_path}" if probes.path == "auto" and probes.chosen_path else ""
+    return [
+        f"{fps:.1f} fps, {seconds * 1000.0:.2f} ms a frame",
+        f"passes {stats.passes}, draw calls {stats.draw_calls}",
+        f"views per level {per_level}",
+        f"reflection views {stats.reflection_views}, dropped {stats.reflection_views_dropped}, "
+        f"capped {stats.reflection_depth_capped}",
+        f"probe captures {stats.probe_captures} ({stats.probe_faces} faces)",
+        f"reflection path {stats.reflection_path or '-'} (set: {reflect.path}, budget {budget})",
+        f"probe path {stats.probe_path or '-'} (set: {probes.path}{chosen})",
+    ]
+
+
+class OverlayRenderer(ModernGLRenderer):
+    """moderngl-window's ImGui renderer with ImGui 1.92's texture protocol: each texture ImGui
+    asks for (the font atlas, grown as glyphs are needed) is created, updated and destroyed
+    as a moderngl texture registered under its GL name."""
+
+    def __init__(self, ctx: moderngl.Context, size: tuple[int, int]) -> None:
+        super().__init__(ctx=ctx, display_size=size)
+        self.io.backend_flags |= imgui.BackendFlags_.renderer_has_textures
+        platform = imgui.get_platform_io()
+        platform.renderer_texture_max_width = platform.renderer_texture_max_height = ctx.info["GL_MAX_TEXTURE_SIZE"]
+
+    def refresh_font_texture(self) -> None:
+        """Nothing to do: the font atlas arrives as an ImGui texture request (``render``)."""
+
+    def _update_texture(self, tex: imgui.ImTextureData) -> None:
+        status = tex.status
+        if status == imgui.ImTextureStatus.want_create:
+            texture = self.ctx.texture((tex.width, tex.height), 4, tex.get_pixels_array().tobytes())
+            texture.repeat_x = texture.repeat_y = False
+            self.register_texture(texture)
+            tex.set_tex_id(texture.glo)
+            tex.status = imgui.ImTextureStatus.ok
+        elif status == imgui.ImTextureStatus.want_updates:
+            texture = self._textures[tex.tex_id]
+            pixels = tex.get_pixels_array().reshape(tex.height, tex.width, 4)
+            for r in tex.updates:
+                block = np.ascontiguousarray(pixels[r.y:r.y + r.h, r.x:r.x + r.w])
+                texture.write(block.tobytes(), viewport=(r.x, r.y, r.w, r.h))
+            tex.status = imgui.ImTextureStatus.ok
+        elif status == imgui.ImTextureStatus.want_destroy:
+            texture = self._textures.pop(tex.tex_id, None)
+            if texture is not None:
+                texture.release()
+            tex.set_tex_id(0)
+            tex.status = imgui.ImTextureStatus.destroyed
+
+    def render(self, draw_data: imgui.ImDrawData) -> None:
+        """Draw ``draw_data`` into the bound framebuffer (its viewport set by the caller)."""
+        for tex in imgui.get_platform_io().textures:
+            if tex.status != imgui.ImTextureStatus.ok:
+                self._update_texture(tex)
+        io = self.io
+        width, height = io.display_size
+        fb_height = int(height * io.display_framebuffer_scale[1])
+        if width <= 0 or height <= 0:
+            return
+        self.projMat.value = (2.0 / width, 0.0, 0.0, 0.0, 0.0, -2.0 / height, 0.0, 0.0,
+                              0.0, 0.0, -1.0, 0.0, -1.0, 1.0, 0.0, 1.0)
+        draw_data.scale_clip_rects(imgui.ImVec2(*io.display_framebuffer_scale))
+        self.ctx.enable_only(moderngl.BLEND)
+        self.ctx.blend_equation = moderngl.FUNC_ADD
+        self.ctx.blend_func = moderngl.SRC_ALPHA, moderngl.ONE_MINUS_SRC_ALPHA
+        for commands in draw_data.cmd_lists:
+            vertices = commands.vtx_buffer.size() * imgui.VERTEX_SIZE
+            indices = commands.idx_buffer.size() * imgui.INDEX_SIZE
+            for buffer, size in ((self._vertex_buffer, vertices), (self._index_buffer, indices)):
+                if buffer.size < size:
+                    buffer.orphan(size)
+            self._vertex_buffer.write((ctypes.c_byte * vertices).from_address(commands.vtx_buffer.data_address()))
+            self._index_buffer.write((ctypes.c_byte * indices).from_address(commands.idx_buffer.data_address()))
+            for command in commands.cmd_buffer:
+                texture = self._textures.get(command.get_tex_id())
+                if texture is None:
+                    raise ValueError(f"overlay: ImGui drew with texture {command.get_tex_id()}, which it never "
+                                     f"asked to create (known: {list(self._textures)})")
+                texture.use(0)
+                x, y, z, w = command.clip_rect
+                self.ctx.scissor = int(x), int(fb_height - w), int(z - x), int(w - y)
+                self._vao.render(moderngl.TRIANGLES, vertices=command.elem_count, first=command.idx_offset)
+        self.ctx.scissor = None
+
+    def shutdown(self) -> None:
+        for tex in imgui.get_platform_io().textures:
+            if tex.status != imgui.ImTextureStatus.destroyed:
+                tex.status = imgui.ImTextureStatus.want_destroy
+                self._update_texture(tex)
+        for texture in self._textures.values():
+            texture.release()
+        self._textures.clear()
+        self.io.backend_flags &= ~imgui.BackendFlags_.renderer_has_textures
+        for obj in (self._vao, self._vertex_buffer, self._index_buffer, self._prog):
+            obj.release()
+
+
+class DebugOverlay:
+    """One overlay on one GL context: ``record`` each frame's time, ``draw`` after the frame."""
+
+    def __init__(self, ctx: moderngl.Context, visible: bool = True) -> None:
+        self.ctx = ctx
+        self.visible = visible
+        self.frame_times: deque[float] = deque(maxlen=FRAME_HISTORY)
+        self.lines: list[str] = []           # the text of the last overlay drawn
+        self.region: tuple[int, int, int, int] | None = None  # x, y (from the top-left), w, h last drawn
+        self.widgets: dict[str, tuple[float, float]] = {}  # each toggle's centre, last drawn (pixels)
+        self._last = None
+        self._previous = imgui.get_current_context()
+        self.context = imgui.create_context()
+        io = imgui.get_io()
+        io.set_ini_filename("")  # no imgui.ini written next to the game
+        self.renderer = OverlayRenderer(ctx, (1, 1))
+        self.io = io
+
+    def record(self, seconds: float | None = None) -> None:
+        """Add one frame's time (``None``: the time since the last call, wall clock)."""
+        now = time.perf_counter()
+        if seconds is None:
+            seconds = now - self._last if self._last is not None else 0.0
+        self._last = now
+        if seconds > 0:
+            self.frame_times.append(seconds)
+
+    def toggle(self) -> None:
+        self.visible = not self.visible
+
+    # --- input a shell forwards (moderngl-window's mouse buttons: 1 left, 2 right, 3 middle) ---
+    def mouse_moved(self, x: float, y: float) -> None:
+        self.io.add_mouse_pos_event(float(x), float(y))
+
+    def mouse_button(self, button: int, down: bool) -> None:
+        index = {1: 0, 2: 1, 3: 2}.get(button)
+        if index is not None:
+            self.io.add_mouse_button_event(index, down)
+
+    @property
+    def wants_mouse(self) -> bool:
+        """The pointer is over the overlay (its clicks and drags are the overlay's)."""
+        return self.visible and self.io.want_capture_mouse
+
+    def draw(self, engine, framebuffer: moderngl.Framebuffer, size: tuple[int, int]) -> None:
+        """Lay out the overlay for ``engine``'s last frame, apply its toggles, and draw it
+        over ``framebuffer`` (``size`` pixels)."""
+        if not self.visible or size[0] <= 0 or size[1] <= 0:
+            return
+        imgui.set_current_context(self.context)
+        io = self.io
+        io.display_size = imgui.ImVec2(*size)
+        io.display_framebuffer_scale = imgui.ImVec2(1.0, 1.0)
+        io.delta_time = self.frame_times[-1] if self.frame_times else 1.0 / 60.0
+        if imgui.get_frame_count() == 0:
+            # ImGui measures an auto-sized window in its first frame and shows it from the
+            # second: lay the first one out unseen, so a single headless frame has the overlay.
+            imgui.new_frame()
+            self._layout(engine)
+            imgui.end_frame()
+        imgui.new_frame()
+        self._layout(engine)
+        imgui.render()
+        framebuffer.use()
+        self.ctx.viewport = (0, 0, *size)
+        self.renderer.render(imgui.get_draw_data())
+
+    def _layout(self, engine) -> None:
+        self.lines = overlay_lines(engine, self.frame_times)
+        imgui.set_next_window_pos(imgui.ImVec2(*POSITION))
+        imgui.set_next_window_bg_alpha(0.85)
+        flags = (imgui.WindowFlags_.always_auto_resize | imgui.WindowFlags_.no_saved_settings
+                 | imgui.WindowFlags_.no_collapse | imgui.WindowFlags_.no_move)
+        imgui.begin("Speculum (F1)", None, flags)
+        for line in self.lines:
+            imgui.text(line)
+        times = np.array(self.frame_times or [0.0], np.float32) * 1000.0
+        imgui.plot_lines("##frame times", times, overlay_text=f"frame ms, max {times.max():.1f}",
+                         scale_min=0.0, graph_size=imgui.ImVec2(220, 40))
+        imgui.separator()
+        reflect, probes, renderer = engine.reflection_system, engine.stages["probes"], engine.renderer
+        imgui.text("reflections")
+        for path in REFLECTION_PATHS:
+            imgui.same_line()
+            if imgui.radio_button(f"{path}##reflection", reflect.path == path):
+                reflect.path = path
+            self._widget(f"reflection {path}")
+        changed, cap = imgui.slider_int("depth cap", reflect.max_depth_cap, 0, MAX_DEPTH_CAP)
+        if changed:
+            reflect.max_depth_cap = cap
+        self._widget("depth cap")
+        imgui.text("probes")
+        for path in PROBE_PATHS:
+            imgui.same_line()
+            if imgui.radio_button(f"{path}##probe", probes.path == path):
+                probes.path = path
+            self._widget(f"probe {path}")
+        changed, fxaa = imgui.checkbox("FXAA", renderer.antialias == "fxaa")
+        if changed:
+            renderer.antialias = "fxaa" if fxaa else "off"
+        self._widget("fxaa")
+        for error in renderer.shaders.errors.values():
+            imgui.text_colored(imgui.ImVec4(1.0, 0.35, 0.3, 1.0), error)
+        x, y = imgui.get_window_pos()
+        w, h = imgui.get_window_size()
+        width, height = self.io.display_size
+        self.region = (int(x), int(y), int(min(np.ceil(w), width - x)), int(min(np.ceil(h), height - y)))
+        imgui.end()
+
+    def _widget(self, name: str) -> None:
+        low, high = imgui.get_item_rect_min(), imgui.get_item_rect_max()
+        self.widgets[name] = ((low.x + high.x) / 2.0, (low.y + high.y) / 2.0)
+
+    def release(self) -> None:
+        imgui.set_current_context(self.context)
+        self.renderer.shutdown()
+        imgui.destroy_context(self.context)
+        if self._previous is not None:
+            imgui.set_current_context(self._previous)
