@@ -154,6 +154,7 @@ class DebugOverlay:
         self.visible = visible
         self.frame_times: deque[float] = deque(maxlen=FRAME_HISTORY)
         self.lines: list[str] = []           # the text of the last overlay drawn
+        self.shown_errors: list[str] = []    # the shader errors it showed (hot reload)
         self.region: tuple[int, int, int, int] | None = None  # x, y (from the top-left), w, h last drawn
         self.widgets: dict[str, tuple[float, float]] = {}  # each toggle's centre, last drawn (pixels)
         self._last = None
@@ -247,7 +248,8 @@ class DebugOverlay:
         if changed:
             renderer.antialias = "fxaa" if fxaa else "off"
         self._widget("fxaa")
-        for error in renderer.shaders.errors.values():
+        self.shown_errors = list(renderer.shaders.errors.values())
+        for error in self.shown_errors:
             imgui.text_colored(imgui.ImVec4(1.0, 0.35, 0.3, 1.0), error)
         x, y = imgui.get_window_pos()
         w, h = imgui.get_window_size()

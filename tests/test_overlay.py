@@ -1,0 +1,188 @@
+"""The debug overlay: drawn over the finished frame (its region changes, nothing else), its
+numbers are the frame's own, its toggles write the engine's settings, and the next frame
+is drawn as if it had never been there.  Headless, through the runner's ``--overlay`` and
+through the window shell under moderngl-window's headless window."""
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+from PIL import Image
+
+from components import Material, MeshRef, ReflectionProbe, Transform
+from engine.mesh import sphere
+from engine.overlay import POSITION, DebugOverlay, overlay_lines
+from tests import test_hot_reload
+from tests.support import FunctionGame
+from tests.test_hot_reload import room
+
+ROOT = Path(__file__).resolve().parents[1]
+SIZE = (400, 300)
+shader_copy = test_hot_reload.shader_copy  # the fixture: a copy of shaders/ the engine reads
+
+
+def room_with_probe(world) -> None:
+    """One mirror facing the camera (so views per level are 1 / 1) and one chrome sphere whose
+    probe captures every frame (so a frame has 1 probe capture of 6 faces)."""
+    room(world)
+    world.spawn(Transform(position=(-0.9, 0.5, 0.6)), MeshRef(sphere(0.4)), Material(metallic=1.0, roughness=0.05),
+                ReflectionProbe(resolution=16, refresh="every_frame"))
+
+
+def test_the_overlay_shows_the_frames_numbers_over_its_own_region_only(scene, ctx):
+    runner = scene(room_with_probe, SIZE)
+    runner.engine.stages["probes"].path = "six_pass"
+    runner.frame()
+    plain = runner.frame()
+    overlay = DebugOverlay(ctx)
+    try:
+        overlay.record(0.02)
+        overlay.draw(runner.engine, runner.capture.framebuffer, SIZE)
+        shown = runner.capture.read_rgb()
+        stats = runner.stats
+        lines = overlay.lines
+        assert lines == overlay_lines(runner.engine, [0.02])
+        # The numbers, from the scene (one mirror in view, one probe capturing every frame)...
+        assert "50.0 fps, 20.00 ms a frame" in lines
+        assert "views per level 1 / 1" in lines
+        assert "probe captures 1 (6 faces)" in lines
+        assert "reflection views 1, dropped 0, capped 0" in lines
+        # ...and as RenderStats counted them in this frame.
+        assert f"passes {stats.passes}, draw calls {stats.draw_calls}" in lines and stats.draw_calls > 0
+        assert f"reflection path {stats.reflection_path} (set: auto, budget none)" in lines
+        assert stats.reflection_path in ("per_mirror", "batched")
+        assert "probe path six_pass (set: six_pass)" in lines
+
+        x, y, w, h = overlay.region
+        assert (x, y) == POSITION and 100 < w < SIZE[0] and 100 < h < SIZE[1]
+        changed = np.any(shown != plain, axis=2)
+        inside = np.zeros_like(changed)
+        inside[y:y + h, x:x + w] = True
+        assert not changed[~inside].any(), "the overlay drew outside its window"
+        assert changed[inside].mean() > 0.5, changed[inside].mean()
+
+        assert np.array_equal(runner.frame(), plain), "a frame after the overlay must not see it"
+        overlay.visible = False
+        overlay.draw(runner.engine, runner.capture.framebuffer, SIZE)
+        assert np.array_equal(runner.capture.read_rgb(), plain)
+    finally:
+        overlay.release()
+
+
+def test_the_overlay_shows_a_shader_error_from_hot_reload(scene, ctx, shader_copy):
+    size = (480, 480)
+    runner = scene(room, size)
+    runner.frame()
+    overlay = DebugOverlay(ctx)
+    try:
+        overlay.draw(runner.engine, runner.capture.framebuffer, size)
+        before = overlay.region[3]
+        path = shader_copy / "scene.frag"
+        path.write_text(path.read_text().replace("void main() {", "void main() {\n    broken_for_the_overlay;", 1))
+        assert runner.engine.renderer.shaders.poll(now=1e6)
+        for _ in range(2):  # an auto-sized window takes its new size in the frame after
+            runner.frame()
+            overlay.draw(runner.engine, runner.capture.framebuffer, size)
+        errors = list(runner.engine.renderer.shaders.errors.values())
+        assert errors and overlay.shown_errors == errors and "broken_for_the_overlay" in errors[0]
+        assert overlay.region[3] > before + 3 * 13  # the error's lines of text (13-pixel font)
+    finally:
+        overlay.release()
+
+
+def test_window_f1_shows_the_overlay_and_its_toggles_change_the_paths(tmp_path):
+    import moderngl_window as mglw
+
+    from engine import spawn_camera
+    from engine.window import make_window_config
+
+    def build(world):
+        room(world)
+        spawn_camera(world, position=(0.0, 1.4, 4.0))  # a FlyController: a click in the world captures
+
+    config = mglw.create_window_config_instance(
+        make_window_config(FunctionGame(build)), args=["--window", "headless", "--backend", "egl",
+                                                       "--size", "480x400"])
+    try:
+        keys = config.wnd.keys
+
+        class Mods:
+            shift = False
+            ctrl = False
+
+        f1 = keys.F1 if isinstance(keys.F1, int) else "F1"  # the headless backend has no key codes
+        config.on_render(0.0, 1 / 60)
+        hidden = np.frombuffer(config.wnd.fbo.read(components=3), np.uint8).copy()
+        assert not config.overlay.visible
+        config.on_key_event(f1, keys.ACTION_PRESS, Mods())
+        config.on_key_event(f1, keys.ACTION_RELEASE, Mods())
+        assert config.overlay.visible and "f1" not in config.input.pressed
+        config.on_render(0.0, 1 / 60)
+        shown = np.frombuffer(config.wnd.fbo.read(components=3), np.uint8)
+        assert (shown != hidden).mean() > 0.1
+
+        def click(widget: str) -> None:
+            x, y = config.overlay.widgets[widget]
+            config.on_mouse_position_event(int(x), int(y), 0, 0)
+            config.on_render(0.0, 1 / 60)
+            config.on_mouse_press_event(int(x), int(y), 1)
+            config.on_render(0.0, 1 / 60)
+            config.on_mouse_release_event(int(x), int(y), 1)
+            config.on_render(0.0, 1 / 60)
+
+        assert config.engine.reflection_system.path == "auto"
+        click("reflection batched")
+        assert config.engine.reflection_system.path == "batched"
+        click("probe layered")
+        assert config.engine.stages["probes"].path == "layered"
+        click("fxaa")
+        assert config.engine.renderer.antialias == "off"
+        assert not config.mouse_captured, "a click on the overlay is not a click in the world"
+        assert config.overlay.lines[-2].startswith("reflection path batched")  # what the frame drew with
+
+        config.on_key_event(f1, keys.ACTION_PRESS, Mods())
+        assert not config.overlay.visible
+        assert config.ctx.error == "GL_NO_ERROR"
+    finally:
+        config.on_close()
+        config.wnd.destroy()
+
+
+LEVEL = """
+from components import DirectionalLight, Material, MeshRef, Skybox, Transform
+from engine import Game, run, spawn_camera
+from engine.mesh import box, plane
+
+
+class Still(Game):
+    def build(self, world):
+        spawn_camera(world, position=(0, 1.2, 4), pitch=-10)
+        world.spawn(Skybox())
+        world.spawn(DirectionalLight(direction=(-0.3, -1, -0.5), intensity=2.0))
+        world.spawn(Transform(), MeshRef(plane(8, 8)), Material(color=(0.5, 0.5, 0.5)))
+        world.spawn(Transform(position=(0.5, 0.5, 0)), MeshRef(box()), Material(color=(0.8, 0.2, 0.1)))
+
+
+run(Still())
+"""
+
+
+def test_headless_overlay_flag_draws_into_the_png_and_nothing_else(tmp_path):
+    level = tmp_path / "still.py"
+    level.write_text(LEVEL)
+    frames = {}
+    for name, extra in (("plain", []), ("overlay", ["--overlay"])):
+        out = tmp_path / name
+        result = subprocess.run([sys.executable, str(level), "--headless", "--frames", "1", "--size", "480x400",
+                                 "--out", str(out), *extra], cwd=ROOT, env={**os.environ, "PYTHONPATH": str(ROOT)},
+                                capture_output=True, text=True, timeout=120)
+        assert result.returncode == 0, result.stderr
+        frames[name] = np.asarray(Image.open(out / "frame_0000.png").convert("RGB"))
+    changed = np.any(frames["plain"] != frames["overlay"], axis=2)
+    rows, columns = np.nonzero(changed)
+    assert (columns.min(), rows.min()) == POSITION  # the overlay window's corner, nothing before it
+    box = changed[rows.min():rows.max() + 1, columns.min():columns.max() + 1]
+    assert box.mean() > 0.5 and columns.max() < 470 and rows.max() < 390, (box.mean(), columns.max(), rows.max())
