@@ -225,3 +225,29 @@ def test_every_program_the_engine_builds_reports_errors_at_the_edited_file_and_l
             for name in files.names[1:]:
                 (shader_copy / name).write_text(originals[name])
     assert checked >= len(programs) * 2
+
+
+def test_the_window_shell_polls_and_says_each_reload_once(shader_copy, capsys):
+    """Windowed runs poll the library each frame: an edit is drawn, and said once."""
+    import moderngl_window as mglw
+
+    from engine.window import make_window_config
+    from tests.support import FunctionGame
+
+    config = mglw.create_window_config_instance(
+        make_window_config(FunctionGame(room)), args=["--window", "headless", "--backend", "egl", "--size", "96x72"])
+    try:
+        library = config.engine.renderer.shaders
+        config.on_render(0.0, 1 / 60)
+        before = np.frombuffer(config.wnd.fbo.read(components=3), np.uint8).copy()
+        edit(shader_copy, "scene.frag", "out_color = vec4(color,", "    color = vec3(0.0, 1.0, 1.0);")
+        library._next_poll = 0.0  # as if half a second had passed
+        for _ in range(3):
+            config.on_render(0.0, 1 / 60)
+        after = np.frombuffer(config.wnd.fbo.read(components=3), np.uint8)
+        assert (after != before).any() and library.reloads > 0
+        said = [line for line in capsys.readouterr().err.splitlines() if "shader reloaded" in line]
+        assert len(said) == library.reloads, said  # once per program rebuilt, not once per frame
+    finally:
+        config.on_close()
+        config.wnd.destroy()
