@@ -222,7 +222,8 @@ class ShaderLibrary:
 
     def reload(self, changed: set[str]) -> list[str]:
         """Rebuild every program built from one of ``changed``; a program whose new build
-        fails keeps drawing with its old one and its error goes to ``errors``."""
+        fails keeps drawing with its old one and its error goes to ``errors``.  Returns what
+        happened, one message per rebuild and per distinct error."""
         messages = []
         for key, program in list(self._programs.items()):
             if not self._uses[key] & changed:
@@ -244,7 +245,7 @@ class ShaderLibrary:
             self.reloads += 1
             names = ", ".join(f for f in key[:3] if f)
             messages.append(f"shader reloaded: {names}" + (f" {dict(key[3])}" if key[3] else ""))
-        return messages
+        return list(dict.fromkeys(messages))  # variants of one program failing alike: said once
 
     def _swap_in(self, key: ProgramKey, program: moderngl.Program, built: moderngl.Program) -> None:
         """Relink ``program``'s GL object with ``built``'s shaders (see the module's docstring)

@@ -70,7 +70,7 @@ def test_a_broken_edit_keeps_the_old_program_and_names_file_and_line_then_a_fix_
     line = edit(shader_copy, "scene.frag", "out_color = vec4(color,", "    color += undefined_hot_reload_name;")
     messages = library.poll(now=1001.0)
     scene_programs = [key for key in library._programs if key[1] == "scene.frag"]
-    assert scene_programs and len(messages) == len(scene_programs), messages
+    assert len(scene_programs) > 1 and len(messages) == 1, messages  # the variants fail alike: said once
     for message in messages:
         assert f"scene.frag:{line}:" in message and "undefined_hot_reload_name" in message, message
     assert set(library.errors) == set(scene_programs)
