@@ -31,6 +31,9 @@ class Mesh:
     indices: np.ndarray
     name: str = "mesh"
     id: int = field(default_factory=lambda: next(_mesh_ids))
+    # How it was made, as a level file writes it ({"box": [w, h, d]}, {"file": path}, ...);
+    # None for a mesh built from arrays, which a level file cannot name.
+    source: dict | None = field(default=None, repr=False)
 
     def __post_init__(self) -> None:
         self.positions = np.ascontiguousarray(self.positions, np.float32).reshape(-1, 3)
@@ -134,7 +137,8 @@ def box(size: tuple[float, float, float] = (1.0, 1.0, 1.0), name: str = "box") -
             normals.append(n)
             uvs.append(((su + 1) / 2, (sv + 1) / 2))
         indices += [(base, base + 1, base + 2), (base, base + 2, base + 3)]
-    return Mesh(np.array(positions), np.array(normals), np.array(uvs), np.array(indices), name=name)
+    return Mesh(np.array(positions), np.array(normals), np.array(uvs), np.array(indices), name=name,
+                source={"box": [float(s) for s in size], **({} if name == "box" else {"name": name})})
 
 
 def plane(width: float = 1.0, depth: float = 1.0, uv_repeat: float = 1.0, name: str = "plane") -> Mesh:
@@ -143,7 +147,9 @@ def plane(width: float = 1.0, depth: float = 1.0, uv_repeat: float = 1.0, name: 
     positions = np.array([(-hw, 0, hd), (hw, 0, hd), (hw, 0, -hd), (-hw, 0, -hd)])
     normals = np.tile((0.0, 1.0, 0.0), (4, 1))
     uvs = np.array([(0, 0), (1, 0), (1, 1), (0, 1)]) * uv_repeat
-    return Mesh(positions, normals, uvs, np.array([(0, 1, 2), (0, 2, 3)]), name=name)
+    source = {"plane": [float(width), float(depth)], **({} if uv_repeat == 1.0 else {"uv_repeat": float(uv_repeat)}),
+              **({} if name == "plane" else {"name": name})}
+    return Mesh(positions, normals, uvs, np.array([(0, 1, 2), (0, 2, 3)]), name=name, source=source)
 
 
 def quad(width: float = 1.0, height: float = 1.0, name: str = "quad") -> Mesh:
@@ -152,7 +158,8 @@ def quad(width: float = 1.0, height: float = 1.0, name: str = "quad") -> Mesh:
     positions = np.array([(-hw, -hh, 0), (hw, -hh, 0), (hw, hh, 0), (-hw, hh, 0)])
     normals = np.tile((0.0, 0.0, 1.0), (4, 1))
     uvs = np.array([(0, 0), (1, 0), (1, 1), (0, 1)])
-    return Mesh(positions, normals, uvs, np.array([(0, 1, 2), (0, 2, 3)]), name=name)
+    return Mesh(positions, normals, uvs, np.array([(0, 1, 2), (0, 2, 3)]), name=name,
+                source={"quad": [float(width), float(height)], **({} if name == "quad" else {"name": name})})
 
 
 def sphere(radius: float = 0.5, segments: int = 48, rings: int = 24, name: str = "sphere") -> Mesh:
@@ -167,7 +174,9 @@ def sphere(radius: float = 0.5, segments: int = 48, rings: int = 24, name: str =
     a = (i * row + j).ravel()
     b, c, d = a + row, a + row + 1, a + 1
     indices = np.concatenate([np.stack([a, b, c], 1), np.stack([a, c, d], 1)])
-    return Mesh(normals * radius, normals, uvs, indices, name=name)
+    source = {"sphere": float(radius), **({} if segments == 48 else {"segments": int(segments)}),
+              **({} if rings == 24 else {"rings": int(rings)}), **({} if name == "sphere" else {"name": name})}
+    return Mesh(normals * radius, normals, uvs, indices, name=name, source=source)
 
 
 # --- loading files -----------------------------------------------------------------------

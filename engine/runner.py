@@ -44,6 +44,10 @@ def parse_args(game: Game, argv: Sequence[str] | None) -> argparse.Namespace:
                         help="write FILE.glb or FILE.gltf (world geometry) and FILE.json (camera, components) "
                              "at the end")
     parser.add_argument("--camera", type=_pose, default=None, help="start pose x,y,z,yaw,pitch (degrees)")
+    parser.add_argument("--dt", type=_seconds, default=HEADLESS_DT,
+                        help=f"seconds of game time per headless frame (default {HEADLESS_DT:.4f}: 60 a second)")
+    parser.add_argument("--gif", type=_gif_path, default=None,
+                        help="headless: also write the frames as an animated GIF (one frame per --dt)")
     parser.add_argument("--aa", choices=ANTIALIAS_MODES, default="fxaa",
                         help="anti-aliasing of the final image (default fxaa; ids are never affected)")
     parser.add_argument("--overlay", action="store_true",
@@ -70,6 +74,23 @@ def _scene_path(text: str) -> Path:
     if path.suffix.lower() not in SCENE_FORMATS:
         raise argparse.ArgumentTypeError(
             f"--export-scene must end in {' or '.join(SCENE_FORMATS)} (the format written), got {text!r}")
+    return path
+
+
+def _seconds(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        value = float("nan")
+    if not 0.0 < value <= 1.0:
+        raise argparse.ArgumentTypeError(f"--dt must be seconds in (0, 1], got {text!r}")
+    return value
+
+
+def _gif_path(text: str) -> Path:
+    path = Path(text)
+    if path.suffix.lower() != ".gif":
+        raise argparse.ArgumentTypeError(f"--gif must name a .gif file, got {text!r}")
     return path
 
 
@@ -107,6 +128,8 @@ def _main(game: Game, args: argparse.Namespace) -> int:
             prepare_out(args.out)
             if args.export_scene is not None:
                 prepare_out(args.export_scene.parent, "--export-scene folder")
+            if args.gif is not None:
+                prepare_out(args.gif.parent, "--gif folder")
             written = run_headless(game, args)
             frames = sum(1 for path in written if path.name.startswith("frame_"))
             print(f"speculum: wrote {frames} frame(s): {describe_written(written)}")
@@ -178,15 +201,21 @@ def run_headless(game: Game, args: argparse.Namespace) -> list[Path]:
             from engine.overlay import DebugOverlay
 
             overlay = DebugOverlay(ctx)
+        gif_frames: list[np.ndarray] = []
         for index in range(frames):
             start = time.perf_counter()
-            engine.frame(HEADLESS_DT, output)
+            engine.frame(args.dt, output)
             if overlay is not None:  # over the presented frame, numbers of this frame
                 overlay.record(time.perf_counter() - start)
                 overlay.draw(engine, capture.framebuffer, args.size)
-            written.append(_write(save_png, capture.read_rgb(), args.out / f"frame_{index:04d}.png"))
+            rgb = capture.read_rgb()
+            written.append(_write(save_png, rgb, args.out / f"frame_{index:04d}.png"))
+            if args.gif is not None:
+                gif_frames.append(rgb)
             if args.ids:
                 written.append(_write(save_ids, engine.renderer.targets.read_ids(), args.out / f"ids_{index:04d}.npy"))
+        if args.gif is not None:
+            written.append(_write(lambda data, path: save_gif(data, path, args.dt), gif_frames, args.gif))
         if args.export_scene:
             camera = engine.active_camera()
             if camera is None:
@@ -208,6 +237,13 @@ def run_headless(game: Game, args: argparse.Namespace) -> list[Path]:
             engine.close()
         ctx.release()
     return written
+
+
+def save_gif(frames: Sequence[np.ndarray], path: Path, seconds_per_frame: float) -> None:
+    """The frames as a looping animated GIF (imageio; 256 colours a frame)."""
+    import imageio.v3 as iio
+
+    iio.imwrite(path, np.stack(frames), extension=".gif", duration=max(20, round(seconds_per_frame * 1000)), loop=0)
 
 
 def _write(save: Callable[[np.ndarray, Path], None], data: np.ndarray, path: Path) -> Path:

@@ -16,6 +16,7 @@ class TextureData:
 
     pixels: np.ndarray
     name: str = "texture"
+    source: dict | None = None  # how it was made, as a level file writes it (None: from arrays)
 
     def __post_init__(self) -> None:
         p = np.asarray(self.pixels)
@@ -50,7 +51,7 @@ def load_texture(path: str | Path) -> TextureData:
             pixels = np.asarray(image.convert("RGBA"))
     except (UnidentifiedImageError, OSError) as exc:
         raise AssetError(f"texture file {str(path)!r}: cannot be read as an image ({exc})") from exc
-    return TextureData(pixels, name=path.name)
+    return TextureData(pixels, name=path.name, source={"file": str(path.resolve())})
 
 
 def checker_texture(size: int = 256, squares: int = 8, a: tuple[int, int, int] = (230, 230, 230),
@@ -62,4 +63,6 @@ def checker_texture(size: int = 256, squares: int = 8, a: tuple[int, int, int] =
     pixels = np.empty((size, size, 3), np.uint8)
     pixels[~mask] = a
     pixels[mask] = b
-    return TextureData(pixels, name=name)
+    source = {"checker": [int(size), int(squares)], **({} if tuple(a) == (230, 230, 230) else {"a": list(a)}),
+              **({} if tuple(b) == (40, 40, 48) else {"b": list(b)}), **({} if name == "checker" else {"name": name})}
+    return TextureData(pixels, name=name, source=source)

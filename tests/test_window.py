@@ -97,10 +97,12 @@ def test_f12_in_a_real_window_writes_the_frame_and_later_frames_have_no_gl_error
     assert shot.shape == (SIZE[1], SIZE[0], 3)
     assert shot.mean() > 20 and shot.std() > 20  # a picture, not a black or flat frame
 
-    # The same frame rendered headless (same size, same number of 1/60 s steps) is the
-    # picture the window showed when F12 was pressed.
+    # The same frame rendered headless (same size, same number of 1/60 s steps, the camera
+    # held at the level's start pose instead of touring) is the picture the window showed
+    # when F12 was pressed.
     headless = subprocess.run([sys.executable, "-m", "games.hall_of_mirrors", "--headless", "--frames",
-                               str(FRAMES_BEFORE), "--size", size, "--out", str(reference)],
+                               str(FRAMES_BEFORE), "--size", size, "--out", str(reference),
+                               "--camera", "0,1.7,6.5,0,-8"],
                               cwd=ROOT, capture_output=True, text=True, timeout=120)
     assert headless.returncode == 0, headless.stderr
     expected = np.asarray(Image.open(reference / f"frame_{FRAMES_BEFORE - 1:04d}.png"))
