@@ -467,10 +467,17 @@ def _encode_component(path: Path, component: Any, by_id: Mapping[int, str], enti
     out: dict[str, Any] = {}
     fields = [f for f in dataclasses.fields(cls) if f.init and not f.name.startswith("_")] \
         if dataclasses.is_dataclass(cls) else []
+    try:
+        defaults = cls()  # the defaults as the component holds them (a direction normalised, ...)
+    except (TypeError, ComponentValueError):
+        defaults = None
     for f in fields:
         value = getattr(component, f.name)
-        default = f.default if f.default is not dataclasses.MISSING else (
-            f.default_factory() if f.default_factory is not dataclasses.MISSING else dataclasses.MISSING)
+        if defaults is not None:
+            default = getattr(defaults, f.name)
+        else:
+            default = f.default if f.default is not dataclasses.MISSING else (
+                f.default_factory() if f.default_factory is not dataclasses.MISSING else dataclasses.MISSING)
         if default is not dataclasses.MISSING and _same(value, default):
             continue
         where = f"{cls.__name__}.{f.name}"

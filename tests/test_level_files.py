@@ -1,0 +1,296 @@
+"""Level files: every shipped level survives load -> save -> load unchanged, a mistake is
+refused naming the file, line, entity and field with nothing made, and one asset file is
+one GPU resource."""
+from __future__ import annotations
+
+import textwrap
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from components import Mirror, Portal, Transform
+from engine.level_file import LevelError, _encode_component, load_level, same_floats, save_level
+from engine.world import World
+from games.hall_of_mirrors.level import LEVEL as HALL
+from games.hall_of_mirrors.level import HallOfMirrors, Spin
+from tests.support import SceneRunner
+
+ROOT = Path(__file__).resolve().parents[1]
+SHIPPED = sorted(ROOT.glob("games/**/*.toml"))
+EXTRA = {"Spin": Spin}  # the hall's own component; the games' levels use engine components only
+
+
+def fields_by_name(world: World, names: dict[str, int]) -> dict[str, dict]:
+    """Every entity's components as a level file writes them, by entity name."""
+    by_id = {entity: name for name, entity in names.items()}
+    return {name: {type(c).__name__: _encode_component(Path("x.toml"), c, by_id, name)
+                   for c in world.components_of(entity)} for name, entity in names.items()}
+
+
+def test_the_shipped_levels_are_found():
+    names = {p.relative_to(ROOT).as_posix() for p in SHIPPED}
+    assert "games/hall_of_mirrors/hall.toml" in names
+    assert sum(n.startswith("games/mirror_beam/levels/") for n in names) >= 5
+    assert sum(n.startswith("games/portal_run/levels/") for n in names) >= 3
+
+
+@pytest.mark.parametrize("path", SHIPPED, ids=lambda p: p.relative_to(ROOT).as_posix())
+def test_a_shipped_level_loads_saves_and_loads_to_the_same_world(path, tmp_path):
+    level = load_level(path, EXTRA)
+    first = World("first")
+    names = level.spawn(first)
+    saved = save_level(first, tmp_path / "again.toml", names, name=level.name, game=level.game, rules=level.rules,
+                       extra_components=EXTRA)
+    again = load_level(saved, EXTRA)
+    second = World("second")
+    names_again = again.spawn(second)
+    assert (again.name, again.game, again.rules) == (level.name, level.game, level.rules)
+    assert list(names_again) == list(names)
+    # Equal up to float32 rounding (a direction is normalised again when it is read back).
+    assert same_floats(fields_by_name(second, names_again), fields_by_name(first, names), 1e-6)
+    # References are names in the file and ids in the world: the same named pairs either way.
+    assert references(second, names_again) == references(first, names)
+
+
+def references(world: World, names: dict[str, int]) -> set[tuple[str, str, str]]:
+    by_id = {entity: name for name, entity in names.items()}
+    found = {("partner", by_id[e], by_id[p.partner]) for e, p in world.query_one(Portal) if p.partner}
+    return found | {("parent", by_id[e], by_id[t.parent]) for e, t in world.query_one(Transform) if t.parent}
+
+
+def test_the_hall_saved_and_loaded_renders_the_same_frame(ctx, tmp_path):
+    """The round trip is checked on pixels too: the shipped hall and its saved copy."""
+    copy = tmp_path / "hall_copy.toml"
+    level = load_level(HALL, EXTRA)
+    world = World("copy")
+    save_level(world, copy, level.spawn(world), name=level.name, game=level.game, rules=level.rules,
+               extra_components=EXTRA)
+    frames = []
+    for path in (HALL, copy):
+        game = HallOfMirrors(path)
+        scene = SceneRunner(ctx, game.build, size=(96, 54))
+        try:
+            frames.append(scene.frame())
+        finally:
+            scene.close()
+    assert frames[0].std() > 10  # a picture, not a flat frame
+    np.testing.assert_array_equal(frames[0], frames[1])
+
+
+BASE = """\
+[level]
+name = "test"
+
+[[entity]]
+name = "floor"
+[entity.Transform]
+position = [0.0, 0.0, 0.0]
+[entity.MeshRef]
+mesh = { plane = [4.0, 4.0] }
+[entity.Material]
+color = [0.5, 0.5, 0.5, 1.0]
+
+[[entity]]
+name = "door_a"
+[entity.Transform]
+position = [0.0, 1.0, 0.0]
+[entity.MeshRef]
+mesh = { quad = [1.0, 2.0] }
+[entity.Material]
+[entity.Portal]
+partner = "door_b"
+size = [1.0, 2.0]
+
+[[entity]]
+name = "door_b"
+[entity.Transform]
+position = [3.0, 1.0, 0.0]
+rotation = { yaw = 90, pitch = 0 }
+[entity.MeshRef]
+mesh = { quad = [1.0, 2.0] }
+[entity.Material]
+[entity.Portal]
+partner = "door_a"
+size = [1.0, 2.0]
+"""
+
+
+def write(tmp_path: Path, text: str, name: str = "level.toml") -> Path:
+    path = tmp_path / name
+    path.write_text(textwrap.dedent(text))
+    return path
+
+
+def line_of(path: Path, needle: str, after: str | None = None) -> int:
+    lines = path.read_text().splitlines()
+    start = next(i for i, line in enumerate(lines) if after in line) if after else 0
+    return next(i for i, line in enumerate(lines) if i >= start and needle in line) + 1
+
+
+def test_the_base_level_loads_and_spawns(tmp_path):
+    world = World("base")
+    names = load_level(write(tmp_path, BASE)).spawn(world)
+    assert world.get(names["door_a"], Portal).partner == names["door_b"]
+    assert world.get(names["door_b"], Portal).partner == names["door_a"]
+
+
+@pytest.mark.parametrize("case", [
+    "unknown_component", "unknown_field", "wrong_type", "bad_value", "missing_mesh", "missing_texture",
+    "partner_names_nothing", "parent_names_nothing", "duplicate_name", "bad_rotation", "parent_cycle",
+])
+def test_a_mistake_names_file_line_entity_and_field_and_makes_nothing(tmp_path, case):
+    edits = {
+        # case: (old text, new text, entity, field or None, the line's text, reason pattern)
+        "unknown_component": ("[entity.Portal]\npartner = \"door_b\"", "[entity.Portl]\npartner = \"door_b\"",
+                              "door_a", None, "[entity.Portl]", r"no component 'Portl'"),
+        "unknown_field": ("color = [0.5, 0.5, 0.5, 1.0]", "colour = [0.5, 0.5, 0.5, 1.0]",
+                          "floor", "Material.colour", "colour =", r"Material has no field 'colour'"),
+        "wrong_type": ("size = [1.0, 2.0]\n\n[[entity]]", "size = \"big\"\n\n[[entity]]",
+                       "door_a", "Portal.size", "size = \"big\"", r"Portal\.size"),
+        "bad_value": ("color = [0.5, 0.5, 0.5, 1.0]", "color = [0.5, -2.0, 0.5, 1.0]",
+                      "floor", "Material.color", "color = [0.5, -2.0", r"Material\.color"),
+        "missing_mesh": ("mesh = { plane = [4.0, 4.0] }", "mesh = { file = \"meshes/gone.obj\" }",
+                         "floor", "MeshRef.mesh", "gone.obj", r"mesh file .*gone\.obj.*: no such file"),
+        "missing_texture": ("color = [0.5, 0.5, 0.5, 1.0]",
+                            "color = [0.5, 0.5, 0.5, 1.0]\ntexture = { file = \"tex/gone.png\" }",
+                            "floor", "Material.texture", "gone.png", r"texture file .*gone\.png.*: no such file"),
+        "partner_names_nothing": ("partner = \"door_a\"", "partner = \"door_c\"", "door_b", "Portal.partner",
+                                  "partner = \"door_c\"", r"names no entity in this file, got 'door_c'"),
+        "parent_names_nothing": ("position = [3.0, 1.0, 0.0]", "position = [3.0, 1.0, 0.0]\nparent = \"table\"",
+                                 "door_b", "Transform.parent", "parent = \"table\"",
+                                 r"names no entity in this file, got 'table'"),
+        "duplicate_name": ("name = \"door_b\"", "name = \"door_a\"", "door_a", None, None,
+                           r"the name is used twice"),
+        "bad_rotation": ("rotation = { yaw = 90, pitch = 0 }", "rotation = { yaw = 90, roll = 3 }", "door_b",
+                         "Transform.rotation", "roll = 3", r"a rotation table is"),
+        "parent_cycle": ("position = [3.0, 1.0, 0.0]", "position = [3.0, 1.0, 0.0]\nparent = \"door_a\"",
+                         "door_a", "Transform.parent", None, r"parents make a cycle"),
+    }
+    old, new, entity, field, line_text, reason = edits[case]
+    text = BASE
+    if case == "parent_cycle":  # door_b's parent is door_a and door_a's is door_b
+        text = text.replace("position = [0.0, 1.0, 0.0]", "position = [0.0, 1.0, 0.0]\nparent = \"door_b\"")
+    assert old in text
+    path = write(tmp_path, text.replace(old, new, 1))
+    world = World("untouched")
+    with pytest.raises(LevelError, match=reason) as caught:
+        load_level(path).spawn(world)
+    error = caught.value
+    assert error.file == str(path) and str(path) in str(error)
+    assert error.entity == entity and f"entity {entity!r}" in str(error)
+    if field is not None:
+        assert error.field == field and field in str(error)
+    if line_text is not None:
+        assert error.line == line_of(path, line_text) and f"{path}:{error.line}:" in str(error)
+    else:
+        assert error.line is not None and f"{path}:{error.line}:" in str(error)
+    assert not world.entities()  # checked before anything was made
+
+
+def test_a_toml_syntax_error_names_its_line(tmp_path):
+    path = write(tmp_path, BASE.replace("position = [3.0, 1.0, 0.0]", "position = [3.0, 1.0, 0.0"))
+    with pytest.raises(LevelError, match=r"not valid TOML") as caught:
+        load_level(path)
+    assert caught.value.line == line_of(path, "position = [3.0, 1.0, 0.0") + 1 or \
+        caught.value.line == line_of(path, "position = [3.0, 1.0, 0.0")
+    assert f"{path}:{caught.value.line}:" in str(caught.value)
+
+
+def test_a_failure_at_spawn_takes_back_what_it_made(tmp_path):
+    """A mirror on a mesh without area is a whole-entity mistake the world refuses at spawn:
+    the level's earlier entities are deleted again, and the error names the file and the entity."""
+    path = write(tmp_path, BASE + textwrap.dedent("""
+        [[entity]]
+        name = "crate_mirror"
+        [entity.Transform]
+        [entity.MeshRef]
+        mesh = { quad = [0.0, 1.0] }
+        [entity.Material]
+        [entity.Mirror]
+        """))
+    world = World("spawn")
+    keep = world.spawn(Transform())
+    with pytest.raises(LevelError, match=r"entity 'crate_mirror'.*Mirror") as caught:
+        load_level(path).spawn(world)
+    assert str(path) in str(caught.value)
+    assert world.entities() == [keep]
+    assert not world.query_one(Mirror)
+
+
+def test_bad_paths_and_headers_are_named(tmp_path):
+    with pytest.raises(LevelError, match=r"no such file"):
+        load_level(tmp_path / "nothing.toml")
+    with pytest.raises(LevelError, match=r"a level file path is a str or pathlib\.Path, got int"):
+        load_level(5)
+    with pytest.raises(LevelError, match=r"\[level\] needs name"):
+        load_level(write(tmp_path, BASE.replace('name = "test"', 'title = "test"')))
+    with pytest.raises(LevelError, match=r"PortalClone is made by the engine"):
+        load_level(write(tmp_path, BASE + '\n[[entity]]\nname = "x"\n[entity.PortalClone]\nsource = 2\n'))
+
+
+def test_one_asset_file_is_one_gpu_resource(ctx, tmp_path):
+    """Two entities naming one OBJ (and two naming one PNG, two one generated box) share one
+    Mesh / TextureData and so one GPU mesh and texture; saved, the level names the files
+    relative to itself."""
+    from PIL import Image
+
+    (tmp_path / "meshes").mkdir()
+    (tmp_path / "meshes" / "tri.obj").write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")
+    Image.fromarray(np.full((8, 8, 3), 200, np.uint8)).save(tmp_path / "wood.png")
+    extra = "".join(f"""
+[[entity]]
+name = "thing_{i}"
+[entity.Transform]
+position = [{i}.0, 0.5, -1.0]
+[entity.MeshRef]
+mesh = {{ file = "meshes/tri.obj" }}
+[entity.Material]
+texture = {{ file = "wood.png" }}
+""" for i in range(2))
+    path = write(tmp_path, BASE + extra + '\n[[entity]]\nname = "cam"\n[entity.Transform]\nposition = [0.0, 1.0, 4.0]'
+                                          '\n[entity.Camera]\n')
+    level = load_level(path)
+    names: dict[str, int] = {}
+    scene = SceneRunner(ctx, lambda world: names.update(level.spawn(world)), size=(32, 24))
+    try:
+        scene.frame()
+        world = scene.world
+        from components import Material, MeshRef
+        meshes = {id(world.get(names[f"thing_{i}"], MeshRef).mesh) for i in range(2)}
+        textures = {id(world.get(names[f"thing_{i}"], Material).texture) for i in range(2)}
+        assert len(meshes) == 1 and len(textures) == 1
+        counts = scene.engine.renderer.resource_counts()
+        assert counts["meshes"] == 3  # plane, quad (both doors), triangle
+        assert counts["textures"] == 1
+        (tmp_path / "out").mkdir()
+        text = save_level(world, tmp_path / "out" / "saved.toml", names, name="t").read_text()
+        assert 'mesh = { file = "../meshes/tri.obj" }' in text and 'texture = { file = "../wood.png" }' in text
+    finally:
+        scene.close()
+
+
+def test_the_hall_takes_another_level_file(ctx, tmp_path):
+    """HallOfMirrors(level_path) builds any level file (as --level does): an edited copy of
+    the hall with its floor removed has one entity fewer and no floor."""
+    text = HALL.read_text()
+    start = text.index('[[entity]]\nname = "floor"')
+    end = text.index("[[entity]]", start + 10)
+    edited = write(tmp_path, text[:start] + text[end:], "no_floor.toml")
+    game = HallOfMirrors(edited)
+    world = World("edited")
+    game.build(world)
+    assert "floor" not in game.names and len(game.names) == len(load_level(HALL, EXTRA).entity_names) - 1
+
+
+def test_every_toml_example_in_the_docs_loads_and_spawns(tmp_path):
+    """The README's and docs/level_files.md's level examples are levels that load."""
+    import re
+
+    blocks = [block for doc in ("README.md", "docs/level_files.md")
+              for block in re.findall(r"^```toml\n(.*?)^```", (ROOT / doc).read_text(), flags=re.S | re.M)]
+    assert len(blocks) >= 2
+    for index, block in enumerate(blocks):
+        world = World(f"example {index}")
+        names = load_level(write(tmp_path, block, f"example_{index}.toml")).spawn(world)
+        assert names and world.entities()
