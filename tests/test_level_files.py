@@ -294,3 +294,22 @@ def test_every_toml_example_in_the_docs_loads_and_spawns(tmp_path):
         world = World(f"example {index}")
         names = load_level(write(tmp_path, block, f"example_{index}.toml")).spawn(world)
         assert names and world.entities()
+
+
+def test_a_bad_level_through_the_runner_is_one_error_line(tmp_path):
+    """--level with a mistake: exit 2 and one 'speculum: error:' line naming file, line,
+    entity and field; no frame written."""
+    import os
+    import subprocess
+    import sys
+
+    path = write(tmp_path, BASE.replace("color = [0.5, 0.5, 0.5, 1.0]", "colour = [0.5, 0.5, 0.5, 1.0]"))
+    result = subprocess.run([sys.executable, "-m", "games.hall_of_mirrors", "--level", str(path), "--headless",
+                             "--frames", "1", "--size", "32x18", "--out", str(tmp_path / "out")],
+                            cwd=ROOT, env={**os.environ, "PYTHONPATH": str(ROOT)}, capture_output=True, text=True,
+                            timeout=120)
+    assert result.returncode == 2, result.stderr
+    lines = result.stderr.strip().splitlines()
+    assert lines == [f"speculum: error: {path}:{line_of(path, 'colour =')}: entity 'floor': Material.colour: "
+                     "Material has no field 'colour' (fields: color, metallic, roughness, texture)"], lines
+    assert not list((tmp_path / "out").glob("frame_*.png"))
