@@ -9,7 +9,10 @@ with a ``ComponentValueError`` that names ``Class.field`` (or the entity, for ch
 whole entity), or the frame renders with no NaN in the HDR colour target and ``ctx.error``
 clean.  Any other exception, above all one raised from inside a system, is a failure.
 
-    python -m benchmarks fuzz --cases 5000
+    python -m benchmarks fuzz --cases 5000 --level-cases 2000
+
+``--level-cases`` runs the level-file fuzz as well (``benchmarks/level_fuzz.py``: a small
+level's text mutated, loaded, spawned and rendered).
 """
 from __future__ import annotations
 
@@ -250,25 +253,39 @@ def fuzz(ctx, cases: int, seed: int = 0, report=None) -> tuple[int, list[tuple[s
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--cases", type=int, default=1000, help="how many cases to run (default 1000)")
     parser.add_argument("--seed", type=int, default=0, help="random seed (the cases are reproducible)")
+    parser.add_argument("--level-cases", type=int, default=0,
+                        help="also run this many level-file cases (mutated level files; default 0)")
 
 
 def main(args: argparse.Namespace) -> int:
+    import tempfile
+    from pathlib import Path
+
+    from benchmarks.level_fuzz import fuzz_levels
     from engine.gl_context import create_headless_context
 
     ctx = create_headless_context()
     try:
-        def report(index: int, case: Case, why: str) -> None:
+        def report(index: int, case, why: str) -> None:
             if not args.json:
                 print(f"case {index}: {case.describe()}\n  {why.strip().splitlines()[0]}")
 
         ran, failures, passes = fuzz(ctx, args.cases, args.seed, report)
+        with tempfile.TemporaryDirectory() as folder:
+            level_ran, level_failures, level_passes = fuzz_levels(ctx, Path(folder), args.level_cases, args.seed,
+                                                                  report)
     finally:
         ctx.release()
     if args.json:
         print(json.dumps({"cases": ran, "failed": len(failures), **passes, "failures": failures[:50]}))
+        if args.level_cases:
+            print(json.dumps({"level_cases": level_ran, "failed": len(level_failures), **level_passes,
+                              "failures": level_failures[:50]}))
     else:
         print(f"fuzz: {ran} cases ran, {len(failures)} failed ({passes['refused']} refused naming the field, "
               f"{passes['rendered']} rendered clean; seed {args.seed})")
-    return 1 if failures else 0
-
-
+        if args.level_cases:
+            print(f"level fuzz: {level_ran} level files ran, {len(level_failures)} failed "
+                  f"({level_passes['refused']} refused naming the file, {level_passes['rendered']} rendered clean; "
+                  f"seed {args.seed})")
+    return 1 if failures or level_failures else 0

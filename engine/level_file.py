@@ -348,7 +348,7 @@ def _entity(path: Path, folder: Path, index: int, name: str, table: dict[str, An
                 continue
             try:
                 decoded[field] = _decode(key, field, value, folder)
-            except (ValueError, TypeError, AssetError) as exc:
+            except (ValueError, TypeError, OverflowError, AssetError) as exc:
                 raise LevelError(path, str(exc), where, name, f"{key}.{field}") from None
         try:
             cls(**decoded)  # the component's own checks, now, not at spawn

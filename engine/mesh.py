@@ -162,8 +162,15 @@ def quad(width: float = 1.0, height: float = 1.0, name: str = "quad") -> Mesh:
                 source={"quad": [float(width), float(height)], **({} if name == "quad" else {"name": name})})
 
 
+MAX_SPHERE_DIVISIONS = 1024  # segments or rings of a generated sphere (a million triangles at most)
+
+
 def sphere(radius: float = 0.5, segments: int = 48, rings: int = 24, name: str = "sphere") -> Mesh:
     """A UV sphere with smooth normals."""
+    for what, value, low in (("segments", segments, 3), ("rings", rings, 2)):
+        if isinstance(value, bool) or not isinstance(value, int) or not low <= value <= MAX_SPHERE_DIVISIONS:
+            raise AssetError(f"sphere mesh {name!r}: {what} must be an int in [{low}, {MAX_SPHERE_DIVISIONS}], "
+                             f"got {value!r}")
     theta = np.linspace(0.0, np.pi, rings + 1)          # from +Y down
     phi = np.linspace(0.0, 2.0 * np.pi, segments + 1)
     t, p = np.meshgrid(theta, phi, indexing="ij")

@@ -54,9 +54,16 @@ def load_texture(path: str | Path) -> TextureData:
     return TextureData(pixels, name=path.name, source={"file": str(path.resolve())})
 
 
+MAX_GENERATED_SIZE = 16384  # texels along a side of a generated texture (GL's limit is checked at upload)
+
+
 def checker_texture(size: int = 256, squares: int = 8, a: tuple[int, int, int] = (230, 230, 230),
                     b: tuple[int, int, int] = (40, 40, 48), name: str = "checker") -> TextureData:
     """A procedural checkerboard (the benchmark ground and the samples use it)."""
+    if isinstance(size, bool) or not isinstance(size, int) or not 1 <= size <= MAX_GENERATED_SIZE:
+        raise AssetError(f"checker texture {name!r}: size must be an int in [1, {MAX_GENERATED_SIZE}], got {size!r}")
+    if isinstance(squares, bool) or not isinstance(squares, int) or not 1 <= squares <= size:
+        raise AssetError(f"checker texture {name!r}: squares must be an int in [1, size={size}], got {squares!r}")
     cell = max(1, size // squares)
     yy, xx = np.mgrid[0:size, 0:size]
     mask = ((xx // cell + yy // cell) % 2).astype(bool)

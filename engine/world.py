@@ -168,6 +168,13 @@ class World:
         if not area > 0.0:
             raise ComponentValueError(f"Mirror on entity {entity}: its MeshRef.mesh {mesh.name!r} has no area "
                                       f"(a mirror needs a flat mesh of non-zero size), got area {area}")
+        from engine.mesh import flat_plane
+
+        if flat_plane(mesh) is None:
+            lo, hi = mesh.bounds
+            raise ComponentValueError(
+                f"Mirror on entity {entity}: its MeshRef.mesh {mesh.name!r} which is not flat (model-space "
+                f"extents {[round(float(v), 3) for v in hi - lo]}); give the mirror a flat mesh or plane_normal")
 
     def _check_sharing(self, entity: int, component: TrackedComponent) -> None:
         """Refuse a component of another world, or a per-entity one already held elsewhere."""

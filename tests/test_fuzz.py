@@ -58,3 +58,45 @@ def test_the_fuzzer_catches_a_value_that_breaks_a_frame(fuzzer):
     assert fuzzer.run(Case(Mirror, {"roughness": 0.3})) is None
     why = Fuzzer._named(Case(Mirror, {"color": 5}), __import__("components").ComponentValueError("boom"))
     assert why is not None and "without naming Mirror" in why
+
+
+# --- level files ---------------------------------------------------------------------------------
+
+LEVEL_CI = settings(max_examples=120, deadline=None, derandomize=True, database=None,
+                    suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow])
+
+
+@pytest.fixture(scope="module")
+def level_fuzzer(ctx, tmp_path_factory):
+    from benchmarks.level_fuzz import LevelFuzzer
+
+    f = LevelFuzzer(ctx, tmp_path_factory.mktemp("level_fuzz"))
+    yield f
+    f.close()
+
+
+@LEVEL_CI
+@given(seed=st.integers(0, 2 ** 32 - 1))
+def test_every_mutated_level_file_is_refused_naming_the_file_or_renders_clean(level_fuzzer, seed):
+    """A small level's text with one to three random mutations (awkward values, unknown
+    components and fields, broken lines, bad references, bad mesh and texture specs)."""
+    from benchmarks.level_fuzz import random_level_case
+
+    case = random_level_case(random.Random(seed))
+    why = level_fuzzer.run(case)
+    assert why is None, f"{case.describe()}: {why}\n{case.text}"
+
+
+def test_the_level_fuzzer_renders_the_base_level_and_catches_a_silent_failure(level_fuzzer):
+    """The unmutated level renders (so mutations are measured against a working level), and
+    a refusal that leaves entities behind is reported."""
+    from benchmarks.level_fuzz import BASE, LevelCase
+
+    before = level_fuzzer.rendered
+    assert level_fuzzer.run(LevelCase(BASE, [])) is None and level_fuzzer.rendered == before + 1
+    keep = level_fuzzer.world.spawn(Transform())
+    try:
+        why = level_fuzzer.run(LevelCase(BASE.replace('name = "fuzz"', 'title = "fuzz"'), ["no name"]))
+        assert why is not None and "left entities" in why
+    finally:
+        level_fuzzer.world.delete_entity(keep)

@@ -319,3 +319,37 @@ def test_a_pose_float32_cannot_hold_is_refused_naming_the_field(field, value, me
         Transform(**{field: value})
     t = Transform(position=(1e8, 0, -1e8), scale=(1e-5, 2e5, -1))  # within the bounds: kept as given
     assert t.position.x == 1e8 and t.scale.y == 2e5
+
+
+def test_generated_assets_past_their_bounds_are_refused_naming_them():
+    """Found by the level-file fuzz: a checker of 100000 texels asked for 149 GiB and a
+    sphere of 10^8 segments ran out of memory; both are refused with the argument named."""
+    from engine.errors import AssetError
+    from engine.mesh import sphere
+    from engine.texture_data import checker_texture
+
+    with pytest.raises(AssetError, match=r"checker texture 'checker': size must be an int in \[1, 16384\]"):
+        checker_texture(100_000, 2)
+    with pytest.raises(AssetError, match=r"squares must be an int in \[1, size=8\]"):
+        checker_texture(8, 0)
+    with pytest.raises(AssetError, match=r"sphere mesh 'sphere': segments must be an int in \[3, 1024\]"):
+        sphere(0.5, 100_000_000)
+    with pytest.raises(AssetError, match=r"rings must be an int in \[2, 1024\]"):
+        sphere(0.5, 16, 1)
+    assert checker_texture(16, 4).pixels.shape == (16, 16, 4) and len(sphere(0.5, 8, 4).indices) == 64
+
+
+def test_a_mirror_on_a_mesh_that_is_not_flat_is_refused_when_it_is_attached(world):
+    """Found by the level-file fuzz: a Mirror on a sphere was accepted and failed in the
+    surfaces stage on the first frame; it is refused at spawn (and on a later mesh change)."""
+    from components import Mirror
+    from engine.mesh import sphere
+
+    with pytest.raises(ComponentValueError, match=r"Mirror on entity \d+: its MeshRef\.mesh 'sphere' which is not "
+                                                  r"flat"):
+        world.spawn(Transform(), MeshRef(sphere(0.5, 8, 4)), Material(), Mirror())
+    assert not world.entities()
+    mirror = world.spawn(Transform(), MeshRef(quad(1, 1)), Material(), Mirror())
+    with pytest.raises(ComponentValueError, match=r"which is not flat"):
+        world.get(mirror, MeshRef).mesh = box()
+    assert world.spawn(Transform(), MeshRef(box()), Material(), Mirror(plane_normal=(0, 0, 1)))  # told the plane
