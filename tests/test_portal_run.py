@@ -20,6 +20,7 @@ from components import Emissive, MeshRef, Portal, Transform
 from engine.app import Engine
 from engine.capture import save_png
 from engine.frame_io import Input, Output
+from engine.level_file import LevelError
 from engine.render.targets import CaptureTarget
 from games.portal_run import LevelRulesError, PortalRun, levels
 from games.portal_run.autopilot import Autopilot, ScriptError
@@ -327,6 +328,18 @@ def test_rules_that_need_the_spawned_level_are_named(ctx, tmp_path, change, word
     with pytest.raises(LevelRulesError) as info:
         Engine(PortalRun(level, verbose=False), ctx)
     assert words in str(info.value) and "bad.toml" in str(info.value)
+
+
+def test_a_broken_level_file_is_the_loaders_error_naming_file_and_line(tmp_path):
+    level = tmp_path / "broken.toml"
+    level.write_text(SMALL_LEVEL.replace("[entity.Material]\ncolor = [0.6, 0.4, 0.2, 1.0]",
+                                         "[entity.Material]\ncolour = [0.6, 0.4, 0.2, 1.0]"))
+    with pytest.raises(LevelError) as info:
+        PortalRun(level, verbose=False)
+    text = str(info.value)
+    assert "broken.toml" in text and "'crate'" in text and "colour" in text
+    line = int(text.split("broken.toml:")[1].split(":")[0])
+    assert level.read_text().splitlines()[line - 1].startswith("colour")
 
 
 def test_bad_script_steps_are_named():

@@ -37,7 +37,6 @@ from pyglm import glm
 
 from components import (
     Camera,
-    ComponentValueError,
     Emissive,
     Material,
     MeshRef,
@@ -46,15 +45,14 @@ from components import (
     look_rotation,
     yaw_pitch_rotation,
 )
-from engine.app import Game
 from engine.errors import SpeculumError
 from engine.frame_io import Input
+from engine.level_file import LevelGame, load_level
 from engine.mesh import box, quad
 from engine.portals import spawn_portal_pair
 from engine.raycast import RayCaster
 from engine.world import World
 from games.portal_run.autopilot import Autopilot, ScriptError, parse_script
-from games.portal_run.level import load
 from games.portal_run.physics import BodyShape, Solid, move_body
 from systems.portal_travel_system import PortalCrossings
 
@@ -233,8 +231,8 @@ def load_rules(rules: dict[str, Any], names: dict[str, int], where: str) -> RunR
 
 # --- the game ---------------------------------------------------------------------------------
 
-class PortalRun(Game):
-    """One level of portal run, from a level file.
+class PortalRun(LevelGame):
+    """One level of portal run, from a level file (``engine.level_file``).
 
     ``autopilot=True`` plays the level's ``solution`` (headless runs with no person);
     ``events`` lists every RunEvent since the game was built (restarts included)."""
@@ -245,8 +243,8 @@ class PortalRun(Game):
 
     def __init__(self, level: str | Path | None = None, autopilot: bool = False,
                  script: Sequence[str] | None = None, verbose: bool = True) -> None:
-        self.level_path = Path(level) if level is not None else levels()[0]
-        self.level = load(self.level_path)
+        super().__init__(level if level is not None else levels()[0])
+        self.level = load_level(self.level_path)  # checked now: a bad file is an error before any window opens
         self.title = f"portal run: {self.level.name}"
         self.verbose = verbose
         self.events: list[RunEvent] = []
@@ -260,10 +258,7 @@ class PortalRun(Game):
     def build(self, world: World) -> None:
         self.world = world
         where = f"level file {str(self.level_path)!r}"
-        try:
-            self.names = self.level.spawn(world)
-        except (ComponentValueError, KeyError, TypeError, ValueError) as exc:
-            raise LevelRulesError(f"{where}: {exc}") from None
+        super().build(world)  # loads the file again (a restart reads it afresh) and spawns it: self.names
         self.rules = load_rules(dict(self.level.rules), self.names, where)
         if self._want_pilot and self.pilot is None:
             self.pilot = Autopilot(self._script if self._script is not None else self.rules.solution,
@@ -322,7 +317,6 @@ class PortalRun(Game):
         """Delete everything and build the level again from its file (the autopilot goes on)."""
         for entity in world.entities():
             world.delete_entity(entity)
-        self.level = load(self.level_path)
         self.build(world)
         self._event(why, "level reloaded")
 
