@@ -402,9 +402,11 @@ def test_the_layered_and_six_pass_captures_agree_face_by_face_and_culling_cuts_p
     owner = ents["sphere"]
     position = probe_stage(runner).probes[owner].position
     views = {face: face_view(face, position, 0.05, 100.0, 64, skip=owner) for face in range(6)}
-    probes.capture(owner, views, None, 0)
-    six_pass = [probes.read_face(owner, face) for face in range(6)]
     query = ctx.query(primitives=True)
+    with query:
+        probes.capture(owner, views, None, 0)
+    six_pass_primitives = query.primitives
+    six_pass = [probes.read_face(owner, face) for face in range(6)]
     with query:
         probes.capture_layered(owner, views, culled=True)
     culled = query.primitives
@@ -419,6 +421,9 @@ def test_the_layered_and_six_pass_captures_agree_face_by_face_and_culling_cuts_p
     assert mips == probes.mips.primitives(64)
     assert naive == 6 * one_face + mips
     assert culled - mips <= 2 * one_face
+    # Six views each draw the scene without the probe's own sphere: its batch (one instance,
+    # the skipped entity) is not drawn at all, rather than drawn and clipped away.
+    assert six_pass_primitives == 6 * one_face + mips
 
 
 def test_auto_times_both_paths_once_and_keeps_the_faster(scene):
