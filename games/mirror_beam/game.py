@@ -28,6 +28,7 @@ from components import Camera, Emissive, Material, MeshRef, Mirror, Transform, l
 from engine.app import Game, spawn_camera
 from engine.errors import SpeculumError
 from engine.frame_io import Input, Output
+from engine.level_file import load_level
 from engine.mesh import box
 from engine.raycast import raycast
 from engine.render.view_tree import Surfaces
@@ -361,9 +362,7 @@ class MirrorBeam(Game):
         self.script: list[list[str]] = []
 
     def build(self, world: World) -> None:
-        from games.mirror_beam.level import load
-
-        level = load(self.level_path)
+        level = load_level(self.level_path)
         names = self.names = level.spawn(world)
         rules = parse_rules(level.rules, names, world, f"level file {str(self.level_path)!r}")
         if not world.query_one(Camera):
