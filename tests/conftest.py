@@ -3,6 +3,8 @@ its own world and must leave the context without a GL error."""
 from __future__ import annotations
 
 import os
+import shutil
+import subprocess
 
 import pytest
 
@@ -50,3 +52,28 @@ def scene(ctx):
 def pytest_addoption(parser):
     parser.addoption("--update-golden", action="store_true",
                      help="rewrite tests/golden/ from the frames rendered now (say why in the commit)")
+
+
+@pytest.fixture(scope="session")
+def x_display():
+    """A private Xvfb display for the windowed tests (any DISPLAY the machine has is left alone);
+    skipped, saying why, without Xvfb or pyglet."""
+    xvfb = shutil.which("Xvfb")
+    if xvfb is None:
+        pytest.skip("Xvfb is not installed (apt-get install xvfb): no X server to open a real window on")
+    try:
+        import pyglet  # noqa: F401
+    except ImportError:
+        pytest.skip("pyglet is not installed: moderngl-window has no windowed backend")
+    read_fd, write_fd = os.pipe()
+    server = subprocess.Popen([xvfb, "-displayfd", str(write_fd), "-screen", "0", "640x480x24", "-nolisten", "tcp"],
+                              pass_fds=(write_fd,), stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    os.close(write_fd)
+    with os.fdopen(read_fd) as pipe:
+        number = pipe.readline().strip()  # Xvfb writes its display number once it is ready
+    if not number:
+        server.kill()
+        pytest.skip("Xvfb did not start")
+    yield f":{number}"
+    server.terminate()
+    server.wait(timeout=10)

@@ -7,7 +7,6 @@ from __future__ import annotations
 import json
 import math
 import os
-import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -440,30 +439,14 @@ config.wnd.destroy()
 '''
 
 
-def test_played_in_a_real_window_with_keys_and_a_click(tmp_path):
+def test_played_in_a_real_window_with_keys_and_a_click(x_display, tmp_path):
     """Level 2 in an X window (Xvfb, pyglet): a click on m2 selects and turns it one step and
     leaves the pointer free (no fly camera here); then the number and arrow keys, delivered
     through pyglet's event queue, solve it; no GL error in any frame.  Skipped, saying why,
     without Xvfb or pyglet."""
-    xvfb = shutil.which("Xvfb")
-    if xvfb is None:
-        pytest.skip("Xvfb is not installed (apt-get install xvfb)")
-    pytest.importorskip("pyglet", reason="moderngl-window has no windowed backend without pyglet")
-    read_fd, write_fd = os.pipe()
-    server = subprocess.Popen([xvfb, "-displayfd", str(write_fd), "-screen", "0", "640x480x24", "-nolisten", "tcp"],
-                              pass_fds=(write_fd,), stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-    os.close(write_fd)
-    try:
-        with os.fdopen(read_fd) as pipe:
-            number = pipe.readline().strip()
-        if not number:
-            pytest.skip("Xvfb did not start")
-        env = {**os.environ, "DISPLAY": f":{number}", "PYTHONPATH": str(ROOT), "SPECULUM_DEBUG": "1"}
-        result = subprocess.run([sys.executable, "-c", WINDOW_SCRIPT, str(level_file("02_two_bounces"))],
-                                cwd=tmp_path, env=env, capture_output=True, text=True, timeout=120)
-    finally:
-        server.terminate()
-        server.wait(timeout=10)
+    env = {**os.environ, "DISPLAY": x_display, "PYTHONPATH": str(ROOT), "SPECULUM_DEBUG": "1"}
+    result = subprocess.run([sys.executable, "-c", WINDOW_SCRIPT, str(level_file("02_two_bounces"))], cwd=tmp_path,
+                            env=env, capture_output=True, text=True, timeout=120)
     assert result.returncode == 0, result.stderr[-3000:]
     report = json.loads(result.stdout.strip().splitlines()[-1])
     assert set(report["errors"]) == {"GL_NO_ERROR"}

@@ -8,13 +8,11 @@ from __future__ import annotations
 
 import json
 import os
-import shutil
 import subprocess
 import sys
 from pathlib import Path
 
 import numpy as np
-import pytest
 from PIL import Image
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -56,30 +54,6 @@ print(json.dumps({"errors": errors, "screenshots": written, "buffer_size": list(
 config.on_close()
 config.wnd.destroy()
 '''
-
-
-@pytest.fixture(scope="module")
-def x_display():
-    """A private Xvfb display for this module (any DISPLAY the machine has is left alone)."""
-    xvfb = shutil.which("Xvfb")
-    if xvfb is None:
-        pytest.skip("Xvfb is not installed (apt-get install xvfb): no X server to open a real window on")
-    try:
-        import pyglet  # noqa: F401
-    except ImportError:
-        pytest.skip("pyglet is not installed: moderngl-window has no windowed backend")
-    read_fd, write_fd = os.pipe()
-    server = subprocess.Popen([xvfb, "-displayfd", str(write_fd), "-screen", "0", "640x480x24", "-nolisten", "tcp"],
-                              pass_fds=(write_fd,), stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-    os.close(write_fd)
-    with os.fdopen(read_fd) as pipe:
-        number = pipe.readline().strip()  # Xvfb writes its display number once it is ready
-    if not number:
-        server.kill()
-        pytest.skip("Xvfb did not start")
-    yield f":{number}"
-    server.terminate()
-    server.wait(timeout=10)
 
 
 def test_f12_in_a_real_window_writes_the_frame_and_later_frames_have_no_gl_error(x_display, tmp_path):
