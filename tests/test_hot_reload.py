@@ -21,7 +21,7 @@ from engine.errors import ShaderError
 from engine.mesh import box, plane, quad, sphere
 from engine.portals import spawn_portal_pair
 from engine.shader_library import POLL_INTERVAL, ShaderLibrary, load_source
-from tests.support import look_from
+from tests.support import linear_to_srgb8, look_from
 
 SIZE = (96, 72)
 BOX_AT = (0.9, 0.5, 0.5)
@@ -251,3 +251,21 @@ def test_the_window_shell_polls_and_says_each_reload_once(shader_copy, capsys):
     finally:
         config.on_close()
         config.wnd.destroy()
+
+
+def test_a_uniform_the_first_build_dropped_is_fed_after_a_reload(scene, shader_copy):
+    """The plain box's program never read sky_face_size (only sky-reflecting variants do),
+    so the linker dropped it; an edit that reads it gets its value on the next frame, not a
+    0 left from a cache made before the reload."""
+    runner = scene(room, SIZE)
+    library = runner.engine.renderer.shaders
+    runner.frame()
+    sky_size = runner.engine.renderer.sky.size[0]
+    assert sky_size > 0
+    edit(shader_copy, "scene.frag", "out_color = vec4(color,", "    color = vec3(sky_face_size / 1024.0, 0.0, 0.0);")
+    assert library.poll(now=1000.0) and library.errors == {}
+    rgb = runner.frame()
+    column, row = runner.project(BOX_AT)
+    expected = linear_to_srgb8(np.array([sky_size / 1024.0]))[0]  # present: linear -> sRGB
+    assert abs(int(rgb[row, column, 0]) - int(expected)) <= 2 and rgb[row, column, 1] == 0, \
+        (rgb[row, column].tolist(), expected)

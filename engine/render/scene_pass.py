@@ -94,6 +94,7 @@ class ScenePass:
         # layered capture, the batch's variants or None).
         self._programs: dict[tuple[int, str, tuple[int, int, int] | None], moderngl.Program] = {}
         self._uniforms: dict[int, tuple] = {}  # program -> its _PER_DRAW_UNIFORMS (None where dropped)
+        self._reloads_seen = 0  # ShaderLibrary.reloads when the two caches above were made
         self._written: dict[int, list] = {}  # program -> the values last written in this pass
         self._sky_size = 0
         self._sky_layered: moderngl.VertexArray | None = None
@@ -104,7 +105,14 @@ class ScenePass:
                 layered: str = "") -> moderngl.Program:
         """The scene program for a batch of ``variants`` (None: mixed, switched per
         instance): plain, batched (``invocations`` > 0: the geometry shader's) or a one-pass
-        cube-map capture (``layered`` "culled" or "naive"), built once."""
+        cube-map capture (``layered`` "culled" or "naive"), built once.  After a shader hot
+        reload the set-up is done again (the relinked program may read uniforms and samplers
+        the first build dropped)."""
+        reloads = self.renderer.shaders.reloads
+        if reloads != self._reloads_seen:
+            self._programs.clear()
+            self._uniforms.clear()
+            self._reloads_seen = reloads
         key = (invocations, layered, variants)
         program = self._programs.get(key)
         if program is None:
