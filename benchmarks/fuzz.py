@@ -146,8 +146,8 @@ class Fuzzer:
         self.capture.release()
         self.engine.close()
 
-    def run(self, case: Case) -> str | None:
-        """None when the case passed, else why it failed."""
+    def run(self, case: Case, index: int = 0) -> str | None:
+        """None when the case passed, else why it failed (``index``: the case's number, unused)."""
         try:
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
@@ -231,15 +231,16 @@ class Fuzzer:
         return f"refused without naming {name}.<field>: {text}"
 
 
-def fuzz(ctx, cases: int, seed: int = 0, report=None) -> tuple[int, list[tuple[str, str]], dict[str, int]]:
-    """Run ``cases`` cases; the count run, the failures (case, why) and passes by kind."""
+def run_cases(fuzzer, make_case, cases: int, seed: int, report=None) -> tuple[int, list[tuple[str, str]],
+                                                                             dict[str, int]]:
+    """``cases`` cases from ``make_case(rng)`` through ``fuzzer.run(case, index)``, then the
+    fuzzer closed; the count run, the failures (case, why) and passes by kind."""
     rng = random.Random(seed)
-    fuzzer = Fuzzer(ctx)
     failures: list[tuple[str, str]] = []
     try:
         for index in range(cases):
-            case = random_case(rng)
-            why = fuzzer.run(case)
+            case = make_case(rng)
+            why = fuzzer.run(case, index)
             if why is not None:
                 failures.append((case.describe(), why))
                 if report is not None:
@@ -248,6 +249,11 @@ def fuzz(ctx, cases: int, seed: int = 0, report=None) -> tuple[int, list[tuple[s
     finally:
         fuzzer.close()
     return cases, failures, passes
+
+
+def fuzz(ctx, cases: int, seed: int = 0, report=None) -> tuple[int, list[tuple[str, str]], dict[str, int]]:
+    """Run ``cases`` component cases (``run_cases``)."""
+    return run_cases(Fuzzer(ctx), random_case, cases, seed, report)
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:

@@ -258,19 +258,7 @@ class LevelFuzzer:
 
 
 def fuzz_levels(ctx, folder: Path, cases: int, seed: int = 0, report=None) -> tuple[int, list, dict[str, int]]:
-    """Run ``cases`` level cases; the count run, the failures (case, why) and passes by kind."""
-    rng = random.Random(seed)
-    fuzzer = LevelFuzzer(ctx, folder)
-    failures: list[tuple[str, str]] = []
-    try:
-        for index in range(cases):
-            case = random_level_case(rng)
-            why = fuzzer.run(case, index)
-            if why is not None:
-                failures.append((case.describe(), why))
-                if report is not None:
-                    report(index, case, why)
-        passes = {"refused": fuzzer.refused, "rendered": fuzzer.rendered}
-    finally:
-        fuzzer.close()
-    return cases, failures, passes
+    """Run ``cases`` level cases (``benchmarks.fuzz.run_cases``), their files in ``folder``."""
+    from benchmarks.fuzz import run_cases
+
+    return run_cases(LevelFuzzer(ctx, folder), random_level_case, cases, seed, report)
