@@ -32,6 +32,7 @@ from pyglm import glm
 import components as _components
 from components import ComponentValueError, look_rotation, yaw_pitch_rotation
 from engine.app import Game
+from engine.capture import VALUE_KINDS, json_value
 from engine.errors import AssetError, SpeculumError
 from engine.mesh import Mesh, box, load_model, plane, quad, sphere
 from engine.texture_data import TextureData, checker_texture, load_texture
@@ -513,19 +514,21 @@ def _plain_or_none(value: Any) -> Any:
 
 
 def _plain(value: Any, path: Path, entity: str, where: str) -> Any:
-    if isinstance(value, (bool, str)):
-        return value
-    if isinstance(value, (int, np.integer)):
-        return int(value)
-    if isinstance(value, (float, np.floating)):
-        return float(value)
-    if isinstance(value, glm.quat):
-        return [_f32(value.w), _f32(value.x), _f32(value.y), _f32(value.z)]
-    if isinstance(value, (glm.vec2, glm.vec3, glm.vec4)):
-        return [_f32(v) for v in value]
+    """A field value as TOML: scene.json's encoder (``engine.capture.json_value``: vectors as
+    lists, quaternions ``[w, x, y, z]``), floats kept as numbers (TOML has inf and nan) and
+    float32 vectors at their shortest decimal; meshes, textures, arrays, matrices and other
+    objects cannot be written in a level."""
     if isinstance(value, (list, tuple)):
         return [_plain(v, path, entity, where) for v in value]
-    raise LevelError(path, f"a {type(value).__name__} cannot be written in a level file", None, entity, where)
+    data, kind = json_value(value)
+    if kind in ("bool", "int", "str"):
+        return data
+    if kind == "float":
+        return float(value)
+    if kind in ("vec2", "vec3", "vec4", "quat"):
+        return [_f32(v) for v in data]
+    raise LevelError(path, f"a {type(value).__name__} ({kind}: {VALUE_KINDS[kind]}) cannot be written in a level "
+                           "file", None, entity, where)
 
 
 def _f32(value: float) -> float:

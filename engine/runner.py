@@ -1,8 +1,8 @@
 """Command line of every game: windowed through moderngl-window, or headless on EGL.
 
-  python -m games.<name> [--headless] [--frames N] [--size WxH] [--out DIR]
+  python -m games.<name> [--headless] [--frames N] [--size WxH] [--out DIR] [--level FILE.toml]
                          [--ids] [--export-scene FILE.glb|FILE.gltf] [--camera x,y,z,yaw,pitch]
-                         [--aa fxaa|off] [--overlay]
+                         [--dt SECONDS] [--gif FILE.gif] [--aa fxaa|off] [--overlay]
 
 With no display the runner goes headless by itself and says so.
 """
@@ -39,6 +39,8 @@ def parse_args(game: Game, argv: Sequence[str] | None) -> argparse.Namespace:
                         help="frames to run (headless default 4; windowed: until closed)")
     parser.add_argument("--size", type=_size, default=game.size, help="WxH, e.g. 1280x720")
     parser.add_argument("--out", type=Path, default=None, help="folder for frame_NNNN.png (headless)")
+    parser.add_argument("--level", type=Path, default=None, metavar="FILE",
+                        help="play this level file (.toml, docs/level_files.md) instead of the game's own")
     parser.add_argument("--ids", action="store_true", help="also write ids_NNNN.npy per frame")
     parser.add_argument("--export-scene", type=_scene_path, default=None,
                         help="write FILE.glb or FILE.gltf (world geometry) and FILE.json (camera, components) "
@@ -119,6 +121,7 @@ def _one_line_warning(message, category, filename, lineno, file=None, line=None)
 
 def _main(game: Game, args: argparse.Namespace) -> int:
     try:
+        use_level(game, args.level)
         if not args.headless and not have_display():
             print("speculum: no display found (DISPLAY/WAYLAND_DISPLAY unset); running headless", file=sys.stderr)
             args.headless = True
@@ -145,6 +148,22 @@ def _main(game: Game, args: argparse.Namespace) -> int:
         print(f"speculum: error: {exc}", file=sys.stderr)
         return 2
     return 0
+
+
+def use_level(game: Game, level: Path | None) -> None:
+    """``--level FILE``: a game built from a level file (``LevelGame``) plays ``FILE``
+    instead; any other game refuses it.  A level game's file is checked here, before a
+    context or window is made, so a mistake in it is one error line and nothing drawn."""
+    from engine.level_file import LevelGame, load_level
+
+    if not isinstance(game, LevelGame):
+        if level is not None:
+            raise SpeculumError(f"--level {str(level)!r}: {game.title!r} builds its own world in Python, not from "
+                                "a level file, so it cannot play one")
+        return
+    if level is not None:
+        game.level_path = level
+    load_level(game.level_path, game.components)
 
 
 class OutputPathError(SpeculumError):

@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from components import Mirror, Portal, Transform
+from components import Camera, MeshRef, Mirror, Portal, Transform, look_rotation
 from engine.level_file import LevelError, _encode_component, load_level, same_floats, save_level
 from engine.world import World
 from games.hall_of_mirrors.level import LEVEL as HALL
@@ -59,17 +59,29 @@ def references(world: World, names: dict[str, int]) -> set[tuple[str, str, str]]
     return found | {("parent", by_id[e], by_id[t.parent]) for e, t in world.query_one(Transform) if t.parent}
 
 
-def test_the_hall_saved_and_loaded_renders_the_same_frame(ctx, tmp_path):
-    """The round trip is checked on pixels too: the shipped hall and its saved copy."""
-    copy = tmp_path / "hall_copy.toml"
-    level = load_level(HALL, EXTRA)
+@pytest.mark.parametrize("path", SHIPPED, ids=lambda p: p.relative_to(ROOT).as_posix())
+def test_a_shipped_level_saved_and_loaded_renders_the_same_frame(ctx, tmp_path, path):
+    """The round trip is checked on pixels too: each shipped level and its saved copy, seen
+    by the level's own camera, or (the games' levels, whose game adds the camera) from
+    above and behind the middle of what it holds."""
+    copy = tmp_path / "copy.toml"
+    level = load_level(path, EXTRA)
     world = World("copy")
     save_level(world, copy, level.spawn(world), name=level.name, game=level.game, rules=level.rules,
                extra_components=EXTRA)
+
+    def build(file: Path, world: World) -> None:
+        load_level(file, EXTRA).spawn(world)
+        if not world.query_one(Camera):
+            points = np.array([list(t.position) for _, (t, _m) in world.query(Transform, MeshRef)])
+            low, high = points.min(axis=0), points.max(axis=0)
+            middle, reach = (low + high) / 2, max(float(np.linalg.norm(high - low)), 4.0)
+            eye = middle + np.array([0.0, 0.6, 0.8]) * reach
+            world.spawn(Transform(position=tuple(eye), rotation=look_rotation(tuple(middle - eye))), Camera())
+
     frames = []
-    for path in (HALL, copy):
-        game = HallOfMirrors(path)
-        scene = SceneRunner(ctx, game.build, size=(96, 54))
+    for file in (path, copy):
+        scene = SceneRunner(ctx, lambda world, file=file: build(file, world), size=(96, 54))
         try:
             frames.append(scene.frame())
         finally:
@@ -174,6 +186,7 @@ def test_a_mistake_names_file_line_entity_and_field_and_makes_nothing(tmp_path, 
     assert old in text
     path = write(tmp_path, text.replace(old, new, 1))
     world = World("untouched")
+    keep = world.spawn(Transform(position=(1.0, 2.0, 3.0)))
     with pytest.raises(LevelError, match=reason) as caught:
         load_level(path).spawn(world)
     error = caught.value
@@ -185,7 +198,8 @@ def test_a_mistake_names_file_line_entity_and_field_and_makes_nothing(tmp_path, 
         assert error.line == line_of(path, line_text) and f"{path}:{error.line}:" in str(error)
     else:
         assert error.line is not None and f"{path}:{error.line}:" in str(error)
-    assert not world.entities()  # checked before anything was made
+    assert world.entities() == [keep]  # checked before anything was made; what was there stays
+    assert len(world.components_of(keep)) == 1 and list(world.get(keep, Transform).position) == [1.0, 2.0, 3.0]
 
 
 def test_a_toml_syntax_error_names_its_line(tmp_path):
@@ -313,3 +327,67 @@ def test_a_bad_level_through_the_runner_is_one_error_line(tmp_path):
     assert lines == [f"speculum: error: {path}:{line_of(path, 'colour =')}: entity 'floor': Material.colour: "
                      "Material has no field 'colour' (fields: color, metallic, roughness, texture)"], lines
     assert not list((tmp_path / "out").glob("frame_*.png"))
+
+
+RED_WALL = """\
+[level]
+name = "A red wall"
+
+[[entity]]
+name = "camera"
+[entity.Transform]
+position = [0.0, 0.0, 2.0]
+[entity.Camera]
+
+[[entity]]
+name = "wall"
+[entity.Transform]
+[entity.MeshRef]
+mesh = { quad = [6.0, 6.0] }
+[entity.Material]
+color = [1.0, 0.0, 0.0, 1.0]
+[entity.Emissive]
+power = 1.0
+"""
+
+
+def test_level_through_the_runner_plays_that_file(tmp_path):
+    """--level is the runner's: the hall's script plays any level file (here a red wall
+    filling the view, with no tour in its rules)."""
+    import os
+    import subprocess
+    import sys
+
+    from PIL import Image
+
+    path = write(tmp_path, RED_WALL)
+    out = tmp_path / "out"
+    result = subprocess.run([sys.executable, "-m", "games.hall_of_mirrors", "--level", str(path), "--headless",
+                             "--frames", "1", "--size", "32x18", "--out", str(out)],
+                            cwd=ROOT, env={**os.environ, "PYTHONPATH": str(ROOT)}, capture_output=True, text=True,
+                            timeout=120)
+    assert result.returncode == 0, result.stderr
+    frame = np.asarray(Image.open(out / "frame_0000.png")).astype(int)
+    assert (frame[..., 0] > 200).all() and (frame[..., 1:] < 40).all()  # the wall, not the hall
+
+
+def test_level_replaces_a_level_games_file_and_is_refused_by_any_other_game(tmp_path, capsys):
+    """runner.use_level: a LevelGame's file is replaced (and checked before anything is
+    made); a game that builds in Python refuses --level with one error line, exit 2."""
+    from engine.runner import main, use_level
+    from tests.support import FunctionGame
+
+    game = HallOfMirrors()
+    path = write(tmp_path, RED_WALL)
+    use_level(game, path)
+    assert game.level_path == path
+    world = World("red")
+    game.build(world)
+    assert set(game.names) == {"camera", "wall"}
+
+    out = tmp_path / "out"
+    assert main(FunctionGame(lambda world: None), ["--level", str(path), "--headless", "--out", str(out)]) == 2
+    error = capsys.readouterr().err.strip().splitlines()
+    assert len(error) == 1 and error[0].startswith("speculum: error: --level ") and str(path) in error[0] \
+        and "not from a level file" in error[0], error
+    assert not out.exists() or not list(out.iterdir())
