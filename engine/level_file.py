@@ -132,7 +132,9 @@ def _mesh(spec: Any, folder: Path) -> Mesh:
         names = [p.mesh.name for p in parts]
         if part is None and len(parts) > 1:
             raise ValueError(f"mesh file {str(path)!r} has {len(parts)} parts {names}: say which with part = \"...\"")
-        chosen = parts[0] if part is None else next((p for p in parts if p.mesh.name == part), None)
+        # A part by its name in the file ("left") or as the engine names it ("two.obj:left").
+        chosen = parts[0] if part is None else next(
+            (p for p in parts if part in (p.mesh.name, p.mesh.name.split(":", 1)[-1])), None)
         if chosen is None:
             raise ValueError(f"mesh file {str(path)!r} has no part {part!r} (parts: {names})")
         chosen.mesh.source = {"file": str(path), **({"part": part} if part is not None else {})}

@@ -11,6 +11,7 @@ import pytest
 
 from components import Camera, MeshRef, Mirror, Portal, Transform, look_rotation
 from engine.level_file import LevelError, _encode_component, load_level, same_floats, save_level
+from engine.mesh import load_model
 from engine.world import World
 from games.hall_of_mirrors.level import LEVEL as HALL
 from games.hall_of_mirrors.level import HallOfMirrors, Spin
@@ -391,3 +392,36 @@ def test_level_replaces_a_level_games_file_and_is_refused_by_any_other_game(tmp_
     assert len(error) == 1 and error[0].startswith("speculum: error: --level ") and str(path) in error[0] \
         and "not from a level file" in error[0], error
     assert not out.exists() or not list(out.iterdir())
+
+
+def test_a_file_with_several_meshes_needs_a_part(tmp_path):
+    """An OBJ with two materials is two meshes: naming the file alone is an error listing
+    them; part = "name" (as in the file, or file:name) picks one, and saving keeps it."""
+    (tmp_path / "two.obj").write_text("o left\nv 0 0 0\nv 1 0 0\nv 0 1 0\nusemtl m1\nf 1 2 3\n"
+                                      "o right\nv 2 0 0\nv 3 0 0\nv 2 1 0\nusemtl m2\nf 4 5 6\n")
+    whole = '[level]\nname = "parts"\n\n[[entity]]\nname = "thing"\n[entity.Transform]\n[entity.MeshRef]\n' \
+            'mesh = { file = "two.obj" }\n'
+    path = write(tmp_path, whole)
+    with pytest.raises(LevelError, match=r"has 2 parts \['two\.obj:left', 'two\.obj:left_1'\]: say which") as caught:
+        load_level(path)
+    assert (caught.value.entity, caught.value.field, caught.value.line) == ("thing", "MeshRef.mesh", 8)
+
+    other = whole.split("\n\n", 1)[1].replace('"thing"', '"other"')
+    parts = whole.replace('"two.obj" }', '"two.obj", part = "left_1" }') + \
+        other.replace('"two.obj" }', '"two.obj", part = "two.obj:left" }')
+    world = World("parts")
+    names = load_level(write(tmp_path, parts)).spawn(world)
+    first, second = (world.get(names[n], MeshRef).mesh for n in ("thing", "other"))
+    by_name = {part.mesh.name: part.mesh.positions for part in load_model(tmp_path / "two.obj")}
+    assert (first.name, second.name) == ("two.obj:left_1", "two.obj:left")
+    np.testing.assert_array_equal(first.positions, by_name["two.obj:left_1"])
+    np.testing.assert_array_equal(second.positions, by_name["two.obj:left"])
+    assert not np.array_equal(first.positions, second.positions)
+    text = save_level(world, tmp_path / "saved.toml", names, name="parts").read_text()
+    assert 'mesh = { file = "two.obj", part = "left_1" }' in text
+    again = World("again")
+    names_again = load_level(tmp_path / "saved.toml").spawn(again)
+    assert again.get(names_again["thing"], MeshRef).mesh is first  # one file, one mesh per part
+
+    with pytest.raises(LevelError, match=r"has no part 'middle' \(parts: "):
+        load_level(write(tmp_path, whole.replace('"two.obj" }', '"two.obj", part = "middle" }'), "bad.toml"))
