@@ -27,6 +27,13 @@ one draw.  Meanwhile the cube's base and max level are limited to the level abov
 ``glTexParameteri``; moderngl keeps no copy of them, and ``build_mipmaps`` sets them
 itself), so the level written is never one the draw reads.
 
+A cube-map face as a colour attachment (``RawGL.attach_cube_face``): a probe face that
+roots no view tree is drawn straight into its face instead of into a 2D target and copied.
+The framebuffer is made by moderngl (a placeholder colour texture and a depth texture);
+its colour attachment 0 is then re-pointed at the face with ``glFramebufferTexture2D``.
+moderngl still binds, clears and sets the viewport of it as its own; the copy's wait for
+each face's rasterisation (llvmpipe) is gone with the copy.
+
 ``glFlush``.  moderngl has ``finish`` (wait for everything) but no flush (start
 the GPU on what is queued, without waiting).  On llvmpipe that difference is frame time:
 draws are binned on the calling thread and rasterised only at a flush, a framebuffer
@@ -77,6 +84,7 @@ _SIGNATURES = {
     "glDeleteFramebuffers": (None, _i, ctypes.POINTER(_u)),
     "glBindFramebuffer": (None, _u, _u),
     "glFramebufferTexture": (None, _u, _u, _u, _i),
+    "glFramebufferTexture2D": (None, _u, _u, _u, _u, _i),
     "glCheckFramebufferStatus": (_u, _u),
     "glDrawBuffers": (None, _i, ctypes.POINTER(_u)),
     "glClearBufferfv": (None, _u, _i, ctypes.POINTER(ctypes.c_float)),
@@ -97,6 +105,35 @@ class RawGL:
         self.ctx = ctx
         self._flush = _load(ctx, "glFlush", _VOID_CALL)
         self._copy_tex_sub_image = _load(ctx, "glCopyTexSubImage2D", _COPY_TEX_SUB_IMAGE_2D)
+        self._attach = {name: _load(ctx, name, ctypes.CFUNCTYPE(*_SIGNATURES[name]))
+                        for name in ("glBindFramebuffer", "glFramebufferTexture2D", "glCheckFramebufferStatus",
+                                     "glGetError")}
+
+    @property
+    def can_attach_cube_faces(self) -> bool:
+        return all(fn is not None for fn in self._attach.values())
+
+    def attach_cube_face(self, framebuffer: moderngl.Framebuffer, cube: moderngl.TextureCube, face: int) -> None:
+        """Make ``face`` (0-5: +X, -X, +Y, -Y, +Z, -Z) of ``cube``'s base level the colour
+        attachment 0 of ``framebuffer`` (made by moderngl with a colour texture of the
+        face's size, which it replaces).  Raises RuntimeError where the calls are not
+        reachable or the framebuffer is not complete; moderngl's bound framebuffer is bound
+        again either way."""
+        if not self.can_attach_cube_faces:
+            raise RuntimeError("attaching a cube-map face needs GL entry points the loader lacks")
+        gl = self._attach
+        gl["glGetError"]()  # start clean: what follows is checked
+        gl["glBindFramebuffer"](GL_FRAMEBUFFER, framebuffer.glo)
+        gl["glFramebufferTexture2D"](GL_FRAMEBUFFER, GL_COLOR_ATTACHMENT0, GL_TEXTURE_CUBE_MAP_POSITIVE_X + face,
+                                     cube.glo, 0)
+        status = gl["glCheckFramebufferStatus"](GL_FRAMEBUFFER)
+        error = gl["glGetError"]()
+        gl["glBindFramebuffer"](GL_FRAMEBUFFER, 0)
+        if self.ctx.fbo is not None:
+            self.ctx.fbo.use()
+        if status != GL_FRAMEBUFFER_COMPLETE or error:
+            raise RuntimeError(f"cube-map face {face} of {cube.size[0]} as a colour attachment: framebuffer "
+                               f"status 0x{status:x}, GL error 0x{error:x}")
 
     @property
     def can_flush(self) -> bool:

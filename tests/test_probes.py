@@ -205,9 +205,11 @@ def test_a_deleted_probe_gives_its_cube_map_back(scene):
     runner = scene(chrome_scene(ents), (64, 48))
     runner.frame()
     assert ents["sphere"] in runner.engine.renderer.probes.cubes
+    assert runner.engine.renderer.resource_counts()["face_targets"] == 1
     runner.world.delete_entity(ents["sphere"])
     runner.frame()
     assert not runner.engine.renderer.probes.cubes and not probe_stage(runner).probes
+    assert runner.engine.renderer.resource_counts()["face_targets"] == 0
 
 
 @pytest.mark.parametrize("field, value", [("resolution", 100), ("resolution", 4), ("near", -1.0),
@@ -424,6 +426,33 @@ def test_the_layered_and_six_pass_captures_agree_face_by_face_and_culling_cuts_p
     # Six views each draw the scene without the probe's own sphere: its batch (one instance,
     # the skipped entity) is not drawn at all, rather than drawn and clipped away.
     assert six_pass_primitives == 6 * one_face + mips
+
+
+def test_faces_drawn_straight_into_the_cube_equal_faces_drawn_and_copied(scene):
+    """A face that roots no view tree is drawn straight into its cube face (a framebuffer
+    whose colour is the face); drawn into a 2D target and copied instead (where the face
+    cannot be attached, and for faces that see mirrors) it is the same image, texel for
+    texel, on every face: a face attached in the wrong place, or a pass that leaves part of
+    a face undrawn, fails."""
+    from engine.render.probes import face_view
+
+    ents = {}
+    runner = scene(marked_chrome_scene(ents), (64, 48))
+    runner.frame()
+    probes = runner.engine.renderer.probes
+    owner = ents["sphere"]
+    assert probes.direct_faces and owner in probes._faces  # the direct path drew the first capture
+    position = probe_stage(runner).probes[owner].position
+    views = {face: face_view(face, position, 0.05, 100.0, 64, skip=owner) for face in range(6)}
+    probes.capture(owner, views, None, 0)
+    direct = [probes.read_face(owner, face) for face in range(6)]
+    probes.cubes[owner].texture.write(0, np.zeros((64, 64, 4), np.float16).tobytes())  # nothing left over
+    probes.direct_faces = False
+    probes.capture(owner, views, None, 0)
+    copied = [probes.read_face(owner, face) for face in range(6)]
+    for face in range(6):
+        assert copied[face].std() > 0.01  # a marker or the wall: not a flat face
+        np.testing.assert_array_equal(direct[face], copied[face], err_msg=f"face {face}")
 
 
 def test_auto_times_both_paths_once_and_keeps_the_faster(scene):

@@ -20,7 +20,7 @@ from engine.errors import GLLimitError
 from engine.raw_gl import CubeMipTarget, LayeredCubeTarget
 from engine.render.bindings import CUBE_MIP_UNIT, SCRATCH_UNIT, PassState, apply_pass_state
 from engine.render.scene_pass import SceneOptions
-from engine.render.targets import LevelStack
+from engine.render.targets import LevelStack, release_framebuffer
 from engine.render.view_tree import SurfaceTable, TreeSettings, ViewTree
 from engine.render.views import View
 
@@ -216,6 +216,55 @@ class CubeMipPass:
         self._vaos.clear()
 
 
+@dataclass
+class FaceTarget:
+    """A target the scene pass draws one probe face into: one framebuffer (the cube face as
+    colour, a depth texture) serving as the clear, view and sky framebuffer alike, so a
+    face is one uninterrupted pass.  It has no id images, so it roots no view tree."""
+
+    framebuffer: moderngl.Framebuffer
+    size: tuple[int, int]
+
+    @property
+    def view_framebuffer(self) -> moderngl.Framebuffer:
+        return self.framebuffer
+
+    @property
+    def sky_framebuffer(self) -> moderngl.Framebuffer:
+        return self.framebuffer
+
+
+class CubeFaceTargets:
+    """Six framebuffers drawing straight into the faces of one probe's cube map (raw GL:
+    ``RawGL.attach_cube_face``), sharing one depth texture (faces are drawn one after
+    another, each cleared first).  Against drawing into a 2D target and copying, a face
+    costs no copy and, on llvmpipe, neither the copy's wait for the face's rasterisation
+    nor the framebuffer switches between clear, scene and sky."""
+
+    def __init__(self, ctx: moderngl.Context, raw_gl, cube: moderngl.TextureCube) -> None:
+        self.cube = cube
+        size = cube.size
+        self.depth = ctx.depth_texture(size)
+        placeholder = ctx.texture(size, 1, dtype="f1")  # moderngl needs a colour texture to make it
+        self.faces: list[FaceTarget] = []
+        try:
+            for face in range(6):
+                framebuffer = ctx.framebuffer([placeholder], self.depth)
+                self.faces.append(FaceTarget(framebuffer, size))
+                raw_gl.attach_cube_face(framebuffer, cube, face)
+        except BaseException:
+            self.release()
+            raise
+        finally:
+            placeholder.release()  # attached to none of them any more
+
+    def release(self) -> None:
+        for target in self.faces:
+            release_framebuffer(target.framebuffer)
+        self.faces.clear()
+        self.depth.release()
+
+
 class ProbeCaptures:
     """The GPU side of every probe: cube maps by probe key, and the targets faces draw into
     (one LevelStack per resolution, shared by all probes: captures run one after another)."""
@@ -225,6 +274,8 @@ class ProbeCaptures:
         self.ctx = renderer.ctx
         self.cubes: dict[int, ProbeCube] = {}
         self._layered: dict[int, LayeredCubeTarget] = {}  # the one-pass path's targets, by probe
+        self._faces: dict[int, CubeFaceTargets] = {}  # the six-pass path's face targets, by probe
+        self.direct_faces = renderer.raw_gl.can_attach_cube_faces  # False: draw in a 2D target, copy
         self._stacks: dict[int, LevelStack] = {}
         self.tree = ViewTree(renderer)
         self.mips = CubeMipPass(renderer)
@@ -246,22 +297,47 @@ class ProbeCaptures:
 
     def capture(self, key: int, views: dict[int, View], surfaces: SurfaceTable | None, depth: int,
                 prefilter: str = "mips") -> None:
-        """Draw each face view of ``views`` (face -> view, all of the probe's resolution) and
-        copy it into the probe's cube, then rebuild the cube's mips."""
+        """Draw each face view of ``views`` (face -> view, all of the probe's resolution) into
+        the probe's cube, then rebuild the cube's mips.  A face that sees mirrors or portals
+        (``surfaces`` given, ``depth`` > 0) roots a view tree, which needs the id images of a
+        full level: it is drawn into a 2D level target and copied into its face; any other
+        face is drawn straight into its face (``CubeFaceTargets``)."""
         renderer = self.renderer
         resolution = next(iter(views.values())).size[0]
         cube = self.cube(key, resolution)
-        levels = self._stacks.setdefault(resolution, LevelStack(self.ctx))
+        trees = surfaces is not None and depth > 0
+        direct = None if trees else self._face_targets(key, cube.texture)
         for face, view in sorted(views.items()):
-            targets = levels.get(0, view.size)
-            renderer.scene_pass.draw([view], targets, FACE)
-            if surfaces is not None and depth > 0:
-                self.tree.render(view, levels, surfaces, TreeSettings(depth_cap=depth))
-            renderer.raw_gl.copy_to_cube_face(targets.framebuffer, cube.texture, face, SCRATCH_UNIT)
-            renderer.checkpoint(f"probe face {face} copy")
+            if direct is not None:
+                renderer.scene_pass.draw([view], direct.faces[face], FACE)
+            else:
+                levels = self._stacks.setdefault(resolution, LevelStack(self.ctx))
+                targets = levels.get(0, view.size)
+                renderer.scene_pass.draw([view], targets, FACE)
+                if trees:
+                    self.tree.render(view, levels, surfaces, TreeSettings(depth_cap=depth))
+                renderer.raw_gl.copy_to_cube_face(targets.framebuffer, cube.texture, face, SCRATCH_UNIT)
+                renderer.checkpoint(f"probe face {face} copy")
             renderer.stats.probe_faces += 1
         cube.prefilter = prefilter
         self.mips.build(key, cube.texture, prefilter)
+
+    def _face_targets(self, key: int, cube: moderngl.TextureCube) -> CubeFaceTargets | None:
+        """The probe's direct face targets (made, or remade for a new cube), or None where a
+        cube face cannot be attached (then faces are copied)."""
+        if not self.direct_faces:
+            return None
+        targets = self._faces.get(key)
+        if targets is None or targets.cube is not cube:
+            if targets is not None:
+                targets.release()
+                del self._faces[key]
+            try:
+                targets = self._faces[key] = CubeFaceTargets(self.ctx, self.renderer.raw_gl, cube)
+            except RuntimeError:
+                self.direct_faces = False
+                return None
+        return targets
 
     def capture_layered(self, key: int, views: dict[int, View], culled: bool = True, prefilter: str = "mips") -> None:
         """All six faces in one pass (``ScenePass.draw_layered``) straight into the cube map,
@@ -288,6 +364,9 @@ class ProbeCaptures:
 
     def drop(self, key: int) -> None:
         self.mips.drop(key)
+        faces = self._faces.pop(key, None)
+        if faces is not None:
+            faces.release()
         target = self._layered.pop(key, None)
         if target is not None:
             target.release()
