@@ -35,7 +35,7 @@ from systems import (
 )
 from systems.frame_rules_system import FrameRulesSystem
 from systems.portal_slice_system import PortalSliceSystem
-from systems.probe_system import ProbeSystem
+from systems.probe_system import ProbeAfterPresentSystem, ProbeSystem
 from systems.surface_system import SurfaceSystem
 
 
@@ -78,6 +78,7 @@ FRAME_STAGES: tuple[tuple[str, Callable[[Engine], esper.Processor]], ...] = (
     ("main", lambda e: MainViewSystem(e.world, e.renderer)),
     ("reflect", lambda e: ReflectionSystem(e.world, e.renderer)),
     ("present", lambda e: PresentSystem(e.world, e.renderer)),
+    ("probes_after", lambda e: ProbeAfterPresentSystem(e.stages["probes"])),  # recaptures, for the next frame
 )
 
 

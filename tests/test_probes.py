@@ -127,6 +127,43 @@ def test_a_chrome_sphere_shows_the_red_wall_on_its_side_and_the_sky_on_the_other
     assert np.mean(hits[True]) > 0.95 and np.mean(hits[False]) < 0.05
 
 
+def test_an_object_whose_probe_has_no_capture_yet_reflects_the_sky(scene, ctx):
+    """A probe captured after another sees the other's object before its cube map exists
+    (the first frame captures probes one after the other).  The scene pass then gives that
+    object the sky, as an object with no probe reflects, not whatever cube map another pass
+    left on the probe's texture unit: drawn with the chrome sphere's cube map dropped and a
+    red one left bound, the sphere is the sky's colours, as in a frame where it reflects
+    the sky."""
+    from engine.render.bindings import PROBE_UNIT
+
+    ents = {}
+
+    def build(world):
+        world.spawn(Skybox())
+        look_from(world, (0.0, 0.0, 4.0), target=(0.0, 0.0, 0.0), fov=40.0)
+        ents["sphere"] = world.spawn(Transform(), MeshRef(sphere(0.6, 32, 16)),
+                                     Material(color=(1, 1, 1), metallic=1.0, roughness=0.0), Reflective("cube"))
+
+    runner = scene(build, (64, 48))
+    runner.frame()
+    renderer = runner.engine.renderer
+    pixels = runner.ids() == ents["sphere"]
+    assert pixels.sum() > 100
+    renderer.probes.drop(ents["sphere"])  # as before its first capture
+    red = ctx.texture_cube((1, 1), 4, np.tile(np.array([255, 0, 0, 255], np.uint8), 6).tobytes())
+    try:
+        red.use(PROBE_UNIT)  # left there by another pass
+        renderer.scene_pass.draw([runner.engine.main_view], renderer.targets)
+    finally:
+        red.release()
+    colour = np.flipud(np.frombuffer(renderer.targets.color.read(), np.float16).reshape(48, 64, 4))[pixels]
+    assert np.median(colour[:, 2]) > np.median(colour[:, 0]) + 0.1  # the sky's blue, not red
+    runner.world.get(ents["sphere"], Reflective).mode = "skybox"
+    runner.frame()
+    sky = np.flipud(np.frombuffer(renderer.targets.color.read(), np.float16).reshape(48, 64, 4))[pixels]
+    np.testing.assert_allclose(np.median(colour[:, :3], axis=0), np.median(sky[:, :3], axis=0), atol=0.05)
+
+
 def test_a_static_probe_captures_once_in_a_hundred_frames(scene):
     ents = {}
     runner = scene(chrome_scene(ents), (64, 48))
@@ -157,6 +194,35 @@ def test_a_box_moving_on_the_probes_plus_x_side_recaptures_only_that_face(scene)
     for _ in range(3):
         runner.frame()
     assert (state.captures, state.faces_captured) == (2, 7)
+
+
+@pytest.mark.parametrize("after_present", [True, False])
+def test_a_recapture_is_sampled_from_the_next_frame_or_at_once(scene, after_present):
+    """The red wall beside the chrome sphere turns green.  Recaptures drawn after present
+    (the default) leave this frame's sphere red on the wall's side and make the next one
+    green (the cube already holds green when the frame ends); drawn before the main view,
+    this frame's sphere is green at once."""
+    ents = {}
+    runner = scene(chrome_scene(ents), (96, 72))
+    probe_stage(runner).recapture_after_present = after_present
+    runner.frame()
+    side = runner.ids() == ents["sphere"]
+    side[:, :48] = False  # the sphere's right half: the wall (at +X) is what it reflects most
+
+    def redness(rgb):
+        colour = srgb_to_linear(rgb[side])
+        return float(np.median(colour[:, 0] - colour[:, 1]))
+
+    assert redness(runner.frame()) > 0.2
+    runner.world.get(ents["wall"], Material).color = (0.05, 0.9, 0.05)
+    changed = runner.frame()
+    state = probe_stage(runner).probes[ents["sphere"]]
+    assert state.captures == 2 and runner.stats.probe_faces > 0  # recaptured in this frame either way
+    green_face = runner.engine.renderer.probes.read_face(ents["sphere"], 0)[32, 32]  # +X: the wall
+    assert green_face[1] > green_face[0]  # the cube holds the green wall when the frame ends
+    if after_present:
+        assert redness(changed) > 0.2  # this frame sampled the cube as it was
+    assert redness(runner.frame() if after_present else changed) < -0.2
 
 
 def test_time_slicing_captures_one_face_a_frame_after_a_whole_first_capture(scene):

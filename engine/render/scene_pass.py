@@ -177,6 +177,12 @@ class ScenePass:
                 if cube is not None:
                     cube.texture.use(PROBE_UNIT)
                     probe_size, lookup = cube.face_size, cube.lookup()
+                else:
+                    # Its probe has no capture yet (a probe whose first capture comes later in
+                    # this stage sees it): the sky, as an object with no probe reflects, rather
+                    # than whatever cube another pass left on the unit.
+                    self.renderer.sky.use(PROBE_UNIT)
+                    probe_size = self._sky_size
             for i, value in enumerate((masked, self._sky_size, node, textured, batch.transparent, probe_size,
                                        *lookup)):
                 if values[i] != value and uniforms[i] is not None:
