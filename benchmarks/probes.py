@@ -21,10 +21,14 @@ level (``ggx``, ``ReflectionProbe.prefilter``), and ``build_mipmaps`` (glGenerat
 for comparison; interleaved.
 
 Frame rows (``probe``, ``frame_ms_median``): whole frames (``Engine.frame`` + ``finish``)
-of four engines interleaved frame by frame: ``none`` (the sphere reflects the sky),
-``once`` (a probe captured on the first frame only), ``static`` (``on_change``: the faces
-that see a spinning box are recaptured), ``dynamic`` (``every_frame`` at 128).  Ratios are
-to ``none``.
+of four engines, interleaved frame by frame in a shuffled order each round (an engine's
+frame pays for the caches the frame before it left cold): ``none`` (the sphere reflects
+the sky), ``static`` (a probe of static surroundings: captured on the first frame, never
+again; an ``on_change`` probe in a still scene does the same work, tests/test_probes.py
+counts one capture in 100 frames), ``on_change`` (the default refresh in this scene, where
+5 boxes spin: the faces that see one are recaptured, 3 a frame), ``dynamic``
+(``every_frame`` at 128: six faces a frame).  Ratios are to ``none``.  Recaptures are drawn
+after present (``ProbeSystem.recapture_after_present``).
 
     python -m benchmarks probes            # table
     python -m benchmarks probes --json     # one JSON object per line
@@ -33,6 +37,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import random
 import statistics
 import time
 from functools import partial
@@ -48,7 +53,7 @@ from engine.mesh import sphere
 from engine.render.probes import face_view
 from engine.render.targets import CaptureTarget
 
-MODES = {"none": None, "once": "once", "static": "on_change", "dynamic": "every_frame"}
+MODES = {"none": None, "static": "once", "on_change": "on_change", "dynamic": "every_frame"}
 
 
 class ProbeRing(MirrorRing):
@@ -156,8 +161,14 @@ def frame_rows(ctx, frames: int, warmup: int) -> list[dict]:
         outputs = [Output(c.framebuffer, OUTPUT_SIZE) for c in captures]
         times: list[list[float]] = [[] for _ in engines]
         faces: list[int] = [0 for _ in engines]
+        rng = random.Random(0)
         for frame in range(warmup + frames):
-            for i, (engine, output) in enumerate(zip(engines, outputs, strict=True)):
+            # A shuffled order each round: an engine's frame pays for the caches the frame
+            # before it left cold (a capture's most), so each follows every other alike.
+            order = list(range(len(engines)))
+            rng.shuffle(order)
+            for i in order:
+                engine, output = engines[i], outputs[i]
                 start = time.perf_counter()
                 engine.frame(DT, output)
                 ctx.finish()
