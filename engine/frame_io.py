@@ -17,7 +17,8 @@ class Input:
     belong to the shell: screenshot, quit).  ``held`` is what is down now; ``pressed`` what
     went down since the last frame (an edge: one frame per press, for toggles and actions);
     ``clicks`` the mouse buttons pressed since the last frame ('left', 'right', 'middle') and
-    ``mouse`` the pointer's last position in window pixels (x right, y down).  The engine
+    ``mouse`` the pointer's last position in the output's pixels (x right, y down;
+    the window shell scales a high-DPI window's points by its pixel ratio).  The engine
     empties ``pressed``, ``clicks`` and the mouse motion after every frame; the shell (a
     window, a test, a scripted player) fills them before the next."""
 

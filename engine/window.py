@@ -106,7 +106,10 @@ def make_window_config(game: Game, args: argparse.Namespace | None = None) -> ty
                 self.overlay.mouse_button(button, True)
                 if self.overlay.wants_mouse:
                     return
-            self.input.mouse = (float(x), float(y))
+            # In the output's pixels (what Output.size and the main view measure): on a
+            # high-DPI screen the framebuffer has pixel_ratio times the window's pixels.
+            ratio = float(getattr(self.wnd, "pixel_ratio", 1.0) or 1.0)
+            self.input.mouse = (float(x) * ratio, float(y) * ratio)
             if getattr(game, "mouse_look", False) and not self.mouse_captured:
                 # A game that looks with the mouse (its own controller, no FlyController):
                 # the click that takes the pointer is not a game click (no portal fired).
@@ -128,7 +131,10 @@ def make_window_config(game: Game, args: argparse.Namespace | None = None) -> ty
         def on_mouse_position_event(self, x: int, y: int, dx: int, dy: int) -> None:
             if self.overlay.visible and not self.mouse_captured:
                 self.overlay.mouse_moved(x, y)
-            self.input.mouse = (float(x), float(y))
+            # In the output's pixels (what Output.size and the main view measure): on a
+            # high-DPI screen the framebuffer has pixel_ratio times the window's pixels.
+            ratio = float(getattr(self.wnd, "pixel_ratio", 1.0) or 1.0)
+            self.input.mouse = (float(x) * ratio, float(y) * ratio)
             if self.mouse_captured:
                 self.input.mouse_dx += dx
                 self.input.mouse_dy += dy
@@ -138,7 +144,10 @@ def make_window_config(game: Game, args: argparse.Namespace | None = None) -> ty
                 self.overlay.mouse_moved(x, y)
                 if self.overlay.wants_mouse:  # dragging the depth-cap slider, not looking around
                     return
-            self.input.mouse = (float(x), float(y))
+            # In the output's pixels (what Output.size and the main view measure): on a
+            # high-DPI screen the framebuffer has pixel_ratio times the window's pixels.
+            ratio = float(getattr(self.wnd, "pixel_ratio", 1.0) or 1.0)
+            self.input.mouse = (float(x) * ratio, float(y) * ratio)
             self.input.mouse_dx += dx
             self.input.mouse_dy += dy
 

@@ -241,7 +241,7 @@ def restart(world: World, state: BeamState) -> None:
 
 
 def pick_mirror(world: World, mirrors: list[int], mouse: tuple[float, float]) -> int | None:
-    """The turnable mirror under the pointer (window pixels, y down) in the last frame's main
+    """The turnable mirror under the pointer (output pixels, y down) in the last frame's main
     view: the nearest outline the pointer's ray crosses, front or back."""
     views = world.resources.get(FrameViews)
     output = world.resources.get(Output)
