@@ -515,6 +515,32 @@ def test_a_portal_over_a_crate_is_refused_and_falling_off_the_level_restarts(pla
     assert glm.length(p.eye - glm.vec3(0, EYE_HEIGHT, 0)) < 0.5
 
 
+def test_a_solid_turned_off_the_world_axes_is_reported_once_a_build(play, tmp_path):
+    """The body's physics is axis-aligned, so a crate turned 30 degrees collides as its
+    world-axis box: the game says so, naming the crate, when it first moves the body (and
+    again after a restart rebuilds the level), and says nothing of quarter turns."""
+    import warnings as warnings_module
+
+    from games.portal_run.game import CoarseCollisionWarning
+
+    crate = "position = [0, 0.5, -5.5]"
+    turned = tmp_path / "turned.toml"
+    turned.write_text(SMALL_LEVEL.replace(crate, crate + "\nrotation = { yaw = 30 }"))
+    quarter = tmp_path / "quarter.toml"
+    quarter.write_text(SMALL_LEVEL.replace(crate, crate + "\nrotation = { yaw = 90 }"))
+    for level, expected in ((turned, ["'crate'"]), (quarter, [])):
+        p = play(level, ["hold w 3"])
+        with warnings_module.catch_warnings(record=True) as caught:
+            warnings_module.simplefilter("always")
+            p.run_script(render=False)
+            p.game.restart(p.engine.world)
+            p.frame(render=False)
+        found = [str(w.message) for w in caught if issubclass(w.category, CoarseCollisionWarning)]
+        assert len(found) == (2 if expected else 0), found
+        for text in found:
+            assert all(name in text for name in expected) and "'wall'" not in text and level.name in text
+
+
 def test_a_fast_body_does_not_tunnel_through_a_thin_wall_and_rests_on_a_floor():
     from games.portal_run.physics import BodyShape, Solid, move_body
 

@@ -27,6 +27,7 @@ sides; the game never teleports the player itself.
 from __future__ import annotations
 
 import math
+import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -87,6 +88,28 @@ CROSSHAIR_SIZE = 0.0012  # m: about 1.5% of the view's height at that distance
 
 class LevelRulesError(SpeculumError, ValueError):
     """A level's [rules] table that the game cannot play (names the file, the rule and why)."""
+
+
+class CoarseCollisionWarning(UserWarning):
+    """A solid turned off the world axes: the body collides with its world-axis bounding box
+    (``games.portal_run.physics`` is axis-aligned), which is larger than the solid."""
+
+
+def off_axis(world: World, entity: int) -> bool:
+    """Whether ``entity`` is turned off the world axes (by any rotation but quarter turns),
+    its rotation composed up its parents (from the Transforms themselves: a level just built
+    has no world matrices until the transform stage runs)."""
+    rotation = glm.quat()
+    seen: set[int] = set()
+    while entity and entity not in seen and world.exists(entity):
+        seen.add(entity)
+        transform = world.try_get(entity, Transform)
+        if transform is None:
+            break
+        rotation = glm.quat(transform.rotation) * rotation
+        entity = transform.parent or 0
+    columns = np.array([list(column) for column in glm.mat3_cast(rotation)], np.float64)
+    return bool((np.abs(columns).max(axis=1) < 1.0 - 1e-4).any())
 
 
 def levels() -> list[Path]:
@@ -312,6 +335,7 @@ class PortalRun(LevelGame):
         self._exiting: int | None = None  # the portal the body is coming out of, during a move
         self._in_front: set[int] = set()  # portals the eye was in front of when the move started
         self._boxes: tuple[int, list[Solid]] | None = None  # (frame, solid boxes) of the latest frame
+        self._axes_checked = False  # off-axis solids reported (once a build, from world matrices)
 
     def restart(self, world: World, why: str = "restart") -> None:
         """Delete everything and build the level again from its file (the autopilot goes on)."""
@@ -388,6 +412,17 @@ class PortalRun(LevelGame):
     def solid_boxes(self) -> list[Solid]:
         """The level's solids as world AABBs (from the ray caster's cached triangles), worked
         out once a frame."""
+        if not self._axes_checked:
+            self._axes_checked = True
+            names = {entity: name for name, entity in self.names.items()}
+            turned = [names.get(e, str(e)) for e in sorted(self.solids)
+                      if off_axis(self.world, e)]
+            if turned:
+                warnings.warn(CoarseCollisionWarning(
+                    f"portal_run, level file {str(self.level_path)!r}: solid(s) {', '.join(map(repr, turned))} "
+                    "turned off the world axes collide as their world-axis bounding box, larger than the mesh "
+                    "(the player's physics is axis-aligned: games/portal_run/physics.py); keep solids to quarter "
+                    "turns, or list them in [rules] not_solid"), stacklevel=2)
         if self._boxes is None or self._boxes[0] != self.frame:
             boxes = []
             for entity in sorted(self.solids):

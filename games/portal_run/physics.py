@@ -7,6 +7,9 @@ a fast body cannot tunnel through a wall thinner than its step.  A body that sta
 inside a solid (just carried out of a portal into a wall's thickness) is pushed out along
 the axis of least penetration first.  ``passable(entity, lo, hi)`` lets the game open a hole
 in a solid (the wall a portal sits on, while the body is in front of the portal's opening).
+
+A limit: a solid turned off the world axes collides as its world-axis box, which is larger
+than it; the game reports such solids once a build (``CoarseCollisionWarning``).
 """
 from __future__ import annotations
 
