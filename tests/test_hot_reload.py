@@ -269,3 +269,40 @@ def test_a_uniform_the_first_build_dropped_is_fed_after_a_reload(scene, shader_c
     expected = linear_to_srgb8(np.array([sky_size / 1024.0]))[0]  # present: linear -> sRGB
     assert abs(int(rgb[row, column, 0]) - int(expected)) <= 2 and rgb[row, column, 1] == 0, \
         (rgb[row, column].tolist(), expected)
+
+
+def test_a_vertex_input_the_first_build_dropped_is_fed_after_a_reload(scene, shader_copy):
+    """The plain box's program never read its instances' tint (only reflecting variants do),
+    so the linker dropped the input and the box's vertex array was made without it; an edit
+    that reads it gets the instance's tint on the next frame (the vertex arrays are made
+    again for the relinked programs), not the default (0, 0, 0, 1) of an unfed input."""
+    runner = scene(room, SIZE)
+    library = runner.engine.renderer.shaders
+    runner.frame()
+    edit(shader_copy, "scene.frag", "out_color = vec4(color,", "    color = v_tint.rgb * 0.5;")
+    assert library.poll(now=1000.0) and library.errors == {}
+    rgb = runner.frame()
+    column, row = runner.project(BOX_AT)
+    box_entity = next(e for e, t in runner.world.query_one(Transform) if np.allclose(tuple(t.position), BOX_AT))
+    batch = next(b for b in runner.engine.renderer.batches.values() if box_entity in list(b.entity_at[:b.count]))
+    tint = batch.row(box_entity)["tint"][:3] * 0.5
+    assert tint.max() > 0.1  # a tint that shows (an unfed input reads 0)
+    expected = linear_to_srgb8(np.asarray(tint, np.float64))
+    assert np.abs(rgb[row, column].astype(int) - expected.astype(int)).max() <= 2, (rgb[row, column].tolist(), expected)
+
+
+def test_a_composite_column_the_first_build_dropped_is_fed_after_a_reload(scene, shader_copy):
+    """The sharp mirror composite never read the portal's carry rotation, so its rows' vertex
+    format skipped that column; an edit that reads it (a mirror's carry is the identity: its
+    first column is red) gets the rows' values once the format and array are made again."""
+    runner = scene(room, SIZE)
+    library = runner.engine.renderer.shaders
+    before = runner.frame()
+    column, row = runner.project((0.0, 1.3, -1.5))  # the mirror's centre
+    edit(shader_copy, "mirror_composite.frag", "out_color = vec4(reflected, reflect_rate);",
+         "    reflected = v_carry[0];")
+    assert library.poll(now=1000.0) and library.errors == {}
+    rgb = runner.frame().astype(int)
+    red, green = rgb[row, column, 0], rgb[row, column, 1]
+    assert red > green + 60 and red > int(before[row, column, 0]) + 30, (rgb[row, column].tolist(),
+                                                                          before[row, column].tolist())

@@ -186,13 +186,18 @@ class InstanceBatch:
             self._vaos[key] = vao
         return vao
 
+    def drop_vertex_arrays(self) -> None:
+        """Forget the vertex arrays (after a shader hot reload a relinked program may read an
+        input its first build dropped, which an array made before was not given)."""
+        for vao in self._vaos.values():
+            vao.release()
+        self._vaos.clear()
+
     def draw(self, program: moderngl.Program) -> None:
         if self.count:
             self.vao(program).render(moderngl.TRIANGLES, vertices=self.mesh.index_count,
                                      instances=self.count)
 
     def release(self) -> None:
-        for vao in self._vaos.values():
-            vao.release()
-        self._vaos.clear()
+        self.drop_vertex_arrays()
         self._buffer.release()

@@ -135,8 +135,16 @@ class _CompositeDraw:
         self.format, self.attributes = _instance_format(program)
         self.rows: moderngl.Buffer | None = None     # grown as needed
         self.vao: moderngl.VertexArray | None = None
+        self.reloads = 0  # ShaderLibrary.reloads when the format and vertex array were made
 
-    def draw(self, rows: bytes) -> None:
+    def draw(self, rows: bytes, reloads: int = 0) -> None:
+        """Draw ``rows``; ``reloads`` is the shader library's count of rebuilds: after a hot
+        reload the program may read columns its first build dropped, so the format and the
+        vertex array are made again."""
+        if reloads != self.reloads:
+            self.reloads = reloads
+            self.format, self.attributes = _instance_format(self.program)
+            self.release()
         if self.rows is None or self.rows.size < len(rows):
             self.release()
             self.rows = self.ctx.buffer(reserve=max(len(rows), 16 * _COMPOSITE_ROW.size))
@@ -314,7 +322,7 @@ class MirrorPasses:
                 program["atlas_size"].value = self.rough_atlas.texture.size
             program["parent_size"].value = parent.size
             program["to_reflection"].value = (level.size[0] / parent.size[0], level.size[1] / parent.size[1])
-            draw.draw(variant_rows)
+            draw.draw(variant_rows, self.renderer.shaders.reloads)
         self.renderer.checkpoint("composite")
         self.renderer.flush()
 

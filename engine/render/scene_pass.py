@@ -106,12 +106,15 @@ class ScenePass:
         """The scene program for a batch of ``variants`` (None: mixed, switched per
         instance): plain, batched (``invocations`` > 0: the geometry shader's) or a one-pass
         cube-map capture (``layered`` "culled" or "naive"), built once.  After a shader hot
-        reload the set-up is done again (the relinked program may read uniforms and samplers
-        the first build dropped)."""
+        reload the set-up is done again and the batches' vertex arrays are made again (the
+        relinked program may read uniforms, samplers and vertex inputs the first build
+        dropped)."""
         reloads = self.renderer.shaders.reloads
         if reloads != self._reloads_seen:
             self._programs.clear()
             self._uniforms.clear()
+            for batch in self.renderer.batches.values():
+                batch.drop_vertex_arrays()  # made again for the relinked programs' inputs
             self._reloads_seen = reloads
         key = (invocations, layered, variants)
         program = self._programs.get(key)
