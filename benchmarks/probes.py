@@ -13,7 +13,9 @@ query around the main view's scene pass (one view of the scene), the yardstick f
 geometry six faces push.  Paths: ``six_pass`` (each face a view through the scene pass;
 the primitives count includes the probe's own sphere, which each face view clips),
 ``layered`` with ``culled`` true (one pass, each triangle sent to the faces it touches) and
-false (to all six faces).
+false (to all six faces).  An ``auto_chose`` row per size names the path ``ProbeSystem.path
+= "auto"`` settled on at the engine's first capture and ``chosen_over_faster``, its median
+here over the faster path's (1.0 when it chose right; the target is at most 1.10).
 
 Prefilter rows (``prefilter``, ``size``, ``prefilter_ms_median``): the mip chain of a
 captured cube rebuilt, box-filtered (``mips``, the default) or GGX-convolved level by
@@ -90,6 +92,7 @@ def capture_rows(ctx, frames: int) -> list[dict]:
     for size in (128, 512):
         engine, capture = captured_ring(ctx, size)
         try:
+            chosen = engine.stages["probes"].chosen_path  # "auto" timed both on the first capture
             query = ctx.query(primitives=True)
             with query:
                 engine.renderer.scene_pass.draw([engine.main_view], engine.renderer.targets)
@@ -119,6 +122,9 @@ def capture_rows(ctx, frames: int) -> list[dict]:
                 rows.append({"path": path, "culled": culled, "size": size,
                              "capture_ms_median": round(statistics.median(samples), 2),
                              "primitives": primitives[(path, culled)], "face_primitives": face_primitives})
+            medians = {path: statistics.median(times[(path, path == "layered")]) for path in ("six_pass", "layered")}
+            rows.append({"auto_chose": chosen, "size": size,
+                         "chosen_over_faster": round(medians[chosen] / min(medians.values()), 3)})
         finally:
             capture.release()
             engine.close()
