@@ -35,30 +35,45 @@ class MeshRef(TrackedComponent):
         return value
 
 
+MAX_NORMAL_SCALE = 16.0  # beyond this a normal map's bumps are all edge-on: a mistake, not a look
+
+
 @dataclass(eq=False)
 class Material(TrackedComponent):
     """Surface parameters, linear colour space.
 
     ``texture`` multiplies ``color``; ``metallic`` and ``roughness`` drive the GGX
     specular; ``alpha`` in ``color`` is used by refraction (how much shows through).
+
+    ``normal_map`` bends the shading normal per pixel: a tangent-space normal map in the
+    OpenGL convention (RGB = normal x 0.5 + 0.5; red towards +U, green towards +V, blue out
+    of the surface), read linearly, with ``normal_scale`` scaling its X and Y (glTF's
+    ``normalTexture.scale``: 0 is flat).  It bends lighting, sky and probe reflections,
+    refraction, and a mirror's reflection (the mirror's lookup of its reflected image
+    follows the bent ray: engine/render/mirror_passes.py).  The tangent frame comes from
+    the UVs' screen derivatives, so meshes need UVs, not tangents.
     """
 
     color: Any = field(default_factory=lambda: glm.vec4(0.8, 0.8, 0.8, 1.0))
     texture: TextureData | None = None
     metallic: float = 0.0
     roughness: float = 0.5
+    normal_map: TextureData | None = None
+    normal_scale: float = 1.0
 
     def _validate(self, name: str, value: Any) -> Any:
         if name == "color":
             return color(self, name, value)
         if name in ("metallic", "roughness"):
             return finite(self, name, value, low=0.0, high=1.0)
-        if name == "texture" and value is not None:
+        if name == "normal_scale":
+            return finite(self, name, value, low=0.0, high=MAX_NORMAL_SCALE)
+        if name in ("texture", "normal_map") and value is not None:
             from engine.texture_data import TextureData
 
             if not isinstance(value, TextureData):
                 raise ComponentValueError(
-                    f"Material.texture must be an engine.texture_data.TextureData, got {type(value).__name__}")
+                    f"Material.{name} must be an engine.texture_data.TextureData, got {type(value).__name__}")
         return value
 
 
