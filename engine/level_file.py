@@ -6,7 +6,8 @@ component, named by its class (``[entity.Transform]``) with the component's fiel
 Vectors and colours are lists, a rotation is a quaternion ``[w, x, y, z]`` or
 ``{ yaw = .., pitch = .. }`` (degrees) or ``{ look = [x, y, z] }``; a mesh is a generator
 (``{ box = [w, h, d] }``, ``{ quad = [w, h] }``, ``{ plane = [w, d], uv_repeat = r }``,
-``{ sphere = r }``) or ``{ file = "x.obj" }``; a texture ``{ checker = [size, squares] }`` or
+``{ sphere = r }``) or ``{ file = "x.obj" }``; a texture (``Material.texture``, ``Material.normal_map``)
+``{ checker = [size, squares] }``, ``{ ripples = [size, rings] }`` (a normal map) or
 ``{ file = "x.png" }``; paths are relative to the level file. Entity references
 (``Transform.parent``, ``Portal.partner``) are entity names. docs/level_files.md has the
 whole format with an example.
@@ -35,7 +36,7 @@ from engine.app import Game
 from engine.capture import VALUE_KINDS, json_value
 from engine.errors import AssetError, SpeculumError
 from engine.mesh import Mesh, box, load_model, plane, quad, sphere
-from engine.texture_data import TextureData, checker_texture, load_texture
+from engine.texture_data import TextureData, checker_texture, load_texture, ripple_normal_map
 from engine.world import World
 
 try:
@@ -164,8 +165,8 @@ def _mesh(spec: Any, folder: Path) -> Mesh:
 
 def _texture(spec: Any, folder: Path) -> TextureData:
     if not isinstance(spec, Mapping):
-        raise ValueError(f"a texture is a table such as {{ checker = [128, 8] }} or {{ file = \"x.png\" }}, "
-                         f"got {spec!r}")
+        raise ValueError(f"a texture is a table such as {{ checker = [128, 8] }}, {{ ripples = [256, 6] }} or "
+                         f"{{ file = \"x.png\" }}, got {spec!r}")
     spec = dict(spec)
     name = spec.pop("name", None)
     if "file" in spec:
@@ -174,8 +175,10 @@ def _texture(spec: Any, folder: Path) -> TextureData:
         if not path.is_file():
             raise ValueError(f"texture file {str(path)!r}: no such file")
         return _cached(("texture", str(path), path.stat().st_mtime_ns), lambda: load_texture(path))
+    if "ripples" in spec and "checker" not in spec:
+        return _ripples(spec, name)
     if "checker" not in spec:
-        raise ValueError(f"a texture names checker or file, got {sorted(spec)}")
+        raise ValueError(f"a texture names one of checker, ripples or file, got {sorted(spec)}")
     size, squares = (int(v) for v in spec.pop("checker"))
     colours = {k: tuple(int(c) for c in spec.pop(k)) for k in ("a", "b") if k in spec}
     _no_more(spec, "checker texture")
@@ -183,6 +186,31 @@ def _texture(spec: Any, folder: Path) -> TextureData:
         colours["name"] = str(name)
     key = ("checker", size, squares, tuple(sorted(colours.items())))
     return _cached(key, lambda: checker_texture(size, squares, **colours))
+
+
+def _ripples(spec: dict, name: Any) -> TextureData:
+    """``{ ripples = [size, rings] }`` with optional ``slope`` and ``name``: engine.texture_data's
+    ripple_normal_map (it checks the ranges; here only the kinds, so the cache key is plain)."""
+    size_rings = spec.pop("ripples")
+    if not isinstance(size_rings, list) or len(size_rings) != 2 or \
+            not all(isinstance(v, int) and not isinstance(v, bool) for v in size_rings):
+        raise ValueError(f"ripples = [size, rings] (two integers), got {size_rings!r}")
+    options: dict[str, Any] = {}
+    if "slope" in spec:
+        slope = spec.pop("slope")
+        if isinstance(slope, bool) or not isinstance(slope, (int, float)):
+            raise ValueError(f"ripples normal map: slope must be a number, got {slope!r}")
+        options["slope"] = float(slope)
+    _no_more(spec, "ripples normal map")
+    if name is not None:
+        if not isinstance(name, str):
+            raise ValueError(f"ripples normal map: name must be a string, got {name!r}")
+        options["name"] = name
+    size, rings = size_rings
+    defaults = {"slope": 0.5, "name": "ripples"}  # written or left out: one map
+    options = {k: v for k, v in options.items() if v != defaults[k]}
+    key = ("ripples", size, rings, tuple(sorted(options.items())))
+    return _cached(key, lambda: ripple_normal_map(size, rings, **options))
 
 
 def _asset_path(value: Any, folder: Path) -> Path:
@@ -369,7 +397,7 @@ def _entity(path: Path, folder: Path, index: int, name: str, table: dict[str, An
 def _decode(cls_name: str, field: str, value: Any, folder: Path) -> Any:
     if cls_name == "MeshRef" and field == "mesh":
         return _mesh(value, folder)
-    if field == "texture":
+    if field == "texture" or (cls_name, field) == ("Material", "normal_map"):
         return _texture(value, folder)
     if cls_name == "Transform" and field == "rotation":
         return _rotation(value)

@@ -19,7 +19,7 @@ from components import ComponentValueError, Emissive, Material, MeshRef, Mirror,
 from engine.assets import spawn_model
 from engine.errors import AssetError
 from engine.mesh import Mesh, box, load_model
-from engine.texture_data import TextureData, load_texture
+from engine.texture_data import TextureData, load_texture, ripple_normal_map
 from engine.world import World
 from tests.support import srgb_to_linear
 
@@ -442,6 +442,107 @@ def test_texture_data_rejects_bad_pixels(pixels):
 def test_texture_data_adds_opaque_alpha():
     tex = TextureData(np.full((1, 2, 3), 7, np.uint8))
     assert tex.pixels.shape == (1, 2, 4) and (tex.pixels[..., 3] == 255).all() and not tex.has_alpha
+
+
+# --- the ripples normal map ---------------------------------------------------------------
+
+RIPPLE_SIZE, RIPPLE_RINGS, RIPPLE_SLOPE = 65, 4, 0.5   # odd: texel 32 is the centre, u = v = 0.5 exactly
+MIDDLE = RIPPLE_SIZE // 2
+
+
+def decoded(tex: TextureData) -> np.ndarray:
+    """The normals a shader reads: RGB / 255 * 2 - 1 (linear data, not sRGB)."""
+    return tex.pixels[..., :3].astype(np.float64) / 255.0 * 2.0 - 1.0
+
+
+def ripple_uv(row: int, col: int) -> tuple[float, float]:
+    return (col + 0.5) / RIPPLE_SIZE, 1.0 - (row + 0.5) / RIPPLE_SIZE   # row 0 is the top: v = 1 there
+
+
+def ripple_height(u: float, v: float) -> float:
+    k = RIPPLE_RINGS
+    return float(np.cos(2 * np.pi * k * np.hypot(u - 0.5, v - 0.5)) / (2 * np.pi * k))
+
+
+def ripple_normal(row: int, col: int) -> np.ndarray:
+    """The documented normal at a texel's centre, worked out here by the chain rule:
+    dh/du = dh/dr (u - 0.5) / r with dh/dr = -sin(2 pi rings r)."""
+    u, v = ripple_uv(row, col)
+    r = np.hypot(u - 0.5, v - 0.5)
+    dh_dr = -np.sin(2 * np.pi * RIPPLE_RINGS * r)
+    gradient = np.zeros(2) if r == 0 else dh_dr * np.array([u - 0.5, v - 0.5]) / r
+    n = np.array([-RIPPLE_SLOPE * gradient[0], -RIPPLE_SLOPE * gradient[1], 1.0])
+    return n / np.linalg.norm(n)
+
+
+def test_ripple_normal_map_texels_are_the_analytic_unit_normals():
+    tex = ripple_normal_map(RIPPLE_SIZE, RIPPLE_RINGS, RIPPLE_SLOPE)
+    assert tex.size == (RIPPLE_SIZE, RIPPLE_SIZE) and tex.name == "ripples" and not tex.has_alpha
+    n = decoded(tex)
+    quantum = 1.0 / 255.0 + 1e-9                          # half a step of n * 127.5, and a hair
+    np.testing.assert_allclose(np.linalg.norm(n, axis=-1), 1.0, atol=2 * quantum)
+    assert (n[..., 2] > 0).all()                           # blue: out of the surface everywhere
+    # The centre is a smooth crest: straight out.
+    np.testing.assert_array_equal(tex.pixels[MIDDLE, MIDDLE], [128, 128, 255, 255])
+    # r = 1 / (4 rings) = 1/16 is the steepest ring (|dh/dr| = 1): the texel 4 above the centre
+    # (r = 4/65, 0.2% short of it) leans straight up, by the slope; the one 3 up and 3 right
+    # (r = 0.065) leans along the diagonal, away from the centre.
+    steep = MIDDLE - 4
+    assert abs(np.hypot(*np.subtract(ripple_uv(steep, MIDDLE), 0.5)) - 1 / (4 * RIPPLE_RINGS)) < 0.002
+    np.testing.assert_allclose(n[steep, MIDDLE], np.array([0.0, RIPPLE_SLOPE, 1.0]) / np.hypot(RIPPLE_SLOPE, 1),
+                               atol=2 * quantum)
+    diagonal = n[MIDDLE - 3, MIDDLE + 3]
+    assert diagonal[0] > 0.3 and diagonal[1] > 0.3 and abs(diagonal[0] - diagonal[1]) <= 2 * quantum
+    for row, col in [(steep, MIDDLE), (MIDDLE - 3, MIDDLE + 3), (MIDDLE + 7, MIDDLE - 2), (5, 60), (0, 0),
+                     (MIDDLE, 40), (20, MIDDLE)]:
+        np.testing.assert_allclose(n[row, col], ripple_normal(row, col), atol=quantum, err_msg=f"texel {row, col}")
+    # Every texel, against the same formula.
+    expected = np.array([[ripple_normal(row, col) for col in range(RIPPLE_SIZE)] for row in range(RIPPLE_SIZE)])
+    np.testing.assert_allclose(n, expected, atol=quantum)
+
+
+def test_ripple_normal_map_green_is_up_the_image():
+    """Green is +V, and row 0 is the top of the image. Row 20 is 12 texels above the centre,
+    where the height rises going outwards, i.e. up the image (found here from the heights,
+    not the formula): the surface faces down the image there, so green is below the middle;
+    the texel as far below the centre mirrors it."""
+    tex = ripple_normal_map(RIPPLE_SIZE, RIPPLE_RINGS, RIPPLE_SLOPE)
+    above, below = MIDDLE - 12, MIDDLE + 12
+    assert ripple_height(*ripple_uv(above - 1, MIDDLE)) > ripple_height(*ripple_uv(above + 1, MIDDLE))
+    green_above, green_below = int(tex.pixels[above, MIDDLE, 1]), int(tex.pixels[below, MIDDLE, 1])
+    assert green_above < 100 and green_below > 155 and abs(green_above + green_below - 255) <= 1
+    assert abs(int(tex.pixels[above, MIDDLE, 0]) - 128) <= 1   # straight above: no lean along U
+    # And red is +U: the texel as far to the right leans the same way along U as this one does along V.
+    assert abs(int(tex.pixels[MIDDLE, MIDDLE + 12, 0]) - green_above) <= 1
+
+
+def test_ripple_normal_map_source_and_flat_slope():
+    assert ripple_normal_map(64, 4).source == {"ripples": [64, 4]}
+    assert ripple_normal_map(32, 2, slope=0.25, name="pond").source == {"ripples": [32, 2], "slope": 0.25,
+                                                                         "name": "pond"}
+    flat = ripple_normal_map(16, 3, slope=0)
+    assert (flat.pixels == [128, 128, 255, 255]).all()
+
+
+@pytest.mark.parametrize("kwargs, argument", [
+    ({"size": 0}, "size"), ({"size": 64.0}, "size"), ({"size": True}, "size"), ({"size": 20000}, "size"),
+    ({"rings": 0}, "rings"), ({"size": 8, "rings": 9}, "rings"), ({"rings": 2.5}, "rings"),
+    ({"slope": -0.1}, "slope"), ({"slope": float("nan")}, "slope"), ({"slope": float("inf")}, "slope"),
+    ({"slope": 101}, "slope"), ({"slope": "steep"}, "slope"), ({"slope": True}, "slope"),
+])
+def test_ripple_normal_map_bad_arguments_are_named(kwargs, argument):
+    with pytest.raises(AssetError, match=rf"^ripples normal map 'lake': {argument} must be "):
+        ripple_normal_map(**{"name": "lake", **kwargs})
+
+
+def test_a_normal_map_file_loads_as_its_pixels(tmp_path):
+    """A normal map file is an image like any other: load_texture keeps its bytes as they are
+    (no colour conversion), RGBA or RGB."""
+    tex = ripple_normal_map(32, 3)
+    Image.fromarray(tex.pixels).save(tmp_path / "rgba.png")
+    Image.fromarray(tex.pixels[..., :3]).save(tmp_path / "rgb.png")
+    for name in ("rgba.png", "rgb.png"):
+        np.testing.assert_array_equal(load_texture(tmp_path / name).pixels, tex.pixels)
 
 
 # --- rendering ------------------------------------------------------------------------------

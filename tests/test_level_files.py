@@ -12,6 +12,7 @@ import pytest
 from components import Camera, MeshRef, Mirror, Portal, Transform, look_rotation
 from engine.level_file import LevelError, _encode_component, load_level, same_floats, save_level
 from engine.mesh import load_model
+from engine.texture_data import ripple_normal_map
 from engine.world import World
 from games.hall_of_mirrors.level import LEVEL as HALL
 from games.hall_of_mirrors.level import HallOfMirrors, Spin
@@ -326,7 +327,8 @@ def test_a_bad_level_through_the_runner_is_one_error_line(tmp_path):
     assert result.returncode == 2, result.stderr
     lines = result.stderr.strip().splitlines()
     assert lines == [f"speculum: error: {path}:{line_of(path, 'colour =')}: entity 'floor': Material.colour: "
-                     "Material has no field 'colour' (fields: color, metallic, normal_map, normal_scale, roughness, texture)"], lines
+                     "Material has no field 'colour' (fields: color, metallic, normal_map, normal_scale, roughness, "
+                     "texture)"], lines
     assert not list((tmp_path / "out").glob("frame_*.png"))
 
 
@@ -425,3 +427,114 @@ def test_a_file_with_several_meshes_needs_a_part(tmp_path):
 
     with pytest.raises(LevelError, match=r"has no part 'middle' \(parts: "):
         load_level(write(tmp_path, whole.replace('"two.obj" }', '"two.obj", part = "middle" }'), "bad.toml"))
+
+
+POND = BASE + """
+[[entity]]
+name = "pond"
+[entity.Transform]
+position = [0.0, 0.01, 2.0]
+[entity.MeshRef]
+mesh = { quad = [1.0, 1.0] }
+[entity.Material]
+normal_map = { ripples = [64, 4] }
+normal_scale = 0.5
+
+[[entity]]
+name = "puddle"
+[entity.Transform]
+position = [1.0, 0.01, 2.0]
+[entity.MeshRef]
+mesh = { quad = [0.5, 0.5] }
+[entity.Material]
+texture = { checker = [16, 2] }
+normal_map = { ripples = [64, 4], slope = 0.5 }
+
+[[entity]]
+name = "tiles"
+[entity.Transform]
+position = [2.0, 0.01, 2.0]
+[entity.MeshRef]
+mesh = { quad = [0.5, 0.5] }
+[entity.Material]
+normal_map = { ripples = [32, 2], slope = 0.25, name = "wide" }
+normal_scale = 2.0
+"""
+
+
+def test_a_normal_map_loads_saves_and_loads_again(tmp_path):
+    """Material.normal_map = { ripples = [size, rings] } (optional slope, name) is the
+    generator's map, one object for one call (the default slope written or not), and
+    normal_scale a plain number; a normal map file is named like a texture file. Saved, the
+    level writes each map by how it was made, and loads again to the same pixels and scales."""
+    from PIL import Image
+
+    from components import Material
+
+    (tmp_path / "maps").mkdir()
+    Image.fromarray(ripple_normal_map(8, 1).pixels[..., :3]).save(tmp_path / "maps" / "bumps.png")
+    text = POND + textwrap.dedent("""
+        [[entity]]
+        name = "filed"
+        [entity.Transform]
+        [entity.MeshRef]
+        mesh = { quad = [1.0, 1.0] }
+        [entity.Material]
+        normal_map = { file = "maps/bumps.png" }
+        """)
+    world = World("pond")
+    names = load_level(write(tmp_path, text)).spawn(world)
+    pond, puddle, tiles, filed = (world.get(names[n], Material) for n in ("pond", "puddle", "tiles", "filed"))
+    np.testing.assert_array_equal(pond.normal_map.pixels, ripple_normal_map(64, 4).pixels)
+    assert pond.normal_map.source == {"ripples": [64, 4]} and pond.normal_scale == 0.5
+    assert puddle.normal_map is pond.normal_map and puddle.normal_scale == 1.0 and puddle.texture is not None
+    np.testing.assert_array_equal(tiles.normal_map.pixels, ripple_normal_map(32, 2, 0.25).pixels)
+    assert tiles.normal_map.name == "wide" and tiles.normal_scale == 2.0
+    np.testing.assert_array_equal(filed.normal_map.pixels, ripple_normal_map(8, 1).pixels)
+
+    (tmp_path / "out").mkdir()
+    saved = save_level(world, tmp_path / "out" / "saved.toml", names, name="pond")
+    written = saved.read_text()
+    assert "normal_map = { ripples = [64, 4] }\nnormal_scale = 0.5\n" in written
+    assert 'normal_map = { ripples = [32, 2], slope = 0.25, name = "wide" }\nnormal_scale = 2.0\n' in written
+    assert 'normal_map = { file = "../maps/bumps.png" }' in written
+    again = World("again")
+    names_again = load_level(saved).spawn(again)
+    for name in ("pond", "puddle", "tiles", "filed"):
+        first, second = world.get(names[name], Material), again.get(names_again[name], Material)
+        np.testing.assert_array_equal(second.normal_map.pixels, first.normal_map.pixels)
+        assert second.normal_scale == first.normal_scale and second.normal_map.name == first.normal_map.name
+    assert same_floats(fields_by_name(again, names_again), fields_by_name(world, names))
+
+
+@pytest.mark.parametrize("old, new, field, reason", [
+    ("{ ripples = [64, 4] }", "{ ripples = [64, 0] }", "Material.normal_map",
+     r"rings must be an int in \[1, size=64\]"),
+    ("{ ripples = [64, 4] }", "{ ripples = [0, 4] }", "Material.normal_map", r"size must be an int in \[1, "),
+    ("{ ripples = [64, 4] }", "{ ripples = [64] }", "Material.normal_map", r"ripples = \[size, rings\] \(two integ"),
+    ("{ ripples = [64, 4] }", "{ ripples = [64, 4.5] }", "Material.normal_map", r"ripples = \[size, rings\]"),
+    ("{ ripples = [64, 4] }", "{ ripples = [64, 4], slope = -1.0 }", "Material.normal_map",
+     r"slope must be a number in \[0, 100\], got -1\.0"),
+    ("{ ripples = [64, 4] }", "{ ripples = [64, 4], slope = \"steep\" }", "Material.normal_map",
+     r"slope must be a number, got 'steep'"),
+    ("{ ripples = [64, 4] }", "{ ripples = [64, 4], slop = 1.0 }", "Material.normal_map",
+     r"ripples normal map: unknown keys \['slop'\]"),
+    ("{ ripples = [64, 4] }", "{ waves = 3 }", "Material.normal_map", r"names one of checker, ripples or file"),
+    ("{ ripples = [64, 4] }", "\"ripples.png\"", "Material.normal_map", r"a texture is a table"),
+    ("{ ripples = [64, 4] }", "{ file = \"maps/gone.png\" }", "Material.normal_map",
+     r"texture file .*gone\.png.*: no such file"),
+    ("normal_scale = 0.5", "normal_scale = 20.0", "Material.normal_scale", r"normal_scale"),
+    ("normal_scale = 0.5", "normal_scale = -0.5", "Material.normal_scale", r"normal_scale"),
+], ids=["rings", "size", "one_number", "float_rings", "negative_slope", "string_slope", "unknown_key",
+        "no_generator", "not_a_table", "missing_file", "scale_too_big", "scale_negative"])
+def test_a_bad_normal_map_names_the_entity_and_field(tmp_path, old, new, field, reason):
+    text = POND.replace(old, new, 1)
+    assert text != POND
+    path = write(tmp_path, text)
+    with pytest.raises(LevelError, match=reason) as caught:
+        load_level(path)
+    error = caught.value
+    assert (error.entity, error.field) == ("pond", field)
+    assert error.line == line_of(path, new.split(" = ")[0] if new.startswith("normal_scale") else "normal_map =",
+                                 after='name = "pond"')
+    assert f"{path}:{error.line}: entity 'pond': {field}: " in str(error)
