@@ -7,8 +7,14 @@
 // executes both sides of every branch, even one no pixel of the draw takes.
 //   COMPOSITE_PORTAL: a plain window onto the view, the sky beyond the partner behind it;
 //   COMPOSITE_ROUGH:  a rough mirror, reading the blurred mips of its own atlas tile;
-//   neither:          a sharp mirror, reading its level 1:1.
+//   neither:          a sharp mirror, reading its level 1:1;
+//   COMPOSITE_BUMPY:  (with or without ROUGH) a mirror with a normal map, which reads its
+//                     image along the ray its bent normal reflects (below).
 #include "ggx.glsl"
+#include "normal_map.glsl"
+#ifdef COMPOSITE_BUMPY
+flat in mat3 v_project_dir;
+#endif
 
 uniform sampler2D reflection;        // premultiplied: alpha 0 where nothing was reflected
 uniform usampler2D reflection_seen;
@@ -27,7 +33,7 @@ flat in vec4 v_eye;        // w: tile x
 flat in vec4 v_tint;       // a: tile scale
 flat in vec4 v_params;
 flat in vec4 v_normal;     // w: tile y
-flat in mat3 v_carry;
+flat in mat3 v_carry;       // a bumpy mirror's UV map: columns u's gradient, v's, (u0, v0, map scale)
 flat in uint v_view;
 
 layout(location = 0) out vec4 out_color;  // blended: rgb x reflect_rate + own x (1 - reflect_rate)
@@ -53,6 +59,35 @@ void main() {
     float reflect_rate = v_params.x;
     float roughness = v_params.y;
     vec3 normal = v_normal.xyz;
+#ifdef COMPOSITE_BUMPY
+    // A normal map bends the mirror (seed 000's future work: the reflection texture stays as
+    // it is, only its lookup moves).  The pixel's ray meets the mirror's plane at p, whose UVs
+    // give the map's normal.  The bent reflected ray, carried back through the flat mirror,
+    // is the direction the mirror's image shows it in: its vanishing point in the parent view
+    // is where the image holds what lies far along it (exact for distant things, overstated
+    // for near ones).  A lookup that leaves this view's pixels keeps the flat one.
+    vec3 flat_normal = normal;
+    vec3 p = v_eye.xyz + view_dir * (-(dot(flat_normal, v_eye.xyz) + v_params.z) / dot(flat_normal, view_dir));
+    vec2 mirror_uv = vec2(dot(v_carry[0], p), dot(v_carry[1], p)) + v_carry[2].xy;
+    vec3 along_u = normalize(v_carry[0] - dot(v_carry[0], flat_normal) * flat_normal);
+    vec3 along_v = normalize(v_carry[1] - dot(v_carry[1], flat_normal) * flat_normal);
+    normal = bent_normal(along_u, along_v, flat_normal, mirror_uv, v_carry[2].z);
+    vec3 seen_dir = reflect(reflect(view_dir, normal), flat_normal);
+    vec3 clip = v_project_dir * seen_dir;
+    if (clip.z > 1e-6) {
+        vec2 bent_uv = clip.xy / clip.z * 0.5 + 0.5;
+        vec2 bent_level_px = bent_uv * parent_size * to_reflection;
+        ivec2 bent_px = ivec2(bent_level_px);
+        // Inside the view's rectangle (outside it the node image is an older frame's).
+        if (all(greaterThanEqual(bent_level_px, v_rect.xy)) && all(lessThan(bent_level_px, v_rect.zw))
+                && texelFetch(reflection_nodes, bent_px, 0).r == v_view) {
+            uv = bent_uv;
+            level_px = bent_level_px;
+            px = bent_px;
+            out_seen = texelFetch(reflection_seen, px, 0).r;
+        }
+    }
+#endif
     vec3 r = reflect(view_dir, normal);
 #ifdef COMPOSITE_ROUGH
     // A rough mirror reads the blurred mips of its own tile (the level's would mix in its

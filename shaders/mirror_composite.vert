@@ -19,6 +19,9 @@ flat out vec4 v_params;
 flat out vec4 v_normal;
 flat out mat3 v_carry;
 flat out uint v_view;        // the view's index (its pixels in the level's node image)
+#ifdef COMPOSITE_BUMPY
+flat out mat3 v_project_dir; // rows x, y, w of the parent's view-projection for directions (w = 0)
+#endif
 
 uniform vec2 parent_size;     // pixels of the level composited into
 uniform vec2 to_reflection;   // those pixels -> the reflection level's
@@ -43,4 +46,8 @@ void main() {
     v_normal = in_normal;
     v_carry = in_carry;
     v_view = uint(in_params.w + 0.5);
+#ifdef COMPOSITE_BUMPY
+    mat4 view_proj = inverse(in_inv_view_proj);
+    v_project_dir = mat3(view_proj[0].xyw, view_proj[1].xyw, view_proj[2].xyw);
+#endif
 }

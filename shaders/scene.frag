@@ -109,6 +109,23 @@ vec3 direct_lighting(Surface s) {
     return total;
 }
 
+#include "normal_map.glsl"
+#ifdef NORMAL_MAP
+// The directions in which U and V grow across the surface, from screen derivatives of the
+// position and the UVs (a cotangent frame: Schüler, "Normal Mapping Without Precomputed
+// Tangents", 2013), so meshes need no tangent attribute.  Only this build of the program
+// computes it (engine/render/scene_pass.py): a batch with a normal map.
+vec3 mapped_normal(vec3 n, vec3 p, vec2 uv, float scale) {
+    vec3 dp1 = dFdx(p), dp2 = dFdy(p);
+    vec2 duv1 = dFdx(uv), duv2 = dFdy(uv);
+    vec3 dp2perp = cross(dp2, n), dp1perp = cross(n, dp1);
+    vec3 t = dp2perp * duv1.x + dp1perp * duv2.x;  // the gradients of u and of v in the surface
+    vec3 b = dp2perp * duv1.y + dp1perp * duv2.y;
+    if (dot(t, t) < 1e-30 || dot(b, b) < 1e-30) return n;  // UVs that do not vary here: flat
+    return bent_normal(normalize(t), normalize(b), n, uv, scale);
+}
+#endif
+
 // --- Reflect slot ---------------------------------------------------------------------
 vec3 sample_environment(vec3 direction, float lod, float roughness) {
     return textureLod(sky_map, direction, lod + roughness_lod_bias(roughness)).rgb;
@@ -204,6 +221,9 @@ void main() {
     s.to_eye = normalize(VIEW_EYE - v_world_pos);
     s.normal = normalize(v_normal);
     if (!gl_FrontFacing) s.normal = -s.normal;
+#ifdef NORMAL_MAP
+    s.normal = mapped_normal(s.normal, v_world_pos, v_uv, v_surface.w);
+#endif
     vec4 base = v_color;
     if (has_albedo_map) base *= texture(albedo_map, v_uv);
     s.albedo = base.rgb;

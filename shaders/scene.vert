@@ -27,7 +27,7 @@ in vec2 in_uv;
 in mat4 in_model;          // model -> world
 in mat3 in_normal_matrix;  // inverse-transpose of the model's upper 3x3
 in vec4 in_color;          // linear base colour, alpha
-in vec4 in_surface;        // metallic, roughness, emissive power, -
+in vec4 in_surface;        // metallic, roughness, emissive power, normal-map scale
 in vec4 in_reflect;        // reflection mix, refraction ior, -, -
 in vec4 in_tint;           // reflection tint
 in vec4 in_slice;          // world plane: only its front is drawn (things partly through a portal)

@@ -82,9 +82,9 @@ class ExtractSystem(esper.Processor):
         transparent = material is not None and material.color.w < 1.0 and not world.has(entity, Refractive)
         try:
             batch = self.renderer.batch_for(mesh_ref.mesh, material.texture if material else None, probe,
-                                            entity if transparent else 0)
+                                            entity if transparent else 0, material.normal_map if material else None)
         except GLLimitError as exc:
-            raise GLLimitError(f"entity {entity}: Material.texture: {exc}") from None
+            raise GLLimitError(f"entity {entity}: {exc}") from None
         if old is not batch:
             if old is not None:
                 self._remove_instance(entity, old)

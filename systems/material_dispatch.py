@@ -24,7 +24,7 @@ class MaterialChoice:
     refract: RefractVariant
     reflect: ReflectVariant
     color: glm.vec4
-    surface: tuple[float, float, float, float]  # metallic, roughness, emissive power, -
+    surface: tuple[float, float, float, float]  # metallic, roughness, emissive power, normal-map scale
     reflect_params: tuple[float, float, float, float]  # reflection mix, ior, -, -
     tint: glm.vec4
 
@@ -61,7 +61,7 @@ def choose_material(material: Material | None, emissive: Emissive | None,
         refract=RefractVariant.ENVIRONMENT if refractive is not None else RefractVariant.NONE,
         reflect=reflect_variant,
         color=material.color,
-        surface=(material.metallic, material.roughness, emissive.power if emissive else 0.0, 0.0),
+        surface=(material.metallic, material.roughness, emissive.power if emissive else 0.0, material.normal_scale),
         reflect_params=(mix, refractive.ior if refractive else 1.0, 0.0, 0.0),
         tint=tint,
     )

@@ -12,18 +12,22 @@ from __future__ import annotations
 import esper
 import numpy as np
 
-from components import MeshRef, Mirror, Portal, Transform
+from components import Material, MeshRef, Mirror, Portal, Transform
 from engine.errors import SpeculumError
 from engine.frame_rules import frame_rules, world_corners
 from engine.mesh import flat_plane
 from engine.portal_math import pair_transform, portal_plane
 from engine.reflection_math import plane_from_point_normal, reflection_matrix, transform_plane
+from engine.render.mirror_passes import MirrorBumps
 from engine.render.view_tree import Surfaces, SurfaceState
 from engine.world import World
 
 # A mirror mesh thinner than this fraction of its size composites over its outline quad;
 # anything thicker (a mirror plane given explicitly on a solid mesh) over its rectangle.
 FLAT_OUTLINE_TOLERANCE = 1e-3
+# A bumpy mirror's UVs must be an affine function of position on its plane to within this
+# fraction of their range (the composite works them out from the plane point it shades).
+UV_FIT_TOLERANCE = 1e-3
 
 
 class MirrorError(SpeculumError, ValueError):
@@ -44,6 +48,7 @@ class SurfaceSystem(esper.Processor):
     def _refresh_mirrors(self) -> None:
         world = self.world
         touched = world.changed(Mirror) | world.changed(MeshRef)
+        touched |= {e for e in world.changed(Material) if e in self.mirrors}  # a normal map given or taken
         touched |= {e for e in world.frame.moved | world.frame.added if e in self.mirrors or e in touched}
         for entity in touched:
             mirror = world.try_get(entity, Mirror) if world.exists(entity) else None
@@ -54,7 +59,8 @@ class SurfaceSystem(esper.Processor):
             transform = world.try_get(entity, Transform)
             if mesh_ref is None or transform is None:
                 raise MirrorError(f"entity {entity}: a Mirror needs a MeshRef and a Transform")
-            self.mirrors[entity] = self._mirror_state(entity, mirror, mesh_ref, transform)
+            self.mirrors[entity] = self._mirror_state(entity, mirror, mesh_ref, transform,
+                                                      world.try_get(entity, Material))
 
     def _refresh_portals(self) -> None:
         """Portals depend on their partner's pose too; there are few, so all are redone."""
@@ -75,7 +81,8 @@ class SurfaceSystem(esper.Processor):
                 portal.max_depth, portal.enabled)
 
     @staticmethod
-    def _mirror_state(entity: int, mirror: Mirror, mesh_ref: MeshRef, transform: Transform) -> SurfaceState:
+    def _mirror_state(entity: int, mirror: Mirror, mesh_ref: MeshRef, transform: Transform,
+                      material: Material | None = None) -> SurfaceState:
         mesh = mesh_ref.mesh
         if mirror.plane_normal is not None:
             point = np.array(mirror.plane_point if mirror.plane_point is not None else (0.0, 0.0, 0.0))
@@ -100,6 +107,28 @@ class SurfaceSystem(esper.Processor):
         outline = None
         if extents[flat_axis] <= FLAT_OUTLINE_TOLERANCE * max(float(extents.max()), 1e-9):
             outline = corners[[i for i in range(8) if not (i >> (2 - flat_axis)) & 1]]
+        bumps = None
+        if material is not None and material.normal_map is not None:
+            bumps = MirrorBumps(material.normal_map, material.normal_scale,
+                                _uv_rows(entity, mesh, np.array(model.to_list(), np.float64).T), float(plane.w))
         return SurfaceState(entity, "mirror", plane, corners, outline,
                             reflection_matrix(plane), plane, entity, mirror.max_depth, mirror.enabled,
-                            mirror.color, mirror.reflect_rate, mirror.roughness, mirror.resolution_scale)
+                            mirror.color, mirror.reflect_rate, mirror.roughness, mirror.resolution_scale, bumps)
+
+
+def _uv_rows(entity: int, mesh, model: np.ndarray) -> np.ndarray:
+    """The mirror's UVs as an affine function of world position, (2, 4) rows: fitted to the
+    mesh's vertices by least squares in model space (the fit's free part along the normal is
+    the smallest), then carried to world space by the inverse model matrix.  A mesh whose UVs
+    are not affine over its plane is refused: its composite could not find them."""
+    points = np.hstack([mesh.positions.astype(np.float64), np.ones((len(mesh.positions), 1))])
+    uvs = mesh.uvs.astype(np.float64)
+    rows, *_ = np.linalg.lstsq(points, uvs, rcond=None)  # (4, 2)
+    error = float(np.abs(points @ rows - uvs).max())
+    span = float(np.ptp(uvs, axis=0).max())
+    if not error <= UV_FIT_TOLERANCE * max(span, 1e-9) or span <= 0.0:
+        raise MirrorError(
+            f"entity {entity}: Material.normal_map on a Mirror needs UVs that vary linearly over the mirror "
+            f"(mesh {mesh.name!r}: {'its UVs do not vary' if span <= 0.0 else f'off a plane map by {error:.3g}'}); "
+            "use a flat mesh with planar UVs, such as a quad")
+    return rows.T @ np.linalg.inv(model)

@@ -21,6 +21,7 @@ from engine.errors import ShaderError
 from engine.mesh import box, plane, quad, sphere
 from engine.portals import spawn_portal_pair
 from engine.shader_library import POLL_INTERVAL, ShaderLibrary, load_source
+from engine.texture_data import ripple_normal_map
 from tests.support import linear_to_srgb8, look_from
 
 SIZE = (96, 72)
@@ -154,10 +155,13 @@ def test_an_include_inside_a_dropped_branch_does_not_shift_later_lines(ctx, tmp_
 
 
 def every_program_scene(world) -> None:
-    """A mirror (sharp and rough), a portal pair, a probe captured both ways: the engine
-    builds most of its programs, geometry-shader and specialised variants included."""
+    """A mirror (sharp and rough, one with a normal map), a portal pair, a probe captured
+    both ways: the engine builds most of its programs, geometry-shader and specialised
+    variants included."""
     room(world)
     world.spawn(Transform(position=(-1.5, 1.0, -1.0)), MeshRef(quad(1, 1)), Material(), Mirror(roughness=0.3))
+    world.spawn(Transform(position=(1.5, 1.0, -1.0)), MeshRef(quad(1, 1)),
+                Material(normal_map=ripple_normal_map(32, 2)), Mirror())
     spawn_portal_pair(world, (-2.5, 1.0, 0.0), glm.angleAxis(0.5, glm.vec3(0, 1, 0)), (2.5, 1.0, 0.0),
                       glm.angleAxis(-0.5, glm.vec3(0, 1, 0)), size=(1.0, 1.6))
     world.spawn(Transform(position=(-0.8, 0.5, 0.8)), MeshRef(sphere(0.4)), Material(metallic=1.0, roughness=0.1),

@@ -30,6 +30,7 @@ ATLAS_UNIT = 6           # composite (rough variant): the rough-reflection atlas
 LEVEL_UNITS = (3, 5)     # rough-atlas copy: a level's colour and node images (the composite's units for them)
 PRESENT_UNIT = 0         # present: the HDR image
 PROBE_UNIT = 7           # scene: the cube map of the batch's reflection probe
+NORMAL_UNIT = 8          # scene: the batch's normal map; composite (bumpy mirrors): the mirror's
 CUBE_MIP_UNIT = 14       # cube-map mip pass: the cube whose next level it draws
 SCRATCH_UNIT = 15        # raw-GL copies bind their target here; no program reads it
 

@@ -49,13 +49,14 @@ class GpuMesh:
 
 
 class InstanceBatch:
-    """The instances of one (mesh, texture) pair."""
+    """The instances of one (mesh, texture, normal map) triple."""
 
     def __init__(self, ctx: moderngl.Context, mesh: GpuMesh, texture: moderngl.Texture | None,
-                 capacity: int = 16) -> None:
+                 normal_map: moderngl.Texture | None = None, capacity: int = 16) -> None:
         self.ctx = ctx
         self.mesh = mesh
         self.texture = texture
+        self.normal_map = normal_map
         self.rows = np.zeros(capacity, INSTANCE_DTYPE)
         self.count = 0
         self.row_of: dict[int, int] = {}

@@ -22,6 +22,7 @@ from pyglm import glm
 from engine.render.bindings import (
     ATLAS_UNIT,
     BLEND_OVER,
+    NORMAL_UNIT,
     PARENT_NODE_UNIT,
     PARENT_SURFACE_UNIT,
     RECT_CLIPS,
@@ -38,11 +39,24 @@ from engine.render.views import (
     CAMERA_BLOCK_VIEW_PROJ,
     View,
 )
+from engine.texture_data import TextureData
 
 # The claims and the reset write every depth they touch (depth test "always"); the
 # composite blends quads trimmed to their rectangles by clip distances 1-4.
 _CLAIM = PassState(depth_func="1")
 _COMPOSITE = PassState(blend=BLEND_OVER, clips=RECT_CLIPS)
+
+
+@dataclass(frozen=True, eq=False)
+class MirrorBumps:
+    """A mirror's normal map (``Material.normal_map``) as its composite reads it: the map,
+    its scale, and the mirror's UVs as a function of world position on its plane (rows: u
+    and v as ``dot(row.xyz, p) + row.w``; SurfaceSystem fits them to the mesh)."""
+
+    normal_map: TextureData
+    scale: float
+    uv_rows: np.ndarray          # (2, 4) float64
+    plane_offset: float          # d of the mirror's world plane n.p + d = 0
 
 
 @dataclass(frozen=True)
@@ -53,23 +67,33 @@ class CompositeSurface:
     variant: str                 # the build of mirror_composite.frag (COMPOSITE_VARIANTS)
     roughness: float
     reflect_rate: float
-    portal: float                # 1.0: a plain window (no Fresnel, no tint)
+    params_z: float              # 1.0 for a portal (a plain window); a bumpy mirror's plane offset
     outline: glm.mat4 | None     # its 4 world corners as columns (a 2 x 2 grid), or None: the rect
     tint: bytes                  # 3 floats
     normal: bytes                # 3 floats: world, facing the side it is seen from
-    carry: bytes                 # a column-major mat3: directions here -> the view's world
+    carry: bytes                 # a column-major mat3: a portal's directions here -> the view's
+                                 # world; a bumpy mirror's UV map (u's gradient, v's, (u0, v0, scale))
+    normal_map: TextureData | None = None  # a bumpy mirror's (its rows are drawn per map)
 
 
 def composite_surface(tint: glm.vec4, reflect_rate: float, roughness: float, normal: glm.vec3,
                       outline: np.ndarray | None = None, portal: bool = False,
-                      carry: glm.mat3 | None = None) -> CompositeSurface:
+                      carry: glm.mat3 | None = None, bumps: MirrorBumps | None = None) -> CompositeSurface:
     """A surface's composite parameters; ``outline`` is its 4 world corners as homogeneous
-    rows in 2 x 2 grid order (None: composite over its screen rectangle)."""
+    rows in 2 x 2 grid order (None: composite over its screen rectangle).  A mirror with
+    ``bumps`` reads its normal map in the composite (a ``_bumpy`` variant)."""
     variant = "portal" if portal else ("rough" if roughness > 0.0 else "sharp")
     columns = None if outline is None else glm.mat4(*(glm.vec4(*map(float, row)) for row in outline))
-    return CompositeSurface(variant, float(roughness), float(reflect_rate), 1.0 if portal else 0.0, columns,
+    params_z = 1.0 if portal else 0.0
+    if bumps is not None and not portal:
+        variant += "_bumpy"
+        u, v = (glm.vec4(*map(float, row)) for row in bumps.uv_rows)
+        carry = glm.mat3(glm.vec3(u), glm.vec3(v), glm.vec3(u.w, v.w, bumps.scale))
+        params_z = float(bumps.plane_offset)
+    return CompositeSurface(variant, float(roughness), float(reflect_rate), params_z, columns,
                             glm.vec3(tint).to_bytes(), glm.vec3(normal).to_bytes(),
-                            (carry if carry is not None else glm.mat3(1.0)).to_bytes())
+                            (carry if carry is not None else glm.mat3(1.0)).to_bytes(),
+                            bumps.normal_map if bumps is not None and not portal else None)
 
 
 @dataclass(slots=True)
@@ -89,7 +113,7 @@ class PreparedComposites:
     """A level's composite, ready to draw (``MirrorPasses.prepare_composites``)."""
 
     rough: list[tuple[int, tuple[int, int, int, int]]]   # rough views to copy into the atlas
-    rows: dict[str, bytes]                               # packed instance rows per composite variant
+    rows: dict[tuple[str, TextureData | None], bytes]    # packed instance rows per (variant, normal map)
 
 
 # One row per composite instance (mirror_composite.vert's attributes, in order): the 4 clip
@@ -110,7 +134,10 @@ _FLATTEN_Z = glm.mat4(1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
 _NO_TILE = Tile(0, 0, 0.0)
 _RESET_RECT = struct.Struct("<12f")   # a rectangle as two clip-space triangles (the reset's vertices)
 # The composite's variants (mirror_composite.frag); a level's views are drawn grouped by them.
-COMPOSITE_VARIANTS = {"sharp": {}, "rough": {"COMPOSITE_ROUGH": "1"}, "portal": {"COMPOSITE_PORTAL": "1"}}
+# A "_bumpy" build reads the mirror's normal map (MirrorBumps); its views are drawn per map.
+COMPOSITE_VARIANTS = {"sharp": {}, "rough": {"COMPOSITE_ROUGH": "1"}, "portal": {"COMPOSITE_PORTAL": "1"},
+                      "sharp_bumpy": {"COMPOSITE_BUMPY": "1"},
+                      "rough_bumpy": {"COMPOSITE_ROUGH": "1", "COMPOSITE_BUMPY": "1"}}
 
 
 def _instance_format(program: moderngl.Program) -> tuple[str, list[str]]:
@@ -181,7 +208,7 @@ def composite_rows(composites: list[Composite], size: tuple[int, int]) -> bytes:
         tile = c.tile or _NO_TILE
         rows.append(_COMPOSITE_ROW.pack(
             corners, lx, ly, lx + lw, ly + lh, block[_BLOCK_INVERSE], block[_BLOCK_EYE], tile.x,
-            surface.tint, tile.scale, surface.reflect_rate, surface.roughness, surface.portal, float(c.view_index),
+            surface.tint, tile.scale, surface.reflect_rate, surface.roughness, surface.params_z, float(c.view_index),
             surface.normal, tile.y, surface.carry))
     return b"".join(rows)
 
@@ -228,7 +255,7 @@ class MirrorPasses:
         self.claim["parent_surface_map"].value = PARENT_SURFACE_UNIT
         self.composites: dict[str, _CompositeDraw] = {}
         units = {**dict(zip(("reflection", "reflection_seen", "reflection_nodes"), REFLECTION_UNITS, strict=True)),
-                 "sky_map": SKY_UNIT, "rough_atlas": ATLAS_UNIT}
+                 "sky_map": SKY_UNIT, "rough_atlas": ATLAS_UNIT, "normal_map": NORMAL_UNIT}
         for variant, defines in COMPOSITE_VARIANTS.items():
             program = shaders.program("mirror_composite.vert", "mirror_composite.frag",
                                       defines={"ROUGH_TILE": f"{TILE}.0", **defines})
@@ -287,13 +314,13 @@ class MirrorPasses:
         """The CPU half of compositing a level into a parent of ``parent_size`` pixels: rough
         views' atlas tiles and each variant's instance rows.  Needs no pixels, so the
         ReflectionSystem does it while the GPU still draws the level."""
-        rough = [(c.view_index, c.level_rect) for c in composites if c.surface.variant == "rough"]
+        rough = [(c.view_index, c.level_rect) for c in composites if c.surface.variant.startswith("rough")]
         tiles = place_tiles(rough)
-        groups: dict[str, list[Composite]] = {}
+        groups: dict[tuple[str, TextureData | None], list[Composite]] = {}
         for c in composites:
             c.tile = tiles.get(c.view_index)
-            groups.setdefault(c.surface.variant, []).append(c)
-        rows = {variant: composite_rows(group, parent_size) for variant, group in groups.items()}
+            groups.setdefault((c.surface.variant, c.surface.normal_map), []).append(c)
+        rows = {key: composite_rows(group, parent_size) for key, group in groups.items()}
         return PreparedComposites(rough, rows)
 
     def composite_level(self, parent: RenderTargets, level: RenderTargets, prepared: PreparedComposites) -> None:
@@ -315,10 +342,16 @@ class MirrorPasses:
         self.renderer.sky.use(SKY_UNIT)
         if prepared.rough:
             self.rough_atlas.texture.use(ATLAS_UNIT)
-        for variant, variant_rows in prepared.rows.items():
+        for (variant, normal_map), variant_rows in prepared.rows.items():
+            if normal_map is not None:
+                texture = self.renderer.normal_map_texture(normal_map)
+                if texture is None:  # the mirror's own batch holds it; none drawn: the flat build
+                    variant = variant.removesuffix("_bumpy")
+                else:
+                    texture.use(NORMAL_UNIT)
             draw = self.composites[variant]
             program = draw.program
-            if variant == "rough":
+            if variant.startswith("rough"):
                 program["atlas_size"].value = self.rough_atlas.texture.size
             program["parent_size"].value = parent.size
             program["to_reflection"].value = (level.size[0] / parent.size[0], level.size[1] / parent.size[1])

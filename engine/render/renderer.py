@@ -72,7 +72,7 @@ class Renderer:
         self.camera_ubo = ctx.buffer(reserve=CAMERA_BLOCK_BYTES)
         self.lights_ubo = ctx.buffer(reserve=LIGHTS_BLOCK_BYTES)
         self._meshes: dict[int, _Shared] = {}
-        self._textures: dict[int, _Shared] = {}
+        self._textures: dict[object, _Shared] = {}  # id(TextureData); ("normal", id) for a normal map
         self.batches: dict[tuple[int, int, int, int], InstanceBatch] = {}
         self._draw_order: list[InstanceBatch] = []   # non-empty batches, smallest extent first
         self._order_stale = True
@@ -107,20 +107,27 @@ class Renderer:
 
     # --- shared resources ------------------------------------------------------------------
     def batch_for(self, mesh: Mesh, texture: TextureData | None, probe: int = 0,
-                  transparent_entity: int = 0) -> InstanceBatch:
-        """The batch of (mesh, texture, the probe its instances sample; 0: none).  A
-        transparent entity gets a batch of its own (``transparent_entity``): transparent
-        things are drawn one by one, farthest first."""
-        key = (mesh.id, id(texture) if texture is not None else 0, probe, transparent_entity)
+                  transparent_entity: int = 0, normal_map: TextureData | None = None) -> InstanceBatch:
+        """The batch of (mesh, albedo texture, normal map, the probe its instances sample;
+        0: none).  A transparent entity gets a batch of its own (``transparent_entity``):
+        transparent things are drawn one by one, farthest first.  Textures are shared by
+        every batch that uses them; a normal map is uploaded linear (its texels are vectors,
+        not colours), so one image used both ways is two GPU textures."""
+        key = (mesh.id, id(texture) if texture is not None else 0, probe, transparent_entity,
+               id(normal_map) if normal_map is not None else 0)
         batch = self.batches.get(key)
         if batch is None:
-            if texture is not None:
-                self.check_texture(texture)  # before anything is made: nothing half-built
+            for name, image in (("Material.texture", texture), ("Material.normal_map", normal_map)):
+                if image is not None:
+                    self.check_texture(image, name)  # before anything is made: nothing half-built
             gpu_mesh = self._acquire(self._meshes, mesh.id, lambda: GpuMesh(self.ctx, mesh))
-            gpu_texture = None
+            gpu_texture = gpu_normal_map = None
             if texture is not None:
                 gpu_texture = self._acquire(self._textures, id(texture), lambda: self._upload_texture(texture))
-            batch = self.batches[key] = InstanceBatch(self.ctx, gpu_mesh, gpu_texture)
+            if normal_map is not None:
+                gpu_normal_map = self._acquire(self._textures, ("normal", id(normal_map)),
+                                               lambda: self._upload_texture(normal_map, linear=True))
+            batch = self.batches[key] = InstanceBatch(self.ctx, gpu_mesh, gpu_texture, gpu_normal_map)
             batch.key = key
             batch.probe = probe
             batch.transparent = bool(transparent_entity)
@@ -133,10 +140,18 @@ class Renderer:
         del self.batches[batch.key]
         self._order_stale = True
         batch.release()
-        mesh_id, texture_id, _, _ = batch.key
+        mesh_id, texture_id, _, _, normal_map_id = batch.key
         self._release(self._meshes, mesh_id)
         if texture_id:
             self._release(self._textures, texture_id)
+        if normal_map_id:
+            self._release(self._textures, ("normal", normal_map_id))
+
+    def normal_map_texture(self, normal_map: TextureData) -> moderngl.Texture | None:
+        """The uploaded normal map of ``normal_map`` while a batch draws with it (a mirror's
+        composite reads the one its scene-pass batch holds), else None."""
+        shared = self._textures.get(("normal", id(normal_map)))
+        return shared.obj if shared is not None else None
 
     @staticmethod
     def _acquire(table: dict[int, _Shared], key: int, make):
@@ -154,18 +169,19 @@ class Renderer:
             shared.obj.release()
             del table[key]
 
-    def check_texture(self, texture: TextureData) -> None:
-        """Refuse a texture this context cannot hold, naming it and the limit."""
+    def check_texture(self, texture: TextureData, field: str = "texture") -> None:
+        """Refuse a texture this context cannot hold, naming it, the field it fills and the limit."""
         w, h = texture.size
         limit = self.caps.max_texture_size
         if w > limit or h > limit:
-            raise GLLimitError(f"texture {texture.name!r} is {w}x{h}: this OpenGL ({self.caps.renderer}) takes "
-                               f"textures of at most {limit}x{limit} (GL_MAX_TEXTURE_SIZE); scale the image down")
+            raise GLLimitError(f"{field}: texture {texture.name!r} is {w}x{h}: this OpenGL ({self.caps.renderer}) "
+                               f"takes textures of at most {limit}x{limit} (GL_MAX_TEXTURE_SIZE); scale the image down")
 
-    def _upload_texture(self, texture: TextureData) -> moderngl.Texture:
+    def _upload_texture(self, texture: TextureData, linear: bool = False) -> moderngl.Texture:
         w, h = texture.size
         # Image rows are top-first, GL's are bottom-first: flip so v=0 is the bottom.
-        gl_texture = self.ctx.texture((w, h), 4, texture.pixels[::-1].tobytes(), internal_format=GL_SRGB8_ALPHA8)
+        gl_texture = self.ctx.texture((w, h), 4, texture.pixels[::-1].tobytes(),
+                                      internal_format=None if linear else GL_SRGB8_ALPHA8)
         gl_texture.build_mipmaps()
         gl_texture.filter = (moderngl.LINEAR_MIPMAP_LINEAR, moderngl.LINEAR)
         gl_texture.anisotropy = self.texture_anisotropy

@@ -41,6 +41,7 @@ from engine.render.bindings import (
     CAMERA_BINDING,
     LIGHTS_BINDING,
     NODE_UNIT,
+    NORMAL_UNIT,
     PROBE_UNIT,
     SCENE_CLIPS,
     SKY_UNIT,
@@ -91,8 +92,8 @@ class ScenePass:
         self.sky_program["sky_map"].value = SKY_UNIT
         self._sky = self.ctx.vertex_array(self.sky_program, [])
         # Scene programs by (geometry-shader invocations or 0, "" / "culled" / "naive" for a
-        # layered capture, the batch's variants or None).
-        self._programs: dict[tuple[int, str, tuple[int, int, int] | None], moderngl.Program] = {}
+        # layered capture, the batch's variants or None, whether it reads a normal map).
+        self._programs: dict[tuple[int, str, tuple[int, int, int] | None, bool], moderngl.Program] = {}
         self._uniforms: dict[int, tuple] = {}  # program -> its _PER_DRAW_UNIFORMS (None where dropped)
         self._reloads_seen = 0  # ShaderLibrary.reloads when the two caches above were made
         self._written: dict[int, list] = {}  # program -> the values last written in this pass
@@ -102,10 +103,12 @@ class ScenePass:
         self._reflection_sampler: moderngl.Sampler | None = None
 
     def program(self, variants: tuple[int, int, int] | None = None, invocations: int = 0,
-                layered: str = "") -> moderngl.Program:
+                layered: str = "", normal_mapped: bool = False) -> moderngl.Program:
         """The scene program for a batch of ``variants`` (None: mixed, switched per
         instance): plain, batched (``invocations`` > 0: the geometry shader's) or a one-pass
-        cube-map capture (``layered`` "culled" or "naive"), built once.  After a shader hot
+        cube-map capture (``layered`` "culled" or "naive"), with or without a normal map
+        (a build of its own: llvmpipe would run the map's derivatives and fetch for every
+        pixel behind a uniform branch), built once.  After a shader hot
         reload the set-up is done again and the batches' vertex arrays are made again (the
         relinked program may read uniforms, samplers and vertex inputs the first build
         dropped)."""
@@ -116,12 +119,14 @@ class ScenePass:
             for batch in self.renderer.batches.values():
                 batch.drop_vertex_arrays()  # made again for the relinked programs' inputs
             self._reloads_seen = reloads
-        key = (invocations, layered, variants)
+        key = (invocations, layered, variants, normal_mapped)
         program = self._programs.get(key)
         if program is None:
             defines = {}
             if variants is not None:
                 defines = {f"FIXED_{slot}": f"{value}u" for slot, value in zip(SLOTS, variants, strict=True)}
+            if normal_mapped:
+                defines["NORMAL_MAP"] = "1"
             geometry = None
             if invocations:
                 geometry = "scene_batched.geom"
@@ -144,7 +149,7 @@ class ScenePass:
                 program["Views"].binding = VIEWS_BINDING
             # A build may not read every input (the linker drops what a variant never uses).
             for name, unit in (("albedo_map", ALBEDO_UNIT), ("sky_map", SKY_UNIT), ("node_map", NODE_UNIT),
-                               ("probe_map", PROBE_UNIT)):
+                               ("probe_map", PROBE_UNIT), ("normal_map", NORMAL_UNIT)):
                 if name in program:
                     program[name].value = unit
             if "Lights" in program:
@@ -166,7 +171,7 @@ class ScenePass:
         for batch in batches:
             if not batch.count or (skip and batch.count == 1 and batch.entity_at[0] == skip):
                 continue
-            program = self.program(batch.variants, invocations, layered)
+            program = self.program(batch.variants, invocations, layered, batch.normal_map is not None)
             uniforms = self._uniforms[program.glo]
             values = written.get(program.glo)
             if values is None:
@@ -174,6 +179,8 @@ class ScenePass:
             textured = batch.texture is not None
             if textured:
                 batch.texture.use(ALBEDO_UNIT)
+            if batch.normal_map is not None:
+                batch.normal_map.use(NORMAL_UNIT)
             probe_size, lookup = 0, _NO_PROBE
             if batch.probe:
                 cube = cubes.get(batch.probe)

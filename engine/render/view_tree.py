@@ -37,6 +37,7 @@ from engine.render.mirror_passes import (
     Claim,
     Composite,
     CompositeSurface,
+    MirrorBumps,
     MirrorPasses,
     PreparedComposites,
     composite_surface,
@@ -97,11 +98,13 @@ class SurfaceState:
     reflect_rate: float = 1.0
     roughness: float = 0.0
     resolution_scale: float = 1.0
+    bumps: MirrorBumps | None = None  # a mirror's normal map, as its composite reads it
     look: CompositeSurface = field(init=False, repr=False)  # what its composite reads, packed once
 
     def __post_init__(self) -> None:
         self.look = composite_surface(self.tint, self.reflect_rate, self.roughness, glm.vec3(self.plane),
-                                      self.outline, portal=self.kind == "portal", carry=glm.mat3(self.carry))
+                                      self.outline, portal=self.kind == "portal", carry=glm.mat3(self.carry),
+                                      bumps=self.bumps)
 
 
 @dataclass

@@ -1,0 +1,13 @@
+// Tangent-space normal maps (Material.normal_map), OpenGL convention: RGB = n x 0.5 + 0.5, red
+// towards +U, green towards +V, blue out of the surface; the texture is linear (not sRGB).
+// Shared by the scene pass (a frame from screen derivatives) and the composite of a bumpy
+// mirror (a frame from the mirror's UV mapping): both pass the unit directions in which U and
+// V grow across the surface.
+uniform sampler2D normal_map;
+
+// The map's normal at uv in the frame (t: +U, u: +V, n: out of the surface, all unit), its
+// slope scaled by scale (glTF's normalTexture.scale; 0: n itself).
+vec3 bent_normal(vec3 t, vec3 b, vec3 n, vec2 uv, float scale) {
+    vec3 m = texture(normal_map, uv).xyz * 2.0 - 1.0;
+    return normalize((t * m.x + b * m.y) * scale + n * m.z);
+}
