@@ -52,6 +52,12 @@ class Material(TrackedComponent):
     refraction, and a mirror's reflection (the mirror's lookup of its reflected image
     follows the bent ray: engine/render/mirror_passes.py).  The tangent frame comes from
     the UVs' screen derivatives, so meshes need UVs, not tangents.
+
+    On a mirror (limits): the UVs must be a linear map of the mirror's plane (a quad's
+    are; otherwise ``MirrorError``); the lookup is exact for distant things and shifts
+    nearby ones too far; a bent lookup that would leave the mirror's own pixels keeps the
+    flat one; and a mirror magnifies an 8-bit map's slope steps (1/127, about 0.45
+    degrees), so gentle slopes show as terraces: give mirror maps slopes well above that.
     """
 
     color: Any = field(default_factory=lambda: glm.vec4(0.8, 0.8, 0.8, 1.0))
