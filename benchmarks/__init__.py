@@ -14,4 +14,5 @@ SUITES: dict[str, tuple[str, str]] = {
     "churn": ("benchmarks.churn", "mirrors, portals, probes, meshes and textures made and deleted in waves"),
     "fuzz": ("benchmarks.fuzz", "adversarial component values: each refused naming Class.field or drawn clean"),
     "probes": ("benchmarks.probes", "probe captures at 128 / 512; whole frames with no / static / dynamic probe"),
+    "normal_maps": ("benchmarks.normal_maps", "whole frame with a plain vs a normal-mapped ground (trilinear, 8x)"),
 }

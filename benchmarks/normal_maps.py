@@ -1,0 +1,86 @@
+"""Normal-maps benchmark: what a normal map costs a whole frame.
+
+The scene is ``benchmarks.mirrors.MirrorRing`` with no mirrors (a 40 x 40 textured ground
+that covers about half of the 640 x 360 frame, 20 boxes, two lights); the ``mapped`` engine
+gives the ground a ripple normal map (``engine.texture_data.ripple_normal_map``).  Rows
+(``ground``, ``anisotropy``, ``frame_ms_median``, ``ratio_to_plain``): whole frames
+(``Engine.frame`` + ``finish``), the engines interleaved frame by frame: ``plain``, then
+``mapped`` with the renderer's normal-map anisotropy (``Renderer.normal_map_anisotropy``:
+1 on a software rasteriser) and with the colour textures' (8x), which is what made llvmpipe
+filter normal maps trilinearly.
+
+    python -m benchmarks normal_maps            # table
+    python -m benchmarks normal_maps --json     # one JSON object per line
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import statistics
+import time
+
+import moderngl
+
+from benchmarks.mirrors import DT, OUTPUT_SIZE, MirrorRing
+from components import Material
+from engine.app import Engine
+from engine.frame_io import Output
+from engine.gl_context import create_headless_context
+from engine.render.targets import CaptureTarget
+from engine.texture_data import ripple_normal_map
+
+
+class MappedGround(MirrorRing):
+    """The mirror benchmark's scene without mirrors, its ground normal-mapped."""
+
+    title = "benchmark: normal maps"
+
+    def __init__(self, normal_map) -> None:
+        super().__init__(0)
+        self.normal_map = normal_map
+
+    def build(self, world) -> None:
+        super().build(world)
+        for _, (material,) in world.query(Material):
+            if material.texture is not None:  # the ground, the scene's one textured thing
+                material.normal_map = self.normal_map
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--frames", type=int, default=40, help="timed frames (default 40)")
+    parser.add_argument("--warmup", type=int, default=3)
+
+
+def main(args: argparse.Namespace) -> int:
+    ctx: moderngl.Context = create_headless_context()
+    engines, captures = [], []
+    try:
+        ripples = ripple_normal_map(256, 10, 0.5)
+        plain = Engine(MirrorRing(0), ctx)
+        default = Engine(MappedGround(ripples), ctx)
+        anisotropic = Engine(MappedGround(ripple_normal_map(256, 10, 0.5, name="ripples 8x")), ctx)
+        anisotropic.renderer.normal_map_anisotropy = anisotropic.renderer.texture_anisotropy
+        engines = [plain, default, anisotropic]
+        rows = [("plain", None), ("mapped", default.renderer.normal_map_anisotropy),
+                ("mapped", anisotropic.renderer.texture_anisotropy)]
+        captures = [CaptureTarget(ctx, OUTPUT_SIZE) for _ in engines]
+        times: list[list[float]] = [[] for _ in engines]
+        for frame in range(args.warmup + args.frames):
+            for i, (engine, capture) in enumerate(zip(engines, captures, strict=True)):
+                start = time.perf_counter()
+                engine.frame(DT, Output(capture.framebuffer, OUTPUT_SIZE))
+                ctx.finish()
+                if frame >= args.warmup:
+                    times[i].append((time.perf_counter() - start) * 1e3)
+        base = statistics.median(times[0])
+        for (ground, anisotropy), samples in zip(rows, times, strict=True):
+            row = {"ground": ground, "anisotropy": anisotropy, "frame_ms_median": round(statistics.median(samples), 2),
+                   "ratio_to_plain": round(statistics.median(samples) / base, 3)}
+            print(json.dumps(row) if args.json else "  ".join(f"{k}={v}" for k, v in row.items()), flush=True)
+    finally:
+        for capture in captures:
+            capture.release()
+        for engine in engines:
+            engine.close()
+        ctx.release()
+    return 0
