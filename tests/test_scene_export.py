@@ -71,9 +71,10 @@ def live_assets(world):
     meshes = {m.mesh.id: m.mesh for _, (m,) in world.query(MeshRef)}
     textures = {}
     for _, (material,) in world.query(Material):
-        if material.texture is not None:
-            height, width = material.texture.pixels.shape[:2]
-            textures[(material.texture.name, width, height)] = material.texture
+        for image in (material.texture, material.normal_map):
+            if image is not None:
+                height, width = image.pixels.shape[:2]
+                textures[(image.name, width, height)] = image
     return meshes, textures
 
 

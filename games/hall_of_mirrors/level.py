@@ -7,7 +7,8 @@ mirrors with different tints and roughness whose centre mirror faces one behind 
 (a corridor of reflections); a portal doorway that opens far across the hall, where a crate
 stands half in it and half out of its partner, and a facing pair of portals that shows a
 tunnel to the recursion limit; a chrome ball whose probe is captured every frame, a brass
-statue whose probe follows what moves near it, and a glass ball in front of a red crate.
+statue hammered by a normal map whose probe follows what moves near it, and a glass ball in
+front of a red crate.
 
 Headless runs follow a camera tour (the level's ``[rules] tour``: poses ``[x, y, z, yaw,
 pitch]``, each held ``tour_seconds`` while the camera pans ``tour_pan`` degrees) unless
