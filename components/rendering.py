@@ -80,6 +80,10 @@ class Material(TrackedComponent):
             if not isinstance(value, TextureData):
                 raise ComponentValueError(
                     f"Material.{name} must be an engine.texture_data.TextureData, got {type(value).__name__}")
+            world = getattr(self, "_world_ref", None)
+            if name == "normal_map" and world is not None:
+                for entity in self._entities:  # a mirror's UVs must allow it, as at spawn
+                    world._check_mirror_mesh(entity, normal_map=value)
         return value
 
 

@@ -416,3 +416,23 @@ def _first(value, default: float) -> float:
 def _srgb_to_linear(c: float) -> float:
     c = float(c)
     return c / 12.92 if c <= 0.04045 else ((c + 0.055) / 1.055) ** 2.4
+
+
+UV_FIT_TOLERANCE = 1e-3  # of the UVs' range: how far from an affine map of position they may be
+
+
+def planar_uv_map(mesh: Mesh) -> tuple[np.ndarray | None, str]:
+    """The mesh's UVs as an affine function of model position, (2, 4) rows (u and v as
+    ``dot(row.xyz, p) + row.w``), fitted to its vertices by least squares (on a flat mesh
+    the part along the normal is the smallest); (None, why) when they are not one (a
+    bumpy mirror's composite works its UVs out from the plane point it shades)."""
+    points = np.hstack([mesh.positions.astype(np.float64), np.ones((len(mesh.positions), 1))])
+    uvs = mesh.uvs.astype(np.float64)
+    rows, *_ = np.linalg.lstsq(points, uvs, rcond=None)  # (4, 2)
+    span = float(np.ptp(uvs, axis=0).max())
+    if not span > 0.0:
+        return None, "its UVs do not vary"
+    error = float(np.abs(points @ rows - uvs).max())
+    if not error <= UV_FIT_TOLERANCE * span:
+        return None, f"its UVs are off a plane map by {error:.3g}"
+    return rows.T, ""

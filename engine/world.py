@@ -123,7 +123,7 @@ class World:
                 if walk == entity:
                     raise ComponentValueError(f"Transform.parent {parent!r} of entity {entity} would make a "
                                               f"cycle (entity {parent} descends from entity {entity})")
-        if kind.__name__ in ("Mirror", "MeshRef"):
+        if kind.__name__ in ("Mirror", "MeshRef", "Material"):
             self._check_mirror_mesh(entity, component)
         if esper.has_component(entity, kind):
             old = esper.component_for_entity(entity, kind)
@@ -147,22 +147,32 @@ class World:
                 warnings.warn(f"entity {entity} has MeshRef and Material but no Transform: it is not drawn "
                               f"until one is added", stacklevel=3)
 
-    def _check_mirror_mesh(self, entity: int, joining: Any = None, mesh: Any = None) -> None:
+    def _check_mirror_mesh(self, entity: int, joining: Any = None, mesh: Any = None,
+                           normal_map: Any = None) -> None:
         """A mirror needs a mesh with area (its plane comes from it, unless ``plane_normal``
         gives one): checked when a Mirror or MeshRef joins an entity holding the other, and
         when a mirror's ``MeshRef.mesh`` is replaced, so the refusal comes then, not on the
-        next frame inside the surfaces stage."""
+        next frame inside the surfaces stage.  A mirror with a normal map needs planar UVs
+        too (``engine.mesh.planar_uv_map``), checked the same way and when the map is set."""
         held = {type(c).__name__: c for c in esper.components_for_entity(entity)} if esper.entity_exists(entity) \
             else {}
         if joining is not None:
             held[type(joining).__name__] = joining
         mirror, mesh_ref = held.get("Mirror"), held.get("MeshRef")
-        if mirror is None or getattr(mirror, "plane_normal", None) is not None:
-            return
-        if mesh is None:
-            if mesh_ref is None:
-                return
+        if mesh is None and mesh_ref is not None:
             mesh = mesh_ref.mesh
+        if mirror is None or mesh is None:
+            return
+        if (normal_map or getattr(held.get("Material"), "normal_map", None)) is not None:
+            from engine.mesh import planar_uv_map
+
+            rows, why = planar_uv_map(mesh)
+            if rows is None:
+                raise ComponentValueError(
+                    f"Mirror on entity {entity}: Material.normal_map needs UVs that vary linearly over the mirror "
+                    f"(mesh {mesh.name!r}: {why}); use a flat mesh with planar UVs, such as a quad")
+        if getattr(mirror, "plane_normal", None) is not None:
+            return
         tri = mesh.positions[mesh.indices]
         area = float(np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1).sum())
         if not area > 0.0:

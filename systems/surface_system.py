@@ -15,7 +15,7 @@ import numpy as np
 from components import Material, MeshRef, Mirror, Portal, Transform
 from engine.errors import SpeculumError
 from engine.frame_rules import frame_rules, world_corners
-from engine.mesh import flat_plane
+from engine.mesh import flat_plane, planar_uv_map
 from engine.portal_math import pair_transform, portal_plane
 from engine.reflection_math import plane_from_point_normal, reflection_matrix, transform_plane
 from engine.render.mirror_passes import MirrorBumps
@@ -25,9 +25,6 @@ from engine.world import World
 # A mirror mesh thinner than this fraction of its size composites over its outline quad;
 # anything thicker (a mirror plane given explicitly on a solid mesh) over its rectangle.
 FLAT_OUTLINE_TOLERANCE = 1e-3
-# A bumpy mirror's UVs must be an affine function of position on its plane to within this
-# fraction of their range (the composite works them out from the plane point it shades).
-UV_FIT_TOLERANCE = 1e-3
 
 
 class MirrorError(SpeculumError, ValueError):
@@ -117,18 +114,12 @@ class SurfaceSystem(esper.Processor):
 
 
 def _uv_rows(entity: int, mesh, model: np.ndarray) -> np.ndarray:
-    """The mirror's UVs as an affine function of world position, (2, 4) rows: fitted to the
-    mesh's vertices by least squares in model space (the fit's free part along the normal is
-    the smallest), then carried to world space by the inverse model matrix.  A mesh whose UVs
-    are not affine over its plane is refused: its composite could not find them."""
-    points = np.hstack([mesh.positions.astype(np.float64), np.ones((len(mesh.positions), 1))])
-    uvs = mesh.uvs.astype(np.float64)
-    rows, *_ = np.linalg.lstsq(points, uvs, rcond=None)  # (4, 2)
-    error = float(np.abs(points @ rows - uvs).max())
-    span = float(np.ptp(uvs, axis=0).max())
-    if not error <= UV_FIT_TOLERANCE * max(span, 1e-9) or span <= 0.0:
-        raise MirrorError(
-            f"entity {entity}: Material.normal_map on a Mirror needs UVs that vary linearly over the mirror "
-            f"(mesh {mesh.name!r}: {'its UVs do not vary' if span <= 0.0 else f'off a plane map by {error:.3g}'}); "
-            "use a flat mesh with planar UVs, such as a quad")
-    return rows.T @ np.linalg.inv(model)
+    """The mirror's UVs as an affine function of world position, (2, 4) rows: the mesh's
+    plane map (``engine.mesh.planar_uv_map``) carried to world space by the inverse model
+    matrix.  The world refuses a mesh without one when the map is given; this is the
+    backstop for a mesh replaced by other means."""
+    rows, why = planar_uv_map(mesh)
+    if rows is None:
+        raise MirrorError(f"entity {entity}: Material.normal_map on a Mirror needs UVs that vary linearly over the "
+                          f"mirror (mesh {mesh.name!r}: {why}); use a flat mesh with planar UVs, such as a quad")
+    return rows @ np.linalg.inv(model)

@@ -15,7 +15,6 @@ from engine.gl_context import GLCapabilities
 from engine.mesh import Mesh, box, quad
 from engine.render.sky import face_directions
 from engine.texture_data import TextureData, checker_texture
-from systems.surface_system import MirrorError
 
 TILT = math.radians(18.0)
 
@@ -142,19 +141,29 @@ def test_a_mirror_with_a_map_of_one_bent_normal_shows_what_the_turned_mirror_sho
 
 
 def test_a_mirror_normal_map_needs_uvs_that_vary_linearly_over_the_mirror(scene):
+    """Refused when given: at spawn, when the map is set on a mirror, when the mesh changes."""
     flat = quad(2.0, 2.0)
     uvs = flat.uvs.copy()
     uvs[0] += (0.3, 0.0)  # one corner's UV off the plane map
     warped = Mesh(flat.positions, flat.normals, uvs, flat.indices, name="warped quad")
+    refusal = r"Material.normal_map needs UVs that vary linearly.*'warped quad'"
+    ents = {}
 
     def build(world):
         world.spawn(Transform(position=(0.0, 0.0, 4.0)), Camera())
-        world.spawn(Transform(), MeshRef(warped), Material(normal_map=tilt_map("u")), Mirror())
+        with pytest.raises(ValueError, match=refusal):
+            world.spawn(Transform(), MeshRef(warped), Material(normal_map=tilt_map("u")), Mirror())
+        ents["plain"] = world.spawn(Transform(), MeshRef(warped), Material(), Mirror())
+        ents["bumpy"] = world.spawn(Transform(), MeshRef(quad(2.0, 2.0)), Material(normal_map=tilt_map("u")),
+                                    Mirror())
 
     runner = scene(build, (32, 32))
-    with pytest.raises(MirrorError, match=r"Material.normal_map on a Mirror needs UVs that vary linearly.*"
-                                          r"'warped quad'"):
-        runner.frame()
+    runner.frame()
+    with pytest.raises(ValueError, match=refusal):
+        runner.world.get(ents["plain"], Material).normal_map = tilt_map("u")
+    with pytest.raises(ValueError, match=refusal):
+        runner.world.get(ents["bumpy"], MeshRef).mesh = warped
+    runner.frame()  # nothing half-set: both still draw
 
 
 def test_normal_maps_are_shared_uploaded_linear_and_released(scene):

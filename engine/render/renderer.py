@@ -73,7 +73,8 @@ class Renderer:
         self.lights_ubo = ctx.buffer(reserve=LIGHTS_BLOCK_BYTES)
         self._meshes: dict[int, _Shared] = {}
         self._textures: dict[object, _Shared] = {}  # id(TextureData); ("normal", id) for a normal map
-        self.batches: dict[tuple[int, int, int, int], InstanceBatch] = {}
+        # (mesh, texture, probe, transparent entity, normal map) -> batch
+        self.batches: dict[tuple[int, int, int, int, int], InstanceBatch] = {}
         self._draw_order: list[InstanceBatch] = []   # non-empty batches, smallest extent first
         self._order_stale = True
         self.sky = flat_cube(ctx, BACKGROUND)
@@ -88,7 +89,7 @@ class Renderer:
         # filters them like the main view.  Set it to texture_anisotropy for equal quality.
         self.reflection_anisotropy = 1.0 if caps.software else self.texture_anisotropy
         # Normal maps likewise: on llvmpipe an 8x anisotropic normal map on the benchmark
-        # ground cost +36-41% of the frame, trilinear +4% (interleaved, 60 frames).  Set
+        # ground cost +36-41% of the frame, trilinear +4-5% (benchmarks/normal_maps.py).  Set
         # before the first normal map is uploaded.
         self.normal_map_anisotropy = 1.0 if caps.software else self.texture_anisotropy
         # Debug mode: every pass checks for an OpenGL error when it ends and names itself

@@ -5,7 +5,7 @@
 // V grow across the surface.
 uniform sampler2D normal_map;
 
-// The map's normal at uv in the frame (t: +U, u: +V, n: out of the surface, all unit), its
+// The map's normal at uv in the frame (t: +U, b: +V, n: out of the surface, all unit), its
 // slope scaled by scale (glTF's normalTexture.scale; 0: n itself).
 vec3 bent_normal(vec3 t, vec3 b, vec3 n, vec2 uv, float scale) {
     vec3 m = texture(normal_map, uv).xyz * 2.0 - 1.0;
