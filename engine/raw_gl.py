@@ -48,8 +48,10 @@ correct image, only for overlap.
 from __future__ import annotations
 
 import ctypes
+from dataclasses import dataclass
 
 import moderngl
+import numpy as np
 
 _VOID_CALL = ctypes.CFUNCTYPE(None)
 _COPY_TEX_SUB_IMAGE_2D = ctypes.CFUNCTYPE(None, ctypes.c_uint, ctypes.c_int, ctypes.c_int, ctypes.c_int,
@@ -64,6 +66,8 @@ GL_FRAMEBUFFER_COMPLETE = 0x8CD5
 GL_DEPTH_COMPONENT = 0x1902
 GL_DEPTH_COMPONENT24 = 0x81A6
 GL_UNSIGNED_INT = 0x1405
+GL_FLOAT = 0x1406
+GL_RGBA = 0x1908
 GL_TEXTURE_MIN_FILTER = 0x2801
 GL_TEXTURE_MAG_FILTER = 0x2800
 GL_NEAREST = 0x2600
@@ -72,6 +76,18 @@ GL_TEXTURE_MAX_LEVEL = 0x813D
 GL_MAX_LEVEL_DEFAULT = 1000
 GL_COLOR = 0x1800
 GL_DEPTH = 0x1801
+GL_DRAW_FRAMEBUFFER = 0x8CA9
+GL_DRAW_FRAMEBUFFER_BINDING = 0x8CA6
+GL_FRAMEBUFFER_ATTACHMENT_LAYERED = 0x8DA7
+GL_FRAMEBUFFER_ATTACHMENT_OBJECT_NAME = 0x8CD1
+GL_FRAMEBUFFER_ATTACHMENT_TEXTURE_LEVEL = 0x8CD2
+GL_SCISSOR_TEST = 0x0C11
+GL_SCISSOR_BOX = 0x0C10
+GL_VIEWPORT = 0x0BA2
+GL_ACTIVE_TEXTURE = 0x84E0
+GL_TEXTURE0 = 0x84C0
+GL_TEXTURE_BINDING_CUBE_MAP = 0x8514
+GL_MAX_COMBINED_TEXTURE_IMAGE_UNITS = 0x8B4D
 _u = ctypes.c_uint
 _i = ctypes.c_int
 _SIGNATURES = {
@@ -90,6 +106,16 @@ _SIGNATURES = {
     "glClearBufferfv": (None, _u, _i, ctypes.POINTER(ctypes.c_float)),
     "glViewport": (None, _i, _i, _i, _i),
     "glGetError": (_u,),
+    "glDisable": (None, _u),
+    "glColorMask": (None, ctypes.c_ubyte, ctypes.c_ubyte, ctypes.c_ubyte, ctypes.c_ubyte),
+    "glDepthMask": (None, ctypes.c_ubyte),
+}
+# Read-backs for debug mode (``inspect_target``): what the driver says is bound and attached.
+_QUERY_SIGNATURES = {
+    "glGetIntegerv": (None, _u, ctypes.POINTER(_i)),
+    "glGetFramebufferAttachmentParameteriv": (None, _u, _u, _u, ctypes.POINTER(_i)),
+    "glIsEnabled": (ctypes.c_ubyte, _u),
+    "glActiveTexture": (None, _u),
 }
 
 
@@ -113,10 +139,11 @@ class RawGL:
     def can_attach_cube_faces(self) -> bool:
         return all(fn is not None for fn in self._attach.values())
 
-    def attach_cube_face(self, framebuffer: moderngl.Framebuffer, cube: moderngl.TextureCube, face: int) -> None:
-        """Make ``face`` (0-5: +X, -X, +Y, -Y, +Z, -Z) of ``cube``'s base level the colour
+    def attach_cube_face(self, framebuffer: moderngl.Framebuffer, cube: moderngl.TextureCube, face: int,
+                         level: int = 0) -> None:
+        """Make ``face`` (0-5: +X, -X, +Y, -Y, +Z, -Z) of ``cube``'s mip ``level`` the colour
         attachment 0 of ``framebuffer`` (made by moderngl with a colour texture of the
-        face's size, which it replaces).  Raises RuntimeError where the calls are not
+        face's size at that level, which it replaces).  Raises RuntimeError where the calls are not
         reachable or the framebuffer is not complete; moderngl's bound framebuffer is bound
         again either way."""
         if not self.can_attach_cube_faces:
@@ -125,15 +152,15 @@ class RawGL:
         gl["glGetError"]()  # start clean: what follows is checked
         gl["glBindFramebuffer"](GL_FRAMEBUFFER, framebuffer.glo)
         gl["glFramebufferTexture2D"](GL_FRAMEBUFFER, GL_COLOR_ATTACHMENT0, GL_TEXTURE_CUBE_MAP_POSITIVE_X + face,
-                                     cube.glo, 0)
+                                     cube.glo, level)
         status = gl["glCheckFramebufferStatus"](GL_FRAMEBUFFER)
         error = gl["glGetError"]()
         gl["glBindFramebuffer"](GL_FRAMEBUFFER, 0)
         if self.ctx.fbo is not None:
             self.ctx.fbo.use()
         if status != GL_FRAMEBUFFER_COMPLETE or error:
-            raise RuntimeError(f"cube-map face {face} of {cube.size[0]} as a colour attachment: framebuffer "
-                               f"status 0x{status:x}, GL error 0x{error:x}")
+            raise RuntimeError(f"cube-map face {face} level {level} of {cube.size[0]} as a colour attachment: "
+                               f"framebuffer status 0x{status:x}, GL error 0x{error:x}")
 
     @property
     def can_flush(self) -> bool:
@@ -199,9 +226,17 @@ class LayeredCubeTarget:
                                f"GL error 0x{error:x}")
 
     def bind(self) -> None:
-        """Draw into all six faces from now on (until a moderngl framebuffer is used)."""
-        self.gl["glBindFramebuffer"](GL_FRAMEBUFFER, self.framebuffer)
-        self.gl["glViewport"](0, 0, self.size, self.size)
+        """Draw into all six faces from now on (until a moderngl framebuffer is used).  The
+        state a moderngl ``Framebuffer.use`` sets for its own framebuffer (viewport, scissor,
+        colour and depth write masks) is set here for this one, so nothing the framebuffer
+        used before left behind (a scissor box, a depth mask off) reaches the clear or the
+        draws; the next moderngl ``use`` sets it all again for its own."""
+        gl = self.gl
+        gl["glBindFramebuffer"](GL_FRAMEBUFFER, self.framebuffer)
+        gl["glViewport"](0, 0, self.size, self.size)
+        gl["glDisable"](GL_SCISSOR_TEST)
+        gl["glColorMask"](1, 1, 1, 1)
+        gl["glDepthMask"](1)
 
     def unbind(self) -> None:
         """Back to the framebuffer moderngl thinks is bound."""
@@ -238,14 +273,22 @@ class CubeMipTarget:
         self.gl["glGenFramebuffers"](1, ctypes.byref(name))
         self.framebuffer = name.value
 
-    def bind_level(self, level: int, unit: int) -> int:
-        """Draw into mip ``level`` (>= 1) of every face, reading only level ``level - 1``
-        through ``unit``; returns the level's face size."""
+    def bind_level(self, level: int, unit: int, face: int | None = None) -> int:
+        """Draw into mip ``level`` (>= 1) of every face (layered: ``glFramebufferTexture``),
+        or of ``face`` alone (``glFramebufferTexture2D``: the per-face pass, for a driver
+        whose layered draw was refused), reading only level ``level - 1`` through ``unit``;
+        returns the level's face size."""
         gl = self.gl
         gl["glGetError"]()  # start clean: what follows is checked
         gl["glBindFramebuffer"](GL_FRAMEBUFFER, self.framebuffer)
-        gl["glFramebufferTexture"](GL_FRAMEBUFFER, GL_COLOR_ATTACHMENT0, self.cube.glo, level)
+        if face is None:
+            gl["glFramebufferTexture"](GL_FRAMEBUFFER, GL_COLOR_ATTACHMENT0, self.cube.glo, level)
+        else:
+            gl["glFramebufferTexture2D"](GL_FRAMEBUFFER, GL_COLOR_ATTACHMENT0, GL_TEXTURE_CUBE_MAP_POSITIVE_X + face,
+                                         self.cube.glo, level)
         gl["glDrawBuffers"](1, (_u * 1)(GL_COLOR_ATTACHMENT0))
+        gl["glDisable"](GL_SCISSOR_TEST)
+        gl["glColorMask"](1, 1, 1, 1)
         status = gl["glCheckFramebufferStatus"](GL_FRAMEBUFFER)
         self.cube.use(unit)
         gl["glTexParameteri"](GL_TEXTURE_CUBE_MAP, GL_TEXTURE_BASE_LEVEL, level - 1)
@@ -255,7 +298,8 @@ class CubeMipTarget:
         error = gl["glGetError"]()
         if status != GL_FRAMEBUFFER_COMPLETE or error:
             self.done(unit)
-            raise RuntimeError(f"cube-map mip level {level} of {self.cube.size[0]}: framebuffer status "
+            where = "every face" if face is None else f"face {face}"
+            raise RuntimeError(f"cube-map mip level {level} ({where}) of {self.cube.size[0]}: framebuffer status "
                                f"0x{status:x}, GL error 0x{error:x}")
         return size
 
@@ -272,6 +316,125 @@ class CubeMipTarget:
         if self.framebuffer:
             self.gl["glDeleteFramebuffers"](1, ctypes.byref(_u(self.framebuffer)))
             self.framebuffer = 0
+
+
+def read_cube_level(ctx: moderngl.Context, cube: moderngl.TextureCube, face: int, level: int,
+                    unit: int) -> np.ndarray:
+    """Face ``face`` of mip ``level`` of ``cube`` as RGBA float32, rows in texture order
+    (``glGetTexImage``: moderngl reads level 0 only); binds ``cube`` on ``unit``."""
+    get = _load(ctx, "glGetTexImage", ctypes.CFUNCTYPE(None, _u, _i, _u, _u, ctypes.c_void_p))
+    if get is None:
+        raise RuntimeError("reading a cube-map mip level needs glGetTexImage, which the loader lacks")
+    n = max(1, cube.size[0] >> level)
+    out = np.zeros((n, n, 4), np.float32)
+    cube.use(unit)
+    get(GL_TEXTURE_CUBE_MAP_POSITIVE_X + face, level, GL_RGBA, GL_FLOAT, out.ctypes.data)
+    return out
+
+
+def write_cube_level(ctx: moderngl.Context, cube: moderngl.TextureCube, face: int, level: int,
+                     rgba: np.ndarray, unit: int) -> None:
+    """Write ``rgba`` (n x n x 4 float32) into face ``face`` of mip ``level`` of ``cube``
+    (``glTexSubImage2D``; moderngl writes level 0 only); binds ``cube`` on ``unit``."""
+    put = _load(ctx, "glTexSubImage2D", ctypes.CFUNCTYPE(None, _u, _i, _i, _i, _i, _i, _u, _u, ctypes.c_void_p))
+    if put is None:
+        raise RuntimeError("writing a cube-map mip level needs glTexSubImage2D, which the loader lacks")
+    data = np.ascontiguousarray(rgba, np.float32)
+    cube.use(unit)
+    put(GL_TEXTURE_CUBE_MAP_POSITIVE_X + face, level, 0, 0, data.shape[1], data.shape[0], GL_RGBA, GL_FLOAT,
+        data.ctypes.data)
+
+
+@dataclass(frozen=True)
+class BoundTargetState:
+    """What the driver reports while a layered target is bound (``inspect_bound_target``):
+    the draw framebuffer, whether each attachment is layered (``GL_FRAMEBUFFER_ATTACHMENT_LAYERED``)
+    and what it names, the scissor and viewport, the texture units the target's cube is
+    bound on, and the address the loader gave for ``glFramebufferTexture``."""
+
+    draw_framebuffer: int
+    colour_layered: bool
+    depth_layered: bool | None  # None: no depth attachment
+    colour_texture: int
+    colour_level: int
+    scissor_test: bool
+    scissor_box: tuple[int, int, int, int]
+    viewport: tuple[int, int, int, int]
+    cube_bound_on_units: tuple[int, ...]
+    framebuffer_texture_entry: int
+
+    def problems(self, framebuffer: int, cube: int, level: int, size: int, depth: bool,
+                 source_units: tuple[int, ...] = ()) -> list[str]:
+        """Each way this state differs from what a layered draw into every face of ``cube``'s
+        mip ``level`` (``size`` texels) through ``framebuffer`` needs, in words
+        (``source_units``: where the cube may be bound, limited to other levels: the mip
+        pass's source)."""
+        found = []
+        if self.draw_framebuffer != framebuffer:
+            found.append(f"draw framebuffer {self.draw_framebuffer} is bound, not the layered target {framebuffer}")
+        if not self.colour_layered:
+            found.append("the colour attachment is not layered")
+        if depth and not self.depth_layered:
+            found.append("the depth attachment is not layered")
+        if (self.colour_texture, self.colour_level) != (cube, level):
+            found.append(f"the colour attachment is texture {self.colour_texture} level {self.colour_level}, "
+                         f"not the cube {cube} level {level}")
+        if self.scissor_test and not (self.scissor_box[:2] <= (0, 0) and self.scissor_box[2] >= size
+                                      and self.scissor_box[3] >= size):
+            found.append(f"the scissor box {self.scissor_box} cuts the {size}-texel faces")
+        if self.viewport != (0, 0, size, size):
+            found.append(f"the viewport is {self.viewport}, not the {size}-texel face")
+        stray = tuple(unit for unit in self.cube_bound_on_units if unit not in source_units)
+        if stray:
+            found.append(f"the cube drawn into is bound for sampling on texture units {stray} "
+                         "(a rendering feedback loop: undefined results)")
+        return found
+
+
+def inspect_bound_target(ctx: moderngl.Context, cube: moderngl.TextureCube, depth: bool) -> BoundTargetState:
+    """Read back the state a layered draw depends on, with the framebuffer bound (debug mode:
+    glGet calls wait for the driver).  The active texture unit is restored afterwards;
+    nothing else is changed."""
+    gl = {name: _load(ctx, name, ctypes.CFUNCTYPE(*sig)) for name, sig in _QUERY_SIGNATURES.items()}
+    missing = [name for name, fn in gl.items() if fn is None]
+    if missing:
+        raise RuntimeError(f"inspecting a layered target needs GL entry points the loader lacks: {missing}")
+
+    def integers(pname: int, count: int = 1) -> tuple[int, ...]:
+        values = (_i * max(count, 4))()
+        gl["glGetIntegerv"](pname, values)
+        return tuple(values[:count])
+
+    def attachment(point: int, pname: int) -> int:
+        value = _i(0)
+        gl["glGetFramebufferAttachmentParameteriv"](GL_DRAW_FRAMEBUFFER, point, pname, ctypes.byref(value))
+        return value.value
+
+    active = integers(GL_ACTIVE_TEXTURE)[0]
+    bound_on = []
+    for unit in range(integers(GL_MAX_COMBINED_TEXTURE_IMAGE_UNITS)[0]):
+        gl["glActiveTexture"](GL_TEXTURE0 + unit)
+        if integers(GL_TEXTURE_BINDING_CUBE_MAP)[0] == cube.glo:
+            bound_on.append(unit)
+    gl["glActiveTexture"](active)
+    entry = _address(ctx, "glFramebufferTexture")
+    return BoundTargetState(
+        draw_framebuffer=integers(GL_DRAW_FRAMEBUFFER_BINDING)[0],
+        colour_layered=bool(attachment(GL_COLOR_ATTACHMENT0, GL_FRAMEBUFFER_ATTACHMENT_LAYERED)),
+        depth_layered=bool(attachment(GL_DEPTH_ATTACHMENT, GL_FRAMEBUFFER_ATTACHMENT_LAYERED)) if depth else None,
+        colour_texture=attachment(GL_COLOR_ATTACHMENT0, GL_FRAMEBUFFER_ATTACHMENT_OBJECT_NAME),
+        colour_level=attachment(GL_COLOR_ATTACHMENT0, GL_FRAMEBUFFER_ATTACHMENT_TEXTURE_LEVEL),
+        scissor_test=bool(gl["glIsEnabled"](GL_SCISSOR_TEST)),
+        scissor_box=integers(GL_SCISSOR_BOX, 4),
+        viewport=integers(GL_VIEWPORT, 4),
+        cube_bound_on_units=tuple(bound_on),
+        framebuffer_texture_entry=entry or 0,
+    )
+
+
+def _address(ctx: moderngl.Context, name: str) -> int | None:
+    loader = getattr(getattr(ctx.mglo, "_context", None), "load_opengl_function", None)
+    return loader(name) if loader is not None else None
 
 
 def _load(ctx: moderngl.Context, name: str, prototype):

@@ -1,5 +1,7 @@
 #version 410 core
-// A cube map's next mip level from the one above it, on all six faces at once (gl_Layer).
+// A cube map's next mip level from the one above it, on all six faces at once (gl_Layer),
+// or, built with ONE_FACE, on the one face attached (six draws a level: for a driver whose
+// layered draw the start-up check refused, engine/render/path_checks.py).
 // The source is limited to the level above (base = max level), so the level written is
 // never one being read; seamless cube filtering blends across face edges.
 //
@@ -22,7 +24,12 @@ const int SAMPLES = 32;
 const float PI = 3.14159265358979;
 #endif
 
+#ifdef ONE_FACE
+uniform int face;          // one face a draw (no geometry shader: the per-face pass)
+#define g_face face
+#else
 flat in int g_face;
+#endif
 out vec4 color;
 
 #ifdef GGX_PREFILTER

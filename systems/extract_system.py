@@ -45,7 +45,8 @@ class ExtractSystem(esper.Processor):
         world.resources[Renderer] = renderer
 
     def process(self, dt: float) -> None:
-        self.renderer.stats = RenderStats()
+        checks = self.renderer.path_checks
+        self.renderer.stats = RenderStats(paths_verified=checks.verified(), paths_refused=checks.refused())
         self.world.resources[RenderStats] = self.renderer.stats
         world = self.world
         touched: set[int] = set()

@@ -125,8 +125,7 @@ class ProbeSystem(esper.Processor):
             self._schedule(state, boxes, everything)
             if not state.captures or not self.recapture_after_present:
                 self._capture_due(state)  # a first capture now: the main view has nothing to sample yet
-        # The path in use, every frame there are probes (the overlay and frame stats show it).
-        self.renderer.stats.probe_path = self.path_used
+        self._report()
 
     def capture_after_present(self) -> None:
         """The "probes_after" stage: the faces due of every probe captured before, drawn after
@@ -136,7 +135,14 @@ class ProbeSystem(esper.Processor):
         for state in self.probes.values():
             if state.captures:
                 self._capture_due(state)
-        self.renderer.stats.probe_path = self.path_used
+        self._report()
+
+    def _report(self) -> None:
+        """The path in use, every frame there are probes, and the self-check's verdicts (the
+        overlay and frame stats show them)."""
+        stats, checks = self.renderer.stats, self.renderer.path_checks
+        stats.probe_path = self.path_used
+        stats.paths_verified, stats.paths_refused = checks.verified(), checks.refused()
 
     def _capture_due(self, state: ProbeState) -> None:
         faces = state.pending
@@ -263,6 +269,10 @@ class ProbeSystem(esper.Processor):
         if self.path not in PATHS:
             raise ValueError(f"ProbeSystem.path must be one of {PATHS}, got {self.path!r}")
         if not layered_possible or self.path == "six_pass":
+            return "six_pass"
+        # The layered capture only where the path self-check verified it on this context
+        # (forced or chosen by auto): a refused path would leave faces unwritten.
+        if not self.renderer.path_checks.trusted("layered_capture"):
             return "six_pass"
         if self.path == "layered":
             return "layered"

@@ -9,20 +9,24 @@ direction of each texel; tests/test_probes.py checks one labelled direction per 
 """
 from __future__ import annotations
 
+import logging
 import math
+from contextlib import contextmanager
 from dataclasses import dataclass
 
 import moderngl
 import numpy as np
 from pyglm import glm
 
-from engine.errors import GLLimitError
-from engine.raw_gl import CubeMipTarget, LayeredCubeTarget
-from engine.render.bindings import CUBE_MIP_UNIT, SCRATCH_UNIT, PassState, apply_pass_state
+from engine.errors import GLLimitError, GLPassError
+from engine.raw_gl import CubeMipTarget, LayeredCubeTarget, inspect_bound_target
+from engine.render.bindings import CUBE_MIP_UNIT, PROBE_UNIT, SCRATCH_UNIT, PassState, apply_pass_state
 from engine.render.scene_pass import SceneOptions
 from engine.render.targets import LevelStack, release_framebuffer
 from engine.render.view_tree import SurfaceTable, TreeSettings, ViewTree
 from engine.render.views import View
+
+LOG = logging.getLogger("speculum")
 
 # (looking along, up) per face, in GL's face order.
 FACE_AXES = (
@@ -135,8 +139,13 @@ class ProbeCube:
 class CubeMipPass:
     """Rebuilds a cube map's mip chain with one layered draw a level (``cube_mip.geom`` and
     ``.frag``: a 2x2 box filter, as ``glGenerateMipmap``'s), where ``build_mipmaps`` costs six
-    blits a level (42 for a 128 cube: most of a small probe's capture on llvmpipe).  Where
-    the raw GL calls it needs are not reachable it uses ``build_mipmaps``."""
+    blits a level (42 for a 128 cube: most of a small probe's capture on llvmpipe).
+
+    Three ways, chosen per build: ``layered`` (one draw a level) once the path self-check
+    (``engine/render/path_checks.py``) has verified it on this context; ``per_face`` (six
+    draws a level, each face attached alone: the same shader without the geometry shader)
+    where the layered draw was refused; ``build_mipmaps`` where the raw GL calls are not
+    reachable (box mips only: a GGX chain then cannot be drawn and says so)."""
 
     STATE = PassState()  # no depth test, no blending, no clip distances
 
@@ -144,41 +153,76 @@ class CubeMipPass:
         self.renderer = renderer
         self.ctx = renderer.ctx
         self._targets: dict[int, CubeMipTarget] = {}  # by probe key
-        self._vaos: dict[bool, moderngl.VertexArray] = {}  # by GGX prefiltering or not
+        self._vaos: dict[tuple[bool, bool], moderngl.VertexArray] = {}  # by (GGX, one face a draw)
         self.layered = True  # False once the raw calls turned out unreachable
+        self.used = ""  # how the last chain was built: "layered", "per_face" or "build_mipmaps"
+        self._warned_box = False
 
     @staticmethod
     def primitives(size: int) -> int:
         """Primitives the pass emits for a cube of ``size`` (a primitives-generated query
-        around a capture counts them too)."""
+        around a capture counts them too; the per-face pass emits as many)."""
         return 6 * (size.bit_length() - 1)
 
-    def build(self, key: int, cube: moderngl.TextureCube, prefilter: str = "mips") -> None:
+    def build(self, key: int, cube: moderngl.TextureCube, prefilter: str = "mips", way: str | None = None) -> str:
         """Levels 1.. of ``cube`` from its level 0: box-filtered (``mips``), or each level the
         one above convolved with a GGX lobe so that level L holds roughness L / top level
-        (``ggx``; ``ProbeCube.roughness_levels``)."""
+        (``ggx``; ``ProbeCube.roughness_levels``).  ``way`` forces "layered" or "per_face"
+        (the path self-check compares them); None chooses as the class docstring says.
+        Returns the prefilter built: "mips" where a GGX chain cannot be drawn here (neither
+        of the drawn passes is reachable or verified; a warning says so once)."""
         ggx = prefilter == "ggx"
         target = self._target(key, cube)
-        if target is None:
-            if ggx:
-                raise GLLimitError(f"reflection probe of entity {key}: ReflectionProbe.prefilter 'ggx' needs "
-                                   "layered framebuffer calls this OpenGL loader does not give")
+        if target is None and ggx:
+            raise GLLimitError(f"reflection probe of entity {key}: ReflectionProbe.prefilter 'ggx' needs "
+                               "layered framebuffer calls this OpenGL loader does not give")
+        if target is not None and way is None:
+            checks = self.renderer.path_checks
+            way = ("layered" if checks.trusted("layered_mips") else
+                   "per_face" if checks.trusted("face_mips") else None)
+        if target is None or way is None:
+            if ggx and not self._warned_box:
+                LOG.warning("speculum: no mip pass this OpenGL draws right was found (path self-check): "
+                            "GGX-prefiltered probes are box-filtered instead")
+                self._warned_box = True
             cube.build_mipmaps()
-            return
-        vao = self._program_vao(ggx)
+            self.used = "build_mipmaps"
+            return "mips"
+        one_face = way == "per_face"
+        vao = self._program_vao(ggx, one_face)
         program = vao.program
         apply_pass_state(self.ctx, self.STATE, (0, 0, *cube.size))
+        for unit in (PROBE_UNIT, SCRATCH_UNIT, self.ctx.default_texture_unit):
+            self.renderer.sky.use(unit)  # the cube is bound only where the pass reads it (CUBE_MIP_UNIT)
         top = cube.size[0].bit_length() - 1
         try:
             for level in range(1, top + 1):
-                program["level_size"].value = float(target.bind_level(level, CUBE_MIP_UNIT))
                 if ggx:
                     alpha, above = (level / top) ** 2, ((level - 1) / top) ** 2
                     program["alpha"].value = math.sqrt(alpha * alpha - above * above)
-                vao.render(moderngl.TRIANGLES, vertices=3)
+                for face in (range(6) if one_face else (None,)):
+                    program["level_size"].value = float(target.bind_level(level, CUBE_MIP_UNIT, face))
+                    if face is not None:
+                        program["face"].value = face
+                    elif self.renderer.debug:
+                        self._check_bound(target, level)
+                    vao.render(moderngl.TRIANGLES, vertices=3)
         finally:
             target.done(CUBE_MIP_UNIT)
+            self.renderer.sky.use(CUBE_MIP_UNIT)  # not left bound where the next capture draws into it
+        self.used = way
         self.renderer.checkpoint("probe mip chain")
+        return prefilter
+
+    def _check_bound(self, target: CubeMipTarget, level: int) -> None:
+        """Debug mode: the driver has the level attached layered, the framebuffer bound, the
+        cube sampled only through the pass's source unit (``raw_gl.inspect_bound_target``)."""
+        size = max(1, target.cube.size[0] >> level)
+        state = inspect_bound_target(self.ctx, target.cube, depth=False)
+        problems = state.problems(target.framebuffer, target.cube.glo, level, size, depth=False,
+                                  source_units=(CUBE_MIP_UNIT,))
+        if problems:
+            raise GLPassError(f"probe mip pass, level {level}: " + "; ".join(problems))
 
     def _target(self, key: int, cube: moderngl.TextureCube) -> CubeMipTarget | None:
         if not self.layered:
@@ -194,13 +238,17 @@ class CubeMipPass:
                 return None
         return target
 
-    def _program_vao(self, ggx: bool) -> moderngl.VertexArray:
-        vao = self._vaos.get(ggx)
+    def _program_vao(self, ggx: bool, one_face: bool) -> moderngl.VertexArray:
+        vao = self._vaos.get((ggx, one_face))
         if vao is None:
-            program = self.renderer.shaders.program("fullscreen.vert", "cube_mip.frag", "cube_mip.geom",
-                                                    defines={"GGX_PREFILTER": "1"} if ggx else None)
+            defines = {"GGX_PREFILTER": "1"} if ggx else {}
+            if one_face:
+                defines["ONE_FACE"] = "1"
+            geometry = None if one_face else "cube_mip.geom"
+            program = self.renderer.shaders.program("fullscreen.vert", "cube_mip.frag", geometry,
+                                                    defines=defines or None)
             program["source"].value = CUBE_MIP_UNIT
-            vao = self._vaos[ggx] = self.ctx.vertex_array(program, [])
+            vao = self._vaos[(ggx, one_face)] = self.ctx.vertex_array(program, [])
         return vao
 
     def drop(self, key: int) -> None:
@@ -296,31 +344,51 @@ class ProbeCaptures:
         return cube
 
     def capture(self, key: int, views: dict[int, View], surfaces: SurfaceTable | None, depth: int,
-                prefilter: str = "mips") -> None:
+                prefilter: str = "mips", direct: bool | None = None, build_mips: bool = True) -> None:
         """Draw each face view of ``views`` (face -> view, all of the probe's resolution) into
         the probe's cube, then rebuild the cube's mips.  A face that sees mirrors or portals
         (``surfaces`` given, ``depth`` > 0) roots a view tree, which needs the id images of a
         full level: it is drawn into a 2D level target and copied into its face; any other
-        face is drawn straight into its face (``CubeFaceTargets``)."""
+        face is drawn straight into its face (``CubeFaceTargets``) once the path self-check
+        has verified that on this context (``direct`` forces one way: the check itself)."""
         renderer = self.renderer
         resolution = next(iter(views.values())).size[0]
         cube = self.cube(key, resolution)
         trees = surfaces is not None and depth > 0
-        direct = None if trees else self._face_targets(key, cube.texture)
-        for face, view in sorted(views.items()):
-            if direct is not None:
-                renderer.scene_pass.draw([view], direct.faces[face], FACE)
-            else:
-                levels = self._stacks.setdefault(resolution, LevelStack(self.ctx))
-                targets = levels.get(0, view.size)
-                renderer.scene_pass.draw([view], targets, FACE)
-                if trees:
-                    self.tree.render(view, levels, surfaces, TreeSettings(depth_cap=depth))
-                renderer.raw_gl.copy_to_cube_face(targets.framebuffer, cube.texture, face, SCRATCH_UNIT)
-                renderer.checkpoint(f"probe face {face} copy")
-            renderer.stats.probe_faces += 1
-        cube.prefilter = prefilter
-        self.mips.build(key, cube.texture, prefilter)
+        if direct is None:
+            direct = not trees and self.direct_faces and renderer.path_checks.trusted("direct_faces")
+        targets_direct = self._face_targets(key, cube.texture) if direct and not trees else None
+        with self._drawing_into(key):
+            for face, view in sorted(views.items()):
+                if targets_direct is not None:
+                    renderer.scene_pass.draw([view], targets_direct.faces[face], FACE)
+                else:
+                    levels = self._stacks.setdefault(resolution, LevelStack(self.ctx))
+                    targets = levels.get(0, view.size)
+                    renderer.scene_pass.draw([view], targets, FACE)
+                    if trees:
+                        self.tree.render(view, levels, surfaces, TreeSettings(depth_cap=depth))
+                    renderer.raw_gl.copy_to_cube_face(targets.framebuffer, cube.texture, face, SCRATCH_UNIT)
+                    renderer.checkpoint(f"probe face {face} copy")
+                renderer.stats.probe_faces += 1
+        if build_mips:
+            cube.prefilter = self.mips.build(key, cube.texture, prefilter)
+
+    @contextmanager
+    def _drawing_into(self, key: int):
+        """While probe ``key``'s cube is drawn into: nothing samples it (the scene pass gives
+        what samples it the sky), and it is bound on no texture unit a pass reads or a
+        copy left it on (a texture drawn into while bound for sampling is a rendering
+        feedback loop, undefined on a GPU; llvmpipe forgives it)."""
+        renderer = self.renderer
+        for unit in (PROBE_UNIT, SCRATCH_UNIT, CUBE_MIP_UNIT, self.ctx.default_texture_unit):
+            renderer.sky.use(unit)
+        renderer.scene_pass.capturing = key
+        try:
+            yield
+        finally:
+            renderer.scene_pass.capturing = 0
+            renderer.sky.use(SCRATCH_UNIT)  # the copies bound the cube there
 
     def _face_targets(self, key: int, cube: moderngl.TextureCube) -> CubeFaceTargets | None:
         """The probe's direct face targets (made, or remade for a new cube), or None where a
@@ -339,7 +407,8 @@ class ProbeCaptures:
                 return None
         return targets
 
-    def capture_layered(self, key: int, views: dict[int, View], culled: bool = True, prefilter: str = "mips") -> None:
+    def capture_layered(self, key: int, views: dict[int, View], culled: bool = True, prefilter: str = "mips",
+                        build_mips: bool = True) -> None:
         """All six faces in one pass (``ScenePass.draw_layered``) straight into the cube map,
         then its mips.  No view trees: mirrors and portals show their own surface."""
         resolution = views[0].size[0]
@@ -349,9 +418,10 @@ class ProbeCaptures:
             if target is not None:
                 target.release()
             target = self._layered[key] = LayeredCubeTarget(self.ctx, cube.texture)
-        self.renderer.scene_pass.draw_layered([views[face] for face in range(6)], target, culled)
-        cube.prefilter = prefilter
-        self.mips.build(key, cube.texture, prefilter)
+        with self._drawing_into(key):
+            self.renderer.scene_pass.draw_layered([views[face] for face in range(6)], target, culled)
+        if build_mips:
+            cube.prefilter = self.mips.build(key, cube.texture, prefilter)
         self.renderer.stats.probe_faces += 6
 
     def read_face(self, key: int, face: int) -> np.ndarray:

@@ -19,6 +19,7 @@ from engine.mesh import Mesh
 from engine.raw_gl import RawGL
 from engine.render.bindings import CAMERA_BINDING
 from engine.render.instances import GpuMesh, InstanceBatch
+from engine.render.path_checks import PathChecks
 from engine.render.present import ANTIALIAS_MODES, PresentPass
 from engine.render.probes import ProbeCaptures
 from engine.render.scene_pass import ScenePass
@@ -50,6 +51,10 @@ class RenderStats:
     # How reflection levels were drawn: "per_mirror", "batched", "mixed" (auto chose both in
     # one frame), or "" when no reflection view was drawn (ReflectionSystem.path).
     reflection_path: str = ""
+    # The path self-check's verdicts so far on this context (engine/render/path_checks.py):
+    # the alternative GL paths compared with their plain counterparts and trusted, or refused.
+    paths_verified: tuple[str, ...] = ()
+    paths_refused: tuple[str, ...] = ()
 
 
 class _Shared:
@@ -97,6 +102,9 @@ class Renderer:
         self.debug = os.environ.get("SPECULUM_DEBUG", "") not in ("", "0")
         self.scene_pass = ScenePass(self)
         self.probes = ProbeCaptures(self)
+        self.path_checks = PathChecks(self)
+        # When set, the only batches scene passes draw (the path self-check's own scene).
+        self.scene_only: list[InstanceBatch] | None = None
 
     @property
     def antialias(self) -> str:
@@ -236,6 +244,8 @@ class Renderer:
 
     def opaque_batches(self) -> list[InstanceBatch]:
         """Non-empty opaque batches, smallest extent first (re-sorted after uploads)."""
+        if self.scene_only is not None:
+            return self.scene_only
         if self._order_stale:
             self._draw_order = sorted((b for b in self.batches.values() if b.count and not b.transparent),
                                       key=lambda b: b.extent)
@@ -245,6 +255,8 @@ class Renderer:
     def transparent_batches(self) -> list[InstanceBatch]:
         """Non-empty batches drawn in the scene pass's transparent slot (none until a
         material is transparent: refraction fills the slot)."""
+        if self.scene_only is not None:
+            return []
         return [b for b in self.batches.values() if b.count and b.transparent]
 
     def checkpoint(self, name: str) -> None:

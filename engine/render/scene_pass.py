@@ -25,14 +25,15 @@ path of the "Multiple Mirrors" OpenGL project; at most
 """
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import moderngl
 from pyglm import glm
 
+from engine.errors import GLPassError
 from engine.material_slots import SLOTS
-from engine.raw_gl import LayeredCubeTarget
+from engine.raw_gl import LayeredCubeTarget, inspect_bound_target
 from engine.render.batched_mirrors import MAX_BATCHED_VIEWS, VIEWS_BLOCK_BYTES, VIEWS_PER_INVOCATION, views_block
 from engine.render.bindings import (
     ALBEDO_UNIT,
@@ -100,6 +101,9 @@ class ScenePass:
         self._sky_size = 0
         self._sky_layered: moderngl.VertexArray | None = None
         self._views_ubo: moderngl.Buffer | None = None
+        # The probe whose cube map is being drawn into (ProbeCaptures sets it for a capture):
+        # batches sampling it read the sky instead (no rendering feedback loop).
+        self.capturing = 0
         self._reflection_sampler: moderngl.Sampler | None = None
 
     def program(self, variants: tuple[int, int, int] | None = None, invocations: int = 0,
@@ -159,7 +163,7 @@ class ScenePass:
         return program
 
     def _draw_batches(self, batches, invocations: int, masked: bool, node: int, layered: str = "",
-                      skip: int = 0) -> None:
+                      skip: int = 0, before_draw: Callable[[], None] | None = None) -> None:
         """One instanced draw per batch, each with the program of its variants.  A program's
         uniforms are written only when their value changes (``self._written``, reset at the
         start of each pass): on llvmpipe each call is CPU time on a view's critical path.
@@ -183,20 +187,24 @@ class ScenePass:
                 batch.normal_map.use(NORMAL_UNIT)
             probe_size, lookup = 0, _NO_PROBE
             if batch.probe:
-                cube = cubes.get(batch.probe)
+                # The probe being captured is drawn into, so it cannot be sampled (a rendering
+                # feedback loop: undefined on a GPU); what samples it shows the sky in its capture.
+                cube = cubes.get(batch.probe) if batch.probe != self.capturing else None
                 if cube is not None:
                     cube.texture.use(PROBE_UNIT)
                     probe_size, lookup = cube.face_size, cube.lookup()
                 else:
                     # Its probe has no capture yet (a probe whose first capture comes later in
-                    # this stage sees it): the sky, as an object with no probe reflects, rather
-                    # than whatever cube another pass left on the unit.
+                    # this stage sees it), or is the one being captured: the sky, as an object
+                    # with no probe reflects, rather than whatever cube another pass left on the unit.
                     self.renderer.sky.use(PROBE_UNIT)
                     probe_size = self._sky_size
             for i, value in enumerate((masked, self._sky_size, node, textured, batch.transparent, probe_size,
                                        *lookup)):
                 if values[i] != value and uniforms[i] is not None:
                     uniforms[i].value = values[i] = value
+            if before_draw is not None:
+                before_draw()
             batch.draw(program)
             stats.draw_calls += 1
             stats.instances += batch.count
@@ -310,21 +318,31 @@ class ScenePass:
         renderer.lights_ubo.bind_to_uniform_block(LIGHTS_BINDING)
         renderer.sky.use(SKY_UNIT)
         renderer.bind_view(views[0])  # the shared eye, for what reads the Camera block
-        target.bind()
         size = (0, 0, target.size, target.size)
+        # moderngl's state setters first (they write to the framebuffer moderngl thinks is
+        # bound), then the raw bind, which sets this target's viewport, scissor and masks.
         apply_pass_state(ctx, _LAYERED_SCENE, size)
+        target.bind()
+        check = self._layered_target_check(target) if renderer.debug else None
+        if check is not None:
+            check("clear")
         target.clear()
         sampler = self._reflection_filter()
         if sampler is not None:
             sampler.use(ALBEDO_UNIT)
+        skip = views[0].skip  # the probe's own object: in none of its faces (not drawn at all)
+        draw_check = (lambda: check("draw")) if check is not None else None
         try:
             layered = "culled" if culled else "naive"
-            self._draw_batches(renderer.opaque_batches(), 6, False, 0, layered)
+            self._draw_batches(renderer.opaque_batches(), 6, False, 0, layered, skip=skip, before_draw=draw_check)
             transparent = renderer.transparent_batches()
             if transparent:
                 apply_pass_state(ctx, _LAYERED_TRANSPARENT, size)
-                self._draw_batches(_back_to_front(transparent, views[0].eye), 6, False, 0, layered)
+                self._draw_batches(_back_to_front(transparent, views[0].eye), 6, False, 0, layered, skip=skip,
+                                   before_draw=draw_check)
             apply_pass_state(ctx, _LAYERED_SKY, size)
+            if check is not None:
+                check("sky")
             self._layered_sky().render(moderngl.TRIANGLES, vertices=3)
         finally:
             if sampler is not None:
@@ -332,6 +350,19 @@ class ScenePass:
             target.unbind()
         renderer.stats.passes += 1
         renderer.checkpoint("layered cube-map capture")
+
+    def _layered_target_check(self, target: LayeredCubeTarget) -> Callable[[str], None]:
+        """Debug mode: a check that the driver has the layered target bound and attached as
+        a layered draw needs (``raw_gl.inspect_bound_target``), raising ``GLPassError`` with
+        what differs.  Run before the clear and before each draw of the capture."""
+
+        def check(moment: str) -> None:
+            state = inspect_bound_target(self.ctx, target.cube, depth=True)
+            problems = state.problems(target.framebuffer, target.cube.glo, 0, target.size, depth=True)
+            if problems:
+                raise GLPassError(f"layered cube-map capture, at the {moment}: " + "; ".join(problems))
+
+        return check
 
     def _layered_sky(self) -> moderngl.VertexArray:
         if self._sky_layered is None:
