@@ -7,22 +7,36 @@ inserted after the ``#version`` line.
 Compile errors name the file and line a person edits, not the line of the expanded text the
 driver saw.  Every file of a program gets a number k, and a ``#line`` directive starts each
 file and resumes the includer after each ``#include`` with line numbers counted from
-k x ``LINE_STRIDE``, so the driver's log says "0:300008(5)" for line 8 of file 3 and the
-library rewrites that as ``include/ggx.glsl:8:5``.  The file is carried in the line number,
-not in GLSL's source-string number, because Mesa drops the latter from semantic errors
-(an undeclared name is reported in source 0).  Mesa writes ``S:L(C)``, NVIDIA ``S(L)``,
-AMD and Apple ``ERROR: S:L:``; all three are rewritten.  File 0 is the generated header
-(the defines).  The numbering is resumed after every ``#else``, ``#elif`` and ``#endif``
-too: the preprocessor skips a ``#line`` inside a branch it drops but still counts that
-branch's lines, so an ``#include`` inside an ``#ifdef`` a variant leaves undefined would
-otherwise shift every later line of that variant.
+k x ``LINE_STRIDE``, so the driver's log says line 300008 for line 8 of file 3.  The file is
+carried in the line number, not in GLSL's source-string number, because Mesa drops the
+latter from semantic errors (an undeclared name is reported in source 0).  File 0 is the
+generated header (the defines).  The numbering is resumed after every ``#else``, ``#elif``
+and ``#endif`` too: the preprocessor skips a ``#line`` inside a branch it drops but still
+counts that branch's lines, so an ``#include`` inside an ``#ifdef`` a variant leaves
+undefined would otherwise shift every later line of that variant.
+
+Every driver words its log its own way; each message is rewritten into the engine's one
+form, ``file:line[:column]: error|warning: text`` (``Diagnostic``; the column where the
+driver gives one)::
+
+    Mesa (llvmpipe, radeonsi, Intel on Linux)   0:300008(5): error: `x' undeclared
+    NVIDIA                                      0(300008) : error C1503: undefined variable "x"
+    AMD, Intel on Windows, Apple, ANGLE,        ERROR: 0:300008: 'x' : undeclared identifier
+      glslang (old AMD: "error(#143) ...")
+                                   all become   include/ggx.glsl:8[:5]: error: ...
+
+Shader files are read as bytes and must be UTF-8; only regular files are opened (a named
+pipe or a directory in the shaders folder is refused by ``os.stat`` before any ``open``,
+which would wait for a writer forever).
 
 Hot reload (windowed runs): ``ShaderLibrary.poll`` looks at the files every program was
-built from (size and modification time, then the text) at most every ``POLL_INTERVAL``
+built from (size and modification time, then the bytes) at most every ``POLL_INTERVAL``
 seconds, and rebuilds the programs that used a changed file.  A rebuild that fails keeps
 the old program drawing and records the error (``ShaderLibrary.errors``, file:line as
-above).  One that builds is swapped in under the old program's own GL name: the new
-shaders are attached to the old program object and it is relinked, with each vertex input
+above); ``poll`` says each change once: one line for the programs rebuilt, one message for
+the errors (each distinct error line once, however many variants of a program share it).
+One that builds is swapped in under the old program's own GL name: the new shaders are
+attached to the old program object and it is relinked, with each vertex input
 bound to its old location, so every vertex array, cached program and uniform a pass holds
 keeps working without knowing of the reload; moderngl's uniform objects get their new
 locations, and the values the engine set once (sampler units, uniform-block bindings) are
@@ -31,7 +45,9 @@ written back.
 from __future__ import annotations
 
 import ctypes
+import os
 import re
+import stat
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -49,12 +65,39 @@ POLL_INTERVAL = 0.5  # seconds between two looks at the shader files (hot reload
 _VERSION = "#version 410 core"
 HEADER = "(generated defines)"
 LINE_STRIDE = 100_000  # file k's line n is reported as line k x LINE_STRIDE + n
-# Where drivers put (source-string number, line[, column]) in a compile log.
-_LOG_PLACES = (
-    re.compile(r"\b(?P<n>\d+):(?P<line>\d+)\((?P<col>\d+)\)"),  # Mesa: 0:12(5)
-    re.compile(r"\b(?P<n>\d+)\((?P<line>\d+)\)(?= :)"),  # NVIDIA: 0(12) : error
-    re.compile(r"(?<=ERROR: )(?P<n>\d+):(?P<line>\d+)(?=:)"),  # AMD, Apple: ERROR: 0:12: ...
+# One line of a driver's compile or link log, by vendor: source-string number (ignored: the file
+# is in the line number), line, column where given, severity and text.
+_DRIVER_LINES = (
+    # Mesa: "0:12(5): error: `x' undeclared"; its preprocessor: "0:3(1): preprocessor error: ..."
+    re.compile(r"^\s*(?P<source>\d+):(?P<line>\d+)\((?P<column>\d+)\):\s*"
+               r"(?:preprocessor\s+)?(?P<severity>error|warning):\s*(?P<text>.*)$", re.IGNORECASE),
+    # NVIDIA: "0(12) : error C1503: undefined variable "x"", "(0) : error C5145: ..." in a link log
+    re.compile(r"^\s*(?P<source>\d+)?\((?P<line>\d+)\)\s*:\s*(?:fatal\s+)?(?P<severity>error|warning)"
+               r"(?:\s+(?P<code>C\d+))?\s*:\s*(?P<text>.*)$", re.IGNORECASE),
+    # AMD, Intel on Windows, Apple, ANGLE, glslang: "ERROR: 0:12: 'x' : undeclared identifier"
+    re.compile(r"^\s*(?P<severity>ERROR|WARNING):\s*(?P<source>\d+):(?P<line>\d+):\s*(?P<text>.*)$"),
 )
+_OLD_AMD_CODE = re.compile(r"^(?:error|warning)\((?P<code>#\d+)\)\s*(?P<text>.*)$")  # "error(#143) Undeclared ..."
+_NVIDIA_REFERENCE = re.compile(r"(?<=\bat )(?P<source>\d+)?\((?P<line>\d+)\)")  # "... previous declaration at 0(16)"
+_RULE = re.compile(r"^\s*[=-]+\s*$")  # moderngl's "=====" under the stage, NVIDIA's "-----" under "Vertex info"
+
+
+@dataclass(frozen=True)
+class Diagnostic:
+    """One compiler message in the engine's form: ``file:line[:column]: severity: text``
+    (``file`` and ``line`` None for a message about no line, as most link errors are)."""
+
+    file: str | None
+    line: int | None
+    column: int | None
+    severity: str  # "error" or "warning"
+    text: str
+
+    def __str__(self) -> str:
+        if self.file is None:
+            return f"{self.severity}: {self.text}"
+        column = f":{self.column}" if self.column is not None else ""
+        return f"{self.file}:{self.line}{column}: {self.severity}: {self.text}"
 
 
 def shader_dir() -> Path:
@@ -72,18 +115,112 @@ class SourceFiles:
             self.names.append(name)
         return self.names.index(name)
 
-    def readable(self, log: str) -> str:
-        """``log`` with every driver reference to a line written as ``file:line``."""
-        def rename(match: re.Match[str]) -> str:
-            number, line = divmod(int(match.group("line")), LINE_STRIDE)
-            if number >= len(self.names):
-                return match.group(0)
-            column = match.groupdict().get("col")
-            return f"{self.names[number]}:{line}" + (f":{column}" if column else "")
+    def place(self, reported: int) -> tuple[str, int] | None:
+        """The (file, line) of a line number the driver reported; None for line 0 (no line)
+        or a number no file of this program has."""
+        number, line = divmod(reported, LINE_STRIDE)
+        if reported <= 0 or number >= len(self.names):
+            return None
+        return self.names[number], line
 
-        for place in _LOG_PLACES:
-            log = place.sub(rename, log)
-        return log
+    def diagnostic(self, log_line: str) -> Diagnostic | None:
+        """``log_line`` of any driver's log as a ``Diagnostic``; None for a line that is no
+        message (a header, a rule, a count of errors) or names a line no file has."""
+        for pattern in _DRIVER_LINES:
+            match = pattern.match(log_line)
+            if match is not None:
+                break
+        else:
+            return None
+        text = match.group("text").strip()
+        code = match.groupdict().get("code")
+        old_amd = _OLD_AMD_CODE.match(text)
+        if old_amd is not None:
+            code, text = old_amd.group("code"), old_amd.group("text")
+        if pattern is _DRIVER_LINES[1]:
+            text = _NVIDIA_REFERENCE.sub(self._reference, text)
+        if code:
+            text = f"{text} [{code}]"
+        severity = match.group("severity").lower()
+        reported = int(match.group("line"))
+        if reported == 0:
+            return Diagnostic(None, None, None, severity, text)
+        place = self.place(reported)
+        if place is None:
+            return None
+        column = match.groupdict().get("column")
+        return Diagnostic(place[0], place[1], int(column) if column else None, severity, text)
+
+    def _reference(self, match: re.Match[str]) -> str:
+        place = self.place(int(match.group("line")))
+        return match.group(0) if place is None else f"{place[0]}:{place[1]}"
+
+    def diagnostics(self, log: str) -> list[Diagnostic]:
+        """Every message of a driver's ``log``, in the engine's form."""
+        return [d for d in map(self.diagnostic, log.splitlines()) if d is not None]
+
+    def readable(self, log: str) -> str:
+        """``log`` with every driver message rewritten in the engine's form (``Diagnostic``),
+        and the blank lines and rules left out; other lines are kept as they are."""
+        out = []
+        for line in log.splitlines():
+            if not line.strip() or _RULE.match(line):
+                continue
+            found = self.diagnostic(line)
+            out.append(line.rstrip() if found is None else str(found))
+        return "\n".join(out)
+
+
+class ShaderBuildError(ShaderError):
+    """A program whose shaders did not compile or link; ``diagnostics`` holds the driver's
+    messages in the engine's form."""
+
+    def __init__(self, message: str, diagnostics: list[Diagnostic]) -> None:
+        super().__init__(message)
+        self.diagnostics = diagnostics
+
+
+class _NotRegularFile(Exception):
+    def __init__(self, kind: str) -> None:
+        super().__init__(kind)
+        self.kind = kind
+
+
+def _kind(mode: int) -> str:
+    for test, kind in ((stat.S_ISDIR, "a directory"), (stat.S_ISFIFO, "a named pipe (FIFO)"),
+                       (stat.S_ISSOCK, "a socket"), (stat.S_ISCHR, "a device"), (stat.S_ISBLK, "a device")):
+        if test(mode):
+            return kind
+    return "not a regular file"
+
+
+def _read_bytes(path: Path) -> bytes:
+    """The bytes of the regular file at ``path``.  Anything else (a named pipe, whose open
+    would wait for a writer forever; a directory; a device) raises ``_NotRegularFile``
+    without being opened; OSError when it is missing or unreadable."""
+    mode = os.stat(path).st_mode
+    if not stat.S_ISREG(mode):
+        raise _NotRegularFile(_kind(mode))
+    # Non-blocking, and looked at again once open: a pipe put there since the stat above
+    # opens at once (and is refused) instead of waiting for a writer.
+    descriptor = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_BINARY", 0))
+    with open(descriptor, "rb") as file:
+        mode = os.fstat(descriptor).st_mode
+        if not stat.S_ISREG(mode):
+            raise _NotRegularFile(_kind(mode))
+        return file.read()
+
+
+def _decode(data: bytes, name: str, where: str) -> str:
+    """``data`` as text (UTF-8, newlines as ``Path.read_text`` makes them)."""
+    try:
+        text = data.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        line = data.count(b"\n", 0, exc.start) + 1
+        column = exc.start - (data.rfind(b"\n", 0, exc.start) + 1) + 1
+        raise ShaderError(f"shader file {name!r}{where} is not UTF-8 text: byte 0x{data[exc.start]:02x} "
+                          f"at line {line}, column {column} (save it as UTF-8)") from None
+    return text.replace("\r\n", "\n").replace("\r", "\n")
 
 
 def load_source(name: str, defines: dict[str, str] | None = None, *, root: Path | None = None,
@@ -110,13 +247,19 @@ def _line(line: int, number: int) -> str:
 def _expand(name: str, stack: tuple[str, ...], root: Path, files: SourceFiles) -> str:
     if name in stack:
         raise ShaderError(f"shader include cycle: {' -> '.join(stack + (name,))}")
-    path = root / name
-    if not path.is_file():
-        where = f" (included from {stack[-1]!r})" if stack else ""
-        raise ShaderError(f"shader file {name!r} not found in {root}{where}")
+    where = f" (included from {stack[-1]!r})" if stack else ""
+    try:
+        data = _read_bytes(root / name)
+    except _NotRegularFile as exc:
+        raise ShaderError(f"shader file {name!r} in {root}{where} is {exc.kind}, not a regular file") from None
+    except (FileNotFoundError, NotADirectoryError):
+        raise ShaderError(f"shader file {name!r} not found in {root}{where}") from None
+    except OSError as exc:
+        raise ShaderError(f"shader file {name!r} in {root}{where} could not be read: {exc.strerror}") from None
+    text = _decode(data, name, where)
     number = files.number(name)
     out = []
-    for index, line in enumerate(path.read_text().split("\n"), start=1):
+    for index, line in enumerate(text.split("\n"), start=1):
         match = _INCLUDE.match(line)
         if match is None:
             out.append(line)
@@ -155,15 +298,17 @@ class ShaderLibrary:
         key = (vertex, fragment, geometry, tuple(sorted((defines or {}).items())))
         program = self._programs.get(key)
         if program is None:
-            program, files = self._build(key)
+            files = SourceFiles()
+            program = self._build(key, files)
             self._programs[key] = program
             self._uses[key] = set(files.names[1:])
         return program
 
-    def _build(self, key: ProgramKey) -> tuple[moderngl.Program, SourceFiles]:
+    def _build(self, key: ProgramKey, files: SourceFiles) -> moderngl.Program:
+        """A new program of ``key``; ``files`` gets the files it was built from (also those
+        read before a failure, so a fix to any of them is seen)."""
         vertex, fragment, geometry, defines = key
-        files = SourceFiles()  # one numbering for every stage, so a log line names one file
-        try:
+        try:  # one numbering for every stage, so a log line names one file
             sources = {stage: load_source(name, dict(defines), root=self.root, files=files) if name else None
                        for stage, name in (("vertex_shader", vertex), ("fragment_shader", fragment),
                                            ("geometry_shader", geometry))}
@@ -171,10 +316,12 @@ class ShaderLibrary:
             for name in files.names[1:]:
                 self._remember_file(name)
         try:
-            return self.ctx.program(**sources), files
+            return self.ctx.program(**sources)
         except moderngl.Error as exc:
             names = ", ".join(f for f in (vertex, geometry, fragment) if f)
-            raise ShaderError(f"shader program ({names}) failed to build:\n{files.readable(str(exc))}") from exc
+            log = str(exc)
+            raise ShaderBuildError(f"shader program ({names}) failed to build:\n{files.readable(log)}",
+                                   files.diagnostics(log)) from exc
 
     # --- hot reload ---------------------------------------------------------------------------
     def _path(self, name: str) -> Path:
@@ -185,35 +332,42 @@ class ShaderLibrary:
             self._seen[name] = self._read(name)
 
     def _read(self, name: str) -> tuple:
+        """(mtime_ns, size, contents) of file ``name``: its bytes, or for something that is
+        not a regular file what it is (never opened), or all None when it is gone (an editor
+        saving by rename: rebuilt, and refused, until it is back)."""
         path = self._path(name)
         try:
-            stat = path.stat()
-            return stat.st_mtime_ns, stat.st_size, path.read_text()
+            found = os.stat(path)
+            contents = _read_bytes(path)
+        except _NotRegularFile as exc:
+            contents = exc.kind
         except OSError:
-            return None, None, None  # gone (an editor saving by rename): rebuilt, and refused, until it is back
+            return None, None, None
+        return found.st_mtime_ns, found.st_size, contents
 
     def changed_files(self) -> set[str]:
-        """Files some program was built from whose text changed since it was last read (the
-        size and modification time are looked at first, so an unchanged file is not read)."""
+        """Files some program was built from whose bytes changed since they were last read
+        (the size and modification time are looked at first, so an unchanged file is not
+        read)."""
         changed = set()
-        for name, (mtime, size, text) in list(self._seen.items()):
+        for name, (mtime, size, contents) in list(self._seen.items()):
             try:
-                stat = self._path(name).stat()
-                if (stat.st_mtime_ns, stat.st_size) == (mtime, size):
+                found = os.stat(self._path(name))
+                if (found.st_mtime_ns, found.st_size) == (mtime, size):
                     continue
             except OSError:
-                if text is None:
+                if contents is None:
                     continue
             now = self._read(name)
             self._seen[name] = now
-            if now[2] != text:
+            if now[2] != contents:
                 changed.add(name)
         return changed
 
     def poll(self, now: float | None = None) -> list[str]:
         """Rebuild the programs whose files changed, at most every ``POLL_INTERVAL`` seconds
-        (the window shell calls it each frame).  Returns one message per rebuild or new
-        error, so each change is reported once."""
+        (the window shell calls it each frame).  Returns what ``reload`` says, so each change
+        is reported once."""
         now = time.monotonic() if now is None else now
         if now < self._next_poll:
             return []
@@ -222,30 +376,38 @@ class ShaderLibrary:
 
     def reload(self, changed: set[str]) -> list[str]:
         """Rebuild every program built from one of ``changed``; a program whose new build
-        fails keeps drawing with its old one and its error goes to ``errors``.  Returns what
-        happened, one message per rebuild and per distinct error."""
-        messages = []
+        fails keeps drawing with its old one and its error goes to ``errors``.  Returns at
+        most two messages: one for the errors (each distinct error line once, however many
+        programs and variants share it), one line for the programs rebuilt."""
+        rebuilt, failed, edited = [], {}, set()
         for key, program in list(self._programs.items()):
-            if not self._uses[key] & changed:
+            touched = self._uses[key] & changed
+            if not touched:
                 continue
+            files = SourceFiles()
             try:
-                built, files = self._build(key)
-            except ShaderError as exc:
-                self.errors[key] = str(exc)
-                messages.append(f"shader error, the previous program keeps drawing: {exc}")
-                continue
-            self._uses[key] = set(files.names[1:])
-            try:
+                built = self._build(key, files)
+                self._uses[key] = set(files.names[1:])
                 self._swap_in(key, program, built)
             except ShaderError as exc:
+                self._uses[key] |= set(files.names[1:])  # a file the broken build reached, the fix may be in
                 self.errors[key] = str(exc)
-                messages.append(f"shader error, the previous program keeps drawing: {exc}")
+                failed[key] = _reasons(exc)
                 continue
             self.errors.pop(key, None)
             self.reloads += 1
-            names = ", ".join(f for f in key[:3] if f)
-            messages.append(f"shader reloaded: {names}" + (f" {dict(key[3])}" if key[3] else ""))
-        return list(dict.fromkeys(messages))  # variants of one program failing alike: said once
+            rebuilt.append(key)
+            edited |= touched
+        messages = []
+        if failed:
+            reasons = list(dict.fromkeys(line for lines in failed.values() for line in lines))
+            head = f"shader error, previous build kept for {_programs(failed)}"
+            messages.append(f"{head}: {reasons[0]}" if len(reasons) == 1 else "\n".join([f"{head}:", *reasons]))
+        if rebuilt:
+            kept = f"; {len(failed)} kept the previous build" if failed else ""
+            messages.append(f"shader reloaded: {', '.join(sorted(edited))} "
+                            f"({_count(len(rebuilt), 'program')} rebuilt{kept})")
+        return messages
 
     def _swap_in(self, key: ProgramKey, program: moderngl.Program, built: moderngl.Program) -> None:
         """Relink ``program``'s GL object with ``built``'s shaders (see the module's docstring)
@@ -334,6 +496,27 @@ class ShaderLibrary:
         self._programs.clear()
         self._uses.clear()
         self._seen.clear()
+
+
+def _reasons(error: ShaderError) -> list[str]:
+    """The lines that say why a build failed: its error messages in the engine's form (not
+    the warnings, which differ between the variants of one program), else the whole text."""
+    found = [str(d) for d in getattr(error, "diagnostics", ()) if d.severity == "error"]
+    return found or [line for line in str(error).splitlines() if line.strip()]
+
+
+def _programs(keys) -> str:
+    """``keys`` named by their files, variants of one program counted, not listed."""
+    variants: dict[str, int] = {}
+    for key in keys:
+        name = " + ".join(f for f in (key[0], key[2], key[1]) if f)
+        variants[name] = variants.get(name, 0) + 1
+    named = [name + (f" ({count} variants)" if count > 1 else "") for name, count in variants.items()]
+    return ", ".join(named[:3]) + (f" and {_count(len(named) - 3, 'other program')}" if len(named) > 3 else "")
+
+
+def _count(n: int, noun: str) -> str:
+    return f"{n} {noun}" + ("" if n == 1 else "s")
 
 
 def _is_uniform(member) -> bool:

@@ -7,8 +7,12 @@ found through ``engine.shader_library.shader_dir``, pointed at the copy), render
 frames and compare their pixels."""
 from __future__ import annotations
 
+import contextlib
+import os
 import re
 import shutil
+import threading
+import time
 from pathlib import Path
 
 import numpy as np
@@ -72,8 +76,9 @@ def test_a_broken_edit_keeps_the_old_program_and_names_file_and_line_then_a_fix_
     messages = library.poll(now=1001.0)
     scene_programs = [key for key in library._programs if key[1] == "scene.frag"]
     assert len(scene_programs) > 1 and len(messages) == 1, messages  # the variants fail alike: said once
-    for message in messages:
-        assert f"scene.frag:{line}:" in message and "undefined_hot_reload_name" in message, message
+    found = [m for m in map(DIAGNOSTIC.search, messages[0].split("\n")) if m]
+    assert any(m.group("file", "line", "severity") == ("scene.frag", str(line), "error")
+               and "undefined_hot_reload_name" in m.group("text") for m in found), messages
     assert set(library.errors) == set(scene_programs)
     assert library.poll(now=1002.0) == []  # said once per change
     assert np.array_equal(runner.frame(), first), "the previous programs must keep drawing"
@@ -82,7 +87,7 @@ def test_a_broken_edit_keeps_the_old_program_and_names_file_and_line_then_a_fix_
     edit(shader_copy, "scene.frag", "    color += undefined_hot_reload_name;", None)
     edit(shader_copy, "scene.frag", "out_color = vec4(color,", "    color = vec3(1.0, 0.0, 1.0);")
     messages = library.poll(now=1003.0)
-    assert all(m.startswith("shader reloaded: scene.vert, scene.frag") for m in messages), messages
+    assert messages == [f"shader reloaded: scene.frag ({len(scene_programs)} programs rebuilt)"], messages
     assert library.errors == {} and library.reloads == len(scene_programs)
     magenta = runner.frame()
     column, row = runner.project(BOX_AT)
@@ -118,7 +123,7 @@ def test_files_are_looked_at_at_most_every_poll_interval(ctx, shader_copy):
         assert library.poll(now=50.0) == []
         edit(shader_copy, "include/color.glsl", "", "// an edit")
         assert library.poll(now=50.0 + POLL_INTERVAL / 2) == []  # too soon: not looked at
-        assert library.poll(now=50.0 + POLL_INTERVAL) == ["shader reloaded: present.vert, present.frag"]
+        assert library.poll(now=50.0 + POLL_INTERVAL) == ["shader reloaded: include/color.glsl (1 program rebuilt)"]
         assert library.program("present.vert", "present.frag") is program  # the same object, relinked
         assert library.poll(now=60.0) == []
     finally:
@@ -134,7 +139,7 @@ def test_a_deleted_file_is_an_error_until_it_is_back(ctx, shader_copy):
         (message,) = library.poll(now=1.0)
         assert "'mirror_claim.frag' not found" in message
         (shader_copy / "mirror_claim.frag").write_text(saved)
-        assert library.poll(now=2.0) == ["shader reloaded: fullscreen.vert, mirror_claim.frag"]
+        assert library.poll(now=2.0) == ["shader reloaded: mirror_claim.frag (1 program rebuilt)"]
         assert library.errors == {}
     finally:
         library.release()
@@ -149,7 +154,7 @@ def test_an_include_inside_a_dropped_branch_does_not_shift_later_lines(ctx, tmp_
     (tmp_path / "main.frag").write_text('#version 410 core\n#ifdef UNSET\n#include "long.glsl"\n#endif\n'
                                         "out vec4 c;\nvoid main() { c = vec4(missing_name); }\n")
     library = ShaderLibrary(ctx, tmp_path)
-    with pytest.raises(ShaderError, match=r"main\.frag:6:\d+: .*missing_name"):
+    with pytest.raises(ShaderError, match=r"main\.frag:6(:\d+)?: error: .*missing_name"):
         library.program("main.vert", "main.frag")
     library.release()
 
@@ -215,7 +220,9 @@ def test_every_program_the_engine_builds_reports_errors_at_the_edited_file_and_l
                 with pytest.raises(ShaderError) as info:
                     library.program(vertex, fragment, geometry, dict(defines))
                 message = str(info.value)
-                reported = set(re.findall(rf"(\S+?):(\d+):\d+: error: .*?({PROBE}\w+?)_undeclared", message))
+                reported = {(m.group("file"), m.group("line"), marker.group(1))
+                            for m in map(DIAGNOSTIC.match, message.split("\n")) if m and m.group("severity") == "error"
+                            for marker in [re.search(rf"({PROBE}\w+?)_undeclared", m.group("text"))] if marker}
                 assert reported, message
                 for where, line, marker in reported:
                     name = next(n for n, (m, _) in waiting.items() if m == marker)
@@ -232,15 +239,9 @@ def test_every_program_the_engine_builds_reports_errors_at_the_edited_file_and_l
 
 
 def test_the_window_shell_polls_and_says_each_reload_once(shader_copy, capsys):
-    """Windowed runs poll the library each frame: an edit is drawn, and said once."""
-    import moderngl_window as mglw
-
-    from engine.window import make_window_config
-    from tests.support import FunctionGame
-
-    config = mglw.create_window_config_instance(
-        make_window_config(FunctionGame(room)), args=["--window", "headless", "--backend", "egl", "--size", "96x72"])
-    try:
+    """Windowed runs poll the library each frame: an edit is drawn, and said in one line
+    (however many variants were rebuilt), without the variants' defines."""
+    with window_shell() as config:
         library = config.engine.renderer.shaders
         config.on_render(0.0, 1 / 60)
         before = np.frombuffer(config.wnd.fbo.read(components=3), np.uint8).copy()
@@ -249,12 +250,9 @@ def test_the_window_shell_polls_and_says_each_reload_once(shader_copy, capsys):
         for _ in range(3):
             config.on_render(0.0, 1 / 60)
         after = np.frombuffer(config.wnd.fbo.read(components=3), np.uint8)
-        assert (after != before).any() and library.reloads > 0
-        said = [line for line in capsys.readouterr().err.splitlines() if "shader reloaded" in line]
-        assert len(said) == library.reloads, said  # once per program rebuilt, not once per frame
-    finally:
-        config.on_close()
-        config.wnd.destroy()
+        assert (after != before).any() and library.reloads > 1
+        said = [line for line in capsys.readouterr().err.splitlines() if "shader" in line]
+        assert said == [f"speculum: shader reloaded: scene.frag ({library.reloads} programs rebuilt)"], said
 
 
 def test_a_uniform_the_first_build_dropped_is_fed_after_a_reload(scene, shader_copy):
@@ -310,3 +308,150 @@ def test_a_composite_column_the_first_build_dropped_is_fed_after_a_reload(scene,
     red, green = rgb[row, column, 0], rgb[row, column, 1]
     assert red > green + 60 and red > int(before[row, column, 0]) + 30, (rgb[row, column].tolist(),
                                                                           before[row, column].tolist())
+
+
+# --- hot reload never raises, hangs, or says a thing twice (issue 26) ---------------------------
+DIAGNOSTIC = re.compile(r"(?P<file>[\w./-]+):(?P<line>\d+)(?::\d+)?: (?P<severity>error|warning): (?P<text>.*)")
+
+
+def test_a_file_saved_in_latin1_is_one_error_line_once_and_the_old_program_keeps_drawing(ctx, shader_copy):
+    """A Latin-1 "é" in a comment is no UnicodeDecodeError out of every poll: one line, naming
+    the file and the reason, said once; the program keeps its build until the file is fixed."""
+    library = ShaderLibrary(ctx)
+    try:
+        program = library.program("present.vert", "present.frag")
+        glo = program.glo
+        path = shader_copy / "include" / "color.glsl"
+        saved = path.read_bytes()
+        path.write_bytes(b"// caf\xe9 au lait\n" + saved)
+        (message,) = library.poll(now=1.0)
+        assert "\n" not in message and "include/color.glsl" in message and "UTF-8" in message, message
+        assert "0xe9" in message and "line 1" in message, message
+        assert library.errors and library.program("present.vert", "present.frag") is program
+        assert program.glo == glo
+        assert library.poll(now=2.0) == [] and library.poll(now=3.0) == []  # said once, not every frame
+        path.write_bytes(saved)
+        assert library.poll(now=4.0) == ["shader reloaded: include/color.glsl (1 program rebuilt)"]
+        assert library.errors == {}
+    finally:
+        library.release()
+
+
+@contextlib.contextmanager
+def _watch_fifo(path: Path):
+    """Yields a list that gets True if anything opened the FIFO at ``path`` for reading (a
+    non-blocking writer open succeeds only then); that writer also frees a reader blocked in
+    ``open``, so a regression fails the test instead of hanging it."""
+    opened, done = [], threading.Event()
+
+    def watch() -> None:
+        while not done.is_set():
+            try:
+                fd = os.open(path, os.O_WRONLY | os.O_NONBLOCK)
+            except OSError:  # ENXIO: no reader (the only answer when nothing opens it)
+                time.sleep(0.01)
+                continue
+            opened.append(True)
+            os.close(fd)
+            time.sleep(0.01)
+
+    thread = threading.Thread(target=watch, daemon=True)
+    thread.start()
+    try:
+        yield opened
+    finally:
+        done.set()
+        thread.join()
+
+
+@pytest.mark.parametrize("kind", ["fifo", "directory"])
+def test_an_include_that_is_not_a_regular_file_is_refused_without_being_opened(ctx, shader_copy, kind):
+    """An include that became a named pipe (whose open would wait for a writer forever) or a
+    directory is refused by what os.stat says, on a rebuild and on a first build; the old
+    program keeps drawing and the error is said once."""
+    if kind == "fifo" and not hasattr(os, "mkfifo"):
+        pytest.skip("no named pipes on this system")
+    library = ShaderLibrary(ctx)
+    try:
+        program = library.program("present.vert", "present.frag")
+        path = shader_copy / "include" / "color.glsl"
+        saved = path.read_text()
+        path.unlink()
+        os.mkfifo(path) if kind == "fifo" else path.mkdir()
+        what = "a named pipe (FIFO)" if kind == "fifo" else "a directory"
+        with (_watch_fifo(path) if kind == "fifo" else contextlib.nullcontext([])) as opened:
+            (message,) = library.poll(now=1.0)
+            assert not opened, "the named pipe was opened"
+            assert "\n" not in message and "'include/color.glsl'" in message and what in message, message
+            assert library.errors and library.program("present.vert", "present.frag") is program
+            assert library.poll(now=2.0) == []
+            with pytest.raises(ShaderError, match=rf"'include/color\.glsl'.* is {re.escape(what)}, not a regular"):
+                library.program("present.vert", "present.frag", defines={"A_NEW_VARIANT": "1"})
+        assert not opened, "the named pipe was opened"
+        path.unlink() if kind == "fifo" else path.rmdir()
+        path.write_text(saved)
+        assert library.poll(now=3.0) == ["shader reloaded: include/color.glsl (1 program rebuilt)"]
+    finally:
+        library.release()
+
+
+def test_an_include_written_before_its_file_is_built_once_the_file_comes(ctx, shader_copy):
+    """A broken build still watches every file it reached: an #include of a file not yet made
+    is an error, and making the file rebuilds the program."""
+    library = ShaderLibrary(ctx)
+    try:
+        library.program("present.vert", "present.frag")
+        edit(shader_copy, "present.frag", "uniform sampler2D hdr_image;", '#include "later.glsl"')
+        (message,) = library.poll(now=1.0)
+        assert "'include/later.glsl' not found" in message, message
+        (shader_copy / "include" / "later.glsl").write_text("float later() { return 1.0; }\n")
+        assert library.poll(now=2.0) == ["shader reloaded: include/later.glsl (1 program rebuilt)"]
+        assert library.errors == {}
+    finally:
+        library.release()
+
+
+@contextlib.contextmanager
+def window_shell(build=None):
+    """The windowed shell (headless EGL window) running a game of ``build`` (``room``)."""
+    import moderngl_window as mglw
+
+    from engine.window import make_window_config
+    from tests.support import FunctionGame
+
+    config = mglw.create_window_config_instance(
+        make_window_config(FunctionGame(build or room)),
+        args=["--window", "headless", "--backend", "egl", "--size", "96x72"])
+    try:
+        yield config
+    finally:
+        config.on_close()
+        config.wnd.destroy()
+
+
+def test_an_error_in_present_frag_is_printed_once(shader_copy, capsys):
+    """present.frag is built twice (with and without LUMA_IN_ALPHA), and the two builds of a
+    broken edit warn differently: the shell still prints the error once, each of its lines
+    once, in the engine's form, and then nothing while the file stays as it is."""
+    with window_shell() as config:
+        library = config.engine.renderer.shaders
+        config.on_render(0.0, 1 / 60)
+        capsys.readouterr()
+        path = shader_copy / "present.frag"
+        text = path.read_text()
+        # srgb is now broken, and each variant warns of its use at its own line (#ifdef LUMA_IN_ALPHA)
+        path.write_text(text.replace("* exposure);", "* exposure) + present_undeclared_name;"))
+        line = 1 + text[:text.index("* exposure);")].count("\n")
+        for _ in range(3):
+            library._next_poll = 0.0  # as if half a second had passed each frame
+            config.on_render(0.0, 1 / 60)
+        printed = capsys.readouterr().err.splitlines()
+        errors = [text for text in printed if "shader error" in text]
+        assert len(errors) == 1, printed
+        found = [m for m in map(DIAGNOSTIC.search, printed) if m]
+        assert len({m.group(0) for m in found}) == len(found), printed  # no line twice
+        assert "present.vert + present.frag (2 variants)" in errors[0], printed
+        assert found and all(m.group("severity") == "error" for m in found), printed
+        assert any(m.group("file", "line") == ("present.frag", str(line)) and "present_undeclared_name" in
+                   m.group("text") for m in found), printed
+        assert len(library.errors) == 2
