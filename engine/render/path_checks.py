@@ -42,6 +42,7 @@ import moderngl
 import numpy as np
 from pyglm import glm
 
+from engine.errors import GLPassError
 from engine.material_slots import EmissiveVariant, ReflectVariant, RefractVariant
 from engine.mesh import quad
 from engine.raw_gl import read_cube_level, write_cube_level
@@ -91,10 +92,11 @@ class PathChecks:
 
     def trusted(self, path: str) -> bool:
         """Whether ``path`` may be used: checked now if it never was on this context."""
-        verdict = self.verdicts[path]
-        if verdict.status == "unchecked" and path not in self._running:
+        if path in self._running:
+            return True  # the check itself is drawing with it
+        if self.verdicts[path].status == "unchecked":
             self.check(path)
-        return verdict.status == "verified" or path in self._running
+        return self.verdicts[path].status == "verified"
 
     def run_all(self) -> dict[str, PathVerdict]:
         """Check every path not checked yet on this context; returns the verdicts."""
@@ -128,7 +130,7 @@ class PathChecks:
                 problem = checks[path]()
         except _Unavailable as missing:
             verdict = PathVerdict("unavailable", str(missing))
-        except RuntimeError as error:  # a framebuffer the driver would not complete, a GL error
+        except (RuntimeError, GLPassError) as error:  # a framebuffer the driver would not complete, a GL error
             verdict = PathVerdict("refused", str(error))
         else:
             verdict = PathVerdict("refused", problem) if problem else PathVerdict("verified")

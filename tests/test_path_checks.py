@@ -1,0 +1,247 @@
+"""The path self-check (engine/render/path_checks.py): every alternative GL path is compared
+with its plain counterpart before it is trusted, and a broken one is refused while the
+picture stays right.
+
+llvmpipe draws every path right, so the broken paths here are stand-ins injected for the
+test: a layered target whose attachments are single faces (what the NVIDIA H200 did: face
++X written, the other five untouched), a mip pass that skips a level, face attachments
+swapped.  Each is refused, named in one warning, and the frame is drawn by the plain path.
+"""
+from __future__ import annotations
+
+import logging
+import re
+from contextlib import contextmanager
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from components import Material, ReflectionProbe
+from engine.errors import GLPassError
+from engine.raw_gl import (
+    GL_COLOR_ATTACHMENT0,
+    GL_DEPTH_ATTACHMENT,
+    GL_FRAMEBUFFER,
+    GL_TEXTURE_CUBE_MAP_POSITIVE_X,
+    CubeMipTarget,
+    LayeredCubeTarget,
+    RawGL,
+    read_cube_level,
+)
+from engine.render.bindings import PROBE_UNIT, SCRATCH_UNIT
+from engine.render.path_checks import PATH_NAMES, SENTINEL, PathChecks
+from engine.render.probes import ProbeCaptures, face_view
+from tests.support import srgb_to_linear
+from tests.test_probes import chrome_scene, ggx_reference, marked_chrome_scene, probe_stage
+
+SHADERS = Path(__file__).resolve().parent.parent / "shaders"
+
+
+@pytest.fixture
+def fresh_checks(ctx):
+    """Verdicts are kept per context: forget them before the test (so its stand-in is
+    checked) and after it (so later tests check the real paths again)."""
+    from engine.render import path_checks
+
+    verdicts = path_checks._BY_CONTEXT.get(ctx)
+    if verdicts is not None:
+        verdicts.clear()
+        verdicts.update({name: path_checks.PathVerdict() for name in PATH_NAMES})
+    yield
+    verdicts = path_checks._BY_CONTEXT.get(ctx)
+    if verdicts is not None:
+        verdicts.update({name: path_checks.PathVerdict() for name in PATH_NAMES})
+
+
+def face_zero_only(monkeypatch):
+    """The H200's layered capture: the target's attachments are face +X alone, so gl_Layer
+    is ignored, every face's triangles land in face 0 and faces 1-5 are never written."""
+    original = LayeredCubeTarget.bind
+
+    def bind(self):
+        original(self)
+        self.gl["glFramebufferTexture2D"](GL_FRAMEBUFFER, GL_COLOR_ATTACHMENT0, GL_TEXTURE_CUBE_MAP_POSITIVE_X,
+                                          self.cube.glo, 0)
+        self.gl["glFramebufferTexture2D"](GL_FRAMEBUFFER, GL_DEPTH_ATTACHMENT, GL_TEXTURE_CUBE_MAP_POSITIVE_X,
+                                          self.depth, 0)
+
+    monkeypatch.setattr(LayeredCubeTarget, "bind", bind)
+
+
+def cube_faces(ctx, probes, key, level=0):
+    texture = probes.cubes[key].texture
+    return [read_cube_level(ctx, texture, face, level, SCRATCH_UNIT)[..., :3] for face in range(6)]
+
+
+def test_every_path_is_verified_on_llvmpipe_once_per_context(scene, ctx, fresh_checks, monkeypatch):
+    ran = []
+    original = PathChecks.check
+    monkeypatch.setattr(PathChecks, "check", lambda self, path: ran.append(path) or original(self, path))
+    ents = {}
+    runner = scene(marked_chrome_scene(ents), (64, 48))
+    runner.frame()
+    verdicts = runner.engine.renderer.path_checks.verdicts
+    assert {name: v.status for name, v in verdicts.items()} == dict.fromkeys(PATH_NAMES, "verified") | {
+        "face_mips": "unchecked"}  # the layered mip pass was verified: its fallback never needed checking
+    assert set(runner.stats.paths_verified) == {"direct_faces", "layered_capture", "layered_mips"}
+    assert runner.stats.paths_refused == ()
+    assert sorted(ran) == ["direct_faces", "layered_capture", "layered_mips"]
+    second = scene(marked_chrome_scene({}), (64, 48))  # another engine on the same context
+    second.frame()
+    assert len(ran) == 3 and set(second.stats.paths_verified) == set(runner.stats.paths_verified)
+
+
+def test_a_layered_capture_that_writes_one_face_is_refused_and_the_sphere_stays_right(
+        scene, ctx, fresh_checks, monkeypatch, caplog):
+    face_zero_only(monkeypatch)
+    ents = {}
+    runner = scene(chrome_scene(ents), (96, 72))
+    with caplog.at_level(logging.WARNING, logger="speculum"):
+        rgb = runner.frame()
+    stage = probe_stage(runner)
+    checks = runner.engine.renderer.path_checks
+    assert checks.verdicts["layered_capture"].status == "refused"
+    assert "layered_capture" in runner.stats.paths_refused and runner.stats.probe_path == "six_pass"
+    assert stage.timings == {}  # auto never timed (so never used) the refused path
+    warnings = [r.getMessage() for r in caplog.records if "layered_capture" in r.getMessage()]
+    assert len(warnings) == 1 and ctx.info["GL_RENDERER"] in warnings[0] and ctx.info["GL_VERSION"] in warnings[0]
+    # Every face written, none left at the sentinel or unwritten memory, and equal to a
+    # capture drawn again by the plain path.
+    probes = runner.engine.renderer.probes
+    owner = ents["sphere"]
+    drawn = cube_faces(ctx, probes, owner)
+    position = stage.probes[owner].position
+    views = {face: face_view(face, position, 0.05, 100.0, 128, skip=owner) for face in range(6)}
+    probes.capture(owner, views, None, 0, direct=False)
+    for face in range(6):
+        assert np.isfinite(drawn[face]).all() and drawn[face].max() < SENTINEL / 2
+        np.testing.assert_allclose(drawn[face], cube_faces(ctx, probes, owner)[face], atol=2e-3)
+    # The sphere's right half reflects the red wall on its +X side.
+    side = runner.ids() == ents["sphere"]
+    side[:, :48] = False
+    colour = srgb_to_linear(rgb[side])
+    assert float(np.median(colour[:, 0] - colour[:, 1])) > 0.2
+    # A forced layered path is not used either once refused.
+    stage.path = "layered"
+    runner.world.get(ents["wall"], Material).color = (0.05, 0.9, 0.05)
+    runner.frame()
+    runner.frame()
+    assert runner.stats.probe_path == "six_pass" or runner.stats.probe_faces == 0
+
+
+def test_the_stand_in_is_what_the_check_catches(scene, ctx, fresh_checks, monkeypatch):
+    """The face-0 stand-in really leaves five faces unwritten (so the refusal above is the
+    check's doing); without the check the capture shows the sentinel there.  Debug mode
+    names why at the clear: the attachment is not layered."""
+    ents = {}
+    runner = scene(marked_chrome_scene(ents), (64, 48))
+    runner.frame()
+    face_zero_only(monkeypatch)
+    renderer = runner.engine.renderer
+    probes = renderer.probes
+    owner = ents["sphere"]
+    views = {face: face_view(face, probe_stage(runner).probes[owner].position, 0.05, 100.0, 128, skip=owner)
+             for face in range(6)}
+    renderer.debug = True
+    with pytest.raises(GLPassError, match=r"at the clear: .*colour attachment is not layered"):
+        probes.capture_layered(owner, views)
+    renderer.debug = False
+    for face in range(6):
+        probes.cubes[owner].texture.write(face, np.full((128, 128, 4), SENTINEL, np.float16).tobytes())
+    probes.capture_layered(owner, views, build_mips=False)
+    faces = cube_faces(ctx, probes, owner)
+    assert faces[0].max() < SENTINEL / 2
+    assert all((faces[face] == SENTINEL).all() for face in range(1, 6))
+
+
+def test_a_mip_pass_that_skips_a_level_is_refused_and_the_per_face_pass_draws_the_ggx_chain(
+        scene, ctx, fresh_checks, monkeypatch):
+    original = CubeMipTarget.bind_level
+
+    def skip_level_two(self, level, unit, face=None):
+        size = original(self, level, unit, face)
+        if level == 2 and face is None:
+            self.gl["glViewport"](0, 0, 0, 0)  # nothing of level 2 is drawn
+        return size
+
+    monkeypatch.setattr(CubeMipTarget, "bind_level", skip_level_two)
+    ents = {}
+
+    def build(world):
+        marked_chrome_scene(ents)(world)
+        world.get(ents["sphere"], Material).roughness = 0.5
+        world.add_component(ents["sphere"], ReflectionProbe(resolution=32, prefilter="ggx"))
+
+    runner = scene(build, (96, 72))
+    runner.frame()
+    renderer = runner.engine.renderer
+    verdicts = renderer.path_checks.verdicts
+    assert verdicts["layered_mips"].status == "refused" and "level 2" in verdicts["layered_mips"].detail
+    assert verdicts["face_mips"].status == "verified"
+    probes = renderer.probes
+    assert probes.mips.used == "per_face" and probes.cubes[ents["sphere"]].prefilter == "ggx"
+    level0 = cube_faces(ctx, probes, ents["sphere"])
+    for level in (2, 3):
+        reference = ggx_reference(level0, 32, (level / 5) ** 2, 32 >> level)
+        drawn = np.stack(cube_faces(ctx, probes, ents["sphere"], level))
+        for face in range(6):
+            assert np.abs(drawn[face] - reference[face]).mean() / reference.max() < 0.02, (level, face)
+
+
+def test_swapped_face_attachments_are_refused_and_faces_are_copied(scene, ctx, fresh_checks, monkeypatch):
+    original = RawGL.attach_cube_face
+    monkeypatch.setattr(RawGL, "attach_cube_face",
+                        lambda self, framebuffer, cube, face, level=0: original(self, framebuffer, cube, face ^ 1,
+                                                                                level))
+    ents = {}
+    runner = scene(marked_chrome_scene(ents), (64, 48))
+    probe_stage(runner).path = "six_pass"
+    runner.frame()
+    renderer = runner.engine.renderer
+    assert renderer.path_checks.verdicts["direct_faces"].status == "refused"
+    assert "direct_faces" in runner.stats.paths_refused
+    probes = renderer.probes
+    owner = ents["sphere"]
+    drawn = cube_faces(ctx, probes, owner)
+    position = probe_stage(runner).probes[owner].position
+    views = {face: face_view(face, position, 0.05, 100.0, 128, skip=owner) for face in range(6)}
+    probes.capture(owner, views, None, 0, direct=False)
+    for face in range(6):
+        np.testing.assert_array_equal(drawn[face], cube_faces(ctx, probes, owner)[face], err_msg=f"face {face}")
+
+
+def test_debug_mode_names_a_cube_bound_for_sampling_while_it_is_drawn_into(scene, ctx, monkeypatch):
+    """Drawing into a cube map a program may sample is a rendering feedback loop (undefined
+    on a GPU): captures unbind it first; without that, debug mode says so at the clear."""
+    ents = {}
+    runner = scene(marked_chrome_scene(ents), (64, 48))
+    runner.frame()
+    renderer = runner.engine.renderer
+    probes = renderer.probes
+    owner = ents["sphere"]
+
+    @contextmanager
+    def keeps_it_bound(self, key):
+        self.cubes[key].texture.use(PROBE_UNIT)
+        yield
+
+    monkeypatch.setattr(ProbeCaptures, "_drawing_into", keeps_it_bound)
+    views = {face: face_view(face, probe_stage(runner).probes[owner].position, 0.05, 100.0, 128, skip=owner)
+             for face in range(6)}
+    assert renderer.debug
+    with pytest.raises(GLPassError, match=rf"feedback loop"):
+        probes.capture_layered(owner, views)
+    assert f"({PROBE_UNIT},)" in str(pytest.raises(GLPassError, probes.capture_layered, owner, views).value)
+
+
+def test_every_layered_geometry_shader_writes_gl_layer_before_each_vertex():
+    """gl_Layer, like every output, is undefined after EmitVertex: a layered geometry shader
+    must write it again for every vertex (a driver may take it from any vertex)."""
+    for path in sorted(SHADERS.glob("*.geom")):
+        text = path.read_text()
+        if "gl_Layer" not in text:
+            continue
+        for body in re.split(r"EmitVertex\(\);", text)[:-1]:
+            last = body.rsplit("gl_Layer", 1)
+            assert len(last) == 2 and "EndPrimitive" not in last[1], f"{path.name}: a vertex emitted without gl_Layer"
