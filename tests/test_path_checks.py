@@ -230,7 +230,7 @@ def test_debug_mode_names_a_cube_bound_for_sampling_while_it_is_drawn_into(scene
     views = {face: face_view(face, probe_stage(runner).probes[owner].position, 0.05, 100.0, 128, skip=owner)
              for face in range(6)}
     assert renderer.debug
-    with pytest.raises(GLPassError, match=rf"feedback loop"):
+    with pytest.raises(GLPassError, match=r"feedback loop"):
         probes.capture_layered(owner, views)
     assert f"({PROBE_UNIT},)" in str(pytest.raises(GLPassError, probes.capture_layered, owner, views).value)
 
