@@ -1,9 +1,13 @@
 """Speculum benchmarks: ``python -m benchmarks <name> [--json]``.
 
 Each benchmark is a module of this package with ``add_arguments(parser)`` and
-``main(args) -> int``; ``SUITES`` names them.
+``main(args) -> int``; ``SUITES`` names them.  Every suite that renders takes
+``--size WxH`` (its output size; ``add_size_argument``), and ``gpu-report`` runs several of
+them on one machine and writes what it found (see ``benchmarks/README.md``).
 """
 from __future__ import annotations
+
+import argparse
 
 # name -> (module, one-line description)
 SUITES: dict[str, tuple[str, str]] = {
@@ -15,4 +19,41 @@ SUITES: dict[str, tuple[str, str]] = {
     "fuzz": ("benchmarks.fuzz", "adversarial component values: each refused naming Class.field or drawn clean"),
     "probes": ("benchmarks.probes", "probe captures at 128 / 512; whole frames with no / static / dynamic probe"),
     "normal_maps": ("benchmarks.normal_maps", "whole frame with a plain vs a normal-mapped ground (trilinear, 8x)"),
+    "gpu-report": ("benchmarks.gpu_report", "GL renderer and limits, rendering-path checks, test summary and the "
+                   "mirrors / portals / probes benchmarks at two sizes, as report.md + report.json"),
 }
+
+# The suites that draw frames: each takes --size WxH.
+RENDERING_SUITES = ("ecs", "portals", "mirrors", "soak", "churn", "probes", "normal_maps")
+
+MAX_SIDE = 16384  # no OpenGL this engine runs on offers a larger render target
+
+
+def parse_size(text: str) -> tuple[int, int]:
+    """``"640x360"`` -> ``(640, 360)``; anything else is an ``argparse.ArgumentTypeError``
+    that says what was expected (argparse prints it as ``argument --size: ...``)."""
+    parts = text.strip().lower().split("x")
+    if len(parts) != 2 or not all(part.strip().isdigit() for part in parts):
+        raise argparse.ArgumentTypeError(f"{text!r} is not WIDTHxHEIGHT in pixels (e.g. 640x360)")
+    width, height = (int(part) for part in parts)
+    if not (1 <= width <= MAX_SIDE and 1 <= height <= MAX_SIDE):
+        raise argparse.ArgumentTypeError(f"{text!r}: width and height must be 1 to {MAX_SIDE} pixels")
+    return width, height
+
+
+def parse_sizes(text: str) -> tuple[tuple[int, int], ...]:
+    """``"640x360,1920x1080"`` -> ``((640, 360), (1920, 1080))`` (each as ``parse_size``)."""
+    sizes = tuple(parse_size(part) for part in text.split(","))
+    if len(set(sizes)) != len(sizes):
+        raise argparse.ArgumentTypeError(f"{text!r} names a size twice")
+    return sizes
+
+
+def format_size(size: tuple[int, int]) -> str:
+    return f"{size[0]}x{size[1]}"
+
+
+def add_size_argument(parser: argparse.ArgumentParser, default: tuple[int, int], what: str = "output") -> None:
+    """``--size WxH`` (stored as ``args.size``, a ``(width, height)`` tuple)."""
+    parser.add_argument("--size", type=parse_size, default=default, metavar="WxH",
+                        help=f"{what} size in pixels (default {format_size(default)})")

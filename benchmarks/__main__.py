@@ -9,7 +9,8 @@ from collections.abc import Sequence
 from benchmarks import SUITES
 
 
-def main(argv: Sequence[str] | None = None) -> int:
+def build_parser() -> tuple[argparse.ArgumentParser, dict]:
+    """The command line of every suite: (parser, {suite name: its module})."""
     parser = argparse.ArgumentParser(prog="python -m benchmarks", description="Speculum benchmarks")
     commands = parser.add_subparsers(dest="suite", required=True, metavar="<name>")
     modules = {}
@@ -19,6 +20,11 @@ def main(argv: Sequence[str] | None = None) -> int:
                                   formatter_class=argparse.RawDescriptionHelpFormatter)
         sub.add_argument("--json", action="store_true", help="print one JSON object per line instead of a table")
         module.add_arguments(sub)
+    return parser, modules
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser, modules = build_parser()
     args = parser.parse_args(argv)
     return modules[args.suite].main(args)
 

@@ -4,7 +4,7 @@ engine's GL resources and the world's entities must come back to where they star
 Each wave spawns ``--entities`` things in a ring around the camera, cycling through five
 kinds: a mirror (its own quad mesh), a portal pair, a chrome sphere (its own automatic
 probe), a box with its own new mesh, and a box with its own new texture; renders
-``--frames`` frames (320 x 180), deletes every one of them, renders one more frame, and
+``--frames`` frames (320 x 180, ``--size``), deletes every one of them, renders one more frame, and
 prints the renderer's live GL resources (``resource_counts``), the entity count and the
 resident memory.  The exit status is 1 when, after the last wave, a count is not back to
 its value before the first (memory: more than ``--rss-slack`` MiB above its value after the
@@ -20,6 +20,7 @@ import math
 
 import numpy as np
 
+from benchmarks import add_size_argument
 from benchmarks.soak import resident_mib
 from components import (
     Camera,
@@ -88,11 +89,11 @@ def snapshot(engine: Engine) -> dict:
             "rss_mib": round(resident_mib(), 1)}
 
 
-def run(entities: int, waves: int, frames: int) -> list[dict]:
+def run(entities: int, waves: int, frames: int, size: tuple[int, int] = SIZE) -> list[dict]:
     ctx = create_headless_context()
     engine = Engine(Arena(), ctx)
-    capture = CaptureTarget(ctx, SIZE)
-    output = Output(capture.framebuffer, SIZE)
+    capture = CaptureTarget(ctx, size)
+    output = Output(capture.framebuffer, size)
     rows = []
     try:
         engine.frame(1 / 60, output)
@@ -134,10 +135,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--waves", type=int, default=5)
     parser.add_argument("--frames", type=int, default=3, help="frames rendered while a wave lives")
     parser.add_argument("--rss-slack", type=float, default=40.0, help="MiB of growth tolerated")
+    add_size_argument(parser, SIZE)
 
 
 def main(args: argparse.Namespace) -> int:
-    rows = run(args.entities, args.waves, args.frames)
+    rows = run(args.entities, args.waves, args.frames, args.size)
     for row in rows:
         print(json.dumps(row) if args.json else "  ".join(f"{k}={v}" for k, v in row.items()), flush=True)
     problems = leftovers(rows, args.rss_slack)

@@ -11,10 +11,11 @@ lights) - *minus* the time spent inside ``ScenePass.draw`` and ``Renderer.presen
 (the draw submission, which on a software rasteriser is GPU work done on the CPU).
 ``ctx.finish()`` runs after every frame, outside the timed span, so one frame's drawing
 never stalls the next frame's upload.  The output is a 64x36 capture target, as in the
-tests.  ``frame_ms_median`` is the whole ``Engine.frame`` call for reference.  On a
-software rasteriser (llvmpipe) the draw of the previous frame leaves the CPU caches cold,
-which adds ~0.2 ms to ``cpu_ms`` at 10,000 entities compared with running the systems
-back to back without drawing; that cost is real for a frame and is left in.
+tests (``--size``; ``--sizes`` is the entity counts).  ``frame_ms_median`` is the whole
+``Engine.frame`` call for reference.  On a software rasteriser (llvmpipe) the draw of the
+previous frame leaves the CPU caches cold, which adds ~0.2 ms to ``cpu_ms`` at 10,000
+entities compared with running the systems back to back without drawing; that cost is
+real for a frame and is left in.
 
 Each size runs ``--warmup`` frames (the first uploads every instance), then ``--frames``
 timed frames with the movers moving, then ``--frames`` frames where nothing is assigned:
@@ -38,6 +39,7 @@ from dataclasses import asdict, dataclass
 
 from pyglm import glm
 
+from benchmarks import add_size_argument
 from components import DirectionalLight, Material, MeshRef, Transform
 from engine.app import Engine, Game, spawn_camera
 from engine.frame_io import Output
@@ -137,11 +139,11 @@ def _percentile(values: list[float], q: float) -> float:
     return ordered[min(len(ordered) - 1, max(0, math.ceil(q * len(ordered)) - 1))]
 
 
-def run_scene(ctx, count: int, frames: int, warmup: int) -> Result:
+def run_scene(ctx, count: int, frames: int, warmup: int, size: tuple[int, int] = OUTPUT_SIZE) -> Result:
     game = GridScene(count)
     engine = Engine(game, ctx)
-    capture = CaptureTarget(ctx, OUTPUT_SIZE)
-    output = Output(capture.framebuffer, OUTPUT_SIZE)
+    capture = CaptureTarget(ctx, size)
+    output = Output(capture.framebuffer, size)
     clock = _DrawClock(engine.renderer)
     try:
         def frame() -> tuple[float, float]:
@@ -190,6 +192,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="comma-separated entity counts (default 100,1000,10000)")
     parser.add_argument("--frames", type=int, default=60, help="timed frames per size (default 60)")
     parser.add_argument("--warmup", type=int, default=10, help="untimed frames first (default 10)")
+    add_size_argument(parser, OUTPUT_SIZE, "output (not the entity counts: --sizes)")
 
 
 COLUMNS = (("entities", "entities", 9), ("moving", "moving", 7), ("cpu_ms_median", "cpu ms med", 11),
@@ -209,7 +212,7 @@ def main(args: argparse.Namespace) -> int:
                   f"{args.frames} frames after {args.warmup} warm-up)")
             print(" ".join(f"{title:>{width}}" for _, title, width in COLUMNS))
         for size in args.sizes:
-            result = run_scene(ctx, size, args.frames, args.warmup)
+            result = run_scene(ctx, size, args.frames, args.warmup, args.size)
             if result.static_uploaded_bytes:
                 failed.append(size)
             if args.json:

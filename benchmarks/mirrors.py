@@ -5,7 +5,7 @@ radius 8 (fixed seed; one shared box mesh, so one batch), 5 of them spinning, a 
 and a point light, and N mirrors of 4 x 3 on a ring of radius 9 facing the centre.  The
 camera orbits at radius 14, height 3, looking at the centre (0.5 degrees a frame, the
 same angles for every path), starting across the ring from the first mirror.  Output
-640 x 360 into a capture target.  For each N in 0, 1, 2, 4, 8, 16 there is one engine per
+640 x 360 (``--size``) into a capture target.  For each N in 0, 1, 2, 4, 8, 16 there is one engine per
 ``ReflectionSystem.path`` (per_mirror, batched, auto); they run ``--warmup`` frames, then
 ``--frames`` timed frames; every (N, path) engine runs interleaved frame by frame with all
 the others, so other load on the machine falls on every one alike and the ratios between
@@ -26,6 +26,7 @@ of the FXAA pass.
     python -m benchmarks mirrors --json        # one JSON object per line
     python -m benchmarks mirrors --frames 20 --mirrors 0,8
     python -m benchmarks mirrors --mirrors 0,8 --paths auto --aa fxaa,off --frames 200
+    python -m benchmarks mirrors --size 1920x1080
 """
 from __future__ import annotations
 
@@ -41,6 +42,7 @@ from dataclasses import asdict, dataclass, field
 import numpy as np
 from pyglm import glm
 
+from benchmarks import add_size_argument, format_size
 from components import (
     Camera,
     DirectionalLight,
@@ -151,11 +153,12 @@ def _percentile(values: list[float], q: float) -> float:
 
 
 def run_scenes(ctx, mirror_counts: tuple[int, ...], paths: tuple[str, ...], frames: int,
-               warmup: int, aa_modes: tuple[str, ...] = ("fxaa",)) -> list[Result]:
+               warmup: int, aa_modes: tuple[str, ...] = ("fxaa",),
+               size: tuple[int, int] = OUTPUT_SIZE) -> list[Result]:
     """One engine per (mirror count, path, anti-aliasing mode) on the same scene, their
     frames interleaved (frame i of every engine, then frame i + 1), so load from outside the
     benchmark, and the drift of a shared machine, land on every engine alike and the ratios
-    between them hold."""
+    between them hold.  ``size`` is the output's (width, height)."""
     cases = [(mirrors, path, aa) for mirrors in mirror_counts for path in paths for aa in aa_modes]
     engines, captures = [], []
     try:
@@ -164,8 +167,8 @@ def run_scenes(ctx, mirror_counts: tuple[int, ...], paths: tuple[str, ...], fram
             engine.reflection_system.path = path
             engine.renderer.antialias = aa
             engines.append(engine)
-            captures.append(CaptureTarget(ctx, OUTPUT_SIZE))
-        outputs = [Output(capture.framebuffer, OUTPUT_SIZE) for capture in captures]
+            captures.append(CaptureTarget(ctx, size))
+        outputs = [Output(capture.framebuffer, size) for capture in captures]
         times: list[list[float]] = [[] for _ in cases]
         stats: list[list] = [[] for _ in cases]
         for frame in range(warmup + frames):
@@ -210,6 +213,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--warmup", type=int, default=3, help="untimed frames first (default 3)")
     parser.add_argument("--aa", type=lambda text: tuple(text.split(",")), default=("fxaa",),
                         help="comma-separated anti-aliasing modes (default fxaa; fxaa,off measures its cost)")
+    add_size_argument(parser, OUTPUT_SIZE)
 
 
 COLUMNS = (("n_mirrors", "mirrors", 8), ("path", "path", 11), ("aa", "aa", 5), ("frame_ms_median", "ms med", 8),
@@ -230,10 +234,10 @@ def main(args: argparse.Namespace) -> int:
     results: list[Result] = []
     try:
         if not args.json:
-            print(f"Mirrors: whole frame incl. ctx.finish() at {OUTPUT_SIZE[0]}x{OUTPUT_SIZE[1]} "
+            print(f"Mirrors: whole frame incl. ctx.finish() at {format_size(args.size)} "
                   f"({ctx.info.get('GL_RENDERER', '?')}, {args.frames} frames after {args.warmup} warm-up)")
             print(" ".join(f"{title:>{width}}" for _, title, width in COLUMNS) + "  chosen")
-        for result in run_scenes(ctx, args.mirrors, args.paths, args.frames, args.warmup, args.aa):
+        for result in run_scenes(ctx, args.mirrors, args.paths, args.frames, args.warmup, args.aa, args.size):
             results.append(result)
             if args.json:
                 print(json.dumps(asdict(result)), flush=True)

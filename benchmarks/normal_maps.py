@@ -1,7 +1,7 @@
 """Normal-maps benchmark: what a normal map costs a whole frame.
 
 The scene is ``benchmarks.mirrors.MirrorRing`` with no mirrors (a 40 x 40 textured ground
-that covers about half of the 640 x 360 frame, 20 boxes, two lights); the ``mapped`` engine
+that covers about half of the 640 x 360 frame (``--size``), 20 boxes, two lights); the ``mapped`` engine
 gives the ground a ripple normal map (``engine.texture_data.ripple_normal_map``).  Rows
 (``ground``, ``anisotropy``, ``frame_ms_median``, ``ratio_to_plain``): whole frames
 (``Engine.frame`` + ``finish``), the engines interleaved frame by frame: ``plain``, then
@@ -11,6 +11,7 @@ filter normal maps trilinearly.
 
     python -m benchmarks normal_maps            # table
     python -m benchmarks normal_maps --json     # one JSON object per line
+    python -m benchmarks normal_maps --size 1920x1080
 """
 from __future__ import annotations
 
@@ -21,6 +22,7 @@ import time
 
 import moderngl
 
+from benchmarks import add_size_argument
 from benchmarks.mirrors import DT, OUTPUT_SIZE, MirrorRing
 from components import Material
 from engine.app import Engine
@@ -49,6 +51,7 @@ class MappedGround(MirrorRing):
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--frames", type=int, default=40, help="timed frames (default 40)")
     parser.add_argument("--warmup", type=int, default=3)
+    add_size_argument(parser, OUTPUT_SIZE)
 
 
 def main(args: argparse.Namespace) -> int:
@@ -63,12 +66,12 @@ def main(args: argparse.Namespace) -> int:
         engines = [plain, default, anisotropic]
         rows = [("plain", None), ("mapped", default.renderer.normal_map_anisotropy),
                 ("mapped", anisotropic.renderer.texture_anisotropy)]
-        captures = [CaptureTarget(ctx, OUTPUT_SIZE) for _ in engines]
+        captures = [CaptureTarget(ctx, args.size) for _ in engines]
         times: list[list[float]] = [[] for _ in engines]
         for frame in range(args.warmup + args.frames):
             for i, (engine, capture) in enumerate(zip(engines, captures, strict=True)):
                 start = time.perf_counter()
-                engine.frame(DT, Output(capture.framebuffer, OUTPUT_SIZE))
+                engine.frame(DT, Output(capture.framebuffer, args.size))
                 ctx.finish()
                 if frame >= args.warmup:
                     times[i].append((time.perf_counter() - start) * 1e3)

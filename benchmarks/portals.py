@@ -4,10 +4,11 @@ Two 2 x 2.5 m portals face each other 6 m apart over a checkered floor with a fe
 between them; the camera stands between them looking into one, so every level of
 recursion shows the other one again, smaller.  For each depth limit the whole frame is
 timed (``Engine.frame`` then ``ctx.finish()``, wall clock: llvmpipe's GPU timers are not
-usable), 640x360.  ``passes`` counts scene renders (1 main + 1 per portal view).
+usable), 640x360 (``--size``).  ``passes`` counts scene renders (1 main + 1 per portal view).
 
     python -m benchmarks portals            # table
     python -m benchmarks portals --json     # one JSON object per depth
+    python -m benchmarks portals --size 1920x1080
 """
 from __future__ import annotations
 
@@ -18,6 +19,7 @@ import time
 
 from pyglm import glm
 
+from benchmarks import add_size_argument
 from components import DirectionalLight, Material, MeshRef, Portal, Skybox, Transform
 from engine.app import Engine, Game
 from engine.frame_io import Output
@@ -53,13 +55,14 @@ class FacingPortals(Game):
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--frames", type=int, default=30, help="timed frames per depth")
     parser.add_argument("--warmup", type=int, default=3)
+    add_size_argument(parser, SIZE)
 
 
 def main(args: argparse.Namespace) -> int:
     ctx = create_headless_context()
     engine = Engine(FacingPortals(), ctx)
-    capture = CaptureTarget(ctx, SIZE)
-    output = Output(capture.framebuffer, SIZE)
+    capture = CaptureTarget(ctx, args.size)
+    output = Output(capture.framebuffer, args.size)
     rows = []
     try:
         for depth in DEPTHS:

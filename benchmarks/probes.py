@@ -2,7 +2,7 @@
 
 The scene is ``benchmarks.mirrors.MirrorRing`` with no mirrors (a textured ground, 20
 boxes of which 5 spin, two lights, the orbiting camera) plus a chrome sphere (radius 1) at
-the ring's centre, 640 x 360.
+the ring's centre, 640 x 360 (``--size``: the output, not the probe's faces).
 
 Capture rows (``path``, ``culled``, ``size``, ``capture_ms_median``, ``primitives``): all six
 faces of the sphere's probe captured ``--frames`` times at 128 and 512 texels a face, each
@@ -15,7 +15,10 @@ the primitives count includes the probe's own sphere, which each face view clips
 ``layered`` with ``culled`` true (one pass, each triangle sent to the faces it touches) and
 false (to all six faces).  An ``auto_chose`` row per size names the path ``ProbeSystem.path
 = "auto"`` settled on at the engine's first capture and ``chosen_over_faster``, its median
-here over the faster path's (1.0 when it chose right; the target is at most 1.10).
+here over the faster path's (1.0 when it chose right; the target is at most 1.10);
+``auto_timed`` is false where it timed nothing because the path self-check
+(``Renderer.path_checks``) had not verified the layered capture on this context, so auto
+used ``six_pass``.  The capture rows time the layered paths whatever the self-check said.
 
 Prefilter rows (``prefilter``, ``size``, ``prefilter_ms_median``): the mip chain of a
 captured cube rebuilt, box-filtered (``mips``, the default) or GGX-convolved level by
@@ -34,6 +37,7 @@ after present (``ProbeSystem.recapture_after_present``).
 
     python -m benchmarks probes            # table
     python -m benchmarks probes --json     # one JSON object per line
+    python -m benchmarks probes --size 1920x1080
 """
 from __future__ import annotations
 
@@ -46,6 +50,7 @@ from functools import partial
 
 import moderngl
 
+from benchmarks import add_size_argument
 from benchmarks.mirrors import DT, OUTPUT_SIZE, MirrorRing
 from components import Material, MeshRef, ReflectionProbe, Reflective, Transform
 from engine.app import Engine
@@ -79,20 +84,23 @@ class ProbeRing(MirrorRing):
         self.sphere = world.spawn(*components)
 
 
-def captured_ring(ctx, size: int) -> tuple[Engine, CaptureTarget]:
+def captured_ring(ctx, size: int, output_size: tuple[int, int] = OUTPUT_SIZE) -> tuple[Engine, CaptureTarget]:
     """A scripted-probe ring of ``size``-texel faces after its first frame (probe captured)."""
     engine = Engine(ProbeRing("scripted", size), ctx)
-    capture = CaptureTarget(ctx, OUTPUT_SIZE)
-    engine.frame(DT, Output(capture.framebuffer, OUTPUT_SIZE))
+    capture = CaptureTarget(ctx, output_size)
+    engine.frame(DT, Output(capture.framebuffer, output_size))
     return engine, capture
 
 
-def capture_rows(ctx, frames: int) -> list[dict]:
+def capture_rows(ctx, frames: int, output_size: tuple[int, int] = OUTPUT_SIZE) -> list[dict]:
     rows = []
     for size in (128, 512):
-        engine, capture = captured_ring(ctx, size)
+        engine, capture = captured_ring(ctx, size, output_size)
         try:
-            chosen = engine.stages["probes"].chosen_path  # "auto" timed both on the first capture
+            stage = engine.stages["probes"]
+            # "auto" timed both on the first capture, where the path self-check trusted the
+            # layered one; where it did not, auto used six_pass without timing anything.
+            timed, chosen = stage.chosen_path is not None, stage.chosen_path or stage.path_used
             query = ctx.query(primitives=True)
             with query:
                 engine.renderer.scene_pass.draw([engine.main_view], engine.renderer.targets)
@@ -123,18 +131,19 @@ def capture_rows(ctx, frames: int) -> list[dict]:
                              "capture_ms_median": round(statistics.median(samples), 2),
                              "primitives": primitives[(path, culled)], "face_primitives": face_primitives})
             medians = {path: statistics.median(times[(path, path == "layered")]) for path in ("six_pass", "layered")}
-            rows.append({"auto_chose": chosen, "size": size,
-                         "chosen_over_faster": round(medians[chosen] / min(medians.values()), 3)})
+            rows.append({"auto_chose": chosen, "size": size, "auto_timed": timed,
+                         "chosen_over_faster": round(medians[chosen] / min(medians.values()), 3)
+                         if chosen in medians else None})
         finally:
             capture.release()
             engine.close()
     return rows
 
 
-def prefilter_rows(ctx, frames: int) -> list[dict]:
+def prefilter_rows(ctx, frames: int, output_size: tuple[int, int] = OUTPUT_SIZE) -> list[dict]:
     rows = []
     for size in (128, 512):
-        engine, capture = captured_ring(ctx, size)
+        engine, capture = captured_ring(ctx, size, output_size)
         try:
             owner = engine.stages["probes"].probes[engine.game.sphere].owner
             probes = engine.renderer.probes
@@ -158,13 +167,13 @@ def prefilter_rows(ctx, frames: int) -> list[dict]:
     return rows
 
 
-def frame_rows(ctx, frames: int, warmup: int) -> list[dict]:
+def frame_rows(ctx, frames: int, warmup: int, output_size: tuple[int, int] = OUTPUT_SIZE) -> list[dict]:
     engines, captures = [], []
     try:
         for refresh in MODES.values():
             engines.append(Engine(ProbeRing(refresh), ctx))
-            captures.append(CaptureTarget(ctx, OUTPUT_SIZE))
-        outputs = [Output(c.framebuffer, OUTPUT_SIZE) for c in captures]
+            captures.append(CaptureTarget(ctx, output_size))
+        outputs = [Output(c.framebuffer, output_size) for c in captures]
         times: list[list[float]] = [[] for _ in engines]
         faces: list[int] = [0 for _ in engines]
         rng = random.Random(0)
@@ -195,13 +204,14 @@ def frame_rows(ctx, frames: int, warmup: int) -> list[dict]:
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--frames", type=int, default=30, help="timed frames (default 30)")
     parser.add_argument("--warmup", type=int, default=3)
+    add_size_argument(parser, OUTPUT_SIZE)
 
 
 def main(args: argparse.Namespace) -> int:
     ctx: moderngl.Context = create_headless_context()
     try:
-        rows = capture_rows(ctx, args.frames) + prefilter_rows(ctx, min(args.frames, 10)) + \
-            frame_rows(ctx, args.frames, args.warmup)
+        rows = capture_rows(ctx, args.frames, args.size) + prefilter_rows(ctx, min(args.frames, 10), args.size) + \
+            frame_rows(ctx, args.frames, args.warmup, args.size)
     finally:
         ctx.release()
     for row in rows:

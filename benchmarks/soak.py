@@ -2,7 +2,7 @@
 the process's memory, printed as it goes, must stay flat.
 
 The camera circles the hall (radius 4.5 m about (0, 1.6, -1), once every 600 frames, a
-slow bob up and down) at 320 x 180, so views of mirrors, portals and probes come and go.
+slow bob up and down) at 320 x 180 (``--size``), so views of mirrors, portals and probes come and go.
 Printed at the start, every ``--every`` frames and at the end (one JSON object a line with
 ``--json``): the frame, the renderer's live GL resources by kind (``resource_counts``), the
 resident memory (MiB) and the median frame time since the last line.  The exit status is 1
@@ -19,6 +19,7 @@ import math
 import statistics
 import time
 
+from benchmarks import add_size_argument
 from components import Transform, yaw_pitch_rotation
 from engine.app import Engine
 from engine.frame_io import Output
@@ -53,11 +54,11 @@ def tour(engine: Engine, frame: int) -> None:
     transform.rotation = yaw_pitch_rotation(math.degrees(angle), -5.0)
 
 
-def run(frames: int, every: int, warmup: int = 60) -> list[dict]:
+def run(frames: int, every: int, warmup: int = 60, size: tuple[int, int] = SIZE) -> list[dict]:
     ctx = create_headless_context()
     engine = Engine(HallOfMirrors(), ctx)
-    capture = CaptureTarget(ctx, SIZE)
-    output = Output(capture.framebuffer, SIZE)
+    capture = CaptureTarget(ctx, size)
+    output = Output(capture.framebuffer, size)
     rows, times = [], []
     try:
         for frame in range(frames + 1):
@@ -95,11 +96,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--frames", type=int, default=10_000)
     parser.add_argument("--every", type=int, default=1000, help="frames between reports")
     parser.add_argument("--rss-slack", type=float, default=20.0, help="MiB of growth tolerated (allocator noise)")
+    add_size_argument(parser, SIZE)
 
 
 def main(args: argparse.Namespace) -> int:
     warmup = min(60, args.frames)
-    rows = run(args.frames, args.every, warmup)
+    rows = run(args.frames, args.every, warmup, args.size)
     for row in rows:
         print(json.dumps(row) if args.json else
               f"frame {row['frame']:>6}  rss {row['rss_mib']:>7} MiB  ms {row['frame_ms_median']}  "

@@ -1,0 +1,527 @@
+"""GPU report: what this machine's OpenGL is, what the engine verified on it, whether the
+tests pass on it and what the mirrors, portals and probes benchmarks measure on it, written
+as ``DIR/report.md`` (to read) and ``DIR/report.json`` (to compare).
+
+Sections, in the order they run (both files are rewritten after each, so a driver crash part
+way leaves what came before, with ``"complete": false``):
+
+* ``gl``: ``GL_RENDERER``, ``GL_VENDOR``, ``GL_VERSION`` (``ctx.info``), whether it is a
+  software rasteriser, the engine's capability check (``engine.gl_context.prepare_context``)
+  with each requirement's value next to its minimum, and every ``GL_MAX_*`` limit.
+* ``paths``: the rendering paths the engine's self-check verified or refused on this
+  context (``Renderer.path_checks.run_all()``: ``layered_capture``, ``layered_mips``,
+  ``direct_faces`` and any other path ``engine.render.path_checks.PATH_NAMES`` lists; each
+  ``verified``, ``refused``, ``unavailable`` or ``unchecked``, with its detail).  A checkout
+  without the self-check reports each path ``unchecked``.
+* ``benchmarks``: ``mirrors``, ``portals`` and ``probes`` (``--benchmarks``) at each
+  ``--size`` (default 640x360 and 1920x1080), each run as ``python -m benchmarks <suite>
+  --json --size WxH --frames N --warmup M`` would run it (in this process, or one
+  subprocess each with ``--isolate``); the rows are the suite's own JSON lines, kept as
+  they are, and the report's median tables are read from them.  ``--frames`` (default 10)
+  is per suite and size; the suites' own defaults are 30-40.
+* ``tests``: ``python -m pytest -q`` (plus ``--tests-args``) in a subprocess from the
+  repository root, when its ``tests/`` folder is there: passed / failed / errors / skipped
+  counts, the failing tests' ids and why tests were skipped.  ``--no-tests`` leaves it out.
+
+Exit status 0 when every section ran clean, 1 when a benchmark failed or a test failed (the
+report is written either way), 2 for a bad command line.  Nothing here imports the debug
+overlay, so the report runs where imgui-bundle is not installed.
+
+On a GPU machine (from the repository root, ``pip install -e ".[dev]"`` done)::
+
+    python -m benchmarks gpu-report --out gpu-report                 # everything, ~minutes
+    python -m benchmarks gpu-report --out gpu-report --no-tests      # benchmarks only
+    python -m benchmarks gpu-report --out gpu-report --size 2560x1440 --frames 30
+    python -m benchmarks gpu-report --out gpu-report --tests-args="-x -k probes"
+
+On a headless Linux GPU box the context is made through EGL: check that ``GL_RENDERER`` in
+the report names the GPU, not llvmpipe (with NVIDIA, ``__EGL_VENDOR_LIBRARY_FILENAMES=
+/usr/share/glvnd/egl_vendor.d/10_nvidia.json`` picks its EGL when Mesa's is found first).
+``SPECULUM_DEBUG=1`` (the test suite's setting) checks for a GL error after every pass;
+the report records it, and timings should be taken without it.  CI on llvmpipe runs it at a
+tiny size::
+
+    python -m benchmarks gpu-report --out report --size 160x90 --frames 2 --no-tests
+"""
+from __future__ import annotations
+
+import argparse
+import contextlib
+import io
+import json
+import os
+import platform
+import re
+import shlex
+import subprocess
+import sys
+import tempfile
+import time
+import traceback
+from pathlib import Path
+
+from benchmarks import format_size, parse_sizes
+
+ROOT = Path(__file__).resolve().parents[1]
+DEFAULT_SIZES = ((640, 360), (1920, 1080))
+BENCHMARKS = ("mirrors", "portals", "probes")
+PATHS = ("layered_capture", "layered_mips", "direct_faces")
+STATUSES = ("verified", "refused", "unavailable", "unchecked")
+SCHEMA = 1
+
+# Per suite, the tables of medians the report lays side by side across sizes: the rows that
+# have every key field and the value field, keyed by those fields.
+MEDIANS: dict[str, tuple[tuple[tuple[str, ...], str], ...]] = {
+    "mirrors": ((("n_mirrors", "path", "aa"), "frame_ms_median"),),
+    "portals": ((("depth",), "frame_ms_median"),),
+    "probes": ((("probe",), "frame_ms_median"), (("path", "culled", "size"), "capture_ms_median"),
+               (("prefilter", "size"), "prefilter_ms_median")),
+}
+
+
+def _suites(text: str) -> tuple[str, ...]:
+    names = tuple(name.strip() for name in text.split(",") if name.strip())
+    unknown = sorted(set(names) - set(BENCHMARKS))
+    if unknown or not names:
+        raise argparse.ArgumentTypeError(f"unknown suites {unknown}; choose from {','.join(BENCHMARKS)}")
+    return names
+
+
+def _positive(text: str) -> int:
+    value = int(text)
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"{text} is not >= 1")
+    return value
+
+
+def _non_negative(text: str) -> int:
+    value = int(text)
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"{text} is not >= 0")
+    return value
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--out", type=Path, required=True, metavar="DIR",
+                        help="folder for report.md and report.json (made if missing)")
+    parser.add_argument("--size", type=parse_sizes, default=DEFAULT_SIZES, metavar="WxH[,WxH...]",
+                        help="output sizes the benchmarks run at (default 640x360,1920x1080)")
+    parser.add_argument("--frames", type=_positive, default=10,
+                        help="timed frames per suite and size (default 10)")
+    parser.add_argument("--warmup", type=_non_negative, default=2, help="untimed frames first (default 2)")
+    parser.add_argument("--benchmarks", type=_suites, default=BENCHMARKS, metavar="NAME[,NAME...]",
+                        help="which suites (default mirrors,portals,probes)")
+    parser.add_argument("--isolate", action="store_true",
+                        help="run each suite in a subprocess (a driver crash costs that suite, not the report)")
+    parser.add_argument("--no-tests", action="store_true", help="do not run the test suite")
+    parser.add_argument("--tests-args", type=shlex.split, default=[], metavar="ARGS",
+                        help='more pytest arguments, one string: --tests-args="-x -k probes"')
+    parser.add_argument("--tests-timeout", type=float, default=3600.0, help="seconds (default 3600)")
+
+
+# -- sections ---------------------------------------------------------------------------------
+
+def _jsonable(value):
+    if isinstance(value, (bool, int, float, str)) or value is None:
+        return value
+    if isinstance(value, (tuple, list)):
+        return [_jsonable(v) for v in value]
+    return str(value)
+
+
+def gl_section(ctx) -> dict:
+    """Renderer, vendor, version, the capability check and the limits of ``ctx``."""
+    from engine.errors import GLCapabilityError
+    from engine.gl_context import REQUIREMENTS, GLCapabilities, prepare_context
+
+    info = ctx.info
+    try:
+        caps = prepare_context(ctx)
+        check = "passed"
+    except GLCapabilityError as exc:
+        caps = GLCapabilities.read(ctx)
+        check = str(exc)
+    return {
+        "renderer": str(info.get("GL_RENDERER", "?")),
+        "vendor": str(info.get("GL_VENDOR", "?")),
+        "version": str(info.get("GL_VERSION", "?")),
+        "version_code": ctx.version_code,
+        "software": caps.software,
+        "capability_check": check,
+        "requirements": [{"name": name, "have": getattr(caps, name), "minimum": minimum, "for": why}
+                         for name, minimum, why in REQUIREMENTS],
+        "limits": {key: _jsonable(value) for key, value in sorted(info.items()) if key.startswith("GL_MAX_")},
+        "extensions": len(caps.extensions),
+    }
+
+
+def path_section(ctx) -> dict:
+    """Each rendering path's verdict from the engine's self-check, run now on ``ctx``."""
+    from engine.app import Engine, Game
+
+    class Empty(Game):
+        title = "gpu report: path checks"
+
+        def build(self, world) -> None:
+            pass
+
+    try:
+        from engine.render.path_checks import PATH_NAMES as expected
+    except ImportError:
+        expected = PATHS
+    engine = Engine(Empty(), ctx)
+    try:
+        return verdicts_of(getattr(engine.renderer, "path_checks", None), (*PATHS, *expected))
+    finally:
+        engine.close()
+
+
+def verdicts_of(checks, expected: tuple[str, ...] = PATHS) -> dict:
+    """``checks.run_all()``, then {path: {"status", "detail"}} for every path ``expected`` (and
+    any other the self-check names); ``unchecked`` where there is no self-check, it raised, or
+    it has no verdict for a path."""
+    expected = tuple(dict.fromkeys(expected))
+
+    def every(detail: str) -> dict:
+        return {name: {"status": "unchecked", "detail": detail} for name in expected}
+
+    if checks is None:
+        return every("this checkout has no rendering-path self-check (Renderer.path_checks)")
+    try:
+        checks.run_all()
+        verdicts = dict(checks.verdicts)
+    except Exception as exc:  # the report goes on: this is what it says about the paths
+        return every(f"the self-check raised {type(exc).__name__}: {exc}")
+    found = {str(name): {"status": str(getattr(v, "status", "unchecked")), "detail": str(getattr(v, "detail", ""))}
+             for name, v in verdicts.items()}
+    for name in expected:
+        found.setdefault(name, {"status": "unchecked", "detail": "the self-check gave no verdict on it"})
+    return {name: found[name] for name in (*expected, *sorted(set(found) - set(expected)))}
+
+
+def run_suite(name: str, size: tuple[int, int], frames: int, warmup: int, isolate: bool) -> dict:
+    """One suite at one size, as ``python -m benchmarks <name> --json ...``: its JSON rows."""
+    argv = [name, "--json", "--size", format_size(size), "--frames", str(frames), "--warmup", str(warmup)]
+    out, err = io.StringIO(), io.StringIO()
+    start = time.perf_counter()
+    status: int | str
+    if isolate:
+        try:
+            done = subprocess.run([sys.executable, "-m", "benchmarks", *argv], cwd=ROOT, capture_output=True,
+                                  text=True, timeout=3600)
+            out.write(done.stdout)
+            err.write(done.stderr)
+            status = done.returncode
+        except subprocess.TimeoutExpired as exc:
+            status = f"timed out after {exc.timeout:.0f} s"
+    else:
+        from benchmarks.__main__ import build_parser
+
+        parser, modules = build_parser()
+        args = parser.parse_args(argv)
+        try:
+            with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+                status = modules[name].main(args)
+        except SystemExit as exc:
+            status = exc.code if isinstance(exc.code, int) else str(exc.code)
+        except Exception:
+            status = "raised"
+            err.write(traceback.format_exc())
+    rows, stray = [], []
+    for line in out.getvalue().splitlines():
+        try:
+            rows.append(json.loads(line))
+        except ValueError:
+            if line.strip():
+                stray.append(line)
+    result = {"command": "python -m benchmarks " + " ".join(argv), "status": "ok" if status in (0, None) else "failed",
+              "exit": status, "seconds": round(time.perf_counter() - start, 2), "rows": rows}
+    problems = "\n".join(stray + err.getvalue().splitlines())
+    if problems.strip():
+        result["stderr_tail"] = problems[-4000:]
+    return result
+
+
+SUMMARY_WORDS = ("passed", "failed", "error", "errors", "skipped", "xfailed", "xpassed", "deselected", "warning",
+                 "warnings")
+
+
+def parse_pytest(output: str) -> dict:
+    """Counts, failing test ids and skip reasons from ``pytest -q -ra`` output."""
+    counts = {"passed": 0, "failed": 0, "errors": 0, "skipped": 0, "xfailed": 0, "xpassed": 0, "deselected": 0}
+    summary = ""
+    lines = output.splitlines()
+    for line in reversed(lines):
+        found = re.findall(r"(\d+) (" + "|".join(SUMMARY_WORDS) + r")\b", line)
+        if found and re.search(r"\bin [\d.]+s\b", line):
+            summary = line.strip("= ").strip()
+            for number, word in found:
+                word = {"error": "errors", "warning": "warnings"}.get(word, word)
+                if word in counts:
+                    counts[word] = int(number)
+            break
+    failures, skips = [], []
+    for line in lines:
+        match = re.match(r"^(FAILED|ERROR) (\S+)(?: - (.*))?$", line)
+        if match:
+            failures.append({"test": match[2], "outcome": match[1].lower(), "message": (match[3] or "")[:300]})
+        elif line.startswith("SKIPPED "):
+            skips.append(line[len("SKIPPED "):][:300])
+    return {**counts, "summary": summary, "failures": failures, "skips": skips}
+
+
+def junit_messages(path: Path) -> dict[str, str]:
+    """{test id: first line of its failure or error message} from a pytest JUnit XML file."""
+    import xml.etree.ElementTree as ElementTree
+
+    try:
+        tree = ElementTree.parse(path)
+    except (OSError, ElementTree.ParseError):
+        return {}
+    found = {}
+    for case in tree.iter("testcase"):
+        for problem in (*case.findall("failure"), *case.findall("error")):
+            found[f"{case.get('classname', '')}::{case.get('name', '')}"] = (problem.get("message") or "")[:500]
+    return found
+
+
+def _junit_id(nodeid: str) -> str:
+    """``tests/test_x.py::Class::test[p]`` -> ``tests.test_x.Class::test[p]`` (JUnit's classname::name)."""
+    parts = nodeid.split("::")
+    module = parts[0].removesuffix(".py").replace("/", ".")
+    return ".".join([module, *parts[1:-1]]) + "::" + parts[-1]
+
+
+def tests_section(extra: list[str], timeout: float) -> dict:
+    """``python -m pytest -q -ra`` from the repository root, in a subprocess."""
+    if not (ROOT / "tests").is_dir():
+        return {"ran": False, "reason": f"no tests/ folder in {ROOT} (an installed copy of the benchmarks)"}
+    with tempfile.TemporaryDirectory(prefix="speculum-gpu-report-") as scratch:
+        junit = Path(scratch) / "junit.xml"
+        command = [sys.executable, "-m", "pytest", "-q", "-ra", "-p", "no:cacheprovider", *extra]
+        shown = shlex.join(["python", *command[1:]])
+        start = time.perf_counter()
+        try:
+            done = subprocess.run([*command, f"--junitxml={junit}"], cwd=ROOT, capture_output=True, text=True,
+                                  timeout=timeout)
+        except subprocess.TimeoutExpired as exc:
+            output = exc.stdout.decode(errors="replace") if isinstance(exc.stdout, bytes) else (exc.stdout or "")
+            return {"ran": True, "command": shown, "exit": f"timed out after {timeout:.0f} s",
+                    "seconds": round(time.perf_counter() - start, 1), **parse_pytest(output),
+                    "output_tail": output[-4000:]}
+        messages = junit_messages(junit)
+    result = {"ran": True, "command": shown, "exit": done.returncode,
+              "seconds": round(time.perf_counter() - start, 1), **parse_pytest(done.stdout)}
+    for failure in result["failures"]:
+        failure["message"] = messages.get(_junit_id(failure["test"])) or failure["message"]
+    if done.returncode not in (0, 1) or not result["summary"]:  # crashed, interrupted, usage error
+        result["output_tail"] = (done.stdout + done.stderr)[-4000:]
+    return result
+
+
+def host_section() -> dict:
+    import moderngl
+
+    def git(*args: str) -> str | None:
+        try:
+            done = subprocess.run(["git", *args], cwd=ROOT, capture_output=True, text=True, timeout=30)
+        except (OSError, subprocess.TimeoutExpired):
+            return None
+        return done.stdout.strip() if done.returncode == 0 else None
+
+    status = git("status", "--porcelain", "--untracked-files=no")
+    return {"python": platform.python_version(), "platform": platform.platform(), "machine": platform.machine(),
+            "cpus": os.cpu_count(), "moderngl": moderngl.__version__, "git_commit": git("rev-parse", "HEAD"),
+            "git_dirty": None if status is None else bool(status),
+            "speculum_debug": os.environ.get("SPECULUM_DEBUG", "") not in ("", "0")}
+
+
+# -- the report ------------------------------------------------------------------------------
+
+def medians(report: dict) -> dict[str, list[dict]]:
+    """Per suite, one table per ``MEDIANS`` entry: {"keys", "value", "rows": [{key..., size: ms}]}."""
+    tables: dict[str, list[dict]] = {}
+    for suite, runs in report.get("benchmarks", {}).items():
+        for keys, value in MEDIANS.get(suite, ()):
+            table: dict[tuple, dict] = {}
+            for size, run in runs.items():
+                for row in run.get("rows", ()):
+                    if value in row and all(key in row for key in keys):
+                        key = tuple(_jsonable(row[k]) for k in keys)
+                        table.setdefault(key, dict(zip(keys, key, strict=True)))[size] = row[value]
+            if table:
+                tables.setdefault(suite, []).append({"keys": list(keys), "value": value, "rows": list(table.values())})
+    return tables
+
+
+def _one_line(text: str, limit: int = 300) -> str:
+    text = " / ".join(line.strip() for line in text.splitlines() if line.strip())
+    return text if len(text) <= limit else text[:limit - 3] + "..."
+
+
+def _cell(value) -> str:
+    if isinstance(value, dict):
+        value = ", ".join(f"{k}: {v}" for k, v in value.items())
+    return str(value).replace("|", "\\|").replace("\n", " ")
+
+
+def _table(columns: list[str], rows: list[dict]) -> list[str]:
+    lines = ["| " + " | ".join(columns) + " |", "|" + "---|" * len(columns)]
+    lines += ["| " + " | ".join(_cell(row.get(c, "")) for c in columns) + " |" for row in rows]
+    return lines + [""]
+
+
+def markdown(report: dict) -> str:
+    host, gl = report["host"], report.get("gl", {})
+    out = ["# Speculum GPU report", ""]
+    if not report.get("complete"):
+        out += ["**Incomplete**: the run stopped before every section was done.", ""]
+    out += [f"- created: {report['created']}", f"- command: `{report['command']}`",
+            f"- commit: {host['git_commit'] or '?'}{' (with local changes)' if host['git_dirty'] else ''}",
+            f"- python {host['python']}, moderngl {host['moderngl']}, {host['platform']}, {host['cpus']} CPUs"]
+    if host["speculum_debug"]:
+        out.append("- **SPECULUM_DEBUG is set**: a GL error check after every pass; timings are not representative")
+    out.append("")
+    if gl:
+        out += ["## OpenGL", ""]
+        out += _table(["field", "value"], [
+            {"field": "GL_RENDERER", "value": gl["renderer"]}, {"field": "GL_VENDOR", "value": gl["vendor"]},
+            {"field": "GL_VERSION", "value": gl["version"]},
+            {"field": "software rasteriser", "value": "yes" if gl["software"] else "no"},
+            {"field": "engine capability check", "value": gl["capability_check"]},
+            {"field": "extensions", "value": gl["extensions"]}])
+        out += ["Engine requirements:", ""]
+        out += _table(["name", "have", "minimum", "for"], gl["requirements"])
+        out += ["<details><summary>GL_MAX_* limits</summary>", ""]
+        out += _table(["limit", "value"], [{"limit": k, "value": v} for k, v in gl["limits"].items()])
+        out += ["</details>", ""]
+    if "paths" in report:
+        out += ["## Rendering paths (engine self-check)", ""]
+        out += _table(["path", "status", "detail"],
+                      [{"path": name, **verdict} for name, verdict in report["paths"].items()])
+    if "benchmarks" in report:
+        sizes = report["sizes"]
+        out += ["## Benchmarks", "",
+                f"{report['frames']} timed frames after {report['warmup']} warm-up per suite and size; "
+                "times in ms (wall clock around each frame and `ctx.finish()`).", ""]
+        for suite, tables in medians(report).items():
+            for table in tables:
+                out += [f"### {suite}: {table['value']} by size", ""]
+                out += _table(table["keys"] + [s for s in sizes if any(s in r for r in table["rows"])], table["rows"])
+        if "probes" in report["benchmarks"]:
+            out += ["(The probes' capture and prefilter rows draw cube faces of 128 and 512 texels: they do not "
+                    "depend on the output size.)", ""]
+        out += ["### Every row", "", "Each suite's JSON lines as it printed them, by suite and size.", ""]
+        for suite, runs in report["benchmarks"].items():
+            for size, run in runs.items():
+                out += [f"<details><summary>{suite} at {size}: {run['status']}, {len(run['rows'])} rows, "
+                        f"{run['seconds']} s</summary>", "", f"`{run['command']}`", ""]
+                groups: dict[tuple, list[dict]] = {}
+                for row in run["rows"]:
+                    groups.setdefault(tuple(row), []).append(row)
+                for columns, rows in groups.items():
+                    out += _table(list(columns), rows)
+                out += ["</details>", ""]
+                if "stderr_tail" in run:
+                    out += [f"{suite} at {size} said:", "", "```", run["stderr_tail"][-1500:], "```", ""]
+    tests = report.get("tests")
+    if tests is not None:
+        out += ["## Test suite", ""]
+        if not tests["ran"]:
+            out += [f"Not run: {tests['reason']}.", ""]
+        else:
+            out += [f"`{tests['command']}`: exit {tests['exit']}, {tests['seconds']} s", "",
+                    f"**{tests['passed']} passed, {tests['failed']} failed, {tests['errors']} errors, "
+                    f"{tests['skipped']} skipped** ({tests['summary'] or 'no summary line'})", ""]
+            if tests["failures"]:
+                out += ["Failures:", ""] + [f"- `{f['test']}` ({f['outcome']}): {_one_line(f['message'])}"
+                                           for f in tests["failures"]] + [""]
+            if tests["skips"]:
+                out += ["Skipped:", ""] + [f"- {s}" for s in tests["skips"]] + [""]
+            if "output_tail" in tests:
+                out += ["```", tests["output_tail"][-2000:], "```", ""]
+    return "\n".join(out)
+
+
+def write(report: dict, out: Path) -> None:
+    report["medians"] = medians(report)
+    (out / "report.json").write_text(json.dumps(report, indent=1) + "\n")
+    (out / "report.md").write_text(markdown(report))
+
+
+def failed(report: dict) -> list[str]:
+    """What went wrong: failed suites, failed or unfinished tests."""
+    found = [f"{suite} at {size}: {run['exit']}" for suite, runs in report.get("benchmarks", {}).items()
+             for size, run in runs.items() if run["status"] != "ok"]
+    tests = report.get("tests") or {}
+    if tests.get("ran") and (tests["exit"] != 0 or tests["failed"] or tests["errors"]):
+        found.append(f"tests: {tests['summary'] or 'exit ' + str(tests['exit'])}")
+    return found
+
+
+def command_line(args: argparse.Namespace) -> str:
+    """The command that makes this report again."""
+    words = ["python", "-m", "benchmarks", "gpu-report", "--out", str(args.out),
+             "--size", ",".join(format_size(size) for size in args.size), "--frames", str(args.frames),
+             "--warmup", str(args.warmup), "--benchmarks", ",".join(args.benchmarks)]
+    if args.isolate:
+        words.append("--isolate")
+    if args.no_tests:
+        words.append("--no-tests")
+    elif args.tests_args:
+        words.append("--tests-args=" + shlex.join(args.tests_args))
+    return shlex.join(words)
+
+
+def main(args: argparse.Namespace) -> int:
+    from engine.gl_context import create_headless_context
+
+    out: Path = args.out
+    out.mkdir(parents=True, exist_ok=True)
+    sizes = [format_size(size) for size in args.size]
+    report: dict = {"schema": SCHEMA, "complete": False, "created": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
+                    "command": command_line(args), "host": host_section(), "sizes": sizes, "frames": args.frames,
+                    "warmup": args.warmup}
+
+    def progress(text: str) -> None:
+        if not args.json:
+            print(text, flush=True)
+
+    ctx = create_headless_context()
+    try:
+        report["gl"] = gl_section(ctx)
+        progress(f"{report['gl']['renderer']} | {report['gl']['vendor']} | {report['gl']['version']}")
+        write(report, out)
+        try:
+            report["paths"] = path_section(ctx)
+        except Exception as exc:  # no engine on this context (the capability check says why)
+            report["paths"] = verdicts_of(None) | {
+                name: {"status": "unchecked", "detail": f"no engine to check with: {type(exc).__name__}: {exc}"}
+                for name in PATHS}
+        progress("paths: " + ", ".join(f"{name} {v['status']}" for name, v in report["paths"].items()))
+        write(report, out)
+    finally:
+        ctx.release()
+    report["benchmarks"] = {suite: {} for suite in args.benchmarks}
+    for size, text in zip(args.size, sizes, strict=True):
+        for suite in args.benchmarks:
+            run = report["benchmarks"][suite][text] = run_suite(suite, size, args.frames, args.warmup, args.isolate)
+            progress(f"{suite} at {text}: {run['status']}, {len(run['rows'])} rows, {run['seconds']} s")
+            write(report, out)
+    if args.no_tests:
+        report["tests"] = {"ran": False, "reason": "--no-tests"}
+    else:
+        progress("tests: python -m pytest -q ...")
+        report["tests"] = tests_section(args.tests_args, args.tests_timeout)
+        if report["tests"]["ran"]:
+            progress(f"tests: {report['tests']['summary'] or 'exit ' + str(report['tests']['exit'])}")
+    report["complete"] = True
+    write(report, out)
+    problems = failed(report)
+    if args.json:
+        print(json.dumps(report))
+    else:
+        print(f"wrote {out / 'report.md'} and {out / 'report.json'}")
+        for problem in problems:
+            print(f"failed: {problem}", file=sys.stderr)
+    return 1 if problems else 0

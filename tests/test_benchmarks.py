@@ -1,0 +1,243 @@
+"""The benchmark command line: every suite that renders takes ``--size WxH`` (its default
+unchanged, a bad value an argparse error, the size reaching the render target), and
+``python -m benchmarks gpu-report`` writes report.md and report.json naming this context's
+renderer, the sizes asked and each benchmark's rows, with imgui-bundle out of reach."""
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from benchmarks import RENDERING_SUITES, SUITES, parse_size
+from benchmarks.__main__ import build_parser
+from engine.gl_context import GLCapabilities
+from engine.raw_gl import make_current
+
+ROOT = Path(__file__).resolve().parents[1]
+
+# What each rendering suite drew at before --size existed: the default must not move.
+DEFAULT_SIZES = {"ecs": (64, 36), "portals": (640, 360), "mirrors": (640, 360), "soak": (320, 180),
+                 "churn": (320, 180), "probes": (640, 360), "normal_maps": (640, 360)}
+
+
+@pytest.fixture
+def own_contexts(ctx):
+    """For tests whose suites make (and release) contexts of their own: the session's is made
+    current again afterwards, for the tests that follow."""
+    yield
+    make_current(ctx)
+
+
+def test_every_rendering_suite_takes_size_with_its_old_default():
+    parser, _ = build_parser()
+    assert set(RENDERING_SUITES) == set(DEFAULT_SIZES) and set(RENDERING_SUITES) <= set(SUITES)
+    for name in RENDERING_SUITES:
+        assert parser.parse_args([name]).size == DEFAULT_SIZES[name], name
+        assert parser.parse_args([name, "--size", "1920x1080"]).size == (1920, 1080), name
+        assert parser.parse_args([name, "--size", "32X18"]).size == (32, 18), name
+
+
+@pytest.mark.parametrize("bad", ["640", "640x", "x360", "0x360", "640x0", "axb", "640x360x2", "6.5x3", "99999x10"])
+def test_a_bad_size_is_an_argparse_error_that_says_what_was_expected(bad, capsys):
+    parser, _ = build_parser()
+    for name in (*RENDERING_SUITES, "gpu-report"):
+        argv = [name, "--size", bad] + (["--out", "unused"] if name == "gpu-report" else [])
+        with pytest.raises(SystemExit) as exit_:
+            parser.parse_args(argv)
+        assert exit_.value.code == 2
+        error = capsys.readouterr().err
+        assert "argument --size:" in error and repr(bad) in error, error
+        assert "WIDTHxHEIGHT" in error or "1 to 16384" in error, error
+    with pytest.raises(SystemExit):
+        parser.parse_args(["gpu-report", "--out", "unused", "--size", "64x36,64x36"])
+    assert "names a size twice" in capsys.readouterr().err
+    assert parse_size(" 64x36 ") == (64, 36)
+
+
+def test_every_suite_has_a_clean_help(capsys):
+    parser, _ = build_parser()
+    for name in SUITES:
+        with pytest.raises(SystemExit) as exit_:
+            parser.parse_args([name, "--help"])
+        assert exit_.value.code == 0
+        text = capsys.readouterr().out
+        assert text.startswith(f"usage: python -m benchmarks {name}"), text[:200]
+        if name in RENDERING_SUITES or name == "gpu-report":
+            assert "--size" in text, name
+
+
+def _spy_on_capture_targets(monkeypatch, module) -> list[tuple[int, int]]:
+    made = []
+    real = module.CaptureTarget
+
+    def capture_target(ctx, size, *args, **kwargs):
+        made.append(tuple(size))
+        return real(ctx, size, *args, **kwargs)
+
+    monkeypatch.setattr(module, "CaptureTarget", capture_target)
+    return made
+
+
+@pytest.mark.parametrize("argv", [
+    ["portals", "--frames", "1", "--warmup", "0"],
+    ["mirrors", "--mirrors", "0,1", "--paths", "auto", "--frames", "1", "--warmup", "0"],
+    ["normal_maps", "--frames", "1", "--warmup", "0"],
+    ["ecs", "--sizes", "100", "--frames", "1", "--warmup", "1"],
+    ["churn", "--entities", "5", "--waves", "1", "--frames", "1"],
+], ids=lambda argv: argv[0])
+def test_the_size_reaches_the_render_target(argv, monkeypatch, capsys, own_contexts):
+    parser, modules = build_parser()
+    args = parser.parse_args([*argv, "--json", "--size", "48x27"])
+    made = _spy_on_capture_targets(monkeypatch, modules[argv[0]])
+    assert modules[argv[0]].main(args) == 0
+    assert made and set(made) == {(48, 27)}, made
+    rows = [json.loads(line) for line in capsys.readouterr().out.splitlines()]
+    assert rows
+
+
+def test_the_probe_suite_draws_every_part_at_the_size(monkeypatch, capsys, own_contexts):
+    """Captures and prefilters run at 128 and 512 texels a face whatever the size (seconds on
+    llvmpipe): each part is stood in for by a recorder here; the whole frames run for real."""
+    from benchmarks import probes
+
+    asked = []
+    monkeypatch.setattr(probes, "capture_rows", lambda ctx, frames, size: asked.append(("capture", size)) or [])
+    monkeypatch.setattr(probes, "prefilter_rows", lambda ctx, frames, size: asked.append(("prefilter", size)) or [])
+    made = _spy_on_capture_targets(monkeypatch, probes)
+    parser, _ = build_parser()
+    assert probes.main(parser.parse_args(["probes", "--json", "--size", "48x27", "--frames", "1",
+                                          "--warmup", "0"])) == 0
+    assert asked == [("capture", (48, 27)), ("prefilter", (48, 27))]
+    assert set(made) == {(48, 27)} and len(made) == 4
+    assert [json.loads(line)["probe"] for line in capsys.readouterr().out.splitlines()] == \
+        ["none", "static", "on_change", "dynamic"]
+
+
+# Blocks imgui-bundle (an import of it raises ImportError), runs the report, and says whether
+# the debug overlay was imported.
+WITHOUT_IMGUI = """
+import sys
+sys.modules["imgui_bundle"] = None
+from benchmarks.__main__ import main
+status = main(sys.argv[1:])
+print("overlay imported:", "engine.overlay" in sys.modules)
+sys.exit(status)
+"""
+
+
+def test_gpu_report_writes_markdown_and_json_without_imgui(ctx, tmp_path):
+    out = tmp_path / "report"
+    done = subprocess.run(
+        [sys.executable, "-c", WITHOUT_IMGUI, "gpu-report", "--out", str(out), "--size", "160x90", "--no-tests",
+         "--frames", "2"],
+        cwd=ROOT, env={**os.environ, "PYTHONPATH": str(ROOT)}, capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stdout[-2000:] + done.stderr[-3000:]
+    assert "overlay imported: False" in done.stdout
+    report = json.loads((out / "report.json").read_text())
+    markdown = (out / "report.md").read_text()
+
+    assert report["complete"] and report["sizes"] == ["160x90"] and report["frames"] == 2
+    assert report["gl"]["renderer"] == ctx.info["GL_RENDERER"]
+    assert report["gl"]["vendor"] == ctx.info["GL_VENDOR"] and report["gl"]["version"] == ctx.info["GL_VERSION"]
+    assert report["gl"]["capability_check"] == "passed"
+    assert report["gl"]["software"] == GLCapabilities.read(ctx).software  # True on llvmpipe
+    assert report["gl"]["limits"]["GL_MAX_TEXTURE_SIZE"] == ctx.info["GL_MAX_TEXTURE_SIZE"]
+    assert set(report["paths"]) >= {"layered_capture", "layered_mips", "direct_faces"}
+    for path, verdict in report["paths"].items():
+        assert verdict["status"] in ("verified", "refused", "unavailable", "unchecked"), (path, verdict)
+        assert verdict["status"] == "verified" or verdict["detail"], (path, verdict)  # a refusal says why
+    try:
+        from engine.render.path_checks import PATH_NAMES
+    except ImportError:  # a checkout without the self-check: every path unchecked
+        assert {v["status"] for v in report["paths"].values()} == {"unchecked"}
+    else:  # run_all checked every path on the report's context
+        assert set(report["paths"]) == {"layered_capture", "layered_mips", "direct_faces", *PATH_NAMES}
+        assert "unchecked" not in {v["status"] for v in report["paths"].values()}, report["paths"]
+    assert report["tests"] == {"ran": False, "reason": "--no-tests"}
+
+    runs = report["benchmarks"]
+    assert set(runs) == {"mirrors", "portals", "probes"}
+    for suite, by_size in runs.items():
+        assert set(by_size) == {"160x90"}, suite
+        assert by_size["160x90"]["status"] == "ok", by_size["160x90"]
+        assert "--size 160x90" in by_size["160x90"]["command"] and "--frames 2" in by_size["160x90"]["command"]
+    mirrors = [r for r in runs["mirrors"]["160x90"]["rows"] if "n_mirrors" in r and "path" in r]
+    assert {(r["n_mirrors"], r["path"]) for r in mirrors} == \
+        {(n, p) for n in (0, 1, 2, 4, 8, 16) for p in ("per_mirror", "batched", "auto")}
+    assert all(r["frames"] == 2 and r["frame_ms_median"] > 0 for r in mirrors)
+    assert [r["depth"] for r in runs["portals"]["160x90"]["rows"]] == list(range(9))
+    probe_rows = runs["probes"]["160x90"]["rows"]
+    assert [r["probe"] for r in probe_rows if "probe" in r] == ["none", "static", "on_change", "dynamic"]
+    assert {(r["path"], r["size"]) for r in probe_rows if "capture_ms_median" in r} == \
+        {(p, s) for p in ("six_pass", "layered") for s in (128, 512)}
+
+    # The medians, side by side by size, are read from those rows.
+    portals = report["medians"]["portals"][0]
+    assert portals["value"] == "frame_ms_median" and [r["160x90"] for r in portals["rows"]] == \
+        [r["frame_ms_median"] for r in runs["portals"]["160x90"]["rows"]]
+    assert ctx.info["GL_RENDERER"] in markdown
+    for heading in ("## OpenGL", "## Rendering paths", "## Benchmarks", "### mirrors: frame_ms_median by size",
+                    "## Test suite"):
+        assert heading in markdown, heading
+
+
+def test_pytest_output_is_read_into_counts_failures_and_skips(tmp_path):
+    from benchmarks.gpu_report import _junit_id, junit_messages, parse_pytest
+
+    output = "\n".join([
+        "....F.s",
+        "=========================== short test summary info ============================",
+        "SKIPPED [1] tests/test_window.py:59: Xvfb is not installed",
+        "FAILED tests/test_probes.py::test_layered[512] - AssertionError: assert 1 == 2",
+        "ERROR tests/test_x.py::Case::test_y",
+        "1 failed, 4 passed, 1 skipped, 3 deselected, 1 error in 12.34s",
+    ])
+    parsed = parse_pytest(output)
+    assert (parsed["passed"], parsed["failed"], parsed["skipped"], parsed["errors"], parsed["deselected"]) == \
+        (4, 1, 1, 1, 3)
+    assert parsed["summary"] == "1 failed, 4 passed, 1 skipped, 3 deselected, 1 error in 12.34s"
+    assert parsed["failures"] == [
+        {"test": "tests/test_probes.py::test_layered[512]", "outcome": "failed",
+         "message": "AssertionError: assert 1 == 2"},
+        {"test": "tests/test_x.py::Case::test_y", "outcome": "error", "message": ""}]
+    assert parsed["skips"] == ["[1] tests/test_window.py:59: Xvfb is not installed"]
+
+    junit = tmp_path / "junit.xml"
+    junit.write_text('<testsuites><testsuite><testcase classname="tests.test_x.Case" name="test_y">'
+                     '<error message="RuntimeError: boom"/></testcase></testsuite></testsuites>')
+    assert junit_messages(junit) == {"tests.test_x.Case::test_y": "RuntimeError: boom"}
+    assert _junit_id("tests/test_x.py::Case::test_y") == "tests.test_x.Case::test_y"
+
+
+def test_path_verdicts_are_read_from_the_self_check_or_unchecked():
+    from benchmarks.gpu_report import PATHS, verdicts_of
+
+    class Verdict:
+        def __init__(self, status, detail):
+            self.status, self.detail = status, detail
+
+    class Checks:
+        ran = 0
+
+        def run_all(self):
+            self.ran += 1
+            self.verdicts = {"layered_capture": Verdict("verified", "matches six_pass"),
+                             "direct_faces": Verdict("refused", "face 3 differs")}
+
+    checks = Checks()
+    found = verdicts_of(checks)
+    assert checks.ran == 1 and list(found) == list(PATHS)
+    assert found["layered_capture"] == {"status": "verified", "detail": "matches six_pass"}
+    assert found["direct_faces"] == {"status": "refused", "detail": "face 3 differs"}
+    assert found["layered_mips"]["status"] == "unchecked"
+    assert all(v["status"] == "unchecked" for v in verdicts_of(None).values())
+
+    class Broken:
+        def run_all(self):
+            raise RuntimeError("no geometry shaders")
+
+    assert all("RuntimeError: no geometry shaders" in v["detail"] for v in verdicts_of(Broken()).values())
