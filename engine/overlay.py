@@ -59,6 +59,8 @@ def overlay_lines(engine, frame_times: Sequence[float]) -> list[str]:
         f"probe captures {stats.probe_captures} ({stats.probe_faces} faces)",
         f"reflection path {stats.reflection_path or '-'} (set: {reflect.path}, budget {budget})",
         f"probe path {stats.probe_path or '-'} (set: {probes.path}{chosen})",
+        f"GL paths verified: {', '.join(stats.paths_verified) or '-'}; "
+        f"refused: {', '.join(stats.paths_refused) or '-'}",
     ]
 
 

@@ -21,7 +21,6 @@ from engine.app import Engine, Game
 from engine.capture import save_png
 from engine.errors import SpeculumError
 from engine.frame_io import Input, Output
-from engine.overlay import DebugOverlay
 from engine.render.targets import CaptureTarget
 
 _NAMED_KEYS = {"SPACE": "space", "ENTER": "enter", "TAB": "tab", "BACKSPACE": "backspace", "LEFT": "left",
@@ -37,6 +36,37 @@ def key_names(keys) -> dict:
     by its attribute name ("W", "SPACE"), as the tests do."""
     codes = {attr: getattr(keys, attr, None) for attr in _NAMED_KEYS}
     return {code if isinstance(code, int) else attr: _NAMED_KEYS[attr] for attr, code in codes.items()}
+
+
+class NoOverlay:
+    """Stands in for the debug overlay where imgui-bundle is not installed (it is a
+    dependency, but a machine may lack its native wheel): F1 says why once, nothing is drawn."""
+
+    visible = False
+    wants_mouse = False
+    wants_keyboard = False
+
+    def __init__(self) -> None:
+        self._said = False
+
+    def toggle(self) -> None:
+        if not self._said:
+            print("speculum: the debug overlay needs imgui-bundle (pip install imgui-bundle)", file=sys.stderr)
+            self._said = True
+
+    def __getattr__(self, name: str):
+        return lambda *args, **kwargs: None  # record, draw, mouse and key forwarding, release
+
+
+def make_overlay(ctx, visible: bool):
+    """The debug overlay, or ``NoOverlay`` where imgui-bundle cannot be imported."""
+    try:
+        from engine.overlay import DebugOverlay
+    except ImportError:
+        if visible:
+            print("speculum: --overlay needs imgui-bundle (pip install imgui-bundle): drawing none", file=sys.stderr)
+        return NoOverlay()
+    return DebugOverlay(ctx, visible=visible)
 
 
 def make_window_config(game: Game, args: argparse.Namespace | None = None) -> type[mglw.WindowConfig]:
@@ -61,7 +91,7 @@ def make_window_config(game: Game, args: argparse.Namespace | None = None) -> ty
             self.screenshots = Path(args.out) if args is not None and args.out else Path("screenshots")
             self.mouse_captured = False
             self.key_names = key_names(self.wnd.keys)
-            self.overlay = DebugOverlay(self.ctx, visible=bool(getattr(args, "overlay", False)))
+            self.overlay = make_overlay(self.ctx, visible=bool(getattr(args, "overlay", False)))
 
         def on_render(self, time_s: float, frametime: float) -> None:
             size = self.wnd.buffer_size
