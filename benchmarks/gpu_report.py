@@ -176,6 +176,28 @@ def path_section(ctx) -> dict:
         engine.close()
 
 
+def layered_target_section(ctx) -> dict:
+    """What the driver reports with a layered cube-map target bound as a capture binds it
+    (bound framebuffer, layered attachments, scissor, viewport, texture units the cube is
+    on, the loader's ``glFramebufferTexture``): the first thing to read where the layered
+    capture is refused."""
+    from engine.app import Engine, Game
+
+    class Empty(Game):
+        title = "gpu report: layered target"
+
+        def build(self, world) -> None:
+            pass
+
+    engine = Engine(Empty(), ctx)
+    try:
+        return engine.renderer.path_checks.layered_target_state()
+    except Exception as exc:  # the report goes on
+        return {"error": f"{type(exc).__name__}: {exc}"}
+    finally:
+        engine.close()
+
+
 def verdicts_of(checks, expected: tuple[str, ...] = PATHS) -> dict:
     """``checks.run_all()``, then {path: {"status", "detail"}} for every path ``expected`` (and
     any other the self-check names); ``unchecked`` where there is no self-check, it raised, or
@@ -399,6 +421,9 @@ def markdown(report: dict) -> str:
         out += ["## Rendering paths (engine self-check)", ""]
         out += _table(["path", "status", "detail"],
                       [{"path": name, **verdict} for name, verdict in report["paths"].items()])
+    if "layered_target" in report:
+        out += ["## A layered cube-map target as the driver reports it", ""]
+        out += _table(["field", "value"], [{"field": k, "value": v} for k, v in report["layered_target"].items()])
     if "benchmarks" in report:
         sizes = report["sizes"]
         out += ["## Benchmarks", "",
@@ -499,6 +524,7 @@ def main(args: argparse.Namespace) -> int:
                 name: {"status": "unchecked", "detail": f"no engine to check with: {type(exc).__name__}: {exc}"}
                 for name in PATHS}
         progress("paths: " + ", ".join(f"{name} {v['status']}" for name, v in report["paths"].items()))
+        report["layered_target"] = layered_target_section(ctx)
         write(report, out)
     finally:
         ctx.release()

@@ -245,3 +245,18 @@ def test_every_layered_geometry_shader_writes_gl_layer_before_each_vertex():
         for body in re.split(r"EmitVertex\(\);", text)[:-1]:
             last = body.rsplit("gl_Layer", 1)
             assert len(last) == 2 and "EndPrimitive" not in last[1], f"{path.name}: a vertex emitted without gl_Layer"
+
+
+def test_the_layered_target_state_is_what_a_layered_draw_needs_here_and_names_a_face_attachment(
+        scene, ctx, monkeypatch):
+    """What ``gpu-report`` prints where the layered capture is refused: llvmpipe binds and
+    attaches it as the draw needs; the H200-like stand-in shows up as attachments that are
+    not layered."""
+    runner = scene(marked_chrome_scene({}), (32, 24))
+    checks = runner.engine.renderer.path_checks
+    state = checks.layered_target_state()
+    assert state["problems"] == [] and state["colour_layered"] and state["depth_layered"]
+    assert state["viewport"] == (0, 0, 16, 16) and state["cube_bound_on_units"] == ()
+    face_zero_only(monkeypatch)
+    problems = checks.layered_target_state()["problems"]
+    assert "the colour attachment is not layered" in problems and "the depth attachment is not layered" in problems

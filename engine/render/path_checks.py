@@ -36,7 +36,7 @@ import logging
 import weakref
 from collections.abc import Callable
 from contextlib import contextmanager
-from dataclasses import dataclass, fields
+from dataclasses import asdict, dataclass, fields
 
 import moderngl
 import numpy as np
@@ -45,8 +45,8 @@ from pyglm import glm
 from engine.errors import GLPassError
 from engine.material_slots import EmissiveVariant, ReflectVariant, RefractVariant
 from engine.mesh import quad
-from engine.raw_gl import read_cube_level, write_cube_level
-from engine.render.bindings import SCRATCH_UNIT
+from engine.raw_gl import LayeredCubeTarget, inspect_bound_target, read_cube_level, write_cube_level
+from engine.render.bindings import SCRATCH_UNIT, PassState, apply_pass_state
 from engine.render.instances import InstanceBatch
 from engine.render.probes import face_view
 from engine.render.views import lights_block
@@ -142,6 +142,26 @@ class PathChecks:
             LOG.warning("speculum: refusing the %s path on %s (OpenGL %s): %s; using its plain counterpart",
                         path, info.get("GL_RENDERER", "?"), info.get("GL_VERSION", "?"), verdict.detail)
         return verdict
+
+    def layered_target_state(self) -> dict:
+        """What the driver reports with a layered capture target bound as a capture binds it
+        (``raw_gl.inspect_bound_target``), and what of it differs from what a layered draw
+        needs: for reports from machines where the layered capture is refused."""
+        probes = self.renderer.probes
+        key = CHECK_KEYS[1]
+        cube = probes.cube(key, CHECK_SIZE).texture
+        target = LayeredCubeTarget(self.ctx, cube)
+        try:
+            with probes._drawing_into(key):
+                apply_pass_state(self.ctx, PassState(depth_func="<", cull=True), (0, 0, CHECK_SIZE, CHECK_SIZE))
+                target.bind()
+                state = inspect_bound_target(self.ctx, cube, depth=True)
+                target.unbind()
+            problems = state.problems(target.framebuffer, cube.glo, 0, CHECK_SIZE, depth=True)
+            return {**asdict(state), "problems": problems}
+        finally:
+            target.release()
+            probes.drop(key)
 
     # --- the checks -------------------------------------------------------------------------
     def _check_direct_faces(self) -> str | None:
