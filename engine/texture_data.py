@@ -1,9 +1,13 @@
 """Image data for textures, kept on the CPU; the renderer uploads it when first drawn."""
 from __future__ import annotations
 
+import errno
 import math
 import numbers
 import os
+import stat
+import warnings
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -16,7 +20,9 @@ from engine.errors import AssetError
 class TextureData:
     """RGBA8 pixels, row 0 at the top (as image files store them): sRGB encoded colour for
     ``Material.texture``, linear data for ``Material.normal_map`` (the renderer reads each as
-    its field says)."""
+    its field says). Eight bits a channel is what the renderer uploads: an image file with
+    16-bit or floating-point channels is scaled to them (``load_texture``), its finer steps
+    not kept."""
 
     pixels: np.ndarray
     name: str = "texture"
@@ -41,42 +47,220 @@ class TextureData:
         return bool((self.pixels[..., 3] < 255).any())
 
 
-def load_texture(path: str | Path) -> TextureData:
-    """Read an image file (PNG, JPEG, ...) with Pillow."""
-    from PIL import Image, UnidentifiedImageError
+MAX_TEXTURE_SIDE = 16384  # texels along a side of a texture the engine makes or loads (see below)
+MAX_GENERATED_SIZE = MAX_TEXTURE_SIDE  # the generators' size limit (the older name)
+ASSET_MEMORY_BUDGET = 1 << 30  # bytes one texture's pixels (or one mesh's arrays) may take on the CPU
+WORK_BLOCK = 1 << 16  # texels a generator or a conversion works on at a time (its float temporaries)
+# MAX_TEXTURE_SIDE is the GL_MAX_TEXTURE_SIZE every OpenGL 4.1 context has at least: a texture
+# past it is refused when made or loaded, before any pixel is decoded or allocated (the renderer
+# checks its own context's limit again at upload). 16384 x 16384 RGBA8 is 1 GiB, exactly the
+# budget: a generator allocates about what it returns (plus WORK_BLOCK texels of temporaries),
+# and a decoded image about its size in its own format on top of that.
 
+
+def check_texture_size(width: int, height: int, what: str) -> None:
+    """Refuse a ``width`` x ``height`` RGBA8 texture past the GL side limit or the memory
+    budget, before anything is allocated (``what`` names it in the message)."""
+    if not (1 <= width <= MAX_TEXTURE_SIDE and 1 <= height <= MAX_TEXTURE_SIDE):
+        raise AssetError(f"{what}: is {width}x{height} texels: a texture is at most "
+                         f"{MAX_TEXTURE_SIDE}x{MAX_TEXTURE_SIDE} (the GL_MAX_TEXTURE_SIZE OpenGL 4.1 guarantees)")
+    size = texture_bytes(width, height)
+    if size > ASSET_MEMORY_BUDGET:
+        raise AssetError(f"{what}: {width}x{height} texels take {_mib(size)} MiB, over the memory budget of "
+                         f"{_mib(ASSET_MEMORY_BUDGET)} MiB an asset may have (engine.texture_data.ASSET_MEMORY_BUDGET)")
+
+
+def texture_bytes(width: int, height: int) -> int:
+    """Bytes of a ``width`` x ``height`` TextureData (RGBA8)."""
+    return int(width) * int(height) * 4
+
+
+def _mib(size: int) -> str:
+    return f"{size / (1 << 20):.0f}" if size >= 1 << 20 else f"{size / (1 << 20):.2f}"
+
+
+# --- files ---------------------------------------------------------------------------------------
+
+_FILE_KINDS = ((stat.S_ISDIR, "a directory"), (stat.S_ISFIFO, "a FIFO"), (stat.S_ISCHR, "a character device"),
+               (stat.S_ISBLK, "a block device"), (stat.S_ISSOCK, "a socket"))
+
+
+def check_asset_file(path: str | Path, what: str, max_bytes: int | None = None) -> os.stat_result:
+    """Check, before any loader opens it, that ``path`` is a regular file this process may
+    read (and at most ``max_bytes`` long); an AssetError starting with ``what`` says what it
+    is instead (``file_problem``). Returns its stat."""
+    problem, info = file_problem(path, max_bytes)
+    if problem is not None:
+        raise AssetError(f"{what}: {problem}")
+    return info
+
+
+def file_problem(path: str | Path, max_bytes: int | None = None) -> tuple[str | None, os.stat_result | None]:
+    """(None, stat) when ``path`` is a regular file this process may read (at most
+    ``max_bytes`` long), else (why not, None): no such file, a symlink loop, a directory, a
+    FIFO, a device, permission denied, too large. The file is stat-ed, then opened without
+    blocking (O_NONBLOCK: a FIFO put in its place meanwhile is seen, not waited on) and
+    closed again; nothing is read."""
+    def reason(exc: OSError) -> str:
+        if exc.errno in (errno.ENOENT, errno.ENOTDIR):
+            return "no such file"
+        if exc.errno == errno.ELOOP:
+            return "is a symlink loop (or too many links)"
+        if exc.errno in (errno.EACCES, errno.EPERM):
+            return "cannot be read (permission denied)"
+        return f"cannot be read ({exc.strerror or exc})"
+
+    try:
+        info = os.stat(path)
+    except OSError as exc:
+        return reason(exc), None
+    except ValueError as exc:  # a NUL in the path
+        return f"is not a usable path ({exc})", None
+    if not stat.S_ISREG(info.st_mode):
+        return _not_regular(info), None
+    try:
+        fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_CLOEXEC", 0))
+    except OSError as exc:
+        return reason(exc), None
+    try:
+        info = os.fstat(fd)  # what was opened: a FIFO swapped in after the stat is seen here
+    finally:
+        os.close(fd)
+    if not stat.S_ISREG(info.st_mode):
+        return _not_regular(info), None
+    if max_bytes is not None and info.st_size > max_bytes:
+        return f"is {info.st_size} bytes, more than the {max_bytes} such a file may be", None
+    return None, info
+
+
+def _not_regular(info: os.stat_result) -> str:
+    kind = next((name for test, name in _FILE_KINDS if test(info.st_mode)), "not a file")
+    return f"is {kind}, not a regular file"
+
+
+def contained_path(path: str | Path, roots: Sequence[str | Path]) -> Path | None:
+    """``path`` absolute with its links followed when it is inside one of ``roots`` (folders),
+    both as written and once its links are followed; None when it is not. Nothing is
+    opened and no error is raised, so the answer says nothing about whether an outside
+    file exists."""
+    def inside(candidate: Path, folders: list[Path]) -> bool:
+        return any(candidate == folder or folder in candidate.parents for folder in folders)
+
+    written, real = Path(os.path.abspath(path)), Path(os.path.realpath(path))
+    real_roots = [Path(os.path.realpath(root)) for root in roots]
+    if not inside(written, [Path(os.path.abspath(root)) for root in roots] + real_roots):
+        return None
+    return real if inside(real, real_roots) else None
+
+
+def pillow_image_module():
+    """PIL.Image with its decompression-bomb limit set from the GL texture limit
+    (``MAX_TEXTURE_SIDE`` squared) instead of Pillow's default: every image the engine
+    decodes (texture files, and a mesh file's images through trimesh) is held to it."""
+    from PIL import Image
+
+    Image.MAX_IMAGE_PIXELS = MAX_TEXTURE_SIDE * MAX_TEXTURE_SIDE
+    return Image
+
+
+def load_texture(path: str | Path) -> TextureData:
+    """Read an image file (PNG, JPEG, TIFF, ...) with Pillow as RGBA8, row 0 at the top.
+
+    Its size is checked from the header (``check_texture_size``) before any pixel is
+    decoded. Pixel formats are scaled to 8 bits, not clipped: 16-bit channels as ``round(v *
+    255 / 65535)`` (Pillow itself takes a 16-bit RGB or RGBA PNG's high byte, within one step
+    of that), floating-point (mode F) as ``round(clip(v, 0, 1) * 255)`` (NaN is refused); 32-bit
+    integer images have no agreed range and are refused. What is kept is 8 bits a channel:
+    TextureData is what the renderer uploads, RGBA8, so a 16-bit normal map is rounded to 8
+    bits (the terraces the Material docstring notes). Values are not converted between linear
+    and sRGB: a file's 0.5 is 128, read as its Material field says."""
     if isinstance(path, bytes) or not isinstance(path, (str, os.PathLike)):
         raise AssetError(f"texture file path must be a str or pathlib.Path, got {type(path).__name__} {path!r}")
     path = Path(path)
-    if not path.is_file():
-        raise AssetError(f"texture file {str(path)!r}: no such file")
+    what = f"texture file {str(path)!r}"
+    check_asset_file(path, what)
+    Image = pillow_image_module()
     try:
-        with Image.open(path) as image:
-            pixels = np.asarray(image.convert("RGBA"))
-    except (UnidentifiedImageError, OSError) as exc:
-        raise AssetError(f"texture file {str(path)!r}: cannot be read as an image ({exc})") from exc
+        with warnings.catch_warnings():
+            warnings.simplefilter("error", Image.DecompressionBombWarning)
+            with Image.open(path) as image:
+                check_texture_size(*image.size, what)
+                pixels = image_to_rgba8(image, what)
+    except AssetError:
+        raise
+    except MemoryError:
+        raise AssetError(f"{what}: does not fit in memory") from None
+    except (Image.DecompressionBombError, Image.DecompressionBombWarning):
+        raise AssetError(f"{what}: declares more pixels than a texture may have ({MAX_TEXTURE_SIDE}x"
+                         f"{MAX_TEXTURE_SIDE}, the GL_MAX_TEXTURE_SIZE OpenGL 4.1 guarantees)") from None
+    except Exception as exc:  # noqa: BLE001 - Pillow raises many kinds for a corrupt file
+        raise AssetError(f"{what}: cannot be read as an image ({type(exc).__name__}: {exc})") from None
     return TextureData(pixels, name=path.name, source={"file": str(path.resolve())})
 
 
-MAX_GENERATED_SIZE = 16384  # texels along a side of a generated texture (GL's limit is checked at upload)
+def image_to_rgba8(image, what: str) -> np.ndarray:
+    """A Pillow image as an HxWx4 uint8 array, every pixel format scaled to 0..255 (see
+    ``load_texture``); ``what`` names the image in an error."""
+    mode = image.mode
+    if mode.startswith("I;16") or (mode == "I" and image.format == "PNG"):  # a 16-bit PNG in older Pillows
+        return _grey_to_rgba(np.asarray(image), lambda v: (np.clip(v, 0, 65535).astype(np.uint32) * 255 + 32767)
+                             // 65535, what)
+    if mode == "I":
+        raise AssetError(f"{what}: has 32-bit integer pixels, which have no agreed range: save it with 8 or 16 bits "
+                         "a channel, or as floating point in [0, 1]")
+    if mode == "F":
+        return _grey_to_rgba(np.asarray(image), lambda v: np.rint(np.clip(v, 0.0, 1.0) * 255.0), what)
+    return np.asarray(image.convert("RGBA"))
 
+
+def _grey_to_rgba(grey: np.ndarray, scale, what: str) -> np.ndarray:
+    """One channel of any number kind to opaque grey RGBA8, ``scale`` applied a block of rows
+    at a time (its temporaries stay small)."""
+    height, width = grey.shape[:2]
+    out = np.empty((height, width, 4), np.uint8)
+    out[..., 3] = 255
+    rows = max(1, WORK_BLOCK // max(1, width))
+    for top in range(0, height, rows):
+        block = grey[top:top + rows]
+        if block.dtype.kind == "f" and np.isnan(block).any():
+            raise AssetError(f"{what}: has NaN pixels")
+        out[top:top + rows, :, :3] = np.asarray(scale(block), np.uint8)[..., np.newaxis]
+    return out
+
+
+# --- generators ----------------------------------------------------------------------------------
 
 def checker_texture(size: int = 256, squares: int = 8, a: tuple[int, int, int] = (230, 230, 230),
                     b: tuple[int, int, int] = (40, 40, 48), name: str = "checker") -> TextureData:
-    """A procedural checkerboard (the benchmark ground and the samples use it)."""
+    """A procedural checkerboard (the benchmark ground and the samples use it): ``size``
+    texels square, ``squares`` cells a side (cells of ``size // squares`` texels), colour ``a``
+    at the top-left cell, ``b`` on the others. Allocates the texture and two rows."""
+    if not isinstance(name, str):
+        raise AssetError(f"checker texture: name must be a string, got {name!r}")
     if isinstance(size, bool) or not isinstance(size, int) or not 1 <= size <= MAX_GENERATED_SIZE:
         raise AssetError(f"checker texture {name!r}: size must be an int in [1, {MAX_GENERATED_SIZE}], got {size!r}")
     if isinstance(squares, bool) or not isinstance(squares, int) or not 1 <= squares <= size:
         raise AssetError(f"checker texture {name!r}: squares must be an int in [1, size={size}], got {squares!r}")
+    colours = {"a": _colour(a, "a", name), "b": _colour(b, "b", name)}
+    check_texture_size(size, size, f"checker texture {name!r}")
     cell = max(1, size // squares)
-    yy, xx = np.mgrid[0:size, 0:size]
-    mask = ((xx // cell + yy // cell) % 2).astype(bool)
-    pixels = np.empty((size, size, 3), np.uint8)
-    pixels[~mask] = a
-    pixels[mask] = b
-    source = {"checker": [int(size), int(squares)], **({} if tuple(a) == (230, 230, 230) else {"a": list(a)}),
-              **({} if tuple(b) == (40, 40, 48) else {"b": list(b)}), **({} if name == "checker" else {"name": name})}
+    odd_columns = ((np.arange(size) // cell) % 2).astype(bool)[:, np.newaxis]
+    first, second = (np.array(colours[k] + (255,), np.uint8) for k in ("a", "b"))
+    rows = np.stack([np.where(odd_columns, second, first), np.where(odd_columns, first, second)])  # (2, size, 4)
+    pixels = np.empty((size, size, 4), np.uint8)
+    np.take(rows, (np.arange(size) // cell) % 2, axis=0, out=pixels, mode="clip")  # "raise" buffers a copy
+    source = {"checker": [int(size), int(squares)],
+              **({} if colours["a"] == (230, 230, 230) else {"a": list(colours["a"])}),
+              **({} if colours["b"] == (40, 40, 48) else {"b": list(colours["b"])}),
+              **({} if name == "checker" else {"name": name})}
     return TextureData(pixels, name=name, source=source)
+
+
+def _colour(value, which: str, name: str) -> tuple[int, int, int]:
+    if not isinstance(value, (tuple, list)) or len(value) != 3 or not all(
+            isinstance(c, (int, np.integer)) and not isinstance(c, bool) and 0 <= c <= 255 for c in value):
+        raise AssetError(f"checker texture {name!r}: {which} must be three integers in [0, 255], got {value!r}")
+    return tuple(int(c) for c in value)
 
 
 MAX_RIPPLE_SLOPE = 100.0  # the steepest ripple then leans 89.4 degrees: past it, all edge-on
@@ -105,11 +289,12 @@ def ripple_normal_map(size: int = 256, rings: int = 6, slope: float = 0.5, name:
                          f"got {slope!r}")
     if not isinstance(name, str):
         raise AssetError(f"ripples normal map: name must be a string, got {name!r}")
+    check_texture_size(size, size, f"ripples normal map {name!r}")
     centres = (np.arange(size, dtype=np.float64) + 0.5) / size
     du = centres[np.newaxis, :] - 0.5           # columns: u grows to the right
     dv = (1.0 - centres)[:, np.newaxis] - 0.5   # rows: row 0 is the top, v = 1 at the top edge
     pixels = np.full((size, size, 4), 255, np.uint8)
-    block = max(1, (1 << 20) // size)           # rows at a time: the float work stays small at any size
+    block = max(1, WORK_BLOCK // size)          # rows at a time: the float work stays small at any size
     for top in range(0, size, block):
         rows = dv[top:top + block]
         r = np.hypot(du, rows)
