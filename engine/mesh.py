@@ -5,10 +5,15 @@ whose MeshRef points at it.
 """
 from __future__ import annotations
 
+import contextlib
 import itertools
 import json
+import logging
+import math
+import numbers
 import os
 import warnings
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -16,7 +21,14 @@ import numpy as np
 from pyglm import glm
 
 from engine.errors import AssetError
-from engine.texture_data import TextureData
+from engine.texture_data import (
+    TextureData,
+    check_asset_file,
+    check_texture_size,
+    contained_path,
+    image_to_rgba8,
+    pillow_image_module,
+)
 
 _mesh_ids = itertools.count(1)
 
@@ -72,7 +84,14 @@ class Mesh:
             uv = np.zeros((len(positions), 2), np.float32)
         if not np.isfinite(positions).all():
             raise AssetError(f"mesh {name!r}: has NaN or infinite vertex data")
-        return cls(positions, _unit_normals(tm), uv, np.asarray(tm.faces), name=name)
+        faces = np.asarray(tm.faces)
+        if faces.ndim != 2 or faces.shape[1] != 3 or not np.issubdtype(faces.dtype, np.integer):
+            raise AssetError(f"mesh {name!r}: faces are not triangles of vertex indices (shape {faces.shape})")
+        low, high = int(faces.min()), int(faces.max())
+        if low < 0 or high >= len(positions):  # before normals are worked out from them
+            raise AssetError(f"mesh {name!r}: face index {low if low < 0 else high} is out of range "
+                             f"({len(positions)} vertices)")
+        return cls(positions, _unit_normals(tm), uv, faces, name=name)
 
 
 def _unit_normals(tm) -> np.ndarray:
@@ -119,9 +138,31 @@ def flat_plane(mesh: Mesh) -> tuple[np.ndarray, np.ndarray] | None:
 
 # --- primitives --------------------------------------------------------------------------
 
+def _extent(value, what: str, mesh: str) -> float:
+    """A generator's size: a finite number >= 0 (0 is a mesh with no area, which a mirror or
+    portal refuses; a negative one would turn the mesh inside out)."""
+    if isinstance(value, (bool, str, bytes)) or not isinstance(value, numbers.Real) or \
+            not (math.isfinite(float(value)) and 0.0 <= float(value) <= MAX_EXTENT):
+        raise AssetError(f"{mesh}: {what} must be a finite number >= 0 (at most {MAX_EXTENT:g}), got {value!r}")
+    return float(value)
+
+
+def _name(name, kind: str) -> str:
+    if not isinstance(name, str):
+        raise AssetError(f"{kind} mesh: name must be a string, got {name!r}")
+    return name
+
+
+MAX_EXTENT = 1e18  # metres: a generated mesh's size (past float32 once scaled and multiplied out)
+
+
 def box(size: tuple[float, float, float] = (1.0, 1.0, 1.0), name: str = "box") -> Mesh:
-    """An axis-aligned box centred on the origin, flat normals, 0..1 UVs per face."""
-    hx, hy, hz = (s * 0.5 for s in size)
+    """An axis-aligned box centred on the origin, flat normals, 0..1 UVs per face; ``size``
+    is three finite numbers >= 0."""
+    name = _name(name, "box")
+    if isinstance(size, (str, bytes)) or not hasattr(size, "__len__") or len(size) != 3:
+        raise AssetError(f"box mesh {name!r}: size must be three numbers [w, h, d], got {size!r}")
+    hx, hy, hz = (_extent(s, "size", f"box mesh {name!r}") * 0.5 for s in size)
     positions, normals, uvs, indices = [], [], [], []
     faces = [  # normal, u axis, v axis
         ((1, 0, 0), (0, 0, -1), (0, 1, 0)), ((-1, 0, 0), (0, 0, 1), (0, 1, 0)),
@@ -142,7 +183,15 @@ def box(size: tuple[float, float, float] = (1.0, 1.0, 1.0), name: str = "box") -
 
 
 def plane(width: float = 1.0, depth: float = 1.0, uv_repeat: float = 1.0, name: str = "plane") -> Mesh:
-    """A flat rectangle in the XZ plane facing +Y."""
+    """A flat rectangle in the XZ plane facing +Y; sizes finite and >= 0, ``uv_repeat`` (the
+    UVs run 0..uv_repeat) any finite number."""
+    name = _name(name, "plane")
+    width, depth = _extent(width, "width", f"plane mesh {name!r}"), _extent(depth, "depth", f"plane mesh {name!r}")
+    if isinstance(uv_repeat, (bool, str, bytes)) or not isinstance(uv_repeat, numbers.Real) or \
+            not abs(float(uv_repeat)) <= MAX_UV_REPEAT:
+        raise AssetError(f"plane mesh {name!r}: uv_repeat must be a finite number (at most {MAX_UV_REPEAT:g} either "
+                         f"way), got {uv_repeat!r}")
+    uv_repeat = float(uv_repeat)
     hw, hd = width / 2, depth / 2
     positions = np.array([(-hw, 0, hd), (hw, 0, hd), (hw, 0, -hd), (-hw, 0, -hd)])
     normals = np.tile((0.0, 1.0, 0.0), (4, 1))
@@ -152,8 +201,14 @@ def plane(width: float = 1.0, depth: float = 1.0, uv_repeat: float = 1.0, name: 
     return Mesh(positions, normals, uvs, np.array([(0, 1, 2), (0, 2, 3)]), name=name, source=source)
 
 
+MAX_UV_REPEAT = 1e6  # past it float32 UVs have no texel left between neighbours
+
+
 def quad(width: float = 1.0, height: float = 1.0, name: str = "quad") -> Mesh:
-    """A flat rectangle in the XY plane facing +Z (mirrors and portals use it)."""
+    """A flat rectangle in the XY plane facing +Z (mirrors and portals use it); sizes finite
+    and >= 0."""
+    name = _name(name, "quad")
+    width, height = _extent(width, "width", f"quad mesh {name!r}"), _extent(height, "height", f"quad mesh {name!r}")
     hw, hh = width / 2, height / 2
     positions = np.array([(-hw, -hh, 0), (hw, -hh, 0), (hw, hh, 0), (-hw, hh, 0)])
     normals = np.tile((0.0, 0.0, 1.0), (4, 1))
@@ -166,24 +221,40 @@ MAX_SPHERE_DIVISIONS = 1024  # segments or rings of a generated sphere (a millio
 
 
 def sphere(radius: float = 0.5, segments: int = 48, rings: int = 24, name: str = "sphere") -> Mesh:
-    """A UV sphere with smooth normals."""
+    """A UV sphere with smooth normals; ``radius`` finite and >= 0. Built in float32 and
+    int32 in place: it allocates about the mesh it returns (56 MB at 1024 x 1024)."""
+    name = _name(name, "sphere")
+    radius = _extent(radius, "radius", f"sphere mesh {name!r}")
     for what, value, low in (("segments", segments, 3), ("rings", rings, 2)):
         if isinstance(value, bool) or not isinstance(value, int) or not low <= value <= MAX_SPHERE_DIVISIONS:
             raise AssetError(f"sphere mesh {name!r}: {what} must be an int in [{low}, {MAX_SPHERE_DIVISIONS}], "
                              f"got {value!r}")
-    theta = np.linspace(0.0, np.pi, rings + 1)          # from +Y down
-    phi = np.linspace(0.0, 2.0 * np.pi, segments + 1)
-    t, p = np.meshgrid(theta, phi, indexing="ij")
-    normals = np.stack([np.sin(t) * np.sin(p), np.cos(t), np.sin(t) * np.cos(p)], axis=-1).reshape(-1, 3)
-    uvs = np.stack([p / (2 * np.pi), 1.0 - t / np.pi], axis=-1).reshape(-1, 2)
+    theta = np.linspace(0.0, np.pi, rings + 1)[:, np.newaxis]      # from +Y down, one per row
+    phi = np.linspace(0.0, 2.0 * np.pi, segments + 1)[np.newaxis, :]
     row = segments + 1
-    i, j = np.meshgrid(np.arange(rings), np.arange(segments), indexing="ij")
-    a = (i * row + j).ravel()
-    b, c, d = a + row, a + row + 1, a + 1
-    indices = np.concatenate([np.stack([a, b, c], 1), np.stack([a, c, d], 1)])
+    count = (rings + 1) * row
+    normals = np.empty((rings + 1, row, 3), np.float32)
+    positions = np.empty((rings + 1, row, 3), np.float32)
+    for axis, part in enumerate((lambda: np.sin(theta) * np.sin(phi), lambda: np.cos(theta) + 0.0 * phi,
+                                 lambda: np.sin(theta) * np.cos(phi))):
+        value = part()  # one coordinate in float64 at a time: positions are float32(normal * radius) exactly
+        normals[..., axis] = value
+        value *= radius
+        positions[..., axis] = value
+    uvs = np.empty((rings + 1, row, 2), np.float32)
+    uvs[..., 0] = phi / (2 * np.pi)
+    uvs[..., 1] = 1.0 - theta / np.pi
+    a = (np.arange(rings, dtype=np.int32)[:, np.newaxis] * row + np.arange(segments, dtype=np.int32)).ravel()
+    indices = np.empty((2, len(a), 3), np.int32)
+    indices[0, :, 0] = indices[1, :, 0] = a
+    indices[0, :, 1] = a + row
+    indices[0, :, 2] = indices[1, :, 1] = a + row + 1
+    indices[1, :, 2] = a + 1
     source = {"sphere": float(radius), **({} if segments == 48 else {"segments": int(segments)}),
               **({} if rings == 24 else {"rings": int(rings)}), **({} if name == "sphere" else {"name": name})}
-    return Mesh(normals * radius, normals, uvs, indices, name=name, source=source)
+    return Mesh(positions.reshape(count, 3), normals.reshape(count, 3), uvs.reshape(count, 2), indices.reshape(-1, 3),
+                name=name,
+                source=source)
 
 
 # --- loading files -----------------------------------------------------------------------
@@ -203,33 +274,56 @@ class ModelPart:
 
 
 SUPPORTED_SUFFIXES = (".obj", ".glb", ".gltf", ".ply", ".stl", ".off")
+MAX_MESH_FILE_BYTES = 256 << 20  # a mesh file's size: trimesh holds several times it while parsing
+MAX_JSON_NESTING = 64  # arrays and objects inside a glTF's JSON (a real one nests about 6 deep)
 
 
-def load_model(path: str | Path) -> list[ModelPart]:
-    """Load every mesh of a file with trimesh; errors name the file and the reason."""
+def load_model(path: str | Path, roots: Sequence[str | Path] | None = None) -> list[ModelPart]:
+    """Load every mesh of a file with trimesh; errors name the file and the reason.
+
+    The file, and every file it names (an OBJ's material libraries and their images, a
+    glTF's buffers and images), must be a regular file (a FIFO, a device or a directory is
+    refused before anything opens it); ``roots``: folders those named files must be inside
+    (a level's folder and asset roots; None, anywhere). A file past MAX_MESH_FILE_BYTES,
+    JSON nested past MAX_JSON_NESTING, an image past the texture limits, or running out of
+    memory is an AssetError too."""
     import trimesh
 
     if isinstance(path, bytes) or not isinstance(path, (str, os.PathLike)):
         raise AssetError(f"mesh file path must be a str or pathlib.Path, got {type(path).__name__} {path!r}")
     path = Path(path)
-    if not path.is_file():
-        raise AssetError(f"mesh file {str(path)!r}: no such file")
+    what = f"mesh file {str(path)!r}"
+    info = check_asset_file(path, what, MAX_MESH_FILE_BYTES)
     if path.suffix.lower() not in SUPPORTED_SUFFIXES:
-        raise AssetError(f"mesh file {str(path)!r}: unsupported type {path.suffix!r} "
-                         f"(supported: {', '.join(SUPPORTED_SUFFIXES)})")
-    if path.stat().st_size == 0:
-        raise AssetError(f"mesh file {str(path)!r}: file is empty")
-    if path.suffix.lower() == ".gltf":
-        _check_gltf_json(path)
-    elif path.suffix.lower() == ".obj":
-        _check_obj_text(path)
+        raise AssetError(f"{what}: unsupported type {path.suffix!r} (supported: {', '.join(SUPPORTED_SUFFIXES)})")
+    if info.st_size == 0:
+        raise AssetError(f"{what}: file is empty")
+    Image = pillow_image_module()  # the texture limits for the images trimesh decodes
+    try:
+        with _quiet_trimesh(), warnings.catch_warnings():
+            warnings.simplefilter("error", Image.DecompressionBombWarning)
+            return _load_model(path, what, roots, trimesh)
+    except MemoryError:
+        raise AssetError(f"{what}: does not fit in memory") from None
+
+
+def _load_model(path: Path, what: str, roots, trimesh) -> list[ModelPart]:
+    suffix = path.suffix.lower()
+    if suffix == ".gltf":
+        _check_gltf_json(path, roots)
+    elif suffix == ".glb":
+        _check_glb_json(path, roots)
+    elif suffix == ".obj":
+        _check_obj_text(path, roots)
     try:
         loaded = trimesh.load(str(path), force="scene", process=False)
+    except MemoryError:
+        raise
     except Exception as exc:  # trimesh raises many kinds for corrupt files
-        raise AssetError(f"mesh file {str(path)!r}: cannot be parsed ({type(exc).__name__}: {exc})") from exc
+        raise AssetError(f"{what}: cannot be parsed ({type(exc).__name__}: {exc})") from exc
     parts: list[ModelPart] = []
     try:
-        texture_refs = _mtl_texture_refs(path) if path.suffix.lower() == ".obj" else {}
+        texture_refs = _mtl_texture_refs(path) if suffix == ".obj" else {}
         for node in loaded.graph.nodes_geometry:
             matrix, geom_name = loaded.graph[node]
             tm = loaded.geometry[geom_name]
@@ -250,40 +344,157 @@ def load_model(path: str | Path) -> list[ModelPart]:
             _read_material(tm, part, path, texture_refs)
             parts.append(part)
     except AssetError as exc:
-        raise AssetError(f"mesh file {str(path)!r}: {exc}") from exc
+        raise AssetError(f"{what}: {exc}") from exc
+    except MemoryError:
+        raise
     except Exception as exc:  # trimesh computing normals/visuals of malformed data
-        raise AssetError(f"mesh file {str(path)!r}: holds malformed mesh data "
-                         f"({type(exc).__name__}: {exc})") from exc
+        raise AssetError(f"{what}: holds malformed mesh data ({type(exc).__name__}: {exc})") from exc
     if not parts:
-        raise AssetError(f"mesh file {str(path)!r}: contains no triangle meshes")
+        raise AssetError(f"{what}: contains no triangle meshes")
     return parts
 
 
-def _check_gltf_json(path: Path) -> None:
-    """A .gltf is JSON; say so plainly instead of trimesh's guess at a missing buffer file."""
+@contextlib.contextmanager
+def _quiet_trimesh() -> Iterator[None]:
+    """trimesh logs what it works around in a bad file, tracebacks included (Python's last-
+    resort handler prints them): the loader says what is wrong itself, in one line."""
+    logger = logging.getLogger("trimesh")
+    level = logger.level
+    logger.setLevel(logging.CRITICAL)
+    try:
+        yield
+    finally:
+        logger.setLevel(level)
+
+
+def _referenced(path: Path, name: str, roots, kind: str, owner: str = "mesh file") -> Path | None:
+    """A file ``path`` names (``name``, relative to its folder): None when it does not exist
+    (the loader says so or does without it); an AssetError when it is outside ``roots`` or
+    not a regular file, before anything opens it."""
+    target = path.parent / name
+    if roots is not None and contained_path(target, roots) is None:
+        raise AssetError(f"{owner} {str(path)!r}: its {kind} {name!r} is outside the level's folder (a level's "
+                         "assets stay inside it: a game may declare more asset roots, a player may pass "
+                         "--asset-root DIR)")
+    if not os.path.lexists(target):
+        return None
+    check_asset_file(target, f"{owner} {str(path)!r}: its {kind} {name!r}")
+    return target
+
+
+def _check_gltf_json(path: Path, roots=None) -> None:
+    """A .gltf is JSON; say so plainly instead of trimesh's guess at a missing buffer file,
+    and check the files it names."""
     try:
         doc = json.loads(path.read_bytes().decode("utf-8"))
+    except RecursionError:
+        raise AssetError(f"mesh file {str(path)!r}: its JSON is nested too deeply (at most {MAX_JSON_NESTING})") \
+            from None
     except (UnicodeDecodeError, ValueError) as exc:
         raise AssetError(f"mesh file {str(path)!r}: is not a JSON glTF file ({type(exc).__name__})") from None
     if not isinstance(doc, dict) or "asset" not in doc:
         raise AssetError(f"mesh file {str(path)!r}: is not a glTF document (no 'asset' object)")
+    _check_gltf_document(path, doc, roots)
 
 
-def _check_obj_text(path: Path) -> None:
-    """What trimesh accepts silently in an OBJ: a face index 0, a missing MTL, a non-numeric Kd."""
+def _check_glb_json(path: Path, roots=None) -> None:
+    """A .glb's JSON chunk (12-byte header, then the chunk's length and type): its nesting and
+    the files it names. A file that is not a GLB is left to trimesh to refuse."""
+    with path.open("rb") as f:
+        head = f.read(20)
+        if len(head) < 20 or head[:4] != b"glTF" or head[16:20] != b"JSON":
+            return
+        length = int.from_bytes(head[12:16], "little")
+        if length > MAX_MESH_FILE_BYTES:
+            return
+        chunk = f.read(length)
+    try:
+        doc = json.loads(chunk.decode("utf-8"))
+    except RecursionError:
+        raise AssetError(f"mesh file {str(path)!r}: its JSON is nested too deeply (at most {MAX_JSON_NESTING})") \
+            from None
+    except (UnicodeDecodeError, ValueError):
+        return  # trimesh says it cannot be parsed
+    if isinstance(doc, dict):
+        _check_gltf_document(path, doc, roots)
+
+
+def _check_gltf_document(path: Path, doc: dict, roots) -> None:
+    deepest, stack = 0, [(doc, 1)]
+    while stack:
+        item, depth = stack.pop()
+        deepest = max(deepest, depth)
+        if deepest > MAX_JSON_NESTING:
+            raise AssetError(f"mesh file {str(path)!r}: its JSON is nested too deeply (at most {MAX_JSON_NESTING})")
+        children = item.values() if isinstance(item, dict) else item
+        stack.extend((child, depth + 1) for child in children if isinstance(child, (dict, list)))
+    for kind in ("buffers", "images"):
+        entries = doc.get(kind)
+        for entry in entries if isinstance(entries, list) else ():
+            uri = entry.get("uri") if isinstance(entry, dict) else None
+            if isinstance(uri, str) and not uri.startswith("data:"):
+                from urllib.parse import unquote
+
+                _referenced(path, unquote(uri), roots, kind[:-1])
+
+
+def _check_obj_text(path: Path, roots=None) -> None:
+    """What trimesh accepts silently or answers with an IndexError in an OBJ: a face index 0
+    or past the vertices so far, a vertex with fewer than three numbers, a missing MTL, a
+    non-numeric Kd; and a material library or image outside ``roots`` or not a regular file."""
+    counts = {b"v": 0, b"vt": 0, b"vn": 0}
+    names = ("vertices", "texture coordinates", "normals")
+    kinds = ("face index", "texture coordinate index", "normal index")
     with path.open("rb") as f:
         for number, raw in enumerate(f, 1):
             line = raw.strip()
-            if line.startswith(b"f ") and any(tok.split(b"/")[0] in (b"0", b"-0") for tok in line.split()[1:]):
-                raise AssetError(f"mesh file {str(path)!r}: line {number}: face index 0 (OBJ indices start at 1)")
-            if line.startswith(b"mtllib"):
+            first = line.split(None, 1)[0] if line else b""
+            if first in counts:
+                counts[first] += 1
+                if first == b"v" and len(line.split()) < 4:
+                    raise AssetError(f"mesh file {str(path)!r}: line {number}: a vertex is 'v x y z' (three "
+                                     f"numbers), got {line.decode('utf-8', 'replace')[:60]!r}")
+            elif first == b"f":
+                _check_face(path, number, line, counts, names, kinds)
+            elif first == b"mtllib":
                 for name in line[6:].decode("utf-8", "replace").split():
-                    library = path.parent / name
-                    if not library.is_file():
+                    library = _referenced(path, name, roots, "material library")
+                    if library is None:
                         warnings.warn(f"mesh file {str(path)!r}: material library {name!r} not found; "
-                                      f"default material used", stacklevel=3)
+                                      f"default material used", stacklevel=4)
                         continue
                     _check_mtl_numbers(library)
+                    _check_mtl_files(path, library, roots)
+
+
+def _check_face(path: Path, number: int, line: bytes, counts: dict, names: tuple, kinds: tuple) -> None:
+    for token in line.split()[1:]:
+        for slot, (value, key) in enumerate(zip(token.split(b"/"), (b"v", b"vt", b"vn"), strict=False)):
+            if not value:
+                continue
+            try:
+                index = int(value)
+            except ValueError:
+                raise AssetError(f"mesh file {str(path)!r}: line {number}: a face index is a number, got "
+                                 f"{value.decode('utf-8', 'replace')[:20]!r}") from None
+            if index == 0:
+                raise AssetError(f"mesh file {str(path)!r}: line {number}: face index 0 (OBJ indices start at 1)")
+            if not -counts[key] <= index <= counts[key]:
+                raise AssetError(f"mesh file {str(path)!r}: line {number}: {kinds[slot]} {index}, but "
+                                 f"{counts[key]} {names[slot]} so far")
+
+
+_MTL_FILE_KEYS = (b"map_ka", b"map_kd", b"map_ks", b"map_ke", b"map_ns", b"map_d", b"map_bump", b"bump", b"disp",
+                  b"decal", b"refl", b"norm", b"map_pr", b"map_pm", b"map_ps")
+
+
+def _check_mtl_files(obj_path: Path, library: Path, roots) -> None:
+    """The images a material library names (its last word on the line: options come first)."""
+    for raw in library.read_bytes().splitlines():
+        words = raw.split()
+        if len(words) >= 2 and words[0].lower() in _MTL_FILE_KEYS:
+            name = words[-1].decode("utf-8", "replace")
+            _referenced(library, name, roots, "image", "material library")
 
 
 def _check_mtl_numbers(library: Path) -> None:
@@ -389,10 +600,14 @@ def _read_material(tm, part: ModelPart, path: Path, texture_refs: dict[str, Path
             diffuse = max(part.color[channel], 1e-6)
             part.emissive_factor = float(np.clip(emissive[min(channel, len(emissive) - 1)] / diffuse, 0.0, 1e4))
     if image is not None:
+        what = f"texture of {str(path)!r}"
+        check_texture_size(*image.size, what)
         try:
-            part.texture = TextureData(np.asarray(image.convert("RGBA")), name=f"{path.name}:texture")
+            part.texture = TextureData(image_to_rgba8(image, what), name=f"{path.name}:texture")
+        except (AssetError, MemoryError):
+            raise
         except Exception as exc:
-            raise AssetError(f"texture of {str(path)!r} cannot be decoded ({exc})") from exc
+            raise AssetError(f"{what} cannot be decoded ({exc})") from exc
     for name in ("metallic", "roughness", "reflectivity"):
         value = getattr(part, name)
         if not (np.isfinite(value) and 0.0 <= value <= 1.0):

@@ -5,6 +5,7 @@ Every file is written at test time into tmp_path (text OBJ/MTL/PLY/STL, or trime
 """
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import numpy as np
@@ -298,7 +299,11 @@ BAD_FILES = [
     ("garbage.ply", GARBAGE, "cannot be parsed"),
     ("garbage.obj", GARBAGE, "no triangle meshes"),
     ("points.obj", b"v 0 0 0\nv 1 0 0\nv 0 1 0\n", "no triangle meshes"),
-    ("badindex.obj", b"v 0 0 0\nv 1 0 0\nf 1 2 5\n", "cannot be parsed"),
+    ("badindex.obj", b"v 0 0 0\nv 1 0 0\nf 1 2 5\n", "line 3: face index 5, but 2 vertices so far"),
+    ("badindex.ply", NAN_PLY.replace("inf", "0").replace("3 0 1 2", "3 0 1 9").encode(),
+     "face index 9 is out of range (3 vertices)"),
+    ("fifo.obj", "fifo", "is a FIFO, not a regular file"),
+    ("folder.obj", "folder", "is a directory, not a regular file"),
     ("model.fbx", b"Kaydara FBX Binary", "unsupported type '.fbx'"),
     ("model", b"v 0 0 0\n", "unsupported type ''"),
     ("nan.obj", NAN_OBJ.encode(), "NaN or infinite"),
@@ -316,6 +321,10 @@ def test_bad_file_is_an_asset_error_naming_file_and_reason(tmp_path, world, name
     path = tmp_path / name
     if name in BAD_MATERIALS:
         path = write_obj(tmp_path, Path(name).stem, BAD_MATERIALS[name])
+    elif contents == "fifo":
+        os.mkfifo(path)  # refused before anything opens it: reading would block
+    elif contents == "folder":
+        path.mkdir()
     elif contents is not None:
         path.write_bytes(contents)
     with pytest.raises(AssetError) as info:
