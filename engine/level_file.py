@@ -8,12 +8,16 @@ Vectors and colours are lists, a rotation is a quaternion ``[w, x, y, z]`` or
 (``{ box = [w, h, d] }``, ``{ quad = [w, h] }``, ``{ plane = [w, d], uv_repeat = r }``,
 ``{ sphere = r }``) or ``{ file = "x.obj" }``; a texture (``Material.texture``, ``Material.normal_map``)
 ``{ checker = [size, squares] }``, ``{ ripples = [size, rings] }`` (a normal map) or
-``{ file = "x.png" }``; paths are relative to the level file. Entity references
+``{ file = "x.png" }``; paths are relative to the level file and stay inside its folder (or an
+asset root: ``LevelGame.asset_roots``, ``--asset-root DIR``). Entity references
 (``Transform.parent``, ``Portal.partner``) are entity names. docs/level_files.md has the
 whole format with an example.
 
 Loading checks everything before anything is made (``load_level``): a mistake is a
-``LevelError`` naming the file, the line, the entity and the field. ``Level.spawn`` then
+``LevelError`` naming the file, the line, the entity and the field. A level is data a stranger
+may have written: whatever file it names (a symlink loop, a FIFO, a device, an image bomb, a
+file nested past any parser's depth, a path outside its folder), loading ends in the level or
+in a LevelError, within ``LEVEL_MEMORY_BUDGET``. ``Level.spawn`` then
 creates the entities all or nothing. The same asset file (and the same generated mesh or
 texture) loaded twice is one object, so the renderer uploads it once.
 """
@@ -23,7 +27,7 @@ import dataclasses
 import math
 import os
 import re
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -35,8 +39,18 @@ from components import ComponentValueError, look_rotation, yaw_pitch_rotation
 from engine.app import Game
 from engine.capture import VALUE_KINDS, json_value
 from engine.errors import AssetError, SpeculumError
-from engine.mesh import Mesh, box, load_model, plane, quad, sphere
-from engine.texture_data import TextureData, checker_texture, load_texture, ripple_normal_map
+from engine.mesh import Mesh, box, flat_plane, load_model, plane, quad, sphere
+from engine.texture_data import (
+    MAX_TEXTURE_SIDE,
+    TextureData,
+    check_asset_file,
+    checker_texture,
+    contained_path,
+    file_problem,
+    load_texture,
+    ripple_normal_map,
+    texture_bytes,
+)
 from engine.world import World
 
 try:
@@ -54,6 +68,10 @@ DERIVED_COMPONENTS = ("PortalClone", "Slice")
 # Fields holding another entity: a name in the file, an id in the world.
 REFERENCE_FIELDS = {("Transform", "parent"), ("Portal", "partner")}
 _MESH_MAKERS: dict[str, Callable[..., Mesh]] = {"box": box, "quad": quad, "plane": plane, "sphere": sphere}
+MAX_LEVEL_BYTES = 4 << 20  # a level file's size (the shipped ones are a few KB)
+MAX_NESTING = 16  # arrays and inline tables inside one value (a level needs three at most)
+LEVEL_MEMORY_BUDGET = 2 << 30  # bytes a level's meshes and textures may take together (each is held to
+#                                 engine.texture_data.ASSET_MEMORY_BUDGET), counted before a generator runs
 
 
 class LevelError(SpeculumError):
@@ -74,18 +92,24 @@ class LevelError(SpeculumError):
 # --- where things are in the text (tomllib gives no positions) ------------------------------
 
 _TABLE = re.compile(r"^\s*\[\s*entity\.([A-Za-z_]\w*)\s*\]")
-_KEY = re.compile(r"^\s*([A-Za-z_][\w]*)\s*=")
+_KEY = re.compile(r"^\s*([A-Za-z_][\w-]*)\s*=")
+_HEADER = re.compile(r"^\s*\[\[?\s*([A-Za-z0-9_-]+)")
 
 
 def _line_map(text: str) -> dict[tuple, int]:
     """Line numbers of each ``[[entity]]`` (key (i,)), component table ((i, Class)) and field
-    ((i, Class, field)), by the entity's index in the file."""
+    ((i, Class, field)), by the entity's index in the file; of the other tables' headers
+    (("table", name): ``[level]``, a misspelt ``[[entitty]]``, and a key before any table),
+    and their keys (("level", key), ("rules", key))."""
     lines: dict[tuple, int] = {}
-    entity, table = -1, None
+    entity, table, section = -1, None, None
     for number, raw in enumerate(text.splitlines(), start=1):
         stripped = raw.strip()
+        header = _HEADER.match(raw) if stripped.startswith("[") else None
+        if header:
+            lines.setdefault(("table", header.group(1)), number)
         if stripped.startswith("[[entity]]"):
-            entity, table = entity + 1, None
+            entity, table, section = entity + 1, None, None
             lines[(entity,)] = number
             continue
         match = _TABLE.match(raw)
@@ -95,6 +119,7 @@ def _line_map(text: str) -> dict[tuple, int]:
             continue
         if stripped.startswith("["):
             entity, table = (entity if stripped.startswith("[entity") else -1), None
+            section = None if stripped.startswith("[entity") or not header else header.group(1)
             continue
         match = _KEY.match(raw)
         if match and entity >= 0:
@@ -103,7 +128,58 @@ def _line_map(text: str) -> dict[tuple, int]:
                 lines.setdefault((entity, key), number)  # an inline component table, or name
             else:
                 lines.setdefault((entity, table, key), number)
+        elif match:
+            lines.setdefault((section, match.group(1)) if section else ("table", match.group(1)), number)
     return lines
+
+
+def _depth(value: Any) -> int:
+    """How deep arrays and tables nest in ``value`` (a number is 0, ``[1]`` is 1; past
+    MAX_NESTING the walk stops at MAX_NESTING + 1), without recursion."""
+    deepest, stack = 0, [(value, 0)]
+    while stack:
+        item, depth = stack.pop()
+        if isinstance(item, (list, dict)):
+            deepest = max(deepest, depth + 1)
+            if deepest > MAX_NESTING:
+                return deepest
+            stack.extend((child, depth + 1) for child in (item.values() if isinstance(item, dict) else item))
+    return deepest
+
+
+def _deep_line(text: str) -> int | None:
+    """The first line where brackets and braces outside strings and comments nest past
+    ``MAX_NESTING`` (for a file too deep for the TOML parser to say where)."""
+    depth, line, i, n = 0, 1, 0, len(text)
+    while i < n:
+        c = text[i]
+        if c == "\n":
+            line += 1
+        elif c == "#":
+            end = text.find("\n", i)
+            i = n if end < 0 else end
+            continue
+        elif c in "\"'":
+            quote = text[i:i + 3] if text[i:i + 3] in ('"""', "'''") else c
+            j = i + len(quote)
+            while j < n and not text.startswith(quote, j):
+                if text[j] == "\\" and c == '"':
+                    j += 1
+                elif text[j] == "\n":
+                    if len(quote) == 1:
+                        break
+                    line += 1
+                j += 1
+            i = j + len(quote)
+            continue
+        elif c in "[{":
+            depth += 1
+            if depth > MAX_NESTING + 2:  # a [[table]] header is two of them
+                return line
+        elif c in "]}":
+            depth = max(0, depth - 1)
+        i += 1
+    return None
 
 
 # --- assets ------------------------------------------------------------------------------------
@@ -118,18 +194,66 @@ def _cached(key: tuple, make: Callable[[], Any]) -> Any:
     return value
 
 
-def _mesh(spec: Any, folder: Path) -> Mesh:
+class _Budget:
+    """What a level's assets take together (each distinct asset once), checked against
+    LEVEL_MEMORY_BUDGET before a generator runs (files: once loaded, each held to the
+    asset budget as it loads)."""
+
+    def __init__(self) -> None:
+        self.used, self.keys = 0, set()
+
+    def take(self, key: tuple, size: int) -> None:
+        if key in self.keys:
+            return
+        if self.used + size > LEVEL_MEMORY_BUDGET:
+            raise ValueError(f"the level's meshes and textures would take {_mib(self.used + size)} MiB, over the "
+                             f"memory budget of {_mib(LEVEL_MEMORY_BUDGET)} MiB a level may have "
+                             "(engine.level_file.LEVEL_MEMORY_BUDGET)")
+        self.keys.add(key)
+        self.used += size
+
+
+def _mib(size: int) -> str:
+    return f"{size / (1 << 20):.0f}"
+
+
+def _mesh_bytes(mesh: Mesh) -> int:
+    return mesh.positions.nbytes + mesh.normals.nbytes + mesh.uvs.nbytes + mesh.indices.nbytes
+
+
+class _Where:
+    """Where a level's assets are looked for: its folder and any asset roots (the game's and
+    the user's), and what they take so far."""
+
+    def __init__(self, folder: Path, roots: Sequence[Path]) -> None:
+        self.folder = folder
+        self.roots = [folder, *roots]
+        self.budget = _Budget()
+
+
+def _is_number(value: Any) -> bool:
+    return isinstance(value, (int, float)) and not isinstance(value, bool)
+
+
+def _is_int(value: Any) -> bool:
+    return isinstance(value, int) and not isinstance(value, bool)
+
+
+def _mesh(spec: Any, where: _Where) -> Mesh:
     if not isinstance(spec, Mapping):
         raise ValueError(f"a mesh is a table such as {{ box = [1, 1, 1] }} or {{ file = \"x.obj\" }}, got {spec!r}")
     spec = dict(spec)
     name = spec.pop("name", None)
+    if name is not None and not isinstance(name, str):
+        raise ValueError(f"a mesh's name must be a string, got {name!r}")
     if "file" in spec:
-        path = _asset_path(spec.pop("file"), folder)
+        path = _asset_path(spec.pop("file"), where)
         part = spec.pop("part", None)
         _no_more(spec, "mesh file")
-        if not path.is_file():
-            raise ValueError(f"mesh file {str(path)!r}: no such file")
-        parts = _cached(("model", str(path), path.stat().st_mtime_ns), lambda: load_model(path))
+        info = check_asset_file(path, f"mesh file {str(path)!r}")
+        key = ("model", str(path), info.st_mtime_ns, info.st_size, info.st_ino, tuple(map(str, where.roots)))
+        parts = _cached(key, lambda: load_model(path, roots=where.roots))
+        where.budget.take(key, sum(_mesh_bytes(p.mesh) for p in parts))
         names = [p.mesh.name for p in parts]
         if part is None and len(parts) > 1:
             raise ValueError(f"mesh file {str(path)!r} has {len(parts)} parts {names}: say which with part = \"...\"")
@@ -147,76 +271,111 @@ def _mesh(spec: Any, folder: Path) -> Mesh:
     size = spec.pop(kind)
     options = {k: spec.pop(k) for k in ("uv_repeat", "segments", "rings") if k in spec}
     _no_more(spec, f"{kind} mesh")
-    if kind == "box":
-        args: tuple = (tuple(float(v) for v in size),)
-        if len(args[0]) != 3:
-            raise ValueError(f"box = [w, h, d], got {size!r}")
-    elif kind == "sphere":
-        args = (float(size),)
+    allowed = {"plane": ("uv_repeat",), "sphere": ("segments", "rings")}.get(kind, ())
+    for option, value in options.items():
+        if option not in allowed:
+            raise ValueError(f"a {kind} mesh has no {option} ({kind} takes {', '.join(allowed) or 'no options'})")
+        if option == "uv_repeat" and not (_is_number(value) and math.isfinite(value)):
+            raise ValueError(f"plane mesh: uv_repeat must be a finite number, got {value!r}")
+        if option in ("segments", "rings") and not _is_int(value):
+            raise ValueError(f"sphere mesh: {option} must be an int, got {value!r}")
+    if kind == "sphere":
+        if not _is_number(size):
+            raise ValueError(f"sphere = r (a number, the radius), got {size!r}")
+        args: tuple = (float(size),)
     else:
-        args = tuple(float(v) for v in size)
-        if len(args) != 2:
-            raise ValueError(f"{kind} = [w, {'h' if kind == 'quad' else 'd'}], got {size!r}")
+        count = 3 if kind == "box" else 2
+        if not isinstance(size, list) or len(size) != count or not all(_is_number(v) for v in size):
+            shape = {"box": "[w, h, d] (three numbers)", "quad": "[w, h] (two numbers)",
+                     "plane": "[w, d] (two numbers)"}[kind]
+            raise ValueError(f"{kind} = {shape}, got {size!r}")
+        args = (tuple(float(v) for v in size),) if kind == "box" else tuple(float(v) for v in size)
     if name is not None:
-        options["name"] = str(name)
+        options["name"] = name
     key = ("mesh", kind, args, tuple(sorted(options.items())))
+    if kind == "sphere":  # the others are a few hundred bytes
+        segments, rings = options.get("segments", 48), options.get("rings", 24)
+        where.budget.take(key, (segments + 1) * (rings + 1) * 32 + segments * rings * 24)
     return _cached(key, lambda: _MESH_MAKERS[kind](*args, **options))  # the generator records its source
 
 
-def _texture(spec: Any, folder: Path) -> TextureData:
+def _texture(spec: Any, where: _Where) -> TextureData:
     if not isinstance(spec, Mapping):
         raise ValueError(f"a texture is a table such as {{ checker = [128, 8] }}, {{ ripples = [256, 6] }} or "
                          f"{{ file = \"x.png\" }}, got {spec!r}")
     spec = dict(spec)
     name = spec.pop("name", None)
+    if name is not None and not isinstance(name, str):
+        raise ValueError(f"a texture's name must be a string, got {name!r}")
     if "file" in spec:
-        path = _asset_path(spec.pop("file"), folder)
+        path = _asset_path(spec.pop("file"), where)
         _no_more(spec, "texture file")
-        if not path.is_file():
-            raise ValueError(f"texture file {str(path)!r}: no such file")
-        return _cached(("texture", str(path), path.stat().st_mtime_ns), lambda: load_texture(path))
+        info = check_asset_file(path, f"texture file {str(path)!r}")
+        key = ("texture", str(path), info.st_mtime_ns, info.st_size, info.st_ino)
+        texture = _cached(key, lambda: load_texture(path))
+        where.budget.take(key, texture.pixels.nbytes)
+        return texture
     if "ripples" in spec and "checker" not in spec:
-        return _ripples(spec, name)
+        return _ripples(spec, name, where)
     if "checker" not in spec:
         raise ValueError(f"a texture names one of checker, ripples or file, got {sorted(spec)}")
-    size, squares = (int(v) for v in spec.pop("checker"))
-    colours = {k: tuple(int(c) for c in spec.pop(k)) for k in ("a", "b") if k in spec}
+    size_squares = spec.pop("checker")
+    if not isinstance(size_squares, list) or len(size_squares) != 2 or not all(_is_int(v) for v in size_squares):
+        raise ValueError(f"checker = [size, squares] (two integers), got {size_squares!r}")
+    size, squares = size_squares
+    colours: dict[str, Any] = {}
+    for k in ("a", "b"):
+        if k in spec:
+            value = spec.pop(k)
+            if not isinstance(value, list) or len(value) != 3 or not all(_is_int(c) and 0 <= c <= 255 for c in value):
+                raise ValueError(f"checker texture: {k} must be three integers in [0, 255], got {value!r}")
+            colours[k] = tuple(value)
     _no_more(spec, "checker texture")
     if name is not None:
-        colours["name"] = str(name)
+        colours["name"] = name
     key = ("checker", size, squares, tuple(sorted(colours.items())))
+    if 1 <= size <= MAX_TEXTURE_SIDE:  # else checker_texture says what is wrong
+        where.budget.take(key, texture_bytes(size, size))
     return _cached(key, lambda: checker_texture(size, squares, **colours))
 
 
-def _ripples(spec: dict, name: Any) -> TextureData:
+def _ripples(spec: dict, name: Any, where: _Where) -> TextureData:
     """``{ ripples = [size, rings] }`` with optional ``slope`` and ``name``: engine.texture_data's
     ripple_normal_map (it checks the ranges; here only the kinds, so the cache key is plain)."""
     size_rings = spec.pop("ripples")
-    if not isinstance(size_rings, list) or len(size_rings) != 2 or \
-            not all(isinstance(v, int) and not isinstance(v, bool) for v in size_rings):
+    if not isinstance(size_rings, list) or len(size_rings) != 2 or not all(_is_int(v) for v in size_rings):
         raise ValueError(f"ripples = [size, rings] (two integers), got {size_rings!r}")
     options: dict[str, Any] = {}
     if "slope" in spec:
         slope = spec.pop("slope")
-        if isinstance(slope, bool) or not isinstance(slope, (int, float)):
+        if not _is_number(slope):
             raise ValueError(f"ripples normal map: slope must be a number, got {slope!r}")
         options["slope"] = float(slope)
     _no_more(spec, "ripples normal map")
     if name is not None:
-        if not isinstance(name, str):
-            raise ValueError(f"ripples normal map: name must be a string, got {name!r}")
         options["name"] = name
     size, rings = size_rings
     defaults = {"slope": 0.5, "name": "ripples"}  # written or left out: one map
     options = {k: v for k, v in options.items() if v != defaults[k]}
     key = ("ripples", size, rings, tuple(sorted(options.items())))
+    if 1 <= size <= MAX_TEXTURE_SIDE:
+        where.budget.take(key, texture_bytes(size, size))
     return _cached(key, lambda: ripple_normal_map(size, rings, **options))
 
 
-def _asset_path(value: Any, folder: Path) -> Path:
+def _asset_path(value: Any, where: _Where) -> Path:
+    """The file a level names, made absolute with its links followed, when it is inside the
+    level's folder or an asset root; the refusal reads the same whether the file is there or not."""
     if not isinstance(value, str):
         raise ValueError(f"a file is a path string, got {value!r}")
-    return (folder / value).resolve()
+    if not value or "\0" in value:
+        raise ValueError(f"a file is a path, got {value!r}")
+    path = contained_path(where.folder / value, where.roots)
+    if path is None:
+        roots = "" if len(where.roots) == 1 else f" and its asset roots ({', '.join(str(r) for r in where.roots[1:])})"
+        raise ValueError(f"file {value!r} is outside the level's folder{roots}: a level's assets stay inside it "
+                         "(a game may declare more asset roots, a player may pass --asset-root DIR)")
+    return path
 
 
 def _no_more(spec: dict, what: str) -> None:
@@ -286,56 +445,87 @@ class Level:
         return made
 
 
-def load_level(path: str | Path, extra_components: Mapping[str, type] | None = None) -> Level:
+_USER_ASSET_ROOTS: list[Path] = []
+
+
+def set_asset_roots(roots: Iterable[str | Path]) -> None:
+    """Folders every level loaded from now on may take assets from, besides its own folder
+    and its game's ``asset_roots`` (the runner's ``--asset-root DIR``, the user's choice)."""
+    _USER_ASSET_ROOTS[:] = [Path(root) for root in roots]
+
+
+def asset_roots() -> list[Path]:
+    """The folders ``set_asset_roots`` gave (what ``--asset-root`` allows)."""
+    return list(_USER_ASSET_ROOTS)
+
+
+def load_level(path: str | Path, extra_components: Mapping[str, type] | None = None,
+               asset_roots: Iterable[str | Path] = ()) -> Level:
     """Read and check the level file at ``path``; nothing is created (``Level.spawn`` does).
-    ``extra_components``: a game's own plain-data components allowed in the file, by name."""
+    ``extra_components``: a game's own plain-data components allowed in the file, by name.
+    ``asset_roots``: folders besides the level's own that its ``file = ...`` may name (a
+    game's shared assets); the ones ``set_asset_roots`` gave are allowed too."""
     if isinstance(path, bytes) or not isinstance(path, (str, os.PathLike)):
         raise LevelError(repr(path), f"a level file path is a str or pathlib.Path, got {type(path).__name__}")
     path = Path(path)
+    problem, _info = file_problem(path, MAX_LEVEL_BYTES)
+    if problem is not None:
+        raise LevelError(path, problem)
     try:
-        text = path.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise LevelError(path, "no such file") from None
+        text = path.read_bytes().decode("utf-8")
     except (OSError, UnicodeDecodeError) as exc:
         raise LevelError(path, f"cannot be read ({exc})") from None
+    except MemoryError:
+        raise LevelError(path, "does not fit in memory") from None
     try:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         match = re.search(r"line (\d+)", str(exc))
         raise LevelError(path, f"not valid TOML ({exc})", int(match.group(1)) if match else None) from None
+    except RecursionError:
+        raise LevelError(path, f"arrays or inline tables nested too deeply (at most {MAX_NESTING})",
+                         _deep_line(text)) from None
+    except MemoryError:
+        raise LevelError(path, "does not fit in memory") from None
     lines = _line_map(text)
     known = {**ENGINE_COMPONENTS, **(extra_components or {})}
-    unknown_top = set(data) - {"level", "rules", "entity"}
+    unknown_top = [key for key in data if key not in ("level", "rules", "entity")]
     if unknown_top:
         raise LevelError(path, f"unknown top-level tables {sorted(unknown_top)} (a level has [level], [rules] and "
-                               "[[entity]])")
+                               "[[entity]])", lines.get(("table", unknown_top[0])))
     header = data.get("level")
     if not isinstance(header, dict) or not isinstance(header.get("name"), str) or not header["name"]:
-        raise LevelError(path, "[level] needs name = \"...\" (the level's title)")
-    extra = set(header) - {"name", "game"}
+        line = lines.get(("level", "name")) if isinstance(header, dict) and "name" in header else \
+            lines.get(("table", "level"))
+        raise LevelError(path, "[level] needs name = \"...\" (the level's title)", line)
+    extra = [key for key in header if key not in ("name", "game")]
     if extra:
-        raise LevelError(path, f"[level] has unknown keys {sorted(extra)} (name, game)")
+        raise LevelError(path, f"[level] has unknown keys {sorted(extra)} (name, game)", lines.get(("level", extra[0])))
     game = header.get("game")
     if game is not None and not isinstance(game, str):
-        raise LevelError(path, f"[level] game must be a string, got {game!r}")
+        raise LevelError(path, f"[level] game must be a string, got {_short(game)}", lines.get(("level", "game")))
     rules = data.get("rules", {})
     if not isinstance(rules, dict):
-        raise LevelError(path, "[rules] must be a table")
+        raise LevelError(path, "[rules] must be a table", lines.get(("table", "rules")))
+    for key, value in rules.items():
+        if _depth(value) > MAX_NESTING:
+            raise LevelError(path, f"[rules] {key}: arrays or inline tables nested too deeply (at most {MAX_NESTING})",
+                             lines.get(("rules", key), lines.get(("table", "rules"))))
     tables = data.get("entity", [])
-    if not isinstance(tables, list):
-        raise LevelError(path, "entities are [[entity]] tables")
-    folder = path.parent
+    if not isinstance(tables, list) or not all(isinstance(t, dict) for t in tables):
+        raise LevelError(path, "entities are [[entity]] tables", lines.get(("table", "entity")))
+    where = _Where(path.parent, [*(Path(r) for r in asset_roots), *_USER_ASSET_ROOTS])
     names: dict[str, int] = {}
     entities = []
     for index, table in enumerate(tables):
         line = lines.get((index,))
         name = table.get("name")
         if not isinstance(name, str) or not name:
-            raise LevelError(path, "every [[entity]] needs name = \"...\"", line)
+            raise LevelError(path, "every [[entity]] needs name = \"...\"", lines.get((index, "name"), line))
         if name in names:
             raise LevelError(path, f"the name is used twice (first at entity {names[name] + 1})", line, name)
         names[name] = index
-        entities.append(_entity(path, folder, index, name, table, known, lines))
+        entities.append(_entity(path, where, index, name, table, known, lines))
     for spec in entities:
         for cls_name, field, target in spec.references:
             if target not in names:
@@ -349,7 +539,13 @@ def load_level(path: str | Path, extra_components: Mapping[str, type] | None = N
     return Level(path, header["name"], game, rules, entities, lines)
 
 
-def _entity(path: Path, folder: Path, index: int, name: str, table: dict[str, Any], known: Mapping[str, type],
+def _short(value: Any) -> str:
+    """A value for a message, cut short (a stranger's value may be long)."""
+    text = repr(value)
+    return text if len(text) <= 80 else text[:77] + "..."
+
+
+def _entity(path: Path, assets: _Where, index: int, name: str, table: dict[str, Any], known: Mapping[str, type],
             lines: dict[tuple, int]) -> _EntitySpec:
     parts: list[tuple[type, dict[str, Any]]] = []
     references: list[tuple[str, str, str]] = []
@@ -362,6 +558,11 @@ def _entity(path: Path, folder: Path, index: int, name: str, table: dict[str, An
         cls = known.get(key)
         if cls is None:
             raise LevelError(path, f"no component {key!r} (components: {', '.join(sorted(known))})", line, name)
+        deep = [f for f, v in fields.items() if _depth(v) > MAX_NESTING] if isinstance(fields, dict) else \
+            ([None] if _depth(fields) > MAX_NESTING else [])
+        if deep:
+            raise LevelError(path, f"arrays or inline tables nested too deeply (at most {MAX_NESTING})",
+                             lines.get((index, key, deep[0]), line), name, f"{key}.{deep[0]}" if deep[0] else key)
         if not isinstance(fields, dict):
             raise LevelError(path, f"[entity.{key}] must be a table of fields, got {fields!r}", line, name)
         allowed = {f.name: f for f in dataclasses.fields(cls) if f.init and not f.name.startswith("_")} \
@@ -378,9 +579,11 @@ def _entity(path: Path, folder: Path, index: int, name: str, table: dict[str, An
                 references.append((key, field, value))
                 continue
             try:
-                decoded[field] = _decode(key, field, value, folder)
+                decoded[field] = _decode(key, field, value, assets)
             except (ValueError, TypeError, OverflowError, AssetError) as exc:
                 raise LevelError(path, str(exc), where, name, f"{key}.{field}") from None
+            except MemoryError:
+                raise LevelError(path, "does not fit in memory", where, name, f"{key}.{field}") from None
         try:
             cls(**decoded)  # the component's own checks, now, not at spawn
         except ComponentValueError as exc:
@@ -391,14 +594,33 @@ def _entity(path: Path, folder: Path, index: int, name: str, table: dict[str, An
         except TypeError as exc:
             raise LevelError(path, str(exc), line, name, key) from None
         parts.append((cls, decoded))
+    _check_mirror(path, index, name, parts, lines)
     return _EntitySpec(name, index, parts, references)
 
 
-def _decode(cls_name: str, field: str, value: Any, folder: Path) -> Any:
+def _check_mirror(path: Path, index: int, name: str, parts: list[tuple[type, dict[str, Any]]],
+                  lines: dict[tuple, int]) -> None:
+    """A Mirror needs a MeshRef and a Transform, and a flat mesh unless it gives plane_normal
+    (the SurfaceSystem's rules, checked here so the message has the file, line and entity)."""
+    fields = {cls.__name__: decoded for cls, decoded in parts}
+    if "Mirror" not in fields:
+        return
+    line = lines.get((index, "Mirror"))
+    missing = [kind for kind in ("MeshRef", "Transform") if kind not in fields]
+    if missing:
+        raise LevelError(path, f"a Mirror needs a MeshRef and a Transform (it has no {' and no '.join(missing)})",
+                         line, name, "Mirror")
+    mesh = fields["MeshRef"].get("mesh")
+    if isinstance(mesh, Mesh) and fields["Mirror"].get("plane_normal") is None and flat_plane(mesh) is None:
+        raise LevelError(path, f"a Mirror on mesh {mesh.name!r}, which is not flat: give it a flat mesh (a quad, a "
+                               "plane) or Mirror.plane_normal", line, name, "Mirror")
+
+
+def _decode(cls_name: str, field: str, value: Any, where: _Where) -> Any:
     if cls_name == "MeshRef" and field == "mesh":
-        return _mesh(value, folder)
+        return _mesh(value, where)
     if field == "texture" or (cls_name, field) == ("Material", "normal_map"):
-        return _texture(value, folder)
+        return _texture(value, where)
     if cls_name == "Transform" and field == "rotation":
         return _rotation(value)
     if cls_name == "Skybox" and field == "faces":
@@ -578,9 +800,11 @@ class LevelGame(Game):
     """A game that builds its world from a level file (``--level FILE`` replaces it).
 
     ``components``: the game's own plain-data components its files may hold, by name.
+    ``asset_roots``: folders besides a level's own its files may name (shared game assets).
     After ``build``: ``level`` (the checked file) and ``names`` (entity ids by name)."""
 
     components: Mapping[str, type] = {}
+    asset_roots: Sequence[str | Path] = ()
 
     def __init__(self, level_path: str | Path) -> None:
         self.level_path = Path(level_path)
@@ -588,7 +812,7 @@ class LevelGame(Game):
         self.names: dict[str, int] = {}
 
     def build(self, world: World) -> None:
-        self.level = load_level(self.level_path, self.components)
+        self.level = load_level(self.level_path, self.components, self.asset_roots)
         self.names = self.level.spawn(world)
 
 

@@ -3,6 +3,7 @@
   python -m games.<name> [--headless] [--frames N] [--size WxH] [--out DIR] [--level FILE.toml]
                          [--ids] [--export-scene FILE.glb|FILE.gltf] [--camera x,y,z,yaw,pitch]
                          [--dt SECONDS] [--gif FILE.gif] [--aa fxaa|off] [--overlay]
+                         [--asset-root DIR ...]
 
 With no display the runner goes headless by itself and says so.
 """
@@ -52,6 +53,9 @@ def parse_args(game: Game, argv: Sequence[str] | None) -> argparse.Namespace:
                         help="headless: also write the frames as an animated GIF (one frame per --dt)")
     parser.add_argument("--aa", choices=ANTIALIAS_MODES, default="fxaa",
                         help="anti-aliasing of the final image (default fxaa; ids are never affected)")
+    parser.add_argument("--asset-root", type=_folder, action="append", default=[], metavar="DIR",
+                        help="a folder a level file's meshes and textures may come from besides the level's own "
+                             "(repeatable; a level's assets stay in its folder otherwise)")
     parser.add_argument("--overlay", action="store_true",
                         help="draw the debug overlay (frame rate, passes, draw calls, views, probe captures, "
                              "paths) into the frames; windowed: shown from the start (F1 toggles it)")
@@ -96,6 +100,13 @@ def _gif_path(text: str) -> Path:
     return path
 
 
+def _folder(text: str) -> Path:
+    path = Path(text)
+    if not path.is_dir():
+        raise argparse.ArgumentTypeError(f"--asset-root must name an existing folder, got {text!r}: not a folder")
+    return path
+
+
 def _pose(text: str) -> tuple[float, ...]:
     try:
         values = tuple(float(v) for v in text.split(","))
@@ -107,10 +118,17 @@ def _pose(text: str) -> tuple[float, ...]:
 
 
 def main(game: Game, argv: Sequence[str] | None = None) -> int:
+    from engine.level_file import asset_roots, set_asset_roots
+
     args = parse_args(game, argv)
-    with warnings.catch_warnings():
-        warnings.showwarning = _one_line_warning
-        return _main(game, args)
+    before = asset_roots()
+    set_asset_roots(args.asset_root)  # for every level loaded in this run, the game's own loads too
+    try:
+        with warnings.catch_warnings():
+            warnings.showwarning = _one_line_warning
+            return _main(game, args)
+    finally:
+        set_asset_roots(before)
 
 
 def _one_line_warning(message, category, filename, lineno, file=None, line=None) -> None:
@@ -163,7 +181,7 @@ def use_level(game: Game, level: Path | None) -> None:
         return
     if level is not None:
         game.level_path = level
-    load_level(game.level_path, game.components)
+    load_level(game.level_path, game.components, game.asset_roots)
 
 
 class OutputPathError(SpeculumError):

@@ -498,8 +498,10 @@ def test_a_normal_map_loads_saves_and_loads_again(tmp_path):
     assert "normal_map = { ripples = [64, 4] }\nnormal_scale = 0.5\n" in written
     assert 'normal_map = { ripples = [32, 2], slope = 0.25, name = "wide" }\nnormal_scale = 2.0\n' in written
     assert 'normal_map = { file = "../maps/bumps.png" }' in written
+    with pytest.raises(LevelError, match=r"'\.\./maps/bumps\.png' is outside the level's folder"):
+        load_level(saved)  # written relative, but outside the saved file's folder: a root is needed
     again = World("again")
-    names_again = load_level(saved).spawn(again)
+    names_again = load_level(saved, asset_roots=[tmp_path]).spawn(again)
     for name in ("pond", "puddle", "tiles", "filed"):
         first, second = world.get(names[name], Material), again.get(names_again[name], Material)
         np.testing.assert_array_equal(second.normal_map.pixels, first.normal_map.pixels)
