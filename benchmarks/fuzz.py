@@ -12,7 +12,11 @@ clean.  Any other exception, above all one raised from inside a system, is a fai
     python -m benchmarks fuzz --cases 5000 --level-cases 2000
 
 ``--level-cases`` runs the level-file fuzz as well (``benchmarks/level_fuzz.py``: a small
-level's text mutated, loaded, spawned and rendered).
+level's text mutated, loaded, spawned and rendered; a quarter of its cases name adversarial
+files).  Every run also tries each of the level fuzz's file cases once (``FILE_CASES``:
+symlink loops, FIFOs, a directory, /dev/zero, image bombs, deep nesting, 16-bit and float
+images, paths outside the level's folder): each refused saying what it is, or loaded with
+the right texel and drawn clean.
 """
 from __future__ import annotations
 
@@ -267,7 +271,7 @@ def main(args: argparse.Namespace) -> int:
     import tempfile
     from pathlib import Path
 
-    from benchmarks.level_fuzz import fuzz_levels
+    from benchmarks.level_fuzz import fuzz_files, fuzz_levels
     from engine.gl_context import create_headless_context
 
     ctx = create_headless_context()
@@ -280,6 +284,8 @@ def main(args: argparse.Namespace) -> int:
         with tempfile.TemporaryDirectory() as folder:
             level_ran, level_failures, level_passes = fuzz_levels(ctx, Path(folder), args.level_cases, args.seed,
                                                                   report)
+        with tempfile.TemporaryDirectory() as folder:
+            file_ran, file_failures, file_passes = fuzz_files(ctx, Path(folder), report)
     finally:
         ctx.release()
     if args.json:
@@ -287,6 +293,8 @@ def main(args: argparse.Namespace) -> int:
         if args.level_cases:
             print(json.dumps({"level_cases": level_ran, "failed": len(level_failures), **level_passes,
                               "failures": level_failures[:50]}))
+        print(json.dumps({"file_cases": file_ran, "failed": len(file_failures), **file_passes,
+                          "failures": file_failures[:50]}))
     else:
         print(f"fuzz: {ran} cases ran, {len(failures)} failed ({passes['refused']} refused naming the field, "
               f"{passes['rendered']} rendered clean; seed {args.seed})")
@@ -294,4 +302,6 @@ def main(args: argparse.Namespace) -> int:
             print(f"level fuzz: {level_ran} level files ran, {len(level_failures)} failed "
                   f"({level_passes['refused']} refused naming the file, {level_passes['rendered']} rendered clean; "
                   f"seed {args.seed})")
-    return 1 if failures or level_failures else 0
+        print(f"file cases: {file_ran} ran, {len(file_failures)} failed ({file_passes['refused']} refused saying what "
+              f"the file is, {file_passes['rendered']} loaded right and rendered clean)")
+    return 1 if failures or level_failures or file_failures else 0

@@ -6,16 +6,32 @@ spec replaced, a line broken, a table emptied) and writes the result to a file. 
 passes when either loading or spawning raises a ``LevelError`` that names the file (and the
 entity where the mutation touched one), or the level spawns and renders a 48 x 32 frame
 with no NaN in the HDR target and ``ctx.error`` clean.  Any other exception is a failure,
-as is an entity left in the world by a refused level.
+as is an entity left in the world by a refused level, or a case still running after
+``CASE_SECONDS`` (a hang).
+
+A quarter of the cases are file cases (``FILE_CASES``, made in the fuzz folder once): the
+crate's mesh or the floor's texture or normal map names an adversarial file (a symlink
+loop, a FIFO, a directory, a link to /dev/zero, an image bomb, a glTF nested 100,000 deep,
+an OBJ whose faces pass its vertices or whose material reaches outside, a path outside the
+level's folder, existing or not) or a value nested thousands deep; each must be refused
+saying what it is, or (16-bit and float images) load with the texel the file holds and
+render.  ``python -m benchmarks fuzz`` also runs every file case once.
 
     python -m benchmarks fuzz --level-cases 2000
 """
 from __future__ import annotations
 
+import contextlib
+import os
 import random
 import re
+import signal
+import struct
+import threading
 import traceback
 import warnings
+import zlib
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -130,20 +146,147 @@ _VALUES = ["0", "1", "-1", "0.5", "1e-30", "65505.0", "1e20", "3.4e38", "1e39", 
            "{ box = [1.0, 0.0, 1.0] }", "{ quad = [0.0, 0.0] }", "{ sphere = -1.0 }", "{ file = \"gone.obj\" }",
            "{ checker = [0, 0] }", "{ checker = [100000, 2] }", "{ checker = [inf, 2] }", "{ checker = [8.5, 2] }",
            "{ box = [inf, 1.0, 1.0] }", "{ sphere = 1e39 }", "{ plane = [1.0, 1.0], uv_repeat = nan }",
-           "{ sphere = 0.5, segments = 100000000 }", "{ file = \"gone.png\" }", "1979-05-27"]
+           "{ sphere = 0.5, segments = 100000000 }", "{ file = \"gone.png\" }", "1979-05-27",
+           "[" * 3000 + "]" * 3000, "{ a = " * 1000 + "1" + " }" * 1000, "[" * 20 + "1.0" + "]" * 20,
+           "{ file = \"../outside/there.png\" }", "{ file = \"assets/loop.png\" }", "{ file = \"assets/fifo.obj\" }",
+           "{ box = [-1.0, 1.0, 1.0] }", "{ plane = [1.0, 1.0], uv_repeat = \"x\" }", "{ checker = [2.5, 1] }"]
 _NAMES = ["Transform", "MeshRef", "Material", "Mirror", "Portal", "Camera", "Skybox", "Emissive", "Slice",
           "PortalClone", "Nope", "transform"]
 _FIELDS = ["position", "rotation", "scale", "parent", "partner", "color", "colour", "mesh", "texture", "size",
            "enabled", "mode", "resolution", "refresh", "fov_y", "near", "far", "power", "bogus"]
 
 
+CASE_SECONDS = 30.0  # a case still loading or rendering after this long has hung
+OUTSIDE = "@OUTSIDE@"  # in a case's text: the folder outside the level's, made absolute when it runs
+
+
 @dataclass
 class LevelCase:
     text: str
     mutations: list[str]
+    expect: str | None = None   # words the refusal must hold (a file case)
+    texel: tuple[int, ...] | None = None  # or: it loads, and texel (0, 0) of the floor's map is this RGBA
 
     def describe(self) -> str:
         return "; ".join(self.mutations)
+
+
+@dataclass(frozen=True)
+class FileCase:
+    """A file a level may name: ``slot`` says where (the crate's ``mesh``, the floor's
+    ``texture`` or ``normal_map``), ``spec`` the TOML value written there."""
+
+    what: str
+    slot: str
+    spec: str
+    expect: str | None = None
+    texel: tuple[int, ...] | None = None
+
+
+def _file(name: str) -> str:
+    return f'{{ file = "{name}" }}'
+
+
+_OUT = "outside the level's folder"
+FILE_CASES: tuple[FileCase, ...] = (
+    FileCase("a symlink loop (texture)", "texture", _file("assets/loop.png"), "symlink loop"),
+    FileCase("a symlink loop (mesh)", "mesh", _file("assets/loop.obj"), "symlink loop"),
+    FileCase("a FIFO (texture)", "texture", _file("assets/fifo.png"), "is a FIFO"),
+    FileCase("a FIFO (mesh)", "mesh", _file("assets/fifo.obj"), "is a FIFO"),
+    FileCase("an OBJ naming a FIFO material library", "mesh", _file("assets/fifo_mtl.obj"), "is a FIFO"),
+    FileCase("a directory", "texture", _file("assets/folder.png"), "is a directory"),
+    FileCase("a link to /dev/zero", "normal_map", _file("assets/zero.png"), _OUT),
+    FileCase("a PNG declaring 30000 x 30000", "texture", _file("assets/bomb.png"), "16384x16384"),
+    FileCase("a PNG wider than GL takes", "texture", _file("assets/wide.png"), "16384x16384"),
+    FileCase("a glTF nested 100,000 deep", "mesh", _file("assets/deep.gltf"), "nested too deeply"),
+    FileCase("a glTF whose buffer is outside", "mesh", _file("assets/reach.gltf"), _OUT),
+    FileCase("an OBJ whose image is outside", "mesh", _file("assets/reach.obj"), _OUT),
+    FileCase("an OBJ face past its vertices", "mesh", _file("assets/index.obj"), "face index 9"),
+    FileCase("a mesh file of random bytes", "mesh", _file("assets/noise.glb"), "cannot be parsed"),
+    FileCase("an image of random bytes", "texture", _file("assets/noise.png"), "cannot be read as an image"),
+    FileCase("../ outside, there", "texture", _file("../outside/there.png"), _OUT),
+    FileCase("../ outside, not there", "texture", _file("../outside/gone.png"), _OUT),
+    FileCase("an absolute path outside", "texture", _file(f"{OUTSIDE}/there.png"), _OUT),
+    FileCase("a link leading outside", "texture", _file("assets/out.png"), _OUT),
+    FileCase("a float TIFF with NaN", "texture", _file("assets/nan.tiff"), "NaN"),
+    FileCase("a 32-bit integer TIFF", "texture", _file("assets/int32.tiff"), "32-bit integer"),
+    FileCase("a value nested 3000 deep", "mesh", "[" * 3000 + "]" * 3000, "nested too deeply"),
+    FileCase("a 16-bit grey PNG at 50%", "texture", _file("assets/grey16.png"), texel=(128, 128, 128, 255)),
+    FileCase("a float TIFF at 0.5", "texture", _file("assets/half.tiff"), texel=(128, 128, 128, 255)),
+    FileCase("a 16-bit flat normal map", "normal_map", _file("assets/flat16.png"), texel=(128, 128, 255, 255)),
+    FileCase("a plain PNG", "texture", _file("assets/plain.png"), texel=(200, 100, 50, 255)),
+    FileCase("a plain OBJ", "mesh", _file("assets/plain.obj")),
+)
+
+
+def make_files(level_folder: Path, outside: Path) -> None:
+    """The files FILE_CASES name: in ``level_folder / "assets"``, and ``outside``."""
+    import numpy as np
+    from PIL import Image
+
+    assets = level_folder / "assets"
+    assets.mkdir(parents=True, exist_ok=True)
+    outside.mkdir(parents=True, exist_ok=True)
+    Image.new("RGB", (4, 4), (255, 0, 0)).save(outside / "there.png")
+    (outside / "there.bin").write_bytes(bytes(36))
+
+    def link(name: str, target: str | Path) -> None:
+        if not os.path.lexists(assets / name):
+            (assets / name).symlink_to(target)
+
+    link("loop.png", assets / "loop.png")
+    link("loop.obj", assets / "loop2.obj")
+    link("loop2.obj", assets / "loop.obj")
+    link("zero.png", "/dev/zero")
+    link("out.png", outside / "there.png")
+    for name in ("fifo.png", "fifo.obj", "fifo.mtl"):
+        if not os.path.lexists(assets / name):
+            os.mkfifo(assets / name)
+    (assets / "folder.png").mkdir(exist_ok=True)
+    triangle = "v 0 0 0\nv 1 0 0\nv 0 1 0\n"
+    (assets / "fifo_mtl.obj").write_text("mtllib fifo.mtl\n" + triangle + "f 1 2 3\n")
+    (assets / "reach.mtl").write_text("newmtl m\nKd 1 1 1\nmap_Kd ../../outside/there.png\n")
+    (assets / "reach.obj").write_text("mtllib reach.mtl\nusemtl m\n" + triangle + "vt 0 0\nf 1/1 2/1 3/1\n")
+    (assets / "index.obj").write_text(triangle + "f 1 2 9\n")
+    (assets / "plain.obj").write_text(triangle + "f 1 2 3\n")
+    (assets / "deep.gltf").write_text("[" * 100_000 + "]" * 100_000)
+    (assets / "reach.gltf").write_text('{"asset": {"version": "2.0"}, "buffers": [{"uri": "../../outside/there.bin", '
+                                       '"byteLength": 36}]}')
+    noise = np.random.default_rng(26).integers(0, 256, 600, dtype=np.uint8).tobytes()
+    (assets / "noise.glb").write_bytes(noise)
+    (assets / "noise.png").write_bytes(noise)
+    _png(assets / "bomb.png", np.zeros((4, 4), np.uint8), 0, 8, (30000, 30000))
+    _png(assets / "wide.png", np.zeros((4, 4), np.uint8), 0, 8, (16385, 4))
+    _png(assets / "grey16.png", np.full((4, 4), 32768, np.uint16), 0, 16)
+    _png(assets / "flat16.png", np.tile(np.array([32768, 32768, 65535], np.uint16), (4, 4, 1)), 2, 16)
+    Image.fromarray(np.full((4, 4), 0.5, np.float32)).save(assets / "half.tiff")
+    Image.fromarray(np.array([[0.5, np.nan]], np.float32)).save(assets / "nan.tiff")
+    Image.fromarray(np.full((2, 2), 7, np.int32)).save(assets / "int32.tiff")
+    Image.new("RGB", (4, 4), (200, 100, 50)).save(assets / "plain.png")
+
+
+def _png(path: Path, pixels, colour_type: int, depth: int, declared: tuple[int, int] | None = None) -> None:
+    """A PNG by hand (Pillow writes neither 48-bit RGB nor a header that lies about its size)."""
+    def chunk(kind: bytes, data: bytes) -> bytes:
+        return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data))
+
+    h, w = pixels.shape[:2]
+    raw = b"".join(b"\0" + pixels[y].astype(">u2" if depth == 16 else "u1").tobytes() for y in range(h))
+    w, h = declared or (w, h)
+    path.write_bytes(b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", struct.pack(">IIBBBBB", w, h, depth, colour_type, 0, 0, 0))
+                     + chunk(b"IDAT", zlib.compress(raw)) + chunk(b"IEND", b""))
+
+
+_SLOTS = {"mesh": "mesh = { box = [1.0, 1.0, 1.0] }", "texture": "texture = { checker = [32, 4] }",
+          "normal_map": "texture = { checker = [32, 4] }"}
+
+
+def file_level_case(case: FileCase) -> LevelCase:
+    """BASE with ``case``'s file named in its slot (the crate's mesh, the floor's texture or
+    normal map): one mutation, so the refusal must be the file's."""
+    key = "normal_map" if case.slot == "normal_map" else case.slot
+    text = BASE.replace(_SLOTS[case.slot], f"{key} = {case.spec}", 1)
+    return LevelCase(text, [f"file case: {case.what}"], case.expect, case.texel)
 
 
 def mutate(rng: random.Random, text: str) -> tuple[str, str]:
@@ -184,6 +327,8 @@ def mutate(rng: random.Random, text: str) -> tuple[str, str]:
 
 
 def random_level_case(rng: random.Random) -> LevelCase:
+    if rng.random() < 0.25:
+        return file_level_case(rng.choice(FILE_CASES))
     text, done = BASE, []
     for _ in range(rng.randint(1, 3)):
         text, what = mutate(rng, text)
@@ -198,12 +343,40 @@ class _Empty(Game):
         pass
 
 
+class _Hung(Exception):
+    pass
+
+
+@contextlib.contextmanager
+def _deadline(seconds: float) -> Iterator[None]:
+    """Raise _Hung in the block after ``seconds`` (a SIGALRM timer; only on the main thread,
+    where Python runs signal handlers: elsewhere there is no deadline)."""
+    if threading.current_thread() is not threading.main_thread() or not hasattr(signal, "setitimer"):
+        yield
+        return
+
+    def hung(signum, frame):
+        raise _Hung
+
+    previous = signal.signal(signal.SIGALRM, hung)
+    signal.setitimer(signal.ITIMER_REAL, seconds)
+    try:
+        yield
+    finally:
+        signal.setitimer(signal.ITIMER_REAL, 0)
+        signal.signal(signal.SIGALRM, previous)
+
+
 class LevelFuzzer:
-    """One engine on an empty world; each case's level is spawned, rendered and deleted."""
+    """One engine on an empty world; each case's level is spawned, rendered and deleted. Its
+    files are written in ``folder / "level"``, FILE_CASES' files in ``folder / "level" /
+    "assets"`` and ``folder / "outside"``."""
 
     def __init__(self, ctx, folder: Path) -> None:
         self.ctx = ctx
-        self.folder = folder
+        self.folder = folder / "level"
+        self.outside = folder / "outside"
+        make_files(self.folder, self.outside)
         self.engine = Engine(_Empty(), ctx)
         self.world = self.engine.world
         self.capture = CaptureTarget(ctx, SIZE)
@@ -216,25 +389,38 @@ class LevelFuzzer:
     def run(self, case: LevelCase, index: int = 0) -> str | None:
         """None when the case passed, else why it failed."""
         path = self.folder / f"case_{index}.toml"
-        path.write_text(case.text)
+        path.write_text(case.text.replace(OUTSIDE, str(self.outside.resolve())))
         try:
-            with warnings.catch_warnings():
+            with warnings.catch_warnings(), _deadline(CASE_SECONDS):
                 warnings.simplefilter("ignore")
-                load_level(path).spawn(self.world)
+                names = load_level(path).spawn(self.world)
         except LevelError as exc:
             if str(path) not in str(exc):
                 return f"LevelError without the file's name: {exc}"
             if self.world.entities():
                 return f"refused, but left entities {self.world.entities()} in the world"
+            if case.expect is not None and case.expect not in exc.reason:
+                return f"refused, but without saying {case.expect!r}: {exc}"
+            if case.texel is not None:
+                return f"refused a file that should load: {exc}"
             self.refused += 1
             return None
+        except _Hung:
+            return f"loading hung for more than {CASE_SECONDS:g} s"
         except Exception as exc:  # noqa: BLE001 - any other kind is what the fuzz is looking for
             return f"load raised {type(exc).__name__}: {exc}\n{traceback.format_exc(limit=-3)}"
+        problem = None
+        if case.expect is not None:
+            problem = f"loaded, but should be refused saying {case.expect!r}"
+        elif case.texel is not None:
+            problem = self._check_texel(names, case.texel)
         try:
-            with warnings.catch_warnings():
+            with warnings.catch_warnings(), _deadline(CASE_SECONDS):
                 warnings.simplefilter("ignore")
                 self.engine.frame(1.0 / 60.0, Output(self.capture.framebuffer, SIZE))
-            problem = self._check_pixels()
+            problem = problem or self._check_pixels()
+        except _Hung:
+            problem = f"the frame hung for more than {CASE_SECONDS:g} s"
         except Exception as exc:  # noqa: BLE001
             problem = f"frame raised {type(exc).__name__}: {exc}\n{traceback.format_exc(limit=-3)}"
         finally:
@@ -243,6 +429,19 @@ class LevelFuzzer:
         if problem is None:
             self.rendered += 1
         return problem
+
+    def _check_texel(self, names: dict[str, int], texel: tuple[int, ...]) -> str | None:
+        """The floor's texture or normal map holds ``texel`` at (0, 0): the file's value, scaled."""
+        from components import Material
+
+        material = self.world.try_get(names.get("floor", -1), Material)
+        texture = material and (material.normal_map or material.texture)
+        if texture is None:
+            return "the floor has no texture or normal map"
+        got = tuple(int(v) for v in texture.pixels[0, 0])
+        if any(abs(a - b) > 1 for a, b in zip(got, texel, strict=True)):
+            return f"texel (0, 0) is {got}, the file holds {texel}"
+        return None
 
     def _check_pixels(self) -> str | None:
         error = self.ctx.error
@@ -262,3 +461,11 @@ def fuzz_levels(ctx, folder: Path, cases: int, seed: int = 0, report=None) -> tu
     from benchmarks.fuzz import run_cases
 
     return run_cases(LevelFuzzer(ctx, folder), random_level_case, cases, seed, report)
+
+
+def fuzz_files(ctx, folder: Path, report=None) -> tuple[int, list, dict[str, int]]:
+    """Run every FILE_CASES case once (``benchmarks.fuzz.run_cases``), their files in ``folder``."""
+    from benchmarks.fuzz import run_cases
+
+    cases = iter(FILE_CASES)
+    return run_cases(LevelFuzzer(ctx, folder), lambda rng: file_level_case(next(cases)), len(FILE_CASES), 0, report)

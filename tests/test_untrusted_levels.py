@@ -543,3 +543,15 @@ def test_asset_root_on_the_command_line(tmp_path):
     missing = subprocess.run(base + ["--asset-root", str(tmp_path / "nowhere")], cwd=ROOT, capture_output=True,
                              text=True, timeout=120)
     assert missing.returncode == 2 and "--asset-root" in missing.stderr and "not a folder" in missing.stderr
+
+
+# --- the fuzz's file cases --------------------------------------------------------------------------
+
+def test_every_file_case_of_the_level_fuzz_is_refused_saying_what_or_loads_right(ctx, tmp_path):
+    """``python -m benchmarks fuzz`` runs these too (benchmarks/level_fuzz.py FILE_CASES):
+    each refused saying what the file is, or loaded with the file's texel and drawn clean."""
+    from benchmarks.level_fuzz import FILE_CASES, fuzz_files
+
+    ran, failures, passes = fuzz_files(ctx, tmp_path)
+    assert ran == len(FILE_CASES) and not failures, failures
+    assert passes["rendered"] == sum(case.expect is None for case in FILE_CASES)
