@@ -454,7 +454,7 @@ def set_asset_roots(roots: Iterable[str | Path]) -> None:
     _USER_ASSET_ROOTS[:] = [Path(root) for root in roots]
 
 
-def asset_roots() -> list[Path]:
+def user_asset_roots() -> list[Path]:
     """The folders ``set_asset_roots`` gave (what ``--asset-root`` allows)."""
     return list(_USER_ASSET_ROOTS)
 

@@ -118,10 +118,10 @@ def _pose(text: str) -> tuple[float, ...]:
 
 
 def main(game: Game, argv: Sequence[str] | None = None) -> int:
-    from engine.level_file import asset_roots, set_asset_roots
+    from engine.level_file import set_asset_roots, user_asset_roots
 
     args = parse_args(game, argv)
-    before = asset_roots()
+    before = user_asset_roots()
     set_asset_roots(args.asset_root)  # for every level loaded in this run, the game's own loads too
     try:
         with warnings.catch_warnings():
@@ -254,17 +254,7 @@ def run_headless(game: Game, args: argparse.Namespace) -> list[Path]:
         if args.gif is not None:
             written.append(_write(lambda data, path: save_gif(data, path, args.dt), gif_frames, args.gif))
         if args.export_scene:
-            camera = engine.active_camera()
-            if camera is None:
-                raise SpeculumError(f"--export-scene {str(args.export_scene)!r}: the world has no active camera "
-                                    "(spawn one with engine.spawn_camera), so there is no view to export")
-            try:
-                geometry = export_scene(engine.world, args.export_scene, camera[0], args.size,
-                                        engine.reflection_system.mirror_planes())
-                written += [geometry, geometry.with_suffix(".json")]
-            except OSError as exc:
-                raise OutputPathError(f"--export-scene {str(args.export_scene)!r} cannot be written: "
-                                      f"{exc.strerror or exc}") from None
+            written += write_scene(engine, args.export_scene, args.size)
     finally:
         if overlay is not None:
             overlay.release()
@@ -274,6 +264,21 @@ def run_headless(game: Game, args: argparse.Namespace) -> list[Path]:
             engine.close()
         ctx.release()
     return written
+
+
+def write_scene(engine: Engine, path: Path, size: tuple[int, int]) -> list[Path]:
+    """``--export-scene``: the world's geometry and its camera (as seen at ``size``) to
+    ``path`` and its ``.json``; returns both paths.  A headless run writes it after its last
+    frame, a window as it closes."""
+    camera = engine.active_camera()
+    if camera is None:
+        raise SpeculumError(f"--export-scene {str(path)!r}: the world has no active camera "
+                            "(spawn one with engine.spawn_camera), so there is no view to export")
+    try:
+        geometry = export_scene(engine.world, path, camera[0], size, engine.reflection_system.mirror_planes())
+    except OSError as exc:
+        raise OutputPathError(f"--export-scene {str(path)!r} cannot be written: {exc.strerror or exc}") from None
+    return [geometry, geometry.with_suffix(".json")]
 
 
 def save_gif(frames: Sequence[np.ndarray], path: Path, seconds_per_frame: float) -> None:
