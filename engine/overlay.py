@@ -148,8 +148,20 @@ class OverlayRenderer(ModernGLRenderer):
             obj.release()
 
 
+_LIVE: list = []  # the ImGui contexts of overlays not yet released, oldest first
+
+
+def _alive(context) -> bool:
+    return context is not None and any(context == live for live in _LIVE)
+
+
 class DebugOverlay:
-    """One overlay on one GL context: ``record`` each frame's time, ``draw`` after the frame."""
+    """One overlay on one GL context: ``record`` each frame's time, ``draw`` after the frame.
+
+    ``release`` gives back its GL objects and destroys its ImGui context, once (a second call
+    does nothing: destroying an ImGui context twice aborts the process with "double free or
+    corruption"), and makes current again the context that was current before, unless that
+    one has been destroyed since (overlays released in any order)."""
 
     def __init__(self, ctx: moderngl.Context, visible: bool = True) -> None:
         self.ctx = ctx
@@ -162,6 +174,7 @@ class DebugOverlay:
         self._last = None
         self._previous = imgui.get_current_context()
         self.context = imgui.create_context()
+        _LIVE.append(self.context)
         io = imgui.get_io()
         io.set_ini_filename("")  # no imgui.ini written next to the game
         self.renderer = OverlayRenderer(ctx, (1, 1))
@@ -196,7 +209,7 @@ class DebugOverlay:
     def draw(self, engine, framebuffer: moderngl.Framebuffer, size: tuple[int, int]) -> None:
         """Lay out the overlay for ``engine``'s last frame, apply its toggles, and draw it
         over ``framebuffer`` (``size`` pixels)."""
-        if not self.visible or size[0] <= 0 or size[1] <= 0:
+        if not self.visible or self.context is None or size[0] <= 0 or size[1] <= 0:
             return
         imgui.set_current_context(self.context)
         io = self.io
@@ -264,8 +277,17 @@ class DebugOverlay:
         self.widgets[name] = ((low.x + high.x) / 2.0, (low.y + high.y) / 2.0)
 
     def release(self) -> None:
-        imgui.set_current_context(self.context)
-        self.renderer.shutdown()
-        imgui.destroy_context(self.context)
-        if self._previous is not None:
-            imgui.set_current_context(self._previous)
+        if self.context is None:
+            return  # released already
+        context, self.context = self.context, None
+        current = imgui.get_current_context()
+        imgui.set_current_context(context)
+        try:
+            self.renderer.shutdown()
+        finally:
+            imgui.destroy_context(context)  # leaves no context current
+            _LIVE[:] = [live for live in _LIVE if not live == context]
+            for candidate in (current, self._previous):
+                if _alive(candidate):
+                    imgui.set_current_context(candidate)
+                    break

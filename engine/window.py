@@ -1,15 +1,27 @@
 """The windowed shell: a moderngl-window WindowConfig that drives an Engine.
 
-WASD + mouse fly camera (Q/E down/up, Shift faster), Esc quits, F12 writes a screenshot,
-F1 shows or hides the debug overlay (``engine/overlay.py``; the mouse is the overlay's while
+WASD + mouse fly camera (Q/E down/up, Shift faster), Esc quits (exit status 0), F12 writes a
+screenshot, F1 shows or hides the debug overlay (``engine/overlay.py``; the mouse is the overlay's while
 it is over it).  Each frame the shell also polls the shader library, so an edited file
 under ``shaders/`` is rebuilt while the game runs (hot reload; errors printed once and shown
 in the overlay).  The same class runs under moderngl-window's headless window, which the
 tests use.
+
+Closing: everything the shell made (the engine's GL objects, the overlay's ImGui context)
+is released once, while the window's GL context is still current, and the window is
+closed after the main loop.  Esc is the shell's key, not moderngl-window's exit key: that
+one closes the pyglet window (destroying its GL context) inside the event dispatch before
+it calls ``on_close``, and a second close from the shell's own Esc handler released the
+overlay twice ("double free or corruption", exit 134).  ``--frames N`` closes
+the window the same way after N frames; ``--export-scene`` is written as the window closes;
+``--gif`` and ``--ids`` are headless outputs and are refused for a window.  moderngl-window
+logs only warnings (its INFO lines, the GL context's description and the frame rate at the
+end, are off).
 """
 from __future__ import annotations
 
 import argparse
+import logging
 import sys
 import time
 from pathlib import Path
@@ -79,9 +91,17 @@ def make_window_config(game: Game, args: argparse.Namespace | None = None) -> ty
         aspect_ratio = None
         resizable = True
         vsync = True
+        log_level = logging.WARNING  # moderngl-window's INFO lines (context description, frame rate) off
 
         def __init__(self, **kwargs) -> None:
             super().__init__(**kwargs)
+            # Esc is handled by the shell (``quit``), which releases before the window closes;
+            # moderngl-window's own exit key would close first and call on_close after.
+            self.wnd.exit_key = None
+            self.frames_left: int | None = getattr(args, "frames", None)
+            self.export_scene: Path | None = getattr(args, "export_scene", None)
+            self.written: list[Path] = []  # what release wrote (the scene export)
+            self.released = False
             self.engine = Engine(game, self.ctx)
             if args is not None:
                 self.engine.renderer.antialias = args.aa
@@ -94,17 +114,25 @@ def make_window_config(game: Game, args: argparse.Namespace | None = None) -> ty
             self.overlay = make_overlay(self.ctx, visible=bool(getattr(args, "overlay", False)))
 
         def on_render(self, time_s: float, frametime: float) -> None:
+            if self.released:
+                return  # closed (Esc, --frames): nothing is left to draw with
             size = self.wnd.buffer_size
             for message in self.engine.renderer.shaders.poll():  # hot reload: at most every 0.5 s
                 print(f"speculum: {message}", file=sys.stderr, flush=True)
             self.overlay.record(frametime)
             self.engine.frame(min(frametime, 0.1), Output(self.wnd.fbo, size))
             self.overlay.draw(self.engine, self.wnd.fbo, size)
+            if self.frames_left is not None:
+                self.frames_left -= 1
+                if self.frames_left <= 0:
+                    self.quit()
 
         def on_resize(self, width: int, height: int) -> None:
             pass  # the render system sizes its targets from the framebuffer each frame; 0x0 skips
 
         def on_key_event(self, key, action, modifiers) -> None:
+            if self.released:
+                return  # events queued behind Esc
             keys = self.wnd.keys
             name = self.key_names.get(key)
             if name == "f1":  # the overlay's key, not the game's
@@ -121,7 +149,7 @@ def make_window_config(game: Game, args: argparse.Namespace | None = None) -> ty
                 elif key == getattr(keys, "F12", None):
                     self.screenshot()
                 elif key == keys.ESCAPE:
-                    self.wnd.close()
+                    self.quit()
             elif action == keys.ACTION_RELEASE and name:
                 self.input.release(name)
             for modifier in ("shift", "ctrl"):
@@ -131,6 +159,8 @@ def make_window_config(game: Game, args: argparse.Namespace | None = None) -> ty
                     self.input.held.discard(modifier)
 
         def on_mouse_press_event(self, x: int, y: int, button: int) -> None:
+            if self.released:
+                return  # events queued behind Esc
             if self.overlay.visible:
                 self.overlay.mouse_moved(x, y)
                 self.overlay.mouse_button(button, True)
@@ -154,11 +184,15 @@ def make_window_config(game: Game, args: argparse.Namespace | None = None) -> ty
                 self.wnd.cursor = False
 
         def on_mouse_release_event(self, x: int, y: int, button: int) -> None:
+            if self.released:
+                return  # events queued behind Esc
             if self.overlay.visible:
                 self.overlay.mouse_moved(x, y)
                 self.overlay.mouse_button(button, False)
 
         def on_mouse_position_event(self, x: int, y: int, dx: int, dy: int) -> None:
+            if self.released:
+                return  # events queued behind Esc
             if self.overlay.visible and not self.mouse_captured:
                 self.overlay.mouse_moved(x, y)
             # In the output's pixels (what Output.size and the main view measure): on a
@@ -170,6 +204,8 @@ def make_window_config(game: Game, args: argparse.Namespace | None = None) -> ty
                 self.input.mouse_dy += dy
 
         def on_mouse_drag_event(self, x: int, y: int, dx: int, dy: int) -> None:
+            if self.released:
+                return  # events queued behind Esc
             if self.overlay.visible:
                 self.overlay.mouse_moved(x, y)
                 if self.overlay.wants_mouse:  # dragging the depth-cap slider, not looking around
@@ -208,15 +244,66 @@ def make_window_config(game: Game, args: argparse.Namespace | None = None) -> ty
             print(f"speculum: screenshot {path}", flush=True)
             return path
 
+        def quit(self) -> None:
+            """End the run: release everything now (the window's GL context is current) and
+            let the main loop stop; ``run_windowed`` closes the window after it.  Not closed
+            here: a key arrives inside pyglet's event dispatch, and a window closed under it
+            breaks the rest of that dispatch."""
+            self.release()
+            self.wnd.is_closing = True
+
+        def release(self) -> None:
+            """Write ``--export-scene`` and release the overlay and the engine, once."""
+            if self.released:
+                return
+            self.released = True
+            try:
+                if self.export_scene is not None:
+                    from engine.runner import write_scene
+
+                    self.written += write_scene(self.engine, self.export_scene, self.wnd.buffer_size)
+                    print(f"speculum: wrote {', '.join(str(p) for p in self.written)}", flush=True)
+            finally:
+                try:
+                    self.overlay.release()
+                finally:
+                    self.engine.close()
+
         def on_close(self) -> None:
-            self.overlay.release()
-            self.engine.close()
+            # The window's close button (its GL context is still there) or ``quit`` (done).
+            self.release()
 
     return SpeculumWindow
 
 
+WINDOW_REFUSES = {"gif": "--gif", "ids": "--ids"}
+
+
 def run_windowed(game: Game, args: argparse.Namespace) -> None:
+    """Open the window and run until it is closed (Esc, its close button, ``--frames N``).
+    ``--gif`` and ``--ids`` write headless frames: a window refuses them (a SpeculumError,
+    the runner's one error line) rather than ignoring them."""
+    given = [flag for name, flag in WINDOW_REFUSES.items() if getattr(args, name, None)]
+    if given:
+        raise SpeculumError(f"{' and '.join(given)} {'write' if len(given) > 1 else 'writes'} the frames of a "
+                            "headless run: add --headless (a window writes screenshots with F12, and the scene "
+                            "with --export-scene when it closes)")
+    if getattr(args, "export_scene", None) is not None:
+        from engine.runner import prepare_out
+
+        prepare_out(args.export_scene.parent, "--export-scene folder")
     w, h = args.size
     config_cls = make_window_config(game, args)
     config = mglw.create_window_config_instance(config_cls, args=["--size", f"{w}x{h}"])
-    mglw.run_window_config_instance(config)
+    try:
+        try:
+            mglw.run_window_config_instance(config)
+        except BaseException:
+            try:
+                config.release()  # a frame raised: give back what is left, and report the frame's error
+            except Exception:
+                pass
+            raise
+        config.release()  # closed by Esc or --frames: done already; by the close button: done in on_close
+    finally:
+        config.wnd.close()  # after the loop, outside any event dispatch (on_close finds it released)

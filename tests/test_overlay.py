@@ -191,3 +191,33 @@ def test_headless_overlay_flag_draws_into_the_png_and_nothing_else(tmp_path):
     assert (columns.min(), rows.min()) == POSITION  # the overlay window's corner, nothing before it
     box = changed[rows.min():rows.max() + 1, columns.min():columns.max() + 1]
     assert box.mean() > 0.5 and columns.max() < 470 and rows.max() < 390, (box.mean(), columns.max(), rows.max())
+
+
+RELEASE_TWICE = """
+from imgui_bundle import imgui
+
+from engine.gl_context import create_headless_context
+from engine.overlay import DebugOverlay
+
+ctx = create_headless_context()
+a, b = DebugOverlay(ctx), DebugOverlay(ctx)  # a is current (ImGui makes only the first one current)
+a.release()
+assert imgui.get_current_context() is None  # not the destroyed a
+a.release()  # a second release does nothing (destroying an ImGui context twice aborts)
+b.release()
+assert imgui.get_current_context() is None  # a, current before b, is not restored: destroyed
+b.release()
+c, d = DebugOverlay(ctx), DebugOverlay(ctx)
+d.release()
+assert imgui.get_current_context() == c.context  # c stays current
+c.release()
+print("released")
+"""
+
+
+def test_an_overlay_released_twice_or_out_of_order_does_not_abort_the_process():
+    """Esc in a window released the overlay twice: "double free or corruption (!prev)" and
+    exit status 134 (in a subprocess, so an abort fails this test rather than the run)."""
+    result = subprocess.run([sys.executable, "-c", RELEASE_TWICE], cwd=ROOT,
+                            env={**os.environ, "PYTHONPATH": str(ROOT)}, capture_output=True, text=True, timeout=120)
+    assert result.returncode == 0 and result.stdout.strip() == "released", (result.returncode, result.stderr[-2000:])

@@ -13,6 +13,7 @@ import sys
 from pathlib import Path
 
 import numpy as np
+import pytest
 from PIL import Image
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -82,3 +83,86 @@ def test_f12_in_a_real_window_writes_the_frame_and_later_frames_have_no_gl_error
     expected = np.asarray(Image.open(reference / f"frame_{FRAMES_BEFORE - 1:04d}.png"))
     difference = np.abs(shot.astype(int) - expected.astype(int))
     assert difference.max() <= 2 and (difference > 0).mean() < 0.001, (difference.max(), (difference > 0).mean())
+
+
+# Runs ``python -m <game> ARGS`` as a player would, and presses Esc as the X server delivers
+# it: a KeyPress event sent to the game's window (XSendEvent) after a few frames, read back
+# by pyglet's event loop and handed to the shell's key handler.
+ESC_SCRIPT = r'''
+import runpy, sys
+from ctypes import byref
+
+from pyglet.libs.x11 import xlib
+
+import engine.window as shell
+
+module, after = sys.argv[1], int(sys.argv[2])
+make_window_config = shell.make_window_config
+
+
+def pressing_esc(game, args=None):
+    base = make_window_config(game, args)
+
+    class PressingEsc(base):
+        frames = 0
+
+        def on_render(self, time_s, frametime):
+            super().on_render(time_s, frametime)
+            PressingEsc.frames += 1
+            if PressingEsc.frames == after:
+                window = self.wnd._window
+                event = xlib.XEvent()
+                event.xkey.type = xlib.KeyPress
+                event.xkey.display = window._x_display
+                event.xkey.window = window._window
+                event.xkey.root = xlib.XDefaultRootWindow(window._x_display)
+                event.xkey.keycode = xlib.XKeysymToKeycode(window._x_display, 0xFF1B)  # XK_Escape
+                event.xkey.same_screen = 1
+                xlib.XSendEvent(window._x_display, window._window, 1, xlib.KeyPressMask, byref(event))
+                xlib.XFlush(window._x_display)
+
+    return PressingEsc
+
+
+shell.make_window_config = pressing_esc
+sys.argv = [module] + sys.argv[3:]
+runpy.run_module(module, run_name="__main__")
+'''
+GAMES = ("games.hall_of_mirrors", "games.mirror_beam", "games.portal_run")
+
+
+def _windowed(x_display, cwd, *args: str) -> subprocess.CompletedProcess:
+    env = {**os.environ, "DISPLAY": x_display, "PYTHONPATH": str(ROOT), "SPECULUM_DEBUG": "1"}
+    return subprocess.run([sys.executable, *args], cwd=cwd, env=env, capture_output=True, text=True, timeout=120)
+
+
+@pytest.mark.parametrize("module", GAMES)
+def test_esc_in_every_game_closes_its_window_with_exit_status_0(x_display, tmp_path, module):
+    """Esc released the debug overlay twice (moderngl-window's exit key closed the window and
+    called on_close, then the shell's own Esc handler closed it again): "double free or
+    corruption (!prev)", exit status 134.  Now the shell releases once, with the window's GL
+    context current, and the process ends with 0.  moderngl-window's INFO lines are off."""
+    result = _windowed(x_display, tmp_path, "-c", ESC_SCRIPT, module, "3", "--size", "160x90")
+    assert result.returncode == 0, (result.returncode, result.stderr[-3000:])
+    assert "double free" not in result.stderr and "Traceback" not in result.stderr, result.stderr[-3000:]
+    assert " - INFO - " not in result.stderr, result.stderr[-3000:]
+
+
+def test_windowed_frames_closes_the_window_and_export_scene_is_written_as_it_closes(x_display, tmp_path):
+    scene = tmp_path / "scene" / "hall.glb"
+    result = _windowed(x_display, ROOT, "-m", "games.hall_of_mirrors", "--frames", "3", "--size", "160x90",
+                       "--export-scene", str(scene))
+    assert result.returncode == 0, result.stderr[-3000:]
+    assert scene.is_file() and scene.with_suffix(".json").is_file()
+    assert f"speculum: wrote {scene}, {scene.with_suffix('.json')}" in result.stdout
+
+
+@pytest.mark.parametrize("flags", [["--gif", "x.gif"], ["--ids"], ["--ids", "--gif", "x.gif"]])
+def test_a_window_refuses_the_headless_outputs_with_one_line(x_display, tmp_path, flags):
+    result = _windowed(x_display, tmp_path, "-m", "games.hall_of_mirrors", "--frames", "1", "--size", "160x90",
+                       *flags)
+    assert result.returncode == 2, result.stderr[-3000:]
+    lines = [line for line in result.stderr.splitlines() if line.strip()]
+    assert len(lines) == 1 and lines[0].startswith("speculum: error:"), result.stderr
+    assert all(flag in lines[0] for flag in flags if flag.startswith("--")) and "--headless" in lines[0]
+    assert not (tmp_path / "x.gif").exists()
