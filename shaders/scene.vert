@@ -64,6 +64,7 @@ void main() {
     // Behind the view's plane is clipped; so is all of the surface the view looks out of
     // (a mirror's own glass, a portal's partner), which lies on that plane: the plane itself
     // needs no offset, so nothing touching the mirror opens a crack in its reflection.
-    gl_ClipDistance[0] = in_slots.w == camera.skip.x ? -1.0 : dot(world, camera.clip_plane);
+    bool hidden = in_slots.w == camera.skip.x || (camera.skip.y != 0u && in_slots.w == camera.skip.y);
+    gl_ClipDistance[0] = hidden ? -1.0 : dot(world, camera.clip_plane);
 #endif
 }

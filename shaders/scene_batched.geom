@@ -28,7 +28,8 @@ struct MirrorView {
     vec4 clip_plane;  // world-space mirror plane; geometry behind it is clipped
     vec4 eye;         // xyz: world-space eye; w: 1 if mirrored (front faces clockwise)
     vec4 rect;        // the view's screen rectangle in NDC: x0, y0, x1, y1
-    uvec4 node;       // x: the view's index in the node image; y: the entity it never draws (its surface)
+    uvec4 node;       // x: the view's index in the node image; y: the entity it never draws (its surface);
+                      // z: one no view of its tree draws (a probe's own object); 0: none
 };
 
 layout(std140) uniform Views {
@@ -98,6 +99,7 @@ void main() {
         if (i >= view_count.x) return;
         MirrorView v = views[i];
         if (g_slots[0].w == v.node.y) continue;  // the surface the view looks out of
+        if (v.node.z != 0u && g_slots[0].w == v.node.z) continue;  // hidden in the whole tree (a probe's own object)
         vec4 p0 = v.view_proj * w0;
         vec4 p1 = v.view_proj * w1;
         vec4 p2 = v.view_proj * w2;

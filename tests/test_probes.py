@@ -365,6 +365,46 @@ def test_a_probe_face_sees_a_mirror_reflect_what_the_probe_cannot_see_directly(s
     assert is_red == bool(depth), seen
 
 
+@pytest.mark.parametrize("path", ["per_mirror", "batched"])
+def test_a_probes_own_object_is_in_none_of_its_mirror_views(scene, path, monkeypatch):
+    """The red box of the test above is now the probe's own object (its mesh offset to
+    (0, 1.5, 2) from the probe's entity at the origin): the mirror under the -Z face shows
+    it for a second probe at the same place, and not for its own, on either way of drawing
+    a level (the whole view tree leaves the probe's object out, not only the face's view)."""
+    from components import Mirror
+    from engine.mesh import Mesh
+    from engine.mesh import quad as quad_mesh
+
+    cube = box((0.8, 0.8, 0.8))
+    offset_box = Mesh(cube.positions + np.array([0.0, 1.5, 2.0], np.float32), cube.normals, cube.uvs, cube.indices,
+                      name="box behind the probe")
+    ents = {}
+
+    def build(world):
+        world.spawn(Skybox())
+        look_from(world, (3.0, 0.5, 3.0), target=(0.0, 0.0, 0.0))
+        ents["own"] = world.spawn(Transform(), MeshRef(offset_box), Material(color=(0.9, 0.05, 0.05)), Emissive(2.0),
+                                  ReflectionProbe(resolution=64, refresh="once", depth=1))
+        ents["other"] = world.spawn(Transform(), ReflectionProbe(resolution=64, refresh="once", depth=1))
+        world.spawn(Transform(position=(0, 0, -2)), MeshRef(quad_mesh(6, 6)), Material(color=(0.05, 0.05, 0.05)),
+                    Mirror())
+        # A second instance of the box's mesh, far below: the box shares its batch, so the
+        # shaders (not only the batch skip) must leave it out.
+        world.spawn(Transform(position=(0, -60, 0)), MeshRef(offset_box), Material(color=(0.9, 0.05, 0.05)))
+
+    import engine.render.view_tree as view_tree
+
+    monkeypatch.setattr(view_tree, "choose_path", lambda setting, views, triangles: path)
+    runner = scene(build, (64, 48))
+    runner.frame()
+    target = np.array([0.0, 1.5, -6.0]) / np.linalg.norm([0.0, 1.5, -6.0])
+    row, col = np.unravel_index(np.argmax(face_directions(5, 64) @ target), (64, 64))
+    own, other = (runner.engine.renderer.probes.read_face(ents[key], 5)[row, col] for key in ("own", "other"))
+    assert other[0] > 1.0 and other[0] > 4 * max(other[1], other[2]), other  # the mirror shows the box...
+    assert not own[0] > 0.5 * other[0], own  # ...except to the box's own probe
+    assert own[2] > own[0] and own.sum() > 0.5, own  # the sky there (blue), not the box, red or black
+
+
 def test_box_projection_puts_a_walls_reflection_where_the_math_says(scene):
     """A chrome floor tile off the probe's centre, inside its influence box (8 x 4 x 8 about
     (0, 1, 0)), with a red panel on the box's +X wall.  Each tile pixel's reflected ray,

@@ -108,6 +108,6 @@ def views_block(views: Sequence[View]) -> bytes:
         row["eye"] = (*view.eye, 1.0 if view.mirrored else 0.0)
         row["rect"] = (2.0 * x / width - 1.0, 2.0 * y / height - 1.0,
                        2.0 * (x + w) / width - 1.0, 2.0 * (y + h) / height - 1.0)
-        row["node"] = (view.node, view.skip, 0, 0)
+        row["node"] = (view.node, view.skip, view.hide, 0)
     count = np.array([len(views), 0, 0, 0], np.int32)
     return count.tobytes() + table.tobytes()

@@ -51,7 +51,8 @@ def face_view(face: int, position: glm.vec3, near: float, far: float, size: int,
     eye = glm.vec3(position)
     view = glm.lookAt(eye, eye + glm.vec3(forward), glm.vec3(up))
     proj = glm.perspective(glm.radians(90.0), 1.0, near, far)
-    return View(view=view, proj=proj, eye=eye, size=(size, size), name=f"probe face {face}", node=face, skip=skip)
+    return View(view=view, proj=proj, eye=eye, size=(size, size), name=f"probe face {face}", node=face, skip=skip,
+                hide=skip)
 
 
 def _side_normals(face: int) -> np.ndarray:

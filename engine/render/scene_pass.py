@@ -163,17 +163,18 @@ class ScenePass:
         return program
 
     def _draw_batches(self, batches, invocations: int, masked: bool, node: int, layered: str = "",
-                      skip: int = 0, before_draw: Callable[[], None] | None = None) -> None:
+                      skip: int = 0, before_draw: Callable[[], None] | None = None, hide: int = 0) -> None:
         """One instanced draw per batch, each with the program of its variants.  A program's
         uniforms are written only when their value changes (``self._written``, reset at the
         start of each pass): on llvmpipe each call is CPU time on a view's critical path.
-        A batch whose one instance is the view's ``skip`` entity (a probe's own sphere, a
-        mirror's own quad) is not drawn at all: its vertices would all be clipped away."""
+        A batch whose one instance is the view's ``skip`` or ``hide`` entity (a mirror's own
+        quad, a probe's own sphere) is not drawn at all: its vertices would all be clipped
+        away (0: none; entities start at 1)."""
         stats = self.renderer.stats
         cubes = self.renderer.probes.cubes
         written = self._written
         for batch in batches:
-            if not batch.count or (skip and batch.count == 1 and batch.entity_at[0] == skip):
+            if not batch.count or (batch.count == 1 and batch.entity_at[0] in (skip, hide)):
                 continue
             program = self.program(batch.variants, invocations, layered, batch.normal_map is not None)
             uniforms = self._uniforms[program.glo]
@@ -256,7 +257,8 @@ class ScenePass:
             ctx.scissor = view.scissor
             ctx.front_face = "cw" if view.mirrored else "ccw"
             renderer.bind_view(view)
-            self._draw_batches(renderer.opaque_batches(), 0, options.masked, view.node, skip=view.skip)
+            self._draw_batches(renderer.opaque_batches(), 0, options.masked, view.node, skip=view.skip,
+                               hide=view.hide)
             if options.sky:
                 # Colour only: the clear already put id 0 (nothing) where the sky shows.
                 targets.sky_framebuffer.use()
@@ -271,7 +273,7 @@ class ScenePass:
                 apply_pass_state(ctx, _TRANSPARENT, viewport, view.scissor)
                 ctx.front_face = "cw" if view.mirrored else "ccw"
                 self._draw_batches(_back_to_front(transparent, view.eye), 0, options.masked, view.node,
-                                   skip=view.skip)
+                                   skip=view.skip, hide=view.hide)
                 targets.view_framebuffer.depth_mask = True
                 targets.view_framebuffer.use()
             if options.sky or transparent:

@@ -247,7 +247,7 @@ class ViewTree:
         mirrored = parent.view.mirrored != (state.kind == "mirror")
         return View(view=view, proj=proj, eye=eye, size=size, name=f"{state.kind} {state.entity}",
                     clip_plane=clip_plane, mirrored=mirrored, scissor=scissor, node=index,
-                    skip=state.exit_entity)
+                    skip=state.exit_entity, hide=parent.view.hide)
 
     def release(self) -> None:
         self.passes.release()

@@ -38,6 +38,7 @@ class View:
     scissor: tuple[int, int, int, int] | None = None
     node: int = 0
     skip: int = 0
+    hide: int = 0  # an entity no view of the tree draws (a probe's own object), whatever surface it looks out of
     _block: bytes | None = field(default=None, init=False, repr=False, compare=False)
 
     @property
@@ -53,7 +54,7 @@ class View:
             self._block = b"".join([
                 self.view.to_bytes(), self.proj.to_bytes(), vp.to_bytes(), glm.inverse(vp).to_bytes(),
                 glm.vec4(self.eye, 1.0).to_bytes(), glm.vec4(0.0, 0.0, w, h).to_bytes(), self.clip_plane.to_bytes(),
-                glm.uvec4(self.skip, 0, 0, 0).to_bytes(),
+                glm.uvec4(self.skip, self.hide, 0, 0).to_bytes(),
             ])
         return self._block
 
