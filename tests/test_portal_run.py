@@ -559,3 +559,69 @@ def test_a_fast_body_does_not_tunnel_through_a_thin_wall_and_rests_on_a_floor():
     moved = move_body((0.0, EYE_HEIGHT + 0.5, 0.0), (150.0, 0.0, 0.0), 1 / 60, shape, [wall, floor],
                       passable=lambda entity, lo, hi: entity == 1)
     assert moved.position[0] == pytest.approx(2.5, abs=1e-6)
+
+
+def _autoplay(ctx, level: Path, dt: float, seconds: float = 20.0, script=None) -> tuple[PortalRun, Engine, int]:
+    """The game's own autopilot plays ``level`` at ``dt`` a frame (no frames drawn) until it
+    wins or ``seconds`` of game time pass; returns the game, its engine and the frames run."""
+    game = PortalRun(level, autopilot=True, script=script, verbose=False)
+    engine = Engine(game, ctx)
+    frames = 0
+    while "win" not in game.event_kinds() and frames * dt < seconds and not (script and game.pilot.done):
+        engine.frame(dt, None)
+        frames += 1
+    return game, engine, frames
+
+
+@pytest.mark.parametrize("level", LEVELS, ids=[p.stem for p in LEVELS])
+def test_every_level_is_won_at_a_slow_frame_rate_as_at_60(ctx, level):
+    """The body moves in fixed physics steps and the autopilot gives input every 1/60 s of game
+    time, so a level plays the same at --dt 0.1 as at 1/60 (the fling was never completed at
+    0.1: one gravity step a frame fell short of the ledge, and 'hold w 20' was two seconds)."""
+    won_at = {}
+    for dt in (1.0 / 60.0, 0.1):
+        game, engine, frames = _autoplay(ctx, level, dt)
+        try:
+            kinds = game.event_kinds()
+            assert kinds.count("win") == 1 and "fell" not in kinds and "restart" not in kinds, (dt, game.events)
+            won_at[dt] = frames * dt
+        finally:
+            engine.close()
+    assert won_at[0.1] == pytest.approx(won_at[1.0 / 60.0], abs=0.15), won_at
+
+
+def test_the_body_moves_the_same_whatever_the_frame_time(ctx):
+    """A run and a jump played at 1/60, 0.1 and 0.05 s a frame: after the same game time the
+    eye is in the same place (the same fixed steps ran)."""
+    script = ["look 90 0", "press space", "hold w+a 59"]  # 1 s of game time from the press on
+    eyes = {}
+    for dt in (1.0 / 60.0, 0.1, 0.05):
+        game, engine, frames = _autoplay(ctx, LEVELS[0], dt, seconds=1.02, script=script)
+        try:
+            eyes[dt] = np.array(engine.world.get(game.player, Transform).position)
+        finally:
+            engine.close()
+    start = np.array([0.0, EYE_HEIGHT, 3.0])
+    assert np.linalg.norm(eyes[1.0 / 60.0] - start) > 3.0  # it did move
+    for dt in (0.1, 0.05):
+        np.testing.assert_allclose(eyes[dt], eyes[1.0 / 60.0], atol=1e-9)
+
+
+def test_n_after_a_win_plays_the_next_level_in_the_same_world(play, capsys):
+    p = play(LEVELS[0])
+    p.game.verbose = True
+    p.run_script(render=False)
+    assert p.game.won
+    said = capsys.readouterr().out
+    assert "level complete: Portal run 1: first jump" in said and "press n for the next level" in said
+    p.pilot = Autopilot(["press n", "wait 2"])
+    p.run_script(render=False)
+    assert p.game.level_path == LEVELS[1] and p.game.level.name == "Portal run 2: round the corner"
+    assert p.game.event_kinds()[-1] == "next" and not p.game.won and p.game.placed == [None, None]
+    start = p.game.rules.start
+    assert glm.length(p.eye - glm.vec3(start[0], start[1] + EYE_HEIGHT, start[2])) < 1e-2
+    assert "next level: Portal run 2" in capsys.readouterr().out
+    # And the next level plays from there to its own win.
+    p.pilot = Autopilot(p.game.rules.solution)
+    p.run_script(render=False)
+    assert p.game.won

@@ -7,14 +7,17 @@ how big portals are (``load_rules`` lists them all).  Each frame the game stage 
 order:
 
 * ``restart``: 'r' (or falling below ``kill_y``) deletes everything and builds the level
-  again from its file;
+  again from its file; 'n' after a win plays the next shipped level;
 * ``travelled``: a crossing the travel stage made last frame (``PortalCrossings``) turned the
   player's camera; the game turns the player's velocity by the same rotation and reads its
   heading back from the new orientation, so momentum goes out of the exit portal;
 * ``look and move``: mouse look, WASD on the ground (air control in the air), gravity and
   jumping, then the body (an AABB, ``games.portal_run.physics``) is moved through the level's
   solids; the wall a portal sits on lets the body through while it is in front of the
-  portal's opening, so the camera can reach the portal plane;
+  portal's opening, so the camera can reach the portal plane.  The body moves in fixed steps
+  of ``PHYSICS_STEP`` (as many as the frame's time holds, the rest carried to the next frame),
+  so the game plays the same at any frame rate or ``--dt``; the autopilot gives its input
+  every ``SCRIPT_STEPS`` steps (a script counts 60ths of a second);
 * ``place portals``: a left / right click casts a ray from the eye (``engine.raycast``) and
   places portal A / B on the wall (or, where the rules allow, the floor) it hits, or refuses
   it (a red marker flashes at the hit and a 'refused' event names the reason);
@@ -70,6 +73,15 @@ JUMP_SPEED = 5.5  # about a metre high: no ledge in the levels is that low
 EXIT_SPEED = 2.0  # m/s: the least speed out of an exit portal until the body is clear of its wall
 MOUSE_SENSITIVITY = 0.15  # degrees per pixel
 
+# Time.  The body moves in fixed steps whatever the frame's dt, so a level plays the same at
+# 30, 60 or 144 frames a second and at ``--dt 0.1``: a frame runs as many steps as its time
+# holds (the rest carries over), at most MAX_STEPS (a slower frame plays the game slower
+# rather than in coarser steps).  A scripted player (the autopilot) gives its input once
+# every SCRIPT_STEPS steps: a script's frame counts are 60ths of a second at any frame rate.
+PHYSICS_STEP = 1.0 / 120.0
+MAX_STEPS = 30  # 0.25 s of game time a frame at most
+SCRIPT_STEPS = 2  # physics steps per autopilot frame (1/60 s)
+
 # Portals.
 REACH = 60.0  # m: how far a portal shot goes
 PORTAL_OFFSET = 0.01  # m off the wall, so the portal never fights the wall for depth
@@ -78,7 +90,7 @@ CORNER_INSET = 0.03  # m: the fit test's probe points are this far inside the po
 FRONT_CLEARANCE = 0.3  # m in front of a portal that must be free of solids
 WALL_SLOPE = 0.05  # |normal.y| above this is a floor, ceiling or slope: no portals
 PORTAL_COLORS = ((0.15, 0.45, 1.0), (1.0, 0.45, 0.05))  # A blue, B orange
-REFUSED_FRAMES = 40
+REFUSED_SECONDS = 0.65  # how long the red marker of a refused shot shows
 REFUSED_COLOR = (1.0, 0.05, 0.03)
 WIN_GLOW = 4.0
 DEFAULT_PORTAL_SIZE = (1.2, 2.0)
@@ -273,7 +285,7 @@ class PortalRun(LevelGame):
         self.events: list[RunEvent] = []
         self.pilot: Autopilot | None = None
         self._want_pilot = autopilot
-        self._script = script
+        self._script_source = script  # None: the level's own solution
         self.won = False
         self.frame = 0
 
@@ -284,7 +296,7 @@ class PortalRun(LevelGame):
         super().build(world)  # loads the file again (a restart reads it afresh) and spawns it: self.names
         self.rules = load_rules(dict(self.level.rules), self.names, where)
         if self._want_pilot and self.pilot is None:
-            self.pilot = Autopilot(self._script if self._script is not None else self.rules.solution,
+            self.pilot = Autopilot(self._script_source if self._script_source is not None else self.rules.solution,
                                    f"{where}: rule 'solution'")
         self.caster = world.resources.get(RayCaster)
         if self.caster is None or self.caster.world is not world:
@@ -327,7 +339,7 @@ class PortalRun(LevelGame):
         self.placed: list[PlacedPortal | None] = [None, None]
         self.marker = world.spawn(Transform(position=hidden), MeshRef(box((0.5, 0.5, 0.5)), visible=False),
                                   Material(color=(*REFUSED_COLOR, 1.0), roughness=1.0), Emissive(1.2))
-        self.marker_frames = 0
+        self.marker_time = 0.0  # seconds the refused marker still shows
         self._exit_glow = world.try_get(self.exit, Emissive)
         self.won = False
         self.travels = 0
@@ -336,6 +348,12 @@ class PortalRun(LevelGame):
         self._in_front: set[int] = set()  # portals the eye was in front of when the move started
         self._boxes: tuple[int, list[Solid]] | None = None  # (frame, solid boxes) of the latest frame
         self._axes_checked = False  # off-axis solids reported (once a build, from world matrices)
+        self._clock = 0.0  # game time not yet run as a physics step
+        self._steps = 0  # physics steps since the build (the autopilot gives input every SCRIPT_STEPS)
+        self._pending = Input()  # the person's input for the next step
+        self._script = Input()  # the autopilot's input of its current frame
+        self._moved_in_frame = -1  # the frame whose first move decided self._in_front
+        self._came_out_of: set[int] = set()  # portals the player came out of last frame (closed to it this frame)
 
     def restart(self, world: World, why: str = "restart") -> None:
         """Delete everything and build the level again from its file (the autopilot goes on)."""
@@ -346,24 +364,129 @@ class PortalRun(LevelGame):
 
     # --- per frame ---------------------------------------------------------------------------
     def update(self, world: World, dt: float) -> None:
+        """One frame: follow last frame's crossing, take the frame's input, and run the fixed
+        physics steps its ``dt`` holds (``PHYSICS_STEP``; see the constants)."""
         self.frame += 1
-        state: Input = world.resources[Input]
+        person: Input = world.resources[Input]
         self._travelled(world)  # first: this frame's turning starts from the heading the portal gave
-        if self.pilot is not None:
-            self.pilot.fill(state, self)
+        # The frame's edges (presses, clicks) wait for the next step, even past a frame too
+        # short to hold one; its mouse motion turns the view now.
+        self._pending.pressed |= person.pressed
+        self._pending.clicks |= person.clicks
+        self._pending.held = set(person.held)
+        if self._piloted() is None and (person.mouse_dx or person.mouse_dy):
+            self._look(world, person.mouse_dx, person.mouse_dy)
+        self._flash(world, dt)
+        steps = self._take_steps(dt)
+        for done in range(1, steps + 1):
+            outcome = self._step(world)
+            if outcome == "rebuilt":
+                # The level was built again (restart, fall, next level): the frame goes on as
+                # a fresh game's first frame does, with no input.
+                for _ in range(self._take_steps(dt)):
+                    self._step(world, quiet=True)
+                break
+            if outcome in ("crossed", "held"):
+                # The eye went through an open portal: the travel stage carries it at the end
+                # of this frame, and the frame's steps left run from the other side next frame.
+                # Or it would have gone back into the portal it came out of last frame, which
+                # the travel stage does not allow (no ping-pong): that step is run next frame.
+                left = steps - done + (outcome == "held")
+                self._clock = min(self._clock + left * PHYSICS_STEP, MAX_STEPS * PHYSICS_STEP)
+                break
+
+    def _piloted(self) -> Autopilot | None:
+        """The autopilot while it has commands left (then the person's input plays)."""
+        return self.pilot if self.pilot is not None and not self.pilot.done else None
+
+    def _take_steps(self, dt: float) -> int:
+        """How many physics steps ``dt`` more of game time makes (the rest is kept)."""
+        self._clock = min(self._clock + dt, MAX_STEPS * PHYSICS_STEP)
+        steps = int(self._clock / PHYSICS_STEP + 1e-6)
+        self._clock = max(0.0, self._clock - steps * PHYSICS_STEP)
+        return steps
+
+    def _step(self, world: World, quiet: bool = False) -> str | None:
+        """One physics step with its input (the autopilot's, or the person's: the frame's edges
+        on its first step, held keys on every step; none when ``quiet``).  Returns "rebuilt"
+        when the level was built again, "crossed" when the eye went through an open portal's
+        opening (the travel stage carries it after the game stage), else None."""
+        if quiet:
+            state = Input()
+        elif self._piloted() is not None:
+            if self._steps % SCRIPT_STEPS == 0:
+                self._script = Input()
+                self.pilot.fill(self._script, self)
+                state = self._script
+                self._look(world, state.mouse_dx, state.mouse_dy)
+            else:
+                state = Input(held=set(self._script.held))
+        else:
+            state, self._pending = self._pending, Input(held=set(self._pending.held))
+        self._steps += 1
         if "r" in state.pressed:
             self.restart(world)
-            state = Input()  # the rebuilt level's first frame runs as a fresh game's does, with no input
-        self._look_and_move(world, state, dt)
-        if world.get(self.player, Transform).position.y < self.rules.kill_y:
+            return "rebuilt"
+        if self.won and "n" in state.pressed:
+            following = self.next_level()
+            if following is not None:
+                self.load(world, following)
+                return "rebuilt"
+        transform = world.get(self.player, Transform)
+        body = world.get(self.player, PlayerBody)
+        before = np.array(transform.position, np.float64)
+        kept = (transform.position, np.array(body.velocity), body.on_ground, body.exit_portal)
+        self._move(world, state, PHYSICS_STEP)
+        after = np.array(transform.position, np.float64)
+        if after[1] < self.rules.kill_y:
             self.restart(world, "fell")
-            self._look_and_move(world, Input(), dt)
-            return
+            return "rebuilt"
+        through = self._through_portal(before, after)
+        if through is not None and through in self._came_out_of:
+            transform.position, body.velocity, body.on_ground, body.exit_portal = kept
+            through = "held"
         for index, button in enumerate(("left", "right")):
             if button in state.clicks:
                 self.place(world, index)
-        self._flash(world)
         self._check_win(world)
+        return through if through == "held" else "crossed" if through is not None else None
+
+    def _through_portal(self, before: np.ndarray, after: np.ndarray) -> int | None:
+        """The open portal (0 = A, 1 = B) whose opening the eye went through from front to back
+        between ``before`` and ``after``, or None."""
+        if None in self.placed:
+            return None  # a lone portal is closed
+        w, h = self.rules.portal_size
+        for index, placed in enumerate(self.placed):
+            plane = placed.center + placed.normal * PORTAL_OFFSET
+            d0, d1 = float((before - plane) @ placed.normal), float((after - plane) @ placed.normal)
+            if d0 >= 0.0 > d1:
+                hit = before + (after - before) * (d0 / (d0 - d1)) - plane
+                if abs(float(hit @ placed.right)) <= w / 2 and abs(float(hit @ placed.up)) <= h / 2:
+                    return index
+        return None
+
+    def next_level(self) -> Path | None:
+        """The shipped level after this one (the first after the last); None for a level file
+        from elsewhere."""
+        shipped = [p.resolve() for p in levels()]
+        here = self.level_path.resolve()
+        return shipped[(shipped.index(here) + 1) % len(shipped)] if here in shipped else None
+
+    def load(self, world: World, level: str | Path) -> None:
+        """Play ``level`` from its start in the same world ('n' after a win: the next level).
+        An autopilot playing a level's own solution plays the new level's."""
+        self.level_path = Path(level)
+        self.level = load_level(self.level_path)
+        self.title = f"portal run: {self.level.name}"
+        for entity in world.entities():
+            world.delete_entity(entity)
+        if self._script_source is None:
+            self.pilot = None  # build makes the new level's
+        self.build(world)
+        self._event("next", self.level.name)
+        if self.verbose:
+            print(f"portal_run: next level: {self.level.name}", flush=True)
 
     # --- Pilotable ----------------------------------------------------------------------------
     def player_view(self) -> tuple[tuple[float, float, float], float, float, float]:
@@ -390,6 +513,8 @@ class PortalRun(LevelGame):
         if crossings is self._consumed:
             return
         self._consumed = crossings
+        self._came_out_of = {self.portals.index(c.to_portal) for c in crossings
+                             if c.entity == self.player and c.to_portal in self.portals}
         body = world.get(self.player, PlayerBody)
         transform = world.get(self.player, Transform)
         for crossing in crossings:
@@ -431,14 +556,20 @@ class PortalRun(LevelGame):
             self._boxes = (self.frame, boxes)
         return self._boxes[1]
 
-    def _look_and_move(self, world: World, state: Input, dt: float) -> None:
+    def _look(self, world: World, dx: float, dy: float) -> None:
+        """Mouse look: ``dx`` / ``dy`` pixels of motion turn the player (and the camera)."""
+        body = world.get(self.player, PlayerBody)
+        if dx or dy:
+            body.yaw = (body.yaw - dx * body.mouse_sensitivity + 180.0) % 360.0 - 180.0
+            body.pitch = max(-89.0, min(89.0, body.pitch - dy * body.mouse_sensitivity))
+        body.rotation = yaw_pitch_rotation(body.yaw, body.pitch)
+        world.get(self.player, Transform).rotation = body.rotation
+
+    def _move(self, world: World, state: Input, dt: float) -> None:
+        """One physics step of ``dt``: walking (on the ground) or air control, jumping,
+        gravity, and the body moved through the solids."""
         body = world.get(self.player, PlayerBody)
         transform = world.get(self.player, Transform)
-        if state.mouse_dx or state.mouse_dy:
-            body.yaw = (body.yaw - state.mouse_dx * body.mouse_sensitivity + 180.0) % 360.0 - 180.0
-            body.pitch = max(-89.0, min(89.0, body.pitch - state.mouse_dy * body.mouse_sensitivity))
-        body.rotation = yaw_pitch_rotation(body.yaw, body.pitch)
-        transform.rotation = body.rotation
         if dt <= 0.0:
             return
         yaw = math.radians(body.yaw)
@@ -464,12 +595,15 @@ class PortalRun(LevelGame):
         eye = transform.position
         self._step_out(body, v, np.array(eye, np.float64))
         self._exiting = body.exit_portal
-        start = np.array(eye, np.float64)
-        # Which portals the eye is in front of as the move starts: their walls may let the body
-        # through. (Decided once: within the move the eye may pass a portal's plane, the travel
-        # stage then carries it through, and the wall must not close on the body half way.)
-        self._in_front = {index for index, placed in enumerate(self.placed)
-                          if placed is not None and float((start - placed.center) @ placed.normal) >= -0.02}
+        if self._moved_in_frame != self.frame:
+            self._moved_in_frame = self.frame
+            start = np.array(eye, np.float64)
+            # Which portals the eye is in front of as the frame's first step starts: their walls
+            # may let the body through. (Decided once a frame: within the frame the eye may pass
+            # a portal's plane, the travel stage then carries it through at the frame's end, and
+            # the wall must not close on the body half way.)
+            self._in_front = {index for index, placed in enumerate(self.placed)
+                              if placed is not None and float((start - placed.center) @ placed.normal) >= -0.02}
         v[1] -= GRAVITY * dt
         moved = move_body((eye.x, eye.y, eye.z), v, dt, self.shape, self.solid_boxes(), self._passable)
         body.velocity = moved.velocity
@@ -614,15 +748,15 @@ class PortalRun(LevelGame):
         if point is not None:
             world.get(self.marker, Transform).position = tuple(point + normal * 0.3)
             world.get(self.marker, MeshRef).visible = True
-            self.marker_frames = REFUSED_FRAMES
+            self.marker_time = REFUSED_SECONDS
         self._event("refused", f"portal {'AB'[index]}: {why}", index,
                     tuple(float(c) for c in point) if point is not None else None)
         return False
 
-    def _flash(self, world: World) -> None:
-        if self.marker_frames > 0:
-            self.marker_frames -= 1
-            if self.marker_frames == 0:
+    def _flash(self, world: World, dt: float) -> None:
+        if self.marker_time > 0.0:
+            self.marker_time -= dt
+            if self.marker_time <= 0.0:
                 world.get(self.marker, MeshRef).visible = False
 
     # --- winning -------------------------------------------------------------------------------
@@ -642,7 +776,9 @@ class PortalRun(LevelGame):
                 self._exit_glow.power = WIN_GLOW
             self._event("win", f"reached {self.rules.exit}")
             if self.verbose:
-                print(f"portal_run: level complete: {self.level.name} (frame {self.frame}; press r to restart)")
+                keys = "press n for the next level, r to restart" if self.next_level() is not None \
+                    else "press r to restart"
+                print(f"portal_run: level complete: {self.level.name} (frame {self.frame}; {keys})", flush=True)
 
     # --- helpers ----------------------------------------------------------------------------------
     def _name(self, entity: int) -> str:
