@@ -71,3 +71,65 @@ def probe_for(world: World, entity: int) -> int:
             if distance < best_distance:
                 best, best_distance = owner, distance
     return best
+
+
+MAX_SURFACE_IMAGES = 4096  # boxes seen through mirrors and portals a probe's schedule follows a frame
+
+
+def images_through_surfaces(eye, lo: np.ndarray, hi: np.ndarray, surfaces, depth: int,
+                            far: float) -> tuple[np.ndarray, np.ndarray] | None:
+    """Where the world boxes [lo, hi] (rows) appear to a probe at ``eye`` through the mirrors
+    and portals ``surfaces`` (each with ``plane``, ``exit_plane`` and ``carry``, as the
+    view tree's ``SurfaceState``), up to ``depth`` surfaces deep: a box that can be seen
+    through a surface (a corner in front of the plane the surface's view looks out of) is
+    seen where the inverse of the surface's ``carry`` puts it (its mirror image; through a
+    portal, carried back to this side).  The images' boxes, within ``far`` of the eye, as
+    (lo, hi) rows; conservative (a box is only left out when it cannot be seen).  None when
+    there would be more than MAX_SURFACE_IMAGES: the caller then takes every face that sees
+    a surface."""
+    eye = np.asarray(eye, np.float64)
+    pick = np.array([(x, y, z) for x in (0, 1) for y in (0, 1) for z in (0, 1)], dtype=bool)
+    carried = []
+    for surface in surfaces:
+        plane = np.asarray(surface.plane, np.float64)
+        exit_plane = np.asarray(surface.exit_plane, np.float64)
+        back = np.linalg.inv(np.array(surface.carry.to_list(), np.float64).T)
+        carried.append((plane, exit_plane, back))
+    images_lo, images_hi = [], []
+    level_lo, level_hi = np.atleast_2d(lo).astype(np.float64), np.atleast_2d(hi).astype(np.float64)
+    for level in range(depth):
+        next_lo, next_hi = [], []
+        for plane, exit_plane, back in carried:
+            if level == 0 and plane[:3] @ eye + plane[3] <= 0.0:
+                continue  # the probe is behind it: it sees the surface's back
+            corners = np.where(pick[None], level_hi[:, None, :], level_lo[:, None, :])  # (box, corner, xyz)
+            homogeneous = np.concatenate([corners, np.ones(corners.shape[:2] + (1,))], axis=2)
+            seen = (homogeneous @ exit_plane >= 0.0).any(axis=1)
+            if not seen.any():
+                continue
+            moved = homogeneous[seen] @ back.T
+            moved = moved[..., :3] / moved[..., 3:4]
+            next_lo.append(moved.min(axis=1))
+            next_hi.append(moved.max(axis=1))
+        if not next_lo:
+            break
+        level_lo, level_hi = np.concatenate(next_lo), np.concatenate(next_hi)
+        near = np.linalg.norm(np.clip(eye, level_lo, level_hi) - eye, axis=1) <= far
+        level_lo, level_hi = level_lo[near], level_hi[near]
+        images_lo.append(level_lo)
+        images_hi.append(level_hi)
+        if sum(len(b) for b in images_lo) > MAX_SURFACE_IMAGES:
+            return None
+        if not len(level_lo):
+            break
+    if not images_lo:
+        return np.zeros((0, 3)), np.zeros((0, 3))
+    return np.concatenate(images_lo), np.concatenate(images_hi)
+
+
+def lights_reach(eye, far: float, lights: list[tuple[np.ndarray, float]]) -> bool:
+    """Whether any point light of ``lights`` ((position, range) rows, where a light was or
+    is) lights something a probe at ``eye`` sees out to ``far``: its sphere of range meets
+    the probe's sphere of sight."""
+    eye = np.asarray(eye, np.float64)
+    return any(float(np.linalg.norm(np.asarray(p, np.float64) - eye)) <= r + far for p, r in lights)

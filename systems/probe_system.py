@@ -7,8 +7,11 @@ has a ``ProbeState``.  What is captured each frame, per probe:
   - the first frame it exists: all six faces;
   - ``on_change`` (the default): only the faces whose frustum holds the old or the new
     bounds of an entity that was added, removed or moved (the transform stage's frame sets)
-    or whose material changed, within the probe's range; all six when the probe itself
-    moved or its settings changed, or a light or the sky changed;
+    or whose material changed, within the probe's range, either directly or as seen in a
+    mirror or through a portal (the boxes' images, up to the probe's ``depth``;
+    ``engine.probe_rules.images_through_surfaces``); all six when the probe itself moved or
+    its settings changed, the sun or the sky changed, or a point light whose range reaches
+    what the probe sees changed, came, went or moved (its own Transform or a parent's);
   - ``every_frame``: all six; ``every_n``: all six every n frames; ``once``: nothing more;
     ``scripted``: all six after ``ReflectionProbe.request()``;
   - with ``time_slicing="one_face_per_frame"`` the waiting faces go one a frame (after a
@@ -65,7 +68,7 @@ from components import (
     Skybox,
     Transform,
 )
-from engine.probe_rules import has_own_probe, world_bounds
+from engine.probe_rules import has_own_probe, images_through_surfaces, lights_reach, world_bounds
 from engine.render.probes import ALL_FACES, ProbeStates, face_view, faces_touched
 from engine.render.renderer import Renderer
 from engine.render.view_tree import Surfaces
@@ -75,7 +78,10 @@ PATHS = ("auto", "six_pass", "layered")
 AUTO_TIMED_CAPTURES = 3  # timed captures of each path before "auto" chooses (medians compared)
 LOG = logging.getLogger("speculum")
 LOOK_KINDS = (Material, MeshRef, Emissive, Reflective, Refractive, Mirror, Portal)  # what changes a look
-LIGHTING_KINDS = (DirectionalLight, PointLight, Skybox)  # what changes every face
+LIGHTING_KINDS = (DirectionalLight, Skybox)  # what changes every face of every probe
+# A PointLight relights the probes within its reach (engine.probe_rules.lights_reach) when it
+# changes, comes, goes or moves (its own Transform or a parent's: the transform stage's
+# moved set holds descendants).
 
 
 @dataclass
@@ -106,6 +112,7 @@ class ProbeSystem(esper.Processor):
         self.timings: dict[str, float] = {}  # median ms of the timed captures, by path
         self.path_used = ""  # the path of the last capture (RenderStats.probe_path, every frame with probes)
         self._bounds: dict[int, tuple[np.ndarray, np.ndarray]] = {}  # entity -> last world box
+        self._lights: dict[int, tuple[np.ndarray, float]] = {}  # point light -> (position, range) last seen
         # Recaptures drawn after the frame is presented, sampled from the next frame on (the
         # module's docstring says why); False draws them before the main view, as first captures are.
         self.recapture_after_present = True
@@ -116,13 +123,17 @@ class ProbeSystem(esper.Processor):
         self._refresh_probes()
         if not self.probes:
             self._bounds.clear()  # nothing to keep boxes for (a world without probes pays nothing)
+            self._lights.clear()
             return
         # Where every drawable was when the first probe came (its first capture saw them
         # there); after that, only what changed is looked at.
         boxes = self._changed_boxes() if had_probes else self._all_boxes()
         everything = any(world.changed(kind) for kind in LIGHTING_KINDS)
+        lights = self._changed_lights() if had_probes else self._all_lights()
+        surfaces = world.resources.get(Surfaces)
         for state in self.probes.values():
-            self._schedule(state, boxes, everything)
+            self._schedule(state, boxes, everything or lights_reach(state.position, state.settings.far, lights),
+                           surfaces)
             if not state.captures or not self.recapture_after_present:
                 self._capture_due(state)  # a first capture now: the main view has nothing to sample yet
         self._report()
@@ -205,12 +216,44 @@ class ProbeSystem(esper.Processor):
                 boxes[entity] = found
         return boxes
 
+    def _changed_lights(self) -> list[tuple[np.ndarray, float]]:
+        """(position, range) where each point light that changed, came, went or moved this
+        frame was and is."""
+        world = self.world
+        frame = world.frame
+        entities = (set(frame.moved) | set(frame.added) | set(frame.removed) | world.deleted()
+                    | world.changed(PointLight) | world.changed(Transform))
+        spheres = []
+        for entity in entities:
+            old = self._lights.pop(entity, None)
+            if old is not None:
+                spheres.append(old)
+            new = self._light_sphere(entity)
+            if new is not None:
+                self._lights[entity] = new
+                spheres.append(new)
+        return spheres
+
+    def _all_lights(self) -> list[tuple[np.ndarray, float]]:
+        self._lights = {entity: sphere for entity in list(self.world.query_one(PointLight))
+                        if (sphere := self._light_sphere(entity[0])) is not None}
+        return []  # a first capture takes every face anyway
+
+    def _light_sphere(self, entity: int) -> tuple[np.ndarray, float] | None:
+        world = self.world
+        if not world.exists(entity):
+            return None
+        light, transform = world.try_get(entity, PointLight), world.try_get(entity, Transform)
+        if light is None or transform is None:
+            return None
+        return np.array(transform.world[3].xyz, np.float64), float(light.range)
+
     def _all_boxes(self) -> dict[int, list[tuple[np.ndarray, np.ndarray]]]:
         self._bounds = {entity: world_bounds(mesh_ref.mesh, transform.world)
                         for entity, (mesh_ref, transform) in self.world.query(MeshRef, Transform)}
         return {entity: [box] for entity, box in self._bounds.items()}
 
-    def _schedule(self, state: ProbeState, boxes, everything: bool) -> None:
+    def _schedule(self, state: ProbeState, boxes, everything: bool, surfaces: Surfaces | None) -> None:
         settings = state.settings
         state.frames += 1
         if settings._requested:
@@ -225,8 +268,26 @@ class ProbeSystem(esper.Processor):
                 return
             found = [box for entity, boxes_of in boxes.items() if entity != state.owner for box in boxes_of]
             if found:
-                lo, hi = zip(*found, strict=True)
-                state.pending |= faces_touched(state.position, settings.far, np.array(lo), np.array(hi))
+                lo, hi = (np.array(side) for side in zip(*found, strict=True))
+                state.pending |= faces_touched(state.position, settings.far, lo, hi)
+                if settings.depth > 0 and surfaces is not None and (surfaces.mirrors or surfaces.portals):
+                    state.pending |= self._faces_through_surfaces(state, lo, hi, surfaces)
+
+    @staticmethod
+    def _faces_through_surfaces(state: ProbeState, lo: np.ndarray, hi: np.ndarray, surfaces: Surfaces) -> set[int]:
+        """The faces that may see a change through a mirror or portal (a face's view tree
+        draws what its mirrors show): where the changed boxes' images lie
+        (``probe_rules.images_through_surfaces``), or, past the images' limit, every face that
+        sees a surface."""
+        settings = state.settings
+        shown = [*surfaces.mirrors.values(), *surfaces.portals.values()]
+        images = images_through_surfaces(state.position, lo, hi, shown, settings.depth, settings.far)
+        if images is None:
+            corners = np.concatenate([s.corners[:, :3] for s in shown])
+            return faces_touched(state.position, settings.far, corners.min(axis=0), corners.max(axis=0))
+        if not len(images[0]):
+            return set()
+        return faces_touched(state.position, settings.far, *images)
 
     def _capture(self, state: ProbeState, faces: set[int]) -> None:
         settings = state.settings

@@ -405,6 +405,90 @@ def test_a_probes_own_object_is_in_none_of_its_mirror_views(scene, path, monkeyp
     assert own[2] > own[0] and own.sum() > 0.5, own  # the sky there (blue), not the box, red or black
 
 
+@pytest.mark.parametrize("change", ["recolour", "move"])
+def test_a_face_that_sees_a_change_only_in_a_mirror_is_recaptured(scene, change):
+    """The mirror at z = -2 shows the -Z face a red box behind the probe (z = +2); the box
+    is not in the -Z face's own frustum.  When the box turns green, or moves 0.3 m to the
+    side, the -Z face is captured again (its mirror view sees it) and shows it there."""
+    from components import Mirror
+    from engine.mesh import quad as quad_mesh
+
+    ents = {}
+
+    def build(world):
+        world.spawn(Skybox())
+        look_from(world, (3.0, 0.5, 3.0), target=(0.0, 0.0, 0.0))
+        ents["probe"] = world.spawn(Transform(), ReflectionProbe(resolution=64, depth=1))
+        world.spawn(Transform(position=(0, 0, -2)), MeshRef(quad_mesh(6, 6)), Material(color=(0.05, 0.05, 0.05)),
+                    Mirror())
+        ents["box"] = world.spawn(Transform(position=(0, 1.5, 2)), MeshRef(box((0.8, 0.8, 0.8))),
+                                  Material(color=(0.9, 0.05, 0.05)), Emissive(2.0))
+
+    runner = scene(build, (64, 48))
+    runner.engine.stages["probes"].recapture_after_present = False
+    runner.frame()
+    runner.frame()
+    probes = runner.engine.renderer.probes
+    state = probe_stage(runner).probes[ents["probe"]]
+    image = np.array([0.0, 1.5, -6.0])
+    if change == "recolour":
+        runner.world.get(ents["box"], Material).color = (0.05, 0.9, 0.05)
+        expect = 1  # green
+    else:
+        runner.world.get(ents["box"], Transform).position = glm.vec3(0.6, 1.5, 2.0)
+        image = np.array([0.6, 1.5, -6.0])
+        expect = 0  # red, where the moved box's image now is
+    before = state.faces_captured
+    runner.frame()
+    assert state.faces_captured > before
+    target = image / np.linalg.norm(image)
+    row, col = np.unravel_index(np.argmax(face_directions(5, 64) @ target), (64, 64))
+    seen = probes.read_face(ents["probe"], 5)[row, col]
+    assert seen[expect] > 1.0 and seen[expect] > 4 * max(seen[c] for c in range(3) if c != expect), seen
+
+
+def test_a_moved_point_light_recaptures_the_probes_it_reaches(scene):
+    """A point light 2 m from a probe (range 3) moves, then its parent moves it: the probe
+    is captured again each time (all six faces: its light falls on whatever the faces see);
+    a probe 100 m away is not.  A light out of every probe's reach moving recaptures none."""
+    from components import PointLight
+
+    ents = {}
+
+    def build(world):
+        world.spawn(Skybox())
+        look_from(world, (3.0, 0.5, 3.0), target=(0.0, 0.0, 0.0))
+        world.spawn(Transform(position=(0, -1, 0)), MeshRef(box((4.0, 0.2, 4.0))), Material(color=(0.8, 0.8, 0.8)))
+        ents["near"] = world.spawn(Transform(), ReflectionProbe(resolution=16, far=10.0))
+        ents["far"] = world.spawn(Transform(position=(100.0, 0.0, 0.0)), ReflectionProbe(resolution=16, far=10.0))
+        ents["holder"] = world.spawn(Transform(position=(2.0, 0.0, 0.0)))
+        ents["light"] = world.spawn(Transform(parent=ents["holder"]), PointLight(intensity=5.0, range=3.0))
+        ents["distant"] = world.spawn(Transform(position=(50.0, 0.0, 0.0)), PointLight(range=3.0))
+
+    runner = scene(build, (32, 24))
+    runner.engine.stages["probes"].recapture_after_present = False
+    runner.frame()
+    runner.frame()
+    states = probe_stage(runner).probes
+    counts = {key: states[ents[key]].faces_captured for key in ("near", "far")}
+
+    def captured() -> dict[str, int]:
+        runner.frame()
+        now = {key: states[ents[key]].faces_captured for key in ("near", "far")}
+        grown = {key: now[key] - counts[key] for key in now}
+        counts.update(now)
+        return grown
+
+    runner.world.get(ents["light"], Transform).position = glm.vec3(0.0, 0.5, 0.0)  # its own Transform
+    assert captured() == {"near": 6, "far": 0}
+    runner.world.get(ents["holder"], Transform).position = glm.vec3(2.5, 0.0, 0.0)  # its parent's
+    assert captured() == {"near": 6, "far": 0}
+    runner.world.get(ents["distant"], Transform).position = glm.vec3(60.0, 0.0, 0.0)  # reaches no probe
+    assert captured() == {"near": 0, "far": 0}
+    runner.world.get(ents["light"], PointLight).intensity = 2.0
+    assert captured() == {"near": 6, "far": 0}
+
+
 def test_box_projection_puts_a_walls_reflection_where_the_math_says(scene):
     """A chrome floor tile off the probe's centre, inside its influence box (8 x 4 x 8 about
     (0, 1, 0)), with a red panel on the box's +X wall.  Each tile pixel's reflected ray,

@@ -186,7 +186,7 @@ def test_a_relink_that_cannot_keep_the_vertex_inputs_leaves_the_old_program_draw
              ("v_reflect = in_reflect;", "v_reflect = vec4(0.0);"), ("v_slots = in_slots;", "v_slots = in_slots[0];"),
              ("in_slots.w == camera", "in_slots[0].w == camera")]
     for old, new in edits:
-        assert text.count(old) == 1, old
+        assert text.count(old) >= 1, old
         text = text.replace(old, new)
     path.write_text(text)
     scene_programs = [key for key in library._programs if key[0] == "scene.vert"]
