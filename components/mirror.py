@@ -6,6 +6,7 @@ from typing import Any
 
 from pyglm import glm
 
+from components.limits import MAX_VIEW_DEPTH
 from components.tracking import ComponentValueError, TrackedComponent, boolean, color, finite, vec3
 
 
@@ -39,8 +40,8 @@ class Mirror(TrackedComponent):
         if name == "resolution_scale":
             return finite(self, name, value, low=0.1, high=1.0)
         if name == "max_depth":
-            if not isinstance(value, int) or isinstance(value, bool) or not 0 <= value <= 16:
-                raise ComponentValueError(f"Mirror.max_depth must be an int in [0, 16], got {value!r}")
+            if not isinstance(value, int) or isinstance(value, bool) or not 0 <= value <= MAX_VIEW_DEPTH:
+                raise ComponentValueError(f"Mirror.max_depth must be an int in [0, {MAX_VIEW_DEPTH}], got {value!r}")
         if name == "enabled":
             return boolean(self, name, value)
         if name == "plane_point" and value is not None:

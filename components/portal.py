@@ -7,6 +7,7 @@ from typing import Any
 
 from pyglm import glm
 
+from components.limits import MAX_VIEW_DEPTH
 from components.tracking import ComponentValueError, TrackedComponent, color, finite, integer, vec3
 
 
@@ -47,8 +48,8 @@ class Portal(TrackedComponent):
                 raise ComponentValueError(f"Portal.size must be (width, height) > 0, got {value!r}") from None
             return (w, h)
         if name == "max_depth":
-            if not isinstance(value, int) or isinstance(value, bool) or not 0 <= value <= 16:
-                raise ComponentValueError(f"Portal.max_depth must be an int in [0, 16], got {value!r}")
+            if not isinstance(value, int) or isinstance(value, bool) or not 0 <= value <= MAX_VIEW_DEPTH:
+                raise ComponentValueError(f"Portal.max_depth must be an int in [0, {MAX_VIEW_DEPTH}], got {value!r}")
         if name == "enabled" and not isinstance(value, bool):
             raise ComponentValueError(f"Portal.enabled must be True or False, got {value!r}")
         if name == "closed_color":

@@ -4,6 +4,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any
 
+from components.limits import MAX_VIEW_DEPTH
 from components.tracking import ComponentValueError, TrackedComponent, boolean, choice, finite, integer, vec3
 
 REFRESH_MODES = ("once", "on_change", "every_frame", "every_n", "scripted")
@@ -80,5 +81,5 @@ class ReflectionProbe(TrackedComponent):
         if name == "box_projection":
             return boolean(self, name, value)
         if name == "depth":
-            return integer(self, name, value, low=0, high=16)
+            return integer(self, name, value, low=0, high=MAX_VIEW_DEPTH)
         return value

@@ -31,6 +31,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from pyglm import glm
 
+from components.limits import MAX_VIEW_DEPTH
 from engine.reflection_math import oblique_is_safe, oblique_projection, transform_plane
 from engine.render.batched_mirrors import PATHS, choose_path, submitted_triangles
 from engine.render.mirror_passes import (
@@ -48,7 +49,7 @@ from engine.render.views import View
 
 # The deepest a tree may go (each level is one more set of root-sized targets); the depth
 # limits of Mirror and Portal components take values up to this.
-MAX_TREE_DEPTH = 16
+MAX_TREE_DEPTH = MAX_VIEW_DEPTH  # the depth cap's limit: the components' own
 _BATCHED = SceneOptions(clear=False, masked=True, sky=False, batched=True, reflection_filter=True)
 
 
