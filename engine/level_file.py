@@ -423,6 +423,14 @@ class Level:
     def entity_names(self) -> list[str]:
         return [e.name for e in self._entities]
 
+    @property
+    def has_camera(self) -> bool:
+        """Whether an entity has a Camera (not turned off) and a Transform: what the main view
+        looks through."""
+        return any(any(cls.__name__ == "Camera" and fields.get("active", True) is not False
+                       for cls, fields in spec.components)
+                   and any(cls.__name__ == "Transform" for cls, _ in spec.components) for spec in self._entities)
+
     def spawn(self, world: World) -> dict[str, int]:
         """Create every entity (fresh components each call); returns ids by name. All or
         nothing: a failure deletes what this call made and raises a LevelError."""
@@ -801,18 +809,39 @@ class LevelGame(Game):
 
     ``components``: the game's own plain-data components its files may hold, by name.
     ``asset_roots``: folders besides a level's own its files may name (shared game assets).
-    After ``build``: ``level`` (the checked file) and ``names`` (entity ids by name)."""
+    ``game``: the name a level's ``[level] game`` gives this game; a level for another game
+    is refused (one that names no game plays in any).  ``makes_camera``: the game adds the
+    player's camera itself; otherwise a level with no camera is refused (its frames would
+    be black).  After ``build``: ``level`` (the checked file) and ``names`` (entity ids by name)."""
 
     components: Mapping[str, type] = {}
     asset_roots: Sequence[str | Path] = ()
+    game: str | None = None
+    makes_camera: bool = False
 
     def __init__(self, level_path: str | Path) -> None:
         self.level_path = Path(level_path)
         self.level: Level | None = None
         self.names: dict[str, int] = {}
 
+    def load(self) -> Level:
+        """The game's level file, loaded and checked for this game (``check_level``)."""
+        level = load_level(self.level_path, self.components, self.asset_roots)
+        self.check_level(level)
+        return level
+
+    def check_level(self, level: Level) -> None:
+        """A LevelError (naming the file) for a level made for another game, or one with no
+        camera where the game makes none."""
+        if self.game is not None and level.game is not None and level.game != self.game:
+            raise LevelError(level.path, f"[level] game = {level.game!r}: the level is for {level.game}, not for "
+                                         f"{self.game} (play it with that game)", level._lines.get(("level", "game")))
+        if not self.makes_camera and not level.has_camera:
+            raise LevelError(level.path, "no entity has a Camera and a Transform, so every frame would be black (add "
+                                         "one: [[entity]] with [entity.Transform] and [entity.Camera])")
+
     def build(self, world: World) -> None:
-        self.level = load_level(self.level_path, self.components, self.asset_roots)
+        self.level = self.load()
         self.names = self.level.spawn(world)
 
 

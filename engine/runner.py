@@ -31,25 +31,31 @@ from engine.render.targets import CaptureTarget
 HEADLESS_DT = 1.0 / 60.0
 
 
-def parse_args(game: Game, argv: Sequence[str] | None) -> argparse.Namespace:
-    parser = argparse.ArgumentParser(prog=f"python -m games.{type(game).__module__.split('.')[1]}"
-                                     if type(game).__module__.startswith("games.") else None,
-                                     description=f"{game.title} (Speculum)")
+def build_parser(game: Game | type[Game]) -> argparse.ArgumentParser:
+    """Every game's options, titled by the game (an instance or its class).  A game with
+    options of its own adds them to this parser (an argument group) and passes it to
+    ``main``, so ``--help`` is one title, one usage and every option."""
+    module = (game if isinstance(game, type) else type(game)).__module__
+    title = game.title if "speculum" in game.title.lower() else f"{game.title} (Speculum)"
+    parser = argparse.ArgumentParser(prog=f"python -m games.{module.split('.')[1]}"
+                                     if module.startswith("games.") else None, description=title)
     parser.add_argument("--headless", action="store_true", help="render offscreen through EGL and write PNGs")
-    parser.add_argument("--frames", type=int, default=None,
-                        help="frames to run (headless default 4; windowed: until closed)")
-    parser.add_argument("--size", type=_size, default=game.size, help="WxH, e.g. 1280x720")
-    parser.add_argument("--out", type=Path, default=None, help="folder for frame_NNNN.png (headless)")
+    parser.add_argument("--frames", type=int, default=None, metavar="N",
+                        help="frames to run (headless default 4; windowed: the window closes after N)")
+    parser.add_argument("--size", type=_size, default=game.size, metavar="WxH", help="WxH, e.g. 1280x720")
+    parser.add_argument("--out", type=Path, default=None, metavar="DIR",
+                        help="folder for frame_NNNN.png (headless) or F12 screenshots (windowed)")
     parser.add_argument("--level", type=Path, default=None, metavar="FILE",
                         help="play this level file (.toml, docs/level_files.md) instead of the game's own")
-    parser.add_argument("--ids", action="store_true", help="also write ids_NNNN.npy per frame")
-    parser.add_argument("--export-scene", type=_scene_path, default=None,
+    parser.add_argument("--ids", action="store_true", help="headless: also write ids_NNNN.npy per frame")
+    parser.add_argument("--export-scene", type=_scene_path, default=None, metavar="FILE",
                         help="write FILE.glb or FILE.gltf (world geometry) and FILE.json (camera, components) "
-                             "at the end")
-    parser.add_argument("--camera", type=_pose, default=None, help="start pose x,y,z,yaw,pitch (degrees)")
-    parser.add_argument("--dt", type=_seconds, default=HEADLESS_DT,
+                             "at the end (windowed: as the window closes)")
+    parser.add_argument("--camera", type=_pose, default=None, metavar="X,Y,Z,YAW,PITCH",
+                        help="start pose (metres, degrees)")
+    parser.add_argument("--dt", type=_seconds, default=HEADLESS_DT, metavar="SECONDS",
                         help=f"seconds of game time per headless frame (default {HEADLESS_DT:.4f}: 60 a second)")
-    parser.add_argument("--gif", type=_gif_path, default=None,
+    parser.add_argument("--gif", type=_gif_path, default=None, metavar="FILE",
                         help="headless: also write the frames as an animated GIF (one frame per --dt)")
     parser.add_argument("--aa", choices=ANTIALIAS_MODES, default="fxaa",
                         help="anti-aliasing of the final image (default fxaa; ids are never affected)")
@@ -59,6 +65,14 @@ def parse_args(game: Game, argv: Sequence[str] | None) -> argparse.Namespace:
     parser.add_argument("--overlay", action="store_true",
                         help="draw the debug overlay (frame rate, passes, draw calls, views, probe captures, "
                              "paths) into the frames; windowed: shown from the start (F1 toggles it)")
+    return parser
+
+
+def parse_args(game: Game, argv: Sequence[str] | None,
+               parser: argparse.ArgumentParser | None = None) -> argparse.Namespace:
+    """``argv`` by ``parser`` (``build_parser(game)`` when None), checked."""
+    if parser is None:
+        parser = build_parser(game)
     args = parser.parse_args(argv)
     if args.frames is not None and args.frames < 1:
         parser.error("--frames must be >= 1")
@@ -117,10 +131,12 @@ def _pose(text: str) -> tuple[float, ...]:
     return values
 
 
-def main(game: Game, argv: Sequence[str] | None = None) -> int:
+def main(game: Game, argv: Sequence[str] | None = None, parser: argparse.ArgumentParser | None = None) -> int:
+    """Run ``game`` as ``argv`` says; the exit status (0, or 2 after one error line).
+    ``parser``: ``build_parser``'s with the game's own options added."""
     from engine.level_file import set_asset_roots, user_asset_roots
 
-    args = parse_args(game, argv)
+    args = parse_args(game, argv, parser)
     before = user_asset_roots()
     set_asset_roots(args.asset_root)  # for every level loaded in this run, the game's own loads too
     try:
@@ -172,7 +188,7 @@ def use_level(game: Game, level: Path | None) -> None:
     """``--level FILE``: a game built from a level file (``LevelGame``) plays ``FILE``
     instead; any other game refuses it.  A level game's file is checked here, before a
     context or window is made, so a mistake in it is one error line and nothing drawn."""
-    from engine.level_file import LevelGame, load_level
+    from engine.level_file import LevelGame
 
     if not isinstance(game, LevelGame):
         if level is not None:
@@ -181,7 +197,7 @@ def use_level(game: Game, level: Path | None) -> None:
         return
     if level is not None:
         game.level_path = level
-    load_level(game.level_path, game.components, game.asset_roots)
+    game.load()  # load_level and the game's own checks (a level for another game, no camera)
 
 
 class OutputPathError(SpeculumError):

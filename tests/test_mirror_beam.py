@@ -326,15 +326,22 @@ def test_bad_rules_are_errors_naming_the_file_and_the_rule(ctx, tmp_path, old, n
     assert ctx.error == "GL_NO_ERROR"
 
 
-def test_command_line_autopilot_writes_frames_of_the_level_solved(tmp_path):
-    """The headless command plays the solution: the last frame shows the target lit; a bad
-    --level is one 'speculum: error:' line and exit 2."""
+@pytest.mark.parametrize("how", ["--headless", "no display"])
+def test_command_line_autopilot_writes_frames_of_the_level_solved(tmp_path, how):
+    """The headless command plays the solution: the last frame shows the target lit, and the
+    win is said in one line.  So does a run with no display, which goes headless (it drew the
+    unsolved level before); a bad --level is one 'speculum: error:' line and exit 2."""
     out = tmp_path / "frames"
-    done = subprocess.run([sys.executable, "-m", "games.mirror_beam", "--headless", "--frames", "7",
+    flags, env = (["--headless"], os.environ) if how == "--headless" else \
+        ([], {**os.environ, "DISPLAY": "", "WAYLAND_DISPLAY": ""})
+    done = subprocess.run([sys.executable, "-m", "games.mirror_beam", *flags, "--frames", "7",
                            "--size", "96x54", "--out", str(out), "--level", str(level_file("01_one_bounce")),
                            "--aa", "off"],  # the colours of a 20-pixel target, not its blended rim
-                          cwd=ROOT, capture_output=True, text=True, timeout=120)
+                          cwd=ROOT, env=env, capture_output=True, text=True, timeout=120)
     assert done.returncode == 0, done.stderr
+    solved = [line for line in done.stdout.splitlines() if line.startswith("mirror_beam: solved:")]
+    assert solved == ["mirror_beam: solved: Mirror beam 1: one bounce with 1 bounce (frame 5; press n for the next "
+                      "level, r to restart)"], done.stdout
     frames = sorted(out.glob("frame_*.png"))
     assert len(frames) == 7
     from PIL import Image

@@ -38,6 +38,7 @@ class Spin:
 class HallOfMirrors(LevelGame):
     title = "Speculum: hall of mirrors"
     size = (960, 540)
+    game = "hall_of_mirrors"  # a level file's [level] game
     components = {"Spin": Spin}
 
     def __init__(self, level_path: str | Path = LEVEL, tour: bool = False) -> None:

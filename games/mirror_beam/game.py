@@ -25,10 +25,10 @@ from typing import Any
 from pyglm import glm
 
 from components import Camera, Emissive, Material, MeshRef, Mirror, Transform, look_rotation
-from engine.app import Game, spawn_camera
+from engine.app import spawn_camera
 from engine.errors import SpeculumError
 from engine.frame_io import Input, Output
-from engine.level_file import load_level
+from engine.level_file import LevelGame
 from engine.mesh import box
 from engine.raycast import raycast
 from engine.render.view_tree import Surfaces
@@ -343,7 +343,7 @@ def solution_script(rules: BeamRules, interval: int = 1) -> list[list[str]]:
     return script
 
 
-class MirrorBeam(Game):
+class MirrorBeam(LevelGame):
     """The puzzle on one level file (``level``; the first shipped level by default).
 
     ``autopilot`` plays the level's ``rules.solution`` through the ``Input`` resource, one
@@ -352,17 +352,20 @@ class MirrorBeam(Game):
 
     title = "Speculum: mirror beam"
     size = (960, 540)
+    game = "mirror_beam"  # a level file's [level] game
+    makes_camera = True  # rules.camera places one when the level has none
 
-    def __init__(self, level: str | Path | None = None, autopilot: bool = False, interval: int = 1) -> None:
-        self.level_path = Path(level) if level is not None else levels()[0]
+    def __init__(self, level: str | Path | None = None, autopilot: bool = False, interval: int = 1,
+                 verbose: bool = True) -> None:
+        super().__init__(level if level is not None else levels()[0])
         self.autopilot = autopilot
         self.interval = max(1, int(interval))
+        self.verbose = verbose  # print a line when a puzzle is solved
         self.state: BeamState | None = None
-        self.names: dict[str, int] = {}
         self.script: list[list[str]] = []
 
     def build(self, world: World) -> None:
-        level = load_level(self.level_path)
+        level = self.level = self.load()
         names = self.names = level.spawn(world)
         rules = parse_rules(level.rules, names, world, f"level file {str(self.level_path)!r}")
         if not world.query_one(Camera):
@@ -405,7 +408,7 @@ class MirrorBeam(Game):
         here = self.level_path.resolve()
         return shipped[(shipped.index(here) + 1) % len(shipped)] if here in shipped else None
 
-    def load(self, world: World, level: Path) -> None:
+    def play_level(self, world: World, level: Path) -> None:
         """Replace the level being played: every entity goes (deleted at the next step, and
         left out of queries until then) and ``level`` is built in the same world."""
         for entity in world.entities():
@@ -425,12 +428,19 @@ class MirrorBeam(Game):
             state.next_asked = False
             following = self.next_level()
             if following is not None:
-                self.load(world, following)  # its beam is traced from its first full frame on
+                self.play_level(world, following)  # its beam is traced from its first full frame on
                 return
         if not moved:
             # A mirror that moved this frame is in ``Surfaces`` from the next frame on: until
             # then the beam keeps the path drawn last frame (and cannot win on a stale one).
             beam_system(world, state)
+            solved = state.won
             win_system(world, state)
+            if state.won and not solved and self.verbose:
+                keys = "press n for the next level, r to restart" if self.next_level() is not None \
+                    else "press r to restart"
+                bounces = state.wins()[-1].detail["bounces"]
+                print(f"mirror_beam: solved: {state.level_name} with {bounces} bounce{'s' * (bounces != 1)} "
+                      f"(frame {state.frame}; {keys})", flush=True)
         marker_system(world, state)
         state.frame += 1

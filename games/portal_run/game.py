@@ -51,7 +51,7 @@ from components import (
 )
 from engine.errors import SpeculumError
 from engine.frame_io import Input
-from engine.level_file import LevelGame, load_level
+from engine.level_file import LevelGame
 from engine.mesh import box, quad
 from engine.portals import spawn_portal_pair
 from engine.raycast import RayCaster
@@ -274,12 +274,14 @@ class PortalRun(LevelGame):
 
     title = "portal run"
     size = (1280, 720)
+    game = "portal_run"  # a level file's [level] game
+    makes_camera = True  # the player is the camera
     mouse_look = True  # the window shell captures the pointer on the first click (engine/window.py)
 
     def __init__(self, level: str | Path | None = None, autopilot: bool = False,
                  script: Sequence[str] | None = None, verbose: bool = True) -> None:
         super().__init__(level if level is not None else levels()[0])
-        self.level = load_level(self.level_path)  # checked now: a bad file is an error before any window opens
+        self.level = self.load()  # checked now: a bad file is an error before any window opens
         self.title = f"portal run: {self.level.name}"
         self.verbose = verbose
         self.events: list[RunEvent] = []
@@ -430,7 +432,7 @@ class PortalRun(LevelGame):
         if self.won and "n" in state.pressed:
             following = self.next_level()
             if following is not None:
-                self.load(world, following)
+                self.play_level(world, following)
                 return "rebuilt"
         transform = world.get(self.player, Transform)
         body = world.get(self.player, PlayerBody)
@@ -473,11 +475,11 @@ class PortalRun(LevelGame):
         here = self.level_path.resolve()
         return shipped[(shipped.index(here) + 1) % len(shipped)] if here in shipped else None
 
-    def load(self, world: World, level: str | Path) -> None:
+    def play_level(self, world: World, level: str | Path) -> None:
         """Play ``level`` from its start in the same world ('n' after a win: the next level).
         An autopilot playing a level's own solution plays the new level's."""
         self.level_path = Path(level)
-        self.level = load_level(self.level_path)
+        self.level = self.load()
         self.title = f"portal run: {self.level.name}"
         for entity in world.entities():
             world.delete_entity(entity)
