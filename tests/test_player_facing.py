@@ -10,10 +10,13 @@ import os
 import re
 import subprocess
 import sys
+import warnings
 from pathlib import Path
 
 import pytest
 
+from components import Portal, Transform
+from components.portal import PortalPartnerWarning
 from engine.level_file import LevelError
 from engine.runner import build_parser, main
 from engine.world import World
@@ -26,6 +29,15 @@ from games.portal_run import levels as run_levels
 ROOT = Path(__file__).resolve().parents[1]
 GAME_OPTIONS = {"hall_of_mirrors": [], "mirror_beam": ["--interval"], "portal_run": ["--autopilot", "--no-autopilot"]}
 HEADLESS = ["--headless", "--frames", "1", "--size", "8x8"]
+
+
+@pytest.fixture
+def world():
+    made = World("player facing")
+    try:
+        yield made
+    finally:
+        made.close()
 
 
 def _cli(module: str, *args: str, env: dict | None = None) -> subprocess.CompletedProcess:
@@ -117,3 +129,51 @@ def test_a_level_made_for_another_game_is_refused_naming_both(tmp_path, capsys):
     text = NO_CAMERA + CAMERA
     HallOfMirrors(_level(tmp_path, text, "any.toml")).load()
     HallOfMirrors(_level(tmp_path, text.replace("[level]\n", '[level]\ngame = "hall_of_mirrors"\n'), "own.toml")).load()
+
+
+def test_a_portal_paired_with_no_entity_says_so_once(world):
+    """Portal(partner=999) left a closed portal without a word."""
+    from engine.frame_rules import open_portal_pairs
+    from engine.portals import spawn_portal_pair
+
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        a = world.spawn(Transform(), Portal(partner=999))
+        world.get(a, Portal).partner = 999  # the same again: said already
+        said = [str(w.message) for w in caught if issubclass(w.category, PortalPartnerWarning)]
+        assert said == [f"Portal on entity {a}: partner 999 names no entity in this world, so the portal stays "
+                        "closed (it shows closed_color) until partner names a portal"], said
+        assert open_portal_pairs(world) == {}
+        world.get(a, Portal).partner = 998  # another id that is no entity: said
+        pair = spawn_portal_pair(world, (0, 0, 0), None, (3, 0, 0), None)  # partners that exist: nothing
+        b = world.spawn(Transform(position=(6, 0, 0)), Portal(partner=a))
+        world.get(a, Portal).partner = b
+        assert open_portal_pairs(world) == {a: b, b: a, pair[0]: pair[1], pair[1]: pair[0]}
+        world.delete_entity(b)  # a partner deleted later closes the portal without a word
+        world.get(a, Portal).enabled = True
+        said = [str(w.message) for w in caught if issubclass(w.category, PortalPartnerWarning)]
+    assert len(said) == 2 and "partner 998" in said[1]
+
+
+NO_PARTNER_GAME = """
+from components import Portal, Transform
+from engine import Game, run, spawn_camera
+
+class Lone(Game):
+    def build(self, world):
+        spawn_camera(world)
+        world.spawn(Transform(), Portal(partner=999))
+
+run(Lone())
+"""
+
+
+def test_the_runner_says_a_missing_partner_in_one_line(tmp_path):
+    game = tmp_path / "lone.py"
+    game.write_text(NO_PARTNER_GAME)
+    result = subprocess.run([sys.executable, str(game), *HEADLESS, "--out", str(tmp_path / "out")], cwd=ROOT,
+                            capture_output=True, text=True, timeout=120, env={**os.environ, "PYTHONPATH": str(ROOT)})
+    assert result.returncode == 0, result.stderr
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("speculum: warning: Portal on entity ") \
+        and "partner 999 names no entity" in lines[0], lines
