@@ -528,7 +528,8 @@ def test_asset_root_on_the_command_line(tmp_path):
     from games.hall_of_mirrors.level import HallOfMirrors
 
     Image.new("RGB", (2, 2)).save(tmp_path / "shared.png")
-    level = write_level(tmp_path / "level", HEAD + entity(texture='{ file = "../shared.png" }'))
+    camera = '\n[[entity]]\nname = "camera"\n[entity.Transform]\nposition = [0.0, 0.0, 3.0]\n[entity.Camera]\n'
+    level = write_level(tmp_path / "level", HEAD + entity(texture='{ file = "../shared.png" }') + camera)
     args = parse_args(HallOfMirrors(), ["--asset-root", str(tmp_path), "--asset-root", str(tmp_path / "level")])
     assert args.asset_root == [tmp_path, tmp_path / "level"]
     script = ("import sys; from engine.runner import main; from games.hall_of_mirrors.level import HallOfMirrors; "

@@ -11,6 +11,7 @@ import sys
 
 from engine.errors import SpeculumError
 from engine.gl_context import have_display
+from engine.level_file import set_asset_roots
 from engine.runner import build_parser
 from engine.runner import main as run
 from games.portal_run.game import PortalRun
@@ -28,6 +29,7 @@ def main(argv: list[str] | None = None) -> None:
     headless = args.headless or not have_display()
     autopilot = headless if args.autopilot is None else args.autopilot
     try:
+        set_asset_roots(args.asset_root)  # the game loads its level now, before the runner reads the option
         game = PortalRun(args.level, autopilot=autopilot)
     except (SpeculumError, ValueError) as exc:
         print(f"speculum: error: {exc}", file=sys.stderr)
