@@ -34,14 +34,15 @@ from components import (
     Transform,
     look_rotation,
 )
-from engine.app import Engine, Game
-from engine.frame_io import Output
-from engine.gl_context import create_headless_context
-from engine.mesh import box, plane, quad, sphere
-from engine.portals import spawn_portal_pair
+from engine.assets.mesh import box, plane, quad, sphere
+from engine.assets.portals import spawn_portal_pair
+from engine.assets.texture_data import TextureData, checker_texture
+from engine.core.frame_io import Output
+from engine.core.game import Game
+from engine.core.world import World
+from engine.render.gl_context import create_headless_context
 from engine.render.targets import CaptureTarget
-from engine.texture_data import TextureData, checker_texture
-from engine.world import World
+from shell.app import Engine
 
 SIZE = (320, 180)
 

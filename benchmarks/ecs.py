@@ -41,12 +41,13 @@ from pyglm import glm
 
 from benchmarks import add_size_argument
 from components import DirectionalLight, Material, MeshRef, Transform
-from engine.app import Engine, Game, spawn_camera
-from engine.frame_io import Output
-from engine.gl_context import create_headless_context
-from engine.mesh import box, sphere
+from engine.assets.mesh import box, sphere
+from engine.core.frame_io import Output
+from engine.core.game import Game, spawn_camera
+from engine.core.world import World
+from engine.render.gl_context import create_headless_context
 from engine.render.targets import CaptureTarget
-from engine.world import World
+from shell.app import Engine
 
 SIZES = (100, 1_000, 10_000)
 MOVING_FRACTION = 0.01

@@ -31,6 +31,7 @@ from typing import Any
 import numpy as np
 from pyglm import glm
 
+from benchmarks.fuzz_cases import run_cases
 from components import (
     Camera,
     ComponentValueError,
@@ -52,11 +53,12 @@ from components import (
     Traveller,
     look_rotation,
 )
-from engine.app import Engine, Game
-from engine.frame_io import Output
-from engine.mesh import box, quad, sphere
+from engine.assets.mesh import box, quad, sphere
+from engine.assets.texture_data import checker_texture
+from engine.core.frame_io import Output
+from engine.core.game import Game
 from engine.render.targets import CaptureTarget
-from engine.texture_data import checker_texture
+from shell.app import Engine
 
 SIZE = (48, 32)
 CLASSES: tuple[type, ...] = (Transform, MeshRef, Material, Emissive, Reflective, Refractive, Mirror, Portal,
@@ -237,26 +239,6 @@ class Fuzzer:
         return f"refused without naming {name}.<field>: {text}"
 
 
-def run_cases(fuzzer, make_case, cases: int, seed: int, report=None) -> tuple[int, list[tuple[str, str]],
-                                                                             dict[str, int]]:
-    """``cases`` cases from ``make_case(rng)`` through ``fuzzer.run(case, index)``, then the
-    fuzzer closed; the count run, the failures (case, why) and passes by kind."""
-    rng = random.Random(seed)
-    failures: list[tuple[str, str]] = []
-    try:
-        for index in range(cases):
-            case = make_case(rng)
-            why = fuzzer.run(case, index)
-            if why is not None:
-                failures.append((case.describe(), why))
-                if report is not None:
-                    report(index, case, why)
-        passes = {"refused": fuzzer.refused, "rendered": fuzzer.rendered}
-    finally:
-        fuzzer.close()
-    return cases, failures, passes
-
-
 def fuzz(ctx, cases: int, seed: int = 0, report=None) -> tuple[int, list[tuple[str, str]], dict[str, int]]:
     """Run ``cases`` component cases (``run_cases``)."""
     return run_cases(Fuzzer(ctx), random_case, cases, seed, report)
@@ -274,7 +256,7 @@ def main(args: argparse.Namespace) -> int:
     from pathlib import Path
 
     from benchmarks.level_fuzz import fuzz_files, fuzz_levels
-    from engine.gl_context import create_headless_context
+    from engine.render.gl_context import create_headless_context
 
     ctx = create_headless_context()
     try:

@@ -6,7 +6,7 @@ Sections, in the order they run (both files are rewritten after each, so a drive
 way leaves what came before, with ``"complete": false``):
 
 * ``gl``: ``GL_RENDERER``, ``GL_VENDOR``, ``GL_VERSION`` (``ctx.info``), whether it is a
-  software rasteriser, the engine's capability check (``engine.gl_context.prepare_context``)
+  software rasteriser, the engine's capability check (``engine.render.gl_context.prepare_context``)
   with each requirement's value next to its minimum, and every ``GL_MAX_*`` limit.
 * ``paths``: the rendering paths the engine's self-check verified or refused on this
   context (``Renderer.path_checks.run_all()``: ``layered_capture``, ``layered_mips``,
@@ -131,8 +131,8 @@ def _jsonable(value):
 
 def gl_section(ctx) -> dict:
     """Renderer, vendor, version, the capability check and the limits of ``ctx``."""
-    from engine.errors import GLCapabilityError
-    from engine.gl_context import REQUIREMENTS, GLCapabilities, prepare_context
+    from engine.core.errors import GLCapabilityError
+    from engine.render.gl_context import REQUIREMENTS, GLCapabilities, prepare_context
 
     info = ctx.info
     try:
@@ -157,7 +157,8 @@ def gl_section(ctx) -> dict:
 
 def path_section(ctx) -> dict:
     """Each rendering path's verdict from the engine's self-check, run now on ``ctx``."""
-    from engine.app import Engine, Game
+    from engine.core.game import Game
+    from shell.app import Engine
 
     class Empty(Game):
         title = "gpu report: path checks"
@@ -181,7 +182,8 @@ def layered_target_section(ctx) -> dict:
     (bound framebuffer, layered attachments, scissor, viewport, texture units the cube is
     on, the loader's ``glFramebufferTexture``): the first thing to read where the layered
     capture is refused."""
-    from engine.app import Engine, Game
+    from engine.core.game import Game
+    from shell.app import Engine
 
     class Empty(Game):
         title = "gpu report: layered target"
@@ -499,7 +501,7 @@ def command_line(args: argparse.Namespace) -> str:
 
 
 def main(args: argparse.Namespace) -> int:
-    from engine.gl_context import create_headless_context
+    from engine.render.gl_context import create_headless_context
 
     out: Path = args.out
     out.mkdir(parents=True, exist_ok=True)

@@ -37,10 +37,11 @@ from pathlib import Path
 
 import numpy as np
 
-from engine.app import Engine, Game
-from engine.frame_io import Output
-from engine.level_file import LevelError, load_level
+from engine.assets.level_file import LevelError, load_level
+from engine.core.frame_io import Output
+from engine.core.game import Game
 from engine.render.targets import CaptureTarget
+from shell.app import Engine
 
 SIZE = (48, 32)
 BASE = """\
@@ -457,15 +458,15 @@ class LevelFuzzer:
 
 
 def fuzz_levels(ctx, folder: Path, cases: int, seed: int = 0, report=None) -> tuple[int, list, dict[str, int]]:
-    """Run ``cases`` level cases (``benchmarks.fuzz.run_cases``), their files in ``folder``."""
-    from benchmarks.fuzz import run_cases
+    """Run ``cases`` level cases (``benchmarks.fuzz_cases.run_cases``), their files in ``folder``."""
+    from benchmarks.fuzz_cases import run_cases
 
     return run_cases(LevelFuzzer(ctx, folder), random_level_case, cases, seed, report)
 
 
 def fuzz_files(ctx, folder: Path, report=None) -> tuple[int, list, dict[str, int]]:
-    """Run every FILE_CASES case once (``benchmarks.fuzz.run_cases``), their files in ``folder``."""
-    from benchmarks.fuzz import run_cases
+    """Run every FILE_CASES case once (``benchmarks.fuzz_cases.run_cases``), their files in ``folder``."""
+    from benchmarks.fuzz_cases import run_cases
 
     cases = iter(FILE_CASES)
     return run_cases(LevelFuzzer(ctx, folder), lambda rng: file_level_case(next(cases)), len(FILE_CASES), 0, report)

@@ -54,14 +54,15 @@ from components import (
     Transform,
     look_rotation,
 )
-from engine.app import Engine, Game
-from engine.frame_io import Output
-from engine.gl_context import create_headless_context
-from engine.mesh import box, plane, quad
+from engine.assets.mesh import box, plane, quad
+from engine.assets.texture_data import checker_texture
+from engine.core.frame_io import Output
+from engine.core.game import Game
+from engine.core.world import World
+from engine.render.gl_context import create_headless_context
 from engine.render.present import ANTIALIAS_MODES
 from engine.render.targets import CaptureTarget
-from engine.texture_data import checker_texture
-from engine.world import World
+from shell.app import Engine
 
 MIRROR_COUNTS = (0, 1, 2, 4, 8, 16)
 PATHS = ("per_mirror", "batched", "auto")

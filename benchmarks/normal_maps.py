@@ -2,7 +2,7 @@
 
 The scene is ``benchmarks.mirrors.MirrorRing`` with no mirrors (a 40 x 40 textured ground
 that covers about half of the 640 x 360 frame (``--size``), 20 boxes, two lights); the ``mapped`` engine
-gives the ground a ripple normal map (``engine.texture_data.ripple_normal_map``).  Rows
+gives the ground a ripple normal map (``engine.assets.texture_data.ripple_normal_map``).  Rows
 (``ground``, ``anisotropy``, ``frame_ms_median``, ``ratio_to_plain``): whole frames
 (``Engine.frame`` + ``finish``), the engines interleaved frame by frame: ``plain``, then
 ``mapped`` with the renderer's normal-map anisotropy (``Renderer.normal_map_anisotropy``:
@@ -25,11 +25,11 @@ import moderngl
 from benchmarks import add_size_argument
 from benchmarks.mirrors import DT, OUTPUT_SIZE, MirrorRing
 from components import Material
-from engine.app import Engine
-from engine.frame_io import Output
-from engine.gl_context import create_headless_context
+from engine.assets.texture_data import ripple_normal_map
+from engine.core.frame_io import Output
+from engine.render.gl_context import create_headless_context
 from engine.render.targets import CaptureTarget
-from engine.texture_data import ripple_normal_map
+from shell.app import Engine
 
 
 class MappedGround(MirrorRing):

@@ -21,14 +21,15 @@ from pyglm import glm
 
 from benchmarks import add_size_argument
 from components import DirectionalLight, Material, MeshRef, Portal, Skybox, Transform
-from engine.app import Engine, Game
-from engine.frame_io import Output
-from engine.gl_context import create_headless_context
-from engine.mesh import box, plane
-from engine.portals import spawn_portal_pair
+from engine.assets.mesh import box, plane
+from engine.assets.portals import spawn_portal_pair
+from engine.assets.texture_data import checker_texture
+from engine.core.frame_io import Output
+from engine.core.game import Game
+from engine.core.world import World
+from engine.render.gl_context import create_headless_context
 from engine.render.targets import CaptureTarget
-from engine.texture_data import checker_texture
-from engine.world import World
+from shell.app import Engine
 
 SIZE = (640, 360)
 DEPTHS = range(0, 9)
@@ -38,7 +39,7 @@ class FacingPortals(Game):
     title = "portal benchmark"
 
     def build(self, world: World) -> None:
-        from engine.app import spawn_camera
+        from engine.core.game import spawn_camera
 
         spawn_camera(world, position=(0.3, 1.5, 3.0), yaw=3.0, pitch=-2.0, fly=False)
         world.spawn(Skybox())

@@ -53,12 +53,12 @@ import moderngl
 from benchmarks import add_size_argument
 from benchmarks.mirrors import DT, OUTPUT_SIZE, MirrorRing
 from components import Material, MeshRef, ReflectionProbe, Reflective, Transform
-from engine.app import Engine
-from engine.frame_io import Output
-from engine.gl_context import create_headless_context
-from engine.mesh import sphere
+from engine.assets.mesh import sphere
+from engine.core.frame_io import Output
+from engine.render.gl_context import create_headless_context
 from engine.render.probes import face_view
 from engine.render.targets import CaptureTarget
+from shell.app import Engine
 
 MODES = {"none": None, "static": "once", "on_change": "on_change", "dynamic": "every_frame"}
 

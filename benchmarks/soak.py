@@ -21,11 +21,11 @@ import time
 
 from benchmarks import add_size_argument
 from components import Transform, yaw_pitch_rotation
-from engine.app import Engine
-from engine.frame_io import Output
-from engine.gl_context import create_headless_context
+from engine.core.frame_io import Output
+from engine.render.gl_context import create_headless_context
 from engine.render.targets import CaptureTarget
 from games.hall_of_mirrors.level import HallOfMirrors
+from shell.app import Engine
 
 SIZE = (320, 180)
 DT = 1.0 / 60.0

@@ -2,16 +2,18 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 from pyglm import glm
 
 from components.tracking import HALF_MAX, ComponentValueError, TrackedComponent, boolean, choice, color, finite, integer
 
-if TYPE_CHECKING:
-    from engine.mesh import Mesh
-    from engine.texture_data import TextureData
+# Assets are the engine's types (engine.assets.mesh.Mesh, engine.assets.texture_data.TextureData);
+# components are the floor below it and import none of it: a field holding one is checked by
+# the class's ASSET_KIND ("mesh", "texture"), and typed by these names.
+Mesh = Any
+TextureData = Any
 
 
 @dataclass(eq=False)
@@ -22,14 +24,12 @@ class MeshRef(TrackedComponent):
     visible: bool = True
 
     def _validate(self, name: str, value: Any) -> Any:
-        from engine.mesh import Mesh
-
-        if name == "mesh" and not isinstance(value, Mesh):
-            raise ComponentValueError(f"MeshRef.mesh must be an engine.mesh.Mesh, got {type(value).__name__}")
+        if name == "mesh" and getattr(type(value), "ASSET_KIND", None) != "mesh":
+            raise ComponentValueError(f"MeshRef.mesh must be an engine.assets.mesh.Mesh, got {type(value).__name__}")
         world = getattr(self, "_world_ref", None)
         if name == "mesh" and world is not None:
             for entity in self._entities:  # a mirror's new mesh must have area, as at spawn
-                world._check_mirror_mesh(entity, mesh=value)
+                world.check_invariants(entity, MeshRef, mesh=value)
         if name == "visible":
             return boolean(self, name, value)
         return value
@@ -75,15 +75,13 @@ class Material(TrackedComponent):
         if name == "normal_scale":
             return finite(self, name, value, low=0.0, high=MAX_NORMAL_SCALE)
         if name in ("texture", "normal_map") and value is not None:
-            from engine.texture_data import TextureData
-
-            if not isinstance(value, TextureData):
+            if getattr(type(value), "ASSET_KIND", None) != "texture":
                 raise ComponentValueError(
-                    f"Material.{name} must be an engine.texture_data.TextureData, got {type(value).__name__}")
+                    f"Material.{name} must be an engine.assets.texture_data.TextureData, got {type(value).__name__}")
             world = getattr(self, "_world_ref", None)
             if name == "normal_map" and world is not None:
                 for entity in self._entities:  # a mirror's UVs must allow it, as at spawn
-                    world._check_mirror_mesh(entity, normal_map=value)
+                    world.check_invariants(entity, Material, normal_map=value)
         return value
 
 

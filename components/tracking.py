@@ -37,7 +37,7 @@ class ComponentValueError(ValueError):
 class TrackedComponent:
     """Base of all components: validates fields and reports writes to its world."""
 
-    # Set by engine.world.World when the component is attached; never by users.
+    # Set by engine.core.world.World when the component is attached; never by users.
     _sink: set[int] | None = None
     _entity: int = 0                      # the entity it last joined
     _entities: frozenset[int] = frozenset()  # every entity holding it (one unless shared)

@@ -1,15 +1,14 @@
-"""Speculum's engine: world, math, assets, GPU helpers, and the app shell that runs a game.
-
-The core (``engine.world``, ``engine.render``, assets and math) never imports ``systems``;
-the app shell (``engine.app``: Game, Engine; ``engine.runner``; ``engine.window``) wires the
-systems into a world.  So that ``import systems`` works first, this package loads the shell
-only when one of its names is asked for.
+"""Speculum's engine: the core (``engine.core``: world, game interface, math), assets
+(``engine.assets``: meshes, textures, model and level files), the rules systems agree on
+(``engine.rules``) and every GL call (``engine.render``).  It never imports ``systems`` or
+the app shell (``shell``), which wires the systems into a world and runs a game.
 
 A tiny game::
 
-    from engine import Game, run, spawn_camera
-    from engine.mesh import box
-    from components import Transform, MeshRef, Material, DirectionalLight
+    from components import DirectionalLight, Material, MeshRef, Transform
+    from engine import Game, spawn_camera
+    from engine.assets.mesh import box
+    from shell import run
 
     class Tiny(Game):
         def build(self, world):
@@ -21,31 +20,8 @@ A tiny game::
 """
 from __future__ import annotations
 
-import sys
-from collections.abc import Sequence
-from typing import TYPE_CHECKING, Any
+import engine.rules.mirror_rules  # noqa: F401  (registers the mirror-mesh invariant with every world)
+from engine.core.game import Game, spawn_camera
+from engine.core.world import World
 
-from engine.world import World
-
-if TYPE_CHECKING:
-    from engine.app import Engine, Game, spawn_camera
-
-_SHELL = ("Engine", "Game", "spawn_camera")
-
-
-def __getattr__(name: str) -> Any:
-    if name in _SHELL:
-        import engine.app
-
-        return getattr(engine.app, name)
-    raise AttributeError(f"module 'engine' has no attribute {name!r}")
-
-
-def run(game: Game, argv: Sequence[str] | None = None) -> None:
-    """Run ``game`` from the command line (see engine.runner for the options) and exit."""
-    from engine.runner import main
-
-    sys.exit(main(game, argv))
-
-
-__all__ = ["Engine", "Game", "World", "run", "spawn_camera"]
+__all__ = ["Game", "World", "spawn_camera"]

@@ -1,5 +1,5 @@
 """Systems: the only place behaviour lives. Each is an esper processor run once a frame, in
-the stage order of ``engine.app.FRAME_STAGES`` (ARCHITECTURE.md)."""
+the stage order of ``shell.app.FRAME_STAGES`` (ARCHITECTURE.md)."""
 from systems.extract_system import ExtractSystem
 from systems.fly_camera_system import FlyCameraSystem
 from systems.main_view_system import MainViewSystem, active_camera

@@ -24,11 +24,11 @@ from components import (
     Slice,
     Transform,
 )
-from engine.errors import GLLimitError
-from engine.probe_rules import probe_for
+from engine.core.errors import GLLimitError
+from engine.core.world import World
 from engine.render.instances import InstanceBatch
 from engine.render.renderer import Renderer, RenderStats
-from engine.world import World
+from engine.rules.probe_rules import probe_for
 from systems.material_dispatch import choose_material
 
 MATERIAL_KINDS = (MeshRef, Material, Emissive, Reflective, Refractive, Mirror, Portal, Slice, PortalClone,

@@ -5,8 +5,8 @@ import esper
 from pyglm import glm
 
 from components import FlyController, Transform, yaw_pitch_rotation
-from engine.frame_io import Input
-from engine.world import World
+from engine.core.frame_io import Input
+from engine.core.world import World
 
 
 class FlyCameraSystem(esper.Processor):

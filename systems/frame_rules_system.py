@@ -2,15 +2,15 @@
 
 Runs right after the game's update (which may enable, disable, delete or re-pair portals
 and switch cameras) and before input and travel, and publishes
-``world.resources[FrameRules]`` (``engine/frame_rules.py``) so travel, slicing, the
+``world.resources[FrameRules]`` (``engine/rules/frame_rules.py``) so travel, slicing, the
 surfaces and the main view all act on the same answer this frame.
 """
 from __future__ import annotations
 
 import esper
 
-from engine.frame_rules import FrameRules, compute_frame_rules
-from engine.world import World
+from engine.core.world import World
+from engine.rules.frame_rules import FrameRules, compute_frame_rules
 
 
 class FrameRulesSystem(esper.Processor):

@@ -11,17 +11,17 @@ import warnings
 import esper
 
 from components import Camera, Transform
-from engine.errors import NoCameraWarning
-from engine.frame_io import Output
-from engine.frame_rules import frame_rules
+from engine.core.errors import NoCameraWarning
+from engine.core.frame_io import Output
+from engine.core.world import World
 from engine.render.renderer import Renderer
 from engine.render.views import FrameViews, camera_view
-from engine.world import World
+from engine.rules.frame_rules import frame_rules
 
 
 def active_camera(world: World) -> tuple[int, Camera, Transform] | None:
     """The active Camera with a Transform and the lowest entity id, or None (the rule is
-    ``engine.frame_rules.active_camera``, the camera travel carries too)."""
+    ``engine.rules.frame_rules.active_camera``, the camera travel carries too)."""
     entity = frame_rules(world).active_camera
     return None if entity is None else (entity, world.get(entity, Camera), world.get(entity, Transform))
 

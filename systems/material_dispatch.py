@@ -7,7 +7,7 @@ from dataclasses import dataclass
 from pyglm import glm
 
 from components import Emissive, Material, Mirror, Portal, Reflective, Refractive
-from engine.material_slots import EmissiveVariant, ReflectVariant, RefractVariant
+from engine.core.material_slots import EmissiveVariant, ReflectVariant, RefractVariant
 
 _REFLECT_MODES = {
     "skybox": ReflectVariant.SKYBOX, "planar": ReflectVariant.PLANAR,
@@ -33,7 +33,7 @@ def choose_material(material: Material | None, emissive: Emissive | None,
                     reflective: Reflective | None, refractive: Refractive | None,
                     mirror: Mirror | None = None, portal: Portal | None = None,
                     probe: bool = False) -> MaterialChoice:
-    """``probe``: a reflection probe serves the object (``engine/probe_rules.py``); without
+    """``probe``: a reflection probe serves the object (``engine/rules/probe_rules.py``); without
     one, ``Reflective("cube")`` reflects the sky."""
     material = material or DEFAULT_MATERIAL
     emissive_variant = EmissiveVariant.EMISSIVE if emissive is not None and emissive.power > 0 else \

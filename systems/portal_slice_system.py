@@ -1,7 +1,7 @@
 """Things partly through a portal (the visible seam where an object crosses a portal): sliced, with a clone beyond.
 
 A Traveller whose bounds straddle an open portal's rectangle (open as
-``engine.frame_rules.open_portal_pairs`` says, the rule travel and the views use: a portal
+``engine.rules.frame_rules.open_portal_pairs`` says, the rule travel and the views use: a portal
 with a disabled, deleted or Transform-less partner slices nothing) is drawn only in front of
 that portal (a Slice clip plane), and a clone, carried by the pair transform, draws the
 part that went through in front of the partner.  Clones are made when straddling starts
@@ -17,9 +17,9 @@ import numpy as np
 from pyglm import glm
 
 from components import Material, MeshRef, Portal, PortalClone, Slice, Transform, Traveller
-from engine.frame_rules import frame_rules, world_corners
-from engine.portal_math import pair_transform, portal_plane
-from engine.world import World
+from engine.core.portal_math import pair_transform, portal_plane
+from engine.core.world import World
+from engine.rules.frame_rules import frame_rules, world_corners
 from systems.transform_system import current_world_matrix
 
 

@@ -4,14 +4,14 @@ Runs after input (the fly camera has moved) and before the TransformSystem (whic
 publishes the teleported poses), so every rendered frame shows a traveller on one side only.
 
 Who travels: every entity with a ``Traveller`` and the active camera (``Camera.active``,
-lowest id, with a Transform: ``engine.frame_rules.active_camera``; it needs no Traveller).
+lowest id, with a Transform: ``engine.rules.frame_rules.active_camera``; it needs no Traveller).
 Travellers are expected to be roots: one whose Transform has a parent is moved by its
 velocity but never teleported (its pose is relative to something that does not travel
 with it).
 
 A crossing is the segment from where the traveller was at the end of the last frame to where
 it is now going from a portal's front (local +Z) to its back inside its rectangle.  Only
-open pairs count (``engine.frame_rules.open_portal_pairs``, the rule the views and slicing
+open pairs count (``engine.rules.frame_rules.open_portal_pairs``, the rule the views and slicing
 use too): a portal that is disabled, or whose partner is deleted, disabled or has no
 Portal or Transform, is just a quad.  The new pose is ``pair_transform(in, out)``
 applied to the old one (position and orientation; scale is kept); the Traveller's velocity
@@ -46,11 +46,11 @@ import esper
 from pyglm import glm
 
 from components import Camera, FlyController, Portal, Transform, Traveller
-from engine.frame_io import Output
-from engine.frame_rules import frame_rules
-from engine.portal_math import near_plane_corners, pair_rotation, pair_transform, portal_plane
-from engine.reflection_math import signed_distance
-from engine.world import World
+from engine.core.frame_io import Output
+from engine.core.portal_math import near_plane_corners, pair_rotation, pair_transform, portal_plane
+from engine.core.reflection_math import signed_distance
+from engine.core.world import World
+from engine.rules.frame_rules import frame_rules
 from systems.transform_system import current_world_matrix
 
 DEFAULT_ASPECT = 16.0 / 9.0

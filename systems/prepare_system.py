@@ -8,10 +8,10 @@ from __future__ import annotations
 import esper
 
 from components import DirectionalLight, PointLight, Skybox, Transform
+from engine.core.world import World
 from engine.render.renderer import Renderer
 from engine.render.sky import build_faces
 from engine.render.views import lights_block
-from engine.world import World
 
 AMBIENT = (0.03, 0.03, 0.035)
 

@@ -3,10 +3,10 @@ from __future__ import annotations
 
 import esper
 
-from engine.frame_io import Output
+from engine.core.frame_io import Output
+from engine.core.world import World
 from engine.render.renderer import Renderer
 from engine.render.views import FrameViews
-from engine.world import World
 
 
 class PresentSystem(esper.Processor):

@@ -1,7 +1,7 @@
 """Probes: capture the reflection probes that need it, before the main view samples them.
 
 Every ``ReflectionProbe`` (at its entity's position) and every automatic probe (a
-cube-reflective mesh that is not flat, at its bounding box's centre; ``engine/probe_rules.py``)
+cube-reflective mesh that is not flat, at its bounding box's centre; ``engine/rules/probe_rules.py``)
 has a ``ProbeState``.  What is captured each frame, per probe:
 
   - the first frame it exists: all six faces;
@@ -9,7 +9,7 @@ has a ``ProbeState``.  What is captured each frame, per probe:
     bounds of an entity that was added, removed or moved (the transform stage's frame sets)
     or whose material changed, within the probe's range, either directly or as seen in a
     mirror or through a portal (the boxes' images, up to the probe's ``depth``;
-    ``engine.probe_rules.images_through_surfaces``); all six when the probe itself moved or
+    ``engine.rules.probe_rules.images_through_surfaces``); all six when the probe itself moved or
     its settings changed, the sun or the sky changed, or a point light whose range reaches
     what the probe sees changed, came, went or moved (its own Transform or a parent's);
   - ``every_frame``: all six; ``every_n``: all six every n frames; ``once``: nothing more;
@@ -68,18 +68,18 @@ from components import (
     Skybox,
     Transform,
 )
-from engine.probe_rules import has_own_probe, images_through_surfaces, lights_reach, world_bounds
+from engine.core.world import World
 from engine.render.probes import ALL_FACES, ProbeStates, face_view, faces_touched
 from engine.render.renderer import Renderer
 from engine.render.view_tree import Surfaces
-from engine.world import World
+from engine.rules.probe_rules import has_own_probe, images_through_surfaces, lights_reach, world_bounds
 
 PATHS = ("auto", "six_pass", "layered")
 AUTO_TIMED_CAPTURES = 3  # timed captures of each path before "auto" chooses (medians compared)
 LOG = logging.getLogger("speculum")
 LOOK_KINDS = (Material, MeshRef, Emissive, Reflective, Refractive, Mirror, Portal)  # what changes a look
 LIGHTING_KINDS = (DirectionalLight, Skybox)  # what changes every face of every probe
-# A PointLight relights the probes within its reach (engine.probe_rules.lights_reach) when it
+# A PointLight relights the probes within its reach (engine.rules.probe_rules.lights_reach) when it
 # changes, comes, goes or moves (its own Transform or a parent's: the transform stage's
 # moved set holds descendants).
 

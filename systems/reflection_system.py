@@ -12,10 +12,10 @@ from dataclasses import replace
 
 import esper
 
+from engine.core.world import World
 from engine.render.renderer import Renderer
 from engine.render.view_tree import ReflectionView, Surfaces, TreeSettings, ViewTree
 from engine.render.views import FrameViews
-from engine.world import World
 from systems.surface_system import MirrorError
 
 __all__ = ["MirrorError", "ReflectionSystem"]
@@ -75,7 +75,7 @@ class ReflectionSystem(esper.Processor):
             return
         if surfaces.mirrors or surfaces.portals:
             # The main view rasterises while the CPU culls and works out the first level's
-            # cameras; the same after each level's views (engine/raw_gl.py says why).
+            # cameras; the same after each level's views (engine/render/raw_gl.py says why).
             renderer.flush()
         settings = self.settings
         result = self.tree.render(main, renderer.levels, surfaces.table, settings)

@@ -13,14 +13,14 @@ import esper
 import numpy as np
 
 from components import Material, MeshRef, Mirror, Portal, Transform
-from engine.errors import SpeculumError
-from engine.frame_rules import frame_rules, world_corners
-from engine.mesh import flat_plane, planar_uv_map
-from engine.portal_math import pair_transform, portal_plane
-from engine.reflection_math import plane_from_point_normal, reflection_matrix, transform_plane
+from engine.assets.mesh import flat_plane, planar_uv_map
+from engine.core.errors import SpeculumError
+from engine.core.portal_math import pair_transform, portal_plane
+from engine.core.reflection_math import plane_from_point_normal, reflection_matrix, transform_plane
+from engine.core.world import World
 from engine.render.mirror_passes import MirrorBumps
 from engine.render.view_tree import Surfaces, SurfaceState
-from engine.world import World
+from engine.rules.frame_rules import frame_rules, world_corners
 
 # A mirror mesh thinner than this fraction of its size composites over its outline quad;
 # anything thicker (a mirror plane given explicitly on a solid mesh) over its rectangle.
@@ -115,7 +115,7 @@ class SurfaceSystem(esper.Processor):
 
 def _uv_rows(entity: int, mesh, model: np.ndarray) -> np.ndarray:
     """The mirror's UVs as an affine function of world position, (2, 4) rows: the mesh's
-    plane map (``engine.mesh.planar_uv_map``) carried to world space by the inverse model
+    plane map (``engine.assets.mesh.planar_uv_map``) carried to world space by the inverse model
     matrix.  The world refuses a mesh without one when the map is given; this is the
     backstop for a mesh replaced by other means."""
     rows, why = planar_uv_map(mesh)

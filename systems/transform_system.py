@@ -5,7 +5,7 @@ import esper
 from pyglm import glm
 
 from components import Transform
-from engine.world import FrameEvents, World
+from engine.core.world import FrameEvents, World
 
 
 class TransformSystem(esper.Processor):

@@ -12,7 +12,7 @@ import pytest
 # for a GL error when it ends and names itself (engine.render.renderer.Renderer.checkpoint).
 os.environ.setdefault("SPECULUM_DEBUG", "1")
 
-from engine.gl_context import create_headless_context
+from engine.render.gl_context import create_headless_context
 from tests.support import SceneRunner
 
 

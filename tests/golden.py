@@ -34,9 +34,9 @@ import numpy as np
 from PIL import Image
 from scipy import ndimage
 
-from engine.app import Engine
-from engine.frame_io import Output
+from engine.core.frame_io import Output
 from engine.render.targets import CaptureTarget
+from shell.app import Engine
 from tests.golden_scenes import SIZE, GoldenCase
 
 GOLDEN_DIR = Path(__file__).resolve().parent / "golden"

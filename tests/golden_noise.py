@@ -65,7 +65,7 @@ CHANGES = {
 def patch_shaders(change: str) -> Callable[[], None]:
     """Install a ``shader:old=>new`` change in the shader library's include expansion (programs
     built from now on see it); returns what undoes it."""
-    import engine.shader_library as library
+    import engine.render.shader_library as library
 
     old, new = change[len("shader:"):].split("=>")
     expand = library._expand
@@ -122,7 +122,7 @@ def changed_case(case, change: str):
 
 
 def render_all(folder: Path, change: str | None) -> None:
-    from engine.gl_context import create_headless_context
+    from engine.render.gl_context import create_headless_context
     from tests import golden
     from tests.golden_scenes import cases
 

@@ -14,7 +14,8 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from components import Portal
-from engine.app import Engine, Game
+from engine.core.game import Game
+from shell.app import Engine
 
 SIZE = (320, 180)
 REPO = Path(__file__).resolve().parent.parent

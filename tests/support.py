@@ -5,9 +5,10 @@ import numpy as np
 from pyglm import glm
 
 from components import Camera, Transform, look_rotation
-from engine.app import Engine, Game
-from engine.frame_io import Output
+from engine.core.frame_io import Output
+from engine.core.game import Game
 from engine.render.targets import CaptureTarget
+from shell.app import Engine
 
 
 class FunctionGame(Game):

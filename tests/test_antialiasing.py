@@ -14,7 +14,7 @@ from PIL import Image
 from pyglm import glm
 
 from components import Camera, Emissive, Material, MeshRef, Transform
-from engine.mesh import box
+from engine.assets.mesh import box
 from engine.render.present import MAX_SEARCH_STEPS
 from tests.support import linear_to_srgb8, srgb_to_linear
 

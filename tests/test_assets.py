@@ -17,11 +17,11 @@ from trimesh.visual import TextureVisuals
 from trimesh.visual.material import PBRMaterial
 
 from components import ComponentValueError, Emissive, Material, MeshRef, Mirror, Reflective, Transform
-from engine.assets import spawn_model
-from engine.errors import AssetError
-from engine.mesh import Mesh, box, load_model
-from engine.texture_data import TextureData, load_texture, ripple_normal_map
-from engine.world import World
+from engine.assets.mesh import Mesh, box, load_model
+from engine.assets.models import spawn_model
+from engine.assets.texture_data import TextureData, load_texture, ripple_normal_map
+from engine.core.errors import AssetError
+from engine.core.world import World
 from tests.support import srgb_to_linear
 
 # A quad in the XY plane whose file normals lean towards +Y: trimesh would compute (0, 0, 1),
@@ -348,14 +348,14 @@ def test_spawn_model_rejects_bad_placement_before_spawning(tmp_path, world):
 
 def test_failing_component_leaves_no_entities(tmp_path, world, monkeypatch):
     """A part whose components cannot be built fails the spawn before any entity exists."""
-    import engine.assets
+    import engine.assets.models
 
     write_glb(tmp_path / "pbr.glb")
 
     def broken(*args, **kwargs):
         raise ComponentValueError("Reflective.mix broken on purpose")
 
-    monkeypatch.setattr(engine.assets, "Reflective", broken)
+    monkeypatch.setattr(engine.assets.models, "Reflective", broken)
     with pytest.raises(AssetError, match=r"pbr\.glb.*Reflective\.mix"):
         spawn_model(world, tmp_path / "pbr.glb")
     assert world.entities() == []

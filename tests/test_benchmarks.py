@@ -14,8 +14,8 @@ import pytest
 
 from benchmarks import RENDERING_SUITES, SUITES, parse_size
 from benchmarks.__main__ import build_parser
-from engine.gl_context import GLCapabilities
-from engine.raw_gl import make_current
+from engine.render.gl_context import GLCapabilities
+from engine.render.raw_gl import make_current
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -124,7 +124,7 @@ import sys
 sys.modules["imgui_bundle"] = None
 from benchmarks.__main__ import main
 status = main(sys.argv[1:])
-print("overlay imported:", "engine.overlay" in sys.modules)
+print("overlay imported:", "shell.overlay" in sys.modules)
 sys.exit(status)
 """
 

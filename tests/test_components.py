@@ -21,8 +21,8 @@ from components import (
     Skybox,
     Transform,
 )
-from engine.mesh import box
-from engine.world import World
+from engine.assets.mesh import box
+from engine.core.world import World
 
 NAN = float("nan")
 INF = float("inf")
@@ -138,8 +138,8 @@ def test_a_bad_component_value_in_a_level_stops_the_runner_with_one_line(tmp_pat
     level = tmp_path / "rough_level.py"
     level.write_text(
         "from components import Material, MeshRef, Transform\n"
-        "from engine import Game, run, spawn_camera\n"
-        "from engine.mesh import box\n"
+        "from engine import Game, spawn_camera\nfrom shell import run\n"
+        "from engine.assets.mesh import box\n"
         "class Rough(Game):\n"
         "    def build(self, world):\n"
         "        spawn_camera(world)\n"

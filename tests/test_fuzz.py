@@ -32,7 +32,7 @@ def cases(draw) -> Case:
     rng = random.Random(draw(st.integers(0, 2 ** 32 - 1)))
     values = {name: random_value(rng) for name in chosen}
     if cls.__name__ == "MeshRef" and "mesh" not in values:
-        from engine.mesh import box
+        from engine.assets.mesh import box
 
         values["mesh"] = box()
     return Case(cls, values)

@@ -5,8 +5,8 @@ import dataclasses
 
 import pytest
 
-from engine.errors import GLCapabilityError
-from engine.gl_context import REQUIREMENTS, GLCapabilities, check_capabilities, prepare_context
+from engine.core.errors import GLCapabilityError
+from engine.render.gl_context import REQUIREMENTS, GLCapabilities, check_capabilities, prepare_context
 
 GOOD = GLCapabilities(
     version_code=410,

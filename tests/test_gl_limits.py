@@ -6,12 +6,12 @@ import numpy as np
 import pytest
 
 from components import Camera, Material, MeshRef, Transform
-from engine.errors import GLLimitError, GLPassError
-from engine.frame_io import Output
-from engine.gl_context import GLCapabilities
-from engine.mesh import box
+from engine.assets.mesh import box
+from engine.assets.texture_data import TextureData
+from engine.core.errors import GLLimitError, GLPassError
+from engine.core.frame_io import Output
+from engine.render.gl_context import GLCapabilities
 from engine.render.targets import CaptureTarget, RenderTargets
-from engine.texture_data import TextureData
 
 
 def test_a_texture_wider_than_the_gl_limit_is_named_with_its_entity(scene, ctx):

@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from engine.gl_context import prepare_context
+from engine.render.gl_context import prepare_context
 from tests import golden, golden_noise
 from tests.golden_scenes import REPO, cases
 
@@ -126,7 +126,7 @@ def test_goldens_render_with_the_software_filtering_policy(ctx, monkeypatch):
     renderer that starts with a GPU's (8x anisotropy in reflections and on normal maps)
     uploads the sample level's normal map trilinear, draws reflections trilinear, and
     renders the reference's frame."""
-    import engine.app
+    import shell.app
     from engine.render.renderer import Renderer
 
     uploads, reflections = [], []
@@ -145,7 +145,7 @@ def test_goldens_render_with_the_software_filtering_policy(ctx, monkeypatch):
             reflections.append(self.reflection_anisotropy)
             super().checkpoint(name)
 
-    monkeypatch.setattr(engine.app, "Renderer", GpuPolicyRenderer)
+    monkeypatch.setattr(shell.app, "Renderer", GpuPolicyRenderer)
     frame = golden.render_case(ctx, CASE["hall_start"])
     assert (True, golden.SOFTWARE_ANISOTROPY) in uploads and all(a == golden.SOFTWARE_ANISOTROPY
                                                                   for linear, a in uploads if linear)

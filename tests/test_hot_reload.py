@@ -3,7 +3,7 @@ a build that fails leaves the old program drawing and names the file and line; a
 compile error names the right file and line in every program the engine builds.
 
 The tests work on a copy of ``shaders/`` in a temporary folder (the library's files are
-found through ``engine.shader_library.shader_dir``, pointed at the copy), render real
+found through ``engine.render.shader_library.shader_dir``, pointed at the copy), render real
 frames and compare their pixels."""
 from __future__ import annotations
 
@@ -19,13 +19,13 @@ import numpy as np
 import pytest
 from pyglm import glm
 
-import engine.shader_library as shader_library
+import engine.render.shader_library as shader_library
 from components import DirectionalLight, Material, MeshRef, Mirror, ReflectionProbe, Skybox, Transform
-from engine.errors import ShaderError
-from engine.mesh import box, plane, quad, sphere
-from engine.portals import spawn_portal_pair
-from engine.shader_library import POLL_INTERVAL, ShaderLibrary, load_source
-from engine.texture_data import ripple_normal_map
+from engine.assets.mesh import box, plane, quad, sphere
+from engine.assets.portals import spawn_portal_pair
+from engine.assets.texture_data import ripple_normal_map
+from engine.core.errors import ShaderError
+from engine.render.shader_library import POLL_INTERVAL, ShaderLibrary, load_source
 from tests.support import linear_to_srgb8, look_from
 
 SIZE = (96, 72)
@@ -416,7 +416,7 @@ def window_shell(build=None):
     """The windowed shell (headless EGL window) running a game of ``build`` (``room``)."""
     import moderngl_window as mglw
 
-    from engine.window import make_window_config
+    from shell.window import make_window_config
     from tests.support import FunctionGame
 
     config = mglw.create_window_config_instance(

@@ -3,7 +3,7 @@ and through the window shell's key handler (moderngl-window's headless window)."
 from __future__ import annotations
 
 from components import Skybox
-from engine.frame_io import Input
+from engine.core.frame_io import Input
 from tests.support import SceneRunner, look_from
 
 
@@ -37,7 +37,7 @@ def test_a_press_lasts_one_frame_and_a_held_key_stays(ctx):
 def test_window_shell_names_keys_and_clicks(tmp_path):
     import moderngl_window as mglw
 
-    from engine.window import make_window_config
+    from shell.window import make_window_config
     from tests.support import FunctionGame
 
     seen: list[tuple[set, set]] = []

@@ -1,5 +1,7 @@
-"""Layering: every module imports on its own in a fresh interpreter, and the engine's core
-never imports ``systems`` (only the app shell wires systems into a world)."""
+"""Layering: every module imports on its own in a fresh interpreter; imports run only down
+the floors of the house (components, then the engine's core, assets, rules and render, then
+systems, the app shell, games and benchmarks), transitively; no two modules import each
+other, however far round."""
 from __future__ import annotations
 
 import ast
@@ -10,9 +12,10 @@ import sys
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
-PACKAGES = ("components", "engine", "systems", "games", "benchmarks", "shaders")
-# The app shell: the one place that may import systems.
-SHELL = {"engine.app", "engine.runner", "engine.window"}
+PACKAGES = ("components", "engine", "systems", "shell", "games", "benchmarks", "shaders")
+# The floors, lowest first: a module may import its own floor and the ones below.
+FLOORS = ("shaders", "components", "engine.core", "engine.assets", "engine.rules", "engine.render", "engine",
+          "systems", "shell", "games", "benchmarks")
 
 
 def modules() -> list[str]:
@@ -93,24 +96,97 @@ def test_import_systems_first_in_a_truly_fresh_interpreter():
     assert result.returncode == 0, result.stderr[-2000:]
 
 
-def imported_names(path: Path) -> set[str]:
-    names = set()
-    for node in ast.walk(ast.parse(path.read_text())):
-        if isinstance(node, ast.Import):
-            names.update(alias.name for alias in node.names)
-        elif isinstance(node, ast.ImportFrom) and node.module and not node.level:
-            names.add(node.module)
-    return names
+def floor_of(module: str) -> int:
+    """The floor of ``module``: its longest FLOORS prefix."""
+    best = max((f for f in FLOORS if module == f or module.startswith(f + ".")), key=len)
+    return FLOORS.index(best)
 
 
-def test_the_engine_core_never_imports_systems():
-    offenders = []
-    for name in modules():
-        if not name.startswith("engine") or name in SHELL:
+def module_path(name: str) -> Path:
+    path = ROOT / (name.replace(".", "/") + ".py")
+    return path if path.exists() else ROOT / name.replace(".", "/") / "__init__.py"
+
+
+def imported_modules(name: str, known: set[str]) -> set[str]:
+    """The project modules ``name`` imports at run time, at its top or inside a function (an
+    ``if TYPE_CHECKING:`` block is for type checkers only); ``from a import b`` counts a.b
+    where that is a module, else a."""
+    tree = ast.parse(module_path(name).read_text())
+    typing_only = {id(node) for block in ast.walk(tree) if isinstance(block, ast.If)
+                   and getattr(block.test, "id", None) == "TYPE_CHECKING" for node in ast.walk(block)}
+    found = set()
+    for node in ast.walk(tree):
+        if id(node) in typing_only:
             continue
-        path = ROOT / (name.replace(".", "/") + ".py")
-        if not path.exists():
-            path = ROOT / name.replace(".", "/") / "__init__.py"
-        if any(n == "systems" or n.startswith("systems.") for n in imported_names(path)):
-            offenders.append(name)
-    assert not offenders, f"engine core modules importing systems: {offenders}"
+        if isinstance(node, ast.Import):
+            found.update(alias.name for alias in node.names)
+        elif isinstance(node, ast.ImportFrom) and node.module and not node.level:
+            found.update(f"{node.module}.{alias.name}" if f"{node.module}.{alias.name}" in known else node.module
+                         for alias in node.names)
+    return {m for m in found if m in known and m != name}
+
+
+def import_graph() -> dict[str, set[str]]:
+    known = set(modules())
+    return {name: imported_modules(name, known) for name in known}
+
+
+def test_imports_run_only_down_the_floors_transitively():
+    graph = import_graph()
+    offenders = []
+    for name in graph:
+        seen, stack = set(), list(graph[name])
+        while stack:
+            other = stack.pop()
+            if other in seen:
+                continue
+            seen.add(other)
+            stack.extend(graph[other])
+        above = sorted(m for m in seen if floor_of(m) > floor_of(name) and not name.endswith("__main__"))
+        if above:
+            offenders.append(f"{name} (floor {FLOORS[floor_of(name)]}) reaches {above}")
+    assert not offenders, "\n".join(offenders)
+
+
+def test_no_two_modules_import_each_other():
+    """No import circle of any length (Tarjan's strongly connected components)."""
+    graph = import_graph()
+    index, low, on_stack, stack, circles, counter = {}, {}, set(), [], [], [0]
+
+    def visit(node: str) -> None:
+        index[node] = low[node] = counter[0]
+        counter[0] += 1
+        stack.append(node)
+        on_stack.add(node)
+        for other in graph[node]:
+            if other not in index:
+                visit(other)
+                low[node] = min(low[node], low[other])
+            elif other in on_stack:
+                low[node] = min(low[node], index[other])
+        if low[node] == index[node]:
+            component = []
+            while True:
+                other = stack.pop()
+                on_stack.discard(other)
+                component.append(other)
+                if other == node:
+                    break
+            if len(component) > 1:
+                circles.append(sorted(component))
+
+    for node in sorted(graph):
+        if node not in index:
+            visit(node)
+    assert not circles, circles
+
+
+def test_loading_a_level_file_imports_no_system_and_no_shell():
+    """The level-file loader (an asset) loads no system, shell module or game in a fresh
+    interpreter: the layering of the imports, as Python runs them."""
+    probe = ("import sys, engine.assets.level_file; "
+             "print(sorted(m for m in sys.modules if m.split('.')[0] in ('systems', 'shell', 'games')))")
+    result = subprocess.run([sys.executable, "-c", probe], cwd=ROOT, env={**os.environ, "PYTHONPATH": str(ROOT)},
+                            capture_output=True, text=True, timeout=60)
+    assert result.returncode == 0, result.stderr[-2000:]
+    assert result.stdout.strip() == "[]", result.stdout

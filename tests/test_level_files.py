@@ -10,10 +10,10 @@ import numpy as np
 import pytest
 
 from components import Camera, MeshRef, Mirror, Portal, Transform, look_rotation
-from engine.level_file import LevelError, _encode_component, load_level, same_floats, save_level
-from engine.mesh import load_model
-from engine.texture_data import ripple_normal_map
-from engine.world import World
+from engine.assets.level_file import LevelError, _encode_component, load_level, same_floats, save_level
+from engine.assets.mesh import load_model
+from engine.assets.texture_data import ripple_normal_map
+from engine.core.world import World
 from games.hall_of_mirrors.level import LEVEL as HALL
 from games.hall_of_mirrors.level import HallOfMirrors, Spin
 from tests.support import SceneRunner
@@ -377,7 +377,7 @@ def test_level_through_the_runner_plays_that_file(tmp_path):
 def test_level_replaces_a_level_games_file_and_is_refused_by_any_other_game(tmp_path, capsys):
     """runner.use_level: a LevelGame's file is replaced (and checked before anything is
     made); a game that builds in Python refuses --level with one error line, exit 2."""
-    from engine.runner import main, use_level
+    from shell.runner import main, use_level
     from tests.support import FunctionGame
 
     game = HallOfMirrors()

@@ -16,15 +16,15 @@ import pytest
 from pyglm import glm
 
 from components import Emissive, Transform
-from engine.app import Engine
-from engine.capture import save_png
-from engine.frame_io import Input, Output
-from engine.reflection_math import plane_from_point_normal, reflection_matrix
+from engine.core.frame_io import Input, Output
+from engine.core.reflection_math import plane_from_point_normal, reflection_matrix
 from engine.render.targets import CaptureTarget
 from engine.render.view_tree import Surfaces
 from games.mirror_beam import BeamState, LevelRulesError, MirrorBeam, levels
 from games.mirror_beam.beam import trace_beam
 from games.mirror_beam.game import BeamSegment, MirrorFrame
+from shell.app import Engine
+from shell.capture import save_png
 
 try:
     import tomllib
@@ -399,7 +399,7 @@ from pyglet.window import key, mouse
 from pyglm import glm
 
 from components import Transform
-from engine.window import make_window_config
+from shell.window import make_window_config
 from games.mirror_beam import BeamState, MirrorBeam
 
 config = mglw.create_window_config_instance(make_window_config(MirrorBeam(sys.argv[1])),

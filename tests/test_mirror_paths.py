@@ -19,9 +19,9 @@ from components import (
     Transform,
     look_rotation,
 )
-from engine.mesh import box, plane, quad, sphere
+from engine.assets.mesh import box, plane, quad, sphere
+from engine.assets.texture_data import checker_texture
 from engine.render.batched_mirrors import AUTO_MAX_TRIANGLES, AUTO_MIN_VIEWS, choose_path, submitted_triangles
-from engine.texture_data import checker_texture
 
 SIZE = (200, 150)
 

@@ -6,11 +6,11 @@ import pytest
 from pyglm import glm
 
 from components import ComponentValueError, DirectionalLight, Emissive, Material, MeshRef, Mirror, Skybox, Transform
-from engine.mesh import box, plane, quad, sphere
-from engine.reflection_math import plane_from_point_normal, reflection_matrix
+from engine.assets.mesh import box, plane, quad, sphere
+from engine.assets.texture_data import checker_texture
+from engine.core.reflection_math import plane_from_point_normal, reflection_matrix
 from engine.render.sky import sky_radiance
 from engine.render.view_tree import Surfaces
-from engine.texture_data import checker_texture
 from tests.support import look_from, srgb_to_linear
 
 SIZE = (200, 150)
@@ -507,7 +507,7 @@ def test_a_double_sided_mirror_mesh_does_not_show_its_own_glass(scene, path):
     camera behind the mirror its back triangles face the camera and lie on the mirror plane.
     The view leaves its own surface out by entity (without that, every mirror pixel of this
     view showed the glass), so the reflection is there."""
-    from engine.mesh import Mesh
+    from engine.assets.mesh import Mesh
 
     ents = {}
     single = quad(4, 3)

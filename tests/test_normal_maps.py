@@ -10,11 +10,11 @@ import pytest
 from pyglm import glm
 
 from components import Camera, DirectionalLight, Emissive, Material, MeshRef, Mirror, Reflective, Skybox, Transform
-from engine.errors import GLLimitError
-from engine.gl_context import GLCapabilities
-from engine.mesh import Mesh, box, quad
+from engine.assets.mesh import Mesh, box, quad
+from engine.assets.texture_data import TextureData, checker_texture
+from engine.core.errors import GLLimitError
+from engine.render.gl_context import GLCapabilities
 from engine.render.sky import face_directions
-from engine.texture_data import TextureData, checker_texture
 
 TILT = math.radians(18.0)
 
@@ -217,5 +217,5 @@ def test_a_normal_map_over_the_gl_limit_is_named_with_its_entity_and_field(scene
 def test_a_bad_normal_scale_is_refused_naming_the_field(value, message):
     with pytest.raises(ValueError, match=message):
         Material(normal_scale=value)
-    with pytest.raises(ValueError, match="Material.normal_map must be an engine.texture_data.TextureData"):
+    with pytest.raises(ValueError, match="Material.normal_map must be an engine.assets.texture_data.TextureData"):
         Material(normal_map=np.zeros((4, 4, 3), np.uint8))

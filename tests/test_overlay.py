@@ -14,10 +14,10 @@ import pytest
 from PIL import Image
 
 from components import Material, MeshRef, ReflectionProbe, Transform
-from engine.mesh import sphere
+from engine.assets.mesh import sphere
 
 pytest.importorskip("imgui_bundle", reason="the debug overlay needs imgui-bundle (not installed here)")
-from engine.overlay import POSITION, DebugOverlay, overlay_lines  # noqa: E402
+from shell.overlay import POSITION, DebugOverlay, overlay_lines  # noqa: E402
 from tests import test_hot_reload
 from tests.support import FunctionGame
 from tests.test_hot_reload import room
@@ -102,7 +102,7 @@ def test_window_f1_shows_the_overlay_and_its_toggles_change_the_paths(tmp_path):
     import moderngl_window as mglw
 
     from engine import spawn_camera
-    from engine.window import make_window_config
+    from shell.window import make_window_config
 
     def build(world):
         room(world)
@@ -158,8 +158,9 @@ def test_window_f1_shows_the_overlay_and_its_toggles_change_the_paths(tmp_path):
 
 LEVEL = """
 from components import DirectionalLight, Material, MeshRef, Skybox, Transform
-from engine import Game, run, spawn_camera
-from engine.mesh import box, plane
+from engine import Game, spawn_camera
+from shell import run
+from engine.assets.mesh import box, plane
 
 
 class Still(Game):
@@ -196,8 +197,8 @@ def test_headless_overlay_flag_draws_into_the_png_and_nothing_else(tmp_path):
 RELEASE_TWICE = """
 from imgui_bundle import imgui
 
-from engine.gl_context import create_headless_context
-from engine.overlay import DebugOverlay
+from engine.render.gl_context import create_headless_context
+from shell.overlay import DebugOverlay
 
 ctx = create_headless_context()
 a, b = DebugOverlay(ctx), DebugOverlay(ctx)  # a is current (ImGui makes only the first one current)

@@ -13,7 +13,7 @@ import random
 import moderngl
 import numpy as np
 
-from engine.frame_io import Output
+from engine.core.frame_io import Output
 from engine.render.targets import CaptureTarget
 from games.hall_of_mirrors.level import HallOfMirrors
 from tests.support import SceneRunner

@@ -18,8 +18,11 @@ import numpy as np
 import pytest
 
 from components import Material, ReflectionProbe
-from engine.errors import GLPassError
-from engine.raw_gl import (
+from engine.core.errors import GLPassError
+from engine.render.bindings import PROBE_UNIT, SCRATCH_UNIT
+from engine.render.path_checks import PATH_NAMES, SENTINEL, PathChecks
+from engine.render.probes import ProbeCaptures, face_view
+from engine.render.raw_gl import (
     GL_COLOR_ATTACHMENT0,
     GL_DEPTH_ATTACHMENT,
     GL_FRAMEBUFFER,
@@ -29,9 +32,6 @@ from engine.raw_gl import (
     RawGL,
     read_cube_level,
 )
-from engine.render.bindings import PROBE_UNIT, SCRATCH_UNIT
-from engine.render.path_checks import PATH_NAMES, SENTINEL, PathChecks
-from engine.render.probes import ProbeCaptures, face_view
 from tests.support import srgb_to_linear
 from tests.test_probes import chrome_scene, ggx_reference, marked_chrome_scene, probe_stage
 

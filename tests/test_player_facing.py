@@ -17,14 +17,14 @@ import pytest
 
 from components import Portal, Transform
 from components.portal import PortalPartnerWarning
-from engine.level_file import LevelError
-from engine.runner import build_parser, main
-from engine.world import World
+from engine.assets.level_file import LevelError
+from engine.core.world import World
 from games.hall_of_mirrors.level import HallOfMirrors
 from games.mirror_beam import MirrorBeam
 from games.mirror_beam import levels as beam_levels
 from games.portal_run import PortalRun
 from games.portal_run import levels as run_levels
+from shell.runner import build_parser, main
 
 ROOT = Path(__file__).resolve().parents[1]
 GAME_OPTIONS = {"hall_of_mirrors": [], "mirror_beam": ["--interval"], "portal_run": ["--autopilot", "--no-autopilot"]}
@@ -133,8 +133,8 @@ def test_a_level_made_for_another_game_is_refused_naming_both(tmp_path, capsys):
 
 def test_a_portal_paired_with_no_entity_says_so_once(world):
     """Portal(partner=999) left a closed portal without a word."""
-    from engine.frame_rules import open_portal_pairs
-    from engine.portals import spawn_portal_pair
+    from engine.assets.portals import spawn_portal_pair
+    from engine.rules.frame_rules import open_portal_pairs
 
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
@@ -157,7 +157,8 @@ def test_a_portal_paired_with_no_entity_says_so_once(world):
 
 NO_PARTNER_GAME = """
 from components import Portal, Transform
-from engine import Game, run, spawn_camera
+from engine import Game, spawn_camera
+from shell import run
 
 class Lone(Game):
     def build(self, world):

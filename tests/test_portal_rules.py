@@ -1,4 +1,4 @@
-"""The rules every system shares (engine/frame_rules.py): which portal pairs are open, the
+"""The rules every system shares (engine/rules/frame_rules.py): which portal pairs are open, the
 active camera, a mesh's world corners.
 
 Scene tests render real frames: portal A at (-3, 1.5, 0) and B at (3, 1.5, 0), both facing
@@ -30,11 +30,11 @@ from components import (
     Transform,
     Traveller,
 )
-from engine.capture import export_scene
-from engine.frame_rules import FrameRules, active_camera, frame_rules, open_portal_pairs, world_corners
-from engine.mesh import box
-from engine.portals import spawn_portal_pair
-from engine.world import World
+from engine.assets.mesh import box
+from engine.assets.portals import spawn_portal_pair
+from engine.core.world import World
+from engine.rules.frame_rules import FrameRules, active_camera, frame_rules, open_portal_pairs, world_corners
+from shell.capture import export_scene
 from systems import PortalCrossings
 from tests.support import look_from, srgb_to_linear
 

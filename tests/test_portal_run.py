@@ -16,14 +16,14 @@ import pytest
 from pyglm import glm
 
 from components import Emissive, MeshRef, Portal, Transform
-from engine.app import Engine
-from engine.capture import save_png
-from engine.frame_io import Input, Output
-from engine.level_file import LevelError
+from engine.assets.level_file import LevelError
+from engine.core.frame_io import Input, Output
 from engine.render.targets import CaptureTarget
 from games.portal_run import LevelRulesError, PortalRun, levels
 from games.portal_run.autopilot import Autopilot, ScriptError
 from games.portal_run.game import EYE_HEIGHT, GRAVITY, HALF_WIDTH, JUMP_SPEED, WALK_SPEED, PlayerBody, load_rules
+from shell.app import Engine
+from shell.capture import save_png
 
 ROOT = Path(__file__).resolve().parent.parent
 OUT = ROOT / "out" / "portal_run"
@@ -383,7 +383,7 @@ import moderngl_window as mglw
 from pyglet.window import key, mouse
 
 from components import Transform
-from engine.window import make_window_config
+from shell.window import make_window_config
 from games.portal_run import PortalRun
 
 game = PortalRun(sys.argv[1], verbose=False)

@@ -17,8 +17,8 @@ from components import (
     Traveller,
     look_rotation,
 )
-from engine.mesh import box
-from engine.portals import spawn_portal_pair
+from engine.assets.mesh import box
+from engine.assets.portals import spawn_portal_pair
 
 SIZE = (200, 150)
 

@@ -27,11 +27,11 @@ from components import (
     Traveller,
     yaw_pitch_rotation,
 )
-from engine.app import spawn_camera
-from engine.frame_io import Input
-from engine.mesh import box, sphere
-from engine.portals import spawn_portal_pair
-from engine.world import World
+from engine.assets.mesh import box, sphere
+from engine.assets.portals import spawn_portal_pair
+from engine.core.frame_io import Input
+from engine.core.game import spawn_camera
+from engine.core.world import World
 from systems import PortalCrossing, PortalCrossings, PortalTravelSystem, TransformSystem
 
 TURN_Y_90 = glm.angleAxis(glm.radians(90), glm.vec3(0, 1, 0))

@@ -14,9 +14,9 @@ from components import (
     Skybox,
     Transform,
 )
-from engine.mesh import box, plane, quad
-from engine.portals import spawn_portal_pair
-from engine.texture_data import checker_texture
+from engine.assets.mesh import box, plane, quad
+from engine.assets.portals import spawn_portal_pair
+from engine.assets.texture_data import checker_texture
 from tests.support import look_from, srgb_to_linear
 
 SIZE = (200, 150)

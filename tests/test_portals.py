@@ -8,10 +8,10 @@ import pytest
 from pyglm import glm
 
 from components import ComponentValueError, Portal, Transform
-from engine.capture import export_scene
-from engine.portal_math import pair_transform, portal_plane
-from engine.portals import spawn_portal_pair
-from engine.world import World
+from engine.assets.portals import spawn_portal_pair
+from engine.core.portal_math import pair_transform, portal_plane
+from engine.core.world import World
+from shell.capture import export_scene
 
 TURN_Y_90 = glm.angleAxis(glm.radians(90), glm.vec3(0, 1, 0))
 

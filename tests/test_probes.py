@@ -20,7 +20,7 @@ from components import (
     Transform,
     look_rotation,
 )
-from engine.mesh import box, quad, sphere
+from engine.assets.mesh import box, quad, sphere
 from engine.render.sky import face_directions
 from tests.support import look_from, srgb_to_linear
 
@@ -342,7 +342,7 @@ def test_a_probe_face_sees_a_mirror_reflect_what_the_probe_cannot_see_directly(s
     mirror image at (0, 1.5, -6).  With ``depth`` 1 the -Z face shows red in the direction of
     that image (the face roots a view tree of its own); with 0 the mirror shows its glass."""
     from components import Mirror
-    from engine.mesh import quad as quad_mesh
+    from engine.assets.mesh import quad as quad_mesh
 
     ents = {}
 
@@ -372,8 +372,8 @@ def test_a_probes_own_object_is_in_none_of_its_mirror_views(scene, path, monkeyp
     it for a second probe at the same place, and not for its own, on either way of drawing
     a level (the whole view tree leaves the probe's object out, not only the face's view)."""
     from components import Mirror
-    from engine.mesh import Mesh
-    from engine.mesh import quad as quad_mesh
+    from engine.assets.mesh import Mesh
+    from engine.assets.mesh import quad as quad_mesh
 
     cube = box((0.8, 0.8, 0.8))
     offset_box = Mesh(cube.positions + np.array([0.0, 1.5, 2.0], np.float32), cube.normals, cube.uvs, cube.indices,
@@ -411,7 +411,7 @@ def test_a_face_that_sees_a_change_only_in_a_mirror_is_recaptured(scene, change)
     is not in the -Z face's own frustum.  When the box turns green, or moves 0.3 m to the
     side, the -Z face is captured again (its mirror view sees it) and shows it there."""
     from components import Mirror
-    from engine.mesh import quad as quad_mesh
+    from engine.assets.mesh import quad as quad_mesh
 
     ents = {}
 
@@ -554,7 +554,7 @@ def test_box_projection_puts_a_walls_reflection_where_the_math_says(scene):
 def test_the_exported_scene_lists_each_probe_and_what_samples_it(scene, tmp_path):
     import json
 
-    from engine.capture import export_scene
+    from shell.capture import export_scene
 
     ents = {}
 
@@ -677,7 +677,7 @@ def test_a_probes_own_object_never_appears_in_its_capture(scene):
     """A red panel 1 m in front of its own probe (a quad mesh offset from the entity's
     origin, facing the probe): absent from that probe's -Z face, present in the same face of
     a second probe at the same place."""
-    from engine.mesh import Mesh
+    from engine.assets.mesh import Mesh
 
     panel = quad(1.0, 1.0)
     offset_panel = Mesh(panel.positions + np.array([0.0, 0.0, -1.0], np.float32), panel.normals, panel.uvs,
@@ -736,7 +736,7 @@ def fill_cube(probes, key: int) -> None:
 
 def fill_levels(ctx, cube) -> None:
     """Every face of every level below level 0 set to the sentinel."""
-    from engine.raw_gl import write_cube_level
+    from engine.render.raw_gl import write_cube_level
 
     for level in range(1, cube.size[0].bit_length()):
         n = cube.size[0] >> level
@@ -748,7 +748,7 @@ def read_cube_level(ctx, cube, face: int, level: int) -> np.ndarray:
     """Face ``face`` of mip ``level`` of ``cube``, RGBA float32 (glGetTexImage: moderngl reads level 0 only)."""
     import ctypes
 
-    from engine.raw_gl import GL_TEXTURE_CUBE_MAP_POSITIVE_X, _load
+    from engine.render.raw_gl import GL_TEXTURE_CUBE_MAP_POSITIVE_X, _load
     get_tex_image = _load(ctx, "glGetTexImage", ctypes.CFUNCTYPE(None, ctypes.c_uint, ctypes.c_int, ctypes.c_uint,
                                                                    ctypes.c_uint, ctypes.c_void_p))
     n = max(1, cube.size[0] >> level)

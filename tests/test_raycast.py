@@ -1,4 +1,4 @@
-"""engine.raycast against hits worked out by hand (planes of boxes and quads, a sphere's
+"""engine.rules.raycast against hits worked out by hand (planes of boxes and quads, a sphere's
 distance), its filters, and its cache following moves, mesh swaps and deletions."""
 from __future__ import annotations
 
@@ -9,9 +9,9 @@ import pytest
 from pyglm import glm
 
 from components import Material, MeshRef, Transform, yaw_pitch_rotation
-from engine.mesh import box, quad, sphere
-from engine.raycast import RayCaster, RayCastError, raycast
-from engine.world import World
+from engine.assets.mesh import box, quad, sphere
+from engine.core.world import World
+from engine.rules.raycast import RayCaster, RayCastError, raycast
 from systems.transform_system import TransformSystem
 
 
@@ -126,7 +126,7 @@ def test_cache_follows_moves_mesh_swaps_parents_and_deletion(world):
 def test_against_a_plain_per_triangle_reference(world):
     # Random triangles; each ray's nearest hit from a scalar line-plane-inside test, triangle by triangle.
     rng = np.random.default_rng(7)
-    from engine.mesh import Mesh
+    from engine.assets.mesh import Mesh
 
     soup = rng.uniform(-2, 2, (40, 3, 3))
     positions = soup.reshape(-1, 3)

@@ -19,7 +19,8 @@ ROOT = Path(__file__).resolve().parents[1]
 README = (ROOT / "README.md").read_text()
 PYTHON_BLOCKS = re.findall(r"^```python\n(.*?)^```", README, flags=re.S | re.M)
 # Where the prose's bare names live, searched in order.
-NAMESPACES = ("components", "engine", "engine.mesh", "engine.texture_data", "engine.portals", "engine.assets")
+NAMESPACES = ("components", "engine", "shell", "engine.assets.mesh", "engine.assets.texture_data",
+              "engine.assets.portals", "engine.assets.models")
 NOT_PYTHON = {"layout"}  # GLSL's layout(binding=), named under Requirements
 
 
@@ -69,7 +70,8 @@ def test_every_call_the_readme_prose_shows_exists_with_its_keywords():
 
     calls = re.findall(r"`([A-Za-z_][\w.]*)\(([^`]*)\)`", README)
     named = {name for name, _ in calls} | set(re.findall(r"`(checker_texture|load_texture)`", README))
-    assert {"look_rotation", "yaw_pitch_rotation", "checker_texture", "engine.texture_data.load_texture"} <= named
+    assert {"look_rotation", "yaw_pitch_rotation", "checker_texture",
+            "engine.assets.texture_data.load_texture"} <= named
     for name, arguments in calls:
         if name in NOT_PYTHON:
             continue

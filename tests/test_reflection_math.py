@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 from pyglm import glm
 
-from engine.reflection_math import (
+from engine.core.reflection_math import (
     MIRROR_X,
     mirrored_view,
     oblique_projection,

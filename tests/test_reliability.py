@@ -28,10 +28,10 @@ from components import (
     Traveller,
     euler_rotation,
 )
-from engine.errors import AssetError
-from engine.mesh import box, load_model, quad
-from engine.texture_data import load_texture
-from engine.world import World
+from engine.assets.mesh import box, load_model, quad
+from engine.assets.texture_data import load_texture
+from engine.core.errors import AssetError
+from engine.core.world import World
 from tests.support import look_from
 
 
@@ -271,7 +271,7 @@ def test_a_glb_node_scaled_past_float32_is_named(tmp_path):
 
 
 def test_spawn_portal_pair_refuses_euler_looking_rotations_naming_the_argument_and_spawns_nothing(world):
-    from engine.portals import spawn_portal_pair
+    from engine.assets.portals import spawn_portal_pair
 
     with pytest.raises(ComponentValueError, match=r"spawn_portal_pair rotation_b: Transform\.rotation must be a "
                                                   r"quaternion.*euler_rotation"):
@@ -292,7 +292,7 @@ def test_a_mirrors_mesh_without_area_is_refused_whenever_it_comes(world):
     mirror's MeshRef.mesh is replaced: refused then (naming the entity and MeshRef.mesh),
     the old state kept, not a failure inside the surfaces stage on the next frame."""
     from components import Mirror
-    from engine.mesh import quad
+    from engine.assets.mesh import quad
 
     with pytest.raises(ComponentValueError, match=r"Mirror on entity \d+: its MeshRef\.mesh 'quad' has no area"):
         world.spawn(Transform(), MeshRef(quad(0, 0)), Material(), Mirror())
@@ -324,9 +324,9 @@ def test_a_pose_float32_cannot_hold_is_refused_naming_the_field(field, value, me
 def test_generated_assets_past_their_bounds_are_refused_naming_them():
     """Found by the level-file fuzz: a checker of 100000 texels asked for 149 GiB and a
     sphere of 10^8 segments ran out of memory; both are refused with the argument named."""
-    from engine.errors import AssetError
-    from engine.mesh import sphere
-    from engine.texture_data import checker_texture
+    from engine.assets.mesh import sphere
+    from engine.assets.texture_data import checker_texture
+    from engine.core.errors import AssetError
 
     with pytest.raises(AssetError, match=r"checker texture 'checker': size must be an int in \[1, 16384\]"):
         checker_texture(100_000, 2)
@@ -343,7 +343,7 @@ def test_a_mirror_on_a_mesh_that_is_not_flat_is_refused_when_it_is_attached(worl
     """Found by the level-file fuzz: a Mirror on a sphere was accepted and failed in the
     surfaces stage on the first frame; it is refused at spawn (and on a later mesh change)."""
     from components import Mirror
-    from engine.mesh import sphere
+    from engine.assets.mesh import sphere
 
     with pytest.raises(ComponentValueError, match=r"Mirror on entity \d+: its MeshRef\.mesh 'sphere' which is not "
                                                   r"flat"):

@@ -15,9 +15,9 @@ from components import (
     Skybox,
     Transform,
 )
-from engine.mesh import box, plane, quad, sphere
+from engine.assets.mesh import box, plane, quad, sphere
+from engine.assets.texture_data import checker_texture
 from engine.render.sky import sky_radiance
-from engine.texture_data import checker_texture
 from tests.support import srgb_to_linear
 
 SIZE = (160, 120)
@@ -274,7 +274,7 @@ def test_entities_release_their_gpu_resources(scene):
 
 
 def test_minimised_output_renders_nothing_and_does_not_crash(scene, ctx):
-    from engine.frame_io import Output
+    from engine.core.frame_io import Output
 
     def build(world):
         camera(world)
@@ -370,7 +370,7 @@ def test_reflections_filter_trilinearly_on_a_software_rasteriser_only(ctx, rende
     trilinearly; on a GPU they filter like the main view."""
     import dataclasses
 
-    from engine.gl_context import GLCapabilities
+    from engine.render.gl_context import GLCapabilities
     from engine.render.renderer import Renderer
 
     caps = dataclasses.replace(GLCapabilities.read(ctx), renderer=renderer_name)

@@ -70,8 +70,8 @@ def test_window_shell_runs_under_moderngl_window_headless(tmp_path):
     """The WindowConfig used for windowed runs, driven by moderngl-window's EGL headless window."""
     import moderngl_window as mglw
 
-    from engine.window import make_window_config
     from games.hall_of_mirrors import HallOfMirrors
+    from shell.window import make_window_config
 
     config_cls = make_window_config(HallOfMirrors())
     config = mglw.create_window_config_instance(
@@ -107,8 +107,8 @@ def test_a_bad_level_stops_cleanly_with_one_line(tmp_path):
     level = tmp_path / "bad_level.py"
     level.write_text(
         "from components import Material, MeshRef, Mirror, Transform\n"
-        "from engine import Game, run, spawn_camera\n"
-        "from engine.mesh import box\n"
+        "from engine import Game, spawn_camera\nfrom shell import run\n"
+        "from engine.assets.mesh import box\n"
         "class Bad(Game):\n"
         "    def build(self, world):\n"
         "        spawn_camera(world)\n"
@@ -175,8 +175,8 @@ def test_export_scene_without_a_camera_is_an_error_not_silence(tmp_path):
     level = tmp_path / "no_camera.py"
     level.write_text(
         "from components import Material, MeshRef, Transform\n"
-        "from engine import Game, run\n"
-        "from engine.mesh import box\n"
+        "from engine import Game\nfrom shell import run\n"
+        "from engine.assets.mesh import box\n"
         "class NoCamera(Game):\n"
         "    def build(self, world):\n"
         "        world.spawn(Transform(), MeshRef(box()), Material())\n"
@@ -201,7 +201,7 @@ def test_no_camera_is_said_once_and_again_when_it_goes_away(ctx):
     import warnings
 
     from components import Camera, Skybox
-    from engine.errors import NoCameraWarning
+    from engine.core.errors import NoCameraWarning
     from tests.support import SceneRunner, look_from
 
     scene = SceneRunner(ctx, lambda world: world.spawn(Skybox()), size=(16, 12))
@@ -225,7 +225,7 @@ def test_no_camera_is_said_once_and_again_when_it_goes_away(ctx):
 
 def test_the_runner_says_no_camera_in_one_line(tmp_path):
     level = tmp_path / "no_camera.py"
-    level.write_text("from components import Skybox\nfrom engine import Game, run\n"
+    level.write_text("from components import Skybox\nfrom engine import Game\nfrom shell import run\n"
                      "class Empty(Game):\n    def build(self, world):\n        world.spawn(Skybox())\nrun(Empty())\n")
     result = subprocess.run([sys.executable, str(level), "--headless", "--frames", "2", "--size", "16x12",
                              "--out", str(tmp_path / "out")], cwd=ROOT, env={**os.environ, "PYTHONPATH": str(ROOT)},

@@ -9,8 +9,9 @@ import numpy as np
 from pyglm import glm
 
 from components import PortalClone, Slice, Transform
-from engine.capture import export_scene, json_value
+from engine.assets.values import json_value
 from games.hall_of_mirrors import HallOfMirrors
+from shell.capture import export_scene
 
 SIZE = (160, 90)
 SYSTEM_MADE = {"PortalClone", "Slice"}  # the slice system makes these each frame; not level data

@@ -8,8 +8,8 @@ from pathlib import Path
 
 import pytest
 
-from engine.errors import ShaderError
-from engine.shader_library import ShaderBuildError, ShaderLibrary, SourceFiles, load_source, shader_dir
+from engine.core.errors import ShaderError
+from engine.render.shader_library import ShaderBuildError, ShaderLibrary, SourceFiles, load_source, shader_dir
 
 VERTEX = """#version 410 core
 in vec2 in_position;
@@ -108,7 +108,7 @@ def test_an_error_in_the_real_scene_shader_is_reported_at_its_line(ctx, tmp_path
 
 
 # --- every driver's log, rewritten in the engine's one form ------------------------------------
-# The engine's form of a compiler message (engine.shader_library.Diagnostic): the file a person
+# The engine's form of a compiler message (engine.render.shader_library.Diagnostic): the file a person
 # edits, its line, the column where the driver gives one, the severity, the driver's text.
 ONE_FORM = re.compile(r"^(?P<file>[\w./-]+):(?P<line>\d+)(?::(?P<column>\d+))?: (?P<severity>error|warning): "
                       r"(?P<text>.*)$")

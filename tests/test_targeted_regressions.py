@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 from pyglm import glm
 
-import engine.shader_library as shader_library
+import engine.render.shader_library as shader_library
 from components import (
     DirectionalLight,
     Emissive,
@@ -23,8 +23,8 @@ from components import (
     Skybox,
     Transform,
 )
-from engine.level_file import load_level
-from engine.mesh import box, plane, quad, sphere
+from engine.assets.level_file import load_level
+from engine.assets.mesh import box, plane, quad, sphere
 from systems.prepare_system import AMBIENT
 from tests.support import linear_to_srgb8, look_from, srgb_to_linear
 

@@ -20,17 +20,17 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from engine.errors import AssetError
-from engine.level_file import LevelError, load_level
-from engine.mesh import box, load_model, plane, quad, sphere
-from engine.texture_data import (
+from engine.assets.level_file import LevelError, load_level
+from engine.assets.mesh import box, load_model, plane, quad, sphere
+from engine.assets.texture_data import (
     ASSET_MEMORY_BUDGET,
     MAX_TEXTURE_SIDE,
     checker_texture,
     load_texture,
     ripple_normal_map,
 )
-from engine.world import World
+from engine.core.errors import AssetError
+from engine.core.world import World
 
 ROOT = Path(__file__).resolve().parents[1]
 HEAD = '[level]\nname = "untrusted"\n\n'
@@ -158,7 +158,7 @@ def test_a_file_the_process_may_not_read_is_named(tmp_path, monkeypatch):
 
 
 def test_running_out_of_memory_is_an_error_line_naming_the_field(tmp_path, monkeypatch):
-    import engine.level_file as level_file
+    import engine.assets.level_file as level_file
 
     def no_memory(*args, **kwargs):
         raise MemoryError
@@ -207,7 +207,7 @@ def test_the_checker_still_draws_the_same_board():
 
 
 def test_the_memory_budget_is_checked_before_allocating(monkeypatch):
-    import engine.texture_data as texture_data
+    import engine.assets.texture_data as texture_data
 
     monkeypatch.setattr(texture_data, "ASSET_MEMORY_BUDGET", 1 << 20)
     for make in (lambda: checker_texture(1024, 1), lambda: ripple_normal_map(1024, 2)):
@@ -224,7 +224,7 @@ def test_the_memory_budget_is_checked_before_allocating(monkeypatch):
 
 
 def test_a_level_of_many_big_textures_stays_in_its_budget(tmp_path, monkeypatch):
-    import engine.level_file as level_file
+    import engine.assets.level_file as level_file
 
     monkeypatch.setattr(level_file, "LEVEL_MEMORY_BUDGET", 3 << 20)
     text = HEAD + "".join(f'[[entity]]\nname = "t{i}"\n[entity.Material]\ntexture = {{ checker = [512, {i + 1}] }}\n'
@@ -278,7 +278,7 @@ def test_asset_roots_let_a_level_use_shared_assets(outside):
     path = write_level(folder, HEAD + entity(texture='{ file = "../../secret.png" }'))
     level = load_level(path, asset_roots=[outside])
     assert level.entity_names == ["thing"]
-    import engine.level_file as level_file
+    import engine.assets.level_file as level_file
 
     level_file.set_asset_roots([outside])
     try:
@@ -505,7 +505,7 @@ def test_the_runner_prints_one_line_and_exits_2_for_each_kind_of_file(tmp_path):
     }
     script = textwrap.dedent("""\
         import sys
-        from engine.runner import main
+        from shell.runner import main
         from games.hall_of_mirrors.level import HallOfMirrors
         codes = []
         for path in sys.argv[1:]:
@@ -524,15 +524,15 @@ def test_the_runner_prints_one_line_and_exits_2_for_each_kind_of_file(tmp_path):
 
 
 def test_asset_root_on_the_command_line(tmp_path):
-    from engine.runner import parse_args
     from games.hall_of_mirrors.level import HallOfMirrors
+    from shell.runner import parse_args
 
     Image.new("RGB", (2, 2)).save(tmp_path / "shared.png")
     camera = '\n[[entity]]\nname = "camera"\n[entity.Transform]\nposition = [0.0, 0.0, 3.0]\n[entity.Camera]\n'
     level = write_level(tmp_path / "level", HEAD + entity(texture='{ file = "../shared.png" }') + camera)
     args = parse_args(HallOfMirrors(), ["--asset-root", str(tmp_path), "--asset-root", str(tmp_path / "level")])
     assert args.asset_root == [tmp_path, tmp_path / "level"]
-    script = ("import sys; from engine.runner import main; from games.hall_of_mirrors.level import HallOfMirrors; "
+    script = ("import sys; from shell.runner import main; from games.hall_of_mirrors.level import HallOfMirrors; "
               "sys.exit(main(HallOfMirrors(), sys.argv[1:]))")
     base = [sys.executable, "-c", script, "--level", str(level), "--headless", "--frames", "1", "--size", "8x8",
             "--out", str(tmp_path / "out")]

@@ -7,7 +7,7 @@ import pytest
 from pyglm import glm
 
 from components import ComponentValueError, DirectionalLight, Emissive, Material, MeshRef, Mirror, Portal, Transform
-from engine.mesh import box, quad, sphere
+from engine.assets.mesh import box, quad, sphere
 from engine.render.view_tree import MAX_TREE_DEPTH
 from tests.support import look_from
 

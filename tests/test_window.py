@@ -27,7 +27,7 @@ from pathlib import Path
 import moderngl_window as mglw
 import pyglet
 
-from engine.window import make_window_config
+from shell.window import make_window_config
 from games.hall_of_mirrors import HallOfMirrors
 
 shots, before, after, size = Path(sys.argv[1]), int(sys.argv[2]), int(sys.argv[3]), sys.argv[4]
@@ -94,7 +94,7 @@ from ctypes import byref
 
 from pyglet.libs.x11 import xlib
 
-import engine.window as shell
+import shell.window as shell
 
 module, after = sys.argv[1], int(sys.argv[2])
 make_window_config = shell.make_window_config

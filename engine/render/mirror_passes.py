@@ -19,6 +19,7 @@ import moderngl
 import numpy as np
 from pyglm import glm
 
+from engine.assets.texture_data import TextureData
 from engine.render.bindings import (
     ATLAS_UNIT,
     BLEND_OVER,
@@ -39,7 +40,6 @@ from engine.render.views import (
     CAMERA_BLOCK_VIEW_PROJ,
     View,
 )
-from engine.texture_data import TextureData
 
 # The claims and the reset write every depth they touch (depth test "always"); the
 # composite blends quads trimmed to their rectangles by clip distances 1-4.

@@ -42,13 +42,13 @@ import moderngl
 import numpy as np
 from pyglm import glm
 
-from engine.errors import GLPassError
-from engine.material_slots import EmissiveVariant, ReflectVariant, RefractVariant
-from engine.mesh import quad
-from engine.raw_gl import LayeredCubeTarget, inspect_bound_target, read_cube_level, write_cube_level
+from engine.assets.mesh import quad
+from engine.core.errors import GLPassError
+from engine.core.material_slots import EmissiveVariant, ReflectVariant, RefractVariant
 from engine.render.bindings import SCRATCH_UNIT, PassState, apply_pass_state
 from engine.render.instances import InstanceBatch
 from engine.render.probes import face_view
+from engine.render.raw_gl import LayeredCubeTarget, inspect_bound_target, read_cube_level, write_cube_level
 from engine.render.views import lights_block
 
 LOG = logging.getLogger("speculum")

@@ -13,8 +13,8 @@ from __future__ import annotations
 import moderngl
 
 from engine.render.bindings import PRESENT_UNIT, PassState, apply_pass_state
+from engine.render.shader_library import ShaderLibrary
 from engine.render.targets import CaptureTarget
-from engine.shader_library import ShaderLibrary
 
 ANTIALIAS_MODES = ("fxaa", "off")
 MAX_SEARCH_STEPS = 8   # the length of fxaa.frag's SEARCH table

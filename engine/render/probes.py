@@ -18,9 +18,9 @@ import moderngl
 import numpy as np
 from pyglm import glm
 
-from engine.errors import GLLimitError, GLPassError
-from engine.raw_gl import CubeMipTarget, LayeredCubeTarget, inspect_bound_target
+from engine.core.errors import GLLimitError, GLPassError
 from engine.render.bindings import CUBE_MIP_UNIT, PROBE_UNIT, SCRATCH_UNIT, PassState, apply_pass_state
+from engine.render.raw_gl import CubeMipTarget, LayeredCubeTarget, inspect_bound_target
 from engine.render.scene_pass import SceneOptions
 from engine.render.targets import LevelStack, release_framebuffer
 from engine.render.view_tree import SurfaceTable, TreeSettings, ViewTree

@@ -13,21 +13,21 @@ from dataclasses import dataclass
 
 import moderngl
 
-from engine.errors import GLLimitError, GLPassError
-from engine.gl_context import GLCapabilities
-from engine.mesh import Mesh
-from engine.raw_gl import RawGL
+from engine.assets.mesh import Mesh
+from engine.assets.texture_data import TextureData
+from engine.core.errors import GLLimitError, GLPassError
 from engine.render.bindings import CAMERA_BINDING
+from engine.render.gl_context import GLCapabilities
 from engine.render.instances import GpuMesh, InstanceBatch
 from engine.render.path_checks import PathChecks
 from engine.render.present import ANTIALIAS_MODES, PresentPass
 from engine.render.probes import ProbeCaptures
+from engine.render.raw_gl import RawGL
 from engine.render.scene_pass import ScenePass
+from engine.render.shader_library import ShaderLibrary
 from engine.render.sky import flat_cube, upload_cube
 from engine.render.targets import LevelStack, RenderTargets
 from engine.render.views import CAMERA_BLOCK_BYTES, LIGHTS_BLOCK_BYTES, View
-from engine.shader_library import ShaderLibrary
-from engine.texture_data import TextureData
 
 GL_SRGB8_ALPHA8 = 0x8C43
 TEXTURE_ANISOTROPY = 8.0

@@ -31,9 +31,8 @@ from dataclasses import dataclass
 import moderngl
 from pyglm import glm
 
-from engine.errors import GLPassError
-from engine.material_slots import SLOTS
-from engine.raw_gl import LayeredCubeTarget, inspect_bound_target
+from engine.core.errors import GLPassError
+from engine.core.material_slots import SLOTS
 from engine.render.batched_mirrors import MAX_BATCHED_VIEWS, VIEWS_BLOCK_BYTES, VIEWS_PER_INVOCATION, views_block
 from engine.render.bindings import (
     ALBEDO_UNIT,
@@ -50,6 +49,7 @@ from engine.render.bindings import (
     PassState,
     apply_pass_state,
 )
+from engine.render.raw_gl import LayeredCubeTarget, inspect_bound_target
 from engine.render.targets import RenderTargets
 from engine.render.views import View, union_rect
 

@@ -9,7 +9,7 @@ from __future__ import annotations
 import moderngl
 import numpy as np
 
-from engine.errors import GLLimitError
+from engine.core.errors import GLLimitError
 
 NO_NODE = 0xFFFFFFFF
 

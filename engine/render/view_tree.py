@@ -32,7 +32,7 @@ import numpy as np
 from pyglm import glm
 
 from components.limits import MAX_VIEW_DEPTH
-from engine.reflection_math import oblique_is_safe, oblique_projection, transform_plane
+from engine.core.reflection_math import oblique_is_safe, oblique_projection, transform_plane
 from engine.render.batched_mirrors import PATHS, choose_path, submitted_triangles
 from engine.render.mirror_passes import (
     Claim,

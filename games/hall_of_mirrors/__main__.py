@@ -8,9 +8,9 @@ from __future__ import annotations
 
 import sys
 
-from engine import run
-from engine.gl_context import have_display
+from engine.render.gl_context import have_display
 from games.hall_of_mirrors.level import HallOfMirrors
+from shell import run
 
 
 def main(argv: list[str]) -> None:

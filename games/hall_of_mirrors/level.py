@@ -22,8 +22,8 @@ from pathlib import Path
 from pyglm import glm
 
 from components import FlyController, Transform, yaw_pitch_rotation
-from engine.level_file import LevelError, LevelGame
-from engine.world import World
+from engine.assets.level_file import LevelError, LevelGame
+from engine.core.world import World
 
 LEVEL = Path(__file__).with_name("hall.toml")
 

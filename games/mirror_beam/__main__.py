@@ -7,10 +7,10 @@ puzzle is said in one line.  ``--help`` lists every option, the game's and the r
 import argparse
 import sys
 
-from engine.gl_context import have_display
-from engine.runner import build_parser
-from engine.runner import main as run
+from engine.render.gl_context import have_display
 from games.mirror_beam.game import MirrorBeam
+from shell.runner import build_parser
+from shell.runner import main as run
 
 
 def _count(text: str) -> int:

@@ -2,14 +2,14 @@
 
 Bounces use the renderer's own description of each mirror, the ``SurfaceState`` rows of the
 ``Surfaces`` resource (``systems/surface_system.py``): the world plane, the outline the
-composite covers, and ``carry``, the reflection matrix (``engine.reflection_math``) that
+composite covers, and ``carry``, the reflection matrix (``engine.core.reflection_math``) that
 builds the mirror's virtual camera.  A ray hits a mirror where it crosses that plane inside
 the outline, coming from the front (the side the plane's normal points to); the bounce is
 the incoming ray carried by the same matrix, so the beam turns exactly as the picture in
 the mirror does.  A ray that reaches a mirror's back is stopped there, like any solid.
 
 Solids (walls, the target, mirror frames) are found by a callable, in the game the engine's
-ray cast against world triangles (``engine.raycast``, Möller–Trumbore), so the beam stops
+ray cast against world triangles (``engine.rules.raycast``, Möller–Trumbore), so the beam stops
 where the visible geometry is.
 """
 from __future__ import annotations

@@ -25,15 +25,15 @@ from typing import Any
 from pyglm import glm
 
 from components import Camera, Emissive, Material, MeshRef, Mirror, Transform, look_rotation
-from engine.app import spawn_camera
-from engine.errors import SpeculumError
-from engine.frame_io import Input, Output
-from engine.level_file import LevelGame
-from engine.mesh import box
-from engine.raycast import raycast
+from engine.assets.level_file import LevelGame
+from engine.assets.mesh import box
+from engine.core.errors import SpeculumError
+from engine.core.frame_io import Input, Output
+from engine.core.game import spawn_camera
+from engine.core.world import World
 from engine.render.view_tree import Surfaces
 from engine.render.views import FrameViews
-from engine.world import World
+from engine.rules.raycast import raycast
 from games.mirror_beam.beam import BeamPath, FirstSolid, hit_mirror, trace_beam
 
 LEVEL_DIR = Path(__file__).parent / "levels"

@@ -9,12 +9,12 @@ from __future__ import annotations
 
 import sys
 
-from engine.errors import SpeculumError
-from engine.gl_context import have_display
-from engine.level_file import set_asset_roots
-from engine.runner import build_parser
-from engine.runner import main as run
+from engine.assets.level_file import set_asset_roots
+from engine.core.errors import SpeculumError
+from engine.render.gl_context import have_display
 from games.portal_run.game import PortalRun
+from shell.runner import build_parser
+from shell.runner import main as run
 
 
 def main(argv: list[str] | None = None) -> None:

@@ -23,8 +23,8 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Protocol
 
-from engine.errors import SpeculumError
-from engine.frame_io import Input
+from engine.core.errors import SpeculumError
+from engine.core.frame_io import Input
 
 ARRIVED = 0.3  # m
 _ARITY = {"aim": (3, 3), "look": (2, 2), "click": (1, 1), "press": (1, 1), "hold": (2, 2), "wait": (1, 1),

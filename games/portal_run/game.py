@@ -18,7 +18,7 @@ order:
   of ``PHYSICS_STEP`` (as many as the frame's time holds, the rest carried to the next frame),
   so the game plays the same at any frame rate or ``--dt``; the autopilot gives its input
   every ``SCRIPT_STEPS`` steps (a script counts 60ths of a second);
-* ``place portals``: a left / right click casts a ray from the eye (``engine.raycast``) and
+* ``place portals``: a left / right click casts a ray from the eye (``engine.rules.raycast``) and
   places portal A / B on the wall (or, where the rules allow, the floor) it hits, or refuses
   it (a red marker flashes at the hit and a 'refused' event names the reason);
 * ``win``: the body touching the exit pad records a 'win' event once and lights the pad.
@@ -49,13 +49,13 @@ from components import (
     look_rotation,
     yaw_pitch_rotation,
 )
-from engine.errors import SpeculumError
-from engine.frame_io import Input
-from engine.level_file import LevelGame
-from engine.mesh import box, quad
-from engine.portals import spawn_portal_pair
-from engine.raycast import RayCaster
-from engine.world import World
+from engine.assets.level_file import LevelGame
+from engine.assets.mesh import box, quad
+from engine.assets.portals import spawn_portal_pair
+from engine.core.errors import SpeculumError
+from engine.core.frame_io import Input
+from engine.core.world import World
+from engine.rules.raycast import RayCaster
 from games.portal_run.autopilot import Autopilot, ScriptError, parse_script
 from games.portal_run.physics import BodyShape, Solid, move_body
 from systems.portal_travel_system import PortalCrossings
@@ -267,7 +267,7 @@ def load_rules(rules: dict[str, Any], names: dict[str, int], where: str) -> RunR
 # --- the game ---------------------------------------------------------------------------------
 
 class PortalRun(LevelGame):
-    """One level of portal run, from a level file (``engine.level_file``).
+    """One level of portal run, from a level file (``engine.assets.level_file``).
 
     ``autopilot=True`` plays the level's ``solution`` (headless runs with no person);
     ``events`` lists every RunEvent since the game was built (restarts included)."""
@@ -276,7 +276,7 @@ class PortalRun(LevelGame):
     size = (1280, 720)
     game = "portal_run"  # a level file's [level] game
     makes_camera = True  # the player is the camera
-    mouse_look = True  # the window shell captures the pointer on the first click (engine/window.py)
+    mouse_look = True  # the window shell captures the pointer on the first click (shell/window.py)
 
     def __init__(self, level: str | Path | None = None, autopilot: bool = False,
                  script: Sequence[str] | None = None, verbose: bool = True) -> None:

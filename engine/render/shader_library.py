@@ -55,9 +55,9 @@ from pathlib import Path
 import moderngl
 
 import shaders
-from engine.errors import ShaderError
-from engine.material_slots import glsl_defines
-from engine.raw_gl import _load as load_gl_function
+from engine.core.errors import ShaderError
+from engine.core.material_slots import glsl_defines
+from engine.render.raw_gl import _load as load_gl_function
 
 _INCLUDE = re.compile(r'^\s*#include\s+"([^"]+)"\s*$')
 _BRANCH = re.compile(r"^\s*#\s*(else|elif|endif)\b")  # after these the line numbering is resumed

@@ -20,7 +20,7 @@ import numpy as np
 from pyglm import glm
 
 from components import Camera, Portal, Transform
-from engine.world import World
+from engine.core.world import World
 
 
 def open_portal_pairs(world: World) -> dict[int, int]:

@@ -5,8 +5,8 @@ from pyglm import glm
 
 from components import ComponentValueError, Material, MeshRef, Portal, Transform
 from components.transform import rotation as to_rotation
-from engine.mesh import quad
-from engine.world import World
+from engine.assets.mesh import quad
+from engine.core.world import World
 
 
 def spawn_portal_pair(world: World, position_a, rotation_a, position_b, rotation_b,

@@ -12,7 +12,7 @@ from dataclasses import dataclass
 
 import moderngl
 
-from engine.errors import GLCapabilityError
+from engine.core.errors import GLCapabilityError
 
 REQUIRED_VERSION = 410
 SOFTWARE_RENDERERS = ("llvmpipe", "softpipe", "swrast", "swiftshader", "software rasterizer")

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from engine.errors import AssetError
+from engine.core.errors import AssetError
 
 
 @dataclass(eq=False)
@@ -23,6 +23,8 @@ class TextureData:
     its field says). Eight bits a channel is what the renderer uploads: an image file with
     16-bit or floating-point channels is scaled to them (``load_texture``), its finer steps
     not kept."""
+
+    ASSET_KIND = "texture"  # what Material.texture and normal_map check for (components do not import the engine)
 
     pixels: np.ndarray
     name: str = "texture"
@@ -67,7 +69,8 @@ def check_texture_size(width: int, height: int, what: str) -> None:
     size = texture_bytes(width, height)
     if size > ASSET_MEMORY_BUDGET:
         raise AssetError(f"{what}: {width}x{height} texels take {_mib(size)} MiB, over the memory budget of "
-                         f"{_mib(ASSET_MEMORY_BUDGET)} MiB an asset may have (engine.texture_data.ASSET_MEMORY_BUDGET)")
+                         f"{_mib(ASSET_MEMORY_BUDGET)} MiB an asset may have "
+                         "(engine.assets.texture_data.ASSET_MEMORY_BUDGET)")
 
 
 def texture_bytes(width: int, height: int) -> int:

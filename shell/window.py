@@ -1,7 +1,7 @@
 """The windowed shell: a moderngl-window WindowConfig that drives an Engine.
 
 WASD + mouse fly camera (Q/E down/up, Shift faster), Esc quits (exit status 0), F12 writes a
-screenshot, F1 shows or hides the debug overlay (``engine/overlay.py``; the mouse is the overlay's while
+screenshot, F1 shows or hides the debug overlay (``shell/overlay.py``; the mouse is the overlay's while
 it is over it).  Each frame the shell also polls the shader library, so an edited file
 under ``shaders/`` is rebuilt while the game runs (hot reload; errors printed once and shown
 in the overlay).  The same class runs under moderngl-window's headless window, which the
@@ -29,11 +29,12 @@ from pathlib import Path
 import moderngl_window as mglw
 
 from components import FlyController
-from engine.app import Engine, Game
-from engine.capture import save_png
-from engine.errors import SpeculumError
-from engine.frame_io import Input, Output
+from engine.core.errors import SpeculumError
+from engine.core.frame_io import Input, Output
+from engine.core.game import Game
 from engine.render.targets import CaptureTarget
+from shell.app import Engine
+from shell.capture import save_png
 
 _NAMED_KEYS = {"SPACE": "space", "ENTER": "enter", "TAB": "tab", "BACKSPACE": "backspace", "LEFT": "left",
                "RIGHT": "right", "UP": "up", "DOWN": "down", **{f"F{n}": f"f{n}" for n in range(1, 12)},
@@ -73,7 +74,7 @@ class NoOverlay:
 def make_overlay(ctx, visible: bool):
     """The debug overlay, or ``NoOverlay`` where imgui-bundle cannot be imported."""
     try:
-        from engine.overlay import DebugOverlay
+        from shell.overlay import DebugOverlay
     except ImportError:
         if visible:
             print("speculum: --overlay needs imgui-bundle (pip install imgui-bundle): drawing none", file=sys.stderr)
@@ -259,7 +260,7 @@ def make_window_config(game: Game, args: argparse.Namespace | None = None) -> ty
             self.released = True
             try:
                 if self.export_scene is not None:
-                    from engine.runner import write_scene
+                    from shell.capture import write_scene
 
                     self.written += write_scene(self.engine, self.export_scene, self.wnd.buffer_size)
                     print(f"speculum: wrote {', '.join(str(p) for p in self.written)}", flush=True)
@@ -289,7 +290,7 @@ def run_windowed(game: Game, args: argparse.Namespace) -> None:
                             "headless run: add --headless (a window writes screenshots with F12, and the scene "
                             "with --export-scene when it closes)")
     if getattr(args, "export_scene", None) is not None:
-        from engine.runner import prepare_out
+        from shell.capture import prepare_out
 
         prepare_out(args.export_scene.parent, "--export-scene folder")
     w, h = args.size

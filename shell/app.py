@@ -15,13 +15,14 @@ import esper
 import moderngl
 
 from components import FlyController, yaw_pitch_rotation
-from engine.errors import GLPassError
-from engine.frame_io import Input, Output
-from engine.gl_context import prepare_context
-from engine.raw_gl import make_current
+from engine.core.errors import GLPassError
+from engine.core.frame_io import Input, Output
+from engine.core.game import Game
+from engine.core.world import World
+from engine.render.gl_context import prepare_context
+from engine.render.raw_gl import make_current
 from engine.render.renderer import Renderer
 from engine.render.views import FrameViews, View
-from engine.world import World
 from systems import (
     ExtractSystem,
     FlyCameraSystem,
@@ -37,19 +38,6 @@ from systems.frame_rules_system import FrameRulesSystem
 from systems.portal_slice_system import PortalSliceSystem
 from systems.probe_system import ProbeAfterPresentSystem, ProbeSystem
 from systems.surface_system import SurfaceSystem
-
-
-class Game:
-    """Subclass this: ``build`` spawns the level; ``update`` runs first every frame."""
-
-    title = "Speculum"
-    size: tuple[int, int] = (1280, 720)
-
-    def build(self, world: World) -> None:
-        raise NotImplementedError
-
-    def update(self, world: World, dt: float) -> None:
-        pass
 
 
 class GameUpdateSystem(esper.Processor):
@@ -157,14 +145,3 @@ class Engine:
         make_current(self.ctx)
         self.world.close()
         self.renderer.release()
-
-
-def spawn_camera(world: World, position=(0.0, 1.6, 6.0), yaw: float = 0.0, pitch: float = 0.0,
-                 fov_y: float = 60.0, fly: bool = True) -> int:
-    """A camera entity, with fly controls for windowed runs unless ``fly`` is False."""
-    from components import Camera, Transform
-
-    components = [Transform(position=position, rotation=yaw_pitch_rotation(yaw, pitch)), Camera(fov_y=fov_y)]
-    if fly:
-        components.append(FlyController(yaw=yaw, pitch=pitch))
-    return world.spawn(*components)

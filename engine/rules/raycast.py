@@ -28,8 +28,8 @@ import numpy as np
 from pyglm import glm
 
 from components import MeshRef, Transform
-from engine.errors import SpeculumError
-from engine.world import World
+from engine.core.errors import SpeculumError
+from engine.core.world import World
 
 EPSILON = 1e-9  # |determinant| below this: the ray runs along the triangle's plane (no hit)
 

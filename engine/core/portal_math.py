@@ -3,7 +3,7 @@ from __future__ import annotations
 
 from pyglm import glm
 
-from engine.reflection_math import plane_from_point_normal
+from engine.core.reflection_math import plane_from_point_normal
 
 HALF_TURN = glm.rotate(glm.pi(), glm.vec3(0.0, 1.0, 0.0))
 

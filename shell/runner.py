@@ -10,7 +10,6 @@ With no display the runner goes headless by itself and says so.
 from __future__ import annotations
 
 import argparse
-import os
 import sys
 import time
 import warnings
@@ -20,13 +19,14 @@ from pathlib import Path
 import numpy as np
 
 from components import ComponentValueError
-from engine.app import Engine, Game
-from engine.capture import SCENE_FORMATS, export_scene, save_ids, save_png
-from engine.errors import SpeculumError
-from engine.frame_io import Output
-from engine.gl_context import create_headless_context, have_display
+from engine.core.errors import SpeculumError
+from engine.core.frame_io import Output
+from engine.core.game import Game
+from engine.render.gl_context import create_headless_context, have_display
 from engine.render.present import ANTIALIAS_MODES
 from engine.render.targets import CaptureTarget
+from shell.app import Engine
+from shell.capture import SCENE_FORMATS, OutputPathError, prepare_out, save_ids, save_png, write_scene
 
 HEADLESS_DT = 1.0 / 60.0
 
@@ -134,7 +134,7 @@ def _pose(text: str) -> tuple[float, ...]:
 def main(game: Game, argv: Sequence[str] | None = None, parser: argparse.ArgumentParser | None = None) -> int:
     """Run ``game`` as ``argv`` says; the exit status (0, or 2 after one error line).
     ``parser``: ``build_parser``'s with the game's own options added."""
-    from engine.level_file import set_asset_roots, user_asset_roots
+    from engine.assets.level_file import set_asset_roots, user_asset_roots
 
     args = parse_args(game, argv, parser)
     before = user_asset_roots()
@@ -171,7 +171,7 @@ def _main(game: Game, args: argparse.Namespace) -> int:
             frames = sum(1 for path in written if path.name.startswith("frame_"))
             print(f"speculum: wrote {frames} frame(s): {describe_written(written)}")
         else:
-            from engine.window import run_windowed
+            from shell.window import run_windowed
 
             if args.out is not None:
                 prepare_out(args.out)
@@ -188,7 +188,7 @@ def use_level(game: Game, level: Path | None) -> None:
     """``--level FILE``: a game built from a level file (``LevelGame``) plays ``FILE``
     instead; any other game refuses it.  A level game's file is checked here, before a
     context or window is made, so a mistake in it is one error line and nothing drawn."""
-    from engine.level_file import LevelGame
+    from engine.assets.level_file import LevelGame
 
     if not isinstance(game, LevelGame):
         if level is not None:
@@ -199,22 +199,6 @@ def use_level(game: Game, level: Path | None) -> None:
         game.level_path = level
     game.load()  # load_level and the game's own checks (a level for another game, no camera)
 
-
-class OutputPathError(SpeculumError):
-    """An output folder that is a file, or cannot be made or written."""
-
-
-def prepare_out(folder: Path, what: str = "--out") -> None:
-    """Make ``folder`` and check it can be written before any rendering, so a bad path is one
-    clear line up front instead of a traceback after the first frame."""
-    if folder.exists() and not folder.is_dir():
-        raise OutputPathError(f"{what} {str(folder)!r} is an existing file, not a folder")
-    try:
-        folder.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise OutputPathError(f"{what} {str(folder)!r} cannot be made: {exc.strerror or exc}") from None
-    if not os.access(folder, os.W_OK | os.X_OK):
-        raise OutputPathError(f"{what} {str(folder)!r} is not writable")
 
 
 def describe_written(written: Sequence[Path]) -> str:
@@ -251,7 +235,7 @@ def run_headless(game: Game, args: argparse.Namespace) -> list[Path]:
         capture = CaptureTarget(ctx, args.size)
         output = Output(capture.framebuffer, args.size)
         if args.overlay:
-            from engine.overlay import DebugOverlay
+            from shell.overlay import DebugOverlay
 
             overlay = DebugOverlay(ctx)
         gif_frames: list[np.ndarray] = []
@@ -280,21 +264,6 @@ def run_headless(game: Game, args: argparse.Namespace) -> list[Path]:
             engine.close()
         ctx.release()
     return written
-
-
-def write_scene(engine: Engine, path: Path, size: tuple[int, int]) -> list[Path]:
-    """``--export-scene``: the world's geometry and its camera (as seen at ``size``) to
-    ``path`` and its ``.json``; returns both paths.  A headless run writes it after its last
-    frame, a window as it closes."""
-    camera = engine.active_camera()
-    if camera is None:
-        raise SpeculumError(f"--export-scene {str(path)!r}: the world has no active camera "
-                            "(spawn one with engine.spawn_camera), so there is no view to export")
-    try:
-        geometry = export_scene(engine.world, path, camera[0], size, engine.reflection_system.mirror_planes())
-    except OSError as exc:
-        raise OutputPathError(f"--export-scene {str(path)!r} cannot be written: {exc.strerror or exc}") from None
-    return [geometry, geometry.with_suffix(".json")]
 
 
 def save_gif(frames: Sequence[np.ndarray], path: Path, seconds_per_frame: float) -> None:

@@ -6,9 +6,9 @@ from pathlib import Path
 from pyglm import glm
 
 from components import ComponentValueError, Emissive, Material, MeshRef, Mirror, Reflective, Transform
-from engine.errors import AssetError
-from engine.mesh import flat_plane, load_model
-from engine.world import World
+from engine.assets.mesh import flat_plane, load_model
+from engine.core.errors import AssetError
+from engine.core.world import World
 
 
 def spawn_model(world: World, path: str | Path, position=(0.0, 0.0, 0.0), rotation=None,

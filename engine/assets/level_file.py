@@ -36,11 +36,8 @@ from pyglm import glm
 
 import components as _components
 from components import ComponentValueError, look_rotation, yaw_pitch_rotation
-from engine.app import Game
-from engine.capture import VALUE_KINDS, json_value
-from engine.errors import AssetError, SpeculumError
-from engine.mesh import Mesh, box, flat_plane, load_model, plane, quad, sphere
-from engine.texture_data import (
+from engine.assets.mesh import Mesh, box, flat_plane, load_model, plane, quad, sphere
+from engine.assets.texture_data import (
     MAX_TEXTURE_SIDE,
     TextureData,
     check_asset_file,
@@ -51,7 +48,10 @@ from engine.texture_data import (
     ripple_normal_map,
     texture_bytes,
 )
-from engine.world import World
+from engine.assets.values import VALUE_KINDS, json_value
+from engine.core.errors import AssetError, SpeculumError
+from engine.core.game import Game
+from engine.core.world import World
 
 try:
     import tomllib
@@ -71,7 +71,7 @@ _MESH_MAKERS: dict[str, Callable[..., Mesh]] = {"box": box, "quad": quad, "plane
 MAX_LEVEL_BYTES = 4 << 20  # a level file's size (the shipped ones are a few KB)
 MAX_NESTING = 16  # arrays and inline tables inside one value (a level needs three at most)
 LEVEL_MEMORY_BUDGET = 2 << 30  # bytes a level's meshes and textures may take together (each is held to
-#                                 engine.texture_data.ASSET_MEMORY_BUDGET), counted before a generator runs
+#                                 engine.assets.texture_data.ASSET_MEMORY_BUDGET), counted before a generator runs
 
 
 class LevelError(SpeculumError):
@@ -208,7 +208,7 @@ class _Budget:
         if self.used + size > LEVEL_MEMORY_BUDGET:
             raise ValueError(f"the level's meshes and textures would take {_mib(self.used + size)} MiB, over the "
                              f"memory budget of {_mib(LEVEL_MEMORY_BUDGET)} MiB a level may have "
-                             "(engine.level_file.LEVEL_MEMORY_BUDGET)")
+                             "(engine.assets.level_file.LEVEL_MEMORY_BUDGET)")
         self.keys.add(key)
         self.used += size
 
@@ -340,7 +340,7 @@ def _texture(spec: Any, where: _Where) -> TextureData:
 
 
 def _ripples(spec: dict, name: Any, where: _Where) -> TextureData:
-    """``{ ripples = [size, rings] }`` with optional ``slope`` and ``name``: engine.texture_data's
+    """``{ ripples = [size, rings] }`` with optional ``slope`` and ``name``: engine.assets.texture_data's
     ripple_normal_map (it checks the ranges; here only the kinds, so the cache key is plain)."""
     size_rings = spec.pop("ripples")
     if not isinstance(size_rings, list) or len(size_rings) != 2 or not all(_is_int(v) for v in size_rings):
@@ -774,7 +774,7 @@ def _plain_or_none(value: Any) -> Any:
 
 
 def _plain(value: Any, path: Path, entity: str, where: str) -> Any:
-    """A field value as TOML: scene.json's encoder (``engine.capture.json_value``: vectors as
+    """A field value as TOML: scene.json's encoder (``shell.capture.json_value``: vectors as
     lists, quaternions ``[w, x, y, z]``), floats kept as numbers (TOML has inf and nan) and
     float32 vectors at their shortest decimal; meshes, textures, arrays, matrices and other
     objects cannot be written in a level."""

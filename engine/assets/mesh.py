@@ -20,8 +20,7 @@ from pathlib import Path
 import numpy as np
 from pyglm import glm
 
-from engine.errors import AssetError
-from engine.texture_data import (
+from engine.assets.texture_data import (
     TextureData,
     check_asset_file,
     check_texture_size,
@@ -29,6 +28,7 @@ from engine.texture_data import (
     image_to_rgba8,
     pillow_image_module,
 )
+from engine.core.errors import AssetError
 
 _mesh_ids = itertools.count(1)
 
@@ -36,6 +36,8 @@ _mesh_ids = itertools.count(1)
 @dataclass(eq=False)
 class Mesh:
     """Indexed triangles: positions, normals (unit), uvs, and int32 triangle indices."""
+
+    ASSET_KIND = "mesh"  # what MeshRef.mesh checks for (components do not import the engine)
 
     positions: np.ndarray
     normals: np.ndarray

@@ -1,19 +1,23 @@
 """Frames, id images and scene exports written to disk, for debugging and verification."""
 from __future__ import annotations
 
-import dataclasses
 import json
-import math
+import os
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from pyglm import glm
 
 from components import Camera, MeshRef, Portal, Transform
-from engine.frame_rules import frame_rules
-from engine.portal_math import pair_transform
-from engine.world import World
+from engine.assets.values import VALUE_KINDS, json_value, public_fields
+from engine.core.errors import SpeculumError
+from engine.core.portal_math import pair_transform
+from engine.core.world import World
+from engine.rules.frame_rules import frame_rules
+
+if TYPE_CHECKING:
+    from shell.app import Engine
 
 # What --export-scene writes, by the file's extension: binary glTF, or JSON glTF with its
 # buffer embedded (one file either way).
@@ -92,8 +96,8 @@ def export_scene(world: World, path: str | Path, camera_entity: int, size: tuple
 def _probes(world: World) -> dict[str, dict]:
     """Each reflection probe (by the entity owning it: a ReflectionProbe's, or an object's own
     automatic one) with where and how it captures, and which probe each entity samples."""
-    from engine.probe_rules import probe_for
     from engine.render.probes import ProbeStates
+    from engine.rules.probe_rules import probe_for
 
     states = world.resources.get(ProbeStates, {})
     probes = {}
@@ -115,7 +119,7 @@ def _probes(world: World) -> dict[str, dict]:
 
 def _portal_pairs(world: World) -> dict[str, dict]:
     """Per portal: its partner and the column-major 4x4 that carries points at it to the
-    partner; both None when the pair is closed (``engine.frame_rules.open_portal_pairs``)."""
+    partner; both None when the pair is closed (``engine.rules.frame_rules.open_portal_pairs``)."""
     pairs = {}
     open_portals = frame_rules(world).open_portals
     for entity, (_, transform) in world.query(Portal, Transform):
@@ -127,83 +131,6 @@ def _portal_pairs(world: World) -> dict[str, dict]:
             "to_partner": [float(v) for column in carry.to_list() for v in column] if carry is not None else None,
         }
     return pairs
-
-
-# How component field values are written to scene.json (``component_values``).  Every kind
-# is plain JSON; ``VALUE_KINDS`` goes into the file so a tool reading it needs nothing else.
-VALUE_KINDS = {
-    "null": "no value (None)",
-    "bool": "true / false",
-    "int": "an integer (Transform.parent, Portal.partner, PortalClone.source/.portal: an entity id)",
-    "float": "a number; inf, -inf and nan are written as those strings",
-    "str": "a string",
-    "vec2": "[x, y]", "vec3": "[x, y, z]", "vec4": "[x, y, z, w] (colours: [r, g, b, a])",
-    "quat": "[w, x, y, z]: a unit quaternion, w first (glm.quat(w, x, y, z))",
-    "mat4": "16 numbers, column by column (glm's order)",
-    "list": "a list of values, each written by these rules",
-    "array": "{'shape': [...], 'dtype': ..., 'values': nested lists} (a numpy array of up to 64 values)",
-    "array_summary": "{'shape': [...], 'dtype': ...} (a larger numpy array, e.g. generated sky faces)",
-    "mesh": "{'name', 'id', 'vertices', 'triangles', 'bounds': [min xyz, max xyz] local}: entities with "
-            "the same id share one mesh; the entity's geometry is node <entity id> of the .glb/.gltf beside "
-            "this file, in world space (its Transform's world matrix undoes it)",
-    "texture": "{'name', 'size': [width, height]}: pixels by name, not embedded",
-    "object": "an object's public fields, each written by these rules",
-}
-_GLM_KIND = {glm.vec2: "vec2", glm.vec3: "vec3", glm.vec4: "vec4", glm.quat: "quat", glm.mat4: "mat4"}
-_ARRAY_VALUES_MAX = 64
-
-
-def json_value(value: Any) -> tuple[Any, str]:
-    """``value`` as plain JSON and the kind it was written as (a key of ``VALUE_KINDS``)."""
-    from engine.mesh import Mesh
-    from engine.texture_data import TextureData
-
-    if value is None:
-        return None, "null"
-    if isinstance(value, bool | np.bool_):
-        return bool(value), "bool"
-    if isinstance(value, int | np.integer):
-        return int(value), "int"
-    if isinstance(value, float | np.floating):
-        return _number(value), "float"
-    if isinstance(value, str):
-        return value, "str"
-    kind = _GLM_KIND.get(type(value))
-    if kind == "quat":
-        return [_number(v) for v in (value.w, value.x, value.y, value.z)], kind
-    if kind == "mat4":
-        return [_number(v) for column in value.to_list() for v in column], kind
-    if kind is not None:
-        return [_number(v) for v in value], kind
-    if isinstance(value, Mesh):
-        low, high = value.positions.min(axis=0), value.positions.max(axis=0)
-        return {"name": value.name, "id": value.id, "vertices": len(value.positions),
-                "triangles": len(value.indices), "bounds": [[_number(v) for v in low], [_number(v) for v in high]]}, \
-            "mesh"
-    if isinstance(value, TextureData):
-        height, width = np.asarray(value.pixels).shape[:2]
-        return {"name": value.name, "size": [int(width), int(height)]}, "texture"
-    if isinstance(value, np.ndarray):
-        summary = {"shape": list(value.shape), "dtype": str(value.dtype)}
-        if value.size > _ARRAY_VALUES_MAX:
-            return summary, "array_summary"
-        return {**summary, "values": json.loads(json.dumps(value.tolist(), default=str))}, "array"
-    if isinstance(value, list | tuple):
-        return [json_value(v)[0] for v in value], "list"
-    return {name: json_value(v)[0] for name, v in _public_fields(value).items()}, "object"
-
-
-def _number(value: Any) -> float | str:
-    value = float(value)
-    return value if math.isfinite(value) else str(value)
-
-
-def _public_fields(component: Any) -> dict[str, Any]:
-    """The fields a component is made from: a dataclass's init fields, else its public attributes."""
-    if dataclasses.is_dataclass(component):
-        return {f.name: getattr(component, f.name) for f in dataclasses.fields(component)
-                if f.init and not f.name.startswith("_")}
-    return {name: v for name, v in vars(component).items() if not name.startswith("_")}
 
 
 def component_values(world: World) -> dict[str, Any]:
@@ -218,8 +145,40 @@ def component_values(world: World) -> dict[str, Any]:
             cls = type(component)
             info = types.setdefault(cls.__name__, {"class": f"{cls.__module__}.{cls.__qualname__}", "fields": {}})
             fields = row[cls.__name__] = {}
-            for name, value in _public_fields(component).items():
+            for name, value in public_fields(component).items():
                 fields[name], kind = json_value(value)
                 if kind != "null" or name not in info["fields"]:
                     info["fields"][name] = kind
     return {"components": values, "component_types": dict(sorted(types.items())), "value_kinds": VALUE_KINDS}
+
+
+class OutputPathError(SpeculumError):
+    """An output folder that is a file, or cannot be made or written."""
+
+
+def prepare_out(folder: Path, what: str = "--out") -> None:
+    """Make ``folder`` and check it can be written before any rendering, so a bad path is one
+    clear line up front instead of a traceback after the first frame."""
+    if folder.exists() and not folder.is_dir():
+        raise OutputPathError(f"{what} {str(folder)!r} is an existing file, not a folder")
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise OutputPathError(f"{what} {str(folder)!r} cannot be made: {exc.strerror or exc}") from None
+    if not os.access(folder, os.W_OK | os.X_OK):
+        raise OutputPathError(f"{what} {str(folder)!r} is not writable")
+
+
+def write_scene(engine: Engine, path: Path, size: tuple[int, int]) -> list[Path]:
+    """``--export-scene``: the world's geometry and its camera (as seen at ``size``) to
+    ``path`` and its ``.json``; returns both paths.  A headless run writes it after its last
+    frame, a window as it closes."""
+    camera = engine.active_camera()
+    if camera is None:
+        raise SpeculumError(f"--export-scene {str(path)!r}: the world has no active camera "
+                            "(spawn one with engine.spawn_camera), so there is no view to export")
+    try:
+        geometry = export_scene(engine.world, path, camera[0], size, engine.reflection_system.mirror_planes())
+    except OSError as exc:
+        raise OutputPathError(f"--export-scene {str(path)!r} cannot be written: {exc.strerror or exc}") from None
+    return [geometry, geometry.with_suffix(".json")]

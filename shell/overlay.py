@@ -10,7 +10,7 @@ reflect stage's settings and view tree, the probes stage's path) and writes the 
 its toggles change.
 
 No window is needed: the overlay owns its ImGui context and sets the display size and time
-step itself each frame; input comes only when a shell forwards it (``engine/window.py``).
+step itself each frame; input comes only when a shell forwards it (``shell/window.py``).
 moderngl-window 3.1's renderer still uploads the font the way ImGui did before 1.92; ImGui
 1.92 (imgui-bundle 1.93) hands the backend its textures to create, update and destroy
 (``RendererHasTextures``), which ``OverlayRenderer`` does with moderngl textures.

@@ -18,9 +18,9 @@ import numpy as np
 from pyglm import glm
 
 from components import MeshRef, ReflectionProbe, Reflective, Refractive, Transform
-from engine.frame_rules import world_corners
-from engine.mesh import Mesh, flat_plane
-from engine.world import World
+from engine.assets.mesh import Mesh, flat_plane
+from engine.core.world import World
+from engine.rules.frame_rules import world_corners
 
 _FLAT: dict[int, bool] = {}  # mesh id -> flat (meshes do not change once made)
 

@@ -10,15 +10,33 @@ from __future__ import annotations
 import itertools
 import warnings
 from collections import defaultdict
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any, TypeVar
 
 import esper
-import numpy as np
 
 from components.tracking import ComponentValueError, TrackedComponent
 
 C = TypeVar("C")
+# Invariants over an entity's components together, by the component kinds that trigger them:
+# ``check(world, entity, joining, **pending)`` raises ComponentValueError.  Rules modules
+# register them (``world_invariant``; the mirror-mesh rule: engine/rules/mirror_rules.py), so
+# the world runs them when a component of those kinds joins an entity, and components ask
+# for them when a field changes (``World.check_invariants``), without either knowing the rule.
+Invariant = Callable[..., None]
+_INVARIANTS: dict[type, list[Invariant]] = defaultdict(list)
+
+
+def world_invariant(*kinds: type) -> Callable[[Invariant], Invariant]:
+    """Register the decorated check for every world, run when one of ``kinds`` joins an
+    entity or asks (see ``_INVARIANTS``)."""
+    def register(check: Invariant) -> Invariant:
+        for kind in kinds:
+            if check not in _INVARIANTS[kind]:
+                _INVARIANTS[kind].append(check)
+        return check
+    return register
 _world_ids = itertools.count(1)
 
 
@@ -123,8 +141,8 @@ class World:
                 if walk == entity:
                     raise ComponentValueError(f"Transform.parent {parent!r} of entity {entity} would make a "
                                               f"cycle (entity {parent} descends from entity {entity})")
-        if kind.__name__ in ("Mirror", "MeshRef", "Material"):
-            self._check_mirror_mesh(entity, component)
+        for check in _INVARIANTS.get(kind, ()):
+            check(self, entity, component)
         if esper.has_component(entity, kind):
             old = esper.component_for_entity(entity, kind)
             if old is not component:
@@ -147,44 +165,12 @@ class World:
                 warnings.warn(f"entity {entity} has MeshRef and Material but no Transform: it is not drawn "
                               f"until one is added", stacklevel=3)
 
-    def _check_mirror_mesh(self, entity: int, joining: Any = None, mesh: Any = None,
-                           normal_map: Any = None) -> None:
-        """A mirror needs a mesh with area (its plane comes from it, unless ``plane_normal``
-        gives one): checked when a Mirror or MeshRef joins an entity holding the other, and
-        when a mirror's ``MeshRef.mesh`` is replaced, so the refusal comes then, not on the
-        next frame inside the surfaces stage.  A mirror with a normal map needs planar UVs
-        too (``engine.mesh.planar_uv_map``), checked the same way and when the map is set."""
-        held = {type(c).__name__: c for c in esper.components_for_entity(entity)} if esper.entity_exists(entity) \
-            else {}
-        if joining is not None:
-            held[type(joining).__name__] = joining
-        mirror, mesh_ref = held.get("Mirror"), held.get("MeshRef")
-        if mesh is None and mesh_ref is not None:
-            mesh = mesh_ref.mesh
-        if mirror is None or mesh is None:
-            return
-        if (normal_map or getattr(held.get("Material"), "normal_map", None)) is not None:
-            from engine.mesh import planar_uv_map
-
-            rows, why = planar_uv_map(mesh)
-            if rows is None:
-                raise ComponentValueError(
-                    f"Mirror on entity {entity}: Material.normal_map needs UVs that vary linearly over the mirror "
-                    f"(mesh {mesh.name!r}: {why}); use a flat mesh with planar UVs, such as a quad")
-        if getattr(mirror, "plane_normal", None) is not None:
-            return
-        tri = mesh.positions[mesh.indices]
-        area = float(np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1).sum())
-        if not area > 0.0:
-            raise ComponentValueError(f"Mirror on entity {entity}: its MeshRef.mesh {mesh.name!r} has no area "
-                                      f"(a mirror needs a flat mesh of non-zero size), got area {area}")
-        from engine.mesh import flat_plane
-
-        if flat_plane(mesh) is None:
-            lo, hi = mesh.bounds
-            raise ComponentValueError(
-                f"Mirror on entity {entity}: its MeshRef.mesh {mesh.name!r} which is not flat (model-space "
-                f"extents {[round(float(v), 3) for v in hi - lo]}); give the mirror a flat mesh or plane_normal")
+    def check_invariants(self, entity: int, kind: type, **pending: Any) -> None:
+        """Run the invariants registered for ``kind`` on ``entity`` as if the fields in
+        ``pending`` already held their new values (a component's field setter asks before it
+        takes a value, so the refusal comes then, not frames later in a system)."""
+        for check in _INVARIANTS.get(kind, ()):
+            check(self, entity, None, **pending)
 
     def _check_sharing(self, entity: int, component: TrackedComponent) -> None:
         """Refuse a component of another world, or a per-entity one already held elsewhere."""
