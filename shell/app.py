@@ -23,6 +23,7 @@ from engine.render.gl_context import prepare_context
 from engine.render.raw_gl import make_current
 from engine.render.renderer import Renderer
 from engine.render.views import FrameViews, View
+from engine.rules.frame_rules import active_camera_parts
 from systems import (
     ExtractSystem,
     FlyCameraSystem,
@@ -32,7 +33,6 @@ from systems import (
     PresentSystem,
     ReflectionSystem,
     TransformSystem,
-    active_camera,
 )
 from systems.frame_rules_system import FrameRulesSystem
 from systems.portal_slice_system import PortalSliceSystem
@@ -125,8 +125,9 @@ class Engine:
             raise RuntimeError(f"OpenGL error after frame {self.world.frame_index}: {error}")
 
     def active_camera(self):
-        """(entity, Camera, Transform) of the camera the main view looks through, or None."""
-        return active_camera(self.world)
+        """(entity, Camera, Transform) of the camera the main view looks through, or None
+        (``engine.rules.frame_rules.active_camera_parts``; the rule is ``active_camera`` there)."""
+        return active_camera_parts(self.world)
 
     def place_camera(self, x: float, y: float, z: float, yaw: float, pitch: float) -> None:
         """Move the active camera (``--camera``); yaw 0 looks down -Z, degrees."""

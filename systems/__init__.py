@@ -2,7 +2,7 @@
 the stage order of ``shell.app.FRAME_STAGES`` (ARCHITECTURE.md)."""
 from systems.extract_system import ExtractSystem
 from systems.fly_camera_system import FlyCameraSystem
-from systems.main_view_system import MainViewSystem, active_camera
+from systems.main_view_system import MainViewSystem
 from systems.portal_travel_system import PortalCrossing, PortalCrossings, PortalTravelSystem
 from systems.prepare_system import PrepareSystem
 from systems.present_system import PresentSystem
@@ -11,5 +11,5 @@ from systems.transform_system import TransformSystem
 
 __all__ = [
     "ExtractSystem", "FlyCameraSystem", "MainViewSystem", "PortalCrossing", "PortalCrossings", "PortalTravelSystem",
-    "PrepareSystem", "PresentSystem", "ReflectionSystem", "TransformSystem", "active_camera",
+    "PrepareSystem", "PresentSystem", "ReflectionSystem", "TransformSystem",
 ]

@@ -10,20 +10,12 @@ import warnings
 
 import esper
 
-from components import Camera, Transform
 from engine.core.errors import NoCameraWarning
 from engine.core.frame_io import Output
 from engine.core.world import World
 from engine.render.renderer import Renderer
 from engine.render.views import FrameViews, camera_view
-from engine.rules.frame_rules import frame_rules
-
-
-def active_camera(world: World) -> tuple[int, Camera, Transform] | None:
-    """The active Camera with a Transform and the lowest entity id, or None (the rule is
-    ``engine.rules.frame_rules.active_camera``, the camera travel carries too)."""
-    entity = frame_rules(world).active_camera
-    return None if entity is None else (entity, world.get(entity, Camera), world.get(entity, Transform))
+from engine.rules.frame_rules import active_camera_parts
 
 
 class MainViewSystem(esper.Processor):
@@ -37,7 +29,7 @@ class MainViewSystem(esper.Processor):
         world = self.world
         views = world.resources[FrameViews] = FrameViews()
         output: Output | None = world.resources.get(Output)
-        camera = active_camera(world)
+        camera = active_camera_parts(world)
         if camera is None and output is not None and not self._said_no_camera:
             # A black frame with no word is the worst answer to a forgotten camera.
             warnings.warn(NoCameraWarning(

@@ -56,6 +56,14 @@ def active_camera(world: World) -> int | None:
     return min(cameras) if cameras else None
 
 
+def active_camera_parts(world: World) -> tuple[int, Camera, Transform] | None:
+    """This frame's active camera (``frame_rules(world).active_camera``, the rule above) with
+    its Camera and Transform, or None: what the main view looks through and what the shell
+    places and exports."""
+    entity = frame_rules(world).active_camera
+    return None if entity is None else (entity, world.get(entity, Camera), world.get(entity, Transform))
+
+
 def world_corners(mesh, model: glm.mat4) -> np.ndarray:
     """The 8 corners of ``mesh.bounds`` carried by ``model``: an (8, 4) float64 array of
     homogeneous world-space rows.
