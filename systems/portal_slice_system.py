@@ -18,9 +18,9 @@ from pyglm import glm
 
 from components import Material, MeshRef, Portal, PortalClone, Slice, Transform, Traveller
 from engine.core.portal_math import pair_transform, portal_plane
+from engine.core.transforms import current_world_matrix
 from engine.core.world import World
 from engine.rules.frame_rules import frame_rules, world_corners
-from systems.transform_system import current_world_matrix
 
 
 class PortalSliceSystem(esper.Processor):

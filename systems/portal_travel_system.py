@@ -49,9 +49,9 @@ from components import Camera, FlyController, Portal, Transform, Traveller
 from engine.core.frame_io import Output
 from engine.core.portal_math import near_plane_corners, pair_rotation, pair_transform, portal_plane
 from engine.core.reflection_math import signed_distance
+from engine.core.transforms import current_world_matrix
 from engine.core.world import World
 from engine.rules.frame_rules import frame_rules
-from systems.transform_system import current_world_matrix
 
 DEFAULT_ASPECT = 16.0 / 9.0
 TOUCH = 0.02  # the frustum tip "touches" a portal within TOUCH x near of its plane

@@ -2,7 +2,6 @@
 from __future__ import annotations
 
 import esper
-from pyglm import glm
 
 from components import Transform
 from engine.core.world import FrameEvents, World
@@ -12,8 +11,10 @@ class TransformSystem(esper.Processor):
     """Updates ``Transform.world`` for changed entities and their descendants.
 
     Publishes ``world.frame`` (moved / added / removed entity sets) for later systems:
-    the renderer re-uploads only moved instances and probes will re-render only when
-    something near them moved.
+    the renderer re-uploads only moved instances and probes re-render only when something
+    near them moved.  Code that runs before this stage works the same matrix out from the
+    components with ``engine.core.transforms.current_world_matrix`` (a parent that does not
+    exist or has no Transform is no parent, here and there).
     """
 
     def __init__(self, world: World) -> None:
@@ -91,18 +92,3 @@ class TransformSystem(esper.Processor):
             object.__setattr__(transform, "_world", parent_t.world * local if parent_t is not None else local)
             stack.extend(self._children.get(entity, ()))
 
-
-def current_world_matrix(world: World, transform: Transform, max_hops: int = 64) -> glm.mat4:
-    """This frame's model-to-world matrix, for systems that run before the TransformSystem
-    (``Transform.world`` is last frame's until it runs, and identity for a new entity)."""
-    matrix = transform.local_matrix()
-    parent = transform.parent
-    for _ in range(max_hops):
-        if parent is None or not world.exists(parent):
-            break
-        parent_t = world.try_get(parent, Transform)
-        if parent_t is None:
-            break  # as the TransformSystem does: a parent without a Transform is no parent
-        matrix = parent_t.local_matrix() * matrix
-        parent = parent_t.parent
-    return matrix

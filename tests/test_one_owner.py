@@ -9,11 +9,15 @@ import ast
 import re
 from pathlib import Path
 
+import numpy as np
 import pytest
+from pyglm import glm
 
 from components import Camera, Transform
+from engine.core.transforms import current_world_matrix
 from engine.core.world import World
 from engine.rules.frame_rules import active_camera, active_camera_parts
+from systems.transform_system import TransformSystem
 
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGES = ("components", "engine", "systems", "shell", "games", "benchmarks")
@@ -21,6 +25,7 @@ PACKAGES = ("components", "engine", "systems", "shell", "games", "benchmarks")
 # rule: (the pattern a top-level function or constant of the rule is named by, its one owner)
 OWNERS = {
     "the active camera": (r"_?active_camera(_\w+)?", "engine/rules/frame_rules.py"),
+    "the world matrix": (r"_?current_world_matrix", "engine/core/transforms.py"),
 }
 
 
@@ -56,5 +61,31 @@ def test_active_camera_parts_is_the_rules_camera():
         entity, camera, transform = active_camera_parts(world)
         assert entity == active_camera(world) == cameras[1]
         assert camera is world.get(entity, Camera) and transform is world.get(entity, Transform)
+    finally:
+        world.close()
+
+
+def test_current_world_matrix_is_the_transform_stages_matrix():
+    """Worked out before the transform stage, the matrix is the one the stage then writes,
+    through a chain with a parent that has no Transform and one that was deleted."""
+    world = World("one owner")
+    try:
+        turn = glm.angleAxis(0.7, glm.vec3(0.0, 1.0, 0.0))
+        root = world.spawn(Transform(position=(1.0, 2.0, 3.0), rotation=turn, scale=(2.0, 2.0, 2.0)))
+        child = world.spawn(Transform(position=(0.5, 0.0, -1.0), parent=root))
+        grandchild = world.spawn(Transform(position=(0.0, 1.0, 0.0), rotation=turn, parent=child))
+        bare = world.spawn(Camera(active=False))             # an entity with no Transform
+        under_bare = world.spawn(Transform(position=(4.0, 0.0, 0.0), parent=bare))
+        gone = world.spawn(Transform(position=(9.0, 9.0, 9.0)))
+        under_gone = world.spawn(Transform(position=(0.0, 0.0, 5.0), parent=gone))
+        world.delete_entity(gone)
+        entities = (root, child, grandchild, under_bare, under_gone)
+        before = {e: current_world_matrix(world, world.get(e, Transform)) for e in entities}
+        TransformSystem(world).process(0.0)
+        for entity in entities:
+            written = world.get(entity, Transform).world
+            np.testing.assert_allclose(before[entity].to_list(), written.to_list(), atol=1e-6, err_msg=str(entity))
+        assert before[under_bare][3] == glm.vec4(4.0, 0.0, 0.0, 1.0)
+        assert before[under_gone][3] == glm.vec4(0.0, 0.0, 5.0, 1.0)
     finally:
         world.close()

@@ -29,6 +29,7 @@ from pyglm import glm
 
 from components import MeshRef, Transform
 from engine.core.errors import SpeculumError
+from engine.core.transforms import MAX_PARENT_HOPS, current_world_matrix
 from engine.core.world import World
 
 EPSILON = 1e-9  # |determinant| below this: the ray runs along the triangle's plane (no hit)
@@ -177,13 +178,13 @@ class RayCaster:
         chain_written = entity in written
         parent = transform.parent
         hops = 0
-        while not chain_written and parent is not None and hops < 64:
+        while not chain_written and parent is not None and hops < MAX_PARENT_HOPS:
             chain_written = parent in written
             above = self.world.try_get(parent, Transform) if self.world.exists(parent) else None
             parent = above.parent if above is not None else None
             hops += 1
         if chain_written:
-            return tuple(_current_world_matrix(self.world, transform).to_list())
+            return tuple(current_world_matrix(self.world, transform).to_list())
         return transform.world
 
     def _restack(self) -> None:
@@ -221,22 +222,6 @@ def _vector(name: str, value) -> np.ndarray:
     if v.shape != (3,) or not np.isfinite(v).all():
         raise RayCastError(f"ray {name} must be 3 finite numbers, got {value!r}")
     return v
-
-
-def _current_world_matrix(world: World, transform: Transform, max_hops: int = 64) -> glm.mat4:
-    """The model-to-world matrix from the parent chain's local poses now (as
-    ``systems.transform_system.current_world_matrix``; the engine core does not import systems)."""
-    matrix = transform.local_matrix()
-    parent = transform.parent
-    for _ in range(max_hops):
-        if parent is None or not world.exists(parent):
-            break
-        above = world.try_get(parent, Transform)
-        if above is None:
-            break
-        matrix = above.local_matrix() * matrix
-        parent = above.parent
-    return matrix
 
 
 def _same_key(a: object, b: object) -> bool:
