@@ -3,8 +3,11 @@ stage order, one renderer).  The shell is the one place systems are wired into a
 the rest of ``engine`` never imports ``systems``.
 
 A frame is ``FRAME_STAGES`` in order, one system each (ARCHITECTURE.md says what each
-does and where its code is).  A new stage is a new entry here; what a later stage needs
-from an earlier one is a world resource (``Output``, ``FrameViews``, ``RenderStats``,
+does and where its code is), with the game's own systems (``Game.systems``: each a
+``GameSystem`` that runs after and before named stages) ordered in among them when the
+Engine is made (``engine.core.game.schedule_order``); ``Engine.schedule`` is the result, the
+frame as it runs.  A new stage is a new entry here; what a later stage needs from an
+earlier one is a world resource (``Output``, ``FrameViews``, ``RenderStats``,
 ``PortalCrossings``), never a reference to the other system.
 """
 from __future__ import annotations
@@ -17,8 +20,8 @@ import moderngl
 from components import FlyController, yaw_pitch_rotation
 from engine.core.errors import GLPassError
 from engine.core.frame_io import Input, Output
-from engine.core.game import Game
-from engine.core.world import World
+from engine.core.game import Game, GameSystem, schedule_order
+from engine.core.world import FrameEvents, World
 from engine.render.gl_context import prepare_context
 from engine.render.raw_gl import make_current
 from engine.render.renderer import Renderer
@@ -51,6 +54,38 @@ class GameUpdateSystem(esper.Processor):
         self.game.update(self.world, dt)
 
 
+class GameSystemProcessor(esper.Processor):
+    """A game system given as ``function(world, dt)``, run in its place in the schedule."""
+
+    def __init__(self, system: GameSystem, world: World) -> None:
+        self.system = system
+        self.world = world
+
+    def process(self, dt: float) -> None:
+        self.system.system(self.world, dt)
+
+
+class LateTransformSystem(esper.Processor):
+    """"transform_late": world matrices again, after game systems that run between the
+    transform stage and extract (the schedule puts one after each such run of them), so the
+    Transforms they write are drawn this frame.  The transform stage's system works out
+    every Transform changed this frame again (its change set lasts the frame) and
+    ``world.frame`` becomes what both passes saw."""
+
+    def __init__(self, world: World, transform: esper.Processor) -> None:
+        self.world = world
+        self.transform = transform
+
+    def process(self, dt: float) -> None:
+        earlier = self.world.frame
+        self.transform.process(dt)
+        later = self.world.frame
+        removed = earlier.removed | later.removed
+        added = (earlier.added | later.added) - removed
+        self.world.frame = FrameEvents(moved=(earlier.moved | later.moved) - added - removed, added=added,
+                                       removed=removed)
+
+
 # (stage, what makes its system from the engine).  Order is execution order.
 FRAME_STAGES: tuple[tuple[str, Callable[[Engine], esper.Processor]], ...] = (
     ("game", lambda e: GameUpdateSystem(e.game, e.world)),
@@ -74,6 +109,9 @@ class Engine:
     """Owns a game's world and renderer on a given GL context."""
 
     def __init__(self, game: Game, ctx: moderngl.Context) -> None:
+        # The game's systems are checked and ordered first: a ScheduleError makes nothing.
+        order = schedule_order([name for name, _ in FRAME_STAGES], game.systems(), f"{type(game).__name__}.systems()",
+                               reserved=("transform_late",))
         make_current(ctx)  # everything below makes GL objects on it
         caps = prepare_context(ctx)
         self.game = game
@@ -82,9 +120,26 @@ class Engine:
         self.world.resources[Input] = Input()  # the shell fills it, systems and the game read it
         self.renderer = Renderer(ctx, caps)
         self.stages: dict[str, esper.Processor] = {}
-        for order, (name, make) in enumerate(FRAME_STAGES):
-            system = self.stages[name] = make(self)
-            self.world.add_system(system, priority=len(FRAME_STAGES) - order)
+        for name, make in FRAME_STAGES:
+            self.stages[name] = make(self)
+        # The frame as it runs: (name, system), stages and game systems in schedule order.
+        self.schedule: list[tuple[str, esper.Processor]] = []
+        stage_names = [name for name, _ in FRAME_STAGES]
+        transformed = False  # past the transform stage, before extract
+        for index, item in enumerate(order):
+            if isinstance(item, str):
+                self.schedule.append((item, self.stages[item]))
+                transformed = stage_names.index(item) >= stage_names.index("transform") and \
+                    stage_names.index(item) < stage_names.index("extract")
+                continue
+            system = item.system if callable(getattr(item.system, "process", None)) else \
+                GameSystemProcessor(item, self.world)
+            self.schedule.append((item.name, system))
+            following = order[index + 1] if index + 1 < len(order) else None
+            if transformed and isinstance(following, str):
+                self.schedule.append(("transform_late", LateTransformSystem(self.world, self.stages["transform"])))
+        for index, (_, system) in enumerate(self.schedule):
+            self.world.add_system(system, priority=len(self.schedule) - index)
         try:
             game.build(self.world)
         except BaseException:
