@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 from pyglm import glm
 
-from components import Emissive, Transform
+from components import Emissive, MeshRef, Transform
 from engine.core.frame_io import Input, Output
 from engine.core.reflection_math import plane_from_point_normal, reflection_matrix
 from engine.render.targets import CaptureTarget
@@ -121,10 +121,11 @@ def test_each_level_is_won_by_its_scripted_key_presses(run, stem, tmp_path):
     r.frame()
     assert r.state.path is not None and r.state.path.end != "target", "the level starts unsolved"
     keys = solution_keys(path)
-    for key in keys:
+    for key in keys[:-1]:
         r.frame(key)
         assert not r.state.wins(), f"won before the last key of {keys}"
-    first = r.frame()
+    first = r.frame(keys[-1])  # the beam drawn with a frame's mirrors: the last turn wins in its own frame
+    assert len(r.state.wins()) == 1 and r.state.wins()[0].frame == r.state.frame - 1
     last = r.frame()
     wins = r.state.wins()
     assert len(wins) == 1 and wins[0].detail["level"].startswith("Mirror beam")
@@ -252,6 +253,43 @@ def test_the_beam_is_drawn_emissive_and_seen_inside_a_mirror(run):
     assert seen >= 3, "too few samples of the beam's reflection land inside m1"
 
 
+def test_frame_0_shows_the_beam(run):
+    """The beam is a game system after the surfaces stage and before extract
+    (``MirrorBeam.systems``), so the very first frame draws it: its segments are posed with
+    their world matrices worked out again before extract ("transform_late"), each visible
+    segment's entity id is in frame 0's id image where the segment projects, its pixels are
+    the beam's red, and frame 0 is the same picture as frame 1."""
+    path = level_file("01_one_bounce")
+    r = run(path, size=(320, 180))
+    names = [name for name, _ in r.engine.schedule]
+    assert names[names.index("surfaces"):names.index("extract") + 1] == ["surfaces", "beam", "transform_late",
+                                                                         "extract"]
+    first = r.frame()
+    assert r.world.frame_index == 1 and r.state.frame == 1
+    beam = r.state.path
+    assert beam is not None and len(beam.points) >= 3, "traced in frame 0 (one bounce off m1 at least)"
+    ids = r.engine.renderer.targets.read_ids()
+    shown = set(np.unique(ids).tolist())
+    for entity, (segment, transform) in r.world.query(BeamSegment, Transform):
+        drawn = segment.index < len(beam.points) - 1
+        assert r.world.get(entity, MeshRef).visible == drawn
+        if not drawn:
+            assert entity not in shown
+            continue
+        a, b = beam.points[segment.index], beam.points[segment.index + 1]
+        assert glm.distance(glm.vec3(transform.world[3]), (a + b) * 0.5) < 1e-5, "this frame's world matrix"
+        if segment.index > 1:
+            continue  # the open end leaves the view; the first two segments are in it
+        assert entity in shown
+        for f in (0.3, 0.5, 0.7):
+            x, y = r.project(a + f * (b - a))
+            near = [(int(y) + dy, int(x) + dx) for dy in (-1, 0, 1) for dx in (-1, 0, 1)]
+            assert any(ids[p] == entity for p in near), f"segment {segment.index} not at {x:.0f},{y:.0f}"
+            assert any(red(first[p]) for p in near)
+    second = r.frame()
+    assert np.abs(second.astype(int) - first.astype(int)).max() <= 2, "frame 0 is the picture frame 1 is"
+
+
 def test_restart_puts_the_level_back_as_it_started(run):
     path = level_file("02_two_bounces")
     r = run(path)
@@ -340,7 +378,7 @@ def test_command_line_autopilot_writes_frames_of_the_level_solved(tmp_path, how)
                           cwd=ROOT, env=env, capture_output=True, text=True, timeout=120)
     assert done.returncode == 0, done.stderr
     solved = [line for line in done.stdout.splitlines() if line.startswith("mirror_beam: solved:")]
-    assert solved == ["mirror_beam: solved: Mirror beam 1: one bounce with 1 bounce (frame 5; press n for the next "
+    assert solved == ["mirror_beam: solved: Mirror beam 1: one bounce with 1 bounce (frame 4; press n for the next "
                       "level, r to restart)"], done.stdout
     frames = sorted(out.glob("frame_*.png"))
     assert len(frames) == 7
@@ -364,7 +402,8 @@ def test_command_line_autopilot_writes_frames_of_the_level_solved(tmp_path, how)
 def test_n_after_a_win_plays_the_next_level_in_the_same_world(run):
     """Level 1 won, 'n': every entity of level 1 goes, level 2 is built in the same world and
     engine (its mirrors are the renderer's surfaces, the frame shows none of level 1's ids) and
-    is won by its own keys; 'n' before a win does nothing; after the last level comes the first."""
+    is won by its own keys (its beam is traced in the frame it is built); 'n' before a win does nothing;
+    after the last level comes the first."""
     r = run(level_file("01_one_bounce"))
     r.frame("n")
     assert r.game.level_path == level_file("01_one_bounce")
@@ -373,6 +412,8 @@ def test_n_after_a_win_plays_the_next_level_in_the_same_world(run):
     assert r.state.won
     old = set(r.world.entities())
     r.frame("n")
+    assert r.state.path is not None and r.state.path.bounces, "level 2's beam, traced in the frame it is built"
+    assert {b.mirror for b in r.state.path.bounces} <= {r.game.names["m1"], r.game.names["m2"]}
     r.frame()
     r.frame()
     assert r.game.level_path == level_file("02_two_bounces") and r.state.level_name == "Mirror beam 2: two bounces"

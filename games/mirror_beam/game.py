@@ -1,20 +1,24 @@
 """Mirror beam: turn the mirrors so a beam of light bounces onto the target.
 
 A level file places a source (the beam leaves it along its -Z, the way a camera looks), a
-target, mirrors and walls; its ``[rules]`` say which mirrors turn and by what step.  Every
-frame the game stage runs three small systems, in order:
+target, mirrors and walls; its ``[rules]`` say which mirrors turn and by what step.  Each
+frame runs, in order:
 
-* ``input_system``: tab / number keys / a click pick a mirror, left and right turn it about
-  the vertical axis by the rules' step, 'r' puts the level back as it started;
-* ``beam_system``: traces the beam through this frame's ``Surfaces`` (the renderer's planes,
-  outlines and reflection matrices, ``games.mirror_beam.beam``) and re-poses the beam's
-  segments (thin emissive boxes, ordinary entities, so mirrors show them) when it changed;
-* ``win_system``: a beam that ends on the target records a ``BeamEvent('win')`` once and
-  makes the target glow.
+* in the game stage (``update``), ``input_system``: tab / number keys / a click pick a
+  mirror, left and right turn it about the vertical axis by the rules' step, 'r' puts the
+  level back as it started, 'n' after a win plays the next level;
+* the game's "beam" system (``MirrorBeam.systems``), after the engine's surfaces stage and
+  before extract: ``beam_system`` traces the beam through this frame's ``Surfaces`` (the
+  renderer's planes, outlines and reflection matrices, ``games.mirror_beam.beam``) and
+  re-poses the beam's segments (thin emissive boxes, ordinary entities, so mirrors show
+  them) when it changed; ``win_system``: a beam that ends on the target records a
+  ``BeamEvent('win')`` once and makes the target glow; ``marker_system`` keeps the
+  selection light over the selected mirror.
 
-``Surfaces`` is published by the surfaces stage, after the game stage, so the beam traced in
-a frame follows the mirrors as they were drawn in the frame before: a turn shows in the beam
-one frame later, and in the frame of a turn or a restart the beam is not traced again.
+So the beam drawn in a frame is the one the mirrors of that frame make: it is there from
+frame 0, and a turn (or a restart) shows in the beam in the frame of the key press.  The
+segments are posed after the transform stage; the engine works their world matrices out
+again before extract (the schedule's "transform_late" entry).
 """
 from __future__ import annotations
 
@@ -29,7 +33,7 @@ from engine.assets.level_file import LevelGame
 from engine.assets.mesh import box
 from engine.core.errors import SpeculumError
 from engine.core.frame_io import Input, Output
-from engine.core.game import spawn_camera
+from engine.core.game import GameSystem, spawn_camera
 from engine.core.world import World
 from engine.render.view_tree import Surfaces
 from engine.render.views import FrameViews
@@ -283,7 +287,7 @@ def beam_system(world: World, state: BeamState) -> None:
     """Trace the beam through the renderer's mirror states and re-pose its segments."""
     surfaces = world.resources.get(Surfaces)
     if surfaces is None:
-        return  # before the first surfaces stage: nothing to bounce off yet
+        return  # no surfaces stage has run (the system called outside the schedule)
     rules = state.rules
     source = world.get(rules.source, Transform).world
     origin = glm.vec3(source[3])
@@ -416,31 +420,38 @@ class MirrorBeam(LevelGame):
         self.level_path = Path(level)
         self.build(world)
 
+    def systems(self) -> list[GameSystem]:
+        """The beam, traced with this frame's ``Surfaces`` (so after the surfaces stage) and
+        drawn this frame (so before extract)."""
+        return [GameSystem(self.beam, after="surfaces", before="extract", name="beam")]
+
     def update(self, world: World, dt: float) -> None:
+        """The game stage: the autopilot's keys, then the player's input (mirrors turn,
+        restart, the next level)."""
         state = self.state
         keys = world.resources[Input]
         if 0 < state.frame <= len(self.script):
             keys.release(*self.script[state.frame - 1])
         if state.frame < len(self.script):
             keys.press(*self.script[state.frame])
-        moved = input_system(world, state)
+        input_system(world, state)
         if state.next_asked:
             state.next_asked = False
             following = self.next_level()
             if following is not None:
-                self.play_level(world, following)  # its beam is traced from its first full frame on
-                return
-        if not moved:
-            # A mirror that moved this frame is in ``Surfaces`` from the next frame on: until
-            # then the beam keeps the path drawn last frame (and cannot win on a stale one).
-            beam_system(world, state)
-            solved = state.won
-            win_system(world, state)
-            if state.won and not solved and self.verbose:
-                keys = "press n for the next level, r to restart" if self.next_level() is not None \
-                    else "press r to restart"
-                bounces = state.wins()[-1].detail["bounces"]
-                print(f"mirror_beam: solved: {state.level_name} with {bounces} bounce{'s' * (bounces != 1)} "
-                      f"(frame {state.frame}; {keys})", flush=True)
+                self.play_level(world, following)  # the beam system traces its beam this frame
+
+    def beam(self, world: World, dt: float) -> None:
+        """The beam system: trace, win, the selection marker; the frame's last game work."""
+        state = self.state
+        beam_system(world, state)
+        solved = state.won
+        win_system(world, state)
+        if state.won and not solved and self.verbose:
+            keys = "press n for the next level, r to restart" if self.next_level() is not None \
+                else "press r to restart"
+            bounces = state.wins()[-1].detail["bounces"]
+            print(f"mirror_beam: solved: {state.level_name} with {bounces} bounce{'s' * (bounces != 1)} "
+                  f"(frame {state.frame}; {keys})", flush=True)
         marker_system(world, state)
         state.frame += 1
