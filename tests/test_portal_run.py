@@ -19,6 +19,7 @@ from components import Emissive, MeshRef, Portal, Transform
 from engine.assets.level_file import LevelError
 from engine.core.frame_io import Input, Output
 from engine.render.targets import CaptureTarget
+from engine.rules.frame_rules import FrameRules
 from games.portal_run import LevelRulesError, PortalRun, levels
 from games.portal_run.autopilot import Autopilot, ScriptError
 from games.portal_run.game import EYE_HEIGHT, GRAVITY, HALF_WIDTH, JUMP_SPEED, WALK_SPEED, PlayerBody, load_rules
@@ -571,6 +572,21 @@ def _autoplay(ctx, level: Path, dt: float, seconds: float = 20.0, script=None) -
         engine.frame(dt, None)
         frames += 1
     return game, engine, frames
+
+
+def test_the_body_physics_is_a_system_before_the_rules_and_travel(play):
+    """``PortalRun.systems()``: "physics" runs right after the game stage and before the rules
+    stage (so before travel), so a step that completes the pair opens it in the same frame's
+    rules (travel, views and slicing act on it at once)."""
+    p = play(LEVELS[0])
+    names = [name for name, _ in p.engine.schedule]
+    assert names[:4] == ["game", "physics", "rules", "input"] and names.index("physics") < names.index("travel")
+    placed = 0
+    while placed < 2:
+        assert not p.pilot.done, "the solution places both portals"
+        p.frame(render=False)
+        placed = p.game.event_kinds().count("placed")
+    assert set(p.world.resources[FrameRules].open_portals) == set(p.game.portals), "open in the frame it was placed"
 
 
 @pytest.mark.parametrize("level", LEVELS, ids=[p.stem for p in LEVELS])

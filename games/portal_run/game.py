@@ -3,29 +3,36 @@ portals the player shoots onto the level's walls.
 
 A level file places the room (every entity with a mesh is solid unless the rules say not),
 the exit pad, and says in ``[rules]`` where the player starts, which walls take portals and
-how big portals are (``load_rules`` lists them all).  Each frame the game stage runs, in
-order:
+how big portals are (``load_rules`` lists them all).  Each frame runs, in order:
 
-* ``restart``: 'r' (or falling below ``kill_y``) deletes everything and builds the level
-  again from its file; 'n' after a win plays the next shipped level;
-* ``travelled``: a crossing the travel stage made last frame (``PortalCrossings``) turned the
-  player's camera; the game turns the player's velocity by the same rotation and reads its
-  heading back from the new orientation, so momentum goes out of the exit portal;
-* ``look and move``: mouse look, WASD on the ground (air control in the air), gravity and
-  jumping, then the body (an AABB, ``games.portal_run.physics``) is moved through the level's
-  solids; the wall a portal sits on lets the body through while it is in front of the
-  portal's opening, so the camera can reach the portal plane.  The body moves in fixed steps
-  of ``PHYSICS_STEP`` (as many as the frame's time holds, the rest carried to the next frame),
-  so the game plays the same at any frame rate or ``--dt``; the autopilot gives its input
-  every ``SCRIPT_STEPS`` steps (a script counts 60ths of a second);
-* ``place portals``: a left / right click casts a ray from the eye (``engine.rules.raycast``) and
-  places portal A / B on the wall (or, where the rules allow, the floor) it hits, or refuses
-  it (a red marker flashes at the hit and a 'refused' event names the reason);
-* ``win``: the body touching the exit pad records a 'win' event once and lights the pad.
+* the game stage (``update``):
+  * ``travelled``: a crossing the travel stage made last frame (``PortalCrossings``) turned
+    the player's camera; the game turns the player's velocity by the same rotation and reads
+    its heading back from the new orientation, so momentum goes out of the exit portal;
+  * the frame's input: mouse look now, key presses and clicks kept for the next physics step;
+* the game's "physics" system (``PortalRun.systems``), after the game stage and before the
+  engine's rules stage: the body moves in fixed steps of ``PHYSICS_STEP`` (as many as the
+  frame's time holds, the rest carried to the next frame), so the game plays the same at
+  any frame rate or ``--dt``; the autopilot gives its input every ``SCRIPT_STEPS`` steps (a
+  script counts 60ths of a second).  Each step, with its input:
+  * ``restart``: 'r' (or falling below ``kill_y``) deletes everything and builds the level
+    again from its file; 'n' after a win plays the next shipped level;
+  * ``move``: WASD on the ground (air control in the air), gravity and jumping, then the body
+    (an AABB, ``games.portal_run.physics``) is moved through the level's solids; the wall a
+    portal sits on lets the body through while it is in front of the portal's opening, so
+    the camera can reach the portal plane;
+  * ``place portals``: a left / right click casts a ray from the eye (``engine.rules.raycast``)
+    and places portal A / B on the wall (or, where the rules allow, the floor) it hits, or
+    refuses it (a red marker flashes at the hit and a 'refused' event names the reason);
+  * ``win``: the body touching the exit pad records a 'win' event once and lights the pad.
 
 The engine's portal travel system carries the camera (the player) through an open pair in
 the same frame, before anything is drawn, so there is no frame with the player on both
-sides; the game never teleports the player itself.
+sides; the game never teleports the player itself.  That is why physics runs where it does:
+before travel, so a step that takes the eye through a portal's opening stops the frame's
+steps and travel carries the eye at once (the steps left run from the other side next
+frame); and before the rules stage, so a portal placed by a step is open to this frame's
+travel, views and slicing (the rules stage works out the open pairs once a frame).
 """
 from __future__ import annotations
 
@@ -54,6 +61,7 @@ from engine.assets.mesh import box, quad
 from engine.assets.portals import spawn_portal_pair
 from engine.core.errors import SpeculumError
 from engine.core.frame_io import Input
+from engine.core.game import GameSystem
 from engine.core.world import World
 from engine.rules.raycast import RayCaster
 from games.portal_run.autopilot import Autopilot, ScriptError, parse_script
@@ -365,9 +373,14 @@ class PortalRun(LevelGame):
         self._event(why, "level reloaded")
 
     # --- per frame ---------------------------------------------------------------------------
+    def systems(self) -> list[GameSystem]:
+        """The body's physics, after the game stage and before the rules stage (and so before
+        travel): see the module's docstring."""
+        return [GameSystem(self.physics, after="game", before="rules", name="physics")]
+
     def update(self, world: World, dt: float) -> None:
-        """One frame: follow last frame's crossing, take the frame's input, and run the fixed
-        physics steps its ``dt`` holds (``PHYSICS_STEP``; see the constants)."""
+        """The game stage: follow last frame's crossing and take the frame's input (the
+        physics system then runs its steps)."""
         self.frame += 1
         person: Input = world.resources[Input]
         self._travelled(world)  # first: this frame's turning starts from the heading the portal gave
@@ -379,6 +392,10 @@ class PortalRun(LevelGame):
         if self._piloted() is None and (person.mouse_dx or person.mouse_dy):
             self._look(world, person.mouse_dx, person.mouse_dy)
         self._flash(world, dt)
+
+    def physics(self, world: World, dt: float) -> None:
+        """The physics system: the fixed steps ``dt`` holds (``PHYSICS_STEP``; see the
+        constants), each with its input."""
         steps = self._take_steps(dt)
         for done in range(1, steps + 1):
             outcome = self._step(world)
