@@ -14,8 +14,11 @@ import pytest
 from pyglm import glm
 
 from components import Camera, Transform
+from engine.core.cube_faces import CUBE_FACES, FACE_NAMES, face_directions
 from engine.core.transforms import current_world_matrix
 from engine.core.world import World
+from engine.render.shader_library import load_source, shader_dir
+from engine.render.targets import release_framebuffer
 from engine.rules.frame_rules import active_camera, active_camera_parts
 from systems.transform_system import TransformSystem
 
@@ -26,6 +29,8 @@ PACKAGES = ("components", "engine", "systems", "shell", "games", "benchmarks")
 OWNERS = {
     "the active camera": (r"_?active_camera(_\w+)?", "engine/rules/frame_rules.py"),
     "the world matrix": (r"_?current_world_matrix", "engine/core/transforms.py"),
+    "the cube-face table": (r"CUBE_FACES|FACE_AXES|FACE_ORDER|FACE_NAMES|face_directions",
+                            "engine/core/cube_faces.py"),
 }
 
 
@@ -89,3 +94,77 @@ def test_current_world_matrix_is_the_transform_stages_matrix():
         assert before[under_gone][3] == glm.vec4(0.0, 0.0, 5.0, 1.0)
     finally:
         world.close()
+
+
+# The OpenGL spec's cube-map face selection ("Cube Map Texture Selection"): the face is the
+# direction's largest component and its sign; sc, tc (before s = (sc / |ma| + 1) / 2) are
+# these components of the direction r.
+GL_SPEC_FACES = {
+    "+X": lambda r: (-r[..., 2], -r[..., 1]), "-X": lambda r: (r[..., 2], -r[..., 1]),
+    "+Y": lambda r: (r[..., 0], r[..., 2]), "-Y": lambda r: (r[..., 0], -r[..., 2]),
+    "+Z": lambda r: (r[..., 0], -r[..., 1]), "-Z": lambda r: (-r[..., 0], -r[..., 1]),
+}
+
+
+def test_the_cube_face_table_is_the_gl_specs():
+    """Every texel direction of the table selects its own face and lands on its own texel
+    by the spec's selection rule; a face view looking along the face's axis with up its t
+    axis has the s axis on its right."""
+    n = 8
+    c = (np.arange(n) + 0.5) / n * 2.0 - 1.0
+    for face, name in enumerate(FACE_NAMES):
+        r = face_directions(face, n)
+        major = np.argmax(np.abs(r), axis=-1)
+        assert (2 * major + (r[np.arange(n)[:, None], np.arange(n)[None, :], major] < 0) == face).all(), name
+        ma = np.abs(r).max(axis=-1)
+        sc, tc = GL_SPEC_FACES[name](r)
+        np.testing.assert_allclose(sc / ma, np.broadcast_to(c[None, :], (n, n)), atol=1e-12, err_msg=name)
+        np.testing.assert_allclose(tc / ma, np.broadcast_to(c[:, None], (n, n)), atol=1e-12, err_msg=name)
+        forward, s_axis, t_axis = (glm.vec3(a) for a in CUBE_FACES[face])
+        assert glm.cross(forward, t_axis) == s_axis, name
+
+
+CUBE_PROBE_FRAG = """#version 410 core
+#include "cube_faces.glsl"
+uniform int face;
+uniform float level_size;
+out vec4 color;
+void main() {
+    vec2 st = gl_FragCoord.xy / level_size * 2.0 - 1.0;  // as shaders/cube_mip.frag
+    color = vec4(normalize(cube_face_direction(face, st)), 1.0);
+}
+"""
+CUBE_PROBE_VERT = """#version 410 core
+in vec2 in_position;
+void main() { gl_Position = vec4(in_position, 0.0, 1.0); }
+"""
+
+
+def test_the_glsl_cube_face_directions_are_the_tables_texel_by_texel(ctx, tmp_path):
+    """shaders/include/cube_faces.glsl, built as every program is (its table from the
+    defines the shader library makes of CUBE_FACES), gives each texel of each face the
+    direction ``face_directions`` gives it."""
+    (tmp_path / "include").mkdir()
+    (tmp_path / "include" / "cube_faces.glsl").write_bytes((shader_dir() / "include" / "cube_faces.glsl").read_bytes())
+    (tmp_path / "probe.frag").write_text(CUBE_PROBE_FRAG)
+    (tmp_path / "probe.vert").write_text(CUBE_PROBE_VERT)
+    n = 16
+    program = ctx.program(vertex_shader=load_source("probe.vert", root=tmp_path),
+                          fragment_shader=load_source("probe.frag", root=tmp_path))
+    quad = ctx.buffer(np.array([-1, -1, 1, -1, -1, 1, 1, 1], np.float32).tobytes())
+    vao = ctx.vertex_array(program, [(quad, "2f", "in_position")])
+    target = ctx.texture((n, n), 4, dtype="f4")
+    fbo = ctx.framebuffer([target])
+    try:
+        fbo.use()
+        ctx.viewport = (0, 0, n, n)
+        program["level_size"].value = float(n)
+        for face in range(6):
+            program["face"].value = face
+            vao.render(mode=ctx.TRIANGLE_STRIP)
+            drawn = np.frombuffer(fbo.read(components=4, dtype="f4"), np.float32).reshape(n, n, 4)[..., :3]
+            np.testing.assert_allclose(drawn, face_directions(face, n), atol=1e-6, err_msg=FACE_NAMES[face])
+    finally:
+        release_framebuffer(fbo)  # binds framebuffer 0 first: no deleted name left bound
+        for thing in (vao, target, quad, program):
+            thing.release()

@@ -2,10 +2,11 @@
 mirrors and portals it sees, through a view tree rooted at the face) and copied into a
 face of the probe's mipmapped cube map.
 
-Face views follow GL's cube-map convention: face i looks along +X, -X, +Y, -Y, +Z, -Z with
-up -Y, -Y, +Z, -Z, -Y, -Y, a 90 degree square frustum, so a face rendered the usual way
-(bottom row first) is the face's texture rows in order (``sky.face_directions`` gives the
-direction of each texel; tests/test_probes.py checks one labelled direction per face).
+Face views follow GL's cube-map convention (``engine.core.cube_faces.CUBE_FACES``): face i
+looks along the face's axis with up its texture's t axis, a 90 degree square frustum, so a
+face rendered the usual way (bottom row first) is the face's texture rows in order
+(``cube_faces.face_directions`` gives the direction of each texel; tests/test_probes.py
+checks one labelled direction per face).
 """
 from __future__ import annotations
 
@@ -18,6 +19,7 @@ import moderngl
 import numpy as np
 from pyglm import glm
 
+from engine.core.cube_faces import CUBE_FACES
 from engine.core.errors import GLLimitError, GLPassError
 from engine.render.bindings import CUBE_MIP_UNIT, PROBE_UNIT, SCRATCH_UNIT, PassState, apply_pass_state
 from engine.render.raw_gl import CubeMipTarget, LayeredCubeTarget, inspect_bound_target
@@ -28,15 +30,6 @@ from engine.render.views import View
 
 LOG = logging.getLogger("speculum")
 
-# (looking along, up) per face, in GL's face order.
-FACE_AXES = (
-    ((1.0, 0.0, 0.0), (0.0, -1.0, 0.0)),
-    ((-1.0, 0.0, 0.0), (0.0, -1.0, 0.0)),
-    ((0.0, 1.0, 0.0), (0.0, 0.0, 1.0)),
-    ((0.0, -1.0, 0.0), (0.0, 0.0, -1.0)),
-    ((0.0, 0.0, 1.0), (0.0, -1.0, 0.0)),
-    ((0.0, 0.0, -1.0), (0.0, -1.0, 0.0)),
-)
 ALL_FACES = frozenset(range(6))
 # A face is a root view; its textures filter as reflections do (trilinear on a software
 # rasteriser, where anisotropic filtering is most of a view's cost: a probe is a
@@ -47,7 +40,7 @@ FACE = SceneOptions(reflection_filter=True)
 def face_view(face: int, position: glm.vec3, near: float, far: float, size: int, skip: int = 0) -> View:
     """The view of cube face ``face`` from ``position`` (``skip``: the entity left out, the
     probe's own object)."""
-    forward, up = FACE_AXES[face]
+    forward, _, up = CUBE_FACES[face]
     eye = glm.vec3(position)
     view = glm.lookAt(eye, eye + glm.vec3(forward), glm.vec3(up))
     proj = glm.perspective(glm.radians(90.0), 1.0, near, far)
@@ -57,8 +50,9 @@ def face_view(face: int, position: glm.vec3, near: float, far: float, size: int,
 
 def _side_normals(face: int) -> np.ndarray:
     """The inward normals of a face's four side planes (through the probe's centre)."""
-    axis = int(np.argmax(np.abs(FACE_AXES[face][0])))
-    sign = FACE_AXES[face][0][axis]
+    forward = CUBE_FACES[face].forward
+    axis = int(np.argmax(np.abs(forward)))
+    sign = forward[axis]
     rows = []
     for other in range(3):
         if other == axis:
@@ -427,7 +421,7 @@ class ProbeCaptures:
 
     def read_face(self, key: int, face: int) -> np.ndarray:
         """Face ``face`` of probe ``key``'s cube map, linear RGB float32 (rows in texture order:
-        row t of ``sky.face_directions``)."""
+        row t of ``engine.core.cube_faces.face_directions``)."""
         cube = self.cubes[key]
         n = cube.resolution
         data = np.frombuffer(cube.texture.read(face), np.float16).reshape(n, n, 4)

@@ -1,8 +1,9 @@
 """Loads GLSL from the ``shaders`` package, resolves ``#include``, and caches programs.
 
 Shared GLSL (camera block, lights, GGX, colour encoding) lives in ``shaders/include`` and is
-included, never pasted.  Defines (the material slot indices, per-program switches) are
-inserted after the ``#version`` line.
+included, never pasted.  Defines are inserted after the ``#version`` line: a program's own
+switches, and for every program the numbers GLSL shares with Python, generated from the
+Python that owns them (``engine_defines``: the material slot indices, the cube-face table).
 
 Compile errors name the file and line a person edits, not the line of the expanded text the
 driver saw.  Every file of a program gets a number k, and a ``#line`` directive starts each
@@ -55,8 +56,8 @@ from pathlib import Path
 import moderngl
 
 import shaders
+from engine.core import cube_faces, material_slots
 from engine.core.errors import ShaderError
-from engine.core.material_slots import glsl_defines
 from engine.render.raw_gl import _load as load_gl_function
 
 _INCLUDE = re.compile(r'^\s*#include\s+"([^"]+)"\s*$')
@@ -234,9 +235,15 @@ def load_source(name: str, defines: dict[str, str] | None = None, *, root: Path 
     first, _, rest = text.partition("\n")
     if first.strip() != _VERSION:
         raise ShaderError(f"shader {name!r}: must start with '{_VERSION}' (the 4.1 baseline)")
-    all_defines = {**glsl_defines(), **(defines or {})}
+    all_defines = {**engine_defines(), **(defines or {})}
     header = "".join(f"#define {k} {v}\n" for k, v in all_defines.items())
     return f"{first}\n#line 1\n{header}{_line(2, files.number(name))}\n{rest}"
+
+
+def engine_defines() -> dict[str, str]:
+    """The defines every program is built with: numbers the GLSL shares with Python, each
+    made from its one Python owner (the material slot indices, the cube-face table)."""
+    return {**material_slots.glsl_defines(), **cube_faces.glsl_defines()}
 
 
 def _line(line: int, number: int) -> str:

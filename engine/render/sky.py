@@ -1,30 +1,17 @@
 """The sky cube map: generated from a Skybox's colours (nothing is downloaded) or given faces.
 
 ``sky_radiance`` is the generated sky as a function of direction; tests use it to know
-what colour a reflected ray must show.  ``face_directions`` follows GL's cube-map face
-convention (the faces are left-handed: see the OpenGL spec's cube map table).
+what colour a reflected ray must show.  The faces are in GL's order, their texels in the
+directions of ``engine.core.cube_faces.face_directions`` (GL's cube-map table, kept there).
 """
 from __future__ import annotations
 
 import moderngl
 import numpy as np
 
-FACE_ORDER = ("+X", "-X", "+Y", "-Y", "+Z", "-Z")
+from engine.core.cube_faces import face_directions
+
 SEAMLESS_CUBE_MAP = 0x884F  # GL_TEXTURE_CUBE_MAP_SEAMLESS, core since 3.2
-
-
-def face_directions(face: int, size: int) -> np.ndarray:
-    """Unit directions of the texel centres of one face, shape (size, size, 3), row = t."""
-    c = (np.arange(size, dtype=np.float64) + 0.5) / size * 2.0 - 1.0
-    t, s = np.meshgrid(c, c, indexing="ij")
-    one = np.ones_like(s)
-    d = {
-        0: (one, -t, -s), 1: (-one, -t, s),
-        2: (s, one, t), 3: (s, -one, -t),
-        4: (s, -t, one), 5: (-s, -t, -one),
-    }[face]
-    v = np.stack(d, axis=-1)
-    return v / np.linalg.norm(v, axis=-1, keepdims=True)
 
 
 def sky_radiance(skybox, directions: np.ndarray) -> np.ndarray:

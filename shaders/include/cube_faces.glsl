@@ -1,13 +1,11 @@
 // The direction through point (s, t) of cube-map face `face` (0-5: +X, -X, +Y, -Y, +Z, -Z),
-// s and t in [-1, 1] along the face's texture axes: GL's cube-map face table (the faces are
-// left-handed; engine/render/sky.py face_directions is the same table in numpy).
+// s and t in [-1, 1] along the face's texture axes: the face's axis plus s and t times its
+// texture axes. The table is GL's cube-map face table, kept once in engine/core/cube_faces.py;
+// the shader library defines CUBE_FACE_FORWARD, CUBE_FACE_S and CUBE_FACE_T from it for
+// every program (tests/test_one_owner.py checks this function against it texel by texel).
 vec3 cube_face_direction(int face, vec2 st) {
-    float s = st.x;
-    float t = st.y;
-    if (face == 0) return vec3(1.0, -t, -s);
-    if (face == 1) return vec3(-1.0, -t, s);
-    if (face == 2) return vec3(s, 1.0, t);
-    if (face == 3) return vec3(s, -1.0, -t);
-    if (face == 4) return vec3(s, -t, 1.0);
-    return vec3(-s, -t, -1.0);
+    const vec3 forward[6] = CUBE_FACE_FORWARD;
+    const vec3 s_axis[6] = CUBE_FACE_S;
+    const vec3 t_axis[6] = CUBE_FACE_T;
+    return forward[face] + st.x * s_axis[face] + st.y * t_axis[face];
 }
