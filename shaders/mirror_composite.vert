@@ -29,15 +29,16 @@ uniform vec2 to_reflection;   // those pixels -> the reflection level's
 void main() {
     vec4 position = in_corners[gl_VertexID];
     gl_Position = position;
-    // Clip distances 1-4 trim the quad to the view's rectangle, so the pixels of the
-    // surface outside it (hidden by the parent's own rectangle) are never shaded.
+    // The CLIP_RECT_* distances trim the quad to the view's rectangle, so the pixels of the
+    // surface outside it (hidden by the parent's own rectangle) are never shaded; the
+    // others are off in this pass (bindings.RECT_CLIPS) and written as "inside".
     vec4 ndc_rect = in_rect / vec4(to_reflection, to_reflection) / vec4(parent_size, parent_size) * 2.0 - 1.0;
-    gl_ClipDistance[0] = 1.0;
-    gl_ClipDistance[1] = position.x - ndc_rect.x * position.w;
-    gl_ClipDistance[2] = ndc_rect.z * position.w - position.x;
-    gl_ClipDistance[3] = position.y - ndc_rect.y * position.w;
-    gl_ClipDistance[4] = ndc_rect.w * position.w - position.y;
-    gl_ClipDistance[5] = 1.0;
+    gl_ClipDistance[CLIP_VIEW_PLANE] = 1.0;
+    gl_ClipDistance[CLIP_RECT_LEFT] = position.x - ndc_rect.x * position.w;
+    gl_ClipDistance[CLIP_RECT_RIGHT] = ndc_rect.z * position.w - position.x;
+    gl_ClipDistance[CLIP_RECT_BOTTOM] = position.y - ndc_rect.y * position.w;
+    gl_ClipDistance[CLIP_RECT_TOP] = ndc_rect.w * position.w - position.y;
+    gl_ClipDistance[CLIP_SLICE] = 1.0;
     v_rect = in_rect;
     v_inv_view_proj = in_inv_view_proj;
     v_eye = in_eye;

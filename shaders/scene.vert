@@ -2,9 +2,9 @@
 // Instanced scene geometry: per-vertex mesh data, per-instance transform and material record.
 #include "camera.glsl"
 
-// Clip distances: 0 is the view's plane (mirror and portal views), 1-4 the batched mirror
-// path's per-view rectangle (scene_batched.geom), SLICE_CLIP the instance's slice plane.
-#define SLICE_CLIP 5
+// Clip distances (indices defined from engine/render/bindings.py): CLIP_VIEW_PLANE is the
+// view's plane (mirror and portal views), CLIP_RECT_* the batched mirror path's per-view
+// rectangle (scene_batched.geom), CLIP_SLICE the instance's slice plane.
 
 #ifdef BATCHED_VIEWS
 // The batched mirror program (engine/render/batched_mirrors.py): scene_batched.geom projects
@@ -34,7 +34,7 @@ in vec4 in_slice;          // world plane: only its front is drawn (things partl
 in uvec4 in_slots;         // emissive variant, refract variant, reflect variant, entity id
 
 #ifdef BATCHED_VIEWS
-out float g_slice_distance;  // the geometry shader re-emits it as gl_ClipDistance[SLICE_CLIP]
+out float g_slice_distance;  // the geometry shader re-emits it as gl_ClipDistance[CLIP_SLICE]
 #endif
 out vec3 v_world_pos;
 out vec3 v_normal;
@@ -55,7 +55,7 @@ void main() {
     v_reflect = in_reflect;
     v_tint = in_tint;
     v_slots = in_slots;
-    gl_ClipDistance[SLICE_CLIP] = dot(world, in_slice);
+    gl_ClipDistance[CLIP_SLICE] = dot(world, in_slice);
 #ifdef BATCHED_VIEWS
     g_slice_distance = dot(world, in_slice);
 #endif
@@ -65,6 +65,6 @@ void main() {
     // (a mirror's own glass, a portal's partner), which lies on that plane: the plane itself
     // needs no offset, so nothing touching the mirror opens a crack in its reflection.
     bool hidden = in_slots.w == camera.skip.x || (camera.skip.y != 0u && in_slots.w == camera.skip.y);
-    gl_ClipDistance[0] = hidden ? -1.0 : dot(world, camera.clip_plane);
+    gl_ClipDistance[CLIP_VIEW_PLANE] = hidden ? -1.0 : dot(world, camera.clip_plane);
 #endif
 }

@@ -4,8 +4,8 @@
 // the triangle, the triangle as that view's reflected camera sees it (its view_proj holds
 // the oblique near plane).  Per view: triangles wholly outside the view's frustum or screen
 // rectangle, or behind its mirror plane, are culled here; the rest get gl_ClipDistance for
-// the mirror plane (0) and the rectangle's four sides (1-4), which stands in for the
-// per-view scissor of the per-mirror path.  A mirrored view (odd reflection count) emits
+// the mirror plane (CLIP_VIEW_PLANE) and the rectangle's four sides (CLIP_RECT_*), which
+// stands in for the per-view scissor of the per-mirror path.  A mirrored view (odd reflection count) emits
 // its vertices in reverse order, so with front faces counter-clockwise the same faces are
 // culled and gl_FrontFacing matches the per-mirror path's clockwise front faces.
 // scene.frag (compiled with BATCHED_VIEWS) discards pixels whose node image names another
@@ -48,7 +48,7 @@ flat in uvec4 g_slots[];
 
 in float g_slice_distance[];
 
-out float gl_ClipDistance[6];  // 0: mirror plane, 1-4: the view's rectangle, 5: the instance's slice
+out float gl_ClipDistance[CLIP_DISTANCE_COUNT];  // indices: engine/render/bindings.py
 out vec3 v_world_pos;
 out vec3 v_normal;
 out vec2 v_uv;
@@ -68,12 +68,12 @@ bool outside(vec4 a, vec4 p0, vec4 p1, vec4 p2) {
 void emit_corner(int c, vec4 position, MirrorView v) {
     gl_Position = position;
     vec4 world = vec4(g_world_pos[c], 1.0);
-    gl_ClipDistance[0] = dot(world, v.clip_plane);
-    gl_ClipDistance[1] = position.x - v.rect.x * position.w;
-    gl_ClipDistance[2] = v.rect.z * position.w - position.x;
-    gl_ClipDistance[3] = position.y - v.rect.y * position.w;
-    gl_ClipDistance[4] = v.rect.w * position.w - position.y;
-    gl_ClipDistance[5] = g_slice_distance[c];  // SLICE_CLIP in scene.vert
+    gl_ClipDistance[CLIP_VIEW_PLANE] = dot(world, v.clip_plane);
+    gl_ClipDistance[CLIP_RECT_LEFT] = position.x - v.rect.x * position.w;
+    gl_ClipDistance[CLIP_RECT_RIGHT] = v.rect.z * position.w - position.x;
+    gl_ClipDistance[CLIP_RECT_BOTTOM] = position.y - v.rect.y * position.w;
+    gl_ClipDistance[CLIP_RECT_TOP] = v.rect.w * position.w - position.y;
+    gl_ClipDistance[CLIP_SLICE] = g_slice_distance[c];  // scene.vert's, passed on
     v_world_pos = g_world_pos[c];
     v_normal = g_normal[c];
     v_uv = g_uv[c];

@@ -17,7 +17,8 @@ from components import Camera, Transform
 from engine.core.cube_faces import CUBE_FACES, FACE_NAMES, face_directions
 from engine.core.transforms import current_world_matrix
 from engine.core.world import World
-from engine.render.shader_library import load_source, shader_dir
+from engine.render import bindings
+from engine.render.shader_library import engine_defines, load_source, shader_dir
 from engine.render.targets import release_framebuffer
 from engine.rules.frame_rules import active_camera, active_camera_parts
 from systems.transform_system import TransformSystem
@@ -31,6 +32,8 @@ OWNERS = {
     "the world matrix": (r"_?current_world_matrix", "engine/core/transforms.py"),
     "the cube-face table": (r"CUBE_FACES|FACE_AXES|FACE_ORDER|FACE_NAMES|face_directions",
                             "engine/core/cube_faces.py"),
+    "the clip-distance indices": (r"_?(CLIP_(VIEW_PLANE|RECT|RECT_SIDES|SLICE|DISTANCE_COUNT)|SLICE_CLIP)",
+                                  "engine/render/bindings.py"),
 }
 
 
@@ -168,3 +171,28 @@ def test_the_glsl_cube_face_directions_are_the_tables_texel_by_texel(ctx, tmp_pa
         release_framebuffer(fbo)  # binds framebuffer 0 first: no deleted name left bound
         for thing in (vao, target, quad, program):
             thing.release()
+
+
+def test_the_glsl_names_every_clip_distance_and_numbers_none():
+    """Every gl_ClipDistance a shader writes is indexed by a name the shader library defines
+    from engine/render/bindings.py (never a number, never a define of the shader's own), and
+    those defines are the indices the passes enable."""
+    defines = engine_defines()
+    clip_names = {name for name in defines if name.startswith("CLIP_")}
+    used = set()
+    for path in sorted(shader_dir().rglob("*.*")):
+        if path.suffix not in (".vert", ".frag", ".geom", ".glsl"):
+            continue
+        text = path.read_text(encoding="utf-8")
+        name = path.relative_to(shader_dir()).as_posix()
+        for index in re.findall(r"gl_ClipDistance\s*\[([^\]]*)\]", text):
+            assert index.strip() in clip_names, f"{name}: gl_ClipDistance[{index}] (use a CLIP_ name)"
+            used.add(index.strip())
+        assert not re.search(r"^\s*#\s*define\s+\w*CLIP\w*", text, re.MULTILINE), f"{name} defines a clip index"
+    assert used == clip_names, f"defined, never used: {sorted(clip_names - used)}"
+    rect = dict(zip(bindings.CLIP_RECT_SIDES, bindings.CLIP_RECT, strict=True))
+    assert {name: int(defines[name]) for name in clip_names} == {
+        "CLIP_VIEW_PLANE": bindings.CLIP_VIEW_PLANE, "CLIP_SLICE": bindings.CLIP_SLICE,
+        "CLIP_DISTANCE_COUNT": bindings.CLIP_DISTANCE_COUNT, **{f"CLIP_RECT_{side}": i for side, i in rect.items()}}
+    assert sorted((bindings.CLIP_VIEW_PLANE, bindings.CLIP_SLICE, *bindings.CLIP_RECT)) == list(
+        range(bindings.CLIP_DISTANCE_COUNT))

@@ -3,9 +3,10 @@ sets at its start.
 
 Texture units, uniform-block binding points and clip-distance indices are fixed for the
 whole engine (OpenGL 4.1 has no ``layout(binding=)``, so programs are told their units
-from here when they are built).  A unit may serve different samplers in different passes
-(a claim's parent images, a composite's reflection images) as long as no pass binds two
-of them to it.
+from here when they are built; the clip-distance indices reach the GLSL as ``#define``s,
+``clip_glsl_defines``, that the shader library gives every program).  A unit may serve
+different samplers in different passes (a claim's parent images, a composite's reflection
+images) as long as no pass binds two of them to it.
 
 ``PassState`` is everything a pass's draws depend on besides its program and inputs:
 depth test and function, face culling and winding, blending, which clip distances are on,
@@ -40,8 +41,11 @@ LIGHTS_BINDING = 1
 VIEWS_BINDING = 2        # the batched scene program's table of a level's views
 
 # --- clip distances ------------------------------------------------------------------------
+# The GLSL writes gl_ClipDistance[CLIP_VIEW_PLANE] and so on: the names below, defined for
+# every program (``clip_glsl_defines``), never a number.
 CLIP_VIEW_PLANE = 0      # a mirror or portal view's plane (camera.clip_plane)
 CLIP_RECT = (1, 2, 3, 4)  # a rectangle: views drawn in one batched draw, composite quads
+CLIP_RECT_SIDES = ("LEFT", "RIGHT", "BOTTOM", "TOP")  # CLIP_RECT's order: x >= x0, x <= x1, y >= y0, y <= y1
 CLIP_SLICE = 5           # an instance's slice plane (things partly through a portal)
 CLIP_DISTANCE_COUNT = 6
 _GL_CLIP_DISTANCE0 = 0x3000
@@ -50,6 +54,16 @@ SCENE_CLIPS = frozenset((CLIP_VIEW_PLANE, CLIP_SLICE))
 BATCHED_SCENE_CLIPS = SCENE_CLIPS | frozenset(CLIP_RECT)
 RECT_CLIPS = frozenset(CLIP_RECT)
 NO_CLIPS: frozenset[int] = frozenset()
+
+
+
+def clip_glsl_defines() -> dict[str, str]:
+    """``CLIP_VIEW_PLANE``, ``CLIP_RECT_LEFT`` .. ``CLIP_RECT_TOP``, ``CLIP_SLICE`` and
+    ``CLIP_DISTANCE_COUNT`` for the GLSL, from the indices above."""
+    rect = {f"CLIP_RECT_{side}": str(index) for side, index in zip(CLIP_RECT_SIDES, CLIP_RECT, strict=True)}
+    return {"CLIP_VIEW_PLANE": str(CLIP_VIEW_PLANE), **rect, "CLIP_SLICE": str(CLIP_SLICE),
+            "CLIP_DISTANCE_COUNT": str(CLIP_DISTANCE_COUNT)}
+
 
 # Blending "over", alpha kept: the composite's (reflection x rate + own x (1 - rate)) and the
 # transparent slot's.

@@ -3,7 +3,8 @@
 Shared GLSL (camera block, lights, GGX, colour encoding) lives in ``shaders/include`` and is
 included, never pasted.  Defines are inserted after the ``#version`` line: a program's own
 switches, and for every program the numbers GLSL shares with Python, generated from the
-Python that owns them (``engine_defines``: the material slot indices, the cube-face table).
+Python that owns them (``engine_defines``: the material slot indices, the cube-face table,
+the clip-distance indices).
 
 Compile errors name the file and line a person edits, not the line of the expanded text the
 driver saw.  Every file of a program gets a number k, and a ``#line`` directive starts each
@@ -58,6 +59,7 @@ import moderngl
 import shaders
 from engine.core import cube_faces, material_slots
 from engine.core.errors import ShaderError
+from engine.render.bindings import clip_glsl_defines
 from engine.render.raw_gl import _load as load_gl_function
 
 _INCLUDE = re.compile(r'^\s*#include\s+"([^"]+)"\s*$')
@@ -242,8 +244,9 @@ def load_source(name: str, defines: dict[str, str] | None = None, *, root: Path 
 
 def engine_defines() -> dict[str, str]:
     """The defines every program is built with: numbers the GLSL shares with Python, each
-    made from its one Python owner (the material slot indices, the cube-face table)."""
-    return {**material_slots.glsl_defines(), **cube_faces.glsl_defines()}
+    made from its one Python owner (the material slot indices, the cube-face table, the
+    clip-distance indices of ``engine/render/bindings.py``)."""
+    return {**material_slots.glsl_defines(), **cube_faces.glsl_defines(), **clip_glsl_defines()}
 
 
 def _line(line: int, number: int) -> str:
