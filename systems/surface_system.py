@@ -5,7 +5,10 @@ After the transform stage, the Mirror and Portal components become ``SurfaceStat
 again when it moves or its components change; the few portals are redone every frame, as
 they depend on their partner's pose too), published as ``world.resources[Surfaces]``: the
 probes stage roots view trees at probe faces with them, the reflect stage at the main view.
-A Mirror on something that cannot be a mirror is a ``MirrorError`` naming the entity.
+A Mirror's plane and normal-map UVs are the mirror rule's (``engine.rules.mirror_rules.mirror_mesh``,
+the function the world's invariant refuses a bad mirror with); a Mirror on something that
+cannot be a mirror (a mesh changed behind the world's back) is a ``MirrorError`` naming the
+entity and the rule's reason.
 """
 from __future__ import annotations
 
@@ -13,7 +16,6 @@ import esper
 import numpy as np
 
 from components import Material, MeshRef, Mirror, Portal, Transform
-from engine.assets.mesh import flat_plane, planar_uv_map
 from engine.core.errors import SpeculumError
 from engine.core.portal_math import pair_transform, portal_plane
 from engine.core.reflection_math import plane_from_point_normal, reflection_matrix, transform_plane
@@ -21,6 +23,7 @@ from engine.core.world import World
 from engine.render.mirror_passes import MirrorBumps
 from engine.render.view_tree import Surfaces, SurfaceState
 from engine.rules.frame_rules import frame_rules, world_corners
+from engine.rules.mirror_rules import MirrorMeshError, mirror_mesh
 
 # A mirror mesh thinner than this fraction of its size composites over its outline quad;
 # anything thicker (a mirror plane given explicitly on a solid mesh) over its rectangle.
@@ -81,17 +84,12 @@ class SurfaceSystem(esper.Processor):
     def _mirror_state(entity: int, mirror: Mirror, mesh_ref: MeshRef, transform: Transform,
                       material: Material | None = None) -> SurfaceState:
         mesh = mesh_ref.mesh
-        if mirror.plane_normal is not None:
-            point = np.array(mirror.plane_point if mirror.plane_point is not None else (0.0, 0.0, 0.0))
-            normal = np.array(mirror.plane_normal)
-        else:
-            found = flat_plane(mesh)
-            if found is None:
-                lo, hi = mesh.bounds
-                raise MirrorError(
-                    f"entity {entity}: Mirror on mesh {mesh.name!r} which is not flat (model-space "
-                    f"extents {np.round(hi - lo, 4).tolist()}); give the mirror a flat mesh or plane_normal")
-            point, normal = found
+        bumpy = material is not None and material.normal_map is not None
+        try:
+            shape = mirror_mesh(mirror, mesh, bumpy)
+        except MirrorMeshError as exc:
+            raise MirrorError(f"Mirror on entity {entity}: {exc}") from None
+        point, normal = shape.point, shape.normal
         model = transform.world
         local_plane = plane_from_point_normal(tuple(float(v) for v in point), tuple(float(v) for v in normal))
         plane = transform_plane(model, local_plane)
@@ -105,21 +103,12 @@ class SurfaceSystem(esper.Processor):
         if extents[flat_axis] <= FLAT_OUTLINE_TOLERANCE * max(float(extents.max()), 1e-9):
             outline = corners[[i for i in range(8) if not (i >> (2 - flat_axis)) & 1]]
         bumps = None
-        if material is not None and material.normal_map is not None:
-            bumps = MirrorBumps(material.normal_map, material.normal_scale,
-                                _uv_rows(entity, mesh, np.array(model.to_list(), np.float64).T), float(plane.w))
+        if bumpy:
+            # The UVs as an affine function of world position: the rule's model-space map
+            # carried by the inverse model matrix.
+            uv_rows = shape.uv_rows @ np.linalg.inv(np.array(model.to_list(), np.float64).T)
+            bumps = MirrorBumps(material.normal_map, material.normal_scale, uv_rows, float(plane.w))
         return SurfaceState(entity, "mirror", plane, corners, outline,
                             reflection_matrix(plane), plane, entity, mirror.max_depth, mirror.enabled,
                             mirror.color, mirror.reflect_rate, mirror.roughness, mirror.resolution_scale, bumps)
 
-
-def _uv_rows(entity: int, mesh, model: np.ndarray) -> np.ndarray:
-    """The mirror's UVs as an affine function of world position, (2, 4) rows: the mesh's
-    plane map (``engine.assets.mesh.planar_uv_map``) carried to world space by the inverse model
-    matrix.  The world refuses a mesh without one when the map is given; this is the
-    backstop for a mesh replaced by other means."""
-    rows, why = planar_uv_map(mesh)
-    if rows is None:
-        raise MirrorError(f"entity {entity}: Material.normal_map on a Mirror needs UVs that vary linearly over the "
-                          f"mirror (mesh {mesh.name!r}: {why}); use a flat mesh with planar UVs, such as a quad")
-    return rows @ np.linalg.inv(model)

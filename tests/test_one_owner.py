@@ -13,7 +13,8 @@ import numpy as np
 import pytest
 from pyglm import glm
 
-from components import Camera, Transform
+from components import Camera, ComponentValueError, Material, MeshRef, Mirror, Skybox, Transform
+from engine.assets.mesh import box, quad
 from engine.core.cube_faces import CUBE_FACES, FACE_NAMES, face_directions
 from engine.core.transforms import current_world_matrix
 from engine.core.world import World
@@ -21,7 +22,10 @@ from engine.render import bindings
 from engine.render.shader_library import engine_defines, load_source, shader_dir
 from engine.render.targets import release_framebuffer
 from engine.rules.frame_rules import active_camera, active_camera_parts
+from engine.rules.mirror_rules import mirror_mesh
+from systems.surface_system import MirrorError
 from systems.transform_system import TransformSystem
+from tests.support import look_from
 
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGES = ("components", "engine", "systems", "shell", "games", "benchmarks")
@@ -196,3 +200,32 @@ def test_the_glsl_names_every_clip_distance_and_numbers_none():
         "CLIP_DISTANCE_COUNT": bindings.CLIP_DISTANCE_COUNT, **{f"CLIP_RECT_{side}": i for side, i in rect.items()}}
     assert sorted((bindings.CLIP_VIEW_PLANE, bindings.CLIP_SLICE, *bindings.CLIP_RECT)) == list(
         range(bindings.CLIP_DISTANCE_COUNT))
+
+
+@pytest.mark.parametrize("bad", ["not flat", "no area"])
+def test_the_surfaces_stage_takes_the_mirror_rules_plane_and_refuses_with_its_reason(scene, bad):
+    """The surfaces stage's plane is the mirror rule's, and a mesh the world would refuse
+    (here put in behind its back, past the MeshRef setter) is refused there with the words
+    the world's invariant uses."""
+    ents = {}
+
+    def build(world):
+        world.spawn(Skybox())
+        look_from(world, (0.0, 1.0, 4.0), target=(0.0, 1.0, 0.0))
+        ents["mirror"] = world.spawn(Transform(position=(0.0, 1.0, 0.0)), MeshRef(quad(2.0, 2.0)), Material(),
+                                     Mirror())
+
+    runner = scene(build, (32, 24))
+    runner.frame()
+    world, entity = runner.world, ents["mirror"]
+    state = runner.engine.stages["surfaces"].mirrors[entity]  # the SurfaceSystem's row
+    rule = mirror_mesh(world.get(entity, Mirror), world.get(entity, MeshRef).mesh)
+    np.testing.assert_allclose(np.array(state.plane.to_list())[:3], rule.normal, atol=1e-6)
+    mesh = box(name="crate") if bad == "not flat" else quad(0.0, 0.0, name="dot")
+    with pytest.raises(ComponentValueError) as refused:
+        world.check_invariants(entity, MeshRef, mesh=mesh)
+    object.__setattr__(world.get(entity, MeshRef), "mesh", mesh)  # what the setter would refuse
+    world.get(entity, Transform).position = (0.0, 1.5, 0.0)       # moved: the stage looks again
+    with pytest.raises(MirrorError) as stage:
+        runner.frame()
+    assert str(stage.value) == str(refused.value) and bad in str(stage.value)

@@ -1,15 +1,19 @@
-"""What makes a mesh a mirror: one rule, registered with every world as an invariant
-(``engine.core.world.world_invariant``), so a bad mirror is refused when it is made, not
-on the next frame inside the surfaces stage.
+"""What makes a mesh a mirror: one rule, ``mirror_mesh``, registered with every world as an
+invariant (``engine.core.world.world_invariant``), so a bad mirror is refused when it is
+made, not on the next frame inside the surfaces stage.
 
 A mirror needs a mesh with area (its plane comes from it, unless ``Mirror.plane_normal``
 gives one) that is flat; a mirror with a normal map needs UVs that vary linearly over its
 plane (``engine.assets.mesh.planar_uv_map``).  Checked when a Mirror, MeshRef or Material
 joins an entity holding the others, when a mirror's ``MeshRef.mesh`` is replaced and when
-its ``Material.normal_map`` is set.  The surfaces stage fits the same plane and UVs.
+its ``Material.normal_map`` is set.  The surfaces stage (``systems/surface_system.py``)
+takes the mirror's plane and UV map from the same function, so what the world accepted is
+what is drawn, and a mesh changed behind the world's back is refused there with the same
+reason.
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -17,6 +21,45 @@ import numpy as np
 from components import ComponentValueError, Material, MeshRef, Mirror
 from engine.assets.mesh import Mesh, flat_plane, planar_uv_map
 from engine.core.world import World, world_invariant
+
+
+class MirrorMeshError(ValueError):
+    """Why a mesh cannot make a mirror: the reason alone; the caller names the entity."""
+
+
+@dataclass(frozen=True)
+class MirrorMesh:
+    """What a mirror makes of its mesh, in model space."""
+
+    point: np.ndarray  # a point on the mirror's plane
+    normal: np.ndarray  # the plane's normal (the side the mirror reflects)
+    uv_rows: np.ndarray | None  # with a normal map: (2, 4) rows, the UVs as an affine map of position
+
+
+def mirror_mesh(mirror: Mirror, mesh: Mesh, normal_map: bool = False) -> MirrorMesh:
+    """The mirror rule: the plane of ``mirror`` on ``mesh`` (``Mirror.plane_normal`` through
+    ``plane_point`` when given, else the flat mesh's own) and, with a normal map, the mesh's
+    planar UV map; ``MirrorMeshError`` says why there is none."""
+    uv_rows = None
+    if normal_map:
+        uv_rows, why = planar_uv_map(mesh)
+        if uv_rows is None:
+            raise MirrorMeshError(f"Material.normal_map needs UVs that vary linearly over the mirror (mesh "
+                                  f"{mesh.name!r}: {why}); use a flat mesh with planar UVs, such as a quad")
+    if mirror.plane_normal is not None:
+        point = np.array(mirror.plane_point if mirror.plane_point is not None else (0.0, 0.0, 0.0))
+        return MirrorMesh(point, np.array(mirror.plane_normal), uv_rows)
+    tri = mesh.positions[mesh.indices]
+    area = float(np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1).sum())
+    if not area > 0.0:
+        raise MirrorMeshError(f"its MeshRef.mesh {mesh.name!r} has no area (a mirror needs a flat mesh of non-zero "
+                              f"size), got area {area}")
+    found = flat_plane(mesh)
+    if found is None:
+        lo, hi = mesh.bounds
+        raise MirrorMeshError(f"its MeshRef.mesh {mesh.name!r} which is not flat (model-space extents "
+                              f"{[round(float(v), 3) for v in hi - lo]}); give the mirror a flat mesh or plane_normal")
+    return MirrorMesh(found[0], found[1], uv_rows)
 
 
 @world_invariant(Mirror, MeshRef, Material)
@@ -32,21 +75,7 @@ def check_mirror_mesh(world: World, entity: int, joining: Any = None, mesh: Mesh
         mesh = mesh_ref.mesh
     if mirror is None or mesh is None:
         return
-    if (normal_map or getattr(material, "normal_map", None)) is not None:
-        rows, why = planar_uv_map(mesh)
-        if rows is None:
-            raise ComponentValueError(
-                f"Mirror on entity {entity}: Material.normal_map needs UVs that vary linearly over the mirror "
-                f"(mesh {mesh.name!r}: {why}); use a flat mesh with planar UVs, such as a quad")
-    if mirror.plane_normal is not None:
-        return
-    tri = mesh.positions[mesh.indices]
-    area = float(np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1).sum())
-    if not area > 0.0:
-        raise ComponentValueError(f"Mirror on entity {entity}: its MeshRef.mesh {mesh.name!r} has no area "
-                                  f"(a mirror needs a flat mesh of non-zero size), got area {area}")
-    if flat_plane(mesh) is None:
-        lo, hi = mesh.bounds
-        raise ComponentValueError(
-            f"Mirror on entity {entity}: its MeshRef.mesh {mesh.name!r} which is not flat (model-space "
-            f"extents {[round(float(v), 3) for v in hi - lo]}); give the mirror a flat mesh or plane_normal")
+    try:
+        mirror_mesh(mirror, mesh, (normal_map or getattr(material, "normal_map", None)) is not None)
+    except MirrorMeshError as exc:
+        raise ComponentValueError(f"Mirror on entity {entity}: {exc}") from None
