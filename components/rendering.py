@@ -54,7 +54,8 @@ class Material(TrackedComponent):
     the UVs' screen derivatives, so meshes need UVs, not tangents.
 
     On a mirror (limits): the UVs must be a linear map of the mirror's plane (a quad's
-    are; otherwise ``MirrorError``); the lookup is exact for distant things and shifts
+    are; otherwise the map, or the mirror, is refused when given: the mirror rule,
+    ``engine/rules/mirror_rules.py``); the lookup is exact for distant things and shifts
     nearby ones too far; a bent lookup that would leave the mirror's own pixels keeps the
     flat one; and a mirror magnifies an 8-bit map's slope steps (1/127, about 0.45
     degrees), so gentle slopes show as terraces: give mirror maps slopes well above that.
