@@ -98,3 +98,17 @@ def test_passes_draw_the_same_pixels_whatever_ran_before_them(ctx):
     for (rgb, ids), (want_rgb, want_ids) in zip(got, expected, strict=True):
         np.testing.assert_array_equal(ids, want_ids)
         np.testing.assert_array_equal(rgb, want_rgb)
+
+
+def test_the_sky_pass_enables_no_clip_distance_its_shaders_do_not_write():
+    """A clip distance that is on but not written by the shaders is undefined in OpenGL
+    (llvmpipe reads 0 and keeps the pixel; a GPU may clip it away): the sky's shaders write
+    none, so its passes turn none on."""
+    from pathlib import Path
+
+    from engine.render import scene_pass
+
+    shaders = Path(__file__).resolve().parents[1] / "shaders"
+    for state, files in ((scene_pass._SKY, ("sky.vert",)), (scene_pass._LAYERED_SKY, ("sky.vert", "sky_layered.geom"))):
+        writes = any("gl_ClipDistance" in (shaders / name).read_text() for name in files)
+        assert writes or not state.clips, (files, state.clips)

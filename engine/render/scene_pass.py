@@ -72,7 +72,10 @@ _PER_DRAW_UNIFORMS = ("masked", "sky_face_size", "node_index", "has_albedo_map",
 _NO_PROBE = ((0.0, 0.0, 0.0, 0.0),) * 3
 _SCENE = PassState(depth_func="<", cull=True, clips=SCENE_CLIPS)
 _BATCHED_SCENE = PassState(depth_func="<", cull=True, clips=BATCHED_SCENE_CLIPS)
-_SKY = PassState(depth_func="<=", clips=SCENE_CLIPS)
+# The sky's shaders write no gl_ClipDistance: a clip distance left on with no value written
+# is undefined (llvmpipe reads 0 and keeps the pixel; a GPU may clip the sky away), so its
+# pass turns none on.  It needs none: the sky lies on the far plane, behind any view's plane.
+_SKY = PassState(depth_func="<=")
 _LAYERED_SCENE = PassState(depth_func="<", cull=True, clips=BATCHED_SCENE_CLIPS)
 _LAYERED_SKY = PassState(depth_func="<=")
 _BATCHED_TRANSPARENT = PassState(depth_func="<", cull=True, clips=BATCHED_SCENE_CLIPS, blend=BLEND_OVER)
