@@ -1,1 +1,1 @@
-"""GLSL sources, shipped as package data; see engine.shader_library for how they load."""
+"""GLSL sources, shipped as package data; see engine.render.shader_library for how they load."""

@@ -25,7 +25,8 @@ from engine.core.world import FrameEvents, World
 from engine.render.gl_context import prepare_context
 from engine.render.raw_gl import make_current
 from engine.render.renderer import Renderer
-from engine.render.views import FrameViews, View
+from engine.render.views import View
+from engine.resources import FrameViews, RenderStats
 from engine.rules.frame_rules import active_camera_parts
 from systems import (
     ExtractSystem,
@@ -173,6 +174,11 @@ class Engine:
             # Not this engine's: left by code that used the context since the last frame.
             raise GLPassError(f"OpenGL error {pending} was pending before frame {self.world.frame_index + 1} "
                               "(left by other code on this context, not by the engine)")
+        # This frame's counters, fresh: a world resource for whoever reads them after the
+        # frame, and where the renderer's passes count while it runs.
+        checks = self.renderer.path_checks
+        stats = RenderStats(paths_verified=checks.verified(), paths_refused=checks.refused())
+        self.world.resources[RenderStats] = self.renderer.stats = stats
         self.world.step(dt)
         self.world.resources[Input].end_frame()
         error = self.ctx.error

@@ -3,7 +3,7 @@
 The first render stage of a frame.  It reads the ECS through the world's change sets (a
 frame where nothing changed touches nothing), chooses each instance's material variants
 (``material_dispatch``) and writes the rows the GPU batches upload in the prepare stage.
-It also starts the frame's ``RenderStats``.  Nothing here writes game state.
+Nothing here writes game state.
 """
 from __future__ import annotations
 
@@ -27,7 +27,7 @@ from components import (
 from engine.core.errors import GLLimitError
 from engine.core.world import World
 from engine.render.instances import InstanceBatch
-from engine.render.renderer import Renderer, RenderStats
+from engine.render.renderer import Renderer
 from engine.rules.probe_rules import probe_for
 from systems.material_dispatch import choose_material
 
@@ -45,9 +45,6 @@ class ExtractSystem(esper.Processor):
         world.resources[Renderer] = renderer
 
     def process(self, dt: float) -> None:
-        checks = self.renderer.path_checks
-        self.renderer.stats = RenderStats(paths_verified=checks.verified(), paths_refused=checks.refused())
-        self.world.resources[RenderStats] = self.renderer.stats
         world = self.world
         touched: set[int] = set()
         for kind in MATERIAL_KINDS:

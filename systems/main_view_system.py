@@ -14,7 +14,8 @@ from engine.core.errors import NoCameraWarning
 from engine.core.frame_io import Output
 from engine.core.world import World
 from engine.render.renderer import Renderer
-from engine.render.views import FrameViews, camera_view
+from engine.render.views import camera_view
+from engine.resources import FrameViews
 from engine.rules.frame_rules import active_camera_parts
 
 

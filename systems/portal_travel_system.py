@@ -51,6 +51,7 @@ from engine.core.portal_math import near_plane_corners, pair_rotation, pair_tran
 from engine.core.reflection_math import signed_distance
 from engine.core.transforms import current_world_matrix
 from engine.core.world import World
+from engine.resources import PortalCrossing, PortalCrossings
 from engine.rules.frame_rules import frame_rules
 
 DEFAULT_ASPECT = 16.0 / 9.0
@@ -58,19 +59,6 @@ TOUCH = 0.02  # the frustum tip "touches" a portal within TOUCH x near of its pl
 CLEAR = 0.1  # after a teleport the whole tip is at least CLEAR x near in front of the exit
 # Edges of the frustum tip: points are [eye, corner 0..3] (corners go round the rectangle).
 _TIP_EDGES = ((0, 1), (0, 2), (0, 3), (0, 4), (1, 2), (2, 3), (3, 4), (4, 1))
-
-
-@dataclass(frozen=True)
-class PortalCrossing:
-    """``entity`` went into ``from_portal`` and came out of ``to_portal``."""
-
-    entity: int
-    from_portal: int
-    to_portal: int
-
-
-class PortalCrossings(list):
-    """The crossings of the latest frame, in the order they happened (list of PortalCrossing)."""
 
 
 @dataclass
@@ -132,7 +120,7 @@ class PortalTravelSystem(esper.Processor):
                 gate = self._crossed(gates, before, transform, cam, exited.get(entity))
                 if gate is not None:
                     self._carry(entity, transform, cam, gate)
-                    crossings.append(PortalCrossing(entity, gate.entity, gate.partner))
+                    crossings.append(PortalCrossing(entity, gate.entity, gate.partner, gate.carry, gate.turn))
                     self._exited[entity] = gate.partner
             self._last[entity] = glm.vec3(transform.position)
 

@@ -6,7 +6,7 @@ import esper
 from engine.core.frame_io import Output
 from engine.core.world import World
 from engine.render.renderer import Renderer
-from engine.render.views import FrameViews
+from engine.resources import FrameViews
 
 
 class PresentSystem(esper.Processor):

@@ -71,7 +71,7 @@ from components import (
 from engine.core.world import World
 from engine.render.probes import ALL_FACES, ProbeStates, face_view, faces_touched
 from engine.render.renderer import Renderer
-from engine.render.view_tree import Surfaces
+from engine.resources import Surfaces
 from engine.rules.probe_rules import has_own_probe, images_through_surfaces, lights_reach, world_bounds
 
 PATHS = ("auto", "six_pass", "layered")

@@ -14,8 +14,8 @@ import esper
 
 from engine.core.world import World
 from engine.render.renderer import Renderer
-from engine.render.view_tree import ReflectionView, Surfaces, TreeSettings, ViewTree
-from engine.render.views import FrameViews
+from engine.render.view_tree import ReflectionView, TreeSettings, ViewTree
+from engine.resources import FrameViews, Surfaces
 from systems.surface_system import MirrorError
 
 __all__ = ["MirrorError", "ReflectionSystem"]

@@ -20,8 +20,7 @@ from engine.core.errors import SpeculumError
 from engine.core.portal_math import pair_transform, portal_plane
 from engine.core.reflection_math import plane_from_point_normal, reflection_matrix, transform_plane
 from engine.core.world import World
-from engine.render.mirror_passes import MirrorBumps
-from engine.render.view_tree import Surfaces, SurfaceState
+from engine.resources import MirrorBumps, Surfaces, SurfaceState
 from engine.rules.frame_rules import frame_rules, world_corners
 from engine.rules.mirror_rules import MirrorMeshError, mirror_mesh
 

@@ -19,7 +19,7 @@ from components import Emissive, MeshRef, Transform
 from engine.core.frame_io import Input, Output
 from engine.core.reflection_math import plane_from_point_normal, reflection_matrix
 from engine.render.targets import CaptureTarget
-from engine.render.view_tree import Surfaces
+from engine.resources import Surfaces
 from games.mirror_beam import BeamState, LevelRulesError, MirrorBeam, levels
 from games.mirror_beam.beam import trace_beam
 from games.mirror_beam.game import BeamSegment, MirrorFrame

@@ -10,7 +10,7 @@ from engine.assets.mesh import box, plane, quad, sphere
 from engine.assets.texture_data import checker_texture
 from engine.core.reflection_math import plane_from_point_normal, reflection_matrix
 from engine.render.sky import sky_radiance
-from engine.render.view_tree import Surfaces
+from engine.resources import Surfaces
 from tests.support import look_from, srgb_to_linear
 
 SIZE = (200, 150)

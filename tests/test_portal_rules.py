@@ -33,9 +33,9 @@ from components import (
 from engine.assets.mesh import box
 from engine.assets.portals import spawn_portal_pair
 from engine.core.world import World
+from engine.resources import PortalCrossings
 from engine.rules.frame_rules import FrameRules, active_camera, frame_rules, open_portal_pairs, world_corners
 from shell.capture import export_scene
-from systems import PortalCrossings
 from tests.support import look_from, srgb_to_linear
 
 SIZE = (160, 120)

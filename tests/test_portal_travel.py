@@ -32,7 +32,8 @@ from engine.assets.portals import spawn_portal_pair
 from engine.core.frame_io import Input
 from engine.core.game import spawn_camera
 from engine.core.world import World
-from systems import PortalCrossing, PortalCrossings, PortalTravelSystem, TransformSystem
+from engine.resources import PortalCrossing, PortalCrossings
+from systems import PortalTravelSystem, TransformSystem
 
 TURN_Y_90 = glm.angleAxis(glm.radians(90), glm.vec3(0, 1, 0))
 A_POS, B_POS = (0.0, 1.5, 0.0), (10.0, 1.5, 0.0)
@@ -116,6 +117,11 @@ def test_traveller_walking_into_a_comes_out_of_b_with_turned_pose_velocity_and_y
     assert crossings(world) == []
     world.step(0.1)  # z 0.4 -> -0.2: 0.2 behind A, inside its rectangle
     assert crossings(world) == [PortalCrossing(mover, a, b)]
+    crossing = crossings(world)[0]
+    # The crossing carries the pair's turn (a quarter turn about +Y here: -Z goes to +X) and
+    # its carry, which took the mover where it is.
+    np.testing.assert_allclose(crossing.turn * glm.vec3(0, 0, -1), (1, 0, 0), atol=1e-5)
+    np.testing.assert_allclose(glm.vec3(crossing.carry * glm.vec4(0.3, 2.0, -0.2, 1.0)), (10.2, 2.0, 0.3), atol=1e-5)
     t = world.get(mover, Transform)
     # 0.2 m behind A comes out 0.2 m in front of B: (10 - (-0.2), 2.0, 0.3).
     np.testing.assert_allclose(t.position, (10.2, 2.0, 0.3), atol=1e-5)

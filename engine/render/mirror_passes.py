@@ -13,6 +13,7 @@ reads; a claim per view costs a few ns a pixel.)
 from __future__ import annotations
 
 import struct
+import weakref
 from dataclasses import dataclass
 
 import moderngl
@@ -47,18 +48,6 @@ _CLAIM = PassState(depth_func="1")
 _COMPOSITE = PassState(blend=BLEND_OVER, clips=RECT_CLIPS)
 
 
-@dataclass(frozen=True, eq=False)
-class MirrorBumps:
-    """A mirror's normal map (``Material.normal_map``) as its composite reads it: the map,
-    its scale, and the mirror's UVs as a function of world position on its plane (rows: u
-    and v as ``dot(row.xyz, p) + row.w``; SurfaceSystem fits them to the mesh)."""
-
-    normal_map: TextureData
-    scale: float
-    uv_rows: np.ndarray          # (2, 4) float64
-    plane_offset: float          # d of the mirror's world plane n.p + d = 0
-
-
 @dataclass(frozen=True)
 class CompositeSurface:
     """What a surface's composite reads that stays put while the surface does, packed once
@@ -78,7 +67,7 @@ class CompositeSurface:
 
 def composite_surface(tint: glm.vec4, reflect_rate: float, roughness: float, normal: glm.vec3,
                       outline: np.ndarray | None = None, portal: bool = False,
-                      carry: glm.mat3 | None = None, bumps: MirrorBumps | None = None) -> CompositeSurface:
+                      carry: glm.mat3 | None = None, bumps=None) -> CompositeSurface:
     """A surface's composite parameters; ``outline`` is its 4 world corners as homogeneous
     rows in 2 x 2 grid order (None: composite over its screen rectangle).  A mirror with
     ``bumps`` reads its normal map in the composite (a ``_bumpy`` variant)."""
@@ -94,6 +83,20 @@ def composite_surface(tint: glm.vec4, reflect_rate: float, roughness: float, nor
                             glm.vec3(tint).to_bytes(), glm.vec3(normal).to_bytes(),
                             (carry if carry is not None else glm.mat3(1.0)).to_bytes(),
                             bumps.normal_map if bumps is not None and not portal else None)
+
+
+_LOOKS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+
+
+def surface_look(state) -> CompositeSurface:
+    """What the composite reads of a surface (``engine.resources.SurfaceState``), packed once
+    per state object: the packing is the renderer's, so the public state stays plain data."""
+    look = _LOOKS.get(state)
+    if look is None:
+        look = _LOOKS[state] = composite_surface(state.tint, state.reflect_rate, state.roughness,
+                                                 glm.vec3(state.plane), state.outline, portal=state.kind == "portal",
+                                                 carry=glm.mat3(state.carry), bumps=state.bumps)
+    return look
 
 
 @dataclass(slots=True)

@@ -26,7 +26,8 @@ level (``TreeSettings.level_budget``: the views with the most claimed pixels are
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from pyglm import glm
@@ -37,11 +38,9 @@ from engine.render.batched_mirrors import PATHS, choose_path, submitted_triangle
 from engine.render.mirror_passes import (
     Claim,
     Composite,
-    CompositeSurface,
-    MirrorBumps,
     MirrorPasses,
     PreparedComposites,
-    composite_surface,
+    surface_look,
 )
 from engine.render.scene_pass import REFLECTION_LEVEL, SceneOptions
 from engine.render.targets import LevelStack
@@ -51,6 +50,10 @@ from engine.render.views import View
 # limits of Mirror and Portal components take values up to this.
 MAX_TREE_DEPTH = MAX_VIEW_DEPTH  # the depth cap's limit: the components' own
 _BATCHED = SceneOptions(clear=False, masked=True, sky=False, batched=True, reflection_filter=True)
+
+# The mirror and portal records the surfaces stage publishes (``engine.resources.SurfaceState``,
+# plain data above this floor): read here by their fields.
+SurfaceState = Any
 
 
 @dataclass(frozen=True)
@@ -79,57 +82,6 @@ class TreeResult:
     paths: set[str]               # how the levels were drawn
     dropped: int = 0              # views with pixels left out by the level budget
     capped: int = 0               # views the surfaces' own limits allowed below the depth cap
-
-
-@dataclass
-class SurfaceState:
-    """A mirror or a portal as the passes see it: where it is and where its view goes."""
-
-    entity: int
-    kind: str                    # "mirror" or "portal"
-    plane: glm.vec4              # world; its normal points to the side it is seen from
-    corners: np.ndarray          # world corners, homogeneous rows
-    outline: np.ndarray | None   # for a flat surface: its 4 world corners as a 2 x 2 grid (a quad), else None
-    carry: glm.mat4              # takes the parent camera to this surface's view (a reflection, or the pair)
-    exit_plane: glm.vec4         # what the view keeps: the mirror's front, or the look-out portal's front
-    exit_entity: int             # the surface the view looks out of: the mirror itself, or the partner
-    max_depth: int
-    enabled: bool = True
-    tint: glm.vec4 = field(default_factory=lambda: glm.vec4(1.0))
-    reflect_rate: float = 1.0
-    roughness: float = 0.0
-    resolution_scale: float = 1.0
-    bumps: MirrorBumps | None = None  # a mirror's normal map, as its composite reads it
-    look: CompositeSurface = field(init=False, repr=False)  # what its composite reads, packed once
-
-    def __post_init__(self) -> None:
-        self.look = composite_surface(self.tint, self.reflect_rate, self.roughness, glm.vec3(self.plane),
-                                      self.outline, portal=self.kind == "portal", carry=glm.mat3(self.carry),
-                                      bumps=self.bumps)
-
-
-@dataclass
-class Surfaces:
-    """This frame's mirrors and portals by entity (a world resource, from the surfaces stage)."""
-
-    mirrors: dict[int, SurfaceState]
-    portals: dict[int, SurfaceState]
-    _table: SurfaceTable | None = field(default=None, init=False, repr=False)
-
-    @property
-    def table(self) -> SurfaceTable:
-        """All of them as the arrays a tree culls with (built once a frame, on first use)."""
-        if self._table is None:
-            self._table = SurfaceTable([*self.mirrors.values(), *self.portals.values()])
-        return self._table
-
-    def mirror_planes(self) -> dict[int, tuple[list[float], list[float]]]:
-        """Each mirror's world plane as (point on it, unit normal towards its front)."""
-        planes = {}
-        for entity, state in self.mirrors.items():
-            n = glm.vec3(state.plane)
-            planes[entity] = (list(-state.plane.w * n), list(n))
-        return planes
 
 
 @dataclass
@@ -227,7 +179,7 @@ class ViewTree:
         """The composite of a level's views into the level above (``parent_size`` pixels)."""
         return self.passes.prepare_composites([Composite(
             child.index, _to_level(child.rect, root.size, parent_size), child.view.scissor, child.parent.view,
-            child.surface.look) for child in children], parent_size)
+            surface_look(child.surface)) for child in children], parent_size)
 
     @staticmethod
     def _surface_view(parent: ReflectionView, state: SurfaceState, root: View, index: int,

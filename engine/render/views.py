@@ -59,14 +59,6 @@ class View:
         return self._block
 
 
-@dataclass
-class FrameViews:
-    """The root views of this frame (a world resource): the main camera's, None when there is
-    no active camera or nothing to draw into.  Cube-map probe faces join it as roots next."""
-
-    main: View | None = None
-
-
 def camera_view(world_matrix: glm.mat4, fov_y_deg: float, near: float, far: float,
                 size: tuple[int, int], name: str = "main") -> View:
     """The view of a camera whose model-to-world matrix is ``world_matrix`` (looks down -Z)."""

@@ -19,7 +19,7 @@ from dataclasses import dataclass, field
 
 from pyglm import glm
 
-from engine.render.view_tree import SurfaceState
+from engine.resources import SurfaceState
 
 # How far a beam that meets nothing is drawn, and the smallest ray parameter that counts as
 # a hit (so a ray leaving a mirror does not hit that mirror again at its own start).

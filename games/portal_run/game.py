@@ -63,10 +63,10 @@ from engine.core.errors import SpeculumError
 from engine.core.frame_io import Input
 from engine.core.game import GameSystem
 from engine.core.world import World
+from engine.resources import PortalCrossings
 from engine.rules.raycast import RayCaster
 from games.portal_run.autopilot import Autopilot, ScriptError, parse_script
 from games.portal_run.physics import BodyShape, Solid, move_body
-from systems.portal_travel_system import PortalCrossings
 
 LEVEL_DIR = Path(__file__).parent / "levels"
 
@@ -525,8 +525,8 @@ class PortalRun(LevelGame):
 
     # --- travel ---------------------------------------------------------------------------------
     def _travelled(self, world: World) -> None:
-        """Follow a crossing the travel stage made last frame: turn the velocity as the camera
-        was turned (the rotation it now has over the one the game wrote), and read the
+        """Follow a crossing the travel stage made last frame: turn the velocity by the pair's
+        turn (``PortalCrossing.turn``, what the engine turned the camera by), and read the
         heading back, dropping any roll."""
         crossings = world.resources.get(PortalCrossings) or ()
         if crossings is self._consumed:
@@ -539,8 +539,7 @@ class PortalRun(LevelGame):
         for crossing in crossings:
             if crossing.entity != self.player:
                 continue
-            turn = transform.rotation * glm.inverse(body.rotation)
-            v = turn * glm.vec3(*body.velocity)
+            v = crossing.turn * glm.vec3(*body.velocity)  # the pair's turn, which turned the camera
             body.velocity = np.array([v.x, v.y, v.z])
             body.yaw, body.pitch = heading(transform.rotation)
             body.on_ground = False  # the contact was on the other side: the next move finds the new one

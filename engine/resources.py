@@ -1,0 +1,113 @@
+"""The frame's public data: what one stage publishes for the later ones, and what games and
+tools read (``world.resources[Type]``).  Plain data: no GL objects, no packed bytes.
+
+- ``Surfaces`` (the surfaces stage): every mirror and portal as a ``SurfaceState``: its
+  plane, outline, where its view goes (``carry``), its look; a game traces rays with them
+  (mirror beam) as the view tree draws with them.
+- ``FrameViews`` (the main stage): the root views of this frame.
+- ``PortalCrossings`` (the travel stage): who went through which portal, with the pair's
+  ``carry`` and ``turn``, so a game turns what it keeps itself (a body's velocity) by the
+  rotation the engine turned the camera with.
+- ``RenderStats`` (made fresh by ``shell.app.Engine.frame``): what the frame cost.
+
+Games import engine data from here and from ``components`` only.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from pyglm import glm
+
+from engine.assets.texture_data import TextureData
+from engine.render.renderer import RenderStats
+from engine.render.view_tree import SurfaceTable
+from engine.render.views import View
+
+__all__ = ["FrameViews", "MirrorBumps", "PortalCrossing", "PortalCrossings", "RenderStats", "SurfaceState",
+           "Surfaces"]
+
+
+@dataclass(frozen=True, eq=False)
+class MirrorBumps:
+    """A mirror's normal map (``Material.normal_map``) as its composite reads it: the map,
+    its scale, and the mirror's UVs as a function of world position on its plane (rows: u
+    and v as ``dot(row.xyz, p) + row.w``; SurfaceSystem fits them to the mesh)."""
+
+    normal_map: TextureData
+    scale: float
+    uv_rows: np.ndarray          # (2, 4) float64
+    plane_offset: float          # d of the mirror's world plane n.p + d = 0
+
+
+@dataclass(eq=False)
+class SurfaceState:
+    """A mirror or a portal as the passes see it: where it is and where its view goes.  One
+    object per surface while it is unchanged (the surfaces stage makes a new one when it
+    changes), so what is derived from it can be kept by identity (the renderer's packed
+    composite parameters)."""
+
+    entity: int
+    kind: str                    # "mirror" or "portal"
+    plane: glm.vec4              # world; its normal points to the side it is seen from
+    corners: np.ndarray          # world corners, homogeneous rows
+    outline: np.ndarray | None   # for a flat surface: its 4 world corners as a 2 x 2 grid (a quad), else None
+    carry: glm.mat4              # takes the parent camera to this surface's view (a reflection, or the pair)
+    exit_plane: glm.vec4         # what the view keeps: the mirror's front, or the look-out portal's front
+    exit_entity: int             # the surface the view looks out of: the mirror itself, or the partner
+    max_depth: int
+    enabled: bool = True
+    tint: glm.vec4 = field(default_factory=lambda: glm.vec4(1.0))
+    reflect_rate: float = 1.0
+    roughness: float = 0.0
+    resolution_scale: float = 1.0
+    bumps: MirrorBumps | None = None  # a mirror's normal map, as its composite reads it
+
+
+@dataclass
+class Surfaces:
+    """This frame's mirrors and portals by entity (a world resource, from the surfaces stage)."""
+
+    mirrors: dict[int, SurfaceState]
+    portals: dict[int, SurfaceState]
+    _table: SurfaceTable | None = field(default=None, init=False, repr=False)
+
+    @property
+    def table(self) -> SurfaceTable:
+        """All of them as the arrays a view tree culls with (built once a frame, on first use)."""
+        if self._table is None:
+            self._table = SurfaceTable([*self.mirrors.values(), *self.portals.values()])
+        return self._table
+
+    def mirror_planes(self) -> dict[int, tuple[list[float], list[float]]]:
+        """Each mirror's world plane as (point on it, unit normal towards its front)."""
+        planes = {}
+        for entity, state in self.mirrors.items():
+            n = glm.vec3(state.plane)
+            planes[entity] = (list(-state.plane.w * n), list(n))
+        return planes
+
+
+@dataclass
+class FrameViews:
+    """The root views of this frame (a world resource): the main camera's, None when there is
+    no active camera or nothing to draw into."""
+
+    main: View | None = None
+
+
+@dataclass(frozen=True)
+class PortalCrossing:
+    """``entity`` went into ``from_portal`` and came out of ``to_portal``; ``carry`` took it
+    there (world to world: the pair's transform) and ``turn`` is carry's rotation, what a
+    game turns a velocity or a facing it keeps itself by."""
+
+    entity: int
+    from_portal: int
+    to_portal: int
+    carry: glm.mat4 = field(default_factory=glm.mat4, compare=False)
+    turn: glm.quat = field(default_factory=glm.quat, compare=False)
+
+
+class PortalCrossings(list):
+    """The crossings of the latest frame, in the order they happened (list of PortalCrossing)."""
