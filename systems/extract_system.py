@@ -18,7 +18,6 @@ from components import (
     Mirror,
     Portal,
     PortalClone,
-    ReflectionProbe,
     Reflective,
     Refractive,
     Slice,
@@ -28,11 +27,9 @@ from engine.core.errors import GLLimitError
 from engine.core.world import World
 from engine.render.instances import InstanceBatch
 from engine.render.renderer import Renderer
-from engine.rules.probe_rules import probe_for
+from engine.rules.probe_rules import LookChanges, probe_for
 from systems.material_dispatch import choose_material
 
-MATERIAL_KINDS = (MeshRef, Material, Emissive, Reflective, Refractive, Mirror, Portal, Slice, PortalClone,
-                  ReflectionProbe)
 NO_SLICE = (0.0, 0.0, 0.0, 1.0)
 
 
@@ -41,20 +38,14 @@ class ExtractSystem(esper.Processor):
         self.world = world
         self.renderer = renderer
         self._batch_of: dict[int, InstanceBatch] = {}
-        self._probe_owners: set[int] = set()
+        self._looks = LookChanges()  # what changes a look, and which probe each object samples
         world.resources[Renderer] = renderer
 
     def process(self, dt: float) -> None:
         world = self.world
-        touched: set[int] = set()
-        for kind in MATERIAL_KINDS:
-            touched |= world.changed(kind)
-        if world.changed(ReflectionProbe) or self._probe_owners & (world.frame.moved | world.deleted()):
-            # A probe came, went, changed or moved: which probe each cube-reflective object
-            # samples (an influence box) may change with it.
-            touched |= {e for e, r in world.query_one(Reflective) if r.mode == "cube"}
-            touched |= {e for e, _ in world.query_one(Refractive)}
-        self._probe_owners = {e for e, _ in world.query_one(ReflectionProbe)}
+        # A component of probe_rules.LOOK_KINDS changed, or the probe the entity samples did (a
+        # probe came, went, changed or moved, or the entity moved into or out of an influence box).
+        touched = self._looks.entities(world)
         for entity in touched:
             self._refresh_instance(entity)
         # Every moved entity, touched or not: a refresh writes the transform only when the

@@ -7,7 +7,7 @@ has a ``ProbeState``.  What is captured each frame, per probe:
   - the first frame it exists: all six faces;
   - ``on_change`` (the default): only the faces whose frustum holds the old or the new
     bounds of an entity that was added, removed or moved (the transform stage's frame sets)
-    or whose material changed, within the probe's range, either directly or as seen in a
+    or whose look changed (``probe_rules.LookChanges``), within the probe's range, either directly or as seen in a
     mirror or through a portal (the boxes' images, up to the probe's ``depth``;
     ``engine.rules.probe_rules.images_through_surfaces``); all six when the probe itself moved or
     its settings changed, the sun or the sky changed, or a point light whose range reaches
@@ -56,15 +56,9 @@ from pyglm import glm
 
 from components import (
     DirectionalLight,
-    Emissive,
-    Material,
     MeshRef,
-    Mirror,
     PointLight,
-    Portal,
     ReflectionProbe,
-    Reflective,
-    Refractive,
     Skybox,
     Transform,
 )
@@ -72,12 +66,18 @@ from engine.core.world import World
 from engine.render.probes import ALL_FACES, ProbeStates, face_view, faces_touched
 from engine.render.renderer import Renderer
 from engine.resources import Surfaces
-from engine.rules.probe_rules import has_own_probe, images_through_surfaces, lights_reach, world_bounds
+from engine.rules.probe_rules import (
+    LookChanges,
+    has_own_probe,
+    images_through_surfaces,
+    lights_reach,
+    probe_samplers,
+    world_bounds,
+)
 
 PATHS = ("auto", "six_pass", "layered")
 AUTO_TIMED_CAPTURES = 3  # timed captures of each path before "auto" chooses (medians compared)
 LOG = logging.getLogger("speculum")
-LOOK_KINDS = (Material, MeshRef, Emissive, Reflective, Refractive, Mirror, Portal)  # what changes a look
 LIGHTING_KINDS = (DirectionalLight, Skybox)  # what changes every face of every probe
 # A PointLight relights the probes within its reach (engine.rules.probe_rules.lights_reach) when it
 # changes, comes, goes or moves (its own Transform or a parent's: the transform stage's
@@ -113,6 +113,7 @@ class ProbeSystem(esper.Processor):
         self.path_used = ""  # the path of the last capture (RenderStats.probe_path, every frame with probes)
         self._bounds: dict[int, tuple[np.ndarray, np.ndarray]] = {}  # entity -> last world box
         self._lights: dict[int, tuple[np.ndarray, float]] = {}  # point light -> (position, range) last seen
+        self._looks = LookChanges()  # what changes a look (probe_rules.LOOK_KINDS), and which probe each samples
         # Recaptures drawn after the frame is presented, sampled from the next frame on (the
         # module's docstring says why); False draws them before the main view, as first captures are.
         self.recapture_after_present = True
@@ -120,6 +121,7 @@ class ProbeSystem(esper.Processor):
     def process(self, dt: float) -> None:
         world = self.world
         had_probes = bool(self.probes)
+        looks = self._looks.entities(world)  # asked every frame: it follows what each object samples
         self._refresh_probes()
         if not self.probes:
             self._bounds.clear()  # nothing to keep boxes for (a world without probes pays nothing)
@@ -127,7 +129,7 @@ class ProbeSystem(esper.Processor):
             return
         # Where every drawable was when the first probe came (its first capture saw them
         # there); after that, only what changed is looked at.
-        boxes = self._changed_boxes() if had_probes else self._all_boxes()
+        boxes = self._changed_boxes(looks) if had_probes else self._all_boxes()
         everything = any(world.changed(kind) for kind in LIGHTING_KINDS)
         lights = self._changed_lights() if had_probes else self._all_lights()
         surfaces = world.resources.get(Surfaces)
@@ -169,11 +171,9 @@ class ProbeSystem(esper.Processor):
         found: dict[int, tuple[ReflectionProbe, glm.vec3, bool]] = {}
         for owner, (probe, transform) in world.query(ReflectionProbe, Transform):
             found[owner] = (probe, glm.vec3(transform.world[3]), False)
-        # Automatic probes: only cube-reflective and refractive things can have one (a few,
-        # not every drawable: a 10,000-entity world must not pay for them).
-        candidates = {e for e, r in world.query_one(Reflective) if r.mode == "cube"}
-        candidates |= {e for e, _ in world.query_one(Refractive)}
-        for owner in candidates:
+        # Automatic probes: only what samples a probe can have one (a few, not every
+        # drawable: a 10,000-entity world must not pay for them).
+        for owner in probe_samplers(world):
             if has_own_probe(world, owner) and world.has(owner, Transform):
                 mesh_ref, transform = world.get(owner, MeshRef), world.get(owner, Transform)
                 lo, hi = world_bounds(mesh_ref.mesh, transform.world)
@@ -194,13 +194,11 @@ class ProbeSystem(esper.Processor):
                 state.pending = set(ALL_FACES)
 
     # --- what to capture ----------------------------------------------------------------------
-    def _changed_boxes(self) -> dict[int, list[tuple[np.ndarray, np.ndarray]]]:
+    def _changed_boxes(self, looks: set[int]) -> dict[int, list[tuple[np.ndarray, np.ndarray]]]:
         """The old and new world boxes of every entity that moved, came, went or changed its look."""
         world = self.world
         frame = world.frame
-        entities = set(frame.moved) | set(frame.added) | set(frame.removed) | world.deleted()
-        for kind in LOOK_KINDS:
-            entities |= world.changed(kind)
+        entities = set(frame.moved) | set(frame.added) | set(frame.removed) | world.deleted() | looks
         boxes: dict[int, list] = {}
         for entity in entities:
             found = []

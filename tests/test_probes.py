@@ -489,6 +489,81 @@ def test_a_moved_point_light_recaptures_the_probes_it_reaches(scene):
     assert captured() == {"near": 6, "far": 0}
 
 
+def test_a_slice_written_on_a_still_box_recaptures_the_faces_that_see_it(scene):
+    """What changes a look is one list (``probe_rules.LOOK_KINDS``) for the extract stage and
+    the probes.  The probes' own list lacked ``Slice``: a Slice written on an entity that did
+    not move (as the PortalSliceSystem writes and drops one on a still traveller when a pair
+    opens or closes around it) changed the frame but not the probe.  A red box on the probe's
+    +X side, cut away whole by a Slice, leaves the +X face, which alone is captured again."""
+    from components import Slice
+
+    ents = {}
+
+    def build(world):
+        world.spawn(Skybox())
+        look_from(world, (3.0, 0.5, 3.0), target=(0.0, 0.0, 0.0))
+        ents["probe"] = world.spawn(Transform(), ReflectionProbe(resolution=16))
+        ents["box"] = world.spawn(Transform(position=(2.0, 0.0, 0.0)), MeshRef(box((0.5, 0.5, 0.5))),
+                                  Material(color=(0.9, 0.05, 0.05)), Emissive(2.0))
+
+    runner = scene(build, (32, 24))
+    runner.engine.stages["probes"].recapture_after_present = False
+    runner.frame()
+    runner.frame()
+    probes = runner.engine.renderer.probes
+    state = probe_stage(runner).probes[ents["probe"]]
+    assert probes.read_face(ents["probe"], 0)[8, 8][0] > 1.0  # the red box, +X
+    runner.world.add_component(ents["box"], Slice(plane=(-1.0, 0.0, 0.0, -10.0)))  # keeps only x <= -10
+    runner.frame()
+    assert (state.captures, state.faces_captured) == (2, 7)
+    seen = probes.read_face(ents["probe"], 0)[8, 8]
+    assert seen[2] > seen[0], seen  # the sky
+
+
+def test_a_chrome_tile_moved_into_another_probes_box_reflects_that_probe(scene, ctx):
+    """A flat chrome tile samples the probe whose influence box holds it.  Moved from probe
+    a's box into probe b's, it reflects b's cube map (the extract stage follows which probe an
+    object samples through ``probe_rules.LookChanges``; it kept a's before).  The cubes are
+    filled red (a) and green (b) after their one capture, so the tile's colour says which it
+    samples."""
+    from engine.render.bindings import SCRATCH_UNIT
+    from engine.render.raw_gl import write_cube_level
+
+    ents = {}
+
+    def build(world):
+        world.spawn(Skybox())
+        look_from(world, (0.0, 6.0, 6.0), target=(0.0, 0.0, 0.0), fov=70.0)
+        for key, x in (("a", -3.0), ("b", 3.0)):
+            ents[key] = world.spawn(Transform(position=(x, 0.5, 0.0)),
+                                    ReflectionProbe(resolution=8, influence=(3, 3, 3), refresh="once"))
+        ents["tile"] = world.spawn(Transform(position=(-3.0, 0.0, 0.0)), MeshRef(quad(1.5, 1.5)),
+                                   Material(color=(1, 1, 1), metallic=1.0, roughness=0.0), Reflective("cube"))
+
+    runner = scene(build, (64, 48))
+    runner.frame()
+    probes = runner.engine.renderer.probes
+    for key, colour in (("a", (1.0, 0.0, 0.0)), ("b", (0.0, 1.0, 0.0))):
+        cube = probes.cubes[ents[key]].texture
+        for level in range(4):  # 8, 4, 2, 1
+            size = 8 >> level
+            for face in range(6):
+                write_cube_level(ctx, cube, face, level, np.tile(np.array([*colour, 1.0], np.float32),
+                                                                (size, size, 1)), SCRATCH_UNIT)
+
+    def tile_colour() -> np.ndarray:
+        rgb = runner.frame()
+        pixels = runner.ids() == ents["tile"]
+        assert pixels.sum() > 20
+        return np.median(srgb_to_linear(rgb[pixels]), axis=0)
+
+    at_a = tile_colour()
+    assert at_a[0] > at_a[1] + 0.3, at_a
+    runner.world.get(ents["tile"], Transform).position = (3.0, 0.0, 0.0)
+    at_b = tile_colour()
+    assert at_b[1] > at_b[0] + 0.3, at_b
+
+
 def test_box_projection_puts_a_walls_reflection_where_the_math_says(scene):
     """A chrome floor tile off the probe's centre, inside its influence box (8 x 4 x 8 about
     (0, 1, 0)), with a red panel on the box's +X wall.  Each tile pixel's reflected ray,

@@ -1,8 +1,10 @@
-"""Which reflection probe an object samples: worked out from components alone (no GL), so
-the extract stage (which builds instance rows) and the probes stage (which captures) agree.
+"""The probe rules: which reflection probe an object samples and what changes a look.
+Worked out from components alone (no GL), so the extract stage (which builds instance rows)
+and the probes stage (which captures) agree.
 
-An object with ``Reflective("cube")`` or ``Refractive`` (glass refracts what the probe
-saw behind it) samples:
+Sampling.  An object samples a probe when it is ``Reflective("cube")`` or ``Refractive``
+(glass refracts what the probe saw behind it): ``samples_a_probe``, the one definition
+(``probe_samplers`` finds them all).  It samples:
   - its own probe, when it has a ``ReflectionProbe`` component;
   - else, when its mesh is not flat, a probe of its own at its bounding box's centre (made
     by the probes stage; the chrome-sphere case: material detection as in the OpenGL 4
@@ -11,13 +13,29 @@ saw behind it) samples:
   - else the probe whose influence box holds its position (the nearest centre if several);
   - else nothing: it reflects the sky.
 A probe is known by the entity that owns it (the ReflectionProbe's, or the object's own).
+
+Looks.  ``LOOK_KINDS`` (with why each kind is there) and ``LookChanges`` (those, plus the
+objects whose sampled probe changed) say whose look changed this frame: the extract stage
+rewrites their rows, the probes stage recaptures the faces that see them.
 """
 from __future__ import annotations
 
 import numpy as np
 from pyglm import glm
 
-from components import MeshRef, ReflectionProbe, Reflective, Refractive, Transform
+from components import (
+    Emissive,
+    Material,
+    MeshRef,
+    Mirror,
+    Portal,
+    PortalClone,
+    ReflectionProbe,
+    Reflective,
+    Refractive,
+    Slice,
+    Transform,
+)
 from engine.assets.mesh import Mesh, flat_plane
 from engine.core.world import World
 from engine.rules.frame_rules import world_corners
@@ -32,10 +50,23 @@ def is_flat(mesh: Mesh) -> bool:
     return flat
 
 
+SAMPLER_KINDS = (Reflective, Refractive)  # an entity that samples a probe has one of these
+
+
 def samples_a_probe(world: World, entity: int) -> bool:
     """Cube-reflective or refractive: what looks up a probe when one serves it."""
     reflective = world.try_get(entity, Reflective)
     return (reflective is not None and reflective.mode == "cube") or world.has(entity, Refractive)
+
+
+def probe_samplers(world: World) -> set[int]:
+    """Every entity that samples a probe (``samples_a_probe``), found through the few that
+    have a component of ``SAMPLER_KINDS``: a 10,000-entity world does not pay for a look at
+    each."""
+    found: set[int] = set()
+    for kind in SAMPLER_KINDS:
+        found.update(entity for entity, _ in world.query_one(kind))
+    return {entity for entity in found if samples_a_probe(world, entity)}
 
 
 def has_own_probe(world: World, entity: int) -> bool:
@@ -71,6 +102,73 @@ def probe_for(world: World, entity: int) -> int:
             if distance < best_distance:
                 best, best_distance = owner, distance
     return best
+
+
+# What changes a look: an entity one of these components was added to, removed from or
+# written on is drawn differently (why, per kind).  The extract stage rewrites its instance
+# row; the probes scheduler recaptures the probe faces that see it.  Not here: Transform
+# (where a thing is, not how it looks: the transform stage's moved set says that) and
+# ReflectionProbe (what it changes in a look is which probe an object samples, which
+# ``LookChanges`` follows object by object, and the cube's picture, which is not followed
+# into the probes that see the object: two probes that see each other's objects would
+# recapture each other every frame).
+LOOK_KINDS: dict[type, str] = {
+    MeshRef: "the mesh drawn, and whether it is drawn at all (visible)",
+    Material: "colour, alpha (the transparent slot), texture, normal map, metallic and roughness",
+    Emissive: "the light it gives off",
+    Reflective: "what it reflects (sky, planar mirror, probe or portal), and whether it samples a probe",
+    Refractive: "glass: it refracts what its probe saw behind it (and samples a probe)",
+    Mirror: "a mirror's surface: its tint, reflectance, roughness and view resolution, or switched off",
+    Portal: "a portal's surface: its partner's view, or closed",
+    Slice: "the clip plane that cuts a thing part-way through a portal (the PortalSliceSystem writes and "
+           "drops it on travellers that need not move: a pair opening or closing around one)",
+    PortalClone: "the entity it is drawn as: the id image, and the views that hide it (a probe face hides "
+                 "its own object's clones too)",
+}
+
+
+class LookChanges:
+    """The entities whose look may have changed this frame, for one reader (the extract stage
+    and the probes scheduler keep one each): a component of ``LOOK_KINDS`` added, removed or
+    written, or the probe the entity samples (``probe_for``) changed: it moved into or out
+    of a probe's influence box, a probe came, went, moved or changed, or its own components
+    changed.  It remembers which probe each object sampled when last asked."""
+
+    def __init__(self) -> None:
+        self._sampled: dict[int, int] = {}  # entity -> the probe it sampled (not 0), when last asked
+        self._probe_owners: set[int] = set()
+
+    def entities(self, world: World) -> set[int]:
+        """This frame's entities whose look may have changed (each call follows on from the
+        last: ask once a frame)."""
+        looks: set[int] = set()
+        for kind in LOOK_KINDS:
+            looks |= world.changed(kind)
+        return looks | self.resampled(world, looks)
+
+    def resampled(self, world: World, looks: set[int]) -> set[int]:
+        """The entities whose sampled probe changed since the last call (``looks``: this
+        frame's LOOK_KINDS changes)."""
+        frame = world.frame
+        for entity in world.deleted() & self._sampled.keys():
+            del self._sampled[entity]
+        owners = {entity for entity, _ in world.query_one(ReflectionProbe)}
+        probes_changed = (owners != self._probe_owners or bool(world.changed(ReflectionProbe))
+                          or bool(owners & frame.moved))
+        self._probe_owners = owners
+        known = probe_samplers(world) | self._sampled.keys()
+        # Which probe an object samples depends on its components, its position and the probes.
+        candidates = known if probes_changed else (looks | frame.moved | frame.added) & known
+        resampled = set()
+        for entity in candidates:
+            probe = probe_for(world, entity) if world.exists(entity) else 0
+            if probe != self._sampled.get(entity, 0):
+                resampled.add(entity)
+            if probe:
+                self._sampled[entity] = probe
+            else:
+                self._sampled.pop(entity, None)
+        return resampled
 
 
 MAX_SURFACE_IMAGES = 4096  # boxes seen through mirrors and portals a probe's schedule follows a frame
