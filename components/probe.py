@@ -45,12 +45,18 @@ class ReflectionProbe(TrackedComponent):
     box_projection: bool = False
     depth: int = 1
     prefilter: str = "mips"
-    _requested: bool = field(default=False, init=False, repr=False, compare=False)
+    _requests: int = field(default=0, init=False, repr=False, compare=False)
 
     def request(self) -> None:
         """Ask a ``scripted`` probe (or any other) for a capture of every face next frame."""
-        self._requested = True
+        self._requests += 1
         self.touch()
+
+    @property
+    def requests(self) -> int:
+        """How many times ``request()`` was called.  A reader (the probes scheduler) compares
+        it with the count it saw last: reading a request clears nothing."""
+        return self._requests
 
     def _validate(self, name: str, value: Any) -> Any:
         if name == "resolution":

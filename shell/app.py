@@ -102,7 +102,7 @@ FRAME_STAGES: tuple[tuple[str, Callable[[Engine], esper.Processor]], ...] = (
     ("main", lambda e: MainViewSystem(e.world, e.renderer)),
     ("reflect", lambda e: ReflectionSystem(e.world, e.renderer)),
     ("present", lambda e: PresentSystem(e.world, e.renderer)),
-    ("probes_after", lambda e: ProbeAfterPresentSystem(e.stages["probes"])),  # recaptures, for the next frame
+    ("probes_after", lambda e: ProbeAfterPresentSystem(e.world, e.renderer)),  # recaptures, for the next frame
 )
 
 

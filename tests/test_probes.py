@@ -727,7 +727,7 @@ def test_faces_drawn_straight_into_the_cube_equal_faces_drawn_and_copied(scene):
 def test_auto_times_both_paths_once_and_keeps_the_faster(scene):
     """On the first full capture ``auto`` draws each path once untimed, then times each
     AUTO_TIMED_CAPTURES times and keeps the faster median; later probes and frames use it."""
-    from systems.probe_system import AUTO_TIMED_CAPTURES
+    from engine.render.probes import AUTO_TIMED_CAPTURES
 
     ents = {}
 
@@ -940,7 +940,7 @@ def test_faces_touched_holds_every_face_a_point_of_the_boxes_lies_in():
     point of a box (the point's largest axis, GL's face choice) is among the faces found,
     for one box at a time and for all boxes at once (their union); a box out of range
     touches none."""
-    from engine.render.probes import faces_touched
+    from engine.rules.probe_rules import faces_touched
 
     rng = np.random.default_rng(7)
     centre = np.array([0.5, -0.25, 1.0])

@@ -1,6 +1,12 @@
 """Cube-map probe captures: six views from a point, each drawn by the scene pass (with the
 mirrors and portals it sees, through a view tree rooted at the face) and copied into a
-face of the probe's mipmapped cube map.
+face of the probe's mipmapped cube map, or all six in one layered pass.
+
+``ProbeCaptures`` is the GPU side of every probe: the cube maps (``ProbeCube``: the texture
+and where it was captured from, set by ``capture_probe`` alone), the targets faces are drawn
+into, the mip pass (``CubeMipPass``) and the path chooser (``ProbePaths``: six_pass or
+layered, ``auto`` timing both).  Which faces to capture, and when, is the probes scheduler's
+(``systems/probe_scheduler.py``); what a face sees is ``engine.rules.probe_rules``'.
 
 Face views follow GL's cube-map convention (``engine.core.cube_faces.CUBE_FACES``): face i
 looks along the face's axis with up its texture's t axis, a 90 degree square frustum, so a
@@ -12,6 +18,9 @@ from __future__ import annotations
 
 import logging
 import math
+import statistics
+import time
+from collections.abc import Callable
 from contextlib import contextmanager
 from dataclasses import dataclass
 
@@ -19,6 +28,7 @@ import moderngl
 import numpy as np
 from pyglm import glm
 
+from components import ReflectionProbe
 from engine.core.cube_faces import CUBE_FACES
 from engine.core.errors import GLLimitError, GLPassError
 from engine.render.bindings import CUBE_MIP_UNIT, PROBE_UNIT, SCRATCH_UNIT, PassState, apply_pass_state
@@ -27,10 +37,13 @@ from engine.render.scene_pass import SceneOptions
 from engine.render.targets import LevelStack, release_framebuffer
 from engine.render.view_tree import SurfaceTable, TreeSettings, ViewTree
 from engine.render.views import View
+from engine.rules.probe_rules import projection_box
+from engine.rules.probe_schedule import ProbeStates  # noqa: F401  (the probe states' resource, read here by tools)
 
 LOG = logging.getLogger("speculum")
+PROBE_PATHS = ("auto", "six_pass", "layered")
+AUTO_TIMED_CAPTURES = 3  # timed captures of each path before "auto" chooses (medians compared)
 
-ALL_FACES = frozenset(range(6))
 # A face is a root view; its textures filter as reflections do (trilinear on a software
 # rasteriser, where anisotropic filtering is most of a view's cost: a probe is a
 # reflection, seen blurred by its mips and through a curved surface).
@@ -46,56 +59,6 @@ def face_view(face: int, position: glm.vec3, near: float, far: float, size: int,
     proj = glm.perspective(glm.radians(90.0), 1.0, near, far)
     return View(view=view, proj=proj, eye=eye, size=(size, size), name=f"probe face {face}", node=face, skip=skip,
                 hide=skip)
-
-
-def _side_normals(face: int) -> np.ndarray:
-    """The inward normals of a face's four side planes (through the probe's centre)."""
-    forward = CUBE_FACES[face].forward
-    axis = int(np.argmax(np.abs(forward)))
-    sign = forward[axis]
-    rows = []
-    for other in range(3):
-        if other == axis:
-            continue
-        for side in (1.0, -1.0):
-            n = np.zeros(3)
-            n[axis] = sign
-            n[other] = -side  # sign * d[axis] - side * d[other] >= 0
-            rows.append(n)
-    return np.array(rows)
-
-
-_SIDE_NORMALS = np.stack([_side_normals(face) for face in range(6)])  # (face, plane, xyz)
-
-
-def face_planes(position: glm.vec3, face: int) -> np.ndarray:
-    """The four side planes of a face's frustum as rows (a, b, c, d): a point p is inside
-    the face's pyramid when every row . (p, 1) >= 0."""
-    normals = _SIDE_NORMALS[face]
-    return np.concatenate([normals, -(normals @ np.array(position))[:, None]], axis=1)
-
-
-def faces_touched(position: glm.vec3, far: float, lo: np.ndarray, hi: np.ndarray) -> set[int]:
-    """Faces whose frustum (from ``position`` out to ``far``) any of the world boxes [lo, hi]
-    may touch (``lo``, ``hi``: one box's corners, or rows of several).  Conservative: a box
-    is left out of a face only when all its corners are outside one of the face's planes.
-    All boxes and faces in a few array operations: a probe may see many movers a frame."""
-    centre = np.array(position, dtype=np.float64)
-    lo = np.atleast_2d(np.asarray(lo, dtype=np.float64))
-    hi = np.atleast_2d(np.asarray(hi, dtype=np.float64))
-    in_range = np.linalg.norm(np.clip(centre, lo, hi) - centre, axis=1) <= far
-    if not in_range.any():
-        return set()
-    lo, hi = lo[in_range] - centre, hi[in_range] - centre  # planes through the centre: d = 0
-    pick = np.array([(x, y, z) for x in (0, 1) for y in (0, 1) for z in (0, 1)], dtype=bool)  # (8, 3)
-    corners = np.where(pick[None], hi[:, None, :], lo[:, None, :])  # (box, corner, xyz)
-    inside = np.einsum("bck,fpk->bcfp", corners, _SIDE_NORMALS) >= 0.0  # (box, corner, face, plane)
-    outside_one_plane = (~inside).all(axis=1).any(axis=2)  # (box, face)
-    return {int(face) for face in np.flatnonzero((~outside_one_plane).any(axis=0))}
-
-
-class ProbeStates(dict):
-    """World resource: every probe the probes stage keeps, by owning entity (``ProbeState``)."""
 
 
 @dataclass
@@ -308,6 +271,80 @@ class CubeFaceTargets:
         self.depth.release()
 
 
+class ProbePaths:
+    """Which path draws a probe capture: ``six_pass`` (each face a view through the scene
+    pass, with a view tree of the mirrors and portals it sees) or ``layered`` (all six faces
+    in one pass, a geometry shader choosing each triangle's faces; no view trees).  ``path``
+    is one of them, or ``auto`` (the default): both timed with ``finish()`` on the first
+    full capture that either could draw (each drawn once untimed first, so neither pays for
+    building its programs, then ``AUTO_TIMED_CAPTURES`` times each, alternating, and the
+    medians compared), the faster kept for the rest of the run and said (``chosen``,
+    ``timings``, ``in_use``, a log line).
+
+    Only a path the path self-check (``renderer.path_checks``) trusts on this context is
+    drawn: a refused layered capture would leave faces unwritten, so a forced or chosen
+    ``layered`` takes ``six_pass`` there, and ``auto`` never times it.  A capture of some
+    faces only, or of a probe whose faces see mirrors or portals, takes ``six_pass``."""
+
+    def __init__(self, renderer) -> None:
+        self.renderer = renderer
+        self.path = "auto"
+        self.used = ""  # the path that drew the last capture
+        self.chosen: str | None = None  # what "auto" settled on, once it has timed both
+        self.timings: dict[str, float] = {}  # median ms of the timed captures, by path
+
+    @property
+    def in_use(self) -> str:
+        """The path the frame statistics report: what ``auto`` chose, once it has; else the
+        path of the last capture."""
+        return self.chosen if self.path == "auto" and self.chosen else self.used
+
+    def draw(self, draws: dict[str, Callable[[], None]], layered_possible: bool, resolution: int) -> str:
+        """Draw a capture by the path this one takes (``draws``: each path's drawing of it);
+        the path that drew it."""
+        path = self._path(layered_possible)
+        if path == "time both":
+            self._time_both(draws, resolution)
+            path = self.chosen
+        else:
+            draws[path]()
+        self.used = path
+        return path
+
+    def _path(self, layered_possible: bool) -> str:
+        if self.path not in PROBE_PATHS:
+            raise ValueError(f"ProbeSystem.path must be one of {PROBE_PATHS}, got {self.path!r}")
+        if not layered_possible or self.path == "six_pass":
+            return "six_pass"
+        # The layered capture only where the path self-check verified it on this context
+        # (forced or chosen by auto): a refused path would leave faces unwritten.
+        if not self.renderer.path_checks.trusted("layered_capture"):
+            return "six_pass"
+        if self.path == "layered":
+            return "layered"
+        return self.chosen or "time both"
+
+    def _time_both(self, draws: dict[str, Callable[[], None]], resolution: int) -> None:
+        for draw in draws.values():
+            draw()  # untimed: programs built, targets made
+        samples: dict[str, list[float]] = {name: [] for name in draws}
+        for _ in range(AUTO_TIMED_CAPTURES):
+            for name, draw in draws.items():
+                samples[name].append(self._timed(draw))
+        self.timings = {name: statistics.median(times) for name, times in samples.items()}
+        self.chosen = min(self.timings, key=self.timings.get)
+        LOG.info("probe capture path: %s (six_pass %.2f ms, layered %.2f ms for %d-texel faces)",
+                 self.chosen, self.timings["six_pass"], self.timings["layered"], resolution)
+
+    def _timed(self, draw: Callable[[], None]) -> float:
+        ctx = self.renderer.ctx
+        ctx.finish()
+        start = time.perf_counter()
+        draw()
+        ctx.finish()
+        return (time.perf_counter() - start) * 1e3
+
+
 class ProbeCaptures:
     """The GPU side of every probe: cube maps by probe key, and the targets faces draw into
     (one LevelStack per resolution, shared by all probes: captures run one after another)."""
@@ -322,6 +359,7 @@ class ProbeCaptures:
         self._stacks: dict[int, LevelStack] = {}
         self.tree = ViewTree(renderer)
         self.mips = CubeMipPass(renderer)
+        self.paths = ProbePaths(renderer)
 
     def cube(self, key: int, resolution: int) -> ProbeCube:
         """The cube map of probe ``key`` at ``resolution`` (made, or remade at a new size)."""
@@ -337,6 +375,27 @@ class ProbeCaptures:
             texture.filter = (moderngl.LINEAR_MIPMAP_LINEAR, moderngl.LINEAR)
             cube = self.cubes[key] = ProbeCube(texture, resolution)
         return cube
+
+    def capture_probe(self, key: int, faces: frozenset[int], position: glm.vec3, settings: ReflectionProbe,
+                      surfaces=None) -> str:
+        """Capture ``faces`` of probe ``key`` (the entity owning it, whose own object every
+        face leaves out) from ``position`` with ``settings``, by the path ``paths`` takes
+        (``surfaces``: this frame's ``engine.resources.Surfaces``, the mirrors and portals a
+        face's view tree draws, up to ``settings.depth``); then the cube's record of where
+        it was captured from and its projection box (``probe_rules.projection_box``): the
+        cube's fields are set here only.  Returns the path that drew it."""
+        views = {face: face_view(face, position, settings.near, settings.far, settings.resolution, skip=key)
+                 for face in faces}
+        sees_surfaces = settings.depth > 0 and surfaces is not None and bool(surfaces.mirrors or surfaces.portals)
+        table = surfaces.table if sees_surfaces else None
+        draws = {"six_pass": lambda: self.capture(key, views, table, settings.depth, settings.prefilter),
+                 "layered": lambda: self.capture_layered(key, views, prefilter=settings.prefilter)}
+        path = self.paths.draw(draws, len(faces) == 6 and not sees_surfaces, settings.resolution)
+        cube = self.cubes[key]
+        cube.position = tuple(position)
+        cube.box = projection_box(position, settings)
+        self.renderer.stats.probe_captures += 1
+        return path
 
     def capture(self, key: int, views: dict[int, View], surfaces: SurfaceTable | None, depth: int,
                 prefilter: str = "mips", direct: bool | None = None, build_mips: bool = True) -> None:

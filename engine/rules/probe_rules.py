@@ -1,6 +1,7 @@
-"""The probe rules: which reflection probe an object samples and what changes a look.
-Worked out from components alone (no GL), so the extract stage (which builds instance rows)
-and the probes stage (which captures) agree.
+"""The probe rules: which reflection probe an object samples, what changes a look, what a
+probe face sees and what relights a probe.  Worked out from components alone (no GL), so
+the extract stage (which builds instance rows), the probes scheduler (which picks the faces
+to capture) and the captures agree.
 
 Sampling.  An object samples a probe when it is ``Reflective("cube")`` or ``Refractive``
 (glass refracts what the probe saw behind it): ``samples_a_probe``, the one definition
@@ -16,7 +17,11 @@ A probe is known by the entity that owns it (the ReflectionProbe's, or the objec
 
 Looks.  ``LOOK_KINDS`` (with why each kind is there) and ``LookChanges`` (those, plus the
 objects whose sampled probe changed) say whose look changed this frame: the extract stage
-rewrites their rows, the probes stage recaptures the faces that see them.
+rewrites their rows, the probes scheduler recaptures the faces that see them.
+
+Faces.  A face sees what is in its frustum (``faces_touched``) and what its mirror and portal
+views show (``images_through_surfaces``), never the probe's own object.  A point light
+relights what is in its range (``lights_reaching``); ``LIGHTING_KINDS`` relight everything.
 """
 from __future__ import annotations
 
@@ -24,6 +29,7 @@ import numpy as np
 from pyglm import glm
 
 from components import (
+    DirectionalLight,
     Emissive,
     Material,
     MeshRef,
@@ -33,10 +39,12 @@ from components import (
     ReflectionProbe,
     Reflective,
     Refractive,
+    Skybox,
     Slice,
     Transform,
 )
 from engine.assets.mesh import Mesh, flat_plane
+from engine.core.cube_faces import CUBE_FACES
 from engine.core.world import World
 from engine.rules.frame_rules import world_corners
 
@@ -171,36 +179,93 @@ class LookChanges:
         return resampled
 
 
+# --- what a probe face sees -------------------------------------------------------------------
+ALL_FACES = frozenset(range(6))
+
+
+def _side_normals(face: int) -> np.ndarray:
+    """The inward normals of a face's four side planes (through the probe's centre)."""
+    forward = CUBE_FACES[face].forward
+    axis = int(np.argmax(np.abs(forward)))
+    sign = forward[axis]
+    rows = []
+    for other in range(3):
+        if other == axis:
+            continue
+        for side in (1.0, -1.0):
+            n = np.zeros(3)
+            n[axis] = sign
+            n[other] = -side  # sign * d[axis] - side * d[other] >= 0
+            rows.append(n)
+    return np.array(rows)
+
+
+_SIDE_NORMALS = np.stack([_side_normals(face) for face in range(6)])  # (face, plane, xyz)
+_CORNER_PICK = np.array([(x, y, z) for x in (0, 1) for y in (0, 1) for z in (0, 1)], dtype=bool)  # (8, 3)
+
+
+def face_planes(position: glm.vec3, face: int) -> np.ndarray:
+    """The four side planes of a face's frustum as rows (a, b, c, d): a point p is inside
+    the face's pyramid when every row . (p, 1) >= 0."""
+    normals = _SIDE_NORMALS[face]
+    return np.concatenate([normals, -(normals @ np.array(position))[:, None]], axis=1)
+
+
+def face_hits(position: glm.vec3, far: float, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    """(box, face) booleans: which faces' frustums (from ``position`` out to ``far``) each
+    world box [lo, hi] (rows, or one box's corners) may touch.  Conservative: a box is left
+    out of a face only when all its corners are outside one of the face's planes.  All
+    boxes and faces in a few array operations: a probe may see many movers a frame."""
+    centre = np.array(position, dtype=np.float64)
+    lo = np.atleast_2d(np.asarray(lo, dtype=np.float64))
+    hi = np.atleast_2d(np.asarray(hi, dtype=np.float64))
+    hits = np.zeros((len(lo), 6), dtype=bool)
+    in_range = np.linalg.norm(np.clip(centre, lo, hi) - centre, axis=1) <= far
+    if not in_range.any():
+        return hits
+    near_lo, near_hi = lo[in_range] - centre, hi[in_range] - centre  # planes through the centre: d = 0
+    corners = np.where(_CORNER_PICK[None], near_hi[:, None, :], near_lo[:, None, :])  # (box, corner, xyz)
+    inside = np.einsum("bck,fpk->bcfp", corners, _SIDE_NORMALS) >= 0.0  # (box, corner, face, plane)
+    hits[in_range] = ~(~inside).all(axis=1).any(axis=2)  # not wholly outside one plane: (box, face)
+    return hits
+
+
+def faces_touched(position: glm.vec3, far: float, lo: np.ndarray, hi: np.ndarray) -> set[int]:
+    """The faces any of the boxes [lo, hi] may touch (``face_hits``, all boxes together)."""
+    return {int(face) for face in np.flatnonzero(face_hits(position, far, lo, hi).any(axis=0))}
+
+
 MAX_SURFACE_IMAGES = 4096  # boxes seen through mirrors and portals a probe's schedule follows a frame
 
 
 def images_through_surfaces(eye, lo: np.ndarray, hi: np.ndarray, surfaces, depth: int,
-                            far: float) -> tuple[np.ndarray, np.ndarray] | None:
+                            far: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None:
     """Where the world boxes [lo, hi] (rows) appear to a probe at ``eye`` through the mirrors
-    and portals ``surfaces`` (each with ``plane``, ``exit_plane`` and ``carry``, as the
-    view tree's ``SurfaceState``), up to ``depth`` surfaces deep: a box that can be seen
-    through a surface (a corner in front of the plane the surface's view looks out of) is
-    seen where the inverse of the surface's ``carry`` puts it (its mirror image; through a
+    and portals ``surfaces`` (each with ``plane``, ``exit_plane``, ``carry`` and ``entity``,
+    as ``engine.resources.SurfaceState``), up to ``depth`` surfaces deep: a box that can be
+    seen through a surface (a corner in front of the plane the surface's view looks out of)
+    is seen where the inverse of the surface's ``carry`` puts it (its mirror image; through a
     portal, carried back to this side).  The images' boxes, within ``far`` of the eye, as
-    (lo, hi) rows; conservative (a box is only left out when it cannot be seen).  None when
-    there would be more than MAX_SURFACE_IMAGES: the caller then takes every face that sees
-    a surface."""
+    rows (lo, hi, the row of [lo, hi] each is an image of, the surface seen last: the one the
+    probe looks into); conservative (a box is only left out when it cannot be seen).  None
+    when there would be more than MAX_SURFACE_IMAGES: the caller then takes every face that
+    sees a surface."""
     eye = np.asarray(eye, np.float64)
-    pick = np.array([(x, y, z) for x in (0, 1) for y in (0, 1) for z in (0, 1)], dtype=bool)
     carried = []
     for surface in surfaces:
         plane = np.asarray(surface.plane, np.float64)
         exit_plane = np.asarray(surface.exit_plane, np.float64)
         back = np.linalg.inv(np.array(surface.carry.to_list(), np.float64).T)
-        carried.append((plane, exit_plane, back))
-    images_lo, images_hi = [], []
+        carried.append((plane, exit_plane, back, surface.entity))
+    images_lo, images_hi, images_of, images_via = [], [], [], []
     level_lo, level_hi = np.atleast_2d(lo).astype(np.float64), np.atleast_2d(hi).astype(np.float64)
+    level_of = np.arange(len(level_lo))
     for level in range(depth):
-        next_lo, next_hi = [], []
-        for plane, exit_plane, back in carried:
+        next_lo, next_hi, next_of, next_via = [], [], [], []
+        for plane, exit_plane, back, entity in carried:
             if level == 0 and plane[:3] @ eye + plane[3] <= 0.0:
                 continue  # the probe is behind it: it sees the surface's back
-            corners = np.where(pick[None], level_hi[:, None, :], level_lo[:, None, :])  # (box, corner, xyz)
+            corners = np.where(_CORNER_PICK[None], level_hi[:, None, :], level_lo[:, None, :])  # (box, corner, xyz)
             homogeneous = np.concatenate([corners, np.ones(corners.shape[:2] + (1,))], axis=2)
             seen = (homogeneous @ exit_plane >= 0.0).any(axis=1)
             if not seen.any():
@@ -209,25 +274,48 @@ def images_through_surfaces(eye, lo: np.ndarray, hi: np.ndarray, surfaces, depth
             moved = moved[..., :3] / moved[..., 3:4]
             next_lo.append(moved.min(axis=1))
             next_hi.append(moved.max(axis=1))
+            next_of.append(level_of[seen])
+            next_via.append(np.full(int(seen.sum()), entity, np.int64))
         if not next_lo:
             break
         level_lo, level_hi = np.concatenate(next_lo), np.concatenate(next_hi)
+        level_of, level_via = np.concatenate(next_of), np.concatenate(next_via)
         near = np.linalg.norm(np.clip(eye, level_lo, level_hi) - eye, axis=1) <= far
-        level_lo, level_hi = level_lo[near], level_hi[near]
+        level_lo, level_hi, level_of, level_via = level_lo[near], level_hi[near], level_of[near], level_via[near]
         images_lo.append(level_lo)
         images_hi.append(level_hi)
+        images_of.append(level_of)
+        images_via.append(level_via)
         if sum(len(b) for b in images_lo) > MAX_SURFACE_IMAGES:
             return None
         if not len(level_lo):
             break
     if not images_lo:
-        return np.zeros((0, 3)), np.zeros((0, 3))
-    return np.concatenate(images_lo), np.concatenate(images_hi)
+        return np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0, np.int64), np.zeros(0, np.int64)
+    return (np.concatenate(images_lo), np.concatenate(images_hi), np.concatenate(images_of),
+            np.concatenate(images_via))
 
 
-def lights_reach(eye, far: float, lights: list[tuple[np.ndarray, float]]) -> bool:
-    """Whether any point light of ``lights`` ((position, range) rows, where a light was or
-    is) lights something a probe at ``eye`` sees out to ``far``: its sphere of range meets
-    the probe's sphere of sight."""
+# --- what relights a probe ----------------------------------------------------------------
+# A change to one of these relights every face of every probe.  A PointLight relights only the
+# probes within its reach (``lights_reaching``) when it changes, comes, goes or moves (its own
+# Transform or a parent's: the transform stage's moved set holds descendants).
+LIGHTING_KINDS = (DirectionalLight, Skybox)
+
+
+def lights_reaching(eye, far: float, lights: list[tuple[np.ndarray, float]]) -> list[int]:
+    """Which point lights of ``lights`` ((position, range) rows, where a light was or is)
+    light something a probe at ``eye`` sees out to ``far``: their sphere of range meets the
+    probe's sphere of sight (their rows' indices)."""
     eye = np.asarray(eye, np.float64)
-    return any(float(np.linalg.norm(np.asarray(p, np.float64) - eye)) <= r + far for p, r in lights)
+    return [index for index, (position, reach) in enumerate(lights)
+            if float(np.linalg.norm(np.asarray(position, np.float64) - eye)) <= reach + far]
+
+
+def projection_box(position: glm.vec3, probe: ReflectionProbe) -> tuple[tuple, tuple] | None:
+    """The box a probe's lookups are parallax-corrected against (world min, max corners):
+    its influence box about where it was captured, with ``box_projection``; else None."""
+    if not probe.box_projection or probe.influence is None:
+        return None
+    half = glm.vec3(probe.influence) / 2.0
+    return tuple(position - half), tuple(position + half)

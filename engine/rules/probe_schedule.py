@@ -1,0 +1,95 @@
+"""What the probes scheduler keeps and publishes (plain data, no GL): every probe's state
+(``ProbeStates``, kept across frames) and this frame's captures (``ProbeSchedule``: which
+faces of which probes, and why).  The scheduler (``systems/probe_scheduler.py``) writes
+them; the captures (``systems/probe_system.py``) draw what the schedule says and count it
+in the probe's state; tools read both (``shell.capture`` exports the states).
+
+A reason is a short line a person reads: "first capture", "probe moved", "settings
+changed", "requested", "every_frame", "every_n", "DirectionalLight changed", "light 7
+moved", "moved: entity 12", "look changed: entity 12, seen in mirror 5", "added: entity 3,
+seen through portal 9", "4 more changes" (past ``MAX_NAMED`` entities a probe and frame).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from pyglm import glm
+
+from components import ReflectionProbe
+from engine.rules.probe_rules import ALL_FACES
+
+MAX_NAMED = 8  # entities named in a probe's reasons a frame; the rest are counted in one reason
+
+
+@dataclass
+class ProbeState:
+    """One probe as the scheduler keeps it.  ``pending``: the faces waiting to be captured
+    (with ``time_slicing`` some wait for later frames) and ``why`` the reasons they wait
+    for (reason -> its faces still waiting).  ``captures`` (frames with a capture) and
+    ``faces_captured`` are counted by the captures (``record_capture``): they are the API."""
+
+    owner: int
+    settings: ReflectionProbe
+    automatic: bool
+    position: glm.vec3
+    pending: set[int] = field(default_factory=lambda: set(ALL_FACES))
+    why: dict[str, set[int]] = field(default_factory=lambda: {"first capture": set(ALL_FACES)})
+    captures: int = 0
+    faces_captured: int = 0
+    frames: int = 0
+    requests_seen: int = 0  # settings.requests when last looked at (ReflectionProbe.request)
+
+    def ask(self, faces, reason: str) -> None:
+        """Faces to capture, and why."""
+        faces = set(faces)
+        if faces:
+            self.pending |= faces
+            self.why.setdefault(reason, set()).update(faces)
+
+    def take(self, faces: frozenset[int]) -> dict[str, frozenset[int]]:
+        """``faces`` leave the waiting set (due this frame); the reasons they waited for."""
+        reasons = {}
+        for reason, waiting in list(self.why.items()):
+            due = waiting & faces
+            if due:
+                reasons[reason] = frozenset(due)
+                waiting -= due
+            if not waiting:
+                del self.why[reason]
+        self.pending -= faces
+        return reasons
+
+    def record_capture(self, faces: frozenset[int]) -> None:
+        """The captures drew ``faces`` of this probe."""
+        self.captures += 1
+        self.faces_captured += len(faces)
+
+
+class ProbeStates(dict):
+    """World resource: every probe the scheduler keeps, by owning entity (``ProbeState``)."""
+
+
+@dataclass
+class ProbeDue:
+    """One probe's capture this frame: ``faces`` and the ``reasons`` (reason -> the faces it
+    asked for).  ``first``: the probe's first capture (drawn before the main view samples
+    it); ``drawn`` once a capture stage has drawn it."""
+
+    owner: int
+    faces: frozenset[int]
+    reasons: dict[str, frozenset[int]]
+    first: bool
+    drawn: bool = False
+
+
+@dataclass
+class ProbeSchedule:
+    """World resource, made by the probes scheduler each frame: the captures due (``due``, by
+    probe) and the probes gone since the last frame (``gone``: their cube maps are given
+    back)."""
+
+    due: dict[int, ProbeDue] = field(default_factory=dict)
+    gone: list[int] = field(default_factory=list)
+
+    def undrawn(self) -> list[ProbeDue]:
+        return [due for due in self.due.values() if not due.drawn]

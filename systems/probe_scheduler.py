@@ -1,0 +1,273 @@
+"""The probes scheduler: which reflection probes there are, and which faces of each to capture
+this frame, and why.  GL-free: it holds no renderer and draws nothing.  Each frame it
+publishes ``ProbeSchedule`` (``engine/rules/probe_schedule.py``: per probe the faces due and
+the reasons) and keeps ``ProbeStates``; the captures (``systems/probe_system.py``) draw what
+it publishes.
+
+Every ``ReflectionProbe`` (at its entity's position) and every automatic probe (a
+cube-reflective mesh that is not flat, at its bounding box's centre; ``engine/rules/probe_rules.py``)
+has a ``ProbeState``.  What is due each frame, per probe:
+
+  - the first frame it exists: all six faces ("first capture");
+  - all six when the probe moved ("probe moved"), its settings changed ("settings changed")
+    or ``ReflectionProbe.request()`` was called ("requested": the component counts its
+    requests and the scheduler compares the count with the one it last saw);
+  - ``on_change`` (the default): only the faces whose frustum holds the old or the new
+    bounds of an entity that was added, removed or moved (the transform stage's frame sets)
+    or whose look changed (``probe_rules.LookChanges``), within the probe's range, either
+    directly ("moved: entity 12") or as seen in a mirror or through a portal (the boxes'
+    images, up to the probe's ``depth``: ``probe_rules.images_through_surfaces``; "moved:
+    entity 12, seen in mirror 5"); all six when the sun or the sky changed
+    ("DirectionalLight changed") or a point light whose range reaches what the probe sees
+    changed, came, went or moved, its own Transform or a parent's ("light 7 moved");
+  - ``every_frame``: all six; ``every_n``: all six every n frames; ``once``: nothing more;
+    ``scripted``: all six after a request;
+  - with ``time_slicing="one_face_per_frame"`` the waiting faces go one a frame (after a
+    first capture of all six, so an object never shows a cube map with faces missing).
+A face leaves the waiting set (``ProbeState.pending``) when it is published as due.
+"""
+from __future__ import annotations
+
+import numpy as np
+from pyglm import glm
+
+from components import MeshRef, PointLight, ReflectionProbe, Transform
+from engine.core.world import World
+from engine.resources import Surfaces
+from engine.rules.probe_rules import (
+    ALL_FACES,
+    LIGHTING_KINDS,
+    LookChanges,
+    face_hits,
+    faces_touched,
+    has_own_probe,
+    images_through_surfaces,
+    lights_reaching,
+    probe_samplers,
+    world_bounds,
+)
+from engine.rules.probe_schedule import MAX_NAMED, ProbeDue, ProbeSchedule, ProbeState, ProbeStates
+
+
+class ChangedBoxes:
+    """The world boxes of this frame's changes, as rows: ``lo``, ``hi`` (world AABB corners),
+    ``entity`` and ``what`` (how it changed) of each; an entity has a row where it was and
+    one where it is."""
+
+    def __init__(self, rows: list[tuple[int, str, np.ndarray, np.ndarray]]) -> None:
+        rows.sort(key=lambda row: row[0])
+        self.entity = np.array([row[0] for row in rows], np.int64)
+        self.what = [row[1] for row in rows]
+        self.lo = np.array([row[2] for row in rows], np.float64).reshape(-1, 3)
+        self.hi = np.array([row[3] for row in rows], np.float64).reshape(-1, 3)
+
+
+class ProbeScheduler:
+    """Keeps ``ProbeStates`` (a world resource) and publishes ``ProbeSchedule`` each
+    ``update``; the module's docstring says what is due when."""
+
+    def __init__(self, world: World) -> None:
+        self.world = world
+        self.probes = world.resources[ProbeStates] = ProbeStates()
+        self._bounds: dict[int, tuple[np.ndarray, np.ndarray]] = {}  # entity -> last world box
+        self._lights: dict[int, tuple[np.ndarray, float]] = {}  # point light -> (position, range) last seen
+        self._looks = LookChanges()
+
+    def update(self) -> ProbeSchedule:
+        """This frame's schedule, published as the world's ``ProbeSchedule``."""
+        world = self.world
+        had_probes = bool(self.probes)
+        looks = self._looks.entities(world)  # asked every frame: it follows what each object samples
+        schedule = world.resources[ProbeSchedule] = ProbeSchedule(gone=self._refresh_probes())
+        if not self.probes:
+            self._bounds.clear()  # nothing to keep boxes for (a world without probes pays nothing)
+            self._lights.clear()
+            return schedule
+        # Where every drawable was when the first probe came (its first capture saw them
+        # there); after that, only what changed is looked at.
+        boxes = self._changed_boxes(looks) if had_probes else self._all_boxes()
+        everything = [f"{kind.__name__} changed" for kind in LIGHTING_KINDS if world.changed(kind)]
+        lights = self._changed_lights() if had_probes else self._all_lights()
+        surfaces = world.resources.get(Surfaces)
+        for state in self.probes.values():
+            reach = lights_reaching(state.position, state.settings.far, [(p, r) for _, p, r in lights])
+            relit = everything + sorted({lights[index][0] for index in reach})
+            self._schedule(state, boxes, relit, surfaces)
+            faces = self._due_faces(state)
+            if faces:
+                schedule.due[state.owner] = ProbeDue(state.owner, faces, state.take(faces), first=not state.captures)
+        return schedule
+
+    @staticmethod
+    def _due_faces(state: ProbeState) -> frozenset[int]:
+        faces = state.pending
+        if state.settings.time_slicing == "one_face_per_frame" and faces and state.captures:
+            faces = {min(faces)}  # the first capture is whole: nothing is shown half-made
+        return frozenset(faces)
+
+    # --- which probes -------------------------------------------------------------------------
+    def _refresh_probes(self) -> list[int]:
+        """Probes found, moved and changed; returns the owners of those gone."""
+        world = self.world
+        found: dict[int, tuple[ReflectionProbe | None, glm.vec3, bool]] = {}
+        for owner, (probe, transform) in world.query(ReflectionProbe, Transform):
+            found[owner] = (probe, glm.vec3(transform.world[3]), False)
+        # Automatic probes: only what samples a probe can have one (a few, not every
+        # drawable: a 10,000-entity world must not pay for them).
+        for owner in probe_samplers(world):
+            if has_own_probe(world, owner) and world.has(owner, Transform):
+                mesh_ref, transform = world.get(owner, MeshRef), world.get(owner, Transform)
+                lo, hi = world_bounds(mesh_ref.mesh, transform.world)
+                found[owner] = (None, glm.vec3(*((lo + hi) / 2.0)), True)
+        gone = [owner for owner in self.probes if owner not in found]
+        for owner in gone:
+            del self.probes[owner]
+        changed = world.changed(ReflectionProbe)
+        for owner, (probe, position, automatic) in found.items():
+            state = self.probes.get(owner)
+            if state is None or state.automatic != automatic:
+                self.probes[owner] = ProbeState(owner, probe or ReflectionProbe(), automatic, position,
+                                                requests_seen=probe.requests if probe is not None else 0)
+                continue
+            if probe is not None:
+                if probe is not state.settings:  # a new component: its requests count from 0
+                    state.settings, state.requests_seen = probe, 0
+                if owner in changed:
+                    if probe.requests != state.requests_seen:
+                        state.requests_seen = probe.requests
+                        state.ask(ALL_FACES, "requested")
+                    else:
+                        state.ask(ALL_FACES, "settings changed")
+            if position != state.position:
+                state.position = position
+                state.ask(ALL_FACES, "probe moved")
+        return gone
+
+    # --- what changed -------------------------------------------------------------------------
+    def _changed_boxes(self, looks: set[int]) -> ChangedBoxes:
+        """The old and new world boxes of every entity that moved, came, went or changed its look."""
+        world = self.world
+        frame = world.frame
+        removed = frame.removed | world.deleted()
+        rows = []
+        for entity in frame.moved | frame.added | removed | looks:
+            what = ("removed" if entity in removed else "added" if entity in frame.added
+                    else "moved" if entity in frame.moved else "look changed")
+            old = self._bounds.pop(entity, None)
+            if old is not None:
+                rows.append((entity, what, *old))
+            mesh_ref = world.try_get(entity, MeshRef) if world.exists(entity) else None
+            transform = world.try_get(entity, Transform) if mesh_ref is not None else None
+            if transform is not None:
+                new = self._bounds[entity] = world_bounds(mesh_ref.mesh, transform.world)
+                rows.append((entity, what, *new))
+        return ChangedBoxes(rows)
+
+    def _all_boxes(self) -> ChangedBoxes:
+        self._bounds = {entity: world_bounds(mesh_ref.mesh, transform.world)
+                        for entity, (mesh_ref, transform) in self.world.query(MeshRef, Transform)}
+        return ChangedBoxes([])  # every probe is new: a first capture takes every face anyway
+
+    def _changed_lights(self) -> list[tuple[str, np.ndarray, float]]:
+        """(reason, position, range) where each point light that changed, came, went or moved
+        this frame was and is."""
+        world = self.world
+        frame = world.frame
+        entities = (frame.moved | frame.added | frame.removed | world.deleted() | world.changed(PointLight)
+                    | world.changed(Transform))
+        rows = []
+        for entity in entities:
+            old = self._lights.pop(entity, None)
+            new = self._light_sphere(entity)
+            if old is None and new is None:
+                continue
+            what = "came" if old is None else "went" if new is None else "moved" if entity in frame.moved \
+                else "changed"
+            for sphere in (old, new):
+                if sphere is not None:
+                    rows.append((f"light {entity} {what}", *sphere))
+            if new is not None:
+                self._lights[entity] = new
+        return rows
+
+    def _all_lights(self) -> list[tuple[str, np.ndarray, float]]:
+        self._lights = {entity: sphere for entity, _ in self.world.query_one(PointLight)
+                        if (sphere := self._light_sphere(entity)) is not None}
+        return []  # a first capture takes every face anyway
+
+    def _light_sphere(self, entity: int) -> tuple[np.ndarray, float] | None:
+        world = self.world
+        if not world.exists(entity):
+            return None
+        light, transform = world.try_get(entity, PointLight), world.try_get(entity, Transform)
+        if light is None or transform is None:
+            return None
+        return np.array(transform.world[3].xyz, np.float64), float(light.range)
+
+    # --- what is due --------------------------------------------------------------------------
+    def _schedule(self, state: ProbeState, boxes: ChangedBoxes, relit: list[str], surfaces: Surfaces | None) -> None:
+        settings = state.settings
+        state.frames += 1
+        mode = settings.refresh
+        if mode == "every_frame":
+            state.ask(ALL_FACES, "every_frame")
+        elif mode == "every_n" and state.frames % settings.every_n == 0:
+            state.ask(ALL_FACES, "every_n")
+        elif mode == "on_change":
+            if relit:
+                for reason in relit:
+                    state.ask(ALL_FACES, reason)
+                return
+            if state.pending == ALL_FACES:
+                return  # every face waits already
+            own = boxes.entity != state.owner  # its own object is in none of its faces
+            if not own.any():
+                return
+            lo, hi, entity, what = boxes.lo[own], boxes.hi[own], boxes.entity[own], \
+                [w for w, keep in zip(boxes.what, own, strict=True) if keep]
+            _ask_named(state, face_hits(state.position, settings.far, lo, hi), entity,
+                       lambda row: f"{what[row]}: entity {entity[row]}")
+            if settings.depth > 0 and surfaces is not None and (surfaces.mirrors or surfaces.portals):
+                self._through_surfaces(state, lo, hi, entity, what, surfaces)
+
+    @staticmethod
+    def _through_surfaces(state: ProbeState, lo: np.ndarray, hi: np.ndarray, entity: np.ndarray, what: list[str],
+                          surfaces: Surfaces) -> None:
+        """The faces that may see a change through a mirror or portal (a face's view tree
+        draws what its mirrors show): where the changed boxes' images lie
+        (``probe_rules.images_through_surfaces``), or, past the images' limit, every face
+        that sees a surface."""
+        settings = state.settings
+        shown = [*surfaces.mirrors.values(), *surfaces.portals.values()]
+        images = images_through_surfaces(state.position, lo, hi, shown, settings.depth, settings.far)
+        if images is None:
+            corners = np.concatenate([s.corners[:, :3] for s in shown])
+            state.ask(faces_touched(state.position, settings.far, corners.min(axis=0), corners.max(axis=0)),
+                      "changes seen in mirrors and portals (too many images to follow)")
+            return
+        image_lo, image_hi, of, via = images
+        if not len(image_lo):
+            return
+
+        def label(row: int) -> str:
+            surface = int(via[row])
+            seen = f"in mirror {surface}" if surface in surfaces.mirrors else f"through portal {surface}"
+            return f"{what[of[row]]}: entity {entity[of[row]]}, seen {seen}"
+
+        _ask_named(state, face_hits(state.position, settings.far, image_lo, image_hi), entity[of] * (1 << 32) + via,
+                   label)
+
+
+def _ask_named(state: ProbeState, hits: np.ndarray, keys: np.ndarray, label) -> None:
+    """Ask for the faces ``hits`` (row, face) holds, each row's for the reason ``label(row)``:
+    rows of one change share a key (``keys``, per row) and a reason.  Past ``MAX_NAMED``
+    keys, the rest together for one reason that counts them."""
+    rows = np.flatnonzero(hits.any(axis=1))
+    if not len(rows):
+        return
+    named = np.isin(keys[rows], np.unique(keys[rows])[:MAX_NAMED])
+    for row in rows[named]:
+        state.ask(np.flatnonzero(hits[row]).tolist(), label(int(row)))
+    rest = rows[~named]
+    if len(rest):
+        state.ask(np.flatnonzero(hits[rest].any(axis=0)).tolist(), f"{len(np.unique(keys[rest]))} more changes")
