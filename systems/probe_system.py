@@ -10,7 +10,8 @@ Three parts, each with one job:
     and counts them in its state;
   - the path chooser (``engine.render.probes.ProbePaths``): ``six_pass`` or ``layered``,
     only a path the path self-check trusts; ``auto`` (the default) times both on the first
-    full capture either could draw, keeps the faster for the rest of the run and says which
+    full capture either could draw with GL timer queries, read after that frame, never with
+    ``ctx.finish()`` in a stage, keeps the faster for the rest of the run and says which
     (``chosen_path``, ``timings``, ``RenderStats.probe_path``, a log line).
 
 When a capture is drawn.  A probe's first capture is drawn in the probes stage, before the
@@ -100,6 +101,7 @@ class ProbeSystem(esper.Processor):
 
     def process(self, dt: float) -> None:
         probes = self.renderer.probes
+        probes.paths.settle()  # the timed captures of an earlier frame, if any wait to be read
         schedule = self.scheduler.update()
         for owner in schedule.gone:
             probes.drop(owner)

@@ -724,11 +724,18 @@ def test_faces_drawn_straight_into_the_cube_equal_faces_drawn_and_copied(scene):
         np.testing.assert_array_equal(direct[face], copied[face], err_msg=f"face {face}")
 
 
-def test_auto_times_both_paths_once_and_keeps_the_faster(scene):
+def test_auto_times_both_paths_once_and_keeps_the_faster(scene, monkeypatch):
     """On the first full capture ``auto`` draws each path once untimed, then times each
-    AUTO_TIMED_CAPTURES times and keeps the faster median; later probes and frames use it."""
+    AUTO_TIMED_CAPTURES times in GL timer queries, and keeps the faster median; later probes
+    and frames use it.  No stage calls ``ctx.finish()``: the queries are read when the next
+    frame's probes stage starts (until then a capture takes six_pass), and the frame stats
+    say the chosen path from then on."""
+    import moderngl
+
     from engine.render.probes import AUTO_TIMED_CAPTURES
 
+    finished = []
+    monkeypatch.setattr(moderngl.Context, "finish", lambda self: finished.append(True))
     ents = {}
 
     def build(world):
@@ -739,13 +746,24 @@ def test_auto_times_both_paths_once_and_keeps_the_faster(scene):
     runner = scene(build, (64, 48))
     runner.frame()
     stage = probe_stage(runner)
+    paths = runner.engine.renderer.probes.paths
+    # both paths (once untimed, then timed) for the first probe; six_pass for the second,
+    # drawn while the timings wait to be read
+    assert runner.stats.probe_faces == 2 * 6 * (1 + AUTO_TIMED_CAPTURES) + 6
+    assert paths._chosen is None and runner.stats.probe_path == "six_pass"
+    runner.frame()
+    assert paths._chosen is not None  # read in the probes stage, not by the assertions below
     assert set(stage.timings) == {"six_pass", "layered"} and stage.chosen_path == min(stage.timings,
                                                                                        key=stage.timings.get)
-    assert runner.stats.probe_path == stage.chosen_path
-    # both paths (once untimed, then timed) for the first probe, the chosen one for the second
-    assert runner.stats.probe_faces == 2 * 6 * (1 + AUTO_TIMED_CAPTURES) + 6
-    runner.frame()
+    assert all(ms > 0 for ms in stage.timings.values())
     assert runner.stats.probe_path == stage.chosen_path and runner.stats.probe_faces == 0  # still: no capture
+    drawn = []
+    draw = paths.draw
+    monkeypatch.setattr(paths, "draw", lambda draws, whole, size: drawn.append((whole, draw(draws, whole, size))))
+    runner.world.get(ents["other"], Transform).position = (-2.0, 0.5, -1.0)  # its probe moves: a whole capture
+    runner.frame()
+    assert (True, stage.chosen_path) in drawn and all(path == "six_pass" for whole, path in drawn if not whole)
+    assert not finished
 
 
 def test_a_probes_own_object_never_appears_in_its_capture(scene):
