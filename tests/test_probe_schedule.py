@@ -4,6 +4,7 @@ look defined once and used by the extract stage and the scheduler alike."""
 from __future__ import annotations
 
 import ast
+import functools
 import re
 from pathlib import Path
 
@@ -169,7 +170,8 @@ RULES = {
 }
 
 
-def top_level_names(path: Path) -> set[str]:
+@functools.cache
+def top_level_names(path: Path) -> frozenset[str]:
     names = set()
     for node in ast.parse(path.read_text(encoding="utf-8")).body:
         if isinstance(node, (ast.FunctionDef, ast.ClassDef)):
@@ -178,7 +180,7 @@ def top_level_names(path: Path) -> set[str]:
             names.update(t.id for t in node.targets if isinstance(t, ast.Name))
         elif isinstance(node, ast.AnnAssign) and isinstance(node.target, ast.Name):
             names.add(node.target.id)
-    return names
+    return frozenset(names)
 
 
 @pytest.mark.parametrize("rule", sorted(RULES))

@@ -61,20 +61,24 @@ def is_flat(mesh: Mesh) -> bool:
 SAMPLER_KINDS = (Reflective, Refractive)  # an entity that samples a probe has one of these
 
 
+def _samples(reflective: Reflective | None, refractive: bool) -> bool:
+    """The rule: cube-reflective, or refractive (glass refracts what its probe saw)."""
+    return (reflective is not None and reflective.mode == "cube") or refractive
+
+
 def samples_a_probe(world: World, entity: int) -> bool:
     """Cube-reflective or refractive: what looks up a probe when one serves it."""
-    reflective = world.try_get(entity, Reflective)
-    return (reflective is not None and reflective.mode == "cube") or world.has(entity, Refractive)
+    return _samples(world.try_get(entity, Reflective), world.has(entity, Refractive))
 
 
 def probe_samplers(world: World) -> set[int]:
-    """Every entity that samples a probe (``samples_a_probe``), found through the few that
-    have a component of ``SAMPLER_KINDS``: a 10,000-entity world does not pay for a look at
-    each."""
-    found: set[int] = set()
-    for kind in SAMPLER_KINDS:
-        found.update(entity for entity, _ in world.query_one(kind))
-    return {entity for entity in found if samples_a_probe(world, entity)}
+    """Every entity that samples a probe (the rule of ``samples_a_probe``), found through the
+    few that have a component of ``SAMPLER_KINDS``: a 10,000-entity world does not pay for a
+    look at each."""
+    found: dict[int, list] = {entity: [reflective, False] for entity, reflective in world.query_one(Reflective)}
+    for entity, _ in world.query_one(Refractive):
+        found.setdefault(entity, [None, False])[1] = True
+    return {entity for entity, (reflective, refractive) in found.items() if _samples(reflective, refractive)}
 
 
 def has_own_probe(world: World, entity: int) -> bool:
@@ -164,9 +168,17 @@ class LookChanges:
         probes_changed = (owners != self._probe_owners or bool(world.changed(ReflectionProbe))
                           or bool(owners & frame.moved))
         self._probe_owners = owners
-        known = probe_samplers(world) | self._sampled.keys()
         # Which probe an object samples depends on its components, its position and the probes.
-        candidates = known if probes_changed else (looks | frame.moved | frame.added) & known
+        if probes_changed:
+            candidates = probe_samplers(world) | self._sampled.keys()
+        else:
+            changed = looks | frame.moved | frame.added
+            if not changed:
+                return set()  # a still frame costs two queries
+            kinds: set[int] = set(self._sampled)
+            for kind in SAMPLER_KINDS:
+                kinds.update(entity for entity, _ in world.query_one(kind))
+            candidates = changed & kinds
         resampled = set()
         for entity in candidates:
             probe = probe_for(world, entity) if world.exists(entity) else 0
