@@ -140,7 +140,8 @@ def test_time_sliced_faces_are_due_one_a_frame_with_their_reasons(gl_free_world)
 def test_a_cube_reflective_tile_that_moves_into_another_probes_box_samples_it(gl_free_world):
     """Which probe an object samples follows its position: ``LookChanges`` (the extract
     stage's and the scheduler's) has it when it moves from one probe's influence box into
-    another's, and not when it moves inside one."""
+    another's, when a box shrinks away from it or moves onto it, and not when it moves
+    inside one."""
     world = gl_free_world
     a = world.spawn(Transform(position=(-5, 0, 0)), ReflectionProbe(influence=(4, 4, 4)))
     b = world.spawn(Transform(position=(5, 0, 0)), ReflectionProbe(influence=(4, 4, 4)))
@@ -159,6 +160,8 @@ def test_a_cube_reflective_tile_that_moves_into_another_probes_box_samples_it(gl
     world.get(b, ReflectionProbe).influence = (1, 1, 1)
     world.get(tile, Transform).position = glm.vec3(6, 0, 0)  # out of b's smaller box: the sky
     assert tile in step() and probe_for(world, tile) == 0
+    world.get(b, Transform).position = glm.vec3(6, 0, 0)  # the probe's box comes to the tile
+    assert tile in step() and probe_for(world, tile) == b
 
 
 # --- one owner for each probe rule -------------------------------------------------------------

@@ -148,7 +148,7 @@ class LookChanges:
 
     def __init__(self) -> None:
         self._sampled: dict[int, int] = {}  # entity -> the probe it sampled (not 0), when last asked
-        self._probe_owners: set[int] = set()
+        self._influences: dict[int, tuple | None] = {}  # probe owner -> its influence box's size, when last asked
 
     def entities(self, world: World) -> set[int]:
         """This frame's entities whose look may have changed (each call follows on from the
@@ -164,17 +164,19 @@ class LookChanges:
         frame = world.frame
         for entity in world.deleted() & self._sampled.keys():
             del self._sampled[entity]
-        owners = {entity for entity, _ in world.query_one(ReflectionProbe)}
-        probes_changed = (owners != self._probe_owners or bool(world.changed(ReflectionProbe))
-                          or bool(owners & frame.moved))
-        self._probe_owners = owners
-        # Which probe an object samples depends on its components, its position and the probes.
+        # Which probe an object samples depends on its components, its position and the probes:
+        # which entities own one, and where the influence boxes are.
+        influences = {entity: None if probe.influence is None else tuple(probe.influence)
+                      for entity, probe in world.query_one(ReflectionProbe)}
+        probes_changed = influences != self._influences or any(
+            influences[entity] is not None for entity in frame.moved & influences.keys())
+        self._influences = influences
         if probes_changed:
             candidates = probe_samplers(world) | self._sampled.keys()
         else:
             changed = looks | frame.moved | frame.added
             if not changed:
-                return set()  # a still frame costs two queries
+                return set()  # a still frame costs a look at each probe
             kinds: set[int] = set(self._sampled)
             for kind in SAMPLER_KINDS:
                 kinds.update(entity for entity, _ in world.query_one(kind))
