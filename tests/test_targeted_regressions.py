@@ -103,7 +103,7 @@ def test_time_slicing_captures_a_waiting_face_each_frame_and_every_face_that_saw
     recaptured, one a frame.  Which face a frame drew is read from the cube itself: every
     face is set to a sentinel before the frame, and the face drawn is the one that lost it.
     Each frame's face must be one that was waiting (it leaves the pending set that frame).
-    Fails when ProbeSystem._capture_due draws {(f + 1) % 6} while retiring face f."""
+    Fails when capture_due (systems/probe_system.py) draws {(f + 1) % 6} while retiring face f."""
     ents = {}
 
     def build(world):
