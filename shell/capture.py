@@ -96,8 +96,8 @@ def export_scene(world: World, path: str | Path, camera_entity: int, size: tuple
 def _probes(world: World) -> dict[str, dict]:
     """Each reflection probe (by the entity owning it: a ReflectionProbe's, or an object's own
     automatic one) with where and how it captures, and which probe each entity samples."""
-    from engine.render.probes import ProbeStates
     from engine.rules.probe_rules import probe_for
+    from engine.rules.probe_schedule import ProbeStates
 
     states = world.resources.get(ProbeStates, {})
     probes = {}

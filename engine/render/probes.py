@@ -38,7 +38,6 @@ from engine.render.targets import LevelStack, release_framebuffer
 from engine.render.view_tree import SurfaceTable, TreeSettings, ViewTree
 from engine.render.views import View
 from engine.rules.probe_rules import projection_box
-from engine.rules.probe_schedule import ProbeStates  # noqa: F401  (the probe states' resource, read here by tools)
 
 LOG = logging.getLogger("speculum")
 PROBE_PATHS = ("auto", "six_pass", "layered")
