@@ -36,7 +36,7 @@ from pyglm import glm
 
 import components as _components
 from components import ComponentValueError, look_rotation, yaw_pitch_rotation
-from engine.assets.mesh import Mesh, box, flat_plane, load_model, plane, quad, sphere
+from engine.assets.mesh import Mesh, box, load_model, plane, quad, sphere
 from engine.assets.texture_data import (
     MAX_TEXTURE_SIDE,
     TextureData,
@@ -51,7 +51,7 @@ from engine.assets.texture_data import (
 from engine.assets.values import VALUE_KINDS, json_value
 from engine.core.errors import AssetError, SpeculumError
 from engine.core.game import Game
-from engine.core.world import World
+from engine.core.world import World, check_components
 
 try:
     import tomllib
@@ -608,8 +608,8 @@ def _entity(path: Path, assets: _Where, index: int, name: str, table: dict[str, 
 
 def _check_mirror(path: Path, index: int, name: str, parts: list[tuple[type, dict[str, Any]]],
                   lines: dict[tuple, int]) -> None:
-    """A Mirror needs a MeshRef and a Transform, and a flat mesh unless it gives plane_normal
-    (the SurfaceSystem's rules, checked here so the message has the file, line and entity)."""
+    """A Mirror needs a MeshRef and a Transform (what the surfaces stage draws it from), and a
+    mesh the mirror rule accepts: checked here so the message has the file, line and entity."""
     fields = {cls.__name__: decoded for cls, decoded in parts}
     if "Mirror" not in fields:
         return
@@ -618,10 +618,12 @@ def _check_mirror(path: Path, index: int, name: str, parts: list[tuple[type, dic
     if missing:
         raise LevelError(path, f"a Mirror needs a MeshRef and a Transform (it has no {' and no '.join(missing)})",
                          line, name, "Mirror")
-    mesh = fields["MeshRef"].get("mesh")
-    if isinstance(mesh, Mesh) and fields["Mirror"].get("plane_normal") is None and flat_plane(mesh) is None:
-        raise LevelError(path, f"a Mirror on mesh {mesh.name!r}, which is not flat: give it a flat mesh (a quad, a "
-                               "plane) or Mirror.plane_normal", line, name, "Mirror")
+    # The mirror rule itself (engine.rules.mirror_rules, registered with every world), run on
+    # the entity's components before any world holds them.
+    try:
+        check_components(cls(**decoded) for cls, decoded in parts if cls.__name__ in ("Mirror", "MeshRef", "Material"))
+    except ComponentValueError as exc:
+        raise LevelError(path, str(exc).replace("Mirror on entity 0: its ", ""), line, name, "Mirror") from None
 
 
 def _decode(cls_name: str, field: str, value: Any, where: _Where) -> Any:
