@@ -2,7 +2,6 @@
 the pair's relative transform) and the things that travel through them."""
 from __future__ import annotations
 
-import warnings
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -23,10 +22,11 @@ class Portal(TrackedComponent):
     The rectangle is ``size`` (width, height) in the entity's local XY plane, facing local
     +Z; looking into its front shows what lies in front of the partner.  ``closed_color``
     is what it shows when it has no working partner (deleted, disabled) or past the
-    recursion limit.  A ``partner`` that names no entity when the portal joins a world, or
-    when it is set, is a ``PortalPartnerWarning`` (once a portal and partner id): such a
-    portal stays closed.  A partner deleted later closes it without a word (deleting one
-    of a pair is how a pair is closed).
+    recursion limit.  A ``partner`` that names an entity never made in its world is a
+    ``PortalPartnerWarning`` from the frame's rules stage (once a portal and partner id:
+    such a portal stays closed); a partner spawned after the portal (a pair spawned one
+    after the other) is no mistake, and a partner deleted later closes it without a word
+    (deleting one of a pair is how a pair is closed).
     """
 
     SHAREABLE = False  # one entity's own state: see components.tracking
@@ -41,19 +41,6 @@ class Portal(TrackedComponent):
         esper's current ones then)."""
         if self.partner == entity:
             raise ComponentValueError(f"Portal on entity {entity} is paired with itself")
-        if self.partner is not None:
-            import esper
-
-            if not esper.entity_exists(self.partner):
-                self._say_no_partner(entity, self.partner, stacklevel=5)  # the caller of World.spawn
-
-    def _say_no_partner(self, entity: int, partner: int, stacklevel: int = 4) -> None:
-        if getattr(self, "_said_partner", None) == partner:
-            return
-        self._said_partner = partner
-        warnings.warn(PortalPartnerWarning(
-            f"Portal on entity {entity}: partner {partner} names no entity in this world, so the portal stays "
-            "closed (it shows closed_color) until partner names a portal"), stacklevel=stacklevel)
 
     def _validate(self, name: str, value: Any) -> Any:
         if name == "partner" and value is not None and value == self._entity and self._sink is not None:
@@ -61,9 +48,6 @@ class Portal(TrackedComponent):
         if name == "partner" and value is not None:
             if not isinstance(value, int) or isinstance(value, bool) or value <= 0:
                 raise ComponentValueError(f"Portal.partner must be an entity id, got {value!r}")
-            world = getattr(self, "_world_ref", None)
-            if world is not None and self._sink is not None and not world.exists(value):
-                self._say_no_partner(self._entity, value)
         if name == "size":
             try:
                 w, h = (finite(self, name, v, positive=True) for v in value)

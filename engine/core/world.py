@@ -87,6 +87,7 @@ class World:
         self.frame_index = 0
         self._changed: dict[type, set[int]] = defaultdict(set)
         self._deleted: set[int] = set()
+        self._made = 0  # the highest entity id spawned (ids only grow)
         self._systems: list[esper.Processor] = []
         self._closed = False
         self._use()
@@ -129,6 +130,7 @@ class World:
         """
         self._use()
         entity = esper.create_entity()
+        self._made = max(self._made, entity)
         try:
             for component in components:
                 self.add_component(entity, component)
@@ -242,6 +244,11 @@ class World:
             else:
                 object.__setattr__(component, "_sink", None)
                 object.__setattr__(component, "_world_ref", None)
+
+    def ever_made(self, entity: int) -> bool:
+        """Whether ``entity`` is an id this world has made (it may be deleted since): an id
+        past them names nothing, now or before (a typo, another world's id)."""
+        return 0 < entity <= self._made
 
     def exists(self, entity: int) -> bool:
         self._use()
