@@ -21,7 +21,7 @@ A tiny game::
 from __future__ import annotations
 
 import engine.rules.mirror_rules  # noqa: F401  (registers the mirror-mesh invariant with every world)
-from engine.core.game import Game, spawn_camera
+from engine.core.game import Game, GameSystem, spawn_camera
 from engine.core.world import World
 
-__all__ = ["Game", "World", "spawn_camera"]
+__all__ = ["Game", "GameSystem", "World", "spawn_camera"]
