@@ -22,6 +22,7 @@ from engine.core.errors import GLPassError
 from engine.core.frame_io import Input, Output
 from engine.core.game import Game, GameSystem, schedule_order
 from engine.core.world import FrameEvents, World
+from engine.render.bindings import invalidate
 from engine.render.gl_context import prepare_context
 from engine.render.raw_gl import make_current
 from engine.render.renderer import Renderer
@@ -169,6 +170,9 @@ class Engine:
         else:
             self.world.resources[Output] = output
         make_current(self.ctx)
+        # GL state set since the last frame by code outside the engine (the debug overlay, a
+        # tool) is unknown to the pass-state cache: every pass state is set afresh once.
+        invalidate(self.ctx)
         pending = self.ctx.error
         if pending != "GL_NO_ERROR":
             # Not this engine's: left by code that used the context since the last frame.

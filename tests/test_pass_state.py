@@ -1,5 +1,8 @@
 """Each pass sets the GL state it needs when it starts: run after any other pass, or after
-any state at all, it draws the same pixels.
+any state at all, it draws the same pixels.  The state is cached (``bindings.apply_pass_state``
+sets only what changed): state set outside the engine is followed by ``invalidate``, except
+the viewport, scissor and bound framebuffer set through moderngl, which the cache reads from
+moderngl and so needs no invalidate (the ``rects_only`` run scrambles only those).
 
 Checked by breaking ``apply_pass_state``: leaving flags enabled (``enable`` instead of
 ``enable_only``) or the depth function unset fails here.  Two breakages pass on llvmpipe
@@ -12,8 +15,10 @@ import random
 
 import moderngl
 import numpy as np
+import pytest
 
 from engine.core.frame_io import Output
+from engine.render.bindings import invalidate
 from engine.render.targets import CaptureTarget
 from games.hall_of_mirrors.level import HallOfMirrors
 from tests.support import SceneRunner
@@ -35,10 +40,11 @@ def frames(runner: SceneRunner) -> list[tuple[np.ndarray, np.ndarray]]:
     return shots
 
 
-def scrambled(ctx, rng: random.Random, other: SceneRunner, scratch: CaptureTarget):
+def scrambled(ctx, rng: random.Random, other: SceneRunner, scratch: CaptureTarget, rects_only: bool = False):
     """Before each pass: another engine's pass (its scene pass or its present), then GL
-    state set at random (flags, depth and blend functions, winding, clip distances,
-    scissor, viewport, bound framebuffer)."""
+    state set at random (flags, depth and blend functions, winding, clip distances, then
+    ``invalidate``; or, ``rects_only``, none of these), then scissor, viewport and bound
+    framebuffer through moderngl."""
     def before():
         if rng.random() < 0.5:
             if other.engine.main_view is not None:
@@ -46,17 +52,9 @@ def scrambled(ctx, rng: random.Random, other: SceneRunner, scratch: CaptureTarge
                                                       other.engine.renderer.targets)
         else:
             other.engine.renderer.present(scratch.framebuffer, scratch.size)
-        flags = moderngl.NOTHING
-        for flag in (moderngl.DEPTH_TEST, moderngl.CULL_FACE, moderngl.BLEND):
-            if rng.random() < 0.5:
-                flags |= flag
-        ctx.enable_only(flags)
-        ctx.depth_func = rng.choice(["<", "<=", ">", "1", "0"])
-        ctx.blend_func = rng.choice([moderngl.ADDITIVE_BLENDING, moderngl.PREMULTIPLIED_ALPHA,
-                                     (moderngl.ONE, moderngl.ZERO)])
-        ctx.front_face = rng.choice(["cw", "ccw"])
-        for index in range(6):
-            (ctx.enable_direct if rng.random() < 0.5 else ctx.disable_direct)(0x3000 + index)
+        if not rects_only:
+            scramble_fixed_function(ctx, rng)
+            invalidate(ctx)
         ctx.scissor = (rng.randrange(50), rng.randrange(30), rng.randrange(1, 60), rng.randrange(1, 40))
         ctx.viewport = (rng.randrange(20), rng.randrange(20), rng.randrange(1, 100), rng.randrange(1, 60))
         scratch.framebuffer.use()
@@ -71,7 +69,23 @@ def scrambled(ctx, rng: random.Random, other: SceneRunner, scratch: CaptureTarge
     return wrap
 
 
-def test_passes_draw_the_same_pixels_whatever_ran_before_them(ctx):
+def scramble_fixed_function(ctx, rng: random.Random) -> None:
+    """Flags, depth and blend functions, winding and clip distances set at random."""
+    flags = moderngl.NOTHING
+    for flag in (moderngl.DEPTH_TEST, moderngl.CULL_FACE, moderngl.BLEND):
+        if rng.random() < 0.5:
+            flags |= flag
+    ctx.enable_only(flags)
+    ctx.depth_func = rng.choice(["<", "<=", ">", "1", "0"])
+    ctx.blend_func = rng.choice([moderngl.ADDITIVE_BLENDING, moderngl.PREMULTIPLIED_ALPHA,
+                                 (moderngl.ONE, moderngl.ZERO)])
+    ctx.front_face = rng.choice(["cw", "ccw"])
+    for index in range(6):
+        (ctx.enable_direct if rng.random() < 0.5 else ctx.disable_direct)(0x3000 + index)
+
+
+@pytest.mark.parametrize("rects_only", [False, True], ids=["all_state", "rects_only"])
+def test_passes_draw_the_same_pixels_whatever_ran_before_them(ctx, rects_only):
     plain = hall(ctx)
     try:
         expected = frames(plain)
@@ -83,7 +97,7 @@ def test_passes_draw_the_same_pixels_whatever_ran_before_them(ctx):
     try:
         other.engine.place_camera(*CAMERAS[1])
         other.engine.frame(1 / 60, Output(other.capture.framebuffer, SIZE))
-        wrap = scrambled(ctx, random.Random(7), other, scratch)
+        wrap = scrambled(ctx, random.Random(7), other, scratch, rects_only)
         renderer = shuffled.engine.renderer
         passes = shuffled.engine.reflection_system.tree.passes
         for owner, name in ((renderer.scene_pass, "draw"), (passes, "prepare_level"), (passes, "composite_level"),

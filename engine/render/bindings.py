@@ -13,6 +13,25 @@ depth test and function, face culling and winding, blending, which clip distance
 the scissor and the viewport.  Each pass applies its whole state when it starts
 (``apply_pass_state``), so no pass relies on what the one before left behind and passes
 can run in any order (tests/test_pass_state.py renders them shuffled).
+
+Only what changed is set: ``apply_pass_state`` remembers, per context, the fixed-function
+state it last set (flags, depth and blend functions, winding, clip distances) and skips a
+moderngl setter whose value is already in place (on a GPU driver each setter is a call of
+several microseconds, ``depth_func`` about 15).  The viewport and scissor are compared with
+moderngl's own record for the bound framebuffer (``ctx.viewport``, ``ctx.scissor``: moderngl
+keeps them per framebuffer and ``Framebuffer.use`` sets them again), so switching
+framebuffers, or anyone setting them with moderngl's ``ctx.viewport``/``ctx.scissor``
+(as passes do per view or claim), needs nothing more.  Within a pass, a winding changed per
+view goes through ``set_front_face`` so the record stays true.
+
+**``invalidate(ctx)``** must be called after any other GL state is set other than through
+these functions: moderngl's ``enable_only``/``enable``/``depth_func``/``blend_func``/
+``front_face``/``enable_direct`` setters, or raw GL (``glViewport``, ``glDisable(GL_SCISSOR_TEST)``...).
+The next ``apply_pass_state`` then sets everything.  Where it is called: raw GL targets
+(engine/render/raw_gl.py) on binding, and ``Engine.frame`` (shell/app.py) at the start of
+every frame, which covers the debug overlay (shell/overlay.py draws after a frame, with
+moderngl setters of its own) and any other code using the context between frames.  Code
+that sets state in the middle of a frame (a pass of a game's own) calls it itself.
 """
 from __future__ import annotations
 
@@ -80,9 +99,151 @@ class PassState:
     blend: tuple[int, ...] | None = None
     clips: frozenset[int] = NO_CLIPS
 
+    def __post_init__(self) -> None:
+        # The state as the cache compares it, less the winding (set per view within a pass):
+        # one small number for each distinct (flags, depth function, blend, clips).
+        flags = moderngl.NOTHING
+        if self.depth_func is not None:
+            flags |= moderngl.DEPTH_TEST
+        if self.cull:
+            flags |= moderngl.CULL_FACE
+        if self.blend is not None:
+            flags |= moderngl.BLEND
+        key = (flags, self.depth_func, self.blend, self.clips)
+        object.__setattr__(self, "_fixed", _FIXED_IDS.setdefault(key, len(_FIXED_IDS)))
+        if len(_FIXED_STATES) < len(_FIXED_IDS):
+            _FIXED_STATES.append(key)
+
+
+_FIXED_IDS: dict[tuple, int] = {}   # (flags, depth_func, blend, clips) -> its number
+_FIXED_STATES: list[tuple] = []     # by number
+_UNKNOWN = -1
+# (number known to be set or _UNKNOWN, number wanted) -> the setter calls between them:
+# (Context attribute, value, whether it is a method to call rather than a property to set).
+_TRANSITIONS: dict[tuple[int, int], tuple[tuple[str, object, bool], ...]] = {}
+
+
+def _transition(known: int, wanted: int) -> tuple[tuple[str, object, bool], ...]:
+    flags, depth_func, blend, clips = _FIXED_STATES[wanted]
+    if known == _UNKNOWN:
+        old_flags, old_depth, old_blend, old_clips = None, None, None, None
+    else:
+        old_flags, old_depth, old_blend, old_clips = _FIXED_STATES[known]
+    actions: list[tuple[str, object, bool]] = []
+    # A depth or blend function left from before is kept while its test is off (set again
+    # only when a state that tests depth or blends wants another).
+    if depth_func is not None and depth_func != old_depth:
+        actions.append(("depth_func", depth_func, False))
+    elif depth_func is None and old_depth is not None:
+        depth_func = old_depth
+    if blend is not None and blend != old_blend:
+        actions.append(("blend_func", blend, False))
+    elif blend is None and old_blend is not None:
+        blend = old_blend
+    if flags != old_flags:
+        actions.append(("enable_only", flags, True))
+    for index in range(CLIP_DISTANCE_COUNT):
+        on = index in clips
+        if old_clips is None or on != (index in old_clips):
+            actions.append(("enable_direct" if on else "disable_direct", _GL_CLIP_DISTANCE0 + index, True))
+    # What is then known to be set: the state, with the functions kept from before.
+    after = (flags, depth_func, blend, clips)
+    if after != _FIXED_STATES[wanted]:
+        _FIXED_IDS.setdefault(after, len(_FIXED_IDS))
+        if len(_FIXED_STATES) < len(_FIXED_IDS):
+            _FIXED_STATES.append(after)
+    return tuple(actions), _FIXED_IDS[after]
+
+
+class _StateCache:
+    """What ``apply_pass_state`` last set on one context."""
+
+    __slots__ = ("fixed", "front_face", "rects_known")
+
+    def __init__(self) -> None:
+        self.fixed = _UNKNOWN        # the number of the (flags, functions, clips) set
+        self.front_face: str | None = None
+        self.rects_known = False     # False: set the viewport and scissor whatever moderngl says
+
+
+# False: every apply sets every piece of state, as before the cache (kept for the
+# before/after measurement and as a fallback: ``bindings.CACHE_STATE = False``).
+CACHE_STATE = True
+
+
+def _cache(ctx: moderngl.Context) -> _StateCache:
+    try:
+        return ctx._speculum_pass_state
+    except AttributeError:
+        cache = ctx._speculum_pass_state = _StateCache()
+        return cache
+
+
+def invalidate(ctx: moderngl.Context) -> None:
+    """Forget what the cache knows of ``ctx``'s state: the next ``apply_pass_state`` sets
+    everything.  Call after GL state was set outside these functions (raw GL, the debug
+    overlay, a test scrambling state)."""
+    cache = getattr(ctx, "_speculum_pass_state", None)
+    if cache is not None:
+        cache.fixed = _UNKNOWN
+        cache.front_face = None
+        cache.rects_known = False
+
+
+def set_front_face(ctx: moderngl.Context, front_face: str) -> None:
+    """The winding, within a pass (a view's), set only if it differs."""
+    cache = _cache(ctx)
+    if cache.front_face != front_face or not CACHE_STATE:
+        ctx.front_face = cache.front_face = front_face
+
+
+def _scissor_is(ctx: moderngl.Context, bound, scissor: tuple[int, int, int, int] | None) -> bool:
+    """Whether moderngl's scissor of the ``bound`` framebuffer already clips as ``scissor``
+    does (None: nothing; a rectangle covering the whole framebuffer clips nothing either)."""
+    if scissor is not None:
+        return bound.scissor == scissor
+    fbo = ctx.fbo
+    return fbo is not None and fbo.mglo is bound and bound.scissor == (0, 0, *fbo.size)
+
 
 def apply_pass_state(ctx: moderngl.Context, state: PassState, viewport: tuple[int, int, int, int],
                      scissor: tuple[int, int, int, int] | None = None) -> None:
+    """Make ``state`` (and the viewport and scissor) the context's, setting only what differs
+    from what is known to be set (everything after ``invalidate``)."""
+    if not CACHE_STATE:
+        _apply_all(ctx, state, viewport, scissor)
+        return
+    try:
+        cache = ctx._speculum_pass_state
+    except AttributeError:
+        cache = _cache(ctx)
+    known = cache.fixed
+    if known != state._fixed:
+        step = _TRANSITIONS.get((known, state._fixed))
+        if step is None:
+            step = _TRANSITIONS[known, state._fixed] = _transition(known, state._fixed)
+        actions, cache.fixed = step
+        for name, value, call in actions:
+            if call:
+                getattr(ctx, name)(value)
+            else:
+                setattr(ctx, name, value)
+    if cache.front_face != state.front_face:
+        ctx.front_face = cache.front_face = state.front_face
+    if cache.rects_known:
+        bound = ctx.mglo.fbo
+        if bound.viewport != viewport:
+            ctx.viewport = viewport
+        if not _scissor_is(ctx, bound, scissor):
+            ctx.scissor = scissor
+    else:
+        ctx.viewport = viewport
+        ctx.scissor = scissor
+        cache.rects_known = True
+
+
+def _apply_all(ctx: moderngl.Context, state: PassState, viewport: tuple[int, int, int, int],
+               scissor: tuple[int, int, int, int] | None = None) -> None:
     """Set every piece of ``state`` (and the viewport and scissor), whatever was set before."""
     flags = moderngl.NOTHING
     if state.depth_func is not None:

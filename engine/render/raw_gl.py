@@ -53,6 +53,8 @@ from dataclasses import dataclass
 import moderngl
 import numpy as np
 
+from engine.render.bindings import invalidate
+
 _VOID_CALL = ctypes.CFUNCTYPE(None)
 _COPY_TEX_SUB_IMAGE_2D = ctypes.CFUNCTYPE(None, ctypes.c_uint, ctypes.c_int, ctypes.c_int, ctypes.c_int,
                                           ctypes.c_int, ctypes.c_int, ctypes.c_int, ctypes.c_int)
@@ -232,6 +234,7 @@ class LayeredCubeTarget:
         used before left behind (a scissor box, a depth mask off) reaches the clear or the
         draws; the next moderngl ``use`` sets it all again for its own."""
         gl = self.gl
+        invalidate(self.ctx)  # the viewport and scissor below are set behind moderngl's back
         gl["glBindFramebuffer"](GL_FRAMEBUFFER, self.framebuffer)
         gl["glViewport"](0, 0, self.size, self.size)
         gl["glDisable"](GL_SCISSOR_TEST)
@@ -279,6 +282,7 @@ class CubeMipTarget:
         whose layered draw was refused), reading only level ``level - 1`` through ``unit``;
         returns the level's face size."""
         gl = self.gl
+        invalidate(self.ctx)  # the viewport and scissor below are set behind moderngl's back
         gl["glGetError"]()  # start clean: what follows is checked
         gl["glBindFramebuffer"](GL_FRAMEBUFFER, self.framebuffer)
         if face is None:

@@ -48,6 +48,7 @@ from engine.render.bindings import (
     VIEWS_BINDING,
     PassState,
     apply_pass_state,
+    set_front_face,
 )
 from engine.render.raw_gl import LayeredCubeTarget, inspect_bound_target
 from engine.render.targets import RenderTargets
@@ -257,8 +258,8 @@ class ScenePass:
         renderer = self.renderer
         transparent = renderer.transparent_batches()
         for view in views:
-            ctx.scissor = view.scissor
-            ctx.front_face = "cw" if view.mirrored else "ccw"
+            ctx.scissor = view.scissor  # moderngl's own record: the cache reads it
+            set_front_face(ctx, "cw" if view.mirrored else "ccw")
             renderer.bind_view(view)
             self._draw_batches(renderer.opaque_batches(), 0, options.masked, view.node, skip=view.skip,
                                hide=view.hide)
@@ -274,7 +275,7 @@ class ScenePass:
                 targets.view_framebuffer.depth_mask = False
                 targets.view_framebuffer.use()
                 apply_pass_state(ctx, _TRANSPARENT, viewport, view.scissor)
-                ctx.front_face = "cw" if view.mirrored else "ccw"
+                set_front_face(ctx, "cw" if view.mirrored else "ccw")
                 self._draw_batches(_back_to_front(transparent, view.eye), 0, options.masked, view.node,
                                    skip=view.skip, hide=view.hide)
                 targets.view_framebuffer.depth_mask = True
@@ -295,7 +296,7 @@ class ScenePass:
         self._views_ubo.bind_to_uniform_block(VIEWS_BINDING)
         scissor = union_rect([v.scissor or (0, 0, *v.size) for v in views])
         ctx.scissor = scissor
-        ctx.front_face = "ccw"  # mirrored views reverse their vertices in the geometry shader
+        set_front_face(ctx, "ccw")  # mirrored views reverse their vertices in the geometry shader
         invocations = geometry_invocations(len(views))
         self._draw_batches(renderer.opaque_batches(), invocations, options.masked, 0)
         transparent = renderer.transparent_batches()

@@ -1,0 +1,233 @@
+"""The pass-state cache (``bindings.apply_pass_state`` sets only what changed): a state
+applied twice sets nothing the second time, it stays true across framebuffer switches
+(moderngl keeps a viewport and scissor per framebuffer), and after ``invalidate`` a pass
+draws the right picture whatever raw GL or the debug overlay set in between."""
+from __future__ import annotations
+
+import ctypes
+import random
+
+import moderngl
+import numpy as np
+import pytest
+
+from engine.render import bindings
+from engine.render.bindings import PassState, apply_pass_state, invalidate, set_front_face
+from engine.render.raw_gl import _load
+from engine.render.targets import release_framebuffer
+from tests.test_pass_state import CAMERAS, frames, hall
+
+_SETTERS = ("depth_func", "blend_func", "front_face", "viewport", "scissor")
+
+
+@pytest.fixture
+def setter_calls(monkeypatch):
+    """Counts of moderngl's Context setters (and enable_only, enable_direct, disable_direct) called."""
+    calls = dict.fromkeys((*_SETTERS, "enable_only", "enable_direct", "disable_direct"), 0)
+    for name in _SETTERS:
+        prop = getattr(moderngl.Context, name)
+
+        def setter(self, value, _name=name, _set=prop.fset):
+            calls[_name] += 1
+            _set(self, value)
+        monkeypatch.setattr(moderngl.Context, name, property(prop.fget, setter))
+    for name in ("enable_only", "enable_direct", "disable_direct"):
+        method = getattr(moderngl.Context, name)
+
+        def counted(self, value, _name=name, _method=method):
+            calls[_name] += 1
+            _method(self, value)
+        monkeypatch.setattr(moderngl.Context, name, counted)
+    return calls
+
+
+_WHITE_VS = "#version 410 core\nvoid main() { vec2 p = vec2((gl_VertexID << 1) & 2, gl_VertexID & 2);" \
+            " gl_Position = vec4(p * 2.0 - 1.0, 0.5, 1.0); }"
+_WHITE_FS = "#version 410 core\nout vec4 colour; void main() { colour = vec4(1.0); }"
+
+
+def _covered(ctx, framebuffer, draw) -> np.ndarray:
+    """Pixels a full-screen triangle drawn by ``draw`` covers in ``framebuffer`` (cleared first)."""
+    framebuffer.clear(0.0, 0.0, 0.0, 0.0, viewport=(0, 0, *framebuffer.size))
+    draw()
+    data = np.frombuffer(framebuffer.read(components=1), dtype=np.uint8)
+    return data.reshape(framebuffer.size[1], framebuffer.size[0]) > 0
+
+
+def test_a_state_applied_again_sets_nothing(ctx, setter_calls):
+    target = ctx.simple_framebuffer((32, 32))
+    try:
+        target.use()
+        invalidate(ctx)
+        state = PassState(depth_func="<", cull=True, clips=frozenset((0, 5)))
+        apply_pass_state(ctx, state, (0, 0, 32, 32))
+        assert sum(setter_calls.values()) > 0
+        setter_calls.update(dict.fromkeys(setter_calls, 0))
+        apply_pass_state(ctx, state, (0, 0, 32, 32))
+        apply_pass_state(ctx, PassState(depth_func="<", cull=True, clips=frozenset((0, 5))), (0, 0, 32, 32))
+        set_front_face(ctx, "ccw")
+        assert sum(setter_calls.values()) == 0, setter_calls
+        # A change sets that piece only.
+        apply_pass_state(ctx, PassState(depth_func="<=", cull=True, clips=frozenset((0,))), (0, 0, 16, 32))
+        assert setter_calls == {**dict.fromkeys(setter_calls, 0), "depth_func": 1, "disable_direct": 1,
+                                "viewport": 1}, setter_calls
+        # A winding set within a pass makes the next apply set the state's own again.
+        set_front_face(ctx, "cw")
+        setter_calls.update(dict.fromkeys(setter_calls, 0))
+        apply_pass_state(ctx, PassState(depth_func="<=", cull=True, clips=frozenset((0,))), (0, 0, 16, 32))
+        assert setter_calls["front_face"] == 1 and ctx.front_face == "ccw"
+    finally:
+        release_framebuffer(target)
+
+
+def test_the_cache_holds_across_framebuffer_switches(ctx):
+    """moderngl keeps a viewport and scissor per framebuffer and ``Framebuffer.use`` sets them
+    again: a scissor left on one framebuffer is found there, not assumed gone."""
+    program = ctx.program(vertex_shader=_WHITE_VS, fragment_shader=_WHITE_FS)
+    vao = ctx.vertex_array(program, [])
+    big, small = ctx.simple_framebuffer((64, 48)), ctx.simple_framebuffer((32, 32))
+    state = PassState()
+    try:
+        invalidate(ctx)
+        big.use()
+        apply_pass_state(ctx, state, (0, 0, 64, 48), (0, 0, 10, 10))
+        small.use()
+        apply_pass_state(ctx, state, (0, 0, 32, 32))
+        assert _covered(ctx, small, lambda: vao.render(vertices=3)).all()
+        big.use()  # its scissor (10 x 10) is back
+        apply_pass_state(ctx, state, (0, 0, 64, 48))
+        assert _covered(ctx, big, lambda: vao.render(vertices=3)).all()
+        apply_pass_state(ctx, state, (0, 0, 32, 24), (0, 0, 8, 8))
+        small.use()
+        apply_pass_state(ctx, state, (0, 0, 16, 16))
+        assert _covered(ctx, small, lambda: vao.render(vertices=3)).sum() == 16 * 16
+        big.use()
+        apply_pass_state(ctx, state, (0, 0, 32, 24), (0, 0, 8, 8))
+        assert _covered(ctx, big, lambda: vao.render(vertices=3)).sum() == 8 * 8
+    finally:
+        for framebuffer in (big, small):
+            release_framebuffer(framebuffer)
+        vao.release()
+        program.release()
+
+
+def test_after_raw_gl_and_invalidate_a_pass_sets_everything_again(ctx):
+    """State changed behind moderngl's back (raw glViewport, glDisable, glDepthFunc): the
+    cache cannot see it; ``invalidate`` makes the next apply set it all."""
+    gl = {name: _load(ctx, name, ctypes.CFUNCTYPE(None, *args)) for name, args in (
+        ("glViewport", (ctypes.c_int,) * 4), ("glEnable", (ctypes.c_uint,)), ("glDisable", (ctypes.c_uint,)),
+        ("glScissor", (ctypes.c_int,) * 4), ("glDepthFunc", (ctypes.c_uint,)))}
+    program = ctx.program(vertex_shader=_WHITE_VS, fragment_shader=_WHITE_FS)
+    vao = ctx.vertex_array(program, [])
+    target = ctx.framebuffer(
+        color_attachments=[ctx.renderbuffer((32, 32))], depth_attachment=ctx.depth_renderbuffer((32, 32)))
+    state = PassState(depth_func="<")
+    try:
+        target.use()
+        invalidate(ctx)
+        apply_pass_state(ctx, state, (0, 0, 32, 32))
+
+        def draw():
+            target.clear(depth=1.0)
+            vao.render(vertices=3)
+        assert _covered(ctx, target, draw).all()
+        gl["glViewport"](0, 0, 4, 4)
+        gl["glEnable"](0x0C11)      # GL_SCISSOR_TEST
+        gl["glScissor"](0, 0, 2, 2)
+        gl["glDepthFunc"](0x0200)   # GL_NEVER
+        invalidate(ctx)
+        apply_pass_state(ctx, state, (0, 0, 32, 32))
+        assert _covered(ctx, target, draw).all()
+    finally:
+        release_framebuffer(target)
+        vao.release()
+        program.release()
+
+
+def test_passes_draw_the_same_pixels_after_raw_gl_state_and_invalidate(ctx):
+    """The hall of mirrors, with raw GL state set before every scene pass, claim, composite
+    and present, then ``invalidate``: the same pixels and ids as without."""
+    plain = hall(ctx)
+    try:
+        expected = frames(plain)
+    finally:
+        plain.close()
+    gl = {name: _load(ctx, name, ctypes.CFUNCTYPE(None, *args)) for name, args in (
+        ("glViewport", (ctypes.c_int,) * 4), ("glEnable", (ctypes.c_uint,)), ("glDisable", (ctypes.c_uint,)),
+        ("glScissor", (ctypes.c_int,) * 4), ("glDepthFunc", (ctypes.c_uint,)), ("glFrontFace", (ctypes.c_uint,)))}
+    rng = random.Random(3)
+
+    def before():
+        gl["glViewport"](rng.randrange(20), rng.randrange(20), rng.randrange(1, 90), rng.randrange(1, 60))
+        gl["glScissor"](rng.randrange(20), rng.randrange(20), rng.randrange(1, 90), rng.randrange(1, 60))
+        for cap in (0x0C11, 0x0B71, 0x0B44, 0x0BE2, 0x3000, 0x3005):  # scissor, depth, cull, blend, clips
+            gl["glEnable" if rng.random() < 0.5 else "glDisable"](cap)
+        gl["glDepthFunc"](rng.choice((0x0200, 0x0201, 0x0204, 0x0207)))
+        gl["glFrontFace"](rng.choice((0x0900, 0x0901)))
+        invalidate(ctx)
+
+    shuffled = hall(ctx)
+    try:
+        renderer = shuffled.engine.renderer
+        passes = shuffled.engine.reflection_system.tree.passes
+        for owner, name in ((renderer.scene_pass, "draw"), (passes, "prepare_level"), (passes, "composite_level"),
+                            (renderer, "present")):
+            method = getattr(owner, name)
+
+            def wrapped(*args, _method=method, **kwargs):
+                before()
+                return _method(*args, **kwargs)
+            setattr(owner, name, wrapped)
+        got = frames(shuffled)
+    finally:
+        shuffled.close()
+    assert len(got) == len(CAMERAS)
+    for (rgb, ids), (want_rgb, want_ids) in zip(got, expected, strict=True):
+        np.testing.assert_array_equal(ids, want_ids)
+        np.testing.assert_array_equal(rgb, want_rgb)
+
+
+def test_the_frame_after_the_overlay_is_the_frame_without_it(ctx):
+    """The debug overlay sets blending, scissor and viewport with moderngl's setters after a
+    frame; ``Engine.frame`` invalidates the cache, so the next frame is the same picture."""
+    pytest.importorskip("imgui_bundle", reason="the debug overlay needs imgui-bundle")
+    from shell.overlay import DebugOverlay
+
+    plain = hall(ctx)
+    try:
+        expected = frames(plain)
+    finally:
+        plain.close()
+    runner = hall(ctx)
+    overlay = DebugOverlay(ctx)
+    try:
+        # Each frame after the first is drawn after the overlay drew over the one before.
+        for camera, (want_rgb, want_ids) in zip(CAMERAS, expected, strict=True):
+            runner.engine.place_camera(*camera)
+            rgb = runner.frame()
+            np.testing.assert_array_equal(runner.ids(), want_ids)
+            np.testing.assert_array_equal(rgb, want_rgb)
+            overlay.record(0.02)
+            overlay.draw(runner.engine, runner.capture.framebuffer, runner.size)
+    finally:
+        overlay.release()
+        runner.close()
+
+
+def test_the_uncached_path_draws_the_same(ctx, monkeypatch):
+    """``CACHE_STATE = False`` (every setter every time, the path before the cache) is kept
+    for measurement: it draws the same pixels."""
+    cached = hall(ctx)
+    try:
+        expected = frames(cached)
+    finally:
+        cached.close()
+    monkeypatch.setattr(bindings, "CACHE_STATE", False)
+    uncached = hall(ctx)
+    try:
+        got = frames(uncached)
+    finally:
+        uncached.close()
+    for (rgb, ids), (want_rgb, want_ids) in zip(got, expected, strict=True):
+        np.testing.assert_array_equal(ids, want_ids)
+        np.testing.assert_array_equal(rgb, want_rgb)
