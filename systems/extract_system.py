@@ -8,8 +8,6 @@ Nothing here writes game state.
 from __future__ import annotations
 
 import esper
-import numpy as np
-from pyglm import glm
 
 from components import (
     Emissive,
@@ -39,6 +37,7 @@ class ExtractSystem(esper.Processor):
         self.renderer = renderer
         self._batch_of: dict[int, InstanceBatch] = {}
         self._looks = LookChanges()  # what changes a look, and which probe each object samples
+        self._joined: set[int] = set()
         world.resources[Renderer] = renderer
 
     def process(self, dt: float) -> None:
@@ -46,14 +45,31 @@ class ExtractSystem(esper.Processor):
         # A component of probe_rules.LOOK_KINDS changed, or the probe the entity samples did (a
         # probe came, went, changed or moved, or the entity moved into or out of an influence box).
         touched = self._looks.entities(world)
+        joined = self._joined = set()  # entities given a row by a refresh: their transform is written below
         for entity in touched:
             self._refresh_instance(entity)
-        # Every moved entity, touched or not: a refresh writes the transform only when the
-        # entity joins a batch (a Slice removed in the frame it moved left it stale).
-        for entity in world.frame.moved | world.frame.added:
-            batch = self._batch_of.get(entity)
+        # The transform of every moved entity, touched or not, and of every entity a refresh
+        # gave a new row (a Slice removed in the frame it moved leaves it in another batch),
+        # grouped by batch: each batch writes its rows in one go (InstanceBatch.write_transforms).
+        frame = world.frame
+        transform_of = _transform_lookup(world)
+        for entities, moving in ((frame.moved, True), ((frame.added | joined) - frame.moved, False)):
+            for batch, group in self._by_batch(entities).items():
+                batch.write_transforms(group, [transform_of(entity).world for entity in group], moving)
+
+    def _by_batch(self, entities: set[int]) -> dict[InstanceBatch, list[int]]:
+        """``entities`` that have a row, by their batch."""
+        batch_of = self._batch_of
+        groups: dict[InstanceBatch, list[int]] = {}
+        for entity in entities:
+            batch = batch_of.get(entity)
             if batch is not None:
-                _write_transform(batch.row(entity), world.get(entity, Transform))
+                group = groups.get(batch)
+                if group is None:
+                    groups[batch] = [entity]
+                else:
+                    group.append(entity)
+        return groups
 
     def _refresh_instance(self, entity: int) -> None:
         world = self.world
@@ -79,7 +95,7 @@ class ExtractSystem(esper.Processor):
                 self._remove_instance(entity, old)
             row = batch.add(entity)
             self._batch_of[entity] = batch
-            _write_transform(row, transform)
+            self._joined.add(entity)
         else:
             row = batch.row(entity)
         choice = choose_material(material, world.try_get(entity, Emissive), world.try_get(entity, Reflective),
@@ -105,7 +121,10 @@ class ExtractSystem(esper.Processor):
             self._remove_instance(entity, batch)
 
 
-def _write_transform(row: np.void, transform: Transform) -> None:
-    model = transform.world
-    row["model"] = np.frombuffer(model.to_bytes(), np.float32)
-    row["normal_matrix"] = np.frombuffer(glm.transpose(glm.inverse(glm.mat3(model))).to_bytes(), np.float32)
+def _transform_lookup(world: World):
+    """``entity -> its Transform`` for entities known to have one: esper's own call when the
+    world is esper's current one (as in a step), else the world's."""
+    if esper.current_world == world.name:
+        component = esper.component_for_entity
+        return lambda entity: component(entity, Transform)
+    return lambda entity: world.get(entity, Transform)

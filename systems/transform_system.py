@@ -29,27 +29,35 @@ class TransformSystem(esper.Processor):
         if not changed:
             world.frame = events
             return
-        dirty: set[int] = set()
+        parent_of, children = self._parent_of, self._children
+        moved, added = events.moved, events.added
+        lookup = _component_lookup(world)
+        dirty: set[int] = set()  # entities in a hierarchy: their subtrees are worked out below
         for entity in changed:
-            transform = world.try_get(entity, Transform) if world.exists(entity) else None
+            transform = lookup(entity)
             if transform is None:
-                if entity in self._parent_of:
+                if entity in parent_of:
                     events.removed.add(entity)
                     self._unlink(entity)
-                    dirty.update(self._children.pop(entity, ()))  # orphans become roots
+                    dirty.update(children.pop(entity, ()))  # orphans become roots
                 continue
-            if entity in self._parent_of:
-                events.moved.add(entity)
-            else:
-                events.added.add(entity)
+            known = entity in parent_of
+            (moved if known else added).add(entity)
+            if transform.parent is None and parent_of.get(entity) is None and not children.get(entity):
+                # The common case, a root without children: its world matrix is its local one,
+                # written here without the subtree walk.
+                parent_of[entity] = None
+                object.__setattr__(transform, "_world", transform.local_matrix())
+                continue
             self._link(entity, transform.parent)
             dirty.add(entity)
-        self._expand(dirty)
-        for entity in dirty:
-            parent = self._parent_of.get(entity)
-            if parent is None or parent not in dirty:
-                self._update_subtree(entity)
-        events.moved |= dirty - events.added
+        if dirty:
+            self._expand(dirty)
+            for entity in dirty:
+                parent = parent_of.get(entity)
+                if parent is None or parent not in dirty:
+                    self._update_subtree(entity)
+            moved |= dirty - added
         world.frame = events
 
     def _link(self, entity: int, parent: int | None) -> None:
@@ -92,3 +100,17 @@ class TransformSystem(esper.Processor):
             object.__setattr__(transform, "_world", parent_t.world * local if parent_t is not None else local)
             stack.extend(self._children.get(entity, ()))
 
+
+
+def _component_lookup(world: World):
+    """``entity -> its Transform`` (None when it has none, or is deleted or gone), through
+    esper's own calls when the world is esper's current one (as in a step: one dict
+    lookup each, not the world's checks per call), else through the world."""
+    if esper.current_world != world.name:
+        return lambda entity: world.try_get(entity, Transform) if world.exists(entity) else None
+    deleted = world.deleted()
+    exists, component = esper.entity_exists, esper.try_component
+
+    def lookup(entity: int) -> Transform | None:
+        return component(entity, Transform) if exists(entity) and entity not in deleted else None
+    return lookup
