@@ -71,11 +71,14 @@ SCHEMA = 1
 
 # Per suite, the tables of medians the report lays side by side across sizes: the rows that
 # have every key field and the value field, keyed by those fields.
+# A frame's CPU cost (``cpu_ms_median``: until Engine.frame returns) and the view trees'
+# planning time per reflection view (``plan_us_per_view``) follow each frame table.
 MEDIANS: dict[str, tuple[tuple[tuple[str, ...], str], ...]] = {
-    "mirrors": ((("n_mirrors", "path", "aa"), "frame_ms_median"),),
-    "portals": ((("depth",), "frame_ms_median"),),
-    "probes": ((("probe",), "frame_ms_median"), (("path", "culled", "size"), "capture_ms_median"),
-               (("prefilter", "size"), "prefilter_ms_median")),
+    "mirrors": ((("n_mirrors", "path", "aa"), "frame_ms_median"), (("n_mirrors", "path", "aa"), "cpu_ms_median"),
+                (("n_mirrors", "path", "aa"), "plan_us_per_view")),
+    "portals": ((("depth",), "frame_ms_median"), (("depth",), "cpu_ms_median"), (("depth",), "plan_us_per_view")),
+    "probes": ((("probe",), "frame_ms_median"), (("probe",), "cpu_ms_median"), (("probe",), "plan_us_per_view"),
+               (("path", "culled", "size"), "capture_ms_median"), (("prefilter", "size"), "prefilter_ms_median")),
 }
 
 
@@ -430,7 +433,10 @@ def markdown(report: dict) -> str:
         sizes = report["sizes"]
         out += ["## Benchmarks", "",
                 f"{report['frames']} timed frames after {report['warmup']} warm-up per suite and size; "
-                "times in ms (wall clock around each frame and `ctx.finish()`).", ""]
+                "times in ms (wall clock around each frame and `ctx.finish()`); `cpu_ms_median` is until "
+                "`Engine.frame` returns, without the `ctx.finish()` (on a GPU, the frame's CPU cost); "
+                "`plan_us_per_view` is the view trees' planning time per reflection view in microseconds "
+                "(None where a frame has no reflection views).", ""]
         for suite, tables in medians(report).items():
             for table in tables:
                 out += [f"### {suite}: {table['value']} by size", ""]

@@ -18,6 +18,13 @@ queries do not measure anything useful.  ``passes``, ``draw_calls`` and
 ``reflection_views`` are medians of ``engine.renderer.stats`` over the timed frames;
 ``chosen`` counts the frames by ``stats.reflection_path`` (what auto picked).  The last
 line is the ratio of the auto path's 8-mirror median frame to its 0-mirror median frame.
+``cpu_ms_median`` is the wall clock until ``Engine.frame`` returns, without the
+``ctx.finish()`` after it (on a GPU, the frame's CPU cost; on llvmpipe it includes the
+rasterising the engine waits for, so it is reported, not targeted).  ``plan_us_per_view``
+is the time the view trees spent planning the frame's reflection views (``PlanClock``:
+candidate search and culling, claims, each view's camera and view block, ordering, the
+level budget), over the views they made, median over the frames that had views (None
+when no frame had one).
 ``--aa fxaa,off`` runs every case once per anti-aliasing mode (``Renderer.antialias``),
 interleaved like the rest, and ends with each case's ratio of the two medians: the cost
 of the FXAA pass.
@@ -60,8 +67,12 @@ from engine.core.frame_io import Output
 from engine.core.game import Game
 from engine.core.world import World
 from engine.render.gl_context import create_headless_context
+from engine.render.mirror_passes import MirrorPasses
 from engine.render.present import ANTIALIAS_MODES
+from engine.render.renderer import Renderer
+from engine.render.scene_pass import ScenePass
 from engine.render.targets import CaptureTarget
+from engine.render.view_tree import ViewTree
 from shell.app import Engine
 
 MIRROR_COUNTS = (0, 1, 2, 4, 8, 16)
@@ -134,6 +145,103 @@ class MirrorRing(Game):
             transform.rotation = glm.angleAxis(self.time * speed, glm.vec3(0, 1, 0))
 
 
+class PlanClock:
+    """How long the view trees spend planning reflection views, and how many views they make.
+
+    While open (``with PlanClock() as clock``) it wraps, on their classes, ``ViewTree.render``
+    and the calls it makes that are not planning: a level's GL work
+    (``MirrorPasses.prepare_level``: the claims; ``ScenePass.draw``: the views;
+    ``Renderer.flush``; ``MirrorPasses.composite_level``) and the composite's CPU half
+    (``ViewTree._prepare_composite``, where there is one).  Planning is the time inside
+    ``render`` less the time in those: the candidate search and cull (``SurfaceTable.cull``),
+    the claims' rectangles, each view's camera and view block, ordering and the level budget.
+    Every tree of every engine counts (the main view's and each probe face's); ``views`` is
+    the reflection views their results hold (``len(TreeResult.views) - 1`` each).
+    ``reset()`` before a frame, read ``plan_s`` and ``views`` after it.  Nothing in
+    ``engine`` changes: the wrappers go when the block ends (or at ``close``).
+    """
+
+    NOT_PLANNING = ((MirrorPasses, "prepare_level"), (ScenePass, "draw"), (Renderer, "flush"),
+                    (MirrorPasses, "composite_level"), (ViewTree, "_prepare_composite"))
+
+    def __init__(self) -> None:
+        self.plan_s = 0.0
+        self.views = 0
+        self._trees = 0       # ViewTree.render calls under way
+        self._aside = 0       # not-planning calls under way inside one (the outermost is timed)
+        self._aside_s = 0.0   # their time, since the clock was made
+        self._saved: list[tuple[type, str, object]] = []
+
+    def reset(self) -> None:
+        self.plan_s, self.views = 0.0, 0
+
+    def us_per_view(self) -> float | None:
+        """This frame's planning time per reflection view, in microseconds (None: no views)."""
+        return self.plan_s * 1e6 / self.views if self.views else None
+
+    def open(self) -> PlanClock:
+        """Put the wrappers on (``close`` takes them off; ``with`` does both)."""
+        if not self._saved:
+            self._wrap(ViewTree, "render", self._tree)
+            for owner, name in self.NOT_PLANNING:
+                if name in vars(owner):
+                    self._wrap(owner, name, self._aside_call)
+        return self
+
+    def close(self) -> None:
+        for owner, name, original in reversed(self._saved):
+            setattr(owner, name, original)
+        self._saved.clear()
+
+    def __enter__(self) -> PlanClock:
+        return self.open()
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def _wrap(self, owner: type, name: str, make) -> None:
+        original = vars(owner)[name]
+        self._saved.append((owner, name, original))
+        setattr(owner, name, make(original))
+
+    def _tree(self, render):
+        clock = self
+
+        def timed_render(*args, **kwargs):
+            aside = clock._aside_s
+            clock._trees += 1
+            start = time.perf_counter()
+            try:
+                result = render(*args, **kwargs)
+            finally:
+                clock._trees -= 1
+            clock.plan_s += time.perf_counter() - start - (clock._aside_s - aside)
+            clock.views += len(result.views) - 1
+            return result
+        return timed_render
+
+    def _aside_call(self, method):
+        clock = self
+
+        def timed(*args, **kwargs):
+            if not clock._trees or clock._aside:
+                return method(*args, **kwargs)
+            clock._aside += 1
+            start = time.perf_counter()
+            try:
+                return method(*args, **kwargs)
+            finally:
+                clock._aside_s += time.perf_counter() - start
+                clock._aside -= 1
+        return timed
+
+
+def plan_median(samples: list[float | None]) -> float | None:
+    """The median of the frames' ``PlanClock.us_per_view`` over the frames with views."""
+    values = [v for v in samples if v is not None]
+    return round(statistics.median(values), 2) if values else None
+
+
 @dataclass
 class Result:
     n_mirrors: int
@@ -146,6 +254,8 @@ class Result:
     frames: int
     aa: str = "fxaa"
     chosen: dict[str, int] = field(default_factory=dict)
+    cpu_ms_median: float = 0.0
+    plan_us_per_view: float | None = None
 
 
 def _percentile(values: list[float], q: float) -> float:
@@ -162,7 +272,9 @@ def run_scenes(ctx, mirror_counts: tuple[int, ...], paths: tuple[str, ...], fram
     between them hold.  ``size`` is the output's (width, height)."""
     cases = [(mirrors, path, aa) for mirrors in mirror_counts for path in paths for aa in aa_modes]
     engines, captures = [], []
+    clock = PlanClock()
     try:
+        clock.open()
         for mirrors, path, aa in cases:
             engine = Engine(MirrorRing(mirrors), ctx)
             engine.reflection_system.path = path
@@ -171,14 +283,20 @@ def run_scenes(ctx, mirror_counts: tuple[int, ...], paths: tuple[str, ...], fram
             captures.append(CaptureTarget(ctx, size))
         outputs = [Output(capture.framebuffer, size) for capture in captures]
         times: list[list[float]] = [[] for _ in cases]
+        cpu: list[list[float]] = [[] for _ in cases]
+        plan: list[list[float | None]] = [[] for _ in cases]
         stats: list[list] = [[] for _ in cases]
         for frame in range(warmup + frames):
             for i, (engine, output) in enumerate(zip(engines, outputs, strict=True)):
+                clock.reset()
                 start = time.perf_counter()
                 engine.frame(DT, output)
+                returned = time.perf_counter()
                 ctx.finish()
                 if frame >= warmup:
                     times[i].append((time.perf_counter() - start) * 1e3)
+                    cpu[i].append((returned - start) * 1e3)
+                    plan[i].append(clock.us_per_view())
                     stats[i].append(engine.renderer.stats)
         if ctx.error != "GL_NO_ERROR":
             raise RuntimeError(f"OpenGL error: {ctx.error}")
@@ -193,8 +311,11 @@ def run_scenes(ctx, mirror_counts: tuple[int, ...], paths: tuple[str, ...], fram
             frames=frames,
             aa=aa,
             chosen=dict(Counter(s.reflection_path or "none" for s in stats[i])),
+            cpu_ms_median=round(statistics.median(cpu[i]), 2),
+            plan_us_per_view=plan_median(plan[i]),
         ) for i, (mirrors, path, aa) in enumerate(cases)]
     finally:
+        clock.close()
         for capture in captures:
             capture.release()
         for engine in engines:
@@ -218,8 +339,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 COLUMNS = (("n_mirrors", "mirrors", 8), ("path", "path", 11), ("aa", "aa", 5), ("frame_ms_median", "ms med", 8),
-           ("frame_ms_p95", "ms p95", 8), ("passes", "passes", 7), ("draw_calls", "draws", 6),
-           ("reflection_views", "views", 6))
+           ("frame_ms_p95", "ms p95", 8), ("cpu_ms_median", "cpu ms", 8), ("plan_us_per_view", "plan us/v", 10),
+           ("passes", "passes", 7), ("draw_calls", "draws", 6), ("reflection_views", "views", 6))
 
 
 def main(args: argparse.Namespace) -> int:
@@ -244,7 +365,7 @@ def main(args: argparse.Namespace) -> int:
                 print(json.dumps(asdict(result)), flush=True)
             else:
                 row = asdict(result)
-                print(" ".join(f"{row[key]:>{width}}" for key, _, width in COLUMNS)
+                print(" ".join(f"{row[key]!s:>{width}}" for key, _, width in COLUMNS)
                       + f"  {result.chosen}", flush=True)
     finally:
         ctx.release()

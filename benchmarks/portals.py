@@ -5,6 +5,9 @@ between them; the camera stands between them looking into one, so every level of
 recursion shows the other one again, smaller.  For each depth limit the whole frame is
 timed (``Engine.frame`` then ``ctx.finish()``, wall clock: llvmpipe's GPU timers are not
 usable), 640x360 (``--size``).  ``passes`` counts scene renders (1 main + 1 per portal view).
+``cpu_ms_median``: until ``Engine.frame`` returns, without the ``ctx.finish()``;
+``plan_us_per_view``: the view tree's planning time per reflection view
+(``benchmarks.mirrors.PlanClock``; None at depth 0, which has no views).
 
     python -m benchmarks portals            # table
     python -m benchmarks portals --json     # one JSON object per depth
@@ -20,6 +23,7 @@ import time
 from pyglm import glm
 
 from benchmarks import add_size_argument
+from benchmarks.mirrors import PlanClock, plan_median
 from components import DirectionalLight, Material, MeshRef, Portal, Skybox, Transform
 from engine.assets.mesh import box, plane
 from engine.assets.portals import spawn_portal_pair
@@ -65,23 +69,32 @@ def main(args: argparse.Namespace) -> int:
     capture = CaptureTarget(ctx, args.size)
     output = Output(capture.framebuffer, args.size)
     rows = []
+    clock = PlanClock()
     try:
+        clock.open()
         for depth in DEPTHS:
             for _, portal in engine.world.query_one(Portal):
                 portal.max_depth = depth
             engine.reflection_system.max_depth_cap = max(depth, 1)
-            times = []
+            times, cpu, plan = [], [], []
             for i in range(args.warmup + args.frames):
+                clock.reset()
                 start = time.perf_counter()
                 engine.frame(1 / 60, output)
+                returned = time.perf_counter()
                 ctx.finish()
                 if i >= args.warmup:
                     times.append((time.perf_counter() - start) * 1000.0)
+                    cpu.append((returned - start) * 1000.0)
+                    plan.append(clock.us_per_view())
             times.sort()
             rows.append({"depth": depth, "frame_ms_median": round(statistics.median(times), 2),
                          "frame_ms_p95": round(times[min(len(times) - 1, int(0.95 * len(times)))], 2),
-                         "passes": engine.renderer.stats.passes})
+                         "passes": engine.renderer.stats.passes,
+                         "reflection_views": engine.renderer.stats.reflection_views,
+                         "cpu_ms_median": round(statistics.median(cpu), 2), "plan_us_per_view": plan_median(plan)})
     finally:
+        clock.close()
         capture.release()
         engine.close()
         ctx.release()
@@ -91,8 +104,9 @@ def main(args: argparse.Namespace) -> int:
         if args.json:
             print(json.dumps(row))
     if not args.json:
-        print(f"{'depth':>5} {'median ms':>10} {'p95 ms':>8} {'passes':>6} {'x depth 0':>9}")
+        print(f"{'depth':>5} {'median ms':>10} {'p95 ms':>8} {'passes':>6} {'x depth 0':>9} {'cpu ms':>8} "
+              f"{'plan us/v':>10}")
         for row in rows:
             print(f"{row['depth']:>5} {row['frame_ms_median']:>10} {row['frame_ms_p95']:>8} {row['passes']:>6} "
-                  f"{row['ratio_to_depth_0']:>9}")
+                  f"{row['ratio_to_depth_0']:>9} {row['cpu_ms_median']:>8} {row['plan_us_per_view']!s:>10}")
     return 0

@@ -33,7 +33,10 @@ again; an ``on_change`` probe in a still scene does the same work, tests/test_pr
 counts one capture in 100 frames), ``on_change`` (the default refresh in this scene, where
 5 boxes spin: the faces that see one are recaptured, 3 a frame), ``dynamic``
 (``every_frame`` at 128: six faces a frame).  Ratios are to ``none``.  Recaptures are drawn
-after present (``ProbeSystem.recapture_after_present``).
+after present (``ProbeSystem.recapture_after_present``).  ``cpu_ms_median``: until
+``Engine.frame`` returns, without the ``ctx.finish()``; ``plan_us_per_view``: the view
+trees' planning time per reflection view (``benchmarks.mirrors.PlanClock``, the main view's
+tree and each probe face's; None here, where no mirror or portal makes a view).
 
     python -m benchmarks probes            # table
     python -m benchmarks probes --json     # one JSON object per line
@@ -51,7 +54,7 @@ from functools import partial
 import moderngl
 
 from benchmarks import add_size_argument
-from benchmarks.mirrors import DT, OUTPUT_SIZE, MirrorRing
+from benchmarks.mirrors import DT, OUTPUT_SIZE, MirrorRing, PlanClock, plan_median
 from components import Material, MeshRef, ReflectionProbe, Reflective, Transform
 from engine.assets.mesh import sphere
 from engine.core.frame_io import Output
@@ -169,12 +172,16 @@ def prefilter_rows(ctx, frames: int, output_size: tuple[int, int] = OUTPUT_SIZE)
 
 def frame_rows(ctx, frames: int, warmup: int, output_size: tuple[int, int] = OUTPUT_SIZE) -> list[dict]:
     engines, captures = [], []
+    clock = PlanClock()
     try:
+        clock.open()
         for refresh in MODES.values():
             engines.append(Engine(ProbeRing(refresh), ctx))
             captures.append(CaptureTarget(ctx, output_size))
         outputs = [Output(c.framebuffer, output_size) for c in captures]
         times: list[list[float]] = [[] for _ in engines]
+        cpu: list[list[float]] = [[] for _ in engines]
+        plan: list[list[float | None]] = [[] for _ in engines]
         faces: list[int] = [0 for _ in engines]
         rng = random.Random(0)
         for frame in range(warmup + frames):
@@ -184,17 +191,24 @@ def frame_rows(ctx, frames: int, warmup: int, output_size: tuple[int, int] = OUT
             rng.shuffle(order)
             for i in order:
                 engine, output = engines[i], outputs[i]
+                clock.reset()
                 start = time.perf_counter()
                 engine.frame(DT, output)
+                returned = time.perf_counter()
                 ctx.finish()
                 if frame >= warmup:
                     times[i].append((time.perf_counter() - start) * 1e3)
+                    cpu[i].append((returned - start) * 1e3)
+                    plan[i].append(clock.us_per_view())
                     faces[i] += engine.renderer.stats.probe_faces
         base = statistics.median(times[0])
         return [{"probe": name, "frame_ms_median": round(statistics.median(times[i]), 2),
                  "ratio_to_none": round(statistics.median(times[i]) / base, 3),
-                 "faces_per_frame": round(faces[i] / frames, 2)} for i, name in enumerate(MODES)]
+                 "faces_per_frame": round(faces[i] / frames, 2),
+                 "cpu_ms_median": round(statistics.median(cpu[i]), 2), "plan_us_per_view": plan_median(plan[i])}
+                for i, name in enumerate(MODES)]
     finally:
+        clock.close()
         for capture in captures:
             capture.release()
         for engine in engines:

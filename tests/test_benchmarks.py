@@ -169,9 +169,17 @@ def test_gpu_report_writes_markdown_and_json_without_imgui(ctx, tmp_path):
     assert {(r["n_mirrors"], r["path"]) for r in mirrors} == \
         {(n, p) for n in (0, 1, 2, 4, 8, 16) for p in ("per_mirror", "batched", "auto")}
     assert all(r["frames"] == 2 and r["frame_ms_median"] > 0 for r in mirrors)
+    # Each frame row carries its CPU time and, where the frames had reflection views, the
+    # planning time per view (none without mirrors).
+    assert all(0 < r["cpu_ms_median"] <= r["frame_ms_median"] for r in mirrors)
+    assert all((r["plan_us_per_view"] is None) == (r["reflection_views"] == 0) for r in mirrors)
+    assert all(r["plan_us_per_view"] > 0 for r in mirrors if r["n_mirrors"] == 16)
+    portal_rows = runs["portals"]["160x90"]["rows"]
+    assert all(r["cpu_ms_median"] > 0 and (r["plan_us_per_view"] is None) == (r["depth"] == 0) for r in portal_rows)
     assert [r["depth"] for r in runs["portals"]["160x90"]["rows"]] == list(range(9))
     probe_rows = runs["probes"]["160x90"]["rows"]
     assert [r["probe"] for r in probe_rows if "probe" in r] == ["none", "static", "on_change", "dynamic"]
+    assert all(r["cpu_ms_median"] > 0 and "plan_us_per_view" in r for r in probe_rows if "probe" in r)
     assert {(r["path"], r["size"]) for r in probe_rows if "capture_ms_median" in r} == \
         {(p, s) for p in ("six_pass", "layered") for s in (128, 512)}
 
@@ -180,8 +188,10 @@ def test_gpu_report_writes_markdown_and_json_without_imgui(ctx, tmp_path):
     assert portals["value"] == "frame_ms_median" and [r["160x90"] for r in portals["rows"]] == \
         [r["frame_ms_median"] for r in runs["portals"]["160x90"]["rows"]]
     assert ctx.info["GL_RENDERER"] in markdown
+    assert {t["value"] for t in report["medians"]["mirrors"]} == {"frame_ms_median", "cpu_ms_median",
+                                                                  "plan_us_per_view"}
     for heading in ("## OpenGL", "## Rendering paths", "## Benchmarks", "### mirrors: frame_ms_median by size",
-                    "## Test suite"):
+                    "### mirrors: plan_us_per_view by size", "### portals: cpu_ms_median by size", "## Test suite"):
         assert heading in markdown, heading
 
 
@@ -241,3 +251,99 @@ def test_path_verdicts_are_read_from_the_self_check_or_unchecked():
             raise RuntimeError("no geometry shaders")
 
     assert all("RuntimeError: no geometry shaders" in v["detail"] for v in verdicts_of(Broken()).values())
+
+
+def test_the_plan_clock_counts_the_view_trees_planning_and_leaves_the_engine_as_it_was(ctx):
+    """``PlanClock`` wraps ViewTree.render and the level's GL calls on their classes while
+    open: a frame of 8 mirrors counts the views the frame's stats count, a planning time
+    below the tree's whole time, and closing puts every method back."""
+    from benchmarks.mirrors import DT, MirrorRing, PlanClock
+    from engine.core.frame_io import Output
+    from engine.render.mirror_passes import MirrorPasses
+    from engine.render.scene_pass import ScenePass
+    from engine.render.targets import CaptureTarget
+    from engine.render.view_tree import ViewTree
+    from shell.app import Engine
+
+    originals = {(owner, name): vars(owner)[name] for owner, name in (*PlanClock.NOT_PLANNING, (ViewTree, "render"))
+                 if name in vars(owner)}
+    engine = Engine(MirrorRing(8), ctx)
+    capture = CaptureTarget(ctx, (160, 90))
+    whole = []
+    try:
+        with PlanClock() as clock:
+            assert vars(ViewTree)["render"] is not originals[ViewTree, "render"]
+            render = vars(ViewTree)["render"]
+
+            def timed(*args, **kwargs):  # the tree's whole time, around the clock's own wrapper
+                import time
+                start = time.perf_counter()
+                try:
+                    return render(*args, **kwargs)
+                finally:
+                    whole.append(time.perf_counter() - start)
+            ViewTree.render = timed
+            try:
+                engine.frame(DT, Output(capture.framebuffer, (160, 90)))
+                clock.reset()
+                whole.clear()
+                engine.frame(DT, Output(capture.framebuffer, (160, 90)))
+            finally:
+                ViewTree.render = render
+            views = engine.renderer.stats.reflection_views
+            assert views > 0 and clock.views == views
+            assert 0 < clock.plan_s < sum(whole)
+            assert clock.us_per_view() == clock.plan_s * 1e6 / views
+            clock.reset()
+            assert clock.us_per_view() is None
+    finally:
+        capture.release()
+        engine.close()
+    assert all(vars(owner)[name] is method for (owner, name), method in originals.items())
+    assert MirrorPasses.prepare_level is originals[MirrorPasses, "prepare_level"]
+    assert ScenePass.draw is originals[ScenePass, "draw"]
+
+
+def test_many_movers_rows_are_gathered_and_the_buffer_holds_every_rows_matrices(ctx):
+    """The ECS benchmark's scene with 6,400 entities, 64 moving (16 per batch): after the
+    frame that gathers the movers' rows at the front of their batches, a moving frame uploads
+    exactly the movers' rows in one span per batch, and every row, in the batch and in its GPU
+    buffer, holds its own entity's world matrix."""
+    import numpy as np
+
+    from benchmarks.ecs import DT, OUTPUT_SIZE, GridScene
+    from components import Transform
+    from engine.core.frame_io import Output
+    from engine.render.instances import INSTANCE_DTYPE
+    from engine.render.targets import CaptureTarget
+    from shell.app import Engine
+
+    engine = Engine(GridScene(6400), ctx)
+    capture = CaptureTarget(ctx, OUTPUT_SIZE)
+    output = Output(capture.framebuffer, OUTPUT_SIZE)
+    try:
+        for _ in range(3):
+            engine.frame(DT, output)
+        batches = [b for b in engine.renderer.batches.values() if b.count]
+        assert len(batches) == 4
+        writes = []
+        for batch in batches:
+            buffer_write = batch._buffer.write
+            batch._buffer.write = lambda data, offset=0, write=buffer_write: writes.append(len(data)) or \
+                write(data, offset=offset)
+        engine.frame(DT, output)
+        movers = len(engine.game.movers)
+        assert movers == 64
+        assert engine.renderer.stats.uploaded_bytes == movers * INSTANCE_DTYPE.itemsize
+        assert len(writes) == len(batches)
+        ctx.finish()
+        for batch in batches:
+            gpu = np.frombuffer(batch._buffer.read(batch.count * INSTANCE_DTYPE.itemsize), INSTANCE_DTYPE)
+            assert gpu.tobytes() == batch.rows[: batch.count].tobytes()
+            for row, entity in enumerate(batch.entity_at[: batch.count]):
+                assert batch.row_of[entity] == row and batch.rows["slots"][row, 3] == entity
+                model = engine.world.get(entity, Transform).world
+                assert batch.rows["model"][row].tobytes() == model.to_bytes()
+    finally:
+        capture.release()
+        engine.close()
