@@ -52,10 +52,10 @@ class ExtractSystem(esper.Processor):
         # gave a new row (a Slice removed in the frame it moved leaves it in another batch),
         # grouped by batch: each batch writes its rows in one go (InstanceBatch.write_transforms).
         frame = world.frame
-        transform_of = _transform_lookup(world)
+        component = esper.component_for_entity if esper.current_world == world.name else world.get
         for entities, moving in ((frame.moved, True), ((frame.added | joined) - frame.moved, False)):
             for batch, group in self._by_batch(entities).items():
-                batch.write_transforms(group, [transform_of(entity).world for entity in group], moving)
+                batch.write_transforms(group, [component(entity, Transform).world for entity in group], moving)
 
     def _by_batch(self, entities: set[int]) -> dict[InstanceBatch, list[int]]:
         """``entities`` that have a row, by their batch."""
@@ -120,11 +120,3 @@ class ExtractSystem(esper.Processor):
         for entity, batch in list(self._batch_of.items()):
             self._remove_instance(entity, batch)
 
-
-def _transform_lookup(world: World):
-    """``entity -> its Transform`` for entities known to have one: esper's own call when the
-    world is esper's current one (as in a step), else the world's."""
-    if esper.current_world == world.name:
-        component = esper.component_for_entity
-        return lambda entity: component(entity, Transform)
-    return lambda entity: world.get(entity, Transform)

@@ -6,6 +6,8 @@ import esper
 from components import Transform
 from engine.core.world import FrameEvents, World
 
+_NEW = object()  # not yet seen by the system (its parent_of has no entry)
+
 
 class TransformSystem(esper.Processor):
     """Updates ``Transform.world`` for changed entities and their descendants.
@@ -31,26 +33,28 @@ class TransformSystem(esper.Processor):
             return
         parent_of, children = self._parent_of, self._children
         moved, added = events.moved, events.added
-        lookup = _component_lookup(world)
+        exists, component, deleted = _lookups(world)
+        set_world = object.__setattr__
         dirty: set[int] = set()  # entities in a hierarchy: their subtrees are worked out below
         for entity in changed:
-            transform = lookup(entity)
+            transform = component(entity, Transform) if exists(entity) and entity not in deleted else None
             if transform is None:
                 if entity in parent_of:
                     events.removed.add(entity)
                     self._unlink(entity)
                     dirty.update(children.pop(entity, ()))  # orphans become roots
                 continue
-            known = entity in parent_of
-            (moved if known else added).add(entity)
-            if transform.parent is None and parent_of.get(entity) is None and not children.get(entity):
-                # The common case, a root without children: its world matrix is its local one,
-                # written here without the subtree walk.
-                parent_of[entity] = None
-                object.__setattr__(transform, "_world", transform.local_matrix())
+            parent = parent_of.get(entity, _NEW)
+            (added if parent is _NEW else moved).add(entity)
+            if (parent is not None and parent is not _NEW) or transform.parent is not None \
+                    or (children and children.get(entity)):
+                self._link(entity, transform.parent)
+                dirty.add(entity)
                 continue
-            self._link(entity, transform.parent)
-            dirty.add(entity)
+            # The common case, a root without children: its world matrix is its local one,
+            # written here without the subtree walk.
+            parent_of[entity] = None
+            set_world(transform, "_world", transform.local_matrix())
         if dirty:
             self._expand(dirty)
             for entity in dirty:
@@ -102,15 +106,10 @@ class TransformSystem(esper.Processor):
 
 
 
-def _component_lookup(world: World):
-    """``entity -> its Transform`` (None when it has none, or is deleted or gone), through
-    esper's own calls when the world is esper's current one (as in a step: one dict
-    lookup each, not the world's checks per call), else through the world."""
-    if esper.current_world != world.name:
-        return lambda entity: world.try_get(entity, Transform) if world.exists(entity) else None
-    deleted = world.deleted()
-    exists, component = esper.entity_exists, esper.try_component
-
-    def lookup(entity: int) -> Transform | None:
-        return component(entity, Transform) if exists(entity) and entity not in deleted else None
-    return lookup
+def _lookups(world: World):
+    """(exists(entity), component(entity, kind), deleted): esper's own calls when the world is
+    esper's current one (as in a step: a dict lookup each, not the world's checks per call),
+    else the world's."""
+    if esper.current_world == world.name:
+        return esper.entity_exists, esper.try_component, world.deleted()
+    return world.exists, world.try_get, ()
