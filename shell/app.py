@@ -17,7 +17,7 @@ from collections.abc import Callable
 import esper
 import moderngl
 
-from components import FlyController, yaw_pitch_rotation
+from components import FlyController, Mirror, Portal, yaw_pitch_rotation
 from engine.core.errors import GLPassError
 from engine.core.frame_io import Input, Output
 from engine.core.game import Game, GameSystem, schedule_order
@@ -185,6 +185,14 @@ class Engine:
         self.world.resources[RenderStats] = self.renderer.stats = stats
         self.world.step(dt)
         self.world.resources[Input].end_frame()
+        if self.renderer.needs_preparing:
+            # The batches this frame made (the level's, on its first frame) get every
+            # program a view may draw them with now, not when a mirror first comes into view.
+            surfaces = [s for _, s in self.world.query_one(Mirror)] + [s for _, s in self.world.query_one(Portal)]
+            scale = max((getattr(s, "resolution_scale", 1.0) for s in surfaces), default=None)
+            self.renderer.prepare_programs(bool(surfaces) and self.reflection_system.path != "per_mirror", scale)
+            if surfaces:
+                self.reflection_system.tree.passes.prepare()
         error = self.ctx.error
         if error != "GL_NO_ERROR":
             raise RuntimeError(f"OpenGL error after frame {self.world.frame_index}: {error}")

@@ -231,3 +231,63 @@ def test_the_uncached_path_draws_the_same(ctx, monkeypatch):
     for (rgb, ids), (want_rgb, want_ids) in zip(got, expected, strict=True):
         np.testing.assert_array_equal(ids, want_ids)
         np.testing.assert_array_equal(rgb, want_rgb)
+
+
+# --- programs built when a level loads -----------------------------------------------------
+def _compiles(runner) -> list:
+    """Records each program the engine's shader library builds from now on."""
+    library = runner.engine.renderer.shaders
+    built = []
+    build = library._build
+
+    def counted(key, files):
+        built.append(key)
+        return build(key, files)
+    library._build = counted
+    return built
+
+
+@pytest.mark.parametrize("path", ["batched", "per_mirror", "auto"])
+def test_a_mirror_coming_into_view_compiles_no_program(scene, path, monkeypatch):
+    """After the engine is made and one frame drawn looking away from the mirror, turning to
+    it builds nothing: the level's batches got their programs (every batched invocation
+    count too) and vertex arrays, and the first reflection level its targets, after that
+    first frame (``Renderer.prepare_programs``)."""
+    from tests.test_hot_reload import room
+
+    runner = scene(room, (160, 120))
+    runner.engine.reflection_system.path = path
+    runner.engine.place_camera(0.0, 1.4, 4.0, 180.0, 0.0)  # the mirror is behind
+    runner.frame()
+    assert runner.stats.reflection_views == 0
+    built = _compiles(runner)
+    made = []
+    for name in ("framebuffer", "texture", "vertex_array"):
+        method = getattr(moderngl.Context, name)
+
+        def counted(self, *args, _name=name, _method=method, **kwargs):
+            made.append(_name)
+            return _method(self, *args, **kwargs)
+        monkeypatch.setattr(moderngl.Context, name, counted)
+    runner.engine.place_camera(0.0, 1.4, 4.0, 0.0, -5.0)
+    runner.frame()
+    assert runner.stats.reflection_views > 0
+    assert built == []
+    assert made == []
+
+
+def test_without_preparing_the_first_mirror_compiles(scene):
+    """The check above is not empty: without ``prepare_programs`` the same turn builds the
+    batched path's programs."""
+    from tests.test_hot_reload import room
+
+    runner = scene(room, (160, 120))
+    runner.engine.reflection_system.path = "batched"
+    runner.engine.renderer.prepare_programs = lambda *args: 0
+    runner.engine.place_camera(0.0, 1.4, 4.0, 180.0, 0.0)
+    runner.frame()
+    built = _compiles(runner)
+    runner.engine.place_camera(0.0, 1.4, 4.0, 0.0, -5.0)
+    runner.frame()
+    assert runner.stats.reflection_views > 0
+    assert built

@@ -176,11 +176,15 @@ class _CompositeDraw:
             self.format, self.attributes = _instance_format(self.program)
             self.release()
         if self.rows is None or self.rows.size < len(rows):
-            self.release()
-            self.rows = self.ctx.buffer(reserve=max(len(rows), 16 * _COMPOSITE_ROW.size))
-            self.vao = self.ctx.vertex_array(self.program, [(self.rows, self.format, *self.attributes)])
+            self.prepare(len(rows))
         self.rows.write(rows)
         self.vao.render(moderngl.TRIANGLE_STRIP, vertices=4, instances=len(rows) // _COMPOSITE_ROW.size)
+
+    def prepare(self, size: int = 0) -> None:
+        """A rows buffer of at least ``size`` bytes (16 rows at least) and its vertex array."""
+        self.release()
+        self.rows = self.ctx.buffer(reserve=max(size, 16 * _COMPOSITE_ROW.size))
+        self.vao = self.ctx.vertex_array(self.program, [(self.rows, self.format, *self.attributes)])
 
     def release(self) -> None:
         for obj in (self.vao, self.rows):
@@ -305,13 +309,26 @@ class MirrorPasses:
             triangles.append(_RESET_RECT.pack(x0, y0, x1, y0, x1, y1, x0, y0, x1, y1, x0, y1))
         corners = b"".join(triangles)
         if self._reset_rects is None or self._reset_rects.size < len(corners):
-            if self._reset_vao is not None:
-                self._reset_vao.release()
-                self._reset_rects.release()
-            self._reset_rects = self.ctx.buffer(reserve=max(len(corners), 64 * _RESET_RECT.size))
-            self._reset_vao = self.ctx.vertex_array(self.reset, [(self._reset_rects, "2f", "in_position")])
+            self._reserve_resets(len(corners))
         self._reset_rects.write(corners)
         self._reset_vao.render(moderngl.TRIANGLES, vertices=6 * len(triangles))
+
+    def _reserve_resets(self, size: int) -> None:
+        if self._reset_vao is not None:
+            self._reset_vao.release()
+            self._reset_rects.release()
+        self._reset_rects = self.ctx.buffer(reserve=max(size, 64 * _RESET_RECT.size))
+        self._reset_vao = self.ctx.vertex_array(self.reset, [(self._reset_rects, "2f", "in_position")])
+
+    def prepare(self) -> None:
+        """The reset's and every composite variant's buffers and vertex arrays, made now
+        (when a level loads: ``Renderer.prepare_programs``'s caller) rather than when the
+        first mirror comes into view."""
+        if self._reset_vao is None:
+            self._reserve_resets(0)
+        for draw in self.composites.values():
+            if draw.vao is None:
+                draw.prepare()
 
     def prepare_composites(self, composites: list[Composite], parent_size: tuple[int, int]) -> PreparedComposites:
         """The CPU half of compositing a level into a parent of ``parent_size`` pixels: rough

@@ -105,6 +105,8 @@ class Renderer:
         self.path_checks = PathChecks(self)
         # When set, the only batches scene passes draw (the path self-check's own scene).
         self.scene_only: list[InstanceBatch] | None = None
+        # A batch was made since prepare_programs last ran (Engine.frame calls it then).
+        self.needs_preparing = False
 
     @property
     def antialias(self) -> str:
@@ -145,7 +147,27 @@ class Renderer:
             batch.probe = probe
             batch.transparent = bool(transparent_entity)
             self._order_stale = True
+            self.needs_preparing = True
         return batch
+
+    def prepare_programs(self, reflections: bool, level_scale: float | None = None) -> int:
+        """Build now what drawing the current batches will need, rather than when it is first
+        drawn: each batch's scene program (and vertex array) for root and per-mirror views,
+        and, with ``reflections`` (the world has mirrors or portals and the batched path may
+        be taken), its builds for every geometry-shader invocation count a level's batched
+        draw can take, the level's view table and the reflection sampler.  With
+        ``level_scale`` (the largest ``resolution_scale`` of the world's surfaces), the first
+        reflection level's targets too, at the root's size times it (the size the view tree
+        gives a level when that surface is in it).  A mirror coming into view for the first
+        time then compiles and allocates nothing (three.js users see a hitch there,
+        mrdoob/three.js#30568).  The composite, claim and reset programs are built when the
+        view tree is made.  Returns the number of programs built."""
+        self.needs_preparing = False
+        built = self.scene_pass.prepare([b for b in self.batches.values() if b.count], reflections)
+        if level_scale is not None and len(self.levels) and self.targets is not None:
+            width, height = self.targets.size
+            self.levels.get(1, (max(1, round(width * level_scale)), max(1, round(height * level_scale))))
+        return built
 
     def drop_batch_if_empty(self, batch: InstanceBatch) -> None:
         if batch.count:

@@ -166,6 +166,22 @@ class ScenePass:
             self._uniforms[program.glo] = tuple(program.get(name, None) for name in _PER_DRAW_UNIFORMS)
         return program
 
+    def prepare(self, batches, reflections: bool) -> int:
+        """Build the programs and vertex arrays ``batches`` will be drawn with: invocations 0
+        (root and per-mirror views) and, with ``reflections``, every invocation count of the
+        batched path (``BATCHED_INVOCATIONS``), its view table and the reflection sampler.
+        Returns how many programs were built (0 when all were there)."""
+        before = len(self._programs)
+        counts = (0, *BATCHED_INVOCATIONS) if reflections else (0,)
+        for batch in batches:
+            for invocations in counts:
+                batch.vao(self.program(batch.variants, invocations, "", batch.normal_map is not None))
+        if reflections:
+            if self._views_ubo is None:
+                self._views_ubo = self.ctx.buffer(reserve=VIEWS_BLOCK_BYTES)
+            self._reflection_filter()
+        return len(self._programs) - before
+
     def _draw_batches(self, batches, invocations: int, masked: bool, node: int, layered: str = "",
                       skip: int = 0, before_draw: Callable[[], None] | None = None, hide: int = 0) -> None:
         """One instanced draw per batch, each with the program of its variants.  A program's
@@ -406,6 +422,10 @@ def geometry_invocations(view_count: int) -> int:
     no view still cost a pass over the triangles; the rounding bounds the programs built)."""
     needed = -(-view_count // VIEWS_PER_INVOCATION)
     return min(1 << max(0, needed - 1).bit_length(), -(-MAX_BATCHED_VIEWS // VIEWS_PER_INVOCATION))
+
+
+# Every invocation count ``geometry_invocations`` gives (1 to MAX_BATCHED_VIEWS views).
+BATCHED_INVOCATIONS = tuple(sorted({geometry_invocations(n) for n in range(1, MAX_BATCHED_VIEWS + 1)}))
 
 
 def _back_to_front(batches, eye: glm.vec3) -> list:
