@@ -33,11 +33,14 @@ class TransformSystem(esper.Processor):
             return
         parent_of, children = self._parent_of, self._children
         moved, added = events.moved, events.added
-        exists, component, deleted = _lookups(world)
+        component, deleted = _lookups(world)
         set_world = object.__setattr__
         dirty: set[int] = set()  # entities in a hierarchy: their subtrees are worked out below
         for entity in changed:
-            transform = component(entity, Transform) if exists(entity) and entity not in deleted else None
+            try:
+                transform = None if entity in deleted else component(entity, Transform)
+            except KeyError:  # gone from the world (deleted, and cleared, since it changed)
+                transform = None
             if transform is None:
                 if entity in parent_of:
                     events.removed.add(entity)
@@ -107,9 +110,7 @@ class TransformSystem(esper.Processor):
 
 
 def _lookups(world: World):
-    """(exists(entity), component(entity, kind), deleted): esper's own calls when the world is
-    esper's current one (as in a step: a dict lookup each, not the world's checks per call),
-    else the world's."""
-    if esper.current_world == world.name:
-        return esper.entity_exists, esper.try_component, world.deleted()
-    return world.exists, world.try_get, ()
+    """(component(entity, kind), the entities deleted this frame): esper's own call when the
+    world is esper's current one (as in a step: a dict lookup, not the world's checks per
+    call), else the world's; either raises KeyError for an entity that is gone."""
+    return esper.try_component if esper.current_world == world.name else world.try_get, world.deleted()
