@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from engine.render import bindings
-from engine.render.bindings import PassState, apply_pass_state, invalidate, set_front_face
+from engine.render.bindings import PassState, apply_pass_state, bind_uniform_block, invalidate, set_front_face
 from engine.render.raw_gl import _load
 from engine.render.targets import release_framebuffer
 from tests.test_pass_state import CAMERAS, frames, hall
@@ -78,6 +78,31 @@ def test_a_state_applied_again_sets_nothing(ctx, setter_calls):
         assert setter_calls["front_face"] == 1 and ctx.front_face == "ccw"
     finally:
         release_framebuffer(target)
+
+
+def test_a_uniform_buffer_is_bound_once_until_another_or_invalidate(ctx, monkeypatch):
+    binds = []
+    method = moderngl.Buffer.bind_to_uniform_block
+
+    def counted(self, binding=0, **kwargs):
+        binds.append((self, binding))
+        return method(self, binding, **kwargs)
+    monkeypatch.setattr(moderngl.Buffer, "bind_to_uniform_block", counted)
+    one, two = ctx.buffer(reserve=64), ctx.buffer(reserve=64)
+    try:
+        invalidate(ctx)
+        for _ in range(3):
+            bind_uniform_block(ctx, one, 0)
+        bind_uniform_block(ctx, one, 1)
+        assert binds == [(one, 0), (one, 1)]
+        bind_uniform_block(ctx, two, 0)
+        bind_uniform_block(ctx, one, 0)
+        invalidate(ctx)
+        bind_uniform_block(ctx, one, 0)
+        assert binds[2:] == [(two, 0), (one, 0), (one, 0)]
+    finally:
+        one.release()
+        two.release()
 
 
 def test_the_cache_holds_across_framebuffer_switches(ctx):

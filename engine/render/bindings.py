@@ -22,7 +22,9 @@ moderngl's own record for the bound framebuffer (``ctx.viewport``, ``ctx.scissor
 keeps them per framebuffer and ``Framebuffer.use`` sets them again), so switching
 framebuffers, or anyone setting them with moderngl's ``ctx.viewport``/``ctx.scissor``
 (as passes do per view or claim), needs nothing more.  Within a pass, a winding changed per
-view goes through ``set_front_face`` so the record stays true.
+view goes through ``set_front_face`` so the record stays true.  Uniform buffers are bound
+to their binding points likewise once (``bind_uniform_block``: once a frame for the camera
+and lights blocks, not once a view or pass).
 
 **``invalidate(ctx)``** must be called after any other GL state is set other than through
 these functions: moderngl's ``enable_only``/``enable``/``depth_func``/``blend_func``/
@@ -158,12 +160,13 @@ def _transition(known: int, wanted: int) -> tuple[tuple[str, object, bool], ...]
 class _StateCache:
     """What ``apply_pass_state`` last set on one context."""
 
-    __slots__ = ("fixed", "front_face", "rects_known")
+    __slots__ = ("fixed", "front_face", "rects_known", "blocks")
 
     def __init__(self) -> None:
         self.fixed = _UNKNOWN        # the number of the (flags, functions, clips) set
         self.front_face: str | None = None
         self.rects_known = False     # False: set the viewport and scissor whatever moderngl says
+        self.blocks: dict[int, moderngl.Buffer] = {}  # uniform-block binding point -> the buffer bound
 
 
 # False: every apply sets every piece of state, as before the cache (kept for the
@@ -188,6 +191,18 @@ def invalidate(ctx: moderngl.Context) -> None:
         cache.fixed = _UNKNOWN
         cache.front_face = None
         cache.rects_known = False
+        cache.blocks.clear()
+
+
+def bind_uniform_block(ctx: moderngl.Context, buffer: moderngl.Buffer, binding: int) -> None:
+    """Bind ``buffer`` to uniform-block ``binding`` unless it is the buffer bound there
+    (binding points are the context's, shared by every program; the buffer object itself
+    is remembered, so a released buffer whose GL name is reused is bound again).  With
+    ``CACHE_STATE`` off it binds every time."""
+    blocks = _cache(ctx).blocks
+    if blocks.get(binding) is not buffer or not CACHE_STATE:
+        buffer.bind_to_uniform_block(binding)
+        blocks[binding] = buffer
 
 
 def set_front_face(ctx: moderngl.Context, front_face: str) -> None:

@@ -16,7 +16,7 @@ import moderngl
 from engine.assets.mesh import Mesh
 from engine.assets.texture_data import TextureData
 from engine.core.errors import GLLimitError, GLPassError
-from engine.render.bindings import CAMERA_BINDING
+from engine.render.bindings import CAMERA_BINDING, bind_uniform_block
 from engine.render.gl_context import GLCapabilities
 from engine.render.instances import GpuMesh, InstanceBatch
 from engine.render.path_checks import PathChecks
@@ -262,7 +262,7 @@ class Renderer:
     def bind_view(self, view: View) -> None:
         """Make ``view`` the Camera block every program reads."""
         self.camera_ubo.write(view.camera_block())
-        self.camera_ubo.bind_to_uniform_block(CAMERA_BINDING)
+        bind_uniform_block(self.ctx, self.camera_ubo, CAMERA_BINDING)  # bound once a frame
 
     def opaque_batches(self) -> list[InstanceBatch]:
         """Non-empty opaque batches, smallest extent first (re-sorted after uploads)."""

@@ -48,6 +48,7 @@ from engine.render.bindings import (
     VIEWS_BINDING,
     PassState,
     apply_pass_state,
+    bind_uniform_block,
     set_front_face,
 )
 from engine.render.raw_gl import LayeredCubeTarget, inspect_bound_target
@@ -249,7 +250,7 @@ class ScenePass:
         apply_pass_state(self.ctx, _BATCHED_SCENE if options.batched else _SCENE, viewport)
         if options.masked:
             targets.node.use(NODE_UNIT)
-        renderer.lights_ubo.bind_to_uniform_block(LIGHTS_BINDING)
+        bind_uniform_block(self.ctx, renderer.lights_ubo, LIGHTS_BINDING)
         renderer.sky.use(SKY_UNIT)
         sampler = self._reflection_filter() if options.reflection_filter else None
         if sampler is not None:
@@ -309,7 +310,7 @@ class ScenePass:
         if self._views_ubo is None:
             self._views_ubo = ctx.buffer(reserve=VIEWS_BLOCK_BYTES)
         self._views_ubo.write(views_block(views))
-        self._views_ubo.bind_to_uniform_block(VIEWS_BINDING)
+        bind_uniform_block(ctx, self._views_ubo, VIEWS_BINDING)
         scissor = union_rect([v.scissor or (0, 0, *v.size) for v in views])
         ctx.scissor = scissor
         set_front_face(ctx, "ccw")  # mirrored views reverse their vertices in the geometry shader
@@ -336,8 +337,8 @@ class ScenePass:
         if self._views_ubo is None:
             self._views_ubo = ctx.buffer(reserve=VIEWS_BLOCK_BYTES)
         self._views_ubo.write(views_block(views))
-        self._views_ubo.bind_to_uniform_block(VIEWS_BINDING)
-        renderer.lights_ubo.bind_to_uniform_block(LIGHTS_BINDING)
+        bind_uniform_block(ctx, self._views_ubo, VIEWS_BINDING)
+        bind_uniform_block(self.ctx, renderer.lights_ubo, LIGHTS_BINDING)
         renderer.sky.use(SKY_UNIT)
         renderer.bind_view(views[0])  # the shared eye, for what reads the Camera block
         size = (0, 0, target.size, target.size)
