@@ -110,12 +110,7 @@ class InstanceBatch:
         movers keep their rows: a few writes cost less than the swaps."""
         index = self.row_of
         if moving and len(entities) >= _GATHER_AT:
-            front = self._moving
-            for entity in entities:
-                if index[entity] >= front:
-                    self._swap(index[entity], front)
-                    front += 1
-            self._moving = front
+            self._gather(np.fromiter((index[entity] for entity in entities), np.int64, len(entities)))
         rows = [index[entity] for entity in entities]
         self.rows["model"][rows] = np.frombuffer(glm.array(models).to_bytes(), np.float32).reshape(-1, 16)
         self.rows["normal_matrix"][rows] = np.frombuffer(
@@ -123,16 +118,27 @@ class InstanceBatch:
             np.float32).reshape(-1, 9)
         self._dirty.update(rows)
 
-    def _swap(self, a: int, b: int) -> None:
-        """Exchange rows ``a`` and ``b`` (both marked for upload)."""
-        if a == b:
+    def _gather(self, movers: np.ndarray) -> None:
+        """Grow the front block of moving rows by the ``movers`` (distinct rows) outside it:
+        each mover past the grown block trades places with a row in it that is not a mover
+        (all at once; the swapped rows are marked for upload)."""
+        front = self._moving
+        outside = movers[movers >= front]
+        if not len(outside):
             return
-        rows, entity_at = self.rows, self.entity_at
-        rows[[a, b]] = rows[[b, a]]
-        entity_at[a], entity_at[b] = entity_at[b], entity_at[a]
-        self.row_of[entity_at[a]], self.row_of[entity_at[b]] = a, b
-        self._dirty.add(a)
-        self._dirty.add(b)
+        end = front + len(outside)
+        inside = np.zeros(end - front, bool)
+        inside[outside[outside < end] - front] = True
+        far = outside[outside >= end]                     # movers to bring in
+        free = np.flatnonzero(~inside) + front            # as many rows of the block that are not movers
+        rows, entity_at, index = self.rows, self.entity_at, self.row_of
+        rows[free], rows[far] = rows[far], rows[free]     # fancy indexing copies: a true exchange
+        for a, b in zip(free.tolist(), far.tolist(), strict=True):
+            entity_at[a], entity_at[b] = entity_at[b], entity_at[a]
+            index[entity_at[a]], index[entity_at[b]] = a, b
+        self._dirty.update(free.tolist())
+        self._dirty.update(far.tolist())
+        self._moving = end
 
     def remove(self, entity: int) -> None:
         index = self.row_of.pop(entity)
