@@ -12,8 +12,10 @@ level, and (next) each face of a cube-map probe.  For each view it draws
 Programs are specialised: a batch whose instances all use the same material variants is
 drawn with a build of ``scene.frag`` whose slots are those variants as constants (the
 other cases of each slot's switch compile away; llvmpipe would otherwise run every case
-of every slot for every pixel), compiled on first use and cached; a batch of mixed
-variants uses the build that switches per instance.
+of every slot for every pixel), built once and cached; a batch of mixed variants uses the
+build that switches per instance.  A level's batches get every build a view may need
+(``prepare``: root and per-mirror views, each batched invocation count) after its first
+frame, so a mirror first coming into view compiles nothing.
 
 ``SceneOptions`` says how: clear the target first (a root view) or keep the depth mask a
 reflection level's claims wrote; draw only the pixels the target's node image gives each
