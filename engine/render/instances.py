@@ -109,14 +109,15 @@ class InstanceBatch:
         scattered row (1,000 movers among 100,000 rows: 4 writes a frame, not 1,000).  A few
         movers keep their rows: a few writes cost less than the swaps."""
         index = self.row_of
-        if moving and len(entities) >= _GATHER_AT:
-            self._gather(np.fromiter((index[entity] for entity in entities), np.int64, len(entities)))
-        rows = [index[entity] for entity in entities]
+        rows = np.array([index[entity] for entity in entities], np.int64)
+        if moving and len(rows) >= _GATHER_AT and rows.max() >= self._moving:  # some outside the block
+            self._gather(rows)
+            rows = np.array([index[entity] for entity in entities], np.int64)
         self.rows["model"][rows] = np.frombuffer(glm.array(models).to_bytes(), np.float32).reshape(-1, 16)
         self.rows["normal_matrix"][rows] = np.frombuffer(
             glm.array([glm.transpose(glm.inverse(glm.mat3(model))) for model in models]).to_bytes(),
             np.float32).reshape(-1, 9)
-        self._dirty.update(rows)
+        self._dirty.update(rows.tolist())
 
     def _gather(self, movers: np.ndarray) -> None:
         """Grow the front block of moving rows by the ``movers`` (distinct rows) outside it:
