@@ -92,6 +92,11 @@ def rotation(value: Any) -> glm.quat:
     A 3-tuple is refused: glm reads it as Euler angles in radians, which is rarely what a
     caller meant; :func:`euler_rotation` takes degrees by name.
     """
+    if type(value) is glm.quat:  # the common case, a game's every rotation write: the same
+        w, x, y, z = value.w, value.x, value.y, value.z  # arithmetic as below, without the checks
+        norm = math.sqrt(w * w + x * x + y * y + z * z)  # a finite non-zero norm needs
+        if norm != 0.0 and math.isfinite(norm):  # finite parts; anything else is refused below
+            return glm.quat(w / norm, x / norm, y / norm, z / norm)
     if isinstance(value, (glm.vec3, glm.dvec3)) or (not isinstance(value, (glm.quat, glm.dquat))
                                                     and len(_parts(value)) == 3):
         raise ComponentValueError(
