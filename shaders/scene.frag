@@ -214,6 +214,27 @@ vec3 apply_emissive(uint variant, vec3 color, Surface s) {
     }
 }
 
+#ifdef CHECKER
+// A generated checker drawn from its cells (engine.render.renderer.checker_look): the share
+// of the pixel's footprint on odd cells, box-filtered in closed form (the integral of the
+// cells' square wave over the footprint fwidth(p) wide, as in Inigo Quilez's filtered
+// checkerboard), so edges are sharp up close and the board averages to grey far off.
+uniform float checker_cells;  // cells across the UV square
+uniform vec3 checker_even;    // linear colour of cells whose integer coordinates sum even
+uniform vec3 checker_odd;
+
+vec3 checker_colour(vec2 uv) {
+    vec2 p = uv * checker_cells;
+    vec2 w = 1.25 * fwidth(p) + 1e-4;  // a box a little wider than the pixel: no moire at grazing angles
+    vec2 i = 2.0 * (abs(fract((p - 0.5 * w) * 0.5) - 0.5) - abs(fract((p + 0.5 * w) * 0.5) - 0.5)) / w;
+    float odd = 0.5 - 0.5 * i.x * i.y;
+    // Where a cell is under a pixel or two, what is left of the pattern beats with the
+    // pixel grid: fade it to the board's mean, as a texture's smallest mips do.
+    odd = mix(odd, 0.5, smoothstep(0.75, 1.5, max(w.x, w.y)));
+    return mix(checker_even, checker_odd, odd);
+}
+#endif
+
 void main() {
     if (masked && texelFetch(node_map, ivec2(gl_FragCoord.xy), 0).r != node_index) discard;
     Surface s;
@@ -225,7 +246,11 @@ void main() {
     s.normal = mapped_normal(s.normal, v_world_pos, v_uv, v_surface.w);
 #endif
     vec4 base = v_color;
+#ifdef CHECKER
+    base.rgb *= checker_colour(v_uv);
+#else
     if (has_albedo_map) base *= texture(albedo_map, v_uv);
+#endif
     s.albedo = base.rgb;
     s.alpha = base.a;
     s.metallic = v_surface.x;

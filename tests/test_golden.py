@@ -60,7 +60,8 @@ def _h200_frames() -> dict[str, Path]:
 
 def test_hardware_rule_accepts_the_h200_frames():
     """Every frame an H200 rendered of a golden case passes the hardware rule against its
-    llvmpipe reference (needs no GPU: the frames are files).  They were rendered with the
+    llvmpipe reference as it was then (``golden.CALIBRATION_DIR``; needs no GPU: the frames
+    are files).  They were rendered with the
     GPU's own filtering policy, before render_case set llvmpipe's, so they are a worse case
     than a GPU running the tests now.  They have no id images: the hardware rule's id limit
     is not checked here and is not calibrated."""
@@ -68,7 +69,7 @@ def test_hardware_rule_accepts_the_h200_frames():
     assert len(frames) >= 17, f"expected the 17 H200 frames in {H200_FRAMES}, found {sorted(frames)}"
     refused = {}
     for name, path in frames.items():
-        frame, reference = golden_noise.load_stored(path), golden.load_reference(name)
+        frame, reference = golden_noise.load_stored(path), golden.load_calibration_reference(name)
         # They are GPU frames indeed: the software rule would refuse every one.
         assert np.abs(frame.rgb.astype(np.int16) - reference.rgb.astype(np.int16)).mean() > 1.0, name
         problems = golden.hardware_difference(frame, reference).failures()
@@ -117,7 +118,7 @@ def test_hardware_rule_catches_real_changes(ctx, change, name, measure):
     if prepare_context(ctx).software and H200_FRAMES.is_dir():  # the change's difference is llvmpipe's alone
         gpu = golden_noise.with_change(golden_noise.load_stored(golden_noise.stored_frames(H200_FRAMES)[name]),
                                        reference, changed)
-        assert golden.hardware_difference(gpu, reference).failures(), \
+        assert golden.hardware_difference(gpu, golden.load_calibration_reference(name)).failures(), \
             f"{change}: the hardware rule passes the H200 frame of {name} with the change added"
 
 

@@ -7,7 +7,7 @@ from pyglm import glm
 
 from components import ComponentValueError, DirectionalLight, Emissive, Material, MeshRef, Mirror, Skybox, Transform
 from engine.assets.mesh import box, plane, quad, sphere
-from engine.assets.texture_data import checker_texture
+from engine.assets.texture_data import TextureData, checker_texture
 from engine.core.reflection_math import plane_from_point_normal, reflection_matrix
 from engine.render.sky import sky_radiance
 from engine.resources import Surfaces
@@ -330,7 +330,9 @@ def test_reflection_filtering_changes_only_the_mirrors_pixels(scene):
     def build(world):
         base_scene(world)
         look_from(world, (0.0, 1.0, 6.0), target=(0.0, 1.0, 0.0))
-        world.spawn(Transform(), MeshRef(plane(60, 60, uv_repeat=30)), Material(texture=checker_texture(64, 8)))
+        # A sampled texture (a generated checker is drawn from its cells, not filtered).
+        ground = TextureData(checker_texture(64, 8).pixels.copy(), name="sampled checker")
+        world.spawn(Transform(), MeshRef(plane(60, 60, uv_repeat=30)), Material(texture=ground))
         ents["mirror"] = mirror_wall(world, position=(0, 1.5, -2), size=(4, 3),
                                      rotation=glm.angleAxis(glm.radians(35.0), glm.vec3(0, 1, 0)))
 

@@ -77,6 +77,10 @@ class InstanceBatch:
         # Drawn in the scene pass's transparent slot (blended, farthest first) instead of
         # with the opaque batches: a material whose alpha is below 1 (Renderer.batch_for).
         self.transparent = False
+        # A generated checker texture drawn analytically (scene.frag's CHECKER build): its
+        # cells across the UV square, and the linear colours of the cells whose integer
+        # coordinates sum even and odd (``checker_look``); None: sampled as any texture.
+        self.checker: tuple[float, tuple[float, float, float], tuple[float, float, float]] | None = None
 
     # --- rows ----------------------------------------------------------------------------
     def add(self, entity: int) -> np.void:

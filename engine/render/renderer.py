@@ -57,6 +57,35 @@ class RenderStats:
     paths_refused: tuple[str, ...] = ()
 
 
+def checker_look(texture: TextureData | None) -> tuple[float, tuple, tuple] | None:
+    """How the scene pass draws a generated checker (``checker_texture``) analytically: its
+    cells across the UV square and the linear colours of the cells whose integer coordinates
+    sum even and odd (the image's top-left cell, colour ``a``, is cell (0, squares - 1) in
+    GL's bottom-up UVs).  Drawn from its cells, filtered by each pixel's footprint, a checker
+    floor is crisp near the camera and grey far off, where a magnified texture of 16 texels
+    a cell was blurred with beaded edges.  None for any other texture, and for a checker
+    whose size is not a whole number of cells (its last cells are narrower: sampled)."""
+    source = getattr(texture, "source", None)
+    if not isinstance(source, dict) or "checker" not in source:
+        return None
+    size, squares = source["checker"]
+    if size % squares:
+        return None
+    a = _srgb_to_linear(source.get("a", (230, 230, 230)))
+    b = _srgb_to_linear(source.get("b", (40, 40, 48)))
+    even, odd = (b, a) if squares % 2 == 0 else (a, b)
+    return float(squares), even, odd
+
+
+def _srgb_to_linear(rgb) -> tuple[float, float, float]:
+    """Bytes of an sRGB colour as the GL's sRGB texture decode gives them."""
+    out = []
+    for byte in rgb:
+        c = byte / 255.0
+        out.append(c / 12.92 if c <= 0.04045 else ((c + 0.055) / 1.055) ** 2.4)
+    return tuple(out)
+
+
 class _Shared:
     """A GL object shared by reference count."""
 
@@ -145,6 +174,7 @@ class Renderer:
             batch = self.batches[key] = InstanceBatch(self.ctx, gpu_mesh, gpu_texture, gpu_normal_map)
             batch.key = key
             batch.probe = probe
+            batch.checker = checker_look(texture)
             batch.transparent = bool(transparent_entity)
             self._order_stale = True
             self.needs_preparing = True

@@ -72,8 +72,10 @@ class SceneOptions:
 ROOT_VIEW = SceneOptions()
 REFLECTION_LEVEL = SceneOptions(clear=False, masked=True, sky=False, reflection_filter=True)
 _PER_DRAW_UNIFORMS = ("masked", "sky_face_size", "node_index", "has_albedo_map", "transparent",
-                      "probe_face_size", "probe_position", "probe_box_min", "probe_box_max")
+                      "probe_face_size", "probe_position", "probe_box_min", "probe_box_max",
+                      "checker_cells", "checker_even", "checker_odd")
 _NO_PROBE = ((0.0, 0.0, 0.0, 0.0),) * 3
+_NO_CHECKER = (0.0, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
 _SCENE = PassState(depth_func="<", cull=True, clips=SCENE_CLIPS)
 _BATCHED_SCENE = PassState(depth_func="<", cull=True, clips=BATCHED_SCENE_CLIPS)
 # The sky's shaders write no gl_ClipDistance: a clip distance left on with no value written
@@ -114,12 +116,14 @@ class ScenePass:
         self._reflection_sampler: moderngl.Sampler | None = None
 
     def program(self, variants: tuple[int, int, int] | None = None, invocations: int = 0,
-                layered: str = "", normal_mapped: bool = False) -> moderngl.Program:
+                layered: str = "", normal_mapped: bool = False, checker: bool = False) -> moderngl.Program:
         """The scene program for a batch of ``variants`` (None: mixed, switched per
         instance): plain, batched (``invocations`` > 0: the geometry shader's) or a one-pass
         cube-map capture (``layered`` "culled" or "naive"), with or without a normal map
         (a build of its own: llvmpipe would run the map's derivatives and fetch for every
-        pixel behind a uniform branch), built once.  After a shader hot
+        pixel behind a uniform branch), and with or without the analytic checker (``CHECKER``:
+        a generated checker texture drawn from its cells, filtered by the pixel's footprint,
+        instead of sampled), built once.  After a shader hot
         reload the set-up is done again and the batches' vertex arrays are made again (the
         relinked program may read uniforms, samplers and vertex inputs the first build
         dropped)."""
@@ -130,7 +134,7 @@ class ScenePass:
             for batch in self.renderer.batches.values():
                 batch.drop_vertex_arrays()  # made again for the relinked programs' inputs
             self._reloads_seen = reloads
-        key = (invocations, layered, variants, normal_mapped)
+        key = (invocations, layered, variants, normal_mapped, checker)
         program = self._programs.get(key)
         if program is None:
             defines = {}
@@ -138,6 +142,8 @@ class ScenePass:
                 defines = {f"FIXED_{slot}": f"{value}u" for slot, value in zip(SLOTS, variants, strict=True)}
             if normal_mapped:
                 defines["NORMAL_MAP"] = "1"
+            if checker:
+                defines["CHECKER"] = "1"
             geometry = None
             if invocations:
                 geometry = "scene_batched.geom"
@@ -178,7 +184,8 @@ class ScenePass:
         counts = (0, *BATCHED_INVOCATIONS) if reflections else (0,)
         for batch in batches:
             for invocations in counts:
-                batch.vao(self.program(batch.variants, invocations, "", batch.normal_map is not None))
+                batch.vao(self.program(batch.variants, invocations, "", batch.normal_map is not None,
+                                       batch.checker is not None))
         if reflections:
             if self._views_ubo is None:
                 self._views_ubo = self.ctx.buffer(reserve=VIEWS_BLOCK_BYTES)
@@ -199,7 +206,8 @@ class ScenePass:
         for batch in batches:
             if not batch.count or (batch.count == 1 and batch.entity_at[0] in (skip, hide)):
                 continue
-            program = self.program(batch.variants, invocations, layered, batch.normal_map is not None)
+            program = self.program(batch.variants, invocations, layered, batch.normal_map is not None,
+                                   batch.checker is not None)
             uniforms = self._uniforms[program.glo]
             values = written.get(program.glo)
             if values is None:
@@ -224,7 +232,7 @@ class ScenePass:
                     self.renderer.sky.use(PROBE_UNIT)
                     probe_size = self._sky_size
             for i, value in enumerate((masked, self._sky_size, node, textured, batch.transparent, probe_size,
-                                       *lookup)):
+                                       *lookup, *(batch.checker or _NO_CHECKER))):
                 if values[i] != value and uniforms[i] is not None:
                     uniforms[i].value = values[i] = value
             if before_draw is not None:
