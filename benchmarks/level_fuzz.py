@@ -214,7 +214,8 @@ FILE_CASES: tuple[FileCase, ...] = (
     FileCase("a value nested 3000 deep", "mesh", "[" * 3000 + "]" * 3000, "nested too deeply"),
     FileCase("a 16-bit grey PNG at 50%", "texture", _file("assets/grey16.png"), texel=(128, 128, 128, 255)),
     FileCase("a float TIFF at 0.5", "texture", _file("assets/half.tiff"), texel=(128, 128, 128, 255)),
-    FileCase("a 16-bit flat normal map", "normal_map", _file("assets/flat16.png"), texel=(128, 128, 255, 255)),
+    FileCase("a 16-bit flat normal map", "normal_map", _file("assets/flat16.png"),
+             texel=(32768, 32768, 65535, 65535)),  # a normal map keeps a 16-bit file's values
     FileCase("a plain PNG", "texture", _file("assets/plain.png"), texel=(200, 100, 50, 255)),
     FileCase("a plain OBJ", "mesh", _file("assets/plain.obj")),
 )

@@ -58,7 +58,8 @@ class Material(TrackedComponent):
     ``engine/rules/mirror_rules.py``); the lookup is exact for distant things and shifts
     nearby ones too far; a bent lookup that would leave the mirror's own pixels keeps the
     flat one; and a mirror magnifies an 8-bit map's slope steps (1/127, about 0.45
-    degrees), so gentle slopes show as terraces: give mirror maps slopes well above that.
+    degrees), so gentle slopes show as terraces: give a mirror a 16-bit map (a 16-bit PNG
+    file, or uint16 pixels: uploaded as RGBA16, steps of 1/32767) or slopes well above that.
     """
 
     color: Any = field(default_factory=lambda: glm.vec4(0.8, 0.8, 0.8, 1.0))

@@ -372,17 +372,18 @@ def test_16_bit_tiffs_and_32_bit_integers(tmp_path):
 
 
 def test_a_16_bit_rgb_normal_map_keeps_its_normal(tmp_path):
-    """A flat 16-bit normal map (0.5, 0.5, 1.0) in a level is (128, 128, 255), not tilted."""
+    """A flat 16-bit normal map (0.5, 0.5, 1.0) in a level keeps its 16-bit values (not
+    tilted, not rounded to 8 bits); a 16-bit grey file as a normal map is three equal channels."""
     flat = np.tile(np.array([32768, 32768, 65535], np.uint16), (4, 4, 1))
     png(tmp_path / "flat16.png", flat, 2, depth=16)
     grey = np.full((4, 4), 32768, np.uint16)
     png(tmp_path / "grey16.png", grey, 0, depth=16)
     path = write_level(tmp_path, HEAD + entity(normal_map='{ file = "flat16.png" }'))
     pixels = load_level(path)._entities[0].components[2][1]["normal_map"].pixels
-    assert (np.abs(pixels[..., :3].astype(int) - (128, 128, 255)) <= 1).all()
+    assert pixels.dtype == np.uint16 and (pixels[..., :3] == (32768, 32768, 65535)).all()
     path = write_level(tmp_path, HEAD + entity(normal_map='{ file = "grey16.png" }'), "grey.toml")
     pixels = load_level(path)._entities[0].components[2][1]["normal_map"].pixels
-    assert (pixels[..., :3] == 128).all()
+    assert (pixels[..., :3] == 32768).all()
 
 
 # --- 6. generator arguments ----------------------------------------------------------------------

@@ -299,7 +299,7 @@ def _mesh(spec: Any, where: _Where) -> Mesh:
     return _cached(key, lambda: _MESH_MAKERS[kind](*args, **options))  # the generator records its source
 
 
-def _texture(spec: Any, where: _Where) -> TextureData:
+def _texture(spec: Any, where: _Where, normal_map: bool = False) -> TextureData:
     if not isinstance(spec, Mapping):
         raise ValueError(f"a texture is a table such as {{ checker = [128, 8] }}, {{ ripples = [256, 6] }} or "
                          f"{{ file = \"x.png\" }}, got {spec!r}")
@@ -311,8 +311,9 @@ def _texture(spec: Any, where: _Where) -> TextureData:
         path = _asset_path(spec.pop("file"), where)
         _no_more(spec, "texture file")
         info = check_asset_file(path, f"texture file {str(path)!r}")
-        key = ("texture", str(path), info.st_mtime_ns, info.st_size, info.st_ino)
-        texture = _cached(key, lambda: load_texture(path))
+        # A normal map keeps a 16-bit file's finer slopes (no terraces); a colour is 8 bits.
+        key = ("texture", str(path), info.st_mtime_ns, info.st_size, info.st_ino, normal_map)
+        texture = _cached(key, lambda: load_texture(path, keep_16_bits=normal_map))
         where.budget.take(key, texture.pixels.nbytes)
         return texture
     if "ripples" in spec and "checker" not in spec:
@@ -630,7 +631,7 @@ def _decode(cls_name: str, field: str, value: Any, where: _Where) -> Any:
     if cls_name == "MeshRef" and field == "mesh":
         return _mesh(value, where)
     if field == "texture" or (cls_name, field) == ("Material", "normal_map"):
-        return _texture(value, where)
+        return _texture(value, where, normal_map=field == "normal_map")
     if cls_name == "Transform" and field == "rotation":
         return _rotation(value)
     if cls_name == "Skybox" and field == "faces":

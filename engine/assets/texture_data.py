@@ -18,11 +18,12 @@ from engine.core.errors import AssetError
 
 @dataclass(eq=False)
 class TextureData:
-    """RGBA8 pixels, row 0 at the top (as image files store them): sRGB encoded colour for
+    """RGBA pixels, row 0 at the top (as image files store them): sRGB encoded colour for
     ``Material.texture``, linear data for ``Material.normal_map`` (the renderer reads each as
-    its field says). Eight bits a channel is what the renderer uploads: an image file with
-    16-bit or floating-point channels is scaled to them (``load_texture``), its finer steps
-    not kept."""
+    its field says).  Eight bits a channel, or sixteen (uint16) where the finer steps matter
+    and the upload keeps them: a normal map (uploaded as normalised 16-bit, RGBA16; a colour
+    texture is rounded to 8 bits at upload, sRGB has no 16-bit format).  ``load_texture``
+    scales every other file format to 8 bits."""
 
     ASSET_KIND = "texture"  # what Material.texture and normal_map check for (components do not import the engine)
 
@@ -34,10 +35,11 @@ class TextureData:
         p = np.asarray(self.pixels)
         if p.ndim != 3 or p.shape[2] not in (3, 4) or p.shape[0] < 1 or p.shape[1] < 1:
             raise AssetError(f"texture {self.name!r}: pixels must be HxWx3 or HxWx4, got shape {p.shape}")
-        if p.dtype != np.uint8:
-            raise AssetError(f"texture {self.name!r}: pixels must be uint8, got {p.dtype}")
+        if p.dtype not in (np.uint8, np.uint16):
+            raise AssetError(f"texture {self.name!r}: pixels must be uint8 (or uint16: a normal map's finer "
+                             f"slopes), got {p.dtype}")
         if p.shape[2] == 3:
-            p = np.concatenate([p, np.full(p.shape[:2] + (1,), 255, np.uint8)], axis=2)
+            p = np.concatenate([p, np.full(p.shape[:2] + (1,), np.iinfo(p.dtype).max, p.dtype)], axis=2)
         self.pixels = np.ascontiguousarray(p)
 
     @property
@@ -46,7 +48,13 @@ class TextureData:
 
     @property
     def has_alpha(self) -> bool:
-        return bool((self.pixels[..., 3] < 255).any())
+        return bool((self.pixels[..., 3] < np.iinfo(self.pixels.dtype).max).any())
+
+    def as_8_bits(self) -> np.ndarray:
+        """The pixels as uint8 (16-bit channels rounded: ``round(v * 255 / 65535)``)."""
+        if self.pixels.dtype == np.uint8:
+            return self.pixels
+        return ((self.pixels.astype(np.uint32) * 255 + 32767) // 65535).astype(np.uint8)
 
 
 MAX_TEXTURE_SIDE = 16384  # texels along a side of a texture the engine makes or loads (see below)
@@ -166,7 +174,7 @@ def pillow_image_module():
     return Image
 
 
-def load_texture(path: str | Path) -> TextureData:
+def load_texture(path: str | Path, keep_16_bits: bool = False) -> TextureData:
     """Read an image file (PNG, JPEG, TIFF, ...) with Pillow as RGBA8, row 0 at the top.
 
     Its size is checked from the header (``check_texture_size``) before any pixel is
@@ -175,13 +183,17 @@ def load_texture(path: str | Path) -> TextureData:
     of that), floating-point (mode F) as ``round(clip(v, 0, 1) * 255)`` (NaN is refused); 32-bit
     integer images have no agreed range and are refused. What is kept is 8 bits a channel:
     TextureData is what the renderer uploads, RGBA8, so a 16-bit normal map is rounded to 8
-    bits (the terraces the Material docstring notes). Values are not converted between linear
-    and sRGB: a file's 0.5 is 128, read as its Material field says."""
+    bits (the terraces the Material docstring notes), unless ``keep_16_bits`` (a normal map,
+    as level files load one): a 16-bit PNG is then decoded whole (pypng: Pillow reads a 16-bit
+    RGB PNG as 8 bits) into uint16 pixels. Values are not converted between linear and sRGB:
+    a file's 0.5 is 128, read as its Material field says."""
     if isinstance(path, bytes) or not isinstance(path, (str, os.PathLike)):
         raise AssetError(f"texture file path must be a str or pathlib.Path, got {type(path).__name__} {path!r}")
     path = Path(path)
     what = f"texture file {str(path)!r}"
     check_asset_file(path, what)
+    if keep_16_bits and _png_bit_depth(path) == 16:
+        return TextureData(_read_png_16(path, what), name=path.name, source={"file": str(path.resolve())})
     Image = pillow_image_module()
     try:
         with warnings.catch_warnings():
@@ -199,6 +211,38 @@ def load_texture(path: str | Path) -> TextureData:
     except Exception as exc:  # noqa: BLE001 - Pillow raises many kinds for a corrupt file
         raise AssetError(f"{what}: cannot be read as an image ({type(exc).__name__}: {exc})") from None
     return TextureData(pixels, name=path.name, source={"file": str(path.resolve())})
+
+
+def _png_bit_depth(path: Path) -> int | None:
+    """A PNG's bit depth from its header (IHDR), or None for any other file."""
+    with open(path, "rb") as file:
+        head = file.read(26)
+    if len(head) < 26 or head[:8] != b"\x89PNG\r\n\x1a\n" or head[12:16] != b"IHDR":
+        return None
+    return head[24]
+
+
+def _read_png_16(path: Path, what: str) -> np.ndarray:
+    """A 16-bit PNG as HxWx3 or HxWx4 uint16 (greyscale as three equal channels), its size
+    checked from the header before a row is decoded."""
+    import png
+
+    try:
+        reader = png.Reader(filename=str(path))
+        width, height, rows, info = reader.asDirect()
+        check_texture_size(width, height, what)
+        planes = info["planes"]
+        pixels = np.vstack([np.asarray(row, np.uint16) for row in rows]).reshape(height, width, planes)
+    except AssetError:
+        raise
+    except MemoryError:
+        raise AssetError(f"{what}: does not fit in memory") from None
+    except Exception as exc:  # noqa: BLE001 - pypng raises its own kinds for a corrupt file
+        raise AssetError(f"{what}: cannot be read as a 16-bit PNG ({type(exc).__name__}: {exc})") from None
+    if planes in (1, 2):  # grey, grey + alpha
+        grey = pixels[..., :1]
+        pixels = np.concatenate([grey, grey, grey] + ([pixels[..., 1:2]] if planes == 2 else []), axis=2)
+    return np.ascontiguousarray(pixels)
 
 
 def image_to_rgba8(image, what: str) -> np.ndarray:

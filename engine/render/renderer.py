@@ -12,6 +12,7 @@ import os
 from dataclasses import dataclass
 
 import moderngl
+import numpy as np
 
 from engine.assets.mesh import Mesh
 from engine.assets.texture_data import TextureData
@@ -244,9 +245,14 @@ class Renderer:
 
     def _upload_texture(self, texture: TextureData, linear: bool = False) -> moderngl.Texture:
         w, h = texture.size
-        # Image rows are top-first, GL's are bottom-first: flip so v=0 is the bottom.
-        gl_texture = self.ctx.texture((w, h), 4, texture.pixels[::-1].tobytes(),
-                                      internal_format=None if linear else GL_SRGB8_ALPHA8)
+        # Image rows are top-first, GL's are bottom-first: flip so v=0 is the bottom.  A 16-bit
+        # normal map stays 16 bits (normalised RGBA16: its slopes without 8-bit terraces); a
+        # colour is 8 bits (sRGB decoding has no 16-bit format).
+        if linear and texture.pixels.dtype == np.uint16:
+            gl_texture = self.ctx.texture((w, h), 4, texture.pixels[::-1].tobytes(), dtype="nu2")
+        else:
+            gl_texture = self.ctx.texture((w, h), 4, texture.as_8_bits()[::-1].tobytes(),
+                                          internal_format=None if linear else GL_SRGB8_ALPHA8)
         gl_texture.build_mipmaps()
         gl_texture.filter = (moderngl.LINEAR_MIPMAP_LINEAR, moderngl.LINEAR)
         gl_texture.anisotropy = self.normal_map_anisotropy if linear else self.texture_anisotropy
