@@ -28,8 +28,9 @@ class FrameRulesSystem(esper.Processor):
     def process(self, dt: float) -> None:
         world = self.world
         world.resources[FrameRules] = compute_frame_rules(world)
-        for entity, portal in world.query_one(Portal):
-            partner = portal.partner
+        for entity in world.changed(Portal):  # a portal added or re-paired: no loop over every portal a frame
+            portal = world.try_get(entity, Portal) if world.exists(entity) else None
+            partner = portal.partner if portal is not None else None
             if partner is not None and not world.ever_made(partner) and (entity, partner) not in self._said:
                 self._said.add((entity, partner))
                 warnings.warn(PortalPartnerWarning(

@@ -4,9 +4,6 @@ by math, by a second path, by entity ids or by which pixels a rule must touch.  
 docstring's last line is the change the test was checked against ("Fails when ...")."""
 from __future__ import annotations
 
-import shutil
-from pathlib import Path
-
 import numpy as np
 import pytest
 from pyglm import glm
@@ -26,6 +23,7 @@ from components import (
 from engine.assets.level_file import load_level
 from engine.assets.mesh import box, plane, quad, sphere
 from systems.prepare_system import AMBIENT
+from tests import test_hot_reload
 from tests.support import linear_to_srgb8, look_from, srgb_to_linear
 
 
@@ -148,21 +146,7 @@ def test_time_slicing_captures_a_waiting_face_each_frame_and_every_face_that_saw
 
 # --- 3. a relink that fails is rolled back --------------------------------------------------------
 
-@pytest.fixture
-def shader_copy(tmp_path, monkeypatch) -> Path:
-    root = tmp_path / "shaders"
-    shutil.copytree(shader_library.shader_dir(), root, ignore=shutil.ignore_patterns("__pycache__", "*.py"))
-    monkeypatch.setattr(shader_library, "shader_dir", lambda: root)
-    return root
-
-
-def lit_room(world) -> None:
-    look_from(world, (0.0, 1.4, 4.0), (0.0, 0.8, 0.0))
-    world.spawn(Skybox())
-    world.spawn(DirectionalLight(direction=(-0.3, -1.0, -0.5), intensity=2.0))
-    world.spawn(Transform(), MeshRef(plane(8, 8)), Material(color=(0.5, 0.5, 0.5)))
-    world.spawn(Transform(position=(0.9, 0.5, 0.5)), MeshRef(box((0.6, 0.6, 0.6))), Material(color=(0.2, 0.6, 0.2)))
-    world.spawn(Transform(position=(0, 1.3, -1.5)), MeshRef(quad(3, 2)), Material(), Mirror(color=(0.9, 0.9, 1.0)))
+shader_copy = test_hot_reload.shader_copy  # the fixture: a copy of shaders/ the engine reads
 
 
 def test_a_relink_that_cannot_keep_the_vertex_inputs_leaves_the_old_program_drawing(scene, shader_copy):
@@ -171,7 +155,7 @@ def test_a_relink_that_cannot_keep_the_vertex_inputs_leaves_the_old_program_draw
     16; bound at 15 it needs location 16, so the relink fails.  Every scene program must
     then be the old one again: same uniforms, blocks and samplers, the same frame.
     Fails when _swap_in's except branch skips _locate/_restore, or relink() skips re-attaching the old shaders."""
-    runner = scene(lit_room, (96, 72))
+    runner = scene(test_hot_reload.room, (96, 72))
     library = runner.engine.renderer.shaders
     first = runner.frame()
     assert np.array_equal(runner.frame(), first)  # a still scene repeats exactly
