@@ -21,11 +21,11 @@ from pyglm import glm
 
 from engine.assets.texture_data import TextureData
 from engine.render.renderer import RenderStats
-from engine.render.view_tree import SurfaceTable
+from engine.render.view_plan import SurfaceTable
 from engine.render.views import View
 
 __all__ = ["FrameViews", "MirrorBumps", "PortalCrossing", "PortalCrossings", "RenderStats", "SurfaceState",
-           "Surfaces"]
+           "Surfaces", "WaterFlow", "WaterLook"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -38,6 +38,34 @@ class MirrorBumps:
     scale: float
     uv_rows: np.ndarray          # (2, 4) float64
     plane_offset: float          # d of the mirror's world plane n.p + d = 0
+
+
+@dataclass(eq=False)
+class WaterFlow:
+    """Where a water surface's waves are (``components.Water``): the first normal-map layer's
+    offset in map tiles (u, v), each in [0, 1) (the map repeats, so whole tiles are dropped
+    and the offset keeps its precision however long the game runs).  The surfaces stage
+    advances it by speed x dt along the direction every frame, in place: one object per
+    water entity for its life, shared by each SurfaceState made for it, so the waves carry
+    on when the mirror moves or its components change."""
+
+    offset: tuple[float, float] = (0.0, 0.0)
+
+    def advance(self, du: float, dv: float) -> None:
+        u, v = self.offset
+        self.offset = ((u + du) % 1.0, (v + dv) % 1.0)
+
+
+@dataclass(frozen=True, eq=False)
+class WaterLook:
+    """A mirror's water (``components.Water``) as its composite reads it: the reflectance
+    looking straight down (Schlick's F0 from the index), the second layer's share, the
+    normal map's repeats across the mirror's UVs, and the waves' offset (``WaterFlow``)."""
+
+    f0: float
+    cross: float
+    tiling: float
+    flow: WaterFlow
 
 
 @dataclass(eq=False)
@@ -62,6 +90,7 @@ class SurfaceState:
     roughness: float = 0.0
     resolution_scale: float = 1.0
     bumps: MirrorBumps | None = None  # a mirror's normal map, as its composite reads it
+    water: WaterLook | None = None    # a mirror that is water: Fresnel weight and moving waves
 
 
 @dataclass

@@ -96,18 +96,24 @@ def submitted_triangles(renderer) -> int:
 
 
 def views_block(views: Sequence[View]) -> bytes:
-    """The Views uniform block for ``views`` (at most MAX_BATCHED_VIEWS)."""
+    """The Views uniform block for ``views`` (at most MAX_BATCHED_VIEWS).  A view the planner
+    made (``PlannedView``) brings its row packed; another is packed here."""
     if len(views) > MAX_BATCHED_VIEWS:
         raise ValueError(f"{len(views)} mirror views in one level; at most {MAX_BATCHED_VIEWS}")
-    table = np.zeros(MAX_BATCHED_VIEWS, _VIEW_DTYPE)
-    for row, view in zip(table, views, strict=False):
-        width, height = view.size
-        x, y, w, h = view.scissor if view.scissor is not None else (0, 0, width, height)
-        row["view_proj"] = np.frombuffer(view.view_proj.to_bytes(), np.float32)
-        row["clip_plane"] = tuple(view.clip_plane)
-        row["eye"] = (*view.eye, 1.0 if view.mirrored else 0.0)
-        row["rect"] = (2.0 * x / width - 1.0, 2.0 * y / height - 1.0,
-                       2.0 * (x + w) / width - 1.0, 2.0 * (y + h) / height - 1.0)
-        row["node"] = (view.node, view.skip, view.hide, 0)
+    rows = [view.batched_row if view.batched_row is not None else _view_row(view) for view in views]
     count = np.array([len(views), 0, 0, 0], np.int32)
-    return count.tobytes() + table.tobytes()
+    return b"".join([count.tobytes(), *rows, bytes(_VIEW_DTYPE.itemsize * (MAX_BATCHED_VIEWS - len(views)))])
+
+
+def _view_row(view: View) -> bytes:
+    """One view's row of the Views block."""
+    row = np.zeros(1, _VIEW_DTYPE)[0]
+    width, height = view.size
+    x, y, w, h = view.scissor if view.scissor is not None else (0, 0, width, height)
+    row["view_proj"] = np.frombuffer(view.view_proj.to_bytes(), np.float32)
+    row["clip_plane"] = tuple(view.clip_plane)
+    row["eye"] = (*view.eye, 1.0 if view.mirrored else 0.0)
+    row["rect"] = (2.0 * x / width - 1.0, 2.0 * y / height - 1.0,
+                   2.0 * (x + w) / width - 1.0, 2.0 * (y + h) / height - 1.0)
+    row["node"] = (view.node, view.skip, view.hide, 0)
+    return row.tobytes()

@@ -63,26 +63,36 @@ class CompositeSurface:
     carry: bytes                 # a column-major mat3: a portal's directions here -> the view's
                                  # world; a bumpy mirror's UV map (u's gradient, v's, (u0, v0, scale))
     normal_map: TextureData | None = None  # a bumpy mirror's (its rows are drawn per map)
+    water: object | None = None            # a water mirror's WaterLook (engine.resources): its row carries
+                                           # F0, the waves' offset and the second layer's share
 
 
 def composite_surface(tint: glm.vec4, reflect_rate: float, roughness: float, normal: glm.vec3,
                       outline: np.ndarray | None = None, portal: bool = False,
-                      carry: glm.mat3 | None = None, bumps=None) -> CompositeSurface:
+                      carry: glm.mat3 | None = None, bumps=None, water=None) -> CompositeSurface:
     """A surface's composite parameters; ``outline`` is its 4 world corners as homogeneous
     rows in 2 x 2 grid order (None: composite over its screen rectangle).  A mirror with
-    ``bumps`` reads its normal map in the composite (a ``_bumpy`` variant)."""
+    ``bumps`` reads its normal map in the composite (a ``_bumpy`` variant).  A mirror with
+    ``water`` (``engine.resources.WaterLook``) is a "water" variant (always sharp: its
+    row's tile components carry the waves instead), its UV map scaled by the water's tiling."""
     variant = "portal" if portal else ("rough" if roughness > 0.0 else "sharp")
+    if water is not None and not portal:
+        variant = "water"
+    else:
+        water = None
     columns = None if outline is None else glm.mat4(*(glm.vec4(*map(float, row)) for row in outline))
     params_z = 1.0 if portal else 0.0
     if bumps is not None and not portal:
         variant += "_bumpy"
         u, v = (glm.vec4(*map(float, row)) for row in bumps.uv_rows)
+        if water is not None:
+            u, v = u * water.tiling, v * water.tiling
         carry = glm.mat3(glm.vec3(u), glm.vec3(v), glm.vec3(u.w, v.w, bumps.scale))
         params_z = float(bumps.plane_offset)
     return CompositeSurface(variant, float(roughness), float(reflect_rate), params_z, columns,
                             glm.vec3(tint).to_bytes(), glm.vec3(normal).to_bytes(),
                             (carry if carry is not None else glm.mat3(1.0)).to_bytes(),
-                            bumps.normal_map if bumps is not None and not portal else None)
+                            bumps.normal_map if bumps is not None and not portal else None, water)
 
 
 _LOOKS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
@@ -95,7 +105,8 @@ def surface_look(state) -> CompositeSurface:
     if look is None:
         look = _LOOKS[state] = composite_surface(state.tint, state.reflect_rate, state.roughness,
                                                  glm.vec3(state.plane), state.outline, portal=state.kind == "portal",
-                                                 carry=glm.mat3(state.carry), bumps=state.bumps)
+                                                 carry=glm.mat3(state.carry), bumps=state.bumps,
+                                                 water=getattr(state, "water", None))
     return look
 
 
@@ -123,7 +134,9 @@ class PreparedComposites:
 # corners, the view's rectangle in its level, the parent's inverse view-projection, then
 # eye.xyz + tile x, tint.rgb + tile scale, (reflect_rate, roughness, is_portal, view index),
 # normal.xyz + tile y, carry.  The tile and the index ride in spare components: a vertex
-# shader has 16 attribute slots and the rest of the row fills them.
+# shader has 16 attribute slots and the rest of the row fills them.  A water row (never
+# rough, so it has no tile) carries the waves' offset u and v where the tile's x and y go,
+# the second layer's share where its scale goes, and F0 where the roughness goes.
 _COMPOSITE_ROW = struct.Struct("<64s4f64s12sf12sf4f12sf36s")
 _COMPOSITE_COLUMNS = (("in_corners", 16), ("in_rect", 4), ("in_inv_view_proj", 16), ("in_eye", 4), ("in_tint", 4),
                       ("in_params", 4), ("in_normal", 4), ("in_carry", 9))
@@ -140,7 +153,9 @@ _RESET_RECT = struct.Struct("<12f")   # a rectangle as two clip-space triangles 
 # A "_bumpy" build reads the mirror's normal map (MirrorBumps); its views are drawn per map.
 COMPOSITE_VARIANTS = {"sharp": {}, "rough": {"COMPOSITE_ROUGH": "1"}, "portal": {"COMPOSITE_PORTAL": "1"},
                       "sharp_bumpy": {"COMPOSITE_BUMPY": "1"},
-                      "rough_bumpy": {"COMPOSITE_ROUGH": "1", "COMPOSITE_BUMPY": "1"}}
+                      "rough_bumpy": {"COMPOSITE_ROUGH": "1", "COMPOSITE_BUMPY": "1"},
+                      "water": {"COMPOSITE_WATER": "1"},
+                      "water_bumpy": {"COMPOSITE_WATER": "1", "COMPOSITE_BUMPY": "1"}}
 
 
 def _instance_format(program: moderngl.Program) -> tuple[str, list[str]]:
@@ -212,11 +227,16 @@ def composite_rows(composites: list[Composite], size: tuple[int, int]) -> bytes:
             x0, y0, x1, y1 = _ndc_rect(c.rect, size)
             corners = struct.pack("<16f", x0, y0, 0.0, 1.0, x0, y1, 0.0, 1.0, x1, y0, 0.0, 1.0, x1, y1, 0.0, 1.0)
         lx, ly, lw, lh = c.level_rect
-        tile = c.tile or _NO_TILE
+        water = surface.water
+        if water is None:
+            tile = c.tile or _NO_TILE
+            x, y, scale, rough = tile.x, tile.y, tile.scale, surface.roughness
+        else:  # this frame's offset of the waves (the surfaces stage moves it in place)
+            (x, y), scale, rough = water.flow.offset, water.cross, water.f0
         rows.append(_COMPOSITE_ROW.pack(
-            corners, lx, ly, lx + lw, ly + lh, block[_BLOCK_INVERSE], block[_BLOCK_EYE], tile.x,
-            surface.tint, tile.scale, surface.reflect_rate, surface.roughness, surface.params_z, float(c.view_index),
-            surface.normal, tile.y, surface.carry))
+            corners, lx, ly, lx + lw, ly + lh, block[_BLOCK_INVERSE], block[_BLOCK_EYE], x,
+            surface.tint, scale, surface.reflect_rate, rough, surface.params_z, float(c.view_index),
+            surface.normal, y, surface.carry))
     return b"".join(rows)
 
 
@@ -239,15 +259,19 @@ def _shared_samples_queries(ctx: moderngl.Context, count: int) -> list[moderngl.
     return pool
 
 
-@dataclass(frozen=True)
-class Claim:
-    """A candidate view of a reflection level: ``surface`` seen from view ``parent`` of the
-    level above, drawn as view ``index`` inside ``rect`` (this level's pixels)."""
+@dataclass
+class Claims:
+    """A reflection level's candidate views, as lists: candidate i is the surface with entity
+    ``surfaces[i]`` seen from view ``parents[i]`` of the level above, drawn as view
+    ``indices[i]`` inside ``rects[i]`` (x, y, width, height in this level's pixels)."""
 
-    parent: int
-    surface: int
-    index: int
-    rect: tuple[int, int, int, int]
+    indices: list[int]
+    surfaces: list[int]
+    parents: list[int]
+    rects: list[list[int]]
+
+    def __len__(self) -> int:
+        return len(self.indices)
 
 
 class MirrorPasses:
@@ -275,7 +299,7 @@ class MirrorPasses:
         self._reset_vao: moderngl.VertexArray | None = None
         self._claim_vao = ctx.vertex_array(self.claim, [])
 
-    def prepare_level(self, level: RenderTargets, parent: RenderTargets, claims: list[Claim]) -> list[int]:
+    def prepare_level(self, level: RenderTargets, parent: RenderTargets, claims: Claims) -> list[int]:
         """Write ``level``'s node image and depth mask for the candidate views ``claims`` and
         return, for each, how many pixels it got (0: the surface is hidden there, or off the
         pixels its parent view drew).  Outside the claims' rectangles nothing is written or
@@ -286,16 +310,17 @@ class MirrorPasses:
         ctx = self.ctx
         level.framebuffer.use()
         apply_pass_state(ctx, _CLAIM, (0, 0, *level.size))
-        self._draw_resets(dict.fromkeys(claim.rect for claim in claims), level.size)
+        self._draw_resets(dict.fromkeys(map(tuple, claims.rects)), level.size)
         parent.node.use(PARENT_NODE_UNIT)
         parent.surface.use(PARENT_SURFACE_UNIT)
         program = self.claim
         program["to_parent"].value = (parent.size[0] / level.size[0], parent.size[1] / level.size[1])
         claim_ids = program["claim"]
         queries = _shared_samples_queries(ctx, len(claims))
-        for query, claim in zip(queries, claims, strict=False):
-            ctx.scissor = claim.rect
-            claim_ids.value = (claim.parent, claim.surface, claim.index)
+        for query, parent_index, surface, index, rect in zip(queries, claims.parents, claims.surfaces,
+                                                             claims.indices, claims.rects, strict=False):
+            ctx.scissor = rect
+            claim_ids.value = (parent_index, surface, index)
             with query:
                 self._claim_vao.render(moderngl.TRIANGLES, vertices=3)
         self.renderer.checkpoint("claims")

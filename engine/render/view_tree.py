@@ -30,13 +30,11 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from pyglm import glm
 
 from components.limits import MAX_VIEW_DEPTH
-from engine.core.reflection_math import oblique_is_safe, oblique_projection, transform_plane
 from engine.render.batched_mirrors import PATHS, choose_path, submitted_triangles
 from engine.render.mirror_passes import (
-    Claim,
+    Claims,
     Composite,
     MirrorPasses,
     PreparedComposites,
@@ -44,6 +42,7 @@ from engine.render.mirror_passes import (
 )
 from engine.render.scene_pass import REFLECTION_LEVEL, SceneOptions
 from engine.render.targets import LevelStack
+from engine.render.view_plan import LevelRows, SurfaceTable, _mat, planned_views
 from engine.render.views import View
 
 # The deepest a tree may go (each level is one more set of root-sized targets); the depth
@@ -96,17 +95,6 @@ class ReflectionView:
     parent: ReflectionView | None = None
 
 
-@dataclass
-class LevelCandidates:
-    """The views a reflection level may have, before its claims say which have pixels."""
-
-    found: list[tuple[ReflectionView, SurfaceState, tuple[int, int, int, int]]]  # (parent, surface, screen rect)
-    size: tuple[int, int]          # the level's pixels
-    claims: list[Claim]
-    views: list[View]              # each candidate's camera, in claim order
-    next_index: int                # the first view index the level after may use
-
-
 class ViewTree:
     """Renders the reflection levels below a root view into a ``LevelStack`` and composites
     them back into the root's targets."""
@@ -122,57 +110,50 @@ class ViewTree:
         root_node = ReflectionView(0, 0, root, (0, 0, *root.size))
         result = TreeResult([root_node], set())
         composites: list[PreparedComposites] = []
-        candidates = self._candidates(surfaces, [root_node], root, 1, settings.depth_cap)
+        root_proj = _mat(root.proj)
+        nodes = [root_node]
+        rows = LevelRows.root(root)
+        candidates = surfaces.plan(rows, 1, root, root_proj, 1, settings.depth_cap, root.hide)
         level = 0
-        children: list[ReflectionView] = []
         while candidates is not None and level < settings.depth_cap:
             targets = levels.get(level + 1, candidates.size)
-            pixels = self.passes.prepare_level(targets, levels[level], candidates.claims)
-            children = [ReflectionView(view.node, level + 1, view, rect, state, parent)
-                        for (parent, state, rect), view, count in zip(candidates.found, candidates.views, pixels,
-                                                                      strict=True) if count]
-            if settings.level_budget is not None and len(children) > settings.level_budget:
-                by_pixels = dict(zip((v.node for v in candidates.views), pixels, strict=True))
-                kept = sorted(children, key=lambda c: -by_pixels[c.index])[: settings.level_budget]
-                result.dropped += len(children) - len(kept)
-                children = sorted(kept, key=lambda c: c.index)
-            if not children:
+            r = candidates.rows
+            pixels = np.array(self.passes.prepare_level(targets, levels[level], Claims(
+                r.node.tolist(), surfaces.entities[candidates.surface].tolist(),
+                rows.node[candidates.parent].tolist(), list(map(tuple, candidates.scissor.tolist())))), np.int64)
+            keep = np.flatnonzero(pixels)
+            if settings.level_budget is not None and len(keep) > settings.level_budget:
+                # The views with the most claimed pixels, in claim order.
+                kept = np.sort(keep[np.argsort(-pixels[keep], kind="stable")[: settings.level_budget]])
+                result.dropped += len(keep) - len(kept)
+                keep = kept
+            if not len(keep):
                 break
+            chosen = candidates.select(keep)
+            views = planned_views(surfaces, chosen, root.hide)
+            states = surfaces.states
+            children = [ReflectionView(view.node, level + 1, view, (x0, y0, x1 - x0, y1 - y0), states[s], nodes[p])
+                        for view, (x0, y0, x1, y1), s, p in zip(
+                            views, chosen.rows.rect.astype(np.int64).tolist(), chosen.surface.tolist(),
+                            chosen.parent.tolist(), strict=True)]
             path = choose_path(settings.path, len(children), submitted_triangles(renderer))
             result.paths.add(path)
-            renderer.scene_pass.draw([c.view for c in children], targets,
-                                     _BATCHED if path == "batched" else REFLECTION_LEVEL)
+            renderer.scene_pass.draw(views, targets, _BATCHED if path == "batched" else REFLECTION_LEVEL)
             renderer.flush()
             result.views.extend(children)
             level += 1
+            nodes, rows = children, chosen.rows
             # While the GPU draws the views: the next level's cull and cameras (measured: on
             # the critical path when done after the views finish), then their composite rows.
-            candidates = self._candidates(surfaces, children, root, candidates.next_index, settings.depth_cap)
+            candidates = surfaces.plan(rows, level + 1, root, root_proj, int(r.node[-1]) + 1, settings.depth_cap,
+                                       root.hide)
             composites.append(self._prepare_composite(children, root, levels[level - 1].size))
-        if children and level == settings.depth_cap:
+        if level and level == settings.depth_cap:
             # Reaching the cap is reported: how many views the surfaces' own limits still allowed.
-            result.capped = len(surfaces.cull(children, root, MAX_TREE_DEPTH))
+            result.capped = len(surfaces.cull(rows, level + 1, root_proj, root.size, MAX_TREE_DEPTH)[0])
         for depth in range(level, 0, -1):
             self.passes.composite_level(levels[depth - 1], levels[depth], composites[depth - 1])
         return result
-
-    def _candidates(self, surfaces: SurfaceTable, parents: list[ReflectionView], root: View,
-                    first_index: int, depth_cap: int) -> LevelCandidates | None:
-        """The next level's candidate views: every (parent, surface) the cull keeps, its claim
-        (view indices from ``first_index``) and its camera, packed; None when there are none.
-        Needs no pixels, so it is done while the GPU draws the parents."""
-        found = surfaces.cull(parents, root, depth_cap)
-        if not found:
-            return None
-        scale = max(state.resolution_scale for _, state, _ in found)
-        size = (max(1, round(root.size[0] * scale)), max(1, round(root.size[1] * scale)))
-        claims = [Claim(parent.index, state.entity, first_index + k, _to_level(rect, root.size, size))
-                  for k, (parent, state, rect) in enumerate(found)]
-        views = [self._surface_view(parent, state, root, claim.index, size, claim.rect)
-                 for (parent, state, _), claim in zip(found, claims, strict=True)]
-        for view in views:
-            view.camera_block()  # packed now, not on the critical path of the views' draws
-        return LevelCandidates(found, size, claims, views, first_index + len(claims))
 
     def _prepare_composite(self, children: list[ReflectionView], root: View,
                            parent_size: tuple[int, int]) -> PreparedComposites:
@@ -181,111 +162,8 @@ class ViewTree:
             child.index, _to_level(child.rect, root.size, parent_size), child.view.scissor, child.parent.view,
             surface_look(child.surface)) for child in children], parent_size)
 
-    @staticmethod
-    def _surface_view(parent: ReflectionView, state: SurfaceState, root: View, index: int,
-                      size: tuple[int, int], scissor: tuple[int, int, int, int]) -> View:
-        """The parent's camera carried through the surface (for a mirror: its reflection; for
-        a portal: look-out x half turn x inverse(look-in), as in the DirectX "magic mirrors"
-        write-up), clipped at the plane it looks out of, with an oblique near plane there
-        unless the eye is too close.  The projection is the root's: levels map onto it
-        pixel for pixel."""
-        eye = glm.vec3(state.carry * glm.vec4(parent.view.eye, 1.0))
-        view = parent.view.view * glm.inverse(state.carry)
-        # Clipped exactly at the plane it looks out of (what touches a mirror meets its
-        # reflection without a crack); the surface on that plane is left out by entity.
-        clip_plane = state.exit_plane
-        proj = root.proj
-        if oblique_is_safe(eye, clip_plane, _near_distance(root.proj)):
-            proj = oblique_projection(root.proj, transform_plane(view, clip_plane))
-        mirrored = parent.view.mirrored != (state.kind == "mirror")
-        return View(view=view, proj=proj, eye=eye, size=size, name=f"{state.kind} {state.entity}",
-                    clip_plane=clip_plane, mirrored=mirrored, scissor=scissor, node=index,
-                    skip=state.exit_entity, hide=parent.view.hide)
-
     def release(self) -> None:
         self.passes.release()
-
-
-class SurfaceTable:
-    """Every mirror and portal as arrays, so one view culls them all with a few numpy
-    operations (the per-surface Python loop was most of the reflection system's CPU time)."""
-
-    def __init__(self, states: list[SurfaceState]) -> None:
-        self.states = states
-        count = len(states)
-        self.planes = np.array([tuple(s.plane) for s in states], np.float64).reshape(count, 4)
-        # Corner rows padded to 8 per surface (a portal has 4) by repeating its first corner.
-        self.corners = np.zeros((count, 8, 4))
-        for i, state in enumerate(states):
-            rows = state.corners
-            self.corners[i] = np.concatenate([rows, np.repeat(rows[:1], 8 - len(rows), axis=0)])
-        self.enabled = np.array([s.enabled for s in states], bool)
-        self.max_depth = np.array([s.max_depth for s in states], np.int64)
-        self.entities = np.array([s.entity for s in states], np.int64)
-        self.deepest = int(self.max_depth[self.enabled].max()) if self.enabled.any() else 0
-
-    def cull(self, parents: list[ReflectionView], root: View,
-             depth_cap: int) -> list[tuple[ReflectionView, SurfaceState, tuple[int, int, int, int]]]:
-        """Each (parent, surface) where the parent view can see the surface, with the screen
-        rectangle where it can show: enabled and within its depth, not the surface the view
-        looks out of, facing the view's eye (a mirror facing away shows nothing, as the "Multiple
-        Mirrors" project notes), not wholly behind the view's
-        clip plane, inside the frustum and overlapping the parent's rectangle.  All parents
-        are one level deep.  Every (parent, surface) pair goes through the same few array
-        operations: in a frame, after the rasteriser has run, each numpy call costs about
-        twice what it does in a warm loop (measured), so their number is what counts here."""
-        depth = parents[0].level + 1 if parents else 0
-        if not parents or depth > min(self.deepest, depth_cap):
-            return []  # nothing enabled may be seen this deep (also: no surfaces at all)
-        # Per parent: eye (homogeneous, 4), rectangle corners (x0, y0, x1, y1) and exit entity.
-        rows = np.array([(*p.view.eye, 1.0, p.rect[0], p.rect[1], p.rect[0] + p.rect[2], p.rect[1] + p.rect[3],
-                          p.surface.exit_entity if p.surface else -1) for p in parents], np.float64)
-        eyes, rects, exits = rows[:, 0:4], rows[:, 4:8], rows[:, 8]
-        # Per parent, one 4 x 11 matrix: corner rows @ it give the corners in clip space (the
-        # view-projection with the root projection, as the rectangle is in root pixels),
-        # then six values that are > 0 outside each side of the frustum (x > w, x < -w, ...)
-        # and the corner's side of the parent's clip plane.
-        rows_in = np.frombuffer(b"".join(glm.transpose(root.proj * p.view.view).to_bytes()
-                                         + p.view.clip_plane.to_bytes() for p in parents),
-                                np.float32).reshape(len(parents), 5, 4)
-        to_clip = _CULL_ROWS @ rows_in
-        clip = (self.corners.reshape(1, -1, 4) @ to_clip.transpose(0, 2, 1)).reshape(len(parents), -1, 8, 11)
-        keep = self.enabled & (depth <= np.minimum(self.max_depth, depth_cap))
-        keep = keep & (exits[:, None] != self.entities) & (eyes @ self.planes.T > 0.0)
-        # Culled: every corner outside one side of the frustum, or every corner behind the clip plane.
-        outside = np.concatenate([clip[..., 4:10] > 0.0, clip[..., 10:11] <= 0.0], axis=3)
-        keep &= ~outside.all(axis=2).any(axis=2)
-        w = clip[..., 3]
-        behind = w <= 1e-6
-        straddles = behind.any(axis=2)  # corners behind the eye: be conservative
-        ndc = clip[..., :2] / np.where(behind, 1.0, w)[..., None]
-        half = 0.5 * np.array(root.size)
-        lo = np.where(straddles[..., None], -np.inf, np.floor((ndc.min(axis=2) + 1.0) * half) - 1.0)  # P x S x 2
-        hi = np.where(straddles[..., None], np.inf, np.ceil((ndc.max(axis=2) + 1.0) * half) + 1.0)
-        x0y0 = np.maximum(lo, rects[:, None, 0:2])
-        x1y1 = np.minimum(hi, rects[:, None, 2:4])
-        keep &= (x1y1 > x0y0).all(axis=2)
-        found = []
-        for p, i in np.argwhere(keep).tolist():
-            x0, y0 = int(x0y0[p, i, 0]), int(x0y0[p, i, 1])
-            found.append((parents[p], self.states[i], (x0, y0, int(x1y1[p, i, 0]) - x0, int(x1y1[p, i, 1]) - y0)))
-        return found
-
-
-# From the rows of a view-projection (x, y, z, w) and a clip plane, the rows SurfaceTable.cull
-# applies to every corner: x, y, z, w, then x - w, y - w, z - w, -x - w, -y - w, -z - w (each
-# > 0 outside one side of the frustum), then the clip plane.
-_CULL_ROWS = np.array([
-    [1, 0, 0, 0, 0], [0, 1, 0, 0, 0], [0, 0, 1, 0, 0], [0, 0, 0, 1, 0],
-    [1, 0, 0, -1, 0], [0, 1, 0, -1, 0], [0, 0, 1, -1, 0],
-    [-1, 0, 0, -1, 0], [0, -1, 0, -1, 0], [0, 0, -1, -1, 0],
-    [0, 0, 0, 0, 1]], np.float32)
-
-
-def _near_distance(proj: glm.mat4) -> float:
-    """The near-plane distance of a standard GL perspective matrix."""
-    a, b = proj[2][2], proj[3][2]
-    return b / (a - 1.0)
 
 
 def _to_level(rect: tuple[int, int, int, int], screen: tuple[int, int],

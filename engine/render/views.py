@@ -40,6 +40,7 @@ class View:
     skip: int = 0
     hide: int = 0  # an entity no view of the tree draws (a probe's own object), whatever surface it looks out of
     _block: bytes | None = field(default=None, init=False, repr=False, compare=False)
+    batched_row: bytes | None = field(default=None, init=False, repr=False, compare=False)  # packed by the planner
 
     @property
     def view_proj(self) -> glm.mat4:
@@ -57,6 +58,47 @@ class View:
                 glm.uvec4(self.skip, self.hide, 0, 0).to_bytes(),
             ])
         return self._block
+
+
+class PlannedView(View):
+    """A mirror or portal view planned in arrays (``engine.render.view_plan``): its Camera
+    block and its batched-path row come packed, and its matrices and eye are read back from
+    the block only when something asks (most frames nothing does: the passes read the block).
+    Made for one pass, like every View, and not changed after."""
+
+    def __init__(self, block: bytes, batched_row: bytes, size: tuple[int, int], kind: str, entity: int,
+                 clip_plane: glm.vec4, mirrored: bool, scissor: tuple[int, int, int, int], node: int,
+                 skip: int, hide: int) -> None:
+        self._block = block
+        self.batched_row = batched_row
+        self.size = size
+        self._kind, self._entity = kind, entity
+        self.clip_plane = clip_plane
+        self.mirrored = mirrored
+        self.scissor = scissor
+        self.node = node
+        self.skip = skip
+        self.hide = hide
+
+    @property
+    def name(self) -> str:
+        return f"{self._kind} {self._entity}"
+
+    @property
+    def view(self) -> glm.mat4:
+        return glm.mat4.from_bytes(self._block[0:64])
+
+    @property
+    def proj(self) -> glm.mat4:
+        return glm.mat4.from_bytes(self._block[64:128])
+
+    @property
+    def view_proj(self) -> glm.mat4:
+        return glm.mat4.from_bytes(self._block[128:192])
+
+    @property
+    def eye(self) -> glm.vec3:
+        return glm.vec3.from_bytes(self._block[256:268])
 
 
 def camera_view(world_matrix: glm.mat4, fov_y_deg: float, near: float, far: float,

@@ -1,0 +1,270 @@
+"""Planning a reflection level in arrays: which (parent view x surface) pairs get a view,
+where on screen, and each view's camera, for all pairs of a level at once.
+
+A view tree level is planned in a fixed number of numpy operations whatever its number of
+views: the parents of a level are rows of arrays (``LevelRows``), every mirror and portal
+is a row of ``SurfaceTable``, and ``SurfaceTable.cull`` and ``plan_candidates`` work on
+(parents x surfaces) blocks.  Per view, only what the draws need is made in Python (a
+``View`` holding its packed camera block and batched-path row).  Planning a view one at a
+time with glm cost ~30 us a view on llvmpipe's machine (one glm call is ~0.3 us, and a
+view took about a hundred); a level in arrays costs a few us a view.
+
+Conventions: matrices here are numpy (..., 4, 4) arrays in the usual row-major math
+layout (``M @ x``); glm's and GL's are column-major, so they are transposed at the edges.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from pyglm import glm
+
+from engine.render.views import CAMERA_BLOCK_BYTES, PlannedView, View
+
+# The mirror and portal records the surfaces stage publishes (``engine.resources.SurfaceState``,
+# plain data above this floor): read here by their fields.
+SurfaceState = Any
+
+# Close to its clip plane an oblique frustum degenerates (its far plane swings towards the
+# eye): nearer than this many near distances, the clip distance alone keeps what is behind out
+# (``engine.core.reflection_math.oblique_is_safe``: the same rule, one view at a time).
+OBLIQUE_SAFE_NEARS = 4.0
+_CAMERA_FLOATS = CAMERA_BLOCK_BYTES // 4
+# The batched path's row of a view (``batched_mirrors``): mat4 view_proj, vec4 clip plane,
+# vec4 eye (w: mirrored), vec4 rect (NDC), uvec4 (node, skip, hide, 0).
+BATCHED_ROW_FLOATS = 32
+
+
+def _mat(matrix: glm.mat4) -> np.ndarray:
+    """A glm matrix as a row-major numpy one."""
+    return np.frombuffer(matrix.to_bytes(), np.float32).reshape(4, 4).T.astype(np.float64)
+
+
+@dataclass
+class LevelRows:
+    """The views of one level of a tree as arrays, a row each (the root: one row)."""
+
+    view: np.ndarray        # (n, 4, 4) world -> eye
+    inv_view: np.ndarray    # (n, 4, 4) eye -> world
+    eye: np.ndarray         # (n, 4) homogeneous world position
+    clip: np.ndarray        # (n, 4) world clip plane (what the view keeps)
+    rect: np.ndarray        # (n, 4) x0, y0, x1, y1 where it shows, screen pixels
+    exit: np.ndarray        # (n,) the entity the view looks out of (-1: none)
+    mirrored: np.ndarray    # (n,) bool: front faces wind clockwise
+    node: np.ndarray        # (n,) the view's index in the tree
+
+    @staticmethod
+    def root(view: View) -> LevelRows:
+        matrix = _mat(view.view)
+        return LevelRows(matrix[None], np.linalg.inv(matrix)[None], np.array([[*view.eye, 1.0]]),
+                         np.array([tuple(view.clip_plane)], np.float64), np.array([[0.0, 0.0, *view.size]]),
+                         np.array([-1]), np.array([view.mirrored]), np.array([0]))
+
+
+@dataclass
+class Candidates:
+    """A level's candidate views, before its claims say which have pixels: one row each,
+    in claim order (``parent`` rows of the level above, ``surface`` rows of the table)."""
+
+    parent: np.ndarray       # (k,) row of the parent in the level above
+    surface: np.ndarray      # (k,) row in the SurfaceTable
+    rows: LevelRows          # their cameras and screen rectangles (node: claim order from first_index)
+    scissor: np.ndarray      # (k, 4) int x, y, w, h in the level's pixels
+    proj: np.ndarray         # (k, 4, 4) the root projection, oblique at the surface where safe
+    blocks: np.ndarray       # (k, CAMERA_BLOCK_BYTES / 4) float32: packed Camera blocks
+    batched: np.ndarray      # (k, BATCHED_ROW_FLOATS) float32: packed batched-path rows
+    size: tuple[int, int]    # the level's pixels
+
+    def __len__(self) -> int:
+        return len(self.parent)
+
+    def select(self, keep: np.ndarray) -> Candidates:
+        """The candidates at ``keep`` (indices or a mask), in their order."""
+        r = self.rows
+        rows = LevelRows(r.view[keep], r.inv_view[keep], r.eye[keep], r.clip[keep], r.rect[keep], r.exit[keep],
+                         r.mirrored[keep], r.node[keep])
+        return Candidates(self.parent[keep], self.surface[keep], rows, self.scissor[keep], self.proj[keep],
+                          self.blocks[keep], self.batched[keep], self.size)
+
+
+class SurfaceTable:
+    """Every mirror and portal as arrays, so one level of views culls them all, and plans
+    the views it keeps, with a few numpy operations."""
+
+    def __init__(self, states: list[SurfaceState]) -> None:
+        self.states = states
+        count = len(states)
+        self.planes = np.array([tuple(s.plane) for s in states], np.float64).reshape(count, 4)
+        # Corner rows padded to 8 per surface (a portal has 4) by repeating its first corner.
+        self.corners = np.zeros((count, 8, 4))
+        for i, state in enumerate(states):
+            rows = state.corners
+            self.corners[i] = np.concatenate([rows, np.repeat(rows[:1], 8 - len(rows), axis=0)])
+        self.corner_columns = self.corners.transpose(0, 2, 1).copy()  # S x 4 x 8: the corners as columns
+        self.enabled = np.array([s.enabled for s in states], bool)
+        self.max_depth = np.array([s.max_depth for s in states], np.int64)
+        self.entities = np.array([s.entity for s in states], np.int64)
+        self.deepest = int(self.max_depth[self.enabled].max()) if self.enabled.any() else 0
+        # What carries a parent's camera through each surface (a reflection, or the portal pair).
+        self.carry = np.array([_mat(s.carry) for s in states]).reshape(count, 4, 4)
+        self.inv_carry = np.linalg.inv(self.carry) if count else self.carry
+        self.exit_planes = np.array([tuple(s.exit_plane) for s in states], np.float64).reshape(count, 4)
+        self.exit_entities = np.array([s.exit_entity for s in states], np.int64)
+        self.is_mirror = np.array([s.kind == "mirror" for s in states], bool)
+        self.scale = np.array([s.resolution_scale for s in states], np.float64)
+
+    def cull(self, parents: LevelRows, depth: int, root_proj: np.ndarray, root_size: tuple[int, int],
+             depth_cap: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Each (parent, surface) where the parent view can see the surface, with the screen
+        rectangle where it can show: enabled and within its depth, not the surface the view
+        looks out of, facing the view's eye (a mirror facing away shows nothing, as the
+        "Multiple Mirrors" project notes), not wholly behind the view's clip plane, inside
+        the frustum and overlapping the parent's rectangle.  ``depth`` is the level the
+        views would be on.  Returns (parent rows, surface rows, rects x0 y0 x1 y1), parent
+        major.  Every pair goes through the same few array operations: in a frame, after
+        the rasteriser has run, each numpy call costs about twice what it does in a warm
+        loop (measured), so their number is what counts here."""
+        none = np.zeros(0, np.int64)
+        if not len(parents.node) or depth > min(self.deepest, depth_cap):
+            return none, none, np.zeros((0, 4))  # nothing enabled may be seen this deep
+        # First what needs no corners, for every pair: enabled and within its depth, not the
+        # surface the view looks out of, and facing the view's eye.
+        keep = self.enabled & (depth <= np.minimum(self.max_depth, depth_cap))
+        keep = keep & (parents.exit[:, None] != self.entities) & (parents.eye @ self.planes.T > 0.0)
+        p, s = np.nonzero(keep)
+        if not len(p):
+            return none, none, np.zeros((0, 4))
+        # Per parent, one 11 x 4 matrix: times a corner, the corner in clip space (the
+        # view-projection with the root projection, as the rectangle is in root pixels), then
+        # six values that are > 0 outside each side of the frustum (x > w, x < -w, ...) and
+        # the corner's side of the parent's clip plane.  Per pair: 11 values x 8 corners.
+        rows_in = np.concatenate([root_proj @ parents.view, parents.clip[:, None, :]], axis=1)  # P x 5 x 4
+        clip = (_CULL_ROWS @ rows_in)[p] @ self.corner_columns[s]                          # K x 11 x 8
+        # Culled: every corner outside one side of the frustum, or every corner behind the clip plane.
+        seen = ~(clip[:, 4:10].min(axis=2) > 0.0).any(axis=1) & (clip[:, 10].max(axis=1) > 0.0)
+        w = clip[:, 3]
+        behind = w <= 1e-6
+        straddles = behind.any(axis=1)[:, None]  # corners behind the eye: be conservative
+        ndc = clip[:, 0:2] / np.where(behind, 1.0, w)[:, None, :]                          # K x 2 x 8
+        half = 0.5 * np.array(root_size, np.float64)
+        lo = np.where(straddles, -np.inf, np.floor((ndc.min(axis=2) + 1.0) * half) - 1.0)  # K x 2
+        hi = np.where(straddles, np.inf, np.ceil((ndc.max(axis=2) + 1.0) * half) + 1.0)
+        rect = parents.rect[p]
+        x0y0 = np.maximum(lo, rect[:, 0:2])
+        x1y1 = np.minimum(hi, rect[:, 2:4])
+        seen &= (x1y1 > x0y0).all(axis=1)
+        return p[seen], s[seen], np.concatenate([x0y0[seen], x1y1[seen]], axis=1)
+
+    def plan(self, parents: LevelRows, depth: int, root: View, root_proj: np.ndarray, first_index: int,
+             depth_cap: int, hide: int) -> Candidates | None:
+        """The next level's candidate views from ``parents`` (level ``depth - 1``): the
+        cull's pairs, each with its camera (the parent's carried through the surface: for a
+        mirror its reflection, for a portal look-out x half turn x inverse(look-in), as in
+        the DirectX "magic mirrors" write-up), clipped at the plane it looks out of, with
+        Lengyel's oblique near plane there unless the eye is too close (then the clip
+        distance alone), its claim rectangle in the level's pixels, and its packed Camera
+        block and batched-path row.  None when nothing can be seen."""
+        p, s, rects = self.cull(parents, depth, root_proj, root.size, depth_cap)
+        k = len(p)
+        if not k:
+            return None
+        scale = float(self.scale[s].max())
+        size = (max(1, round(root.size[0] * scale)), max(1, round(root.size[1] * scale)))
+        view = parents.view[p] @ self.inv_carry[s]
+        inv_view = self.carry[s] @ parents.inv_view[p]
+        eye = inv_view[:, :, 3]  # where the carried camera is: its eye-to-world translation
+        clip = self.exit_planes[s]
+        mirrored = parents.mirrored[p] != self.is_mirror[s]
+        proj, inv_proj = _oblique_projections(root_proj, np.linalg.inv(root_proj), inv_view, eye, clip)
+        scissor = _to_level(rects, root.size, size)
+        nodes = np.arange(first_index, first_index + k)
+        skip = self.exit_entities[s]
+        # The Camera blocks (camera.glsl): four column-major matrices, then eye, viewport,
+        # clip plane and ids; the matrices are written straight into their columns.
+        blocks = np.empty((k, _CAMERA_FLOATS), np.float32)
+        matrices = blocks[:, 0:64].reshape(k, 4, 4, 4).transpose(0, 1, 3, 2)
+        matrices[:, 0] = view
+        matrices[:, 1] = proj
+        np.matmul(proj, view, out=matrices[:, 2])
+        np.matmul(inv_view, inv_proj, out=matrices[:, 3])
+        blocks[:, 64:68] = eye
+        blocks[:, 68:72] = (0.0, 0.0, *size)
+        blocks[:, 72:76] = clip
+        ids = blocks[:, 76:80].view(np.uint32)
+        ids[:, 0], ids[:, 1], ids[:, 2:] = skip, hide, 0
+        batched = np.empty((k, BATCHED_ROW_FLOATS), np.float32)
+        batched[:, 0:16] = blocks[:, 32:48]
+        batched[:, 16:20] = clip
+        batched[:, 20:23] = eye[:, :3]
+        batched[:, 23] = mirrored
+        corners = scissor.reshape(k, 2, 2).cumsum(axis=1) * (2.0 / np.array(size)) - 1.0  # NDC x0 y0, x1 y1
+        batched[:, 24:28] = corners.reshape(k, 4)
+        ids = batched[:, 28:32].view(np.uint32)
+        ids[:, 0], ids[:, 1], ids[:, 2], ids[:, 3] = nodes, skip, hide, 0
+        rows = LevelRows(view, inv_view, eye, clip, rects, skip, mirrored, nodes)
+        return Candidates(p, s, rows, scissor, proj, blocks, batched, size)
+
+
+def planned_views(table: SurfaceTable, candidates: Candidates, hide: int) -> list[PlannedView]:
+    """A ``PlannedView`` for each candidate (what the scene pass and the composite read): its
+    Camera block and batched-path row already packed; its matrices are read from the block
+    only if something asks for them."""
+    states = table.states
+    size = candidates.size
+    blocks = candidates.blocks.tobytes()
+    batched = candidates.batched.tobytes()
+    step, row = CAMERA_BLOCK_BYTES, BATCHED_ROW_FLOATS * 4
+    views = []
+    for i, (s, mirrored, node, scissor) in enumerate(zip(
+            candidates.surface.tolist(), candidates.rows.mirrored.tolist(), candidates.rows.node.tolist(),
+            candidates.scissor.tolist(), strict=True)):
+        state = states[s]
+        views.append(PlannedView(blocks[i * step:(i + 1) * step], batched[i * row:(i + 1) * row], size,
+                                 state.kind, state.entity, state.exit_plane, mirrored, tuple(scissor), node,
+                                 state.exit_entity, hide))
+    return views
+
+
+def _oblique_projections(root_proj: np.ndarray, inv_root_proj: np.ndarray, inv_view: np.ndarray, eye: np.ndarray,
+                         clip: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Lengyel's oblique near plane for each view (``reflection_math.oblique_projection``, in
+    arrays), and the projections' inverses: the root projection's third row replaced so that
+    the clip plane, in view space, is the near plane; the root projection where the eye is
+    too close to the plane.  One row changes, so each inverse is a rank-one update of the
+    root's (Sherman-Morrison), not a 4 x 4 inversion."""
+    plane = np.einsum("kji,kj->ki", inv_view, clip)  # planes transform by the inverse transpose; the
+    # construction below is unchanged by the plane's (positive) scale, so it is not normalised
+    near = root_proj[2, 3] / (root_proj[2, 2] - 1.0)
+    safe = np.abs(np.einsum("ki,ki->k", clip, eye)) > OBLIQUE_SAFE_NEARS * near
+    q = np.sign(plane[:, :2]) @ inv_root_proj[:, :2].T + (inv_root_proj[:, 2] + inv_root_proj[:, 3])
+    c = plane * (2.0 / np.einsum("ki,ki->k", plane, q))[:, None]
+    change = np.where(safe[:, None], c - root_proj[3] - root_proj[2], 0.0)  # the third row's change
+    proj = np.repeat(root_proj[None], len(plane), axis=0)
+    proj[:, 2] += change
+    column = inv_root_proj[:, 2]
+    row = change @ inv_root_proj
+    inv_proj = inv_root_proj - column[None, :, None] * (row / (1.0 + change @ column)[:, None])[:, None, :]
+    return proj, inv_proj
+
+
+def _to_level(rects: np.ndarray, screen: tuple[int, int], level: tuple[int, int]) -> np.ndarray:
+    """Screen-pixel rectangles (x0, y0, x1, y1) as (x, y, width, height) in the pixels of a
+    level of another size (rounded outwards, at least one pixel)."""
+    if level == screen:
+        xy = rects[:, 0:2]
+        return np.concatenate([xy, rects[:, 2:4] - xy], axis=1).astype(np.int64)
+    s = np.array(level, np.float64) / np.array(screen, np.float64)
+    x0y0 = np.floor(rects[:, 0:2] * s)
+    x1y1 = np.minimum(np.array(level, np.float64), np.ceil(rects[:, 2:4] * s))
+    return np.concatenate([x0y0, np.maximum(1.0, x1y1 - x0y0)], axis=1).astype(np.int64)
+
+
+# From the rows of a view-projection (x, y, z, w) and a clip plane, the rows SurfaceTable.cull
+# applies to every corner: x, y, z, w, then x - w, y - w, z - w, -x - w, -y - w, -z - w (each
+# > 0 outside one side of the frustum), then the clip plane.
+_CULL_ROWS = np.array([
+    [1, 0, 0, 0, 0], [0, 1, 0, 0, 0], [0, 0, 1, 0, 0], [0, 0, 0, 1, 0],
+    [1, 0, 0, -1, 0], [0, 1, 0, -1, 0], [0, 0, 1, -1, 0],
+    [-1, 0, 0, -1, 0], [0, -1, 0, -1, 0], [0, 0, -1, -1, 0],
+    [0, 0, 0, 0, 1]], np.float64)

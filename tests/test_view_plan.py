@@ -1,0 +1,99 @@
+"""The array planner of a reflection level (engine/render/view_plan.py) against a second
+path: each view's camera worked out one at a time with glm from its parent (the carried
+view matrix, its eye, Lengyel's oblique projection from engine.core.reflection_math), and
+the cull's rectangles against the surfaces' corners projected one by one."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from pyglm import glm
+
+import engine.render.view_tree as view_tree
+from engine.core.reflection_math import oblique_is_safe, oblique_projection, signed_distance, transform_plane
+from engine.render.batched_mirrors import _view_row
+from engine.render.views import PlannedView, View
+from tests import golden
+from tests.golden_scenes import cases
+
+SCENES = ("hall_start", "hall_mirror_wall", "hall_tunnel", "mirror_ring_16", "portals_depth_8")
+
+
+def _reference(parent: View, state, root: View, node: View) -> View:
+    """The view through ``state`` from ``parent``, one glm call at a time."""
+    eye = glm.vec3(state.carry * glm.vec4(parent.eye, 1.0))
+    view = parent.view * glm.inverse(state.carry)
+    proj = root.proj
+    near = root.proj[3][2] / (root.proj[2][2] - 1.0)
+    if oblique_is_safe(eye, state.exit_plane, near):
+        proj = oblique_projection(root.proj, transform_plane(view, state.exit_plane))
+    return View(view=view, proj=proj, eye=eye, size=node.size, clip_plane=state.exit_plane,
+                mirrored=parent.mirrored != (state.kind == "mirror"), scissor=node.scissor, node=node.node,
+                skip=state.exit_entity, hide=parent.hide)
+
+
+@pytest.fixture
+def trees(monkeypatch):
+    """Every TreeResult the next frames render, with its root."""
+    rendered = []
+    render = view_tree.ViewTree.render
+
+    def recording(self, root, levels, surfaces, settings=view_tree.TreeSettings()):
+        result = render(self, root, levels, surfaces, settings)
+        rendered.append((root, result))
+        return result
+    monkeypatch.setattr(view_tree.ViewTree, "render", recording)
+    return rendered
+
+
+@pytest.mark.parametrize("name", SCENES)
+def test_planned_views_equal_the_one_at_a_time_views(ctx, trees, name):
+    """Camera blocks and batched rows of every planned view agree with glm's to float32
+    precision, across mirrors, portals and depth-8 recursion (each view from its planned
+    parent, so an error cannot hide in a chain)."""
+    golden.render_case(ctx, {case.name: case for case in cases()}[name])
+    views = [(root, node) for root, result in trees for node in result.views[1:]]
+    assert len(views) >= 8, f"{name}: the scene made only {len(views)} reflection views"
+    for root, node in views:
+        assert isinstance(node.view, PlannedView)
+        expected = _reference(node.parent.view, node.surface, root, node.view)
+        got = np.frombuffer(node.view.camera_block(), np.float32)
+        want = np.frombuffer(expected.camera_block(), np.float32)
+        assert np.array_equal(got[76:], want[76:]), f"{name} view {node.index}: ids differ"
+        assert np.allclose(got[:76], want[:76], rtol=2e-3, atol=2e-4), \
+            f"{name} view {node.index} (level {node.level}): worst {np.abs(got[:76] - want[:76]).max()}"
+        row, want_row = np.frombuffer(node.view.batched_row, np.float32), np.frombuffer(_view_row(expected), np.float32)
+        assert np.allclose(row, want_row, rtol=2e-3, atol=2e-4), f"{name} view {node.index}: batched row"
+        assert node.view.mirrored == expected.mirrored and node.view.name == f"{node.surface.kind} {node.surface.entity}"
+        # The matrices read back from the block are the view's.
+        assert np.allclose(np.array(node.view.view.to_list()), np.array(expected.view.to_list()), atol=2e-4)
+        assert glm.distance(node.view.eye, expected.eye) < 1e-3
+
+
+@pytest.mark.parametrize("name", ("hall_start", "mirror_ring_16"))
+def test_every_view_shows_inside_its_rectangle_and_faces_its_parent(ctx, trees, name):
+    """The cull's facts, from the surfaces' own corners: a view's surface faces its parent's
+    eye, and every corner of it that is in front of the parent's eye projects inside the
+    view's rectangle (with the rectangle's 1-pixel margin) or the rectangle is clipped by
+    the parent's own."""
+    golden.render_case(ctx, {case.name: case for case in cases()}[name])
+    checked = 0
+    for root, result in trees:
+        for node in result.views[1:]:
+            parent = node.parent
+            assert signed_distance(node.surface.plane, parent.view.eye) > 0.0
+            x, y, w, h = node.rect
+            px, py, pw, ph = parent.rect
+            assert px <= x and py <= y and x + w <= px + pw and y + h <= py + ph
+            vp = root.proj * parent.view.view
+            for corner in node.surface.corners:
+                clip = vp * glm.vec4(*map(float, corner))
+                if clip.w <= 1e-3 or any(abs(c) > clip.w for c in (clip.x, clip.y, clip.z)):
+                    continue  # behind the eye or outside the frustum: the rectangle is clipped there
+                sx = (clip.x / clip.w + 1.0) * 0.5 * root.size[0]
+                sy = (clip.y / clip.w + 1.0) * 0.5 * root.size[1]
+                inside_parent = px <= sx <= px + pw and py <= sy <= py + ph
+                if inside_parent:
+                    assert x - 1e-3 <= sx <= x + w + 1e-3 and y - 1e-3 <= sy <= y + h + 1e-3, \
+                        f"{name} view {node.index}: corner at {sx:.1f}, {sy:.1f} outside {node.rect}"
+                    checked += 1
+    assert checked >= 20
