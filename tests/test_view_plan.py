@@ -37,8 +37,8 @@ def trees(monkeypatch):
     rendered = []
     render = view_tree.ViewTree.render
 
-    def recording(self, root, levels, surfaces, settings=view_tree.TreeSettings()):
-        result = render(self, root, levels, surfaces, settings)
+    def recording(self, root, levels, surfaces, *settings):
+        result = render(self, root, levels, surfaces, *settings)
         rendered.append((root, result))
         return result
     monkeypatch.setattr(view_tree.ViewTree, "render", recording)
@@ -61,9 +61,11 @@ def test_planned_views_equal_the_one_at_a_time_views(ctx, trees, name):
         assert np.array_equal(got[76:], want[76:]), f"{name} view {node.index}: ids differ"
         assert np.allclose(got[:76], want[:76], rtol=2e-3, atol=2e-4), \
             f"{name} view {node.index} (level {node.level}): worst {np.abs(got[:76] - want[:76]).max()}"
-        row, want_row = np.frombuffer(node.view.batched_row, np.float32), np.frombuffer(_view_row(expected), np.float32)
+        row = np.frombuffer(node.view.batched_row, np.float32)
+        want_row = np.frombuffer(_view_row(expected), np.float32)
         assert np.allclose(row, want_row, rtol=2e-3, atol=2e-4), f"{name} view {node.index}: batched row"
-        assert node.view.mirrored == expected.mirrored and node.view.name == f"{node.surface.kind} {node.surface.entity}"
+        assert node.view.mirrored == expected.mirrored
+        assert node.view.name == f"{node.surface.kind} {node.surface.entity}"
         # The matrices read back from the block are the view's.
         assert np.allclose(np.array(node.view.view.to_list()), np.array(expected.view.to_list()), atol=2e-4)
         assert glm.distance(node.view.eye, expected.eye) < 1e-3
