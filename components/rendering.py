@@ -60,6 +60,16 @@ class Material(TrackedComponent):
     flat one; and a mirror magnifies an 8-bit map's slope steps (1/127, about 0.45
     degrees), so gentle slopes show as terraces: give a mirror a 16-bit map (a 16-bit PNG
     file, or uint16 pixels: uploaded as RGBA16, steps of 1/32767) or slopes well above that.
+
+    ``metallic_roughness_map`` (glTF's ``metallicRoughnessTexture``, read linearly): its
+    green channel multiplies ``roughness`` and its blue channel ``metallic`` per pixel; the
+    blue channel also scales a sky or probe reflection's mix (``Reflective.mix``), so the
+    parts the map says are not metal keep their own shading.  ``emissive_map`` (glTF's
+    ``emissiveTexture``, sRGB colour): with an ``Emissive`` component, the surface emits
+    ``Emissive.power`` x the map's colour instead of ``power`` x its diffuse colour (glTF's
+    ``emissiveFactor x emissiveTexture``, the factor being ``power``); without one it emits
+    nothing, as a glTF emissive texture with a zero factor.  A map left out costs nothing:
+    each is sampled only by a build of the scene shader for batches that have it.
     """
 
     color: Any = field(default_factory=lambda: glm.vec4(0.8, 0.8, 0.8, 1.0))
@@ -68,6 +78,8 @@ class Material(TrackedComponent):
     roughness: float = 0.5
     normal_map: TextureData | None = None
     normal_scale: float = 1.0
+    emissive_map: TextureData | None = None
+    metallic_roughness_map: TextureData | None = None
 
     def _validate(self, name: str, value: Any) -> Any:
         if name == "color":
@@ -76,7 +88,7 @@ class Material(TrackedComponent):
             return finite(self, name, value, low=0.0, high=1.0)
         if name == "normal_scale":
             return finite(self, name, value, low=0.0, high=MAX_NORMAL_SCALE)
-        if name in ("texture", "normal_map") and value is not None:
+        if name in ("texture", "normal_map", "emissive_map", "metallic_roughness_map") and value is not None:
             if getattr(type(value), "ASSET_KIND", None) != "texture":
                 raise ComponentValueError(
                     f"Material.{name} must be an engine.assets.texture_data.TextureData, got {type(value).__name__}")

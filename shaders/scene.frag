@@ -110,6 +110,7 @@ vec3 direct_lighting(Surface s) {
 }
 
 #include "normal_map.glsl"
+#include "material_maps.glsl"
 #ifdef NORMAL_MAP
 // The directions in which U and V grow across the surface, from screen derivatives of the
 // position and the UVs (a cotangent frame: Schüler, "Normal Mapping Without Precomputed
@@ -209,7 +210,7 @@ vec3 apply_refract(uint variant, vec3 color, Surface s) {
 // --- Emissive slot --------------------------------------------------------------------
 vec3 apply_emissive(uint variant, vec3 color, Surface s) {
     switch (variant) {
-        case EMISSIVE_EMISSIVE: return color + v_surface.z * s.albedo;  // emissive = power x diffuse
+        case EMISSIVE_EMISSIVE: return color + v_surface.z * emitted_colour(s);  // power x diffuse (or emissive map)
         default: return color;
     }
 }
@@ -255,6 +256,7 @@ void main() {
     s.alpha = base.a;
     s.metallic = v_surface.x;
     s.roughness = v_surface.y;
+    float metal_share = apply_metallic_roughness(s);  // x the metallic-roughness map
     s.f0 = mix(vec3(0.04), s.albedo, s.metallic);
     s.reflect_dir = reflect(-s.to_eye, s.normal);
     s.refract_dir = refract(-s.to_eye, s.normal, 1.0 / max(v_reflect.y, 1.0));
@@ -268,8 +270,8 @@ void main() {
     if (SLOT_REFRACT == REFRACT_ENVIRONMENT)
         s.refract_lod = cube_lod(s.refract_dir, probe_face_size > 0.0 ? probe_face_size : sky_face_size);
 
-    vec3 color = direct_lighting(s);
-    color = apply_reflect(SLOT_REFLECT, color, s);
+    vec3 lit = direct_lighting(s);
+    vec3 color = mapped_reflection(SLOT_REFLECT, lit, apply_reflect(SLOT_REFLECT, lit, s), metal_share);
     color = apply_refract(SLOT_REFRACT, color, s);
     color = apply_emissive(SLOT_EMISSIVE, color, s);
     out_color = vec4(color, transparent ? s.alpha : 1.0);

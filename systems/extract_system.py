@@ -87,7 +87,9 @@ class ExtractSystem(esper.Processor):
         transparent = material is not None and material.color.w < 1.0 and not world.has(entity, Refractive)
         try:
             batch = self.renderer.batch_for(mesh_ref.mesh, material.texture if material else None, probe,
-                                            entity if transparent else 0, material.normal_map if material else None)
+                                            entity if transparent else 0, material.normal_map if material else None,
+                                            material.emissive_map if material else None,
+                                            material.metallic_roughness_map if material else None)
         except GLLimitError as exc:
             raise GLLimitError(f"entity {entity}: {exc}") from None
         if old is not batch:

@@ -132,14 +132,19 @@ def test_flat_reflective_obj_becomes_a_mirror(tmp_path, world):
     assert world.get(child, Material).metallic == pytest.approx(0.6)
 
 
-def test_reflective_obj_that_is_not_flat_reflects_the_sky(tmp_path, world):
+def test_reflective_obj_that_is_not_flat_samples_a_probe_of_its_own(tmp_path, world):
+    """A curved reflective part reflects a cube-map probe (the probes stage makes it one at its
+    box's centre), not only the sky (issue 27 item 7; it was Reflective("skybox"))."""
+    from engine.rules.probe_rules import has_own_probe, probe_for
+
     path = tmp_path / "chrome.obj"
     (tmp_path / "chrome.mtl").write_text("newmtl m\nKd 0.9 0.9 0.9\nPm 0.6\nPr 0.1\n")
     path.write_text("mtllib chrome.mtl\n" + mesh_obj_text(box()))
     root = spawn_model(world, path)
     (child,) = children(world, root)
     reflective = world.get(child, Reflective)
-    assert reflective.mode == "skybox" and reflective.mix == pytest.approx(0.6)
+    assert reflective.mode == "cube" and reflective.mix == pytest.approx(0.6)
+    assert has_own_probe(world, child) and probe_for(world, child) == child
     assert not world.has(child, Mirror)
     assert world.get(child, Material).roughness == pytest.approx(0.1)
 

@@ -6,10 +6,11 @@ component, named by its class (``[entity.Transform]``) with the component's fiel
 Vectors and colours are lists, a rotation is a quaternion ``[w, x, y, z]`` or
 ``{ yaw = .., pitch = .. }`` (degrees) or ``{ look = [x, y, z] }``; a mesh is a generator
 (``{ box = [w, h, d] }``, ``{ quad = [w, h] }``, ``{ plane = [w, d], uv_repeat = r }``,
-``{ sphere = r }``) or ``{ file = "x.obj" }``; a texture (``Material.texture``, ``Material.normal_map``)
-``{ checker = [size, squares] }``, ``{ ripples = [size, rings] }`` (a normal map) or
-``{ file = "x.png" }``; paths are relative to the level file and stay inside its folder (or an
-asset root: ``LevelGame.asset_roots``, ``--asset-root DIR``). Entity references
+``{ sphere = r }``) or ``{ file = "x.obj" }``; a texture (``Material.texture``, ``normal_map``,
+``emissive_map``, ``metallic_roughness_map``) ``{ checker = [size, squares] }``,
+``{ ripples = [size, rings] }`` (a normal map) or ``{ file = "x.png" }``; paths are relative
+to the level file and stay inside its folder (or an asset root: ``LevelGame.asset_roots``,
+``--asset-root DIR``). Entity references
 (``Transform.parent``, ``Portal.partner``) are entity names. docs/level_files.md has the
 whole format with an example.
 
@@ -627,11 +628,15 @@ def _check_mirror(path: Path, index: int, name: str, parts: list[tuple[type, dic
         raise LevelError(path, str(exc).replace("Mirror on entity 0: its ", ""), line, name, "Mirror") from None
 
 
+_MATERIAL_MAPS = {("Material", name) for name in ("normal_map", "emissive_map", "metallic_roughness_map")}
+
+
 def _decode(cls_name: str, field: str, value: Any, where: _Where) -> Any:
     if cls_name == "MeshRef" and field == "mesh":
         return _mesh(value, where)
-    if field == "texture" or (cls_name, field) == ("Material", "normal_map"):
-        return _texture(value, where, normal_map=field == "normal_map")
+    if field == "texture" or (cls_name, field) in _MATERIAL_MAPS:
+        # A linear map (normal, metallic-roughness) keeps a 16-bit PNG's 16 bits; colour is 8 bits.
+        return _texture(value, where, normal_map=field in ("normal_map", "metallic_roughness_map"))
     if cls_name == "Transform" and field == "rotation":
         return _rotation(value)
     if cls_name == "Skybox" and field == "faces":

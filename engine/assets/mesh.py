@@ -25,7 +25,10 @@ from engine.assets.texture_data import (
     check_asset_file,
     check_texture_size,
     contained_path,
+    height_to_normal_map,
     image_to_rgba8,
+    is_grey,
+    load_texture,
     pillow_image_module,
 )
 from engine.core.errors import AssetError
@@ -263,7 +266,16 @@ def sphere(radius: float = 0.5, segments: int = 48, rings: int = 24, name: str =
 
 @dataclass
 class ModelPart:
-    """One mesh of a loaded file with the material the file gave it."""
+    """One mesh of a loaded file with the material the file gave it.
+
+    The maps are ``Material``'s: ``normal_map`` (glTF's ``normalTexture`` with its
+    ``scale``; an MTL's ``norm``, or ``map_Bump`` / ``bump``, a grey one being a height map
+    turned into normals, with ``-bm`` as the scale), ``emissive_map`` (glTF's
+    ``emissiveTexture``, an MTL's ``map_Ke``) and ``metallic_roughness_map`` (glTF's
+    ``metallicRoughnessTexture``).  With an emissive map, ``emissive_factor`` is the
+    strength the map is emitted at (the largest channel of glTF's ``emissiveFactor`` or the
+    MTL's ``Ke``; a factor that is not grey has its hue multiplied into the map's texels),
+    not the ratio of emissive to diffuse colour it is without one."""
 
     mesh: Mesh
     local: glm.mat4
@@ -271,8 +283,12 @@ class ModelPart:
     texture: TextureData | None = None
     metallic: float = 0.0
     roughness: float = 0.5
-    emissive_factor: float = 0.0   # emissive colour / diffuse colour
+    emissive_factor: float = 0.0   # emissive colour / diffuse colour (with an emissive map: its strength)
     reflectivity: float = 0.0
+    normal_map: TextureData | None = None
+    normal_scale: float = 1.0
+    emissive_map: TextureData | None = None
+    metallic_roughness_map: TextureData | None = None
 
 
 SUPPORTED_SUFFIXES = (".obj", ".glb", ".gltf", ".ply", ".stl", ".off")
@@ -311,10 +327,11 @@ def load_model(path: str | Path, roots: Sequence[str | Path] | None = None) -> l
 
 def _load_model(path: Path, what: str, roots, trimesh) -> list[ModelPart]:
     suffix = path.suffix.lower()
+    gltf_doc = None  # a glTF's JSON: what trimesh does not keep (normalTexture.scale)
     if suffix == ".gltf":
-        _check_gltf_json(path, roots)
+        gltf_doc = _check_gltf_json(path, roots)
     elif suffix == ".glb":
-        _check_glb_json(path, roots)
+        gltf_doc = _check_glb_json(path, roots)
     elif suffix == ".obj":
         _check_obj_text(path, roots)
     try:
@@ -326,6 +343,7 @@ def _load_model(path: Path, what: str, roots, trimesh) -> list[ModelPart]:
     parts: list[ModelPart] = []
     try:
         texture_refs = _mtl_texture_refs(path) if suffix == ".obj" else {}
+        maps = _MaterialMaps(path, gltf_doc, roots)
         for node in loaded.graph.nodes_geometry:
             matrix, geom_name = loaded.graph[node]
             tm = loaded.geometry[geom_name]
@@ -344,6 +362,7 @@ def _load_model(path: Path, what: str, roots, trimesh) -> list[ModelPart]:
             mesh = Mesh.from_trimesh(tm, name=f"{path.name}:{geom_name}")
             part = ModelPart(mesh=mesh, local=glm.mat4(*matrix.astype(np.float32).T.ravel()))
             _read_material(tm, part, path, texture_refs)
+            maps.read(tm, part)
             parts.append(part)
     except AssetError as exc:
         raise AssetError(f"{what}: {exc}") from exc
@@ -384,9 +403,9 @@ def _referenced(path: Path, name: str, roots, kind: str, owner: str = "mesh file
     return target
 
 
-def _check_gltf_json(path: Path, roots=None) -> None:
+def _check_gltf_json(path: Path, roots=None) -> dict:
     """A .gltf is JSON; say so plainly instead of trimesh's guess at a missing buffer file,
-    and check the files it names."""
+    and check the files it names.  Returns the document."""
     try:
         doc = json.loads(path.read_bytes().decode("utf-8"))
     except RecursionError:
@@ -397,18 +416,20 @@ def _check_gltf_json(path: Path, roots=None) -> None:
     if not isinstance(doc, dict) or "asset" not in doc:
         raise AssetError(f"mesh file {str(path)!r}: is not a glTF document (no 'asset' object)")
     _check_gltf_document(path, doc, roots)
+    return doc
 
 
-def _check_glb_json(path: Path, roots=None) -> None:
+def _check_glb_json(path: Path, roots=None) -> dict | None:
     """A .glb's JSON chunk (12-byte header, then the chunk's length and type): its nesting and
-    the files it names. A file that is not a GLB is left to trimesh to refuse."""
+    the files it names. A file that is not a GLB is left to trimesh to refuse.  Returns the
+    document (None where there is none to read)."""
     with path.open("rb") as f:
         head = f.read(20)
         if len(head) < 20 or head[:4] != b"glTF" or head[16:20] != b"JSON":
-            return
+            return None
         length = int.from_bytes(head[12:16], "little")
         if length > MAX_MESH_FILE_BYTES:
-            return
+            return None
         chunk = f.read(length)
     try:
         doc = json.loads(chunk.decode("utf-8"))
@@ -416,9 +437,11 @@ def _check_glb_json(path: Path, roots=None) -> None:
         raise AssetError(f"mesh file {str(path)!r}: its JSON is nested too deeply (at most {MAX_JSON_NESTING})") \
             from None
     except (UnicodeDecodeError, ValueError):
-        return  # trimesh says it cannot be parsed
+        return None  # trimesh says it cannot be parsed
     if isinstance(doc, dict):
         _check_gltf_document(path, doc, roots)
+        return doc
+    return None
 
 
 def _check_gltf_document(path: Path, doc: dict, roots) -> None:
@@ -614,6 +637,226 @@ def _read_material(tm, part: ModelPart, path: Path, texture_refs: dict[str, Path
         value = getattr(part, name)
         if not (np.isfinite(value) and 0.0 <= value <= 1.0):
             raise AssetError(f"material {name} {value} is outside 0..1")
+
+
+# --- material maps -----------------------------------------------------------------------
+
+# MTL texture options and how many values each takes (-o, -s and -t take one to three); the
+# file name is what follows them (it may hold spaces).
+_MTL_OPTION_VALUES = {"-blendu": 1, "-blendv": 1, "-bm": 1, "-boost": 1, "-cc": 1, "-clamp": 1, "-imfchan": 1,
+                      "-texres": 1, "-type": 1, "-mm": 2, "-o": 3, "-s": 3, "-t": 3}
+_MTL_MAP_KEYS = ("norm", "map_bump", "bump", "map_ke")  # the maps an MTL gives beyond map_Kd
+
+
+@dataclass(frozen=True)
+class _MtlMap:
+    """One map statement of a material library: the file, its ``-bm`` (None: not given), and
+    where it was written (for errors)."""
+
+    path: Path
+    bump_scale: float | None
+    library: Path
+    line: int
+    key: str
+
+
+def _mtl_map_statement(words: list[str], library: Path, number: int, roots) -> _MtlMap:
+    """``key [-option values...] file``: the options read (``-bm`` kept), the file checked
+    (inside ``roots``, a regular file, there at all), every problem naming the library and line."""
+    key = words[0].lower()
+    where = f"material library {str(library)!r}: line {number}: {words[0]}"
+    bump_scale, i = None, 1
+    while i < len(words) and words[i].lower() in _MTL_OPTION_VALUES:
+        option, count = words[i].lower(), _MTL_OPTION_VALUES[words[i].lower()]
+        values = words[i + 1:i + 1 + count]
+        if option in ("-o", "-s", "-t"):  # one to three numbers
+            taken = 0
+            for word in values:
+                try:
+                    float(word)
+                except ValueError:
+                    break
+                taken += 1
+            values = values[:taken]
+        if option == "-bm":
+            try:
+                bump_scale = float(values[0]) if values else math.nan
+            except ValueError:
+                bump_scale = math.nan
+            if not 0.0 <= bump_scale <= MAX_MTL_BUMP_SCALE:
+                raise AssetError(f"{where}: -bm (the bump scale) must be a number in [0, {MAX_MTL_BUMP_SCALE:g}], "
+                                 f"got {values[0] if values else 'nothing'!r}")
+        i += 1 + len(values)
+    name = " ".join(words[i:])
+    if not name:
+        raise AssetError(f"{where}: names no file")
+    target = _referenced(library, name, roots, "image", "material library")
+    if target is None:
+        raise AssetError(f"{where}: its image {name!r} does not exist (looked for {str(library.parent / name)!r})")
+    return _MtlMap(target, bump_scale, library, number, key)
+
+
+MAX_MTL_BUMP_SCALE = 16.0  # Material.normal_scale's limit
+
+
+def _mtl_maps(obj_path: Path, roots) -> dict[str, dict[str, _MtlMap]]:
+    """The ``norm``, ``map_Bump`` / ``bump`` and ``map_Ke`` statements of the MTL libraries an
+    OBJ names, by material name (trimesh reads none of them)."""
+    maps: dict[str, dict[str, _MtlMap]] = {}
+    with open(obj_path, "rb") as f:
+        libraries = [line[6:].strip().decode("utf-8", "replace") for line in f if line.startswith(b"mtllib")]
+    for library_name in libraries:
+        library = obj_path.parent / library_name
+        if not library.is_file():
+            continue  # the OBJ check warned; the default material is used
+        material = None
+        for number, line in enumerate(library.read_text(encoding="utf-8", errors="replace").splitlines(), 1):
+            words = line.split()
+            if len(words) >= 2 and words[0] == "newmtl":
+                material = " ".join(words[1:])
+            elif words and words[0].lower() in _MTL_MAP_KEYS and material is not None:
+                entry = _mtl_map_statement(words, library, number, roots)
+                maps.setdefault(material, {})["bump" if entry.key == "map_bump" else entry.key] = entry
+    return maps
+
+
+class _MaterialMaps:
+    """The material maps of a file's parts beyond the albedo texture: normal, emissive and
+    metallic-roughness maps (glTF through trimesh's PBRMaterial, with the normal map's scale
+    from the file's JSON, which trimesh drops; OBJ from the MTL statements, read here).  One
+    image is one TextureData however many parts use it, so it is uploaded once."""
+
+    def __init__(self, path: Path, gltf_doc: dict | None, roots) -> None:
+        self.path = path
+        materials = gltf_doc.get("materials") if isinstance(gltf_doc, dict) else None
+        self.gltf_materials = [m for m in materials if isinstance(m, dict)] if isinstance(materials, list) else []
+        self.mtl = _mtl_maps(path, roots) if path.suffix.lower() == ".obj" else {}
+        self._made: dict[tuple, TextureData] = {}
+
+    def read(self, tm, part: ModelPart) -> None:
+        from trimesh.visual.material import SimpleMaterial
+
+        material = getattr(getattr(tm, "visual", None), "material", None)
+        if material is None:
+            return
+        if hasattr(material, "baseColorFactor"):
+            self._gltf(material, part)
+        elif isinstance(material, SimpleMaterial):
+            found = self.mtl.get(getattr(material, "_name", None) or "")
+            if found:
+                extra = {str(k).lower(): v for k, v in (getattr(material, "kwargs", {}) or {}).items()}
+                self._obj(found, extra, part)
+
+    # --- glTF ------------------------------------------------------------------------------
+    def _gltf(self, material, part: ModelPart) -> None:
+        what = f"material {material.name!r}"
+        image = getattr(material, "normalTexture", None)
+        if image is not None:
+            part.normal_map = self._image(image, f"{what}: normalTexture", "normal")
+            part.normal_scale = self._normal_scale(material.name, what)
+        image = getattr(material, "metallicRoughnessTexture", None)
+        if image is not None:
+            # glTF: the factors multiply the texture (roughness G, metallic B); absent, they are 1.
+            part.metallic_roughness_map = self._image(image, f"{what}: metallicRoughnessTexture", "linear")
+            part.metallic = 1.0 if material.metallicFactor is None else float(material.metallicFactor)
+            part.roughness = 1.0 if material.roughnessFactor is None else float(material.roughnessFactor)
+            for name in ("metallic", "roughness"):
+                value = getattr(part, name)
+                if not (np.isfinite(value) and 0.0 <= value <= 1.0):
+                    raise AssetError(f"{what}: {name}Factor {value} is outside 0..1")
+            # Reflective where any texel is metal; the map's blue weighs the reflection per pixel.
+            metal = part.metallic_roughness_map.pixels[..., 2].max() > 0
+            part.reflectivity = part.metallic if metal else 0.0
+        image = getattr(material, "emissiveTexture", None)
+        factor = _floats(material.emissiveFactor)
+        if image is not None and factor is not None and len(factor) >= 3 and max(factor[:3]) > 0.0:
+            self._emissive(part, self._image(image, f"{what}: emissiveTexture", "colour"), factor[:3], what)
+
+    def _image(self, image, what: str, kind: str) -> TextureData:
+        """A decoded image of the file as a TextureData (once per image and kind)."""
+        key = ("image", id(image), kind)
+        texture = self._made.get(key)
+        if texture is None:
+            check_texture_size(*image.size, f"{what} of {str(self.path)!r}")
+            try:
+                pixels = image_to_rgba8(image, what)
+            except (AssetError, MemoryError):
+                raise
+            except Exception as exc:
+                raise AssetError(f"{what} of {str(self.path)!r} cannot be decoded ({exc})") from exc
+            texture = self._made[key] = TextureData(pixels, name=f"{self.path.name}:{what.split(': ')[-1]}")
+        return texture
+
+    def _normal_scale(self, name, what: str) -> float:
+        """The file's ``normalTexture.scale`` for the material called ``name`` (glTF default 1).
+        trimesh keeps neither the scale nor the material's index, so materials are matched by
+        name; a material no name picks gets the scale every normal texture of the file shares."""
+        scales = [(m.get("name"), m["normalTexture"].get("scale", 1.0)) for m in self.gltf_materials
+                  if isinstance(m.get("normalTexture"), dict)]
+        named = [scale for n, scale in scales if n == name]
+        shared = {repr(scale) for _, scale in scales}
+        scale = named[0] if named else (scales[0][1] if len(shared) == 1 else 1.0)
+        if isinstance(scale, bool) or not isinstance(scale, numbers.Real) or \
+                not 0.0 <= float(scale) <= MAX_MTL_BUMP_SCALE:
+            raise AssetError(f"{what}: normalTexture.scale must be a number in [0, {MAX_MTL_BUMP_SCALE:g}], "
+                             f"got {scale!r}")
+        return float(scale)
+
+    def _emissive(self, part: ModelPart, texture: TextureData, factor: list[float], what: str) -> None:
+        """An emissive map emitted at the factor's largest channel (``Emissive.power``); a
+        factor that is not grey has its hue (factor / largest) multiplied into the texels, in
+        linear light, so the emitted colour is the file's factor x texture."""
+        if not all(np.isfinite(e) and 0.0 <= e <= 65504.0 for e in factor):
+            raise AssetError(f"{what}: emissive colour {factor} must be finite and >= 0")
+        strength = max(factor)
+        hue = np.asarray(factor, np.float64) / strength
+        if not np.all(hue == 1.0):
+            key = ("tinted", id(texture), tuple(hue))
+            tinted = self._made.get(key)
+            if tinted is None:
+                linear = _srgb_to_linear_array(texture.as_8_bits()[..., :3] / 255.0) * hue
+                pixels = texture.as_8_bits().copy()
+                pixels[..., :3] = np.rint(_linear_to_srgb_array(linear) * 255.0).astype(np.uint8)
+                tinted = self._made[key] = TextureData(pixels, name=f"{texture.name} x {list(hue)}")
+            texture = tinted
+        part.emissive_map = texture
+        part.emissive_factor = float(min(strength, 1e4))
+
+    # --- OBJ / MTL -------------------------------------------------------------------------
+    def _obj(self, found: dict[str, _MtlMap], extra: dict, part: ModelPart) -> None:
+        entry = found.get("norm") or found.get("bump")
+        if entry is not None:
+            texture = self._file(entry.path, True)
+            if entry.key != "norm" and is_grey(texture):  # a height map: its slopes become normals
+                key = ("heights", entry.path)
+                if key not in self._made:
+                    self._made[key] = height_to_normal_map(texture)
+                texture = self._made[key]
+            part.normal_map = texture
+            part.normal_scale = 1.0 if entry.bump_scale is None else entry.bump_scale
+        entry = found.get("map_ke")
+        if entry is not None:
+            ke = _floats(extra.get("ke"))
+            factor = [1.0, 1.0, 1.0] if ke is None else (ke * 3 if len(ke) == 1 else ke[:3])
+            if max(factor) > 0.0:
+                self._emissive(part, self._file(entry.path, False), factor,
+                               f"material library {str(entry.library)!r}: line {entry.line}")
+
+    def _file(self, path: Path, linear: bool) -> TextureData:
+        key = ("file", str(path), linear)
+        texture = self._made.get(key)
+        if texture is None:
+            texture = self._made[key] = load_texture(path, keep_16_bits=linear)
+        return texture
+
+
+def _srgb_to_linear_array(c: np.ndarray) -> np.ndarray:
+    return np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
+
+
+def _linear_to_srgb_array(c: np.ndarray) -> np.ndarray:
+    c = np.clip(c, 0.0, 1.0)
+    return np.where(c <= 0.0031308, c * 12.92, 1.055 * c ** (1.0 / 2.4) - 0.055)
 
 
 def _floats(value) -> list[float] | None:

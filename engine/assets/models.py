@@ -15,11 +15,16 @@ def spawn_model(world: World, path: str | Path, position=(0.0, 0.0, 0.0), rotati
                 scale=(1.0, 1.0, 1.0)) -> int:
     """Load ``path`` and spawn it; returns the root entity.
 
-    The file's material decides the components : an emissive colour gives
-    Emissive(emissive / diffuse); reflectivity > 0 gives a Mirror on a flat mesh and
-    Reflective (sky) on any other.  The file is fully
-    loaded and every component built (so validated) before anything is spawned, so a bad
-    file leaves the world untouched.
+    The file's material decides the components: its colour, texture, metallic and
+    roughness, normal, emissive and metallic-roughness maps make the Material; an emissive
+    colour gives Emissive(emissive / diffuse), or with an emissive map Emissive(its
+    strength) (``ModelPart``); reflectivity > 0 (a metallic glTF material, an MTL's
+    ``refl`` or ``Pm``) gives a Mirror on a flat mesh and, on any other,
+    ``Reflective("cube")``: the probes stage gives such a part a cube-map probe of its own
+    at its bounding box's centre (engine/rules/probe_rules.py's automatic probe, the seed's
+    detection: flat is a planar mirror, curved a cube map), so a chrome teapot reflects the
+    room around it, not only the sky.  The file is fully loaded and every component built
+    (so validated) before anything is spawned, so a bad file leaves the world untouched.
     """
     root_transform = Transform(position=position, rotation=rotation if rotation is not None else glm.quat(),
                                scale=scale)
@@ -33,16 +38,19 @@ def spawn_model(world: World, path: str | Path, position=(0.0, 0.0, 0.0), rotati
             components = [
                 Transform(position=translation, rotation=rotation_q, scale=scale_v),  # parent set below
                 MeshRef(part.mesh),
-                Material(color=part.color, texture=part.texture, metallic=part.metallic, roughness=part.roughness),
+                Material(color=part.color, texture=part.texture, metallic=part.metallic, roughness=part.roughness,
+                         normal_map=part.normal_map, normal_scale=part.normal_scale, emissive_map=part.emissive_map,
+                         metallic_roughness_map=part.metallic_roughness_map),
             ]
             if part.emissive_factor > 0.0:
                 components.append(Emissive(part.emissive_factor))
             if part.reflectivity > 0.0:
-                # A flat reflective surface is a planar mirror, anything else reflects the sky.
+                # A flat reflective surface is a planar mirror; anything else samples a cube-map
+                # probe (its own, made by the probes stage at its box's centre).
                 if flat_plane(part.mesh) is not None:
                     components.append(Mirror(reflect_rate=part.reflectivity, roughness=part.roughness))
                 else:
-                    components.append(Reflective(mode="skybox", mix=part.reflectivity))
+                    components.append(Reflective(mode="cube", mix=part.reflectivity))
             part_components.append(components)
     except ComponentValueError as exc:
         raise AssetError(f"mesh file {str(path)!r}: {exc}") from exc

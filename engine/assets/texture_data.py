@@ -354,3 +354,40 @@ def ripple_normal_map(size: int = 256, rings: int = 6, slope: float = 0.5, name:
     source = {"ripples": [int(size), int(rings)], **({} if float(slope) == 0.5 else {"slope": float(slope)}),
               **({} if name == "ripples" else {"name": name})}
     return TextureData(pixels, name=name, source=source)
+
+
+def is_grey(texture: TextureData) -> bool:
+    """Every texel's red, green and blue are equal: a height (bump) map, not a normal map."""
+    p = texture.pixels
+    return bool((p[..., 0] == p[..., 1]).all() and (p[..., 1] == p[..., 2]).all())
+
+
+def height_to_normal_map(height: TextureData, name: str | None = None) -> TextureData:
+    """A tangent-space normal map (``Material.normal_map``'s convention: RGB = n x 0.5 + 0.5,
+    red towards +U, green towards +V, i.e. up the image) from a height map (a grey bump map,
+    as an OBJ's ``bump`` / ``map_Bump`` names one): heights are the red channel in 0..1, and
+    a step of 1 between neighbouring texels is a slope of 1, so ``n = normalize(-dh/du,
+    -dh/dv, 1)`` with the slopes taken by central differences per texel, one-sided at the
+    image's edges (a map that does not tile would otherwise get a cliff along them; one that
+    does loses only its edge texels' exact slope). Strength is left to
+    ``Material.normal_scale`` (an MTL's ``-bm``). Written as 16 bits a channel (a normal map
+    keeps them: gentle slopes without 8-bit terraces); worked a block of rows at a time."""
+    p = height.pixels
+    h = p[..., 0].astype(np.float32) / float(np.iinfo(p.dtype).max)
+    rows, cols = h.shape
+    out = np.empty((rows, cols, 4), np.uint16)
+    out[..., 3] = 65535
+    columns = np.arange(cols)
+    left, right = np.maximum(columns - 1, 0), np.minimum(columns + 1, cols - 1)
+    across = np.maximum(right - left, 1).astype(np.float32)  # 2 inside, 1 at an edge (0 slope: 1 texel wide)
+    block = max(1, WORK_BLOCK // max(1, cols))
+    for top in range(0, rows, block):
+        index = np.arange(top, min(rows, top + block))
+        here = h[index]
+        du = (here[:, right] - here[:, left]) / across                      # columns: u grows to the right
+        up, down = np.maximum(index - 1, 0), np.minimum(index + 1, rows - 1)
+        dv = (h[up] - h[down]) / np.maximum(down - up, 1)[:, None]          # row 0 is the top: v grows upwards
+        n = np.stack([-du, -dv, np.ones_like(du)], axis=-1)
+        n /= np.linalg.norm(n, axis=-1, keepdims=True)
+        out[index, :, :3] = np.clip(np.rint(n * 32767.5 + 32767.5), 0, 65535).astype(np.uint16)
+    return TextureData(out, name=name or f"{height.name} (as normals)")

@@ -53,6 +53,8 @@ LEVEL_UNITS = (3, 5)     # rough-atlas copy: a level's colour and node images (t
 PRESENT_UNIT = 0         # present: the HDR image
 PROBE_UNIT = 7           # scene: the cube map of the batch's reflection probe
 NORMAL_UNIT = 8          # scene: the batch's normal map; composite (bumpy mirrors): the mirror's
+EMISSIVE_MAP_UNIT = 12   # scene: the batch's emissive map (Material.emissive_map)
+METALLIC_ROUGHNESS_UNIT = 13  # scene: the batch's metallic-roughness map (Material.metallic_roughness_map)
 CUBE_MIP_UNIT = 14       # cube-map mip pass: the cube whose next level it draws
 SCRATCH_UNIT = 15        # raw-GL copies bind their target here; no program reads it
 

@@ -81,6 +81,10 @@ class InstanceBatch:
         # cells across the UV square, and the linear colours of the cells whose integer
         # coordinates sum even and odd (``checker_look``); None: sampled as any texture.
         self.checker: tuple[float, tuple[float, float, float], tuple[float, float, float]] | None = None
+        # The material's emissive (sRGB) and metallic-roughness (linear) maps, part of the
+        # batch's key like its texture (Renderer.batch_for); None: the build without them.
+        self.emissive_map: moderngl.Texture | None = None
+        self.metallic_roughness_map: moderngl.Texture | None = None
 
     # --- rows ----------------------------------------------------------------------------
     def add(self, entity: int) -> np.void:

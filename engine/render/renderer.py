@@ -107,9 +107,10 @@ class Renderer:
         self.camera_ubo = ctx.buffer(reserve=CAMERA_BLOCK_BYTES)
         self.lights_ubo = ctx.buffer(reserve=LIGHTS_BLOCK_BYTES)
         self._meshes: dict[int, _Shared] = {}
-        self._textures: dict[object, _Shared] = {}  # id(TextureData); ("normal", id) for a normal map
-        # (mesh, texture, probe, transparent entity, normal map) -> batch
-        self.batches: dict[tuple[int, int, int, int, int], InstanceBatch] = {}
+        # id(TextureData); ("normal", id): uploaded linear (normal and metallic-roughness maps)
+        self._textures: dict[object, _Shared] = {}
+        # (mesh, texture, probe, transparent entity, normal map, emissive map, metallic-roughness map) -> batch
+        self.batches: dict[tuple[int, int, int, int, int, int, int], InstanceBatch] = {}
         self._draw_order: list[InstanceBatch] = []   # non-empty batches, smallest extent first
         self._order_stale = True
         self.sky = flat_cube(ctx, BACKGROUND)
@@ -152,17 +153,23 @@ class Renderer:
 
     # --- shared resources ------------------------------------------------------------------
     def batch_for(self, mesh: Mesh, texture: TextureData | None, probe: int = 0,
-                  transparent_entity: int = 0, normal_map: TextureData | None = None) -> InstanceBatch:
-        """The batch of (mesh, albedo texture, normal map, the probe its instances sample;
-        0: none).  A transparent entity gets a batch of its own (``transparent_entity``):
-        transparent things are drawn one by one, farthest first.  Textures are shared by
-        every batch that uses them; a normal map is uploaded linear (its texels are vectors,
+                  transparent_entity: int = 0, normal_map: TextureData | None = None,
+                  emissive_map: TextureData | None = None,
+                  metallic_roughness_map: TextureData | None = None) -> InstanceBatch:
+        """The batch of (mesh, albedo texture, normal map, emissive map, metallic-roughness
+        map, the probe its instances sample; 0: none).  A transparent entity gets a batch of
+        its own (``transparent_entity``): transparent things are drawn one by one, farthest
+        first.  Textures are shared by every batch that uses them; a normal map and a
+        metallic-roughness map are uploaded linear (their texels are vectors and factors,
         not colours), so one image used both ways is two GPU textures."""
         key = (mesh.id, id(texture) if texture is not None else 0, probe, transparent_entity,
-               id(normal_map) if normal_map is not None else 0)
+               id(normal_map) if normal_map is not None else 0, id(emissive_map) if emissive_map is not None else 0,
+               id(metallic_roughness_map) if metallic_roughness_map is not None else 0)
         batch = self.batches.get(key)
         if batch is None:
-            for name, image in (("Material.texture", texture), ("Material.normal_map", normal_map)):
+            for name, image in (("Material.texture", texture), ("Material.normal_map", normal_map),
+                                ("Material.emissive_map", emissive_map),
+                                ("Material.metallic_roughness_map", metallic_roughness_map)):
                 if image is not None:
                     self.check_texture(image, name)  # before anything is made: nothing half-built
             gpu_mesh = self._acquire(self._meshes, mesh.id, lambda: GpuMesh(self.ctx, mesh))
@@ -173,6 +180,13 @@ class Renderer:
                 gpu_normal_map = self._acquire(self._textures, ("normal", id(normal_map)),
                                                lambda: self._upload_texture(normal_map, linear=True))
             batch = self.batches[key] = InstanceBatch(self.ctx, gpu_mesh, gpu_texture, gpu_normal_map)
+            if emissive_map is not None:  # sRGB, shared with the same image used as an albedo texture
+                batch.emissive_map = self._acquire(self._textures, id(emissive_map),
+                                                   lambda: self._upload_texture(emissive_map))
+            if metallic_roughness_map is not None:  # linear, shared with the same image as a normal map
+                batch.metallic_roughness_map = self._acquire(
+                    self._textures, ("normal", id(metallic_roughness_map)),
+                    lambda: self._upload_texture(metallic_roughness_map, linear=True))
             batch.key = key
             batch.probe = probe
             batch.checker = checker_look(texture)
@@ -206,12 +220,16 @@ class Renderer:
         del self.batches[batch.key]
         self._order_stale = True
         batch.release()
-        mesh_id, texture_id, _, _, normal_map_id = batch.key
+        mesh_id, texture_id, _, _, normal_map_id, emissive_map_id, metallic_roughness_id = batch.key
         self._release(self._meshes, mesh_id)
         if texture_id:
             self._release(self._textures, texture_id)
         if normal_map_id:
             self._release(self._textures, ("normal", normal_map_id))
+        if emissive_map_id:
+            self._release(self._textures, emissive_map_id)
+        if metallic_roughness_id:
+            self._release(self._textures, ("normal", metallic_roughness_id))
 
     def normal_map_texture(self, normal_map: TextureData) -> moderngl.Texture | None:
         """The uploaded normal map of ``normal_map`` while a batch draws with it (a mirror's

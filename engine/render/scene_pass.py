@@ -41,7 +41,9 @@ from engine.render.bindings import (
     BATCHED_SCENE_CLIPS,
     BLEND_OVER,
     CAMERA_BINDING,
+    EMISSIVE_MAP_UNIT,
     LIGHTS_BINDING,
+    METALLIC_ROUGHNESS_UNIT,
     NODE_UNIT,
     NORMAL_UNIT,
     PROBE_UNIT,
@@ -102,8 +104,9 @@ class ScenePass:
         self.sky_program["sky_map"].value = SKY_UNIT
         self._sky = self.ctx.vertex_array(self.sky_program, [])
         # Scene programs by (geometry-shader invocations or 0, "" / "culled" / "naive" for a
-        # layered capture, the batch's variants or None, whether it reads a normal map).
-        self._programs: dict[tuple[int, str, tuple[int, int, int] | None, bool], moderngl.Program] = {}
+        # layered capture, the batch's variants or None, whether it reads a normal map, draws
+        # the analytic checker, reads an emissive map, a metallic-roughness map).
+        self._programs: dict[tuple, moderngl.Program] = {}
         self._uniforms: dict[int, tuple] = {}  # program -> its _PER_DRAW_UNIFORMS (None where dropped)
         self._reloads_seen = 0  # ShaderLibrary.reloads when the two caches above were made
         self._written: dict[int, list] = {}  # program -> the values last written in this pass
@@ -116,14 +119,18 @@ class ScenePass:
         self._reflection_sampler: moderngl.Sampler | None = None
 
     def program(self, variants: tuple[int, int, int] | None = None, invocations: int = 0,
-                layered: str = "", normal_mapped: bool = False, checker: bool = False) -> moderngl.Program:
+                layered: str = "", normal_mapped: bool = False, checker: bool = False,
+                material_maps: tuple[bool, bool] = (False, False)) -> moderngl.Program:
         """The scene program for a batch of ``variants`` (None: mixed, switched per
         instance): plain, batched (``invocations`` > 0: the geometry shader's) or a one-pass
         cube-map capture (``layered`` "culled" or "naive"), with or without a normal map
         (a build of its own: llvmpipe would run the map's derivatives and fetch for every
         pixel behind a uniform branch), and with or without the analytic checker (``CHECKER``:
         a generated checker texture drawn from its cells, filtered by the pixel's footprint,
-        instead of sampled), built once.  After a shader hot
+        instead of sampled), and with or without each of the material maps ``material_maps``
+        (emissive, metallic-roughness: ``EMISSIVE_MAP`` and ``METALLIC_ROUGHNESS_MAP`` builds,
+        shaders/include/material_maps.glsl; a batch without them samples nothing for them),
+        built once.  After a shader hot
         reload the set-up is done again and the batches' vertex arrays are made again (the
         relinked program may read uniforms, samplers and vertex inputs the first build
         dropped)."""
@@ -134,7 +141,7 @@ class ScenePass:
             for batch in self.renderer.batches.values():
                 batch.drop_vertex_arrays()  # made again for the relinked programs' inputs
             self._reloads_seen = reloads
-        key = (invocations, layered, variants, normal_mapped, checker)
+        key = (invocations, layered, variants, normal_mapped, checker, material_maps)
         program = self._programs.get(key)
         if program is None:
             defines = {}
@@ -144,6 +151,10 @@ class ScenePass:
                 defines["NORMAL_MAP"] = "1"
             if checker:
                 defines["CHECKER"] = "1"
+            if material_maps[0]:
+                defines["EMISSIVE_MAP"] = "1"
+            if material_maps[1]:
+                defines["METALLIC_ROUGHNESS_MAP"] = "1"
             geometry = None
             if invocations:
                 geometry = "scene_batched.geom"
@@ -166,7 +177,9 @@ class ScenePass:
                 program["Views"].binding = VIEWS_BINDING
             # A build may not read every input (the linker drops what a variant never uses).
             for name, unit in (("albedo_map", ALBEDO_UNIT), ("sky_map", SKY_UNIT), ("node_map", NODE_UNIT),
-                               ("probe_map", PROBE_UNIT), ("normal_map", NORMAL_UNIT)):
+                               ("probe_map", PROBE_UNIT), ("normal_map", NORMAL_UNIT),
+                               ("emissive_map", EMISSIVE_MAP_UNIT),
+                               ("metallic_roughness_map", METALLIC_ROUGHNESS_UNIT)):
                 if name in program:
                     program[name].value = unit
             if "Lights" in program:
@@ -185,7 +198,7 @@ class ScenePass:
         for batch in batches:
             for invocations in counts:
                 batch.vao(self.program(batch.variants, invocations, "", batch.normal_map is not None,
-                                       batch.checker is not None))
+                                       batch.checker is not None, _material_maps(batch)))
         if reflections:
             if self._views_ubo is None:
                 self._views_ubo = self.ctx.buffer(reserve=VIEWS_BLOCK_BYTES)
@@ -207,7 +220,7 @@ class ScenePass:
             if not batch.count or (batch.count == 1 and batch.entity_at[0] in (skip, hide)):
                 continue
             program = self.program(batch.variants, invocations, layered, batch.normal_map is not None,
-                                   batch.checker is not None)
+                                   batch.checker is not None, _material_maps(batch))
             uniforms = self._uniforms[program.glo]
             values = written.get(program.glo)
             if values is None:
@@ -217,6 +230,10 @@ class ScenePass:
                 batch.texture.use(ALBEDO_UNIT)
             if batch.normal_map is not None:
                 batch.normal_map.use(NORMAL_UNIT)
+            if batch.emissive_map is not None:
+                batch.emissive_map.use(EMISSIVE_MAP_UNIT)
+            if batch.metallic_roughness_map is not None:
+                batch.metallic_roughness_map.use(METALLIC_ROUGHNESS_UNIT)
             probe_size, lookup = 0, _NO_PROBE
             if batch.probe:
                 # The probe being captured is drawn into, so it cannot be sampled (a rendering
@@ -437,6 +454,11 @@ def geometry_invocations(view_count: int) -> int:
 
 # Every invocation count ``geometry_invocations`` gives (1 to MAX_BATCHED_VIEWS views).
 BATCHED_INVOCATIONS = tuple(sorted({geometry_invocations(n) for n in range(1, MAX_BATCHED_VIEWS + 1)}))
+
+
+def _material_maps(batch) -> tuple[bool, bool]:
+    """Which material maps a batch's program samples: (emissive, metallic-roughness)."""
+    return batch.emissive_map is not None, batch.metallic_roughness_map is not None
 
 
 def _back_to_front(batches, eye: glm.vec3) -> list:
