@@ -111,16 +111,18 @@ class ViewTree:
         result = TreeResult([root_node], set())
         composites: list[PreparedComposites] = []
         root_proj = _mat(root.proj)
+        planning = (root, root_proj, np.linalg.inv(root_proj))
         nodes = [root_node]
         rows = LevelRows.root(root)
-        candidates = surfaces.plan(rows, 1, root, root_proj, 1, settings.depth_cap, root.hide)
+        candidates = surfaces.plan(rows, 1, *planning, 1, settings.depth_cap, root.hide)
         level = 0
         while candidates is not None and level < settings.depth_cap:
             targets = levels.get(level + 1, candidates.size)
             r = candidates.rows
             pixels = np.array(self.passes.prepare_level(targets, levels[level], Claims(
-                r.node.tolist(), surfaces.entities[candidates.surface].tolist(),
-                rows.node[candidates.parent].tolist(), list(map(tuple, candidates.scissor.tolist())))), np.int64)
+                r.node.astype(np.int64).tolist(), surfaces.entities[candidates.surface].tolist(),
+                rows.node[candidates.parent].astype(np.int64).tolist(),
+                list(map(tuple, candidates.scissor.tolist())))), np.int64)
             keep = np.flatnonzero(pixels)
             if settings.level_budget is not None and len(keep) > settings.level_budget:
                 # The views with the most claimed pixels, in claim order.
@@ -145,7 +147,7 @@ class ViewTree:
             nodes, rows = children, chosen.rows
             # While the GPU draws the views: the next level's cull and cameras (measured: on
             # the critical path when done after the views finish), then their composite rows.
-            candidates = surfaces.plan(rows, level + 1, root, root_proj, int(r.node[-1]) + 1, settings.depth_cap,
+            candidates = surfaces.plan(rows, level + 1, *planning, int(r.node[-1]) + 1, settings.depth_cap,
                                        root.hide)
             composites.append(self._prepare_composite(children, root, levels[level - 1].size))
         if level and level == settings.depth_cap:
