@@ -6,11 +6,12 @@ from components.probe import ReflectionProbe
 from components.rendering import Emissive, Material, MeshRef, Reflective, Refractive, Skybox
 from components.tracking import ComponentValueError, TrackedComponent
 from components.transform import Transform, euler_rotation, look_rotation, yaw_pitch_rotation
+from components.water import Water
 
 __all__ = [
     "Camera", "ComponentValueError", "DirectionalLight", "Emissive", "FlyController", "Material",
     "MeshRef", "Mirror", "PointLight", "Portal", "PortalClone", "ReflectionProbe", "Reflective", "Refractive",
     "Skybox", "Slice",
-    "TrackedComponent", "Transform", "Traveller",
+    "TrackedComponent", "Transform", "Traveller", "Water",
     "euler_rotation", "look_rotation", "yaw_pitch_rotation",
 ]

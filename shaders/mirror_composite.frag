@@ -10,8 +10,17 @@
 //   neither:          a sharp mirror, reading its level 1:1;
 //   COMPOSITE_BUMPY:  (with or without ROUGH) a mirror with a normal map, which reads its
 //                     image along the ray its bent normal reflects (below).
+//   COMPOSITE_WATER:  (with or without BUMPY, never ROUGH) a water surface: the reflection
+//                     weighted by Schlick's Fresnel for the water's F0 instead of the fixed
+//                     reflect_rate, and with a map, rippled by two scrolling layers of it.
+//                     Its row carries the waves' offset in the tile's x and y (v_eye.w,
+//                     v_normal.w), the second layer's share in the tile scale (v_tint.a)
+//                     and F0 in the roughness (v_params.y).
 #include "ggx.glsl"
 #include "normal_map.glsl"
+#ifdef COMPOSITE_WATER
+#include "water.glsl"
+#endif
 #ifdef COMPOSITE_BUMPY
 flat in mat3 v_project_dir;
 #endif
@@ -71,7 +80,12 @@ void main() {
     vec2 mirror_uv = vec2(dot(v_carry[0], p), dot(v_carry[1], p)) + v_carry[2].xy;
     vec3 along_u = normalize(v_carry[0] - dot(v_carry[0], flat_normal) * flat_normal);
     vec3 along_v = normalize(v_carry[1] - dot(v_carry[1], flat_normal) * flat_normal);
+#ifdef COMPOSITE_WATER
+    normal = water_normal(along_u, along_v, flat_normal, mirror_uv, vec2(v_eye.w, v_normal.w), v_tint.a,
+                          v_carry[2].z);
+#else
     normal = bent_normal(along_u, along_v, flat_normal, mirror_uv, v_carry[2].z);
+#endif
     vec3 seen_dir = reflect(reflect(view_dir, normal), flat_normal);
     vec3 clip = v_project_dir * seen_dir;
     if (clip.z > 1e-6) {
@@ -105,7 +119,13 @@ void main() {
 #endif
     vec3 environment = textureLod(sky_map, r, lod).rgb;
     vec3 radiance = seen.rgb + environment * (1.0 - seen.a);
+#ifdef COMPOSITE_WATER
+    // Water: what is reflected (tinted) over the surface's own pixels, which show what lies
+    // below, by the Fresnel reflectance at this pixel's angle (reflect_rate scales it).
+    out_color = vec4(radiance * v_tint.rgb, water_fresnel(normal, -view_dir, v_params.y) * reflect_rate);
+#else
     vec3 reflected = ggx_reflect(normal, r, -view_dir, radiance, v_tint.rgb, roughness);
     out_color = vec4(reflected, reflect_rate);
+#endif
 #endif
 }

@@ -9,18 +9,23 @@ A Mirror's plane and normal-map UVs are the mirror rule's (``engine.rules.mirror
 the function the world's invariant refuses a bad mirror with); a Mirror on something that
 cannot be a mirror (a mesh changed behind the world's back) is a ``MirrorError`` naming the
 entity and the rule's reason.
+
+A Mirror with a ``Water`` component is a water surface: its state carries a ``WaterLook``
+(the Fresnel F0, the waves' layers) and the waves' ``WaterFlow``, which this stage advances
+by the frame's ``dt`` (speed x direction, in normal-map tiles) in place every frame, so the
+composite reads this frame's offset without the state being made again.
 """
 from __future__ import annotations
 
 import esper
 import numpy as np
 
-from components import Material, MeshRef, Mirror, Portal, Transform
+from components import Material, MeshRef, Mirror, Portal, Transform, Water
 from engine.core.errors import SpeculumError
 from engine.core.portal_math import pair_transform, portal_plane
 from engine.core.reflection_math import plane_from_point_normal, reflection_matrix, transform_plane
 from engine.core.world import World
-from engine.resources import MirrorBumps, Surfaces, SurfaceState
+from engine.resources import MirrorBumps, Surfaces, SurfaceState, WaterFlow, WaterLook
 from engine.rules.frame_rules import frame_rules, world_corners
 from engine.rules.mirror_rules import MirrorMeshError, mirror_mesh
 
@@ -38,9 +43,11 @@ class SurfaceSystem(esper.Processor):
         self.world = world
         self.mirrors: dict[int, SurfaceState] = {}
         self.portals: dict[int, SurfaceState] = {}
+        self.flows: dict[int, WaterFlow] = {}  # each water mirror's waves, for the entity's life
 
     def process(self, dt: float) -> None:
         self._refresh_mirrors()
+        self._advance_waves(dt)
         self._refresh_portals()
         self.world.resources[Surfaces] = Surfaces(dict(self.mirrors), dict(self.portals))
 
@@ -48,18 +55,42 @@ class SurfaceSystem(esper.Processor):
         world = self.world
         touched = world.changed(Mirror) | world.changed(MeshRef)
         touched |= {e for e in world.changed(Material) if e in self.mirrors}  # a normal map given or taken
+        for entity in world.changed(Water):
+            if world.exists(entity) and world.has(entity, Water) and not world.has(entity, Mirror):
+                raise MirrorError(f"entity {entity}: a Water needs a Mirror on the same entity (the surface it "
+                                  "makes water)")
+            touched.add(entity)
         touched |= {e for e in world.frame.moved | world.frame.added if e in self.mirrors or e in touched}
         for entity in touched:
             mirror = world.try_get(entity, Mirror) if world.exists(entity) else None
             if mirror is None:
                 self.mirrors.pop(entity, None)
+                self.flows.pop(entity, None)
                 continue
             mesh_ref = world.try_get(entity, MeshRef)
             transform = world.try_get(entity, Transform)
             if mesh_ref is None or transform is None:
                 raise MirrorError(f"entity {entity}: a Mirror needs a MeshRef and a Transform")
+            water = world.try_get(entity, Water)
+            flow = None
+            if water is None:
+                self.flows.pop(entity, None)
+            else:
+                if mirror.roughness > 0.0:
+                    raise MirrorError(f"Water on entity {entity}: a water surface is sharp (its waves break up the "
+                                      f"image), so its Mirror.roughness must be 0, got {mirror.roughness}")
+                flow = self.flows.setdefault(entity, WaterFlow())
             self.mirrors[entity] = self._mirror_state(entity, mirror, mesh_ref, transform,
-                                                      world.try_get(entity, Material))
+                                                      world.try_get(entity, Material), water, flow)
+
+    def _advance_waves(self, dt: float) -> None:
+        """Every water mirror's waves move on by this frame's ``dt`` (read from its Water now,
+        so a change of speed carries on from where the waves are)."""
+        for entity, flow in self.flows.items():
+            water = self.world.try_get(entity, Water)
+            if water is not None:
+                step = water.speed * dt
+                flow.advance(water.direction[0] * step, water.direction[1] * step)
 
     def _refresh_portals(self) -> None:
         """Portals depend on their partner's pose too; there are few, so all are redone."""
@@ -81,7 +112,8 @@ class SurfaceSystem(esper.Processor):
 
     @staticmethod
     def _mirror_state(entity: int, mirror: Mirror, mesh_ref: MeshRef, transform: Transform,
-                      material: Material | None = None) -> SurfaceState:
+                      material: Material | None = None, water: Water | None = None,
+                      flow: WaterFlow | None = None) -> SurfaceState:
         mesh = mesh_ref.mesh
         bumpy = material is not None and material.normal_map is not None
         try:
@@ -107,7 +139,10 @@ class SurfaceSystem(esper.Processor):
             # carried by the inverse model matrix.
             uv_rows = shape.uv_rows @ np.linalg.inv(np.array(model.to_list(), np.float64).T)
             bumps = MirrorBumps(material.normal_map, material.normal_scale, uv_rows, float(plane.w))
+        look = None
+        if water is not None:
+            look = WaterLook(water.f0, water.cross, water.tiling, flow if flow is not None else WaterFlow())
         return SurfaceState(entity, "mirror", plane, corners, outline,
                             reflection_matrix(plane), plane, entity, mirror.max_depth, mirror.enabled,
-                            mirror.color, mirror.reflect_rate, mirror.roughness, mirror.resolution_scale, bumps)
+                            mirror.color, mirror.reflect_rate, mirror.roughness, mirror.resolution_scale, bumps, look)
 

@@ -64,7 +64,7 @@ except ImportError:  # Python 3.10
 ENGINE_COMPONENTS: dict[str, type] = {
     name: getattr(_components, name) for name in (
         "Camera", "DirectionalLight", "Emissive", "FlyController", "Material", "MeshRef", "Mirror", "PointLight",
-        "Portal", "ReflectionProbe", "Reflective", "Refractive", "Skybox", "Transform", "Traveller")}
+        "Portal", "ReflectionProbe", "Reflective", "Refractive", "Skybox", "Transform", "Traveller", "Water")}
 DERIVED_COMPONENTS = ("PortalClone", "Slice")
 # Fields holding another entity: a name in the file, an id in the world.
 REFERENCE_FIELDS = {("Transform", "parent"), ("Portal", "partner")}
@@ -605,7 +605,25 @@ def _entity(path: Path, assets: _Where, index: int, name: str, table: dict[str, 
             raise LevelError(path, str(exc), line, name, key) from None
         parts.append((cls, decoded))
     _check_mirror(path, index, name, parts, lines)
+    _check_water(path, index, name, parts, lines)
     return _EntitySpec(name, index, parts, references)
+
+
+def _check_water(path: Path, index: int, name: str, parts: list[tuple[type, dict[str, Any]]],
+                 lines: dict[tuple, int]) -> None:
+    """A Water makes its entity's Mirror water (systems/surface_system.py refuses the same in
+    a world): it needs one, and a sharp one (the waves break up the image, not a blur)."""
+    fields = {cls.__name__: decoded for cls, decoded in parts}
+    if "Water" not in fields:
+        return
+    if "Mirror" not in fields:
+        raise LevelError(path, "a Water needs a Mirror on the same entity (the surface it makes water)",
+                         lines.get((index, "Water")), name, "Water")
+    roughness = fields["Mirror"].get("roughness", 0.0)
+    if roughness > 0.0:
+        raise LevelError(path, f"a water surface is sharp: its Mirror.roughness must be 0, got {roughness}",
+                         lines.get((index, "Mirror", "roughness"), lines.get((index, "Mirror"))), name,
+                         "Mirror.roughness")
 
 
 def _check_mirror(path: Path, index: int, name: str, parts: list[tuple[type, dict[str, Any]]],

@@ -7,8 +7,9 @@ mirrors with different tints and roughness whose centre mirror faces one behind 
 (a corridor of reflections); a portal doorway that opens far across the hall, where a crate
 stands half in it and half out of its partner, and a facing pair of portals that shows a
 tunnel to the recursion limit; a chrome ball whose probe is captured every frame, a brass
-statue hammered by a normal map whose probe follows what moves near it, and a glass ball in
-front of a red crate.
+statue hammered by a normal map whose probe follows what moves near it, a glass ball in
+front of a red crate, and a pond in the foreground (a Water surface: Fresnel-weighted
+reflection, moving ripples, a koi turning under it).
 
 Headless runs follow a camera tour (the level's ``[rules] tour``: poses ``[x, y, z, yaw,
 pitch]``, each held ``tour_seconds`` while the camera pans ``tour_pan`` degrees) unless

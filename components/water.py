@@ -1,0 +1,80 @@
+"""Water: a still or moving pond on a Mirror entity."""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+from components.tracking import ComponentValueError, TrackedComponent, finite
+
+MAX_WATER_SPEED = 100.0    # normal-map tiles a second; faster is a strobe, not a wave
+MAX_WATER_TILING = 1000.0  # repeats of the map across the mirror's UV square
+
+
+@dataclass(eq=False)
+class Water(TrackedComponent):
+    """Makes the entity's Mirror a water surface, as game engines draw ponds and pools: the
+    planar reflection weighted by Fresnel, the surface rippled by a moving normal map, and
+    what lies below seen through it.
+
+    Needs a ``Mirror`` on the same entity (the view tree plans its reflection as any
+    mirror's) with ``roughness`` 0: the waves, not a blur, break up the image.  The look:
+
+    - **Fresnel.**  The reflection's weight is Schlick's approximation for a dielectric of
+      index ``ior`` (F0 = ((ior - 1) / (ior + 1))^2, 0.02 for water's 1.333) at the angle
+      between the eye ray and the (rippled) surface normal: a few percent looking straight
+      down, everything at grazing angles.  It replaces the Mirror's fixed mix:
+      ``Mirror.reflect_rate`` scales it (1, the default, is the physical weight) and
+      ``Mirror.color`` tints what is reflected.
+    - **What is below.**  The water quad's own shading is what the weight leaves: its
+      ``Material`` with an alpha below 1 is drawn see-through (the scene pass's blended
+      slot), so the pond's floor and anything under the surface show through, tinted by
+      the material's colour in proportion to its alpha (the water's murk: 0 is clear).
+      What is below is seen where it is, not bent by the waves (that would need a copy of
+      the frame behind the water, which the passes do not keep).
+    - **Waves.**  ``Material.normal_map`` (``normal_scale`` its strength) is read twice in
+      the reflection's composite and the two heightfields summed (their slopes averaged,
+      ``cross`` the second's share): once ``tiling`` times across the mirror's UVs,
+      scrolling along ``direction`` (in UV space) at ``speed`` tiles a second, and once
+      turned a quarter turn at 1.7 times that tiling, its waves crossing the first's and
+      scrolling across them (along ``direction`` turned a quarter turn, at ``speed`` of its
+      own smaller tiles a second), so the pattern never slides by as one piece (the
+      two-layer scrolling normal maps of Valve's and Unity's water).  The offsets are
+      integrated from each frame's ``dt`` by the surfaces stage, so a change of speed or
+      direction carries on from where the waves are.  The waves bend the reflection (the
+      bumpy-mirror lookup) and the Fresnel angle.  Without a normal map the water is
+      still: a Fresnel-weighted mirror.
+    """
+
+    ior: float = 1.333
+    speed: float = 0.05
+    direction: Any = (1.0, 0.0)
+    tiling: float = 1.0
+    cross: float = 0.5
+
+    def _validate(self, name: str, value: Any) -> Any:
+        if name == "ior":
+            return finite(self, name, value, low=1.0, high=4.0)
+        if name == "speed":
+            return finite(self, name, value, low=0.0, high=MAX_WATER_SPEED)
+        if name == "tiling":
+            return finite(self, name, value, positive=True, high=MAX_WATER_TILING)
+        if name == "cross":
+            return finite(self, name, value, low=0.0, high=1.0)
+        if name == "direction":
+            try:
+                u, v = (finite(self, name, c) for c in value)
+            except (TypeError, ValueError) as exc:
+                if isinstance(exc, ComponentValueError):
+                    raise
+                raise ComponentValueError(f"Water.direction must be two numbers (u, v), got {value!r}") from None
+            length = math.hypot(u, v)
+            if not length > 0.0 or not math.isfinite(length):
+                raise ComponentValueError(f"Water.direction must not be the zero vector, got {value!r}")
+            return (u / length, v / length)
+        return value
+
+    @property
+    def f0(self) -> float:
+        """Reflectance looking straight down (Schlick's F0 for this index against air)."""
+        return ((self.ior - 1.0) / (self.ior + 1.0)) ** 2

@@ -1,0 +1,31 @@
+// Water (components/water.py) in the reflection's composite: the rippled normal from two
+// scrolling layers of the mirror's normal map, and the reflection's Fresnel weight.
+// Needs normal_map.glsl (the map) and, for the weight, nothing else.
+
+// The second layer's repeats relative to the first: not a whole number or a simple ratio,
+// so the two patterns do not line up again for many tiles.
+#define WATER_CROSS_TILING 1.7
+
+// The normal of two heightfields summed: the map read at uv moving along flow (map tiles,
+// the first layer), and read turned a quarter turn at WATER_CROSS_TILING times the repeats,
+// so its waves cross the first's and move across them (the same flow in its own turned
+// coordinates is flow turned a quarter turn on the surface).  Each layer's tangent-space
+// normal m is its heightfield's slope (m.x, m.y) / m.z (the turned layer's slope turned
+// back), and the slopes are averaged by ``share`` (the second layer's weight:
+// partial-derivative blending, the slope of the summed height), then scaled by ``scale``
+// (normal_scale) in the frame t (+U), b (+V), n (out of the surface).  With share 0 it is
+// bent_normal's.
+vec3 water_normal(vec3 t, vec3 b, vec3 n, vec2 uv, vec2 flow, float share, float scale) {
+    vec3 first = texture(normal_map, uv - flow).xyz * 2.0 - 1.0;
+    // Turned coordinates (v, -u): the map's +U runs along the surface's +V.
+    vec3 second = texture(normal_map, vec2(uv.y, -uv.x) * WATER_CROSS_TILING - flow).xyz * 2.0 - 1.0;
+    vec2 slope = mix(first.xy / max(first.z, 0.05), vec2(-second.y, second.x) / max(second.z, 0.05), share);
+    return normalize((t * slope.x + b * slope.y) * scale + n);
+}
+
+// Schlick's approximation of the reflectance of a dielectric with reflectance f0 at normal
+// incidence, for a surface of normal n seen from direction to_eye (both unit).
+float water_fresnel(vec3 n, vec3 to_eye, float f0) {
+    float c = clamp(dot(n, to_eye), 0.0, 1.0);
+    return f0 + (1.0 - f0) * pow(1.0 - c, 5.0);
+}

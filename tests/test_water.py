@@ -1,0 +1,362 @@
+"""Water (components.Water on a Mirror): the reflection weighted by Schlick's Fresnel for the
+water's index, the waves' normal map moving at its speed, and what lies below seen through
+the surface.  Each is measured in rendered frames against the formula or a second render."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from pyglm import glm
+
+from components import (
+    Camera,
+    ComponentValueError,
+    Emissive,
+    Material,
+    MeshRef,
+    Mirror,
+    Skybox,
+    Transform,
+    Water,
+    look_rotation,
+)
+from engine.assets.level_file import LevelError, load_level, save_level
+from engine.assets.mesh import box, quad
+from engine.assets.texture_data import TextureData
+from engine.core.cube_faces import face_directions
+from engine.core.world import World
+from systems.surface_system import MirrorError
+from tests.support import srgb_to_linear
+
+# A quad faces +Z; turned this way it lies flat, facing up (its U along +X, V along -Z).
+FLAT = glm.angleAxis(-math.pi / 2, glm.vec3(1, 0, 0))
+SKY = 0.8      # the uniform sky's linear radiance: all the water reflects
+FLOOR = 0.05   # the pool floor's emitted colour (linear), under the surface
+
+
+def schlick(f0: float, cos_theta: float) -> float:
+    return f0 + (1.0 - f0) * (1.0 - cos_theta) ** 5
+
+
+def uniform_sky(value: float) -> Skybox:
+    return Skybox(faces=[np.full((8, 8, 3), value, np.float32) for _ in range(6)])
+
+
+def pool(world, water: bool, eye, target, *, water_colour=(1.0, 1.0, 1.0, 0.0), ior: float = 1.333) -> None:
+    """A uniform sky over a flat pond at y = 0 (a clear water surface unless ``water_colour``
+    says otherwise) with an unlit floor of colour FLOOR a metre below it."""
+    eye = glm.vec3(eye)
+    world.spawn(Transform(position=eye, rotation=look_rotation(glm.vec3(target) - eye)), Camera(fov_y=60.0))
+    world.spawn(uniform_sky(SKY))
+    world.spawn(Transform(position=(0.0, -1.0, 0.0), rotation=FLAT), MeshRef(quad(200.0, 200.0)),
+                Material(color=(FLOOR, FLOOR, FLOOR, 1.0), roughness=1.0), Emissive(1.0))
+    if water:
+        world.spawn(Transform(rotation=FLAT), MeshRef(quad(200.0, 200.0)), Material(color=water_colour),
+                    Mirror(), Water(ior=ior))
+
+
+def render(scene, build, size=(64, 96), frames: int = 2, dt: float = 1.0 / 60.0):
+    runner = scene(build, size)
+    runner.engine.renderer.antialias = "off"  # pixels as shaded: no filter across the water's rows
+    for _ in range(frames):
+        rgb = runner.frame(dt)
+    return runner, srgb_to_linear(rgb)
+
+
+def pixel_rays(runner, column: int) -> list[tuple[int, float]]:
+    """(row, cosine between the eye ray and the water's up normal) for each row of a column
+    whose pixel centre's ray meets the water plane y = 0 in front of the eye."""
+    view = runner.engine.main_view
+    inverse = glm.inverse(view.view_proj)
+    w, h = runner.size
+    out = []
+    for row in range(h):
+        ndc = glm.vec4((column + 0.5) / w * 2.0 - 1.0, 1.0 - (row + 0.5) / h * 2.0, -1.0, 1.0)
+        near = inverse * ndc
+        direction = glm.normalize(glm.vec3(near) / near.w - view.eye)
+        if direction.y < -1e-3:
+            out.append((row, -direction.y))
+    return out
+
+
+@pytest.mark.parametrize("eye, target", [((0.0, 3.0, 0.0), (0.0, 0.0, -0.6)),      # looking down
+                                         ((0.0, 0.4, 0.0), (0.0, 0.05, -10.0))])  # grazing
+def test_the_reflection_is_weighted_by_schlicks_fresnel_for_the_waters_index(scene, eye, target):
+    """Over a uniform sky, a pixel of clear water is F x sky + (1 - F) x what is below, F by
+    Schlick's formula at the pixel's angle with F0 = ((n - 1) / (n + 1))^2; the floor's
+    colour is the same frame without the water, pixel for pixel."""
+    runner_water, water = render(scene, lambda w: pool(w, True, eye, target))
+    runner_floor, floor = render(scene, lambda w: pool(w, False, eye, target))
+    f0 = ((1.333 - 1.0) / (1.333 + 1.0)) ** 2
+    column = runner_water.size[0] // 2
+    rays = pixel_rays(runner_water, column)
+    assert len(rays) > 20
+    measured, expected = [], []
+    for row, cos_theta in rays:
+        if cos_theta > 0.999 or cos_theta < 0.02:
+            continue
+        below = floor[row, column, 0]
+        assert abs(below - FLOOR) < 0.02, (row, below)  # the floor shows where there is no water
+        measured.append((water[row, column, 0] - below) / (SKY - below))
+        expected.append(schlick(f0, cos_theta))
+    measured, expected = np.array(measured), np.array(expected)
+    # 8-bit sRGB steps: at most 0.004 of weight near the floor's dark colour, 0.01 near the sky's.
+    np.testing.assert_allclose(measured, expected, atol=0.012)
+    if eye[1] > 1.0:
+        assert expected.max() < 0.03  # straight down: a few percent, the floor shows
+    else:
+        assert expected.max() > 0.5   # grazing: the reflection dominates
+
+
+def test_a_higher_index_reflects_more(scene):
+    """The weight follows the index given (F0 0.04 for glass's 1.5), not a constant."""
+    eye, target = (0.0, 3.0, 0.0), (0.0, 0.0, -0.01)
+    _, water = render(scene, lambda w: pool(w, True, eye, target, ior=1.5))
+    _, floor = render(scene, lambda w: pool(w, False, eye, target))
+    centre = (water.shape[0] // 2, water.shape[1] // 2)
+    weight = (water[centre][0] - floor[centre][0]) / (SKY - floor[centre][0])
+    assert weight == pytest.approx(0.04, abs=0.004)
+
+
+def test_looking_down_shows_what_is_under_the_surface_and_grazing_shows_the_reflection(scene):
+    """A red stone on the pool floor under tinted water: seen from above, the pixel over it
+    is the stone's colour through the water (the water's alpha of its own colour over it,
+    plus the few percent reflected); seen at a grazing angle, the water shows mostly the
+    lit wall it reflects."""
+    water_colour = (0.1, 0.4, 0.35, 0.25)
+
+    def build(water: bool, eye, target):
+        def b(world):
+            pool(world, water, eye, target, water_colour=water_colour)
+            world.spawn(Transform(position=(0.0, -0.9, -1.0)), MeshRef(box((0.8, 0.2, 0.8))),
+                        Material(color=(0.9, 0.05, 0.05, 1.0), roughness=1.0), Emissive(1.0))
+            # A bright green wall across the pond, above the water: what it reflects.
+            world.spawn(Transform(position=(0.0, 2.0, -12.0)), MeshRef(quad(40.0, 4.0)),
+                        Material(color=(0.1, 0.9, 0.2, 1.0), roughness=1.0), Emissive(1.0))
+        return b
+
+    down = ((0.0, 3.0, -0.98), (0.0, 0.0, -1.0))
+    runner, seen = render(scene, build(True, *down))
+    _, dry = render(scene, build(False, *down))
+    col, row = runner.project((0.0, 0.0, -1.0))
+    stone = dry[row, col]
+    assert stone[0] > 0.5 and stone[1] < 0.1  # the stone, without the water
+    # Blended over it: the water's own colour by its alpha (its shading: ambient-lit at most
+    # its colour), and the reflection of a uniform sky by F at normal incidence (0.02).
+    f = schlick(0.02, 1.0)
+    a = water_colour[3]
+    low = (1.0 - f) * (1.0 - a) * stone
+    high = low + f * SKY + (1.0 - f) * a * np.array(water_colour[:3]) * 2.0
+    assert np.all(seen[row, col] >= low - 0.01) and np.all(seen[row, col] <= high + 0.01), (seen[row, col], low, high)
+    assert seen[row, col][0] > 0.5  # red: the stone shows through
+
+    graze = ((0.0, 0.3, 0.0), (0.0, 0.2, -12.0))
+    runner, seen = render(scene, build(True, *graze), size=(96, 64))
+    _, dry = render(scene, build(False, *graze), size=(96, 64))
+    # The wall's mirror image: where the ray from the eye to the wall's image below the plane
+    # crosses the water.
+    image = glm.vec3(0.0, -0.5, -12.0)  # the wall half a metre up, in the water
+    eye = glm.vec3(graze[0])
+    crossing = eye + (image - eye) * (eye.y / (eye.y - image.y))
+    col, row = runner.project(crossing)
+    wall = np.array([0.1, 0.9, 0.2])
+    cos_theta = -glm.normalize(crossing - eye).y
+    f = schlick(0.02, cos_theta)
+    assert f > 0.6
+    assert seen[row, col][1] > 0.6 * 0.9 * f and seen[row, col][1] > 3.0 * dry[row, col][1], (seen[row, col], f)
+    np.testing.assert_allclose(seen[row, col], f * wall + (1.0 - f) * dry[row, col], atol=0.05)
+
+
+def wave_map(periods: int = 2, size: int = 64, slope: float = 0.35) -> TextureData:
+    """A tileable normal map of straight waves along U: height A sin(2 pi periods u), so the
+    normal leans along U only and every column of texels is one normal."""
+    u = (np.arange(size) + 0.5) / size
+    tilt = -slope * np.cos(2.0 * math.pi * periods * u)
+    n = np.stack([tilt, np.zeros(size), np.ones(size)], axis=-1)
+    n /= np.linalg.norm(n, axis=-1, keepdims=True)
+    row = np.concatenate([np.round((n * 0.5 + 0.5) * 255), np.full((size, 1), 255)], axis=-1).astype(np.uint8)
+    return TextureData(np.tile(row[None], (size, 1, 1)), name="waves")
+
+
+def direction_sky() -> Skybox:
+    """A sky whose colour is its direction: a reflection's colour says where its ray went."""
+    return Skybox(faces=[face_directions(face, 32) * 0.5 + 0.5 for face in range(6)])
+
+
+SIDE = 4.0       # the wave pond's quad, metres (its UVs span it once)
+TILING = 3.0     # map repeats across it: waves 4 / 3 / 2 m apart (2 periods a tile)
+HEIGHT = 2.0     # the camera above it, looking straight down
+
+
+def wave_pond(speed: float, cross: float = 0.0, scale: float = 1.0):
+    """Straight waves along U under a sky that shows their slope, seen straight down (+X on
+    the screen's right, the water's +V up); a high index (F0 0.36) so the reflection is
+    bright straight down."""
+    def b(world):
+        world.spawn(Transform(position=(0.0, HEIGHT, 0.0), rotation=glm.angleAxis(-math.pi / 2, glm.vec3(1, 0, 0))),
+                    Camera(fov_y=60.0))
+        world.spawn(direction_sky())
+        world.spawn(Transform(rotation=FLAT), MeshRef(quad(SIDE, SIDE)),
+                    Material(color=(0.0, 0.0, 0.0, 1.0), normal_map=wave_map(), normal_scale=scale),
+                    Mirror(), Water(ior=4.0, speed=speed, direction=(1.0, 0.0), tiling=TILING, cross=cross))
+    return b
+
+
+class WaveCamera:
+    """The wave pond's frames, each less the same view of still water (normal_scale 0): what
+    is left is the waves' pattern, without the sky's gradient across the view.  The sky's
+    red says how far a reflected ray leans along x (the water's U), its blue along z (-V)."""
+
+    def __init__(self, scene, speed: float, cross: float, size: int = 128) -> None:
+        self.runner = scene(wave_pond(speed, cross), (size, size))
+        still = scene(wave_pond(speed, cross, scale=0.0), (size, size))
+        for runner in (self.runner, still):
+            runner.engine.renderer.antialias = "off"
+        self.still = srgb_to_linear(still.frame(0.0))
+        # Pixels a metre across the water (the view is 2 tan 30 x HEIGHT wide at its distance).
+        self.per_metre = size / (2.0 * HEIGHT * math.tan(math.radians(30.0)))
+
+    def frame(self, dt: float) -> np.ndarray:
+        return srgb_to_linear(self.runner.frame(dt)) - self.still
+
+
+def phase(profile: np.ndarray, period: float) -> float:
+    """The phase (radians) of ``profile``'s component of ``period`` pixels: a least-squares fit
+    of a cos + b sin + a straight line; a pattern moved s pixels forward adds 2 pi s / period."""
+    x = np.arange(len(profile), dtype=float)
+    w = 2.0 * math.pi / period
+    basis = np.stack([np.cos(w * x), np.sin(w * x), np.ones_like(x), x], axis=1)
+    (a, b, _, _), *_ = np.linalg.lstsq(basis, profile, rcond=None)
+    return math.atan2(b, a)
+
+
+def moved(before: np.ndarray, after: np.ndarray, period: float) -> float:
+    turn = (phase(after, period) - phase(before, period) + math.pi) % (2.0 * math.pi) - math.pi
+    return turn / (2.0 * math.pi) * period
+
+
+def test_the_waves_move_at_their_speed_along_their_direction(scene):
+    """Frames at different times differ on the water, and its pattern has moved speed x dt
+    tiles of the map along +U: on the screen, that fraction of a tile to the right."""
+    speed = 0.05
+    waves = WaveCamera(scene, speed, cross=0.0)
+    first = waves.frame(0.0)[..., 0]
+    np.testing.assert_array_equal(first, waves.frame(0.0)[..., 0])  # time stands still: so does the water
+    tile = SIDE / TILING * waves.per_metre  # pixels a tile of the map spans (two crests)
+    rows = slice(40, 88)
+    assert np.ptp(first[rows].mean(axis=0)) > 0.1  # the waves show (a reflection's colour says its ray)
+    for dt in (1.0, 2.0, 0.5):
+        later = waves.frame(dt)[..., 0]
+        assert np.abs(later - first).max() > 0.02  # the water changed (8-bit steps here are ~0.003)
+        shift = moved(first[rows].mean(axis=0), later[rows].mean(axis=0), tile / 2)
+        assert shift == pytest.approx(speed * dt * tile, abs=0.3), (dt, shift, speed * dt * tile)
+        assert np.ptp(later[:, 40:88].mean(axis=1)) < 0.01  # straight waves along U, nothing along V
+        first = later
+
+
+def test_the_cross_layer_crosses_the_waves_and_moves_across_them(scene):
+    """The second layer alone (cross = 1): the map's waves along U turned to run along V,
+    1.7 times smaller, moving speed x dt of its own tiles up the screen (+V, the direction
+    turned a quarter turn); with both, the picture changes along both axes."""
+    speed = 0.05
+    waves = WaveCamera(scene, speed, cross=1.0)
+    first = waves.frame(0.0)
+    tile = SIDE / TILING / 1.7 * waves.per_metre
+    columns, rows = slice(40, 88), slice(40, 88)
+    assert np.ptp(first[:, columns, 2].mean(axis=1)) > 0.1   # the rays lean along z, row by row...
+    assert np.ptp(first[rows, :, 0].mean(axis=0)) < 0.01     # ...and not along x
+    later = waves.frame(2.0)
+    # Moved up the screen: along the rows read from the bottom.
+    shift = moved(first[::-1, columns, 2].mean(axis=1), later[::-1, columns, 2].mean(axis=1), tile / 2)
+    assert shift == pytest.approx(speed * 2.0 * tile, abs=0.3), (shift, speed * 2.0 * tile)
+    both = WaveCamera(scene, speed, cross=0.5).frame(0.0)
+    assert np.ptp(both[rows, :, 0].mean(axis=0)) > 0.05 and np.ptp(both[:, columns, 2].mean(axis=1)) > 0.05
+
+
+def test_water_values_are_checked_when_given():
+    with pytest.raises(ComponentValueError, match=r"Water.ior must be >= 1.0"):
+        Water(ior=0.5)
+    with pytest.raises(ComponentValueError, match=r"Water.speed must be >= 0.0"):
+        Water(speed=-1.0)
+    with pytest.raises(ComponentValueError, match=r"Water.tiling must be > 0"):
+        Water(tiling=0.0)
+    with pytest.raises(ComponentValueError, match=r"Water.direction must not be the zero vector"):
+        Water(direction=(0.0, 0.0))
+    with pytest.raises(ComponentValueError, match=r"Water.direction must be two numbers"):
+        Water(direction=(1.0, 0.0, 0.0))
+    with pytest.raises(ComponentValueError, match=r"Water.cross must be <= 1.0"):
+        Water(cross=2.0)
+    water = Water(direction=(3.0, 4.0))
+    assert water.direction == pytest.approx((0.6, 0.8))
+    assert water.f0 == pytest.approx(0.02, abs=0.001)
+
+
+def test_water_needs_a_sharp_mirror(scene):
+    def lone(world):
+        world.spawn(Transform(), MeshRef(quad(1.0, 1.0)), Material(), Water())
+
+    def rough(world):
+        world.spawn(Transform(), MeshRef(quad(1.0, 1.0)), Material(), Mirror(roughness=0.3), Water())
+
+    for build, message in ((lone, "a Water needs a Mirror"), (rough, "Mirror.roughness must be 0")):
+        runner = scene(build, (16, 16))
+        with pytest.raises(MirrorError, match=message):
+            runner.frame()
+
+
+def test_the_waves_stop_when_the_water_goes_and_a_new_water_starts_still(scene):
+    """A water's waves belong to its entity: taken off, the mirror is a plain mirror again
+    (no flow kept); put back, they start from rest."""
+    runner = scene(wave_pond(0.05), (32, 32))
+    runner.frame(1.0)
+    system = runner.engine.stages["surfaces"]
+    (entity,) = system.flows
+    assert system.flows[entity].offset == pytest.approx((0.05, 0.0))
+    runner.world.remove_component(entity, Water)
+    runner.frame(1.0)
+    assert system.flows == {} and system.mirrors[entity].water is None
+    runner.world.add_component(entity, Water(speed=0.1))
+    runner.frame(0.5)
+    assert system.flows[entity].offset == pytest.approx((0.05, 0.0))
+
+
+def test_level_files_carry_water(tmp_path):
+    level = tmp_path / "pond.toml"
+    level.write_text("""
+[level]
+name = "pond"
+
+[[entity]]
+name = "pond"
+[entity.Transform]
+[entity.MeshRef]
+mesh = { quad = [2.0, 2.0] }
+[entity.Material]
+color = [0.1, 0.3, 0.3, 0.3]
+normal_map = { ripples = [64, 4] }
+[entity.Mirror]
+[entity.Water]
+ior = 1.33
+speed = 0.2
+direction = [0.0, 2.0]
+tiling = 4.0
+cross = 0.25
+""")
+    world = World("pond")
+    names = load_level(level).spawn(world)
+    water = world.get(names["pond"], Water)
+    assert (water.ior, water.speed, water.tiling, water.cross) == (1.33, 0.2, 4.0, 0.25)
+    assert water.direction == pytest.approx((0.0, 1.0))
+    saved = save_level(world, tmp_path / "again.toml", names, name="pond")
+    again = World("again")
+    names_again = load_level(saved).spawn(again)
+    assert again.get(names_again["pond"], Water).direction == pytest.approx((0.0, 1.0))
+    text = level.read_text()
+    for good, bad, message in (("ior = 1.33", "ior = 0.5", r"Water.ior must be >= 1.0"),
+                               ("[entity.Mirror]\n", "", "a Water needs a Mirror"),
+                               ("[entity.Mirror]\n", "[entity.Mirror]\nroughness = 0.2\n",
+                                "Mirror.roughness must be 0")):
+        level.write_text(text.replace(good, bad))
+        with pytest.raises(LevelError, match=message):
+            load_level(level)
