@@ -4,9 +4,10 @@ A root is any view with its own targets: the main camera (``ReflectionSystem``),
 cube-map probe's faces.  From it, ``ViewTree.render`` runs the loop of planar reflections
 and portals:
 
-  1. cull   - for every view of level L and every mirror or portal at once (SurfaceTable):
-              skip it if disabled, too deep, facing away, behind the view's own mirror,
-              outside the frustum or off the view's rectangle;
+  1. plan   - for every view of level L and every mirror or portal at once, in arrays
+              (``engine/render/view_plan.py``): skip it if disabled, too deep, facing away,
+              behind the view's own mirror, outside the frustum or off the view's rectangle;
+              for each pair kept, its camera and packed Camera block;
   2. claim  - each candidate takes, in level L+1's node image and depth mask, the pixels
               where level L shows it; a samples query counts them, and a candidate with
               none gets no view (MirrorPasses.prepare_level);
