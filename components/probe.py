@@ -26,6 +26,11 @@ class ReflectionProbe(TrackedComponent):
     ``time_slicing`` spreads a capture over six frames (one face each) instead of one.
     ``influence`` is the size of a box around the probe: objects inside it that reflect a
     cube map sample this probe (None: the probe serves only its own entity).
+    ``blend_distance`` is how far inside the box's walls its weight falls off to nothing
+    (Unity HDRP's blend distance): an object blends the probes whose boxes hold it by their
+    weights, so it moves from one probe's room to the next without a pop
+    (``engine.rules.probe_rules.probe_blend``; 0, the default: full weight up to the walls,
+    the box's edge is hard).  At most half the box's smallest side.
     ``box_projection`` corrects lookups for the box's walls (parallax-corrected, as Unity's
     and Godot's probes do).  ``depth`` is how many levels of mirrors and portals a face
     sees (0: mirrors show their own surface).  ``prefilter``: how rough materials blur
@@ -42,6 +47,7 @@ class ReflectionProbe(TrackedComponent):
     every_n: int = 1
     time_slicing: str = "all_faces"
     influence: Any = None
+    blend_distance: float = 0.0
     box_projection: bool = False
     depth: int = 1
     prefilter: str = "mips"
@@ -83,9 +89,27 @@ class ReflectionProbe(TrackedComponent):
         if name == "prefilter":
             return choice(self, name, value, PREFILTERS)
         if name == "influence" and value is not None:
-            return vec3(self, name, value, low=0.0, nonzero=True)
+            value = vec3(self, name, value, low=0.0, nonzero=True)
+            self._check_blend(self.__dict__.get("blend_distance"), value, name)
+            return value
+        if name == "blend_distance":
+            value = finite(self, name, value, low=0.0, high=1e6)
+            self._check_blend(value, self.__dict__.get("influence"), name)
+            return value
         if name == "box_projection":
             return boolean(self, name, value)
         if name == "depth":
             return integer(self, name, value, low=0, high=MAX_VIEW_DEPTH)
         return value
+
+    @staticmethod
+    def _check_blend(blend: float | None, influence: Any, name: str) -> None:
+        """A falloff wider than half the box's smallest side would never reach full weight,
+        even at the centre: refused, naming the field just written."""
+        if blend is None or influence is None:
+            return
+        half = min(float(influence[0]), float(influence[1]), float(influence[2])) / 2.0
+        if blend > half:
+            raise ComponentValueError(
+                f"ReflectionProbe.{name}: blend_distance ({blend}) must be at most half the influence box's "
+                f"smallest side ({half})")

@@ -143,13 +143,22 @@ class Refractive(TrackedComponent):
 
     The environment seen along the refracted ray is weighted by Fresnel transmittance and
     blended with the surface colour by the material's alpha (alpha 0 = clear glass).
+    ``solid`` False (the default): a thin surface, the ray refracted once where it enters (a
+    bubble or a window's pane seen as one surface).  True: a solid glass ball, the ray
+    refracted in, carried along its chord through the sphere and refracted out (a ball lens,
+    worked out in closed form in the shader: ``solid_sphere_exit`` in shaders/scene.frag),
+    so the ball shows the room behind it upside down and more strongly bent; exact for a
+    sphere mesh, an approximation on other shapes.
     """
 
     ior: float = 1.5
+    solid: bool = False
 
     def _validate(self, name: str, value: Any) -> Any:
         if name == "ior":
             return finite(self, name, value, low=1.0, high=4.0)
+        if name == "solid":
+            return boolean(self, name, value)
         return value
 
 

@@ -10,11 +10,6 @@ uniform bool has_albedo_map;
 uniform samplerCube sky_map;
 uniform float sky_face_size;   // texels across one face of sky_map
 uniform bool transparent;       // the transparent slot: alpha is the material's, for blending
-uniform samplerCube probe_map;  // the batch's reflection probe (Reflect = cube)
-uniform float probe_face_size;
-uniform vec4 probe_position;    // xyz: where the probe was captured; w: top level of a GGX-prefiltered chain (0: box mips)
-uniform vec4 probe_box_min;     // xyz: its influence box; w = 1: box projection on
-uniform vec4 probe_box_max;
 
 in vec3 v_world_pos;
 in vec3 v_normal;
@@ -138,30 +133,14 @@ vec3 reflect_skybox(vec3 color, Surface s) {
     return mix(color, env, v_reflect.x);
 }
 
-// Box projection (parallax correction, as Unity's and Godot's probes do): follow the ray
-// from the shaded point to the wall of the probe's box and look that point up from where
-// the probe was captured; without a box, the ray's direction is looked up as it is.
-vec3 probe_direction(vec3 position, vec3 ray) {
-    if (probe_box_min.w < 0.5) return ray;
-    vec3 wall = mix(probe_box_min.xyz, probe_box_max.xyz, step(vec3(0.0), ray));
-    vec3 t = (wall - position) / ray;
-    return position + ray * min(min(t.x, t.y), t.z) - probe_position.xyz;
-}
-
-// The probe's mip level for a lookup: a box-filtered chain is blurred by a roughness bias
-// on the pixel's footprint; a GGX-prefiltered one (probe_position.w = its top level) holds
-// roughness L / top at level L, never sharper than the footprint.
-float probe_lod(float footprint_lod, float roughness) {
-    if (probe_position.w > 0.0) return max(footprint_lod, roughness * probe_position.w);
-    return footprint_lod + roughness_lod_bias(roughness);
-}
+// The probe uniforms, box projection, the level a roughness reads and probe blending.
+#include "probe.glsl"
 
 vec3 reflect_probe(vec3 color, Surface s) {
     // A cube map captured around the object (engine/render/probes.py), blurred by roughness
     // and weighted by GGXReflect with the material's F0: a metal tints what it reflects
     // (brass is golden), a dielectric reflects most at grazing angles.
-    vec3 env = textureLod(probe_map, probe_direction(s.position, s.reflect_dir),
-                          probe_lod(s.reflect_lod, s.roughness)).rgb;
+    vec3 env = probe_radiance(s.position, s.reflect_dir, s.reflect_lod, s.roughness);
     vec3 reflected = ggx_reflect(s.normal, s.reflect_dir, s.to_eye, env, s.f0, s.roughness);
     return mix(color, reflected * v_tint.rgb, v_reflect.x);
 }
@@ -185,16 +164,31 @@ vec3 apply_reflect(uint variant, vec3 color, Surface s) {
 }
 
 // --- Refract slot ---------------------------------------------------------------------
-vec3 refract_environment(vec3 color, Surface s) {
+// A solid ball (Refractive(solid=True)): the eye ray refracted in at the surface (Snell's
+// law), carried along the chord through the sphere and refracted out where it leaves: the
+// two-interface ray trace of a ball lens, in closed form.  With n the unit normal where the
+// ray enters and d the unit direction inside, the chord ends where the normal is
+// n - 2 (d.n) d (the sphere's radius drops out: only the exit's direction is needed).  Exact
+// for a sphere, an approximation for any other mesh (each point taken as on the sphere
+// its normal implies).  Rays entering a sphere always leave it (the exit angle equals the
+// entry angle), so there is no total internal reflection to handle.
+vec3 solid_sphere_exit(vec3 incident, vec3 n, float ior) {
+    vec3 inside = refract(incident, n, 1.0 / ior);
+    vec3 exit_normal = n - 2.0 * dot(inside, n) * inside;  // outward, where the chord leaves
+    return refract(inside, -exit_normal, ior);
+}
+
+vec3 refract_environment(vec3 color, Surface s, bool solid) {
     // Refraction: environment seen along the refracted ray, weighted by Fresnel
-    // transmittance, blended with the surface colour by alpha (alpha 0 = clear).
+    // transmittance (twice, in and out, through a solid ball), blended with the surface
+    // colour by alpha (alpha 0 = clear).
     float ior = v_reflect.y;
     float f0 = pow((ior - 1.0) / (ior + 1.0), 2.0);
     vec3 transmittance = vec3(1.0) - schlick_fresnel(s.to_eye, s.normal, vec3(f0));
+    if (solid) transmittance *= transmittance;  // the exit's angle is the entry's
     // What lies behind: the probe's capture when one serves the object, else the sky.
     vec3 behind = probe_face_size > 0.0
-        ? textureLod(probe_map, probe_direction(s.position, s.refract_dir),
-                     probe_lod(s.refract_lod, s.roughness)).rgb
+        ? probe_radiance(s.position, s.refract_dir, s.refract_lod, s.roughness)
         : sample_environment(s.refract_dir, s.refract_lod, s.roughness);
     vec3 transmitted = transmittance * s.albedo * behind;
     return mix(transmitted, color, s.alpha);
@@ -202,7 +196,8 @@ vec3 refract_environment(vec3 color, Surface s) {
 
 vec3 apply_refract(uint variant, vec3 color, Surface s) {
     switch (variant) {
-        case REFRACT_ENVIRONMENT: return refract_environment(color, s);
+        case REFRACT_ENVIRONMENT: return refract_environment(color, s, false);
+        case REFRACT_SOLID: return refract_environment(color, s, true);
         default: return color;
     }
 }
@@ -260,6 +255,7 @@ void main() {
     s.f0 = mix(vec3(0.04), s.albedo, s.metallic);
     s.reflect_dir = reflect(-s.to_eye, s.normal);
     s.refract_dir = refract(-s.to_eye, s.normal, 1.0 / max(v_reflect.y, 1.0));
+    if (SLOT_REFRACT == REFRACT_SOLID) s.refract_dir = solid_sphere_exit(-s.to_eye, s.normal, max(v_reflect.y, 1.0));
     // The sky LODs only where a slot samples the sky: about a sixth of a frame's shading on
     // llvmpipe otherwise. The variants are flat per instance, so every pixel of a 2 x 2 quad
     // (one primitive) takes the same branch and the derivatives stay defined.
@@ -267,7 +263,7 @@ void main() {
     if (SLOT_REFLECT == REFLECT_SKYBOX) s.reflect_lod = cube_lod(s.reflect_dir, sky_face_size);
     if (SLOT_REFLECT == REFLECT_CUBE) s.reflect_lod = cube_lod(s.reflect_dir, probe_face_size);
     s.refract_lod = 0.0;
-    if (SLOT_REFRACT == REFRACT_ENVIRONMENT)
+    if (SLOT_REFRACT == REFRACT_ENVIRONMENT || SLOT_REFRACT == REFRACT_SOLID)
         s.refract_lod = cube_lod(s.refract_dir, probe_face_size > 0.0 ? probe_face_size : sky_face_size);
 
     vec3 lit = direct_lighting(s);

@@ -25,7 +25,7 @@ from engine.core.errors import GLLimitError
 from engine.core.world import World
 from engine.render.instances import InstanceBatch
 from engine.render.renderer import Renderer
-from engine.rules.probe_rules import LookChanges, probe_for
+from engine.rules.probe_rules import LookChanges, probe_blend
 from systems.material_dispatch import choose_material
 
 NO_SLICE = (0.0, 0.0, 0.0, 1.0)
@@ -81,7 +81,9 @@ class ExtractSystem(esper.Processor):
                 self._remove_instance(entity, old)
             return
         material = world.try_get(entity, Material)
-        probe = probe_for(world, entity)
+        blend = probe_blend(world, entity)  # the probes it samples, and their weights
+        probe = blend.probes[0] if blend.probes else 0
+        second = blend.probes[1] if len(blend.probes) > 1 else 0
         # A material whose alpha is below 1 is see-through: blended in the transparent slot
         # (glass, whose alpha weighs the refracted view, stays opaque).
         transparent = material is not None and material.color.w < 1.0 and not world.has(entity, Refractive)
@@ -89,7 +91,8 @@ class ExtractSystem(esper.Processor):
             batch = self.renderer.batch_for(mesh_ref.mesh, material.texture if material else None, probe,
                                             entity if transparent else 0, material.normal_map if material else None,
                                             material.emissive_map if material else None,
-                                            material.metallic_roughness_map if material else None)
+                                            material.metallic_roughness_map if material else None,
+                                            second_probe=second, probe_blend=blend.blended)
         except GLLimitError as exc:
             raise GLLimitError(f"entity {entity}: {exc}") from None
         if old is not batch:
@@ -106,6 +109,7 @@ class ExtractSystem(esper.Processor):
         row["color"] = choice.color
         row["surface"] = choice.surface
         row["reflect"] = choice.reflect_params
+        row["reflect"][2:] = (*blend.weights, 0.0, 0.0)[:2]  # each probe's weight (the PROBE_BLEND build)
         row["tint"] = choice.tint
         slice_ = world.try_get(entity, Slice)
         row["slice"] = slice_.plane if slice_ is not None else NO_SLICE

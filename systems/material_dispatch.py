@@ -58,7 +58,8 @@ def choose_material(material: Material | None, emissive: Emissive | None,
         reflect_variant = ReflectVariant.SKYBOX
     return MaterialChoice(
         emissive=emissive_variant,
-        refract=RefractVariant.ENVIRONMENT if refractive is not None else RefractVariant.NONE,
+        refract=(RefractVariant.NONE if refractive is None else
+                 RefractVariant.SOLID if refractive.solid else RefractVariant.ENVIRONMENT),
         reflect=reflect_variant,
         color=material.color,
         surface=(material.metallic, material.roughness, emissive.power if emissive else 0.0, material.normal_scale),

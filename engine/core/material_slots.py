@@ -18,7 +18,8 @@ class EmissiveVariant(IntEnum):
 
 class RefractVariant(IntEnum):
     NONE = 0
-    ENVIRONMENT = 1
+    ENVIRONMENT = 1  # a thin surface: refracted once, where the ray enters
+    SOLID = 2        # a solid ball: refracted in and out (Refractive.solid)
 
 
 class ReflectVariant(IntEnum):

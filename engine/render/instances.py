@@ -16,7 +16,7 @@ INSTANCE_DTYPE = np.dtype([
     ("normal_matrix", "<f4", (9,)),   # column-major mat3
     ("color", "<f4", (4,)),
     ("surface", "<f4", (4,)),         # metallic, roughness, emissive power, -
-    ("reflect", "<f4", (4,)),         # reflection mix, refraction ior, -, -
+    ("reflect", "<f4", (4,)),         # reflection mix, refraction ior, weights of the batch's probe and second probe
     ("tint", "<f4", (4,)),
     ("slice", "<f4", (4,)),           # world plane; only its front is drawn ((0,0,0,1): all)
     ("slots", "<u4", (4,)),           # emissive, refract, reflect variants, entity id
@@ -72,6 +72,10 @@ class InstanceBatch:
         self._max_scale = 0.0
         self._rescale = False
         self.probe = 0  # the entity owning the reflection probe its instances sample (0: none)
+        # Probe blending (probe_rules.probe_blend): a second probe (0: none), and whether the
+        # instances blend (their rows' ``reflect`` z and w weigh the two probes, the sky the rest).
+        self.second_probe = 0
+        self.probe_blend = False
         self._variants: tuple[int, int, int] | None = None
         self._variants_stale = True
         # Drawn in the scene pass's transparent slot (blended, farthest first) instead of

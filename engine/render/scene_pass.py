@@ -46,6 +46,7 @@ from engine.render.bindings import (
     METALLIC_ROUGHNESS_UNIT,
     NODE_UNIT,
     NORMAL_UNIT,
+    PROBE2_UNIT,
     PROBE_UNIT,
     SCENE_CLIPS,
     SKY_UNIT,
@@ -75,6 +76,7 @@ ROOT_VIEW = SceneOptions()
 REFLECTION_LEVEL = SceneOptions(clear=False, masked=True, sky=False, reflection_filter=True)
 _PER_DRAW_UNIFORMS = ("masked", "sky_face_size", "node_index", "has_albedo_map", "transparent",
                       "probe_face_size", "probe_position", "probe_box_min", "probe_box_max",
+                      "probe2_face_size", "probe2_position", "probe2_box_min", "probe2_box_max",
                       "checker_cells", "checker_even", "checker_odd")
 _NO_PROBE = ((0.0, 0.0, 0.0, 0.0),) * 3
 _NO_CHECKER = (0.0, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
@@ -120,7 +122,7 @@ class ScenePass:
 
     def program(self, variants: tuple[int, int, int] | None = None, invocations: int = 0,
                 layered: str = "", normal_mapped: bool = False, checker: bool = False,
-                material_maps: tuple[bool, bool] = (False, False)) -> moderngl.Program:
+                material_maps: tuple[bool, bool] = (False, False), probe_blend: bool = False) -> moderngl.Program:
         """The scene program for a batch of ``variants`` (None: mixed, switched per
         instance): plain, batched (``invocations`` > 0: the geometry shader's) or a one-pass
         cube-map capture (``layered`` "culled" or "naive"), with or without a normal map
@@ -141,7 +143,7 @@ class ScenePass:
             for batch in self.renderer.batches.values():
                 batch.drop_vertex_arrays()  # made again for the relinked programs' inputs
             self._reloads_seen = reloads
-        key = (invocations, layered, variants, normal_mapped, checker, material_maps)
+        key = (invocations, layered, variants, normal_mapped, checker, material_maps, probe_blend)
         program = self._programs.get(key)
         if program is None:
             defines = {}
@@ -155,6 +157,8 @@ class ScenePass:
                 defines["EMISSIVE_MAP"] = "1"
             if material_maps[1]:
                 defines["METALLIC_ROUGHNESS_MAP"] = "1"
+            if probe_blend:  # two probes and the sky by the instances' weights (shaders/include/probe.glsl)
+                defines["PROBE_BLEND"] = "1"
             geometry = None
             if invocations:
                 geometry = "scene_batched.geom"
@@ -177,7 +181,7 @@ class ScenePass:
                 program["Views"].binding = VIEWS_BINDING
             # A build may not read every input (the linker drops what a variant never uses).
             for name, unit in (("albedo_map", ALBEDO_UNIT), ("sky_map", SKY_UNIT), ("node_map", NODE_UNIT),
-                               ("probe_map", PROBE_UNIT), ("normal_map", NORMAL_UNIT),
+                               ("probe_map", PROBE_UNIT), ("probe2_map", PROBE2_UNIT), ("normal_map", NORMAL_UNIT),
                                ("emissive_map", EMISSIVE_MAP_UNIT),
                                ("metallic_roughness_map", METALLIC_ROUGHNESS_UNIT)):
                 if name in program:
@@ -198,7 +202,7 @@ class ScenePass:
         for batch in batches:
             for invocations in counts:
                 batch.vao(self.program(batch.variants, invocations, "", batch.normal_map is not None,
-                                       batch.checker is not None, _material_maps(batch)))
+                                       batch.checker is not None, _material_maps(batch), batch.probe_blend))
         if reflections:
             if self._views_ubo is None:
                 self._views_ubo = self.ctx.buffer(reserve=VIEWS_BLOCK_BYTES)
@@ -220,7 +224,7 @@ class ScenePass:
             if not batch.count or (batch.count == 1 and batch.entity_at[0] in (skip, hide)):
                 continue
             program = self.program(batch.variants, invocations, layered, batch.normal_map is not None,
-                                   batch.checker is not None, _material_maps(batch))
+                                   batch.checker is not None, _material_maps(batch), batch.probe_blend)
             uniforms = self._uniforms[program.glo]
             values = written.get(program.glo)
             if values is None:
@@ -234,22 +238,12 @@ class ScenePass:
                 batch.emissive_map.use(EMISSIVE_MAP_UNIT)
             if batch.metallic_roughness_map is not None:
                 batch.metallic_roughness_map.use(METALLIC_ROUGHNESS_UNIT)
-            probe_size, lookup = 0, _NO_PROBE
-            if batch.probe:
-                # The probe being captured is drawn into, so it cannot be sampled (a rendering
-                # feedback loop: undefined on a GPU); what samples it shows the sky in its capture.
-                cube = cubes.get(batch.probe) if batch.probe != self.capturing else None
-                if cube is not None:
-                    cube.texture.use(PROBE_UNIT)
-                    probe_size, lookup = cube.face_size, cube.lookup()
-                else:
-                    # Its probe has no capture yet (a probe whose first capture comes later in
-                    # this stage sees it), or is the one being captured: the sky, as an object
-                    # with no probe reflects, rather than whatever cube another pass left on the unit.
-                    self.renderer.sky.use(PROBE_UNIT)
-                    probe_size = self._sky_size
+            probe_size, lookup = self._bind_probe(batch.probe, PROBE_UNIT, cubes) if batch.probe else (0, _NO_PROBE)
+            probe2_size, lookup2 = 0, _NO_PROBE
+            if batch.probe_blend:  # the second probe's unit (the sky where the blend is a probe and the sky)
+                probe2_size, lookup2 = self._bind_probe(batch.second_probe, PROBE2_UNIT, cubes)
             for i, value in enumerate((masked, self._sky_size, node, textured, batch.transparent, probe_size,
-                                       *lookup, *(batch.checker or _NO_CHECKER))):
+                                       *lookup, probe2_size, *lookup2, *(batch.checker or _NO_CHECKER))):
                 if values[i] != value and uniforms[i] is not None:
                     uniforms[i].value = values[i] = value
             if before_draw is not None:
@@ -257,6 +251,20 @@ class ScenePass:
             batch.draw(program)
             stats.draw_calls += 1
             stats.instances += batch.count
+
+    def _bind_probe(self, probe: int, unit: int, cubes) -> tuple[int, tuple]:
+        """Bind the cube map of ``probe`` to ``unit``: its face size and lookup uniforms.  The
+        probe being captured is drawn into, so it cannot be sampled (a rendering feedback
+        loop: undefined on a GPU); what samples it shows the sky in its capture.  A probe with
+        no capture yet (one whose first capture comes later in this stage), that one, and no
+        probe (0) bind the sky, as an object with no probe reflects, rather than whatever cube
+        another pass left on the unit."""
+        cube = cubes.get(probe) if probe and probe != self.capturing else None
+        if cube is not None:
+            cube.texture.use(unit)
+            return cube.face_size, cube.lookup()
+        self.renderer.sky.use(unit)
+        return self._sky_size, _NO_PROBE
 
     # --- the pass ------------------------------------------------------------------------------
     def draw(self, views: Sequence[View], targets: RenderTargets, options: SceneOptions = ROOT_VIEW) -> None:

@@ -11,9 +11,13 @@ Sampling.  An object samples a probe when it is ``Reflective("cube")`` or ``Refr
     by the probes stage; the chrome-sphere case: material detection as in the OpenGL 4
     course chapter "Texture Effects": a flat reflective mesh is a planar mirror, any other
     a cube map);
-  - else the probe whose influence box holds its position (the nearest centre if several);
+  - else the probes whose influence boxes hold its position, blended by weight
+    (``probe_blend``: each box's weight falls off to 0 over its ``blend_distance`` inside its
+    walls; the MAX_BLENDED_PROBES strongest are sampled, their weights normalised when they
+    add up to more than 1, and what is left of 1 is the sky);
   - else nothing: it reflects the sky.
 A probe is known by the entity that owns it (the ReflectionProbe's, or the object's own).
+``probe_for`` is the strongest of them: the one an object is said to sample.
 
 Looks.  ``LOOK_KINDS`` (with why each kind is there) and ``LookChanges`` (those, plus the
 objects whose sampled probe changed) say whose look changed this frame: the extract stage
@@ -24,6 +28,8 @@ views show (``images_through_surfaces``), never the probe's own object.  A point
 relights what is in its range (``lights_reaching``); ``LIGHTING_KINDS`` relight everything.
 """
 from __future__ import annotations
+
+from dataclasses import dataclass
 
 import numpy as np
 from pyglm import glm
@@ -94,26 +100,82 @@ def world_bounds(mesh: Mesh, model: glm.mat4) -> tuple[np.ndarray, np.ndarray]:
     return world[:, :3].min(axis=0), world[:, :3].max(axis=0)
 
 
-def probe_for(world: World, entity: int) -> int:
-    """The entity owning the probe ``entity`` samples, or 0 (the sky)."""
+MAX_BLENDED_PROBES = 2  # probes an object blends at most (two cube samplers: GL 4.1 has no cube-map arrays)
+
+
+@dataclass(frozen=True)
+class ProbeBlend:
+    """What an object's cube-map lookups read: ``probes`` (owners, the strongest first, at
+    most MAX_BLENDED_PROBES) with their ``weights`` (the same order; their sum is at most 1
+    and the rest, ``sky``, is the sky's).  ``NO_PROBE``: the sky alone."""
+
+    probes: tuple[int, ...] = ()
+    weights: tuple[float, ...] = ()
+
+    @property
+    def sky(self) -> float:
+        return max(0.0, 1.0 - sum(self.weights))
+
+    @property
+    def blended(self) -> bool:
+        """More than one source: two probes, or a probe and the sky (the scene shader's
+        PROBE_BLEND build); a lone probe at full weight is sampled as it always was."""
+        return len(self.probes) > 1 or (len(self.probes) == 1 and self.weights[0] < 1.0)
+
+
+NO_PROBE = ProbeBlend()
+
+
+def probe_weight(position, centre, influence, blend_distance: float) -> float:
+    """A probe's weight at ``position``: 0 outside its influence box (``influence`` wide
+    about ``centre``), rising linearly from the box's nearest wall to 1 at ``blend_distance``
+    inside it (1 everywhere inside with no blend distance; a wall counts as inside then).
+    The linear falloff of Unity HDRP's influence volumes."""
+    inside = float(np.min(np.asarray(influence, np.float64) / 2.0
+                          - np.abs(np.asarray(position, np.float64) - np.asarray(centre, np.float64))))
+    if inside < 0.0:
+        return 0.0
+    if blend_distance <= 0.0:
+        return 1.0
+    return min(1.0, inside / blend_distance)
+
+
+def probe_blend(world: World, entity: int) -> ProbeBlend:
+    """The probes ``entity`` samples and their weights (the module docstring's rule): its own
+    probe alone, or the MAX_BLENDED_PROBES influence boxes that weigh most at its position
+    (ties: the nearest centre first), weights w_i normalised as w_i / max(1, sum w) (Bevy's
+    and HDRP's normalisation: where the boxes overlap the weights share 1 between them;
+    where a lone box falls off, the sky takes the rest), or ``NO_PROBE``.  Continuous in the
+    position while at most MAX_BLENDED_PROBES boxes weigh more than 0 there."""
     if not samples_a_probe(world, entity):
-        return 0
+        return NO_PROBE
     if world.has(entity, ReflectionProbe) or has_own_probe(world, entity):
-        return entity
+        return ProbeBlend((entity,), (1.0,))
     transform = world.try_get(entity, Transform)
     if transform is None:
-        return 0
+        return NO_PROBE
     position = np.array(transform.world[3].xyz)
-    best, best_distance = 0, np.inf
+    found = []
     for owner, (probe, probe_t) in world.query(ReflectionProbe, Transform):
         if probe.influence is None:
             continue
         centre = np.array(probe_t.world[3].xyz)
-        if (np.abs(position - centre) <= np.array(probe.influence) / 2.0).all():
-            distance = float(np.linalg.norm(position - centre))
-            if distance < best_distance:
-                best, best_distance = owner, distance
-    return best
+        weight = probe_weight(position, centre, probe.influence, probe.blend_distance)
+        if weight > 0.0:
+            found.append((-weight, float(np.linalg.norm(position - centre)), owner, weight))
+    if not found:
+        return NO_PROBE
+    found.sort()
+    kept = found[:MAX_BLENDED_PROBES]
+    scale = 1.0 / max(1.0, sum(weight for *_, weight in kept))
+    return ProbeBlend(tuple(owner for _, _, owner, _ in kept), tuple(weight * scale for *_, weight in kept))
+
+
+def probe_for(world: World, entity: int) -> int:
+    """The entity owning the probe ``entity`` samples (the strongest of ``probe_blend``), or 0
+    (the sky)."""
+    probes = probe_blend(world, entity).probes
+    return probes[0] if probes else 0
 
 
 # What changes a look: an entity one of these components was added to, removed from or
@@ -142,13 +204,14 @@ LOOK_KINDS: dict[type, str] = {
 class LookChanges:
     """The entities whose look may have changed this frame, for one reader (the extract stage
     and the probes scheduler keep one each): a component of ``LOOK_KINDS`` added, removed or
-    written, or the probe the entity samples (``probe_for``) changed: it moved into or out
-    of a probe's influence box, a probe came, went, moved or changed, or its own components
-    changed.  It remembers which probe each object sampled when last asked."""
+    written, or the probes the entity samples or their weights (``probe_blend``) changed: it
+    moved into, out of or within the falloff of a probe's influence box, a probe came, went,
+    moved or changed, or its own components changed.  It remembers what each object sampled
+    when last asked."""
 
     def __init__(self) -> None:
-        self._sampled: dict[int, int] = {}  # entity -> the probe it sampled (not 0), when last asked
-        self._influences: dict[int, tuple | None] = {}  # probe owner -> its influence box's size, when last asked
+        self._sampled: dict[int, ProbeBlend] = {}  # entity -> what it sampled (not NO_PROBE), when last asked
+        self._influences: dict[int, tuple | None] = {}  # probe owner -> its influence box and falloff, when last asked
 
     def entities(self, world: World) -> set[int]:
         """This frame's entities whose look may have changed (each call follows on from the
@@ -159,14 +222,14 @@ class LookChanges:
         return looks | self.resampled(world, looks)
 
     def resampled(self, world: World, looks: set[int]) -> set[int]:
-        """The entities whose sampled probe changed since the last call (``looks``: this
-        frame's LOOK_KINDS changes)."""
+        """The entities whose sampled probes or their weights changed since the last call
+        (``looks``: this frame's LOOK_KINDS changes)."""
         frame = world.frame
         for entity in world.deleted() & self._sampled.keys():
             del self._sampled[entity]
-        # Which probe an object samples depends on its components, its position and the probes:
-        # which entities own one, and where the influence boxes are.
-        influences = {entity: None if probe.influence is None else tuple(probe.influence)
+        # Which probes an object samples depends on its components, its position and the probes:
+        # which entities own one, where the influence boxes are and how they fall off.
+        influences = {entity: None if probe.influence is None else (*probe.influence, probe.blend_distance)
                       for entity, probe in world.query_one(ReflectionProbe)}
         probes_changed = influences != self._influences or any(
             influences[entity] is not None for entity in frame.moved & influences.keys())
@@ -183,10 +246,10 @@ class LookChanges:
             candidates = changed & kinds
         resampled = set()
         for entity in candidates:
-            probe = probe_for(world, entity) if world.exists(entity) else 0
-            if probe != self._sampled.get(entity, 0):
+            probe = probe_blend(world, entity) if world.exists(entity) else NO_PROBE
+            if probe != self._sampled.get(entity, NO_PROBE):
                 resampled.add(entity)
-            if probe:
+            if probe.probes:
                 self._sampled[entity] = probe
             else:
                 self._sampled.pop(entity, None)

@@ -40,8 +40,13 @@ vec3 ggx_reflect(vec3 n, vec3 r, vec3 v, vec3 radiance, vec3 f0, float roughness
     return f * vis * (4.0 * max(dot(v, n), 0.0)) * max(dot(n, r), 0.0) * radiance;
 }
 
-// Roughness-to-mip bias for a reflection sampled with roughness m: lod += 2/(1-m)^2 - 1.
+// Roughness-to-mip bias for a reflection sampled with roughness m from a box-filtered mip
+// chain: lod += 2/(1-m)^2 - 1 from m = 0.25 up (the curve rough surfaces were tuned with);
+// below it the constant level of that curve fades out (smoothstep), so the bias is 0 at
+// m = 0 and a mirror-smooth surface reads the level of its own footprint.  (It was 1 there:
+// a chrome ball read a level blurrier than its pixels, and a rough mirror's composite
+// jumped a level between roughness 0, read 1:1, and the least roughness above it.)
 float roughness_lod_bias(float m) {
     float gloss = max(1.0 - m, 0.05);
-    return 2.0 / (gloss * gloss) - 1.0;
+    return 2.0 / (gloss * gloss) - 2.0 + smoothstep(0.0, 0.25, m);
 }

@@ -1,0 +1,66 @@
+// Reflection probes as the scene shader samples them: engine/render/probes.py captures them,
+// engine/rules/probe_rules.py says which probes an object samples and with what weight.
+// Included by scene.frag after sky_map, sky_face_size, roughness_lod_bias (ggx.glsl) and
+// sample_environment.
+uniform samplerCube probe_map;  // the batch's reflection probe (the strongest, when it blends)
+uniform float probe_face_size;
+uniform vec4 probe_position;    // xyz: where the probe was captured; w: top level of a GGX-prefiltered chain (0: box mips)
+uniform vec4 probe_box_min;     // xyz: its influence box; w = 1: box projection on
+uniform vec4 probe_box_max;
+#ifdef PROBE_BLEND
+// Probe blending (Unity HDRP's and Bevy's weighted blending of influence volumes), built for
+// a batch whose instances blend: a second probe with the same uniforms; the instance's
+// v_reflect.z and v_reflect.w weigh the two probes and the sky takes what is left of 1
+// (probe_rules.probe_blend).  A second cube-map unit, not a cube-map array (GL 4.1).
+uniform samplerCube probe2_map;
+uniform float probe2_face_size;
+uniform vec4 probe2_position;
+uniform vec4 probe2_box_min;
+uniform vec4 probe2_box_max;
+#endif
+
+// Box projection (parallax correction, as Unity's and Godot's probes do): follow the ray
+// from the shaded point to the wall of the probe's box and look that point up from where
+// the probe was captured (``centre``); without a box (box_min.w = 0), the ray's direction is
+// looked up as it is.
+vec3 box_projected(vec3 position, vec3 ray, vec3 centre, vec4 box_min, vec4 box_max) {
+    if (box_min.w < 0.5) return ray;
+    vec3 wall = mix(box_min.xyz, box_max.xyz, step(vec3(0.0), ray));
+    vec3 t = (wall - position) / ray;
+    return position + ray * min(min(t.x, t.y), t.z) - centre;
+}
+
+// The probe's mip level for a lookup.  A box-filtered chain (ggx_top = 0): the pixel's
+// footprint level, blurred by the roughness bias (0 at roughness 0: a mirror-smooth surface
+// samples its footprint's level).  A GGX-prefiltered chain (ggx_top = its top level): level
+// L holds perceptual roughness L / ggx_top (engine/render/probes.py, cube_mip.frag), so the
+// level is roughness x ggx_top and nothing else, as UE4's and three.js's prefiltered probes
+// are read: roughness 0 reads level 0, the capture itself; a footprint raising it would read
+// a level convolved for a rougher lobe and bleed colours across the image's edges.
+float probe_level(float footprint_lod, float roughness, float ggx_top) {
+    if (ggx_top > 0.0) return roughness * ggx_top;
+    return footprint_lod + roughness_lod_bias(roughness);
+}
+
+vec3 probe_lookup(samplerCube map, vec4 position, vec4 box_min, vec4 box_max, vec3 p, vec3 ray,
+                  float footprint_lod, float roughness) {
+    return textureLod(map, box_projected(p, ray, position.xyz, box_min, box_max),
+                      probe_level(footprint_lod, roughness, position.w)).rgb;
+}
+
+// What the object's probes saw along ``ray`` from ``p``: ``footprint_lod`` is the ray's
+// footprint level in texels of the first probe's faces (probe_face_size).  Blended, each
+// probe and the sky are read at their own footprint level (their faces differ in size).
+vec3 probe_radiance(vec3 p, vec3 ray, float footprint_lod, float roughness) {
+    vec3 first = probe_lookup(probe_map, probe_position, probe_box_min, probe_box_max, p, ray,
+                              footprint_lod, roughness);
+#ifdef PROBE_BLEND
+    vec3 second = probe_lookup(probe2_map, probe2_position, probe2_box_min, probe2_box_max, p, ray,
+                               footprint_lod + log2(probe2_face_size / probe_face_size), roughness);
+    float sky = max(1.0 - v_reflect.z - v_reflect.w, 0.0);
+    vec3 env = sample_environment(ray, footprint_lod + log2(sky_face_size / probe_face_size), roughness);
+    return first * v_reflect.z + second * v_reflect.w + env * sky;
+#else
+    return first;
+#endif
+}
