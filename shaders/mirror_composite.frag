@@ -18,9 +18,7 @@
 //                     and F0 in the roughness (v_params.y).
 #include "ggx.glsl"
 #include "normal_map.glsl"
-#ifdef COMPOSITE_WATER
 #include "water.glsl"
-#endif
 #ifdef COMPOSITE_BUMPY
 flat in mat3 v_project_dir;
 #endif

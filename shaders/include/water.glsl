@@ -1,6 +1,8 @@
 // Water (components/water.py) in the reflection's composite: the rippled normal from two
 // scrolling layers of the mirror's normal map, and the reflection's Fresnel weight.
-// Needs normal_map.glsl (the map) and, for the weight, nothing else.
+// Needs normal_map.glsl (the map). Included by every build of the composite, only
+// COMPOSITE_WATER calls it: an include inside an #ifdef would hide its errors from every
+// build that leaves it out.
 
 // The second layer's repeats relative to the first: not a whole number or a simple ratio,
 // so the two patterns do not line up again for many tiles.
