@@ -29,6 +29,7 @@ from components import (
 from engine.assets.level_file import load_level, save_level
 from engine.assets.mesh import Mesh, load_model, quad, sphere
 from engine.assets.models import spawn_model
+from engine.assets.texture_data import TextureData
 from engine.core.errors import AssetError
 from engine.core.world import World
 from tests.support import look_from, srgb_to_linear
@@ -364,9 +365,11 @@ def test_a_bad_map_statement_names_the_library_and_line(tmp_path, mtl, message):
 # --- a curved reflective part gets a probe ------------------------------------------------------
 
 def test_a_curved_reflective_part_reflects_its_probes_capture_not_only_the_sky(scene, tmp_path):
-    """A metallic sphere from a GLB, a red wall on its +X side: the sphere's pixels whose
-    reflected ray goes towards +X are red (the wall, as the probe captured it); the same
-    sphere made to reflect only the sky (what spawn_model gave before) shows no red there."""
+    """A metallic sphere from a GLB, a wall on its +X side that glows red through its emissive
+    map (its diffuse colour is grey: the capture must draw the map too): the sphere's pixels
+    whose reflected ray goes towards +X are red (the wall, as the probe captured it); the
+    same sphere made to reflect only the sky (what spawn_model gave before) shows no red
+    there."""
     path = write_glb(tmp_path / "ball.glb", sphere(0.6, 48, 24), {"pbrMetallicRoughness": {
         "baseColorFactor": [1.0, 1.0, 1.0, 1.0], "metallicFactor": 1.0, "roughnessFactor": 0.0}}, [])
     found = {}
@@ -381,7 +384,9 @@ def test_a_curved_reflective_part_reflects_its_probes_capture_not_only_the_sky(s
                 world.get(found["ball"], Reflective).mode = "skybox"
             wall = glm.angleAxis(-glm.pi() / 2, glm.vec3(0, 1, 0))
             world.spawn(Transform(position=(1.6, 0.0, 0.0), rotation=wall),
-                        MeshRef(quad(12, 12)), Material(color=(0.9, 0.05, 0.05)), Emissive(1.5))
+                        MeshRef(quad(12, 12)), Emissive(1.5),
+                        Material(color=(0.5, 0.5, 0.5), emissive_map=TextureData(np.full((4, 4, 3), (240, 20, 20),
+                                                                                         np.uint8), "red glow")))
         return b
 
     redness = {}
