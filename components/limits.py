@@ -6,3 +6,14 @@ from __future__ import annotations
 # Portal.max_depth, ReflectionProbe.depth, the view tree's depth cap).  Each level is one more
 # set of views drawn into one more level of targets; Valve's Portal stops at 10 views.
 MAX_VIEW_DEPTH = 16
+
+# Reflection layers (show/hide lists): an entity belongs to some of REFLECTION_LAYERS layers
+# and a mirror, portal, probe or camera shows some of them; a view shows an entity when they
+# share one.  16 layers keep the entity's bits exact in the float slot the scene pass reads.
+REFLECTION_LAYERS = 16
+ALL_LAYERS = (1 << REFLECTION_LAYERS) - 1
+# The kinds of view an entity can be hidden in.  A view's kinds are those of the surfaces its
+# chain of views passed through (the main camera's own view is DIRECT, a probe face's tree is
+# PROBE throughout), so a vampire hidden in mirrors is hidden in a portal seen in a mirror too.
+VIEW_DIRECT, VIEW_MIRROR, VIEW_PORTAL, VIEW_PROBE = 1, 2, 4, 8
+VIEW_KINDS = 4         # bits 0-3 of a view mask; the layers it shows are bits 4-19

@@ -19,6 +19,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from pyglm import glm
 
+from components.limits import ALL_LAYERS
 from engine.assets.texture_data import TextureData
 from engine.render.renderer import RenderStats
 from engine.render.view_plan import SurfaceTable
@@ -91,6 +92,7 @@ class SurfaceState:
     resolution_scale: float = 1.0
     bumps: MirrorBumps | None = None  # a mirror's normal map, as its composite reads it
     water: WaterLook | None = None    # a mirror that is water: Fresnel weight and moving waves
+    layers: int = ALL_LAYERS     # the reflection layers its view shows (components/limits.py)
 
 
 @dataclass

@@ -9,6 +9,7 @@ import pytest
 from pyglm import glm
 
 import engine.render.view_tree as view_tree
+from components.limits import VIEW_DIRECT, VIEW_MIRROR, VIEW_PORTAL
 from engine.core.reflection_math import oblique_is_safe, oblique_projection, signed_distance, transform_plane
 from engine.render.batched_mirrors import _view_row
 from engine.render.views import PlannedView, View
@@ -26,9 +27,12 @@ def _reference(parent: View, state, root: View, node: View) -> View:
     near = root.proj[3][2] / (root.proj[2][2] - 1.0)
     if oblique_is_safe(eye, state.exit_plane, near):
         proj = oblique_projection(root.proj, transform_plane(view, state.exit_plane))
+    # Through a surface a view is no longer direct; it is a mirror's or a portal's, on top of
+    # the kinds its chain passed, and shows the layers both it and the surface show.
+    kinds = (parent.kinds & ~VIEW_DIRECT) | (VIEW_MIRROR if state.kind == "mirror" else VIEW_PORTAL)
     return View(view=view, proj=proj, eye=eye, size=node.size, clip_plane=state.exit_plane,
                 mirrored=parent.mirrored != (state.kind == "mirror"), scissor=node.scissor, node=node.node,
-                skip=state.exit_entity, hide=parent.hide)
+                skip=state.exit_entity, hide=parent.hide, kinds=kinds, layers=parent.layers & state.layers)
 
 
 @pytest.fixture

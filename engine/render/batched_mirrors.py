@@ -34,7 +34,8 @@ MAX_BATCHED_VIEWS = 32
 # components, and 8 invocations x 4 views cover MAX_BATCHED_VIEWS (32 invocations guaranteed).
 VIEWS_PER_INVOCATION = 4
 # std140 layout of the Views block: ivec4 count, then per view (128 bytes)
-# mat4 view_proj, vec4 clip_plane, vec4 eye (w: mirrored), vec4 rect (NDC), uvec4 node.
+# mat4 view_proj, vec4 clip_plane, vec4 eye (w: mirrored), vec4 rect (NDC), uvec4 node (node,
+# skip, hide, view mask: View.view_mask).
 _VIEW_DTYPE = np.dtype([
     ("view_proj", "<f4", (16,)),
     ("clip_plane", "<f4", (4,)),
@@ -115,5 +116,5 @@ def _view_row(view: View) -> bytes:
     row["eye"] = (*view.eye, 1.0 if view.mirrored else 0.0)
     row["rect"] = (2.0 * x / width - 1.0, 2.0 * y / height - 1.0,
                    2.0 * (x + w) / width - 1.0, 2.0 * (y + h) / height - 1.0)
-    row["node"] = (view.node, view.skip, view.hide, 0)
+    row["node"] = (view.node, view.skip, view.hide, view.view_mask)
     return row.tobytes()

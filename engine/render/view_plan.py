@@ -20,6 +20,7 @@ from typing import Any
 import numpy as np
 from pyglm import glm
 
+from components.limits import VIEW_DIRECT, VIEW_KINDS, VIEW_MIRROR, VIEW_PORTAL
 from engine.render.views import CAMERA_BLOCK_BYTES, PlannedView, View
 
 # The mirror and portal records the surfaces stage publishes (``engine.resources.SurfaceState``,
@@ -31,6 +32,7 @@ SurfaceState = Any
 # (``engine.core.reflection_math.oblique_is_safe``: the same rule, one view at a time).
 OBLIQUE_SAFE_NEARS = 4.0
 _CAMERA_FLOATS = CAMERA_BLOCK_BYTES // 4
+_KINDS_BUT_DIRECT = ((1 << VIEW_KINDS) - 1) & ~VIEW_DIRECT  # a view through a surface is no longer direct
 # The batched path's row of a view (``batched_mirrors``): mat4 view_proj, vec4 clip plane,
 # vec4 eye (w: mirrored), vec4 rect (NDC), uvec4 (node, skip, hide, 0).
 BATCHED_ROW_FLOATS = 32
@@ -45,7 +47,8 @@ class LevelRows:
     """The views of one level of a tree as arrays, a row each (the root: one row), packed
     in one float64 array so that a level's rows are gathered in one operation."""
 
-    WIDTH = 47  # view 0-15, inv_view 16-31, eye 32-35, clip 36-39, rect 40-43, exit 44, mirrored 45, node 46
+    WIDTH = 48  # view 0-15, inv_view 16-31, eye 32-35, clip 36-39, rect 40-43, exit 44, mirrored 45, node 46,
+    # view mask 47 (its kinds and layers: View.view_mask)
 
     def __init__(self, data: np.ndarray) -> None:
         self.data = data
@@ -90,12 +93,18 @@ class LevelRows:
         """(n,) the view's index in the tree."""
         return self.data[:, 46]
 
+    @property
+    def mask(self) -> np.ndarray:
+        """(n,) int64: the view's kinds and the layers it shows (``View.view_mask``)."""
+        return self.data[:, 47].astype(np.int64)
+
     @staticmethod
     def root(view: View) -> LevelRows:
         data = np.empty((1, LevelRows.WIDTH))
         data[0, 0:16] = _mat(view.view).reshape(16)
         data[0, 16:32] = _mat(glm.inverse(view.view)).reshape(16)
-        data[0, 32:47] = (*view.eye, 1.0, *view.clip_plane, 0.0, 0.0, *view.size, -1.0, float(view.mirrored), 0.0)
+        data[0, 32:48] = (*view.eye, 1.0, *view.clip_plane, 0.0, 0.0, *view.size, -1.0, float(view.mirrored), 0.0,
+                          float(view.view_mask))
         return LevelRows(data)
 
 
@@ -145,6 +154,10 @@ class SurfaceTable:
         self.exit_planes = np.array([tuple(s.exit_plane) for s in states], np.float64).reshape(count, 4)
         self.exit_entities = np.array([s.exit_entity for s in states], np.int64)
         self.is_mirror = np.array([s.kind == "mirror" for s in states], bool)
+        # The kind a view through each surface gains, and the layers each shows (a view shows
+        # the layers every surface of its chain shows).
+        self.kind_bit = np.where(self.is_mirror, VIEW_MIRROR, VIEW_PORTAL).astype(np.int64)
+        self.layers = np.array([s.layers for s in states], np.int64)
         self.scale = np.array([s.resolution_scale for s in states], np.float64)
 
     def cull(self, parents: LevelRows, depth: int, root_proj: np.ndarray, root_size: tuple[int, int],
@@ -220,6 +233,9 @@ class SurfaceTable:
         data[:, 44] = skip = self.exit_entities[s]
         data[:, 45] = mirrored = parent.mirrored != self.is_mirror[s]
         data[:, 46] = nodes = np.arange(first_index, first_index + k)
+        mask = parent.mask
+        mask = (mask & _KINDS_BUT_DIRECT) | self.kind_bit[s] | (mask & (self.layers[s] << VIEW_KINDS))
+        data[:, 47] = mask
         proj, inv_proj = _oblique_projections(root_proj, inv_root_proj, inv_view, eye, clip)
         scissor = _to_level(rects, root.size, size)
         # The Camera blocks (camera.glsl): four column-major matrices, then eye, viewport,
@@ -234,7 +250,7 @@ class SurfaceTable:
         blocks[:, 68:72] = (0.0, 0.0, *size)
         blocks[:, 72:76] = clip
         ids = blocks[:, 76:80].view(np.uint32)
-        ids[:, 0], ids[:, 1], ids[:, 2:] = skip, hide, 0
+        ids[:, 0], ids[:, 1], ids[:, 2], ids[:, 3] = skip, hide, mask, 0
         batched = np.empty((k, BATCHED_ROW_FLOATS), np.float32)
         batched[:, 0:16] = blocks[:, 32:48]
         batched[:, 16:20] = clip
@@ -243,7 +259,7 @@ class SurfaceTable:
         corners = scissor.reshape(k, 2, 2).cumsum(axis=1) * (2.0 / np.array(size)) - 1.0  # NDC x0 y0, x1 y1
         batched[:, 24:28] = corners.reshape(k, 4)
         ids = batched[:, 28:32].view(np.uint32)
-        ids[:, 0], ids[:, 1], ids[:, 2], ids[:, 3] = nodes, skip, hide, 0
+        ids[:, 0], ids[:, 1], ids[:, 2], ids[:, 3] = nodes, skip, hide, mask
         return Candidates(p, s, rows, scissor, blocks, batched, size)
 
 

@@ -7,6 +7,8 @@ from dataclasses import dataclass, field
 import numpy as np
 from pyglm import glm
 
+from components.limits import ALL_LAYERS, VIEW_DIRECT, VIEW_KINDS
+
 CAMERA_BLOCK_BYTES = 4 * 64 + 4 * 16
 # Float columns of a packed Camera block (View.camera_block; camera.glsl): view 0-15,
 # proj 16-31, then these, then viewport and clip plane.
@@ -39,12 +41,19 @@ class View:
     node: int = 0
     skip: int = 0
     hide: int = 0  # an entity no view of the tree draws (a probe's own object), whatever surface it looks out of
+    kinds: int = VIEW_DIRECT     # the kinds of view it is (components/limits.py): an entity hidden in one is not drawn
+    layers: int = ALL_LAYERS     # the reflection layers it shows
     _block: bytes | None = field(default=None, init=False, repr=False, compare=False)
     batched_row: bytes | None = field(default=None, init=False, repr=False, compare=False)  # packed by the planner
 
     @property
     def view_proj(self) -> glm.mat4:
         return self.proj * self.view
+
+    @property
+    def view_mask(self) -> int:
+        """Its kinds (bits 0-3) and the layers it shows (bits 4-19), as the shaders read them."""
+        return self.kinds | (self.layers << VIEW_KINDS)
 
     def camera_block(self) -> bytes:
         """The Camera uniform block of this view, packed once: a View is made for one pass
@@ -55,7 +64,7 @@ class View:
             self._block = b"".join([
                 self.view.to_bytes(), self.proj.to_bytes(), vp.to_bytes(), glm.inverse(vp).to_bytes(),
                 glm.vec4(self.eye, 1.0).to_bytes(), glm.vec4(0.0, 0.0, w, h).to_bytes(), self.clip_plane.to_bytes(),
-                glm.uvec4(self.skip, self.hide, 0, 0).to_bytes(),
+                glm.uvec4(self.skip, self.hide, self.view_mask, 0).to_bytes(),
             ])
         return self._block
 
@@ -99,6 +108,18 @@ class PlannedView(View):
     @property
     def eye(self) -> glm.vec3:
         return glm.vec3.from_bytes(self._block[256:268])
+
+    @property
+    def kinds(self) -> int:
+        return self.view_mask & ((1 << VIEW_KINDS) - 1)
+
+    @property
+    def layers(self) -> int:
+        return self.view_mask >> VIEW_KINDS
+
+    @property
+    def view_mask(self) -> int:
+        return int.from_bytes(self._block[312:316], "little")
 
 
 def camera_view(world_matrix: glm.mat4, fov_y_deg: float, near: float, far: float,
