@@ -21,6 +21,14 @@ class Mirror(TrackedComponent):
     mirrors it draws), ``max_depth`` limits mirrors seen in mirrors.  ``plane_point`` and
     ``plane_normal`` (model space) override the plane found from the mesh; a non-flat mesh
     without them is an error.
+
+    Fades (both off by default), as Unreal's planar reflections offer: ``fade_distance =
+    (start, end)`` in metres from the viewing eye to the mirror (to its bounding sphere), and
+    ``fade_angle = (start, end)`` in degrees between the mirror's normal and the direction to
+    the eye (0: straight on, 90: edge on).  Between start and end the reflection's weight
+    falls linearly from 1 to 0 and the mirror shows its own shading instead; at end and past
+    it the mirror costs no view at all.  A view's weight is the product of the two, seen from
+    that view's eye (a mirror seen in another mirror fades by the reflected eye's distance).
     """
 
     color: Any = field(default_factory=lambda: glm.vec4(1.0))
@@ -31,6 +39,8 @@ class Mirror(TrackedComponent):
     enabled: bool = True
     plane_point: Any = None
     plane_normal: Any = None
+    fade_distance: Any = None
+    fade_angle: Any = None
 
     def _validate(self, name: str, value: Any) -> Any:
         if name == "color":
@@ -44,8 +54,22 @@ class Mirror(TrackedComponent):
                 raise ComponentValueError(f"Mirror.max_depth must be an int in [0, {MAX_VIEW_DEPTH}], got {value!r}")
         if name == "enabled":
             return boolean(self, name, value)
+        if name in ("fade_distance", "fade_angle") and value is not None:
+            return _fade(name, value, 90.0 if name == "fade_angle" else None)
         if name == "plane_point" and value is not None:
             return vec3(self, name, value)
         if name == "plane_normal" and value is not None:
             return glm.normalize(vec3(self, name, value, nonzero=True))
         return value
+
+
+def _fade(name: str, value: Any, most: float | None) -> tuple[float, float]:
+    """A fade's (start, end): finite, 0 <= start < end (<= ``most``)."""
+    try:
+        start, end = (float(v) for v in value)
+    except (TypeError, ValueError):
+        raise ComponentValueError(f"Mirror.{name} must be None or (start, end), got {value!r}") from None
+    limit = f" <= {most:g}" if most is not None else ""
+    if not (0.0 <= start < end and end < float("inf") and (most is None or end <= most)):
+        raise ComponentValueError(f"Mirror.{name} must have 0 <= start < end{limit}, got {value!r}")
+    return start, end

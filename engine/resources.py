@@ -93,6 +93,8 @@ class SurfaceState:
     bumps: MirrorBumps | None = None  # a mirror's normal map, as its composite reads it
     water: WaterLook | None = None    # a mirror that is water: Fresnel weight and moving waves
     layers: int = ALL_LAYERS     # the reflection layers its view shows (components/limits.py)
+    fade: tuple[float, float, float, float] | None = None  # a mirror's fades: distance start, end (m), angle
+                                                           # start, end (degrees); None: no fade
 
 
 @dataclass

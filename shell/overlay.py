@@ -55,7 +55,7 @@ def overlay_lines(engine, frame_times: Sequence[float]) -> list[str]:
         f"passes {stats.passes}, draw calls {stats.draw_calls}",
         f"views per level {per_level}",
         f"reflection views {stats.reflection_views}, dropped {stats.reflection_views_dropped}, "
-        f"capped {stats.reflection_depth_capped}",
+        f"capped {stats.reflection_depth_capped}, faded {stats.reflection_views_faded}",
         f"probe captures {stats.probe_captures} ({stats.probe_faces} faces)",
         f"reflection path {stats.reflection_path or '-'} (set: {reflect.path}, budget {budget})",
         f"probe path {stats.probe_path or '-'} (set: {probes.path}{chosen})",

@@ -84,6 +84,7 @@ class ReflectionSystem(esper.Processor):
         stats.reflection_views = len(result.views) - 1
         stats.reflection_views_dropped = result.dropped
         stats.reflection_depth_capped = result.capped
+        stats.reflection_views_faded = result.faded
         paths = result.paths
         stats.reflection_path = paths.pop() if len(paths) == 1 else ("mixed" if paths else "")
 

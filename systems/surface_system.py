@@ -144,5 +144,16 @@ class SurfaceSystem(esper.Processor):
             look = WaterLook(water.f0, water.cross, water.tiling, flow if flow is not None else WaterFlow())
         return SurfaceState(entity, "mirror", plane, corners, outline,
                             reflection_matrix(plane), plane, entity, mirror.max_depth, mirror.enabled,
-                            mirror.color, mirror.reflect_rate, mirror.roughness, mirror.resolution_scale, bumps, look)
+                            mirror.color, mirror.reflect_rate, mirror.roughness, mirror.resolution_scale, bumps, look,
+                            fade=_fades(mirror))
 
+
+
+def _fades(mirror: Mirror) -> tuple[float, float, float, float] | None:
+    """A mirror's fades as the view planner reads them (an unset one never fades)."""
+    if mirror.fade_distance is None and mirror.fade_angle is None:
+        return None
+    return (*(mirror.fade_distance or (NO_FADE, 2.0 * NO_FADE)), *(mirror.fade_angle or (NO_FADE, 2.0 * NO_FADE)))
+
+
+NO_FADE = 1e30  # a start no distance or angle reaches

@@ -120,6 +120,7 @@ class Composite:
     parent_view: View                                          # the view that sees the surface
     surface: CompositeSurface
     tile: Tile | None = None                                   # a rough view's blur source (RoughAtlas)
+    fade: float = 1.0                                          # the reflection's weight (a mirror's fades)
 
 
 @dataclass
@@ -235,7 +236,7 @@ def composite_rows(composites: list[Composite], size: tuple[int, int]) -> bytes:
             (x, y), scale, rough = water.flow.offset, water.cross, water.f0
         rows.append(_COMPOSITE_ROW.pack(
             corners, lx, ly, lx + lw, ly + lh, block[_BLOCK_INVERSE], block[_BLOCK_EYE], x,
-            surface.tint, scale, surface.reflect_rate, rough, surface.params_z, float(c.view_index),
+            surface.tint, scale, surface.reflect_rate * c.fade, rough, surface.params_z, float(c.view_index),
             surface.normal, y, surface.carry))
     return b"".join(rows)
 

@@ -49,6 +49,7 @@ class RenderStats:
     probe_path: str = ""      # the path of the last probe capture: "six_pass" or "layered" (while there are probes)
     reflection_views_dropped: int = 0   # views with pixels a level's view budget left out
     reflection_depth_capped: int = 0    # views the surfaces' own depth limits allowed below the tree's cap
+    reflection_views_faded: int = 0     # mirror views their fades took out (each cost nothing)
     # How reflection levels were drawn: "per_mirror", "batched", "mixed" (auto chose both in
     # one frame), or "" when no reflection view was drawn (ReflectionSystem.path).
     reflection_path: str = ""

@@ -120,6 +120,7 @@ class Candidates:
     blocks: np.ndarray       # (k, CAMERA_BLOCK_BYTES / 4) float32: packed Camera blocks
     batched: np.ndarray      # (k, BATCHED_ROW_FLOATS) float32: packed batched-path rows
     size: tuple[int, int]    # the level's pixels
+    fade: np.ndarray         # (k,) the reflection's weight (Mirror fades; 1: none)
 
     def __len__(self) -> int:
         return len(self.parent)
@@ -127,7 +128,7 @@ class Candidates:
     def select(self, keep: np.ndarray) -> Candidates:
         """The candidates at ``keep`` (indices or a mask), in their order."""
         return Candidates(self.parent[keep], self.surface[keep], LevelRows(self.rows.data[keep]), self.scissor[keep],
-                          self.blocks[keep], self.batched[keep], self.size)
+                          self.blocks[keep], self.batched[keep], self.size, self.fade[keep])
 
 
 class SurfaceTable:
@@ -159,28 +160,37 @@ class SurfaceTable:
         self.kind_bit = np.where(self.is_mirror, VIEW_MIRROR, VIEW_PORTAL).astype(np.int64)
         self.layers = np.array([s.layers for s in states], np.int64)
         self.scale = np.array([s.resolution_scale for s in states], np.float64)
+        # Fades (Mirror.fade_distance, fade_angle): start and end of each, and each surface's
+        # bounding sphere; a surface without fades never fades.
+        self.fades = [s.fade for s in states]
+        self.fading = any(f is not None for f in self.fades)
+        if self.fading:
+            self.fade = np.array([f if f is not None else _NEVER for f in self.fades], np.float64)
+            self.centres = self.corners[:, :, :3].mean(axis=1)
+            self.radii = np.linalg.norm(self.corners[:, :, :3] - self.centres[:, None, :], axis=2).max(axis=1)
 
     def cull(self, parents: LevelRows, depth: int, root_proj: np.ndarray, root_size: tuple[int, int],
-             depth_cap: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+             depth_cap: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None]:
         """Each (parent, surface) where the parent view can see the surface, with the screen
         rectangle where it can show: enabled and within its depth, not the surface the view
         looks out of, facing the view's eye (a mirror facing away shows nothing, as the
         "Multiple Mirrors" project notes), not wholly behind the view's clip plane, inside
         the frustum and overlapping the parent's rectangle.  ``depth`` is the level the
         views would be on.  Returns (parent rows, surface rows, rects x0 y0 x1 y1), parent
-        major.  Every pair goes through the same few array operations: in a frame, after
-        the rasteriser has run, each numpy call costs about twice what it does in a warm
-        loop (measured), so their number is what counts here."""
-        none = np.zeros(0, np.int64)
+        major, and the fade weights of the pairs seen before the fades (None: no surface
+        fades; a pair faded out, weight 0, is not returned).  Every pair goes through the
+        same few array operations: in a frame, after the rasteriser has run, each numpy call
+        costs about twice what it does in a warm loop (measured), so their number is what
+        counts here."""
         if not len(parents.node) or depth > min(self.deepest, depth_cap):
-            return none, none, np.zeros((0, 4))  # nothing enabled may be seen this deep
+            return _NONE, _NONE, _NO_RECTS, None  # nothing enabled may be seen this deep
         # First what needs no corners, for every pair: enabled and within its depth, not the
         # surface the view looks out of, and facing the view's eye.
         keep = self.enabled & (depth <= np.minimum(self.max_depth, depth_cap))
         keep = keep & (parents.exit[:, None] != self.entities) & (parents.eye @ self.planes.T > 0.0)
         p, s = np.nonzero(keep)
         if not len(p):
-            return none, none, np.zeros((0, 4))
+            return _NONE, _NONE, _NO_RECTS, None
         # Per parent, one 11 x 4 matrix: times a corner, the corner in clip space (the
         # view-projection with the root projection, as the rectangle is in root pixels), then
         # six values that are > 0 outside each side of the frustum (x > w, x < -w, ...) and
@@ -203,21 +213,42 @@ class SurfaceTable:
         x0y0 = np.maximum(lo, rect[:, 0:2])
         x1y1 = np.minimum(hi, rect[:, 2:4])
         seen &= (x1y1 > x0y0).all(axis=1)
-        return p[seen], s[seen], np.concatenate([x0y0[seen], x1y1[seen]], axis=1)
+        p, s, rects = p[seen], s[seen], np.concatenate([x0y0[seen], x1y1[seen]], axis=1)
+        if not self.fading:
+            return p, s, rects, None
+        fade = self.fade_weights(parents.eye[p], s)
+        kept = fade > 0.0  # faded out: no view at all (the weights of the pairs kept say how many went)
+        return p[kept], s[kept], rects[kept], np.where(kept, fade, 0.0)
+
+    def fade_weights(self, eyes: np.ndarray, s: np.ndarray) -> np.ndarray:
+        """Each surface ``s`` seen from ``eyes``: the product of its distance fade (by the
+        distance to its bounding sphere) and its angle fade (by the angle between its normal
+        and the direction to the eye), each falling linearly from 1 at start to 0 at end."""
+        to_eye = eyes[:, :3] - self.centres[s]
+        distance = np.linalg.norm(to_eye, axis=1)
+        fade = self.fade[s]
+        by_distance = (fade[:, 1] - np.maximum(distance - self.radii[s], 0.0)) / (fade[:, 1] - fade[:, 0])
+        cosine = np.einsum("ki,ki->k", to_eye, self.planes[s, :3]) / np.maximum(distance, 1e-9)
+        angle = np.degrees(np.arccos(np.clip(cosine, -1.0, 1.0)))
+        by_angle = (fade[:, 3] - angle) / (fade[:, 3] - fade[:, 2])
+        return np.clip(by_distance, 0.0, 1.0) * np.clip(by_angle, 0.0, 1.0)
 
     def plan(self, parents: LevelRows, depth: int, root: View, root_proj: np.ndarray, inv_root_proj: np.ndarray,
-             first_index: int, depth_cap: int, hide: int) -> Candidates | None:
+             first_index: int, depth_cap: int, hide: int) -> tuple[Candidates | None, int]:
         """The next level's candidate views from ``parents`` (level ``depth - 1``): the
         cull's pairs, each with its camera (the parent's carried through the surface: for a
         mirror its reflection, for a portal look-out x half turn x inverse(look-in), as in
         the DirectX "magic mirrors" write-up), clipped at the plane it looks out of, with
         Lengyel's oblique near plane there unless the eye is too close (then the clip
         distance alone), its claim rectangle in the level's pixels, and its packed Camera
-        block and batched-path row.  None when nothing can be seen."""
-        p, s, rects = self.cull(parents, depth, root_proj, root.size, depth_cap)
+        block and batched-path row (None when nothing can be seen), and how many pairs the
+        fades took out."""
+        p, s, rects, weights = self.cull(parents, depth, root_proj, root.size, depth_cap)
+        faded = 0 if weights is None else int((weights == 0.0).sum())
+        fade = None if weights is None else weights[weights > 0.0]
         k = len(p)
         if not k:
-            return None
+            return None, faded
         scale = float(self.scale[s].max())
         size = (max(1, round(root.size[0] * scale)), max(1, round(root.size[1] * scale)))
         parent = LevelRows(parents.data[p])
@@ -260,7 +291,7 @@ class SurfaceTable:
         batched[:, 24:28] = corners.reshape(k, 4)
         ids = batched[:, 28:32].view(np.uint32)
         ids[:, 0], ids[:, 1], ids[:, 2], ids[:, 3] = nodes, skip, hide, mask
-        return Candidates(p, s, rows, scissor, blocks, batched, size)
+        return Candidates(p, s, rows, scissor, blocks, batched, size, fade if fade is not None else np.ones(k)), faded
 
 
 def planned_views(table: SurfaceTable, candidates: Candidates, hide: int) -> list[PlannedView]:
@@ -317,6 +348,10 @@ def _to_level(rects: np.ndarray, screen: tuple[int, int], level: tuple[int, int]
     x1y1 = np.minimum(np.array(level, np.float64), np.ceil(rects[:, 2:4] * s))
     return np.concatenate([x0y0, np.maximum(1.0, x1y1 - x0y0)], axis=1).astype(np.int64)
 
+
+_NONE = np.zeros(0, np.int64)
+_NO_RECTS = np.zeros((0, 4))
+_NEVER = (1e30, 2e30, 1e30, 2e30)  # fade starts no distance or angle reaches
 
 # From the rows of a view-projection (x, y, z, w) and a clip plane, the rows SurfaceTable.cull
 # applies to every corner: x, y, z, w, then x - w, y - w, z - w, -x - w, -y - w, -z - w (each

@@ -82,6 +82,7 @@ class TreeResult:
     paths: set[str]               # how the levels were drawn
     dropped: int = 0              # views with pixels left out by the level budget
     capped: int = 0               # views the surfaces' own limits allowed below the depth cap
+    faded: int = 0                # views the mirrors' fades took out (each costs nothing)
 
 
 @dataclass
@@ -94,6 +95,7 @@ class ReflectionView:
     rect: tuple[int, int, int, int]   # where it shows, in screen (level 0) pixels
     surface: SurfaceState | None = None
     parent: ReflectionView | None = None
+    fade: float = 1.0                 # the reflection's weight (a mirror's fades)
 
 
 class ViewTree:
@@ -115,7 +117,7 @@ class ViewTree:
         planning = (root, root_proj, np.linalg.inv(root_proj))
         nodes = [root_node]
         rows = LevelRows.root(root)
-        candidates = surfaces.plan(rows, 1, *planning, 1, settings.depth_cap, root.hide)
+        candidates, result.faded = surfaces.plan(rows, 1, *planning, 1, settings.depth_cap, root.hide)
         level = 0
         while candidates is not None and level < settings.depth_cap:
             targets = levels.get(level + 1, candidates.size)
@@ -135,10 +137,10 @@ class ViewTree:
             chosen = candidates.select(keep)
             views = planned_views(surfaces, chosen, root.hide)
             states = surfaces.states
-            children = [ReflectionView(view.node, level + 1, view, (x0, y0, x1 - x0, y1 - y0), states[s], nodes[p])
-                        for view, (x0, y0, x1, y1), s, p in zip(
+            children = [ReflectionView(view.node, level + 1, view, (x0, y0, x1 - x0, y1 - y0), states[s], nodes[p], f)
+                        for view, (x0, y0, x1, y1), s, p, f in zip(
                             views, chosen.rows.rect.astype(np.int64).tolist(), chosen.surface.tolist(),
-                            chosen.parent.tolist(), strict=True)]
+                            chosen.parent.tolist(), chosen.fade.tolist(), strict=True)]
             path = choose_path(settings.path, len(children), submitted_triangles(renderer))
             result.paths.add(path)
             renderer.scene_pass.draw(views, targets, _BATCHED if path == "batched" else REFLECTION_LEVEL)
@@ -148,8 +150,9 @@ class ViewTree:
             nodes, rows = children, chosen.rows
             # While the GPU draws the views: the next level's cull and cameras (measured: on
             # the critical path when done after the views finish), then their composite rows.
-            candidates = surfaces.plan(rows, level + 1, *planning, int(r.node[-1]) + 1, settings.depth_cap,
-                                       root.hide)
+            candidates, faded = surfaces.plan(rows, level + 1, *planning, int(r.node[-1]) + 1, settings.depth_cap,
+                                              root.hide)
+            result.faded += faded
             composites.append(self._prepare_composite(children, root, levels[level - 1].size))
         if level and level == settings.depth_cap:
             # Reaching the cap is reported: how many views the surfaces' own limits still allowed.
@@ -163,7 +166,7 @@ class ViewTree:
         """The composite of a level's views into the level above (``parent_size`` pixels)."""
         return self.passes.prepare_composites([Composite(
             child.index, _to_level(child.rect, root.size, parent_size), child.view.scissor, child.parent.view,
-            surface_look(child.surface)) for child in children], parent_size)
+            surface_look(child.surface), fade=child.fade) for child in children], parent_size)
 
     def release(self) -> None:
         self.passes.release()
