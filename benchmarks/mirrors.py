@@ -95,8 +95,9 @@ class MirrorRing(Game):
 
     title = "benchmark: mirrors"
 
-    def __init__(self, mirrors: int) -> None:
+    def __init__(self, mirrors: int, faded: bool = False) -> None:
         self.mirrors = mirrors
+        self.faded = faded  # every mirror past its distance fade: it should cost no view
         self.camera: Transform | None = None
         self.spinning: list[tuple[Transform, float]] = []
         self.angle = START_ANGLE
@@ -127,7 +128,8 @@ class MirrorRing(Game):
             outward = glm.vec3(math.cos(a), 0.0, math.sin(a))
             world.spawn(Transform(position=RING_RADIUS * outward + glm.vec3(0.0, 1.5, 0.0),
                                   rotation=look_rotation(outward)),  # +Z (the glass's front) to the centre
-                        MeshRef(glass), Material(color=(0.1, 0.1, 0.1)), Mirror(color=(0.95, 0.97, 1.0)))
+                        MeshRef(glass), Material(color=(0.1, 0.1, 0.1)),
+                        Mirror(color=(0.95, 0.97, 1.0), fade_distance=(0.0, 0.5) if self.faded else None))
         self.camera = Transform()
         world.spawn(self.camera, Camera(fov_y=60.0, near=0.1, far=100.0))
         self._place_camera()
@@ -262,6 +264,7 @@ class Result:
     chosen: dict[str, int] = field(default_factory=dict)
     cpu_ms_median: float = 0.0
     plan_us_per_view: float | None = None
+    faded: bool = False   # every mirror faded out (``--faded``)
 
 
 def _percentile(values: list[float], q: float) -> float:
@@ -271,18 +274,20 @@ def _percentile(values: list[float], q: float) -> float:
 
 def run_scenes(ctx, mirror_counts: tuple[int, ...], paths: tuple[str, ...], frames: int,
                warmup: int, aa_modes: tuple[str, ...] = ("fxaa",),
-               size: tuple[int, int] = OUTPUT_SIZE) -> list[Result]:
+               size: tuple[int, int] = OUTPUT_SIZE, faded: bool = False) -> list[Result]:
     """One engine per (mirror count, path, anti-aliasing mode) on the same scene, their
     frames interleaved (frame i of every engine, then frame i + 1), so load from outside the
     benchmark, and the drift of a shared machine, land on every engine alike and the ratios
-    between them hold.  ``size`` is the output's (width, height)."""
-    cases = [(mirrors, path, aa) for mirrors in mirror_counts for path in paths for aa in aa_modes]
+    between them hold.  ``size`` is the output's (width, height); ``faded`` adds, for each
+    mirror count, the same ring with every mirror faded out (``Mirror.fade_distance``)."""
+    cases = [(mirrors, path, aa, fade) for mirrors in mirror_counts for path in paths for aa in aa_modes
+             for fade in ((False, True) if faded and mirrors else (False,))]
     engines, captures = [], []
     clock = PlanClock()
     try:
         clock.open()
-        for mirrors, path, aa in cases:
-            engine = Engine(MirrorRing(mirrors), ctx)
+        for mirrors, path, aa, fade in cases:
+            engine = Engine(MirrorRing(mirrors, fade), ctx)
             engine.reflection_system.path = path
             engine.renderer.antialias = aa
             engines.append(engine)
@@ -319,7 +324,8 @@ def run_scenes(ctx, mirror_counts: tuple[int, ...], paths: tuple[str, ...], fram
             chosen=dict(Counter(s.reflection_path or "none" for s in stats[i])),
             cpu_ms_median=round(statistics.median(cpu[i]), 2),
             plan_us_per_view=plan_median(plan[i]),
-        ) for i, (mirrors, path, aa) in enumerate(cases)]
+            faded=fade,
+        ) for i, (mirrors, path, aa, fade) in enumerate(cases)]
     finally:
         clock.close()
         for capture in captures:
@@ -341,12 +347,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--warmup", type=int, default=3, help="untimed frames first (default 3)")
     parser.add_argument("--aa", type=lambda text: tuple(text.split(",")), default=("fxaa",),
                         help="comma-separated anti-aliasing modes (default fxaa; fxaa,off measures its cost)")
+    parser.add_argument("--faded", action="store_true",
+                        help="also run each mirror count with every mirror faded out (it should cost no view)")
     add_size_argument(parser, OUTPUT_SIZE)
 
 
 COLUMNS = (("n_mirrors", "mirrors", 8), ("path", "path", 11), ("aa", "aa", 5), ("frame_ms_median", "ms med", 8),
            ("frame_ms_p95", "ms p95", 8), ("cpu_ms_median", "cpu ms", 8), ("plan_us_per_view", "plan us/v", 10),
-           ("passes", "passes", 7), ("draw_calls", "draws", 6), ("reflection_views", "views", 6))
+           ("passes", "passes", 7), ("draw_calls", "draws", 6), ("reflection_views", "views", 6),
+           ("faded", "faded", 6))
 
 
 def main(args: argparse.Namespace) -> int:
@@ -365,7 +374,8 @@ def main(args: argparse.Namespace) -> int:
             print(f"Mirrors: whole frame incl. ctx.finish() at {format_size(args.size)} "
                   f"({ctx.info.get('GL_RENDERER', '?')}, {args.frames} frames after {args.warmup} warm-up)")
             print(" ".join(f"{title:>{width}}" for _, title, width in COLUMNS) + "  chosen")
-        for result in run_scenes(ctx, args.mirrors, args.paths, args.frames, args.warmup, args.aa, args.size):
+        for result in run_scenes(ctx, args.mirrors, args.paths, args.frames, args.warmup, args.aa, args.size,
+                                 args.faded):
             results.append(result)
             if args.json:
                 print(json.dumps(asdict(result)), flush=True)
