@@ -39,9 +39,12 @@ class Water(TrackedComponent):
       turned a quarter turn at 1.7 times that tiling, its waves crossing the first's and
       scrolling across them (along ``direction`` turned a quarter turn, at ``speed`` of its
       own smaller tiles a second), so the pattern never slides by as one piece (the
-      two-layer scrolling normal maps of Valve's and Unity's water).  The offsets are
-      integrated from each frame's ``dt`` by the surfaces stage, so a change of speed or
-      direction carries on from where the waves are.  The waves bend the reflection (the
+      two-layer scrolling normal maps of Valve's and Unity's water).  ``offset`` is where
+      the waves are (the first layer's shift in map tiles, u and v, each kept in [0, 1):
+      the map repeats): the surfaces stage moves it on by speed x dt along the direction
+      every frame, so a change of speed or direction carries on from where the waves are,
+      and a saved level or an exported scene draws them where they were (a game may set
+      it too).  The waves bend the reflection (the
       bumpy-mirror lookup) and the Fresnel angle.  Without a normal map the water is
       still: a Fresnel-weighted mirror.
     """
@@ -51,6 +54,7 @@ class Water(TrackedComponent):
     direction: Any = (1.0, 0.0)
     tiling: float = 1.0
     cross: float = 0.5
+    offset: Any = (0.0, 0.0)
 
     def _validate(self, name: str, value: Any) -> Any:
         if name == "ior":
@@ -61,18 +65,25 @@ class Water(TrackedComponent):
             return finite(self, name, value, positive=True, high=MAX_WATER_TILING)
         if name == "cross":
             return finite(self, name, value, low=0.0, high=1.0)
+        if name == "offset":
+            u, v = self._pair(name, value)
+            return (u % 1.0, v % 1.0)
         if name == "direction":
-            try:
-                u, v = (finite(self, name, c) for c in value)
-            except (TypeError, ValueError) as exc:
-                if isinstance(exc, ComponentValueError):
-                    raise
-                raise ComponentValueError(f"Water.direction must be two numbers (u, v), got {value!r}") from None
+            u, v = self._pair(name, value)
             length = math.hypot(u, v)
             if not length > 0.0 or not math.isfinite(length):
                 raise ComponentValueError(f"Water.direction must not be the zero vector, got {value!r}")
             return (u / length, v / length)
         return value
+
+    def _pair(self, name: str, value: Any) -> tuple[float, float]:
+        try:
+            u, v = (finite(self, name, c) for c in value)
+        except (TypeError, ValueError) as exc:
+            if isinstance(exc, ComponentValueError):
+                raise
+            raise ComponentValueError(f"Water.{name} must be two numbers (u, v), got {value!r}") from None
+        return u, v
 
     @property
     def f0(self) -> float:

@@ -43,18 +43,13 @@ class MirrorBumps:
 
 @dataclass(eq=False)
 class WaterFlow:
-    """Where a water surface's waves are (``components.Water``): the first normal-map layer's
-    offset in map tiles (u, v), each in [0, 1) (the map repeats, so whole tiles are dropped
-    and the offset keeps its precision however long the game runs).  The surfaces stage
-    advances it by speed x dt along the direction every frame, in place: one object per
-    water entity for its life, shared by each SurfaceState made for it, so the waves carry
-    on when the mirror moves or its components change."""
+    """Where a water surface's waves are this frame (``components.Water.offset``: the first
+    normal-map layer's shift in map tiles, u and v, each in [0, 1)), as its composite reads
+    it.  The surfaces stage copies it in place every frame: one object per water entity for
+    its life, shared by each SurfaceState made for it, so the state is not made again only
+    because the waves moved."""
 
     offset: tuple[float, float] = (0.0, 0.0)
-
-    def advance(self, du: float, dv: float) -> None:
-        u, v = self.offset
-        self.offset = ((u + du) % 1.0, (v + dv) % 1.0)
 
 
 @dataclass(frozen=True, eq=False)

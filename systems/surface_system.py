@@ -11,9 +11,10 @@ cannot be a mirror (a mesh changed behind the world's back) is a ``MirrorError``
 entity and the rule's reason.
 
 A Mirror with a ``Water`` component is a water surface: its state carries a ``WaterLook``
-(the Fresnel F0, the waves' layers) and the waves' ``WaterFlow``, which this stage advances
-by the frame's ``dt`` (speed x direction, in normal-map tiles) in place every frame, so the
-composite reads this frame's offset without the state being made again.
+(the Fresnel F0, the waves' layers) and the waves' ``WaterFlow``; this stage moves
+``Water.offset`` on by the frame's ``dt`` (speed x direction, in normal-map tiles) every
+frame and copies it into the flow in place, so the composite reads this frame's offset
+without the state being made again.
 """
 from __future__ import annotations
 
@@ -56,9 +57,14 @@ class SurfaceSystem(esper.Processor):
         touched = world.changed(Mirror) | world.changed(MeshRef)
         touched |= {e for e in world.changed(Material) if e in self.mirrors}  # a normal map given or taken
         for entity in world.changed(Water):
-            if world.exists(entity) and world.has(entity, Water) and not world.has(entity, Mirror):
+            water = world.try_get(entity, Water) if world.exists(entity) else None
+            if water is not None and not world.has(entity, Mirror):
                 raise MirrorError(f"entity {entity}: a Water needs a Mirror on the same entity (the surface it "
                                   "makes water)")
+            look = getattr(self.mirrors.get(entity), "water", None)
+            if water is not None and look is not None and (look.f0, look.cross, look.tiling) == \
+                    (water.f0, water.cross, water.tiling):
+                continue  # only the waves moved (this stage writes Water.offset each frame): the state stands
             touched.add(entity)
         touched |= {e for e in world.frame.moved | world.frame.added if e in self.mirrors or e in touched}
         for entity in touched:
@@ -84,13 +90,19 @@ class SurfaceSystem(esper.Processor):
                                                       world.try_get(entity, Material), water, flow)
 
     def _advance_waves(self, dt: float) -> None:
-        """Every water mirror's waves move on by this frame's ``dt`` (read from its Water now,
-        so a change of speed carries on from where the waves are)."""
+        """Every water's waves move on by this frame's ``dt`` at its speed and direction now
+        (a change of speed carries on from where the waves are): ``Water.offset`` is written
+        (the waves' state is the component's, so a saved level or an exported scene draws
+        them where they were) and copied into the ``WaterFlow`` its composite reads."""
         for entity, flow in self.flows.items():
             water = self.world.try_get(entity, Water)
-            if water is not None:
-                step = water.speed * dt
-                flow.advance(water.direction[0] * step, water.direction[1] * step)
+            if water is None:
+                continue
+            step = water.speed * dt
+            if step:
+                u, v = water.offset
+                water.offset = (u + water.direction[0] * step, v + water.direction[1] * step)
+            flow.offset = water.offset
 
     def _refresh_portals(self) -> None:
         """Portals depend on their partner's pose too; there are few, so all are redone."""

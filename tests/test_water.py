@@ -274,6 +274,20 @@ def test_the_cross_layer_crosses_the_waves_and_moves_across_them(scene):
     assert np.ptp(both[rows, :, 0].mean(axis=0)) > 0.05 and np.ptp(both[:, columns, 2].mean(axis=1)) > 0.05
 
 
+def test_the_waves_are_where_water_offset_says(scene):
+    """The waves' state is the component's: water moved on for a second and water given that
+    second's offset (no time passing) draw the same frame, and a different one than at rest."""
+    moving = scene(wave_pond(0.05, cross=0.5), (64, 64))
+    placed = scene(wave_pond(0.0, cross=0.5), (64, 64))
+    moving.frame(0.0)
+    at_rest = moving.frame(0.0)
+    moved = moving.frame(1.0)
+    ((_, water),) = placed.world.query_one(Water)
+    water.offset = (0.05, 0.0)
+    np.testing.assert_array_equal(placed.frame(0.0), moved)
+    assert np.abs(moved.astype(int) - at_rest).max() > 5
+
+
 def test_water_values_are_checked_when_given():
     with pytest.raises(ComponentValueError, match=r"Water.ior must be >= 1.0"):
         Water(ior=0.5)
@@ -287,8 +301,11 @@ def test_water_values_are_checked_when_given():
         Water(direction=(1.0, 0.0, 0.0))
     with pytest.raises(ComponentValueError, match=r"Water.cross must be <= 1.0"):
         Water(cross=2.0)
-    water = Water(direction=(3.0, 4.0))
+    with pytest.raises(ComponentValueError, match=r"Water.offset must be finite"):
+        Water(offset=(math.inf, 0.0))
+    water = Water(direction=(3.0, 4.0), offset=(2.25, -0.25))
     assert water.direction == pytest.approx((0.6, 0.8))
+    assert water.offset == pytest.approx((0.25, 0.75))  # whole tiles dropped: the map repeats
     assert water.f0 == pytest.approx(0.02, abs=0.001)
 
 
@@ -313,6 +330,7 @@ def test_the_waves_stop_when_the_water_goes_and_a_new_water_starts_still(scene):
     system = runner.engine.stages["surfaces"]
     (entity,) = system.flows
     assert system.flows[entity].offset == pytest.approx((0.05, 0.0))
+    assert runner.world.get(entity, Water).offset == system.flows[entity].offset  # the component's state
     runner.world.remove_component(entity, Water)
     runner.frame(1.0)
     assert system.flows == {} and system.mirrors[entity].water is None
