@@ -43,7 +43,8 @@ def uniform_sky(value: float) -> Skybox:
     return Skybox(faces=[np.full((8, 8, 3), value, np.float32) for _ in range(6)])
 
 
-def pool(world, water: bool, eye, target, *, water_colour=(1.0, 1.0, 1.0, 0.0), ior: float = 1.333) -> None:
+def pool(world, water: bool, eye, target, *, water_colour=(1.0, 1.0, 1.0, 0.0), ior: float = 1.333,
+         reflect_rate: float = 1.0) -> None:
     """A uniform sky over a flat pond at y = 0 (a clear water surface unless ``water_colour``
     says otherwise) with an unlit floor of colour FLOOR a metre below it."""
     eye = glm.vec3(eye)
@@ -53,7 +54,7 @@ def pool(world, water: bool, eye, target, *, water_colour=(1.0, 1.0, 1.0, 0.0), 
                 Material(color=(FLOOR, FLOOR, FLOOR, 1.0), roughness=1.0), Emissive(1.0))
     if water:
         world.spawn(Transform(rotation=FLAT), MeshRef(quad(200.0, 200.0)), Material(color=water_colour),
-                    Mirror(), Water(ior=ior))
+                    Mirror(reflect_rate=reflect_rate), Water(ior=ior))
 
 
 def render(scene, build, size=(64, 96), frames: int = 2, dt: float = 1.0 / 60.0):
@@ -109,14 +110,16 @@ def test_the_reflection_is_weighted_by_schlicks_fresnel_for_the_waters_index(sce
         assert expected.max() > 0.5   # grazing: the reflection dominates
 
 
-def test_a_higher_index_reflects_more(scene):
-    """The weight follows the index given (F0 0.04 for glass's 1.5), not a constant."""
+@pytest.mark.parametrize("ior, reflect_rate", [(1.5, 1.0), (2.0, 1.0), (2.0, 0.5)])
+def test_the_weight_follows_the_index_and_reflect_rate_scales_it(scene, ior, reflect_rate):
+    """Looking straight down the weight is F0 for the index given (0.04 for glass's 1.5, 1/9
+    for 2), not a constant, times the Mirror's reflect_rate."""
     eye, target = (0.0, 3.0, 0.0), (0.0, 0.0, -0.01)
-    _, water = render(scene, lambda w: pool(w, True, eye, target, ior=1.5))
+    runner, water = render(scene, lambda w: pool(w, True, eye, target, ior=ior, reflect_rate=reflect_rate))
     _, floor = render(scene, lambda w: pool(w, False, eye, target))
-    centre = (water.shape[0] // 2, water.shape[1] // 2)
-    weight = (water[centre][0] - floor[centre][0]) / (SKY - floor[centre][0])
-    assert weight == pytest.approx(0.04, abs=0.004)
+    col, row = runner.project((0.0, 0.0, 0.0))  # straight below the eye: normal incidence
+    weight = (water[row, col, 0] - floor[row, col, 0]) / (SKY - floor[row, col, 0])
+    assert weight == pytest.approx(reflect_rate * ((ior - 1.0) / (ior + 1.0)) ** 2, abs=0.004)
 
 
 def test_looking_down_shows_what_is_under_the_surface_and_grazing_shows_the_reflection(scene):
