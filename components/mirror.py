@@ -7,7 +7,7 @@ from typing import Any
 from pyglm import glm
 
 from components.limits import MAX_VIEW_DEPTH
-from components.tracking import ComponentValueError, TrackedComponent, boolean, color, finite, vec3
+from components.tracking import ComponentValueError, TrackedComponent, boolean, color, finite, integer, vec3
 
 
 @dataclass(eq=False)
@@ -21,6 +21,8 @@ class Mirror(TrackedComponent):
     mirrors it draws), ``max_depth`` limits mirrors seen in mirrors.  ``plane_point`` and
     ``plane_normal`` (model space) override the plane found from the mesh; a non-flat mesh
     without them is an error.
+    ``priority`` (an int, higher first; default 0) orders it under the frame's view budget
+    (``engine.resources.ViewBudget``).
 
     Fades (both off by default), as Unreal's planar reflections offer: ``fade_distance =
     (start, end)`` in metres from the viewing eye to the mirror (to its bounding sphere), and
@@ -37,6 +39,7 @@ class Mirror(TrackedComponent):
     resolution_scale: float = 1.0
     max_depth: int = 3
     enabled: bool = True
+    priority: int = 0
     plane_point: Any = None
     plane_normal: Any = None
     fade_distance: Any = None
@@ -54,6 +57,8 @@ class Mirror(TrackedComponent):
                 raise ComponentValueError(f"Mirror.max_depth must be an int in [0, {MAX_VIEW_DEPTH}], got {value!r}")
         if name == "enabled":
             return boolean(self, name, value)
+        if name == "priority":
+            return integer(self, name, value, low=-1000, high=1000)
         if name in ("fade_distance", "fade_angle") and value is not None:
             return _fade(name, value, 90.0 if name == "fade_angle" else None)
         if name == "plane_point" and value is not None:

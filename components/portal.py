@@ -27,6 +27,8 @@ class Portal(TrackedComponent):
     such a portal stays closed); a partner spawned after the portal (a pair spawned one
     after the other) is no mistake, and a partner deleted later closes it without a word
     (deleting one of a pair is how a pair is closed).
+    ``priority`` (an int, higher first; default 0) orders it under the frame's view budget
+    (``engine.resources.ViewBudget``).
     """
 
     SHAREABLE = False  # one entity's own state: see components.tracking
@@ -34,6 +36,7 @@ class Portal(TrackedComponent):
     size: Any = (2.0, 3.0)
     max_depth: int = 4
     enabled: bool = True
+    priority: int = 0
     closed_color: Any = field(default_factory=lambda: glm.vec4(0.02, 0.02, 0.03, 1.0))
 
     def check_attach(self, entity: int) -> None:
@@ -59,6 +62,8 @@ class Portal(TrackedComponent):
         if name == "max_depth":
             if not isinstance(value, int) or isinstance(value, bool) or not 0 <= value <= MAX_VIEW_DEPTH:
                 raise ComponentValueError(f"Portal.max_depth must be an int in [0, {MAX_VIEW_DEPTH}], got {value!r}")
+        if name == "priority":
+            return integer(self, name, value, low=-1000, high=1000)
         if name == "enabled" and not isinstance(value, bool):
             raise ComponentValueError(f"Portal.enabled must be True or False, got {value!r}")
         if name == "closed_color":

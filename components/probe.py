@@ -38,6 +38,8 @@ class ReflectionProbe(TrackedComponent):
     roughness bias) or ``ggx`` (each level convolved with a GGX lobe of its own roughness,
     as three.js's PMREM and Unity's probe convolution do: closer to the light's true spread,
     and dearer to capture).
+    ``priority`` (an int, higher first; default 0) orders its captures under the frame's
+    budgets (``engine.resources.ViewBudget``), after first captures and before distance.
     """
 
     resolution: int = 128
@@ -51,6 +53,7 @@ class ReflectionProbe(TrackedComponent):
     box_projection: bool = False
     depth: int = 1
     prefilter: str = "mips"
+    priority: int = 0
     _requests: int = field(default=0, init=False, repr=False, compare=False)
 
     def request(self) -> None:
@@ -65,6 +68,8 @@ class ReflectionProbe(TrackedComponent):
         return self._requests
 
     def _validate(self, name: str, value: Any) -> Any:
+        if name == "priority":
+            return integer(self, name, value, low=-1000, high=1000)
         if name == "resolution":
             value = integer(self, name, value, low=MIN_PROBE_RESOLUTION, high=MAX_PROBE_RESOLUTION)
             if value & (value - 1):

@@ -26,7 +26,7 @@ from engine.render.view_plan import SurfaceTable
 from engine.render.views import View
 
 __all__ = ["FrameViews", "MirrorBumps", "PortalCrossing", "PortalCrossings", "RenderStats", "SurfaceState",
-           "Surfaces", "WaterFlow", "WaterLook"]
+           "Surfaces", "ViewBudget", "WaterFlow", "WaterLook"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -88,8 +88,36 @@ class SurfaceState:
     bumps: MirrorBumps | None = None  # a mirror's normal map, as its composite reads it
     water: WaterLook | None = None    # a mirror that is water: Fresnel weight and moving waves
     layers: int = ALL_LAYERS     # the reflection layers its view shows (components/limits.py)
+    priority: int = 0            # the view budget keeps higher priorities first (Mirror.priority, Portal.priority)
     fade: tuple[float, float, float, float] | None = None  # a mirror's fades: distance start, end (m), angle
                                                            # start, end (degrees); None: no fade
+
+
+@dataclass(frozen=True)
+class ViewBudget:
+    """The frame's one view budget (a world resource; none: no limit), shared by every view
+    the frame draws besides the main one: mirror and portal views of every tree and probe
+    cube faces.  Views are spent in the order they are drawn: first captures of probes (an
+    object sampling a probe needs one), then the main view's tree level by level (within a
+    level the surfaces with the highest ``priority`` first, then those covering the most
+    pixels: what does not fit is skipped, so the deepest levels go first), then the probes'
+    recaptures.  ``probe_ms`` is a separate budget of time for the probe captures, spent by
+    each probe's measured cost a face (``ProbeStates.face_ms``) in the scheduler's order:
+    first captures, then a probe's own ``priority``, then nearest the camera.  A probe that
+    does not fit waits (its faces stay pending) and goes first later frames; one probe a
+    frame is always captured, so none starves.  ``RenderStats`` reports what was spent and
+    cut (``views_spent``, ``views_cut``, ``probe_ms_spent``, ``probe_faces_deferred``)."""
+
+    views: int | None = None
+    probe_ms: float | None = None
+
+    def __post_init__(self) -> None:
+        if self.views is not None and (not isinstance(self.views, int) or isinstance(self.views, bool)
+                                       or self.views < 0):
+            raise ValueError(f"ViewBudget.views must be None or an int >= 0, got {self.views!r}")
+        if self.probe_ms is not None and (isinstance(self.probe_ms, bool) or not isinstance(self.probe_ms, (int, float))
+                                          or not 0.0 < self.probe_ms < float("inf")):
+            raise ValueError(f"ViewBudget.probe_ms must be None or a finite number > 0, got {self.probe_ms!r}")
 
 
 @dataclass

@@ -27,7 +27,7 @@ from engine.render.gl_context import prepare_context
 from engine.render.raw_gl import make_current
 from engine.render.renderer import Renderer
 from engine.render.views import View
-from engine.resources import FrameViews, RenderStats
+from engine.resources import FrameViews, RenderStats, ViewBudget
 from engine.rules.frame_rules import active_camera_parts
 from systems import (
     ExtractSystem,
@@ -181,7 +181,9 @@ class Engine:
         # This frame's counters, fresh: a world resource for whoever reads them after the
         # frame, and where the renderer's passes count while it runs.
         checks = self.renderer.path_checks
-        stats = RenderStats(paths_verified=checks.verified(), paths_refused=checks.refused())
+        budget = self.world.resources.get(ViewBudget) or ViewBudget()
+        stats = RenderStats(paths_verified=checks.verified(), paths_refused=checks.refused(),
+                            view_budget=budget.views, probe_ms_budget=budget.probe_ms)
         self.world.resources[RenderStats] = self.renderer.stats = stats
         self.world.step(dt)
         self.world.resources[Input].end_frame()

@@ -57,6 +57,10 @@ def overlay_lines(engine, frame_times: Sequence[float]) -> list[str]:
         f"reflection views {stats.reflection_views}, dropped {stats.reflection_views_dropped}, "
         f"capped {stats.reflection_depth_capped}, faded {stats.reflection_views_faded}",
         f"probe captures {stats.probe_captures} ({stats.probe_faces} faces)",
+        f"view budget {'none' if stats.view_budget is None else stats.view_budget}: spent {stats.views_spent}, "
+        f"cut {stats.views_cut}",
+        f"probe budget {'none' if stats.probe_ms_budget is None else f'{stats.probe_ms_budget:g} ms'}: "
+        f"spent {stats.probe_ms_spent:.1f} ms, {stats.probe_faces_deferred} faces wait",
         f"reflection path {stats.reflection_path or '-'} (set: {reflect.path}, budget {budget})",
         f"probe path {stats.probe_path or '-'} (set: {probes.path}{chosen})",
         f"GL paths verified: {', '.join(stats.paths_verified) or '-'}; "

@@ -33,7 +33,8 @@ from pyglm import glm
 
 from components import MeshRef, PointLight, ReflectionProbe, Transform
 from engine.core.world import World
-from engine.resources import Surfaces
+from engine.resources import RenderStats, Surfaces, ViewBudget
+from engine.rules.frame_rules import active_camera_parts
 from engine.rules.probe_rules import (
     ALL_FACES,
     LIGHTING_KINDS,
@@ -89,14 +90,44 @@ class ProbeScheduler:
         everything = [f"{kind.__name__} changed" for kind in LIGHTING_KINDS if world.changed(kind)]
         lights = self._changed_lights() if had_probes else self._all_lights()
         surfaces = world.resources.get(Surfaces)
+        due = []
         for state in self.probes.values():
             reach = lights_reaching(state.position, state.settings.far, [(p, r) for _, p, r in lights])
             relit = everything + sorted({lights[index][0] for index in reach})
             self._schedule(state, boxes, relit, surfaces)
             faces = self._due_faces(state)
             if faces:
-                schedule.due[state.owner] = ProbeDue(state.owner, faces, state.take(faces), first=not state.captures)
+                due.append((state, faces))
+        for state, faces in self._within_budget(due):
+            schedule.due[state.owner] = ProbeDue(state.owner, faces, state.take(faces), first=not state.captures)
         return schedule
+
+    def _within_budget(self, due: list[tuple[ProbeState, frozenset[int]]]) -> list[tuple[ProbeState, frozenset[int]]]:
+        """The due captures in the order the budget spends on them (first captures, then a
+        probe's own priority plus the frames it has waited, then nearest the camera) and,
+        under ``ViewBudget.probe_ms``, those that fit by ``ProbeStates.face_ms`` a face; the
+        first always goes, and a probe gains a priority a frame it waits, so none starves.
+        What does not fit stays pending, counted in ``RenderStats.probe_faces_deferred``."""
+        eye = _camera_position(self.world)
+        due.sort(key=lambda item: (item[0].captures > 0, -(item[0].settings.priority + item[0].waiting),
+                                   float(np.linalg.norm(np.asarray(item[0].position) - eye))))
+        budget = self.world.resources.get(ViewBudget)
+        face_ms = self.probes.face_ms
+        if budget is None or budget.probe_ms is None or face_ms is None:
+            return due
+        kept, spent = [], 0.0
+        for state, faces in due:
+            cost = face_ms * len(faces)
+            if kept and spent + cost > budget.probe_ms:
+                state.waiting += 1
+                stats = self.world.resources.get(RenderStats)
+                if stats is not None:
+                    stats.probe_faces_deferred += len(faces)
+                continue
+            state.waiting = 0
+            kept.append((state, faces))
+            spent += cost
+        return kept
 
     @staticmethod
     def _due_faces(state: ProbeState) -> frozenset[int]:
@@ -271,3 +302,9 @@ def _ask_named(state: ProbeState, hits: np.ndarray, keys: np.ndarray, label) -> 
     rest = rows[~named]
     if len(rest):
         state.ask(np.flatnonzero(hits[rest].any(axis=0)).tolist(), f"{len(np.unique(keys[rest]))} more changes")
+
+
+def _camera_position(world: World) -> np.ndarray:
+    """Where the active camera is (the origin without one): probes nearer it go first."""
+    parts = active_camera_parts(world)
+    return np.zeros(3) if parts is None else np.array(parts[2].world[3].xyz, np.float64)

@@ -34,6 +34,8 @@ probe (``ProbeState.captures``: frames with a capture, ``faces_captured``) are t
 """
 from __future__ import annotations
 
+import time
+
 import esper
 
 from engine.core.world import World
@@ -44,11 +46,33 @@ from systems.probe_scheduler import ProbeScheduler
 
 
 def capture_due(world: World, renderer: Renderer, due: ProbeDue) -> None:
-    """Draw one probe's due faces (``ProbeCaptures.capture_probe``) and count them in its state."""
-    state = world.resources[ProbeStates][due.owner]
-    renderer.probes.capture_probe(due.owner, due.faces, state.position, state.settings, world.resources.get(Surfaces))
-    state.record_capture(due.faces)
+    """Draw one probe's due faces (``ProbeCaptures.capture_probe``) and count them in its
+    state.  The frame's view budget (``ViewBudget.views``) is spent a face each: faces past
+    it wait for a later frame (pending again), and a first capture waits whole (nothing
+    samples a half-made cube).  The capture's wall time a face feeds ``ProbeStates.face_ms``,
+    what the scheduler spends its time budget by."""
+    probes = world.resources[ProbeStates]
+    state = probes[due.owner]
+    stats = renderer.stats
+    faces = due.faces
+    left = stats.views_left()
+    if left is not None and len(faces) > left:
+        kept = frozenset() if due.first else frozenset(sorted(faces)[:left])
+        waiting = faces - kept
+        state.ask(waiting, "view budget")
+        stats.views_cut += len(waiting)
+        stats.probe_faces_deferred += len(waiting)
+        faces = kept
     due.drawn = True
+    if not faces:
+        return
+    stats.views_spent += len(faces)
+    start = time.perf_counter()
+    renderer.probes.capture_probe(due.owner, faces, state.position, state.settings, world.resources.get(Surfaces))
+    spent_ms = (time.perf_counter() - start) * 1e3
+    stats.probe_ms_spent += spent_ms
+    probes.measured(spent_ms / len(faces))
+    state.record_capture(faces)
 
 
 def report(renderer: Renderer) -> None:

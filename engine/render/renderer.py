@@ -50,6 +50,19 @@ class RenderStats:
     reflection_views_dropped: int = 0   # views with pixels a level's view budget left out
     reflection_depth_capped: int = 0    # views the surfaces' own depth limits allowed below the tree's cap
     reflection_views_faded: int = 0     # mirror views their fades took out (each cost nothing)
+    # The frame's view budget (engine.resources.ViewBudget): its limits, and what was spent
+    # (reflection views of every tree and probe faces drawn) and cut (views with pixels and
+    # probe faces the budget left out; the faces wait for a later frame).
+    view_budget: int | None = None
+    views_spent: int = 0
+    views_cut: int = 0
+    probe_ms_budget: float | None = None
+    probe_ms_spent: float = 0.0         # the captures' cost by their measured ms a face
+    probe_faces_deferred: int = 0       # faces due that the budgets left for a later frame
+
+    def views_left(self) -> int | None:
+        """Views the frame's budget still allows (None: no limit)."""
+        return None if self.view_budget is None else max(self.view_budget - self.views_spent, 0)
     # How reflection levels were drawn: "per_mirror", "batched", "mixed" (auto chose both in
     # one frame), or "" when no reflection view was drawn (ReflectionSystem.path).
     reflection_path: str = ""

@@ -160,6 +160,7 @@ class SurfaceTable:
         self.kind_bit = np.where(self.is_mirror, VIEW_MIRROR, VIEW_PORTAL).astype(np.int64)
         self.layers = np.array([s.layers for s in states], np.int64)
         self.scale = np.array([s.resolution_scale for s in states], np.float64)
+        self.priority = np.array([s.priority for s in states], np.int64)
         # Fades (Mirror.fade_distance, fade_angle): start and end of each, and each surface's
         # bounding sphere; a surface without fades never fades.
         self.fades = [s.fade for s in states]

@@ -110,6 +110,7 @@ class ViewTree:
                settings: TreeSettings = TreeSettings()) -> TreeResult:
         """Draw every level below ``root`` (already drawn into ``levels[0]``) and composite them."""
         renderer = self.renderer
+        stats = renderer.stats
         root_node = ReflectionView(0, 0, root, (0, 0, *root.size))
         result = TreeResult([root_node], set())
         composites: list[PreparedComposites] = []
@@ -127,11 +128,20 @@ class ViewTree:
                 rows.node[candidates.parent].astype(np.int64).tolist(),
                 list(map(tuple, candidates.scissor.tolist())))), np.int64)
             keep = np.flatnonzero(pixels)
+            if len(keep) > 1 and (settings.level_budget is not None or stats.view_budget is not None):
+                # Budgets keep the surfaces of highest priority, then those covering the most
+                # pixels (this frame's claims), in claim order after.
+                rank = np.lexsort((keep, -pixels[keep], -surfaces.priority[candidates.surface[keep]]))
+                keep = keep[rank]
             if settings.level_budget is not None and len(keep) > settings.level_budget:
-                # The views with the most claimed pixels, in claim order.
-                kept = np.sort(keep[np.argsort(-pixels[keep], kind="stable")[: settings.level_budget]])
-                result.dropped += len(keep) - len(kept)
-                keep = kept
+                result.dropped += len(keep) - settings.level_budget
+                keep = keep[: settings.level_budget]
+            left = stats.views_left()
+            if left is not None and len(keep) > left:
+                stats.views_cut += len(keep) - left
+                keep = keep[:left]
+            keep = np.sort(keep)
+            stats.views_spent += len(keep)
             if not len(keep):
                 break
             chosen = candidates.select(keep)

@@ -38,6 +38,7 @@ class ProbeState:
     faces_captured: int = 0
     frames: int = 0
     requests_seen: int = 0  # settings.requests when last looked at (ReflectionProbe.request)
+    waiting: int = 0        # frames its due capture has waited for the time budget (it goes sooner)
 
     def ask(self, faces, reason: str) -> None:
         """Faces to capture, and why."""
@@ -66,7 +67,15 @@ class ProbeState:
 
 
 class ProbeStates(dict):
-    """World resource: every probe the scheduler keeps, by owning entity (``ProbeState``)."""
+    """World resource: every probe the scheduler keeps, by owning entity (``ProbeState``),
+    and what a cube face has cost to capture lately (``face_ms``: a running mean of the
+    captures' wall time a face, None before the first; the time budget is spent by it)."""
+
+    face_ms: float | None = None
+
+    def measured(self, ms_a_face: float) -> None:
+        """One capture's wall time a face, folded into ``face_ms`` (a quarter each time)."""
+        self.face_ms = ms_a_face if self.face_ms is None else 0.75 * self.face_ms + 0.25 * ms_a_face
 
 
 @dataclass

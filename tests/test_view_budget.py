@@ -1,0 +1,170 @@
+"""One view budget a frame (issue 27 item 3): mirror views, portal views and probe faces
+spend it in drawing order; within a level, surfaces of higher priority and larger coverage
+first; probes by first capture, priority and distance, under a time budget too; what is
+cut is counted.  Counts come from the frame's own views, not from the budget's ledger only."""
+from __future__ import annotations
+
+import math
+
+import pytest
+from pyglm import glm
+
+from components import (
+    DirectionalLight,
+    Emissive,
+    Material,
+    MeshRef,
+    Mirror,
+    Portal,
+    Reflective,
+    ReflectionProbe,
+    Transform,
+)
+from engine.assets.mesh import box, quad, sphere
+from engine.resources import ViewBudget
+from engine.rules.probe_schedule import ProbeStates
+from shell.overlay import overlay_lines
+from tests.support import look_from
+from tests.test_view_tree import mirror_grid
+
+
+def test_a_frame_budget_of_n_views_keeps_the_frames_views_at_most_n(scene):
+    ents = {}
+    runner = scene(mirror_grid(ents), (320, 200))
+    runner.world.resources[ViewBudget] = ViewBudget(views=12)
+    runner.frame()
+    stats = runner.stats
+    views = runner.engine.reflection_system.views[1:]
+    assert len(views) == stats.reflection_views == 12 == stats.views_spent
+    assert stats.views_cut == 60 - 12
+    # The ones kept cover the most pixels (no priorities set): none cut covers more.
+    surface = runner.engine.renderer.targets.read_surface_ids()
+    pixels = {m: int((surface == m).sum()) for m in ents["mirrors"]}
+    kept = {v.surface.entity for v in views}
+    assert min(pixels[m] for m in kept) >= max(pixels[m] for m in pixels if m not in kept)
+
+
+def test_a_surfaces_priority_comes_before_its_coverage(scene):
+    ents = {}
+    runner = scene(mirror_grid(ents), (320, 200))
+    runner.frame()
+    surface = runner.engine.renderer.targets.read_surface_ids()
+    smallest = min(ents["mirrors"], key=lambda m: (surface == m).sum())
+    runner.world.get(smallest, Mirror).priority = 5
+    runner.world.resources[ViewBudget] = ViewBudget(views=3)
+    runner.frame()
+    kept = [v.surface.entity for v in runner.engine.reflection_system.views[1:]]
+    assert len(kept) == 3 and smallest in kept
+
+
+def test_deeper_levels_are_cut_first(scene):
+    """Two facing mirrors to depth 4: a budget of 3 draws levels 1 to 3 and cuts the rest."""
+    def build(world):
+        world.spawn(DirectionalLight(direction=(0.2, -1.0, -0.5), intensity=1.0))
+        look_from(world, (0.3, 1.5, 1.0), target=(0.0, 1.5, -3.0), fov=50.0)
+        for z, turn in ((-3.0, 0.0), (3.0, math.pi)):
+            world.spawn(Transform(position=(0.0, 1.5, z), rotation=glm.angleAxis(turn, glm.vec3(0, 1, 0))),
+                        MeshRef(quad(3.0, 2.5)), Material(color=(0.2, 0.2, 0.2)), Mirror(max_depth=4))
+    runner = scene(build, (160, 120))
+    runner.frame()
+    unlimited = [v.level for v in runner.engine.reflection_system.views[1:]]
+    assert max(unlimited) == 4
+    runner.world.resources[ViewBudget] = ViewBudget(views=3)
+    runner.frame()
+    levels = sorted(v.level for v in runner.engine.reflection_system.views[1:])
+    assert levels == sorted(unlimited)[:3] and runner.stats.views_cut >= 1
+
+
+def _probe_room(world, probes):
+    """Probes at x = -4, 0, 4 over chrome balls, a glowing box to see, and the camera."""
+    world.spawn(DirectionalLight(direction=(0.2, -1.0, -0.5), intensity=1.0))
+    look_from(world, (0.0, 1.5, 8.0), target=(0.0, 1.0, 0.0), fov=60.0)
+    world.spawn(Transform(position=(0.0, 1.0, -4.0)), MeshRef(box()), Material(color=(0.9, 0.2, 0.1)), Emissive(1.0))
+    owners = []
+    for x, settings in zip((-4.0, 0.0, 4.0), probes, strict=True):
+        owners.append(world.spawn(Transform(position=(x, 1.0, 0.0)), MeshRef(sphere(0.5)),
+                                  Material(color=(1.0, 1.0, 1.0), metallic=1.0, roughness=0.0),
+                                  Reflective(mode="cube"), settings))
+    return owners
+
+
+def test_probe_faces_spend_the_views_budget_first_captures_whole(scene):
+    """Two new probes and a budget of 8 views: one first capture (6 faces) fits; the other
+    waits whole (nothing samples a half-made cube) and is captured next frame."""
+    owners = []
+    runner = scene(lambda world: owners.extend(_probe_room(world, [
+        ReflectionProbe(resolution=16, refresh="once", depth=0), ReflectionProbe(resolution=16, refresh="once", depth=0),
+        ReflectionProbe(resolution=16, refresh="once", depth=0, priority=-1)])), (160, 120))
+    runner.world.resources[ViewBudget] = ViewBudget(views=8)
+    runner.frame()
+    states = runner.world.resources[ProbeStates]
+    assert sum(states[owner].faces_captured for owner in owners) == 6 <= runner.stats.views_spent <= 8
+    assert runner.stats.probe_faces_deferred == 12
+    captured = [owner for owner in owners if states[owner].faces_captured]
+    assert len(captured) == 1 and owners[2] not in captured  # the lowest priority waits
+    runner.frame()
+    assert sum(1 for owner in owners if states[owner].faces_captured == 6) == 2
+    runner.frame()
+    assert all(states[owner].faces_captured == 6 for owner in owners)
+
+
+def test_the_probe_time_budget_takes_one_probe_a_frame_by_priority_and_none_starves(scene):
+    owners = []
+    runner = scene(lambda world: owners.extend(_probe_room(world, [
+        ReflectionProbe(resolution=16, refresh="every_frame", depth=0),
+        ReflectionProbe(resolution=16, refresh="every_frame", depth=0, priority=3),
+        ReflectionProbe(resolution=16, refresh="every_frame", depth=0)])), (160, 120))
+    runner.frame()  # first captures: all three (no cost measured yet)
+    states = runner.world.resources[ProbeStates]
+    assert states.face_ms is not None and states.face_ms > 0.0
+    runner.world.resources[ViewBudget] = ViewBudget(probe_ms=states.face_ms * 0.5)  # under one probe's cost
+    order = []
+    for _ in range(6):
+        before = {owner: states[owner].captures for owner in owners}
+        runner.frame()
+        done = [owner for owner in owners if states[owner].captures > before[owner]]
+        assert len(done) == 1, done
+        order.append(done[0])
+        assert runner.stats.probe_faces_deferred == 12
+    assert order[0] == owners[1]               # the highest priority goes first
+    assert set(order) == set(owners)           # and the others still get their turn
+
+
+def test_portal_views_spend_the_same_budget(scene):
+    def build(world):
+        world.spawn(DirectionalLight(direction=(0.2, -1.0, -0.5), intensity=1.0))
+        look_from(world, (0.0, 1.5, 3.0), target=(0.0, 1.5, -3.0), fov=60.0)
+        a = world.spawn(Transform(position=(0.0, 1.5, -3.0)), MeshRef(quad(2.0, 2.0)), Portal(size=(2.0, 2.0)))
+        b = world.spawn(Transform(position=(0.0, 1.5, 3.5), rotation=glm.angleAxis(math.pi, glm.vec3(0, 1, 0))),
+                        MeshRef(quad(2.0, 2.0)), Portal(size=(2.0, 2.0), partner=a))
+        world.get(a, Portal).partner = b
+    runner = scene(build, (160, 120))
+    runner.frame()
+    assert runner.stats.reflection_views >= 3
+    runner.world.resources[ViewBudget] = ViewBudget(views=2)
+    runner.frame()
+    assert runner.stats.reflection_views == 2 and runner.stats.views_cut >= 1
+
+
+def test_the_overlay_reports_the_budget(scene):
+    ents = {}
+    runner = scene(mirror_grid(ents, columns=4, rows=2), (320, 200))
+    runner.world.resources[ViewBudget] = ViewBudget(views=5, probe_ms=2.0)
+    runner.frame()
+    lines = overlay_lines(runner.engine, [0.02])
+    assert f"view budget 5: spent 5, cut {8 - 5}" in lines
+    assert "probe budget 2 ms: spent 0.0 ms, 0 faces wait" in lines
+
+
+@pytest.mark.parametrize("kwargs", [{"views": -1}, {"views": 2.5}, {"views": True}, {"probe_ms": 0.0},
+                                    {"probe_ms": float("inf")}, {"probe_ms": "1"}])
+def test_bad_budgets_are_refused_naming_the_field(kwargs):
+    with pytest.raises(ValueError, match=f"ViewBudget.{next(iter(kwargs))}"):
+        ViewBudget(**kwargs)
+
+
+def test_priorities_are_checked():
+    from components import ComponentValueError
+    for component in (Mirror, Portal, ReflectionProbe):
+        with pytest.raises(ComponentValueError, match=f"{component.__name__}.priority"):
+            component(priority=1.5)
