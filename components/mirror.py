@@ -8,6 +8,7 @@ from pyglm import glm
 
 from components.limits import MAX_VIEW_DEPTH
 from components.tracking import ComponentValueError, TrackedComponent, boolean, color, finite, integer, vec3
+from components.visibility import check_surface_layers, surface_layers
 
 
 @dataclass(eq=False)
@@ -21,6 +22,8 @@ class Mirror(TrackedComponent):
     mirrors it draws), ``max_depth`` limits mirrors seen in mirrors.  ``plane_point`` and
     ``plane_normal`` (model space) override the plane found from the mesh; a non-flat mesh
     without them is an error.
+    ``shows_layers`` (None: all) and ``hides_layers`` are the reflection layers its view
+    shows (``components.visibility``): ``hides_layers=[3]`` shows all but layer 3.
     ``priority`` (an int, higher first; default 0) orders it under the frame's view budget
     (``engine.resources.ViewBudget``).
 
@@ -42,12 +45,21 @@ class Mirror(TrackedComponent):
     priority: int = 0
     plane_point: Any = None
     plane_normal: Any = None
+    shows_layers: Any = None
+    hides_layers: Any = ()
     fade_distance: Any = None
     fade_angle: Any = None
+
+    @property
+    def layer_mask(self) -> int:
+        """The reflection layers its view shows, as bits."""
+        return surface_layers(self.shows_layers, self.hides_layers)
 
     def _validate(self, name: str, value: Any) -> Any:
         if name == "color":
             return color(self, name, value)
+        if name in ("shows_layers", "hides_layers"):
+            return check_surface_layers(self, name, value)
         if name in ("reflect_rate", "roughness"):
             return finite(self, name, value, low=0.0, high=1.0)
         if name == "resolution_scale":

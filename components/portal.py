@@ -9,6 +9,7 @@ from pyglm import glm
 
 from components.limits import MAX_VIEW_DEPTH
 from components.tracking import ComponentValueError, TrackedComponent, color, finite, integer, vec3
+from components.visibility import check_surface_layers, surface_layers
 
 
 class PortalPartnerWarning(UserWarning):
@@ -27,6 +28,8 @@ class Portal(TrackedComponent):
     such a portal stays closed); a partner spawned after the portal (a pair spawned one
     after the other) is no mistake, and a partner deleted later closes it without a word
     (deleting one of a pair is how a pair is closed).
+    ``shows_layers`` (None: all) and ``hides_layers`` are the reflection layers its view
+    shows (``components.visibility``): ``hides_layers=[3]`` shows all but layer 3.
     ``priority`` (an int, higher first; default 0) orders it under the frame's view budget
     (``engine.resources.ViewBudget``).
     """
@@ -38,6 +41,13 @@ class Portal(TrackedComponent):
     enabled: bool = True
     priority: int = 0
     closed_color: Any = field(default_factory=lambda: glm.vec4(0.02, 0.02, 0.03, 1.0))
+    shows_layers: Any = None
+    hides_layers: Any = ()
+
+    @property
+    def layer_mask(self) -> int:
+        """The reflection layers its view shows, as bits."""
+        return surface_layers(self.shows_layers, self.hides_layers)
 
     def check_attach(self, entity: int) -> None:
         """Called by the world before the component joins ``entity`` (the world's entities are
@@ -68,6 +78,8 @@ class Portal(TrackedComponent):
             raise ComponentValueError(f"Portal.enabled must be True or False, got {value!r}")
         if name == "closed_color":
             return color(self, name, value)
+        if name in ("shows_layers", "hides_layers"):
+            return check_surface_layers(self, name, value)
         return value
 
 

@@ -6,6 +6,7 @@ from typing import Any
 
 from components.limits import MAX_VIEW_DEPTH
 from components.tracking import ComponentValueError, TrackedComponent, boolean, choice, finite, integer, vec3
+from components.visibility import check_surface_layers, surface_layers
 
 REFRESH_MODES = ("once", "on_change", "every_frame", "every_n", "scripted")
 TIME_SLICING = ("all_faces", "one_face_per_frame")
@@ -40,6 +41,8 @@ class ReflectionProbe(TrackedComponent):
     and dearer to capture).
     ``priority`` (an int, higher first; default 0) orders its captures under the frame's
     budgets (``engine.resources.ViewBudget``), after first captures and before distance.
+    ``shows_layers`` (None: all) and ``hides_layers`` are the reflection layers its captures
+    show (``components.visibility``), in the faces and the mirrors and portals they see.
     """
 
     resolution: int = 128
@@ -53,6 +56,8 @@ class ReflectionProbe(TrackedComponent):
     box_projection: bool = False
     depth: int = 1
     prefilter: str = "mips"
+    shows_layers: Any = None
+    hides_layers: Any = ()
     priority: int = 0
     _requests: int = field(default=0, init=False, repr=False, compare=False)
 
@@ -67,7 +72,14 @@ class ReflectionProbe(TrackedComponent):
         it with the count it saw last: reading a request clears nothing."""
         return self._requests
 
+    @property
+    def layer_mask(self) -> int:
+        """The reflection layers its captures show, as bits."""
+        return surface_layers(self.shows_layers, self.hides_layers)
+
     def _validate(self, name: str, value: Any) -> Any:
+        if name in ("shows_layers", "hides_layers"):
+            return check_surface_layers(self, name, value)
         if name == "priority":
             return integer(self, name, value, low=-1000, high=1000)
         if name == "resolution":

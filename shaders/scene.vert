@@ -1,6 +1,7 @@
 #version 410 core
 // Instanced scene geometry: per-vertex mesh data, per-instance transform and material record.
 #include "camera.glsl"
+#include "visibility.glsl"
 
 // Clip distances (indices defined from engine/render/bindings.py): CLIP_VIEW_PLANE is the
 // view's plane (mirror and portal views), CLIP_RECT_* the batched mirror path's per-view
@@ -29,7 +30,7 @@ in mat3 in_normal_matrix;  // inverse-transpose of the model's upper 3x3
 in vec4 in_color;          // linear base colour, alpha
 in vec4 in_surface;        // metallic, roughness, emissive power, normal-map scale
 in vec4 in_reflect;        // reflection mix, refraction ior, -, -
-in vec4 in_tint;           // reflection tint
+in vec4 in_tint;           // reflection tint; w: where it is drawn (visibility.glsl)
 in vec4 in_slice;          // world plane: only its front is drawn (things partly through a portal)
 in uvec4 in_slots;         // emissive variant, refract variant, reflect variant, entity id
 
@@ -63,8 +64,10 @@ void main() {
     gl_Position = camera.view_proj * world;
     // Behind the view's plane is clipped; so is all of the surface the view looks out of
     // (a mirror's own glass, a portal's partner), which lies on that plane: the plane itself
-    // needs no offset, so nothing touching the mirror opens a crack in its reflection.
-    bool hidden = in_slots.w == camera.skip.x || (camera.skip.y != 0u && in_slots.w == camera.skip.y);
+    // needs no offset, so nothing touching the mirror opens a crack in its reflection.  An
+    // instance hidden in this kind of view, or on none of the layers it shows, goes the same way.
+    bool hidden = in_slots.w == camera.skip.x || (camera.skip.y != 0u && in_slots.w == camera.skip.y)
+        || hidden_in_view(in_tint.w, camera.skip.z);
     gl_ClipDistance[CLIP_VIEW_PLANE] = hidden ? -1.0 : dot(world, camera.clip_plane);
 #endif
 }

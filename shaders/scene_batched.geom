@@ -20,6 +20,8 @@
 // triangle goes only to the faces it can be seen in), unless NO_FACE_CULLING (the naive
 // capture, six copies of every triangle, kept to measure the culling against).
 
+#include "visibility.glsl"
+
 layout(triangles, invocations = GS_INVOCATIONS) in;
 layout(triangle_strip, max_vertices = GS_MAX_VERTICES) out;  // 3 x VIEWS_PER_INVOCATION
 
@@ -29,7 +31,8 @@ struct MirrorView {
     vec4 eye;         // xyz: world-space eye; w: 1 if mirrored (front faces clockwise)
     vec4 rect;        // the view's screen rectangle in NDC: x0, y0, x1, y1
     uvec4 node;       // x: the view's index in the node image; y: the entity it never draws (its surface);
-                      // z: one no view of its tree draws (a probe's own object); 0: none
+                      // z: one no view of its tree draws (a probe's own object); 0: none;
+                      // w: the view's kinds and the layers it shows (visibility.glsl)
 };
 
 layout(std140) uniform Views {
@@ -100,6 +103,7 @@ void main() {
         MirrorView v = views[i];
         if (g_slots[0].w == v.node.y) continue;  // the surface the view looks out of
         if (v.node.z != 0u && g_slots[0].w == v.node.z) continue;  // hidden in the whole tree (a probe's own object)
+        if (hidden_in_view(g_tint[0].w, v.node.w)) continue;  // hidden in this kind of view, or on none of its layers
         vec4 p0 = v.view_proj * w0;
         vec4 p1 = v.view_proj * w1;
         vec4 p2 = v.view_proj * w2;

@@ -20,10 +20,11 @@ from components import (
     Refractive,
     Slice,
     Transform,
+    Visibility,
 )
 from engine.core.errors import GLLimitError
 from engine.core.world import World
-from engine.render.instances import InstanceBatch
+from engine.render.instances import DRAWN_EVERYWHERE, InstanceBatch, visibility_code
 from engine.render.renderer import Renderer
 from engine.rules.probe_rules import LookChanges, probe_blend
 from systems.material_dispatch import choose_material
@@ -45,6 +46,9 @@ class ExtractSystem(esper.Processor):
         # A component of probe_rules.LOOK_KINDS changed, or the probe the entity samples did (a
         # probe came, went, changed or moved, or the entity moved into or out of an influence box).
         touched = self._looks.entities(world)
+        shown = world.changed(Visibility)
+        if shown:  # a portal clone is drawn where its source is (its row reads the source's Visibility)
+            touched |= {entity for entity, clone in world.query_one(PortalClone) if clone.source in shown}
         joined = self._joined = set()  # entities given a row by a refresh: their transform is written below
         for entity in touched:
             self._refresh_instance(entity)
@@ -110,11 +114,17 @@ class ExtractSystem(esper.Processor):
         row["surface"] = choice.surface
         row["reflect"] = choice.reflect_params
         row["reflect"][2:] = (*blend.weights, 0.0, 0.0)[:2]  # each probe's weight (the PROBE_BLEND build)
+        clone = world.try_get(entity, PortalClone)
+        drawn_as = clone.source if clone else entity  # a clone stands in for its source past a portal
         row["tint"] = choice.tint
+        # Where it is drawn: the views it is hidden in and its reflection layers (the scene
+        # shaders leave it out of views of a hidden kind or sharing none of its layers).
+        visibility = world.try_get(drawn_as, Visibility) if world.exists(drawn_as) else None
+        row["tint"][3] = DRAWN_EVERYWHERE if visibility is None else \
+            visibility_code(visibility.hidden_kinds, visibility.layer_mask)
         slice_ = world.try_get(entity, Slice)
         row["slice"] = slice_.plane if slice_ is not None else NO_SLICE
-        clone = world.try_get(entity, PortalClone)
-        row["slots"] = (choice.emissive, choice.refract, choice.reflect, clone.source if clone else entity)
+        row["slots"] = (choice.emissive, choice.refract, choice.reflect, drawn_as)
         batch.variants_changed()
 
     def _remove_instance(self, entity: int, batch: InstanceBatch) -> None:

@@ -46,7 +46,7 @@ from engine.assets.mesh import quad
 from engine.core.errors import GLPassError
 from engine.core.material_slots import EmissiveVariant, ReflectVariant, RefractVariant
 from engine.render.bindings import SCRATCH_UNIT, PassState, apply_pass_state
-from engine.render.instances import InstanceBatch
+from engine.render.instances import DRAWN_EVERYWHERE, InstanceBatch
 from engine.render.probes import face_view
 from engine.render.raw_gl import LayeredCubeTarget, inspect_bound_target, read_cube_level, write_cube_level
 from engine.render.views import lights_block
@@ -290,7 +290,7 @@ def _fill_row(row: np.void, face: int) -> None:
     row["color"] = (*_COLOURS[face], 1.0)
     row["surface"] = (0.0, 1.0, 2.0, 0.0)  # not metallic, rough, emissive power 2
     row["reflect"] = (0.0, 1.0, 0.0, 0.0)
-    row["tint"] = (1.0, 1.0, 1.0, 1.0)
+    row["tint"] = (1.0, 1.0, 1.0, DRAWN_EVERYWHERE)
     row["slice"] = (0.0, 0.0, 0.0, 1.0)
     row["slots"] = (EmissiveVariant.EMISSIVE, RefractVariant.NONE, ReflectVariant.NONE, CHECK_ENTITY + face)
 

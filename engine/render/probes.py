@@ -29,6 +29,7 @@ import numpy as np
 from pyglm import glm
 
 from components import ReflectionProbe
+from components.limits import ALL_LAYERS, VIEW_PROBE
 from engine.core.cube_faces import CUBE_FACES
 from engine.core.errors import GLLimitError, GLPassError
 from engine.render.bindings import CUBE_MIP_UNIT, PROBE2_UNIT, PROBE_UNIT, SCRATCH_UNIT, PassState, apply_pass_state
@@ -50,15 +51,18 @@ AUTO_TIMED_CAPTURES = 3  # timed captures of each path before "auto" chooses (me
 FACE = SceneOptions(reflection_filter=True)
 
 
-def face_view(face: int, position: glm.vec3, near: float, far: float, size: int, skip: int = 0) -> View:
+def face_view(face: int, position: glm.vec3, near: float, far: float, size: int, skip: int = 0,
+              layers: int = ALL_LAYERS) -> View:
     """The view of cube face ``face`` from ``position`` (``skip``: the entity left out, the
-    probe's own object)."""
+    probe's own object): a probe view (an entity hidden in probe captures is not drawn in it,
+    nor in the mirrors and portals it sees) showing the reflection ``layers`` given (the
+    probe's ``layer_mask``)."""
     forward, _, up = CUBE_FACES[face]
     eye = glm.vec3(position)
     view = glm.lookAt(eye, eye + glm.vec3(forward), glm.vec3(up))
     proj = glm.perspective(glm.radians(90.0), 1.0, near, far)
     return View(view=view, proj=proj, eye=eye, size=(size, size), name=f"probe face {face}", node=face, skip=skip,
-                hide=skip)
+                hide=skip, kinds=VIEW_PROBE, layers=layers)
 
 
 @dataclass
@@ -417,7 +421,8 @@ class ProbeCaptures:
         face's view tree draws, up to ``settings.depth``); then the cube's record of where
         it was captured from and its projection box (``probe_rules.projection_box``): the
         cube's fields are set here only.  Returns the path that drew it."""
-        views = {face: face_view(face, position, settings.near, settings.far, settings.resolution, skip=key)
+        views = {face: face_view(face, position, settings.near, settings.far, settings.resolution, skip=key,
+                                 layers=settings.layer_mask)
                  for face in faces}
         sees_surfaces = settings.depth > 0 and surfaces is not None and bool(surfaces.mirrors or surfaces.portals)
         table = surfaces.table if sees_surfaces else None

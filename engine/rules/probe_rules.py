@@ -48,6 +48,7 @@ from components import (
     Skybox,
     Slice,
     Transform,
+    Visibility,
 )
 from engine.assets.mesh import Mesh, flat_plane
 from engine.core.cube_faces import CUBE_FACES
@@ -198,6 +199,7 @@ LOOK_KINDS: dict[type, str] = {
            "drops it on travellers that need not move: a pair opening or closing around one)",
     PortalClone: "the entity it is drawn as: the id image, and the views that hide it (a probe face hides "
                  "its own object's clones too)",
+    Visibility: "which kinds of view draw it (direct, mirrors, portals, probe captures) and its reflection layers",
 }
 
 

@@ -8,5 +8,6 @@ layout(std140) uniform Camera {
     vec4 viewport;   // x, y, width, height in pixels of the target
     vec4 clip_plane; // world-space plane; geometry behind it is clipped (mirror views)
     uvec4 skip;      // x: the entity this view never draws (the surface it looks out of); y: one no view
-                     // of its tree draws (a probe's own object); 0: none
+                     // of its tree draws (a probe's own object); 0: none; z: the view's mask (View.view_mask:
+                     // its kinds, bits 0-3, and the reflection layers it shows, bits 4-19; visibility.glsl)
 } camera;

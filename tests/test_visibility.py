@@ -1,0 +1,470 @@
+"""Show and hide in reflections (components.visibility): real frames, facts about the id
+image (what is drawn at each pixel after the mirrors and portals are composited) and the
+probes' cube faces.  Where a thing should land is worked out from the reflection's math,
+and each hidden case is set against the same scene without the component."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from pyglm import glm
+
+from components import (
+    ComponentValueError,
+    DirectionalLight,
+    Emissive,
+    Material,
+    MeshRef,
+    Mirror,
+    Portal,
+    ReflectionProbe,
+    Skybox,
+    Transform,
+    Visibility,
+)
+from components.limits import ALL_LAYERS, REFLECTION_LAYERS, VIEW_KINDS, VIEW_MIRROR, VIEW_PROBE
+from engine.assets.mesh import box, quad
+from engine.assets.portals import spawn_portal_pair
+from engine.core.reflection_math import plane_from_point_normal, reflection_matrix
+from engine.render.sky import face_directions
+from tests.support import look_from, srgb_to_linear
+
+SIZE = (200, 150)
+VAMPIRE = (-1.0, 1.2, 0.0)
+EYE = (1.5, 1.8, 5.0)
+BLUE_BACKDROP = (0.05, 0.05, 0.9)
+
+
+def hall(ents, visibility=None, **mirror):
+    """A mirror at z = -2 facing the camera, a red box (the vampire) between them, and a blue
+    backdrop behind the camera: what the mirror shows behind the vampire (the reflected ray
+    through the vampire goes on to the backdrop at z = 8)."""
+    def build(world):
+        world.spawn(DirectionalLight(direction=(0.2, -1.0, -0.5), intensity=2.0))
+        world.spawn(Skybox())
+        look_from(world, EYE)
+        ents["mirror"] = world.spawn(Transform(position=(0, 1.5, -2)), MeshRef(quad(4, 3)),
+                                     Material(color=(0.1, 0.1, 0.1)), Mirror(**mirror))
+        ents["backdrop"] = world.spawn(Transform(position=(0, 2, 8)), MeshRef(box((16, 8, 0.2))),
+                                       Material(color=BLUE_BACKDROP), Emissive(1.0))
+        parts = [Transform(position=VAMPIRE, scale=(0.6, 0.6, 0.6)), MeshRef(box()), Material(color=(0.9, 0.05, 0.05)),
+                 Emissive(0.8)]
+        if visibility is not None:
+            parts.append(visibility)
+        ents["vampire"] = world.spawn(*parts)
+    return build
+
+
+def reflected_pixel(runner, point, mirror_point=(0, 1.5, -2), normal=(0, 0, 1)):
+    """Where the mirror image of ``point`` lands on screen (the reflection matrix, no renderer)."""
+    m = reflection_matrix(plane_from_point_normal(mirror_point, normal))
+    return runner.project(glm.vec3(m * glm.vec4(glm.vec3(point), 1.0)))
+
+
+def in_surface(runner, entity) -> np.ndarray:
+    """The main view's pixels of surface ``entity`` (a mirror or portal drawn at level 0)."""
+    return runner.engine.renderer.targets.read_surface_ids() == entity
+
+
+def test_a_vampire_is_seen_directly_and_not_in_the_mirror_which_shows_what_is_behind_it(scene):
+    shown, hidden = {}, {}
+    runs = {}
+    for key, ents, visibility in (("shown", shown, None), ("hidden", hidden, Visibility(in_mirrors=False))):
+        runner = runs[key] = scene(hall(ents, visibility), SIZE)
+        rgb = runner.frame()
+        col, row = reflected_pixel(runner, VAMPIRE)
+        direct_col, direct_row = runner.project(VAMPIRE)
+        ids = runner.ids()
+        assert in_surface(runner, ents["mirror"])[row, col]  # the image point lies on the glass
+        assert ids[direct_row, direct_col] == ents["vampire"]  # seen directly either way
+        mirror_ids = ids[in_surface(runner, ents["mirror"])]
+        if key == "shown":
+            assert ids[row, col] == ents["vampire"]
+            assert (mirror_ids == ents["vampire"]).sum() > 50
+        else:
+            # The mirror shows what lies behind the vampire along the reflected ray: the backdrop.
+            assert ids[row, col] == ents["backdrop"]
+            assert not (mirror_ids == ents["vampire"]).any()
+            r, g, b = srgb_to_linear(rgb[row, col])
+            assert b > 0.3 and b > 4 * r, rgb[row, col]
+        runs[key + "_rgb"] = rgb
+
+
+def test_a_ghost_is_seen_only_in_the_mirror(scene):
+    ents = {}
+    runner = scene(hall(ents, Visibility(direct=False)), SIZE)
+    runner.frame()
+    col, row = reflected_pixel(runner, VAMPIRE)
+    ids = runner.ids()
+    mirror = in_surface(runner, ents["mirror"])
+    assert ids[row, col] == ents["vampire"]
+    assert (ids[mirror] == ents["vampire"]).sum() > 50
+    assert not (ids[~mirror] == ents["vampire"]).any()  # nowhere outside the mirror's own pixels
+    direct_col, direct_row = runner.project(VAMPIRE)
+    assert ids[direct_row, direct_col] != ents["vampire"]  # not where it stands
+
+
+def two_mirrors(ents, layer3=None):
+    """Two mirrors side by side, the left one hiding layer 3; a box on layer 3 (or with
+    ``layer3``'s Visibility) and one on layer 0 stand in front of both."""
+    def build(world):
+        world.spawn(DirectionalLight(direction=(0.2, -1.0, -0.5), intensity=2.0))
+        world.spawn(Skybox())
+        look_from(world, (0.0, 2.5, 6.0), target=(0.0, 0.8, -2.0))
+        ents["left"] = world.spawn(Transform(position=(-2.1, 1.5, -2)), MeshRef(quad(4, 3)),
+                                   Material(color=(0.1, 0.1, 0.1)), Mirror(hides_layers=[3]))
+        ents["right"] = world.spawn(Transform(position=(2.1, 1.5, -2)), MeshRef(quad(4, 3)),
+                                    Material(color=(0.1, 0.1, 0.1)), Mirror())
+        # Each box is wide and in front of the seam: its image lands on both mirrors (at y 1.1
+        # and 1.5 on the glass), while the camera sees the boxes themselves below the glass.
+        ents["layer3"] = world.spawn(Transform(position=(0.0, 0.4, 2.0), scale=(3.0, 0.3, 0.3)), MeshRef(box()),
+                                     Material(color=(0.9, 0.05, 0.05)), Emissive(0.8),
+                                     layer3 if layer3 is not None else Visibility(layers=[3]))
+        ents["layer0"] = world.spawn(Transform(position=(0.0, 1.0, 2.0), scale=(3.0, 0.3, 0.3)), MeshRef(box()),
+                                     Material(color=(0.05, 0.9, 0.05)), Emissive(0.8))
+    return build
+
+
+def test_a_mirror_that_hides_a_layer_leaves_out_what_is_on_it_while_another_mirror_shows_it(scene):
+    """Two mirrors side by side, the left one hiding layer 3; a box on layer 3 and one on layer
+    0 stand in front of both: the layer-3 box is in the right mirror only, the layer-0 box in
+    both, and both are seen directly (the camera's view shows every layer)."""
+    ents = {}
+    runner = scene(two_mirrors(ents), SIZE)
+    runner.frame()
+    ids = runner.ids()
+    left, right = in_surface(runner, ents["left"]), in_surface(runner, ents["right"])
+    assert (ids[right] == ents["layer3"]).sum() > 30
+    assert not (ids[left] == ents["layer3"]).any()
+    assert (ids[left] == ents["layer0"]).sum() > 30 and (ids[right] == ents["layer0"]).sum() > 30
+    outside = ~(left | right)
+    assert (ids[outside] == ents["layer3"]).sum() > 30 and (ids[outside] == ents["layer0"]).sum() > 30
+
+
+def portal_room(ents, visibility=None, mirror_beyond=False):
+    """A portal A at (0, 1.5, 0) facing the camera (z = 4) and its partner B at (20, 1.5, 0):
+    the camera sees through A what lies in front of B, as from (20, 1.5, -4) looking +z.
+    Without ``mirror_beyond`` a red box (the vampire) stands 2 m in front of B, a blue
+    backdrop behind it; with it, the box stands 3 m to B's side, outside what A's window
+    shows, and a mirror 6 m in front of B faces back: the box is seen only in that mirror,
+    through the portal (a mirror view below a portal view)."""
+    def build(world):
+        world.spawn(DirectionalLight(direction=(0.2, -1.0, -0.5), intensity=2.0))
+        world.spawn(Skybox())
+        look_from(world, (0.0, 1.5, 4.0), target=(0.0, 1.5, 0.0))
+        ents["a"], ents["b"] = spawn_portal_pair(world, (0, 1.5, 0), None, (20, 1.5, 0), None)
+        ents["backdrop"] = world.spawn(Transform(position=(20, 2, 12)), MeshRef(box((16, 8, 0.2))),
+                                       Material(color=BLUE_BACKDROP), Emissive(1.0))
+        if mirror_beyond:
+            facing_b = glm.angleAxis(glm.pi(), glm.vec3(0, 1, 0))
+            ents["mirror"] = world.spawn(Transform(position=(20, 1.5, 6), rotation=facing_b), MeshRef(quad(8, 5)),
+                                         Material(color=(0.1, 0.1, 0.1)), Mirror())
+        position = (23.0, 1.5, 1.0) if mirror_beyond else (20.0, 1.2, 2.0)
+        size = 1.0 if mirror_beyond else 0.6
+        parts = [Transform(position=position, scale=(size, size, size)), MeshRef(box()),
+                 Material(color=(0.9, 0.05, 0.05)), Emissive(0.8)]
+        ents["vampire"] = world.spawn(*parts, *([visibility] if visibility is not None else []))
+    return build
+
+
+@pytest.mark.parametrize("visibility, seen", [(None, True), (Visibility(in_portals=False), False),
+                                              (Visibility(in_mirrors=False), True), (Visibility(in_probes=False), True),
+                                              (Visibility(direct=False), True)])
+def test_hidden_in_portals_is_hidden_through_a_portal_and_only_there(scene, visibility, seen):
+    ents = {}
+    runner = scene(portal_room(ents, visibility), SIZE)
+    rgb = runner.frame()
+    ids = runner.ids()
+    through = in_surface(runner, ents["a"])
+    assert through.sum() > 2000 and runner.stats.reflection_views >= 1
+    assert ((ids[through] == ents["vampire"]).sum() > 100) == seen
+    # Where it is not, the backdrop behind it is: the carried point lands on A's pixels.
+    col, row = runner.project((0.0, 1.2, -2.0))  # (20, 1.2, 2) carried back to A's side
+    assert through[row, col]
+    assert ids[row, col] == (ents["vampire"] if seen else ents["backdrop"])
+    if not seen:
+        r, g, b = srgb_to_linear(rgb[row, col])
+        assert b > 0.3 and b > 4 * r, rgb[row, col]
+
+
+@pytest.mark.parametrize("visibility, seen", [(None, True), (Visibility(in_mirrors=False), False),
+                                              (Visibility(in_portals=False), False),
+                                              (Visibility(direct=False), True)])
+def test_kinds_accumulate_a_mirror_seen_through_a_portal_is_both(scene, visibility, seen):
+    """The box is seen only in the mirror beyond the portal: a view that is a portal's and a
+    mirror's at once.  Hidden in mirrors, or in portals, it is not drawn there."""
+    ents = {}
+    runner = scene(portal_room(ents, visibility, mirror_beyond=True), SIZE)
+    runner.frame()
+    ids = runner.ids()
+    through = in_surface(runner, ents["a"])
+    assert runner.stats.reflection_views >= 2  # the portal's view and the mirror's below it
+    assert ((ids[through] == ents["vampire"]).sum() > 30) == seen
+    assert not (ids[~through] == ents["vampire"]).any()
+
+
+def probe_room(ents, visibility=None, probe_hides=(), mirror_behind=False):
+    """A probe at the origin (32 texels a face), a red box 2 m down -Z and a green one 2 m
+    down +X, both glowing: each in the centre of its face.  With ``mirror_behind`` the red
+    box is behind the probe (+Z) and a mirror 2 m down -Z shows it to the -Z face (the face's
+    view tree: a mirror view below a probe view)."""
+    def build(world):
+        world.spawn(Skybox())
+        look_from(world, (3.0, 0.5, 3.0), target=(0.0, 0.0, 0.0))
+        ents["probe"] = world.spawn(Transform(), ReflectionProbe(resolution=32, refresh="once", depth=1,
+                                                                 hides_layers=list(probe_hides)))
+        if mirror_behind:
+            ents["mirror"] = world.spawn(Transform(position=(0, 0, -2)), MeshRef(quad(6, 6)),
+                                         Material(color=(0.05, 0.05, 0.05)), Mirror())
+        parts = [Transform(position=(0, 0, 2) if mirror_behind else (0, 0, -2)), MeshRef(box((0.8, 0.8, 0.8))),
+                 Material(color=(0.9, 0.05, 0.05)), Emissive(2.0)]
+        ents["red"] = world.spawn(*parts, *([visibility] if visibility is not None else []))
+        ents["green"] = world.spawn(Transform(position=(2, 0, 0)), MeshRef(box((0.8, 0.8, 0.8))),
+                                    Material(color=(0.05, 0.9, 0.05)), Emissive(2.0))
+    return build
+
+
+def face_centre(runner, probe: int, face: int) -> np.ndarray:
+    image = runner.engine.renderer.probes.read_face(probe, face)
+    n = image.shape[0]
+    return image[n // 2 - 1: n // 2 + 1, n // 2 - 1: n // 2 + 1].mean(axis=(0, 1))
+
+
+def is_red(rgb) -> bool:
+    return rgb[0] > 1.0 and rgb[0] > 4 * max(rgb[1], rgb[2])
+
+
+@pytest.mark.parametrize("path", ["six_pass", "layered"])
+@pytest.mark.parametrize("visibility, probe_hides, seen", [
+    (None, (), True), (Visibility(in_probes=False), (), False), (Visibility(in_mirrors=False), (), True),
+    (Visibility(in_portals=False), (), True), (Visibility(direct=False), (), True),
+    (Visibility(layers=[3]), (3,), False), (Visibility(layers=[3, 5]), (3,), True), (None, (3,), True)])
+def test_a_probe_capture_leaves_out_what_is_hidden_in_probes_or_on_a_layer_it_hides(scene, path, visibility,
+                                                                                     probe_hides, seen):
+    """The -Z face read back: red where the box is drawn, the sky where it is hidden; the
+    green box on the +X face is drawn either way."""
+    ents = {}
+    runner = scene(probe_room(ents, visibility, probe_hides), (32, 32))
+    runner.engine.stages["probes"].path = path
+    runner.frame()
+    assert runner.stats.probe_captures == 1 and runner.engine.stages["probes"].path_used == path
+    red, green = face_centre(runner, ents["probe"], 5), face_centre(runner, ents["probe"], 0)
+    assert is_red(red) == seen, red
+    if not seen:
+        assert red[2] > red[0] and red.sum() > 0.3, red  # the sky behind it, not black
+    assert green[1] > 1.0 and green[1] > 4 * max(green[0], green[2]), green
+
+
+@pytest.mark.parametrize("visibility, seen", [(None, True), (Visibility(in_mirrors=False), False),
+                                              (Visibility(in_probes=False), False),
+                                              (Visibility(direct=False), True)])
+def test_a_mirror_seen_by_a_probe_face_is_a_probe_view_and_a_mirror_view(scene, visibility, seen):
+    ents = {}
+    runner = scene(probe_room(ents, visibility, mirror_behind=True), (32, 32))
+    runner.frame()
+    face = runner.engine.renderer.probes.read_face(ents["probe"], 5)  # -Z: the mirror, the box's image in it
+    target = np.array([0.0, 0.0, -6.0]) / 6.0  # the image of (0, 0, 2) in the mirror at z = -2
+    row, col = np.unravel_index(np.argmax(face_directions(5, 32) @ target), (32, 32))
+    assert is_red(face[row, col]) == seen, face[row, col]
+
+
+@pytest.mark.parametrize("case", ["vampire", "ghost", "layers", "hidden_layer_box"])
+def test_the_batched_path_draws_the_same_ids_as_the_per_mirror_path(scene, case):
+    """One draw per mesh for a whole level (the geometry shader's per-view loop) leaves out
+    the same instances as a draw per view (the vertex shader's clip distance)."""
+    results = {}
+    for path in ("per_mirror", "batched"):
+        ents = {}
+        if case in ("vampire", "ghost"):
+            build = hall(ents, Visibility(in_mirrors=False) if case == "vampire" else Visibility(direct=False))
+        else:
+            build = two_mirrors(ents, None if case == "layers" else Visibility(in_mirrors=False, layers=[3]))
+        runner = scene(build, SIZE)
+        runner.engine.reflection_system.path = path
+        runner.frame()
+        assert runner.stats.reflection_path == path
+        results[path] = runner.ids()
+    assert results["per_mirror"].any()
+    np.testing.assert_array_equal(results["batched"], results["per_mirror"])
+
+
+def test_a_changed_added_or_removed_visibility_is_drawn_the_next_frame(scene):
+    """The instance row is written again when the component is added, changed or removed."""
+    ents = {}
+    runner = scene(hall(ents), SIZE)
+    world = runner.world
+
+    def in_mirror() -> int:
+        runner.frame()
+        return int((runner.ids()[in_surface(runner, ents["mirror"])] == ents["vampire"]).sum())
+
+    shown = in_mirror()
+    assert shown > 50
+    world.add_component(ents["vampire"], Visibility(in_mirrors=False))
+    assert in_mirror() == 0
+    world.get(ents["vampire"], Visibility).in_mirrors = True
+    assert in_mirror() == shown
+    world.get(ents["vampire"], Visibility).layers = [2]
+    assert in_mirror() == shown  # the mirror shows every layer
+    world.get(ents["mirror"], Mirror).shows_layers = [0, 1]
+    assert in_mirror() == 0
+    world.get(ents["mirror"], Mirror).shows_layers = None
+    world.get(ents["vampire"], Visibility).in_mirrors = False
+    assert in_mirror() == 0
+    world.remove_component(ents["vampire"], Visibility)
+    assert in_mirror() == shown
+
+
+LEVEL = """
+[level]
+name = "vampires"
+
+[[entity]]
+name = "mirror"
+[entity.Transform]
+position = [0.0, 1.5, -2.0]
+[entity.MeshRef]
+mesh = { quad = [4.0, 3.0] }
+[entity.Mirror]
+hides_layers = [3]
+
+[[entity]]
+name = "door"
+[entity.Transform]
+position = [5.0, 1.5, -2.0]
+[entity.MeshRef]
+mesh = { quad = [2.0, 3.0] }
+[entity.Portal]
+shows_layers = [0, 2]
+
+[[entity]]
+name = "probe"
+[entity.Transform]
+[entity.ReflectionProbe]
+hides_layers = [1, 3]
+
+[[entity]]
+name = "vampire"
+[entity.Transform]
+position = [0.0, 1.0, 0.0]
+[entity.MeshRef]
+mesh = { box = [0.5, 1.8, 0.5] }
+[entity.Visibility]
+in_mirrors = false
+in_probes = false
+layers = [0, 3]
+"""
+
+
+def test_a_level_file_carries_visibility_and_the_surfaces_layers_and_saves_them_back(tmp_path):
+    from engine.assets.level_file import load_level, save_level
+    from engine.core.world import World
+
+    path = tmp_path / "level.toml"
+    path.write_text(LEVEL)
+    world = World("visibility-level")
+    try:
+        names = load_level(path).spawn(world)
+        vampire = world.get(names["vampire"], Visibility)
+        assert (vampire.direct, vampire.in_mirrors, vampire.in_portals, vampire.in_probes) == (True, False, True, False)
+        assert vampire.layers == (0, 3) and vampire.layer_mask == 0b1001
+        assert vampire.hidden_kinds == VIEW_MIRROR | VIEW_PROBE
+        assert world.get(names["mirror"], Mirror).layer_mask == ALL_LAYERS & ~(1 << 3)
+        assert world.get(names["door"], Portal).layer_mask == 0b101
+        assert world.get(names["probe"], ReflectionProbe).layer_mask == ALL_LAYERS & ~0b1010
+        saved = tmp_path / "saved.toml"
+        save_level(world, saved, names)
+        again = World("visibility-level-again")
+        try:
+            names2 = load_level(saved).spawn(again)
+            assert again.get(names2["vampire"], Visibility).hidden_kinds == VIEW_MIRROR | VIEW_PROBE
+            assert again.get(names2["vampire"], Visibility).layers == (0, 3)
+            assert again.get(names2["mirror"], Mirror).hides_layers == (3,)
+            assert again.get(names2["door"], Portal).shows_layers == (0, 2)
+        finally:
+            again.close()
+    finally:
+        world.close()
+
+
+@pytest.mark.parametrize("old, new, field, reason", [
+    ("layers = [0, 3]", "layers = [0, 16]", "Visibility.layers", r"layer numbers in \[0, 15\].*16"),
+    ("layers = [0, 3]", "layers = 3", "Visibility.layers", r"must be a list of layer numbers"),
+    ("layers = [0, 3]", "layers = []", "Visibility.layers", r"at least one layer"),
+    ("layers = [0, 3]", "layers = [1.5]", "Visibility.layers", r"layer numbers"),
+    ("in_mirrors = false", "in_mirrors = 0", "Visibility.in_mirrors", r"must be True or False"),
+    ("in_mirrors = false", "in_mirror = false", "Visibility.in_mirror", r"Visibility has no field 'in_mirror'"),
+    ("hides_layers = [3]", "hides_layers = [-1]", "Mirror.hides_layers", r"layer numbers in \[0, 15\]"),
+    ("shows_layers = [0, 2]", "shows_layers = [\"all\"]", "Portal.shows_layers", r"layer numbers"),
+    ("hides_layers = [1, 3]", "hides_layers = [99]", "ReflectionProbe.hides_layers", r"\[0, 15\]"),
+])
+def test_a_bad_value_in_a_level_file_is_refused_naming_the_field_and_line(tmp_path, old, new, field, reason):
+    from engine.assets.level_file import LevelError, load_level
+
+    assert old in LEVEL
+    path = tmp_path / "level.toml"
+    path.write_text(LEVEL.replace(old, new, 1))
+    with pytest.raises(LevelError, match=reason) as caught:
+        load_level(path)
+    assert caught.value.field == field
+    assert caught.value.line == path.read_text().splitlines().index(new) + 1
+
+
+@pytest.mark.parametrize("make", [
+    lambda: Visibility(layers=[REFLECTION_LAYERS]), lambda: Visibility(layers=3), lambda: Visibility(layers=[]),
+    lambda: Visibility(layers=[True]), lambda: Visibility(in_portals="no"), lambda: Mirror(shows_layers=[16]),
+    lambda: Portal(hides_layers=5), lambda: ReflectionProbe(shows_layers=[-2])])
+def test_bad_values_are_refused_when_given_naming_the_field(make):
+    with pytest.raises(ComponentValueError, match=r"^(Visibility|Mirror|Portal|ReflectionProbe)\.\w+ "):
+        make()
+    visibility = Visibility()
+    with pytest.raises(ComponentValueError, match=r"Visibility\.layers .*\[0, 15\]"):
+        visibility.layers = [2, 40]
+    assert visibility.layers == (0,)  # the refused write changed nothing
+
+
+def test_the_shaders_read_the_masks_as_the_python_side_packs_them():
+    """The GLSL's kind-bit count is the one of components/limits.py, and the instance code is
+    exact in the float it rides in (all 16 layers and 4 kinds set)."""
+    from pathlib import Path
+
+    from engine.render.instances import DRAWN_EVERYWHERE, visibility_code
+
+    text = (Path(__file__).parent.parent / "shaders" / "include" / "visibility.glsl").read_text()
+    assert f"#define VIEW_KIND_BITS {VIEW_KINDS}u" in text
+    full = visibility_code((1 << VIEW_KINDS) - 1, ALL_LAYERS)
+    assert int(np.float32(full)) == (1 << (VIEW_KINDS + REFLECTION_LAYERS)) - 1 < 2 ** 24
+    assert DRAWN_EVERYWHERE == 1 << VIEW_KINDS
+
+
+@pytest.mark.parametrize("hider, seen", [(None, True), ("a", False), ("b", True)])
+def test_a_portal_that_hides_a_layer_leaves_it_out_of_its_view(scene, hider, seen):
+    """The box is on layer 2.  Portal A (the one looked into) hiding layer 2 leaves it out of
+    the view through A; its partner B hiding it does not (B's layers are for looking into B)."""
+    ents = {}
+    runner = scene(portal_room(ents, Visibility(layers=[2])), SIZE)
+    if hider is not None:
+        runner.world.get(ents[hider], Portal).hides_layers = [2]
+    runner.frame()
+    ids = runner.ids()
+    through = in_surface(runner, ents["a"])
+    assert ((ids[through] == ents["vampire"]).sum() > 100) == seen
+
+
+def test_a_portal_clone_is_drawn_where_its_source_is_and_follows_its_changes(scene):
+    """A bar halfway through portal A comes out of B as a clone (the slice stage's stand-in):
+    seen directly at both portals.  Given Visibility(direct=False) after the first frame, the
+    clone is hidden with its source (it stands in for it): neither half is seen directly."""
+    from tests.test_portal_slice import SIZE as SLICE_SIZE
+    from tests.test_portal_slice import build_pair
+
+    ents = {}
+    runner = scene(lambda world: build_pair(world, ents, (0, 3.0, 7.0), (0, 1.5, 0)), SLICE_SIZE)
+    runner.frame()
+    halves = [runner.project((-2.8, 1.7, 0.6)), runner.project((2.8, 1.7, 0.6))]  # in front of A; out of B
+    assert [runner.ids()[row, col] for col, row in halves] == [ents["bar"]] * 2
+    runner.world.add_component(ents["bar"], Visibility(direct=False))
+    runner.frame()
+    assert ents["bar"] not in [runner.ids()[row, col] for col, row in halves]
+    runner.world.get(ents["bar"], Visibility).direct = True
+    runner.frame()
+    assert [runner.ids()[row, col] for col, row in halves] == [ents["bar"]] * 2
