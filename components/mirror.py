@@ -7,7 +7,16 @@ from typing import Any
 from pyglm import glm
 
 from components.limits import MAX_VIEW_DEPTH
-from components.tracking import ComponentValueError, TrackedComponent, boolean, color, finite, integer, vec3
+from components.tracking import (
+    ComponentValueError,
+    TrackedComponent,
+    boolean,
+    color,
+    end_image_choice,
+    finite,
+    integer,
+    vec3,
+)
 from components.visibility import check_surface_layers, surface_layers
 
 
@@ -26,6 +35,10 @@ class Mirror(TrackedComponent):
     shows (``components.visibility``): ``hides_layers=[3]`` shows all but layer 3.
     ``priority`` (an int, higher first; default 0) orders it under the frame's view budget
     (``engine.resources.ViewBudget``).
+    ``end_image``: past the depth limit, show the surface's image from the previous frame,
+    shrunk onto the cut view's footprint (``engine/render/end_images.py``), instead of its
+    closed look: True, False, or "auto" (the default: on for a facing pair, whose recursion
+    would otherwise end in a flat rectangle).
 
     Fades (both off by default), as Unreal's planar reflections offer: ``fade_distance =
     (start, end)`` in metres from the viewing eye to the mirror (to its bounding sphere), and
@@ -43,6 +56,7 @@ class Mirror(TrackedComponent):
     max_depth: int = 3
     enabled: bool = True
     priority: int = 0
+    end_image: Any = "auto"
     plane_point: Any = None
     plane_normal: Any = None
     shows_layers: Any = None
@@ -71,6 +85,8 @@ class Mirror(TrackedComponent):
             return boolean(self, name, value)
         if name == "priority":
             return integer(self, name, value, low=-1000, high=1000)
+        if name == "end_image":
+            return end_image_choice(self, name, value)
         if name in ("fade_distance", "fade_angle") and value is not None:
             return _fade(name, value, 90.0 if name == "fade_angle" else None)
         if name == "plane_point" and value is not None:

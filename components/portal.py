@@ -8,7 +8,7 @@ from typing import Any
 from pyglm import glm
 
 from components.limits import MAX_VIEW_DEPTH
-from components.tracking import ComponentValueError, TrackedComponent, color, finite, integer, vec3
+from components.tracking import ComponentValueError, TrackedComponent, color, end_image_choice, finite, integer, vec3
 from components.visibility import check_surface_layers, surface_layers
 
 
@@ -32,6 +32,10 @@ class Portal(TrackedComponent):
     shows (``components.visibility``): ``hides_layers=[3]`` shows all but layer 3.
     ``priority`` (an int, higher first; default 0) orders it under the frame's view budget
     (``engine.resources.ViewBudget``).
+    ``end_image``: past the depth limit, show the surface's image from the previous frame,
+    shrunk onto the cut view's footprint (``engine/render/end_images.py``), instead of its
+    closed look: True, False, or "auto" (the default: on for a facing pair, whose recursion
+    would otherwise end in a flat rectangle).
     """
 
     SHAREABLE = False  # one entity's own state: see components.tracking
@@ -40,6 +44,7 @@ class Portal(TrackedComponent):
     max_depth: int = 4
     enabled: bool = True
     priority: int = 0
+    end_image: Any = "auto"
     closed_color: Any = field(default_factory=lambda: glm.vec4(0.02, 0.02, 0.03, 1.0))
     shows_layers: Any = None
     hides_layers: Any = ()
@@ -74,6 +79,8 @@ class Portal(TrackedComponent):
                 raise ComponentValueError(f"Portal.max_depth must be an int in [0, {MAX_VIEW_DEPTH}], got {value!r}")
         if name == "priority":
             return integer(self, name, value, low=-1000, high=1000)
+        if name == "end_image":
+            return end_image_choice(self, name, value)
         if name == "enabled" and not isinstance(value, bool):
             raise ComponentValueError(f"Portal.enabled must be True or False, got {value!r}")
         if name == "closed_color":

@@ -197,6 +197,13 @@ def _items(value: Any) -> list[Any]:
         return []
 
 
+def end_image_choice(owner: object, name: str, value: Any) -> bool | str:
+    """True, False or "auto" (a surface's ``end_image``)."""
+    if value is True or value is False or value == "auto":
+        return value
+    raise _fail(owner, name, value, 'must be True, False or "auto"')
+
+
 def choice(owner: object, name: str, value: Any, options: tuple[str, ...]) -> str:
     if not isinstance(value, str) or value not in options:
         raise _fail(owner, name, value, f"must be one of {options}")

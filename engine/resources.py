@@ -89,6 +89,7 @@ class SurfaceState:
     water: WaterLook | None = None    # a mirror that is water: Fresnel weight and moving waves
     layers: int = ALL_LAYERS     # the reflection layers its view shows (components/limits.py)
     priority: int = 0            # the view budget keeps higher priorities first (Mirror.priority, Portal.priority)
+    end_image: bool | str = "auto"  # past the depth limit, last frame's image: True, False, or "auto" (facing pairs)
     fade: tuple[float, float, float, float] | None = None  # a mirror's fades: distance start, end (m), angle
                                                            # start, end (degrees); None: no fade
 

@@ -27,7 +27,7 @@ class ReflectionSystem(esper.Processor):
     def __init__(self, world: World, renderer: Renderer, max_depth_cap: int = 8) -> None:
         self.world = world
         self.renderer = renderer
-        self.tree = ViewTree(renderer)
+        self.tree = ViewTree(renderer, end_images=True)
         self.settings = TreeSettings(max_depth_cap)
         self.views: list[ReflectionView] = []   # last frame's view tree, level order
 
@@ -85,6 +85,7 @@ class ReflectionSystem(esper.Processor):
         stats.reflection_views_dropped = result.dropped
         stats.reflection_depth_capped = result.capped
         stats.reflection_views_faded = result.faded
+        stats.reflection_end_views = len(result.end_views)
         paths = result.paths
         stats.reflection_path = paths.pop() if len(paths) == 1 else ("mixed" if paths else "")
 

@@ -120,7 +120,8 @@ class SurfaceSystem(esper.Processor):
             self.portals[entity] = SurfaceState(
                 entity, "portal", portal_plane(transform.world), corners, corners,
                 pair_transform(transform.world, out.world), portal_plane(out.world), partner,
-                portal.max_depth, portal.enabled, layers=portal.layer_mask, priority=portal.priority)
+                portal.max_depth, portal.enabled, layers=portal.layer_mask, priority=portal.priority,
+                end_image=portal.end_image)
 
     @staticmethod
     def _mirror_state(entity: int, mirror: Mirror, mesh_ref: MeshRef, transform: Transform,
@@ -157,7 +158,8 @@ class SurfaceSystem(esper.Processor):
         return SurfaceState(entity, "mirror", plane, corners, outline,
                             reflection_matrix(plane), plane, entity, mirror.max_depth, mirror.enabled,
                             mirror.color, mirror.reflect_rate, mirror.roughness, mirror.resolution_scale, bumps, look,
-                            fade=_fades(mirror), layers=mirror.layer_mask, priority=mirror.priority)
+                            fade=_fades(mirror), layers=mirror.layer_mask, priority=mirror.priority,
+                            end_image=mirror.end_image)
 
 
 

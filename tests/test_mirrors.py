@@ -266,8 +266,10 @@ def test_facing_mirrors_keep_memory_bounded(scene):
     runner.engine.reflection_system.max_depth_cap = 6
     for _ in range(5):
         runner.frame()
-    assert runner.stats.reflection_views == 6
-    assert len(runner.engine.renderer.levels) == 7  # one screen-sized set per level, reused
+    assert runner.stats.reflection_views == 6 and runner.stats.reflection_end_views == 1
+    # One screen-sized set per level, reused: the root's, six levels', and the end image's
+    # (the facing pair's recursion ends in last frame's image one level past the cap).
+    assert len(runner.engine.renderer.levels) == 8
 
 
 def test_a_mirror_on_a_mesh_that_is_not_flat_is_a_clear_error(scene):

@@ -53,6 +53,7 @@ LEVEL_UNITS = (3, 5)     # rough-atlas copy: a level's colour and node images (t
 PRESENT_UNIT = 0         # present: the HDR image
 PROBE_UNIT = 7           # scene: the cube map of the batch's reflection probe
 PROBE2_UNIT = 9          # scene: the cube map of the batch's second probe (probe blending)
+HISTORY_UNIT = 10        # end images: the previous frame's main image (engine/render/end_images.py)
 NORMAL_UNIT = 8          # scene: the batch's normal map; composite (bumpy mirrors): the mirror's
 EMISSIVE_MAP_UNIT = 12   # scene: the batch's emissive map (Material.emissive_map)
 METALLIC_ROUGHNESS_UNIT = 13  # scene: the batch's metallic-roughness map (Material.metallic_roughness_map)

@@ -161,6 +161,7 @@ class SurfaceTable:
         self.layers = np.array([s.layers for s in states], np.int64)
         self.scale = np.array([s.resolution_scale for s in states], np.float64)
         self.priority = np.array([s.priority for s in states], np.int64)
+        self.end_image = self._end_images(states)
         # Fades (Mirror.fade_distance, fade_angle): start and end of each, and each surface's
         # bounding sphere; a surface without fades never fades.
         self.fades = [s.fade for s in states]
@@ -170,8 +171,31 @@ class SurfaceTable:
             self.centres = self.corners[:, :, :3].mean(axis=1)
             self.radii = np.linalg.norm(self.corners[:, :, :3] - self.centres[:, None, :], axis=2).max(axis=1)
 
+    def _end_images(self, states: list[SurfaceState]) -> np.ndarray:
+        """Which surfaces end their recursion in an image: ``end_image`` True, or "auto" for
+        one of a facing pair (each in front of the other: mirrors facing each other, or a
+        portal and its partner facing each other, whose views see themselves again)."""
+        wanted = np.array([s.end_image is True for s in states], bool)
+        auto = np.array([s.end_image == "auto" for s in states], bool)
+        if not auto.any():
+            return wanted
+        centres = np.concatenate([self.corners[:, :, :3].mean(axis=1), np.ones((len(states), 1))], axis=1)
+        in_front = centres @ self.planes.T > 1e-6           # [i, j]: i's centre in front of j's plane
+        mirrors = self.is_mirror
+        facing_mirrors = (in_front & in_front.T & (self.planes[:, :3] @ self.planes[:, :3].T < -0.5)
+                          & mirrors[:, None] & mirrors[None, :]).any(axis=1)
+        # A portal's view looks out of its partner: it sees itself when it stands in front of
+        # the partner's plane and the partner in front of its own.
+        partner_front = np.einsum("si,si->s", centres, self.exit_planes) > 1e-6
+        index = {entity: i for i, entity in enumerate(self.entities.tolist())}
+        partner_sees = np.array([self.exit_entities[i] in index and bool(in_front[index[self.exit_entities[i]], i])
+                                 for i in range(len(states))], bool)
+        facing_portals = ~mirrors & partner_front & partner_sees
+        return wanted | (auto & (facing_mirrors | facing_portals))
+
     def cull(self, parents: LevelRows, depth: int, root_proj: np.ndarray, root_size: tuple[int, int],
-             depth_cap: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None]:
+             depth_cap: int, ends: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray,
+                                                                     np.ndarray | None]:
         """Each (parent, surface) where the parent view can see the surface, with the screen
         rectangle where it can show: enabled and within its depth, not the surface the view
         looks out of, facing the view's eye (a mirror facing away shows nothing, as the
@@ -182,12 +206,18 @@ class SurfaceTable:
         fades; a pair faded out, weight 0, is not returned).  Every pair goes through the
         same few array operations: in a frame, after the rasteriser has run, each numpy call
         costs about twice what it does in a warm loop (measured), so their number is what
-        counts here."""
-        if not len(parents.node) or depth > min(self.deepest, depth_cap):
+        counts here.  With ``ends`` (a mask of surfaces), only the pairs of those surfaces the
+        depth limits cut are kept: the end views (``engine/render/end_images.py``)."""
+        if ends is not None:
+            keep = self.enabled & ends & (depth > np.minimum(self.max_depth, depth_cap))
+            if not len(parents.node) or not keep.any():
+                return _NONE, _NONE, _NO_RECTS, None
+        elif not len(parents.node) or depth > min(self.deepest, depth_cap):
             return _NONE, _NONE, _NO_RECTS, None  # nothing enabled may be seen this deep
+        else:
+            keep = self.enabled & (depth <= np.minimum(self.max_depth, depth_cap))
         # First what needs no corners, for every pair: enabled and within its depth, not the
         # surface the view looks out of, and facing the view's eye.
-        keep = self.enabled & (depth <= np.minimum(self.max_depth, depth_cap))
         keep = keep & (parents.exit[:, None] != self.entities) & (parents.eye @ self.planes.T > 0.0)
         p, s = np.nonzero(keep)
         if not len(p):
@@ -235,7 +265,8 @@ class SurfaceTable:
         return np.clip(by_distance, 0.0, 1.0) * np.clip(by_angle, 0.0, 1.0)
 
     def plan(self, parents: LevelRows, depth: int, root: View, root_proj: np.ndarray, inv_root_proj: np.ndarray,
-             first_index: int, depth_cap: int, hide: int) -> tuple[Candidates | None, int]:
+             first_index: int, depth_cap: int, hide: int, ends: np.ndarray | None = None,
+             size: tuple[int, int] | None = None) -> tuple[Candidates | None, int]:
         """The next level's candidate views from ``parents`` (level ``depth - 1``): the
         cull's pairs, each with its camera (the parent's carried through the surface: for a
         mirror its reflection, for a portal look-out x half turn x inverse(look-in), as in
@@ -243,15 +274,17 @@ class SurfaceTable:
         Lengyel's oblique near plane there unless the eye is too close (then the clip
         distance alone), its claim rectangle in the level's pixels, and its packed Camera
         block and batched-path row (None when nothing can be seen), and how many pairs the
-        fades took out."""
-        p, s, rects, weights = self.cull(parents, depth, root_proj, root.size, depth_cap)
+        fades took out.  ``ends``: the end views of those surfaces instead (``cull``);
+        ``size``: the level's pixels when another set of candidates chose them."""
+        p, s, rects, weights = self.cull(parents, depth, root_proj, root.size, depth_cap, ends)
         faded = 0 if weights is None else int((weights == 0.0).sum())
         fade = None if weights is None else weights[weights > 0.0]
         k = len(p)
         if not k:
             return None, faded
-        scale = float(self.scale[s].max())
-        size = (max(1, round(root.size[0] * scale)), max(1, round(root.size[1] * scale)))
+        if size is None:
+            scale = float(self.scale[s].max())
+            size = (max(1, round(root.size[0] * scale)), max(1, round(root.size[1] * scale)))
         parent = LevelRows(parents.data[p])
         data = np.empty((k, LevelRows.WIDTH))
         rows = LevelRows(data)

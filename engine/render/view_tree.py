@@ -27,13 +27,15 @@ level (``TreeSettings.level_budget``: the views with the most claimed pixels are
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
+from pyglm import glm
 
 from components.limits import MAX_VIEW_DEPTH
 from engine.render.batched_mirrors import PATHS, choose_path, submitted_triangles
+from engine.render.end_images import EndImages
 from engine.render.mirror_passes import (
     Claims,
     Composite,
@@ -43,7 +45,7 @@ from engine.render.mirror_passes import (
 )
 from engine.render.scene_pass import REFLECTION_LEVEL, SceneOptions
 from engine.render.targets import LevelStack
-from engine.render.view_plan import LevelRows, SurfaceTable, _mat, planned_views
+from engine.render.view_plan import Candidates, LevelRows, SurfaceTable, _mat, planned_views
 from engine.render.views import View
 
 # The deepest a tree may go (each level is one more set of root-sized targets); the depth
@@ -83,6 +85,8 @@ class TreeResult:
     dropped: int = 0              # views with pixels left out by the level budget
     capped: int = 0               # views the surfaces' own limits allowed below the depth cap
     faded: int = 0                # views the mirrors' fades took out (each costs nothing)
+    end_views: list[ReflectionView] = field(default_factory=list)  # views past the depth limits shown
+                                                                   # as last frame's image (EndImages)
 
 
 @dataclass
@@ -100,76 +104,165 @@ class ReflectionView:
 
 class ViewTree:
     """Renders the reflection levels below a root view into a ``LevelStack`` and composites
-    them back into the root's targets."""
+    them back into the root's targets.  With ``end_images`` (the main view's tree) a view the
+    depth limits cut shows its surface's image from the previous frame (``EndImages``)."""
 
-    def __init__(self, renderer) -> None:
+    def __init__(self, renderer, end_images: bool = False) -> None:
         self.renderer = renderer
         self.passes = MirrorPasses(renderer)
+        self.ends = EndImages(renderer) if end_images else None
 
     def render(self, root: View, levels: LevelStack, surfaces: SurfaceTable,
                settings: TreeSettings = TreeSettings()) -> TreeResult:
         """Draw every level below ``root`` (already drawn into ``levels[0]``) and composite them."""
         renderer = self.renderer
-        stats = renderer.stats
         root_node = ReflectionView(0, 0, root, (0, 0, *root.size))
         result = TreeResult([root_node], set())
         composites: list[PreparedComposites] = []
         root_proj = _mat(root.proj)
         planning = (root, root_proj, np.linalg.inv(root_proj))
+        ends = self._end_surfaces(surfaces, root)
         nodes = [root_node]
         rows = LevelRows.root(root)
         candidates, result.faded = surfaces.plan(rows, 1, *planning, 1, settings.depth_cap, root.hide)
+        end_candidates, to_ancestors = self._plan_ends(surfaces, rows, nodes, 1, planning, candidates, 1, settings,
+                                                       ends)
         level = 0
-        while candidates is not None and level < settings.depth_cap:
-            targets = levels.get(level + 1, candidates.size)
-            r = candidates.rows
-            pixels = np.array(self.passes.prepare_level(targets, levels[level], Claims(
-                r.node.astype(np.int64).tolist(), surfaces.entities[candidates.surface].tolist(),
-                rows.node[candidates.parent].astype(np.int64).tolist(),
-                list(map(tuple, candidates.scissor.tolist())))), np.int64)
-            keep = np.flatnonzero(pixels)
-            if len(keep) > 1 and (settings.level_budget is not None or stats.view_budget is not None):
-                # Budgets keep the surfaces of highest priority, then those covering the most
-                # pixels (this frame's claims), in claim order after.
-                rank = np.lexsort((keep, -pixels[keep], -surfaces.priority[candidates.surface[keep]]))
-                keep = keep[rank]
-            if settings.level_budget is not None and len(keep) > settings.level_budget:
-                result.dropped += len(keep) - settings.level_budget
-                keep = keep[: settings.level_budget]
-            left = stats.views_left()
-            if left is not None and len(keep) > left:
-                stats.views_cut += len(keep) - left
-                keep = keep[:left]
-            keep = np.sort(keep)
-            stats.views_spent += len(keep)
-            if not len(keep):
+        while candidates is not None or end_candidates is not None:
+            size = (candidates or end_candidates).size
+            targets = levels.get(level + 1, size)
+            pixels = self._claim(surfaces, targets, levels[level], rows, candidates, end_candidates)
+            children, views = [], []
+            if candidates is not None:
+                keep = self._within_budgets(surfaces, candidates, pixels[: len(candidates)], settings, result)
+                chosen = candidates.select(keep)
+                views = planned_views(surfaces, chosen, root.hide)
+                children = self._nodes(surfaces, chosen, views, nodes, level + 1)
+            ended = []
+            if end_candidates is not None:
+                with_pixels = np.flatnonzero(pixels[len(candidates or ()):])
+                chosen_ends = end_candidates.select(with_pixels)
+                end_matrices = [to_ancestors[i] for i in with_pixels.tolist()]
+                end_views = planned_views(surfaces, chosen_ends, root.hide)
+                ended = self._nodes(surfaces, chosen_ends, end_views, nodes, level + 1)
+            if not children and not ended:
                 break
-            chosen = candidates.select(keep)
-            views = planned_views(surfaces, chosen, root.hide)
-            states = surfaces.states
-            children = [ReflectionView(view.node, level + 1, view, (x0, y0, x1 - x0, y1 - y0), states[s], nodes[p], f)
-                        for view, (x0, y0, x1, y1), s, p, f in zip(
-                            views, chosen.rows.rect.astype(np.int64).tolist(), chosen.surface.tolist(),
-                            chosen.parent.tolist(), chosen.fade.tolist(), strict=True)]
-            path = choose_path(settings.path, len(children), submitted_triangles(renderer))
-            result.paths.add(path)
-            renderer.scene_pass.draw(views, targets, _BATCHED if path == "batched" else REFLECTION_LEVEL)
+            if children:
+                path = choose_path(settings.path, len(children), submitted_triangles(renderer))
+                result.paths.add(path)
+                renderer.scene_pass.draw(views, targets, _BATCHED if path == "batched" else REFLECTION_LEVEL)
+            if ended:
+                self.ends.draw(end_views, [node.surface.entity for node in ended], end_matrices, targets, root)
+                result.end_views.extend(ended)
             renderer.flush()
             result.views.extend(children)
             level += 1
-            nodes, rows = children, chosen.rows
-            # While the GPU draws the views: the next level's cull and cameras (measured: on
-            # the critical path when done after the views finish), then their composite rows.
-            candidates, faded = surfaces.plan(rows, level + 1, *planning, int(r.node[-1]) + 1, settings.depth_cap,
-                                              root.hide)
-            result.faded += faded
-            composites.append(self._prepare_composite(children, root, levels[level - 1].size))
-        if level and level == settings.depth_cap:
+            last = (candidates or end_candidates).rows.node
+            next_index = int(max(last[-1], end_candidates.rows.node[-1] if end_candidates else 0)) + 1
+            candidates = end_candidates = None
+            if children:
+                nodes, rows = children, chosen.rows
+                # While the GPU draws the views: the next level's cull and cameras (measured: on
+                # the critical path when done after the views finish), then their composite rows.
+                candidates, faded = surfaces.plan(rows, level + 1, *planning, next_index, settings.depth_cap,
+                                                  root.hide)
+                result.faded += faded
+                end_candidates, to_ancestors = self._plan_ends(surfaces, rows, nodes, level + 1, planning, candidates,
+                                                               next_index, settings, ends)
+            composites.append(self._prepare_composite(children + ended, root, levels[level - 1].size))
+        deepest = max((node.level for node in result.views), default=0)
+        if deepest and deepest == settings.depth_cap:
             # Reaching the cap is reported: how many views the surfaces' own limits still allowed.
-            result.capped = len(surfaces.cull(rows, level + 1, root_proj, root.size, MAX_TREE_DEPTH)[0])
+            result.capped = len(surfaces.cull(rows, deepest + 1, root_proj, root.size, MAX_TREE_DEPTH)[0])
         for depth in range(level, 0, -1):
             self.passes.composite_level(levels[depth - 1], levels[depth], composites[depth - 1])
+        if self.ends is not None:
+            if surfaces.end_image.any():
+                self.ends.keep(levels[0], root, frozenset(node.surface.entity for node in
+                                                          (*result.views[1:], *result.end_views)))
+            else:
+                self.ends.forget()
         return result
+
+    def _end_surfaces(self, surfaces: SurfaceTable, root: View) -> np.ndarray | None:
+        """The surfaces that may get end views this frame: an end image, and a view last frame
+        (None: no end views, as in a probe's tree, on the first frame or after a resize)."""
+        if self.ends is None or not surfaces.end_image.any() or not self.ends.ready(root.size):
+            return None
+        seen = np.isin(surfaces.entities, np.fromiter(self.ends.seen, np.int64, len(self.ends.seen)))
+        ends = surfaces.end_image & seen
+        return ends if ends.any() else None
+
+    @staticmethod
+    def _plan_ends(surfaces: SurfaceTable, rows: LevelRows, nodes: list[ReflectionView], depth: int,
+                   planning: tuple, candidates: Candidates | None, first_index: int, settings: TreeSettings,
+                   ends: np.ndarray | None) -> tuple[Candidates | None, list[glm.mat4]]:
+        """The end views of a level (the pairs the depth limits cut), numbered after its views
+        and drawn at their level's size, with the matrix that takes each one's exit plane to
+        the eye space of the view that saw its surface the last time up its chain (the end
+        image repeats that view's image, shrunk: ``EndImages``).  A pair whose surface is not
+        up its chain gets no end view (its closed look, as without one)."""
+        if ends is None:
+            return None, []
+        if candidates is not None:
+            first_index = int(candidates.rows.node[-1]) + 1
+        found, _ = surfaces.plan(rows, depth, *planning, first_index, settings.depth_cap, planning[0].hide,
+                                 ends=ends, size=candidates.size if candidates is not None else None)
+        if found is None:
+            return None, []
+        keep, matrices = [], []
+        for i, (p, s) in enumerate(zip(found.parent.tolist(), found.surface.tolist(), strict=True)):
+            node, entity = nodes[p], surfaces.states[s].entity
+            while node.parent is not None and node.surface.entity != entity:
+                node = node.parent
+            if node.parent is not None:
+                keep.append(i)
+                matrices.append(node.parent.view.view * glm.inverse(surfaces.states[s].carry))
+        if not keep:
+            return None, []
+        return found.select(np.array(keep)), matrices
+
+    def _claim(self, surfaces: SurfaceTable, targets, parent_targets, rows: LevelRows,
+               *sets: Candidates | None) -> np.ndarray:
+        """Every candidate's claim in ``targets`` (views, then end views): its pixels."""
+        sets = [c for c in sets if c is not None]
+        nodes = np.concatenate([c.rows.node for c in sets]).astype(np.int64)
+        entities = np.concatenate([surfaces.entities[c.surface] for c in sets])
+        parents = np.concatenate([rows.node[c.parent] for c in sets]).astype(np.int64)
+        scissors = np.concatenate([c.scissor for c in sets])
+        return np.array(self.passes.prepare_level(targets, parent_targets, Claims(
+            nodes.tolist(), entities.tolist(), parents.tolist(), list(map(tuple, scissors.tolist())))), np.int64)
+
+    def _within_budgets(self, surfaces: SurfaceTable, candidates: Candidates, pixels: np.ndarray,
+                        settings: TreeSettings, result: TreeResult) -> np.ndarray:
+        """The candidates with pixels that the level's and the frame's budgets keep (highest
+        priority first, then the most pixels), in claim order; spends the frame's budget."""
+        stats = self.renderer.stats
+        keep = np.flatnonzero(pixels)
+        if len(keep) > 1 and (settings.level_budget is not None or stats.view_budget is not None):
+            # Budgets keep the surfaces of highest priority, then those covering the most
+            # pixels (this frame's claims), in claim order after.
+            rank = np.lexsort((keep, -pixels[keep], -surfaces.priority[candidates.surface[keep]]))
+            keep = keep[rank]
+        if settings.level_budget is not None and len(keep) > settings.level_budget:
+            result.dropped += len(keep) - settings.level_budget
+            keep = keep[: settings.level_budget]
+        left = stats.views_left()
+        if left is not None and len(keep) > left:
+            stats.views_cut += len(keep) - left
+            keep = keep[:left]
+        stats.views_spent += len(keep)
+        return np.sort(keep)
+
+    @staticmethod
+    def _nodes(surfaces: SurfaceTable, chosen: Candidates, views: list[View], parents: list[ReflectionView],
+               level: int) -> list[ReflectionView]:
+        """The tree's nodes of a level's chosen candidates."""
+        states = surfaces.states
+        return [ReflectionView(view.node, level, view, (x0, y0, x1 - x0, y1 - y0), states[s], parents[p], f)
+                for view, (x0, y0, x1, y1), s, p, f in zip(
+                    views, chosen.rows.rect.astype(np.int64).tolist(), chosen.surface.tolist(),
+                    chosen.parent.tolist(), chosen.fade.tolist(), strict=True)]
 
     def _prepare_composite(self, children: list[ReflectionView], root: View,
                            parent_size: tuple[int, int]) -> PreparedComposites:
@@ -180,6 +273,8 @@ class ViewTree:
 
     def release(self) -> None:
         self.passes.release()
+        if self.ends is not None:
+            self.ends.release()
 
 
 def _to_level(rect: tuple[int, int, int, int], screen: tuple[int, int],

@@ -1,0 +1,99 @@
+"""Recursion that ends in an image: at the depth limit a mirror or portal shows its image from
+the previous frame, reprojected, instead of its closed look (Valve's Portal fills the end of
+the line; Unity3DPortals reprojects the previous frame past its depth limit).
+
+The main view tree keeps its finished root image each frame (``keep``: one blit into a
+history texture) with that frame's view-projection and the surfaces that had a view.  Next
+frame, a view the depth limits cut (``view_plan.SurfaceTable.plan(..., ends=True)``) of a
+surface with an end image, seen last frame, gets an "end view": claimed like any view, then
+filled by ``shaders/end_image.frag`` instead of the scene pass and composited like any view
+(tint, fades).  What it shows is what the last view through the same surface up its chain
+showed, shrunk onto this footprint: each pixel's ray meets the surface at x, and the view
+that saw the surface there before (two levels up for a facing pair) shows, around x, the
+levels beyond it in the previous frame's image.  So each frame the image holds a few more
+levels, and a still camera sees it converge to the deep recursion.  The first frame, a
+surface not seen last frame, and a surface not seen before up its chain keep the closed look.
+Probe faces' trees draw none (their image is not the main view's).
+"""
+from __future__ import annotations
+
+import moderngl
+from pyglm import glm
+
+from engine.render.bindings import HISTORY_UNIT, NODE_UNIT, PassState, apply_pass_state
+from engine.render.targets import RenderTargets, release_framebuffer
+from engine.render.views import View
+
+_END = PassState()  # no depth test, no blending: each pixel of a claim is written once
+
+
+class EndImages:
+    """The previous frame's main image and the pass that fills end views from it."""
+
+    def __init__(self, renderer) -> None:
+        self.renderer = renderer
+        self.ctx = renderer.ctx
+        self.program = renderer.shaders.program("fullscreen.vert", "end_image.frag")
+        self.program["history"].value = HISTORY_UNIT
+        self.program["node_map"].value = NODE_UNIT
+        self.vao = self.ctx.vertex_array(self.program, [])
+        self.history: moderngl.Texture | None = None
+        self._history_fbo: moderngl.Framebuffer | None = None
+        self.view_proj: glm.mat4 | None = None   # the previous frame's main view-projection
+        self.seen: frozenset[int] = frozenset()  # surfaces with a view (or end view) last frame
+
+    def ready(self, size: tuple[int, int]) -> bool:
+        """Whether a previous frame of this size is kept."""
+        return self.history is not None and self.history.size == size and self.view_proj is not None
+
+    def draw(self, views: list[View], surfaces: list[int], to_ancestors: list[glm.mat4], targets: RenderTargets,
+             root: View) -> None:
+        """Fill each end view (its claim already made in ``targets``) from the history:
+        ``surfaces[i]`` is the entity ``views[i]`` looks into, ``to_ancestors[i]`` takes its
+        exit plane to the eye space of the view that saw that surface last up its chain."""
+        ctx, renderer = self.ctx, self.renderer
+        targets.view_framebuffer.use()
+        apply_pass_state(ctx, _END, (0, 0, *targets.size))
+        targets.node.use(NODE_UNIT)
+        self.history.use(HISTORY_UNIT)
+        program = self.program
+        program["reproject"].write(self.view_proj * glm.inverse(root.view))
+        program["level_size"].value = targets.size
+        index, surface, to_ancestor = program["view_index"], program["surface"], program["to_ancestor"]
+        for view, entity, matrix in zip(views, surfaces, to_ancestors, strict=True):
+            ctx.scissor = view.scissor
+            renderer.bind_view(view)
+            index.value, surface.value = view.node, entity
+            to_ancestor.write(matrix)
+            self.vao.render(moderngl.TRIANGLES, vertices=3)
+            renderer.stats.draw_calls += 1
+        renderer.stats.passes += 1
+        renderer.checkpoint("end images")
+
+    def keep(self, root_targets: RenderTargets, root: View, seen: frozenset[int]) -> None:
+        """This frame's finished main image (after every composite), its view-projection and
+        the surfaces that had a view: what the next frame's end views read."""
+        size = root_targets.size
+        if self.history is None or self.history.size != size:
+            self._release_history()
+            self.history = self.ctx.texture(size, 4, dtype="f2")
+            self.history.filter = (moderngl.LINEAR, moderngl.LINEAR)
+            self._history_fbo = self.ctx.framebuffer([self.history])
+        self.ctx.copy_framebuffer(self._history_fbo, root_targets.sky_framebuffer)  # its one attachment: colour
+        self.view_proj = root.view_proj
+        self.seen = seen
+
+    def forget(self) -> None:
+        """No previous frame (a tree without end views this frame): the next starts closed."""
+        self.view_proj = None
+        self.seen = frozenset()
+
+    def _release_history(self) -> None:
+        if self._history_fbo is not None:
+            release_framebuffer(self._history_fbo)
+            self.history.release()
+        self.history, self._history_fbo = None, None
+
+    def release(self) -> None:
+        self._release_history()
+        self.vao.release()

@@ -1,0 +1,38 @@
+#version 410 core
+// Recursion that ends in an image (Valve's "end of the line", Unity3DPortals' fallback): a
+// view cut by the depth limit is filled, in the pixels its claim gave it, from the previous
+// frame's finished main image.  Each pixel's ray meets the plane the view looks out of at x;
+// to_ancestor takes x (back through the surface) into the eye space of the view that saw
+// the same surface last up the chain, and reproject (previous main view-projection x
+// inverse(main view): the chain's carries undone on last frame's camera) finds where that
+// view showed the surface at x.  There the previous image holds the levels beyond it: the
+// recursion's image repeats, shrunk, one period deeper (engine/render/end_images.py).
+#include "camera.glsl"
+
+uniform sampler2D history;      // the previous frame's main image (linear HDR, alpha 1)
+uniform usampler2D node_map;    // this level's node image (the claims)
+uniform uint view_index;        // this view's node index
+uniform uint surface;           // the surface it looks into (the pixel's seen id, as without the image)
+uniform mat4 reproject;         // previous main view-projection x inverse(main view)
+uniform mat4 to_ancestor;       // exit plane -> eye space of the last view through this surface
+uniform vec2 level_size;
+
+layout(location = 0) out vec4 out_color;
+layout(location = 1) out uint out_surface;
+layout(location = 2) out uint out_seen;
+
+void main() {
+    if (texelFetch(node_map, ivec2(gl_FragCoord.xy), 0).r != view_index) discard;
+    vec2 ndc = gl_FragCoord.xy / level_size * 2.0 - 1.0;
+    vec4 a = camera.inv_view_proj * vec4(ndc, -1.0, 1.0);
+    vec4 b = camera.inv_view_proj * vec4(ndc, 1.0, 1.0);
+    vec3 origin = a.xyz / a.w;
+    vec3 dir = b.xyz / b.w - origin;
+    float along = dot(camera.clip_plane.xyz, dir);
+    float t = abs(along) > 1e-8 ? -(dot(camera.clip_plane.xyz, origin) + camera.clip_plane.w) / along : 0.0;
+    vec4 previous = reproject * (to_ancestor * vec4(origin + dir * t, 1.0));
+    vec2 uv = previous.w > 1e-6 ? previous.xy / previous.w * 0.5 + 0.5 : gl_FragCoord.xy / level_size;
+    out_color = vec4(textureLod(history, clamp(uv, 0.0, 1.0), 0.0).rgb, 1.0);
+    out_surface = 0u;
+    out_seen = surface;
+}
