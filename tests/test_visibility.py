@@ -468,3 +468,34 @@ def test_a_portal_clone_is_drawn_where_its_source_is_and_follows_its_changes(sce
     runner.world.get(ents["bar"], Visibility).direct = True
     runner.frame()
     assert [runner.ids()[row, col] for col, row in halves] == [ents["bar"]] * 2
+
+
+def test_the_sample_level_has_a_vampire_no_mirror_shows_and_a_ghost_only_the_mirrors_show(ctx):
+    """The hall (games/hall_of_mirrors/hall.toml) from its mirror-wall pose: the vampire and
+    its head are seen directly and in none of the mirrors' pixels; the ghost is seen in the
+    mirrors' pixels only."""
+    from engine.core.frame_io import Output
+    from engine.render.targets import CaptureTarget
+    from games.hall_of_mirrors.level import HallOfMirrors
+    from shell.app import Engine
+
+    game = HallOfMirrors()
+    engine = Engine(game, ctx)
+    size = (320, 180)
+    capture = CaptureTarget(ctx, size)
+    try:
+        engine.place_camera(-1.5, 1.6, -1.0, 10.0, 0.0)
+        engine.frame(1.0 / 60.0, Output(capture.framebuffer, size))
+        assert capture.read_rgb().max() > 0
+        ids = engine.renderer.targets.read_ids()
+        surfaces = engine.renderer.targets.read_surface_ids()
+        names = game.names
+        mirrors = np.isin(surfaces, [names[f"mirror_{i}"] for i in range(1, 6)])
+        assert mirrors.mean() > 0.2
+        vampire = np.isin(ids, [names["vampire"], names["vampire_head"]])
+        assert vampire[~mirrors].sum() > 500 and not vampire[mirrors].any()
+        ghost = ids == names["ghost"]
+        assert ghost[mirrors].sum() > 100 and not ghost[~mirrors].any()
+    finally:
+        capture.release()
+        engine.close()
