@@ -7,6 +7,7 @@ from typing import Any
 from pyglm import glm
 
 from components.tracking import HALF_MAX, ComponentValueError, TrackedComponent, boolean, color, finite, vec3
+from components.visibility import check_surface_layers, surface_layers
 
 # Depth range the 24-bit depth buffer still resolves: far / near up to 1e7 keeps surfaces a
 # few percent of their distance apart distinct at the far end; beyond, entity pixels vanish.
@@ -18,15 +19,28 @@ _DEFAULT_FAR = 200.0
 
 @dataclass(eq=False)
 class Camera(TrackedComponent):
-    """A perspective camera. The active camera with the lowest entity id renders."""
+    """A perspective camera. The active camera with the lowest entity id renders.
+
+    ``shows_layers`` (None: all) and ``hides_layers`` are the reflection layers its view
+    shows (a camera's culling mask, ``components.visibility``); the mirrors and portals it
+    sees show at most those too."""
 
     SHAREABLE = False  # one entity's own state: see components.tracking
     fov_y: float = 60.0
     near: float = 0.05
     far: float = _DEFAULT_FAR
     active: bool = True
+    shows_layers: Any = None
+    hides_layers: Any = ()
+
+    @property
+    def layer_mask(self) -> int:
+        """The reflection layers its view shows, as bits."""
+        return surface_layers(self.shows_layers, self.hides_layers)
 
     def _validate(self, name: str, value: Any) -> Any:
+        if name in ("shows_layers", "hides_layers"):
+            return check_surface_layers(self, name, value)
         if name == "fov_y":
             return finite(self, name, value, low=1.0, high=179.0)
         if name in ("near", "far"):

@@ -42,4 +42,5 @@ class MainViewSystem(esper.Processor):
         _, cam, cam_t = camera
         targets = self.renderer.levels.get(0, output.size)
         views.main = camera_view(cam_t.world, cam.fov_y, cam.near, cam.far, output.size)
+        views.main.layers = cam.layer_mask  # its culling mask (Camera.shows_layers / hides_layers)
         self.renderer.scene_pass.draw([views.main], targets)

@@ -9,6 +9,7 @@ import pytest
 from pyglm import glm
 
 from components import (
+    Camera,
     ComponentValueError,
     DirectionalLight,
     Emissive,
@@ -343,6 +344,14 @@ name = "probe"
 hides_layers = [1, 3]
 
 [[entity]]
+name = "camera"
+[entity.Transform]
+position = [0.0, 1.7, 5.0]
+[entity.Camera]
+shows_layers = [0, 1, 3]
+hides_layers = [1]
+
+[[entity]]
 name = "vampire"
 [entity.Transform]
 position = [0.0, 1.0, 0.0]
@@ -371,6 +380,7 @@ def test_a_level_file_carries_visibility_and_the_surfaces_layers_and_saves_them_
         assert world.get(names["mirror"], Mirror).layer_mask == ALL_LAYERS & ~(1 << 3)
         assert world.get(names["door"], Portal).layer_mask == 0b101
         assert world.get(names["probe"], ReflectionProbe).layer_mask == ALL_LAYERS & ~0b1010
+        assert world.get(names["camera"], Camera).layer_mask == 0b1001
         saved = tmp_path / "saved.toml"
         save_level(world, saved, names)
         again = World("visibility-level-again")
@@ -380,6 +390,7 @@ def test_a_level_file_carries_visibility_and_the_surfaces_layers_and_saves_them_
             assert again.get(names2["vampire"], Visibility).layers == (0, 3)
             assert again.get(names2["mirror"], Mirror).hides_layers == (3,)
             assert again.get(names2["door"], Portal).shows_layers == (0, 2)
+            assert again.get(names2["camera"], Camera).layer_mask == 0b1001
         finally:
             again.close()
     finally:
@@ -396,6 +407,7 @@ def test_a_level_file_carries_visibility_and_the_surfaces_layers_and_saves_them_
     ("hides_layers = [3]", "hides_layers = [-1]", "Mirror.hides_layers", r"layer numbers in \[0, 15\]"),
     ("shows_layers = [0, 2]", "shows_layers = [\"all\"]", "Portal.shows_layers", r"layer numbers"),
     ("hides_layers = [1, 3]", "hides_layers = [99]", "ReflectionProbe.hides_layers", r"\[0, 15\]"),
+    ("shows_layers = [0, 1, 3]", "shows_layers = 0", "Camera.shows_layers", r"list of layer numbers"),
 ])
 def test_a_bad_value_in_a_level_file_is_refused_naming_the_field_and_line(tmp_path, old, new, field, reason):
     from engine.assets.level_file import LevelError, load_level
@@ -499,3 +511,42 @@ def test_the_sample_level_has_a_vampire_no_mirror_shows_and_a_ghost_only_the_mir
     finally:
         capture.release()
         engine.close()
+
+
+@pytest.mark.parametrize("camera_layers", [{}, {"hides_layers": [3]}])
+def test_the_camera_shows_its_layers_directly_and_in_what_it_sees_through_surfaces(scene, camera_layers):
+    """A camera's culling mask: the two-mirror scene seen by a camera hiding layer 3.  The
+    right mirror shows every layer, so what it shows is the camera's: the layer-3 box is
+    nowhere, the layer-0 box directly and in both mirrors."""
+
+    ents = {}
+    runner = scene(two_mirrors(ents), SIZE)
+    for _, camera in runner.world.query_one(Camera):
+        for field, value in camera_layers.items():
+            setattr(camera, field, value)
+    runner.frame()
+    ids = runner.ids()
+    left, right = in_surface(runner, ents["left"]), in_surface(runner, ents["right"])
+    outside = ~(left | right)
+    shown = not camera_layers
+    assert ((ids[outside] == ents["layer3"]).sum() > 30) == shown
+    assert ((ids[right] == ents["layer3"]).sum() > 30) == shown
+    assert (ids == ents["layer3"]).any() == shown
+    for where in (outside, left, right):
+        assert (ids[where] == ents["layer0"]).sum() > 30
+
+
+def test_a_camera_showing_only_a_layer_sees_nothing_else_not_even_the_mirrors(scene):
+    """Everything without a Visibility is on layer 0: a camera showing only layer 3 draws the
+    layer-3 box alone; the mirrors are not drawn, so they reflect nothing (a surface's view
+    claims only the pixels where it was drawn)."""
+
+    ents = {}
+    runner = scene(two_mirrors(ents), SIZE)
+    for _, camera in runner.world.query_one(Camera):
+        camera.shows_layers = [3]
+    runner.frame()
+    ids = runner.ids()
+    assert set(np.unique(ids).tolist()) == {0, ents["layer3"]}
+    assert (ids == ents["layer3"]).sum() > 200
+    assert runner.stats.reflection_views == 0
