@@ -66,6 +66,7 @@ from engine.assets.texture_data import checker_texture
 from engine.core.frame_io import Output
 from engine.core.game import Game
 from engine.core.world import World
+from engine.render.end_images import EndImages
 from engine.render.gl_context import create_headless_context
 from engine.render.mirror_passes import MirrorPasses
 from engine.render.present import ANTIALIAS_MODES
@@ -153,7 +154,8 @@ class PlanClock:
     While open (``with PlanClock() as clock``) it wraps, on their classes, ``ViewTree.render``
     and the calls it makes that are not planning: a level's GL work
     (``MirrorPasses.prepare_level``: the claims; ``ScenePass.draw``: the views;
-    ``Renderer.flush``; ``MirrorPasses.composite_level``) and the composite's CPU half
+    ``Renderer.flush``; ``MirrorPasses.composite_level``; ``EndImages.draw`` and ``keep``:
+    the end images' pass and blit) and the composite's CPU half
     (``ViewTree._prepare_composite``, where there is one).  Planning is the time inside
     ``render`` less the time in those: the candidate search and cull (``SurfaceTable.cull``),
     the claims' rectangles, each view's camera and view block, ordering and the level budget.
@@ -164,7 +166,8 @@ class PlanClock:
     """
 
     NOT_PLANNING = ((MirrorPasses, "prepare_level"), (ScenePass, "draw"), (Renderer, "flush"),
-                    (MirrorPasses, "composite_level"), (ViewTree, "_prepare_composite"))
+                    (MirrorPasses, "composite_level"), (ViewTree, "_prepare_composite"), (EndImages, "draw"),
+                    (EndImages, "keep"))
     OPTIONAL = ((ViewTree, "_prepare_composite"),)  # the others must be there: a renamed GL call
     # would otherwise count as planning without a word
 

@@ -16,8 +16,8 @@ from components import (
     MeshRef,
     Mirror,
     Portal,
-    Reflective,
     ReflectionProbe,
+    Reflective,
     Transform,
 )
 from engine.assets.mesh import box, quad, sphere
@@ -93,7 +93,8 @@ def test_probe_faces_spend_the_views_budget_first_captures_whole(scene):
     waits whole (nothing samples a half-made cube) and is captured next frame."""
     owners = []
     runner = scene(lambda world: owners.extend(_probe_room(world, [
-        ReflectionProbe(resolution=16, refresh="once", depth=0), ReflectionProbe(resolution=16, refresh="once", depth=0),
+        ReflectionProbe(resolution=16, refresh="once", depth=0),
+        ReflectionProbe(resolution=16, refresh="once", depth=0),
         ReflectionProbe(resolution=16, refresh="once", depth=0, priority=-1)])), (160, 120))
     runner.world.resources[ViewBudget] = ViewBudget(views=8)
     runner.frame()

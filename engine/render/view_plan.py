@@ -256,10 +256,10 @@ class SurfaceTable:
         distance to its bounding sphere) and its angle fade (by the angle between its normal
         and the direction to the eye), each falling linearly from 1 at start to 0 at end."""
         to_eye = eyes[:, :3] - self.centres[s]
-        distance = np.linalg.norm(to_eye, axis=1)
+        distance = np.sqrt((to_eye * to_eye).sum(axis=1))
         fade = self.fade[s]
         by_distance = (fade[:, 1] - np.maximum(distance - self.radii[s], 0.0)) / (fade[:, 1] - fade[:, 0])
-        cosine = np.einsum("ki,ki->k", to_eye, self.planes[s, :3]) / np.maximum(distance, 1e-9)
+        cosine = (to_eye * self.planes[s, :3]).sum(axis=1) / np.maximum(distance, 1e-9)
         angle = np.degrees(np.arccos(np.clip(cosine, -1.0, 1.0)))
         by_angle = (fade[:, 3] - angle) / (fade[:, 3] - fade[:, 2])
         return np.clip(by_distance, 0.0, 1.0) * np.clip(by_angle, 0.0, 1.0)
@@ -356,18 +356,19 @@ def _oblique_projections(root_proj: np.ndarray, inv_root_proj: np.ndarray, inv_v
     the clip plane, in view space, is the near plane; the root projection where the eye is
     too close to the plane.  One row changes, so each inverse is a rank-one update of the
     root's (Sherman-Morrison), not a 4 x 4 inversion."""
-    plane = np.einsum("kji,kj->ki", inv_view, clip)  # planes transform by the inverse transpose; the
+    plane = np.matmul(clip[:, None, :], inv_view)[:, 0]  # planes transform by the inverse transpose; the
     # construction below is unchanged by the plane's (positive) scale, so it is not normalised
     near = root_proj[2, 3] / (root_proj[2, 2] - 1.0)
-    safe = np.abs(np.einsum("ki,ki->k", clip, eye)) > OBLIQUE_SAFE_NEARS * near
+    safe = np.abs((clip * eye).sum(axis=1)) > OBLIQUE_SAFE_NEARS * near
     q = np.sign(plane[:, :2]) @ inv_root_proj[:, :2].T + (inv_root_proj[:, 2] + inv_root_proj[:, 3])
-    c = plane * (2.0 / np.einsum("ki,ki->k", plane, q))[:, None]
+    c = plane * (2.0 / (plane * q).sum(axis=1))[:, None]
     change = np.where(safe[:, None], c - root_proj[3] - root_proj[2], 0.0)  # the third row's change
     proj = np.repeat(root_proj[None], len(plane), axis=0)
     proj[:, 2] += change
+    # The inverse: P = P0 + e2 change^T, so P^-1 = P0^-1 - (P0^-1 e2)(change^T P0^-1) / (1 + change^T P0^-1 e2).
     column = inv_root_proj[:, 2]
-    row = change @ inv_root_proj
-    inv_proj = inv_root_proj - column[None, :, None] * (row / (1.0 + change @ column)[:, None])[:, None, :]
+    row = (change @ inv_root_proj) / (1.0 + change @ column)[:, None]
+    inv_proj = inv_root_proj - column[None, :, None] * row[:, None, :]
     return proj, inv_proj
 
 

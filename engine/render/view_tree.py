@@ -121,7 +121,7 @@ class ViewTree:
         composites: list[PreparedComposites] = []
         root_proj = _mat(root.proj)
         planning = (root, root_proj, np.linalg.inv(root_proj))
-        ends = self._end_surfaces(surfaces, root)
+        ends = self._end_surfaces(surfaces, root, settings.depth_cap)
         nodes = [root_node]
         rows = LevelRows.root(root)
         candidates, result.faded = surfaces.plan(rows, 1, *planning, 1, settings.depth_cap, root.hide)
@@ -184,30 +184,33 @@ class ViewTree:
                 self.ends.forget()
         return result
 
-    def _end_surfaces(self, surfaces: SurfaceTable, root: View) -> np.ndarray | None:
-        """The surfaces that may get end views this frame: an end image, and a view last frame
-        (None: no end views, as in a probe's tree, on the first frame or after a resize)."""
+    def _end_surfaces(self, surfaces: SurfaceTable, root: View, depth_cap: int) -> tuple[np.ndarray, int] | None:
+        """The surfaces that may get end views this frame (an end image, and a view last
+        frame) and the first level where one can (None: no end views, as in a probe's tree,
+        on the first frame or after a resize)."""
         if self.ends is None or not surfaces.end_image.any() or not self.ends.ready(root.size):
             return None
-        seen = np.isin(surfaces.entities, np.fromiter(self.ends.seen, np.int64, len(self.ends.seen)))
-        ends = surfaces.end_image & seen
-        return ends if ends.any() else None
+        seen = self.ends.seen
+        ends = surfaces.end_image & np.array([entity in seen for entity in surfaces.entities.tolist()], bool)
+        if not ends.any():
+            return None
+        return ends, int(np.minimum(surfaces.max_depth[ends], depth_cap).min()) + 1
 
     @staticmethod
     def _plan_ends(surfaces: SurfaceTable, rows: LevelRows, nodes: list[ReflectionView], depth: int,
                    planning: tuple, candidates: Candidates | None, first_index: int, settings: TreeSettings,
-                   ends: np.ndarray | None) -> tuple[Candidates | None, list[glm.mat4]]:
+                   ends: tuple[np.ndarray, int] | None) -> tuple[Candidates | None, list[glm.mat4]]:
         """The end views of a level (the pairs the depth limits cut), numbered after its views
         and drawn at their level's size, with the matrix that takes each one's exit plane to
         the eye space of the view that saw its surface the last time up its chain (the end
         image repeats that view's image, shrunk: ``EndImages``).  A pair whose surface is not
         up its chain gets no end view (its closed look, as without one)."""
-        if ends is None:
-            return None, []
+        if ends is None or depth < ends[1]:
+            return None, []  # no surface's depth limits cut this level
         if candidates is not None:
             first_index = int(candidates.rows.node[-1]) + 1
         found, _ = surfaces.plan(rows, depth, *planning, first_index, settings.depth_cap, planning[0].hide,
-                                 ends=ends, size=candidates.size if candidates is not None else None)
+                                 ends=ends[0], size=candidates.size if candidates is not None else None)
         if found is None:
             return None, []
         keep, matrices = [], []
@@ -226,10 +229,16 @@ class ViewTree:
                *sets: Candidates | None) -> np.ndarray:
         """Every candidate's claim in ``targets`` (views, then end views): its pixels."""
         sets = [c for c in sets if c is not None]
-        nodes = np.concatenate([c.rows.node for c in sets]).astype(np.int64)
-        entities = np.concatenate([surfaces.entities[c.surface] for c in sets])
-        parents = np.concatenate([rows.node[c.parent] for c in sets]).astype(np.int64)
-        scissors = np.concatenate([c.scissor for c in sets])
+        if len(sets) == 1:
+            (c,) = sets
+            nodes, entities, scissors = c.rows.node, surfaces.entities[c.surface], c.scissor
+            parents = rows.node[c.parent]
+        else:
+            nodes = np.concatenate([c.rows.node for c in sets])
+            entities = np.concatenate([surfaces.entities[c.surface] for c in sets])
+            parents = np.concatenate([rows.node[c.parent] for c in sets])
+            scissors = np.concatenate([c.scissor for c in sets])
+        nodes, parents = nodes.astype(np.int64), parents.astype(np.int64)
         return np.array(self.passes.prepare_level(targets, parent_targets, Claims(
             nodes.tolist(), entities.tolist(), parents.tolist(), list(map(tuple, scissors.tolist())))), np.int64)
 
