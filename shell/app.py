@@ -183,7 +183,7 @@ class Engine:
         checks = self.renderer.path_checks
         budget = self.world.resources.get(ViewBudget) or ViewBudget()
         stats = RenderStats(paths_verified=checks.verified(), paths_refused=checks.refused(),
-                            view_budget=budget.views, probe_ms_budget=budget.probe_ms)
+                            view_budget=budget.views, probe_ms_budget=budget.probe_ms, pixel_budget=budget.pixels)
         self.world.resources[RenderStats] = self.renderer.stats = stats
         self.world.step(dt)
         self.world.resources[Input].end_frame()

@@ -59,6 +59,8 @@ def overlay_lines(engine, frame_times: Sequence[float]) -> list[str]:
         f"probe captures {stats.probe_captures} ({stats.probe_faces} faces)",
         f"view budget {'none' if stats.view_budget is None else stats.view_budget}: spent {stats.views_spent}, "
         f"cut {stats.views_cut}",
+        f"pixel budget {'none' if stats.pixel_budget is None else stats.pixel_budget}: spent {stats.pixels_spent}, "
+        f"{stats.levels_downscaled} levels smaller",
         f"probe budget {'none' if stats.probe_ms_budget is None else f'{stats.probe_ms_budget:g} ms'}: "
         f"spent {stats.probe_ms_spent:.1f} ms, {stats.probe_faces_deferred} faces wait",
         f"reflection path {stats.reflection_path or '-'} (set: {reflect.path}, budget {budget})",

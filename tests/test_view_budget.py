@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
 import pytest
 from pyglm import glm
 
@@ -155,6 +156,7 @@ def test_the_overlay_reports_the_budget(scene):
     lines = overlay_lines(runner.engine, [0.02])
     assert f"view budget 5: spent 5, cut {8 - 5}" in lines
     assert "probe budget 2 ms: spent 0.0 ms, 0 faces wait" in lines
+    assert f"pixel budget none: spent {runner.stats.pixels_spent}, 0 levels smaller" in lines
 
 
 @pytest.mark.parametrize("kwargs", [{"views": -1}, {"views": 2.5}, {"views": True}, {"probe_ms": 0.0},
@@ -169,3 +171,31 @@ def test_priorities_are_checked():
     for component in (Mirror, Portal, ReflectionProbe):
         with pytest.raises(ComponentValueError, match=f"{component.__name__}.priority"):
             component(priority=1.5)
+
+
+def test_a_pixel_budget_draws_a_level_at_lower_resolution_instead_of_cutting_it(scene):
+    """Last frame's coverage of level 1 is known; a budget of a quarter of it draws level 1
+    at half resolution (scale sqrt(1/4)): every view kept, each still showing the panel,
+    and the pixels drawn within the budget."""
+    ents = {}
+    runner = scene(mirror_grid(ents, columns=4, rows=2), (320, 200))
+    runner.frame()
+    full = runner.stats.pixels_spent
+    levels = runner.engine.renderer.levels
+    assert full > 0 and levels[1].size == (320, 200)
+    runner.world.resources[ViewBudget] = ViewBudget(pixels=full // 4)
+    runner.frame()
+    stats = runner.stats
+    assert stats.levels_downscaled == 1 and stats.views_cut == 0 and stats.reflection_views == 8
+    assert levels[1].size == (160, 100)
+    assert stats.pixels_spent <= full // 4
+    surface = runner.engine.renderer.targets.read_surface_ids()
+    seen = runner.ids()
+    on_mirrors = np.isin(surface, ents["mirrors"])
+    assert (seen[on_mirrors] == ents["panel"]).mean() > 0.75  # half resolution loses edge pixels (as resolution_scale)
+    for mirror in ents["mirrors"]:
+        assert (seen[surface == mirror] == ents["panel"]).mean() > 0.5
+    # A budget below what the lowest resolution needs cuts views instead.
+    runner.world.resources[ViewBudget] = ViewBudget(pixels=full // 100)
+    runner.frame()
+    assert runner.stats.views_cut >= 1 and runner.stats.pixels_spent <= full // 100

@@ -60,6 +60,13 @@ class RenderStats:
     probe_ms_budget: float | None = None
     probe_ms_spent: float = 0.0         # the captures' cost by their measured ms a face
     probe_faces_deferred: int = 0       # faces due that the budgets left for a later frame
+    pixel_budget: int | None = None
+    pixels_spent: int = 0               # reflection pixels drawn, at the screen's resolution
+    levels_downscaled: int = 0          # levels the pixel budget drew at a lower resolution
+
+    def pixels_left(self) -> int | None:
+        """Reflection pixels the frame's budget still allows (None: no limit)."""
+        return None if self.pixel_budget is None else max(self.pixel_budget - self.pixels_spent, 0)
 
     def views_left(self) -> int | None:
         """Views the frame's budget still allows (None: no limit)."""

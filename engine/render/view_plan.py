@@ -266,7 +266,7 @@ class SurfaceTable:
 
     def plan(self, parents: LevelRows, depth: int, root: View, root_proj: np.ndarray, inv_root_proj: np.ndarray,
              first_index: int, depth_cap: int, hide: int, ends: np.ndarray | None = None,
-             size: tuple[int, int] | None = None) -> tuple[Candidates | None, int]:
+             size: tuple[int, int] | None = None, scale: float = 1.0) -> tuple[Candidates | None, int]:
         """The next level's candidate views from ``parents`` (level ``depth - 1``): the
         cull's pairs, each with its camera (the parent's carried through the surface: for a
         mirror its reflection, for a portal look-out x half turn x inverse(look-in), as in
@@ -275,7 +275,8 @@ class SurfaceTable:
         distance alone), its claim rectangle in the level's pixels, and its packed Camera
         block and batched-path row (None when nothing can be seen), and how many pairs the
         fades took out.  ``ends``: the end views of those surfaces instead (``cull``);
-        ``size``: the level's pixels when another set of candidates chose them."""
+        ``size``: the level's pixels when another set of candidates chose them; ``scale``:
+        a factor on the level's resolution (the frame's pixel budget, ``ViewTree``)."""
         p, s, rects, weights = self.cull(parents, depth, root_proj, root.size, depth_cap, ends)
         faded = 0 if weights is None else int((weights == 0.0).sum())
         fade = None if weights is None else weights[weights > 0.0]
@@ -283,7 +284,7 @@ class SurfaceTable:
         if not k:
             return None, faded
         if size is None:
-            scale = float(self.scale[s].max())
+            scale *= float(self.scale[s].max())
             size = (max(1, round(root.size[0] * scale)), max(1, round(root.size[1] * scale)))
         parent = LevelRows(parents.data[p])
         data = np.empty((k, LevelRows.WIDTH))

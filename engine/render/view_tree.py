@@ -27,6 +27,7 @@ level (``TreeSettings.level_budget``: the views with the most claimed pixels are
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -51,6 +52,7 @@ from engine.render.views import View
 # The deepest a tree may go (each level is one more set of root-sized targets); the depth
 # limits of Mirror and Portal components take values up to this.
 MAX_TREE_DEPTH = MAX_VIEW_DEPTH  # the depth cap's limit: the components' own
+MIN_LEVEL_SCALE = 0.25  # the lowest resolution factor the pixel budget draws a level at
 _BATCHED = SceneOptions(clear=False, masked=True, sky=False, batched=True, reflection_filter=True)
 
 # The mirror and portal records the surfaces stage publishes (``engine.resources.SurfaceState``,
@@ -111,6 +113,7 @@ class ViewTree:
         self.renderer = renderer
         self.passes = MirrorPasses(renderer)
         self.ends = EndImages(renderer) if end_images else None
+        self.coverage: dict[int, int] = {}  # level -> its views' claimed pixels last frame (screen pixels)
 
     def render(self, root: View, levels: LevelStack, surfaces: SurfaceTable,
                settings: TreeSettings = TreeSettings()) -> TreeResult:
@@ -124,7 +127,8 @@ class ViewTree:
         ends = self._end_surfaces(surfaces, root, settings.depth_cap)
         nodes = [root_node]
         rows = LevelRows.root(root)
-        candidates, result.faded = surfaces.plan(rows, 1, *planning, 1, settings.depth_cap, root.hide)
+        candidates, result.faded = surfaces.plan(rows, 1, *planning, 1, settings.depth_cap, root.hide,
+                                                 scale=self._level_scale(1))
         end_candidates, to_ancestors = self._plan_ends(surfaces, rows, nodes, 1, planning, candidates, 1, settings,
                                                        ends)
         level = 0
@@ -134,7 +138,8 @@ class ViewTree:
             pixels = self._claim(surfaces, targets, levels[level], rows, candidates, end_candidates)
             children, views = [], []
             if candidates is not None:
-                keep = self._within_budgets(surfaces, candidates, pixels[: len(candidates)], settings, result)
+                keep = self._within_budgets(surfaces, candidates, pixels[: len(candidates)], settings, result,
+                                            level + 1, root.size)
                 chosen = candidates.select(keep)
                 views = planned_views(surfaces, chosen, root.hide)
                 children = self._nodes(surfaces, chosen, views, nodes, level + 1)
@@ -165,7 +170,7 @@ class ViewTree:
                 # While the GPU draws the views: the next level's cull and cameras (measured: on
                 # the critical path when done after the views finish), then their composite rows.
                 candidates, faded = surfaces.plan(rows, level + 1, *planning, next_index, settings.depth_cap,
-                                                  root.hide)
+                                                  root.hide, scale=self._level_scale(level + 1))
                 result.faded += faded
                 end_candidates, to_ancestors = self._plan_ends(surfaces, rows, nodes, level + 1, planning, candidates,
                                                                next_index, settings, ends)
@@ -242,13 +247,31 @@ class ViewTree:
         return np.array(self.passes.prepare_level(targets, parent_targets, Claims(
             nodes.tolist(), entities.tolist(), parents.tolist(), list(map(tuple, scissors.tolist())))), np.int64)
 
+    def _level_scale(self, level: int) -> float:
+        """The resolution factor of ``level`` under the frame's pixel budget: 1, or the scale
+        at which last frame's coverage of the level (its pixels at the screen's resolution)
+        fits in the pixels left (at least ``MIN_LEVEL_SCALE``; what still does not fit is cut
+        after the claims)."""
+        stats = self.renderer.stats
+        left, needed = stats.pixels_left(), self.coverage.get(level)
+        if left is None or not needed or needed <= left:
+            return 1.0
+        stats.levels_downscaled += 1
+        return max(MIN_LEVEL_SCALE, math.sqrt(left / needed))
+
     def _within_budgets(self, surfaces: SurfaceTable, candidates: Candidates, pixels: np.ndarray,
-                        settings: TreeSettings, result: TreeResult) -> np.ndarray:
+                        settings: TreeSettings, result: TreeResult, level: int, screen: tuple[int, int]) -> np.ndarray:
         """The candidates with pixels that the level's and the frame's budgets keep (highest
-        priority first, then the most pixels), in claim order; spends the frame's budget."""
+        priority first, then the most pixels), in claim order; spends the frame's budgets and
+        records the level's coverage for the next frame's pixel budget."""
         stats = self.renderer.stats
         keep = np.flatnonzero(pixels)
-        if len(keep) > 1 and (settings.level_budget is not None or stats.view_budget is not None):
+        width, height = candidates.size
+        on_screen = pixels * (screen[0] * screen[1] / (width * height))  # the claims' pixels, at screen resolution
+        self.coverage[level] = int(on_screen.sum())
+        pixel_budget = stats.pixels_left()
+        if len(keep) > 1 and (settings.level_budget is not None or stats.view_budget is not None
+                              or pixel_budget is not None):
             # Budgets keep the surfaces of highest priority, then those covering the most
             # pixels (this frame's claims), in claim order after.
             rank = np.lexsort((keep, -pixels[keep], -surfaces.priority[candidates.surface[keep]]))
@@ -260,7 +283,12 @@ class ViewTree:
         if left is not None and len(keep) > left:
             stats.views_cut += len(keep) - left
             keep = keep[:left]
+        if pixel_budget is not None:  # spent by the pixels drawn, at the level's resolution
+            fits = np.cumsum(pixels[keep]) <= pixel_budget
+            stats.views_cut += int(len(keep) - fits.sum())
+            keep = keep[fits]
         stats.views_spent += len(keep)
+        stats.pixels_spent += int(pixels[keep].sum())
         return np.sort(keep)
 
     @staticmethod
