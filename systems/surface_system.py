@@ -45,14 +45,19 @@ class SurfaceSystem(esper.Processor):
         self.mirrors: dict[int, SurfaceState] = {}
         self.portals: dict[int, SurfaceState] = {}
         self.flows: dict[int, WaterFlow] = {}  # each water mirror's waves, for the entity's life
+        self._open_portals: dict[int, int] | None = None  # the pairs the portal states were made for
 
     def process(self, dt: float) -> None:
-        self._refresh_mirrors()
+        changed = self._refresh_mirrors()
         self._advance_waves(dt)
-        self._refresh_portals()
-        self.world.resources[Surfaces] = Surfaces(dict(self.mirrors), dict(self.portals))
+        changed |= self._refresh_portals()
+        if changed or Surfaces not in self.world.resources:
+            # A new resource only when a surface changed: the view planner's arrays
+            # (``Surfaces.table``, built on first use) are kept while none does.
+            self.world.resources[Surfaces] = Surfaces(dict(self.mirrors), dict(self.portals))
 
-    def _refresh_mirrors(self) -> None:
+    def _refresh_mirrors(self) -> bool:
+        """Mirror states redone for what changed; whether any was."""
         world = self.world
         touched = world.changed(Mirror) | world.changed(MeshRef)
         touched |= {e for e in world.changed(Material) if e in self.mirrors}  # a normal map given or taken
@@ -88,6 +93,7 @@ class SurfaceSystem(esper.Processor):
                 flow = self.flows.setdefault(entity, WaterFlow())
             self.mirrors[entity] = self._mirror_state(entity, mirror, mesh_ref, transform,
                                                       world.try_get(entity, Material), water, flow)
+        return bool(touched)
 
     def _advance_waves(self, dt: float) -> None:
         """Every water's waves move on by this frame's ``dt`` at its speed and direction now
@@ -104,11 +110,18 @@ class SurfaceSystem(esper.Processor):
                 water.offset = (u + water.direction[0] * step, v + water.direction[1] * step)
             flow.offset = water.offset
 
-    def _refresh_portals(self) -> None:
-        """Portals depend on their partner's pose too; there are few, so all are redone."""
+    def _refresh_portals(self) -> bool:
+        """Portals depend on their partner's pose too; there are few, so all are redone when
+        a portal, its pose or a pairing changed (whether they were)."""
         world = self.world
-        self.portals = {}
         open_portals = frame_rules(world).open_portals  # the rule travel and slicing use too
+        frame = world.frame
+        moved = frame.moved | frame.added | frame.removed
+        if (open_portals == self._open_portals and not world.changed(Portal)
+                and not any(e in moved or p in moved for e, p in open_portals.items())):
+            return False
+        self._open_portals = dict(open_portals)
+        self.portals = {}
         for entity, (portal, transform) in world.query(Portal, Transform):
             partner = open_portals.get(entity)
             if partner is None:
@@ -122,6 +135,7 @@ class SurfaceSystem(esper.Processor):
                 pair_transform(transform.world, out.world), portal_plane(out.world), partner,
                 portal.max_depth, portal.enabled, layers=portal.layer_mask, priority=portal.priority,
                 end_image=portal.end_image)
+        return True
 
     @staticmethod
     def _mirror_state(entity: int, mirror: Mirror, mesh_ref: MeshRef, transform: Transform,

@@ -105,3 +105,42 @@ def test_every_view_shows_inside_its_rectangle_and_faces_its_parent(ctx, trees, 
                         f"{name} view {node.index}: corner at {sx:.1f}, {sy:.1f} outside {node.rect}"
                     checked += 1
     assert checked >= 20
+
+
+def test_the_surfaces_and_their_arrays_are_kept_while_no_surface_changes(scene):
+    """The planner's arrays are built once while the mirrors and portals stand still (a
+    moving camera or box changes nothing), and made again when one moves or changes."""
+    import math
+
+    from components import Material, MeshRef, Mirror, Transform
+    from engine.assets.mesh import box, quad
+    from engine.assets.portals import spawn_portal_pair
+    from engine.resources import Surfaces
+    from tests.support import look_from
+
+    ents = {}
+
+    def build(world):
+        look_from(world, (0.0, 1.5, 4.0), target=(0.0, 1.5, -2.0))
+        ents["mirror"] = world.spawn(Transform(position=(-1.5, 1.5, -2.0)), MeshRef(quad(2.0, 2.0)),
+                                     Material(), Mirror())
+        ents["box"] = world.spawn(Transform(position=(0.0, 0.5, 0.0)), MeshRef(box()), Material())
+        ents["a"], ents["b"] = spawn_portal_pair(world, (1.5, 1.5, -2.0), None, (6.0, 1.5, 0.0),
+                                                 glm.angleAxis(math.pi / 2, glm.vec3(0, 1, 0)))
+    runner = scene(build, (96, 64))
+    runner.frame()
+    surfaces = runner.world.resources[Surfaces]
+    table = surfaces.table
+    runner.world.get(ents["box"], Transform).position = glm.vec3(0.3, 0.5, 0.0)
+    runner.frame()
+    assert runner.world.resources[Surfaces] is surfaces and surfaces.table is table
+    runner.world.get(ents["b"], Transform).position = glm.vec3(6.0, 1.6, 0.0)  # a portal's partner moves
+    runner.frame()
+    moved = runner.world.resources[Surfaces]
+    assert moved is not surfaces and moved.portals[ents["a"]].carry != surfaces.portals[ents["a"]].carry
+    runner.frame()
+    assert runner.world.resources[Surfaces] is moved
+    runner.world.get(ents["mirror"], Mirror).reflect_rate = 0.5
+    runner.frame()
+    assert runner.world.resources[Surfaces] is not moved
+    assert runner.world.resources[Surfaces].mirrors[ents["mirror"]].reflect_rate == 0.5
