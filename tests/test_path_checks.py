@@ -260,3 +260,24 @@ def test_the_layered_target_state_is_what_a_layered_draw_needs_here_and_names_a_
     face_zero_only(monkeypatch)
     problems = checks.layered_target_state()["problems"]
     assert "the colour attachment is not layered" in problems and "the depth attachment is not layered" in problems
+
+
+def test_paths_that_both_draw_only_the_sky_prove_nothing_and_are_refused(scene, ctx, fresh_checks, monkeypatch):
+    """With the check's quads hidden from every view, the plain capture and the alternative
+    agree on a sky-only cube; the check must not take that for a verified path."""
+    from engine.render import path_checks
+    from engine.render.instances import visibility_code
+
+    original = path_checks._fill_row
+
+    def hidden(row, face):
+        original(row, face)
+        row["tint"] = (1.0, 1.0, 1.0, visibility_code(0xF, 1))  # hidden in every kind of view
+    monkeypatch.setattr(path_checks, "_fill_row", hidden)
+    runner = scene(lambda world: None, (32, 32))
+    checks = runner.engine.renderer.path_checks
+    for name in ("direct_faces", "layered_capture"):
+        verdict = checks.check(name)
+        assert verdict.status == "refused" and "shows no check quad" in verdict.detail, verdict
+    monkeypatch.setattr(path_checks, "_fill_row", original)
+    assert checks.check("layered_capture").status == "verified"

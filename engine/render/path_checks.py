@@ -55,6 +55,7 @@ LOG = logging.getLogger("speculum")
 
 PATH_NAMES = ("direct_faces", "layered_capture", "layered_mips", "face_mips")
 CHECK_SIZE = 16                 # texels along a face of the check cube
+MIN_QUAD_SHARE = 0.05          # of a check face's texels that must show its quad (it covers about a fifth)
 SENTINEL = 1234.0               # what a cube holds before a path draws into it (half floats hold it exactly)
 CHECK_KEYS = (-101, -102)       # probe keys of the check's two cubes (never an entity)
 CHECK_ENTITY = 0x7FFFFF00       # the entity id the check's quads carry
@@ -315,11 +316,22 @@ def _level0_pattern() -> list[np.ndarray]:
     return faces
 
 
+def _quad_share(image: np.ndarray, face: int) -> float:
+    """The share of a face's texels showing its check quad's colour (hue, whatever the light)."""
+    rgb = np.asarray(image, np.float32)[..., :3]
+    colour = np.array(_COLOURS[face], np.float32)
+    hue = rgb / np.maximum(rgb.max(axis=-1, keepdims=True), 1e-6)
+    return float(np.mean(np.abs(hue - colour / colour.max()).max(axis=-1) < 0.15))
+
+
 def _compare_faces(drawn: list[np.ndarray], reference: list[np.ndarray], what: str) -> str | None:
     """None when every face of ``drawn`` is ``reference``'s, else which face differs and how."""
     for face, (image, ref) in enumerate(zip(drawn, reference, strict=True)):
         if not np.isfinite(ref).all() or (ref >= SENTINEL / 2).any():
             return f"the plain counterpart left face {face} unwritten: nothing to compare {what} with"
+        if _quad_share(ref, face) < MIN_QUAD_SHARE:
+            # Two paths that both draw nothing but the sky agree, and prove nothing.
+            return f"the plain counterpart shows no check quad on face {face}: nothing to compare {what} with"
         if not np.isfinite(image).all():
             return f"{what} left face {face} holding non-numbers (unwritten memory)"
         differs = (np.abs(image - ref) / (1.0 + np.abs(ref)) > TEXEL_TOLERANCE).any(axis=-1)
