@@ -199,3 +199,22 @@ def test_a_pixel_budget_draws_a_level_at_lower_resolution_instead_of_cutting_it(
     runner.world.resources[ViewBudget] = ViewBudget(pixels=full // 100)
     runner.frame()
     assert runner.stats.views_cut >= 1 and runner.stats.pixels_spent <= full // 100
+
+
+def test_a_level_drawn_at_two_sizes_in_turn_keeps_both_target_sets(scene):
+    """The pixel budget's scales come in steps, and a level keeps its targets of the size
+    before: alternating between full and half resolution makes no GPU targets after the
+    first round."""
+    ents = {}
+    runner = scene(mirror_grid(ents, columns=4, rows=2), (320, 200))
+    runner.frame()
+    full = runner.stats.pixels_spent
+    levels = runner.engine.renderer.levels
+    sizes, made = [], []
+    for frame in range(6):
+        runner.world.resources[ViewBudget] = ViewBudget(pixels=full // 4 if frame % 2 == 0 else None)
+        runner.frame()
+        sizes.append(levels[1].size)
+        made.append(levels.made)
+    assert sizes == [(160, 100), (320, 200)] * 3
+    assert made[1] == made[-1]

@@ -85,20 +85,32 @@ class RenderTargets:
 class LevelStack:
     """The render targets of one view tree: ``[0]`` is its root view's, ``[L]`` reflection
     level L's.  Each is made on first use and remade when its size changes (a resize, or
-    another resolution scale); they are kept between frames."""
+    another resolution scale); they are kept between frames, and a level keeps the set of
+    the size it had before too, so a level the pixel budget draws at two sizes in turn
+    (``ViewTree``) does not make and release GPU targets every frame."""
 
     def __init__(self, ctx: moderngl.Context) -> None:
         self.ctx = ctx
         self._levels: list[RenderTargets | None] = []
+        self._before: dict[int, RenderTargets] = {}  # level -> its targets of the size before
+        self.made = 0  # target sets made so far (tests watch it)
 
     def get(self, level: int, size: tuple[int, int]) -> RenderTargets:
         while len(self._levels) <= level:
             self._levels.append(None)
         targets = self._levels[level]
         if targets is None or targets.size != size:
+            spare = self._before.pop(level, None)
             if targets is not None:
-                targets.release()
-            targets = self._levels[level] = RenderTargets(self.ctx, size)
+                self._before[level] = targets
+            if spare is not None and spare.size == size:
+                targets = spare
+            else:
+                if spare is not None:
+                    spare.release()
+                targets = RenderTargets(self.ctx, size)
+                self.made += 1
+            self._levels[level] = targets
         return targets
 
     def __getitem__(self, level: int) -> RenderTargets:
@@ -111,10 +123,11 @@ class LevelStack:
         return len(self._levels)
 
     def release(self) -> None:
-        for targets in self._levels:
+        for targets in (*self._levels, *self._before.values()):
             if targets is not None:
                 targets.release()
         self._levels.clear()
+        self._before.clear()
 
 
 class CaptureTarget:

@@ -257,7 +257,10 @@ class ViewTree:
         if left is None or not needed or needed <= left:
             return 1.0
         stats.levels_downscaled += 1
-        return max(MIN_LEVEL_SCALE, math.sqrt(left / needed))
+        # In steps of a square root of two (1, 0.71, 0.5, 0.35, 0.25): a level's size changes
+        # only when its coverage crosses a step, not with every pixel.
+        step = math.ceil(-2.0 * math.log2(max(math.sqrt(left / needed), MIN_LEVEL_SCALE)) - 1e-9)
+        return 2.0 ** (-step / 2.0)
 
     def _within_budgets(self, surfaces: SurfaceTable, candidates: Candidates, pixels: np.ndarray,
                         settings: TreeSettings, result: TreeResult, level: int, screen: tuple[int, int]) -> np.ndarray:
