@@ -97,11 +97,10 @@ def submitted_triangles(renderer) -> int:
 
 
 def views_block(views: Sequence[View]) -> bytes:
-    """The Views uniform block for ``views`` (at most MAX_BATCHED_VIEWS).  A view the planner
-    made (``PlannedView``) brings its row packed; another is packed here."""
+    """The Views uniform block for ``views`` (at most MAX_BATCHED_VIEWS)."""
     if len(views) > MAX_BATCHED_VIEWS:
         raise ValueError(f"{len(views)} mirror views in one level; at most {MAX_BATCHED_VIEWS}")
-    rows = [view.batched_row if view.batched_row is not None else _view_row(view) for view in views]
+    rows = [_view_row(view) for view in views]
     count = np.array([len(views), 0, 0, 0], np.int32)
     return b"".join([count.tobytes(), *rows, bytes(_VIEW_DTYPE.itemsize * (MAX_BATCHED_VIEWS - len(views)))])
 

@@ -5,7 +5,7 @@ A view tree level is planned in a fixed number of numpy operations whatever its 
 views: the parents of a level are rows of arrays (``LevelRows``), every mirror and portal
 is a row of ``SurfaceTable``, and ``SurfaceTable.cull`` and ``plan_candidates`` work on
 (parents x surfaces) blocks.  Per view, only what the draws need is made in Python (a
-``View`` holding its packed camera block and batched-path row).  Planning a view one at a
+``View`` holding its packed camera block).  Planning a view one at a
 time with glm cost ~30 us a view on llvmpipe's machine (one glm call is ~0.3 us, and a
 view took about a hundred); a level in arrays costs a few us a view.
 
@@ -33,9 +33,6 @@ SurfaceState = Any
 OBLIQUE_SAFE_NEARS = 4.0
 _CAMERA_FLOATS = CAMERA_BLOCK_BYTES // 4
 _KINDS_BUT_DIRECT = ((1 << VIEW_KINDS) - 1) & ~VIEW_DIRECT  # a view through a surface is no longer direct
-# The batched path's row of a view (``batched_mirrors``): mat4 view_proj, vec4 clip plane,
-# vec4 eye (w: mirrored), vec4 rect (NDC), uvec4 (node, skip, hide, 0).
-BATCHED_ROW_FLOATS = 32
 
 
 def _mat(matrix: glm.mat4) -> np.ndarray:
@@ -118,9 +115,9 @@ class Candidates:
     rows: LevelRows          # their cameras and screen rectangles (node: claim order from first_index)
     scissor: np.ndarray      # (k, 4) int x, y, w, h in the level's pixels
     blocks: np.ndarray       # (k, CAMERA_BLOCK_BYTES / 4) float32: packed Camera blocks
-    batched: np.ndarray      # (k, BATCHED_ROW_FLOATS) float32: packed batched-path rows
     size: tuple[int, int]    # the level's pixels
     fade: np.ndarray         # (k,) the reflection's weight (Mirror fades; 1: none)
+    end: np.ndarray | None = None  # (k,) bool: an end view, cut by the depth limits (None: none asked for)
 
     def __len__(self) -> int:
         return len(self.parent)
@@ -128,7 +125,8 @@ class Candidates:
     def select(self, keep: np.ndarray) -> Candidates:
         """The candidates at ``keep`` (indices or a mask), in their order."""
         return Candidates(self.parent[keep], self.surface[keep], LevelRows(self.rows.data[keep]), self.scissor[keep],
-                          self.blocks[keep], self.batched[keep], self.size, self.fade[keep])
+                          self.blocks[keep], self.size, self.fade[keep],
+                          None if self.end is None else self.end[keep])
 
 
 class SurfaceTable:
@@ -206,16 +204,17 @@ class SurfaceTable:
         fades; a pair faded out, weight 0, is not returned).  Every pair goes through the
         same few array operations: in a frame, after the rasteriser has run, each numpy call
         costs about twice what it does in a warm loop (measured), so their number is what
-        counts here.  With ``ends`` (a mask of surfaces), only the pairs of those surfaces the
-        depth limits cut are kept: the end views (``engine/render/end_images.py``)."""
+        counts here.  With ``ends`` (a mask of surfaces), the pairs of those surfaces the depth
+        limits cut are kept too: the end views (``engine/render/end_images.py``)."""
+        if not len(parents.node):
+            return _NONE, _NONE, _NO_RECTS, None
+        within = depth <= np.minimum(self.max_depth, depth_cap)
         if ends is not None:
-            keep = self.enabled & ends & (depth > np.minimum(self.max_depth, depth_cap))
-            if not len(parents.node) or not keep.any():
-                return _NONE, _NONE, _NO_RECTS, None
-        elif not len(parents.node) or depth > min(self.deepest, depth_cap):
+            keep = self.enabled & (within | ends)
+        elif depth > min(self.deepest, depth_cap):
             return _NONE, _NONE, _NO_RECTS, None  # nothing enabled may be seen this deep
         else:
-            keep = self.enabled & (depth <= np.minimum(self.max_depth, depth_cap))
+            keep = self.enabled & within
         # First what needs no corners, for every pair: enabled and within its depth, not the
         # surface the view looks out of, and facing the view's eye.
         keep = keep & (parents.exit[:, None] != self.entities) & (parents.eye @ self.planes.T > 0.0)
@@ -273,10 +272,10 @@ class SurfaceTable:
         the DirectX "magic mirrors" write-up), clipped at the plane it looks out of, with
         Lengyel's oblique near plane there unless the eye is too close (then the clip
         distance alone), its claim rectangle in the level's pixels, and its packed Camera
-        block and batched-path row (None when nothing can be seen), and how many pairs the
-        fades took out.  ``ends``: the end views of those surfaces instead (``cull``);
-        ``size``: the level's pixels when another set of candidates chose them; ``scale``:
-        a factor on the level's resolution (the frame's pixel budget, ``ViewTree``)."""
+        block (None when nothing can be seen), and how many pairs the
+        fades took out.  ``ends``: those surfaces' end views too (``cull``; marked in
+        ``Candidates.end``); ``size``: the level's pixels, when given; ``scale``: a factor on
+        the level's resolution (the frame's pixel budget, ``ViewTree``)."""
         p, s, rects, weights = self.cull(parents, depth, root_proj, root.size, depth_cap, ends)
         faded = 0 if weights is None else int((weights == 0.0).sum())
         fade = None if weights is None else weights[weights > 0.0]
@@ -297,8 +296,8 @@ class SurfaceTable:
         data[:, 36:40] = clip = self.exit_planes[s]
         data[:, 40:44] = rects
         data[:, 44] = skip = self.exit_entities[s]
-        data[:, 45] = mirrored = parent.mirrored != self.is_mirror[s]
-        data[:, 46] = nodes = np.arange(first_index, first_index + k)
+        data[:, 45] = parent.mirrored != self.is_mirror[s]
+        data[:, 46] = np.arange(first_index, first_index + k)
         mask = parent.mask
         mask = (mask & _KINDS_BUT_DIRECT) | self.kind_bit[s] | (mask & (self.layers[s] << VIEW_KINDS))
         data[:, 47] = mask
@@ -317,34 +316,26 @@ class SurfaceTable:
         blocks[:, 72:76] = clip
         ids = blocks[:, 76:80].view(np.uint32)
         ids[:, 0], ids[:, 1], ids[:, 2], ids[:, 3] = skip, hide, mask, 0
-        batched = np.empty((k, BATCHED_ROW_FLOATS), np.float32)
-        batched[:, 0:16] = blocks[:, 32:48]
-        batched[:, 16:20] = clip
-        batched[:, 20:23] = eye[:, :3]
-        batched[:, 23] = mirrored
-        corners = scissor.reshape(k, 2, 2).cumsum(axis=1) * (2.0 / np.array(size)) - 1.0  # NDC x0 y0, x1 y1
-        batched[:, 24:28] = corners.reshape(k, 4)
-        ids = batched[:, 28:32].view(np.uint32)
-        ids[:, 0], ids[:, 1], ids[:, 2], ids[:, 3] = nodes, skip, hide, mask
-        return Candidates(p, s, rows, scissor, blocks, batched, size, fade if fade is not None else np.ones(k)), faded
+        end = None if ends is None else depth > np.minimum(self.max_depth[s], depth_cap)
+        return Candidates(p, s, rows, scissor, blocks, size, fade if fade is not None else np.ones(k),
+                          end), faded
 
 
 def planned_views(table: SurfaceTable, candidates: Candidates, hide: int) -> list[PlannedView]:
     """A ``PlannedView`` for each candidate (what the scene pass and the composite read): its
-    Camera block and batched-path row already packed; its matrices are read from the block
+    Camera block already packed; its matrices are read from the block
     only if something asks for them."""
     states = table.states
     size = candidates.size
     blocks = candidates.blocks.tobytes()
-    batched = candidates.batched.tobytes()
-    step, row = CAMERA_BLOCK_BYTES, BATCHED_ROW_FLOATS * 4
+    step = CAMERA_BLOCK_BYTES
     views = []
     for i, (s, mirrored, node, scissor) in enumerate(zip(
             candidates.surface.tolist(), (candidates.rows.mirrored > 0.0).tolist(),
             candidates.rows.node.astype(np.int64).tolist(),
             candidates.scissor.tolist(), strict=True)):
         state = states[s]
-        views.append(PlannedView(blocks[i * step:(i + 1) * step], batched[i * row:(i + 1) * row], size,
+        views.append(PlannedView(blocks[i * step:(i + 1) * step], size,
                                  state.kind, state.entity, state.exit_plane, mirrored, tuple(scissor), node,
                                  state.exit_entity, hide))
     return views

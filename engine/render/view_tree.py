@@ -123,31 +123,27 @@ class ViewTree:
         result = TreeResult([root_node], set())
         composites: list[PreparedComposites] = []
         root_proj = _mat(root.proj)
-        planning = (root, root_proj, np.linalg.inv(root_proj))
+        planning = (root, root_proj, _mat(glm.inverse(root.proj)))
         ends = self._end_surfaces(surfaces, root, settings.depth_cap)
         nodes = [root_node]
         rows = LevelRows.root(root)
         candidates, result.faded = surfaces.plan(rows, 1, *planning, 1, settings.depth_cap, root.hide,
-                                                 scale=self._level_scale(1))
-        end_candidates, to_ancestors = self._plan_ends(surfaces, rows, nodes, 1, planning, candidates, 1, settings,
-                                                       ends)
+                                                 ends=_ends_at(ends, 1), scale=self._level_scale(1))
+        candidates, to_ancestors = self._end_ancestors(surfaces, candidates, nodes)
         level = 0
-        while candidates is not None or end_candidates is not None:
-            size = (candidates or end_candidates).size
-            targets = levels.get(level + 1, size)
-            pixels = self._claim(surfaces, targets, levels[level], rows, candidates, end_candidates)
-            children, views = [], []
-            if candidates is not None:
-                keep = self._within_budgets(surfaces, candidates, pixels[: len(candidates)], settings, result,
-                                            level + 1, root.size)
-                chosen = candidates.select(keep)
-                views = planned_views(surfaces, chosen, root.hide)
-                children = self._nodes(surfaces, chosen, views, nodes, level + 1)
+        while candidates is not None:
+            targets = levels.get(level + 1, candidates.size)
+            pixels = self._claim(surfaces, targets, levels[level], rows, candidates)
+            is_end = candidates.end
+            keep = self._within_budgets(surfaces, candidates, pixels if is_end is None else np.where(is_end, 0, pixels),
+                                        settings, result, level + 1, root.size)
+            chosen = candidates.select(keep)
+            views = planned_views(surfaces, chosen, root.hide)
+            children = self._nodes(surfaces, chosen, views, nodes, level + 1)
             ended = []
-            if end_candidates is not None:
-                with_pixels = np.flatnonzero(pixels[len(candidates or ()):])
-                chosen_ends = end_candidates.select(with_pixels)
-                end_matrices = [to_ancestors[i] for i in with_pixels.tolist()]
+            if is_end is not None:
+                end_rows = np.flatnonzero(is_end & (pixels > 0))
+                chosen_ends = candidates.select(end_rows)
                 end_views = planned_views(surfaces, chosen_ends, root.hide)
                 ended = self._nodes(surfaces, chosen_ends, end_views, nodes, level + 1)
             if not children and not ended:
@@ -157,23 +153,23 @@ class ViewTree:
                 result.paths.add(path)
                 renderer.scene_pass.draw(views, targets, _BATCHED if path == "batched" else REFLECTION_LEVEL)
             if ended:
-                self.ends.draw(end_views, [node.surface.entity for node in ended], end_matrices, targets, root)
+                self.ends.draw(end_views, [node.surface.entity for node in ended],
+                               [to_ancestors[i] for i in end_rows.tolist()], targets, root)
                 result.end_views.extend(ended)
             renderer.flush()
             result.views.extend(children)
             level += 1
-            last = (candidates or end_candidates).rows.node
-            next_index = int(max(last[-1], end_candidates.rows.node[-1] if end_candidates else 0)) + 1
-            candidates = end_candidates = None
+            next_index = int(candidates.rows.node[-1]) + 1
+            candidates = None
             if children:
                 nodes, rows = children, chosen.rows
                 # While the GPU draws the views: the next level's cull and cameras (measured: on
                 # the critical path when done after the views finish), then their composite rows.
                 candidates, faded = surfaces.plan(rows, level + 1, *planning, next_index, settings.depth_cap,
-                                                  root.hide, scale=self._level_scale(level + 1))
+                                                  root.hide, ends=_ends_at(ends, level + 1),
+                                                  scale=self._level_scale(level + 1))
                 result.faded += faded
-                end_candidates, to_ancestors = self._plan_ends(surfaces, rows, nodes, level + 1, planning, candidates,
-                                                               next_index, settings, ends)
+                candidates, to_ancestors = self._end_ancestors(surfaces, candidates, nodes)
             composites.append(self._prepare_composite(children + ended, root, levels[level - 1].size))
         deepest = max((node.level for node in result.views), default=0)
         if deepest and deepest == settings.depth_cap:
@@ -202,50 +198,40 @@ class ViewTree:
         return ends, int(np.minimum(surfaces.max_depth[ends], depth_cap).min()) + 1
 
     @staticmethod
-    def _plan_ends(surfaces: SurfaceTable, rows: LevelRows, nodes: list[ReflectionView], depth: int,
-                   planning: tuple, candidates: Candidates | None, first_index: int, settings: TreeSettings,
-                   ends: tuple[np.ndarray, int] | None) -> tuple[Candidates | None, list[glm.mat4]]:
-        """The end views of a level (the pairs the depth limits cut), numbered after its views
-        and drawn at their level's size, with the matrix that takes each one's exit plane to
-        the eye space of the view that saw its surface the last time up its chain (the end
-        image repeats that view's image, shrunk: ``EndImages``).  A pair whose surface is not
-        up its chain gets no end view (its closed look, as without one)."""
-        if ends is None or depth < ends[1]:
-            return None, []  # no surface's depth limits cut this level
-        if candidates is not None:
-            first_index = int(candidates.rows.node[-1]) + 1
-        found, _ = surfaces.plan(rows, depth, *planning, first_index, settings.depth_cap, planning[0].hide,
-                                 ends=ends[0], size=candidates.size if candidates is not None else None)
-        if found is None:
-            return None, []
-        keep, matrices = [], []
-        for i, (p, s) in enumerate(zip(found.parent.tolist(), found.surface.tolist(), strict=True)):
-            node, entity = nodes[p], surfaces.states[s].entity
-            while node.parent is not None and node.surface.entity != entity:
+    def _end_ancestors(surfaces: SurfaceTable, candidates: Candidates | None,
+                       nodes: list[ReflectionView]) -> tuple[Candidates | None, dict[int, glm.mat4]]:
+        """For each end view among ``candidates`` (a pair the depth limits cut), the matrix
+        that takes its exit plane to the eye space of the view that saw its surface the last
+        time up its chain (the end image repeats that view's image, shrunk: ``EndImages``),
+        by candidate row.  An end view whose surface is not up its chain is dropped (its
+        closed look, as without one)."""
+        if candidates is None or candidates.end is None or not candidates.end.any():
+            return candidates, {}
+        matrices, drop = {}, []
+        for i in np.flatnonzero(candidates.end).tolist():
+            node = nodes[int(candidates.parent[i])]
+            state = surfaces.states[int(candidates.surface[i])]
+            while node.parent is not None and node.surface.entity != state.entity:
                 node = node.parent
-            if node.parent is not None:
-                keep.append(i)
-                matrices.append(node.parent.view.view * glm.inverse(surfaces.states[s].carry))
-        if not keep:
-            return None, []
-        return found.select(np.array(keep)), matrices
+            if node.parent is None:
+                drop.append(i)
+            else:
+                matrices[i] = node.parent.view.view * glm.inverse(state.carry)
+        if drop:
+            kept = np.setdiff1d(np.arange(len(candidates)), drop)
+            if not len(kept):
+                return None, {}
+            index = {int(old): new for new, old in enumerate(kept.tolist())}
+            return candidates.select(kept), {index[i]: m for i, m in matrices.items()}
+        return candidates, matrices
 
     def _claim(self, surfaces: SurfaceTable, targets, parent_targets, rows: LevelRows,
-               *sets: Candidates | None) -> np.ndarray:
-        """Every candidate's claim in ``targets`` (views, then end views): its pixels."""
-        sets = [c for c in sets if c is not None]
-        if len(sets) == 1:
-            (c,) = sets
-            nodes, entities, scissors = c.rows.node, surfaces.entities[c.surface], c.scissor
-            parents = rows.node[c.parent]
-        else:
-            nodes = np.concatenate([c.rows.node for c in sets])
-            entities = np.concatenate([surfaces.entities[c.surface] for c in sets])
-            parents = np.concatenate([rows.node[c.parent] for c in sets])
-            scissors = np.concatenate([c.scissor for c in sets])
-        nodes, parents = nodes.astype(np.int64), parents.astype(np.int64)
+               candidates: Candidates) -> np.ndarray:
+        """Every candidate's claim in ``targets``: its pixels."""
         return np.array(self.passes.prepare_level(targets, parent_targets, Claims(
-            nodes.tolist(), entities.tolist(), parents.tolist(), list(map(tuple, scissors.tolist())))), np.int64)
+            candidates.rows.node.astype(np.int64).tolist(), surfaces.entities[candidates.surface].tolist(),
+            rows.node[candidates.parent].astype(np.int64).tolist(),
+            list(map(tuple, candidates.scissor.tolist())))), np.int64)
 
     def _level_scale(self, level: int) -> float:
         """The resolution factor of ``level`` under the frame's pixel budget: 1, or the scale
@@ -269,12 +255,18 @@ class ViewTree:
         records the level's coverage for the next frame's pixel budget."""
         stats = self.renderer.stats
         keep = np.flatnonzero(pixels)
-        width, height = candidates.size
-        on_screen = pixels * (screen[0] * screen[1] / (width * height))  # the claims' pixels, at screen resolution
-        self.coverage[level] = int(on_screen.sum())
         pixel_budget = stats.pixels_left()
-        if len(keep) > 1 and (settings.level_budget is not None or stats.view_budget is not None
-                              or pixel_budget is not None):
+        width, height = candidates.size
+        to_screen = screen[0] * screen[1] / (width * height)
+        if settings.level_budget is None and stats.view_budget is None and pixel_budget is None:
+            drawn = int(pixels.sum())  # no budget: every view with pixels
+            self.coverage[level] = round(drawn * to_screen)
+            stats.views_spent += len(keep)
+            stats.pixels_spent += drawn
+            return keep
+        on_screen = pixels * to_screen  # the claims' pixels, at screen resolution
+        self.coverage[level] = int(on_screen.sum())
+        if len(keep) > 1:
             # Budgets keep the surfaces of highest priority, then those covering the most
             # pixels (this frame's claims), in claim order after.
             rank = np.lexsort((keep, -pixels[keep], -surfaces.priority[candidates.surface[keep]]))
@@ -315,6 +307,11 @@ class ViewTree:
         self.passes.release()
         if self.ends is not None:
             self.ends.release()
+
+
+def _ends_at(ends: tuple[np.ndarray, int] | None, depth: int) -> np.ndarray | None:
+    """The end-image surfaces to plan at ``depth`` (None before the first level a depth limit cuts)."""
+    return ends[0] if ends is not None and depth >= ends[1] else None
 
 
 def _to_level(rect: tuple[int, int, int, int], screen: tuple[int, int],

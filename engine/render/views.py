@@ -44,7 +44,6 @@ class View:
     kinds: int = VIEW_DIRECT     # the kinds of view it is (components/limits.py): an entity hidden in one is not drawn
     layers: int = ALL_LAYERS     # the reflection layers it shows
     _block: bytes | None = field(default=None, init=False, repr=False, compare=False)
-    batched_row: bytes | None = field(default=None, init=False, repr=False, compare=False)  # packed by the planner
 
     @property
     def view_proj(self) -> glm.mat4:
@@ -71,15 +70,14 @@ class View:
 
 class PlannedView(View):
     """A mirror or portal view planned in arrays (``engine.render.view_plan``): its Camera
-    block and its batched-path row come packed, and its matrices and eye are read back from
-    the block only when something asks (most frames nothing does: the passes read the block).
+    block comes packed, and its matrices and eye are read back from the block only when
+    something asks (the per-view passes read the block; the batched path packs its row).
     Made for one pass, like every View, and not changed after."""
 
-    def __init__(self, block: bytes, batched_row: bytes, size: tuple[int, int], kind: str, entity: int,
+    def __init__(self, block: bytes, size: tuple[int, int], kind: str, entity: int,
                  clip_plane: glm.vec4, mirrored: bool, scissor: tuple[int, int, int, int], node: int,
                  skip: int, hide: int) -> None:
         self._block = block
-        self.batched_row = batched_row
         self.size = size
         self._kind, self._entity = kind, entity
         self.clip_plane = clip_plane
