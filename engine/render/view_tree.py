@@ -127,11 +127,14 @@ class ViewTree:
         ends = self._end_surfaces(surfaces, root, settings.depth_cap)
         nodes = [root_node]
         rows = LevelRows.root(root)
+        scale = self._level_scale(1)
         candidates, result.faded = surfaces.plan(rows, 1, *planning, 1, settings.depth_cap, root.hide,
-                                                 ends=_ends_at(ends, 1), scale=self._level_scale(1))
+                                                 ends=_ends_at(ends, 1), scale=scale)
         candidates, to_ancestors = self._end_ancestors(surfaces, candidates, nodes)
         level = 0
         while candidates is not None:
+            if scale < 1.0:
+                renderer.stats.levels_downscaled += 1
             targets = levels.get(level + 1, candidates.size)
             pixels = self._claim(surfaces, targets, levels[level], rows, candidates)
             is_end = candidates.end
@@ -165,9 +168,9 @@ class ViewTree:
                 nodes, rows = children, chosen.rows
                 # While the GPU draws the views: the next level's cull and cameras (measured: on
                 # the critical path when done after the views finish), then their composite rows.
+                scale = self._level_scale(level + 1)
                 candidates, faded = surfaces.plan(rows, level + 1, *planning, next_index, settings.depth_cap,
-                                                  root.hide, ends=_ends_at(ends, level + 1),
-                                                  scale=self._level_scale(level + 1))
+                                                  root.hide, ends=_ends_at(ends, level + 1), scale=scale)
                 result.faded += faded
                 candidates, to_ancestors = self._end_ancestors(surfaces, candidates, nodes)
             composites.append(self._prepare_composite(children + ended, root, levels[level - 1].size))
@@ -238,11 +241,9 @@ class ViewTree:
         at which last frame's coverage of the level (its pixels at the screen's resolution)
         fits in the pixels left (at least ``MIN_LEVEL_SCALE``; what still does not fit is cut
         after the claims)."""
-        stats = self.renderer.stats
-        left, needed = stats.pixels_left(), self.coverage.get(level)
+        left, needed = self.renderer.stats.pixels_left(), self.coverage.get(level)
         if left is None or not needed or needed <= left:
             return 1.0
-        stats.levels_downscaled += 1
         # In steps of a square root of two (1, 0.71, 0.5, 0.35, 0.25): a level's size changes
         # only when its coverage crosses a step, not with every pixel.
         step = math.ceil(-2.0 * math.log2(max(math.sqrt(left / needed), MIN_LEVEL_SCALE)) - 1e-9)
