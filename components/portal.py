@@ -30,12 +30,8 @@ class Portal(TrackedComponent):
     (deleting one of a pair is how a pair is closed).
     ``shows_layers`` (None: all) and ``hides_layers`` are the reflection layers its view
     shows (``components.visibility``): ``hides_layers=[3]`` shows all but layer 3.
-    ``priority`` (an int, higher first; default 0) orders it under the frame's view budget
-    (``engine.resources.ViewBudget``).
-    ``end_image``: past the depth limit, show the surface's image from the previous frame,
-    shrunk onto the cut view's footprint (``engine/render/end_images.py``), instead of its
-    closed look: True, False, or "auto" (the default: on for a facing pair, whose recursion
-    would otherwise end in a flat rectangle).
+    ``priority`` and ``end_image``: as on ``Mirror`` (the view budget's order; past the
+    depth limit, last frame's image instead of the closed look, "auto" for a facing pair).
     """
 
     SHAREABLE = False  # one entity's own state: see components.tracking

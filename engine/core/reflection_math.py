@@ -76,10 +76,16 @@ def oblique_projection(proj: glm.mat4, view_plane: glm.vec4) -> glm.mat4:
     return result
 
 
+# Closer to its plane than this many near-plane distances, an oblique frustum loses its depth
+# precision (its far plane swings towards the eye): the clip distance alone keeps what is
+# behind out.  One rule for the one-at-a-time check below and the view planner's arrays.
+OBLIQUE_SAFE_NEARS = 4.0
+
+
 def oblique_is_safe(eye, plane: glm.vec4, near: float) -> bool:
     """Whether an oblique near plane keeps useful depth precision.
 
     Close to the plane the oblique frustum degenerates (its far plane swings towards the
     eye); there a clip distance is used instead.
     """
-    return abs(signed_distance(plane, eye)) > 4.0 * near
+    return abs(signed_distance(plane, eye)) > OBLIQUE_SAFE_NEARS * near

@@ -21,16 +21,13 @@ import numpy as np
 from pyglm import glm
 
 from components.limits import VIEW_DIRECT, VIEW_KINDS, VIEW_MIRROR, VIEW_PORTAL
+from engine.core.reflection_math import OBLIQUE_SAFE_NEARS
 from engine.render.views import CAMERA_BLOCK_BYTES, PlannedView, View
 
 # The mirror and portal records the surfaces stage publishes (``engine.resources.SurfaceState``,
 # plain data above this floor): read here by their fields.
 SurfaceState = Any
 
-# Close to its clip plane an oblique frustum degenerates (its far plane swings towards the
-# eye): nearer than this many near distances, the clip distance alone keeps what is behind out
-# (``engine.core.reflection_math.oblique_is_safe``: the same rule, one view at a time).
-OBLIQUE_SAFE_NEARS = 4.0
 _CAMERA_FLOATS = CAMERA_BLOCK_BYTES // 4
 _KINDS_BUT_DIRECT = ((1 << VIEW_KINDS) - 1) & ~VIEW_DIRECT  # a view through a surface is no longer direct
 
@@ -302,7 +299,7 @@ class SurfaceTable:
         mask = (mask & _KINDS_BUT_DIRECT) | self.kind_bit[s] | (mask & (self.layers[s] << VIEW_KINDS))
         data[:, 47] = mask
         proj, inv_proj = _oblique_projections(root_proj, inv_root_proj, inv_view, eye, clip)
-        scissor = _to_level(rects, root.size, size)
+        scissor = level_rects(rects, root.size, size)
         # The Camera blocks (camera.glsl): four column-major matrices, then eye, viewport,
         # clip plane and ids; the matrices are written straight into their columns.
         blocks = np.empty((k, _CAMERA_FLOATS), np.float32)
@@ -364,7 +361,7 @@ def _oblique_projections(root_proj: np.ndarray, inv_root_proj: np.ndarray, inv_v
     return proj, inv_proj
 
 
-def _to_level(rects: np.ndarray, screen: tuple[int, int], level: tuple[int, int]) -> np.ndarray:
+def level_rects(rects: np.ndarray, screen: tuple[int, int], level: tuple[int, int]) -> np.ndarray:
     """Screen-pixel rectangles (x0, y0, x1, y1) as (x, y, width, height) in the pixels of a
     level of another size (rounded outwards, at least one pixel)."""
     if level == screen:

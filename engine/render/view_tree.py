@@ -46,7 +46,7 @@ from engine.render.mirror_passes import (
 )
 from engine.render.scene_pass import REFLECTION_LEVEL, SceneOptions
 from engine.render.targets import LevelStack
-from engine.render.view_plan import Candidates, LevelRows, SurfaceTable, _mat, planned_views
+from engine.render.view_plan import Candidates, LevelRows, SurfaceTable, _mat, level_rects, planned_views
 from engine.render.views import View
 
 # The deepest a tree may go (each level is one more set of root-sized targets); the depth
@@ -300,9 +300,11 @@ class ViewTree:
     def _prepare_composite(self, children: list[ReflectionView], root: View,
                            parent_size: tuple[int, int]) -> PreparedComposites:
         """The composite of a level's views into the level above (``parent_size`` pixels)."""
+        rects = level_rects(np.array([(x, y, x + w, y + h) for x, y, w, h in (c.rect for c in children)], np.float64),
+                            root.size, parent_size).tolist()
         return self.passes.prepare_composites([Composite(
-            child.index, _to_level(child.rect, root.size, parent_size), child.view.scissor, child.parent.view,
-            surface_look(child.surface), fade=child.fade) for child in children], parent_size)
+            child.index, tuple(rect), child.view.scissor, child.parent.view, surface_look(child.surface),
+            fade=child.fade) for child, rect in zip(children, rects, strict=True)], parent_size)
 
     def release(self) -> None:
         self.passes.release()
@@ -313,16 +315,3 @@ class ViewTree:
 def _ends_at(ends: tuple[np.ndarray, int] | None, depth: int) -> np.ndarray | None:
     """The end-image surfaces to plan at ``depth`` (None before the first level a depth limit cuts)."""
     return ends[0] if ends is not None and depth >= ends[1] else None
-
-
-def _to_level(rect: tuple[int, int, int, int], screen: tuple[int, int],
-              level: tuple[int, int]) -> tuple[int, int, int, int]:
-    """A screen-pixel rectangle in the pixels of a level of another size (rounded outwards)."""
-    if level == screen:
-        return rect
-    sx, sy = level[0] / screen[0], level[1] / screen[1]
-    x0, y0 = int(rect[0] * sx), int(rect[1] * sy)
-    x1 = min(level[0], int(np.ceil((rect[0] + rect[2]) * sx)))
-    y1 = min(level[1], int(np.ceil((rect[1] + rect[3]) * sy)))
-    return x0, y0, max(1, x1 - x0), max(1, y1 - y0)
-
