@@ -23,51 +23,20 @@ from __future__ import annotations
 
 import ctypes
 import time
-from collections import Counter, deque
-from collections.abc import Sequence
+from collections import deque
 
 import moderngl
 import numpy as np
 from imgui_bundle import imgui
 from moderngl_window.integrations.imgui_bundle import ModernGLRenderer
 
+from shell.overlay_text import overlay_lines
+
 FRAME_HISTORY = 120             # frames in the frame-time graph and the frame rate's average
 POSITION = (8, 8)               # the overlay window's top-left corner, in pixels from the top-left
 REFLECTION_PATHS = ("per_mirror", "batched", "auto")
 PROBE_PATHS = ("auto", "six_pass", "layered")
 MAX_DEPTH_CAP = 16
-
-
-def overlay_lines(engine, frame_times: Sequence[float]) -> list[str]:
-    """The overlay's text, from the engine's last frame: the one place it is worded, shared by
-    the overlay and the tests that check its numbers against ``RenderStats``."""
-    stats = engine.renderer.stats
-    reflect = engine.reflection_system
-    probes = engine.stages["probes"]
-    seconds = sum(frame_times) / len(frame_times) if frame_times else 0.0
-    fps = 1.0 / seconds if seconds > 0 else 0.0
-    levels = Counter(view.level for view in reflect.views)
-    per_level = " / ".join(str(levels[level]) for level in range(max(levels) + 1)) if levels else "-"
-    budget = "none" if reflect.level_budget is None else str(reflect.level_budget)
-    chosen = f", chose {probes.chosen_path}" if probes.path == "auto" and probes.chosen_path else ""
-    return [
-        f"{fps:.1f} fps, {seconds * 1000.0:.2f} ms a frame",
-        f"passes {stats.passes}, draw calls {stats.draw_calls}",
-        f"views per level {per_level}",
-        f"reflection views {stats.reflection_views}, dropped {stats.reflection_views_dropped}, "
-        f"capped {stats.reflection_depth_capped}, faded {stats.reflection_views_faded}",
-        f"probe captures {stats.probe_captures} ({stats.probe_faces} faces)",
-        f"view budget {'none' if stats.view_budget is None else stats.view_budget}: spent {stats.views_spent}, "
-        f"cut {stats.views_cut}",
-        f"pixel budget {'none' if stats.pixel_budget is None else stats.pixel_budget}: spent {stats.pixels_spent}, "
-        f"{stats.levels_downscaled} levels smaller",
-        f"probe budget {'none' if stats.probe_ms_budget is None else f'{stats.probe_ms_budget:g} ms'}: "
-        f"spent {stats.probe_ms_spent:.1f} ms, {stats.probe_faces_deferred} faces wait",
-        f"reflection path {stats.reflection_path or '-'} (set: {reflect.path}, budget {budget})",
-        f"probe path {stats.probe_path or '-'} (set: {probes.path}{chosen})",
-        f"GL paths verified: {', '.join(stats.paths_verified) or '-'}; "
-        f"refused: {', '.join(stats.paths_refused) or '-'}",
-    ]
 
 
 class OverlayRenderer(ModernGLRenderer):

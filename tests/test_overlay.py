@@ -17,7 +17,8 @@ from components import Material, MeshRef, ReflectionProbe, Transform
 from engine.assets.mesh import sphere
 
 pytest.importorskip("imgui_bundle", reason="the debug overlay needs imgui-bundle (not installed here)")
-from shell.overlay import POSITION, DebugOverlay, overlay_lines  # noqa: E402
+from shell.overlay import POSITION, DebugOverlay  # noqa: E402
+from shell.overlay_text import overlay_lines  # noqa: E402
 from tests import test_hot_reload
 from tests.support import FunctionGame
 from tests.test_hot_reload import room

@@ -24,7 +24,7 @@ from components import (
 from engine.assets.mesh import box, quad, sphere
 from engine.resources import ViewBudget
 from engine.rules.probe_schedule import ProbeStates
-from shell.overlay import overlay_lines
+from shell.overlay_text import overlay_lines
 from tests.support import look_from
 from tests.test_view_tree import mirror_grid
 

@@ -1,0 +1,42 @@
+"""The debug overlay's text, worded from the engine's last frame.
+
+Kept apart from ``shell/overlay.py`` (which draws it with Dear ImGui) so that what the
+overlay says can be read and tested where imgui-bundle is not installed: a GPU machine the
+report runs on, or a game that never opens the overlay.
+"""
+from __future__ import annotations
+
+from collections import Counter
+from collections.abc import Sequence
+
+
+def overlay_lines(engine, frame_times: Sequence[float]) -> list[str]:
+    """The overlay's text, from the engine's last frame: the one place it is worded, shared by
+    the overlay and the tests that check its numbers against ``RenderStats``."""
+    stats = engine.renderer.stats
+    reflect = engine.reflection_system
+    probes = engine.stages["probes"]
+    seconds = sum(frame_times) / len(frame_times) if frame_times else 0.0
+    fps = 1.0 / seconds if seconds > 0 else 0.0
+    levels = Counter(view.level for view in reflect.views)
+    per_level = " / ".join(str(levels[level]) for level in range(max(levels) + 1)) if levels else "-"
+    budget = "none" if reflect.level_budget is None else str(reflect.level_budget)
+    chosen = f", chose {probes.chosen_path}" if probes.path == "auto" and probes.chosen_path else ""
+    return [
+        f"{fps:.1f} fps, {seconds * 1000.0:.2f} ms a frame",
+        f"passes {stats.passes}, draw calls {stats.draw_calls}",
+        f"views per level {per_level}",
+        f"reflection views {stats.reflection_views}, dropped {stats.reflection_views_dropped}, "
+        f"capped {stats.reflection_depth_capped}, faded {stats.reflection_views_faded}",
+        f"probe captures {stats.probe_captures} ({stats.probe_faces} faces)",
+        f"view budget {'none' if stats.view_budget is None else stats.view_budget}: spent {stats.views_spent}, "
+        f"cut {stats.views_cut}",
+        f"pixel budget {'none' if stats.pixel_budget is None else stats.pixel_budget}: spent {stats.pixels_spent}, "
+        f"{stats.levels_downscaled} levels smaller",
+        f"probe budget {'none' if stats.probe_ms_budget is None else f'{stats.probe_ms_budget:g} ms'}: "
+        f"spent {stats.probe_ms_spent:.1f} ms, {stats.probe_faces_deferred} faces wait",
+        f"reflection path {stats.reflection_path or '-'} (set: {reflect.path}, budget {budget})",
+        f"probe path {stats.probe_path or '-'} (set: {probes.path}{chosen})",
+        f"GL paths verified: {', '.join(stats.paths_verified) or '-'}; "
+        f"refused: {', '.join(stats.paths_refused) or '-'}",
+    ]
