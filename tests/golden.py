@@ -20,7 +20,8 @@ On a GPU (``prepare_context(ctx).software`` is False; figures next to
 rounding and edges are its own.  The frame is compared by structure and by regional
 brightness instead (``hardware_difference``): its mean SSIM, the share of its pixels whose
 SSIM says the structure is gone, the mean linear colour of each region of two grids (a
-brightness or colour change, global or local: a light, a mirror's tint), and the id image.
+brightness or colour change, global or local: a light, a mirror's tint), and the id image
+(each id held to the reference's 3 x 3 neighbourhood: ``ids_missing_nearby``).
 Both machines render the goldens with llvmpipe's filtering policy (``render_case``).
 """
 from __future__ import annotations
@@ -123,10 +124,17 @@ class HardwareTolerance:
 # theirs); the Fresnel exponent, which brightens, trades mirror_ring_16 for hall_doorway.
 # What passes: a filtering change (the main view's anisotropy off, FXAA off) looks like a
 # GPU's own difference and fails in 2-4 cases only; the software rule catches those on
-# llvmpipe.  Ids: NOT calibrated (the H200 frames have no id images): 0.5% is a guess
-# (a crate moved 20 cm changes 0.1-1.4% of the id pixels).
+# llvmpipe.  Ids (``ids_share``), calibrated on the H200's id images of every case (2026-11-26,
+# driver 580.159.04): an id pixel of the GPU frame counts as another entity only when no pixel
+# of the reference's 3 x 3 neighbourhood names it, and the other way round (the larger share
+# of the two).  Exact ids differ in up to 1.45% of hall_start's pixels on the GPU, all in the
+# pond: the water's rippled lookup (``mirror_composite.frag``) reads the reflected ids one
+# texel off where the two machines' normals differ in the last bits; the neighbourhood rule
+# gives 0.27% there and at most 0.014% elsewhere.  0.4% sits 1.5x above that and fails a
+# crate moved 20 cm in 4 of the 6 cases that show it (0.53-1.23%) and a mirror switched
+# off in 10 of 11 (0.45-6.8%; hall_back_mirror 0.34%), as many as exact ids at 0.5% did.
 HARDWARE_TOLERANCE = HardwareTolerance(ssim_mean=0.96, ssim_poor=0.2, ssim_poor_share=0.008,
-                                       regions=((3, 4, 0.015), (6, 10, 0.025)), ids_share=0.005)
+                                       regions=((3, 4, 0.015), (6, 10, 0.025)), ids_share=0.004)
 # SSIM as Wang, Bovik, Sheikh and Simoncelli 2004 define it: on the luma of the sRGB values
 # (0.299 R + 0.587 G + 0.114 B), an 11-tap Gaussian window of sigma 1.5, K1 0.01, K2 0.03,
 # the statistics over the frame less the window's 5-pixel border (on the H200 frames the
@@ -265,10 +273,24 @@ def region_change(actual: np.ndarray, expected: np.ndarray, rows: int, columns: 
     return float(np.max(np.abs(a - b) / (b + REGION_FLOOR)))
 
 
+def ids_missing_nearby(ids: np.ndarray, reference: np.ndarray) -> float:
+    """The share of ``ids``' pixels whose entity no pixel of ``reference``'s 3 x 3
+    neighbourhood names (the hardware rule's id measure: a GPU may put an edge or a rippled
+    lookup one pixel over)."""
+    height, width = reference.shape
+    padded = np.pad(reference, 1, mode="edge")
+    found = np.zeros(ids.shape, bool)
+    for dy in (-1, 0, 1):
+        for dx in (-1, 0, 1):
+            found |= padded[1 + dy:1 + dy + height, 1 + dx:1 + dx + width] == ids
+    return float(np.mean(~found))
+
+
 def hardware_difference(actual: Frame, expected: Frame,
                         tolerance: HardwareTolerance = HARDWARE_TOLERANCE) -> HardwareDifference:
     ssim = ssim_map(actual.rgb, expected.rgb)
-    ids = None if actual.ids is None or expected.ids is None else float(np.mean(actual.ids != expected.ids))
+    ids = None if actual.ids is None or expected.ids is None else max(
+        ids_missing_nearby(actual.ids, expected.ids), ids_missing_nearby(expected.ids, actual.ids))
     return HardwareDifference(
         ssim_mean=float(ssim.mean()),
         ssim_poor_share=float(np.mean(ssim < tolerance.ssim_poor)),

@@ -78,6 +78,29 @@ def test_hardware_rule_accepts_the_h200_frames():
     assert not refused, f"the hardware rule refuses GPU frames of unchanged cases: {refused}"
 
 
+# The id images an H200 rendered of every golden case (driver 580.159.04, render_case's
+# settings, 2026-11-26), each with the llvmpipe reference it was compared with then.
+H200_IDS = golden.CALIBRATION_DIR / "ids_2026-11-26.npz"
+
+
+def test_hardware_id_rule_accepts_the_h200_id_images():
+    """Every id image the H200 rendered passes the hardware rule's id measure against its
+    reference (needs no GPU: the images are a file).  The neighbourhood is what lets them:
+    held exactly, hall_start's pond (the water's rippled lookup) names another entity in
+    over 1% of the pixels, beyond the limit."""
+    with np.load(H200_IDS) as data:
+        pairs = {key.removesuffix(".gpu"): (data[key], data[key.removesuffix(".gpu") + ".reference"])
+                 for key in data.files if key.endswith(".gpu")}
+    assert set(pairs) == set(CASE), sorted(set(CASE) ^ set(pairs))
+    limit = golden.HARDWARE_TOLERANCE.ids_share
+    measured = {name: golden.hardware_difference(golden.Frame(np.zeros((*gpu.shape, 3), np.uint8), gpu),
+                                                 golden.Frame(np.zeros((*gpu.shape, 3), np.uint8), reference)).ids_share
+                for name, (gpu, reference) in pairs.items()}
+    assert max(measured.values()) <= limit, measured
+    gpu, reference = pairs["hall_start"]
+    assert np.mean(gpu != reference) > 2 * limit > 2 * measured["hall_start"]
+
+
 # (change in golden_noise.CHANGES, case that shows it clearly, a measure that must refuse it)
 REAL_CHANGES = [
     ("point_lights_80pc", "hall_tunnel", "region"),
@@ -87,6 +110,7 @@ REAL_CHANGES = [
     ("fresnel_exponent_4", "hall_back_mirror", "region"),
     ("crate_moved_2cm", "hall_mirror_wall", "region"),
     ("mirror_switched_off", "hall_mirror_wall", "SSIM"),
+    ("crate_moved_20cm", "hall_doorway", "id pixels"),
 ]
 
 
@@ -126,7 +150,7 @@ def test_goldens_render_with_the_software_filtering_policy(ctx, monkeypatch):
     """render_case gives every machine llvmpipe's filtering policy before the first frame: a
     renderer that starts with a GPU's (8x anisotropy in reflections and on normal maps)
     uploads the sample level's normal map trilinear, draws reflections trilinear, and
-    renders the reference's frame."""
+    renders the reference's frame (held to the rule of the machine it runs on)."""
     import shell.app
     from engine.render.renderer import Renderer
 
@@ -151,4 +175,5 @@ def test_goldens_render_with_the_software_filtering_policy(ctx, monkeypatch):
     assert (True, golden.SOFTWARE_ANISOTROPY) in uploads and all(a == golden.SOFTWARE_ANISOTROPY
                                                                   for linear, a in uploads if linear)
     assert reflections and set(reflections) == {golden.SOFTWARE_ANISOTROPY}
-    assert not golden.failures(frame, golden.load_reference("hall_start"), software=True)
+    # The reference's frame: by the software rule on llvmpipe, by the hardware rule on a GPU.
+    assert not golden.failures(frame, golden.load_reference("hall_start"), software=prepare_context(ctx).software)
