@@ -67,8 +67,10 @@ def test_a_facing_pair_at_depth_3_ends_in_an_image_close_to_the_depth_8_renderin
     assert ends[0] == 0 and all(count >= 1 for count in ends[1:])  # the first frame has nothing to show
     for image in images[2:]:
         assert np.abs(image - deep)[hole].mean() < 0.4 * first
-    # No flat rectangle: the hole holds the continuing corridor, not one colour.
-    assert images[3][hole].std(axis=0).mean() > 1.5 * images[0][hole].std(axis=0).mean()
+    # No flat rectangle: the hole holds the continuing corridor, as varied as the depth-8
+    # rendering there, not one colour (llvmpipe: 26.9 against 22.2; an H200: 33.4 against
+    # 30.1, where the hole also takes in more edge pixels, so the first frame's is not flat).
+    assert images[3][hole].std(axis=0).mean() > 0.8 * deep[hole].std(axis=0).mean()
 
 
 def test_without_end_images_the_pair_keeps_its_closed_look(ctx):
