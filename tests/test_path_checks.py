@@ -20,6 +20,7 @@ import pytest
 from components import Material, ReflectionProbe
 from engine.core.errors import GLPassError
 from engine.render.bindings import PROBE_UNIT, SCRATCH_UNIT
+from engine.render.gl_context import prepare_context
 from engine.render.path_checks import PATH_NAMES, SENTINEL, PathChecks
 from engine.render.probes import ProbeCaptures, face_view
 from engine.render.raw_gl import (
@@ -74,7 +75,11 @@ def cube_faces(ctx, probes, key, level=0):
     return [read_cube_level(ctx, texture, face, level, SCRATCH_UNIT)[..., :3] for face in range(6)]
 
 
-def test_every_path_is_verified_on_llvmpipe_once_per_context(scene, ctx, fresh_checks, monkeypatch):
+def test_every_path_is_checked_once_per_context_and_verified_on_llvmpipe(scene, ctx, fresh_checks, monkeypatch):
+    """Each path the engine would use is checked once per context, before its first use, and
+    the frame's stats say the verdicts.  On llvmpipe every check passes; a GPU driver may
+    refuse some (the NVIDIA H200's writes only face 0 of a layered cube-map attachment, so
+    both layered paths are refused there and the per-face mip pass is checked instead)."""
     ran = []
     original = PathChecks.check
     monkeypatch.setattr(PathChecks, "check", lambda self, path: ran.append(path) or original(self, path))
@@ -82,14 +87,20 @@ def test_every_path_is_verified_on_llvmpipe_once_per_context(scene, ctx, fresh_c
     runner = scene(marked_chrome_scene(ents), (64, 48))
     runner.frame()
     verdicts = runner.engine.renderer.path_checks.verdicts
-    assert {name: v.status for name, v in verdicts.items()} == dict.fromkeys(PATH_NAMES, "verified") | {
-        "face_mips": "unchecked"}  # the layered mip pass was verified: its fallback never needed checking
-    assert set(runner.stats.paths_verified) == {"direct_faces", "layered_capture", "layered_mips"}
-    assert runner.stats.paths_refused == ()
-    assert sorted(ran) == ["direct_faces", "layered_capture", "layered_mips"]
+    status = {name: v.status for name, v in verdicts.items()}
+    if prepare_context(ctx).software:
+        assert status == dict.fromkeys(PATH_NAMES, "verified") | {
+            "face_mips": "unchecked"}  # the layered mip pass was verified: its fallback never needed checking
+    expected = ["direct_faces", "layered_capture", "layered_mips"]
+    if status["layered_mips"] == "refused":
+        expected.append("face_mips")  # the fallback is checked before it is used
+    assert sorted(ran) == sorted(expected)
+    assert all(status[name] in ("verified", "refused") for name in expected), status
+    assert set(runner.stats.paths_verified) == {name for name in expected if status[name] == "verified"}
+    assert set(runner.stats.paths_refused) == {name for name in expected if status[name] == "refused"}
     second = scene(marked_chrome_scene({}), (64, 48))  # another engine on the same context
     second.frame()
-    assert len(ran) == 3 and set(second.stats.paths_verified) == set(runner.stats.paths_verified)
+    assert len(ran) == len(expected) and set(second.stats.paths_verified) == set(runner.stats.paths_verified)
 
 
 def test_a_layered_capture_that_writes_one_face_is_refused_and_the_sphere_stays_right(
@@ -280,4 +291,4 @@ def test_paths_that_both_draw_only_the_sky_prove_nothing_and_are_refused(scene, 
         verdict = checks.check(name)
         assert verdict.status == "refused" and "shows no check quad" in verdict.detail, verdict
     monkeypatch.setattr(path_checks, "_fill_row", original)
-    assert checks.check("layered_capture").status == "verified"
+    assert checks.check("direct_faces").status == "verified"  # with its quads shown, the check passes again

@@ -22,7 +22,7 @@ from components import (
 )
 from engine.assets.mesh import box, quad, sphere
 from engine.render.sky import face_directions
-from tests.support import look_from, srgb_to_linear
+from tests.support import look_from, skip_unless_trusted, srgb_to_linear
 
 AXES = [np.array(a, float) for a in ((1, 0, 0), (-1, 0, 0), (0, 1, 0), (0, -1, 0), (0, 0, 1), (0, 0, -1))]
 MARKER_COLOURS = [(1, 0, 0), (0, 1, 0), (0, 0, 1), (1, 1, 0), (0, 1, 1), (1, 0, 1)]
@@ -95,6 +95,8 @@ def test_a_chrome_sphere_shows_the_red_wall_on_its_side_and_the_sky_on_the_other
     it; the pixel is red where it meets it, not red where it turns away."""
     ents = {}
     runner = scene(chrome_scene(ents), (160, 120))
+    if path == "layered":
+        skip_unless_trusted(runner.engine.renderer, "layered_capture")
     probe_stage(runner).path = path
     rgb = runner.frame()
     assert runner.stats.probe_captures == 1 and runner.stats.probe_faces == 6
@@ -664,6 +666,7 @@ def test_the_layered_and_six_pass_captures_agree_face_by_face_and_culling_cuts_p
 
     ents = {}
     runner = scene(marked_chrome_scene(ents), (64, 48))
+    skip_unless_trusted(runner.engine.renderer, "layered_capture")
     runner.frame()
     probes = runner.engine.renderer.probes
     owner = ents["sphere"]
@@ -744,6 +747,7 @@ def test_auto_times_both_paths_once_and_keeps_the_faster(scene, monkeypatch):
                                     Material(color=(1, 1, 1), metallic=1.0), Reflective("cube"))
 
     runner = scene(build, (64, 48))
+    skip_unless_trusted(runner.engine.renderer, "layered_capture")  # else auto has one path, nothing to time
     runner.frame()
     stage = probe_stage(runner)
     paths = runner.engine.renderer.probes.paths
@@ -860,6 +864,8 @@ def test_the_mip_pass_builds_the_chain_glGenerateMipmap_builds(scene, ctx, way):
     unwritten, or a level filtered from the wrong one above, fails."""
     ents = {}
     runner = scene(marked_chrome_scene(ents), (64, 48))
+    if way == "layered":
+        skip_unless_trusted(runner.engine.renderer, "layered_mips")
     runner.frame()
     probes = runner.engine.renderer.probes
     assert probes.mips.layered  # the raw GL calls are reachable here: the pass itself is tested

@@ -27,7 +27,7 @@ from engine.assets.mesh import box, quad
 from engine.assets.portals import spawn_portal_pair
 from engine.core.reflection_math import plane_from_point_normal, reflection_matrix
 from engine.render.sky import face_directions
-from tests.support import look_from, srgb_to_linear
+from tests.support import look_from, skip_unless_trusted, srgb_to_linear
 
 SIZE = (200, 150)
 VAMPIRE = (-1.0, 1.2, 0.0)
@@ -245,6 +245,8 @@ def test_a_probe_capture_leaves_out_what_is_hidden_in_probes_or_on_a_layer_it_hi
     green box on the +X face is drawn either way."""
     ents = {}
     runner = scene(probe_room(ents, visibility, probe_hides), (32, 32))
+    if path == "layered":
+        skip_unless_trusted(runner.engine.renderer, "layered_capture")
     runner.engine.stages["probes"].path = path
     runner.frame()
     assert runner.stats.probe_captures == 1 and runner.engine.stages["probes"].path_used == path
