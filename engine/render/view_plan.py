@@ -39,10 +39,13 @@ def _mat(matrix: glm.mat4) -> np.ndarray:
 
 class LevelRows:
     """The views of one level of a tree as arrays, a row each (the root: one row), packed
-    in one float64 array so that a level's rows are gathered in one operation."""
+    in one float64 array so that a level's rows are gathered in one operation.  The columns
+    are laid out for the planner's products: eye, viewport and clip plane side by side are
+    the Camera block's (one copy), and the clip plane above the view matrix makes the 5 x 4
+    block ``SurfaceTable.cull`` multiplies once a level."""
 
-    WIDTH = 48  # view 0-15, inv_view 16-31, eye 32-35, clip 36-39, rect 40-43, exit 44, mirrored 45, node 46,
-    # view mask 47 (its kinds and layers: View.view_mask)
+    WIDTH = 52  # eye 0-3, viewport 4-7, clip 8-11, view 12-27, inv_view 28-43, rect 44-47, exit 48,
+    # view mask 49 (its kinds and layers: View.view_mask), mirrored 50, node 51
 
     def __init__(self, data: np.ndarray) -> None:
         self.data = data
@@ -50,55 +53,55 @@ class LevelRows:
     @property
     def view(self) -> np.ndarray:
         """(n, 4, 4) world -> eye."""
-        return self.data[:, 0:16].reshape(-1, 4, 4)
+        return self.data[:, 12:28].reshape(-1, 4, 4)
 
     @property
     def inv_view(self) -> np.ndarray:
         """(n, 4, 4) eye -> world."""
-        return self.data[:, 16:32].reshape(-1, 4, 4)
+        return self.data[:, 28:44].reshape(-1, 4, 4)
 
     @property
     def eye(self) -> np.ndarray:
         """(n, 4) homogeneous world position."""
-        return self.data[:, 32:36]
+        return self.data[:, 0:4]
 
     @property
     def clip(self) -> np.ndarray:
         """(n, 4) world clip plane (what the view keeps)."""
-        return self.data[:, 36:40]
+        return self.data[:, 8:12]
 
     @property
     def rect(self) -> np.ndarray:
         """(n, 4) x0, y0, x1, y1 where it shows, screen pixels."""
-        return self.data[:, 40:44]
+        return self.data[:, 44:48]
 
     @property
     def exit(self) -> np.ndarray:
         """(n,) the entity the view looks out of (-1: none)."""
-        return self.data[:, 44]
-
-    @property
-    def mirrored(self) -> np.ndarray:
-        """(n,) 1.0 where front faces wind clockwise."""
-        return self.data[:, 45]
-
-    @property
-    def node(self) -> np.ndarray:
-        """(n,) the view's index in the tree."""
-        return self.data[:, 46]
+        return self.data[:, 48]
 
     @property
     def mask(self) -> np.ndarray:
         """(n,) int64: the view's kinds and the layers it shows (``View.view_mask``)."""
-        return self.data[:, 47].astype(np.int64)
+        return self.data[:, 49].astype(np.int64)
+
+    @property
+    def mirrored(self) -> np.ndarray:
+        """(n,) 1.0 where front faces wind clockwise."""
+        return self.data[:, 50]
+
+    @property
+    def node(self) -> np.ndarray:
+        """(n,) the view's index in the tree."""
+        return self.data[:, 51]
 
     @staticmethod
     def root(view: View) -> LevelRows:
         data = np.empty((1, LevelRows.WIDTH))
-        data[0, 0:16] = _mat(view.view).reshape(16)
-        data[0, 16:32] = _mat(glm.inverse(view.view)).reshape(16)
-        data[0, 32:48] = (*view.eye, 1.0, *view.clip_plane, 0.0, 0.0, *view.size, -1.0, float(view.mirrored), 0.0,
-                          float(view.view_mask))
+        data[0, 0:12] = (*view.eye, 1.0, 0.0, 0.0, *view.size, *view.clip_plane)
+        data[0, 12:28] = _mat(view.view).reshape(16)
+        data[0, 28:44] = _mat(glm.inverse(view.view)).reshape(16)
+        data[0, 44:52] = (0.0, 0.0, *view.size, -1.0, float(view.view_mask), float(view.mirrored), 0.0)
         return LevelRows(data)
 
 
@@ -139,7 +142,6 @@ class SurfaceTable:
         for i, state in enumerate(states):
             rows = state.corners
             self.corners[i] = np.concatenate([rows, np.repeat(rows[:1], 8 - len(rows), axis=0)])
-        self.corner_columns = self.corners.transpose(0, 2, 1).copy()  # S x 4 x 8: the corners as columns
         self.enabled = np.array([s.enabled for s in states], bool)
         self.max_depth = np.array([s.max_depth for s in states], np.int64)
         self.entities = np.array([s.entity for s in states], np.int64)
@@ -165,6 +167,26 @@ class SurfaceTable:
             self.fade = np.array([f if f is not None else _NEVER for f in self.fades], np.float64)
             self.centres = self.corners[:, :, :3].mean(axis=1)
             self.radii = np.linalg.norm(self.corners[:, :, :3] - self.centres[:, None, :], axis=2).max(axis=1)
+        # What the planner reads per level, packed once while the surfaces stand still (the
+        # table is made again when one changes), so a level gathers each surface's part in
+        # one operation: the distinct corners as the columns of one product per corner
+        # (a flat mirror's 8 box corners are 4 twice over: the extremes of a set do not
+        # change when its repeats go), ...
+        distinct = [np.unique(c, axis=0) for c in self.corners]
+        self.corner_count = max((len(c) for c in distinct), default=1)
+        self.corner_columns = np.zeros((self.corner_count, 4, count))  # corner c of every surface: a 4 x S block
+        for i, c in enumerate(distinct):
+            self.corner_columns[:, :, i] = np.concatenate([c, np.repeat(c[:1], self.corner_count - len(c), axis=0)])
+        self.planes_t = np.ascontiguousarray(self.planes.T)
+        # ... the floats of each surface's views (carry 0-15, its inverse 16-31, exit plane
+        # 32-35, is a mirror 36, resolution scale 37) and their integers (exit entity, the
+        # view mask bits a view through it keeps: its layers and every kind but direct, the
+        # kind bit it adds).
+        self.float_rows = np.concatenate([self.carry.reshape(count, 16), self.inv_carry.reshape(count, 16),
+                                          self.exit_planes, self.is_mirror[:, None], self.scale[:, None]], axis=1)
+        self.int_rows = np.stack([self.exit_entities, _KINDS_BUT_DIRECT | (self.layers << VIEW_KINDS),
+                                  self.kind_bit], axis=1).reshape(count, 3)
+        self._depths: dict[tuple[int, int], tuple[np.ndarray, np.ndarray]] = {}
 
     def _end_images(self, states: list[SurfaceState]) -> np.ndarray:
         """Which surfaces end their recursion in an image: ``end_image`` True, or "auto" for
@@ -188,6 +210,16 @@ class SurfaceTable:
         facing_portals = ~mirrors & partner_front & partner_sees
         return wanted | (auto & (facing_mirrors | facing_portals))
 
+    def _within(self, depth: int, depth_cap: int) -> tuple[np.ndarray, np.ndarray]:
+        """Per surface: enabled and allowed at ``depth`` by its own limit and the cap, and
+        cut there by them (the same for every level of that depth: kept)."""
+        key = (depth, depth_cap)
+        found = self._depths.get(key)
+        if found is None:
+            cut = depth > np.minimum(self.max_depth, depth_cap)
+            found = self._depths[key] = (self.enabled & ~cut, cut)
+        return found
+
     def cull(self, parents: LevelRows, depth: int, root_proj: np.ndarray, root_size: tuple[int, int],
              depth_cap: int, ends: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray,
                                                                      np.ndarray | None]:
@@ -198,49 +230,55 @@ class SurfaceTable:
         the frustum and overlapping the parent's rectangle.  ``depth`` is the level the
         views would be on.  Returns (parent rows, surface rows, rects x0 y0 x1 y1), parent
         major, and the fade weights of the pairs seen before the fades (None: no surface
-        fades; a pair faded out, weight 0, is not returned).  Every pair goes through the
-        same few array operations: in a frame, after the rasteriser has run, each numpy call
-        costs about twice what it does in a warm loop (measured), so their number is what
-        counts here.  With ``ends`` (a mask of surfaces), the pairs of those surfaces the depth
-        limits cut are kept too: the end views (``engine/render/end_images.py``)."""
-        if not len(parents.node):
+        fades; a pair faded out, weight 0, is not returned).  With ``ends`` (a mask of
+        surfaces), the pairs of those surfaces the depth limits cut are kept too: the end
+        views (``engine/render/end_images.py``).
+
+        Every (parent x surface) pair goes through the same few array operations, the
+        whole grid at once: in a frame, after the rasteriser has run, each numpy call costs
+        about twice what it does in a warm loop (measured), so their number, not the pairs
+        they hold, is what a level costs at these sizes.  One product takes every distinct
+        corner of every surface through 12 rows per parent (``_cull_rows``): x, y, -x, -y
+        and w in clip space, six values > 0 outside each side of the frustum, and minus the
+        side of the parent's clip plane.  Then one minimum over the corners gives each
+        pair's frustum and clip-plane tests, and, with x and y divided by w first, its
+        rectangle's four sides as minima (x0, y0, -x1, -y1: the same rounding rule, floor
+        then one pixel out, for each side)."""
+        count = len(parents.data)
+        if not count or not len(self.states):
             return _NONE, _NONE, _NO_RECTS, None
-        within = depth <= np.minimum(self.max_depth, depth_cap)
+        allowed, cut = self._within(depth, depth_cap)
         if ends is not None:
-            keep = self.enabled & (within | ends)
-        elif depth > min(self.deepest, depth_cap):
+            allowed = allowed | (self.enabled & ends)
+        elif not allowed.any():
             return _NONE, _NONE, _NO_RECTS, None  # nothing enabled may be seen this deep
-        else:
-            keep = self.enabled & within
-        # First what needs no corners, for every pair: enabled and within its depth, not the
-        # surface the view looks out of, and facing the view's eye.
-        keep = keep & (parents.exit[:, None] != self.entities) & (parents.eye @ self.planes.T > 0.0)
-        p, s = np.nonzero(keep)
-        if not len(p):
+        data = parents.data
+        # First what needs no corners: allowed, facing the view's eye, and not the surface
+        # the view looks out of.
+        seen = data[:, 0:4] @ self.planes_t > 0.0                                   # P x S
+        seen &= allowed
+        seen &= data[:, 48:49] != self.entities
+        if not seen.any():
             return _NONE, _NONE, _NO_RECTS, None
-        # Per parent, one 11 x 4 matrix: times a corner, the corner in clip space (the
-        # view-projection with the root projection, as the rectangle is in root pixels), then
-        # six values that are > 0 outside each side of the frustum (x > w, x < -w, ...) and
-        # the corner's side of the parent's clip plane.  Per pair: 11 values x 8 corners.
-        rows_in = np.concatenate([root_proj @ parents.view, parents.clip[:, None, :]], axis=1)  # P x 5 x 4
-        clip = (_CULL_ROWS @ rows_in)[p] @ self.corner_columns[s]                          # K x 11 x 8
-        # Corners first: numpy reduces over a leading axis ~15x faster than over a short last one.
-        clip = np.ascontiguousarray(clip.transpose(2, 0, 1))                                # 8 x K x 11
-        least, most = clip.min(axis=0), clip.max(axis=0)                                    # K x 11
-        # Culled: every corner outside one side of the frustum, or every corner behind the clip plane.
-        seen = ~(least[:, 4:10] > 0.0).any(axis=1) & (most[:, 10] > 0.0)
-        w = clip[:, :, 3]
-        ndc = clip[:, :, 0:2] / np.where(w <= 1e-6, 1.0, w)[:, :, None]                   # 8 x K x 2
-        half = 0.5 * np.array(root_size, np.float64)
-        lo = np.floor((ndc.min(axis=0) + 1.0) * half) - 1.0                                 # K x 2
-        hi = np.ceil((ndc.max(axis=0) + 1.0) * half) + 1.0
-        straddles = least[:, 3] <= 1e-6  # a corner behind the eye: be conservative
-        lo[straddles], hi[straddles] = -np.inf, np.inf
-        rect = parents.rect[p]
-        x0y0 = np.maximum(lo, rect[:, 0:2])
-        x1y1 = np.minimum(hi, rect[:, 2:4])
-        seen &= (x1y1 > x0y0).all(axis=1)
-        p, s, rects = p[seen], s[seen], np.concatenate([x0y0[seen], x1y1[seen]], axis=1)
+        # Rows first: (12, P) x 4 times each corner's (4, S) gives (corners, 12, P, S), so x
+        # and y are divided by w, and the minimum over the corners taken, in whole blocks.
+        block = data[:, 8:28].reshape(count, 5, 4).transpose(1, 0, 2).reshape(5, 4 * count)
+        clip = (_cull_rows(root_proj) @ block).reshape(12 * count, 4) @ self.corner_columns
+        clip = clip.reshape(self.corner_count, 12, count, len(self.states))
+        np.divide(clip[:, 0:4], np.maximum(clip[:, 4:5], 1e-6), out=clip[:, 0:4])  # a w <= 0: see straddles
+        least = clip.min(axis=0)                                                         # 12 x P x S
+        # Culled: every corner outside one side of the frustum, or behind the clip plane.
+        seen &= least[5:11].max(axis=0) <= 0.0
+        seen &= least[11] < 0.0
+        # x0, y0, -x1, -y1 in pixels, rounded outwards with a pixel's margin; a pair with a
+        # corner behind the eye is conservative (the parent's whole rectangle).
+        rects = np.floor((least[0:4] + _OUTWARDS) * (0.5 * np.array(root_size, np.float64)[_XYXY, None, None]))
+        rects -= 1.0
+        np.copyto(rects, -np.inf, where=least[4] <= 1e-6)
+        np.maximum(rects, (data[:, 44:48] * _SIGNS).T[:, :, None], out=rects)  # inside the parent's
+        seen &= (rects[0:2] + rects[2:4]).max(axis=0) < 0.0                       # x1 > x0 and y1 > y0
+        p, s = np.nonzero(seen)
+        rects = rects[:, p, s].T * _SIGNS
         if not self.fading:
             return p, s, rects, None
         fade = self.fade_weights(parents.eye[p], s)
@@ -272,34 +310,43 @@ class SurfaceTable:
         block (None when nothing can be seen), and how many pairs the
         fades took out.  ``ends``: those surfaces' end views too (``cull``; marked in
         ``Candidates.end``); ``size``: the level's pixels, when given; ``scale``: a factor on
-        the level's resolution (the frame's pixel budget, ``ViewTree``)."""
+        the level's resolution (the frame's pixel budget, ``ViewTree``).
+
+        Like the cull, a fixed number of array operations whatever the number of views:
+        each candidate's parent row and surface rows are gathered once (``take``), and the
+        results are written where they are read next (the level's rows, the Camera blocks)."""
         p, s, rects, weights = self.cull(parents, depth, root_proj, root.size, depth_cap, ends)
-        faded = 0 if weights is None else int((weights == 0.0).sum())
-        fade = None if weights is None else weights[weights > 0.0]
+        if weights is None:
+            faded, fade = 0, None
+        else:
+            faded = int((weights == 0.0).sum())
+            fade = weights[weights > 0.0]
         k = len(p)
         if not k:
             return None, faded
+        surface = self.float_rows.take(s, axis=0)
+        ints = self.int_rows.take(s, axis=0)
+        parent = parents.data.take(p, axis=0)
         if size is None:
-            scale *= float(self.scale[s].max())
+            scale *= float(surface[:, 37].max())
             size = (max(1, round(root.size[0] * scale)), max(1, round(root.size[1] * scale)))
-        parent = LevelRows(parents.data[p])
         data = np.empty((k, LevelRows.WIDTH))
-        rows = LevelRows(data)
-        view, inv_view = rows.view, rows.inv_view
-        np.matmul(parent.view, self.inv_carry[s], out=view)
-        np.matmul(self.carry[s], parent.inv_view, out=inv_view)
-        eye = inv_view[:, :, 3]  # where the carried camera is: its eye-to-world translation
-        data[:, 32:36] = eye
-        data[:, 36:40] = clip = self.exit_planes[s]
-        data[:, 40:44] = rects
-        data[:, 44] = skip = self.exit_entities[s]
-        data[:, 45] = parent.mirrored != self.is_mirror[s]
-        data[:, 46] = np.arange(first_index, first_index + k)
-        mask = parent.mask
-        mask = (mask & _KINDS_BUT_DIRECT) | self.kind_bit[s] | (mask & (self.layers[s] << VIEW_KINDS))
-        data[:, 47] = mask
+        view = data[:, 12:28].reshape(k, 4, 4)
+        inv_view = data[:, 28:44].reshape(k, 4, 4)
+        np.matmul(parent[:, 12:28].reshape(k, 4, 4), surface[:, 16:32].reshape(k, 4, 4), out=view)
+        np.matmul(surface[:, 0:16].reshape(k, 4, 4), parent[:, 28:44].reshape(k, 4, 4), out=inv_view)
+        eye = data[:, 0:4]
+        eye[:] = inv_view[:, :, 3]  # where the carried camera is: its eye-to-world translation
+        data[:, 4:8] = (0.0, 0.0, *size)
+        data[:, 8:12] = clip = surface[:, 32:36]
+        data[:, 44:48] = rects
+        mask = ints[:, 1]  # a view shows the layers every surface of its chain shows
+        np.bitwise_and(parent[:, 49].astype(np.int64), mask, out=mask)
+        mask |= ints[:, 2]
+        data[:, 48:50] = ints[:, 0:2]  # exit, mask
+        np.not_equal(parent[:, 50], surface[:, 36], out=data[:, 50])
+        np.add(_counting(k), first_index, out=data[:, 51])
         proj, inv_proj = _oblique_projections(root_proj, inv_root_proj, inv_view, eye, clip)
-        scissor = level_rects(rects, root.size, size)
         # The Camera blocks (camera.glsl): four column-major matrices, then eye, viewport,
         # clip plane and ids; the matrices are written straight into their columns.
         blocks = np.empty((k, _CAMERA_FLOATS), np.float32)
@@ -308,14 +355,13 @@ class SurfaceTable:
         matrices[:, 1] = proj
         np.matmul(proj, view, out=matrices[:, 2])
         np.matmul(inv_view, inv_proj, out=matrices[:, 3])
-        blocks[:, 64:68] = eye
-        blocks[:, 68:72] = (0.0, 0.0, *size)
-        blocks[:, 72:76] = clip
+        blocks[:, 64:76] = data[:, 0:12]
         ids = blocks[:, 76:80].view(np.uint32)
-        ids[:, 0], ids[:, 1], ids[:, 2], ids[:, 3] = skip, hide, mask, 0
-        end = None if ends is None else depth > np.minimum(self.max_depth[s], depth_cap)
-        return Candidates(p, s, rows, scissor, blocks, size, fade if fade is not None else np.ones(k),
-                          end), faded
+        ids[:, 0::2] = ints[:, 0:2]  # skip, mask
+        ids[:, 1::2] = (hide, 0)
+        end = None if ends is None else self._within(depth, depth_cap)[1].take(s)
+        return Candidates(p, s, LevelRows(data), level_rects(rects, root.size, size), blocks, size,
+                          fade if fade is not None else _ones(k), end), faded
 
 
 def planned_views(table: SurfaceTable, candidates: Candidates, hide: int) -> list[PlannedView]:
@@ -347,17 +393,20 @@ def _oblique_projections(root_proj: np.ndarray, inv_root_proj: np.ndarray, inv_v
     root's (Sherman-Morrison), not a 4 x 4 inversion."""
     plane = np.matmul(clip[:, None, :], inv_view)[:, 0]  # planes transform by the inverse transpose; the
     # construction below is unchanged by the plane's (positive) scale, so it is not normalised
-    near = root_proj[2, 3] / (root_proj[2, 2] - 1.0)
-    safe = np.abs((clip * eye).sum(axis=1)) > OBLIQUE_SAFE_NEARS * near
-    q = np.sign(plane[:, :2]) @ inv_root_proj[:, :2].T + (inv_root_proj[:, 2] + inv_root_proj[:, 3])
+    root = _projection(root_proj, inv_root_proj)
+    safe = np.abs((clip * eye).sum(axis=1)) > root.safe_distance
+    q = np.sign(plane[:, :2]) @ root.inv_xy_t
+    q += root.inv_zw
     c = plane * (2.0 / (plane * q).sum(axis=1))[:, None]
-    change = np.where(safe[:, None], c - root_proj[3] - root_proj[2], 0.0)  # the third row's change
+    c -= root_proj[3]
+    c -= root_proj[2]
+    change = np.where(safe[:, None], c, 0.0)  # the third row's change
     proj = np.repeat(root_proj[None], len(plane), axis=0)
     proj[:, 2] += change
     # The inverse: P = P0 + e2 change^T, so P^-1 = P0^-1 - (P0^-1 e2)(change^T P0^-1) / (1 + change^T P0^-1 e2).
-    column = inv_root_proj[:, 2]
-    row = (change @ inv_root_proj) / (1.0 + change @ column)[:, None]
-    inv_proj = inv_root_proj - column[None, :, None] * row[:, None, :]
+    row = change @ inv_root_proj
+    row /= (1.0 + change @ root.column)[:, None]
+    inv_proj = inv_root_proj - root.column[None, :, None] * row[:, None, :]
     return proj, inv_proj
 
 
@@ -376,12 +425,79 @@ def level_rects(rects: np.ndarray, screen: tuple[int, int], level: tuple[int, in
 _NONE = np.zeros(0, np.int64)
 _NO_RECTS = np.zeros((0, 4))
 _NEVER = (1e30, 2e30, 1e30, 2e30)  # fade starts no distance or angle reaches
+# A rectangle as the cull keeps it, x0, y0, -x1, -y1: its signs, the pixel axis of each
+# side, and what each side's NDC value gets before it is scaled to pixels and floored.
+_SIGNS = np.array([1.0, 1.0, -1.0, -1.0])
+_XYXY = np.array([0, 1, 0, 1])
+_OUTWARDS = np.array([1.0, 1.0, -1.0, -1.0])[:, None, None]
 
-# From the rows of a view-projection (x, y, z, w) and a clip plane, the rows SurfaceTable.cull
-# applies to every corner: x, y, z, w, then x - w, y - w, z - w, -x - w, -y - w, -z - w (each
-# > 0 outside one side of the frustum), then the clip plane.
+# From the rows of a projection (x, y, z, w) and a view's clip plane, the rows
+# SurfaceTable.cull applies to the block (clip plane; view matrix) of a view (LevelRows
+# columns 8-27) and then to every corner: x, y, -x, -y, w, then x - w, y - w, z - w, -x - w,
+# -y - w, -z - w (each > 0 outside one side of the frustum), then minus the clip plane.
 _CULL_ROWS = np.array([
-    [1, 0, 0, 0, 0], [0, 1, 0, 0, 0], [0, 0, 1, 0, 0], [0, 0, 0, 1, 0],
-    [1, 0, 0, -1, 0], [0, 1, 0, -1, 0], [0, 0, 1, -1, 0],
-    [-1, 0, 0, -1, 0], [0, -1, 0, -1, 0], [0, 0, -1, -1, 0],
-    [0, 0, 0, 0, 1]], np.float64)
+    [1, 0, 0, 0], [0, 1, 0, 0], [-1, 0, 0, 0], [0, -1, 0, 0], [0, 0, 0, 1],
+    [1, 0, 0, -1], [0, 1, 0, -1], [0, 0, 1, -1], [-1, 0, 0, -1], [0, -1, 0, -1], [0, 0, -1, -1]], np.float64)
+
+
+@dataclass
+class _Projection:
+    """What the oblique near planes read of a root projection, worked out once per projection."""
+
+    safe_distance: float     # closer to its plane, a view keeps the clip distance alone
+    inv_xy_t: np.ndarray     # the inverse's first two columns, transposed
+    inv_zw: np.ndarray       # the inverse's last two columns, summed
+    column: np.ndarray       # the inverse's third column
+
+
+# Kept per root projection (the main camera's, a probe face's: a few a frame).
+_PROJECTIONS: dict[bytes, _Projection] = {}
+_CULLS: dict[bytes, np.ndarray] = {}
+
+
+def _projection(root_proj: np.ndarray, inv_root_proj: np.ndarray) -> _Projection:
+    """The oblique near planes' constants of ``root_proj`` (with its inverse)."""
+    key = root_proj.tobytes() + inv_root_proj.tobytes()
+    found = _PROJECTIONS.get(key)
+    if found is None:
+        if len(_PROJECTIONS) > 32:
+            _PROJECTIONS.clear()
+        near = root_proj[2, 3] / (root_proj[2, 2] - 1.0)
+        found = _PROJECTIONS[key] = _Projection(OBLIQUE_SAFE_NEARS * near, inv_root_proj[:, :2].T.copy(),
+                                                inv_root_proj[:, 2] + inv_root_proj[:, 3],
+                                                inv_root_proj[:, 2].copy())
+    return found
+
+
+def _cull_rows(root_proj: np.ndarray) -> np.ndarray:
+    """``SurfaceTable.cull``'s 12 x 5 rows for ``root_proj``: ``_CULL_ROWS`` through it, and
+    minus the clip plane (column 0: the clip plane comes first in a view's block)."""
+    key = root_proj.tobytes()
+    rows = _CULLS.get(key)
+    if rows is None:
+        if len(_CULLS) > 32:
+            _CULLS.clear()
+        rows = _CULLS[key] = np.zeros((12, 5))
+        rows[:11, 1:] = _CULL_ROWS @ root_proj
+        rows[11, 0] = -1.0
+    return rows
+
+
+_COUNTING = np.arange(256, dtype=np.float64)
+_ONES = np.ones(256)
+
+
+def _counting(k: int) -> np.ndarray:
+    """0, 1, ..., k - 1 as float64 (read only)."""
+    global _COUNTING
+    if len(_COUNTING) < k:
+        _COUNTING = np.arange(2 * k, dtype=np.float64)
+    return _COUNTING[:k]
+
+
+def _ones(k: int) -> np.ndarray:
+    """k ones (read only: a level's fades where no surface fades)."""
+    global _ONES
+    if len(_ONES) < k:
+        _ONES = np.ones(2 * k)
+    return _ONES[:k]
