@@ -14,6 +14,7 @@ layout (``M @ x``); glm's and GL's are column-major, so they are transposed at t
 """
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 from typing import Any
 
@@ -22,7 +23,7 @@ from pyglm import glm
 
 from components.limits import VIEW_DIRECT, VIEW_KINDS, VIEW_MIRROR, VIEW_PORTAL
 from engine.core.reflection_math import OBLIQUE_SAFE_NEARS
-from engine.render.views import CAMERA_BLOCK_BYTES, PlannedView, View
+from engine.render.views import CAMERA_BLOCK_BYTES, View
 
 # The mirror and portal records the surfaces stage publishes (``engine.resources.SurfaceState``,
 # plain data above this floor): read here by their fields.
@@ -187,6 +188,12 @@ class SurfaceTable:
         self.int_rows = np.stack([self.exit_entities, _KINDS_BUT_DIRECT | (self.layers << VIEW_KINDS),
                                   self.kind_bit], axis=1).reshape(count, 3)
         self._depths: dict[tuple[int, int], tuple[np.ndarray, np.ndarray]] = {}
+
+    @functools.cached_property
+    def inverse_carry(self) -> list[glm.mat4]:
+        """Each surface's carry inverted (glm: an end view's matrix to its ancestor's eye
+        space), made the first time a frame has end views and kept with the table."""
+        return [glm.inverse(state.carry) for state in self.states]
 
     def _end_images(self, states: list[SurfaceState]) -> np.ndarray:
         """Which surfaces end their recursion in an image: ``end_image`` True, or "auto" for
@@ -362,26 +369,6 @@ class SurfaceTable:
         end = None if ends is None else self._within(depth, depth_cap)[1].take(s)
         return Candidates(p, s, LevelRows(data), level_rects(rects, root.size, size), blocks, size,
                           fade if fade is not None else _ones(k), end), faded
-
-
-def planned_views(table: SurfaceTable, candidates: Candidates, hide: int) -> list[PlannedView]:
-    """A ``PlannedView`` for each candidate (what the scene pass and the composite read): its
-    Camera block already packed; its matrices are read from the block
-    only if something asks for them."""
-    states = table.states
-    size = candidates.size
-    blocks = candidates.blocks.tobytes()
-    step = CAMERA_BLOCK_BYTES
-    views = []
-    for i, (s, mirrored, node, scissor) in enumerate(zip(
-            candidates.surface.tolist(), (candidates.rows.mirrored > 0.0).tolist(),
-            candidates.rows.node.astype(np.int64).tolist(),
-            candidates.scissor.tolist(), strict=True)):
-        state = states[s]
-        views.append(PlannedView(blocks[i * step:(i + 1) * step], size,
-                                 state.kind, state.entity, state.exit_plane, mirrored, tuple(scissor), node,
-                                 state.exit_entity, hide))
-    return views
 
 
 def _oblique_projections(root_proj: np.ndarray, inv_root_proj: np.ndarray, inv_view: np.ndarray, eye: np.ndarray,

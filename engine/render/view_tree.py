@@ -46,8 +46,8 @@ from engine.render.mirror_passes import (
 )
 from engine.render.scene_pass import REFLECTION_LEVEL, SceneOptions
 from engine.render.targets import LevelStack
-from engine.render.view_plan import Candidates, LevelRows, SurfaceTable, _mat, level_rects, planned_views
-from engine.render.views import View
+from engine.render.view_plan import Candidates, LevelRows, SurfaceTable, _mat, level_rects
+from engine.render.views import CAMERA_BLOCK_BYTES, PlannedView, View
 
 # The deepest a tree may go (each level is one more set of root-sized targets); the depth
 # limits of Mirror and Portal components take values up to this.
@@ -125,12 +125,16 @@ class ViewTree:
         root_proj = _mat(root.proj)
         planning = (root, root_proj, _mat(glm.inverse(root.proj)))
         ends = self._end_surfaces(surfaces, root, settings.depth_cap)
+        # With end views: for each row of the level, the index in result.views of the view
+        # that saw each surface last up its chain (-1: none), what an end view repeats.
+        seers = None if ends is None else np.full((1, len(surfaces.states)), -1, np.int64)
+        parent_offset = 0  # where the level's parent rows are in result.views
         nodes = [root_node]
         rows = LevelRows.root(root)
         scale = self._level_scale(1)
         candidates, result.faded = surfaces.plan(rows, 1, *planning, 1, settings.depth_cap, root.hide,
                                                  ends=_ends_at(ends, 1), scale=scale)
-        candidates, to_ancestors = self._end_ancestors(surfaces, candidates, nodes)
+        candidates, end_seers = self._end_seers(candidates, seers)
         level = 0
         while candidates is not None:
             if scale < 1.0:
@@ -140,15 +144,14 @@ class ViewTree:
             is_end = candidates.end
             keep = self._within_budgets(surfaces, candidates, pixels if is_end is None else np.where(is_end, 0, pixels),
                                         settings, result, level + 1, root.size)
-            chosen = candidates.select(keep)
-            views = planned_views(surfaces, chosen, root.hide)
-            children = self._nodes(surfaces, chosen, views, nodes, level + 1)
+            chosen = candidates if len(keep) == len(candidates) else candidates.select(keep)
+            views, children = self._level_nodes(surfaces, chosen, nodes, level + 1, root.hide)
             ended = []
             if is_end is not None:
                 end_rows = np.flatnonzero(is_end & (pixels > 0))
-                chosen_ends = candidates.select(end_rows)
-                end_views = planned_views(surfaces, chosen_ends, root.hide)
-                ended = self._nodes(surfaces, chosen_ends, end_views, nodes, level + 1)
+                if len(end_rows):
+                    chosen_ends = candidates.select(end_rows)
+                    end_views, ended = self._level_nodes(surfaces, chosen_ends, nodes, level + 1, root.hide)
             if not children and not ended:
                 break
             if children:
@@ -156,15 +159,23 @@ class ViewTree:
                 result.paths.add(path)
                 renderer.scene_pass.draw(views, targets, _BATCHED if path == "batched" else REFLECTION_LEVEL)
             if ended:
+                inverse_carry = surfaces.inverse_carry
                 self.ends.draw(end_views, [node.surface.entity for node in ended],
-                               [to_ancestors[i] for i in end_rows.tolist()], targets, root)
+                               [result.views[seer].view.view * inverse_carry[s] for seer, s in
+                                zip(end_seers[end_rows].tolist(), chosen_ends.surface.tolist(), strict=True)],
+                               targets, root)
                 result.end_views.extend(ended)
             renderer.flush()
+            child_offset = len(result.views)
             result.views.extend(children)
             level += 1
             next_index = int(candidates.rows.node[-1]) + 1
             candidates = None
             if children:
+                if seers is not None:  # each child saw its own surface from its parent
+                    seers = seers.take(chosen.parent, axis=0)
+                    seers[np.arange(len(chosen)), chosen.surface] = chosen.parent + parent_offset
+                    parent_offset = child_offset
                 nodes, rows = children, chosen.rows
                 # While the GPU draws the views: the next level's cull and cameras (measured: on
                 # the critical path when done after the views finish), then their composite rows.
@@ -172,7 +183,7 @@ class ViewTree:
                 candidates, faded = surfaces.plan(rows, level + 1, *planning, next_index, settings.depth_cap,
                                                   root.hide, ends=_ends_at(ends, level + 1), scale=scale)
                 result.faded += faded
-                candidates, to_ancestors = self._end_ancestors(surfaces, candidates, nodes)
+                candidates, end_seers = self._end_seers(candidates, seers)
             composites.append(self._prepare_composite(children + ended, root, levels[level - 1].size))
         deepest = max((node.level for node in result.views), default=0)
         if deepest and deepest == settings.depth_cap:
@@ -201,32 +212,23 @@ class ViewTree:
         return ends, int(np.minimum(surfaces.max_depth[ends], depth_cap).min()) + 1
 
     @staticmethod
-    def _end_ancestors(surfaces: SurfaceTable, candidates: Candidates | None,
-                       nodes: list[ReflectionView]) -> tuple[Candidates | None, dict[int, glm.mat4]]:
-        """For each end view among ``candidates`` (a pair the depth limits cut), the matrix
-        that takes its exit plane to the eye space of the view that saw its surface the last
-        time up its chain (the end image repeats that view's image, shrunk: ``EndImages``),
-        by candidate row.  An end view whose surface is not up its chain is dropped (its
-        closed look, as without one)."""
-        if candidates is None or candidates.end is None or not candidates.end.any():
-            return candidates, {}
-        matrices, drop = {}, []
-        for i in np.flatnonzero(candidates.end).tolist():
-            node = nodes[int(candidates.parent[i])]
-            state = surfaces.states[int(candidates.surface[i])]
-            while node.parent is not None and node.surface.entity != state.entity:
-                node = node.parent
-            if node.parent is None:
-                drop.append(i)
-            else:
-                matrices[i] = node.parent.view.view * glm.inverse(state.carry)
-        if drop:
-            kept = np.setdiff1d(np.arange(len(candidates)), drop)
+    def _end_seers(candidates: Candidates | None,
+                   seers: np.ndarray | None) -> tuple[Candidates | None, np.ndarray | None]:
+        """For each end view among ``candidates`` (a pair the depth limits cut), the index in
+        the tree's views of the view that saw its surface the last time up its chain (the end
+        image repeats that view's image, shrunk: ``EndImages``; -1 for the other candidates),
+        from ``seers`` (the level's rows x surfaces).  An end view whose surface is not up its
+        chain is dropped (its closed look, as without one)."""
+        if candidates is None or candidates.end is None or seers is None or not candidates.end.any():
+            return candidates, None
+        found = seers[candidates.parent, candidates.surface]
+        drop = candidates.end & (found < 0)
+        if drop.any():
+            kept = np.flatnonzero(~drop)
             if not len(kept):
-                return None, {}
-            index = {int(old): new for new, old in enumerate(kept.tolist())}
-            return candidates.select(kept), {index[i]: m for i, m in matrices.items()}
-        return candidates, matrices
+                return None, None
+            candidates, found = candidates.select(kept), found[kept]
+        return candidates, found
 
     def _claim(self, surfaces: SurfaceTable, targets, parent_targets, rows: LevelRows,
                candidates: Candidates) -> np.ndarray:
@@ -288,14 +290,29 @@ class ViewTree:
         return np.sort(keep)
 
     @staticmethod
-    def _nodes(surfaces: SurfaceTable, chosen: Candidates, views: list[View], parents: list[ReflectionView],
-               level: int) -> list[ReflectionView]:
-        """The tree's nodes of a level's chosen candidates."""
+    def _level_nodes(surfaces: SurfaceTable, chosen: Candidates, parents: list[ReflectionView], level: int,
+                     hide: int) -> tuple[list[PlannedView], list[ReflectionView]]:
+        """The planned views of a level's chosen candidates (what the scene pass and the
+        composite read: each with its Camera block already packed, its matrices read from the
+        block only if something asks) and their tree nodes, in one pass: one ``tolist`` per
+        column, not one conversion per view."""
         states = surfaces.states
-        return [ReflectionView(view.node, level, view, (x0, y0, x1 - x0, y1 - y0), states[s], parents[p], f)
-                for view, (x0, y0, x1, y1), s, p, f in zip(
-                    views, chosen.rows.rect.astype(np.int64).tolist(), chosen.surface.tolist(),
-                    chosen.parent.tolist(), chosen.fade.tolist(), strict=True)]
+        size = chosen.size
+        blocks = chosen.blocks.tobytes()
+        step = CAMERA_BLOCK_BYTES
+        columns = chosen.rows.data[:, 44:52].astype(np.int64)  # rect, exit, mask, mirrored, node
+        views, nodes = [], []
+        at = 0
+        for (x0, y0, x1, y1, _, _, mirrored, node), s, p, scissor, fade in zip(
+                columns.tolist(), chosen.surface.tolist(), chosen.parent.tolist(), chosen.scissor.tolist(),
+                chosen.fade.tolist(), strict=True):
+            state = states[s]
+            view = PlannedView(blocks[at:at + step], size, state.kind, state.entity, state.exit_plane, mirrored == 1,
+                               tuple(scissor), node, state.exit_entity, hide)
+            at += step
+            views.append(view)
+            nodes.append(ReflectionView(node, level, view, (x0, y0, x1 - x0, y1 - y0), state, parents[p], fade))
+        return views, nodes
 
     def _prepare_composite(self, children: list[ReflectionView], root: View,
                            parent_size: tuple[int, int]) -> PreparedComposites:
