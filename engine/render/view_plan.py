@@ -188,6 +188,8 @@ class SurfaceTable:
         self.int_rows = np.stack([self.exit_entities, _KINDS_BUT_DIRECT | (self.layers << VIEW_KINDS),
                                   self.kind_bit], axis=1).reshape(count, 3)
         self._depths: dict[tuple[int, int], tuple[np.ndarray, np.ndarray]] = {}
+        # The resolution scale every surface shares (None: they differ; a level takes its largest).
+        self.one_scale = float(self.scale[0]) if count and (self.scale == self.scale[0]).all() else None
 
     @functools.cached_property
     def inverse_carry(self) -> list[glm.mat4]:
@@ -335,7 +337,7 @@ class SurfaceTable:
         ints = self.int_rows.take(s, axis=0)
         parent = parents.data.take(p, axis=0)
         if size is None:
-            scale *= float(surface[:, 37].max())
+            scale *= self.one_scale if self.one_scale is not None else float(surface[:, 37].max())
             size = (max(1, round(root.size[0] * scale)), max(1, round(root.size[1] * scale)))
         data = np.empty((k, LevelRows.WIDTH))
         view = data[:, 12:28].reshape(k, 4, 4)
@@ -353,7 +355,7 @@ class SurfaceTable:
         data[:, 48:50] = ints[:, 0:2]  # exit, mask
         np.not_equal(parent[:, 50], surface[:, 36], out=data[:, 50])
         np.add(_counting(k), first_index, out=data[:, 51])
-        proj, inv_proj = _oblique_projections(root_proj, inv_root_proj, inv_view, eye, clip)
+        proj, inv_proj = _oblique_projections(root_proj, inv_root_proj, inv_view, clip)
         # The Camera blocks (camera.glsl): four column-major matrices, then eye, viewport,
         # clip plane and ids; the matrices are written straight into their columns.
         blocks = np.empty((k, _CAMERA_FLOATS), np.float32)
@@ -371,7 +373,7 @@ class SurfaceTable:
                           fade if fade is not None else _ones(k), end), faded
 
 
-def _oblique_projections(root_proj: np.ndarray, inv_root_proj: np.ndarray, inv_view: np.ndarray, eye: np.ndarray,
+def _oblique_projections(root_proj: np.ndarray, inv_root_proj: np.ndarray, inv_view: np.ndarray,
                          clip: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Lengyel's oblique near plane for each view (``reflection_math.oblique_projection``, in
     arrays), and the projections' inverses: the root projection's third row replaced so that
@@ -381,7 +383,7 @@ def _oblique_projections(root_proj: np.ndarray, inv_root_proj: np.ndarray, inv_v
     plane = np.matmul(clip[:, None, :], inv_view)[:, 0]  # planes transform by the inverse transpose; the
     # construction below is unchanged by the plane's (positive) scale, so it is not normalised
     root = _projection(root_proj, inv_root_proj)
-    safe = np.abs((clip * eye).sum(axis=1)) > root.safe_distance
+    safe = np.abs(plane[:, 3]) > root.safe_distance  # the eye's distance to the plane: clip . eye
     q = np.sign(plane[:, :2]) @ root.inv_xy_t
     q += root.inv_zw
     c = plane * (2.0 / (plane * q).sum(axis=1))[:, None]
@@ -390,10 +392,11 @@ def _oblique_projections(root_proj: np.ndarray, inv_root_proj: np.ndarray, inv_v
     change = np.where(safe[:, None], c, 0.0)  # the third row's change
     proj = np.repeat(root_proj[None], len(plane), axis=0)
     proj[:, 2] += change
-    # The inverse: P = P0 + e2 change^T, so P^-1 = P0^-1 - (P0^-1 e2)(change^T P0^-1) / (1 + change^T P0^-1 e2).
-    row = change @ inv_root_proj
-    row /= (1.0 + change @ root.column)[:, None]
-    inv_proj = inv_root_proj - root.column[None, :, None] * row[:, None, :]
+    # The inverse: P = P0 + e2 change^T, so P^-1 = P0^-1 - (P0^-1 e2)(change^T P0^-1) / (1 + change^T P0^-1 e2),
+    # both products of the change in one (root.inv_and_column: P0^-1 with its third column after it).
+    row = change @ root.inv_and_column
+    row[:, 0:4] /= 1.0 + row[:, 4:5]
+    inv_proj = inv_root_proj - root.column[None, :, None] * row[:, None, 0:4]
     return proj, inv_proj
 
 
@@ -401,8 +404,9 @@ def level_rects(rects: np.ndarray, screen: tuple[int, int], level: tuple[int, in
     """Screen-pixel rectangles (x0, y0, x1, y1) as (x, y, width, height) in the pixels of a
     level of another size (rounded outwards, at least one pixel)."""
     if level == screen:
-        xy = rects[:, 0:2]
-        return np.concatenate([xy, rects[:, 2:4] - xy], axis=1).astype(np.int64)
+        rects = rects.astype(np.int64)  # whole pixels already
+        rects[:, 2:4] -= rects[:, 0:2]
+        return rects
     s = np.array(level, np.float64) / np.array(screen, np.float64)
     x0y0 = np.floor(rects[:, 0:2] * s)
     x1y1 = np.minimum(np.array(level, np.float64), np.ceil(rects[:, 2:4] * s))
@@ -435,6 +439,7 @@ class _Projection:
     inv_xy_t: np.ndarray     # the inverse's first two columns, transposed
     inv_zw: np.ndarray       # the inverse's last two columns, summed
     column: np.ndarray       # the inverse's third column
+    inv_and_column: np.ndarray  # 4 x 5: the inverse, then its third column
 
 
 # Kept per root projection (the main camera's, a probe face's: a few a frame).
@@ -452,7 +457,8 @@ def _projection(root_proj: np.ndarray, inv_root_proj: np.ndarray) -> _Projection
         near = root_proj[2, 3] / (root_proj[2, 2] - 1.0)
         found = _PROJECTIONS[key] = _Projection(OBLIQUE_SAFE_NEARS * near, inv_root_proj[:, :2].T.copy(),
                                                 inv_root_proj[:, 2] + inv_root_proj[:, 3],
-                                                inv_root_proj[:, 2].copy())
+                                                inv_root_proj[:, 2].copy(),
+                                                np.concatenate([inv_root_proj, inv_root_proj[:, 2:3]], axis=1))
     return found
 
 
