@@ -79,7 +79,7 @@ def test_every_path_is_checked_once_per_context_and_verified_on_llvmpipe(scene, 
     """Each path the engine would use is checked once per context, before its first use, and
     the frame's stats say the verdicts.  On llvmpipe every check passes; a GPU driver may
     refuse some (the NVIDIA H200's writes only face 0 of a layered cube-map attachment, so
-    both layered paths are refused there and the per-face mip pass is checked instead)."""
+    both layered paths are refused there)."""
     ran = []
     original = PathChecks.check
     monkeypatch.setattr(PathChecks, "check", lambda self, path: ran.append(path) or original(self, path))
@@ -91,9 +91,10 @@ def test_every_path_is_checked_once_per_context_and_verified_on_llvmpipe(scene, 
     if prepare_context(ctx).software:
         assert status == dict.fromkeys(PATH_NAMES, "verified") | {
             "face_mips": "unchecked"}  # the layered mip pass was verified: its fallback never needed checking
+    # The per-face mip pass is only a GGX chain's fallback (box mips fall back to
+    # glGenerateMipmap): this probe's box mips never need it checked.
     expected = ["direct_faces", "layered_capture", "layered_mips"]
-    if status["layered_mips"] == "refused":
-        expected.append("face_mips")  # the fallback is checked before it is used
+    assert status["face_mips"] == "unchecked"
     assert sorted(ran) == sorted(expected)
     assert all(status[name] in ("verified", "refused") for name in expected), status
     assert set(runner.stats.paths_verified) == {name for name in expected if status[name] == "verified"}
@@ -164,6 +165,38 @@ def test_the_stand_in_is_what_the_check_catches(scene, ctx, fresh_checks, monkey
     faces = cube_faces(ctx, probes, owner)
     assert faces[0].max() < SENTINEL / 2
     assert all((faces[face] == SENTINEL).all() for face in range(1, 6))
+
+
+def test_box_mips_fall_back_to_glGenerateMipmap_where_the_layered_mip_pass_is_refused(
+        scene, ctx, fresh_checks, monkeypatch):
+    """Box mips need no drawn pass: where the layered one is refused (the H200), a probe's
+    chain is the driver's own ``glGenerateMipmap`` (one call, where the per-face pass is 42
+    attachments and draws for a 128 cube) and the per-face pass is never checked; each
+    level is the 2x2 box average of the one above (numpy, from the level read back)."""
+    original = CubeMipTarget.bind_level
+
+    def skip_level_two(self, level, unit, face=None):
+        size = original(self, level, unit, face)
+        if level == 2 and face is None:
+            self.gl["glViewport"](0, 0, 0, 0)  # nothing of level 2 is drawn
+        return size
+
+    monkeypatch.setattr(CubeMipTarget, "bind_level", skip_level_two)
+    ents = {}
+    runner = scene(marked_chrome_scene(ents), (64, 48))
+    runner.frame()
+    renderer = runner.engine.renderer
+    assert renderer.path_checks.verdicts["layered_mips"].status == "refused"
+    assert renderer.path_checks.verdicts["face_mips"].status == "unchecked"
+    probes = renderer.probes
+    assert probes.mips.used == "build_mipmaps" and probes.cubes[ents["sphere"]].prefilter == "mips"
+    above = np.stack(cube_faces(ctx, probes, ents["sphere"]))
+    for level in (1, 2, 3):
+        drawn = np.stack(cube_faces(ctx, probes, ents["sphere"], level))
+        n = above.shape[1] // 2
+        box = above.reshape(6, n, 2, n, 2, -1).mean(axis=(2, 4))
+        assert np.abs(drawn - box).max() < 4e-3, level
+        above = drawn
 
 
 def test_a_mip_pass_that_skips_a_level_is_refused_and_the_per_face_pass_draws_the_ggx_chain(

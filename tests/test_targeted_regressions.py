@@ -168,7 +168,8 @@ def test_a_relink_that_cannot_keep_the_vertex_inputs_leaves_the_old_program_draw
     path = shader_copy / "scene.vert"
     text = path.read_text()
     edits = [("in uvec4 in_slots;", "in uvec4 in_slots[2];"), ("in vec4 in_reflect;", ""),
-             ("v_reflect = in_reflect;", "v_reflect = vec4(0.0);"), ("v_slots = in_slots;", "v_slots = in_slots[0] ^ in_slots[1];"),
+             ("v_reflect = in_reflect;", "v_reflect = vec4(0.0);"),
+             ("v_slots = in_slots;", "v_slots = in_slots[0] ^ in_slots[1];"),
              ("in_slots.w == camera", "in_slots[0].w == camera")]
     for old, new in edits:
         assert text.count(old) >= 1, old

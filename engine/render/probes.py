@@ -104,9 +104,11 @@ class CubeMipPass:
     blits a level (42 for a 128 cube: most of a small probe's capture on llvmpipe).
 
     Three ways, chosen per build: ``layered`` (one draw a level) once the path self-check
-    (``engine/render/path_checks.py``) has verified it on this context; ``per_face`` (six
-    draws a level, each face attached alone: the same shader without the geometry shader)
-    where the layered draw was refused; ``build_mipmaps`` where the raw GL calls are not
+    (``engine/render/path_checks.py``) has verified it on this context; for a GGX chain
+    where the layered draw was refused (the NVIDIA H200's driver writes only face 0 of a
+    layered cube-map attachment), ``per_face`` (six draws a level, each face attached alone:
+    the same shader without the geometry shader); ``build_mipmaps`` (``glGenerateMipmap``)
+    for box mips where the layered draw is not trusted, and where the raw GL calls are not
     reachable (box mips only: a GGX chain then cannot be drawn and says so)."""
 
     STATE = PassState()  # no depth test, no blending, no clip distances
@@ -140,8 +142,10 @@ class CubeMipPass:
                                "layered framebuffer calls this OpenGL loader does not give")
         if target is not None and way is None:
             checks = self.renderer.path_checks
+            # Box mips without a trusted layered pass: glGenerateMipmap (the driver's own,
+            # one call; the per-face pass would be 42 attachments and draws for a 128 cube).
             way = ("layered" if checks.trusted("layered_mips") else
-                   "per_face" if checks.trusted("face_mips") else None)
+                   "per_face" if ggx and checks.trusted("face_mips") else None)
         if target is None or way is None:
             if ggx and not self._warned_box:
                 LOG.warning("speculum: no mip pass this OpenGL draws right was found (path self-check): "

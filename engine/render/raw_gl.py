@@ -275,40 +275,54 @@ class CubeMipTarget:
         name = _u(0)
         self.gl["glGenFramebuffers"](1, ctypes.byref(name))
         self.framebuffer = name.value
+        self._level: int | None = None  # the level whose state is set (None: none, after done)
+        self._complete: set[tuple[int, int | None]] = set()  # (level, face) attachments checked complete
 
     def bind_level(self, level: int, unit: int, face: int | None = None) -> int:
         """Draw into mip ``level`` (>= 1) of every face (layered: ``glFramebufferTexture``),
         or of ``face`` alone (``glFramebufferTexture2D``: the per-face pass, for a driver
         whose layered draw was refused), reading only level ``level - 1`` through ``unit``;
-        returns the level's face size."""
+        returns the level's face size.  The level's state (framebuffer, source levels,
+        viewport, masks) is set at its first face; the next faces of the same level only
+        re-point the attachment.  Each attachment's completeness and GL errors are checked
+        the first time it is bound (it cannot change while the cube's storage stands): on a
+        GPU driver each raw call is a ctypes call of several microseconds, and the per-face
+        pass binds 42 attachments for a 128 cube."""
         gl = self.gl
-        invalidate(self.ctx)  # the viewport and scissor below are set behind moderngl's back
-        gl["glGetError"]()  # start clean: what follows is checked
-        gl["glBindFramebuffer"](GL_FRAMEBUFFER, self.framebuffer)
+        size = max(1, self.cube.size[0] >> level)
+        first = (level, face) not in self._complete
+        if first:
+            gl["glGetError"]()  # start clean: what follows is checked
+        if self._level != level:
+            invalidate(self.ctx)  # the viewport and scissor below are set behind moderngl's back
+            gl["glBindFramebuffer"](GL_FRAMEBUFFER, self.framebuffer)
+            gl["glDrawBuffers"](1, (_u * 1)(GL_COLOR_ATTACHMENT0))
+            gl["glDisable"](GL_SCISSOR_TEST)
+            gl["glColorMask"](1, 1, 1, 1)
+            self.cube.use(unit)
+            gl["glTexParameteri"](GL_TEXTURE_CUBE_MAP, GL_TEXTURE_BASE_LEVEL, level - 1)
+            gl["glTexParameteri"](GL_TEXTURE_CUBE_MAP, GL_TEXTURE_MAX_LEVEL, level - 1)
+            gl["glViewport"](0, 0, size, size)
+            self._level = level
         if face is None:
             gl["glFramebufferTexture"](GL_FRAMEBUFFER, GL_COLOR_ATTACHMENT0, self.cube.glo, level)
         else:
             gl["glFramebufferTexture2D"](GL_FRAMEBUFFER, GL_COLOR_ATTACHMENT0, GL_TEXTURE_CUBE_MAP_POSITIVE_X + face,
                                          self.cube.glo, level)
-        gl["glDrawBuffers"](1, (_u * 1)(GL_COLOR_ATTACHMENT0))
-        gl["glDisable"](GL_SCISSOR_TEST)
-        gl["glColorMask"](1, 1, 1, 1)
-        status = gl["glCheckFramebufferStatus"](GL_FRAMEBUFFER)
-        self.cube.use(unit)
-        gl["glTexParameteri"](GL_TEXTURE_CUBE_MAP, GL_TEXTURE_BASE_LEVEL, level - 1)
-        gl["glTexParameteri"](GL_TEXTURE_CUBE_MAP, GL_TEXTURE_MAX_LEVEL, level - 1)
-        size = max(1, self.cube.size[0] >> level)
-        gl["glViewport"](0, 0, size, size)
-        error = gl["glGetError"]()
-        if status != GL_FRAMEBUFFER_COMPLETE or error:
-            self.done(unit)
-            where = "every face" if face is None else f"face {face}"
-            raise RuntimeError(f"cube-map mip level {level} ({where}) of {self.cube.size[0]}: framebuffer status "
-                               f"0x{status:x}, GL error 0x{error:x}")
+        if first:
+            status = gl["glCheckFramebufferStatus"](GL_FRAMEBUFFER)
+            error = gl["glGetError"]()
+            if status != GL_FRAMEBUFFER_COMPLETE or error:
+                self.done(unit)
+                where = "every face" if face is None else f"face {face}"
+                raise RuntimeError(f"cube-map mip level {level} ({where}) of {self.cube.size[0]}: framebuffer "
+                                   f"status 0x{status:x}, GL error 0x{error:x}")
+            self._complete.add((level, face))
         return size
 
     def done(self, unit: int) -> None:
         """Every level readable again; back to the framebuffer moderngl thinks is bound."""
+        self._level = None
         self.cube.use(unit)
         self.gl["glTexParameteri"](GL_TEXTURE_CUBE_MAP, GL_TEXTURE_BASE_LEVEL, 0)
         self.gl["glTexParameteri"](GL_TEXTURE_CUBE_MAP, GL_TEXTURE_MAX_LEVEL, GL_MAX_LEVEL_DEFAULT)
