@@ -1,5 +1,5 @@
 """GPU report: what this machine's OpenGL is, what the engine verified on it, whether the
-tests pass on it and what the mirrors, portals and probes benchmarks measure on it, written
+tests pass on it and what the mirrors, portals, probes and stages benchmarks measure on it, written
 as ``DIR/report.md`` (to read) and ``DIR/report.json`` (to compare).
 
 Sections, in the order they run (both files are rewritten after each, so a driver crash part
@@ -13,7 +13,7 @@ way leaves what came before, with ``"complete": false``):
   ``direct_faces`` and any other path ``engine.render.path_checks.PATH_NAMES`` lists; each
   ``verified``, ``refused``, ``unavailable`` or ``unchecked``, with its detail).  A checkout
   without the self-check reports each path ``unchecked``.
-* ``benchmarks``: ``mirrors``, ``portals`` and ``probes`` (``--benchmarks``) at each
+* ``benchmarks``: ``mirrors``, ``portals``, ``probes`` and ``stages`` (``--benchmarks``) at each
   ``--size`` (default 640x360 and 1920x1080), each run as ``python -m benchmarks <suite>
   --json --size WxH --frames N --warmup M`` would run it (in this process, or one
   subprocess each with ``--isolate``); the rows are the suite's own JSON lines, kept as
@@ -64,7 +64,7 @@ from benchmarks import format_size, parse_sizes
 
 ROOT = Path(__file__).resolve().parents[1]
 DEFAULT_SIZES = ((640, 360), (1920, 1080))
-BENCHMARKS = ("mirrors", "portals", "probes")
+BENCHMARKS = ("mirrors", "portals", "probes", "stages")
 PATHS = ("layered_capture", "layered_mips", "direct_faces")
 STATUSES = ("verified", "refused", "unavailable", "unchecked")
 SCHEMA = 1
@@ -79,6 +79,8 @@ MEDIANS: dict[str, tuple[tuple[tuple[str, ...], str], ...]] = {
     "portals": ((("depth",), "frame_ms_median"), (("depth",), "cpu_ms_median"), (("depth",), "plan_us_per_view")),
     "probes": ((("probe",), "frame_ms_median"), (("probe",), "cpu_ms_median"), (("probe",), "plan_us_per_view"),
                (("path", "culled", "size"), "capture_ms_median"), (("prefilter", "size"), "prefilter_ms_median")),
+    "stages": ((("scene", "stage"), "gpu_ms_median"), (("scene", "stage"), "cpu_ms_median"),
+               (("scene", "stage"), "frame_ms_median")),
 }
 
 

@@ -21,7 +21,7 @@ ROOT = Path(__file__).resolve().parents[1]
 
 # What each rendering suite drew at before --size existed: the default must not move.
 DEFAULT_SIZES = {"ecs": (64, 36), "portals": (640, 360), "mirrors": (640, 360), "soak": (320, 180),
-                 "churn": (320, 180), "probes": (640, 360), "normal_maps": (640, 360)}
+                 "churn": (320, 180), "probes": (640, 360), "normal_maps": (640, 360), "stages": (640, 360)}
 
 
 @pytest.fixture
@@ -160,7 +160,7 @@ def test_gpu_report_writes_markdown_and_json_without_imgui(ctx, tmp_path):
     assert report["tests"] == {"ran": False, "reason": "--no-tests"}
 
     runs = report["benchmarks"]
-    assert set(runs) == {"mirrors", "portals", "probes"}
+    assert set(runs) == {"mirrors", "portals", "probes", "stages"}
     for suite, by_size in runs.items():
         assert set(by_size) == {"160x90"}, suite
         assert by_size["160x90"]["status"] == "ok", by_size["160x90"]
@@ -190,7 +190,10 @@ def test_gpu_report_writes_markdown_and_json_without_imgui(ctx, tmp_path):
     assert ctx.info["GL_RENDERER"] in markdown
     assert {t["value"] for t in report["medians"]["mirrors"]} == {"frame_ms_median", "cpu_ms_median",
                                                                   "plan_us_per_view"}
+    stage_rows = runs["stages"]["160x90"]["rows"]
+    assert {r["scene"] for r in stage_rows} == {"mirrors_0", "mirrors_8", "mirrors_16", "probe_dynamic"}
     for heading in ("## OpenGL", "## Rendering paths", "## Benchmarks", "### mirrors: frame_ms_median by size",
+                    "### stages: gpu_ms_median by size",
                     "### mirrors: plan_us_per_view by size", "### portals: cpu_ms_median by size", "## Test suite"):
         assert heading in markdown, heading
 
@@ -366,3 +369,26 @@ def test_the_suite_collects_without_imgui():
     assert done.returncode == 0, done.stdout[-3000:] + done.stderr[-2000:]
     assert " error" not in done.stdout.splitlines()[-1], done.stdout[-3000:]
     assert "tests/test_view_budget.py::" in done.stdout
+
+
+def test_stages_time_every_stage_inside_its_frame(ctx):
+    """Every stage of every scene has a row, and the stages' CPU times are parts of the
+    frame's: their medians add up to no more than Engine.frame's (plus a little: medians of
+    parts need not add up exactly), and the view stages are where the mirrors' time goes."""
+    from benchmarks import stages
+    from shell.app import FRAME_STAGES
+
+    rows = stages.run(ctx, (0, 16), frames=3, warmup=1, size=(64, 36))
+    scenes = {r["scene"] for r in rows}
+    assert scenes == {"mirrors_0", "mirrors_16", "probe_dynamic"}
+    for scene in scenes:
+        by_stage = {r["stage"]: r for r in rows if r["scene"] == scene}
+        assert set(by_stage) == {*(name for name, _ in FRAME_STAGES), "frame"}, scene
+        frame = by_stage.pop("frame")
+        assert 0 < frame["cpu_ms_median"] <= frame["frame_ms_median"]
+        assert sum(r["cpu_ms_median"] for r in by_stage.values()) <= 1.2 * frame["cpu_ms_median"] + 0.05, scene
+        assert all(r["gpu_ms_median"] >= 0 and r["software"] for r in by_stage.values())
+    reflect = {r["scene"]: r["cpu_ms_median"] for r in rows if r["stage"] == "reflect"}
+    assert reflect["mirrors_16"] > 5 * reflect["mirrors_0"]
+    probes = {r["scene"]: r["cpu_ms_median"] for r in rows if r["stage"] == "probes"}
+    assert probes["probe_dynamic"] > probes["mirrors_0"]

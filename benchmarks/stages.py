@@ -1,0 +1,161 @@
+"""Stages benchmark: where a frame's time goes, stage by stage, on the CPU and on the GPU.
+
+Each stage of ``Engine.stages`` (``FRAME_STAGES``: game, rules, ..., main, reflect, present)
+is timed twice a frame: the wall clock of its ``process`` call (the CPU's share, including
+any wait for the GPU inside it) and the GPU time of the commands it issued (a GL timer
+query, ``GL_TIME_ELAPSED``, around the call, read after the frame's ``ctx.finish()``).  On
+a GPU that says which stage a frame waits for and whether it is the CPU or the GPU: the
+frame-time tables of the other suites cannot.  On llvmpipe (a software rasteriser that
+draws on the calling thread at flushes) the GPU column is not a GPU's and is reported with
+``software: true``.
+
+Scenes, each its own engine, their frames interleaved (frame i of every engine, then i + 1):
+the mirrors benchmark's ring (``benchmarks.mirrors.MirrorRing``) with 0, 8 and 16 mirrors
+(``--mirrors``), and the probes benchmark's dynamic probe (``ProbeRing``, six faces a
+frame; its capture path is fixed to ``six_pass``, since ``auto`` times its candidates with
+timer queries of its own, which cannot nest in these).  The engine has no timing code: the
+stages' ``process`` methods are wrapped on the instances for the run.
+
+One JSON row per scene and stage: ``scene``, ``stage``, ``cpu_ms_median``,
+``gpu_ms_median``; and one per scene with ``stage`` "frame": the whole ``Engine.frame``
+(``cpu_ms_median``) and the frame with its ``ctx.finish()`` (``frame_ms_median``).
+
+    python -m benchmarks stages                 # table
+    python -m benchmarks stages --json --size 1920x1080
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import statistics
+import time
+from collections.abc import Callable
+
+from benchmarks import add_size_argument, format_size
+from benchmarks.mirrors import DT, MirrorRing
+from benchmarks.probes import ProbeRing
+from engine.core.frame_io import Output
+from engine.core.game import Game
+from engine.render.gl_context import create_headless_context, prepare_context
+from engine.render.targets import CaptureTarget
+from shell.app import Engine
+
+SIZE = (640, 360)
+
+
+def scenes(mirror_counts: tuple[int, ...]) -> list[tuple[str, Callable[[], Game]]]:
+    """(name, game factory) of every scene the suite times."""
+    found = [(f"mirrors_{n}", lambda n=n: MirrorRing(n)) for n in mirror_counts]
+    return [*found, ("probe_dynamic", lambda: ProbeRing("every_frame"))]
+
+
+class StageClock:
+    """Times each stage of one engine: wraps its stages' ``process`` (on the instances) with
+    a wall clock and a GL timer query; ``read()`` after the frame's finish gives that
+    frame's {stage: (cpu ms, gpu ms)}."""
+
+    def __init__(self, engine: Engine) -> None:
+        self.ctx = engine.ctx
+        self.cpu: dict[str, float] = {}
+        self.queries: dict[str, object] = {}
+        for name, system in engine.stages.items():
+            system.process = self._timed(name, system.process)
+
+    def _timed(self, name: str, process: Callable) -> Callable:
+        def timed(*args, **kwargs):
+            query = self.queries.get(name)
+            if query is None:
+                query = self.queries[name] = self.ctx.query(time=True)
+            start = time.perf_counter()
+            with query:
+                result = process(*args, **kwargs)
+            self.cpu[name] = (time.perf_counter() - start) * 1e3
+            return result
+        return timed
+
+    def read(self) -> dict[str, tuple[float, float]]:
+        """This frame's times (call after ``ctx.finish()``), then forget them."""
+        times = {name: (ms, self.queries[name].elapsed / 1e6) for name, ms in self.cpu.items()}
+        self.cpu = {}
+        return times
+
+
+def run(ctx, mirror_counts: tuple[int, ...], frames: int, warmup: int, size: tuple[int, int]) -> list[dict]:
+    """Every scene's rows (module docstring), its frames interleaved with the others'."""
+    software = prepare_context(ctx).software
+    built, captures = [], []
+    try:
+        for name, game in scenes(mirror_counts):
+            engine = Engine(game(), ctx)
+            if name.startswith("probe"):
+                engine.stages["probes"].path = "six_pass"
+            capture = CaptureTarget(ctx, size)
+            captures.append(capture)
+            built.append((name, engine, Output(capture.framebuffer, size), StageClock(engine)))
+        samples: dict[str, dict[str, list[tuple[float, float]]]] = {name: {} for name, *_ in built}
+        for frame in range(warmup + frames):
+            for name, engine, output, clock in built:
+                start = time.perf_counter()
+                engine.frame(DT, output)
+                returned = time.perf_counter()
+                ctx.finish()
+                finished = time.perf_counter()
+                times = clock.read()
+                if frame >= warmup:
+                    for stage, pair in times.items():
+                        samples[name].setdefault(stage, []).append(pair)
+                    samples[name].setdefault("frame", []).append(((returned - start) * 1e3,
+                                                                  (finished - start) * 1e3))
+        if ctx.error != "GL_NO_ERROR":
+            raise RuntimeError(f"OpenGL error: {ctx.error}")
+        rows = []
+        for name, *_ in built:
+            for stage, pairs in samples[name].items():
+                cpu = round(statistics.median(p[0] for p in pairs), 3)
+                other = round(statistics.median(p[1] for p in pairs), 3)
+                row = {"scene": name, "stage": stage, "cpu_ms_median": cpu, "software": software,
+                       "frames": frames}
+                row["frame_ms_median" if stage == "frame" else "gpu_ms_median"] = other
+                rows.append(row)
+        return rows
+    finally:
+        for capture in captures:
+            capture.release()
+        for _, engine, _, _ in built:
+            engine.close()
+
+
+def _ints(text: str) -> tuple[int, ...]:
+    return tuple(int(part) for part in text.split(",") if part.strip())
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--mirrors", type=_ints, default=(0, 8, 16), help="mirror counts (default 0,8,16)")
+    parser.add_argument("--frames", type=int, default=30, help="timed frames per scene (default 30)")
+    parser.add_argument("--warmup", type=int, default=5, help="untimed frames first (default 5)")
+    add_size_argument(parser, SIZE)
+
+
+def main(args: argparse.Namespace) -> int:
+    if args.frames < 1 or args.warmup < 0 or any(n < 0 for n in args.mirrors):
+        raise SystemExit("--frames must be >= 1, --warmup and --mirrors >= 0")
+    ctx = create_headless_context()
+    try:
+        rows = run(ctx, args.mirrors, args.frames, args.warmup, args.size)
+        if args.json:
+            for row in rows:
+                print(json.dumps(row), flush=True)
+            return 0
+        print(f"Stages at {format_size(args.size)} ({ctx.info.get('GL_RENDERER', '?')}, medians of {args.frames} "
+              f"frames; GPU column by timer query{', not a GPU: software rasteriser' if rows[0]['software'] else ''})")
+        for scene in dict.fromkeys(row["scene"] for row in rows):
+            frame = next(row for row in rows if row["scene"] == scene and row["stage"] == "frame")
+            print(f"{scene}: frame {frame['frame_ms_median']} ms, Engine.frame {frame['cpu_ms_median']} ms")
+            for row in rows:
+                if row["scene"] == scene and row is not frame and (row["cpu_ms_median"] >= 0.005
+                                                                   or row["gpu_ms_median"] >= 0.005):
+                    print(f"    {row['stage']:14s} cpu {row['cpu_ms_median']:8.3f} ms   "
+                          f"gpu {row['gpu_ms_median']:8.3f} ms")
+        return 0
+    finally:
+        ctx.release()
