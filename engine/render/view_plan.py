@@ -15,6 +15,8 @@ layout (``M @ x``); glm's and GL's are column-major, so they are transposed at t
 from __future__ import annotations
 
 import functools
+import math
+import struct
 from dataclasses import dataclass
 from typing import Any
 
@@ -324,6 +326,9 @@ class SurfaceTable:
         Like the cull, a fixed number of array operations whatever the number of views:
         each candidate's parent row and surface rows are gathered once (``take``), and the
         results are written where they are read next (the level's rows, the Camera blocks)."""
+        if len(parents.data) * len(self.states) <= SMALL_LEVEL_PAIRS and not self.fading:
+            return self._plan_small(parents, depth, root, root_proj, inv_root_proj, first_index, depth_cap, hide,
+                                    ends, size, scale), 0
         p, s, rects, weights = self.cull(parents, depth, root_proj, root.size, depth_cap, ends)
         if weights is None:
             faded, fade = 0, None
@@ -371,6 +376,113 @@ class SurfaceTable:
         end = None if ends is None else self._within(depth, depth_cap)[1].take(s)
         return Candidates(p, s, LevelRows(data), level_rects(rects, root.size, size), blocks, size,
                           fade if fade is not None else _ones(k), end), faded
+
+
+    @functools.cached_property
+    def _small(self) -> list[_SmallSurface]:
+        """Each surface as ``_plan_small`` reads it (glm doubles of the table's own float64s)."""
+        mat = _dmat
+        keep = (_KINDS_BUT_DIRECT | (self.layers << VIEW_KINDS)).tolist()
+        return [_SmallSurface(int(self.entities[i]), int(self.exit_entities[i]), glm.dvec4(*self.planes[i].tolist()),
+                              glm.dvec4(*self.exit_planes[i].tolist()), mat(self.carry[i]), mat(self.inv_carry[i]),
+                              [glm.dvec4(*c) for c in np.unique(self.corners[i], axis=0).tolist()],
+                              float(self.is_mirror[i]), keep[i], int(self.kind_bit[i]))
+                for i in range(len(self.states))]
+
+    def _plan_small(self, parents: LevelRows, depth: int, root: View, root_proj: np.ndarray,
+                    inv_root_proj: np.ndarray, first_index: int, depth_cap: int, hide: int, ends: np.ndarray | None,
+                    size: tuple[int, int] | None, scale: float) -> Candidates | None:
+        """``plan`` for a level of a few (parent x surface) pairs (``SMALL_LEVEL_PAIRS``: the
+        first level of a tree with one or two surfaces, every level of a portal pair), pair
+        by pair in glm doubles: the same tests, rectangles and cameras as the arrays (the same
+        formulas, in the same order), for a fraction of their fixed cost.  In a frame, after
+        the rasteriser has run, the first call of each kind of numpy operation costs several
+        microseconds (measured: 4-10 us against 0.5-1 warm), a glm call under one; a level in
+        arrays takes some 70 of them whatever its size.  Levels with fades take the arrays."""
+        allowed, cut = self._within(depth, depth_cap)
+        if ends is not None:
+            allowed = allowed | (self.enabled & ends)
+        elif not allowed.any():
+            return None
+        allowed = allowed.tolist()
+        surfaces = self._small
+        projection = _projection(root_proj, inv_root_proj)
+        small = projection.small
+        half_w, half_h = 0.5 * root.size[0], 0.5 * root.size[1]
+        pairs = []
+        for p, row in enumerate(parents.data.tolist()):
+            view = glm.transpose(glm.dmat4(*row[12:28]))
+            clip = glm.dvec4(*row[8:12])
+            eye = glm.dvec4(*row[0:4])
+            view_proj = small.proj * view
+            for s, surface in enumerate(surfaces):
+                if not allowed[s] or surface.entity == row[48] or glm.dot(eye, surface.plane) <= 0.0:
+                    continue
+                # Every corner outside one side of the frustum, or behind the clip plane: culled.
+                outside = [True] * 6
+                in_front = False
+                straddles = False
+                lo_x = lo_y = float("inf")
+                hi_x = hi_y = -float("inf")
+                for corner in surface.corners:
+                    x, y, z, w = view_proj * corner
+                    for side, value in enumerate((x - w, y - w, z - w, -x - w, -y - w, -z - w)):
+                        if value <= 0.0:
+                            outside[side] = False
+                    in_front = in_front or glm.dot(clip, corner) > 0.0
+                    straddles = straddles or w <= 1e-6
+                    w = max(w, 1e-6)
+                    lo_x, hi_x, lo_y, hi_y = min(lo_x, x / w), max(hi_x, x / w), min(lo_y, y / w), max(hi_y, y / w)
+                if any(outside) or not in_front:
+                    continue
+                if straddles:  # a corner behind the eye: the parent's whole rectangle
+                    x0, y0, x1, y1 = row[44:48]
+                else:
+                    x0 = max(math.floor((lo_x + 1.0) * half_w) - 1.0, row[44])
+                    y0 = max(math.floor((lo_y + 1.0) * half_h) - 1.0, row[45])
+                    x1 = min(-(math.floor((-hi_x - 1.0) * half_w) - 1.0), row[46])
+                    y1 = min(-(math.floor((-hi_y - 1.0) * half_h) - 1.0), row[47])
+                if x1 > x0 and y1 > y0:
+                    pairs.append((p, s, row, view, (float(x0), float(y0), float(x1), float(y1))))
+        if not pairs:
+            return None
+        if size is None:
+            scale *= self.one_scale if self.one_scale is not None else float(max(self.scale[s] for _, s, *_ in pairs))
+            size = (max(1, round(root.size[0] * scale)), max(1, round(root.size[1] * scale)))
+        rows, blocks, scissors = [], [], []
+        viewport = glm.vec4(0.0, 0.0, *size)
+        for i, (_, s, row, view, rect) in enumerate(pairs):
+            surface = surfaces[s]
+            # (+ 0: a sum that cancels is +0.0, as the arrays' products give it, not glm's -0.0)
+            view = view * surface.inv_carry + _ZERO
+            inv_view = surface.carry * glm.transpose(glm.dmat4(*row[28:44])) + _ZERO
+            eye = inv_view[3]  # where the carried camera is: its eye-to-world translation
+            clip = surface.exit_plane
+            # Lengyel's oblique near plane and its Sherman-Morrison inverse (_oblique_projections).
+            plane = clip * inv_view
+            q = small.inv * glm.dvec4(_sign(plane.x), _sign(plane.y), 1.0, 1.0)
+            change = plane * (2.0 / glm.dot(plane, q))
+            change -= small.row_3
+            change -= small.row_2
+            if not abs(plane.w) > projection.safe_distance:
+                change = glm.dvec4(0.0)
+            proj = small.proj + glm.outerProduct(_E2, change)
+            inv_proj = small.inv - glm.outerProduct(small.column, (change * small.inv) /
+                                                    (1.0 + glm.dot(change, small.column)))
+            mask = (int(row[49]) & surface.keep) | surface.kind_bit
+            blocks += (glm.mat4(view).to_bytes(), glm.mat4(proj).to_bytes(), glm.mat4(proj * view + _ZERO).to_bytes(),
+                       glm.mat4(inv_view * inv_proj + _ZERO).to_bytes(), glm.vec4(eye).to_bytes(), viewport.to_bytes(),
+                       glm.vec4(clip).to_bytes(), _IDS.pack(surface.exit & 0xFFFFFFFF, hide & 0xFFFFFFFF,
+                                                            mask & 0xFFFFFFFF, 0))
+            rows.append([*eye, 0.0, 0.0, *size, *clip, *_rows(view), *_rows(inv_view), *rect, surface.exit, mask,
+                         float(row[50] != surface.mirror), first_index + i])
+            scissors.append(rect)
+        k = len(pairs)
+        surface_rows = np.array([s for _, s, *_ in pairs], np.int64)
+        return Candidates(np.array([p for p, *_ in pairs], np.int64), surface_rows, LevelRows(np.array(rows)),
+                          level_rects(np.array(scissors), root.size, size),
+                          np.frombuffer(b"".join(blocks), np.float32).reshape(k, _CAMERA_FLOATS), size, _ones(k),
+                          None if ends is None else cut.take(surface_rows))
 
 
 def _oblique_projections(root_proj: np.ndarray, inv_root_proj: np.ndarray, inv_view: np.ndarray,
@@ -440,6 +552,32 @@ class _Projection:
     inv_zw: np.ndarray       # the inverse's last two columns, summed
     column: np.ndarray       # the inverse's third column
     inv_and_column: np.ndarray  # 4 x 5: the inverse, then its third column
+    small: _SmallProjection  # the same in glm doubles, for SurfaceTable._plan_small
+
+
+@dataclass
+class _SmallProjection:
+    proj: glm.dmat4
+    inv: glm.dmat4
+    row_2: glm.dvec4
+    row_3: glm.dvec4
+    column: glm.dvec4
+
+
+@dataclass
+class _SmallSurface:
+    """A surface as ``SurfaceTable._plan_small`` reads it."""
+
+    entity: int
+    exit: int                # the entity its view looks out of
+    plane: glm.dvec4
+    exit_plane: glm.dvec4
+    carry: glm.dmat4
+    inv_carry: glm.dmat4
+    corners: list[glm.dvec4]  # its distinct corners
+    mirror: float            # 1.0 for a mirror
+    keep: int                # the view mask bits a view through it keeps
+    kind_bit: int            # the kind bit it adds
 
 
 # Kept per root projection (the main camera's, a probe face's: a few a frame).
@@ -458,7 +596,11 @@ def _projection(root_proj: np.ndarray, inv_root_proj: np.ndarray) -> _Projection
         found = _PROJECTIONS[key] = _Projection(OBLIQUE_SAFE_NEARS * near, inv_root_proj[:, :2].T.copy(),
                                                 inv_root_proj[:, 2] + inv_root_proj[:, 3],
                                                 inv_root_proj[:, 2].copy(),
-                                                np.concatenate([inv_root_proj, inv_root_proj[:, 2:3]], axis=1))
+                                                np.concatenate([inv_root_proj, inv_root_proj[:, 2:3]], axis=1),
+                                                _SmallProjection(_dmat(root_proj), _dmat(inv_root_proj),
+                                                                 glm.dvec4(*root_proj[2].tolist()),
+                                                                 glm.dvec4(*root_proj[3].tolist()),
+                                                                 glm.dvec4(*inv_root_proj[:, 2].tolist())))
     return found
 
 
@@ -494,3 +636,26 @@ def _ones(k: int) -> np.ndarray:
     if len(_ONES) < k:
         _ONES = np.ones(2 * k)
     return _ONES[:k]
+
+
+# The most (parent x surface) pairs a level plans pair by pair in glm (SurfaceTable._plan_small)
+# rather than in arrays: measured in frames on llvmpipe (LP_NUM_THREADS=0), a pair costs the
+# glm path some 15-25 us and a level in arrays some 150 us whatever its size.
+SMALL_LEVEL_PAIRS = 4
+_E2 = glm.dvec4(0.0, 0.0, 1.0, 0.0)
+_ZERO = glm.dmat4(0.0)
+_IDS = struct.Struct("<4I")
+
+
+def _dmat(matrix: np.ndarray) -> glm.dmat4:
+    """A row-major numpy matrix as a glm double one."""
+    return glm.dmat4(*matrix.T.reshape(16).tolist())
+
+
+def _rows(matrix: glm.dmat4) -> list[float]:
+    """A glm matrix's 16 values row by row (LevelRows' layout)."""
+    return [value for row in glm.transpose(matrix).to_list() for value in row]
+
+
+def _sign(x: float) -> float:
+    return 1.0 if x > 0.0 else (-1.0 if x < 0.0 else 0.0)
