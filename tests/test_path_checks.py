@@ -276,7 +276,11 @@ def test_debug_mode_names_a_cube_bound_for_sampling_while_it_is_drawn_into(scene
     assert renderer.debug
     with pytest.raises(GLPassError, match=r"feedback loop"):
         probes.capture_layered(owner, views)
-    assert f"({PROBE_UNIT},)" in str(pytest.raises(GLPassError, probes.capture_layered, owner, views).value)
+    message = str(pytest.raises(GLPassError, probes.capture_layered, owner, views).value)
+    units = re.search(r"texture units \(([^)]*)\)", message)
+    # PROBE_UNIT named (a driver that refused the layered mip pass has glGenerateMipmap's
+    # binding on moderngl's default unit too, which the real _drawing_into would clear).
+    assert units and PROBE_UNIT in {int(u) for u in units.group(1).replace(",", " ").split()}, message
 
 
 def test_every_layered_geometry_shader_writes_gl_layer_before_each_vertex():
