@@ -4,7 +4,12 @@ context with its plain counterpart on a tiny built-in scene before it is trusted
 Shipping engines keep a list of driver bugs and work around them by vendor and version.
 That list is never complete, and the layered cube-map capture proved it: on an NVIDIA H200
 (driver 580) it wrote face +X only and left the five other faces uninitialised, while Mesa
-drew all six (`../shared/measurements/gpu-h200-2026-11-26.md`).  So instead of trusting a
+drew all six (`../shared/measurements/gpu-h200-2026-11-26.md`).  A probe on that machine
+(2026-11-26) narrowed it down: with a cube map attached by ``glFramebufferTexture`` the
+framebuffer is complete and reports itself layered, yet a clear and a draw reach face 0
+only, for a moderngl cube, a raw ``glTexImage2D`` cube and the engine's target alike, while a
+2D array texture attached the same way takes all six layers.  Both layered paths are
+refused there, and the engine draws the plain ones.  So instead of trusting a
 path because the spec allows it, each path that has a plainer way to the same picture is
 run once on this context and compared with it, texel by texel:
 
