@@ -262,17 +262,16 @@ def _shared_samples_queries(ctx: moderngl.Context, count: int) -> list[moderngl.
 
 @dataclass
 class Claims:
-    """A reflection level's candidate views, as lists: candidate i is the surface with entity
-    ``surfaces[i]`` seen from view ``parents[i]`` of the level above, drawn as view
-    ``indices[i]`` inside ``rects[i]`` (x, y, width, height in this level's pixels)."""
+    """A reflection level's candidate views: candidate i is drawn inside ``rects[i]`` (x, y,
+    width, height in this level's pixels), and ``ids`` holds, for each, the claim shader's
+    (parent view, surface entity, view index) as three uint32s (packed once a level: a write
+    of its 12 bytes a claim is cheaper than setting the uniform from a tuple)."""
 
-    indices: list[int]
-    surfaces: list[int]
-    parents: list[int]
-    rects: list[list[int]]
+    ids: bytes
+    rects: list[tuple[int, int, int, int]]
 
     def __len__(self) -> int:
-        return len(self.indices)
+        return len(self.rects)
 
 
 class MirrorPasses:
@@ -311,19 +310,20 @@ class MirrorPasses:
         ctx = self.ctx
         level.framebuffer.use()
         apply_pass_state(ctx, _CLAIM, (0, 0, *level.size))
-        self._draw_resets(dict.fromkeys(map(tuple, claims.rects)), level.size)
+        self._draw_resets(dict.fromkeys(claims.rects), level.size)
         parent.node.use(PARENT_NODE_UNIT)
         parent.surface.use(PARENT_SURFACE_UNIT)
         program = self.claim
         program["to_parent"].value = (parent.size[0] / level.size[0], parent.size[1] / level.size[1])
-        claim_ids = program["claim"]
+        write_ids = program["claim"].write
+        ids = memoryview(claims.ids)
+        render = self._claim_vao.render
         queries = _shared_samples_queries(ctx, len(claims))
-        for query, parent_index, surface, index, rect in zip(queries, claims.parents, claims.surfaces,
-                                                             claims.indices, claims.rects, strict=False):
+        for at, (query, rect) in enumerate(zip(queries, claims.rects, strict=False)):
             ctx.scissor = rect
-            claim_ids.value = (parent_index, surface, index)
+            write_ids(ids[12 * at:12 * at + 12])
             with query:
-                self._claim_vao.render(moderngl.TRIANGLES, vertices=3)
+                render(moderngl.TRIANGLES, vertices=3)
         self.renderer.checkpoint("claims")
         return [query.samples for query in queries[: len(claims)]]
 

@@ -162,6 +162,7 @@ class SurfaceTable:
         self.scale = np.array([s.resolution_scale for s in states], np.float64)
         self.priority = np.array([s.priority for s in states], np.int64)
         self.end_image = self._end_images(states)
+        self.has_end_images = bool(self.end_image.any())
         # Fades (Mirror.fade_distance, fade_angle): start and end of each, and each surface's
         # bounding sphere; a surface without fades never fades.
         self.fades = [s.fade for s in states]

@@ -114,6 +114,8 @@ class ViewTree:
         self.passes = MirrorPasses(renderer)
         self.ends = EndImages(renderer) if end_images else None
         self.coverage: dict[int, int] = {}  # level -> its views' claimed pixels last frame (screen pixels)
+        self._ends_key: tuple | None = None  # what _end_surfaces found last, and for what
+        self._ends_found: tuple[np.ndarray, int] | None = None
 
     def render(self, root: View, levels: LevelStack, surfaces: SurfaceTable,
                settings: TreeSettings = TreeSettings()) -> TreeResult:
@@ -141,14 +143,16 @@ class ViewTree:
                 renderer.stats.levels_downscaled += 1
             targets = levels.get(level + 1, candidates.size)
             pixels = self._claim(surfaces, targets, levels[level], rows, candidates)
-            is_end = candidates.end
-            keep = self._within_budgets(surfaces, candidates, pixels if is_end is None else np.where(is_end, 0, pixels),
+            is_end = None if candidates.end is None else candidates.end.tolist()
+            keep = self._within_budgets(surfaces, candidates, pixels if is_end is None else
+                                        [0 if end else n for n, end in zip(pixels, is_end, strict=True)],
                                         settings, result, level + 1, root.size)
-            chosen = candidates if len(keep) == len(candidates) else candidates.select(keep)
+            chosen = candidates if len(keep) == len(candidates) else candidates.select(np.asarray(keep, np.int64))
             views, children = self._level_nodes(surfaces, chosen, nodes, level + 1, root.hide)
             ended = []
             if is_end is not None:
-                end_rows = np.flatnonzero(is_end & (pixels > 0))
+                end_rows = np.array([i for i, (n, end) in enumerate(zip(pixels, is_end, strict=True))
+                                     if end and n > 0], np.int64)
                 if len(end_rows):
                     chosen_ends = candidates.select(end_rows)
                     end_views, ended = self._level_nodes(surfaces, chosen_ends, nodes, level + 1, root.hide)
@@ -192,7 +196,7 @@ class ViewTree:
         for depth in range(level, 0, -1):
             self.passes.composite_level(levels[depth - 1], levels[depth], composites[depth - 1])
         if self.ends is not None:
-            if surfaces.end_image.any():
+            if surfaces.has_end_images:
                 self.ends.keep(levels[0], root, frozenset(node.surface.entity for node in
                                                           (*result.views[1:], *result.end_views)))
             else:
@@ -202,14 +206,18 @@ class ViewTree:
     def _end_surfaces(self, surfaces: SurfaceTable, root: View, depth_cap: int) -> tuple[np.ndarray, int] | None:
         """The surfaces that may get end views this frame (an end image, and a view last
         frame) and the first level where one can (None: no end views, as in a probe's tree,
-        on the first frame or after a resize)."""
-        if self.ends is None or not surfaces.end_image.any() or not self.ends.ready(root.size):
+        on the first frame or after a resize).  Kept while the table, the surfaces seen last
+        frame and the cap are the same (a still scene: every frame)."""
+        if self.ends is None or not surfaces.has_end_images or not self.ends.ready(root.size):
             return None
         seen = self.ends.seen
+        key = (surfaces, seen, depth_cap)
+        if self._ends_key is not None and self._ends_key[0] is surfaces and self._ends_key[1:] == key[1:]:
+            return self._ends_found
         ends = surfaces.end_image & np.array([entity in seen for entity in surfaces.entities.tolist()], bool)
-        if not ends.any():
-            return None
-        return ends, int(np.minimum(surfaces.max_depth[ends], depth_cap).min()) + 1
+        found = (ends, int(np.minimum(surfaces.max_depth[ends], depth_cap).min()) + 1) if ends.any() else None
+        self._ends_key, self._ends_found = key, found
+        return found
 
     @staticmethod
     def _end_seers(candidates: Candidates | None,
@@ -231,12 +239,14 @@ class ViewTree:
         return candidates, found
 
     def _claim(self, surfaces: SurfaceTable, targets, parent_targets, rows: LevelRows,
-               candidates: Candidates) -> np.ndarray:
+               candidates: Candidates) -> list[int]:
         """Every candidate's claim in ``targets``: its pixels."""
-        return np.array(self.passes.prepare_level(targets, parent_targets, Claims(
-            candidates.rows.node.astype(np.int64).tolist(), surfaces.entities[candidates.surface].tolist(),
-            rows.node[candidates.parent].astype(np.int64).tolist(),
-            list(map(tuple, candidates.scissor.tolist())))), np.int64)
+        ids = np.empty((len(candidates), 3), np.uint32)  # the claim uniform's (parent, surface, index)
+        ids[:, 0] = rows.node.take(candidates.parent)
+        ids[:, 1] = surfaces.entities.take(candidates.surface)
+        ids[:, 2] = candidates.rows.node
+        return self.passes.prepare_level(targets, parent_targets, Claims(
+            ids.tobytes(), list(map(tuple, candidates.scissor.tolist()))))
 
     def _level_scale(self, level: int) -> float:
         """The resolution factor of ``level`` under the frame's pixel budget: 1, or the scale
@@ -251,22 +261,26 @@ class ViewTree:
         step = math.ceil(-2.0 * math.log2(max(math.sqrt(left / needed), MIN_LEVEL_SCALE)) - 1e-9)
         return 2.0 ** (-step / 2.0)
 
-    def _within_budgets(self, surfaces: SurfaceTable, candidates: Candidates, pixels: np.ndarray,
-                        settings: TreeSettings, result: TreeResult, level: int, screen: tuple[int, int]) -> np.ndarray:
+    def _within_budgets(self, surfaces: SurfaceTable, candidates: Candidates, pixels: list[int],
+                        settings: TreeSettings, result: TreeResult, level: int,
+                        screen: tuple[int, int]) -> list[int] | np.ndarray:
         """The candidates with pixels that the level's and the frame's budgets keep (highest
         priority first, then the most pixels), in claim order; spends the frame's budgets and
-        records the level's coverage for the next frame's pixel budget."""
+        records the level's coverage for the next frame's pixel budget.  Without a budget,
+        in Python: a level's claims are a list, and a few numpy calls cost more than it."""
         stats = self.renderer.stats
-        keep = np.flatnonzero(pixels)
         pixel_budget = stats.pixels_left()
         width, height = candidates.size
         to_screen = screen[0] * screen[1] / (width * height)
         if settings.level_budget is None and stats.view_budget is None and pixel_budget is None:
-            drawn = int(pixels.sum())  # no budget: every view with pixels
+            keep = [i for i, n in enumerate(pixels) if n]  # no budget: every view with pixels
+            drawn = sum(pixels)
             self.coverage[level] = round(drawn * to_screen)
             stats.views_spent += len(keep)
             stats.pixels_spent += drawn
             return keep
+        pixels = np.asarray(pixels, np.int64)
+        keep = np.flatnonzero(pixels)
         on_screen = pixels * to_screen  # the claims' pixels, at screen resolution
         self.coverage[level] = int(on_screen.sum())
         if len(keep) > 1:
