@@ -78,6 +78,7 @@ _PER_DRAW_UNIFORMS = ("masked", "sky_face_size", "node_index", "has_albedo_map",
                       "probe_face_size", "probe_position", "probe_box_min", "probe_box_max",
                       "probe2_face_size", "probe2_position", "probe2_box_min", "probe2_box_max",
                       "checker_cells", "checker_even", "checker_odd")
+_PER_PASS_UNIFORMS = 3  # the first three change with the pass or view; the rest with the batch
 _NO_PROBE = ((0.0, 0.0, 0.0, 0.0),) * 3
 _NO_CHECKER = (0.0, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
 _SCENE = PassState(depth_func="<", cull=True, clips=SCENE_CLIPS)
@@ -115,6 +116,7 @@ class ScenePass:
         # uniforms' values between passes and frames (GL program state), and only
         # _draw_batches writes these, so a value is written only when it changes.
         self._written: dict[int, list] = {}
+        self._last_own: dict[int, tuple] = {}  # program -> the batch values it last drew with
         self._sky_size = 0
         self._sky_layered: moderngl.VertexArray | None = None
         self._views_ubo: moderngl.Buffer | None = None
@@ -144,6 +146,7 @@ class ScenePass:
             self._programs.clear()
             self._uniforms.clear()
             self._written.clear()  # a relinked program's uniforms start again from the defaults
+            self._last_own.clear()
             for batch in self.renderer.batches.values():
                 batch.drop_vertex_arrays()  # made again for the relinked programs' inputs
             self._reloads_seen = reloads
@@ -225,15 +228,17 @@ class ScenePass:
         stats = self.renderer.stats
         cubes = self.renderer.probes.cubes
         written = self._written
+        per_pass = (masked, self._sky_size, node)
         for batch in batches:
             if not batch.count or (batch.count == 1 and batch.entity_at[0] in (skip, hide)):
                 continue
             program = self.program(batch.variants, invocations, layered, batch.normal_map is not None,
                                    batch.checker is not None, _material_maps(batch), batch.probe_blend)
-            uniforms = self._uniforms[program.glo]
-            values = written.get(program.glo)
+            glo = program.glo
+            uniforms = self._uniforms[glo]
+            values = written.get(glo)
             if values is None:
-                values = written[program.glo] = [None] * len(_PER_DRAW_UNIFORMS)
+                values = written[glo] = [None] * len(_PER_DRAW_UNIFORMS)
             textured = batch.texture is not None
             if textured:
                 batch.texture.use(ALBEDO_UNIT)
@@ -247,10 +252,19 @@ class ScenePass:
             probe2_size, lookup2 = 0, _NO_PROBE
             if batch.probe_blend:  # the second probe's unit (the sky where the blend is a probe and the sky)
                 probe2_size, lookup2 = self._bind_probe(batch.second_probe, PROBE2_UNIT, cubes)
-            for i, value in enumerate((masked, self._sky_size, node, textured, batch.transparent, probe_size,
-                                       *lookup, probe2_size, *lookup2, *(batch.checker or _NO_CHECKER))):
-                if values[i] != value and uniforms[i] is not None:
-                    uniforms[i].value = values[i] = value
+            for i in range(_PER_PASS_UNIFORMS):
+                if values[i] != per_pass[i] and uniforms[i] is not None:
+                    uniforms[i].value = values[i] = per_pass[i]
+            # The batch's own values: one tuple compared in C, and a uniform at a time only
+            # where it differs from what this program last drew with.
+            own = (textured, batch.transparent, probe_size, *lookup, probe2_size, *lookup2,
+                   *(batch.checker or _NO_CHECKER))
+            last = self._last_own.get(glo)
+            if last != own:
+                for i, value in enumerate(own, _PER_PASS_UNIFORMS):
+                    if values[i] != value and uniforms[i] is not None:
+                        uniforms[i].value = values[i] = value
+                self._last_own[glo] = own
             if before_draw is not None:
                 before_draw()
             batch.draw(program)
