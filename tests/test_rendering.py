@@ -11,6 +11,7 @@ from components import (
     Emissive,
     Material,
     MeshRef,
+    PointLight,
     Reflective,
     Skybox,
     Transform,
@@ -250,6 +251,39 @@ def test_moving_a_parent_moves_its_child(scene):
     image = runner.ids()
     assert image[runner.project((1.5, 0, 0.3))[::-1]] == ents["child"]
     assert image[runner.project((-1.5, 0, 0.3))[::-1]] == 0
+
+
+def _lit_floor(ents, light_at, parent_at=None, sun=1.0):
+    def build(world):
+        camera(world, eye=glm.vec3(0.0, 3.0, 6.0))
+        world.spawn(Transform(position=(0, -1, 0)), MeshRef(plane(12.0, 12.0)), Material(color=(0.8, 0.8, 0.8)))
+        ents["sun"] = world.spawn(DirectionalLight(direction=(0.3, -1.0, -0.2), intensity=sun))
+        ents["parent"] = world.spawn(Transform(position=parent_at or (0, 0, 0)))
+        ents["light"] = world.spawn(Transform(position=light_at, parent=ents["parent"]),
+                                    PointLight(color=(1.0, 0.5, 0.2), intensity=6.0, range=6.0))
+    return build
+
+
+def test_the_lights_follow_a_parent_moved_and_a_light_changed(scene):
+    """The lights block is worked out again only when a light changes or moves; a point light
+    moved by its parent alone (its own Transform untouched) and a sun made dimmer each give
+    the frame of a scene built with them so from the start."""
+    ents = {}
+    runner = scene(_lit_floor(ents, (-2.0, 0.0, 0.0)), SIZE)
+    first = runner.frame()
+    assert np.array_equal(runner.frame(), first)  # nothing changed: the same frame
+    runner.world.get(ents["parent"], Transform).position = (3.0, 0.0, 0.0)
+    moved = runner.frame()
+    assert np.abs(moved.astype(int) - first.astype(int)).max() > 20
+    fresh = scene(_lit_floor({}, (-2.0, 0.0, 0.0), parent_at=(3.0, 0.0, 0.0)), SIZE)
+    fresh.frame()
+    assert np.abs(fresh.frame().astype(int) - moved.astype(int)).max() <= 1
+    runner.world.get(ents["sun"], DirectionalLight).intensity = 0.5
+    dimmer = runner.frame()
+    fresh = scene(_lit_floor({}, (-2.0, 0.0, 0.0), parent_at=(3.0, 0.0, 0.0), sun=0.5), SIZE)
+    fresh.frame()
+    assert np.abs(fresh.frame().astype(int) - dimmer.astype(int)).max() <= 1
+    assert dimmer.mean() < moved.mean() - 2
 
 
 def test_entities_release_their_gpu_resources(scene):
