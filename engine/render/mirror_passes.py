@@ -218,12 +218,16 @@ def composite_rows(composites: list[Composite], size: tuple[int, int]) -> bytes:
     rasteriser has run, the numpy version of this cost ~0.27 ms a level (measured on
     llvmpipe), several times its warm cost, for a handful of rows."""
     rows = []
+    flattened: dict[bytes, glm.mat4] = {}  # per parent view (a parent has a view into each surface it sees)
     for c in composites:
         surface = c.surface
         block = c.parent_view.camera_block()
         if surface.outline is not None:
             # The surface's own quad in the parent's clip space, flattened onto z = 0.
-            corners = (_FLATTEN_Z * glm.mat4.from_bytes(block[_BLOCK_VIEW_PROJ]) * surface.outline).to_bytes()
+            to_clip = flattened.get(block)
+            if to_clip is None:
+                to_clip = flattened[block] = _FLATTEN_Z * glm.mat4.from_bytes(block[_BLOCK_VIEW_PROJ])
+            corners = (to_clip * surface.outline).to_bytes()
         else:
             x0, y0, x1, y1 = _ndc_rect(c.rect, size)
             corners = struct.pack("<16f", x0, y0, 0.0, 1.0, x0, y1, 0.0, 1.0, x1, y0, 0.0, 1.0, x1, y1, 0.0, 1.0)

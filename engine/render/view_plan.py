@@ -100,12 +100,11 @@ class LevelRows:
 
     @staticmethod
     def root(view: View) -> LevelRows:
-        data = np.empty((1, LevelRows.WIDTH))
-        data[0, 0:12] = (*view.eye, 1.0, 0.0, 0.0, *view.size, *view.clip_plane)
-        data[0, 12:28] = _mat(view.view).reshape(16)
-        data[0, 28:44] = _mat(glm.inverse(view.view)).reshape(16)
-        data[0, 44:52] = (0.0, 0.0, *view.size, -1.0, float(view.view_mask), float(view.mirrored), 0.0)
-        return LevelRows(data)
+        """A root view's row, made from its glm values in one array (each a float64 of the
+        float32 glm holds)."""
+        return LevelRows(np.array([[*view.eye, 1.0, 0.0, 0.0, *view.size, *view.clip_plane,
+                                    *_rows(view.view), *_rows(glm.inverse(view.view)),
+                                    0.0, 0.0, *view.size, -1.0, float(view.view_mask), float(view.mirrored), 0.0]]))
 
 
 @dataclass
@@ -653,7 +652,7 @@ def _dmat(matrix: np.ndarray) -> glm.dmat4:
     return glm.dmat4(*matrix.T.reshape(16).tolist())
 
 
-def _rows(matrix: glm.dmat4) -> list[float]:
+def _rows(matrix: glm.dmat4 | glm.mat4) -> list[float]:
     """A glm matrix's 16 values row by row (LevelRows' layout)."""
     return [value for row in glm.transpose(matrix).to_list() for value in row]
 

@@ -115,6 +115,7 @@ class ViewTree:
         self.ends = EndImages(renderer) if end_images else None
         self.coverage: dict[int, int] = {}  # level -> its views' claimed pixels last frame (screen pixels)
         self._ends_key: tuple | None = None  # what _end_surfaces found last, and for what
+        self._projections: tuple[bytes, np.ndarray, np.ndarray] | None = None  # the last root's projection
         self._ends_found: tuple[np.ndarray, int] | None = None
 
     def render(self, root: View, levels: LevelStack, surfaces: SurfaceTable,
@@ -124,8 +125,8 @@ class ViewTree:
         root_node = ReflectionView(0, 0, root, (0, 0, *root.size))
         result = TreeResult([root_node], set())
         composites: list[PreparedComposites] = []
-        root_proj = _mat(root.proj)
-        planning = (root, root_proj, _mat(glm.inverse(root.proj)))
+        root_proj, inv_root_proj = self._projection(root.proj)
+        planning = (root, root_proj, inv_root_proj)
         ends = self._end_surfaces(surfaces, root, settings.depth_cap)
         # With end views: for each row of the level, the index in result.views of the view
         # that saw each surface last up its chain (-1: none), what an end view repeats.
@@ -202,6 +203,14 @@ class ViewTree:
             else:
                 self.ends.forget()
         return result
+
+    def _projection(self, proj: glm.mat4) -> tuple[np.ndarray, np.ndarray]:
+        """A root's projection and its inverse as numpy rows, kept while it is the same (a
+        camera's from frame to frame, a probe's six faces)."""
+        key = proj.to_bytes()
+        if self._projections is None or self._projections[0] != key:
+            self._projections = (key, _mat(proj), _mat(glm.inverse(proj)))
+        return self._projections[1], self._projections[2]
 
     def _end_surfaces(self, surfaces: SurfaceTable, root: View, depth_cap: int) -> tuple[np.ndarray, int] | None:
         """The surfaces that may get end views this frame (an end image, and a view last
@@ -330,11 +339,16 @@ class ViewTree:
 
     def _prepare_composite(self, children: list[ReflectionView], root: View,
                            parent_size: tuple[int, int]) -> PreparedComposites:
-        """The composite of a level's views into the level above (``parent_size`` pixels)."""
-        rects = level_rects(np.array([(x, y, x + w, y + h) for x, y, w, h in (c.rect for c in children)], np.float64),
-                            root.size, parent_size).tolist()
+        """The composite of a level's views into the level above (``parent_size`` pixels: a
+        view's rectangle as it is when that is the screen's size)."""
+        if parent_size == root.size:
+            rects = [child.rect for child in children]
+        else:
+            rects = list(map(tuple, level_rects(np.array([(x, y, x + w, y + h) for x, y, w, h in
+                                                          (c.rect for c in children)], np.float64),
+                                                root.size, parent_size).tolist()))
         return self.passes.prepare_composites([Composite(
-            child.index, tuple(rect), child.view.scissor, child.parent.view, surface_look(child.surface),
+            child.index, rect, child.view.scissor, child.parent.view, surface_look(child.surface),
             fade=child.fade) for child, rect in zip(children, rects, strict=True)], parent_size)
 
     def release(self) -> None:
