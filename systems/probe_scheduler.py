@@ -31,7 +31,8 @@ from __future__ import annotations
 import numpy as np
 from pyglm import glm
 
-from components import MeshRef, PointLight, ReflectionProbe, Transform
+from components import MeshRef, PointLight, ReflectionProbe, Transform, Visibility
+from components.limits import ALL_LAYERS, VIEW_PROBE
 from engine.core.world import World
 from engine.resources import RenderStats, Surfaces, ViewBudget
 from engine.rules.frame_rules import active_camera_parts
@@ -53,14 +54,24 @@ from engine.rules.probe_schedule import MAX_NAMED, ProbeDue, ProbeSchedule, Prob
 class ChangedBoxes:
     """The world boxes of this frame's changes, as rows: ``lo``, ``hi`` (world AABB corners),
     ``entity`` and ``what`` (how it changed) of each; an entity has a row where it was and
-    one where it is."""
+    one where it is.  ``unseen`` and ``layers``: for a row of an entity that only moved, whether
+    its ``Visibility`` hides it in every probe capture and the reflection layers it is on
+    (a probe whose layers it is not on, or any probe where it is hidden in captures, cannot
+    see it move); every other row counts as seen by all (a look change may be the Visibility
+    itself, and what was seen before must go)."""
 
-    def __init__(self, rows: list[tuple[int, str, np.ndarray, np.ndarray]]) -> None:
+    def __init__(self, rows: list[tuple[int, str, np.ndarray, np.ndarray, bool, int]]) -> None:
         rows.sort(key=lambda row: row[0])
         self.entity = np.array([row[0] for row in rows], np.int64)
         self.what = [row[1] for row in rows]
         self.lo = np.array([row[2] for row in rows], np.float64).reshape(-1, 3)
         self.hi = np.array([row[3] for row in rows], np.float64).reshape(-1, 3)
+        self.unseen = np.array([row[4] for row in rows], bool)
+        self.layers = np.array([row[5] for row in rows], np.int64)
+
+    def seen_by(self, probe: ReflectionProbe) -> np.ndarray:
+        """The rows a probe with these settings may see."""
+        return ~self.unseen & ((self.layers & probe.layer_mask) != 0)
 
 
 class ProbeScheduler:
@@ -184,14 +195,19 @@ class ProbeScheduler:
         for entity in frame.moved | frame.added | removed | looks:
             what = ("removed" if entity in removed else "added" if entity in frame.added
                     else "moved" if entity in frame.moved else "look changed")
+            unseen, layers = False, ALL_LAYERS
+            if what == "moved":
+                visibility = world.try_get(entity, Visibility)
+                if visibility is not None:
+                    unseen, layers = bool(visibility.hidden_kinds & VIEW_PROBE), visibility.layer_mask
             old = self._bounds.pop(entity, None)
             if old is not None:
-                rows.append((entity, what, *old))
+                rows.append((entity, what, *old, unseen, layers))
             mesh_ref = world.try_get(entity, MeshRef) if world.exists(entity) else None
             transform = world.try_get(entity, Transform) if mesh_ref is not None else None
             if transform is not None:
                 new = self._bounds[entity] = world_bounds(mesh_ref.mesh, transform.world)
-                rows.append((entity, what, *new))
+                rows.append((entity, what, *new, unseen, layers))
         return ChangedBoxes(rows)
 
     def _all_boxes(self) -> ChangedBoxes:
@@ -251,7 +267,8 @@ class ProbeScheduler:
                 return
             if state.pending == ALL_FACES:
                 return  # every face waits already
-            own = boxes.entity != state.owner  # its own object is in none of its faces
+            # Its own object is in none of its faces; what its captures hide moves unseen.
+            own = (boxes.entity != state.owner) & boxes.seen_by(settings)
             if not own.any():
                 return
             lo, hi, entity, what = boxes.lo[own], boxes.hi[own], boxes.entity[own], \

@@ -20,6 +20,7 @@ from components import (
     ReflectionProbe,
     Reflective,
     Transform,
+    Visibility,
 )
 from engine.assets.mesh import box, quad
 from engine.core.world import World
@@ -101,6 +102,35 @@ def test_the_schedule_says_which_faces_of_which_probes_and_why(gl_free_world):
     assert set(due(world)) == {every}
     # The scheduler counts nothing as captured: that is the captures' to say.
     assert world.resources[ProbeStates][probe].captures == 0
+
+
+def test_what_a_probe_cannot_see_moves_without_a_recapture(gl_free_world):
+    """An object hidden in probe captures (``Visibility(in_probes=False)``), or on a layer the
+    probe hides, moves without asking for a face; a visible one on the same spot asks for
+    its face; hiding an object is a look change that asks for the face that saw it."""
+    world = gl_free_world
+    probe = world.spawn(Transform(), ReflectionProbe(resolution=16, far=20.0, hides_layers=[3]))
+    ghost = world.spawn(Transform(position=(2, 0, 0)), MeshRef(box((0.2, 0.2, 0.2))), Material(),
+                        Visibility(in_probes=False))
+    layered = world.spawn(Transform(position=(2, 0, 1)), MeshRef(box((0.2, 0.2, 0.2))), Material(),
+                          Visibility(layers=[3]))
+    plain = world.spawn(Transform(position=(2, 0, -1)), MeshRef(box((0.2, 0.2, 0.2))), Material())
+    world.step(1 / 60)
+    world.step(1 / 60)
+    assert due(world) == {}
+    for entity in (ghost, layered):
+        world.get(entity, Transform).position = glm.vec3(world.get(entity, Transform).position) + glm.vec3(0, 0.1, 0)
+        world.step(1 / 60)
+        assert due(world) == {}, entity
+    world.get(plain, Transform).position = glm.vec3(2, 0.1, -1)
+    world.step(1 / 60)
+    assert due(world) == {probe: {f"moved: entity {plain}": {0}}}
+    world.add_component(plain, Visibility(in_probes=False))
+    world.step(1 / 60)
+    assert due(world) == {probe: {f"look changed: entity {plain}": {0}}}
+    world.get(plain, Transform).position = glm.vec3(2, 0.2, -1)
+    world.step(1 / 60)
+    assert due(world) == {}
 
 
 def test_a_request_is_read_not_cleared(gl_free_world):
