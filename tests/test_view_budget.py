@@ -218,3 +218,40 @@ def test_a_level_drawn_at_two_sizes_in_turn_keeps_both_target_sets(scene):
         made.append(levels.made)
     assert sizes == [(160, 100), (320, 200)] * 3
     assert made[1] == made[-1]
+
+
+
+def test_a_resize_releases_the_targets_kept_for_the_old_size(scene):
+    """A level keeps its previous size's set only while the window keeps its size: after a
+    resize the sets kept for the old size are released (at 1920x1080 one is about 50 MB of
+    GPU memory), the levels follow the new size, and the pixel budget's alternation keeps
+    one set a level again."""
+    from engine.render.targets import CaptureTarget, RenderTargets
+
+    ents = {}
+    runner = scene(mirror_grid(ents, columns=4, rows=2), (320, 200))
+    runner.frame()
+    full = runner.stats.pixels_spent
+    levels = runner.engine.renderer.levels
+    for frame in range(2):
+        runner.world.resources[ViewBudget] = ViewBudget(pixels=full // 4 if frame % 2 == 0 else None)
+        runner.frame()
+    assert levels.kept() >= 1
+    released = []
+    original = RenderTargets.release
+
+    def spy(self):
+        released.append(self.size)
+        original(self)
+
+    RenderTargets.release = spy
+    try:
+        runner.world.resources[ViewBudget] = ViewBudget()
+        runner.capture.release()
+        runner.size = (200, 120)
+        runner.capture = CaptureTarget(runner.ctx, runner.size)
+        runner.frame()
+    finally:
+        RenderTargets.release = original
+    assert levels.kept() == 0 and levels[0].size == (200, 120) and levels[1].size == (200, 120)
+    assert (160, 100) in released and (320, 200) in released  # the kept half-size set and the old full ones
