@@ -147,6 +147,7 @@ class SurfaceTable:
         self.enabled = np.array([s.enabled for s in states], bool)
         self.max_depth = np.array([s.max_depth for s in states], np.int64)
         self.entities = np.array([s.entity for s in states], np.int64)
+        self.entity_list = self.entities.tolist()
         self.deepest = int(self.max_depth[self.enabled].max()) if self.enabled.any() else 0
         # What carries a parent's camera through each surface (a reflection, or the portal pair).
         self.carry = np.array([_mat(s.carry) for s in states]).reshape(count, 4, 4)

@@ -28,6 +28,7 @@ level (``TreeSettings.level_budget``: the views with the most claimed pixels are
 from __future__ import annotations
 
 import math
+from array import array
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -130,7 +131,7 @@ class ViewTree:
         ends = self._end_surfaces(surfaces, root, settings.depth_cap)
         # With end views: for each row of the level, the index in result.views of the view
         # that saw each surface last up its chain (-1: none), what an end view repeats.
-        seers = None if ends is None else np.full((1, len(surfaces.states)), -1, np.int64)
+        seers = None if ends is None else [[-1] * len(surfaces.states)]
         parent_offset = 0  # where the level's parent rows are in result.views
         nodes = [root_node]
         rows = LevelRows.root(root)
@@ -143,7 +144,7 @@ class ViewTree:
             if scale < 1.0:
                 renderer.stats.levels_downscaled += 1
             targets = levels.get(level + 1, candidates.size)
-            pixels = self._claim(surfaces, targets, levels[level], rows, candidates)
+            pixels = self._claim(surfaces, targets, levels[level], candidates, nodes)
             is_end = None if candidates.end is None else candidates.end.tolist()
             keep = self._within_budgets(surfaces, candidates, pixels if is_end is None else
                                         [0 if end else n for n, end in zip(pixels, is_end, strict=True)],
@@ -167,7 +168,8 @@ class ViewTree:
                 inverse_carry = surfaces.inverse_carry
                 self.ends.draw(end_views, [node.surface.entity for node in ended],
                                [result.views[seer].view.view * inverse_carry[s] for seer, s in
-                                zip(end_seers[end_rows].tolist(), chosen_ends.surface.tolist(), strict=True)],
+                                zip([end_seers[i] for i in end_rows.tolist()], chosen_ends.surface.tolist(),
+                                    strict=True)],
                                targets, root)
                 result.end_views.extend(ended)
             renderer.flush()
@@ -178,8 +180,7 @@ class ViewTree:
             candidates = None
             if children:
                 if seers is not None:  # each child saw its own surface from its parent
-                    seers = seers.take(chosen.parent, axis=0)
-                    seers[np.arange(len(chosen)), chosen.surface] = chosen.parent + parent_offset
+                    seers = self._child_seers(seers, chosen, parent_offset)
                     parent_offset = child_offset
                 nodes, rows = children, chosen.rows
                 # While the GPU draws the views: the next level's cull and cameras (measured: on
@@ -229,31 +230,48 @@ class ViewTree:
         return found
 
     @staticmethod
+    def _child_seers(seers: list[list[int]], chosen: Candidates, parent_offset: int) -> list[list[int]]:
+        """Each chosen view's row of seers (``_end_seers``): its parent's, where its own
+        surface was last seen by its parent (index ``parent_offset`` + its parent's row in the
+        tree's views).  Lists, a level's worth of copies: a few numpy calls cost more."""
+        rows = []
+        for p, s in zip(chosen.parent.tolist(), chosen.surface.tolist(), strict=True):
+            row = seers[p].copy()
+            row[s] = parent_offset + p
+            rows.append(row)
+        return rows
+
+    @staticmethod
     def _end_seers(candidates: Candidates | None,
-                   seers: np.ndarray | None) -> tuple[Candidates | None, np.ndarray | None]:
+                   seers: list[list[int]] | None) -> tuple[Candidates | None, list[int] | None]:
         """For each end view among ``candidates`` (a pair the depth limits cut), the index in
         the tree's views of the view that saw its surface the last time up its chain (the end
         image repeats that view's image, shrunk: ``EndImages``; -1 for the other candidates),
-        from ``seers`` (the level's rows x surfaces).  An end view whose surface is not up its
-        chain is dropped (its closed look, as without one)."""
-        if candidates is None or candidates.end is None or seers is None or not candidates.end.any():
+        from ``seers`` (a row of surfaces per row of the level).  An end view whose surface
+        is not up its chain is dropped (its closed look, as without one)."""
+        if candidates is None or candidates.end is None or seers is None:
             return candidates, None
-        found = seers[candidates.parent, candidates.surface]
-        drop = candidates.end & (found < 0)
-        if drop.any():
-            kept = np.flatnonzero(~drop)
-            if not len(kept):
+        ends = candidates.end.tolist()
+        if not any(ends):
+            return candidates, None
+        found = [seers[p][s] if end else -1 for p, s, end in
+                 zip(candidates.parent.tolist(), candidates.surface.tolist(), ends, strict=True)]
+        kept = [i for i, (end, seer) in enumerate(zip(ends, found, strict=True)) if not end or seer >= 0]
+        if len(kept) < len(found):
+            if not kept:
                 return None, None
-            candidates, found = candidates.select(kept), found[kept]
+            candidates, found = candidates.select(np.array(kept, np.int64)), [found[i] for i in kept]
         return candidates, found
 
-    def _claim(self, surfaces: SurfaceTable, targets, parent_targets, rows: LevelRows,
-               candidates: Candidates) -> list[int]:
-        """Every candidate's claim in ``targets``: its pixels."""
-        ids = np.empty((len(candidates), 3), np.uint32)  # the claim uniform's (parent, surface, index)
-        ids[:, 0] = rows.node.take(candidates.parent)
-        ids[:, 1] = surfaces.entities.take(candidates.surface)
-        ids[:, 2] = candidates.rows.node
+    def _claim(self, surfaces: SurfaceTable, targets, parent_targets, candidates: Candidates,
+               parents: list[ReflectionView]) -> list[int]:
+        """Every candidate's claim in ``targets``: its pixels.  The claim uniform's (parent
+        view, surface, view index) of every candidate packed in one array of uint32s."""
+        entities = surfaces.entity_list
+        ids = array("I")
+        for p, s, node in zip(candidates.parent.tolist(), candidates.surface.tolist(),
+                              candidates.rows.data[:, 51].astype(np.int64).tolist(), strict=True):
+            ids.extend((parents[p].index, entities[s], node))
         return self.passes.prepare_level(targets, parent_targets, Claims(
             ids.tobytes(), list(map(tuple, candidates.scissor.tolist()))))
 
