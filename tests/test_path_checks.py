@@ -4,8 +4,11 @@ picture stays right.
 
 llvmpipe draws every path right, so the broken paths here are stand-ins injected for the
 test: a layered target whose attachments are single faces (what the NVIDIA H200 did: face
-+X written, the other five untouched), a mip pass that skips a level, face attachments
-swapped.  Each is refused, named in one warning, and the frame is drawn by the plain path.
++X written, the other five untouched), a 2D-array capture whose copy puts layer 0 in every
+face or whose attachment is layer 0 alone, a mip pass that skips a level, face attachments
+swapped.  Each is refused, named in one warning, and the frame is drawn by the next path
+that is trusted: the 2D-array capture where only the cube-map one is refused (the H200),
+six passes where both are.
 """
 from __future__ import annotations
 
@@ -29,6 +32,7 @@ from engine.render.raw_gl import (
     GL_FRAMEBUFFER,
     GL_TEXTURE_CUBE_MAP_POSITIVE_X,
     CubeMipTarget,
+    LayeredArrayTarget,
     LayeredCubeTarget,
     RawGL,
     read_cube_level,
@@ -70,6 +74,34 @@ def face_zero_only(monkeypatch):
     monkeypatch.setattr(LayeredCubeTarget, "bind", bind)
 
 
+def copy_layer_zero_everywhere(monkeypatch):
+    """A 2D-array capture whose copy is wrong: layer 0 (face +X) copied into all six faces."""
+    original = LayeredArrayTarget.copy_to_cube
+
+    def copy(self, unit):
+        kept = self.read_framebuffers
+        self.read_framebuffers = [kept[0]] * 6
+        try:
+            original(self, unit)
+        finally:
+            self.read_framebuffers = kept
+
+    monkeypatch.setattr(LayeredArrayTarget, "copy_to_cube", copy)
+
+
+def array_layer_zero_only(monkeypatch):
+    """A 2D-array capture whose attachment is layer 0 alone (the H200's cube-map fault, on
+    the array): every triangle lands in layer 0, layers 1-5 are never cleared or drawn."""
+    original = LayeredArrayTarget.bind
+
+    def bind(self):
+        original(self)
+        self.gl["glFramebufferTextureLayer"](GL_FRAMEBUFFER, GL_COLOR_ATTACHMENT0, self.texture, 0, 0)
+        self.gl["glFramebufferTextureLayer"](GL_FRAMEBUFFER, GL_DEPTH_ATTACHMENT, self.depth, 0, 0)
+
+    monkeypatch.setattr(LayeredArrayTarget, "bind", bind)
+
+
 def cube_faces(ctx, probes, key, level=0):
     texture = probes.cubes[key].texture
     return [read_cube_level(ctx, texture, face, level, SCRATCH_UNIT)[..., :3] for face in range(6)]
@@ -79,7 +111,8 @@ def test_every_path_is_checked_once_per_context_and_verified_on_llvmpipe(scene, 
     """Each path the engine would use is checked once per context, before its first use, and
     the frame's stats say the verdicts.  On llvmpipe every check passes; a GPU driver may
     refuse some (the NVIDIA H200's writes only face 0 of a layered cube-map attachment, so
-    both layered paths are refused there)."""
+    both layered paths are refused there, and the layered capture into a 2D array, checked
+    only then, is what its layered probe captures draw)."""
     ran = []
     original = PathChecks.check
     monkeypatch.setattr(PathChecks, "check", lambda self, path: ran.append(path) or original(self, path))
@@ -89,11 +122,17 @@ def test_every_path_is_checked_once_per_context_and_verified_on_llvmpipe(scene, 
     verdicts = runner.engine.renderer.path_checks.verdicts
     status = {name: v.status for name, v in verdicts.items()}
     if prepare_context(ctx).software:
+        # The layered capture and mip pass were verified: their fallbacks never needed checking.
         assert status == dict.fromkeys(PATH_NAMES, "verified") | {
-            "face_mips": "unchecked"}  # the layered mip pass was verified: its fallback never needed checking
+            "face_mips": "unchecked", "layered_array_capture": "unchecked"}
     # The per-face mip pass is only a GGX chain's fallback (box mips fall back to
-    # glGenerateMipmap): this probe's box mips never need it checked.
+    # glGenerateMipmap): this probe's box mips never need it checked.  The array capture is
+    # checked only where the layered capture into the cube map was refused.
     expected = ["direct_faces", "layered_capture", "layered_mips"]
+    if status["layered_capture"] == "refused":
+        expected.append("layered_array_capture")
+    else:
+        assert status["layered_array_capture"] == "unchecked"
     assert status["face_mips"] == "unchecked"
     assert sorted(ran) == sorted(expected)
     assert all(status[name] in ("verified", "refused") for name in expected), status
@@ -106,7 +145,10 @@ def test_every_path_is_checked_once_per_context_and_verified_on_llvmpipe(scene, 
 
 def test_a_layered_capture_that_writes_one_face_is_refused_and_the_sphere_stays_right(
         scene, ctx, fresh_checks, monkeypatch, caplog):
+    """Both layered targets broken (the cube map's attachment face +X alone, the 2D array's
+    copy layer 0 into every face): both refused, and every capture takes six passes."""
     face_zero_only(monkeypatch)
+    copy_layer_zero_everywhere(monkeypatch)
     ents = {}
     runner = scene(chrome_scene(ents), (96, 72))
     with caplog.at_level(logging.WARNING, logger="speculum"):
@@ -114,10 +156,14 @@ def test_a_layered_capture_that_writes_one_face_is_refused_and_the_sphere_stays_
     stage = probe_stage(runner)
     checks = runner.engine.renderer.path_checks
     assert checks.verdicts["layered_capture"].status == "refused"
-    assert "layered_capture" in runner.stats.paths_refused and runner.stats.probe_path == "six_pass"
+    assert checks.verdicts["layered_array_capture"].status == "refused"
+    assert "face 1" in checks.verdicts["layered_array_capture"].detail  # face 0 is right: the copy's is layer 0
+    assert {"layered_capture", "layered_array_capture"} <= set(runner.stats.paths_refused)
+    assert runner.stats.probe_path == "six_pass"
     assert stage.timings == {}  # auto never timed (so never used) the refused path
-    warnings = [r.getMessage() for r in caplog.records if "layered_capture" in r.getMessage()]
-    assert len(warnings) == 1 and ctx.info["GL_RENDERER"] in warnings[0] and ctx.info["GL_VERSION"] in warnings[0]
+    for path in ("layered_capture", "layered_array_capture"):
+        warnings = [r.getMessage() for r in caplog.records if f"the {path} path" in r.getMessage()]
+        assert len(warnings) == 1 and ctx.info["GL_RENDERER"] in warnings[0] and ctx.info["GL_VERSION"] in warnings[0]
     # Every face written, none left at the sentinel or unwritten memory, and equal to a
     # capture drawn again by the plain path.
     probes = runner.engine.renderer.probes
@@ -140,6 +186,76 @@ def test_a_layered_capture_that_writes_one_face_is_refused_and_the_sphere_stays_
     runner.frame()
     runner.frame()
     assert runner.stats.probe_path == "six_pass" or runner.stats.probe_faces == 0
+
+
+def test_where_only_the_cube_map_target_is_refused_probes_draw_one_pass_into_the_2d_array(
+        scene, ctx, fresh_checks, monkeypatch, caplog):
+    """The H200's case: the layered cube-map attachment writes face +X alone, a 2D array
+    takes every layer.  The array capture is checked (only then) and verified, a probe's
+    layered capture draws into the array and copies it into the cube, and every face is the
+    six-pass capture's, texel for texel within half-float rounding (each face filled with a
+    sentinel first, so a face the copy missed shows); auto times six_pass against it."""
+    face_zero_only(monkeypatch)
+    ents = {}
+    runner = scene(marked_chrome_scene(ents), (64, 48))
+    stage = probe_stage(runner)
+    stage.path = "layered"
+    with caplog.at_level(logging.WARNING, logger="speculum"):
+        runner.frame()
+    renderer = runner.engine.renderer
+    verdicts = renderer.path_checks.verdicts
+    assert verdicts["layered_capture"].status == "refused"
+    assert verdicts["layered_array_capture"].status == "verified", verdicts["layered_array_capture"]
+    assert not [r for r in caplog.records if "layered_array_capture" in r.getMessage()]
+    assert runner.stats.probe_path == "layered" and "layered_array_capture" in runner.stats.paths_verified
+    probes = renderer.probes
+    owner = ents["sphere"]
+    assert isinstance(probes._layered[owner], LayeredArrayTarget)
+    state = stage.probes[owner]
+    fill = np.full((128, 128, 4), SENTINEL, np.float16).tobytes()
+    for face in range(6):
+        probes.cubes[owner].texture.write(face, fill)
+    assert probes.capture_probe(owner, frozenset(range(6)), state.position, state.settings) == "layered"
+    layered = cube_faces(ctx, probes, owner)
+    for face in range(6):
+        probes.cubes[owner].texture.write(face, fill)
+    stage.path = "six_pass"
+    assert probes.capture_probe(owner, frozenset(range(6)), state.position, state.settings) == "six_pass"
+    six_pass = cube_faces(ctx, probes, owner)
+    for face in range(6):
+        assert six_pass[face].max() < SENTINEL / 2 and six_pass[face].std() > 0.01  # a marker or the wall
+        np.testing.assert_allclose(layered[face], six_pass[face], atol=2e-3, err_msg=f"face {face}")
+    # Auto times six_pass against the array capture (the layered path this context has).
+    auto = scene(marked_chrome_scene({}), (64, 48))
+    auto.frame()
+    auto.frame()
+    assert set(probe_stage(auto).timings) == {"six_pass", "layered"}
+    assert probe_stage(auto).chosen_path in ("six_pass", "layered")
+
+
+@pytest.mark.parametrize("stand_in", [copy_layer_zero_everywhere, array_layer_zero_only])
+def test_a_broken_2d_array_capture_is_refused_and_a_verified_one_is_not(scene, ctx, fresh_checks, monkeypatch,
+                                                                         stand_in):
+    """On llvmpipe the 2D-array capture is verified; with its copy putting layer 0 in every
+    face (face 0 right, face 1 the first wrong), or its attachment layer 0 alone (every
+    face's triangles in face 0), the check refuses it on what the faces show.  Debug mode
+    names the single-layer attachment at the clear."""
+    runner = scene(lambda world: None, (32, 32))
+    renderer = runner.engine.renderer
+    checks = renderer.path_checks
+    assert renderer.debug and checks.check("layered_array_capture").status == "verified"  # no misfire
+    stand_in(monkeypatch)
+    renderer.debug = False  # the pixels decide
+    verdict = checks.check("layered_array_capture")
+    first_wrong = "face 1" if stand_in is copy_layer_zero_everywhere else "face 0"
+    assert verdict.status == "refused" and f"differs from the plain capture on {first_wrong}" in verdict.detail, verdict
+    renderer.debug = True
+    verdict = checks.check("layered_array_capture")
+    assert verdict.status == "refused"
+    if stand_in is array_layer_zero_only:
+        assert "layered 2D-array capture, at the clear: the colour attachment is not layered" in verdict.detail
+    else:  # the attachments are right: only the copy is wrong, and only the pixels show it
+        assert "on face 1" in verdict.detail, verdict
 
 
 def test_the_stand_in_is_what_the_check_catches(scene, ctx, fresh_checks, monkeypatch):

@@ -280,6 +280,36 @@ def test_a_deleted_probe_gives_its_cube_map_back(scene):
     assert runner.engine.renderer.resource_counts()["face_targets"] == 0
 
 
+def test_a_deleted_probe_gives_its_2d_array_target_back(scene, ctx):
+    """A probe whose layered captures drew into a 2D array (where the cube-map target is
+    refused) gives back, with its entity, the array, its depth array and the seven
+    framebuffers: GL no longer knows their names."""
+    import ctypes
+
+    from engine.render.probes import face_view
+    from engine.render.raw_gl import LayeredArrayTarget, _load
+
+    ents = {}
+    runner = scene(marked_chrome_scene(ents), (64, 48))
+    runner.frame()
+    probes = runner.engine.renderer.probes
+    owner = ents["sphere"]
+    state = probe_stage(runner).probes[owner]
+    views = {face: face_view(face, state.position, 0.05, 100.0, 128, skip=owner) for face in range(6)}
+    probes.capture_layered(owner, views, into="array")
+    target = probes._layered[owner]
+    assert isinstance(target, LayeredArrayTarget)
+    is_texture = _load(ctx, "glIsTexture", ctypes.CFUNCTYPE(ctypes.c_ubyte, ctypes.c_uint))
+    is_framebuffer = _load(ctx, "glIsFramebuffer", ctypes.CFUNCTYPE(ctypes.c_ubyte, ctypes.c_uint))
+    textures, framebuffers = (target.texture, target.depth), (target.framebuffer, *target.read_framebuffers)
+    assert len(set(framebuffers)) == 7 and all(is_texture(t) for t in textures)
+    assert all(is_framebuffer(f) for f in framebuffers)
+    runner.world.delete_entity(owner)
+    runner.frame()
+    assert runner.engine.renderer.resource_counts()["layered_targets"] == 0
+    assert not any(is_texture(t) for t in textures) and not any(is_framebuffer(f) for f in framebuffers)
+
+
 @pytest.mark.parametrize("field, value", [("resolution", 100), ("resolution", 4), ("near", -1.0),
                                           ("refresh", "sometimes"), ("every_n", 0), ("influence", (0, 0, 0))])
 def test_bad_probe_settings_name_the_field(field, value):
@@ -657,16 +687,18 @@ def test_the_exported_scene_lists_each_probe_and_what_samples_it(scene, tmp_path
     assert info["samples_probe"] == {str(ents["sphere"]): ents["sphere"], str(ents["tile"]): ents["room probe"]}
 
 
-def test_the_layered_and_six_pass_captures_agree_face_by_face_and_culling_cuts_primitives(scene, ctx):
-    """The one-pass capture (a geometry shader choosing each triangle's faces) against six
-    views through the scene pass: the same cube, face by face, within half-float rounding;
-    with per-face culling it emits at most twice the primitives one face's view of the
-    scene has, without it six times as many."""
+@pytest.mark.parametrize("into", ["cube", "array"])
+def test_the_layered_and_six_pass_captures_agree_face_by_face_and_culling_cuts_primitives(scene, ctx, into):
+    """The one-pass capture (a geometry shader choosing each triangle's faces), drawn into
+    the cube map or into a six-layer 2D array copied into it (``into``), against six views
+    through the scene pass: the same cube, face by face, within half-float rounding; with
+    per-face culling it emits at most twice the primitives one face's view of the scene
+    has, without it six times as many (the array's copy draws nothing)."""
     from engine.render.probes import face_view
 
     ents = {}
     runner = scene(marked_chrome_scene(ents), (64, 48))
-    skip_unless_trusted(runner.engine.renderer, "layered_capture")
+    skip_unless_trusted(runner.engine.renderer, "layered_capture" if into == "cube" else "layered_array_capture")
     runner.frame()
     probes = runner.engine.renderer.probes
     owner = ents["sphere"]
@@ -679,14 +711,14 @@ def test_the_layered_and_six_pass_captures_agree_face_by_face_and_culling_cuts_p
     six_pass = [probes.read_face(owner, face) for face in range(6)]
     fill_cube(probes, owner)  # a face the layered pass leaves unwritten keeps the sentinel, not six_pass's
     with query:
-        probes.capture_layered(owner, views, culled=True)
+        probes.capture_layered(owner, views, culled=True, into=into)
     culled = query.primitives
     layered = [probes.read_face(owner, face) for face in range(6)]
     for face in range(6):
         np.testing.assert_allclose(layered[face], six_pass[face], atol=2e-3)
     fill_cube(probes, owner)
     with query:
-        probes.capture_layered(owner, views, culled=False)
+        probes.capture_layered(owner, views, culled=False, into=into)
     naive = query.primitives
     for face in range(6):
         np.testing.assert_allclose(probes.read_face(owner, face), six_pass[face], atol=2e-3)

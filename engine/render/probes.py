@@ -33,7 +33,7 @@ from components.limits import ALL_LAYERS, VIEW_PROBE
 from engine.core.cube_faces import CUBE_FACES
 from engine.core.errors import GLLimitError, GLPassError
 from engine.render.bindings import CUBE_MIP_UNIT, PROBE2_UNIT, PROBE_UNIT, SCRATCH_UNIT, PassState, apply_pass_state
-from engine.render.raw_gl import CubeMipTarget, LayeredCubeTarget, inspect_bound_target
+from engine.render.raw_gl import CubeMipTarget, LayeredArrayTarget, LayeredCubeTarget, inspect_bound_target
 from engine.render.scene_pass import SceneOptions
 from engine.render.targets import LevelStack, release_framebuffer
 from engine.render.view_plan import SurfaceTable
@@ -287,9 +287,13 @@ class ProbePaths:
     kept.
 
     Only a path the path self-check (``renderer.path_checks``) trusts on this context is
-    drawn: a refused layered capture would leave faces unwritten, so a forced or chosen
-    ``layered`` takes ``six_pass`` there, and ``auto`` never times it.  A capture of some
-    faces only, or of a probe whose faces see mirrors or portals, takes ``six_pass``.
+    drawn.  ``layered`` draws into the cube map itself where ``layered_capture`` is
+    verified, else into a six-layer 2D array copied into the cube where
+    ``layered_array_capture`` is (the NVIDIA H200's driver takes a layered draw into an
+    array but not into a cube map: ``layered_target``); where neither is, a forced or
+    chosen ``layered`` takes ``six_pass`` (a refused layered capture would leave faces
+    unwritten), and ``auto`` never times it.  A capture of some faces only, or of a probe
+    whose faces see mirrors or portals, takes ``six_pass``.
 
     How ``auto`` measures, with no ``ctx.finish()`` in a frame stage.  On the first full
     capture either path could draw, each path draws it once untimed (programs built, targets
@@ -346,6 +350,19 @@ class ProbePaths:
         self.used = path
         return path
 
+    def layered_target(self) -> str | None:
+        """The target the layered path draws into on this context: "cube" (the cube map,
+        ``layered_capture`` verified), "array" (a 2D array copied into it,
+        ``layered_array_capture`` verified where the other was refused), or None (neither:
+        six_pass only).  Each check runs at its first need, the array's only where the
+        cube's was refused."""
+        checks = self.renderer.path_checks
+        if checks.trusted("layered_capture"):
+            return "cube"
+        if checks.trusted("layered_array_capture"):
+            return "array"
+        return None
+
     def settle(self) -> None:
         """Read the timed captures' queries, if any wait, and choose (the class docstring)."""
         if self._queries is None:
@@ -354,17 +371,18 @@ class ProbePaths:
         self._timings = {name: statistics.median(query.elapsed / 1e6 for query in timed)
                          for name, timed in queries.items()}
         self._chosen = min(self._timings, key=self._timings.get)
-        LOG.info("probe capture path: %s (six_pass %.2f ms, layered %.2f ms for %d-texel faces)",
-                 self._chosen, self._timings["six_pass"], self._timings["layered"], self._resolution)
+        LOG.info("probe capture path: %s (six_pass %.2f ms, layered into the %s %.2f ms for %d-texel faces)",
+                 self._chosen, self._timings["six_pass"], self.layered_target(), self._timings["layered"],
+                 self._resolution)
 
     def _path(self, layered_possible: bool) -> str:
         if self.path not in PROBE_PATHS:
             raise ValueError(f"ProbeSystem.path must be one of {PROBE_PATHS}, got {self.path!r}")
         if not layered_possible or self.path == "six_pass":
             return "six_pass"
-        # The layered capture only where the path self-check verified it on this context
-        # (forced or chosen by auto): a refused path would leave faces unwritten.
-        if not self.renderer.path_checks.trusted("layered_capture"):
+        # The layered capture only where the path self-check verified one of its targets on
+        # this context (forced or chosen by auto): a refused path would leave faces unwritten.
+        if self.layered_target() is None:
             return "six_pass"
         if self.path == "layered":
             return "layered"
@@ -394,7 +412,8 @@ class ProbeCaptures:
         self.renderer = renderer
         self.ctx = renderer.ctx
         self.cubes: dict[int, ProbeCube] = {}
-        self._layered: dict[int, LayeredCubeTarget] = {}  # the one-pass path's targets, by probe
+        # the one-pass path's targets, by probe (the cube map itself, or a 2D array copied into it)
+        self._layered: dict[int, LayeredCubeTarget | LayeredArrayTarget] = {}
         self._faces: dict[int, CubeFaceTargets] = {}  # the six-pass path's face targets, by probe
         self.direct_faces = renderer.raw_gl.can_attach_cube_faces  # False: draw in a 2D target, copy
         self._stacks: dict[int, LevelStack] = {}
@@ -504,18 +523,27 @@ class ProbeCaptures:
         return targets
 
     def capture_layered(self, key: int, views: dict[int, View], culled: bool = True, prefilter: str = "mips",
-                        build_mips: bool = True) -> None:
-        """All six faces in one pass (``ScenePass.draw_layered``) straight into the cube map,
-        then its mips.  No view trees: mirrors and portals show their own surface."""
+                        build_mips: bool = True, into: str | None = None) -> None:
+        """All six faces in one pass (``ScenePass.draw_layered``), then the cube's mips.  No
+        view trees: mirrors and portals show their own surface.  ``into`` is where the pass
+        draws: "cube" (straight into the cube map) or "array" (a six-layer 2D array, each
+        layer then copied into its face); None takes what ``ProbePaths.layered_target``
+        trusts on this context, the cube where neither is (a caller asked for this path)."""
+        into = into or self.paths.layered_target() or "cube"
+        kind = {"cube": LayeredCubeTarget, "array": LayeredArrayTarget}[into]
         resolution = views[0].size[0]
         cube = self.cube(key, resolution)
         target = self._layered.get(key)
-        if target is None or target.cube is not cube.texture:
+        if target is None or target.cube is not cube.texture or type(target) is not kind:
             if target is not None:
                 target.release()
-            target = self._layered[key] = LayeredCubeTarget(self.ctx, cube.texture)
+                del self._layered[key]
+            target = self._layered[key] = kind(self.ctx, cube.texture)
         with self._drawing_into(key):
             self.renderer.scene_pass.draw_layered([views[face] for face in range(6)], target, culled)
+            if isinstance(target, LayeredArrayTarget):
+                target.copy_to_cube(SCRATCH_UNIT)  # a unit no pass reads; _drawing_into rebinds the sky there
+                self.renderer.checkpoint("layered capture's copy into the cube")
         if build_mips:
             cube.prefilter = self.mips.build(key, cube.texture, prefilter)
         self.renderer.stats.probe_faces += 6

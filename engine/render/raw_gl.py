@@ -20,6 +20,18 @@ colour attachment and a depth cube map of its own.  It is bound with raw calls f
 pass; the next moderngl ``Framebuffer.use`` binds moderngl's again (it always binds), and
 the calls are checked with ``glGetError`` so a failure is named where it happens.
 
+A layered 2D-array target copied into the cube (``LayeredArrayTarget``): on an NVIDIA H200
+(driver 580.159.04, OpenGL 4.1 core through EGL, 2026-11-26) a cube map attached with
+``glFramebufferTexture`` makes a complete framebuffer that reports itself layered, yet a
+layered clear and draw reach face 0 only, for a moderngl cube, a raw ``glTexImage2D`` cube
+and ``LayeredCubeTarget`` alike; a 2D array texture of six layers attached the same way
+takes all six.  So the same one-pass draw (``gl_Layer`` = face) goes into an RGBA16F array
+and a depth array of six layers, and each layer is then copied into its cube face: GL 4.1
+has no ``glCopyImageSubData``, so a read framebuffer per layer (``glFramebufferTextureLayer``)
+and ``glCopyTexSubImage2D`` into the face, with the cube bound through moderngl as
+``copy_to_cube_face`` binds it.  Six copies of a face each cost a little GPU bandwidth; the
+five scene passes the six-pass path would draw instead cost far more CPU.
+
 A cube map's mip levels drawn by the engine (``CubeMipTarget``): ``glGenerateMipmap`` on a
 cube map is six blits a level, each with a draw's fixed cost, which on llvmpipe is most of
 a small probe's capture; a layered target on one mip level takes a level's six faces in
@@ -90,6 +102,11 @@ GL_ACTIVE_TEXTURE = 0x84E0
 GL_TEXTURE0 = 0x84C0
 GL_TEXTURE_BINDING_CUBE_MAP = 0x8514
 GL_MAX_COMBINED_TEXTURE_IMAGE_UNITS = 0x8B4D
+GL_TEXTURE_2D_ARRAY = 0x8C1A
+GL_TEXTURE_BINDING_2D_ARRAY = 0x8C1D
+GL_READ_FRAMEBUFFER = 0x8CA8
+GL_RGBA16F = 0x881A
+GL_HALF_FLOAT = 0x140B
 _u = ctypes.c_uint
 _i = ctypes.c_int
 _SIGNATURES = {
@@ -112,6 +129,13 @@ _SIGNATURES = {
     "glColorMask": (None, ctypes.c_ubyte, ctypes.c_ubyte, ctypes.c_ubyte, ctypes.c_ubyte),
     "glDepthMask": (None, ctypes.c_ubyte),
 }
+# What the 2D-array target needs besides (``LayeredArrayTarget``).
+_ARRAY_SIGNATURES = {
+    "glTexImage3D": (None, _u, _i, _i, _i, _i, _i, _i, _u, _u, ctypes.c_void_p),
+    "glFramebufferTextureLayer": (None, _u, _u, _u, _i, _i),
+    "glReadBuffer": (None, _u),
+    "glCopyTexSubImage2D": (None, _u, _i, _i, _i, _i, _i, _i, _i),
+}
 # Read-backs for debug mode (``inspect_target``): what the driver says is bound and attached.
 _QUERY_SIGNATURES = {
     "glGetIntegerv": (None, _u, ctypes.POINTER(_i)),
@@ -119,6 +143,11 @@ _QUERY_SIGNATURES = {
     "glIsEnabled": (ctypes.c_ubyte, _u),
     "glActiveTexture": (None, _u),
 }
+
+
+class MissingEntryPoints(RuntimeError):
+    """The loader does not give a GL function a raw path needs (the path is unavailable,
+    not broken)."""
 
 
 def make_current(ctx: moderngl.Context) -> None:
@@ -196,6 +225,8 @@ class LayeredCubeTarget:
         self.ctx = ctx
         self.cube = cube
         self.size = cube.size[0]
+        self.texture = cube.glo  # what the layered draw writes (the debug check's)
+        self.texture_binding = GL_TEXTURE_BINDING_CUBE_MAP
         self.gl = {name: _load(ctx, name, ctypes.CFUNCTYPE(*sig)) for name, sig in _SIGNATURES.items()}
         missing = [name for name, fn in self.gl.items() if fn is None]
         if missing:
@@ -259,6 +290,108 @@ class LayeredCubeTarget:
         if self.depth:
             self.gl["glDeleteTextures"](1, ctypes.byref(_u(self.depth)))
             self.depth = 0
+
+
+class LayeredArrayTarget:
+    """A framebuffer drawing into the six layers of a 2D array texture at once (``gl_Layer`` =
+    face), with a depth array of its own, whose layers ``copy_to_cube`` then copies into the
+    faces of ``cube``'s level 0: ``LayeredCubeTarget``'s draw for a driver that takes a
+    layered array attachment but not a layered cube map (the module's docstring).  The same
+    ``bind``, ``clear`` and ``unbind`` as ``LayeredCubeTarget``; the copy follows the draw."""
+
+    def __init__(self, ctx: moderngl.Context, cube: moderngl.TextureCube) -> None:
+        self.ctx = ctx
+        self.cube = cube
+        self.size = cube.size[0]
+        wanted = {**_SIGNATURES, **_ARRAY_SIGNATURES}
+        self.gl = {name: _load(ctx, name, ctypes.CFUNCTYPE(*sig)) for name, sig in wanted.items()}
+        missing = [name for name, fn in self.gl.items() if fn is None]
+        if missing:
+            raise MissingEntryPoints(f"layered array capture needs GL entry points the loader lacks: {missing}")
+        self.texture = self.depth = self.framebuffer = 0
+        self.read_framebuffers: list[int] = []
+        self.texture_binding = GL_TEXTURE_BINDING_2D_ARRAY
+        gl = self.gl
+        gl["glGetError"]()  # start clean: what follows is checked
+        problems = []
+        try:
+            self.texture = self._array(GL_RGBA16F, GL_RGBA, GL_HALF_FLOAT)
+            self.depth = self._array(GL_DEPTH_COMPONENT24, GL_DEPTH_COMPONENT, GL_UNSIGNED_INT)
+            self.framebuffer = self._framebuffer()
+            gl["glBindFramebuffer"](GL_FRAMEBUFFER, self.framebuffer)
+            gl["glFramebufferTexture"](GL_FRAMEBUFFER, GL_COLOR_ATTACHMENT0, self.texture, 0)
+            gl["glFramebufferTexture"](GL_FRAMEBUFFER, GL_DEPTH_ATTACHMENT, self.depth, 0)
+            gl["glDrawBuffers"](1, (_u * 1)(GL_COLOR_ATTACHMENT0))
+            status = gl["glCheckFramebufferStatus"](GL_FRAMEBUFFER)
+            if status != GL_FRAMEBUFFER_COMPLETE:
+                problems.append(f"layered framebuffer status 0x{status:x}")
+            # One read framebuffer a layer, so a copy is a bind and glCopyTexSubImage2D.
+            for layer in range(6):
+                read = self._framebuffer()
+                self.read_framebuffers.append(read)
+                gl["glBindFramebuffer"](GL_READ_FRAMEBUFFER, read)
+                gl["glFramebufferTextureLayer"](GL_READ_FRAMEBUFFER, GL_COLOR_ATTACHMENT0, self.texture, 0, layer)
+                gl["glReadBuffer"](GL_COLOR_ATTACHMENT0)
+                status = gl["glCheckFramebufferStatus"](GL_READ_FRAMEBUFFER)
+                if status != GL_FRAMEBUFFER_COMPLETE:
+                    problems.append(f"layer {layer}'s read framebuffer status 0x{status:x}")
+            error = gl["glGetError"]()
+            if error:
+                problems.append(f"GL error 0x{error:x}")
+        finally:
+            self.unbind()
+        if problems:
+            self.release()
+            raise RuntimeError(f"layered array target of {self.size}: " + ", ".join(problems))
+
+    def _array(self, internal: int, format: int, kind: int) -> int:
+        gl = self.gl
+        name = _u(0)
+        gl["glGenTextures"](1, ctypes.byref(name))
+        gl["glBindTexture"](GL_TEXTURE_2D_ARRAY, name.value)
+        gl["glTexImage3D"](GL_TEXTURE_2D_ARRAY, 0, internal, self.size, self.size, 6, 0, format, kind, None)
+        gl["glTexParameteri"](GL_TEXTURE_2D_ARRAY, GL_TEXTURE_MIN_FILTER, GL_NEAREST)  # one level: complete
+        gl["glTexParameteri"](GL_TEXTURE_2D_ARRAY, GL_TEXTURE_MAG_FILTER, GL_NEAREST)
+        gl["glBindTexture"](GL_TEXTURE_2D_ARRAY, 0)
+        return name.value
+
+    def _framebuffer(self) -> int:
+        name = _u(0)
+        self.gl["glGenFramebuffers"](1, ctypes.byref(name))
+        return name.value
+
+    # The layered cube target's own (the same raw state for the draw); the functions, not
+    # a subclass, so a stand-in patched onto LayeredCubeTarget in a test stays its own.
+    bind = LayeredCubeTarget.bind
+    unbind = LayeredCubeTarget.unbind
+    clear = LayeredCubeTarget.clear
+
+    def copy_to_cube(self, unit: int) -> None:
+        """Each layer into its face of the cube's level 0 (``glCopyTexSubImage2D`` from layer
+        i's read framebuffer into face i), binding the cube on ``unit`` (one no pass reads
+        while the cube is drawn into); then moderngl's framebuffer is bound again.  Raises
+        RuntimeError naming the GL error a copy left."""
+        gl = self.gl
+        gl["glGetError"]()  # start clean: what follows is checked
+        self.cube.use(unit)
+        for face, read in enumerate(self.read_framebuffers):
+            gl["glBindFramebuffer"](GL_READ_FRAMEBUFFER, read)
+            gl["glCopyTexSubImage2D"](GL_TEXTURE_CUBE_MAP_POSITIVE_X + face, 0, 0, 0, 0, 0, self.size, self.size)
+        error = gl["glGetError"]()
+        self.unbind()
+        if error:
+            raise RuntimeError(f"copying the layered array into the faces of a {self.size} cube: "
+                               f"GL error 0x{error:x}")
+
+    def release(self) -> None:
+        framebuffers = [fb for fb in (self.framebuffer, *self.read_framebuffers) if fb]
+        if framebuffers:
+            self.gl["glDeleteFramebuffers"](len(framebuffers), (_u * len(framebuffers))(*framebuffers))
+        self.framebuffer, self.read_framebuffers = 0, []
+        textures = [t for t in (self.texture, self.depth) if t]
+        if textures:
+            self.gl["glDeleteTextures"](len(textures), (_u * len(textures))(*textures))
+        self.texture = self.depth = 0
 
 
 class CubeMipTarget:
@@ -396,7 +529,7 @@ class BoundTargetState:
             found.append("the depth attachment is not layered")
         if (self.colour_texture, self.colour_level) != (cube, level):
             found.append(f"the colour attachment is texture {self.colour_texture} level {self.colour_level}, "
-                         f"not the cube {cube} level {level}")
+                         f"not the texture drawn into ({cube}) level {level}")
         if self.scissor_test and not (self.scissor_box[:2] <= (0, 0) and self.scissor_box[2] >= size
                                       and self.scissor_box[3] >= size):
             found.append(f"the scissor box {self.scissor_box} cuts the {size}-texel faces")
@@ -404,15 +537,19 @@ class BoundTargetState:
             found.append(f"the viewport is {self.viewport}, not the {size}-texel face")
         stray = tuple(unit for unit in self.cube_bound_on_units if unit not in source_units)
         if stray:
-            found.append(f"the cube drawn into is bound for sampling on texture units {stray} "
+            found.append(f"the texture drawn into is bound for sampling on texture units {stray} "
                          "(a rendering feedback loop: undefined results)")
         return found
 
 
-def inspect_bound_target(ctx: moderngl.Context, cube: moderngl.TextureCube, depth: bool) -> BoundTargetState:
+def inspect_bound_target(ctx: moderngl.Context, cube: moderngl.TextureCube | int, depth: bool,
+                         binding: int = GL_TEXTURE_BINDING_CUBE_MAP) -> BoundTargetState:
     """Read back the state a layered draw depends on, with the framebuffer bound (debug mode:
-    glGet calls wait for the driver).  The active texture unit is restored afterwards;
-    nothing else is changed."""
+    glGet calls wait for the driver).  ``cube`` is the texture drawn into (a moderngl cube
+    map, or a GL texture name: ``LayeredArrayTarget``'s array, with ``binding``
+    ``GL_TEXTURE_BINDING_2D_ARRAY``, the query that finds it bound for sampling).  The
+    active texture unit is restored afterwards; nothing else is changed."""
+    glo = cube if isinstance(cube, int) else cube.glo
     gl = {name: _load(ctx, name, ctypes.CFUNCTYPE(*sig)) for name, sig in _QUERY_SIGNATURES.items()}
     missing = [name for name, fn in gl.items() if fn is None]
     if missing:
@@ -432,7 +569,7 @@ def inspect_bound_target(ctx: moderngl.Context, cube: moderngl.TextureCube, dept
     bound_on = []
     for unit in range(integers(GL_MAX_COMBINED_TEXTURE_IMAGE_UNITS)[0]):
         gl["glActiveTexture"](GL_TEXTURE0 + unit)
-        if integers(GL_TEXTURE_BINDING_CUBE_MAP)[0] == cube.glo:
+        if integers(binding)[0] == glo:
             bound_on.append(unit)
     gl["glActiveTexture"](active)
     entry = _address(ctx, "glFramebufferTexture")

@@ -56,7 +56,7 @@ from engine.render.bindings import (
     bind_uniform_block,
     set_front_face,
 )
-from engine.render.raw_gl import LayeredCubeTarget, inspect_bound_target
+from engine.render.raw_gl import LayeredArrayTarget, LayeredCubeTarget, inspect_bound_target
 from engine.render.targets import RenderTargets
 from engine.render.views import View, union_rect
 
@@ -377,12 +377,15 @@ class ScenePass:
             apply_pass_state(ctx, _BATCHED_SCENE, viewport)
         renderer.stats.passes += 1
 
-    def draw_layered(self, views: Sequence[View], target: LayeredCubeTarget, culled: bool = True) -> None:
+    def draw_layered(self, views: Sequence[View], target: LayeredCubeTarget | LayeredArrayTarget,
+                     culled: bool = True) -> None:
         """The six faces of a cube map in one pass (``views[i]`` is face i, node i): every
         batch drawn once through the geometry shader with six invocations, each triangle
         emitted to the faces whose frustum it touches (``culled``) or to all six, then the
         sky behind, per face.  Colour only: a layered face has no ids, so it cannot root a
-        view tree (faces that must see mirrors and portals take the six-pass path)."""
+        view tree (faces that must see mirrors and portals take the six-pass path).  The
+        target is the cube map itself or a six-layer 2D array (layer i face i) that the
+        caller copies into the cube afterwards (``raw_gl.LayeredArrayTarget``)."""
         renderer = self.renderer
         ctx = self.ctx
         self._sky_size = renderer.sky.size[0]
@@ -426,16 +429,20 @@ class ScenePass:
         renderer.stats.passes += 1
         renderer.checkpoint("layered cube-map capture")
 
-    def _layered_target_check(self, target: LayeredCubeTarget) -> Callable[[str], None]:
+    def _layered_target_check(self, target: LayeredCubeTarget | LayeredArrayTarget) -> Callable[[str], None]:
         """Debug mode: a check that the driver has the layered target bound and attached as
         a layered draw needs (``raw_gl.inspect_bound_target``), raising ``GLPassError`` with
-        what differs.  Run before the clear and before each draw of the capture."""
+        what differs.  Run before the clear and before each draw of the capture.  What is
+        checked is the texture the draw writes (``target.texture``: the cube map, or the
+        2D array later copied into it) and where that texture is bound for sampling."""
 
         def check(moment: str) -> None:
-            state = inspect_bound_target(self.ctx, target.cube, depth=True)
-            problems = state.problems(target.framebuffer, target.cube.glo, 0, target.size, depth=True)
+            state = inspect_bound_target(self.ctx, target.texture, depth=True, binding=target.texture_binding)
+            problems = state.problems(target.framebuffer, target.texture, 0, target.size, depth=True)
             if problems:
-                raise GLPassError(f"layered cube-map capture, at the {moment}: " + "; ".join(problems))
+                raise GLPassError(f"{what}, at the {moment}: " + "; ".join(problems))
+
+        what = "layered cube-map capture" if isinstance(target, LayeredCubeTarget) else "layered 2D-array capture"
 
         return check
 
