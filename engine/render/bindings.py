@@ -209,6 +209,15 @@ def bind_uniform_block(ctx: moderngl.Context, buffer: moderngl.Buffer, binding: 
         blocks[binding] = buffer
 
 
+def bind_uniform_range(ctx: moderngl.Context, buffer: moderngl.Buffer, binding: int, offset: int,
+                       size: int) -> None:
+    """Bind ``size`` bytes of ``buffer`` from ``offset`` to uniform-block ``binding`` (every
+    time: ranges change view by view); the binding is then unknown to ``bind_uniform_block``,
+    which binds its buffer again."""
+    buffer.bind_to_uniform_block(binding, offset=offset, size=size)
+    _cache(ctx).blocks.pop(binding, None)
+
+
 def set_front_face(ctx: moderngl.Context, front_face: str) -> None:
     """The winding, within a pass (a view's), set only if it differs."""
     cache = _cache(ctx)

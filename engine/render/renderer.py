@@ -9,6 +9,7 @@ is drawn.
 from __future__ import annotations
 
 import os
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import moderngl
@@ -17,7 +18,7 @@ import numpy as np
 from engine.assets.mesh import Mesh
 from engine.assets.texture_data import TextureData
 from engine.core.errors import GLLimitError, GLPassError
-from engine.render.bindings import CAMERA_BINDING, bind_uniform_block
+from engine.render.bindings import CAMERA_BINDING, bind_uniform_block, bind_uniform_range
 from engine.render.gl_context import GLCapabilities
 from engine.render.instances import GpuMesh, InstanceBatch
 from engine.render.path_checks import PathChecks
@@ -127,6 +128,11 @@ class Renderer:
         self.shaders = ShaderLibrary(ctx)
         self.present_pass = PresentPass(ctx, self.shaders, caps.software)
         self.camera_ubo = ctx.buffer(reserve=CAMERA_BLOCK_BYTES)
+        # A pass's Camera blocks, one after another at the alignment a uniform range needs.
+        align = max(1, int(ctx.info.get("GL_UNIFORM_BUFFER_OFFSET_ALIGNMENT", 256)))
+        self.camera_stride = -(-CAMERA_BLOCK_BYTES // align) * align
+        self._camera_padding = bytes(self.camera_stride - CAMERA_BLOCK_BYTES)
+        self.cameras_ubo = ctx.buffer(reserve=self.camera_stride * 16)
         self.lights_ubo = ctx.buffer(reserve=LIGHTS_BLOCK_BYTES)
         self._meshes: dict[int, _Shared] = {}
         # id(TextureData); ("normal", id): uploaded linear (normal and metallic-roughness maps)
@@ -345,6 +351,26 @@ class Renderer:
         self.camera_ubo.write(view.camera_block())
         bind_uniform_block(self.ctx, self.camera_ubo, CAMERA_BINDING)  # bound once a frame
 
+    def upload_views(self, views: Sequence[View]) -> None:
+        """The Camera blocks of a pass's views in one buffer, in one upload (``bind_view_at``
+        then binds view i's range): one write a pass, not one a view, and into fresh storage
+        (orphaned), so a GPU driver never waits for, or copies, a block the pass before
+        still reads."""
+        padding = self._camera_padding
+        data = b"".join(view.camera_block() + padding for view in views)
+        if len(data) > self.cameras_ubo.size:
+            reserve = max(len(data), 2 * self.cameras_ubo.size)
+            self.cameras_ubo.release()
+            self.cameras_ubo = self.ctx.buffer(reserve=reserve)
+        else:
+            self.cameras_ubo.orphan()
+        self.cameras_ubo.write(data)
+
+    def bind_view_at(self, index: int) -> None:
+        """Make the ``index``-th view of the last ``upload_views`` the Camera block."""
+        bind_uniform_range(self.ctx, self.cameras_ubo, CAMERA_BINDING, index * self.camera_stride,
+                           CAMERA_BLOCK_BYTES)
+
     def opaque_batches(self) -> list[InstanceBatch]:
         """Non-empty opaque batches, smallest extent first (re-sorted after uploads)."""
         if self.scene_only is not None:
@@ -393,6 +419,6 @@ class Renderer:
         self.probes.release()
         self.scene_pass.release()
         self.present_pass.release()
-        for obj in (self.sky, self.camera_ubo, self.lights_ubo):
+        for obj in (self.sky, self.camera_ubo, self.cameras_ubo, self.lights_ubo):
             obj.release()
         self.shaders.release()

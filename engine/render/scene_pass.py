@@ -327,10 +327,11 @@ class ScenePass:
         ctx = self.ctx
         renderer = self.renderer
         transparent = renderer.transparent_batches()
-        for view in views:
+        renderer.upload_views(views)  # every view's Camera block in one write; each binds its range
+        for index, view in enumerate(views):
             ctx.scissor = view.scissor  # moderngl's own record: the cache reads it
             set_front_face(ctx, "cw" if view.mirrored else "ccw")
-            renderer.bind_view(view)
+            renderer.bind_view_at(index)
             self._draw_batches(renderer.opaque_batches(), 0, options.masked, view.node, skip=view.skip,
                                hide=view.hide)
             if options.sky:
