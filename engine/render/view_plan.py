@@ -125,10 +125,11 @@ class Candidates:
         return len(self.parent)
 
     def select(self, keep: np.ndarray) -> Candidates:
-        """The candidates at ``keep`` (indices or a mask), in their order."""
-        return Candidates(self.parent[keep], self.surface[keep], LevelRows(self.rows.data[keep]), self.scissor[keep],
-                          self.blocks[keep], self.size, self.fade[keep],
-                          None if self.end is None else self.end[keep])
+        """The candidates at ``keep`` (int64 indices), in their order (``take``: several
+        times cheaper than fancy indexing for these small gathers)."""
+        return Candidates(self.parent.take(keep), self.surface.take(keep), LevelRows(self.rows.data.take(keep, axis=0)),
+                          self.scissor.take(keep, axis=0), self.blocks.take(keep, axis=0), self.size,
+                          self.fade.take(keep), None if self.end is None else self.end.take(keep))
 
 
 class SurfaceTable:
@@ -190,7 +191,7 @@ class SurfaceTable:
                                           self.exit_planes, self.is_mirror[:, None], self.scale[:, None]], axis=1)
         self.int_rows = np.stack([self.exit_entities, _KINDS_BUT_DIRECT | (self.layers << VIEW_KINDS),
                                   self.kind_bit], axis=1).reshape(count, 3)
-        self._depths: dict[tuple[int, int], tuple[np.ndarray, np.ndarray]] = {}
+        self._depths: dict[tuple[int, int], tuple[np.ndarray, np.ndarray, list[bool]]] = {}
         # The resolution scale every surface shares (None: they differ; a level takes its largest).
         self.one_scale = float(self.scale[0]) if count and (self.scale == self.scale[0]).all() else None
 
@@ -222,14 +223,16 @@ class SurfaceTable:
         facing_portals = ~mirrors & partner_front & partner_sees
         return wanted | (auto & (facing_mirrors | facing_portals))
 
-    def _within(self, depth: int, depth_cap: int) -> tuple[np.ndarray, np.ndarray]:
+    def _within(self, depth: int, depth_cap: int) -> tuple[np.ndarray, np.ndarray, list[bool]]:
         """Per surface: enabled and allowed at ``depth`` by its own limit and the cap, and
-        cut there by them (the same for every level of that depth: kept)."""
+        cut there by them, and the first as a list (the same for every level of that depth:
+        kept)."""
         key = (depth, depth_cap)
         found = self._depths.get(key)
         if found is None:
             cut = depth > np.minimum(self.max_depth, depth_cap)
-            found = self._depths[key] = (self.enabled & ~cut, cut)
+            allowed = self.enabled & ~cut
+            found = self._depths[key] = (allowed, cut, allowed.tolist())
         return found
 
     def cull(self, parents: LevelRows, depth: int, root_proj: np.ndarray, root_size: tuple[int, int],
@@ -259,10 +262,10 @@ class SurfaceTable:
         count = len(parents.data)
         if not count or not len(self.states):
             return _NONE, _NONE, _NO_RECTS, None
-        allowed, cut = self._within(depth, depth_cap)
+        allowed, _, listed = self._within(depth, depth_cap)
         if ends is not None:
             allowed = allowed | (self.enabled & ends)
-        elif not allowed.any():
+        elif not any(listed):
             return _NONE, _NONE, _NO_RECTS, None  # nothing enabled may be seen this deep
         data = parents.data
         # First what needs no corners: allowed, facing the view's eye, and not the surface
@@ -400,12 +403,13 @@ class SurfaceTable:
         the rasteriser has run, the first call of each kind of numpy operation costs several
         microseconds (measured: 4-10 us against 0.5-1 warm), a glm call under one; a level in
         arrays takes some 70 of them whatever its size.  Levels with fades take the arrays."""
-        allowed, cut = self._within(depth, depth_cap)
+        allowed, cut, listed = self._within(depth, depth_cap)
         if ends is not None:
-            allowed = allowed | (self.enabled & ends)
-        elif not allowed.any():
+            allowed = (allowed | (self.enabled & ends)).tolist()
+        elif not any(listed):
             return None
-        allowed = allowed.tolist()
+        else:
+            allowed = listed
         surfaces = self._small
         projection = _projection(root_proj, inv_root_proj)
         small = projection.small
@@ -481,7 +485,8 @@ class SurfaceTable:
         k = len(pairs)
         surface_rows = np.array([s for _, s, *_ in pairs], np.int64)
         return Candidates(np.array([p for p, *_ in pairs], np.int64), surface_rows, LevelRows(np.array(rows)),
-                          level_rects(np.array(scissors), root.size, size),
+                          np.array([(int(x0), int(y0), int(x1 - x0), int(y1 - y0)) for x0, y0, x1, y1 in scissors],
+                                   np.int64) if size == root.size else level_rects(np.array(scissors), root.size, size),
                           np.frombuffer(b"".join(blocks), np.float32).reshape(k, _CAMERA_FLOATS), size, _ones(k),
                           None if ends is None else cut.take(surface_rows))
 
