@@ -645,9 +645,11 @@ def _ones(k: int) -> np.ndarray:
 
 
 # The most (parent x surface) pairs a level plans pair by pair in glm (SurfaceTable._plan_small)
-# rather than in arrays: measured in frames on llvmpipe (LP_NUM_THREADS=0), a pair costs the
-# glm path some 15-25 us and a level in arrays some 150 us whatever its size.
-SMALL_LEVEL_PAIRS = 4
+# rather than in arrays.  Measured in frames on llvmpipe (LP_NUM_THREADS=0, 32x18, the mirrors
+# benchmark): a level in arrays costs some 150 us whatever its size, a pair in glm a few us
+# (faced away) to some 20 (a view); against 4, a limit of 8 made planning 0.91x at 4 mirrors,
+# 16 made it 0.82x at 4 mirrors again and changed nothing at 8 and 16 (0.98x, 1.02x).
+SMALL_LEVEL_PAIRS = 16
 _E2 = glm.dvec4(0.0, 0.0, 1.0, 0.0)
 _ZERO = glm.dmat4(0.0)
 _IDS = struct.Struct("<4I")
