@@ -192,6 +192,7 @@ class SurfaceTable:
         self.int_rows = np.stack([self.exit_entities, _KINDS_BUT_DIRECT | (self.layers << VIEW_KINDS),
                                   self.kind_bit], axis=1).reshape(count, 3)
         self._depths: dict[tuple[int, int], tuple[np.ndarray, np.ndarray, list[bool]]] = {}
+        self._ends: dict[tuple[int, int], tuple[np.ndarray, np.ndarray, list[bool]]] = {}
         # The resolution scale every surface shares (None: they differ; a level takes its largest).
         self.one_scale = float(self.scale[0]) if count and (self.scale == self.scale[0]).all() else None
 
@@ -235,6 +236,16 @@ class SurfaceTable:
             found = self._depths[key] = (allowed, cut, allowed.tolist())
         return found
 
+    def _with_ends(self, depth: int, depth_cap: int, ends: np.ndarray) -> tuple[np.ndarray, list[bool]]:
+        """``_within``'s surfaces and those of ``ends`` (enabled), as an array and a list, kept
+        while ``ends`` is the same array (the view tree keeps it while nothing changes)."""
+        key = (depth, depth_cap)
+        found = self._ends.get(key)
+        if found is None or found[0] is not ends:
+            allowed = self._within(depth, depth_cap)[0] | (self.enabled & ends)
+            found = self._ends[key] = (ends, allowed, allowed.tolist())
+        return found[1], found[2]
+
     def cull(self, parents: LevelRows, depth: int, root_proj: np.ndarray, root_size: tuple[int, int],
              depth_cap: int, ends: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray,
                                                                      np.ndarray | None]:
@@ -264,7 +275,7 @@ class SurfaceTable:
             return _NONE, _NONE, _NO_RECTS, None
         allowed, _, listed = self._within(depth, depth_cap)
         if ends is not None:
-            allowed = allowed | (self.enabled & ends)
+            allowed = self._with_ends(depth, depth_cap, ends)[0]
         elif not any(listed):
             return _NONE, _NONE, _NO_RECTS, None  # nothing enabled may be seen this deep
         data = parents.data
@@ -287,7 +298,7 @@ class SurfaceTable:
         seen &= least[11] < 0.0
         # x0, y0, -x1, -y1 in pixels, rounded outwards with a pixel's margin; a pair with a
         # corner behind the eye is conservative (the parent's whole rectangle).
-        rects = np.floor((least[0:4] + _OUTWARDS) * (0.5 * np.array(root_size, np.float64)[_XYXY, None, None]))
+        rects = np.floor((least[0:4] + _OUTWARDS) * _half_sizes(root_size))
         rects -= 1.0
         np.copyto(rects, -np.inf, where=least[4] <= 1e-6)
         np.maximum(rects, (data[:, 44:48] * _SIGNS).T[:, :, None], out=rects)  # inside the parent's
@@ -405,7 +416,7 @@ class SurfaceTable:
         arrays takes some 70 of them whatever its size.  Levels with fades take the arrays."""
         allowed, cut, listed = self._within(depth, depth_cap)
         if ends is not None:
-            allowed = (allowed | (self.enabled & ends)).tolist()
+            allowed = self._with_ends(depth, depth_cap, ends)[1]
         elif not any(listed):
             return None
         else:
@@ -622,6 +633,19 @@ def _cull_rows(root_proj: np.ndarray) -> np.ndarray:
         rows[:11, 1:] = _CULL_ROWS @ root_proj
         rows[11, 0] = -1.0
     return rows
+
+
+_HALVES: dict[tuple[int, int], np.ndarray] = {}
+
+
+def _half_sizes(size: tuple[int, int]) -> np.ndarray:
+    """Half a root's width and height, as the cull's 4 x 1 x 1 factor of x0, y0, -x1, -y1."""
+    found = _HALVES.get(size)
+    if found is None:
+        if len(_HALVES) > 32:
+            _HALVES.clear()
+        found = _HALVES[size] = (0.5 * np.array(size, np.float64))[_XYXY, None, None]
+    return found
 
 
 _COUNTING = np.arange(256, dtype=np.float64)
