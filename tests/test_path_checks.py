@@ -273,11 +273,11 @@ def test_the_stand_in_is_what_the_check_catches(scene, ctx, fresh_checks, monkey
              for face in range(6)}
     renderer.debug = True
     with pytest.raises(GLPassError, match=r"at the clear: .*colour attachment is not layered"):
-        probes.capture_layered(owner, views)
+        probes.capture_layered(owner, views, into="cube")
     renderer.debug = False
     for face in range(6):
         probes.cubes[owner].texture.write(face, np.full((128, 128, 4), SENTINEL, np.float16).tobytes())
-    probes.capture_layered(owner, views, build_mips=False)
+    probes.capture_layered(owner, views, build_mips=False, into="cube")
     faces = cube_faces(ctx, probes, owner)
     assert faces[0].max() < SENTINEL / 2
     assert all((faces[face] == SENTINEL).all() for face in range(1, 6))
@@ -391,8 +391,8 @@ def test_debug_mode_names_a_cube_bound_for_sampling_while_it_is_drawn_into(scene
              for face in range(6)}
     assert renderer.debug
     with pytest.raises(GLPassError, match=r"feedback loop"):
-        probes.capture_layered(owner, views)
-    message = str(pytest.raises(GLPassError, probes.capture_layered, owner, views).value)
+        probes.capture_layered(owner, views, into="cube")  # drawn into the cube itself (the 2D array is not sampled)
+    message = str(pytest.raises(GLPassError, probes.capture_layered, owner, views, into="cube").value)
     units = re.search(r"texture units \(([^)]*)\)", message)
     # PROBE_UNIT named (a driver that refused the layered mip pass has glGenerateMipmap's
     # binding on moderngl's default unit too, which the real _drawing_into would clear).
