@@ -31,7 +31,7 @@ flat in vec3 v_eye;
 #define node_index v_node
 #define VIEW_EYE v_eye
 #else
-uniform uint node_index;
+#define node_index camera.skip.w  // the view's index in its tree (camera.glsl)
 #define VIEW_EYE camera.eye.xyz
 #endif
 

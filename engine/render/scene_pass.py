@@ -74,11 +74,12 @@ class SceneOptions:
 
 ROOT_VIEW = SceneOptions()
 REFLECTION_LEVEL = SceneOptions(clear=False, masked=True, sky=False, reflection_filter=True)
-_PER_DRAW_UNIFORMS = ("masked", "sky_face_size", "node_index", "has_albedo_map", "transparent",
+_PER_DRAW_UNIFORMS = ("masked", "sky_face_size", "has_albedo_map", "transparent",
                       "probe_face_size", "probe_position", "probe_box_min", "probe_box_max",
                       "probe2_face_size", "probe2_position", "probe2_box_min", "probe2_box_max",
                       "checker_cells", "checker_even", "checker_odd")
-_PER_PASS_UNIFORMS = 3  # the first three change with the pass or view; the rest with the batch
+_PER_PASS_UNIFORMS = 2  # the first two change with the pass; the rest with the batch (a view's node
+# index is its Camera block's: nothing is written per view)
 _NO_PROBE = ((0.0, 0.0, 0.0, 0.0),) * 3
 _NO_CHECKER = (0.0, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
 _SCENE = PassState(depth_func="<", cull=True, clips=SCENE_CLIPS)
@@ -216,7 +217,7 @@ class ScenePass:
             self._reflection_filter()
         return len(self._programs) - before
 
-    def _draw_batches(self, batches, invocations: int, masked: bool, node: int, layered: str = "",
+    def _draw_batches(self, batches, invocations: int, masked: bool, layered: str = "",
                       skip: int = 0, before_draw: Callable[[], None] | None = None, hide: int = 0) -> None:
         """One instanced draw per batch, each with the program of its variants.  A program's
         uniforms are written only when their value changes (``self._written``, kept for the
@@ -228,7 +229,7 @@ class ScenePass:
         stats = self.renderer.stats
         cubes = self.renderer.probes.cubes
         written = self._written
-        per_pass = (masked, self._sky_size, node)
+        per_pass = (masked, self._sky_size)
         for batch in batches:
             if not batch.count or (batch.count == 1 and batch.entity_at[0] in (skip, hide)):
                 continue
@@ -332,7 +333,7 @@ class ScenePass:
             ctx.scissor = view.scissor  # moderngl's own record: the cache reads it
             set_front_face(ctx, "cw" if view.mirrored else "ccw")
             renderer.bind_view_at(index)
-            self._draw_batches(renderer.opaque_batches(), 0, options.masked, view.node, skip=view.skip,
+            self._draw_batches(renderer.opaque_batches(), 0, options.masked, skip=view.skip,
                                hide=view.hide)
             if options.sky:
                 # Colour only: the clear already put id 0 (nothing) where the sky shows.
@@ -347,7 +348,7 @@ class ScenePass:
                 targets.view_framebuffer.use()
                 apply_pass_state(ctx, _TRANSPARENT, viewport, view.scissor)
                 set_front_face(ctx, "cw" if view.mirrored else "ccw")
-                self._draw_batches(_back_to_front(transparent, view.eye), 0, options.masked, view.node,
+                self._draw_batches(_back_to_front(transparent, view.eye), 0, options.masked,
                                    skip=view.skip, hide=view.hide)
                 targets.view_framebuffer.depth_mask = True
                 targets.view_framebuffer.use()
@@ -369,12 +370,12 @@ class ScenePass:
         ctx.scissor = scissor
         set_front_face(ctx, "ccw")  # mirrored views reverse their vertices in the geometry shader
         invocations = geometry_invocations(len(views))
-        self._draw_batches(renderer.opaque_batches(), invocations, options.masked, 0)
+        self._draw_batches(renderer.opaque_batches(), invocations, options.masked)
         transparent = renderer.transparent_batches()
         if transparent:  # farthest from the first view's eye first (the views of a level are close)
             viewport = (0, 0, *views[0].size)
             apply_pass_state(ctx, _BATCHED_TRANSPARENT, viewport, scissor)
-            self._draw_batches(_back_to_front(transparent, views[0].eye), invocations, options.masked, 0)
+            self._draw_batches(_back_to_front(transparent, views[0].eye), invocations, options.masked)
             apply_pass_state(ctx, _BATCHED_SCENE, viewport)
         renderer.stats.passes += 1
 
@@ -413,11 +414,11 @@ class ScenePass:
         draw_check = (lambda: check("draw")) if check is not None else None
         try:
             layered = "culled" if culled else "naive"
-            self._draw_batches(renderer.opaque_batches(), 6, False, 0, layered, skip=skip, before_draw=draw_check)
+            self._draw_batches(renderer.opaque_batches(), 6, False, layered, skip=skip, before_draw=draw_check)
             transparent = renderer.transparent_batches()
             if transparent:
                 apply_pass_state(ctx, _LAYERED_TRANSPARENT, size)
-                self._draw_batches(_back_to_front(transparent, views[0].eye), 6, False, 0, layered, skip=skip,
+                self._draw_batches(_back_to_front(transparent, views[0].eye), 6, False, layered, skip=skip,
                                    before_draw=draw_check)
             apply_pass_state(ctx, _LAYERED_SKY, size)
             if check is not None:

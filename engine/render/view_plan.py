@@ -387,7 +387,8 @@ class SurfaceTable:
         blocks[:, 64:76] = data[:, 0:12]
         ids = blocks[:, 76:80].view(np.uint32)
         ids[:, 0::2] = ints[:, 0:2]  # skip, mask
-        ids[:, 1::2] = (hide, 0)
+        ids[:, 1] = hide
+        ids[:, 3] = data[:, 51]  # the view's node (the node image's value for its pixels)
         end = None if ends is None else self._within(depth, depth_cap)[1].take(s)
         return Candidates(p, s, LevelRows(data), level_rects(rects, root.size, size), blocks, size,
                           fade if fade is not None else _ones(k), end), faded
@@ -489,7 +490,7 @@ class SurfaceTable:
             blocks += (glm.mat4(view).to_bytes(), glm.mat4(proj).to_bytes(), glm.mat4(proj * view + _ZERO).to_bytes(),
                        glm.mat4(inv_view * inv_proj + _ZERO).to_bytes(), glm.vec4(eye).to_bytes(), viewport.to_bytes(),
                        glm.vec4(clip).to_bytes(), _IDS.pack(surface.exit & 0xFFFFFFFF, hide & 0xFFFFFFFF,
-                                                            mask & 0xFFFFFFFF, 0))
+                                                            mask & 0xFFFFFFFF, first_index + i))
             rows.append([*eye, 0.0, 0.0, *size, *clip, *_rows(view), *_rows(inv_view), *rect, surface.exit, mask,
                          float(row[50] != surface.mirror), first_index + i])
             scissors.append(rect)

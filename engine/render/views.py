@@ -63,7 +63,7 @@ class View:
             self._block = b"".join([
                 self.view.to_bytes(), self.proj.to_bytes(), vp.to_bytes(), glm.inverse(vp).to_bytes(),
                 glm.vec4(self.eye, 1.0).to_bytes(), glm.vec4(0.0, 0.0, w, h).to_bytes(), self.clip_plane.to_bytes(),
-                glm.uvec4(self.skip, self.hide, self.view_mask, 0).to_bytes(),
+                glm.uvec4(self.skip, self.hide, self.view_mask, self.node).to_bytes(),
             ])
         return self._block
 

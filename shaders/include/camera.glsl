@@ -9,5 +9,6 @@ layout(std140) uniform Camera {
     vec4 clip_plane; // world-space plane; geometry behind it is clipped (mirror views)
     uvec4 skip;      // x: the entity this view never draws (the surface it looks out of); y: one no view
                      // of its tree draws (a probe's own object); 0: none; z: the view's mask (View.view_mask:
-                     // its kinds, bits 0-3, and the reflection layers it shows, bits 4-19; visibility.glsl)
+                     // its kinds, bits 0-3, and the reflection layers it shows, bits 4-19; visibility.glsl);
+                     // w: the view's index in its tree (View.node: the node image's value for its pixels)
 } camera;
