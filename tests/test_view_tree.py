@@ -124,3 +124,27 @@ def test_a_cap_beyond_the_limit_is_refused_when_set(scene):
         system.level_budget = 0
     assert system.max_depth_cap == MAX_TREE_DEPTH and system.level_budget is None
     assert np.asarray(runner.frame()).shape == (32, 32, 3)
+
+
+def test_a_world_without_mirrors_or_portals_plans_nothing(scene, monkeypatch):
+    """No mirror or portal: the tree is its root alone, and no level is planned (the planner's
+    fixed cost is not paid by a frame that has nothing to reflect); a mirror added later is
+    planned and drawn."""
+    from engine.render.view_plan import SurfaceTable
+
+    planned = []
+    original = SurfaceTable.plan
+    monkeypatch.setattr(SurfaceTable, "plan", lambda self, *a, **k: planned.append(1) or original(self, *a, **k))
+
+    def build(world):
+        look_from(world, (0, 1.5, 5), (0, 1.5, 0))
+        world.spawn(DirectionalLight())
+        world.spawn(Transform(position=(0, 1, 0)), MeshRef(box()), Material(color=(0.8, 0.2, 0.2)))
+
+    runner = scene(build, (64, 48))
+    runner.frame()
+    assert planned == [] and len(runner.engine.reflection_system.views) == 1
+    assert runner.stats.reflection_views == 0
+    runner.world.spawn(Transform(position=(0, 1.5, -2)), MeshRef(quad(3, 3)), Material(), Mirror())
+    runner.frame()
+    assert planned and runner.stats.reflection_views == 1

@@ -125,6 +125,10 @@ class ViewTree:
         renderer = self.renderer
         root_node = ReflectionView(0, 0, root, (0, 0, *root.size))
         result = TreeResult([root_node], set())
+        if not surfaces.states:  # no mirror or portal anywhere: the root is the whole tree
+            if self.ends is not None:
+                self.ends.forget()
+            return result
         composites: list[PreparedComposites] = []
         root_proj, inv_root_proj = self._projection(root.proj)
         planning = (root, root_proj, inv_root_proj)
