@@ -283,12 +283,8 @@ def test_the_stand_in_is_what_the_check_catches(scene, ctx, fresh_checks, monkey
     assert all((faces[face] == SENTINEL).all() for face in range(1, 6))
 
 
-def test_box_mips_fall_back_to_glGenerateMipmap_where_the_layered_mip_pass_is_refused(
-        scene, ctx, fresh_checks, monkeypatch):
-    """Box mips need no drawn pass: where the layered one is refused (the H200), a probe's
-    chain is the driver's own ``glGenerateMipmap`` (one call, where the per-face pass is 42
-    attachments and draws for a 128 cube) and the per-face pass is never checked; each
-    level is the 2x2 box average of the one above (numpy, from the level read back)."""
+def layered_mips_skip_level_two(monkeypatch) -> None:
+    """A stand-in for a driver whose layered mip pass draws nothing of level 2."""
     original = CubeMipTarget.bind_level
 
     def skip_level_two(self, level, unit, face=None):
@@ -298,6 +294,15 @@ def test_box_mips_fall_back_to_glGenerateMipmap_where_the_layered_mip_pass_is_re
         return size
 
     monkeypatch.setattr(CubeMipTarget, "bind_level", skip_level_two)
+
+
+def test_box_mips_fall_back_to_glGenerateMipmap_where_the_layered_mip_pass_is_refused(
+        scene, ctx, fresh_checks, monkeypatch):
+    """Box mips need no drawn pass: where the layered one is refused (the H200), a probe's
+    chain is the driver's own ``glGenerateMipmap`` (one call, where the per-face pass is 42
+    attachments and draws for a 128 cube) and the per-face pass is never checked; each
+    level is the 2x2 box average of the one above (numpy, from the level read back)."""
+    layered_mips_skip_level_two(monkeypatch)
     ents = {}
     runner = scene(marked_chrome_scene(ents), (64, 48))
     runner.frame()
@@ -317,15 +322,7 @@ def test_box_mips_fall_back_to_glGenerateMipmap_where_the_layered_mip_pass_is_re
 
 def test_a_mip_pass_that_skips_a_level_is_refused_and_the_per_face_pass_draws_the_ggx_chain(
         scene, ctx, fresh_checks, monkeypatch):
-    original = CubeMipTarget.bind_level
-
-    def skip_level_two(self, level, unit, face=None):
-        size = original(self, level, unit, face)
-        if level == 2 and face is None:
-            self.gl["glViewport"](0, 0, 0, 0)  # nothing of level 2 is drawn
-        return size
-
-    monkeypatch.setattr(CubeMipTarget, "bind_level", skip_level_two)
+    layered_mips_skip_level_two(monkeypatch)
     ents = {}
 
     def build(world):
