@@ -770,6 +770,41 @@ def test_faces_drawn_straight_into_the_cube_equal_faces_drawn_and_copied(scene):
         np.testing.assert_array_equal(direct[face], copied[face], err_msg=f"face {face}")
 
 
+@pytest.mark.parametrize("slow", ["six_pass", "layered"])
+def test_auto_weighs_each_capture_by_the_larger_of_its_gpu_and_cpu_time(scene, monkeypatch, slow):
+    """A capture costs the frame the larger of its GPU time and the CPU's time issuing it: a
+    path made 30 ms slower to issue (a sleep in its drawing, which a GPU's timer query does
+    not see) shows it in its CPU samples, each capture is weighed by max(GPU, CPU), and the
+    path kept is the one whose median of that is least.  (llvmpipe's timer queries can take
+    in the other path's sleep too, so which path wins is asserted from the samples.)"""
+    import statistics
+    import time as clock
+
+    from engine.render.probes import AUTO_TIMED_CAPTURES, ProbeCaptures
+
+    ents = {}
+    runner = scene(chrome_scene(ents), (64, 48))
+    skip_unless_layered(runner.engine.renderer)
+    name = "capture" if slow == "six_pass" else "capture_layered"
+    original = getattr(ProbeCaptures, name)
+
+    def slower(self, *args, **kwargs):
+        clock.sleep(0.03)
+        return original(self, *args, **kwargs)
+
+    monkeypatch.setattr(ProbeCaptures, name, slower)
+    runner.frame()
+    runner.frame()
+    paths = runner.engine.renderer.probes.paths
+    samples = paths.samples
+    fast = "layered" if slow == "six_pass" else "six_pass"
+    assert len(samples[slow]) == len(samples[fast]) == AUTO_TIMED_CAPTURES
+    assert all(cpu >= 30.0 for _, cpu in samples[slow]) and all(cpu < 30.0 for _, cpu in samples[fast])
+    weighed = {path: statistics.median(max(gpu, cpu) for gpu, cpu in pairs) for path, pairs in samples.items()}
+    assert paths.timings == weighed and paths.chosen == min(weighed, key=weighed.get)
+    assert weighed[slow] >= 30.0
+
+
 def test_auto_times_both_paths_once_and_keeps_the_faster(scene, monkeypatch):
     """On the first full capture ``auto`` draws each path once untimed, then times each
     AUTO_TIMED_CAPTURES times in GL timer queries, and keeps the faster median; later probes

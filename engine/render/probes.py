@@ -20,6 +20,7 @@ from __future__ import annotations
 import logging
 import math
 import statistics
+import time
 from collections.abc import Callable
 from contextlib import contextmanager
 from dataclasses import dataclass
@@ -303,7 +304,10 @@ class ProbePaths:
     on a GPU, which draws them later, and the paths differ most in the drawing (the layered
     path's geometry shader); on llvmpipe the query gave, for 64- to 512-texel faces on both
     paths, within 7% of the capture's wall time with ``finish()`` on both sides (the old
-    way of timing it) and the same order of the two.  Nothing waits for the queries where
+    way of timing it) and the same order of the two.  The CPU's time issuing each capture
+    is taken too (wall clock around it): a capture costs the frame the larger of the two
+    (the NVIDIA H200 draws a 512 probe faster in six passes, but issues the layered one
+    17% faster, and its frames wait for the CPU), so that is what is compared.  Nothing waits for the queries where
     they are drawn: they are read when the next frame's probes stage starts (``settle``),
     or when ``chosen`` or ``timings`` are read, by when the frame that drew them has been
     presented and the GPU is through with them (were it not, the read would wait until it
@@ -318,6 +322,8 @@ class ProbePaths:
         self._chosen: str | None = None
         self._timings: dict[str, float] = {}  # median ms of the timed captures, by path
         self._queries: dict[str, list[moderngl.Query]] | None = None  # timed, not read yet
+        self._cpu_ms: dict[str, list[float]] = {}  # the timed captures' CPU time, by path
+        self.samples: dict[str, list[tuple[float, float]]] = {}  # (GPU ms, CPU ms) of each timed capture
         self._resolution = 0
 
     @property
@@ -328,7 +334,8 @@ class ProbePaths:
 
     @property
     def timings(self) -> dict[str, float]:
-        """Median ms of the timed captures, by path (empty before ``auto`` timed them)."""
+        """Median ms of the timed captures, by path: of each capture the larger of its GPU
+        time and its CPU time (empty before ``auto`` timed them)."""
         self.settle()
         return dict(self._timings)
 
@@ -368,8 +375,10 @@ class ProbePaths:
         if self._queries is None:
             return
         queries, self._queries = self._queries, None
-        self._timings = {name: statistics.median(query.elapsed / 1e6 for query in timed)
-                         for name, timed in queries.items()}
+        self.samples = {name: [(query.elapsed / 1e6, cpu) for query, cpu in zip(timed, self._cpu_ms[name],
+                                                                                  strict=True)]
+                        for name, timed in queries.items()}
+        self._timings = {name: statistics.median(max(pair) for pair in pairs) for name, pairs in self.samples.items()}
         self._chosen = min(self._timings, key=self._timings.get)
         LOG.info("probe capture path: %s (six_pass %.2f ms, layered into the %s %.2f ms for %d-texel faces)",
                  self._chosen, self._timings["six_pass"], self.layered_target(), self._timings["layered"],
@@ -395,13 +404,16 @@ class ProbePaths:
         for draw in draws.values():
             draw()  # untimed: programs built, targets made
         queries: dict[str, list[moderngl.Query]] = {name: [] for name in draws}
+        cpu_ms: dict[str, list[float]] = {name: [] for name in draws}
         for _ in range(AUTO_TIMED_CAPTURES):
             for name, draw in draws.items():
                 query = ctx.query(time=True)
+                start = time.perf_counter()
                 with query:
                     draw()
+                cpu_ms[name].append((time.perf_counter() - start) * 1e3)
                 queries[name].append(query)
-        self._queries, self._resolution = queries, resolution
+        self._queries, self._cpu_ms, self._resolution = queries, cpu_ms, resolution
 
 
 class ProbeCaptures:
