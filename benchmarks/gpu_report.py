@@ -21,7 +21,8 @@ way leaves what came before, with ``"complete": false``):
   is per suite and size; the suites' own defaults are 30-40.
 * ``tests``: ``python -m pytest -q`` (plus ``--tests-args``) in a subprocess from the
   repository root, when its ``tests/`` folder is there: passed / failed / errors / skipped
-  counts, the failing tests' ids and why tests were skipped.  ``--no-tests`` leaves it out.
+  counts, the failing tests' ids and why tests were skipped; each failing test's arrays
+  and frames go to ``DIR/failures/<test>.npz``.  ``--no-tests`` leaves it out.
 
 Exit status 0 when every section ran clean, 1 when a benchmark failed or a test failed (the
 report is written either way), 2 for a bad command line.  Nothing here imports the debug
@@ -321,8 +322,10 @@ def _junit_id(nodeid: str) -> str:
     return ".".join([module, *parts[1:-1]]) + "::" + parts[-1]
 
 
-def tests_section(extra: list[str], timeout: float) -> dict:
-    """``python -m pytest -q -ra`` from the repository root, in a subprocess."""
+def tests_section(extra: list[str], timeout: float, failures: Path | None = None) -> dict:
+    """``python -m pytest -q -ra`` from the repository root, in a subprocess; with
+    ``failures``, each failing test's arrays and frames are saved there as ``.npz``
+    (``SPECULUM_FAIL_OUT``, tests/conftest.py), to look at after the machine is gone."""
     if not (ROOT / "tests").is_dir():
         return {"ran": False, "reason": f"no tests/ folder in {ROOT} (an installed copy of the benchmarks)"}
     with tempfile.TemporaryDirectory(prefix="speculum-gpu-report-") as scratch:
@@ -331,8 +334,9 @@ def tests_section(extra: list[str], timeout: float) -> dict:
         shown = shlex.join(["python", *command[1:]])
         start = time.perf_counter()
         try:
+            env = dict(os.environ) if failures is None else {**os.environ, "SPECULUM_FAIL_OUT": str(failures)}
             done = subprocess.run([*command, f"--junitxml={junit}"], cwd=ROOT, capture_output=True, text=True,
-                                  timeout=timeout)
+                                  timeout=timeout, env=env)
         except subprocess.TimeoutExpired as exc:
             output = exc.stdout.decode(errors="replace") if isinstance(exc.stdout, bytes) else (exc.stdout or "")
             return {"ran": True, "command": shown, "exit": f"timed out after {timeout:.0f} s",
@@ -548,7 +552,7 @@ def main(args: argparse.Namespace) -> int:
         report["tests"] = {"ran": False, "reason": "--no-tests"}
     else:
         progress("tests: python -m pytest -q ...")
-        report["tests"] = tests_section(args.tests_args, args.tests_timeout)
+        report["tests"] = tests_section(args.tests_args, args.tests_timeout, args.out / "failures")
         if report["tests"]["ran"]:
             progress(f"tests: {report['tests']['summary'] or 'exit ' + str(report['tests']['exit'])}")
     report["complete"] = True

@@ -3,9 +3,11 @@ its own world and must leave the context without a GL error."""
 from __future__ import annotations
 
 import os
+import re
 import shutil
 import subprocess
 
+import numpy as np
 import pytest
 
 # Debug mode in every engine the tests make (and in their subprocesses): each pass checks
@@ -77,3 +79,32 @@ def x_display():
     yield f":{number}"
     server.terminate()
     server.wait(timeout=10)
+
+
+# A failing test's pictures, kept for a machine one cannot look at while it runs (a GPU host
+# lent for minutes): with SPECULUM_FAIL_OUT set, the numpy arrays and frames (``.rgb`` /
+# ``.ids``) a failing test held in its own frames are saved to <that folder>/<test id>.npz.
+# ``python -m benchmarks gpu-report`` sets it to <report>/failures.
+@pytest.hookimpl(hookwrapper=True)
+def pytest_runtest_makereport(item, call):
+    outcome = yield
+    report = outcome.get_result()
+    folder = os.environ.get("SPECULUM_FAIL_OUT")
+    if not folder or not report.failed or call.excinfo is None:
+        return
+    arrays: dict[str, np.ndarray] = {}
+    for entry in call.excinfo.traceback:
+        if "tests" not in str(entry.path):
+            continue
+        for name, value in entry.frame.f_locals.items():
+            values = value if isinstance(value, (list, tuple)) else (value,)
+            for i, one in enumerate(values):
+                parts = (("", one), ("_rgb", getattr(one, "rgb", None)), ("_ids", getattr(one, "ids", None)))
+                for part, array in parts:
+                    if isinstance(array, np.ndarray) and array.nbytes < 4_000_000:
+                        suffix = f"_{i}" if len(values) > 1 else ""
+                        arrays[f"line{entry.lineno + 1}_{name}{suffix}{part}"] = array
+    if arrays:
+        os.makedirs(folder, exist_ok=True)
+        np.savez_compressed(os.path.join(folder, re.sub(r"[^A-Za-z0-9_.-]", "_", item.nodeid)[-150:] + ".npz"),
+                            **arrays)

@@ -10,6 +10,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from benchmarks import RENDERING_SUITES, SUITES, parse_size
@@ -358,6 +359,7 @@ def test_many_movers_rows_are_gathered_and_the_buffer_holds_every_rows_matrices(
 COLLECT_WITHOUT_IMGUI = """
 import sys
 sys.modules["imgui_bundle"] = None
+import numpy as np
 import pytest
 sys.exit(pytest.main(["--collect-only", "-q", "-p", "no:cacheprovider", "tests"]))
 """
@@ -394,3 +396,38 @@ def test_stages_time_every_stage_inside_its_frame(ctx):
     assert reflect["mirrors_16"] > 5 * reflect["mirrors_0"]
     probes = {r["scene"]: r["cpu_ms_median"] for r in rows if r["stage"] == "probes"}
     assert probes["probe_dynamic"] > probes["mirrors_0"]
+
+
+FAILING_TEST = """
+import numpy as np
+
+def test_a_frame_that_is_wrong():
+    frame = np.full((4, 6, 3), 7, np.uint8)
+    frames = [np.zeros((2, 2)), np.ones((2, 2))]
+    assert frame.mean() == 0
+
+def test_a_frame_that_is_right():
+    frame = np.zeros((4, 6, 3), np.uint8)
+    assert frame.mean() == 0
+"""
+
+
+def test_a_failing_tests_frames_are_kept_where_speculum_fail_out_says(tmp_path):
+    """What a GPU session cannot look at while the machine is lent: with SPECULUM_FAIL_OUT
+    set (gpu-report sets it), each failing test's numpy arrays are saved there as .npz, the
+    passing tests' are not."""
+    folder = tmp_path / "tests"
+    folder.mkdir()
+    (folder / "conftest.py").write_text((ROOT / "tests" / "conftest.py").read_text())
+    (folder / "test_frames.py").write_text(FAILING_TEST)
+    out = tmp_path / "failures"
+    done = subprocess.run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", str(folder)],
+                          cwd=tmp_path, env={**os.environ, "PYTHONPATH": str(ROOT), "SPECULUM_FAIL_OUT": str(out)},
+                          capture_output=True, text=True, timeout=300)
+    assert "1 failed, 1 passed" in done.stdout, done.stdout[-2000:] + done.stderr[-2000:]
+    saved = sorted(out.iterdir())
+    assert len(saved) == 1 and "test_a_frame_that_is_wrong" in saved[0].name
+    with np.load(saved[0]) as arrays:
+        frame = next(arrays[key] for key in arrays.files if key.endswith("_frame"))
+        assert frame.shape == (4, 6, 3) and (frame == 7).all()
+        assert sum(key.endswith(("_frames_0", "_frames_1")) for key in arrays.files) == 2
