@@ -60,9 +60,10 @@ class EndImages:
         program["reproject"].write(self.view_proj * glm.inverse(root.view))
         program["level_size"].value = targets.size
         index, surface, to_ancestor = program["view_index"], program["surface"], program["to_ancestor"]
-        for view, entity, matrix in zip(views, surfaces, to_ancestors, strict=True):
+        renderer.upload_views(views)  # every view's Camera block in one write; each binds its range
+        for at, (view, entity, matrix) in enumerate(zip(views, surfaces, to_ancestors, strict=True)):
             ctx.scissor = view.scissor
-            renderer.bind_view(view)
+            renderer.bind_view_at(at)
             index.value, surface.value = view.node, entity
             to_ancestor.write(matrix)
             self.vao.render(moderngl.TRIANGLES, vertices=3)

@@ -307,8 +307,8 @@ class ProbePaths:
     way of timing it) and the same order of the two.  The CPU's time issuing each capture
     is taken too (wall clock around it): a capture costs the frame the larger of the two
     (the NVIDIA H200 draws a 512 probe faster in six passes, but issues the layered one
-    17% faster, and its frames wait for the CPU), so that is what is compared.  Nothing waits for the queries where
-    they are drawn: they are read when the next frame's probes stage starts (``settle``),
+    17% faster, and its frames wait for the CPU), so that is what is compared.  Nothing
+    waits for the queries where they are drawn: they are read when the next frame's probes stage starts (``settle``),
     or when ``chosen`` or ``timings`` are read, by when the frame that drew them has been
     presented and the GPU is through with them (were it not, the read would wait until it
     is, once in a run).  Until then captures take ``six_pass``.  The medians are compared,
@@ -321,8 +321,8 @@ class ProbePaths:
         self.used = ""  # the path that drew the last capture
         self._chosen: str | None = None
         self._timings: dict[str, float] = {}  # median ms of the timed captures, by path
-        self._queries: dict[str, list[moderngl.Query]] | None = None  # timed, not read yet
-        self._cpu_ms: dict[str, list[float]] = {}  # the timed captures' CPU time, by path
+        # timed, not read yet: each capture's timer query and its CPU ms, by path
+        self._queries: dict[str, list[tuple[moderngl.Query, float]]] | None = None
         self.samples: dict[str, list[tuple[float, float]]] = {}  # (GPU ms, CPU ms) of each timed capture
         self._resolution = 0
 
@@ -375,9 +375,7 @@ class ProbePaths:
         if self._queries is None:
             return
         queries, self._queries = self._queries, None
-        self.samples = {name: [(query.elapsed / 1e6, cpu) for query, cpu in zip(timed, self._cpu_ms[name],
-                                                                                  strict=True)]
-                        for name, timed in queries.items()}
+        self.samples = {name: [(query.elapsed / 1e6, cpu) for query, cpu in timed] for name, timed in queries.items()}
         self._timings = {name: statistics.median(max(pair) for pair in pairs) for name, pairs in self.samples.items()}
         self._chosen = min(self._timings, key=self._timings.get)
         LOG.info("probe capture path: %s (six_pass %.2f ms, layered into the %s %.2f ms for %d-texel faces)",
@@ -403,17 +401,15 @@ class ProbePaths:
         ctx = self.renderer.ctx
         for draw in draws.values():
             draw()  # untimed: programs built, targets made
-        queries: dict[str, list[moderngl.Query]] = {name: [] for name in draws}
-        cpu_ms: dict[str, list[float]] = {name: [] for name in draws}
+        queries: dict[str, list[tuple[moderngl.Query, float]]] = {name: [] for name in draws}
         for _ in range(AUTO_TIMED_CAPTURES):
             for name, draw in draws.items():
                 query = ctx.query(time=True)
                 start = time.perf_counter()
                 with query:
                     draw()
-                cpu_ms[name].append((time.perf_counter() - start) * 1e3)
-                queries[name].append(query)
-        self._queries, self._cpu_ms, self._resolution = queries, cpu_ms, resolution
+                queries[name].append((query, (time.perf_counter() - start) * 1e3))
+        self._queries, self._resolution = queries, resolution
 
 
 class ProbeCaptures:

@@ -18,7 +18,7 @@ import numpy as np
 from engine.assets.mesh import Mesh
 from engine.assets.texture_data import TextureData
 from engine.core.errors import GLLimitError, GLPassError
-from engine.render.bindings import CAMERA_BINDING, bind_uniform_block, bind_uniform_range
+from engine.render.bindings import CAMERA_BINDING, bind_uniform_range
 from engine.render.gl_context import GLCapabilities
 from engine.render.instances import GpuMesh, InstanceBatch
 from engine.render.path_checks import PathChecks
@@ -127,7 +127,6 @@ class Renderer:
         self.raw_gl = RawGL(ctx)
         self.shaders = ShaderLibrary(ctx)
         self.present_pass = PresentPass(ctx, self.shaders, caps.software)
-        self.camera_ubo = ctx.buffer(reserve=CAMERA_BLOCK_BYTES)
         # A pass's Camera blocks, one after another at the alignment a uniform range needs.
         align = max(1, int(ctx.info.get("GL_UNIFORM_BUFFER_OFFSET_ALIGNMENT", 256)))
         self.camera_stride = -(-CAMERA_BLOCK_BYTES // align) * align
@@ -347,9 +346,9 @@ class Renderer:
         self.lights_ubo.write(block)
 
     def bind_view(self, view: View) -> None:
-        """Make ``view`` the Camera block every program reads."""
-        self.camera_ubo.write(view.camera_block())
-        bind_uniform_block(self.ctx, self.camera_ubo, CAMERA_BINDING)  # bound once a frame
+        """Make ``view`` the Camera block every program reads (a pass of one view)."""
+        self.upload_views((view,))
+        self.bind_view_at(0)
 
     def upload_views(self, views: Sequence[View]) -> None:
         """The Camera blocks of a pass's views in one buffer, in one upload (``bind_view_at``
@@ -419,6 +418,6 @@ class Renderer:
         self.probes.release()
         self.scene_pass.release()
         self.present_pass.release()
-        for obj in (self.sky, self.camera_ubo, self.cameras_ubo, self.lights_ubo):
+        for obj in (self.sky, self.cameras_ubo, self.lights_ubo):
             obj.release()
         self.shaders.release()

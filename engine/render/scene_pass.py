@@ -438,13 +438,13 @@ class ScenePass:
         checked is the texture the draw writes (``target.texture``: the cube map, or the
         2D array later copied into it) and where that texture is bound for sampling."""
 
+        what = "layered cube-map capture" if isinstance(target, LayeredCubeTarget) else "layered 2D-array capture"
+
         def check(moment: str) -> None:
             state = inspect_bound_target(self.ctx, target.texture, depth=True, binding=target.texture_binding)
             problems = state.problems(target.framebuffer, target.texture, 0, target.size, depth=True)
             if problems:
                 raise GLPassError(f"{what}, at the {moment}: " + "; ".join(problems))
-
-        what = "layered cube-map capture" if isinstance(target, LayeredCubeTarget) else "layered 2D-array capture"
 
         return check
 

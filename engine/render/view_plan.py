@@ -197,8 +197,8 @@ class SurfaceTable:
         self.one_scale = float(self.scale[0]) if count and (self.scale == self.scale[0]).all() else None
 
     @functools.cached_property
-    def inverse_carry(self) -> list[glm.mat4]:
-        """Each surface's carry inverted (glm: an end view's matrix to its ancestor's eye
+    def inv_carry_glm(self) -> list[glm.mat4]:
+        """``inv_carry``'s matrices as glm ones (an end view's matrix to its ancestor's eye
         space), made the first time a frame has end views and kept with the table."""
         return [glm.inverse(state.carry) for state in self.states]
 

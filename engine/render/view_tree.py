@@ -115,9 +115,9 @@ class ViewTree:
         self.passes = MirrorPasses(renderer)
         self.ends = EndImages(renderer) if end_images else None
         self.coverage: dict[int, int] = {}  # level -> its views' claimed pixels last frame (screen pixels)
-        self._ends_key: tuple | None = None  # what _end_surfaces found last, and for what
         self._projections: tuple[bytes, np.ndarray, np.ndarray] | None = None  # the last root's projection
-        self._ends_found: tuple[np.ndarray, int] | None = None
+        # what _end_surfaces found last, and for what (table, surfaces seen, cap)
+        self._ends_cache: tuple[tuple, tuple[np.ndarray, int] | None] | None = None
 
     def render(self, root: View, levels: LevelStack, surfaces: SurfaceTable,
                settings: TreeSettings = TreeSettings()) -> TreeResult:
@@ -169,7 +169,7 @@ class ViewTree:
                 result.paths.add(path)
                 renderer.scene_pass.draw(views, targets, _BATCHED if path == "batched" else REFLECTION_LEVEL)
             if ended:
-                inverse_carry = surfaces.inverse_carry
+                inverse_carry = surfaces.inv_carry_glm
                 self.ends.draw(end_views, [node.surface.entity for node in ended],
                                [result.views[seer].view.view * inverse_carry[s] for seer, s in
                                 zip([end_seers[i] for i in end_rows.tolist()], chosen_ends.surface.tolist(),
@@ -226,11 +226,12 @@ class ViewTree:
             return None
         seen = self.ends.seen
         key = (surfaces, seen, depth_cap)
-        if self._ends_key is not None and self._ends_key[0] is surfaces and self._ends_key[1:] == key[1:]:
-            return self._ends_found
+        cached = self._ends_cache
+        if cached is not None and cached[0][0] is surfaces and cached[0][1:] == key[1:]:
+            return cached[1]
         ends = surfaces.end_image & np.array([entity in seen for entity in surfaces.entities.tolist()], bool)
         found = (ends, int(np.minimum(surfaces.max_depth[ends], depth_cap).min()) + 1) if ends.any() else None
-        self._ends_key, self._ends_found = key, found
+        self._ends_cache = (key, found)
         return found
 
     @staticmethod
