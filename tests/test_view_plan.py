@@ -12,7 +12,7 @@ import engine.render.view_plan as view_plan
 import engine.render.view_tree as view_tree
 from components.limits import VIEW_DIRECT, VIEW_MIRROR, VIEW_PORTAL
 from engine.core.reflection_math import oblique_is_safe, oblique_projection, signed_distance, transform_plane
-from engine.render.batched_mirrors import _view_row
+from engine.render.batched_mirrors import views_block
 from engine.render.end_images import EndImages
 from engine.render.views import PlannedView, View
 from tests import golden
@@ -35,6 +35,45 @@ def _reference(parent: View, state, root: View, node: View) -> View:
     return View(view=view, proj=proj, eye=eye, size=node.size, clip_plane=state.exit_plane,
                 mirrored=parent.mirrored != (state.kind == "mirror"), scissor=node.scissor, node=node.node,
                 skip=state.exit_entity, hide=parent.hide, kinds=kinds, layers=parent.layers & state.layers)
+
+
+def batched_row(view: View) -> np.ndarray:
+    """The Views block row of ``view`` from its glm matrices and fields, one at a time (the
+    layout of scene_batched.geom's MirrorView)."""
+    width, height = view.size
+    x, y, w, h = view.scissor if view.scissor is not None else (0, 0, width, height)
+    row = np.zeros(32, np.float32)
+    row[0:16] = np.frombuffer(view.view_proj.to_bytes(), np.float32)
+    row[16:20] = tuple(view.clip_plane)
+    row[20:24] = (*view.eye, 1.0 if view.mirrored else 0.0)
+    row[24:28] = (2.0 * x / width - 1.0, 2.0 * y / height - 1.0,
+                  2.0 * (x + w) / width - 1.0, 2.0 * (y + h) / height - 1.0)
+    row[28:32].view(np.uint32)[:] = (view.node, view.skip, view.hide, view.view_mask)
+    return row
+
+
+def test_the_views_block_holds_each_views_row_then_zeros():
+    """A level's Views block (packed from the views' Camera blocks in arrays) is the count,
+    then each view's row as glm computes it one view at a time, then zeros."""
+    views = []
+    for i in range(5):
+        eye = glm.vec3(i, 1.0 + i, 4.0 - i)
+        view = View(glm.lookAt(eye, glm.vec3(0.0, 0.5 * i, 0.0), glm.vec3(0, 1, 0)),
+                    glm.perspective(glm.radians(50.0 + i), 16 / 9, 0.1, 80.0), eye, (320, 180),
+                    clip_plane=glm.vec4(0.0, 1.0, 0.1 * i, -0.5), mirrored=i % 2 == 1,
+                    scissor=None if i == 0 else (10 * i, 5 * i, 100 + i, 60 - i), node=3 + i, skip=40 + i,
+                    hide=i, kinds=VIEW_MIRROR if i % 2 else VIEW_PORTAL, layers=0xF0F >> i)
+        views.append(view)
+    block = np.frombuffer(views_block(views), np.float32)
+    assert block[0:4].view(np.int32).tolist() == [5, 0, 0, 0]
+    for i, view in enumerate(views):
+        got = block[4 + 32 * i: 4 + 32 * (i + 1)]
+        assert np.allclose(got[:28], batched_row(view)[:28], rtol=1e-6, atol=1e-6), f"view {i}"
+        assert np.array_equal(got[28:].view(np.uint32), batched_row(view)[28:].view(np.uint32)), f"view {i} ids"
+    assert not block[4 + 32 * 5:].any()
+    assert np.frombuffer(views_block([]), np.int32)[0] == 0
+    with pytest.raises(ValueError, match="at most"):
+        views_block(views * 7)
 
 
 @pytest.fixture
@@ -69,8 +108,8 @@ def test_planned_views_equal_the_one_at_a_time_views(ctx, trees, name):
         assert np.array_equal(got[76:], want[76:]), f"{name} view {node.index}: ids differ"
         assert np.allclose(got[:76], want[:76], rtol=2e-3, atol=2e-4), \
             f"{name} view {node.index} (level {node.level}): worst {np.abs(got[:76] - want[:76]).max()}"
-        row = np.frombuffer(_view_row(node.view), np.float32)  # the batched path's row, from the planned view
-        want_row = np.frombuffer(_view_row(expected), np.float32)
+        row = np.frombuffer(views_block([node.view]), np.float32)[4:36]  # the batched path's row, from the planned view
+        want_row = batched_row(expected)
         assert np.allclose(row, want_row, rtol=2e-3, atol=2e-4), f"{name} view {node.index}: batched row"
         assert node.view.mirrored == expected.mirrored
         assert node.view.name == f"{node.surface.kind} {node.surface.entity}"
