@@ -153,7 +153,8 @@ class PlanClock:
 
     While open (``with PlanClock() as clock``) it wraps, on their classes, ``ViewTree.render``
     and the calls it makes that are not planning: a level's GL work
-    (``MirrorPasses.prepare_level``: the claims; ``ScenePass.draw``: the views;
+    (``MirrorPasses.prepare_level``: the claims; ``claimed_pixels``: waiting for their counts;
+    ``ScenePass.draw``: the views;
     ``Renderer.flush``; ``MirrorPasses.composite_level``; ``EndImages.draw`` and ``keep``:
     the end images' pass and blit) and the composite's CPU half
     (``ViewTree._prepare_composite``, where there is one).  Planning is the time inside
@@ -165,9 +166,9 @@ class PlanClock:
     ``engine`` changes: the wrappers go when the block ends (or at ``close``).
     """
 
-    NOT_PLANNING = ((MirrorPasses, "prepare_level"), (ScenePass, "draw"), (Renderer, "flush"),
-                    (MirrorPasses, "composite_level"), (ViewTree, "_prepare_composite"), (EndImages, "draw"),
-                    (EndImages, "keep"))
+    NOT_PLANNING = ((MirrorPasses, "prepare_level"), (MirrorPasses, "claimed_pixels"), (ScenePass, "draw"),
+                    (Renderer, "flush"), (MirrorPasses, "composite_level"), (ViewTree, "_prepare_composite"),
+                    (EndImages, "draw"), (EndImages, "keep"))
     OPTIONAL = ((ViewTree, "_prepare_composite"),)  # the others must be there: a renamed GL call
     # would otherwise count as planning without a word
 

@@ -64,6 +64,20 @@ class ReflectionSystem(esper.Processor):
     def path(self, value: str) -> None:
         self.settings = replace(self.settings, path=value)
 
+    @property
+    def visibility(self) -> str:
+        """How each level learns which of its candidate views have pixels: "exact" (this
+        frame's claim counts: the CPU waits for the GPU once a level), "predicted" (last
+        frame's: nothing waits; a view hidden last frame is drawn but gets no views of its
+        own surfaces until a frame counted it visible, so a mirror uncovered this frame shows
+        the mirrors inside it a frame late) or "auto" (exact on a software rasteriser,
+        predicted on a GPU).  A view or pixel budget always counts exactly."""
+        return self.settings.visibility
+
+    @visibility.setter
+    def visibility(self, value: str) -> None:
+        self.settings = replace(self.settings, visibility=value)
+
     # --- schedule and render -----------------------------------------------------------------
     def process(self, dt: float) -> None:
         views = self.world.resources.get(FrameViews)
@@ -86,6 +100,8 @@ class ReflectionSystem(esper.Processor):
         stats.reflection_depth_capped = result.capped
         stats.reflection_views_faded = result.faded
         stats.reflection_end_views = len(result.end_views)
+        stats.reflection_visibility = result.visibility
+        stats.reflection_views_unseen = result.unseen
         paths = result.paths
         stats.reflection_path = paths.pop() if len(paths) == 1 else ("mixed" if paths else "")
 

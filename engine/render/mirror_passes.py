@@ -252,16 +252,24 @@ def _ndc_rect(rect: tuple[int, int, int, int], size: tuple[int, int]) -> tuple[f
     return x * sx - 1.0, y * sy - 1.0, (x + w) * sx - 1.0, (y + h) * sy - 1.0
 
 
-def _shared_samples_queries(ctx: moderngl.Context, count: int) -> list[moderngl.Query]:
-    """At least ``count`` samples-passed queries, shared by every engine on the context:
-    moderngl 5.13 cannot release a Query, so engines made and closed on one context (tests,
-    editors) reuse one pool instead of leaking (it grows to the most candidates a level had)."""
+def take_samples_queries(ctx: moderngl.Context, count: int) -> list[moderngl.Query]:
+    """``count`` samples-passed queries from the context's free pool (made where it has too
+    few): moderngl 5.13 cannot release a Query, so trees and engines made and closed on one
+    context (probes, tests, editors) hand theirs back (``give_samples_queries``) instead of
+    leaking them; the pool grows to the most any tree held at once."""
     if not isinstance(ctx.extra, dict):
         ctx.extra = {}
     pool = ctx.extra.setdefault("speculum.samples_queries", [])
-    while len(pool) < count:
-        pool.append(ctx.query(samples=True))
-    return pool
+    taken = pool[len(pool) - min(count, len(pool)):]
+    del pool[len(pool) - len(taken):]
+    return taken + [ctx.query(samples=True) for _ in range(count - len(taken))]
+
+
+def give_samples_queries(ctx: moderngl.Context, queries: list[moderngl.Query]) -> None:
+    """Hand queries back to the context's free pool (``take_samples_queries``)."""
+    if not isinstance(ctx.extra, dict):
+        ctx.extra = {}
+    ctx.extra.setdefault("speculum.samples_queries", []).extend(queries)
 
 
 @dataclass
@@ -303,14 +311,15 @@ class MirrorPasses:
         self._reset_vao: moderngl.VertexArray | None = None
         self._claim_vao = ctx.vertex_array(self.claim, [])
 
-    def prepare_level(self, level: RenderTargets, parent: RenderTargets, claims: Claims) -> list[int]:
-        """Write ``level``'s node image and depth mask for the candidate views ``claims`` and
-        return, for each, how many pixels it got (0: the surface is hidden there, or off the
-        pixels its parent view drew).  Outside the claims' rectangles nothing is written or
-        read this frame.  The queries are all issued before any result is read, so the CPU
-        waits for the GPU once per level."""
+    def prepare_level(self, level: RenderTargets, parent: RenderTargets, claims: Claims,
+                      queries: list[moderngl.Query]) -> None:
+        """Write ``level``'s node image and depth mask for the candidate views ``claims``,
+        counting each one's pixels in ``queries[i]`` (0: the surface is hidden there, or off
+        the pixels its parent view drew).  Outside the claims' rectangles nothing is written
+        or read this frame.  Nothing waits here: the counts are read by ``claimed_pixels``,
+        now (the CPU waits for the GPU) or a frame later (``ViewTree``'s visibility)."""
         if not claims:
-            return []
+            return
         ctx = self.ctx
         level.framebuffer.use()
         apply_pass_state(ctx, _CLAIM, (0, 0, *level.size))
@@ -322,14 +331,17 @@ class MirrorPasses:
         write_ids = program["claim"].write
         ids = memoryview(claims.ids)
         render = self._claim_vao.render
-        queries = _shared_samples_queries(ctx, len(claims))
         for at, (query, rect) in enumerate(zip(queries, claims.rects, strict=False)):
             ctx.scissor = rect
             write_ids(ids[12 * at:12 * at + 12])
             with query:
                 render(moderngl.TRIANGLES, vertices=3)
         self.renderer.checkpoint("claims")
-        return [query.samples for query in queries[: len(claims)]]
+
+    def claimed_pixels(self, queries: list[moderngl.Query]) -> list[int]:
+        """The pixels each claim of ``queries`` got: the CPU waits until the GPU has drawn
+        them (all issued before the first is read, so it waits once)."""
+        return [query.samples for query in queries]
 
     def _draw_resets(self, rects, size: tuple[int, int]) -> None:
         """The reset over every rectangle in one draw (two clip-space triangles each)."""

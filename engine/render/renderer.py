@@ -52,6 +52,8 @@ class RenderStats:
     reflection_depth_capped: int = 0    # views the surfaces' own depth limits allowed below the tree's cap
     reflection_views_faded: int = 0     # mirror views their fades took out (each cost nothing)
     reflection_end_views: int = 0       # views past the depth limits shown as last frame's image
+    reflection_visibility: str = ""     # "exact" or "predicted": how the main tree's levels knew their pixels
+    reflection_views_unseen: int = 0    # views drawn that had no pixels last frame (predicted visibility)
     # The frame's view budget (engine.resources.ViewBudget): its limits, and what was spent
     # (reflection views of every tree and probe faces drawn) and cut (views with pixels and
     # probe faces the budget left out; the faces wait for a later frame).

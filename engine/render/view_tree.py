@@ -32,6 +32,7 @@ from array import array
 from dataclasses import dataclass, field
 from typing import Any
 
+import moderngl
 import numpy as np
 from pyglm import glm
 
@@ -43,7 +44,9 @@ from engine.render.mirror_passes import (
     Composite,
     MirrorPasses,
     PreparedComposites,
+    give_samples_queries,
     surface_look,
+    take_samples_queries,
 )
 from engine.render.scene_pass import REFLECTION_LEVEL, SceneOptions
 from engine.render.targets import LevelStack
@@ -54,6 +57,11 @@ from engine.render.views import CAMERA_BLOCK_BYTES, PlannedView, View
 # limits of Mirror and Portal components take values up to this.
 MAX_TREE_DEPTH = MAX_VIEW_DEPTH  # the depth cap's limit: the components' own
 MIN_LEVEL_SCALE = 0.25  # the lowest resolution factor the pixel budget draws a level at
+# How a level learns which candidates have pixels: "exact" reads this frame's claim counts
+# (the CPU waits for the GPU once a level), "predicted" uses last frame's (nothing waits), and
+# "auto" is exact on a software rasteriser (the CPU draws anyway: waiting costs nothing and
+# the counts save views) and predicted on a GPU.
+VISIBILITY_MODES = ("auto", "exact", "predicted")
 _BATCHED = SceneOptions(clear=False, masked=True, sky=False, batched=True, reflection_filter=True)
 
 # The mirror and portal records the surfaces stage publishes (``engine.resources.SurfaceState``,
@@ -68,6 +76,7 @@ class TreeSettings:
     depth_cap: int = 8                 # levels below the root, whatever the surfaces' own limits
     level_budget: int | None = None    # most views a level draws (None: every view with pixels)
     path: str = "auto"                 # "per_mirror", "batched" or "auto" (batched_mirrors.choose_path)
+    visibility: str = "auto"           # "exact", "predicted" or "auto" (VISIBILITY_MODES, ViewTree says how)
 
     def __post_init__(self) -> None:
         if not isinstance(self.depth_cap, int) or isinstance(self.depth_cap, bool) \
@@ -77,6 +86,8 @@ class TreeSettings:
             raise ValueError(f"view tree level_budget must be None or an int >= 1, got {self.level_budget!r}")
         if self.path not in PATHS:
             raise ValueError(f"view tree path must be one of {PATHS}, got {self.path!r}")
+        if self.visibility not in VISIBILITY_MODES:
+            raise ValueError(f"view tree visibility must be one of {VISIBILITY_MODES}, got {self.visibility!r}")
 
 
 @dataclass
@@ -90,6 +101,30 @@ class TreeResult:
     faded: int = 0                # views the mirrors' fades took out (each costs nothing)
     end_views: list[ReflectionView] = field(default_factory=list)  # views past the depth limits shown
                                                                    # as last frame's image (EndImages)
+    visibility: str = ""          # "exact" or "predicted": how the levels knew their views' pixels
+    unseen: int = 0               # views drawn that had no pixels last frame (predicted: none below them)
+
+
+@dataclass
+class RootVisibility:
+    """One root's claim counts (``ViewTree``'s predicted visibility): each claim is keyed by
+    its chain of surface entities from the root.  ``seen``: last frame's counts; this frame's
+    are ``counted`` (read now, exact) or ``pending`` (their keys, in the order of ``queries``,
+    read at the root's next render, when the GPU has long drawn them)."""
+
+    queries: list[moderngl.Query] = field(default_factory=list)
+    used: int = 0                 # queries taken this frame
+    pending: list[tuple[int, ...]] = field(default_factory=list)
+    counted: dict[tuple[int, ...], int] = field(default_factory=dict)
+    seen: dict[tuple[int, ...], int] = field(default_factory=dict)
+    frame: int = -1               # the ViewTree frame it was last drawn in
+
+    def take(self, count: int, ctx: moderngl.Context) -> list[moderngl.Query]:
+        """The next ``count`` of this frame's queries (the root's pool grows as needed)."""
+        if len(self.queries) < self.used + count:
+            self.queries += take_samples_queries(ctx, self.used + count - len(self.queries))
+        self.used += count
+        return self.queries[self.used - count:self.used]
 
 
 @dataclass
@@ -118,6 +153,9 @@ class ViewTree:
         self._projections: tuple[bytes, np.ndarray, np.ndarray] | None = None  # the last root's projection
         # what _end_surfaces found last, and for what (table, surfaces seen, cap)
         self._ends_cache: tuple[tuple, tuple[np.ndarray, int] | None] | None = None
+        self._visibility: dict[tuple[str, int], RootVisibility] = {}  # by root (its name and skipped entity)
+        self._frame = 0                   # frames this tree has drawn in (a new RenderStats: a new frame)
+        self._frame_stats: object | None = None
 
     def render(self, root: View, levels: LevelStack, surfaces: SurfaceTable,
                settings: TreeSettings = TreeSettings()) -> TreeResult:
@@ -136,32 +174,52 @@ class ViewTree:
         # With end views: for each row of the level, the index in result.views of the view
         # that saw each surface last up its chain (-1: none), what an end view repeats.
         seers = None if ends is None else [[-1] * len(surfaces.states)]
-        parent_offset = 0  # where the level's parent rows are in result.views
         nodes = [root_node]
         rows = LevelRows.root(root)
         scale = self._level_scale(1)
         candidates, result.faded = surfaces.plan(rows, 1, *planning, 1, settings.depth_cap, root.hide,
                                                  ends=_ends_at(ends, 1), scale=scale)
         candidates, end_seers = self._end_seers(candidates, seers)
+        exact = self._waits_for_counts(settings)
+        result.visibility = "exact" if exact else "predicted"
+        record = self._visibility_of(root)
+        keys: list[tuple[int, ...]] = [()]  # each parent row's chain of surfaces from the root
+        parent_at = [0]                      # each parent row's index in result.views
         level = 0
         while candidates is not None:
             if scale < 1.0:
                 renderer.stats.levels_downscaled += 1
             targets = levels.get(level + 1, candidates.size)
-            pixels = self._claim(surfaces, targets, levels[level], candidates, nodes)
-            is_end = None if candidates.end is None else candidates.end.tolist()
-            keep = self._within_budgets(surfaces, candidates, pixels if is_end is None else
-                                        [0 if end else n for n, end in zip(pixels, is_end, strict=True)],
-                                        settings, result, level + 1, root.size)
+            entities = surfaces.entity_list
+            claim_keys = [keys[p] + (entities[s],) for p, s in
+                          zip(candidates.parent.tolist(), candidates.surface.tolist(), strict=True)]
+            queries = record.take(len(candidates), self.renderer.ctx)
+            self._claim(surfaces, targets, levels[level], candidates, nodes, queries)
+            is_end = candidates.end.tolist() if candidates.end is not None else [False] * len(candidates)
+            if exact:  # this frame's counts: the CPU waits for the GPU to draw the claims
+                pixels = self.passes.claimed_pixels(queries)
+                record.counted.update(zip(claim_keys, pixels, strict=True))
+                keep = self._within_budgets(surfaces, candidates,
+                                            [0 if end else n for n, end in zip(pixels, is_end, strict=True)],
+                                            settings, result, level + 1, root.size)
+                grow = range(len(keep))  # every view kept has pixels: each gets its own surfaces
+                end_rows = [i for i, (n, end) in enumerate(zip(pixels, is_end, strict=True)) if end and n > 0]
+            else:  # last frame's counts: nothing waits; the GPU counts this frame's for the next
+                record.pending.extend(claim_keys)
+                seen = [record.seen.get(key) for key in claim_keys]
+                keep = [i for i, end in enumerate(is_end) if not end]
+                # A view hidden last frame is drawn (it may show now) but its own surfaces
+                # wait for a frame that counts pixels for it.
+                grow = [at for at, i in enumerate(keep) if seen[i] != 0]
+                result.unseen += len(keep) - len(grow)
+                renderer.stats.views_spent += len(keep)
+                end_rows = [i for i, end in enumerate(is_end) if end]
             chosen = candidates if len(keep) == len(candidates) else candidates.select(np.asarray(keep, np.int64))
             views, children = self._level_nodes(surfaces, chosen, nodes, level + 1, root.hide)
             ended = []
-            if is_end is not None:
-                end_rows = np.array([i for i, (n, end) in enumerate(zip(pixels, is_end, strict=True))
-                                     if end and n > 0], np.int64)
-                if len(end_rows):
-                    chosen_ends = candidates.select(end_rows)
-                    end_views, ended = self._level_nodes(surfaces, chosen_ends, nodes, level + 1, root.hide)
+            if end_rows:
+                chosen_ends = candidates.select(np.asarray(end_rows, np.int64))
+                end_views, ended = self._level_nodes(surfaces, chosen_ends, nodes, level + 1, root.hide)
             if not children and not ended:
                 break
             if children:
@@ -171,9 +229,8 @@ class ViewTree:
             if ended:
                 inverse_carry = surfaces.inv_carry_glm
                 self.ends.draw(end_views, [node.surface.entity for node in ended],
-                               [result.views[seer].view.view * inverse_carry[s] for seer, s in
-                                zip([end_seers[i] for i in end_rows.tolist()], chosen_ends.surface.tolist(),
-                                    strict=True)],
+                               [result.views[end_seers[i]].view.view * inverse_carry[s] for i, s in
+                                zip(end_rows, chosen_ends.surface.tolist(), strict=True)],
                                targets, root)
                 result.end_views.extend(ended)
             renderer.flush()
@@ -182,11 +239,13 @@ class ViewTree:
             level += 1
             next_index = int(candidates.rows.node[-1]) + 1
             candidates = None
-            if children:
+            if grow:
+                parents = chosen if len(grow) == len(children) else chosen.select(np.asarray(grow, np.int64))
                 if seers is not None:  # each child saw its own surface from its parent
-                    seers = self._child_seers(seers, chosen, parent_offset)
-                    parent_offset = child_offset
-                nodes, rows = children, chosen.rows
+                    seers = self._child_seers(seers, parents, parent_at)
+                keys = [claim_keys[keep[at]] for at in grow]
+                parent_at = [child_offset + at for at in grow]
+                nodes, rows = [children[at] for at in grow], parents.rows
                 # While the GPU draws the views: the next level's cull and cameras (measured: on
                 # the critical path when done after the views finish), then their composite rows.
                 scale = self._level_scale(level + 1)
@@ -207,7 +266,46 @@ class ViewTree:
                                                           (*result.views[1:], *result.end_views)))
             else:
                 self.ends.forget()
+        if exact:
+            record.seen, record.counted = record.counted, {}
         return result
+
+    def _waits_for_counts(self, settings: TreeSettings) -> bool:
+        """Whether the levels read this frame's claim counts (the CPU waits for the GPU once
+        a level).  Budgets rank views by this frame's pixels, so any budget waits."""
+        stats = self.renderer.stats
+        if settings.level_budget is not None or stats.view_budget is not None or stats.pixel_budget is not None:
+            return True
+        if settings.visibility == "auto":
+            return self.renderer.caps.software
+        return settings.visibility == "exact"
+
+    def _visibility_of(self, root: View) -> RootVisibility:
+        """``root``'s claim counts, with last frame's read (``RootVisibility.seen``: empty
+        where the root was not drawn last frame, and nothing is predicted from them).  At a
+        tree's first render in a frame, roots it did not draw last frame hand their queries
+        back to the context's pool."""
+        stats = self.renderer.stats
+        if stats is not self._frame_stats:
+            self._frame_stats = stats
+            self._frame += 1
+            for key, old in list(self._visibility.items()):
+                if old.frame < self._frame - 1:
+                    give_samples_queries(self.renderer.ctx, old.queries)
+                    del self._visibility[key]
+        key = (root.name, root.skip)
+        record = self._visibility.get(key)
+        if record is None:
+            record = self._visibility[key] = RootVisibility()
+        if record.pending:  # drawn by the GPU a frame ago: reading them waits for nothing more
+            record.seen = dict(zip(record.pending, self.passes.claimed_pixels(record.queries[:len(record.pending)]),
+                                   strict=True))
+            record.pending = []
+        if record.frame < self._frame - 1:
+            record.seen = {}
+        record.frame, record.used = self._frame, 0
+        record.counted = {}
+        return record
 
     def _projection(self, proj: glm.mat4) -> tuple[np.ndarray, np.ndarray]:
         """A root's projection and its inverse as numpy rows, kept while it is the same (a
@@ -235,14 +333,14 @@ class ViewTree:
         return found
 
     @staticmethod
-    def _child_seers(seers: list[list[int]], chosen: Candidates, parent_offset: int) -> list[list[int]]:
+    def _child_seers(seers: list[list[int]], chosen: Candidates, parent_at: list[int]) -> list[list[int]]:
         """Each chosen view's row of seers (``_end_seers``): its parent's, where its own
-        surface was last seen by its parent (index ``parent_offset`` + its parent's row in the
+        surface was last seen by its parent (``parent_at``: each parent row's index in the
         tree's views).  Lists, a level's worth of copies: a few numpy calls cost more."""
         rows = []
         for p, s in zip(chosen.parent.tolist(), chosen.surface.tolist(), strict=True):
             row = seers[p].copy()
-            row[s] = parent_offset + p
+            row[s] = parent_at[p]
             rows.append(row)
         return rows
 
@@ -269,16 +367,17 @@ class ViewTree:
         return candidates, found
 
     def _claim(self, surfaces: SurfaceTable, targets, parent_targets, candidates: Candidates,
-               parents: list[ReflectionView]) -> list[int]:
-        """Every candidate's claim in ``targets``: its pixels.  The claim uniform's (parent
-        view, surface, view index) of every candidate packed in one array of uint32s."""
+               parents: list[ReflectionView], queries: list[moderngl.Query]) -> None:
+        """Every candidate's claim in ``targets``, its pixels counted in ``queries``.  The
+        claim uniform's (parent view, surface, view index) of every candidate packed in one
+        array of uint32s."""
         entities = surfaces.entity_list
         ids = array("I")
         for p, s, node in zip(candidates.parent.tolist(), candidates.surface.tolist(),
                               candidates.rows.data[:, 51].astype(np.int64).tolist(), strict=True):
             ids.extend((parents[p].index, entities[s], node))
-        return self.passes.prepare_level(targets, parent_targets, Claims(
-            ids.tobytes(), list(map(tuple, candidates.scissor.tolist()))))
+        self.passes.prepare_level(targets, parent_targets, Claims(
+            ids.tobytes(), list(map(tuple, candidates.scissor.tolist()))), queries)
 
     def _level_scale(self, level: int) -> float:
         """The resolution factor of ``level`` under the frame's pixel budget: 1, or the scale
@@ -375,6 +474,9 @@ class ViewTree:
             fade=child.fade) for child, rect in zip(children, rects, strict=True)], parent_size)
 
     def release(self) -> None:
+        for record in self._visibility.values():
+            give_samples_queries(self.renderer.ctx, record.queries)
+        self._visibility.clear()
         self.passes.release()
         if self.ends is not None:
             self.ends.release()

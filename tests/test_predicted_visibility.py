@@ -1,0 +1,202 @@
+"""Predicted visibility (``ReflectionSystem.visibility``): a level decides which candidate
+views to draw from last frame's claim counts, so the CPU never waits for this frame's.
+
+The facts: the frames equal the exact mode's while nothing uncovers a surface; the claim
+counts read in a frame are all from an earlier frame (exact mode reads its own, so the
+check can fail); a mirror uncovered this frame shows its reflection this frame, and the
+mirrors inside it follow a frame later; budgets count exactly; queries are reused, not
+made anew every frame."""
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from components import Material, MeshRef, Transform
+from engine.assets.mesh import box
+from engine.render import view_tree
+from engine.render.mirror_passes import MirrorPasses
+from engine.render.view_tree import TreeSettings
+from tests import golden
+from tests.golden_scenes import cases
+from tests.test_mirrors import FACING_BACK, base_scene, mirror_wall
+from tests.support import look_from
+
+SCENES = ("hall_start", "hall_mirror_wall", "mirror_ring_16", "mirror_ring_8_batched", "portals_depth_8")
+
+
+def _with_visibility(case, mode: str, renderers: list):
+    def setup(engine) -> None:
+        if case.setup is not None:
+            case.setup(engine)
+        engine.reflection_system.visibility = mode
+        renderers.append(engine.renderer)
+    return replace(case, setup=setup, frames=case.frames + 2)
+
+
+@pytest.mark.parametrize("name", SCENES)
+def test_predicted_frames_equal_the_exact_frames(ctx, name):
+    """Golden scenes, a few frames in: the same colours and ids with either mode, and the
+    predicted engine did predict (its views include ones drawn on last frame's word)."""
+    case = {case.name: case for case in cases()}[name]
+    renderers: list = []
+    exact = golden.render_case(ctx, _with_visibility(case, "exact", renderers))
+    predicted = golden.render_case(ctx, _with_visibility(case, "predicted", renderers))
+    exact_stats, predicted_stats = (renderer.stats for renderer in renderers)
+    assert exact_stats.reflection_visibility == "exact"
+    assert predicted_stats.reflection_visibility == "predicted"
+    assert exact_stats.reflection_views > 0
+    assert predicted_stats.reflection_views >= exact_stats.reflection_views
+    assert np.array_equal(exact.ids, predicted.ids), f"{name}: ids differ"
+    delta = np.abs(exact.rgb.astype(np.int16) - predicted.rgb.astype(np.int16))
+    assert delta.max() <= 1, f"{name}: {int((delta > 1).any(axis=2).sum())} pixels differ, by up to {delta.max()}"
+
+
+def test_hidden_candidates_are_drawn_unseen(ctx):
+    """In the ring of 16 mirrors some candidates are hidden behind others: predicted mode
+    draws them (unseen, with no views below them); exact mode leaves them out."""
+    case = {case.name: case for case in cases()}["mirror_ring_16"]
+    renderers: list = []
+    golden.render_case(ctx, _with_visibility(case, "exact", renderers))
+    golden.render_case(ctx, _with_visibility(case, "predicted", renderers))
+    exact_stats, predicted_stats = (renderer.stats for renderer in renderers)
+    assert predicted_stats.reflection_views_unseen > 0
+    assert exact_stats.reflection_views_unseen == 0
+    assert predicted_stats.reflection_views - predicted_stats.reflection_views_unseen <= \
+        exact_stats.reflection_views + exact_stats.reflection_views // 10  # the ring turns a little a frame
+
+
+@pytest.mark.parametrize("mode", ("exact", "predicted"))
+def test_predicted_mode_reads_only_counts_of_earlier_frames(ctx, monkeypatch, mode):
+    """Every claim count read during a frame was claimed in an earlier frame (predicted), or
+    in this frame (exact: the CPU waits for the GPU once a level)."""
+    case = {case.name: case for case in cases()}["mirror_ring_8"]
+    frame = {"n": 0}
+    claimed_in: dict[int, int] = {}
+    read_ages: list[int] = []
+    prepare, counts = MirrorPasses.prepare_level, MirrorPasses.claimed_pixels
+
+    def prepare_level(self, level, parent, claims, queries):
+        for query in queries:
+            claimed_in[id(query)] = frame["n"]
+        return prepare(self, level, parent, claims, queries)
+
+    def claimed_pixels(self, queries):
+        read_ages.extend(frame["n"] - claimed_in[id(query)] for query in queries)
+        return counts(self, queries)
+
+    monkeypatch.setattr(MirrorPasses, "prepare_level", prepare_level)
+    monkeypatch.setattr(MirrorPasses, "claimed_pixels", claimed_pixels)
+    render = view_tree.ViewTree.render
+
+    def counting(self, *args, **kwargs):
+        frame["n"] += 1
+        return render(self, *args, **kwargs)
+    monkeypatch.setattr(view_tree.ViewTree, "render", counting)
+    golden.render_case(ctx, _with_visibility(case, mode, []))
+    assert read_ages, "no claim count was read"
+    if mode == "predicted":
+        assert min(read_ages) == 1
+    else:
+        assert set(read_ages) == {0}
+
+
+def _covered_mirrors(world, ents, facing: bool):
+    base_scene(world)
+    look_from(world, (0.0, 1.5, 5.0))
+    # No end images: past the depth limit they repeat last frame's image, so a frame that
+    # differs would echo on in the next ones.
+    ents["mirror"] = mirror_wall(world, position=(0, 1.5, -2), size=(3, 2.5), end_image=False)
+    if facing:  # a second mirror behind the camera: the first shows it, and it the first, ...
+        ents["back"] = mirror_wall(world, position=(0, 1.5, 7), size=(3, 2.5), rotation=FACING_BACK, end_image=False)
+    ents["crate"] = world.spawn(Transform(position=(-1.0, 1.0, -1.0)), MeshRef(box()), Material(color=(0.9, 0.2, 0.1)))
+    # The cover: a wall between the camera and the mirror, moved aside later.
+    ents["cover"] = world.spawn(Transform(position=(0.0, 1.5, 1.0), scale=(5.0, 4.0, 0.2)), MeshRef(box()),
+                                Material(color=(0.2, 0.2, 0.25)))
+
+
+@pytest.mark.parametrize("facing", (False, True))
+def test_an_uncovered_mirror_shows_its_reflection_the_same_frame(scene, facing):
+    """The cover hides the mirror for three frames (its view: no pixels, predicted hidden);
+    on the frame it moves away the mirror shows the crate in both modes alike.  With a
+    facing mirror, the views inside the uncovered one come a frame later in predicted mode
+    (the exact mode has them at once), and the frames agree again after it."""
+    runners = {}
+    for mode in ("exact", "predicted"):
+        ents: dict = {}
+        runner = scene(lambda world, ents=ents: _covered_mirrors(world, ents, facing), (200, 150))
+        runner.engine.reflection_system.visibility = mode
+        for _ in range(3):
+            runner.frame()
+        runners[mode] = (runner, ents)
+    frames = {}
+    for mode, (runner, ents) in runners.items():
+        assert runner.stats.reflection_views == (0 if mode == "exact" else runner.stats.reflection_views_unseen)
+        runner.world.get(ents["cover"], Transform).position = (0.0, 1.5, 30.0)
+        frames[mode] = [(runner.frame().astype(np.int16), runner.stats.reflection_views) for _ in range(2)]
+    (exact_now, exact_views), (exact_next, _) = frames["exact"]
+    (predicted_now, predicted_views), (predicted_next, _) = frames["predicted"]
+    runner, ents = runners["exact"]
+    surface = runner.engine.renderer.targets.read_surface_ids()
+    in_mirror = surface == ents["mirror"]
+    assert in_mirror.sum() > 2000
+    crate = runner.ids() == ents["crate"]
+    assert (crate & in_mirror).sum() > 20, "the crate's reflection is in the mirror"
+    if not facing:
+        assert np.abs(exact_now - predicted_now).max() <= 1
+        assert predicted_views == exact_views == 1
+    else:
+        assert predicted_views < exact_views  # the views inside the uncovered mirror wait a frame
+        # what differs is inside the mirror: the mirrors it shows
+        differs = np.abs(exact_now - predicted_now).max(axis=2) > 1
+        near_mirror = np.zeros_like(in_mirror)  # the mirror and the pixels anti-aliasing blends with it
+        for dy in range(-2, 3):
+            for dx in range(-2, 3):
+                near_mirror |= np.roll(in_mirror, (dy, dx), axis=(0, 1))
+        assert differs.any() and not (differs & ~near_mirror).any(), np.argwhere(differs & ~near_mirror)[:5]
+    assert np.abs(exact_next - predicted_next).max() <= 1
+
+
+def test_budgets_count_exactly_whatever_the_mode(ctx):
+    """A level budget ranks views by this frame's pixels: the tree reads them."""
+    case = {case.name: case for case in cases()}["mirror_ring_16"]
+    renderers: list = []
+
+    def budget(engine):
+        engine.reflection_system.level_budget = 3
+    golden.render_case(ctx, _with_visibility(replace(case, setup=budget), "predicted", renderers))
+    assert renderers[0].stats.reflection_visibility == "exact"
+    assert renderers[0].stats.reflection_views_dropped > 0
+
+
+def test_auto_waits_on_a_software_rasteriser_only(scene):
+    runner = scene(lambda world: _covered_mirrors(world, {}, True), (120, 90))
+    assert runner.engine.reflection_system.visibility == "auto"
+    runner.frame()
+    software = runner.engine.renderer.caps.software
+    assert runner.stats.reflection_visibility == ("exact" if software else "predicted")
+    with pytest.raises(ValueError, match="visibility"):
+        TreeSettings(visibility="sometimes")
+
+
+def test_the_queries_are_reused_frame_after_frame(scene):
+    """The claims' queries come from the context's pool and go back to it: after the first
+    frames, neither the pool nor the tree's queries grow."""
+    ents: dict = {}
+    runner = scene(lambda world: _covered_mirrors(world, ents, True), (120, 90))
+    runner.world.get(ents["cover"], Transform).position = (0.0, 1.5, 30.0)
+    runner.engine.reflection_system.visibility = "predicted"
+    tree = runner.engine.reflection_system.tree
+    ctx = runner.engine.ctx
+
+    def held() -> tuple[int, int]:
+        return (sum(len(record.queries) for record in tree._visibility.values()),
+                len(ctx.extra.get("speculum.samples_queries", [])))
+    for _ in range(3):
+        runner.frame()
+    before = held()
+    assert before[0] > 0
+    for _ in range(20):
+        runner.frame()
+    assert held() == before
