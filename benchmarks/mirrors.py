@@ -73,7 +73,7 @@ from engine.render.present import ANTIALIAS_MODES
 from engine.render.renderer import Renderer
 from engine.render.scene_pass import ScenePass
 from engine.render.targets import CaptureTarget
-from engine.render.view_tree import ViewTree
+from engine.render.view_tree import VISIBILITY_MODES, ViewTree
 from shell.app import Engine
 
 MIRROR_COUNTS = (0, 1, 2, 4, 8, 16)
@@ -269,6 +269,9 @@ class Result:
     cpu_ms_median: float = 0.0
     plan_us_per_view: float | None = None
     faded: bool = False   # every mirror faded out (``--faded``)
+    visibility: str = "auto"  # ReflectionSystem.visibility (``--visibility``); what the frames used: ``used``
+    used: str = ""
+    unseen: int = 0           # views drawn on last frame's word with no pixels then (median)
 
 
 def _percentile(values: list[float], q: float) -> float:
@@ -278,7 +281,8 @@ def _percentile(values: list[float], q: float) -> float:
 
 def run_scenes(ctx, mirror_counts: tuple[int, ...], paths: tuple[str, ...], frames: int,
                warmup: int, aa_modes: tuple[str, ...] = ("fxaa",),
-               size: tuple[int, int] = OUTPUT_SIZE, faded: bool = False) -> list[Result]:
+               size: tuple[int, int] = OUTPUT_SIZE, faded: bool = False,
+               visibilities: tuple[str, ...] = ("auto",)) -> list[Result]:
     """One engine per (mirror count, path, anti-aliasing mode) on the same scene, their
     frames interleaved (frame i of every engine, then frame i + 1), so load from outside the
     benchmark, and the drift of a shared machine, land on every engine alike and the ratios
@@ -290,9 +294,10 @@ def run_scenes(ctx, mirror_counts: tuple[int, ...], paths: tuple[str, ...], fram
     clock = PlanClock()
     try:
         clock.open()
-        for mirrors, path, aa, fade in cases:
+        for mirrors, path, aa, fade, visibility in cases:
             engine = Engine(MirrorRing(mirrors, fade), ctx)
             engine.reflection_system.path = path
+            engine.reflection_system.visibility = visibility
             engine.renderer.antialias = aa
             engines.append(engine)
             captures.append(CaptureTarget(ctx, size))
@@ -329,7 +334,10 @@ def run_scenes(ctx, mirror_counts: tuple[int, ...], paths: tuple[str, ...], fram
             cpu_ms_median=round(statistics.median(cpu[i]), 2),
             plan_us_per_view=plan_median(plan[i]),
             faded=fade,
-        ) for i, (mirrors, path, aa, fade) in enumerate(cases)]
+            visibility=visibility,
+            used=",".join(sorted({s.reflection_visibility for s in stats[i]} - {""})),
+            unseen=round(statistics.median(s.reflection_views_unseen for s in stats[i])),
+        ) for i, (mirrors, path, aa, fade, visibility) in enumerate(cases)]
     finally:
         clock.close()
         for capture in captures:
@@ -353,13 +361,16 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="comma-separated anti-aliasing modes (default fxaa; fxaa,off measures its cost)")
     parser.add_argument("--faded", action="store_true",
                         help="also run each mirror count with every mirror faded out (it should cost no view)")
+    parser.add_argument("--visibility", type=lambda text: tuple(text.split(",")), default=("auto",),
+                        help="comma-separated ReflectionSystem.visibility modes (default auto; "
+                             "exact,predicted compares them)")
     add_size_argument(parser, OUTPUT_SIZE)
 
 
 COLUMNS = (("n_mirrors", "mirrors", 8), ("path", "path", 11), ("aa", "aa", 5), ("frame_ms_median", "ms med", 8),
            ("frame_ms_p95", "ms p95", 8), ("cpu_ms_median", "cpu ms", 8), ("plan_us_per_view", "plan us/v", 10),
            ("passes", "passes", 7), ("draw_calls", "draws", 6), ("reflection_views", "views", 6),
-           ("faded", "faded", 6))
+           ("faded", "faded", 6), ("used", "visibility", 10), ("unseen", "unseen", 6))
 
 
 def main(args: argparse.Namespace) -> int:
@@ -368,6 +379,9 @@ def main(args: argparse.Namespace) -> int:
     unknown = set(args.paths) - set(PATHS)
     if unknown:
         raise SystemExit(f"unknown paths {sorted(unknown)}; choose from {PATHS}")
+    unknown = set(args.visibility) - set(VISIBILITY_MODES)
+    if unknown:
+        raise SystemExit(f"unknown --visibility modes {sorted(unknown)}; choose from {VISIBILITY_MODES}")
     unknown = set(args.aa) - set(ANTIALIAS_MODES)
     if unknown:
         raise SystemExit(f"unknown --aa modes {sorted(unknown)}; choose from {ANTIALIAS_MODES}")
@@ -379,7 +393,7 @@ def main(args: argparse.Namespace) -> int:
                   f"({ctx.info.get('GL_RENDERER', '?')}, {args.frames} frames after {args.warmup} warm-up)")
             print(" ".join(f"{title:>{width}}" for _, title, width in COLUMNS) + "  chosen")
         for result in run_scenes(ctx, args.mirrors, args.paths, args.frames, args.warmup, args.aa, args.size,
-                                 args.faded):
+                                 args.faded, args.visibility):
             results.append(result)
             if args.json:
                 print(json.dumps(asdict(result)), flush=True)

@@ -7,7 +7,8 @@ timed (``Engine.frame`` then ``ctx.finish()``, wall clock: llvmpipe's GPU timers
 usable), 640x360 (``--size``).  ``passes`` counts scene renders (1 main + 1 per portal view).
 ``cpu_ms_median``: until ``Engine.frame`` returns, without the ``ctx.finish()``;
 ``plan_us_per_view``: the view tree's planning time per reflection view
-(``benchmarks.mirrors.PlanClock``; None at depth 0, which has no views).
+(``benchmarks.mirrors.PlanClock``; None at depth 0, which has no views).  ``--visibility
+exact,predicted`` runs one engine per ``ReflectionSystem.visibility`` mode, frames interleaved.
 
     python -m benchmarks portals            # table
     python -m benchmarks portals --json     # one JSON object per depth
@@ -33,6 +34,7 @@ from engine.core.game import Game
 from engine.core.world import World
 from engine.render.gl_context import create_headless_context
 from engine.render.targets import CaptureTarget
+from engine.render.view_tree import VISIBILITY_MODES
 from shell.app import Engine
 
 SIZE = (640, 360)
@@ -60,53 +62,72 @@ class FacingPortals(Game):
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--frames", type=int, default=30, help="timed frames per depth")
     parser.add_argument("--warmup", type=int, default=3)
+    parser.add_argument("--visibility", type=lambda text: tuple(text.split(",")), default=("auto",),
+                        help="comma-separated ReflectionSystem.visibility modes, each its own engine, their "
+                             "frames interleaved (default auto; exact,predicted compares them)")
     add_size_argument(parser, SIZE)
 
 
 def main(args: argparse.Namespace) -> int:
+    unknown = set(args.visibility) - set(VISIBILITY_MODES)
+    if unknown:
+        raise SystemExit(f"unknown --visibility modes {sorted(unknown)}; choose from {VISIBILITY_MODES}")
     ctx = create_headless_context()
-    engine = Engine(FacingPortals(), ctx)
-    capture = CaptureTarget(ctx, args.size)
-    output = Output(capture.framebuffer, args.size)
+    engines, captures = [], []
     rows = []
     clock = PlanClock()
     try:
+        for visibility in args.visibility:
+            engine = Engine(FacingPortals(), ctx)
+            engine.reflection_system.visibility = visibility
+            engines.append(engine)
+            captures.append(CaptureTarget(ctx, args.size))
+        outputs = [Output(capture.framebuffer, args.size) for capture in captures]
         clock.open()
         for depth in DEPTHS:
-            for _, portal in engine.world.query_one(Portal):
-                portal.max_depth = depth
-            engine.reflection_system.max_depth_cap = max(depth, 1)
-            times, cpu, plan = [], [], []
+            for engine in engines:
+                for _, portal in engine.world.query_one(Portal):
+                    portal.max_depth = depth
+                engine.reflection_system.max_depth_cap = max(depth, 1)
+            times, cpu, plan = ([[] for _ in engines] for _ in range(3))
             for i in range(args.warmup + args.frames):
-                clock.reset()
-                start = time.perf_counter()
-                engine.frame(1 / 60, output)
-                returned = time.perf_counter()
-                ctx.finish()
-                if i >= args.warmup:
-                    times.append((time.perf_counter() - start) * 1000.0)
-                    cpu.append((returned - start) * 1000.0)
-                    plan.append(clock.us_per_view())
-            times.sort()
-            rows.append({"depth": depth, "frame_ms_median": round(statistics.median(times), 2),
-                         "frame_ms_p95": round(times[min(len(times) - 1, int(0.95 * len(times)))], 2),
-                         "passes": engine.renderer.stats.passes,
-                         "reflection_views": engine.renderer.stats.reflection_views,
-                         "cpu_ms_median": round(statistics.median(cpu), 2), "plan_us_per_view": plan_median(plan)})
+                for at, (engine, output) in enumerate(zip(engines, outputs, strict=True)):
+                    clock.reset()
+                    start = time.perf_counter()
+                    engine.frame(1 / 60, output)
+                    returned = time.perf_counter()
+                    ctx.finish()
+                    if i >= args.warmup:
+                        times[at].append((time.perf_counter() - start) * 1000.0)
+                        cpu[at].append((returned - start) * 1000.0)
+                        plan[at].append(clock.us_per_view())
+            for at, (engine, visibility) in enumerate(zip(engines, args.visibility, strict=True)):
+                frame_times = sorted(times[at])
+                stats = engine.renderer.stats
+                rows.append({"depth": depth, "frame_ms_median": round(statistics.median(frame_times), 2),
+                             "frame_ms_p95": round(frame_times[min(len(frame_times) - 1,
+                                                                   int(0.95 * len(frame_times)))], 2),
+                             "passes": stats.passes, "reflection_views": stats.reflection_views,
+                             "cpu_ms_median": round(statistics.median(cpu[at]), 2),
+                             "plan_us_per_view": plan_median(plan[at]), "visibility": visibility,
+                             "used": stats.reflection_visibility})
     finally:
         clock.close()
-        capture.release()
-        engine.close()
+        for capture in captures:
+            capture.release()
+        for engine in engines:
+            engine.close()
         ctx.release()
-    base = rows[0]["frame_ms_median"]
+    base = {row["visibility"]: row["frame_ms_median"] for row in rows if row["depth"] == 0}
     for row in rows:
-        row["ratio_to_depth_0"] = round(row["frame_ms_median"] / base, 2)
+        row["ratio_to_depth_0"] = round(row["frame_ms_median"] / base[row["visibility"]], 2)
         if args.json:
             print(json.dumps(row))
     if not args.json:
         print(f"{'depth':>5} {'median ms':>10} {'p95 ms':>8} {'passes':>6} {'x depth 0':>9} {'cpu ms':>8} "
-              f"{'plan us/v':>10}")
+              f"{'plan us/v':>10} {'visibility':>10}")
         for row in rows:
             print(f"{row['depth']:>5} {row['frame_ms_median']:>10} {row['frame_ms_p95']:>8} {row['passes']:>6} "
-                  f"{row['ratio_to_depth_0']:>9} {row['cpu_ms_median']:>8} {row['plan_us_per_view']!s:>10}")
+                  f"{row['ratio_to_depth_0']:>9} {row['cpu_ms_median']:>8} {row['plan_us_per_view']!s:>10} "
+                  f"{row['used'] or row['visibility']:>10}")
     return 0

@@ -21,7 +21,8 @@ from __future__ import annotations
 import esper
 import numpy as np
 
-from components import Material, MeshRef, Mirror, Portal, Transform, Water
+from components import Material, MeshRef, Mirror, Portal, Transform, Visibility, Water
+from components.limits import VIEW_KINDS
 from engine.core.errors import SpeculumError
 from engine.core.portal_math import pair_transform, portal_plane
 from engine.core.reflection_math import plane_from_point_normal, reflection_matrix, transform_plane
@@ -61,6 +62,8 @@ class SurfaceSystem(esper.Processor):
         world = self.world
         touched = world.changed(Mirror) | world.changed(MeshRef)
         touched |= {e for e in world.changed(Material) if e in self.mirrors}  # a normal map given or taken
+        touched |= {e for e in world.changed(Visibility) if e in self.mirrors or world.exists(e)
+                    and world.has(e, Mirror)}
         for entity in world.changed(Water):
             water = world.try_get(entity, Water) if world.exists(entity) else None
             if water is not None and not world.has(entity, Mirror):
@@ -92,7 +95,8 @@ class SurfaceSystem(esper.Processor):
                                       f"image), so its Mirror.roughness must be 0, got {mirror.roughness}")
                 flow = self.flows.setdefault(entity, WaterFlow())
             self.mirrors[entity] = self._mirror_state(entity, mirror, mesh_ref, transform,
-                                                      world.try_get(entity, Material), water, flow)
+                                                      world.try_get(entity, Material), water, flow,
+                                                      drawn_code(world, entity))
         return bool(touched)
 
     def _advance_waves(self, dt: float) -> None:
@@ -118,7 +122,8 @@ class SurfaceSystem(esper.Processor):
         frame = world.frame
         moved = frame.moved | frame.added | frame.removed
         if (open_portals == self._open_portals and not world.changed(Portal)
-                and not any(e in moved or p in moved for e, p in open_portals.items())):
+                and not any(e in moved or p in moved for e, p in open_portals.items())
+                and not any(e in open_portals for e in world.changed(Visibility) | world.changed(MeshRef))):
             return False
         self._open_portals = dict(open_portals)
         self.portals = {}
@@ -134,13 +139,13 @@ class SurfaceSystem(esper.Processor):
                 entity, "portal", portal_plane(transform.world), corners, corners,
                 pair_transform(transform.world, out.world), portal_plane(out.world), partner,
                 portal.max_depth, portal.enabled, layers=portal.layer_mask, priority=portal.priority,
-                end_image=portal.end_image)
+                end_image=portal.end_image, drawn=drawn_code(world, entity))
         return True
 
     @staticmethod
     def _mirror_state(entity: int, mirror: Mirror, mesh_ref: MeshRef, transform: Transform,
                       material: Material | None = None, water: Water | None = None,
-                      flow: WaterFlow | None = None) -> SurfaceState:
+                      flow: WaterFlow | None = None, drawn: int = 1 << VIEW_KINDS) -> SurfaceState:
         mesh = mesh_ref.mesh
         bumpy = material is not None and material.normal_map is not None
         try:
@@ -173,8 +178,20 @@ class SurfaceSystem(esper.Processor):
                             reflection_matrix(plane), plane, entity, mirror.max_depth, mirror.enabled,
                             mirror.color, mirror.reflect_rate, mirror.roughness, mirror.resolution_scale, bumps, look,
                             fade=_fades(mirror), layers=mirror.layer_mask, priority=mirror.priority,
-                            end_image=mirror.end_image)
+                            end_image=mirror.end_image, drawn=drawn)
 
+
+
+def drawn_code(world: World, entity: int) -> int:
+    """Where ``entity`` (a mirror or portal) is itself drawn: its Visibility's hidden kinds and
+    layers (layer 0 and every kind without one), and no layer at all with an invisible mesh."""
+    mesh_ref = world.try_get(entity, MeshRef)
+    if mesh_ref is not None and not mesh_ref.visible:
+        return 0
+    visibility = world.try_get(entity, Visibility)
+    if visibility is None:
+        return 1 << VIEW_KINDS
+    return visibility.hidden_kinds | (visibility.layer_mask << VIEW_KINDS)
 
 
 def _fades(mirror: Mirror) -> tuple[float, float, float, float] | None:

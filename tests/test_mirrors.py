@@ -97,7 +97,11 @@ def test_camera_close_to_the_mirror_uses_a_clip_plane_and_still_hides_what_is_be
     assert (runner.engine.renderer.targets.read_surface_ids() == ents["mirror"]).mean() > 0.9  # all mirror
 
 
-def test_mirror_facing_away_offscreen_or_hidden_costs_no_pass(scene):
+@pytest.mark.parametrize("visibility", ("exact", "predicted"))
+def test_mirror_facing_away_offscreen_or_hidden_costs_no_pass(scene, visibility):
+    """A mirror facing away or off screen is never a candidate.  One hidden behind a wall
+    is: exact visibility finds it has no pixels and draws no view; predicted visibility
+    draws it unseen (it might show this frame) and nothing below it."""
     ents = {}
 
     def build(world):
@@ -109,13 +113,22 @@ def test_mirror_facing_away_offscreen_or_hidden_costs_no_pass(scene):
         ents["wall"] = world.spawn(Transform(position=(2.5, 1.5, -2)), MeshRef(box((3, 3, 0.2))), Material())
 
     runner = scene(build, SIZE)
-    runner.frame()
-    assert runner.stats.passes == 1 and runner.stats.reflection_views == 0
+    runner.engine.reflection_system.visibility = visibility
+    for _ in range(2):
+        runner.frame()
+    stats = runner.stats
+    if visibility == "exact":
+        assert stats.passes == 1 and stats.reflection_views == 0
+    else:
+        assert stats.passes == 2 and stats.reflection_views == 1 and stats.reflection_views_unseen == 1
+        assert runner.engine.reflection_system.views[1].surface.entity == ents["hidden"]
     # Uncover the hidden one: now exactly one reflection pass.
     runner.world.get(ents["wall"], Transform).position = (2.5, 10.0, -2)
     runner.frame()
     assert runner.stats.reflection_views == 1 and runner.stats.passes == 2
     assert runner.engine.reflection_system.views[1].surface.entity == ents["hidden"]
+    runner.frame()
+    assert runner.stats.reflection_views_unseen == 0
 
 
 def test_reflection_work_is_limited_to_the_mirror_footprint(scene):

@@ -20,8 +20,8 @@ from engine.render.mirror_passes import MirrorPasses
 from engine.render.view_tree import TreeSettings
 from tests import golden
 from tests.golden_scenes import cases
-from tests.test_mirrors import FACING_BACK, base_scene, mirror_wall
 from tests.support import look_from
+from tests.test_mirrors import FACING_BACK, base_scene, mirror_wall
 
 SCENES = ("hall_start", "hall_mirror_wall", "mirror_ring_16", "mirror_ring_8_batched", "portals_depth_8")
 

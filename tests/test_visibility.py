@@ -538,17 +538,76 @@ def test_the_camera_shows_its_layers_directly_and_in_what_it_sees_through_surfac
         assert (ids[where] == ents["layer0"]).sum() > 30
 
 
-def test_a_camera_showing_only_a_layer_sees_nothing_else_not_even_the_mirrors(scene):
+@pytest.mark.parametrize("visibility", ("exact", "predicted"))
+def test_a_camera_showing_only_a_layer_sees_nothing_else_not_even_the_mirrors(scene, visibility):
     """Everything without a Visibility is on layer 0: a camera showing only layer 3 draws the
-    layer-3 box alone; the mirrors are not drawn, so they reflect nothing (a surface's view
-    claims only the pixels where it was drawn)."""
+    layer-3 box alone; the mirrors are not drawn, so they reflect nothing, and the planner
+    knows it without a claim: no view, not even one drawn on last frame's word."""
 
     ents = {}
     runner = scene(two_mirrors(ents), SIZE)
+    runner.engine.reflection_system.visibility = visibility
     for _, camera in runner.world.query_one(Camera):
         camera.shows_layers = [3]
-    runner.frame()
+    for _ in range(2):
+        runner.frame()
     ids = runner.ids()
     assert set(np.unique(ids).tolist()) == {0, ents["layer3"]}
     assert (ids == ents["layer3"]).sum() > 200
-    assert runner.stats.reflection_views == 0
+    assert runner.stats.reflection_views == 0 and runner.stats.passes == 1
+
+
+@pytest.mark.parametrize("visibility", ("exact", "predicted"))
+def test_a_mirror_drawn_nowhere_the_view_looks_is_no_candidate(scene, visibility):
+    """A mirror's own Visibility decides where it is drawn, and so whether a view can look
+    into it: moved to a layer the camera does not show, or its mesh made invisible, it makes
+    no view from the next frame on (the surfaces' table follows the change); a mirror hidden
+    in mirrors is seen directly but not in the other mirror."""
+    ents = {}
+    runner = scene(two_mirrors(ents), SIZE)
+    runner.engine.reflection_system.visibility = visibility
+    for _, camera in runner.world.query_one(Camera):
+        camera.shows_layers = [0, 3]
+    runner.frame()
+    runner.frame()
+    views = lambda: sorted(v.surface.entity for v in runner.engine.reflection_system.views[1:])  # noqa: E731
+    assert views() == sorted((ents["left"], ents["right"]))
+    runner.world.add_component(ents["left"], Visibility(layers=[5]))
+    runner.frame()
+    assert views() == [ents["right"]]
+    assert not in_surface(runner, ents["left"]).any()
+    runner.world.get(ents["left"], Visibility).layers = [0]
+    runner.world.get(ents["right"], MeshRef).visible = False
+    runner.frame()
+    assert views() == [ents["left"]]
+    runner.world.get(ents["right"], MeshRef).visible = True
+    runner.frame()
+    assert views() == sorted((ents["left"], ents["right"]))
+
+
+@pytest.mark.parametrize("visibility", ("exact", "predicted"))
+def test_a_mirror_hidden_in_mirrors_is_not_looked_into_from_a_mirror(scene, visibility):
+    """Two facing mirrors, the back one hidden in mirrors: the camera sees the front one, whose
+    view does not draw the back one, so no view looks into the back mirror from it (not even
+    one drawn on last frame's word: it is no candidate)."""
+    ents = {}
+
+    def build(world):
+        world.spawn(DirectionalLight(direction=(0.2, -1.0, -0.5), intensity=2.0))
+        world.spawn(Skybox())
+        look_from(world, (0.0, 1.5, 4.0), target=(0.0, 1.5, -2.0))
+        ents["front"] = world.spawn(Transform(position=(0, 1.5, -2)), MeshRef(quad(4, 3)),
+                                    Material(color=(0.1, 0.1, 0.1)), Mirror(max_depth=4, end_image=False))
+        ents["back"] = world.spawn(Transform(position=(0, 1.5, 6), rotation=glm.angleAxis(glm.pi(), glm.vec3(0, 1, 0))),
+                                   MeshRef(quad(4, 3)), Material(color=(0.1, 0.1, 0.1)),
+                                   Mirror(max_depth=4, end_image=False))
+    runner = scene(build, SIZE)
+    runner.engine.reflection_system.visibility = visibility
+    runner.frame()
+    seen = [v.surface.entity for v in runner.engine.reflection_system.views[1:]]
+    assert ents["back"] in seen and len(seen) >= 2  # the front mirror shows the back one, and so on
+    runner.world.add_component(ents["back"], Visibility(in_mirrors=False))
+    runner.frame()
+    runner.frame()
+    seen = [v.surface.entity for v in runner.engine.reflection_system.views[1:]]
+    assert seen == [ents["front"]]

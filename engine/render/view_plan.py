@@ -160,6 +160,10 @@ class SurfaceTable:
         # the layers every surface of its chain shows).
         self.kind_bit = np.where(self.is_mirror, VIEW_MIRROR, VIEW_PORTAL).astype(np.int64)
         self.layers = np.array([s.layers for s in states], np.int64)
+        # Where each surface itself is drawn (its entity's Visibility, as the scene shaders
+        # read it): a view that does not draw it gives it no pixels, so no candidate.
+        self.drawn = np.array([s.drawn for s in states], np.int64)
+        self._drawn_in: dict[int, np.ndarray | None] = {}
         self.scale = np.array([s.resolution_scale for s in states], np.float64)
         self.priority = np.array([s.priority for s in states], np.int64)
         self.end_image = self._end_images(states)
@@ -224,6 +228,28 @@ class SurfaceTable:
         facing_portals = ~mirrors & partner_front & partner_sees
         return wanted | (auto & (facing_mirrors | facing_portals))
 
+    def drawn_in(self, view_mask: int) -> np.ndarray | None:
+        """(S,) bool: the surfaces a view of ``view_mask`` (``View.view_mask``) draws, by the
+        rule of ``shaders/include/visibility.glsl`` (None: all of them)."""
+        found = self._drawn_in.get(view_mask, False)
+        if found is False:
+            kinds = (1 << VIEW_KINDS) - 1
+            shares_a_layer = ((self.drawn >> VIEW_KINDS) & (view_mask >> VIEW_KINDS)) != 0
+            found = ((self.drawn & view_mask & kinds) == 0) & shares_a_layer
+            found = self._drawn_in[view_mask] = None if found.all() else found
+        return found
+
+    def _drawn_by(self, masks: np.ndarray) -> np.ndarray | None:
+        """(P, S) bool, or (S,) when every parent has the same view mask: the surfaces each
+        parent view draws (None: every parent draws every surface)."""
+        masks = masks.astype(np.int64).tolist()
+        if len(set(masks)) == 1:
+            return self.drawn_in(masks[0])
+        rows = [self.drawn_in(mask) for mask in masks]
+        if all(row is None for row in rows):
+            return None
+        return np.array([np.ones(len(self.states), bool) if row is None else row for row in rows])
+
     def _within(self, depth: int, depth_cap: int) -> tuple[np.ndarray, np.ndarray, list[bool]]:
         """Per surface: enabled and allowed at ``depth`` by its own limit and the cap, and
         cut there by them, and the first as a list (the same for every level of that depth:
@@ -284,6 +310,9 @@ class SurfaceTable:
         seen = data[:, 0:4] @ self.planes_t > 0.0                                   # P x S
         seen &= allowed
         seen &= data[:, 48:49] != self.entities
+        drawn = self._drawn_by(data[:, 49])
+        if drawn is not None:
+            seen &= drawn
         if not seen.any():
             return _NONE, _NONE, _NO_RECTS, None
         # Rows first: (12, P) x 4 times each corner's (4, S) gives (corners, 12, P, S), so x
@@ -428,12 +457,14 @@ class SurfaceTable:
         half_w, half_h = 0.5 * root.size[0], 0.5 * root.size[1]
         pairs = []
         for p, row in enumerate(parents.data.tolist()):
+            drawn = self.drawn_in(int(row[49]))
             view = glm.transpose(glm.dmat4(*row[12:28]))
             clip = glm.dvec4(*row[8:12])
             eye = glm.dvec4(*row[0:4])
             view_proj = small.proj * view
             for s, surface in enumerate(surfaces):
-                if not allowed[s] or surface.entity == row[48] or glm.dot(eye, surface.plane) <= 0.0:
+                if not allowed[s] or surface.entity == row[48] or glm.dot(eye, surface.plane) <= 0.0 \
+                        or (drawn is not None and not drawn[s]):
                     continue
                 # Every corner outside one side of the frustum, or behind the clip plane: culled.
                 outside = [True] * 6

@@ -212,7 +212,12 @@ class ViewTree:
                 # wait for a frame that counts pixels for it.
                 grow = [at for at, i in enumerate(keep) if seen[i] != 0]
                 result.unseen += len(keep) - len(grow)
+                # The frame's spending and the level's coverage, by last frame's counts.
+                drawn = sum(seen[i] or 0 for i in keep)
+                width, height = candidates.size
+                self.coverage[level + 1] = round(drawn * root.size[0] * root.size[1] / (width * height))
                 renderer.stats.views_spent += len(keep)
+                renderer.stats.pixels_spent += drawn
                 end_rows = [i for i, end in enumerate(is_end) if end]
             chosen = candidates if len(keep) == len(candidates) else candidates.select(np.asarray(keep, np.int64))
             views, children = self._level_nodes(surfaces, chosen, nodes, level + 1, root.hide)
