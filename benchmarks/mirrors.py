@@ -287,9 +287,11 @@ def run_scenes(ctx, mirror_counts: tuple[int, ...], paths: tuple[str, ...], fram
     frames interleaved (frame i of every engine, then frame i + 1), so load from outside the
     benchmark, and the drift of a shared machine, land on every engine alike and the ratios
     between them hold.  ``size`` is the output's (width, height); ``faded`` adds, for each
-    mirror count, the same ring with every mirror faded out (``Mirror.fade_distance``)."""
-    cases = [(mirrors, path, aa, fade) for mirrors in mirror_counts for path in paths for aa in aa_modes
-             for fade in ((False, True) if faded and mirrors else (False,))]
+    mirror count, the same ring with every mirror faded out (``Mirror.fade_distance``);
+    ``visibilities``: the ``ReflectionSystem.visibility`` modes, an engine each."""
+    cases = [(mirrors, path, aa, fade, visibility) for mirrors in mirror_counts for path in paths
+             for aa in aa_modes for fade in ((False, True) if faded and mirrors else (False,))
+             for visibility in visibilities]
     engines, captures = [], []
     clock = PlanClock()
     try:

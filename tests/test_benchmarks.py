@@ -100,6 +100,30 @@ def test_the_size_reaches_the_render_target(argv, monkeypatch, capsys, own_conte
     assert rows
 
 
+@pytest.mark.parametrize("argv", [
+    ["portals", "--frames", "2", "--warmup", "1"],
+    ["mirrors", "--mirrors", "8", "--paths", "auto", "--frames", "2", "--warmup", "1"],
+], ids=lambda argv: argv[0])
+def test_visibility_modes_run_side_by_side(argv, capsys, own_contexts):
+    """``--visibility exact,predicted``: a row per mode (per depth, or mirror count and path),
+    each saying the mode its frames used; the modes draw the same views or more when
+    predicting (views drawn unseen on last frame's word)."""
+    parser, modules = build_parser()
+    args = parser.parse_args([*argv, "--json", "--size", "96x54", "--visibility", "exact,predicted"])
+    assert modules[argv[0]].main(args) == 0
+    rows = [row for row in map(json.loads, capsys.readouterr().out.splitlines()) if "reflection_views" in row]
+    by_mode = {}
+    for row in rows:
+        by_mode.setdefault(row["visibility"], []).append(row)
+        assert row["used"] in ("", row["visibility"])
+    assert set(by_mode) == {"exact", "predicted"} and len(by_mode["exact"]) == len(by_mode["predicted"])
+    assert any(row["used"] == "predicted" for row in by_mode["predicted"])
+    for exact, predicted in zip(by_mode["exact"], by_mode["predicted"], strict=True):
+        assert predicted["reflection_views"] >= exact["reflection_views"]
+    with pytest.raises(SystemExit, match="visibility"):
+        modules[argv[0]].main(parser.parse_args([*argv, "--visibility", "sometimes"]))
+
+
 def test_the_probe_suite_draws_every_part_at_the_size(monkeypatch, capsys, own_contexts):
     """Captures and prefilters run at 128 and 512 texels a face whatever the size (seconds on
     llvmpipe): each part is stood in for by a recorder here; the whole frames run for real."""

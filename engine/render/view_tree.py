@@ -9,8 +9,11 @@ and portals:
               behind the view's own mirror, outside the frustum or off the view's rectangle;
               for each pair kept, its camera and packed Camera block;
   2. claim  - each candidate takes, in level L+1's node image and depth mask, the pixels
-              where level L shows it; a samples query counts them, and a candidate with
-              none gets no view (MirrorPasses.prepare_level);
+              where level L shows it; a samples query counts them (MirrorPasses.prepare_level).
+              With exact visibility the CPU reads the counts now and a candidate with none
+              gets no view; with predicted visibility it reads them at the root's next
+              render and draws every candidate now, growing views below only those that had
+              pixels last frame (or were not claimed then) (VISIBILITY_MODES);
   3. render - the level's views through the scene pass (``ScenePass.draw``): the parent's
               camera carried through the surface, oblique near plane (or clip distance
               close up), only its claimed pixels; view by view, or all in one draw per
