@@ -21,7 +21,13 @@ from components import (
 )
 from engine.assets.mesh import box, plane, quad, sphere
 from engine.assets.texture_data import checker_texture
-from engine.render.batched_mirrors import AUTO_MAX_TRIANGLES, AUTO_MIN_VIEWS, choose_path, submitted_triangles
+from engine.render.batched_mirrors import (
+    AUTO_GPU_MAX_TRIANGLES,
+    AUTO_MAX_TRIANGLES,
+    AUTO_MIN_VIEWS,
+    choose_path,
+    submitted_triangles,
+)
 
 SIZE = (200, 150)
 
@@ -147,6 +153,11 @@ def test_auto_rule_boundaries():
     assert choose_path("auto", AUTO_MIN_VIEWS, AUTO_MAX_TRIANGLES) == "batched"
     assert choose_path("auto", 32, AUTO_MAX_TRIANGLES) == "batched"
     assert choose_path("auto", 32, AUTO_MAX_TRIANGLES + 1) == "per_mirror"
+    # On a GPU the geometry shader's amplification is cheap up to a larger scene.
+    assert choose_path("auto", AUTO_MIN_VIEWS, AUTO_GPU_MAX_TRIANGLES, software=False) == "batched"
+    assert choose_path("auto", AUTO_MIN_VIEWS - 1, 10, software=False) == "per_mirror"
+    assert choose_path("auto", 32, AUTO_GPU_MAX_TRIANGLES + 1, software=False) == "per_mirror"
+    assert AUTO_GPU_MAX_TRIANGLES > AUTO_MAX_TRIANGLES
     with pytest.raises(ValueError, match="ReflectionSystem.path must be one of"):
         choose_path("fast", 3, 10)
 
@@ -157,8 +168,11 @@ def test_auto_follows_the_rule_each_level_and_reports_it(scene):
     assert light["levels"] == [5, 5, 9]
     assert light["stats"].reflection_path == "batched" and light["stats"].passes == 1 + 3
 
-    heavier = render(scene, hall({}), "auto")  # the sphere: 224 more triangles
-    assert submitted_triangles(heavier["runner"].engine.renderer) > AUTO_MAX_TRIANGLES
+    # The sphere: 224 more triangles, over llvmpipe's limit; 960 on a GPU, over its own.
+    software = light["runner"].engine.renderer.caps.software
+    heavier = render(scene, hall({}, sphere_detail=(16, 8) if software else (32, 16)), "auto")
+    assert submitted_triangles(heavier["runner"].engine.renderer) > \
+        (AUTO_MAX_TRIANGLES if software else AUTO_GPU_MAX_TRIANGLES)
     assert heavier["stats"].reflection_path == "per_mirror" and heavier["stats"].passes == 1 + 19
 
     # Close to the middle panel: levels of 1, 2 and 6 views, the first two under AUTO_MIN_VIEWS.

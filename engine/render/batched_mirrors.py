@@ -78,16 +78,30 @@ _VIEW_FLOATS = _VIEW_DTYPE.itemsize // 4
 # pass's CPU overhead is the bottleneck, the balance is likely the other way: re-measure.
 AUTO_MIN_VIEWS = 3
 AUTO_MAX_TRIANGLES = 40
+#
+# On a GPU (NVIDIA H200, 2026-11-26, .whl/vis_exp.py in one process, engines interleaved,
+# predicted visibility; whole frames, median ms, per_mirror / batched):
+#
+#   scene (triangles a view)        4 mirrors     8 mirrors     16 mirrors
+#   benchmark ring (274), 640x360       -         5.37 / 5.19   10.89 / 8.98
+#   benchmark ring (274), 1080p         -         5.99 / 5.81   10.86 / 9.24
+#   ring + five 64x32 spheres (20754)   3.17 / 3.81      -       9.63 / 70.67
+#
+# The batched draw saves ~16 us of CPU a view; its geometry shader costs ~30 ns a triangle a
+# view against ~4 ns through the per-mirror vertex stage, so it pays below ~600 triangles.
+AUTO_GPU_MAX_TRIANGLES = 512
 
 
-def choose_path(setting: str, view_count: int, triangles: int) -> str:
+def choose_path(setting: str, view_count: int, triangles: int, software: bool = True) -> str:
     """The path that draws a level of ``view_count`` views of a scene submitting
-    ``triangles`` triangles a view: ``setting`` unless it is "auto" (the rule above)."""
+    ``triangles`` triangles a view: ``setting`` unless it is "auto" (the rules above: on a
+    ``software`` rasteriser, or on a GPU)."""
     if setting not in PATHS:
         raise ValueError(f"ReflectionSystem.path must be one of {PATHS}, got {setting!r}")
     if setting != "auto":
         return setting
-    if view_count >= AUTO_MIN_VIEWS and triangles <= AUTO_MAX_TRIANGLES:
+    limit = AUTO_MAX_TRIANGLES if software else AUTO_GPU_MAX_TRIANGLES
+    if view_count >= AUTO_MIN_VIEWS and triangles <= limit:
         return "batched"
     return "per_mirror"
 

@@ -231,7 +231,8 @@ class ViewTree:
             if not children and not ended:
                 break
             if children:
-                path = choose_path(settings.path, len(children), submitted_triangles(renderer))
+                path = choose_path(settings.path, len(children), submitted_triangles(renderer),
+                                   renderer.caps.software)
                 result.paths.add(path)
                 renderer.scene_pass.draw(views, targets, _BATCHED if path == "batched" else REFLECTION_LEVEL)
             if ended:
