@@ -435,7 +435,7 @@ def test_a_probes_own_object_is_in_none_of_its_mirror_views(scene, path, monkeyp
 
     import engine.render.view_tree as view_tree
 
-    monkeypatch.setattr(view_tree, "choose_path", lambda setting, views, triangles: path)
+    monkeypatch.setattr(view_tree, "choose_path", lambda setting, views, triangles, software=True: path)
     runner = scene(build, (64, 48))
     runner.frame()
     target = np.array([0.0, 1.5, -6.0]) / np.linalg.norm([0.0, 1.5, -6.0])
