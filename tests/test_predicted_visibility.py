@@ -200,3 +200,36 @@ def test_the_queries_are_reused_frame_after_frame(scene):
     for _ in range(20):
         runner.frame()
     assert held() == before
+
+
+def test_a_view_drawn_unseen_costs_the_gpu_no_primitives_while_hidden(scene, monkeypatch):
+    """Per-mirror path, predicted: the covered mirror's view is drawn on last frame's word, but
+    conditional on its claim: the GPU draws no primitive for it (GL_PRIMITIVES_GENERATED
+    around the level's pass), and once uncovered the same view draws its scene."""
+    from engine.render.scene_pass import ScenePass
+
+    ents: dict = {}
+    runner = scene(lambda world: _covered_mirrors(world, ents, False), (160, 120))
+    runner.engine.reflection_system.visibility = "predicted"
+    runner.engine.reflection_system.path = "per_mirror"
+    ctx = runner.engine.ctx
+    counted: list[tuple[bool, int]] = []
+    draw = ScenePass.draw
+
+    def counting(self, views, targets, options=None, conditions=None):
+        query = ctx.query(primitives=True)
+        with query:
+            draw(self, views, targets, options, conditions) if options is not None else draw(self, views, targets)
+        counted.append((conditions is not None, query.primitives))
+    monkeypatch.setattr(ScenePass, "draw", counting)
+    for _ in range(3):
+        runner.frame()
+    assert runner.stats.reflection_views == runner.stats.reflection_views_unseen == 1
+    levels = [n for conditional, n in counted if conditional]
+    assert levels and levels[-1] == 0, counted
+    assert counted[-2][1] > 0  # the main view, drawn the same way, counts its primitives
+    runner.world.get(ents["cover"], Transform).position = (0.0, 1.5, 30.0)
+    counted.clear()
+    runner.frame()
+    assert runner.stats.reflection_views_unseen == 1  # hidden last frame: still on last frame's word
+    assert [n for conditional, n in counted if conditional][-1] > 0

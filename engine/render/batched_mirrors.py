@@ -128,9 +128,9 @@ def views_block(views: Sequence[View]) -> bytes:
         # The screen rectangle in NDC: the scissor, or the whole target.
         rects = np.array([view.scissor if view.scissor is not None else (0, 0, *view.size) for view in views],
                          np.float64)
-        sizes = np.array([view.size for view in views], np.float64)
-        corners = np.concatenate((rects[:, 0:2], rects[:, 0:2] + rects[:, 2:4]), axis=1)
-        rows[:count, 24:28] = 2.0 * corners / np.tile(sizes, 2) - 1.0
+        sizes = np.array([(*view.size, *view.size) for view in views], np.float64)
+        rects[:, 2:4] += rects[:, 0:2]  # x0, y0, x1, y1
+        rows[:count, 24:28] = 2.0 * rects / sizes - 1.0
         # (skip, hide, view mask, node) in the block; (node, skip, hide, view mask) in the row.
         rows[:count, 28:32].view(np.uint32)[:] = blocks[:, CAMERA_BLOCK_IDS].view(np.uint32)[:, (3, 0, 1, 2)]
     return np.array([count, 0, 0, 0], np.int32).tobytes() + rows.tobytes()

@@ -28,6 +28,7 @@ path of the "Multiple Mirrors" OpenGL project; at most
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
+from contextlib import nullcontext
 from dataclasses import dataclass
 
 import moderngl
@@ -59,6 +60,8 @@ from engine.render.bindings import (
 from engine.render.raw_gl import LayeredArrayTarget, LayeredCubeTarget, inspect_bound_target
 from engine.render.targets import RenderTargets
 from engine.render.views import View, union_rect
+
+_ALWAYS = nullcontext()  # a view drawn whatever its claim counted
 
 
 @dataclass(frozen=True)
@@ -287,8 +290,13 @@ class ScenePass:
         return self._sky_size, _NO_PROBE
 
     # --- the pass ------------------------------------------------------------------------------
-    def draw(self, views: Sequence[View], targets: RenderTargets, options: SceneOptions = ROOT_VIEW) -> None:
-        """Draw the scene for each of ``views`` into ``targets`` (all of one size)."""
+    def draw(self, views: Sequence[View], targets: RenderTargets, options: SceneOptions = ROOT_VIEW,
+             conditions: Sequence[moderngl.Query] | None = None) -> None:
+        """Draw the scene for each of ``views`` into ``targets`` (all of one size).  With
+        ``conditions`` (a samples query per view: its claim), view by view each view's draws
+        are conditional on its query having counted pixels (GL conditional rendering: the
+        GPU skips a view hidden this frame without the CPU reading the count); the batched
+        path draws them all (the node image masks a hidden view's pixels anyway)."""
         if not views:
             return
         renderer = self.renderer
@@ -314,14 +322,14 @@ class ScenePass:
                 for first in range(0, len(views), MAX_BATCHED_VIEWS):
                     self._draw_batched(views[first:first + MAX_BATCHED_VIEWS], options)
             else:
-                self._draw_each(views, targets, viewport, options)
+                self._draw_each(views, targets, viewport, options, conditions)
         finally:
             if sampler is not None:
                 sampler.clear(ALBEDO_UNIT)
         renderer.checkpoint(f"scene ({views[0].name}{' and others' if len(views) > 1 else ''})")
 
     def _draw_each(self, views: Sequence[View], targets: RenderTargets, viewport: tuple[int, int, int, int],
-                   options: SceneOptions) -> None:
+                   options: SceneOptions, conditions: Sequence[moderngl.Query] | None = None) -> None:
         """Each view its own draws: state shared by the views is set once; per view there is
         a scissor, a winding, a camera and the draws (on llvmpipe the Python and driver cost
         per view is on the frame's critical path)."""
@@ -330,31 +338,32 @@ class ScenePass:
         transparent = renderer.transparent_batches()
         renderer.upload_views(views)  # every view's Camera block in one write; each binds its range
         for index, view in enumerate(views):
-            ctx.scissor = view.scissor  # moderngl's own record: the cache reads it
-            set_front_face(ctx, "cw" if view.mirrored else "ccw")
-            renderer.bind_view_at(index)
-            self._draw_batches(renderer.opaque_batches(), 0, options.masked, skip=view.skip,
-                               hide=view.hide)
-            if options.sky:
-                # Colour only: the clear already put id 0 (nothing) where the sky shows.
-                targets.sky_framebuffer.use()
-                apply_pass_state(ctx, _SKY, viewport, view.scissor)
-                self._sky.render(moderngl.TRIANGLES, vertices=3)
-                renderer.stats.draw_calls += 1
-                targets.view_framebuffer.use()
-            if transparent:
-                # Blended over what is there, farthest first, testing depth but not writing it.
-                targets.view_framebuffer.depth_mask = False
-                targets.view_framebuffer.use()
-                apply_pass_state(ctx, _TRANSPARENT, viewport, view.scissor)
+            with _ALWAYS if conditions is None else conditions[index].crender:
+                ctx.scissor = view.scissor  # moderngl's own record: the cache reads it
                 set_front_face(ctx, "cw" if view.mirrored else "ccw")
-                self._draw_batches(_back_to_front(transparent, view.eye), 0, options.masked,
-                                   skip=view.skip, hide=view.hide)
-                targets.view_framebuffer.depth_mask = True
-                targets.view_framebuffer.use()
-            if options.sky or transparent:
-                apply_pass_state(ctx, _SCENE, viewport)
-            renderer.stats.passes += 1
+                renderer.bind_view_at(index)
+                self._draw_batches(renderer.opaque_batches(), 0, options.masked, skip=view.skip,
+                                   hide=view.hide)
+                if options.sky:
+                    # Colour only: the clear already put id 0 (nothing) where the sky shows.
+                    targets.sky_framebuffer.use()
+                    apply_pass_state(ctx, _SKY, viewport, view.scissor)
+                    self._sky.render(moderngl.TRIANGLES, vertices=3)
+                    renderer.stats.draw_calls += 1
+                    targets.view_framebuffer.use()
+                if transparent:
+                    # Blended over what is there, farthest first, testing depth but not writing it.
+                    targets.view_framebuffer.depth_mask = False
+                    targets.view_framebuffer.use()
+                    apply_pass_state(ctx, _TRANSPARENT, viewport, view.scissor)
+                    set_front_face(ctx, "cw" if view.mirrored else "ccw")
+                    self._draw_batches(_back_to_front(transparent, view.eye), 0, options.masked,
+                                       skip=view.skip, hide=view.hide)
+                    targets.view_framebuffer.depth_mask = True
+                    targets.view_framebuffer.use()
+                if options.sky or transparent:
+                    apply_pass_state(ctx, _SCENE, viewport)
+                renderer.stats.passes += 1
 
     def _draw_batched(self, views: Sequence[View], options: SceneOptions) -> None:
         """Every batch once for all ``views`` (at most MAX_BATCHED_VIEWS): the geometry

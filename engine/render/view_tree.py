@@ -234,7 +234,9 @@ class ViewTree:
                 path = choose_path(settings.path, len(children), submitted_triangles(renderer),
                                    renderer.caps.software)
                 result.paths.add(path)
-                renderer.scene_pass.draw(views, targets, _BATCHED if path == "batched" else REFLECTION_LEVEL)
+                # Predicted: the GPU skips the views its claims found hidden (conditional rendering).
+                renderer.scene_pass.draw(views, targets, _BATCHED if path == "batched" else REFLECTION_LEVEL,
+                                         None if exact else [queries[i] for i in keep])
             if ended:
                 inverse_carry = surfaces.inv_carry_glm
                 self.ends.draw(end_views, [node.surface.entity for node in ended],
