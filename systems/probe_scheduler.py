@@ -84,6 +84,7 @@ class ProbeScheduler:
         self._bounds: dict[int, tuple[np.ndarray, np.ndarray]] = {}  # entity -> last world box
         self._lights: dict[int, tuple[np.ndarray, float]] = {}  # point light -> (position, range) last seen
         self._looks = LookChanges()
+        self._watching = False  # the boxes and lights are kept: an on_change probe was there last frame
 
     def update(self) -> ProbeSchedule:
         """This frame's schedule, published as the world's ``ProbeSchedule``."""
@@ -95,11 +96,23 @@ class ProbeScheduler:
             self._bounds.clear()  # nothing to keep boxes for (a world without probes pays nothing)
             self._lights.clear()
             return schedule
-        # Where every drawable was when the first probe came (its first capture saw them
-        # there); after that, only what changed is looked at.
-        boxes = self._changed_boxes(looks) if had_probes else self._all_boxes()
-        everything = [f"{kind.__name__} changed" for kind in LIGHTING_KINDS if world.changed(kind)]
-        lights = self._changed_lights() if had_probes else self._all_lights()
+        if any(state.settings.refresh == "on_change" for state in self.probes.values()):
+            # Where every drawable was when the first probe came (its first capture saw them
+            # there), or when the first on_change probe did; after that, only what changed
+            # is looked at.
+            primed = had_probes and self._watching
+            boxes = self._changed_boxes(looks) if primed else self._all_boxes()
+            lights = self._changed_lights() if primed else self._all_lights()
+            everything = [f"{kind.__name__} changed" for kind in LIGHTING_KINDS if world.changed(kind)]
+            self._watching = True
+        else:
+            # No probe refreshes on change: what moved matters to none (a probe that turns
+            # on_change recaptures every face for its new settings, and the boxes are taken
+            # afresh then).
+            self._bounds.clear()
+            self._lights.clear()
+            self._watching = False
+            boxes, lights, everything = ChangedBoxes([]), [], []
         surfaces = world.resources.get(Surfaces)
         due = []
         for state in self.probes.values():

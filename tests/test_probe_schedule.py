@@ -251,3 +251,28 @@ def test_every_component_the_extract_stage_draws_an_instance_from_is_a_look_kind
     kinds = {kind.__name__ for kind in LOOK_KINDS}
     assert read - {"Transform"} <= kinds, read - {"Transform"} - kinds
     assert all(isinstance(why, str) and why for why in LOOK_KINDS.values())
+
+
+def test_probes_that_refresh_every_frame_watch_no_changes_until_one_turns_on_change(gl_free_world):
+    """With only an every-frame probe the scheduler keeps no boxes (what moves matters to no
+    probe); once it turns on_change it recaptures every face for its new settings, and from
+    then on a box that moves from its +X side to its -X side asks for both faces: where the
+    box was (kept since the switch) and where it is."""
+    world = gl_free_world
+    probe = world.spawn(Transform(), ReflectionProbe(resolution=16, far=20.0, refresh="every_frame"))
+    crate = world.spawn(Transform(position=(2, 0, 0)), MeshRef(box((0.2, 0.2, 0.2))), Material())
+    scheduler = world.get_system(Scheduling).scheduler
+    for step in range(3):
+        world.get(crate, Transform).position = glm.vec3(2, 0.1 * step, 0)
+        world.step(1 / 60)
+        assert due(world)[probe]["every_frame"] == ALL_FACES
+    assert not scheduler._bounds
+    world.get(probe, ReflectionProbe).refresh = "on_change"
+    world.step(1 / 60)
+    assert due(world)[probe] == {"settings changed": ALL_FACES}
+    assert crate in scheduler._bounds
+    world.step(1 / 60)
+    assert probe not in due(world)
+    world.get(crate, Transform).position = glm.vec3(-2, 0, 0)
+    world.step(1 / 60)
+    assert due(world)[probe] == {f"moved: entity {crate}": {0, 1}}
