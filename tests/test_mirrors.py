@@ -122,6 +122,7 @@ def test_mirror_facing_away_offscreen_or_hidden_costs_no_pass(scene, visibility)
     else:
         assert stats.passes == 2 and stats.reflection_views == 1 and stats.reflection_views_unseen == 1
         assert runner.engine.reflection_system.views[1].surface.entity == ents["hidden"]
+        assert runner.engine.reflection_system.views[1].unseen
     # Uncover the hidden one: now exactly one reflection pass.
     runner.world.get(ents["wall"], Transform).position = (2.5, 10.0, -2)
     runner.frame()
@@ -129,6 +130,7 @@ def test_mirror_facing_away_offscreen_or_hidden_costs_no_pass(scene, visibility)
     assert runner.engine.reflection_system.views[1].surface.entity == ents["hidden"]
     runner.frame()
     assert runner.stats.reflection_views_unseen == 0
+    assert not runner.engine.reflection_system.views[1].unseen
 
 
 def test_reflection_work_is_limited_to_the_mirror_footprint(scene):

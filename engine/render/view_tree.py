@@ -141,6 +141,7 @@ class ReflectionView:
     surface: SurfaceState | None = None
     parent: ReflectionView | None = None
     fade: float = 1.0                 # the reflection's weight (a mirror's fades)
+    unseen: bool = False              # drawn on last frame's word that it had no pixels (predicted visibility)
 
 
 class ViewTree:
@@ -224,6 +225,10 @@ class ViewTree:
                 end_rows = [i for i, end in enumerate(is_end) if end]
             chosen = candidates if len(keep) == len(candidates) else candidates.select(np.asarray(keep, np.int64))
             views, children = self._level_nodes(surfaces, chosen, nodes, level + 1, root.hide)
+            if len(grow) < len(children):
+                grown = set(grow)
+                for at, child in enumerate(children):
+                    child.unseen = at not in grown
             ended = []
             if end_rows:
                 chosen_ends = candidates.select(np.asarray(end_rows, np.int64))
@@ -273,8 +278,10 @@ class ViewTree:
             self.passes.composite_level(levels[depth - 1], levels[depth], composites[depth - 1])
         if self.ends is not None:
             if surfaces.has_end_images:
+                # The surfaces this image shows (an unseen view's may well not be in it).
                 self.ends.keep(levels[0], root, frozenset(node.surface.entity for node in
-                                                          (*result.views[1:], *result.end_views)))
+                                                          (*result.views[1:], *result.end_views)
+                                                          if not node.unseen))
             else:
                 self.ends.forget()
         if exact:
