@@ -583,6 +583,12 @@ def test_a_mirror_drawn_nowhere_the_view_looks_is_no_candidate(scene, visibility
     runner.world.get(ents["right"], MeshRef).visible = True
     runner.frame()
     assert views() == sorted((ents["left"], ents["right"]))
+    runner.world.get(ents["left"], Visibility).layers = [5]
+    runner.frame()
+    assert views() == [ents["right"]]
+    runner.world.remove_component(ents["left"], Visibility)  # back on layer 0
+    runner.frame()
+    assert views() == sorted((ents["left"], ents["right"]))
 
 
 @pytest.mark.parametrize("visibility", ("exact", "predicted"))
