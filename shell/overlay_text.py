@@ -36,6 +36,8 @@ def overlay_lines(engine, frame_times: Sequence[float]) -> list[str]:
         f"probe budget {'none' if stats.probe_ms_budget is None else f'{stats.probe_ms_budget:g} ms'}: "
         f"spent {stats.probe_ms_spent:.1f} ms, {stats.probe_faces_deferred} faces wait",
         f"reflection path {stats.reflection_path or '-'} (set: {reflect.path}, budget {budget})",
+        f"visibility {stats.reflection_visibility or '-'} (set: {reflect.visibility}), "
+        f"{stats.reflection_views_unseen} views drawn unseen",
         f"probe path {stats.probe_path or '-'} (set: {probes.path}{chosen})",
         f"GL paths verified: {', '.join(stats.paths_verified) or '-'}; "
         f"refused: {', '.join(stats.paths_refused) or '-'}",

@@ -233,3 +233,19 @@ def test_a_view_drawn_unseen_costs_the_gpu_no_primitives_while_hidden(scene, mon
     runner.frame()
     assert runner.stats.reflection_views_unseen == 1  # hidden last frame: still on last frame's word
     assert [n for conditional, n in counted if conditional][-1] > 0
+
+
+def test_the_overlay_says_how_the_levels_knew_their_pixels(scene):
+    """The debug overlay's text names the mode the frame used, the one set, and the views
+    drawn unseen."""
+    from shell.overlay_text import overlay_lines
+
+    runner = scene(lambda world: _covered_mirrors(world, {}, False), (120, 90))
+    runner.engine.reflection_system.visibility = "predicted"
+    for _ in range(2):
+        runner.frame()
+    assert "visibility predicted (set: predicted), 1 views drawn unseen" in overlay_lines(runner.engine, [0.02])
+    runner.engine.reflection_system.visibility = "auto"
+    runner.frame()
+    mode = "exact" if runner.engine.renderer.caps.software else "predicted"
+    assert f"visibility {mode} (set: auto), " in "\n".join(overlay_lines(runner.engine, [0.02]))
