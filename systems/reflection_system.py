@@ -15,7 +15,8 @@ import esper
 from engine.core.world import World
 from engine.render.renderer import Renderer
 from engine.render.view_tree import ReflectionView, TreeSettings, ViewTree
-from engine.resources import FrameViews, Surfaces
+from engine.resources import FrameViews, PortalCrossings, Surfaces
+from engine.rules.frame_rules import frame_rules
 from systems.surface_system import MirrorError
 
 __all__ = ["MirrorError", "ReflectionSystem"]
@@ -30,6 +31,8 @@ class ReflectionSystem(esper.Processor):
         self.tree = ViewTree(renderer, end_images=True)
         self.settings = TreeSettings(max_depth_cap)
         self.views: list[ReflectionView] = []   # last frame's view tree, level order
+        self._cut = False                        # camera_cut() was called since the last frame
+        self._camera: int | None = None          # the camera last frame's tree was seen from
 
     # --- the main tree's settings, checked when they are set --------------------------------------
     @property
@@ -78,6 +81,13 @@ class ReflectionSystem(esper.Processor):
     def visibility(self, value: str) -> None:
         self.settings = replace(self.settings, visibility=value)
 
+    def camera_cut(self) -> None:
+        """Say the camera jumps this frame (a teleport, a cut to another shot): predicted
+        visibility forgets last frame's counts, which describe another place (the first
+        frame after draws every candidate, so no mirror inside a mirror appears a frame
+        late).  Done by itself when the active camera changes or goes through a portal."""
+        self._cut = True
+
     # --- schedule and render -----------------------------------------------------------------
     def process(self, dt: float) -> None:
         views = self.world.resources.get(FrameViews)
@@ -91,6 +101,11 @@ class ReflectionSystem(esper.Processor):
             # The main view rasterises while the CPU culls and works out the first level's
             # cameras; the same after each level's views (engine/render/raw_gl.py says why).
             renderer.flush()
+        camera = frame_rules(self.world).active_camera
+        crossed = any(crossing.entity == camera for crossing in self.world.resources.get(PortalCrossings, ()))
+        if self._cut or crossed or camera != self._camera:
+            self.tree.forget_visibility()
+        self._cut, self._camera = False, camera
         settings = self.settings
         result = self.tree.render(main, renderer.levels, surfaces.table, settings)
         self.views = result.views

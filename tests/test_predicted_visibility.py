@@ -249,3 +249,47 @@ def test_the_overlay_says_how_the_levels_knew_their_pixels(scene):
     runner.frame()
     mode = "exact" if runner.engine.renderer.caps.software else "predicted"
     assert f"visibility {mode} (set: auto), " in "\n".join(overlay_lines(runner.engine, [0.02]))
+
+
+def test_a_camera_cut_forgets_last_frames_counts(scene):
+    """``ReflectionSystem.camera_cut()``: the next frame predicts nothing, so the covered
+    mirror's view is drawn and grows views like a visible one (not unseen); the frame after
+    predicts again."""
+    runner = scene(lambda world: _covered_mirrors(world, {}, True), (120, 90))
+    reflect = runner.engine.reflection_system
+    reflect.visibility = "predicted"
+    for _ in range(3):
+        runner.frame()
+    assert runner.stats.reflection_views_unseen == 1
+    reflect.camera_cut()
+    runner.frame()
+    assert runner.stats.reflection_views_unseen == 0 and not reflect.views[1].unseen
+    runner.frame()
+    assert runner.stats.reflection_views_unseen == 1
+
+
+def test_the_camera_going_through_a_portal_is_a_cut(scene, monkeypatch):
+    """The tree forgets its counts on the frame the active camera crosses a portal (the
+    chains of surfaces from the camera mean other places after it), and on the first frame
+    a camera is seen; on no other frame of the flight."""
+    from tests.test_portal_travel import DT, crossings, portal_scene
+
+    forgot: list[int] = []
+    forget = view_tree.ViewTree.forget_visibility
+
+    def counting(self):
+        forgot.append(frame["n"])
+        forget(self)
+    monkeypatch.setattr(view_tree.ViewTree, "forget_visibility", counting)
+    frame = {"n": 0}
+    ents: dict = {}
+    runner = scene(portal_scene(ents), (96, 72))
+    runner.engine.reflection_system.visibility = "predicted"
+    crossed = []
+    for n in range(40):
+        frame["n"] = n
+        runner.frame(DT)
+        if crossings(runner.world):
+            crossed.append(n)
+    assert len(crossed) == 1
+    assert forgot == [0, crossed[0]]

@@ -325,6 +325,14 @@ class ViewTree:
         record.counted = {}
         return record
 
+    def forget_visibility(self) -> None:
+        """A camera cut: what last frame's claims counted no longer says what this frame's
+        views see (the camera went through a portal, or jumped), so the next render predicts
+        nothing: every candidate is drawn and grows views, as on a first frame (the image
+        is exact; the frame draws more views)."""
+        for record in self._visibility.values():
+            record.seen, record.pending = {}, []
+
     def _projection(self, proj: glm.mat4) -> tuple[np.ndarray, np.ndarray]:
         """A root's projection and its inverse as numpy rows, kept while it is the same (a
         camera's from frame to frame, a probe's six faces)."""
