@@ -116,7 +116,7 @@ class ReflectionSystem(esper.Processor):
         stats.reflection_views_faded = result.faded
         stats.reflection_end_views = len(result.end_views)
         stats.reflection_visibility = result.visibility
-        stats.reflection_views_unseen = result.unseen
+        stats.reflection_views_unseen = sum(1 for view in result.views if view.unseen)
         paths = result.paths
         stats.reflection_path = paths.pop() if len(paths) == 1 else ("mixed" if paths else "")
 

@@ -176,8 +176,11 @@ def test_auto_waits_on_a_software_rasteriser_only(scene):
     runner.frame()
     software = runner.engine.renderer.caps.software
     assert runner.stats.reflection_visibility == ("exact" if software else "predicted")
-    with pytest.raises(ValueError, match="visibility"):
+    with pytest.raises(ValueError, match="ReflectionSystem.visibility"):
         TreeSettings(visibility="sometimes")
+    with pytest.raises(ValueError, match="'sometimes'"):
+        runner.engine.reflection_system.visibility = "sometimes"
+    assert runner.engine.reflection_system.visibility == "auto"  # refused when given, nothing half-set
 
 
 def test_the_queries_are_reused_frame_after_frame(scene):

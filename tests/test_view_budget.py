@@ -173,16 +173,21 @@ def test_priorities_are_checked():
             component(priority=1.5)
 
 
+def eight_mirrors_drawn_whole(scene, ents):
+    """Eight mirrors drawn one frame without a budget: the runner, the reflection pixels
+    that frame drew (counted exactly, on a GPU too) and the renderer's levels."""
+    runner = scene(mirror_grid(ents, columns=4, rows=2), (320, 200))
+    runner.engine.reflection_system.visibility = "exact"
+    runner.frame()
+    return runner, runner.stats.pixels_spent, runner.engine.renderer.levels
+
+
 def test_a_pixel_budget_draws_a_level_at_lower_resolution_instead_of_cutting_it(scene):
     """Last frame's coverage of level 1 is known; a budget of a quarter of it draws level 1
     at half resolution (scale sqrt(1/4)): every view kept, each still showing the panel,
     and the pixels drawn within the budget."""
     ents = {}
-    runner = scene(mirror_grid(ents, columns=4, rows=2), (320, 200))
-    runner.engine.reflection_system.visibility = "exact"  # this frame's pixels, on a GPU too
-    runner.frame()
-    full = runner.stats.pixels_spent
-    levels = runner.engine.renderer.levels
+    runner, full, levels = eight_mirrors_drawn_whole(scene, ents)
     assert full > 0 and levels[1].size == (320, 200)
     runner.world.resources[ViewBudget] = ViewBudget(pixels=full // 4)
     runner.frame()
@@ -207,11 +212,7 @@ def test_a_level_drawn_at_two_sizes_in_turn_keeps_both_target_sets(scene):
     before: alternating between full and half resolution makes no GPU targets after the
     first round."""
     ents = {}
-    runner = scene(mirror_grid(ents, columns=4, rows=2), (320, 200))
-    runner.engine.reflection_system.visibility = "exact"  # this frame's pixels, on a GPU too
-    runner.frame()
-    full = runner.stats.pixels_spent
-    levels = runner.engine.renderer.levels
+    runner, full, levels = eight_mirrors_drawn_whole(scene, ents)
     sizes, made = [], []
     for frame in range(6):
         runner.world.resources[ViewBudget] = ViewBudget(pixels=full // 4 if frame % 2 == 0 else None)
@@ -231,11 +232,7 @@ def test_a_resize_releases_the_targets_kept_for_the_old_size(scene):
     from engine.render.targets import CaptureTarget, RenderTargets
 
     ents = {}
-    runner = scene(mirror_grid(ents, columns=4, rows=2), (320, 200))
-    runner.engine.reflection_system.visibility = "exact"  # this frame's pixels, on a GPU too
-    runner.frame()
-    full = runner.stats.pixels_spent
-    levels = runner.engine.renderer.levels
+    runner, full, levels = eight_mirrors_drawn_whole(scene, ents)
     for frame in range(2):
         runner.world.resources[ViewBudget] = ViewBudget(pixels=full // 4 if frame % 2 == 0 else None)
         runner.frame()

@@ -90,7 +90,8 @@ class TreeSettings:
         if self.path not in PATHS:
             raise ValueError(f"view tree path must be one of {PATHS}, got {self.path!r}")
         if self.visibility not in VISIBILITY_MODES:
-            raise ValueError(f"view tree visibility must be one of {VISIBILITY_MODES}, got {self.visibility!r}")
+            raise ValueError(f"view tree visibility (ReflectionSystem.visibility, TreeSettings.visibility) must be "
+                             f"one of {VISIBILITY_MODES}, got {self.visibility!r}")
 
 
 @dataclass
@@ -105,20 +106,19 @@ class TreeResult:
     end_views: list[ReflectionView] = field(default_factory=list)  # views past the depth limits shown
                                                                    # as last frame's image (EndImages)
     visibility: str = ""          # "exact" or "predicted": how the levels knew their views' pixels
-    unseen: int = 0               # views drawn that had no pixels last frame (predicted: none below them)
 
 
 @dataclass
 class RootVisibility:
-    """One root's claim counts (``ViewTree``'s predicted visibility): each claim is keyed by
-    its chain of surface entities from the root.  ``seen``: last frame's counts; this frame's
-    are ``counted`` (read now, exact) or ``pending`` (their keys, in the order of ``queries``,
-    read at the root's next render, when the GPU has long drawn them)."""
+    """One root's claim queries and, for predicted visibility, its claim counts, each keyed by
+    the claim's chain of surface entities from the root: ``seen``, last frame's; ``pending``,
+    this frame's keys in the order of ``queries``, read at the root's next render, when the
+    GPU has long drawn them.  An exact frame counts nothing for the next: after it, nothing
+    is predicted."""
 
     queries: list[moderngl.Query] = field(default_factory=list)
     used: int = 0                 # queries taken this frame
     pending: list[tuple[int, ...]] = field(default_factory=list)
-    counted: dict[tuple[int, ...], int] = field(default_factory=dict)
     seen: dict[tuple[int, ...], int] = field(default_factory=dict)
     frame: int = -1               # the ViewTree frame it was last drawn in
 
@@ -194,28 +194,26 @@ class ViewTree:
             if scale < 1.0:
                 renderer.stats.levels_downscaled += 1
             targets = levels.get(level + 1, candidates.size)
-            entities = surfaces.entity_list
-            claim_keys = [keys[p] + (entities[s],) for p, s in
-                          zip(candidates.parent.tolist(), candidates.surface.tolist(), strict=True)]
             queries = record.take(len(candidates), self.renderer.ctx)
             self._claim(surfaces, targets, levels[level], candidates, nodes, queries)
             is_end = candidates.end.tolist() if candidates.end is not None else [False] * len(candidates)
             if exact:  # this frame's counts: the CPU waits for the GPU to draw the claims
                 pixels = self.passes.claimed_pixels(queries)
-                record.counted.update(zip(claim_keys, pixels, strict=True))
                 keep = self._within_budgets(surfaces, candidates,
                                             [0 if end else n for n, end in zip(pixels, is_end, strict=True)],
                                             settings, result, level + 1, root.size)
                 grow = range(len(keep))  # every view kept has pixels: each gets its own surfaces
                 end_rows = [i for i, (n, end) in enumerate(zip(pixels, is_end, strict=True)) if end and n > 0]
             else:  # last frame's counts: nothing waits; the GPU counts this frame's for the next
+                entities = surfaces.entity_list
+                claim_keys = [keys[p] + (entities[s],) for p, s in
+                              zip(candidates.parent.tolist(), candidates.surface.tolist(), strict=True)]
                 record.pending.extend(claim_keys)
                 seen = [record.seen.get(key) for key in claim_keys]
                 keep = [i for i, end in enumerate(is_end) if not end]
                 # A view hidden last frame is drawn (it may show now) but its own surfaces
                 # wait for a frame that counts pixels for it.
                 grow = [at for at, i in enumerate(keep) if seen[i] != 0]
-                result.unseen += len(keep) - len(grow)
                 # The frame's spending and the level's coverage, by last frame's counts.
                 drawn = sum(seen[i] or 0 for i in keep)
                 width, height = candidates.size
@@ -259,7 +257,8 @@ class ViewTree:
                 parents = chosen if len(grow) == len(children) else chosen.select(np.asarray(grow, np.int64))
                 if seers is not None:  # each child saw its own surface from its parent
                     seers = self._child_seers(seers, parents, parent_at)
-                keys = [claim_keys[keep[at]] for at in grow]
+                if not exact:
+                    keys = [claim_keys[keep[at]] for at in grow]
                 parent_at = [child_offset + at for at in grow]
                 nodes, rows = [children[at] for at in grow], parents.rows
                 # While the GPU draws the views: the next level's cull and cameras (measured: on
@@ -284,8 +283,6 @@ class ViewTree:
                                                           if not node.unseen))
             else:
                 self.ends.forget()
-        if exact:
-            record.seen, record.counted = record.counted, {}
         return result
 
     def _waits_for_counts(self, settings: TreeSettings) -> bool:
@@ -315,14 +312,13 @@ class ViewTree:
         record = self._visibility.get(key)
         if record is None:
             record = self._visibility[key] = RootVisibility()
-        if record.pending:  # drawn by the GPU a frame ago: reading them waits for nothing more
-            record.seen = dict(zip(record.pending, self.passes.claimed_pixels(record.queries[:len(record.pending)]),
-                                   strict=True))
-            record.pending = []
-        if record.frame < self._frame - 1:
-            record.seen = {}
+        # Last frame's counts, drawn by the GPU a frame ago (reading them waits for nothing
+        # more); none where the root was not drawn last frame, or was drawn exactly.
+        fresh = record.pending and record.frame == self._frame - 1
+        record.seen = dict(zip(record.pending, self.passes.claimed_pixels(record.queries[:len(record.pending)]),
+                               strict=True)) if fresh else {}
+        record.pending = []
         record.frame, record.used = self._frame, 0
-        record.counted = {}
         return record
 
     def forget_visibility(self) -> None:
