@@ -47,7 +47,7 @@ class LevelRows:
     the Camera block's (one copy), and the clip plane above the view matrix makes the 5 x 4
     block ``SurfaceTable.cull`` multiplies once a level."""
 
-    WIDTH = 52  # eye 0-3, viewport 4-7, clip 8-11, view 12-27, inv_view 28-43, rect 44-47, exit 48,
+    WIDTH = 52  # eye 0-3, viewport 4-7, clip 8-11, view 12-27, inv_view 28-43, rect 44-47, exit row 48,
     # view mask 49 (its kinds and layers: View.view_mask), mirrored 50, node 51
 
     def __init__(self, data: np.ndarray) -> None:
@@ -79,8 +79,8 @@ class LevelRows:
         return self.data[:, 44:48]
 
     @property
-    def exit(self) -> np.ndarray:
-        """(n,) the entity the view looks out of (-1: none)."""
+    def exit_row(self) -> np.ndarray:
+        """(n,) the SurfaceTable row of the surface the view looks out of (-1: none)."""
         return self.data[:, 48]
 
     @property
@@ -155,6 +155,10 @@ class SurfaceTable:
         self.inv_carry = np.linalg.inv(self.carry) if count else self.carry
         self.exit_planes = np.array([tuple(s.exit_plane) for s in states], np.float64).reshape(count, 4)
         self.exit_entities = np.array([s.exit_entity for s in states], np.int64)
+        row_of = {entity: i for i, entity in enumerate(self.entity_list)}
+        # The row of the surface each view through a surface looks out of (a mirror: itself; a
+        # portal: its partner; -1: not in the table), which that view cannot see.
+        self.exit_rows = np.array([row_of.get(e, -1) for e in self.exit_entities.tolist()], np.int64)
         self.is_mirror = np.array([s.kind == "mirror" for s in states], bool)
         # The kind a view through each surface gains, and the layers each shows (a view shows
         # the layers every surface of its chain shows).
@@ -188,14 +192,16 @@ class SurfaceTable:
             self.corner_columns[:, :, i] = np.concatenate([c, np.repeat(c[:1], self.corner_count - len(c), axis=0)])
         self.planes_t = np.ascontiguousarray(self.planes.T)
         # ... the floats of each surface's views (carry 0-15, its inverse 16-31, exit plane
-        # 32-35, is a mirror 36, resolution scale 37) and their integers (exit entity, the
-        # view mask bits a view through it keeps: its layers and every kind but direct, the
-        # kind bit it adds).
+        # 32-35, is a mirror 36, resolution scale 37) and their integers, in the order the
+        # view's rows and Camera block take them: the exit's row, the view mask bits a view
+        # through it keeps (its layers and every kind but direct), the exit entity, the kind
+        # bit it adds.
         self.float_rows = np.concatenate([self.carry.reshape(count, 16), self.inv_carry.reshape(count, 16),
                                           self.exit_planes, self.is_mirror[:, None], self.scale[:, None]], axis=1)
-        self.int_rows = np.stack([self.exit_entities, _KINDS_BUT_DIRECT | (self.layers << VIEW_KINDS),
-                                  self.kind_bit], axis=1).reshape(count, 3)
+        self.int_rows = np.stack([self.exit_rows, _KINDS_BUT_DIRECT | (self.layers << VIEW_KINDS),
+                                  self.exit_entities, self.kind_bit], axis=1).reshape(count, 4)
         self._depths: dict[tuple[int, int], tuple[np.ndarray, np.ndarray, list[bool]]] = {}
+        self._biases: dict[tuple, tuple[np.ndarray | None, np.ndarray | None, np.ndarray]] = {}
         self._ends: dict[tuple[int, int], tuple[np.ndarray, np.ndarray, list[bool]]] = {}
         # The resolution scale every surface shares (None: they differ; a level takes its largest).
         self.one_scale = float(self.scale[0]) if count and (self.scale == self.scale[0]).all() else None
@@ -272,6 +278,29 @@ class SurfaceTable:
             found = self._ends[key] = (ends, allowed, allowed.tolist())
         return found[1], found[2]
 
+    def _seen_bias(self, depth: int, depth_cap: int, ends: np.ndarray | None,
+                   drawn: np.ndarray | None) -> np.ndarray:
+        """(S + 1, S): what the cull adds to each (parent, surface) facing value, by the
+        parent's exit row (the last row: a view looking out of nothing): 0 where the surface
+        may be seen at ``depth`` (enabled, within its limits or one of ``ends``, drawn by
+        the view: ``drawn``, None for all), -inf where not, and on the surface the view
+        looks out of.  Kept per depth, cap, ``ends`` and ``drawn`` (arrays the table and
+        the view tree keep while nothing changes)."""
+        key = (depth, depth_cap, id(ends), id(drawn))
+        found = self._biases.get(key)
+        if found is None or found[0] is not ends or found[1] is not drawn:
+            allowed = self._within(depth, depth_cap)[0] if ends is None else self._with_ends(depth, depth_cap,
+                                                                                              ends)[0]
+            if drawn is not None:
+                allowed = allowed & drawn
+            count = len(self.states)
+            bias = np.repeat(np.where(allowed, 0.0, -np.inf)[None, :], count + 1, axis=0)
+            bias[np.arange(count), np.arange(count)] = -np.inf
+            if len(self._biases) > 64:
+                self._biases.clear()
+            found = self._biases[key] = (ends, drawn, bias)
+        return found[2]
+
     def cull(self, parents: LevelRows, depth: int, root_proj: np.ndarray, root_size: tuple[int, int],
              depth_cap: int, ends: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray,
                                                                      np.ndarray | None]:
@@ -299,19 +328,19 @@ class SurfaceTable:
         count = len(parents.data)
         if not count or not len(self.states):
             return _NONE, _NONE, _NO_RECTS, None
-        allowed, _, listed = self._within(depth, depth_cap)
-        if ends is not None:
-            allowed = self._with_ends(depth, depth_cap, ends)[0]
-        elif not any(listed):
+        if ends is None and not any(self._within(depth, depth_cap)[2]):
             return _NONE, _NONE, _NO_RECTS, None  # nothing enabled may be seen this deep
         data = parents.data
-        # First what needs no corners: allowed, facing the view's eye, and not the surface
-        # the view looks out of.
-        seen = data[:, 0:4] @ self.planes_t > 0.0                                   # P x S
-        seen &= allowed
-        seen &= data[:, 48:49] != self.entities
+        # First what needs no corners: facing the view's eye, and allowed (enabled, within
+        # its depth, drawn by the view, not the surface the view looks out of): one product
+        # and a bias row per parent, -inf where a surface is not allowed (_seen_bias).
         drawn = self._drawn_by(data[:, 49])
-        if drawn is not None:
+        each_parent = drawn is not None and drawn.ndim == 2  # parents that draw different surfaces
+        facing = data[:, 0:4] @ self.planes_t                                        # P x S
+        facing += self._seen_bias(depth, depth_cap, ends, None if each_parent else drawn).take(
+            data[:, 48].astype(np.int64), axis=0)
+        seen = facing > 0.0
+        if each_parent:
             seen &= drawn
         if not seen.any():
             return _NONE, _NONE, _NO_RECTS, None
@@ -322,9 +351,9 @@ class SurfaceTable:
         clip = clip.reshape(self.corner_count, 12, count, len(self.states))
         np.divide(clip[:, 0:4], np.maximum(clip[:, 4:5], 1e-6), out=clip[:, 0:4])  # a w <= 0: see straddles
         least = clip.min(axis=0)                                                         # 12 x P x S
-        # Culled: every corner outside one side of the frustum, or behind the clip plane.
-        seen &= least[5:11].max(axis=0) <= 0.0
-        seen &= least[11] < 0.0
+        # Culled: every corner outside one side of the frustum, or behind the clip plane (on
+        # a side counts as outside: one test for all seven).
+        seen &= least[5:12].max(axis=0) < 0.0
         # x0, y0, -x1, -y1 in pixels, rounded outwards with a pixel's margin; a pair with a
         # corner behind the eye is conservative (the parent's whole rectangle).
         rects = np.floor((least[0:4] + _OUTWARDS) * _half_sizes(root_size))
@@ -400,8 +429,8 @@ class SurfaceTable:
         data[:, 44:48] = rects
         mask = ints[:, 1]  # a view shows the layers every surface of its chain shows
         np.bitwise_and(parent[:, 49].astype(np.int64), mask, out=mask)
-        mask |= ints[:, 2]
-        data[:, 48:50] = ints[:, 0:2]  # exit, mask
+        mask |= ints[:, 3]
+        data[:, 48:50] = ints[:, 0:2]  # the exit's row, the mask
         np.not_equal(parent[:, 50], surface[:, 36], out=data[:, 50])
         np.add(_counting(k), first_index, out=data[:, 51])
         proj, inv_proj = _oblique_projections(root_proj, inv_root_proj, inv_view, clip)
@@ -415,7 +444,7 @@ class SurfaceTable:
         np.matmul(inv_view, inv_proj, out=matrices[:, 3])
         blocks[:, 64:76] = data[:, 0:12]
         ids = blocks[:, 76:80].view(np.uint32)
-        ids[:, 0::2] = ints[:, 0:2]  # skip, mask
+        ids[:, 0::2] = ints[:, 2:0:-1]  # skip (the exit entity), mask
         ids[:, 1] = hide
         ids[:, 3] = data[:, 51]  # the view's node (the node image's value for its pixels)
         end = None if ends is None else self._within(depth, depth_cap)[1].take(s)
@@ -431,7 +460,7 @@ class SurfaceTable:
         return [_SmallSurface(int(self.entities[i]), int(self.exit_entities[i]), glm.dvec4(*self.planes[i].tolist()),
                               glm.dvec4(*self.exit_planes[i].tolist()), mat(self.carry[i]), mat(self.inv_carry[i]),
                               [glm.dvec4(*c) for c in np.unique(self.corners[i], axis=0).tolist()],
-                              float(self.is_mirror[i]), keep[i], int(self.kind_bit[i]))
+                              float(self.is_mirror[i]), keep[i], int(self.kind_bit[i]), int(self.exit_rows[i]))
                 for i in range(len(self.states))]
 
     def _plan_small(self, parents: LevelRows, depth: int, root: View, root_proj: np.ndarray,
@@ -463,10 +492,11 @@ class SurfaceTable:
             eye = glm.dvec4(*row[0:4])
             view_proj = small.proj * view
             for s, surface in enumerate(surfaces):
-                if not allowed[s] or surface.entity == row[48] or glm.dot(eye, surface.plane) <= 0.0 \
+                if not allowed[s] or s == row[48] or glm.dot(eye, surface.plane) <= 0.0 \
                         or (drawn is not None and not drawn[s]):
                     continue
-                # Every corner outside one side of the frustum, or behind the clip plane: culled.
+                # Every corner outside one side of the frustum (on it counts as outside), or
+                # behind the clip plane: culled.
                 outside = [True] * 6
                 in_front = False
                 straddles = False
@@ -475,7 +505,7 @@ class SurfaceTable:
                 for corner in surface.corners:
                     x, y, z, w = view_proj * corner
                     for side, value in enumerate((x - w, y - w, z - w, -x - w, -y - w, -z - w)):
-                        if value <= 0.0:
+                        if value < 0.0:
                             outside[side] = False
                     in_front = in_front or glm.dot(clip, corner) > 0.0
                     straddles = straddles or w <= 1e-6
@@ -522,7 +552,7 @@ class SurfaceTable:
                        glm.mat4(inv_view * inv_proj + _ZERO).to_bytes(), glm.vec4(eye).to_bytes(), viewport.to_bytes(),
                        glm.vec4(clip).to_bytes(), _IDS.pack(surface.exit & 0xFFFFFFFF, hide & 0xFFFFFFFF,
                                                             mask & 0xFFFFFFFF, first_index + i))
-            rows.append([*eye, 0.0, 0.0, *size, *clip, *_rows(view), *_rows(inv_view), *rect, surface.exit, mask,
+            rows.append([*eye, 0.0, 0.0, *size, *clip, *_rows(view), *_rows(inv_view), *rect, surface.exit_row, mask,
                          float(row[50] != surface.mirror), first_index + i])
             scissors.append(rect)
         k = len(pairs)
@@ -627,6 +657,7 @@ class _SmallSurface:
     mirror: float            # 1.0 for a mirror
     keep: int                # the view mask bits a view through it keeps
     kind_bit: int            # the kind bit it adds
+    exit_row: int            # the table row of its exit (-1: none)
 
 
 # Kept per root projection (the main camera's, a probe face's: a few a frame).

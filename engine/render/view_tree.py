@@ -18,7 +18,9 @@ and portals:
               camera carried through the surface, oblique near plane (or clip distance
               close up), only its claimed pixels; view by view, or all in one draw per
               mesh through the geometry shader (the batched path);
-  4. repeat for surfaces seen in those views, up to the depth limits;
+  4. repeat for surfaces seen in those views, up to the depth limits (exact: plan, claim,
+              read, render, level after level; predicted: every level planned first, back
+              to back, then claimed and rendered in one run);
   5. composite, deepest level first: blend each level's views into their surfaces' pixels
               one level up (one instanced draw per level and composite variant).
 
@@ -31,7 +33,6 @@ level (``TreeSettings.level_budget``: the views with the most claimed pixels are
 from __future__ import annotations
 
 import math
-from array import array
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -52,7 +53,7 @@ from engine.render.mirror_passes import (
     take_samples_queries,
 )
 from engine.render.scene_pass import REFLECTION_LEVEL, SceneOptions
-from engine.render.targets import LevelStack
+from engine.render.targets import LevelStack, RenderTargets
 from engine.render.view_plan import Candidates, LevelRows, SurfaceTable, _mat, level_rects
 from engine.render.views import CAMERA_BLOCK_BYTES, PlannedView, View
 
@@ -144,6 +145,27 @@ class ReflectionView:
     unseen: bool = False              # drawn on last frame's word that it had no pixels (predicted visibility)
 
 
+@dataclass
+class _Level:
+    """One level of a tree as planned, and what its GL half reads: the claims of its
+    candidates, the views kept, the end views, and its composite."""
+
+    candidates: Candidates
+    targets: RenderTargets
+    parent_targets: RenderTargets
+    parents: list[ReflectionView]                 # the level above's views, by candidate parent row
+    queries: list[moderngl.Query]                 # each candidate's claim count
+    views: list[PlannedView] = field(default_factory=list)
+    path: str | None = None                       # how its views are drawn (batched_mirrors.PATHS)
+    conditions: list[moderngl.Query] | None = None  # predicted: each view drawn if its claim has pixels
+    ended: list[ReflectionView] = field(default_factory=list)  # end views (EndImages)
+    end_views: list[PlannedView] = field(default_factory=list)
+    end_matrices: list[glm.mat4] = field(default_factory=list)
+    composite: list[ReflectionView] | None = None  # what it composites into the level above (None: no
+                                                   # views, only claims)
+    prepared: PreparedComposites | None = None
+
+
 class ViewTree:
     """Renders the reflection levels below a root view into a ``LevelStack`` and composites
     them back into the root's targets.  With ``end_images`` (the main view's tree) a view the
@@ -171,7 +193,6 @@ class ViewTree:
             if self.ends is not None:
                 self.ends.forget()
             return result
-        composites: list[PreparedComposites] = []
         root_proj, inv_root_proj = self._projection(root.proj)
         planning = (root, root_proj, inv_root_proj)
         ends = self._end_surfaces(surfaces, root, settings.depth_cap)
@@ -189,16 +210,18 @@ class ViewTree:
         record = self._visibility_of(root)
         keys: list[tuple[int, ...]] = [()]  # each parent row's chain of surfaces from the root
         parent_at = [0]                      # each parent row's index in result.views
+        planned: list[_Level] = []           # predicted: the levels planned, drawn after the last
+        drawn: list[_Level] = []             # exact: the levels drawn, one by one
         level = 0
         while candidates is not None:
             if scale < 1.0:
                 renderer.stats.levels_downscaled += 1
-            targets = levels.get(level + 1, candidates.size)
-            queries = record.take(len(candidates), self.renderer.ctx)
-            self._claim(surfaces, targets, levels[level], candidates, nodes, queries)
+            step = _Level(candidates, levels.get(level + 1, candidates.size), levels[level], nodes,
+                          record.take(len(candidates), self.renderer.ctx))
             is_end = candidates.end.tolist() if candidates.end is not None else [False] * len(candidates)
             if exact:  # this frame's counts: the CPU waits for the GPU to draw the claims
-                pixels = self.passes.claimed_pixels(queries)
+                self._claim(surfaces, step)
+                pixels = self.passes.claimed_pixels(step.queries)
                 keep = self._within_budgets(surfaces, candidates,
                                             [0 if end else n for n, end in zip(pixels, is_end, strict=True)],
                                             settings, result, level + 1, root.size)
@@ -221,33 +244,32 @@ class ViewTree:
                 renderer.stats.views_spent += len(keep)
                 renderer.stats.pixels_spent += drawn
                 end_rows = [i for i, end in enumerate(is_end) if end]
+                planned.append(step)  # its claims are drawn with it (they count for the next frame)
+                # Predicted: the GPU skips the views its claims find hidden (conditional rendering).
+                step.conditions = [step.queries[i] for i in keep]
             chosen = candidates if len(keep) == len(candidates) else candidates.select(np.asarray(keep, np.int64))
-            views, children = self._level_nodes(surfaces, chosen, nodes, level + 1, root.hide)
+            step.views, children = self._level_nodes(surfaces, chosen, nodes, level + 1, root.hide)
             if len(grow) < len(children):
                 grown = set(grow)
                 for at, child in enumerate(children):
                     child.unseen = at not in grown
-            ended = []
             if end_rows:
                 chosen_ends = candidates.select(np.asarray(end_rows, np.int64))
-                end_views, ended = self._level_nodes(surfaces, chosen_ends, nodes, level + 1, root.hide)
-            if not children and not ended:
+                step.end_views, step.ended = self._level_nodes(surfaces, chosen_ends, nodes, level + 1, root.hide)
+                inverse_carry = surfaces.inv_carry_glm
+                step.end_matrices = [result.views[end_seers[i]].view.view * inverse_carry[s] for i, s in
+                                     zip(end_rows, chosen_ends.surface.tolist(), strict=True)]
+                result.end_views.extend(step.ended)
+            if not children and not step.ended:
                 break
             if children:
-                path = choose_path(settings.path, len(children), submitted_triangles(renderer),
-                                   renderer.caps.software)
-                result.paths.add(path)
-                # Predicted: the GPU skips the views its claims found hidden (conditional rendering).
-                renderer.scene_pass.draw(views, targets, _BATCHED if path == "batched" else REFLECTION_LEVEL,
-                                         None if exact else [queries[i] for i in keep])
-            if ended:
-                inverse_carry = surfaces.inv_carry_glm
-                self.ends.draw(end_views, [node.surface.entity for node in ended],
-                               [result.views[end_seers[i]].view.view * inverse_carry[s] for i, s in
-                                zip(end_rows, chosen_ends.surface.tolist(), strict=True)],
-                               targets, root)
-                result.end_views.extend(ended)
-            renderer.flush()
+                step.path = choose_path(settings.path, len(children), submitted_triangles(renderer),
+                                        renderer.caps.software)
+                result.paths.add(step.path)
+            step.composite = children + step.ended
+            if exact:
+                self._draw_level(step, root)
+                drawn.append(step)
             child_offset = len(result.views)
             result.views.extend(children)
             level += 1
@@ -261,14 +283,21 @@ class ViewTree:
                     keys = [claim_keys[keep[at]] for at in grow]
                 parent_at = [child_offset + at for at in grow]
                 nodes, rows = [children[at] for at in grow], parents.rows
-                # While the GPU draws the views: the next level's cull and cameras (measured: on
-                # the critical path when done after the views finish), then their composite rows.
+                # Exact: while the GPU draws the views, the next level's cull and cameras
+                # (measured: on the critical path when done after the views finish).
+                # Predicted: every level is planned before any is drawn, the planner's
+                # array work back to back (in a frame, numpy calls between GL calls cost
+                # 2-3 times what they cost in a row), and the GPU gets the tree in one run.
                 scale = self._level_scale(level + 1)
                 candidates, faded = surfaces.plan(rows, level + 1, *planning, next_index, settings.depth_cap,
                                                   root.hide, ends=_ends_at(ends, level + 1), scale=scale)
                 result.faded += faded
                 candidates, end_seers = self._end_seers(candidates, seers)
-            composites.append(self._prepare_composite(children + ended, root, levels[level - 1].size))
+        for step in planned:  # predicted: the whole tree, planned, drawn in one run
+            self._claim(surfaces, step)
+            if step.composite is not None:
+                self._draw_level(step, root)
+        composites = [step.prepared for step in (planned if not exact else drawn) if step.prepared is not None]
         deepest = max((node.level for node in result.views), default=0)
         if deepest and deepest == settings.depth_cap:
             # Reaching the cap is reported: how many views the surfaces' own limits still allowed.
@@ -388,18 +417,30 @@ class ViewTree:
             candidates, found = candidates.select(np.array(kept, np.int64)), [found[i] for i in kept]
         return candidates, found
 
-    def _claim(self, surfaces: SurfaceTable, targets, parent_targets, candidates: Candidates,
-               parents: list[ReflectionView], queries: list[moderngl.Query]) -> None:
-        """Every candidate's claim in ``targets``, its pixels counted in ``queries``.  The
-        claim uniform's (parent view, surface, view index) of every candidate packed in one
-        array of uint32s."""
-        entities = surfaces.entity_list
-        ids = array("I")
-        for p, s, node in zip(candidates.parent.tolist(), candidates.surface.tolist(),
-                              candidates.rows.data[:, 51].astype(np.int64).tolist(), strict=True):
-            ids.extend((parents[p].index, entities[s], node))
-        self.passes.prepare_level(targets, parent_targets, Claims(
-            ids.tobytes(), list(map(tuple, candidates.scissor.tolist()))), queries)
+    def _claim(self, surfaces: SurfaceTable, step: _Level) -> None:
+        """Every candidate's claim in the level's targets, its pixels counted in its query.
+        The claim uniform's (parent view, surface, view index) of every candidate packed in
+        one array of uint32s."""
+        candidates = step.candidates
+        ids = np.empty((len(candidates), 3), np.uint32)
+        ids[:, 0] = np.array([node.index for node in step.parents], np.int64).take(candidates.parent)
+        ids[:, 1] = surfaces.entities.take(candidates.surface)
+        ids[:, 2] = candidates.rows.data[:, 51]
+        self.passes.prepare_level(step.targets, step.parent_targets, Claims(
+            ids.tobytes(), list(map(tuple, candidates.scissor.tolist()))), step.queries)
+
+    def _draw_level(self, step: _Level, root: View) -> None:
+        """A planned level's views (and end views) into its targets, then its composite's
+        rows (CPU work while the GPU draws)."""
+        renderer = self.renderer
+        if step.views:
+            renderer.scene_pass.draw(step.views, step.targets, _BATCHED if step.path == "batched"
+                                     else REFLECTION_LEVEL, step.conditions)
+        if step.ended:
+            self.ends.draw(step.end_views, [node.surface.entity for node in step.ended], step.end_matrices,
+                           step.targets, root)
+        renderer.flush()
+        step.prepared = self._prepare_composite(step.composite, root, step.parent_targets.size)
 
     def _level_scale(self, level: int) -> float:
         """The resolution factor of ``level`` under the frame's pixel budget: 1, or the scale
