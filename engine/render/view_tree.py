@@ -33,6 +33,7 @@ level (``TreeSettings.level_budget``: the views with the most claimed pixels are
 from __future__ import annotations
 
 import math
+from array import array
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -422,10 +423,11 @@ class ViewTree:
         The claim uniform's (parent view, surface, view index) of every candidate packed in
         one array of uint32s."""
         candidates = step.candidates
-        ids = np.empty((len(candidates), 3), np.uint32)
-        ids[:, 0] = np.array([node.index for node in step.parents], np.int64).take(candidates.parent)
-        ids[:, 1] = surfaces.entities.take(candidates.surface)
-        ids[:, 2] = candidates.rows.data[:, 51]
+        entities, parents = surfaces.entity_list, step.parents
+        ids = array("I")  # a level's few claims: list work costs less than a few numpy calls
+        for p, s, node in zip(candidates.parent.tolist(), candidates.surface.tolist(),
+                              candidates.rows.data[:, 51].astype(np.int64).tolist(), strict=True):
+            ids.extend((parents[p].index, entities[s], node))
         self.passes.prepare_level(step.targets, step.parent_targets, Claims(
             ids.tobytes(), list(map(tuple, candidates.scissor.tolist()))), step.queries)
 
