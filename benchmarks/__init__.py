@@ -21,12 +21,14 @@ SUITES: dict[str, tuple[str, str]] = {
     "normal_maps": ("benchmarks.normal_maps", "whole frame with a plain vs a normal-mapped ground (trilinear, 8x)"),
     "stages": ("benchmarks.stages", "each frame stage's CPU time and GPU time (timer queries): mirrors 0/8/16, "
                "a dynamic probe"),
+    "profile": ("benchmarks.cpu_profile", "where a frame's CPU time goes, function by function (cProfile): 16 "
+                "mirrors, portals at depth 8, a dynamic probe"),
     "gpu-report": ("benchmarks.gpu_report", "GL renderer and limits, rendering-path checks, test summary and the "
-                   "mirrors / portals / probes / stages benchmarks at two sizes, as report.md + report.json"),
+                   "mirrors / portals / probes / stages / profile benchmarks at two sizes, as report.md + report.json"),
 }
 
 # The suites that draw frames: each takes --size WxH.
-RENDERING_SUITES = ("ecs", "portals", "mirrors", "soak", "churn", "probes", "normal_maps", "stages")
+RENDERING_SUITES = ("ecs", "portals", "mirrors", "soak", "churn", "probes", "normal_maps", "stages", "profile")
 
 MAX_SIDE = 16384  # no OpenGL this engine runs on offers a larger render target
 

@@ -1,5 +1,6 @@
 """GPU report: what this machine's OpenGL is, what the engine verified on it, whether the
-tests pass on it and what the mirrors, portals, probes and stages benchmarks measure on it, written
+tests pass on it, what the mirrors, portals, probes and stages benchmarks measure on it and where
+its frames' CPU time goes (the profile suite), written
 as ``DIR/report.md`` (to read) and ``DIR/report.json`` (to compare).
 
 Sections, in the order they run (both files are rewritten after each, so a driver crash part
@@ -13,12 +14,14 @@ way leaves what came before, with ``"complete": false``):
   ``direct_faces`` and any other path ``engine.render.path_checks.PATH_NAMES`` lists; each
   ``verified``, ``refused``, ``unavailable`` or ``unchecked``, with its detail).  A checkout
   without the self-check reports each path ``unchecked``.
-* ``benchmarks``: ``mirrors``, ``portals``, ``probes`` and ``stages`` (``--benchmarks``) at each
+* ``benchmarks``: ``mirrors``, ``portals``, ``probes``, ``stages`` and ``profile`` (``--benchmarks``) at each
   ``--size`` (default 640x360 and 1920x1080), each run as ``python -m benchmarks <suite>
   --json --size WxH --frames N --warmup M`` would run it (in this process, or one
   subprocess each with ``--isolate``); the rows are the suite's own JSON lines, kept as
   they are, and the report's median tables are read from them.  ``--frames`` (default 10)
-  is per suite and size; the suites' own defaults are 30-40.
+  is per suite and size; the suites' own defaults are 30-40.  ``profile``'s rows (cProfile:
+  the functions a frame's CPU time goes to, per scene) get a table each, its first
+  ``PROFILE_ROWS`` functions.
 * ``tests``: ``python -m pytest -q`` (plus ``--tests-args``) in a subprocess from the
   repository root, when its ``tests/`` folder is there: passed / failed / errors / skipped
   counts, the failing tests' ids and why tests were skipped; each failing test's arrays
@@ -65,7 +68,8 @@ from benchmarks import format_size, parse_sizes
 
 ROOT = Path(__file__).resolve().parents[1]
 DEFAULT_SIZES = ((640, 360), (1920, 1080))
-BENCHMARKS = ("mirrors", "portals", "probes", "stages")
+BENCHMARKS = ("mirrors", "portals", "probes", "stages", "profile")
+PROFILE_ROWS = 15  # functions per scene and size in report.md (report.json keeps every row)
 PATHS = ("layered_capture", "layered_mips", "direct_faces")
 STATUSES = ("verified", "refused", "unavailable", "unchecked")
 SCHEMA = 1
@@ -116,7 +120,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="timed frames per suite and size (default 10)")
     parser.add_argument("--warmup", type=_non_negative, default=2, help="untimed frames first (default 2)")
     parser.add_argument("--benchmarks", type=_suites, default=BENCHMARKS, metavar="NAME[,NAME...]",
-                        help="which suites (default mirrors,portals,probes)")
+                        help=f"which suites (default {','.join(BENCHMARKS)})")
     parser.add_argument("--isolate", action="store_true",
                         help="run each suite in a subprocess (a driver crash costs that suite, not the report)")
     parser.add_argument("--no-tests", action="store_true", help="do not run the test suite")
@@ -447,6 +451,7 @@ def markdown(report: dict) -> str:
             for table in tables:
                 out += [f"### {suite}: {table['value']} by size", ""]
                 out += _table(table["keys"] + [s for s in sizes if any(s in r for r in table["rows"])], table["rows"])
+        out += profile_tables(report)
         if "probes" in report["benchmarks"]:
             out += ["(The probes' capture and prefilter rows draw cube faces of 128 and 512 texels: they do not "
                     "depend on the output size.)", ""]
@@ -480,6 +485,20 @@ def markdown(report: dict) -> str:
             if "output_tail" in tests:
                 out += ["```", tests["output_tail"][-2000:], "```", ""]
     return "\n".join(out)
+
+
+def profile_tables(report: dict) -> list[str]:
+    """The ``profile`` suite's rows as report.md lines: per size and scene, the first
+    ``PROFILE_ROWS`` functions by their own time."""
+    out = []
+    for size, run in report.get("benchmarks", {}).get("profile", {}).items():
+        for head in (row for row in run.get("rows", ()) if "rank" not in row):
+            out += [f"### profile: {head['scene']} at {size} (cProfile, ms a frame; {head['frames']} frames, "
+                    f"median {head['frame_ms_profiled']} ms profiled)", ""]
+            out += _table(["rank", "own_ms_per_frame", "total_ms_per_frame", "calls_per_frame", "function"],
+                          [row for row in run["rows"] if row.get("scene") == head["scene"] and "rank" in row
+                           and row["rank"] <= PROFILE_ROWS])
+    return out
 
 
 def write(report: dict, out: Path) -> None:

@@ -22,7 +22,8 @@ ROOT = Path(__file__).resolve().parents[1]
 
 # What each rendering suite drew at before --size existed: the default must not move.
 DEFAULT_SIZES = {"ecs": (64, 36), "portals": (640, 360), "mirrors": (640, 360), "soak": (320, 180),
-                 "churn": (320, 180), "probes": (640, 360), "normal_maps": (640, 360), "stages": (640, 360)}
+                 "churn": (320, 180), "probes": (640, 360), "normal_maps": (640, 360), "stages": (640, 360),
+                 "profile": (640, 360)}
 
 
 @pytest.fixture
@@ -89,6 +90,7 @@ def _spy_on_capture_targets(monkeypatch, module) -> list[tuple[int, int]]:
     ["normal_maps", "--frames", "1", "--warmup", "0"],
     ["ecs", "--sizes", "100", "--frames", "1", "--warmup", "1"],
     ["churn", "--entities", "5", "--waves", "1", "--frames", "1"],
+    ["profile", "--scenes", "portals_d8", "--frames", "1", "--warmup", "0"],
 ], ids=lambda argv: argv[0])
 def test_the_size_reaches_the_render_target(argv, monkeypatch, capsys, own_contexts):
     parser, modules = build_parser()
@@ -185,7 +187,7 @@ def test_gpu_report_writes_markdown_and_json_without_imgui(ctx, tmp_path):
     assert report["tests"] == {"ran": False, "reason": "--no-tests"}
 
     runs = report["benchmarks"]
-    assert set(runs) == {"mirrors", "portals", "probes", "stages"}
+    assert set(runs) == {"mirrors", "portals", "probes", "stages", "profile"}
     for suite, by_size in runs.items():
         assert set(by_size) == {"160x90"}, suite
         assert by_size["160x90"]["status"] == "ok", by_size["160x90"]
@@ -217,7 +219,10 @@ def test_gpu_report_writes_markdown_and_json_without_imgui(ctx, tmp_path):
                                                                   "plan_us_per_view"}
     stage_rows = runs["stages"]["160x90"]["rows"]
     assert {r["scene"] for r in stage_rows} == {"mirrors_0", "mirrors_8", "mirrors_16", "probe_dynamic"}
+    profiled = runs["profile"]["160x90"]["rows"]
+    assert {r["scene"] for r in profiled if "rank" not in r} == {"mirrors_16", "portals_d8", "probe_dynamic"}
     for heading in ("## OpenGL", "## Rendering paths", "## Benchmarks", "### mirrors: frame_ms_median by size",
+                    "### profile: mirrors_16 at 160x90", "### profile: probe_dynamic at 160x90",
                     "### stages: gpu_ms_median by size",
                     "### mirrors: plan_us_per_view by size", "### portals: cpu_ms_median by size", "## Test suite"):
         assert heading in markdown, heading
@@ -279,6 +284,31 @@ def test_path_verdicts_are_read_from_the_self_check_or_unchecked():
             raise RuntimeError("no geometry shaders")
 
     assert all("RuntimeError: no geometry shaders" in v["detail"] for v in verdicts_of(Broken()).values())
+
+
+def test_the_profile_finds_the_view_tree_once_a_frame_and_a_plan_a_level(capsys, own_contexts):
+    """The portal pair at depth 8 draws one view a level: a frame renders one tree, plans
+    each of its 8 levels and the one below them that finds nothing, and no function's own
+    time exceeds the frame's."""
+    parser, modules = build_parser()
+    args = parser.parse_args(["profile", "--scenes", "portals_d8", "--frames", "3", "--warmup", "1", "--top", "400",
+                              "--json", "--size", "64x36"])
+    assert modules["profile"].main(args) == 0
+    rows = [json.loads(line) for line in capsys.readouterr().out.splitlines()]
+    head, functions = rows[0], rows[1:]
+    assert head["scene"] == "portals_d8" and head["frames"] == 3 and head["reflection_views"] == 8
+    assert [r["rank"] for r in functions] == list(range(1, len(functions) + 1))
+    def one(path: str, name: str) -> dict:
+        found = [r for r in functions if r["function"].startswith(path + ":") and r["function"].endswith(f"({name})")]
+        assert len(found) == 1, (path, name, found)
+        return found[0]
+
+    tree = one("engine/render/view_tree.py", "render")
+    assert tree["calls_per_frame"] == 1.0
+    assert one("engine/render/view_plan.py", "plan")["calls_per_frame"] == head["reflection_views"] + 1
+    own = [r["own_ms_per_frame"] for r in functions]
+    assert own == sorted(own, reverse=True) and 0 < sum(own) <= head["frame_ms_profiled"] * 1.05
+    assert tree["total_ms_per_frame"] <= head["frame_ms_profiled"]
 
 
 def test_the_plan_clock_counts_the_view_trees_planning_and_leaves_the_engine_as_it_was(ctx):
