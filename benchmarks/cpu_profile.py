@@ -7,8 +7,8 @@ frame).  Each runs ``--warmup`` frames, then ``--frames`` frames with the profil
 ``Engine.frame`` only (the ``ctx.finish()`` after each frame is outside it, so on a GPU a
 function's time is the CPU's, waits for the GPU inside the frame included).  Rows: per
 scene, the ``--top`` functions by their own time (``own_ms_per_frame``: in the function
-itself; ``total_ms_per_frame``: with what it calls; ``calls_per_frame``), and a row with the
-frame's median wall clock under the profiler.
+itself; ``total_ms_per_frame``: with what it calls; ``calls_per_frame``; each the mean over
+the frames), and a row with the frames' median and mean wall clock under the profiler.
 
 What it is for: a GPU frame's CPU cost (the ``cpu_ms_median`` of the other suites) in one
 call of ``gpu-report``, so a lent GPU machine says which functions to work on.  The
@@ -118,6 +118,7 @@ def profile_scene(ctx, name: str, size: tuple[int, int], frames: int, warmup: in
         stats = pstats.Stats(profiler).stats  # key -> (primitive calls, calls, own s, total s, callers)
         ranked = sorted(stats.items(), key=lambda item: -item[1][2])[:top]
         rows = [{"scene": name, "frames": frames, "frame_ms_profiled": round(statistics.median(times), 3),
+                 "frame_ms_profiled_mean": round(statistics.fmean(times), 3),
                  "reflection_views": engine.renderer.stats.reflection_views}]
         rows += [{"scene": name, "rank": rank, "function": function_name(key),
                   "calls_per_frame": round(calls / frames, 1), "own_ms_per_frame": round(own * 1e3 / frames, 4),

@@ -307,8 +307,8 @@ def test_the_profile_finds_the_view_tree_once_a_frame_and_a_plan_a_level(capsys,
     assert tree["calls_per_frame"] == 1.0
     assert one("engine/render/view_plan.py", "plan")["calls_per_frame"] == head["reflection_views"] + 1
     own = [r["own_ms_per_frame"] for r in functions]
-    assert own == sorted(own, reverse=True) and 0 < sum(own) <= head["frame_ms_profiled"] * 1.05
-    assert tree["total_ms_per_frame"] <= head["frame_ms_profiled"]
+    assert own == sorted(own, reverse=True) and 0 < sum(own) <= head["frame_ms_profiled_mean"] * 1.02
+    assert tree["total_ms_per_frame"] <= head["frame_ms_profiled_mean"]
 
 
 def test_the_plan_clock_counts_the_view_trees_planning_and_leaves_the_engine_as_it_was(ctx):
