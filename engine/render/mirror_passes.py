@@ -1,9 +1,11 @@
 """The per-pixel passes of planar reflections: preparing a level (reset, then claims with
 their visibility queries) and the composite.
 
-The reset is one draw over every candidate's rectangle (rects.vert); each claim is a
-full-screen triangle limited by a scissor rectangle; the composite is one instanced draw
-per level, a quad per view over its surface.  They read the uint images
+The claims' rectangles are one buffer a level (two triangles each, every vertex with its
+claim's ids: claim.vert): the reset is one draw over all of them (rects.vert), each claim
+a draw of its own six vertices (three GL calls a claim: its query's begin and end and the
+draw; no scissor, no uniform); the composite is one instanced draw per level, a quad per
+view over its surface.  They read the uint images
 of a level (which view drew a pixel, which entity's surface is there).  The claim does the
 work of a visibility query and a mask at once: its samples-passed count is the number of
 pixels a candidate view owns.  (A mask pass that found each pixel's owner by looping over
@@ -14,6 +16,7 @@ from __future__ import annotations
 
 import struct
 import weakref
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import moderngl
@@ -149,7 +152,8 @@ _BLOCK_EYE = slice(4 * CAMERA_BLOCK_EYE.start, 4 * CAMERA_BLOCK_EYE.stop)
 # cut the quad) while clipping still drops w <= 0.
 _FLATTEN_Z = glm.mat4(1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0)
 _NO_TILE = Tile(0, 0, 0.0)
-_RESET_RECT = struct.Struct("<12f")   # a rectangle as two clip-space triangles (the reset's vertices)
+# A claim as two clip-space triangles, each vertex its position and the claim's ids (claim.vert).
+_CLAIM_VERTICES = struct.Struct("<" + "2f3I" * 6)
 # The composite's variants (mirror_composite.frag); a level's views are drawn grouped by them.
 # A "_bumpy" build reads the mirror's normal map (MirrorBumps); its views are drawn per map.
 COMPOSITE_VARIANTS = {"sharp": {}, "rough": {"COMPOSITE_ROUGH": "1"}, "portal": {"COMPOSITE_PORTAL": "1"},
@@ -274,12 +278,12 @@ def give_samples_queries(ctx: moderngl.Context, queries: list[moderngl.Query]) -
 
 @dataclass
 class Claims:
-    """A reflection level's candidate views: candidate i is drawn inside ``rects[i]`` (x, y,
+    """A reflection level's candidate views: candidate i is drawn over ``rects[i]`` (x, y,
     width, height in this level's pixels), and ``ids`` holds, for each, the claim shader's
-    (parent view, surface entity, view index) as three uint32s (packed once a level: a write
-    of its 12 bytes a claim is cheaper than setting the uniform from a tuple)."""
+    (parent view, surface entity, view index): three integers a candidate, in one flat
+    sequence."""
 
-    ids: bytes
+    ids: Sequence[int]
     rects: list[tuple[int, int, int, int]]
 
     def __len__(self) -> int:
@@ -293,7 +297,7 @@ class MirrorPasses:
         self.ctx = ctx
         shaders = renderer.shaders
         self.reset = shaders.program("rects.vert", "mirror_reset.frag")
-        self.claim = shaders.program("fullscreen.vert", "mirror_claim.frag")
+        self.claim = shaders.program("claim.vert", "mirror_claim.frag")
         self.claim["parent_node_map"].value = PARENT_NODE_UNIT
         self.claim["parent_surface_map"].value = PARENT_SURFACE_UNIT
         self.composites: dict[str, _CompositeDraw] = {}
@@ -307,9 +311,9 @@ class MirrorPasses:
                     program[name].value = unit
             self.composites[variant] = _CompositeDraw(ctx, program)
         self.rough_atlas = RoughAtlas(renderer)
-        self._reset_rects: moderngl.Buffer | None = None          # clip-space triangles, grown as needed
+        self._claim_buffer: moderngl.Buffer | None = None  # the claims' triangles (claim.vert), grown as needed
         self._reset_vao: moderngl.VertexArray | None = None
-        self._claim_vao = ctx.vertex_array(self.claim, [])
+        self._claim_vao: moderngl.VertexArray | None = None
 
     def prepare_level(self, level: RenderTargets, parent: RenderTargets, claims: Claims,
                       queries: list[moderngl.Query]) -> None:
@@ -323,51 +327,61 @@ class MirrorPasses:
         ctx = self.ctx
         level.framebuffer.use()
         apply_pass_state(ctx, _CLAIM, (0, 0, *level.size))
-        self._draw_resets(dict.fromkeys(claims.rects), level.size)
+        # Every claim's rectangle as two triangles, its ids on each vertex: one write.  The
+        # reset draws them all at once (a rectangle reset twice is reset the same), then
+        # each claim draws its own six vertices inside its query.
+        count = len(claims)
+        vertices = self._claim_vertices(claims, level.size)
+        if self._claim_buffer is None or self._claim_buffer.size < len(vertices):
+            self._reserve_claims(len(vertices))
+        self._claim_buffer.write(vertices)
+        self._reset_vao.render(moderngl.TRIANGLES, vertices=6 * count)
         parent.node.use(PARENT_NODE_UNIT)
         parent.surface.use(PARENT_SURFACE_UNIT)
-        program = self.claim
-        program["to_parent"].value = (parent.size[0] / level.size[0], parent.size[1] / level.size[1])
-        write_ids = program["claim"].write
-        ids = memoryview(claims.ids)
+        self.claim["to_parent"].value = (parent.size[0] / level.size[0], parent.size[1] / level.size[1])
         render = self._claim_vao.render
-        for at, (query, rect) in enumerate(zip(queries, claims.rects, strict=False)):
-            ctx.scissor = rect
-            write_ids(ids[12 * at:12 * at + 12])
+        for at, query in enumerate(queries[:count]):
             with query:
-                render(moderngl.TRIANGLES, vertices=3)
+                render(moderngl.TRIANGLES, vertices=6, first=6 * at)
         self.renderer.checkpoint("claims")
+
+    @staticmethod
+    def _claim_vertices(claims: Claims, size: tuple[int, int]) -> bytes:
+        """Each claim's rectangle as two clip-space triangles, each vertex with the claim's
+        three ids (claim.vert's attributes)."""
+        sx, sy = 2.0 / size[0], 2.0 / size[1]
+        ids = claims.ids
+        pack = _CLAIM_VERTICES.pack
+        out = []
+        for at, (x, y, w, h) in enumerate(claims.rects):
+            x0, y0, x1, y1 = x * sx - 1.0, y * sy - 1.0, (x + w) * sx - 1.0, (y + h) * sy - 1.0
+            a, b, c = ids[3 * at:3 * at + 3]
+            out.append(pack(x0, y0, a, b, c, x1, y0, a, b, c, x1, y1, a, b, c,
+                            x0, y0, a, b, c, x1, y1, a, b, c, x0, y1, a, b, c))
+        return b"".join(out)
 
     def claimed_pixels(self, queries: list[moderngl.Query]) -> list[int]:
         """The pixels each claim of ``queries`` got: the CPU waits until the GPU has drawn
         them (all issued before the first is read, so it waits once)."""
         return [query.samples for query in queries]
 
-    def _draw_resets(self, rects, size: tuple[int, int]) -> None:
-        """The reset over every rectangle in one draw (two clip-space triangles each)."""
-        triangles = []
-        for rect in rects:
-            x0, y0, x1, y1 = _ndc_rect(rect, size)
-            triangles.append(_RESET_RECT.pack(x0, y0, x1, y0, x1, y1, x0, y0, x1, y1, x0, y1))
-        corners = b"".join(triangles)
-        if self._reset_rects is None or self._reset_rects.size < len(corners):
-            self._reserve_resets(len(corners))
-        self._reset_rects.write(corners)
-        self._reset_vao.render(moderngl.TRIANGLES, vertices=6 * len(triangles))
-
-    def _reserve_resets(self, size: int) -> None:
-        if self._reset_vao is not None:
-            self._reset_vao.release()
-            self._reset_rects.release()
-        self._reset_rects = self.ctx.buffer(reserve=max(size, 64 * _RESET_RECT.size))
-        self._reset_vao = self.ctx.vertex_array(self.reset, [(self._reset_rects, "2f", "in_position")])
+    def _reserve_claims(self, size: int) -> None:
+        """A claims buffer of at least ``size`` bytes (64 claims at least), with the reset's
+        and the claims' vertex arrays over it."""
+        for old in (self._reset_vao, self._claim_vao, self._claim_buffer):
+            if old is not None:
+                old.release()
+        self._claim_buffer = self.ctx.buffer(reserve=max(size, 64 * _CLAIM_VERTICES.size))
+        self._reset_vao = self.ctx.vertex_array(self.reset, [(self._claim_buffer, "2f 12x", "in_position")])
+        self._claim_vao = self.ctx.vertex_array(self.claim, [(self._claim_buffer, "2f 3u", "in_position",
+                                                              "in_claim")])
 
     def prepare(self) -> None:
         """The reset's and every composite variant's buffers and vertex arrays, made now
         (when a level loads: ``Renderer.prepare_programs``'s caller) rather than when the
         first mirror comes into view."""
-        if self._reset_vao is None:
-            self._reserve_resets(0)
+        if self._claim_buffer is None:
+            self._reserve_claims(0)
         for draw in self.composites.values():
             if draw.vao is None:
                 draw.prepare()
@@ -422,7 +436,7 @@ class MirrorPasses:
         self.renderer.flush()
 
     def release(self) -> None:
-        for obj in (self._reset_vao, self._reset_rects, self._claim_vao):
+        for obj in (self._reset_vao, self._claim_vao, self._claim_buffer):
             if obj is not None:
                 obj.release()
         for draw in self.composites.values():

@@ -420,8 +420,8 @@ class ViewTree:
 
     def _claim(self, surfaces: SurfaceTable, step: _Level) -> None:
         """Every candidate's claim in the level's targets, its pixels counted in its query.
-        The claim uniform's (parent view, surface, view index) of every candidate packed in
-        one array of uint32s."""
+        The claim shader's (parent view, surface, view index) of every candidate in one
+        flat array of uint32s."""
         candidates = step.candidates
         entities, parents = surfaces.entity_list, step.parents
         ids = array("I")  # a level's few claims: list work costs less than a few numpy calls
@@ -429,7 +429,7 @@ class ViewTree:
                               candidates.rows.data[:, 51].astype(np.int64).tolist(), strict=True):
             ids.extend((parents[p].index, entities[s], node))
         self.passes.prepare_level(step.targets, step.parent_targets, Claims(
-            ids.tobytes(), list(map(tuple, candidates.scissor.tolist()))), step.queries)
+            ids, list(map(tuple, candidates.scissor.tolist()))), step.queries)
 
     def _draw_level(self, step: _Level, root: View) -> None:
         """A planned level's views (and end views) into its targets, then its composite's
