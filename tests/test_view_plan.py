@@ -249,3 +249,42 @@ def test_an_end_view_repeats_the_view_that_saw_its_surface_last_up_its_chain(ctx
             seer = seer.parent
             assert seer is not None, "an end view without its surface up its chain was drawn"
         assert matrix == seer.parent.view.view * glm.inverse(node.surface.carry)
+
+
+def test_a_surface_with_eight_corners_is_culled_on_all_of_them_by_both_planners(monkeypatch):
+    """A mirror whose mesh has some thickness has 8 distinct box corners: the pair-by-pair
+    planner takes them four at a time, and a side culls the pair only when every corner of
+    both fours is outside it.  Two thick mirrors facing each other, seen by cameras where
+    only the far four corners of one show (the near four are behind the camera's near
+    plane or off one side), plan the same views both ways, and the views exist."""
+    from engine.core.reflection_math import reflection_matrix
+    from engine.resources import SurfaceState
+
+    def thick_mirror(entity: int, z: float, facing: float) -> SurfaceState:
+        plane = glm.vec4(0.0, 0.0, facing, -facing * z)
+        corners = np.array([(x, y, z + dz, 1.0) for x in (-1.0, 1.0) for y in (0.0, 2.0) for dz in (-0.05, 0.05)])
+        return SurfaceState(entity, "mirror", plane, corners, None, reflection_matrix(plane), plane, entity, 2)
+
+    table = view_plan.SurfaceTable([thick_mirror(7, 0.0, 1.0), thick_mirror(8, 6.0, -1.0)])
+    assert table.corner_count == 8 and all(len(s.corners) == 2 for s in table._small)
+    proj = glm.perspective(glm.radians(60.0), 16 / 9, 0.1, 50.0)
+    planned = {}
+    for eye, target in (((0.3, 1.0, 3.0), (0.0, 1.0, 0.0)), ((0.0, 1.0, 0.08), (0.0, 1.0, -1.0)),
+                        ((2.2, 1.0, 3.0), (-1.0, 1.0, 1.0))):
+        view = View(glm.lookAt(glm.vec3(eye), glm.vec3(target), glm.vec3(0, 1, 0)), proj, glm.vec3(eye), (320, 180))
+        root_proj, inv_root_proj = view_plan._mat(proj), view_plan._mat(glm.inverse(proj))
+        for pairs in (0, 10**9):
+            monkeypatch.setattr(view_plan, "SMALL_LEVEL_PAIRS", pairs)
+            rows, found = view_plan.LevelRows.root(view), []
+            for depth in (1, 2):
+                candidates, _ = table.plan(rows, depth, view, root_proj, inv_root_proj, 1, 8, 0)
+                if candidates is None:
+                    break
+                found.append((candidates.parent.tolist(), candidates.surface.tolist(),
+                              candidates.scissor.tolist(), candidates.blocks))
+                rows = candidates.rows
+            planned[pairs] = found
+        assert planned[0], eye  # each camera sees a mirror
+        assert [f[:3] for f in planned[0]] == [f[:3] for f in planned[10**9]], eye
+        for (*_, arrays), (*_, small) in zip(planned[0], planned[10**9], strict=True):
+            assert np.allclose(arrays, small, rtol=1e-6, atol=1e-6), eye

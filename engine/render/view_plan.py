@@ -459,7 +459,7 @@ class SurfaceTable:
         keep = (_KINDS_BUT_DIRECT | (self.layers << VIEW_KINDS)).tolist()
         return [_SmallSurface(int(self.entities[i]), int(self.exit_entities[i]), glm.dvec4(*self.planes[i].tolist()),
                               glm.dvec4(*self.exit_planes[i].tolist()), mat(self.carry[i]), mat(self.inv_carry[i]),
-                              [glm.dvec4(*c) for c in np.unique(self.corners[i], axis=0).tolist()],
+                              _corner_blocks(np.unique(self.corners[i], axis=0)),
                               float(self.is_mirror[i]), keep[i], int(self.kind_bit[i]), int(self.exit_rows[i]))
                 for i in range(len(self.states))]
 
@@ -496,23 +496,27 @@ class SurfaceTable:
                         or (drawn is not None and not drawn[s]):
                     continue
                 # Every corner outside one side of the frustum (on it counts as outside), or
-                # behind the clip plane: culled.
-                outside = [True] * 6
-                in_front = False
+                # behind the clip plane: culled.  Four corners at a time, the columns of one
+                # matrix, so each clip-space coordinate is a vector over them; per side, the
+                # least over every corner.
+                sides = None
+                projected = []
+                for block in surface.corners:
+                    x, y, z, w = glm.transpose(view_proj * block)
+                    least = (min(x - w), min(y - w), min(z - w), min(-x - w), min(-y - w), min(-z - w),
+                             -max(clip * block))
+                    sides = least if sides is None else tuple(map(min, sides, least))
+                    projected.append((x, y, w))
+                if max(sides) >= 0.0:
+                    continue
                 straddles = False
                 lo_x = lo_y = float("inf")
                 hi_x = hi_y = -float("inf")
-                for corner in surface.corners:
-                    x, y, z, w = view_proj * corner
-                    for side, value in enumerate((x - w, y - w, z - w, -x - w, -y - w, -z - w)):
-                        if value < 0.0:
-                            outside[side] = False
-                    in_front = in_front or glm.dot(clip, corner) > 0.0
-                    straddles = straddles or w <= 1e-6
-                    w = max(w, 1e-6)
-                    lo_x, hi_x, lo_y, hi_y = min(lo_x, x / w), max(hi_x, x / w), min(lo_y, y / w), max(hi_y, y / w)
-                if any(outside) or not in_front:
-                    continue
+                for x, y, w in projected:
+                    straddles = straddles or min(w) <= 1e-6
+                    w = glm.max(w, 1e-6)
+                    x, y = x / w, y / w
+                    lo_x, hi_x, lo_y, hi_y = min(lo_x, *x), max(hi_x, *x), min(lo_y, *y), max(hi_y, *y)
                 if straddles:  # a corner behind the eye: the parent's whole rectangle
                     x0, y0, x1, y1 = row[44:48]
                 else:
@@ -653,7 +657,7 @@ class _SmallSurface:
     exit_plane: glm.dvec4
     carry: glm.dmat4
     inv_carry: glm.dmat4
-    corners: list[glm.dvec4]  # its distinct corners
+    corners: list[glm.dmat4]  # its distinct corners, four to a matrix as its columns (_corner_blocks)
     mirror: float            # 1.0 for a mirror
     keep: int                # the view mask bits a view through it keeps
     kind_bit: int            # the kind bit it adds
@@ -740,6 +744,14 @@ SMALL_LEVEL_PAIRS = 16
 _E2 = glm.dvec4(0.0, 0.0, 1.0, 0.0)
 _ZERO = glm.dmat4(0.0)
 _IDS = struct.Struct("<4I")
+
+
+def _corner_blocks(corners: np.ndarray) -> list[glm.dmat4]:
+    """A surface's distinct corners (homogeneous rows) four to a glm matrix, as its columns;
+    the last padded with the first corner (the extremes of a set do not change with repeats)."""
+    rows = corners.tolist()
+    rows += [rows[0]] * (-len(rows) % 4)
+    return [glm.dmat4(*(glm.dvec4(*row) for row in rows[at:at + 4])) for at in range(0, len(rows), 4)]
 
 
 def _dmat(matrix: np.ndarray) -> glm.dmat4:
