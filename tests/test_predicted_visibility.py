@@ -102,6 +102,47 @@ def test_predicted_mode_reads_only_counts_of_earlier_frames(ctx, monkeypatch, mo
         assert set(read_ages) == {0}
 
 
+@pytest.mark.parametrize("mode", ("exact", "predicted"))
+def test_a_predicted_tree_is_planned_whole_before_any_of_it_is_drawn(ctx, monkeypatch, mode):
+    """Predicted: within a tree's render, every level's plan comes before the first claim,
+    then each level's claims come before its views and before the next level's claims.
+    Exact: a level's claims come before the next level is planned (it reads their counts)."""
+    from engine.render.scene_pass import ScenePass
+    from engine.render.view_plan import SurfaceTable
+
+    case = {case.name: case for case in cases()}["mirror_ring_8"]
+    events: list[list[str]] = []
+    wrapped = {(SurfaceTable, "plan"): "plan", (MirrorPasses, "prepare_level"): "claim", (ScenePass, "draw"): "draw"}
+    for (owner, name), label in wrapped.items():
+        original = getattr(owner, name)
+
+        def logged(*args, _original=original, _label=label, **kwargs):
+            if events:
+                events[-1].append(_label)
+            return _original(*args, **kwargs)
+        monkeypatch.setattr(owner, name, logged)
+    render = view_tree.ViewTree.render
+
+    def tree(self, *args, **kwargs):
+        events.append([])
+        return render(self, *args, **kwargs)
+    monkeypatch.setattr(view_tree.ViewTree, "render", tree)
+    golden.render_case(ctx, _with_visibility(case, mode, []))
+    trees = [e for e in events if e.count("claim") >= 2]  # trees of two levels or more
+    assert trees
+    for order in trees:
+        claims = [i for i, label in enumerate(order) if label == "claim"]
+        draws = [i for i, label in enumerate(order) if label == "draw"]
+        plans = [i for i, label in enumerate(order) if label == "plan"]
+        assert len(plans) >= len(claims) and len(draws) >= len(claims) - 1
+        if mode == "predicted":
+            assert max(plans) < min(claims), order
+        else:
+            assert plans[1] > claims[0], order  # level 2 planned from level 1's counts
+        # Either way, level by level: claims, then that level's views, then the next claims.
+        assert all(claims[i] < draws[i] < claims[i + 1] for i in range(len(claims) - 1)), order
+
+
 def _covered_mirrors(world, ents, facing: bool):
     base_scene(world)
     look_from(world, (0.0, 1.5, 5.0))
