@@ -61,3 +61,13 @@ def add_size_argument(parser: argparse.ArgumentParser, default: tuple[int, int],
     """``--size WxH`` (stored as ``args.size``, a ``(width, height)`` tuple)."""
     parser.add_argument("--size", type=parse_size, default=default, metavar="WxH",
                         help=f"{what} size in pixels (default {format_size(default)})")
+
+
+def names_from(text: str, allowed: tuple[str, ...], what: str) -> tuple[str, ...]:
+    """``"a,b"`` -> ``("a", "b")``, each one of ``allowed``; else an
+    ``argparse.ArgumentTypeError`` naming the unknown ones and the choices."""
+    names = tuple(name.strip() for name in text.split(",") if name.strip())
+    unknown = sorted(set(names) - set(allowed))
+    if unknown or not names:
+        raise argparse.ArgumentTypeError(f"unknown {what} {unknown}; choose from {','.join(allowed)}")
+    return names

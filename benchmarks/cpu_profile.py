@@ -29,7 +29,7 @@ import statistics
 import time
 from pathlib import Path
 
-from benchmarks import add_size_argument
+from benchmarks import add_size_argument, names_from
 from components import Portal
 from engine.core.frame_io import Output
 from engine.render.gl_context import create_headless_context
@@ -67,11 +67,7 @@ SCENES = {"mirrors_16": _mirrors_16, "portals_d8": _portals_d8, "probe_dynamic":
 
 
 def _scenes(text: str) -> tuple[str, ...]:
-    names = tuple(name.strip() for name in text.split(",") if name.strip())
-    unknown = sorted(set(names) - set(SCENES))
-    if unknown or not names:
-        raise argparse.ArgumentTypeError(f"unknown scenes {unknown}; choose from {','.join(SCENES)}")
-    return names
+    return names_from(text, tuple(SCENES), "scenes")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:

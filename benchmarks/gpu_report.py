@@ -64,7 +64,7 @@ import time
 import traceback
 from pathlib import Path
 
-from benchmarks import format_size, parse_sizes
+from benchmarks import format_size, names_from, parse_sizes
 
 ROOT = Path(__file__).resolve().parents[1]
 DEFAULT_SIZES = ((640, 360), (1920, 1080))
@@ -90,11 +90,7 @@ MEDIANS: dict[str, tuple[tuple[tuple[str, ...], str], ...]] = {
 
 
 def _suites(text: str) -> tuple[str, ...]:
-    names = tuple(name.strip() for name in text.split(",") if name.strip())
-    unknown = sorted(set(names) - set(BENCHMARKS))
-    if unknown or not names:
-        raise argparse.ArgumentTypeError(f"unknown suites {unknown}; choose from {','.join(BENCHMARKS)}")
-    return names
+    return names_from(text, BENCHMARKS, "suites")
 
 
 def _positive(text: str) -> int:
