@@ -288,3 +288,58 @@ def test_a_surface_with_eight_corners_is_culled_on_all_of_them_by_both_planners(
         assert [f[:3] for f in planned[0]] == [f[:3] for f in planned[10**9]], eye
         for (*_, arrays), (*_, small) in zip(planned[0], planned[10**9], strict=True):
             assert np.allclose(arrays, small, rtol=1e-6, atol=1e-6), eye
+
+
+def test_a_level_planned_from_the_same_rows_is_found_again_read_only(scene, monkeypatch):
+    """``SurfaceTable.plan`` keeps its plans: with the camera and the surfaces still (a box
+    moving), the next frame computes no plan and draws the same image; a camera that moves,
+    or a surface that moves (a new table), plans again; a kept plan cannot be written."""
+    from components import Material, MeshRef, Mirror, Transform
+    from engine.assets.mesh import box, quad
+    from engine.resources import Surfaces
+    from tests.support import look_from
+    from tests.test_mirrors import FACING_BACK
+
+    ents = {}
+
+    def build(world):
+        ents["camera"] = look_from(world, (0.3, 1.5, 2.5), target=(0.0, 1.5, -2.0))
+        # No end images: past the depth limit they repeat last frame's image, so still frames
+        # would still differ for a few frames.
+        ents["front"] = world.spawn(Transform(position=(0.0, 1.5, -2.0)), MeshRef(quad(3.0, 2.0)), Material(),
+                                    Mirror(end_image=False))
+        ents["back"] = world.spawn(Transform(position=(0.0, 1.5, 4.0), rotation=FACING_BACK), MeshRef(quad(3.0, 2.0)),
+                                   Material(), Mirror(end_image=False))
+        ents["box"] = world.spawn(Transform(position=(0.8, 0.5, 0.0)), MeshRef(box()), Material(color=(0.9, 0.2, 0.1)))
+    computed = []
+    plan = view_plan.SurfaceTable._plan
+
+    def counting(self, *args, **kwargs):
+        computed.append(args[1])  # the depth
+        return plan(self, *args, **kwargs)
+    monkeypatch.setattr(view_plan.SurfaceTable, "_plan", counting)
+    runner = scene(build, (96, 64))
+    runner.frame()
+    first = runner.frame()
+    assert runner.stats.reflection_views >= 3 and computed  # mirror in mirror in mirror
+    computed.clear()
+    again = runner.frame()
+    assert computed == [] and np.array_equal(first, again)
+    # A kept plan is shared by the frames that find it: its arrays are read-only.
+    table = runner.world.resources[Surfaces].table
+    kept = next(candidates for _, (candidates, _) in table._plans.values() if candidates is not None)
+    with pytest.raises(ValueError, match="read-only"):
+        kept.blocks[0, 0] = 1.0
+    # Something that is not a surface moves: the plans hold (the image changes where the box is).
+    runner.world.get(ents["box"], Transform).position = glm.vec3(-0.8, 0.5, 0.0)
+    moved_box = runner.frame()
+    assert computed == [] and not np.array_equal(moved_box, again)
+    # The camera moves: every level is planned again.
+    runner.world.get(ents["camera"], Transform).position = glm.vec3(0.4, 1.5, 2.5)
+    runner.frame()
+    assert computed and computed[0] == 1
+    computed.clear()
+    # A mirror moves: a new table, planned afresh.
+    runner.world.get(ents["back"], Transform).position = glm.vec3(0.0, 1.5, 4.2)
+    runner.frame()
+    assert computed and runner.world.resources[Surfaces].table is not table

@@ -124,6 +124,12 @@ class Candidates:
     def __len__(self) -> int:
         return len(self.parent)
 
+    def freeze(self) -> None:
+        """Make every array read-only (a kept plan is shared by the frames that read it)."""
+        for array_ in (self.parent, self.surface, self.rows.data, self.scissor, self.blocks, self.fade, self.end):
+            if array_ is not None:
+                array_.flags.writeable = False
+
     def select(self, keep: np.ndarray) -> Candidates:
         """The candidates at ``keep`` (int64 indices), in their order (``take``: several
         times cheaper than fancy indexing for these small gathers)."""
@@ -202,6 +208,7 @@ class SurfaceTable:
                                   self.exit_entities, self.kind_bit], axis=1).reshape(count, 4)
         self._depths: dict[tuple[int, int], tuple[np.ndarray, np.ndarray, list[bool]]] = {}
         self._biases: dict[tuple, tuple[np.ndarray | None, np.ndarray | None, np.ndarray]] = {}
+        self._plans: dict[tuple, tuple[np.ndarray | None, tuple[Candidates | None, int]]] = {}  # plan's, oldest first
         self._ends: dict[tuple[int, int], tuple[np.ndarray, np.ndarray, list[bool]]] = {}
         # The resolution scale every surface shares (None: they differ; a level takes its largest).
         self.one_scale = float(self.scale[0]) if count and (self.scale == self.scale[0]).all() else None
@@ -385,6 +392,28 @@ class SurfaceTable:
     def plan(self, parents: LevelRows, depth: int, root: View, root_proj: np.ndarray, inv_root_proj: np.ndarray,
              first_index: int, depth_cap: int, hide: int, ends: np.ndarray | None = None,
              size: tuple[int, int] | None = None, scale: float = 1.0) -> tuple[Candidates | None, int]:
+        """``_plan``, kept: a level's plan is a function of the table (made again when a
+        surface changes) and these arguments alone, so a level planned before from the same
+        parent rows (a probe face's tree, whose camera stands still; a still main camera)
+        is that plan again, read-only, for the price of comparing its inputs' bytes.  The
+        last ``PLANS_KEPT`` plans are kept."""
+        key = (parents.data.tobytes(), root_proj.tobytes(), depth, first_index, depth_cap, hide, size, scale,
+               root.size, id(ends))
+        found = self._plans.get(key)
+        if found is not None and found[0] is ends:
+            return found[1]
+        planned = self._plan(parents, depth, root, root_proj, inv_root_proj, first_index, depth_cap, hide, ends,
+                             size, scale)
+        if planned[0] is not None:
+            planned[0].freeze()
+        if len(self._plans) >= PLANS_KEPT:
+            del self._plans[next(iter(self._plans))]  # the oldest
+        self._plans[key] = (ends, planned)
+        return planned
+
+    def _plan(self, parents: LevelRows, depth: int, root: View, root_proj: np.ndarray, inv_root_proj: np.ndarray,
+              first_index: int, depth_cap: int, hide: int, ends: np.ndarray | None = None,
+              size: tuple[int, int] | None = None, scale: float = 1.0) -> tuple[Candidates | None, int]:
         """The next level's candidate views from ``parents`` (level ``depth - 1``): the
         cull's pairs, each with its camera (the parent's carried through the surface: for a
         mirror its reflection, for a portal look-out x half turn x inverse(look-in), as in
@@ -741,6 +770,9 @@ def _ones(k: int) -> np.ndarray:
 # (faced away) to some 20 (a view); against 4, a limit of 8 made planning 0.91x at 4 mirrors,
 # 16 made it 0.82x at 4 mirrors again and changed nothing at 8 and 16 (0.98x, 1.02x).
 SMALL_LEVEL_PAIRS = 16
+# How many level plans a SurfaceTable keeps (SurfaceTable.plan): a frame's main tree and a
+# probe's six faces, a few levels each, with room for a second probe.
+PLANS_KEPT = 96
 _E2 = glm.dvec4(0.0, 0.0, 1.0, 0.0)
 _ZERO = glm.dmat4(0.0)
 _IDS = struct.Struct("<4I")

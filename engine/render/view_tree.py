@@ -32,8 +32,10 @@ level (``TreeSettings.level_budget``: the views with the most claimed pixels are
 """
 from __future__ import annotations
 
+import functools
 import math
 from array import array
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -103,11 +105,19 @@ class TreeResult:
     views: list[ReflectionView]   # the root first, then level by level
     paths: set[str]               # how the levels were drawn
     dropped: int = 0              # views with pixels left out by the level budget
-    capped: int = 0               # views the surfaces' own limits allowed below the depth cap
     faded: int = 0                # views the mirrors' fades took out (each costs nothing)
     end_views: list[ReflectionView] = field(default_factory=list)  # views past the depth limits shown
                                                                    # as last frame's image (EndImages)
     visibility: str = ""          # "exact" or "predicted": how the levels knew their views' pixels
+    count_capped: Callable[[], int] | None = field(default=None, repr=False)  # counts ``capped`` (the
+                                                                               # cap was reached)
+
+    @functools.cached_property
+    def capped(self) -> int:
+        """Views the surfaces' own limits allowed below the depth cap (0: the cap was not
+        reached), counted when first asked: one more cull, which the main view's tree
+        reports (``RenderStats.reflection_depth_capped``) and a probe face's never needs."""
+        return self.count_capped() if self.count_capped is not None else 0
 
 
 @dataclass
@@ -178,6 +188,7 @@ class ViewTree:
         self.ends = EndImages(renderer) if end_images else None
         self.coverage: dict[int, int] = {}  # level -> its views' claimed pixels last frame (screen pixels)
         self._projections: tuple[bytes, np.ndarray, np.ndarray] | None = None  # the last root's projection
+        self._roots: dict[tuple, LevelRows] = {}  # each root's row, by its camera (_root_rows)
         # what _end_surfaces found last, and for what (table, surfaces seen, cap)
         self._ends_cache: tuple[tuple, tuple[np.ndarray, int] | None] | None = None
         self._visibility: dict[tuple[str, int], RootVisibility] = {}  # by root (its name and skipped entity)
@@ -201,7 +212,9 @@ class ViewTree:
         # that saw each surface last up its chain (-1: none), what an end view repeats.
         seers = None if ends is None else [[-1] * len(surfaces.states)]
         nodes = [root_node]
-        rows = LevelRows.root(root)
+        rows = self._root_rows(root)
+        # What a scene pass submits, for the auto path's choice (the same for every level).
+        triangles = submitted_triangles(renderer) if settings.path == "auto" else 0
         scale = self._level_scale(1)
         candidates, result.faded = surfaces.plan(rows, 1, *planning, 1, settings.depth_cap, root.hide,
                                                  ends=_ends_at(ends, 1), scale=scale)
@@ -264,8 +277,7 @@ class ViewTree:
             if not children and not step.ended:
                 break
             if children:
-                step.path = choose_path(settings.path, len(children), submitted_triangles(renderer),
-                                        renderer.caps.software)
+                step.path = choose_path(settings.path, len(children), triangles, renderer.caps.software)
                 result.paths.add(step.path)
             step.composite = children + step.ended
             if exact:
@@ -301,8 +313,9 @@ class ViewTree:
         composites = [step.prepared for step in (planned if not exact else drawn) if step.prepared is not None]
         deepest = max((node.level for node in result.views), default=0)
         if deepest and deepest == settings.depth_cap:
-            # Reaching the cap is reported: how many views the surfaces' own limits still allowed.
-            result.capped = len(surfaces.cull(rows, deepest + 1, root_proj, root.size, MAX_TREE_DEPTH)[0])
+            # Reaching the cap is reported: how many views the surfaces' own limits still allowed
+            # (counted when asked: TreeResult.capped).
+            result.count_capped = lambda: len(surfaces.cull(rows, deepest + 1, root_proj, root.size, MAX_TREE_DEPTH)[0])
         for depth in range(level, 0, -1):
             self.passes.composite_level(levels[depth - 1], levels[depth], composites[depth - 1])
         if self.ends is not None:
@@ -358,6 +371,20 @@ class ViewTree:
         is exact; the frame draws more views)."""
         for record in self._visibility.values():
             record.seen, record.pending = {}, []
+
+    def _root_rows(self, root: View) -> LevelRows:
+        """``LevelRows.root(root)``, kept per root while its camera stands still (a probe
+        face's every frame): the same row, so the plans kept for it are found again
+        (``SurfaceTable.plan``)."""
+        key = (root.view.to_bytes(), tuple(root.eye), root.size, tuple(root.clip_plane), root.view_mask,
+               root.mirrored)
+        rows = self._roots.get(key)
+        if rows is None:
+            if len(self._roots) >= 64:
+                self._roots.clear()
+            rows = self._roots[key] = LevelRows.root(root)
+            rows.data.flags.writeable = False
+        return rows
 
     def _projection(self, proj: glm.mat4) -> tuple[np.ndarray, np.ndarray]:
         """A root's projection and its inverse as numpy rows, kept while it is the same (a
