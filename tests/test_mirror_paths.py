@@ -158,6 +158,16 @@ def test_auto_rule_boundaries():
     assert choose_path("auto", AUTO_MIN_VIEWS - 1, 10, software=False) == "per_mirror"
     assert choose_path("auto", 32, AUTO_GPU_MAX_TRIANGLES + 1, software=False) == "per_mirror"
     assert AUTO_GPU_MAX_TRIANGLES > AUTO_MAX_TRIANGLES
+    # Given as a function, the scene's triangles are counted only where the views could batch.
+    counted = []
+
+    def count() -> int:
+        counted.append(1)
+        return AUTO_MAX_TRIANGLES + 1
+    assert choose_path("auto", AUTO_MIN_VIEWS - 1, count) == "per_mirror" and not counted
+    assert choose_path("per_mirror", 32, count) == "per_mirror" and not counted
+    assert choose_path("auto", AUTO_MIN_VIEWS, count) == "per_mirror" and counted == [1]
+    assert choose_path("auto", AUTO_MIN_VIEWS, lambda: AUTO_MAX_TRIANGLES) == "batched"
     with pytest.raises(ValueError, match="ReflectionSystem.path must be one of"):
         choose_path("fast", 3, 10)
 

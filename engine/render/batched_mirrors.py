@@ -19,7 +19,7 @@ it only for the lightest scenes there.
 """
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 
 import numpy as np
 
@@ -92,16 +92,19 @@ AUTO_MAX_TRIANGLES = 40
 AUTO_GPU_MAX_TRIANGLES = 512
 
 
-def choose_path(setting: str, view_count: int, triangles: int, software: bool = True) -> str:
+def choose_path(setting: str, view_count: int, triangles: int | Callable[[], int], software: bool = True) -> str:
     """The path that draws a level of ``view_count`` views of a scene submitting
-    ``triangles`` triangles a view: ``setting`` unless it is "auto" (the rules above: on a
+    ``triangles`` triangles a view (or a function that counts them, called only where the
+    view count could batch): ``setting`` unless it is "auto" (the rules above: on a
     ``software`` rasteriser, or on a GPU)."""
     if setting not in PATHS:
         raise ValueError(f"ReflectionSystem.path must be one of {PATHS}, got {setting!r}")
     if setting != "auto":
         return setting
+    if view_count < AUTO_MIN_VIEWS:
+        return "per_mirror"
     limit = AUTO_MAX_TRIANGLES if software else AUTO_GPU_MAX_TRIANGLES
-    if view_count >= AUTO_MIN_VIEWS and triangles <= limit:
+    if (triangles() if callable(triangles) else triangles) <= limit:
         return "batched"
     return "per_mirror"
 

@@ -213,8 +213,9 @@ class ViewTree:
         seers = None if ends is None else [[-1] * len(surfaces.states)]
         nodes = [root_node]
         rows = self._root_rows(root)
-        # What a scene pass submits, for the auto path's choice (the same for every level).
-        triangles = submitted_triangles(renderer) if settings.path == "auto" else 0
+        # What a scene pass submits, for the auto path's choice: counted once a tree, where a
+        # level has views enough to batch (a probe face's levels seldom have).
+        triangles = functools.cache(lambda: submitted_triangles(renderer))
         scale = self._level_scale(1)
         candidates, result.faded = surfaces.plan(rows, 1, *planning, 1, settings.depth_cap, root.hide,
                                                  ends=_ends_at(ends, 1), scale=scale)
