@@ -208,7 +208,8 @@ class SurfaceTable:
                                   self.exit_entities, self.kind_bit], axis=1).reshape(count, 4)
         self._depths: dict[tuple[int, int], tuple[np.ndarray, np.ndarray, list[bool]]] = {}
         self._biases: dict[tuple, tuple[np.ndarray | None, np.ndarray | None, np.ndarray]] = {}
-        self._plans: dict[tuple, tuple[np.ndarray | None, tuple[Candidates | None, int]]] = {}  # plan's, oldest first
+        self._plans: dict[tuple, tuple[np.ndarray | None, tuple[Candidates | None, int]]] = {}  # plan's, least
+        # recently used first
         self._ends: dict[tuple[int, int], tuple[np.ndarray, np.ndarray, list[bool]]] = {}
         # The resolution scale every surface shares (None: they differ; a level takes its largest).
         self.one_scale = float(self.scale[0]) if count and (self.scale == self.scale[0]).all() else None
@@ -396,18 +397,19 @@ class SurfaceTable:
         surface changes) and these arguments alone, so a level planned before from the same
         parent rows (a probe face's tree, whose camera stands still; a still main camera)
         is that plan again, read-only, for the price of comparing its inputs' bytes.  The
-        last ``PLANS_KEPT`` plans are kept."""
+        ``PLANS_KEPT`` plans used last are kept."""
         key = (parents.data.tobytes(), root_proj.tobytes(), depth, first_index, depth_cap, hide, size, scale,
                root.size, id(ends))
-        found = self._plans.get(key)
+        found = self._plans.pop(key, None)
         if found is not None and found[0] is ends:
+            self._plans[key] = found  # the most recently used last
             return found[1]
         planned = self._plan(parents, depth, root, root_proj, inv_root_proj, first_index, depth_cap, hide, ends,
                              size, scale)
         if planned[0] is not None:
             planned[0].freeze()
         if len(self._plans) >= PLANS_KEPT:
-            del self._plans[next(iter(self._plans))]  # the oldest
+            del self._plans[next(iter(self._plans))]  # the least recently used
         self._plans[key] = (ends, planned)
         return planned
 
