@@ -71,3 +71,19 @@ def names_from(text: str, allowed: tuple[str, ...], what: str) -> tuple[str, ...
     if unknown or not names:
         raise argparse.ArgumentTypeError(f"unknown {what} {unknown}; choose from {','.join(allowed)}")
     return names
+
+
+def positive_int(text: str) -> int:
+    """An argparse type: an int >= 1 (else an error saying so)."""
+    value = int(text)
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"{text} is not >= 1")
+    return value
+
+
+def non_negative_int(text: str) -> int:
+    """An argparse type: an int >= 0 (else an error saying so)."""
+    value = int(text)
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"{text} is not >= 0")
+    return value

@@ -29,8 +29,7 @@ import statistics
 import time
 from pathlib import Path
 
-from benchmarks import add_size_argument, names_from
-from components import Portal
+from benchmarks import add_size_argument, names_from, non_negative_int, positive_int
 from engine.core.frame_io import Output
 from engine.render.gl_context import create_headless_context
 from engine.render.targets import CaptureTarget
@@ -48,12 +47,10 @@ def _mirrors_16(ctx) -> Engine:
 
 
 def _portals_d8(ctx) -> Engine:
-    from benchmarks.portals import FacingPortals
+    from benchmarks.portals import FacingPortals, set_depth
 
     engine = Engine(FacingPortals(), ctx)
-    for _, portal in engine.world.query_one(Portal):
-        portal.max_depth = 8
-    engine.reflection_system.max_depth_cap = 8
+    set_depth(engine, 8)
     return engine
 
 
@@ -71,9 +68,10 @@ def _scenes(text: str) -> tuple[str, ...]:
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--frames", type=int, default=30, help="profiled frames per scene (default 30)")
-    parser.add_argument("--warmup", type=int, default=5, help="frames before the profiler starts (default 5)")
-    parser.add_argument("--top", type=int, default=25, help="functions per scene, by own time (default 25)")
+    parser.add_argument("--frames", type=positive_int, default=30, help="profiled frames per scene (default 30)")
+    parser.add_argument("--warmup", type=non_negative_int, default=5,
+                        help="frames before the profiler starts (default 5)")
+    parser.add_argument("--top", type=positive_int, default=25, help="functions per scene, by own time (default 25)")
     parser.add_argument("--scenes", type=_scenes, default=tuple(SCENES), metavar="NAME[,NAME...]",
                         help=f"which scenes (default {','.join(SCENES)})")
     add_size_argument(parser, SIZE)

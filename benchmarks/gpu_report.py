@@ -64,7 +64,7 @@ import time
 import traceback
 from pathlib import Path
 
-from benchmarks import format_size, names_from, parse_sizes
+from benchmarks import format_size, names_from, non_negative_int, parse_sizes, positive_int
 
 ROOT = Path(__file__).resolve().parents[1]
 DEFAULT_SIZES = ((640, 360), (1920, 1080))
@@ -93,28 +93,14 @@ def _suites(text: str) -> tuple[str, ...]:
     return names_from(text, BENCHMARKS, "suites")
 
 
-def _positive(text: str) -> int:
-    value = int(text)
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"{text} is not >= 1")
-    return value
-
-
-def _non_negative(text: str) -> int:
-    value = int(text)
-    if value < 0:
-        raise argparse.ArgumentTypeError(f"{text} is not >= 0")
-    return value
-
-
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", type=Path, required=True, metavar="DIR",
                         help="folder for report.md and report.json (made if missing)")
     parser.add_argument("--size", type=parse_sizes, default=DEFAULT_SIZES, metavar="WxH[,WxH...]",
                         help="output sizes the benchmarks run at (default 640x360,1920x1080)")
-    parser.add_argument("--frames", type=_positive, default=10,
+    parser.add_argument("--frames", type=positive_int, default=10,
                         help="timed frames per suite and size (default 10)")
-    parser.add_argument("--warmup", type=_non_negative, default=2, help="untimed frames first (default 2)")
+    parser.add_argument("--warmup", type=non_negative_int, default=2, help="untimed frames first (default 2)")
     parser.add_argument("--benchmarks", type=_suites, default=BENCHMARKS, metavar="NAME[,NAME...]",
                         help=f"which suites (default {','.join(BENCHMARKS)})")
     parser.add_argument("--isolate", action="store_true",

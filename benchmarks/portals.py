@@ -59,6 +59,13 @@ class FacingPortals(Game):
                         Material(color=(0.2 + 0.2 * i, 0.5, 0.9 - 0.2 * i)))
 
 
+def set_depth(engine: Engine, depth: int) -> None:
+    """Both portals' recursion depth ``depth`` (the tree's cap with them, at least 1)."""
+    for _, portal in engine.world.query_one(Portal):
+        portal.max_depth = depth
+    engine.reflection_system.max_depth_cap = max(depth, 1)
+
+
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--frames", type=int, default=30, help="timed frames per depth")
     parser.add_argument("--warmup", type=int, default=3)
@@ -86,9 +93,7 @@ def main(args: argparse.Namespace) -> int:
         clock.open()
         for depth in DEPTHS:
             for engine in engines:
-                for _, portal in engine.world.query_one(Portal):
-                    portal.max_depth = depth
-                engine.reflection_system.max_depth_cap = max(depth, 1)
+                set_depth(engine, depth)
             times, cpu, plan = ([[] for _ in engines] for _ in range(3))
             for i in range(args.warmup + args.frames):
                 for at, (engine, output) in enumerate(zip(engines, outputs, strict=True)):

@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import struct
 import weakref
-from collections.abc import Sequence
 from dataclasses import dataclass
 
 import moderngl
@@ -279,11 +278,10 @@ def give_samples_queries(ctx: moderngl.Context, queries: list[moderngl.Query]) -
 @dataclass
 class Claims:
     """A reflection level's candidate views: candidate i is drawn over ``rects[i]`` (x, y,
-    width, height in this level's pixels), and ``ids`` holds, for each, the claim shader's
-    (parent view, surface entity, view index): three integers a candidate, in one flat
-    sequence."""
+    width, height in this level's pixels) with the claim shader's ``ids[i]``: (parent view,
+    surface entity, view index)."""
 
-    ids: Sequence[int]
+    ids: list[tuple[int, int, int]]
     rects: list[tuple[int, int, int, int]]
 
     def __len__(self) -> int:
@@ -349,13 +347,10 @@ class MirrorPasses:
     def _claim_vertices(claims: Claims, size: tuple[int, int]) -> bytes:
         """Each claim's rectangle as two clip-space triangles, each vertex with the claim's
         three ids (claim.vert's attributes)."""
-        sx, sy = 2.0 / size[0], 2.0 / size[1]
-        ids = claims.ids
         pack = _CLAIM_VERTICES.pack
         out = []
-        for at, (x, y, w, h) in enumerate(claims.rects):
-            x0, y0, x1, y1 = x * sx - 1.0, y * sy - 1.0, (x + w) * sx - 1.0, (y + h) * sy - 1.0
-            a, b, c = ids[3 * at:3 * at + 3]
+        for (a, b, c), rect in zip(claims.ids, claims.rects, strict=True):
+            x0, y0, x1, y1 = _ndc_rect(rect, size)
             out.append(pack(x0, y0, a, b, c, x1, y0, a, b, c, x1, y1, a, b, c,
                             x0, y0, a, b, c, x1, y1, a, b, c, x0, y1, a, b, c))
         return b"".join(out)

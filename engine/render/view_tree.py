@@ -34,7 +34,6 @@ from __future__ import annotations
 
 import functools
 import math
-from array import array
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
@@ -225,14 +224,15 @@ class ViewTree:
         record = self._visibility_of(root)
         keys: list[tuple[int, ...]] = [()]  # each parent row's chain of surfaces from the root
         parent_at = [0]                      # each parent row's index in result.views
-        planned: list[_Level] = []           # predicted: the levels planned, drawn after the last
-        drawn: list[_Level] = []             # exact: the levels drawn, one by one
+        steps: list[_Level] = []             # the levels, in order (exact: drawn as they come; predicted:
+                                             # drawn after the last is planned)
         level = 0
         while candidates is not None:
             if scale < 1.0:
                 renderer.stats.levels_downscaled += 1
             step = _Level(candidates, levels.get(level + 1, candidates.size), levels[level], nodes,
                           record.take(len(candidates), self.renderer.ctx))
+            steps.append(step)
             is_end = candidates.end.tolist() if candidates.end is not None else [False] * len(candidates)
             if exact:  # this frame's counts: the CPU waits for the GPU to draw the claims
                 self._claim(surfaces, step)
@@ -259,7 +259,6 @@ class ViewTree:
                 renderer.stats.views_spent += len(keep)
                 renderer.stats.pixels_spent += drawn
                 end_rows = [i for i, end in enumerate(is_end) if end]
-                planned.append(step)  # its claims are drawn with it (they count for the next frame)
                 # Predicted: the GPU skips the views its claims find hidden (conditional rendering).
                 step.conditions = [step.queries[i] for i in keep]
             chosen = candidates if len(keep) == len(candidates) else candidates.select(np.asarray(keep, np.int64))
@@ -283,7 +282,6 @@ class ViewTree:
             step.composite = children + step.ended
             if exact:
                 self._draw_level(step, root)
-                drawn.append(step)
             child_offset = len(result.views)
             result.views.extend(children)
             level += 1
@@ -307,11 +305,11 @@ class ViewTree:
                                                   root.hide, ends=_ends_at(ends, level + 1), scale=scale)
                 result.faded += faded
                 candidates, end_seers = self._end_seers(candidates, seers)
-        for step in planned:  # predicted: the whole tree, planned, drawn in one run
-            self._claim(surfaces, step)
+        for step in steps if not exact else ():  # predicted: the whole tree, planned, drawn in one run
+            self._claim(surfaces, step)  # (a last level without views still counts its claims)
             if step.composite is not None:
                 self._draw_level(step, root)
-        composites = [step.prepared for step in (planned if not exact else drawn) if step.prepared is not None]
+        composites = [step.prepared for step in steps if step.prepared is not None]
         deepest = max((node.level for node in result.views), default=0)
         if deepest and deepest == settings.depth_cap:
             # Reaching the cap is reported: how many views the surfaces' own limits still allowed
@@ -448,16 +446,15 @@ class ViewTree:
 
     def _claim(self, surfaces: SurfaceTable, step: _Level) -> None:
         """Every candidate's claim in the level's targets, its pixels counted in its query.
-        The claim shader's (parent view, surface, view index) of every candidate in one
-        flat array of uint32s."""
+        The claim shader's (parent view, surface, view index) of every candidate: a level's
+        few claims, so lists (a few numpy calls cost more)."""
         candidates = step.candidates
         entities, parents = surfaces.entity_list, step.parents
-        ids = array("I")  # a level's few claims: list work costs less than a few numpy calls
-        for p, s, node in zip(candidates.parent.tolist(), candidates.surface.tolist(),
-                              candidates.rows.data[:, 51].astype(np.int64).tolist(), strict=True):
-            ids.extend((parents[p].index, entities[s], node))
-        self.passes.prepare_level(step.targets, step.parent_targets, Claims(
-            ids, list(map(tuple, candidates.scissor.tolist()))), step.queries)
+        ids = [(parents[p].index, entities[s], node) for p, s, node in
+               zip(candidates.parent.tolist(), candidates.surface.tolist(),
+                   candidates.rows.data[:, 51].astype(np.int64).tolist(), strict=True)]
+        self.passes.prepare_level(step.targets, step.parent_targets,
+                                  Claims(ids, list(map(tuple, candidates.scissor.tolist()))), step.queries)
 
     def _draw_level(self, step: _Level, root: View) -> None:
         """A planned level's views (and end views) into its targets, then its composite's
