@@ -298,11 +298,12 @@ def test_a_level_planned_from_the_same_rows_is_found_again_read_only(scene, monk
     from engine.assets.mesh import box, quad
     from engine.resources import Surfaces
     from tests.support import look_from
-    from tests.test_mirrors import FACING_BACK
+    from tests.test_mirrors import FACING_BACK, base_scene
 
     ents = {}
 
     def build(world):
+        base_scene(world)  # a light and the sky
         ents["camera"] = look_from(world, (0.3, 1.5, 2.5), target=(0.0, 1.5, -2.0))
         # No end images: past the depth limit they repeat last frame's image, so still frames
         # would still differ for a few frames.
