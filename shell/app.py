@@ -17,7 +17,7 @@ from collections.abc import Callable
 import esper
 import moderngl
 
-from components import FlyController, Mirror, Portal, yaw_pitch_rotation
+from components import Camera, FlyController, Mirror, Portal, Transform, yaw_pitch_rotation
 from engine.core.errors import GLPassError
 from engine.core.frame_io import Input, Output
 from engine.core.game import Game, GameSystem, schedule_order
@@ -199,7 +199,7 @@ class Engine:
         if error != "GL_NO_ERROR":
             raise RuntimeError(f"OpenGL error after frame {self.world.frame_index}: {error}")
 
-    def active_camera(self):
+    def active_camera(self) -> tuple[int, Camera, Transform] | None:
         """(entity, Camera, Transform) of the camera the main view looks through, or None
         (``engine.rules.frame_rules.active_camera_parts``; the rule is ``active_camera`` there)."""
         return active_camera_parts(self.world)

@@ -24,6 +24,7 @@ from __future__ import annotations
 import ctypes
 import time
 from collections import deque
+from typing import TYPE_CHECKING
 
 import moderngl
 import numpy as np
@@ -31,6 +32,9 @@ from imgui_bundle import imgui
 from moderngl_window.integrations.imgui_bundle import ModernGLRenderer
 
 from shell.overlay_text import overlay_lines
+
+if TYPE_CHECKING:  # the app's window makes the overlay
+    from shell.app import Engine
 
 FRAME_HISTORY = 120             # frames in the frame-time graph and the frame rate's average
 POSITION = (8, 8)               # the overlay window's top-left corner, in pixels from the top-left
@@ -181,7 +185,7 @@ class DebugOverlay:
         """The pointer is over the overlay (its clicks and drags are the overlay's)."""
         return self.visible and self.io.want_capture_mouse
 
-    def draw(self, engine, framebuffer: moderngl.Framebuffer, size: tuple[int, int]) -> None:
+    def draw(self, engine: Engine, framebuffer: moderngl.Framebuffer, size: tuple[int, int]) -> None:
         """Lay out the overlay for ``engine``'s last frame, apply its toggles, and draw it
         over ``framebuffer`` (``size`` pixels)."""
         if not self.visible or self.context is None or size[0] <= 0 or size[1] <= 0:

@@ -8,9 +8,13 @@ from __future__ import annotations
 
 from collections import Counter
 from collections.abc import Sequence
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:  # the engine is the app's, which draws the overlay with this text
+    from shell.app import Engine
 
 
-def overlay_lines(engine, frame_times: Sequence[float]) -> list[str]:
+def overlay_lines(engine: Engine, frame_times: Sequence[float]) -> list[str]:
     """The overlay's text, from the engine's last frame: the one place it is worded, shared by
     the overlay and the tests that check its numbers against ``RenderStats``."""
     stats = engine.renderer.stats

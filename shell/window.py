@@ -25,6 +25,7 @@ import logging
 import sys
 import time
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import moderngl_window as mglw
 
@@ -36,6 +37,12 @@ from engine.render.targets import CaptureTarget
 from shell.app import Engine
 from shell.capture import save_png
 
+if TYPE_CHECKING:
+    import moderngl
+    from moderngl_window.context.base import BaseKeys, KeyModifiers
+
+    from shell.overlay import DebugOverlay  # imported when the overlay is made: it needs imgui-bundle
+
 _NAMED_KEYS = {"SPACE": "space", "ENTER": "enter", "TAB": "tab", "BACKSPACE": "backspace", "LEFT": "left",
                "RIGHT": "right", "UP": "up", "DOWN": "down", **{f"F{n}": f"f{n}" for n in range(1, 12)},
                **{chr(c): chr(c).lower() for c in range(ord("A"), ord("Z") + 1)},
@@ -43,7 +50,7 @@ _NAMED_KEYS = {"SPACE": "space", "ENTER": "enter", "TAB": "tab", "BACKSPACE": "b
 _BUTTONS = {1: "left", 2: "right", 3: "middle"}
 
 
-def key_names(keys) -> dict:
+def key_names(keys: type[BaseKeys]) -> dict:
     """moderngl-window key code -> the ``Input`` name of that key (the backend's codes differ).
     The headless backend has no key codes (every one reads "undefined"): there a key is sent
     by its attribute name ("W", "SPACE"), as the tests do."""
@@ -71,7 +78,7 @@ class NoOverlay:
         return lambda *args, **kwargs: None  # record, draw, mouse and key forwarding, release
 
 
-def make_overlay(ctx, visible: bool):
+def make_overlay(ctx: moderngl.Context, visible: bool) -> DebugOverlay | NoOverlay:
     """The debug overlay, or ``NoOverlay`` where imgui-bundle cannot be imported."""
     try:
         from shell.overlay import DebugOverlay
@@ -131,7 +138,7 @@ def make_window_config(game: Game, args: argparse.Namespace | None = None) -> ty
         def on_resize(self, width: int, height: int) -> None:
             pass  # the render system sizes its targets from the framebuffer each frame; 0x0 skips
 
-        def on_key_event(self, key, action, modifiers) -> None:
+        def on_key_event(self, key: int | str, action: int | str, modifiers: KeyModifiers) -> None:
             if self.released:
                 return  # events queued behind Esc
             keys = self.wnd.keys

@@ -16,6 +16,7 @@ import warnings
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 from pyglm import glm
@@ -32,6 +33,9 @@ from engine.assets.texture_data import (
     pillow_image_module,
 )
 from engine.core.errors import AssetError
+
+if TYPE_CHECKING:  # trimesh is imported when a mesh file is first loaded
+    import trimesh
 
 _mesh_ids = itertools.count(1)
 
@@ -79,7 +83,7 @@ class Mesh:
         return np.hstack([self.positions, self.normals, self.uvs]).astype(np.float32)
 
     @classmethod
-    def from_trimesh(cls, tm, name: str = "mesh") -> Mesh:
+    def from_trimesh(cls, tm: trimesh.Trimesh, name: str = "mesh") -> Mesh:
         """Convert a trimesh.Trimesh (its UVs are used when it has them)."""
         uv = getattr(getattr(tm, "visual", None), "uv", None)
         positions = np.asarray(tm.vertices, np.float32)
@@ -733,7 +737,7 @@ class _MaterialMaps:
         self.mtl = _mtl_maps(path, roots) if path.suffix.lower() == ".obj" else {}
         self._made: dict[tuple, TextureData] = {}
 
-    def read(self, tm, part: ModelPart) -> None:
+    def read(self, tm: trimesh.Trimesh, part: ModelPart) -> None:
         from trimesh.visual.material import SimpleMaterial
 
         material = getattr(getattr(tm, "visual", None), "material", None)

@@ -1,6 +1,7 @@
 """Spawning entities from mesh files: one entity per mesh part, under one root entity."""
 from __future__ import annotations
 
+from collections.abc import Sequence
 from pathlib import Path
 
 from pyglm import glm
@@ -11,8 +12,9 @@ from engine.core.errors import AssetError
 from engine.core.world import World
 
 
-def spawn_model(world: World, path: str | Path, position=(0.0, 0.0, 0.0), rotation=None,
-                scale=(1.0, 1.0, 1.0)) -> int:
+def spawn_model(world: World, path: str | Path, position: glm.vec3 | Sequence[float] = (0.0, 0.0, 0.0),
+                rotation: glm.quat | Sequence[float] | None = None,
+                scale: glm.vec3 | Sequence[float] = (1.0, 1.0, 1.0)) -> int:
     """Load ``path`` and spawn it; returns the root entity.
 
     The file's material decides the components: its colour, texture, metallic and

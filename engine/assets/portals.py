@@ -1,6 +1,8 @@
 """Spawning portal pairs: two quads whose Portal components name each other."""
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 from pyglm import glm
 
 from components import ComponentValueError, Material, MeshRef, Portal, Transform
@@ -9,7 +11,9 @@ from engine.assets.mesh import quad
 from engine.core.world import World
 
 
-def spawn_portal_pair(world: World, position_a, rotation_a, position_b, rotation_b,
+def spawn_portal_pair(world: World, position_a: glm.vec3 | Sequence[float],
+                      rotation_a: glm.quat | Sequence[float] | None, position_b: glm.vec3 | Sequence[float],
+                      rotation_b: glm.quat | Sequence[float] | None,
                       size: tuple[float, float] = (2.0, 3.0), max_depth: int = 4) -> tuple[int, int]:
     """Two portals facing their local +Z; looking into either shows the other's front side.
 

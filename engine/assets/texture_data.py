@@ -10,10 +10,16 @@ import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from engine.core.errors import AssetError
+
+if TYPE_CHECKING:  # Pillow is imported when an image is first decoded (pillow_image_module)
+    from types import ModuleType
+
+    import PIL.Image
 
 
 @dataclass(eq=False)
@@ -164,7 +170,7 @@ def contained_path(path: str | Path, roots: Sequence[str | Path]) -> Path | None
     return real if inside(real, real_roots) else None
 
 
-def pillow_image_module():
+def pillow_image_module() -> ModuleType:
     """PIL.Image with its decompression-bomb limit set from the GL texture limit
     (``MAX_TEXTURE_SIDE`` squared) instead of Pillow's default: every image the engine
     decodes (texture files, and a mesh file's images through trimesh) is held to it."""
@@ -245,7 +251,7 @@ def _read_png_16(path: Path, what: str) -> np.ndarray:
     return np.ascontiguousarray(pixels)
 
 
-def image_to_rgba8(image, what: str) -> np.ndarray:
+def image_to_rgba8(image: PIL.Image.Image, what: str) -> np.ndarray:
     """A Pillow image as an HxWx4 uint8 array, every pixel format scaled to 0..255 (see
     ``load_texture``); ``what`` names the image in an error."""
     mode = image.mode

@@ -19,6 +19,8 @@ import difflib
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
 
+from pyglm import glm
+
 from components import Camera, FlyController, Transform, yaw_pitch_rotation
 from engine.core.errors import SpeculumError
 from engine.core.world import World
@@ -226,8 +228,8 @@ class Game:
         return ()
 
 
-def spawn_camera(world: World, position=(0.0, 1.6, 6.0), yaw: float = 0.0, pitch: float = 0.0,
-                 fov_y: float = 60.0, fly: bool = True) -> int:
+def spawn_camera(world: World, position: glm.vec3 | Sequence[float] = (0.0, 1.6, 6.0), yaw: float = 0.0,
+                 pitch: float = 0.0, fov_y: float = 60.0, fly: bool = True) -> int:
     """A camera entity, with fly controls for windowed runs unless ``fly`` is False."""
     components = [Transform(position=position, rotation=yaw_pitch_rotation(yaw, pitch)), Camera(fov_y=fov_y)]
     if fly:

@@ -1,6 +1,8 @@
 """Math of paired portals: the transform that carries things from one portal to its partner."""
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 from pyglm import glm
 
 from engine.core.reflection_math import plane_from_point_normal
@@ -26,7 +28,7 @@ def pair_rotation(carry: glm.mat4) -> glm.quat:
     return glm.normalize(glm.quat_cast(glm.mat3(glm.normalize(m[0]), glm.normalize(m[1]), glm.normalize(m[2]))))
 
 
-def near_plane_corners(position, rotation: glm.quat, fov_y_deg: float, near: float,
+def near_plane_corners(position: glm.vec3 | Sequence[float], rotation: glm.quat, fov_y_deg: float, near: float,
                        aspect: float) -> list[glm.vec3]:
     """World corners of a camera's near-plane rectangle (the camera looks down its -Z)."""
     half_h = near * glm.tan(glm.radians(fov_y_deg) / 2.0)

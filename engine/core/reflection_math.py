@@ -4,10 +4,12 @@ Planes are glm.vec4 (n.x, n.y, n.z, d) with unit n: a point x is in front when n
 """
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 from pyglm import glm
 
 
-def plane_from_point_normal(point, normal) -> glm.vec4:
+def plane_from_point_normal(point: glm.vec3 | Sequence[float], normal: glm.vec3 | Sequence[float]) -> glm.vec4:
     n = glm.normalize(glm.vec3(normal))
     return glm.vec4(n, -glm.dot(n, glm.vec3(point)))
 
@@ -18,7 +20,7 @@ def transform_plane(matrix: glm.mat4, plane: glm.vec4) -> glm.vec4:
     return p / glm.length(glm.vec3(p))
 
 
-def signed_distance(plane: glm.vec4, point) -> float:
+def signed_distance(plane: glm.vec4, point: glm.vec3 | Sequence[float]) -> float:
     return glm.dot(glm.vec3(plane), glm.vec3(point)) + plane.w
 
 
@@ -34,7 +36,8 @@ def reflection_matrix(plane: glm.vec4) -> glm.mat4:
     return m
 
 
-def reflect_camera(eye, forward, up, plane: glm.vec4) -> tuple[glm.vec3, glm.vec3, glm.vec3]:
+def reflect_camera(eye: glm.vec3 | Sequence[float], forward: glm.vec3 | Sequence[float],
+                   up: glm.vec3 | Sequence[float], plane: glm.vec4) -> tuple[glm.vec3, glm.vec3, glm.vec3]:
     """The classic planar-mirror virtual camera: reflect its position, its look direction and its up vector.
 
     The result is an ordinary (right-handed) camera behind the mirror; what it sees is the
@@ -82,7 +85,7 @@ def oblique_projection(proj: glm.mat4, view_plane: glm.vec4) -> glm.mat4:
 OBLIQUE_SAFE_NEARS = 4.0
 
 
-def oblique_is_safe(eye, plane: glm.vec4, near: float) -> bool:
+def oblique_is_safe(eye: glm.vec3 | Sequence[float], plane: glm.vec4, near: float) -> bool:
     """Whether an oblique near plane keeps useful depth precision.
 
     Close to the plane the oblique frustum degenerates (its far plane swings towards the

@@ -6,14 +6,19 @@ before it (travel, slicing) and by ray casts in the game stage.
 """
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 from pyglm import glm
 
 from components import Transform
 
+if TYPE_CHECKING:
+    from engine.core.world import World
+
 MAX_PARENT_HOPS = 64  # a chain longer than this (or a cycle, which the transform stage refuses) stops here
 
 
-def current_world_matrix(world, transform: Transform, max_hops: int = MAX_PARENT_HOPS) -> glm.mat4:
+def current_world_matrix(world: World, transform: Transform, max_hops: int = MAX_PARENT_HOPS) -> glm.mat4:
     """``transform``'s model-to-world matrix from its parent chain's local poses now.
 
     The chain follows the rules of the transform stage: a parent that does not exist, or has

@@ -12,6 +12,7 @@ import numpy as np
 from pyglm import glm
 
 from components.limits import VIEW_KINDS
+from engine.assets.mesh import Mesh
 
 INSTANCE_DTYPE = np.dtype([
     ("model", "<f4", (16,)),          # column-major mat4
@@ -53,7 +54,7 @@ _GATHER_AT = 16
 class GpuMesh:
     """Vertex and index buffers of one Mesh, shared by every batch that draws it."""
 
-    def __init__(self, ctx: moderngl.Context, mesh) -> None:
+    def __init__(self, ctx: moderngl.Context, mesh: Mesh) -> None:
         self.vertices = ctx.buffer(mesh.interleaved().tobytes())
         self.indices = ctx.buffer(mesh.indices.astype(np.uint32).tobytes())
         self.index_count = mesh.indices.size

@@ -17,6 +17,7 @@ from __future__ import annotations
 import struct
 import weakref
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import moderngl
 import numpy as np
@@ -43,6 +44,10 @@ from engine.render.views import (
     CAMERA_BLOCK_VIEW_PROJ,
     View,
 )
+
+if TYPE_CHECKING:  # the renderer imports this module; the surfaces' records are a floor above
+    from engine.render.renderer import Renderer
+    from engine.resources import MirrorBumps, SurfaceState, WaterLook
 
 # The claims and the reset write every depth they touch (depth test "always"); the
 # composite blends quads trimmed to their rectangles by clip distances 1-4.
@@ -71,7 +76,8 @@ class CompositeSurface:
 
 def composite_surface(tint: glm.vec4, reflect_rate: float, roughness: float, normal: glm.vec3,
                       outline: np.ndarray | None = None, portal: bool = False,
-                      carry: glm.mat3 | None = None, bumps=None, water=None) -> CompositeSurface:
+                      carry: glm.mat3 | None = None, bumps: MirrorBumps | None = None,
+                      water: WaterLook | None = None) -> CompositeSurface:
     """A surface's composite parameters; ``outline`` is its 4 world corners as homogeneous
     rows in 2 x 2 grid order (None: composite over its screen rectangle).  A mirror with
     ``bumps`` reads its normal map in the composite (a ``_bumpy`` variant).  A mirror with
@@ -100,7 +106,7 @@ def composite_surface(tint: glm.vec4, reflect_rate: float, roughness: float, nor
 _LOOKS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 
 
-def surface_look(state) -> CompositeSurface:
+def surface_look(state: SurfaceState) -> CompositeSurface:
     """What the composite reads of a surface (``engine.resources.SurfaceState``), packed once
     per state object: the packing is the renderer's, so the public state stays plain data."""
     look = _LOOKS.get(state)
@@ -212,7 +218,6 @@ class _CompositeDraw:
         self.vao = self.rows = None
 
 
-
 def composite_rows(composites: list[Composite], size: tuple[int, int]) -> bytes:
     """The packed instance rows of ``composites`` drawn into a level of ``size`` pixels.
 
@@ -289,7 +294,7 @@ class Claims:
 
 
 class MirrorPasses:
-    def __init__(self, renderer) -> None:
+    def __init__(self, renderer: Renderer) -> None:
         self.renderer = renderer
         ctx = renderer.ctx
         self.ctx = ctx

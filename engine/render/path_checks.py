@@ -48,6 +48,7 @@ import weakref
 from collections.abc import Callable
 from contextlib import contextmanager
 from dataclasses import asdict, dataclass, fields
+from typing import TYPE_CHECKING
 
 import moderngl
 import numpy as np
@@ -67,6 +68,9 @@ from engine.render.raw_gl import (
     write_cube_level,
 )
 from engine.render.views import lights_block
+
+if TYPE_CHECKING:  # the renderer imports this module
+    from engine.render.renderer import Renderer
 
 LOG = logging.getLogger("speculum")
 
@@ -101,7 +105,7 @@ _BY_CONTEXT: weakref.WeakKeyDictionary[moderngl.Context, dict[str, PathVerdict]]
 class PathChecks:
     """The verdicts of this renderer's context, and the checks that make them (module docstring)."""
 
-    def __init__(self, renderer) -> None:
+    def __init__(self, renderer: Renderer) -> None:
         self.renderer = renderer
         self.ctx = renderer.ctx
         self.verdicts: dict[str, PathVerdict] = _BY_CONTEXT.setdefault(

@@ -24,6 +24,7 @@ import time
 from collections.abc import Callable
 from contextlib import contextmanager
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import moderngl
 import numpy as np
@@ -41,6 +42,11 @@ from engine.render.view_plan import SurfaceTable
 from engine.render.view_tree import TreeSettings, ViewTree
 from engine.render.views import View
 from engine.rules.probe_rules import projection_box
+
+if TYPE_CHECKING:  # the renderer imports this module; the frame's surfaces are a floor above
+    from engine.render.raw_gl import RawGL
+    from engine.render.renderer import Renderer
+    from engine.resources import Surfaces
 
 LOG = logging.getLogger("speculum")
 PROBE_PATHS = ("auto", "six_pass", "layered")
@@ -114,7 +120,7 @@ class CubeMipPass:
 
     STATE = PassState()  # no depth test, no blending, no clip distances
 
-    def __init__(self, renderer) -> None:
+    def __init__(self, renderer: Renderer) -> None:
         self.renderer = renderer
         self.ctx = renderer.ctx
         self._targets: dict[int, CubeMipTarget] = {}  # by probe key
@@ -256,7 +262,7 @@ class CubeFaceTargets:
     costs no copy and, on llvmpipe, neither the copy's wait for the face's rasterisation
     nor the framebuffer switches between clear, scene and sky."""
 
-    def __init__(self, ctx: moderngl.Context, raw_gl, cube: moderngl.TextureCube) -> None:
+    def __init__(self, ctx: moderngl.Context, raw_gl: RawGL, cube: moderngl.TextureCube) -> None:
         self.cube = cube
         size = cube.size
         self.depth = ctx.depth_texture(size)
@@ -315,7 +321,7 @@ class ProbePaths:
     and the faster is kept for the rest of the run and said (``chosen``, ``timings``,
     ``in_use``, a log line)."""
 
-    def __init__(self, renderer) -> None:
+    def __init__(self, renderer: Renderer) -> None:
         self.renderer = renderer
         self.path = "auto"
         self.used = ""  # the path that drew the last capture
@@ -416,7 +422,7 @@ class ProbeCaptures:
     """The GPU side of every probe: cube maps by probe key, and the targets faces draw into
     (one LevelStack per resolution, shared by all probes: captures run one after another)."""
 
-    def __init__(self, renderer) -> None:
+    def __init__(self, renderer: Renderer) -> None:
         self.renderer = renderer
         self.ctx = renderer.ctx
         self.cubes: dict[int, ProbeCube] = {}
@@ -445,7 +451,7 @@ class ProbeCaptures:
         return cube
 
     def capture_probe(self, key: int, faces: frozenset[int], position: glm.vec3, settings: ReflectionProbe,
-                      surfaces=None) -> str:
+                      surfaces: Surfaces | None = None) -> str:
         """Capture ``faces`` of probe ``key`` (the entity owning it, whose own object every
         face leaves out) from ``position`` with ``settings``, by the path ``paths`` takes
         (``surfaces``: this frame's ``engine.resources.Surfaces``, the mirrors and portals a

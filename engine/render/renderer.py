@@ -310,7 +310,7 @@ class Renderer:
         gl_texture.anisotropy = self.normal_map_anisotropy if linear else self.texture_anisotropy
         return gl_texture
 
-    def set_sky_faces(self, faces) -> None:
+    def set_sky_faces(self, faces: np.ndarray | None) -> None:
         old = self.sky
         self.sky = upload_cube(self.ctx, faces) if faces is not None else flat_cube(self.ctx, BACKGROUND)
         old.release()

@@ -27,9 +27,10 @@ path of the "Multiple Mirrors" OpenGL project; at most
 """
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from contextlib import nullcontext
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import moderngl
 from pyglm import glm
@@ -60,6 +61,10 @@ from engine.render.bindings import (
 from engine.render.raw_gl import LayeredArrayTarget, LayeredCubeTarget, inspect_bound_target
 from engine.render.targets import RenderTargets
 from engine.render.views import View, union_rect
+
+if TYPE_CHECKING:  # the renderer imports this module
+    from engine.render.instances import InstanceBatch
+    from engine.render.renderer import Renderer
 
 _ALWAYS = nullcontext()  # a view drawn whatever its claim counted
 
@@ -102,7 +107,7 @@ class ScenePass:
     """The scene programs and the one ``draw`` every view goes through (``draw_layered``
     is the same scene for the six faces of a cube map at once)."""
 
-    def __init__(self, renderer) -> None:
+    def __init__(self, renderer: Renderer) -> None:
         self.renderer = renderer
         self.ctx = renderer.ctx
         shaders = renderer.shaders
@@ -203,7 +208,7 @@ class ScenePass:
             self._uniforms[program.glo] = tuple(program.get(name, None) for name in _PER_DRAW_UNIFORMS)
         return program
 
-    def prepare(self, batches, reflections: bool) -> int:
+    def prepare(self, batches: Iterable[InstanceBatch], reflections: bool) -> int:
         """Build the programs and vertex arrays ``batches`` will be drawn with: invocations 0
         (root and per-mirror views) and, with ``reflections``, every invocation count of the
         batched path (``BATCHED_INVOCATIONS``), its view table and the reflection sampler.

@@ -6,15 +6,20 @@ directions of ``engine.core.cube_faces.face_directions`` (GL's cube-map table, k
 """
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import moderngl
 import numpy as np
 
 from engine.core.cube_faces import face_directions
 
+if TYPE_CHECKING:
+    from components import Skybox
+
 SEAMLESS_CUBE_MAP = 0x884F  # GL_TEXTURE_CUBE_MAP_SEAMLESS, core since 3.2
 
 
-def sky_radiance(skybox, directions: np.ndarray) -> np.ndarray:
+def sky_radiance(skybox: Skybox, directions: np.ndarray) -> np.ndarray:
     """Linear RGB of the generated sky along each unit direction (..., 3)."""
     d = np.asarray(directions, np.float64)
     d = d / np.linalg.norm(d, axis=-1, keepdims=True)
@@ -33,7 +38,7 @@ def sky_radiance(skybox, directions: np.ndarray) -> np.ndarray:
     return color + glow + disc
 
 
-def build_faces(skybox) -> np.ndarray:
+def build_faces(skybox: Skybox) -> np.ndarray:
     """Six faces (6, size, size, 3) float32 in GL order, from ``skybox.faces`` or generated."""
     if skybox.faces is not None:
         faces = np.asarray(skybox.faces, np.float32)

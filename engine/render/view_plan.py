@@ -18,7 +18,7 @@ import functools
 import math
 import struct
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 from pyglm import glm
@@ -27,9 +27,8 @@ from components.limits import VIEW_DIRECT, VIEW_KINDS, VIEW_MIRROR, VIEW_PORTAL
 from engine.core.reflection_math import OBLIQUE_SAFE_NEARS
 from engine.render.views import CAMERA_BLOCK_BYTES, View
 
-# The mirror and portal records the surfaces stage publishes (``engine.resources.SurfaceState``,
-# plain data above this floor): read here by their fields.
-SurfaceState = Any
+if TYPE_CHECKING:  # the surfaces stage's records, a floor above: read here by their fields
+    from engine.resources import SurfaceState
 
 _CAMERA_FLOATS = CAMERA_BLOCK_BYTES // 4
 _KINDS_BUT_DIRECT = ((1 << VIEW_KINDS) - 1) & ~VIEW_DIRECT  # a view through a surface is no longer direct
@@ -481,7 +480,6 @@ class SurfaceTable:
         end = None if ends is None else self._within(depth, depth_cap)[1].take(s)
         return Candidates(p, s, LevelRows(data), level_rects(rects, root.size, size), blocks, size,
                           fade if fade is not None else _ones(k), end), faded
-
 
     @functools.cached_property
     def _small(self) -> list[_SmallSurface]:

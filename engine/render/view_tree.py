@@ -36,7 +36,7 @@ import functools
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING
 
 import moderngl
 import numpy as np
@@ -59,6 +59,10 @@ from engine.render.targets import LevelStack, RenderTargets
 from engine.render.view_plan import Candidates, LevelRows, SurfaceTable, _mat, level_rects
 from engine.render.views import CAMERA_BLOCK_BYTES, PlannedView, View
 
+if TYPE_CHECKING:  # the renderer imports this module; the surfaces' records are a floor above
+    from engine.render.renderer import Renderer
+    from engine.resources import SurfaceState
+
 # The deepest a tree may go (each level is one more set of root-sized targets); the depth
 # limits of Mirror and Portal components take values up to this.
 MAX_TREE_DEPTH = MAX_VIEW_DEPTH  # the depth cap's limit: the components' own
@@ -69,10 +73,6 @@ MIN_LEVEL_SCALE = 0.25  # the lowest resolution factor the pixel budget draws a 
 # the counts save views) and predicted on a GPU.
 VISIBILITY_MODES = ("auto", "exact", "predicted")
 _BATCHED = SceneOptions(clear=False, masked=True, sky=False, batched=True, reflection_filter=True)
-
-# The mirror and portal records the surfaces stage publishes (``engine.resources.SurfaceState``,
-# plain data above this floor): read here by their fields.
-SurfaceState = Any
 
 
 @dataclass(frozen=True)
@@ -181,7 +181,7 @@ class ViewTree:
     them back into the root's targets.  With ``end_images`` (the main view's tree) a view the
     depth limits cut shows its surface's image from the previous frame (``EndImages``)."""
 
-    def __init__(self, renderer, end_images: bool = False) -> None:
+    def __init__(self, renderer: Renderer, end_images: bool = False) -> None:
         self.renderer = renderer
         self.passes = MirrorPasses(renderer)
         self.ends = EndImages(renderer) if end_images else None

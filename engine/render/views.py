@@ -2,6 +2,7 @@
 views later), and the std140 packing of the Camera and Lights uniform blocks."""
 from __future__ import annotations
 
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -130,7 +131,7 @@ def camera_view(world_matrix: glm.mat4, fov_y_deg: float, near: float, far: floa
     return View(view=glm.inverse(world_matrix), proj=proj, eye=glm.vec3(world_matrix[3]), size=size, name=name)
 
 
-def lights_block(ambient, directional: list[tuple], point: list[tuple]) -> bytes:
+def lights_block(ambient: Sequence[float], directional: list[tuple], point: list[tuple]) -> bytes:
     """Pack lights: directional = [(direction, rgb)], point = [(position, range, rgb)]."""
     data = np.zeros(LIGHTS_BLOCK_BYTES // 4, np.float32)
     data[0:3] = ambient[:3]
@@ -148,7 +149,7 @@ def lights_block(ambient, directional: list[tuple], point: list[tuple]) -> bytes
     return data.tobytes()
 
 
-def union_rect(rects) -> tuple[int, int, int, int]:
+def union_rect(rects: Iterable[tuple[int, int, int, int]]) -> tuple[int, int, int, int]:
     """The smallest (x, y, width, height) rectangle holding all of ``rects``."""
     rects = list(rects)
     x0 = min(r[0] for r in rects)

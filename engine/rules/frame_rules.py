@@ -15,12 +15,16 @@ from __future__ import annotations
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from types import MappingProxyType
+from typing import TYPE_CHECKING
 
 import numpy as np
 from pyglm import glm
 
 from components import Camera, Portal, Transform
 from engine.core.world import World
+
+if TYPE_CHECKING:
+    from engine.assets.mesh import Mesh
 
 
 def open_portal_pairs(world: World) -> dict[int, int]:
@@ -64,7 +68,7 @@ def active_camera_parts(world: World) -> tuple[int, Camera, Transform] | None:
     return None if entity is None else (entity, world.get(entity, Camera), world.get(entity, Transform))
 
 
-def world_corners(mesh, model: glm.mat4) -> np.ndarray:
+def world_corners(mesh: Mesh, model: glm.mat4) -> np.ndarray:
     """The 8 corners of ``mesh.bounds`` carried by ``model``: an (8, 4) float64 array of
     homogeneous world-space rows.
 

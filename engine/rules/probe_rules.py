@@ -29,7 +29,9 @@ relights what is in its range (``lights_reaching``); ``LIGHTING_KINDS`` relight 
 """
 from __future__ import annotations
 
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 from pyglm import glm
@@ -54,6 +56,9 @@ from engine.assets.mesh import Mesh, flat_plane
 from engine.core.cube_faces import CUBE_FACES
 from engine.core.world import World
 from engine.rules.frame_rules import world_corners
+
+if TYPE_CHECKING:  # the surfaces stage's records, two floors above: read here by their fields
+    from engine.resources import SurfaceState
 
 _FLAT: dict[int, bool] = {}  # mesh id -> flat (meshes do not change once made)
 
@@ -127,7 +132,8 @@ class ProbeBlend:
 NO_PROBE = ProbeBlend()
 
 
-def probe_weight(position, centre, influence, blend_distance: float) -> float:
+def probe_weight(position: glm.vec3 | Sequence[float] | np.ndarray, centre: glm.vec3 | Sequence[float] | np.ndarray,
+                 influence: glm.vec3 | Sequence[float] | np.ndarray, blend_distance: float) -> float:
     """A probe's weight at ``position``: 0 outside its influence box (``influence`` wide
     about ``centre``), rising linearly from the box's nearest wall to 1 at ``blend_distance``
     inside it (1 everywhere inside with no blend distance; a wall counts as inside then).
@@ -317,7 +323,8 @@ def faces_touched(position: glm.vec3, far: float, lo: np.ndarray, hi: np.ndarray
 MAX_SURFACE_IMAGES = 4096  # boxes seen through mirrors and portals a probe's schedule follows a frame
 
 
-def images_through_surfaces(eye, lo: np.ndarray, hi: np.ndarray, surfaces, depth: int,
+def images_through_surfaces(eye: glm.vec3 | Sequence[float], lo: np.ndarray, hi: np.ndarray,
+                            surfaces: Iterable[SurfaceState], depth: int,
                             far: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None:
     """Where the world boxes [lo, hi] (rows) appear to a probe at ``eye`` through the mirrors
     and portals ``surfaces`` (each with ``plane``, ``exit_plane``, ``carry`` and ``entity``,
@@ -382,7 +389,7 @@ def images_through_surfaces(eye, lo: np.ndarray, hi: np.ndarray, surfaces, depth
 LIGHTING_KINDS = (DirectionalLight, Skybox)
 
 
-def lights_reaching(eye, far: float, lights: list[tuple[np.ndarray, float]]) -> list[int]:
+def lights_reaching(eye: glm.vec3 | Sequence[float], far: float, lights: list[tuple[np.ndarray, float]]) -> list[int]:
     """Which point lights of ``lights`` ((position, range) rows, where a light was or is)
     light something a probe at ``eye`` sees out to ``far``: their sphere of range meets the
     probe's sphere of sight (their rows' indices)."""

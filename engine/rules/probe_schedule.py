@@ -11,6 +11,7 @@ seen through portal 9", "4 more changes" (past ``MAX_NAMED`` entities a probe an
 """
 from __future__ import annotations
 
+from collections.abc import Iterable
 from dataclasses import dataclass, field
 
 from pyglm import glm
@@ -40,7 +41,7 @@ class ProbeState:
     requests_seen: int = 0  # settings.requests when last looked at (ReflectionProbe.request)
     waiting: int = 0        # frames its due capture has waited for the time budget (it goes sooner)
 
-    def ask(self, faces, reason: str) -> None:
+    def ask(self, faces: Iterable[int], reason: str) -> None:
         """Faces to capture, and why."""
         faces = set(faces)
         if faces:

@@ -21,7 +21,7 @@ rebuilt only when its entity's world matrix or mesh changed:
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Collection
+from collections.abc import Callable, Collection, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -81,7 +81,8 @@ class RayCaster:
         self.rebuilds = 0  # entities whose triangles were (re)computed, for tests and profiling
 
     # --- public --------------------------------------------------------------------------
-    def cast(self, origin, direction, max_distance: float = math.inf,
+    def cast(self, origin: glm.vec3 | Sequence[float], direction: glm.vec3 | Sequence[float],
+             max_distance: float = math.inf,
              where: Callable[[int], bool] | None = None, ignore: Collection[int] = (),
              two_sided: bool = True) -> RayHit | None:
         """The nearest hit along ``origin + t * direction`` for 0 <= t <= ``max_distance``
@@ -202,7 +203,8 @@ class RayCaster:
                               for name in ("v0", "e1", "e2", "normal"))
 
 
-def raycast(world: World, origin, direction, max_distance: float = math.inf,
+def raycast(world: World, origin: glm.vec3 | Sequence[float], direction: glm.vec3 | Sequence[float],
+            max_distance: float = math.inf,
             where: Callable[[int], bool] | None = None, ignore: Collection[int] = (),
             two_sided: bool = True) -> RayHit | None:
     """``RayCaster.cast`` on the world's shared caster (``world.resources[RayCaster]``, made on first use)."""
