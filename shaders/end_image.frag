@@ -6,8 +6,11 @@
 // the same surface last up the chain, and reproject (previous main view-projection x
 // inverse(main view): the chain's carries undone on last frame's camera) finds where that
 // view showed the surface at x.  There the previous image holds the levels beyond it: the
-// recursion's image repeats, shrunk, one period deeper (engine/render/end_images.py).
+// recursion's image repeats, shrunk, one period deeper (engine/render/end_images.py).  Where
+// it holds nothing (x off its edge or behind its camera) the pixel is marked NO_END_IMAGE and
+// keeps its surface's closed look (the composite leaves it).
 #include "camera.glsl"
+#include "end_image.glsl"
 
 uniform sampler2D history;      // the previous frame's main image (linear HDR, alpha 1)
 uniform usampler2D node_map;    // this level's node image (the claims)
@@ -31,8 +34,11 @@ void main() {
     float along = dot(camera.clip_plane.xyz, dir);
     float t = abs(along) > 1e-8 ? -(dot(camera.clip_plane.xyz, origin) + camera.clip_plane.w) / along : 0.0;
     vec4 previous = reproject * (to_ancestor * vec4(origin + dir * t, 1.0));
-    vec2 uv = previous.w > 1e-6 ? previous.xy / previous.w * 0.5 + 0.5 : gl_FragCoord.xy / level_size;
+    vec2 uv = previous.w > 1e-6 ? previous.xy / previous.w * 0.5 + 0.5 : vec2(-1.0);
+    bool held = all(greaterThanEqual(uv, vec2(0.0))) && all(lessThanEqual(uv, vec2(1.0)));
+    // (Where nothing is held the colour is the nearest edge's, only for a rough mirror's
+    // blur to read beside the pixels it does show.)
     out_color = vec4(textureLod(history, clamp(uv, 0.0, 1.0), 0.0).rgb, 1.0);
     out_surface = 0u;
-    out_seen = surface;
+    out_seen = held ? surface : NO_END_IMAGE;
 }

@@ -19,6 +19,7 @@
 #include "ggx.glsl"
 #include "normal_map.glsl"
 #include "water.glsl"
+#include "end_image.glsl"
 #ifdef COMPOSITE_BUMPY
 flat in mat3 v_project_dir;
 #endif
@@ -58,6 +59,7 @@ void main() {
     vec4 near = v_inv_view_proj * vec4(uv * 2.0 - 1.0, -1.0, 1.0);
     vec3 view_dir = normalize(near.xyz / near.w - v_eye.xyz);
     out_seen = texelFetch(reflection_seen, px, 0).r;
+    if (out_seen == NO_END_IMAGE) discard;  // an end view's pixel last frame's image did not hold
 #ifdef COMPOSITE_PORTAL
     vec4 through = textureLod(reflection, uv, 0.0);
     vec3 beyond = textureLod(sky_map, v_carry * view_dir, 0.0).rgb;
@@ -90,9 +92,11 @@ void main() {
         vec2 bent_uv = clip.xy / clip.z * 0.5 + 0.5;
         vec2 bent_level_px = bent_uv * parent_size * to_reflection;
         ivec2 bent_px = ivec2(bent_level_px);
-        // Inside the view's rectangle (outside it the node image is an older frame's).
+        // Inside the view's rectangle (outside it the node image is an older frame's), on a
+        // pixel the view shows.
         if (all(greaterThanEqual(bent_level_px, v_rect.xy)) && all(lessThan(bent_level_px, v_rect.zw))
-                && texelFetch(reflection_nodes, bent_px, 0).r == v_view) {
+                && texelFetch(reflection_nodes, bent_px, 0).r == v_view
+                && texelFetch(reflection_seen, bent_px, 0).r != NO_END_IMAGE) {
             uv = bent_uv;
             level_px = bent_level_px;
             px = bent_px;

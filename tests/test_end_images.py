@@ -29,10 +29,10 @@ from tests.support import SceneRunner, look_from
 EYE = (0.5, 1.6, 1.5)
 
 
-def _facing_pair(depth: int, end_image=True, camera=None):
+def _facing_pair(depth: int, end_image=True, camera=None, target=(-0.2, 1.4, -3.0)):
     def build(world) -> None:
         world.spawn(DirectionalLight(direction=(0.2, -1.0, -0.5), intensity=1.5))
-        look_from(world, camera or EYE, target=(-0.2, 1.4, -3.0), fov=60.0)
+        look_from(world, camera or EYE, target=target, fov=60.0)
         world.spawn(Transform(), MeshRef(box()), Material(color=(0.5, 0.5, 0.5)))
         world.spawn(Transform(position=(0.8, 1.0, 0.0), scale=(0.4, 2.0, 0.4)), MeshRef(box()),
                     Material(color=(0.9, 0.2, 0.1)), Emissive(0.6))
@@ -45,15 +45,22 @@ def _facing_pair(depth: int, end_image=True, camera=None):
     return build
 
 
-def _frames(ctx, build, count: int, move=None) -> tuple[list[np.ndarray], list[int]]:
+def _frames(ctx, build, count: int, move=None, after=None, fxaa: bool = True) -> tuple[list[np.ndarray], list[int]]:
+    """``count`` frames of ``build`` (``move(runner, frame)`` before each) and each frame's
+    end views; ``after(runner)`` reads what it wants after the last; ``fxaa=False``: each
+    pixel its own (FXAA blends an unchanged pixel with a changed neighbour)."""
     runner = SceneRunner(ctx, build, (240, 160))
     runner.engine.reflection_system.max_depth_cap = 8
+    if not fxaa:
+        runner.engine.renderer.antialias = "off"
     images, ends = [], []
     for frame in range(count):
         if move is not None:
             move(runner, frame)
         images.append(runner.frame(0.0).astype(float))
         ends.append(runner.stats.reflection_end_views)
+    if after is not None:
+        after(runner)
     runner.close()
     return images, ends
 
@@ -92,6 +99,79 @@ def test_a_turning_camera_finds_last_frames_image_where_it_was(ctx):
     hole = np.abs(closed - still[3]).max(axis=2) > 10
     assert hole.sum() >= 100
     assert np.abs(turning[3] - still[3])[hole].mean() < 0.12 * np.abs(closed - still[3])[hole].mean()
+
+
+def test_after_a_turn_an_end_view_last_frames_image_does_not_hold_keeps_its_closed_look(ctx):
+    """Turned round in one frame (from the mirror behind to the one ahead), every end view's
+    surface point lies behind last frame's camera: that image holds nothing for it, so the
+    frame is the closed look's, pixel for pixel, not last frame's pixels at the same place
+    on the screen (what an end view showed there before)."""
+    def turn(runner, frame):
+        yaw = math.pi if frame < 3 else 0.0
+        runner.world.get(active_camera(runner.world), Transform).rotation = look_rotation(
+            glm.vec3(math.sin(yaw), -0.05, -math.cos(yaw)))
+    turned, ends = _frames(ctx, _facing_pair(3), 4, turn, fxaa=False)
+    closed, _ = _frames(ctx, _facing_pair(3, end_image=False), 4, turn, fxaa=False)
+    assert ends[3] >= 1  # both mirrors were seen last frame (the one behind, the other in it)
+    assert np.abs(turned[3] - closed[3]).max() == 0.0
+    held, _ = _frames(ctx, _facing_pair(3), 4, lambda runner, frame: turn(runner, 3), fxaa=False)
+    assert (np.abs(held[3] - closed[3]).max(axis=2) > 10).sum() >= 100  # held still, the image shows
+
+
+def test_an_end_view_pixel_off_last_frames_image_keeps_its_closed_look(ctx, monkeypatch):
+    """Looking across the pair at a slant, the recursion's far images lie where the view
+    that saw the surface before showed it off the screen's edge: last frame's image holds
+    nothing there, and those pixels keep the closed look (the image's edge stretched over
+    them drew streaks).  Which pixels those are is worked out here from the end views'
+    cameras and the planes, as end_image.frag does, in float64."""
+    from engine.render.view_tree import ViewTree
+    camera, target = (0.0, 1.6, 0.0), (1.9, 1.5, -3.0)
+    trees, found = [], {}
+    render = ViewTree.render
+
+    def keep(self, root, *args, **kwargs):
+        trees.append(render(self, root, *args, **kwargs))
+        return trees[-1]
+
+    def read(runner):
+        found["result"], found["main"], found["ids"] = trees[-1], runner.engine.main_view, runner.ids()
+        found["nodes"] = {level: np.frombuffer(runner.engine.renderer.levels[level].node.read(), np.uint32)
+                          .reshape(160, 240)[::-1] for level in {end.level for end in trees[-1].end_views}}
+
+    monkeypatch.setattr(ViewTree, "render", keep)
+    images, ends = _frames(ctx, _facing_pair(3, camera=camera, target=target), 3, after=read, fxaa=False)
+    closed = _frames(ctx, _facing_pair(3, end_image=False, camera=camera, target=target), 3, fxaa=False)[0][2]
+    main = found["main"]
+    reproject = np.array(main.view_proj * glm.inverse(main.view))  # a still camera: last frame's is this one's
+    off, held = np.zeros((160, 240), bool), np.zeros((160, 240), bool)
+    ys, xs = np.mgrid[0:160, 0:240]
+    ndc = np.stack([(xs + 0.5) / 240 * 2 - 1, 1 - (ys + 0.5) / 160 * 2], axis=-1)  # row 0 at the top
+    for end in found["result"].end_views:
+        chain = []
+        node = end
+        while node.parent is not None:
+            chain.append(node)
+            node = node.parent
+        seer = next(n.parent for n in chain[1:] if n.surface.entity == end.surface.entity)
+        to_ancestor = np.array(seer.view.view * glm.inverse(end.surface.carry))
+        inverse = np.linalg.inv(np.array(end.view.view_proj))  # (numpy reads a glm matrix as its rows)
+        plane = np.array(end.view.clip_plane)
+        near = np.concatenate([ndc, -np.ones((160, 240, 1)), np.ones((160, 240, 1))], axis=-1) @ inverse.T
+        far = np.concatenate([ndc, np.ones((160, 240, 1)), np.ones((160, 240, 1))], axis=-1) @ inverse.T
+        origin = near[..., :3] / near[..., 3:]
+        direction = far[..., :3] / far[..., 3:] - origin
+        t = -(origin @ plane[:3] + plane[3]) / (direction @ plane[:3])
+        point = np.concatenate([origin + direction * t[..., None], np.ones((160, 240, 1))], axis=-1)
+        previous = point @ (reproject @ to_ancestor).T
+        uv = previous[..., :2] / previous[..., 3:] * 0.5 + 0.5
+        mine = found["nodes"][end.level] == end.view.node
+        margin = 1e-3  # float32 on the GPU: leave the edge itself out
+        off |= mine & ((previous[..., 3] <= 1e-6) | (uv < -margin).any(axis=-1) | (uv > 1 + margin).any(axis=-1))
+        held |= mine & (previous[..., 3] > 1e-6) & (uv > margin).all(axis=-1) & (uv < 1 - margin).all(axis=-1)
+    assert ends[2] >= 1 and off.sum() >= 20 and held.sum() >= 20
+    assert np.abs(images[2] - closed)[off].max() == 0.0
+    assert not (found["ids"] == 0xFFFFFFFF).any()  # the mark stays in the end views' level (NO_END_IMAGE)
+    assert (np.abs(images[2] - closed).max(axis=2)[held] > 2).mean() > 0.5  # the held ones show the image
 
 
 def test_auto_end_images_are_for_facing_pairs(ctx):
