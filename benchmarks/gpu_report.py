@@ -15,7 +15,8 @@ way leaves what came before, with ``"complete": false``):
   ``verified``, ``refused``, ``unavailable`` or ``unchecked``, with its detail).  A checkout
   without the self-check reports each path ``unchecked``.
 * ``benchmarks``: ``mirrors``, ``portals``, ``probes``, ``stages`` and ``profile`` (``--benchmarks``) at each
-  ``--size`` (default 640x360 and 1920x1080), each run as ``python -m benchmarks <suite>
+  ``--size`` (default 640x360 and 1920x1080), and ``targets`` once at the sizes it names
+  (tabled first, as "Targets (issue 25)"), each run as ``python -m benchmarks <suite>
   --json --size WxH --frames N --warmup M`` would run it (in this process, or one
   subprocess each with ``--isolate``); the rows are the suite's own JSON lines, kept as
   they are, and the report's median tables are read from them.  ``--frames`` (default 10)
@@ -68,7 +69,9 @@ from benchmarks import format_size, names_from, non_negative_int, parse_sizes, p
 
 ROOT = Path(__file__).resolve().parents[1]
 DEFAULT_SIZES = ((640, 360), (1920, 1080))
-BENCHMARKS = ("mirrors", "portals", "probes", "stages", "profile")
+BENCHMARKS = ("mirrors", "portals", "probes", "stages", "profile", "targets")
+FIXED_SIZE = ("targets",)  # suites that run at the sizes they name: once, not at each --size
+FIXED = "own sizes"  # their runs' key where the others' is a size
 PROFILE_ROWS = 15  # functions per scene and size in report.md (report.json keeps every row)
 PATHS = ("layered_capture", "layered_mips", "direct_faces")
 STATUSES = ("verified", "refused", "unavailable", "unchecked")
@@ -215,9 +218,11 @@ def verdicts_of(checks, expected: tuple[str, ...] = PATHS) -> dict:
     return {name: found[name] for name in (*expected, *sorted(set(found) - set(expected)))}
 
 
-def run_suite(name: str, size: tuple[int, int], frames: int, warmup: int, isolate: bool) -> dict:
-    """One suite at one size, as ``python -m benchmarks <name> --json ...``: its JSON rows."""
-    argv = [name, "--json", "--size", format_size(size), "--frames", str(frames), "--warmup", str(warmup)]
+def run_suite(name: str, size: tuple[int, int] | None, frames: int, warmup: int, isolate: bool) -> dict:
+    """One suite at one size (None: at its own, ``FIXED_SIZE``), as ``python -m benchmarks
+    <name> --json ...``: its JSON rows."""
+    argv = [name, "--json", *(("--size", format_size(size)) if size is not None else ()), "--frames", str(frames),
+            "--warmup", str(warmup)]
     out, err = io.StringIO(), io.StringIO()
     start = time.perf_counter()
     status: int | str
@@ -421,6 +426,13 @@ def markdown(report: dict) -> str:
     if "layered_target" in report:
         out += ["## A layered cube-map target as the driver reports it", ""]
         out += _table(["field", "value"], [{"field": k, "value": v} for k, v in report["layered_target"].items()])
+    targets = report.get("benchmarks", {}).get("targets", {}).get(FIXED)
+    if targets is not None:
+        out += ["## Targets (issue 25)", "",
+                "Each measured on its own engines at the size it names (`python -m benchmarks targets`); "
+                "`applies`: whether the issue sets the limit for this kind of machine (a GPU's targets are "
+                "reported, not judged, on a software rasteriser, and this machine's on a GPU).", ""]
+        out += _table(["target", "value", "limit", "unit", "met", "set_for", "applies", "measured"], targets["rows"])
     if "benchmarks" in report:
         sizes = report["sizes"]
         out += ["## Benchmarks", "",
@@ -545,10 +557,14 @@ def main(args: argparse.Namespace) -> int:
         ctx.release()
     report["benchmarks"] = {suite: {} for suite in args.benchmarks}
     for size, text in zip(args.size, sizes, strict=True):
-        for suite in args.benchmarks:
+        for suite in (s for s in args.benchmarks if s not in FIXED_SIZE):
             run = report["benchmarks"][suite][text] = run_suite(suite, size, args.frames, args.warmup, args.isolate)
             progress(f"{suite} at {text}: {run['status']}, {len(run['rows'])} rows, {run['seconds']} s")
             write(report, out)
+    for suite in (s for s in args.benchmarks if s in FIXED_SIZE):
+        run = report["benchmarks"][suite][FIXED] = run_suite(suite, None, args.frames, args.warmup, args.isolate)
+        progress(f"{suite}: {run['status']}, {len(run['rows'])} rows, {run['seconds']} s")
+        write(report, out)
     if args.no_tests:
         report["tests"] = {"ran": False, "reason": "--no-tests"}
     else:

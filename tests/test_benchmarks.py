@@ -187,7 +187,16 @@ def test_gpu_report_writes_markdown_and_json_without_imgui(ctx, tmp_path):
     assert report["tests"] == {"ran": False, "reason": "--no-tests"}
 
     runs = report["benchmarks"]
-    assert set(runs) == {"mirrors", "portals", "probes", "stages", "profile"}
+    assert set(runs) == {"mirrors", "portals", "probes", "stages", "profile", "targets"}
+    targets = runs.pop("targets")  # at the sizes it names, once
+    assert set(targets) == {"own sizes"} and targets["own sizes"]["status"] == "ok", targets
+    assert "--size" not in targets["own sizes"]["command"] and "--frames 2" in targets["own sizes"]["command"]
+    from benchmarks.targets import LIMITS
+    assert [row["target"] for row in targets["own sizes"]["rows"]] == list(LIMITS)
+    for row in targets["own sizes"]["rows"]:
+        assert row["value"] > 0 and row["met"] == (row["value"] <= row["limit"]), row
+        assert row["applies"] == (row["set_for"] == "this machine"), row  # llvmpipe: this machine's kind
+    assert "## Targets (issue 25)" in markdown and "portal_depth_8_ratio" in markdown
     for suite, by_size in runs.items():
         assert set(by_size) == {"160x90"}, suite
         assert by_size["160x90"]["status"] == "ok", by_size["160x90"]
@@ -485,3 +494,17 @@ def test_a_failing_tests_frames_are_kept_where_speculum_fail_out_says(tmp_path):
         frame = next(arrays[key] for key in arrays.files if key.endswith("_frame"))
         assert frame.shape == (4, 6, 3) and (frame == 7).all()
         assert sum(key.endswith(("_frames_0", "_frames_1")) for key in arrays.files) == 2
+
+
+def test_targets_rows_judge_each_value_against_its_limit_on_the_machine_it_is_set_for():
+    from benchmarks.targets import LIMITS, rows
+    found = {name: (limit * 0.5, "below") for name, (limit, _, _) in LIMITS.items()}
+    found["portal_depth_8_ratio"] = (LIMITS["portal_depth_8_ratio"][0] + 0.01, "just over")
+    found["plan_us_per_view"] = (None, "no view")  # no frame had a reflection view: nothing to judge as met
+    for software in (True, False):
+        table = {row["target"]: row for row in rows(found, software)}
+        assert list(table) == list(LIMITS)
+        assert not table["portal_depth_8_ratio"]["met"] and not table["plan_us_per_view"]["met"]
+        assert table["frame_0_mirrors"]["met"] and table["ecs_cpu_ms"]["met"]
+        assert table["frame_16_mirrors_1080p"]["applies"] == (not software)
+        assert table["ecs_cpu_ms"]["applies"] == software
