@@ -235,32 +235,11 @@ class ViewTree:
             steps.append(step)
             is_end = candidates.end.tolist() if candidates.end is not None else [False] * len(candidates)
             if exact:  # this frame's counts: the CPU waits for the GPU to draw the claims
-                self._claim(surfaces, step)
-                pixels = self.passes.claimed_pixels(step.queries)
-                keep = self._within_budgets(surfaces, candidates,
-                                            [0 if end else n for n, end in zip(pixels, is_end, strict=True)],
-                                            settings, result, level + 1, root.size)
-                grow = range(len(keep))  # every view kept has pixels: each gets its own surfaces
-                end_rows = [i for i, (n, end) in enumerate(zip(pixels, is_end, strict=True)) if end and n > 0]
+                keep, grow, end_rows = self._chosen_by_counts(surfaces, step, is_end, settings, result, level + 1,
+                                                              root.size)
             else:  # last frame's counts: nothing waits; the GPU counts this frame's for the next
-                entities = surfaces.entity_list
-                claim_keys = [keys[p] + (entities[s],) for p, s in
-                              zip(candidates.parent.tolist(), candidates.surface.tolist(), strict=True)]
-                record.pending.extend(claim_keys)
-                seen = [record.seen.get(key) for key in claim_keys]
-                keep = [i for i, end in enumerate(is_end) if not end]
-                # A view hidden last frame is drawn (it may show now) but its own surfaces
-                # wait for a frame that counts pixels for it.
-                grow = [at for at, i in enumerate(keep) if seen[i] != 0]
-                # The frame's spending and the level's coverage, by last frame's counts.
-                drawn = sum(seen[i] or 0 for i in keep)
-                width, height = candidates.size
-                self.coverage[level + 1] = round(drawn * root.size[0] * root.size[1] / (width * height))
-                renderer.stats.views_spent += len(keep)
-                renderer.stats.pixels_spent += drawn
-                end_rows = [i for i, end in enumerate(is_end) if end]
-                # Predicted: the GPU skips the views its claims find hidden (conditional rendering).
-                step.conditions = [step.queries[i] for i in keep]
+                keep, grow, end_rows, claim_keys = self._chosen_by_prediction(surfaces, step, is_end, keys, record,
+                                                                              level + 1, root.size)
             chosen = candidates if len(keep) == len(candidates) else candidates.select(np.asarray(keep, np.int64))
             step.views, children = self._level_nodes(surfaces, chosen, nodes, level + 1, root.hide)
             if len(grow) < len(children):
@@ -326,6 +305,49 @@ class ViewTree:
             else:
                 self.ends.forget()
         return result
+
+    def _chosen_by_counts(self, surfaces: SurfaceTable, step: _Level, is_end: list[bool], settings: TreeSettings,
+                          result: TreeResult, level: int,
+                          screen: tuple[int, int]) -> tuple[list[int] | np.ndarray, range, list[int]]:
+        """Exact visibility: a level's candidates claimed and their counts read now (the CPU
+        waits for the GPU), and which become views (those with pixels that the budgets
+        keep), which of those get views below them (all), and which end views have pixels;
+        each a list of rows of ``step.candidates``."""
+        self._claim(surfaces, step)
+        pixels = self.passes.claimed_pixels(step.queries)
+        keep = self._within_budgets(surfaces, step.candidates,
+                                    [0 if end else n for n, end in zip(pixels, is_end, strict=True)],
+                                    settings, result, level, screen)
+        end_rows = [i for i, (n, end) in enumerate(zip(pixels, is_end, strict=True)) if end and n > 0]
+        return keep, range(len(keep)), end_rows  # every view kept has pixels: each gets its own surfaces
+
+    def _chosen_by_prediction(self, surfaces: SurfaceTable, step: _Level, is_end: list[bool],
+                              keys: list[tuple[int, ...]], record: RootVisibility, level: int,
+                              screen: tuple[int, int]) -> tuple[list[int], list[int], list[int], list[tuple[int, ...]]]:
+        """Predicted visibility: every candidate of the level becomes a view (or an end
+        view), drawn on the GPU only if its claim counts pixels (conditional rendering:
+        ``step.conditions``); only those that had pixels last frame (or were not claimed
+        then) get views below them.  Returns (views, those of them that grow, end views) as
+        rows of ``step.candidates``, and each candidate's key (its chain of surfaces, from
+        its parent's in ``keys``), whose count the GPU keeps in ``record`` for next frame.
+        The frame's spending and the level's coverage go by last frame's counts."""
+        candidates, entities = step.candidates, surfaces.entity_list
+        claim_keys = [keys[p] + (entities[s],) for p, s in
+                      zip(candidates.parent.tolist(), candidates.surface.tolist(), strict=True)]
+        record.pending.extend(claim_keys)
+        seen = [record.seen.get(key) for key in claim_keys]
+        keep = [i for i, end in enumerate(is_end) if not end]
+        # A view hidden last frame is drawn (it may show now) but its own surfaces wait for
+        # a frame that counts pixels for it.
+        grow = [at for at, i in enumerate(keep) if seen[i] != 0]
+        drawn = sum(seen[i] or 0 for i in keep)
+        width, height = candidates.size
+        self.coverage[level] = round(drawn * screen[0] * screen[1] / (width * height))
+        stats = self.renderer.stats
+        stats.views_spent += len(keep)
+        stats.pixels_spent += drawn
+        step.conditions = [step.queries[i] for i in keep]
+        return keep, grow, [i for i, end in enumerate(is_end) if end], claim_keys
 
     def _waits_for_counts(self, settings: TreeSettings) -> bool:
         """Whether the levels read this frame's claim counts (the CPU waits for the GPU once
