@@ -58,8 +58,9 @@ void main() {
     // the parent mirror's plane: still in front of the eye, unlike its tilted far plane).
     vec4 near = v_inv_view_proj * vec4(uv * 2.0 - 1.0, -1.0, 1.0);
     vec3 view_dir = normalize(near.xyz / near.w - v_eye.xyz);
-    out_seen = texelFetch(reflection_seen, px, 0).r;
-    if (out_seen == NO_END_IMAGE) discard;  // an end view's pixel last frame's image did not hold
+    uint seen_id = texelFetch(reflection_seen, px, 0).r;
+    if (seen_id == NO_END_IMAGE) discard;  // an end view's pixel last frame's image did not hold
+    out_seen = seen_id;
 #ifdef COMPOSITE_PORTAL
     vec4 through = textureLod(reflection, uv, 0.0);
     vec3 beyond = textureLod(sky_map, v_carry * view_dir, 0.0).rgb;
