@@ -128,6 +128,8 @@ def main(args: argparse.Namespace) -> int:
     try:
         software = GLCapabilities.read(ctx).software
         found = rows(measure(ctx, args.frames, args.warmup), software)
+        if ctx.error != "GL_NO_ERROR":
+            raise RuntimeError(f"OpenGL error: {ctx.error}")
         renderer = ctx.info.get("GL_RENDERER", "?")
     finally:
         ctx.release()
