@@ -59,11 +59,18 @@ EMISSIVE_MAP_UNIT = 12   # scene: the batch's emissive map (Material.emissive_ma
 METALLIC_ROUGHNESS_UNIT = 13  # scene: the batch's metallic-roughness map (Material.metallic_roughness_map)
 CUBE_MIP_UNIT = 14       # cube-map mip pass: the cube whose next level it draws
 SCRATCH_UNIT = 15        # raw-GL copies bind their target here; no program reads it
+# Lighting (the scene pass binds these at its start: the passes that use 3, 4 and 5 for
+# other images are not scene passes).
+SHADOW_ATLAS_UNIT = 11   # scene: the directional lights' shadow maps, one depth atlas (sampler2DShadow)
+POINT_SHADOW_UNITS = (3, 4)  # scene: the shadowed point lights' distance cube maps, one a light
+IRRADIANCE_UNIT = 5      # scene: the irradiance table (sky and probes' spherical harmonics)
 
 # --- uniform-block binding points ----------------------------------------------------------
 CAMERA_BINDING = 0
 LIGHTS_BINDING = 1
 VIEWS_BINDING = 2        # the batched scene program's table of a level's views
+SHADOWS_BINDING = 3      # scene: the lights' shadow matrices and atlas rectangles
+IRRADIANCE_BINDING = 4   # scene: the probes' influence boxes for diffuse image lighting
 
 # --- clip distances ------------------------------------------------------------------------
 # The GLSL writes gl_ClipDistance[CLIP_VIEW_PLANE] and so on: the names below, defined for
