@@ -60,6 +60,11 @@ class GpuMesh:
         self.index_count = mesh.indices.size
         # Model-space radius about the origin (what an instance's scale stretches).
         self.radius = float(np.linalg.norm(mesh.positions, axis=1).max()) if len(mesh.positions) else 0.0
+        # The corners of its model-space box, homogeneous (what an instance's world box is made from).
+        lo = mesh.positions.min(axis=0) if len(mesh.positions) else np.zeros(3)
+        hi = mesh.positions.max(axis=0) if len(mesh.positions) else np.zeros(3)
+        self.corners = np.array([[x, y, z, 1.0] for x in (lo[0], hi[0]) for y in (lo[1], hi[1])
+                                 for z in (lo[2], hi[2])], np.float64)
 
     def release(self) -> None:
         self.vertices.release()
@@ -86,6 +91,9 @@ class InstanceBatch:
         self._vaos: dict[int, moderngl.VertexArray] = {}
         self._max_scale = 0.0
         self._rescale = False
+        # The world box of every instance, as of the last upload: grown by the rows each
+        # upload sends, measured again from all rows after a removal (the shadows' fit).
+        self._box: tuple[np.ndarray, np.ndarray] | None = None
         self.probe = 0  # the entity owning the reflection probe its instances sample (0: none)
         # Probe blending (probe_rules.probe_blend): a second probe (0: none), and whether the
         # instances blend (their rows' ``reflect`` z and w weigh the two probes, the sky the rest).
@@ -218,6 +226,22 @@ class InstanceBatch:
             squares = [np.einsum("ij,ij->i", model[:, c:c + 3], model[:, c:c + 3]).max() for c in (0, 4, 8)]
             self._max_scale = max(self._max_scale, float(np.sqrt(max(squares))))
 
+    def _grow_box(self, rows: np.ndarray) -> None:
+        if not len(rows):
+            return
+        models = self.rows["model"][rows].astype(np.float64).reshape(-1, 4, 4)  # [instance, column, row]
+        world = np.einsum("kc,ncr->nkr", self.mesh.corners, models)[..., :3]
+        lo, hi = world.min(axis=(0, 1)), world.max(axis=(0, 1))
+        if self._box is not None:
+            lo, hi = np.minimum(lo, self._box[0]), np.maximum(hi, self._box[1])
+        self._box = (lo, hi)
+
+    @property
+    def box(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """The world box [lo, hi] holding every instance as of the last upload (None: empty);
+        it may be larger than they are after one moved inward, never smaller."""
+        return self._box if self.count else None
+
     def upload(self) -> int:
         """Send rows written since the last upload; returns the bytes sent."""
         size = INSTANCE_DTYPE.itemsize
@@ -226,14 +250,16 @@ class InstanceBatch:
             self._buffer_rows = len(self.rows)
             self._dirty = set(range(self.count))
         if self._rescale:
-            self._max_scale, self._rescale = 0.0, False
+            self._max_scale, self._rescale, self._box = 0.0, False, None
             self._grow_scale(np.arange(self.count))
+            self._grow_box(np.arange(self.count))
         if not self._dirty:
             return 0
         dirty = np.fromiter(self._dirty, np.int64, len(self._dirty))
         dirty.sort()
         self._dirty.clear()
         self._grow_scale(dirty)
+        self._grow_box(dirty)
         breaks = np.flatnonzero(np.diff(dirty) != 1) + 1
         starts = np.concatenate([[dirty[0]], dirty[breaks]])
         ends = np.concatenate([dirty[breaks - 1], [dirty[-1]]]) + 1
