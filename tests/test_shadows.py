@@ -8,7 +8,16 @@ import numpy as np
 import pytest
 from pyglm import glm
 
-from components import ComponentValueError, DirectionalLight, Material, MeshRef, Mirror, PointLight, ReflectionProbe, Transform
+from components import (
+    ComponentValueError,
+    DirectionalLight,
+    Material,
+    MeshRef,
+    Mirror,
+    PointLight,
+    ReflectionProbe,
+    Transform,
+)
 from engine.assets.mesh import box, plane, quad, sphere
 from engine.rules.probe_schedule import ProbeSchedule
 from tests.support import look_from, srgb_to_linear

@@ -331,7 +331,8 @@ class Renderer:
         """Live GL resources this renderer owns, by kind (soak and churn runs check that they
         come back to their baseline; tests that they go back to zero)."""
         return {"meshes": len(self._meshes), "textures": len(self._textures), "batches": len(self.batches),
-                "probe_cubes": len(self.probes.cubes), "shadow_cubes": len(self.shadows.cubes), "layered_targets": len(self.probes._layered),
+                "probe_cubes": len(self.probes.cubes), "shadow_cubes": len(self.shadows.cubes),
+                "layered_targets": len(self.probes._layered),
                 "face_targets": len(self.probes._faces),
                 "levels": len(self.levels), "probe_levels": sum(len(s) for s in self.probes._stacks.values()),
                 "programs": len(self.shaders._programs)}
