@@ -242,6 +242,11 @@ class DebugOverlay:
         if changed:
             renderer.antialias = "fxaa" if fxaa else "off"
         self._widget("fxaa")
+        shadows = engine.stages["shadows"]
+        changed, on = imgui.checkbox("shadows", shadows.enabled)
+        if changed:
+            shadows.enabled = on
+        self._widget("shadows")
         self.shown_errors = list(renderer.shaders.errors.values())
         for error in self.shown_errors:
             imgui.text_colored(imgui.ImVec4(1.0, 0.35, 0.3, 1.0), error)

@@ -147,6 +147,9 @@ def test_window_f1_shows_the_overlay_and_its_toggles_change_the_paths(tmp_path):
         assert config.engine.stages["probes"].path == "layered"
         click("fxaa")
         assert config.engine.renderer.antialias == "off"
+        click("shadows")
+        assert not config.engine.stages["shadows"].enabled
+        assert any(line.startswith("shadow maps drawn") and line.endswith("(off)") for line in config.overlay.lines)
         assert not config.mouse_captured, "a click on the overlay is not a click in the world"
         assert any(line.startswith("reflection path batched") for line in config.overlay.lines)
 

@@ -19,6 +19,8 @@ from components import (
     Transform,
 )
 from engine.assets.mesh import box, plane, quad, sphere
+from engine.assets.portals import spawn_portal_pair
+from engine.core.portal_math import pair_transform
 from engine.rules.probe_schedule import ProbeSchedule
 from tests.support import look_from, srgb_to_linear
 
@@ -151,6 +153,36 @@ def test_the_shadow_seen_in_a_mirror_is_the_mirrored_points_shadow(scene):
     share, counted, in_shadow = _agreement(shadowed, lit, in_mirror, occluded_in, occluded_out)
     assert counted > 4000 and in_shadow > 300, (counted, in_shadow, share)
     assert share >= 0.99, f"{share:.4f} of {counted} floor pixels in the mirror agree with the shadow rays"
+
+
+def test_the_shadow_seen_through_a_portal_is_the_carried_points_shadow(scene):
+    """Looking into portal A (at z = 5, facing the camera) shows what lies in front of
+    portal B (at z = -6, facing the box and the sphere): the floor point each pixel shows is
+    the ray carried by the pair's transform to where it meets the floor."""
+    def build(world):
+        ids = world.resources["ids"] = _floor_scene(world, (0.0, 2.6, 9.5), (0.0, 1.2, 5.0))
+        ids["a"], ids["b"] = spawn_portal_pair(world, (0.0, 1.5, 5.0), None, (0.0, 1.5, -6.0), None)
+
+    runner, ids, without, with_shadows = _render_both(scene, build)
+    shadowed, lit = _classified(without, with_shadows)
+    targets = runner.engine.renderer.targets
+    through = (targets.read_surface_ids() == ids["a"]) & (runner.ids() == ids["floor"])
+    carry = glm.dmat4(pair_transform(runner.world.get(ids["a"], Transform).world,
+                                     runner.world.get(ids["b"], Transform).world))
+    m = np.array(carry.to_list(), np.float64).T   # rows act on column vectors
+    eye, rays = _pixel_rays(runner.engine.main_view, runner.size)
+    t = (5.0 - eye[2]) / rays[..., 2]
+    at_a = eye + rays * t[..., None]
+    carried = at_a @ m[:3, :3].T + m[:3, 3]
+    turned = rays @ m[:3, :3].T
+    s = -carried[..., 1] / turned[..., 1]
+    points = (carried + turned * s[..., None]).reshape(-1, 3)
+    to_light = np.tile(-np.array(LIGHT, np.float64), (len(points), 1))
+    occluded_in = _hits(points, to_light, -PENUMBRA).reshape(through.shape)
+    occluded_out = _hits(points, to_light, PENUMBRA).reshape(through.shape)
+    share, counted, in_shadow = _agreement(shadowed, lit, through, occluded_in, occluded_out)
+    assert counted > 4000 and in_shadow > 200, (counted, in_shadow, share)
+    assert share >= 0.99, f"{share:.4f} of {counted} floor pixels through the portal agree with the shadow rays"
 
 
 @pytest.mark.parametrize("path", ["layered", "six_pass"])
