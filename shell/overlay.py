@@ -243,6 +243,7 @@ class DebugOverlay:
             renderer.antialias = "fxaa" if fxaa else "off"
         self._widget("fxaa")
         shadows = engine.stages["shadows"]
+        imgui.same_line()
         changed, on = imgui.checkbox("shadows", shadows.enabled)
         if changed:
             shadows.enabled = on

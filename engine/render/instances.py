@@ -91,8 +91,10 @@ class InstanceBatch:
         self._vaos: dict[int, moderngl.VertexArray] = {}
         self._max_scale = 0.0
         self._rescale = False
-        # The world box of every instance, as of the last upload: grown by the rows each
-        # upload sends, measured again from all rows after a removal (the shadows' fit).
+        # Each row's world box, kept for the rows each upload sends (a removal's moved row
+        # is sent too), and their union, worked out again after an upload that sent rows:
+        # what the shadows' fit reads, exact whatever came and went before.
+        self._row_boxes = np.zeros((capacity, 2, 3), np.float64)
         self._box: tuple[np.ndarray, np.ndarray] | None = None
         self.probe = 0  # the entity owning the reflection probe its instances sample (0: none)
         # Probe blending (probe_rules.probe_blend): a second probe (0: none), and whether the
@@ -190,6 +192,7 @@ class InstanceBatch:
         self._moving = min(self._moving, last)
         self._dirty.discard(last)
         self._rescale = True  # the largest instance may have gone: measure all rows again
+        self._box = None      # and the union of the rows' boxes
         self._variants_stale = True
 
     def variants_changed(self) -> None:
@@ -227,20 +230,26 @@ class InstanceBatch:
             self._max_scale = max(self._max_scale, float(np.sqrt(max(squares))))
 
     def _grow_box(self, rows: np.ndarray) -> None:
-        if not len(rows):
-            return
+        """Measure the world boxes of ``rows`` (just sent) and forget the union."""
+        if len(self._row_boxes) < len(self.rows):
+            grown = np.zeros((len(self.rows), 2, 3), np.float64)
+            grown[: len(self._row_boxes)] = self._row_boxes
+            self._row_boxes = grown
         models = self.rows["model"][rows].astype(np.float64).reshape(-1, 4, 4)  # [instance, column, row]
         world = np.einsum("kc,ncr->nkr", self.mesh.corners, models)[..., :3]
-        lo, hi = world.min(axis=(0, 1)), world.max(axis=(0, 1))
-        if self._box is not None:
-            lo, hi = np.minimum(lo, self._box[0]), np.maximum(hi, self._box[1])
-        self._box = (lo, hi)
+        self._row_boxes[rows, 0] = world.min(axis=1)
+        self._row_boxes[rows, 1] = world.max(axis=1)
+        self._box = None
 
     @property
     def box(self) -> tuple[np.ndarray, np.ndarray] | None:
-        """The world box [lo, hi] holding every instance as of the last upload (None: empty);
-        it may be larger than they are after one moved inward, never smaller."""
-        return self._box if self.count else None
+        """The world box [lo, hi] holding every instance as of the last upload (None: empty)."""
+        if not self.count:
+            return None
+        if self._box is None:
+            boxes = self._row_boxes[: self.count]
+            self._box = (boxes[:, 0].min(axis=0), boxes[:, 1].max(axis=0))
+        return self._box
 
     def upload(self) -> int:
         """Send rows written since the last upload; returns the bytes sent."""
@@ -252,7 +261,6 @@ class InstanceBatch:
         if self._rescale:
             self._max_scale, self._rescale, self._box = 0.0, False, None
             self._grow_scale(np.arange(self.count))
-            self._grow_box(np.arange(self.count))
         if not self._dirty:
             return 0
         dirty = np.fromiter(self._dirty, np.int64, len(self._dirty))

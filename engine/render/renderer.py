@@ -85,7 +85,8 @@ class RenderStats:
     # Shadow maps (systems/shadow_system.py): drawn this frame, kept from an earlier frame (no
     # caster or light changed), and lights whose shadows a limit left out (point lights past
     # MAX_POINT_SHADOWS); how the last point light's cube was drawn ("layered" or "six_pass").
-    shadow_maps_drawn: int = 0
+    shadow_maps_drawn: int = 0           # (their draws: shadow_draw_calls, not in passes or draw_calls)
+    shadow_draw_calls: int = 0
     shadow_maps_kept: int = 0
     shadows_cut: int = 0
     shadow_path: str = ""

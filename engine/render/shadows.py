@@ -228,10 +228,9 @@ class ShadowMaps:
             for batch in renderer.opaque_batches():
                 if batch.count:
                     batch.draw(program)
-                    renderer.stats.draw_calls += 1
+                    renderer.stats.shadow_draw_calls += 1
         finally:
             ctx.polygon_offset = (0.0, 0.0)
-        renderer.stats.passes += 1
 
     def upload(self) -> None:
         self.ubo.write(self.block.tobytes())

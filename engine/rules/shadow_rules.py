@@ -80,17 +80,27 @@ def boxes_in_reach(lo: np.ndarray, hi: np.ndarray, position: np.ndarray, light_r
 def directional_shadow_bounds(lo: np.ndarray, hi: np.ndarray, direction: glm.vec3 | np.ndarray,
                               level_lo: np.ndarray, level_hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """World boxes (rows) holding where the shadows of the boxes [lo, hi] fall under a light
-    travelling along ``direction``: each box swept along the light until it leaves the
-    level's box (nothing lies beyond it to receive a shadow).  Conservative."""
+    travelling along ``direction``: each box swept along the light until its last corner
+    leaves the level's box (nothing beyond it receives a shadow).  Conservative."""
     lo = np.atleast_2d(np.asarray(lo, np.float64))
     hi = np.atleast_2d(np.asarray(hi, np.float64))
+    level_lo = np.asarray(level_lo, np.float64)
+    level_hi = np.asarray(level_hi, np.float64)
     d = np.asarray(direction, np.float64)
     d = d / np.linalg.norm(d)
-    length = float(np.linalg.norm(np.asarray(level_hi, np.float64) - np.asarray(level_lo, np.float64)))
-    far_lo, far_hi = lo + d * length, hi + d * length
-    out_lo = np.maximum(np.minimum(lo, far_lo), level_lo)
-    out_hi = np.minimum(np.maximum(hi, far_hi), level_hi)
-    return np.minimum(out_lo, lo), np.maximum(out_hi, hi)
+    # How far each box's corners travel before leaving the level's box: per axis the distance
+    # to the wall the light runs towards, the nearest of those; the farthest corner's.
+    moving = np.abs(d) > 1e-9
+    wall = np.where(d > 0.0, level_hi, level_lo)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        from_lo = np.where(moving, (wall - lo) / np.where(moving, d, 1.0), np.inf)
+        from_hi = np.where(moving, (wall - hi) / np.where(moving, d, 1.0), np.inf)
+    travel = np.maximum(np.maximum(from_lo, from_hi).min(axis=1), 0.0)   # the corner farthest from the walls
+    travel = np.minimum(travel, float(np.linalg.norm(level_hi - level_lo)))
+    far_lo, far_hi = lo + d * travel[:, None], hi + d * travel[:, None]
+    out_lo = np.maximum(np.minimum(lo, far_lo), np.minimum(level_lo, lo))
+    out_hi = np.minimum(np.maximum(hi, far_hi), np.maximum(level_hi, hi))
+    return out_lo, out_hi
 
 
 def point_shadow_bounds(lo: np.ndarray, hi: np.ndarray, position: np.ndarray,
