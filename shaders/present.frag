@@ -9,12 +9,12 @@
 // (TONEMAP_CURVE, include/tonemap.glsl), then the sRGB encoding.  Without POST the
 // code is the plain look's, unchanged.
 #include "color.glsl"
+#include "tonemap.glsl"
 
 uniform sampler2D hdr_image;
 uniform float exposure;
 
 #ifdef POST
-#include "tonemap.glsl"
 #ifdef BLOOM
 uniform sampler2D bloom_image;
 uniform vec2 bloom_mix;   // (weight of the image, weight of the bloom image's sum of levels)

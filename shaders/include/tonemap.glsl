@@ -10,6 +10,9 @@
 #define TONEMAP_ACES 1
 #define TONEMAP_AGX 2
 #define TONEMAP_PBR_NEUTRAL 3
+#ifndef TONEMAP_CURVE
+#define TONEMAP_CURVE TONEMAP_NONE
+#endif
 
 // ACES: Stephen Hill's fit of the ACES reference rendering transform and sRGB output
 // transform (BakingLab, ACES.hlsl, 2016): sRGB -> AP1 with the RRT's saturation, a rational
