@@ -12,18 +12,17 @@
 // goes on down the chain.
 
 uniform sampler2D source;     // the level above (the HDR image for FIRST): bilinear
-uniform vec2 source_texel;    // 1 / its size
-uniform vec2 target_texel;    // 1 / this level's size
 #ifdef THRESHOLD
 uniform vec4 threshold;       // (threshold, threshold - knee, 2 knee, 1 / (4 knee))
 #endif
 
+in vec2 v_uv;                 // this level's pixel centre (present.vert)
 out vec4 out_color;
 
 // Taps past the edge read the edge (clamped here, not by the source's wrap mode: the HDR
 // image is the main view's level 0, whose sampler state other passes own).
-vec3 tap(vec2 uv, vec2 offset) {
-    return texture(source, clamp(uv + offset * source_texel, 0.5 * source_texel, 1.0 - 0.5 * source_texel)).rgb;
+vec3 tap(vec2 uv, vec2 texel, vec2 offset) {
+    return textureLod(source, clamp(uv + offset * texel, 0.5 * texel, 1.0 - 0.5 * texel), 0.0).rgb;
 }
 
 #ifdef FIRST
@@ -33,12 +32,13 @@ float karis_weight(vec3 c) {
 #endif
 
 void main() {
-    vec2 uv = gl_FragCoord.xy * target_texel;
-    vec3 a = tap(uv, vec2(-2.0, 2.0)), b = tap(uv, vec2(0.0, 2.0)), c = tap(uv, vec2(2.0, 2.0));
-    vec3 d = tap(uv, vec2(-2.0, 0.0)), e = tap(uv, vec2(0.0, 0.0)), f = tap(uv, vec2(2.0, 0.0));
-    vec3 g = tap(uv, vec2(-2.0, -2.0)), h = tap(uv, vec2(0.0, -2.0)), i = tap(uv, vec2(2.0, -2.0));
-    vec3 j = tap(uv, vec2(-1.0, 1.0)), k = tap(uv, vec2(1.0, 1.0));
-    vec3 l = tap(uv, vec2(-1.0, -1.0)), m = tap(uv, vec2(1.0, -1.0));
+    vec2 uv = v_uv;
+    vec2 t = 1.0 / vec2(textureSize(source, 0));
+    vec3 a = tap(uv, t, vec2(-2.0, 2.0)), b = tap(uv, t, vec2(0.0, 2.0)), c = tap(uv, t, vec2(2.0, 2.0));
+    vec3 d = tap(uv, t, vec2(-2.0, 0.0)), e = tap(uv, t, vec2(0.0, 0.0)), f = tap(uv, t, vec2(2.0, 0.0));
+    vec3 g = tap(uv, t, vec2(-2.0, -2.0)), h = tap(uv, t, vec2(0.0, -2.0)), i = tap(uv, t, vec2(2.0, -2.0));
+    vec3 j = tap(uv, t, vec2(-1.0, 1.0)), k = tap(uv, t, vec2(1.0, 1.0));
+    vec3 l = tap(uv, t, vec2(-1.0, -1.0)), m = tap(uv, t, vec2(1.0, -1.0));
     vec3 centre = (j + k + l + m) * 0.25;
     vec3 top_left = (a + b + d + e) * 0.25, top_right = (b + c + e + f) * 0.25;
     vec3 bottom_left = (d + e + g + h) * 0.25, bottom_right = (e + f + h + i) * 0.25;

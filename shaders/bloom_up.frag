@@ -5,19 +5,22 @@
 // sum of its own blur and every smaller level's (Jimenez 2014).  The weights sum to 1.
 
 uniform sampler2D source;     // the smaller level (already holding the sum of those below it)
-uniform vec2 source_texel;    // 1 / its size
-uniform vec2 target_texel;    // 1 / the larger level's size
 uniform float radius;         // tap spacing in texels of the smaller level
 
+in vec2 v_uv;                 // the larger level's pixel centre (present.vert)
 out vec4 out_color;
 
+// textureLod: the levels have no mipmaps, and a software rasteriser skips the derivatives.
+vec3 tap(vec2 uv) {
+    return textureLod(source, uv, 0.0).rgb;
+}
+
 void main() {
-    vec2 uv = gl_FragCoord.xy * target_texel;
-    vec2 s = source_texel * radius;
-    vec3 sum = texture(source, uv).rgb * 4.0;
-    sum += (texture(source, uv + vec2(-s.x, 0.0)).rgb + texture(source, uv + vec2(s.x, 0.0)).rgb
-            + texture(source, uv + vec2(0.0, -s.y)).rgb + texture(source, uv + vec2(0.0, s.y)).rgb) * 2.0;
-    sum += texture(source, uv + vec2(-s.x, -s.y)).rgb + texture(source, uv + vec2(s.x, -s.y)).rgb
-         + texture(source, uv + vec2(-s.x, s.y)).rgb + texture(source, uv + vec2(s.x, s.y)).rgb;
+    vec2 uv = v_uv;
+    vec2 s = radius / vec2(textureSize(source, 0));
+    vec3 sum = tap(uv) * 4.0;
+    sum += (tap(uv + vec2(-s.x, 0.0)) + tap(uv + vec2(s.x, 0.0)) + tap(uv + vec2(0.0, -s.y))
+            + tap(uv + vec2(0.0, s.y))) * 2.0;
+    sum += tap(uv + vec2(-s.x, -s.y)) + tap(uv + vec2(s.x, -s.y)) + tap(uv + vec2(-s.x, s.y)) + tap(uv + vec2(s.x, s.y));
     out_color = vec4(sum * (1.0 / 16.0), 1.0);
 }

@@ -502,3 +502,72 @@ def test_level_files_carry_tonemap_and_bloom(tmp_path):
     bad.write_text(LEVEL.replace('curve = "aces"', 'curve = "filmic"'))
     with pytest.raises(Exception, match="Tonemap.curve"):
         load_level(bad)
+
+
+# --- the present stage's switches and the overlay -----------------------------------------------------
+
+def test_the_present_stages_switches_turn_bloom_off_and_override_the_curve(known):
+    """``PresentSystem.bloom = False`` draws no camera's bloom (its textures go), ``curve``
+    sets every camera's curve; the overlay's text says which, with the adapted exposure."""
+    from shell.overlay_text import post_lines
+
+    def post_line(engine) -> str:
+        return "; ".join(post_lines(engine))
+
+    image = ramp()
+    runner = known(image, Tonemap(curve="agx", auto_exposure=True), Bloom(intensity=0.3))
+    present = runner.engine.stages["present"]
+    bloomed = runner.frame()
+    adapted = runner.engine.renderer.present_pass.auto_exposure.adapted_ev()
+    line = post_line(runner.engine)
+    assert line.startswith(f"post: agx (camera), +0.00 EV, auto {adapted:+.2f}; "), line
+    # 12 rows: levels 6x128 and 3x64 (3 passes), and 4 exposure passes
+    assert line.endswith("; bloom 0.3 x2, 7 passes"), line
+    present.bloom = False
+    plain = runner.frame()
+    assert not np.array_equal(plain, bloomed)
+    assert runner.engine.renderer.resource_counts()["post_targets"] == 5  # the exposure's only
+    assert "bloom off (set)" in post_line(runner.engine)
+    present.curve = "none"
+    runner.world.get(runner.game.camera, Tonemap).auto_exposure = False
+    got = runner.frame().astype(np.int16)
+    assert np.abs(got - expected_srgb8(CURVES["none"](image[..., :3].astype(np.float64)))).max() <= 1
+    assert post_line(runner.engine) == "post: none (set; camera agx), +0.00 EV; bloom off (set), 0 passes"
+    with pytest.raises(ValueError, match="PresentSystem.curve"):
+        present.curve = "filmic"
+    bare = known(image)
+    bare.frame()
+    assert post_line(bare.engine) == "post: none (camera), x1; bloom off, 0 passes"
+
+
+def test_the_overlay_toggles_bloom_and_picks_the_curve(known, ctx):
+    pytest.importorskip("imgui_bundle", reason="the debug overlay needs imgui-bundle (not installed here)")
+    from shell.overlay import DebugOverlay
+
+    image = ramp(width=640, rows_per_tint=100)   # room for the whole overlay
+    runner = known(image, Tonemap(curve="agx"), Bloom())
+    present = runner.engine.stages["present"]
+    runner.frame()
+    overlay = DebugOverlay(ctx)
+    try:
+        def click(widget: str) -> None:
+            for down in (None, True, False):
+                x, y = overlay.widgets[widget]
+                overlay.mouse_moved(x, y)
+                if down is not None:
+                    overlay.mouse_button(1, down)
+                overlay.draw(runner.engine, runner.capture.framebuffer, runner.size)
+
+        overlay.draw(runner.engine, runner.capture.framebuffer, runner.size)
+        assert any(line.startswith("post: agx (camera)") for line in overlay.lines)
+        assert overlay.region[3] < runner.size[1] - 8, overlay.region
+        click("bloom")
+        assert present.bloom is False, overlay.widgets
+        click("curve")            # opens the drop-down
+        click("curve aces")
+        assert present.curve == "aces"
+        click("curve")
+        click("curve camera")
+        assert present.curve is None
+    finally:
+        overlay.release()

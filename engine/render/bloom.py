@@ -52,15 +52,23 @@ class BloomPass:
         self.textures: list[moderngl.Texture] = []
         self._framebuffers: list[moderngl.Framebuffer] = []
         self.levels = 0   # levels drawn by the last ``draw``
+        self._written: dict[tuple[int, str], object] = {}   # (vao id, uniform) -> the value last written
 
     def _vao(self, fragment: str, **defines: str) -> moderngl.VertexArray:
         key = (fragment, tuple(sorted(defines.items())))
         vao = self._vaos.get(key)
         if vao is None:
-            program = self.shaders.program("fullscreen.vert", fragment, defines=defines or None)
+            program = self.shaders.program("present.vert", fragment, defines=defines or None)
             program["source"].value = PRESENT_UNIT
             vao = self._vaos[key] = self.ctx.vertex_array(program, [])
         return vao
+
+    def _set(self, vao: moderngl.VertexArray, name: str, value) -> None:
+        """Write a uniform only when its value changes (each write is a GL call)."""
+        key = (id(vao), name)
+        if self._written.get(key) != value:
+            vao.program[name].value = value
+            self._written[key] = value
 
     def _chain(self, sizes: list[tuple[int, int]]) -> None:
         if [t.size for t in self.textures] == sizes:
@@ -85,32 +93,25 @@ class BloomPass:
         source = hdr
         for index, (size, framebuffer) in enumerate(zip(sizes, self._framebuffers, strict=False)):
             if index == 0:
-                defines = {"FIRST": "1"}
-                if bloom.threshold > 0.0:
-                    defines["THRESHOLD"] = "1"
-                vao = self._vao("bloom_down.frag", **defines)
-                if bloom.threshold > 0.0:
+                threshold = bloom.threshold > 0.0
+                vao = self._vao("bloom_down.frag", FIRST="1", **({"THRESHOLD": "1"} if threshold else {}))
+                if threshold:
                     knee = bloom.threshold * bloom.knee
-                    vao.program["threshold"].value = (bloom.threshold, bloom.threshold - knee, 2.0 * knee,
-                                                      0.25 / max(knee, 1e-5))
+                    self._set(vao, "threshold", (bloom.threshold, bloom.threshold - knee, 2.0 * knee,
+                                                 0.25 / max(knee, 1e-5)))
             else:
                 vao = self._vao("bloom_down.frag")
             framebuffer.use()
             apply_pass_state(self.ctx, _DOWN, (0, 0, *size))
             source.use(PRESENT_UNIT)
-            vao.program["source_texel"].value = (1.0 / source.size[0], 1.0 / source.size[1])
-            vao.program["target_texel"].value = (1.0 / size[0], 1.0 / size[1])
             vao.render(moderngl.TRIANGLES, vertices=3)
             source = self.textures[index]
         up = self._vao("bloom_up.frag")
-        up.program["radius"].value = bloom.radius
+        self._set(up, "radius", bloom.radius)
         for index in range(len(sizes) - 2, -1, -1):
-            size, smaller = sizes[index], self.textures[index + 1]
             self._framebuffers[index].use()
-            apply_pass_state(self.ctx, _UP, (0, 0, *size))
-            smaller.use(PRESENT_UNIT)
-            up.program["source_texel"].value = (1.0 / smaller.size[0], 1.0 / smaller.size[1])
-            up.program["target_texel"].value = (1.0 / size[0], 1.0 / size[1])
+            apply_pass_state(self.ctx, _UP, (0, 0, *sizes[index]))
+            self.textures[index + 1].use(PRESENT_UNIT)
             up.render(moderngl.TRIANGLES, vertices=3)
         return self.textures[0]
 
@@ -131,3 +132,4 @@ class BloomPass:
         for vao in self._vaos.values():
             vao.release()
         self._vaos.clear()
+        self._written.clear()

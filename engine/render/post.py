@@ -51,6 +51,15 @@ class AutoExposure:
         self._state: list[tuple[moderngl.Texture, moderngl.Framebuffer]] = []
         self.current: moderngl.Texture | None = None   # the 1x1 exposure written last
         self.camera: int | None = None                  # whose exposure it is
+        self._luminance.program["target_texel"].value = (1.0 / LUMINANCE_SIDE, 1.0 / LUMINANCE_SIDE)
+        self._written: dict[tuple[int, str], object] = {}   # (vao id, uniform) -> the value last written
+
+    def _set(self, vao: moderngl.VertexArray, name: str, value) -> None:
+        """Write a uniform only when its value changes (each write is a GL call)."""
+        key = (id(vao), name)
+        if self._written.get(key) != value:
+            vao.program[name].value = value
+            self._written[key] = value
 
     def _vao(self, fragment: str, **units: int) -> moderngl.VertexArray:
         program = self.shaders.program("fullscreen.vert", fragment)
@@ -84,9 +93,7 @@ class AutoExposure:
         framebuffer.use()
         apply_pass_state(ctx, _PASS, (0, 0, LUMINANCE_SIDE, LUMINANCE_SIDE))
         hdr.use(PRESENT_UNIT)
-        program = self._luminance.program
-        program["target_texel"].value = (1.0 / LUMINANCE_SIDE, 1.0 / LUMINANCE_SIDE)
-        program["log_range"].value = (key_log2 - tonemap.max_ev, key_log2 - tonemap.min_ev)
+        self._set(self._luminance, "log_range", (key_log2 - tonemap.max_ev, key_log2 - tonemap.min_ev))
         self._luminance.render(moderngl.TRIANGLES, vertices=3)
         # 2. 4x4 means down to 4x4.
         for (source, _), (_, target) in zip(self._targets, self._targets[1:], strict=False):
@@ -101,10 +108,9 @@ class AutoExposure:
         apply_pass_state(ctx, _PASS, (0, 0, 1, 1))
         self._targets[-1][0].use(PRESENT_UNIT)
         previous[0].use(EXPOSURE_UNIT)
-        program = self._adapt.program
-        program["key_log2"].value = key_log2
-        program["ev_range"].value = (tonemap.min_ev, tonemap.max_ev)
-        program["blend"].value = 1.0 if reset else adapt_blend(tonemap.adapt_speed, dt)
+        self._set(self._adapt, "key_log2", key_log2)
+        self._set(self._adapt, "ev_range", (tonemap.min_ev, tonemap.max_ev))
+        self._set(self._adapt, "blend", 1.0 if reset else adapt_blend(tonemap.adapt_speed, dt))
         self._adapt.render(moderngl.TRIANGLES, vertices=3)
         self._state.reverse()
         self.current = state

@@ -46,6 +46,7 @@ class PresentPass:
         self._encoded: CaptureTarget | None = None   # what FXAA reads, made at the output's size
         self.search_steps = 0 if software else GPU_SEARCH_STEPS
         self._post: dict[tuple, moderngl.VertexArray] = {}   # present.frag's POST builds, by their defines
+        self._written: dict[tuple[int, str], object] = {}    # (vao id, uniform) -> the value last written
         self.bloom = BloomPass(ctx, shaders)
         self.auto_exposure = AutoExposure(ctx, shaders)
         self.post_passes = 0   # bloom and exposure draws in the last frame (the tone map is the present draw)
@@ -139,17 +140,23 @@ class PresentPass:
             self.auto_exposure.release_targets()
         curve = curve if curve is not None else (tonemap.curve if tonemap is not None else "none")
         encode = self._post_build(curve, bloomed is not None, auto, luma)
-        program = encode.program
-        program["exposure"].value = 2.0 ** tonemap.exposure if tonemap is not None else exposure
+        self._set(encode, "exposure", 2.0 ** tonemap.exposure if tonemap is not None else exposure)
         hdr.use(PRESENT_UNIT)
         if bloomed is not None:
             bloomed.use(BLOOM_UNIT)
             share = bloom.intensity / self.bloom.levels
-            program["bloom_mix"].value = ((1.0 - bloom.intensity) if bloom.composite == "energy_conserving" else 1.0,
-                                          share)
+            self._set(encode, "bloom_mix", ((1.0 - bloom.intensity) if bloom.composite == "energy_conserving"
+                                            else 1.0, share))
         if state is not None:
             state.use(EXPOSURE_UNIT)
         return encode
+
+    def _set(self, vao: moderngl.VertexArray, name: str, value) -> None:
+        """Write a uniform of a POST build only when its value changes (each write is a GL call)."""
+        key = (id(vao), name)
+        if self._written.get(key) != value:
+            vao.program[name].value = value
+            self._written[key] = value
 
     def _release_post_targets(self) -> None:
         if self.bloom.textures:
