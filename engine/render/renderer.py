@@ -15,6 +15,7 @@ from dataclasses import dataclass
 import moderngl
 import numpy as np
 
+from components.post import Bloom, Tonemap
 from engine.assets.mesh import Mesh
 from engine.assets.texture_data import TextureData
 from engine.core.errors import GLLimitError, GLPassError
@@ -336,7 +337,7 @@ class Renderer:
                 "layered_targets": len(self.probes._layered),
                 "face_targets": len(self.probes._faces),
                 "levels": len(self.levels), "probe_levels": sum(len(s) for s in self.probes._stacks.values()),
-                "programs": len(self.shaders._programs)}
+                "programs": len(self.shaders._programs), "post_targets": self.present_pass.post_target_count()}
 
     # --- frame -----------------------------------------------------------------------------
     @property
@@ -424,11 +425,16 @@ class Renderer:
         """Start the GPU on the passes queued so far, before CPU-only work (``RawGL.flush``)."""
         self.raw_gl.flush()
 
-    def present(self, output: moderngl.Framebuffer, size: tuple[int, int]) -> None:
+    def present(self, output: moderngl.Framebuffer, size: tuple[int, int], tonemap: Tonemap | None = None,
+                bloom: Bloom | None = None, curve: str | None = None, camera: int | None = None,
+                dt: float = 0.0) -> None:
         """Encode the HDR image to sRGB into ``output`` (a window's or a capture target),
-        anti-aliased unless ``antialias`` is "off"."""
+        anti-aliased unless ``antialias`` is "off"; with the active camera's ``tonemap`` and
+        ``bloom`` (``components/post.py``), bloomed, exposed and tone mapped first
+        (``PresentPass.draw``; ``exposure`` is used only without a Tonemap)."""
         assert self.targets is not None
-        self.present_pass.draw(self.targets.color, self.exposure, self._antialias, output, size)
+        self.present_pass.draw(self.targets.color, self.exposure, self._antialias, output, size, tonemap, bloom,
+                               curve, camera, dt)
         self.checkpoint("present")
 
     def release(self) -> None:
