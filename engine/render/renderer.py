@@ -21,6 +21,7 @@ from engine.core.errors import GLLimitError, GLPassError
 from engine.render.bindings import CAMERA_BINDING, bind_uniform_range
 from engine.render.gl_context import GLCapabilities
 from engine.render.instances import GpuMesh, InstanceBatch
+from engine.render.irradiance import IrradianceTable
 from engine.render.path_checks import PathChecks
 from engine.render.present import ANTIALIAS_MODES, PresentPass
 from engine.render.probes import ProbeCaptures
@@ -161,6 +162,7 @@ class Renderer:
         # (checkpoint); glGetError is cheap on the CPU but makes no sense to pay in a game.
         self.debug = os.environ.get("SPECULUM_DEBUG", "") not in ("", "0")
         self.scene_pass = ScenePass(self)
+        self.irradiance = IrradianceTable(self)  # the probes' diffuse light (engine/render/irradiance.py)
         self.probes = ProbeCaptures(self)
         self.path_checks = PathChecks(self)
         # When set, the only batches scene passes draw (the path self-check's own scene).
@@ -322,7 +324,7 @@ class Renderer:
                 "probe_cubes": len(self.probes.cubes), "layered_targets": len(self.probes._layered),
                 "face_targets": len(self.probes._faces),
                 "levels": len(self.levels), "probe_levels": sum(len(s) for s in self.probes._stacks.values()),
-                "programs": len(self.shaders._programs)}
+                "programs": len(self.shaders._programs), "irradiance_rows": len(self.irradiance.rows)}
 
     # --- frame -----------------------------------------------------------------------------
     @property
@@ -418,6 +420,7 @@ class Renderer:
         self.levels.release()
         self._draw_order.clear()
         self.probes.release()
+        self.irradiance.release()
         self.scene_pass.release()
         self.present_pass.release()
         for obj in (self.sky, self.cameras_ubo, self.lights_ubo):
