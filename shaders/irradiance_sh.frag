@@ -30,9 +30,9 @@ void main() {
                 float area = corner_area(s1, t1) - corner_area(s0, t1) - corner_area(s1, t0) + corner_area(s0, t0);
                 vec3 d = normalize(cube_face_direction(face, vec2(0.5 * (s0 + s1), 0.5 * (t0 + t1))));
                 float basis[9] = float[9](
-                    0.282095, 0.488603 * d.y, 0.488603 * d.z, 0.488603 * d.x,
-                    1.092548 * d.x * d.y, 1.092548 * d.y * d.z, 0.315392 * (3.0 * d.z * d.z - 1.0),
-                    1.092548 * d.x * d.z, 0.546274 * (d.x * d.x - d.y * d.y));
+                    0.2820948, 0.4886025 * d.y, 0.4886025 * d.z, 0.4886025 * d.x,
+                    1.0925484 * d.x * d.y, 1.0925484 * d.y * d.z, 0.3153916 * (3.0 * d.z * d.z - 1.0),
+                    1.0925484 * d.x * d.z, 0.5462742 * (d.x * d.x - d.y * d.y));
                 sum += textureLod(source, d, level).rgb * (basis[i] * area);
             }
         }

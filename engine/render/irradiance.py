@@ -66,6 +66,7 @@ from engine.render.bindings import (
     apply_pass_state,
     bind_uniform_block,
 )
+from engine.render.targets import release_framebuffer
 
 if TYPE_CHECKING:
     from engine.render.probes import ProbeCube
@@ -75,7 +76,9 @@ LOG = logging.getLogger("speculum")
 
 SH_COEFFICIENTS = 9
 # Y_lm(x, y, z) = SH_CONSTANTS[i] x the i-th polynomial of ``sh_basis`` (real, orthonormal).
-SH_CONSTANTS = (0.282095, 0.488603, 0.488603, 0.488603, 1.092548, 1.092548, 0.315392, 1.092548, 0.546274)
+_Y0, _Y1 = 0.5 * math.sqrt(1.0 / math.pi), math.sqrt(3.0 / (4.0 * math.pi))
+_Y2, _Y20, _Y22 = 0.5 * math.sqrt(15.0 / math.pi), 0.25 * math.sqrt(5.0 / math.pi), 0.25 * math.sqrt(15.0 / math.pi)
+SH_CONSTANTS = (_Y0, _Y1, _Y1, _Y1, _Y2, _Y2, _Y20, _Y2, _Y22)
 # The clamped cosine's band factors A_l, per coefficient (Ramamoorthi and Hanrahan, eq. 8).
 BAND_FACTORS = (math.pi,) + (2.0 * math.pi / 3.0,) * 3 + (math.pi / 4.0,) * 5
 MAX_IRRADIANCE_PROBES = 32   # influence boxes the scene shader blends from (more: the first kept, a warning)
@@ -123,7 +126,7 @@ def hemisphere_sh(sky: Iterable[float], ground: Iterable[float]) -> np.ndarray:
     """Irradiance coefficients (9, 3) of radiance ``sky`` from every direction above the
     horizon (y > 0) and ``ground`` below, in closed form: with a = (sky + ground) / 2 and
     b = (sky - ground) / 2, L = a + b sign(y) has L_00 = 2 sqrt(pi) a and L_1,-1 =
-    2 pi 0.488603 b and nothing else (sign(y) is odd, the band-2 terms even in y), so
+    2 pi sqrt(3 / (4 pi)) b and nothing else (sign(y) is odd, the band-2 terms even in y), so
     E(n) = pi a + pi b n.y."""
     sky = np.asarray(tuple(sky)[:3], np.float64)
     ground = np.asarray(tuple(ground)[:3], np.float64)
@@ -264,7 +267,8 @@ class IrradianceTable:
         if self._vao is not None:
             self._vao.release()
             self._vao = None
-        for obj in (self.framebuffer, self.table, self.ubo, self.empty_ubo):
+        release_framebuffer(self.framebuffer)
+        for obj in (self.table, self.ubo, self.empty_ubo):
             obj.release()
         self.rows.clear()
 

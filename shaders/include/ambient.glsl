@@ -15,15 +15,15 @@ uniform sampler2D irradiance_table;           // row r, texel i: coefficient i o
 
 // The order-2 basis Y_lm(n) (real, orthonormal).
 void sh_basis(vec3 n, out float y[9]) {
-    y[0] = 0.282095;
-    y[1] = 0.488603 * n.y;
-    y[2] = 0.488603 * n.z;
-    y[3] = 0.488603 * n.x;
-    y[4] = 1.092548 * n.x * n.y;
-    y[5] = 1.092548 * n.y * n.z;
-    y[6] = 0.315392 * (3.0 * n.z * n.z - 1.0);
-    y[7] = 1.092548 * n.x * n.z;
-    y[8] = 0.546274 * (n.x * n.x - n.y * n.y);
+    y[0] = 0.2820948;
+    y[1] = 0.4886025 * n.y;
+    y[2] = 0.4886025 * n.z;
+    y[3] = 0.4886025 * n.x;
+    y[4] = 1.0925484 * n.x * n.y;
+    y[5] = 1.0925484 * n.y * n.z;
+    y[6] = 0.3153916 * (3.0 * n.z * n.z - 1.0);
+    y[7] = 1.0925484 * n.x * n.z;
+    y[8] = 0.5462742 * (n.x * n.x - n.y * n.y);
 }
 
 // A box's weight at p: probe_rules.probe_weight (0 outside, rising linearly from the nearest
