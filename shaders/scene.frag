@@ -5,6 +5,7 @@
 #include "lights.glsl"
 #include "shadows.glsl"
 #include "ggx.glsl"
+#include "ambient.glsl"
 
 uniform sampler2D albedo_map;
 uniform bool has_albedo_map;
@@ -81,7 +82,7 @@ float cube_lod(vec3 direction, float n) {
 
 vec3 direct_lighting(Surface s) {
     vec3 diffuse = s.albedo * (1.0 - s.metallic) / PI;
-    vec3 total = lights.ambient.rgb * s.albedo;
+    vec3 total = ambient_irradiance(s.position, s.normal) * diffuse;  // E(n) x albedo x (1 - metallic) / pi
     for (int i = 0; i < lights.counts.x; ++i) {
         vec3 l = -lights.directional_dir[i].xyz;
         float nl = max(dot(s.normal, l), 0.0);

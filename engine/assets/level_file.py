@@ -63,9 +63,9 @@ except ImportError:  # Python 3.10
 # made by the slice stage each frame (derived state), never written by hand.
 ENGINE_COMPONENTS: dict[str, type] = {
     name: getattr(_components, name) for name in (
-        "Bloom", "Camera", "DirectionalLight", "Emissive", "FlyController", "Material", "MeshRef", "Mirror",
-        "PointLight", "Portal", "ReflectionProbe", "Reflective", "Refractive", "Skybox", "Tonemap", "Transform",
-        "Traveller", "Visibility", "Water")}
+        "Bloom", "Camera", "DirectionalLight", "Emissive", "FlyController", "HemisphereLight", "Material", "MeshRef",
+        "Mirror", "PointLight", "Portal", "ReflectionProbe", "Reflective", "Refractive", "Skybox", "Tonemap",
+        "Transform", "Traveller", "Visibility", "Water")}
 DERIVED_COMPONENTS = ("PortalClone", "Slice")
 # Fields holding another entity: a name in the file, an id in the world.
 REFERENCE_FIELDS = {("Transform", "parent"), ("Portal", "partner")}

@@ -22,6 +22,7 @@ from engine.core.errors import GLLimitError, GLPassError
 from engine.render.bindings import CAMERA_BINDING, bind_uniform_range
 from engine.render.gl_context import GLCapabilities
 from engine.render.instances import GpuMesh, InstanceBatch
+from engine.render.irradiance import IrradianceTable
 from engine.render.path_checks import PathChecks
 from engine.render.present import ANTIALIAS_MODES, PresentPass
 from engine.render.probes import ProbeCaptures
@@ -171,6 +172,7 @@ class Renderer:
         # (checkpoint); glGetError is cheap on the CPU but makes no sense to pay in a game.
         self.debug = os.environ.get("SPECULUM_DEBUG", "") not in ("", "0")
         self.scene_pass = ScenePass(self)
+        self.irradiance = IrradianceTable(self)  # the probes' diffuse light (engine/render/irradiance.py)
         self.probes = ProbeCaptures(self)
         self.shadows = ShadowMaps(self)
         # Counts uploads that wrote instance rows, and batches made or dropped: the shadows
@@ -337,7 +339,8 @@ class Renderer:
                 "layered_targets": len(self.probes._layered),
                 "face_targets": len(self.probes._faces),
                 "levels": len(self.levels), "probe_levels": sum(len(s) for s in self.probes._stacks.values()),
-                "programs": len(self.shaders._programs), "post_targets": self.present_pass.post_target_count()}
+                "programs": len(self.shaders._programs), "post_targets": self.present_pass.post_target_count(),
+                "irradiance_rows": len(self.irradiance.rows)}
 
     # --- frame -----------------------------------------------------------------------------
     @property
@@ -449,6 +452,7 @@ class Renderer:
         self._draw_order.clear()
         self.probes.release()
         self.shadows.release()
+        self.irradiance.release()
         self.scene_pass.release()
         self.present_pass.release()
         for obj in (self.sky, self.cameras_ubo, self.lights_ubo):
