@@ -167,7 +167,7 @@ def read_asset_file(path: str | Path, what: str, max_bytes: int) -> bytes:
             raise AssetError(f"{what}: {_not_regular(info)}")
         if info.st_size > max_bytes:
             raise AssetError(f"{what}: is {info.st_size} bytes, more than the {max_bytes} such a file may be")
-        data = file.read(max_bytes + 1)
+        data = file.read(min(info.st_size, max_bytes) + 1)  # read(n) allocates n bytes first
     if len(data) > max_bytes:
         raise AssetError(f"{what}: is more than the {max_bytes} bytes such a file may be")
     return data
