@@ -383,7 +383,8 @@ def test_max_probes_is_the_callers_to_set(tmp_path):
     path = glb(tmp_path / "pair.glb", CHROME, [], nodes=2)
     world = World("probes")
     try:
-        root = spawn_model(world, path, max_probes=0)
+        with pytest.warns(UserWarning, match="2 curved reflective parts: 0 of them"):
+            root = spawn_model(world, path, max_probes=0)
         modes = [world.get(e, Reflective).mode for e, (t,) in world.query(Transform) if t.parent == root]
         assert modes == ["skybox", "skybox"]
         with pytest.raises(AssetError, match="max_probes"):

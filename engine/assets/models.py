@@ -72,9 +72,9 @@ def spawn_model(world: World, path: str | Path, position: glm.vec3 | Sequence[fl
     except ComponentValueError as exc:
         raise AssetError(f"mesh file {str(path)!r}: {exc}") from exc
     if len(curved) > len(probed):
-        warnings.warn(f"mesh file {str(path)!r}: {len(curved)} curved reflective parts: the {len(probed)} largest "
-                      f"get a cube-map probe each, the other {len(curved) - len(probed)} reflect the sky "
-                      f"(spawn_model's max_probes, MAX_MODEL_PROBES = {MAX_MODEL_PROBES}; or give the model "
+        warnings.warn(f"mesh file {str(path)!r}: {len(curved)} curved reflective parts: {len(probed)} of them (the "
+                      f"largest) get a cube-map probe each, the other {len(curved) - len(probed)} reflect the sky "
+                      f"(spawn_model's max_probes = {max_probes}, MAX_MODEL_PROBES by default; or give the model "
                       "ReflectionProbe entities with an influence box)", stacklevel=2)
 
     spawned: list[int] = []

@@ -257,11 +257,11 @@ def _read_png_16(path: Path, what: str) -> np.ndarray:
     import png
 
     try:
-        reader = png.Reader(filename=str(path))
-        width, height, rows, info = reader.asDirect()
-        check_texture_size(width, height, what, 8)  # kept as RGBA16
-        planes = info["planes"]
-        pixels = np.vstack([np.asarray(row, np.uint16) for row in rows]).reshape(height, width, planes)
+        with open(path, "rb") as file:  # closed however the read ends (pypng's own open is not)
+            width, height, rows, info = png.Reader(file=file).asDirect()
+            check_texture_size(width, height, what, 8)  # kept as RGBA16
+            planes = info["planes"]
+            pixels = np.vstack([np.asarray(row, np.uint16) for row in rows]).reshape(height, width, planes)
     except AssetError:
         raise
     except MemoryError:
