@@ -455,3 +455,34 @@ def test_what_is_truly_broken_is_still_refused(tmp_path, text, reason):
     path.write_text(text)
     with pytest.raises(AssetError, match=reason):
         load_model(path)
+
+
+# --- the model fuzz (python -m benchmarks fuzz --model-cases N) --------------------------------
+
+def test_the_model_fuzz_refuses_by_name_or_renders_clean(ctx, tmp_path):
+    """80 model files made at random (benchmarks/model_fuzz.py), spawned outside any level,
+    FRAMES frames each: no case fails, and both outcomes happen (the cases reach a frame)."""
+    from benchmarks.model_fuzz import fuzz_models
+
+    ran, failures, passes = fuzz_models(ctx, tmp_path, 80, seed=3)
+    assert ran == 80 and not failures, failures[:3]
+    assert passes["refused"] > 10 and passes["rendered"] > 10, passes
+
+
+def test_the_model_fuzz_reports_what_is_not_an_asset_error(ctx, tmp_path, monkeypatch):
+    """The check can fail: a loader that raises anything but an AssetError naming the file is
+    a failure of the case."""
+    import random
+
+    from benchmarks.model_fuzz import ModelFuzzer, random_model_case
+    from engine.assets import models
+
+    fuzzer = ModelFuzzer(ctx, tmp_path)
+    try:
+        case = random_model_case(random.Random(1))
+        monkeypatch.setattr(models, "spawn_model", lambda *a, **k: (_ for _ in ()).throw(ValueError("boom")))
+        assert "spawn_model raised ValueError: boom" in fuzzer.run(case, 0)
+        monkeypatch.setattr(models, "spawn_model", lambda *a, **k: (_ for _ in ()).throw(AssetError("nameless")))
+        assert "without the model's file name" in fuzzer.run(case, 1)
+    finally:
+        fuzzer.close()

@@ -432,6 +432,11 @@ def prepare_gltf(path: Path, data: bytes, roots: Sequence[Path], textures: bool)
         if not isinstance(material, dict) or index not in used_materials:
             continue
         pbr = material.get("pbrMetallicRoughness") if isinstance(material.get("pbrMetallicRoughness"), dict) else {}
+        emissive = material.get("emissiveFactor", [0.0, 0.0, 0.0])
+        if not (isinstance(emissive, list) and len(emissive) == 3 and all(
+                isinstance(e, (int, float)) and not isinstance(e, bool) and 0.0 <= e <= 65504.0 for e in emissive)):
+            raise AssetError(f"{what}: {result.label(index)}: emissiveFactor must be three numbers in [0, 65504], "
+                             f"got {emissive!r}")
         for slot in GLTF_TEXTURE_SLOTS:
             info = pbr.get(slot, material.get(slot))
             if info is None:
