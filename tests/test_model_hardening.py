@@ -443,6 +443,25 @@ def test_negative_indices_count_back_from_where_they_are_written(tmp_path):
     assert sorted(float(t[:, 0].min()) for t in triangles) == [0.0, 5.0]
 
 
+@pytest.mark.parametrize("name, text", [
+    ("a byte order mark", "\ufeffv 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0\nf 2 4 3\nf 1 2 3\n"),
+    ("tabs between the numbers", "v\t0 0 0\nv 1\t0 0\nv 0 1 0\nv 1 1 0\nf\t2 4 3\nf 1\t2 3\n"),
+    ("comments after the numbers", "v 0 0 0 # origin\nv 1 0 0\nv 0 1 0\nv 1 1 0\nf 2 4 3 # upper\nf 1 2 3\n"),
+    ("texture coordinates of one value", "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0\nvt 0.25\nvt 0.75 0.5 0\n"
+                                         "f 2/1 4/1 3/2\nf 1/2 2/2 3/2\n"),
+    ("CRLF and a continued line", "v 0 0 0\r\nv 1 0 0\r\nv 0 1 0\r\nv 1 1 0\r\nf 2 4 \\\r\n3\r\nf 1 2 3\r\n"),
+])
+def test_what_the_format_allows_loads(tmp_path, name, text):
+    """Each file is the same two triangles of the unit square, written as the format allows."""
+    path = tmp_path / "allowed.obj"
+    path.write_bytes(text.encode())
+    (part,) = load_model(path)
+    corners = {tuple(np.round(part.mesh.positions[i], 3)) for i in part.mesh.indices.ravel()}
+    assert len(part.mesh.indices) == 2 and corners == {(0, 0, 0), (1, 0, 0), (0, 1, 0), (1, 1, 0)}, name
+    if "one value" in name:
+        assert sorted({tuple(np.round(uv, 3)) for uv in part.mesh.uvs}) == [(0.25, 0.0), (0.75, 0.5)]
+
+
 @pytest.mark.parametrize("text, reason", [
     ("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 7\n", "face index 7, but 3 vertices in the file"),
     ("v 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\nf 1/1 2/5 3/1\n", "texture coordinate index 5, but 1"),

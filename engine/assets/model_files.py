@@ -183,8 +183,11 @@ class ObjFiles:
 
 def obj_text(data: bytes) -> bytes:
     """An OBJ's bytes as trimesh reads them: CRLF as LF, a backslash at a line's end joining
-    it to the next (the format's line continuation)."""
-    return b"\n" + data.strip().replace(b"\r\n", b"\n").replace(b"\\\n", b"") + b"\n"
+    it to the next (the format's line continuation); and as other readers take them: tabs
+    as spaces, no byte order mark (trimesh's own parsing splits on spaces)."""
+    if data.startswith(b"\xef\xbb\xbf"):  # a UTF-8 byte order mark
+        data = data[3:]
+    return b"\n" + data.strip().replace(b"\r\n", b"\n").replace(b"\\\n", b"").replace(b"\t", b" ") + b"\n"
 
 
 _FACE_SLOTS = (b"v", b"vt", b"vn")
@@ -224,10 +227,15 @@ def prepare_obj(path: Path, data: bytes, roots: Sequence[Path], textures: bool) 
             if first == b"v" and len(words) < 4:
                 raise AssetError(f"{what}: line {number}: a vertex is 'v x y z' (three numbers), got "
                                  f"{line.decode('utf-8', 'replace')[:60]!r}")
+            if first == b"vt" and len(words) != 3:  # 'vt u [v [w]]': trimesh reads exactly two
+                uv = (words[1:3] + [b"0"])[:2] if len(words) > 1 else [b"0", b"0"]
+                edits.append((start, start + len(line), b"vt " + b" ".join(uv)))
+            elif body is not line:  # a comment after the numbers (trimesh reads it as one)
+                edits.append((start, start + len(line), body))
         elif first == b"f":
             rewritten = _check_face(what, number, words, counts, highest)
-            if rewritten is not None:
-                edits.append((start, start + len(line), rewritten))
+            if rewritten is not None or body is not line:
+                edits.append((start, start + len(line), rewritten if rewritten is not None else body))
         elif first == b"mtllib":
             libraries += body[6:].decode("utf-8", "replace").split()
         elif first == b"usemtl" and len(words) >= 2:
