@@ -23,7 +23,8 @@ SUITES: dict[str, tuple[str, str]] = {
                "a dynamic probe"),
     "profile": ("benchmarks.cpu_profile", "where a frame's CPU time goes, function by function (cProfile): 16 "
                 "mirrors, portals at depth 8, a dynamic probe"),
-    "targets": ("benchmarks.targets", "issue 25's speed targets, each on its own engines, against its limit"),
+    "cpu": ("benchmarks.cpu", "the frame a GPU host pays for (32x18, LP_NUM_THREADS=0: the engine's CPU) with its "
+            "GL calls and profile, and every speed target against its limit"),
     "gpu-report": ("benchmarks.gpu_report", "GL renderer and limits, rendering-path checks, test summary and the "
                    "mirrors / portals / probes / stages / profile benchmarks at two sizes, as report.md + report.json"),
 }
