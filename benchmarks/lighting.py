@@ -85,7 +85,7 @@ BASELINE = "off"
 # name -> (variant, over variant, mirror count, size, limit, the machine the issue sets it
 # for): a ratio of two medians.  "gpu": on a software rasteriser the ratio is reported, not
 # judged (every post pass is pixel work its CPU does, where a GPU's frame at 0 mirrors is the
-# CPU issuing draws), as benchmarks/targets.py does.
+# CPU issuing draws), as benchmarks/cpu.py does.
 TARGETS: dict[str, tuple[str, str, int, tuple[int, int], float, str]] = {
     "post_0_mirrors": ("post", "off", 0, (640, 360), 1.10, "gpu"),
 }

@@ -597,6 +597,7 @@ def test_the_gl_call_counter_counts_each_call_the_engine_makes_once_and_puts_mod
     from benchmarks.cpu import GLCallCounter
     from engine.render import raw_gl
     from engine.render.bindings import invalidate
+    from engine.render.targets import release_framebuffer
 
     program = ctx.program(vertex_shader="#version 410 core\nuniform float scale;\nin vec2 p;\n"
                                         "void main() { gl_Position = vec4(p * scale, 0.0, 1.0); }",
@@ -629,7 +630,8 @@ def test_the_gl_call_counter_counts_each_call_the_engine_makes_once_and_puts_mod
         assert counter.total == 0
         assert ctx.fbo is target and (np.frombuffer(target.read(), np.uint8) == 255).all()  # the draws drew
     finally:
-        for thing in (vao, buffer, program, target):
+        release_framebuffer(target)  # the bound one: moderngl would bind its deleted name again
+        for thing in (vao, buffer, program):
             thing.release()
         invalidate(ctx)  # the engines' state cache: this test set state behind it
     now = {(owner, name): attr for owner in GLCallCounter.classes() for name, attr in vars(owner).items()}
