@@ -267,6 +267,14 @@ def test_mtl_map_options_are_options_not_part_of_the_file_name(tmp_path):
     np.testing.assert_array_equal(part.texture.pixels[..., :3], colour)
 
 
+def test_a_map_written_with_windows_separators_is_found(tmp_path):
+    (tmp_path / "textures").mkdir()
+    colour = np.full((4, 4, 3), (10, 200, 30), np.uint8)
+    png(tmp_path / "textures", "wood.png", colour)
+    (part,) = load_model(obj_with(tmp_path, "Kd 1 1 1\nmap_Kd textures\\wood.png"))
+    np.testing.assert_array_equal(part.texture.pixels[..., :3], colour)
+
+
 def test_an_unknown_map_option_is_named(tmp_path):
     png(tmp_path, "wood.png", np.zeros((4, 4, 3), np.uint8))
     with pytest.raises(AssetError, match=r"line 3: map_Kd: unknown map option '-wobble'"):
