@@ -220,6 +220,25 @@ def test_a_sparse_material_library_is_refused_by_its_size_before_it_is_read(tmp_
     assert peak < MAX_MTL_BYTES // 4, peak
 
 
+@pytest.mark.parametrize("kind", ["fifo", "sparse", "missing"])
+def test_a_gltf_buffer_is_checked_before_it_is_read(tmp_path, kind):
+    from engine.assets.model_files import MAX_SIDE_FILE_BYTES
+
+    buffer = tmp_path / "data.bin"
+    if kind == "fifo":
+        os.mkfifo(buffer)
+    elif kind == "sparse":
+        with open(buffer, "wb") as f:
+            f.truncate(MAX_SIDE_FILE_BYTES + 1)
+    path = tmp_path / "model.gltf"
+    path.write_text(json.dumps({"asset": {"version": "2.0"}, "buffers": [{"uri": "data.bin", "byteLength": 36}]}))
+    out = not_hanging(lambda: load_model(path), [buffer])
+    assert isinstance(out.get("error"), AssetError), out
+    message = str(out["error"])
+    assert str(path) in message and "data.bin" in message
+    assert {"fifo": "is a FIFO", "sparse": "more than", "missing": "does not exist"}[kind] in message, message
+
+
 # --- glTF textures that are missing or not images ----------------------------------------------
 
 @pytest.mark.parametrize("slot", ["emissiveTexture", "normalTexture", "baseColorTexture", "metallicRoughnessTexture"])
