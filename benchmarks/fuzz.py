@@ -1,4 +1,4 @@
-"""Fuzz: every component's fields given adversarial values, one case a frame.
+"""Fuzz: every component's fields given adversarial values, several frames a case.
 
 Each case builds one component with one to three fields drawn from a pool of awkward
 values (NaN, infinities, numbers past float32 and float16, huge ints, wrong kinds, zero

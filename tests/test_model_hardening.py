@@ -220,6 +220,25 @@ def test_a_sparse_material_library_is_refused_by_its_size_before_it_is_read(tmp_
     assert peak < MAX_MTL_BYTES // 4, peak
 
 
+@pytest.mark.parametrize("kind", ["fifo", "sparse", "missing"])
+def test_a_gltf_buffer_is_checked_before_it_is_read(tmp_path, kind):
+    from engine.assets.model_files import MAX_SIDE_FILE_BYTES
+
+    buffer = tmp_path / "data.bin"
+    if kind == "fifo":
+        os.mkfifo(buffer)
+    elif kind == "sparse":
+        with open(buffer, "wb") as f:
+            f.truncate(MAX_SIDE_FILE_BYTES + 1)
+    path = tmp_path / "model.gltf"
+    path.write_text(json.dumps({"asset": {"version": "2.0"}, "buffers": [{"uri": "data.bin", "byteLength": 36}]}))
+    out = not_hanging(lambda: load_model(path), [buffer])
+    assert isinstance(out.get("error"), AssetError), out
+    message = str(out["error"])
+    assert str(path) in message and "data.bin" in message
+    assert {"fifo": "is a FIFO", "sparse": "more than", "missing": "does not exist"}[kind] in message, message
+
+
 # --- glTF textures that are missing or not images ----------------------------------------------
 
 @pytest.mark.parametrize("slot", ["emissiveTexture", "normalTexture", "baseColorTexture", "metallicRoughnessTexture"])
@@ -264,6 +283,14 @@ def test_mtl_map_options_are_options_not_part_of_the_file_name(tmp_path):
     path = obj_with(tmp_path, "Kd 1 1 1\nmap_Kd -s 2 2 1 -o 0.5 0 0 -clamp on -blendu off wood.png")
     (part,) = load_model(path)
     assert part.texture is not None
+    np.testing.assert_array_equal(part.texture.pixels[..., :3], colour)
+
+
+def test_a_map_written_with_windows_separators_is_found(tmp_path):
+    (tmp_path / "textures").mkdir()
+    colour = np.full((4, 4, 3), (10, 200, 30), np.uint8)
+    png(tmp_path / "textures", "wood.png", colour)
+    (part,) = load_model(obj_with(tmp_path, "Kd 1 1 1\nmap_Kd textures\\wood.png"))
     np.testing.assert_array_equal(part.texture.pixels[..., :3], colour)
 
 

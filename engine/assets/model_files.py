@@ -81,12 +81,16 @@ class CheckedFiles:
 
 def side_file(owner: Path, name: str, roots: Sequence[Path], kind: str, owner_kind: str = "mesh file",
               max_bytes: int = MAX_SIDE_FILE_BYTES) -> Path | None:
-    """The file ``owner`` names (``name``, relative to its folder): None when nothing is
+    """The file ``owner`` names (``name``, relative to its folder; backslashes read as a
+    Windows path's separators when no file has the name as written): None when nothing is
     there; an AssetError when it is outside ``roots``, not a regular file or past
     ``max_bytes``, before anything opens it for reading."""
     where = f"{owner_kind} {str(owner)!r}: its {kind} {name!r}"
     if not name or "\0" in name:
         raise AssetError(f"{where}: is not a usable file name")
+    if "\\" in name and not os.path.lexists(owner.parent / name):
+        name = name.replace("\\", "/")  # a path written on Windows (as other readers take it)
+        where = f"{owner_kind} {str(owner)!r}: its {kind} {name!r}"
     target = owner.parent / name
     if contained_path(target, roots) is None:
         raise AssetError(f"{where} is outside the level's folder (the folders a model's files may be in: "
