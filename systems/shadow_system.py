@@ -71,7 +71,7 @@ class ShadowSystem(esper.Processor):
                     maps.clear_directional(slot)
                 continue
             published.directional.append(tuple(light.direction))
-            key = (tuple(light.direction), light.shadow_resolution, light.shadow_softness, maps.tile,
+            key = (tuple(light.direction), light.shadow_resolution, light.shadow_softness, maps.tile, maps.filter,
                    level[0].tobytes(), level[1].tobytes())
             if key == self._directional.get(slot) and not casters_changed:
                 stats.shadow_maps_kept += 1
@@ -104,7 +104,7 @@ class ShadowSystem(esper.Processor):
         for slot, (index, entity, light, transform) in enumerate(casting):
             position = transform.world[3].xyz
             published.points.append((tuple(position), light.range))
-            key = (entity, tuple(position), light.range, light.shadow_resolution, light.shadow_softness)
+            key = (entity, tuple(position), light.range, light.shadow_resolution, light.shadow_softness, maps.filter)
             reached = len(changed_lo) and boxes_in_reach(changed_lo, changed_hi, np.array(position), light.range).any()
             if key == self._point.get(slot) and not reached:
                 maps.keep_point(slot, index)

@@ -44,6 +44,7 @@ if TYPE_CHECKING:
     from engine.rules.shadow_rules import DirectionalFit
 
 MAX_POINT_SHADOWS = 2  # cube samplers in shaders/include/shadows.glsl
+SHADOW_FILTERS = ("grid", "single")
 SHADOWS_BLOCK_BYTES = 64 * MAX_DIRECTIONAL_LIGHTS + 16 * MAX_DIRECTIONAL_LIGHTS + 4 * MAX_POINT_LIGHTS \
     + 16 * MAX_POINT_SHADOWS
 # The casters' slope-scaled depth offset (glPolygonOffset factor, units): with the normal
@@ -82,6 +83,13 @@ class ShadowMaps:
         self._face_framebuffers: dict[int, list[moderngl.Framebuffer]] = {}
         self._face_depth: dict[int, moderngl.Texture] = {}
         self._layered: dict[int, LayeredCubeTarget] = {}
+        # How edges are filtered: "grid" (2 x 2 taps, 3 x 3 past a softness of 1, four on a
+        # cube), each a bilinear percentage-closer comparison; "single" (one such tap: a
+        # one-texel edge).  On a software rasteriser every tap is CPU time for every pixel a
+        # light reaches (the benchmark scene at 640x360: a still frame 1.24x the frame without
+        # shadows with the grid, 1.04x with one tap; benchmarks/lighting.py), so there the
+        # default is "single"; set "grid" for equal quality (maps are drawn again).
+        self.filter = "single" if renderer.caps.software else "grid"
 
     # --- the atlas --------------------------------------------------------------------------
     def _make_atlas(self, size: tuple[int, int]) -> moderngl.Texture:
@@ -124,8 +132,24 @@ class ShadowMaps:
             * glm.scale(glm.vec3(0.5 * scale, 0.5 * scale, 0.5))
         self.block[16 * slot:16 * slot + 16] = np.array((to_tile * fit.view_proj).to_list(), np.float32).ravel()
         base = 16 * MAX_DIRECTIONAL_LIGHTS + 4 * slot
-        self.block[base:base + 4] = (fit.texel, softness, 1.0 / width, 1.0)
+        self.block[base:base + 4] = (fit.texel, softness, 1.0 / width, self._taps(softness))
         self.renderer.checkpoint(f"shadow map of directional light {slot}")
+
+    @property
+    def filter(self) -> str:
+        return self._filter
+
+    @filter.setter
+    def filter(self, value: str) -> None:
+        if value not in SHADOW_FILTERS:
+            raise ValueError(f"shadow filter must be one of {', '.join(map(repr, SHADOW_FILTERS))}, got {value!r}")
+        self._filter = value
+
+    def _taps(self, softness: float) -> float:
+        """Taps a side of a directional light's grid."""
+        if self._filter == "single":
+            return 1.0
+        return 3.0 if softness > 1.0 else 2.0
 
     def clear_directional(self, slot: int) -> None:
         """Directional light ``slot`` casts no shadow (off, or no light there)."""
@@ -155,7 +179,8 @@ class ShadowMaps:
         self._slots[light_index] = slot
         base = (64 + 16) * MAX_DIRECTIONAL_LIGHTS // 4 + MAX_POINT_LIGHTS + 4 * slot
         # A texel's angle: 90 degrees over the face's texels.
-        self.block[base:base + 4] = (np.pi / 2.0 / resolution, softness, light_range, 0.0)
+        self.block[base:base + 4] = (np.pi / 2.0 / resolution, softness, light_range,
+                                     1.0 if self.filter == "single" else 4.0)
         self.renderer.checkpoint(f"shadow cube of point light {light_index}")
         return path
 
