@@ -22,7 +22,7 @@ from engine.render.renderer import Renderer
 from engine.render.shadows import MAX_POINT_SHADOWS
 from engine.render.views import MAX_DIRECTIONAL_LIGHTS, MAX_POINT_LIGHTS
 from engine.rules.probe_rules import world_bounds
-from engine.rules.shadow_rules import ShadowCasters, boxes_in_reach, directional_fit
+from engine.rules.shadow_rules import DirectionalFit, ShadowCasters, boxes_in_reach, directional_fit, map_region
 
 _LOOKS = (MeshRef, Material, Visibility, Refractive)  # what decides whether, and what shape, a thing casts
 
@@ -33,6 +33,7 @@ class ShadowSystem(esper.Processor):
         self.renderer = renderer
         self.enabled = True   # the debug overlay's toggle: off, no light casts
         self._directional: dict[int, tuple] = {}   # slot -> what its map was drawn from
+        self._fits: dict[int, DirectionalFit] = {}  # slot -> its map's camera
         self._point: dict[int, tuple] = {}         # cube slot -> what its cube was drawn from
         self._casters_seen = -1
         self._bounds: dict[int, tuple[np.ndarray, np.ndarray]] = {}  # entity -> world box (point lights only)
@@ -44,9 +45,10 @@ class ShadowSystem(esper.Processor):
         maps = renderer.shadows
         casters_changed = renderer.casters_version != self._casters_seen
         self._casters_seen = renderer.casters_version
+        changed_box = renderer.take_changed_box()
         level = renderer.level_bounds()
         published = ShadowCasters(level=level)
-        self._directional_maps(casters_changed, level, published)
+        self._directional_maps(casters_changed, changed_box, level, published)
         self._point_maps(published)
         self.world.resources[ShadowCasters] = published
         block = maps.block.tobytes()
@@ -55,7 +57,7 @@ class ShadowSystem(esper.Processor):
             self._uploaded = block
 
     # --- directional lights -------------------------------------------------------------------
-    def _directional_maps(self, casters_changed: bool, level, published: ShadowCasters) -> None:
+    def _directional_maps(self, casters_changed: bool, changed_box, level, published: ShadowCasters) -> None:
         maps = self.renderer.shadows
         stats = self.renderer.stats
         lights = [light for _, light in self.world.query_one(DirectionalLight)][:MAX_DIRECTIONAL_LIGHTS]
@@ -73,11 +75,24 @@ class ShadowSystem(esper.Processor):
             published.directional.append(tuple(light.direction))
             key = (tuple(light.direction), light.shadow_resolution, light.shadow_softness, maps.tile, maps.filter,
                    level[0].tobytes(), level[1].tobytes())
-            if key == self._directional.get(slot) and not casters_changed:
+            same = key == self._directional.get(slot)
+            if same and not casters_changed:
                 stats.shadow_maps_kept += 1
                 continue
-            fit = directional_fit(light.direction, level[0], level[1], light.shadow_resolution)
-            maps.draw_directional(slot, fit, light.shadow_resolution, light.shadow_softness)
+            region = None
+            if same:
+                # Only casters changed, within the level's box (the fit is the same): only the
+                # texels under where they were and are are drawn again.
+                fit = self._fits[slot]
+                region = (0, 0, 0, 0) if changed_box is None else \
+                    map_region(fit, changed_box[0], changed_box[1], light.shadow_resolution)
+                if region is not None and region[2] * region[3] == 0:
+                    stats.shadow_maps_kept += 1   # what changed casts nothing here (or is glass)
+                    continue
+            else:
+                fit = self._fits[slot] = directional_fit(light.direction, level[0], level[1], light.shadow_resolution)
+            stats.shadow_texels_drawn += maps.draw_directional(slot, fit, light.shadow_resolution,
+                                                               light.shadow_softness, region)
             self._directional[slot] = key
             stats.shadow_maps_drawn += 1
 

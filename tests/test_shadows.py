@@ -272,6 +272,47 @@ def test_a_still_scene_draws_no_shadow_pass_and_a_moved_caster_draws_one(scene):
     assert not np.array_equal(first, moved)
 
 
+@pytest.mark.parametrize("change", ["moved", "removed", "added"])
+def test_a_changed_caster_redraws_only_its_footprint_and_the_frame_is_a_fresh_engines(scene, change):
+    """The box moves (is deleted, or a second box comes) inside the level's box: the map's
+    texels under where it was and is are drawn again, a small share of the map, and the frame
+    is the one an engine made with the box already there draws (every texel as a whole
+    redraw leaves it)."""
+    def build_with(box_at, extra=False):
+        def build(world):
+            world.resources["ids"] = _floor_scene(world, (0.5, 5.0, 6.5), (0.0, 0.0, 0.0))
+            box_id = world.resources["ids"]["box"]
+            if box_at is None:
+                world.delete_entity(box_id)
+            else:
+                world.get(box_id, Transform).position = glm.vec3(box_at)
+            if extra:
+                world.spawn(Transform(position=(2.5, 0.4, -2.0)), MeshRef(box((0.8, 0.8, 0.8))), Material())
+        return build
+
+    start, end = BOX_CENTRE.tolist(), [-1.6, 0.5, -0.7]
+    runner = scene(build_with(start), (320, 240))
+    runner.engine.renderer.antialias = "off"
+    runner.frame()
+    box_id = runner.world.resources["ids"]["box"]
+    if change == "moved":
+        runner.world.get(box_id, Transform).position = glm.vec3(end)
+        fresh_build = build_with(end)
+    elif change == "removed":
+        runner.world.delete_entity(box_id)
+        fresh_build = build_with(None)
+    else:
+        runner.world.spawn(Transform(position=(2.5, 0.4, -2.0)), MeshRef(box((0.8, 0.8, 0.8))), Material())
+        fresh_build = build_with(start, extra=True)
+    changed = runner.frame()
+    resolution = DirectionalLight().shadow_resolution
+    assert runner.stats.shadow_maps_drawn == 1
+    assert 0 < runner.stats.shadow_texels_drawn < 0.1 * resolution * resolution
+    fresh = scene(fresh_build, (320, 240))
+    fresh.engine.renderer.antialias = "off"
+    assert np.array_equal(changed, fresh.frame())
+
+
 def test_a_point_light_ignores_changes_outside_its_reach(scene):
     def build(world):
         world.resources["ids"] = _floor_scene(world, (0.0, 5.5, 6.0), (0.0, 0.0, 0.0), sun=False,

@@ -113,14 +113,19 @@ class ShadowMaps:
     def tile_origin(self, slot: int) -> tuple[int, int]:
         return (slot % 2) * self.tile, (slot // 2) * self.tile
 
-    def draw_directional(self, slot: int, fit: DirectionalFit, resolution: int, softness: float) -> None:
+    def draw_directional(self, slot: int, fit: DirectionalFit, resolution: int, softness: float,
+                         region: tuple[int, int, int, int] | None = None) -> int:
         """Draw directional light ``slot``'s map (its tile of the atlas, ``resolution`` texels
-        a side) from ``fit``, and write its row of the Shadows block."""
+        a side) from ``fit``, and write its row of the Shadows block.  With ``region`` (x, y,
+        width, height in the tile's texels) only those texels are cleared and drawn again (the
+        casters' draws scissored to them: the same depths a whole redraw writes there).
+        Returns the texels drawn."""
         x, y = self.tile_origin(slot)
-        rect = (x, y, resolution, resolution)
+        tile = (x, y, resolution, resolution)
+        rect = tile if region is None else (x + region[0], y + region[1], region[2], region[3])
         framebuffer = self._atlas_framebuffer
         framebuffer.use()
-        apply_pass_state(self.ctx, _CASTERS, rect, rect)
+        apply_pass_state(self.ctx, _CASTERS, tile, rect)
         framebuffer.clear(depth=1.0, viewport=rect)
         view = View(view=fit.view, proj=fit.proj, eye=glm.vec3(0.0), size=(resolution, resolution),
                     name=f"shadow {slot}", kinds=0, layers=ALL_LAYERS)
@@ -134,6 +139,7 @@ class ShadowMaps:
         base = 16 * MAX_DIRECTIONAL_LIGHTS + 4 * slot
         self.block[base:base + 4] = (fit.texel, softness, 1.0 / width, self._taps(softness))
         self.renderer.checkpoint(f"shadow map of directional light {slot}")
+        return rect[2] * rect[3]
 
     @property
     def filter(self) -> str:

@@ -64,6 +64,33 @@ def directional_fit(direction: glm.vec3, lo: np.ndarray, hi: np.ndarray, resolut
     return DirectionalFit(glm.mat4(view), glm.mat4(proj), float(texel))
 
 
+# Texels around a changed caster's footprint redrawn with it: the rasteriser's rounding at
+# the footprint's edge (the filter reads the map, it does not write it).
+REGION_PAD = 2
+# Past this share of a map's texels a region is drawn whole (one clear and draw of the tile).
+REGION_WHOLE_SHARE = 0.5
+
+
+def map_region(fit: DirectionalFit, lo: np.ndarray, hi: np.ndarray,
+               resolution: int) -> tuple[int, int, int, int] | None:
+    """The texels (x, y, width, height) of a directional light's map that the world box
+    [lo, hi] covers, seen along the light, padded; None when they are most of the map (draw
+    it whole).  A caster's shadow is in the map only where its footprint is: moving it from
+    one box to another changes only the texels under both."""
+    corners = np.array([[x, y, z, 1.0] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
+    clip = corners @ np.array(fit.view_proj.to_list(), np.float64)  # orthographic: w is 1
+    texel = (clip[:, :2] * 0.5 + 0.5) * resolution
+    x0, y0 = np.floor(texel.min(axis=0)).astype(int) - REGION_PAD
+    x1, y1 = np.ceil(texel.max(axis=0)).astype(int) + REGION_PAD
+    x0, y0 = max(int(x0), 0), max(int(y0), 0)
+    x1, y1 = min(int(x1), resolution), min(int(y1), resolution)
+    if x1 <= x0 or y1 <= y0:
+        return (0, 0, 0, 0)
+    if (x1 - x0) * (y1 - y0) > REGION_WHOLE_SHARE * resolution * resolution:
+        return None
+    return x0, y0, x1 - x0, y1 - y0
+
+
 def point_reach(position: np.ndarray, light_range: float) -> tuple[np.ndarray, np.ndarray]:
     """The world box a point light's shadows can change: its range's sphere."""
     position = np.asarray(position, np.float64)
