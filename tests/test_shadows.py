@@ -402,3 +402,47 @@ def test_shadow_fields_refuse_bad_values():
     with pytest.raises(ComponentValueError, match="shadows"):
         PointLight(shadows="yes")
     assert DirectionalLight().shadows and not PointLight().shadows
+
+
+LEVEL = """
+[level]
+name = "shadowed"
+
+[[entity]]
+name = "sun"
+[entity.DirectionalLight]
+direction = [-0.4, -1.0, -0.3]
+shadows = false
+shadow_resolution = 1024
+shadow_softness = 2.5
+
+[[entity]]
+name = "lamp"
+[entity.Transform]
+position = [0.0, 2.0, 0.0]
+[entity.PointLight]
+range = 6.0
+shadows = true
+shadow_resolution = 256
+"""
+
+
+def test_level_files_carry_the_shadow_fields_and_refuse_bad_ones(tmp_path):
+    from engine.assets.level_file import LevelError, load_level, save_level
+    from engine.core.world import World
+
+    path = tmp_path / "shadowed.toml"
+    path.write_text(LEVEL)
+    world = World("shadow level")
+    names = load_level(path).spawn(world)
+    sun, lamp = world.get(names["sun"], DirectionalLight), world.get(names["lamp"], PointLight)
+    assert (sun.shadows, sun.shadow_resolution, sun.shadow_softness) == (False, 1024, 2.5)
+    assert (lamp.shadows, lamp.shadow_resolution) == (True, 256)
+    saved = save_level(world, tmp_path / "again.toml", names)
+    again = World("again")
+    names_again = load_level(saved).spawn(again)
+    assert again.get(names_again["lamp"], PointLight).shadow_resolution == 256
+    assert again.get(names_again["sun"], DirectionalLight).shadow_softness == 2.5
+    path.write_text(LEVEL.replace("shadow_resolution = 1024", "shadow_resolution = 1000"))
+    with pytest.raises(LevelError, match="shadow_resolution"):
+        load_level(path)
