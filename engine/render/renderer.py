@@ -92,6 +92,8 @@ class RenderStats:
     shadow_texels_drawn: int = 0         # of directional maps: a moved caster redraws only its footprint's
     shadow_maps_kept: int = 0
     shadows_cut: int = 0
+    virtual_lights: int = 0              # lights shining through mirrors and portals this frame
+    virtual_lights_cut: int = 0          # ... that the limit or the view budget left out
     shadow_path: str = ""
 
 
