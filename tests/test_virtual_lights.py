@@ -258,3 +258,49 @@ def test_a_lamp_lights_the_floor_beyond_a_portal(scene):
     assert sure.sum() > 5000 and rays.sum() > 1500, (int(sure.sum()), int(rays.sum()))
     assert float((says == rays).mean()) >= 0.99, float((says == rays).mean())
     assert min(shadows[0]) > 100, shadows   # both boxes' shadows fall in the light out of B
+
+
+def test_level_files_carry_the_light_fields(tmp_path):
+    from engine.assets.level_file import LevelError, load_level, save_level
+    from engine.core.world import World
+
+    text = """
+[level]
+name = "light through"
+
+[[entity]]
+name = "mirror"
+[entity.Transform]
+position = [0.0, 1.0, -3.0]
+[entity.MeshRef]
+mesh = { quad = [2.0, 2.0] }
+[entity.Mirror]
+reflects_light = true
+
+[[entity]]
+name = "a"
+[entity.Transform]
+position = [-5.0, 0.0, 0.0]
+[entity.Portal]
+partner = "b"
+carries_light = true
+
+[[entity]]
+name = "b"
+[entity.Transform]
+position = [5.0, 0.0, 0.0]
+[entity.Portal]
+partner = "a"
+"""
+    path = tmp_path / "through.toml"
+    path.write_text(text)
+    world = World("through")
+    names = load_level(path).spawn(world)
+    assert world.get(names["mirror"], Mirror).reflects_light and world.get(names["a"], Portal).carries_light
+    again = World("again")
+    names_again = load_level(save_level(world, tmp_path / "again.toml", names)).spawn(again)
+    assert again.get(names_again["mirror"], Mirror).reflects_light
+    assert again.get(names_again["a"], Portal).carries_light and not again.get(names_again["b"], Portal).carries_light
+    path.write_text(text.replace("reflects_light = true", 'reflects_light = "yes"'))
+    with pytest.raises(LevelError, match="reflects_light"):
+        load_level(path)
