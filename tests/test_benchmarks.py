@@ -596,6 +596,7 @@ def test_the_gl_call_counter_counts_each_call_the_engine_makes_once_and_puts_mod
     from benchmarks.cpu import GLCallCounter
     from engine.render import raw_gl
     from engine.render.bindings import invalidate
+    from engine.render.targets import release_framebuffer
 
     program = ctx.program(vertex_shader="#version 410 core\nuniform float scale;\nin vec2 p;\n"
                                         "void main() { gl_Position = vec4(p * scale, 0.0, 1.0); }",
@@ -628,14 +629,15 @@ def test_the_gl_call_counter_counts_each_call_the_engine_makes_once_and_puts_mod
         assert counter.total == 0
         assert ctx.fbo is target and (np.frombuffer(target.read(), np.uint8) == 255).all()  # the draws drew
     finally:
-        for thing in (vao, buffer, program, target):
+        release_framebuffer(target)  # framebuffer 0 bound first: no deleted name left bound
+        for thing in (vao, buffer, program):
             thing.release()
         invalidate(ctx)  # the engines' state cache: this test set state behind it
     now = {(owner, name): attr for owner in GLCallCounter.classes() for name, attr in vars(owner).items()}
     assert now == originals and vars(_moderngl.Uniform)["value"] is originals[_moderngl.Uniform, "value"]
 
 
-def test_the_cpu_part_runs_in_its_own_process_with_no_rasteriser_threads(capsys):
+def test_the_cpu_part_runs_in_its_own_process_with_no_rasteriser_threads(capsys, own_contexts):
     """``--parts cpu`` on tiny frame counts: each 32x18 scene's row comes from the
     LP_NUM_THREADS=0 process with its views (none without mirrors, a view a portal level),
     its draw calls among its counted GL calls, and a profile of its top functions; only the
