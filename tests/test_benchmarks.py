@@ -195,8 +195,8 @@ def test_gpu_report_writes_markdown_and_json_without_imgui(ctx, tmp_path):
     from benchmarks.cpu import TARGETS
     targets = [row for row in cpu["own sizes"]["rows"] if "target" in row]
     assert [row["target"] for row in targets] == list(TARGETS)
-    for row in targets:  # every part ran: every target has its value
-        assert row["value"] > 0 and row["met"] == (row["value"] <= row["limit"]), row
+    for row in targets:  # every part ran: every target has its value (what it is is timing: not asserted)
+        assert row["value"] is not None and row["met"] == (row["value"] <= row["limit"]), row
         assert row["applies"] == (row["set_for"] == "software"), row  # llvmpipe: a software rasteriser
     scenes = {(row["scene"], row["size"]): row for row in cpu["own sizes"]["rows"] if "gl_calls" in row}
     assert {scene for scene, size in scenes if size == "32x18"} == \
