@@ -445,8 +445,8 @@ def markdown(report: dict) -> str:
                     "The 32x18 scenes run in a process with `LP_NUM_THREADS=0` (`lp_num_threads`): on llvmpipe "
                     "their frame is the engine's CPU.  Medians, ms; `gl_calls`: calls into moderngl and raw GL "
                     "calls a frame (`python -m benchmarks cpu --help` says what counts).", ""]
-            out += _table(["scene", "size", "lp_num_threads", "frame_ms_median", "cpu_ms_median", "views", "passes",
-                           "draw_calls", "gl_calls", "gl_calls_top"], scenes)
+            out += _table(["scene", "size", "lp_num_threads", "frame_ms_median", "cpu_ms_median", "thread_ms_median",
+                           "views", "passes", "draw_calls", "gl_calls", "gl_calls_top"], scenes)
         ecs = [row for row in cpu["rows"] if row.get("scene") == "ecs"]
         if ecs:
             out += _table(["scene", "entities", "moving", "cpu_ms_median", "frame_ms_median", "draw_calls"], ecs)
