@@ -23,7 +23,7 @@ ROOT = Path(__file__).resolve().parents[1]
 # What each rendering suite drew at before --size existed: the default must not move.
 DEFAULT_SIZES = {"ecs": (64, 36), "portals": (640, 360), "mirrors": (640, 360), "soak": (320, 180),
                  "churn": (320, 180), "probes": (640, 360), "normal_maps": (640, 360), "stages": (640, 360),
-                 "profile": (640, 360)}
+                 "profile": (640, 360), "lighting": (640, 360)}
 
 
 @pytest.fixture
@@ -91,6 +91,7 @@ def _spy_on_capture_targets(monkeypatch, module) -> list[tuple[int, int]]:
     ["ecs", "--sizes", "100", "--frames", "1", "--warmup", "1"],
     ["churn", "--entities", "5", "--waves", "1", "--frames", "1"],
     ["profile", "--scenes", "portals_d8", "--frames", "1", "--warmup", "0"],
+    ["lighting", "--frames", "1", "--warmup", "0"],
 ], ids=lambda argv: argv[0])
 def test_the_size_reaches_the_render_target(argv, monkeypatch, capsys, own_contexts):
     parser, modules = build_parser()
@@ -630,7 +631,7 @@ def test_the_gl_call_counter_counts_each_call_the_engine_makes_once_and_puts_mod
         assert counter.total == 0
         assert ctx.fbo is target and (np.frombuffer(target.read(), np.uint8) == 255).all()  # the draws drew
     finally:
-        release_framebuffer(target)  # framebuffer 0 bound first: no deleted name left bound
+        release_framebuffer(target)  # the bound one: moderngl would bind its deleted name again
         for thing in (vao, buffer, program):
             thing.release()
         invalidate(ctx)  # the engines' state cache: this test set state behind it

@@ -273,9 +273,9 @@ class LayeredCubeTarget:
         if self.ctx.fbo is not None:
             self.ctx.fbo.use()
 
-    def clear(self) -> None:
-        """Colour 0 and depth far on every face (the target must be bound)."""
-        self.gl["glClearBufferfv"](GL_COLOR, 0, (ctypes.c_float * 4)(0.0, 0.0, 0.0, 0.0))
+    def clear(self, color: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 0.0)) -> None:
+        """``color`` (0 by default) and depth far on every face (the target must be bound)."""
+        self.gl["glClearBufferfv"](GL_COLOR, 0, (ctypes.c_float * 4)(*color))
         self.gl["glClearBufferfv"](GL_DEPTH, 0, (ctypes.c_float * 1)(1.0))
 
     def release(self) -> None:
