@@ -27,8 +27,9 @@ SUITES: dict[str, tuple[str, str]] = {
             "GL calls and profile, and every speed target against its limit"),
     "lighting": ("benchmarks.lighting", "the mirrors scene with shadows and post-processing (tone mapping, "
                  "bloom) on and off, interleaved: medians, ratios and the lighting cost targets"),
-    "gpu-report": ("benchmarks.gpu_report", "GL renderer and limits, rendering-path checks, test summary and the "
-                   "mirrors / portals / probes / stages / profile benchmarks at two sizes, as report.md + report.json"),
+    "gpu-report": ("benchmarks.gpu_report", "GL renderer and limits, rendering-path checks, the mirrors / portals / "
+                   "probes / stages / profile benchmarks at two sizes, the cpu suite and its targets, and the test "
+                   "suite (minutes: --no-tests leaves it out), as report.md + report.json"),
 }
 
 # The suites that draw frames: each takes --size WxH.

@@ -196,8 +196,8 @@ def test_gpu_report_writes_markdown_and_json_without_imgui(ctx, tmp_path):
     from benchmarks.cpu import TARGETS
     targets = [row for row in cpu["own sizes"]["rows"] if "target" in row]
     assert [row["target"] for row in targets] == list(TARGETS)
-    for row in targets:  # every part ran: every target has its value
-        assert row["value"] > 0 and row["met"] == (row["value"] <= row["limit"]), row
+    for row in targets:  # every part ran: every target has its value (what it is is timing: not asserted)
+        assert row["value"] is not None and row["met"] == (row["value"] <= row["limit"]), row
         assert row["applies"] == (row["set_for"] == "software"), row  # llvmpipe: a software rasteriser
     scenes = {(row["scene"], row["size"]): row for row in cpu["own sizes"]["rows"] if "gl_calls" in row}
     assert {scene for scene, size in scenes if size == "32x18"} == \
@@ -508,7 +508,8 @@ def test_a_failing_tests_frames_are_kept_where_speculum_fail_out_says(tmp_path):
 
 def _scene_row(scene: str, size: str, frame_ms: float) -> dict:
     return {"scene": scene, "size": size, "frames": 1, "frame_ms_median": frame_ms, "cpu_ms_median": frame_ms,
-            "views": 0, "passes": 1, "draw_calls": 3, "gl_calls": 40, "gl_calls_top": {}, "lp_num_threads": None}
+            "thread_ms_median": frame_ms, "views": 0, "passes": 1, "draw_calls": 3, "gl_calls": 40,
+            "gl_calls_top": {}, "lp_num_threads": None}
 
 
 def test_the_cpu_targets_are_read_from_the_scene_rows_and_judged_against_their_limits():
@@ -638,7 +639,7 @@ def test_the_gl_call_counter_counts_each_call_the_engine_makes_once_and_puts_mod
     assert now == originals and vars(_moderngl.Uniform)["value"] is originals[_moderngl.Uniform, "value"]
 
 
-def test_the_cpu_part_runs_in_its_own_process_with_no_rasteriser_threads(capsys):
+def test_the_cpu_part_runs_in_its_own_process_with_no_rasteriser_threads(capsys, own_contexts):
     """``--parts cpu`` on tiny frame counts: each 32x18 scene's row comes from the
     LP_NUM_THREADS=0 process with its views (none without mirrors, a view a portal level),
     its draw calls among its counted GL calls, and a profile of its top functions; only the
@@ -654,7 +655,7 @@ def test_the_cpu_part_runs_in_its_own_process_with_no_rasteriser_threads(capsys)
     for row in scenes.values():
         assert row["size"] == "32x18" and row["lp_num_threads"] == "0" and row["frames"] == 1
         assert row["gl_calls"] >= row["gl_calls_top"]["VertexArray.render"] >= row["draw_calls"] > 0, row
-        assert 0 < row["cpu_ms_median"] <= row["frame_ms_median"]
+        assert 0 < row["cpu_ms_median"] <= row["frame_ms_median"] and row["thread_ms_median"] > 0
     assert scenes["mirrors_0"]["views"] == scenes["portals_d0"]["views"] == 0
     assert scenes["portals_d8"]["views"] == 8 and 0 < scenes["mirrors_8"]["views"] < scenes["mirrors_16"]["views"]
     profiled = [row for row in rows if "rank" in row]
