@@ -28,7 +28,7 @@ from typing import Any
 
 from pyglm import glm
 
-from components import Camera, Emissive, Material, MeshRef, Mirror, Transform, look_rotation
+from components import Bloom, Camera, Emissive, Material, MeshRef, Mirror, Tonemap, Transform, look_rotation
 from engine.assets.level_file import LevelGame
 from engine.assets.mesh import box
 from engine.core.errors import SpeculumError
@@ -377,6 +377,12 @@ class MirrorBeam(LevelGame):
             yaw = glm.degrees(glm.atan(-forward.x, -forward.z))
             pitch = glm.degrees(glm.asin(forward.y))
             spawn_camera(world, position=eye, yaw=yaw, pitch=pitch, fly=False)
+        for camera, _ in world.query_one(Camera):
+            # ACES, and the beam, the target and the marker glowing (directly and in the
+            # mirrors), unless the level file says how its camera looks.
+            if not world.has(camera, Tonemap) and not world.has(camera, Bloom):
+                world.add_component(camera, Tonemap(curve="aces"))
+                world.add_component(camera, Bloom(intensity=0.5, threshold=0.8, composite="additive"))
         target = world.try_get(rules.target, Emissive)
         if target is None:
             target = Emissive(0.0)

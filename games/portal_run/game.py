@@ -47,11 +47,13 @@ import numpy as np
 from pyglm import glm
 
 from components import (
+    Bloom,
     Camera,
     Emissive,
     Material,
     MeshRef,
     Portal,
+    Tonemap,
     Transform,
     look_rotation,
     yaw_pitch_rotation,
@@ -328,8 +330,11 @@ class PortalRun(LevelGame):
         r = self.rules
         body = PlayerBody(yaw=r.yaw, pitch=r.pitch, rotation=yaw_pitch_rotation(r.yaw, r.pitch))
         eye = (r.start[0], r.start[1] + EYE_HEIGHT, r.start[2])
+        # ACES half a stop down (the bright walls keep the rims' colour), and a glow round
+        # the portal rims and the exit pad (brighter than white).
         self.player = world.spawn(Transform(position=eye, rotation=body.rotation), Camera(fov_y=70.0, near=0.05),
-                                  body)
+                                  Tonemap(curve="aces", exposure=-0.5),
+                                  Bloom(intensity=0.5, threshold=0.8, composite="additive"), body)
         # A crosshair: a small bright dot just past the near plane, a child of the camera.
         self.crosshair = world.spawn(Transform(position=(0.0, 0.0, -CROSSHAIR_DISTANCE), parent=self.player),
                                      MeshRef(quad(CROSSHAIR_SIZE, CROSSHAIR_SIZE, name="crosshair")),
