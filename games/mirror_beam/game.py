@@ -43,7 +43,7 @@ LEVEL_DIR = Path(__file__).parent / "levels"
 BEAM_WIDTH = 0.07
 BEAM_COLOR = (1.0, 0.04, 0.02, 1.0)
 BEAM_POWER = 2.0
-WIN_GLOW = 1.2
+WIN_GLOW = 4.0  # HDR: a solved target is four times brighter than white, and glows
 MAX_BOUNCES_CAP = 16
 FRAME_DEPTH = 0.04
 DEFAULT_CAMERA = {"position": [0.0, 7.5, 7.5], "look_at": [0.0, 0.5, 0.0]}
@@ -378,10 +378,12 @@ class MirrorBeam(LevelGame):
             pitch = glm.degrees(glm.asin(forward.y))
             spawn_camera(world, position=eye, yaw=yaw, pitch=pitch, fly=False)
         for camera, _ in world.query_one(Camera):
-            # ACES, and the beam, the target and the marker glowing (directly and in the
-            # mirrors), unless the level file says how its camera looks.
+            # Khronos PBR Neutral (it keeps the red beam and the green target their colours,
+            # which ACES and AgX wash toward white when bright), and the beam, the lit target
+            # and the marker glowing, directly and in the mirrors; unless the level file says
+            # how its camera looks.
             if not world.has(camera, Tonemap) and not world.has(camera, Bloom):
-                world.add_component(camera, Tonemap(curve="aces"))
+                world.add_component(camera, Tonemap(curve="pbr_neutral"))
                 world.add_component(camera, Bloom(intensity=0.5, threshold=0.8, composite="additive"))
         target = world.try_get(rules.target, Emissive)
         if target is None:

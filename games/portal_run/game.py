@@ -330,10 +330,11 @@ class PortalRun(LevelGame):
         r = self.rules
         body = PlayerBody(yaw=r.yaw, pitch=r.pitch, rotation=yaw_pitch_rotation(r.yaw, r.pitch))
         eye = (r.start[0], r.start[1] + EYE_HEIGHT, r.start[2])
-        # ACES half a stop down (the bright walls keep the rims' colour), and a glow round
-        # the portal rims and the exit pad (brighter than white).
+        # Khronos PBR Neutral: it keeps the colours the rules are read by (cyan and orange
+        # rims, the green pad, the red refusal marker), which ACES and AgX wash toward white
+        # when bright; and a glow round what is brighter than white (rims, the won pad).
         self.player = world.spawn(Transform(position=eye, rotation=body.rotation), Camera(fov_y=70.0, near=0.05),
-                                  Tonemap(curve="aces", exposure=-0.5),
+                                  Tonemap(curve="pbr_neutral"),
                                   Bloom(intensity=0.5, threshold=0.8, composite="additive"), body)
         # A crosshair: a small bright dot just past the near plane, a child of the camera.
         self.crosshair = world.spawn(Transform(position=(0.0, 0.0, -CROSSHAIR_DISTANCE), parent=self.player),
@@ -353,7 +354,7 @@ class PortalRun(LevelGame):
                                          Material(color=(*rgb, 1.0), roughness=1.0), Emissive(1.5)))
         self.placed: list[PlacedPortal | None] = [None, None]
         self.marker = world.spawn(Transform(position=hidden), MeshRef(box((0.5, 0.5, 0.5)), visible=False),
-                                  Material(color=(*REFUSED_COLOR, 1.0), roughness=1.0), Emissive(1.2))
+                                  Material(color=(*REFUSED_COLOR, 1.0), roughness=1.0), Emissive(0.8))
         self.marker_time = 0.0  # seconds the refused marker still shows
         self._exit_glow = world.try_get(self.exit, Emissive)
         self.won = False
