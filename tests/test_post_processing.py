@@ -333,6 +333,24 @@ def test_bloom_spreads_a_bright_point_and_leaves_level_0_as_it_was(known):
     dim[62:66, 94:98, :3] = 0.9   # below the threshold: shown as it is, no glow
     frame = known(dim, Tonemap(curve="none"), bloom).frame()
     assert frame[63, 95, 0] == expected_srgb8(np.array(0.9)) and not frame[:60].any() and not frame[:, :90].any()
+    # Bloom comes before exposure: 2 EV up shows the patch at 3.6 (clipped white), and still
+    # no glow, since the threshold is in the scene's units.
+    frame = known(dim, Tonemap(curve="none", exposure=2.0), bloom).frame()
+    assert frame[63, 95, 0] == 255 and not frame[:60].any() and not frame[:, :90].any()
+
+
+def test_fxaa_runs_after_the_tone_map(known):
+    """With FXAA on, the tone-mapped frame is encoded with its luma and filtered: a flat
+    image comes through unchanged, and an edge of two tone-mapped values is blended."""
+    flat = grey(0.4, (64, 32))
+    assert np.array_equal(known(flat, Tonemap(curve="aces"), Bloom(), aa="fxaa").frame(),
+                          known(flat, Tonemap(curve="aces"), Bloom(), aa="off").frame())
+    edge = grey(0.05, (64, 32))
+    edge[:, 32:, :3] = 4.0
+    edge[16:, 31, :3] = 4.0   # a step in the edge: FXAA blends its pixels
+    on = known(edge, Tonemap(curve="agx"), aa="fxaa").frame()
+    off = known(edge, Tonemap(curve="agx"), aa="off").frame()
+    assert not np.array_equal(on, off) and set(np.unique(off)) <= set(np.unique(off[:, [0, 63]]))
 
 
 def test_bloom_level_sizes_stop_at_two_pixels():
