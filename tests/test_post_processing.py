@@ -589,3 +589,45 @@ def test_the_overlay_toggles_bloom_and_picks_the_curve(known, ctx):
         assert present.curve is None
     finally:
         overlay.release()
+
+
+def test_a_lamp_seen_only_in_a_mirror_glows_there(scene):
+    """Bloom runs on the image with every reflection composited in: a lamp hidden from the
+    camera but shown by a mirror glows around its reflection (pixels next to its image, which
+    the ids say is the lamp, are brighter than without Bloom), and far from it the frame is
+    as without."""
+    from components import DirectionalLight, Emissive, Material, MeshRef, Mirror, Visibility
+    from engine.assets.mesh import plane, quad, sphere
+    from tests.support import look_from
+
+    lamp = {}
+
+    def build(bloom: bool):
+        def make(world) -> None:
+            camera = look_from(world, (0.0, 1.2, 4.0), (0.0, 1.0, 0.0))
+            world.add_component(camera, Tonemap(curve="none"))
+            if bloom:
+                world.add_component(camera, Bloom(intensity=0.5, threshold=1.0, composite="additive"))
+            world.spawn(DirectionalLight(direction=(-0.3, -1.0, -0.5), intensity=1.0))
+            world.spawn(Transform(), MeshRef(plane(10, 10)), Material(color=(0.3, 0.3, 0.3)))
+            world.spawn(Transform(position=(0.0, 1.2, -2.0)), MeshRef(quad(3.0, 2.2)), Material(), Mirror())
+            lamp["id"] = world.spawn(Transform(position=(0.4, 1.1, 1.0)), MeshRef(sphere(0.2)),
+                                     Material(color=(1.0, 0.9, 0.7)), Emissive(20.0), Visibility(direct=False))
+        return make
+
+    runs = {}
+    for bloom in (False, True):
+        runner = scene(build(bloom), (192, 128))
+        runner.engine.renderer.antialias = "off"
+        runs[bloom] = (runner.frame().astype(int), runner.ids())
+    (plain, ids), (glowing, _) = runs[False], runs[True]
+    lit = ids == lamp["id"]
+    assert 5 <= lit.sum() < 200, lit.sum()   # the lamp's image, in the mirror only
+    rows, columns = np.nonzero(lit)
+    assert 30 < rows.mean() < 100   # inside the mirror, above the floor
+    near = np.zeros_like(lit)
+    near[max(rows.min() - 6, 0):rows.max() + 7, max(columns.min() - 6, 0):columns.max() + 7] = True
+    near &= ~lit
+    gain = (glowing - plain).sum(axis=2)
+    assert gain[near].mean() > 20, gain[near].mean()
+    assert np.abs(glowing[:16, :16] - plain[:16, :16]).max() <= 2
