@@ -3,7 +3,7 @@
 Each case builds one component with one to three fields drawn from a pool of awkward
 values (NaN, infinities, numbers past float32 and float16, huge ints, wrong kinds, zero
 vectors, Euler-looking tuples), attaches it to an entity of a small lit scene (a box, a
-quad for surfaces, the camera entity for Camera and FlyController, the sky entity for the
+quad for surfaces, the camera entity for Camera, FlyController, Tonemap and Bloom, the sky entity for the
 Skybox) and renders one 48 x 32 frame.  A case passes when either the component is refused
 with a ``ComponentValueError`` that names ``Class.field`` (or the entity, for checks on the
 whole entity), or the frame renders with no NaN in the HDR colour target and ``ctx.error``
@@ -33,6 +33,7 @@ from pyglm import glm
 
 from benchmarks.fuzz_cases import run_cases
 from components import (
+    Bloom,
     Camera,
     ComponentValueError,
     DirectionalLight,
@@ -49,6 +50,7 @@ from components import (
     Refractive,
     Skybox,
     Slice,
+    Tonemap,
     Transform,
     Traveller,
     look_rotation,
@@ -63,7 +65,7 @@ from shell.app import Engine
 SIZE = (48, 32)
 CLASSES: tuple[type, ...] = (Transform, MeshRef, Material, Emissive, Reflective, Refractive, Mirror, Portal,
                              Traveller, Slice, PortalClone, ReflectionProbe, Camera, FlyController,
-                             DirectionalLight, PointLight, Skybox)
+                             DirectionalLight, PointLight, Skybox, Tonemap, Bloom)
 
 _NUMBERS: list[Any] = [0, 1, -1, 0.5, 2.0, 1e-30, 1e-4, 3.0, 16, 100.0, 1e5, 65504.0, 65505.0, 1e7, 1e20,
                        3.4e38, 1e39, float("nan"), float("inf"), -float("inf"), 10 ** 400, 2 ** 63, 2 ** 64 + 5,
@@ -168,7 +170,7 @@ class Fuzzer:
         try:
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
-                if case.cls in (Camera, FlyController):
+                if case.cls in (Camera, FlyController, Tonemap, Bloom):
                     restore = (self.game.camera, world.try_get(self.game.camera, case.cls))
                     world.add_component(self.game.camera, component)
                 elif case.cls is Skybox:
