@@ -1,4 +1,5 @@
 """Components: plain data attached to entities. Behaviour lives in ``systems``."""
+from components.ambient import HemisphereLight
 from components.camera import Camera, DirectionalLight, FlyController, PointLight
 from components.mirror import Mirror
 from components.portal import Portal, PortalClone, Slice, Traveller
@@ -11,7 +12,8 @@ from components.visibility import Visibility
 from components.water import Water
 
 __all__ = [
-    "Bloom", "Camera", "ComponentValueError", "DirectionalLight", "Emissive", "FlyController", "Material",
+    "Bloom", "Camera", "ComponentValueError", "DirectionalLight", "Emissive", "FlyController", "HemisphereLight",
+    "Material",
     "MeshRef", "Mirror", "PointLight", "Portal", "PortalClone", "ReflectionProbe", "Reflective", "Refractive",
     "Skybox", "Slice",
     "Tonemap", "TrackedComponent", "Transform", "Traveller", "Visibility", "Water",

@@ -246,6 +246,12 @@ class DebugOverlay:
         if changed:
             renderer.antialias = "fxaa" if fxaa else "off"
         self._widget("fxaa")
+        shadows = engine.stages["shadows"]
+        imgui.same_line()
+        changed, on = imgui.checkbox("shadows", shadows.enabled)
+        if changed:
+            shadows.enabled = on
+        self._widget("shadows")
         present = engine.stages["present"]
         imgui.same_line()
         changed, bloom = imgui.checkbox("bloom", present.bloom)

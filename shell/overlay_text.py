@@ -32,7 +32,9 @@ def overlay_lines(engine: Engine, frame_times: Sequence[float]) -> list[str]:
         f"views per level {per_level}",
         f"reflection views {stats.reflection_views}, dropped {stats.reflection_views_dropped}, "
         f"capped {stats.reflection_depth_capped}, faded {stats.reflection_views_faded}",
-        f"probe captures {stats.probe_captures} ({stats.probe_faces} faces)",
+        f"probe captures {stats.probe_captures} ({stats.probe_faces} faces); shadow maps drawn "
+        f"{stats.shadow_maps_drawn}, kept {stats.shadow_maps_kept}, cut {stats.shadows_cut}"
+        f"{' (off)' if not engine.stages['shadows'].enabled else ''}",
         f"view budget {'none' if stats.view_budget is None else stats.view_budget}: spent {stats.views_spent}, "
         f"cut {stats.views_cut}",
         f"pixel budget {'none' if stats.pixel_budget is None else stats.pixel_budget}: spent {stats.pixels_spent}, "
