@@ -3,7 +3,7 @@
 Each case builds one component with one to three fields drawn from a pool of awkward
 values (NaN, infinities, numbers past float32 and float16, huge ints, wrong kinds, zero
 vectors, Euler-looking tuples), attaches it to an entity of a small lit scene (a box, a
-quad for surfaces, the camera entity for Camera and FlyController, the sky entity for the
+quad for surfaces, the camera entity for Camera, FlyController, Tonemap and Bloom, the sky entity for the
 Skybox) and renders ``FRAMES`` 48 x 32 frames (``benchmarks/fuzz_cases.py``: what a first frame
 leaves to later ones, probes captured a face a frame, is run too).  A case passes when either
 the component is refused with a ``ComponentValueError`` that names ``Class.field`` (or the
@@ -37,6 +37,7 @@ from pyglm import glm
 from benchmarks.fuzz_cases import FRAMES, run_cases
 from benchmarks.model_fuzz import FRAMES as MODEL_FRAMES
 from components import (
+    Bloom,
     Camera,
     ComponentValueError,
     DirectionalLight,
@@ -53,6 +54,7 @@ from components import (
     Refractive,
     Skybox,
     Slice,
+    Tonemap,
     Transform,
     Traveller,
     look_rotation,
@@ -67,7 +69,7 @@ from shell.app import Engine
 SIZE = (48, 32)
 CLASSES: tuple[type, ...] = (Transform, MeshRef, Material, Emissive, Reflective, Refractive, Mirror, Portal,
                              Traveller, Slice, PortalClone, ReflectionProbe, Camera, FlyController,
-                             DirectionalLight, PointLight, Skybox)
+                             DirectionalLight, PointLight, Skybox, Tonemap, Bloom)
 
 _NUMBERS: list[Any] = [0, 1, -1, 0.5, 2.0, 1e-30, 1e-4, 3.0, 16, 100.0, 1e5, 65504.0, 65505.0, 1e7, 1e20,
                        3.4e38, 1e39, float("nan"), float("inf"), -float("inf"), 10 ** 400, 2 ** 63, 2 ** 64 + 5,
@@ -172,7 +174,7 @@ class Fuzzer:
         try:
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
-                if case.cls in (Camera, FlyController):
+                if case.cls in (Camera, FlyController, Tonemap, Bloom):
                     restore = (self.game.camera, world.try_get(self.game.camera, case.cls))
                     world.add_component(self.game.camera, component)
                 elif case.cls is Skybox:

@@ -14,7 +14,8 @@ way leaves what came before, with ``"complete": false``):
   ``direct_faces`` and any other path ``engine.render.path_checks.PATH_NAMES`` lists; each
   ``verified``, ``refused``, ``unavailable`` or ``unchecked``, with its detail).  A checkout
   without the self-check reports each path ``unchecked``.
-* ``benchmarks``: ``mirrors``, ``portals``, ``probes``, ``stages`` and ``profile`` (``--benchmarks``) at each
+* ``benchmarks``: ``mirrors``, ``portals``, ``probes``, ``stages``, ``profile`` and ``lighting``
+  (shadows and post-processing on and off; its targets are ``target`` rows) (``--benchmarks``) at each
   ``--size`` (default 640x360 and 1920x1080), and ``cpu`` once at the sizes it names (its
   targets tabled first, as "Targets", then its scenes' frames and GL calls), each run as
   ``python -m benchmarks <suite> --json --size WxH --frames N --warmup M`` would run it
@@ -71,7 +72,7 @@ from benchmarks import format_size, names_from, non_negative_int, parse_sizes, p
 
 ROOT = Path(__file__).resolve().parents[1]
 DEFAULT_SIZES = ((640, 360), (1920, 1080))
-BENCHMARKS = ("mirrors", "portals", "probes", "stages", "profile", "cpu")
+BENCHMARKS = ("mirrors", "portals", "probes", "stages", "profile", "lighting", "cpu")
 FIXED_SIZE = ("cpu",)  # suites that run at the sizes they name: once, not at each --size
 JUDGED = ("cpu",)  # suites with target rows, run with --report-only: the report judges them
 FIXED = "own sizes"  # their runs' key where the others' is a size
@@ -92,6 +93,8 @@ MEDIANS: dict[str, tuple[tuple[tuple[str, ...], str], ...]] = {
                (("path", "culled", "size"), "capture_ms_median"), (("prefilter", "size"), "prefilter_ms_median")),
     "stages": ((("scene", "stage"), "gpu_ms_median"), (("scene", "stage"), "cpu_ms_median"),
                (("scene", "stage"), "frame_ms_median")),
+    "lighting": ((("n_mirrors", "variant"), "frame_ms_median"), (("n_mirrors", "variant"), "ratio_to_off"),
+                 (("n_mirrors", "variant"), "cpu_ms_median"), (("target",), "value")),
 }
 
 

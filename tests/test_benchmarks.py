@@ -188,7 +188,7 @@ def test_gpu_report_writes_markdown_and_json_without_imgui(ctx, tmp_path):
     assert report["tests"] == {"ran": False, "reason": "--no-tests"}
 
     runs = report["benchmarks"]
-    assert set(runs) == {"mirrors", "portals", "probes", "stages", "profile", "cpu"}
+    assert set(runs) == {"mirrors", "portals", "probes", "stages", "profile", "lighting", "cpu"}
     cpu = runs.pop("cpu")  # at the sizes it names, once
     assert set(cpu) == {"own sizes"} and cpu["own sizes"]["status"] == "ok", cpu
     command = cpu["own sizes"]["command"]
@@ -237,6 +237,12 @@ def test_gpu_report_writes_markdown_and_json_without_imgui(ctx, tmp_path):
                                                                   "plan_us_per_view"}
     stage_rows = runs["stages"]["160x90"]["rows"]
     assert {r["scene"] for r in stage_rows} == {"mirrors_0", "mirrors_8", "mirrors_16", "probe_dynamic"}
+    lighting = runs["lighting"]["160x90"]["rows"]
+    from benchmarks.lighting import VARIANTS
+    assert [r["variant"] for r in lighting if "variant" in r] == [v.name for v in VARIANTS]
+    targets = {r["target"]: r for r in lighting if "target" in r}
+    assert not targets["post_0_mirrors"]["applies"]  # set for 640x360 on a GPU
+    assert "### lighting: ratio_to_off by size" in markdown
     profiled = runs["profile"]["160x90"]["rows"]
     assert {r["scene"] for r in profiled if "rank" not in r} == {"mirrors_16", "portals_d8", "probe_dynamic"}
     for heading in ("## OpenGL", "## Rendering paths", "## Benchmarks", "### mirrors: frame_ms_median by size",
