@@ -234,6 +234,7 @@ class IrradianceTable:
         level = max(0, resolution.bit_length() - 1 - (PROJECTION_FACE_SIZE.bit_length() - 1))
         vao = self._program()
         program = vao.program
+        program["source"].value = CUBE_MIP_UNIT  # again each time: a shader hot reload resets uniforms
         program["level"].value = float(level)
         program["level_size"].value = max(1, resolution >> level)
         self.framebuffer.use()
@@ -248,7 +249,6 @@ class IrradianceTable:
     def _program(self) -> moderngl.VertexArray:
         if self._vao is None:
             program = self.renderer.shaders.program("fullscreen.vert", "irradiance_sh.frag")
-            program["source"].value = CUBE_MIP_UNIT
             self._vao = self.ctx.vertex_array(program, [])
         return self._vao
 
@@ -273,7 +273,10 @@ class IrradianceTable:
             if block != self._block:
                 self.ubo.write(block)
                 self._block = block
-            self._count = min(len(boxes), MAX_IRRADIANCE_PROBES)
+            count = min(len(boxes), MAX_IRRADIANCE_PROBES)
+            if count and not self._count:
+                self.renderer.needs_preparing = True  # the AMBIENT_PROBES builds, made before a mirror needs them
+            self._count = count
             self._stale = False
 
     def bind(self, capturing: bool) -> bool:
