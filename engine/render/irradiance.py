@@ -125,13 +125,23 @@ def texel_solid_angles(size: int) -> np.ndarray:
 def project_faces(faces: np.ndarray) -> np.ndarray:
     """Irradiance coefficients E_lm (9, 3) of a cube map's six faces (6, n, n, 3) of linear
     radiance, in GL's face order with rows along t (``face_directions``)."""
-    faces = np.asarray(faces, np.float64)
+    faces = np.asarray(faces)[..., :3]
+    # Big faces are box-filtered to at most 128 texels first (2 x 2 means, as mips are): nine
+    # low-frequency coefficients do not need 25 million texels, and a 2048 sky then takes
+    # well under a second.
+    while faces.shape[1] > 128 and faces.shape[1] % 2 == 0:
+        half = faces.shape[1] // 2
+        faces = faces.astype(np.float32).reshape(6, half, 2, half, 2, 3).mean(axis=(2, 4))
     n = faces.shape[1]
     weights = texel_solid_angles(n)
     coefficients = np.zeros((SH_COEFFICIENTS, 3))
+    rows = max(1, (1 << 20) // (n * SH_COEFFICIENTS))  # a few MB at a time, for 2048-texel faces too
     for face in range(6):
-        basis = sh_basis(face_directions(face, n)) * weights[..., None]  # (n, n, 9)
-        coefficients += np.einsum("tsk,tsc->kc", basis, faces[face, ..., :3])
+        directions = face_directions(face, n)
+        for start in range(0, n, rows):
+            part = slice(start, start + rows)
+            basis = sh_basis(directions[part]) * weights[part, :, None]  # (rows, n, 9)
+            coefficients += np.einsum("tsk,tsc->kc", basis, faces[face, part, :, :3].astype(np.float64))
     return coefficients * np.array(BAND_FACTORS)[:, None]
 
 
