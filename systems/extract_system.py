@@ -39,7 +39,6 @@ class ExtractSystem(esper.Processor):
         self._batch_of: dict[int, InstanceBatch] = {}
         self._looks = LookChanges()  # what changes a look, and which probe each object samples
         self._joined: set[int] = set()
-        world.resources[Renderer] = renderer
 
     def process(self, dt: float) -> None:
         world = self.world
