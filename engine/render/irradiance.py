@@ -193,6 +193,9 @@ class IrradianceTable:
         self.table = ctx.texture((SH_COEFFICIENTS, MAX_IRRADIANCE_PROBES), 4, dtype="f4")
         self.table.filter = (moderngl.NEAREST, moderngl.NEAREST)
         self.framebuffer = ctx.framebuffer(color_attachments=[self.table])
+        # Bound on the table's unit while the table is drawn into: no texture is bound for
+        # sampling where it is also the target (a feedback loop is undefined on a GPU).
+        self._placeholder = ctx.texture((1, 1), 4, np.zeros(4, np.float32).tobytes(), dtype="f4")
         self.ubo = ctx.buffer(irradiance_block(()))
         self.empty_ubo = ctx.buffer(irradiance_block(()))  # bound while a probe is captured: sky only
         self.rows: dict[int, int] = {}   # probe owner -> its row (a capture was projected into it)
@@ -247,6 +250,7 @@ class IrradianceTable:
         program["source"].value = CUBE_MIP_UNIT  # again each time: a shader hot reload resets uniforms
         program["level"].value = float(level)
         program["level_size"].value = max(1, resolution >> level)
+        self._placeholder.use(IRRADIANCE_UNIT)  # the scene pass binds the table again
         self.framebuffer.use()
         apply_pass_state(self.ctx, self.STATE, (0, row, SH_COEFFICIENTS, 1))
         cube.texture.use(CUBE_MIP_UNIT)
@@ -310,7 +314,7 @@ class IrradianceTable:
             self._vao.release()
             self._vao = None
         release_framebuffer(self.framebuffer)
-        for obj in (self.table, self.ubo, self.empty_ubo):
+        for obj in (self.table, self._placeholder, self.ubo, self.empty_ubo):
             obj.release()
         self.rows.clear()
 
