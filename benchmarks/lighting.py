@@ -12,7 +12,8 @@ Each row gives the median and its ratio to the ``off`` variant of the same mirro
 Variants now (``VARIANTS``; add a row by appending a ``Variant``):
 
 * ``off``: the scene lit as before shadows and post-processing (the sun's shadows off, no
-  Tonemap, no Bloom);
+  Tonemap, no Bloom); in every variant the scene's spinning boxes stand still (only the
+  camera moves), so what a variant moves is all that moves;
 * ``shadows``: the sun casts shadows; nothing but the camera moves, so its map is drawn
   once and kept (the still scene);
 * ``shadows_moving``: the same with a box sliding to and fro under the sun every frame
@@ -76,8 +77,11 @@ def camera_entity(engine: Engine) -> int:
 
 
 def _sun_shadows(engine: Engine, on: bool) -> None:
+    """The sun's shadows on or off, and the scene's spinning boxes stopped: every variant is a
+    still scene but for what it moves itself."""
     for _, light in engine.world.query_one(DirectionalLight):
         light.shadows = on
+    engine.game.spinning.clear()
 
 
 def _plain(engine: Engine) -> None:

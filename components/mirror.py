@@ -47,6 +47,11 @@ class Mirror(TrackedComponent):
     falls linearly from 1 to 0 and the mirror shows its own shading instead; at end and past
     it the mirror costs no view at all.  A view's weight is the product of the two, seen from
     that view's eye (a mirror seen in another mirror fades by the reflected eye's distance).
+
+    ``reflects_light`` (off by default): the lights that reach its front are reflected onto
+    what it faces, through its outline, tinted by ``color`` and scaled by ``reflect_rate``
+    (a virtual light: the light's mirror image, with a shadow map of its own; one bounce;
+    ``engine/rules/shadow_rules.py``).
     """
 
     color: Any = field(default_factory=lambda: glm.vec4(1.0))
@@ -63,6 +68,7 @@ class Mirror(TrackedComponent):
     hides_layers: Any = ()
     fade_distance: Any = None
     fade_angle: Any = None
+    reflects_light: bool = False
 
     @property
     def layer_mask(self) -> int:
@@ -81,7 +87,7 @@ class Mirror(TrackedComponent):
         if name == "max_depth":
             if not isinstance(value, int) or isinstance(value, bool) or not 0 <= value <= MAX_VIEW_DEPTH:
                 raise ComponentValueError(f"Mirror.max_depth must be an int in [0, {MAX_VIEW_DEPTH}], got {value!r}")
-        if name == "enabled":
+        if name in ("enabled", "reflects_light"):
             return boolean(self, name, value)
         if name == "priority":
             return integer(self, name, value, low=-1000, high=1000)

@@ -32,6 +32,8 @@ class Portal(TrackedComponent):
     shows (``components.visibility``): ``hides_layers=[3]`` shows all but layer 3.
     ``priority`` and ``end_image``: as on ``Mirror`` (the view budget's order; past the
     depth limit, last frame's image instead of the closed look, "auto" for a facing pair).
+    ``carries_light`` (off by default): lights in front of it shine out of its partner's
+    opening (their images carried by the pair's transform), with shadows on both sides.
     """
 
     SHAREABLE = False  # one entity's own state: see components.tracking
@@ -44,6 +46,7 @@ class Portal(TrackedComponent):
     closed_color: Any = field(default_factory=lambda: glm.vec4(0.02, 0.02, 0.03, 1.0))
     shows_layers: Any = None
     hides_layers: Any = ()
+    carries_light: bool = False
 
     @property
     def layer_mask(self) -> int:
@@ -77,8 +80,8 @@ class Portal(TrackedComponent):
             return integer(self, name, value, low=-1000, high=1000)
         if name == "end_image":
             return end_image_choice(self, name, value)
-        if name == "enabled" and not isinstance(value, bool):
-            raise ComponentValueError(f"Portal.enabled must be True or False, got {value!r}")
+        if name in ("enabled", "carries_light") and not isinstance(value, bool):
+            raise ComponentValueError(f"Portal.{name} must be True or False, got {value!r}")
         if name == "closed_color":
             return color(self, name, value)
         if name in ("shows_layers", "hides_layers"):

@@ -95,6 +95,7 @@ class SurfaceState:
     end_image: bool | str = "auto"  # past the depth limit, last frame's image: True, False, or "auto" (facing pairs)
     fade: tuple[float, float, float, float] | None = None  # a mirror's fades: distance start, end (m), angle
                                                            # start, end (degrees); None: no fade
+    carries_light: bool = False  # Mirror.reflects_light, Portal.carries_light: lights shine through it
 
 
 @dataclass(frozen=True)

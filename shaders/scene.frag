@@ -5,6 +5,9 @@
 #include "lights.glsl"
 #include "shadows.glsl"
 #include "ggx.glsl"
+#ifdef VIRTUAL_LIGHTS
+#include "virtual_lights.glsl"
+#endif
 #include "ambient.glsl"
 
 uniform sampler2D albedo_map;
@@ -106,6 +109,9 @@ vec3 direct_lighting(Surface s) {
                      * point_shadow(i, s.position, lights.point_pos[i].xyz, s.geometric_normal, l);
         }
     }
+#ifdef VIRTUAL_LIGHTS
+    total += virtual_lighting(s.position, s.normal, s.geometric_normal, s.to_eye, diffuse, s.f0, s.roughness);
+#endif
     return total;
 }
 

@@ -24,13 +24,18 @@ out vec2 v_clip;  // shadow_layered.geom writes them per face
 void main() {
     vec4 world = in_model * vec4(in_position, 1.0);
     gl_Position = camera.view_proj * world;
-    bool casts = in_slots.z != REFLECT_PORTAL && in_slots.y == REFRACT_NONE && !hidden_everywhere(in_tint.w);
-    gl_ClipDistance[CLIP_VIEW_PLANE] = casts ? 1.0 : -1.0;
+    // A virtual light's map (light through a mirror or portal) leaves out the surfaces it
+    // passes through (camera.skip) and what lies behind them (camera.clip_plane); a light's
+    // own map has neither.
+    bool casts = in_slots.z != REFLECT_PORTAL && in_slots.y == REFRACT_NONE && !hidden_everywhere(in_tint.w)
+        && in_slots.w != camera.skip.x && in_slots.w != camera.skip.y;
+    float plane = dot(world, camera.clip_plane);
+    gl_ClipDistance[CLIP_VIEW_PLANE] = casts ? plane : -1.0;
     gl_ClipDistance[CLIP_SLICE] = dot(world, in_slice);
 #ifdef DISTANCE
     v_world_pos = world.xyz;
 #endif
 #ifdef LAYERED
-    v_clip = vec2(casts ? 1.0 : -1.0, dot(world, in_slice));
+    v_clip = vec2(casts ? plane : -1.0, dot(world, in_slice));
 #endif
 }

@@ -19,10 +19,22 @@ import numpy as np
 from components import DirectionalLight, Material, MeshRef, PointLight, Refractive, Transform, Visibility
 from engine.core.world import World
 from engine.render.renderer import Renderer
-from engine.render.shadows import MAX_POINT_SHADOWS
+from engine.render.shadows import MAX_POINT_SHADOWS, VIRTUAL_RESOLUTION
 from engine.render.views import MAX_DIRECTIONAL_LIGHTS, MAX_POINT_LIGHTS
+from engine.resources import Surfaces
 from engine.rules.probe_rules import world_bounds
-from engine.rules.shadow_rules import ShadowCasters, boxes_in_reach, directional_fit
+from engine.rules.shadow_rules import (
+    MAX_VIRTUAL_LIGHTS,
+    DirectionalFit,
+    ShadowCasters,
+    VirtualLight,
+    boxes_in_reach,
+    directional_fit,
+    map_region,
+    rank_virtual_lights,
+    virtual_lights,
+    virtual_shadow_camera,
+)
 
 _LOOKS = (MeshRef, Material, Visibility, Refractive)  # what decides whether, and what shape, a thing casts
 
@@ -33,6 +45,8 @@ class ShadowSystem(esper.Processor):
         self.renderer = renderer
         self.enabled = True   # the debug overlay's toggle: off, no light casts
         self._directional: dict[int, tuple] = {}   # slot -> what its map was drawn from
+        self._fits: dict[int, DirectionalFit] = {}  # slot -> its map's camera
+        self._virtual: dict[int, tuple] = {}        # virtual light slot -> what its map was drawn from
         self._point: dict[int, tuple] = {}         # cube slot -> what its cube was drawn from
         self._casters_seen = -1
         self._bounds: dict[int, tuple[np.ndarray, np.ndarray]] = {}  # entity -> world box (point lights only)
@@ -44,18 +58,20 @@ class ShadowSystem(esper.Processor):
         maps = renderer.shadows
         casters_changed = renderer.casters_version != self._casters_seen
         self._casters_seen = renderer.casters_version
+        changed_box = renderer.take_changed_box()
         level = renderer.level_bounds()
         published = ShadowCasters(level=level)
-        self._directional_maps(casters_changed, level, published)
+        self._directional_maps(casters_changed, changed_box, level, published)
         self._point_maps(published)
+        self._virtual_maps(casters_changed, level)
         self.world.resources[ShadowCasters] = published
-        block = maps.block.tobytes()
+        block = maps.block.tobytes() + maps.virtual_block.tobytes()
         if block != self._uploaded:
             maps.upload()
             self._uploaded = block
 
     # --- directional lights -------------------------------------------------------------------
-    def _directional_maps(self, casters_changed: bool, level, published: ShadowCasters) -> None:
+    def _directional_maps(self, casters_changed: bool, changed_box, level, published: ShadowCasters) -> None:
         maps = self.renderer.shadows
         stats = self.renderer.stats
         lights = [light for _, light in self.world.query_one(DirectionalLight)][:MAX_DIRECTIONAL_LIGHTS]
@@ -71,13 +87,26 @@ class ShadowSystem(esper.Processor):
                     maps.clear_directional(slot)
                 continue
             published.directional.append(tuple(light.direction))
-            key = (tuple(light.direction), light.shadow_resolution, light.shadow_softness, maps.tile,
+            key = (tuple(light.direction), light.shadow_resolution, light.shadow_softness, maps.tile, maps.filter,
                    level[0].tobytes(), level[1].tobytes())
-            if key == self._directional.get(slot) and not casters_changed:
+            same = key == self._directional.get(slot)
+            if same and not casters_changed:
                 stats.shadow_maps_kept += 1
                 continue
-            fit = directional_fit(light.direction, level[0], level[1], light.shadow_resolution)
-            maps.draw_directional(slot, fit, light.shadow_resolution, light.shadow_softness)
+            region = None
+            if same:
+                # Only casters changed, within the level's box (the fit is the same): only the
+                # texels under where they were and are are drawn again.
+                fit = self._fits[slot]
+                region = (0, 0, 0, 0) if changed_box is None else \
+                    map_region(fit, changed_box[0], changed_box[1], light.shadow_resolution)
+                if region is not None and region[2] * region[3] == 0:
+                    stats.shadow_maps_kept += 1   # what changed casts nothing here (or is glass)
+                    continue
+            else:
+                fit = self._fits[slot] = directional_fit(light.direction, level[0], level[1], light.shadow_resolution)
+            stats.shadow_texels_drawn += maps.draw_directional(slot, fit, light.shadow_resolution,
+                                                               light.shadow_softness, region)
             self._directional[slot] = key
             stats.shadow_maps_drawn += 1
 
@@ -104,7 +133,7 @@ class ShadowSystem(esper.Processor):
         for slot, (index, entity, light, transform) in enumerate(casting):
             position = transform.world[3].xyz
             published.points.append((tuple(position), light.range))
-            key = (entity, tuple(position), light.range, light.shadow_resolution, light.shadow_softness)
+            key = (entity, tuple(position), light.range, light.shadow_resolution, light.shadow_softness, maps.filter)
             reached = len(changed_lo) and boxes_in_reach(changed_lo, changed_hi, np.array(position), light.range).any()
             if key == self._point.get(slot) and not reached:
                 maps.keep_point(slot, index)
@@ -143,3 +172,61 @@ class ShadowSystem(esper.Processor):
         if not boxes:
             return np.zeros((0, 3)), np.zeros((0, 3))
         return np.array([lo for lo, _ in boxes]), np.array([hi for _, hi in boxes])
+
+    # --- lights through mirrors and portals ---------------------------------------------------
+    def _virtual_maps(self, casters_changed: bool, level) -> None:
+        """Each light's image through the mirrors and portals that carry light
+        (``shadow_rules.virtual_lights``), brightest and highest priority first, at most
+        ``MAX_VIRTUAL_LIGHTS``: a map each, drawn when it or a caster changed, a view of the
+        frame's ``ViewBudget`` each time it is drawn; one the limit or the budget leaves out
+        lights nothing and is counted in ``RenderStats.virtual_lights_cut``."""
+        world = self.world
+        renderer = self.renderer
+        maps = renderer.shadows
+        stats = renderer.stats
+        surfaces = world.resources.get(Surfaces)
+        found: list[VirtualLight] = []
+        if self.enabled and level is not None and surfaces is not None and (surfaces.mirrors or surfaces.portals):
+            directional = [(entity, light.direction, light.color.xyz * light.intensity)
+                           for entity, light in world.query_one(DirectionalLight)][:MAX_DIRECTIONAL_LIGHTS]
+            points = [(entity, transform.world[3].xyz, light.range, light.color.xyz * light.intensity)
+                      for entity, (light, transform) in world.query(PointLight, Transform)][:MAX_POINT_LIGHTS]
+            found = rank_virtual_lights(virtual_lights(directional, points, surfaces))
+        drawn = 0
+        for light in found:
+            slot = drawn
+            if slot == MAX_VIRTUAL_LIGHTS:
+                stats.virtual_lights_cut += 1
+                continue
+            key = (light.light, light.surface, light.kind, light.position, light.color, light.light_range,
+                   light.exit_plane, light.aperture, light.carry.to_bytes(), light.entry_plane.to_bytes(),
+                   level[0].tobytes(), level[1].tobytes(), maps.filter)
+            if key != self._virtual.get(slot) or casters_changed:
+                left = stats.views_left()
+                if left is not None and left <= 0:
+                    stats.virtual_lights_cut += 1
+                    self._virtual.pop(slot, None)
+                    continue
+                lo, hi = level
+                if light.kind == "directional":
+                    lo, hi = _with_image(lo, hi, light.carry)
+                maps.draw_virtual(slot, light, virtual_shadow_camera(light, lo, hi, VIRTUAL_RESOLUTION))
+                self._virtual[slot] = key
+                stats.views_spent += 1
+                stats.shadow_maps_drawn += 1
+            else:
+                stats.shadow_maps_kept += 1
+            drawn += 1
+        for slot in [s for s in self._virtual if s >= drawn]:
+            del self._virtual[slot]
+        stats.virtual_lights = drawn
+        maps.set_virtual_count(drawn)
+        renderer.scene_pass.virtual_lights = drawn > 0
+
+
+def _with_image(lo: np.ndarray, hi: np.ndarray, carry) -> tuple[np.ndarray, np.ndarray]:
+    """The box [lo, hi] grown to hold its image under ``carry`` (a virtual light's map holds
+    the scene and its image, the way in)."""
+    corners = np.array([[x, y, z, 1.0] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
+    image = corners @ np.array(carry.to_list(), np.float64)
+    return np.minimum(lo, image[:, :3].min(axis=0)), np.maximum(hi, image[:, :3].max(axis=0))

@@ -139,7 +139,7 @@ class SurfaceSystem(esper.Processor):
                 entity, "portal", portal_plane(transform.world), corners, corners,
                 pair_transform(transform.world, out.world), portal_plane(out.world), partner,
                 portal.max_depth, portal.enabled, layers=portal.layer_mask, priority=portal.priority,
-                end_image=portal.end_image, drawn=drawn_code(world, entity))
+                end_image=portal.end_image, drawn=drawn_code(world, entity), carries_light=portal.carries_light)
         return True
 
     @staticmethod
@@ -178,7 +178,7 @@ class SurfaceSystem(esper.Processor):
                             reflection_matrix(plane), plane, entity, mirror.max_depth, mirror.enabled,
                             mirror.color, mirror.reflect_rate, mirror.roughness, mirror.resolution_scale, bumps, look,
                             fade=_fades(mirror), layers=mirror.layer_mask, priority=mirror.priority,
-                            end_image=mirror.end_image, drawn=drawn)
+                            end_image=mirror.end_image, drawn=drawn, carries_light=mirror.reflects_light)
 
 
 

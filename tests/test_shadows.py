@@ -101,10 +101,12 @@ def _agreement(shadowed, lit, mask, occluded_in, occluded_out):
     return float((frame_says == rays_say).mean()), int(sure.sum()), int(rays_say.sum())
 
 
-def _render_both(scene, build, size=(320, 240), light="sun"):
-    """The frame with the light's shadows off, then on (same scene, one runner)."""
+def _render_both(scene, build, size=(320, 240), light="sun", shadow_filter="single"):
+    """The frame with the light's shadows off, then on (same scene, one runner), the edges
+    filtered by ``shadow_filter`` (ShadowMaps.filter: the software default, or the GPU's)."""
     runner = scene(build, size)
     runner.engine.renderer.antialias = "off"
+    runner.engine.renderer.shadows.filter = shadow_filter
     ids = runner.world.resources["ids"]
     caster = runner.world.get(ids[light], DirectionalLight if light == "sun" else PointLight)
     caster.shadows = False
@@ -114,11 +116,12 @@ def _render_both(scene, build, size=(320, 240), light="sun"):
     return runner, ids, without, with_shadows
 
 
-def test_directional_shadows_agree_with_shadow_rays(scene):
+@pytest.mark.parametrize("shadow_filter", ["single", "grid"])
+def test_directional_shadows_agree_with_shadow_rays(scene, shadow_filter):
     def build(world):
         world.resources["ids"] = _floor_scene(world, (0.5, 5.0, 6.5), (0.0, 0.0, 0.0))
 
-    runner, ids, without, with_shadows = _render_both(scene, build)
+    runner, ids, without, with_shadows = _render_both(scene, build, shadow_filter=shadow_filter)
     shadowed, lit = _classified(without, with_shadows)
     floor = runner.ids() == ids["floor"]
     eye, rays = _pixel_rays(runner.engine.main_view, runner.size)
@@ -132,11 +135,12 @@ def test_directional_shadows_agree_with_shadow_rays(scene):
     assert share >= 0.99, f"{share:.4f} of {counted} floor pixels agree with the shadow rays"
 
 
-def test_the_shadow_seen_in_a_mirror_is_the_mirrored_points_shadow(scene):
+@pytest.mark.parametrize("shadow_filter", ["single", "grid"])
+def test_the_shadow_seen_in_a_mirror_is_the_mirrored_points_shadow(scene, shadow_filter):
     def build(world):
         world.resources["ids"] = _floor_scene(world, (0.0, 3.0, 5.0), (0.0, 1.2, -3.0), mirror=True)
 
-    runner, ids, without, with_shadows = _render_both(scene, build)
+    runner, ids, without, with_shadows = _render_both(scene, build, shadow_filter=shadow_filter)
     shadowed, lit = _classified(without, with_shadows)
     targets = runner.engine.renderer.targets
     in_mirror = (targets.read_surface_ids() == ids["mirror"]) & (runner.ids() == ids["floor"])
@@ -185,8 +189,8 @@ def test_the_shadow_seen_through_a_portal_is_the_carried_points_shadow(scene):
     assert share >= 0.99, f"{share:.4f} of {counted} floor pixels through the portal agree with the shadow rays"
 
 
-@pytest.mark.parametrize("path", ["layered", "six_pass"])
-def test_point_light_shadows_agree_with_shadow_rays(scene, monkeypatch, path):
+@pytest.mark.parametrize("path, shadow_filter", [("layered", "single"), ("six_pass", "grid")])
+def test_point_light_shadows_agree_with_shadow_rays(scene, monkeypatch, path, shadow_filter):
     lamp = np.array([3.2, 1.3, 0.9])
     if path == "six_pass":
         from engine.render.path_checks import PathChecks
@@ -198,7 +202,7 @@ def test_point_light_shadows_agree_with_shadow_rays(scene, monkeypatch, path):
         world.resources["ids"] = _floor_scene(world, (0.0, 5.5, 6.0), (0.0, 0.0, 0.0), sun=False,
                                               point=lamp.tolist())
 
-    runner, ids, without, with_shadows = _render_both(scene, build, light="lamp")
+    runner, ids, without, with_shadows = _render_both(scene, build, light="lamp", shadow_filter=shadow_filter)
     assert runner.stats.shadow_path == path
     shadowed, lit = _classified(without, with_shadows)
     # Only where the lamp gives a visible share of the light (near the end of its range
@@ -217,13 +221,14 @@ def test_point_light_shadows_agree_with_shadow_rays(scene, monkeypatch, path):
     assert share >= 0.99, f"{share:.4f} of {counted} floor pixels agree with the shadow rays ({path})"
 
 
-def test_lit_surfaces_have_no_acne(scene):
+@pytest.mark.parametrize("shadow_filter", ["single", "grid"])
+def test_lit_surfaces_have_no_acne(scene, shadow_filter):
     """Every surface the light reaches unblocked (the rays say so, well away from any outline)
     is as bright with shadows as without: the sphere's lit side, the box's lit faces, the floor."""
     def build(world):
         world.resources["ids"] = _floor_scene(world, (2.5, 2.5, 4.0), (0.0, 0.5, 0.0))
 
-    runner, ids, without, with_shadows = _render_both(scene, build)
+    runner, ids, without, with_shadows = _render_both(scene, build, shadow_filter=shadow_filter)
     _, lit = _classified(without, with_shadows)
     seen = runner.ids()
     sphere = seen == ids["sphere"]
@@ -265,6 +270,47 @@ def test_a_still_scene_draws_no_shadow_pass_and_a_moved_caster_draws_one(scene):
     runner.frame()
     assert runner.stats.shadow_maps_drawn == 0
     assert not np.array_equal(first, moved)
+
+
+@pytest.mark.parametrize("change", ["moved", "removed", "added"])
+def test_a_changed_caster_redraws_only_its_footprint_and_the_frame_is_a_fresh_engines(scene, change):
+    """The box moves (is deleted, or a second box comes) inside the level's box: the map's
+    texels under where it was and is are drawn again, a small share of the map, and the frame
+    is the one an engine made with the box already there draws (every texel as a whole
+    redraw leaves it)."""
+    def build_with(box_at, extra=False):
+        def build(world):
+            world.resources["ids"] = _floor_scene(world, (0.5, 5.0, 6.5), (0.0, 0.0, 0.0))
+            box_id = world.resources["ids"]["box"]
+            if box_at is None:
+                world.delete_entity(box_id)
+            else:
+                world.get(box_id, Transform).position = glm.vec3(box_at)
+            if extra:
+                world.spawn(Transform(position=(2.5, 0.4, -2.0)), MeshRef(box((0.8, 0.8, 0.8))), Material())
+        return build
+
+    start, end = BOX_CENTRE.tolist(), [-1.6, 0.5, -0.7]
+    runner = scene(build_with(start), (320, 240))
+    runner.engine.renderer.antialias = "off"
+    runner.frame()
+    box_id = runner.world.resources["ids"]["box"]
+    if change == "moved":
+        runner.world.get(box_id, Transform).position = glm.vec3(end)
+        fresh_build = build_with(end)
+    elif change == "removed":
+        runner.world.delete_entity(box_id)
+        fresh_build = build_with(None)
+    else:
+        runner.world.spawn(Transform(position=(2.5, 0.4, -2.0)), MeshRef(box((0.8, 0.8, 0.8))), Material())
+        fresh_build = build_with(start, extra=True)
+    changed = runner.frame()
+    resolution = DirectionalLight().shadow_resolution
+    assert runner.stats.shadow_maps_drawn == 1
+    assert 0 < runner.stats.shadow_texels_drawn < 0.1 * resolution * resolution
+    fresh = scene(fresh_build, (320, 240))
+    fresh.engine.renderer.antialias = "off"
+    assert np.array_equal(changed, fresh.frame())
 
 
 def test_a_point_light_ignores_changes_outside_its_reach(scene):
@@ -330,6 +376,22 @@ def test_a_probe_face_recaptures_when_a_shadow_it_shows_moves(scene):
     assert any(reason.startswith("shadow of entity") for reason in due[probe].reasons), due[probe].reasons
 
 
+def test_the_filter_is_checked_and_a_new_one_draws_the_maps_again(scene):
+    def build(world):
+        world.resources["ids"] = _floor_scene(world, (0.5, 5.0, 6.5), (0.0, 0.0, 0.0))
+
+    runner = scene(build)
+    runner.frame()
+    runner.frame()
+    assert runner.stats.shadow_maps_drawn == 0
+    maps = runner.engine.renderer.shadows
+    maps.filter = "grid" if maps.filter == "single" else "single"
+    runner.frame()
+    assert runner.stats.shadow_maps_drawn == 1
+    with pytest.raises(ValueError, match="shadow filter"):
+        maps.filter = "pcss"
+
+
 def test_shadow_fields_refuse_bad_values():
     with pytest.raises(ComponentValueError, match="power of two"):
         DirectionalLight(shadow_resolution=1000)
@@ -340,3 +402,47 @@ def test_shadow_fields_refuse_bad_values():
     with pytest.raises(ComponentValueError, match="shadows"):
         PointLight(shadows="yes")
     assert DirectionalLight().shadows and not PointLight().shadows
+
+
+LEVEL = """
+[level]
+name = "shadowed"
+
+[[entity]]
+name = "sun"
+[entity.DirectionalLight]
+direction = [-0.4, -1.0, -0.3]
+shadows = false
+shadow_resolution = 1024
+shadow_softness = 2.5
+
+[[entity]]
+name = "lamp"
+[entity.Transform]
+position = [0.0, 2.0, 0.0]
+[entity.PointLight]
+range = 6.0
+shadows = true
+shadow_resolution = 256
+"""
+
+
+def test_level_files_carry_the_shadow_fields_and_refuse_bad_ones(tmp_path):
+    from engine.assets.level_file import LevelError, load_level, save_level
+    from engine.core.world import World
+
+    path = tmp_path / "shadowed.toml"
+    path.write_text(LEVEL)
+    world = World("shadow level")
+    names = load_level(path).spawn(world)
+    sun, lamp = world.get(names["sun"], DirectionalLight), world.get(names["lamp"], PointLight)
+    assert (sun.shadows, sun.shadow_resolution, sun.shadow_softness) == (False, 1024, 2.5)
+    assert (lamp.shadows, lamp.shadow_resolution) == (True, 256)
+    saved = save_level(world, tmp_path / "again.toml", names)
+    again = World("again")
+    names_again = load_level(saved).spawn(again)
+    assert again.get(names_again["lamp"], PointLight).shadow_resolution == 256
+    assert again.get(names_again["sun"], DirectionalLight).shadow_softness == 2.5
+    path.write_text(LEVEL.replace("shadow_resolution = 1024", "shadow_resolution = 1000"))
+    with pytest.raises(LevelError, match="shadow_resolution"):
+        load_level(path)

@@ -64,6 +64,7 @@ SCRATCH_UNIT = 15        # raw-GL copies bind their target here; no program read
 SHADOW_ATLAS_UNIT = 11   # scene: the directional lights' shadow maps, one depth atlas (sampler2DShadow)
 POINT_SHADOW_UNITS = (3, 4)  # scene: the shadowed point lights' distance cube maps, one a light
 IRRADIANCE_UNIT = 5      # scene: the irradiance table (sky and probes' spherical harmonics)
+VIRTUAL_SHADOW_UNIT = 14  # scene: the virtual lights' shadow maps, one depth atlas (the mip pass's unit)
 # Post-processing (the present stage; these passes bind nothing else, so they reuse the
 # scene's units).  Bloom and exposure passes read their source at PRESENT_UNIT.
 BLOOM_UNIT = 1           # present: the bloom chain's sum of levels (engine/render/bloom.py)
@@ -75,6 +76,7 @@ LIGHTS_BINDING = 1
 VIEWS_BINDING = 2        # the batched scene program's table of a level's views
 SHADOWS_BINDING = 3      # scene: the lights' shadow matrices and atlas rectangles
 IRRADIANCE_BINDING = 4   # scene: the probes' influence boxes for diffuse image lighting
+VIRTUAL_LIGHTS_BINDING = 5  # scene: lights seen through mirrors and portals (shadow_rules.VirtualLight)
 
 # --- clip distances ------------------------------------------------------------------------
 # The GLSL writes gl_ClipDistance[CLIP_VIEW_PLANE] and so on: the names below, defined for

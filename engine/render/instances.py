@@ -94,8 +94,11 @@ class InstanceBatch:
         # Each row's world box, kept for the rows each upload sends (a removal's moved row
         # is sent too), and their union, worked out again after an upload that sent rows:
         # what the shadows' fit reads, exact whatever came and went before.
-        self._row_boxes = np.zeros((capacity, 2, 3), np.float64)
+        self._row_boxes = np.full((capacity, 2, 3), np.nan)   # NaN: a row never measured
         self._box: tuple[np.ndarray, np.ndarray] | None = None
+        # Where instances were and are whose rows changed since ``take_changed_box`` (the old
+        # and the new boxes of moved, added and removed rows): what a shadow map must redraw.
+        self._changed: tuple[np.ndarray, np.ndarray] | None = None
         self.probe = 0  # the entity owning the reflection probe its instances sample (0: none)
         # Probe blending (probe_rules.probe_blend): a second probe (0: none), and whether the
         # instances blend (their rows' ``reflect`` z and w weigh the two probes, the sky the rest).
@@ -171,6 +174,8 @@ class InstanceBatch:
         free = np.flatnonzero(~inside) + front            # as many rows of the block that are not movers
         rows, entity_at, index = self.rows, self.entity_at, self.row_of
         rows[free], rows[far] = rows[far], rows[free]     # fancy indexing copies: a true exchange
+        boxes = self._boxes_for(len(rows))
+        boxes[free], boxes[far] = boxes[far], boxes[free]  # each row's box goes with its instance
         for a, b in zip(free.tolist(), far.tolist(), strict=True):
             entity_at[a], entity_at[b] = entity_at[b], entity_at[a]
             index[entity_at[a]], index[entity_at[b]] = a, b
@@ -193,6 +198,11 @@ class InstanceBatch:
         self._dirty.discard(last)
         self._rescale = True  # the largest instance may have gone: measure all rows again
         self._box = None      # and the union of the rows' boxes
+        boxes = self._boxes_for(last + 1)
+        self._note_changed(boxes[index, 0], boxes[index, 1])  # where it was
+        if index != last:
+            boxes[index] = boxes[last]  # the moved row's box moves with it
+        boxes[last] = np.nan
         self._variants_stale = True
 
     def variants_changed(self) -> None:
@@ -231,15 +241,41 @@ class InstanceBatch:
 
     def _grow_box(self, rows: np.ndarray) -> None:
         """Measure the world boxes of ``rows`` (just sent) and forget the union."""
-        if len(self._row_boxes) < len(self.rows):
-            grown = np.zeros((len(self.rows), 2, 3), np.float64)
-            grown[: len(self._row_boxes)] = self._row_boxes
-            self._row_boxes = grown
+        self._boxes_for(len(self.rows))
         models = self.rows["model"][rows].astype(np.float64).reshape(-1, 4, 4)  # [instance, column, row]
         world = np.einsum("kc,ncr->nkr", self.mesh.corners, models)[..., :3]
-        self._row_boxes[rows, 0] = world.min(axis=1)
-        self._row_boxes[rows, 1] = world.max(axis=1)
+        old = self._row_boxes[rows]
+        lo, hi = world.min(axis=1), world.max(axis=1)
+        changed = ~np.all((old[:, 0] == lo) & (old[:, 1] == hi), axis=1)  # rewritten in place: no change
+        if changed.any():
+            with np.errstate(invalid="ignore"):
+                self._note_changed(np.nanmin(np.concatenate([old[changed, 0], lo[changed]]), axis=0),
+                                   np.nanmax(np.concatenate([old[changed, 1], hi[changed]]), axis=0))
+        self._row_boxes[rows, 0] = lo
+        self._row_boxes[rows, 1] = hi
         self._box = None
+
+    def _boxes_for(self, rows: int) -> np.ndarray:
+        """The rows' boxes, grown to hold at least ``rows`` rows."""
+        if len(self._row_boxes) < rows:
+            grown = np.full((max(rows, len(self.rows)), 2, 3), np.nan)
+            grown[: len(self._row_boxes)] = self._row_boxes
+            self._row_boxes = grown
+        return self._row_boxes
+
+    def _note_changed(self, lo: np.ndarray, hi: np.ndarray) -> None:
+        if np.isnan(lo).any() or np.isnan(hi).any():
+            return
+        lo, hi = np.array(lo, np.float64), np.array(hi, np.float64)  # copies: the rows' boxes change under views
+        if self._changed is not None:
+            lo, hi = np.minimum(lo, self._changed[0]), np.maximum(hi, self._changed[1])
+        self._changed = (lo, hi)
+
+    def take_changed_box(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """The box holding where instances were and are whose boxes changed since the last
+        call (None: none), forgotten."""
+        changed, self._changed = self._changed, None
+        return changed
 
     @property
     def box(self) -> tuple[np.ndarray, np.ndarray] | None:

@@ -89,8 +89,11 @@ class RenderStats:
     # MAX_POINT_SHADOWS); how the last point light's cube was drawn ("layered" or "six_pass").
     shadow_maps_drawn: int = 0           # (their draws: shadow_draw_calls, not in passes or draw_calls)
     shadow_draw_calls: int = 0
+    shadow_texels_drawn: int = 0         # of directional maps: a moved caster redraws only its footprint's
     shadow_maps_kept: int = 0
     shadows_cut: int = 0
+    virtual_lights: int = 0              # lights shining through mirrors and portals this frame
+    virtual_lights_cut: int = 0          # ... that the limit or the view budget left out
     shadow_path: str = ""
 
 
@@ -178,6 +181,7 @@ class Renderer:
         # Counts uploads that wrote instance rows, and batches made or dropped: the shadows
         # stage draws a map again when it moves on (a caster moved, came, went or changed).
         self.casters_version = 0
+        self._dropped_changes: tuple[np.ndarray, np.ndarray] | None = None  # boxes of batches dropped
         self.path_checks = PathChecks(self)
         # When set, the only batches scene passes draw (the path self-check's own scene).
         self.scene_only: list[InstanceBatch] | None = None
@@ -269,6 +273,7 @@ class Renderer:
             return
         del self.batches[batch.key]
         self._order_stale = True
+        self._note_dropped(batch.take_changed_box())
         batch.release()
         mesh_id, texture_id, _, _, normal_map_id, emissive_map_id, metallic_roughness_id = batch.key
         self._release(self._meshes, mesh_id)
@@ -363,6 +368,24 @@ class Renderer:
         if self._order_stale:
             self.casters_version += 1
         return sent
+
+    def _note_dropped(self, box: tuple[np.ndarray, np.ndarray] | None) -> None:
+        if box is not None:
+            old = self._dropped_changes
+            self._dropped_changes = box if old is None else (np.minimum(old[0], box[0]), np.maximum(old[1], box[1]))
+
+    def take_changed_box(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """The box holding where opaque instances were and are whose rows changed since the
+        last call (moved, came, went, changed their look), forgotten; None: none.  What a
+        shadow map redraws (engine/render/shadows.py)."""
+        boxes = [box for batch in self.batches.values() if (box := batch.take_changed_box()) is not None
+                 and not batch.transparent]
+        if self._dropped_changes is not None:
+            boxes.append(self._dropped_changes)
+            self._dropped_changes = None
+        if not boxes:
+            return None
+        return np.min([lo for lo, _ in boxes], axis=0), np.max([hi for _, hi in boxes], axis=0)
 
     def level_bounds(self) -> tuple[np.ndarray, np.ndarray] | None:
         """The world box holding every opaque instance as of the last upload (None: none):

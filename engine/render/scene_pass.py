@@ -58,6 +58,8 @@ from engine.render.bindings import (
     SHADOWS_BINDING,
     SKY_UNIT,
     VIEWS_BINDING,
+    VIRTUAL_LIGHTS_BINDING,
+    VIRTUAL_SHADOW_UNIT,
     PassState,
     apply_pass_state,
     bind_uniform_block,
@@ -139,6 +141,10 @@ class ScenePass:
         self.capturing = 0
         self._ambient_probes = False  # this pass draws the AMBIENT_PROBES builds (IrradianceTable.bind)
         self._reflection_sampler: moderngl.Sampler | None = None
+        # Whether a virtual light shines this frame (the shadows stage sets it): the scene
+        # programs are built with its loop only then (llvmpipe runs a loop's body for every
+        # pixel even when it has nothing to do).
+        self.virtual_lights = False
 
     def program(self, variants: tuple[int, int, int] | None = None, invocations: int = 0,
                 layered: str = "", normal_mapped: bool = False, checker: bool = False,
@@ -166,7 +172,9 @@ class ScenePass:
             for batch in self.renderer.batches.values():
                 batch.drop_vertex_arrays()  # made again for the relinked programs' inputs
             self._reloads_seen = reloads
-        key = (invocations, layered, variants, normal_mapped, checker, material_maps, probe_blend, ambient_probes)
+        virtual = self.virtual_lights
+        key = (invocations, layered, variants, normal_mapped, checker, material_maps, probe_blend, virtual,
+               ambient_probes)
         program = self._programs.get(key)
         if program is None:
             defines = {}
@@ -182,6 +190,8 @@ class ScenePass:
                 defines["METALLIC_ROUGHNESS_MAP"] = "1"
             if probe_blend:  # two probes and the sky by the instances' weights (shaders/include/probe.glsl)
                 defines["PROBE_BLEND"] = "1"
+            if virtual:  # light through mirrors and portals (shaders/include/virtual_lights.glsl)
+                defines["VIRTUAL_LIGHTS"] = "1"
             if ambient_probes:  # diffuse light from the probes' boxes too (shaders/include/ambient.glsl)
                 defines["AMBIENT_PROBES"] = "1"
             geometry = None
@@ -211,13 +221,15 @@ class ScenePass:
                                ("metallic_roughness_map", METALLIC_ROUGHNESS_UNIT),
                                ("shadow_atlas", SHADOW_ATLAS_UNIT), ("point_shadow0", POINT_SHADOW_UNITS[0]),
                                ("point_shadow1", POINT_SHADOW_UNITS[1]),
-                               ("irradiance_table", IRRADIANCE_UNIT)):
+                               ("irradiance_table", IRRADIANCE_UNIT), ("virtual_atlas", VIRTUAL_SHADOW_UNIT)):
                 if name in program:
                     program[name].value = unit
             if "Lights" in program:
                 program["Lights"].binding = LIGHTS_BINDING
             if "Shadows" in program:
                 program["Shadows"].binding = SHADOWS_BINDING
+            if "VirtualLights" in program:
+                program["VirtualLights"].binding = VIRTUAL_LIGHTS_BINDING
             if "Irradiance" in program:
                 program["Irradiance"].binding = IRRADIANCE_BINDING
             self._programs[key] = program

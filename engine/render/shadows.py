@@ -31,6 +31,8 @@ from engine.render.bindings import (
     SCENE_CLIPS,
     SHADOW_ATLAS_UNIT,
     SHADOWS_BINDING,
+    VIRTUAL_LIGHTS_BINDING,
+    VIRTUAL_SHADOW_UNIT,
     PassState,
     apply_pass_state,
     bind_uniform_block,
@@ -38,12 +40,19 @@ from engine.render.bindings import (
 from engine.render.raw_gl import LayeredCubeTarget
 from engine.render.targets import release_framebuffer
 from engine.render.views import MAX_DIRECTIONAL_LIGHTS, MAX_POINT_LIGHTS, View
+from engine.rules.shadow_rules import MAX_VIRTUAL_LIGHTS
 
 if TYPE_CHECKING:
     from engine.render.renderer import Renderer
-    from engine.rules.shadow_rules import DirectionalFit
+    from engine.rules.shadow_rules import DirectionalFit, VirtualLight
 
 MAX_POINT_SHADOWS = 2  # cube samplers in shaders/include/shadows.glsl
+SHADOW_FILTERS = ("grid", "single")
+VIRTUAL_RESOLUTION = 1024   # texels a side of a virtual light's map (a tile of the virtual atlas)
+# The VirtualLights block (shaders/include/virtual_lights.glsl): a count, then per light a
+# matrix and seven vectors.
+VIRTUAL_FIELDS = ("position", "color", "exit", "origin", "u", "v", "params")
+VIRTUAL_BLOCK_BYTES = 16 + 64 * MAX_VIRTUAL_LIGHTS + 16 * MAX_VIRTUAL_LIGHTS * len(VIRTUAL_FIELDS)
 SHADOWS_BLOCK_BYTES = 64 * MAX_DIRECTIONAL_LIGHTS + 16 * MAX_DIRECTIONAL_LIGHTS + 4 * MAX_POINT_LIGHTS \
     + 16 * MAX_POINT_SHADOWS
 # The casters' slope-scaled depth offset (glPolygonOffset factor, units): with the normal
@@ -82,6 +91,22 @@ class ShadowMaps:
         self._face_framebuffers: dict[int, list[moderngl.Framebuffer]] = {}
         self._face_depth: dict[int, moderngl.Texture] = {}
         self._layered: dict[int, LayeredCubeTarget] = {}
+        # How edges are filtered: "grid" (2 x 2 taps, 3 x 3 past a softness of 1, four on a
+        # cube), each a bilinear percentage-closer comparison; "single" (one such tap: a
+        # one-texel edge).  On a software rasteriser every tap is CPU time for every pixel a
+        # light reaches (the benchmark scene at 640x360: a still frame 1.24x the frame without
+        # shadows with the grid, 1.04x with one tap; benchmarks/lighting.py), so there the
+        # default is "single"; set "grid" for equal quality (maps are drawn again).
+        self.filter = "single" if renderer.caps.software else "grid"
+        # Lights through mirrors and portals: a depth atlas of 2 x 2 tiles and their block.
+        self.virtual_block = np.zeros(VIRTUAL_BLOCK_BYTES // 4, np.float32)
+        self.virtual_ubo = ctx.buffer(self.virtual_block.tobytes())
+        self.virtual_atlas: moderngl.Texture | None = None
+        self._virtual_framebuffer: moderngl.Framebuffer | None = None
+        self._virtual_empty = self._make_atlas((1, 1))
+        empty = ctx.framebuffer(depth_attachment=self._virtual_empty)
+        empty.clear(depth=1.0)
+        release_framebuffer(empty)
 
     # --- the atlas --------------------------------------------------------------------------
     def _make_atlas(self, size: tuple[int, int]) -> moderngl.Texture:
@@ -105,14 +130,19 @@ class ShadowMaps:
     def tile_origin(self, slot: int) -> tuple[int, int]:
         return (slot % 2) * self.tile, (slot // 2) * self.tile
 
-    def draw_directional(self, slot: int, fit: DirectionalFit, resolution: int, softness: float) -> None:
+    def draw_directional(self, slot: int, fit: DirectionalFit, resolution: int, softness: float,
+                         region: tuple[int, int, int, int] | None = None) -> int:
         """Draw directional light ``slot``'s map (its tile of the atlas, ``resolution`` texels
-        a side) from ``fit``, and write its row of the Shadows block."""
+        a side) from ``fit``, and write its row of the Shadows block.  With ``region`` (x, y,
+        width, height in the tile's texels) only those texels are cleared and drawn again (the
+        casters' draws scissored to them: the same depths a whole redraw writes there).
+        Returns the texels drawn."""
         x, y = self.tile_origin(slot)
-        rect = (x, y, resolution, resolution)
+        tile = (x, y, resolution, resolution)
+        rect = tile if region is None else (x + region[0], y + region[1], region[2], region[3])
         framebuffer = self._atlas_framebuffer
         framebuffer.use()
-        apply_pass_state(self.ctx, _CASTERS, rect, rect)
+        apply_pass_state(self.ctx, _CASTERS, tile, rect)
         framebuffer.clear(depth=1.0, viewport=rect)
         view = View(view=fit.view, proj=fit.proj, eye=glm.vec3(0.0), size=(resolution, resolution),
                     name=f"shadow {slot}", kinds=0, layers=ALL_LAYERS)
@@ -124,12 +154,79 @@ class ShadowMaps:
             * glm.scale(glm.vec3(0.5 * scale, 0.5 * scale, 0.5))
         self.block[16 * slot:16 * slot + 16] = np.array((to_tile * fit.view_proj).to_list(), np.float32).ravel()
         base = 16 * MAX_DIRECTIONAL_LIGHTS + 4 * slot
-        self.block[base:base + 4] = (fit.texel, softness, 1.0 / width, 1.0)
+        self.block[base:base + 4] = (fit.texel, softness, 1.0 / width, self._taps(softness))
         self.renderer.checkpoint(f"shadow map of directional light {slot}")
+        return rect[2] * rect[3]
+
+    @property
+    def filter(self) -> str:
+        return self._filter
+
+    @filter.setter
+    def filter(self, value: str) -> None:
+        if value not in SHADOW_FILTERS:
+            raise ValueError(f"shadow filter must be one of {', '.join(map(repr, SHADOW_FILTERS))}, got {value!r}")
+        self._filter = value
+
+    def _taps(self, softness: float) -> float:
+        """Taps a side of a directional light's grid."""
+        if self._filter == "single":
+            return 1.0
+        return 3.0 if softness > 1.0 else 2.0
 
     def clear_directional(self, slot: int) -> None:
         """Directional light ``slot`` casts no shadow (off, or no light there)."""
         self.block[16 * MAX_DIRECTIONAL_LIGHTS + 4 * slot + 3] = 0.0
+
+    # --- virtual lights (through mirrors and portals) -------------------------------------
+    def draw_virtual(self, slot: int, light: VirtualLight, fit: DirectionalFit) -> None:
+        """Draw virtual light ``slot``'s map (a tile of the virtual atlas) and write its row of
+        the VirtualLights block.  The casters are drawn twice into the one map: as they are,
+        in front of the exit surface (the light's way out to what it lights), and carried by
+        the surface's transform, in front of the entry surface (the light's way in, as its
+        image sees it); the surfaces it passes through are left out."""
+        if self.virtual_atlas is None:
+            self.virtual_atlas = self._make_atlas((2 * VIRTUAL_RESOLUTION, 2 * VIRTUAL_RESOLUTION))
+            self._virtual_framebuffer = self.ctx.framebuffer(depth_attachment=self.virtual_atlas)
+        x, y = (slot % 2) * VIRTUAL_RESOLUTION, (slot // 2) * VIRTUAL_RESOLUTION
+        rect = (x, y, VIRTUAL_RESOLUTION, VIRTUAL_RESOLUTION)
+        framebuffer = self._virtual_framebuffer
+        framebuffer.use()
+        apply_pass_state(self.ctx, _CASTERS, rect, rect)
+        framebuffer.clear(depth=1.0, viewport=rect)
+        size = (VIRTUAL_RESOLUTION, VIRTUAL_RESOLUTION)
+        way_out = View(view=fit.view, proj=fit.proj, eye=glm.vec3(light.position), size=size,
+                       name=f"virtual light {slot}", clip_plane=glm.vec4(*light.exit_plane),
+                       skip=light.exit_entity, hide=light.surface, kinds=0, layers=ALL_LAYERS)
+        way_in = View(view=fit.view * light.carry, proj=fit.proj, eye=glm.vec3(light.position), size=size,
+                      name=f"virtual light {slot} (way in)", clip_plane=glm.vec4(light.entry_plane),
+                      skip=light.surface, hide=light.exit_entity, kinds=0, layers=ALL_LAYERS)
+        self._draw_casters(way_out, self._depth_program)
+        self._draw_casters(way_in, self._depth_program)
+        width = 2 * VIRTUAL_RESOLUTION
+        scale = VIRTUAL_RESOLUTION / width
+        to_tile = glm.translate(glm.vec3(x / width + 0.5 * scale, y / width + 0.5 * scale, 0.5)) \
+            * glm.scale(glm.vec3(0.5 * scale, 0.5 * scale, 0.5))
+        block = self.virtual_block
+        base = 4 + 16 * slot
+        block[base:base + 16] = np.array((to_tile * fit.view_proj).to_list(), np.float32).ravel()
+        point = light.kind == "point"
+        rows = {
+            "position": (*light.position, 1.0 if point else 0.0),
+            "color": (*light.color, light.light_range),
+            "exit": light.exit_plane,
+            "origin": (*light.aperture[0], fit.texel),
+            "u": (*(np.asarray(light.aperture[1]) / max(np.dot(light.aperture[1], light.aperture[1]), 1e-12)), 0.0),
+            "v": (*(np.asarray(light.aperture[2]) / max(np.dot(light.aperture[2], light.aperture[2]), 1e-12)), 0.0),
+            "params": (1.0 / width, 1.0, self._taps(1.0), 0.0),
+        }
+        for index, name in enumerate(VIRTUAL_FIELDS):
+            at = 4 + 16 * MAX_VIRTUAL_LIGHTS + 4 * (index * MAX_VIRTUAL_LIGHTS + slot)
+            block[at:at + 4] = rows[name]
+        self.renderer.checkpoint(f"shadow map of virtual light {slot}")
+
+    def set_virtual_count(self, count: int) -> None:
+        self.virtual_block[:4].view(np.int32)[0] = count
 
     # --- point lights ---------------------------------------------------------------------
     def draw_point(self, slot: int, light_index: int, position: glm.vec3, light_range: float, resolution: int,
@@ -155,7 +252,8 @@ class ShadowMaps:
         self._slots[light_index] = slot
         base = (64 + 16) * MAX_DIRECTIONAL_LIGHTS // 4 + MAX_POINT_LIGHTS + 4 * slot
         # A texel's angle: 90 degrees over the face's texels.
-        self.block[base:base + 4] = (np.pi / 2.0 / resolution, softness, light_range, 0.0)
+        self.block[base:base + 4] = (np.pi / 2.0 / resolution, softness, light_range,
+                                     1.0 if self.filter == "single" else 4.0)
         self.renderer.checkpoint(f"shadow cube of point light {light_index}")
         return path
 
@@ -234,6 +332,7 @@ class ShadowMaps:
 
     def upload(self) -> None:
         self.ubo.write(self.block.tobytes())
+        self.virtual_ubo.write(self.virtual_block.tobytes())
 
     def bind(self) -> None:
         """Bind the maps and the Shadows block for a scene pass (every pass: the units are
@@ -242,6 +341,8 @@ class ShadowMaps:
         for slot, unit in enumerate(POINT_SHADOW_UNITS):
             self.cubes.get(slot, self._empty_cube).use(unit)
         bind_uniform_block(self.ctx, self.ubo, SHADOWS_BINDING)
+        (self.virtual_atlas or self._virtual_empty).use(VIRTUAL_SHADOW_UNIT)
+        bind_uniform_block(self.ctx, self.virtual_ubo, VIRTUAL_LIGHTS_BINDING)
 
     def _drop_cube(self, slot: int) -> None:
         for framebuffer in self._face_framebuffers.pop(slot, []):
@@ -262,5 +363,8 @@ class ShadowMaps:
         for slot in list(self.cubes):
             self._drop_cube(slot)
         release_framebuffer(self._atlas_framebuffer)
-        for obj in (self.atlas, self._empty_cube, self.ubo):
-            obj.release()
+        if self._virtual_framebuffer is not None:
+            release_framebuffer(self._virtual_framebuffer)
+        for obj in (self.atlas, self._empty_cube, self.ubo, self.virtual_ubo, self.virtual_atlas, self._virtual_empty):
+            if obj is not None:
+                obj.release()

@@ -64,6 +64,33 @@ def directional_fit(direction: glm.vec3, lo: np.ndarray, hi: np.ndarray, resolut
     return DirectionalFit(glm.mat4(view), glm.mat4(proj), float(texel))
 
 
+# Texels around a changed caster's footprint redrawn with it: the rasteriser's rounding at
+# the footprint's edge (the filter reads the map, it does not write it).
+REGION_PAD = 2
+# Past this share of a map's texels a region is drawn whole (one clear and draw of the tile).
+REGION_WHOLE_SHARE = 0.5
+
+
+def map_region(fit: DirectionalFit, lo: np.ndarray, hi: np.ndarray,
+               resolution: int) -> tuple[int, int, int, int] | None:
+    """The texels (x, y, width, height) of a directional light's map that the world box
+    [lo, hi] covers, seen along the light, padded; None when they are most of the map (draw
+    it whole).  A caster's shadow is in the map only where its footprint is: moving it from
+    one box to another changes only the texels under both."""
+    corners = np.array([[x, y, z, 1.0] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
+    clip = corners @ np.array(fit.view_proj.to_list(), np.float64)  # orthographic: w is 1
+    texel = (clip[:, :2] * 0.5 + 0.5) * resolution
+    x0, y0 = np.floor(texel.min(axis=0)).astype(int) - REGION_PAD
+    x1, y1 = np.ceil(texel.max(axis=0)).astype(int) + REGION_PAD
+    x0, y0 = max(int(x0), 0), max(int(y0), 0)
+    x1, y1 = min(int(x1), resolution), min(int(y1), resolution)
+    if x1 <= x0 or y1 <= y0:
+        return (0, 0, 0, 0)
+    if (x1 - x0) * (y1 - y0) > REGION_WHOLE_SHARE * resolution * resolution:
+        return None
+    return x0, y0, x1 - x0, y1 - y0
+
+
 def point_reach(position: np.ndarray, light_range: float) -> tuple[np.ndarray, np.ndarray]:
     """The world box a point light's shadows can change: its range's sphere."""
     position = np.asarray(position, np.float64)
@@ -157,3 +184,122 @@ class ShadowCasters:
                 out_hi.append(b)
                 out_of.append(rows[reach])
         return np.concatenate(out_lo), np.concatenate(out_hi), np.concatenate(out_of)
+
+
+# --- light through mirrors and portals -------------------------------------------------------
+MAX_VIRTUAL_LIGHTS = 4   # virtual lights a frame (shaders/include/virtual_lights.glsl)
+VIRTUAL_NEAR = 0.05      # metres: a virtual point light's shadow camera sees casters from here on
+
+
+@dataclass(frozen=True)
+class VirtualLight:
+    """A light's image through a mirror or portal (``Mirror.reflects_light``,
+    ``Portal.carries_light``): the light as the room beyond the surface receives it.
+
+    For a mirror the image is the light reflected in the mirror's plane; for a portal, carried
+    by the pair's transform (the light in front of the portal goes in and comes out of its
+    partner).  It lights a point only through the ``exit`` surface's outline (the mirror
+    itself, or the partner) and only on its front; its colour is the light's times the
+    surface's tint and reflect rate.  ``carry`` (world to world) takes the real scene to where
+    the light's image sees it: what stands between the light and the ``entry`` surface shadows
+    what lies beyond, as the image of that thing (``entry_plane``: its front)."""
+
+    light: int                       # the light's entity
+    surface: int                     # the mirror or entry portal
+    kind: str                        # "directional" or "point"
+    position: tuple[float, float, float]   # the image's position (point), or the direction it travels
+    color: tuple[float, float, float]
+    light_range: float               # a point light's range (along the whole path); 0 for directional
+    exit_plane: tuple[float, float, float, float]   # lit points lie in front of it
+    aperture: tuple[tuple[float, ...], tuple[float, ...], tuple[float, ...]]  # origin, u, v of the exit outline
+    carry: glm.mat4                  # real scene -> as the image sees it, for the shadows of the incoming leg
+    entry_plane: glm.vec4
+    exit_entity: int
+    priority: int
+
+
+def _outline(surface) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+    """A flat surface's outline as an origin corner and its two edges (a parallelogram)."""
+    if surface.outline is None:
+        return None
+    c = np.asarray(surface.outline, np.float64)[:, :3]
+    return c[0], c[2] - c[0], c[1] - c[0]
+
+
+def virtual_lights(directional: list[tuple[int, glm.vec3, glm.vec3]],
+                   points: list[tuple[int, glm.vec3, float, glm.vec3]], surfaces) -> list[VirtualLight]:
+    """The virtual lights of this frame's lights through the surfaces that carry light:
+    ``directional`` as (entity, direction travelled, colour x intensity), ``points`` as
+    (entity, position, range, colour x intensity), ``surfaces`` the ``Surfaces`` resource.
+    A light makes an image only if it reaches the surface's front (a point light in front of
+    it, within range; a directional one travelling towards it).  One bounce: an image is not
+    carried again."""
+    found: list[VirtualLight] = []
+    if surfaces is None:
+        return found
+    shown = [*surfaces.mirrors.values(), *surfaces.portals.values()]
+    for surface in shown:
+        if not surface.carries_light or not surface.enabled:
+            continue
+        exit_surface = surface if surface.kind == "mirror" else surfaces.portals.get(surface.exit_entity)
+        if exit_surface is None:
+            continue
+        outline = _outline(exit_surface)
+        if outline is None:
+            continue
+        entry = glm.vec4(surface.plane)
+        carry = glm.mat4(surface.carry)
+        tint = glm.vec3(surface.tint) * surface.reflect_rate if surface.kind == "mirror" else glm.vec3(1.0)
+        aperture = tuple(tuple(float(v) for v in part) for part in outline)
+        exit_plane = tuple(float(v) for v in surface.exit_plane)
+        for entity, direction, rgb in directional:
+            d = glm.normalize(glm.vec3(direction))
+            if glm.dot(glm.vec3(entry), d) >= 0.0:
+                continue  # travelling away from its front: it never lights the surface
+            image = glm.normalize(glm.mat3(carry) * d)
+            found.append(VirtualLight(entity, surface.entity, "directional", tuple(float(v) for v in image),
+                                      tuple(float(v) for v in glm.vec3(rgb) * tint), 0.0, exit_plane, aperture,
+                                      carry, entry, exit_surface.entity, surface.priority))
+        for entity, position, light_range, rgb in points:
+            p = glm.vec3(position)
+            height = glm.dot(glm.vec3(entry), p) + entry.w
+            if height <= 0.0 or height >= light_range:
+                continue  # behind the surface, or its range ends before it
+            image = glm.vec3(carry * glm.vec4(p, 1.0))
+            found.append(VirtualLight(entity, surface.entity, "point", tuple(float(v) for v in image),
+                                      tuple(float(v) for v in glm.vec3(rgb) * tint), float(light_range), exit_plane,
+                                      aperture, carry, entry, exit_surface.entity, surface.priority))
+    return found
+
+
+def rank_virtual_lights(lights: list[VirtualLight]) -> list[VirtualLight]:
+    """The order the budget spends on them: the surface's priority, then the brightest."""
+    return sorted(lights, key=lambda v: (-v.priority, -max(v.color), v.surface, v.light))
+
+
+def virtual_shadow_camera(light: VirtualLight, level_lo: np.ndarray, level_hi: np.ndarray,
+                          resolution: int) -> DirectionalFit:
+    """The shadow camera of a virtual light: for a directional image, the level's box seen
+    along it (as a real sun's); for a point image, a perspective camera at the image looking
+    at the exit outline's centre, wide enough for the whole outline (the light reaches
+    nothing else)."""
+    if light.kind == "directional":
+        return directional_fit(glm.vec3(light.position), level_lo, level_hi, resolution)
+    eye = glm.dvec3(*light.position)
+    origin, u, v = (np.asarray(part, np.float64) for part in light.aperture)
+    corners = [origin, origin + u, origin + v, origin + u + v]
+    centre = glm.dvec3(*(origin + 0.5 * (u + v)))
+    forward = glm.normalize(centre - eye)
+    up = glm.dvec3(0.0, 1.0, 0.0) if abs(forward.y) < 0.99 else glm.dvec3(1.0, 0.0, 0.0)
+    view = glm.lookAt(eye, centre, up)
+    # The widest angle from the axis to a corner, each way, and a texel's margin.
+    half = 0.0
+    for corner in corners:
+        local = view * glm.dvec4(*corner, 1.0)
+        depth = max(-local.z, 1e-6)
+        half = max(half, abs(local.x) / depth, abs(local.y) / depth)
+    fov = 2.0 * np.degrees(np.arctan(half * (1.0 + 4.0 / resolution))) + 0.5
+    fov = float(min(fov, 170.0))
+    proj = glm.perspective(glm.radians(fov), 1.0, VIRTUAL_NEAR, max(light.light_range * 1.5, VIRTUAL_NEAR * 4))
+    texel = 2.0 * half / resolution   # a texel's angle (radians, small): the lookup scales it by distance
+    return DirectionalFit(glm.mat4(view), glm.mat4(proj), float(texel))

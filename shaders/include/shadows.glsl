@@ -10,10 +10,10 @@
 layout(std140) uniform Shadows {
     mat4 directional_matrix[MAX_DIRECTIONAL_LIGHTS];  // world -> atlas uv (xy) and depth (z), each in [0, 1]
     vec4 directional_params[MAX_DIRECTIONAL_LIGHTS];  // x: a texel's world size, y: softness (texels),
-                                                      // z: one atlas texel in uv, w: 1 where it casts shadows
+                                                      // z: one atlas texel in uv, w: taps a side (0: no shadow)
     ivec4 point_slot[MAX_POINT_LIGHTS / 4];           // per point light: its cube (0, 1) or -1
     vec4 point_params[MAX_POINT_SHADOWS];             // x: a texel's angular size (radians), y: softness
-                                                      // (texels), z: range, w: -
+                                                      // (texels), z: range, w: taps (1 or 4)
 } shadows;
 
 uniform sampler2DShadow shadow_atlas;
@@ -30,10 +30,11 @@ float directional_shadow(int i, vec3 position, vec3 normal, vec3 l) {
     float offset = params.x * (1.0 + params.y) * (1.5 - nl);
     vec4 p = shadows.directional_matrix[i] * vec4(position + normal * offset, 1.0);
     if (any(lessThan(p.xyz, vec3(0.0))) || any(greaterThan(p.xyz, vec3(1.0)))) return 1.0;  // outside the map
-    // A grid of taps, each a bilinear comparison of 2 x 2 texels: 2 x 2 taps half a
-    // softness apart (a 3 x 3-texel tent at softness 1), 3 x 3 for wider edges.
-    int n = params.y > 1.0 ? 3 : 2;
-    float step = params.z * params.y / float(n - 1);
+    // A grid of n x n taps (engine/render/shadows.py ShadowMaps.filter), each a bilinear
+    // comparison of 2 x 2 texels: 2 x 2 taps half a softness apart (a 3 x 3-texel tent at
+    // softness 1), 3 x 3 for wider edges; one tap on a software rasteriser.
+    int n = int(params.w);
+    float step = n > 1 ? params.z * params.y / float(n - 1) : 0.0;
     vec2 start = p.xy - 0.5 * step * float(n - 1);
     float lit = 0.0;
     for (int y = 0; y < n; ++y)
@@ -53,14 +54,15 @@ float point_cube_shadow(samplerCube cube, vec4 params, vec3 from_light, vec3 nor
     vec3 dir = normalize(p);
     vec3 side = normalize(cross(dir, abs(dir.y) < 0.99 ? vec3(0.0, 1.0, 0.0) : vec3(1.0, 0.0, 0.0)));
     vec3 up = cross(dir, side);
-    float spread = params.x * max(params.y, 0.5);
+    float spread = params.w > 1.0 ? params.x * max(params.y, 0.5) : 0.0;
+    int taps = int(params.w);
     float lit = 0.0;
-    for (int k = 0; k < 4; ++k) {
+    for (int k = 0; k < taps; ++k) {
         vec2 o = vec2(k & 1, k >> 1) * 2.0 - 1.0;
         vec3 tap = dir + (side * o.x + up * o.y) * spread * 0.5;
         lit += d <= texture(cube, tap).r ? 1.0 : 0.0;
     }
-    return lit * 0.25;
+    return lit / float(taps);
 }
 
 // How much of point light i (its position ``light_pos``) reaches ``position``.

@@ -1,0 +1,73 @@
+// Light through mirrors and portals (engine/rules/shadow_rules.py VirtualLight): each light's
+// image through a surface that carries light, lighting a point only on the exit surface's
+// front and only when the line from the point to the image crosses the exit's outline (the
+// light came through the mirror or the portal's opening), shadowed by a map drawn from the
+// image (engine/render/shadows.py draw_virtual).  One bounce.
+#define MAX_VIRTUAL_LIGHTS 4   // engine/rules/shadow_rules.py MAX_VIRTUAL_LIGHTS
+layout(std140) uniform VirtualLights {
+    ivec4 virtual_count;                            // x: how many
+    mat4 virtual_matrix[MAX_VIRTUAL_LIGHTS];        // world -> atlas uv and depth (divide by w)
+    vec4 virtual_position[MAX_VIRTUAL_LIGHTS];      // xyz: the image (w 1), or the direction it travels (w 0)
+    vec4 virtual_color[MAX_VIRTUAL_LIGHTS];         // rgb: colour x intensity x tint x rate; w: range (point)
+    vec4 virtual_exit[MAX_VIRTUAL_LIGHTS];          // the exit surface's plane, its front positive
+    vec4 virtual_origin[MAX_VIRTUAL_LIGHTS];        // xyz: a corner of the exit's outline; w: a texel's size
+                                                    // (metres for a directional image, radians for a point)
+    vec4 virtual_u[MAX_VIRTUAL_LIGHTS];             // xyz: an edge of the outline over its length squared
+    vec4 virtual_v[MAX_VIRTUAL_LIGHTS];             // xyz: the other edge likewise
+    vec4 virtual_params[MAX_VIRTUAL_LIGHTS];        // x: an atlas texel in uv, y: softness, z: taps a side
+} virtual_lights;
+
+uniform sampler2DShadow virtual_atlas;
+
+float virtual_shadow(int i, vec3 position, vec3 normal, vec3 l, float dist) {
+    vec4 params = virtual_lights.virtual_params[i];
+    float nl = clamp(dot(normal, l), 0.0, 1.0);
+    float texel = virtual_lights.virtual_origin[i].w;
+    if (virtual_lights.virtual_position[i].w > 0.5) texel *= dist;  // an angle: its size here
+    vec4 p = virtual_lights.virtual_matrix[i] * vec4(position + normal * texel * (1.0 + params.y) * (1.5 - nl), 1.0);
+    p.xyz /= p.w;
+    if (any(lessThan(p.xyz, vec3(0.0))) || any(greaterThan(p.xyz, vec3(1.0)))) return 1.0;
+    int n = int(params.z);
+    float step = n > 1 ? params.x * params.y / float(n - 1) : 0.0;
+    vec2 start = p.xy - 0.5 * step * float(n - 1);
+    float lit = 0.0;
+    for (int y = 0; y < n; ++y)
+        for (int x = 0; x < n; ++x)
+            lit += texture(virtual_atlas, vec3(start + step * vec2(x, y), p.z));
+    return lit / float(n * n);
+}
+
+// The light of every virtual light at a surface point: ``diffuse`` its Lambertian share,
+// ``normal`` the shading normal, ``geometric`` the mesh's (for the shadow lookup).
+vec3 virtual_lighting(vec3 position, vec3 normal, vec3 geometric, vec3 to_eye, vec3 diffuse, vec3 f0,
+                      float roughness) {
+    vec3 total = vec3(0.0);
+    for (int i = 0; i < virtual_lights.virtual_count.x; ++i) {
+        vec4 exit_plane = virtual_lights.virtual_exit[i];
+        float height = dot(exit_plane.xyz, position) + exit_plane.w;
+        if (height <= 0.0) continue;  // behind the exit: the light never comes out there
+        vec4 image = virtual_lights.virtual_position[i];
+        vec3 l = -image.xyz;
+        float dist = 1e30;
+        float falloff = 1.0;
+        if (image.w > 0.5) {
+            vec3 d = image.xyz - position;
+            dist = length(d);
+            l = d / max(dist, 1e-4);
+            float range = virtual_lights.virtual_color[i].w;
+            float fade = clamp(1.0 - pow(dist / range, 4.0), 0.0, 1.0);  // lights.glsl's falloff, along the whole path
+            falloff = fade * fade / (dist * dist + 1.0);
+        }
+        float nl = dot(normal, l);
+        float towards = dot(exit_plane.xyz, l);
+        if (nl <= 0.0 || falloff <= 0.0 || towards >= 0.0) continue;
+        // Where the line to the image crosses the exit's plane: inside its outline?
+        vec3 x = position + l * (height / -towards) - virtual_lights.virtual_origin[i].xyz;
+        float a = dot(x, virtual_lights.virtual_u[i].xyz);
+        float b = dot(x, virtual_lights.virtual_v[i].xyz);
+        if (a < 0.0 || a > 1.0 || b < 0.0 || b > 1.0 || height / -towards > dist) continue;
+        total += (diffuse + ggx_specular(normal, l, to_eye, f0, roughness)) * virtual_lights.virtual_color[i].rgb
+                 * nl * falloff * virtual_shadow(i, position, geometric, l, dist);
+    }
+    return total;
+}
