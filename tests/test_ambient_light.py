@@ -192,6 +192,29 @@ def test_the_lights_packer_and_the_glsl_block_agree(ctx):
         np.testing.assert_allclose(read[rows + MAX_POINT_LIGHTS + i, :3], rgb, rtol=1e-6)
 
 
+def test_the_irradiance_block_is_as_big_in_glsl_as_in_python(ctx):
+    """ambient.glsl's Irradiance block (its MAX_IRRADIANCE_PROBES boxes) has the size
+    irradiance_block packs, as the GL lays it out."""
+    import pathlib
+    import tempfile
+
+    from engine.render.irradiance import IRRADIANCE_BLOCK_BYTES, irradiance_block
+    from engine.render.shader_library import load_source
+
+    source = ('#version 410 core\n#include "lights.glsl"\n#include "ambient.glsl"\nout vec4 value;\n'
+              "void main() { value = vec4(ambient_irradiance(gl_FragCoord.xyz, vec3(0.0, 1.0, 0.0)), 1.0); }\n")
+    with tempfile.TemporaryDirectory() as folder:
+        path = pathlib.Path(folder) / "reader.frag"
+        path.write_text(source)
+        fragment = load_source(str(path), {"AMBIENT_PROBES": "1"})
+    vertex = "#version 410 core\nvoid main() { gl_Position = vec4(0.0, 0.0, 0.0, 1.0); }"
+    program = ctx.program(vertex_shader=vertex, fragment_shader=fragment)
+    try:
+        assert program["Irradiance"].size == IRRADIANCE_BLOCK_BYTES == len(irradiance_block(()))
+    finally:
+        program.release()
+
+
 # --- in frames -------------------------------------------------------------------------------------
 def test_a_white_surface_under_a_constant_sky_shows_the_skys_radiance(scene):
     """A white Lambertian box under a sky of one radiance L, no light: every face shows L."""
