@@ -192,6 +192,29 @@ def test_the_lights_packer_and_the_glsl_block_agree(ctx):
         np.testing.assert_allclose(read[rows + MAX_POINT_LIGHTS + i, :3], rgb, rtol=1e-6)
 
 
+def test_the_irradiance_block_is_as_big_in_glsl_as_in_python(ctx):
+    """ambient.glsl's Irradiance block (its MAX_IRRADIANCE_PROBES boxes) has the size
+    irradiance_block packs, as the GL lays it out."""
+    import pathlib
+    import tempfile
+
+    from engine.render.irradiance import IRRADIANCE_BLOCK_BYTES, irradiance_block
+    from engine.render.shader_library import load_source
+
+    source = ('#version 410 core\n#include "lights.glsl"\n#include "ambient.glsl"\nout vec4 value;\n'
+              "void main() { value = vec4(ambient_irradiance(gl_FragCoord.xyz, vec3(0.0, 1.0, 0.0)), 1.0); }\n")
+    with tempfile.TemporaryDirectory() as folder:
+        path = pathlib.Path(folder) / "reader.frag"
+        path.write_text(source)
+        fragment = load_source(str(path), {"AMBIENT_PROBES": "1"})
+    vertex = "#version 410 core\nvoid main() { gl_Position = vec4(0.0, 0.0, 0.0, 1.0); }"
+    program = ctx.program(vertex_shader=vertex, fragment_shader=fragment)
+    try:
+        assert program["Irradiance"].size == IRRADIANCE_BLOCK_BYTES == len(irradiance_block(()))
+    finally:
+        program.release()
+
+
 # --- in frames -------------------------------------------------------------------------------------
 def test_a_white_surface_under_a_constant_sky_shows_the_skys_radiance(scene):
     """A white Lambertian box under a sky of one radiance L, no light: every face shows L."""
@@ -408,3 +431,39 @@ def test_the_sample_level_has_no_black_surface(ctx):
         dark = frame.rgb.max(axis=2) < 24
         assert entity.mean() > 0.3, pose  # a frame of things, not of sky
         assert (dark & entity).sum() / entity.sum() < 0.002, pose
+
+
+def test_a_probe_gone_gives_back_its_row_and_its_light(scene):
+    """Deleting the probe frees its row of the table (Renderer.resource_counts) and the white
+    box's face towards the red wall goes back to the hemisphere's grey."""
+    ents = {}
+    runner = scene(red_wall_room(ents), (160, 120))
+    runner.frame()
+    assert runner.engine.renderer.resource_counts()["irradiance_rows"] == 1
+    runner.world.delete_entity(ents["probe"])
+    rgb = runner.frame()
+    assert runner.engine.renderer.resource_counts()["irradiance_rows"] == 0
+    column, row = runner.project((-1.75, 1.0, 0.0))
+    seen = pixel_linear(rgb, column, row)
+    assert seen[0] < 1.5 * seen[1] and seen[0] < 0.1
+
+
+def test_more_boxes_than_the_shader_blends_are_reported(scene, caplog):
+    """MAX_IRRADIANCE_PROBES boxes at most reach the shader; one more is said in a warning,
+    once, and the frame is drawn."""
+    from engine.render.irradiance import MAX_IRRADIANCE_PROBES
+
+    def build(world):
+        look_from(world, (0.0, 1.0, 4.0), target=(0.0, 1.0, 0.0))
+        world.spawn(Transform(position=(0, 1, 0)), MeshRef(box()), Material())
+        for i in range(MAX_IRRADIANCE_PROBES + 1):
+            world.spawn(Transform(position=(i * 3.0, 1.0, -10.0)),
+                        ReflectionProbe(resolution=8, refresh="once", influence=(2.0, 2.0, 2.0)))
+
+    runner = scene(build, (32, 24))
+    with caplog.at_level("WARNING", logger="speculum"):
+        runner.frame()
+        runner.frame()
+    said = [r for r in caplog.records if "MAX_IRRADIANCE_PROBES" in r.getMessage()]
+    assert len(said) == 1 and str(MAX_IRRADIANCE_PROBES + 1) in said[0].getMessage()
+    assert runner.engine.renderer.irradiance._count == MAX_IRRADIANCE_PROBES

@@ -156,7 +156,9 @@ def test_each_level_is_won_from_its_scripted_input(play, level):
     glow.power = 0.3
     p.input.mouse_dx = p.input.mouse_dy = 0.0
     dim = p.frame()[row, column].astype(int)
-    assert lit[1] >= 200 and lit.sum() > dim.sum() + 120, (lit, dim)
+    # (100 levels: the sky's ambient light lights the dimmed pad too, and the glowing one
+    # is clipped at 255 in green and blue.)
+    assert lit[1] >= 200 and lit.sum() > dim.sum() + 100, (lit, dim)
 
 
 def test_walking_at_a_wall_stops_at_its_face_and_a_ledge_cannot_be_climbed(play):

@@ -33,6 +33,9 @@ from tests.support import srgb_to_linear
 FLAT = glm.angleAxis(-math.pi / 2, glm.vec3(1, 0, 0))
 SKY = 0.8      # the uniform sky's linear radiance: all the water reflects
 FLOOR = 0.05   # the pool floor's emitted colour (linear), under the surface
+# What the floor shows: its emission plus the uniform sky's ambient light (a white surface
+# under a sky of radiance SKY shows SKY: engine/render/irradiance.py), both times its colour.
+FLOOR_SEEN = FLOOR * (1.0 + SKY)
 
 
 def schlick(f0: float, cos_theta: float) -> float:
@@ -46,7 +49,8 @@ def uniform_sky(value: float) -> Skybox:
 def pool(world, water: bool, eye, target, *, water_colour=(1.0, 1.0, 1.0, 0.0), ior: float = 1.333,
          reflect_rate: float = 1.0) -> None:
     """A uniform sky over a flat pond at y = 0 (a clear water surface unless ``water_colour``
-    says otherwise) with an unlit floor of colour FLOOR a metre below it."""
+    says otherwise) with a floor of colour FLOOR a metre below it, lit by no light but the
+    sky's ambient light."""
     eye = glm.vec3(eye)
     world.spawn(Transform(position=eye, rotation=look_rotation(glm.vec3(target) - eye)), Camera(fov_y=60.0))
     world.spawn(uniform_sky(SKY))
@@ -98,7 +102,7 @@ def test_the_reflection_is_weighted_by_schlicks_fresnel_for_the_waters_index(sce
         if cos_theta > 0.999 or cos_theta < 0.02:
             continue
         below = floor[row, column, 0]
-        assert abs(below - FLOOR) < 0.02, (row, below)  # the floor shows where there is no water
+        assert abs(below - FLOOR_SEEN) < 0.02, (row, below)  # the floor shows where there is no water
         measured.append((water[row, column, 0] - below) / (SKY - below))
         expected.append(schlick(f0, cos_theta))
     measured, expected = np.array(measured), np.array(expected)
@@ -132,11 +136,13 @@ def test_looking_down_shows_what_is_under_the_surface_and_grazing_shows_the_refl
     def build(water: bool, eye, target):
         def b(world):
             pool(world, water, eye, target, water_colour=water_colour)
+            # Dark enough that its emission plus the sky's ambient light (1 + SKY times its
+            # colour) stays under 1: a clipped stone would tell nothing about the blend.
             world.spawn(Transform(position=(0.0, -0.9, -1.0)), MeshRef(box((0.8, 0.2, 0.8))),
-                        Material(color=(0.9, 0.05, 0.05, 1.0), roughness=1.0), Emissive(1.0))
+                        Material(color=(0.5, 0.03, 0.03, 1.0), roughness=1.0), Emissive(1.0))
             # A bright green wall across the pond, above the water: what it reflects.
             world.spawn(Transform(position=(0.0, 2.0, -12.0)), MeshRef(quad(40.0, 4.0)),
-                        Material(color=(0.1, 0.9, 0.2, 1.0), roughness=1.0), Emissive(1.0))
+                        Material(color=(0.05, 0.45, 0.1, 1.0), roughness=1.0), Emissive(1.0))
         return b
 
     down = ((0.0, 3.0, -0.98), (0.0, 0.0, -1.0))
@@ -163,11 +169,11 @@ def test_looking_down_shows_what_is_under_the_surface_and_grazing_shows_the_refl
     eye = glm.vec3(graze[0])
     crossing = eye + (image - eye) * (eye.y / (eye.y - image.y))
     col, row = runner.project(crossing)
-    wall = np.array([0.1, 0.9, 0.2])
+    wall = np.array([0.05, 0.45, 0.1]) * (1.0 + SKY)  # its emission and the sky's ambient light (facing sideways)
     cos_theta = -glm.normalize(crossing - eye).y
     f = schlick(0.02, cos_theta)
     assert f > 0.6
-    assert seen[row, col][1] > 0.6 * 0.9 * f and seen[row, col][1] > 3.0 * dry[row, col][1], (seen[row, col], f)
+    assert seen[row, col][1] > 0.6 * wall[1] * f and seen[row, col][1] > 3.0 * dry[row, col][1], (seen[row, col], f)
     np.testing.assert_allclose(seen[row, col], f * wall + (1.0 - f) * dry[row, col], atol=0.05)
 
 

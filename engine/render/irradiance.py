@@ -34,13 +34,26 @@ The scene shader blends them per pixel by the engine's probe-blending rule
 (``engine.rules.probe_rules.probe_blend``: the two influence boxes weighing most at the
 shaded point, each by its linear falloff, normalised only when they sum past 1, the sky
 taking the rest), reading the boxes from the Irradiance uniform block
-(``irradiance_block``) and their coefficients from the table.  Why per pixel and not per
-instance: every object gets it (not only reflective ones, whose rows carry probe weights),
-a floor or wall spanning two rooms takes each room's light where it lies, nothing is
-rewritten in the instance rows when a thing moves, and a pixel outside every box pays for
-the loop over the boxes and nothing else (the table is read in a loop whose count is the
-boxes found, which llvmpipe skips when no pixel of a quad found one).
+(``irradiance_block``) and their coefficients from the table.  For an object inside its
+boxes' full-weight interiors this is exactly its reflection's blend; in a falloff band the
+reflection weighs the boxes at the object's origin and the diffuse light at each pixel.
 
+Why per pixel, not per instance (weights and table rows in each instance's row, as
+``probe_blend`` gives reflective batches).  Per instance needs two table rows and two
+weights in every instance row, whose vertex attributes are all in use (GL 4.1's sixteen),
+and ``probe_blend`` worked out on the CPU for every object that moves; per pixel needs
+nothing in the rows, lights every object without the extract stage knowing, and lights a
+floor or wall spanning two rooms by each room where it lies.  What it costs: llvmpipe runs
+a loop's body at least once and both sides of every branch, so the loop over the boxes and
+the table's reads are a build of the scene program of their own (``AMBIENT_PROBES``),
+drawn only while some box has a capture (``IrradianceTable.bind``).  Measured on llvmpipe
+(CPU ms a frame, ``time.process_time``, 640x360, 91 diffuse boxes on a floor under a sky
+and a sun, medians of 15 rounds of 3 frames, the machine shared): the old constant ambient
+15.6-16.1; the sky's harmonics alone (no box) 16.6-17.3; two boxes holding every pixel
+27-28; eight boxes holding none 25.5-26.7; per instance, emulated by the same 18 table reads
+with weights from flat inputs and no box loop, about 5.5 ms over the constant ambient
+against about 12 per pixel.  The per-pixel price, in worlds with probe boxes only, is
+taken for the reasons above; a GPU pays next to nothing for either.
 Feedback.  A probe's capture is lit by the sky's irradiance alone: the scene pass binds an
 empty Irradiance block while a probe is drawn (``IrradianceTable.bind``), so no probe's
 picture depends on any probe's irradiance, and a still scene's probes settle in one capture
@@ -112,13 +125,23 @@ def texel_solid_angles(size: int) -> np.ndarray:
 def project_faces(faces: np.ndarray) -> np.ndarray:
     """Irradiance coefficients E_lm (9, 3) of a cube map's six faces (6, n, n, 3) of linear
     radiance, in GL's face order with rows along t (``face_directions``)."""
-    faces = np.asarray(faces, np.float64)
+    faces = np.asarray(faces)[..., :3]
+    # Big faces are box-filtered to at most 128 texels first (2 x 2 means, as mips are): nine
+    # low-frequency coefficients do not need 25 million texels, and a 2048 sky then takes
+    # well under a second.
+    while faces.shape[1] > 128 and faces.shape[1] % 2 == 0:
+        half = faces.shape[1] // 2
+        faces = faces.astype(np.float32).reshape(6, half, 2, half, 2, 3).mean(axis=(2, 4))
     n = faces.shape[1]
     weights = texel_solid_angles(n)
     coefficients = np.zeros((SH_COEFFICIENTS, 3))
+    rows = max(1, (1 << 20) // (n * SH_COEFFICIENTS))  # a few MB at a time, for 2048-texel faces too
     for face in range(6):
-        basis = sh_basis(face_directions(face, n)) * weights[..., None]  # (n, n, 9)
-        coefficients += np.einsum("tsk,tsc->kc", basis, faces[face, ..., :3])
+        directions = face_directions(face, n)
+        for start in range(0, n, rows):
+            part = slice(start, start + rows)
+            basis = sh_basis(directions[part]) * weights[part, :, None]  # (rows, n, 9)
+            coefficients += np.einsum("tsk,tsc->kc", basis, faces[face, part, :, :3].astype(np.float64))
     return coefficients * np.array(BAND_FACTORS)[:, None]
 
 
@@ -170,12 +193,16 @@ class IrradianceTable:
         self.table = ctx.texture((SH_COEFFICIENTS, MAX_IRRADIANCE_PROBES), 4, dtype="f4")
         self.table.filter = (moderngl.NEAREST, moderngl.NEAREST)
         self.framebuffer = ctx.framebuffer(color_attachments=[self.table])
+        # Bound on the table's unit while the table is drawn into: no texture is bound for
+        # sampling where it is also the target (a feedback loop is undefined on a GPU).
+        self._placeholder = ctx.texture((1, 1), 4, np.zeros(4, np.float32).tobytes(), dtype="f4")
         self.ubo = ctx.buffer(irradiance_block(()))
         self.empty_ubo = ctx.buffer(irradiance_block(()))  # bound while a probe is captured: sky only
         self.rows: dict[int, int] = {}   # probe owner -> its row (a capture was projected into it)
         self._boxes: list[tuple[int, tuple, tuple, float]] = []  # (owner, centre, half size, blend distance)
         self._block = irradiance_block(())
         self._stale = False
+        self._count = 0  # boxes in the block
         self._warned = False
         self._vao: moderngl.VertexArray | None = None
         self.projections = 0  # rows written since made (tests and the overlay read it)
@@ -220,8 +247,10 @@ class IrradianceTable:
         level = max(0, resolution.bit_length() - 1 - (PROJECTION_FACE_SIZE.bit_length() - 1))
         vao = self._program()
         program = vao.program
+        program["source"].value = CUBE_MIP_UNIT  # again each time: a shader hot reload resets uniforms
         program["level"].value = float(level)
         program["level_size"].value = max(1, resolution >> level)
+        self._placeholder.use(IRRADIANCE_UNIT)  # the scene pass binds the table again
         self.framebuffer.use()
         apply_pass_state(self.ctx, self.STATE, (0, row, SH_COEFFICIENTS, 1))
         cube.texture.use(CUBE_MIP_UNIT)
@@ -234,7 +263,6 @@ class IrradianceTable:
     def _program(self) -> moderngl.VertexArray:
         if self._vao is None:
             program = self.renderer.shaders.program("fullscreen.vert", "irradiance_sh.frag")
-            program["source"].value = CUBE_MIP_UNIT
             self._vao = self.ctx.vertex_array(program, [])
         return self._vao
 
@@ -245,18 +273,36 @@ class IrradianceTable:
         return data[row, :, :3].astype(np.float64)
 
     # --- binding -------------------------------------------------------------------------------
-    def bind(self, capturing: bool) -> None:
-        """Bind the table and the Irradiance block for a scene pass: the boxes, or none while a
-        probe is captured (the module docstring: captures see the sky's irradiance alone)."""
+    def has_boxes(self) -> bool:
+        """Whether any influence box with a projected capture lights the scene (the scene
+        pass then draws its AMBIENT_PROBES builds outside captures)."""
+        self._refresh()
+        return self._count > 0
+
+    def _refresh(self) -> None:
         if self._stale:
-            block = irradiance_block((centre, half, blend, self.rows[owner])
-                                     for owner, centre, half, blend in self._boxes if owner in self.rows)
+            boxes = [(centre, half, blend, self.rows[owner])
+                     for owner, centre, half, blend in self._boxes if owner in self.rows]
+            block = irradiance_block(boxes)
             if block != self._block:
                 self.ubo.write(block)
                 self._block = block
+            count = min(len(boxes), MAX_IRRADIANCE_PROBES)
+            if count and not self._count:
+                self.renderer.needs_preparing = True  # the AMBIENT_PROBES builds, made before a mirror needs them
+            self._count = count
             self._stale = False
+
+    def bind(self, capturing: bool) -> bool:
+        """Bind the table and the Irradiance block for a scene pass: the boxes, or none while a
+        probe is captured (the module docstring: captures see the sky's irradiance alone).
+        Returns whether the pass draws with the probes' builds (``AMBIENT_PROBES``: the box
+        loop and the table's reads are a build of their own, since llvmpipe runs a loop's
+        body once even when it has nothing to do: +25% of a frame of diffuse boxes)."""
+        self._refresh()
         self.table.use(IRRADIANCE_UNIT)
         bind_uniform_block(self.ctx, self.empty_ubo if capturing else self.ubo, IRRADIANCE_BINDING)
+        return not capturing and self._count > 0
 
     def drop(self, owner: int) -> None:
         """Probe ``owner`` is gone: its row is free (and no box names it)."""
@@ -268,7 +314,7 @@ class IrradianceTable:
             self._vao.release()
             self._vao = None
         release_framebuffer(self.framebuffer)
-        for obj in (self.table, self.ubo, self.empty_ubo):
+        for obj in (self.table, self._placeholder, self.ubo, self.empty_ubo):
             obj.release()
         self.rows.clear()
 

@@ -139,6 +139,7 @@ class ScenePass:
         # The probe whose cube map is being drawn into (ProbeCaptures sets it for a capture):
         # batches sampling it read the sky instead (no rendering feedback loop).
         self.capturing = 0
+        self._ambient_probes = False  # this pass draws the AMBIENT_PROBES builds (IrradianceTable.bind)
         self._reflection_sampler: moderngl.Sampler | None = None
         # Whether a virtual light shines this frame (the shadows stage sets it): the scene
         # programs are built with its loop only then (llvmpipe runs a loop's body for every
@@ -147,7 +148,8 @@ class ScenePass:
 
     def program(self, variants: tuple[int, int, int] | None = None, invocations: int = 0,
                 layered: str = "", normal_mapped: bool = False, checker: bool = False,
-                material_maps: tuple[bool, bool] = (False, False), probe_blend: bool = False) -> moderngl.Program:
+                material_maps: tuple[bool, bool] = (False, False), probe_blend: bool = False,
+                ambient_probes: bool = False) -> moderngl.Program:
         """The scene program for a batch of ``variants`` (None: mixed, switched per
         instance): plain, batched (``invocations`` > 0: the geometry shader's) or a one-pass
         cube-map capture (``layered`` "culled" or "naive"), with or without a normal map
@@ -171,7 +173,8 @@ class ScenePass:
                 batch.drop_vertex_arrays()  # made again for the relinked programs' inputs
             self._reloads_seen = reloads
         virtual = self.virtual_lights
-        key = (invocations, layered, variants, normal_mapped, checker, material_maps, probe_blend, virtual)
+        key = (invocations, layered, variants, normal_mapped, checker, material_maps, probe_blend, virtual,
+               ambient_probes)
         program = self._programs.get(key)
         if program is None:
             defines = {}
@@ -189,6 +192,8 @@ class ScenePass:
                 defines["PROBE_BLEND"] = "1"
             if virtual:  # light through mirrors and portals (shaders/include/virtual_lights.glsl)
                 defines["VIRTUAL_LIGHTS"] = "1"
+            if ambient_probes:  # diffuse light from the probes' boxes too (shaders/include/ambient.glsl)
+                defines["AMBIENT_PROBES"] = "1"
             geometry = None
             if invocations:
                 geometry = "scene_batched.geom"
@@ -238,10 +243,13 @@ class ScenePass:
         Returns how many programs were built (0 when all were there)."""
         before = len(self._programs)
         counts = (0, *BATCHED_INVOCATIONS) if reflections else (0,)
+        ambient = (False, True) if self.renderer.irradiance.has_boxes() else (False,)  # captures: False
         for batch in batches:
             for invocations in counts:
-                batch.vao(self.program(batch.variants, invocations, "", batch.normal_map is not None,
-                                       batch.checker is not None, _material_maps(batch), batch.probe_blend))
+                for probes in ambient:
+                    batch.vao(self.program(batch.variants, invocations, "", batch.normal_map is not None,
+                                           batch.checker is not None, _material_maps(batch), batch.probe_blend,
+                                           probes))
         if reflections:
             if self._views_ubo is None:
                 self._views_ubo = self.ctx.buffer(reserve=VIEWS_BLOCK_BYTES)
@@ -265,7 +273,8 @@ class ScenePass:
             if not batch.count or (batch.count == 1 and batch.entity_at[0] in (skip, hide)):
                 continue
             program = self.program(batch.variants, invocations, layered, batch.normal_map is not None,
-                                   batch.checker is not None, _material_maps(batch), batch.probe_blend)
+                                   batch.checker is not None, _material_maps(batch), batch.probe_blend,
+                                   self._ambient_probes)
             glo = program.glo
             uniforms = self._uniforms[glo]
             values = written.get(glo)
@@ -342,7 +351,9 @@ class ScenePass:
             targets.node.use(NODE_UNIT)
         bind_uniform_block(self.ctx, renderer.lights_ubo, LIGHTS_BINDING)
         renderer.shadows.bind()
-        renderer.irradiance.bind(capturing=self.capturing != 0)  # unit 5 serves other passes between
+        # The irradiance table (unit 5 serves other passes between) and the boxes; a probe's
+        # capture, and a world without boxes, draw the build without them (sky only).
+        self._ambient_probes = renderer.irradiance.bind(capturing=self.capturing != 0)
         renderer.sky.use(SKY_UNIT)
         sampler = self._reflection_filter() if options.reflection_filter else None
         if sampler is not None:
@@ -436,7 +447,7 @@ class ScenePass:
         bind_uniform_block(ctx, self._views_ubo, VIEWS_BINDING)
         bind_uniform_block(self.ctx, renderer.lights_ubo, LIGHTS_BINDING)
         renderer.shadows.bind()
-        renderer.irradiance.bind(capturing=True)  # a capture: the sky's irradiance alone
+        self._ambient_probes = renderer.irradiance.bind(capturing=True)  # a capture: the sky's irradiance alone
         renderer.sky.use(SKY_UNIT)
         renderer.bind_view(views[0])  # the shared eye, for what reads the Camera block
         size = (0, 0, target.size, target.size)

@@ -13,17 +13,23 @@ layout(std140) uniform Irradiance {
 } irradiance;
 uniform sampler2D irradiance_table;           // row r, texel i: coefficient i of the probe of row r
 
-// The order-2 basis Y_lm(n) (real, orthonormal).
-void sh_basis(vec3 n, out float y[9]) {
-    y[0] = 0.2820948;
-    y[1] = 0.4886025 * n.y;
-    y[2] = 0.4886025 * n.z;
-    y[3] = 0.4886025 * n.x;
-    y[4] = 1.0925484 * n.x * n.y;
-    y[5] = 1.0925484 * n.y * n.z;
-    y[6] = 0.3153916 * (3.0 * n.z * n.z - 1.0);
-    y[7] = 1.0925484 * n.x * n.z;
-    y[8] = 0.5462742 * (n.x * n.x - n.y * n.y);
+// E(n) = sum of E_lm Y_lm(n), the basis written out (an array and a loop cost llvmpipe a
+// fifth of a frame of diffuse boxes; this costs next to nothing).
+vec3 sh_irradiance(vec3 c0, vec3 c1, vec3 c2, vec3 c3, vec3 c4, vec3 c5, vec3 c6, vec3 c7, vec3 c8, vec3 n) {
+    return c0 * 0.2820948
+        + (c1 * n.y + c2 * n.z + c3 * n.x) * 0.4886025
+        + (c4 * (n.x * n.y) + c5 * (n.y * n.z) + c7 * (n.x * n.z)) * 1.0925484
+        + c6 * (0.3153916 * (3.0 * n.z * n.z - 1.0))
+        + c8 * (0.5462742 * (n.x * n.x - n.y * n.y));
+}
+
+vec3 table_irradiance(int row, vec3 n) {
+    return sh_irradiance(
+        texelFetch(irradiance_table, ivec2(0, row), 0).rgb, texelFetch(irradiance_table, ivec2(1, row), 0).rgb,
+        texelFetch(irradiance_table, ivec2(2, row), 0).rgb, texelFetch(irradiance_table, ivec2(3, row), 0).rgb,
+        texelFetch(irradiance_table, ivec2(4, row), 0).rgb, texelFetch(irradiance_table, ivec2(5, row), 0).rgb,
+        texelFetch(irradiance_table, ivec2(6, row), 0).rgb, texelFetch(irradiance_table, ivec2(7, row), 0).rgb,
+        texelFetch(irradiance_table, ivec2(8, row), 0).rgb, n);
 }
 
 // A box's weight at p: probe_rules.probe_weight (0 outside, rising linearly from the nearest
@@ -31,44 +37,44 @@ void sh_basis(vec3 n, out float y[9]) {
 float box_weight(int i, vec3 p) {
     vec3 away = irradiance.half_size[i].xyz - abs(p - irradiance.centre[i].xyz);
     float inside = min(min(away.x, away.y), away.z);
-    if (inside < 0.0) return 0.0;
     float blend = irradiance.centre[i].w;
-    return blend <= 0.0 ? 1.0 : min(1.0, inside / blend);
+    return inside < 0.0 ? 0.0 : (blend <= 0.0 ? 1.0 : min(1.0, inside / blend));
 }
 
 // E(n) at p: the two boxes weighing most (ties: the nearest centre), weights normalised only
 // when they sum past 1, the sky (lights.sky_sh) taking what is left of 1: the rule of
-// probe_rules.probe_blend, at the shaded point.
+// probe_rules.probe_blend, at the shaded point.  Written for llvmpipe, which runs every
+// branch: scalars, not arrays (an array indexed by a variable is kept in memory), selects,
+// not ifs, in the loop over the boxes.
 vec3 ambient_irradiance(vec3 p, vec3 n) {
-    float y[9];
-    sh_basis(n, y);
-    int best[2] = int[2](-1, -1);
-    float w[2] = float[2](0.0, 0.0);
-    float dist[2] = float[2](0.0, 0.0);
+    vec3 e = sh_irradiance(lights.sky_sh[0].rgb, lights.sky_sh[1].rgb, lights.sky_sh[2].rgb, lights.sky_sh[3].rgb,
+                           lights.sky_sh[4].rgb, lights.sky_sh[5].rgb, lights.sky_sh[6].rgb, lights.sky_sh[7].rgb,
+                           lights.sky_sh[8].rgb, n);
+#ifdef AMBIENT_PROBES
+    int best0 = 0, best1 = 0;
+    float w0 = 0.0, w1 = 0.0, d0 = 0.0, d1 = 0.0;  // a weight of 0: no box yet
     for (int i = 0; i < irradiance.count.x; ++i) {
-        float weight = box_weight(i, p);
-        if (weight <= 0.0) continue;
-        float d = length(p - irradiance.centre[i].xyz);
-        if (best[0] < 0 || weight > w[0] || (weight == w[0] && d < dist[0])) {
-            best[1] = best[0]; w[1] = w[0]; dist[1] = dist[0];
-            best[0] = i; w[0] = weight; dist[0] = d;
-        } else if (best[1] < 0 || weight > w[1] || (weight == w[1] && d < dist[1])) {
-            best[1] = i; w[1] = weight; dist[1] = d;
-        }
+        float w = box_weight(i, p);
+        vec3 v = p - irradiance.centre[i].xyz;
+        float d = dot(v, v);
+        bool first = w > 0.0 && (w > w0 || (w == w0 && d < d0));
+        bool second = !first && w > 0.0 && (w > w1 || (w == w1 && d < d1));
+        best1 = first ? best0 : (second ? i : best1);
+        w1 = first ? w0 : (second ? w : w1);
+        d1 = first ? d0 : (second ? d : d1);
+        best0 = first ? i : best0;
+        w0 = first ? w : w0;
+        d0 = first ? d : d0;
     }
-    int found = best[1] >= 0 ? 2 : (best[0] >= 0 ? 1 : 0);
-    float scale = 1.0 / max(1.0, w[0] + w[1]);
-    vec3 e = vec3(0.0);
-    float sky = 1.0;
+    int found = w1 > 0.0 ? 2 : (w0 > 0.0 ? 1 : 0);
+    float scale = 1.0 / max(1.0, w0 + w1);
+    vec3 probes = vec3(0.0);
     // A loop as long as the boxes found: a quad outside every box reads no texel of the table.
     for (int k = 0; k < found; ++k) {
-        int row = int(irradiance.half_size[best[k]].w);
-        vec3 probe = vec3(0.0);
-        for (int c = 0; c < 9; ++c) probe += texelFetch(irradiance_table, ivec2(c, row), 0).rgb * y[c];
-        e += probe * (w[k] * scale);
-        sky -= w[k] * scale;
+        int box = k == 0 ? best0 : best1;
+        probes += table_irradiance(int(irradiance.half_size[box].w), n) * ((k == 0 ? w0 : w1) * scale);
     }
-    vec3 from_sky = vec3(0.0);
-    for (int c = 0; c < 9; ++c) from_sky += lights.sky_sh[c].rgb * y[c];
-    return max(e + from_sky * max(sky, 0.0), vec3(0.0));
+    e = probes + e * max(1.0 - (w0 + w1) * scale, 0.0);
+#endif
+    return max(e, vec3(0.0));
 }
