@@ -30,6 +30,7 @@ from engine.render.shader_library import ShaderLibrary
 from engine.render.sky import flat_cube, upload_cube
 from engine.render.targets import LevelStack, RenderTargets
 from engine.render.views import CAMERA_BLOCK_BYTES, LIGHTS_BLOCK_BYTES, View
+from engine.rules.probe_rules import ProbeBlend
 
 GL_SRGB8_ALPHA8 = 0x8C43
 TEXTURE_ANISOTROPY = 8.0
@@ -81,6 +82,11 @@ class RenderStats:
     # the alternative GL paths compared with their plain counterparts and trusted, or refused.
     paths_verified: tuple[str, ...] = ()
     paths_refused: tuple[str, ...] = ()
+    # Mirrors and portals seen without a view of their own (cut by a budget, faded, past the
+    # depth limit, switched off), or partly faded, or an end view's pixels last frame's image
+    # did not hold, that showed the fallback (the probe's or the sky's reflection) this
+    # frame, in every tree: one per (parent view, surface).
+    reflection_fallbacks: int = 0
 
 
 def checker_look(texture: TextureData | None) -> tuple[float, tuple, tuple] | None:
@@ -145,6 +151,9 @@ class Renderer:
         self.sky = flat_cube(ctx, BACKGROUND)
         self.levels = LevelStack(ctx)   # the main view tree's: [0] the main view, then its reflection levels
         self.stats = RenderStats()
+        # Each mirror's and portal's fallback probes (probe_rules.surface_blend), by entity: the
+        # extract stage's, read by the view trees' composites.
+        self.surface_probes: dict[int, ProbeBlend] = {}
         self.exposure = 1.0
         self._antialias = "fxaa"
         self.texture_anisotropy = min(TEXTURE_ANISOTROPY, ctx.max_anisotropy)

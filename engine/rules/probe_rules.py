@@ -161,7 +161,15 @@ def probe_blend(world: World, entity: int) -> ProbeBlend:
     transform = world.try_get(entity, Transform)
     if transform is None:
         return NO_PROBE
-    position = np.array(transform.world[3].xyz)
+    return box_blend(world, transform.world[3].xyz)
+
+
+def box_blend(world: World, position: glm.vec3 | Sequence[float] | np.ndarray) -> ProbeBlend:
+    """The influence boxes' blend at ``position`` (``probe_blend``'s rule for an object with
+    no probe of its own): the MAX_BLENDED_PROBES boxes that weigh most there (ties: the
+    nearest centre first), normalised only when their weights add up to more than 1, the
+    sky taking the rest; ``NO_PROBE`` where no box holds it."""
+    position = np.array(tuple(position), np.float64)
     found = []
     for owner, (probe, probe_t) in world.query(ReflectionProbe, Transform):
         if probe.influence is None:
@@ -176,6 +184,51 @@ def probe_blend(world: World, entity: int) -> ProbeBlend:
     kept = found[:MAX_BLENDED_PROBES]
     scale = 1.0 / max(1.0, sum(weight for *_, weight in kept))
     return ProbeBlend(tuple(owner for _, _, owner, _ in kept), tuple(weight * scale for *_, weight in kept))
+
+
+def surface_point(state: SurfaceState) -> np.ndarray:
+    """Where a mirror's or portal's fallback reflection is looked up from (its probes'
+    weights, ``surface_blend``): a mirror's centre; for a portal, its centre carried through
+    the pair, beside the partner, where the view it stands for would look out."""
+    centre = np.append(np.asarray(state.corners, np.float64)[:, :3].mean(axis=0), 1.0)
+    if state.kind == "portal":
+        centre = np.array(state.carry.to_list(), np.float64).T @ centre
+    return centre[:3]
+
+
+def surface_blend(world: World, state: SurfaceState) -> ProbeBlend:
+    """The probes (and weights) of a mirror's or portal's fallback: what its surface shows
+    where it has no view of its own (cut by the view budget, faded out, past the depth limit,
+    a mirror switched off): the influence boxes' blend at ``surface_point`` (``box_blend``),
+    else the sky."""
+    return box_blend(world, surface_point(state))
+
+
+class SurfaceProbes:
+    """Every mirror's and portal's ``surface_blend``, by entity, worked out again only for
+    surfaces that changed (a new ``SurfaceState``) or when a probe with an influence box came,
+    went, moved or changed: a still frame compares a few tuples."""
+
+    def __init__(self) -> None:
+        self._probes: tuple = ()
+        self._states: dict[int, SurfaceState] = {}
+        self.blends: dict[int, ProbeBlend] = {}
+
+    def update(self, world: World, states: Iterable[SurfaceState]) -> dict[int, ProbeBlend]:
+        """The blends of ``states`` (this frame's surfaces); the same dict while nothing changed."""
+        probes = tuple((owner, tuple(probe.influence), probe.blend_distance, tuple(probe_t.world[3].xyz))
+                       for owner, (probe, probe_t) in world.query(ReflectionProbe, Transform)
+                       if probe.influence is not None)
+        states = {state.entity: state for state in states}
+        if probes == self._probes and states.keys() == self._states.keys() and all(
+                state is self._states[entity] for entity, state in states.items()):
+            return self.blends
+        again = probes != self._probes
+        self.blends = {entity: self.blends[entity] if not again and self._states.get(entity) is state
+                       and entity in self.blends else surface_blend(world, state)
+                       for entity, state in states.items()}
+        self._probes, self._states = probes, states
+        return self.blends
 
 
 def probe_for(world: World, entity: int) -> int:
