@@ -569,8 +569,10 @@ class MirrorPasses:
             if "to_child" in program:
                 program["to_child"].value = to_child
             for rows, ids, weights in chunks:
-                program["fallback_ids"].write(ids.ljust(FALLBACK_ROWS * _FALLBACK_IDS.size, b"\0"))
-                program["fallback_weights"].write(weights.ljust(FALLBACK_ROWS * _FALLBACK_WEIGHTS.size, b"\0"))
+                for name, data, size in (("fallback_ids", ids, _FALLBACK_IDS.size),
+                                         ("fallback_weights", weights, _FALLBACK_WEIGHTS.size)):
+                    if name in program:  # (a build being edited may not read one: hot reload)
+                        program[name].write(data.ljust(FALLBACK_ROWS * size, b"\0"))
                 draw.draw(rows, renderer.shaders.reloads)
         renderer.stats.reflection_fallbacks += prepared.count
         renderer.checkpoint("fallback")
