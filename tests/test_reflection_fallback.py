@@ -284,3 +284,17 @@ def test_a_portal_cut_by_the_budget_shows_the_sky_beyond_its_partner(scene):
     # kink the cube's texels round off.)
     assert difference.max() <= 5.0, difference.max()
     assert difference.mean() < 1.0
+
+
+def test_the_overlay_says_how_many_surfaces_showed_the_fallback(scene):
+    """``RenderStats.reflection_fallbacks`` in the overlay's words: the mirror cut by a view
+    budget of none shows the fallback, then with no budget, its view."""
+    from shell.overlay_text import overlay_lines
+
+    runner, _ = _render(scene, _floor_mirror({}, Mirror(color=TINT), ViewBudget(views=0)))
+    assert runner.stats.reflection_fallbacks == 1
+    assert "reflection views 0, dropped 0, capped 0, faded 0, fallbacks 1" in overlay_lines(runner.engine, [0.02])
+    del runner.world.resources[ViewBudget]
+    runner.frame()
+    assert runner.stats.reflection_views == 1 and runner.stats.reflection_fallbacks == 0
+    assert "reflection views 1, dropped 0, capped 0, faded 0, fallbacks 0" in overlay_lines(runner.engine, [0.02])
