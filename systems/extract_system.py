@@ -103,7 +103,7 @@ class ExtractSystem(esper.Processor):
                                             entity if transparent else 0, material.normal_map if material else None,
                                             material.emissive_map if material else None,
                                             material.metallic_roughness_map if material else None,
-                                            second_probe=second, probe_blend=blend.blended)
+                                            second_probe=second, probe_blend=blend.blended, rest_probe=blend.rest)
         except GLLimitError as exc:
             raise GLLimitError(f"entity {entity}: {exc}") from None
         if old is not batch:

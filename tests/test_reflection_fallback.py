@@ -23,12 +23,14 @@ from components import (
     MeshRef,
     Mirror,
     ReflectionProbe,
+    Reflective,
     Skybox,
     Transform,
 )
-from engine.assets.mesh import box, quad
+from engine.assets.mesh import box, quad, sphere
 from engine.assets.portals import spawn_portal_pair
 from engine.core.cube_faces import CUBE_FACES
+from engine.core.world import World
 from engine.render.mirror_passes import MirrorPasses
 from engine.render.sky import sky_radiance
 from engine.resources import ViewBudget
@@ -298,3 +300,85 @@ def test_the_overlay_says_how_many_surfaces_showed_the_fallback(scene):
     runner.frame()
     assert runner.stats.reflection_views == 1 and runner.stats.reflection_fallbacks == 0
     assert "reflection views 1, dropped 0, capped 0, faded 0, fallbacks 0" in overlay_lines(runner.engine, [0.02])
+
+
+# --- probe blending reaches curved objects ---------------------------------------------------
+def _two_rooms_with_a_ball(ents: dict):
+    """test_probe_blending's two rooms (A's box x in [-7, 1], B's in [-1, 7], a red wall where
+    A's reflections look, a blue one for B), with a chrome ball, curved: a probe of its own."""
+    from tests.test_probe_blending import two_rooms
+
+    rooms = two_rooms(ents)
+
+    def build(world) -> None:
+        rooms(world)
+        world.delete_entity(ents["quad"])
+        ents["quad"] = world.spawn(Transform(), MeshRef(sphere(0.5)),
+                                   Material(color=(1, 1, 1), metallic=1.0, roughness=0.0), Reflective("cube"))
+    return build
+
+
+def test_a_curved_objects_blend_follows_the_boxes_with_its_own_probe_for_the_rest():
+    """The rules: a chrome ball (an automatic probe) where two boxes overlap blends them by the
+    oracle's weights (test_probe_blending.expected_weights: normalised past 1); in a lone box's
+    falloff its own probe takes what the box leaves, in place of the sky; outside both boxes,
+    its own probe alone."""
+    from engine.rules.probe_rules import has_own_probe, probe_blend
+    from systems.transform_system import TransformSystem
+    from tests.test_probe_blending import expected_weights
+
+    world = World("curved-blend")
+    world.add_system(TransformSystem(world), priority=1)
+    try:
+        ents = {}
+        _two_rooms_with_a_ball(ents)(world)
+        ball = ents["quad"]
+        for x in (-8.0, -6.6, -3.0, -0.7, 0.0, 0.4, 0.95, 3.0, 6.5, 7.5):
+            world.get(ball, Transform).position = glm.vec3(x, 0.0, 0.0)
+            world.step(1 / 60)
+            assert has_own_probe(world, ball)
+            blend = probe_blend(world, ball)
+            a, b, left = expected_weights(x)
+            got = dict(zip(blend.probes, blend.weights, strict=True))
+            if a == b == 0.0:
+                assert blend.probes == (ball,) and blend.weights == (1.0,), x
+                continue
+            assert got.get(ents["a"], 0.0) == pytest.approx(a, abs=1e-6), x
+            assert got.get(ents["b"], 0.0) == pytest.approx(b, abs=1e-6), x
+            assert blend.sky == 0.0, x
+            assert blend.left == pytest.approx(left, abs=1e-6), x
+            assert blend.rest == (ball if left > 0.0 else 0), x
+    finally:
+        world.close()
+
+
+def test_a_curved_object_in_two_overlapping_boxes_shows_them_mixed_by_the_oracles_weights(scene):
+    """The chrome ball's middle pixel (its reflection looks straight back, at the walls behind
+    the camera) in the overlap is the two rooms' colours mixed by the oracle's weights, each
+    room's colour measured where its box alone holds the ball at full weight; its own probe
+    alone would show one wall or the other, switching at x = 0."""
+    from tests.test_probe_blending import expected_weights, place
+
+    ents = {}
+    runner = scene(_two_rooms_with_a_ball(ents), (64, 48))
+    runner.engine.renderer.antialias = "off"
+    runner.engine.stages["probes"].recapture_after_present = False  # the ball's own probe where it is now
+    pure = {"a": place(runner, ents, -3.0), "b": place(runner, ents, 3.0)}
+    assert pure["a"][0] > 3 * pure["a"][2] and pure["b"][2] > 3 * pure["b"][0]
+    spread = np.abs(pure["a"] - pure["b"]).max()
+    for x in (-0.7, -0.3, 0.0, 0.4, 0.8):
+        a, b, left = expected_weights(x)
+        assert abs(left) < 1e-9 and 0.0 < a < 1.0
+        seen = place(runner, ents, x)
+        expect = a * pure["a"] + b * pure["b"]
+        assert np.abs(seen - expect).max() < 0.03 * spread + 0.004, (x, (a, b), seen, expect)
+    # In A's falloff alone (x = -6.5: A at 0.5), the ball's own probe takes the other half, not
+    # the sky: its own capture sees the red wall there too (measured outside both boxes, at
+    # x = -8, where it is sampled alone), and the sky is green.
+    a, b, left = expected_weights(-6.5)
+    assert (a, b) == pytest.approx((0.5, 0.0)) and left == pytest.approx(0.5)
+    own = place(runner, ents, -8.0)
+    seen = place(runner, ents, -6.5)
+    expect = a * pure["a"] + left * own
+    assert np.abs(seen - expect).max() < 0.03 * spread + 0.004, (seen, expect)
+    assert seen[1] < 0.5 * seen[0]  # no green sky in it

@@ -194,7 +194,7 @@ class Renderer:
                   transparent_entity: int = 0, normal_map: TextureData | None = None,
                   emissive_map: TextureData | None = None,
                   metallic_roughness_map: TextureData | None = None, second_probe: int = 0,
-                  probe_blend: bool = False) -> InstanceBatch:
+                  probe_blend: bool = False, rest_probe: int = 0) -> InstanceBatch:
         """The batch of (mesh, albedo texture, normal map, emissive map, metallic-roughness
         map, the probe its instances sample; 0: none).  A transparent entity gets a batch of
         its own (``transparent_entity``): transparent things are drawn one by one, farthest
@@ -202,8 +202,9 @@ class Renderer:
         metallic-roughness map are uploaded linear (their texels are vectors and factors,
         not colours), so one image used both ways is two GPU textures."""
         # ``second_probe`` and ``probe_blend``: the instances blend two probes, or a probe and
-        # the sky, by per-instance weights (probe_rules.probe_blend; the PROBE_BLEND build).
-        key = (mesh.id, id(texture) if texture is not None else 0, (probe, second_probe, probe_blend),
+        # the sky, by per-instance weights (probe_rules.probe_blend; the PROBE_BLEND build);
+        # ``rest_probe``: a probe, not the sky, takes what the weights leave (PROBE_REST).
+        key = (mesh.id, id(texture) if texture is not None else 0, (probe, second_probe, probe_blend, rest_probe),
                transparent_entity,
                id(normal_map) if normal_map is not None else 0, id(emissive_map) if emissive_map is not None else 0,
                id(metallic_roughness_map) if metallic_roughness_map is not None else 0)
@@ -231,7 +232,7 @@ class Renderer:
                     lambda: self._upload_texture(metallic_roughness_map, linear=True))
             batch.key = key
             batch.probe = probe
-            batch.second_probe, batch.probe_blend = second_probe, probe_blend
+            batch.second_probe, batch.probe_blend, batch.rest_probe = second_probe, probe_blend, rest_probe
             batch.checker = checker_look(texture)
             batch.transparent = bool(transparent_entity)
             self._order_stale = True

@@ -49,6 +49,7 @@ from engine.render.bindings import (
     NODE_UNIT,
     NORMAL_UNIT,
     PROBE2_UNIT,
+    PROBE_REST_UNIT,
     PROBE_UNIT,
     SCENE_CLIPS,
     SKY_UNIT,
@@ -85,6 +86,7 @@ REFLECTION_LEVEL = SceneOptions(clear=False, masked=True, sky=False, reflection_
 _PER_DRAW_UNIFORMS = ("masked", "sky_face_size", "has_albedo_map", "transparent",
                       "probe_face_size", "probe_position", "probe_box_min", "probe_box_max",
                       "probe2_face_size", "probe2_position", "probe2_box_min", "probe2_box_max",
+                      "probe_rest_face_size", "probe_rest_position", "probe_rest_box_min", "probe_rest_box_max",
                       "checker_cells", "checker_even", "checker_odd")
 _PER_PASS_UNIFORMS = 2  # the first two change with the pass; the rest with the batch (a view's node
 # index is its Camera block's: nothing is written per view)
@@ -136,7 +138,8 @@ class ScenePass:
 
     def program(self, variants: tuple[int, int, int] | None = None, invocations: int = 0,
                 layered: str = "", normal_mapped: bool = False, checker: bool = False,
-                material_maps: tuple[bool, bool] = (False, False), probe_blend: bool = False) -> moderngl.Program:
+                material_maps: tuple[bool, bool] = (False, False), probe_blend: bool = False,
+                probe_rest: bool = False) -> moderngl.Program:
         """The scene program for a batch of ``variants`` (None: mixed, switched per
         instance): plain, batched (``invocations`` > 0: the geometry shader's) or a one-pass
         cube-map capture (``layered`` "culled" or "naive"), with or without a normal map
@@ -146,7 +149,8 @@ class ScenePass:
         instead of sampled), and with or without each of the material maps ``material_maps``
         (emissive, metallic-roughness: ``EMISSIVE_MAP`` and ``METALLIC_ROUGHNESS_MAP`` builds,
         shaders/include/material_maps.glsl; a batch without them samples nothing for them),
-        built once.  After a shader hot
+        blending probes (``probe_blend``: ``PROBE_BLEND``) with a probe instead of the sky
+        taking the rest (``probe_rest``: ``PROBE_REST``, a curved object's own), built once.  After a shader hot
         reload the set-up is done again and the batches' vertex arrays are made again (the
         relinked program may read uniforms, samplers and vertex inputs the first build
         dropped)."""
@@ -159,7 +163,7 @@ class ScenePass:
             for batch in self.renderer.batches.values():
                 batch.drop_vertex_arrays()  # made again for the relinked programs' inputs
             self._reloads_seen = reloads
-        key = (invocations, layered, variants, normal_mapped, checker, material_maps, probe_blend)
+        key = (invocations, layered, variants, normal_mapped, checker, material_maps, probe_blend, probe_rest)
         program = self._programs.get(key)
         if program is None:
             defines = {}
@@ -175,6 +179,8 @@ class ScenePass:
                 defines["METALLIC_ROUGHNESS_MAP"] = "1"
             if probe_blend:  # two probes and the sky by the instances' weights (shaders/include/probe.glsl)
                 defines["PROBE_BLEND"] = "1"
+                if probe_rest:  # a probe, not the sky, takes what the weights leave
+                    defines["PROBE_REST"] = "1"
             geometry = None
             if invocations:
                 geometry = "scene_batched.geom"
@@ -197,7 +203,8 @@ class ScenePass:
                 program["Views"].binding = VIEWS_BINDING
             # A build may not read every input (the linker drops what a variant never uses).
             for name, unit in (("albedo_map", ALBEDO_UNIT), ("sky_map", SKY_UNIT), ("node_map", NODE_UNIT),
-                               ("probe_map", PROBE_UNIT), ("probe2_map", PROBE2_UNIT), ("normal_map", NORMAL_UNIT),
+                               ("probe_map", PROBE_UNIT), ("probe2_map", PROBE2_UNIT),
+                               ("probe_rest_map", PROBE_REST_UNIT), ("normal_map", NORMAL_UNIT),
                                ("emissive_map", EMISSIVE_MAP_UNIT),
                                ("metallic_roughness_map", METALLIC_ROUGHNESS_UNIT)):
                 if name in program:
@@ -218,7 +225,8 @@ class ScenePass:
         for batch in batches:
             for invocations in counts:
                 batch.vao(self.program(batch.variants, invocations, "", batch.normal_map is not None,
-                                       batch.checker is not None, _material_maps(batch), batch.probe_blend))
+                                       batch.checker is not None, _material_maps(batch), batch.probe_blend,
+                                       bool(batch.rest_probe)))
         if reflections:
             if self._views_ubo is None:
                 self._views_ubo = self.ctx.buffer(reserve=VIEWS_BLOCK_BYTES)
@@ -242,7 +250,8 @@ class ScenePass:
             if not batch.count or (batch.count == 1 and batch.entity_at[0] in (skip, hide)):
                 continue
             program = self.program(batch.variants, invocations, layered, batch.normal_map is not None,
-                                   batch.checker is not None, _material_maps(batch), batch.probe_blend)
+                                   batch.checker is not None, _material_maps(batch), batch.probe_blend,
+                                   bool(batch.rest_probe))
             glo = program.glo
             uniforms = self._uniforms[glo]
             values = written.get(glo)
@@ -261,12 +270,15 @@ class ScenePass:
             probe2_size, lookup2 = 0, _NO_PROBE
             if batch.probe_blend:  # the second probe's unit (the sky where the blend is a probe and the sky)
                 probe2_size, lookup2 = self._bind_probe(batch.second_probe, PROBE2_UNIT, cubes)
+            rest_size, lookup_rest = 0, _NO_PROBE
+            if batch.rest_probe:  # the probe taking what the weights leave (a curved object's own)
+                rest_size, lookup_rest = self._bind_probe(batch.rest_probe, PROBE_REST_UNIT, cubes)
             for i in range(_PER_PASS_UNIFORMS):
                 if values[i] != per_pass[i] and uniforms[i] is not None:
                     uniforms[i].value = values[i] = per_pass[i]
             # The batch's own values: one tuple compared in C, and a uniform at a time only
             # where it differs from what this program last drew with.
-            own = (textured, batch.transparent, probe_size, *lookup, probe2_size, *lookup2,
+            own = (textured, batch.transparent, probe_size, *lookup, probe2_size, *lookup2, rest_size, *lookup_rest,
                    *(batch.checker or _NO_CHECKER))
             last = self._last_own.get(glo)
             if last != own:

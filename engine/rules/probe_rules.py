@@ -7,15 +7,18 @@ Sampling.  An object samples a probe when it is ``Reflective("cube")`` or ``Refr
 (glass refracts what the probe saw behind it): ``samples_a_probe``, the one definition
 (``probe_samplers`` finds them all).  It samples:
   - its own probe, when it has a ``ReflectionProbe`` component;
+  - else the probes whose influence boxes hold its position, blended by weight
+    (``probe_blend``: each box's weight falls off to 0 over its ``blend_distance`` inside its
+    walls; the MAX_BLENDED_PROBES strongest are sampled, their weights normalised only when
+    they add up to more than 1, and what is left of 1 is the sky's); when its mesh is not
+    flat, what is left is its own probe's instead (below);
   - else, when its mesh is not flat, a probe of its own at its bounding box's centre (made
     by the probes stage; the chrome-sphere case: material detection as in the OpenGL 4
     course chapter "Texture Effects": a flat reflective mesh is a planar mirror, any other
     a cube map);
-  - else the probes whose influence boxes hold its position, blended by weight
-    (``probe_blend``: each box's weight falls off to 0 over its ``blend_distance`` inside its
-    walls; the MAX_BLENDED_PROBES strongest are sampled, their weights normalised when they
-    add up to more than 1, and what is left of 1 is the sky);
   - else nothing: it reflects the sky.
+A mirror or portal seen with no view of its own shows the boxes' blend at its centre, the sky
+taking the rest (``surface_blend``, the reflection fallback).
 A probe is known by the entity that owns it (the ReflectionProbe's, or the object's own).
 ``probe_for`` is the strongest of them: the one an object is said to sample.
 
@@ -112,15 +115,24 @@ MAX_BLENDED_PROBES = 2  # probes an object blends at most (two cube samplers: GL
 @dataclass(frozen=True)
 class ProbeBlend:
     """What an object's cube-map lookups read: ``probes`` (owners, the strongest first, at
-    most MAX_BLENDED_PROBES) with their ``weights`` (the same order; their sum is at most 1
-    and the rest, ``sky``, is the sky's).  ``NO_PROBE``: the sky alone."""
+    most MAX_BLENDED_PROBES) with their ``weights`` (the same order; their sum is at most 1).
+    What they leave of 1 (``left``) is the sky's, or, with ``rest``, that probe's: a curved
+    object's own automatic probe where influence boxes hold it only in part.  ``NO_PROBE``:
+    the sky alone."""
 
     probes: tuple[int, ...] = ()
     weights: tuple[float, ...] = ()
+    rest: int = 0  # who takes what the weights leave: 0 the sky, else the owner of a probe
+
+    @property
+    def left(self) -> float:
+        """What the weights leave of 1 (the sky's, or ``rest``'s)."""
+        return max(0.0, 1.0 - sum(self.weights))
 
     @property
     def sky(self) -> float:
-        return max(0.0, 1.0 - sum(self.weights))
+        """The sky's weight."""
+        return self.left if not self.rest else 0.0
 
     @property
     def blended(self) -> bool:
@@ -148,20 +160,30 @@ def probe_weight(position: glm.vec3 | Sequence[float] | np.ndarray, centre: glm.
 
 
 def probe_blend(world: World, entity: int) -> ProbeBlend:
-    """The probes ``entity`` samples and their weights (the module docstring's rule): its own
-    probe alone, or the MAX_BLENDED_PROBES influence boxes that weigh most at its position
-    (ties: the nearest centre first), weights w_i normalised as w_i / max(1, sum w) (Bevy's
-    and HDRP's normalisation: where the boxes overlap the weights share 1 between them;
-    where a lone box falls off, the sky takes the rest), or ``NO_PROBE``.  Continuous in the
-    position while at most MAX_BLENDED_PROBES boxes weigh more than 0 there."""
+    """The probes ``entity`` samples and their weights (the module docstring's rule): a
+    ReflectionProbe of its own alone, or the MAX_BLENDED_PROBES influence boxes that weigh
+    most at its position (ties: the nearest centre first), weights w_i normalised as
+    w_i / max(1, sum w) (Bevy's and HDRP's normalisation: only where the boxes' weights add
+    up to more than 1 do they share 1 between them; where they fall short, as in a lone
+    box's falloff, the rest is the sky's), or ``NO_PROBE``.  A curved object with an
+    automatic probe blends the boxes that hold it the same way, its own probe taking the
+    rest in place of the sky (its own probe alone outside every box): so it crosses a box's
+    wall without a pop.  Continuous in the position while at most MAX_BLENDED_PROBES boxes
+    weigh more than 0 there."""
     if not samples_a_probe(world, entity):
         return NO_PROBE
-    if world.has(entity, ReflectionProbe) or has_own_probe(world, entity):
+    if world.has(entity, ReflectionProbe):
         return ProbeBlend((entity,), (1.0,))
     transform = world.try_get(entity, Transform)
+    own = has_own_probe(world, entity)
     if transform is None:
-        return NO_PROBE
-    return box_blend(world, transform.world[3].xyz)
+        return ProbeBlend((entity,), (1.0,)) if own else NO_PROBE
+    boxes = box_blend(world, transform.world[3].xyz)
+    if not own:
+        return boxes
+    if not boxes.probes:
+        return ProbeBlend((entity,), (1.0,))
+    return boxes if boxes.left <= 0.0 else ProbeBlend(boxes.probes, boxes.weights, entity)
 
 
 def box_blend(world: World, position: glm.vec3 | Sequence[float] | np.ndarray) -> ProbeBlend:

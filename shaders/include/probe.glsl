@@ -17,6 +17,15 @@ uniform float probe2_face_size;
 uniform vec4 probe2_position;
 uniform vec4 probe2_box_min;
 uniform vec4 probe2_box_max;
+#ifdef PROBE_REST
+// A curved object with a probe of its own where influence boxes hold it in part: its own
+// probe takes what the boxes' weights leave, in place of the sky (probe_rules.probe_blend).
+uniform samplerCube probe_rest_map;
+uniform float probe_rest_face_size;
+uniform vec4 probe_rest_position;
+uniform vec4 probe_rest_box_min;
+uniform vec4 probe_rest_box_max;
+#endif
 #endif
 
 // Box projection, the level a roughness reads, one probe's lookup.
@@ -32,7 +41,12 @@ vec3 probe_radiance(vec3 p, vec3 ray, float footprint_lod, float roughness) {
     vec3 second = probe_lookup(probe2_map, probe2_position, probe2_box_min, probe2_box_max, p, ray,
                                footprint_lod + log2(probe2_face_size / probe_face_size), roughness);
     float sky = max(1.0 - v_reflect.z - v_reflect.w, 0.0);
+#ifdef PROBE_REST
+    vec3 env = probe_lookup(probe_rest_map, probe_rest_position, probe_rest_box_min, probe_rest_box_max, p, ray,
+                            footprint_lod + log2(probe_rest_face_size / probe_face_size), roughness);
+#else
     vec3 env = sample_environment(ray, footprint_lod + log2(sky_face_size / probe_face_size), roughness);
+#endif
     return first * v_reflect.z + second * v_reflect.w + env * sky;
 #else
     return first;
