@@ -1,5 +1,18 @@
 """The per-pixel passes of planar reflections: preparing a level (reset, then claims with
-their visibility queries) and the composite.
+their visibility queries), the composite, and the fallback of surfaces with no view.
+
+The fallback (issue 36's reflection fallback chain, as Unity and Godot drop a cut planar
+reflection to the nearest probe or the sky): a mirror or portal a view sees but that gets no
+view of its own shows what the composite would show with an empty reflection, its
+environment (``COMPOSITE_FALLBACK`` builds of the same shader, one code path).  It is drawn
+over the parent view's own pixels of the surface, found by the parent level's node and
+surface images, so it needs no claim; the probes are uniforms of a draw and each row's
+weights and ids ride in uniform arrays (the composite's row fills a vertex shader's 16
+attribute slots).  Why there and not in the scene pass: the scene pass cannot know which
+mirrors will get views (the budgets choose after it has drawn them), so writing the fallback
+there would cost every mirror pixel its probe lookups and need the composite to take it out
+again where a view is drawn, changing drawn mirrors' pixels; here a drawn view's pixels are
+never touched, and only the pixels that show a fallback pay for it.
 
 The claims' rectangles are one buffer a level (two triangles each, every vertex with its
 claim's ids: claim.vert): the reset is one draw over all of them (rects.vert), each claim
