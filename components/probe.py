@@ -37,8 +37,8 @@ class ReflectionProbe(TrackedComponent):
     and Godot's probes do).  ``depth`` is how many levels of mirrors and portals a face
     sees (0: none, and no view tree: mirrors show their own surface in its captures).
     ``prefilter``: how rough materials blur what the probe saw: ``mips`` (the default: a
-    box-filtered mip chain, sampled with a roughness bias) or ``ggx`` (each level convolved with a GGX lobe of its own roughness,
-    as three.js's PMREM and Unity's probe convolution do: closer to the light's true spread,
+    box-filtered mip chain, sampled with a roughness bias) or ``ggx`` (each level convolved
+    with a GGX lobe of its own roughness, as three.js's PMREM and Unity's probe convolution do: closer to the light's true spread,
     and dearer to capture).
     ``priority`` (an int, higher first; default 0) orders its captures under the frame's
     budgets (``engine.resources.ViewBudget``), after first captures and before distance.
