@@ -38,8 +38,8 @@ class ReflectionProbe(TrackedComponent):
     sees (0: none, and no view tree: mirrors show their own surface in its captures).
     ``prefilter``: how rough materials blur what the probe saw: ``mips`` (the default: a
     box-filtered mip chain, sampled with a roughness bias) or ``ggx`` (each level convolved
-    with a GGX lobe of its own roughness, as three.js's PMREM and Unity's probe convolution do: closer to the light's true spread,
-    and dearer to capture).
+    with a GGX lobe of its own roughness, as three.js's PMREM and Unity's probe convolution
+    do: closer to the light's true spread, and dearer to capture).
     ``priority`` (an int, higher first; default 0) orders its captures under the frame's
     budgets (``engine.resources.ViewBudget``), after first captures and before distance.
     ``shows_layers`` (None: all) and ``hides_layers`` are the reflection layers its captures
