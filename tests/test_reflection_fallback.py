@@ -382,3 +382,31 @@ def test_a_curved_object_in_two_overlapping_boxes_shows_them_mixed_by_the_oracle
     expect = a * pure["a"] + left * own
     assert np.abs(seen - expect).max() < 0.03 * spread + 0.004, (seen, expect)
     assert seen[1] < 0.5 * seen[0]  # no green sky in it
+
+
+def test_a_cut_water_surface_weighs_its_fallback_by_fresnel(scene):
+    """Water (a still pond: no normal map) cut by the budget: the sky's reflection, tinted,
+    over its own shading by Schlick's Fresnel for its index at each pixel's angle (the
+    weight its drawn reflection gets), not by a fixed reflect rate."""
+    from components import Water
+
+    ior = 1.5
+    f0 = ((ior - 1.0) / (ior + 1.0)) ** 2
+    ents = {}
+    runner, image = _render(scene, _floor_mirror(ents, Mirror(color=TINT), ViewBudget(views=0)))
+    world = runner.world
+    world.add_component(ents["mirror"], Water(ior=ior, speed=0.0))
+    image = runner.frame()
+    assert runner.stats.reflection_fallbacks == 1
+    _, own = _render(scene, _floor_mirror({}, Mirror(color=TINT, reflect_rate=0.0), ViewBudget(views=0)))
+    rays = _rays(runner)
+    normal = np.array([0.0, 1.0, 0.0])
+    reflected = rays - 2.0 * (rays * normal).sum(axis=-1, keepdims=True) * normal
+    cosine = np.clip(-(rays * normal).sum(axis=-1, keepdims=True), 0.0, 1.0)
+    weight = f0 + (1.0 - f0) * (1.0 - cosine) ** 5
+    expected = weight * np.asarray(TINT) * sky_radiance(Skybox(), reflected) + (1.0 - weight) * srgb_to_linear(own)
+    mask = _mirror_pixels(runner, ents["mirror"]) & _away_from_the_sun(reflected)
+    assert mask.sum() > 2000
+    difference = np.abs(image[mask].astype(float) - linear_to_srgb8(expected[mask]))
+    assert difference.max() <= 4.0, difference.max()
+    assert weight[mask].max() < 0.5  # mostly its own shading: Fresnel, not the mirror's rate of 1
