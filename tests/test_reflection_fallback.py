@@ -410,3 +410,26 @@ def test_a_cut_water_surface_weighs_its_fallback_by_fresnel(scene):
     difference = np.abs(image[mask].astype(float) - linear_to_srgb8(expected[mask]))
     assert difference.max() <= 4.0, difference.max()
     assert weight[mask].max() < 0.5  # mostly its own shading: Fresnel, not the mirror's rate of 1
+
+
+def test_an_end_views_pixels_its_image_does_not_hold_show_the_fallback(ctx, monkeypatch):
+    """Turned round in one frame, every end view's pixels lie off last frame's image: they show
+    the fallback, as the pair without end images does (the same frame, exactly), not the
+    mirrors' material (what the frame is with the fallback pass taken out)."""
+    from engine.rules.frame_rules import active_camera
+    from tests.test_end_images import _facing_pair, _frames
+
+    def turn(runner, frame):
+        yaw = math.pi if frame < 3 else 0.0
+        runner.world.get(active_camera(runner.world), Transform).rotation = glm.quat(
+            glm.angleAxis(-yaw, glm.vec3(0, 1, 0)))
+
+    counts = []
+    turned, ends = _frames(ctx, _facing_pair(3), 4, turn, fxaa=False,
+                           after=lambda runner: counts.append(runner.stats.reflection_fallbacks))
+    closed, _ = _frames(ctx, _facing_pair(3, end_image=False), 4, turn, fxaa=False)
+    assert ends[3] >= 1 and counts[0] >= ends[3]  # each end view's holes are a fallback
+    assert np.array_equal(turned[3], closed[3])
+    monkeypatch.setattr(MirrorPasses, "draw_fallbacks", lambda *args: None)
+    bare, _ = _frames(ctx, _facing_pair(3), 4, turn, fxaa=False)
+    assert (np.abs(bare[3] - turned[3]).max(axis=2) > 10).sum() >= 100
