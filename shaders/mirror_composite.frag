@@ -61,8 +61,10 @@ flat in uint v_view;       // fallback: the parent view's index (its pixels in t
 uniform usampler2D parent_nodes;     // the level composited into: which view drew each pixel
 uniform usampler2D parent_surfaces;  // and the surface there
 uniform vec2 to_child;               // its pixels -> the reflection level's (an end view's holes)
+#ifdef FALLBACK_PROBES
 // The draw's two probes (engine/render/probes.py; the sky where a row has fewer), as the
-// scene shader's probe.glsl reads them.
+// scene shader's probe.glsl reads them.  A draw whose surfaces no influence box holds is a
+// build without them (the sky alone: llvmpipe would look up both probes at weight 0).
 uniform samplerCube probe_map;
 uniform vec4 probe_position;
 uniform vec4 probe_box_min;
@@ -71,6 +73,7 @@ uniform samplerCube probe2_map;
 uniform vec4 probe2_position;
 uniform vec4 probe2_box_min;
 uniform vec4 probe2_box_max;
+#endif
 flat in uvec4 v_ids;       // x: the surface's entity; y: its end view + 1 (0: not an end view)
 flat in vec4 v_weights;    // x, y: the probes' weights (the sky has the rest); z: the fallback's share
 flat in vec4 v_place;      // x: the plane's w; yzw: a portal's offset to beyond its partner
@@ -79,11 +82,15 @@ flat in vec4 v_place;      // x: the plane's w; yzw: a portal's offset to beyond
 // taking what is left of 1, each read at its level for ``roughness`` (the scene shader's
 // probe_radiance, with no pixel footprint: the composite reads its sky at level 0 too).
 vec3 fallback_environment(vec3 p, vec3 ray, float roughness) {
+    vec3 sky = textureLod(sky_map, ray, roughness_lod_bias(roughness)).rgb;
+#ifdef FALLBACK_PROBES
     vec3 first = probe_lookup(probe_map, probe_position, probe_box_min, probe_box_max, p, ray, 0.0, roughness);
     vec3 second = probe_lookup(probe2_map, probe2_position, probe2_box_min, probe2_box_max, p, ray, 0.0,
                                roughness);
-    vec3 sky = textureLod(sky_map, ray, roughness_lod_bias(roughness)).rgb;
     return first * v_weights.x + second * v_weights.y + sky * max(1.0 - v_weights.x - v_weights.y, 0.0);
+#else
+    return sky;
+#endif
 }
 
 // The blend weight of the fallback under a reflection of weight ``rate`` (the reflect rate or

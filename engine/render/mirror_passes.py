@@ -225,10 +225,16 @@ COMPOSITE_VARIANTS = {"sharp": {}, "rough": {"COMPOSITE_ROUGH": "1"}, "portal": 
 
 
 # The fallback's builds (COMPOSITE_FALLBACK, mirror_composite.frag): one for sharp and rough
-# mirrors (roughness is a mip bias of the environment), a portal's, water's, and the bumpy ones.
-FALLBACK_VARIANTS = {f"fallback{name}": {"COMPOSITE_FALLBACK": "1", **defines} for name, defines in (
-    ("", {}), ("_portal", {"COMPOSITE_PORTAL": "1"}), ("_bumpy", {"COMPOSITE_BUMPY": "1"}),
-    ("_water", {"COMPOSITE_WATER": "1"}), ("_water_bumpy", {"COMPOSITE_WATER": "1", "COMPOSITE_BUMPY": "1"}))}
+# mirrors (roughness is a mip bias of the environment), a portal's, water's, and the bumpy ones;
+# each with the probes ("fallback_probes...": FALLBACK_PROBES) or the sky alone (no influence
+# box holds the draw's surfaces: on llvmpipe, the 8-mirror ring faded out at 640x360, its six
+# fallbacks took 0.8 ms a frame without the probes' lookups at weight 0, 0.9-1.2 with them).
+_FALLBACK_BUILDS = (("", {}), ("_portal", {"COMPOSITE_PORTAL": "1"}), ("_bumpy", {"COMPOSITE_BUMPY": "1"}),
+                    ("_water", {"COMPOSITE_WATER": "1"}),
+                    ("_water_bumpy", {"COMPOSITE_WATER": "1", "COMPOSITE_BUMPY": "1"}))
+FALLBACK_VARIANTS = {f"fallback{probes}{name}": {"COMPOSITE_FALLBACK": "1", **extra, **defines}
+                     for probes, extra in (("", {}), ("_probes", {"FALLBACK_PROBES": "1"}))
+                     for name, defines in _FALLBACK_BUILDS}
 FALLBACK_ROWS = 32  # rows a fallback draw takes (its uniform arrays' length); more are drawn in chunks
 _FALLBACK_IDS = struct.Struct("<4I")
 _FALLBACK_WEIGHTS = struct.Struct("<8f")
@@ -533,7 +539,10 @@ class MirrorPasses:
             surface = fallback.surface
             blend = probes.get(surface.entity)
             owners = (*blend.probes, 0, 0)[:2] if blend is not None else (0, 0)
-            key = (surface.fallback_variant, surface.normal_map, *owners)
+            variant = surface.fallback_variant
+            if owners != (0, 0):
+                variant = variant.replace("fallback", "fallback_probes", 1)
+            key = (variant, surface.normal_map, *owners)
             groups.setdefault(key, []).append((fallback, blend.weights if blend is not None else ()))
         prepared = PreparedFallbacks({}, len(fallbacks))
         for key, group in groups.items():
@@ -573,6 +582,8 @@ class MirrorPasses:
             draw = self.fallbacks[variant]
             program = draw.program
             for prefix, probe, unit in (("probe", first, PROBE_UNIT), ("probe2", second, PROBE2_UNIT)):
+                if not first:
+                    break  # a draw with no probes is a build without them
                 for name, value in zip(("position", "box_min", "box_max"), self._bind_probe(probe, unit),
                                        strict=True):
                     if f"{prefix}_{name}" in program:
