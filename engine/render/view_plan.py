@@ -214,6 +214,7 @@ class SurfaceTable:
         self._plans: dict[tuple, tuple[np.ndarray | None, tuple[Candidates | None, int]]] = {}  # plan's, least
         # recently used first
         self._ends: dict[tuple[int, int], tuple[np.ndarray, np.ndarray, list[bool]]] = {}
+        self._unviewed: dict[tuple, tuple[np.ndarray | None, tuple[np.ndarray, np.ndarray]]] = {}  # unviewed's
         # The resolution scale every surface shares (None: they differ; a level takes its largest).
         self.one_scale = float(self.scale[0]) if count and (self.scale == self.scale[0]).all() else None
 
@@ -400,9 +401,22 @@ class SurfaceTable:
         cut = self.falls_back & ~viewable
         if not len(parents.data) or (not cut.any() and not self.fading):
             return _NONE, _NONE
+        # Kept like the plans (``plan``): the same parent rows (a still camera, a probe face)
+        # give the same pairs, for the price of comparing bytes.
+        key = (parents.data.tobytes(), root_proj.tobytes(), depth, depth_cap, root_size, id(ends))
+        found = self._unviewed.pop(key, None)
+        if found is not None and found[0] is ends:
+            self._unviewed[key] = found
+            return found[1]
         p, s, _, fade = self.cull(parents, depth, root_proj, root_size, depth_cap, ends, fallback=True)
         unviewed = cut[s] if fade is None else cut[s] | (fade <= 0.0)
-        return p[unviewed], s[unviewed]
+        pairs = (p[unviewed], s[unviewed])
+        for array_ in pairs:
+            array_.flags.writeable = False  # shared by the frames that find them again
+        if len(self._unviewed) >= PLANS_KEPT:
+            del self._unviewed[next(iter(self._unviewed))]
+        self._unviewed[key] = (ends, pairs)
+        return pairs
 
     def fade_weights(self, eyes: np.ndarray, s: np.ndarray) -> np.ndarray:
         """Each surface ``s`` seen from ``eyes``: the product of its distance fade (by the
