@@ -433,3 +433,29 @@ def test_an_end_views_pixels_its_image_does_not_hold_show_the_fallback(ctx, monk
     monkeypatch.setattr(MirrorPasses, "draw_fallbacks", lambda *args: None)
     bare, _ = _frames(ctx, _facing_pair(3), 4, turn, fxaa=False)
     assert (np.abs(bare[3] - turned[3]).max(axis=2) > 10).sum() >= 100
+
+
+def test_a_mirror_inside_one_uncovered_this_frame_shows_its_fallback_in_predicted_mode(scene, monkeypatch):
+    """Predicted visibility: the views inside a mirror uncovered this frame wait a frame
+    (tests/test_predicted_visibility.py); meanwhile the facing mirror seen in it shows its
+    fallback, not its material: the frame differs from the one drawn with the fallback pass
+    taken out, and only inside the uncovered mirror."""
+    from tests.test_predicted_visibility import _covered_mirrors
+
+    frames = []
+    for fallback in (True, False):
+        if not fallback:
+            monkeypatch.setattr(MirrorPasses, "draw_fallbacks", lambda *args: None)
+        ents: dict = {}
+        runner = scene(lambda world, ents=ents: _covered_mirrors(world, ents, True), (200, 150))
+        runner.engine.reflection_system.visibility = "predicted"
+        runner.engine.renderer.antialias = "off"
+        for _ in range(3):
+            runner.frame()
+        runner.world.get(ents["cover"], Transform).position = (0.0, 1.5, 30.0)
+        frames.append(runner.frame().astype(float))
+        if fallback:
+            assert runner.stats.reflection_views_unseen >= 1 and runner.stats.reflection_fallbacks >= 1
+            in_mirror = runner.engine.renderer.targets.read_surface_ids() == ents["mirror"]
+    differs = np.abs(frames[0] - frames[1]).max(axis=2) > 10
+    assert differs.sum() > 50 and not (differs & ~in_mirror).any()

@@ -257,6 +257,11 @@ class ViewTree:
                 grown = set(grow)
                 for at, child in enumerate(children):
                     child.unseen = at not in grown
+                # A view drawn unseen gets no views of its surfaces this frame: should it show
+                # now, they show their fallback (every surface it sees, as if past every limit).
+                unseen = [at for at in range(len(children)) if at not in grown]
+                self._unviewed(fallbacks, surfaces, chosen.select(np.asarray(unseen, np.int64)).rows,
+                               [children[at] for at in unseen], level + 1, root_proj, root, 0, None)
             self._fallbacks_of_level(fallbacks, surfaces, step, keep, is_end, children, level, exact)
             if end_rows:
                 chosen_ends = candidates.select(np.asarray(end_rows, np.int64))
@@ -383,7 +388,7 @@ class ViewTree:
                   ends: tuple[np.ndarray, int] | None) -> None:
         """The fallbacks of the surfaces the views ``nodes`` (``rows``, of ``level``) see but
         that the next level plans no view for (``SurfaceTable.unviewed``: past their depth
-        limits, switched off, faded out)."""
+        limits, switched off, faded out; a ``depth_cap`` of 0: all of them)."""
         p, s = surfaces.unviewed(rows, level + 1, root_proj, root.size, depth_cap, _ends_at(ends, level + 1))
         if len(p):
             states = surfaces.states
