@@ -23,13 +23,17 @@ SUITES: dict[str, tuple[str, str]] = {
                "a dynamic probe"),
     "profile": ("benchmarks.cpu_profile", "where a frame's CPU time goes, function by function (cProfile): 16 "
                 "mirrors, portals at depth 8, a dynamic probe"),
-    "targets": ("benchmarks.targets", "issue 25's speed targets, each on its own engines, against its limit"),
+    "cpu": ("benchmarks.cpu", "the frame a GPU host pays for (32x18, LP_NUM_THREADS=0: the engine's CPU) with its "
+            "GL calls and profile, and every speed target against its limit"),
+    "lighting": ("benchmarks.lighting", "the mirrors scene with shadows and post-processing (tone mapping, "
+                 "bloom) on and off, interleaved: medians, ratios and the lighting cost targets"),
     "gpu-report": ("benchmarks.gpu_report", "GL renderer and limits, rendering-path checks, test summary and the "
                    "mirrors / portals / probes / stages / profile benchmarks at two sizes, as report.md + report.json"),
 }
 
 # The suites that draw frames: each takes --size WxH.
-RENDERING_SUITES = ("ecs", "portals", "mirrors", "soak", "churn", "probes", "normal_maps", "stages", "profile")
+RENDERING_SUITES = ("ecs", "portals", "mirrors", "soak", "churn", "probes", "normal_maps", "stages", "profile",
+                    "lighting")
 
 MAX_SIDE = 16384  # no OpenGL this engine runs on offers a larger render target
 

@@ -1,22 +1,25 @@
-"""Fuzz: every component's fields given adversarial values, one case a frame.
+"""Fuzz: every component's fields given adversarial values, several frames a case.
 
 Each case builds one component with one to three fields drawn from a pool of awkward
 values (NaN, infinities, numbers past float32 and float16, huge ints, wrong kinds, zero
 vectors, Euler-looking tuples), attaches it to an entity of a small lit scene (a box, a
 quad for surfaces, the camera entity for Camera and FlyController, the sky entity for the
-Skybox) and renders one 48 x 32 frame.  A case passes when either the component is refused
-with a ``ComponentValueError`` that names ``Class.field`` (or the entity, for checks on the
-whole entity), or the frame renders with no NaN in the HDR colour target and ``ctx.error``
-clean.  Any other exception, above all one raised from inside a system, is a failure.
+Skybox) and renders ``FRAMES`` 48 x 32 frames (``benchmarks/fuzz_cases.py``: what a first frame
+leaves to later ones, probes captured a face a frame, is run too).  A case passes when either
+the component is refused with a ``ComponentValueError`` that names ``Class.field`` (or the
+entity, for checks on the whole entity), or every frame renders with no NaN in the HDR colour
+target and ``ctx.error`` clean.  Any other exception, above all one raised from inside a system, is a failure.
 
-    python -m benchmarks fuzz --cases 5000 --level-cases 2000
+    python -m benchmarks fuzz --cases 5000 --level-cases 2000 --model-cases 500
 
 ``--level-cases`` runs the level-file fuzz as well (``benchmarks/level_fuzz.py``: a small
 level's text mutated, loaded, spawned and rendered; a quarter of its cases name adversarial
 files).  Every run also tries each of the level fuzz's file cases once (``FILE_CASES``:
 symlink loops, FIFOs, a directory, /dev/zero, image bombs, deep nesting, 16-bit and float
 images, paths outside the level's folder): each refused saying what it is, or loaded with
-the right texel and drawn clean.
+the right texel and drawn clean.  ``--model-cases`` (default 100) runs the model fuzz
+(``benchmarks/model_fuzz.py``: model files and the maps they name made at random, loaded and
+spawned with ``spawn_model`` outside any level).
 """
 from __future__ import annotations
 
@@ -31,7 +34,8 @@ from typing import Any
 import numpy as np
 from pyglm import glm
 
-from benchmarks.fuzz_cases import run_cases
+from benchmarks.fuzz_cases import FRAMES, run_cases
+from benchmarks.model_fuzz import FRAMES as MODEL_FRAMES
 from components import (
     Camera,
     ComponentValueError,
@@ -188,8 +192,10 @@ class Fuzzer:
         except Exception as exc:  # noqa: BLE001
             return f"attach raised {type(exc).__name__}: {exc}"
         try:
-            self.frame()
-            problem = self._check_pixels()
+            problem = None
+            for _ in range(FRAMES):
+                self.frame()
+                problem = problem or self._check_pixels()
         except Exception as exc:  # noqa: BLE001
             problem = f"frame raised {type(exc).__name__}: {exc}\n{traceback.format_exc(limit=-3)}"
         finally:
@@ -249,6 +255,34 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--seed", type=int, default=0, help="random seed (the cases are reproducible)")
     parser.add_argument("--level-cases", type=int, default=0,
                         help="also run this many level-file cases (mutated level files; default 0)")
+    add_model_arguments(parser)
+
+
+# --- model files outside a level (benchmarks/model_fuzz.py) ---------------------------------------
+
+def add_model_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--model-cases", type=int, default=100,
+                        help="model files made at random, loaded and spawned with spawn_model outside a level "
+                             "(benchmarks/model_fuzz.py; default 100)")
+
+
+def run_model_fuzz(ctx, args: argparse.Namespace, report) -> tuple[int, list, dict[str, int]]:
+    """The model fuzz's cases (``benchmarks.model_fuzz.fuzz_models``), in a folder of their own."""
+    import tempfile
+    from pathlib import Path
+
+    from benchmarks.model_fuzz import fuzz_models
+
+    with tempfile.TemporaryDirectory() as folder:
+        return fuzz_models(ctx, Path(folder), args.model_cases, args.seed, report)
+
+
+def print_model_fuzz(args: argparse.Namespace, ran: int, failures: list, passes: dict[str, int]) -> None:
+    if args.json:
+        print(json.dumps({"model_cases": ran, "failed": len(failures), **passes, "failures": failures[:50]}))
+    else:
+        print(f"model fuzz: {ran} model files ran, {len(failures)} failed ({passes['refused']} refused naming the "
+              f"file, {passes['rendered']} spawned and rendered clean for {MODEL_FRAMES} frames; seed {args.seed})")
 
 
 def main(args: argparse.Namespace) -> int:
@@ -270,6 +304,7 @@ def main(args: argparse.Namespace) -> int:
                                                                   report)
         with tempfile.TemporaryDirectory() as folder:
             file_ran, file_failures, file_passes = fuzz_files(ctx, Path(folder), report)
+        model_ran, model_failures, model_passes = run_model_fuzz(ctx, args, report)
     finally:
         ctx.release()
     if args.json:
@@ -288,4 +323,5 @@ def main(args: argparse.Namespace) -> int:
                   f"seed {args.seed})")
         print(f"file cases: {file_ran} ran, {len(file_failures)} failed ({file_passes['refused']} refused saying what "
               f"the file is, {file_passes['rendered']} loaded right and rendered clean)")
-    return 1 if failures or level_failures or file_failures else 0
+    print_model_fuzz(args, model_ran, model_failures, model_passes)
+    return 1 if failures or level_failures or file_failures or model_failures else 0

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import random
 
+FRAMES = 3  # frames each fuzz renders a case: probes, time-sliced captures and uploads settle over a few
+
 
 def run_cases(fuzzer, make_case, cases: int, seed: int, report=None) -> tuple[int, list[tuple[str, str]],
                                                                              dict[str, int]]:

@@ -4,7 +4,7 @@ Each case applies one to three mutations to ``BASE`` (a field's value replaced b
 TOML value, a component or field renamed, a name or reference changed, a mesh or texture
 spec replaced, a line broken, a table emptied) and writes the result to a file.  A case
 passes when either loading or spawning raises a ``LevelError`` that names the file (and the
-entity where the mutation touched one), or the level spawns and renders a 48 x 32 frame
+entity where the mutation touched one), or the level spawns and renders ``FRAMES`` 48 x 32 frames
 with no NaN in the HDR target and ``ctx.error`` clean.  Any other exception is a failure,
 as is an entity left in the world by a refused level, or a case still running after
 ``CASE_SECONDS`` (a hang).
@@ -22,6 +22,7 @@ render.  ``python -m benchmarks fuzz`` also runs every file case once.
 from __future__ import annotations
 
 import contextlib
+import json
 import os
 import random
 import re
@@ -37,6 +38,7 @@ from pathlib import Path
 
 import numpy as np
 
+from benchmarks.fuzz_cases import FRAMES
 from engine.assets.level_file import LevelError, load_level
 from engine.core.frame_io import Output
 from engine.core.game import Game
@@ -220,6 +222,48 @@ FILE_CASES: tuple[FileCase, ...] = (
     FileCase("a plain OBJ", "mesh", _file("assets/plain.obj")),
 )
 
+# Models and material maps (issue 41): what a model names obeys the level's rules, and no name
+# reaches a FIFO through a library's own lookup; the Material's other map slots take files too.
+MODEL_FILE_CASES: tuple[FileCase, ...] = (
+    FileCase("an OBJ map whose bare name is a FIFO", "mesh", _file("assets/fallback.obj"), "does not exist"),
+    FileCase("an OBJ whose mtllib comment names a FIFO", "mesh", _file("assets/comment.obj")),
+    FileCase("a glTF image data: URI not base64", "mesh", _file("assets/data_uri.gltf"), "not base64"),
+    FileCase("an MTL norm outside", "mesh", _file("assets/norm_out.obj"), _OUT),
+    FileCase("an MTL past its size limit", "mesh", _file("assets/sparse.obj"), "more than"),
+    FileCase("an MTL map with options", "mesh", _file("assets/options.obj")),
+    FileCase("an OBJ with forward normals, no UVs, a continued line", "mesh", _file("assets/real.obj")),
+    FileCase("a FIFO (emissive map)", "emissive_map", _file("assets/fifo.png"), "is a FIFO"),
+    FileCase("a plain PNG (emissive map)", "emissive_map", _file("assets/plain.png"), texel=(200, 100, 50, 255)),
+    FileCase("a 16-bit metallic-roughness map", "metallic_roughness_map", _file("assets/flat16.png"),
+             texel=(32768, 32768, 65535, 65535)),
+    FileCase("an image of random bytes (metallic-roughness map)", "metallic_roughness_map",
+             _file("assets/noise.png"), "cannot be read as an image"),
+)
+FILE_CASES += MODEL_FILE_CASES
+
+
+def make_model_files(assets: Path) -> None:
+    """The files MODEL_FILE_CASES name, in ``assets`` (beside make_files' FIFOs)."""
+    from engine.assets.model_files import MAX_MTL_BYTES
+
+    triangle = "v 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\nvt 1 0\nvt 0 1\n"
+    (assets / "fallback.mtl").write_text("newmtl m\nKd 1 1 1\nmap_Kd textures/fifo.png\n")
+    (assets / "fallback.obj").write_text("mtllib fallback.mtl\n" + triangle + "usemtl m\nf 1/1 2/2 3/3\n")
+    (assets / "comment.obj").write_text("# mtllib fifo.mtl\n" + triangle + "f 1 2 3\n")
+    (assets / "data_uri.gltf").write_text(json.dumps({
+        "asset": {"version": "2.0"}, "images": [{"uri": "data:,fifo.png"}], "textures": [{"source": 0}],
+        "materials": [{"pbrMetallicRoughness": {"baseColorTexture": {"index": 0}}}],
+        "meshes": [{"primitives": [{"attributes": {}, "material": 0}]}]}))
+    (assets / "norm_out.mtl").write_text("newmtl m\nKd 1 1 1\nnorm ../../outside/there.png\n")
+    (assets / "norm_out.obj").write_text("mtllib norm_out.mtl\n" + triangle + "usemtl m\nf 1/1 2/2 3/3\n")
+    with open(assets / "sparse.mtl", "wb") as f:
+        f.truncate(MAX_MTL_BYTES + 1)
+    (assets / "sparse.obj").write_text("mtllib sparse.mtl\n" + triangle + "f 1 2 3\n")
+    (assets / "options.mtl").write_text("newmtl m\nKd 1 1 1\nmap_Kd -s 2 2 1 -clamp on plain.png\n"
+                                        "map_Bump -bm 0.5 -o 0.1 plain.png\n")
+    (assets / "options.obj").write_text("mtllib options.mtl\n" + triangle + "usemtl m\nf 1/1 2/2 3/3\n")
+    (assets / "real.obj").write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1/1/1 2/2/1 \\\n3/3/1\nvn 0 0 1\n")
+
 
 def make_files(level_folder: Path, outside: Path) -> None:
     """The files FILE_CASES name: in ``level_folder / "assets"``, and ``outside``."""
@@ -265,6 +309,7 @@ def make_files(level_folder: Path, outside: Path) -> None:
     Image.fromarray(np.array([[0.5, np.nan]], np.float32)).save(assets / "nan.tiff")
     Image.fromarray(np.full((2, 2), 7, np.int32)).save(assets / "int32.tiff")
     Image.new("RGB", (4, 4), (200, 100, 50)).save(assets / "plain.png")
+    make_model_files(assets)
 
 
 def _png(path: Path, pixels, colour_type: int, depth: int, declared: tuple[int, int] | None = None) -> None:
@@ -280,13 +325,14 @@ def _png(path: Path, pixels, colour_type: int, depth: int, declared: tuple[int, 
 
 
 _SLOTS = {"mesh": "mesh = { box = [1.0, 1.0, 1.0] }", "texture": "texture = { checker = [32, 4] }",
-          "normal_map": "texture = { checker = [32, 4] }"}
+          "normal_map": "texture = { checker = [32, 4] }", "emissive_map": "texture = { checker = [32, 4] }",
+          "metallic_roughness_map": "texture = { checker = [32, 4] }"}
 
 
 def file_level_case(case: FileCase) -> LevelCase:
     """BASE with ``case``'s file named in its slot (the crate's mesh, the floor's texture or
     normal map): one mutation, so the refusal must be the file's."""
-    key = "normal_map" if case.slot == "normal_map" else case.slot
+    key = case.slot
     text = BASE.replace(_SLOTS[case.slot], f"{key} = {case.spec}", 1)
     return LevelCase(text, [f"file case: {case.what}"], case.expect, case.texel)
 
@@ -417,10 +463,11 @@ class LevelFuzzer:
         elif case.texel is not None:
             problem = self._check_texel(names, case.texel)
         try:
-            with warnings.catch_warnings(), _deadline(CASE_SECONDS):
-                warnings.simplefilter("ignore")
-                self.engine.frame(1.0 / 60.0, Output(self.capture.framebuffer, SIZE))
-            problem = problem or self._check_pixels()
+            for _ in range(FRAMES):
+                with warnings.catch_warnings(), _deadline(CASE_SECONDS):
+                    warnings.simplefilter("ignore")
+                    self.engine.frame(1.0 / 60.0, Output(self.capture.framebuffer, SIZE))
+                problem = problem or self._check_pixels()
         except _Hung:
             problem = f"the frame hung for more than {CASE_SECONDS:g} s"
         except Exception as exc:  # noqa: BLE001
@@ -437,7 +484,8 @@ class LevelFuzzer:
         from components import Material
 
         material = self.world.try_get(names.get("floor", -1), Material)
-        texture = material and (material.normal_map or material.texture)
+        texture = material and (material.normal_map or material.emissive_map or material.metallic_roughness_map
+                                or material.texture)
         if texture is None:
             return "the floor has no texture or normal map"
         got = tuple(int(v) for v in texture.pixels[0, 0])

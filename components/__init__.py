@@ -1,7 +1,9 @@
 """Components: plain data attached to entities. Behaviour lives in ``systems``."""
+from components.ambient import HemisphereLight
 from components.camera import Camera, DirectionalLight, FlyController, PointLight
 from components.mirror import Mirror
 from components.portal import Portal, PortalClone, Slice, Traveller
+from components.post import Bloom, Tonemap
 from components.probe import ReflectionProbe
 from components.rendering import Emissive, Material, MeshRef, Reflective, Refractive, Skybox
 from components.tracking import ComponentValueError, TrackedComponent
@@ -10,9 +12,10 @@ from components.visibility import Visibility
 from components.water import Water
 
 __all__ = [
-    "Camera", "ComponentValueError", "DirectionalLight", "Emissive", "FlyController", "Material",
+    "Bloom", "Camera", "ComponentValueError", "DirectionalLight", "Emissive", "FlyController", "HemisphereLight",
+    "Material",
     "MeshRef", "Mirror", "PointLight", "Portal", "PortalClone", "ReflectionProbe", "Reflective", "Refractive",
     "Skybox", "Slice",
-    "TrackedComponent", "Transform", "Traveller", "Visibility", "Water",
+    "Tonemap", "TrackedComponent", "Transform", "Traveller", "Visibility", "Water",
     "euler_rotation", "look_rotation", "yaw_pitch_rotation",
 ]

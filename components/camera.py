@@ -6,7 +6,16 @@ from typing import Any
 
 from pyglm import glm
 
-from components.tracking import HALF_MAX, ComponentValueError, TrackedComponent, boolean, color, finite, vec3
+from components.tracking import (
+    HALF_MAX,
+    ComponentValueError,
+    TrackedComponent,
+    boolean,
+    color,
+    finite,
+    integer,
+    vec3,
+)
 from components.visibility import check_surface_layers, surface_layers
 
 # Depth range the 24-bit depth buffer still resolves: far / near up to 1e7 keeps surfaces a
@@ -88,13 +97,44 @@ class FlyController(TrackedComponent):
         return value
 
 
+# Shadow maps (engine/render/shadows.py): sides in texels, and the PCF filter's reach.
+MIN_SHADOW_RESOLUTION = 64
+MAX_SHADOW_RESOLUTION = 4096   # a 4096^2 depth map is 64 MiB: past that, fit the level instead
+MAX_SHADOW_SOFTNESS = 8.0      # texels; a wider filter would need more taps than it takes
+
+
+def _shadow_field(owner: TrackedComponent, name: str, value: Any) -> Any:
+    """The shadow fields DirectionalLight and PointLight share (None: not a shadow field)."""
+    if name == "shadows":
+        return boolean(owner, name, value)
+    if name == "shadow_resolution":
+        value = integer(owner, name, value, low=MIN_SHADOW_RESOLUTION, high=MAX_SHADOW_RESOLUTION)
+        if value & (value - 1):
+            raise ComponentValueError(
+                f"{type(owner).__name__}.shadow_resolution must be a power of two (texels a side), got {value}")
+        return value
+    if name == "shadow_softness":
+        return finite(owner, name, value, low=0.0, high=MAX_SHADOW_SOFTNESS)
+    return None
+
+
 @dataclass(eq=False)
 class DirectionalLight(TrackedComponent):
-    """Light from infinitely far along ``direction`` (the way the light travels)."""
+    """Light from infinitely far along ``direction`` (the way the light travels).
+
+    ``shadows`` (on by default): things cast shadows in its light, from one shadow map a
+    frame fitted to the whole level and shared by every view (the main camera, every mirror,
+    portal and probe face), redrawn only when a caster or the light changed
+    (``engine/render/shadows.py``).  ``shadow_resolution``: the map's side in texels (a power
+    of two); ``shadow_softness``: how far, in texels, the edge is filtered (percentage-closer
+    filtering; 0 is the hardest edge the map's texels allow)."""
 
     direction: Any = field(default_factory=lambda: glm.vec3(-0.3, -1.0, -0.4))
     color: Any = field(default_factory=lambda: glm.vec4(1.0))
     intensity: float = 1.0
+    shadows: bool = True
+    shadow_resolution: int = 2048
+    shadow_softness: float = 1.0
 
     def _validate(self, name: str, value: Any) -> Any:
         if name == "direction":
@@ -103,16 +143,24 @@ class DirectionalLight(TrackedComponent):
             return color(self, name, value)
         if name == "intensity":
             return finite(self, name, value, low=0.0, high=HALF_MAX)  # lit colour lands in half floats
-        return value
+        shadow = _shadow_field(self, name, value)
+        return value if shadow is None else shadow
 
 
 @dataclass(eq=False)
 class PointLight(TrackedComponent):
-    """Light from the entity's position, falling off smoothly to zero at ``range``."""
+    """Light from the entity's position, falling off smoothly to zero at ``range``.
+
+    ``shadows`` (off by default, as in most engines: six views a light): things within its
+    range cast shadows, from a cube shadow map of ``shadow_resolution`` texels a face,
+    redrawn only when a caster in its range or the light changed."""
 
     color: Any = field(default_factory=lambda: glm.vec4(1.0))
     intensity: float = 1.0
     range: float = 10.0
+    shadows: bool = False
+    shadow_resolution: int = 512
+    shadow_softness: float = 1.0
 
     def _validate(self, name: str, value: Any) -> Any:
         if name == "color":
@@ -121,4 +169,5 @@ class PointLight(TrackedComponent):
             return finite(self, name, value, low=0.0, high=HALF_MAX)  # lit colour lands in half floats
         if name == "range":
             return finite(self, name, value, positive=True)
-        return value
+        shadow = _shadow_field(self, name, value)
+        return value if shadow is None else shadow

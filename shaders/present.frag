@@ -1,16 +1,46 @@
 #version 410 core
 // Present: the linear HDR image, times exposure, encoded to sRGB.  With LUMA_IN_ALPHA (the
 // frame the FXAA pass filters) alpha holds the pixel's luma, else 1.
+//
+// With POST (a camera with a Tonemap or a Bloom, components/post.py), in this order: the
+// bloom mixed in (BLOOM: the mean of the mip chain's blurs, engine/render/bloom.py), the
+// exposure (a linear scale; AUTO_EXPOSURE: times 2^EV from the adapted 1x1 exposure
+// texture, engine/render/post.py, read here on the GPU), the tone curve
+// (TONEMAP_CURVE, include/tonemap.glsl), then the sRGB encoding.  Without POST the
+// code is the plain look's, unchanged.
 #include "color.glsl"
+#include "tonemap.glsl"
 
 uniform sampler2D hdr_image;
 uniform float exposure;
+
+#ifdef POST
+#ifdef BLOOM
+uniform sampler2D bloom_image;
+uniform vec2 bloom_mix;   // (weight of the image, weight of the bloom image's sum of levels)
+#endif
+#ifdef AUTO_EXPOSURE
+uniform sampler2D exposure_state;   // 1x1, r: the adapted automatic exposure in EV
+#endif
+#endif
 
 in vec2 v_uv;
 out vec4 out_color;
 
 void main() {
+#ifdef POST
+    vec3 hdr = texture(hdr_image, v_uv).rgb;
+#ifdef BLOOM
+    hdr = hdr * bloom_mix.x + texture(bloom_image, v_uv).rgb * bloom_mix.y;
+#endif
+    float scale = exposure;
+#ifdef AUTO_EXPOSURE
+    scale *= exp2(texelFetch(exposure_state, ivec2(0), 0).r);
+#endif
+    vec3 srgb = linear_to_srgb(tone_map(hdr * scale));
+#else
     vec3 srgb = linear_to_srgb(texture(hdr_image, v_uv).rgb * exposure);
+#endif
 #ifdef LUMA_IN_ALPHA
     out_color = vec4(srgb, dot(srgb, vec3(0.299, 0.587, 0.114)));
 #else

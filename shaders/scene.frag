@@ -3,7 +3,9 @@
 // (reflect, refract, emissive). Each slot switches on the instance's variant index.
 #include "camera.glsl"
 #include "lights.glsl"
+#include "shadows.glsl"
 #include "ggx.glsl"
+#include "ambient.glsl"
 
 uniform sampler2D albedo_map;
 uniform bool has_albedo_map;
@@ -56,7 +58,8 @@ layout(location = 3) out uint out_node;
 
 struct Surface {
     vec3 position;
-    vec3 normal;      // unit, facing the viewer
+    vec3 normal;      // unit, facing the viewer (bent by a normal map)
+    vec3 geometric_normal;  // unit, facing the viewer: the mesh's own (shadow lookups offset along it)
     vec3 to_eye;      // unit, surface -> eye
     vec3 albedo;
     float alpha;
@@ -79,13 +82,14 @@ float cube_lod(vec3 direction, float n) {
 
 vec3 direct_lighting(Surface s) {
     vec3 diffuse = s.albedo * (1.0 - s.metallic) / PI;
-    vec3 total = lights.ambient.rgb * s.albedo;
+    vec3 total = ambient_irradiance(s.position, s.normal) * diffuse;  // E(n) x albedo x (1 - metallic) / pi
     for (int i = 0; i < lights.counts.x; ++i) {
         vec3 l = -lights.directional_dir[i].xyz;
         float nl = max(dot(s.normal, l), 0.0);
         if (nl > 0.0) {
             total += (diffuse + ggx_specular(s.normal, l, s.to_eye, s.f0, s.roughness))
-                     * lights.directional_color[i].rgb * nl;
+                     * lights.directional_color[i].rgb * nl
+                     * directional_shadow(i, s.position, s.geometric_normal, l);
         }
     }
     for (int i = 0; i < lights.counts.y; ++i) {
@@ -98,7 +102,8 @@ vec3 direct_lighting(Surface s) {
         float falloff = fade * fade / (dist * dist + 1.0);
         if (nl > 0.0 && falloff > 0.0) {
             total += (diffuse + ggx_specular(s.normal, l, s.to_eye, s.f0, s.roughness))
-                     * lights.point_color[i].rgb * nl * falloff;
+                     * lights.point_color[i].rgb * nl * falloff
+                     * point_shadow(i, s.position, lights.point_pos[i].xyz, s.geometric_normal, l);
         }
     }
     return total;
@@ -239,6 +244,7 @@ void main() {
     s.to_eye = normalize(VIEW_EYE - v_world_pos);
     s.normal = normalize(v_normal);
     if (!gl_FrontFacing) s.normal = -s.normal;
+    s.geometric_normal = s.normal;
 #ifdef NORMAL_MAP
     s.normal = mapped_normal(s.normal, v_world_pos, v_uv, v_surface.w);
 #endif

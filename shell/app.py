@@ -42,6 +42,7 @@ from systems import (
 from systems.frame_rules_system import FrameRulesSystem
 from systems.portal_slice_system import PortalSliceSystem
 from systems.probe_system import ProbeAfterPresentSystem, ProbeSystem
+from systems.shadow_system import ShadowSystem
 from systems.surface_system import SurfaceSystem
 
 
@@ -99,6 +100,7 @@ FRAME_STAGES: tuple[tuple[str, Callable[[Engine], esper.Processor]], ...] = (
     ("surfaces", lambda e: SurfaceSystem(e.world)),
     ("extract", lambda e: ExtractSystem(e.world, e.renderer)),
     ("prepare", lambda e: PrepareSystem(e.world, e.renderer)),
+    ("shadows", lambda e: ShadowSystem(e.world, e.renderer)),
     ("probes", lambda e: ProbeSystem(e.world, e.renderer)),
     ("main", lambda e: MainViewSystem(e.world, e.renderer)),
     ("reflect", lambda e: ReflectionSystem(e.world, e.renderer)),

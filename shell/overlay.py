@@ -1,6 +1,7 @@
 """The debug overlay: frame rate and a frame-time graph, what the last frame cost (passes,
 draw calls, views per reflection level, probe captures), the reflection and probe capture
-paths in use, toggles for them, and shader errors from hot reload.
+paths in use, toggles for them, the post-processing (tone curve, exposure, bloom; toggles
+for bloom and the curve), and shader errors from hot reload.
 
 It is an immediate-mode GUI (Dear ImGui, through imgui-bundle) drawn by moderngl-window's
 moderngl renderer for it, after the present stage, over the finished frame in the output
@@ -31,6 +32,7 @@ import numpy as np
 from imgui_bundle import imgui
 from moderngl_window.integrations.imgui_bundle import ModernGLRenderer
 
+from components.post import TONEMAP_CURVES
 from shell.overlay_text import overlay_lines
 
 if TYPE_CHECKING:  # the app's window makes the overlay
@@ -41,6 +43,8 @@ POSITION = (8, 8)               # the overlay window's top-left corner, in pixel
 REFLECTION_PATHS = ("per_mirror", "batched", "auto")
 PROBE_PATHS = ("auto", "six_pass", "layered")
 MAX_DEPTH_CAP = 16
+CURVE_CHOICES = (None, *TONEMAP_CURVES)   # None: each camera's own Tonemap curve
+CURVE_WIDTH = 100                          # pixels of the curve's drop-down
 
 
 class OverlayRenderer(ModernGLRenderer):
@@ -242,6 +246,29 @@ class DebugOverlay:
         if changed:
             renderer.antialias = "fxaa" if fxaa else "off"
         self._widget("fxaa")
+        shadows = engine.stages["shadows"]
+        imgui.same_line()
+        changed, on = imgui.checkbox("shadows", shadows.enabled)
+        if changed:
+            shadows.enabled = on
+        self._widget("shadows")
+        present = engine.stages["present"]
+        imgui.same_line()
+        changed, bloom = imgui.checkbox("bloom", present.bloom)
+        if changed:
+            present.bloom = bloom
+        self._widget("bloom")
+        imgui.same_line()
+        imgui.set_next_item_width(CURVE_WIDTH)
+        if imgui.begin_combo("curve", present.curve or "camera's"):
+            self._widget("curve")
+            for curve in CURVE_CHOICES:
+                if imgui.selectable(f"{curve or 'camera'}##curve", present.curve == curve)[0]:
+                    present.curve = curve
+                self._widget(f"curve {curve or 'camera'}")
+            imgui.end_combo()
+        else:
+            self._widget("curve")
         self.shown_errors = list(renderer.shaders.errors.values())
         for error in self.shown_errors:
             imgui.text_colored(imgui.ImVec4(1.0, 0.35, 0.3, 1.0), error)

@@ -33,7 +33,9 @@ def overlay_lines(engine: Engine, frame_times: Sequence[float]) -> list[str]:
         f"reflection views {stats.reflection_views}, dropped {stats.reflection_views_dropped}, "
         f"capped {stats.reflection_depth_capped}, faded {stats.reflection_views_faded}, "
         f"fallbacks {stats.reflection_fallbacks}",
-        f"probe captures {stats.probe_captures} ({stats.probe_faces} faces)",
+        f"probe captures {stats.probe_captures} ({stats.probe_faces} faces); shadow maps drawn "
+        f"{stats.shadow_maps_drawn}, kept {stats.shadow_maps_kept}, cut {stats.shadows_cut}"
+        f"{' (off)' if not engine.stages['shadows'].enabled else ''}",
         f"view budget {'none' if stats.view_budget is None else stats.view_budget}: spent {stats.views_spent}, "
         f"cut {stats.views_cut}",
         f"pixel budget {'none' if stats.pixel_budget is None else stats.pixel_budget}: spent {stats.pixels_spent}, "
@@ -46,4 +48,29 @@ def overlay_lines(engine: Engine, frame_times: Sequence[float]) -> list[str]:
         f"probe path {stats.probe_path or '-'} (set: {probes.path}{chosen})",
         f"GL paths verified: {', '.join(stats.paths_verified) or '-'}; "
         f"refused: {', '.join(stats.paths_refused) or '-'}",
+        *post_lines(engine),
     ]
+
+
+def post_lines(engine: Engine) -> list[str]:
+    """The present stage's post-processing in the last frame, one line: the tone curve (and
+    whose it is), the exposure, the bloom (intensity, levels) and the post passes drawn.  The
+    automatic exposure's adapted value is read back from the GPU (a wait, only while the
+    overlay shows it)."""
+    present, renderer = engine.stages["present"], engine.renderer
+    tonemap, bloom = present.tonemap, present.bloomed
+    camera_curve = tonemap.curve if tonemap is not None else "none"
+    curve = present.curve or camera_curve
+    whose = "camera" if present.curve is None else f"set; camera {camera_curve}"
+    if tonemap is None:
+        exposure = f"x{renderer.exposure:g}"
+    else:
+        exposure = f"{tonemap.exposure:+.2f} EV"
+        if tonemap.auto_exposure:
+            adapted = renderer.present_pass.auto_exposure.adapted_ev()
+            exposure += f", auto {'-' if adapted is None else f'{adapted:+.2f}'}"
+    if bloom is not None:
+        glow = f"bloom {bloom.intensity:g} x{renderer.present_pass.bloom.levels}"
+    else:
+        glow = "bloom off" + (" (set)" if not present.bloom else "")
+    return [f"post: {curve} ({whose}), {exposure}; {glow}, {renderer.present_pass.post_passes} passes"]

@@ -25,7 +25,7 @@ import logging
 import sys
 import time
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import moderngl_window as mglw
 
@@ -89,199 +89,205 @@ def make_overlay(ctx: moderngl.Context, visible: bool) -> DebugOverlay | NoOverl
     return DebugOverlay(ctx, visible=visible)
 
 
-def make_window_config(game: Game, args: argparse.Namespace | None = None) -> type[mglw.WindowConfig]:
-    """A WindowConfig class bound to ``game`` (moderngl-window instantiates it itself)."""
+class SpeculumWindow(mglw.WindowConfig):
+    """The window that runs an Engine: ``make_window_config`` makes the subclass bound to a
+    game and its command line (moderngl-window makes the instance itself, from a class)."""
 
-    class SpeculumWindow(mglw.WindowConfig):
-        gl_version = (4, 1)
-        title = game.title
-        window_size = args.size if args else game.size
-        aspect_ratio = None
-        resizable = True
-        vsync = True
-        log_level = logging.WARNING  # moderngl-window's INFO lines (context description, frame rate) off
+    game: Game  # the game the window runs (set on the subclass)
+    options: argparse.Namespace | None = None  # the command line (``--frames``, ``--aa``, ...), if any
+    gl_version = (4, 1)
+    aspect_ratio = None
+    resizable = True
+    vsync = True
+    log_level = logging.WARNING  # moderngl-window's INFO lines (context description, frame rate) off
 
-        def __init__(self, **kwargs) -> None:
-            super().__init__(**kwargs)
-            # Esc is handled by the shell (``quit``), which releases before the window closes;
-            # moderngl-window's own exit key would close first and call on_close after.
-            self.wnd.exit_key = None
-            self.frames_left: int | None = getattr(args, "frames", None)
-            self.export_scene: Path | None = getattr(args, "export_scene", None)
-            self.written: list[Path] = []  # what release wrote (the scene export)
-            self.released = False
-            self.engine = Engine(game, self.ctx)
-            if args is not None:
-                self.engine.renderer.antialias = args.aa
-            if args is not None and args.camera:
-                self.engine.place_camera(*args.camera)
-            self.input: Input = self.engine.world.resources[Input]
-            self.screenshots = Path(args.out) if args is not None and args.out else Path("screenshots")
-            self.mouse_captured = False
-            self.key_names = key_names(self.wnd.keys)
-            self.overlay = make_overlay(self.ctx, visible=bool(getattr(args, "overlay", False)))
+    def __init__(self, **kwargs: Any) -> None:  # ctx, wnd, timer: moderngl-window's
+        super().__init__(**kwargs)
+        # Esc is handled by the shell (``quit``), which releases before the window closes;
+        # moderngl-window's own exit key would close first and call on_close after.
+        self.wnd.exit_key = None
+        self.frames_left: int | None = getattr(self.options, "frames", None)
+        self.export_scene: Path | None = getattr(self.options, "export_scene", None)
+        self.written: list[Path] = []  # what release wrote (the scene export)
+        self.released = False
+        args = self.options
+        self.engine = Engine(self.game, self.ctx)
+        if args is not None:
+            self.engine.renderer.antialias = args.aa
+        if args is not None and args.camera:
+            self.engine.place_camera(*args.camera)
+        self.input: Input = self.engine.world.resources[Input]
+        self.screenshots = Path(args.out) if args is not None and args.out else Path("screenshots")
+        self.mouse_captured = False
+        self.key_names = key_names(self.wnd.keys)
+        self.overlay = make_overlay(self.ctx, visible=bool(getattr(args, "overlay", False)))
 
-        def on_render(self, time_s: float, frametime: float) -> None:
-            if self.released:
-                return  # closed (Esc, --frames): nothing is left to draw with
-            size = self.wnd.buffer_size
-            for message in self.engine.renderer.shaders.poll():  # hot reload: at most every 0.5 s
-                print(f"speculum: {message}", file=sys.stderr, flush=True)
-            self.overlay.record(frametime)
-            self.engine.frame(min(frametime, 0.1), Output(self.wnd.fbo, size))
-            self.overlay.draw(self.engine, self.wnd.fbo, size)
-            if self.frames_left is not None:
-                self.frames_left -= 1
-                if self.frames_left <= 0:
-                    self.quit()
+    def on_render(self, time_s: float, frametime: float) -> None:
+        if self.released:
+            return  # closed (Esc, --frames): nothing is left to draw with
+        size = self.wnd.buffer_size
+        for message in self.engine.renderer.shaders.poll():  # hot reload: at most every 0.5 s
+            print(f"speculum: {message}", file=sys.stderr, flush=True)
+        self.overlay.record(frametime)
+        self.engine.frame(min(frametime, 0.1), Output(self.wnd.fbo, size))
+        self.overlay.draw(self.engine, self.wnd.fbo, size)
+        if self.frames_left is not None:
+            self.frames_left -= 1
+            if self.frames_left <= 0:
+                self.quit()
 
-        def on_resize(self, width: int, height: int) -> None:
-            pass  # the render system sizes its targets from the framebuffer each frame; 0x0 skips
+    def on_resize(self, width: int, height: int) -> None:
+        pass  # the render system sizes its targets from the framebuffer each frame; 0x0 skips
 
-        def on_key_event(self, key: int | str, action: int | str, modifiers: KeyModifiers) -> None:
-            if self.released:
-                return  # events queued behind Esc
-            keys = self.wnd.keys
-            name = self.key_names.get(key)
-            if name == "f1":  # the overlay's key, not the game's
-                if action == keys.ACTION_PRESS:
-                    self.overlay.toggle()
-                    if self.overlay.visible and self.mouse_captured:  # give the pointer back to use it
-                        self.mouse_captured = False
-                        self.wnd.mouse_exclusivity = False
-                        self.wnd.cursor = True
-                return
+    def on_key_event(self, key: int | str, action: int | str, modifiers: KeyModifiers) -> None:
+        if self.released:
+            return  # events queued behind Esc
+        keys = self.wnd.keys
+        name = self.key_names.get(key)
+        if name == "f1":  # the overlay's key, not the game's
             if action == keys.ACTION_PRESS:
-                if name:
-                    self.input.press(name)
-                elif key == getattr(keys, "F12", None):
-                    self.screenshot()
-                elif key == keys.ESCAPE:
-                    self.quit()
-            elif action == keys.ACTION_RELEASE and name:
-                self.input.release(name)
-            for modifier in ("shift", "ctrl"):
-                if getattr(modifiers, modifier, False):
-                    self.input.held.add(modifier)
-                else:
-                    self.input.held.discard(modifier)
+                self.overlay.toggle()
+                if self.overlay.visible and self.mouse_captured:  # give the pointer back to use it
+                    self.mouse_captured = False
+                    self.wnd.mouse_exclusivity = False
+                    self.wnd.cursor = True
+            return
+        if action == keys.ACTION_PRESS:
+            if name:
+                self.input.press(name)
+            elif key == getattr(keys, "F12", None):
+                self.screenshot()
+            elif key == keys.ESCAPE:
+                self.quit()
+        elif action == keys.ACTION_RELEASE and name:
+            self.input.release(name)
+        for modifier in ("shift", "ctrl"):
+            if getattr(modifiers, modifier, False):
+                self.input.held.add(modifier)
+            else:
+                self.input.held.discard(modifier)
 
-        def on_mouse_press_event(self, x: int, y: int, button: int) -> None:
-            if self.released:
-                return  # events queued behind Esc
-            if self.overlay.visible:
-                self.overlay.mouse_moved(x, y)
-                self.overlay.mouse_button(button, True)
-                if self.overlay.wants_mouse:
-                    return
-            # In the output's pixels (what Output.size and the main view measure): on a
-            # high-DPI screen the framebuffer has pixel_ratio times the window's pixels.
-            ratio = float(getattr(self.wnd, "pixel_ratio", 1.0) or 1.0)
-            self.input.mouse = (float(x) * ratio, float(y) * ratio)
-            if getattr(game, "mouse_look", False) and not self.mouse_captured:
-                # A game that looks with the mouse (its own controller, no FlyController):
-                # the click that takes the pointer is not a game click (no portal fired).
-                self.mouse_captured = True
-                self.wnd.mouse_exclusivity = True
-                self.wnd.cursor = False
+    def on_mouse_press_event(self, x: int, y: int, button: int) -> None:
+        if self.released:
+            return  # events queued behind Esc
+        if self.overlay.visible:
+            self.overlay.mouse_moved(x, y)
+            self.overlay.mouse_button(button, True)
+            if self.overlay.wants_mouse:
                 return
-            self.input.clicks.add(_BUTTONS.get(button, str(button)))
-            if self.engine.world.query_one(FlyController):  # mouse look; a game without it keeps the pointer
-                self.mouse_captured = True
-                self.wnd.mouse_exclusivity = True
-                self.wnd.cursor = False
+        # In the output's pixels (what Output.size and the main view measure): on a
+        # high-DPI screen the framebuffer has pixel_ratio times the window's pixels.
+        ratio = float(getattr(self.wnd, "pixel_ratio", 1.0) or 1.0)
+        self.input.mouse = (float(x) * ratio, float(y) * ratio)
+        if getattr(self.game, "mouse_look", False) and not self.mouse_captured:
+            # A game that looks with the mouse (its own controller, no FlyController):
+            # the click that takes the pointer is not a game click (no portal fired).
+            self.mouse_captured = True
+            self.wnd.mouse_exclusivity = True
+            self.wnd.cursor = False
+            return
+        self.input.clicks.add(_BUTTONS.get(button, str(button)))
+        if self.engine.world.query_one(FlyController):  # mouse look; a game without it keeps the pointer
+            self.mouse_captured = True
+            self.wnd.mouse_exclusivity = True
+            self.wnd.cursor = False
 
-        def on_mouse_release_event(self, x: int, y: int, button: int) -> None:
-            if self.released:
-                return  # events queued behind Esc
-            if self.overlay.visible:
-                self.overlay.mouse_moved(x, y)
-                self.overlay.mouse_button(button, False)
+    def on_mouse_release_event(self, x: int, y: int, button: int) -> None:
+        if self.released:
+            return  # events queued behind Esc
+        if self.overlay.visible:
+            self.overlay.mouse_moved(x, y)
+            self.overlay.mouse_button(button, False)
 
-        def on_mouse_position_event(self, x: int, y: int, dx: int, dy: int) -> None:
-            if self.released:
-                return  # events queued behind Esc
-            if self.overlay.visible and not self.mouse_captured:
-                self.overlay.mouse_moved(x, y)
-            # In the output's pixels (what Output.size and the main view measure): on a
-            # high-DPI screen the framebuffer has pixel_ratio times the window's pixels.
-            ratio = float(getattr(self.wnd, "pixel_ratio", 1.0) or 1.0)
-            self.input.mouse = (float(x) * ratio, float(y) * ratio)
-            if self.mouse_captured:
-                self.input.mouse_dx += dx
-                self.input.mouse_dy += dy
-
-        def on_mouse_drag_event(self, x: int, y: int, dx: int, dy: int) -> None:
-            if self.released:
-                return  # events queued behind Esc
-            if self.overlay.visible:
-                self.overlay.mouse_moved(x, y)
-                if self.overlay.wants_mouse:  # dragging the depth-cap slider, not looking around
-                    return
-            # In the output's pixels (what Output.size and the main view measure): on a
-            # high-DPI screen the framebuffer has pixel_ratio times the window's pixels.
-            ratio = float(getattr(self.wnd, "pixel_ratio", 1.0) or 1.0)
-            self.input.mouse = (float(x) * ratio, float(y) * ratio)
+    def on_mouse_position_event(self, x: int, y: int, dx: int, dy: int) -> None:
+        if self.released:
+            return  # events queued behind Esc
+        if self.overlay.visible and not self.mouse_captured:
+            self.overlay.mouse_moved(x, y)
+        # In the output's pixels (what Output.size and the main view measure): on a
+        # high-DPI screen the framebuffer has pixel_ratio times the window's pixels.
+        ratio = float(getattr(self.wnd, "pixel_ratio", 1.0) or 1.0)
+        self.input.mouse = (float(x) * ratio, float(y) * ratio)
+        if self.mouse_captured:
             self.input.mouse_dx += dx
             self.input.mouse_dy += dy
 
-        def screenshot(self) -> Path:
-            """Write the last frame drawn to a PNG, by presenting it again into an offscreen
-            capture target (the headless runs' path).  Why not read the window: moderngl reads
-            a framebuffer through GL_COLOR_ATTACHMENT0, which a window's default framebuffer
-            does not have, so under a real window (GLX) that read leaves GL_INVALID_OPERATION
-            behind and the next frame's error check fails."""
-            renderer = self.engine.renderer
-            if renderer.targets is None:
-                raise SpeculumError("screenshot: no frame has been drawn yet")
-            size = renderer.targets.size
-            capture = CaptureTarget(self.ctx, size)
-            try:
-                renderer.present(capture.framebuffer, size)
-                rgb = capture.read_rgb()
-            finally:
-                capture.release()
-            self.screenshots.mkdir(parents=True, exist_ok=True)
-            stamp = time.strftime("%Y%m%d_%H%M%S")
-            path = self.screenshots / f"screenshot_{stamp}.png"
-            n = 1
-            while path.exists():  # two presses within a second keep both pictures
-                path = self.screenshots / f"screenshot_{stamp}_{n}.png"
-                n += 1
-            save_png(rgb, path)
-            print(f"speculum: screenshot {path}", flush=True)
-            return path
-
-        def quit(self) -> None:
-            """End the run: release everything now (the window's GL context is current) and
-            let the main loop stop; ``run_windowed`` closes the window after it.  Not closed
-            here: a key arrives inside pyglet's event dispatch, and a window closed under it
-            breaks the rest of that dispatch."""
-            self.release()
-            self.wnd.is_closing = True
-
-        def release(self) -> None:
-            """Write ``--export-scene`` and release the overlay and the engine, once."""
-            if self.released:
+    def on_mouse_drag_event(self, x: int, y: int, dx: int, dy: int) -> None:
+        if self.released:
+            return  # events queued behind Esc
+        if self.overlay.visible:
+            self.overlay.mouse_moved(x, y)
+            if self.overlay.wants_mouse:  # dragging the depth-cap slider, not looking around
                 return
-            self.released = True
+        # In the output's pixels (what Output.size and the main view measure): on a
+        # high-DPI screen the framebuffer has pixel_ratio times the window's pixels.
+        ratio = float(getattr(self.wnd, "pixel_ratio", 1.0) or 1.0)
+        self.input.mouse = (float(x) * ratio, float(y) * ratio)
+        self.input.mouse_dx += dx
+        self.input.mouse_dy += dy
+
+    def screenshot(self) -> Path:
+        """Write the last frame drawn to a PNG, by presenting it again into an offscreen
+        capture target (the headless runs' path).  Why not read the window: moderngl reads
+        a framebuffer through GL_COLOR_ATTACHMENT0, which a window's default framebuffer
+        does not have, so under a real window (GLX) that read leaves GL_INVALID_OPERATION
+        behind and the next frame's error check fails."""
+        renderer = self.engine.renderer
+        if renderer.targets is None:
+            raise SpeculumError("screenshot: no frame has been drawn yet")
+        size = renderer.targets.size
+        capture = CaptureTarget(self.ctx, size)
+        try:
+            renderer.present(capture.framebuffer, size)
+            rgb = capture.read_rgb()
+        finally:
+            capture.release()
+        self.screenshots.mkdir(parents=True, exist_ok=True)
+        stamp = time.strftime("%Y%m%d_%H%M%S")
+        path = self.screenshots / f"screenshot_{stamp}.png"
+        n = 1
+        while path.exists():  # two presses within a second keep both pictures
+            path = self.screenshots / f"screenshot_{stamp}_{n}.png"
+            n += 1
+        save_png(rgb, path)
+        print(f"speculum: screenshot {path}", flush=True)
+        return path
+
+    def quit(self) -> None:
+        """End the run: release everything now (the window's GL context is current) and
+        let the main loop stop; ``run_windowed`` closes the window after it.  Not closed
+        here: a key arrives inside pyglet's event dispatch, and a window closed under it
+        breaks the rest of that dispatch."""
+        self.release()
+        self.wnd.is_closing = True
+
+    def release(self) -> None:
+        """Write ``--export-scene`` and release the overlay and the engine, once."""
+        if self.released:
+            return
+        self.released = True
+        try:
+            if self.export_scene is not None:
+                from shell.capture import write_scene
+
+                self.written += write_scene(self.engine, self.export_scene, self.wnd.buffer_size)
+                print(f"speculum: wrote {', '.join(str(p) for p in self.written)}", flush=True)
+        finally:
             try:
-                if self.export_scene is not None:
-                    from shell.capture import write_scene
-
-                    self.written += write_scene(self.engine, self.export_scene, self.wnd.buffer_size)
-                    print(f"speculum: wrote {', '.join(str(p) for p in self.written)}", flush=True)
+                self.overlay.release()
             finally:
-                try:
-                    self.overlay.release()
-                finally:
-                    self.engine.close()
+                self.engine.close()
 
-        def on_close(self) -> None:
-            # The window's close button (its GL context is still there) or ``quit`` (done).
-            self.release()
+    def on_close(self) -> None:
+        # The window's close button (its GL context is still there) or ``quit`` (done).
+        self.release()
 
-    return SpeculumWindow
+
+def make_window_config(game: Game, args: argparse.Namespace | None = None) -> type[mglw.WindowConfig]:
+    """A ``SpeculumWindow`` class bound to ``game`` and its command line (moderngl-window
+    instantiates it itself)."""
+    return type("SpeculumWindow", (SpeculumWindow,), {
+        "game": game, "options": args, "title": game.title, "window_size": args.size if args else game.size})
 
 
 WINDOW_REFUSES = {"gif": "--gif", "ids": "--ids"}

@@ -41,7 +41,6 @@ class ExtractSystem(esper.Processor):
         self._looks = LookChanges()  # what changes a look, and which probe each object samples
         self._joined: set[int] = set()
         self._surface_probes = SurfaceProbes()  # each mirror's and portal's fallback probes
-        world.resources[Renderer] = renderer
 
     def process(self, dt: float) -> None:
         world = self.world

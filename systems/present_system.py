@@ -1,21 +1,51 @@
-"""Present: the finished level-0 image (reflections composited in) goes to the output."""
+"""Present: the finished level-0 image (reflections composited in) goes to the output,
+bloomed, exposed and tone mapped as the active camera's ``Bloom`` and ``Tonemap`` say
+(``components/post.py``; a camera with neither keeps the plain look)."""
 from __future__ import annotations
 
 import esper
 
+from components.post import TONEMAP_CURVES, Bloom, Tonemap
 from engine.core.frame_io import Output
 from engine.core.world import World
 from engine.render.renderer import Renderer
 from engine.resources import FrameViews
+from engine.rules.frame_rules import active_camera_parts
 
 
 class PresentSystem(esper.Processor):
+    """Settings the debug overlay writes (a developer's switches over every camera):
+    ``bloom`` (False: no camera's Bloom is drawn) and ``curve`` (None: each camera's own;
+    else one of ``TONEMAP_CURVES`` for every camera, with or without a Tonemap)."""
+
     def __init__(self, world: World, renderer: Renderer) -> None:
         self.world = world
         self.renderer = renderer
+        self.bloom = True
+        self._curve: str | None = None
+        self.tonemap: Tonemap | None = None   # what the last frame presented with (the overlay shows it)
+        self.bloomed: Bloom | None = None
+
+    @property
+    def curve(self) -> str | None:
+        return self._curve
+
+    @curve.setter
+    def curve(self, value: str | None) -> None:
+        if value is not None and value not in TONEMAP_CURVES:
+            raise ValueError(f"PresentSystem.curve must be None or one of {TONEMAP_CURVES}, got {value!r}")
+        self._curve = value
 
     def process(self, dt: float) -> None:
         output: Output | None = self.world.resources.get(Output)
         views: FrameViews | None = self.world.resources.get(FrameViews)
-        if output is not None and views is not None and views.main is not None:
-            self.renderer.present(output.framebuffer, output.size)
+        if output is None or views is None or views.main is None:
+            return
+        parts = active_camera_parts(self.world)
+        camera = parts[0] if parts is not None else None
+        tonemap = bloom = None
+        if camera is not None:
+            tonemap = self.world.try_get(camera, Tonemap)
+            bloom = self.world.try_get(camera, Bloom) if self.bloom else None
+        self.tonemap, self.bloomed = tonemap, bloom
+        self.renderer.present(output.framebuffer, output.size, tonemap, bloom, self._curve, camera, dt)

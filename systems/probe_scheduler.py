@@ -49,6 +49,7 @@ from engine.rules.probe_rules import (
     world_bounds,
 )
 from engine.rules.probe_schedule import MAX_NAMED, ProbeDue, ProbeSchedule, ProbeState, ProbeStates
+from engine.rules.shadow_rules import ShadowCasters
 
 
 class ChangedBoxes:
@@ -288,6 +289,14 @@ class ProbeScheduler:
                 [w for w, keep in zip(boxes.what, own, strict=True) if keep]
             _ask_named(state, face_hits(state.position, settings.far, lo, hi), entity,
                        lambda row: f"{what[row]}: entity {entity[row]}")
+            casters = self.world.resources.get(ShadowCasters)
+            if casters is not None and (casters.directional or casters.points):
+                # Where their shadows fall: a face showing that place changes even when the
+                # thing itself is outside it.
+                shadow_lo, shadow_hi, of = casters.shadow_bounds(lo, hi)
+                if len(of):
+                    _ask_named(state, face_hits(state.position, settings.far, shadow_lo, shadow_hi), entity[of],
+                               lambda row: f"shadow of entity {entity[of[row]]} ({what[of[row]]})")
             if settings.depth > 0 and surfaces is not None and (surfaces.mirrors or surfaces.portals):
                 self._through_surfaces(state, lo, hi, entity, what, surfaces)
 

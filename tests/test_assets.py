@@ -304,7 +304,7 @@ BAD_FILES = [
     ("garbage.ply", GARBAGE, "cannot be parsed"),
     ("garbage.obj", GARBAGE, "no triangle meshes"),
     ("points.obj", b"v 0 0 0\nv 1 0 0\nv 0 1 0\n", "no triangle meshes"),
-    ("badindex.obj", b"v 0 0 0\nv 1 0 0\nf 1 2 5\n", "line 3: face index 5, but 2 vertices so far"),
+    ("badindex.obj", b"v 0 0 0\nv 1 0 0\nf 1 2 5\n", "line 3: face index 5, but 2 vertices in the file"),
     ("badindex.ply", NAN_PLY.replace("inf", "0").replace("3 0 1 2", "3 0 1 9").encode(),
      "face index 9 is out of range (3 vertices)"),
     ("fifo.obj", "fifo", "is a FIFO, not a regular file"),

@@ -23,7 +23,7 @@ ROOT = Path(__file__).resolve().parents[1]
 # What each rendering suite drew at before --size existed: the default must not move.
 DEFAULT_SIZES = {"ecs": (64, 36), "portals": (640, 360), "mirrors": (640, 360), "soak": (320, 180),
                  "churn": (320, 180), "probes": (640, 360), "normal_maps": (640, 360), "stages": (640, 360),
-                 "profile": (640, 360)}
+                 "profile": (640, 360), "lighting": (640, 360)}
 
 
 @pytest.fixture
@@ -91,6 +91,7 @@ def _spy_on_capture_targets(monkeypatch, module) -> list[tuple[int, int]]:
     ["ecs", "--sizes", "100", "--frames", "1", "--warmup", "1"],
     ["churn", "--entities", "5", "--waves", "1", "--frames", "1"],
     ["profile", "--scenes", "portals_d8", "--frames", "1", "--warmup", "0"],
+    ["lighting", "--frames", "1", "--warmup", "0"],
 ], ids=lambda argv: argv[0])
 def test_the_size_reaches_the_render_target(argv, monkeypatch, capsys, own_contexts):
     parser, modules = build_parser()
@@ -160,7 +161,7 @@ def test_gpu_report_writes_markdown_and_json_without_imgui(ctx, tmp_path):
     out = tmp_path / "report"
     done = subprocess.run(
         [sys.executable, "-c", WITHOUT_IMGUI, "gpu-report", "--out", str(out), "--size", "160x90", "--no-tests",
-         "--frames", "2"],
+         "--frames", "2", "--report-only"],
         cwd=ROOT, env={**os.environ, "PYTHONPATH": str(ROOT)}, capture_output=True, text=True, timeout=120)
     assert done.returncode == 0, done.stdout[-2000:] + done.stderr[-3000:]
     assert "overlay imported: False" in done.stdout
@@ -187,16 +188,24 @@ def test_gpu_report_writes_markdown_and_json_without_imgui(ctx, tmp_path):
     assert report["tests"] == {"ran": False, "reason": "--no-tests"}
 
     runs = report["benchmarks"]
-    assert set(runs) == {"mirrors", "portals", "probes", "stages", "profile", "targets"}
-    targets = runs.pop("targets")  # at the sizes it names, once
-    assert set(targets) == {"own sizes"} and targets["own sizes"]["status"] == "ok", targets
-    assert "--size" not in targets["own sizes"]["command"] and "--frames 2" in targets["own sizes"]["command"]
-    from benchmarks.targets import LIMITS
-    assert [row["target"] for row in targets["own sizes"]["rows"]] == list(LIMITS)
-    for row in targets["own sizes"]["rows"]:
+    assert set(runs) == {"mirrors", "portals", "probes", "stages", "profile", "cpu"}
+    cpu = runs.pop("cpu")  # at the sizes it names, once
+    assert set(cpu) == {"own sizes"} and cpu["own sizes"]["status"] == "ok", cpu
+    command = cpu["own sizes"]["command"]
+    assert "--size" not in command and "--frames 2" in command and "--report-only" in command
+    from benchmarks.cpu import TARGETS
+    targets = [row for row in cpu["own sizes"]["rows"] if "target" in row]
+    assert [row["target"] for row in targets] == list(TARGETS)
+    for row in targets:  # every part ran: every target has its value
         assert row["value"] > 0 and row["met"] == (row["value"] <= row["limit"]), row
-        assert row["applies"] == (row["set_for"] == "this machine"), row  # llvmpipe: this machine's kind
-    assert "## Targets (issue 25)" in markdown and "portal_depth_8_ratio" in markdown
+        assert row["applies"] == (row["set_for"] == "software"), row  # llvmpipe: a software rasteriser
+    scenes = {(row["scene"], row["size"]): row for row in cpu["own sizes"]["rows"] if "gl_calls" in row}
+    assert {scene for scene, size in scenes if size == "32x18"} == \
+        {"mirrors_0", "mirrors_8", "mirrors_16", "portals_d0", "portals_d8"}
+    assert all(row["lp_num_threads"] == "0" for (_, size), row in scenes.items() if size == "32x18")
+    assert ("mirrors_16", "1920x1080") in scenes and ("probe_dynamic", "640x360") in scenes
+    assert "## Targets" in markdown and "cpu_portal_depth_8_ratio" in markdown and "## CPU frames" in markdown
+    assert "issue 25" not in markdown
     for suite, by_size in runs.items():
         assert set(by_size) == {"160x90"}, suite
         assert by_size["160x90"]["status"] == "ok", by_size["160x90"]
@@ -232,6 +241,7 @@ def test_gpu_report_writes_markdown_and_json_without_imgui(ctx, tmp_path):
     assert {r["scene"] for r in profiled if "rank" not in r} == {"mirrors_16", "portals_d8", "probe_dynamic"}
     for heading in ("## OpenGL", "## Rendering paths", "## Benchmarks", "### mirrors: frame_ms_median by size",
                     "### profile: mirrors_16 at 160x90", "### profile: probe_dynamic at 160x90",
+                    "### cpu: mirrors_16 at 32x18",
                     "### stages: gpu_ms_median by size",
                     "### mirrors: plan_us_per_view by size", "### portals: cpu_ms_median by size", "## Test suite"):
         assert heading in markdown, heading
@@ -496,15 +506,160 @@ def test_a_failing_tests_frames_are_kept_where_speculum_fail_out_says(tmp_path):
         assert sum(key.endswith(("_frames_0", "_frames_1")) for key in arrays.files) == 2
 
 
-def test_targets_rows_judge_each_value_against_its_limit_on_the_machine_it_is_set_for():
-    from benchmarks.targets import LIMITS, rows
-    found = {name: (limit * 0.5, "below") for name, (limit, _, _) in LIMITS.items()}
-    found["portal_depth_8_ratio"] = (LIMITS["portal_depth_8_ratio"][0] + 0.01, "just over")
-    found["plan_us_per_view"] = (None, "no view")  # no frame had a reflection view: nothing to judge as met
+def _scene_row(scene: str, size: str, frame_ms: float) -> dict:
+    return {"scene": scene, "size": size, "frames": 1, "frame_ms_median": frame_ms, "cpu_ms_median": frame_ms,
+            "views": 0, "passes": 1, "draw_calls": 3, "gl_calls": 40, "gl_calls_top": {}, "lp_num_threads": None}
+
+
+def test_the_cpu_targets_are_read_from_the_scene_rows_and_judged_against_their_limits():
+    """Each target's value from the rows of the scenes it compares, met when at or under its
+    limit, judged only on the kind of machine its limit is set for and only where measured."""
+    from benchmarks.cpu import TARGETS, judge, unmet, values
+
+    rows = [_scene_row("mirrors_0", "32x18", 0.6), _scene_row("mirrors_8", "32x18", 2.5),
+            _scene_row("portals_d0", "32x18", 0.5), _scene_row("portals_d8", "32x18", 1.25),
+            _scene_row("mirrors_0", "640x360", 10.0), _scene_row("mirrors_8", "640x360", 14.0),
+            _scene_row("probe_none", "640x360", 10.0), _scene_row("probe_dynamic", "640x360", 13.5),
+            {"scene": "ecs", "entities": 100_000, "moving": 1000, "frames": 1, "cpu_ms_median": 7.5,
+             "frame_ms_median": 50.0, "draw_calls": 5},
+            {"scene": "mirrors_0", "rank": 1, "function": "f", "calls_per_frame": 1.0, "own_ms_per_frame": 9.0,
+             "total_ms_per_frame": 9.0}]
+    found = values(rows)
+    assert set(found) == set(TARGETS)
+    assert found["cpu_frame_0_mirrors"] == 0.6 and found["cpu_frame_8_mirrors"] == 2.5
+    assert found["cpu_frame_16_mirrors"] is None  # its scene did not run
+    assert found["cpu_portal_depth_8_ratio"] == 2.5 and found["ratio_8_to_0_mirrors"] == 1.4
+    assert found["dynamic_probe_share"] == 0.35 and found["gpu_dynamic_probe_ms"] == 3.5
+    assert found["ecs_cpu_ms"] == 7.5 and found["gpu_frame_0_mirrors"] == 10.0
+    assert found["gpu_portal_depth_8_ratio"] is None and found["gpu_frame_16_mirrors_1080p"] is None
     for software in (True, False):
-        table = {row["target"]: row for row in rows(found, software)}
-        assert list(table) == list(LIMITS)
-        assert not table["portal_depth_8_ratio"]["met"] and not table["plan_us_per_view"]["met"]
-        assert table["frame_0_mirrors"]["met"] and table["ecs_cpu_ms"]["met"]
-        assert table["frame_16_mirrors_1080p"]["applies"] == (not software)
-        assert table["ecs_cpu_ms"]["applies"] == software
+        table = {row["target"]: row for row in judge(found, software)}
+        assert list(table) == list(TARGETS)
+        assert table["cpu_frame_0_mirrors"]["met"] and table["cpu_portal_depth_8_ratio"]["met"]  # at the limit
+        assert table["ratio_8_to_0_mirrors"]["met"] and table["ecs_cpu_ms"]["met"]
+        assert table["cpu_frame_8_mirrors"]["met"] is False and table["dynamic_probe_share"]["met"] is False
+        assert table["cpu_frame_16_mirrors"]["met"] is None and not table["cpu_frame_16_mirrors"]["applies"]
+        assert table["cpu_frame_8_mirrors"]["applies"] == software
+        assert table["gpu_frame_0_mirrors"]["applies"] == (not software)
+        assert table["gpu_frame_0_mirrors"]["met"] is False and table["gpu_dynamic_probe_ms"]["met"] is False
+        missed = [row["target"] for row in unmet(list(table.values()))]
+        assert missed == (["cpu_frame_8_mirrors", "dynamic_probe_share"] if software else
+                          ["gpu_frame_0_mirrors", "gpu_dynamic_probe_ms"])
+
+
+def test_the_cpu_suite_prints_each_target_and_fails_its_exit_status_on_one_not_met(monkeypatch, capsys):
+    """The table names every target with its value, limit and verdict; the exit status is 1
+    while a target that applies is not met, 0 with --report-only or when all are met."""
+    from benchmarks import cpu
+
+    rows = [_scene_row("mirrors_0", "32x18", 0.5), _scene_row("mirrors_8", "32x18", 2.5)]
+    monkeypatch.setattr(cpu, "measure", lambda args: (list(rows), True, "a test renderer"))
+    parser, _ = build_parser()
+    assert cpu.main(parser.parse_args(["cpu"])) == 1
+    out, err = capsys.readouterr()
+    assert "a test renderer" in out and "not met: cpu_frame_8_mirrors" in err
+    lines = {line.split()[0]: line.split() for line in out.splitlines() if line.split() and
+             line.split()[0] in cpu.TARGETS}
+    assert list(lines) == list(cpu.TARGETS)
+    assert lines["cpu_frame_0_mirrors"][1:5] == ["0.5", "0.6", "ms", "yes"]
+    assert lines["cpu_frame_8_mirrors"][1:5] == ["2.5", "2.0", "ms", "no"]
+    assert lines["cpu_frame_16_mirrors"][1:5] == ["None", "3.5", "ms", "-"]
+    assert "issue" not in out.lower()
+    assert cpu.main(parser.parse_args(["cpu", "--report-only"])) == 0
+    capsys.readouterr()
+    assert cpu.main(parser.parse_args(["cpu", "--json"])) == 1
+    printed = [json.loads(line) for line in capsys.readouterr().out.splitlines()]
+    assert printed[:2] == rows and [row["target"] for row in printed[2:]] == list(cpu.TARGETS)
+    rows[1]["frame_ms_median"] = 1.5
+    assert cpu.main(parser.parse_args(["cpu"])) == 0
+
+
+def test_gpu_report_fails_on_a_target_not_met_where_it_applies_unless_told_to_report_only():
+    from benchmarks.gpu_report import failed
+
+    target = {"target": "cpu_frame_8_mirrors", "value": 2.5, "limit": 2.0, "unit": "ms", "met": False,
+              "applies": True}
+    report = {"benchmarks": {"cpu": {"own sizes": {"status": "ok", "exit": 0, "rows": [
+        target, {**target, "target": "gpu_frame_0_mirrors", "applies": False},
+        {**target, "target": "cpu_frame_0_mirrors", "value": 0.5, "met": True},
+        {**target, "target": "ecs_cpu_ms", "value": None, "met": None, "applies": False}]}}}}
+    assert failed(report) == ["target cpu_frame_8_mirrors not met: 2.5 ms over 2.0"]
+    assert failed(report, targets=False) == []
+
+
+def test_the_gl_call_counter_counts_each_call_the_engine_makes_once_and_puts_moderngl_back(ctx):
+    """Known calls give known counts (a uniform written counts once, though its setter calls
+    its write); a raw GL function loaded while counting is allowed counts its calls; with the
+    counter closed nothing counts and every moderngl method is the one it was."""
+    import _moderngl
+    import moderngl
+
+    from benchmarks.cpu import GLCallCounter
+    from engine.render import raw_gl
+    from engine.render.bindings import invalidate
+    from engine.render.targets import release_framebuffer
+
+    program = ctx.program(vertex_shader="#version 410 core\nuniform float scale;\nin vec2 p;\n"
+                                        "void main() { gl_Position = vec4(p * scale, 0.0, 1.0); }",
+                          fragment_shader="#version 410 core\nout vec4 c;\nvoid main() { c = vec4(1.0); }")
+    buffer = ctx.buffer(np.zeros(6, "f4").tobytes())
+    vao = ctx.vertex_array(program, [(buffer, "2f", "p")])
+    target = ctx.simple_framebuffer((8, 8))
+    ctx.enable_only(moderngl.NOTHING)
+    ctx.scissor = None
+    originals = {(owner, name): attr for owner in GLCallCounter.classes() for name, attr in vars(owner).items()}
+    counter = GLCallCounter()
+    try:
+        with counter.raw_gl_loading():
+            flush = raw_gl._load(ctx, "glFlush", raw_gl._VOID_CALL)
+        with counter:
+            target.use()
+            buffer.write(np.array([-1, -1, 3, -1, -1, 3], "f4").tobytes())  # a triangle over the target
+            program["scale"].value = 1.0
+            vao.render(moderngl.TRIANGLES)
+            vao.render(moderngl.TRIANGLES)
+            flush()
+            assert ctx.error == "GL_NO_ERROR"
+            assert counter.calls == {"Framebuffer.use": 1, "Buffer.write": 1, "Uniform.value": 1,
+                                     "VertexArray.render": 2, "raw glFlush": 1, "Context.error": 1}
+            assert counter.total == 7
+            counter.reset()
+            assert counter.total == 0
+        vao.render(moderngl.TRIANGLES)
+        flush()
+        assert counter.total == 0
+        assert ctx.fbo is target and (np.frombuffer(target.read(), np.uint8) == 255).all()  # the draws drew
+    finally:
+        release_framebuffer(target)  # the bound one: moderngl would bind its deleted name again
+        for thing in (vao, buffer, program):
+            thing.release()
+        invalidate(ctx)  # the engines' state cache: this test set state behind it
+    now = {(owner, name): attr for owner in GLCallCounter.classes() for name, attr in vars(owner).items()}
+    assert now == originals and vars(_moderngl.Uniform)["value"] is originals[_moderngl.Uniform, "value"]
+
+
+def test_the_cpu_part_runs_in_its_own_process_with_no_rasteriser_threads(capsys):
+    """``--parts cpu`` on tiny frame counts: each 32x18 scene's row comes from the
+    LP_NUM_THREADS=0 process with its views (none without mirrors, a view a portal level),
+    its draw calls among its counted GL calls, and a profile of its top functions; only the
+    targets of that part have values."""
+    from benchmarks import cpu
+
+    parser, _ = build_parser()
+    assert cpu.main(parser.parse_args(["cpu", "--parts", "cpu", "--frames", "1", "--warmup", "0", "--top", "3",
+                                       "--json", "--report-only"])) == 0
+    rows = [json.loads(line) for line in capsys.readouterr().out.splitlines()]
+    scenes = {row["scene"]: row for row in rows if "gl_calls" in row}
+    assert list(scenes) == list(cpu.CPU_SCENES)
+    for row in scenes.values():
+        assert row["size"] == "32x18" and row["lp_num_threads"] == "0" and row["frames"] == 1
+        assert row["gl_calls"] >= row["gl_calls_top"]["VertexArray.render"] >= row["draw_calls"] > 0, row
+        assert 0 < row["cpu_ms_median"] <= row["frame_ms_median"]
+    assert scenes["mirrors_0"]["views"] == scenes["portals_d0"]["views"] == 0
+    assert scenes["portals_d8"]["views"] == 8 and 0 < scenes["mirrors_8"]["views"] < scenes["mirrors_16"]["views"]
+    profiled = [row for row in rows if "rank" in row]
+    assert [(row["scene"], row["rank"]) for row in profiled] == [(s, r) for s in cpu.CPU_SCENES for r in (1, 2, 3)]
+    targets = {row["target"]: row for row in rows if "target" in row}
+    assert list(targets) == list(cpu.TARGETS)
+    assert {name for name, row in targets.items() if row["value"] is not None} == \
+        {name for name, target in cpu.TARGETS.items() if target.part == "cpu"}

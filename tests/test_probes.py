@@ -189,6 +189,8 @@ def test_a_box_moving_on_the_probes_plus_x_side_recaptures_only_that_face(scene)
 
     def build(world):
         chrome_scene(ents)(world)
+        for _, light in world.query_one(DirectionalLight):
+            light.shadows = False  # the box's shadow falls on the wall's lower part, in the -Y face (test_shadows.py)
         ents["box"] = world.spawn(Transform(position=(1.0, 0.0, 0.0)), MeshRef(box((0.2, 0.2, 0.2))),
                                   Material(color=(0.2, 0.9, 0.2)))
         ents["far box"] = world.spawn(Transform(position=(0.0, 0.0, -150.0)), MeshRef(box((0.2, 0.2, 0.2))),

@@ -20,9 +20,9 @@ from components import (
     Skybox,
     Transform,
 )
+from components.ambient import DEFAULT_GROUND, DEFAULT_SKY
 from engine.assets.level_file import load_level
 from engine.assets.mesh import box, plane, quad, sphere
-from systems.prepare_system import AMBIENT
 from tests import test_hot_reload
 from tests.support import linear_to_srgb8, look_from, srgb_to_linear
 
@@ -268,7 +268,8 @@ def test_a_level_files_child_is_placed_and_moved_by_its_parent(scene, tmp_path):
 
 def test_a_tinted_mirror_shows_tint_times_what_it_reflects(scene):
     """A sharp mirror seen head-on reflects an emissive wall behind the camera.  With no
-    light, the wall's radiance is albedo x (power + ambient); at normal incidence the mirror's
+    light, the wall's radiance is albedo x (power + ambient), the ambient of a wall facing
+    sideways under the default hemisphere the mean of its sky and ground; at normal incidence the mirror's
     Fresnel term is its tint and GGX's visibility is 1, so the mirror's pixel is
     tint x albedo x (power + ambient), encoded to sRGB.
     Fails when mirror_composite.frag multiplies the reflection by v_tint.rgb a second time."""
@@ -285,7 +286,8 @@ def test_a_tinted_mirror_shows_tint_times_what_it_reflects(scene):
     rgb = runner.frame()
     col, row = runner.project((0.0, 1.5, -2.0))
     patch = rgb[row - 4:row + 5, col - 4:col + 5].reshape(-1, 3).astype(float)  # within 3 degrees of the normal
-    expected = linear_to_srgb8(tint * albedo * (power + np.array(AMBIENT)))
+    ambient = (np.array(DEFAULT_SKY) + np.array(DEFAULT_GROUND)) / 2
+    expected = linear_to_srgb8(tint * albedo * (power + ambient))
     np.testing.assert_allclose(patch, np.broadcast_to(expected, patch.shape), atol=1.5)
 
 

@@ -37,7 +37,7 @@ from pyglm import glm
 
 import components as _components
 from components import ComponentValueError, look_rotation, yaw_pitch_rotation
-from engine.assets.mesh import Mesh, box, load_model, plane, quad, sphere
+from engine.assets.mesh import Mesh, box, load_model, model_bytes, plane, quad, sphere
 from engine.assets.texture_data import (
     MAX_TEXTURE_SIDE,
     TextureData,
@@ -63,9 +63,9 @@ except ImportError:  # Python 3.10
 # made by the slice stage each frame (derived state), never written by hand.
 ENGINE_COMPONENTS: dict[str, type] = {
     name: getattr(_components, name) for name in (
-        "Camera", "DirectionalLight", "Emissive", "FlyController", "Material", "MeshRef", "Mirror", "PointLight",
-        "Portal", "ReflectionProbe", "Reflective", "Refractive", "Skybox", "Transform", "Traveller", "Visibility",
-        "Water")}
+        "Bloom", "Camera", "DirectionalLight", "Emissive", "FlyController", "HemisphereLight", "Material", "MeshRef",
+        "Mirror", "PointLight", "Portal", "ReflectionProbe", "Reflective", "Refractive", "Skybox", "Tonemap",
+        "Transform", "Traveller", "Visibility", "Water")}
 DERIVED_COMPONENTS = ("PortalClone", "Slice")
 # Fields holding another entity: a name in the file, an id in the world.
 REFERENCE_FIELDS = {("Transform", "parent"), ("Portal", "partner")}
@@ -219,10 +219,6 @@ def _mib(size: int) -> str:
     return f"{size / (1 << 20):.0f}"
 
 
-def _mesh_bytes(mesh: Mesh) -> int:
-    return mesh.positions.nbytes + mesh.normals.nbytes + mesh.uvs.nbytes + mesh.indices.nbytes
-
-
 class _Where:
     """Where a level's assets are looked for: its folder and any asset roots (the game's and
     the user's), and what they take so far."""
@@ -254,14 +250,16 @@ def _mesh(spec: Any, where: _Where) -> Mesh:
         _no_more(spec, "mesh file")
         info = check_asset_file(path, f"mesh file {str(path)!r}")
         key = ("model", str(path), info.st_mtime_ns, info.st_size, info.st_ino, tuple(map(str, where.roots)))
-        parts = _cached(key, lambda: load_model(path, roots=where.roots))
-        where.budget.take(key, sum(_mesh_bytes(p.mesh) for p in parts))
-        names = [p.mesh.name for p in parts]
+        # The mesh alone: a level draws a file's mesh with its own Material, so the images the
+        # model's materials name are checked but neither decoded nor cached.
+        parts = _cached(key, lambda: load_model(path, roots=where.roots, materials=False))
+        where.budget.take(key, model_bytes(parts))
+        names = [p.name for p in parts]
         if part is None and len(parts) > 1:
             raise ValueError(f"mesh file {str(path)!r} has {len(parts)} parts {names}: say which with part = \"...\"")
         # A part by its name in the file ("left") or as the engine names it ("two.obj:left").
         chosen = parts[0] if part is None else next(
-            (p for p in parts if part in (p.mesh.name, p.mesh.name.split(":", 1)[-1])), None)
+            (p for p in parts if part in (p.name, p.name.split(":", 1)[-1])), None)
         if chosen is None:
             raise ValueError(f"mesh file {str(path)!r} has no part {part!r} (parts: {names})")
         chosen.mesh.source = {"file": str(path), **({"part": part} if part is not None else {})}

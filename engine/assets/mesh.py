@@ -6,8 +6,9 @@ whose MeshRef points at it.
 from __future__ import annotations
 
 import contextlib
+import hashlib
+import io
 import itertools
-import json
 import logging
 import math
 import numbers
@@ -21,16 +22,28 @@ from typing import TYPE_CHECKING
 import numpy as np
 from pyglm import glm
 
+from engine.assets.model_files import (
+    MAX_JSON_NESTING,  # noqa: F401 - the loader's limits are read from here too
+    MAX_MTL_BUMP_SCALE,
+    CheckedFiles,
+    GltfFiles,
+    MtlMap,
+    ObjFiles,
+    prepare_gltf,
+    prepare_obj,
+)
 from engine.assets.texture_data import (
+    MAX_TEXTURE_SIDE,
+    WORK_BLOCK,
     TextureData,
     check_asset_file,
     check_texture_size,
-    contained_path,
     height_to_normal_map,
     image_to_rgba8,
     is_grey,
     load_texture,
     pillow_image_module,
+    read_asset_file,
 )
 from engine.core.errors import AssetError
 
@@ -293,22 +306,35 @@ class ModelPart:
     normal_scale: float = 1.0
     emissive_map: TextureData | None = None
     metallic_roughness_map: TextureData | None = None
+    name: str = ""  # "file:part", as a level file's part = "..." names it (parts may share one mesh)
+
+    def __post_init__(self) -> None:
+        if not self.name:
+            self.name = self.mesh.name
 
 
 SUPPORTED_SUFFIXES = (".obj", ".glb", ".gltf", ".ply", ".stl", ".off")
 MAX_MESH_FILE_BYTES = 256 << 20  # a mesh file's size: trimesh holds several times it while parsing
-MAX_JSON_NESTING = 64  # arrays and objects inside a glTF's JSON (a real one nests about 6 deep)
 
 
-def load_model(path: str | Path, roots: Sequence[str | Path] | None = None) -> list[ModelPart]:
+def load_model(path: str | Path, roots: Sequence[str | Path] | None = None,
+               materials: bool = True) -> list[ModelPart]:
     """Load every mesh of a file with trimesh; errors name the file and the reason.
 
-    The file, and every file it names (an OBJ's material libraries and their images, a
-    glTF's buffers and images), must be a regular file (a FIFO, a device or a directory is
-    refused before anything opens it); ``roots``: folders those named files must be inside
-    (a level's folder and asset roots; None, anywhere). A file past MAX_MESH_FILE_BYTES,
-    JSON nested past MAX_JSON_NESTING, an image past the texture limits, or running out of
-    memory is an AssetError too."""
+    The file, and every file it names (an OBJ's material libraries and their maps, a glTF's
+    buffers and images), is resolved and read by the engine (engine/assets/model_files.py):
+    inside ``roots`` (folders; None: the model's own folder), a regular file (a FIFO, a
+    device or a directory is refused before anything opens it), within its size limit
+    before it is read; trimesh is handed those bytes and opens nothing itself. A file past
+    MAX_MESH_FILE_BYTES, JSON nested past MAX_JSON_NESTING, an image past the texture
+    limits (checked from its header before it is decoded), a glTF or MTL map that is missing
+    or not an image (named with its material), or running out of memory is an AssetError.
+
+    ``materials`` False: the meshes alone (what a level file takes from a model, its
+    MeshRef): the images the materials name are checked by name but neither read nor
+    decoded, and the parts keep the default material. Parts with the same geometry (glTF
+    nodes sharing a mesh, or identical arrays) share one Mesh, so it is uploaded once and
+    drawn instanced."""
     import trimesh
 
     if isinstance(path, bytes) or not isinstance(path, (str, os.PathLike)):
@@ -320,34 +346,53 @@ def load_model(path: str | Path, roots: Sequence[str | Path] | None = None) -> l
         raise AssetError(f"{what}: unsupported type {path.suffix!r} (supported: {', '.join(SUPPORTED_SUFFIXES)})")
     if info.st_size == 0:
         raise AssetError(f"{what}: file is empty")
-    Image = pillow_image_module()  # the texture limits for the images trimesh decodes
+    if roots is None:
+        roots = [path.parent]
+    elif isinstance(roots, (str, bytes, os.PathLike)) or not all(isinstance(r, (str, os.PathLike)) for r in roots):
+        raise AssetError(f"{what}: roots must be a list of folders, got {roots!r}")
+    roots = [Path(root) for root in roots]
+    Image = pillow_image_module()  # the texture limits for the images trimesh opens
     try:
         with _quiet_trimesh(), warnings.catch_warnings():
             warnings.simplefilter("error", Image.DecompressionBombWarning)
-            return _load_model(path, what, roots, trimesh)
+            data = read_asset_file(path, what, MAX_MESH_FILE_BYTES)
+            return _load_model(path, data, what, roots, materials, trimesh)
     except MemoryError:
         raise AssetError(f"{what}: does not fit in memory") from None
+    except (Image.DecompressionBombError, Image.DecompressionBombWarning):
+        raise AssetError(f"{what}: an image it names declares more pixels than a texture may have "
+                         f"({MAX_TEXTURE_SIDE}x{MAX_TEXTURE_SIDE})") from None
 
 
-def _load_model(path: Path, what: str, roots, trimesh) -> list[ModelPart]:
+def _load_model(path: Path, data: bytes, what: str, roots, materials: bool, trimesh) -> list[ModelPart]:
     suffix = path.suffix.lower()
-    gltf_doc = None  # a glTF's JSON: what trimesh does not keep (normalTexture.scale)
-    if suffix == ".gltf":
-        gltf_doc = _check_gltf_json(path, roots)
-    elif suffix == ".glb":
-        gltf_doc = _check_glb_json(path, roots)
-    elif suffix == ".obj":
-        _check_obj_text(path, roots)
+    gltf = obj = None
     try:
-        loaded = trimesh.load(str(path), force="scene", process=False)
+        if suffix in (".gltf", ".glb"):
+            gltf = prepare_gltf(path, data, roots, materials)
+            body, resolver = gltf.data, gltf.resolver
+        elif suffix == ".obj":
+            obj = prepare_obj(path, data, roots, materials)
+            body, resolver = obj.text, obj.resolver
+    except AssetError as exc:
+        if str(exc).startswith(what):
+            raise
+        raise AssetError(f"{what}: {exc}") from exc
+    if gltf is None and obj is None:  # PLY, STL, OFF: a PLY's TextureFile is not served (never drawn)
+        body, resolver = data, CheckedFiles(path.name)
+    del data
+    try:
+        loaded = trimesh.load(io.BytesIO(body), file_type=suffix[1:], resolver=resolver, force="scene",
+                              process=False)
     except MemoryError:
         raise
     except Exception as exc:  # trimesh raises many kinds for corrupt files
         raise AssetError(f"{what}: cannot be parsed ({type(exc).__name__}: {exc})") from exc
+    del body
     parts: list[ModelPart] = []
+    meshes: dict = {}  # geometry name, then content digest -> the one Mesh
     try:
-        texture_refs = _mtl_texture_refs(path) if suffix == ".obj" else {}
-        maps = _MaterialMaps(path, gltf_doc, roots)
+        maps = _MaterialMaps(path, gltf, obj)
         for node in loaded.graph.nodes_geometry:
             matrix, geom_name = loaded.graph[node]
             tm = loaded.geometry[geom_name]
@@ -363,10 +408,16 @@ def _load_model(path: Path, what: str, roots, trimesh) -> list[ModelPart]:
                 # Past float32 once multiplied out (vertex x scale x parents): refuse here, by node.
                 raise AssetError(f"node {node!r} has a transform too large for float32 rendering "
                                  f"(largest entry {np.abs(matrix).max():.3g}, limit 1e18)")
-            mesh = Mesh.from_trimesh(tm, name=f"{path.name}:{geom_name}")
-            part = ModelPart(mesh=mesh, local=glm.mat4(*matrix.astype(np.float32).T.ravel()))
-            _read_material(tm, part, path, texture_refs)
-            maps.read(tm, part)
+            name = f"{path.name}:{geom_name}"
+            mesh = meshes.get(("geometry", geom_name))
+            if mesh is None:
+                mesh = Mesh.from_trimesh(tm, name=name)
+                mesh = meshes.setdefault(("content", _digest(mesh)), mesh)
+                meshes[("geometry", geom_name)] = mesh
+            part = ModelPart(mesh=mesh, local=glm.mat4(*matrix.astype(np.float32).T.ravel()), name=name)
+            if materials:
+                _read_material(tm, part, path, maps)
+                maps.read(tm, part)
             parts.append(part)
     except AssetError as exc:
         raise AssetError(f"{what}: {exc}") from exc
@@ -377,6 +428,32 @@ def _load_model(path: Path, what: str, roots, trimesh) -> list[ModelPart]:
     if not parts:
         raise AssetError(f"{what}: contains no triangle meshes")
     return parts
+
+
+def _digest(mesh: Mesh) -> bytes:
+    """What makes two meshes the same geometry: their arrays, byte for byte."""
+    digest = hashlib.blake2b(digest_size=20)
+    for array in (mesh.positions, mesh.normals, mesh.uvs, mesh.indices):
+        digest.update(np.asarray(array.shape, np.int64).tobytes())
+        digest.update(memoryview(array).cast("B"))
+    return digest.digest()
+
+
+def model_bytes(parts: Sequence[ModelPart]) -> int:
+    """What a loaded model's meshes and textures take on the CPU, each shared one once (what
+    a level's memory budget counts for it)."""
+    seen: set[int] = set()
+    total = 0
+    for part in parts:
+        mesh = part.mesh
+        if id(mesh) not in seen:
+            seen.add(id(mesh))
+            total += mesh.positions.nbytes + mesh.normals.nbytes + mesh.uvs.nbytes + mesh.indices.nbytes
+        for texture in (part.texture, part.normal_map, part.emissive_map, part.metallic_roughness_map):
+            if texture is not None and id(texture) not in seen:
+                seen.add(id(texture))
+                total += texture.pixels.nbytes
+    return total
 
 
 @contextlib.contextmanager
@@ -392,152 +469,6 @@ def _quiet_trimesh() -> Iterator[None]:
         logger.setLevel(level)
 
 
-def _referenced(path: Path, name: str, roots, kind: str, owner: str = "mesh file") -> Path | None:
-    """A file ``path`` names (``name``, relative to its folder): None when it does not exist
-    (the loader says so or does without it); an AssetError when it is outside ``roots`` or
-    not a regular file, before anything opens it."""
-    target = path.parent / name
-    if roots is not None and contained_path(target, roots) is None:
-        raise AssetError(f"{owner} {str(path)!r}: its {kind} {name!r} is outside the level's folder (a level's "
-                         "assets stay inside it: a game may declare more asset roots, a player may pass "
-                         "--asset-root DIR)")
-    if not os.path.lexists(target):
-        return None
-    check_asset_file(target, f"{owner} {str(path)!r}: its {kind} {name!r}")
-    return target
-
-
-def _check_gltf_json(path: Path, roots=None) -> dict:
-    """A .gltf is JSON; say so plainly instead of trimesh's guess at a missing buffer file,
-    and check the files it names.  Returns the document."""
-    try:
-        doc = json.loads(path.read_bytes().decode("utf-8"))
-    except RecursionError:
-        raise AssetError(f"mesh file {str(path)!r}: its JSON is nested too deeply (at most {MAX_JSON_NESTING})") \
-            from None
-    except (UnicodeDecodeError, ValueError) as exc:
-        raise AssetError(f"mesh file {str(path)!r}: is not a JSON glTF file ({type(exc).__name__})") from None
-    if not isinstance(doc, dict) or "asset" not in doc:
-        raise AssetError(f"mesh file {str(path)!r}: is not a glTF document (no 'asset' object)")
-    _check_gltf_document(path, doc, roots)
-    return doc
-
-
-def _check_glb_json(path: Path, roots=None) -> dict | None:
-    """A .glb's JSON chunk (12-byte header, then the chunk's length and type): its nesting and
-    the files it names. A file that is not a GLB is left to trimesh to refuse.  Returns the
-    document (None where there is none to read)."""
-    with path.open("rb") as f:
-        head = f.read(20)
-        if len(head) < 20 or head[:4] != b"glTF" or head[16:20] != b"JSON":
-            return None
-        length = int.from_bytes(head[12:16], "little")
-        if length > MAX_MESH_FILE_BYTES:
-            return None
-        chunk = f.read(length)
-    try:
-        doc = json.loads(chunk.decode("utf-8"))
-    except RecursionError:
-        raise AssetError(f"mesh file {str(path)!r}: its JSON is nested too deeply (at most {MAX_JSON_NESTING})") \
-            from None
-    except (UnicodeDecodeError, ValueError):
-        return None  # trimesh says it cannot be parsed
-    if isinstance(doc, dict):
-        _check_gltf_document(path, doc, roots)
-        return doc
-    return None
-
-
-def _check_gltf_document(path: Path, doc: dict, roots) -> None:
-    deepest, stack = 0, [(doc, 1)]
-    while stack:
-        item, depth = stack.pop()
-        deepest = max(deepest, depth)
-        if deepest > MAX_JSON_NESTING:
-            raise AssetError(f"mesh file {str(path)!r}: its JSON is nested too deeply (at most {MAX_JSON_NESTING})")
-        children = item.values() if isinstance(item, dict) else item
-        stack.extend((child, depth + 1) for child in children if isinstance(child, (dict, list)))
-    for kind in ("buffers", "images"):
-        entries = doc.get(kind)
-        for entry in entries if isinstance(entries, list) else ():
-            uri = entry.get("uri") if isinstance(entry, dict) else None
-            if isinstance(uri, str) and not uri.startswith("data:"):
-                from urllib.parse import unquote
-
-                _referenced(path, unquote(uri), roots, kind[:-1])
-
-
-def _check_obj_text(path: Path, roots=None) -> None:
-    """What trimesh accepts silently or answers with an IndexError in an OBJ: a face index 0
-    or past the vertices so far, a vertex with fewer than three numbers, a missing MTL, a
-    non-numeric Kd; and a material library or image outside ``roots`` or not a regular file."""
-    counts = {b"v": 0, b"vt": 0, b"vn": 0}
-    names = ("vertices", "texture coordinates", "normals")
-    kinds = ("face index", "texture coordinate index", "normal index")
-    with path.open("rb") as f:
-        for number, raw in enumerate(f, 1):
-            line = raw.strip()
-            first = line.split(None, 1)[0] if line else b""
-            if first in counts:
-                counts[first] += 1
-                if first == b"v" and len(line.split()) < 4:
-                    raise AssetError(f"mesh file {str(path)!r}: line {number}: a vertex is 'v x y z' (three "
-                                     f"numbers), got {line.decode('utf-8', 'replace')[:60]!r}")
-            elif first == b"f":
-                _check_face(path, number, line, counts, names, kinds)
-            elif first == b"mtllib":
-                for name in line[6:].decode("utf-8", "replace").split():
-                    library = _referenced(path, name, roots, "material library")
-                    if library is None:
-                        warnings.warn(f"mesh file {str(path)!r}: material library {name!r} not found; "
-                                      f"default material used", stacklevel=4)
-                        continue
-                    _check_mtl_numbers(library)
-                    _check_mtl_files(path, library, roots)
-
-
-def _check_face(path: Path, number: int, line: bytes, counts: dict, names: tuple, kinds: tuple) -> None:
-    for token in line.split()[1:]:
-        for slot, (value, key) in enumerate(zip(token.split(b"/"), (b"v", b"vt", b"vn"), strict=False)):
-            if not value:
-                continue
-            try:
-                index = int(value)
-            except ValueError:
-                raise AssetError(f"mesh file {str(path)!r}: line {number}: a face index is a number, got "
-                                 f"{value.decode('utf-8', 'replace')[:20]!r}") from None
-            if index == 0:
-                raise AssetError(f"mesh file {str(path)!r}: line {number}: face index 0 (OBJ indices start at 1)")
-            if not -counts[key] <= index <= counts[key]:
-                raise AssetError(f"mesh file {str(path)!r}: line {number}: {kinds[slot]} {index}, but "
-                                 f"{counts[key]} {names[slot]} so far")
-
-
-_MTL_FILE_KEYS = (b"map_ka", b"map_kd", b"map_ks", b"map_ke", b"map_ns", b"map_d", b"map_bump", b"bump", b"disp",
-                  b"decal", b"refl", b"norm", b"map_pr", b"map_pm", b"map_ps")
-
-
-def _check_mtl_files(obj_path: Path, library: Path, roots) -> None:
-    """The images a material library names (its last word on the line: options come first)."""
-    for raw in library.read_bytes().splitlines():
-        words = raw.split()
-        if len(words) >= 2 and words[0].lower() in _MTL_FILE_KEYS:
-            name = words[-1].decode("utf-8", "replace")
-            _referenced(library, name, roots, "image", "material library")
-
-
-def _check_mtl_numbers(library: Path) -> None:
-    for number, raw in enumerate(library.read_bytes().splitlines(), 1):
-        parts = raw.split()
-        if parts and parts[0] in (b"Kd", b"Ka", b"Ks", b"Ke", b"Ns", b"d", b"Tr", b"Ni"):
-            try:
-                [float(v) for v in parts[1:]]
-            except ValueError:
-                text = raw.decode("utf-8", "replace")
-                raise AssetError(f"material library {str(library)!r}: line {number}: "
-                                 f"{parts[0].decode()} must be numbers, got {text!r}") from None
-
-
 def _unit_color(value) -> np.ndarray:
     """A colour from trimesh (uint8 0..255 or float 0..1) as float RGBA."""
     c = np.asarray(value)
@@ -547,33 +478,11 @@ def _unit_color(value) -> np.ndarray:
     return c[:4]
 
 
-def _mtl_texture_refs(obj_path: Path) -> dict[str, Path]:
-    """``map_Kd`` files of the MTL libraries an OBJ names, by material name.
-
-    trimesh drops a missing or undecodable texture silently (the model would render
-    untextured); knowing what the MTL asked for lets the loader say so instead.
-    """
-    refs: dict[str, Path] = {}
-    with open(obj_path, "rb") as f:
-        libraries = [line[6:].strip().decode("utf-8", "replace") for line in f if line.startswith(b"mtllib")]
-    for library in libraries:
-        mtl_path = obj_path.parent / library
-        if not mtl_path.is_file():
-            continue
-        material = None
-        for line in mtl_path.read_text(encoding="utf-8", errors="replace").splitlines():
-            words = line.split()
-            if len(words) >= 2 and words[0] == "newmtl":
-                material = " ".join(words[1:])
-            elif len(words) >= 2 and words[0].lower() == "map_kd" and material is not None:
-                refs[material] = mtl_path.parent / words[-1]
-    return refs
-
-
-def _read_material(tm, part: ModelPart, path: Path, texture_refs: dict[str, Path] | None = None) -> None:
+def _read_material(tm, part: ModelPart, path: Path, maps: _MaterialMaps) -> None:
     """Fill colour, texture, PBR factors and the emissive factor from trimesh's visual."""
     from trimesh.visual.material import SimpleMaterial
 
+    image_what = f"texture of {str(path)!r}"
     visual = getattr(tm, "visual", None)
     material = getattr(visual, "material", None)
     if isinstance(material, SimpleMaterial) and not (material.kwargs or getattr(material, "_name", None)):
@@ -590,6 +499,8 @@ def _read_material(tm, part: ModelPart, path: Path, texture_refs: dict[str, Path
         if base is not None:
             part.color = tuple(float(c) for c in _unit_color(base))
         image = material.baseColorTexture
+        maps.check_gltf_slot(material, "baseColorTexture", image)
+        image_what = f"{maps.gltf_label(material)}: baseColorTexture"
         # glTF's defaults are 1.0; trimesh reports an absent factor as None.  The engine
         # keeps its own defaults (dielectric, 0.5) for a file that says nothing.
         part.metallic = float(material.metallicFactor if material.metallicFactor is not None else 0.0)
@@ -608,10 +519,11 @@ def _read_material(tm, part: ModelPart, path: Path, texture_refs: dict[str, Path
             color[3] = 1.0 - _first(extra.get("tr"), 0.0)
         part.color = tuple(float(c) for c in color)
         image = material.image
-        wanted = (texture_refs or {}).get(getattr(material, "_name", None) or "")
-        if image is None and wanted is not None:
-            why = "cannot be decoded as an image" if wanted.is_file() else "no such file"
-            raise AssetError(f"texture {str(wanted)!r} of material {material.name!r}: {why}")
+        wanted = maps.mtl_map(material, "map_kd")
+        if wanted is not None:
+            image_what = f"{wanted.where}: the image {wanted.name!r} of material {material.name!r}"
+            if image is None:
+                raise AssetError(f"{image_what}: cannot be decoded as an image")
         emissive = _floats(extra.get("ke"))
         part.metallic = _first(extra.get("pm"), 0.0)
         part.roughness = _first(extra.get("pr"), 0.5)
@@ -629,14 +541,7 @@ def _read_material(tm, part: ModelPart, path: Path, texture_refs: dict[str, Path
             diffuse = max(part.color[channel], 1e-6)
             part.emissive_factor = float(np.clip(emissive[min(channel, len(emissive) - 1)] / diffuse, 0.0, 1e4))
     if image is not None:
-        what = f"texture of {str(path)!r}"
-        check_texture_size(*image.size, what)
-        try:
-            part.texture = TextureData(image_to_rgba8(image, what), name=f"{path.name}:texture")
-        except (AssetError, MemoryError):
-            raise
-        except Exception as exc:
-            raise AssetError(f"{what} cannot be decoded ({exc})") from exc
+        part.texture = maps.image(image, image_what, "colour")
     for name in ("metallic", "roughness", "reflectivity"):
         value = getattr(part, name)
         if not (np.isfinite(value) and 0.0 <= value <= 1.0):
@@ -645,96 +550,18 @@ def _read_material(tm, part: ModelPart, path: Path, texture_refs: dict[str, Path
 
 # --- material maps -----------------------------------------------------------------------
 
-# MTL texture options and how many values each takes (-o, -s and -t take one to three); the
-# file name is what follows them (it may hold spaces).
-_MTL_OPTION_VALUES = {"-blendu": 1, "-blendv": 1, "-bm": 1, "-boost": 1, "-cc": 1, "-clamp": 1, "-imfchan": 1,
-                      "-texres": 1, "-type": 1, "-mm": 2, "-o": 3, "-s": 3, "-t": 3}
-_MTL_MAP_KEYS = ("norm", "map_bump", "bump", "map_ke")  # the maps an MTL gives beyond map_Kd
-
-
-@dataclass(frozen=True)
-class _MtlMap:
-    """One map statement of a material library: the file, its ``-bm`` (None: not given), and
-    where it was written (for errors)."""
-
-    path: Path
-    bump_scale: float | None
-    library: Path
-    line: int
-    key: str
-
-
-def _mtl_map_statement(words: list[str], library: Path, number: int, roots) -> _MtlMap:
-    """``key [-option values...] file``: the options read (``-bm`` kept), the file checked
-    (inside ``roots``, a regular file, there at all), every problem naming the library and line."""
-    key = words[0].lower()
-    where = f"material library {str(library)!r}: line {number}: {words[0]}"
-    bump_scale, i = None, 1
-    while i < len(words) and words[i].lower() in _MTL_OPTION_VALUES:
-        option, count = words[i].lower(), _MTL_OPTION_VALUES[words[i].lower()]
-        values = words[i + 1:i + 1 + count]
-        if option in ("-o", "-s", "-t"):  # one to three numbers
-            taken = 0
-            for word in values:
-                try:
-                    float(word)
-                except ValueError:
-                    break
-                taken += 1
-            values = values[:taken]
-        if option == "-bm":
-            try:
-                bump_scale = float(values[0]) if values else math.nan
-            except ValueError:
-                bump_scale = math.nan
-            if not 0.0 <= bump_scale <= MAX_MTL_BUMP_SCALE:
-                raise AssetError(f"{where}: -bm (the bump scale) must be a number in [0, {MAX_MTL_BUMP_SCALE:g}], "
-                                 f"got {values[0] if values else 'nothing'!r}")
-        i += 1 + len(values)
-    name = " ".join(words[i:])
-    if not name:
-        raise AssetError(f"{where}: names no file")
-    target = _referenced(library, name, roots, "image", "material library")
-    if target is None:
-        raise AssetError(f"{where}: its image {name!r} does not exist (looked for {str(library.parent / name)!r})")
-    return _MtlMap(target, bump_scale, library, number, key)
-
-
-MAX_MTL_BUMP_SCALE = 16.0  # Material.normal_scale's limit
-
-
-def _mtl_maps(obj_path: Path, roots) -> dict[str, dict[str, _MtlMap]]:
-    """The ``norm``, ``map_Bump`` / ``bump`` and ``map_Ke`` statements of the MTL libraries an
-    OBJ names, by material name (trimesh reads none of them)."""
-    maps: dict[str, dict[str, _MtlMap]] = {}
-    with open(obj_path, "rb") as f:
-        libraries = [line[6:].strip().decode("utf-8", "replace") for line in f if line.startswith(b"mtllib")]
-    for library_name in libraries:
-        library = obj_path.parent / library_name
-        if not library.is_file():
-            continue  # the OBJ check warned; the default material is used
-        material = None
-        for number, line in enumerate(library.read_text(encoding="utf-8", errors="replace").splitlines(), 1):
-            words = line.split()
-            if len(words) >= 2 and words[0] == "newmtl":
-                material = " ".join(words[1:])
-            elif words and words[0].lower() in _MTL_MAP_KEYS and material is not None:
-                entry = _mtl_map_statement(words, library, number, roots)
-                maps.setdefault(material, {})["bump" if entry.key == "map_bump" else entry.key] = entry
-    return maps
-
-
 class _MaterialMaps:
-    """The material maps of a file's parts beyond the albedo texture: normal, emissive and
-    metallic-roughness maps (glTF through trimesh's PBRMaterial, with the normal map's scale
-    from the file's JSON, which trimesh drops; OBJ from the MTL statements, read here).  One
-    image is one TextureData however many parts use it, so it is uploaded once."""
+    """The material maps of a file's parts: the albedo texture, and normal, emissive and
+    metallic-roughness maps (glTF through trimesh's PBRMaterial, matched to the file's JSON by
+    the index ``prepare_gltf`` wrote into its name, for ``normalTexture.scale``, which trimesh
+    drops; OBJ from the MTL statements ``prepare_obj`` read).  One image is one TextureData
+    however many parts use it, so it is decoded and uploaded once; only the maps of the
+    materials the faces use are read at all."""
 
-    def __init__(self, path: Path, gltf_doc: dict | None, roots) -> None:
+    def __init__(self, path: Path, gltf: GltfFiles | None, obj: ObjFiles | None) -> None:
         self.path = path
-        materials = gltf_doc.get("materials") if isinstance(gltf_doc, dict) else None
-        self.gltf_materials = [m for m in materials if isinstance(m, dict)] if isinstance(materials, list) else []
-        self.mtl = _mtl_maps(path, roots) if path.suffix.lower() == ".obj" else {}
+        self.gltf = gltf
+        self.obj = obj
         self._made: dict[tuple, TextureData] = {}
 
     def read(self, tm: trimesh.Trimesh, part: ModelPart) -> None:
@@ -746,22 +573,52 @@ class _MaterialMaps:
         if hasattr(material, "baseColorFactor"):
             self._gltf(material, part)
         elif isinstance(material, SimpleMaterial):
-            found = self.mtl.get(getattr(material, "_name", None) or "")
+            found = self.obj.maps.get(getattr(material, "_name", None) or "") if self.obj else None
             if found:
                 extra = {str(k).lower(): v for k, v in (getattr(material, "kwargs", {}) or {}).items()}
                 self._obj(found, extra, part)
 
+    def mtl_map(self, material, key: str) -> MtlMap | None:
+        """The ``key`` map statement of the OBJ material trimesh calls ``material``."""
+        found = self.obj.maps.get(getattr(material, "_name", None) or "") if self.obj else None
+        return (found or {}).get(key)
+
+    def gltf_label(self, material) -> str:
+        """The glTF material trimesh calls ``material`` as the file names it."""
+        if self.gltf is None:
+            return f"material {material.name!r}"
+        index, _ = self.gltf.material(material.name)
+        return self.gltf.label(index) if index is not None else f"material {material.name!r}"
+
+    def check_gltf_slot(self, material, slot: str, image) -> None:
+        """A slot the file fills whose image trimesh could not open is an error (it would be
+        drawn without it: an emissive part glowing whole), named with the material."""
+        if self.gltf is None or image is not None:
+            return
+        index, _ = self.gltf.material(material.name)
+        source = self.gltf.slots.get(index, {}).get(slot) if index is not None else None
+        if source is not None:
+            images = self.gltf.doc.get("images") or []
+            entry = images[source] if source < len(images) and isinstance(images[source], dict) else {}
+            named = entry.get("uri") if isinstance(entry.get("uri"), str) and \
+                not entry["uri"].startswith("data:") else None
+            raise AssetError(f"{self.gltf.label(index)}: {slot}: image {source}"
+                             f"{f' ({named!r})' if named else ''} cannot be read as an image")
+
     # --- glTF ------------------------------------------------------------------------------
     def _gltf(self, material, part: ModelPart) -> None:
-        what = f"material {material.name!r}"
+        what = self.gltf_label(material)
+        _, doc_material = self.gltf.material(material.name) if self.gltf else (None, {})
         image = getattr(material, "normalTexture", None)
+        self.check_gltf_slot(material, "normalTexture", image)
         if image is not None:
-            part.normal_map = self._image(image, f"{what}: normalTexture", "normal")
-            part.normal_scale = self._normal_scale(material.name, what)
+            part.normal_map = self.image(image, f"{what}: normalTexture", "normal")
+            part.normal_scale = self._normal_scale(doc_material, what)
         image = getattr(material, "metallicRoughnessTexture", None)
+        self.check_gltf_slot(material, "metallicRoughnessTexture", image)
         if image is not None:
             # glTF: the factors multiply the texture (roughness G, metallic B); absent, they are 1.
-            part.metallic_roughness_map = self._image(image, f"{what}: metallicRoughnessTexture", "linear")
+            part.metallic_roughness_map = self.image(image, f"{what}: metallicRoughnessTexture", "linear")
             part.metallic = 1.0 if material.metallicFactor is None else float(material.metallicFactor)
             part.roughness = 1.0 if material.roughnessFactor is None else float(material.roughnessFactor)
             for name in ("metallic", "roughness"):
@@ -772,12 +629,14 @@ class _MaterialMaps:
             metal = part.metallic_roughness_map.pixels[..., 2].max() > 0
             part.reflectivity = part.metallic if metal else 0.0
         image = getattr(material, "emissiveTexture", None)
+        self.check_gltf_slot(material, "emissiveTexture", image)
         factor = _floats(material.emissiveFactor)
         if image is not None and factor is not None and len(factor) >= 3 and max(factor[:3]) > 0.0:
-            self._emissive(part, self._image(image, f"{what}: emissiveTexture", "colour"), factor[:3], what)
+            self._emissive(part, self.image(image, f"{what}: emissiveTexture", "colour"), factor[:3], what)
 
-    def _image(self, image, what: str, kind: str) -> TextureData:
-        """A decoded image of the file as a TextureData (once per image and kind)."""
+    def image(self, image, what: str, kind: str) -> TextureData:
+        """A decoded image of the file as a TextureData (once per image and kind), its size
+        checked from its header before it is decoded."""
         key = ("image", id(image), kind)
         texture = self._made.get(key)
         if texture is None:
@@ -787,19 +646,15 @@ class _MaterialMaps:
             except (AssetError, MemoryError):
                 raise
             except Exception as exc:
-                raise AssetError(f"{what} of {str(self.path)!r} cannot be decoded ({exc})") from exc
+                raise AssetError(f"{what} cannot be decoded ({type(exc).__name__}: {exc})") from exc
             texture = self._made[key] = TextureData(pixels, name=f"{self.path.name}:{what.split(': ')[-1]}")
         return texture
 
-    def _normal_scale(self, name, what: str) -> float:
-        """The file's ``normalTexture.scale`` for the material called ``name`` (glTF default 1).
-        trimesh keeps neither the scale nor the material's index, so materials are matched by
-        name; a material no name picks gets the scale every normal texture of the file shares."""
-        scales = [(m.get("name"), m["normalTexture"].get("scale", 1.0)) for m in self.gltf_materials
-                  if isinstance(m.get("normalTexture"), dict)]
-        named = [scale for n, scale in scales if n == name]
-        shared = {repr(scale) for _, scale in scales}
-        scale = named[0] if named else (scales[0][1] if len(shared) == 1 else 1.0)
+    @staticmethod
+    def _normal_scale(doc_material: dict, what: str) -> float:
+        """The file's ``normalTexture.scale`` of this material (glTF default 1)."""
+        info = doc_material.get("normalTexture") if isinstance(doc_material, dict) else None
+        scale = info.get("scale", 1.0) if isinstance(info, dict) else 1.0
         if isinstance(scale, bool) or not isinstance(scale, numbers.Real) or \
                 not 0.0 <= float(scale) <= MAX_MTL_BUMP_SCALE:
             raise AssetError(f"{what}: normalTexture.scale must be a number in [0, {MAX_MTL_BUMP_SCALE:g}], "
@@ -813,24 +668,21 @@ class _MaterialMaps:
         if not all(np.isfinite(e) and 0.0 <= e <= 65504.0 for e in factor):
             raise AssetError(f"{what}: emissive colour {factor} must be finite and >= 0")
         strength = max(factor)
-        hue = np.asarray(factor, np.float64) / strength
-        if not np.all(hue == 1.0):
-            key = ("tinted", id(texture), tuple(hue))
+        hue = tuple(float(f) / strength for f in factor)
+        if hue != (1.0, 1.0, 1.0):
+            key = ("tinted", id(texture), hue)
             tinted = self._made.get(key)
             if tinted is None:
-                linear = _srgb_to_linear_array(texture.as_8_bits()[..., :3] / 255.0) * hue
-                pixels = texture.as_8_bits().copy()
-                pixels[..., :3] = np.rint(_linear_to_srgb_array(linear) * 255.0).astype(np.uint8)
-                tinted = self._made[key] = TextureData(pixels, name=f"{texture.name} x {list(hue)}")
+                tinted = self._made[key] = tint_srgb(texture, hue)
             texture = tinted
         part.emissive_map = texture
         part.emissive_factor = float(min(strength, 1e4))
 
     # --- OBJ / MTL -------------------------------------------------------------------------
-    def _obj(self, found: dict[str, _MtlMap], extra: dict, part: ModelPart) -> None:
+    def _obj(self, found: dict[str, MtlMap], extra: dict, part: ModelPart) -> None:
         entry = found.get("norm") or found.get("bump")
         if entry is not None:
-            texture = self._file(entry.path, True)
+            texture = self._file(entry, True)
             if entry.key != "norm" and is_grey(texture):  # a height map: its slopes become normals
                 key = ("heights", entry.path)
                 if key not in self._made:
@@ -843,15 +695,36 @@ class _MaterialMaps:
             ke = _floats(extra.get("ke"))
             factor = [1.0, 1.0, 1.0] if ke is None else (ke * 3 if len(ke) == 1 else ke[:3])
             if max(factor) > 0.0:
-                self._emissive(part, self._file(entry.path, False), factor,
-                               f"material library {str(entry.library)!r}: line {entry.line}")
+                self._emissive(part, self._file(entry, False), factor, entry.where)
 
-    def _file(self, path: Path, linear: bool) -> TextureData:
-        key = ("file", str(path), linear)
+    def _file(self, entry: MtlMap, linear: bool) -> TextureData:
+        key = ("file", str(entry.path), linear)
         texture = self._made.get(key)
         if texture is None:
-            texture = self._made[key] = load_texture(path, keep_16_bits=linear)
+            try:
+                texture = self._made[key] = load_texture(entry.path, keep_16_bits=linear)
+            except AssetError as exc:
+                raise AssetError(f"{entry.where}: {exc}") from exc
         return texture
+
+
+def tint_srgb(texture: TextureData, hue: Sequence[float], name: str | None = None) -> TextureData:
+    """``texture`` (sRGB colour) with each channel multiplied by ``hue`` in linear light, as
+    8 bits: through a 256-entry table per channel (sRGB byte -> linear x hue -> sRGB byte), a
+    block of rows at a time, so it costs the output image and no per-texel float temporaries."""
+    levels = _srgb_to_linear_array(np.arange(256, dtype=np.float64) / 255.0)
+    tables = [np.rint(_linear_to_srgb_array(levels * float(h)) * 255.0).astype(np.uint8) for h in hue[:3]]
+    source = texture.pixels
+    out = np.empty(source.shape, np.uint8)
+    rows = max(1, WORK_BLOCK // max(1, source.shape[1]))
+    for top in range(0, source.shape[0], rows):
+        block = source[top:top + rows]
+        if block.dtype != np.uint8:
+            block = ((block.astype(np.uint32) * 255 + 32767) // 65535).astype(np.uint8)
+        for channel, table in enumerate(tables):
+            out[top:top + rows, :, channel] = table[block[..., channel]]
+        out[top:top + rows, :, 3] = block[..., 3]
+    return TextureData(out, name=name or f"{texture.name} x {[round(h, 4) for h in hue[:3]]}")
 
 
 def _srgb_to_linear_array(c: np.ndarray) -> np.ndarray:

@@ -1,9 +1,11 @@
 """Spawning entities from mesh files: one entity per mesh part, under one root entity."""
 from __future__ import annotations
 
+import warnings
 from collections.abc import Sequence
 from pathlib import Path
 
+import numpy as np
 from pyglm import glm
 
 from components import ComponentValueError, Emissive, Material, MeshRef, Mirror, Reflective, Transform
@@ -11,10 +13,13 @@ from engine.assets.mesh import flat_plane, load_model
 from engine.core.errors import AssetError
 from engine.core.world import World
 
+MAX_MODEL_PROBES = 4  # curved reflective parts of one model that get a cube-map probe each (see spawn_model)
+
 
 def spawn_model(world: World, path: str | Path, position: glm.vec3 | Sequence[float] = (0.0, 0.0, 0.0),
                 rotation: glm.quat | Sequence[float] | None = None,
-                scale: glm.vec3 | Sequence[float] = (1.0, 1.0, 1.0)) -> int:
+                scale: glm.vec3 | Sequence[float] = (1.0, 1.0, 1.0),
+                roots: Sequence[str | Path] | None = None, max_probes: int = MAX_MODEL_PROBES) -> int:
     """Load ``path`` and spawn it; returns the root entity.
 
     The file's material decides the components: its colour, texture, metallic and
@@ -25,15 +30,24 @@ def spawn_model(world: World, path: str | Path, position: glm.vec3 | Sequence[fl
     ``Reflective("cube")``: the probes stage gives such a part a cube-map probe of its own
     at its bounding box's centre (engine/rules/probe_rules.py's automatic probe, the seed's
     detection: flat is a planar mirror, curved a cube map), so a chrome teapot reflects the
-    room around it, not only the sky.  The file is fully loaded and every component built
-    (so validated) before anything is spawned, so a bad file leaves the world untouched.
+    room around it, not only the sky.  A probe is six views a capture, so a model gets at
+    most ``max_probes`` of them (MAX_MODEL_PROBES): its largest curved reflective parts (by
+    their box's diagonal once placed); the others reflect the sky (``Reflective("skybox")``)
+    and a warning says how many.  Parts of the same geometry share one Mesh (drawn
+    instanced).  ``roots``: the folders the files the model names may be in (None: its own
+    folder; ``load_model``).  The file is fully loaded and every component built (so
+    validated) before anything is spawned, so a bad file leaves the world untouched.
     """
+    if isinstance(max_probes, bool) or not isinstance(max_probes, int) or max_probes < 0:
+        raise AssetError(f"spawn_model: max_probes must be an int >= 0, got {max_probes!r}")
     root_transform = Transform(position=position, rotation=rotation if rotation is not None else glm.quat(),
                                scale=scale)
-    parts = load_model(path)
+    parts = load_model(path, roots=roots)
+    curved = [i for i, part in enumerate(parts) if part.reflectivity > 0.0 and flat_plane(part.mesh) is None]
+    probed = set(sorted(curved, key=lambda i: -_placed_size(parts[i]))[:max_probes])
     part_components = []
     try:
-        for part in parts:
+        for index, part in enumerate(parts):
             scale_v, rotation_q, translation = glm.vec3(), glm.quat(), glm.vec3()
             if not glm.decompose(part.local, scale_v, rotation_q, translation, glm.vec3(), glm.vec4()):
                 raise ComponentValueError(f"node transform of {part.mesh.name!r} cannot be decomposed")
@@ -52,10 +66,16 @@ def spawn_model(world: World, path: str | Path, position: glm.vec3 | Sequence[fl
                 if flat_plane(part.mesh) is not None:
                     components.append(Mirror(reflect_rate=part.reflectivity, roughness=part.roughness))
                 else:
-                    components.append(Reflective(mode="cube", mix=part.reflectivity))
+                    mode = "cube" if index in probed else "skybox"
+                    components.append(Reflective(mode=mode, mix=part.reflectivity))
             part_components.append(components)
     except ComponentValueError as exc:
         raise AssetError(f"mesh file {str(path)!r}: {exc}") from exc
+    if len(curved) > len(probed):
+        warnings.warn(f"mesh file {str(path)!r}: {len(curved)} curved reflective parts: {len(probed)} of them (the "
+                      f"largest) get a cube-map probe each, the other {len(curved) - len(probed)} reflect the sky "
+                      f"(spawn_model's max_probes = {max_probes}, MAX_MODEL_PROBES by default; or give the model "
+                      "ReflectionProbe entities with an influence box)", stacklevel=2)
 
     spawned: list[int] = []
     try:
@@ -69,3 +89,12 @@ def spawn_model(world: World, path: str | Path, position: glm.vec3 | Sequence[fl
             world.delete_entity(entity)
         raise
     return root
+
+
+def _placed_size(part) -> float:
+    """The diagonal of a part's box once its node transform places it (which parts are
+    largest, for the probes)."""
+    lo, hi = part.mesh.bounds
+    corners = np.array([[x, y, z, 1.0] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
+    placed = corners @ np.array(part.local, np.float64).T  # numpy(glm.mat4) reads as M: points are columns
+    return float(np.linalg.norm(placed[:, :3].max(axis=0) - placed[:, :3].min(axis=0)))

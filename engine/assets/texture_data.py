@@ -65,6 +65,7 @@ class TextureData:
 
 MAX_TEXTURE_SIDE = 16384  # texels along a side of a texture the engine makes or loads (see below)
 MAX_GENERATED_SIZE = MAX_TEXTURE_SIDE  # the generators' size limit (the older name)
+MAX_IMAGE_FILE_BYTES = 1 << 30  # an image file's size on disk (the budget: no file past it decodes within it)
 ASSET_MEMORY_BUDGET = 1 << 30  # bytes one texture's pixels (or one mesh's arrays) may take on the CPU
 WORK_BLOCK = 1 << 16  # texels a generator or a conversion works on at a time (its float temporaries)
 # MAX_TEXTURE_SIDE is the GL_MAX_TEXTURE_SIZE every OpenGL 4.1 context has at least: a texture
@@ -74,22 +75,23 @@ WORK_BLOCK = 1 << 16  # texels a generator or a conversion works on at a time (i
 # and a decoded image about its size in its own format on top of that.
 
 
-def check_texture_size(width: int, height: int, what: str) -> None:
-    """Refuse a ``width`` x ``height`` RGBA8 texture past the GL side limit or the memory
-    budget, before anything is allocated (``what`` names it in the message)."""
+def check_texture_size(width: int, height: int, what: str, texel_bytes: int = 4) -> None:
+    """Refuse a ``width`` x ``height`` texture past the GL side limit or the memory budget,
+    before anything is allocated (``what`` names it in the message); ``texel_bytes``: 4
+    (RGBA8) or 8 (RGBA16: a 16-bit normal map, or one made from a bump map)."""
     if not (1 <= width <= MAX_TEXTURE_SIDE and 1 <= height <= MAX_TEXTURE_SIDE):
         raise AssetError(f"{what}: is {width}x{height} texels: a texture is at most "
                          f"{MAX_TEXTURE_SIDE}x{MAX_TEXTURE_SIDE} (the GL_MAX_TEXTURE_SIZE OpenGL 4.1 guarantees)")
-    size = texture_bytes(width, height)
+    size = texture_bytes(width, height, texel_bytes)
     if size > ASSET_MEMORY_BUDGET:
         raise AssetError(f"{what}: {width}x{height} texels take {_mib(size)} MiB, over the memory budget of "
                          f"{_mib(ASSET_MEMORY_BUDGET)} MiB an asset may have "
                          "(engine.assets.texture_data.ASSET_MEMORY_BUDGET)")
 
 
-def texture_bytes(width: int, height: int) -> int:
-    """Bytes of a ``width`` x ``height`` TextureData (RGBA8)."""
-    return int(width) * int(height) * 4
+def texture_bytes(width: int, height: int, texel_bytes: int = 4) -> int:
+    """Bytes of a ``width`` x ``height`` TextureData (RGBA8; ``texel_bytes`` 8: RGBA16)."""
+    return int(width) * int(height) * int(texel_bytes)
 
 
 def _mib(size: int) -> str:
@@ -150,6 +152,27 @@ def file_problem(path: str | Path, max_bytes: int | None = None) -> tuple[str | 
     return None, info
 
 
+def read_asset_file(path: str | Path, what: str, max_bytes: int) -> bytes:
+    """The bytes of ``path`` after ``file_problem``'s checks, made again on the descriptor
+    that is read (opened without blocking: a FIFO swapped in after the check is refused, not
+    waited on), at most ``max_bytes`` of them; an AssetError starting with ``what`` otherwise."""
+    check_asset_file(path, what, max_bytes)
+    try:
+        fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_CLOEXEC", 0))
+    except OSError as exc:
+        raise AssetError(f"{what}: cannot be read ({exc.strerror or exc})") from None
+    with os.fdopen(fd, "rb") as file:
+        info = os.fstat(file.fileno())
+        if not stat.S_ISREG(info.st_mode):
+            raise AssetError(f"{what}: {_not_regular(info)}")
+        if info.st_size > max_bytes:
+            raise AssetError(f"{what}: is {info.st_size} bytes, more than the {max_bytes} such a file may be")
+        data = file.read(min(info.st_size, max_bytes) + 1)  # read(n) allocates n bytes first
+    if len(data) > max_bytes:
+        raise AssetError(f"{what}: is more than the {max_bytes} bytes such a file may be")
+    return data
+
+
 def _not_regular(info: os.stat_result) -> str:
     kind = next((name for test, name in _FILE_KINDS if test(info.st_mode)), "not a file")
     return f"is {kind}, not a regular file"
@@ -197,7 +220,7 @@ def load_texture(path: str | Path, keep_16_bits: bool = False) -> TextureData:
         raise AssetError(f"texture file path must be a str or pathlib.Path, got {type(path).__name__} {path!r}")
     path = Path(path)
     what = f"texture file {str(path)!r}"
-    check_asset_file(path, what)
+    check_asset_file(path, what, MAX_IMAGE_FILE_BYTES)
     if keep_16_bits and _png_bit_depth(path) == 16:
         return TextureData(_read_png_16(path, what), name=path.name, source={"file": str(path.resolve())})
     Image = pillow_image_module()
@@ -234,11 +257,11 @@ def _read_png_16(path: Path, what: str) -> np.ndarray:
     import png
 
     try:
-        reader = png.Reader(filename=str(path))
-        width, height, rows, info = reader.asDirect()
-        check_texture_size(width, height, what)
-        planes = info["planes"]
-        pixels = np.vstack([np.asarray(row, np.uint16) for row in rows]).reshape(height, width, planes)
+        with open(path, "rb") as file:  # closed however the read ends (pypng's own open is not)
+            width, height, rows, info = png.Reader(file=file).asDirect()
+            check_texture_size(width, height, what, 8)  # kept as RGBA16
+            planes = info["planes"]
+            pixels = np.vstack([np.asarray(row, np.uint16) for row in rows]).reshape(height, width, planes)
     except AssetError:
         raise
     except MemoryError:
@@ -379,6 +402,7 @@ def height_to_normal_map(height: TextureData, name: str | None = None) -> Textur
     ``Material.normal_scale`` (an MTL's ``-bm``). Written as 16 bits a channel (a normal map
     keeps them: gentle slopes without 8-bit terraces); worked a block of rows at a time."""
     p = height.pixels
+    check_texture_size(p.shape[1], p.shape[0], f"normal map made from {height.name!r}", 8)
     h = p[..., 0].astype(np.float32) / float(np.iinfo(p.dtype).max)
     rows, cols = h.shape
     out = np.empty((rows, cols, 4), np.uint16)

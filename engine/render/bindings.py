@@ -68,6 +68,10 @@ SCRATCH_UNIT = 15        # raw-GL copies bind their target here; no program read
 SHADOW_ATLAS_UNIT = 11   # scene: the directional lights' shadow maps, one depth atlas (sampler2DShadow)
 POINT_SHADOW_UNITS = (3, 4)  # scene: the shadowed point lights' distance cube maps, one a light
 IRRADIANCE_UNIT = 5      # scene: the irradiance table (sky and probes' spherical harmonics)
+# Post-processing (the present stage; these passes bind nothing else, so they reuse the
+# scene's units).  Bloom and exposure passes read their source at PRESENT_UNIT.
+BLOOM_UNIT = 1           # present: the bloom chain's sum of levels (engine/render/bloom.py)
+EXPOSURE_UNIT = 2        # present, exposure adaptation: the 1x1 adapted exposure (engine/render/post.py)
 
 # --- uniform-block binding points ----------------------------------------------------------
 CAMERA_BINDING = 0

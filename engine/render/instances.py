@@ -60,6 +60,11 @@ class GpuMesh:
         self.index_count = mesh.indices.size
         # Model-space radius about the origin (what an instance's scale stretches).
         self.radius = float(np.linalg.norm(mesh.positions, axis=1).max()) if len(mesh.positions) else 0.0
+        # The corners of its model-space box, homogeneous (what an instance's world box is made from).
+        lo = mesh.positions.min(axis=0) if len(mesh.positions) else np.zeros(3)
+        hi = mesh.positions.max(axis=0) if len(mesh.positions) else np.zeros(3)
+        self.corners = np.array([[x, y, z, 1.0] for x in (lo[0], hi[0]) for y in (lo[1], hi[1])
+                                 for z in (lo[2], hi[2])], np.float64)
 
     def release(self) -> None:
         self.vertices.release()
@@ -86,6 +91,11 @@ class InstanceBatch:
         self._vaos: dict[int, moderngl.VertexArray] = {}
         self._max_scale = 0.0
         self._rescale = False
+        # Each row's world box, kept for the rows each upload sends (a removal's moved row
+        # is sent too), and their union, worked out again after an upload that sent rows:
+        # what the shadows' fit reads, exact whatever came and went before.
+        self._row_boxes = np.zeros((capacity, 2, 3), np.float64)
+        self._box: tuple[np.ndarray, np.ndarray] | None = None
         self.probe = 0  # the entity owning the reflection probe its instances sample (0: none)
         # Probe blending (probe_rules.probe_blend): a second probe (0: none), and whether the
         # instances blend (their rows' ``reflect`` z and w weigh the two probes, the sky the rest).
@@ -183,6 +193,7 @@ class InstanceBatch:
         self._moving = min(self._moving, last)
         self._dirty.discard(last)
         self._rescale = True  # the largest instance may have gone: measure all rows again
+        self._box = None      # and the union of the rows' boxes
         self._variants_stale = True
 
     def variants_changed(self) -> None:
@@ -219,6 +230,28 @@ class InstanceBatch:
             squares = [np.einsum("ij,ij->i", model[:, c:c + 3], model[:, c:c + 3]).max() for c in (0, 4, 8)]
             self._max_scale = max(self._max_scale, float(np.sqrt(max(squares))))
 
+    def _grow_box(self, rows: np.ndarray) -> None:
+        """Measure the world boxes of ``rows`` (just sent) and forget the union."""
+        if len(self._row_boxes) < len(self.rows):
+            grown = np.zeros((len(self.rows), 2, 3), np.float64)
+            grown[: len(self._row_boxes)] = self._row_boxes
+            self._row_boxes = grown
+        models = self.rows["model"][rows].astype(np.float64).reshape(-1, 4, 4)  # [instance, column, row]
+        world = np.einsum("kc,ncr->nkr", self.mesh.corners, models)[..., :3]
+        self._row_boxes[rows, 0] = world.min(axis=1)
+        self._row_boxes[rows, 1] = world.max(axis=1)
+        self._box = None
+
+    @property
+    def box(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """The world box [lo, hi] holding every instance as of the last upload (None: empty)."""
+        if not self.count:
+            return None
+        if self._box is None:
+            boxes = self._row_boxes[: self.count]
+            self._box = (boxes[:, 0].min(axis=0), boxes[:, 1].max(axis=0))
+        return self._box
+
     def upload(self) -> int:
         """Send rows written since the last upload; returns the bytes sent."""
         size = INSTANCE_DTYPE.itemsize
@@ -227,7 +260,7 @@ class InstanceBatch:
             self._buffer_rows = len(self.rows)
             self._dirty = set(range(self.count))
         if self._rescale:
-            self._max_scale, self._rescale = 0.0, False
+            self._max_scale, self._rescale, self._box = 0.0, False, None
             self._grow_scale(np.arange(self.count))
         if not self._dirty:
             return 0
@@ -235,6 +268,7 @@ class InstanceBatch:
         dirty.sort()
         self._dirty.clear()
         self._grow_scale(dirty)
+        self._grow_box(dirty)
         breaks = np.flatnonzero(np.diff(dirty) != 1) + 1
         starts = np.concatenate([[dirty[0]], dirty[breaks]])
         ends = np.concatenate([dirty[breaks - 1], [dirty[-1]]]) + 1

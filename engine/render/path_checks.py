@@ -269,7 +269,7 @@ class PathChecks:
         for face in range(6):
             _fill_row(batch.add(CHECK_ENTITY + face), face)
         batch.upload()
-        lights = self.ctx.buffer(lights_block((0.0, 0.0, 0.0), [], []))
+        lights = self.ctx.buffer(lights_block(np.zeros((9, 3)), [], []))
         saved_lights, renderer.lights_ubo = renderer.lights_ubo, lights
         stats = renderer.stats
         saved_stats = {f.name: getattr(stats, f.name) for f in fields(stats)}

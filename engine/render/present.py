@@ -2,6 +2,15 @@
 exposure, encoded to sRGB into the output; with anti-aliasing on, encoded into an RGBA8
 image (luma in alpha) that an FXAA pass (``shaders/fxaa.frag``) filters into the output.
 
+With the active camera's ``Tonemap`` or ``Bloom`` (``components/post.py``) the order is:
+bloom on the HDR image (``engine/render/bloom.py``; the image is only read), automatic
+exposure measured from it (``engine/render/post.py``; on the GPU, nothing read back), then
+one full-screen draw that mixes the bloom in, exposes (``2 ** Tonemap.exposure``, times the
+adapted value), applies the tone curve (``shaders/include/tonemap.glsl``) and encodes to
+sRGB, then FXAA.  Each combination (curve, bloom, automatic exposure) is a build of
+``present.frag`` of its own.  Without either component the plain build draws, as before
+(curve none, ``Renderer.exposure``), and the bloom and exposure textures are released.
+
 FXAA runs once on the final colour: ids are never touched, and mirror and portal images,
 already composited, get no seam at their edges.  Its walk along an edge (long nearly level
 edges become ramps) is ``search_steps`` long: 8 on a GPU; 0 on a software rasteriser,
@@ -12,7 +21,10 @@ from __future__ import annotations
 
 import moderngl
 
-from engine.render.bindings import PRESENT_UNIT, PassState, apply_pass_state
+from components.post import TONEMAP_CURVES, Bloom, Tonemap
+from engine.render.bindings import BLOOM_UNIT, EXPOSURE_UNIT, PRESENT_UNIT, PassState, apply_pass_state
+from engine.render.bloom import BloomPass
+from engine.render.post import AutoExposure
 from engine.render.shader_library import ShaderLibrary
 from engine.render.targets import CaptureTarget
 
@@ -33,6 +45,11 @@ class PresentPass:
         self._fxaa: moderngl.VertexArray | None = None
         self._encoded: CaptureTarget | None = None   # what FXAA reads, made at the output's size
         self.search_steps = 0 if software else GPU_SEARCH_STEPS
+        self._post: dict[tuple, moderngl.VertexArray] = {}   # present.frag's POST builds, by their defines
+        self._written: dict[tuple[int, str], object] = {}    # (vao id, uniform) -> the value last written
+        self.bloom = BloomPass(ctx, shaders)
+        self.auto_exposure = AutoExposure(ctx, shaders)
+        self.post_passes = 0   # bloom and exposure draws in the last frame (the tone map is the present draw)
 
     @property
     def search_steps(self) -> int:
@@ -53,18 +70,49 @@ class PresentPass:
         program = self.shaders.program("present.vert", fragment, defines=defines or None)
         return self.ctx.vertex_array(program, [])
 
+    def _post_build(self, curve: str, bloom: bool, auto: bool, luma: bool) -> moderngl.VertexArray:
+        key = (curve, bloom, auto, luma)
+        vao = self._post.get(key)
+        if vao is None:
+            defines = {"POST": "1", "TONEMAP_CURVE": str(TONEMAP_CURVES.index(curve))}
+            if bloom:
+                defines["BLOOM"] = "1"
+            if auto:
+                defines["AUTO_EXPOSURE"] = "1"
+            if luma:
+                defines["LUMA_IN_ALPHA"] = "1"
+            vao = self._post[key] = self._fullscreen("present.frag", **defines)
+            vao.program["hdr_image"].value = PRESENT_UNIT
+            if bloom:
+                vao.program["bloom_image"].value = BLOOM_UNIT
+            if auto:
+                vao.program["exposure_state"].value = EXPOSURE_UNIT
+        return vao
+
     def draw(self, hdr: moderngl.Texture, exposure: float, antialias: str, output: moderngl.Framebuffer,
-             size: tuple[int, int]) -> None:
+             size: tuple[int, int], tonemap: Tonemap | None = None, bloom: Bloom | None = None,
+             curve: str | None = None, camera: int | None = None, dt: float = 0.0) -> None:
+        """Present ``hdr`` into ``output``.  ``tonemap`` and ``bloom``: the active camera's
+        components (None: none); ``curve`` overrides the tone curve (the debug overlay's
+        choice; None: the Tonemap's, or "none"); ``camera`` is whose image it is (automatic
+        exposure starts over when it changes) and ``dt`` the frame's time step (adaptation)."""
         fxaa = antialias == "fxaa"
         if fxaa and (self._encoded is None or self._encoded.size != size):
             if self._encoded is not None:
                 self._encoded.release()
             self._encoded = CaptureTarget(self.ctx, size)
-        encode = self._encode_luma if fxaa else self._encode
-        (self._encoded.framebuffer if fxaa else output).use()
-        apply_pass_state(self.ctx, _PRESENT, (0, 0, *size))
-        hdr.use(PRESENT_UNIT)
-        encode.program["exposure"].value = exposure
+        self.post_passes = 0
+        if tonemap is None and bloom is None and curve is None:
+            self._release_post_targets()
+            encode = self._encode_luma if fxaa else self._encode
+            (self._encoded.framebuffer if fxaa else output).use()
+            apply_pass_state(self.ctx, _PRESENT, (0, 0, *size))
+            hdr.use(PRESENT_UNIT)
+            encode.program["exposure"].value = exposure
+        else:
+            encode = self._post_encode(hdr, exposure, tonemap, bloom, curve, camera, dt, fxaa)
+            (self._encoded.framebuffer if fxaa else output).use()
+            apply_pass_state(self.ctx, _PRESENT, (0, 0, *size))
         encode.render(moderngl.TRIANGLES, vertices=3)
         if fxaa:
             output.use()
@@ -74,9 +122,59 @@ class PresentPass:
             self._encoded.texture.use(PRESENT_UNIT)
             self._fxaa.render(moderngl.TRIANGLES, vertices=3)
 
+    def _post_encode(self, hdr: moderngl.Texture, exposure: float, tonemap: Tonemap | None, bloom: Bloom | None,
+                     curve: str | None, camera: int | None, dt: float, luma: bool) -> moderngl.VertexArray:
+        """Run bloom and automatic exposure; the present build to draw, its inputs bound."""
+        bloomed = None
+        if bloom is not None and bloom.intensity > 0.0:
+            bloomed = self.bloom.draw(hdr, bloom)
+            self.post_passes += self.bloom.passes()
+        if bloomed is None:
+            self.bloom.release_targets()
+        auto = tonemap is not None and tonemap.auto_exposure
+        state = None
+        if auto:
+            state = self.auto_exposure.draw(hdr, tonemap, camera, dt)
+            self.post_passes += self.auto_exposure.passes()
+        else:
+            self.auto_exposure.release_targets()
+        curve = curve if curve is not None else (tonemap.curve if tonemap is not None else "none")
+        encode = self._post_build(curve, bloomed is not None, auto, luma)
+        self._set(encode, "exposure", 2.0 ** tonemap.exposure if tonemap is not None else exposure)
+        hdr.use(PRESENT_UNIT)
+        if bloomed is not None:
+            bloomed.use(BLOOM_UNIT)
+            share = bloom.intensity / self.bloom.levels
+            self._set(encode, "bloom_mix", ((1.0 - bloom.intensity) if bloom.composite == "energy_conserving"
+                                            else 1.0, share))
+        if state is not None:
+            state.use(EXPOSURE_UNIT)
+        return encode
+
+    def _set(self, vao: moderngl.VertexArray, name: str, value) -> None:
+        """Write a uniform of a POST build only when its value changes (each write is a GL call)."""
+        key = (id(vao), name)
+        if self._written.get(key) != value:
+            vao.program[name].value = value
+            self._written[key] = value
+
+    def _release_post_targets(self) -> None:
+        if self.bloom.textures:
+            self.bloom.release_targets()
+        if self.auto_exposure.current is not None:
+            self.auto_exposure.release_targets()
+
+    def post_target_count(self) -> int:
+        """Textures the bloom chain and automatic exposure hold now (0 without a camera
+        that asks for them)."""
+        return len(self.bloom.textures) + len(self.auto_exposure._targets) + len(self.auto_exposure._state)
+
     def release(self) -> None:
         if self._encoded is not None:
             self._encoded.release()
             self._encoded = None
-        for vao in (self._encode, self._encode_luma, self._fxaa):
+        for vao in (self._encode, self._encode_luma, self._fxaa, *self._post.values()):
             vao.release()
+        self._post.clear()
+        self.bloom.release()
+        self.auto_exposure.release()

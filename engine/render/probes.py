@@ -477,6 +477,8 @@ class ProbeCaptures:
         cube = self.cubes[key]
         cube.position = tuple(position)
         cube.box = projection_box(position, settings)
+        if settings.influence is not None:  # its irradiance, from the new mip chain (engine/render/irradiance.py)
+            self.renderer.irradiance.project(key, cube)
         self.renderer.stats.probe_captures += 1
         return path
 
@@ -581,6 +583,7 @@ class ProbeCaptures:
 
     def drop(self, key: int) -> None:
         self.mips.drop(key)
+        self.renderer.irradiance.drop(key)
         faces = self._faces.pop(key, None)
         if faces is not None:
             faces.release()

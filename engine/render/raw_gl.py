@@ -72,7 +72,6 @@ _COPY_TEX_SUB_IMAGE_2D = ctypes.CFUNCTYPE(None, ctypes.c_uint, ctypes.c_int, cty
                                           ctypes.c_int, ctypes.c_int, ctypes.c_int, ctypes.c_int)
 GL_TEXTURE_CUBE_MAP_POSITIVE_X = 0x8515
 GL_TEXTURE_CUBE_MAP = 0x8513
-GL_TEXTURE_2D = 0x0DE1
 GL_FRAMEBUFFER = 0x8D40
 GL_COLOR_ATTACHMENT0 = 0x8CE0
 GL_DEPTH_ATTACHMENT = 0x8D00
@@ -193,10 +192,6 @@ class RawGL:
             raise RuntimeError(f"cube-map face {face} level {level} of {cube.size[0]} as a colour attachment: "
                                f"framebuffer status 0x{status:x}, GL error 0x{error:x}")
 
-    @property
-    def can_flush(self) -> bool:
-        return self._flush is not None
-
     def flush(self) -> None:
         """Start the GPU (or llvmpipe's rasteriser threads) on every queued command."""
         if self._flush is not None:
@@ -278,9 +273,9 @@ class LayeredCubeTarget:
         if self.ctx.fbo is not None:
             self.ctx.fbo.use()
 
-    def clear(self) -> None:
-        """Colour 0 and depth far on every face (the target must be bound)."""
-        self.gl["glClearBufferfv"](GL_COLOR, 0, (ctypes.c_float * 4)(0.0, 0.0, 0.0, 0.0))
+    def clear(self, color: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 0.0)) -> None:
+        """``color`` (0 by default) and depth far on every face (the target must be bound)."""
+        self.gl["glClearBufferfv"](GL_COLOR, 0, (ctypes.c_float * 4)(*color))
         self.gl["glClearBufferfv"](GL_DEPTH, 0, (ctypes.c_float * 1)(1.0))
 
     def release(self) -> None:

@@ -15,18 +15,21 @@ from dataclasses import dataclass
 import moderngl
 import numpy as np
 
+from components.post import Bloom, Tonemap
 from engine.assets.mesh import Mesh
 from engine.assets.texture_data import TextureData
 from engine.core.errors import GLLimitError, GLPassError
 from engine.render.bindings import CAMERA_BINDING, bind_uniform_range
 from engine.render.gl_context import GLCapabilities
 from engine.render.instances import GpuMesh, InstanceBatch
+from engine.render.irradiance import IrradianceTable
 from engine.render.path_checks import PathChecks
 from engine.render.present import ANTIALIAS_MODES, PresentPass
 from engine.render.probes import ProbeCaptures
 from engine.render.raw_gl import RawGL
 from engine.render.scene_pass import ScenePass
 from engine.render.shader_library import ShaderLibrary
+from engine.render.shadows import ShadowMaps
 from engine.render.sky import flat_cube, upload_cube
 from engine.render.targets import LevelStack, RenderTargets
 from engine.render.views import CAMERA_BLOCK_BYTES, LIGHTS_BLOCK_BYTES, View
@@ -82,6 +85,14 @@ class RenderStats:
     # the alternative GL paths compared with their plain counterparts and trusted, or refused.
     paths_verified: tuple[str, ...] = ()
     paths_refused: tuple[str, ...] = ()
+    # Shadow maps (systems/shadow_system.py): drawn this frame, kept from an earlier frame (no
+    # caster or light changed), and lights whose shadows a limit left out (point lights past
+    # MAX_POINT_SHADOWS); how the last point light's cube was drawn ("layered" or "six_pass").
+    shadow_maps_drawn: int = 0           # (their draws: shadow_draw_calls, not in passes or draw_calls)
+    shadow_draw_calls: int = 0
+    shadow_maps_kept: int = 0
+    shadows_cut: int = 0
+    shadow_path: str = ""
     # Mirrors and portals seen without a view of their own (cut by a budget, faded, past the
     # depth limit, switched off), or partly faded, or an end view's pixels last frame's image
     # did not hold, that showed the fallback (the probe's or the sky's reflection) this
@@ -170,7 +181,12 @@ class Renderer:
         # (checkpoint); glGetError is cheap on the CPU but makes no sense to pay in a game.
         self.debug = os.environ.get("SPECULUM_DEBUG", "") not in ("", "0")
         self.scene_pass = ScenePass(self)
+        self.irradiance = IrradianceTable(self)  # the probes' diffuse light (engine/render/irradiance.py)
         self.probes = ProbeCaptures(self)
+        self.shadows = ShadowMaps(self)
+        # Counts uploads that wrote instance rows, and batches made or dropped: the shadows
+        # stage draws a map again when it moves on (a caster moved, came, went or changed).
+        self.casters_version = 0
         self.path_checks = PathChecks(self)
         # When set, the only batches scene passes draw (the path self-check's own scene).
         self.scene_only: list[InstanceBatch] | None = None
@@ -329,10 +345,12 @@ class Renderer:
         """Live GL resources this renderer owns, by kind (soak and churn runs check that they
         come back to their baseline; tests that they go back to zero)."""
         return {"meshes": len(self._meshes), "textures": len(self._textures), "batches": len(self.batches),
-                "probe_cubes": len(self.probes.cubes), "layered_targets": len(self.probes._layered),
+                "probe_cubes": len(self.probes.cubes), "shadow_cubes": len(self.shadows.cubes),
+                "layered_targets": len(self.probes._layered),
                 "face_targets": len(self.probes._faces),
                 "levels": len(self.levels), "probe_levels": sum(len(s) for s in self.probes._stacks.values()),
-                "programs": len(self.shaders._programs)}
+                "programs": len(self.shaders._programs), "post_targets": self.present_pass.post_target_count(),
+                "irradiance_rows": len(self.irradiance.rows)}
 
     # --- frame -----------------------------------------------------------------------------
     @property
@@ -352,7 +370,17 @@ class Renderer:
             sent += written
             self._order_stale |= written > 0
         self.stats.uploaded_bytes += sent
+        if self._order_stale:
+            self.casters_version += 1
         return sent
+
+    def level_bounds(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """The world box holding every opaque instance as of the last upload (None: none):
+        what a directional light's shadow map is fitted to."""
+        boxes = [b.box for b in self.opaque_batches() if b.box is not None]
+        if not boxes:
+            return None
+        return np.min([lo for lo, _ in boxes], axis=0), np.max([hi for _, hi in boxes], axis=0)
 
     def set_lights(self, block: bytes) -> None:
         self.lights_ubo.write(block)
@@ -410,11 +438,16 @@ class Renderer:
         """Start the GPU on the passes queued so far, before CPU-only work (``RawGL.flush``)."""
         self.raw_gl.flush()
 
-    def present(self, output: moderngl.Framebuffer, size: tuple[int, int]) -> None:
+    def present(self, output: moderngl.Framebuffer, size: tuple[int, int], tonemap: Tonemap | None = None,
+                bloom: Bloom | None = None, curve: str | None = None, camera: int | None = None,
+                dt: float = 0.0) -> None:
         """Encode the HDR image to sRGB into ``output`` (a window's or a capture target),
-        anti-aliased unless ``antialias`` is "off"."""
+        anti-aliased unless ``antialias`` is "off"; with the active camera's ``tonemap`` and
+        ``bloom`` (``components/post.py``), bloomed, exposed and tone mapped first
+        (``PresentPass.draw``; ``exposure`` is used only without a Tonemap)."""
         assert self.targets is not None
-        self.present_pass.draw(self.targets.color, self.exposure, self._antialias, output, size)
+        self.present_pass.draw(self.targets.color, self.exposure, self._antialias, output, size, tonemap, bloom,
+                               curve, camera, dt)
         self.checkpoint("present")
 
     def release(self) -> None:
@@ -428,6 +461,8 @@ class Renderer:
         self.levels.release()
         self._draw_order.clear()
         self.probes.release()
+        self.shadows.release()
+        self.irradiance.release()
         self.scene_pass.release()
         self.present_pass.release()
         for obj in (self.sky, self.cameras_ubo, self.lights_ubo):

@@ -44,14 +44,19 @@ from engine.render.bindings import (
     BLEND_OVER,
     CAMERA_BINDING,
     EMISSIVE_MAP_UNIT,
+    IRRADIANCE_BINDING,
+    IRRADIANCE_UNIT,
     LIGHTS_BINDING,
     METALLIC_ROUGHNESS_UNIT,
     NODE_UNIT,
     NORMAL_UNIT,
+    POINT_SHADOW_UNITS,
     PROBE2_UNIT,
     PROBE_REST_UNIT,
     PROBE_UNIT,
     SCENE_CLIPS,
+    SHADOW_ATLAS_UNIT,
+    SHADOWS_BINDING,
     SKY_UNIT,
     VIEWS_BINDING,
     PassState,
@@ -206,11 +211,18 @@ class ScenePass:
                                ("probe_map", PROBE_UNIT), ("probe2_map", PROBE2_UNIT),
                                ("probe_rest_map", PROBE_REST_UNIT), ("normal_map", NORMAL_UNIT),
                                ("emissive_map", EMISSIVE_MAP_UNIT),
-                               ("metallic_roughness_map", METALLIC_ROUGHNESS_UNIT)):
+                               ("metallic_roughness_map", METALLIC_ROUGHNESS_UNIT),
+                               ("shadow_atlas", SHADOW_ATLAS_UNIT), ("point_shadow0", POINT_SHADOW_UNITS[0]),
+                               ("point_shadow1", POINT_SHADOW_UNITS[1]),
+                               ("irradiance_table", IRRADIANCE_UNIT)):
                 if name in program:
                     program[name].value = unit
             if "Lights" in program:
                 program["Lights"].binding = LIGHTS_BINDING
+            if "Shadows" in program:
+                program["Shadows"].binding = SHADOWS_BINDING
+            if "Irradiance" in program:
+                program["Irradiance"].binding = IRRADIANCE_BINDING
             self._programs[key] = program
             self._uniforms[program.glo] = tuple(program.get(name, None) for name in _PER_DRAW_UNIFORMS)
         return program
@@ -330,6 +342,8 @@ class ScenePass:
         if options.masked:
             targets.node.use(NODE_UNIT)
         bind_uniform_block(self.ctx, renderer.lights_ubo, LIGHTS_BINDING)
+        renderer.shadows.bind()
+        renderer.irradiance.bind(capturing=self.capturing != 0)  # unit 5 serves other passes between
         renderer.sky.use(SKY_UNIT)
         sampler = self._reflection_filter() if options.reflection_filter else None
         if sampler is not None:
@@ -422,6 +436,8 @@ class ScenePass:
         self._views_ubo.write(views_block(views))
         bind_uniform_block(ctx, self._views_ubo, VIEWS_BINDING)
         bind_uniform_block(self.ctx, renderer.lights_ubo, LIGHTS_BINDING)
+        renderer.shadows.bind()
+        renderer.irradiance.bind(capturing=True)  # a capture: the sky's irradiance alone
         renderer.sky.use(SKY_UNIT)
         renderer.bind_view(views[0])  # the shared eye, for what reads the Camera block
         size = (0, 0, target.size, target.size)

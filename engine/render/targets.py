@@ -11,8 +11,6 @@ import numpy as np
 
 from engine.core.errors import GLLimitError
 
-NO_NODE = 0xFFFFFFFF
-
 
 def check_target_size(ctx: moderngl.Context, size: tuple[int, int], what: str) -> None:
     """Refuse a render target this context cannot make (before any GL object is made, so no

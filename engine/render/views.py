@@ -21,7 +21,8 @@ CAMERA_BLOCK_IDS = slice(76, 80)   # uint32 skip, hide, view mask, node
 NO_CLIP = glm.vec4(0.0, 0.0, 0.0, 1.0)
 MAX_DIRECTIONAL_LIGHTS = 4
 MAX_POINT_LIGHTS = 16
-LIGHTS_BLOCK_BYTES = 16 + 16 + 2 * 16 * MAX_DIRECTIONAL_LIGHTS + 2 * 16 * MAX_POINT_LIGHTS
+SKY_SH_COEFFICIENTS = 9  # the sky's irradiance coefficients (engine/render/irradiance.py)
+LIGHTS_BLOCK_BYTES = 16 * SKY_SH_COEFFICIENTS + 16 + 2 * 16 * MAX_DIRECTIONAL_LIGHTS + 2 * 16 * MAX_POINT_LIGHTS
 
 
 @dataclass
@@ -131,14 +132,21 @@ def camera_view(world_matrix: glm.mat4, fov_y_deg: float, near: float, far: floa
     return View(view=glm.inverse(world_matrix), proj=proj, eye=glm.vec3(world_matrix[3]), size=size, name=name)
 
 
-def lights_block(ambient: Sequence[float], directional: list[tuple], point: list[tuple]) -> bytes:
-    """Pack lights: directional = [(direction, rgb)], point = [(position, range, rgb)]."""
+def lights_block(sky_sh: Sequence[Sequence[float]] | np.ndarray, directional: list[tuple],
+                 point: list[tuple]) -> bytes:
+    """Pack the Lights block (shaders/include/lights.glsl, std140): ``sky_sh`` the sky's nine
+    irradiance coefficients (9, 3) (``engine.render.irradiance``), directional =
+    [(direction, rgb)], point = [(position, range, rgb)]."""
     data = np.zeros(LIGHTS_BLOCK_BYTES // 4, np.float32)
-    data[0:3] = ambient[:3]
+    sh = np.asarray(sky_sh, np.float64)
+    if sh.shape != (SKY_SH_COEFFICIENTS, 3):
+        raise ValueError(f"lights_block: sky_sh must be {SKY_SH_COEFFICIENTS} RGB coefficients, got shape {sh.shape}")
+    data[0:4 * SKY_SH_COEFFICIENTS].reshape(SKY_SH_COEFFICIENTS, 4)[:, :3] = sh
+    base = 4 * SKY_SH_COEFFICIENTS
     counts = np.array([min(len(directional), MAX_DIRECTIONAL_LIGHTS), min(len(point), MAX_POINT_LIGHTS), 0, 0],
                       np.int32)
-    data[4:8] = counts.view(np.float32)
-    base = 8
+    data[base:base + 4] = counts.view(np.float32)
+    base += 4
     for i, (direction, rgb) in enumerate(directional[:MAX_DIRECTIONAL_LIGHTS]):
         data[base + 4 * i: base + 4 * i + 3] = direction
         data[base + 4 * (MAX_DIRECTIONAL_LIGHTS + i): base + 4 * (MAX_DIRECTIONAL_LIGHTS + i) + 3] = rgb

@@ -42,6 +42,7 @@ from pyglm import glm
 from components import (
     DirectionalLight,
     Emissive,
+    HemisphereLight,
     Material,
     MeshRef,
     Mirror,
@@ -461,7 +462,7 @@ def images_through_surfaces(eye: glm.vec3 | Sequence[float], lo: np.ndarray, hi:
 # A change to one of these relights every face of every probe.  A PointLight relights only the
 # probes within its reach (``lights_reaching``) when it changes, comes, goes or moves (its own
 # Transform or a parent's: the transform stage's moved set holds descendants).
-LIGHTING_KINDS = (DirectionalLight, Skybox)
+LIGHTING_KINDS = (DirectionalLight, Skybox, HemisphereLight)  # the sun, and the sky's light and ambient
 
 
 def lights_reaching(eye: glm.vec3 | Sequence[float], far: float, lights: list[tuple[np.ndarray, float]]) -> list[int]:

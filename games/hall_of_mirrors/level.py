@@ -81,10 +81,6 @@ class HallOfMirrors(LevelGame):
         if fly is not None:
             fly.yaw, fly.pitch = yaw, pitch
 
-    def tour_frame_count(self, fps: float = 10.0) -> int:
-        """Frames at ``fps`` for one loop of the tour."""
-        return max(1, round(len(self.poses) * self.seconds * fps))
-
 
 def tour_poses(path: Path, rules: dict) -> list[list[float]]:
     """The ``[rules] tour`` of a hall level: a list of [x, y, z, yaw, pitch] (may be absent)."""

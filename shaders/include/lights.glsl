@@ -1,8 +1,9 @@
-// Scene lights, packed by engine/gpu/frame_uniforms.py (keep the sizes in step).
+// Scene lights, packed by engine/render/views.py lights_block (keep the two in step:
+// tests/test_ambient_light.py reads the block back as GLSL lays it out).
 #define MAX_DIRECTIONAL_LIGHTS 4
 #define MAX_POINT_LIGHTS 16
 layout(std140) uniform Lights {
-    vec4 ambient;                                   // rgb: ambient radiance
+    vec4 sky_sh[9];                                 // rgb: the sky's irradiance coefficients E_lm (engine/render/irradiance.py)
     ivec4 counts;                                   // x: directional, y: point
     vec4 directional_dir[MAX_DIRECTIONAL_LIGHTS];   // xyz: direction the light travels
     vec4 directional_color[MAX_DIRECTIONAL_LIGHTS]; // rgb: colour x intensity

@@ -12,3 +12,9 @@ bool hidden_in_view(float instance_code, uint view_mask) {
     uint kinds = (1u << VIEW_KIND_BITS) - 1u;
     return (code & view_mask & kinds) != 0u || ((code >> VIEW_KIND_BITS) & (view_mask >> VIEW_KIND_BITS)) == 0u;
 }
+
+// Hidden in every kind of view: drawn nowhere, so it casts no shadow either.
+bool hidden_everywhere(float instance_code) {
+    uint kinds = (1u << VIEW_KIND_BITS) - 1u;
+    return (uint(instance_code + 0.5) & kinds) == kinds;
+}

@@ -1,0 +1,345 @@
+"""Model fuzz: model files made at random, loaded with ``load_model`` and spawned with
+``spawn_model`` outside any level, and rendered for ``FRAMES`` frames.
+
+Each case writes an OBJ (with its MTL) or a GLB whose statements are drawn from adversarial
+pools: faces whose indices refer forward, count back, pass the file's end, are 0 or text,
+or name texture coordinates the file never gives; lines continued with a backslash; an
+``mtllib`` in a comment or naming a FIFO; map statements (``map_Kd``, ``norm``,
+``map_Bump``, ``bump``, ``map_Ke``) with options (``-s``, ``-o``, ``-bm``, ``-clamp``, an
+unknown one) naming an image, a 16-bit or grey map, garbage, a FIFO, a directory, a symlink
+loop, a missing file whose bare name is a FIFO, a file outside the model's folder; glTF
+materials whose textures are missing, not images, ``data:`` URIs of either kind, indices
+out of range; many chrome nodes of one mesh.  A case passes when ``load_model`` or
+``spawn_model`` raises an ``AssetError`` naming the model's file (and the world is left as
+it was), or the model spawns and ``FRAMES`` frames render with no NaN in the HDR target
+and ``ctx.error`` clean.  Any other exception, or a case still running after
+``CASE_SECONDS`` (a FIFO opened), is a failure.
+
+    python -m benchmarks fuzz --model-cases 300
+"""
+from __future__ import annotations
+
+import base64
+import io
+import json
+import os
+import random
+import struct
+import traceback
+import warnings
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from benchmarks.fuzz_cases import FRAMES  # frames rendered a case
+
+SIZE = (48, 32)
+
+
+@dataclass
+class ModelCase:
+    kind: str                 # "obj" or "glb"
+    files: dict[str, bytes]   # written beside the model (in the case's own folder)
+    mutations: list[str] = field(default_factory=list)
+
+    def describe(self) -> str:
+        return f"{self.kind}: " + "; ".join(self.mutations)
+
+
+# --- the shared files a case may name (in the fuzz folder's "shared" folder and "outside") -------
+
+_IMAGES = ["good.png", "grey.png", "n16.png", "garbage.png", "fifo.png", "folder.png", "loop.png", "gone.png",
+           "textures/fifo.png", "../outside/secret.png", "@OUTSIDE@/secret.png", "with space.png", "big16.png"]
+_OPTIONS = ["", "", "", "-s 2 2 1 ", "-o 0.5 0 0 ", "-bm 2 ", "-bm nan ", "-bm 99 ", "-clamp on ", "-mm 0 1 ",
+            "-blendu off -blendv off ", "-wobble 1 ", "-o ", "-type sphere "]
+
+
+def make_shared(folder: Path, outside: Path) -> None:
+    """The images and odd files cases name, made once: ``folder`` is where every case's
+    model is written (so the names above are relative to it), ``outside`` beside it."""
+    from PIL import Image
+
+    from benchmarks.level_fuzz import _png
+
+    folder.mkdir(parents=True, exist_ok=True)
+    outside.mkdir(parents=True, exist_ok=True)
+    (folder / "textures").mkdir(exist_ok=True)
+    Image.new("RGB", (8, 8), (200, 120, 40)).save(folder / "good.png")
+    Image.new("RGB", (8, 8), (200, 120, 40)).save(folder / "with space.png")
+    Image.fromarray(np.tile(np.arange(0, 256, 32, dtype=np.uint8), (8, 1))).convert("RGB").save(folder / "grey.png")
+    _png(folder / "n16.png", np.tile(np.array([32768, 32768, 65535], np.uint16), (4, 4, 1)), 2, 16)
+    _png(folder / "big16.png", np.zeros((4, 4, 3), np.uint16), 2, 16, (16384, 16384))
+    (folder / "garbage.png").write_bytes(bytes(range(256)) * 3)
+    Image.new("RGB", (4, 4), (255, 0, 0)).save(outside / "secret.png")
+    for name in ("fifo.png", "fifo.mtl"):  # textures/fifo.png is not there: its bare name is a FIFO
+        if not os.path.lexists(folder / name):
+            os.mkfifo(folder / name)
+    (folder / "folder.png").mkdir(exist_ok=True)
+    if not os.path.lexists(folder / "loop.png"):
+        (folder / "loop.png").symlink_to(folder / "loop.png")
+
+
+# --- cases ---------------------------------------------------------------------------------------
+
+def _face_lines(rng: random.Random, count: int, uvs: int, normals: int, mutations: list[str]) -> list[str]:
+    faces = []
+    for _ in range(rng.randint(1, 4)):
+        corners = []
+        form = rng.choice(["v", "v/vt", "v//vn", "v/vt/vn", "v/vt/vn", "v/vt/vn", "v", "odd"])
+        for _ in range(3):
+            index = rng.randint(1, count)
+            if form == "odd":
+                index = rng.choice([0, count + 1, -count - 1, -1, 10 ** 20])
+            parts = [str(index)]
+            if "vt" in form:
+                parts.append(str(rng.randint(1, max(uvs, 1) + rng.choice([0, 0, 0, 0, 0, 2]))))
+            elif "vn" in form:
+                parts.append("")
+            if "vn" in form:
+                parts.append(str(rng.randint(1, max(normals, 1) + rng.choice([0, 0, 0, 0, 0, 2]))))
+            corners.append("/".join(parts))
+        faces.append("f " + " ".join(corners))
+        mutations.append(f"face {form}")
+    if rng.random() < 0.2:
+        faces[0] = faces[0].replace(" ", " \\\n", 1)
+        mutations.append("a continued face line")
+    if rng.random() < 0.1:
+        faces.append("f 1 2 x")
+        mutations.append("a face of text")
+    return faces
+
+
+def random_obj(rng: random.Random) -> ModelCase:
+    mutations: list[str] = []
+    count = rng.randint(3, 8)
+    vertices = [f"v {rng.uniform(-1, 1):.3f} {rng.uniform(-1, 1):.3f} {rng.uniform(-1, 1):.3f}" for _ in range(count)]
+    uvs = rng.choice([0, 0, count])
+    normals = rng.choice([0, 1, count])
+    lines = vertices + [f"vt {rng.random():.3f} {rng.random():.3f}" for _ in range(uvs)]
+    late_normals = [f"vn 0 {rng.choice([-1, 1])} 0" for _ in range(normals)]
+    faces = _face_lines(rng, count, uvs, normals, mutations)
+    if rng.random() < 0.3:  # the normals after the faces: indices refer forward
+        body = lines + ["usemtl m"] + faces + late_normals
+        mutations.append("normals after the faces")
+    else:
+        body = lines + late_normals + ["usemtl m"] + faces
+    library = rng.choice(["m.mtl", "m.mtl", "m.mtl", "# mtllib fifo.mtl", "fifo.mtl", "gone.mtl",
+                          "../outside/m.mtl"])
+    mutations.append(f"mtllib {library}")
+    header = [library if library.startswith("#") else f"mtllib {library}"]
+    mtl = ["newmtl m", f"Kd {rng.choice(['0.8 0.8 0.8', '1 0.2 0.2', 'nan 0 0', '2 2 2'])}"]
+    for key in rng.sample(["Ke 0.8 0.4 0.2", "Ke 1 1 1", "Pm 1", "Pr 0.1", "refl 1", "Ke -1 0 0", "d 0.5"],
+                          rng.randint(0, 3)):
+        mtl.append(key)
+    for _ in range(rng.randint(0, 3)):
+        key = rng.choice(["map_Kd", "norm", "map_Bump", "bump", "map_Ke"])
+        statement = f"{key} {rng.choice(_OPTIONS)}{rng.choice(_IMAGES)}"
+        mtl.append(statement)
+        mutations.append(statement)
+    text = "\n".join(header + body) + "\n"
+    return ModelCase("obj", {"model.obj": text.encode(), "m.mtl": ("\n".join(mtl) + "\n").encode()}, mutations)
+
+
+def _png_bytes(colour: tuple[int, int, int]) -> bytes:
+    from PIL import Image
+
+    out = io.BytesIO()
+    Image.new("RGB", (4, 4), colour).save(out, format="PNG")
+    return out.getvalue()
+
+
+def random_glb(rng: random.Random) -> ModelCase:
+    """A sphere-ish mesh (an octahedron) drawn by 1 to 40 nodes, its one material's slots
+    naming images from the pools."""
+    mutations: list[str] = []
+    positions = np.array([(1, 0, 0), (-1, 0, 0), (0, 1, 0), (0, -1, 0), (0, 0, 1), (0, 0, -1)], np.float32) * 0.3
+    indices = np.array([(0, 2, 4), (2, 1, 4), (1, 3, 4), (3, 0, 4), (2, 0, 5), (1, 2, 5), (3, 1, 5), (0, 3, 5)],
+                       np.uint32)
+    uvs = (positions[:, :2] + 0.5).astype(np.float32)
+    blob = bytearray()
+    views = []
+
+    def view(data: bytes) -> int:
+        while len(blob) % 4:
+            blob.append(0)
+        views.append({"buffer": 0, "byteOffset": len(blob), "byteLength": len(data)})
+        blob.extend(data)
+        return len(views) - 1
+
+    accessors = [
+        {"bufferView": view(positions.tobytes()), "componentType": 5126, "count": 6, "type": "VEC3",
+         "min": positions.min(0).tolist(), "max": positions.max(0).tolist()},
+        {"bufferView": view(uvs.tobytes()), "componentType": 5126, "count": 6, "type": "VEC2"},
+        {"bufferView": view(indices.tobytes()), "componentType": 5125, "count": 24, "type": "SCALAR"},
+    ]
+    images = []
+    for _ in range(rng.randint(0, 3)):
+        choice = rng.choice(["file", "file", "embedded", "base64", "data", "bad view"])
+        if choice == "file":
+            images.append({"uri": rng.choice(_IMAGES).replace(" ", "%20")})
+        elif choice == "embedded":
+            images.append({"bufferView": view(_png_bytes((30, 200, 90))), "mimeType": "image/png"})
+        elif choice == "base64":
+            images.append({"uri": "data:image/png;base64," + base64.b64encode(_png_bytes((90, 30, 200))).decode()})
+        elif choice == "data":
+            images.append({"uri": "data:,fifo.png"})
+        else:
+            images.append({"bufferView": 99})
+        mutations.append(f"image {choice} {images[-1].get('uri', '')[:30]}")
+    material: dict = {"name": "fuzzed", "pbrMetallicRoughness": {
+        "baseColorFactor": [rng.random(), rng.random(), rng.random(), 1.0],
+        "metallicFactor": rng.choice([0.0, 1.0, 1.0, 2.0]), "roughnessFactor": rng.choice([0.0, 0.3, 1.0])}}
+    for slot in rng.sample(["baseColorTexture", "metallicRoughnessTexture", "normalTexture", "emissiveTexture"],
+                           rng.randint(0, 3)):
+        texture = {"index": rng.choice([0, 0, 0, 1, 2, 7])}
+        (material["pbrMetallicRoughness"] if slot in ("baseColorTexture", "metallicRoughnessTexture")
+         else material)[slot] = texture
+        mutations.append(f"{slot} -> texture {texture['index']}")
+    if rng.random() < 0.5:
+        material["emissiveFactor"] = rng.choice([[1, 1, 1], [0.8, 0.4, 0.2], [0, 0, 0], [-1, 0, 0]])
+    nodes = rng.choice([1, 1, 2, 12, 40])
+    mutations.append(f"{nodes} nodes, metallic {material['pbrMetallicRoughness']['metallicFactor']}")
+    doc = {"asset": {"version": "2.0"}, "scene": 0, "scenes": [{"nodes": list(range(nodes))}],
+           "nodes": [{"mesh": 0, "translation": [0.7 * (i % 8) - 2.5, 0.7 * (i // 8), 0.0]} for i in range(nodes)],
+           "meshes": [{"primitives": [{"attributes": {"POSITION": 0, "TEXCOORD_0": 1}, "indices": 2,
+                                       "material": 0}]}],
+           "materials": [material], "accessors": accessors, "bufferViews": views,
+           "buffers": [{"byteLength": len(blob)}]}
+    if images:
+        doc["images"] = images
+        doc["textures"] = [{"source": rng.choice([i, i, i, 9])} for i in range(len(images))]
+    text = json.dumps(doc).encode()
+    text += b" " * (-len(text) % 4)
+    while len(blob) % 4:
+        blob.append(0)
+    body = struct.pack("<I4s", len(text), b"JSON") + text + struct.pack("<I4s", len(blob), b"BIN\0") + bytes(blob)
+    return ModelCase("glb", {"model.glb": struct.pack("<4sII", b"glTF", 2, 12 + len(body)) + body}, mutations)
+
+
+def _glb_with(data: bytes, old: bytes, new: bytes) -> bytes:
+    """A GLB (as ``random_glb`` writes it) with ``old`` replaced in its JSON chunk."""
+    length = struct.unpack("<I", data[12:16])[0]
+    text = data[20:20 + length].replace(old, new).rstrip(b" ")
+    text += b" " * (-len(text) % 4)
+    rest = data[20 + length:]
+    body = struct.pack("<I4s", len(text), b"JSON") + text + rest
+    return struct.pack("<4sII", b"glTF", 2, 12 + len(body)) + body
+
+
+def random_model_case(rng: random.Random) -> ModelCase:
+    return random_obj(rng) if rng.random() < 0.6 else random_glb(rng)
+
+
+# --- running -------------------------------------------------------------------------------------
+
+class ModelFuzzer:
+    """One engine on a small lit scene; each case's model is written in ``folder / "models"``
+    (beside the shared files), loaded, spawned, rendered FRAMES frames and deleted."""
+
+    def __init__(self, ctx, folder: Path) -> None:
+        from pyglm import glm
+
+        from components import Camera, DirectionalLight, Material, MeshRef, Skybox, Transform, look_rotation
+        from engine.assets.mesh import box
+        from engine.core.game import Game
+        from engine.render.targets import CaptureTarget
+        from shell.app import Engine
+
+        class Scene(Game):
+            title = "model fuzz"
+
+            def build(self, world) -> None:
+                eye = glm.vec3(0, 1.0, 4)
+                world.spawn(Transform(position=eye, rotation=look_rotation(-eye)), Camera())
+                world.spawn(Skybox(face_size=8))
+                world.spawn(DirectionalLight(direction=(-0.3, -1, -0.5), intensity=2.0))
+                world.spawn(Transform(position=(0, -1.0, 0)), MeshRef(box((4, 0.1, 4))), Material())
+
+        self.ctx = ctx
+        self.folder = folder / "models"
+        self.outside = folder / "outside"
+        make_shared(self.folder, self.outside)
+        self.engine = Engine(Scene(), ctx)
+        self.world = self.engine.world
+        self.capture = CaptureTarget(ctx, SIZE)
+        self.baseline = set(self.world.entities())
+        self.refused = self.rendered = 0
+
+    def close(self) -> None:
+        self.capture.release()
+        self.engine.close()
+
+    def run(self, case: ModelCase, index: int = 0) -> str | None:
+        """None when the case passed, else why it failed."""
+        from benchmarks.level_fuzz import CASE_SECONDS, _deadline, _Hung
+        from engine.assets.models import spawn_model
+        from engine.core.errors import AssetError
+        from engine.core.frame_io import Output
+
+        names = {}
+        for name, data in case.files.items():
+            target = self.folder / f"case_{index}_{name}"
+            names[name] = target
+            text = data.replace(b"@OUTSIDE@", str(self.outside.resolve()).encode())
+            if name.endswith(".glb") and text != data:  # the JSON chunk grew: its lengths written again
+                text = _glb_with(data, b"@OUTSIDE@", str(self.outside.resolve()).encode())
+            if name.endswith(".obj"):
+                text = text.replace(b"mtllib m.mtl", f"mtllib case_{index}_m.mtl".encode())
+            target.write_bytes(text)
+        path = names[f"model.{case.kind}"]
+        try:
+            with warnings.catch_warnings(), _deadline(CASE_SECONDS):
+                warnings.simplefilter("ignore")
+                spawn_model(self.world, path, position=(0.0, 0.0, 0.0))
+        except AssetError as exc:
+            if str(path) not in str(exc):
+                return f"AssetError without the model's file name: {exc}"
+            if set(self.world.entities()) != self.baseline:
+                return "refused, but left entities in the world"
+            self.refused += 1
+            return None
+        except _Hung:
+            return f"loading hung for more than {CASE_SECONDS:g} s (a FIFO opened?)"
+        except Exception as exc:  # noqa: BLE001 - any other kind is what the fuzz is looking for
+            return f"spawn_model raised {type(exc).__name__}: {exc}\n{traceback.format_exc(limit=-3)}"
+        finally:
+            for target in names.values():
+                target.unlink(missing_ok=True)
+        problem = None
+        try:
+            for _ in range(FRAMES):
+                with warnings.catch_warnings(), _deadline(CASE_SECONDS):
+                    warnings.simplefilter("ignore")
+                    self.engine.frame(1.0 / 60.0, Output(self.capture.framebuffer, SIZE))
+                problem = problem or self._check_pixels()
+        except _Hung:
+            problem = f"a frame hung for more than {CASE_SECONDS:g} s"
+        except Exception as exc:  # noqa: BLE001
+            problem = f"frame raised {type(exc).__name__}: {exc}\n{traceback.format_exc(limit=-3)}"
+        finally:
+            for entity in list(self.world.entities()):
+                if entity not in self.baseline:
+                    self.world.delete_entity(entity)
+        if problem is None:
+            self.rendered += 1
+        return problem
+
+    def _check_pixels(self) -> str | None:
+        error = self.ctx.error
+        if error != "GL_NO_ERROR":
+            return f"ctx.error {error}"
+        targets = self.engine.renderer.targets
+        if targets is None:
+            return None
+        hdr = np.frombuffer(targets.color.read(), np.float16)
+        if not np.isfinite(hdr).all():
+            return f"{int((~np.isfinite(hdr)).sum())} non-finite values in the HDR colour target"
+        return None
+
+
+def fuzz_models(ctx, folder: Path, cases: int, seed: int = 0, report=None) -> tuple[int, list, dict[str, int]]:
+    """Run ``cases`` model cases (``benchmarks.fuzz_cases.run_cases``), their files in ``folder``."""
+    from benchmarks.fuzz_cases import run_cases
+
+    return run_cases(ModelFuzzer(ctx, folder), random_model_case, cases, seed, report)

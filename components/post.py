@@ -1,0 +1,123 @@
+"""How the active camera's image is exposed, tone mapped and bloomed: components on the
+camera entity, as Bevy puts ``Tonemapping``, ``Exposure`` and ``Bloom`` on its camera.
+
+The frame is drawn in linear HDR (half floats: a lamp may be 20 times brighter than white
+paper); the present stage turns it into the picture.  Its order (``engine/render/present.py``):
+every mirror and portal view is composited into the main image first, then **bloom** (on
+that finished HDR image, so a lamp glows directly and in every reflection, for the same
+cost whatever the number of mirrors), then **exposure** and the **tone curve**, then the sRGB
+encoding, then FXAA.  A camera with neither component keeps the plain look: no curve, the
+renderer's linear ``Renderer.exposure``.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+from components.tracking import HALF_MAX, ComponentValueError, TrackedComponent, boolean, choice, finite, integer
+
+# "none": clamp to [0, 1] (today's look); "aces": Stephen Hill's fit of the ACES RRT + sRGB
+# ODT (BakingLab's ACES.hlsl, with three.js's input scale of 1 / 0.6); "agx": Troy
+# Sobotka's AgX, base with the default (identity) look, as three.js r162+ writes it
+# (Filament's Rec. 2020 inset/outset matrices, the 6th-order sigmoid fit of Benjamin
+# Wrensch's minimal AgX); "pbr_neutral": the Khronos PBR Neutral tone mapper (2024).
+TONEMAP_CURVES = ("none", "aces", "agx", "pbr_neutral")
+BLOOM_COMPOSITES = ("energy_conserving", "additive")
+MAX_EXPOSURE_EV = 24.0      # 2**24: a moonlit scene brought to daylight and more
+MAX_ADAPT_SPEED = 100.0     # per second: faster is a jump, not an adaptation
+MAX_BLOOM_LEVELS = 8        # half-size steps below the screen: 8 spread a glow over ~1/2 of a 1080p frame
+MAX_BLOOM_RADIUS = 4.0      # the upsample tent's reach in texels of the smaller level
+_DEFAULT_MAX_EV = 8.0
+
+
+@dataclass(eq=False)
+class Tonemap(TrackedComponent):
+    """Exposure and tone curve of a camera's image (on the camera's entity).
+
+    - ``curve``: one of ``TONEMAP_CURVES`` ("agx" by default; "none" clamps, as a camera
+      without a Tonemap does).
+    - ``exposure``: in EV, stops: the linear image is scaled by ``2 ** exposure`` before the
+      curve (+1 doubles it).  With ``auto_exposure`` it is the compensation added to the
+      automatic value.  A Tonemap replaces ``Renderer.exposure`` for its camera.
+    - ``auto_exposure``: expose from the frame's mean log luminance (computed on the GPU,
+      never read back): the target is ``log2(key) - mean(log2 L)`` EV, clamped to
+      ``[min_ev, max_ev]``, reached at ``adapt_speed`` (each frame the exposure moves the
+      share ``1 - exp(-adapt_speed * dt)`` of the way to its target, so the gap shrinks
+      by ``e`` every ``1 / adapt_speed`` seconds).  ``key`` is the grey the mean is
+      brought to (0.18, middle grey).  A camera's first frame starts at its target.
+    """
+
+    curve: str = "agx"
+    exposure: float = 0.0
+    auto_exposure: bool = False
+    key: float = 0.18
+    adapt_speed: float = 1.5
+    min_ev: float = -8.0
+    max_ev: float = _DEFAULT_MAX_EV
+
+    def _validate(self, name: str, value: Any) -> Any:
+        if name == "curve":
+            return choice(self, name, value, TONEMAP_CURVES)
+        if name == "exposure":
+            return finite(self, name, value, low=-MAX_EXPOSURE_EV, high=MAX_EXPOSURE_EV)
+        if name == "auto_exposure":
+            return boolean(self, name, value)
+        if name == "key":
+            return finite(self, name, value, positive=True, high=1.0)
+        if name == "adapt_speed":
+            return finite(self, name, value, positive=True, high=MAX_ADAPT_SPEED)
+        if name in ("min_ev", "max_ev"):
+            value = finite(self, name, value, low=-MAX_EXPOSURE_EV, high=MAX_EXPOSURE_EV)
+            low = value if name == "min_ev" else self.__dict__.get("min_ev")
+            high = value if name == "max_ev" else self.__dict__.get("max_ev")
+            if low is not None and high is not None and low > high:
+                # During construction min_ev comes first: Tonemap(min_ev=9) is wrong about
+                # min_ev, not about the default max_ev (as Camera blames near and far).
+                if name == "max_ev" and "max_ev" not in self.__dict__ and value == _DEFAULT_MAX_EV:
+                    name = "min_ev"
+                raise ComponentValueError(f"Tonemap.{name} must keep min_ev <= max_ev, got min_ev={low} "
+                                          f"max_ev={high}")
+            return value
+        return value
+
+
+@dataclass(eq=False)
+class Bloom(TrackedComponent):
+    """A glow around bright things (on the camera's entity): Jimenez's mip-chain bloom (Call
+    of Duty: Advanced Warfare, SIGGRAPH 2014).  The finished HDR image is halved ``levels``
+    times with a 13-tap filter (the first step weighs its five boxes by Karis's
+    1 / (1 + luma), so a lone bright pixel does not flicker into a blob), then each level is
+    added into the next larger one through a 3x3 tent of ``radius`` texels; the result is
+    the mean of the levels' blurs, so it keeps the image's mean brightness.
+
+    - ``intensity`` (0..1): the bloom's share.  ``composite`` "energy_conserving" (the
+      default) mixes: ``image * (1 - intensity) + bloom * intensity`` (the mean is kept:
+      bright things spread light, nothing is added); "additive" adds ``bloom * intensity``.
+    - ``threshold`` (scene HDR units, before exposure; 0: everything blooms) with a soft
+      ``knee`` (a share of the threshold over which light fades in): only what is
+      brighter feeds the bloom.
+    - ``levels`` (1..8): how far a glow spreads (each level doubles it); fewer are made where
+      the image is too small to halve that often (a level is at least 2 pixels a side).
+    """
+
+    intensity: float = 0.1
+    threshold: float = 0.0
+    knee: float = 0.5
+    levels: int = 6
+    radius: float = 1.0
+    composite: str = "energy_conserving"
+
+    def _validate(self, name: str, value: Any) -> Any:
+        if name == "intensity":
+            return finite(self, name, value, low=0.0, high=1.0)
+        if name == "threshold":
+            return finite(self, name, value, low=0.0, high=HALF_MAX)
+        if name == "knee":
+            return finite(self, name, value, low=0.0, high=1.0)
+        if name == "levels":
+            return integer(self, name, value, low=1, high=MAX_BLOOM_LEVELS)
+        if name == "radius":
+            return finite(self, name, value, low=0.25, high=MAX_BLOOM_RADIUS)
+        if name == "composite":
+            return choice(self, name, value, BLOOM_COMPOSITES)
+        return value

@@ -1,0 +1,135 @@
+"""Bloom: Jimenez's mip-chain bloom ("Next Generation Post Processing in Call of Duty:
+Advanced Warfare", SIGGRAPH 2014), run by the present pass on the finished HDR image.
+
+Down: the image is halved ``levels`` times, each level drawn from the one above by the
+13-tap filter (``shaders/bloom_down.frag``; the first step with Karis's firefly weighting
+and the optional soft threshold).  Up: from the smallest, each level is added (blending
+ONE, ONE) into the next larger through a 3x3 tent (``shaders/bloom_up.frag``), so the
+half-size level ends up holding the sum of every level's blur.  The present shader takes
+that sum times ``1 / levels`` (the mean of the blurs: it keeps the image's mean) and mixes
+it in.  The image itself is only read: the main image the end images keep
+(``engine/render/end_images.py``) stays the linear HDR the views drew.
+
+Its cost is that of ``2 levels - 1`` small full-screen draws over at most a third of the
+screen's pixels, whatever the number of mirrors and portals composited into the image.
+The chain's textures are made at the first bloomed frame of a size and released when no
+camera asks for bloom (``release``).
+"""
+from __future__ import annotations
+
+import moderngl
+
+from components.post import Bloom
+from engine.render.bindings import PRESENT_UNIT, PassState, apply_pass_state
+from engine.render.shader_library import ShaderLibrary
+from engine.render.targets import release_framebuffer
+
+MIN_LEVEL_SIDE = 2   # no level smaller than this many pixels a side: fewer levels are made
+_DOWN = PassState()
+_UP = PassState(blend=(moderngl.ONE, moderngl.ONE))
+
+
+def level_sizes(size: tuple[int, int], levels: int) -> list[tuple[int, int]]:
+    """The chain's sizes below ``size``: each half the one above (rounded down), as many of
+    ``levels`` as keep both sides at least ``MIN_LEVEL_SIDE``."""
+    sizes = []
+    width, height = size
+    for _ in range(levels):
+        width, height = width // 2, height // 2
+        if width < MIN_LEVEL_SIDE or height < MIN_LEVEL_SIDE:
+            break
+        sizes.append((width, height))
+    return sizes
+
+
+class BloomPass:
+    """The mip chain and its two programs (and the first step's builds)."""
+
+    def __init__(self, ctx: moderngl.Context, shaders: ShaderLibrary) -> None:
+        self.ctx = ctx
+        self.shaders = shaders
+        self._vaos: dict[tuple, moderngl.VertexArray] = {}
+        self.textures: list[moderngl.Texture] = []
+        self._framebuffers: list[moderngl.Framebuffer] = []
+        self.levels = 0   # levels drawn by the last ``draw``
+        self._written: dict[tuple[int, str], object] = {}   # (vao id, uniform) -> the value last written
+
+    def _vao(self, fragment: str, **defines: str) -> moderngl.VertexArray:
+        key = (fragment, tuple(sorted(defines.items())))
+        vao = self._vaos.get(key)
+        if vao is None:
+            program = self.shaders.program("present.vert", fragment, defines=defines or None)
+            program["source"].value = PRESENT_UNIT
+            vao = self._vaos[key] = self.ctx.vertex_array(program, [])
+        return vao
+
+    def _set(self, vao: moderngl.VertexArray, name: str, value) -> None:
+        """Write a uniform only when its value changes (each write is a GL call)."""
+        key = (id(vao), name)
+        if self._written.get(key) != value:
+            vao.program[name].value = value
+            self._written[key] = value
+
+    def _chain(self, sizes: list[tuple[int, int]]) -> None:
+        if [t.size for t in self.textures] == sizes:
+            return
+        self.release_targets()
+        for size in sizes:
+            texture = self.ctx.texture(size, 4, dtype="f2")
+            texture.filter = (moderngl.LINEAR, moderngl.LINEAR)
+            texture.repeat_x = texture.repeat_y = False
+            self.textures.append(texture)
+            self._framebuffers.append(self.ctx.framebuffer([texture]))
+
+    def draw(self, hdr: moderngl.Texture, bloom: Bloom) -> moderngl.Texture | None:
+        """Bloom ``hdr`` (read only): returns the half-size texture holding the sum of the
+        levels' blurs (``self.levels`` of them), or None where the image is too small to
+        halve even once."""
+        sizes = level_sizes(hdr.size, bloom.levels)
+        self.levels = len(sizes)
+        if not sizes:
+            return None
+        self._chain(sizes)
+        source = hdr
+        for index, (size, framebuffer) in enumerate(zip(sizes, self._framebuffers, strict=False)):
+            if index == 0:
+                threshold = bloom.threshold > 0.0
+                vao = self._vao("bloom_down.frag", FIRST="1", **({"THRESHOLD": "1"} if threshold else {}))
+                if threshold:
+                    knee = bloom.threshold * bloom.knee
+                    self._set(vao, "threshold", (bloom.threshold, bloom.threshold - knee, 2.0 * knee,
+                                                 0.25 / max(knee, 1e-5)))
+            else:
+                vao = self._vao("bloom_down.frag")
+            framebuffer.use()
+            apply_pass_state(self.ctx, _DOWN, (0, 0, *size))
+            source.use(PRESENT_UNIT)
+            vao.render(moderngl.TRIANGLES, vertices=3)
+            source = self.textures[index]
+        up = self._vao("bloom_up.frag")
+        self._set(up, "radius", bloom.radius)
+        for index in range(len(sizes) - 2, -1, -1):
+            self._framebuffers[index].use()
+            apply_pass_state(self.ctx, _UP, (0, 0, *sizes[index]))
+            self.textures[index + 1].use(PRESENT_UNIT)
+            up.render(moderngl.TRIANGLES, vertices=3)
+        return self.textures[0]
+
+    def passes(self) -> int:
+        """Draws the last ``draw`` made (levels down, levels - 1 up)."""
+        return max(0, 2 * self.levels - 1)
+
+    def release_targets(self) -> None:
+        for framebuffer in self._framebuffers:
+            release_framebuffer(framebuffer)
+        for texture in self.textures:
+            texture.release()
+        self._framebuffers.clear()
+        self.textures.clear()
+
+    def release(self) -> None:
+        self.release_targets()
+        for vao in self._vaos.values():
+            vao.release()
+        self._vaos.clear()
+        self._written.clear()

@@ -1,0 +1,274 @@
+"""Diffuse image lighting: the irradiance of the sky, of the hemisphere fallback and of each
+probe's capture as nine spherical-harmonic coefficients (order 2), and the GPU table the
+probes' coefficients live in.
+
+The representation is Ramamoorthi and Hanrahan's ("An Efficient Representation for
+Irradiance Environment Maps", SIGGRAPH 2001): the radiance L(w) arriving from every
+direction is projected on the nine real orthonormal spherical harmonics Y_lm of bands 0-2,
+L_lm = integral of L(w) Y_lm(w) dw, and the irradiance of a surface of normal n,
+E(n) = integral of L(w) max(0, n.w) dw, is then E(n) = sum of A_l L_lm Y_lm(n) with
+A_0 = pi, A_1 = 2 pi / 3, A_2 = pi / 4 (the clamped cosine's own bands; the error against
+the exact integral is a few percent at most for smooth skies).
+
+**The convention, everywhere in the engine:** the nine coefficients stored (the Lights
+block's ``sky_sh``, a row of the irradiance table) are the *irradiance* coefficients
+E_lm = A_l L_lm, in the order (l, m) = (0,0), (1,-1), (1,0), (1,1), (2,-2), (2,-1), (2,0),
+(2,1), (2,2), each an RGB triple; ``shaders/include/ambient.glsl`` evaluates
+E(n) = sum E_lm Y_lm(n) with the Y_lm constants below, and a Lambertian surface of albedo a
+reflects a E(n) / pi.  A constant sky of radiance L gives E = pi L for every normal, so a
+white surface shows L.
+
+Where they come from:
+  - the sky: ``project_faces`` of the Skybox's faces (``engine.render.sky.build_faces``),
+    each texel weighted by its solid angle, worked out on the CPU by the prepare stage when
+    the Skybox changes (``systems/prepare_system.py``);
+  - no Skybox: a ``HemisphereLight`` (``components/ambient.py``; a dim default when there is
+    none either), whose upper half of the sphere has radiance ``sky`` and lower half
+    ``ground``: ``hemisphere_sh`` in closed form.  Projected to order 2 it is exactly
+    E(n) / pi = mix(ground, sky, (1 + n.y) / 2), three.js's HemisphereLight;
+  - a probe with an influence box: ``IrradianceTable.project`` after each capture's mip chain,
+    on the GPU (``shaders/irradiance_sh.frag`` reads a 16-texel level of the cube and writes
+    the probe's row of the table): nothing is read back and nothing waits.
+
+The scene shader blends them per pixel by the engine's probe-blending rule
+(``engine.rules.probe_rules.probe_blend``: the two influence boxes weighing most at the
+shaded point, each by its linear falloff, normalised only when they sum past 1, the sky
+taking the rest), reading the boxes from the Irradiance uniform block
+(``irradiance_block``) and their coefficients from the table.  Why per pixel and not per
+instance: every object gets it (not only reflective ones, whose rows carry probe weights),
+a floor or wall spanning two rooms takes each room's light where it lies, nothing is
+rewritten in the instance rows when a thing moves, and a pixel outside every box pays for
+the loop over the boxes and nothing else (the table is read in a loop whose count is the
+boxes found, which llvmpipe skips when no pixel of a quad found one).
+
+Feedback.  A probe's capture is lit by the sky's irradiance alone: the scene pass binds an
+empty Irradiance block while a probe is drawn (``IrradianceTable.bind``), so no probe's
+picture depends on any probe's irradiance, and a still scene's probes settle in one capture
+(with probe irradiance in captures, each capture would change the next: one more bounce per
+capture, never still, and two probes that see each other would recapture each other).
+"""
+from __future__ import annotations
+
+import logging
+import math
+from collections.abc import Iterable
+from typing import TYPE_CHECKING
+
+import moderngl
+import numpy as np
+
+from engine.core.cube_faces import face_directions
+from engine.render.bindings import (
+    CUBE_MIP_UNIT,
+    IRRADIANCE_BINDING,
+    IRRADIANCE_UNIT,
+    PassState,
+    apply_pass_state,
+    bind_uniform_block,
+)
+from engine.render.targets import release_framebuffer
+
+if TYPE_CHECKING:
+    from engine.render.probes import ProbeCube
+    from engine.render.renderer import Renderer
+
+LOG = logging.getLogger("speculum")
+
+SH_COEFFICIENTS = 9
+# Y_lm(x, y, z) = SH_CONSTANTS[i] x the i-th polynomial of ``sh_basis`` (real, orthonormal).
+_Y0, _Y1 = 0.5 * math.sqrt(1.0 / math.pi), math.sqrt(3.0 / (4.0 * math.pi))
+_Y2, _Y20, _Y22 = 0.5 * math.sqrt(15.0 / math.pi), 0.25 * math.sqrt(5.0 / math.pi), 0.25 * math.sqrt(15.0 / math.pi)
+SH_CONSTANTS = (_Y0, _Y1, _Y1, _Y1, _Y2, _Y2, _Y20, _Y2, _Y22)
+# The clamped cosine's band factors A_l, per coefficient (Ramamoorthi and Hanrahan, eq. 8).
+BAND_FACTORS = (math.pi,) + (2.0 * math.pi / 3.0,) * 3 + (math.pi / 4.0,) * 5
+MAX_IRRADIANCE_PROBES = 32   # influence boxes the scene shader blends from (more: the first kept, a warning)
+PROJECTION_FACE_SIZE = 16    # texels across a face at the cube level the GPU projection reads
+IRRADIANCE_BLOCK_BYTES = 16 + 2 * 16 * MAX_IRRADIANCE_PROBES
+
+
+def sh_basis(directions: np.ndarray) -> np.ndarray:
+    """The nine Y_lm at unit ``directions`` (..., 3): (..., 9), float64."""
+    d = np.asarray(directions, np.float64)
+    x, y, z = d[..., 0], d[..., 1], d[..., 2]
+    c = SH_CONSTANTS
+    return np.stack([np.full_like(x, c[0]), c[1] * y, c[2] * z, c[3] * x, c[4] * x * y, c[5] * y * z,
+                     c[6] * (3.0 * z * z - 1.0), c[7] * x * z, c[8] * (x * x - y * y)], axis=-1)
+
+
+def texel_solid_angles(size: int) -> np.ndarray:
+    """The solid angle of each texel of a cube face of ``size`` texels (size, size): exact,
+    from the area of a face's corner region, A(s, t) = atan2(s t, sqrt(s^2 + t^2 + 1)); the
+    six faces' texels add up to 4 pi.  The same for every face (and rows or columns)."""
+    edges = np.linspace(-1.0, 1.0, size + 1)
+    s0, t0 = np.meshgrid(edges[:-1], edges[:-1], indexing="ij")
+    s1, t1 = np.meshgrid(edges[1:], edges[1:], indexing="ij")
+
+    def corner(s, t):
+        return np.arctan2(s * t, np.sqrt(s * s + t * t + 1.0))
+
+    return corner(s1, t1) - corner(s0, t1) - corner(s1, t0) + corner(s0, t0)
+
+
+def project_faces(faces: np.ndarray) -> np.ndarray:
+    """Irradiance coefficients E_lm (9, 3) of a cube map's six faces (6, n, n, 3) of linear
+    radiance, in GL's face order with rows along t (``face_directions``)."""
+    faces = np.asarray(faces, np.float64)
+    n = faces.shape[1]
+    weights = texel_solid_angles(n)
+    coefficients = np.zeros((SH_COEFFICIENTS, 3))
+    for face in range(6):
+        basis = sh_basis(face_directions(face, n)) * weights[..., None]  # (n, n, 9)
+        coefficients += np.einsum("tsk,tsc->kc", basis, faces[face, ..., :3])
+    return coefficients * np.array(BAND_FACTORS)[:, None]
+
+
+def hemisphere_sh(sky: Iterable[float], ground: Iterable[float]) -> np.ndarray:
+    """Irradiance coefficients (9, 3) of radiance ``sky`` from every direction above the
+    horizon (y > 0) and ``ground`` below, in closed form: with a = (sky + ground) / 2 and
+    b = (sky - ground) / 2, L = a + b sign(y) has L_00 = 2 sqrt(pi) a and L_1,-1 =
+    2 pi sqrt(3 / (4 pi)) b and nothing else (sign(y) is odd, the band-2 terms even in y), so
+    E(n) = pi a + pi b n.y."""
+    sky = np.asarray(tuple(sky)[:3], np.float64)
+    ground = np.asarray(tuple(ground)[:3], np.float64)
+    coefficients = np.zeros((SH_COEFFICIENTS, 3))
+    coefficients[0] = math.pi * (sky + ground) / 2.0 / SH_CONSTANTS[0]
+    coefficients[1] = math.pi * (sky - ground) / 2.0 / SH_CONSTANTS[1]
+    return coefficients
+
+
+def evaluate_sh(coefficients: np.ndarray, normals: np.ndarray) -> np.ndarray:
+    """Irradiance E(n) (..., 3) at unit ``normals`` (..., 3) from coefficients (9, 3)."""
+    return sh_basis(normals) @ np.asarray(coefficients, np.float64)
+
+
+def irradiance_block(boxes: Iterable[tuple[Iterable[float], Iterable[float], float, int]]) -> bytes:
+    """The std140 Irradiance block (``shaders/include/ambient.glsl``): the count, then per box
+    its centre with its blend distance, and its half size with its table row."""
+    boxes = list(boxes)[:MAX_IRRADIANCE_PROBES]
+    data = np.zeros(IRRADIANCE_BLOCK_BYTES // 4, np.float32)
+    data[0:4] = np.array([len(boxes), 0, 0, 0], np.int32).view(np.float32)
+    base = 4
+    for i, (centre, half, blend, row) in enumerate(boxes):
+        data[base + 4 * i: base + 4 * i + 4] = (*tuple(centre)[:3], blend)
+        data[base + 4 * (MAX_IRRADIANCE_PROBES + i): base + 4 * (MAX_IRRADIANCE_PROBES + i) + 4] = \
+            (*tuple(half)[:3], float(row))
+    return data.tobytes()
+
+
+class IrradianceTable:
+    """The probes' irradiance on the GPU: a texture of ``MAX_IRRADIANCE_PROBES`` rows of nine
+    RGBA32F texels (row r, texel i: coefficient E_i of the probe given row r), written by
+    ``project`` after each capture, and the Irradiance uniform block of the influence boxes
+    whose rows hold a capture (``set_boxes``).  The scene pass binds both at the start of
+    each of its passes (``bind``): units 3-5 serve other images in the passes between."""
+
+    STATE = PassState()  # no depth test, no blending, no clip distances
+
+    def __init__(self, renderer: Renderer) -> None:
+        self.renderer = renderer
+        self.ctx = ctx = renderer.ctx
+        self.table = ctx.texture((SH_COEFFICIENTS, MAX_IRRADIANCE_PROBES), 4, dtype="f4")
+        self.table.filter = (moderngl.NEAREST, moderngl.NEAREST)
+        self.framebuffer = ctx.framebuffer(color_attachments=[self.table])
+        self.ubo = ctx.buffer(irradiance_block(()))
+        self.empty_ubo = ctx.buffer(irradiance_block(()))  # bound while a probe is captured: sky only
+        self.rows: dict[int, int] = {}   # probe owner -> its row (a capture was projected into it)
+        self._boxes: list[tuple[int, tuple, tuple, float]] = []  # (owner, centre, half size, blend distance)
+        self._block = irradiance_block(())
+        self._stale = False
+        self._warned = False
+        self._vao: moderngl.VertexArray | None = None
+        self.projections = 0  # rows written since made (tests and the overlay read it)
+
+    # --- the boxes -----------------------------------------------------------------------------
+    def set_boxes(self, boxes: Iterable[tuple[int, Iterable[float], Iterable[float], float]]) -> None:
+        """The influence boxes probes serve: (owner, centre, size, blend distance) each.  Only
+        those whose probe has a projected capture reach the shader (a row not written holds
+        whatever the GPU left there)."""
+        kept = sorted((int(owner), tuple(map(float, centre)), tuple(float(v) / 2.0 for v in size), float(blend))
+                      for owner, centre, size, blend in boxes)
+        if len(kept) > MAX_IRRADIANCE_PROBES and not self._warned:
+            LOG.warning("speculum: %d reflection probes with influence boxes; the ambient light blends from the "
+                        "first %d (MAX_IRRADIANCE_PROBES) by entity id, the rest light nothing", len(kept),
+                        MAX_IRRADIANCE_PROBES)
+            self._warned = True
+        if kept != self._boxes:
+            self._boxes = kept
+            self._stale = True
+
+    def _row_for(self, owner: int) -> int | None:
+        row = self.rows.get(owner)
+        if row is None:
+            taken = set(self.rows.values())
+            free = next((r for r in range(MAX_IRRADIANCE_PROBES) if r not in taken), None)
+            if free is None:
+                return None
+            row = self.rows[owner] = free
+            self._stale = True
+        return row
+
+    # --- the GPU projection ----------------------------------------------------------------------
+    def project(self, owner: int, cube: ProbeCube) -> bool:
+        """Project probe ``owner``'s capture (its mip chain built) into its row: one draw of
+        nine fragments, each summing one coefficient over the six faces of the cube's
+        ``PROJECTION_FACE_SIZE``-texel level, every texel weighted by its solid angle.  False
+        when the table is full (the probe lights nothing; ``set_boxes`` warned)."""
+        row = self._row_for(owner)
+        if row is None:
+            return False
+        resolution = cube.resolution
+        level = max(0, resolution.bit_length() - 1 - (PROJECTION_FACE_SIZE.bit_length() - 1))
+        vao = self._program()
+        program = vao.program
+        program["level"].value = float(level)
+        program["level_size"].value = max(1, resolution >> level)
+        self.framebuffer.use()
+        apply_pass_state(self.ctx, self.STATE, (0, row, SH_COEFFICIENTS, 1))
+        cube.texture.use(CUBE_MIP_UNIT)
+        vao.render(moderngl.TRIANGLES, vertices=3)
+        self.renderer.sky.use(CUBE_MIP_UNIT)  # not left bound where the next capture draws into it
+        self.projections += 1
+        self.renderer.checkpoint("probe irradiance projection")
+        return True
+
+    def _program(self) -> moderngl.VertexArray:
+        if self._vao is None:
+            program = self.renderer.shaders.program("fullscreen.vert", "irradiance_sh.frag")
+            program["source"].value = CUBE_MIP_UNIT
+            self._vao = self.ctx.vertex_array(program, [])
+        return self._vao
+
+    def read_row(self, owner: int) -> np.ndarray:
+        """Probe ``owner``'s coefficients (9, 3) as the GPU wrote them (tests; reads back)."""
+        row = self.rows[owner]
+        data = np.frombuffer(self.table.read(), np.float32).reshape(MAX_IRRADIANCE_PROBES, SH_COEFFICIENTS, 4)
+        return data[row, :, :3].astype(np.float64)
+
+    # --- binding -------------------------------------------------------------------------------
+    def bind(self, capturing: bool) -> None:
+        """Bind the table and the Irradiance block for a scene pass: the boxes, or none while a
+        probe is captured (the module docstring: captures see the sky's irradiance alone)."""
+        if self._stale:
+            block = irradiance_block((centre, half, blend, self.rows[owner])
+                                     for owner, centre, half, blend in self._boxes if owner in self.rows)
+            if block != self._block:
+                self.ubo.write(block)
+                self._block = block
+            self._stale = False
+        self.table.use(IRRADIANCE_UNIT)
+        bind_uniform_block(self.ctx, self.empty_ubo if capturing else self.ubo, IRRADIANCE_BINDING)
+
+    def drop(self, owner: int) -> None:
+        """Probe ``owner`` is gone: its row is free (and no box names it)."""
+        if self.rows.pop(owner, None) is not None:
+            self._stale = True
+
+    def release(self) -> None:
+        if self._vao is not None:
+            self._vao.release()
+            self._vao = None
+        release_framebuffer(self.framebuffer)
+        for obj in (self.table, self.ubo, self.empty_ubo):
+            obj.release()
+        self.rows.clear()
+

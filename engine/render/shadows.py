@@ -1,0 +1,291 @@
+"""Shadow maps: drawn once a frame at most, by the shadows stage, and read by every view.
+
+A directional light's map is one tile of a depth atlas (a tile a light, up to
+``MAX_DIRECTIONAL_LIGHTS``), drawn from an orthographic camera fitted to the whole level
+(``engine/rules/shadow_rules.py``), so the main camera, each mirror and portal view and each
+probe face find their shadows in the same map, and the same shadow shows directly, in a
+mirror and through a portal.  A point light's map is a cube of distances (distance / range
+in a 32-bit float channel), drawn in one layered pass where the path self-check trusts the
+layered cube capture (``engine/render/path_checks.py``, the probes' check), else as six
+views; at most ``MAX_POINT_SHADOWS`` point lights cast shadows (two cube samplers), the
+rest light without and are counted in ``RenderStats.shadows_cut``.
+
+Nothing here decides when a map is drawn again: the shadows stage does
+(``systems/shadow_system.py``, from the frame's change sets).  The Shadows uniform block
+(``shaders/include/shadows.glsl``) holds each light's atlas matrix and filter, written when
+a map is drawn or a light's shadows are turned off.
+"""
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import moderngl
+import numpy as np
+from pyglm import glm
+
+from components.limits import ALL_LAYERS
+from engine.core.cube_faces import CUBE_FACES
+from engine.render.bindings import (
+    CAMERA_BINDING,
+    POINT_SHADOW_UNITS,
+    SCENE_CLIPS,
+    SHADOW_ATLAS_UNIT,
+    SHADOWS_BINDING,
+    PassState,
+    apply_pass_state,
+    bind_uniform_block,
+)
+from engine.render.raw_gl import LayeredCubeTarget
+from engine.render.targets import release_framebuffer
+from engine.render.views import MAX_DIRECTIONAL_LIGHTS, MAX_POINT_LIGHTS, View
+
+if TYPE_CHECKING:
+    from engine.render.renderer import Renderer
+    from engine.rules.shadow_rules import DirectionalFit
+
+MAX_POINT_SHADOWS = 2  # cube samplers in shaders/include/shadows.glsl
+SHADOW_FILTERS = ("grid", "single")
+SHADOWS_BLOCK_BYTES = 64 * MAX_DIRECTIONAL_LIGHTS + 16 * MAX_DIRECTIONAL_LIGHTS + 4 * MAX_POINT_LIGHTS \
+    + 16 * MAX_POINT_SHADOWS
+# The casters' slope-scaled depth offset (glPolygonOffset factor, units): with the normal
+# offset in the lookup, no acne on the sample level's slanted and curved surfaces.
+SLOPE_BIAS = (1.5, 2.0)
+POINT_NEAR = 0.02   # metres: a point light's cube sees casters from here out
+# Depth only, both faces: a quad (a mirror, a wall of one face) casts whichever side the
+# light reaches; the normal offset keeps a closed mesh's lit side off its own back.
+_CASTERS = PassState(depth_func="<", cull=False, clips=SCENE_CLIPS)
+
+
+class ShadowMaps:
+    """The shadow maps' GL objects: the directional atlas, the point lights' cubes, the
+    Shadows block, and the caster programs."""
+
+    def __init__(self, renderer: Renderer) -> None:
+        self.renderer = renderer
+        ctx = self.ctx = renderer.ctx
+        self.block = np.zeros(SHADOWS_BLOCK_BYTES // 4, np.float32)
+        self._slots = self.block[(64 + 16) * MAX_DIRECTIONAL_LIGHTS // 4:][:MAX_POINT_LIGHTS].view(np.int32)
+        self._slots[:] = -1
+        self.ubo = ctx.buffer(self.block.tobytes())
+        self._depth_program = renderer.shaders.program("shadow.vert", "shadow.frag")
+        self._distance_program = renderer.shaders.program("shadow.vert", "shadow.frag", defines={"DISTANCE": "1"})
+        self._layered_program: moderngl.Program | None = None
+        for program in (self._depth_program, self._distance_program):
+            program["Camera"].binding = CAMERA_BINDING
+        # Until a light casts: a 1x1 atlas at the far depth and 1x1 cubes at the range's end
+        # (every lookup lit), so the scene programs always have something defined to read.
+        self.atlas = self._make_atlas((1, 1))
+        self.tile = 0
+        self._atlas_framebuffer = ctx.framebuffer(depth_attachment=self.atlas)
+        self._atlas_framebuffer.clear(depth=1.0)
+        self._empty_cube = ctx.texture_cube((1, 1), 1, np.ones(6, np.float32).tobytes(), dtype="f4")
+        self.cubes: dict[int, moderngl.TextureCube] = {}        # slot -> the light's distance cube
+        self._face_framebuffers: dict[int, list[moderngl.Framebuffer]] = {}
+        self._face_depth: dict[int, moderngl.Texture] = {}
+        self._layered: dict[int, LayeredCubeTarget] = {}
+        # How edges are filtered: "grid" (2 x 2 taps, 3 x 3 past a softness of 1, four on a
+        # cube), each a bilinear percentage-closer comparison; "single" (one such tap: a
+        # one-texel edge).  On a software rasteriser every tap is CPU time for every pixel a
+        # light reaches (the benchmark scene at 640x360: a still frame 1.24x the frame without
+        # shadows with the grid, 1.04x with one tap; benchmarks/lighting.py), so there the
+        # default is "single"; set "grid" for equal quality (maps are drawn again).
+        self.filter = "single" if renderer.caps.software else "grid"
+
+    # --- the atlas --------------------------------------------------------------------------
+    def _make_atlas(self, size: tuple[int, int]) -> moderngl.Texture:
+        atlas = self.ctx.depth_texture(size)
+        atlas.compare_func = "<="   # sampler2DShadow: each tap a bilinear percentage-closer lookup
+        atlas.filter = (moderngl.LINEAR, moderngl.LINEAR)
+        atlas.repeat_x = atlas.repeat_y = False
+        return atlas
+
+    def fit_atlas(self, tile: int) -> None:
+        """Make the atlas hold ``MAX_DIRECTIONAL_LIGHTS`` tiles of ``tile`` texels (2 x 2),
+        keeping it when it does; a new atlas leaves every map to be drawn again."""
+        if tile == self.tile:
+            return
+        release_framebuffer(self._atlas_framebuffer)
+        self.atlas.release()
+        self.atlas = self._make_atlas((2 * tile, 2 * tile))
+        self._atlas_framebuffer = self.ctx.framebuffer(depth_attachment=self.atlas)
+        self.tile = tile
+
+    def tile_origin(self, slot: int) -> tuple[int, int]:
+        return (slot % 2) * self.tile, (slot // 2) * self.tile
+
+    def draw_directional(self, slot: int, fit: DirectionalFit, resolution: int, softness: float) -> None:
+        """Draw directional light ``slot``'s map (its tile of the atlas, ``resolution`` texels
+        a side) from ``fit``, and write its row of the Shadows block."""
+        x, y = self.tile_origin(slot)
+        rect = (x, y, resolution, resolution)
+        framebuffer = self._atlas_framebuffer
+        framebuffer.use()
+        apply_pass_state(self.ctx, _CASTERS, rect, rect)
+        framebuffer.clear(depth=1.0, viewport=rect)
+        view = View(view=fit.view, proj=fit.proj, eye=glm.vec3(0.0), size=(resolution, resolution),
+                    name=f"shadow {slot}", kinds=0, layers=ALL_LAYERS)
+        self._draw_casters(view, self._depth_program)
+        # World -> the tile's uv and depth in [0, 1].
+        width = self.atlas.size[0]
+        scale = resolution / width
+        to_tile = glm.translate(glm.vec3(x / width + 0.5 * scale, y / width + 0.5 * scale, 0.5)) \
+            * glm.scale(glm.vec3(0.5 * scale, 0.5 * scale, 0.5))
+        self.block[16 * slot:16 * slot + 16] = np.array((to_tile * fit.view_proj).to_list(), np.float32).ravel()
+        base = 16 * MAX_DIRECTIONAL_LIGHTS + 4 * slot
+        self.block[base:base + 4] = (fit.texel, softness, 1.0 / width, self._taps(softness))
+        self.renderer.checkpoint(f"shadow map of directional light {slot}")
+
+    @property
+    def filter(self) -> str:
+        return self._filter
+
+    @filter.setter
+    def filter(self, value: str) -> None:
+        if value not in SHADOW_FILTERS:
+            raise ValueError(f"shadow filter must be one of {', '.join(map(repr, SHADOW_FILTERS))}, got {value!r}")
+        self._filter = value
+
+    def _taps(self, softness: float) -> float:
+        """Taps a side of a directional light's grid."""
+        if self._filter == "single":
+            return 1.0
+        return 3.0 if softness > 1.0 else 2.0
+
+    def clear_directional(self, slot: int) -> None:
+        """Directional light ``slot`` casts no shadow (off, or no light there)."""
+        self.block[16 * MAX_DIRECTIONAL_LIGHTS + 4 * slot + 3] = 0.0
+
+    # --- point lights ---------------------------------------------------------------------
+    def draw_point(self, slot: int, light_index: int, position: glm.vec3, light_range: float, resolution: int,
+                   softness: float, layered: bool) -> str:
+        """Draw point light ``light_index``'s distance cube into cube ``slot``: one layered
+        pass (``layered``) or six views.  Returns the path taken."""
+        cube = self._cube(slot, resolution)
+        views = [View(view=glm.lookAt(position, position + glm.vec3(forward), glm.vec3(up)),
+                      proj=glm.perspective(glm.radians(90.0), 1.0, POINT_NEAR, max(light_range, POINT_NEAR * 2)),
+                      eye=glm.vec3(position), size=(resolution, resolution), name=f"point shadow {slot} face {face}",
+                      kinds=0, layers=ALL_LAYERS)
+                 for face, (forward, _, up) in enumerate(CUBE_FACES)]
+        path = "layered" if layered and self._draw_layered(slot, cube, views, light_range) else "six_pass"
+        if path == "six_pass":
+            self._distance_program["light_range"].value = light_range
+            for face, view in enumerate(views):
+                framebuffer = self._face_framebuffers[slot][face]
+                framebuffer.use()
+                rect = (0, 0, resolution, resolution)
+                apply_pass_state(self.ctx, _CASTERS, rect)
+                framebuffer.clear(1.0, 1.0, 1.0, 1.0, depth=1.0)
+                self._draw_casters(view, self._distance_program)
+        self._slots[light_index] = slot
+        base = (64 + 16) * MAX_DIRECTIONAL_LIGHTS // 4 + MAX_POINT_LIGHTS + 4 * slot
+        # A texel's angle: 90 degrees over the face's texels.
+        self.block[base:base + 4] = (np.pi / 2.0 / resolution, softness, light_range,
+                                     1.0 if self.filter == "single" else 4.0)
+        self.renderer.checkpoint(f"shadow cube of point light {light_index}")
+        return path
+
+    def keep_point(self, slot: int, light_index: int) -> None:
+        """Point light ``light_index`` reads cube ``slot`` as drawn before."""
+        self._slots[light_index] = slot
+
+    def clear_points(self) -> None:
+        """No point light casts (each drawn again sets its own slot)."""
+        self._slots[:] = -1
+
+    def forget_point(self, light_index: int) -> None:
+        self._slots[light_index] = -1
+
+    def _cube(self, slot: int, resolution: int) -> moderngl.TextureCube:
+        cube = self.cubes.get(slot)
+        if cube is not None and cube.size[0] == resolution:
+            return cube
+        self._drop_cube(slot)
+        ctx = self.ctx
+        cube = self.cubes[slot] = ctx.texture_cube((resolution, resolution), 1, dtype="f4")
+        cube.filter = (moderngl.NEAREST, moderngl.NEAREST)
+        depth = self._face_depth[slot] = ctx.depth_texture((resolution, resolution))
+        placeholder = ctx.texture((resolution, resolution), 1, dtype="f4")
+        try:
+            framebuffers = self._face_framebuffers[slot] = []
+            for face in range(6):
+                framebuffer = ctx.framebuffer([placeholder], depth)
+                framebuffers.append(framebuffer)
+                self.renderer.raw_gl.attach_cube_face(framebuffer, cube, face)
+        finally:
+            placeholder.release()
+        return cube
+
+    def _draw_layered(self, slot: int, cube: moderngl.TextureCube, views: list[View], light_range: float) -> bool:
+        """The six faces in one pass through ``shadow_layered.geom``; False where the
+        layered target cannot be made (the caller draws six views)."""
+        target = self._layered.get(slot)
+        if target is None or target.cube is not cube:
+            if target is not None:
+                target.release()
+            try:
+                target = self._layered[slot] = LayeredCubeTarget(self.ctx, cube)
+            except RuntimeError:
+                return False
+        program = self._layered_program
+        if program is None:
+            program = self._layered_program = self.renderer.shaders.program(
+                "shadow.vert", "shadow.frag", "shadow_layered.geom", defines={"DISTANCE": "1", "LAYERED": "1"})
+            program["Camera"].binding = CAMERA_BINDING
+        program["light_range"].value = light_range
+        program["face_view_proj"].write(b"".join(v.view_proj.to_bytes() for v in views))
+        size = (0, 0, target.size, target.size)
+        apply_pass_state(self.ctx, _CASTERS, size)
+        target.bind()
+        try:
+            target.clear((1.0, 1.0, 1.0, 1.0))  # distance / range: nothing nearer than the range
+            self._draw_casters(views[0], program)
+        finally:
+            target.unbind()
+        return True
+
+    # --- drawing --------------------------------------------------------------------------
+    def _draw_casters(self, view: View, program: moderngl.Program) -> None:
+        renderer = self.renderer
+        ctx = self.ctx
+        renderer.bind_view(view)
+        ctx.polygon_offset = SLOPE_BIAS
+        try:
+            for batch in renderer.opaque_batches():
+                if batch.count:
+                    batch.draw(program)
+                    renderer.stats.shadow_draw_calls += 1
+        finally:
+            ctx.polygon_offset = (0.0, 0.0)
+
+    def upload(self) -> None:
+        self.ubo.write(self.block.tobytes())
+
+    def bind(self) -> None:
+        """Bind the maps and the Shadows block for a scene pass (every pass: the units are
+        shared with passes that are not scene passes)."""
+        self.atlas.use(SHADOW_ATLAS_UNIT)
+        for slot, unit in enumerate(POINT_SHADOW_UNITS):
+            self.cubes.get(slot, self._empty_cube).use(unit)
+        bind_uniform_block(self.ctx, self.ubo, SHADOWS_BINDING)
+
+    def _drop_cube(self, slot: int) -> None:
+        for framebuffer in self._face_framebuffers.pop(slot, []):
+            release_framebuffer(framebuffer)
+        for table in (self.cubes, self._face_depth):
+            obj = table.pop(slot, None)
+            if obj is not None:
+                obj.release()
+        target = self._layered.pop(slot, None)
+        if target is not None:
+            target.release()
+
+    def drop_unused_cubes(self, used: set[int]) -> None:
+        for slot in [s for s in self.cubes if s not in used]:
+            self._drop_cube(slot)
+
+    def release(self) -> None:
+        for slot in list(self.cubes):
+            self._drop_cube(slot)
+        release_framebuffer(self._atlas_framebuffer)
+        for obj in (self.atlas, self._empty_cube, self.ubo):
+            obj.release()

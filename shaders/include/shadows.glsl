@@ -1,0 +1,74 @@
+// Shadow maps, made once a frame (at most) and read by every view (engine/render/shadows.py).
+// Directional lights: one depth atlas, a tile a light, each fitted to the whole level
+// (engine/rules/shadow_rules.py), read with hardware depth comparison (sampler2DShadow:
+// bilinear percentage-closer filtering per tap) at a grid of taps.  Point lights: a cube a
+// light holding distance / range, compared by hand.  Bias is a normal offset (the point looked
+// up is moved off the surface along its geometric normal, more at grazing light, by the
+// texel's world size: Holbein's "normal offset shadows", 2011) plus the slope-scaled depth
+// offset the caster pass draws with; nothing is offset along the light, so contact is kept.
+#define MAX_POINT_SHADOWS 2   // engine/render/shadows.py MAX_POINT_SHADOWS: the cube samplers below
+layout(std140) uniform Shadows {
+    mat4 directional_matrix[MAX_DIRECTIONAL_LIGHTS];  // world -> atlas uv (xy) and depth (z), each in [0, 1]
+    vec4 directional_params[MAX_DIRECTIONAL_LIGHTS];  // x: a texel's world size, y: softness (texels),
+                                                      // z: one atlas texel in uv, w: taps a side (0: no shadow)
+    ivec4 point_slot[MAX_POINT_LIGHTS / 4];           // per point light: its cube (0, 1) or -1
+    vec4 point_params[MAX_POINT_SHADOWS];             // x: a texel's angular size (radians), y: softness
+                                                      // (texels), z: range, w: taps (1 or 4)
+} shadows;
+
+uniform sampler2DShadow shadow_atlas;
+uniform samplerCube point_shadow0;
+uniform samplerCube point_shadow1;
+
+// How much of directional light i reaches a point at ``position`` whose geometric normal
+// (facing the viewer) is ``normal`` and for which the light comes from ``l``: 0 (shadowed) to 1.
+float directional_shadow(int i, vec3 position, vec3 normal, vec3 l) {
+    vec4 params = shadows.directional_params[i];
+    if (params.w == 0.0) return 1.0;
+    float nl = clamp(dot(normal, l), 0.0, 1.0);
+    // Off the surface by about the filter's reach in texels, more as the light grazes it.
+    float offset = params.x * (1.0 + params.y) * (1.5 - nl);
+    vec4 p = shadows.directional_matrix[i] * vec4(position + normal * offset, 1.0);
+    if (any(lessThan(p.xyz, vec3(0.0))) || any(greaterThan(p.xyz, vec3(1.0)))) return 1.0;  // outside the map
+    // A grid of n x n taps (engine/render/shadows.py ShadowMaps.filter), each a bilinear
+    // comparison of 2 x 2 texels: 2 x 2 taps half a softness apart (a 3 x 3-texel tent at
+    // softness 1), 3 x 3 for wider edges; one tap on a software rasteriser.
+    int n = int(params.w);
+    float step = n > 1 ? params.z * params.y / float(n - 1) : 0.0;
+    vec2 start = p.xy - 0.5 * step * float(n - 1);
+    float lit = 0.0;
+    for (int y = 0; y < n; ++y)
+        for (int x = 0; x < n; ++x)
+            lit += texture(shadow_atlas, vec3(start + step * vec2(x, y), p.z));
+    return lit / float(n * n);
+}
+
+float point_cube_shadow(samplerCube cube, vec4 params, vec3 from_light, vec3 normal, vec3 l) {
+    float dist = length(from_light);
+    float nl = clamp(dot(normal, l), 0.0, 1.0);
+    // The normal offset: a texel's world size at this distance (its angle x the distance).
+    float texel = params.x * dist;
+    vec3 p = from_light + normal * texel * (1.0 + params.y) * (1.5 - nl);
+    float d = length(p) / params.z;
+    // Taps on a cross around the direction, in the plane facing the light.
+    vec3 dir = normalize(p);
+    vec3 side = normalize(cross(dir, abs(dir.y) < 0.99 ? vec3(0.0, 1.0, 0.0) : vec3(1.0, 0.0, 0.0)));
+    vec3 up = cross(dir, side);
+    float spread = params.w > 1.0 ? params.x * max(params.y, 0.5) : 0.0;
+    int taps = int(params.w);
+    float lit = 0.0;
+    for (int k = 0; k < taps; ++k) {
+        vec2 o = vec2(k & 1, k >> 1) * 2.0 - 1.0;
+        vec3 tap = dir + (side * o.x + up * o.y) * spread * 0.5;
+        lit += d <= texture(cube, tap).r ? 1.0 : 0.0;
+    }
+    return lit / float(taps);
+}
+
+// How much of point light i (its position ``light_pos``) reaches ``position``.
+float point_shadow(int i, vec3 position, vec3 light_pos, vec3 normal, vec3 l) {
+    int slot = shadows.point_slot[i / 4][i % 4];
+    if (slot < 0) return 1.0;
+    if (slot == 0) return point_cube_shadow(point_shadow0, shadows.point_params[0], position - light_pos, normal, l);
+    return point_cube_shadow(point_shadow1, shadows.point_params[1], position - light_pos, normal, l);
+}

@@ -1,0 +1,22 @@
+#version 410 core
+// A shadow map's texels: depth only for a directional light's map; with DISTANCE (a point
+// light's cube), the distance from the light over its range, in a colour channel, so one
+// comparison per tap works in every face and any direction (the depth of a perspective
+// face is not comparable across faces).
+#ifdef DISTANCE
+#include "camera.glsl"
+#ifdef LAYERED
+in vec3 g_world_pos;
+#define v_world_pos g_world_pos
+#else
+in vec3 v_world_pos;
+#endif
+uniform float light_range;
+layout(location = 0) out float out_distance;
+#endif
+
+void main() {
+#ifdef DISTANCE
+    out_distance = length(v_world_pos - camera.eye.xyz) / light_range;
+#endif
+}

@@ -1,0 +1,36 @@
+#version 410 core
+// Shadow casters seen from a light (engine/render/shadows.py): depth only, every opaque
+// batch, the light's camera in the Camera block.  What casts is what a person sees as solid:
+// not a portal's opening, not glass (a refracting instance), not something hidden in every
+// kind of view; the transparent slot is not drawn at all.  Things partly through a portal are
+// cut at their slice plane, as in every view, so the part that came out of the partner casts
+// its own shadow there.
+#include "camera.glsl"
+#include "visibility.glsl"
+
+in vec3 in_position;
+in mat4 in_model;
+in vec4 in_tint;    // w: where it is drawn (visibility.glsl)
+in vec4 in_slice;
+in uvec4 in_slots;  // emissive, refract, reflect variants, entity id
+
+#ifdef DISTANCE
+out vec3 v_world_pos;
+#endif
+#ifdef LAYERED
+out vec2 v_clip;  // shadow_layered.geom writes them per face
+#endif
+
+void main() {
+    vec4 world = in_model * vec4(in_position, 1.0);
+    gl_Position = camera.view_proj * world;
+    bool casts = in_slots.z != REFLECT_PORTAL && in_slots.y == REFRACT_NONE && !hidden_everywhere(in_tint.w);
+    gl_ClipDistance[CLIP_VIEW_PLANE] = casts ? 1.0 : -1.0;
+    gl_ClipDistance[CLIP_SLICE] = dot(world, in_slice);
+#ifdef DISTANCE
+    v_world_pos = world.xyz;
+#endif
+#ifdef LAYERED
+    v_clip = vec2(casts ? 1.0 : -1.0, dot(world, in_slice));
+#endif
+}

@@ -1,0 +1,573 @@
+"""HDR post-processing on the camera (components/post.py, engine/render/present.py,
+engine/render/bloom.py, engine/render/post.py): each tone curve against its published
+formula written here in numpy, exposure in stops, bloom's black and mean, automatic
+exposure's target and speed, the plain look kept byte for byte, the fields' checks and
+level files.
+
+Known HDR images go through the real present stage: a game system between the reflect and
+present stages writes them into the main view's level 0 (where the views' composited image
+is), and the frame's present stage reads the camera's components as in any game.
+"""
+from __future__ import annotations
+
+import math
+import re
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from components import Camera, Transform
+from components.post import BLOOM_COMPOSITES, TONEMAP_CURVES, Bloom, Tonemap
+from components.tracking import ComponentValueError
+from engine.assets.level_file import load_level, save_level
+from engine.core.frame_io import Output
+from engine.core.game import Game, GameSystem
+from engine.render.bloom import level_sizes
+from engine.render.post import adapt_blend
+from engine.render.targets import CaptureTarget
+from shell.app import Engine
+from tests.support import linear_to_srgb8, srgb_to_linear
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+# --- the curves, from their references (row-major matrices, as the references write them) ---
+
+def curve_none(c: np.ndarray) -> np.ndarray:
+    return np.clip(c, 0.0, 1.0)
+
+
+ACES_IN = np.array([[0.59719, 0.35458, 0.04823], [0.07600, 0.90834, 0.01566], [0.02840, 0.13383, 0.83777]])
+ACES_OUT = np.array([[1.60475, -0.53108, -0.07367], [-0.10208, 1.10813, -0.00605], [-0.00327, -0.07276, 1.07602]])
+
+
+def curve_aces(c: np.ndarray) -> np.ndarray:
+    """Stephen Hill's RRT + ODT fit (BakingLab ACES.hlsl), input scaled by 1 / 0.6 (three.js)."""
+    v = (c / 0.6) @ ACES_IN.T
+    v = (v * (v + 0.0245786) - 0.000090537) / (v * (0.983729 * v + 0.4329510) + 0.238081)
+    return np.clip(v @ ACES_OUT.T, 0.0, 1.0)
+
+
+REC2020_TO_709 = np.array([[1.6605, -0.5876, -0.0728], [-0.1246, 1.1329, -0.0083], [-0.0182, -0.1006, 1.1187]])
+AGX_INSET = np.array([[0.856627153315983, 0.137318972929847, 0.11189821299995],
+                      [0.0951212405381588, 0.761241990602591, 0.0767994186031903],
+                      [0.0482516061458583, 0.101439036467562, 0.811302368396859]]).T  # three.js lists columns
+AGX_OUTSET_INV = np.array([[0.899796955911611, 0.11142098895748, 0.11142098895748],
+                           [0.0871996192028351, 0.875575586156966, 0.0871996192028349],
+                           [0.013003424885555, 0.0130034248855548, 0.801379391839686]]).T
+
+
+def curve_agx(c: np.ndarray) -> np.ndarray:
+    """AgX base, default look (three.js r162+ after Filament): the matrices inverted here."""
+    v = np.maximum(c @ np.linalg.inv(REC2020_TO_709).T, 0.0)
+    v = np.maximum(v @ AGX_INSET.T, 1e-10)
+    low, high = -12.47393, 4.026069
+    x = np.clip((np.log2(v) - low) / (high - low), 0.0, 1.0)
+    v = (15.5 * x ** 6 - 40.14 * x ** 5 + 31.96 * x ** 4 - 6.868 * x ** 3 + 0.4298 * x ** 2 + 0.1191 * x
+         - 0.00232)
+    v = np.maximum(v @ np.linalg.inv(AGX_OUTSET_INV).T, 0.0) ** 2.2
+    return np.clip(v @ REC2020_TO_709.T, 0.0, 1.0)
+
+
+def curve_pbr_neutral(c: np.ndarray) -> np.ndarray:
+    """The Khronos PBR Neutral specification's formulas (KhronosGroup/ToneMapping README)."""
+    f90, ks, kd = 0.04, 0.8 - 0.04, 0.15
+    x = c.min(axis=-1, keepdims=True)
+    f = np.where(x <= 2 * f90, x - x * x / (4 * f90), f90)
+    p = (c - f).max(axis=-1, keepdims=True)
+    pn = 1.0 - (1.0 - ks) ** 2 / (p + 1.0 - 2.0 * ks)
+    g = 1.0 / (kd * (p - pn) + 1.0)
+    compressed = (c - f) * pn / np.maximum(p, 1e-30) * g + pn * (1.0 - g)
+    return np.clip(np.where(p <= ks, c - f, compressed), 0.0, 1.0)
+
+
+CURVES = {"none": curve_none, "aces": curve_aces, "agx": curve_agx, "pbr_neutral": curve_pbr_neutral}
+TINTS = ((1.0, 1.0, 1.0), (1.0, 0.5, 0.2), (0.2, 0.6, 1.0), (1.0, 0.0, 0.0), (0.0, 1.0, 0.3), (0.9, 0.8, 0.1))
+
+
+def ramp(width: int = 256, low: float = -8.0, high: float = 6.0, rows_per_tint: int = 2) -> np.ndarray:
+    """(rows, width, 4) float16, GL row order: a log ramp from 2^low to 2^high across, one tint
+    a band of rows."""
+    values = 2.0 ** np.linspace(low, high, width)
+    rows = [np.concatenate([np.outer(values, tint), np.ones((width, 1))], axis=1) for tint in TINTS
+            for _ in range(rows_per_tint)]
+    return np.stack(rows).astype(np.float16)
+
+
+# --- a game whose level 0 is a given image -----------------------------------------------------
+
+class KnownImage(Game):
+    """A camera with the given components; its level 0 overwritten with ``image`` (GL row
+    order, float16 RGBA) after the reflect stage, so the present stage reads exactly it."""
+
+    def __init__(self, image: np.ndarray, *components) -> None:
+        self.image = image
+        self.components = components
+        self.engine: Engine | None = None
+        self.camera = 0
+
+    def build(self, world) -> None:
+        self.camera = world.spawn(Transform(), Camera(), *self.components)
+
+    def systems(self) -> list[GameSystem]:
+        return [GameSystem(self.fill, after="reflect", before="present")]
+
+    def fill(self, world, dt: float) -> None:
+        color = self.engine.renderer.targets.color
+        assert color.size == (self.image.shape[1], self.image.shape[0])
+        color.write(np.ascontiguousarray(self.image).tobytes())
+
+
+class Known:
+    """An engine presenting ``KnownImage`` into a capture target (no FXAA unless asked)."""
+
+    def __init__(self, ctx, image: np.ndarray, *components, aa: str = "off") -> None:
+        self.ctx = ctx
+        self.game = KnownImage(image, *components)
+        self.engine = Engine(self.game, ctx)
+        self.game.engine = self.engine
+        self.engine.renderer.antialias = aa
+        self.size = (image.shape[1], image.shape[0])
+        self.capture = CaptureTarget(ctx, self.size)
+
+    @property
+    def world(self):
+        return self.engine.world
+
+    def frame(self, dt: float = 1 / 60) -> np.ndarray:
+        """The presented frame, uint8 (rows, width, 3) in GL row order (as the image)."""
+        self.engine.frame(dt, Output(self.capture.framebuffer, self.size))
+        return np.flipud(self.capture.read_rgb())
+
+    def level0(self) -> np.ndarray:
+        w, h = self.size
+        return np.frombuffer(self.engine.renderer.targets.color.read(), np.float16).reshape(h, w, 4)
+
+    def close(self) -> None:
+        self.capture.release()
+        self.engine.close()
+
+
+@pytest.fixture
+def known(ctx):
+    made: list[Known] = []
+
+    def make(image, *components, aa: str = "off") -> Known:
+        runner = Known(ctx, image, *components, aa=aa)
+        made.append(runner)
+        return runner
+
+    yield make
+    for runner in made:
+        runner.close()
+
+
+def expected_srgb8(linear: np.ndarray) -> np.ndarray:
+    return np.rint(linear_to_srgb8(linear)).astype(np.int16)
+
+
+# --- tone curves and exposure ---------------------------------------------------------------------
+
+@pytest.mark.parametrize("curve", TONEMAP_CURVES)
+def test_each_curve_matches_its_formula_on_an_hdr_ramp(known, curve):
+    """2^-8 .. 2^6 in six tints through the real present stage: every pixel within one
+    8-bit step of the curve's formula (GLSL float32 pow/log2 against float64), and the
+    curves differ from each other by far more than that, so the wrong curve fails."""
+    image = ramp()
+    runner = known(image, Tonemap(curve=curve))
+    got = runner.frame().astype(np.int16)
+    hdr = image[..., :3].astype(np.float64)
+    want = expected_srgb8(CURVES[curve](hdr))
+    diff = np.abs(got - want)
+    assert diff.max() <= 1, (curve, diff.max(), np.argwhere(diff > 1)[:5])
+    for other, formula in CURVES.items():
+        if other != curve:
+            assert np.abs(expected_srgb8(formula(hdr)) - want).max() > 20, (curve, other)
+    assert got.std() > 30  # a ramp, not a flat frame
+
+
+@pytest.mark.parametrize("curve", ("none", "aces", "agx", "pbr_neutral"))
+def test_one_more_stop_of_exposure_doubles_the_linear_input(known, curve):
+    """exposure=+1 EV on an image v presents exactly what exposure 0 does on 2v (doubling is
+    exact in half floats), and +1 EV is not a no-op."""
+    image = ramp(high=5.0)
+    doubled = image.copy()
+    doubled[..., :3] *= np.float16(2.0)
+    plus_one = known(image, Tonemap(curve=curve, exposure=1.0)).frame()
+    same = known(doubled, Tonemap(curve=curve, exposure=0.0)).frame()
+    base = known(image, Tonemap(curve=curve, exposure=0.0)).frame()
+    assert np.array_equal(plus_one, same)
+    assert np.abs(plus_one.astype(int) - base).max() > 20
+    # And the half-stop between: 2^0.5 times the input, against the formula.
+    half = known(image, Tonemap(curve=curve, exposure=0.5)).frame().astype(np.int16)
+    want = expected_srgb8(CURVES[curve](image[..., :3].astype(np.float64) * 2.0 ** 0.5))
+    assert np.abs(half - want).max() <= 1
+
+
+# --- the plain look ------------------------------------------------------------------------------
+
+PLAIN_PRESENT = """#version 410 core
+uniform sampler2D hdr_image;
+uniform float exposure;
+in vec2 v_uv;
+out vec4 out_color;
+void main() {
+    vec3 srgb = linear_to_srgb(texture(hdr_image, v_uv).rgb * exposure);
+    out_color = vec4(srgb, 1.0);
+}
+"""
+
+
+def plain_program(ctx):
+    """Today's present.frag (before post-processing), with the unchanged include inlined:
+    the program a camera without Tonemap and Bloom must still match byte for byte."""
+    color = (ROOT / "shaders" / "include" / "color.glsl").read_text()
+    fullscreen = (ROOT / "shaders" / "include" / "fullscreen.glsl").read_text()
+    vertex = (ROOT / "shaders" / "present.vert").read_text().replace('#include "fullscreen.glsl"', fullscreen)
+    fragment = PLAIN_PRESENT.replace("#version 410 core\n", "#version 410 core\n" + color + "\n")
+    return ctx.program(vertex_shader=vertex, fragment_shader=fragment)
+
+
+def test_a_camera_without_the_components_presents_todays_frame_byte_for_byte(known, ctx):
+    image = ramp(low=-10.0, high=3.0)
+    runner = known(image)
+    runner.engine.renderer.exposure = 0.7
+    got = runner.frame()
+    program = plain_program(ctx)
+    vao = ctx.vertex_array(program, [])
+    target = CaptureTarget(ctx, runner.size)
+    try:
+        program["hdr_image"].value = 0
+        program["exposure"].value = 0.7
+        runner.engine.renderer.targets.color.use(0)
+        target.framebuffer.use()
+        ctx.viewport = (0, 0, *runner.size)
+        ctx.disable(ctx.BLEND | ctx.DEPTH_TEST | ctx.CULL_FACE)
+        vao.render(vertices=3)
+        plain = np.flipud(target.read_rgb())
+    finally:
+        vao.release()
+        program.release()
+        target.release()
+        from engine.render.bindings import invalidate
+        invalidate(ctx)
+    assert np.array_equal(got, plain)
+    assert runner.engine.renderer.resource_counts()["post_targets"] == 0
+    # A Tonemap of curve "none" at 0 EV is the same picture too (exposure 1).
+    runner.engine.renderer.exposure = 1.0
+    plain_one = runner.frame()
+    runner.world.add_component(runner.game.camera, Tonemap(curve="none"))
+    assert np.array_equal(runner.frame(), plain_one)
+
+
+def test_a_tonemap_replaces_the_renderers_exposure(known):
+    image = ramp(low=-6.0, high=0.0)
+    runner = known(image, Tonemap(curve="none", exposure=-1.0))
+    runner.engine.renderer.exposure = 8.0  # ignored under a Tonemap
+    got = runner.frame().astype(np.int16)
+    assert np.abs(got - expected_srgb8(image[..., :3].astype(np.float64) * 0.5)).max() <= 1
+
+
+# --- bloom -----------------------------------------------------------------------------------------
+
+@pytest.mark.parametrize("composite", BLOOM_COMPOSITES)
+def test_bloom_of_a_black_frame_is_black(known, composite):
+    image = np.zeros((90, 160, 4), np.float16)
+    runner = known(image, Tonemap(curve="none"), Bloom(intensity=1.0, composite=composite))
+    assert not runner.frame().any()
+    bloom = runner.engine.renderer.present_pass.bloom
+    assert bloom.levels == 5   # 80x45 .. 5x2: a sixth would be 2x1
+    for texture in bloom.textures:
+        assert not np.frombuffer(texture.read(), np.float16).reshape(-1, 4)[:, :3].any()
+
+
+def smooth_image(size=(320, 180)) -> np.ndarray:
+    """A smooth HDR image (values 0.2 .. 7.8, waves a few dozen pixels long): GL row order."""
+    w, h = size
+    x, y = np.meshgrid(np.arange(w) / w, np.arange(h) / h)
+    base = 4.0 + 3.0 * np.sin(2 * np.pi * 1.5 * x + 0.3) * np.cos(2 * np.pi * y) + 0.8 * (x - 0.5)
+    image = np.stack([base, 0.5 * base + 1.0, 8.0 - base, np.ones_like(base)], axis=-1)
+    return image.astype(np.float16)
+
+
+def test_bloom_keeps_the_images_mean(known):
+    """The chain's result, divided by its levels, has the image's mean within 0.5% per channel
+    on a smooth image: every filter's weights sum to 1, so what is lost is only at the
+    edges (taps past them read the edge), the odd-sized levels' half-texel shifts, half-float
+    storage and Karis's weights (on a smooth image its boxes differ by the square of the
+    slope).  Energy-conserving at intensity 1 the frame is the bloom alone, and its mean
+    (read as 8-bit sRGB, exposed by 1/8 so nothing clips) agrees within 1%."""
+    image = smooth_image()
+    runner = known(image, Tonemap(curve="none", exposure=-3.0), Bloom(intensity=1.0, levels=5))
+    frame = runner.frame()
+    bloom = runner.engine.renderer.present_pass.bloom
+    assert bloom.levels == 5
+    w, h = bloom.textures[0].size
+    summed = np.frombuffer(bloom.textures[0].read(), np.float16).reshape(h, w, 4)[..., :3].astype(np.float64)
+    mean_in = image[..., :3].astype(np.float64).mean(axis=(0, 1))
+    mean_bloom = summed.mean(axis=(0, 1)) / bloom.levels
+    assert np.all(np.abs(mean_bloom / mean_in - 1.0) < 0.005), (mean_bloom, mean_in)
+    shown = srgb_to_linear(frame).mean(axis=(0, 1)) * 8.0
+    assert np.all(np.abs(shown / mean_in - 1.0) < 0.01), (shown, mean_in)
+    # The bloom is a blur: the frame is smoother than the image it came from.
+    plain = srgb_to_linear(known(image, Tonemap(curve="none", exposure=-3.0)).frame())
+    assert np.abs(np.diff(srgb_to_linear(frame), axis=1)).mean() < 0.8 * np.abs(np.diff(plain, axis=1)).mean()
+
+
+def test_bloom_spreads_a_bright_point_and_leaves_level_0_as_it_was(known):
+    """A 4x4 patch of 200 on black: additive bloom lights pixels tens of pixels away (the
+    deepest levels) falling off with distance; the threshold keeps dim light out; and the
+    main image the end images keep is the image written, untouched."""
+    image = np.zeros((128, 192, 4), np.float16)
+    image[..., 3] = 1.0
+    image[62:66, 94:98, :3] = 200.0
+    bloom = Bloom(intensity=0.5, threshold=1.0, composite="additive")
+    runner = known(image, Tonemap(curve="none"), bloom)
+    frame = runner.frame().astype(np.int16)
+    row = frame[64, :, 0]
+    assert row[96] == 255 and row[96 - 24] > row[96 - 48] > 0, row[40:100]
+    assert np.array_equal(runner.level0(), image)
+    dim = np.zeros_like(image)
+    dim[..., 3] = 1.0
+    dim[62:66, 94:98, :3] = 0.9   # below the threshold: shown as it is, no glow
+    frame = known(dim, Tonemap(curve="none"), bloom).frame()
+    assert frame[63, 95, 0] == expected_srgb8(np.array(0.9)) and not frame[:60].any() and not frame[:, :90].any()
+
+
+def test_bloom_level_sizes_stop_at_two_pixels():
+    assert level_sizes((640, 360), 6) == [(320, 180), (160, 90), (80, 45), (40, 22), (20, 11), (10, 5)]
+    assert level_sizes((640, 360), 8) == level_sizes((640, 360), 7) == [*level_sizes((640, 360), 6), (5, 2)]
+    assert level_sizes((3, 100), 4) == []
+
+
+def test_bloom_resources_go_with_the_component(known):
+    runner = known(smooth_image((64, 48)), Bloom(), Tonemap(auto_exposure=True))
+    runner.frame()
+    counts = runner.engine.renderer.resource_counts()
+    assert counts["post_targets"] == 4 + 5  # 32x24 .. 4x3; luminance 64, 16, 4 and two 1x1
+    runner.world.remove_component(runner.game.camera, Bloom)
+    runner.frame()
+    assert runner.engine.renderer.resource_counts()["post_targets"] == 5
+    runner.world.remove_component(runner.game.camera, Tonemap)
+    runner.frame()
+    assert runner.engine.renderer.resource_counts()["post_targets"] == 0
+
+
+# --- automatic exposure ---------------------------------------------------------------------------
+
+def grey(level: float, size=(96, 64)) -> np.ndarray:
+    image = np.full((size[1], size[0], 4), level, np.float16)
+    image[..., 3] = 1.0
+    return image
+
+
+def test_auto_exposure_brings_a_constant_image_to_the_key_and_adapts_at_its_speed(known):
+    """A constant image of luminance L: the first frame starts at the target log2(key / L);
+    then the image is 16x darker and each frame of dt closes 1 - exp(-speed dt) of the gap
+    (checked frame by frame against the closed form), converging to the new target; the
+    frame shows the key's grey once converged."""
+    key, speed, dt = 0.18, 2.0, 0.1
+    runner = known(grey(2.0), Tonemap(curve="none", auto_exposure=True, key=key, adapt_speed=speed))
+    auto = runner.engine.renderer.present_pass.auto_exposure
+    frame = runner.frame(dt)
+    first = math.log2(key / 2.0)
+    assert auto.adapted_ev() == pytest.approx(first, abs=2e-3)
+    assert np.abs(frame.astype(int) - expected_srgb8(np.array(key))).max() <= 1
+    runner.game.image = grey(0.125)
+    target = math.log2(key / 0.125)
+    for n in range(1, 16):
+        runner.frame(dt)
+        want = target + (first - target) * math.exp(-speed * dt * n)
+        assert auto.adapted_ev() == pytest.approx(want, abs=2e-3), n
+    for _ in range(40):
+        frame = runner.frame(0.25)
+    assert auto.adapted_ev() == pytest.approx(target, abs=2e-3)
+    assert np.abs(frame.astype(int) - expected_srgb8(np.array(key))).max() <= 1
+    assert adapt_blend(speed, dt) == pytest.approx(1 - math.exp(-0.2))
+
+
+def test_auto_exposure_is_clamped_to_its_range_and_uses_the_mean_log_luminance(known):
+    """Half the image at 8, half at 1/8: the mean of log2 L is 0, so the target is log2(key)
+    (an arithmetic mean would give about log2(key / 4)); a nearly black image stops at
+    max_ev; compensation (exposure) adds to the adapted value in the frame."""
+    image = grey(8.0, (128, 64))   # 2 pixels a luminance texel: its taps fall on pixel centres
+    image[:, :64, :3] = 0.125
+    runner = known(image, Tonemap(curve="none", auto_exposure=True, key=0.25))
+    auto = runner.engine.renderer.present_pass.auto_exposure
+    runner.frame()
+    assert auto.adapted_ev() == pytest.approx(-2.0, abs=0.02)
+    dark = known(grey(1e-4), Tonemap(curve="none", auto_exposure=True, max_ev=3.0, exposure=-1.0))
+    frame = dark.frame()
+    assert dark.engine.renderer.present_pass.auto_exposure.adapted_ev() == pytest.approx(3.0, abs=1e-4)
+    assert np.abs(frame.astype(int) - expected_srgb8(np.array(1e-4 * 2.0 ** 2))).max() <= 1
+
+
+# --- the components ---------------------------------------------------------------------------------
+
+@pytest.mark.parametrize(("make", "field"), [
+    (lambda: Tonemap(curve="filmic"), "Tonemap.curve"),
+    (lambda: Tonemap(curve=None), "Tonemap.curve"),
+    (lambda: Tonemap(exposure=float("nan")), "Tonemap.exposure"),
+    (lambda: Tonemap(exposure=30.0), "Tonemap.exposure"),
+    (lambda: Tonemap(exposure="1"), "Tonemap.exposure"),
+    (lambda: Tonemap(auto_exposure=1), "Tonemap.auto_exposure"),
+    (lambda: Tonemap(key=0.0), "Tonemap.key"),
+    (lambda: Tonemap(key=1.5), "Tonemap.key"),
+    (lambda: Tonemap(adapt_speed=0.0), "Tonemap.adapt_speed"),
+    (lambda: Tonemap(adapt_speed=float("inf")), "Tonemap.adapt_speed"),
+    (lambda: Tonemap(min_ev=9.0), "Tonemap.min_ev"),
+    (lambda: Tonemap(min_ev=2.0, max_ev=1.0), "Tonemap.max_ev"),
+    (lambda: Tonemap(max_ev=-30.0), "Tonemap.max_ev"),
+    (lambda: Bloom(intensity=-0.1), "Bloom.intensity"),
+    (lambda: Bloom(intensity=1.5), "Bloom.intensity"),
+    (lambda: Bloom(threshold=-1.0), "Bloom.threshold"),
+    (lambda: Bloom(threshold=1e6), "Bloom.threshold"),
+    (lambda: Bloom(knee=2.0), "Bloom.knee"),
+    (lambda: Bloom(levels=0), "Bloom.levels"),
+    (lambda: Bloom(levels=9), "Bloom.levels"),
+    (lambda: Bloom(levels=3.0), "Bloom.levels"),
+    (lambda: Bloom(radius=0.0), "Bloom.radius"),
+    (lambda: Bloom(composite="screen"), "Bloom.composite"),
+])
+def test_bad_fields_are_refused_naming_the_field(make, field):
+    with pytest.raises(ComponentValueError, match=re.escape(field)):
+        make()
+
+
+def test_a_field_write_is_checked_too():
+    tonemap, bloom = Tonemap(), Bloom()
+    with pytest.raises(ComponentValueError, match="Tonemap.max_ev"):
+        tonemap.max_ev = -9.0
+    with pytest.raises(ComponentValueError, match="Bloom.levels"):
+        bloom.levels = True
+    tonemap.curve = "pbr_neutral"
+    assert tonemap.curve == "pbr_neutral"
+
+
+LEVEL = """
+[level]
+name = "post"
+
+[[entity]]
+name = "camera"
+[entity.Transform]
+position = [0.0, 1.0, 3.0]
+[entity.Camera]
+[entity.Tonemap]
+curve = "aces"
+exposure = -0.5
+auto_exposure = true
+key = 0.12
+adapt_speed = 3.0
+min_ev = -4.0
+max_ev = 6.0
+[entity.Bloom]
+intensity = 0.3
+threshold = 1.5
+knee = 0.25
+levels = 4
+radius = 1.5
+composite = "additive"
+"""
+
+
+def test_level_files_carry_tonemap_and_bloom(tmp_path):
+    from engine.core.world import World
+
+    path = tmp_path / "post.toml"
+    path.write_text(LEVEL)
+    level = load_level(path)
+    world = World("post level")
+    try:
+        names = level.spawn(world)
+        camera = names["camera"]
+        tonemap, bloom = world.get(camera, Tonemap), world.get(camera, Bloom)
+        assert (tonemap.curve, tonemap.exposure, tonemap.auto_exposure, tonemap.key, tonemap.adapt_speed,
+                tonemap.min_ev, tonemap.max_ev) == ("aces", -0.5, True, 0.12, 3.0, -4.0, 6.0)
+        assert (bloom.intensity, bloom.threshold, bloom.knee, bloom.levels, bloom.radius,
+                bloom.composite) == (0.3, 1.5, 0.25, 4, 1.5, "additive")
+        saved = save_level(world, tmp_path / "again.toml", names, name="post")
+        again = World("post level again")
+        try:
+            names2 = load_level(saved).spawn(again)
+            for kind in (Tonemap, Bloom):
+                a, b = world.get(camera, kind), again.get(names2["camera"], kind)
+                assert vars(a) == vars(b) or all(getattr(a, f) == getattr(b, f) for f in a.__dataclass_fields__)
+        finally:
+            again.close()
+    finally:
+        world.close()
+    bad = tmp_path / "bad.toml"
+    bad.write_text(LEVEL.replace('curve = "aces"', 'curve = "filmic"'))
+    with pytest.raises(Exception, match="Tonemap.curve"):
+        load_level(bad)
+
+
+# --- the present stage's switches and the overlay -----------------------------------------------------
+
+def test_the_present_stages_switches_turn_bloom_off_and_override_the_curve(known):
+    """``PresentSystem.bloom = False`` draws no camera's bloom (its textures go), ``curve``
+    sets every camera's curve; the overlay's text says which, with the adapted exposure."""
+    from shell.overlay_text import post_lines
+
+    def post_line(engine) -> str:
+        return "; ".join(post_lines(engine))
+
+    image = ramp()
+    runner = known(image, Tonemap(curve="agx", auto_exposure=True), Bloom(intensity=0.3))
+    present = runner.engine.stages["present"]
+    bloomed = runner.frame()
+    adapted = runner.engine.renderer.present_pass.auto_exposure.adapted_ev()
+    line = post_line(runner.engine)
+    assert line.startswith(f"post: agx (camera), +0.00 EV, auto {adapted:+.2f}; "), line
+    # 12 rows: levels 6x128 and 3x64 (3 passes), and 4 exposure passes
+    assert line.endswith("; bloom 0.3 x2, 7 passes"), line
+    present.bloom = False
+    plain = runner.frame()
+    assert not np.array_equal(plain, bloomed)
+    assert runner.engine.renderer.resource_counts()["post_targets"] == 5  # the exposure's only
+    assert "bloom off (set)" in post_line(runner.engine)
+    present.curve = "none"
+    runner.world.get(runner.game.camera, Tonemap).auto_exposure = False
+    got = runner.frame().astype(np.int16)
+    assert np.abs(got - expected_srgb8(CURVES["none"](image[..., :3].astype(np.float64)))).max() <= 1
+    assert post_line(runner.engine) == "post: none (set; camera agx), +0.00 EV; bloom off (set), 0 passes"
+    with pytest.raises(ValueError, match="PresentSystem.curve"):
+        present.curve = "filmic"
+    bare = known(image)
+    bare.frame()
+    assert post_line(bare.engine) == "post: none (camera), x1; bloom off, 0 passes"
+
+
+def test_the_overlay_toggles_bloom_and_picks_the_curve(known, ctx):
+    pytest.importorskip("imgui_bundle", reason="the debug overlay needs imgui-bundle (not installed here)")
+    from shell.overlay import DebugOverlay
+
+    image = ramp(width=640, rows_per_tint=100)   # room for the whole overlay
+    runner = known(image, Tonemap(curve="agx"), Bloom())
+    present = runner.engine.stages["present"]
+    runner.frame()
+    overlay = DebugOverlay(ctx)
+    try:
+        def click(widget: str) -> None:
+            for down in (None, True, False):
+                x, y = overlay.widgets[widget]
+                overlay.mouse_moved(x, y)
+                if down is not None:
+                    overlay.mouse_button(1, down)
+                overlay.draw(runner.engine, runner.capture.framebuffer, runner.size)
+
+        overlay.draw(runner.engine, runner.capture.framebuffer, runner.size)
+        assert any(line.startswith("post: agx (camera)") for line in overlay.lines)
+        assert overlay.region[3] < runner.size[1] - 8, overlay.region
+        click("bloom")
+        assert present.bloom is False, overlay.widgets
+        click("curve")            # opens the drop-down
+        click("curve aces")
+        assert present.curve == "aces"
+        click("curve")
+        click("curve camera")
+        assert present.curve is None
+    finally:
+        overlay.release()

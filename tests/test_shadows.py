@@ -1,0 +1,363 @@
+"""Shadows: the frame against float64 shadow rays cast in numpy (a second computation of
+which floor points the light reaches), directly, in a mirror and for a point light; the
+maps' caching (a still scene draws no shadow pass); a probe face recaptured when a shadow
+it shows moves; the components' checks."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from pyglm import glm
+
+from components import (
+    ComponentValueError,
+    DirectionalLight,
+    Material,
+    MeshRef,
+    Mirror,
+    PointLight,
+    ReflectionProbe,
+    Transform,
+)
+from engine.assets.mesh import box, plane, quad, sphere
+from engine.assets.portals import spawn_portal_pair
+from engine.core.portal_math import pair_transform
+from engine.rules.probe_schedule import ProbeSchedule
+from tests.support import look_from, srgb_to_linear
+
+LIGHT = glm.normalize(glm.vec3(-1.0, -0.75, -0.5))
+BOX_CENTRE, BOX_HALF = np.array([-1.0, 0.5, 0.0]), 0.5
+SPHERE_CENTRE, SPHERE_RADIUS = np.array([1.2, 0.7, 0.5]), 0.7
+PENUMBRA = 0.06   # metres either side of an occluder's outline left out (the filter's reach and more)
+
+
+def _floor_scene(world, eye, target, sun=True, point=None, mirror=False):
+    ids = {}
+    look_from(world, eye, target)
+    if sun:
+        ids["sun"] = world.spawn(DirectionalLight(direction=LIGHT, intensity=2.5))
+    if point is not None:
+        ids["lamp"] = world.spawn(Transform(position=point), PointLight(intensity=10.0, range=9.0, shadows=True))
+    ids["floor"] = world.spawn(Transform(), MeshRef(plane(14, 14)), Material(color=(0.8, 0.8, 0.8), roughness=1.0))
+    ids["box"] = world.spawn(Transform(position=BOX_CENTRE.tolist()), MeshRef(box()), Material(color=(0.8, 0.3, 0.2)))
+    ids["sphere"] = world.spawn(Transform(position=SPHERE_CENTRE.tolist()), MeshRef(sphere(SPHERE_RADIUS, segments=48)),
+                                Material(color=(0.3, 0.5, 0.8)))
+    if mirror:
+        ids["mirror"] = world.spawn(Transform(position=(0.0, 1.5, -3.0)), MeshRef(quad(6.0, 3.0)), Material(),
+                                    Mirror())
+    return ids
+
+
+def _hits(origin: np.ndarray, direction: np.ndarray, grow: float, segment: np.ndarray | None = None) -> np.ndarray:
+    """Whether rays (rows) from ``origin`` along unit ``direction`` meet the box or the sphere
+    (each grown by ``grow`` metres, negative shrinks), within ``segment`` (a length per ray) if given."""
+    limit = np.full(len(origin), np.inf) if segment is None else segment
+    # The sphere: |o + t d - c|^2 = r^2.
+    r = SPHERE_RADIUS + grow
+    oc = origin - SPHERE_CENTRE
+    b = np.einsum("ij,ij->i", oc, direction)
+    c = np.einsum("ij,ij->i", oc, oc) - r * r
+    disc = b * b - c
+    root = np.sqrt(np.maximum(disc, 0.0))
+    t_far = -b + root
+    sphere = (disc > 0.0) & (t_far > 1e-6) & (-b - root < limit)
+    # The box: slabs.
+    half = BOX_HALF + grow
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t1 = (BOX_CENTRE - half - origin) / direction
+        t2 = (BOX_CENTRE + half - origin) / direction
+    t_near = np.nanmax(np.minimum(t1, t2), axis=1)
+    t_exit = np.nanmin(np.maximum(t1, t2), axis=1)
+    boxed = (t_near <= t_exit) & (t_exit > 1e-6) & (t_near < limit)
+    return sphere | boxed
+
+
+def _pixel_rays(view, size) -> tuple[np.ndarray, np.ndarray]:
+    """Eye and unit direction (float64) through each pixel centre, rows from the top."""
+    w, h = size
+    inverse = np.array(glm.inverse(glm.dmat4(view.view_proj)).to_list(), np.float64).T
+    xs = (np.arange(w) + 0.5) / w * 2.0 - 1.0
+    ys = 1.0 - (np.arange(h) + 0.5) / h * 2.0
+    gx, gy = np.meshgrid(xs, ys)
+    far = np.stack([gx, gy, np.ones_like(gx), np.ones_like(gx)], axis=-1) @ inverse.T
+    far = far[..., :3] / far[..., 3:]
+    eye = np.array(view.eye, np.float64)
+    direction = far - eye
+    return eye, direction / np.linalg.norm(direction, axis=-1, keepdims=True)
+
+
+def _classified(lit_frame: np.ndarray, dark_frame: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Pixels the shadows darkened (shadowed) and left as they were (lit)."""
+    on = srgb_to_linear(dark_frame).mean(axis=-1)
+    off = srgb_to_linear(lit_frame).mean(axis=-1)
+    ratio = on / np.maximum(off, 1e-6)
+    return ratio < 0.7, ratio > 0.95
+
+
+def _agreement(shadowed, lit, mask, occluded_in, occluded_out):
+    """The share of ``mask``'s pixels outside the penumbra band where the frame says what the rays say."""
+    sure = mask & (occluded_in == occluded_out)
+    frame_says = np.where(shadowed, 1, np.where(lit, 0, -1))[sure]
+    rays_say = occluded_in[sure].astype(int)
+    return float((frame_says == rays_say).mean()), int(sure.sum()), int(rays_say.sum())
+
+
+def _render_both(scene, build, size=(320, 240), light="sun", shadow_filter="single"):
+    """The frame with the light's shadows off, then on (same scene, one runner), the edges
+    filtered by ``shadow_filter`` (ShadowMaps.filter: the software default, or the GPU's)."""
+    runner = scene(build, size)
+    runner.engine.renderer.antialias = "off"
+    runner.engine.renderer.shadows.filter = shadow_filter
+    ids = runner.world.resources["ids"]
+    caster = runner.world.get(ids[light], DirectionalLight if light == "sun" else PointLight)
+    caster.shadows = False
+    without = runner.frame()
+    caster.shadows = True
+    with_shadows = runner.frame()
+    return runner, ids, without, with_shadows
+
+
+@pytest.mark.parametrize("shadow_filter", ["single", "grid"])
+def test_directional_shadows_agree_with_shadow_rays(scene, shadow_filter):
+    def build(world):
+        world.resources["ids"] = _floor_scene(world, (0.5, 5.0, 6.5), (0.0, 0.0, 0.0))
+
+    runner, ids, without, with_shadows = _render_both(scene, build, shadow_filter=shadow_filter)
+    shadowed, lit = _classified(without, with_shadows)
+    floor = runner.ids() == ids["floor"]
+    eye, rays = _pixel_rays(runner.engine.main_view, runner.size)
+    t = -eye[1] / rays[..., 1]
+    points = (eye + rays * t[..., None]).reshape(-1, 3)
+    to_light = np.tile(-np.array(LIGHT, np.float64), (len(points), 1))
+    occluded_in = _hits(points, to_light, -PENUMBRA).reshape(floor.shape)
+    occluded_out = _hits(points, to_light, PENUMBRA).reshape(floor.shape)
+    share, counted, in_shadow = _agreement(shadowed, lit, floor, occluded_in, occluded_out)
+    assert counted > 40000 and in_shadow > 800, (counted, in_shadow, share)   # a real floor, real shadows
+    assert share >= 0.99, f"{share:.4f} of {counted} floor pixels agree with the shadow rays"
+
+
+@pytest.mark.parametrize("shadow_filter", ["single", "grid"])
+def test_the_shadow_seen_in_a_mirror_is_the_mirrored_points_shadow(scene, shadow_filter):
+    def build(world):
+        world.resources["ids"] = _floor_scene(world, (0.0, 3.0, 5.0), (0.0, 1.2, -3.0), mirror=True)
+
+    runner, ids, without, with_shadows = _render_both(scene, build, shadow_filter=shadow_filter)
+    shadowed, lit = _classified(without, with_shadows)
+    targets = runner.engine.renderer.targets
+    in_mirror = (targets.read_surface_ids() == ids["mirror"]) & (runner.ids() == ids["floor"])
+    eye, rays = _pixel_rays(runner.engine.main_view, runner.size)
+    # The ray meets the mirror's plane (z = -3, facing +z), turns (z flips) and meets the floor.
+    t = (-3.0 - eye[2]) / rays[..., 2]
+    on_mirror = eye + rays * t[..., None]
+    turned = rays * np.array([1.0, 1.0, -1.0])
+    s = -on_mirror[..., 1] / turned[..., 1]
+    points = (on_mirror + turned * s[..., None]).reshape(-1, 3)
+    to_light = np.tile(-np.array(LIGHT, np.float64), (len(points), 1))
+    occluded_in = _hits(points, to_light, -PENUMBRA).reshape(in_mirror.shape)
+    occluded_out = _hits(points, to_light, PENUMBRA).reshape(in_mirror.shape)
+    share, counted, in_shadow = _agreement(shadowed, lit, in_mirror, occluded_in, occluded_out)
+    assert counted > 4000 and in_shadow > 300, (counted, in_shadow, share)
+    assert share >= 0.99, f"{share:.4f} of {counted} floor pixels in the mirror agree with the shadow rays"
+
+
+def test_the_shadow_seen_through_a_portal_is_the_carried_points_shadow(scene):
+    """Looking into portal A (at z = 5, facing the camera) shows what lies in front of
+    portal B (at z = -6, facing the box and the sphere): the floor point each pixel shows is
+    the ray carried by the pair's transform to where it meets the floor."""
+    def build(world):
+        ids = world.resources["ids"] = _floor_scene(world, (0.0, 2.6, 9.5), (0.0, 1.2, 5.0))
+        ids["a"], ids["b"] = spawn_portal_pair(world, (0.0, 1.5, 5.0), None, (0.0, 1.5, -6.0), None)
+
+    runner, ids, without, with_shadows = _render_both(scene, build)
+    shadowed, lit = _classified(without, with_shadows)
+    targets = runner.engine.renderer.targets
+    through = (targets.read_surface_ids() == ids["a"]) & (runner.ids() == ids["floor"])
+    carry = glm.dmat4(pair_transform(runner.world.get(ids["a"], Transform).world,
+                                     runner.world.get(ids["b"], Transform).world))
+    m = np.array(carry.to_list(), np.float64).T   # rows act on column vectors
+    eye, rays = _pixel_rays(runner.engine.main_view, runner.size)
+    t = (5.0 - eye[2]) / rays[..., 2]
+    at_a = eye + rays * t[..., None]
+    carried = at_a @ m[:3, :3].T + m[:3, 3]
+    turned = rays @ m[:3, :3].T
+    s = -carried[..., 1] / turned[..., 1]
+    points = (carried + turned * s[..., None]).reshape(-1, 3)
+    to_light = np.tile(-np.array(LIGHT, np.float64), (len(points), 1))
+    occluded_in = _hits(points, to_light, -PENUMBRA).reshape(through.shape)
+    occluded_out = _hits(points, to_light, PENUMBRA).reshape(through.shape)
+    share, counted, in_shadow = _agreement(shadowed, lit, through, occluded_in, occluded_out)
+    assert counted > 4000 and in_shadow > 200, (counted, in_shadow, share)
+    assert share >= 0.99, f"{share:.4f} of {counted} floor pixels through the portal agree with the shadow rays"
+
+
+@pytest.mark.parametrize("path, shadow_filter", [("layered", "single"), ("six_pass", "grid")])
+def test_point_light_shadows_agree_with_shadow_rays(scene, monkeypatch, path, shadow_filter):
+    lamp = np.array([3.2, 1.3, 0.9])
+    if path == "six_pass":
+        from engine.render.path_checks import PathChecks
+        real = PathChecks.trusted
+        monkeypatch.setattr(PathChecks, "trusted", lambda self, name: False if name == "layered_capture"
+                            else real(self, name))
+
+    def build(world):
+        world.resources["ids"] = _floor_scene(world, (0.0, 5.5, 6.0), (0.0, 0.0, 0.0), sun=False,
+                                              point=lamp.tolist())
+
+    runner, ids, without, with_shadows = _render_both(scene, build, light="lamp", shadow_filter=shadow_filter)
+    assert runner.stats.shadow_path == path
+    shadowed, lit = _classified(without, with_shadows)
+    # Only where the lamp gives a visible share of the light (near the end of its range
+    # the difference is below the 8-bit output's steps).
+    eye, rays = _pixel_rays(runner.engine.main_view, runner.size)
+    t = -eye[1] / rays[..., 1]
+    points = (eye + rays * t[..., None]).reshape(-1, 3)
+    to_lamp = lamp - points
+    distance = np.linalg.norm(to_lamp, axis=1)
+    floor = (runner.ids() == ids["floor"]) & (distance < 5.0).reshape(runner.ids().shape)
+    direction = to_lamp / distance[:, None]
+    occluded_in = _hits(points, direction, -PENUMBRA, distance).reshape(floor.shape)
+    occluded_out = _hits(points, direction, PENUMBRA, distance).reshape(floor.shape)
+    share, counted, in_shadow = _agreement(shadowed, lit, floor, occluded_in, occluded_out)
+    assert counted > 10000 and in_shadow > 800, (counted, in_shadow, share)
+    assert share >= 0.99, f"{share:.4f} of {counted} floor pixels agree with the shadow rays ({path})"
+
+
+@pytest.mark.parametrize("shadow_filter", ["single", "grid"])
+def test_lit_surfaces_have_no_acne(scene, shadow_filter):
+    """Every surface the light reaches unblocked (the rays say so, well away from any outline)
+    is as bright with shadows as without: the sphere's lit side, the box's lit faces, the floor."""
+    def build(world):
+        world.resources["ids"] = _floor_scene(world, (2.5, 2.5, 4.0), (0.0, 0.5, 0.0))
+
+    runner, ids, without, with_shadows = _render_both(scene, build, shadow_filter=shadow_filter)
+    _, lit = _classified(without, with_shadows)
+    seen = runner.ids()
+    sphere = seen == ids["sphere"]
+    eye, rays = _pixel_rays(runner.engine.main_view, runner.size)
+    oc = eye - SPHERE_CENTRE
+    b = (rays * oc).sum(-1)
+    c = oc @ oc - SPHERE_RADIUS ** 2
+    t = -b - np.sqrt(np.maximum(b * b - c, 0.0))
+    normal = (eye + rays * t[..., None] - SPHERE_CENTRE) / SPHERE_RADIUS
+    facing = normal @ -np.array(LIGHT, np.float64) > 0.25
+    assert (sphere & facing).sum() > 500
+    assert lit[sphere & facing].mean() >= 0.99
+    top = eye + rays * ((1.0 - eye[1]) / rays[..., 1])[..., None]   # where each ray meets the box's top plane
+    inside = np.all(np.abs(top[..., [0, 2]] - BOX_CENTRE[[0, 2]]) < BOX_HALF - 0.03, axis=-1)
+    box_top = (seen == ids["box"]) & inside
+    assert box_top.sum() > 200
+    assert lit[box_top].mean() >= 0.99
+
+
+def test_a_still_scene_draws_no_shadow_pass_and_a_moved_caster_draws_one(scene):
+    def build(world):
+        world.resources["ids"] = _floor_scene(world, (0.5, 5.0, 6.5), (0.0, 0.0, 0.0))
+
+    runner = scene(build)
+    ids = runner.world.resources["ids"]
+    runner.frame()
+    assert runner.stats.shadow_maps_drawn == 1
+    runner.frame()
+    runner.frame()
+    assert (runner.stats.shadow_maps_drawn, runner.stats.shadow_maps_kept) == (0, 1)
+    first = runner.frame()
+    camera = runner.engine.active_camera()[0]
+    runner.world.get(camera, Transform).position += glm.vec3(0.3, 0.0, 0.0)  # only the camera moves
+    runner.frame()
+    assert runner.stats.shadow_maps_drawn == 0
+    runner.world.get(ids["box"], Transform).position += glm.vec3(0.0, 0.0, 0.8)
+    moved = runner.frame()
+    assert runner.stats.shadow_maps_drawn == 1
+    runner.frame()
+    assert runner.stats.shadow_maps_drawn == 0
+    assert not np.array_equal(first, moved)
+
+
+def test_a_point_light_ignores_changes_outside_its_reach(scene):
+    def build(world):
+        world.resources["ids"] = _floor_scene(world, (0.0, 5.5, 6.0), (0.0, 0.0, 0.0), sun=False,
+                                              point=[3.2, 1.3, 0.9])
+        world.resources["ids"]["far"] = world.spawn(Transform(position=(40.0, 0.5, 0.0)), MeshRef(box()), Material())
+
+    runner = scene(build)
+    ids = runner.world.resources["ids"]
+    runner.world.get(ids["lamp"], PointLight).range = 9.0
+    runner.frame()
+    runner.frame()
+    assert runner.stats.shadow_maps_drawn == 0
+    runner.world.get(ids["far"], Transform).position += glm.vec3(1.0, 0.0, 0.0)  # 40 m away: out of reach
+    runner.frame()
+    assert runner.stats.shadow_maps_drawn == 0
+    runner.world.get(ids["sphere"], Transform).position += glm.vec3(0.0, 0.2, 0.0)
+    runner.frame()
+    assert runner.stats.shadow_maps_drawn == 1
+    runner.world.get(ids["lamp"], PointLight).shadow_softness = 2.0
+    runner.frame()
+    assert runner.stats.shadow_maps_drawn == 1
+
+
+def test_point_lights_past_the_limit_are_counted_as_cut(scene):
+    def build(world):
+        look_from(world, (0, 3, 5), (0, 0, 0))
+        world.spawn(Transform(), MeshRef(plane(6, 6)), Material())
+        for x in (-2.0, 0.0, 2.0):
+            world.spawn(Transform(position=(x, 1.5, 0.0)), PointLight(range=5.0, shadows=True))
+
+    runner = scene(build)
+    runner.frame()
+    assert (runner.stats.shadow_maps_drawn, runner.stats.shadows_cut) == (2, 1)
+
+
+def test_a_probe_face_recaptures_when_a_shadow_it_shows_moves(scene):
+    """The probe's -Y face sees the floor below it; the caster stands beside the probe, out of
+    the probe's reach, but its shadow falls into that face; a thing moving far from the probe
+    (its shadow far too) asks for nothing."""
+    def build(world):
+        look_from(world, (0, 3, 6), (0, 0, 0))
+        world.spawn(DirectionalLight(direction=(-1.0, -1.5, 0.0), intensity=2.0))
+        world.spawn(Transform(), MeshRef(plane(60, 60)), Material())
+        world.resources["probe"] = world.spawn(Transform(position=(0.0, 0.6, 0.0)),
+                                               ReflectionProbe(resolution=16, far=2.0))
+        world.resources["caster"] = world.spawn(Transform(position=(2.2, 2.6, 0.0)), MeshRef(box()), Material())
+        world.resources["far"] = world.spawn(Transform(position=(20.0, 0.5, 20.0)), MeshRef(box()), Material())
+
+    runner = scene(build)
+    runner.frame()
+    runner.frame()
+    probe = runner.world.resources["probe"]
+    assert probe not in runner.world.resources[ProbeSchedule].due
+    runner.world.get(runner.world.resources["far"], Transform).position += glm.vec3(0.0, 0.0, 0.5)
+    runner.frame()
+    assert probe not in runner.world.resources[ProbeSchedule].due
+    runner.world.get(runner.world.resources["caster"], Transform).position += glm.vec3(0.0, 0.0, 0.2)
+    runner.frame()
+    due = runner.world.resources[ProbeSchedule].due
+    assert probe in due and 3 in due[probe].faces, due   # face 3: -Y, the floor the shadow falls on
+    assert any(reason.startswith("shadow of entity") for reason in due[probe].reasons), due[probe].reasons
+
+
+def test_the_filter_is_checked_and_a_new_one_draws_the_maps_again(scene):
+    def build(world):
+        world.resources["ids"] = _floor_scene(world, (0.5, 5.0, 6.5), (0.0, 0.0, 0.0))
+
+    runner = scene(build)
+    runner.frame()
+    runner.frame()
+    assert runner.stats.shadow_maps_drawn == 0
+    maps = runner.engine.renderer.shadows
+    maps.filter = "grid" if maps.filter == "single" else "single"
+    runner.frame()
+    assert runner.stats.shadow_maps_drawn == 1
+    with pytest.raises(ValueError, match="shadow filter"):
+        maps.filter = "pcss"
+
+
+def test_shadow_fields_refuse_bad_values():
+    with pytest.raises(ComponentValueError, match="power of two"):
+        DirectionalLight(shadow_resolution=1000)
+    with pytest.raises(ComponentValueError, match="shadow_resolution"):
+        PointLight(shadow_resolution=1 << 14)
+    with pytest.raises(ComponentValueError, match="shadow_softness"):
+        DirectionalLight(shadow_softness=-1.0)
+    with pytest.raises(ComponentValueError, match="shadows"):
+        PointLight(shadows="yes")
+    assert DirectionalLight().shadows and not PointLight().shadows
