@@ -37,15 +37,21 @@ class Mirror(TrackedComponent):
     (``engine.resources.ViewBudget``).
     ``end_image``: past the depth limit, show the surface's image from the previous frame,
     shrunk onto the cut view's footprint (``engine/render/end_images.py``), instead of its
-    closed look: True, False, or "auto" (the default: on for a facing pair, whose recursion
-    would otherwise end in a flat rectangle).
+    fallback: True, False, or "auto" (the default: on for a facing pair, whose recursion
+    would otherwise end in the fallback's rectangle).
+
+    Without a view of its own (cut by the frame's view budget, faded out, past the depth
+    limits without an end image, or ``enabled`` False) a mirror shows its fallback: the
+    reflection its surface would get from the probes whose influence boxes hold it, else
+    from the sky, at its tint, reflect rate and roughness
+    (``engine.rules.probe_rules.surface_blend``, ``engine/render/mirror_passes.py``).
 
     Fades (both off by default), as Unreal's planar reflections offer: ``fade_distance =
     (start, end)`` in metres from the viewing eye to the mirror (to its bounding sphere), and
     ``fade_angle = (start, end)`` in degrees between the mirror's normal and the direction to
     the eye (0: straight on, 90: edge on).  Between start and end the reflection's weight
-    falls linearly from 1 to 0 and the mirror shows its own shading instead; at end and past
-    it the mirror costs no view at all.  A view's weight is the product of the two, seen from
+    falls linearly from 1 to 0 and the mirror shows its fallback instead (the two mixed by the
+    weight); at end and past it the mirror costs no view at all.  A view's weight is the product of the two, seen from
     that view's eye (a mirror seen in another mirror fades by the reflected eye's distance).
 
     ``reflects_light`` (off by default): the lights that reach its front are reflected onto

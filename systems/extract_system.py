@@ -26,7 +26,8 @@ from engine.core.errors import GLLimitError
 from engine.core.world import World
 from engine.render.instances import DRAWN_EVERYWHERE, InstanceBatch, visibility_code
 from engine.render.renderer import Renderer
-from engine.rules.probe_rules import LookChanges, probe_blend
+from engine.resources import Surfaces
+from engine.rules.probe_rules import LookChanges, SurfaceProbes, probe_blend
 from systems.material_dispatch import choose_material
 
 NO_SLICE = (0.0, 0.0, 0.0, 1.0)
@@ -39,6 +40,7 @@ class ExtractSystem(esper.Processor):
         self._batch_of: dict[int, InstanceBatch] = {}
         self._looks = LookChanges()  # what changes a look, and which probe each object samples
         self._joined: set[int] = set()
+        self._surface_probes = SurfaceProbes()  # each mirror's and portal's fallback probes
 
     def process(self, dt: float) -> None:
         world = self.world
@@ -51,6 +53,11 @@ class ExtractSystem(esper.Processor):
         joined = self._joined = set()  # entities given a row by a refresh: their transform is written below
         for entity in touched:
             self._refresh_instance(entity)
+        # What each mirror and portal shows where it has no view: the probes whose influence
+        # boxes hold it (probe_rules.surface_blend), for the view trees' composites.
+        surfaces = world.resources.get(Surfaces)
+        self.renderer.surface_probes = self._surface_probes.update(
+            world, (*surfaces.mirrors.values(), *surfaces.portals.values()) if surfaces is not None else ())
         # The transform of every moved entity, touched or not, and of every entity a refresh
         # gave a new row (a Slice removed in the frame it moved leaves it in another batch),
         # grouped by batch: each batch writes its rows in one go (InstanceBatch.write_transforms).
@@ -95,7 +102,7 @@ class ExtractSystem(esper.Processor):
                                             entity if transparent else 0, material.normal_map if material else None,
                                             material.emissive_map if material else None,
                                             material.metallic_roughness_map if material else None,
-                                            second_probe=second, probe_blend=blend.blended)
+                                            second_probe=second, probe_blend=blend.blended, rest_probe=blend.rest)
         except GLLimitError as exc:
             raise GLLimitError(f"entity {entity}: {exc}") from None
         if old is not batch:

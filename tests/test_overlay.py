@@ -53,7 +53,7 @@ def test_the_overlay_shows_the_frames_numbers_over_its_own_region_only(scene, ct
         assert "50.0 fps, 20.00 ms a frame" in lines
         assert "views per level 1 / 1" in lines
         assert any(line.startswith("probe captures 1 (6 faces); shadow maps drawn") for line in lines)
-        assert "reflection views 1, dropped 0, capped 0, faded 0" in lines
+        assert "reflection views 1, dropped 0, capped 0, faded 0, fallbacks 0" in lines
         # ...and as RenderStats counted them in this frame.
         assert f"passes {stats.passes}, draw calls {stats.draw_calls}" in lines and stats.draw_calls > 0
         assert f"reflection path {stats.reflection_path} (set: auto, budget none)" in lines

@@ -104,6 +104,7 @@ class InstanceBatch:
         # instances blend (their rows' ``reflect`` z and w weigh the two probes, the sky the rest).
         self.second_probe = 0
         self.probe_blend = False
+        self.rest_probe = 0  # the probe taking what the weights leave (0: the sky; a curved object's own)
         self._variants: tuple[int, int, int] | None = None
         self._variants_stale = True
         # Drawn in the scene pass's transparent slot (blended, farthest first) instead of
