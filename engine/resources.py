@@ -21,12 +21,18 @@ from pyglm import glm
 
 from components.limits import ALL_LAYERS, VIEW_KINDS
 from engine.assets.texture_data import TextureData
+from engine.core.errors import SpeculumError
 from engine.render.renderer import RenderStats
 from engine.render.view_plan import SurfaceTable
 from engine.render.views import View
 
 __all__ = ["FrameViews", "MirrorBumps", "PortalCrossing", "PortalCrossings", "RenderStats", "SurfaceState",
-           "Surfaces", "ViewBudget", "WaterFlow", "WaterLook"]
+           "Surfaces", "ViewBudget", "ViewBudgetError", "WaterFlow", "WaterLook"]
+
+
+class ViewBudgetError(SpeculumError, ValueError):
+    """A ``ViewBudget`` that cannot be spent: a field out of range, or something else (the
+    class itself, a dict) where the world's ``ViewBudget`` resource should be."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -125,15 +131,35 @@ class ViewBudget:
     pixels: int | None = None
 
     def __post_init__(self) -> None:
+        self.check()
+
+    def check(self) -> None:
+        """Refuse fields out of range with a ``ViewBudgetError`` naming the field."""
         if self.views is not None and (not isinstance(self.views, int) or isinstance(self.views, bool)
                                        or self.views < 0):
-            raise ValueError(f"ViewBudget.views must be None or an int >= 0, got {self.views!r}")
+            raise ViewBudgetError(f"ViewBudget.views must be None or an int >= 0, got {self.views!r}")
         if self.pixels is not None and (not isinstance(self.pixels, int) or isinstance(self.pixels, bool)
                                         or self.pixels < 0):
-            raise ValueError(f"ViewBudget.pixels must be None or an int >= 0, got {self.pixels!r}")
+            raise ViewBudgetError(f"ViewBudget.pixels must be None or an int >= 0, got {self.pixels!r}")
         if self.probe_ms is not None and (isinstance(self.probe_ms, bool) or not isinstance(self.probe_ms, (int, float))
                                           or not 0.0 < self.probe_ms < float("inf")):
-            raise ValueError(f"ViewBudget.probe_ms must be None or a finite number > 0, got {self.probe_ms!r}")
+            raise ViewBudgetError(f"ViewBudget.probe_ms must be None or a finite number > 0, got {self.probe_ms!r}")
+
+    @staticmethod
+    def of(world_resources: dict) -> ViewBudget | None:
+        """The world's budget (None: no limit), checked: the resource must be a ViewBudget
+        instance with fields in range; the class itself (``= ViewBudget``, the call
+        forgotten) or another object is a ``ViewBudgetError`` saying so."""
+        budget = world_resources.get(ViewBudget)
+        if budget is None:
+            return None
+        if budget is ViewBudget or isinstance(budget, type):
+            raise ViewBudgetError(f"world.resources[ViewBudget] holds the class {budget.__name__}, not a budget: "
+                                  "make one, e.g. ViewBudget(views=24)")
+        if not isinstance(budget, ViewBudget):
+            raise ViewBudgetError(f"world.resources[ViewBudget] must be a ViewBudget(views=..., pixels=..., "
+                                  f"probe_ms=...), got {type(budget).__name__} {budget!r}")
+        return budget
 
 
 @dataclass

@@ -135,7 +135,7 @@ class ProbeScheduler:
         eye = _camera_position(self.world)
         due.sort(key=lambda item: (item[0].captures > 0, -(item[0].settings.priority + item[0].waiting),
                                    float(np.linalg.norm(np.asarray(item[0].position) - eye))))
-        budget = self.world.resources.get(ViewBudget)
+        budget = ViewBudget.of(self.world.resources)
         face_ms = self.probes.face_ms
         if budget is None or budget.probe_ms is None or face_ms is None:
             return due

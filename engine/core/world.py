@@ -26,6 +26,10 @@ C = TypeVar("C")
 # for them when a field changes (``World.check_invariants``), without either knowing the rule.
 Invariant = Callable[..., None]
 _INVARIANTS: dict[type, list[Invariant]] = defaultdict(list)
+# Invariants that need the entity's components together (a Water needs a Mirror): at spawn
+# they run once every component is attached (the order components are listed in is free);
+# ``add_component`` on an existing entity runs them with the joining component.
+_WHOLE_INVARIANTS: dict[type, list[Invariant]] = defaultdict(list)
 
 
 def check_components(components: Iterable[Any]) -> None:
@@ -35,7 +39,7 @@ def check_components(components: Iterable[Any]) -> None:
     held = {type(component): component for component in components}
     detached = _Detached(held)
     for kind in held:
-        for check in _INVARIANTS.get(kind, ()):
+        for check in (*_INVARIANTS.get(kind, ()), *_WHOLE_INVARIANTS.get(kind, ())):
             check(detached, 0, None)
 
 
@@ -52,15 +56,19 @@ class _Detached:
         return self._held.get(kind)
 
 
-def world_invariant(*kinds: type) -> Callable[[Invariant], Invariant]:
+def world_invariant(*kinds: type, whole: bool = False) -> Callable[[Invariant], Invariant]:
     """Register the decorated check for every world, run when one of ``kinds`` joins an
-    entity or asks (see ``_INVARIANTS``)."""
+    entity or asks (see ``_INVARIANTS``); ``whole``: a check that needs the entity's other
+    components (``_WHOLE_INVARIANTS``), run at the end of a spawn and on a later join."""
+    table = _WHOLE_INVARIANTS if whole else _INVARIANTS
+
     def register(check: Invariant) -> Invariant:
         for kind in kinds:
-            if check not in _INVARIANTS[kind]:
-                _INVARIANTS[kind].append(check)
+            if check not in table[kind]:
+                table[kind].append(check)
         return check
     return register
+
 _world_ids = itertools.count(1)
 
 
@@ -133,7 +141,10 @@ class World:
         self._made = max(self._made, entity)
         try:
             for component in components:
-                self.add_component(entity, component)
+                self._add(entity, component, whole=False)
+            for kind in dict.fromkeys(type(component) for component in components):
+                for check in _WHOLE_INVARIANTS.get(kind, ()):
+                    check(self, entity, None)
             self._check_whole(entity, components)
         except BaseException:
             for component in esper.components_for_entity(entity):
@@ -145,6 +156,9 @@ class World:
 
     def add_component(self, entity: int, component: Any) -> None:
         """Attach ``component`` (replacing one of its type); see components.tracking on sharing."""
+        self._add(entity, component, whole=True)
+
+    def _add(self, entity: int, component: Any, whole: bool) -> None:
         self._use()
         kind = type(component)
         if isinstance(component, TrackedComponent):
@@ -167,7 +181,7 @@ class World:
                 if walk == entity:
                     raise ComponentValueError(f"Transform.parent {parent!r} of entity {entity} would make a "
                                               f"cycle (entity {parent} descends from entity {entity})")
-        for check in _INVARIANTS.get(kind, ()):
+        for check in (*_INVARIANTS.get(kind, ()), *(_WHOLE_INVARIANTS.get(kind, ()) if whole else ())):
             check(self, entity, component)
         if esper.has_component(entity, kind):
             old = esper.component_for_entity(entity, kind)

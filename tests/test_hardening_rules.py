@@ -1,0 +1,318 @@
+"""Hardening, round 3 (issue 41): rules checked when the value is given, not frames later
+(item 2), and what a game maker reads when something is wrong (item 6).  Each refusal is
+one ``speculum: error:`` line (exit 2) from the command line, or an error at the line of
+code that makes the mistake; each silent mistake is one warning."""
+from __future__ import annotations
+
+import dataclasses
+import textwrap
+import warnings
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from components import (
+    ComponentValueError,
+    DirectionalLight,
+    Material,
+    MeshRef,
+    Mirror,
+    Transform,
+    Water,
+)
+from components.tracking import TrackedComponent
+from engine.assets.level_file import LevelError, LevelGame, load_level
+from engine.assets.mesh import plane, quad
+from engine.core.game import Game, GameSystem, ScheduleError
+from engine.core.world import World
+from engine.resources import ViewBudget
+from shell.runner import main
+from tests.support import look_from
+
+HEADLESS = ["--headless", "--frames", "1", "--size", "8x8"]
+
+
+@pytest.fixture
+def world():
+    made = World("hardening rules")
+    try:
+        yield made
+    finally:
+        made.close()
+
+
+def _pond(**mirror) -> tuple:
+    return Transform(), MeshRef(quad(2.0, 2.0)), Material(color=(0.1, 0.2, 0.3, 0.5)), Mirror(**mirror)
+
+
+# --- item 2: Water's rules at spawn and at every write --------------------------------------
+
+def test_water_without_a_mirror_is_refused_at_spawn_in_any_order_and_nothing_is_made(world):
+    before = set(world.entities())
+    with pytest.raises(ComponentValueError, match=r"Water on entity \d+: a Water needs a Mirror"):
+        world.spawn(Transform(), MeshRef(quad()), Material(), Water())
+    assert not list(world.query_one(Water)) and set(world.entities()) == before
+    # The Mirror may come before or after the Water in the spawn's list.
+    world.spawn(Water(), *_pond())
+    world.spawn(*_pond(), Water())
+    assert len(list(world.query_one(Water))) == 2
+
+
+def test_water_added_to_an_entity_without_a_mirror_is_refused_at_that_call(world):
+    entity = world.spawn(Transform(), MeshRef(quad()), Material())
+    with pytest.raises(ComponentValueError, match="a Water needs a Mirror"):
+        world.add_component(entity, Water())
+    assert not world.has(entity, Water)
+    world.add_component(entity, Mirror())
+    world.add_component(entity, Water())
+    assert world.has(entity, Water)
+
+
+def test_a_rough_mirror_and_water_are_refused_together_at_spawn_join_and_write(world):
+    with pytest.raises(ComponentValueError, match=r"Mirror.roughness on entity \d+ must be 0 with a Water"):
+        world.spawn(*_pond(roughness=0.2), Water())
+    with pytest.raises(ComponentValueError, match="must be 0 with a Water"):
+        world.spawn(Water(), *_pond(roughness=0.2))
+    rough = world.spawn(*_pond(roughness=0.3))
+    with pytest.raises(ComponentValueError, match="must be 0 with a Water"):
+        world.add_component(rough, Water())
+    pond = world.spawn(*_pond(), Water())
+    mirror = world.get(pond, Mirror)
+    with pytest.raises(ComponentValueError, match=f"Mirror.roughness on entity {pond} must be 0 with a Water"):
+        mirror.roughness = 0.1  # the write itself, not a MirrorError every frame after
+    assert mirror.roughness == 0.0
+    with pytest.raises(ComponentValueError, match="must be 0 with a Water"):
+        world.add_component(pond, Mirror(roughness=0.5))  # a replacement Mirror, too
+    # A mirror without water may be rough; a shared Mirror is checked for every holder.
+    world.get(rough, Mirror).roughness = 0.6
+    shared = Mirror()
+    world.spawn(*_pond()[:3], shared)
+    world.spawn(*_pond()[:3], shared, Water())
+    with pytest.raises(ComponentValueError, match="must be 0 with a Water"):
+        shared.roughness = 0.2
+
+
+def test_water_whose_mirror_is_taken_off_waits_with_a_warning_and_never_stops_a_frame(scene):
+    ents = {}
+
+    def build(world):
+        world.spawn(DirectionalLight(direction=(0.2, -1.0, -0.3)))
+        look_from(world, (0.0, 2.0, 3.0), target=(0.0, 0.0, 0.0))
+        world.spawn(Transform(position=(0.0, -0.2, 0.0)), MeshRef(plane(6, 6)), Material(color=(0.8, 0.6, 0.2)))
+        ents["pond"] = world.spawn(Transform(rotation=_flat()), MeshRef(quad(2.0, 2.0)),
+                                   Material(color=(0.1, 0.2, 0.3, 0.5)), Mirror(), Water())
+    runner = scene(build, (32, 24))
+    runner.frame()
+    world = runner.world
+    world.remove_component(ents["pond"], Mirror)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        world.get(ents["pond"], Water).speed = 0.2
+        runner.frame()
+        world.get(ents["pond"], Water).speed = 0.3
+        rgb = runner.frame()
+    said = [str(w.message) for w in caught if "Water has no Mirror" in str(w.message)]
+    assert len(said) == 1 and f"entity {ents['pond']}" in said[0], said
+    assert rgb.mean() > 3  # the lit floor, not a black frame
+
+
+def _flat():
+    from pyglm import glm
+    return glm.angleAxis(-np.pi / 2, glm.vec3(1, 0, 0))
+
+
+# --- item 2: Mirror fades refuse strings and booleans ---------------------------------------
+
+@pytest.mark.parametrize("value", ["ab", "8", ("8", "14"), (True, 14.0), (0.0, False), 5, (1.0,), (1.0, 2.0, 3.0),
+                                   {"start": 1, "end": 2}])
+@pytest.mark.parametrize("name", ["fade_distance", "fade_angle"])
+def test_fades_refuse_text_booleans_and_wrong_lengths_naming_the_field(name, value):
+    with pytest.raises(ComponentValueError, match=f"Mirror.{name} must be None or two numbers"):
+        Mirror(**{name: value})
+    mirror = Mirror()
+    with pytest.raises(ComponentValueError, match=f"Mirror.{name}"):
+        setattr(mirror, name, value)
+    assert getattr(mirror, name) is None
+
+
+def test_fades_still_take_numbers_of_either_kind():
+    mirror = Mirror(fade_distance=(8, 14.5), fade_angle=np.array([60.0, 85.0]))
+    assert mirror.fade_distance == (8.0, 14.5) and mirror.fade_angle == (60.0, 85.0)
+
+
+# --- item 2: game systems checked when the schedule is built --------------------------------
+
+def _bounce(world, dt):
+    pass
+
+
+def _one_arg(world):
+    pass
+
+
+class _NoDt:
+    def process(self):
+        pass
+
+
+class _SystemsGame(Game):
+    title = "systems check"
+
+    def __init__(self, systems):
+        self._systems = systems
+
+    def build(self, world: World) -> None:
+        look_from(world, (0.0, 1.0, 3.0), target=(0.0, 0.0, 0.0))
+
+    def systems(self):
+        return self._systems() if callable(self._systems) else self._systems
+
+
+@pytest.mark.parametrize("make, expected", [
+    (lambda: [GameSystem(_bounce, after=3)], "GameSystem '_bounce': after must be a stage or game system name"),
+    (lambda: [GameSystem(_bounce, before=("extract", None))], "GameSystem '_bounce': before must be"),
+    (lambda: None, "returned None; return a list of GameSystem"),
+    (lambda: GameSystem(_bounce), "return a list of GameSystem"),
+    (lambda: [GameSystem(_one_arg)], "game system '_one_arg' cannot be called as function(world, dt)"),
+    (lambda: [GameSystem(_NoDt())], "game system '_NoDt' cannot be called as process(dt)"),
+], ids=["after-int", "before-none", "systems-none", "not-a-list", "one-argument", "process-without-dt"])
+def test_game_systems_that_cannot_be_scheduled_or_called_are_one_error_line(make, expected, capsys, tmp_path):
+    """Each was a TypeError traceback (at the Engine, or in the first frame that called the
+    system); now a ScheduleError naming the system, before anything is made."""
+    with pytest.raises(ScheduleError, match=expected.replace("(", r"\(").replace(")", r"\)")):
+        from engine.core.game import schedule_order
+        schedule_order(["game", "extract"], make())
+    assert main(_SystemsGame(make), [*HEADLESS, "--out", str(tmp_path / "out")]) == 2
+    lines = capsys.readouterr().err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("speculum: error: ") and expected in lines[0], lines
+
+
+def test_systems_that_take_more_optional_arguments_or_any_still_run(tmp_path):
+    calls = []
+
+    def optional(world, dt, scale=1.0):
+        calls.append("optional")
+
+    def anything(*args):
+        calls.append("anything")
+
+    game = _SystemsGame([GameSystem(optional), GameSystem(anything)])
+    assert main(game, [*HEADLESS, "--out", str(tmp_path / "out")]) == 0
+    assert calls == ["optional", "anything"]
+
+
+# --- item 2: a game's own components in a level file, by their annotations ------------------
+
+@dataclasses.dataclass(eq=False)
+class Bounce(TrackedComponent):
+    """A game's own component, as games write them: annotated plain data, no checks."""
+
+    height: float = 1.0
+    times: int = 0
+    loud: bool = False
+    label: str = ""
+    span: tuple[float, float] = (0.0, 1.0)
+    steps: list[int] = dataclasses.field(default_factory=list)
+
+
+def _level(tmp_path: Path, body: str, name: str = "level.toml") -> Path:
+    path = tmp_path / name
+    path.write_text(textwrap.dedent(body))
+    return path
+
+
+@pytest.mark.parametrize("field, value, kind", [
+    ("height", '"high"', "a number"), ("height", "true", "a number"), ("times", "1.5", "an integer"),
+    ("loud", "1", "true or false"), ("label", "3", "a string"), ("span", "[1.0, 2.0, 3.0]", "tuple[float, float]"),
+    ("span", '[1.0, "x"]', "tuple[float, float]"), ("steps", "[1, 2.5]", "list[int]"), ("steps", "4", "list[int]")])
+def test_a_games_own_component_field_of_the_wrong_kind_is_refused_naming_file_line_and_field(tmp_path, field, value,
+                                                                                            kind):
+    path = _level(tmp_path, f"""\
+        [level]
+        name = "bouncy"
+
+        [[entity]]
+        name = "ball"
+        [entity.Bounce]
+        {field} = {value}
+        """)
+    with pytest.raises(LevelError) as caught:
+        load_level(path, {"Bounce": Bounce})
+    text = str(caught.value)
+    assert str(path) in text and ":7:" in text and f"Bounce.{field}" in text and kind in text, text
+
+
+def test_a_games_own_component_of_the_right_kinds_loads(tmp_path):
+    path = _level(tmp_path, """\
+        [level]
+        name = "bouncy"
+
+        [[entity]]
+        name = "ball"
+        [entity.Bounce]
+        height = 2
+        times = 3
+        loud = true
+        label = "hop"
+        span = [0.5, 1]
+        steps = [1, 2]
+        """)
+    level = load_level(path, {"Bounce": Bounce})
+    with World("bounce") as world:
+        names = level.spawn(world)
+        bounce = world.get(names["ball"], Bounce)
+        assert (bounce.height, bounce.times, bounce.loud, bounce.label) == (2, 3, True, "hop")
+
+
+class _BounceGame(LevelGame):
+    title = "bouncy"
+    game = "bouncy"
+    components = {"Bounce": Bounce}
+    makes_camera = True
+
+
+def test_a_level_for_another_game_is_refused_as_such_before_its_components_are_read(tmp_path, capsys):
+    """Its components are the other game's: before, the first one unknown here was the error."""
+    path = _level(tmp_path, """\
+        [level]
+        name = "someone else's"
+        game = "portal_run"
+
+        [[entity]]
+        name = "door"
+        [entity.Doorway]
+        width = "wide"
+        """)
+    with pytest.raises(LevelError, match="the level is for portal_run, not for bouncy") as caught:
+        _BounceGame(path).load()
+    assert ":3:" in str(caught.value)
+    assert main(_BounceGame(path), [*HEADLESS, "--out", str(tmp_path / "out")]) == 2
+    lines = capsys.readouterr().err.strip().splitlines()
+    assert len(lines) == 1 and "not for bouncy" in lines[0] and "Doorway" not in lines[0], lines
+
+
+# --- item 2: a wrong ViewBudget is one error line -------------------------------------------
+
+class _BudgetGame(Game):
+    title = "budget"
+
+    def __init__(self, budget):
+        self.budget = budget
+
+    def build(self, world: World) -> None:
+        look_from(world, (0.0, 1.0, 3.0), target=(0.0, 0.0, 0.0))
+        world.resources[ViewBudget] = self.budget() if callable(self.budget) and self.budget is not ViewBudget \
+            else self.budget
+
+
+@pytest.mark.parametrize("budget, expected", [
+    (ViewBudget, "holds the class ViewBudget, not a budget: make one, e.g. ViewBudget(views=24)"),
+    ({"views": 4}, "must be a ViewBudget(views=..., pixels=..., probe_ms=...), got dict"),
+    (lambda: ViewBudget(views=-2), "ViewBudget.views must be None or an int >= 0, got -2"),
+    (lambda: ViewBudget(probe_ms="2"), "ViewBudget.probe_ms must be None or a finite number > 0, got '2'"),
+], ids=["class", "dict", "negative-views", "text-probe-ms"])
+def test_a_wrong_view_budget_is_one_error_line(budget, expected, tmp_path, capsys):
+    assert main(_BudgetGame(budget), [*HEADLESS, "--out", str(tmp_path / "out")]) == 2
+    lines = capsys.readouterr().err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("speculum: error: ") and expected in lines[0], lines
