@@ -4,13 +4,13 @@ from components.mirror import Mirror
 from components.portal import Portal, PortalClone, Slice, Traveller
 from components.probe import ReflectionProbe
 from components.rendering import Emissive, Material, MeshRef, Reflective, Refractive, Skybox
-from components.tracking import ComponentValueError, TrackedComponent
+from components.tracking import ComponentValueError, ComponentWarning, TrackedComponent
 from components.transform import Transform, euler_rotation, look_rotation, yaw_pitch_rotation
 from components.visibility import Visibility
 from components.water import Water
 
 __all__ = [
-    "Camera", "ComponentValueError", "DirectionalLight", "Emissive", "FlyController", "Material",
+    "Camera", "ComponentValueError", "ComponentWarning", "DirectionalLight", "Emissive", "FlyController", "Material",
     "MeshRef", "Mirror", "PointLight", "Portal", "PortalClone", "ReflectionProbe", "Reflective", "Refractive",
     "Skybox", "Slice",
     "TrackedComponent", "Transform", "Traveller", "Visibility", "Water",

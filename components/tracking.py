@@ -34,6 +34,24 @@ class ComponentValueError(ValueError):
     """A component field was given a value it cannot hold (NaN, negative, wrong kind)."""
 
 
+class ComponentWarning(UserWarning):
+    """A component value the engine can hold but that is almost certainly not what was meant
+    (a colour written 0-255, an entity hidden in every kind of view, a view that shows no
+    layer): said when it is given, as one line (``speculum: warning:`` from the command line)."""
+
+
+def warn_component(message: str) -> None:
+    """A ``ComponentWarning`` pointing past the component code, at the caller's line."""
+    import sys
+    import warnings
+
+    level, frame = 2, sys._getframe(1)
+    while frame is not None and frame.f_globals.get("__name__", "").startswith(("components.", "engine.core.world",
+                                                                                 "engine.rules.", "dataclasses")):
+        frame, level = frame.f_back, level + 1
+    warnings.warn(message, ComponentWarning, stacklevel=level)
+
+
 class TrackedComponent:
     """Base of all components: validates fields and reports writes to its world."""
 
@@ -173,6 +191,12 @@ def color(owner: object, name: str, value: Any) -> glm.vec4:
         raise _fail(owner, name, value, "must have alpha <= 1")
     if max(items) > HALF_MAX:
         raise _fail(owner, name, value, "must have components <= 65504 (the half-float colour targets' limit)")
+    rgb = parts[:3]
+    if all(isinstance(c, (Integral, np.integer)) and not isinstance(c, (bool, np.bool_)) for c in rgb) \
+            and 1 < max(items[:3]) <= 255:
+        scaled = ", ".join(f"{float(c) / 255.0:.3g}" for c in rgb)
+        warn_component(f"{type(owner).__name__}.{name} = {value!r} looks like 0-255 colour values; colours are "
+                       f"linear 0-1 (that is ({scaled}) in 0-1; write floats, e.g. 3.0, for a colour brighter than 1)")
     return glm.vec4(*items)
 
 

@@ -120,6 +120,7 @@ def make_window_config(game: Game, args: argparse.Namespace | None = None) -> ty
             self.mouse_captured = False
             self.key_names = key_names(self.wnd.keys)
             self.overlay = make_overlay(self.ctx, visible=bool(getattr(args, "overlay", False)))
+            self.shown_title = self.wnd.title = game.title  # build may have named the level
 
         def on_render(self, time_s: float, frametime: float) -> None:
             if self.released:
@@ -129,6 +130,8 @@ def make_window_config(game: Game, args: argparse.Namespace | None = None) -> ty
                 print(f"speculum: {message}", file=sys.stderr, flush=True)
             self.overlay.record(frametime)
             self.engine.frame(min(frametime, 0.1), Output(self.wnd.fbo, size))
+            if game.title != self.shown_title:  # a game that changed level ('n') renames its window
+                self.shown_title = self.wnd.title = game.title
             self.overlay.draw(self.engine, self.wnd.fbo, size)
             if self.frames_left is not None:
                 self.frames_left -= 1

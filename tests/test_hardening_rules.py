@@ -316,3 +316,129 @@ def test_a_wrong_view_budget_is_one_error_line(budget, expected, tmp_path, capsy
     assert main(_BudgetGame(budget), [*HEADLESS, "--out", str(tmp_path / "out")]) == 2
     lines = capsys.readouterr().err.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith("speculum: error: ") and expected in lines[0], lines
+
+
+# --- item 6: silent mistakes get a warning ---------------------------------------------------
+
+def _warned(make) -> list[str]:
+    from components import ComponentWarning
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        make()
+    return [str(w.message) for w in caught if issubclass(w.category, ComponentWarning)]
+
+
+def test_colours_written_0_to_255_are_warned_and_colours_in_0_to_1_or_bright_floats_are_not():
+    from components import PointLight
+    said = _warned(lambda: Material(color=(255, 128, 0)))
+    assert len(said) == 1 and "Material.color = (255, 128, 0) looks like 0-255" in said[0]
+    assert "(1, 0.502, 0)" in said[0]
+    assert len(_warned(lambda: PointLight(color=[200, 200, 200]))) == 1
+    for fine in ((1, 1, 1), (0, 0, 1), (0.5, 0.2, 0.1), (3.0, 3.0, 3.0), (255.0, 0.0, 0.0)):
+        assert _warned(lambda fine=fine: Material(color=fine)) == [], fine
+
+
+def test_an_entity_hidden_in_every_kind_of_view_is_warned_at_the_line_that_hides_it():
+    from components import Visibility
+    said = _warned(lambda: Visibility(direct=False, in_mirrors=False, in_portals=False, in_probes=False))
+    assert len(said) == 1 and "drawn nowhere" in said[0]
+    ghost = Visibility(direct=False, in_portals=False, in_probes=False)  # seen only in mirrors: fine
+    assert _warned(lambda: setattr(ghost, "in_probes", False)) == []
+    said = _warned(lambda: setattr(ghost, "in_mirrors", False))
+    assert len(said) == 1 and "drawn nowhere" in said[0]
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        Visibility(direct=False, in_mirrors=False, in_portals=False, in_probes=False)
+    assert caught[0].filename == __file__  # the warning points at the game's line, not the component's
+
+
+def test_a_view_that_shows_no_layer_is_warned():
+    from components import Camera, Portal
+    for make in (lambda: Camera(shows_layers=[]), lambda: Mirror(shows_layers=()), lambda: Portal(shows_layers=[])):
+        said = _warned(make)
+        assert len(said) == 1 and "shows no layer" in said[0], said
+    assert _warned(lambda: Camera(shows_layers=None)) == _warned(lambda: Camera(shows_layers=[0])) == []
+
+
+def test_water_with_no_normal_map_is_warned_once_at_spawn(world):
+    from engine.assets.texture_data import ripple_normal_map
+    said = _warned(lambda: world.spawn(*_pond(), Water()))
+    assert len(said) == 1 and "no normal_map, so the water has no waves" in said[0]
+    waves = Material(color=(0.1, 0.2, 0.3, 0.5), normal_map=ripple_normal_map(32))
+    assert _warned(lambda: world.spawn(Transform(), MeshRef(quad(2.0, 2.0)), waves, Mirror(), Water())) == []
+
+
+def test_a_blend_distance_without_an_influence_box_is_warned_when_the_probe_comes(scene):
+    from components import ReflectionProbe, Reflective
+    from engine.assets.mesh import sphere
+
+    def build(world):
+        look_from(world, (0.0, 1.0, 3.0), target=(0.0, 0.0, 0.0))
+        world.spawn(Transform(), MeshRef(sphere(0.5)), Material(metallic=1.0), Reflective("cube"),
+                    ReflectionProbe(resolution=16, blend_distance=0.5))
+        world.spawn(Transform(position=(2.0, 0.0, 0.0)), MeshRef(sphere(0.5)), Material(metallic=1.0),
+                    Reflective("cube"), ReflectionProbe(resolution=16, influence=(4, 4, 4), blend_distance=0.5))
+    runner = scene(build, (16, 16))
+    said = _warned(runner.frame)
+    assert len(said) == 1 and "blend_distance = 0.5 does nothing without an influence box" in said[0], said
+    assert _warned(runner.frame) == []  # said when it comes (or changes), not every frame
+
+
+# --- item 6: the command line and the window ------------------------------------------------
+
+def test_camera_takes_a_negative_first_value_without_an_equals_sign(tmp_path):
+    from games.hall_of_mirrors.level import HallOfMirrors
+    from shell.runner import parse_args
+    args = parse_args(HallOfMirrors(), ["--headless", "--camera", "-4.5,1.6,3,-90,-5"])
+    assert args.camera == (-4.5, 1.6, 3.0, -90.0, -5.0)
+    assert parse_args(HallOfMirrors(), ["--camera", "-.5,1,2,0,0"]).camera == (-0.5, 1.0, 2.0, 0.0, 0.0)
+    assert parse_args(HallOfMirrors(), ["--camera=-1,1,2,0,0"]).camera[0] == -1.0
+
+
+TITLE_SCRIPT = r'''
+import moderngl_window as mglw
+from engine import Game
+from shell.window import make_window_config
+from tests.support import look_from
+
+class Renamed(Game):
+    title = "first level"
+    frames = 0
+    def build(self, world):
+        look_from(world, (0, 1, 3), target=(0, 0, 0))
+    def update(self, world, dt):
+        self.frames += 1
+        if self.frames == 2:
+            self.title = "second level"
+
+config = mglw.create_window_config_instance(make_window_config(Renamed()),
+                                            args=["--window", "headless", "--backend", "egl", "--size", "16x16"])
+titles = [config.wnd.title]
+for _ in range(3):
+    config.on_render(0.0, 1 / 60)
+    titles.append(config.wnd.title)
+print(titles)
+config.on_close()
+config.wnd.destroy()
+'''
+
+
+def test_the_window_title_follows_the_games_title_when_it_changes_level():
+    import subprocess
+    import sys
+    root = Path(__file__).resolve().parents[1]
+    done = subprocess.run([sys.executable, "-c", TITLE_SCRIPT], cwd=root, capture_output=True, text=True, timeout=120,
+                          env={**__import__("os").environ, "PYTHONPATH": str(root)})
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert done.stdout.strip().splitlines()[-1] == str(["first level", "first level", "second level",
+                                                       "second level"])
+
+
+def test_mirror_beams_title_names_the_level_it_plays_after_n(world):
+    from games.mirror_beam import MirrorBeam
+    game = MirrorBeam()
+    game.build(world)
+    first = game.level.name
+    assert game.title == f"Speculum: mirror beam: {first}"
+    game.play_level(world, game.next_level())
+    assert game.level.name != first and game.title == f"Speculum: mirror beam: {game.level.name}"

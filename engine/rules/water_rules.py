@@ -8,8 +8,8 @@ from __future__ import annotations
 
 from typing import Any
 
-from components import Mirror, Water
-from components.tracking import ComponentValueError
+from components import Material, Mirror, Water
+from components.tracking import ComponentValueError, warn_component
 from engine.core.world import World, world_invariant
 
 
@@ -37,3 +37,15 @@ def check_water_is_sharp(world: World, entity: int, joining: Any = None, roughne
     if value > 0.0:
         raise ComponentValueError(f"Mirror.roughness on entity {entity} must be 0 with a Water (a water surface "
                                   f"is sharp: its waves break up the image, not a blur), got {value!r}")
+
+
+@world_invariant(Water, whole=True)
+def warn_still_water(world: World, entity: int, joining: Any = None, **_other: Any) -> None:
+    """A Water whose Material has no ``normal_map`` has no waves: a still, Fresnel-weighted
+    mirror.  Allowed (a calm pond), but said once, as it is usually a forgotten map."""
+    if joining is not None and not isinstance(joining, Water):
+        return
+    material = world.try_get(entity, Material) if world.exists(entity) else None
+    if material is None or material.normal_map is None:
+        warn_component(f"Water on entity {entity}: its Material has no normal_map, so the water has no waves (a "
+                       "still, Fresnel-weighted mirror); give it one, e.g. Material(normal_map=ripple_normal_map())")
