@@ -16,7 +16,7 @@ way leaves what came before, with ``"complete": false``):
   without the self-check reports each path ``unchecked``.
 * ``benchmarks``: ``mirrors``, ``portals``, ``probes``, ``stages`` and ``profile`` (``--benchmarks``) at each
   ``--size`` (default 640x360 and 1920x1080), and ``targets`` once at the sizes it names
-  (tabled first, as "Targets (issue 25)"), each run as ``python -m benchmarks <suite>
+  (tabled first, as "Targets"), each run as ``python -m benchmarks <suite>
   --json --size WxH --frames N --warmup M`` would run it (in this process, or one
   subprocess each with ``--isolate``); the rows are the suite's own JSON lines, kept as
   they are, and the report's median tables are read from them.  ``--frames`` (default 10)
@@ -28,8 +28,11 @@ way leaves what came before, with ``"complete": false``):
   counts, the failing tests' ids and why tests were skipped; each failing test's arrays
   and frames go to ``DIR/failures/<test>.npz``.  ``--no-tests`` leaves it out.
 
-Exit status 0 when every section ran clean, 1 when a benchmark failed or a test failed (the
-report is written either way), 2 for a bad command line.  Nothing here imports the debug
+Exit status 0 when every section ran clean, 1 when a benchmark failed, a test failed or a
+speed target that applies to this machine was not met (each named on stderr; the report is
+written either way), 2 for a bad command line.  The test suite is the longest section
+(about 5 minutes on a GPU machine's CPU with llvmpipe-sized tests, longer on a slow one;
+``--no-tests`` leaves it out), and the report says before it starts.  Nothing here imports the debug
 overlay, so the report runs where imgui-bundle is not installed.
 
 On a GPU machine (from the repository root, ``pip install -e ".[dev]"`` done)::
@@ -428,9 +431,9 @@ def markdown(report: dict) -> str:
         out += _table(["field", "value"], [{"field": k, "value": v} for k, v in report["layered_target"].items()])
     targets = report.get("benchmarks", {}).get("targets", {}).get(FIXED)
     if targets is not None:
-        out += ["## Targets (issue 25)", "",
+        out += ["## Targets", "",
                 "Each measured on its own engines at the size it names (`python -m benchmarks targets`); "
-                "`applies`: whether the issue sets the limit for this kind of machine (a GPU's targets are "
+                "`applies`: whether the limit is set for this kind of machine (a GPU's targets are "
                 "reported, not judged, on a software rasteriser, and this machine's on a GPU).", ""]
         out += _table(["target", "value", "limit", "unit", "met", "set_for", "applies", "measured"], targets["rows"])
     if "benchmarks" in report:
@@ -502,9 +505,14 @@ def write(report: dict, out: Path) -> None:
 
 
 def failed(report: dict) -> list[str]:
-    """What went wrong: failed suites, failed or unfinished tests."""
+    """What went wrong: failed suites, speed targets that apply here and were not met,
+    failed or unfinished tests."""
     found = [f"{suite} at {size}: {run['exit']}" for suite, runs in report.get("benchmarks", {}).items()
              for size, run in runs.items() if run["status"] != "ok"]
+    targets = report.get("benchmarks", {}).get("targets", {}).get(FIXED) or {}
+    found += [f"target {row['target']} not met: {row['value']} {row['unit']} against a limit of {row['limit']} "
+              f"{row['unit']} (set for {row['set_for']})"
+              for row in targets.get("rows", []) if row.get("applies") and not row.get("met")]
     tests = report.get("tests") or {}
     if tests.get("ran") and (tests["exit"] != 0 or tests["failed"] or tests["errors"]):
         found.append(f"tests: {tests['summary'] or 'exit ' + str(tests['exit'])}")
@@ -568,7 +576,9 @@ def main(args: argparse.Namespace) -> int:
     if args.no_tests:
         report["tests"] = {"ran": False, "reason": "--no-tests"}
     else:
-        progress("tests: python -m pytest -q ...")
+        extra = " " + shlex.join(args.tests_args) if args.tests_args else ""
+        progress(f"tests: running the test suite (python -m pytest -q{extra}; about 5 minutes, up to "
+                 "--tests-timeout; --no-tests leaves it out) ...")
         report["tests"] = tests_section(args.tests_args, args.tests_timeout, args.out / "failures")
         if report["tests"]["ran"]:
             progress(f"tests: {report['tests']['summary'] or 'exit ' + str(report['tests']['exit'])}")

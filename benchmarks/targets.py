@@ -1,4 +1,4 @@
-"""Targets benchmark: issue 25's speed targets, each measured on its own and set against its
+"""Targets benchmark: the engine's speed targets, each measured on its own and set against its
 limit, so one command (and one ``gpu-report`` section) says which are met on this machine.
 
 Each target runs only the engines it compares, their frames interleaved (one machine's
@@ -23,7 +23,7 @@ target                      measured                                     limit  
 
 Frame times are wall clock around ``Engine.frame`` and ``ctx.finish()`` with each scene's
 default settings (``auto`` path and visibility: exact on a software rasteriser, predicted
-on a GPU).  "Set for": the machine the issue sets the limit on; ``applies`` says whether
+on a GPU).  "Set for": the machine the limit is set for; ``applies`` says whether
 this is one (a GPU target on a software rasteriser is reported, not judged: llvmpipe's
 frame is its rasteriser's).  One JSON object a target with ``--json``::
 
@@ -50,7 +50,7 @@ from shell.app import Engine
 SMALL = (640, 360)
 LARGE = (1920, 1080)
 ECS_ENTITIES = 100_000
-# name -> (limit, unit, the machine the issue sets it for)
+# name -> (limit, unit, the machine the limit is set for)
 LIMITS: dict[str, tuple[float, str, str]] = {
     "frame_0_mirrors": (0.85, "ms", "gpu"),
     "frame_16_mirrors_1080p": (3.0, "ms", "gpu"),
@@ -137,7 +137,7 @@ def main(args: argparse.Namespace) -> int:
         for row in found:
             print(json.dumps(row))
         return 0
-    print(f"Issue 25's targets on {renderer} ({args.frames} frames after {args.warmup} warm-up)")
+    print(f"Speed targets on {renderer} ({args.frames} frames after {args.warmup} warm-up)")
     print(f"{'target':<24} {'value':>8} {'limit':>9} {'met':>6} {'set for':>13}  measured")
     for row in found:
         met = ("yes" if row["met"] else "no") if row["applies"] else "(n/a)"

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -162,9 +163,14 @@ def test_gpu_report_writes_markdown_and_json_without_imgui(ctx, tmp_path):
         [sys.executable, "-c", WITHOUT_IMGUI, "gpu-report", "--out", str(out), "--size", "160x90", "--no-tests",
          "--frames", "2"],
         cwd=ROOT, env={**os.environ, "PYTHONPATH": str(ROOT)}, capture_output=True, text=True, timeout=120)
-    assert done.returncode == 0, done.stdout[-2000:] + done.stderr[-3000:]
     assert "overlay imported: False" in done.stdout
     report = json.loads((out / "report.json").read_text())
+    # Exit 1 exactly when a target that applies to this machine is not met (whether it is
+    # depends on the machine and its load), each named on stderr; 0 otherwise.
+    unmet = [row["target"] for row in report["benchmarks"]["targets"]["own sizes"]["rows"]
+             if row["applies"] and not row["met"]]
+    assert done.returncode == (1 if unmet else 0), done.stdout[-2000:] + done.stderr[-3000:]
+    assert all(f"failed: target {name} not met" in done.stderr for name in unmet), done.stderr
     markdown = (out / "report.md").read_text()
 
     assert report["complete"] and report["sizes"] == ["160x90"] and report["frames"] == 2
@@ -196,7 +202,8 @@ def test_gpu_report_writes_markdown_and_json_without_imgui(ctx, tmp_path):
     for row in targets["own sizes"]["rows"]:
         assert row["value"] > 0 and row["met"] == (row["value"] <= row["limit"]), row
         assert row["applies"] == (row["set_for"] == "this machine"), row  # llvmpipe: this machine's kind
-    assert "## Targets (issue 25)" in markdown and "portal_depth_8_ratio" in markdown
+    assert "## Targets" in markdown and not re.search(r"issue \d", markdown.lower())
+    assert "portal_depth_8_ratio" in markdown
     for suite, by_size in runs.items():
         assert set(by_size) == {"160x90"}, suite
         assert by_size["160x90"]["status"] == "ok", by_size["160x90"]

@@ -442,3 +442,87 @@ def test_mirror_beams_title_names_the_level_it_plays_after_n(world):
     assert game.title == f"Speculum: mirror beam: {first}"
     game.play_level(world, game.next_level())
     assert game.level.name != first and game.title == f"Speculum: mirror beam: {game.level.name}"
+
+
+# --- item 6: save_level writes spawn_model's parts, or says plainly why not ------------------
+
+def _two_part_glb(path: Path, textured: bool = False) -> Path:
+    import trimesh
+    from PIL import Image
+    first, second = trimesh.creation.box(), trimesh.creation.icosphere(subdivisions=1)
+    if textured:
+        image = Image.fromarray(np.full((4, 4, 3), (200, 30, 30), np.uint8))
+        first.visual = trimesh.visual.TextureVisuals(uv=np.zeros((len(first.vertices), 2)), image=image)
+    scene = trimesh.Scene()
+    scene.add_geometry(first, node_name="crate")
+    scene.add_geometry(second, node_name="ball", transform=trimesh.transformations.translation_matrix([2, 0, 0]))
+    scene.export(path)
+    return path
+
+
+def test_a_spawned_models_parts_are_saved_as_file_and_part_and_load_back_the_same(tmp_path):
+    from engine.assets.level_file import save_level
+    from engine.assets.models import spawn_model
+    model = _two_part_glb(tmp_path / "two.glb")
+    with World("model") as first:
+        root = spawn_model(first, model, position=(1.0, 0.0, -2.0))
+        saved = save_level(first, tmp_path / "saved.toml", {"model": root})
+        text = saved.read_text()
+        assert 'file = "two.glb"' in text and "part = " in text, text
+        before = sorted((len(mesh_ref.mesh.positions), tuple(np.round(transform.position, 5)))
+                        for _, (mesh_ref, transform) in first.query(MeshRef, Transform))
+    with World("again") as second:
+        names = load_level(saved).spawn(second)
+        assert second.get(names["model"], Transform).position == first_position()
+        after = sorted((len(mesh_ref.mesh.positions), tuple(np.round(transform.position, 5)))
+                       for _, (mesh_ref, transform) in second.query(MeshRef, Transform))
+    assert after == before and len(after) == 2
+
+
+def first_position():
+    from pyglm import glm
+    return glm.vec3(1.0, 0.0, -2.0)
+
+
+def test_a_models_embedded_image_is_refused_plainly_by_save_level(tmp_path):
+    from engine.assets.level_file import save_level
+    from engine.assets.models import spawn_model
+    model = _two_part_glb(tmp_path / "painted.glb", textured=True)
+    with World("painted") as world:
+        spawn_model(world, model)
+        assert any(m.texture is not None for _, m in world.query_one(Material))
+        with pytest.raises(LevelError, match=r"Material.texture.*is an image inside the model file .*painted.glb"):
+            save_level(world, tmp_path / "painted.toml")
+
+
+# --- item 6: benchmark help and reports ------------------------------------------------------
+
+def test_benchmark_help_names_targets_without_issue_numbers_and_gpu_report_says_it_runs_the_suite():
+    import re
+    import subprocess
+    import sys
+    root = Path(__file__).resolve().parents[1]
+    for args in (["--help"], ["targets", "--help"], ["gpu-report", "--help"]):
+        done = subprocess.run([sys.executable, "-m", "benchmarks", *args], cwd=root, capture_output=True, text=True,
+                              timeout=120)
+        assert done.returncode == 0, done.stderr
+        assert not re.search(r"issue \d", done.stdout.lower()), done.stdout
+    from benchmarks import SUITES
+    assert "whole test suite" in SUITES["gpu-report"][1] and "minutes" in SUITES["gpu-report"][1]
+    for module in ("benchmarks.targets", "benchmarks.gpu_report"):
+        text = __import__(module, fromlist=["x"]).__doc__
+        assert not re.search(r"issue \d", text.lower()), module
+
+
+def test_gpu_report_fails_when_a_target_that_applies_here_is_not_met():
+    from benchmarks.gpu_report import FIXED, failed
+    rows = [{"target": "ecs_cpu_ms", "value": 12.5, "limit": 10.0, "unit": "ms", "met": False, "applies": True,
+             "set_for": "this machine"},
+            {"target": "frame_0_mirrors", "value": 3.0, "limit": 0.85, "unit": "ms", "met": False, "applies": False,
+             "set_for": "gpu"},
+            {"target": "plan_us_per_view", "value": 4.0, "limit": 10.0, "unit": "us", "met": True, "applies": True,
+             "set_for": "this machine"}]
+    report = {"benchmarks": {"targets": {FIXED: {"status": "ok", "rows": rows}}}}
+    assert failed(report) == ["target ecs_cpu_ms not met: 12.5 ms against a limit of 10.0 ms (set for this machine)"]
+    rows[0]["met"] = True
+    assert failed(report) == []

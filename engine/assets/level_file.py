@@ -855,6 +855,11 @@ def _encode_component(path: Path, component: Any, by_id: Mapping[int, str], enti
             out[f.name] = by_id.get(value, f"entity_{value}")
         elif isinstance(value, (Mesh, TextureData)):
             source = getattr(value, "source", None)
+            if source is not None and "inside" in source:
+                raise LevelError(path, f"{type(value).__name__} {value.name!r} is an image inside the model file "
+                                       f"{source['inside']!r} (spawn_model), and a level file names image files only: "
+                                       "save the image as a file and name it (texture = { file = \"...\" })",
+                                 None, entity, where)
             if source is None:
                 raise LevelError(path, f"{type(value).__name__} {value.name!r} was not made by a generator or loaded "
                                        "from a file, so a level file cannot name it", None, entity, where)

@@ -31,6 +31,7 @@ def spawn_model(world: World, path: str | Path, position: glm.vec3 | Sequence[fl
     root_transform = Transform(position=position, rotation=rotation if rotation is not None else glm.quat(),
                                scale=scale)
     parts = load_model(path)
+    _name_sources(path, parts)
     part_components = []
     try:
         for part in parts:
@@ -69,3 +70,18 @@ def spawn_model(world: World, path: str | Path, position: glm.vec3 | Sequence[fl
             world.delete_entity(entity)
         raise
     return root
+
+
+def _name_sources(path: str | Path, parts: list) -> None:
+    """Say where each part came from, as a level file names it (``save_level`` writes a
+    spawned model back): a mesh as ``{ file, part }``; an image decoded from inside the
+    model file (no file of its own) as ``{"inside": file}``, which ``save_level`` refuses
+    plainly (a level file names image files only)."""
+    file = str(Path(path).resolve())
+    for part in parts:
+        if part.mesh.source is None:
+            name = part.mesh.name.split(":", 1)[-1]
+            part.mesh.source = {"file": file, **({"part": name} if len(parts) > 1 else {})}
+        for texture in (part.texture, part.normal_map, part.emissive_map, part.metallic_roughness_map):
+            if texture is not None and texture.source is None:
+                texture.source = {"inside": file}
