@@ -39,7 +39,10 @@ class Transform(TrackedComponent):
         return self._world
 
     def local_matrix(self) -> glm.mat4:
-        return glm.translate(self.position) * glm.mat4_cast(self.rotation) * glm.scale(self.scale)
+        # The fields read past the in-place watch (components.tracking): this is the engine's
+        # own read, every changed transform every frame, and never edits them.
+        state = self.__dict__
+        return glm.translate(state["position"]) * glm.mat4_cast(state["rotation"]) * glm.scale(state["scale"])
 
     def _validate(self, name: str, value: Any) -> Any:
         if name == "position":

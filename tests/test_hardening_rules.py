@@ -526,3 +526,123 @@ def test_gpu_report_fails_when_a_target_that_applies_here_is_not_met():
     assert failed(report) == ["target ecs_cpu_ms not met: 12.5 ms against a limit of 10.0 ms (set for this machine)"]
     rows[0]["met"] = True
     assert failed(report) == []
+
+
+# --- item 7: the in-place edit trap ----------------------------------------------------------
+
+def _crate_room(ents, x=0.0):
+    from engine.assets.mesh import box
+
+    def build(world):
+        world.spawn(DirectionalLight(direction=(0.3, -1.0, -0.5), intensity=2.0))
+        look_from(world, (0.0, 1.0, 5.0), target=(0.0, 1.0, 0.0), fov=50.0)
+        ents["crate"] = world.spawn(Transform(position=(x, 0.5, 0.0)), MeshRef(box()),
+                                    Material(color=(0.9, 0.2, 0.1)))
+    return build
+
+
+def _runner(ctx, build, update=None, size=(64, 48)):
+    from tests.support import SceneRunner
+    return SceneRunner(ctx, build, size, update)
+
+
+def test_a_position_edited_in_place_in_update_is_drawn_that_frame_as_an_assigned_one_is(ctx):
+    """``t.position.y += 1`` in the game's update: no field write, but the transform stage
+    sees it (the in-place watch), so the frame shows the crate where an assignment would
+    have put it: the same pixels and ids as a second world whose crate was assigned there."""
+    ents, other = {}, {}
+
+    def lift(world, dt):
+        world.get(ents["crate"], Transform).position.y += 0.5
+
+    def assign(world, dt):
+        transform = world.get(other["crate"], Transform)
+        transform.position = transform.position + glm_vec3(0.0, 0.5, 0.0)
+
+    edited, assigned = _runner(ctx, _crate_room(ents), lift), _runner(ctx, _crate_room(other), assign)
+    try:
+        for frame in range(3):
+            seen, expected = edited.frame(), assigned.frame()
+            crate = edited.world.get(ents["crate"], Transform)
+            assert crate.position.y == 0.5 + 0.5 * (frame + 1)
+            assert crate.world[3].y == crate.position.y  # the world matrix followed the edit
+            np.testing.assert_array_equal(seen, expected, err_msg=f"frame {frame}")
+            np.testing.assert_array_equal(edited.ids() == ents["crate"], assigned.ids() == other["crate"])
+        assert (edited.ids() == ents["crate"]).sum() > 20  # on screen: the crate, not an empty frame
+    finally:
+        edited.close()
+        assigned.close()
+
+
+def glm_vec3(*values):
+    from pyglm import glm
+    return glm.vec3(*values)
+
+
+def test_a_colour_edited_in_place_between_frames_is_drawn_the_next_frame(ctx):
+    ents = {}
+    runner = _runner(ctx, _crate_room(ents))
+    try:
+        runner.frame()
+        at = runner.ids() == ents["crate"]
+        red = runner.frame()[at].mean(axis=0)
+        assert red[0] > 2 * red[2]
+        runner.world.get(ents["crate"], Material).color.b = 0.9  # in place, after the frame
+        runner.world.get(ents["crate"], Material).color.x = 0.1
+        blue = runner.frame()[at].mean(axis=0)
+        assert blue[2] > 2 * blue[0], (red, blue)
+    finally:
+        runner.close()
+
+
+def test_a_vector_a_game_keeps_is_watched_while_it_keeps_it_and_dropped_after(ctx):
+    """A game that keeps ``p = t.position`` and edits ``p.x`` every frame without reading the
+    field again: still seen (the value is held elsewhere, so the watch keeps it); vectors
+    read once and not kept leave the watch after the frame (it does not grow with reads)."""
+    ents, kept = {}, {}
+
+    def build(world):
+        _crate_room(ents)(world)
+        for index in range(50):
+            world.spawn(Transform(position=(index, -5.0, 0.0)))
+
+    def update(world, dt):
+        if "done" in kept:
+            return
+        if "p" not in kept:
+            kept["p"] = world.get(ents["crate"], Transform).position
+        kept["p"].x += 0.25
+        for _, transform in world.query_one(Transform):
+            _ = transform.position  # read, not kept
+
+    runner = _runner(ctx, build, update)
+    try:
+        for frame in range(3):
+            runner.frame()
+            assert runner.world.get(ents["crate"], Transform).world[3].x == 0.25 * (frame + 1)
+        watched = runner.world._handed
+        assert len(watched) == 1 and next(iter(watched.values()))[2] is kept["p"]
+        kept.clear()
+        kept["done"] = True
+        runner.frame()
+        assert not runner.world._handed
+    finally:
+        runner.close()
+
+
+class _NanEdit(Game):
+    title = "nan in place"
+
+    def build(self, world: World) -> None:
+        look_from(world, (0.0, 1.0, 3.0), target=(0.0, 0.0, 0.0))
+        self.crate = world.spawn(Transform(), MeshRef(quad()), Material())
+
+    def update(self, world: World, dt: float) -> None:
+        world.get(self.crate, Transform).position.x = float("nan")
+
+
+def test_a_value_edited_in_place_that_the_field_cannot_hold_is_one_error_line(tmp_path, capsys):
+    assert main(_NanEdit(), [*HEADLESS, "--out", str(tmp_path / "out")]) == 2
+    lines = capsys.readouterr().err.strip().splitlines()
+    assert len(lines) == 1 and "Transform.position must be finite" in lines[0], lines
+    assert "in-place edit of Transform.position" in lines[0], lines

@@ -8,6 +8,7 @@ what changed this frame instead of scanning every entity.
 from __future__ import annotations
 
 import itertools
+import sys
 import warnings
 from collections import defaultdict
 from collections.abc import Callable, Iterable
@@ -70,6 +71,7 @@ def world_invariant(*kinds: type, whole: bool = False) -> Callable[[Invariant], 
     return register
 
 _world_ids = itertools.count(1)
+_HELD_BY_WATCH_ONLY = 4  # sys.getrefcount of a watched value nobody else holds, in settle_in_place_edits
 
 
 @dataclass
@@ -97,6 +99,9 @@ class World:
         self._deleted: set[int] = set()
         self._made = 0  # the highest entity id spawned (ids only grow)
         self._systems: list[esper.Processor] = []
+        # The in-place watch (components.tracking's docstring): (id, field) -> (component,
+        # field, the value read, a copy of it), filled by reads, settled by the transform stage.
+        self._handed: dict[tuple[int, str], tuple[TrackedComponent, str, Any, Any]] = {}
         self._closed = False
         self._use()
 
@@ -193,6 +198,7 @@ class World:
             object.__setattr__(component, "_entities", component._entities | {entity})
             object.__setattr__(component, "_sink", self._changed[kind])
             object.__setattr__(component, "_world_ref", self)
+            object.__setattr__(component, "_handed", self._handed)
         self._changed[kind].add(entity)
 
     def _check_whole(self, entity: int, components: tuple[Any, ...]) -> None:
@@ -204,6 +210,41 @@ class World:
             if not any(type(c).__name__ == "Transform" for c in esper.components_for_entity(entity)):
                 warnings.warn(f"entity {entity} has MeshRef and Material but no Transform: it is not drawn "
                               f"until one is added", stacklevel=3)
+
+    def settle_in_place_edits(self) -> int:
+        """Report the glm vectors and quaternions edited in place since they were read (the
+        in-place watch, ``components.tracking``'s docstring): each value read from a
+        component in this world since the last settle is compared with the copy taken when
+        it was read; one that differs is checked by the component's own rules (a NaN put in
+        ``t.position.x`` is refused here, naming the field) and reported as a write of its
+        field.  A value the component no longer holds (the field was assigned since: that
+        write was reported) is dropped; one still held elsewhere (a game keeps ``p =
+        t.position``) stays watched with a fresh copy.  Returns how many edits were found.
+        Called by the transform stage, before it reads the change sets."""
+        handed = self._handed
+        if not handed:
+            return 0
+        found = 0
+        kept = {}
+        for key, (component, name, value, copy) in handed.items():
+            if component.__dict__.get(name) is not value:
+                continue  # assigned since: reported by that write; the old value is not the field's
+            if value != copy:
+                found += 1
+                try:
+                    component._validate(name, type(value)(value))
+                except ComponentValueError as exc:
+                    raise ComponentValueError(f"{exc} (an in-place edit of {type(component).__name__}.{name}, "
+                                              f"e.g. {name}.x = ..., seen at frame {self.frame_index + 1})") from None
+                component.touch()
+                copy = type(value)(value)
+            # Held by the component's dict, this entry, the loop's two names and the call's
+            # argument: more means someone else keeps it and may edit it again unread.
+            if sys.getrefcount(value) > _HELD_BY_WATCH_ONLY:
+                kept[key] = (component, name, value, copy)
+        handed.clear()
+        handed.update(kept)
+        return found
 
     def check_invariants(self, entity: int, kind: type, **pending: Any) -> None:
         """Run the invariants registered for ``kind`` on ``entity`` as if the fields in
