@@ -646,3 +646,42 @@ def test_a_value_edited_in_place_that_the_field_cannot_hold_is_one_error_line(tm
     lines = capsys.readouterr().err.strip().splitlines()
     assert len(lines) == 1 and "Transform.position must be finite" in lines[0], lines
     assert "in-place edit of Transform.position" in lines[0], lines
+
+
+# --- item 3: a level file sets the view budget -----------------------------------------------
+
+def test_a_level_file_sets_the_view_budget_and_save_level_writes_it_back(tmp_path):
+    from engine.assets.level_file import save_level
+    path = _level(tmp_path, """\
+        [level]
+        name = "budgeted"
+        view_budget = { views = 12, probe_ms = 2.5 }
+
+        [[entity]]
+        name = "floor"
+        [entity.Transform]
+        """)
+    level = load_level(path)
+    with World("budget") as world:
+        names = level.spawn(world)
+        assert world.resources[ViewBudget] == ViewBudget(views=12, probe_ms=2.5)
+        saved = save_level(world, tmp_path / "again.toml", names, name="budgeted")
+    assert load_level(saved).view_budget == ViewBudget(views=12, probe_ms=2.5)
+
+
+@pytest.mark.parametrize("value, expected", [
+    ("{ views = -1 }", "ViewBudget.views must be None or an int >= 0, got -1"),
+    ("{ views = 2.5 }", "ViewBudget.views must be None or an int >= 0"),
+    ("{ probe_ms = 0 }", "ViewBudget.probe_ms must be None or a finite number > 0"),
+    ("{ view = 3 }", "view_budget has unknown keys ['view']"),
+    ("12", "view_budget must be a table such as { views = 24 }"),
+])
+def test_a_bad_view_budget_in_a_level_is_refused_naming_file_and_line(tmp_path, value, expected):
+    path = _level(tmp_path, f"""\
+        [level]
+        name = "budgeted"
+        view_budget = {value}
+        """)
+    with pytest.raises(LevelError) as caught:
+        load_level(path)
+    assert f"{path}:3:" in str(caught.value) and expected in str(caught.value), str(caught.value)

@@ -52,6 +52,7 @@ from engine.assets.texture_data import (
     texture_bytes,
 )
 from engine.assets.values import VALUE_KINDS, json_value
+from engine.core.budget import ViewBudget, ViewBudgetError
 from engine.core.errors import AssetError, SpeculumError
 from engine.core.game import Game
 from engine.core.world import World, check_components
@@ -416,11 +417,12 @@ class Level:
     """A checked level file: ``name``, ``game``, ``rules`` and the entities to spawn."""
 
     def __init__(self, path: Path, name: str, game: str | None, rules: dict[str, Any],
-                 entities: list[_EntitySpec], lines: dict[tuple, int]) -> None:
+                 entities: list[_EntitySpec], lines: dict[tuple, int], view_budget: ViewBudget | None = None) -> None:
         self.path = path
         self.name = name
         self.game = game
         self.rules = rules
+        self.view_budget = view_budget  # [level] view_budget: spawn makes it the world's
         self._entities = entities
         self._lines = lines
 
@@ -455,6 +457,8 @@ class Level:
                     world.delete_entity(entity)
             line = self._lines.get((spec.index,)) if spec is not None else None
             raise LevelError(self.path, str(exc), line, spec.name if spec is not None else None) from exc
+        if self.view_budget is not None:
+            world.resources[ViewBudget] = self.view_budget
         return made
 
 
@@ -514,9 +518,11 @@ def load_level(path: str | Path, extra_components: Mapping[str, type] | None = N
         line = lines.get(("level", "name")) if isinstance(header, dict) and "name" in header else \
             lines.get(("table", "level"))
         raise LevelError(path, "[level] needs name = \"...\" (the level's title)", line)
-    extra = [key for key in header if key not in ("name", "game")]
+    extra = [key for key in header if key not in ("name", "game", "view_budget")]
     if extra:
-        raise LevelError(path, f"[level] has unknown keys {sorted(extra)} (name, game)", lines.get(("level", extra[0])))
+        raise LevelError(path, f"[level] has unknown keys {sorted(extra)} (name, game, view_budget)",
+                         lines.get(("level", extra[0])))
+    budget = _view_budget(path, header.get("view_budget"), lines.get(("level", "view_budget")))
     game = header.get("game")
     if game is not None and not isinstance(game, str):
         raise LevelError(path, f"[level] game must be a string, got {_short(game)}", lines.get(("level", "game")))
@@ -554,7 +560,24 @@ def load_level(path: str | Path, extra_components: Mapping[str, type] | None = N
                 raise LevelError(path, "names the entity itself", lines.get((spec.index, cls_name, field)), spec.name,
                                  f"{cls_name}.{field}")
     _check_parent_cycles(path, entities, lines)
-    return Level(path, header["name"], game, rules, entities, lines)
+    return Level(path, header["name"], game, rules, entities, lines, budget)
+
+
+def _view_budget(path: Path, table: Any, line: int | None) -> ViewBudget | None:
+    """``[level] view_budget = { views = 24, pixels = 400000, probe_ms = 2.0 }``: the
+    frame's ``ViewBudget`` (engine.core.budget), each field optional, checked as in Python."""
+    if table is None:
+        return None
+    if not isinstance(table, dict):
+        raise LevelError(path, f"[level] view_budget must be a table such as {{ views = 24 }}, got {_short(table)}",
+                         line)
+    unknown = sorted(set(table) - {"views", "pixels", "probe_ms"})
+    if unknown:
+        raise LevelError(path, f"[level] view_budget has unknown keys {unknown} (views, pixels, probe_ms)", line)
+    try:
+        return ViewBudget(**table)
+    except ViewBudgetError as exc:
+        raise LevelError(path, f"[level] view_budget: {exc}", line) from None
 
 
 def _other_game(game: str, playing: str) -> str:
@@ -785,7 +808,11 @@ def save_level(world: World, path: str | Path, names: Mapping[str, int] | None =
                                        "with extra_components)", entity=by_id[entity])
             table[cls_name] = _encode_component(path, component, by_id, by_id[entity])
         tables.append(table)
-    text = tomli_w.dumps({"level": {"name": name, **({"game": game} if game else {})}})
+    budget = world.resources.get(ViewBudget)
+    header: dict[str, Any] = {"name": name, **({"game": game} if game else {})}
+    if isinstance(budget, ViewBudget) and budget != ViewBudget():
+        header["view_budget"] = {key: value for key, value in dataclasses.asdict(budget).items() if value is not None}
+    text = tomli_w.dumps({"level": header})
     if rules:
         text += "\n" + tomli_w.dumps({"rules": dict(rules)})
     for table in tables:
