@@ -685,3 +685,83 @@ def test_a_bad_view_budget_in_a_level_is_refused_naming_file_and_line(tmp_path, 
     with pytest.raises(LevelError) as caught:
         load_level(path)
     assert f"{path}:3:" in str(caught.value) and expected in str(caught.value), str(caught.value)
+
+
+# --- item 5: mirrored geometry ---------------------------------------------------------------
+
+def _mirror_scene(ents, scale=(1.0, 1.0, 1.0), parent_scale=None, camera_parent=None):
+    from engine.assets.mesh import box
+    from engine.assets.texture_data import checker_texture
+
+    def build(world):
+        world.spawn(DirectionalLight(direction=(0.4, -1.0, -0.6), intensity=2.0))
+        if camera_parent is None:
+            look_from(world, (0.6, 1.6, 4.0), target=(0.0, 0.6, 0.0), fov=60.0)
+        else:
+            holder = world.spawn(Transform(scale=camera_parent))
+            camera = look_from(world, (0.6, 1.6, 4.0), target=(0.0, 0.6, 0.0), fov=60.0)
+            transform = world.get(camera, Transform)
+            transform.position = transform.position * glm_vec3(*(1.0 / s for s in camera_parent))
+            flip = glm_vec3(*camera_parent)
+            transform.rotation = _mirrored_rotation(transform.rotation, flip)
+            transform.parent = holder
+        world.spawn(Transform(), MeshRef(plane(8, 8)), Material(texture=checker_texture(64, 8)))
+        world.spawn(Transform(position=(0.0, 1.2, -2.5)), MeshRef(quad(3.0, 2.0)), Material(), Mirror())
+        if parent_scale is None:
+            ents["crate"] = world.spawn(Transform(position=(-0.8, 0.5, 0.0), scale=scale), MeshRef(box()),
+                                        Material(color=(0.9, 0.3, 0.1)))
+        else:
+            holder = world.spawn(Transform(position=(-0.8, 0.5, 0.0), scale=parent_scale))
+            ents["crate"] = world.spawn(Transform(scale=scale, parent=holder), MeshRef(box()),
+                                        Material(color=(0.9, 0.3, 0.1)))
+    return build
+
+
+def _mirrored_rotation(rotation, flip):
+    """The local rotation that, under a parent scaled by ``flip`` (+-1 each), points the
+    camera's -Z and +Y where ``rotation`` alone does (the mirrored axes mapped back)."""
+    from pyglm import glm
+    forward, up = rotation * glm.vec3(0, 0, -1) * flip, rotation * glm.vec3(0, 1, 0) * flip
+    right = glm.cross(forward, up)
+    return glm.quat_cast(glm.mat3(right, up, -forward))
+
+
+@pytest.mark.parametrize("scale, parent_scale", [((-1.0, 1.0, 1.0), None), ((1.0, -1.0, 1.0), None),
+                                                  ((-1.0, -1.0, -1.0), None), ((1.0, 1.0, 1.0), (-1.0, 1.0, 1.0))],
+                         ids=["x", "y", "xyz", "parent-x"])
+def test_a_mirrored_box_is_drawn_as_the_same_box_unmirrored(scene, scale, parent_scale):
+    """A box is its own mirror image: scaled by -1 along an axis (or under a parent that
+    is) it must look exactly like the plain box, in the frame and in the mirror; culled
+    with the wrong winding it showed its inside faces (or nothing)."""
+    plain_ents, mirrored_ents = {}, {}
+    plain = scene(_mirror_scene(plain_ents), (96, 72))
+    mirrored = scene(_mirror_scene(mirrored_ents, scale, parent_scale), (96, 72))
+    expected, shown = plain.frame(), mirrored.frame()
+    crate = mirrored.ids() == mirrored_ents["crate"]
+    assert crate.sum() > 100 and (plain.ids() == plain_ents["crate"]).sum() == crate.sum()
+    np.testing.assert_allclose(shown.astype(int), expected.astype(int), atol=2)
+    assert mirrored.stats.reflection_views >= 1
+
+
+def test_a_box_that_turns_mirrored_by_moving_changes_batch_and_is_drawn_right(scene):
+    ents, plain_ents = {}, {}
+    runner = scene(_mirror_scene(ents), (96, 72))
+    expected = scene(_mirror_scene(plain_ents), (96, 72)).frame()
+    runner.frame()
+    runner.world.get(ents["crate"], Transform).scale = (-1.0, 1.0, 1.0)
+    np.testing.assert_allclose(runner.frame().astype(int), expected.astype(int), atol=2)
+    runner.world.get(ents["crate"], Transform).scale = (1.0, 1.0, 1.0)
+    np.testing.assert_allclose(runner.frame().astype(int), expected.astype(int), atol=2)
+
+
+def test_a_camera_under_a_mirrored_parent_sees_the_floor_and_the_mirror(scene):
+    """The camera's parent has scale (-1, 1, 1); its local pose is set so that it looks
+    from the same point the same way as the plain camera: the frame is the plain one (the
+    view does not mirror, so no face is culled as a back face)."""
+    plain_ents, parented_ents = {}, {}
+    plain = scene(_mirror_scene(plain_ents), (96, 72))
+    parented = scene(_mirror_scene(parented_ents, camera_parent=(-1.0, 1.0, 1.0)), (96, 72))
+    expected, shown = plain.frame(), parented.frame()
+    assert shown.mean() > 20
+    np.testing.assert_allclose(shown.astype(int), expected.astype(int), atol=2)
+    assert parented.stats.reflection_views >= 1
