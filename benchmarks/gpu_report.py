@@ -32,7 +32,9 @@ way leaves what came before, with ``"complete": false``):
 
 Exit status 0 when every section ran clean, 1 when a benchmark failed, a test failed or a
 speed target that applies to this kind of machine is not met (``--report-only``: targets
-are reported only; the report is written either way), 2 for a bad command line.  Nothing here imports the debug
+are reported only; the report is written either way), 2 for a bad command line.  The test
+suite is the longest section (about 5 minutes on a GPU machine's CPU, longer on a slow one;
+``--no-tests`` leaves it out), and the report says before it starts.  Nothing here imports the debug
 overlay, so the report runs where imgui-bundle is not installed.
 
 On a GPU machine (from the repository root, ``pip install -e ".[dev]"`` done)::

@@ -8,6 +8,7 @@ Nothing here writes game state.
 from __future__ import annotations
 
 import esper
+from pyglm import glm
 
 from components import (
     Emissive,
@@ -22,6 +23,7 @@ from components import (
     Transform,
     Visibility,
 )
+from components.transform import mirroring_seen
 from engine.core.errors import GLLimitError
 from engine.core.world import World
 from engine.render.instances import DRAWN_EVERYWHERE, InstanceBatch, visibility_code
@@ -31,6 +33,12 @@ from engine.rules.probe_rules import LookChanges, SurfaceProbes, probe_blend
 from systems.material_dispatch import choose_material
 
 NO_SLICE = (0.0, 0.0, 0.0, 1.0)
+
+
+def _mirrors(world_matrix) -> bool:
+    """Whether a model matrix mirrors what it places (a negative determinant: an odd number
+    of negative scales along its chain), so its front faces wind the other way on screen."""
+    return glm.determinant(glm.mat3(world_matrix)) < 0.0
 
 
 class ExtractSystem(esper.Processor):
@@ -63,6 +71,13 @@ class ExtractSystem(esper.Processor):
         # grouped by batch: each batch writes its rows in one go (InstanceBatch.write_transforms).
         frame = world.frame
         component = esper.component_for_entity if esper.current_world == world.name else world.get
+        if mirroring_seen():
+            # An instance whose model matrix turned mirrored (or back) by moving (a scale or a
+            # parent's scale changed sign) goes to the batch drawn with its winding.
+            for entity in frame.moved - touched:
+                batch = self._batch_of.get(entity)
+                if batch is not None and batch.mirrored != _mirrors(component(entity, Transform).world):
+                    self._refresh_instance(entity)
         for entities, moving in ((frame.moved, True), ((frame.added | joined) - frame.moved, False)):
             for batch, group in self._by_batch(entities).items():
                 batch.write_transforms(group, [component(entity, Transform).world for entity in group], moving)
@@ -102,7 +117,8 @@ class ExtractSystem(esper.Processor):
                                             entity if transparent else 0, material.normal_map if material else None,
                                             material.emissive_map if material else None,
                                             material.metallic_roughness_map if material else None,
-                                            second_probe=second, probe_blend=blend.blended, rest_probe=blend.rest)
+                                            second_probe=second, probe_blend=blend.blended, rest_probe=blend.rest,
+                                            mirrored=mirroring_seen() and _mirrors(transform.world))
         except GLLimitError as exc:
             raise GLLimitError(f"entity {entity}: {exc}") from None
         if old is not batch:

@@ -96,6 +96,17 @@ def test_the_overlay_shows_a_shader_error_from_hot_reload(scene, ctx, shader_cop
         errors = list(runner.engine.renderer.shaders.errors.values())
         assert errors and overlay.shown_errors == errors and "broken_for_the_overlay" in errors[0]
         assert overlay.region[3] > before + 3 * 13  # the error's lines of text (13-pixel font)
+        # First, at the top (issue 41 item 6): the error's red text starts in the window's
+        # first line, above the stats (white text) below it.
+        shown = runner.capture.read_rgb().astype(int)
+        x, y, w, h = overlay.region
+        window = shown[y:y + h, x:x + w]
+        red = (window[..., 0] > 180) & (window[..., 1] < 140) & (window[..., 2] < 140)
+        white = (window > 200).all(axis=2)
+        rows_red, rows_white = np.flatnonzero(red.any(axis=1)), np.flatnonzero(white.any(axis=1))
+        body = rows_white[rows_white > 20]  # below the title bar's white "Speculum (F1)"
+        assert len(rows_red) and len(body)
+        assert rows_red[0] < 40 and rows_red[0] < body[0], (rows_red[:3], body[:3])
     finally:
         overlay.release()
 

@@ -242,6 +242,14 @@ def set_front_face(ctx: moderngl.Context, front_face: str) -> None:
         ctx.front_face = cache.front_face = front_face
 
 
+def flip_front_face(ctx: moderngl.Context) -> str:
+    """Turn the winding to the other one (for instances whose model matrix mirrors them:
+    their front faces wind the other way on screen); returns the one to put back."""
+    current = _cache(ctx).front_face or ctx.front_face
+    set_front_face(ctx, "cw" if current == "ccw" else "ccw")
+    return current
+
+
 def _scissor_is(ctx: moderngl.Context, bound, scissor: tuple[int, int, int, int] | None) -> bool:
     """Whether moderngl's scissor of the ``bound`` framebuffer already clips as ``scissor``
     does (None: nothing; a rectangle covering the whole framebuffer clips nothing either)."""

@@ -214,7 +214,8 @@ class Renderer:
                   transparent_entity: int = 0, normal_map: TextureData | None = None,
                   emissive_map: TextureData | None = None,
                   metallic_roughness_map: TextureData | None = None, second_probe: int = 0,
-                  probe_blend: bool = False, rest_probe: int = 0) -> InstanceBatch:
+                  probe_blend: bool = False, rest_probe: int = 0,
+                  mirrored: bool = False) -> InstanceBatch:
         """The batch of (mesh, albedo texture, normal map, emissive map, metallic-roughness
         map, the probe its instances sample; 0: none).  A transparent entity gets a batch of
         its own (``transparent_entity``): transparent things are drawn one by one, farthest
@@ -224,10 +225,12 @@ class Renderer:
         # ``second_probe`` and ``probe_blend``: the instances blend two probes, or a probe and
         # the sky, by per-instance weights (probe_rules.probe_blend; the PROBE_BLEND build);
         # ``rest_probe``: a probe, not the sky, takes what the weights leave (PROBE_REST).
+        # ``mirrored``: instances whose model matrix has a negative determinant, drawn with the
+        # other winding (ScenePass), so they get batches of their own.
         key = (mesh.id, id(texture) if texture is not None else 0, (probe, second_probe, probe_blend, rest_probe),
                transparent_entity,
                id(normal_map) if normal_map is not None else 0, id(emissive_map) if emissive_map is not None else 0,
-               id(metallic_roughness_map) if metallic_roughness_map is not None else 0)
+               id(metallic_roughness_map) if metallic_roughness_map is not None else 0, mirrored)
         batch = self.batches.get(key)
         if batch is None:
             for name, image in (("Material.texture", texture), ("Material.normal_map", normal_map),
@@ -251,6 +254,7 @@ class Renderer:
                     self._textures, ("normal", id(metallic_roughness_map)),
                     lambda: self._upload_texture(metallic_roughness_map, linear=True))
             batch.key = key
+            batch.mirrored = mirrored
             batch.probe = probe
             batch.second_probe, batch.probe_blend, batch.rest_probe = second_probe, probe_blend, rest_probe
             batch.checker = checker_look(texture)
@@ -285,7 +289,7 @@ class Renderer:
         self._order_stale = True
         self._note_dropped(batch.take_changed_box())
         batch.release()
-        mesh_id, texture_id, _, _, normal_map_id, emissive_map_id, metallic_roughness_id = batch.key
+        mesh_id, texture_id, _, _, normal_map_id, emissive_map_id, metallic_roughness_id, _ = batch.key
         self._release(self._meshes, mesh_id)
         if texture_id:
             self._release(self._textures, texture_id)

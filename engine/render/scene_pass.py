@@ -64,6 +64,7 @@ from engine.render.bindings import (
     PassState,
     apply_pass_state,
     bind_uniform_block,
+    flip_front_face,
     set_front_face,
 )
 from engine.render.raw_gl import LayeredArrayTarget, LayeredCubeTarget, inspect_bound_target
@@ -317,7 +318,15 @@ class ScenePass:
                 self._last_own[glo] = own
             if before_draw is not None:
                 before_draw()
-            batch.draw(program)
+            if batch.mirrored:
+                # A negative determinant (a negative Transform.scale, or a mirrored parent):
+                # its front faces wind the other way on screen, so the view's winding is
+                # turned for its draw (its own batch: extract keys batches by it).
+                restore = flip_front_face(self.ctx)
+                batch.draw(program)
+                set_front_face(self.ctx, restore)
+            else:
+                batch.draw(program)
             stats.draw_calls += 1
             stats.instances += batch.count
 

@@ -369,6 +369,7 @@ class MirrorBeam(LevelGame):
 
     def build(self, world: World) -> None:
         level = self.level = self.load()
+        self.title = f"Speculum: mirror beam: {level.name}"  # the window's title follows the level ('n')
         names = self.names = level.spawn(world)
         rules = parse_rules(level.rules, names, world, f"level file {str(self.level_path)!r}")
         if not world.query_one(Camera):
