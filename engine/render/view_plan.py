@@ -215,6 +215,7 @@ class SurfaceTable:
         # recently used first
         self._ends: dict[tuple[int, int], tuple[np.ndarray, np.ndarray, list[bool]]] = {}
         self._unviewed: dict[tuple, tuple[np.ndarray | None, tuple[np.ndarray, np.ndarray]]] = {}  # unviewed's
+        self._faded: tuple | None = None  # the last cull's pairs faded out, and for what (cull)
         # The resolution scale every surface shares (None: they differ; a level takes its largest).
         self.one_scale = float(self.scale[0]) if count and (self.scale == self.scale[0]).all() else None
 
@@ -387,6 +388,8 @@ class SurfaceTable:
         if fallback:
             return p, s, rects, fade
         kept = fade > 0.0  # faded out: no view at all (the weights of the pairs kept say how many went)
+        # The pairs faded out, for ``unviewed`` next (their fallbacks: no second cull for them).
+        self._faded = (parents.data, depth, depth_cap, ends, p[~kept], s[~kept])
         return p[kept], s[kept], rects[kept], np.where(kept, fade, 0.0)
 
     def unviewed(self, parents: LevelRows, depth: int, root_proj: np.ndarray, root_size: tuple[int, int],
@@ -408,9 +411,15 @@ class SurfaceTable:
         if found is not None and found[0] is ends:
             self._unviewed[key] = found
             return found[1]
-        p, s, _, fade = self.cull(parents, depth, root_proj, root_size, depth_cap, ends, fallback=True)
-        unviewed = cut[s] if fade is None else cut[s] | (fade <= 0.0)
-        pairs = (p[unviewed], s[unviewed])
+        faded = self._faded
+        if not cut.any() and faded is not None and faded[0] is parents.data and faded[1:3] == (depth, depth_cap) \
+                and faded[3] is ends:
+            # Nothing cut here: the pairs without a view are those the plan's cull just faded out.
+            pairs = (faded[4], faded[5])
+        else:
+            p, s, _, fade = self.cull(parents, depth, root_proj, root_size, depth_cap, ends, fallback=True)
+            unviewed = cut[s] if fade is None else cut[s] | (fade <= 0.0)
+            pairs = (p[unviewed], s[unviewed])
         for array_ in pairs:
             array_.flags.writeable = False  # shared by the frames that find them again
         if len(self._unviewed) >= PLANS_KEPT:
