@@ -29,9 +29,9 @@ SUITES: dict[str, tuple[str, str]] = {
     "lighting": ("benchmarks.lighting", "the mirrors scene with shadows and post-processing (tone mapping, "
                  "bloom) on and off, interleaved: medians, ratios and the lighting cost targets"),
     "gpu-report": ("benchmarks.gpu_report", "GL renderer and limits, rendering-path checks, the mirrors / portals / "
-                   "probes / stages / profile benchmarks at two sizes, the cpu suite and its targets, and the test "
-                   "suite (minutes: --no-tests leaves it out), as report.md + report.json; exit 1 when a test fails "
-                   "or a target that applies here is not met"),
+                   "probes / stages / profile / lighting benchmarks at two sizes, the cpu suite and its targets, "
+                   "and the whole test suite (minutes: --no-tests leaves it out), as report.md + report.json; exit 1 "
+                   "when a test fails or a target that applies here is not met"),
 }
 
 # The suites that draw frames: each takes --size WxH.

@@ -5,9 +5,6 @@
 #include "lights.glsl"
 #include "shadows.glsl"
 #include "ggx.glsl"
-#ifdef VIRTUAL_LIGHTS
-#include "virtual_lights.glsl"
-#endif
 #include "ambient.glsl"
 
 uniform sampler2D albedo_map;
@@ -82,6 +79,9 @@ float cube_lod(vec3 direction, float n) {
     float footprint = max(length(dFdx(direction)), length(dFdy(direction))) * n * 0.5;
     return log2(max(footprint, 1e-6));
 }
+
+// Light through mirrors and portals (its loop only in the VIRTUAL_LIGHTS builds).
+#include "virtual_lights.glsl"
 
 vec3 direct_lighting(Surface s) {
     vec3 diffuse = s.albedo * (1.0 - s.metallic) / PI;

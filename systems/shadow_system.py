@@ -17,6 +17,7 @@ import esper
 import numpy as np
 
 from components import DirectionalLight, Material, MeshRef, PointLight, Refractive, Transform, Visibility
+from components.tracking import raw_field
 from engine.core.world import World
 from engine.render.renderer import Renderer
 from engine.render.shadows import MAX_POINT_SHADOWS, VIRTUAL_RESOLUTION
@@ -86,8 +87,9 @@ class ShadowSystem(esper.Processor):
                 if self._directional.pop(slot, None) is not None:
                     maps.clear_directional(slot)
                 continue
-            published.directional.append(tuple(light.direction))
-            key = (tuple(light.direction), light.shadow_resolution, light.shadow_softness, maps.tile, maps.filter,
+            direction = raw_field(light, "direction")  # past the in-place watch: a read, not a game's edit
+            published.directional.append(tuple(direction))
+            key = (tuple(direction), light.shadow_resolution, light.shadow_softness, maps.tile, maps.filter,
                    level[0].tobytes(), level[1].tobytes())
             same = key == self._directional.get(slot)
             if same and not casters_changed:
@@ -104,7 +106,7 @@ class ShadowSystem(esper.Processor):
                     stats.shadow_maps_kept += 1   # what changed casts nothing here (or is glass)
                     continue
             else:
-                fit = self._fits[slot] = directional_fit(light.direction, level[0], level[1], light.shadow_resolution)
+                fit = self._fits[slot] = directional_fit(direction, level[0], level[1], light.shadow_resolution)
             stats.shadow_texels_drawn += maps.draw_directional(slot, fit, light.shadow_resolution,
                                                                light.shadow_softness, region)
             self._directional[slot] = key
@@ -187,9 +189,9 @@ class ShadowSystem(esper.Processor):
         surfaces = world.resources.get(Surfaces)
         found: list[VirtualLight] = []
         if self.enabled and level is not None and surfaces is not None and (surfaces.mirrors or surfaces.portals):
-            directional = [(entity, light.direction, light.color.xyz * light.intensity)
+            directional = [(entity, raw_field(light, "direction"), raw_field(light, "color").xyz * light.intensity)
                            for entity, light in world.query_one(DirectionalLight)][:MAX_DIRECTIONAL_LIGHTS]
-            points = [(entity, transform.world[3].xyz, light.range, light.color.xyz * light.intensity)
+            points = [(entity, transform.world[3].xyz, light.range, raw_field(light, "color").xyz * light.intensity)
                       for entity, (light, transform) in world.query(PointLight, Transform)][:MAX_POINT_LIGHTS]
             found = rank_virtual_lights(virtual_lights(directional, points, surfaces))
         drawn = 0

@@ -165,12 +165,9 @@ def test_gpu_report_writes_markdown_and_json_without_imgui(ctx, tmp_path):
         cwd=ROOT, env={**os.environ, "PYTHONPATH": str(ROOT)}, capture_output=True, text=True, timeout=120)
     assert "overlay imported: False" in done.stdout
     report = json.loads((out / "report.json").read_text())
-    # Exit 1 exactly when a target that applies to this machine is not met (whether it is
-    # depends on the machine and its load), each named on stderr; 0 otherwise.
-    unmet = [row["target"] for row in report["benchmarks"]["targets"]["own sizes"]["rows"]
-             if row["applies"] and not row["met"]]
-    assert done.returncode == (1 if unmet else 0), done.stdout[-2000:] + done.stderr[-3000:]
-    assert all(f"failed: target {name} not met" in done.stderr for name in unmet), done.stderr
+    # --report-only: the targets are judged in the report, not in the exit status (whether
+    # they are met depends on the machine and its load).
+    assert done.returncode == 0, done.stdout[-2000:] + done.stderr[-3000:]
     markdown = (out / "report.md").read_text()
 
     assert report["complete"] and report["sizes"] == ["160x90"] and report["frames"] == 2

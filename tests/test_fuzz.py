@@ -64,7 +64,7 @@ def test_water_and_visibility_are_fuzzed_and_a_case_runs_several_frames(fuzzer, 
     """Issue 41 item 9: Water (on a mirror quad with waves) and Visibility are among the
     classes; a case renders FRAMES_PER_CASE frames, so a problem that shows only after the
     first frame (waves moved on, a fade or a schedule settled) fails the case."""
-    from benchmarks.fuzz import FRAMES_PER_CASE
+    from benchmarks.fuzz_cases import FRAMES as FRAMES_PER_CASE
     from components import Visibility, Water
     from systems.surface_system import SurfaceSystem
 

@@ -10,9 +10,13 @@ block.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 from pyglm import glm
+
+if TYPE_CHECKING:  # the frame's data is a floor above the rules
+    from engine.resources import Surfaces
 
 # A directional light's map covers the level's box grown by this share of its diagonal (and
 # at least SHADOW_MARGIN metres), so a caster resting on the box's edge still has texels
@@ -227,7 +231,8 @@ def _outline(surface) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
 
 
 def virtual_lights(directional: list[tuple[int, glm.vec3, glm.vec3]],
-                   points: list[tuple[int, glm.vec3, float, glm.vec3]], surfaces) -> list[VirtualLight]:
+                   points: list[tuple[int, glm.vec3, float, glm.vec3]],
+                   surfaces: Surfaces | None) -> list[VirtualLight]:
     """The virtual lights of this frame's lights through the surfaces that carry light:
     ``directional`` as (entity, direction travelled, colour x intensity), ``points`` as
     (entity, position, range, colour x intensity), ``surfaces`` the ``Surfaces`` resource.

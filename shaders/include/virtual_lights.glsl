@@ -3,6 +3,8 @@
 // front and only when the line from the point to the image crosses the exit's outline (the
 // light came through the mirror or the portal's opening), shadowed by a map drawn from the
 // image (engine/render/shadows.py draw_virtual).  One bounce.
+// Only the VIRTUAL_LIGHTS builds hold it (engine/render/scene_pass.py): frames where one shines.
+#ifdef VIRTUAL_LIGHTS
 #define MAX_VIRTUAL_LIGHTS 4   // engine/rules/shadow_rules.py MAX_VIRTUAL_LIGHTS
 layout(std140) uniform VirtualLights {
     ivec4 virtual_count;                            // x: how many
@@ -71,3 +73,4 @@ vec3 virtual_lighting(vec3 position, vec3 normal, vec3 geometric, vec3 to_eye, v
     }
     return total;
 }
+#endif
