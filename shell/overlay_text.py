@@ -20,6 +20,7 @@ def overlay_lines(engine: Engine, frame_times: Sequence[float]) -> list[str]:
     stats = engine.renderer.stats
     reflect = engine.reflection_system
     probes = engine.stages["probes"]
+    shadows_on = engine.stages["shadows"].enabled
     seconds = sum(frame_times) / len(frame_times) if frame_times else 0.0
     fps = 1.0 / seconds if seconds > 0 else 0.0
     levels = Counter(view.level for view in reflect.views)
@@ -33,10 +34,10 @@ def overlay_lines(engine: Engine, frame_times: Sequence[float]) -> list[str]:
         f"reflection views {stats.reflection_views}, dropped {stats.reflection_views_dropped}, "
         f"capped {stats.reflection_depth_capped}, faded {stats.reflection_views_faded}, "
         f"fallbacks {stats.reflection_fallbacks}",
-        f"probe captures {stats.probe_captures} ({stats.probe_faces} faces); shadow maps drawn "
-        f"{stats.shadow_maps_drawn}, kept {stats.shadow_maps_kept}, cut {stats.shadows_cut}; "
-        f"lights through mirrors {stats.virtual_lights}, cut {stats.virtual_lights_cut}"
-        f"{' (off)' if not engine.stages['shadows'].enabled else ''}",
+        f"probe captures {stats.probe_captures} ({stats.probe_faces} faces); shadow maps "
+        f"{stats.shadow_maps_drawn} + {stats.shadow_maps_kept} kept{'' if shadows_on else ' (off)'}",
+        f"cut: shadows {stats.shadows_cut}, lights through mirrors {stats.virtual_lights_cut} "
+        f"(shining {stats.virtual_lights})",
         f"view budget {'none' if stats.view_budget is None else stats.view_budget}: spent {stats.views_spent}, "
         f"cut {stats.views_cut}",
         f"pixel budget {'none' if stats.pixel_budget is None else stats.pixel_budget}: spent {stats.pixels_spent}, "
