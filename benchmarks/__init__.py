@@ -16,7 +16,8 @@ SUITES: dict[str, tuple[str, str]] = {
     "mirrors": ("benchmarks.mirrors", "whole frame with 0-16 mirrors on a ring, per-mirror vs batched vs auto path"),
     "soak": ("benchmarks.soak", "the sample level on a camera tour: GL resources and memory must stay flat"),
     "churn": ("benchmarks.churn", "mirrors, portals, probes, meshes and textures made and deleted in waves"),
-    "fuzz": ("benchmarks.fuzz", "adversarial component values: each refused naming Class.field or drawn clean"),
+    "fuzz": ("benchmarks.fuzz", "adversarial component values and view budgets, several frames a case: each "
+             "refused naming Class.field or drawn clean"),
     "probes": ("benchmarks.probes", "probe captures at 128 / 512; whole frames with no / static / dynamic probe"),
     "normal_maps": ("benchmarks.normal_maps", "whole frame with a plain vs a normal-mapped ground (trilinear, 8x)"),
     "stages": ("benchmarks.stages", "each frame stage's CPU time and GPU time (timer queries): mirrors 0/8/16, "
@@ -27,8 +28,10 @@ SUITES: dict[str, tuple[str, str]] = {
             "GL calls and profile, and every speed target against its limit"),
     "lighting": ("benchmarks.lighting", "the mirrors scene with shadows and post-processing (tone mapping, "
                  "bloom) on and off, interleaved: medians, ratios and the lighting cost targets"),
-    "gpu-report": ("benchmarks.gpu_report", "GL renderer and limits, rendering-path checks, test summary and the "
-                   "mirrors / portals / probes / stages / profile benchmarks at two sizes, as report.md + report.json"),
+    "gpu-report": ("benchmarks.gpu_report", "GL renderer and limits, rendering-path checks, the mirrors / portals / "
+                   "probes / stages / profile benchmarks at two sizes, the cpu suite and its targets, and the test "
+                   "suite (minutes: --no-tests leaves it out), as report.md + report.json; exit 1 when a test fails "
+                   "or a target that applies here is not met"),
 }
 
 # The suites that draw frames: each takes --size WxH.

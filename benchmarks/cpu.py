@@ -19,7 +19,10 @@ Each part's engines run their frames interleaved (every engine's frame i, in a s
 order, then frame i + 1), so a shared machine's drift falls on every scene alike and the
 ratios hold when absolute times drift.  Scene rows: ``frame_ms_median`` (wall clock
 around ``Engine.frame`` and ``ctx.finish()``), ``cpu_ms_median`` (until ``Engine.frame``
-returns), ``views`` (reflection views), ``passes``, ``draw_calls`` (medians of
+returns), ``thread_ms_median`` (the CPU time this thread spent in the frame, finish
+included: with ``LP_NUM_THREADS=0`` llvmpipe rasterises on it, so at 32x18 it is the whole
+frame's CPU, and on a loaded machine it does not count the time other processes took; with
+rasteriser threads it leaves theirs out), ``views`` (reflection views), ``passes``, ``draw_calls`` (medians of
 ``RenderStats``) and ``gl_calls``: the calls a frame makes into the GL, counted over
 ``COUNTED_FRAMES`` more frames with ``GLCallCounter`` on (so the counting costs no timed
 frame).  What that counts: every call into moderngl's GL objects (a method, a property
@@ -300,19 +303,21 @@ def run_scenes(ctx, names: tuple[str, ...], size: tuple[int, int], frames: int, 
         outputs = [Output(capture.framebuffer, size) for capture in captures]
         times: list[list[float]] = [[] for _ in names]
         cpu: list[list[float]] = [[] for _ in names]
+        thread: list[list[float]] = [[] for _ in names]
         stats: list[list] = [[] for _ in names]
         order = list(range(len(names)))
         rng = random.Random(seed)
         for frame in range(warmup + frames):
             rng.shuffle(order)  # each engine follows every other alike (the caches it finds)
             for i in order:
-                start = time.perf_counter()
+                start, own = time.perf_counter(), time.thread_time()
                 engines[i].frame(DT, outputs[i])
                 returned = time.perf_counter()
                 ctx.finish()
                 if frame >= warmup:
                     times[i].append((time.perf_counter() - start) * 1e3)
                     cpu[i].append((returned - start) * 1e3)
+                    thread[i].append((time.thread_time() - own) * 1e3)
                     stats[i].append(engines[i].renderer.stats)
         counted: list[list[int]] = [[] for _ in names]
         kinds: list[Counter] = [Counter() for _ in names]
@@ -331,6 +336,7 @@ def run_scenes(ctx, names: tuple[str, ...], size: tuple[int, int], frames: int, 
                  "frame_ms_median": round(statistics.median(times[i]), 3),
                  "frame_ms_p95": round(_percentile(times[i], 0.95), 3),
                  "cpu_ms_median": round(statistics.median(cpu[i]), 3),
+                 "thread_ms_median": round(statistics.median(thread[i]), 3),
                  "views": round(statistics.median(s.reflection_views for s in stats[i])),
                  "passes": round(statistics.median(s.passes for s in stats[i])),
                  "draw_calls": round(statistics.median(s.draw_calls for s in stats[i])),
@@ -490,13 +496,14 @@ def measure(args: argparse.Namespace) -> tuple[list[dict], bool, str]:
 def print_tables(rows: list[dict], targets: list[dict], renderer: str, frames: int, warmup: int,
                  out: Callable[[str], None] = print) -> None:
     out(f"CPU frames and targets on {renderer} ({frames} frames after {warmup} warm-up, interleaved)")
-    out(f"{'scene':<14} {'size':>9} {'LP':>3} {'frame ms':>9} {'cpu ms':>8} {'views':>5} {'passes':>6} "
-        f"{'draws':>5} {'GL calls':>8}")
+    out(f"{'scene':<14} {'size':>9} {'LP':>3} {'frame ms':>9} {'cpu ms':>8} {'thread ms':>9} {'views':>5} "
+        f"{'passes':>6} {'draws':>5} {'GL calls':>8}")
     for row in rows:
         if "rank" in row or "frames" not in row or row.get("scene") == "ecs" or "frame_ms_profiled" in row:
             continue
         out(f"{row['scene']:<14} {row['size']:>9} {row['lp_num_threads'] or '-':>3} {row['frame_ms_median']:>9} "
-            f"{row['cpu_ms_median']:>8} {row['views']:>5} {row['passes']:>6} {row['draw_calls']:>5} "
+            f"{row['cpu_ms_median']:>8} {row['thread_ms_median']:>9} {row['views']:>5} {row['passes']:>6} "
+            f"{row['draw_calls']:>5} "
             f"{row['gl_calls']:>8}")
     for row in rows:
         if row.get("scene") == "ecs":

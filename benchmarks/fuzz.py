@@ -1,9 +1,9 @@
 """Fuzz: every component's fields given adversarial values, several frames a case.
 
-Each case builds one component with one to three fields drawn from a pool of awkward
+Each case builds one component (Visibility and Water among them) with one to three fields drawn from a pool of awkward
 values (NaN, infinities, numbers past float32 and float16, huge ints, wrong kinds, zero
 vectors, Euler-looking tuples), attaches it to an entity of a small lit scene (a box, a
-quad for surfaces, the camera entity for Camera and FlyController, the sky entity for the
+quad for surfaces, the camera entity for Camera, FlyController, Tonemap and Bloom, the sky entity for the
 Skybox) and renders ``FRAMES`` 48 x 32 frames (``benchmarks/fuzz_cases.py``: what a first frame
 leaves to later ones, probes captured a face a frame, is run too).  A case passes when either
 the component is refused with a ``ComponentValueError`` that names ``Class.field`` (or the
@@ -12,6 +12,9 @@ target and ``ctx.error`` clean.  Any other exception, above all one raised from 
 
     python -m benchmarks fuzz --cases 5000 --level-cases 2000 --model-cases 500
 
+``--budget-cases`` (default 100): ``ViewBudget`` values, plausible and adversarial, set on a
+scene whose facing mirrors, every-frame probe and a pond (its fades, Water and Visibility
+fields drawn too) spend it, several frames a case (``fuzz_budgets``).
 ``--level-cases`` runs the level-file fuzz as well (``benchmarks/level_fuzz.py``: a small
 level's text mutated, loaded, spawned and rendered; a quarter of its cases name adversarial
 files).  Every run also tries each of the level fuzz's file cases once (``FILE_CASES``:
@@ -37,6 +40,7 @@ from pyglm import glm
 from benchmarks.fuzz_cases import FRAMES, run_cases
 from benchmarks.model_fuzz import FRAMES as MODEL_FRAMES
 from components import (
+    Bloom,
     Camera,
     ComponentValueError,
     DirectionalLight,
@@ -53,8 +57,11 @@ from components import (
     Refractive,
     Skybox,
     Slice,
+    Tonemap,
     Transform,
     Traveller,
+    Visibility,
+    Water,
     look_rotation,
 )
 from engine.assets.mesh import box, quad, sphere
@@ -67,7 +74,7 @@ from shell.app import Engine
 SIZE = (48, 32)
 CLASSES: tuple[type, ...] = (Transform, MeshRef, Material, Emissive, Reflective, Refractive, Mirror, Portal,
                              Traveller, Slice, PortalClone, ReflectionProbe, Camera, FlyController,
-                             DirectionalLight, PointLight, Skybox)
+                             DirectionalLight, PointLight, Skybox, Tonemap, Bloom, Visibility, Water)
 
 _NUMBERS: list[Any] = [0, 1, -1, 0.5, 2.0, 1e-30, 1e-4, 3.0, 16, 100.0, 1e5, 65504.0, 65505.0, 1e7, 1e20,
                        3.4e38, 1e39, float("nan"), float("inf"), -float("inf"), 10 ** 400, 2 ** 63, 2 ** 64 + 5,
@@ -172,7 +179,7 @@ class Fuzzer:
         try:
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
-                if case.cls in (Camera, FlyController):
+                if case.cls in (Camera, FlyController, Tonemap, Bloom):
                     restore = (self.game.camera, world.try_get(self.game.camera, case.cls))
                     world.add_component(self.game.camera, component)
                 elif case.cls is Skybox:
@@ -181,10 +188,13 @@ class Fuzzer:
                 elif case.cls in (DirectionalLight, PointLight):
                     spawned = world.spawn(Transform(position=(0, 2, 1)), component)
                 else:
-                    flat = case.cls in (Mirror, Portal)
+                    flat = case.cls in (Mirror, Portal, Water)
                     parts: dict[type, Any] = {Transform: Transform(position=(0, 0.5, 0)),
                                               MeshRef: MeshRef(quad(1.5, 1.5) if flat else box()),
                                               Material: Material()}
+                    if case.cls is Water:  # the surface it makes water, with waves
+                        parts[Mirror] = Mirror()
+                        parts[Material] = Material(color=(0.2, 0.3, 0.4, 0.6), normal_map=_ripples())
                     parts[case.cls] = component
                     spawned = world.spawn(*parts.values())
         except ComponentValueError as exc:
@@ -195,7 +205,9 @@ class Fuzzer:
             problem = None
             for _ in range(FRAMES):
                 self.frame()
-                problem = problem or self._check_pixels()
+                problem = self._check_pixels()
+                if problem is not None:
+                    break
         except Exception as exc:  # noqa: BLE001
             problem = f"frame raised {type(exc).__name__}: {exc}\n{traceback.format_exc(limit=-3)}"
         finally:
@@ -250,9 +262,174 @@ def fuzz(ctx, cases: int, seed: int = 0, report=None) -> tuple[int, list[tuple[s
     return run_cases(Fuzzer(ctx), random_case, cases, seed, report)
 
 
+_RIPPLES: list = []
+
+
+def _ripples():
+    """One small normal map for every water the fuzz makes (made once)."""
+    if not _RIPPLES:
+        from engine.assets.texture_data import ripple_normal_map
+        _RIPPLES.append(ripple_normal_map(16))
+    return _RIPPLES[0]
+
+
+# --- budgets, with the surfaces that spend them ----------------------------------------------
+
+@dataclasses.dataclass
+class BudgetCase:
+    """A ``ViewBudget`` (its fields from the adversarial pool, or plausible small numbers)
+    and the look of a pond and a mirror pair that spend it (their fades, Visibility and
+    Water fields, plausible or not)."""
+
+    budget: dict[str, Any]
+    mirror: dict[str, Any]
+    water: dict[str, Any]
+    visibility: dict[str, Any]
+
+    def describe(self) -> str:
+        return (f"ViewBudget({self.budget}) mirror {self.mirror} water {self.water} "
+                f"visibility {self.visibility}")
+
+
+def _budget_value(rng: random.Random, name: str) -> Any:
+    if rng.random() < 0.85:  # plausible: a small budget that starves something
+        return {"views": rng.randint(0, 12), "pixels": rng.choice((0, 1, 500, 5000, 10 ** 6)),
+                "probe_ms": rng.choice((0.001, 0.05, 1.0, 50.0))}[name]
+    return random_value(rng)
+
+
+def _fade_value(rng: random.Random) -> Any:
+    if rng.random() < 0.85:
+        start = rng.uniform(0.0, 10.0)
+        return (start, start + rng.uniform(0.0, 10.0))
+    return random_value(rng)
+
+
+def random_budget_case(rng: random.Random) -> BudgetCase:
+    budget = {name: _budget_value(rng, name) for name in rng.sample(("views", "pixels", "probe_ms"), rng.randint(1, 3))}
+    mirror = {name: _fade_value(rng) for name in rng.sample(("fade_distance", "fade_angle"), rng.randint(0, 2))}
+    water_fields = ("ior", "speed", "direction", "tiling", "cross", "offset")
+    plausible_water = {"ior": lambda: rng.uniform(1.0, 2.0), "speed": lambda: rng.uniform(0.0, 2.0),
+                       "direction": lambda: (rng.uniform(-1, 1), rng.uniform(0.1, 1)),
+                       "tiling": lambda: rng.uniform(0.5, 8.0), "cross": lambda: rng.random(),
+                       "offset": lambda: (rng.uniform(-5, 5), rng.uniform(-5, 5))}
+    water = {name: plausible_water[name]() if rng.random() < 0.85 else random_value(rng)
+             for name in rng.sample(water_fields, rng.randint(0, 2))}
+    kinds = ("direct", "in_mirrors", "in_portals", "in_probes", "layers")
+    visibility = {name: (rng.random() < 0.5 if name != "layers" else [rng.randint(0, 3)])
+                  if rng.random() < 0.85 else random_value(rng) for name in rng.sample(kinds, rng.randint(0, 3))}
+    return BudgetCase(budget, mirror, water, visibility)
+
+
+class _BudgetScene(Game):
+    """A facing pair of mirrors, a chrome ball with a probe recaptured every frame, a lit
+    box: the views a budget has to share."""
+
+    title = "fuzz: budgets"
+
+    def build(self, world) -> None:
+        eye = glm.vec3(0.4, 1.5, 3.0)
+        world.spawn(Transform(position=eye, rotation=look_rotation(glm.vec3(0, 1, -3) - eye)), Camera())
+        world.spawn(DirectionalLight(direction=(-0.3, -1, -0.5), intensity=2.0))
+        world.spawn(Transform(position=(0.8, 0.5, 0)), MeshRef(box()), Material(color=(0.8, 0.3, 0.1)))
+        for z, turn in ((-3.0, 0.0), (3.5, 3.14159)):
+            world.spawn(Transform(position=(0, 1.2, z), rotation=glm.angleAxis(turn, glm.vec3(0, 1, 0))),
+                        MeshRef(quad(2.5, 2.0)), Material(color=(0.2, 0.2, 0.2)), Mirror(max_depth=3))
+        world.spawn(Transform(position=(-0.8, 0.6, 0)), MeshRef(sphere(0.5, 12, 6)),
+                    Material(metallic=1.0, roughness=0.05), Reflective("cube"),
+                    ReflectionProbe(resolution=16, refresh="every_frame", depth=1))
+
+
+class BudgetFuzzer:
+    """One engine of ``_BudgetScene``; each case sets the world's ViewBudget, spawns a pond
+    (Mirror with the case's fades, Water, Visibility) and renders ``FRAMES`` frames.
+    A case passes when what is refused is refused naming ``ViewBudget.<field>`` (or the
+    component's field), or every frame renders clean (as ``Fuzzer``)."""
+
+    def __init__(self, ctx) -> None:
+        from engine.resources import ViewBudget
+
+        self.ctx = ctx
+        self.engine = Engine(_BudgetScene(), ctx)
+        self.world = self.engine.world
+        self.capture = CaptureTarget(ctx, SIZE)
+        self.view_budget = ViewBudget
+        self.refused = self.rendered = 0
+        Fuzzer.frame(self)
+
+    frame = Fuzzer.frame
+    close = Fuzzer.close
+    _check_pixels = Fuzzer._check_pixels
+
+    def run(self, case: BudgetCase, index: int = 0) -> str | None:
+        from engine.resources import ViewBudgetError
+
+        world = self.world
+        try:
+            budget = self.view_budget(**case.budget)
+        except ViewBudgetError as exc:
+            return self._refused(exc, "ViewBudget", case.budget)
+        except Exception as exc:  # noqa: BLE001
+            return f"ViewBudget raised {type(exc).__name__}: {exc}"
+        spawned = None
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                parts = [Transform(position=(0, 0.02, 1.0), rotation=glm.angleAxis(-1.5708, glm.vec3(1, 0, 0))),
+                         MeshRef(quad(2.0, 2.0)), Material(color=(0.2, 0.3, 0.4, 0.6), normal_map=_ripples())]
+                for cls, values in ((Mirror, case.mirror), (Water, case.water), (Visibility, case.visibility)):
+                    try:
+                        parts.append(cls(**values))
+                    except ComponentValueError as exc:
+                        return self._refused(exc, cls.__name__, values)
+                spawned = world.spawn(*parts)
+        except ComponentValueError as exc:
+            return self._refused(exc, "Water", case.water)
+        except Exception as exc:  # noqa: BLE001
+            return f"attach raised {type(exc).__name__}: {exc}"
+        world.resources[self.view_budget] = budget
+        problem = None
+        try:
+            for _ in range(FRAMES):
+                self.frame()
+                problem = self._check_pixels()
+                if problem is not None:
+                    break
+        except Exception as exc:  # noqa: BLE001
+            problem = f"frame raised {type(exc).__name__}: {exc}\n{traceback.format_exc(limit=-3)}"
+        finally:
+            world.resources.pop(self.view_budget, None)
+            try:
+                if spawned is not None:
+                    world.delete_entity(spawned)
+                self.frame()
+            except Exception:  # noqa: BLE001 - a case that breaks the engine: start a fresh one
+                self.close()
+                self.__init__(self.ctx)
+        if problem is None:
+            self.rendered += 1
+        return problem
+
+    def _refused(self, exc: Exception, name: str, values: dict[str, Any]) -> str | None:
+        text = str(exc)
+        if any(f"{name}.{field}" in text for field in values) or f"{name} on entity" in text:
+            self.refused += 1
+            return None
+        return f"refused without naming {name}.<field>: {text}"
+
+
+def fuzz_budgets(ctx, cases: int, seed: int = 0, report=None) -> tuple[int, list[tuple[str, str]], dict[str, int]]:
+    """Run ``cases`` budget cases (``run_cases``): budgets with the mirrors, probe, water,
+    fades and Visibility that spend them, several frames each."""
+    return run_cases(BudgetFuzzer(ctx), random_budget_case, cases, seed, report)
+
+
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--cases", type=int, default=1000, help="how many cases to run (default 1000)")
     parser.add_argument("--seed", type=int, default=0, help="random seed (the cases are reproducible)")
+    parser.add_argument("--budget-cases", type=int, default=100,
+                        help="view-budget cases, with mirrors, a probe, water, fades and Visibility spending it "
+                             "(default 100)")
     parser.add_argument("--level-cases", type=int, default=0,
                         help="also run this many level-file cases (mutated level files; default 0)")
     add_model_arguments(parser)
@@ -299,6 +476,8 @@ def main(args: argparse.Namespace) -> int:
                 print(f"case {index}: {case.describe()}\n  {why.strip().splitlines()[0]}")
 
         ran, failures, passes = fuzz(ctx, args.cases, args.seed, report)
+        budget_ran, budget_failures, budget_passes = fuzz_budgets(ctx, args.budget_cases, args.seed, report)
+        failures = failures + budget_failures
         with tempfile.TemporaryDirectory() as folder:
             level_ran, level_failures, level_passes = fuzz_levels(ctx, Path(folder), args.level_cases, args.seed,
                                                                   report)
@@ -308,15 +487,21 @@ def main(args: argparse.Namespace) -> int:
     finally:
         ctx.release()
     if args.json:
-        print(json.dumps({"cases": ran, "failed": len(failures), **passes, "failures": failures[:50]}))
+        print(json.dumps({"cases": ran, "failed": len(failures) - len(budget_failures), **passes,
+                          "failures": failures[:50]}))
+        print(json.dumps({"budget_cases": budget_ran, "failed": len(budget_failures), **budget_passes,
+                          "failures": budget_failures[:50]}))
         if args.level_cases:
             print(json.dumps({"level_cases": level_ran, "failed": len(level_failures), **level_passes,
                               "failures": level_failures[:50]}))
         print(json.dumps({"file_cases": file_ran, "failed": len(file_failures), **file_passes,
                           "failures": file_failures[:50]}))
     else:
-        print(f"fuzz: {ran} cases ran, {len(failures)} failed ({passes['refused']} refused naming the field, "
-              f"{passes['rendered']} rendered clean; seed {args.seed})")
+        print(f"fuzz: {ran} cases ran, {len(failures) - len(budget_failures)} failed ({passes['refused']} refused "
+              f"naming the field, {passes['rendered']} rendered clean, {FRAMES} frames each; "
+              f"seed {args.seed})")
+        print(f"budget fuzz: {budget_ran} cases ran, {len(budget_failures)} failed ({budget_passes['refused']} "
+              f"refused naming the field, {budget_passes['rendered']} rendered clean)")
         if args.level_cases:
             print(f"level fuzz: {level_ran} level files ran, {len(level_failures)} failed "
                   f"({level_passes['refused']} refused naming the file, {level_passes['rendered']} rendered clean; "

@@ -14,7 +14,8 @@ way leaves what came before, with ``"complete": false``):
   ``direct_faces`` and any other path ``engine.render.path_checks.PATH_NAMES`` lists; each
   ``verified``, ``refused``, ``unavailable`` or ``unchecked``, with its detail).  A checkout
   without the self-check reports each path ``unchecked``.
-* ``benchmarks``: ``mirrors``, ``portals``, ``probes``, ``stages`` and ``profile`` (``--benchmarks``) at each
+* ``benchmarks``: ``mirrors``, ``portals``, ``probes``, ``stages``, ``profile`` and ``lighting``
+  (shadows and post-processing on and off; its targets are ``target`` rows) (``--benchmarks``) at each
   ``--size`` (default 640x360 and 1920x1080), and ``cpu`` once at the sizes it names (its
   targets tabled first, as "Targets", then its scenes' frames and GL calls), each run as
   ``python -m benchmarks <suite> --json --size WxH --frames N --warmup M`` would run it
@@ -31,7 +32,9 @@ way leaves what came before, with ``"complete": false``):
 
 Exit status 0 when every section ran clean, 1 when a benchmark failed, a test failed or a
 speed target that applies to this kind of machine is not met (``--report-only``: targets
-are reported only; the report is written either way), 2 for a bad command line.  Nothing here imports the debug
+are reported only; the report is written either way), 2 for a bad command line.  The test
+suite is the longest section (about 5 minutes on a GPU machine's CPU, longer on a slow one;
+``--no-tests`` leaves it out), and the report says before it starts.  Nothing here imports the debug
 overlay, so the report runs where imgui-bundle is not installed.
 
 On a GPU machine (from the repository root, ``pip install -e ".[dev]"`` done)::
@@ -71,7 +74,7 @@ from benchmarks import format_size, names_from, non_negative_int, parse_sizes, p
 
 ROOT = Path(__file__).resolve().parents[1]
 DEFAULT_SIZES = ((640, 360), (1920, 1080))
-BENCHMARKS = ("mirrors", "portals", "probes", "stages", "profile", "cpu")
+BENCHMARKS = ("mirrors", "portals", "probes", "stages", "profile", "lighting", "cpu")
 FIXED_SIZE = ("cpu",)  # suites that run at the sizes they name: once, not at each --size
 JUDGED = ("cpu",)  # suites with target rows, run with --report-only: the report judges them
 FIXED = "own sizes"  # their runs' key where the others' is a size
@@ -92,6 +95,8 @@ MEDIANS: dict[str, tuple[tuple[tuple[str, ...], str], ...]] = {
                (("path", "culled", "size"), "capture_ms_median"), (("prefilter", "size"), "prefilter_ms_median")),
     "stages": ((("scene", "stage"), "gpu_ms_median"), (("scene", "stage"), "cpu_ms_median"),
                (("scene", "stage"), "frame_ms_median")),
+    "lighting": ((("n_mirrors", "variant"), "frame_ms_median"), (("n_mirrors", "variant"), "ratio_to_off"),
+                 (("n_mirrors", "variant"), "cpu_ms_median"), (("target",), "value")),
 }
 
 
@@ -111,7 +116,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help=f"which suites (default {','.join(BENCHMARKS)})")
     parser.add_argument("--isolate", action="store_true",
                         help="run each suite in a subprocess (a driver crash costs that suite, not the report)")
-    parser.add_argument("--no-tests", action="store_true", help="do not run the test suite")
+    parser.add_argument("--no-tests", action="store_true",
+                        help="do not run the test suite (python -m pytest: about 6 minutes on 2 llvmpipe cores)")
     parser.add_argument("--report-only", action="store_true",
                         help="report the speed targets, met or not, without failing the exit status on them")
     parser.add_argument("--tests-args", type=shlex.split, default=[], metavar="ARGS",
@@ -445,8 +451,8 @@ def markdown(report: dict) -> str:
                     "The 32x18 scenes run in a process with `LP_NUM_THREADS=0` (`lp_num_threads`): on llvmpipe "
                     "their frame is the engine's CPU.  Medians, ms; `gl_calls`: calls into moderngl and raw GL "
                     "calls a frame (`python -m benchmarks cpu --help` says what counts).", ""]
-            out += _table(["scene", "size", "lp_num_threads", "frame_ms_median", "cpu_ms_median", "views", "passes",
-                           "draw_calls", "gl_calls", "gl_calls_top"], scenes)
+            out += _table(["scene", "size", "lp_num_threads", "frame_ms_median", "cpu_ms_median", "thread_ms_median",
+                           "views", "passes", "draw_calls", "gl_calls", "gl_calls_top"], scenes)
         ecs = [row for row in cpu["rows"] if row.get("scene") == "ecs"]
         if ecs:
             out += _table(["scene", "entities", "moving", "cpu_ms_median", "frame_ms_median", "draw_calls"], ecs)
@@ -594,7 +600,7 @@ def main(args: argparse.Namespace) -> int:
     if args.no_tests:
         report["tests"] = {"ran": False, "reason": "--no-tests"}
     else:
-        progress("tests: python -m pytest -q ...")
+        progress("tests: python -m pytest -q ... (the whole test suite: minutes)")
         report["tests"] = tests_section(args.tests_args, args.tests_timeout, args.out / "failures")
         if report["tests"]["ran"]:
             progress(f"tests: {report['tests']['summary'] or 'exit ' + str(report['tests']['exit'])}")

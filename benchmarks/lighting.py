@@ -18,6 +18,10 @@ Variants now (``VARIANTS``; add a row by appending a ``Variant``):
   once and kept (the still scene);
 * ``shadows_moving``: the same with a box sliding to and fro under the sun every frame
   (its map drawn again each frame);
+* ``mirror_light``: shadows, and the mirror of the ring the sun reaches most throws its
+  light (``Mirror.reflects_light``: one virtual light with its own shadow map); still;
+* ``mirror_light_moving``: the same with the sliding box (at most two maps a frame: the
+  sun's and the virtual light's);
 * ``post``: no shadows, the camera gets ``Tonemap(curve="agx")`` and ``Bloom()`` (six levels);
 * ``post_auto``: the same with ``Tonemap(auto_exposure=True)``.
 
@@ -30,7 +34,8 @@ its limit, printed as value, limit, met:
 * ``shadows_still``: ``shadows`` / ``off`` (a still scene with shadows costs at most 1.05x:
   its maps are kept), set for a GPU likewise (the shadow lookups are per-pixel work);
 * ``shadow_maps_moving`` (a count, judged everywhere): the shadow maps a frame of
-  ``shadows_moving`` draws, at most 1 whatever the number of mirrors; ``shadows`` draws 0.
+  ``shadows_moving`` draws, at most 1 whatever the number of mirrors; ``shadows`` draws 0;
+  ``mirror_light`` 0 and ``mirror_light_moving`` at most 2 (one more for the virtual light).
 
 ::
 
@@ -52,7 +57,7 @@ from pyglm import glm
 
 from benchmarks import add_size_argument, format_size, non_negative_int, positive_int
 from benchmarks.mirrors import DT, OUTPUT_SIZE, MirrorRing
-from components import Bloom, Camera, DirectionalLight, Material, MeshRef, Tonemap, Transform
+from components import Bloom, Camera, DirectionalLight, Material, MeshRef, Mirror, Tonemap, Transform
 from engine.assets.mesh import box
 from engine.core.frame_io import Output
 from engine.render.gl_context import GLCapabilities, create_headless_context
@@ -103,6 +108,22 @@ def _slide_caster(engine: Engine, frame: int) -> None:
     transform.position = glm.vec3(math.sin(frame * 0.1) * 1.5, 0.6, 2.0)
 
 
+def _mirror_light(engine: Engine) -> None:
+    """The sun's shadows on, and the ring's mirror the sun reaches most throws its light."""
+    _sun_shadows(engine, True)
+    (_, sun), = engine.world.query_one(DirectionalLight)
+    facing = [(glm.dot(-sun.direction, glm.vec3(glm.mat3(engine.world.get(entity, Transform).world)
+                                                  * glm.vec3(0.0, 0.0, 1.0))), entity)
+              for entity, _ in engine.world.query_one(Mirror)]
+    if facing:
+        engine.world.get(max(facing)[1], Mirror).reflects_light = True
+
+
+def _mirror_light_moving(engine: Engine) -> None:
+    _mirror_light(engine)
+    _moving_caster(engine)
+
+
 def _post(engine: Engine) -> None:
     _sun_shadows(engine, False)
     engine.world.add_component(camera_entity(engine), Tonemap(curve="agx"))
@@ -120,6 +141,9 @@ VARIANTS: list[Variant] = [
     Variant("shadows", _shadows, "the sun casts shadows; a still scene (its map kept)"),
     Variant("shadows_moving", _moving_caster, "the sun casts shadows; a box slides under it every frame",
             _slide_caster),
+    Variant("mirror_light", _mirror_light, "shadows, and one mirror throws the sun (a virtual light); still"),
+    Variant("mirror_light_moving", _mirror_light_moving, "the same with a box sliding under the sun",
+            _slide_caster),
     Variant("post", _post, "Tonemap(curve='agx') and Bloom() on the camera"),
     Variant("post_auto", _post_auto, "Tonemap(curve='agx', auto_exposure=True) and Bloom()"),
 ]
@@ -134,7 +158,9 @@ TARGETS: dict[str, tuple[str, str, int, tuple[int, int], float, str]] = {
 }
 # name -> (variant, limit): the most shadow maps a frame of it may draw, at every mirror count.
 COUNT_TARGETS: dict[str, tuple[str, int]] = {"shadow_maps_moving": ("shadows_moving", 1),
-                                             "shadow_maps_still": ("shadows", 0)}
+                                             "shadow_maps_still": ("shadows", 0),
+                                             "shadow_maps_mirror_light_still": ("mirror_light", 0),
+                                             "shadow_maps_mirror_light_moving": ("mirror_light_moving", 2)}
 
 
 @dataclass

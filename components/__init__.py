@@ -6,14 +6,14 @@ from components.portal import Portal, PortalClone, Slice, Traveller
 from components.post import Bloom, Tonemap
 from components.probe import ReflectionProbe
 from components.rendering import Emissive, Material, MeshRef, Reflective, Refractive, Skybox
-from components.tracking import ComponentValueError, TrackedComponent
+from components.tracking import ComponentValueError, ComponentWarning, TrackedComponent
 from components.transform import Transform, euler_rotation, look_rotation, yaw_pitch_rotation
 from components.visibility import Visibility
 from components.water import Water
 
 __all__ = [
-    "Bloom", "Camera", "ComponentValueError", "DirectionalLight", "Emissive", "FlyController", "HemisphereLight",
-    "Material",
+    "Bloom", "Camera", "ComponentValueError", "ComponentWarning", "DirectionalLight", "Emissive", "FlyController",
+    "HemisphereLight", "Material",
     "MeshRef", "Mirror", "PointLight", "Portal", "PortalClone", "ReflectionProbe", "Reflective", "Refractive",
     "Skybox", "Slice",
     "Tonemap", "TrackedComponent", "Transform", "Traveller", "Visibility", "Water",

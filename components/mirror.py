@@ -4,6 +4,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any
 
+import numpy as np
 from pyglm import glm
 
 from components.limits import MAX_VIEW_DEPTH
@@ -37,15 +38,21 @@ class Mirror(TrackedComponent):
     (``engine.resources.ViewBudget``).
     ``end_image``: past the depth limit, show the surface's image from the previous frame,
     shrunk onto the cut view's footprint (``engine/render/end_images.py``), instead of its
-    closed look: True, False, or "auto" (the default: on for a facing pair, whose recursion
-    would otherwise end in a flat rectangle).
+    fallback: True, False, or "auto" (the default: on for a facing pair, whose recursion
+    would otherwise end in the fallback's rectangle).
+
+    Without a view of its own (cut by the frame's view budget, faded out, past the depth
+    limits without an end image, or ``enabled`` False) a mirror shows its fallback: the
+    reflection its surface would get from the probes whose influence boxes hold it, else
+    from the sky, at its tint, reflect rate and roughness
+    (``engine.rules.probe_rules.surface_blend``, ``engine/render/mirror_passes.py``).
 
     Fades (both off by default), as Unreal's planar reflections offer: ``fade_distance =
     (start, end)`` in metres from the viewing eye to the mirror (to its bounding sphere), and
     ``fade_angle = (start, end)`` in degrees between the mirror's normal and the direction to
     the eye (0: straight on, 90: edge on).  Between start and end the reflection's weight
-    falls linearly from 1 to 0 and the mirror shows its own shading instead; at end and past
-    it the mirror costs no view at all.  A view's weight is the product of the two, seen from
+    falls linearly from 1 to 0 and the mirror shows its fallback instead (the two mixed by the
+    weight); at end and past it the mirror costs no view at all.  A view's weight is the product of the two, seen from
     that view's eye (a mirror seen in another mirror fades by the reflected eye's distance).
 
     ``reflects_light`` (off by default): the lights that reach its front are reflected onto
@@ -81,7 +88,12 @@ class Mirror(TrackedComponent):
         if name in ("shows_layers", "hides_layers"):
             return check_surface_layers(self, name, value)
         if name in ("reflect_rate", "roughness"):
-            return finite(self, name, value, low=0.0, high=1.0)
+            value = finite(self, name, value, low=0.0, high=1.0)
+            world = getattr(self, "_world_ref", None)
+            if name == "roughness" and world is not None:
+                for entity in self._entities:  # a water's mirror stays sharp, checked at the write
+                    world.check_invariants(entity, Mirror, roughness=value)
+            return value
         if name == "resolution_scale":
             return finite(self, name, value, low=0.1, high=1.0)
         if name == "max_depth":
@@ -103,12 +115,23 @@ class Mirror(TrackedComponent):
 
 
 def _fade(name: str, value: Any, most: float | None) -> tuple[float, float]:
-    """A fade's (start, end): finite, 0 <= start < end (<= ``most``)."""
+    """A fade's (start, end): two numbers (not text, not booleans), finite, 0 <= start < end
+    (<= ``most``)."""
+    parts = [] if isinstance(value, (str, bytes, dict)) else _parts(value)
+    if len(parts) != 2 or any(isinstance(v, (str, bytes, bool, np.bool_)) for v in parts):
+        raise ComponentValueError(f"Mirror.{name} must be None or two numbers (start, end), got {value!r}")
     try:
-        start, end = (float(v) for v in value)
-    except (TypeError, ValueError):
-        raise ComponentValueError(f"Mirror.{name} must be None or (start, end), got {value!r}") from None
+        start, end = (float(v) for v in parts)
+    except (TypeError, ValueError, OverflowError):
+        raise ComponentValueError(f"Mirror.{name} must be None or two numbers (start, end), got {value!r}") from None
     limit = f" <= {most:g}" if most is not None else ""
     if not (0.0 <= start < end and end < float("inf") and (most is None or end <= most)):
         raise ComponentValueError(f"Mirror.{name} must have 0 <= start < end{limit}, got {value!r}")
     return start, end
+
+
+def _parts(value: Any) -> list[Any]:
+    try:
+        return list(value)
+    except TypeError:
+        return []

@@ -22,8 +22,9 @@ class Portal(TrackedComponent):
 
     The rectangle is ``size`` (width, height) in the entity's local XY plane, facing local
     +Z; looking into its front shows what lies in front of the partner.  ``closed_color``
-    is what it shows when it has no working partner (deleted, disabled) or past the
-    recursion limit.  A ``partner`` that names an entity never made in its world is a
+    is what it shows when it has no working partner (deleted, disabled); cut by the view
+    budget or past the recursion limit, it shows what lies beyond the partner as the probes
+    there (or the sky) saw it, its fallback.  A ``partner`` that names an entity never made in its world is a
     ``PortalPartnerWarning`` from the frame's rules stage (once a portal and partner id:
     such a portal stays closed); a partner spawned after the portal (a pair spawned one
     after the other) is no mistake, and a partner deleted later closes it without a word
@@ -31,7 +32,7 @@ class Portal(TrackedComponent):
     ``shows_layers`` (None: all) and ``hides_layers`` are the reflection layers its view
     shows (``components.visibility``): ``hides_layers=[3]`` shows all but layer 3.
     ``priority`` and ``end_image``: as on ``Mirror`` (the view budget's order; past the
-    depth limit, last frame's image instead of the closed look, "auto" for a facing pair).
+    depth limit, last frame's image instead of the fallback, "auto" for a facing pair).
     ``carries_light`` (off by default): lights in front of it shine out of its partner's
     opening (their images carried by the pair's transform), with shadows on both sides.
     """

@@ -29,16 +29,17 @@ class ReflectionProbe(TrackedComponent):
     cube map sample this probe (None: the probe serves only its own entity).
     ``blend_distance`` is how far inside the box's walls its weight falls off to nothing
     (Unity HDRP's blend distance): an object blends the probes whose boxes hold it by their
-    weights, so it moves from one probe's room to the next without a pop
-    (``engine.rules.probe_rules.probe_blend``; 0, the default: full weight up to the walls,
+    weights (normalised only where they add up to more than 1; the sky, or a curved object's
+    own probe, takes what they leave), so it moves from one probe's room to the next without
+    a pop (``engine.rules.probe_rules.probe_blend``; 0, the default: full weight up to the walls,
     the box's edge is hard).  At most half the box's smallest side.
     ``box_projection`` corrects lookups for the box's walls (parallax-corrected, as Unity's
     and Godot's probes do).  ``depth`` is how many levels of mirrors and portals a face
-    sees (0: mirrors show their own surface).  ``prefilter``: how rough materials blur
-    what the probe saw: ``mips`` (the default: a box-filtered mip chain, sampled with a
-    roughness bias) or ``ggx`` (each level convolved with a GGX lobe of its own roughness,
-    as three.js's PMREM and Unity's probe convolution do: closer to the light's true spread,
-    and dearer to capture).
+    sees (0: none, and no view tree: mirrors show their own surface in its captures).
+    ``prefilter``: how rough materials blur what the probe saw: ``mips`` (the default: a
+    box-filtered mip chain, sampled with a roughness bias) or ``ggx`` (each level convolved
+    with a GGX lobe of its own roughness, as three.js's PMREM and Unity's probe convolution
+    do: closer to the light's true spread, and dearer to capture).
     ``priority`` (an int, higher first; default 0) orders its captures under the frame's
     budgets (``engine.resources.ViewBudget``), after first captures and before distance.
     ``shows_layers`` (None: all) and ``hides_layers`` are the reflection layers its captures

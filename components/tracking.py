@@ -5,8 +5,18 @@ component reports its own field writes to the world that owns it.  A component i
 plain data: a dataclass whose ``__setattr__`` validates the value and, once the component
 belongs to a world, adds its entity to that world's change set for its type.
 
-In-place edits of a mutable field (``t.position.x = 1``) cannot be seen; assign the
-field (``t.position = ...``, ``t.position += ...``) or call :meth:`touch`.
+**In-place edits.**  A glm vector or quaternion held in a field can be edited in place
+(``t.position.y += 1``, ``material.color.a = 0.5``): no field write happens, so the
+component cannot report it when it happens.  It is seen one stage later instead: reading
+such a field from a component in a world records the value and a copy of it (``World``'s
+in-place watch); at the start of the transform stage (``World.settle_in_place_edits``) each
+value read since is compared with its copy, and one that changed is checked as a write
+would be and reported as one (the stages from the transform stage on see it in this frame's
+change sets; an edit made after the extract stage is drawn from the next frame).  A value
+still held elsewhere (``p = t.position`` kept by a game) stays watched; the others are
+dropped after the check, so a world pays only for what was read.  Assigning the field
+(``t.position = ...``, ``t.position += ...``) is reported at once and costs nothing extra.
+``touch`` reports a change the component cannot see at all (a numpy array edited in place).
 
 **Sharing one component object between entities.**  Components that are plain data about
 how something looks (Material, MeshRef, Mirror, Emissive, Reflective, Refractive, lights,
@@ -34,6 +44,28 @@ class ComponentValueError(ValueError):
     """A component field was given a value it cannot hold (NaN, negative, wrong kind)."""
 
 
+class ComponentWarning(UserWarning):
+    """A component value the engine can hold but that is almost certainly not what was meant
+    (a colour written 0-255, an entity hidden in every kind of view, a view that shows no
+    layer): said when it is given, as one line (``speculum: warning:`` from the command line)."""
+
+
+def warn_component(message: str) -> None:
+    """A ``ComponentWarning`` pointing past the component code, at the caller's line."""
+    import sys
+    import warnings
+
+    level, frame = 2, sys._getframe(1)
+    while frame is not None and frame.f_globals.get("__name__", "").startswith(("components.", "engine.core.world",
+                                                                                 "engine.rules.", "dataclasses")):
+        frame, level = frame.f_back, level + 1
+    warnings.warn(message, ComponentWarning, stacklevel=level)
+
+
+# glm types a field may hold that can be edited in place (the in-place watch follows them).
+IN_PLACE_TYPES = frozenset({glm.vec2, glm.vec3, glm.vec4, glm.quat, glm.dvec3, glm.dquat})
+
+
 class TrackedComponent:
     """Base of all components: validates fields and reports writes to its world."""
 
@@ -52,7 +84,7 @@ class TrackedComponent:
                 raise AttributeError(f"{type(self).__name__} has no field {name!r} "
                                      f"(fields: {', '.join(sorted(fields))})")
             value = self._validate(name, value)
-        object.__setattr__(self, name, value)
+        self.__dict__[name] = value  # past the fields' watch properties (``_watched_field``)
         sink = self._sink
         if sink is not None and not name.startswith("_"):
             sink.update(self._entities)
@@ -70,13 +102,63 @@ _FIELDS: dict[type, frozenset[str] | None] = {}
 
 
 def _field_names(cls: type) -> frozenset[str] | None:
-    """The dataclass fields of a component class (None for a non-dataclass subclass)."""
+    """The dataclass fields of a component class (None for a non-dataclass subclass); the
+    first call for a class also puts the in-place watch on its fields (``_watched_field``)."""
     try:
         return _FIELDS[cls]
     except KeyError:
         names = frozenset(f.name for f in dataclasses.fields(cls)) if dataclasses.is_dataclass(cls) else None
         _FIELDS[cls] = names
+        for f in dataclasses.fields(cls) if names is not None else ():
+            # Public fields set by __init__ (a private or init=False field keeps its class
+            # default) that may hold a glm vector: only they pay for the watch's property.
+            if f.init and not f.name.startswith("_") and _may_hold_glm(f) and not any(
+                    isinstance(vars(base).get(f.name), property) for base in cls.__mro__):
+                setattr(cls, f.name, _watched_field(f.name))
         return names
+
+
+def _may_hold_glm(f: dataclasses.Field) -> bool:
+    """Whether a field may hold a glm vector or quaternion: its default is one, or it is an
+    ``Any`` field whose default is None (``Mirror.plane_normal``, ``ReflectionProbe.influence``)."""
+    if f.default_factory is not dataclasses.MISSING:
+        default = f.default_factory()
+    else:
+        default = f.default
+    if type(default) in IN_PLACE_TYPES:
+        return True
+    annotation = f.type if isinstance(f.type, str) else getattr(f.type, "__name__", str(f.type))
+    return default is None and annotation in ("Any", "typing.Any")
+
+
+def _watched_field(name: str) -> property:
+    """A field as a property over the instance's ``__dict__``: reading a glm vector or
+    quaternion from a component in a world puts it in the world's in-place watch (the
+    module docstring), once per value until the watch is settled."""
+
+    def read(self: TrackedComponent) -> Any:
+        state = self.__dict__
+        try:
+            value = state[name]
+        except KeyError:
+            raise AttributeError(f"{type(self).__name__} has no value for {name!r} yet") from None
+        if type(value) in IN_PLACE_TYPES:
+            handed = state.get("_handed")
+            if handed is not None:
+                key = (id(self), name)
+                if key not in handed:
+                    handed[key] = (self, name, value, type(value)(value))
+        return value
+
+    def write(self: TrackedComponent, value: Any) -> None:  # object.__setattr__ and dataclasses come here
+        self.__dict__[name] = value
+
+    return property(read, write, doc=f"The {name!r} field (edits in place are seen: module docstring).")
+
+
+def raw_field(component: TrackedComponent, name: str) -> Any:
+    """A field's value without entering the in-place watch (the engine's own hot reads)."""
+    return component.__dict__[name]
 
 
 # --- validators used by the component classes -------------------------------------------
@@ -173,6 +255,12 @@ def color(owner: object, name: str, value: Any) -> glm.vec4:
         raise _fail(owner, name, value, "must have alpha <= 1")
     if max(items) > HALF_MAX:
         raise _fail(owner, name, value, "must have components <= 65504 (the half-float colour targets' limit)")
+    rgb = parts[:3]
+    if all(isinstance(c, (Integral, np.integer)) and not isinstance(c, (bool, np.bool_)) for c in rgb) \
+            and 1 < max(items[:3]) <= 255:
+        scaled = ", ".join(f"{float(c) / 255.0:.3g}" for c in rgb)
+        warn_component(f"{type(owner).__name__}.{name} = {value!r} looks like 0-255 colour values; colours are "
+                       f"linear 0-1 (that is ({scaled}) in 0-1; write floats, e.g. 3.0, for a colour brighter than 1)")
     return glm.vec4(*items)
 
 

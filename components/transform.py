@@ -15,6 +15,13 @@ from components.tracking import ComponentValueError, TrackedComponent, vec3
 # (the inverse transpose) towards 0 or infinity, where normalising gives NaN.
 POSITION_MAX = 1e9
 SCALE_RANGE = (1e-6, 1e6)
+_MIRRORING = [False]  # whether any Transform was given a negative scale component (in this process)
+
+
+def mirroring_seen() -> bool:
+    """Whether any Transform has been given a negative scale component: until one has, no
+    world matrix can mirror, and the extract stage skips looking for instances that do."""
+    return _MIRRORING[0]
 
 
 @dataclass(eq=False)
@@ -39,7 +46,10 @@ class Transform(TrackedComponent):
         return self._world
 
     def local_matrix(self) -> glm.mat4:
-        return glm.translate(self.position) * glm.mat4_cast(self.rotation) * glm.scale(self.scale)
+        # The fields read past the in-place watch (components.tracking): this is the engine's
+        # own read, every changed transform every frame, and never edits them.
+        state = self.__dict__
+        return glm.translate(state["position"]) * glm.mat4_cast(state["rotation"]) * glm.scale(state["scale"])
 
     def _validate(self, name: str, value: Any) -> Any:
         if name == "position":
@@ -53,6 +63,8 @@ class Transform(TrackedComponent):
             if min(abs(v.x), abs(v.y), abs(v.z)) == 0.0:
                 raise ComponentValueError(f"Transform.scale must have no zero component, got {value!r}")
             low, high = SCALE_RANGE
+            if v.x < 0.0 or v.y < 0.0 or v.z < 0.0:
+                _MIRRORING[0] = True
             if not all(low <= abs(c) <= high for c in v):
                 raise ComponentValueError(f"Transform.scale components must be {low:g} to {high:g} in size "
                                           f"(the normal matrix is their inverse), got {value!r}")

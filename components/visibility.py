@@ -24,7 +24,7 @@ from typing import Any
 import numpy as np
 
 from components.limits import ALL_LAYERS, REFLECTION_LAYERS, VIEW_DIRECT, VIEW_MIRROR, VIEW_PORTAL, VIEW_PROBE
-from components.tracking import ComponentValueError, TrackedComponent, boolean
+from components.tracking import ComponentValueError, TrackedComponent, boolean, warn_component
 
 DEFAULT_LAYERS = (0,)
 
@@ -67,7 +67,11 @@ def check_surface_layers(owner: object, name: str, value: Any) -> Any:
     fields of a surface component."""
     if name == "shows_layers" and value is None:
         return None
-    return layer_list(owner, name, value)
+    layers = layer_list(owner, name, value)
+    if name == "shows_layers" and not layers:
+        warn_component(f"{type(owner).__name__}.shows_layers = {value!r} shows no layer, so its view draws nothing "
+                       "(None shows every layer; hides_layers=[n] hides one)")
+    return layers
 
 
 @dataclass(eq=False)
@@ -102,7 +106,14 @@ class Visibility(TrackedComponent):
 
     def _validate(self, name: str, value: Any) -> Any:
         if name in ("direct", "in_mirrors", "in_portals", "in_probes"):
-            return boolean(self, name, value)
+            value = boolean(self, name, value)
+            kinds = {kind: value if kind == name else self.__dict__.get(kind)
+                     for kind in ("direct", "in_mirrors", "in_portals", "in_probes")}
+            if not value and all(shown is False for shown in kinds.values()):
+                warn_component("Visibility hides the entity in every kind of view (direct, in_mirrors, in_portals "
+                               "and in_probes all False), so it is drawn nowhere; MeshRef.visible = False says "
+                               "that plainly")
+            return value
         if name == "layers":
             return layer_list(self, name, value)
         return value

@@ -16,10 +16,23 @@
 //                     Its row carries the waves' offset in the tile's x and y (v_eye.w,
 //                     v_normal.w), the second layer's share in the tile scale (v_tint.a)
 //                     and F0 in the roughness (v_params.y).
+//   COMPOSITE_FALLBACK: (with PORTAL, BUMPY, WATER or none; ROUGH never: its roughness is a
+//                     mip bias here) the fallback of a surface seen with no view of its own
+//                     (cut by the view budget, faded, past the depth limit, a mirror switched
+//                     off; an end view's pixels last frame's image did not hold): the same
+//                     composite with an empty reflection, so what it shows is its environment,
+//                     the probes whose influence boxes hold the surface blended by their
+//                     weights and the sky taking the rest (probe_rules.surface_blend), where a
+//                     drawn view shows the sky.  Its pixels are the parent view's own pixels of
+//                     the surface (the parent level's node and surface images; no claim), its
+//                     rectangle the parent's, in the parent's pixels (to_reflection = 1).  A
+//                     partly faded mirror gets both: this first, weighted so that the view's
+//                     composite over it gives rate x (fade x view + (1 - fade) x fallback).
 #include "ggx.glsl"
 #include "normal_map.glsl"
 #include "water.glsl"
 #include "end_image.glsl"
+#include "probe_lookup.glsl"
 #ifdef COMPOSITE_BUMPY
 flat in mat3 v_project_dir;
 #endif
@@ -42,7 +55,53 @@ flat in vec4 v_tint;       // a: tile scale
 flat in vec4 v_params;
 flat in vec4 v_normal;     // w: tile y
 flat in mat3 v_carry;       // a bumpy mirror's UV map: columns u's gradient, v's, (u0, v0, map scale)
-flat in uint v_view;
+flat in uint v_view;       // fallback: the parent view's index (its pixels in the parent's node image)
+
+#ifdef COMPOSITE_FALLBACK
+uniform usampler2D parent_nodes;     // the level composited into: which view drew each pixel
+uniform usampler2D parent_surfaces;  // and the surface there
+uniform vec2 to_child;               // its pixels -> the reflection level's (an end view's holes)
+#ifdef FALLBACK_PROBES
+// The draw's two probes (engine/render/probes.py; the sky where a row has fewer), as the
+// scene shader's probe.glsl reads them.  A draw whose surfaces no influence box holds is a
+// build without them (the sky alone: llvmpipe would look up both probes at weight 0).
+uniform samplerCube probe_map;
+uniform vec4 probe_position;
+uniform vec4 probe_box_min;
+uniform vec4 probe_box_max;
+uniform samplerCube probe2_map;
+uniform vec4 probe2_position;
+uniform vec4 probe2_box_min;
+uniform vec4 probe2_box_max;
+#endif
+flat in uvec4 v_ids;       // x: the surface's entity; y: its end view + 1 (0: not an end view)
+flat in vec4 v_weights;    // x, y: the probes' weights (the sky has the rest); z: the fallback's share
+flat in vec4 v_place;      // x: the plane's w; yzw: a portal's offset to beyond its partner
+
+// The surface's environment along ``ray`` from ``p``: the probes by their weights and the sky
+// taking what is left of 1, each read at its level for ``roughness`` (the scene shader's
+// probe_radiance, with no pixel footprint: the composite reads its sky at level 0 too).
+vec3 fallback_environment(vec3 p, vec3 ray, float roughness) {
+    vec3 sky = textureLod(sky_map, ray, roughness_lod_bias(roughness)).rgb;
+#ifdef FALLBACK_PROBES
+    vec3 first = probe_lookup(probe_map, probe_position, probe_box_min, probe_box_max, p, ray, 0.0, roughness);
+    vec3 second = probe_lookup(probe2_map, probe2_position, probe2_box_min, probe2_box_max, p, ray, 0.0,
+                               roughness);
+    return first * v_weights.x + second * v_weights.y + sky * max(1.0 - v_weights.x - v_weights.y, 0.0);
+#else
+    return sky;
+#endif
+}
+
+// The blend weight of the fallback under a reflection of weight ``rate`` (the reflect rate or
+// Fresnel) that a view's composite will blend at rate x fade over it: rate x (1 - fade) /
+// (1 - rate x fade), so the two leave rate x fade of the view, rate x (1 - fade) of the
+// fallback and 1 - rate of the surface's own shading.  Share 1 (no view): the rate itself.
+float fallback_alpha(float rate) {
+    float share = v_weights.z;
+    return rate * share / max(1.0 - rate * (1.0 - share), 1e-6);
+}
+#endif
 
 layout(location = 0) out vec4 out_color;  // blended: rgb x reflect_rate + own x (1 - reflect_rate)
 layout(location = 1) out uint out_seen;
@@ -52,19 +111,41 @@ void main() {
     vec2 level_px = gl_FragCoord.xy * to_reflection;
     if (any(lessThan(level_px, v_rect.xy)) || any(greaterThanEqual(level_px, v_rect.zw))) discard;
     ivec2 px = ivec2(level_px);
+#ifdef COMPOSITE_FALLBACK
+    // The parent view's own pixels of the surface; for an end view, those of them its image
+    // from last frame did not hold.
+    if (texelFetch(parent_nodes, px, 0).r != v_view || texelFetch(parent_surfaces, px, 0).r != v_ids.x) discard;
+    if (v_ids.y != 0u) {
+        ivec2 child = ivec2(gl_FragCoord.xy * to_child);
+        if (texelFetch(reflection_nodes, child, 0).r != v_ids.y - 1u
+                || texelFetch(reflection_seen, child, 0).r != NO_END_IMAGE) discard;
+    }
+    out_seen = v_ids.x;  // nothing followed: the surface itself, as its scene pass wrote it
+#else
     if (texelFetch(reflection_nodes, px, 0).r != v_view) discard;
+#endif
     vec2 uv = gl_FragCoord.xy / parent_size;
     // A point on the near plane along this pixel's ray (for an oblique projection that is
     // the parent mirror's plane: still in front of the eye, unlike its tilted far plane).
     vec4 near = v_inv_view_proj * vec4(uv * 2.0 - 1.0, -1.0, 1.0);
     vec3 view_dir = normalize(near.xyz / near.w - v_eye.xyz);
+#ifdef COMPOSITE_FALLBACK
+    // Where the pixel's ray meets the surface (what box projection starts from).
+    vec3 at = v_eye.xyz + view_dir * (-(dot(v_normal.xyz, v_eye.xyz) + v_place.x) / dot(v_normal.xyz, view_dir));
+#else
     uint seen_id = texelFetch(reflection_seen, px, 0).r;
     if (seen_id == NO_END_IMAGE) discard;  // an end view's pixel last frame's image did not hold
     out_seen = seen_id;
+#endif
 #ifdef COMPOSITE_PORTAL
+#ifdef COMPOSITE_FALLBACK
+    // What lies beyond the partner along the carried ray, from the probes there or the sky.
+    out_color = vec4(fallback_environment(v_carry * at + v_place.yzw, v_carry * view_dir, 0.0), 1.0);
+#else
     vec4 through = textureLod(reflection, uv, 0.0);
     vec3 beyond = textureLod(sky_map, v_carry * view_dir, 0.0).rgb;
     out_color = vec4(through.rgb + beyond * (1.0 - through.a), 1.0);
+#endif
 #else
     float reflect_rate = v_params.x;
     float roughness = v_params.y;
@@ -87,6 +168,7 @@ void main() {
 #else
     normal = bent_normal(along_u, along_v, flat_normal, mirror_uv, v_carry[2].z);
 #endif
+#ifndef COMPOSITE_FALLBACK  // (a fallback has no image to look up)
     vec3 seen_dir = reflect(reflect(view_dir, normal), flat_normal);
     vec3 clip = v_project_dir * seen_dir;
     if (clip.z > 1e-6) {
@@ -105,7 +187,12 @@ void main() {
         }
     }
 #endif
+#endif
     vec3 r = reflect(view_dir, normal);
+#ifdef COMPOSITE_FALLBACK
+    // No view: nothing reflected, so all of it is the environment (the probes' or the sky's).
+    vec3 radiance = fallback_environment(at, r, roughness);
+#else
 #ifdef COMPOSITE_ROUGH
     // A rough mirror reads the blurred mips of its own tile (the level's would mix in its
     // neighbours' reflections).
@@ -122,13 +209,22 @@ void main() {
 #endif
     vec3 environment = textureLod(sky_map, r, lod).rgb;
     vec3 radiance = seen.rgb + environment * (1.0 - seen.a);
+#endif
 #ifdef COMPOSITE_WATER
     // Water: what is reflected (tinted) over the surface's own pixels, which show what lies
     // below, by the Fresnel reflectance at this pixel's angle (reflect_rate scales it).
-    out_color = vec4(radiance * v_tint.rgb, water_fresnel(normal, -view_dir, v_params.y) * reflect_rate);
+    float weight = water_fresnel(normal, -view_dir, v_params.y) * reflect_rate;
 #else
     vec3 reflected = ggx_reflect(normal, r, -view_dir, radiance, v_tint.rgb, roughness);
-    out_color = vec4(reflected, reflect_rate);
+    float weight = reflect_rate;
+#endif
+#ifdef COMPOSITE_FALLBACK
+    weight = fallback_alpha(weight);
+#endif
+#ifdef COMPOSITE_WATER
+    out_color = vec4(radiance * v_tint.rgb, weight);
+#else
+    out_color = vec4(reflected, weight);
 #endif
 #endif
 }

@@ -1,7 +1,9 @@
 #version 410 core
 // One instance per view of a reflection level: a quad over the surface (its outline in the
 // parent view's clip space, or its screen rectangle), carrying the view's composite
-// parameters to mirror_composite.frag. All views of a level composite in one draw.
+// parameters to mirror_composite.frag. All views of a level composite in one draw.  A
+// COMPOSITE_FALLBACK build draws a surface seen with no view (its fallback) the same way,
+// over its parent view's pixels.
 in mat4 in_corners;          // 4 clip-space corners as a 2 x 2 grid (a triangle strip)
 in vec4 in_rect;             // the view's rectangle in its own level's pixels: x0, y0, x1, y1
 in mat4 in_inv_view_proj;    // the parent view's
@@ -23,6 +25,18 @@ flat out mat3 v_carry;
 flat out uint v_view;        // the view's index (its pixels in the level's node image)
 #ifdef COMPOSITE_BUMPY
 flat out mat3 v_project_dir; // rows x, y, w of the parent's view-projection for directions (w = 0)
+#endif
+#ifdef COMPOSITE_FALLBACK
+// A fallback row's values the composite's row has no room for (a vertex shader has 16
+// attribute slots, all taken), by instance (mirror_passes.fallback_extras): ids x the
+// surface's entity, y its end view + 1 (0: none); weights[2i] the probes' weights (x, y)
+// and the fallback's share (z), weights[2i + 1] the plane's w and, for a portal, the pair's
+// offset (yzw: the translation of the carry).
+uniform uvec4 fallback_ids[FALLBACK_ROWS];
+uniform vec4 fallback_weights[2 * FALLBACK_ROWS];
+flat out uvec4 v_ids;
+flat out vec4 v_weights;
+flat out vec4 v_place;
 #endif
 
 uniform vec2 parent_size;     // pixels of the level composited into
@@ -49,6 +63,11 @@ void main() {
     v_normal = in_normal;
     v_carry = in_carry;
     v_view = uint(in_params.w + 0.5);
+#ifdef COMPOSITE_FALLBACK
+    v_ids = fallback_ids[gl_InstanceID];
+    v_weights = fallback_weights[2 * gl_InstanceID];
+    v_place = fallback_weights[2 * gl_InstanceID + 1];
+#endif
 #ifdef COMPOSITE_BUMPY
     mat4 view_proj = inverse(in_inv_view_proj);
     v_project_dir = mat3(view_proj[0].xyw, view_proj[1].xyw, view_proj[2].xyw);

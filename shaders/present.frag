@@ -29,9 +29,10 @@ out vec4 out_color;
 
 void main() {
 #ifdef POST
-    vec3 hdr = texture(hdr_image, v_uv).rgb;
+    // textureLod: neither image has mipmaps, and a software rasteriser skips the derivatives.
+    vec3 hdr = textureLod(hdr_image, v_uv, 0.0).rgb;
 #ifdef BLOOM
-    hdr = hdr * bloom_mix.x + texture(bloom_image, v_uv).rgb * bloom_mix.y;
+    hdr = hdr * bloom_mix.x + textureLod(bloom_image, v_uv, 0.0).rgb * bloom_mix.y;
 #endif
     float scale = exposure;
 #ifdef AUTO_EXPOSURE

@@ -163,12 +163,13 @@ vec3 apply_reflect(uint variant, vec3 color, Surface s) {
         case REFLECT_CUBE:
             return reflect_probe(color, s);
         case REFLECT_PORTAL:
-            // A portal's closed look (no partner, or past the recursion limit): flat, unlit.
-            // An open portal's view is composited over it by the ReflectionSystem.
+            // A portal's closed look (no working partner): flat, unlit.  An open portal's view,
+            // or its fallback where it has none, is composited over it by the view tree.
             return v_tint.rgb;
         case REFLECT_PLANAR:
-            // A mirror keeps its own shading here; the ReflectionSystem blends its
-            // reflection over these pixels once the reflection has been rendered.
+            // A mirror keeps its own shading here; the view tree blends its reflection over
+            // these pixels once it has been rendered, or its fallback (the probe's or the
+            // sky's reflection) where it has no view (engine/render/mirror_passes.py).
         default:
             return color;
     }

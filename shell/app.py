@@ -183,7 +183,7 @@ class Engine:
         # This frame's counters, fresh: a world resource for whoever reads them after the
         # frame, and where the renderer's passes count while it runs.
         checks = self.renderer.path_checks
-        budget = self.world.resources.get(ViewBudget) or ViewBudget()
+        budget = ViewBudget.of(self.world.resources) or ViewBudget()  # checked: a bad one is one error line
         stats = RenderStats(paths_verified=checks.verified(), paths_refused=checks.refused(),
                             view_budget=budget.views, probe_ms_budget=budget.probe_ms, pixel_budget=budget.pixels)
         self.world.resources[RenderStats] = self.renderer.stats = stats

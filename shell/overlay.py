@@ -219,6 +219,15 @@ class DebugOverlay:
         flags = (imgui.WindowFlags_.always_auto_resize | imgui.WindowFlags_.no_saved_settings
                  | imgui.WindowFlags_.no_collapse | imgui.WindowFlags_.no_move)
         imgui.begin("Speculum (F1)", None, flags)
+        # A shader that failed to build comes first, at the top: the reason the picture is
+        # wrong.  One error in full (the variants of one file fail alike), the rest counted.
+        self.shown_errors = list(engine.renderer.shaders.errors.values())
+        if self.shown_errors:
+            imgui.text_colored(imgui.ImVec4(1.0, 0.35, 0.3, 1.0), self.shown_errors[0])
+            if len(self.shown_errors) > 1:
+                imgui.text_colored(imgui.ImVec4(1.0, 0.35, 0.3, 1.0),
+                                   f"(and {len(self.shown_errors) - 1} more programs that failed to build)")
+            imgui.separator()
         for line in self.lines:
             imgui.text(line)
         times = np.array(self.frame_times or [0.0], np.float32) * 1000.0
@@ -269,9 +278,6 @@ class DebugOverlay:
             imgui.end_combo()
         else:
             self._widget("curve")
-        self.shown_errors = list(renderer.shaders.errors.values())
-        for error in self.shown_errors:
-            imgui.text_colored(imgui.ImVec4(1.0, 0.35, 0.3, 1.0), error)
         x, y = imgui.get_window_pos()
         w, h = imgui.get_window_size()
         width, height = self.io.display_size

@@ -31,9 +31,11 @@ def overlay_lines(engine: Engine, frame_times: Sequence[float]) -> list[str]:
         f"passes {stats.passes}, draw calls {stats.draw_calls}",
         f"views per level {per_level}",
         f"reflection views {stats.reflection_views}, dropped {stats.reflection_views_dropped}, "
-        f"capped {stats.reflection_depth_capped}, faded {stats.reflection_views_faded}",
+        f"capped {stats.reflection_depth_capped}, faded {stats.reflection_views_faded}, "
+        f"fallbacks {stats.reflection_fallbacks}",
         f"probe captures {stats.probe_captures} ({stats.probe_faces} faces); shadow maps drawn "
-        f"{stats.shadow_maps_drawn}, kept {stats.shadow_maps_kept}, cut {stats.shadows_cut}"
+        f"{stats.shadow_maps_drawn}, kept {stats.shadow_maps_kept}, cut {stats.shadows_cut}; "
+        f"lights through mirrors {stats.virtual_lights}, cut {stats.virtual_lights_cut}"
         f"{' (off)' if not engine.stages['shadows'].enabled else ''}",
         f"view budget {'none' if stats.view_budget is None else stats.view_budget}: spent {stats.views_spent}, "
         f"cut {stats.views_cut}",

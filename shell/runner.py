@@ -73,10 +73,33 @@ def parse_args(game: Game, argv: Sequence[str] | None,
     """``argv`` by ``parser`` (``build_parser(game)`` when None), checked."""
     if parser is None:
         parser = build_parser(game)
-    args = parser.parse_args(argv)
+    args = parser.parse_args(_negative_values_joined(sys.argv[1:] if argv is None else argv))
     if args.frames is not None and args.frames < 1:
         parser.error("--frames must be >= 1")
     return args
+
+
+# Options whose value may start with a minus sign (argparse takes "-4.5,1.6,3,90,0" for an
+# option of its own, as it is not one negative number).
+NEGATIVE_VALUE_OPTIONS = ("--camera",)
+
+
+def _negative_values_joined(argv: Sequence[str]) -> list[str]:
+    """``--camera -4.5,1.6,3,90,0`` as ``--camera=-4.5,1.6,3,90,0``, so it works without the ``=``."""
+    joined: list[str] = []
+    items = list(argv)
+    index = 0
+    while index < len(items):
+        item = items[index]
+        following = items[index + 1] if index + 1 < len(items) else None
+        if item in NEGATIVE_VALUE_OPTIONS and following is not None and following.startswith("-") \
+                and len(following) > 1 and (following[1].isdigit() or following[1] == "."):
+            joined.append(f"{item}={following}")
+            index += 2
+            continue
+        joined.append(item)
+        index += 1
+    return joined
 
 
 def _size(text: str) -> tuple[int, int]:

@@ -121,6 +121,7 @@ class SpeculumWindow(mglw.WindowConfig):
         self.mouse_captured = False
         self.key_names = key_names(self.wnd.keys)
         self.overlay = make_overlay(self.ctx, visible=bool(getattr(args, "overlay", False)))
+        self.shown_title = self.wnd.title = self.game.title  # build may have named the level
 
     def on_render(self, time_s: float, frametime: float) -> None:
         if self.released:
@@ -130,6 +131,8 @@ class SpeculumWindow(mglw.WindowConfig):
             print(f"speculum: {message}", file=sys.stderr, flush=True)
         self.overlay.record(frametime)
         self.engine.frame(min(frametime, 0.1), Output(self.wnd.fbo, size))
+        if self.game.title != self.shown_title:  # a game that changed level ('n') renames its window
+            self.shown_title = self.wnd.title = self.game.title
         self.overlay.draw(self.engine, self.wnd.fbo, size)
         if self.frames_left is not None:
             self.frames_left -= 1

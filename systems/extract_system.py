@@ -8,6 +8,7 @@ Nothing here writes game state.
 from __future__ import annotations
 
 import esper
+from pyglm import glm
 
 from components import (
     Emissive,
@@ -22,14 +23,22 @@ from components import (
     Transform,
     Visibility,
 )
+from components.transform import mirroring_seen
 from engine.core.errors import GLLimitError
 from engine.core.world import World
 from engine.render.instances import DRAWN_EVERYWHERE, InstanceBatch, visibility_code
 from engine.render.renderer import Renderer
-from engine.rules.probe_rules import LookChanges, probe_blend
+from engine.resources import Surfaces
+from engine.rules.probe_rules import LookChanges, SurfaceProbes, probe_blend
 from systems.material_dispatch import choose_material
 
 NO_SLICE = (0.0, 0.0, 0.0, 1.0)
+
+
+def _mirrors(world_matrix) -> bool:
+    """Whether a model matrix mirrors what it places (a negative determinant: an odd number
+    of negative scales along its chain), so its front faces wind the other way on screen."""
+    return glm.determinant(glm.mat3(world_matrix)) < 0.0
 
 
 class ExtractSystem(esper.Processor):
@@ -39,6 +48,7 @@ class ExtractSystem(esper.Processor):
         self._batch_of: dict[int, InstanceBatch] = {}
         self._looks = LookChanges()  # what changes a look, and which probe each object samples
         self._joined: set[int] = set()
+        self._surface_probes = SurfaceProbes()  # each mirror's and portal's fallback probes
 
     def process(self, dt: float) -> None:
         world = self.world
@@ -51,11 +61,23 @@ class ExtractSystem(esper.Processor):
         joined = self._joined = set()  # entities given a row by a refresh: their transform is written below
         for entity in touched:
             self._refresh_instance(entity)
+        # What each mirror and portal shows where it has no view: the probes whose influence
+        # boxes hold it (probe_rules.surface_blend), for the view trees' composites.
+        surfaces = world.resources.get(Surfaces)
+        self.renderer.surface_probes = self._surface_probes.update(
+            world, (*surfaces.mirrors.values(), *surfaces.portals.values()) if surfaces is not None else ())
         # The transform of every moved entity, touched or not, and of every entity a refresh
         # gave a new row (a Slice removed in the frame it moved leaves it in another batch),
         # grouped by batch: each batch writes its rows in one go (InstanceBatch.write_transforms).
         frame = world.frame
         component = esper.component_for_entity if esper.current_world == world.name else world.get
+        if mirroring_seen():
+            # An instance whose model matrix turned mirrored (or back) by moving (a scale or a
+            # parent's scale changed sign) goes to the batch drawn with its winding.
+            for entity in frame.moved - touched:
+                batch = self._batch_of.get(entity)
+                if batch is not None and batch.mirrored != _mirrors(component(entity, Transform).world):
+                    self._refresh_instance(entity)
         for entities, moving in ((frame.moved, True), ((frame.added | joined) - frame.moved, False)):
             for batch, group in self._by_batch(entities).items():
                 batch.write_transforms(group, [component(entity, Transform).world for entity in group], moving)
@@ -95,7 +117,8 @@ class ExtractSystem(esper.Processor):
                                             entity if transparent else 0, material.normal_map if material else None,
                                             material.emissive_map if material else None,
                                             material.metallic_roughness_map if material else None,
-                                            second_probe=second, probe_blend=blend.blended)
+                                            second_probe=second, probe_blend=blend.blended, rest_probe=blend.rest,
+                                            mirrored=mirroring_seen() and _mirrors(transform.world))
         except GLLimitError as exc:
             raise GLLimitError(f"entity {entity}: {exc}") from None
         if old is not batch:

@@ -33,6 +33,7 @@ from pyglm import glm
 
 from components import MeshRef, PointLight, ReflectionProbe, Transform, Visibility
 from components.limits import ALL_LAYERS, VIEW_PROBE
+from components.tracking import warn_component
 from engine.core.world import World
 from engine.resources import RenderStats, Surfaces, ViewBudget
 from engine.rules.frame_rules import active_camera_parts
@@ -136,7 +137,7 @@ class ProbeScheduler:
         eye = _camera_position(self.world)
         due.sort(key=lambda item: (item[0].captures > 0, -(item[0].settings.priority + item[0].waiting),
                                    float(np.linalg.norm(np.asarray(item[0].position) - eye))))
-        budget = self.world.resources.get(ViewBudget)
+        budget = ViewBudget.of(self.world.resources)
         face_ms = self.probes.face_ms
         if budget is None or budget.probe_ms is None or face_ms is None:
             return due
@@ -181,6 +182,8 @@ class ProbeScheduler:
         changed = world.changed(ReflectionProbe)
         for owner, (probe, position, automatic) in found.items():
             state = self.probes.get(owner)
+            if probe is not None and (state is None or owner in changed):
+                _warn_blend_without_box(owner, probe)
             if state is None or state.automatic != automatic:
                 self.probes[owner] = ProbeState(owner, probe or ReflectionProbe(), automatic, position,
                                                 requests_seen=probe.requests if probe is not None else 0)
@@ -341,6 +344,14 @@ def _ask_named(state: ProbeState, hits: np.ndarray, keys: np.ndarray, label) -> 
     rest = rows[~named]
     if len(rest):
         state.ask(np.flatnonzero(hits[rest].any(axis=0)).tolist(), f"{len(np.unique(keys[rest]))} more changes")
+
+
+def _warn_blend_without_box(owner: int, probe: ReflectionProbe) -> None:
+    """``blend_distance`` falls off inside the ``influence`` box: without one it does
+    nothing (the probe serves only its own object), said when the probe comes or changes."""
+    if probe.blend_distance > 0.0 and probe.influence is None:
+        warn_component(f"ReflectionProbe on entity {owner}: blend_distance = {probe.blend_distance:g} does nothing "
+                       "without an influence box (influence=(w, h, d): the box it serves and blends across)")
 
 
 def _camera_position(world: World) -> np.ndarray:

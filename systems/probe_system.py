@@ -35,35 +35,52 @@ probe (``ProbeState.captures``: frames with a capture, ``faces_captured``) are t
 from __future__ import annotations
 
 import time
+import warnings
 
 import esper
 
 from engine.core.world import World
 from engine.render.renderer import Renderer
 from engine.resources import Surfaces
-from engine.rules.probe_schedule import ProbeDue, ProbeSchedule, ProbeStates
+from engine.rules.probe_schedule import ProbeDue, ProbeSchedule, ProbeState, ProbeStates
 from systems.probe_scheduler import ProbeScheduler
 
+# A recapture's face that has waited this many frames for the view budget is drawn in the
+# probes stage, before the main view's tree spends the budget, one face a frame.
+STARVING_FRAMES = 2
 
-def capture_due(world: World, renderer: Renderer, due: ProbeDue) -> None:
-    """Draw one probe's due faces (``ProbeCaptures.capture_probe``) and count them in its
-    state.  The frame's view budget (``ViewBudget.views``) is spent a face each: faces past
-    it wait for a later frame (pending again), and a first capture waits whole (nothing
-    samples a half-made cube).  The capture's wall time a face feeds ``ProbeStates.face_ms``,
-    what the scheduler spends its time budget by."""
+
+def capture_due(world: World, renderer: Renderer, due: ProbeDue, only: frozenset[int] | None = None) -> None:
+    """Draw one probe's due faces (``ProbeCaptures.capture_probe``; ``only``: these of them,
+    the rest left due) and count them in its state.  The frame's view budget
+    (``ViewBudget.views``) is spent a face each: faces past it wait for a later frame
+    (pending again), those that have waited longest first, so every face is redrawn in
+    bounded time; a first capture waits whole (nothing samples a half-made cube), except
+    under a budget smaller than a cube (1 to 5 views), which no frame could ever fit: there
+    the first capture is drawn whole when it is the frame's first view, past the budget by
+    the difference (said once; one probe a frame, so a level's probes all come in bounded
+    time).  The capture's wall time a face feeds ``ProbeStates.face_ms``, what the
+    scheduler spends its time budget by."""
     probes = world.resources[ProbeStates]
     state = probes[due.owner]
     stats = renderer.stats
-    faces = due.faces
+    faces = due.faces if only is None else only
     left = stats.views_left()
     if left is not None and len(faces) > left:
-        kept = frozenset() if due.first else frozenset(sorted(faces)[:left])
-        waiting = faces - kept
-        state.ask(waiting, "view budget")
-        stats.views_cut += len(waiting)
-        stats.probe_faces_deferred += len(waiting)
-        faces = kept
-    due.drawn = True
+        whole_past_budget = due.first and 0 < stats.view_budget < len(faces) and stats.views_spent == 0
+        if whole_past_budget:
+            _say_small_budget(stats.view_budget)
+        else:
+            kept = frozenset() if due.first else frozenset(state.oldest_first(faces)[:left])
+            waiting = faces - kept
+            state.ask(waiting, "view budget")
+            stats.views_cut += len(waiting)
+            stats.probe_faces_deferred += len(waiting)
+            faces = kept
+    if only is None or only == due.faces:
+        due.drawn = True
+    else:
+        due.faces = due.faces - only
     if not faces:
         return
     stats.views_spent += len(faces)
@@ -73,6 +90,26 @@ def capture_due(world: World, renderer: Renderer, due: ProbeDue) -> None:
     stats.probe_ms_spent += spent_ms
     probes.measured(spent_ms / len(faces))
     state.record_capture(faces)
+
+
+_SAID_SMALL: set[int] = set()
+
+
+def _say_small_budget(views: int) -> None:
+    if views not in _SAID_SMALL:
+        _SAID_SMALL.add(views)
+        warnings.warn(f"ViewBudget.views = {views} is below a probe's six faces: each new probe's first capture is "
+                      f"drawn whole anyway, one a frame, {6 - views} view(s) past the budget that frame (a budget of "
+                      "at least 6, plus the reflection views wanted, keeps to it)", stacklevel=3)
+
+
+def starving_face(state: ProbeState, due: ProbeDue) -> frozenset[int] | None:
+    """The one face of a recapture that has waited ``STARVING_FRAMES`` or more for the view
+    budget (the longest waiting), or None."""
+    oldest = state.oldest_first(due.faces)
+    if oldest and state.frames - state.asked_at.get(oldest[0], state.frames) >= STARVING_FRAMES:
+        return frozenset(oldest[:1])
+    return None
 
 
 def report(renderer: Renderer) -> None:
@@ -131,9 +168,14 @@ class ProbeSystem(esper.Processor):
             probes.drop(owner)
         if not self.probes:
             return
+        limited = self.renderer.stats.view_budget is not None
         for due in schedule.undrawn():
             if due.first or not self.recapture_after_present:
                 capture_due(self.world, self.renderer, due)  # a first capture now: nothing to sample yet
+            elif limited and (face := starving_face(self.probes[due.owner], due)) is not None:
+                # Waited past STARVING_FRAMES for the budget the reflections spend first:
+                # one face now, before them (the rest after present, as budget allows).
+                capture_due(self.world, self.renderer, due, only=face)
         report(self.renderer)
 
 

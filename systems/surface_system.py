@@ -18,6 +18,8 @@ without the state being made again.
 """
 from __future__ import annotations
 
+import warnings
+
 import esper
 import numpy as np
 
@@ -47,6 +49,7 @@ class SurfaceSystem(esper.Processor):
         self.portals: dict[int, SurfaceState] = {}
         self.flows: dict[int, WaterFlow] = {}  # each water mirror's waves, for the entity's life
         self._open_portals: dict[int, int] | None = None  # the pairs the portal states were made for
+        self._waiting_water: set[int] = set()  # Waters whose Mirror was removed (warned once)
 
     def process(self, dt: float) -> None:
         changed = self._refresh_mirrors()
@@ -67,8 +70,14 @@ class SurfaceSystem(esper.Processor):
         for entity in world.changed(Water):
             water = world.try_get(entity, Water) if world.exists(entity) else None
             if water is not None and not world.has(entity, Mirror):
-                raise MirrorError(f"entity {entity}: a Water needs a Mirror on the same entity (the surface it "
-                                  "makes water)")
+                # Refused when given (engine/rules/water_rules.py); here only when the Mirror
+                # was taken off later: the Water waits for a Mirror, said once.
+                if entity not in self._waiting_water:
+                    self._waiting_water.add(entity)
+                    warnings.warn(f"entity {entity}: its Water has no Mirror (it was removed), so nothing is "
+                                  "drawn as water until a Mirror comes back", stacklevel=2)
+                continue
+            self._waiting_water.discard(entity)
             look = getattr(self.mirrors.get(entity), "water", None)
             if water is not None and look is not None and (look.f0, look.cross, look.tiling) == \
                     (water.f0, water.cross, water.tiling):

@@ -26,6 +26,9 @@ class TransformSystem(esper.Processor):
 
     def process(self, dt: float) -> None:
         world = self.world
+        # Vectors and quaternions edited in place since they were read (``t.position.y +=
+        # 1``) are reported as writes first, so this stage and every later one see them.
+        world.settle_in_place_edits()
         events = FrameEvents()
         changed = world.changed(Transform)
         if not changed:

@@ -163,9 +163,14 @@ def test_gpu_report_writes_markdown_and_json_without_imgui(ctx, tmp_path):
         [sys.executable, "-c", WITHOUT_IMGUI, "gpu-report", "--out", str(out), "--size", "160x90", "--no-tests",
          "--frames", "2", "--report-only"],
         cwd=ROOT, env={**os.environ, "PYTHONPATH": str(ROOT)}, capture_output=True, text=True, timeout=120)
-    assert done.returncode == 0, done.stdout[-2000:] + done.stderr[-3000:]
     assert "overlay imported: False" in done.stdout
     report = json.loads((out / "report.json").read_text())
+    # Exit 1 exactly when a target that applies to this machine is not met (whether it is
+    # depends on the machine and its load), each named on stderr; 0 otherwise.
+    unmet = [row["target"] for row in report["benchmarks"]["targets"]["own sizes"]["rows"]
+             if row["applies"] and not row["met"]]
+    assert done.returncode == (1 if unmet else 0), done.stdout[-2000:] + done.stderr[-3000:]
+    assert all(f"failed: target {name} not met" in done.stderr for name in unmet), done.stderr
     markdown = (out / "report.md").read_text()
 
     assert report["complete"] and report["sizes"] == ["160x90"] and report["frames"] == 2
@@ -188,7 +193,7 @@ def test_gpu_report_writes_markdown_and_json_without_imgui(ctx, tmp_path):
     assert report["tests"] == {"ran": False, "reason": "--no-tests"}
 
     runs = report["benchmarks"]
-    assert set(runs) == {"mirrors", "portals", "probes", "stages", "profile", "cpu"}
+    assert set(runs) == {"mirrors", "portals", "probes", "stages", "profile", "lighting", "cpu"}
     cpu = runs.pop("cpu")  # at the sizes it names, once
     assert set(cpu) == {"own sizes"} and cpu["own sizes"]["status"] == "ok", cpu
     command = cpu["own sizes"]["command"]
@@ -196,8 +201,8 @@ def test_gpu_report_writes_markdown_and_json_without_imgui(ctx, tmp_path):
     from benchmarks.cpu import TARGETS
     targets = [row for row in cpu["own sizes"]["rows"] if "target" in row]
     assert [row["target"] for row in targets] == list(TARGETS)
-    for row in targets:  # every part ran: every target has its value
-        assert row["value"] > 0 and row["met"] == (row["value"] <= row["limit"]), row
+    for row in targets:  # every part ran: every target has its value (what it is is timing: not asserted)
+        assert row["value"] is not None and row["met"] == (row["value"] <= row["limit"]), row
         assert row["applies"] == (row["set_for"] == "software"), row  # llvmpipe: a software rasteriser
     scenes = {(row["scene"], row["size"]): row for row in cpu["own sizes"]["rows"] if "gl_calls" in row}
     assert {scene for scene, size in scenes if size == "32x18"} == \
@@ -237,6 +242,12 @@ def test_gpu_report_writes_markdown_and_json_without_imgui(ctx, tmp_path):
                                                                   "plan_us_per_view"}
     stage_rows = runs["stages"]["160x90"]["rows"]
     assert {r["scene"] for r in stage_rows} == {"mirrors_0", "mirrors_8", "mirrors_16", "probe_dynamic"}
+    lighting = runs["lighting"]["160x90"]["rows"]
+    from benchmarks.lighting import VARIANTS
+    assert [r["variant"] for r in lighting if "variant" in r] == [v.name for v in VARIANTS]
+    targets = {r["target"]: r for r in lighting if "target" in r}
+    assert not targets["post_0_mirrors"]["applies"]  # set for 640x360 on a GPU
+    assert "### lighting: ratio_to_off by size" in markdown
     profiled = runs["profile"]["160x90"]["rows"]
     assert {r["scene"] for r in profiled if "rank" not in r} == {"mirrors_16", "portals_d8", "probe_dynamic"}
     for heading in ("## OpenGL", "## Rendering paths", "## Benchmarks", "### mirrors: frame_ms_median by size",
@@ -449,12 +460,16 @@ def test_the_suite_collects_without_imgui():
 def test_stages_time_every_stage_inside_its_frame(ctx):
     """Every stage of every scene has a row, and the stages' CPU times are parts of the
     frame's: their medians add up to no more than Engine.frame's (plus a little: medians of
-    parts need not add up exactly), and the view stages are where the mirrors' time goes."""
+    parts need not add up exactly), and the view stages are where the mirrors' time goes.
+    The CPU columns are timed here by this thread's CPU time (``time.thread_time``, injected):
+    another process's load does not stretch one stage of one frame and not the next."""
+    import time
+
     from benchmarks import stages
     from engine.render.gl_context import prepare_context
     from shell.app import FRAME_STAGES
 
-    rows = stages.run(ctx, (0, 16), frames=3, warmup=1, size=(64, 36))
+    rows = stages.run(ctx, (0, 16), frames=3, warmup=1, size=(64, 36), clock=time.thread_time)
     scenes = {r["scene"] for r in rows}
     assert scenes == {"mirrors_0", "mirrors_16", "probe_dynamic"}
     for scene in scenes:
@@ -508,7 +523,8 @@ def test_a_failing_tests_frames_are_kept_where_speculum_fail_out_says(tmp_path):
 
 def _scene_row(scene: str, size: str, frame_ms: float) -> dict:
     return {"scene": scene, "size": size, "frames": 1, "frame_ms_median": frame_ms, "cpu_ms_median": frame_ms,
-            "views": 0, "passes": 1, "draw_calls": 3, "gl_calls": 40, "gl_calls_top": {}, "lp_num_threads": None}
+            "thread_ms_median": frame_ms, "views": 0, "passes": 1, "draw_calls": 3, "gl_calls": 40,
+            "gl_calls_top": {}, "lp_num_threads": None}
 
 
 def test_the_cpu_targets_are_read_from_the_scene_rows_and_judged_against_their_limits():
@@ -638,7 +654,7 @@ def test_the_gl_call_counter_counts_each_call_the_engine_makes_once_and_puts_mod
     assert now == originals and vars(_moderngl.Uniform)["value"] is originals[_moderngl.Uniform, "value"]
 
 
-def test_the_cpu_part_runs_in_its_own_process_with_no_rasteriser_threads(capsys):
+def test_the_cpu_part_runs_in_its_own_process_with_no_rasteriser_threads(capsys, own_contexts):
     """``--parts cpu`` on tiny frame counts: each 32x18 scene's row comes from the
     LP_NUM_THREADS=0 process with its views (none without mirrors, a view a portal level),
     its draw calls among its counted GL calls, and a profile of its top functions; only the
@@ -654,7 +670,7 @@ def test_the_cpu_part_runs_in_its_own_process_with_no_rasteriser_threads(capsys)
     for row in scenes.values():
         assert row["size"] == "32x18" and row["lp_num_threads"] == "0" and row["frames"] == 1
         assert row["gl_calls"] >= row["gl_calls_top"]["VertexArray.render"] >= row["draw_calls"] > 0, row
-        assert 0 < row["cpu_ms_median"] <= row["frame_ms_median"]
+        assert 0 < row["cpu_ms_median"] <= row["frame_ms_median"] and row["thread_ms_median"] > 0
     assert scenes["mirrors_0"]["views"] == scenes["portals_d0"]["views"] == 0
     assert scenes["portals_d8"]["views"] == 8 and 0 < scenes["mirrors_8"]["views"] < scenes["mirrors_16"]["views"]
     profiled = [row for row in rows if "rank" in row]

@@ -69,12 +69,16 @@ def _frames(ctx, build, count: int, move=None, after=None, fxaa: bool = True) ->
 def test_a_facing_pair_at_depth_3_ends_in_an_image_close_to_the_depth_8_rendering(ctx):
     (deep,), _ = _frames(ctx, _facing_pair(8), 1)
     images, ends = _frames(ctx, _facing_pair(3), 4)
-    hole = np.abs(images[0] - deep).max(axis=2) > 10  # where depth 3's flat end differs from depth 8
+    # Where depth 3's end without an image differs from depth 8.  That end is the mirrors'
+    # fallback (the sky's reflection, issue 36), not their flat material: it is close to the
+    # corridor's far end already, so the hole is smaller and the image's gain over it less
+    # (llvmpipe: 120 pixels, the image's error 0.50 and 0.53 of the fallback's).
+    hole = np.abs(images[0] - deep).max(axis=2) > 6
     assert hole.sum() >= 100
     first = np.abs(images[0] - deep)[hole].mean()
     assert ends[0] == 0 and all(count >= 1 for count in ends[1:])  # the first frame has nothing to show
     for image in images[2:]:
-        assert np.abs(image - deep)[hole].mean() < 0.4 * first
+        assert np.abs(image - deep)[hole].mean() < 0.65 * first
     # No flat rectangle: the hole holds the continuing corridor, as varied as the depth-8
     # rendering there, not one colour (llvmpipe: 26.9 against 22.2; an H200: 33.4 against
     # 30.1, where the hole also takes in more edge pixels, so the first frame's is not flat).
@@ -99,7 +103,9 @@ def test_a_turning_camera_finds_last_frames_image_where_it_was(ctx):
     (closed,), _ = _frames(ctx, _facing_pair(3, end_image=False), 1, lambda runner, frame: turn(runner, 3))
     hole = np.abs(closed - still[3]).max(axis=2) > 10
     assert hole.sum() >= 100
-    assert np.abs(turning[3] - still[3])[hole].mean() < 0.12 * np.abs(closed - still[3])[hole].mean()
+    # (Against the fallback, the closed look since issue 36, which is nearer the image than the
+    # flat material was: llvmpipe 3.8 against 28.0.)
+    assert np.abs(turning[3] - still[3])[hole].mean() < 0.2 * np.abs(closed - still[3])[hole].mean()
 
 
 def test_after_a_turn_an_end_view_last_frames_image_does_not_hold_keeps_its_closed_look(ctx):

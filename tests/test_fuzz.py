@@ -60,6 +60,64 @@ def test_the_fuzzer_catches_a_value_that_breaks_a_frame(fuzzer):
     assert why is not None and "without naming Mirror" in why
 
 
+def test_water_and_visibility_are_fuzzed_and_a_case_runs_several_frames(fuzzer, monkeypatch):
+    """Issue 41 item 9: Water (on a mirror quad with waves) and Visibility are among the
+    classes; a case renders FRAMES_PER_CASE frames, so a problem that shows only after the
+    first frame (waves moved on, a fade or a schedule settled) fails the case."""
+    from benchmarks.fuzz import FRAMES_PER_CASE
+    from components import Visibility, Water
+    from systems.surface_system import SurfaceSystem
+
+    assert Water in CLASSES and Visibility in CLASSES and FRAMES_PER_CASE >= 2
+    rendered = fuzzer.rendered
+    assert fuzzer.run(Case(Water, {"speed": 2.0, "tiling": 3.0})) is None
+    assert fuzzer.run(Case(Visibility, {"in_mirrors": False})) is None
+    assert fuzzer.rendered == rendered + 2
+    assert fuzzer.run(Case(Water, {"ior": float("nan")})) is None  # refused naming Water.ior
+
+    calls = []
+    original = SurfaceSystem.process
+
+    def breaks_on_the_second_frame(self, dt):
+        calls.append(dt)
+        if len(calls) == 2:
+            raise RuntimeError("a surface that breaks a frame after the first")
+        original(self, dt)
+
+    monkeypatch.setattr(SurfaceSystem, "process", breaks_on_the_second_frame)
+    why = fuzzer.run(Case(Water, {"speed": 1.0}))
+    assert why is not None and "a surface that breaks a frame after the first" in why
+
+
+def test_budget_cases_are_refused_by_name_or_render_clean(ctx):
+    """ViewBudget values with the surfaces that spend them (facing mirrors, an every-frame
+    probe, a pond with fades, Water and Visibility drawn too), several frames a case."""
+    from benchmarks.fuzz import fuzz_budgets
+
+    ran, failures, passes = fuzz_budgets(ctx, 40, seed=5)
+    assert ran == 40 and failures == [], failures[:3]
+    assert passes["refused"] > 0 and passes["rendered"] > 0, passes
+
+
+def test_the_budget_fuzzer_catches_a_refusal_that_names_no_field(ctx, monkeypatch):
+    from benchmarks.fuzz import BudgetCase, BudgetFuzzer
+    from engine.core import budget
+
+    fuzzer = BudgetFuzzer(ctx)
+    try:
+        assert fuzzer.run(BudgetCase({"views": 3}, {}, {}, {})) is None  # under a cube: still renders
+        assert fuzzer.run(BudgetCase({"views": -3}, {}, {}, {})) is None  # refused naming ViewBudget.views
+
+        def unnamed(self):
+            raise budget.ViewBudgetError("no")
+
+        monkeypatch.setattr(budget.ViewBudget, "check", unnamed)
+        why = fuzzer.run(BudgetCase({"views": 3}, {}, {}, {}))
+        assert why is not None and "without naming ViewBudget" in why
+    finally:
+        fuzzer.close()
+
+
 # --- level files ---------------------------------------------------------------------------------
 
 LEVEL_CI = settings(max_examples=120, deadline=None, derandomize=True, database=None,

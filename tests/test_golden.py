@@ -109,7 +109,9 @@ REAL_CHANGES = [
     ("sun_5pc_weaker", "mirror_ring_0", "region"),
     ("fresnel_exponent_4", "hall_back_mirror", "region"),
     ("crate_moved_2cm", "hall_mirror_wall", "region"),
-    ("mirror_switched_off", "hall_mirror_wall", "SSIM"),
+    # (A mirror switched off shows its fallback, the sky's reflection, since issue 36: no longer
+    # its material's flat face, which the SSIM measure caught; the regions' colours do.)
+    ("mirror_switched_off", "hall_mirror_wall", "region"),
     ("crate_moved_20cm", "hall_doorway", "id pixels"),
 ]
 

@@ -308,7 +308,7 @@ def test_every_toml_example_in_the_docs_loads_and_spawns(tmp_path):
     assert len(blocks) >= 2
     for index, block in enumerate(blocks):
         world = World(f"example {index}")
-        names = load_level(write(tmp_path, block, f"example_{index}.toml")).spawn(world)
+        names = load_level(write(tmp_path, block, f"example_{index}.toml"), EXTRA).spawn(world)
         assert names and world.entities()
 
 

@@ -15,7 +15,7 @@ from components import ComponentValueError, DirectionalLight, Emissive, Material
 from engine.assets.level_file import LevelError, load_level
 from engine.assets.mesh import box, quad
 from engine.core.world import World
-from tests.support import SceneRunner, look_from
+from tests.support import SceneRunner, linear_to_srgb8, look_from, srgb_to_linear
 
 MIRROR_AT = glm.vec3(0.0, 1.5, -2.0)
 HALF = 0.6  # the mirror is 1.2 x 1.2
@@ -68,27 +68,35 @@ def test_a_partly_faded_mirror_shows_its_reflection_at_the_faded_weight(ctx, eye
     (view,) = runner.engine.reflection_system.views[1:]
     assert view.fade == pytest.approx(weight, abs=1e-6)
     runner.close()
-    # The second path: no fades, the reflect rate scaled by the weight.
-    second, runner = _mirror_pixels(ctx, Mirror(reflect_rate=0.9 * weight), eye)
+    # The second path: the mirror unfaded and switched off (its fallback, the sky's
+    # reflection: issue 36), mixed by the weight in linear light: the faded share of the
+    # reflection is the fallback's, not the mirror's own shading.
+    off, runner = _mirror_pixels(ctx, Mirror(reflect_rate=0.9, enabled=False), eye)
     runner.close()
     unfaded, runner = _mirror_pixels(ctx, Mirror(reflect_rate=0.9), eye)
     runner.close()
+    second = linear_to_srgb8(weight * srgb_to_linear(unfaded) + (1.0 - weight) * srgb_to_linear(off))
     assert np.abs(faded - second).max() <= 2.0
     assert faded[:, 0].mean() < unfaded[:, 0].mean() - 20.0  # less of the red panel than unfaded
 
 
-def test_a_mirror_past_its_fades_costs_no_view_and_shows_its_own_shading(ctx):
+def test_a_mirror_past_its_fades_costs_no_view_and_shows_its_fallback(ctx):
+    """Past its fades a mirror costs no view and shows its fallback (the sky's reflection,
+    issue 36), as a mirror switched off does, not its own dark blue."""
     eye = (0.0, 1.5, 4.0)
     faded, runner = _mirror_pixels(ctx, Mirror(fade_distance=(1.0, 3.0)), eye)  # 6 m away, past 3
     stats = runner.engine.renderer.stats
     assert stats.reflection_views == 0 and stats.reflection_views_faded == 1
+    assert stats.reflection_fallbacks == 1
     passes, draws = stats.passes, stats.draw_calls
     runner.close()
     plain, runner = _mirror_pixels(ctx, Mirror(enabled=False), eye)
     assert (runner.stats.passes, runner.stats.draw_calls) == (passes, draws)
     runner.close()
-    assert np.abs(faded - plain).max() <= 1.0  # the mirror's own dark blue
-    assert faded[:, 2].mean() > faded[:, 0].mean() + 20.0
+    assert np.abs(faded - plain).max() <= 1.0
+    material, runner = _mirror_pixels(ctx, Mirror(reflect_rate=0.0), eye)  # the mirror's own shading
+    runner.close()
+    assert np.abs(faded - material).max(axis=1).mean() > 20.0
 
 
 def test_every_mirror_faded_out_costs_what_no_mirror_costs(ctx):

@@ -53,7 +53,7 @@ def test_the_overlay_shows_the_frames_numbers_over_its_own_region_only(scene, ct
         assert "50.0 fps, 20.00 ms a frame" in lines
         assert "views per level 1 / 1" in lines
         assert any(line.startswith("probe captures 1 (6 faces); shadow maps drawn") for line in lines)
-        assert "reflection views 1, dropped 0, capped 0, faded 0" in lines
+        assert "reflection views 1, dropped 0, capped 0, faded 0, fallbacks 0" in lines
         # ...and as RenderStats counted them in this frame.
         assert f"passes {stats.passes}, draw calls {stats.draw_calls}" in lines and stats.draw_calls > 0
         assert f"reflection path {stats.reflection_path} (set: auto, budget none)" in lines
@@ -96,6 +96,17 @@ def test_the_overlay_shows_a_shader_error_from_hot_reload(scene, ctx, shader_cop
         errors = list(runner.engine.renderer.shaders.errors.values())
         assert errors and overlay.shown_errors == errors and "broken_for_the_overlay" in errors[0]
         assert overlay.region[3] > before + 3 * 13  # the error's lines of text (13-pixel font)
+        # First, at the top (issue 41 item 6): the error's red text starts in the window's
+        # first line, above the stats (white text) below it.
+        shown = runner.capture.read_rgb().astype(int)
+        x, y, w, h = overlay.region
+        window = shown[y:y + h, x:x + w]
+        red = (window[..., 0] > 180) & (window[..., 1] < 140) & (window[..., 2] < 140)
+        white = (window > 200).all(axis=2)
+        rows_red, rows_white = np.flatnonzero(red.any(axis=1)), np.flatnonzero(white.any(axis=1))
+        body = rows_white[rows_white > 20]  # below the title bar's white "Speculum (F1)"
+        assert len(rows_red) and len(body)
+        assert rows_red[0] < 40 and rows_red[0] < body[0], (rows_red[:3], body[:3])
     finally:
         overlay.release()
 

@@ -17,6 +17,7 @@ from components import (
 from engine.assets.mesh import box, plane, quad
 from engine.assets.portals import spawn_portal_pair
 from engine.assets.texture_data import checker_texture
+from engine.render.sky import sky_radiance
 from tests.support import look_from, srgb_to_linear
 
 SIZE = (200, 150)
@@ -74,11 +75,18 @@ def test_facing_portals_recurse_to_max_depth_then_fill(scene):
     areas = [w * h for _, _, w, h in (v.rect for v in views)]
     assert all(a > b for a, b in zip(areas, areas[1:], strict=False))
     # Past the limit, on the first frame (no image of the pair from before), the innermost
-    # portal shows its closed colour, flat; later frames end in last frame's image
-    # (tests/test_end_images.py).
-    closed = np.array(Portal().closed_color)[:3]
+    # portal shows its fallback: the sky along the carried ray (issue 36; the pair's carry
+    # turns no direction, so the centre's ray, straight down -Z), not its closed colour;
+    # later frames end in last frame's image (tests/test_end_images.py).
     cx, cy = SIZE[0] // 2, SIZE[1] // 2
-    np.testing.assert_allclose(srgb_to_linear(rgb[cy, cx]), closed, atol=0.01)
+    inverse = glm.inverse(runner.engine.main_view.view_proj)
+    ndc = glm.vec4((cx + 0.5) / SIZE[0] * 2 - 1, 1 - (cy + 0.5) / SIZE[1] * 2, 1.0, 1.0)
+    far = inverse * ndc
+    ray = np.array(glm.vec3(far) / far.w - glm.vec3(0.0, 1.5, 2.5))  # (the sky is steep about the horizon)
+    sky = sky_radiance(Skybox(), ray)
+    # (Within the sky cube's texels against the formula, where it changes fastest: at the horizon.)
+    np.testing.assert_allclose(srgb_to_linear(rgb[cy, cx]), sky, atol=0.025)
+    assert np.abs(sky - np.array(Portal().closed_color)[:3]).max() > 0.2
     # Eight levels work too.
     for _, portal in runner.world.query_one(Portal):
         portal.max_depth = 8

@@ -333,6 +333,24 @@ def test_bloom_spreads_a_bright_point_and_leaves_level_0_as_it_was(known):
     dim[62:66, 94:98, :3] = 0.9   # below the threshold: shown as it is, no glow
     frame = known(dim, Tonemap(curve="none"), bloom).frame()
     assert frame[63, 95, 0] == expected_srgb8(np.array(0.9)) and not frame[:60].any() and not frame[:, :90].any()
+    # Bloom comes before exposure: 2 EV up shows the patch at 3.6 (clipped white), and still
+    # no glow, since the threshold is in the scene's units.
+    frame = known(dim, Tonemap(curve="none", exposure=2.0), bloom).frame()
+    assert frame[63, 95, 0] == 255 and not frame[:60].any() and not frame[:, :90].any()
+
+
+def test_fxaa_runs_after_the_tone_map(known):
+    """With FXAA on, the tone-mapped frame is encoded with its luma and filtered: a flat
+    image comes through unchanged, and an edge of two tone-mapped values is blended."""
+    flat = grey(0.4, (64, 32))
+    assert np.array_equal(known(flat, Tonemap(curve="aces"), Bloom(), aa="fxaa").frame(),
+                          known(flat, Tonemap(curve="aces"), Bloom(), aa="off").frame())
+    edge = grey(0.05, (64, 32))
+    edge[:, 32:, :3] = 4.0
+    edge[16:, 31, :3] = 4.0   # a step in the edge: FXAA blends its pixels
+    on = known(edge, Tonemap(curve="agx"), aa="fxaa").frame()
+    off = known(edge, Tonemap(curve="agx"), aa="off").frame()
+    assert not np.array_equal(on, off) and set(np.unique(off)) <= set(np.unique(off[:, [0, 63]]))
 
 
 def test_bloom_level_sizes_stop_at_two_pixels():
@@ -571,3 +589,45 @@ def test_the_overlay_toggles_bloom_and_picks_the_curve(known, ctx):
         assert present.curve is None
     finally:
         overlay.release()
+
+
+def test_a_lamp_seen_only_in_a_mirror_glows_there(scene):
+    """Bloom runs on the image with every reflection composited in: a lamp hidden from the
+    camera but shown by a mirror glows around its reflection (pixels next to its image, which
+    the ids say is the lamp, are brighter than without Bloom), and far from it the frame is
+    as without."""
+    from components import DirectionalLight, Emissive, Material, MeshRef, Mirror, Visibility
+    from engine.assets.mesh import plane, quad, sphere
+    from tests.support import look_from
+
+    lamp = {}
+
+    def build(bloom: bool):
+        def make(world) -> None:
+            camera = look_from(world, (0.0, 1.2, 4.0), (0.0, 1.0, 0.0))
+            world.add_component(camera, Tonemap(curve="none"))
+            if bloom:
+                world.add_component(camera, Bloom(intensity=0.5, threshold=1.0, composite="additive"))
+            world.spawn(DirectionalLight(direction=(-0.3, -1.0, -0.5), intensity=1.0))
+            world.spawn(Transform(), MeshRef(plane(10, 10)), Material(color=(0.3, 0.3, 0.3)))
+            world.spawn(Transform(position=(0.0, 1.2, -2.0)), MeshRef(quad(3.0, 2.2)), Material(), Mirror())
+            lamp["id"] = world.spawn(Transform(position=(0.4, 1.1, 1.0)), MeshRef(sphere(0.2)),
+                                     Material(color=(1.0, 0.9, 0.7)), Emissive(20.0), Visibility(direct=False))
+        return make
+
+    runs = {}
+    for bloom in (False, True):
+        runner = scene(build(bloom), (192, 128))
+        runner.engine.renderer.antialias = "off"
+        runs[bloom] = (runner.frame().astype(int), runner.ids())
+    (plain, ids), (glowing, _) = runs[False], runs[True]
+    lit = ids == lamp["id"]
+    assert 5 <= lit.sum() < 200, lit.sum()   # the lamp's image, in the mirror only
+    rows, columns = np.nonzero(lit)
+    assert 30 < rows.mean() < 100   # inside the mirror, above the floor
+    near = np.zeros_like(lit)
+    near[max(rows.min() - 6, 0):rows.max() + 7, max(columns.min() - 6, 0):columns.max() + 7] = True
+    near &= ~lit
+    gain = (glowing - plain).sum(axis=2)
+    assert gain[near].mean() > 20, gain[near].mean()
+    assert np.abs(glowing[:16, :16] - plain[:16, :16]).max() <= 2

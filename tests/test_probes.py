@@ -775,13 +775,16 @@ def test_faces_drawn_straight_into_the_cube_equal_faces_drawn_and_copied(scene):
 @pytest.mark.parametrize("slow", ["six_pass", "layered"])
 def test_auto_weighs_each_capture_by_the_larger_of_its_gpu_and_cpu_time(scene, monkeypatch, slow):
     """A capture costs the frame the larger of its GPU time and the CPU's time issuing it: a
-    path made 30 ms slower to issue (a sleep in its drawing, which a GPU's timer query does
-    not see) shows it in its CPU samples, each capture is weighed by max(GPU, CPU), and the
-    path kept is the one whose median of that is least.  (llvmpipe's timer queries can take
-    in the other path's sleep too, so which path wins is asserted from the samples.)"""
+    path made 30 ms slower to issue shows it in its CPU samples, each capture is weighed by
+    max(GPU, CPU), and the path kept is the one whose median of that is least.  The CPU
+    clock the chooser reads is injected (a clock that moves only when the test says: 30 ms
+    inside the slow path's drawing, nothing elsewhere), so a loaded machine changes no
+    sample; the GPU times are the real timer queries, and which path wins is asserted from
+    the samples."""
     import statistics
-    import time as clock
+    import types
 
+    import engine.render.probes as probes_module
     from engine.render.probes import AUTO_TIMED_CAPTURES, ProbeCaptures
 
     ents = {}
@@ -789,22 +792,24 @@ def test_auto_weighs_each_capture_by_the_larger_of_its_gpu_and_cpu_time(scene, m
     skip_unless_layered(runner.engine.renderer)
     name = "capture" if slow == "six_pass" else "capture_layered"
     original = getattr(ProbeCaptures, name)
+    now = [0.0]  # seconds on the injected clock
 
     def slower(self, *args, **kwargs):
-        clock.sleep(0.03)
+        now[0] += 0.03  # the path takes 30 ms more to issue, on the clock the chooser reads
         return original(self, *args, **kwargs)
 
     monkeypatch.setattr(ProbeCaptures, name, slower)
+    monkeypatch.setattr(probes_module, "time", types.SimpleNamespace(perf_counter=lambda: now[0]))
     runner.frame()
     runner.frame()
     paths = runner.engine.renderer.probes.paths
     samples = paths.samples
     fast = "layered" if slow == "six_pass" else "six_pass"
     assert len(samples[slow]) == len(samples[fast]) == AUTO_TIMED_CAPTURES
-    assert all(cpu >= 30.0 for _, cpu in samples[slow]) and all(cpu < 30.0 for _, cpu in samples[fast])
+    assert all(cpu == pytest.approx(30.0) for _, cpu in samples[slow]) and all(cpu == 0.0 for _, cpu in samples[fast])
     weighed = {path: statistics.median(max(gpu, cpu) for gpu, cpu in pairs) for path, pairs in samples.items()}
     assert paths.timings == weighed and paths.chosen == min(weighed, key=weighed.get)
-    assert weighed[slow] >= 30.0
+    assert weighed[slow] >= 30.0 - 1e-9
 
 
 def test_auto_times_both_paths_once_and_keeps_the_faster(scene, monkeypatch):

@@ -28,6 +28,8 @@ import dataclasses
 import math
 import os
 import re
+import types
+import typing
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -50,6 +52,7 @@ from engine.assets.texture_data import (
     texture_bytes,
 )
 from engine.assets.values import VALUE_KINDS, json_value
+from engine.core.budget import ViewBudget, ViewBudgetError
 from engine.core.errors import AssetError, SpeculumError
 from engine.core.game import Game
 from engine.core.world import World, check_components
@@ -412,11 +415,12 @@ class Level:
     """A checked level file: ``name``, ``game``, ``rules`` and the entities to spawn."""
 
     def __init__(self, path: Path, name: str, game: str | None, rules: dict[str, Any],
-                 entities: list[_EntitySpec], lines: dict[tuple, int]) -> None:
+                 entities: list[_EntitySpec], lines: dict[tuple, int], view_budget: ViewBudget | None = None) -> None:
         self.path = path
         self.name = name
         self.game = game
         self.rules = rules
+        self.view_budget = view_budget  # [level] view_budget: spawn makes it the world's
         self._entities = entities
         self._lines = lines
 
@@ -451,6 +455,8 @@ class Level:
                     world.delete_entity(entity)
             line = self._lines.get((spec.index,)) if spec is not None else None
             raise LevelError(self.path, str(exc), line, spec.name if spec is not None else None) from exc
+        if self.view_budget is not None:
+            world.resources[ViewBudget] = self.view_budget
         return made
 
 
@@ -469,11 +475,14 @@ def user_asset_roots() -> list[Path]:
 
 
 def load_level(path: str | Path, extra_components: Mapping[str, type] | None = None,
-               asset_roots: Iterable[str | Path] = ()) -> Level:
+               asset_roots: Iterable[str | Path] = (), for_game: str | None = None) -> Level:
     """Read and check the level file at ``path``; nothing is created (``Level.spawn`` does).
     ``extra_components``: a game's own plain-data components allowed in the file, by name.
     ``asset_roots``: folders besides the level's own that its ``file = ...`` may name (a
-    game's shared assets); the ones ``set_asset_roots`` gave are allowed too."""
+    game's shared assets); the ones ``set_asset_roots`` gave are allowed too.  ``for_game``:
+    the game that will play it (``LevelGame.game``): a level whose ``[level] game`` names
+    another is refused as such from its header, before any entity or component is read (its
+    components are that game's, and would only be reported as unknown)."""
     if isinstance(path, bytes) or not isinstance(path, (str, os.PathLike)):
         raise LevelError(repr(path), f"a level file path is a str or pathlib.Path, got {type(path).__name__}")
     path = Path(path)
@@ -507,12 +516,16 @@ def load_level(path: str | Path, extra_components: Mapping[str, type] | None = N
         line = lines.get(("level", "name")) if isinstance(header, dict) and "name" in header else \
             lines.get(("table", "level"))
         raise LevelError(path, "[level] needs name = \"...\" (the level's title)", line)
-    extra = [key for key in header if key not in ("name", "game")]
+    extra = [key for key in header if key not in ("name", "game", "view_budget")]
     if extra:
-        raise LevelError(path, f"[level] has unknown keys {sorted(extra)} (name, game)", lines.get(("level", extra[0])))
+        raise LevelError(path, f"[level] has unknown keys {sorted(extra)} (name, game, view_budget)",
+                         lines.get(("level", extra[0])))
+    budget = _view_budget(path, header.get("view_budget"), lines.get(("level", "view_budget")))
     game = header.get("game")
     if game is not None and not isinstance(game, str):
         raise LevelError(path, f"[level] game must be a string, got {_short(game)}", lines.get(("level", "game")))
+    if for_game is not None and game is not None and game != for_game:
+        raise LevelError(path, _other_game(game, for_game), lines.get(("level", "game")))
     rules = data.get("rules", {})
     if not isinstance(rules, dict):
         raise LevelError(path, "[rules] must be a table", lines.get(("table", "rules")))
@@ -545,7 +558,29 @@ def load_level(path: str | Path, extra_components: Mapping[str, type] | None = N
                 raise LevelError(path, "names the entity itself", lines.get((spec.index, cls_name, field)), spec.name,
                                  f"{cls_name}.{field}")
     _check_parent_cycles(path, entities, lines)
-    return Level(path, header["name"], game, rules, entities, lines)
+    return Level(path, header["name"], game, rules, entities, lines, budget)
+
+
+def _view_budget(path: Path, table: Any, line: int | None) -> ViewBudget | None:
+    """``[level] view_budget = { views = 24, pixels = 400000, probe_ms = 2.0 }``: the
+    frame's ``ViewBudget`` (engine.core.budget), each field optional, checked as in Python."""
+    if table is None:
+        return None
+    if not isinstance(table, dict):
+        raise LevelError(path, f"[level] view_budget must be a table such as {{ views = 24 }}, got {_short(table)}",
+                         line)
+    unknown = sorted(set(table) - {"views", "pixels", "probe_ms"})
+    if unknown:
+        raise LevelError(path, f"[level] view_budget has unknown keys {unknown} (views, pixels, probe_ms)", line)
+    try:
+        return ViewBudget(**table)
+    except ViewBudgetError as exc:
+        raise LevelError(path, f"[level] view_budget: {exc}", line) from None
+
+
+def _other_game(game: str, playing: str) -> str:
+    """The refusal of a level made for another game."""
+    return f"[level] game = {game!r}: the level is for {game}, not for {playing} (play it with that game)"
 
 
 def _short(value: Any) -> str:
@@ -587,6 +622,10 @@ def _entity(path: Path, assets: _Where, index: int, name: str, table: dict[str, 
                     raise LevelError(path, f"must be an entity's name, got {value!r}", where, name, f"{key}.{field}")
                 references.append((key, field, value))
                 continue
+            if key not in ENGINE_COMPONENTS and allowed is not None:
+                problem = _annotation_problem(cls, field, value)
+                if problem is not None:
+                    raise LevelError(path, problem, where, name, f"{key}.{field}")
             try:
                 decoded[field] = _decode(key, field, value, assets)
             except (ValueError, TypeError, OverflowError, AssetError) as exc:
@@ -648,6 +687,70 @@ def _check_mirror(path: Path, index: int, name: str, parts: list[tuple[type, dic
 _MATERIAL_MAPS = {("Material", name) for name in ("normal_map", "emissive_map", "metallic_roughness_map")}
 
 
+def _annotation_problem(cls: type, field: str, value: Any) -> str | None:
+    """Why ``value`` from a file does not fit the annotated type of a game's own component's
+    ``field`` (``extra_components``: they have no checks of their own, and a wrong kind would
+    reach the game's system frames later as a TypeError), or None.  Understood: bool, int,
+    float (an int is taken), str, list/tuple/Sequence of those (``tuple[float, float]`` by
+    length), Optional and unions; any other annotation (Any, a class of the game's) is the
+    component's own business."""
+    try:
+        hints = typing.get_type_hints(cls)
+    except Exception:  # an annotation the game's module cannot resolve: nothing to check by
+        return None
+    if field not in hints:
+        return None
+    expected = hints[field]
+    if _fits(value, expected) is False:
+        return f"must be {_type_name(expected)} (the annotation of {cls.__name__}.{field}), got {_short(value)}"
+    return None
+
+
+def _fits(value: Any, expected: Any) -> bool | None:
+    """Whether ``value`` fits ``expected``; None when the annotation is not one understood."""
+    origin, args = typing.get_origin(expected), typing.get_args(expected)
+    if expected is Any or isinstance(expected, typing.TypeVar):
+        return None
+    if origin is typing.Union or origin is types.UnionType:
+        verdicts = [_fits(value, arg) for arg in args]
+        if any(v is True for v in verdicts):
+            return True
+        return None if any(v is None for v in verdicts) else False
+    if expected is type(None):
+        return value is None
+    if expected is bool:
+        return isinstance(value, bool)
+    if expected is int:
+        return isinstance(value, int) and not isinstance(value, bool)
+    if expected is float:
+        return isinstance(value, (int, float)) and not isinstance(value, bool)
+    if expected is str:
+        return isinstance(value, str)
+    sequence = origin if origin is not None else expected
+    if sequence in (list, tuple, Sequence) or sequence is typing.List or sequence is typing.Tuple:  # noqa: UP006
+        if not isinstance(value, list):
+            return False
+        if not args:
+            return True
+        if sequence is tuple and not (len(args) == 2 and args[1] is Ellipsis):
+            if len(args) != len(value):
+                return False
+            verdicts = [_fits(v, a) for v, a in zip(value, args, strict=True)]
+        else:
+            verdicts = [_fits(v, args[0]) for v in value]
+        return False if any(v is False for v in verdicts) else (True if all(verdicts) else None)
+    if expected is dict or origin is dict:
+        return isinstance(value, dict)
+    return None
+
+
+def _type_name(expected: Any) -> str:
+    if isinstance(expected, type) and typing.get_origin(expected) is None:
+        return {"float": "a number", "int": "an integer", "bool": "true or false", "str": "a string",
+                "list": "an array", "tuple": "an array", "dict": "a table"}.get(expected.__name__, expected.__name__)
+    return str(expected).replace("typing.", "")
+
+
 def _decode(cls_name: str, field: str, value: Any, where: _Where) -> Any:
     if cls_name == "MeshRef" and field == "mesh":
         return _mesh(value, where)
@@ -703,7 +806,11 @@ def save_level(world: World, path: str | Path, names: Mapping[str, int] | None =
                                        "with extra_components)", entity=by_id[entity])
             table[cls_name] = _encode_component(path, component, by_id, by_id[entity])
         tables.append(table)
-    text = tomli_w.dumps({"level": {"name": name, **({"game": game} if game else {})}})
+    budget = world.resources.get(ViewBudget)
+    header: dict[str, Any] = {"name": name, **({"game": game} if game else {})}
+    if isinstance(budget, ViewBudget) and budget != ViewBudget():
+        header["view_budget"] = {key: value for key, value in dataclasses.asdict(budget).items() if value is not None}
+    text = tomli_w.dumps({"level": header})
     if rules:
         text += "\n" + tomli_w.dumps({"rules": dict(rules)})
     for table in tables:
@@ -773,6 +880,11 @@ def _encode_component(path: Path, component: Any, by_id: Mapping[int, str], enti
             out[f.name] = by_id.get(value, f"entity_{value}")
         elif isinstance(value, (Mesh, TextureData)):
             source = getattr(value, "source", None)
+            if source is not None and "inside" in source:
+                raise LevelError(path, f"{type(value).__name__} {value.name!r} is an image inside the model file "
+                                       f"{source['inside']!r} (spawn_model), and a level file names image files only: "
+                                       "save the image as a file and name it (texture = { file = \"...\" })",
+                                 None, entity, where)
             if source is None:
                 raise LevelError(path, f"{type(value).__name__} {value.name!r} was not made by a generator or loaded "
                                        "from a file, so a level file cannot name it", None, entity, where)
@@ -851,7 +963,7 @@ class LevelGame(Game):
 
     def load(self) -> Level:
         """The game's level file, loaded and checked for this game (``check_level``)."""
-        level = load_level(self.level_path, self.components, self.asset_roots)
+        level = load_level(self.level_path, self.components, self.asset_roots, for_game=self.game)
         self.check_level(level)
         return level
 
@@ -859,8 +971,7 @@ class LevelGame(Game):
         """A LevelError (naming the file) for a level made for another game, or one with no
         camera where the game makes none."""
         if self.game is not None and level.game is not None and level.game != self.game:
-            raise LevelError(level.path, f"[level] game = {level.game!r}: the level is for {level.game}, not for "
-                                         f"{self.game} (play it with that game)", level._lines.get(("level", "game")))
+            raise LevelError(level.path, _other_game(level.game, self.game), level._lines.get(("level", "game")))
         if not self.makes_camera and not level.has_camera:
             raise LevelError(level.path, "no entity has a Camera and a Transform, so every frame would be black (add "
                                          "one: [[entity]] with [entity.Transform] and [entity.Camera])")

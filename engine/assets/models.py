@@ -45,6 +45,7 @@ def spawn_model(world: World, path: str | Path, position: glm.vec3 | Sequence[fl
     parts = load_model(path, roots=roots)
     curved = [i for i, part in enumerate(parts) if part.reflectivity > 0.0 and flat_plane(part.mesh) is None]
     probed = set(sorted(curved, key=lambda i: -_placed_size(parts[i]))[:max_probes])
+    _name_sources(path, parts)
     part_components = []
     try:
         for index, part in enumerate(parts):
@@ -98,3 +99,18 @@ def _placed_size(part) -> float:
     corners = np.array([[x, y, z, 1.0] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
     placed = corners @ np.array(part.local, np.float64).T  # numpy(glm.mat4) reads as M: points are columns
     return float(np.linalg.norm(placed[:, :3].max(axis=0) - placed[:, :3].min(axis=0)))
+
+
+def _name_sources(path: str | Path, parts: list) -> None:
+    """Say where each part came from, as a level file names it (``save_level`` writes a
+    spawned model back): a mesh as ``{ file, part }``; an image decoded from inside the
+    model file (no file of its own) as ``{"inside": file}``, which ``save_level`` refuses
+    plainly (a level file names image files only)."""
+    file = str(Path(path).resolve())
+    for part in parts:
+        if part.mesh.source is None:
+            name = part.mesh.name.split(":", 1)[-1]
+            part.mesh.source = {"file": file, **({"part": name} if len(parts) > 1 else {})}
+        for texture in (part.texture, part.normal_map, part.emissive_map, part.metallic_roughness_map):
+            if texture is not None and texture.source is None:
+                texture.source = {"inside": file}

@@ -16,6 +16,7 @@ pair of constraints the stage table contradicts, or a cycle between game systems
 from __future__ import annotations
 
 import difflib
+import inspect
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
 
@@ -67,11 +68,39 @@ class GameSystem:
             object.__setattr__(self, "name", default)
         for field_name in ("after", "before"):
             value = getattr(self, field_name)
-            object.__setattr__(self, field_name, (value,) if isinstance(value, str) else tuple(value))
+            names = (value,) if isinstance(value, str) else _names(value)
+            if names is None or not all(isinstance(name, str) for name in names):
+                raise ScheduleError(f"GameSystem {self.name!r}: {field_name} must be a stage or game system name, "
+                                    f"or a tuple of names, got {value!r}")
+            object.__setattr__(self, field_name, names)
 
     def runs(self) -> bool:
         """Whether ``system`` can run: a callable, or something with ``process``."""
         return callable(getattr(self.system, "process", None)) or callable(self.system)
+
+    def call_problem(self) -> str | None:
+        """Why ``system`` cannot be called as the schedule calls it (``process(dt)`` or
+        ``function(world, dt)``), or None; a callable whose signature Python cannot read
+        (some built-ins) is taken on trust."""
+        process = getattr(self.system, "process", None)
+        target, arguments, shape = (process, (0.0,), "process(dt)") if callable(process) else \
+            (self.system, (None, 0.0), "function(world, dt)")
+        try:
+            signature = inspect.signature(target)
+        except (TypeError, ValueError):
+            return None
+        try:
+            signature.bind(*arguments)
+        except TypeError as exc:
+            return f"cannot be called as {shape}: its signature is {signature} ({exc})"
+        return None
+
+
+def _names(value: object) -> tuple | None:
+    """``value`` as a tuple, or None when it is not a sequence of names."""
+    if isinstance(value, (bytes, dict)) or not isinstance(value, Iterable):
+        return None
+    return tuple(value)
 
 
 def schedule_order(stages: Sequence[str], systems: Iterable[GameSystem], where: str = "Game.systems()",
@@ -83,6 +112,8 @@ def schedule_order(stages: Sequence[str], systems: Iterable[GameSystem], where: 
     systems that are ready, which run in the order listed).  ``where`` says whose systems
     they are in errors; ``reserved`` are further names a game system may not take."""
     stages = list(stages)
+    if systems is None or isinstance(systems, (str, bytes, dict, GameSystem)) or not isinstance(systems, Iterable):
+        raise ScheduleError(f"{where}: returned {systems!r}; return a list of GameSystem (an empty one for none)")
     systems = list(systems)
     stage_at = {name: index for index, name in enumerate(stages)}
     taken = set(stages) | set(reserved)
@@ -105,6 +136,9 @@ def schedule_order(stages: Sequence[str], systems: Iterable[GameSystem], where: 
             raise fail(system, "is listed twice (game system names are unique)")
         if not system.runs():
             raise fail(system, f"is {system.system!r}, which is neither a function(world, dt) nor has process(dt)")
+        problem = system.call_problem()
+        if problem is not None:
+            raise fail(system, problem)
         by_name[system.name] = system
     for system in systems:
         for field_name in ("after", "before"):

@@ -8,6 +8,7 @@ what changed this frame instead of scanning every entity.
 from __future__ import annotations
 
 import itertools
+import sys
 import warnings
 from collections import defaultdict
 from collections.abc import Callable, Iterable
@@ -26,6 +27,10 @@ C = TypeVar("C")
 # for them when a field changes (``World.check_invariants``), without either knowing the rule.
 Invariant = Callable[..., None]
 _INVARIANTS: dict[type, list[Invariant]] = defaultdict(list)
+# Invariants that need the entity's components together (a Water needs a Mirror): at spawn
+# they run once every component is attached (the order components are listed in is free);
+# ``add_component`` on an existing entity runs them with the joining component.
+_WHOLE_INVARIANTS: dict[type, list[Invariant]] = defaultdict(list)
 
 
 def check_components(components: Iterable[Any]) -> None:
@@ -35,7 +40,7 @@ def check_components(components: Iterable[Any]) -> None:
     held = {type(component): component for component in components}
     detached = _Detached(held)
     for kind in held:
-        for check in _INVARIANTS.get(kind, ()):
+        for check in (*_INVARIANTS.get(kind, ()), *_WHOLE_INVARIANTS.get(kind, ())):
             check(detached, 0, None)
 
 
@@ -52,16 +57,21 @@ class _Detached:
         return self._held.get(kind)
 
 
-def world_invariant(*kinds: type) -> Callable[[Invariant], Invariant]:
+def world_invariant(*kinds: type, whole: bool = False) -> Callable[[Invariant], Invariant]:
     """Register the decorated check for every world, run when one of ``kinds`` joins an
-    entity or asks (see ``_INVARIANTS``)."""
+    entity or asks (see ``_INVARIANTS``); ``whole``: a check that needs the entity's other
+    components (``_WHOLE_INVARIANTS``), run at the end of a spawn and on a later join."""
+    table = _WHOLE_INVARIANTS if whole else _INVARIANTS
+
     def register(check: Invariant) -> Invariant:
         for kind in kinds:
-            if check not in _INVARIANTS[kind]:
-                _INVARIANTS[kind].append(check)
+            if check not in table[kind]:
+                table[kind].append(check)
         return check
     return register
+
 _world_ids = itertools.count(1)
+_HELD_BY_WATCH_ONLY = 4  # sys.getrefcount of a watched value nobody else holds, in settle_in_place_edits
 
 
 @dataclass
@@ -89,6 +99,9 @@ class World:
         self._deleted: set[int] = set()
         self._made = 0  # the highest entity id spawned (ids only grow)
         self._systems: list[esper.Processor] = []
+        # The in-place watch (components.tracking's docstring): (id, field) -> (component,
+        # field, the value read, a copy of it), filled by reads, settled by the transform stage.
+        self._handed: dict[tuple[int, str], tuple[TrackedComponent, str, Any, Any]] = {}
         self._closed = False
         self._use()
 
@@ -133,7 +146,10 @@ class World:
         self._made = max(self._made, entity)
         try:
             for component in components:
-                self.add_component(entity, component)
+                self._add(entity, component, whole=False)
+            for kind in dict.fromkeys(type(component) for component in components):
+                for check in _WHOLE_INVARIANTS.get(kind, ()):
+                    check(self, entity, None)
             self._check_whole(entity, components)
         except BaseException:
             for component in esper.components_for_entity(entity):
@@ -145,6 +161,9 @@ class World:
 
     def add_component(self, entity: int, component: Any) -> None:
         """Attach ``component`` (replacing one of its type); see components.tracking on sharing."""
+        self._add(entity, component, whole=True)
+
+    def _add(self, entity: int, component: Any, whole: bool) -> None:
         self._use()
         kind = type(component)
         if isinstance(component, TrackedComponent):
@@ -167,7 +186,7 @@ class World:
                 if walk == entity:
                     raise ComponentValueError(f"Transform.parent {parent!r} of entity {entity} would make a "
                                               f"cycle (entity {parent} descends from entity {entity})")
-        for check in _INVARIANTS.get(kind, ()):
+        for check in (*_INVARIANTS.get(kind, ()), *(_WHOLE_INVARIANTS.get(kind, ()) if whole else ())):
             check(self, entity, component)
         if esper.has_component(entity, kind):
             old = esper.component_for_entity(entity, kind)
@@ -179,6 +198,7 @@ class World:
             object.__setattr__(component, "_entities", component._entities | {entity})
             object.__setattr__(component, "_sink", self._changed[kind])
             object.__setattr__(component, "_world_ref", self)
+            object.__setattr__(component, "_handed", self._handed)
         self._changed[kind].add(entity)
 
     def _check_whole(self, entity: int, components: tuple[Any, ...]) -> None:
@@ -190,6 +210,41 @@ class World:
             if not any(type(c).__name__ == "Transform" for c in esper.components_for_entity(entity)):
                 warnings.warn(f"entity {entity} has MeshRef and Material but no Transform: it is not drawn "
                               f"until one is added", stacklevel=3)
+
+    def settle_in_place_edits(self) -> int:
+        """Report the glm vectors and quaternions edited in place since they were read (the
+        in-place watch, ``components.tracking``'s docstring): each value read from a
+        component in this world since the last settle is compared with the copy taken when
+        it was read; one that differs is checked by the component's own rules (a NaN put in
+        ``t.position.x`` is refused here, naming the field) and reported as a write of its
+        field.  A value the component no longer holds (the field was assigned since: that
+        write was reported) is dropped; one still held elsewhere (a game keeps ``p =
+        t.position``) stays watched with a fresh copy.  Returns how many edits were found.
+        Called by the transform stage, before it reads the change sets."""
+        handed = self._handed
+        if not handed:
+            return 0
+        found = 0
+        kept = {}
+        for key, (component, name, value, copy) in handed.items():
+            if component.__dict__.get(name) is not value:
+                continue  # assigned since: reported by that write; the old value is not the field's
+            if value != copy:
+                found += 1
+                try:
+                    component._validate(name, type(value)(value))
+                except ComponentValueError as exc:
+                    raise ComponentValueError(f"{exc} (an in-place edit of {type(component).__name__}.{name}, "
+                                              f"e.g. {name}.x = ..., seen at frame {self.frame_index + 1})") from None
+                component.touch()
+                copy = type(value)(value)
+            # Held by the component's dict, this entry, the loop's two names and the call's
+            # argument: more means someone else keeps it and may edit it again unread.
+            if sys.getrefcount(value) > _HELD_BY_WATCH_ONLY:
+                kept[key] = (component, name, value, copy)
+        handed.clear()
+        handed.update(kept)
+        return found
 
     def check_invariants(self, entity: int, kind: type, **pending: Any) -> None:
         """Run the invariants registered for ``kind`` on ``entity`` as if the fields in

@@ -49,11 +49,15 @@ PARENT_NODE_UNIT = 3     # claim: the parent level's node image
 PARENT_SURFACE_UNIT = 4  # claim: the parent level's surface image
 REFLECTION_UNITS = (3, 4, 5)  # composite: the level's colour, seen-id and node images
 ATLAS_UNIT = 6           # composite (rough variant): the rough-reflection atlas
+FALLBACK_PARENT_UNITS = (0, 2)  # composite (fallback variants): the parent level's node and surface images
 LEVEL_UNITS = (3, 5)     # rough-atlas copy: a level's colour and node images (the composite's units for them)
 PRESENT_UNIT = 0         # present: the HDR image
-PROBE_UNIT = 7           # scene: the cube map of the batch's reflection probe
-PROBE2_UNIT = 9          # scene: the cube map of the batch's second probe (probe blending)
+PROBE_UNIT = 7           # scene: the cube map of the batch's reflection probe; composite (fallback): its draw's first
+PROBE2_UNIT = 9          # scene: the cube map of the batch's second probe (probe blending); composite (fallback): the
+                         # draw's second
 HISTORY_UNIT = 10        # end images: the previous frame's main image (engine/render/end_images.py)
+PROBE_REST_UNIT = 10     # scene (PROBE_REST builds): the probe taking what the blend's weights leave (a curved
+                         # object's own, probe_rules.probe_blend)
 NORMAL_UNIT = 8          # scene: the batch's normal map; composite (bumpy mirrors): the mirror's
 EMISSIVE_MAP_UNIT = 12   # scene: the batch's emissive map (Material.emissive_map)
 METALLIC_ROUGHNESS_UNIT = 13  # scene: the batch's metallic-roughness map (Material.metallic_roughness_map)
@@ -236,6 +240,14 @@ def set_front_face(ctx: moderngl.Context, front_face: str) -> None:
     cache = _cache(ctx)
     if cache.front_face != front_face or not CACHE_STATE:
         ctx.front_face = cache.front_face = front_face
+
+
+def flip_front_face(ctx: moderngl.Context) -> str:
+    """Turn the winding to the other one (for instances whose model matrix mirrors them:
+    their front faces wind the other way on screen); returns the one to put back."""
+    current = _cache(ctx).front_face or ctx.front_face
+    set_front_face(ctx, "cw" if current == "ccw" else "ccw")
+    return current
 
 
 def _scissor_is(ctx: moderngl.Context, bound, scissor: tuple[int, int, int, int] | None) -> bool:

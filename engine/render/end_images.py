@@ -12,11 +12,12 @@ showed, shrunk onto this footprint: each pixel's ray meets the surface at x, and
 that saw the surface there before (two levels up for a facing pair) shows, around x, the
 levels beyond it in the previous frame's image.  So each frame the image holds a few more
 levels, and a still camera sees it converge to the deep recursion.  The first frame, a
-surface not seen last frame, and a surface not seen before up its chain keep the closed look,
-and so does each pixel whose point last frame's image does not hold (off its edge, or behind
-its camera, as after a quick turn): the end view marks it (``NO_END_IMAGE``,
-``shaders/include/end_image.glsl``) and the composite leaves it alone, where stretching the
-image's edge over it drew streaks.
+surface not seen last frame, and a surface not seen before up its chain show the fallback
+(the probe's or the sky's reflection: ``MirrorPasses.draw_fallbacks``), and so does each
+pixel whose point last frame's image does not hold (off its edge, or behind its camera, as
+after a quick turn): the end view marks it (``NO_END_IMAGE``,
+``shaders/include/end_image.glsl``), the composite leaves it alone (stretching the image's
+edge over it drew streaks) and the fallback fills it.
 Probe faces' trees draw none (their image is not the main view's).
 """
 from __future__ import annotations

@@ -100,10 +100,12 @@ class InstanceBatch:
         # and the new boxes of moved, added and removed rows): what a shadow map must redraw.
         self._changed: tuple[np.ndarray, np.ndarray] | None = None
         self.probe = 0  # the entity owning the reflection probe its instances sample (0: none)
+        self.mirrored = False  # its instances' model matrices mirror them (drawn with the other winding)
         # Probe blending (probe_rules.probe_blend): a second probe (0: none), and whether the
         # instances blend (their rows' ``reflect`` z and w weigh the two probes, the sky the rest).
         self.second_probe = 0
         self.probe_blend = False
+        self.rest_probe = 0  # the probe taking what the weights leave (0: the sky; a curved object's own)
         self._variants: tuple[int, int, int] | None = None
         self._variants_stale = True
         # Drawn in the scene pass's transparent slot (blended, farthest first) instead of

@@ -1,5 +1,18 @@
 """The per-pixel passes of planar reflections: preparing a level (reset, then claims with
-their visibility queries) and the composite.
+their visibility queries), the composite, and the fallback of surfaces with no view.
+
+The fallback (issue 36's reflection fallback chain, as Unity and Godot drop a cut planar
+reflection to the nearest probe or the sky): a mirror or portal a view sees but that gets no
+view of its own shows what the composite would show with an empty reflection, its
+environment (``COMPOSITE_FALLBACK`` builds of the same shader, one code path).  It is drawn
+over the parent view's own pixels of the surface, found by the parent level's node and
+surface images, so it needs no claim; the probes are uniforms of a draw and each row's
+weights and ids ride in uniform arrays (the composite's row fills a vertex shader's 16
+attribute slots).  Why there and not in the scene pass: the scene pass cannot know which
+mirrors will get views (the budgets choose after it has drawn them), so writing the fallback
+there would cost every mirror pixel its probe lookups and need the composite to take it out
+again where a view is drawn, changing drawn mirrors' pixels; here a drawn view's pixels are
+never touched, and only the pixels that show a fallback pay for it.
 
 The claims' rectangles are one buffer a level (two triangles each, every vertex with its
 claim's ids: claim.vert): the reset is one draw over all of them (rects.vert), each claim
@@ -27,9 +40,12 @@ from engine.assets.texture_data import TextureData
 from engine.render.bindings import (
     ATLAS_UNIT,
     BLEND_OVER,
+    FALLBACK_PARENT_UNITS,
     NORMAL_UNIT,
     PARENT_NODE_UNIT,
     PARENT_SURFACE_UNIT,
+    PROBE2_UNIT,
+    PROBE_UNIT,
     RECT_CLIPS,
     REFLECTION_UNITS,
     SKY_UNIT,
@@ -72,17 +88,31 @@ class CompositeSurface:
     normal_map: TextureData | None = None  # a bumpy mirror's (its rows are drawn per map)
     water: object | None = None            # a water mirror's WaterLook (engine.resources): its row carries
                                            # F0, the waves' offset and the second layer's share
+    entity: int = 0                        # the surface's (its fallback finds its pixels by it)
+    plane_w: float = 0.0                   # its plane's w (the normal's is ``normal``)
+    offset: tuple[float, float, float] = (0.0, 0.0, 0.0)  # a portal's carry's translation (its fallback)
+
+    @property
+    def fallback_variant(self) -> str:
+        """The build of mirror_composite.frag that draws this surface's fallback
+        (FALLBACK_VARIANTS): a rough mirror's roughness is a mip bias there, as in the sharp one."""
+        kind = self.variant.split("_")[0]
+        base = {"portal": "fallback_portal", "water": "fallback_water"}.get(kind, "fallback")
+        return base + ("_bumpy" if self.variant.endswith("_bumpy") else "")
 
 
 def composite_surface(tint: glm.vec4, reflect_rate: float, roughness: float, normal: glm.vec3,
                       outline: np.ndarray | None = None, portal: bool = False,
                       carry: glm.mat3 | None = None, bumps: MirrorBumps | None = None,
-                      water: WaterLook | None = None) -> CompositeSurface:
+                      water: WaterLook | None = None, entity: int = 0, plane_w: float = 0.0,
+                      offset: glm.vec3 | None = None) -> CompositeSurface:
     """A surface's composite parameters; ``outline`` is its 4 world corners as homogeneous
     rows in 2 x 2 grid order (None: composite over its screen rectangle).  A mirror with
     ``bumps`` reads its normal map in the composite (a ``_bumpy`` variant).  A mirror with
     ``water`` (``engine.resources.WaterLook``) is a "water" variant (always sharp: its
-    row's tile components carry the waves instead), its UV map scaled by the water's tiling."""
+    row's tile components carry the waves instead), its UV map scaled by the water's tiling.
+    ``entity``, ``plane_w`` (the plane's w, with ``normal`` its xyz) and a portal's
+    ``offset`` (its carry's translation) are what its fallback reads besides."""
     variant = "portal" if portal else ("rough" if roughness > 0.0 else "sharp")
     if water is not None and not portal:
         variant = "water"
@@ -100,7 +130,9 @@ def composite_surface(tint: glm.vec4, reflect_rate: float, roughness: float, nor
     return CompositeSurface(variant, float(roughness), float(reflect_rate), params_z, columns,
                             glm.vec3(tint).to_bytes(), glm.vec3(normal).to_bytes(),
                             (carry if carry is not None else glm.mat3(1.0)).to_bytes(),
-                            bumps.normal_map if bumps is not None and not portal else None, water)
+                            bumps.normal_map if bumps is not None and not portal else None, water,
+                            int(entity), float(plane_w), tuple(map(float, offset)) if offset is not None
+                            else (0.0, 0.0, 0.0))
 
 
 _LOOKS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
@@ -114,7 +146,8 @@ def surface_look(state: SurfaceState) -> CompositeSurface:
         look = _LOOKS[state] = composite_surface(state.tint, state.reflect_rate, state.roughness,
                                                  glm.vec3(state.plane), state.outline, portal=state.kind == "portal",
                                                  carry=glm.mat3(state.carry), bumps=state.bumps,
-                                                 water=getattr(state, "water", None))
+                                                 water=getattr(state, "water", None), entity=state.entity,
+                                                 plane_w=state.plane.w, offset=glm.vec3(state.carry[3]))
     return look
 
 
@@ -129,6 +162,28 @@ class Composite:
     surface: CompositeSurface
     tile: Tile | None = None                                   # a rough view's blur source (RoughAtlas)
     fade: float = 1.0                                          # the reflection's weight (a mirror's fades)
+
+
+@dataclass(slots=True)
+class Fallback:
+    """A surface seen by a view with no view of its own (or a partly faded one, or an end
+    view's holes), as its fallback composite sees it (``MirrorPasses.prepare_fallbacks``)."""
+
+    parent_view: View                      # the view that sees the surface
+    node: int                              # its index in the tree (its pixels in its level's node image)
+    rect: tuple[int, int, int, int]        # its rectangle in its level's pixels (x, y, width, height)
+    surface: CompositeSurface
+    share: float = 1.0                     # the fallback's share of the reflection (1 - the view's fade)
+    end: int = -1                          # an end view's index: only the pixels its image did not hold
+
+
+@dataclass
+class PreparedFallbacks:
+    """A level's fallbacks, ready to draw: per (variant, normal map, first probe, second
+    probe), chunks of at most FALLBACK_ROWS rows, each (composite rows, ids, weights)."""
+
+    groups: dict[tuple[str, TextureData | None, int, int], list[tuple[bytes, bytes, bytes]]]
+    count: int = 0
 
 
 @dataclass
@@ -157,6 +212,7 @@ _BLOCK_EYE = slice(4 * CAMERA_BLOCK_EYE.start, 4 * CAMERA_BLOCK_EYE.stop)
 # cut the quad) while clipping still drops w <= 0.
 _FLATTEN_Z = glm.mat4(1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0)
 _NO_TILE = Tile(0, 0, 0.0)
+_NO_PROBE = ((0.0, 0.0, 0.0, 0.0),) * 3  # a probe's lookup uniforms where the sky stands in for it
 # A claim as two clip-space triangles, each vertex its position and the claim's ids (claim.vert).
 _CLAIM_VERTICES = struct.Struct("<" + "2f3I" * 6)
 # The composite's variants (mirror_composite.frag); a level's views are drawn grouped by them.
@@ -166,6 +222,22 @@ COMPOSITE_VARIANTS = {"sharp": {}, "rough": {"COMPOSITE_ROUGH": "1"}, "portal": 
                       "rough_bumpy": {"COMPOSITE_ROUGH": "1", "COMPOSITE_BUMPY": "1"},
                       "water": {"COMPOSITE_WATER": "1"},
                       "water_bumpy": {"COMPOSITE_WATER": "1", "COMPOSITE_BUMPY": "1"}}
+
+
+# The fallback's builds (COMPOSITE_FALLBACK, mirror_composite.frag): one for sharp and rough
+# mirrors (roughness is a mip bias of the environment), a portal's, water's, and the bumpy ones;
+# each with the probes ("fallback_probes...": FALLBACK_PROBES) or the sky alone (no influence
+# box holds the draw's surfaces: on llvmpipe, the 8-mirror ring faded out at 640x360, its six
+# fallbacks took 0.8 ms a frame without the probes' lookups at weight 0, 0.9-1.2 with them).
+_FALLBACK_BUILDS = (("", {}), ("_portal", {"COMPOSITE_PORTAL": "1"}), ("_bumpy", {"COMPOSITE_BUMPY": "1"}),
+                    ("_water", {"COMPOSITE_WATER": "1"}),
+                    ("_water_bumpy", {"COMPOSITE_WATER": "1", "COMPOSITE_BUMPY": "1"}))
+FALLBACK_VARIANTS = {f"fallback{probes}{name}": {"COMPOSITE_FALLBACK": "1", **extra, **defines}
+                     for probes, extra in (("", {}), ("_probes", {"FALLBACK_PROBES": "1"}))
+                     for name, defines in _FALLBACK_BUILDS}
+FALLBACK_ROWS = 32  # rows a fallback draw takes (its uniform arrays' length); more are drawn in chunks
+_FALLBACK_IDS = struct.Struct("<4I")
+_FALLBACK_WEIGHTS = struct.Struct("<8f")
 
 
 def _instance_format(program: moderngl.Program) -> tuple[str, list[str]]:
@@ -253,6 +325,16 @@ def composite_rows(composites: list[Composite], size: tuple[int, int]) -> bytes:
     return b"".join(rows)
 
 
+def fallback_extras(fallback: Fallback, weights: tuple[float, ...]) -> tuple[bytes, bytes]:
+    """A fallback row's values in the uniform arrays of its draw (mirror_composite.vert):
+    (entity, end view + 1, 0, 0) and (the probes' two ``weights``, the share, 0, the plane's
+    w, the portal's offset)."""
+    surface = fallback.surface
+    w1, w2 = (*weights, 0.0, 0.0)[:2]
+    return (_FALLBACK_IDS.pack(surface.entity & 0xFFFFFFFF, fallback.end + 1, 0, 0),
+            _FALLBACK_WEIGHTS.pack(w1, w2, fallback.share, 0.0, surface.plane_w, *surface.offset))
+
+
 def _ndc_rect(rect: tuple[int, int, int, int], size: tuple[int, int]) -> tuple[float, float, float, float]:
     """A pixel rectangle (x, y, width, height) of a ``size`` target as NDC x0, y0, x1, y1."""
     x, y, w, h = rect
@@ -313,6 +395,17 @@ class MirrorPasses:
                 if name in program:
                     program[name].value = unit
             self.composites[variant] = _CompositeDraw(ctx, program)
+        self.fallbacks: dict[str, _CompositeDraw] = {}
+        for variant, defines in FALLBACK_VARIANTS.items():
+            program = shaders.program("mirror_composite.vert", "mirror_composite.frag",
+                                      defines={"ROUGH_TILE": f"{TILE}.0", "FALLBACK_ROWS": str(FALLBACK_ROWS),
+                                               **defines})
+            for name, unit in {**units, "probe_map": PROBE_UNIT, "probe2_map": PROBE2_UNIT,
+                               **dict(zip(("parent_nodes", "parent_surfaces"), FALLBACK_PARENT_UNITS,
+                                          strict=True))}.items():
+                if name in program:
+                    program[name].value = unit
+            self.fallbacks[variant] = _CompositeDraw(ctx, program)
         self.rough_atlas = RoughAtlas(renderer)
         self._claim_buffer: moderngl.Buffer | None = None  # the claims' triangles (claim.vert), grown as needed
         self._reset_vao: moderngl.VertexArray | None = None
@@ -382,7 +475,7 @@ class MirrorPasses:
         first mirror comes into view."""
         if self._claim_buffer is None:
             self._reserve_claims(0)
-        for draw in self.composites.values():
+        for draw in (*self.composites.values(), *self.fallbacks.values()):
             if draw.vao is None:
                 draw.prepare()
 
@@ -435,10 +528,96 @@ class MirrorPasses:
         self.renderer.checkpoint("composite")
         self.renderer.flush()
 
+    def prepare_fallbacks(self, fallbacks: list[Fallback], size: tuple[int, int]) -> PreparedFallbacks:
+        """The CPU half of a level's fallbacks (drawn into a level of ``size`` pixels): their
+        rows, grouped by build, normal map and the probes of their surfaces
+        (``Renderer.surface_probes``: the probes are uniforms of a draw, their weights ride
+        in the row's extras)."""
+        probes = self.renderer.surface_probes
+        groups: dict[tuple[str, TextureData | None, int, int], list[tuple[Fallback, tuple[float, ...]]]] = {}
+        for fallback in fallbacks:
+            surface = fallback.surface
+            blend = probes.get(surface.entity)
+            owners = (*blend.probes, 0, 0)[:2] if blend is not None else (0, 0)
+            variant = surface.fallback_variant
+            if owners != (0, 0):
+                variant = variant.replace("fallback", "fallback_probes", 1)
+            key = (variant, surface.normal_map, *owners)
+            groups.setdefault(key, []).append((fallback, blend.weights if blend is not None else ()))
+        prepared = PreparedFallbacks({}, len(fallbacks))
+        for key, group in groups.items():
+            chunks = prepared.groups[key] = []
+            for at in range(0, len(group), FALLBACK_ROWS):
+                part = group[at:at + FALLBACK_ROWS]
+                rows = composite_rows([Composite(f.node, f.rect, f.rect, f.parent_view, f.surface) for f, _ in part],
+                                      size)
+                extras = [fallback_extras(f, weights) for f, weights in part]
+                chunks.append((rows, b"".join(ids for ids, _ in extras), b"".join(w for _, w in extras)))
+        return prepared
+
+    def draw_fallbacks(self, parent: RenderTargets, level: RenderTargets | None, prepared: PreparedFallbacks) -> None:
+        """Blend each fallback of ``prepared`` over its surface's pixels in ``parent`` (before
+        the views of ``level``, the one below, are composited there: a partly faded view's
+        composite goes over its fallback).  ``level`` is read for end views' holes."""
+        if not prepared.groups:
+            return
+        ctx = self.ctx
+        renderer = self.renderer
+        parent.composite_framebuffer.use()
+        apply_pass_state(ctx, _COMPOSITE, (0, 0, *parent.size))
+        parent.node.use(FALLBACK_PARENT_UNITS[0])
+        parent.surface.use(FALLBACK_PARENT_UNITS[1])
+        if level is not None:
+            level.seen.use(REFLECTION_UNITS[1])
+            level.node.use(REFLECTION_UNITS[2])
+        renderer.sky.use(SKY_UNIT)
+        to_child = (1.0, 1.0) if level is None else (level.size[0] / parent.size[0], level.size[1] / parent.size[1])
+        for (variant, normal_map, first, second), chunks in prepared.groups.items():
+            if normal_map is not None:
+                texture = renderer.normal_map_texture(normal_map)
+                if texture is None:  # the mirror's own batch holds it; none drawn: the flat build
+                    variant = variant.removesuffix("_bumpy")
+                else:
+                    texture.use(NORMAL_UNIT)
+            draw = self.fallbacks[variant]
+            program = draw.program
+            for prefix, probe, unit in (("probe", first, PROBE_UNIT), ("probe2", second, PROBE2_UNIT)):
+                if not first:
+                    break  # a draw with no probes is a build without them
+                for name, value in zip(("position", "box_min", "box_max"), self._bind_probe(probe, unit),
+                                       strict=True):
+                    if f"{prefix}_{name}" in program:
+                        program[f"{prefix}_{name}"].value = value
+            program["parent_size"].value = parent.size
+            program["to_reflection"].value = (1.0, 1.0)
+            if "to_child" in program:
+                program["to_child"].value = to_child
+            for rows, ids, weights in chunks:
+                for name, data, size in (("fallback_ids", ids, _FALLBACK_IDS.size),
+                                         ("fallback_weights", weights, _FALLBACK_WEIGHTS.size)):
+                    if name in program:  # (a build being edited may not read one: hot reload)
+                        program[name].write(data.ljust(FALLBACK_ROWS * size, b"\0"))
+                draw.draw(rows, renderer.shaders.reloads)
+        renderer.stats.reflection_fallbacks += prepared.count
+        renderer.checkpoint("fallback")
+
+    def _bind_probe(self, probe: int, unit: int) -> tuple[tuple[float, ...], ...]:
+        """Bind ``probe``'s cube map to ``unit`` and give its lookup uniforms; the sky where
+        there is none (0), it has no capture yet, or it is the probe being captured (nothing
+        samples a cube while it is drawn into: what would read it reads the sky, as in the
+        scene pass)."""
+        renderer = self.renderer
+        cube = renderer.probes.cubes.get(probe) if probe and probe != renderer.scene_pass.capturing else None
+        if cube is not None:
+            cube.texture.use(unit)
+            return cube.lookup()
+        renderer.sky.use(unit)
+        return _NO_PROBE
+
     def release(self) -> None:
         for obj in (self._reset_vao, self._claim_vao, self._claim_buffer):
             if obj is not None:
                 obj.release()
-        for draw in self.composites.values():
+        for draw in (*self.composites.values(), *self.fallbacks.values()):
             draw.release()
         self.rough_atlas.release()

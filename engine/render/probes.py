@@ -34,7 +34,15 @@ from components import ReflectionProbe
 from components.limits import ALL_LAYERS, VIEW_PROBE
 from engine.core.cube_faces import CUBE_FACES
 from engine.core.errors import GLLimitError, GLPassError
-from engine.render.bindings import CUBE_MIP_UNIT, PROBE2_UNIT, PROBE_UNIT, SCRATCH_UNIT, PassState, apply_pass_state
+from engine.render.bindings import (
+    CUBE_MIP_UNIT,
+    PROBE2_UNIT,
+    PROBE_REST_UNIT,
+    PROBE_UNIT,
+    SCRATCH_UNIT,
+    PassState,
+    apply_pass_state,
+)
 from engine.render.raw_gl import CubeMipTarget, LayeredArrayTarget, LayeredCubeTarget, inspect_bound_target
 from engine.render.scene_pass import SceneOptions
 from engine.render.targets import LevelStack, release_framebuffer
@@ -165,7 +173,7 @@ class CubeMipPass:
         vao = self._program_vao(ggx, one_face)
         program = vao.program
         apply_pass_state(self.ctx, self.STATE, (0, 0, *cube.size))
-        for unit in (PROBE_UNIT, PROBE2_UNIT, SCRATCH_UNIT, self.ctx.default_texture_unit):
+        for unit in (PROBE_UNIT, PROBE2_UNIT, PROBE_REST_UNIT, SCRATCH_UNIT, self.ctx.default_texture_unit):
             self.renderer.sky.use(unit)  # the cube is bound only where the pass reads it (CUBE_MIP_UNIT)
         top = cube.size[0].bit_length() - 1
         try:
@@ -512,7 +520,8 @@ class ProbeCaptures:
         copy left it on (a texture drawn into while bound for sampling is a rendering
         feedback loop, undefined on a GPU; llvmpipe forgives it)."""
         renderer = self.renderer
-        for unit in (PROBE_UNIT, PROBE2_UNIT, SCRATCH_UNIT, CUBE_MIP_UNIT, self.ctx.default_texture_unit):
+        for unit in (PROBE_UNIT, PROBE2_UNIT, PROBE_REST_UNIT, SCRATCH_UNIT, CUBE_MIP_UNIT,
+                     self.ctx.default_texture_unit):
             renderer.sky.use(unit)
         renderer.scene_pass.capturing = key
         try:

@@ -33,6 +33,7 @@ from engine.render.shadows import ShadowMaps
 from engine.render.sky import flat_cube, upload_cube
 from engine.render.targets import LevelStack, RenderTargets
 from engine.render.views import CAMERA_BLOCK_BYTES, LIGHTS_BLOCK_BYTES, View
+from engine.rules.probe_rules import ProbeBlend
 
 GL_SRGB8_ALPHA8 = 0x8C43
 TEXTURE_ANISOTROPY = 8.0
@@ -95,6 +96,11 @@ class RenderStats:
     virtual_lights: int = 0              # lights shining through mirrors and portals this frame
     virtual_lights_cut: int = 0          # ... that the limit or the view budget left out
     shadow_path: str = ""
+    # Mirrors and portals seen without a view of their own (cut by a budget, faded, past the
+    # depth limit, switched off), or partly faded, or an end view's pixels last frame's image
+    # did not hold, that showed the fallback (the probe's or the sky's reflection) this
+    # frame, in every tree: one per (parent view, surface).
+    reflection_fallbacks: int = 0
 
 
 def checker_look(texture: TextureData | None) -> tuple[float, tuple, tuple] | None:
@@ -159,6 +165,9 @@ class Renderer:
         self.sky = flat_cube(ctx, BACKGROUND)
         self.levels = LevelStack(ctx)   # the main view tree's: [0] the main view, then its reflection levels
         self.stats = RenderStats()
+        # Each mirror's and portal's fallback probes (probe_rules.surface_blend), by entity: the
+        # extract stage's, read by the view trees' composites.
+        self.surface_probes: dict[int, ProbeBlend] = {}
         self.exposure = 1.0
         self._antialias = "fxaa"
         self.texture_anisotropy = min(TEXTURE_ANISOTROPY, ctx.max_anisotropy)
@@ -205,7 +214,8 @@ class Renderer:
                   transparent_entity: int = 0, normal_map: TextureData | None = None,
                   emissive_map: TextureData | None = None,
                   metallic_roughness_map: TextureData | None = None, second_probe: int = 0,
-                  probe_blend: bool = False) -> InstanceBatch:
+                  probe_blend: bool = False, rest_probe: int = 0,
+                  mirrored: bool = False) -> InstanceBatch:
         """The batch of (mesh, albedo texture, normal map, emissive map, metallic-roughness
         map, the probe its instances sample; 0: none).  A transparent entity gets a batch of
         its own (``transparent_entity``): transparent things are drawn one by one, farthest
@@ -213,11 +223,14 @@ class Renderer:
         metallic-roughness map are uploaded linear (their texels are vectors and factors,
         not colours), so one image used both ways is two GPU textures."""
         # ``second_probe`` and ``probe_blend``: the instances blend two probes, or a probe and
-        # the sky, by per-instance weights (probe_rules.probe_blend; the PROBE_BLEND build).
-        key = (mesh.id, id(texture) if texture is not None else 0, (probe, second_probe, probe_blend),
+        # the sky, by per-instance weights (probe_rules.probe_blend; the PROBE_BLEND build);
+        # ``rest_probe``: a probe, not the sky, takes what the weights leave (PROBE_REST).
+        # ``mirrored``: instances whose model matrix has a negative determinant, drawn with the
+        # other winding (ScenePass), so they get batches of their own.
+        key = (mesh.id, id(texture) if texture is not None else 0, (probe, second_probe, probe_blend, rest_probe),
                transparent_entity,
                id(normal_map) if normal_map is not None else 0, id(emissive_map) if emissive_map is not None else 0,
-               id(metallic_roughness_map) if metallic_roughness_map is not None else 0)
+               id(metallic_roughness_map) if metallic_roughness_map is not None else 0, mirrored)
         batch = self.batches.get(key)
         if batch is None:
             for name, image in (("Material.texture", texture), ("Material.normal_map", normal_map),
@@ -241,8 +254,9 @@ class Renderer:
                     self._textures, ("normal", id(metallic_roughness_map)),
                     lambda: self._upload_texture(metallic_roughness_map, linear=True))
             batch.key = key
+            batch.mirrored = mirrored
             batch.probe = probe
-            batch.second_probe, batch.probe_blend = second_probe, probe_blend
+            batch.second_probe, batch.probe_blend, batch.rest_probe = second_probe, probe_blend, rest_probe
             batch.checker = checker_look(texture)
             batch.transparent = bool(transparent_entity)
             self._order_stale = True
@@ -275,7 +289,7 @@ class Renderer:
         self._order_stale = True
         self._note_dropped(batch.take_changed_box())
         batch.release()
-        mesh_id, texture_id, _, _, normal_map_id, emissive_map_id, metallic_roughness_id = batch.key
+        mesh_id, texture_id, _, _, normal_map_id, emissive_map_id, metallic_roughness_id, _ = batch.key
         self._release(self._meshes, mesh_id)
         if texture_id:
             self._release(self._textures, texture_id)

@@ -52,6 +52,7 @@ from engine.render.bindings import (
     NORMAL_UNIT,
     POINT_SHADOW_UNITS,
     PROBE2_UNIT,
+    PROBE_REST_UNIT,
     PROBE_UNIT,
     SCENE_CLIPS,
     SHADOW_ATLAS_UNIT,
@@ -63,6 +64,7 @@ from engine.render.bindings import (
     PassState,
     apply_pass_state,
     bind_uniform_block,
+    flip_front_face,
     set_front_face,
 )
 from engine.render.raw_gl import LayeredArrayTarget, LayeredCubeTarget, inspect_bound_target
@@ -92,6 +94,7 @@ REFLECTION_LEVEL = SceneOptions(clear=False, masked=True, sky=False, reflection_
 _PER_DRAW_UNIFORMS = ("masked", "sky_face_size", "has_albedo_map", "transparent",
                       "probe_face_size", "probe_position", "probe_box_min", "probe_box_max",
                       "probe2_face_size", "probe2_position", "probe2_box_min", "probe2_box_max",
+                      "probe_rest_face_size", "probe_rest_position", "probe_rest_box_min", "probe_rest_box_max",
                       "checker_cells", "checker_even", "checker_odd")
 _PER_PASS_UNIFORMS = 2  # the first two change with the pass; the rest with the batch (a view's node
 # index is its Camera block's: nothing is written per view)
@@ -149,7 +152,7 @@ class ScenePass:
     def program(self, variants: tuple[int, int, int] | None = None, invocations: int = 0,
                 layered: str = "", normal_mapped: bool = False, checker: bool = False,
                 material_maps: tuple[bool, bool] = (False, False), probe_blend: bool = False,
-                ambient_probes: bool = False) -> moderngl.Program:
+                ambient_probes: bool = False, probe_rest: bool = False) -> moderngl.Program:
         """The scene program for a batch of ``variants`` (None: mixed, switched per
         instance): plain, batched (``invocations`` > 0: the geometry shader's) or a one-pass
         cube-map capture (``layered`` "culled" or "naive"), with or without a normal map
@@ -159,7 +162,8 @@ class ScenePass:
         instead of sampled), and with or without each of the material maps ``material_maps``
         (emissive, metallic-roughness: ``EMISSIVE_MAP`` and ``METALLIC_ROUGHNESS_MAP`` builds,
         shaders/include/material_maps.glsl; a batch without them samples nothing for them),
-        built once.  After a shader hot
+        blending probes (``probe_blend``: ``PROBE_BLEND``) with a probe instead of the sky
+        taking the rest (``probe_rest``: ``PROBE_REST``, a curved object's own), built once.  After a shader hot
         reload the set-up is done again and the batches' vertex arrays are made again (the
         relinked program may read uniforms, samplers and vertex inputs the first build
         dropped)."""
@@ -174,7 +178,7 @@ class ScenePass:
             self._reloads_seen = reloads
         virtual = self.virtual_lights
         key = (invocations, layered, variants, normal_mapped, checker, material_maps, probe_blend, virtual,
-               ambient_probes)
+               ambient_probes, probe_rest)
         program = self._programs.get(key)
         if program is None:
             defines = {}
@@ -190,6 +194,8 @@ class ScenePass:
                 defines["METALLIC_ROUGHNESS_MAP"] = "1"
             if probe_blend:  # two probes and the sky by the instances' weights (shaders/include/probe.glsl)
                 defines["PROBE_BLEND"] = "1"
+                if probe_rest:  # a probe, not the sky, takes what the weights leave
+                    defines["PROBE_REST"] = "1"
             if virtual:  # light through mirrors and portals (shaders/include/virtual_lights.glsl)
                 defines["VIRTUAL_LIGHTS"] = "1"
             if ambient_probes:  # diffuse light from the probes' boxes too (shaders/include/ambient.glsl)
@@ -216,7 +222,8 @@ class ScenePass:
                 program["Views"].binding = VIEWS_BINDING
             # A build may not read every input (the linker drops what a variant never uses).
             for name, unit in (("albedo_map", ALBEDO_UNIT), ("sky_map", SKY_UNIT), ("node_map", NODE_UNIT),
-                               ("probe_map", PROBE_UNIT), ("probe2_map", PROBE2_UNIT), ("normal_map", NORMAL_UNIT),
+                               ("probe_map", PROBE_UNIT), ("probe2_map", PROBE2_UNIT),
+                               ("probe_rest_map", PROBE_REST_UNIT), ("normal_map", NORMAL_UNIT),
                                ("emissive_map", EMISSIVE_MAP_UNIT),
                                ("metallic_roughness_map", METALLIC_ROUGHNESS_UNIT),
                                ("shadow_atlas", SHADOW_ATLAS_UNIT), ("point_shadow0", POINT_SHADOW_UNITS[0]),
@@ -249,7 +256,7 @@ class ScenePass:
                 for probes in ambient:
                     batch.vao(self.program(batch.variants, invocations, "", batch.normal_map is not None,
                                            batch.checker is not None, _material_maps(batch), batch.probe_blend,
-                                           probes))
+                                           probes, bool(batch.rest_probe)))
         if reflections:
             if self._views_ubo is None:
                 self._views_ubo = self.ctx.buffer(reserve=VIEWS_BLOCK_BYTES)
@@ -274,7 +281,7 @@ class ScenePass:
                 continue
             program = self.program(batch.variants, invocations, layered, batch.normal_map is not None,
                                    batch.checker is not None, _material_maps(batch), batch.probe_blend,
-                                   self._ambient_probes)
+                                   self._ambient_probes, bool(batch.rest_probe))
             glo = program.glo
             uniforms = self._uniforms[glo]
             values = written.get(glo)
@@ -293,12 +300,15 @@ class ScenePass:
             probe2_size, lookup2 = 0, _NO_PROBE
             if batch.probe_blend:  # the second probe's unit (the sky where the blend is a probe and the sky)
                 probe2_size, lookup2 = self._bind_probe(batch.second_probe, PROBE2_UNIT, cubes)
+            rest_size, lookup_rest = 0, _NO_PROBE
+            if batch.rest_probe:  # the probe taking what the weights leave (a curved object's own)
+                rest_size, lookup_rest = self._bind_probe(batch.rest_probe, PROBE_REST_UNIT, cubes)
             for i in range(_PER_PASS_UNIFORMS):
                 if values[i] != per_pass[i] and uniforms[i] is not None:
                     uniforms[i].value = values[i] = per_pass[i]
             # The batch's own values: one tuple compared in C, and a uniform at a time only
             # where it differs from what this program last drew with.
-            own = (textured, batch.transparent, probe_size, *lookup, probe2_size, *lookup2,
+            own = (textured, batch.transparent, probe_size, *lookup, probe2_size, *lookup2, rest_size, *lookup_rest,
                    *(batch.checker or _NO_CHECKER))
             last = self._last_own.get(glo)
             if last != own:
@@ -308,7 +318,15 @@ class ScenePass:
                 self._last_own[glo] = own
             if before_draw is not None:
                 before_draw()
-            batch.draw(program)
+            if batch.mirrored:
+                # A negative determinant (a negative Transform.scale, or a mirrored parent):
+                # its front faces wind the other way on screen, so the view's winding is
+                # turned for its draw (its own batch: extract keys batches by it).
+                restore = flip_front_face(self.ctx)
+                batch.draw(program)
+                set_front_face(self.ctx, restore)
+            else:
+                batch.draw(program)
             stats.draw_calls += 1
             stats.instances += batch.count
 

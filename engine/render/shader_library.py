@@ -37,6 +37,11 @@ seconds, and rebuilds the programs that used a changed file.  A rebuild that fai
 the old program drawing and records the error (``ShaderLibrary.errors``, file:line as
 above); ``poll`` says each change once: one line for the programs rebuilt, one message for
 the errors (each distinct error line once, however many variants of a program share it).
+A variant first needed while an edit does not build (a batch that comes after the edit:
+new defines, a new material slot) is built from the files as they were before the edit
+(the last contents every program built from), so the frame draws it as the old program
+would and the game goes on; it is recorded in ``errors`` and said by the next ``poll``, and
+rebuilt from the files like any other once they are fixed.
 One that builds is swapped in under the old program's own GL name: the new shaders are
 attached to the old program object and it is relinked, with each vertex input
 bound to its old location, so every vertex array, cached program and uniform a pass holds
@@ -227,13 +232,14 @@ def _decode(data: bytes, name: str, where: str) -> str:
 
 
 def load_source(name: str, defines: dict[str, str] | None = None, *, root: Path | None = None,
-                files: SourceFiles | None = None) -> str:
+                files: SourceFiles | None = None, contents: dict[str, bytes] | None = None) -> str:
     """The full text of shader file ``name`` (relative to ``root``, the ``shaders`` package by
     default) with includes resolved, ``#line`` directives naming each file's own lines, and
-    defines added; ``files`` collects the file of each source-string number."""
+    defines added; ``files`` collects the file of each source-string number; ``contents``:
+    bytes to use instead of a file's own (a library's last good copies)."""
     root = root or shader_dir()
     files = files if files is not None else SourceFiles()
-    text = _expand(name, (), root, files)
+    text = _expand(name, (), root, files, contents or {})
     first, _, rest = text.partition("\n")
     if first.strip() != _VERSION:
         raise ShaderError(f"shader {name!r}: must start with '{_VERSION}' (the 4.1 baseline)")
@@ -254,12 +260,13 @@ def _line(line: int, number: int) -> str:
     return f"#line {number * LINE_STRIDE + line}"
 
 
-def _expand(name: str, stack: tuple[str, ...], root: Path, files: SourceFiles) -> str:
+def _expand(name: str, stack: tuple[str, ...], root: Path, files: SourceFiles,
+            contents: dict[str, bytes] | None = None) -> str:
     if name in stack:
         raise ShaderError(f"shader include cycle: {' -> '.join(stack + (name,))}")
     where = f" (included from {stack[-1]!r})" if stack else ""
     try:
-        data = _read_bytes(root / name)
+        data = contents[name] if contents and name in contents else _read_bytes(root / name)
     except _NotRegularFile as exc:
         raise ShaderError(f"shader file {name!r} in {root}{where} is {exc.kind}, not a regular file") from None
     except (FileNotFoundError, NotADirectoryError):
@@ -278,7 +285,7 @@ def _expand(name: str, stack: tuple[str, ...], root: Path, files: SourceFiles) -
             continue
         included = f"include/{match.group(1)}"
         out.append(_line(1, files.number(included)))
-        out.append(_expand(included, stack + (name,), root, files))
+        out.append(_expand(included, stack + (name,), root, files, contents))
         out.append(_line(index + 1, number))
     return "\n".join(out)
 
@@ -300,6 +307,8 @@ class ShaderLibrary:
         self._inputs: dict[ProgramKey, dict[str, int]] = {}  # vertex input locations, kept across rebuilds
         self.errors: dict[ProgramKey, str] = {}          # programs whose edited files do not build
         self.reloads = 0                                  # programs rebuilt by poll
+        self._good: dict[str, bytes] = {}                # file -> the last contents every program built from
+        self._news: list[str] = []                       # said by the next poll (variants built from _good)
         self._next_poll = 0.0
         self._gl: _RelinkGL | None = None
 
@@ -309,17 +318,38 @@ class ShaderLibrary:
         program = self._programs.get(key)
         if program is None:
             files = SourceFiles()
-            program = self._build(key, files)
+            try:
+                program = self._build(key, files)
+            except ShaderError as exc:
+                program = self._build_before_the_edit(key, files, exc)
             self._programs[key] = program
-            self._uses[key] = set(files.names[1:])
+            self._uses[key] = self._uses.get(key, set()) | set(files.names[1:])
         return program
 
-    def _build(self, key: ProgramKey, files: SourceFiles) -> moderngl.Program:
+    def _build_before_the_edit(self, key: ProgramKey, files: SourceFiles, error: ShaderError) -> moderngl.Program:
+        """A new variant whose build failed: built from the files as they were before an
+        edit that does not build (``_good``), when the failure reached an edited file;
+        otherwise (a first build that fails, a missing feature) the error stands."""
+        edited = {name for name, good in self._good.items() if self._seen.get(name, (None, None, None))[2] != good}
+        if not edited & set(files.names[1:]):
+            raise error
+        kept = SourceFiles()
+        program = self._build(key, kept, contents={name: self._good[name] for name in edited})
+        self._uses[key] = set(files.names[1:]) | set(kept.names[1:])
+        self.errors[key] = f"{error} (a variant first needed since the edit: built from the files before it)"
+        names = ", ".join(f for f in key[:3] if f)
+        self._news.append(f"shader error: a new variant of ({names}) is built from the files before the edit, "
+                          f"which does not build: {_reasons(error)[0] if _reasons(error) else error}")
+        return program
+
+    def _build(self, key: ProgramKey, files: SourceFiles, contents: dict[str, bytes] | None = None) -> moderngl.Program:
         """A new program of ``key``; ``files`` gets the files it was built from (also those
-        read before a failure, so a fix to any of them is seen)."""
+        read before a failure, so a fix to any of them is seen); ``contents``: bytes to build
+        some files from instead of their own (``_build_before_the_edit``)."""
         vertex, fragment, geometry, defines = key
         try:  # one numbering for every stage, so a log line names one file
-            sources = {stage: load_source(name, dict(defines), root=self.root, files=files) if name else None
+            sources = {stage: load_source(name, dict(defines), root=self.root, files=files, contents=contents)
+                       if name else None
                        for stage, name in (("vertex_shader", vertex), ("fragment_shader", fragment),
                                            ("geometry_shader", geometry))}
         finally:
@@ -340,6 +370,9 @@ class ShaderLibrary:
     def _remember_file(self, name: str) -> None:
         if name not in self._seen:
             self._seen[name] = self._read(name)
+            contents = self._seen[name][2]
+            if isinstance(contents, bytes):
+                self._good.setdefault(name, contents)
 
     def _read(self, name: str) -> tuple:
         """(mtime_ns, size, contents) of file ``name``: its bytes, or for something that is
@@ -379,10 +412,11 @@ class ShaderLibrary:
         (the window shell calls it each frame).  Returns what ``reload`` says, so each change
         is reported once."""
         now = time.monotonic() if now is None else now
+        news, self._news = self._news, []
         if now < self._next_poll:
-            return []
+            return news
         self._next_poll = now + POLL_INTERVAL
-        return self.reload(self.changed_files())
+        return news + self.reload(self.changed_files())
 
     def reload(self, changed: set[str]) -> list[str]:
         """Rebuild every program built from one of ``changed``; a program whose new build
@@ -408,6 +442,11 @@ class ShaderLibrary:
             self.reloads += 1
             rebuilt.append(key)
             edited |= touched
+        broken = set().union(*(self._uses[key] for key in failed)) if failed else set()
+        for name in changed - broken:  # every program built from it builds: its contents are good now
+            contents = self._seen.get(name, (None, None, None))[2]
+            if isinstance(contents, bytes):
+                self._good[name] = contents
         messages = []
         if failed:
             reasons = list(dict.fromkeys(line for lines in failed.values() for line in lines))

@@ -165,6 +165,10 @@ class SurfaceTable:
         # portal: its partner; -1: not in the table), which that view cannot see.
         self.exit_rows = np.array([row_of.get(e, -1) for e in self.exit_entities.tolist()], np.int64)
         self.is_mirror = np.array([s.kind == "mirror" for s in states], bool)
+        # The surfaces that show a fallback (the probe's or the sky's reflection, drawn by the
+        # composite) where they are seen without a view of their own: every mirror, switched
+        # off or not, and every enabled portal (a closed one keeps its closed look).
+        self.falls_back = self.is_mirror | self.enabled
         # The kind a view through each surface gains, and the layers each shows (a view shows
         # the layers every surface of its chain shows).
         self.kind_bit = np.where(self.is_mirror, VIEW_MIRROR, VIEW_PORTAL).astype(np.int64)
@@ -210,6 +214,8 @@ class SurfaceTable:
         self._plans: dict[tuple, tuple[np.ndarray | None, tuple[Candidates | None, int]]] = {}  # plan's, least
         # recently used first
         self._ends: dict[tuple[int, int], tuple[np.ndarray, np.ndarray, list[bool]]] = {}
+        self._unviewed: dict[tuple, tuple[np.ndarray | None, tuple[np.ndarray, np.ndarray]]] = {}  # unviewed's
+        self._faded: tuple | None = None  # the last cull's pairs faded out, and for what (cull)
         # The resolution scale every surface shares (None: they differ; a level takes its largest).
         self.one_scale = float(self.scale[0]) if count and (self.scale == self.scale[0]).all() else None
 
@@ -286,18 +292,22 @@ class SurfaceTable:
         return found[1], found[2]
 
     def _seen_bias(self, depth: int, depth_cap: int, ends: np.ndarray | None,
-                   drawn: np.ndarray | None) -> np.ndarray:
+                   drawn: np.ndarray | None, fallback: bool = False) -> np.ndarray:
         """(S + 1, S): what the cull adds to each (parent, surface) facing value, by the
         parent's exit row (the last row: a view looking out of nothing): 0 where the surface
         may be seen at ``depth`` (enabled, within its limits or one of ``ends``, drawn by
-        the view: ``drawn``, None for all), -inf where not, and on the surface the view
+        the view: ``drawn``, None for all; with ``fallback``, any surface that
+        ``falls_back``, whatever its limits), -inf where not, and on the surface the view
         looks out of.  Kept per depth, cap, ``ends`` and ``drawn`` (arrays the table and
         the view tree keep while nothing changes)."""
-        key = (depth, depth_cap, id(ends), id(drawn))
+        key = (depth, depth_cap, id(ends), id(drawn), fallback)
         found = self._biases.get(key)
         if found is None or found[0] is not ends or found[1] is not drawn:
-            allowed = self._within(depth, depth_cap)[0] if ends is None else self._with_ends(depth, depth_cap,
-                                                                                              ends)[0]
+            if fallback:
+                allowed = self.falls_back
+            else:
+                allowed = self._within(depth, depth_cap)[0] if ends is None else self._with_ends(depth, depth_cap,
+                                                                                                  ends)[0]
             if drawn is not None:
                 allowed = allowed & drawn
             count = len(self.states)
@@ -309,8 +319,8 @@ class SurfaceTable:
         return found[2]
 
     def cull(self, parents: LevelRows, depth: int, root_proj: np.ndarray, root_size: tuple[int, int],
-             depth_cap: int, ends: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray,
-                                                                     np.ndarray | None]:
+             depth_cap: int, ends: np.ndarray | None = None,
+             fallback: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None]:
         """Each (parent, surface) where the parent view can see the surface, with the screen
         rectangle where it can show: enabled and within its depth, not the surface the view
         looks out of, facing the view's eye (a mirror facing away shows nothing, as the
@@ -320,7 +330,9 @@ class SurfaceTable:
         major, and the fade weights of the pairs seen before the fades (None: no surface
         fades; a pair faded out, weight 0, is not returned).  With ``ends`` (a mask of
         surfaces), the pairs of those surfaces the depth limits cut are kept too: the end
-        views (``engine/render/end_images.py``).
+        views (``engine/render/end_images.py``).  With ``fallback`` (``unviewed``), every
+        surface that ``falls_back`` is tested whatever its limits, and the pairs faded out
+        are returned too (their weight 0).
 
         Every (parent x surface) pair goes through the same few array operations, the
         whole grid at once: in a frame, after the rasteriser has run, each numpy call costs
@@ -335,7 +347,7 @@ class SurfaceTable:
         count = len(parents.data)
         if not count or not len(self.states):
             return _NONE, _NONE, _NO_RECTS, None
-        if ends is None and not any(self._within(depth, depth_cap)[2]):
+        if ends is None and not fallback and not any(self._within(depth, depth_cap)[2]):
             return _NONE, _NONE, _NO_RECTS, None  # nothing enabled may be seen this deep
         data = parents.data
         # First what needs no corners: facing the view's eye, and allowed (enabled, within
@@ -344,7 +356,7 @@ class SurfaceTable:
         drawn = self._drawn_by(data[:, 49])
         each_parent = drawn is not None and drawn.ndim == 2  # parents that draw different surfaces
         facing = data[:, 0:4] @ self.planes_t                                        # P x S
-        facing += self._seen_bias(depth, depth_cap, ends, None if each_parent else drawn).take(
+        facing += self._seen_bias(depth, depth_cap, ends, None if each_parent else drawn, fallback).take(
             data[:, 48].astype(np.int64), axis=0)
         seen = facing > 0.0
         if each_parent:
@@ -373,8 +385,47 @@ class SurfaceTable:
         if not self.fading:
             return p, s, rects, None
         fade = self.fade_weights(parents.eye[p], s)
+        if fallback:
+            return p, s, rects, fade
         kept = fade > 0.0  # faded out: no view at all (the weights of the pairs kept say how many went)
+        # The pairs faded out, for ``unviewed`` next (their fallbacks: no second cull for them).
+        self._faded = (parents.data, depth, depth_cap, ends, p[~kept], s[~kept])
         return p[kept], s[kept], rects[kept], np.where(kept, fade, 0.0)
+
+    def unviewed(self, parents: LevelRows, depth: int, root_proj: np.ndarray, root_size: tuple[int, int],
+                 depth_cap: int, ends: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """The (parent, surface) pairs a level shows without a view of their own, as parent
+        rows and surface rows: surfaces that ``falls_back`` seen by the parents (the cull's
+        tests) but cut at ``depth`` by their limits or the cap (not an end view of ``ends``),
+        switched off (a mirror), or faded out (weight 0).  Their pixels get the fallback
+        (``engine/render/mirror_passes.py``).  No array work when nothing can be cut here
+        and nothing fades (a level with every surface it sees within its limits)."""
+        viewable = self._within(depth, depth_cap)[0] if ends is None else self._with_ends(depth, depth_cap, ends)[0]
+        cut = self.falls_back & ~viewable
+        if not len(parents.data) or (not cut.any() and not self.fading):
+            return _NONE, _NONE
+        # Kept like the plans (``plan``): the same parent rows (a still camera, a probe face)
+        # give the same pairs, for the price of comparing bytes.
+        key = (parents.data.tobytes(), root_proj.tobytes(), depth, depth_cap, root_size, id(ends))
+        found = self._unviewed.pop(key, None)
+        if found is not None and found[0] is ends:
+            self._unviewed[key] = found
+            return found[1]
+        faded = self._faded
+        if not cut.any() and faded is not None and faded[0] is parents.data and faded[1:3] == (depth, depth_cap) \
+                and faded[3] is ends:
+            # Nothing cut here: the pairs without a view are those the plan's cull just faded out.
+            pairs = (faded[4], faded[5])
+        else:
+            p, s, _, fade = self.cull(parents, depth, root_proj, root_size, depth_cap, ends, fallback=True)
+            unviewed = cut[s] if fade is None else cut[s] | (fade <= 0.0)
+            pairs = (p[unviewed], s[unviewed])
+        for array_ in pairs:
+            array_.flags.writeable = False  # shared by the frames that find them again
+        if len(self._unviewed) >= PLANS_KEPT:
+            del self._unviewed[next(iter(self._unviewed))]
+        self._unviewed[key] = (ends, pairs)
+        return pairs
 
     def fade_weights(self, eyes: np.ndarray, s: np.ndarray) -> np.ndarray:
         """Each surface ``s`` seen from ``eyes``: the product of its distance fade (by the

@@ -22,7 +22,12 @@ and portals:
               read, render, level after level; predicted: every level planned first, back
               to back, then claimed and rendered in one run);
   5. composite, deepest level first: blend each level's views into their surfaces' pixels
-              one level up (one instanced draw per level and composite variant).
+              one level up (one instanced draw per level and composite variant), after the
+              level's fallbacks: a surface seen with no view of its own (cut by a budget,
+              faded out, past the depth limits without an end image, a mirror switched off)
+              shows the probe's or the sky's reflection at its reflect rate, tint and
+              roughness (``MirrorPasses.draw_fallbacks``), as does the faded share of a partly
+              faded mirror and an end view's pixel its image does not hold.
 
 Levels are the size of the root's targets (times the largest resolution_scale of their
 surfaces), so memory is bounded by (levels x one root image), however many surfaces.
@@ -48,6 +53,7 @@ from engine.render.end_images import EndImages
 from engine.render.mirror_passes import (
     Claims,
     Composite,
+    Fallback,
     MirrorPasses,
     PreparedComposites,
     give_samples_queries,
@@ -174,6 +180,7 @@ class _Level:
     composite: list[ReflectionView] | None = None  # what it composites into the level above (None: no
                                                    # views, only claims)
     prepared: PreparedComposites | None = None
+    pixels: list[int] | None = None               # exact: each candidate's claimed pixels
 
 
 class ViewTree:
@@ -218,6 +225,10 @@ class ViewTree:
         scale = self._level_scale(1)
         candidates, result.faded = surfaces.plan(rows, 1, *planning, 1, settings.depth_cap, root.hide,
                                                  ends=_ends_at(ends, 1), scale=scale)
+        # Each level's fallbacks (the surfaces its views see that get no view of their own),
+        # by the level they are drawn into.
+        fallbacks: dict[int, list[Fallback]] = {}
+        self._unviewed(fallbacks, surfaces, rows, [root_node], 0, root_proj, root, settings.depth_cap, ends)
         candidates, end_seers = self._end_seers(candidates, seers)
         exact = self._waits_for_counts(settings)
         result.visibility = "exact" if exact else "predicted"
@@ -246,6 +257,12 @@ class ViewTree:
                 grown = set(grow)
                 for at, child in enumerate(children):
                     child.unseen = at not in grown
+                # A view drawn unseen gets no views of its surfaces this frame: should it show
+                # now, they show their fallback (every surface it sees, as if past every limit).
+                unseen = [at for at in range(len(children)) if at not in grown]
+                self._unviewed(fallbacks, surfaces, chosen.select(np.asarray(unseen, np.int64)).rows,
+                               [children[at] for at in unseen], level + 1, root_proj, root, 0, None)
+            self._fallbacks_of_level(fallbacks, surfaces, step, keep, is_end, children, level, exact)
             if end_rows:
                 chosen_ends = candidates.select(np.asarray(end_rows, np.int64))
                 step.end_views, step.ended = self._level_nodes(surfaces, chosen_ends, nodes, level + 1, root.hide)
@@ -253,6 +270,8 @@ class ViewTree:
                 step.end_matrices = [result.views[end_seers[i]].view.view * inverse_carry[s] for i, s in
                                      zip(end_rows, chosen_ends.surface.tolist(), strict=True)]
                 result.end_views.extend(step.ended)
+                fallbacks.setdefault(level, []).extend(  # the end views' pixels their images do not hold
+                    self._fallback(node.parent, node.surface, end=node.index) for node in step.ended)
             if not children and not step.ended:
                 break
             if children:
@@ -282,6 +301,7 @@ class ViewTree:
                 scale = self._level_scale(level + 1)
                 candidates, faded = surfaces.plan(rows, level + 1, *planning, next_index, settings.depth_cap,
                                                   root.hide, ends=_ends_at(ends, level + 1), scale=scale)
+                self._unviewed(fallbacks, surfaces, rows, nodes, level, root_proj, root, settings.depth_cap, ends)
                 result.faded += faded
                 candidates, end_seers = self._end_seers(candidates, seers)
         for step in steps if not exact else ():  # predicted: the whole tree, planned, drawn in one run
@@ -294,8 +314,15 @@ class ViewTree:
             # Reaching the cap is reported: how many views the surfaces' own limits still allowed
             # (counted when asked: TreeResult.capped).
             result.count_capped = lambda: len(surfaces.cull(rows, deepest + 1, root_proj, root.size, MAX_TREE_DEPTH)[0])
-        for depth in range(level, 0, -1):
-            self.passes.composite_level(levels[depth - 1], levels[depth], composites[depth - 1])
+        # Deepest first: a level's fallbacks, then the views of the level below composited
+        # over it (a partly faded view's over its fallback).
+        for depth in range(level, -1, -1):
+            if fallbacks.get(depth):
+                child = steps[depth].targets if depth < len(steps) else None
+                self.passes.draw_fallbacks(levels[depth], child,
+                                           self.passes.prepare_fallbacks(fallbacks[depth], levels[depth].size))
+            if depth < level:
+                self.passes.composite_level(levels[depth], levels[depth + 1], composites[depth])
         if self.ends is not None:
             if surfaces.has_end_images:
                 # The surfaces this image shows (an unseen view's may well not be in it).
@@ -314,7 +341,7 @@ class ViewTree:
         keep), which of those get views below them (all), and which end views have pixels;
         each a list of rows of ``step.candidates``."""
         self._claim(surfaces, step)
-        pixels = self.passes.claimed_pixels(step.queries)
+        pixels = step.pixels = self.passes.claimed_pixels(step.queries)
         keep = self._within_budgets(surfaces, step.candidates,
                                     [0 if end else n for n, end in zip(pixels, is_end, strict=True)],
                                     settings, result, level, screen)
@@ -348,6 +375,41 @@ class ViewTree:
         stats.pixels_spent += drawn
         step.conditions = [step.queries[i] for i in keep]
         return keep, grow, [i for i, end in enumerate(is_end) if end], claim_keys
+
+    @staticmethod
+    def _fallback(parent: ReflectionView, surface: SurfaceState, share: float = 1.0, end: int = -1) -> Fallback:
+        """The fallback of ``surface`` in ``parent``'s pixels (``Fallback``)."""
+        view = parent.view
+        rect = view.scissor if parent.level and view.scissor is not None else (0, 0, *view.size)
+        return Fallback(view, parent.index, rect, surface_look(surface), share, end)
+
+    def _unviewed(self, fallbacks: dict[int, list[Fallback]], surfaces: SurfaceTable, rows: LevelRows,
+                  nodes: list[ReflectionView], level: int, root_proj: np.ndarray, root: View, depth_cap: int,
+                  ends: tuple[np.ndarray, int] | None) -> None:
+        """The fallbacks of the surfaces the views ``nodes`` (``rows``, of ``level``) see but
+        that the next level plans no view for (``SurfaceTable.unviewed``: past their depth
+        limits, switched off, faded out; a ``depth_cap`` of 0: all of them)."""
+        p, s = surfaces.unviewed(rows, level + 1, root_proj, root.size, depth_cap, _ends_at(ends, level + 1))
+        if len(p):
+            states = surfaces.states
+            fallbacks.setdefault(level, []).extend(self._fallback(nodes[i], states[j])
+                                                   for i, j in zip(p.tolist(), s.tolist(), strict=True))
+
+    def _fallbacks_of_level(self, fallbacks: dict[int, list[Fallback]], surfaces: SurfaceTable, step: _Level,
+                            keep: list[int] | np.ndarray, is_end: list[bool], children: list[ReflectionView],
+                            level: int, exact: bool) -> None:
+        """The fallbacks of a level's candidates: those with pixels the budgets cut (their
+        whole reflection) and the views kept partly faded (the faded share)."""
+        found = [self._fallback(child.parent, child.surface, 1.0 - child.fade) for child in children
+                 if child.fade < 1.0]
+        if exact and step.pixels is not None and len(keep) < sum(1 for n in step.pixels if n):
+            kept = set(np.asarray(keep).tolist())
+            candidates, states, parents = step.candidates, surfaces.states, step.parents
+            found += [self._fallback(parents[p], states[s]) for i, (n, end, p, s) in enumerate(zip(
+                step.pixels, is_end, candidates.parent.tolist(), candidates.surface.tolist(), strict=True))
+                if n and not end and i not in kept]
+        if found:
+            fallbacks.setdefault(level, []).extend(found)
 
     def _waits_for_counts(self, settings: TreeSettings) -> bool:
         """Whether the levels read this frame's claim counts (the CPU waits for the GPU once

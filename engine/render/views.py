@@ -126,9 +126,16 @@ class PlannedView(View):
 
 def camera_view(world_matrix: glm.mat4, fov_y_deg: float, near: float, far: float,
                 size: tuple[int, int], name: str = "main") -> View:
-    """The view of a camera whose model-to-world matrix is ``world_matrix`` (looks down -Z)."""
+    """The view of a camera whose model-to-world matrix is ``world_matrix`` (looks down -Z).
+    A matrix that mirrors (a camera under a parent with a negative scale: a negative
+    determinant) has its X axis turned back first, as game engines' cameras ignore a
+    mirroring in their transform: the camera looks the same way with the same up, its
+    image is not mirrored and its front faces wind as any view's (else every face would be
+    culled as a back face: no floor, no mirror)."""
     w, h = size
     proj = glm.perspective(glm.radians(fov_y_deg), w / max(h, 1), near, far)
+    if glm.determinant(glm.mat3(world_matrix)) < 0.0:
+        world_matrix = world_matrix * glm.scale(glm.vec3(-1.0, 1.0, 1.0))
     return View(view=glm.inverse(world_matrix), proj=proj, eye=glm.vec3(world_matrix[3]), size=size, name=name)
 
 

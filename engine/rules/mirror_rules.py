@@ -64,9 +64,10 @@ def mirror_mesh(mirror: Mirror, mesh: Mesh, normal_map: bool = False) -> MirrorM
 
 @world_invariant(Mirror, MeshRef, Material)
 def check_mirror_mesh(world: World, entity: int, joining: Any = None, mesh: Mesh | None = None,
-                      normal_map: Any = None) -> None:
+                      normal_map: Any = None, **_other: Any) -> None:
     """Refuse ``entity`` as a mirror when its mesh (``mesh``: a replacement about to be set)
-    or, with a normal map (``normal_map``: one about to be set), its UVs cannot make one."""
+    or, with a normal map (``normal_map``: one about to be set), its UVs cannot make one
+    (``_other``: values about to be set that other rules check)."""
     held = {kind: world.try_get(entity, kind) if world.exists(entity) else None for kind in (Mirror, MeshRef, Material)}
     if joining is not None:
         held[type(joining)] = joining

@@ -7,15 +7,18 @@ Sampling.  An object samples a probe when it is ``Reflective("cube")`` or ``Refr
 (glass refracts what the probe saw behind it): ``samples_a_probe``, the one definition
 (``probe_samplers`` finds them all).  It samples:
   - its own probe, when it has a ``ReflectionProbe`` component;
+  - else the probes whose influence boxes hold its position, blended by weight
+    (``probe_blend``: each box's weight falls off to 0 over its ``blend_distance`` inside its
+    walls; the MAX_BLENDED_PROBES strongest are sampled, their weights normalised only when
+    they add up to more than 1, and what is left of 1 is the sky's); when its mesh is not
+    flat, what is left is its own probe's instead (below);
   - else, when its mesh is not flat, a probe of its own at its bounding box's centre (made
     by the probes stage; the chrome-sphere case: material detection as in the OpenGL 4
     course chapter "Texture Effects": a flat reflective mesh is a planar mirror, any other
     a cube map);
-  - else the probes whose influence boxes hold its position, blended by weight
-    (``probe_blend``: each box's weight falls off to 0 over its ``blend_distance`` inside its
-    walls; the MAX_BLENDED_PROBES strongest are sampled, their weights normalised when they
-    add up to more than 1, and what is left of 1 is the sky);
   - else nothing: it reflects the sky.
+A mirror or portal seen with no view of its own shows the boxes' blend at its centre, the sky
+taking the rest (``surface_blend``, the reflection fallback).
 A probe is known by the entity that owns it (the ReflectionProbe's, or the object's own).
 ``probe_for`` is the strongest of them: the one an object is said to sample.
 
@@ -113,15 +116,24 @@ MAX_BLENDED_PROBES = 2  # probes an object blends at most (two cube samplers: GL
 @dataclass(frozen=True)
 class ProbeBlend:
     """What an object's cube-map lookups read: ``probes`` (owners, the strongest first, at
-    most MAX_BLENDED_PROBES) with their ``weights`` (the same order; their sum is at most 1
-    and the rest, ``sky``, is the sky's).  ``NO_PROBE``: the sky alone."""
+    most MAX_BLENDED_PROBES) with their ``weights`` (the same order; their sum is at most 1).
+    What they leave of 1 (``left``) is the sky's, or, with ``rest``, that probe's: a curved
+    object's own automatic probe where influence boxes hold it only in part.  ``NO_PROBE``:
+    the sky alone."""
 
     probes: tuple[int, ...] = ()
     weights: tuple[float, ...] = ()
+    rest: int = 0  # who takes what the weights leave: 0 the sky, else the owner of a probe
+
+    @property
+    def left(self) -> float:
+        """What the weights leave of 1 (the sky's, or ``rest``'s)."""
+        return max(0.0, 1.0 - sum(self.weights))
 
     @property
     def sky(self) -> float:
-        return max(0.0, 1.0 - sum(self.weights))
+        """The sky's weight."""
+        return self.left if not self.rest else 0.0
 
     @property
     def blended(self) -> bool:
@@ -149,20 +161,38 @@ def probe_weight(position: glm.vec3 | Sequence[float] | np.ndarray, centre: glm.
 
 
 def probe_blend(world: World, entity: int) -> ProbeBlend:
-    """The probes ``entity`` samples and their weights (the module docstring's rule): its own
-    probe alone, or the MAX_BLENDED_PROBES influence boxes that weigh most at its position
-    (ties: the nearest centre first), weights w_i normalised as w_i / max(1, sum w) (Bevy's
-    and HDRP's normalisation: where the boxes overlap the weights share 1 between them;
-    where a lone box falls off, the sky takes the rest), or ``NO_PROBE``.  Continuous in the
-    position while at most MAX_BLENDED_PROBES boxes weigh more than 0 there."""
+    """The probes ``entity`` samples and their weights (the module docstring's rule): a
+    ReflectionProbe of its own alone, or the MAX_BLENDED_PROBES influence boxes that weigh
+    most at its position (ties: the nearest centre first), weights w_i normalised as
+    w_i / max(1, sum w) (Bevy's and HDRP's normalisation: only where the boxes' weights add
+    up to more than 1 do they share 1 between them; where they fall short, as in a lone
+    box's falloff, the rest is the sky's), or ``NO_PROBE``.  A curved object with an
+    automatic probe blends the boxes that hold it the same way, its own probe taking the
+    rest in place of the sky (its own probe alone outside every box): so it crosses a box's
+    wall without a pop.  Continuous in the position while at most MAX_BLENDED_PROBES boxes
+    weigh more than 0 there."""
     if not samples_a_probe(world, entity):
         return NO_PROBE
-    if world.has(entity, ReflectionProbe) or has_own_probe(world, entity):
+    if world.has(entity, ReflectionProbe):
         return ProbeBlend((entity,), (1.0,))
     transform = world.try_get(entity, Transform)
+    own = has_own_probe(world, entity)
     if transform is None:
-        return NO_PROBE
-    position = np.array(transform.world[3].xyz)
+        return ProbeBlend((entity,), (1.0,)) if own else NO_PROBE
+    boxes = box_blend(world, transform.world[3].xyz)
+    if not own:
+        return boxes
+    if not boxes.probes:
+        return ProbeBlend((entity,), (1.0,))
+    return boxes if boxes.left <= 0.0 else ProbeBlend(boxes.probes, boxes.weights, entity)
+
+
+def box_blend(world: World, position: glm.vec3 | Sequence[float] | np.ndarray) -> ProbeBlend:
+    """The influence boxes' blend at ``position`` (``probe_blend``'s rule for an object with
+    no probe of its own): the MAX_BLENDED_PROBES boxes that weigh most there (ties: the
+    nearest centre first), normalised only when their weights add up to more than 1, the
+    sky taking the rest; ``NO_PROBE`` where no box holds it."""
+    position = np.array(tuple(position), np.float64)
     found = []
     for owner, (probe, probe_t) in world.query(ReflectionProbe, Transform):
         if probe.influence is None:
@@ -177,6 +207,51 @@ def probe_blend(world: World, entity: int) -> ProbeBlend:
     kept = found[:MAX_BLENDED_PROBES]
     scale = 1.0 / max(1.0, sum(weight for *_, weight in kept))
     return ProbeBlend(tuple(owner for _, _, owner, _ in kept), tuple(weight * scale for *_, weight in kept))
+
+
+def surface_point(state: SurfaceState) -> np.ndarray:
+    """Where a mirror's or portal's fallback reflection is looked up from (its probes'
+    weights, ``surface_blend``): a mirror's centre; for a portal, its centre carried through
+    the pair, beside the partner, where the view it stands for would look out."""
+    centre = np.append(np.asarray(state.corners, np.float64)[:, :3].mean(axis=0), 1.0)
+    if state.kind == "portal":
+        centre = np.array(state.carry.to_list(), np.float64).T @ centre
+    return centre[:3]
+
+
+def surface_blend(world: World, state: SurfaceState) -> ProbeBlend:
+    """The probes (and weights) of a mirror's or portal's fallback: what its surface shows
+    where it has no view of its own (cut by the view budget, faded out, past the depth limit,
+    a mirror switched off): the influence boxes' blend at ``surface_point`` (``box_blend``),
+    else the sky."""
+    return box_blend(world, surface_point(state))
+
+
+class SurfaceProbes:
+    """Every mirror's and portal's ``surface_blend``, by entity, worked out again only for
+    surfaces that changed (a new ``SurfaceState``) or when a probe with an influence box came,
+    went, moved or changed: a still frame compares a few tuples."""
+
+    def __init__(self) -> None:
+        self._probes: tuple = ()
+        self._states: dict[int, SurfaceState] = {}
+        self.blends: dict[int, ProbeBlend] = {}
+
+    def update(self, world: World, states: Iterable[SurfaceState]) -> dict[int, ProbeBlend]:
+        """The blends of ``states`` (this frame's surfaces); the same dict while nothing changed."""
+        probes = tuple((owner, tuple(probe.influence), probe.blend_distance, tuple(probe_t.world[3].xyz))
+                       for owner, (probe, probe_t) in world.query(ReflectionProbe, Transform)
+                       if probe.influence is not None)
+        states = {state.entity: state for state in states}
+        if probes == self._probes and states.keys() == self._states.keys() and all(
+                state is self._states[entity] for entity, state in states.items()):
+            return self.blends
+        again = probes != self._probes
+        self.blends = {entity: self.blends[entity] if not again and self._states.get(entity) is state
+                       and entity in self.blends else surface_blend(world, state)
+                       for entity, state in states.items()}
+        self._probes, self._states = probes, states
+        return self.blends
 
 
 def probe_for(world: World, entity: int) -> int:

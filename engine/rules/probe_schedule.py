@@ -40,6 +40,9 @@ class ProbeState:
     frames: int = 0
     requests_seen: int = 0  # settings.requests when last looked at (ReflectionProbe.request)
     waiting: int = 0        # frames its due capture has waited for the time budget (it goes sooner)
+    # The frame (``frames``) each face not yet drawn was first asked for: under a view budget
+    # the faces that have waited longest go first, so none waits forever.
+    asked_at: dict[int, int] = field(default_factory=dict)
 
     def ask(self, faces: Iterable[int], reason: str) -> None:
         """Faces to capture, and why."""
@@ -47,6 +50,12 @@ class ProbeState:
         if faces:
             self.pending |= faces
             self.why.setdefault(reason, set()).update(faces)
+            for face in faces:
+                self.asked_at.setdefault(face, self.frames)
+
+    def oldest_first(self, faces: Iterable[int]) -> list[int]:
+        """``faces`` in the order a budget draws them: longest waiting first, then by number."""
+        return sorted(faces, key=lambda face: (self.asked_at.get(face, self.frames), face))
 
     def take(self, faces: frozenset[int]) -> dict[str, frozenset[int]]:
         """``faces`` leave the waiting set (due this frame); the reasons they waited for."""
@@ -65,6 +74,8 @@ class ProbeState:
         """The captures drew ``faces`` of this probe."""
         self.captures += 1
         self.faces_captured += len(faces)
+        for face in faces:
+            self.asked_at.pop(face, None)
 
 
 class ProbeStates(dict):

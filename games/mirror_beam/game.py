@@ -28,7 +28,7 @@ from typing import Any
 
 from pyglm import glm
 
-from components import Camera, Emissive, Material, MeshRef, Mirror, Transform, look_rotation
+from components import Bloom, Camera, Emissive, Material, MeshRef, Mirror, Tonemap, Transform, look_rotation
 from engine.assets.level_file import LevelGame
 from engine.assets.mesh import box
 from engine.core.errors import SpeculumError
@@ -43,7 +43,7 @@ LEVEL_DIR = Path(__file__).parent / "levels"
 BEAM_WIDTH = 0.07
 BEAM_COLOR = (1.0, 0.04, 0.02, 1.0)
 BEAM_POWER = 2.0
-WIN_GLOW = 1.2
+WIN_GLOW = 4.0  # HDR: a solved target is four times brighter than white, and glows
 MAX_BOUNCES_CAP = 16
 FRAME_DEPTH = 0.04
 DEFAULT_CAMERA = {"position": [0.0, 7.5, 7.5], "look_at": [0.0, 0.5, 0.0]}
@@ -369,6 +369,7 @@ class MirrorBeam(LevelGame):
 
     def build(self, world: World) -> None:
         level = self.level = self.load()
+        self.title = f"Speculum: mirror beam: {level.name}"  # the window's title follows the level ('n')
         names = self.names = level.spawn(world)
         rules = parse_rules(level.rules, names, world, f"level file {str(self.level_path)!r}")
         if not world.query_one(Camera):
@@ -377,6 +378,14 @@ class MirrorBeam(LevelGame):
             yaw = glm.degrees(glm.atan(-forward.x, -forward.z))
             pitch = glm.degrees(glm.asin(forward.y))
             spawn_camera(world, position=eye, yaw=yaw, pitch=pitch, fly=False)
+        for camera, _ in world.query_one(Camera):
+            # Khronos PBR Neutral (it keeps the red beam and the green target their colours,
+            # which ACES and AgX wash toward white when bright), and the beam, the lit target
+            # and the marker glowing, directly and in the mirrors; unless the level file says
+            # how its camera looks.
+            if not world.has(camera, Tonemap) and not world.has(camera, Bloom):
+                world.add_component(camera, Tonemap(curve="pbr_neutral"))
+                world.add_component(camera, Bloom(intensity=0.5, threshold=0.8, composite="additive"))
         target = world.try_get(rules.target, Emissive)
         if target is None:
             target = Emissive(0.0)

@@ -47,11 +47,13 @@ import numpy as np
 from pyglm import glm
 
 from components import (
+    Bloom,
     Camera,
     Emissive,
     Material,
     MeshRef,
     Portal,
+    Tonemap,
     Transform,
     look_rotation,
     yaw_pitch_rotation,
@@ -100,7 +102,7 @@ WALL_SLOPE = 0.05  # |normal.y| above this is a floor, ceiling or slope: no port
 PORTAL_COLORS = ((0.15, 0.45, 1.0), (1.0, 0.45, 0.05))  # A blue, B orange
 REFUSED_SECONDS = 0.65  # how long the red marker of a refused shot shows
 REFUSED_COLOR = (1.0, 0.05, 0.03)
-WIN_GLOW = 4.0
+WIN_GLOW = 10.0  # HDR: the won pad flashes ten times brighter than white (and glows)
 DEFAULT_PORTAL_SIZE = (1.2, 2.0)
 CROSSHAIR_DISTANCE = 0.06  # m in front of the eye (the camera's near plane is 0.05)
 CROSSHAIR_SIZE = 0.0012  # m: about 1.5% of the view's height at that distance
@@ -328,8 +330,12 @@ class PortalRun(LevelGame):
         r = self.rules
         body = PlayerBody(yaw=r.yaw, pitch=r.pitch, rotation=yaw_pitch_rotation(r.yaw, r.pitch))
         eye = (r.start[0], r.start[1] + EYE_HEIGHT, r.start[2])
+        # Khronos PBR Neutral: it keeps the colours the rules are read by (cyan and orange
+        # rims, the green pad, the red refusal marker), which ACES and AgX wash toward white
+        # when bright; and a glow round what is brighter than white (rims, the won pad).
         self.player = world.spawn(Transform(position=eye, rotation=body.rotation), Camera(fov_y=70.0, near=0.05),
-                                  body)
+                                  Tonemap(curve="pbr_neutral"),
+                                  Bloom(intensity=0.5, threshold=1.0, composite="additive"), body)
         # A crosshair: a small bright dot just past the near plane, a child of the camera.
         self.crosshair = world.spawn(Transform(position=(0.0, 0.0, -CROSSHAIR_DISTANCE), parent=self.player),
                                      MeshRef(quad(CROSSHAIR_SIZE, CROSSHAIR_SIZE, name="crosshair")),
@@ -348,7 +354,7 @@ class PortalRun(LevelGame):
                                          Material(color=(*rgb, 1.0), roughness=1.0), Emissive(1.5)))
         self.placed: list[PlacedPortal | None] = [None, None]
         self.marker = world.spawn(Transform(position=hidden), MeshRef(box((0.5, 0.5, 0.5)), visible=False),
-                                  Material(color=(*REFUSED_COLOR, 1.0), roughness=1.0), Emissive(1.2))
+                                  Material(color=(*REFUSED_COLOR, 1.0), roughness=1.0), Emissive(0.5))
         self.marker_time = 0.0  # seconds the refused marker still shows
         self._exit_glow = world.try_get(self.exit, Emissive)
         self.won = False

@@ -17,36 +17,19 @@ uniform float probe2_face_size;
 uniform vec4 probe2_position;
 uniform vec4 probe2_box_min;
 uniform vec4 probe2_box_max;
+#ifdef PROBE_REST
+// A curved object with a probe of its own where influence boxes hold it in part: its own
+// probe takes what the boxes' weights leave, in place of the sky (probe_rules.probe_blend).
+uniform samplerCube probe_rest_map;
+uniform float probe_rest_face_size;
+uniform vec4 probe_rest_position;
+uniform vec4 probe_rest_box_min;
+uniform vec4 probe_rest_box_max;
+#endif
 #endif
 
-// Box projection (parallax correction, as Unity's and Godot's probes do): follow the ray
-// from the shaded point to the wall of the probe's box and look that point up from where
-// the probe was captured (``centre``); without a box (box_min.w = 0), the ray's direction is
-// looked up as it is.
-vec3 box_projected(vec3 position, vec3 ray, vec3 centre, vec4 box_min, vec4 box_max) {
-    if (box_min.w < 0.5) return ray;
-    vec3 wall = mix(box_min.xyz, box_max.xyz, step(vec3(0.0), ray));
-    vec3 t = (wall - position) / ray;
-    return position + ray * min(min(t.x, t.y), t.z) - centre;
-}
-
-// The probe's mip level for a lookup.  A box-filtered chain (ggx_top = 0): the pixel's
-// footprint level, blurred by the roughness bias (0 at roughness 0: a mirror-smooth surface
-// samples its footprint's level).  A GGX-prefiltered chain (ggx_top = its top level): level
-// L holds perceptual roughness L / ggx_top (engine/render/probes.py, cube_mip.frag), so the
-// level is roughness x ggx_top and nothing else, as UE4's and three.js's prefiltered probes
-// are read: roughness 0 reads level 0, the capture itself; a footprint raising it would read
-// a level convolved for a rougher lobe and bleed colours across the image's edges.
-float probe_level(float footprint_lod, float roughness, float ggx_top) {
-    if (ggx_top > 0.0) return roughness * ggx_top;
-    return footprint_lod + roughness_lod_bias(roughness);
-}
-
-vec3 probe_lookup(samplerCube map, vec4 position, vec4 box_min, vec4 box_max, vec3 p, vec3 ray,
-                  float footprint_lod, float roughness) {
-    return textureLod(map, box_projected(p, ray, position.xyz, box_min, box_max),
-                      probe_level(footprint_lod, roughness, position.w)).rgb;
-}
+// Box projection, the level a roughness reads, one probe's lookup.
+#include "probe_lookup.glsl"
 
 // What the object's probes saw along ``ray`` from ``p``: ``footprint_lod`` is the ray's
 // footprint level in texels of the first probe's faces (probe_face_size).  Blended, each
@@ -58,7 +41,12 @@ vec3 probe_radiance(vec3 p, vec3 ray, float footprint_lod, float roughness) {
     vec3 second = probe_lookup(probe2_map, probe2_position, probe2_box_min, probe2_box_max, p, ray,
                                footprint_lod + log2(probe2_face_size / probe_face_size), roughness);
     float sky = max(1.0 - v_reflect.z - v_reflect.w, 0.0);
+#ifdef PROBE_REST
+    vec3 env = probe_lookup(probe_rest_map, probe_rest_position, probe_rest_box_min, probe_rest_box_max, p, ray,
+                            footprint_lod + log2(probe_rest_face_size / probe_face_size), roughness);
+#else
     vec3 env = sample_environment(ray, footprint_lod + log2(sky_face_size / probe_face_size), roughness);
+#endif
     return first * v_reflect.z + second * v_reflect.w + env * sky;
 #else
     return first;

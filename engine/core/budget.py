@@ -1,0 +1,72 @@
+"""The frame's one view budget (``ViewBudget``), plain data a game or a level file sets as a
+world resource; the stages that spend it and ``RenderStats`` report against it.  Kept in the
+core (not with ``engine.resources``, which re-exports it) so level files can make one."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from engine.core.errors import SpeculumError
+
+
+class ViewBudgetError(SpeculumError, ValueError):
+    """A ``ViewBudget`` that cannot be spent: a field out of range, or something else (the
+    class itself, a dict) where the world's ``ViewBudget`` resource should be."""
+
+
+@dataclass(frozen=True)
+class ViewBudget:
+    """The frame's one view budget (a world resource; none: no limit), shared by every view
+    the frame draws besides the main one: mirror and portal views of every tree and probe
+    cube faces.  Views are spent in the order they are drawn: first captures of probes (an
+    object sampling a probe needs one), then the main view's tree level by level (within a
+    level the surfaces with the highest ``priority`` first, then those covering the most
+    pixels: what does not fit is skipped, so the deepest levels go first), then the probes'
+    recaptures.  ``probe_ms`` is a separate budget of time for the probe captures, spent by
+    each probe's measured cost a face (``ProbeStates.face_ms``) in the scheduler's order:
+    first captures, then a probe's own ``priority``, then nearest the camera.  A probe that
+    does not fit waits (its faces stay pending) and goes first later frames; one probe a
+    frame is always captured, so none starves.  ``RenderStats`` reports what was spent and
+    cut (``views_spent``, ``views_cut``, ``probe_ms_spent``, ``probe_faces_deferred``).
+
+    ``pixels`` caps the reflection pixels a frame draws (each view's claimed pixels, at the
+    resolution its level is drawn at) by drawing levels at a lower resolution rather than
+    skipping views: a level whose coverage last frame would overrun what is left is drawn
+    at the scale that fits (down to ``MIN_LEVEL_SCALE``; past that its views are skipped).
+    The decision must precede the level's claims, so it is made on last frame's coverage of
+    that level (Valve's Portal downgrades its views the same way).  ``RenderStats``:
+    ``pixels_spent``, ``levels_downscaled``."""
+
+    views: int | None = None
+    probe_ms: float | None = None
+    pixels: int | None = None
+
+    def __post_init__(self) -> None:
+        self.check()
+
+    def check(self) -> None:
+        """Refuse fields out of range with a ``ViewBudgetError`` naming the field."""
+        if self.views is not None and (not isinstance(self.views, int) or isinstance(self.views, bool)
+                                       or self.views < 0):
+            raise ViewBudgetError(f"ViewBudget.views must be None or an int >= 0, got {self.views!r}")
+        if self.pixels is not None and (not isinstance(self.pixels, int) or isinstance(self.pixels, bool)
+                                        or self.pixels < 0):
+            raise ViewBudgetError(f"ViewBudget.pixels must be None or an int >= 0, got {self.pixels!r}")
+        if self.probe_ms is not None and (isinstance(self.probe_ms, bool) or not isinstance(self.probe_ms, (int, float))
+                                          or not 0.0 < self.probe_ms < float("inf")):
+            raise ViewBudgetError(f"ViewBudget.probe_ms must be None or a finite number > 0, got {self.probe_ms!r}")
+
+    @staticmethod
+    def of(world_resources: dict) -> ViewBudget | None:
+        """The world's budget (None: no limit), checked: the resource must be a ViewBudget
+        instance with fields in range; the class itself (``= ViewBudget``, the call
+        forgotten) or another object is a ``ViewBudgetError`` saying so."""
+        budget = world_resources.get(ViewBudget)
+        if budget is None:
+            return None
+        if budget is ViewBudget or isinstance(budget, type):
+            raise ViewBudgetError(f"world.resources[ViewBudget] holds the class {budget.__name__}, not a budget: "
+                                  "make one, e.g. ViewBudget(views=24)")
+        if not isinstance(budget, ViewBudget):
+            raise ViewBudgetError(f"world.resources[ViewBudget] must be a ViewBudget(views=..., pixels=..., "
+                                  f"probe_ms=...), got {type(budget).__name__} {budget!r}")
+        return budget

@@ -1,0 +1,767 @@
+"""Hardening, round 3 (issue 41): rules checked when the value is given, not frames later
+(item 2), and what a game maker reads when something is wrong (item 6).  Each refusal is
+one ``speculum: error:`` line (exit 2) from the command line, or an error at the line of
+code that makes the mistake; each silent mistake is one warning."""
+from __future__ import annotations
+
+import dataclasses
+import textwrap
+import warnings
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from components import (
+    ComponentValueError,
+    DirectionalLight,
+    Material,
+    MeshRef,
+    Mirror,
+    Transform,
+    Water,
+)
+from components.tracking import TrackedComponent
+from engine.assets.level_file import LevelError, LevelGame, load_level
+from engine.assets.mesh import plane, quad
+from engine.core.game import Game, GameSystem, ScheduleError
+from engine.core.world import World
+from engine.resources import ViewBudget
+from shell.runner import main
+from tests.support import look_from
+
+HEADLESS = ["--headless", "--frames", "1", "--size", "8x8"]
+
+
+@pytest.fixture
+def world():
+    made = World("hardening rules")
+    try:
+        yield made
+    finally:
+        made.close()
+
+
+def _pond(**mirror) -> tuple:
+    return Transform(), MeshRef(quad(2.0, 2.0)), Material(color=(0.1, 0.2, 0.3, 0.5)), Mirror(**mirror)
+
+
+# --- item 2: Water's rules at spawn and at every write --------------------------------------
+
+def test_water_without_a_mirror_is_refused_at_spawn_in_any_order_and_nothing_is_made(world):
+    before = set(world.entities())
+    with pytest.raises(ComponentValueError, match=r"Water on entity \d+: a Water needs a Mirror"):
+        world.spawn(Transform(), MeshRef(quad()), Material(), Water())
+    assert not list(world.query_one(Water)) and set(world.entities()) == before
+    # The Mirror may come before or after the Water in the spawn's list.
+    world.spawn(Water(), *_pond())
+    world.spawn(*_pond(), Water())
+    assert len(list(world.query_one(Water))) == 2
+
+
+def test_water_added_to_an_entity_without_a_mirror_is_refused_at_that_call(world):
+    entity = world.spawn(Transform(), MeshRef(quad()), Material())
+    with pytest.raises(ComponentValueError, match="a Water needs a Mirror"):
+        world.add_component(entity, Water())
+    assert not world.has(entity, Water)
+    world.add_component(entity, Mirror())
+    world.add_component(entity, Water())
+    assert world.has(entity, Water)
+
+
+def test_a_rough_mirror_and_water_are_refused_together_at_spawn_join_and_write(world):
+    with pytest.raises(ComponentValueError, match=r"Mirror.roughness on entity \d+ must be 0 with a Water"):
+        world.spawn(*_pond(roughness=0.2), Water())
+    with pytest.raises(ComponentValueError, match="must be 0 with a Water"):
+        world.spawn(Water(), *_pond(roughness=0.2))
+    rough = world.spawn(*_pond(roughness=0.3))
+    with pytest.raises(ComponentValueError, match="must be 0 with a Water"):
+        world.add_component(rough, Water())
+    pond = world.spawn(*_pond(), Water())
+    mirror = world.get(pond, Mirror)
+    with pytest.raises(ComponentValueError, match=f"Mirror.roughness on entity {pond} must be 0 with a Water"):
+        mirror.roughness = 0.1  # the write itself, not a MirrorError every frame after
+    assert mirror.roughness == 0.0
+    with pytest.raises(ComponentValueError, match="must be 0 with a Water"):
+        world.add_component(pond, Mirror(roughness=0.5))  # a replacement Mirror, too
+    # A mirror without water may be rough; a shared Mirror is checked for every holder.
+    world.get(rough, Mirror).roughness = 0.6
+    shared = Mirror()
+    world.spawn(*_pond()[:3], shared)
+    world.spawn(*_pond()[:3], shared, Water())
+    with pytest.raises(ComponentValueError, match="must be 0 with a Water"):
+        shared.roughness = 0.2
+
+
+def test_water_whose_mirror_is_taken_off_waits_with_a_warning_and_never_stops_a_frame(scene):
+    ents = {}
+
+    def build(world):
+        world.spawn(DirectionalLight(direction=(0.2, -1.0, -0.3)))
+        look_from(world, (0.0, 2.0, 3.0), target=(0.0, 0.0, 0.0))
+        world.spawn(Transform(position=(0.0, -0.2, 0.0)), MeshRef(plane(6, 6)), Material(color=(0.8, 0.6, 0.2)))
+        ents["pond"] = world.spawn(Transform(rotation=_flat()), MeshRef(quad(2.0, 2.0)),
+                                   Material(color=(0.1, 0.2, 0.3, 0.5)), Mirror(), Water())
+    runner = scene(build, (32, 24))
+    runner.frame()
+    world = runner.world
+    world.remove_component(ents["pond"], Mirror)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        world.get(ents["pond"], Water).speed = 0.2
+        runner.frame()
+        world.get(ents["pond"], Water).speed = 0.3
+        rgb = runner.frame()
+    said = [str(w.message) for w in caught if "Water has no Mirror" in str(w.message)]
+    assert len(said) == 1 and f"entity {ents['pond']}" in said[0], said
+    assert rgb.mean() > 3  # the lit floor, not a black frame
+
+
+def _flat():
+    from pyglm import glm
+    return glm.angleAxis(-np.pi / 2, glm.vec3(1, 0, 0))
+
+
+# --- item 2: Mirror fades refuse strings and booleans ---------------------------------------
+
+@pytest.mark.parametrize("value", ["ab", "8", ("8", "14"), (True, 14.0), (0.0, False), 5, (1.0,), (1.0, 2.0, 3.0),
+                                   {"start": 1, "end": 2}])
+@pytest.mark.parametrize("name", ["fade_distance", "fade_angle"])
+def test_fades_refuse_text_booleans_and_wrong_lengths_naming_the_field(name, value):
+    with pytest.raises(ComponentValueError, match=f"Mirror.{name} must be None or two numbers"):
+        Mirror(**{name: value})
+    mirror = Mirror()
+    with pytest.raises(ComponentValueError, match=f"Mirror.{name}"):
+        setattr(mirror, name, value)
+    assert getattr(mirror, name) is None
+
+
+def test_fades_still_take_numbers_of_either_kind():
+    mirror = Mirror(fade_distance=(8, 14.5), fade_angle=np.array([60.0, 85.0]))
+    assert mirror.fade_distance == (8.0, 14.5) and mirror.fade_angle == (60.0, 85.0)
+
+
+# --- item 2: game systems checked when the schedule is built --------------------------------
+
+def _bounce(world, dt):
+    pass
+
+
+def _one_arg(world):
+    pass
+
+
+class _NoDt:
+    def process(self):
+        pass
+
+
+class _SystemsGame(Game):
+    title = "systems check"
+
+    def __init__(self, systems):
+        self._systems = systems
+
+    def build(self, world: World) -> None:
+        look_from(world, (0.0, 1.0, 3.0), target=(0.0, 0.0, 0.0))
+
+    def systems(self):
+        return self._systems() if callable(self._systems) else self._systems
+
+
+@pytest.mark.parametrize("make, expected", [
+    (lambda: [GameSystem(_bounce, after=3)], "GameSystem '_bounce': after must be a stage or game system name"),
+    (lambda: [GameSystem(_bounce, before=("extract", None))], "GameSystem '_bounce': before must be"),
+    (lambda: None, "returned None; return a list of GameSystem"),
+    (lambda: GameSystem(_bounce), "return a list of GameSystem"),
+    (lambda: [GameSystem(_one_arg)], "game system '_one_arg' cannot be called as function(world, dt)"),
+    (lambda: [GameSystem(_NoDt())], "game system '_NoDt' cannot be called as process(dt)"),
+], ids=["after-int", "before-none", "systems-none", "not-a-list", "one-argument", "process-without-dt"])
+def test_game_systems_that_cannot_be_scheduled_or_called_are_one_error_line(make, expected, capsys, tmp_path):
+    """Each was a TypeError traceback (at the Engine, or in the first frame that called the
+    system); now a ScheduleError naming the system, before anything is made."""
+    with pytest.raises(ScheduleError, match=expected.replace("(", r"\(").replace(")", r"\)")):
+        from engine.core.game import schedule_order
+        schedule_order(["game", "extract"], make())
+    assert main(_SystemsGame(make), [*HEADLESS, "--out", str(tmp_path / "out")]) == 2
+    lines = capsys.readouterr().err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("speculum: error: ") and expected in lines[0], lines
+
+
+def test_systems_that_take_more_optional_arguments_or_any_still_run(tmp_path):
+    calls = []
+
+    def optional(world, dt, scale=1.0):
+        calls.append("optional")
+
+    def anything(*args):
+        calls.append("anything")
+
+    game = _SystemsGame([GameSystem(optional), GameSystem(anything)])
+    assert main(game, [*HEADLESS, "--out", str(tmp_path / "out")]) == 0
+    assert calls == ["optional", "anything"]
+
+
+# --- item 2: a game's own components in a level file, by their annotations ------------------
+
+@dataclasses.dataclass(eq=False)
+class Bounce(TrackedComponent):
+    """A game's own component, as games write them: annotated plain data, no checks."""
+
+    height: float = 1.0
+    times: int = 0
+    loud: bool = False
+    label: str = ""
+    span: tuple[float, float] = (0.0, 1.0)
+    steps: list[int] = dataclasses.field(default_factory=list)
+
+
+def _level(tmp_path: Path, body: str, name: str = "level.toml") -> Path:
+    path = tmp_path / name
+    path.write_text(textwrap.dedent(body))
+    return path
+
+
+@pytest.mark.parametrize("field, value, kind", [
+    ("height", '"high"', "a number"), ("height", "true", "a number"), ("times", "1.5", "an integer"),
+    ("loud", "1", "true or false"), ("label", "3", "a string"), ("span", "[1.0, 2.0, 3.0]", "tuple[float, float]"),
+    ("span", '[1.0, "x"]', "tuple[float, float]"), ("steps", "[1, 2.5]", "list[int]"), ("steps", "4", "list[int]")])
+def test_a_games_own_component_field_of_the_wrong_kind_is_refused_naming_file_line_and_field(tmp_path, field, value,
+                                                                                            kind):
+    path = _level(tmp_path, f"""\
+        [level]
+        name = "bouncy"
+
+        [[entity]]
+        name = "ball"
+        [entity.Bounce]
+        {field} = {value}
+        """)
+    with pytest.raises(LevelError) as caught:
+        load_level(path, {"Bounce": Bounce})
+    text = str(caught.value)
+    assert str(path) in text and ":7:" in text and f"Bounce.{field}" in text and kind in text, text
+
+
+def test_a_games_own_component_of_the_right_kinds_loads(tmp_path):
+    path = _level(tmp_path, """\
+        [level]
+        name = "bouncy"
+
+        [[entity]]
+        name = "ball"
+        [entity.Bounce]
+        height = 2
+        times = 3
+        loud = true
+        label = "hop"
+        span = [0.5, 1]
+        steps = [1, 2]
+        """)
+    level = load_level(path, {"Bounce": Bounce})
+    with World("bounce") as world:
+        names = level.spawn(world)
+        bounce = world.get(names["ball"], Bounce)
+        assert (bounce.height, bounce.times, bounce.loud, bounce.label) == (2, 3, True, "hop")
+
+
+class _BounceGame(LevelGame):
+    title = "bouncy"
+    game = "bouncy"
+    components = {"Bounce": Bounce}
+    makes_camera = True
+
+
+def test_a_level_for_another_game_is_refused_as_such_before_its_components_are_read(tmp_path, capsys):
+    """Its components are the other game's: before, the first one unknown here was the error."""
+    path = _level(tmp_path, """\
+        [level]
+        name = "someone else's"
+        game = "portal_run"
+
+        [[entity]]
+        name = "door"
+        [entity.Doorway]
+        width = "wide"
+        """)
+    with pytest.raises(LevelError, match="the level is for portal_run, not for bouncy") as caught:
+        _BounceGame(path).load()
+    assert ":3:" in str(caught.value)
+    assert main(_BounceGame(path), [*HEADLESS, "--out", str(tmp_path / "out")]) == 2
+    lines = capsys.readouterr().err.strip().splitlines()
+    assert len(lines) == 1 and "not for bouncy" in lines[0] and "Doorway" not in lines[0], lines
+
+
+# --- item 2: a wrong ViewBudget is one error line -------------------------------------------
+
+class _BudgetGame(Game):
+    title = "budget"
+
+    def __init__(self, budget):
+        self.budget = budget
+
+    def build(self, world: World) -> None:
+        look_from(world, (0.0, 1.0, 3.0), target=(0.0, 0.0, 0.0))
+        world.resources[ViewBudget] = self.budget() if callable(self.budget) and self.budget is not ViewBudget \
+            else self.budget
+
+
+@pytest.mark.parametrize("budget, expected", [
+    (ViewBudget, "holds the class ViewBudget, not a budget: make one, e.g. ViewBudget(views=24)"),
+    ({"views": 4}, "must be a ViewBudget(views=..., pixels=..., probe_ms=...), got dict"),
+    (lambda: ViewBudget(views=-2), "ViewBudget.views must be None or an int >= 0, got -2"),
+    (lambda: ViewBudget(probe_ms="2"), "ViewBudget.probe_ms must be None or a finite number > 0, got '2'"),
+], ids=["class", "dict", "negative-views", "text-probe-ms"])
+def test_a_wrong_view_budget_is_one_error_line(budget, expected, tmp_path, capsys):
+    assert main(_BudgetGame(budget), [*HEADLESS, "--out", str(tmp_path / "out")]) == 2
+    lines = capsys.readouterr().err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("speculum: error: ") and expected in lines[0], lines
+
+
+# --- item 6: silent mistakes get a warning ---------------------------------------------------
+
+def _warned(make) -> list[str]:
+    from components import ComponentWarning
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        make()
+    return [str(w.message) for w in caught if issubclass(w.category, ComponentWarning)]
+
+
+def test_colours_written_0_to_255_are_warned_and_colours_in_0_to_1_or_bright_floats_are_not():
+    from components import PointLight
+    said = _warned(lambda: Material(color=(255, 128, 0)))
+    assert len(said) == 1 and "Material.color = (255, 128, 0) looks like 0-255" in said[0]
+    assert "(1, 0.502, 0)" in said[0]
+    assert len(_warned(lambda: PointLight(color=[200, 200, 200]))) == 1
+    for fine in ((1, 1, 1), (0, 0, 1), (0.5, 0.2, 0.1), (3.0, 3.0, 3.0), (255.0, 0.0, 0.0)):
+        assert _warned(lambda fine=fine: Material(color=fine)) == [], fine
+
+
+def test_an_entity_hidden_in_every_kind_of_view_is_warned_at_the_line_that_hides_it():
+    from components import Visibility
+    said = _warned(lambda: Visibility(direct=False, in_mirrors=False, in_portals=False, in_probes=False))
+    assert len(said) == 1 and "drawn nowhere" in said[0]
+    ghost = Visibility(direct=False, in_portals=False, in_probes=False)  # seen only in mirrors: fine
+    assert _warned(lambda: setattr(ghost, "in_probes", False)) == []
+    said = _warned(lambda: setattr(ghost, "in_mirrors", False))
+    assert len(said) == 1 and "drawn nowhere" in said[0]
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        Visibility(direct=False, in_mirrors=False, in_portals=False, in_probes=False)
+    assert caught[0].filename == __file__  # the warning points at the game's line, not the component's
+
+
+def test_a_view_that_shows_no_layer_is_warned():
+    from components import Camera, Portal
+    for make in (lambda: Camera(shows_layers=[]), lambda: Mirror(shows_layers=()), lambda: Portal(shows_layers=[])):
+        said = _warned(make)
+        assert len(said) == 1 and "shows no layer" in said[0], said
+    assert _warned(lambda: Camera(shows_layers=None)) == _warned(lambda: Camera(shows_layers=[0])) == []
+
+
+def test_water_with_no_normal_map_is_warned_once_at_spawn(world):
+    from engine.assets.texture_data import ripple_normal_map
+    said = _warned(lambda: world.spawn(*_pond(), Water()))
+    assert len(said) == 1 and "no normal_map, so the water has no waves" in said[0]
+    waves = Material(color=(0.1, 0.2, 0.3, 0.5), normal_map=ripple_normal_map(32))
+    assert _warned(lambda: world.spawn(Transform(), MeshRef(quad(2.0, 2.0)), waves, Mirror(), Water())) == []
+
+
+def test_a_blend_distance_without_an_influence_box_is_warned_when_the_probe_comes(scene):
+    from components import ReflectionProbe, Reflective
+    from engine.assets.mesh import sphere
+
+    def build(world):
+        look_from(world, (0.0, 1.0, 3.0), target=(0.0, 0.0, 0.0))
+        world.spawn(Transform(), MeshRef(sphere(0.5)), Material(metallic=1.0), Reflective("cube"),
+                    ReflectionProbe(resolution=16, blend_distance=0.5))
+        world.spawn(Transform(position=(2.0, 0.0, 0.0)), MeshRef(sphere(0.5)), Material(metallic=1.0),
+                    Reflective("cube"), ReflectionProbe(resolution=16, influence=(4, 4, 4), blend_distance=0.5))
+    runner = scene(build, (16, 16))
+    said = _warned(runner.frame)
+    assert len(said) == 1 and "blend_distance = 0.5 does nothing without an influence box" in said[0], said
+    assert _warned(runner.frame) == []  # said when it comes (or changes), not every frame
+
+
+# --- item 6: the command line and the window ------------------------------------------------
+
+def test_camera_takes_a_negative_first_value_without_an_equals_sign(tmp_path):
+    from games.hall_of_mirrors.level import HallOfMirrors
+    from shell.runner import parse_args
+    args = parse_args(HallOfMirrors(), ["--headless", "--camera", "-4.5,1.6,3,-90,-5"])
+    assert args.camera == (-4.5, 1.6, 3.0, -90.0, -5.0)
+    assert parse_args(HallOfMirrors(), ["--camera", "-.5,1,2,0,0"]).camera == (-0.5, 1.0, 2.0, 0.0, 0.0)
+    assert parse_args(HallOfMirrors(), ["--camera=-1,1,2,0,0"]).camera[0] == -1.0
+
+
+TITLE_SCRIPT = r'''
+import moderngl_window as mglw
+from engine import Game
+from shell.window import make_window_config
+from tests.support import look_from
+
+class Renamed(Game):
+    title = "first level"
+    frames = 0
+    def build(self, world):
+        look_from(world, (0, 1, 3), target=(0, 0, 0))
+    def update(self, world, dt):
+        self.frames += 1
+        if self.frames == 2:
+            self.title = "second level"
+
+config = mglw.create_window_config_instance(make_window_config(Renamed()),
+                                            args=["--window", "headless", "--backend", "egl", "--size", "16x16"])
+titles = [config.wnd.title]
+for _ in range(3):
+    config.on_render(0.0, 1 / 60)
+    titles.append(config.wnd.title)
+print(titles)
+config.on_close()
+config.wnd.destroy()
+'''
+
+
+def test_the_window_title_follows_the_games_title_when_it_changes_level():
+    import subprocess
+    import sys
+    root = Path(__file__).resolve().parents[1]
+    done = subprocess.run([sys.executable, "-c", TITLE_SCRIPT], cwd=root, capture_output=True, text=True, timeout=120,
+                          env={**__import__("os").environ, "PYTHONPATH": str(root)})
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert done.stdout.strip().splitlines()[-1] == str(["first level", "first level", "second level",
+                                                       "second level"])
+
+
+def test_mirror_beams_title_names_the_level_it_plays_after_n(world):
+    from games.mirror_beam import MirrorBeam
+    game = MirrorBeam()
+    game.build(world)
+    first = game.level.name
+    assert game.title == f"Speculum: mirror beam: {first}"
+    game.play_level(world, game.next_level())
+    assert game.level.name != first and game.title == f"Speculum: mirror beam: {game.level.name}"
+
+
+# --- item 6: save_level writes spawn_model's parts, or says plainly why not ------------------
+
+def _two_part_glb(path: Path, textured: bool = False) -> Path:
+    import trimesh
+    from PIL import Image
+    first, second = trimesh.creation.box(), trimesh.creation.icosphere(subdivisions=1)
+    if textured:
+        image = Image.fromarray(np.full((4, 4, 3), (200, 30, 30), np.uint8))
+        first.visual = trimesh.visual.TextureVisuals(uv=np.zeros((len(first.vertices), 2)), image=image)
+    scene = trimesh.Scene()
+    scene.add_geometry(first, node_name="crate")
+    scene.add_geometry(second, node_name="ball", transform=trimesh.transformations.translation_matrix([2, 0, 0]))
+    scene.export(path)
+    return path
+
+
+def test_a_spawned_models_parts_are_saved_as_file_and_part_and_load_back_the_same(tmp_path):
+    from engine.assets.level_file import save_level
+    from engine.assets.models import spawn_model
+    model = _two_part_glb(tmp_path / "two.glb")
+    with World("model") as first:
+        root = spawn_model(first, model, position=(1.0, 0.0, -2.0))
+        saved = save_level(first, tmp_path / "saved.toml", {"model": root})
+        text = saved.read_text()
+        assert 'file = "two.glb"' in text and "part = " in text, text
+        before = sorted((len(mesh_ref.mesh.positions), tuple(np.round(transform.position, 5)))
+                        for _, (mesh_ref, transform) in first.query(MeshRef, Transform))
+    with World("again") as second:
+        names = load_level(saved).spawn(second)
+        assert second.get(names["model"], Transform).position == first_position()
+        after = sorted((len(mesh_ref.mesh.positions), tuple(np.round(transform.position, 5)))
+                       for _, (mesh_ref, transform) in second.query(MeshRef, Transform))
+    assert after == before and len(after) == 2
+
+
+def first_position():
+    from pyglm import glm
+    return glm.vec3(1.0, 0.0, -2.0)
+
+
+def test_a_models_embedded_image_is_refused_plainly_by_save_level(tmp_path):
+    from engine.assets.level_file import save_level
+    from engine.assets.models import spawn_model
+    model = _two_part_glb(tmp_path / "painted.glb", textured=True)
+    with World("painted") as world:
+        spawn_model(world, model)
+        assert any(m.texture is not None for _, m in world.query_one(Material))
+        with pytest.raises(LevelError, match=r"Material.texture.*is an image inside the model file .*painted.glb"):
+            save_level(world, tmp_path / "painted.toml")
+
+
+# --- item 6: benchmark help and reports ------------------------------------------------------
+
+def test_benchmark_help_names_targets_without_issue_numbers_and_gpu_report_says_it_runs_the_suite():
+    import re
+    import subprocess
+    import sys
+    root = Path(__file__).resolve().parents[1]
+    for args in (["--help"], ["targets", "--help"], ["gpu-report", "--help"]):
+        done = subprocess.run([sys.executable, "-m", "benchmarks", *args], cwd=root, capture_output=True, text=True,
+                              timeout=120)
+        assert done.returncode == 0, done.stderr
+        assert not re.search(r"issue \d", done.stdout.lower()), done.stdout
+    from benchmarks import SUITES
+    assert "whole test suite" in SUITES["gpu-report"][1] and "minutes" in SUITES["gpu-report"][1]
+    for module in ("benchmarks.targets", "benchmarks.gpu_report"):
+        text = __import__(module, fromlist=["x"]).__doc__
+        assert not re.search(r"issue \d", text.lower()), module
+
+
+def test_gpu_report_fails_when_a_target_that_applies_here_is_not_met():
+    from benchmarks.gpu_report import FIXED, failed
+    rows = [{"target": "ecs_cpu_ms", "value": 12.5, "limit": 10.0, "unit": "ms", "met": False, "applies": True,
+             "set_for": "this machine"},
+            {"target": "frame_0_mirrors", "value": 3.0, "limit": 0.85, "unit": "ms", "met": False, "applies": False,
+             "set_for": "gpu"},
+            {"target": "plan_us_per_view", "value": 4.0, "limit": 10.0, "unit": "us", "met": True, "applies": True,
+             "set_for": "this machine"}]
+    report = {"benchmarks": {"targets": {FIXED: {"status": "ok", "rows": rows}}}}
+    assert failed(report) == ["target ecs_cpu_ms not met: 12.5 ms against a limit of 10.0 ms (set for this machine)"]
+    rows[0]["met"] = True
+    assert failed(report) == []
+
+
+# --- item 7: the in-place edit trap ----------------------------------------------------------
+
+def _crate_room(ents, x=0.0):
+    from engine.assets.mesh import box
+
+    def build(world):
+        world.spawn(DirectionalLight(direction=(0.3, -1.0, -0.5), intensity=2.0))
+        look_from(world, (0.0, 1.0, 5.0), target=(0.0, 1.0, 0.0), fov=50.0)
+        ents["crate"] = world.spawn(Transform(position=(x, 0.5, 0.0)), MeshRef(box()),
+                                    Material(color=(0.9, 0.2, 0.1)))
+    return build
+
+
+def _runner(ctx, build, update=None, size=(64, 48)):
+    from tests.support import SceneRunner
+    return SceneRunner(ctx, build, size, update)
+
+
+def test_a_position_edited_in_place_in_update_is_drawn_that_frame_as_an_assigned_one_is(ctx):
+    """``t.position.y += 1`` in the game's update: no field write, but the transform stage
+    sees it (the in-place watch), so the frame shows the crate where an assignment would
+    have put it: the same pixels and ids as a second world whose crate was assigned there."""
+    ents, other = {}, {}
+
+    def lift(world, dt):
+        world.get(ents["crate"], Transform).position.y += 0.5
+
+    def assign(world, dt):
+        transform = world.get(other["crate"], Transform)
+        transform.position = transform.position + glm_vec3(0.0, 0.5, 0.0)
+
+    edited, assigned = _runner(ctx, _crate_room(ents), lift), _runner(ctx, _crate_room(other), assign)
+    try:
+        for frame in range(3):
+            seen, expected = edited.frame(), assigned.frame()
+            crate = edited.world.get(ents["crate"], Transform)
+            assert crate.position.y == 0.5 + 0.5 * (frame + 1)
+            assert crate.world[3].y == crate.position.y  # the world matrix followed the edit
+            np.testing.assert_array_equal(seen, expected, err_msg=f"frame {frame}")
+            np.testing.assert_array_equal(edited.ids() == ents["crate"], assigned.ids() == other["crate"])
+        assert (edited.ids() == ents["crate"]).sum() > 20  # on screen: the crate, not an empty frame
+    finally:
+        edited.close()
+        assigned.close()
+
+
+def glm_vec3(*values):
+    from pyglm import glm
+    return glm.vec3(*values)
+
+
+def test_a_colour_edited_in_place_between_frames_is_drawn_the_next_frame(ctx):
+    ents = {}
+    runner = _runner(ctx, _crate_room(ents))
+    try:
+        runner.frame()
+        at = runner.ids() == ents["crate"]
+        red = runner.frame()[at].mean(axis=0)
+        assert red[0] > 2 * red[2]
+        runner.world.get(ents["crate"], Material).color.b = 0.9  # in place, after the frame
+        runner.world.get(ents["crate"], Material).color.x = 0.1
+        blue = runner.frame()[at].mean(axis=0)
+        assert blue[2] > 2 * blue[0], (red, blue)
+    finally:
+        runner.close()
+
+
+def test_a_vector_a_game_keeps_is_watched_while_it_keeps_it_and_dropped_after(ctx):
+    """A game that keeps ``p = t.position`` and edits ``p.x`` every frame without reading the
+    field again: still seen (the value is held elsewhere, so the watch keeps it); vectors
+    read once and not kept leave the watch after the frame (it does not grow with reads)."""
+    ents, kept = {}, {}
+
+    def build(world):
+        _crate_room(ents)(world)
+        for index in range(50):
+            world.spawn(Transform(position=(index, -5.0, 0.0)))
+
+    def update(world, dt):
+        if "done" in kept:
+            return
+        if "p" not in kept:
+            kept["p"] = world.get(ents["crate"], Transform).position
+        kept["p"].x += 0.25
+        for _, transform in world.query_one(Transform):
+            _ = transform.position  # read, not kept
+
+    runner = _runner(ctx, build, update)
+    try:
+        for frame in range(3):
+            runner.frame()
+            assert runner.world.get(ents["crate"], Transform).world[3].x == 0.25 * (frame + 1)
+        watched = runner.world._handed
+        assert len(watched) == 1 and next(iter(watched.values()))[2] is kept["p"]
+        kept.clear()
+        kept["done"] = True
+        runner.frame()
+        assert not runner.world._handed
+    finally:
+        runner.close()
+
+
+class _NanEdit(Game):
+    title = "nan in place"
+
+    def build(self, world: World) -> None:
+        look_from(world, (0.0, 1.0, 3.0), target=(0.0, 0.0, 0.0))
+        self.crate = world.spawn(Transform(), MeshRef(quad()), Material())
+
+    def update(self, world: World, dt: float) -> None:
+        world.get(self.crate, Transform).position.x = float("nan")
+
+
+def test_a_value_edited_in_place_that_the_field_cannot_hold_is_one_error_line(tmp_path, capsys):
+    assert main(_NanEdit(), [*HEADLESS, "--out", str(tmp_path / "out")]) == 2
+    lines = capsys.readouterr().err.strip().splitlines()
+    assert len(lines) == 1 and "Transform.position must be finite" in lines[0], lines
+    assert "in-place edit of Transform.position" in lines[0], lines
+
+
+# --- item 3: a level file sets the view budget -----------------------------------------------
+
+def test_a_level_file_sets_the_view_budget_and_save_level_writes_it_back(tmp_path):
+    from engine.assets.level_file import save_level
+    path = _level(tmp_path, """\
+        [level]
+        name = "budgeted"
+        view_budget = { views = 12, probe_ms = 2.5 }
+
+        [[entity]]
+        name = "floor"
+        [entity.Transform]
+        """)
+    level = load_level(path)
+    with World("budget") as world:
+        names = level.spawn(world)
+        assert world.resources[ViewBudget] == ViewBudget(views=12, probe_ms=2.5)
+        saved = save_level(world, tmp_path / "again.toml", names, name="budgeted")
+    assert load_level(saved).view_budget == ViewBudget(views=12, probe_ms=2.5)
+
+
+@pytest.mark.parametrize("value, expected", [
+    ("{ views = -1 }", "ViewBudget.views must be None or an int >= 0, got -1"),
+    ("{ views = 2.5 }", "ViewBudget.views must be None or an int >= 0"),
+    ("{ probe_ms = 0 }", "ViewBudget.probe_ms must be None or a finite number > 0"),
+    ("{ view = 3 }", "view_budget has unknown keys ['view']"),
+    ("12", "view_budget must be a table such as { views = 24 }"),
+])
+def test_a_bad_view_budget_in_a_level_is_refused_naming_file_and_line(tmp_path, value, expected):
+    path = _level(tmp_path, f"""\
+        [level]
+        name = "budgeted"
+        view_budget = {value}
+        """)
+    with pytest.raises(LevelError) as caught:
+        load_level(path)
+    assert f"{path}:3:" in str(caught.value) and expected in str(caught.value), str(caught.value)
+
+
+# --- item 5: mirrored geometry ---------------------------------------------------------------
+
+def _mirror_scene(ents, scale=(1.0, 1.0, 1.0), parent_scale=None, camera_parent=None):
+    from engine.assets.mesh import box
+    from engine.assets.texture_data import checker_texture
+
+    def build(world):
+        world.spawn(DirectionalLight(direction=(0.4, -1.0, -0.6), intensity=2.0))
+        if camera_parent is None:
+            look_from(world, (0.6, 1.6, 4.0), target=(0.0, 0.6, 0.0), fov=60.0)
+        else:
+            holder = world.spawn(Transform(scale=camera_parent))
+            camera = look_from(world, (0.6, 1.6, 4.0), target=(0.0, 0.6, 0.0), fov=60.0)
+            transform = world.get(camera, Transform)
+            transform.position = transform.position * glm_vec3(*(1.0 / s for s in camera_parent))
+            flip = glm_vec3(*camera_parent)
+            transform.rotation = _mirrored_rotation(transform.rotation, flip)
+            transform.parent = holder
+        world.spawn(Transform(), MeshRef(plane(8, 8)), Material(texture=checker_texture(64, 8)))
+        world.spawn(Transform(position=(0.0, 1.2, -2.5)), MeshRef(quad(3.0, 2.0)), Material(), Mirror())
+        if parent_scale is None:
+            ents["crate"] = world.spawn(Transform(position=(-0.8, 0.5, 0.0), scale=scale), MeshRef(box()),
+                                        Material(color=(0.9, 0.3, 0.1)))
+        else:
+            holder = world.spawn(Transform(position=(-0.8, 0.5, 0.0), scale=parent_scale))
+            ents["crate"] = world.spawn(Transform(scale=scale, parent=holder), MeshRef(box()),
+                                        Material(color=(0.9, 0.3, 0.1)))
+    return build
+
+
+def _mirrored_rotation(rotation, flip):
+    """The local rotation that, under a parent scaled by ``flip`` (+-1 each), points the
+    camera's -Z and +Y where ``rotation`` alone does (the mirrored axes mapped back)."""
+    from pyglm import glm
+    forward, up = rotation * glm.vec3(0, 0, -1) * flip, rotation * glm.vec3(0, 1, 0) * flip
+    right = glm.cross(forward, up)
+    return glm.quat_cast(glm.mat3(right, up, -forward))
+
+
+@pytest.mark.parametrize("scale, parent_scale", [((-1.0, 1.0, 1.0), None), ((1.0, -1.0, 1.0), None),
+                                                  ((-1.0, -1.0, -1.0), None), ((1.0, 1.0, 1.0), (-1.0, 1.0, 1.0))],
+                         ids=["x", "y", "xyz", "parent-x"])
+def test_a_mirrored_box_is_drawn_as_the_same_box_unmirrored(scene, scale, parent_scale):
+    """A box is its own mirror image: scaled by -1 along an axis (or under a parent that
+    is) it must look exactly like the plain box, in the frame and in the mirror; culled
+    with the wrong winding it showed its inside faces (or nothing)."""
+    plain_ents, mirrored_ents = {}, {}
+    plain = scene(_mirror_scene(plain_ents), (96, 72))
+    mirrored = scene(_mirror_scene(mirrored_ents, scale, parent_scale), (96, 72))
+    expected, shown = plain.frame(), mirrored.frame()
+    crate = mirrored.ids() == mirrored_ents["crate"]
+    assert crate.sum() > 100 and (plain.ids() == plain_ents["crate"]).sum() == crate.sum()
+    np.testing.assert_allclose(shown.astype(int), expected.astype(int), atol=2)
+    assert mirrored.stats.reflection_views >= 1
+
+
+def test_a_box_that_turns_mirrored_by_moving_changes_batch_and_is_drawn_right(scene):
+    ents, plain_ents = {}, {}
+    runner = scene(_mirror_scene(ents), (96, 72))
+    expected = scene(_mirror_scene(plain_ents), (96, 72)).frame()
+    runner.frame()
+    runner.world.get(ents["crate"], Transform).scale = (-1.0, 1.0, 1.0)
+    np.testing.assert_allclose(runner.frame().astype(int), expected.astype(int), atol=2)
+    runner.world.get(ents["crate"], Transform).scale = (1.0, 1.0, 1.0)
+    np.testing.assert_allclose(runner.frame().astype(int), expected.astype(int), atol=2)
+
+
+def test_a_camera_under_a_mirrored_parent_sees_the_floor_and_the_mirror(scene):
+    """The camera's parent has scale (-1, 1, 1); its local pose is set so that it looks
+    from the same point the same way as the plain camera: the frame is the plain one (the
+    view does not mirror, so no face is culled as a back face)."""
+    plain_ents, parented_ents = {}, {}
+    plain = scene(_mirror_scene(plain_ents), (96, 72))
+    parented = scene(_mirror_scene(parented_ents, camera_parent=(-1.0, 1.0, 1.0)), (96, 72))
+    expected, shown = plain.frame(), parented.frame()
+    assert shown.mean() > 20
+    np.testing.assert_allclose(shown.astype(int), expected.astype(int), atol=2)
+    assert parented.stats.reflection_views >= 1

@@ -1,0 +1,306 @@
+"""Light through mirrors and portals: the frame against a float64 ray computation in numpy
+(a point of the floor is lit by the mirror's image of the sun when the line to the image
+crosses the mirror's outline and neither leg, floor to mirror nor mirror to sun, meets an
+occluder), the patch's brightness against the direct light's times the mirror's rate and
+tint, a light that cannot reach the mirror changing nothing, a lamp through a portal pair,
+and the budget."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from pyglm import glm
+
+from components import DirectionalLight, Material, MeshRef, Mirror, PointLight, Portal, Transform, look_rotation
+from engine.assets.mesh import box, plane, quad
+from engine.assets.portals import spawn_portal_pair
+from engine.core.portal_math import pair_transform
+from engine.resources import ViewBudget
+from tests.support import look_from, srgb_to_linear
+
+SUN = np.array([1.0, -1.0, 0.0]) / np.sqrt(2.0)
+# Boxes as (centre, half sizes): a wall shading part of the floor from the sun, a small box.
+WALL = (np.array([-1.1, 1.25, 0.0]), np.array([0.1, 1.25, 3.0]))
+CUBE = (np.array([0.8, 0.3, 0.6]), np.array([0.3, 0.3, 0.3]))
+# The mirror: at x = 3 facing -x, 3 m wide (z) and 2.5 m tall (y), centred at y = 2.25.
+MIRROR_X, MIRROR_Y, MIRROR_HALF = 3.0, 2.25, np.array([1.25, 1.5])   # half height, half width
+EDGE = 0.06   # metres either side of an outline left out (the maps' texels and the filter)
+
+
+def _scene(world, mirror_color=(1.0, 1.0, 1.0), rate=1.0, sun=SUN, reflects=True):
+    ids = {}
+    look_from(world, (0.5, 6.0, 8.0), (0.5, 0.0, 0.0))
+    ids["sun"] = world.spawn(DirectionalLight(direction=tuple(sun), intensity=2.0))
+    ids["floor"] = world.spawn(Transform(), MeshRef(plane(14, 14)), Material(color=(0.8, 0.8, 0.8), roughness=1.0))
+    for name, (centre, half) in (("wall", WALL), ("cube", CUBE)):
+        ids[name] = world.spawn(Transform(position=centre.tolist()), MeshRef(box(tuple(2 * half))),
+                                Material(color=(0.6, 0.5, 0.4)))
+    facing_minus_x = look_rotation(glm.vec3(1, 0, 0))   # a quad's front is its +Z: turned to face -x
+    ids["mirror"] = world.spawn(Transform(position=(MIRROR_X, MIRROR_Y, 0.0), rotation=facing_minus_x),
+                                MeshRef(quad(2 * MIRROR_HALF[1], 2 * MIRROR_HALF[0])), Material(),
+                                Mirror(color=mirror_color, reflect_rate=rate, reflects_light=reflects))
+    return ids
+
+
+def _box_hit(origin, direction, box, grow, limit=None):
+    centre, half = box
+    half = half + grow
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t1 = (centre - half - origin) / direction
+        t2 = (centre + half - origin) / direction
+    near = np.nanmax(np.minimum(t1, t2), axis=1)
+    far = np.nanmin(np.maximum(t1, t2), axis=1)
+    hit = (near <= far) & (far > 1e-6)
+    if limit is not None:
+        hit &= near < limit
+    return hit
+
+
+def _mirror_lit(points: np.ndarray, grow: float) -> np.ndarray:
+    """Whether the mirror throws the sun on ``points`` (rows), occluders grown by ``grow``
+    and the mirror's outline shrunk by it: the line towards the sun's image crosses the
+    outline from its front, and both legs are clear."""
+    image = SUN * np.array([-1.0, 1.0, 1.0])       # the mirror plane x = 3 flips x
+    to_image = -image
+    t = (MIRROR_X - points[:, 0]) / to_image[0]     # where the line meets the mirror's plane
+    crossing = points + to_image * t[:, None]
+    inside = (np.abs(crossing[:, 1] - MIRROR_Y) < MIRROR_HALF[0] - grow) & \
+             (np.abs(crossing[:, 2]) < MIRROR_HALF[1] - grow) & (t > 0) & (points[:, 0] < MIRROR_X)
+    direction = np.tile(to_image, (len(points), 1))
+    blocked_out = _box_hit(points, direction, WALL, grow, t) | _box_hit(points, direction, CUBE, grow, t)
+    to_sun = np.tile(-SUN, (len(points), 1))
+    blocked_in = _box_hit(crossing, to_sun, WALL, grow) | _box_hit(crossing, to_sun, CUBE, grow)
+    return inside & ~blocked_out & ~blocked_in
+
+
+def _floor_points(runner):
+    view = runner.engine.main_view
+    w, h = runner.size
+    inverse = np.array(glm.inverse(glm.dmat4(view.view_proj)).to_list(), np.float64).T
+    xs = (np.arange(w) + 0.5) / w * 2.0 - 1.0
+    ys = 1.0 - (np.arange(h) + 0.5) / h * 2.0
+    gx, gy = np.meshgrid(xs, ys)
+    far = np.stack([gx, gy, np.ones_like(gx), np.ones_like(gx)], axis=-1) @ inverse.T
+    far = far[..., :3] / far[..., 3:]
+    eye = np.array(view.eye, np.float64)
+    rays = far - eye
+    t = -eye[1] / rays[..., 1]
+    return (eye + rays * t[..., None]).reshape(-1, 3)
+
+
+def _frames(scene, build, size=(320, 240), shadow_filter="single"):
+    """The frame with the mirror's light off, then on."""
+    runner = scene(build, size)
+    runner.engine.renderer.antialias = "off"
+    runner.engine.renderer.shadows.filter = shadow_filter
+    mirror = runner.world.get(runner.world.resources["ids"]["mirror"], Mirror)
+    mirror.reflects_light = False
+    off = runner.frame()
+    mirror.reflects_light = True
+    on = runner.frame()
+    return runner, off, on
+
+
+@pytest.mark.parametrize("shadow_filter", ["single", "grid"])
+def test_a_mirror_throws_the_sun_where_the_rays_say(scene, shadow_filter):
+    def build(world):
+        world.resources["ids"] = _scene(world)
+
+    runner, off, on = _frames(scene, build, shadow_filter=shadow_filter)
+    assert runner.stats.virtual_lights == 1
+    ids = runner.world.resources["ids"]
+    floor = runner.ids() == ids["floor"]
+    ratio = srgb_to_linear(on).mean(-1) / np.maximum(srgb_to_linear(off).mean(-1), 1e-6)
+    brighter, same = ratio > 1.1, ratio < 1.02
+    points = _floor_points(runner)
+    lit_in = _mirror_lit(points, EDGE).reshape(floor.shape)
+    lit_out = _mirror_lit(points, -EDGE).reshape(floor.shape)
+    sure = floor & (lit_in == lit_out)
+    frame_says = np.where(brighter, 1, np.where(same, 0, -1))[sure]
+    rays_say = lit_in[sure].astype(int)
+    share = float((frame_says == rays_say).mean())
+    assert sure.sum() > 40000 and rays_say.sum() > 1000, (int(sure.sum()), int(rays_say.sum()))
+    # The cube's shadow inside the patch: lit by the sun's image except where the cube stands in the way.
+    assert (floor & lit_out & ~_mirror_lit(points, 0.0).reshape(floor.shape)).any()
+    assert share >= 0.99, f"{share:.4f} of {int(sure.sum())} floor pixels agree with the rays"
+
+
+def test_the_patch_is_the_direct_light_times_the_mirrors_rate_and_colour(scene):
+    """On the Lambertian floor, where only the mirror's light lands (in the wall's shadow) its
+    share of the radiance over the direct sun's share on open floor is the mirror's reflect
+    rate times its colour: the reflected direction makes the same angle with the floor."""
+    tint, rate = (0.9, 0.75, 0.6), 0.8
+
+    def build(world):
+        world.resources["ids"] = _scene(world, mirror_color=tint, rate=rate)
+
+    runner, off, on = _frames(scene, build, size=(320, 240))
+    points = _floor_points(runner)
+    seen = runner.ids() == runner.world.resources["ids"]["floor"]
+    patch = _mirror_lit(points, 0.25).reshape(seen.shape) & seen
+    # The wall's shadow: points whose line to the sun meets the wall (grown: none near its edge).
+    to_sun = np.tile(-SUN, (len(points), 1))
+    shaded = _box_hit(points, to_sun, WALL, 0.25).reshape(seen.shape)
+    open_floor = ~_box_hit(points, to_sun, WALL, -0.25).reshape(seen.shape) & \
+        ~_box_hit(points, to_sun, CUBE, -0.25).reshape(seen.shape) & ~_mirror_lit(points, -0.25).reshape(seen.shape)
+    near = np.abs(points[:, 2]).reshape(seen.shape) < 1.0   # the same stretch of floor (the view angle is alike)
+    only_mirror = patch & shaded & near
+    direct = open_floor & ~shaded & near & seen & (points[:, 0] > -4.0).reshape(seen.shape) & \
+        (points[:, 0] < 1.0).reshape(seen.shape)
+    shadowed = seen & shaded & near & ~_mirror_lit(points, -0.25).reshape(seen.shape)
+    counts = (int(only_mirror.sum()), int(direct.sum()), int(shadowed.sum()))
+    assert counts[0] > 300 and counts[1] > 300 and counts[2] > 100, counts
+    lin_on, lin_off = srgb_to_linear(on), srgb_to_linear(off)
+    mirror_share = np.median(lin_on[only_mirror] - lin_off[only_mirror], axis=0)
+    sun_share = np.median(lin_off[direct], axis=0) - np.median(lin_off[shadowed], axis=0)
+    expected = rate * np.array(tint)
+    np.testing.assert_allclose(mirror_share / sun_share, expected, rtol=0.06)
+
+
+def test_a_light_that_cannot_reach_the_mirror_changes_no_pixel(scene):
+    """The sun behind the mirror (travelling the way the mirror faces) makes no image: the
+    frame with reflects_light on is the frame with it off, and no virtual light is drawn."""
+    behind = np.array([-1.0, -1.0, 0.0]) / np.sqrt(2.0)
+
+    def build(world):
+        world.resources["ids"] = _scene(world, sun=behind)
+
+    runner, off, on = _frames(scene, build)
+    assert runner.stats.virtual_lights == 0
+    assert np.array_equal(off, on)
+
+
+def test_the_budget_cuts_a_virtual_light_and_says_so(scene):
+    def build(world):
+        world.resources["ids"] = _scene(world)
+        world.resources[ViewBudget] = ViewBudget(views=0)
+
+    runner, off, on = _frames(scene, build)
+    assert (runner.stats.virtual_lights, runner.stats.virtual_lights_cut) == (0, 1)
+    assert np.array_equal(off, on)
+
+
+def test_a_still_scene_keeps_the_virtual_lights_map(scene):
+    def build(world):
+        world.resources["ids"] = _scene(world)
+
+    runner = scene(build)
+    runner.frame()
+    drawn_first = runner.stats.shadow_maps_drawn
+    runner.frame()
+    assert drawn_first == 2 and runner.stats.shadow_maps_drawn == 0 and runner.stats.virtual_lights == 1
+    runner.world.get(runner.world.resources["ids"]["mirror"], Mirror).reflect_rate = 0.5
+    runner.frame()
+    assert runner.stats.shadow_maps_drawn == 1   # the image's colour changed: its map and block again
+
+
+def test_a_lamp_lights_the_floor_beyond_a_portal(scene):
+    """A lamp in front of portal A (at z = 4, facing +z) shines out of portal B (at x = -6,
+    facing +x) onto the floor beyond B: a floor point is lit by the lamp's image when it is in
+    front of B, within range, its line to the image crosses B's opening, and neither leg meets
+    a box: one stands beyond B, one between the lamp and A (its shadow comes out of B)."""
+    lamp = np.array([0.0, 1.5, 5.5])
+    beyond = (np.array([-3.5, 0.4, 0.6]), np.array([0.4, 0.4, 0.4]))
+    before = (np.array([0.45, 1.2, 4.7]), np.array([0.15, 0.15, 0.15]))
+
+    def build(world):
+        look_from(world, (-3.0, 7.0, 6.0), (-3.5, 0.0, 0.0))
+        ids = world.resources["ids"] = {}
+        ids["floor"] = world.spawn(Transform(), MeshRef(plane(20, 20)), Material(color=(0.8, 0.8, 0.8), roughness=1.0))
+        ids["lamp"] = world.spawn(Transform(position=lamp.tolist()), PointLight(intensity=20.0, range=14.0))
+        ids["a"], ids["b"] = spawn_portal_pair(world, (0.0, 1.5, 4.0), None, (-6.0, 1.5, 0.0),
+                                               look_rotation(glm.vec3(-1, 0, 0)))
+        world.get(ids["a"], Portal).carries_light = True
+        for centre, half in (beyond, before):
+            world.spawn(Transform(position=centre.tolist()), MeshRef(box(tuple(2 * half))), Material())
+
+    runner = scene(build, (320, 240))
+    runner.engine.renderer.antialias = "off"
+    ids = runner.world.resources["ids"]
+    portal = runner.world.get(ids["a"], Portal)
+    portal.carries_light = False
+    off = runner.frame()
+    portal.carries_light = True
+    on = runner.frame()
+    assert runner.stats.virtual_lights == 1
+    carry = glm.dmat4(pair_transform(runner.world.get(ids["a"], Transform).world,
+                                     runner.world.get(ids["b"], Transform).world))
+    image = np.array(glm.dvec3(carry * glm.dvec4(*lamp, 1.0)))
+    points = _floor_points(runner)
+    seen = (runner.ids() == ids["floor"]).reshape(-1)
+    to_image = image - points
+    distance = np.linalg.norm(to_image, axis=1)
+    # B faces +x at x = -6: a point in front has x > -6; the line meets x = -6 at t.
+    t = (-6.0 - points[:, 0]) / to_image[:, 0]
+    crossing = points + to_image * t[:, None]
+
+    back = np.linalg.inv(np.array(carry.to_list(), np.float64).T)   # B's side -> A's side
+    at_a = crossing @ back[:3, :3].T + back[:3, 3]
+
+    def lit(margin):
+        through = (points[:, 0] > -6.0) & (t > 0) & (t < 1) & (np.abs(crossing[:, 1] - 1.5) < 1.5 - margin) & \
+            (np.abs(crossing[:, 2]) < 1.0 - margin)
+        out_leg = _box_hit(points, to_image, beyond, margin, t)
+        in_leg = _box_hit(at_a, lamp - at_a, before, margin, np.ones(len(points)))
+        shadows.append((int((seen & through & out_leg).sum()), int((seen & through & in_leg).sum())))
+        return through & ~out_leg & ~in_leg
+
+    shadows: list[tuple[int, int]] = []
+
+    # Where the image's light would be bright enough to see in 8 bits: the engine's falloff
+    # (lights.glsl) along the whole path, times the cosine at the floor, over a Lambertian 0.8.
+    fade = np.clip(1.0 - (distance / 14.0) ** 4, 0.0, 1.0)
+    expected = 20.0 * fade * fade / (distance ** 2 + 1.0) * np.clip(to_image[:, 1] / distance, 0.0, 1.0) * 0.8 / np.pi
+    near = expected > 0.03
+    ratio = (srgb_to_linear(on).mean(-1) / np.maximum(srgb_to_linear(off).mean(-1), 1e-6)).reshape(-1)
+    sure = seen & near & (lit(EDGE) == lit(-EDGE))
+    says = np.where(ratio > 1.05, 1, np.where(ratio < 1.02, 0, -1))[sure]
+    rays = lit(EDGE)[sure].astype(int)
+    assert sure.sum() > 5000 and rays.sum() > 1500, (int(sure.sum()), int(rays.sum()))
+    assert float((says == rays).mean()) >= 0.99, float((says == rays).mean())
+    assert min(shadows[0]) > 100, shadows   # both boxes' shadows fall in the light out of B
+
+
+def test_level_files_carry_the_light_fields(tmp_path):
+    from engine.assets.level_file import LevelError, load_level, save_level
+    from engine.core.world import World
+
+    text = """
+[level]
+name = "light through"
+
+[[entity]]
+name = "mirror"
+[entity.Transform]
+position = [0.0, 1.0, -3.0]
+[entity.MeshRef]
+mesh = { quad = [2.0, 2.0] }
+[entity.Mirror]
+reflects_light = true
+
+[[entity]]
+name = "a"
+[entity.Transform]
+position = [-5.0, 0.0, 0.0]
+[entity.Portal]
+partner = "b"
+carries_light = true
+
+[[entity]]
+name = "b"
+[entity.Transform]
+position = [5.0, 0.0, 0.0]
+[entity.Portal]
+partner = "a"
+"""
+    path = tmp_path / "through.toml"
+    path.write_text(text)
+    world = World("through")
+    names = load_level(path).spawn(world)
+    assert world.get(names["mirror"], Mirror).reflects_light and world.get(names["a"], Portal).carries_light
+    again = World("again")
+    names_again = load_level(save_level(world, tmp_path / "again.toml", names)).spawn(again)
+    assert again.get(names_again["mirror"], Mirror).reflects_light
+    assert again.get(names_again["a"], Portal).carries_light and not again.get(names_again["b"], Portal).carries_light
+    path.write_text(text.replace("reflects_light = true", 'reflects_light = "yes"'))
+    with pytest.raises(LevelError, match="reflects_light"):
+        load_level(path)
