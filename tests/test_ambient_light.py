@@ -433,3 +433,39 @@ def test_the_sample_level_has_no_black_surface(ctx):
         dark = frame.rgb.max(axis=2) < 16
         assert entity.mean() > 0.3, pose  # a frame of things, not of sky
         assert (dark & entity).sum() / entity.sum() < 0.002, pose
+
+
+def test_a_probe_gone_gives_back_its_row_and_its_light(scene):
+    """Deleting the probe frees its row of the table (Renderer.resource_counts) and the white
+    box's face towards the red wall goes back to the hemisphere's grey."""
+    ents = {}
+    runner = scene(red_wall_room(ents), (160, 120))
+    runner.frame()
+    assert runner.engine.renderer.resource_counts()["irradiance_rows"] == 1
+    runner.world.delete_entity(ents["probe"])
+    rgb = runner.frame()
+    assert runner.engine.renderer.resource_counts()["irradiance_rows"] == 0
+    column, row = runner.project((-1.75, 1.0, 0.0))
+    seen = pixel_linear(rgb, column, row)
+    assert seen[0] < 1.5 * seen[1] and seen[0] < 0.1
+
+
+def test_more_boxes_than_the_shader_blends_are_reported(scene, caplog):
+    """MAX_IRRADIANCE_PROBES boxes at most reach the shader; one more is said in a warning,
+    once, and the frame is drawn."""
+    from engine.render.irradiance import MAX_IRRADIANCE_PROBES
+
+    def build(world):
+        look_from(world, (0.0, 1.0, 4.0), target=(0.0, 1.0, 0.0))
+        world.spawn(Transform(position=(0, 1, 0)), MeshRef(box()), Material())
+        for i in range(MAX_IRRADIANCE_PROBES + 1):
+            world.spawn(Transform(position=(i * 3.0, 1.0, -10.0)),
+                        ReflectionProbe(resolution=8, refresh="once", influence=(2.0, 2.0, 2.0)))
+
+    runner = scene(build, (32, 24))
+    with caplog.at_level("WARNING", logger="speculum"):
+        runner.frame()
+        runner.frame()
+    said = [r for r in caplog.records if "MAX_IRRADIANCE_PROBES" in r.getMessage()]
+    assert len(said) == 1 and str(MAX_IRRADIANCE_PROBES + 1) in said[0].getMessage()
+    assert runner.engine.renderer.irradiance._count == MAX_IRRADIANCE_PROBES
