@@ -70,8 +70,8 @@ def patch_shaders(change: str) -> Callable[[], None]:
     old, new = change[len("shader:"):].split("=>")
     expand = library._expand
 
-    def patched(name, stack, root, files):
-        text = expand(name, stack, root, files)
+    def patched(name, stack, root, files, *contents):  # contents: the library's last good copies, if any
+        text = expand(name, stack, root, files, *contents)
         return text.replace(old, new) if name.startswith("include/") else text
     library._expand = patched
 
