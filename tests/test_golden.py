@@ -144,7 +144,12 @@ def test_hardware_rule_catches_real_changes(ctx, change, name, measure):
     problems = golden.failures(changed, reference, software=False)
     assert any(measure in problem for problem in problems), \
         f"{change}: the hardware rule's {measure} measure passes {name} (it says {problems})"
-    if prepare_context(ctx).software and H200_FRAMES.is_dir():  # the change's difference is llvmpipe's alone
+    calibration = golden.load_calibration_reference(name)
+    calibrated = H200_FRAMES.is_dir() and calibration is not None and np.array_equal(calibration.rgb, reference.rgb)
+    # The H200 frames show the look of their day: once a change meant to alter pictures has
+    # made new references (shadows, sky light, tone mapping), the GPU frame plus this change's
+    # difference measures two looks at once, until a lent GPU renders them again.
+    if prepare_context(ctx).software and calibrated:  # the change's difference is llvmpipe's alone
         gpu = golden_noise.with_change(golden_noise.load_stored(golden_noise.stored_frames(H200_FRAMES)[name]),
                                        reference, changed)
         assert golden.hardware_difference(gpu, golden.load_calibration_reference(name)).failures(), \
