@@ -778,23 +778,53 @@ def _check_parent_cycles(path: Path, entities: list[_EntitySpec], lines: dict[tu
 
 # --- saving ------------------------------------------------------------------------------------
 
-def save_level(world: World, path: str | Path, names: Mapping[str, int] | None = None, name: str = "level",
+def save_level(world: World, path: str | Path, names: Mapping[str, int] | None = None, name: str | None = None,
                game: str | None = None, rules: Mapping[str, Any] | None = None,
-               extra_components: Mapping[str, type] | None = None) -> Path:
+               extra_components: Mapping[str, type] | None = None, keep: str | Path | None = None) -> Path:
     """Write ``world`` as a level file: every entity (``names`` gives names by id; others are
     called ``entity_<id>``), each component's fields that differ from their defaults.
     Derived state (portal clones, slices) is left out; a mesh or texture not made by a
-    generator or loaded from a file cannot be written and raises a LevelError."""
+    generator or loaded from a file cannot be written and raises a LevelError.
+
+    ``keep``: the level file the world was loaded from (it may be ``path`` itself). Its text
+    is kept and only what differs is written into it (a round trip through tomlkit, which
+    keeps comments, key order and layout): a changed field is that field's line, an added or
+    removed component or entity is its table, entities keep their file's names and order, and
+    new entities go at the end. So saving an edit to a file makes a diff that is the edit.
+    ``name``, ``game`` and ``rules`` then change the header only where given and different.
+    Without ``keep`` the file is written afresh (``name`` defaults to "level")."""
     import tomli_w
 
     path = Path(path)
+    by_id, tables = _world_tables(world, path, names, extra_components)
+    if keep is not None:
+        text = _kept_text(world, path, Path(keep), by_id, tables, name, game, rules, extra_components)
+        path.write_text(text, encoding="utf-8")
+        return path
+    budget = world.resources.get(ViewBudget)
+    header: dict[str, Any] = {"name": name or "level", **({"game": game} if game else {})}
+    if isinstance(budget, ViewBudget) and budget != ViewBudget():
+        header["view_budget"] = _budget_table(budget)
+    text = tomli_w.dumps({"level": header})
+    if rules:
+        text += "\n" + tomli_w.dumps({"rules": dict(rules)})
+    for table in tables.values():
+        text += _entity_text(table)
+    path.write_text(text, encoding="utf-8")
+    return path
+
+
+def _world_tables(world: World, path: Path, names: Mapping[str, int] | None,
+                  extra_components: Mapping[str, type] | None) -> tuple[dict[int, str], dict[int, dict[str, Any]]]:
+    """Names by id (``entity_<id>`` for the unnamed) and each entity's table as a level file
+    holds it (``name`` and one dict of written fields per component), by id in id order."""
     known = {**ENGINE_COMPONENTS, **(extra_components or {})}
     by_id = {entity: n for n, entity in (names or {}).items()}
     entities = [e for e in sorted(world.entities())
                 if not any(type(c).__name__ == "PortalClone" for c in world.components_of(e))]
     for entity in entities:
         by_id.setdefault(entity, f"entity_{entity}")
-    tables = []
+    tables: dict[int, dict[str, Any]] = {}
     for entity in entities:
         table: dict[str, Any] = {"name": by_id[entity]}
         for component in sorted(world.components_of(entity), key=_component_order):
@@ -805,21 +835,147 @@ def save_level(world: World, path: str | Path, names: Mapping[str, int] | None =
                 raise LevelError(path, f"component {cls_name} is not one a level file holds (pass the game's own "
                                        "with extra_components)", entity=by_id[entity])
             table[cls_name] = _encode_component(path, component, by_id, by_id[entity])
-        tables.append(table)
+        tables[entity] = table
+    return by_id, tables
+
+
+def _budget_table(budget: ViewBudget) -> dict[str, Any]:
+    return {key: value for key, value in dataclasses.asdict(budget).items() if value is not None}
+
+
+def _entity_text(table: Mapping[str, Any]) -> str:
+    text = f"\n[[entity]]\nname = {_literal(table['name'])}\n"
+    for cls_name, fields in table.items():
+        if cls_name != "name":
+            text += f"[entity.{cls_name}]\n" + "".join(f"{_key(k)} = {_literal(v)}\n" for k, v in fields.items())
+    return text
+
+
+def _kept_text(world: World, path: Path, keep: Path, by_id: Mapping[int, str], tables: Mapping[int, dict[str, Any]],
+               name: str | None, game: str | None, rules: Mapping[str, Any] | None,
+               extra_components: Mapping[str, type] | None) -> str:
+    """``keep``'s text with the world's differences from it written in (see ``save_level``).
+
+    What the file says is compared with the world as both are written (``_encode_component``
+    of the file's own components, decoded by ``load_level``), so a field the file writes in
+    another form (a rotation as yaw and pitch, a default written out) and left unedited keeps
+    its text. File paths are relative to the saved file: saved into another folder, every
+    value naming a file is written again."""
+    import tomlkit
+
+    level = load_level(keep, extra_components)
+    try:
+        doc = tomlkit.parse(keep.read_text(encoding="utf-8"))
+    except Exception as exc:  # load_level read it; tomlkit is stricter only in odd corners
+        raise LevelError(keep, f"its text cannot be kept ({exc}); save without keep to write it afresh") from None
+    moved = keep.resolve().parent != path.resolve().parent
+    fake = {index + 1: spec.name for index, spec in enumerate(level._entities)}  # ids for the file's references
+    ids = {spec_name: entity for entity, spec_name in fake.items()}
+    before: dict[str, dict[str, Any]] = {}
+    for spec in level._entities:
+        made = {cls.__name__: cls(**fields) for cls, fields in spec.components}
+        for cls_name, field, target in spec.references:
+            setattr(made[cls_name], field, ids[target])
+        before[spec.name] = {cls_name: _encode_component(keep if moved else path, c, fake, spec.name)
+                             for cls_name, c in made.items()}
+    files = doc.get("entity")
+    now = {table["name"]: table for table in tables.values()}
+    for index in reversed(range(len(level._entities))):  # the file's entities the world no longer has
+        if level._entities[index].name not in now:
+            del files[index]
+    kept = [spec.name for spec in level._entities if spec.name in now]
+    for position, spec_name in enumerate(kept):
+        _keep_entity(files[position], before[spec_name], now[spec_name], moved)
+    header = doc["level"]
+    if name is not None and name != level.name:
+        header["name"] = name
+    if game is not None and game != level.game:
+        header["game"] = game
     budget = world.resources.get(ViewBudget)
-    header: dict[str, Any] = {"name": name, **({"game": game} if game else {})}
-    if isinstance(budget, ViewBudget) and budget != ViewBudget():
-        header["view_budget"] = {key: value for key, value in dataclasses.asdict(budget).items() if value is not None}
-    text = tomli_w.dumps({"level": header})
-    if rules:
-        text += "\n" + tomli_w.dumps({"rules": dict(rules)})
-    for table in tables:
-        text += f"\n[[entity]]\nname = {_literal(table['name'])}\n"
-        for cls_name, fields in table.items():
-            if cls_name != "name":
-                text += f"[entity.{cls_name}]\n" + "".join(f"{_key(k)} = {_literal(v)}\n" for k, v in fields.items())
-    path.write_text(text, encoding="utf-8")
-    return path
+    budget = budget if isinstance(budget, ViewBudget) and budget != ViewBudget() else None
+    if (budget or ViewBudget()) != (level.view_budget or ViewBudget()):
+        if budget is None:
+            del header["view_budget"]
+        else:
+            header["view_budget"] = _item(_budget_table(budget))
+    if rules is not None and not _equal(dict(rules), level.rules):
+        if "rules" not in doc:
+            doc["rules"] = tomlkit.table()
+        table = doc["rules"]
+        for key in [k for k in table if k not in rules]:
+            del table[key]
+        for key, value in rules.items():
+            if key not in level.rules or not _equal(value, level.rules[key]):
+                table[key] = _item(value)
+    text = tomlkit.dumps(doc)
+    new = [_entity_text(table) for table in tables.values() if table["name"] not in before]
+    return text if not new else text.rstrip("\n") + "\n" + "".join(new)
+
+
+def _keep_entity(table: Any, before: Mapping[str, dict], now: Mapping[str, Any], moved: bool) -> None:
+    """Write into one entity's tomlkit table what differs between the file's components
+    (``before``) and the world's (``now``)."""
+    import tomlkit
+
+    for cls_name in [c for c in before if c not in now]:
+        _move_trailing(table, cls_name, None)
+        del table[cls_name]
+    for cls_name, fields in now.items():
+        if cls_name == "name":
+            continue
+        if cls_name not in before:
+            last = [k for k, v in table.items() if isinstance(v, dict)]
+            table[cls_name] = tomlkit.table()
+            for key, value in fields.items():
+                table[cls_name][key] = _item(value)
+            if last:
+                _move_trailing(table, last[-1], cls_name)
+            continue
+        old, component = before[cls_name], table[cls_name]
+        for key in [k for k in old if k not in fields]:
+            if key in component:
+                del component[key]
+        for key, value in fields.items():
+            names_file = moved and isinstance(value, Mapping) and "file" in value
+            if key not in old or names_file or not _equal(value, old[key]):
+                component[key] = _item(value)
+
+
+def _move_trailing(entity: Any, source: str, target: str | None) -> None:
+    """Move the blank lines and comments ending an entity's table ``source`` (what separates
+    it from the next entity) to ``target``, or to the table before ``source`` when it is
+    about to be removed (None)."""
+    from tomlkit.items import Comment, Whitespace
+
+    tables = [k for k, v in entity.items() if isinstance(v, dict)]
+    if target is None:
+        if source != tables[-1] or len(tables) < 2:
+            return
+        target = tables[-2]
+    body = entity[source].value.body
+    trailing = []
+    while body and body[-1][0] is None and isinstance(body[-1][1], (Whitespace, Comment)):
+        trailing.insert(0, body.pop()[1])
+    for item in trailing:
+        entity[target].value.body.append((None, item))
+
+
+def _item(value: Any) -> Any:
+    """A tomlkit value laid out as a fresh save writes it (one line, ``_literal``)."""
+    import tomlkit
+
+    return tomlkit.parse(f"x = {_literal(value)}\n")["x"]
+
+
+def _equal(a: Any, b: Any) -> bool:
+    """Plain values equal, NaN equal to NaN (a field holding NaN is not an edit)."""
+    if isinstance(a, float) and isinstance(b, float) and math.isnan(a) and math.isnan(b):
+        return True
+    if isinstance(a, Mapping) and isinstance(b, Mapping):
+        return a.keys() == b.keys() and all(_equal(a[k], b[k]) for k in a)
+    if isinstance(a, list) and isinstance(b, list):
+        return len(a) == len(b) and all(_equal(x, y) for x, y in zip(a, b, strict=True))
+    return type(a) is type(b) and a == b or (_is_number(a) and _is_number(b) and a == b)
 
 
 def _key(key: str) -> str:
