@@ -6,8 +6,12 @@ import difflib
 import shutil
 from pathlib import Path
 
-from components import Material, Mirror, Visibility
+import numpy as np
+import pytest
+
+from components import ComponentValueError, Material, MeshRef, Mirror, Transform, Visibility
 from engine.assets.level_file import load_level, same_floats, save_level
+from engine.assets.mesh import box
 from engine.core.world import World
 from games.hall_of_mirrors.level import Spin
 from tests.test_level_files import fields_by_name
@@ -99,4 +103,122 @@ def test_an_unedited_save_is_the_same_text(tmp_path):
     out = save_level(world, tmp_path / "copy.toml", names, name=level.name, game=level.game, rules=level.rules,
                      extra_components=EXTRA, keep=path)
     assert out.read_text() == HALL.read_text()
+    world.close()
+
+
+# --- edits through the editor: the same frames as the same edit in code -----------------------
+
+def edit_scene(world, ents):
+    from tests.support import look_from
+    from tests.test_mirrors import base_scene, mirror_wall
+
+    base_scene(world)
+    look_from(world, (1.5, 1.8, 5.0))
+    ents["mirror"] = mirror_wall(world)
+    ents["box"] = world.spawn(Transform(position=(-1.0, 1.2, 0.0), scale=(0.6, 0.6, 0.6)), MeshRef(box()),
+                              Material(color=(0.9, 0.05, 0.05), roughness=0.4))
+
+
+def test_an_edit_through_the_editor_renders_as_the_same_edit_in_code(scene):
+    from shell.editor import Editor
+
+    by_editor, by_code = {}, {}
+    edited = scene(lambda world: edit_scene(world, by_editor), (160, 120))
+    coded = scene(lambda world: edit_scene(world, by_code), (160, 120))
+    editor = Editor(edited.world)
+    first = edited.frame()
+    assert np.array_equal(first, coded.frame()) and first.std() > 10  # a picture, the same in both
+
+    box_e, box_c = by_editor["box"], by_code["box"]
+    editor.set_field(box_e, "Material", "color", (0.1, 0.8, 0.1, 1.0))
+    coded.world.get(box_c, Material).color = (0.1, 0.8, 0.1, 1.0)
+    editor.set_field(by_editor["mirror"], Mirror, "color", [0.6, 0.6, 1.0, 1.0])
+    coded.world.get(by_code["mirror"], Mirror).color = [0.6, 0.6, 1.0, 1.0]
+    green = edited.frame()
+    assert np.array_equal(green, coded.frame())
+    assert not np.array_equal(green, first)
+    # The box seen directly and in the mirror both turned from red to green.
+    ids = edited.ids()
+    for pixels in (green[ids == box_e],):
+        assert (pixels[:, 1].astype(int) > pixels[:, 0]).mean() > 0.9
+    assert (first[ids == box_e][:, 0].astype(int) > first[ids == box_e][:, 1]).mean() > 0.9
+
+    # A bad value: the component's own message, and nothing changes (nor the undo list).
+    try:
+        Material(roughness=-1.0)
+    except ComponentValueError as exc:
+        expected = str(exc)
+    assert editor.try_set_field(box_e, "Material", "roughness", -1.0) == expected == editor.message
+    with pytest.raises(ComponentValueError):
+        editor.set_field(box_e, "Material", "roughness", float("nan"))
+    assert edited.world.get(box_e, Material).roughness == 0.4
+    assert np.array_equal(edited.frame(), coded.frame())
+
+    # Undo twice is the first frame again (the code side sets the old values back); redo both.
+    assert editor.undo() and editor.undo() and not editor.undo()
+    coded.world.get(box_c, Material).color = (0.9, 0.05, 0.05, 1.0)
+    coded.world.get(by_code["mirror"], Mirror).color = (1.0, 1.0, 1.0, 1.0)
+    undone = edited.frame()
+    assert np.array_equal(undone, coded.frame())
+    assert np.array_equal(undone, first)
+    assert editor.redo() and editor.redo() and not editor.redo()
+    assert np.array_equal(edited.frame(), green)
+
+
+def test_a_drag_is_one_undo_and_components_come_and_go_with_undo(tmp_path):
+    from shell.editor import EditError, Editor
+
+    world, names, level = loaded(_copy_hall(tmp_path), "edit_drag")
+    editor = Editor(world, EXTRA, names, tmp_path / "hall.toml")
+    crate = names["red_crate"]
+    for value in (0.5, 0.4, 0.3, 0.2):
+        editor.set_field(crate, "Material", "roughness", value, merge=True)
+    editor.end_drag()
+    editor.set_field(crate, "Material", "metallic", 0.5)
+    assert editor.undo() and world.get(crate, Material).metallic == 0.0
+    assert editor.undo() and world.get(crate, Material).roughness == 0.6  # the whole drag
+    assert not editor.can_undo
+    assert "Visibility" in editor.addable(crate) and "Spin" not in editor.addable(crate)
+    added = editor.add_component(crate, "Visibility")
+    removed = editor.remove_component(crate, "Spin")
+    assert world.get(crate, Visibility) is added and not world.has(crate, Spin)
+    assert editor.undo() and world.get(crate, Spin) is removed
+    assert editor.undo() and not world.has(crate, Visibility)
+    assert editor.redo() and world.get(crate, Visibility) is added
+    with pytest.raises(EditError, match="no component 'Nonsense'"):
+        editor.add_component(crate, "Nonsense")
+    with pytest.raises(EditError, match="already has a Material"):
+        editor.add_component(crate, "Material")
+    with pytest.raises(EditError, match="Material has no field 'shine'"):
+        editor.set_field(crate, "Material", "shine", 1.0)
+    # A Mirror on an entity without a mesh is refused by the world's own rule, nothing added.
+    with pytest.raises(EditError, match="Mirror"):
+        editor.add_component(names["sun"], "Mirror")
+    assert not world.has(names["sun"], Mirror)
+    # Saved: the file's diff is the edits left (Visibility added; roughness back as it was).
+    editor.set_field(crate, "Material", "roughness", 0.3)
+    original = (tmp_path / "hall.toml").read_text()
+    editor.save()
+    changed = diff(original, (tmp_path / "hall.toml").read_text())
+    assert changed == ["-roughness = 0.6", "+roughness = 0.3", "+[entity.Visibility]"]
+    world.close()
+
+
+def _copy_hall(tmp_path: Path) -> Path:
+    path = tmp_path / "hall.toml"
+    shutil.copy(HALL, path)
+    return path
+
+
+def test_an_edit_the_frame_would_refuse_is_refused_and_changes_nothing(tmp_path):
+    from shell.editor import EditError, Editor
+
+    world, names, level = loaded(_copy_hall(tmp_path), "edit_refused")
+    editor = Editor(world, EXTRA, names)
+    with pytest.raises(EditError, match="a Mirror needs a MeshRef and a Transform"):
+        editor.remove_component(names["mirror_1"], "MeshRef")
+    assert world.has(names["mirror_1"], MeshRef)
+    with pytest.raises(EditError, match="Water"):
+        editor.remove_component(names["pond"], "Mirror")
+    assert world.has(names["pond"], Mirror) and not editor.can_undo
     world.close()

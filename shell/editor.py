@@ -1,0 +1,279 @@
+"""Editing a level in the window: pick an entity from the frame's id images, set its fields
+through the components' own checks, add and remove components, undo and redo, save.
+
+GL-free: the editor works on a World and on id images already read back (numpy arrays), so
+the overlay (``shell.overlay``) calls it and tests drive it headless. An edit is a field
+write as code makes it (``setattr`` on the component: its ``_validate`` and the world's
+invariants refuse a bad value before anything changes), so an edit in the window, in code
+and in a level file are held to one set of rules. Undo and redo are the command pattern:
+each edit is kept as what it changed (the component, the field, the value before and after;
+or the component added or removed) and undone by writing the old value back through the
+same checks. A drag is many writes of one field: ``merge=True`` folds them into one edit.
+Saving writes the level file back into its own text (``save_level(keep=...)``), so the
+file's diff is the edit.
+"""
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from pyglm import glm
+
+from components import ComponentValueError
+from engine.assets.level_file import DERIVED_COMPONENTS, ENGINE_COMPONENTS, save_level
+from engine.core.errors import SpeculumError
+from engine.core.world import World, check_components
+
+MAX_UNDO = 1000  # edits kept for undo; the oldest go first
+
+
+class EditError(SpeculumError, ValueError):
+    """An edit that cannot be made (no such entity, component or field): says which."""
+
+
+@dataclasses.dataclass
+class Edit:
+    """One undoable edit: ``action`` is "set" (``field`` from ``before`` to ``after``), "add"
+    or "remove" (``component``, the object itself, so undo puts back the very same one)."""
+
+    action: str
+    entity: int
+    kind: type
+    component: Any
+    field: str | None = None
+    before: Any = None
+    after: Any = None
+    open: bool = True  # a drag still going on: a merging write of the same field joins it
+
+
+def _copy(value: Any) -> Any:
+    """A value kept for undo, apart from the one the component holds (glm vectors are
+    edited in place by games; lists by hand)."""
+    if isinstance(value, (glm.vec2, glm.vec3, glm.vec4, glm.quat, glm.dvec3, glm.dquat)):
+        return type(value)(value)
+    if isinstance(value, list):
+        return list(value)
+    return value
+
+
+def pick(ids: np.ndarray, surface_ids: np.ndarray | None, x: int, y: int, surface: bool = False) -> int | None:
+    """The entity at pixel (``x``, ``y`` from the top left) of a frame's id images: the one
+    finally seen there (``RenderTargets.read_ids``: a box seen in a mirror is the box), or
+    with ``surface`` the one drawn there in the main view (``read_surface_ids``: the mirror
+    or portal the pixel was seen through, or the thing itself where nothing reflects).
+    None for the sky, or a pixel outside the image."""
+    image = surface_ids if surface else ids
+    if image is None:
+        raise EditError("picking the surface needs the frame's surface id image (read_surface_ids)")
+    height, width = image.shape[:2]
+    if not (0 <= x < width and 0 <= y < height):
+        return None
+    entity = int(image[y, x])
+    return entity or None
+
+
+class Editor:
+    """Edits of one world, with undo and redo, and the selected entity.
+
+    ``components``: the components that may be added, by name (the engine's
+    ``ENGINE_COMPONENTS`` and the game's own, ``LevelGame.components``). ``names``: entity
+    ids by name (``LevelGame.names``), kept in the saved file. ``level_path``: the level file
+    the world was loaded from, whose text a save keeps. ``message``: why the last edit was
+    refused (the component's own words), None after one that was made."""
+
+    def __init__(self, world: World, components: Mapping[str, type] | None = None,
+                 names: Mapping[str, int] | None = None, level_path: str | Path | None = None) -> None:
+        self.world = world
+        self.components: dict[str, type] = {**ENGINE_COMPONENTS, **(components or {})}
+        self.game_components = {k: v for k, v in (components or {}).items() if k not in ENGINE_COMPONENTS}
+        self.names: dict[str, int] = dict(names or {})
+        self.level_path = Path(level_path) if level_path is not None else None
+        self.selected: int | None = None
+        self.message: str | None = None
+        self._done: list[Edit] = []
+        self._undone: list[Edit] = []
+
+    # --- selection -------------------------------------------------------------------------
+    def pick(self, ids: np.ndarray, surface_ids: np.ndarray | None, x: int, y: int,
+             surface: bool = False) -> int | None:
+        """Select the entity at a pixel (``pick``); the sky selects nothing."""
+        self.selected = pick(ids, surface_ids, x, y, surface)
+        return self.selected
+
+    def name_of(self, entity: int) -> str:
+        """The entity's name in the level file, or ``entity <id>``."""
+        return next((n for n, e in self.names.items() if e == entity), f"entity {entity}")
+
+    # --- what an entity holds --------------------------------------------------------------
+    def component(self, entity: int, component: str | type) -> Any:
+        """The entity's component of that class (or class name); an EditError if it has none."""
+        if not self.world.exists(entity):
+            raise EditError(f"entity {entity} does not exist")
+        name = component if isinstance(component, str) else component.__name__
+        found = next((c for c in self.world.components_of(entity) if type(c).__name__ == name), None)
+        if found is None:
+            raise EditError(f"{self.name_of(entity)} has no {name}")
+        return found
+
+    def components_of(self, entity: int) -> list[tuple[str, Any]]:
+        """(class name, component) of the entity's editable components, in a stable order
+        (derived state, PortalClone and Slice, is the engine's and not shown)."""
+        if not self.world.exists(entity):
+            return []
+        found = [(type(c).__name__, c) for c in self.world.components_of(entity)
+                 if type(c).__name__ not in DERIVED_COMPONENTS]
+        return sorted(found, key=lambda item: item[0])
+
+    @staticmethod
+    def fields(component: Any) -> list[tuple[str, Any]]:
+        """(field, value) of a component's public fields, in declaration order."""
+        if not dataclasses.is_dataclass(component):
+            return []
+        return [(f.name, getattr(component, f.name)) for f in dataclasses.fields(component)
+                if f.init and not f.name.startswith("_")]
+
+    def addable(self, entity: int) -> list[str]:
+        """Names of the components the entity could be given (those it has not got)."""
+        held = {type(c).__name__ for c in self.world.components_of(entity)} if self.world.exists(entity) else set()
+        return sorted(n for n in self.components if n not in held)
+
+    # --- edits -----------------------------------------------------------------------------
+    def set_field(self, entity: int, component: str | type, field: str, value: Any, merge: bool = False) -> None:
+        """Write ``value`` into a field as code would (``setattr``): the component's checks
+        and the world's invariants refuse a bad value with their own ComponentValueError,
+        and nothing changes. ``merge``: part of a drag (one undo step for the whole drag)."""
+        target = self.component(entity, component)
+        if dataclasses.is_dataclass(target) and field not in {f.name for f in dataclasses.fields(target)}:
+            raise EditError(f"{type(target).__name__} has no field {field!r} "
+                            f"(fields: {', '.join(n for n, _ in self.fields(target))})")
+        before = _copy(getattr(target, field))
+        try:
+            setattr(target, field, value)
+        except ComponentValueError as exc:
+            self.message = str(exc)
+            raise
+        self.message = None
+        after = _copy(getattr(target, field))
+        last = self._done[-1] if self._done else None
+        if merge and last is not None and last.open and last.action == "set" and last.component is target \
+                and last.field == field and last.entity == entity:
+            last.after = after
+        else:
+            self._push(Edit("set", entity, type(target), target, field, before, after))
+        self._done[-1].open = merge
+
+    def try_set_field(self, entity: int, component: str | type, field: str, value: Any,
+                      merge: bool = False) -> str | None:
+        """``set_field``, answering why it was refused (the component's message) or None."""
+        try:
+            self.set_field(entity, component, field, value, merge)
+        except (ComponentValueError, EditError, TypeError, ValueError) as exc:
+            self.message = str(exc)
+            return self.message
+        return None
+
+    def end_drag(self) -> None:
+        """The drag is over: the next write of the same field is an edit of its own."""
+        if self._done:
+            self._done[-1].open = False
+
+    def add_component(self, entity: int, name: str, **fields: Any) -> Any:
+        """Give the entity a new component of class ``name`` (one of ``components``), made
+        from ``fields`` (its defaults otherwise) and checked as a spawn would check it."""
+        cls = self.components.get(name)
+        if cls is None:
+            raise EditError(f"no component {name!r} to add (components: {', '.join(sorted(self.components))})")
+        if not self.world.exists(entity):
+            raise EditError(f"entity {entity} does not exist")
+        if self.world.has(entity, cls):
+            raise EditError(f"{self.name_of(entity)} already has a {name}")
+        try:
+            component = cls(**fields)
+            self._check_whole(entity, [*self.world.components_of(entity), component])
+            self.world.add_component(entity, component)
+        except (ComponentValueError, TypeError) as exc:
+            self.message = f"{name}: {exc}" if isinstance(exc, TypeError) else str(exc)
+            raise EditError(self.message) from exc
+        self.message = None
+        self._push(Edit("add", entity, cls, component, open=False))
+        return component
+
+    def remove_component(self, entity: int, name: str) -> Any:
+        """Take the entity's component of class ``name`` away (undo gives the same one back)."""
+        component = self.component(entity, name)
+        try:
+            self._check_whole(entity, [c for c in self.world.components_of(entity) if c is not component])
+        except ComponentValueError as exc:
+            self.message = str(exc)
+            raise EditError(self.message) from exc
+        self.world.remove_component(entity, type(component))
+        self.message = None
+        self._push(Edit("remove", entity, type(component), component, open=False))
+        return component
+
+    def _check_whole(self, entity: int, components: list[Any]) -> None:
+        """Refuse an entity the frame would refuse: the registered invariants over its
+        components together (a Water needs a Mirror), and a Mirror needs a MeshRef and a
+        Transform (the surfaces stage draws it from them; a level file is held to the same)."""
+        held = {type(c).__name__ for c in components}
+        if "Mirror" in held and not {"MeshRef", "Transform"} <= held:
+            missing = " and no ".join(k for k in ("MeshRef", "Transform") if k not in held)
+            raise ComponentValueError(f"{self.name_of(entity)}: a Mirror needs a MeshRef and a Transform "
+                                      f"(it would have no {missing})")
+        check_components(components)
+
+    def _push(self, edit: Edit) -> None:
+        self._done.append(edit)
+        del self._done[:-MAX_UNDO]
+        self._undone.clear()
+
+    # --- undo and redo ---------------------------------------------------------------------
+    @property
+    def can_undo(self) -> bool:
+        return bool(self._done)
+
+    @property
+    def can_redo(self) -> bool:
+        return bool(self._undone)
+
+    def undo(self) -> bool:
+        """Take back the last edit; False when there is none."""
+        if not self._done:
+            return False
+        edit = self._done.pop()
+        edit.open = False
+        self._apply(edit, backwards=True)
+        self._undone.append(edit)
+        return True
+
+    def redo(self) -> bool:
+        """Make the last undone edit again; False when there is none."""
+        if not self._undone:
+            return False
+        edit = self._undone.pop()
+        self._apply(edit, backwards=False)
+        self._done.append(edit)
+        return True
+
+    def _apply(self, edit: Edit, backwards: bool) -> None:
+        if not self.world.exists(edit.entity):
+            raise EditError(f"entity {edit.entity} (edited) no longer exists")
+        if edit.action == "set":
+            setattr(edit.component, edit.field, _copy(edit.before if backwards else edit.after))
+        elif (edit.action == "add") == backwards:
+            self.world.remove_component(edit.entity, edit.kind)
+        else:
+            self.world.add_component(edit.entity, edit.component)
+
+    # --- saving ----------------------------------------------------------------------------
+    def save(self, path: str | Path | None = None) -> Path:
+        """Write the level file (``path``, else the one loaded) keeping the loaded file's text:
+        the diff is the edits. A world not loaded from a file is written afresh."""
+        target = Path(path) if path is not None else self.level_path
+        if target is None:
+            raise EditError("no level file to save to: give a path")
+        keep = self.level_path if self.level_path is not None and self.level_path.exists() else None
+        return save_level(self.world, target, self.names, extra_components=self.game_components, keep=keep)
