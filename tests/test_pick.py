@@ -39,3 +39,38 @@ def test_pick_a_box_directly_in_a_mirror_and_the_mirror_itself(scene):
     # Every pixel the box covers, directly or in the mirror, picks the box.
     rows, cols = np.nonzero(ids == ents["box"])
     assert len(rows) > 20 and all(pick(ids, surfaces, c, r) == ents["box"] for r, c in zip(rows, cols, strict=True))
+
+
+def test_the_selection_is_outlined_directly_and_in_the_mirror(scene):
+    """The outline pass over the frame: exactly the pixels next to (not on) the selection's
+    pixels in the id image, worked out here with numpy (a 3x3 dilation), are the outline's
+    colour; the box's outline shows both where it stands and in the mirror."""
+    from engine.render.outline import SelectionOutline
+
+    ents = {}
+    runner = scene(lambda world: edit_scene(world, ents), (160, 120))
+    frame = runner.frame()
+    ids = runner.ids()
+    renderer = runner.engine.renderer
+    outline = SelectionOutline(runner.ctx, renderer.shaders)
+    try:
+        outline.draw(renderer.targets.seen, runner.capture.framebuffer, runner.size, ents["box"],
+                     color=(1.0, 0.0, 1.0, 1.0))
+        outlined = runner.capture.read_rgb()
+    finally:
+        outline.release()
+    mask = ids == ents["box"]
+    padded = np.pad(mask, 1)
+    near = np.zeros_like(mask)
+    for dy in (-1, 0, 1):
+        for dx in (-1, 0, 1):
+            near |= padded[1 + dy:1 + dy + mask.shape[0], 1 + dx:1 + dx + mask.shape[1]]
+    expected = near & ~mask
+    magenta = np.all(outlined == (255, 0, 255), axis=-1)
+    assert np.array_equal(magenta, expected)
+    assert np.array_equal(outlined[~expected], frame[~expected])  # nothing else drawn over
+    # Both of the box's shapes (itself, its image in the mirror) have their outline.
+    direct, mirrored = runner.project(BOX), reflected_pixel(runner, BOX)
+    for col, row in (direct, mirrored):
+        assert magenta[max(row - 12, 0):row + 12, max(col - 12, 0):col + 12].sum() > 8
+    assert not magenta[:, :min(direct[0], mirrored[0]) - 20].any()

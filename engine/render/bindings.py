@@ -52,6 +52,7 @@ ATLAS_UNIT = 6           # composite (rough variant): the rough-reflection atlas
 FALLBACK_PARENT_UNITS = (0, 2)  # composite (fallback variants): the parent level's node and surface images
 LEVEL_UNITS = (3, 5)     # rough-atlas copy: a level's colour and node images (the composite's units for them)
 PRESENT_UNIT = 0         # present: the HDR image
+OUTLINE_UNIT = 0         # selection outline (the editor): the main view's seen-id image (engine/render/outline.py)
 PROBE_UNIT = 7           # scene: the cube map of the batch's reflection probe; composite (fallback): its draw's first
 PROBE2_UNIT = 9          # scene: the cube map of the batch's second probe (probe blending); composite (fallback): the
                          # draw's second
