@@ -99,8 +99,10 @@ class Editor:
     # --- selection -------------------------------------------------------------------------
     def pick(self, ids: np.ndarray, surface_ids: np.ndarray | None, x: int, y: int,
              surface: bool = False) -> int | None:
-        """Select the entity at a pixel (``pick``); the sky selects nothing."""
+        """Select the entity at a pixel (``pick``); the sky selects nothing. A new selection
+        clears the message of the last refused edit."""
         self.selected = pick(ids, surface_ids, x, y, surface)
+        self.message = None
         return self.selected
 
     def name_of(self, entity: int) -> str:

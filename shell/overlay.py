@@ -1,7 +1,11 @@
 """The debug overlay: frame rate and a frame-time graph, what the last frame cost (passes,
 draw calls, views per reflection level, probe captures), the reflection and probe capture
 paths in use, toggles for them, the post-processing (tone curve, exposure, bloom; toggles
-for bloom and the curve), and shader errors from hot reload.
+for bloom and the curve), and shader errors from hot reload; and the level editor's inspector (``shell/editor.py``): a
+click in the world selects the entity seen there (Ctrl+click: the mirror or portal it was
+seen through), outlined wherever it shows (``engine/render/outline.py``); its components'
+fields are drag inputs, checkboxes and colour pickers that edit it through the components'
+own checks, with undo, redo, add, remove and save.
 
 It is an immediate-mode GUI (Dear ImGui, through imgui-bundle) drawn by moderngl-window's
 moderngl renderer for it, after the present stage, over the finished frame in the output
@@ -33,6 +37,8 @@ from imgui_bundle import imgui
 from moderngl_window.integrations.imgui_bundle import ModernGLRenderer
 
 from components.post import TONEMAP_CURVES
+from engine.assets.values import json_value
+from shell.editor import Editor
 from shell.overlay_text import overlay_lines
 
 if TYPE_CHECKING:  # the app's window makes the overlay
@@ -45,6 +51,8 @@ PROBE_PATHS = ("auto", "six_pass", "layered")
 MAX_DEPTH_CAP = 16
 CURVE_CHOICES = (None, *TONEMAP_CURVES)   # None: each camera's own Tonemap curve
 CURVE_WIDTH = 100                          # pixels of the curve's drop-down
+INSPECTOR_WIDTH = 320                      # pixels of the inspector, at the right edge
+DRAG_SPEED = 0.01                          # a number field's change per pixel dragged
 
 
 class OverlayRenderer(ModernGLRenderer):
@@ -162,6 +170,10 @@ class DebugOverlay:
         io.set_ini_filename("")  # no imgui.ini written next to the game
         self.renderer = OverlayRenderer(ctx, (1, 1))
         self.io = io
+        self.editor: Editor | None = None     # the level editor of the engine's world (made when first drawn)
+        self.inspector_lines: list[str] = []  # the inspector's text last drawn (entity, components, message)
+        self._outline = None
+        self._removing: tuple[int, str] | None = None
 
     def record(self, seconds: float | None = None) -> None:
         """Add one frame's time (``None``: the time since the last call, wall clock)."""
@@ -183,6 +195,25 @@ class DebugOverlay:
         index = {1: 0, 2: 1, 3: 2}.get(button)
         if index is not None:
             self.io.add_mouse_button_event(index, down)
+
+    def editing(self, engine: Engine) -> Editor:
+        """The editor of ``engine``'s world (a new one when the world was rebuilt): the game's
+        own components, entity names and level file, where it is a ``LevelGame``."""
+        if self.editor is None or self.editor.world is not engine.world:
+            game = engine.game
+            self.editor = Editor(engine.world, getattr(game, "components", None), getattr(game, "names", None),
+                                 getattr(game, "level_path", None))
+        return self.editor
+
+    def click(self, engine: Engine, x: float, y: float, surface: bool = False) -> bool:
+        """A click in the world at output pixel (``x``, ``y``) while the overlay is shown:
+        select what the last frame's id images hold there (``surface``: the mirror or portal
+        seen through). True when it was the editor's click (the overlay is shown)."""
+        targets = engine.renderer.targets
+        if not self.visible or self.context is None or targets is None:
+            return False
+        self.editing(engine).pick(targets.read_ids(), targets.read_surface_ids(), int(x), int(y), surface)
+        return True
 
     @property
     def wants_mouse(self) -> bool:
@@ -208,9 +239,20 @@ class DebugOverlay:
         imgui.new_frame()
         self._layout(engine)
         imgui.render()
+        self._draw_outline(engine, framebuffer, size)
         framebuffer.use()
         self.ctx.viewport = (0, 0, *size)
         self.renderer.render(imgui.get_draw_data())
+
+    def _draw_outline(self, engine: Engine, framebuffer: moderngl.Framebuffer, size: tuple[int, int]) -> None:
+        editor, targets = self.editor, engine.renderer.targets
+        if editor is None or editor.selected is None or targets is None or not engine.world.exists(editor.selected):
+            return
+        if self._outline is None:
+            from engine.render.outline import SelectionOutline
+
+            self._outline = SelectionOutline(self.ctx, engine.renderer.shaders)
+        self._outline.draw(targets.seen, framebuffer, size, editor.selected)
 
     def _layout(self, engine) -> None:
         self.lines = overlay_lines(engine, self.frame_times)
@@ -283,6 +325,111 @@ class DebugOverlay:
         width, height = self.io.display_size
         self.region = (int(x), int(y), int(min(np.ceil(w), width - x)), int(min(np.ceil(h), height - y)))
         imgui.end()
+        self._inspector(engine)
+
+    # --- the level editor's inspector ---------------------------------------------------------
+    def _inspector(self, engine: Engine) -> None:
+        editor = self.editing(engine)
+        entity = editor.selected
+        lines: list[str] = []
+        if entity is None or not engine.world.exists(entity):  # shown once something is clicked
+            self.inspector_lines = lines
+            return
+        width, _height = self.io.display_size
+        imgui.set_next_window_pos(imgui.ImVec2(max(width - INSPECTOR_WIDTH - POSITION[0], 0), POSITION[1]))
+        imgui.set_next_window_size_constraints(imgui.ImVec2(INSPECTOR_WIDTH, 0), imgui.ImVec2(INSPECTOR_WIDTH, 10000))
+        imgui.set_next_window_bg_alpha(0.85)
+        flags = (imgui.WindowFlags_.always_auto_resize | imgui.WindowFlags_.no_saved_settings
+                 | imgui.WindowFlags_.no_collapse | imgui.WindowFlags_.no_move)
+        imgui.begin("Inspector (click: select, Ctrl+click: the mirror)", None, flags)
+        if imgui.button("undo") and editor.can_undo:
+            editor.undo()
+        self._widget("undo")
+        imgui.same_line()
+        if imgui.button("redo") and editor.can_redo:
+            editor.redo()
+        self._widget("redo")
+        if editor.level_path is not None:
+            imgui.same_line()
+            if imgui.button("save"):
+                try:
+                    editor.message = f"saved {editor.save()}"
+                except Exception as exc:  # shown in the overlay, the window keeps running
+                    editor.message = str(exc)
+            self._widget("save")
+        if editor.message:  # why the last edit was refused (the component's words), or "saved ..."
+            lines.append(editor.message)
+            imgui.push_text_wrap_pos(imgui.get_cursor_pos_x() + INSPECTOR_WIDTH - 16)
+            imgui.text_colored(imgui.ImVec4(1.0, 0.35, 0.3, 1.0), editor.message)
+            imgui.pop_text_wrap_pos()
+        imgui.push_item_width(INSPECTOR_WIDTH * 0.6)
+        name = editor.name_of(entity)
+        lines.append(name if name == f"entity {entity}" else f"{name} (entity {entity})")
+        imgui.text(lines[-1])
+        for cls_name, component in editor.components_of(entity):
+            lines.append(cls_name)
+            opened = imgui.collapsing_header(f"{cls_name}##{entity}", imgui.TreeNodeFlags_.default_open)
+            self._widget(cls_name)
+            if not opened:
+                continue
+            for field, value in editor.fields(component):
+                self._field(editor, entity, cls_name, field, value, lines)
+            if imgui.small_button(f"remove {cls_name}"):
+                self._removing = (entity, cls_name)
+            self._widget(f"remove {cls_name}")
+        addable = editor.addable(entity)
+        if addable and imgui.begin_combo("add component", ""):
+            for name in addable:
+                if imgui.selectable(name, False)[0]:
+                    try:
+                        editor.add_component(entity, name)
+                    except Exception as exc:  # the message is the editor's
+                        editor.message = str(exc)
+            imgui.end_combo()
+        self._widget("add component")
+        imgui.pop_item_width()
+        removing, self._removing = self._removing, None
+        if removing is not None:  # after the loop over the components it changes
+            try:
+                editor.remove_component(*removing)
+            except Exception as exc:
+                editor.message = str(exc)
+        self.inspector_lines = lines
+        imgui.end()
+
+    def _field(self, editor: Editor, entity: int, cls_name: str, field: str, value, lines: list[str]) -> None:
+        """One field's input: numbers drag, booleans tick, colours pick, the rest is shown."""
+        label = f"{field}##{cls_name}.{field}"
+        try:
+            data, kind = json_value(value)
+        except Exception:
+            data, kind = None, "object"
+        changed, new = False, None
+        if kind == "bool":
+            changed, new = imgui.checkbox(label, bool(data))
+        elif kind == "float":
+            changed, new = imgui.drag_float(label, float(data), DRAG_SPEED)
+        elif kind == "int" and (cls_name, field) not in (("Transform", "parent"), ("Portal", "partner")):
+            changed, new = imgui.drag_int(label, int(data))
+        elif kind in ("vec2", "vec3", "vec4"):
+            if "color" in field and kind == "vec4":
+                changed, new = imgui.color_edit4(label, list(data))
+            elif "color" in field and kind == "vec3":
+                changed, new = imgui.color_edit3(label, list(data))
+            else:
+                drag = {"vec2": imgui.drag_float2, "vec3": imgui.drag_float3, "vec4": imgui.drag_float4}[kind]
+                changed, new = drag(label, list(data), DRAG_SPEED)
+        else:
+            shown = value if kind in ("str", "null", "int") else (getattr(value, "name", None) or kind)
+            imgui.text(f"{field}: {shown}")
+        self._widget(f"{cls_name}.{field}")
+        lines.append(f"  {field} = {data if kind not in ('mesh', 'texture', 'object', 'array') else kind}")
+        if changed:
+            if isinstance(new, list | tuple):
+                new = tuple(float(v) for v in new)
+            editor.try_set_field(entity, cls_name, field, new, merge=True)
+        if imgui.is_item_deactivated():
+            editor.end_drag()
 
     def _widget(self, name: str) -> None:
         low, high = imgui.get_item_rect_min(), imgui.get_item_rect_max()
@@ -291,6 +438,9 @@ class DebugOverlay:
     def release(self) -> None:
         if self.context is None:
             return  # released already
+        if self._outline is not None:
+            self._outline.release()
+            self._outline = None
         context, self.context = self.context, None
         current = imgui.get_current_context()
         imgui.set_current_context(context)
