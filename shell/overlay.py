@@ -341,7 +341,7 @@ class DebugOverlay:
         imgui.set_next_window_bg_alpha(0.85)
         flags = (imgui.WindowFlags_.always_auto_resize | imgui.WindowFlags_.no_saved_settings
                  | imgui.WindowFlags_.no_collapse | imgui.WindowFlags_.no_move)
-        imgui.begin("Inspector (click: select, Ctrl+click: the mirror)", None, flags)
+        imgui.begin("Inspector", None, flags)
         if imgui.button("undo") and editor.can_undo:
             editor.undo()
         self._widget("undo")
