@@ -95,6 +95,7 @@ class Editor:
         self.message: str | None = None
         self._done: list[Edit] = []
         self._undone: list[Edit] = []
+        self._everything: list[Edit] = []  # every edit made, undone or not: what a save may write
 
     # --- selection -------------------------------------------------------------------------
     def pick(self, ids: np.ndarray, surface_ids: np.ndarray | None, x: int, y: int,
@@ -228,6 +229,7 @@ class Editor:
         check_components(components)
 
     def _push(self, edit: Edit) -> None:
+        self._everything.append(edit)
         self._done.append(edit)
         del self._done[:-MAX_UNDO]
         self._undone.clear()
@@ -272,10 +274,15 @@ class Editor:
 
     # --- saving ----------------------------------------------------------------------------
     def save(self, path: str | Path | None = None) -> Path:
-        """Write the level file (``path``, else the one loaded) keeping the loaded file's text:
-        the diff is the edits. A world not loaded from a file is written afresh."""
+        """Write the level file (``path``, else the one loaded) keeping the loaded file's text,
+        with the edited components written in (``save_level(keep=..., only=...)``): the diff
+        is the edits. A world not loaded from a file is written afresh."""
         target = Path(path) if path is not None else self.level_path
         if target is None:
             raise EditError("no level file to save to: give a path")
         keep = self.level_path if self.level_path is not None and self.level_path.exists() else None
-        return save_level(self.world, target, self.names, extra_components=self.game_components, keep=keep)
+        # Only what was edited: the running game moves things too (a spinning crate, the
+        # camera flown about), and that is play, not an edit of the level.
+        edited = {(self.name_of(e.entity), e.kind.__name__) for e in self._everything} if keep is not None else None
+        return save_level(self.world, target, self.names, extra_components=self.game_components, keep=keep,
+                          only=edited)

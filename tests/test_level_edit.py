@@ -8,6 +8,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from pyglm import glm
 
 from components import ComponentValueError, Material, MeshRef, Mirror, Transform, Visibility
 from engine.assets.level_file import load_level, same_floats, save_level
@@ -197,6 +198,9 @@ def test_a_drag_is_one_undo_and_components_come_and_go_with_undo(tmp_path):
     assert not world.has(names["sun"], Mirror)
     # Saved: the file's diff is the edits left (Visibility added; roughness back as it was).
     editor.set_field(crate, "Material", "roughness", 0.3)
+    # Play is not an edit: the camera flown and the crate spun are not saved.
+    world.get(names["camera"], Transform).position = (1.0, 2.0, 3.0)
+    world.get(crate, Transform).rotation = glm.angleAxis(0.5, glm.vec3(0, 1, 0))
     original = (tmp_path / "hall.toml").read_text()
     editor.save()
     changed = diff(original, (tmp_path / "hall.toml").read_text())

@@ -30,7 +30,7 @@ import os
 import re
 import types
 import typing
-from collections.abc import Callable, Iterable, Mapping, Sequence
+from collections.abc import Callable, Collection, Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -780,7 +780,8 @@ def _check_parent_cycles(path: Path, entities: list[_EntitySpec], lines: dict[tu
 
 def save_level(world: World, path: str | Path, names: Mapping[str, int] | None = None, name: str | None = None,
                game: str | None = None, rules: Mapping[str, Any] | None = None,
-               extra_components: Mapping[str, type] | None = None, keep: str | Path | None = None) -> Path:
+               extra_components: Mapping[str, type] | None = None, keep: str | Path | None = None,
+               only: Collection[tuple[str, str]] | None = None) -> Path:
     """Write ``world`` as a level file: every entity (``names`` gives names by id; others are
     called ``entity_<id>``), each component's fields that differ from their defaults.
     Derived state (portal clones, slices) is left out; a mesh or texture not made by a
@@ -792,13 +793,17 @@ def save_level(world: World, path: str | Path, names: Mapping[str, int] | None =
     removed component or entity is its table, entities keep their file's names and order, and
     new entities go at the end. So saving an edit to a file makes a diff that is the edit.
     ``name``, ``game`` and ``rules`` then change the header only where given and different.
+    ``only`` (with ``keep``): the (entity name, component class name) pairs whose differences
+    are written; the rest keeps the file's text, entities are neither added nor removed (an
+    editor saves its edits, not the running game's own motion or the camera flown about).
     Without ``keep`` the file is written afresh (``name`` defaults to "level")."""
     import tomli_w
 
     path = Path(path)
     by_id, tables = _world_tables(world, path, names, extra_components)
     if keep is not None:
-        text = _kept_text(world, path, Path(keep), by_id, tables, name, game, rules, extra_components)
+        text = _kept_text(world, path, Path(keep), by_id, tables, name, game, rules, extra_components,
+                          None if only is None else set(only))
         path.write_text(text, encoding="utf-8")
         return path
     budget = world.resources.get(ViewBudget)
@@ -853,7 +858,7 @@ def _entity_text(table: Mapping[str, Any]) -> str:
 
 def _kept_text(world: World, path: Path, keep: Path, by_id: Mapping[int, str], tables: Mapping[int, dict[str, Any]],
                name: str | None, game: str | None, rules: Mapping[str, Any] | None,
-               extra_components: Mapping[str, type] | None) -> str:
+               extra_components: Mapping[str, type] | None, only: set[tuple[str, str]] | None = None) -> str:
     """``keep``'s text with the world's differences from it written in (see ``save_level``).
 
     What the file says is compared with the world as both are written (``_encode_component``
@@ -881,11 +886,18 @@ def _kept_text(world: World, path: Path, keep: Path, by_id: Mapping[int, str], t
     files = doc.get("entity")
     now = {table["name"]: table for table in tables.values()}
     for index in reversed(range(len(level._entities))):  # the file's entities the world no longer has
-        if level._entities[index].name not in now:
+        if level._entities[index].name not in now and only is None:
             del files[index]
-    kept = [spec.name for spec in level._entities if spec.name in now]
+    kept = [spec.name for spec in level._entities if spec.name in now or only is not None]
     for position, spec_name in enumerate(kept):
-        _keep_entity(files[position], before[spec_name], now[spec_name], moved)
+        if spec_name not in now:
+            continue
+        if only is not None:  # the others as the file has them
+            wanted = {c: f for c, f in now[spec_name].items() if c == "name" or (spec_name, c) in only}
+            wanted.update({c: f for c, f in before[spec_name].items() if (spec_name, c) not in only})
+            _keep_entity(files[position], before[spec_name], wanted, moved)
+        else:
+            _keep_entity(files[position], before[spec_name], now[spec_name], moved)
     header = doc["level"]
     if name is not None and name != level.name:
         header["name"] = name
@@ -908,7 +920,7 @@ def _kept_text(world: World, path: Path, keep: Path, by_id: Mapping[int, str], t
             if key not in level.rules or not _equal(value, level.rules[key]):
                 table[key] = _item(value)
     text = tomlkit.dumps(doc)
-    new = [_entity_text(table) for table in tables.values() if table["name"] not in before]
+    new = [_entity_text(table) for table in tables.values() if table["name"] not in before and only is None]
     return text if not new else text.rstrip("\n") + "\n" + "".join(new)
 
 
