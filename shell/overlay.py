@@ -419,8 +419,10 @@ class DebugOverlay:
             else:
                 drag = {"vec2": imgui.drag_float2, "vec3": imgui.drag_float3, "vec4": imgui.drag_float4}[kind]
                 changed, new = drag(label, list(data), DRAG_SPEED)
+        elif kind == "str":  # a choice ("aces", "cube", ...): written, taken on Enter, refused with the choices
+            changed, new = imgui.input_text(label, data, imgui.InputTextFlags_.enter_returns_true)
         else:
-            shown = value if kind in ("str", "null", "int") else (getattr(value, "name", None) or kind)
+            shown = value if kind in ("null", "int") else (getattr(value, "name", None) or kind)
             imgui.text(f"{field}: {shown}")
         self._widget(f"{cls_name}.{field}")
         lines.append(f"  {field} = {data if kind not in ('mesh', 'texture', 'object', 'array') else kind}")
