@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import difflib
 import shutil
+import textwrap
 from pathlib import Path
 
 import numpy as np
@@ -226,3 +227,41 @@ def test_an_edit_the_frame_would_refuse_is_refused_and_changes_nothing(tmp_path)
         editor.remove_component(names["pond"], "Mirror")
     assert world.has(names["pond"], Mirror) and not editor.can_undo
     world.close()
+
+
+@pytest.mark.parametrize("path", sorted(ROOT.glob("games/**/*.toml")), ids=lambda p: p.relative_to(ROOT).as_posix())
+def test_every_shipped_level_saved_unedited_is_its_own_text(path, tmp_path):
+    world, names, level = loaded(path, "edit_shipped")
+    out = save_level(world, tmp_path / path.name, names, extra_components=EXTRA, keep=path)
+    assert out.read_text() == path.read_text()
+    world.close()
+
+
+def test_inline_component_tables_and_a_rotation_written_as_yaw_keep_their_form(tmp_path):
+    path = tmp_path / "inline.toml"
+    path.write_text(textwrap.dedent("""\
+        [level]
+        name = "inline"
+
+        [[entity]]
+        name = "lamp"   # the only light
+        PointLight = { intensity = 2.0 }
+        Transform = { position = [0.0, 2.0, 0.0], rotation = { yaw = 90, pitch = 0 } }
+        """))
+    original = path.read_text()
+    world, names, level = loaded(path, "edit_inline")
+    from components import PointLight
+
+    world.get(names["lamp"], PointLight).intensity = 3.0
+    world.get(names["lamp"], PointLight).range = 5.0
+    world.get(names["lamp"], Transform).position = (1.0, 2.0, 0.0)
+    save_level(world, path, names, keep=path)
+    assert diff(original, path.read_text()) == [
+        "-PointLight = { intensity = 2.0 }",
+        "-Transform = { position = [0.0, 2.0, 0.0], rotation = { yaw = 90, pitch = 0 } }",
+        "+PointLight = { intensity = 3.0, range = 5.0 }",
+        "+Transform = { position = [1.0, 2.0, 0.0], rotation = { yaw = 90, pitch = 0 } }"]
+    again, names_again, _ = loaded(path, "edit_inline_again")
+    assert again.get(names_again["lamp"], PointLight).range == 5.0
+    world.close()
+    again.close()

@@ -928,6 +928,7 @@ def _keep_entity(table: Any, before: Mapping[str, dict], now: Mapping[str, Any],
     """Write into one entity's tomlkit table what differs between the file's components
     (``before``) and the world's (``now``)."""
     import tomlkit
+    from tomlkit.items import InlineTable
 
     for cls_name in [c for c in before if c not in now]:
         _move_trailing(table, cls_name, None)
@@ -944,13 +945,21 @@ def _keep_entity(table: Any, before: Mapping[str, dict], now: Mapping[str, Any],
                 _move_trailing(table, last[-1], cls_name)
             continue
         old, component = before[cls_name], table[cls_name]
+        inline = isinstance(component, InlineTable)
+        if inline:  # rewritten whole, in the one-line form (tomlkit spaces an appended key oddly)
+            component = component.unwrap()
+        changed = False
         for key in [k for k in old if k not in fields]:
             if key in component:
                 del component[key]
+                changed = True
         for key, value in fields.items():
             names_file = moved and isinstance(value, Mapping) and "file" in value
             if key not in old or names_file or not _equal(value, old[key]):
-                component[key] = _item(value)
+                component[key] = value if inline else _item(value)
+                changed = True
+        if inline and changed:
+            table[cls_name] = _item(component)
 
 
 def _move_trailing(entity: Any, source: str, target: str | None) -> None:
