@@ -248,11 +248,11 @@ class DebugOverlay:
         editor, targets = self.editor, engine.renderer.targets
         if editor is None or editor.selected is None or targets is None or not engine.world.exists(editor.selected):
             return
-        if self._outline is None:
-            from engine.render.outline import SelectionOutline
+        from engine.render.outline import SelectionOutline, outline_ids
 
+        if self._outline is None:
             self._outline = SelectionOutline(self.ctx, engine.renderer.shaders)
-        self._outline.draw(targets.seen, framebuffer, size, editor.selected)
+        self._outline.draw(outline_ids(targets, engine.world, editor.selected), framebuffer, size, editor.selected)
 
     def _layout(self, engine) -> None:
         self.lines = overlay_lines(engine, self.frame_times)

@@ -45,7 +45,7 @@ def test_the_selection_is_outlined_directly_and_in_the_mirror(scene):
     """The outline pass over the frame: exactly the pixels next to (not on) the selection's
     pixels in the id image, worked out here with numpy (a 3x3 dilation), are the outline's
     colour; the box's outline shows both where it stands and in the mirror."""
-    from engine.render.outline import SelectionOutline
+    from engine.render.outline import SelectionOutline, outline_ids
 
     ents = {}
     runner = scene(lambda world: edit_scene(world, ents), (160, 120))
@@ -54,18 +54,24 @@ def test_the_selection_is_outlined_directly_and_in_the_mirror(scene):
     renderer = runner.engine.renderer
     outline = SelectionOutline(runner.ctx, renderer.shaders)
     try:
-        outline.draw(renderer.targets.seen, runner.capture.framebuffer, runner.size, ents["box"],
-                     color=(1.0, 0.0, 1.0, 1.0))
+        source = outline_ids(renderer.targets, runner.world, ents["box"])
+        assert source is renderer.targets.seen
+        outline.draw(source, runner.capture.framebuffer, runner.size, ents["box"], color=(1.0, 0.0, 1.0, 1.0))
         outlined = runner.capture.read_rgb()
+        # The mirror, selected, is outlined round its own pixels (the surface-id image).
+        runner.frame()
+        source = outline_ids(renderer.targets, runner.world, ents["mirror"])
+        assert source is renderer.targets.surface
+        outline.draw(source, runner.capture.framebuffer, runner.size, ents["mirror"], color=(1.0, 0.0, 1.0, 1.0))
+        mirror_outlined = runner.capture.read_rgb()
     finally:
         outline.release()
+    glass = renderer.targets.read_surface_ids() == ents["mirror"]
+    ring = dilated(glass) & ~glass
+    assert ring.sum() > 100
+    assert np.array_equal(np.all(mirror_outlined == (255, 0, 255), axis=-1), ring)
     mask = ids == ents["box"]
-    padded = np.pad(mask, 1)
-    near = np.zeros_like(mask)
-    for dy in (-1, 0, 1):
-        for dx in (-1, 0, 1):
-            near |= padded[1 + dy:1 + dy + mask.shape[0], 1 + dx:1 + dx + mask.shape[1]]
-    expected = near & ~mask
+    expected = dilated(mask) & ~mask
     magenta = np.all(outlined == (255, 0, 255), axis=-1)
     assert np.array_equal(magenta, expected)
     assert np.array_equal(outlined[~expected], frame[~expected])  # nothing else drawn over
@@ -74,3 +80,13 @@ def test_the_selection_is_outlined_directly_and_in_the_mirror(scene):
     for col, row in (direct, mirrored):
         assert magenta[max(row - 12, 0):row + 12, max(col - 12, 0):col + 12].sum() > 8
     assert not magenta[:, :min(direct[0], mirrored[0]) - 20].any()
+
+
+def dilated(mask: np.ndarray) -> np.ndarray:
+    """``mask`` grown by one pixel each way (a 3x3 square), in numpy."""
+    padded = np.pad(mask, 1)
+    near = np.zeros_like(mask)
+    for dy in (-1, 0, 1):
+        for dx in (-1, 0, 1):
+            near |= padded[1 + dy:1 + dy + mask.shape[0], 1 + dx:1 + dx + mask.shape[1]]
+    return near

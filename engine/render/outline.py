@@ -7,12 +7,22 @@ from __future__ import annotations
 
 import moderngl
 
+from engine.core.world import World
 from engine.render.bindings import OUTLINE_UNIT, PassState, apply_pass_state
 from engine.render.shader_library import ShaderLibrary
+from engine.render.targets import RenderTargets
 
 OUTLINE_COLOR = (1.0, 0.55, 0.0, 1.0)  # orange: seen on the sky, on floors and in tinted mirrors
 OUTLINE_RADIUS = 1                     # pixels round the selection's shapes (RADIUS in the shader)
 _OUTLINE = PassState()                 # no depth, no blend: the outline's colour replaces the frame's
+
+
+def outline_ids(targets: RenderTargets, world: World, entity: int) -> moderngl.Texture:
+    """The id image to outline ``entity`` in: the seen-id image (the entity wherever it shows,
+    reflections included), or for a mirror or portal the surface-id image, since the pixels
+    of its seen-id image hold what it shows, not itself."""
+    surface = any(type(c).__name__ in ("Mirror", "Portal") for c in world.components_of(entity))
+    return targets.surface if surface else targets.seen
 
 
 class SelectionOutline:
