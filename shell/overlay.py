@@ -35,6 +35,7 @@ import moderngl
 import numpy as np
 from imgui_bundle import imgui
 from moderngl_window.integrations.imgui_bundle import ModernGLRenderer
+from pyglm import glm
 
 from components.post import TONEMAP_CURVES
 from engine.assets.values import json_value
@@ -419,6 +420,11 @@ class DebugOverlay:
             else:
                 drag = {"vec2": imgui.drag_float2, "vec3": imgui.drag_float3, "vec4": imgui.drag_float4}[kind]
                 changed, new = drag(label, list(data), DRAG_SPEED)
+        elif kind == "quat":  # as Euler angles in degrees (pitch, yaw, roll: glm's x, y, z)
+            angles = glm.degrees(glm.eulerAngles(value))
+            changed, new = imgui.drag_float3(f"{field} (deg)##{cls_name}.{field}", list(angles), DRAG_SPEED * 50)
+            if changed:
+                new = glm.quat(glm.radians(glm.vec3(*new)))
         elif kind == "str":  # a choice ("aces", "cube", ...): written, taken on Enter, refused with the choices
             changed, new = imgui.input_text(label, data, imgui.InputTextFlags_.enter_returns_true)
         else:

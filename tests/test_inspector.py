@@ -5,8 +5,9 @@ through ImGui with the mouse events a window forwards."""
 from __future__ import annotations
 
 import pytest
+from pyglm import glm
 
-from components import ComponentValueError, Material
+from components import ComponentValueError, Material, Transform
 
 pytest.importorskip("imgui_bundle", reason="the debug overlay needs imgui-bundle (not installed here)")
 from shell.overlay import DebugOverlay  # noqa: E402
@@ -51,6 +52,21 @@ def test_click_inspect_drag_undo_and_a_refused_value(scene, ctx):
         assert dragged > 0.45, dragged
         assert editor.undo() and runner.world.get(box, Material).roughness == pytest.approx(0.4)
         assert not editor.can_undo  # the whole drag was one edit
+
+        # A rotation drags as angles in degrees; one undo puts it back.
+        x, y = overlay.widgets["Transform.rotation"]
+        overlay.mouse_moved(x, y)
+        draw()
+        overlay.mouse_button(1, True)
+        draw()
+        for step in range(1, 6):
+            overlay.mouse_moved(x + 8 * step, y)
+            draw()
+        overlay.mouse_button(1, False)
+        draw()
+        turned = runner.world.get(box, Transform).rotation
+        assert glm.degrees(glm.angle(turned)) > 5.0, turned
+        assert editor.undo() and runner.world.get(box, Transform).rotation == glm.quat()
 
         with pytest.raises(ComponentValueError) as refused:
             Material(roughness=2.0)
