@@ -38,6 +38,7 @@ from moderngl_window.integrations.imgui_bundle import ModernGLRenderer
 from pyglm import glm
 
 from components.post import TONEMAP_CURVES
+from engine.assets.level_file import LevelGame
 from engine.assets.values import json_value
 from shell.editor import Editor
 from shell.overlay_text import overlay_lines
@@ -201,9 +202,8 @@ class DebugOverlay:
         """The editor of ``engine``'s world (a new one when the world was rebuilt): the game's
         own components, entity names and level file, where it is a ``LevelGame``."""
         if self.editor is None or self.editor.world is not engine.world:
-            game = engine.game
-            self.editor = Editor(engine.world, getattr(game, "components", None), getattr(game, "names", None),
-                                 getattr(game, "level_path", None))
+            game = engine.game if isinstance(engine.game, LevelGame) else None
+            self.editor = Editor(engine.world, *((game.components, game.names, game.level_path) if game else ()))
         return self.editor
 
     def click(self, engine: Engine, x: float, y: float, surface: bool = False) -> bool:
