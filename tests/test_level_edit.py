@@ -265,3 +265,43 @@ def test_inline_component_tables_and_a_rotation_written_as_yaw_keep_their_form(t
     assert again.get(names_again["lamp"], PointLight).range == 5.0
     world.close()
     again.close()
+
+
+def test_saved_into_another_folder_every_file_it_names_is_found_from_there(tmp_path):
+    """Only the edited component is written, but a file the rest names is named again from
+    the new folder (else the copy would name files that are not there)."""
+    from shell.editor import Editor
+
+    (tmp_path / "a").mkdir()
+    (tmp_path / "b" / "deeper").mkdir(parents=True)
+    from engine.assets.texture_data import TextureData
+    from shell.capture import save_png
+
+    save_png(np.full((4, 4, 3), 200, np.uint8), tmp_path / "a" / "wood.png")
+    path = tmp_path / "a" / "level.toml"
+    path.write_text(textwrap.dedent("""\
+        [level]
+        name = "files"
+
+        [[entity]]
+        name = "box"
+        [entity.Transform]
+        [entity.MeshRef]
+        mesh = { box = [1.0, 1.0, 1.0] }
+        [entity.Material]
+        texture = { file = "wood.png" }
+        roughness = 0.7
+        """))
+    world, names, _ = loaded(path, "edit_moved")
+    assert isinstance(world.get(names["box"], Material).texture, TextureData)
+    editor = Editor(world, names=names, level_path=path)
+    editor.set_field(names["box"], "Transform", "position", (0.0, 1.0, 0.0))
+    copy = editor.save(tmp_path / "b" / "deeper" / "level.toml")
+    text = copy.read_text()
+    assert 'texture = { file = "../../a/wood.png" }' in text and "position = [0.0, 1.0, 0.0]" in text
+    again = World("edit_moved_again")  # the file is outside the copy's folder: an asset root allows it
+    names_again = load_level(copy, asset_roots=[tmp_path / "a"]).spawn(again)
+    assert again.get(names_again["box"], Material).roughness == 0.7
+    assert again.get(names_again["box"], Material).texture is world.get(names["box"], Material).texture
+    world.close()
+    again.close()

@@ -877,12 +877,15 @@ def _kept_text(world: World, path: Path, keep: Path, by_id: Mapping[int, str], t
     fake = {index + 1: spec.name for index, spec in enumerate(level._entities)}  # ids for the file's references
     ids = {spec_name: entity for entity, spec_name in fake.items()}
     before: dict[str, dict[str, Any]] = {}
+    here: dict[str, dict[str, Any]] = {}  # the same, its file paths relative to the saved file
     for spec in level._entities:
         made = {cls.__name__: cls(**fields) for cls, fields in spec.components}
         for cls_name, field, target in spec.references:
             setattr(made[cls_name], field, ids[target])
         before[spec.name] = {cls_name: _encode_component(keep if moved else path, c, fake, spec.name)
                              for cls_name, c in made.items()}
+        here[spec.name] = {cls_name: _encode_component(path, c, fake, spec.name) for cls_name, c in made.items()} \
+            if moved else before[spec.name]
     files = doc.get("entity")
     now = {table["name"]: table for table in tables.values()}
     for index in reversed(range(len(level._entities))):  # the file's entities the world no longer has
@@ -894,7 +897,7 @@ def _kept_text(world: World, path: Path, keep: Path, by_id: Mapping[int, str], t
             continue
         if only is not None:  # the others as the file has them
             wanted = {c: f for c, f in now[spec_name].items() if c == "name" or (spec_name, c) in only}
-            wanted.update({c: f for c, f in before[spec_name].items() if (spec_name, c) not in only})
+            wanted.update({c: f for c, f in here[spec_name].items() if (spec_name, c) not in only})
             _keep_entity(files[position], before[spec_name], wanted, moved)
         else:
             _keep_entity(files[position], before[spec_name], now[spec_name], moved)
@@ -905,7 +908,7 @@ def _kept_text(world: World, path: Path, keep: Path, by_id: Mapping[int, str], t
         header["game"] = game
     budget = world.resources.get(ViewBudget)
     budget = budget if isinstance(budget, ViewBudget) and budget != ViewBudget() else None
-    if (budget or ViewBudget()) != (level.view_budget or ViewBudget()):
+    if only is None and (budget or ViewBudget()) != (level.view_budget or ViewBudget()):
         if budget is None:
             del header["view_budget"]
         else:
