@@ -204,6 +204,8 @@ class DebugOverlay:
         if self.editor is None or self.editor.world is not engine.world:
             game = engine.game if isinstance(engine.game, LevelGame) else None
             self.editor = Editor(engine.world, *((game.components, game.names, game.level_path) if game else ()))
+        elif isinstance(engine.game, LevelGame):  # the same world rebuilt from the file: its names now
+            self.editor.names = dict(engine.game.names)
         return self.editor
 
     def click(self, engine: Engine, x: float, y: float, surface: bool = False) -> bool:
@@ -343,21 +345,23 @@ class DebugOverlay:
         flags = (imgui.WindowFlags_.always_auto_resize | imgui.WindowFlags_.no_saved_settings
                  | imgui.WindowFlags_.no_collapse | imgui.WindowFlags_.no_move)
         imgui.begin("Inspector", None, flags)
-        if imgui.button("undo") and editor.can_undo:
-            editor.undo()
-        self._widget("undo")
-        imgui.same_line()
-        if imgui.button("redo") and editor.can_redo:
-            editor.redo()
-        self._widget("redo")
-        if editor.level_path is not None:
+        for action, can, do in (("undo", editor.can_undo, editor.undo), ("redo", editor.can_redo, editor.redo)):
+            if imgui.button(action) and can:
+                try:
+                    do()
+                except Exception as exc:  # an edit of an entity gone since (a level reloaded): said, not raised
+                    editor.message = str(exc)
+            self._widget(action)
             imgui.same_line()
+        if editor.level_path is not None:
             if imgui.button("save"):
                 try:
                     editor.message = f"saved {editor.save()}"
                 except Exception as exc:  # shown in the overlay, the window keeps running
                     editor.message = str(exc)
             self._widget("save")
+        else:
+            imgui.new_line()
         if editor.message:  # why the last edit was refused (the component's words), or "saved ..."
             lines.append(editor.message)
             imgui.push_text_wrap_pos(imgui.get_cursor_pos_x() + INSPECTOR_WIDTH - 16)

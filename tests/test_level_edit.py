@@ -305,3 +305,15 @@ def test_saved_into_another_folder_every_file_it_names_is_found_from_there(tmp_p
     assert again.get(names_again["box"], Material).texture is world.get(names["box"], Material).texture
     world.close()
     again.close()
+
+
+def test_undo_of_an_edit_to_an_entity_gone_since_says_so(tmp_path):
+    from shell.editor import EditError, Editor
+
+    world, names, _ = loaded(_copy_hall(tmp_path), "edit_gone")
+    editor = Editor(world, EXTRA, names)
+    editor.set_field(names["koi"], "Material", "roughness", 0.1)
+    world.delete_entity(names["koi"])
+    with pytest.raises(EditError, match=f"entity {names['koi']} .* no longer exists"):
+        editor.undo()
+    world.close()
