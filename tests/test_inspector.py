@@ -150,10 +150,24 @@ pump()
 roughness = world.get(crate, Material).roughness
 click(*at(*config.overlay.widgets["save"]))
 message = config.overlay.editor.message
+mirror = game.names["mirror_4"]
+low = world.get(mirror, Transform).position - glm.vec3(0.0, 1.0, 0.0)  # low on the glass: it shows the floor
+clip = config.engine.main_view.view_proj * glm.vec4(low, 1.0)
+px, py = int((clip.x / clip.w * 0.5 + 0.5) * w), int((clip.y / clip.w * 0.5 + 0.5) * h)
+window.dispatch_event("on_mouse_motion", px, py, 0, 0)  # off the inspector first, as a hand would
+pump()
+window.dispatch_event("on_mouse_press", px, py, mouse.LEFT, 2)  # Ctrl held (pyglet's MOD_CTRL)
+window.dispatch_event("on_mouse_release", px, py, mouse.LEFT, 2)
+pump()
+with_ctrl = config.overlay.editor.selected
+window.dispatch_event("on_mouse_press", px, py, mouse.LEFT, 0)
+window.dispatch_event("on_mouse_release", px, py, mouse.LEFT, 0)
+pump()
+plain = config.overlay.editor.selected
 window.dispatch_event("on_key_press", key.ESCAPE, 0)
 window.dispatch_events()
 print(json.dumps({"errors": errors, "selected": selected == crate, "roughness": roughness, "message": message,
-                  "released": config.released}))
+                  "released": config.released, "mirror": [with_ctrl == mirror, plain not in (mirror, None)]}))
 config.wnd.destroy()
 '''
 
@@ -161,7 +175,8 @@ config.wnd.destroy()
 def test_in_a_real_window_click_edit_save_and_esc(x_display, tmp_path):
     """The sample level in an X window (Xvfb, pyglet), events through pyglet's queue: F1,
     a click on the blue crate selects it, a drag on its roughness edits it, a click on save
-    writes the level file (its diff is that one line), Esc ends the run (exit 0), and no
+    writes the level file (its diff is that one line), Ctrl+click on a mirror selects the
+    mirror and a plain click what it shows, Esc ends the run (exit 0), and no
     frame has a GL error. Skipped, saying why, without Xvfb or pyglet."""
     import difflib
     import json
@@ -181,6 +196,7 @@ def test_in_a_real_window_click_edit_save_and_esc(x_display, tmp_path):
     report = json.loads(result.stdout.strip().splitlines()[-1])
     assert set(report["errors"]) == {"GL_NO_ERROR"}
     assert report["selected"] and report["released"]
+    assert report["mirror"] == [True, True]  # Ctrl+click: the mirror; a plain click: what it shows there
     assert report["roughness"] > 0.65, report
     assert report["message"] == f"saved {level}"
     changed = [line for line in difflib.unified_diff(HALL.read_text().splitlines(), level.read_text().splitlines(),
