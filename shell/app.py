@@ -29,6 +29,8 @@ from engine.render.renderer import Renderer
 from engine.render.views import View
 from engine.resources import FrameViews, RenderStats, ViewBudget
 from engine.rules.frame_rules import active_camera_parts
+from shell.level_reload import POLL_INTERVAL as RELOAD_INTERVAL
+from shell.level_reload import LevelReload
 from systems import (
     ExtractSystem,
     FlyCameraSystem,
@@ -144,11 +146,19 @@ class Engine:
                 self.schedule.append(("transform_late", LateTransformSystem(self.world, self.stages["transform"])))
         for index, (_, system) in enumerate(self.schedule):
             self.world.add_system(system, priority=len(self.schedule) - index)
+        self.level_reload: LevelReload | None = None  # ``watch_level``: the level file reloads on save
         try:
             game.build(self.world)
         except BaseException:
             self.close()
             raise
+
+    def watch_level(self, interval: float = RELOAD_INTERVAL) -> LevelReload:
+        """Reload the game's level file when it is saved (``shell.level_reload``): the shell
+        calls ``level_reload.poll()`` before each frame and says what it returns.  A game not
+        built from a level file is refused (a SpeculumError)."""
+        self.level_reload = LevelReload(self, interval)
+        return self.level_reload
 
     @property
     def reflection_system(self) -> ReflectionSystem:
