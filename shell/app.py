@@ -46,6 +46,7 @@ from systems.portal_slice_system import PortalSliceSystem
 from systems.probe_system import ProbeAfterPresentSystem, ProbeSystem
 from systems.shadow_system import ShadowSystem
 from systems.surface_system import SurfaceSystem
+from systems.text_system import TextSystem
 
 
 class GameUpdateSystem(esper.Processor):
@@ -107,6 +108,7 @@ FRAME_STAGES: tuple[tuple[str, Callable[[Engine], esper.Processor]], ...] = (
     ("main", lambda e: MainViewSystem(e.world, e.renderer)),
     ("reflect", lambda e: ReflectionSystem(e.world, e.renderer)),
     ("present", lambda e: PresentSystem(e.world, e.renderer)),
+    ("text", lambda e: TextSystem(e.world, e.renderer)),  # screen text over the presented frame
     ("probes_after", lambda e: ProbeAfterPresentSystem(e.world, e.renderer)),  # recaptures, for the next frame
 )
 

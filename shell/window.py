@@ -250,6 +250,8 @@ class SpeculumWindow(mglw.WindowConfig):
         capture = CaptureTarget(self.ctx, size)
         try:
             renderer.present(capture.framebuffer, size)
+            if len(renderer.screen_quads):  # the game's screen text, drawn over the frame as it was
+                renderer.text().draw(renderer.screen_quads, capture.framebuffer, size)
             rgb = capture.read_rgb()
         finally:
             capture.release()
