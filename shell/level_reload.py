@@ -69,10 +69,14 @@ class LevelReload:
         self.path = Path(engine.game.level_path)
         self.reloads = 0
         self.error: str | None = None
-        self._loaded_stat = self._stat()
-        self._loaded_bytes = self._read()
-        self._last_stat = self._loaded_stat
         self._next_poll = 0.0
+        self.follow(self.path)
+
+    def follow(self, path: Path) -> None:
+        """Watch ``path`` (the level the game plays now) as it is now: its next save reloads."""
+        self.path = Path(path)
+        self._loaded_stat = self._last_stat = self._stat()
+        self._loaded_bytes = self._read()
 
     def _stat(self) -> tuple[int, int] | None:
         try:
@@ -95,6 +99,10 @@ class LevelReload:
         if now < self._next_poll:
             return []
         self._next_poll = now + self.interval
+        playing = Path(self.engine.game.level_path)
+        if playing != self.path:  # the game went to another level ('n'): watch that file from now on
+            self.follow(playing)
+            return []
         stat, last = self._stat(), self._last_stat
         self._last_stat = stat
         if stat == self._loaded_stat or stat != last:

@@ -276,3 +276,26 @@ def test_window_reloads_a_saved_level_and_prints_a_broken_one_once(ctx, tmp_path
     finally:
         config.on_close()
         config.wnd.destroy()
+
+
+def test_a_game_that_changes_level_is_followed(ctx, tmp_path):
+    """A game that plays another level (mirror beam's 'n') is watched on its new file: the
+    old file's saves reload nothing, the new one's do."""
+    first, second = tmp_path / "first.toml", tmp_path / "second.toml"
+    save(first, level_text())
+    save(second, level_text(box_x=0.5))
+    run = Run(ctx, first)
+    try:
+        reload = run.engine.watch_level(interval=0.0)
+        run.frame()
+        run.engine.game.level_path = second  # as a game's next level does (it builds it itself)
+        assert reload.poll() == [] and reload.path == second
+        save(first, level_text(color=BLUE))
+        reload.poll()
+        assert reload.poll() == [] and reload.reloads == 0
+        save(second, level_text(box_x=0.5, color=BLUE))
+        reload.poll()
+        assert reload.poll() == [f"level reloaded: {second}"]
+        run.frame()
+    finally:
+        run.close()
