@@ -241,7 +241,7 @@ class SpeculumWindow(mglw.WindowConfig):
         size = renderer.targets.size
         capture = CaptureTarget(self.ctx, size)
         try:
-            renderer.present(capture.framebuffer, size)
+            self.engine.stages["present"].present_into(capture.framebuffer, size)  # as the frame was
             rgb = capture.read_rgb()
         finally:
             capture.release()
