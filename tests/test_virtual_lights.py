@@ -287,3 +287,30 @@ partner = "a"
     path.write_text(text.replace("reflects_light = true", 'reflects_light = "yes"'))
     with pytest.raises(LevelError, match="reflects_light"):
         load_level(path)
+
+
+def test_a_probe_face_recaptures_when_a_shadow_in_the_mirrors_light_moves(scene):
+    """The probe's -Y face sees the floor where the mirror throws the sun; a box on the
+    light's way in (between the sun and the mirror, out of the probe's reach and out of that
+    face even as the sun's own shadow) moves: its shadow in the thrown light moves in that
+    face, which is captured again, for that reason."""
+    from components import ReflectionProbe
+    from engine.rules.probe_schedule import ProbeSchedule
+
+    def build(world):
+        ids = world.resources["ids"] = _scene(world)
+        ids["probe"] = world.spawn(Transform(position=(0.7, 0.6, 0.0)), ReflectionProbe(resolution=16, far=1.5))
+        ids["way_in"] = world.spawn(Transform(position=(2.0, 3.25, 0.0)), MeshRef(box((0.3, 0.3, 0.3))),
+                                    Material())
+
+    runner = scene(build)
+    runner.frame()
+    runner.frame()
+    ids = runner.world.resources["ids"]
+    assert ids["probe"] not in runner.world.resources[ProbeSchedule].due
+    runner.world.get(ids["way_in"], Transform).position += glm.vec3(0.0, 0.0, 0.1)
+    runner.frame()
+    due = runner.world.resources[ProbeSchedule].due
+    assert ids["probe"] in due and 3 in due[ids["probe"]].faces, due
+    reasons = due[ids["probe"]].reasons
+    assert any(reason.startswith("shadow of entity") and 3 in faces for reason, faces in reasons.items()), reasons
