@@ -60,7 +60,14 @@ class ShadowSystem(esper.Processor):
         casters_changed = renderer.casters_version != self._casters_seen
         self._casters_seen = renderer.casters_version
         changed_box = renderer.take_changed_box()
-        level = renderer.level_bounds()
+        # The level's box only where a map is fitted to it (a sun that casts, a surface that
+        # carries light): a world of 100,000 instances and no such light pays nothing for it.
+        surfaces = self.world.resources.get(Surfaces)
+        needed = self.enabled and (
+            any(light.shadows for _, light in self.world.query_one(DirectionalLight))
+            or (surfaces is not None and any(s.carries_light for s in (*surfaces.mirrors.values(),
+                                                                       *surfaces.portals.values()))))
+        level = renderer.level_bounds() if needed else None
         published = ShadowCasters(level=level)
         self._directional_maps(casters_changed, changed_box, level, published)
         self._point_maps(published)
