@@ -249,7 +249,7 @@ class SpeculumWindow(mglw.WindowConfig):
         size = renderer.targets.size
         capture = CaptureTarget(self.ctx, size)
         try:
-            renderer.present(capture.framebuffer, size)
+            self.engine.stages["present"].present_into(capture.framebuffer, size)  # as the frame was
             if len(renderer.screen_quads):  # the game's screen text, drawn over the frame as it was
                 renderer.text().draw(renderer.screen_quads, capture.framebuffer, size)
             rgb = capture.read_rgb()
