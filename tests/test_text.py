@@ -258,3 +258,36 @@ def test_portal_run_shows_its_level_and_time(ctx):
     finally:
         capture.release()
         engine.close()
+
+
+def test_an_f12_screenshot_holds_the_text(scene, tmp_path):
+    """The window shell's screenshot presents the frame again and draws the text over it: the
+    same picture as a headless frame of the same world."""
+    import moderngl_window as mglw
+    from PIL import Image
+
+    from shell.window import make_window_config
+    from tests.support import FunctionGame
+
+    def build(world):
+        room(world)
+        world.spawn(ScreenText("F12", position=(10, 10), scale=2, color=(1.0, 0.3, 0.3, 1.0),
+                               background=(0.0, 0.0, 0.0, 0.5)))
+
+    config = mglw.create_window_config_instance(
+        make_window_config(FunctionGame(build)),
+        args=["--window", "headless", "--backend", "egl", "--size", f"{SIZE[0]}x{SIZE[1]}"])
+    try:
+        for _ in range(2):
+            config.on_render(0.0, 1 / 60)
+        config.screenshots = tmp_path
+        shot = np.asarray(Image.open(config.screenshot()))
+    finally:
+        config.on_close()
+        config.wnd.destroy()
+    runner = scene(build, SIZE)
+    runner.frame(0.0)
+    expected = runner.frame(0.0)
+    assert close_to(shot, expected) <= 1
+    plain, _, _ = render(scene)
+    assert (np.abs(shot.astype(int) - plain.astype(int)).max(axis=2) > 40).sum() > 100, "the text is in the shot"
