@@ -18,6 +18,8 @@ class TextSystem(esper.Processor):
     def __init__(self, world: World, renderer: Renderer) -> None:
         self.world = world
         self.renderer = renderer
+        self._laid_out: tuple[list[ScreenItem], tuple[int, int]] | None = None  # what the last quads are of
+        self._quads = None
 
     def items(self) -> list[ScreenItem]:
         """The world's screen items in drawing order."""
@@ -39,5 +41,7 @@ class TextSystem(esper.Processor):
         items = self.items()
         if not items and not len(self.renderer.screen_quads):
             return  # no text, and none last frame: no atlas is made
-        atlas = self.renderer.text().atlas
-        self.renderer.draw_screen_text(layout(atlas, items, output.size), output.framebuffer, output.size)
+        if self._laid_out != (items, output.size):  # laid out again only when a value or the size changed
+            self._quads = layout(self.renderer.text().atlas, items, output.size)
+            self._laid_out = (items, output.size)
+        self.renderer.draw_screen_text(self._quads, output.framebuffer, output.size)
