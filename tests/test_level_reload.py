@@ -299,3 +299,22 @@ def test_a_game_that_changes_level_is_followed(ctx, tmp_path):
         run.frame()
     finally:
         run.close()
+
+
+def test_a_save_made_by_the_run_itself_is_not_reloaded_after_follow(ctx, tmp_path):
+    """The run's own save (an in-window editor writing the world back) calls ``follow``: the
+    file as written counts as loaded, and the world the editor holds is not rebuilt."""
+    path = tmp_path / "level.toml"
+    save(path, level_text())
+    run = Run(ctx, path)
+    try:
+        reload = run.engine.watch_level(interval=0.0)
+        run.frame()
+        entity = box_entity(run.engine)
+        save(path, level_text(roughness="0.25"))  # as save_level would write the edited world
+        reload.follow(path)
+        for _ in range(3):
+            assert reload.poll() == []
+        assert box_entity(run.engine) == entity and run.engine.world.exists(entity) and reload.reloads == 0
+    finally:
+        run.close()
