@@ -16,7 +16,8 @@ again into it; the renderer releases the old entities' GPU resources as it does 
 deleted entity.  A file that fails keeps the old world running; its error (the
 ``LevelError``'s ``file:line: entity: field: reason``) is said once by ``poll`` (the shell
 prints it) and held in ``error`` until a save loads (the overlay shows it, as it shows
-shader errors).
+shader errors).  A save the run makes itself (an editor in the window writing its world back)
+calls ``follow`` after writing: the file as written counts as loaded, and nothing is rebuilt.
 """
 from __future__ import annotations
 
