@@ -6,6 +6,7 @@ from components.portal import Portal, PortalClone, Slice, Traveller
 from components.post import Bloom, Tonemap
 from components.probe import ReflectionProbe
 from components.rendering import Emissive, Material, MeshRef, Reflective, Refractive, Skybox
+from components.screen import ScreenPanel, ScreenText
 from components.tracking import ComponentValueError, ComponentWarning, TrackedComponent
 from components.transform import Transform, euler_rotation, look_rotation, yaw_pitch_rotation
 from components.visibility import Visibility
@@ -15,7 +16,7 @@ __all__ = [
     "Bloom", "Camera", "ComponentValueError", "ComponentWarning", "DirectionalLight", "Emissive", "FlyController",
     "HemisphereLight", "Material",
     "MeshRef", "Mirror", "PointLight", "Portal", "PortalClone", "ReflectionProbe", "Reflective", "Refractive",
-    "Skybox", "Slice",
+    "ScreenPanel", "ScreenText", "Skybox", "Slice",
     "Tonemap", "TrackedComponent", "Transform", "Traveller", "Visibility", "Water",
     "euler_rotation", "look_rotation", "yaw_pitch_rotation",
 ]

@@ -29,6 +29,8 @@ from engine.render.renderer import Renderer
 from engine.render.views import View
 from engine.resources import FrameViews, RenderStats, ViewBudget
 from engine.rules.frame_rules import active_camera_parts
+from shell.level_reload import POLL_INTERVAL as RELOAD_INTERVAL
+from shell.level_reload import LevelReload
 from systems import (
     ExtractSystem,
     FlyCameraSystem,
@@ -44,6 +46,7 @@ from systems.portal_slice_system import PortalSliceSystem
 from systems.probe_system import ProbeAfterPresentSystem, ProbeSystem
 from systems.shadow_system import ShadowSystem
 from systems.surface_system import SurfaceSystem
+from systems.text_system import TextSystem
 
 
 class GameUpdateSystem(esper.Processor):
@@ -105,6 +108,7 @@ FRAME_STAGES: tuple[tuple[str, Callable[[Engine], esper.Processor]], ...] = (
     ("main", lambda e: MainViewSystem(e.world, e.renderer)),
     ("reflect", lambda e: ReflectionSystem(e.world, e.renderer)),
     ("present", lambda e: PresentSystem(e.world, e.renderer)),
+    ("text", lambda e: TextSystem(e.world, e.renderer)),  # screen text over the presented frame
     ("probes_after", lambda e: ProbeAfterPresentSystem(e.world, e.renderer)),  # recaptures, for the next frame
 )
 
@@ -144,11 +148,19 @@ class Engine:
                 self.schedule.append(("transform_late", LateTransformSystem(self.world, self.stages["transform"])))
         for index, (_, system) in enumerate(self.schedule):
             self.world.add_system(system, priority=len(self.schedule) - index)
+        self.level_reload: LevelReload | None = None  # ``watch_level``: the level file reloads on save
         try:
             game.build(self.world)
         except BaseException:
             self.close()
             raise
+
+    def watch_level(self, interval: float = RELOAD_INTERVAL) -> LevelReload:
+        """Reload the game's level file when it is saved (``shell.level_reload``): the shell
+        calls ``level_reload.poll()`` before each frame and says what it returns.  A game not
+        built from a level file is refused (a SpeculumError)."""
+        self.level_reload = LevelReload(self, interval)
+        return self.level_reload
 
     @property
     def reflection_system(self) -> ReflectionSystem:

@@ -267,11 +267,14 @@ class DebugOverlay:
         # A shader that failed to build comes first, at the top: the reason the picture is
         # wrong.  One error in full (the variants of one file fail alike), the rest counted.
         self.shown_errors = list(engine.renderer.shaders.errors.values())
+        level_reload = getattr(engine, "level_reload", None)
+        if level_reload is not None and level_reload.error:  # a saved level file that failed to load
+            self.shown_errors.insert(0, level_reload.error)
         if self.shown_errors:
             imgui.text_colored(imgui.ImVec4(1.0, 0.35, 0.3, 1.0), self.shown_errors[0])
             if len(self.shown_errors) > 1:
                 imgui.text_colored(imgui.ImVec4(1.0, 0.35, 0.3, 1.0),
-                                   f"(and {len(self.shown_errors) - 1} more programs that failed to build)")
+                                   f"(and {len(self.shown_errors) - 1} more: shaders that failed to build)")
             imgui.separator()
         for line in self.lines:
             imgui.text(line)

@@ -3,7 +3,7 @@
   python -m games.<name> [--headless] [--frames N] [--size WxH] [--out DIR] [--level FILE.toml]
                          [--ids] [--export-scene FILE.glb|FILE.gltf] [--camera x,y,z,yaw,pitch]
                          [--dt SECONDS] [--gif FILE.gif] [--aa fxaa|off] [--overlay]
-                         [--asset-root DIR ...]
+                         [--asset-root DIR ...] [--reload]
 
 With no display the runner goes headless by itself and says so.
 """
@@ -65,6 +65,9 @@ def build_parser(game: Game | type[Game]) -> argparse.ArgumentParser:
     parser.add_argument("--overlay", action="store_true",
                         help="draw the debug overlay (frame rate, passes, draw calls, views, probe captures, "
                              "paths) into the frames; windowed: shown from the start (F1 toggles it)")
+    parser.add_argument("--reload", action="store_true",
+                        help="headless: reload the level file when it is saved, keeping the camera (windowed runs "
+                             "always do); a file that fails to load keeps the old level and prints its error")
     return parser
 
 
@@ -261,8 +264,12 @@ def run_headless(game: Game, args: argparse.Namespace) -> list[Path]:
             from shell.overlay import DebugOverlay
 
             overlay = DebugOverlay(ctx)
+        reload = engine.watch_level(interval=0.0) if getattr(args, "reload", False) else None
         gif_frames: list[np.ndarray] = []
         for index in range(frames):
+            if reload is not None:  # a stat a frame: a save is loaded once it is stable for one frame
+                for message in reload.poll():
+                    print(f"speculum: {message}", file=sys.stderr, flush=True)
             start = time.perf_counter()
             engine.frame(args.dt, output)
             if overlay is not None:  # over the presented frame, numbers of this frame

@@ -4,8 +4,9 @@ WASD + mouse fly camera (Q/E down/up, Shift faster), Esc quits (exit status 0), 
 screenshot, F1 shows or hides the debug overlay (``shell/overlay.py``; the mouse is the overlay's while
 it is over it).  Each frame the shell also polls the shader library, so an edited file
 under ``shaders/`` is rebuilt while the game runs (hot reload; errors printed once and shown
-in the overlay).  The same class runs under moderngl-window's headless window, which the
-tests use.
+in the overlay), and a game's level file is reloaded when it is saved (``shell/level_reload.py``;
+the same: its error printed once and shown in the overlay, the old level kept).  The same
+class runs under moderngl-window's headless window, which the tests use.
 
 Closing: everything the shell made (the engine's GL objects, the overlay's ImGui context)
 is released once, while the window's GL context is still current, and the window is
@@ -122,6 +123,10 @@ class SpeculumWindow(mglw.WindowConfig):
         self.key_names = key_names(self.wnd.keys)
         self.overlay = make_overlay(self.ctx, visible=bool(getattr(args, "overlay", False)))
         self.shown_title = self.wnd.title = self.game.title  # build may have named the level
+        from engine.assets.level_file import LevelGame
+
+        if isinstance(self.game, LevelGame):  # a level file reloads when saved (shell/level_reload.py)
+            self.engine.watch_level()
 
     def on_render(self, time_s: float, frametime: float) -> None:
         if self.released:
@@ -129,6 +134,9 @@ class SpeculumWindow(mglw.WindowConfig):
         size = self.wnd.buffer_size
         for message in self.engine.renderer.shaders.poll():  # hot reload: at most every 0.5 s
             print(f"speculum: {message}", file=sys.stderr, flush=True)
+        if self.engine.level_reload is not None:  # the level file saved: rebuilt, or its error said once
+            for message in self.engine.level_reload.poll():
+                print(f"speculum: {message}", file=sys.stderr, flush=True)
         self.overlay.record(frametime)
         self.engine.frame(min(frametime, 0.1), Output(self.wnd.fbo, size))
         if self.game.title != self.shown_title:  # a game that changed level ('n') renames its window
@@ -247,7 +255,9 @@ class SpeculumWindow(mglw.WindowConfig):
         size = renderer.targets.size
         capture = CaptureTarget(self.ctx, size)
         try:
-            renderer.present(capture.framebuffer, size)
+            self.engine.stages["present"].present_into(capture.framebuffer, size)  # as the frame was
+            if len(renderer.screen_quads):  # the game's screen text, drawn over the frame as it was
+                renderer.text().draw(renderer.screen_quads, capture.framebuffer, size)
             rgb = capture.read_rgb()
         finally:
             capture.release()

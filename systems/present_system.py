@@ -4,6 +4,7 @@ bloomed, exposed and tone mapped as the active camera's ``Bloom`` and ``Tonemap`
 from __future__ import annotations
 
 import esper
+import moderngl
 
 from components.post import TONEMAP_CURVES, Bloom, Tonemap
 from engine.core.frame_io import Output
@@ -41,6 +42,12 @@ class PresentSystem(esper.Processor):
         views: FrameViews | None = self.world.resources.get(FrameViews)
         if output is None or views is None or views.main is None:
             return
+        self.present_into(output.framebuffer, output.size, dt)
+
+    def present_into(self, framebuffer: moderngl.Framebuffer, size: tuple[int, int], dt: float = 0.0) -> None:
+        """Present the last finished frame into ``framebuffer`` as this stage does, with the
+        active camera's Bloom and Tonemap: the frame and a screenshot of it (``dt`` 0: an
+        automatic exposure does not move on for a second presentation)."""
         parts = active_camera_parts(self.world)
         camera = parts[0] if parts is not None else None
         tonemap = bloom = None
@@ -48,4 +55,4 @@ class PresentSystem(esper.Processor):
             tonemap = self.world.try_get(camera, Tonemap)
             bloom = self.world.try_get(camera, Bloom) if self.bloom else None
         self.tonemap, self.bloomed = tonemap, bloom
-        self.renderer.present(output.framebuffer, output.size, tonemap, bloom, self._curve, camera, dt)
+        self.renderer.present(framebuffer, size, tonemap, bloom, self._curve, camera, dt)

@@ -293,7 +293,7 @@ class ProbeScheduler:
             _ask_named(state, face_hits(state.position, settings.far, lo, hi), entity,
                        lambda row: f"{what[row]}: entity {entity[row]}")
             casters = self.world.resources.get(ShadowCasters)
-            if casters is not None and (casters.directional or casters.points):
+            if casters is not None and (casters.directional or casters.points or casters.virtual):
                 # Where their shadows fall: a face showing that place changes even when the
                 # thing itself is outside it.
                 shadow_lo, shadow_hi, of = casters.shadow_bounds(lo, hi)

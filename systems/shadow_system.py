@@ -60,11 +60,18 @@ class ShadowSystem(esper.Processor):
         casters_changed = renderer.casters_version != self._casters_seen
         self._casters_seen = renderer.casters_version
         changed_box = renderer.take_changed_box()
-        level = renderer.level_bounds()
+        # The level's box only where a map is fitted to it (a sun that casts, a surface that
+        # carries light): a world of 100,000 instances and no such light pays nothing for it.
+        surfaces = self.world.resources.get(Surfaces)
+        needed = self.enabled and (
+            any(light.shadows for _, light in self.world.query_one(DirectionalLight))
+            or (surfaces is not None and any(s.carries_light for s in (*surfaces.mirrors.values(),
+                                                                       *surfaces.portals.values()))))
+        level = renderer.level_bounds() if needed else None
         published = ShadowCasters(level=level)
         self._directional_maps(casters_changed, changed_box, level, published)
         self._point_maps(published)
-        self._virtual_maps(casters_changed, level)
+        published.virtual = self._virtual_maps(casters_changed, level)
         self.world.resources[ShadowCasters] = published
         block = maps.block.tobytes() + maps.virtual_block.tobytes()
         if block != self._uploaded:
@@ -176,7 +183,7 @@ class ShadowSystem(esper.Processor):
         return np.array([lo for lo, _ in boxes]), np.array([hi for _, hi in boxes])
 
     # --- lights through mirrors and portals ---------------------------------------------------
-    def _virtual_maps(self, casters_changed: bool, level) -> None:
+    def _virtual_maps(self, casters_changed: bool, level) -> list[VirtualLight]:
         """Each light's image through the mirrors and portals that carry light
         (``shadow_rules.virtual_lights``), brightest and highest priority first, at most
         ``MAX_VIRTUAL_LIGHTS``: a map each, drawn when it or a caster changed, a view of the
@@ -195,6 +202,7 @@ class ShadowSystem(esper.Processor):
                       for entity, (light, transform) in world.query(PointLight, Transform)][:MAX_POINT_LIGHTS]
             found = rank_virtual_lights(virtual_lights(directional, points, surfaces))
         drawn = 0
+        shining: list[VirtualLight] = []
         for light in found:
             slot = drawn
             if slot == MAX_VIRTUAL_LIGHTS:
@@ -218,12 +226,14 @@ class ShadowSystem(esper.Processor):
                 stats.shadow_maps_drawn += 1
             else:
                 stats.shadow_maps_kept += 1
+            shining.append(light)
             drawn += 1
         for slot in [s for s in self._virtual if s >= drawn]:
             del self._virtual[slot]
         stats.virtual_lights = drawn
         maps.set_virtual_count(drawn)
         renderer.scene_pass.virtual_lights = drawn > 0
+        return shining
 
 
 def _with_image(lo: np.ndarray, hi: np.ndarray, carry) -> tuple[np.ndarray, np.ndarray]:

@@ -91,3 +91,34 @@ def skip_unless_trusted(renderer, path: str) -> None:
     if not checks.trusted(path):
         verdict = checks.verdicts[path]
         pytest.skip(f"{path} is {verdict.status} on {renderer.ctx.info['GL_RENDERER']}: {verdict.detail}")
+
+
+def pixel_rays(view, size) -> tuple[np.ndarray, np.ndarray]:
+    """Eye and unit direction (float64) through each pixel centre of ``view`` at ``size``,
+    rows from the top: the primary rays a second computation casts."""
+    w, h = size
+    inverse = np.array(glm.inverse(glm.dmat4(view.view_proj)).to_list(), np.float64).T
+    xs = (np.arange(w) + 0.5) / w * 2.0 - 1.0
+    ys = 1.0 - (np.arange(h) + 0.5) / h * 2.0
+    gx, gy = np.meshgrid(xs, ys)
+    far = np.stack([gx, gy, np.ones_like(gx), np.ones_like(gx)], axis=-1) @ inverse.T
+    far = far[..., :3] / far[..., 3:]
+    eye = np.array(view.eye, np.float64)
+    direction = far - eye
+    return eye, direction / np.linalg.norm(direction, axis=-1, keepdims=True)
+
+
+def box_hits(origin: np.ndarray, direction: np.ndarray, centre: np.ndarray, half: np.ndarray,
+             limit: np.ndarray | None = None) -> np.ndarray:
+    """Whether rays (rows) from ``origin`` along ``direction`` meet the axis-aligned box
+    (``centre``, ``half`` sizes) ahead of them, before ``limit`` (in units of ``direction``)
+    if given: the slab test, in float64."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t1 = (centre - half - origin) / direction
+        t2 = (centre + half - origin) / direction
+    near = np.nanmax(np.minimum(t1, t2), axis=1)
+    far = np.nanmin(np.maximum(t1, t2), axis=1)
+    hit = (near <= far) & (far > 1e-6)
+    if limit is not None:
+        hit &= near < limit
+    return hit

@@ -377,8 +377,9 @@ def test_command_line_autopilot_writes_frames_of_the_level_solved(tmp_path, how)
     flags, env = (["--headless"], os.environ) if how == "--headless" else \
         ([], {**os.environ, "DISPLAY": "", "WAYLAND_DISPLAY": ""})
     done = subprocess.run([sys.executable, "-m", "games.mirror_beam", *flags, "--frames", "7",
-                           "--size", "96x54", "--out", str(out), "--level", str(level_file("01_one_bounce")),
-                           "--aa", "off"],  # the colours of a 20-pixel target, not its blended rim
+                           "--size", "192x108", "--out", str(out), "--level", str(level_file("01_one_bounce")),
+                           "--aa", "off"],  # the colours of a 40-pixel target, not its blended rim
+                          # (192x108: at 96x54 the level's caption, 16-pixel text, covered the target)
                           cwd=ROOT, env=env, capture_output=True, text=True, timeout=120)
     assert done.returncode == 0, done.stderr
     solved = [line for line in done.stdout.splitlines() if line.startswith("mirror_beam: solved:")]

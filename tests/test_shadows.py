@@ -22,7 +22,7 @@ from engine.assets.mesh import box, plane, quad, sphere
 from engine.assets.portals import spawn_portal_pair
 from engine.core.portal_math import pair_transform
 from engine.rules.probe_schedule import ProbeSchedule
-from tests.support import look_from, srgb_to_linear
+from tests.support import box_hits, look_from, pixel_rays, srgb_to_linear
 
 LIGHT = glm.normalize(glm.vec3(-1.0, -0.75, -0.5))
 BOX_CENTRE, BOX_HALF = np.array([-1.0, 0.5, 0.0]), 0.5
@@ -60,29 +60,7 @@ def _hits(origin: np.ndarray, direction: np.ndarray, grow: float, segment: np.nd
     root = np.sqrt(np.maximum(disc, 0.0))
     t_far = -b + root
     sphere = (disc > 0.0) & (t_far > 1e-6) & (-b - root < limit)
-    # The box: slabs.
-    half = BOX_HALF + grow
-    with np.errstate(divide="ignore", invalid="ignore"):
-        t1 = (BOX_CENTRE - half - origin) / direction
-        t2 = (BOX_CENTRE + half - origin) / direction
-    t_near = np.nanmax(np.minimum(t1, t2), axis=1)
-    t_exit = np.nanmin(np.maximum(t1, t2), axis=1)
-    boxed = (t_near <= t_exit) & (t_exit > 1e-6) & (t_near < limit)
-    return sphere | boxed
-
-
-def _pixel_rays(view, size) -> tuple[np.ndarray, np.ndarray]:
-    """Eye and unit direction (float64) through each pixel centre, rows from the top."""
-    w, h = size
-    inverse = np.array(glm.inverse(glm.dmat4(view.view_proj)).to_list(), np.float64).T
-    xs = (np.arange(w) + 0.5) / w * 2.0 - 1.0
-    ys = 1.0 - (np.arange(h) + 0.5) / h * 2.0
-    gx, gy = np.meshgrid(xs, ys)
-    far = np.stack([gx, gy, np.ones_like(gx), np.ones_like(gx)], axis=-1) @ inverse.T
-    far = far[..., :3] / far[..., 3:]
-    eye = np.array(view.eye, np.float64)
-    direction = far - eye
-    return eye, direction / np.linalg.norm(direction, axis=-1, keepdims=True)
+    return sphere | box_hits(origin, direction, BOX_CENTRE, BOX_HALF + grow, limit)
 
 
 def _classified(lit_frame: np.ndarray, dark_frame: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -124,7 +102,7 @@ def test_directional_shadows_agree_with_shadow_rays(scene, shadow_filter):
     runner, ids, without, with_shadows = _render_both(scene, build, shadow_filter=shadow_filter)
     shadowed, lit = _classified(without, with_shadows)
     floor = runner.ids() == ids["floor"]
-    eye, rays = _pixel_rays(runner.engine.main_view, runner.size)
+    eye, rays = pixel_rays(runner.engine.main_view, runner.size)
     t = -eye[1] / rays[..., 1]
     points = (eye + rays * t[..., None]).reshape(-1, 3)
     to_light = np.tile(-np.array(LIGHT, np.float64), (len(points), 1))
@@ -144,7 +122,7 @@ def test_the_shadow_seen_in_a_mirror_is_the_mirrored_points_shadow(scene, shadow
     shadowed, lit = _classified(without, with_shadows)
     targets = runner.engine.renderer.targets
     in_mirror = (targets.read_surface_ids() == ids["mirror"]) & (runner.ids() == ids["floor"])
-    eye, rays = _pixel_rays(runner.engine.main_view, runner.size)
+    eye, rays = pixel_rays(runner.engine.main_view, runner.size)
     # The ray meets the mirror's plane (z = -3, facing +z), turns (z flips) and meets the floor.
     t = (-3.0 - eye[2]) / rays[..., 2]
     on_mirror = eye + rays * t[..., None]
@@ -174,7 +152,7 @@ def test_the_shadow_seen_through_a_portal_is_the_carried_points_shadow(scene):
     carry = glm.dmat4(pair_transform(runner.world.get(ids["a"], Transform).world,
                                      runner.world.get(ids["b"], Transform).world))
     m = np.array(carry.to_list(), np.float64).T   # rows act on column vectors
-    eye, rays = _pixel_rays(runner.engine.main_view, runner.size)
+    eye, rays = pixel_rays(runner.engine.main_view, runner.size)
     t = (5.0 - eye[2]) / rays[..., 2]
     at_a = eye + rays * t[..., None]
     carried = at_a @ m[:3, :3].T + m[:3, 3]
@@ -207,7 +185,7 @@ def test_point_light_shadows_agree_with_shadow_rays(scene, monkeypatch, path, sh
     shadowed, lit = _classified(without, with_shadows)
     # Only where the lamp gives a visible share of the light (near the end of its range
     # the difference is below the 8-bit output's steps).
-    eye, rays = _pixel_rays(runner.engine.main_view, runner.size)
+    eye, rays = pixel_rays(runner.engine.main_view, runner.size)
     t = -eye[1] / rays[..., 1]
     points = (eye + rays * t[..., None]).reshape(-1, 3)
     to_lamp = lamp - points
@@ -232,7 +210,7 @@ def test_lit_surfaces_have_no_acne(scene, shadow_filter):
     _, lit = _classified(without, with_shadows)
     seen = runner.ids()
     sphere = seen == ids["sphere"]
-    eye, rays = _pixel_rays(runner.engine.main_view, runner.size)
+    eye, rays = pixel_rays(runner.engine.main_view, runner.size)
     oc = eye - SPHERE_CENTRE
     b = (rays * oc).sum(-1)
     c = oc @ oc - SPHERE_RADIUS ** 2

@@ -15,7 +15,7 @@ from engine.assets.mesh import box, plane, quad
 from engine.assets.portals import spawn_portal_pair
 from engine.core.portal_math import pair_transform
 from engine.resources import ViewBudget
-from tests.support import look_from, srgb_to_linear
+from tests.support import box_hits, look_from, pixel_rays, srgb_to_linear
 
 SUN = np.array([1.0, -1.0, 0.0]) / np.sqrt(2.0)
 # Boxes as (centre, half sizes): a wall shading part of the floor from the sun, a small box.
@@ -43,16 +43,7 @@ def _scene(world, mirror_color=(1.0, 1.0, 1.0), rate=1.0, sun=SUN, reflects=True
 
 def _box_hit(origin, direction, box, grow, limit=None):
     centre, half = box
-    half = half + grow
-    with np.errstate(divide="ignore", invalid="ignore"):
-        t1 = (centre - half - origin) / direction
-        t2 = (centre + half - origin) / direction
-    near = np.nanmax(np.minimum(t1, t2), axis=1)
-    far = np.nanmin(np.maximum(t1, t2), axis=1)
-    hit = (near <= far) & (far > 1e-6)
-    if limit is not None:
-        hit &= near < limit
-    return hit
+    return box_hits(origin, direction, centre, half + grow, limit)
 
 
 def _mirror_lit(points: np.ndarray, grow: float) -> np.ndarray:
@@ -73,16 +64,8 @@ def _mirror_lit(points: np.ndarray, grow: float) -> np.ndarray:
 
 
 def _floor_points(runner):
-    view = runner.engine.main_view
-    w, h = runner.size
-    inverse = np.array(glm.inverse(glm.dmat4(view.view_proj)).to_list(), np.float64).T
-    xs = (np.arange(w) + 0.5) / w * 2.0 - 1.0
-    ys = 1.0 - (np.arange(h) + 0.5) / h * 2.0
-    gx, gy = np.meshgrid(xs, ys)
-    far = np.stack([gx, gy, np.ones_like(gx), np.ones_like(gx)], axis=-1) @ inverse.T
-    far = far[..., :3] / far[..., 3:]
-    eye = np.array(view.eye, np.float64)
-    rays = far - eye
+    """Where each pixel's primary ray meets the floor (y = 0), rows of the flattened image."""
+    eye, rays = pixel_rays(runner.engine.main_view, runner.size)
     t = -eye[1] / rays[..., 1]
     return (eye + rays * t[..., None]).reshape(-1, 3)
 
@@ -304,3 +287,30 @@ partner = "a"
     path.write_text(text.replace("reflects_light = true", 'reflects_light = "yes"'))
     with pytest.raises(LevelError, match="reflects_light"):
         load_level(path)
+
+
+def test_a_probe_face_recaptures_when_a_shadow_in_the_mirrors_light_moves(scene):
+    """The probe's -Y face sees the floor where the mirror throws the sun; a box on the
+    light's way in (between the sun and the mirror, out of the probe's reach and out of that
+    face even as the sun's own shadow) moves: its shadow in the thrown light moves in that
+    face, which is captured again, for that reason."""
+    from components import ReflectionProbe
+    from engine.rules.probe_schedule import ProbeSchedule
+
+    def build(world):
+        ids = world.resources["ids"] = _scene(world)
+        ids["probe"] = world.spawn(Transform(position=(0.7, 0.6, 0.0)), ReflectionProbe(resolution=16, far=1.5))
+        ids["way_in"] = world.spawn(Transform(position=(2.0, 3.25, 0.0)), MeshRef(box((0.3, 0.3, 0.3))),
+                                    Material())
+
+    runner = scene(build)
+    runner.frame()
+    runner.frame()
+    ids = runner.world.resources["ids"]
+    assert ids["probe"] not in runner.world.resources[ProbeSchedule].due
+    runner.world.get(ids["way_in"], Transform).position += glm.vec3(0.0, 0.0, 0.1)
+    runner.frame()
+    due = runner.world.resources[ProbeSchedule].due
+    assert ids["probe"] in due and 3 in due[ids["probe"]].faces, due
+    reasons = due[ids["probe"]].reasons
+    assert any(reason.startswith("shadow of entity") and 3 in faces for reason, faces in reasons.items()), reasons

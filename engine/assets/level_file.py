@@ -67,7 +67,8 @@ except ImportError:  # Python 3.10
 ENGINE_COMPONENTS: dict[str, type] = {
     name: getattr(_components, name) for name in (
         "Bloom", "Camera", "DirectionalLight", "Emissive", "FlyController", "HemisphereLight", "Material", "MeshRef",
-        "Mirror", "PointLight", "Portal", "ReflectionProbe", "Reflective", "Refractive", "Skybox", "Tonemap",
+        "Mirror", "PointLight", "Portal", "ReflectionProbe", "Reflective", "Refractive", "ScreenPanel", "ScreenText",
+        "Skybox", "Tonemap",
         "Transform", "Traveller", "Visibility", "Water")}
 DERIVED_COMPONENTS = ("PortalClone", "Slice")
 # Fields holding another entity: a name in the file, an id in the world.

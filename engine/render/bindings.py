@@ -74,6 +74,7 @@ VIRTUAL_SHADOW_UNIT = 14  # scene: the virtual lights' shadow maps, one depth at
 # scene's units).  Bloom and exposure passes read their source at PRESENT_UNIT.
 BLOOM_UNIT = 1           # present: the bloom chain's sum of levels (engine/render/bloom.py)
 EXPOSURE_UNIT = 2        # present, exposure adaptation: the 1x1 adapted exposure (engine/render/post.py)
+TEXT_UNIT = 0            # screen text (after present): the font atlas (engine/render/text.py)
 
 # --- uniform-block binding points ----------------------------------------------------------
 CAMERA_BINDING = 0

@@ -32,6 +32,7 @@ from engine.render.shader_library import ShaderLibrary
 from engine.render.shadows import ShadowMaps
 from engine.render.sky import flat_cube, upload_cube
 from engine.render.targets import LevelStack, RenderTargets
+from engine.render.text import TextPass
 from engine.render.views import CAMERA_BLOCK_BYTES, LIGHTS_BLOCK_BYTES, View
 from engine.rules.probe_rules import ProbeBlend
 
@@ -149,6 +150,8 @@ class Renderer:
         self.raw_gl = RawGL(ctx)
         self.shaders = ShaderLibrary(ctx)
         self.present_pass = PresentPass(ctx, self.shaders, caps.software)
+        self.text_pass: TextPass | None = None  # made when text is first drawn (its atlas costs a few ms)
+        self.screen_quads = np.zeros((0, 12), np.float32)  # the last frame's screen text (a screenshot draws it again)
         # A pass's Camera blocks, one after another at the alignment a uniform range needs.
         align = max(1, int(ctx.info.get("GL_UNIFORM_BUFFER_OFFSET_ALIGNMENT", 256)))
         self.camera_stride = -(-CAMERA_BLOCK_BYTES // align) * align
@@ -477,6 +480,20 @@ class Renderer:
                                curve, camera, dt)
         self.checkpoint("present")
 
+    def text(self) -> TextPass:
+        """The screen text pass (``engine/render/text.py``), made on first use."""
+        if self.text_pass is None:
+            self.text_pass = TextPass(self.ctx, self.shaders)
+        return self.text_pass
+
+    def draw_screen_text(self, quads: np.ndarray, output: moderngl.Framebuffer, size: tuple[int, int]) -> None:
+        """Blend the screen text's ``quads`` (``engine.render.text.layout``) over ``output``,
+        after present; kept in ``screen_quads`` so a screenshot shows them too."""
+        self.screen_quads = quads
+        if len(quads):
+            self.text().draw(quads, output, size)
+            self.checkpoint("screen text")
+
     def release(self) -> None:
         for batch in list(self.batches.values()):
             batch.release()
@@ -492,6 +509,9 @@ class Renderer:
         self.irradiance.release()
         self.scene_pass.release()
         self.present_pass.release()
+        if self.text_pass is not None:
+            self.text_pass.release()
+            self.text_pass = None
         for obj in (self.sky, self.cameras_ubo, self.lights_ubo):
             obj.release()
         self.shaders.release()

@@ -165,6 +165,9 @@ class ShadowCasters:
     level: tuple[np.ndarray, np.ndarray] | None = None
     directional: list[tuple[float, float, float]] = field(default_factory=list)
     points: list[tuple[tuple[float, float, float], float]] = field(default_factory=list)
+    # Lights through mirrors and portals: each image's light shadows what lies beyond the
+    # surface, and what stands on the way in shadows there as its carried image.
+    virtual: list[VirtualLight] = field(default_factory=list)
 
     def shadow_bounds(self, lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """World boxes (rows) holding where the shadows of the boxes [lo, hi] may fall under
@@ -187,7 +190,35 @@ class ShadowCasters:
                 out_lo.append(a)
                 out_hi.append(b)
                 out_of.append(rows[reach])
+        for light in self.virtual:
+            if not len(lo) or self.level is None:
+                break
+            carried_lo, carried_hi = _carried_boxes(lo, hi, light.carry)
+            for box_lo, box_hi in ((lo, hi), (carried_lo, carried_hi)):
+                if light.kind == "directional":
+                    level_lo = np.minimum(self.level[0], carried_lo.min(axis=0))
+                    level_hi = np.maximum(self.level[1], carried_hi.max(axis=0))
+                    a, b = directional_shadow_bounds(box_lo, box_hi, light.position, level_lo, level_hi)
+                    keep = rows
+                else:
+                    keep = rows[boxes_in_reach(box_lo, box_hi, np.array(light.position), light.light_range)]
+                    if not len(keep):
+                        continue
+                    a, b = point_shadow_bounds(box_lo[keep], box_hi[keep], np.array(light.position),
+                                               light.light_range)
+                out_lo.append(a)
+                out_hi.append(b)
+                out_of.append(keep)
         return np.concatenate(out_lo), np.concatenate(out_hi), np.concatenate(out_of)
+
+
+def _carried_boxes(lo: np.ndarray, hi: np.ndarray, carry: glm.mat4) -> tuple[np.ndarray, np.ndarray]:
+    """The world boxes holding the boxes [lo, hi] (rows) carried by ``carry``."""
+    pick = np.array([[x, y, z] for x in (0, 1) for y in (0, 1) for z in (0, 1)], bool)
+    corners = np.where(pick[None], hi[:, None, :], lo[:, None, :])
+    m = np.array(carry.to_list(), np.float64)   # glm's columns as rows: row vectors times it
+    moved = corners @ m[:3, :3] + m[3, :3]
+    return moved.min(axis=1), moved.max(axis=1)
 
 
 # --- light through mirrors and portals -------------------------------------------------------

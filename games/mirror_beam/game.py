@@ -28,7 +28,18 @@ from typing import Any
 
 from pyglm import glm
 
-from components import Bloom, Camera, Emissive, Material, MeshRef, Mirror, Tonemap, Transform, look_rotation
+from components import (
+    Bloom,
+    Camera,
+    Emissive,
+    Material,
+    MeshRef,
+    Mirror,
+    ScreenText,
+    Tonemap,
+    Transform,
+    look_rotation,
+)
 from engine.assets.level_file import LevelGame
 from engine.assets.mesh import box
 from engine.core.errors import SpeculumError
@@ -85,6 +96,11 @@ class MirrorFrame:
     """Marks the backing the game puts behind a mirror (``mirror`` is its entity)."""
 
     mirror: int
+
+
+@dataclass
+class Caption:
+    """Marks the game's text on the screen (the level's name; "solved" once it is)."""
 
 
 @dataclass
@@ -333,6 +349,18 @@ def marker_system(world: World, state: BeamState) -> None:
             marker_mesh.visible = not state.won
 
 
+def caption_system(world: World, state: BeamState, has_next: bool) -> None:
+    """The caption says the level's name, and "solved" (with the keys) once it is."""
+    if state.won:
+        keys = "n: next, r: restart" if has_next else "r: restart"
+        wanted = f"{state.level_name}: solved! ({keys})"
+    else:
+        wanted = state.level_name
+    for _, (text, _) in world.query(ScreenText, Caption):
+        if text.text != wanted:
+            text.text = wanted
+
+
 # --- the game -----------------------------------------------------------------------------
 
 def solution_script(rules: BeamRules, interval: int = 1) -> list[list[str]]:
@@ -407,6 +435,9 @@ class MirrorBeam(LevelGame):
                         BeamSegment(index))
         world.spawn(Transform(), MeshRef(box((0.3, 0.06, 0.3), name="marker")),
                     Material(color=(1.0, 0.85, 0.2, 1.0)), Emissive(2.0), SelectionMarker())
+        # The level's name on the screen, over a dark panel; the beam system adds "solved".
+        world.spawn(ScreenText(level.name, position=(14, 14), color=(1.0, 0.95, 0.8, 1.0),
+                               background=(0.0, 0.0, 0.0, 0.55)), Caption())
         self.state = BeamState(rules, level.name,
                                {m: glm.quat(world.get(m, Transform).rotation) for m in rules.rotatable},
                                target.power)
@@ -462,4 +493,5 @@ class MirrorBeam(LevelGame):
             print(f"mirror_beam: solved: {state.level_name} with {bounces} bounce{'s' * (bounces != 1)} "
                   f"(frame {state.frame}; {keys})", flush=True)
         marker_system(world, state)
+        caption_system(world, state, self.next_level() is not None)
         state.frame += 1

@@ -53,6 +53,7 @@ from components import (
     Material,
     MeshRef,
     Portal,
+    ScreenText,
     Tonemap,
     Transform,
     look_rotation,
@@ -280,7 +281,8 @@ class PortalRun(LevelGame):
     """One level of portal run, from a level file (``engine.assets.level_file``).
 
     ``autopilot=True`` plays the level's ``solution`` (headless runs with no person);
-    ``events`` lists every RunEvent since the game was built (restarts included)."""
+    ``events`` lists every RunEvent since the game was built (restarts included);
+    ``show_caption=False`` leaves the level's name and time off the screen."""
 
     title = "portal run"
     size = (1280, 720)
@@ -289,11 +291,14 @@ class PortalRun(LevelGame):
     mouse_look = True  # the window shell captures the pointer on the first click (shell/window.py)
 
     def __init__(self, level: str | Path | None = None, autopilot: bool = False,
-                 script: Sequence[str] | None = None, verbose: bool = True) -> None:
+                 script: Sequence[str] | None = None, verbose: bool = True, show_caption: bool = True) -> None:
         super().__init__(level if level is not None else levels()[0])
         self.level = self.load()  # checked now: a bad file is an error before any window opens
         self.title = f"portal run: {self.level.name}"
         self.verbose = verbose
+        self.show_caption = show_caption  # the level's name and time on the screen
+        self.caption: int | None = None
+        self.elapsed = 0.0
         self.events: list[RunEvent] = []
         self.pilot: Autopilot | None = None
         self._want_pilot = autopilot
@@ -356,6 +361,10 @@ class PortalRun(LevelGame):
         self.marker = world.spawn(Transform(position=hidden), MeshRef(box((0.5, 0.5, 0.5)), visible=False),
                                   Material(color=(*REFUSED_COLOR, 1.0), roughness=1.0), Emissive(0.5))
         self.marker_time = 0.0  # seconds the refused marker still shows
+        # The level's name and the time on the screen, top left over a dark panel (unless show_caption is off).
+        self.elapsed = 0.0  # seconds of game time since the build (stopped by a win)
+        self.caption = world.spawn(ScreenText(self.caption_text(), position=(14, 14), color=(1.0, 1.0, 1.0, 1.0),
+                                              background=(0.0, 0.0, 0.0, 0.55))) if self.show_caption else None
         self._exit_glow = world.try_get(self.exit, Emissive)
         self.won = False
         self.travels = 0
@@ -398,6 +407,17 @@ class PortalRun(LevelGame):
         if self._piloted() is None and (person.mouse_dx or person.mouse_dy):
             self._look(world, person.mouse_dx, person.mouse_dy)
         self._flash(world, dt)
+        if not self.won:
+            self.elapsed += dt
+        caption = world.try_get(self.caption, ScreenText) if self.caption is not None else None
+        if caption is not None and caption.text != self.caption_text():
+            caption.text = self.caption_text()
+
+    def caption_text(self) -> str:
+        """What the screen says: the level's name and its time (complete: the time it took)."""
+        if self.won:
+            return f"{self.level.name}: complete in {self.elapsed:.1f} s"
+        return f"{self.level.name}   {self.elapsed:.1f} s"
 
     def physics(self, world: World, dt: float) -> None:
         """The physics system: the fixed steps ``dt`` holds (``PHYSICS_STEP``; see the

@@ -20,6 +20,20 @@ uniform sampler2DShadow shadow_atlas;
 uniform samplerCube point_shadow0;
 uniform samplerCube point_shadow1;
 
+// Percentage-closer filtering of a depth atlas at ``p`` (uv, depth): a grid of n x n taps
+// (engine/render/shadows.py ShadowMaps.filter), each a bilinear comparison of 2 x 2 texels,
+// ``softness`` atlas texels (``texel`` in uv) across: 2 x 2 taps half a softness apart (a
+// 3 x 3-texel tent at softness 1), 3 x 3 for wider edges; one tap on a software rasteriser.
+float filtered_shadow(sampler2DShadow atlas, vec3 p, int n, float texel, float softness) {
+    float step = n > 1 ? texel * softness / float(n - 1) : 0.0;
+    vec2 start = p.xy - 0.5 * step * float(n - 1);
+    float lit = 0.0;
+    for (int y = 0; y < n; ++y)
+        for (int x = 0; x < n; ++x)
+            lit += texture(atlas, vec3(start + step * vec2(x, y), p.z));
+    return lit / float(n * n);
+}
+
 // How much of directional light i reaches a point at ``position`` whose geometric normal
 // (facing the viewer) is ``normal`` and for which the light comes from ``l``: 0 (shadowed) to 1.
 float directional_shadow(int i, vec3 position, vec3 normal, vec3 l) {
@@ -30,17 +44,7 @@ float directional_shadow(int i, vec3 position, vec3 normal, vec3 l) {
     float offset = params.x * (1.0 + params.y) * (1.5 - nl);
     vec4 p = shadows.directional_matrix[i] * vec4(position + normal * offset, 1.0);
     if (any(lessThan(p.xyz, vec3(0.0))) || any(greaterThan(p.xyz, vec3(1.0)))) return 1.0;  // outside the map
-    // A grid of n x n taps (engine/render/shadows.py ShadowMaps.filter), each a bilinear
-    // comparison of 2 x 2 texels: 2 x 2 taps half a softness apart (a 3 x 3-texel tent at
-    // softness 1), 3 x 3 for wider edges; one tap on a software rasteriser.
-    int n = int(params.w);
-    float step = n > 1 ? params.z * params.y / float(n - 1) : 0.0;
-    vec2 start = p.xy - 0.5 * step * float(n - 1);
-    float lit = 0.0;
-    for (int y = 0; y < n; ++y)
-        for (int x = 0; x < n; ++x)
-            lit += texture(shadow_atlas, vec3(start + step * vec2(x, y), p.z));
-    return lit / float(n * n);
+    return filtered_shadow(shadow_atlas, p.xyz, int(params.w), params.z, params.y);
 }
 
 float point_cube_shadow(samplerCube cube, vec4 params, vec3 from_light, vec3 normal, vec3 l) {

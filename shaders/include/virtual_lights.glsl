@@ -29,14 +29,7 @@ float virtual_shadow(int i, vec3 position, vec3 normal, vec3 l, float dist) {
     vec4 p = virtual_lights.virtual_matrix[i] * vec4(position + normal * texel * (1.0 + params.y) * (1.5 - nl), 1.0);
     p.xyz /= p.w;
     if (any(lessThan(p.xyz, vec3(0.0))) || any(greaterThan(p.xyz, vec3(1.0)))) return 1.0;
-    int n = int(params.z);
-    float step = n > 1 ? params.x * params.y / float(n - 1) : 0.0;
-    vec2 start = p.xy - 0.5 * step * float(n - 1);
-    float lit = 0.0;
-    for (int y = 0; y < n; ++y)
-        for (int x = 0; x < n; ++x)
-            lit += texture(virtual_atlas, vec3(start + step * vec2(x, y), p.z));
-    return lit / float(n * n);
+    return filtered_shadow(virtual_atlas, p.xyz, int(params.z), params.x, params.y);  // shadows.glsl
 }
 
 // The light of every virtual light at a surface point: ``diffuse`` its Lambertian share,

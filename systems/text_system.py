@@ -1,0 +1,47 @@
+"""Text: the screen text and panels (``components/screen.py``) laid out and drawn over the
+presented frame (``engine/render/text.py``), so no mirror, portal or probe shows them."""
+from __future__ import annotations
+
+import esper
+
+from components.screen import SCREEN_ANCHORS, ScreenPanel, ScreenText
+from engine.core.frame_io import Output
+from engine.core.world import World
+from engine.render.renderer import Renderer
+from engine.render.text import ScreenItem, layout
+
+
+class TextSystem(esper.Processor):
+    """Every ScreenPanel and ScreenText, in drawing order (``order``, panels first, entity),
+    as quads blended over the output."""
+
+    def __init__(self, world: World, renderer: Renderer) -> None:
+        self.world = world
+        self.renderer = renderer
+        self._laid_out: tuple[list[ScreenItem], tuple[int, int]] | None = None  # what the last quads are of
+        self._quads = None
+
+    def items(self) -> list[ScreenItem]:
+        """The world's screen items in drawing order."""
+        found = []
+        for entity, panel in self.world.query_one(ScreenPanel):
+            found.append(((panel.order, 0, entity), ScreenItem(
+                None, tuple(panel.position), SCREEN_ANCHORS[panel.anchor], tuple(panel.color),
+                size=tuple(panel.size))))
+        for entity, text in self.world.query_one(ScreenText):
+            found.append(((text.order, 1, entity), ScreenItem(
+                text.text, tuple(text.position), SCREEN_ANCHORS[text.anchor], tuple(text.color), text.scale,
+                background=None if text.background is None else tuple(text.background), padding=text.padding)))
+        return [item for _, item in sorted(found, key=lambda pair: pair[0])]
+
+    def process(self, dt: float) -> None:
+        output: Output | None = self.world.resources.get(Output)
+        if output is None:
+            return
+        items = self.items()
+        if not items and not len(self.renderer.screen_quads):
+            return  # no text, and none last frame: no atlas is made
+        if self._laid_out != (items, output.size):  # laid out again only when a value or the size changed
+            self._quads = layout(self.renderer.text().atlas, items, output.size)
+            self._laid_out = (items, output.size)
+        self.renderer.draw_screen_text(self._quads, output.framebuffer, output.size)

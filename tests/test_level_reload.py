@@ -1,0 +1,320 @@
+"""Level files reload on save (shell/level_reload.py): a run with reload on rebuilds its world
+from the saved file, keeping the camera; a broken save keeps the old world and reports its
+error once (file and line); a fixed save loads again.  Real frames, compared with a second
+path: the saved file rendered by an engine of its own, from the same camera pose."""
+from __future__ import annotations
+
+import argparse
+import os
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from components import Transform
+from engine.assets.level_file import LevelGame
+from engine.core.frame_io import Output
+from engine.render.targets import CaptureTarget
+from shell.app import Engine
+from shell.runner import HEADLESS_DT, run_headless
+
+SIZE = (96, 72)
+POSE = (0.4, 1.2, 4.5, 4.0, -6.0)  # x, y, z, yaw, pitch: not the file's camera
+
+LEVEL = """[level]
+name = "reload test"
+
+[[entity]]
+name = "camera"
+[entity.Transform]
+position = [0.0, 1.0, 5.0]
+[entity.Camera]
+
+[[entity]]
+name = "sun"
+[entity.DirectionalLight]
+direction = [-0.3, -1.0, -0.5]
+intensity = 2.0
+
+[[entity]]
+name = "floor"
+[entity.Transform]
+[entity.MeshRef]
+mesh = { plane = [10.0, 10.0] }
+[entity.Material]
+color = [0.5, 0.5, 0.5, 1.0]
+
+[[entity]]
+name = "box"
+[entity.Transform]
+position = [BOX_X, 1.0, 0.0]
+[entity.MeshRef]
+mesh = { box = [1.0, 1.0, 1.0] }
+[entity.Material]
+color = BOX_COLOR
+roughness = ROUGHNESS
+"""
+RED, BLUE = "[0.9, 0.1, 0.1, 1.0]", "[0.1, 0.2, 0.9, 1.0]"
+ROUGHNESS_LINE = LEVEL.split("\n").index("roughness = ROUGHNESS") + 1
+
+
+def level_text(box_x: float = 0.0, color: str = RED, roughness: str = "0.5") -> str:
+    return LEVEL.replace("BOX_X", str(box_x)).replace("BOX_COLOR", color).replace("ROUGHNESS", roughness)
+
+
+_clock = [1_700_000_000 * 10**9]
+
+
+def save(path: Path, text: str) -> None:
+    """Write ``text`` as an editor saves, with a modification time later than any before
+    (a file system's clock may be coarser than two writes in a test)."""
+    path.write_text(text)
+    _clock[0] += 10**9
+    os.utime(path, ns=(_clock[0], _clock[0]))
+
+
+class Run:
+    """An Engine on a level file rendering into a capture target."""
+
+    def __init__(self, ctx, path: Path) -> None:
+        self.engine = Engine(LevelGame(path), ctx)
+        self.capture = CaptureTarget(ctx, SIZE)
+
+    def frame(self) -> np.ndarray:
+        self.engine.frame(HEADLESS_DT, Output(self.capture.framebuffer, SIZE))
+        return self.capture.read_rgb()
+
+    def close(self) -> None:
+        self.capture.release()
+        self.engine.close()
+
+
+def reference(ctx, tmp_path: Path, text: str, frames: int = 3) -> np.ndarray:
+    """The second path: ``text`` as a level of its own, from ``POSE``."""
+    path = tmp_path / "reference.toml"
+    path.write_text(text)
+    run = Run(ctx, path)
+    try:
+        run.engine.place_camera(*POSE)
+        for _ in range(frames - 1):
+            run.frame()
+        return run.frame()
+    finally:
+        run.close()
+
+
+def box_entity(engine: Engine) -> int:
+    return engine.game.names["box"]
+
+
+def test_saved_level_reloads_broken_keeps_old_fixed_reloads(ctx, tmp_path):
+    path = tmp_path / "level.toml"
+    save(path, level_text())
+    run = Run(ctx, path)
+    try:
+        reload = run.engine.watch_level(interval=0.0)
+        run.engine.place_camera(*POSE)
+        for _ in range(2):
+            run.frame()
+        before = run.frame()
+        assert reload.poll() == []  # nothing saved: nothing happens
+        old_box = box_entity(run.engine)
+
+        # A save: the box moves and turns blue.  The first poll sees the stat change and
+        # waits (the save may be mid-write); the next, with the stat stable, reloads.
+        changed = level_text(box_x=-0.8, color=BLUE)
+        save(path, changed)
+        assert reload.poll() == []
+        assert run.engine.world.exists(old_box)
+        messages = reload.poll()
+        assert messages == [f"level reloaded: {path}"] and reload.reloads == 1 and reload.error is None
+        new_box = box_entity(run.engine)
+        assert new_box != old_box and not run.engine.world.exists(old_box)
+        assert tuple(run.engine.world.get(new_box, Transform).position) == pytest.approx((-0.8, 1.0, 0.0))
+        # The camera stayed where it was placed, not where the file puts it.
+        _, _, camera = run.engine.active_camera()
+        assert tuple(camera.position) == pytest.approx(POSE[:3])
+        for _ in range(2):
+            run.frame()
+        after = run.frame()
+        expected = reference(ctx, tmp_path, changed)
+        assert np.abs(after.astype(int) - expected.astype(int)).max() <= 1
+        assert np.abs(after.astype(int) - before.astype(int)).max() > 60  # a change one can see
+        blue = (after[..., 2].astype(int) - after[..., 0]) > 60
+        assert blue.sum() > 50, "the blue box is in the frame"
+
+        # A broken save: the old (blue) world keeps running, the error is said once and
+        # names the file and the line.
+        save(path, level_text(box_x=0.8, color=RED, roughness="7.0"))
+        assert reload.poll() == []
+        messages = reload.poll()
+        assert len(messages) == 1
+        assert f"{path}:{ROUGHNESS_LINE}" in messages[0] and "'box'" in messages[0] and "roughness" in messages[0]
+        assert reload.error == messages[0]
+        for _ in range(3):
+            assert reload.poll() == []  # once
+            frame = run.frame()
+        assert np.abs(frame.astype(int) - after.astype(int)).max() <= 1
+        assert run.engine.world.exists(new_box) and reload.reloads == 1
+        # The overlay shows it at the top of its error area, as it shows shader errors.
+        overlay_module = pytest.importorskip("shell.overlay")
+        overlay = overlay_module.DebugOverlay(ctx)
+        try:
+            overlay.draw(run.engine, run.capture.framebuffer, SIZE)
+            assert overlay.shown_errors[:1] == [reload.error]
+        finally:
+            overlay.release()
+
+        # A TOML syntax error: the same.
+        save(path, changed.replace("[[entity]]\nname = \"box\"", "[[entity]\nname = \"box\""))
+        reload.poll()
+        (message,) = reload.poll()
+        assert f"{path}:" in message and run.engine.world.exists(new_box)
+
+        # Fixed: it reloads.
+        fixed = level_text(box_x=0.8, color=RED)
+        save(path, fixed)
+        reload.poll()
+        assert reload.poll() == [f"level reloaded: {path}"] and reload.error is None and reload.reloads == 2
+        for _ in range(2):
+            run.frame()
+        final = run.frame()
+        assert np.abs(final.astype(int) - reference(ctx, tmp_path, fixed).astype(int)).max() <= 1
+    finally:
+        run.close()
+
+
+def test_mid_write_and_unchanged_saves_do_not_reload(ctx, tmp_path):
+    path = tmp_path / "level.toml"
+    save(path, level_text())
+    run = Run(ctx, path)
+    try:
+        reload = run.engine.watch_level(interval=0.0)
+        run.frame()
+        # Half a file (an editor writing in chunks), seen by one poll; then the rest.
+        full = level_text(box_x=-0.8, color=BLUE)
+        save(path, full[: len(full) // 2])
+        assert reload.poll() == []
+        save(path, full)
+        assert reload.poll() == []  # changed again since the last look: still waiting
+        assert reload.poll() == [f"level reloaded: {path}"]
+        assert reload.error is None
+        # Saved again without an edit: no rebuild.
+        entity = box_entity(run.engine)
+        save(path, full)
+        reload.poll()
+        assert reload.poll() == [] and box_entity(run.engine) == entity and reload.reloads == 1
+        run.frame()
+    finally:
+        run.close()
+
+
+class SavingLevel(LevelGame):
+    """A level game that, as an editor would, saves its own file at frame ``at``."""
+
+    def __init__(self, path: Path, text: str, at: int) -> None:
+        super().__init__(path)
+        self.text, self.at, self.frame = text, at, 0
+
+    def update(self, world, dt) -> None:
+        self.frame += 1
+        if self.frame == self.at:
+            save(self.level_path, self.text)
+
+
+def test_runner_reload_flag(ctx, tmp_path, capsys):
+    """``--reload`` in a headless run: frames after a save show the saved level."""
+    path = tmp_path / "level.toml"
+    save(path, level_text())
+    changed = level_text(box_x=-0.8, color=BLUE)
+    out = tmp_path / "out"
+    out.mkdir()
+    args = argparse.Namespace(frames=6, out=out, size=SIZE, aa="fxaa", camera=POSE, overlay=False, gif=None,
+                              ids=False, export_scene=None, dt=HEADLESS_DT, reload=True)
+    written = run_headless(SavingLevel(path, changed, at=1), args)
+    assert "level reloaded" in capsys.readouterr().err
+    import imageio.v3 as iio
+
+    last = iio.imread(written[-1])[..., :3]
+    first = iio.imread(written[0])[..., :3]
+    # Saved in frame 1's update, stable by the poll before frame 3: frames from there on are
+    # the new level's (the reference runs as many frames after its build).
+    expected = reference(ctx, tmp_path, changed, frames=4)
+    assert np.abs(last.astype(int) - expected.astype(int)).max() <= 1
+    assert np.abs(first.astype(int) - expected.astype(int)).max() > 60
+
+
+def test_window_reloads_a_saved_level_and_prints_a_broken_one_once(ctx, tmp_path, capsys):
+    """The windowed shell (moderngl-window's headless window) watches a level game's file
+    by itself: a save rebuilds the world; a broken one is printed once and the old kept."""
+    import moderngl_window as mglw
+
+    from shell.window import make_window_config
+
+    path = tmp_path / "level.toml"
+    save(path, level_text())
+    config = mglw.create_window_config_instance(
+        make_window_config(LevelGame(path)), args=["--window", "headless", "--backend", "egl", "--size", "96x72"])
+    try:
+        reload = config.engine.level_reload
+        assert reload is not None
+        config.on_render(0.0, 1 / 60)
+        old_box = box_entity(config.engine)
+        save(path, level_text(box_x=-0.8, color=BLUE))
+        for _ in range(3):
+            reload._next_poll = 0.0  # as if a quarter second had passed each frame
+            config.on_render(0.0, 1 / 60)
+        assert reload.reloads == 1 and not config.engine.world.exists(old_box)
+        save(path, level_text(roughness="7.0"))
+        for _ in range(4):
+            reload._next_poll = 0.0
+            config.on_render(0.0, 1 / 60)
+        printed = [line for line in capsys.readouterr().err.splitlines() if "level reload" in line]
+        assert printed == [f"speculum: level reloaded: {path}", f"speculum: {reload.error}"], printed
+        assert f"{path}:{ROUGHNESS_LINE}" in reload.error
+        assert config.engine.world.exists(box_entity(config.engine)) and reload.reloads == 1
+    finally:
+        config.on_close()
+        config.wnd.destroy()
+
+
+def test_a_game_that_changes_level_is_followed(ctx, tmp_path):
+    """A game that plays another level (mirror beam's 'n') is watched on its new file: the
+    old file's saves reload nothing, the new one's do."""
+    first, second = tmp_path / "first.toml", tmp_path / "second.toml"
+    save(first, level_text())
+    save(second, level_text(box_x=0.5))
+    run = Run(ctx, first)
+    try:
+        reload = run.engine.watch_level(interval=0.0)
+        run.frame()
+        run.engine.game.level_path = second  # as a game's next level does (it builds it itself)
+        assert reload.poll() == [] and reload.path == second
+        save(first, level_text(color=BLUE))
+        reload.poll()
+        assert reload.poll() == [] and reload.reloads == 0
+        save(second, level_text(box_x=0.5, color=BLUE))
+        reload.poll()
+        assert reload.poll() == [f"level reloaded: {second}"]
+        run.frame()
+    finally:
+        run.close()
+
+
+def test_a_save_made_by_the_run_itself_is_not_reloaded_after_follow(ctx, tmp_path):
+    """The run's own save (an in-window editor writing the world back) calls ``follow``: the
+    file as written counts as loaded, and the world the editor holds is not rebuilt."""
+    path = tmp_path / "level.toml"
+    save(path, level_text())
+    run = Run(ctx, path)
+    try:
+        reload = run.engine.watch_level(interval=0.0)
+        run.frame()
+        entity = box_entity(run.engine)
+        save(path, level_text(roughness="0.25"))  # as save_level would write the edited world
+        reload.follow(path)
+        for _ in range(3):
+            assert reload.poll() == []
+        assert box_entity(run.engine) == entity and run.engine.world.exists(entity) and reload.reloads == 0
+    finally:
+        run.close()
