@@ -29,6 +29,7 @@ from __future__ import annotations
 import ctypes
 import time
 from collections import deque
+from pathlib import Path
 from typing import TYPE_CHECKING
 
 import moderngl
@@ -359,7 +360,12 @@ class DebugOverlay:
         if editor.level_path is not None:
             if imgui.button("save"):
                 try:
-                    editor.message = f"saved {editor.save()}"
+                    saved = editor.save()
+                    watch = engine.level_reload
+                    if watch is not None and Path(watch.path).resolve() == saved.resolve():
+                        # The world is what was written: not rebuilt from it (the undo list stays).
+                        watch.follow(saved)
+                    editor.message = f"saved {saved}"
                 except Exception as exc:  # shown in the overlay, the window keeps running
                     editor.message = str(exc)
             self._widget("save")

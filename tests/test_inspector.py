@@ -88,7 +88,7 @@ def test_click_inspect_drag_undo_and_a_refused_value(scene, ctx):
 
 
 WINDOW_SCRIPT = r'''
-import json, shutil, sys
+import json, shutil, sys, time
 from pathlib import Path
 
 import moderngl_window as mglw
@@ -150,6 +150,10 @@ pump()
 roughness = world.get(crate, Material).roughness
 click(*at(*config.overlay.widgets["save"]))
 message = config.overlay.editor.message
+for _ in range(4):  # past two of the level reload's polls: the save is the world, nothing is rebuilt
+    time.sleep(0.2)
+    pump()
+kept = world.exists(crate) and config.engine.level_reload.reloads == 0 and config.overlay.editor.can_undo
 mirror = game.names["mirror_4"]
 low = world.get(mirror, Transform).position - glm.vec3(0.0, 1.0, 0.0)  # low on the glass: it shows the floor
 clip = config.engine.main_view.view_proj * glm.vec4(low, 1.0)
@@ -167,7 +171,8 @@ plain = config.overlay.editor.selected
 window.dispatch_event("on_key_press", key.ESCAPE, 0)
 window.dispatch_events()
 print(json.dumps({"errors": errors, "selected": selected == crate, "roughness": roughness, "message": message,
-                  "released": config.released, "mirror": [with_ctrl == mirror, plain not in (mirror, None)]}))
+                  "released": config.released, "kept": kept,
+                  "mirror": [with_ctrl == mirror, plain not in (mirror, None)]}))
 config.wnd.destroy()
 '''
 
@@ -195,7 +200,7 @@ def test_in_a_real_window_click_edit_save_and_esc(x_display, tmp_path):
     assert result.returncode == 0, result.stderr[-3000:]
     report = json.loads(result.stdout.strip().splitlines()[-1])
     assert set(report["errors"]) == {"GL_NO_ERROR"}
-    assert report["selected"] and report["released"]
+    assert report["selected"] and report["released"] and report["kept"]
     assert report["mirror"] == [True, True]  # Ctrl+click: the mirror; a plain click: what it shows there
     assert report["roughness"] > 0.65, report
     assert report["message"] == f"saved {level}"
