@@ -291,3 +291,39 @@ def test_an_f12_screenshot_holds_the_text(scene, tmp_path):
     assert close_to(shot, expected) <= 1
     plain, _, _ = render(scene)
     assert (np.abs(shot.astype(int) - plain.astype(int)).max(axis=2) > 40).sum() > 100, "the text is in the shot"
+
+
+def test_world_text_is_seen_in_a_mirror_when_asked(scene):
+    """Text asked for in the world (engine.assets.world_text.spawn_world_text) is an object:
+    a label facing the mirror, its back to the camera (culled), shows only in the mirror:
+    every pixel it changes is one of the mirror's, and there are plenty of them."""
+    from pyglm import glm as _glm
+
+    from components import Material, MeshRef, Mirror, Transform, look_rotation
+    from engine.assets.mesh import quad
+    from engine.assets.world_text import spawn_world_text
+    from tests.support import look_from
+
+    def build_with(label: bool):
+        def build(world):
+            look_from(world, (0.0, 1.4, 3.0), (0.0, 1.3, -3.0))
+            world.resources["mirror"] = world.spawn(Transform(position=(0.0, 1.5, -3.0)), MeshRef(quad(4.0, 2.5)),
+                                                    Material(), Mirror())
+            if label:  # its front (+Z) turned to the mirror: the camera sees its back
+                spawn_world_text(world, "EXIT", (0.0, 1.3, 0.0), look_rotation(_glm.vec3(0.0, 0.0, 1.0)),
+                                 height=0.6, color=(1.0, 0.2, 0.1))
+        return build
+
+    plain = scene(build_with(False), (160, 120))
+    labelled = scene(build_with(True), (160, 120))
+    for runner in (plain, labelled):
+        runner.engine.renderer.antialias = "off"
+    before, after = plain.frame(), labelled.frame()
+    changed = np.any(before != after, axis=-1)
+    mirror = labelled.engine.renderer.targets.read_surface_ids() == labelled.world.resources["mirror"]
+    assert changed.sum() > 100, changed.sum()
+    assert not (changed & ~mirror).any(), int((changed & ~mirror).sum())
+    from PIL import Image
+    Image.fromarray(after).save("/tmp/speculum_world_text.png")  # to look at
+    seen = after[changed].astype(int)
+    assert (seen[:, 0] > seen[:, 1] + 20).mean() > 0.5   # the label's colour (red), in the mirror
