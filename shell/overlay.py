@@ -440,13 +440,21 @@ class DebugOverlay:
                 new = glm.quat(glm.radians(glm.vec3(*new)))
         elif kind == "str":  # a choice ("aces", "cube", ...): written, taken on Enter, refused with the choices
             changed, new = imgui.input_text(label, data, imgui.InputTextFlags_.enter_returns_true)
+        elif field.endswith("layers") and (kind == "list" or data is None):  # reflection layers: "1, 3", taken on Enter
+            changed, text = imgui.input_text(label, ", ".join(str(v) for v in data or []),
+                                             imgui.InputTextFlags_.enter_returns_true)
+            if changed:
+                new = parse_layers(text)
+                if new is None:
+                    editor.message = f"{cls_name}.{field}: layers are whole numbers, as 1, 3; got {text!r}"
+                    changed = False
         else:
             shown = value if kind in ("null", "int") else (getattr(value, "name", None) or kind)
             imgui.text(f"{field}: {shown}")
         self._widget(f"{cls_name}.{field}")
         lines.append(f"  {field} = {data if kind not in ('mesh', 'texture', 'object', 'array') else kind}")
         if changed:
-            if isinstance(new, list | tuple):
+            if isinstance(new, list | tuple) and not field.endswith("layers"):
                 new = tuple(float(v) for v in new)
             editor.try_set_field(entity, cls_name, field, new, merge=True)
         if imgui.is_item_deactivated():
@@ -474,3 +482,13 @@ class DebugOverlay:
                 if _alive(candidate):
                     imgui.set_current_context(candidate)
                     break
+
+
+def parse_layers(text: str) -> list[int] | None:
+    """Reflection layers typed in the inspector ("1, 3" or "1 3"; empty: none), or None when a
+    part is not a whole number (the component's own check then judges the numbers)."""
+    parts = text.replace(",", " ").split()
+    try:
+        return [int(part) for part in parts]
+    except ValueError:
+        return None

@@ -207,3 +207,29 @@ def test_in_a_real_window_click_edit_save_and_esc(x_display, tmp_path):
     changed = [line for line in difflib.unified_diff(HALL.read_text().splitlines(), level.read_text().splitlines(),
                                                      lineterm="", n=0) if not line.startswith(("---", "+++", "@@"))]
     assert changed == ["-roughness = 0.6", f"+roughness = {report['roughness']!r}"]
+
+
+def test_layers_are_typed_as_whole_numbers_and_edited_through_the_component(scene, ctx):
+    """A mirror's hides_layers typed in the inspector ("3" then Enter) goes through the
+    editor and the component's own check; text that is not numbers changes nothing."""
+    from components import Mirror
+    from shell.overlay import parse_layers
+
+    assert parse_layers("1, 3") == [1, 3] and parse_layers("1 3") == [1, 3] and parse_layers("") == []
+    assert parse_layers("one") is None
+    ents = {}
+    runner = scene(lambda world: edit_scene(world, ents), SIZE)
+    runner.frame()
+    overlay = DebugOverlay(ctx)
+    try:
+        mirror = ents["mirror"]
+        overlay.click(runner.engine, *runner.project(runner.world.get(mirror, Transform).position), surface=True)
+        editor = overlay.editor
+        assert editor.selected == mirror
+        assert editor.try_set_field(mirror, "Mirror", "hides_layers", parse_layers("3")) is None  # None: taken
+        assert runner.world.get(mirror, Mirror).layer_mask & (1 << 3) == 0
+        refused = editor.try_set_field(mirror, "Mirror", "hides_layers", [99])   # past the 16 layers
+        assert refused and "hides_layers" in refused, refused
+        assert tuple(runner.world.get(mirror, Mirror).hides_layers) == (3,)
+    finally:
+        overlay.release()
