@@ -68,11 +68,9 @@ and the 100,000 entities most of it).
 from __future__ import annotations
 
 import argparse
-import cProfile
 import inspect
 import json
 import os
-import pstats
 import random
 import statistics
 import subprocess
@@ -373,23 +371,11 @@ def run_scenes(ctx, names: tuple[str, ...], size: tuple[int, int], frames: int, 
 def profile_rows(ctx, name: str, engine, output, frames: int, top: int) -> list[dict]:
     """``frames`` frames of ``engine`` under cProfile (around ``Engine.frame`` only): a head row
     and its ``top`` functions by own time, as the profile suite's rows."""
-    from benchmarks.cpu_profile import function_name
+    from benchmarks.cpu_profile import function_rows, profile_frames
 
-    profiler = cProfile.Profile()
-    times = []
-    for _ in range(frames):
-        start = time.perf_counter()
-        profiler.enable()
-        engine.frame(DT, output)
-        profiler.disable()
-        times.append((time.perf_counter() - start) * 1e3)
-        ctx.finish()
-    ranked = sorted(pstats.Stats(profiler).stats.items(), key=lambda item: -item[1][2])[:top]
+    times, ranked = profile_frames(ctx, engine, output, frames, top)
     rows = [{"scene": name, "frames": frames, "frame_ms_profiled": round(statistics.median(times), 3)}]
-    rows += [{"scene": name, "rank": rank, "function": function_name(key), "calls_per_frame": round(calls / frames, 1),
-              "own_ms_per_frame": round(own * 1e3 / frames, 4), "total_ms_per_frame": round(total * 1e3 / frames, 4)}
-             for rank, (key, (_, calls, own, total, _)) in enumerate(ranked, 1)]
-    return rows
+    return rows + function_rows(name, ranked, frames)
 
 
 def run_ecs(ctx, frames: int, warmup: int) -> list[dict]:

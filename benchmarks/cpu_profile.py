@@ -90,6 +90,29 @@ def function_name(key: tuple[str, int, str]) -> str:
     return f"{path}:{line}({name})"
 
 
+def profile_frames(ctx, engine, output, frames: int, top: int) -> tuple[list[float], list]:
+    """``frames`` frames of ``engine`` under cProfile (around ``Engine.frame`` only, each
+    finished before the next): their wall-clock ms and the ``top`` functions by own time, as
+    (key, (primitive calls, calls, own s, total s, callers)) pairs."""
+    profiler = cProfile.Profile()
+    times = []
+    for _ in range(frames):
+        start = time.perf_counter()
+        profiler.enable()
+        engine.frame(DT, output)
+        profiler.disable()
+        times.append((time.perf_counter() - start) * 1e3)
+        ctx.finish()
+    return times, sorted(pstats.Stats(profiler).stats.items(), key=lambda item: -item[1][2])[:top]
+
+
+def function_rows(scene: str, ranked: list, frames: int) -> list[dict]:
+    """A row a profiled function: its calls and its own and total ms, a frame."""
+    return [{"scene": scene, "rank": rank, "function": function_name(key), "calls_per_frame": round(calls / frames, 1),
+             "own_ms_per_frame": round(own * 1e3 / frames, 4), "total_ms_per_frame": round(total * 1e3 / frames, 4)}
+            for rank, (key, (_, calls, own, total, _)) in enumerate(ranked, 1)]
+
+
 def profile_scene(ctx, name: str, size: tuple[int, int], frames: int, warmup: int, top: int) -> list[dict]:
     """``top`` functions of ``frames`` profiled frames of scene ``name``, by own time, and the
     frames' median wall clock under the profiler."""
@@ -100,25 +123,11 @@ def profile_scene(ctx, name: str, size: tuple[int, int], frames: int, warmup: in
         for _ in range(warmup):
             engine.frame(DT, output)
             ctx.finish()
-        profiler = cProfile.Profile()
-        times = []
-        for _ in range(frames):
-            start = time.perf_counter()
-            profiler.enable()
-            engine.frame(DT, output)
-            profiler.disable()
-            times.append((time.perf_counter() - start) * 1e3)
-            ctx.finish()
-        stats = pstats.Stats(profiler).stats  # key -> (primitive calls, calls, own s, total s, callers)
-        ranked = sorted(stats.items(), key=lambda item: -item[1][2])[:top]
+        times, ranked = profile_frames(ctx, engine, output, frames, top)
         rows = [{"scene": name, "frames": frames, "frame_ms_profiled": round(statistics.median(times), 3),
                  "frame_ms_profiled_mean": round(statistics.fmean(times), 3),
                  "reflection_views": engine.renderer.stats.reflection_views}]
-        rows += [{"scene": name, "rank": rank, "function": function_name(key),
-                  "calls_per_frame": round(calls / frames, 1), "own_ms_per_frame": round(own * 1e3 / frames, 4),
-                  "total_ms_per_frame": round(total * 1e3 / frames, 4)}
-                 for rank, (key, (_, calls, own, total, _)) in enumerate(ranked, 1)]
-        return rows
+        return rows + function_rows(name, ranked, frames)
     finally:
         capture.release()
         engine.close()

@@ -38,7 +38,6 @@ import numpy as np
 from pyglm import glm
 
 from benchmarks.fuzz_cases import FRAMES, run_cases
-from benchmarks.model_fuzz import FRAMES as MODEL_FRAMES
 from components import (
     Bloom,
     Camera,
@@ -459,7 +458,7 @@ def print_model_fuzz(args: argparse.Namespace, ran: int, failures: list, passes:
         print(json.dumps({"model_cases": ran, "failed": len(failures), **passes, "failures": failures[:50]}))
     else:
         print(f"model fuzz: {ran} model files ran, {len(failures)} failed ({passes['refused']} refused naming the "
-              f"file, {passes['rendered']} spawned and rendered clean for {MODEL_FRAMES} frames; seed {args.seed})")
+              f"file, {passes['rendered']} spawned and rendered clean for {FRAMES} frames; seed {args.seed})")
 
 
 def main(args: argparse.Namespace) -> int:

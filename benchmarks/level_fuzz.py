@@ -395,6 +395,38 @@ class _Hung(Exception):
     pass
 
 
+def render_checked(ctx, engine, framebuffer, problem: str | None = None) -> str | None:
+    """``FRAMES`` frames of a fuzz case into ``framebuffer`` (at its size), each under the case
+    deadline and checked (``frame_problem``): the first problem found (``problem`` if one was
+    already), or None.  The level and model fuzzes share it."""
+    try:
+        for _ in range(FRAMES):
+            with warnings.catch_warnings(), _deadline(CASE_SECONDS):
+                warnings.simplefilter("ignore")
+                engine.frame(1.0 / 60.0, Output(framebuffer, framebuffer.size))
+            problem = problem or frame_problem(ctx, engine)
+    except _Hung:
+        return f"a frame hung for more than {CASE_SECONDS:g} s"
+    except Exception as exc:  # noqa: BLE001
+        return f"frame raised {type(exc).__name__}: {exc}\n{traceback.format_exc(limit=-3)}"
+    return problem
+
+
+def frame_problem(ctx, engine) -> str | None:
+    """What is wrong with the frame just drawn: a GL error left, or a NaN or infinity in the
+    HDR colour target (None: nothing, or nothing drawn)."""
+    error = ctx.error
+    if error != "GL_NO_ERROR":
+        return f"ctx.error {error}"
+    targets = engine.renderer.targets
+    if targets is None:
+        return None  # nothing drawn (no camera left): nothing to be NaN
+    hdr = np.frombuffer(targets.color.read(), np.float16)
+    if not np.isfinite(hdr).all():
+        return f"{int((~np.isfinite(hdr)).sum())} non-finite values in the HDR colour target"
+    return None
+
+
 @contextlib.contextmanager
 def _deadline(seconds: float) -> Iterator[None]:
     """Raise _Hung in the block after ``seconds`` (a SIGALRM timer; only on the main thread,
@@ -463,15 +495,7 @@ class LevelFuzzer:
         elif case.texel is not None:
             problem = self._check_texel(names, case.texel)
         try:
-            for _ in range(FRAMES):
-                with warnings.catch_warnings(), _deadline(CASE_SECONDS):
-                    warnings.simplefilter("ignore")
-                    self.engine.frame(1.0 / 60.0, Output(self.capture.framebuffer, SIZE))
-                problem = problem or self._check_pixels()
-        except _Hung:
-            problem = f"the frame hung for more than {CASE_SECONDS:g} s"
-        except Exception as exc:  # noqa: BLE001
-            problem = f"frame raised {type(exc).__name__}: {exc}\n{traceback.format_exc(limit=-3)}"
+            problem = render_checked(self.ctx, self.engine, self.capture.framebuffer, problem)
         finally:
             for entity in list(self.world.entities()):
                 self.world.delete_entity(entity)
@@ -493,17 +517,6 @@ class LevelFuzzer:
             return f"texel (0, 0) is {got}, the file holds {texel}"
         return None
 
-    def _check_pixels(self) -> str | None:
-        error = self.ctx.error
-        if error != "GL_NO_ERROR":
-            return f"ctx.error {error}"
-        targets = self.engine.renderer.targets
-        if targets is None:
-            return None  # nothing drawn (no camera left): nothing to be NaN
-        hdr = np.frombuffer(targets.color.read(), np.float16)
-        if not np.isfinite(hdr).all():
-            return f"{int((~np.isfinite(hdr)).sum())} non-finite values in the HDR colour target"
-        return None
 
 
 def fuzz_levels(ctx, folder: Path, cases: int, seed: int = 0, report=None) -> tuple[int, list, dict[str, int]]:

@@ -32,8 +32,6 @@ from pathlib import Path
 
 import numpy as np
 
-from benchmarks.fuzz_cases import FRAMES  # frames rendered a case
-
 SIZE = (48, 32)
 
 
@@ -272,10 +270,9 @@ class ModelFuzzer:
 
     def run(self, case: ModelCase, index: int = 0) -> str | None:
         """None when the case passed, else why it failed."""
-        from benchmarks.level_fuzz import CASE_SECONDS, _deadline, _Hung
+        from benchmarks.level_fuzz import CASE_SECONDS, _deadline, _Hung, render_checked
         from engine.assets.models import spawn_model
         from engine.core.errors import AssetError
-        from engine.core.frame_io import Output
 
         names = {}
         for name, data in case.files.items():
@@ -306,17 +303,8 @@ class ModelFuzzer:
         finally:
             for target in names.values():
                 target.unlink(missing_ok=True)
-        problem = None
         try:
-            for _ in range(FRAMES):
-                with warnings.catch_warnings(), _deadline(CASE_SECONDS):
-                    warnings.simplefilter("ignore")
-                    self.engine.frame(1.0 / 60.0, Output(self.capture.framebuffer, SIZE))
-                problem = problem or self._check_pixels()
-        except _Hung:
-            problem = f"a frame hung for more than {CASE_SECONDS:g} s"
-        except Exception as exc:  # noqa: BLE001
-            problem = f"frame raised {type(exc).__name__}: {exc}\n{traceback.format_exc(limit=-3)}"
+            problem = render_checked(self.ctx, self.engine, self.capture.framebuffer)
         finally:
             for entity in list(self.world.entities()):
                 if entity not in self.baseline:
@@ -324,18 +312,6 @@ class ModelFuzzer:
         if problem is None:
             self.rendered += 1
         return problem
-
-    def _check_pixels(self) -> str | None:
-        error = self.ctx.error
-        if error != "GL_NO_ERROR":
-            return f"ctx.error {error}"
-        targets = self.engine.renderer.targets
-        if targets is None:
-            return None
-        hdr = np.frombuffer(targets.color.read(), np.float16)
-        if not np.isfinite(hdr).all():
-            return f"{int((~np.isfinite(hdr)).sum())} non-finite values in the HDR colour target"
-        return None
 
 
 def fuzz_models(ctx, folder: Path, cases: int, seed: int = 0, report=None) -> tuple[int, list, dict[str, int]]:
