@@ -6,6 +6,7 @@ from typing import Any
 
 from pyglm import glm
 
+from components.limits import MAX_LIGHT_BOUNCES
 from components.tracking import (
     HALF_MAX,
     ComponentValueError,
@@ -115,6 +116,8 @@ def _shadow_field(owner: TrackedComponent, name: str, value: Any) -> Any:
         return value
     if name == "shadow_softness":
         return finite(owner, name, value, low=0.0, high=MAX_SHADOW_SOFTNESS)
+    if name == "bounces":
+        return integer(owner, name, value, low=0, high=MAX_LIGHT_BOUNCES)
     return None
 
 
@@ -127,7 +130,13 @@ class DirectionalLight(TrackedComponent):
     portal and probe face), redrawn only when a caster or the light changed
     (``engine/render/shadows.py``).  ``shadow_resolution``: the map's side in texels (a power
     of two); ``shadow_softness``: how far, in texels, the edge is filtered (percentage-closer
-    filtering; 0 is the hardest edge the map's texels allow)."""
+    filtering; 0 is the hardest edge the map's texels allow).
+
+    ``bounces`` (default 1): how many mirrors and portals that carry light
+    (``Mirror.reflects_light``, ``Portal.carries_light``) its light goes through in a row:
+    0 none, 1 one (a mirror throws it on the floor), up to ``MAX_LIGHT_BOUNCES`` = 4 (mirror
+    to mirror); never deeper than a surface's own ``max_depth`` or the view tree's depth cap.
+    Each bounce is a virtual light of its own (``engine/rules/shadow_rules.py``)."""
 
     direction: Any = field(default_factory=lambda: glm.vec3(-0.3, -1.0, -0.4))
     color: Any = field(default_factory=lambda: glm.vec4(1.0))
@@ -135,6 +144,7 @@ class DirectionalLight(TrackedComponent):
     shadows: bool = True
     shadow_resolution: int = 2048
     shadow_softness: float = 1.0
+    bounces: int = 1
 
     def _validate(self, name: str, value: Any) -> Any:
         if name == "direction":
@@ -153,7 +163,8 @@ class PointLight(TrackedComponent):
 
     ``shadows`` (off by default, as in most engines: six views a light): things within its
     range cast shadows, from a cube shadow map of ``shadow_resolution`` texels a face,
-    redrawn only when a caster in its range or the light changed."""
+    redrawn only when a caster in its range or the light changed.  ``bounces`` as
+    ``DirectionalLight.bounces`` (default 1; 0 to 4 mirrors and portals in a row)."""
 
     color: Any = field(default_factory=lambda: glm.vec4(1.0))
     intensity: float = 1.0
@@ -161,6 +172,7 @@ class PointLight(TrackedComponent):
     shadows: bool = False
     shadow_resolution: int = 512
     shadow_softness: float = 1.0
+    bounces: int = 1
 
     def _validate(self, name: str, value: Any) -> Any:
         if name == "color":

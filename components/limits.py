@@ -6,6 +6,10 @@ from __future__ import annotations
 # Portal.max_depth, ReflectionProbe.depth, the view tree's depth cap).  Each level is one more
 # set of views drawn into one more level of targets; Valve's Portal stops at 10 views.
 MAX_VIEW_DEPTH = 16
+# Mirrors and portals in a row a light's light goes through (DirectionalLight.bounces,
+# PointLight.bounces): each bounce is one more virtual light (a shadow map and a light's
+# shading), and the shader tests one aperture a bounce (shaders/include/virtual_lights.glsl).
+MAX_LIGHT_BOUNCES = 4
 
 # Reflection layers (show/hide lists): an entity belongs to some of REFLECTION_LAYERS layers
 # and a mirror, portal, probe or camera shows some of them; a view shows an entity when they

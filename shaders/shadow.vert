@@ -14,6 +14,10 @@ in vec4 in_tint;    // w: where it is drawn (visibility.glsl)
 in vec4 in_slice;
 in uvec4 in_slots;  // emissive, refract, reflect variants, entity id
 
+#ifdef LEG
+// A middle stretch of a virtual light's way (between two surfaces): its second plane, world.
+uniform vec4 leg_plane;
+#endif
 #ifdef DISTANCE
 out vec3 v_world_pos;
 #endif
@@ -32,6 +36,9 @@ void main() {
     float plane = dot(world, camera.clip_plane);
     gl_ClipDistance[CLIP_VIEW_PLANE] = casts ? plane : -1.0;
     gl_ClipDistance[CLIP_SLICE] = dot(world, in_slice);
+#ifdef LEG
+    gl_ClipDistance[CLIP_LEG_PLANE] = casts ? dot(world, leg_plane) : -1.0;
+#endif
 #ifdef DISTANCE
     v_world_pos = world.xyz;
 #endif

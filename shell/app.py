@@ -130,6 +130,8 @@ class Engine:
         self.stages: dict[str, esper.Processor] = {}
         for name, make in FRAME_STAGES:
             self.stages[name] = make(self)
+        # Light goes no deeper through mirrors and portals than the main view tree's views.
+        self.stages["shadows"].depth_cap = lambda: self.stages["reflect"].max_depth_cap
         # The frame as it runs: (name, system), stages and game systems in schedule order.
         self.schedule: list[tuple[str, esper.Processor]] = []
         stage_names = [name for name, _ in FRAME_STAGES]

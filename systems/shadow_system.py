@@ -13,6 +13,8 @@ frame, so the probes' scheduler can recapture a face where a moved caster's shad
 """
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import esper
 import numpy as np
 
@@ -48,6 +50,9 @@ class ShadowSystem(esper.Processor):
         self._directional: dict[int, tuple] = {}   # slot -> what its map was drawn from
         self._fits: dict[int, DirectionalFit] = {}  # slot -> its map's camera
         self._virtual: dict[int, tuple] = {}        # virtual light slot -> what its map was drawn from
+        # The view tree's depth cap (a light goes no deeper through mirrors than a view does):
+        # the engine ties it to the reflect stage's ``max_depth_cap``; a number or a callable.
+        self.depth_cap: int | Callable[[], int] = 8
         self._point: dict[int, tuple] = {}         # cube slot -> what its cube was drawn from
         self._casters_seen = -1
         self._bounds: dict[int, tuple[np.ndarray, np.ndarray]] = {}  # entity -> world box (point lights only)
@@ -196,11 +201,16 @@ class ShadowSystem(esper.Processor):
         surfaces = world.resources.get(Surfaces)
         found: list[VirtualLight] = []
         if self.enabled and level is not None and surfaces is not None and (surfaces.mirrors or surfaces.portals):
+            suns = list(world.query_one(DirectionalLight))[:MAX_DIRECTIONAL_LIGHTS]
+            lamps = list(world.query(PointLight, Transform))[:MAX_POINT_LIGHTS]
             directional = [(entity, raw_field(light, "direction"), raw_field(light, "color").xyz * light.intensity)
-                           for entity, light in world.query_one(DirectionalLight)][:MAX_DIRECTIONAL_LIGHTS]
+                           for entity, light in suns]
             points = [(entity, transform.world[3].xyz, light.range, raw_field(light, "color").xyz * light.intensity)
-                      for entity, (light, transform) in world.query(PointLight, Transform)][:MAX_POINT_LIGHTS]
-            found = rank_virtual_lights(virtual_lights(directional, points, surfaces))
+                      for entity, (light, transform) in lamps]
+            bounces = {entity: light.bounces for entity, light in suns}
+            bounces.update({entity: light.bounces for entity, (light, _) in lamps})
+            cap = self.depth_cap() if callable(self.depth_cap) else self.depth_cap
+            found = rank_virtual_lights(virtual_lights(directional, points, surfaces, bounces, cap))
         drawn = 0
         shining: list[VirtualLight] = []
         for light in found:
@@ -208,8 +218,10 @@ class ShadowSystem(esper.Processor):
             if slot == MAX_VIRTUAL_LIGHTS:
                 stats.virtual_lights_cut += 1
                 continue
-            key = (light.light, light.surface, light.kind, light.position, light.color, light.light_range,
-                   light.exit_plane, light.aperture, light.carry.to_bytes(), light.entry_plane.to_bytes(),
+            key = (light.light, light.path, light.kind, light.position, light.color, light.light_range,
+                   light.exit_plane, light.aperture, light.apertures,
+                   tuple((leg.carry.to_bytes(), tuple(p.to_bytes() for p in leg.planes), leg.skip)
+                         for leg in light.legs),
                    level[0].tobytes(), level[1].tobytes(), maps.filter)
             if key != self._virtual.get(slot) or casters_changed:
                 left = stats.views_left()
@@ -219,7 +231,8 @@ class ShadowSystem(esper.Processor):
                     continue
                 lo, hi = level
                 if light.kind == "directional":
-                    lo, hi = _with_image(lo, hi, light.carry)
+                    for leg in light.legs[1:]:
+                        lo, hi = _with_image(lo, hi, leg.carry, *level)
                 maps.draw_virtual(slot, light, virtual_shadow_camera(light, lo, hi, VIRTUAL_RESOLUTION))
                 self._virtual[slot] = key
                 stats.views_spent += 1
@@ -236,9 +249,11 @@ class ShadowSystem(esper.Processor):
         return shining
 
 
-def _with_image(lo: np.ndarray, hi: np.ndarray, carry) -> tuple[np.ndarray, np.ndarray]:
-    """The box [lo, hi] grown to hold its image under ``carry`` (a virtual light's map holds
-    the scene and its image, the way in)."""
-    corners = np.array([[x, y, z, 1.0] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
+def _with_image(lo: np.ndarray, hi: np.ndarray, carry, level_lo: np.ndarray,
+                level_hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The box [lo, hi] grown to hold the level's box [level_lo, level_hi] under ``carry``
+    (a virtual light's map holds the scene and its image on each stretch of the way)."""
+    corners = np.array([[x, y, z, 1.0] for x in (level_lo[0], level_hi[0]) for y in (level_lo[1], level_hi[1])
+                        for z in (level_lo[2], level_hi[2])])
     image = corners @ np.array(carry.to_list(), np.float64)
     return np.minimum(lo, image[:, :3].min(axis=0)), np.maximum(hi, image[:, :3].max(axis=0))

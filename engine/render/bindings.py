@@ -91,6 +91,10 @@ CLIP_VIEW_PLANE = 0      # a mirror or portal view's plane (camera.clip_plane)
 CLIP_RECT = (1, 2, 3, 4)  # a rectangle: views drawn in one batched draw, composite quads
 CLIP_RECT_SIDES = ("LEFT", "RIGHT", "BOTTOM", "TOP")  # CLIP_RECT's order: x >= x0, x <= x1, y >= y0, y <= y1
 CLIP_SLICE = 5           # an instance's slice plane (things partly through a portal)
+# A virtual light's shadow map draws the stretch of its way between two surfaces (light
+# reflected more than once): the second surface's plane.  Shadow casters only, which never
+# clip to a rectangle, so it shares the rectangle's first slot.
+CLIP_LEG_PLANE = CLIP_RECT[0]
 CLIP_DISTANCE_COUNT = 6
 _GL_CLIP_DISTANCE0 = 0x3000
 
@@ -102,10 +106,11 @@ NO_CLIPS: frozenset[int] = frozenset()
 
 
 def clip_glsl_defines() -> dict[str, str]:
-    """``CLIP_VIEW_PLANE``, ``CLIP_RECT_LEFT`` .. ``CLIP_RECT_TOP``, ``CLIP_SLICE`` and
+    """``CLIP_VIEW_PLANE``, ``CLIP_RECT_LEFT`` .. ``CLIP_RECT_TOP``, ``CLIP_SLICE``, ``CLIP_LEG_PLANE`` and
     ``CLIP_DISTANCE_COUNT`` for the GLSL, from the indices above."""
     rect = {f"CLIP_RECT_{side}": str(index) for side, index in zip(CLIP_RECT_SIDES, CLIP_RECT, strict=True)}
     return {"CLIP_VIEW_PLANE": str(CLIP_VIEW_PLANE), **rect, "CLIP_SLICE": str(CLIP_SLICE),
+            "CLIP_LEG_PLANE": str(CLIP_LEG_PLANE),
             "CLIP_DISTANCE_COUNT": str(CLIP_DISTANCE_COUNT)}
 
 

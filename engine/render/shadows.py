@@ -27,6 +27,7 @@ from components.limits import ALL_LAYERS
 from engine.core.cube_faces import CUBE_FACES
 from engine.render.bindings import (
     CAMERA_BINDING,
+    CLIP_LEG_PLANE,
     POINT_SHADOW_UNITS,
     SCENE_CLIPS,
     SHADOW_ATLAS_UNIT,
@@ -40,7 +41,7 @@ from engine.render.bindings import (
 from engine.render.raw_gl import LayeredCubeTarget
 from engine.render.targets import release_framebuffer
 from engine.render.views import MAX_DIRECTIONAL_LIGHTS, MAX_POINT_LIGHTS, View
-from engine.rules.shadow_rules import MAX_VIRTUAL_LIGHTS
+from engine.rules.shadow_rules import MAX_APERTURES, MAX_VIRTUAL_LIGHTS, Leg
 
 if TYPE_CHECKING:
     from engine.render.renderer import Renderer
@@ -52,7 +53,11 @@ VIRTUAL_RESOLUTION = 1024   # texels a side of a virtual light's map (a tile of 
 # The VirtualLights block (shaders/include/virtual_lights.glsl): a count, then per light a
 # matrix and seven vectors.
 VIRTUAL_FIELDS = ("position", "color", "exit", "origin", "u", "v", "params")
-VIRTUAL_BLOCK_BYTES = 16 + 64 * MAX_VIRTUAL_LIGHTS + 16 * MAX_VIRTUAL_LIGHTS * len(VIRTUAL_FIELDS)
+# ... then, for light reflected more than once, each light's further outlines (the earlier
+# surfaces as the later ones carry them): a plane, a corner and two edges each.
+VIRTUAL_MORE = MAX_APERTURES - 1
+VIRTUAL_BLOCK_BYTES = 16 + 64 * MAX_VIRTUAL_LIGHTS + 16 * MAX_VIRTUAL_LIGHTS * len(VIRTUAL_FIELDS) \
+    + 16 * 4 * MAX_VIRTUAL_LIGHTS * VIRTUAL_MORE
 SHADOWS_BLOCK_BYTES = 64 * MAX_DIRECTIONAL_LIGHTS + 16 * MAX_DIRECTIONAL_LIGHTS + 4 * MAX_POINT_LIGHTS \
     + 16 * MAX_POINT_SHADOWS
 # The casters' slope-scaled depth offset (glPolygonOffset factor, units): with the normal
@@ -62,6 +67,14 @@ POINT_NEAR = 0.02   # metres: a point light's cube sees casters from here out
 # Depth only, both faces: a quad (a mirror, a wall of one face) casts whichever side the
 # light reaches; the normal offset keeps a closed mesh's lit side off its own back.
 _CASTERS = PassState(depth_func="<", cull=False, clips=SCENE_CLIPS)
+# A virtual light's stretch between two surfaces: kept between both planes.
+_LEG_CASTERS = PassState(depth_func="<", cull=False, clips=SCENE_CLIPS | frozenset((CLIP_LEG_PLANE,)))
+
+
+def _over_length(edge) -> tuple[float, float, float]:
+    """An outline's edge over its length squared (the shader's dot gives 0 to 1 across it)."""
+    edge = np.asarray(edge, np.float64)
+    return tuple(float(v) for v in edge / max(float(edge @ edge), 1e-12))
 
 
 class ShadowMaps:
@@ -78,6 +91,7 @@ class ShadowMaps:
         self._depth_program = renderer.shaders.program("shadow.vert", "shadow.frag")
         self._distance_program = renderer.shaders.program("shadow.vert", "shadow.frag", defines={"DISTANCE": "1"})
         self._layered_program: moderngl.Program | None = None
+        self._leg_program: moderngl.Program | None = None   # made when light first bounces twice
         for program in (self._depth_program, self._distance_program):
             program["Camera"].binding = CAMERA_BINDING
         # Until a light casts: a 1x1 atlas at the far depth and 1x1 cubes at the range's end
@@ -181,10 +195,13 @@ class ShadowMaps:
     # --- virtual lights (through mirrors and portals) -------------------------------------
     def draw_virtual(self, slot: int, light: VirtualLight, fit: DirectionalFit) -> None:
         """Draw virtual light ``slot``'s map (a tile of the virtual atlas) and write its row of
-        the VirtualLights block.  The casters are drawn twice into the one map: as they are,
-        in front of the exit surface (the light's way out to what it lights), and carried by
-        the surface's transform, in front of the entry surface (the light's way in, as its
-        image sees it); the surfaces it passes through are left out."""
+        the VirtualLights block.  The casters are drawn once for each stretch of the light's
+        way (``VirtualLight.legs``) into the one map: as they are, in front of the last
+        surface (the way out to what it lights), and, for each stretch before it, carried to
+        where the image sees it and kept between the surfaces it runs between (the way in
+        from the light: in front of the first surface; a stretch from one mirror to the next:
+        in front of both, the second plane a clip distance of its own); the surfaces on the
+        way are left out."""
         if self.virtual_atlas is None:
             self.virtual_atlas = self._make_atlas((2 * VIRTUAL_RESOLUTION, 2 * VIRTUAL_RESOLUTION))
             self._virtual_framebuffer = self.ctx.framebuffer(depth_attachment=self.virtual_atlas)
@@ -195,14 +212,24 @@ class ShadowMaps:
         apply_pass_state(self.ctx, _CASTERS, rect, rect)
         framebuffer.clear(depth=1.0, viewport=rect)
         size = (VIRTUAL_RESOLUTION, VIRTUAL_RESOLUTION)
-        way_out = View(view=fit.view, proj=fit.proj, eye=glm.vec3(light.position), size=size,
-                       name=f"virtual light {slot}", clip_plane=glm.vec4(*light.exit_plane),
-                       skip=light.exit_entity, hide=light.surface, kinds=0, layers=ALL_LAYERS)
-        way_in = View(view=fit.view * light.carry, proj=fit.proj, eye=glm.vec3(light.position), size=size,
-                      name=f"virtual light {slot} (way in)", clip_plane=glm.vec4(light.entry_plane),
-                      skip=light.surface, hide=light.exit_entity, kinds=0, layers=ALL_LAYERS)
-        self._draw_casters(way_out, self._depth_program)
-        self._draw_casters(way_in, self._depth_program)
+        legs = light.legs or (Leg(glm.mat4(1.0), (glm.vec4(*light.exit_plane),), (light.exit_entity, light.surface)),
+                              Leg(light.carry, (glm.vec4(light.entry_plane),), (light.surface, light.exit_entity)))
+        for index, leg in enumerate(legs):
+            view = View(view=fit.view * leg.carry, proj=fit.proj, eye=glm.vec3(light.position), size=size,
+                        name=f"virtual light {slot} (stretch {index})", clip_plane=glm.vec4(leg.planes[0]),
+                        skip=leg.skip[0], hide=leg.skip[1], kinds=0, layers=ALL_LAYERS)
+            if len(leg.planes) == 1:
+                self._draw_casters(view, self._depth_program)
+                continue
+            program = self._leg_program
+            if program is None:
+                program = self._leg_program = self.renderer.shaders.program("shadow.vert", "shadow.frag",
+                                                                            defines={"LEG": "1"})
+                program["Camera"].binding = CAMERA_BINDING
+            program["leg_plane"].value = tuple(glm.vec4(leg.planes[1]))
+            apply_pass_state(self.ctx, _LEG_CASTERS, rect, rect)
+            self._draw_casters(view, program)
+            apply_pass_state(self.ctx, _CASTERS, rect, rect)
         width = 2 * VIRTUAL_RESOLUTION
         scale = VIRTUAL_RESOLUTION / width
         to_tile = glm.translate(glm.vec3(x / width + 0.5 * scale, y / width + 0.5 * scale, 0.5)) \
@@ -211,21 +238,28 @@ class ShadowMaps:
         base = 4 + 16 * slot
         block[base:base + 16] = np.array((to_tile * fit.view_proj).to_list(), np.float32).ravel()
         point = light.kind == "point"
+        more = light.apertures[1:]
         rows = {
             "position": (*light.position, 1.0 if point else 0.0),
             "color": (*light.color, light.light_range),
             "exit": light.exit_plane,
             "origin": (*light.aperture[0], fit.texel),
-            "u": (*(np.asarray(light.aperture[1]) / max(np.dot(light.aperture[1], light.aperture[1]), 1e-12)), 0.0),
-            "v": (*(np.asarray(light.aperture[2]) / max(np.dot(light.aperture[2], light.aperture[2]), 1e-12)), 0.0),
-            "params": (1.0 / width, 1.0, self._taps(1.0), 0.0),
+            "u": (*_over_length(light.aperture[1]), 0.0),
+            "v": (*_over_length(light.aperture[2]), 0.0),
+            "params": (1.0 / width, 1.0, self._taps(1.0), float(len(more))),
         }
         for index, name in enumerate(VIRTUAL_FIELDS):
             at = 4 + 16 * MAX_VIRTUAL_LIGHTS + 4 * (index * MAX_VIRTUAL_LIGHTS + slot)
             block[at:at + 4] = rows[name]
+        start = 4 + 16 * MAX_VIRTUAL_LIGHTS + 4 * MAX_VIRTUAL_LIGHTS * len(VIRTUAL_FIELDS)
+        for index, aperture in enumerate(more):
+            at = start + 16 * (slot * VIRTUAL_MORE + index)
+            block[at:at + 16] = (*aperture.plane, *aperture.origin, 0.0, *_over_length(aperture.u), 0.0,
+                                 *_over_length(aperture.v), 0.0)
         self.renderer.checkpoint(f"shadow map of virtual light {slot}")
 
     def set_virtual_count(self, count: int) -> None:
+        """How many virtual lights shine (slots 0 to count - 1)."""
         self.virtual_block[:4].view(np.int32)[0] = count
 
     # --- point lights ---------------------------------------------------------------------

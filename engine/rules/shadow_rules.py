@@ -15,6 +15,8 @@ from typing import TYPE_CHECKING
 import numpy as np
 from pyglm import glm
 
+from components.limits import MAX_LIGHT_BOUNCES
+
 if TYPE_CHECKING:  # the frame's data is a floor above the rules
     from engine.resources import Surfaces
 
@@ -193,11 +195,12 @@ class ShadowCasters:
         for light in self.virtual:
             if not len(lo) or self.level is None:
                 break
-            carried_lo, carried_hi = _carried_boxes(lo, hi, light.carry)
-            for box_lo, box_hi in ((lo, hi), (carried_lo, carried_hi)):
+            legs = light.legs or (Leg(glm.mat4(1.0), (), (0, 0)), Leg(light.carry, (), (0, 0)))
+            carried = [_carried_boxes(lo, hi, leg.carry) for leg in legs[1:]]
+            for box_lo, box_hi in ((lo, hi), *carried):
                 if light.kind == "directional":
-                    level_lo = np.minimum(self.level[0], carried_lo.min(axis=0))
-                    level_hi = np.maximum(self.level[1], carried_hi.max(axis=0))
+                    level_lo = np.minimum.reduce([self.level[0], *(c[0].min(axis=0) for c in carried)])
+                    level_hi = np.maximum.reduce([self.level[1], *(c[1].max(axis=0) for c in carried)])
                     a, b = directional_shadow_bounds(box_lo, box_hi, light.position, level_lo, level_hi)
                     keep = rows
                 else:
@@ -224,33 +227,75 @@ def _carried_boxes(lo: np.ndarray, hi: np.ndarray, carry: glm.mat4) -> tuple[np.
 # --- light through mirrors and portals -------------------------------------------------------
 MAX_VIRTUAL_LIGHTS = 4   # virtual lights a frame (shaders/include/virtual_lights.glsl)
 VIRTUAL_NEAR = 0.05      # metres: a virtual point light's shadow camera sees casters from here on
+MAX_APERTURES = MAX_LIGHT_BOUNCES   # outlines a virtual light's line must cross (one a bounce)
+
+
+@dataclass(frozen=True)
+class Aperture:
+    """One outline a virtual light's line passes through, in the image's space (where the
+    line from a lit point to the image is straight): ``plane`` (its front positive: the line
+    enters it from the front), ``origin`` (a corner) and its edges ``u``, ``v``; ``to_image``
+    takes the real outline (world) to where it is here, so a crossing found here is
+    ``inverse(to_image)`` of the real one."""
+
+    plane: tuple[float, float, float, float]
+    origin: tuple[float, float, float]
+    u: tuple[float, float, float]
+    v: tuple[float, float, float]
+    to_image: glm.mat4
+
+
+@dataclass(frozen=True)
+class Leg:
+    """One straight stretch of a virtual light's way (the light to the first surface, one
+    surface to the next, the last surface to what it lights), as its shadow map draws it:
+    the casters of that stretch, where they are (world), carried by ``carry`` to where the
+    image sees them, kept only in front of every plane of ``planes`` (world; one or two:
+    the surfaces it runs between) and without ``skip`` (the surfaces themselves)."""
+
+    carry: glm.mat4
+    planes: tuple[glm.vec4, ...]
+    skip: tuple[int, int]
 
 
 @dataclass(frozen=True)
 class VirtualLight:
-    """A light's image through a mirror or portal (``Mirror.reflects_light``,
-    ``Portal.carries_light``): the light as the room beyond the surface receives it.
+    """A light's image through one or more mirrors or portals in a row
+    (``Mirror.reflects_light``, ``Portal.carries_light``; ``bounces`` of them, at most the
+    light's own ``bounces``): the light as the room beyond the last surface receives it.
 
     For a mirror the image is the light reflected in the mirror's plane; for a portal, carried
     by the pair's transform (the light in front of the portal goes in and comes out of its
-    partner).  It lights a point only through the ``exit`` surface's outline (the mirror
-    itself, or the partner) and only on its front; its colour is the light's times the
-    surface's tint and reflect rate.  ``carry`` (world to world) takes the real scene to where
-    the light's image sees it: what stands between the light and the ``entry`` surface shadows
-    what lies beyond, as the image of that thing (``entry_plane``: its front)."""
+    partner); for several, the image of the image.  It lights a point only when the straight
+    line from the point to the image passes through every surface's outline on the way, in
+    order, each entered from its front (``apertures``: the last surface's outline first, as
+    it is, then each earlier one as the later surfaces carry it); its colour is the light's
+    times each surface's tint and reflect rate.  ``legs`` are the stretches of its way its
+    shadow map holds: the last (way out) as the scene is, each earlier carried to where the
+    image sees it.  ``exit_plane``, ``aperture``, ``carry`` and ``entry_plane`` are the last
+    surface's: the one-bounce light's whole description."""
 
     light: int                       # the light's entity
-    surface: int                     # the mirror or entry portal
+    surface: int                     # the last mirror or entry portal on the way
     kind: str                        # "directional" or "point"
     position: tuple[float, float, float]   # the image's position (point), or the direction it travels
     color: tuple[float, float, float]
     light_range: float               # a point light's range (along the whole path); 0 for directional
     exit_plane: tuple[float, float, float, float]   # lit points lie in front of it
     aperture: tuple[tuple[float, ...], tuple[float, ...], tuple[float, ...]]  # origin, u, v of the exit outline
-    carry: glm.mat4                  # real scene -> as the image sees it, for the shadows of the incoming leg
+    carry: glm.mat4                  # the last surface's carry (the real scene before it -> as the image sees it)
     entry_plane: glm.vec4
     exit_entity: int
     priority: int
+    bounces: int = 1
+    path: tuple[int, ...] = ()       # the surfaces (mirrors, entry portals) in the order the light meets them
+    apertures: tuple[Aperture, ...] = ()
+    legs: tuple[Leg, ...] = ()
+
+    @property
+    def image_box_carries(self) -> list[glm.mat4]:
+        """The carries of the legs before the way out (what its map holds besides the scene)."""
+        return [leg.carry for leg in self.legs[1:]]
 
 
 def _outline(surface) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
@@ -261,56 +306,206 @@ def _outline(surface) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
     return c[0], c[2] - c[0], c[1] - c[0]
 
 
+def _carry_plane(plane: glm.vec4, carry: glm.mat4) -> glm.vec4:
+    """A plane (its front positive) where ``carry`` takes it."""
+    return glm.transpose(glm.inverse(glm.dmat4(carry))) * glm.dvec4(plane)
+
+
+def _carry_aperture(aperture: Aperture, carry: glm.mat4) -> Aperture:
+    m = glm.dmat4(carry)
+    origin = m * glm.dvec4(*aperture.origin, 1.0)
+    u, v = m * glm.dvec4(*aperture.u, 0.0), m * glm.dvec4(*aperture.v, 0.0)
+    plane = glm.dvec4(_carry_plane(glm.dvec4(*aperture.plane), carry))
+    plane /= glm.length(glm.dvec3(plane))
+    return Aperture(tuple(float(x) for x in plane), tuple(float(x) for x in origin.xyz),
+                    tuple(float(x) for x in u.xyz), tuple(float(x) for x in v.xyz),
+                    glm.mat4(m * glm.dmat4(aperture.to_image)))
+
+
+def _reaches_through(image: glm.vec3, kind: str, aperture: Aperture, corners: np.ndarray) -> bool:
+    """Whether light from ``image`` (a point, or a direction travelled) through the
+    parallelogram ``aperture`` (world) can meet any of ``corners`` (a flat outline, rows): a
+    corner in front of the aperture's plane and not every corner outside one side of the
+    pyramid (a prism for a direction) the aperture cuts.  Conservative: it only rules out."""
+    plane = np.asarray(aperture.plane, np.float64)
+    if not (corners @ plane[:3] + plane[3] > 1e-6).any():
+        return False
+    o, u, v = (np.asarray(x, np.float64) for x in (aperture.origin, aperture.u, aperture.v))
+    ring = [o, o + u, o + u + v, o + v]
+    inside = o + 0.5 * (u + v)
+    p = np.asarray(image, np.float64)
+    for a, b in zip(ring, ring[1:] + ring[:1], strict=True):
+        along = p if kind == "directional" else p - a
+        normal = np.cross(b - a, along)
+        if np.linalg.norm(normal) < 1e-12:
+            continue
+        side = np.sign(np.dot(inside - a, normal))
+        if np.all((corners - a) @ normal * side < -1e-6):
+            return False
+    return True
+
+
 def virtual_lights(directional: list[tuple[int, glm.vec3, glm.vec3]],
                    points: list[tuple[int, glm.vec3, float, glm.vec3]],
-                   surfaces: Surfaces | None) -> list[VirtualLight]:
+                   surfaces: Surfaces | None, bounces: dict[int, int] | None = None,
+                   depth_cap: int = MAX_LIGHT_BOUNCES) -> list[VirtualLight]:
     """The virtual lights of this frame's lights through the surfaces that carry light:
     ``directional`` as (entity, direction travelled, colour x intensity), ``points`` as
-    (entity, position, range, colour x intensity), ``surfaces`` the ``Surfaces`` resource.
-    A light makes an image only if it reaches the surface's front (a point light in front of
-    it, within range; a directional one travelling towards it).  One bounce: an image is not
-    carried again."""
+    (entity, position, range, colour x intensity), ``surfaces`` the ``Surfaces`` resource,
+    ``bounces`` each light's limit (its ``bounces`` field; 1 when not given), ``depth_cap``
+    the view tree's.
+
+    A light makes an image through a surface when it reaches the surface's front (a point
+    light in front of it, within range; a directional one travelling towards it); an image
+    makes an image of its own through a further surface (light reflected more than once,
+    mirror to mirror) while the chain is within the light's ``bounces``, the surface's
+    ``max_depth`` (its n-th bounce is at depth n, as its n-th view in the view tree) and
+    ``depth_cap``, the image reaches that surface's front, and the last surface's outline,
+    seen from the image, can reach it.  Every image on the way is a virtual light of its own
+    (it lights what its last surface faces)."""
     found: list[VirtualLight] = []
     if surfaces is None:
         return found
-    shown = [*surfaces.mirrors.values(), *surfaces.portals.values()]
+    bounces = bounces or {}
+    shown = [s for s in (*surfaces.mirrors.values(), *surfaces.portals.values()) if s.carries_light and s.enabled]
+    steps = []   # (surface, its exit outline as an aperture, corners of its entry outline, tint)
     for surface in shown:
-        if not surface.carries_light or not surface.enabled:
-            continue
         exit_surface = surface if surface.kind == "mirror" else surfaces.portals.get(surface.exit_entity)
         if exit_surface is None:
             continue
         outline = _outline(exit_surface)
-        if outline is None:
+        entry = _outline(surface)
+        if outline is None or entry is None:
             continue
-        entry = glm.vec4(surface.plane)
-        carry = glm.mat4(surface.carry)
+        exit_plane = glm.dvec4(surface.exit_plane)
+        exit_plane /= glm.length(glm.dvec3(exit_plane))
+        aperture = Aperture(tuple(float(v) for v in exit_plane), *(tuple(float(v) for v in part) for part in outline),
+                            glm.mat4(1.0))
+        o, u, v = entry
+        corners = np.array([o, o + u, o + u + v, o + v])
         tint = glm.vec3(surface.tint) * surface.reflect_rate if surface.kind == "mirror" else glm.vec3(1.0)
-        aperture = tuple(tuple(float(v) for v in part) for part in outline)
-        exit_plane = tuple(float(v) for v in surface.exit_plane)
-        for entity, direction, rgb in directional:
-            d = glm.normalize(glm.vec3(direction))
-            if glm.dot(glm.vec3(entry), d) >= 0.0:
-                continue  # travelling away from its front: it never lights the surface
-            image = glm.normalize(glm.mat3(carry) * d)
-            found.append(VirtualLight(entity, surface.entity, "directional", tuple(float(v) for v in image),
-                                      tuple(float(v) for v in glm.vec3(rgb) * tint), 0.0, exit_plane, aperture,
-                                      carry, entry, exit_surface.entity, surface.priority))
-        for entity, position, light_range, rgb in points:
-            p = glm.vec3(position)
-            height = glm.dot(glm.vec3(entry), p) + entry.w
-            if height <= 0.0 or height >= light_range:
-                continue  # behind the surface, or its range ends before it
-            image = glm.vec3(carry * glm.vec4(p, 1.0))
-            found.append(VirtualLight(entity, surface.entity, "point", tuple(float(v) for v in image),
-                                      tuple(float(v) for v in glm.vec3(rgb) * tint), float(light_range), exit_plane,
-                                      aperture, carry, entry, exit_surface.entity, surface.priority))
+        steps.append((surface, exit_surface, aperture, corners, tint))
+
+    def extend(light: VirtualLight | None, entity: int, kind: str, image: glm.vec3, light_range: float,
+               rgb: glm.vec3, limit: int) -> None:
+        depth = 1 if light is None else light.bounces + 1
+        if depth > limit:
+            return
+        for surface, exit_surface, aperture, corners, tint in steps:
+            if depth > min(surface.max_depth, depth_cap):
+                continue
+            if light is not None and not _reaches_through(image, kind, light.apertures[0], corners):
+                continue
+            entry = glm.vec4(surface.plane)
+            carry = glm.mat4(surface.carry)
+            if kind == "directional":
+                d = glm.normalize(glm.vec3(image))
+                if glm.dot(glm.vec3(entry), d) >= 0.0:
+                    continue  # travelling away from its front: it never lights the surface
+                new_image = glm.normalize(glm.mat3(carry) * d)
+            else:
+                height = (glm.dot(glm.vec3(entry), glm.vec3(image)) + entry.w) / glm.length(glm.vec3(entry))
+                if height <= 0.0 or height >= light_range:
+                    continue  # behind the surface, or its range ends before it
+                new_image = glm.vec3(carry * glm.vec4(glm.vec3(image), 1.0))
+            color = glm.vec3(rgb) * tint
+            way_out = Leg(glm.mat4(1.0), (glm.vec4(surface.exit_plane),), (exit_surface.entity, surface.entity))
+            if light is None:
+                legs = (way_out, Leg(carry, (entry,), (surface.entity, exit_surface.entity)))
+                apertures = (aperture,)
+                path = (surface.entity,)
+            else:
+                # The earlier way out runs from the last exit to this entry: carried, between both.
+                last = light.legs[0]
+                middle = Leg(carry, (*last.planes, entry), (last.skip[0], surface.entity))
+                legs = (way_out, middle, *(Leg(carry * leg.carry, leg.planes, leg.skip) for leg in light.legs[1:]))
+                apertures = (aperture, *(_carry_aperture(a, carry) for a in light.apertures))
+                path = (*light.path, surface.entity)
+            made = VirtualLight(entity, surface.entity, kind, tuple(float(v) for v in new_image),
+                                tuple(float(v) for v in color), float(light_range),
+                                aperture.plane, (aperture.origin, aperture.u, aperture.v), carry, entry,
+                                exit_surface.entity, surface.priority, depth, path, apertures, legs)
+            found.append(made)
+            extend(made, entity, kind, new_image, light_range, color, limit)
+
+    for entity, direction, rgb in directional:
+        extend(None, entity, "directional", glm.normalize(glm.vec3(direction)), 0.0, glm.vec3(rgb),
+               bounces.get(entity, 1))
+    for entity, position, light_range, rgb in points:
+        extend(None, entity, "point", glm.vec3(position), float(light_range), glm.vec3(rgb), bounces.get(entity, 1))
     return found
 
 
+def light_path(light: VirtualLight, point: np.ndarray, real: np.ndarray | None = None) -> list[np.ndarray] | None:
+    """The way the light of ``light`` takes to ``point`` (world), as the shader's aperture
+    test decides it (``shaders/include/virtual_lights.glsl``; no shadows): None when it does
+    not light the point, else the real corners from the point back towards the light: the
+    point, where the way crosses each surface (last first: for a portal, where it comes out,
+    then where it went in), and the light (a point light's position; for a directional one,
+    a point a kilometre back along it).  Float64: a game's or a test's second opinion."""
+    x = np.asarray(point, np.float64)
+    p = np.asarray(light.position, np.float64)
+    if light.kind == "point":
+        to = p - x
+        dist = float(np.linalg.norm(to))
+        if dist <= 1e-9 or dist >= light.light_range:
+            return None
+        l = to / dist
+    else:
+        l = -p / np.linalg.norm(p)
+        dist = np.inf
+    corners = [x]
+    t_last = 0.0
+    for aperture in light.apertures:
+        plane = np.asarray(aperture.plane, np.float64)
+        towards = float(plane[:3] @ l)
+        height = float(plane[:3] @ x + plane[3])
+        if towards >= 0.0 or height <= 0.0:
+            return None
+        t = height / -towards
+        if t <= t_last or t > dist:
+            return None
+        crossing = x + l * t
+        offset = crossing - np.asarray(aperture.origin)
+        u, v = np.asarray(aperture.u), np.asarray(aperture.v)
+        a, b = offset @ u / (u @ u), offset @ v / (v @ v)
+        if not (0.0 <= a <= 1.0 and 0.0 <= b <= 1.0):
+            return None
+        t_last = t
+        back = np.linalg.inv(np.array(aperture.to_image.to_list(), np.float64).T)
+        corners.append(back[:3, :3] @ crossing + back[:3, 3])
+    # Each surface's far side: a mirror's light leaves where it arrived; a portal's entry is
+    # the exit's crossing carried back by its pair.
+    out = [corners[0]]
+    for index, crossing in enumerate(corners[1:]):
+        out.append(crossing)
+        # The leg before this surface is carried by legs[index + 1], the one after by legs[index].
+        before = np.array(light.legs[index + 1].carry.to_list(), np.float64).T
+        after = np.array(light.legs[index].carry.to_list(), np.float64).T
+        there = np.linalg.inv(before) @ after
+        entered = there[:3, :3] @ crossing + there[:3, 3]
+        if np.linalg.norm(entered - crossing) > 1e-6:
+            out.append(entered)
+    if light.kind == "point":
+        out.append(np.asarray(light_origin(light), np.float64))
+    else:
+        first = out[-1]
+        direction = np.asarray(light.legs[-1].carry.to_list(), np.float64).T
+        travel = np.linalg.inv(direction)[:3, :3] @ (np.asarray(light.position) / np.linalg.norm(light.position))
+        out.append(first - 1000.0 * travel / np.linalg.norm(travel))
+    return out
+
+
+def light_origin(light: VirtualLight) -> tuple[float, float, float]:
+    """A virtual point light's real light: its image carried back along every leg."""
+    back = np.linalg.inv(np.array(light.legs[-1].carry.to_list(), np.float64).T)
+    return tuple(float(v) for v in back[:3, :3] @ np.asarray(light.position) + back[:3, 3])
+
+
 def rank_virtual_lights(lights: list[VirtualLight]) -> list[VirtualLight]:
-    """The order the budget spends on them: the surface's priority, then the brightest."""
-    return sorted(lights, key=lambda v: (-v.priority, -max(v.color), v.surface, v.light))
+    """The order the budget spends on them: the surface's priority, then fewer bounces (an
+    image's own image after it), then the brightest."""
+    return sorted(lights, key=lambda v: (-v.priority, v.bounces, -max(v.color), v.path, v.light))
 
 
 def virtual_shadow_camera(light: VirtualLight, level_lo: np.ndarray, level_hi: np.ndarray,

@@ -2,10 +2,14 @@
 // image through a surface that carries light, lighting a point only on the exit surface's
 // front and only when the line from the point to the image crosses the exit's outline (the
 // light came through the mirror or the portal's opening), shadowed by a map drawn from the
-// image (engine/render/shadows.py draw_virtual).  One bounce.
+// image (engine/render/shadows.py draw_virtual).  Light reflected more than once (mirror to
+// mirror) is the image of the image: the line from the point must then also pass through
+// each earlier surface's outline as the later surfaces carry it, in order along the line,
+// each entered from its front (virtual_more: up to MAX_APERTURES - 1 of them a light).
 // Only the VIRTUAL_LIGHTS builds hold it (engine/render/scene_pass.py): frames where one shines.
 #ifdef VIRTUAL_LIGHTS
 #define MAX_VIRTUAL_LIGHTS 4   // engine/rules/shadow_rules.py MAX_VIRTUAL_LIGHTS
+#define VIRTUAL_MORE 3         // MAX_APERTURES - 1 (components/limits.py MAX_LIGHT_BOUNCES - 1)
 layout(std140) uniform VirtualLights {
     ivec4 virtual_count;                            // x: how many
     mat4 virtual_matrix[MAX_VIRTUAL_LIGHTS];        // world -> atlas uv and depth (divide by w)
@@ -16,8 +20,32 @@ layout(std140) uniform VirtualLights {
                                                     // (metres for a directional image, radians for a point)
     vec4 virtual_u[MAX_VIRTUAL_LIGHTS];             // xyz: an edge of the outline over its length squared
     vec4 virtual_v[MAX_VIRTUAL_LIGHTS];             // xyz: the other edge likewise
-    vec4 virtual_params[MAX_VIRTUAL_LIGHTS];        // x: an atlas texel in uv, y: softness, z: taps a side
+    vec4 virtual_params[MAX_VIRTUAL_LIGHTS];        // x: an atlas texel in uv, y: softness, z: taps a side,
+                                                    // w: how many further outlines (virtual_more)
+    vec4 virtual_more[MAX_VIRTUAL_LIGHTS * VIRTUAL_MORE * 4];  // per outline: plane, corner, u, v (as above)
 } virtual_lights;
+
+// Whether the line from ``position`` along ``l`` (towards the image), already through the
+// exit at ``t``, passes each further outline of light ``i`` in order, from its front, before
+// ``dist`` (the image).
+bool virtual_through(int i, vec3 position, vec3 l, float t, float dist) {
+    int count = int(virtual_lights.virtual_params[i].w);
+    for (int k = 0; k < count; ++k) {
+        int at = (i * VIRTUAL_MORE + k) * 4;
+        vec4 plane = virtual_lights.virtual_more[at];
+        float towards = dot(plane.xyz, l);
+        float h = dot(plane.xyz, position) + plane.w;
+        if (towards >= 0.0 || h <= 0.0) return false;
+        float s = h / -towards;
+        if (s <= t || s > dist) return false;
+        vec3 x = position + l * s - virtual_lights.virtual_more[at + 1].xyz;
+        float a = dot(x, virtual_lights.virtual_more[at + 2].xyz);
+        float b = dot(x, virtual_lights.virtual_more[at + 3].xyz);
+        if (a < 0.0 || a > 1.0 || b < 0.0 || b > 1.0) return false;
+        t = s;
+    }
+    return true;
+}
 
 uniform sampler2DShadow virtual_atlas;
 
@@ -61,6 +89,7 @@ vec3 virtual_lighting(vec3 position, vec3 normal, vec3 geometric, vec3 to_eye, v
         float a = dot(x, virtual_lights.virtual_u[i].xyz);
         float b = dot(x, virtual_lights.virtual_v[i].xyz);
         if (a < 0.0 || a > 1.0 || b < 0.0 || b > 1.0 || height / -towards > dist) continue;
+        if (!virtual_through(i, position, l, height / -towards, dist)) continue;
         total += (diffuse + ggx_specular(normal, l, to_eye, f0, roughness)) * virtual_lights.virtual_color[i].rgb
                  * nl * falloff * virtual_shadow(i, position, geometric, l, dist);
     }
