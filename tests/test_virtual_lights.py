@@ -314,3 +314,205 @@ def test_a_probe_face_recaptures_when_a_shadow_in_the_mirrors_light_moves(scene)
     assert ids["probe"] in due and 3 in due[ids["probe"]].faces, due
     reasons = due[ids["probe"]].reasons
     assert any(reason.startswith("shadow of entity") and 3 in faces for reason, faces in reasons.items()), reasons
+
+
+# --- light reflected twice: the sun -> mirror A -> mirror B -> the floor ----------------------
+# A high on the right (x = 3, facing -x) throws the sun down-left onto B, low on the left
+# (x = -2, facing +x), which throws it down-right onto the floor beside it, the way the sun
+# itself travels (two parallel mirrors: the light leaves B parallel to the sun).  A cube
+# stands in the patch, a small box on the way from A to B.
+A_X, A_Y, A_HALF = 3.0, 5.5, np.array([1.0, 1.5])     # half height (y), half width (z)
+B_X, B_Y, B_HALF = -2.0, 1.5, np.array([1.25, 1.5])
+TWICE_CUBE = (np.array([-1.1, 0.3, 0.6]), np.array([0.3, 0.3, 0.3]))
+ON_THE_WAY = (np.array([0.0, 3.2, -0.6]), np.array([0.25, 0.25, 0.25]))
+THIN = 0.002   # a mirror quad as an occluder: a box this thin
+
+
+def _two_mirror_scene(world, tint_a=(1.0, 1.0, 1.0), rate_a=1.0, tint_b=(1.0, 1.0, 1.0), rate_b=1.0, bounces=2):
+    ids = {}
+    look_from(world, (2.0, 4.0, 4.5), (-1.0, 0.3, 0.0))
+    ids["sun"] = world.spawn(DirectionalLight(direction=tuple(SUN), intensity=2.0, bounces=bounces))
+    ids["floor"] = world.spawn(Transform(), MeshRef(plane(14, 14)), Material(color=(0.8, 0.8, 0.8), roughness=1.0))
+    for name, (centre, half) in (("cube", TWICE_CUBE), ("way", ON_THE_WAY)):
+        ids[name] = world.spawn(Transform(position=centre.tolist()), MeshRef(box(tuple(2 * half))),
+                                Material(color=(0.6, 0.5, 0.4)))
+    for name, x, y, half, face, tint, rate in (("a", A_X, A_Y, A_HALF, (1, 0, 0), tint_a, rate_a),
+                                               ("b", B_X, B_Y, B_HALF, (-1, 0, 0), tint_b, rate_b)):
+        ids[name] = world.spawn(Transform(position=(x, y, 0.0), rotation=look_rotation(glm.vec3(*face))),
+                                MeshRef(quad(2 * half[1], 2 * half[0])), Material(),
+                                Mirror(color=tint, reflect_rate=rate, reflects_light=True))
+    return ids
+
+
+def _mirror_box(x, y, half):
+    return np.array([x, y, 0.0]), np.array([THIN, half[0], half[1]])
+
+
+def _twice_lit(points: np.ndarray, grow: float, boxes=(TWICE_CUBE, ON_THE_WAY)) -> np.ndarray:
+    """Whether the sun reaches ``points`` (rows) by A then B (float64 rays, occluders grown by
+    ``grow``, outlines shrunk by it): the line from the point towards the doubly reflected
+    sun (it travels as the sun: the line runs along -SUN) crosses B's plane inside B from its
+    front, then A's image in B's plane (x = 2 B_X - A_X) inside A's outline; each real leg,
+    point to B, B to A, A to the sun, meets no box and no other mirror."""
+    back = np.tile(-SUN, (len(points), 1))
+    t_b = (B_X - points[:, 0]) / back[:, 0]
+    at_b = points + back * t_b[:, None]
+    a_image_x = 2 * B_X - A_X
+    t_a = (a_image_x - points[:, 0]) / back[:, 0]
+    at_a_image = points + back * t_a[:, None]
+    at_a = at_a_image * np.array([-1.0, 1.0, 1.0]) + np.array([2 * B_X, 0.0, 0.0])   # reflected back in B
+    inside = (points[:, 0] > B_X) & (t_b > 0) & \
+        (np.abs(at_b[:, 1] - B_Y) < B_HALF[0] - grow) & (np.abs(at_b[:, 2]) < B_HALF[1] - grow) & \
+        (np.abs(at_a[:, 1] - A_Y) < A_HALF[0] - grow) & (np.abs(at_a[:, 2]) < A_HALF[1] - grow)
+    a_box, b_box = _mirror_box(A_X, A_Y, A_HALF), _mirror_box(B_X, B_Y, B_HALF)
+    ones = np.ones(len(points))
+    blocked = np.zeros(len(points), bool)
+    for box_ in (*boxes, a_box):             # the point to B
+        blocked |= _box_hit(points, at_b - points, box_, grow, ones)
+    for box_ in boxes:                       # B to A (the mirrors are its ends)
+        blocked |= _box_hit(at_b, at_a - at_b, box_, grow, ones)
+    for box_ in (*boxes, b_box):             # A to the sun
+        blocked |= _box_hit(at_a, back, box_, grow)
+    return inside & ~blocked
+
+
+def _seen_in_a_mirror(runner) -> np.ndarray:
+    """Pixels whose primary ray meets a mirror (grown a little) before the floor: the id image
+    shows what the mirror shows there, the floor too, but not the floor the ray meets."""
+    eye, rays = pixel_rays(runner.engine.main_view, runner.size)
+    rays = rays.reshape(-1, 3)
+    origin = np.tile(eye, (len(rays), 1))
+    hit = np.zeros(len(rays), bool)
+    for x, y, half in ((A_X, A_Y, A_HALF), (B_X, B_Y, B_HALF)):
+        hit |= _box_hit(origin, rays, _mirror_box(x, y, half), 0.05)
+    w, h = runner.size
+    return hit.reshape(h, w)
+
+
+def _bounce_frames(scene, build, size=(320, 240)):
+    """The frame with the sun reflected once, then twice."""
+    runner = scene(build, size)
+    runner.engine.renderer.antialias = "off"
+    runner.engine.renderer.shadows.filter = "single"
+    sun = runner.world.get(runner.world.resources["ids"]["sun"], DirectionalLight)
+    sun.bounces = 1
+    once = runner.frame()
+    once_lights = runner.stats.virtual_lights
+    sun.bounces = 2
+    twice = runner.frame()
+    return runner, once, twice, once_lights
+
+
+def test_the_sun_reflected_by_two_mirrors_lands_where_the_rays_say(scene):
+    def build(world):
+        world.resources["ids"] = _two_mirror_scene(world)
+
+    runner, once, twice, once_lights = _bounce_frames(scene, build)
+    assert (once_lights, runner.stats.virtual_lights) == (1, 2)   # A's light, then also A's through B
+    ids = runner.world.resources["ids"]
+    floor = (runner.ids() == ids["floor"]) & ~_seen_in_a_mirror(runner)
+    ratio = srgb_to_linear(twice).mean(-1) / np.maximum(srgb_to_linear(once).mean(-1), 1e-6)
+    brighter, same = ratio > 1.1, ratio < 1.02
+    points = _floor_points(runner)
+    lit_in = _twice_lit(points, EDGE).reshape(floor.shape)
+    lit_out = _twice_lit(points, -EDGE).reshape(floor.shape)
+    sure = floor & (lit_in == lit_out)
+    frame_says = np.where(brighter, 1, np.where(same, 0, -1))[sure]
+    rays_say = lit_in[sure].astype(int)
+    share = float((frame_says == rays_say).mean())
+    assert sure.sum() > 40000 and rays_say.sum() > 600, (int(sure.sum()), int(rays_say.sum()))
+    exact = _twice_lit(points, 0.0).reshape(floor.shape)
+    # Both boxes shadow the patch: the cube on the last leg, the small box on the way from A to B.
+    for box_ in (TWICE_CUBE, ON_THE_WAY):
+        alone = _twice_lit(points, 0.0, (box_,)).reshape(floor.shape)
+        assert (floor & ~alone & _twice_lit(points, 0.0, ()).reshape(floor.shape)).sum() > 100, box_
+    assert (floor & lit_out & ~exact).sum() > 200
+    assert share >= 0.99, f"{share:.4f} of {int(sure.sum())} floor pixels agree with the rays"
+
+
+def test_light_reflected_twice_is_the_direct_light_times_both_mirrors(scene):
+    """On the Lambertian floor in B's own shadow (the sun is cut off there, A's light once
+    reflected lands farther left), the light that came by A and B, over the direct sun's share
+    on open floor, is A's rate x tint times B's: two parallel mirrors send it on parallel to
+    the sun, so it meets the floor at the sun's angle.  Tolerance 6%, as for one mirror (8-bit
+    frames, the sRGB curve, the floor's small GGX highlight)."""
+    tint_a, rate_a, tint_b, rate_b = (0.9, 0.8, 0.7), 0.9, (1.0, 0.7, 0.5), 0.8
+
+    def build(world):
+        world.resources["ids"] = _two_mirror_scene(world, tint_a, rate_a, tint_b, rate_b)
+
+    runner, once, twice, _ = _bounce_frames(scene, build)
+    shape = (runner.size[1], runner.size[0])
+    seen = (runner.ids() == runner.world.resources["ids"]["floor"]) & ~_seen_in_a_mirror(runner)
+    points = _floor_points(runner)
+    to_sun = np.tile(-SUN, (len(points), 1))
+
+    def sun_blocked(grow):
+        hit = np.zeros(len(points), bool)
+        for box_ in (TWICE_CUBE, ON_THE_WAY, _mirror_box(A_X, A_Y, A_HALF), _mirror_box(B_X, B_Y, B_HALF)):
+            hit |= _box_hit(points, to_sun, box_, grow)
+        return hit.reshape(shape)
+
+    x = points[:, 0].reshape(shape)
+    once_from_a = x < -1.4          # where A's light reflected once can land (A's image line through A)
+    patch = _twice_lit(points, 0.2).reshape(shape) & seen & sun_blocked(-0.2) & ~once_from_a
+    shaded = seen & sun_blocked(-0.2) & ~_twice_lit(points, -0.2).reshape(shape) & ~once_from_a
+    direct = seen & ~sun_blocked(0.2) & ~once_from_a & (x < 2.0) & \
+        (np.abs(points[:, 2]).reshape(shape) < 1.5)
+    counts = (int(patch.sum()), int(shaded.sum()), int(direct.sum()))
+    assert counts[0] > 200 and counts[1] > 100 and counts[2] > 300, counts
+    lin_once, lin_twice = srgb_to_linear(once), srgb_to_linear(twice)
+    twice_share = np.median(lin_twice[patch] - lin_once[patch], axis=0)
+    sun_share = np.median(lin_once[direct], axis=0) - np.median(lin_once[shaded], axis=0)
+    expected = rate_a * rate_b * np.array(tint_a) * np.array(tint_b)
+    np.testing.assert_allclose(twice_share / sun_share, expected, rtol=0.06)
+
+
+def test_each_bounce_is_spent_under_the_budget_and_stops_at_the_depth_limits(scene):
+    """The second bounce is a virtual light of its own: a budget of one view draws A's light
+    and cuts A-through-B, and says so; B's max_depth of 1 (it shows no mirror in a mirror)
+    and the view tree's depth cap of 1 stop it as they stop views; a sun with bounces = 0 is
+    reflected by no mirror."""
+    def build(world):
+        world.resources["ids"] = _two_mirror_scene(world)
+        world.resources[ViewBudget] = ViewBudget(views=1)
+
+    runner = scene(build)
+    ids = runner.world.resources["ids"]
+    runner.frame()
+    assert (runner.stats.virtual_lights, runner.stats.virtual_lights_cut) == (1, 1)
+    runner.world.resources[ViewBudget] = ViewBudget(views=None)
+    runner.frame()
+    assert (runner.stats.virtual_lights, runner.stats.virtual_lights_cut) == (2, 0)
+    runner.world.get(ids["b"], Mirror).max_depth = 1
+    runner.frame()
+    assert (runner.stats.virtual_lights, runner.stats.virtual_lights_cut) == (1, 0)
+    runner.world.get(ids["b"], Mirror).max_depth = 3
+    runner.engine.stages["reflect"].max_depth_cap = 1
+    runner.frame()
+    assert runner.stats.virtual_lights == 1
+    runner.engine.stages["reflect"].max_depth_cap = 8
+    runner.world.get(ids["sun"], DirectionalLight).bounces = 0
+    runner.frame()
+    assert runner.stats.virtual_lights == 0
+
+
+def test_light_bounces_is_checked_and_carried_by_level_files(tmp_path):
+    from components.tracking import ComponentValueError
+    from engine.assets.level_file import load_level, save_level
+    from engine.core.world import World
+
+    with pytest.raises(ComponentValueError, match="bounces"):
+        DirectionalLight(bounces=5)
+    with pytest.raises(ComponentValueError, match="bounces"):
+        PointLight(bounces=-1)
+    path = tmp_path / "bounces.toml"
+    path.write_text('[level]\nname = "b"\n\n[[entity]]\nname = "sun"\n[entity.DirectionalLight]\nbounces = 3\n\n'
+                    '[[entity]]\nname = "lamp"\n[entity.Transform]\n[entity.PointLight]\nbounces = 2\n')
+    world = World("bounces")
+    names = load_level(path).spawn(world)
+    assert world.get(names["sun"], DirectionalLight).bounces == 3
+    again = World("again")
+    names_again = load_level(save_level(world, tmp_path / "again.toml", names)).spawn(again)
+    assert again.get(names_again["sun"], DirectionalLight).bounces == 3
+    assert again.get(names_again["lamp"], PointLight).bounces == 2
