@@ -286,7 +286,7 @@ class VirtualLight:
     carry: glm.mat4                  # the last surface's carry (the real scene before it -> as the image sees it)
     entry_plane: glm.vec4
     exit_entity: int
-    priority: int
+    priority: int                    # the surfaces' priorities on the way, summed
     bounces: int = 1
     path: tuple[int, ...] = ()       # the surfaces (mirrors, entry portals) in the order the light meets them
     apertures: tuple[Aperture, ...] = ()
@@ -424,7 +424,8 @@ def virtual_lights(directional: list[tuple[int, glm.vec3, glm.vec3]],
             made = VirtualLight(entity, surface.entity, kind, tuple(float(v) for v in new_image),
                                 tuple(float(v) for v in color), float(light_range),
                                 aperture.plane, (aperture.origin, aperture.u, aperture.v), carry, entry,
-                                exit_surface.entity, surface.priority, depth, path, apertures, legs)
+                                exit_surface.entity, surface.priority + (0 if light is None else light.priority),
+                                depth, path, apertures, legs)
             found.append(made)
             extend(made, entity, kind, new_image, light_range, color, limit)
 
@@ -503,8 +504,9 @@ def light_origin(light: VirtualLight) -> tuple[float, float, float]:
 
 
 def rank_virtual_lights(lights: list[VirtualLight]) -> list[VirtualLight]:
-    """The order the budget spends on them: the surface's priority, then fewer bounces (an
-    image's own image after it), then the brightest."""
+    """The order the budget spends on them: the priority of the surfaces on the way (their
+    ``priority`` summed: a way through two preferred mirrors before a way through one), then
+    fewer bounces (an image's own image after it), then the brightest."""
     return sorted(lights, key=lambda v: (-v.priority, v.bounces, -max(v.color), v.path, v.light))
 
 

@@ -11,9 +11,21 @@ frame runs, in order:
   before extract: ``beam_system`` traces the beam through this frame's ``Surfaces`` (the
   renderer's planes, outlines and reflection matrices, ``games.mirror_beam.beam``) and
   re-poses the beam's segments (thin emissive boxes, ordinary entities, so mirrors show
-  them) when it changed; ``win_system``: a beam that ends on the target records a
+  them) when it changed: a visual aid; ``light_system`` decides whether the laser's light
+  reaches the target by the mirrors (below); ``win_system``: the target lit records a
   ``BeamEvent('win')`` once and makes the target glow; ``marker_system`` keeps the
   selection light over the selected mirror.
+
+The light is real: a lamp at the laser's mouth (a ``PointLight``, ``BeamLamp``) whose light
+every mirror reflects (``Mirror.reflects_light``, ``bounces`` as many as the engine follows,
+up to the level's ``max_bounces``), so the renderer draws each reflection's patch of light
+with its shadows.  The target is lit when one of the lamp's virtual lights through the
+mirrors (``engine.rules.shadow_rules.virtual_lights``, the rules the shadows stage draws
+from, for this frame's surfaces) reaches a point of the target's faces by the same
+aperture test the shader makes (``shadow_rules.light_path``: the line to the image
+through every mirror's outline, in order, from the front) and no solid stands on any leg
+of that way (the engine's ray cast, as for the beam).  The sun is not reflected
+(``DirectionalLight.bounces = 0``): the puzzle's light is the laser's.
 
 So the beam drawn in a frame is the one the mirrors of that frame make: it is there from
 frame 0, and a turn (or a restart) shows in the beam in the frame of the key press.  The
@@ -31,15 +43,18 @@ from pyglm import glm
 from components import (
     Bloom,
     Camera,
+    DirectionalLight,
     Emissive,
     Material,
     MeshRef,
     Mirror,
+    PointLight,
     ScreenText,
     Tonemap,
     Transform,
     look_rotation,
 )
+from components.limits import MAX_LIGHT_BOUNCES
 from engine.assets.level_file import LevelGame
 from engine.assets.mesh import box
 from engine.core.errors import SpeculumError
@@ -48,6 +63,7 @@ from engine.core.game import GameSystem, spawn_camera
 from engine.core.world import World
 from engine.resources import FrameViews, Surfaces
 from engine.rules.raycast import raycast
+from engine.rules.shadow_rules import VirtualLight, light_path, virtual_lights
 from games.mirror_beam.beam import BeamPath, FirstSolid, hit_mirror, trace_beam
 
 LEVEL_DIR = Path(__file__).parent / "levels"
@@ -57,6 +73,20 @@ BEAM_POWER = 2.0
 WIN_GLOW = 4.0  # HDR: a solved target is four times brighter than white, and glows
 MAX_BOUNCES_CAP = 16
 FRAME_DEPTH = 0.04
+# The laser's lamp: just past the housing's front face (inside it, the housing would shadow
+# its own light), red like the beam, reaching the longest shipped path (about 19 m), at the
+# back of a barrel (a square tube of four plates) that lets out only a narrow cone, as a
+# laser's light is: half-width over length, about 4 degrees; the lamp casts shadows, so
+# its light leaves only through the barrel, directly and by the mirrors.
+LAMP_OFFSET = 0.02
+BARREL_LENGTH = 0.9
+BARREL_HALF = 0.037        # inner half-width (the beam, BEAM_WIDTH wide, runs inside it)
+BARREL_WALL = 0.02
+LAMP_COLOR = (1.0, 0.35, 0.25, 1.0)
+LAMP_INTENSITY = 400.0
+LAMP_RANGE = 30.0
+# Points of the target a reflection must reach: its faces' centres, this far out from them.
+TARGET_PROBE_OUT = 0.01
 DEFAULT_CAMERA = {"position": [0.0, 7.5, 7.5], "look_at": [0.0, 0.5, 0.0]}
 
 
@@ -104,6 +134,16 @@ class Caption:
 
 
 @dataclass
+class BeamLamp:
+    """Marks the laser's lamp (a PointLight at the laser's mouth)."""
+
+
+@dataclass
+class LaserBarrel:
+    """Marks a plate of the barrel in front of the laser's lamp."""
+
+
+@dataclass
 class SelectionMarker:
     """Marks the small light that hovers over the selected mirror."""
 
@@ -128,6 +168,8 @@ class BeamState:
     target_glow: float
     selected: int = 0
     path: BeamPath | None = None
+    lit: bool = False                      # the laser's reflected light reaches the target
+    lit_by: tuple[int, ...] = ()           # the mirrors of the way it came, in order
     won: bool = False
     next_asked: bool = False
     frame: int = 0
@@ -312,6 +354,14 @@ def beam_system(world: World, state: BeamState) -> None:
     if path.same_as(state.path):
         return
     state.path = path
+    # The beam is the laser light's axis: the frame's virtual-light budget goes first to the
+    # light by the mirrors it meets (a way through more of them ranks higher; the lamp's light
+    # reaches other mirrors too, but only through the barrel's narrow cone, often not at all).
+    on_path = {bounce.mirror for bounce in path.bounces}
+    for entity, mirror in world.query_one(Mirror):
+        wanted = 1 if entity in on_path else 0
+        if mirror.priority != wanted:
+            mirror.priority = wanted
     for _, (segment, transform, mesh_ref) in world.query(BeamSegment, Transform, MeshRef):
         if segment.index >= len(path.points) - 1:
             if mesh_ref.visible:
@@ -326,14 +376,102 @@ def beam_system(world: World, state: BeamState) -> None:
             mesh_ref.visible = True
 
 
+def laser_front(world: World, rules: BeamRules) -> float:
+    """How far the laser's housing reaches forward (its -Z) in its own space."""
+    mesh_ref = world.try_get(rules.source, MeshRef)
+    return -float(mesh_ref.mesh.bounds[0][2]) if mesh_ref is not None else 0.0
+
+
+def spawn_laser_light(world: World, rules: BeamRules) -> int:
+    """The laser's lamp and its barrel, children of the laser (they turn with it): the lamp
+    just past the housing's front face, the barrel's four plates from there forward."""
+    front = laser_front(world, rules)
+    look = Material(color=(0.1, 0.1, 0.12, 1.0), metallic=0.6, roughness=0.35)
+    centre = -(front + BARREL_LENGTH / 2.0)
+    side = BARREL_HALF + BARREL_WALL / 2.0
+    outer = 2.0 * (BARREL_HALF + BARREL_WALL)
+    for position, size in (((0.0, side, centre), (outer, BARREL_WALL, BARREL_LENGTH)),
+                           ((0.0, -side, centre), (outer, BARREL_WALL, BARREL_LENGTH)),
+                           ((side, 0.0, centre), (BARREL_WALL, 2.0 * BARREL_HALF, BARREL_LENGTH)),
+                           ((-side, 0.0, centre), (BARREL_WALL, 2.0 * BARREL_HALF, BARREL_LENGTH))):
+        world.spawn(Transform(position=position, parent=rules.source), MeshRef(box(size, name="laser barrel")),
+                    look, LaserBarrel())
+    return world.spawn(Transform(position=(0.0, 0.0, -(front + LAMP_OFFSET)), parent=rules.source),
+                       PointLight(color=LAMP_COLOR, intensity=LAMP_INTENSITY, range=LAMP_RANGE, shadows=True,
+                                  bounces=min(rules.max_bounces, MAX_LIGHT_BOUNCES)), BeamLamp())
+
+
+def target_points(world: World, target: int) -> list[glm.vec3]:
+    """The centres of the target's faces (its mesh's box), a little out from them, world."""
+    mesh_ref = world.get(target, MeshRef)
+    model = world.get(target, Transform).world
+    lo, hi = (glm.vec3(*map(float, b)) for b in mesh_ref.mesh.bounds)
+    centre = (lo + hi) * 0.5
+    points = []
+    for axis in range(3):
+        for end in (lo, hi):
+            face = glm.vec3(centre)
+            face[axis] = end[axis]
+            out = glm.vec3(0.0)
+            out[axis] = 1.0 if end is hi else -1.0
+            world_face = glm.vec3(model * glm.vec4(face, 1.0))
+            normal = glm.normalize(glm.vec3(model * glm.vec4(out, 0.0)))
+            points.append(world_face + normal * TARGET_PROBE_OUT)
+    return points
+
+
+def reflected_light(world: World, surfaces: Surfaces) -> list[VirtualLight]:
+    """The laser lamp's virtual lights through this frame's mirrors (the shadows stage's rules)."""
+    found: list[VirtualLight] = []
+    for entity, (light, transform, _) in world.query(PointLight, Transform, BeamLamp):
+        rgb = glm.vec3(light.color) * light.intensity
+        found += virtual_lights([], [(entity, glm.vec3(transform.world[3]), light.range, rgb)], surfaces,
+                                {entity: light.bounces})
+    return found
+
+
+def light_system(world: World, state: BeamState) -> None:
+    """Whether the laser's reflected light reaches the target this frame: a virtual light of
+    the lamp lights a point of the target's faces (``shadow_rules.light_path``, the shader's
+    aperture test) and no solid stands on any leg of its way (the engine's ray cast)."""
+    surfaces = world.resources.get(Surfaces)
+    if surfaces is None:
+        return
+    rules = state.rules
+    cast = first_solid(world)
+    lit_by: tuple[int, ...] = ()
+    for light in sorted(reflected_light(world, surfaces), key=lambda v: v.bounces):
+        for point in target_points(world, rules.target):
+            way = light_path(light, point)
+            if way is not None and _clear(cast, way, light.light):
+                lit_by = light.path
+                break
+        if lit_by:
+            break
+    state.lit, state.lit_by = bool(lit_by), lit_by
+
+
+def _clear(cast: FirstSolid, way: list, lamp: int) -> bool:
+    """No solid on any leg of ``way`` (its corners, the target's point first)."""
+    for start, end in zip(way, way[1:], strict=False):
+        a, b = glm.vec3(*start), glm.vec3(*end)
+        length = glm.distance(a, b)
+        if length < 1e-6:
+            continue
+        hit = cast(a, (b - a) / length, None)
+        if hit is not None and hit[0] < length - 1e-4:
+            return False
+    return True
+
+
 def win_system(world: World, state: BeamState) -> None:
-    """The beam on the target: the win event (once until a restart) and the target glows."""
-    if state.won or state.path is None or state.path.end != "target":
+    """The laser's light on the target: the win event (once until a restart) and the target glows."""
+    if state.won or not state.lit:
         return
     state.won = True
     world.get(state.rules.target, Emissive).power = WIN_GLOW
     state.events.append(BeamEvent("win", state.frame, {"level": state.level_name,
-                                                       "bounces": len(state.path.bounces)}))
+                                                       "bounces": len(state.lit_by)}))
 
 
 def marker_system(world: World, state: BeamState) -> None:
@@ -414,6 +552,16 @@ class MirrorBeam(LevelGame):
             if not world.has(camera, Tonemap) and not world.has(camera, Bloom):
                 world.add_component(camera, Tonemap(curve="pbr_neutral"))
                 world.add_component(camera, Bloom(intensity=0.5, threshold=0.8, composite="additive"))
+        # The laser's light is reflected by every mirror, as many times in a row as the level
+        # allows and the engine follows (a light goes no deeper than a mirror's max_depth, as
+        # its views); the sun by none (the puzzle's light is the laser's).
+        bounces = min(rules.max_bounces, MAX_LIGHT_BOUNCES)
+        for _, mirror in world.query_one(Mirror):
+            mirror.reflects_light = True
+            mirror.max_depth = max(mirror.max_depth, bounces)
+        for _, sun in world.query_one(DirectionalLight):
+            sun.bounces = 0
+        spawn_laser_light(world, rules)
         target = world.try_get(rules.target, Emissive)
         if target is None:
             target = Emissive(0.0)
@@ -484,6 +632,7 @@ class MirrorBeam(LevelGame):
         """The beam system: trace, win, the selection marker; the frame's last game work."""
         state = self.state
         beam_system(world, state)
+        light_system(world, state)
         solved = state.won
         win_system(world, state)
         if state.won and not solved and self.verbose:
