@@ -170,6 +170,7 @@ class BeamState:
     path: BeamPath | None = None
     lit: bool = False                      # the laser's reflected light reaches the target
     lit_by: tuple[int, ...] = ()           # the mirrors of the way it came, in order
+    light_seen: tuple = ()                 # what ``lit`` was worked out from (the mirrors' states, poses)
     won: bool = False
     next_asked: bool = False
     frame: int = 0
@@ -438,6 +439,13 @@ def light_system(world: World, state: BeamState) -> None:
     if surfaces is None:
         return
     rules = state.rules
+    # Worked out again only when a mirror (a new SurfaceState), the target or the lamp changed.
+    seen = (tuple(surfaces.mirrors.values()), world.get(rules.target, Transform).world.to_bytes(),
+            tuple(t.world.to_bytes() for _, (t, _) in world.query(Transform, BeamLamp)))
+    if len(seen[0]) == len(state.light_seen[0] if state.light_seen else ()) and \
+            all(a is b for a, b in zip(seen[0], state.light_seen[0], strict=True)) and seen[1:] == state.light_seen[1:]:
+        return
+    state.light_seen = seen
     cast = first_solid(world)
     lit_by: tuple[int, ...] = ()
     for light in sorted(reflected_light(world, surfaces), key=lambda v: v.bounces):
