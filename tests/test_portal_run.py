@@ -376,7 +376,7 @@ def test_command_line_runs_a_level_file_headless_and_names_a_bad_one(tmp_path):
 
 def test_level_files_are_in_rising_order_and_ship_a_solution():
     assert [p.name for p in LEVELS] == ["01_first_jump.toml", "02_round_the_corner.toml", "03_two_hops.toml",
-                                        "04_the_fling.toml"]
+                                        "04_the_fling.toml", "05_lamp_through_a_portal.toml"]
     for path in LEVELS:
         assert PortalRun(path, verbose=False).level.rules.get("solution"), path
 
@@ -645,3 +645,97 @@ def test_n_after_a_win_plays_the_next_level_in_the_same_world(play, capsys):
     p.pilot = Autopilot(p.game.rules.solution)
     p.run_script(render=False)
     assert p.game.won
+
+
+def _floor_hits(view, size) -> np.ndarray:
+    """Where each pixel's primary ray meets the plane y = 0 (rows of the flattened image)."""
+    from tests.support import pixel_rays
+
+    eye, rays = pixel_rays(view, size)
+    t = -eye[1] / rays[..., 1]
+    return (eye + rays * t[..., None]).reshape(-1, 3)
+
+
+def test_a_lamp_lights_the_dark_room_through_a_portal_pair(ctx):
+    """Level 5 at night: the lamp is in a closet 40 m off, out of its own range of the room;
+    the closet's portal carries its light out of the skylight high on the left wall.  Looking
+    at the floor below it, float64 rays predict which floor pixels the lamp's image lights
+    (the line from the point to the lamp carried by the pair crosses the skylight's opening,
+    within range) and the frame agrees on 98% of the floor outside a band at the edge; with
+    the closet portal's carries_light off no floor pixel is brighter than the night's."""
+    from components import Portal as PortalComponent
+    from engine.core.portal_math import pair_transform
+    from tests.support import srgb_to_linear
+
+    size = (240, 135)
+    level = next(p for p in LEVELS if p.stem == "05_lamp_through_a_portal")
+    game = PortalRun(level, verbose=False, show_caption=False)
+    engine = Engine(game, ctx)
+    capture = CaptureTarget(ctx, size)
+    try:
+        pilot = Autopilot(["look 60 -20", "wait 3"])
+        while not pilot.done:
+            pilot.fill(engine.world.resources[Input], game)
+            engine.frame(DT, Output(capture.framebuffer, size))
+        on = capture.read_rgb()
+        assert engine.renderer.stats.virtual_lights == 1 and engine.renderer.stats.virtual_lights_cut == 0
+        floor = (engine.renderer.targets.read_ids() == game.names["floor"]).reshape(-1)
+        closet = engine.world.get(game.names["closet_portal"], PortalComponent)
+        closet.carries_light = False
+        engine.frame(DT, Output(capture.framebuffer, size))
+        off = capture.read_rgb()
+        assert engine.renderer.stats.virtual_lights == 0
+        points = _floor_hits(engine.main_view, size)
+        world = engine.world
+        carry = glm.dmat4(pair_transform(world.get(game.names["closet_portal"], Transform).world,
+                                         world.get(game.names["skylight"], Transform).world))
+        lamp = np.array(world.get(game.names["lamp"], Transform).position, np.float64)
+        image = np.array(glm.dvec3(carry * glm.dvec4(*lamp, 1.0)))
+    finally:
+        capture.release()
+        engine.close()
+    # The skylight: facing +x at x = -5.99, 1.6 m wide (z) and 2 m tall (y), centred at y = 5, z = 0.
+    to_image = image - points
+    t = (-5.99 - points[:, 0]) / to_image[:, 0]
+    crossing = points + to_image * t[:, None]
+    distance = np.linalg.norm(to_image, axis=1)
+
+    def lit(margin):
+        return (points[:, 0] > -5.99) & (t > 0) & (t < 1) & (np.abs(crossing[:, 1] - 5.0) < 1.0 - margin) & \
+            (np.abs(crossing[:, 2]) < 0.8 - margin) & (distance < 16.0)
+
+    ratio = (srgb_to_linear(on).mean(-1) / np.maximum(srgb_to_linear(off).mean(-1), 1e-6)).reshape(-1)
+    sure = floor & (lit(0.05) == lit(-0.05))
+    says = np.where(ratio > 1.2, 1, np.where(ratio < 1.02, 0, -1))[sure]
+    rays = lit(0.05)[sure].astype(int)
+    assert sure.sum() > 10000 and rays.sum() > 3000, (int(sure.sum()), int(rays.sum()))
+    assert float((says == rays).mean()) >= 0.98, float((says == rays).mean())
+    assert srgb_to_linear(off).reshape(-1, 3)[floor].mean() < 0.05, "the room is dark without the portal's light"
+
+
+def test_placed_portals_carry_light_unless_the_rules_say_not(ctx, tmp_path):
+    """Level 1's sun goes into portal B (on the back wall, which the sun falls on) and out of
+    portal A, and its fill light into A and out of B: with both placed, a virtual light for
+    each light travelling towards a placed portal's front (counted here from the placed
+    portals' normals); with ``portal_light = false`` in the rules the placed portals carry none."""
+    from components import DirectionalLight
+
+    for light, text in ((True, LEVELS[0].read_text()),
+                        (False, LEVELS[0].read_text().replace("kill_y = -10", "kill_y = -10\nportal_light = false"))):
+        level = tmp_path / f"light_{light}.toml"
+        level.write_text(text)
+        game = PortalRun(level, verbose=False, show_caption=False)
+        engine = Engine(game, ctx)
+        try:
+            pilot = Autopilot(list(game.rules.solution[:4]) + ["wait 2"])
+            while not pilot.done:
+                pilot.fill(engine.world.resources[Input], game)
+                engine.frame(DT, None)
+            assert all(p is not None for p in game.placed)
+            assert [engine.world.get(p, Portal).carries_light for p in game.portals] == [light, light]
+            towards = sum(float(np.dot(placed.normal, np.array(sun.direction))) < 0.0
+                          for placed in game.placed for _, sun in engine.world.query_one(DirectionalLight))
+            assert towards == 2
+            assert engine.renderer.stats.virtual_lights == (towards if light else 0)
+        finally:
+            engine.close()

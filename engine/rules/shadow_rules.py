@@ -345,6 +345,15 @@ def _reaches_through(image: glm.vec3, kind: str, aperture: Aperture, corners: np
     return True
 
 
+def _reach(point: np.ndarray, corners: np.ndarray) -> float:
+    """The distance from ``point`` to the nearest point of a parallelogram (corners o, o + u,
+    o + u + v, o + v as rows)."""
+    o, u, v = corners[0], corners[1] - corners[0], corners[3] - corners[0]
+    a = float(np.clip((point - o) @ u / max(float(u @ u), 1e-12), 0.0, 1.0))
+    b = float(np.clip((point - o) @ v / max(float(v @ v), 1e-12), 0.0, 1.0))
+    return float(np.linalg.norm(o + a * u + b * v - point))
+
+
 def virtual_lights(directional: list[tuple[int, glm.vec3, glm.vec3]],
                    points: list[tuple[int, glm.vec3, float, glm.vec3]],
                    surfaces: Surfaces | None, bounces: dict[int, int] | None = None,
@@ -405,8 +414,8 @@ def virtual_lights(directional: list[tuple[int, glm.vec3, glm.vec3]],
                 new_image = glm.normalize(glm.mat3(carry) * d)
             else:
                 height = (glm.dot(glm.vec3(entry), glm.vec3(image)) + entry.w) / glm.length(glm.vec3(entry))
-                if height <= 0.0 or height >= light_range:
-                    continue  # behind the surface, or its range ends before it
+                if height <= 0.0 or _reach(np.asarray(glm.vec3(image), np.float64), corners) >= light_range:
+                    continue  # behind the surface, or its range ends before its outline
                 new_image = glm.vec3(carry * glm.vec4(glm.vec3(image), 1.0))
             color = glm.vec3(rgb) * tint
             way_out = Leg(glm.mat4(1.0), (glm.vec4(surface.exit_plane),), (exit_surface.entity, surface.entity))

@@ -156,6 +156,7 @@ class RunRules:
     portal_size: tuple[float, float] = DEFAULT_PORTAL_SIZE
     kill_y: float = -20.0
     solution: tuple[str, ...] = ()
+    portal_light: bool = True  # the placed portals carry light (Portal.carries_light)
 
 
 @dataclass
@@ -208,14 +209,16 @@ def load_rules(rules: dict[str, Any], names: dict[str, int], where: str) -> RunR
 
     Rules: ``exit`` (entity name, required), ``start`` ([x, y, z] of the feet, required),
     ``yaw`` / ``pitch`` (degrees), ``portal_walls`` (entity names, or "all"), ``portal_floors``
-    (true: their upward faces take portals too), ``not_solid``
+    (true: their upward faces take portals too), ``portal_light`` (true, the default: the
+    portals the player places carry the lights in front of them out of the other one,
+    ``Portal.carries_light``), ``not_solid``
     (entity names the body passes through), ``portal_size`` ([w, h] m), ``kill_y`` (falling
     below it restarts), ``solution`` (autopilot commands that win the level)."""
     def fail(rule: str, why: str) -> LevelRulesError:
         return LevelRulesError(f"{where}: rule {rule!r} {why}")
 
     known = {"exit", "start", "yaw", "pitch", "portal_walls", "portal_floors", "not_solid", "portal_size", "kill_y",
-             "solution"}
+             "solution", "portal_light"}
     unknown = sorted(set(rules) - known)
     if unknown:
         raise fail(unknown[0], f"is not a portal_run rule (known: {', '.join(sorted(known))})")
@@ -258,6 +261,10 @@ def load_rules(rules: dict[str, Any], names: dict[str, int], where: str) -> RunR
     if not isinstance(floors, bool):
         raise fail("portal_floors", f"must be true or false, got {floors!r}")
     out.portal_floors = floors
+    light = rules.get("portal_light", True)
+    if not isinstance(light, bool):
+        raise fail("portal_light", f"must be true or false, got {light!r}")
+    out.portal_light = light
     if "portal_size" in rules:
         out.portal_size = vector("portal_size", rules["portal_size"], 2, 0.5 + 2 * CORNER_INSET, 20.0)
         if out.portal_size[0] < 2 * HALF_WIDTH + 0.1 or out.portal_size[1] < HEIGHT + 0.1:
@@ -352,6 +359,7 @@ class PortalRun(LevelGame):
         for portal, rgb in zip(self.portals, PORTAL_COLORS, strict=True):
             p = world.get(portal, Portal)
             p.enabled = False
+            p.carries_light = self.rules.portal_light
             p.closed_color = (*(0.35 * c for c in rgb), 1.0)
             world.get(portal, MeshRef).visible = False
             self.rims.append(world.spawn(Transform(position=(0.0, 0.0, -0.4 * PORTAL_OFFSET), parent=portal),
