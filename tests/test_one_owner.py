@@ -197,7 +197,8 @@ def test_the_glsl_names_every_clip_distance_and_numbers_none():
     rect = dict(zip(bindings.CLIP_RECT_SIDES, bindings.CLIP_RECT, strict=True))
     assert {name: int(defines[name]) for name in clip_names} == {
         "CLIP_VIEW_PLANE": bindings.CLIP_VIEW_PLANE, "CLIP_SLICE": bindings.CLIP_SLICE,
-        "CLIP_DISTANCE_COUNT": bindings.CLIP_DISTANCE_COUNT, **{f"CLIP_RECT_{side}": i for side, i in rect.items()}}
+        "CLIP_LEG_PLANE": bindings.CLIP_LEG_PLANE, "CLIP_DISTANCE_COUNT": bindings.CLIP_DISTANCE_COUNT,
+        **{f"CLIP_RECT_{side}": i for side, i in rect.items()}}
     assert sorted((bindings.CLIP_VIEW_PLANE, bindings.CLIP_SLICE, *bindings.CLIP_RECT)) == list(
         range(bindings.CLIP_DISTANCE_COUNT))
 
