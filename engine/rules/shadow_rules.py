@@ -292,11 +292,6 @@ class VirtualLight:
     apertures: tuple[Aperture, ...] = ()
     legs: tuple[Leg, ...] = ()
 
-    @property
-    def image_box_carries(self) -> list[glm.mat4]:
-        """The carries of the legs before the way out (what its map holds besides the scene)."""
-        return [leg.carry for leg in self.legs[1:]]
-
 
 def _outline(surface) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
     """A flat surface's outline as an origin corner and its two edges (a parallelogram)."""
