@@ -657,7 +657,8 @@ def _floor_hits(view, size) -> np.ndarray:
 
 
 def test_a_lamp_lights_the_dark_room_through_a_portal_pair(ctx):
-    """Level 5 at night: the lamp is in a closet 40 m off, out of its own range of the room;
+    """Level 5 at night: the lamp is in a closet behind the left wall (it casts shadows: the
+    wall keeps its own light out);
     the closet's portal carries its light out of the skylight high on the left wall.  Looking
     at the floor below it, float64 rays predict which floor pixels the lamp's image lights
     (the line from the point to the lamp carried by the pair crosses the skylight's opening,
