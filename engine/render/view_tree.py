@@ -62,7 +62,7 @@ from engine.render.mirror_passes import (
 )
 from engine.render.scene_pass import REFLECTION_LEVEL, SceneOptions
 from engine.render.targets import LevelStack, RenderTargets
-from engine.render.view_plan import Candidates, LevelRows, SurfaceTable, _mat, level_rects
+from engine.render.view_plan import ROW, Candidates, LevelRows, SurfaceTable, _mat, level_rects
 from engine.render.views import CAMERA_BLOCK_BYTES, PlannedView, View
 
 if TYPE_CHECKING:  # the renderer imports this module; the surfaces' records are a floor above
@@ -536,7 +536,7 @@ class ViewTree:
         entities, parents = surfaces.entity_list, step.parents
         ids = [(parents[p].index, entities[s], node) for p, s, node in
                zip(candidates.parent.tolist(), candidates.surface.tolist(),
-                   candidates.rows.data[:, 51].astype(np.int64).tolist(), strict=True)]
+                   candidates.rows.node.astype(np.int64).tolist(), strict=True)]
         self.passes.prepare_level(step.targets, step.parent_targets,
                                   Claims(ids, list(map(tuple, candidates.scissor.tolist()))), step.queries)
 
@@ -619,10 +619,10 @@ class ViewTree:
         size = chosen.size
         blocks = chosen.blocks.tobytes()
         step = CAMERA_BLOCK_BYTES
-        columns = chosen.rows.data[:, 44:52].astype(np.int64)  # rect, exit, mask, mirrored, node
+        columns = chosen.rows.data.take(_NODE_COLUMNS, axis=1).astype(np.int64)
         views, nodes = [], []
         at = 0
-        for (x0, y0, x1, y1, _, _, mirrored, node), s, p, scissor, fade in zip(
+        for (x0, y0, x1, y1, mirrored, node), s, p, scissor, fade in zip(
                 columns.tolist(), chosen.surface.tolist(), chosen.parent.tolist(), chosen.scissor.tolist(),
                 chosen.fade.tolist(), strict=True):
             state = states[s]
@@ -654,6 +654,10 @@ class ViewTree:
         self.passes.release()
         if self.ends is not None:
             self.ends.release()
+
+
+# The LevelRows columns a level's nodes read (_level_nodes), as whole numbers: the rectangle, mirrored, node.
+_NODE_COLUMNS = np.array([*range(ROW["rect"].start, ROW["rect"].stop), ROW["mirrored"].start, ROW["node"].start])
 
 
 def _ends_at(ends: tuple[np.ndarray, int] | None, depth: int) -> np.ndarray | None:
