@@ -7,6 +7,8 @@ nothing.
 """
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import moderngl
 import numpy as np
 from pyglm import glm
@@ -71,8 +73,23 @@ class GpuMesh:
         self.indices.release()
 
 
+class BatchKey(NamedTuple):
+    """What sorts an instance into its batch (``Renderer.batch_for``): instances that share
+    all of it are drawn together, with one program build and one set of textures.  Image
+    fields are the images' ``id`` (0: none)."""
+
+    mesh: int                       # Mesh.id
+    texture: int                    # the albedo texture
+    probes: tuple[int, int, bool, int]  # (probe, second probe, probe blend, rest probe): the probes it samples
+    transparent_entity: int         # a transparent entity's own batch (0: opaque, shared)
+    normal_map: int
+    emissive_map: int
+    metallic_roughness_map: int
+    mirrored: bool                  # a negative determinant: the other winding
+
+
 class InstanceBatch:
-    """The instances of one (mesh, texture, normal map) triple."""
+    """The instances of one ``BatchKey``."""
 
     def __init__(self, ctx: moderngl.Context, mesh: GpuMesh, texture: moderngl.Texture | None,
                  normal_map: moderngl.Texture | None = None, capacity: int = 16) -> None:
@@ -99,6 +116,7 @@ class InstanceBatch:
         # Where instances were and are whose rows changed since ``take_changed_box`` (the old
         # and the new boxes of moved, added and removed rows): what a shadow map must redraw.
         self._changed: tuple[np.ndarray, np.ndarray] | None = None
+        self.key: BatchKey | None = None  # set by Renderer.batch_for
         self.probe = 0  # the entity owning the reflection probe its instances sample (0: none)
         self.mirrored = False  # its instances' model matrices mirror them (drawn with the other winding)
         # Probe blending (probe_rules.probe_blend): a second probe (0: none), and whether the

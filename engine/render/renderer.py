@@ -21,7 +21,7 @@ from engine.assets.texture_data import TextureData
 from engine.core.errors import GLLimitError, GLPassError
 from engine.render.bindings import CAMERA_BINDING, bind_uniform_range
 from engine.render.gl_context import GLCapabilities
-from engine.render.instances import GpuMesh, InstanceBatch
+from engine.render.instances import BatchKey, GpuMesh, InstanceBatch
 from engine.render.irradiance import IrradianceTable
 from engine.render.path_checks import PathChecks
 from engine.render.present import ANTIALIAS_MODES, PresentPass
@@ -230,10 +230,11 @@ class Renderer:
         # ``rest_probe``: a probe, not the sky, takes what the weights leave (PROBE_REST).
         # ``mirrored``: instances whose model matrix has a negative determinant, drawn with the
         # other winding (ScenePass), so they get batches of their own.
-        key = (mesh.id, id(texture) if texture is not None else 0, (probe, second_probe, probe_blend, rest_probe),
-               transparent_entity,
-               id(normal_map) if normal_map is not None else 0, id(emissive_map) if emissive_map is not None else 0,
-               id(metallic_roughness_map) if metallic_roughness_map is not None else 0, mirrored)
+        key = BatchKey(mesh.id, id(texture) if texture is not None else 0,
+                       (probe, second_probe, probe_blend, rest_probe), transparent_entity,
+                       id(normal_map) if normal_map is not None else 0,
+                       id(emissive_map) if emissive_map is not None else 0,
+                       id(metallic_roughness_map) if metallic_roughness_map is not None else 0, mirrored)
         batch = self.batches.get(key)
         if batch is None:
             for name, image in (("Material.texture", texture), ("Material.normal_map", normal_map),
@@ -292,16 +293,16 @@ class Renderer:
         self._order_stale = True
         self._note_dropped(batch.take_changed_box())
         batch.release()
-        mesh_id, texture_id, _, _, normal_map_id, emissive_map_id, metallic_roughness_id, _ = batch.key
-        self._release(self._meshes, mesh_id)
-        if texture_id:
-            self._release(self._textures, texture_id)
-        if normal_map_id:
-            self._release(self._textures, ("normal", normal_map_id))
-        if emissive_map_id:
-            self._release(self._textures, emissive_map_id)
-        if metallic_roughness_id:
-            self._release(self._textures, ("normal", metallic_roughness_id))
+        key = batch.key
+        self._release(self._meshes, key.mesh)
+        if key.texture:
+            self._release(self._textures, key.texture)
+        if key.normal_map:
+            self._release(self._textures, ("normal", key.normal_map))
+        if key.emissive_map:
+            self._release(self._textures, key.emissive_map)
+        if key.metallic_roughness_map:
+            self._release(self._textures, ("normal", key.metallic_roughness_map))
 
     def normal_map_texture(self, normal_map: TextureData) -> moderngl.Texture | None:
         """The uploaded normal map of ``normal_map`` while a batch draws with it (a mirror's
