@@ -371,29 +371,30 @@ class SurfaceTable:
         facing += self._pair_bias(data, depth, depth_cap, ends, fallback)
         if not facing.max() > 0.0:
             return _NONE, _NONE, _NO_RECTS, None
-        # Each parent's 12 rows, then every corner of every surface through them: (12, 5)
-        # times each parent's (5, 4) block, then (12 P, 4) times each corner's (4, S) gives
-        # (corners, P, 12, S), so x and y are divided by w, and the minimum over the corners
-        # taken, in whole blocks.
-        clip = np.matmul(_cull_rows(root_proj), data[:, _CLIP_VIEW].reshape(count, 5, 4))
-        clip = (clip.reshape(12 * count, 4) @ self.corner_columns).reshape(self.corner_count, count, 12, surfaces)
-        np.divide(clip[:, :, 0:4], np.maximum(clip[:, :, 4:5], 1e-6), out=clip[:, :, 0:4])  # a w <= 0: straddles
-        least = clip.min(axis=0)                                                         # P x 12 x S
+        # Rows first: (12, 5) times every parent's (5, 4) block side by side, then (12 P, 4)
+        # times each corner's (4, S) gives (corners, 12, P, S), so x and y are divided by w,
+        # and the minima over the corners and over the rows taken, along the first axis
+        # (numpy's fast one for small arrays), in whole blocks.
+        block = data[:, _CLIP_VIEW].reshape(count, 5, 4).transpose(1, 0, 2).reshape(5, 4 * count)
+        clip = (_cull_rows(root_proj) @ block).reshape(12 * count, 4) @ self.corner_columns
+        clip = clip.reshape(self.corner_count, 12, count, surfaces)
+        np.divide(clip[:, 0:4], np.maximum(clip[:, 4:5], 1e-6), out=clip[:, 0:4])  # a w <= 0: see straddles
+        least = _MIN(clip, axis=0)                                                       # 12 x P x S
         # x0, y0, -x1, -y1 in pixels, rounded outwards with a pixel's margin; a pair with a
         # corner behind the eye is conservative (the parent's whole rectangle).
-        rects = least[:, 0:4] + _OUTWARDS
+        rects = least[0:4] + _OUTWARDS
         rects *= _half_sizes(root_size)
         np.floor(rects, out=rects)
         rects -= 1.0
-        np.copyto(rects, -np.inf, where=least[:, 4:5] <= 1e-6)
-        np.maximum(rects, (data[:, _RECT] * _SIGNS)[:, :, None], out=rects)  # inside the parent's
+        np.copyto(rects, -np.inf, where=least[4] <= 1e-6)
+        np.maximum(rects, (data[:, _RECT] * _SIGNS).T[:, :, None], out=rects)  # inside the parent's
         # Seen: facing and allowed, not culled (every corner outside one side of the frustum,
         # or behind the clip plane; on a side counts as outside) and a rectangle with pixels
-        # (x1 > x0 and y1 > y0): one maximum over the rows 2-11 written over, each < 0 to keep.
-        np.negative(facing, out=least[:, 2])
-        np.add(rects[:, 0:2], rects[:, 2:4], out=least[:, 3:5])
-        p, s = np.nonzero(least[:, 2:12].max(axis=1) < 0.0)
-        rects = rects[p, :, s]
+        # (x1 > x0 and y1 > y0): one maximum over the rows 2-11, written over, each < 0 to keep.
+        np.negative(facing, out=least[2])
+        np.add(rects[0:2], rects[2:4], out=least[3:5])
+        p, s = np.nonzero(_MAX(least[2:12], axis=0) < 0.0)
+        rects = rects[:, p, s].T
         rects *= _SIGNS
         if not self.fading:
             return p, s, rects, None
@@ -522,7 +523,7 @@ class SurfaceTable:
         mask |= ints[:, _KIND_BIT]
         data[:, _IDS_PART] = ints[:, _EXIT_ROW_AND_KEEP]  # the exit's row, the mask
         np.not_equal(parent[:, _MIRRORED], surface[:, _IS_MIRROR], out=data[:, _MIRRORED])
-        np.add(_counting(k), first_index, out=data[:, _NODE])
+        data[:, _NODE] = np.arange(first_index, first_index + k)
         proj, inv_proj = _oblique_projections(root_proj, inv_root_proj, inv_view, clip)
         # The Camera blocks (CAMERA_DTYPE) as float32 columns: the four matrices written
         # straight into their columns (column-major: each seen transposed), then the eye,
@@ -556,11 +557,10 @@ def _oblique_projections(root_proj: np.ndarray, inv_root_proj: np.ndarray, inv_v
     safe = np.abs(plane[:, 3]) > root.safe_distance  # the eye's distance to the plane: clip . eye
     q = np.sign(plane[:, :2]) @ root.inv_xy_t
     q += root.inv_zw
-    c = plane * (2.0 / (plane * q).sum(axis=1))[:, None]
-    c -= root_proj[3]
-    c -= root_proj[2]
+    c = plane * (2.0 / np.vecdot(plane, q))[:, None]
+    c -= root.rows_2_3
     change = np.where(safe[:, None], c, 0.0)  # the third row's change
-    proj = np.repeat(root_proj[None], len(plane), axis=0)
+    proj = root_proj[None].repeat(len(plane), 0)
     proj[:, 2] += change
     # The inverse: P = P0 + e2 change^T, so P^-1 = P0^-1 - (P0^-1 e2)(change^T P0^-1) / (1 + change^T P0^-1 e2),
     # both products of the change in one (root.inv_and_column: P0^-1 with its third column after it).
@@ -615,7 +615,8 @@ _NEVER = (1e30, 2e30, 1e30, 2e30)  # fade starts no distance or angle reaches
 # side, and what each side's NDC value gets before it is scaled to pixels and floored.
 _SIGNS = np.array([1.0, 1.0, -1.0, -1.0])
 _XYXY = np.array([0, 1, 0, 1])
-_OUTWARDS = np.array([1.0, 1.0, -1.0, -1.0])[:, None]
+_OUTWARDS = np.array([1.0, 1.0, -1.0, -1.0])[:, None, None]
+_MIN, _MAX = np.minimum.reduce, np.maximum.reduce
 
 # From the rows of a projection (x, y, z, w) and a view's clip plane, the rows
 # SurfaceTable.cull applies to the block (clip plane; view matrix) of a view (LevelRows
@@ -635,15 +636,25 @@ class _Projection:
     inv_zw: np.ndarray       # the inverse's last two columns, summed
     column: np.ndarray       # the inverse's third column
     inv_and_column: np.ndarray  # 4 x 5: the inverse, then its third column
+    rows_2_3: np.ndarray     # the projection's third and fourth rows, summed
+    of: tuple[np.ndarray, np.ndarray]  # the projection and its inverse it was made from
 
 
 # Kept per root projection (the main camera's, a probe face's: a few a frame).
 _PROJECTIONS: dict[bytes, _Projection] = {}
 _CULLS: dict[bytes, np.ndarray] = {}
+_LAST_PROJECTION: list[_Projection | None] = [None]
+_LAST_CULL: list = [None, None]  # the last root projection asked for and its rows
 
 
 def _projection(root_proj: np.ndarray, inv_root_proj: np.ndarray) -> _Projection:
-    """The oblique near planes' constants of ``root_proj`` (with its inverse)."""
+    """The oblique near planes' constants of ``root_proj`` (with its inverse): the last one's
+    again for the same read-only arrays (the view tree's, kept while its root's projection
+    stays), else found by their bytes."""
+    last = _LAST_PROJECTION[0]
+    if last is not None and last.of[0] is root_proj and last.of[1] is inv_root_proj \
+            and not root_proj.flags.writeable and not inv_root_proj.flags.writeable:
+        return last
     key = root_proj.tobytes() + inv_root_proj.tobytes()
     found = _PROJECTIONS.get(key)
     if found is None:
@@ -653,13 +664,19 @@ def _projection(root_proj: np.ndarray, inv_root_proj: np.ndarray) -> _Projection
         found = _PROJECTIONS[key] = _Projection(OBLIQUE_SAFE_NEARS * near, inv_root_proj[:, :2].T.copy(),
                                                 inv_root_proj[:, 2] + inv_root_proj[:, 3],
                                                 inv_root_proj[:, 2].copy(),
-                                                np.concatenate([inv_root_proj, inv_root_proj[:, 2:3]], axis=1))
+                                                np.concatenate([inv_root_proj, inv_root_proj[:, 2:3]], axis=1),
+                                                root_proj[2] + root_proj[3], (root_proj, inv_root_proj))
+    _LAST_PROJECTION[0] = found
     return found
 
 
 def _cull_rows(root_proj: np.ndarray) -> np.ndarray:
     """``SurfaceTable.cull``'s 12 x 5 rows for ``root_proj``: ``_CULL_ROWS`` through it, and
-    minus the clip plane (column 0: the clip plane comes first in a view's block)."""
+    minus the clip plane (column 0: the clip plane comes first in a view's block); the last
+    one's again for the same read-only array."""
+    last = _LAST_CULL
+    if last[0] is root_proj and not root_proj.flags.writeable:
+        return last[1]
     key = root_proj.tobytes()
     rows = _CULLS.get(key)
     if rows is None:
@@ -668,6 +685,7 @@ def _cull_rows(root_proj: np.ndarray) -> np.ndarray:
         rows = _CULLS[key] = np.zeros((12, 5))
         rows[:11, 1:] = _CULL_ROWS @ root_proj
         rows[11, 0] = -1.0
+    last[:] = root_proj, rows
     return rows
 
 
@@ -675,25 +693,16 @@ _HALVES: dict[tuple[int, int], np.ndarray] = {}
 
 
 def _half_sizes(size: tuple[int, int]) -> np.ndarray:
-    """Half a root's width and height, as the cull's 4 x 1 factor of x0, y0, -x1, -y1."""
+    """Half a root's width and height, as the cull's 4 x 1 x 1 factor of x0, y0, -x1, -y1."""
     found = _HALVES.get(size)
     if found is None:
         if len(_HALVES) > 32:
             _HALVES.clear()
-        found = _HALVES[size] = (0.5 * np.array(size, np.float64))[_XYXY, None]
+        found = _HALVES[size] = (0.5 * np.array(size, np.float64))[_XYXY, None, None]
     return found
 
 
-_COUNTING = np.arange(256, dtype=np.float64)
 _ONES = np.ones(256)
-
-
-def _counting(k: int) -> np.ndarray:
-    """0, 1, ..., k - 1 as float64 (read only)."""
-    global _COUNTING
-    if len(_COUNTING) < k:
-        _COUNTING = np.arange(2 * k, dtype=np.float64)
-    return _COUNTING[:k]
 
 
 def _ones(k: int) -> np.ndarray:

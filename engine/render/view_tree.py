@@ -475,6 +475,8 @@ class ViewTree:
         key = proj.to_bytes()
         if self._projections is None or self._projections[0] != key:
             self._projections = (key, _mat(proj), _mat(glm.inverse(proj)))
+            for kept in self._projections[1:]:  # read-only: the planner knows them again by identity
+                kept.flags.writeable = False
         return self._projections[1], self._projections[2]
 
     def _end_surfaces(self, surfaces: SurfaceTable, root: View, depth_cap: int) -> tuple[np.ndarray, int] | None:
