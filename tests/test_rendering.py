@@ -494,7 +494,7 @@ def test_composite_rows_hold_each_views_quad_and_parameters_where_the_shader_rea
     in order); checked here against numpy arithmetic done independently: the outline's
     corners in the parent's clip space flattened onto z = 0, a rectangle's corners in NDC,
     the parent's inverse view-projection and eye, and the surface's and tile's numbers."""
-    from engine.render.mirror_passes import Composite, composite_rows, composite_surface
+    from engine.render.mirror_passes import COMPOSITE_DTYPE, Composite, composite_rows, composite_surface
     from engine.render.rough_atlas import Tile
     from engine.render.views import camera_view
 
@@ -507,10 +507,14 @@ def test_composite_rows_hold_each_views_quad_and_parameters_where_the_shader_rea
         Composite(7, (10, 20, 30, 40), (11, 21, 31, 41), parent, mirror, Tile(256, 512, 0.5)),
         Composite(9, (50, 60, 20, 10), (50, 60, 20, 10), parent, portal),
     ], (200, 100))
-    table = np.frombuffer(rows, np.float32).reshape(2, 61)
-    corners, rect, inverse = table[:, 0:16].reshape(2, 4, 4), table[:, 16:20], table[:, 20:36].reshape(2, 4, 4)
-    eye, tint, params, normal = (table[:, i:i + 4] for i in (36, 40, 44, 48))
-    carried = table[:, 52:61]
+    table = np.frombuffer(rows, COMPOSITE_DTYPE)  # the row's schema, read by field name
+    assert len(table) == 2
+    corners, rect, inverse = table["corners"].reshape(2, 4, 4), table["rect"], table["inv_view_proj"].reshape(2, 4, 4)
+    eye = np.column_stack([table["eye"], table["tile_x"]])
+    tint = np.column_stack([table["tint"], table["tile_scale"]])
+    params = np.column_stack([table[name] for name in ("reflect_rate", "roughness", "params_z", "view_index")])
+    normal = np.column_stack([table["normal"], table["tile_y"]])
+    carried = table["carry"]
 
     view_proj = np.array(parent.view_proj.to_list(), np.float64)       # rows = columns of the GL matrix
     expected = outline @ view_proj

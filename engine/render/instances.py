@@ -26,6 +26,10 @@ INSTANCE_DTYPE = np.dtype([
     ("slice", "<f4", (4,)),           # world plane; only its front is drawn ((0,0,0,1): all)
     ("slots", "<u4", (4,)),           # emissive, refract, reflect variants, entity id
 ])
+# Components of the vec4 fields above that carry a meaning of their own (the scene shaders
+# read them by these positions: in_reflect.y the index, in_reflect.zw the weights, in_tint.w).
+REFLECT_MIX, REFRACTION_IOR, PROBE_WEIGHTS = 0, 1, slice(2, 4)  # "reflect": mix, ior, each probe's weight
+TINT_VISIBILITY = 3                                             # "tint": visibility_code
 INSTANCE_FORMAT = "16f 9f 4f 4f 4f 4f 4f 4u/i"
 INSTANCE_ATTRIBUTES = ("in_model", "in_normal_matrix", "in_color", "in_surface", "in_reflect", "in_tint",
                        "in_slice", "in_slots")

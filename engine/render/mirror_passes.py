@@ -194,16 +194,37 @@ class PreparedComposites:
     rows: dict[tuple[str, TextureData | None], bytes]    # packed instance rows per (variant, normal map)
 
 
-# One row per composite instance (mirror_composite.vert's attributes, in order): the 4 clip
-# corners, the view's rectangle in its level, the parent's inverse view-projection, then
-# eye.xyz + tile x, tint.rgb + tile scale, (reflect_rate, roughness, is_portal, view index),
-# normal.xyz + tile y, carry.  The tile and the index ride in spare components: a vertex
-# shader has 16 attribute slots and the rest of the row fills them.  A water row (never
-# rough, so it has no tile) carries the waves' offset u and v where the tile's x and y go,
-# the second layer's share where its scale goes, and F0 where the roughness goes.
+# One row per composite instance: mirror_composite.vert's attributes, in order, each one or
+# more of these fields.  A vertex shader has 16 attribute slots and the rest of the row fills
+# them, so the tile and the view's index ride in spare components; a water row (never rough,
+# so it has no tile) carries the waves' offset u and v where the tile's x and y go, the second
+# layer's share where its scale goes, and F0 where the roughness goes (composite_rows).
+COMPOSITE_DTYPE = np.dtype([
+    ("corners", "<f4", (16,)),        # the 4 clip-space corners of its quad
+    ("rect", "<f4", (4,)),            # the view's rectangle in its level
+    ("inv_view_proj", "<f4", (16,)),  # the parent view's
+    ("eye", "<f4", (3,)),             # the parent view's
+    ("tile_x", "<f4"),                # the rough atlas tile's x; water: the waves' offset u
+    ("tint", "<f4", (3,)),
+    ("tile_scale", "<f4"),            # the tile's scale; water: the second layer's share
+    ("reflect_rate", "<f4"),          # times the view's fade
+    ("roughness", "<f4"),             # water: F0
+    ("params_z", "<f4"),              # CompositeSurface.params_z: 1.0 for a portal, a bumpy mirror's plane offset
+    ("view_index", "<f4"),            # the view's node index
+    ("normal", "<f4", (3,)),
+    ("tile_y", "<f4"),                # the tile's y; water: the waves' offset v
+    ("carry", "<f4", (9,)),           # a portal's carry (a mirror: identity)
+])
+_COMPOSITE_ATTRIBUTES = (("in_corners", ("corners",)), ("in_rect", ("rect",)), ("in_inv_view_proj", ("inv_view_proj",)),
+                         ("in_eye", ("eye", "tile_x")), ("in_tint", ("tint", "tile_scale")),
+                         ("in_params", ("reflect_rate", "roughness", "params_z", "view_index")),
+                         ("in_normal", ("normal", "tile_y")), ("in_carry", ("carry",)))
+_COMPOSITE_COLUMNS = tuple((name, sum(COMPOSITE_DTYPE.fields[f][0].itemsize // 4 for f in fields))
+                           for name, fields in _COMPOSITE_ATTRIBUTES)
+assert [f for _, fields in _COMPOSITE_ATTRIBUTES for f in fields] == list(COMPOSITE_DTYPE.names)
+# Packed with struct, field by field in that order (composite_rows: cheaper than a record's fields).
 _COMPOSITE_ROW = struct.Struct("<64s4f64s12sf12sf4f12sf36s")
-_COMPOSITE_COLUMNS = (("in_corners", 16), ("in_rect", 4), ("in_inv_view_proj", 16), ("in_eye", 4), ("in_tint", 4),
-                      ("in_params", 4), ("in_normal", 4), ("in_carry", 9))
+assert _COMPOSITE_ROW.size == COMPOSITE_DTYPE.itemsize
 # The parts of a packed Camera block (views.py) a composite row copies, in bytes.
 _BLOCK_VIEW_PROJ = slice(4 * CAMERA_BLOCK_VIEW_PROJ.start, 4 * CAMERA_BLOCK_VIEW_PROJ.stop)
 _BLOCK_INVERSE = slice(4 * CAMERA_BLOCK_INVERSE.start, 4 * CAMERA_BLOCK_INVERSE.stop)

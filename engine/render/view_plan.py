@@ -3,11 +3,13 @@ where on screen, and each view's camera, for all pairs of a level at once.
 
 A view tree level is planned in a fixed number of numpy operations whatever its number of
 views: the parents of a level are rows of arrays (``LevelRows``), every mirror and portal
-is a row of ``SurfaceTable``, and ``SurfaceTable.cull`` and ``plan_candidates`` work on
+is a row of ``SurfaceTable``, and ``SurfaceTable.cull`` and ``SurfaceTable.plan`` work on
 (parents x surfaces) blocks.  Per view, only what the draws need is made in Python (a
-``View`` holding its packed camera block).  Planning a view one at a
-time with glm cost ~30 us a view on llvmpipe's machine (one glm call is ~0.3 us, and a
-view took about a hundred); a level in arrays costs a few us a view.
+``View`` holding its packed camera block).  This is the one planner, for levels of every
+size: a level costs some 70 numpy calls whatever its views (about 50 us on llvmpipe's
+machine for a level of one view, measured warm; planning pair by pair in glm cost some
+15 us a view, so a level of one or two views was cheaper that way, and dearer from about
+six: the second planner that did so is gone, for one set of rules).
 
 Conventions: matrices here are numpy (..., 4, 4) arrays in the usual row-major math
 layout (``M @ x``); glm's and GL's are column-major, so they are transposed at the edges.
@@ -619,8 +621,8 @@ _OUTWARDS = np.array([1.0, 1.0, -1.0, -1.0])[:, None, None]
 _MIN, _MAX = np.minimum.reduce, np.maximum.reduce
 
 # From the rows of a projection (x, y, z, w) and a view's clip plane, the rows
-# SurfaceTable.cull applies to the block (clip plane; view matrix) of a view (LevelRows
-# columns 8-27) and then to every corner: x, y, -x, -y, w, then x - w, y - w, z - w, -x - w,
+# SurfaceTable.cull applies to the block (clip plane; view matrix) of a view (LevelRows'
+# clip_plane and view) and then to every corner: x, y, -x, -y, w, then x - w, y - w, z - w, -x - w,
 # -y - w, -z - w (each > 0 outside one side of the frustum), then minus the clip plane.
 _CULL_ROWS = np.array([
     [1, 0, 0, 0], [0, 1, 0, 0], [-1, 0, 0, 0], [0, -1, 0, 0], [0, 0, 0, 1],
