@@ -9,8 +9,8 @@ import moderngl
 from components.post import TONEMAP_CURVES, Bloom, Tonemap
 from engine.core.frame_io import Output
 from engine.core.world import World
+from engine.render.frame_views import FrameViews
 from engine.render.renderer import Renderer
-from engine.resources import FrameViews
 from engine.rules.frame_rules import active_camera_parts
 
 

@@ -51,10 +51,9 @@ from engine.render.view_tree import TreeSettings, ViewTree
 from engine.render.views import View
 from engine.rules.probe_rules import projection_box
 
-if TYPE_CHECKING:  # the renderer imports this module; the frame's surfaces are a floor above
+if TYPE_CHECKING:  # the renderer imports this module
     from engine.render.raw_gl import RawGL
     from engine.render.renderer import Renderer
-    from engine.resources import Surfaces
 
 LOG = logging.getLogger("speculum")
 PROBE_PATHS = ("auto", "six_pass", "layered")
@@ -459,18 +458,19 @@ class ProbeCaptures:
         return cube
 
     def capture_probe(self, key: int, faces: frozenset[int], position: glm.vec3, settings: ReflectionProbe,
-                      surfaces: Surfaces | None = None) -> str:
+                      surfaces: SurfaceTable | None = None) -> str:
         """Capture ``faces`` of probe ``key`` (the entity owning it, whose own object every
         face leaves out) from ``position`` with ``settings``, by the path ``paths`` takes
-        (``surfaces``: this frame's ``engine.resources.Surfaces``, the mirrors and portals a
-        face's view tree draws, up to ``settings.depth``); then the cube's record of where
+        (``surfaces``: the planner's table of this frame's mirrors and portals,
+        ``engine.render.surface_table``, that a face's view tree draws, up to
+        ``settings.depth``); then the cube's record of where
         it was captured from and its projection box (``probe_rules.projection_box``): the
         cube's fields are set here only.  Returns the path that drew it."""
         views = {face: face_view(face, position, settings.near, settings.far, settings.resolution, skip=key,
                                  layers=settings.layer_mask)
                  for face in faces}
-        sees_surfaces = settings.depth > 0 and surfaces is not None and bool(surfaces.mirrors or surfaces.portals)
-        table = surfaces.table if sees_surfaces else None
+        sees_surfaces = settings.depth > 0 and surfaces is not None and bool(surfaces.states)
+        table = surfaces if sees_surfaces else None
         draws = {"six_pass": lambda: self.capture(key, views, table, settings.depth, settings.prefilter),
                  "layered": lambda: self.capture_layered(key, views, prefilter=settings.prefilter)}
         path = self.paths.draw(draws, len(faces) == 6 and not sees_surfaces, settings.resolution)
