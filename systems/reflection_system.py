@@ -32,7 +32,7 @@ class ReflectionSystem(esper.Processor):
     def __init__(self, world: World, renderer: Renderer, max_depth_cap: int = 8) -> None:
         self.world = world
         self.renderer = renderer
-        self.tree = ViewTree(renderer, end_images=True)
+        self.tree = ViewTree(renderer, renderer.scene_pass, end_images=True)
         self.settings = TreeSettings(max_depth_cap)
         self.views: list[ReflectionView] = []   # last frame's view tree, level order
         self._cut = False                        # camera_cut() was called since the last frame
