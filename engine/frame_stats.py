@@ -1,39 +1,30 @@
-"""The frame report: what one frame cost and what its budget allowed (``RenderStats``, a
-world resource made fresh by ``shell.app.Engine.frame``; re-exported by ``engine.resources``).
+"""The frame report and the budget ledger: what one frame cost (``RenderStats``, a world
+resource made fresh by ``shell.app.Engine.frame``; re-exported by ``engine.resources``) and
+what its ``ViewBudget`` allowed and what was spent of it (``BudgetLedger``).
 
-Plain data, no GL: the passes count into it while the frame runs (the renderer holds the
-frame's object), the stages spend the frame's ``ViewBudget`` through it (``views_left``,
-``pixels_left``: the budget ledger), and tests, benchmarks and the overlay read it after the
-frame.
+Plain data, no GL.  The passes count into the report while the frame runs (the renderer
+holds the frame's object); the stages that draw extra views spend the ledger in the order
+the frame runs them (the shadows stage's virtual lights, the probes stage's faces, the
+reflect stage's view trees, the recaptures after present), each asking ``views_left`` (the
+view trees ``pixels_left`` too) before it draws, and the probes' scheduler defers the faces
+``probe_ms_budget`` leaves out; tests, benchmarks and the overlay read both after the frame.
+The report is a ledger (one object a frame, so every spender and reader sees the same
+counts): its fields are the ledger's and its own.
 """
 from __future__ import annotations
 
 from dataclasses import dataclass
 
-__all__ = ["RenderStats"]
+__all__ = ["BudgetLedger", "RenderStats"]
 
 
 @dataclass
-class RenderStats:
-    """What the last frame cost: read by tests and benchmarks."""
+class BudgetLedger:
+    """The frame's view budget (``engine.resources.ViewBudget``): its limits (None: none),
+    and what was spent (reflection views of every tree and probe faces drawn) and cut
+    (views with pixels and probe faces the budget left out; the faces wait for a later
+    frame)."""
 
-    passes: int = 0
-    draw_calls: int = 0
-    uploaded_bytes: int = 0
-    instances: int = 0
-    reflection_views: int = 0
-    probe_captures: int = 0   # probes that captured at least one face this frame
-    probe_faces: int = 0      # cube faces captured this frame
-    probe_path: str = ""      # the path of the last probe capture: "six_pass" or "layered" (while there are probes)
-    reflection_views_dropped: int = 0   # views with pixels a level's view budget left out
-    reflection_depth_capped: int = 0    # views the surfaces' own depth limits allowed below the tree's cap
-    reflection_views_faded: int = 0     # mirror views their fades took out (each cost nothing)
-    reflection_end_views: int = 0       # views past the depth limits shown as last frame's image
-    reflection_visibility: str = ""     # "exact" or "predicted": how the main tree's levels knew their pixels
-    reflection_views_unseen: int = 0    # views drawn that had no pixels last frame (predicted visibility)
-    # The frame's view budget (engine.resources.ViewBudget): its limits, and what was spent
-    # (reflection views of every tree and probe faces drawn) and cut (views with pixels and
-    # probe faces the budget left out; the faces wait for a later frame).
     view_budget: int | None = None
     views_spent: int = 0
     views_cut: int = 0
@@ -51,6 +42,27 @@ class RenderStats:
     def views_left(self) -> int | None:
         """Views the frame's budget still allows (None: no limit)."""
         return None if self.view_budget is None else max(self.view_budget - self.views_spent, 0)
+
+
+@dataclass
+class RenderStats(BudgetLedger):
+    """What the last frame cost, and its budget ledger: read by tests, benchmarks and the
+    overlay."""
+
+    passes: int = 0
+    draw_calls: int = 0
+    uploaded_bytes: int = 0
+    instances: int = 0
+    reflection_views: int = 0
+    probe_captures: int = 0   # probes that captured at least one face this frame
+    probe_faces: int = 0      # cube faces captured this frame
+    probe_path: str = ""      # the path of the last probe capture: "six_pass" or "layered" (while there are probes)
+    reflection_views_dropped: int = 0   # views with pixels a level's view budget left out
+    reflection_depth_capped: int = 0    # views the surfaces' own depth limits allowed below the tree's cap
+    reflection_views_faded: int = 0     # mirror views their fades took out (each cost nothing)
+    reflection_end_views: int = 0       # views past the depth limits shown as last frame's image
+    reflection_visibility: str = ""     # "exact" or "predicted": how the main tree's levels knew their pixels
+    reflection_views_unseen: int = 0    # views drawn that had no pixels last frame (predicted visibility)
     # How reflection levels were drawn: "per_mirror", "batched", "mixed" (auto chose both in
     # one frame), or "" when no reflection view was drawn (ReflectionSystem.path).
     reflection_path: str = ""
