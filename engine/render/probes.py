@@ -268,7 +268,7 @@ class ProbePaths:
     is one of them, or ``auto`` (the default): both measured on the real scene, the faster
     kept.
 
-    Only a path the path self-check (``renderer.path_checks``) trusts on this context is
+    Only a path the path self-check (``Gpu.path_checks``) trusts on this context is
     drawn.  ``layered`` draws into the cube map itself where ``layered_capture`` is
     verified, else into a six-layer 2D array copied into the cube where
     ``layered_array_capture`` is (the NVIDIA H200's driver takes a layered draw into an
