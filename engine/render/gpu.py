@@ -24,7 +24,7 @@ from engine.core.errors import GLPassError
 from engine.frame_stats import RenderStats
 from engine.render.bindings import CAMERA_BINDING, bind_uniform_range
 from engine.render.gl_context import GLCapabilities
-from engine.render.instances import InstanceBatch
+from engine.render.instances import GpuMesh, InstanceBatch
 from engine.render.raw_gl import RawGL
 from engine.render.shader_library import ShaderLibrary
 from engine.render.sky import flat_cube
@@ -92,7 +92,7 @@ class Shared:
 
     __slots__ = ("obj", "users")
 
-    def __init__(self, obj) -> None:
+    def __init__(self, obj: moderngl.Texture | GpuMesh) -> None:
         self.obj = obj
         self.users = 0
 

@@ -64,10 +64,11 @@ def _srgb_to_linear(rgb) -> tuple[float, float, float]:
 
 
 class Renderer(Gpu):
-    """A world's rendering: the ``Gpu`` every pass draws with, the passes, made here in the
-    order they draw through each other (irradiance and shadows, the scene pass, the probe
-    captures, the path self-check), the main view tree's targets, present and screen text,
-    and the shared meshes, textures and batches made and released by reference count."""
+    """A world's rendering: the ``Gpu`` every pass draws with; the passes, each made after
+    those it draws through and given them (irradiance and shadows, then the scene pass,
+    the probe captures, the path self-check); the main view tree's targets, present and
+    screen text; and the shared meshes, textures and batches, made and released by
+    reference count."""
 
     def __init__(self, ctx: moderngl.Context, caps: GLCapabilities) -> None:
         super().__init__(ctx, caps)
