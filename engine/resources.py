@@ -9,13 +9,14 @@ import of ``engine/render`` (importing this module imports no GL library).
   ``carry`` and ``turn``, so a game turns what it keeps itself (a body's velocity) by the
   rotation the engine turned the camera with.
 - ``RenderStats`` (``engine/frame_stats.py``, made fresh by ``shell.app.Engine.frame``): what
-  the frame cost, and what its ``ViewBudget`` allowed and was spent on.
+  the frame cost, and, as a ``BudgetLedger``, what its ``ViewBudget`` allowed and was spent on.
 - ``ViewBudget`` (``engine/core/budget.py``): the frame's budget a game or level file sets.
 
-What the render stages hand each other is theirs, beside the passes: the root views and
-their targets (``engine.render.frame_views.FrameViews``), the planner's table of these
-surfaces (``engine.render.view_plan.SurfaceTable``).  Games import engine data from here,
-from ``components`` and, to pick through the last frame's main view, ``FrameViews``.
+What the render stages hand each other is theirs, beside the passes: the main view and
+the targets it was drawn into (``engine.render.frame_views.FrameViews``), the planner's
+table of these surfaces (``engine.render.surface_table``).  Games import engine data from
+here and from ``components``; one that picks through the last frame's main view reads
+``FrameViews`` (mirror beam).
 """
 from __future__ import annotations
 
@@ -27,9 +28,9 @@ from pyglm import glm
 from components.limits import ALL_LAYERS, VIEW_KINDS
 from engine.assets.texture_data import TextureData
 from engine.core.budget import ViewBudget, ViewBudgetError
-from engine.frame_stats import RenderStats
+from engine.frame_stats import BudgetLedger, RenderStats
 
-__all__ = ["MirrorBumps", "PortalCrossing", "PortalCrossings", "RenderStats", "SurfaceState",
+__all__ = ["BudgetLedger", "MirrorBumps", "PortalCrossing", "PortalCrossings", "RenderStats", "SurfaceState",
            "Surfaces", "ViewBudget", "ViewBudgetError", "WaterFlow", "WaterLook"]
 
 

@@ -197,3 +197,14 @@ def test_loading_a_level_file_imports_no_system_and_no_shell():
                             capture_output=True, text=True, timeout=60)
     assert result.returncode == 0, result.stderr[-2000:]
     assert result.stdout.strip() == "[]", result.stdout
+
+
+def test_the_frame_data_imports_no_render_code_and_no_gl():
+    """``engine.resources`` (what games read) is plain data: importing it in a fresh
+    interpreter loads nothing of ``engine/render`` and no GL library."""
+    probe = ("import sys, engine.resources; "
+             "print(sorted(m for m in sys.modules if m.startswith(('engine.render', 'moderngl', 'glcontext'))))")
+    result = subprocess.run([sys.executable, "-c", probe], cwd=ROOT, env={**os.environ, "PYTHONPATH": str(ROOT)},
+                            capture_output=True, text=True, timeout=60)
+    assert result.returncode == 0, result.stderr[-2000:]
+    assert result.stdout.strip() == "[]", result.stdout
