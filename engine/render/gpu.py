@@ -17,7 +17,6 @@ from dataclasses import dataclass
 from typing import Protocol
 
 import moderngl
-import numpy as np
 
 from engine.assets.texture_data import TextureData
 from engine.core.errors import GLPassError
@@ -111,8 +110,7 @@ class Gpu:
         self._camera_padding = bytes(self.camera_stride - CAMERA_BLOCK_BYTES)
         self.cameras_ubo = ctx.buffer(reserve=self.camera_stride * 16)
         self.lights_ubo = ctx.buffer(reserve=LIGHTS_BLOCK_BYTES)
-        # Meshes and textures shared by reference count (the Renderer makes and releases them).
-        self._meshes: dict[int, Shared] = {}
+        # Textures shared by reference count (the Renderer makes and releases them), by
         # id(TextureData); ("normal", id): uploaded linear (normal and metallic-roughness maps)
         self._textures: dict[object, Shared] = {}
         # (mesh, texture, probe, transparent entity, normal map, emissive map, metallic-roughness map) -> batch
@@ -144,10 +142,6 @@ class Gpu:
         # Debug mode: every pass checks for an OpenGL error when it ends and names itself
         # (checkpoint); glGetError is cheap on the CPU but makes no sense to pay in a game.
         self.debug = os.environ.get("SPECULUM_DEBUG", "") not in ("", "0")
-        # Counts uploads that wrote instance rows, and batches made or dropped: the shadows
-        # stage draws a map again when it moves on (a caster moved, came, went or changed).
-        self.casters_version = 0
-        self._dropped_changes: tuple[np.ndarray, np.ndarray] | None = None  # boxes of batches dropped
         # When set, the only batches scene passes draw (the path self-check's own scene).
         self.scene_only: list[InstanceBatch] | None = None
         # A batch was made since prepare_programs last ran (Engine.frame calls it then).

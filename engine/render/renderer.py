@@ -72,6 +72,11 @@ class Renderer(Gpu):
 
     def __init__(self, ctx: moderngl.Context, caps: GLCapabilities) -> None:
         super().__init__(ctx, caps)
+        self._meshes: dict[int, Shared] = {}  # GpuMesh by Mesh.id, shared by reference count
+        # Counts uploads that wrote instance rows, and batches made or dropped: the shadows
+        # stage draws a map again when it moves on (a caster moved, came, went or changed).
+        self.casters_version = 0
+        self._dropped_changes: tuple[np.ndarray, np.ndarray] | None = None  # boxes of batches dropped
         self.present_pass = PresentPass(ctx, self.shaders, caps.software)
         self.text_pass: TextPass | None = None  # made when text is first drawn (its atlas costs a few ms)
         self.screen_quads = np.zeros((0, 12), np.float32)  # the last frame's screen text (a screenshot draws it again)
