@@ -1,16 +1,22 @@
 """The frame's public data: what one stage publishes for the later ones, and what games and
-tools read (``world.resources[Type]``).  Plain data: no GL objects, no packed bytes.
+tools read (``world.resources[Type]``).  Plain data: no GL objects, no packed bytes, and no
+import of ``engine/render`` (importing this module imports no GL library).
 
 - ``Surfaces`` (the surfaces stage): every mirror and portal as a ``SurfaceState``: its
   plane, outline, where its view goes (``carry``), its look; a game traces rays with them
   (mirror beam) as the view tree draws with them.
-- ``FrameViews`` (the main stage): the root views of this frame.
 - ``PortalCrossings`` (the travel stage): who went through which portal, with the pair's
   ``carry`` and ``turn``, so a game turns what it keeps itself (a body's velocity) by the
   rotation the engine turned the camera with.
-- ``RenderStats`` (made fresh by ``shell.app.Engine.frame``): what the frame cost.
+- ``RenderStats`` (``engine/frame_stats.py``, made fresh by ``shell.app.Engine.frame``): what
+  the frame cost, and, as a ``BudgetLedger``, what its ``ViewBudget`` allowed and was spent on.
+- ``ViewBudget`` (``engine/core/budget.py``): the frame's budget a game or level file sets.
 
-Games import engine data from here and from ``components`` only.
+What the render stages hand each other is theirs, beside the passes: the main view and
+the targets it was drawn into (``engine.render.frame_views.FrameViews``), the planner's
+table of these surfaces (``engine.render.surface_table``).  Games import engine data from
+here and from ``components``; one that picks through the last frame's main view reads
+``FrameViews`` (mirror beam).
 """
 from __future__ import annotations
 
@@ -22,11 +28,9 @@ from pyglm import glm
 from components.limits import ALL_LAYERS, VIEW_KINDS
 from engine.assets.texture_data import TextureData
 from engine.core.budget import ViewBudget, ViewBudgetError
-from engine.render.renderer import RenderStats
-from engine.render.view_plan import SurfaceTable
-from engine.render.views import View
+from engine.frame_stats import BudgetLedger, RenderStats
 
-__all__ = ["FrameViews", "MirrorBumps", "PortalCrossing", "PortalCrossings", "RenderStats", "SurfaceState",
+__all__ = ["BudgetLedger", "MirrorBumps", "PortalCrossing", "PortalCrossings", "RenderStats", "SurfaceState",
            "Surfaces", "ViewBudget", "ViewBudgetError", "WaterFlow", "WaterLook"]
 
 
@@ -106,14 +110,6 @@ class Surfaces:
 
     mirrors: dict[int, SurfaceState]
     portals: dict[int, SurfaceState]
-    _table: SurfaceTable | None = field(default=None, init=False, repr=False)
-
-    @property
-    def table(self) -> SurfaceTable:
-        """All of them as the arrays a view tree culls with (built once a frame, on first use)."""
-        if self._table is None:
-            self._table = SurfaceTable([*self.mirrors.values(), *self.portals.values()])
-        return self._table
 
     def mirror_planes(self) -> dict[int, tuple[list[float], list[float]]]:
         """Each mirror's world plane as (point on it, unit normal towards its front)."""
@@ -122,14 +118,6 @@ class Surfaces:
             n = glm.vec3(state.plane)
             planes[entity] = (list(-state.plane.w * n), list(n))
         return planes
-
-
-@dataclass
-class FrameViews:
-    """The root views of this frame (a world resource): the main camera's, None when there is
-    no active camera or nothing to draw into."""
-
-    main: View | None = None
 
 
 @dataclass(frozen=True)

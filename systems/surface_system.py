@@ -56,8 +56,8 @@ class SurfaceSystem(esper.Processor):
         self._advance_waves(dt)
         changed |= self._refresh_portals()
         if changed or Surfaces not in self.world.resources:
-            # A new resource only when a surface changed: the view planner's arrays
-            # (``Surfaces.table``, built on first use) are kept while none does.
+            # A new resource only when a surface changed: the view planner's arrays made
+            # from it (``engine.render.surface_table``, on first use) are kept while none does.
             self.world.resources[Surfaces] = Surfaces(dict(self.mirrors), dict(self.portals))
 
     def _refresh_mirrors(self) -> bool:

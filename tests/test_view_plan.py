@@ -156,6 +156,7 @@ def test_the_surfaces_and_their_arrays_are_kept_while_no_surface_changes(scene):
     from components import Material, MeshRef, Mirror, Transform
     from engine.assets.mesh import box, quad
     from engine.assets.portals import spawn_portal_pair
+    from engine.render.surface_table import PlannerSurfaces
     from engine.resources import Surfaces
     from tests.support import look_from
 
@@ -171,10 +172,10 @@ def test_the_surfaces_and_their_arrays_are_kept_while_no_surface_changes(scene):
     runner = scene(build, (96, 64))
     runner.frame()
     surfaces = runner.world.resources[Surfaces]
-    table = surfaces.table
+    table = runner.world.resources[PlannerSurfaces].table  # the reflect stage's, made from them
     runner.world.get(ents["box"], Transform).position = glm.vec3(0.3, 0.5, 0.0)
     runner.frame()
-    assert runner.world.resources[Surfaces] is surfaces and surfaces.table is table
+    assert runner.world.resources[Surfaces] is surfaces and runner.world.resources[PlannerSurfaces].table is table
     runner.world.get(ents["b"], Transform).position = glm.vec3(6.0, 1.6, 0.0)  # a portal's partner moves
     runner.frame()
     moved = runner.world.resources[Surfaces]
@@ -262,7 +263,7 @@ def test_a_level_planned_from_the_same_rows_is_found_again_read_only(scene, monk
     or a surface that moves (a new table), plans again; a kept plan cannot be written."""
     from components import Material, MeshRef, Mirror, Transform
     from engine.assets.mesh import box, quad
-    from engine.resources import Surfaces
+    from engine.render.surface_table import PlannerSurfaces
     from tests.support import look_from
     from tests.test_mirrors import FACING_BACK, base_scene
 
@@ -293,7 +294,7 @@ def test_a_level_planned_from_the_same_rows_is_found_again_read_only(scene, monk
     again = runner.frame()
     assert computed == [] and np.array_equal(first, again)
     # A kept plan is shared by the frames that find it: its arrays are read-only.
-    table = runner.world.resources[Surfaces].table
+    table = runner.world.resources[PlannerSurfaces].table
     kept = next(candidates for _, (candidates, _) in table._plans.values() if candidates is not None)
     with pytest.raises(ValueError, match="read-only"):
         kept.blocks[0, 0] = 1.0
@@ -309,4 +310,4 @@ def test_a_level_planned_from_the_same_rows_is_found_again_read_only(scene, monk
     # A mirror moves: a new table, planned afresh.
     runner.world.get(ents["back"], Transform).position = glm.vec3(0.0, 1.5, 4.2)
     runner.frame()
-    assert computed and runner.world.resources[Surfaces].table is not table
+    assert computed and runner.world.resources[PlannerSurfaces].table is not table

@@ -65,7 +65,6 @@ from __future__ import annotations
 import logging
 import math
 from collections.abc import Iterable
-from typing import TYPE_CHECKING
 
 import moderngl
 import numpy as np
@@ -79,11 +78,8 @@ from engine.render.bindings import (
     apply_pass_state,
     bind_uniform_block,
 )
+from engine.render.gpu import Gpu, ProbeCube
 from engine.render.targets import release_framebuffer
-
-if TYPE_CHECKING:
-    from engine.render.probes import ProbeCube
-    from engine.render.renderer import Renderer
 
 LOG = logging.getLogger("speculum")
 
@@ -187,7 +183,7 @@ class IrradianceTable:
 
     STATE = PassState()  # no depth test, no blending, no clip distances
 
-    def __init__(self, renderer: Renderer) -> None:
+    def __init__(self, renderer: Gpu) -> None:
         self.renderer = renderer
         self.ctx = ctx = renderer.ctx
         self.table = ctx.texture((SH_COEFFICIENTS, MAX_IRRADIANCE_PROBES), 4, dtype="f4")

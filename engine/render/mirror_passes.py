@@ -30,7 +30,6 @@ from __future__ import annotations
 import struct
 import weakref
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
 
 import moderngl
 import numpy as np
@@ -52,6 +51,7 @@ from engine.render.bindings import (
     PassState,
     apply_pass_state,
 )
+from engine.render.gpu import Gpu
 from engine.render.rough_atlas import TILE, RoughAtlas, Tile, place_tiles
 from engine.render.targets import RenderTargets
 from engine.render.views import (
@@ -60,10 +60,7 @@ from engine.render.views import (
     CAMERA_BLOCK_VIEW_PROJ,
     View,
 )
-
-if TYPE_CHECKING:  # the renderer imports this module; the surfaces' records are a floor above
-    from engine.render.renderer import Renderer
-    from engine.resources import MirrorBumps, SurfaceState, WaterLook
+from engine.resources import MirrorBumps, SurfaceState, WaterLook
 
 # The claims and the reset write every depth they touch (depth test "always"); the
 # composite blends quads trimmed to their rectangles by clip distances 1-4.
@@ -397,7 +394,7 @@ class Claims:
 
 
 class MirrorPasses:
-    def __init__(self, renderer: Renderer) -> None:
+    def __init__(self, renderer: Gpu) -> None:
         self.renderer = renderer
         ctx = renderer.ctx
         self.ctx = ctx
@@ -552,7 +549,7 @@ class MirrorPasses:
     def prepare_fallbacks(self, fallbacks: list[Fallback], size: tuple[int, int]) -> PreparedFallbacks:
         """The CPU half of a level's fallbacks (drawn into a level of ``size`` pixels): their
         rows, grouped by build, normal map and the probes of their surfaces
-        (``Renderer.surface_probes``: the probes are uniforms of a draw, their weights ride
+        (``Gpu.surface_probes``: the probes are uniforms of a draw, their weights ride
         in the row's extras)."""
         probes = self.renderer.surface_probes
         groups: dict[tuple[str, TextureData | None, int, int], list[tuple[Fallback, tuple[float, ...]]]] = {}
@@ -628,7 +625,7 @@ class MirrorPasses:
         samples a cube while it is drawn into: what would read it reads the sky, as in the
         scene pass)."""
         renderer = self.renderer
-        cube = renderer.probes.cubes.get(probe) if probe and probe != renderer.scene_pass.capturing else None
+        cube = renderer.probe_cubes.get(probe) if probe and probe != renderer.capturing else None
         if cube is not None:
             cube.texture.use(unit)
             return cube.lookup()

@@ -14,16 +14,13 @@ A rectangle larger than T is scaled down into its tile (a rough mirror is blurre
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
 
 import moderngl
 import numpy as np
 
 from engine.render.bindings import LEVEL_UNITS, PassState, apply_pass_state
+from engine.render.gpu import Gpu
 from engine.render.targets import RenderTargets, release_framebuffer
-
-if TYPE_CHECKING:  # the renderer imports this module (through the mirror passes)
-    from engine.render.renderer import Renderer
 
 TILE = 256
 COLUMNS = 8
@@ -53,7 +50,7 @@ def place_tiles(views: list[tuple[int, tuple[int, int, int, int]]]) -> dict[int,
 
 
 class RoughAtlas:
-    def __init__(self, renderer: Renderer) -> None:
+    def __init__(self, renderer: Gpu) -> None:
         self.renderer = renderer
         self.ctx = renderer.ctx
         self.program = renderer.shaders.program("rough_isolate.vert", "rough_isolate.frag")

@@ -17,8 +17,6 @@ a map is drawn or a light's shadows are turned off.
 """
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
-
 import moderngl
 import numpy as np
 from pyglm import glm
@@ -37,14 +35,11 @@ from engine.render.bindings import (
     apply_pass_state,
     bind_uniform_block,
 )
+from engine.render.gpu import Gpu
 from engine.render.raw_gl import LayeredCubeTarget
 from engine.render.targets import release_framebuffer
 from engine.render.views import MAX_DIRECTIONAL_LIGHTS, MAX_POINT_LIGHTS, View
-from engine.rules.shadow_rules import MAX_VIRTUAL_LIGHTS
-
-if TYPE_CHECKING:
-    from engine.render.renderer import Renderer
-    from engine.rules.shadow_rules import DirectionalFit, VirtualLight
+from engine.rules.shadow_rules import MAX_VIRTUAL_LIGHTS, DirectionalFit, VirtualLight
 
 MAX_POINT_SHADOWS = 2  # cube samplers in shaders/include/shadows.glsl
 SHADOW_FILTERS = ("grid", "single")
@@ -68,7 +63,7 @@ class ShadowMaps:
     """The shadow maps' GL objects: the directional atlas, the point lights' cubes, the
     Shadows block, and the caster programs."""
 
-    def __init__(self, renderer: Renderer) -> None:
+    def __init__(self, renderer: Gpu) -> None:
         self.renderer = renderer
         ctx = self.ctx = renderer.ctx
         self.block = np.zeros(SHADOWS_BLOCK_BYTES // 4, np.float32)

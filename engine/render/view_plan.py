@@ -27,7 +27,7 @@ from components.limits import VIEW_DIRECT, VIEW_KINDS, VIEW_MIRROR, VIEW_PORTAL
 from engine.core.reflection_math import OBLIQUE_SAFE_NEARS
 from engine.render.views import CAMERA_BLOCK_BYTES, CAMERA_DTYPE, CAMERA_FLOATS, CAMERA_IDS, View, field_columns
 
-if TYPE_CHECKING:  # the surfaces stage's records, a floor above: read here by their fields
+if TYPE_CHECKING:  # the surfaces stage's records (engine/resources.py): read here by their fields
     from engine.resources import SurfaceState
 
 _CAMERA_FLOATS = CAMERA_BLOCK_BYTES // 4

@@ -41,7 +41,6 @@ import functools
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING
 
 import moderngl
 import numpy as np
@@ -50,6 +49,7 @@ from pyglm import glm
 from components.limits import MAX_VIEW_DEPTH
 from engine.render.batched_mirrors import PATHS, choose_path, submitted_triangles
 from engine.render.end_images import EndImages
+from engine.render.gpu import Gpu
 from engine.render.mirror_passes import (
     Claims,
     Composite,
@@ -60,14 +60,11 @@ from engine.render.mirror_passes import (
     surface_look,
     take_samples_queries,
 )
-from engine.render.scene_pass import REFLECTION_LEVEL, SceneOptions
+from engine.render.scene_pass import REFLECTION_LEVEL, SceneOptions, ScenePass
 from engine.render.targets import LevelStack, RenderTargets
 from engine.render.view_plan import ROW, Candidates, LevelRows, SurfaceTable, _mat, level_rects
 from engine.render.views import CAMERA_BLOCK_BYTES, PlannedView, View
-
-if TYPE_CHECKING:  # the renderer imports this module; the surfaces' records are a floor above
-    from engine.render.renderer import Renderer
-    from engine.resources import SurfaceState
+from engine.resources import SurfaceState
 
 # The deepest a tree may go (each level is one more set of root-sized targets); the depth
 # limits of Mirror and Portal components take values up to this.
@@ -223,11 +220,13 @@ class _Walk:
 
 class ViewTree:
     """Renders the reflection levels below a root view into a ``LevelStack`` and composites
-    them back into the root's targets.  With ``end_images`` (the main view's tree) a view the
-    depth limits cut shows its surface's image from the previous frame (``EndImages``)."""
+    them back into the root's targets, drawing every view through ``scene_pass``.  With
+    ``end_images`` (the main view's tree) a view the depth limits cut shows its surface's
+    image from the previous frame (``EndImages``)."""
 
-    def __init__(self, renderer: Renderer, end_images: bool = False) -> None:
+    def __init__(self, renderer: Gpu, scene_pass: ScenePass, end_images: bool = False) -> None:
         self.renderer = renderer
+        self.scene_pass = scene_pass
         self.passes = MirrorPasses(renderer)
         self.ends = EndImages(renderer) if end_images else None
         self.coverage: dict[int, int] = {}  # level -> its views' claimed pixels last frame (screen pixels)
@@ -628,8 +627,8 @@ class ViewTree:
         rows (CPU work while the GPU draws)."""
         renderer = self.renderer
         if step.views:
-            renderer.scene_pass.draw(step.views, step.targets, _BATCHED if step.path == "batched"
-                                     else REFLECTION_LEVEL, step.conditions)
+            self.scene_pass.draw(step.views, step.targets, _BATCHED if step.path == "batched"
+                                 else REFLECTION_LEVEL, step.conditions)
         if step.ended:
             self.ends.draw(step.end_views, [node.surface.entity for node in step.ended], step.end_matrices,
                            step.targets, root)

@@ -10,13 +10,11 @@ block.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING
 
 import numpy as np
 from pyglm import glm
 
-if TYPE_CHECKING:  # the frame's data is a floor above the rules
-    from engine.resources import Surfaces
+from engine.resources import Surfaces
 
 # A directional light's map covers the level's box grown by this share of its diagonal (and
 # at least SHADOW_MARGIN metres), so a caster resting on the box's edge still has texels

@@ -46,7 +46,8 @@ from engine.core.errors import SpeculumError
 from engine.core.frame_io import Input, Output
 from engine.core.game import GameSystem, spawn_camera
 from engine.core.world import World
-from engine.resources import FrameViews, Surfaces
+from engine.render.frame_views import FrameViews
+from engine.resources import Surfaces
 from engine.rules.raycast import raycast
 from games.mirror_beam.beam import BeamPath, FirstSolid, hit_mirror, trace_beam
 
