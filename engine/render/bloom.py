@@ -20,7 +20,7 @@ from __future__ import annotations
 import moderngl
 
 from components.post import Bloom
-from engine.render.bindings import PRESENT_UNIT, PassState, apply_pass_state
+from engine.render.bindings import PRESENT_UNIT, PassState, apply_pass_state, bind_texture
 from engine.render.shader_library import ShaderLibrary
 from engine.render.targets import release_framebuffer
 
@@ -103,7 +103,7 @@ class BloomPass:
                 vao = self._vao("bloom_down.frag")
             framebuffer.use()
             apply_pass_state(self.ctx, _DOWN, (0, 0, *size))
-            source.use(PRESENT_UNIT)
+            bind_texture(self.ctx, source, PRESENT_UNIT)
             vao.render(moderngl.TRIANGLES, vertices=3)
             source = self.textures[index]
         up = self._vao("bloom_up.frag")
@@ -111,7 +111,7 @@ class BloomPass:
         for index in range(len(sizes) - 2, -1, -1):
             self._framebuffers[index].use()
             apply_pass_state(self.ctx, _UP, (0, 0, *sizes[index]))
-            self.textures[index + 1].use(PRESENT_UNIT)
+            bind_texture(self.ctx, self.textures[index + 1], PRESENT_UNIT)
             up.render(moderngl.TRIANGLES, vertices=3)
         return self.textures[0]
 
