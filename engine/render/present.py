@@ -47,7 +47,7 @@ class PresentPass:
         self.search_steps = 0 if software else GPU_SEARCH_STEPS
         self._post: dict[tuple, moderngl.VertexArray] = {}   # present.frag's POST builds, by their defines
         self._written: dict[tuple[int, str], object] = {}    # (vao id, uniform) -> the value last written
-        self.bloom = BloomPass(ctx, shaders)
+        self.bloom = BloomPass(ctx, shaders, software)
         self.auto_exposure = AutoExposure(ctx, shaders)
         self.post_passes = 0   # bloom and exposure draws in the last frame (the tone map is the present draw)
 
@@ -167,7 +167,7 @@ class PresentPass:
     def post_target_count(self) -> int:
         """Textures the bloom chain and automatic exposure hold now (0 without a camera
         that asks for them)."""
-        return len(self.bloom.textures) + len(self.auto_exposure._targets) + len(self.auto_exposure._state)
+        return self.bloom.target_count() + len(self.auto_exposure._targets) + len(self.auto_exposure._state)
 
     def release(self) -> None:
         if self._encoded is not None:
