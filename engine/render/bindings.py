@@ -50,6 +50,8 @@ from dataclasses import dataclass
 import moderngl
 
 # --- texture units -----------------------------------------------------------------------
+# What binds to a texture unit (``use(location)``; bind_texture).
+Bindable = moderngl.Texture | moderngl.TextureCube | moderngl.TextureArray | moderngl.Texture3D
 ALBEDO_UNIT = 0          # scene: the batch's albedo map
 SKY_UNIT = 1             # scene, sky, composite: the sky cube map
 NODE_UNIT = 2            # scene (masked views): the level's node image
@@ -198,7 +200,7 @@ class _StateCache:
         self.front_face: str | None = None
         self.rects_known = False     # False: set the viewport and scissor whatever moderngl says
         self.blocks: dict[int, moderngl.Buffer] = {}  # uniform-block binding point -> the buffer bound
-        self.textures: dict[tuple[int, type], object] = {}  # (unit, texture class) -> the texture bound
+        self.textures: dict[tuple[int, type], Bindable] = {}  # (unit, texture class) -> the texture bound
 
 
 # False: every apply sets every piece of state, as before the cache (kept for the
@@ -227,7 +229,7 @@ def invalidate(ctx: moderngl.Context) -> None:
         cache.textures.clear()
 
 
-def bind_texture(ctx: moderngl.Context, texture, unit: int) -> None:
+def bind_texture(ctx: moderngl.Context, texture: Bindable, unit: int) -> None:
     """Bind ``texture`` (a moderngl Texture, TextureCube, TextureArray or Texture3D) on
     ``unit`` unless it is what that unit holds already (the object itself is remembered, as
     ``bind_uniform_block`` does for buffers).  Which unit is active afterwards is not
@@ -243,7 +245,7 @@ def bind_texture(ctx: moderngl.Context, texture, unit: int) -> None:
         textures[key] = texture
 
 
-def bind_texture_now(ctx: moderngl.Context, texture, unit: int) -> None:
+def bind_texture_now(ctx: moderngl.Context, texture: Bindable, unit: int) -> None:
     """Bind ``texture`` on ``unit`` and make ``unit`` the active one, whatever the record says
     (for raw GL that then sets parameters of, or copies into, the active unit's texture);
     the record is kept true."""
