@@ -25,7 +25,7 @@ from __future__ import annotations
 import moderngl
 from pyglm import glm
 
-from engine.render.bindings import HISTORY_UNIT, NODE_UNIT, PassState, apply_pass_state
+from engine.render.bindings import HISTORY_UNIT, NODE_UNIT, PassState, apply_pass_state, bind_texture
 from engine.render.gpu import Gpu
 from engine.render.targets import RenderTargets, release_framebuffer
 from engine.render.views import View
@@ -60,8 +60,8 @@ class EndImages:
         ctx, renderer = self.ctx, self.renderer
         targets.view_framebuffer.use()
         apply_pass_state(ctx, _END, (0, 0, *targets.size))
-        targets.node.use(NODE_UNIT)
-        self.history.use(HISTORY_UNIT)
+        bind_texture(self.ctx, targets.node, NODE_UNIT)
+        bind_texture(self.ctx, self.history, HISTORY_UNIT)
         program = self.program
         program["reproject"].write(self.view_proj * glm.inverse(root.view))
         program["level_size"].value = targets.size

@@ -76,6 +76,7 @@ from engine.render.bindings import (
     IRRADIANCE_UNIT,
     PassState,
     apply_pass_state,
+    bind_texture,
     bind_uniform_block,
 )
 from engine.render.gpu import Gpu, ProbeCube
@@ -246,12 +247,12 @@ class IrradianceTable:
         program["source"].value = CUBE_MIP_UNIT  # again each time: a shader hot reload resets uniforms
         program["level"].value = float(level)
         program["level_size"].value = max(1, resolution >> level)
-        self._placeholder.use(IRRADIANCE_UNIT)  # the scene pass binds the table again
+        bind_texture(self.ctx, self._placeholder, IRRADIANCE_UNIT)  # the scene pass binds the table again
         self.framebuffer.use()
         apply_pass_state(self.ctx, self.STATE, (0, row, SH_COEFFICIENTS, 1))
-        cube.texture.use(CUBE_MIP_UNIT)
+        bind_texture(self.ctx, cube.texture, CUBE_MIP_UNIT)
         vao.render(moderngl.TRIANGLES, vertices=3)
-        self.renderer.sky.use(CUBE_MIP_UNIT)  # not left bound where the next capture draws into it
+        bind_texture(self.ctx, self.renderer.sky, CUBE_MIP_UNIT)  # not left bound where the next capture draws into it
         self.projections += 1
         self.renderer.checkpoint("probe irradiance projection")
         return True
@@ -296,7 +297,7 @@ class IrradianceTable:
         loop and the table's reads are a build of their own, since llvmpipe runs a loop's
         body once even when it has nothing to do: +25% of a frame of diffuse boxes)."""
         self._refresh()
-        self.table.use(IRRADIANCE_UNIT)
+        bind_texture(self.ctx, self.table, IRRADIANCE_UNIT)
         bind_uniform_block(self.ctx, self.empty_ubo if capturing else self.ubo, IRRADIANCE_BINDING)
         return not capturing and self._count > 0
 

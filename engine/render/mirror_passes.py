@@ -50,6 +50,7 @@ from engine.render.bindings import (
     SKY_UNIT,
     PassState,
     apply_pass_state,
+    bind_texture,
 )
 from engine.render.gpu import Gpu
 from engine.render.rough_atlas import TILE, RoughAtlas, Tile, place_tiles
@@ -450,8 +451,8 @@ class MirrorPasses:
             self._reserve_claims(len(vertices))
         self._claim_buffer.write(vertices)
         self._reset_vao.render(moderngl.TRIANGLES, vertices=6 * count)
-        parent.node.use(PARENT_NODE_UNIT)
-        parent.surface.use(PARENT_SURFACE_UNIT)
+        bind_texture(self.ctx, parent.node, PARENT_NODE_UNIT)
+        bind_texture(self.ctx, parent.surface, PARENT_SURFACE_UNIT)
         self.claim["to_parent"].value = (parent.size[0] / level.size[0], parent.size[1] / level.size[1])
         render = self._claim_vao.render
         for at, query in enumerate(queries[:count]):
@@ -525,17 +526,17 @@ class MirrorPasses:
         # Colour: reflection x rate + own x (1 - rate); alpha (coverage) is kept.
         apply_pass_state(ctx, _COMPOSITE, (0, 0, *parent.size))
         for texture, unit in zip((level.color, level.seen, level.node), REFLECTION_UNITS, strict=True):
-            texture.use(unit)
-        self.renderer.sky.use(SKY_UNIT)
+            bind_texture(self.ctx, texture, unit)
+        bind_texture(self.ctx, self.renderer.sky, SKY_UNIT)
         if prepared.rough:
-            self.rough_atlas.texture.use(ATLAS_UNIT)
+            bind_texture(self.ctx, self.rough_atlas.texture, ATLAS_UNIT)
         for (variant, normal_map), variant_rows in prepared.rows.items():
             if normal_map is not None:
                 texture = self.renderer.normal_map_texture(normal_map)
                 if texture is None:  # the mirror's own batch holds it; none drawn: the flat build
                     variant = variant.removesuffix("_bumpy")
                 else:
-                    texture.use(NORMAL_UNIT)
+                    bind_texture(self.ctx, texture, NORMAL_UNIT)
             draw = self.composites[variant]
             program = draw.program
             if variant.startswith("rough"):
@@ -583,12 +584,12 @@ class MirrorPasses:
         renderer = self.renderer
         parent.composite_framebuffer.use()
         apply_pass_state(ctx, _COMPOSITE, (0, 0, *parent.size))
-        parent.node.use(FALLBACK_PARENT_UNITS[0])
-        parent.surface.use(FALLBACK_PARENT_UNITS[1])
+        bind_texture(self.ctx, parent.node, FALLBACK_PARENT_UNITS[0])
+        bind_texture(self.ctx, parent.surface, FALLBACK_PARENT_UNITS[1])
         if level is not None:
-            level.seen.use(REFLECTION_UNITS[1])
-            level.node.use(REFLECTION_UNITS[2])
-        renderer.sky.use(SKY_UNIT)
+            bind_texture(self.ctx, level.seen, REFLECTION_UNITS[1])
+            bind_texture(self.ctx, level.node, REFLECTION_UNITS[2])
+        bind_texture(self.ctx, renderer.sky, SKY_UNIT)
         to_child = (1.0, 1.0) if level is None else (level.size[0] / parent.size[0], level.size[1] / parent.size[1])
         for (variant, normal_map, first, second), chunks in prepared.groups.items():
             if normal_map is not None:
@@ -596,7 +597,7 @@ class MirrorPasses:
                 if texture is None:  # the mirror's own batch holds it; none drawn: the flat build
                     variant = variant.removesuffix("_bumpy")
                 else:
-                    texture.use(NORMAL_UNIT)
+                    bind_texture(self.ctx, texture, NORMAL_UNIT)
             draw = self.fallbacks[variant]
             program = draw.program
             for prefix, probe, unit in (("probe", first, PROBE_UNIT), ("probe2", second, PROBE2_UNIT)):
@@ -627,9 +628,9 @@ class MirrorPasses:
         renderer = self.renderer
         cube = renderer.probe_cubes.get(probe) if probe and probe != renderer.capturing else None
         if cube is not None:
-            cube.texture.use(unit)
+            bind_texture(self.ctx, cube.texture, unit)
             return cube.lookup()
-        renderer.sky.use(unit)
+        bind_texture(self.ctx, renderer.sky, unit)
         return _NO_PROBE
 
     def release(self) -> None:

@@ -42,6 +42,7 @@ from engine.render.bindings import (
     SCRATCH_UNIT,
     PassState,
     apply_pass_state,
+    bind_texture,
 )
 from engine.render.gpu import Gpu, ProbeCube
 from engine.render.irradiance import IrradianceTable
@@ -140,8 +141,9 @@ class CubeMipPass:
         vao = self._program_vao(ggx, one_face)
         program = vao.program
         apply_pass_state(self.ctx, self.STATE, (0, 0, *cube.size))
-        for unit in (PROBE_UNIT, PROBE2_UNIT, PROBE_REST_UNIT, SCRATCH_UNIT, self.ctx.default_texture_unit):
-            self.renderer.sky.use(unit)  # the cube is bound only where the pass reads it (CUBE_MIP_UNIT)
+        for unit in (PROBE_UNIT, PROBE2_UNIT, PROBE_REST_UNIT, SCRATCH_UNIT):
+            bind_texture(self.ctx, self.renderer.sky, unit)  # the cube is bound only where the pass reads it
+        self.renderer.sky.use(self.ctx.default_texture_unit)  # moderngl's own unit: not in the record
         top = cube.size[0].bit_length() - 1
         try:
             for level in range(1, top + 1):
@@ -157,7 +159,8 @@ class CubeMipPass:
                     vao.render(moderngl.TRIANGLES, vertices=3)
         finally:
             target.done(CUBE_MIP_UNIT)
-            self.renderer.sky.use(CUBE_MIP_UNIT)  # not left bound where the next capture draws into it
+            # not left bound where the next capture draws into it
+            bind_texture(self.ctx, self.renderer.sky, CUBE_MIP_UNIT)
         self.used = way
         self.renderer.checkpoint("probe mip chain")
         return prefilter
@@ -492,15 +495,15 @@ class ProbeCaptures:
         copy left it on (a texture drawn into while bound for sampling is a rendering
         feedback loop, undefined on a GPU; llvmpipe forgives it)."""
         renderer = self.renderer
-        for unit in (PROBE_UNIT, PROBE2_UNIT, PROBE_REST_UNIT, SCRATCH_UNIT, CUBE_MIP_UNIT,
-                     self.ctx.default_texture_unit):
-            renderer.sky.use(unit)
+        for unit in (PROBE_UNIT, PROBE2_UNIT, PROBE_REST_UNIT, SCRATCH_UNIT, CUBE_MIP_UNIT):
+            bind_texture(self.ctx, renderer.sky, unit)
+        renderer.sky.use(self.ctx.default_texture_unit)  # moderngl's own unit: not in the record
         renderer.capturing = key
         try:
             yield
         finally:
             renderer.capturing = 0
-            renderer.sky.use(SCRATCH_UNIT)  # the copies bound the cube there
+            bind_texture(self.ctx, renderer.sky, SCRATCH_UNIT)  # the copies bound the cube there
 
     def _face_targets(self, key: int, cube: moderngl.TextureCube) -> CubeFaceTargets | None:
         """The probe's direct face targets (made, or remade for a new cube), or None where a

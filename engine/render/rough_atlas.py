@@ -18,7 +18,7 @@ from dataclasses import dataclass
 import moderngl
 import numpy as np
 
-from engine.render.bindings import LEVEL_UNITS, PassState, apply_pass_state
+from engine.render.bindings import LEVEL_UNITS, PassState, apply_pass_state, bind_texture
 from engine.render.gpu import Gpu
 from engine.render.targets import RenderTargets, release_framebuffer
 
@@ -88,8 +88,8 @@ class RoughAtlas:
         self._rows.write(rows.tobytes())
         self._framebuffer.use()
         apply_pass_state(ctx, _COPY, (0, 0, width, height))
-        level.color.use(LEVEL_UNITS[0])
-        level.node.use(LEVEL_UNITS[1])
+        bind_texture(self.ctx, level.color, LEVEL_UNITS[0])
+        bind_texture(self.ctx, level.node, LEVEL_UNITS[1])
         self._vao.render(moderngl.TRIANGLE_STRIP, vertices=4, instances=len(views))
         self.texture.build_mipmaps(0, int(np.log2(TILE)))
         self.renderer.checkpoint("rough atlas")

@@ -63,6 +63,7 @@ from engine.render.bindings import (
     VIRTUAL_SHADOW_UNIT,
     PassState,
     apply_pass_state,
+    bind_texture,
     bind_uniform_block,
     flip_front_face,
     set_front_face,
@@ -274,6 +275,7 @@ class ScenePass:
         A batch whose one instance is the view's ``skip`` or ``hide`` entity (a mirror's own
         quad, a probe's own sphere) is not drawn at all: its vertices would all be clipped
         away (0: none; entities start at 1)."""
+        ctx = self.ctx
         stats = self.renderer.stats
         cubes = self.renderer.probe_cubes
         written = self._written
@@ -291,13 +293,13 @@ class ScenePass:
                 values = written[glo] = [None] * len(_PER_DRAW_UNIFORMS)
             textured = batch.texture is not None
             if textured:
-                batch.texture.use(ALBEDO_UNIT)
+                bind_texture(ctx, batch.texture, ALBEDO_UNIT)
             if batch.normal_map is not None:
-                batch.normal_map.use(NORMAL_UNIT)
+                bind_texture(ctx, batch.normal_map, NORMAL_UNIT)
             if batch.emissive_map is not None:
-                batch.emissive_map.use(EMISSIVE_MAP_UNIT)
+                bind_texture(ctx, batch.emissive_map, EMISSIVE_MAP_UNIT)
             if batch.metallic_roughness_map is not None:
-                batch.metallic_roughness_map.use(METALLIC_ROUGHNESS_UNIT)
+                bind_texture(ctx, batch.metallic_roughness_map, METALLIC_ROUGHNESS_UNIT)
             probe_size, lookup = self._bind_probe(batch.probe, PROBE_UNIT, cubes) if batch.probe else (0, _NO_PROBE)
             probe2_size, lookup2 = 0, _NO_PROBE
             if batch.probe_blend:  # the second probe's unit (the sky where the blend is a probe and the sky)
@@ -343,9 +345,9 @@ class ScenePass:
         # batches sampling it read the sky instead (no rendering feedback loop).
         cube = cubes.get(probe) if probe and probe != self.renderer.capturing else None
         if cube is not None:
-            cube.texture.use(unit)
+            bind_texture(self.ctx, cube.texture, unit)
             return cube.face_size, cube.lookup()
-        self.renderer.sky.use(unit)
+        bind_texture(self.ctx, self.renderer.sky, unit)
         return self._sky_size, _NO_PROBE
 
     # --- the pass ------------------------------------------------------------------------------
@@ -370,13 +372,13 @@ class ScenePass:
         targets.view_framebuffer.use()  # colour, surface and seen ids, depth
         apply_pass_state(self.ctx, _BATCHED_SCENE if options.batched else _SCENE, viewport)
         if options.masked:
-            targets.node.use(NODE_UNIT)
+            bind_texture(self.ctx, targets.node, NODE_UNIT)
         bind_uniform_block(self.ctx, renderer.lights_ubo, LIGHTS_BINDING)
         self.shadows.bind()
         # The irradiance table (unit 5 serves other passes between) and the boxes; a probe's
         # capture, and a world without boxes, draw the build without them (sky only).
         self._ambient_probes = self.irradiance.bind(capturing=renderer.capturing != 0)
-        renderer.sky.use(SKY_UNIT)
+        bind_texture(self.ctx, renderer.sky, SKY_UNIT)
         sampler = self._reflection_filter() if options.reflection_filter else None
         if sampler is not None:
             sampler.use(ALBEDO_UNIT)  # a bound sampler object overrides the textures' own filter
@@ -470,7 +472,7 @@ class ScenePass:
         bind_uniform_block(self.ctx, renderer.lights_ubo, LIGHTS_BINDING)
         self.shadows.bind()
         self._ambient_probes = self.irradiance.bind(capturing=True)  # a capture: the sky's irradiance alone
-        renderer.sky.use(SKY_UNIT)
+        bind_texture(self.ctx, renderer.sky, SKY_UNIT)
         renderer.bind_view(views[0])  # the shared eye, for what reads the Camera block
         size = (0, 0, target.size, target.size)
         # moderngl's state setters first (they write to the framebuffer moderngl thinks is

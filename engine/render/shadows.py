@@ -33,6 +33,7 @@ from engine.render.bindings import (
     VIRTUAL_SHADOW_UNIT,
     PassState,
     apply_pass_state,
+    bind_texture,
     bind_uniform_block,
 )
 from engine.render.gpu import Gpu
@@ -332,11 +333,11 @@ class ShadowMaps:
     def bind(self) -> None:
         """Bind the maps and the Shadows block for a scene pass (every pass: the units are
         shared with passes that are not scene passes)."""
-        self.atlas.use(SHADOW_ATLAS_UNIT)
+        bind_texture(self.ctx, self.atlas, SHADOW_ATLAS_UNIT)
         for slot, unit in enumerate(POINT_SHADOW_UNITS):
-            self.cubes.get(slot, self._empty_cube).use(unit)
+            bind_texture(self.ctx, self.cubes.get(slot, self._empty_cube), unit)
         bind_uniform_block(self.ctx, self.ubo, SHADOWS_BINDING)
-        (self.virtual_atlas or self._virtual_empty).use(VIRTUAL_SHADOW_UNIT)
+        bind_texture(self.ctx, self.virtual_atlas or self._virtual_empty, VIRTUAL_SHADOW_UNIT)
         bind_uniform_block(self.ctx, self.virtual_ubo, VIRTUAL_LIGHTS_BINDING)
 
     def _drop_cube(self, slot: int) -> None:

@@ -31,7 +31,7 @@ from dataclasses import dataclass
 import moderngl
 import numpy as np
 
-from engine.render.bindings import TEXT_UNIT, PassState, apply_pass_state
+from engine.render.bindings import TEXT_UNIT, PassState, apply_pass_state, bind_texture
 from engine.render.shader_library import ShaderLibrary
 
 FONT_SIZE = 16              # pixels of the atlas's font (ScreenText.scale multiplies them)
@@ -214,7 +214,7 @@ class TextPass:
         self.quads.write(np.ascontiguousarray(quads, np.float32).tobytes())
         framebuffer.use()
         apply_pass_state(self.ctx, _TEXT, (0, 0, *size))
-        self.texture.use(TEXT_UNIT)
+        bind_texture(self.ctx, self.texture, TEXT_UNIT)
         self.program["output_size"].value = (float(size[0]), float(size[1]))
         self.vao.render(moderngl.TRIANGLE_STRIP, vertices=4, instances=self.drawn)
 
