@@ -74,6 +74,31 @@ def check_surface_layers(owner: object, name: str, value: Any) -> Any:
     return layers
 
 
+LAYER_FIELDS = ("shows_layers", "hides_layers")
+
+
+@dataclass(eq=False)
+class ShownLayers(TrackedComponent):
+    """The reflection layers a view shows, one definition for every component that makes
+    views (Camera, Mirror, Portal, ReflectionProbe): ``shows_layers`` (None: all) less
+    ``hides_layers`` (``hides_layers=[3]`` shows all but layer 3), as bits in ``layer_mask``.
+    Keyword-only fields (``Mirror(hides_layers=[3])``), checked by ``check_surface_layers``:
+    a component's own ``_validate`` hands these names to this one."""
+
+    shows_layers: Any = field(default=None, kw_only=True)
+    hides_layers: Any = field(default=(), kw_only=True)
+
+    @property
+    def layer_mask(self) -> int:
+        """The reflection layers its view shows, as bits."""
+        return surface_layers(self.shows_layers, self.hides_layers)
+
+    def _validate(self, name: str, value: Any) -> Any:
+        if name in LAYER_FIELDS:
+            return check_surface_layers(self, name, value)
+        return value
+
+
 @dataclass(eq=False)
 class Visibility(TrackedComponent):
     """Where the entity is drawn: directly (``direct``), in mirrors (``in_mirrors``), through

@@ -4,7 +4,7 @@ Shared GLSL (camera block, lights, GGX, colour encoding) lives in ``shaders/incl
 included, never pasted.  Defines are inserted after the ``#version`` line: a program's own
 switches, and for every program the numbers GLSL shares with Python, generated from the
 Python that owns them (``engine_defines``: the material slot indices, the cube-face table,
-the clip-distance indices).
+the clip-distance indices, the visibility code's kind bits).
 
 Compile errors name the file and line a person edits, not the line of the expanded text the
 driver saw.  Every file of a program gets a number k, and a ``#line`` directive starts each
@@ -66,6 +66,7 @@ from engine.core import cube_faces, material_slots
 from engine.core.errors import ShaderError
 from engine.render.bindings import clip_glsl_defines
 from engine.render.raw_gl import _load as load_gl_function
+from engine.rules import visibility_rules
 
 _INCLUDE = re.compile(r'^\s*#include\s+"([^"]+)"\s*$')
 _BRANCH = re.compile(r"^\s*#\s*(else|elif|endif)\b")  # after these the line numbering is resumed
@@ -251,8 +252,9 @@ def load_source(name: str, defines: dict[str, str] | None = None, *, root: Path 
 def engine_defines() -> dict[str, str]:
     """The defines every program is built with: numbers the GLSL shares with Python, each
     made from its one Python owner (the material slot indices, the cube-face table, the
-    clip-distance indices of ``engine/render/bindings.py``)."""
-    return {**material_slots.glsl_defines(), **cube_faces.glsl_defines(), **clip_glsl_defines()}
+    clip-distance indices of ``engine/render/bindings.py``, the visibility code's kind bits)."""
+    return {**material_slots.glsl_defines(), **cube_faces.glsl_defines(), **clip_glsl_defines(),
+            **visibility_rules.glsl_defines()}
 
 
 def _line(line: int, number: int) -> str:
