@@ -411,8 +411,18 @@ def test_every_copy_of_the_visibility_rule_answers_as_its_owner(ctx, tmp_path):
 
 def test_no_shader_defines_what_python_owns():
     """The numbers GLSL shares with Python come from ``engine_defines`` only: no shader file
-    defines one of them itself."""
+    defines one of them itself, and the blocks' array sizes and tone curves' numbers there
+    are the Python that packs and picks them."""
+    from components.post import TONEMAP_CURVES
+    from engine.render import irradiance, shadows, views
+    from engine.rules import shadow_rules
+
     owned = set(engine_defines())
+    sizes = {"MAX_DIRECTIONAL_LIGHTS": views.MAX_DIRECTIONAL_LIGHTS, "MAX_POINT_LIGHTS": views.MAX_POINT_LIGHTS,
+             "MAX_POINT_SHADOWS": shadows.MAX_POINT_SHADOWS, "MAX_IRRADIANCE_PROBES": irradiance.MAX_IRRADIANCE_PROBES,
+             "MAX_VIRTUAL_LIGHTS": shadow_rules.MAX_VIRTUAL_LIGHTS,
+             **{f"TONEMAP_{curve.upper()}": i for i, curve in enumerate(TONEMAP_CURVES)}}
+    assert {name: int(engine_defines()[name]) for name in sizes} == sizes
     for path in GLSL_FILES:
         for name in re.findall(r"^\s*#\s*define\s+(\w+)", path.read_text(encoding="utf-8"), re.MULTILINE):
             assert name not in owned, f"{path.name} defines {name}, which the shader library makes from Python"

@@ -46,7 +46,7 @@ if TYPE_CHECKING:
     from engine.render.renderer import Renderer
     from engine.rules.shadow_rules import DirectionalFit, VirtualLight
 
-MAX_POINT_SHADOWS = 2  # cube samplers in shaders/include/shadows.glsl
+MAX_POINT_SHADOWS = 2  # cube samplers in shaders/include/shadows.glsl (a define the shader library makes)
 SHADOW_FILTERS = ("grid", "single")
 VIRTUAL_RESOLUTION = 1024   # texels a side of a virtual light's map (a tile of the virtual atlas)
 # The VirtualLights block (shaders/include/virtual_lights.glsl): a count, then per light a
