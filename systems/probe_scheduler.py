@@ -58,7 +58,7 @@ from engine.rules.visibility_rules import SEEN_BY_EVERY_VIEW, drawn_in, entity_c
 class ChangedBoxes:
     """The world boxes of this frame's changes, as rows: ``lo``, ``hi`` (world AABB corners),
     ``entity`` and ``what`` (how it changed) of each; an entity has a row where it was and
-    one where it is.  ``code``: for a row of an entity that only moved, where it is drawn
+    one where it is.  ``code``: for a row of an entity that only moved (its look unchanged), where it is drawn
     (``visibility_rules.entity_code`` of its ``Visibility``: a probe whose captures do not draw
     it cannot see it move); every other row counts as seen by all (``SEEN_BY_EVERY_VIEW``: a
     look change may be the Visibility itself, and what was seen before must go)."""
@@ -216,7 +216,7 @@ class ProbeScheduler:
             what = ("removed" if entity in removed else "added" if entity in frame.added
                     else "moved" if entity in frame.moved else "look changed")
             code = SEEN_BY_EVERY_VIEW
-            if what == "moved":
+            if what == "moved" and entity not in looks:  # a move with a look change: its old look was seen
                 visibility = world.try_get(entity, Visibility)
                 if visibility is not None:
                     code = entity_code(visibility)
