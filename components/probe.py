@@ -21,7 +21,8 @@ class ReflectionProbe(ShownLayers):
     """A cube map captured at the entity's position (its Transform), of the scene around it.
 
     ``resolution`` texels across a face (a power of two), ``near`` / ``far`` the capture
-    range.  ``refresh``: ``once`` (captured the first frame only), ``on_change`` (the
+    range (held to a camera's depth limits: ``components.limits.check_near_far``).
+    ``refresh``: ``once`` (captured the first frame only), ``on_change`` (the
     default: captured the first frame, then only the faces whose view holds something that
     was added, removed, moved or changed its material), ``every_frame``, ``every_n``
     (every ``every_n`` frames) or ``scripted`` (only after ``request()``).
