@@ -25,7 +25,8 @@ from dataclasses import dataclass, field
 import numpy as np
 from pyglm import glm
 
-from components.limits import ALL_LAYERS, VIEW_KINDS
+from components.limits import ALL_LAYERS
+from components.visibility import DRAWN_EVERYWHERE
 from engine.assets.texture_data import TextureData
 from engine.core.budget import ViewBudget, ViewBudgetError
 from engine.frame_stats import BudgetLedger, RenderStats
@@ -94,9 +95,9 @@ class SurfaceState:
     bumps: MirrorBumps | None = None  # a mirror's normal map, as its composite reads it
     water: WaterLook | None = None    # a mirror that is water: Fresnel weight and moving waves
     layers: int = ALL_LAYERS     # the reflection layers its view shows (components/limits.py)
-    drawn: int = 1 << VIEW_KINDS  # where the surface itself is drawn: the kinds of view it is hidden in
-                                  # (bits 0-3) and its own layers (bits 4-19; none: not drawn), as an
-                                  # instance's visibility code (engine/render/instances.py); layer 0 unless told
+    drawn: int = DRAWN_EVERYWHERE  # where the surface itself is drawn: the kinds of view it is hidden in
+                                   # and its own layers (none: not drawn), packed as an instance's code
+                                   # (engine/rules/visibility_rules.py entity_code); layer 0 unless told
     priority: int = 0            # the view budget keeps higher priorities first (Mirror.priority, Portal.priority)
     end_image: bool | str = "auto"  # past the depth limit, last frame's image: True, False, or "auto" (facing pairs)
     fade: tuple[float, float, float, float] | None = None  # a mirror's fades: distance start, end (m), angle

@@ -26,16 +26,11 @@ from components import (
 from components.transform import mirroring_seen
 from engine.core.errors import GLLimitError
 from engine.core.world import World
-from engine.render.instances import (
-    DRAWN_EVERYWHERE,
-    PROBE_WEIGHTS,
-    TINT_VISIBILITY,
-    InstanceBatch,
-    visibility_code,
-)
+from engine.render.instances import PROBE_WEIGHTS, TINT_VISIBILITY, InstanceBatch
 from engine.render.renderer import Renderer
 from engine.resources import Surfaces
 from engine.rules.probe_rules import LookChanges, SurfaceProbes, probe_blend
+from engine.rules.visibility_rules import entity_code
 from systems.material_dispatch import choose_material
 
 NO_SLICE = (0.0, 0.0, 0.0, 1.0)
@@ -148,8 +143,7 @@ class ExtractSystem(esper.Processor):
         # Where it is drawn: the views it is hidden in and its reflection layers (the scene
         # shaders leave it out of views of a hidden kind or sharing none of its layers).
         visibility = world.try_get(drawn_as, Visibility) if world.exists(drawn_as) else None
-        row["tint"][TINT_VISIBILITY] = DRAWN_EVERYWHERE if visibility is None else \
-            visibility_code(visibility.hidden_kinds, visibility.layer_mask)
+        row["tint"][TINT_VISIBILITY] = entity_code(visibility)
         slice_ = world.try_get(entity, Slice)
         row["slice"] = slice_.plane if slice_ is not None else NO_SLICE
         row["slots"] = (choice.emissive, choice.refract, choice.reflect, drawn_as)

@@ -427,7 +427,7 @@ def test_paths_that_both_draw_only_the_sky_prove_nothing_and_are_refused(scene, 
     """With the check's quads hidden from every view, the plain capture and the alternative
     agree on a sky-only cube; the check must not take that for a verified path."""
     from engine.render import path_checks
-    from engine.render.instances import visibility_code
+    from engine.rules.visibility_rules import visibility_code
 
     original = path_checks._fill_row
 

@@ -13,7 +13,6 @@ import moderngl
 import numpy as np
 from pyglm import glm
 
-from components.limits import VIEW_KINDS
 from engine.assets.mesh import Mesh
 
 INSTANCE_DTYPE = np.dtype([
@@ -22,7 +21,7 @@ INSTANCE_DTYPE = np.dtype([
     ("color", "<f4", (4,)),
     ("surface", "<f4", (4,)),         # metallic, roughness, emissive power, normal-map scale
     ("reflect", "<f4", (4,)),         # reflection mix, refraction ior, weights of the batch's probe and second probe
-    ("tint", "<f4", (4,)),            # reflection tint rgb; w: where it is drawn (visibility_code)
+    ("tint", "<f4", (4,)),            # reflection tint rgb; w: where it is drawn (entity_code)
     ("slice", "<f4", (4,)),           # world plane; only its front is drawn ((0,0,0,1): all)
     ("slots", "<u4", (4,)),           # emissive, refract, reflect variants, entity id
 ])
@@ -36,16 +35,11 @@ INSTANCE_ATTRIBUTES = ("in_model", "in_normal_matrix", "in_color", "in_surface",
 VERTEX_FORMAT = "3f 3f 2f"
 
 
-def visibility_code(hidden_kinds: int, layers: int) -> float:
-    """An instance's ``tint`` w: the kinds of view it is hidden in (bits 0-3) and the
-    reflection layers it belongs to (bits 4-19) (``components.visibility``).  Every vertex
-    attribute GL 4.1 guarantees is in use, so it rides in a float slot the scene shaders do
-    not read: an integer below 2^20 is exact in a float32 (24-bit significand), and
-    ``shaders/include/visibility.glsl`` reads it back as a uint."""
-    return float(hidden_kinds | (layers << VIEW_KINDS))
-
-
-DRAWN_EVERYWHERE = visibility_code(0, 1)  # no Visibility component: every view, layer 0
+# An instance's ``tint`` w is where it is drawn: ``engine.rules.visibility_rules.entity_code``,
+# the kinds of view it is hidden in and the reflection layers it belongs to.  Every vertex
+# attribute GL 4.1 guarantees is in use, so it rides in a float slot the scene shaders do not
+# read otherwise: an integer below 2^20 is exact in a float32 (24-bit significand), and
+# ``shaders/include/visibility.glsl`` reads it back as a uint.
 VERTEX_ATTRIBUTES = ("in_position", "in_normal", "in_uv")
 
 # Many separate dirty runs are sent as one span when the span is not much bigger than the

@@ -58,7 +58,7 @@ from engine.core.errors import GLPassError
 from engine.core.material_slots import EmissiveVariant, ReflectVariant, RefractVariant
 from engine.render.bindings import SCRATCH_UNIT, PassState, apply_pass_state
 from engine.render.gpu import Gpu
-from engine.render.instances import DRAWN_EVERYWHERE, InstanceBatch
+from engine.render.instances import InstanceBatch
 from engine.render.probes import ProbeCaptures, face_view
 from engine.render.raw_gl import (
     LayeredCubeTarget,
@@ -68,6 +68,7 @@ from engine.render.raw_gl import (
     write_cube_level,
 )
 from engine.render.views import lights_block
+from engine.rules.visibility_rules import DRAWN_EVERYWHERE
 
 LOG = logging.getLogger("speculum")
 

@@ -135,7 +135,7 @@ _ARRAY_SIGNATURES = {
     "glReadBuffer": (None, _u),
     "glCopyTexSubImage2D": (None, _u, _i, _i, _i, _i, _i, _i, _i),
 }
-# Read-backs for debug mode (``inspect_target``): what the driver says is bound and attached.
+# Read-backs for debug mode (``inspect_bound_target``): what the driver says is bound and attached.
 _QUERY_SIGNATURES = {
     "glGetIntegerv": (None, _u, ctypes.POINTER(_i)),
     "glGetFramebufferAttachmentParameteriv": (None, _u, _u, _u, ctypes.POINTER(_i)),

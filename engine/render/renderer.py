@@ -17,6 +17,7 @@ import numpy as np
 from components.post import Bloom, Tonemap
 from engine.assets.mesh import Mesh
 from engine.assets.texture_data import TextureData
+from engine.core.color import srgb_to_linear
 from engine.core.errors import GLLimitError
 from engine.render.gl_context import GLCapabilities
 from engine.render.gpu import BACKGROUND, Gpu, Shared
@@ -48,19 +49,15 @@ def checker_look(texture: TextureData | None) -> tuple[float, tuple, tuple] | No
     size, squares = source["checker"]
     if size % squares:
         return None
-    a = _srgb_to_linear(source.get("a", (230, 230, 230)))
-    b = _srgb_to_linear(source.get("b", (40, 40, 48)))
+    a = _srgb_bytes_to_linear(source.get("a", (230, 230, 230)))
+    b = _srgb_bytes_to_linear(source.get("b", (40, 40, 48)))
     even, odd = (b, a) if squares % 2 == 0 else (a, b)
     return float(squares), even, odd
 
 
-def _srgb_to_linear(rgb) -> tuple[float, float, float]:
+def _srgb_bytes_to_linear(rgb) -> tuple[float, ...]:
     """Bytes of an sRGB colour as the GL's sRGB texture decode gives them."""
-    out = []
-    for byte in rgb:
-        c = byte / 255.0
-        out.append(c / 12.92 if c <= 0.04045 else ((c + 0.055) / 1.055) ** 2.4)
-    return tuple(out)
+    return tuple(float(c) for c in srgb_to_linear(np.asarray(rgb, np.float64) / 255.0))
 
 
 class Renderer(Gpu):

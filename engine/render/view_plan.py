@@ -23,15 +23,16 @@ from typing import TYPE_CHECKING
 import numpy as np
 from pyglm import glm
 
-from components.limits import VIEW_DIRECT, VIEW_KINDS, VIEW_MIRROR, VIEW_PORTAL
+from components.limits import VIEW_DIRECT, VIEW_MIRROR, VIEW_PORTAL
 from engine.core.reflection_math import OBLIQUE_SAFE_NEARS
 from engine.render.views import CAMERA_BLOCK_BYTES, CAMERA_DTYPE, CAMERA_FLOATS, CAMERA_IDS, View, field_columns
+from engine.rules.visibility_rules import KIND_MASK, drawn_in, visibility_code
 
 if TYPE_CHECKING:  # the surfaces stage's records (engine/resources.py): read here by their fields
     from engine.resources import SurfaceState
 
 _CAMERA_FLOATS = CAMERA_BLOCK_BYTES // 4
-_KINDS_BUT_DIRECT = ((1 << VIEW_KINDS) - 1) & ~VIEW_DIRECT  # a view through a surface is no longer direct
+_KINDS_BUT_DIRECT = KIND_MASK & ~VIEW_DIRECT  # a view through a surface is no longer direct
 
 
 def _mat(matrix: glm.mat4) -> np.ndarray:
@@ -231,7 +232,7 @@ class SurfaceTable:
         # (``_SURFACE_INTS``), in the order the view's rows and Camera block take them.
         self.float_rows = np.concatenate([self.carry.reshape(count, 16), self.inv_carry.reshape(count, 16),
                                           self.exit_planes, self.is_mirror[:, None], self.scale[:, None]], axis=1)
-        self.int_rows = np.stack([self.exit_rows, _KINDS_BUT_DIRECT | (self.layers << VIEW_KINDS),
+        self.int_rows = np.stack([self.exit_rows, visibility_code(_KINDS_BUT_DIRECT, self.layers),
                                   self.exit_entities, self.kind_bit], axis=1).reshape(count, len(_SURFACE_INTS))
         self._depths: dict[tuple[int, int], tuple[np.ndarray, np.ndarray, list[bool], bool]] = {}
         self._biases: dict[tuple, tuple[np.ndarray | None, np.ndarray]] = {}  # _pair_bias's
@@ -273,12 +274,10 @@ class SurfaceTable:
 
     def drawn_in(self, view_mask: int) -> np.ndarray | None:
         """(S,) bool: the surfaces a view of ``view_mask`` (``View.view_mask``) draws, by the
-        rule of ``shaders/include/visibility.glsl`` (None: all of them)."""
+        visibility rule (``engine.rules.visibility_rules.drawn_in``; None: all of them)."""
         found = self._drawn_in.get(view_mask, False)
         if found is False:
-            kinds = (1 << VIEW_KINDS) - 1
-            shares_a_layer = ((self.drawn >> VIEW_KINDS) & (view_mask >> VIEW_KINDS)) != 0
-            found = ((self.drawn & view_mask & kinds) == 0) & shares_a_layer
+            found = drawn_in(self.drawn, view_mask)
             found = self._drawn_in[view_mask] = None if found.all() else found
         return found
 

@@ -47,6 +47,7 @@ import numpy as np
 from pyglm import glm
 
 from components.limits import MAX_VIEW_DEPTH
+from engine.core.budget import screen_coverage, spending_order
 from engine.render.batched_mirrors import PATHS, choose_path, submitted_triangles
 from engine.render.end_images import EndImages
 from engine.render.gpu import Gpu
@@ -448,8 +449,7 @@ class ViewTree:
         # a frame that counts pixels for it.
         grow = [at for at, i in enumerate(keep) if seen[i] != 0]
         drawn = sum(seen[i] or 0 for i in keep)
-        width, height = candidates.size
-        self.coverage[level] = round(drawn * screen[0] * screen[1] / (width * height))
+        self.coverage[level] = screen_coverage(drawn, candidates.size, screen)
         stats = self.renderer.stats
         stats.views_spent += len(keep)
         stats.pixels_spent += drawn
@@ -657,24 +657,20 @@ class ViewTree:
         in Python: a level's claims are a list, and a few numpy calls cost more than it."""
         stats = self.renderer.stats
         pixel_budget = stats.pixels_left()
-        width, height = candidates.size
-        to_screen = screen[0] * screen[1] / (width * height)
         if settings.level_budget is None and stats.view_budget is None and pixel_budget is None:
             keep = [i for i, n in enumerate(pixels) if n]  # no budget: every view with pixels
             drawn = sum(pixels)
-            self.coverage[level] = round(drawn * to_screen)
+            self.coverage[level] = screen_coverage(drawn, candidates.size, screen)
             stats.views_spent += len(keep)
             stats.pixels_spent += drawn
             return keep
         pixels = np.asarray(pixels, np.int64)
         keep = np.flatnonzero(pixels)
-        on_screen = pixels * to_screen  # the claims' pixels, at screen resolution
-        self.coverage[level] = int(on_screen.sum())
+        self.coverage[level] = screen_coverage(pixels.sum(), candidates.size, screen)
         if len(keep) > 1:
             # Budgets keep the surfaces of highest priority, then those covering the most
             # pixels (this frame's claims), in claim order after.
-            rank = np.lexsort((keep, -pixels[keep], -surfaces.priority[candidates.surface[keep]]))
-            keep = keep[rank]
+            keep = keep[spending_order(surfaces.priority[candidates.surface[keep]], pixels[keep])]
         if settings.level_budget is not None and len(keep) > settings.level_budget:
             result.dropped += len(keep) - settings.level_budget
             keep = keep[: settings.level_budget]

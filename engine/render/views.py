@@ -9,6 +9,7 @@ import numpy as np
 from pyglm import glm
 
 from components.limits import ALL_LAYERS, VIEW_DIRECT, VIEW_KINDS
+from engine.rules.visibility_rules import KIND_MASK, visibility_code
 
 # The Camera uniform block (shaders/include/camera.glsl, std140), the one schema of every
 # writer (View.camera_block, the planner's packed blocks) and reader (PlannedView, the
@@ -85,8 +86,9 @@ class View:
 
     @property
     def view_mask(self) -> int:
-        """Its kinds (bits 0-3) and the layers it shows (bits 4-19), as the shaders read them."""
-        return self.kinds | (self.layers << VIEW_KINDS)
+        """Its kinds and the layers it shows, packed as the shaders read them
+        (``engine.rules.visibility_rules.visibility_code``)."""
+        return visibility_code(self.kinds, self.layers)
 
     def camera_block(self) -> bytes:
         """The Camera uniform block of this view (``CAMERA_DTYPE``), packed once: a View is
@@ -144,7 +146,7 @@ class PlannedView(View):
 
     @property
     def kinds(self) -> int:
-        return self.view_mask & ((1 << VIEW_KINDS) - 1)
+        return self.view_mask & KIND_MASK
 
     @property
     def layers(self) -> int:

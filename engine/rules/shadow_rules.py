@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from pyglm import glm
 
+from engine.core.budget import spending_order
 from engine.resources import Surfaces
 
 # A directional light's map covers the level's box grown by this share of its diagonal (and
@@ -307,8 +308,11 @@ def virtual_lights(directional: list[tuple[int, glm.vec3, glm.vec3]],
 
 
 def rank_virtual_lights(lights: list[VirtualLight]) -> list[VirtualLight]:
-    """The order the budget spends on them: the surface's priority, then the brightest."""
-    return sorted(lights, key=lambda v: (-v.priority, -max(v.color), v.surface, v.light))
+    """The order the budget spends on them (``spending_order``): the surface's priority, then
+    the brightest, then by surface and light entity."""
+    order = spending_order([v.priority for v in lights], [max(v.color) for v in lights],
+                           [v.surface for v in lights], [v.light for v in lights])
+    return [lights[i] for i in order.tolist()]
 
 
 def virtual_shadow_camera(light: VirtualLight, level_lo: np.ndarray, level_hi: np.ndarray,

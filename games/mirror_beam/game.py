@@ -39,6 +39,7 @@ from components import (
     Tonemap,
     Transform,
     look_rotation,
+    yaw_pitch_of,
 )
 from engine.assets.level_file import LevelGame
 from engine.assets.mesh import box
@@ -403,9 +404,7 @@ class MirrorBeam(LevelGame):
         rules = parse_rules(level.rules, names, world, f"level file {str(self.level_path)!r}")
         if not world.query_one(Camera):
             eye, at = glm.vec3(rules.camera["position"]), glm.vec3(rules.camera["look_at"])
-            forward = glm.normalize(at - eye)
-            yaw = glm.degrees(glm.atan(-forward.x, -forward.z))
-            pitch = glm.degrees(glm.asin(forward.y))
+            yaw, pitch = yaw_pitch_of(at - eye)
             spawn_camera(world, position=eye, yaw=yaw, pitch=pitch, fly=False)
         for camera, _ in world.query_one(Camera):
             # Khronos PBR Neutral (it keeps the red beam and the green target their colours,

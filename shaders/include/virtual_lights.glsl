@@ -5,7 +5,7 @@
 // image (engine/render/shadows.py draw_virtual).  One bounce.
 // Only the VIRTUAL_LIGHTS builds hold it (engine/render/scene_pass.py): frames where one shines.
 #ifdef VIRTUAL_LIGHTS
-#define MAX_VIRTUAL_LIGHTS 4   // engine/rules/shadow_rules.py MAX_VIRTUAL_LIGHTS
+// MAX_VIRTUAL_LIGHTS: engine/rules/shadow_rules.py's, defined by the shader library.
 layout(std140) uniform VirtualLights {
     ivec4 virtual_count;                            // x: how many
     mat4 virtual_matrix[MAX_VIRTUAL_LIGHTS];        // world -> atlas uv and depth (divide by w)
