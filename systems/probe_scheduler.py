@@ -34,6 +34,7 @@ from pyglm import glm
 from components import MeshRef, PointLight, ReflectionProbe, Transform, Visibility
 from components.limits import VIEW_PROBE
 from components.tracking import warn_component
+from components.visibility import SEEN_BY_EVERY_VIEW, visibility_code
 from engine.core.budget import spending_order
 from engine.core.world import World
 from engine.resources import RenderStats, Surfaces, ViewBudget
@@ -52,7 +53,7 @@ from engine.rules.probe_rules import (
 )
 from engine.rules.probe_schedule import MAX_NAMED, ProbeDue, ProbeSchedule, ProbeState, ProbeStates
 from engine.rules.shadow_rules import ShadowCasters
-from engine.rules.visibility_rules import SEEN_BY_EVERY_VIEW, drawn_in, entity_code, visibility_code
+from engine.rules.visibility_rules import drawn_in, entity_code
 
 
 class ChangedBoxes:

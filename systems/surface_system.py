@@ -24,6 +24,7 @@ import esper
 import numpy as np
 
 from components import Material, MeshRef, Mirror, Portal, Transform, Visibility, Water
+from components.visibility import DRAWN_EVERYWHERE
 from engine.core.errors import SpeculumError
 from engine.core.portal_math import pair_transform, portal_plane
 from engine.core.reflection_math import plane_from_point_normal, reflection_matrix, transform_plane
@@ -31,7 +32,7 @@ from engine.core.world import World
 from engine.resources import MirrorBumps, Surfaces, SurfaceState, WaterFlow, WaterLook
 from engine.rules.frame_rules import frame_rules, world_corners
 from engine.rules.mirror_rules import MirrorMeshError, mirror_mesh
-from engine.rules.visibility_rules import DRAWN_EVERYWHERE, drawn_code
+from engine.rules.visibility_rules import drawn_code
 
 # A mirror mesh thinner than this fraction of its size composites over its outline quad;
 # anything thicker (a mirror plane given explicitly on a solid mesh) over its rectangle.

@@ -371,10 +371,11 @@ def test_every_copy_of_the_visibility_rule_answers_as_its_owner(ctx, tmp_path):
     ``SurfaceTable.drawn_in`` and the probes' ``ChangedBoxes.seen_by`` all give the answer the
     component's own words give, for every kind flag and layers at both ends."""
     from components.limits import VIEW_KINDS
+    from components.visibility import visibility_code
     from engine.core.reflection_math import reflection_matrix
     from engine.render.view_plan import SurfaceTable
     from engine.resources import SurfaceState
-    from engine.rules.visibility_rules import drawn_in, entity_code, hidden_everywhere, visibility_code
+    from engine.rules.visibility_rules import drawn_in, entity_code, hidden_everywhere
     from systems.probe_scheduler import ChangedBoxes
 
     assert engine_defines()["VIEW_KIND_BITS"] == f"{VIEW_KINDS}u"

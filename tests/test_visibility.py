@@ -440,8 +440,8 @@ def test_the_shaders_read_the_masks_as_the_python_side_packs_them():
     """The GLSL's kind-bit count is the one of components/limits.py (a define the shader
     library makes from it), and the instance code is exact in the float it rides in (all 16
     layers and 4 kinds set)."""
+    from components.visibility import DRAWN_EVERYWHERE, visibility_code
     from engine.render.shader_library import engine_defines
-    from engine.rules.visibility_rules import DRAWN_EVERYWHERE, visibility_code
 
     assert engine_defines()["VIEW_KIND_BITS"] == f"{VIEW_KINDS}u"
     full = visibility_code((1 << VIEW_KINDS) - 1, ALL_LAYERS)

@@ -81,6 +81,7 @@ from engine.render.bindings import (
 )
 from engine.render.gpu import Gpu, ProbeCube
 from engine.render.targets import release_framebuffer
+from engine.render.views import MAX_IRRADIANCE_PROBES
 
 LOG = logging.getLogger("speculum")
 
@@ -91,7 +92,6 @@ _Y2, _Y20, _Y22 = 0.5 * math.sqrt(15.0 / math.pi), 0.25 * math.sqrt(5.0 / math.p
 SH_CONSTANTS = (_Y0, _Y1, _Y1, _Y1, _Y2, _Y2, _Y20, _Y2, _Y22)
 # The clamped cosine's band factors A_l, per coefficient (Ramamoorthi and Hanrahan, eq. 8).
 BAND_FACTORS = (math.pi,) + (2.0 * math.pi / 3.0,) * 3 + (math.pi / 4.0,) * 5
-MAX_IRRADIANCE_PROBES = 32   # influence boxes the scene shader blends from (more: the first kept, a warning)
 PROJECTION_FACE_SIZE = 16    # texels across a face at the cube level the GPU projection reads
 IRRADIANCE_BLOCK_BYTES = 16 + 2 * 16 * MAX_IRRADIANCE_PROBES
 

@@ -53,6 +53,7 @@ import moderngl
 import numpy as np
 from pyglm import glm
 
+from components.visibility import DRAWN_EVERYWHERE
 from engine.assets.mesh import quad
 from engine.core.errors import GLPassError
 from engine.core.material_slots import EmissiveVariant, ReflectVariant, RefractVariant
@@ -68,7 +69,6 @@ from engine.render.raw_gl import (
     write_cube_level,
 )
 from engine.render.views import lights_block
-from engine.rules.visibility_rules import DRAWN_EVERYWHERE
 
 LOG = logging.getLogger("speculum")
 

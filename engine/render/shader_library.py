@@ -66,7 +66,7 @@ import shaders
 from components.post import TONEMAP_CURVES
 from engine.core import cube_faces, material_slots
 from engine.core.errors import ShaderError
-from engine.render import irradiance, shadows, views
+from engine.render import views
 from engine.render.bindings import clip_glsl_defines
 from engine.render.raw_gl import _load as load_gl_function
 from engine.rules import shadow_rules, visibility_rules
@@ -268,8 +268,8 @@ def limit_glsl_defines() -> dict[str, str]:
     ``shadow_rules``), and each tone curve's number (its index in ``TONEMAP_CURVES``, the
     number a build's ``TONEMAP_CURVE`` is)."""
     return {"MAX_DIRECTIONAL_LIGHTS": str(views.MAX_DIRECTIONAL_LIGHTS),
-            "MAX_POINT_LIGHTS": str(views.MAX_POINT_LIGHTS), "MAX_POINT_SHADOWS": str(shadows.MAX_POINT_SHADOWS),
-            "MAX_IRRADIANCE_PROBES": str(irradiance.MAX_IRRADIANCE_PROBES),
+            "MAX_POINT_LIGHTS": str(views.MAX_POINT_LIGHTS), "MAX_POINT_SHADOWS": str(views.MAX_POINT_SHADOWS),
+            "MAX_IRRADIANCE_PROBES": str(views.MAX_IRRADIANCE_PROBES),
             "MAX_VIRTUAL_LIGHTS": str(shadow_rules.MAX_VIRTUAL_LIGHTS),
             **{f"TONEMAP_{curve.upper()}": str(index) for index, curve in enumerate(TONEMAP_CURVES)}}
 

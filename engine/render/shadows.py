@@ -39,10 +39,9 @@ from engine.render.bindings import (
 from engine.render.gpu import Gpu
 from engine.render.raw_gl import LayeredCubeTarget
 from engine.render.targets import release_framebuffer
-from engine.render.views import MAX_DIRECTIONAL_LIGHTS, MAX_POINT_LIGHTS, View
+from engine.render.views import MAX_DIRECTIONAL_LIGHTS, MAX_POINT_LIGHTS, MAX_POINT_SHADOWS, View
 from engine.rules.shadow_rules import MAX_VIRTUAL_LIGHTS, DirectionalFit, VirtualLight
 
-MAX_POINT_SHADOWS = 2  # cube samplers in shaders/include/shadows.glsl (a define the shader library makes)
 SHADOW_FILTERS = ("grid", "single")
 VIRTUAL_RESOLUTION = 1024   # texels a side of a virtual light's map (a tile of the virtual atlas)
 # The VirtualLights block (shaders/include/virtual_lights.glsl): a count, then per light a

@@ -24,9 +24,10 @@ import numpy as np
 from pyglm import glm
 
 from components.limits import VIEW_DIRECT, VIEW_MIRROR, VIEW_PORTAL
+from components.visibility import KIND_MASK, visibility_code
 from engine.core.reflection_math import OBLIQUE_SAFE_NEARS
 from engine.render.views import CAMERA_BLOCK_BYTES, CAMERA_DTYPE, CAMERA_FLOATS, CAMERA_IDS, View, field_columns
-from engine.rules.visibility_rules import KIND_MASK, drawn_in, visibility_code
+from engine.rules.visibility_rules import drawn_in
 
 if TYPE_CHECKING:  # the surfaces stage's records (engine/resources.py): read here by their fields
     from engine.resources import SurfaceState

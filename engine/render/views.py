@@ -9,7 +9,7 @@ import numpy as np
 from pyglm import glm
 
 from components.limits import ALL_LAYERS, VIEW_DIRECT, VIEW_KINDS
-from engine.rules.visibility_rules import KIND_MASK, visibility_code
+from components.visibility import KIND_MASK, visibility_code
 
 # The Camera uniform block (shaders/include/camera.glsl, std140), the one schema of every
 # writer (View.camera_block, the planner's packed blocks) and reader (PlannedView, the
@@ -50,8 +50,13 @@ _VIEW_MASK_BYTES = slice(CAMERA_BYTES["skip"].start + 4 * CAMERA_IDS.index("view
                          CAMERA_BYTES["skip"].start + 4 * CAMERA_IDS.index("view_mask") + 4)
 _EYE_BYTES = slice(CAMERA_BYTES["eye"].start, CAMERA_BYTES["eye"].start + 12)  # xyz
 NO_CLIP = glm.vec4(0.0, 0.0, 0.0, 1.0)
+# The shaders' array sizes (the shader library makes them defines): lights, point lights that
+# cast shadows (engine/render/shadows.py), probes whose irradiance the scene blends
+# (engine/render/irradiance.py).
 MAX_DIRECTIONAL_LIGHTS = 4
 MAX_POINT_LIGHTS = 16
+MAX_POINT_SHADOWS = 2  # cube samplers in shaders/include/shadows.glsl
+MAX_IRRADIANCE_PROBES = 32   # influence boxes the scene shader blends from (more: the first kept, a warning)
 SKY_SH_COEFFICIENTS = 9  # the sky's irradiance coefficients (engine/render/irradiance.py)
 LIGHTS_BLOCK_BYTES = 16 * SKY_SH_COEFFICIENTS + 16 + 2 * 16 * MAX_DIRECTIONAL_LIGHTS + 2 * 16 * MAX_POINT_LIGHTS
 
