@@ -7,7 +7,10 @@ camera's components, lights' settings, a moving object...); every (mirror count,
 engine runs its frames interleaved with all the others in one process (frame i of each,
 then frame i + 1), so the drift of a shared machine lands on every variant alike and the
 ratios hold.  Frame time is wall clock around ``Engine.frame`` plus ``ctx.finish()``.
-Each row gives the median and its ratio to the ``off`` variant of the same mirror count.
+Each row gives the median and its ratio to the ``off`` variant of the same mirror count;
+``process_ms_median`` and ``process_ratio_to_off`` are the same for the process's CPU time
+over the frame (every thread's: on llvmpipe its rasteriser's too, so the frame's whole
+work), which other processes on a shared machine do not lengthen: the steadier ratio there.
 
 Variants now (``VARIANTS``; add a row by appending a ``Variant``):
 
@@ -170,6 +173,8 @@ class Row:
     frame_ms_median: float
     cpu_ms_median: float
     ratio_to_off: float
+    process_ms_median: float
+    process_ratio_to_off: float
     passes: int
     shadow_maps: int   # drawn a frame (median)
     frames: int
@@ -190,6 +195,7 @@ def run_variants(ctx, variants: list[Variant], mirror_counts: tuple[int, ...], f
         outputs = [Output(capture.framebuffer, size) for capture in captures]
         times: list[list[float]] = [[] for _ in cases]
         cpu: list[list[float]] = [[] for _ in cases]
+        work: list[list[float]] = [[] for _ in cases]
         passes: list[list[int]] = [[] for _ in cases]
         shadow_maps: list[list[int]] = [[] for _ in cases]
         for frame in range(warmup + frames):
@@ -197,12 +203,14 @@ def run_variants(ctx, variants: list[Variant], mirror_counts: tuple[int, ...], f
                 step = cases[i][1].step
                 if step is not None:
                     step(engine, frame)
-                start = time.perf_counter()
+                ctx.finish()
+                start, start_work = time.perf_counter(), time.process_time()
                 engine.frame(DT, output)
                 returned = time.perf_counter()
                 ctx.finish()
                 if frame >= warmup:
                     times[i].append((time.perf_counter() - start) * 1e3)
+                    work[i].append((time.process_time() - start_work) * 1e3)
                     cpu[i].append((returned - start) * 1e3)
                     passes[i].append(engine.renderer.stats.passes + engine.renderer.present_pass.post_passes)
                     shadow_maps[i].append(engine.renderer.stats.shadow_maps_drawn)
@@ -214,13 +222,18 @@ def run_variants(ctx, variants: list[Variant], mirror_counts: tuple[int, ...], f
         for engine in engines:
             engine.close()
     medians = {(m, v.name): statistics.median(times[i]) for i, (m, v) in enumerate(cases)}
+    work_medians = {(m, v.name): statistics.median(work[i]) for i, (m, v) in enumerate(cases)}
     rows = []
     for i, (mirrors, variant) in enumerate(cases):
         base = medians.get((mirrors, BASELINE))
+        work_base = work_medians.get((mirrors, BASELINE))
         median = medians[mirrors, variant.name]
+        work_median = work_medians[mirrors, variant.name]
         rows.append(Row(n_mirrors=mirrors, variant=variant.name, frame_ms_median=round(median, 3),
                         cpu_ms_median=round(statistics.median(cpu[i]), 3),
                         ratio_to_off=round(median / base, 3) if base else float("nan"),
+                        process_ms_median=round(work_median, 3),
+                        process_ratio_to_off=round(work_median / work_base, 3) if work_base else float("nan"),
                         passes=round(statistics.median(passes[i])),
                         shadow_maps=round(statistics.median(shadow_maps[i])), frames=frames, size=format_size(size)))
     return rows
@@ -275,7 +288,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 COLUMNS = (("n_mirrors", "mirrors", 8), ("variant", "variant", 10), ("frame_ms_median", "ms med", 9),
-           ("cpu_ms_median", "cpu ms", 9), ("ratio_to_off", "/ off", 7), ("passes", "passes", 7),
+           ("cpu_ms_median", "cpu ms", 9), ("ratio_to_off", "/ off", 7), ("process_ms_median", "proc ms", 9),
+           ("process_ratio_to_off", "p / off", 8), ("passes", "passes", 7),
            ("shadow_maps", "shadows", 8))
 
 

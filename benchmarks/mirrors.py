@@ -68,9 +68,9 @@ from engine.core.game import Game
 from engine.core.world import World
 from engine.render.end_images import EndImages
 from engine.render.gl_context import create_headless_context
+from engine.render.gpu import Gpu
 from engine.render.mirror_passes import MirrorPasses
 from engine.render.present import ANTIALIAS_MODES
-from engine.render.renderer import Renderer
 from engine.render.scene_pass import ScenePass
 from engine.render.targets import CaptureTarget
 from engine.render.view_tree import VISIBILITY_MODES, ViewTree
@@ -155,7 +155,7 @@ class PlanClock:
     and the calls it makes that are not planning: a level's GL work
     (``MirrorPasses.prepare_level``: the claims; ``claimed_pixels``: waiting for their counts;
     ``ScenePass.draw``: the views;
-    ``Renderer.flush``; ``MirrorPasses.composite_level``; ``EndImages.draw`` and ``keep``:
+    ``Gpu.flush``; ``MirrorPasses.composite_level``; ``EndImages.draw`` and ``keep``:
     the end images' pass and blit) and the composite's CPU half
     (``ViewTree._prepare_composite``, where there is one).  Planning is the time inside
     ``render`` less the time in those: the candidate search and cull (``SurfaceTable.cull``),
@@ -167,7 +167,7 @@ class PlanClock:
     """
 
     NOT_PLANNING = ((MirrorPasses, "prepare_level"), (MirrorPasses, "claimed_pixels"), (ScenePass, "draw"),
-                    (Renderer, "flush"), (MirrorPasses, "composite_level"), (ViewTree, "_prepare_composite"),
+                    (Gpu, "flush"), (MirrorPasses, "composite_level"), (ViewTree, "_prepare_composite"),
                     (EndImages, "draw"), (EndImages, "keep"))
     OPTIONAL = ((ViewTree, "_prepare_composite"),)  # the others must be there: a renamed GL call
     # would otherwise count as planning without a word

@@ -8,7 +8,7 @@ from components.probe import ReflectionProbe
 from components.rendering import Emissive, Material, MeshRef, Reflective, Refractive, Skybox
 from components.screen import ScreenPanel, ScreenText
 from components.tracking import ComponentValueError, ComponentWarning, TrackedComponent
-from components.transform import Transform, euler_rotation, look_rotation, yaw_pitch_rotation
+from components.transform import Transform, euler_rotation, look_rotation, yaw_pitch_of, yaw_pitch_rotation
 from components.visibility import Visibility
 from components.water import Water
 
@@ -18,5 +18,5 @@ __all__ = [
     "MeshRef", "Mirror", "PointLight", "Portal", "PortalClone", "ReflectionProbe", "Reflective", "Refractive",
     "ScreenPanel", "ScreenText", "Skybox", "Slice",
     "Tonemap", "TrackedComponent", "Transform", "Traveller", "Visibility", "Water",
-    "euler_rotation", "look_rotation", "yaw_pitch_rotation",
+    "euler_rotation", "look_rotation", "yaw_pitch_of", "yaw_pitch_rotation",
 ]

@@ -6,7 +6,7 @@ from typing import Any
 
 from pyglm import glm
 
-from components.limits import MAX_LIGHT_BOUNCES
+from components.limits import MAX_LIGHT_BOUNCES, check_near_far
 from components.tracking import (
     HALF_MAX,
     ComponentValueError,
@@ -17,18 +17,13 @@ from components.tracking import (
     integer,
     vec3,
 )
-from components.visibility import check_surface_layers, surface_layers
+from components.visibility import LAYER_FIELDS, ShownLayers
 
-# Depth range the 24-bit depth buffer still resolves: far / near up to 1e7 keeps surfaces a
-# few percent of their distance apart distinct at the far end; beyond, entity pixels vanish.
-MIN_NEAR = 1e-4
-MAX_FAR = 1e7
-MAX_DEPTH_RATIO = 1e7
 _DEFAULT_FAR = 200.0
 
 
 @dataclass(eq=False)
-class Camera(TrackedComponent):
+class Camera(ShownLayers):
     """A perspective camera. The active camera with the lowest entity id renders.
 
     ``shows_layers`` (None: all) and ``hides_layers`` are the reflection layers its view
@@ -40,38 +35,14 @@ class Camera(TrackedComponent):
     near: float = 0.05
     far: float = _DEFAULT_FAR
     active: bool = True
-    shows_layers: Any = None
-    hides_layers: Any = ()
-
-    @property
-    def layer_mask(self) -> int:
-        """The reflection layers its view shows, as bits."""
-        return surface_layers(self.shows_layers, self.hides_layers)
 
     def _validate(self, name: str, value: Any) -> Any:
-        if name in ("shows_layers", "hides_layers"):
-            return check_surface_layers(self, name, value)
+        if name in LAYER_FIELDS:
+            return super()._validate(name, value)  # ShownLayers' check
         if name == "fov_y":
             return finite(self, name, value, low=1.0, high=179.0)
         if name in ("near", "far"):
-            value = finite(self, name, value, positive=True, high=MAX_FAR if name == "far" else None)
-            if name == "near" and value < MIN_NEAR:
-                raise ComponentValueError(f"Camera.near must be >= {MIN_NEAR} (depth precision), got {value!r}")
-            # Checked on every write, not only at construction (the other plane is in
-            # __dict__ once set; during __init__ ``near`` comes first).
-            near = value if name == "near" else self.__dict__.get("near")
-            far = value if name == "far" else self.__dict__.get("far")
-            if near is not None and far is not None and far <= near:
-                # Blame the field the user set: during construction (far not yet in __dict__)
-                # Camera(near=500) is wrong about near, not about the default far.
-                # (both given, as in Camera(near=10, far=1), the later one, far, is blamed).
-                blamed = "near" if name == "far" and "far" not in self.__dict__ and value == _DEFAULT_FAR else name
-                raise ComponentValueError(f"Camera.{blamed} must keep far > near, got near={near} far={far}")
-            if near is not None and far is not None and far / near > MAX_DEPTH_RATIO:
-                raise ComponentValueError(
-                    f"Camera.{name} must keep far / near <= {MAX_DEPTH_RATIO:.0e} (beyond it the depth buffer "
-                    f"cannot tell surfaces apart), got near={near} far={far}")
-            return value
+            return check_near_far(self, name, value, _DEFAULT_FAR)
         if name == "active":
             return boolean(self, name, value)
         return value

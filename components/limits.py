@@ -1,6 +1,12 @@
 """The engine's limits on component values, one constant each: the components refuse a value
-past them when it is given, and the systems that honour them read the same constant."""
+past them when it is given, and the systems that honour them read the same constant.  A limit
+several components share is checked here too (``check_near_far``: a camera's and a probe's
+planes), so no component words or bounds it its own way."""
 from __future__ import annotations
+
+from typing import Any
+
+from components.tracking import ComponentValueError, finite
 
 # Views deep a mirror, portal or probe face sees into mirrors and portals (Mirror.max_depth,
 # Portal.max_depth, ReflectionProbe.depth, the view tree's depth cap).  Each level is one more
@@ -21,3 +27,37 @@ ALL_LAYERS = (1 << REFLECTION_LAYERS) - 1
 # PROBE throughout), so a vampire hidden in mirrors is hidden in a portal seen in a mirror too.
 VIEW_DIRECT, VIEW_MIRROR, VIEW_PORTAL, VIEW_PROBE = 1, 2, 4, 8
 VIEW_KINDS = 4         # bits 0-3 of a view mask; the layers it shows are bits 4-19
+
+# Depth range the 24-bit depth buffer still resolves, for every view with a near and a far
+# plane (Camera, ReflectionProbe): far / near up to 1e7 keeps surfaces a few percent of their
+# distance apart distinct at the far end; beyond, entity pixels vanish.
+MIN_NEAR = 1e-4
+MAX_FAR = 1e7
+MAX_DEPTH_RATIO = 1e7
+
+
+def check_near_far(owner: Any, name: str, value: Any, default_far: float) -> float:
+    """``_validate`` of a ``near`` or ``far`` plane (``name``) of ``owner`` (a Camera, a
+    ReflectionProbe): a finite distance > 0, near at least ``MIN_NEAR``, far at most
+    ``MAX_FAR``, far beyond near and far / near at most ``MAX_DEPTH_RATIO``.  Checked on every
+    write, not only at construction (the other plane is in ``__dict__`` once set; during
+    ``__init__`` near comes first); ``default_far`` is the class's, to blame the right field."""
+    kind = type(owner).__name__
+    value = finite(owner, name, value, positive=True, high=MAX_FAR if name == "far" else None)
+    if name == "near" and value < MIN_NEAR:
+        raise ComponentValueError(f"{kind}.near must be >= {MIN_NEAR} (depth precision), got {value!r}")
+    near = value if name == "near" else owner.__dict__.get("near")
+    far = value if name == "far" else owner.__dict__.get("far")
+    if near is None or far is None:
+        return value
+    if far <= near:
+        # Blame the field the user set: during construction (far not yet in __dict__)
+        # Camera(near=500) is wrong about near, not about the default far (both given, as in
+        # Camera(near=10, far=1), the later one, far, is blamed).
+        blamed = "near" if name == "far" and "far" not in owner.__dict__ and value == default_far else name
+        raise ComponentValueError(f"{kind}.{blamed} must keep far > near, got near={near} far={far}")
+    if far / near > MAX_DEPTH_RATIO:
+        raise ComponentValueError(
+            f"{kind}.{name} must keep far / near <= {MAX_DEPTH_RATIO:.0e} (beyond it the depth buffer "
+            f"cannot tell surfaces apart), got near={near} far={far}")
+    return value

@@ -10,7 +10,6 @@ from pyglm import glm
 from components.limits import MAX_VIEW_DEPTH
 from components.tracking import (
     ComponentValueError,
-    TrackedComponent,
     boolean,
     color,
     end_image_choice,
@@ -18,11 +17,11 @@ from components.tracking import (
     integer,
     vec3,
 )
-from components.visibility import check_surface_layers, surface_layers
+from components.visibility import LAYER_FIELDS, ShownLayers
 
 
 @dataclass(eq=False)
-class Mirror(TrackedComponent):
+class Mirror(ShownLayers):
     """Reflects the scene in the plane of its flat mesh (a virtual camera reflected in the plane,
     with an oblique near plane on it, as in Lengyel's "Oblique View Frustum" 2005).
 
@@ -71,22 +70,15 @@ class Mirror(TrackedComponent):
     end_image: Any = "auto"
     plane_point: Any = None
     plane_normal: Any = None
-    shows_layers: Any = None
-    hides_layers: Any = ()
     fade_distance: Any = None
     fade_angle: Any = None
     reflects_light: bool = False
 
-    @property
-    def layer_mask(self) -> int:
-        """The reflection layers its view shows, as bits."""
-        return surface_layers(self.shows_layers, self.hides_layers)
-
     def _validate(self, name: str, value: Any) -> Any:
         if name == "color":
             return color(self, name, value)
-        if name in ("shows_layers", "hides_layers"):
-            return check_surface_layers(self, name, value)
+        if name in LAYER_FIELDS:
+            return super()._validate(name, value)  # ShownLayers' check
         if name in ("reflect_rate", "roughness"):
             value = finite(self, name, value, low=0.0, high=1.0)
             world = getattr(self, "_world_ref", None)

@@ -9,7 +9,7 @@ from pyglm import glm
 
 from components.limits import MAX_VIEW_DEPTH
 from components.tracking import ComponentValueError, TrackedComponent, color, end_image_choice, finite, integer, vec3
-from components.visibility import check_surface_layers, surface_layers
+from components.visibility import LAYER_FIELDS, ShownLayers
 
 
 class PortalPartnerWarning(UserWarning):
@@ -17,7 +17,7 @@ class PortalPartnerWarning(UserWarning):
 
 
 @dataclass(eq=False)
-class Portal(TrackedComponent):
+class Portal(ShownLayers):
     """A rectangular window onto the partner portal.
 
     The rectangle is ``size`` (width, height) in the entity's local XY plane, facing local
@@ -45,14 +45,7 @@ class Portal(TrackedComponent):
     priority: int = 0
     end_image: Any = "auto"
     closed_color: Any = field(default_factory=lambda: glm.vec4(0.02, 0.02, 0.03, 1.0))
-    shows_layers: Any = None
-    hides_layers: Any = ()
     carries_light: bool = False
-
-    @property
-    def layer_mask(self) -> int:
-        """The reflection layers its view shows, as bits."""
-        return surface_layers(self.shows_layers, self.hides_layers)
 
     def check_attach(self, entity: int) -> None:
         """Called by the world before the component joins ``entity`` (the world's entities are
@@ -85,8 +78,8 @@ class Portal(TrackedComponent):
             raise ComponentValueError(f"Portal.{name} must be True or False, got {value!r}")
         if name == "closed_color":
             return color(self, name, value)
-        if name in ("shows_layers", "hides_layers"):
-            return check_surface_layers(self, name, value)
+        if name in LAYER_FIELDS:
+            return super()._validate(name, value)  # ShownLayers' check
         return value
 
 

@@ -4,23 +4,25 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any
 
-from components.limits import MAX_VIEW_DEPTH
-from components.tracking import ComponentValueError, TrackedComponent, boolean, choice, finite, integer, vec3
-from components.visibility import check_surface_layers, surface_layers
+from components.limits import MAX_VIEW_DEPTH, check_near_far
+from components.tracking import ComponentValueError, boolean, choice, finite, integer, vec3
+from components.visibility import LAYER_FIELDS, ShownLayers
 
 REFRESH_MODES = ("once", "on_change", "every_frame", "every_n", "scripted")
 TIME_SLICING = ("all_faces", "one_face_per_frame")
 PREFILTERS = ("mips", "ggx")
 MIN_PROBE_RESOLUTION = 8
 MAX_PROBE_RESOLUTION = 2048  # also checked against the context's cube-map limit when the probe is made
+_DEFAULT_FAR = 100.0
 
 
 @dataclass(eq=False)
-class ReflectionProbe(TrackedComponent):
+class ReflectionProbe(ShownLayers):
     """A cube map captured at the entity's position (its Transform), of the scene around it.
 
     ``resolution`` texels across a face (a power of two), ``near`` / ``far`` the capture
-    range.  ``refresh``: ``once`` (captured the first frame only), ``on_change`` (the
+    range (held to a camera's depth limits: ``components.limits.check_near_far``).
+    ``refresh``: ``once`` (captured the first frame only), ``on_change`` (the
     default: captured the first frame, then only the faces whose view holds something that
     was added, removed, moved or changed its material), ``every_frame``, ``every_n``
     (every ``every_n`` frames) or ``scripted`` (only after ``request()``).
@@ -48,7 +50,7 @@ class ReflectionProbe(TrackedComponent):
 
     resolution: int = 128
     near: float = 0.05
-    far: float = 100.0
+    far: float = _DEFAULT_FAR
     refresh: str = "on_change"
     every_n: int = 1
     time_slicing: str = "all_faces"
@@ -57,8 +59,6 @@ class ReflectionProbe(TrackedComponent):
     box_projection: bool = False
     depth: int = 1
     prefilter: str = "mips"
-    shows_layers: Any = None
-    hides_layers: Any = ()
     priority: int = 0
     _requests: int = field(default=0, init=False, repr=False, compare=False)
 
@@ -73,14 +73,9 @@ class ReflectionProbe(TrackedComponent):
         it with the count it saw last: reading a request clears nothing."""
         return self._requests
 
-    @property
-    def layer_mask(self) -> int:
-        """The reflection layers its captures show, as bits."""
-        return surface_layers(self.shows_layers, self.hides_layers)
-
     def _validate(self, name: str, value: Any) -> Any:
-        if name in ("shows_layers", "hides_layers"):
-            return check_surface_layers(self, name, value)
+        if name in LAYER_FIELDS:
+            return super()._validate(name, value)  # ShownLayers' check
         if name == "priority":
             return integer(self, name, value, low=-1000, high=1000)
         if name == "resolution":
@@ -89,15 +84,7 @@ class ReflectionProbe(TrackedComponent):
                 raise ComponentValueError(f"ReflectionProbe.resolution must be a power of two, got {value!r}")
             return value
         if name in ("near", "far"):
-            value = finite(self, name, value, positive=True, high=1e6)
-            # Both given (the constructor sets near before far): far must lie beyond near.
-            near = value if name == "near" else self.__dict__.get("near")
-            far = value if name == "far" else self.__dict__.get("far")
-            if near is not None and far is not None and not far > near * 1.001:
-                # ReflectionProbe(near=100) alone is wrong about near, not about the default far.
-                blamed = "near" if name == "far" and "far" not in self.__dict__ and value == 100.0 else name
-                raise ComponentValueError(f"ReflectionProbe.{blamed}: far ({far}) must be greater than near ({near})")
-            return value
+            return check_near_far(self, name, value, _DEFAULT_FAR)
         if name == "refresh":
             return choice(self, name, value, REFRESH_MODES)
         if name == "every_n":

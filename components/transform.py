@@ -165,3 +165,17 @@ def yaw_pitch_rotation(yaw_deg: float, pitch_deg: float) -> glm.quat:
     """Yaw about +Y then pitch about the local +X, in degrees (yaw 0 looks down -Z)."""
     return glm.angleAxis(glm.radians(yaw_deg), glm.vec3(0, 1, 0)) * glm.angleAxis(
         glm.radians(pitch_deg), glm.vec3(1, 0, 0))
+
+
+def yaw_pitch_of(direction: Any) -> tuple[float, float]:
+    """The (yaw, pitch) in degrees that ``yaw_pitch_rotation`` turns -Z to, for ``direction``
+    (any length but zero; three numbers or a glm vector): the one inverse of it, for a
+    camera's heading, a look at a point, a pose carried through a portal.  Yaw in
+    [-180, 180], pitch in [-90, 90]; straight up or down the yaw is 0 or 180 (no heading)."""
+    x, y, z = (float(c) for c in direction)
+    return math.degrees(math.atan2(-x, -z)), math.degrees(math.atan2(y, math.hypot(x, z)))
+
+
+def heading(rotation: glm.quat) -> tuple[float, float]:
+    """``yaw_pitch_of`` the direction an orientation looks (its -Z); its roll is dropped."""
+    return yaw_pitch_of(rotation * glm.vec3(0.0, 0.0, -1.0))

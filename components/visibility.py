@@ -23,10 +23,34 @@ from typing import Any
 
 import numpy as np
 
-from components.limits import ALL_LAYERS, REFLECTION_LAYERS, VIEW_DIRECT, VIEW_MIRROR, VIEW_PORTAL, VIEW_PROBE
+from components.limits import (
+    ALL_LAYERS,
+    REFLECTION_LAYERS,
+    VIEW_DIRECT,
+    VIEW_KINDS,
+    VIEW_MIRROR,
+    VIEW_PORTAL,
+    VIEW_PROBE,
+)
 from components.tracking import ComponentValueError, TrackedComponent, boolean, warn_component
 
 DEFAULT_LAYERS = (0,)
+
+# The packed code the visibility rule (engine/rules/visibility_rules.py) and the scene shaders
+# read: plain bits of this component's fields, here so frame data (engine/resources.py) can
+# name an entity drawn everywhere without importing the rules a floor above it.
+KIND_MASK = (1 << VIEW_KINDS) - 1  # the kinds' bits of a code
+
+
+def visibility_code(kinds: int | np.ndarray, layers: int | np.ndarray) -> int | np.ndarray:
+    """The packed code of ``kinds`` (bits 0 to VIEW_KINDS - 1) and ``layers`` (the bits above):
+    an entity's hidden kinds and layers, or a view's kinds and shown layers (ints, or numpy
+    integer arrays: the planner packs a level's view masks at once)."""
+    return kinds | (layers << VIEW_KINDS)
+
+
+DRAWN_EVERYWHERE = visibility_code(0, 1)          # an entity without a Visibility: hidden in no view, on layer 0
+SEEN_BY_EVERY_VIEW = visibility_code(0, ALL_LAYERS)  # hidden in no view, on every layer: what any view draws
 
 
 def layer_list(owner: object, name: str, value: Any) -> tuple[int, ...]:
@@ -72,6 +96,31 @@ def check_surface_layers(owner: object, name: str, value: Any) -> Any:
         warn_component(f"{type(owner).__name__}.shows_layers = {value!r} shows no layer, so its view draws nothing "
                        "(None shows every layer; hides_layers=[n] hides one)")
     return layers
+
+
+LAYER_FIELDS = ("shows_layers", "hides_layers")
+
+
+@dataclass(eq=False)
+class ShownLayers(TrackedComponent):
+    """The reflection layers a view shows, one definition for every component that makes
+    views (Camera, Mirror, Portal, ReflectionProbe): ``shows_layers`` (None: all) less
+    ``hides_layers`` (``hides_layers=[3]`` shows all but layer 3), as bits in ``layer_mask``.
+    Keyword-only fields (``Mirror(hides_layers=[3])``), checked by ``check_surface_layers``:
+    a component's own ``_validate`` hands these names to this one."""
+
+    shows_layers: Any = field(default=None, kw_only=True)
+    hides_layers: Any = field(default=(), kw_only=True)
+
+    @property
+    def layer_mask(self) -> int:
+        """The reflection layers its view shows, as bits."""
+        return surface_layers(self.shows_layers, self.hides_layers)
+
+    def _validate(self, name: str, value: Any) -> Any:
+        if name in LAYER_FIELDS:
+            return check_surface_layers(self, name, value)
+        return value
 
 
 @dataclass(eq=False)

@@ -88,4 +88,11 @@ class Water(TrackedComponent):
     @property
     def f0(self) -> float:
         """Reflectance looking straight down (Schlick's F0 for this index against air)."""
-        return ((self.ior - 1.0) / (self.ior + 1.0)) ** 2
+        return f0_from_ior(self.ior)
+
+
+def f0_from_ior(ior: float) -> float:
+    """Schlick's F0, the reflectance at normal incidence of a dielectric of index ``ior``
+    against air: ((ior - 1) / (ior + 1))^2.  The one Python copy; the shaders' is
+    ``f0_from_ior`` in ``shaders/include/ggx.glsl`` (refraction)."""
+    return ((ior - 1.0) / (ior + 1.0)) ** 2

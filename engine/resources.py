@@ -1,16 +1,22 @@
 """The frame's public data: what one stage publishes for the later ones, and what games and
-tools read (``world.resources[Type]``).  Plain data: no GL objects, no packed bytes.
+tools read (``world.resources[Type]``).  Plain data: no GL objects, no packed bytes, and no
+import of ``engine/render`` (importing this module imports no GL library).
 
 - ``Surfaces`` (the surfaces stage): every mirror and portal as a ``SurfaceState``: its
   plane, outline, where its view goes (``carry``), its look; a game traces rays with them
   (mirror beam) as the view tree draws with them.
-- ``FrameViews`` (the main stage): the root views of this frame.
 - ``PortalCrossings`` (the travel stage): who went through which portal, with the pair's
   ``carry`` and ``turn``, so a game turns what it keeps itself (a body's velocity) by the
   rotation the engine turned the camera with.
-- ``RenderStats`` (made fresh by ``shell.app.Engine.frame``): what the frame cost.
+- ``RenderStats`` (``engine/frame_stats.py``, made fresh by ``shell.app.Engine.frame``): what
+  the frame cost, and, as a ``BudgetLedger``, what its ``ViewBudget`` allowed and was spent on.
+- ``ViewBudget`` (``engine/core/budget.py``): the frame's budget a game or level file sets.
 
-Games import engine data from here and from ``components`` only.
+What the render stages hand each other is theirs, beside the passes: the main view and
+the targets it was drawn into (``engine.render.frame_views.FrameViews``), the planner's
+table of these surfaces (``engine.render.surface_table``).  Games import engine data from
+here and from ``components``; one that picks through the last frame's main view reads
+``FrameViews`` (mirror beam).
 """
 from __future__ import annotations
 
@@ -19,14 +25,13 @@ from dataclasses import dataclass, field
 import numpy as np
 from pyglm import glm
 
-from components.limits import ALL_LAYERS, VIEW_KINDS
+from components.limits import ALL_LAYERS
+from components.visibility import DRAWN_EVERYWHERE
 from engine.assets.texture_data import TextureData
 from engine.core.budget import ViewBudget, ViewBudgetError
-from engine.render.renderer import RenderStats
-from engine.render.view_plan import SurfaceTable
-from engine.render.views import View
+from engine.frame_stats import BudgetLedger, RenderStats
 
-__all__ = ["FrameViews", "MirrorBumps", "PortalCrossing", "PortalCrossings", "RenderStats", "SurfaceState",
+__all__ = ["BudgetLedger", "MirrorBumps", "PortalCrossing", "PortalCrossings", "RenderStats", "SurfaceState",
            "Surfaces", "ViewBudget", "ViewBudgetError", "WaterFlow", "WaterLook"]
 
 
@@ -90,9 +95,9 @@ class SurfaceState:
     bumps: MirrorBumps | None = None  # a mirror's normal map, as its composite reads it
     water: WaterLook | None = None    # a mirror that is water: Fresnel weight and moving waves
     layers: int = ALL_LAYERS     # the reflection layers its view shows (components/limits.py)
-    drawn: int = 1 << VIEW_KINDS  # where the surface itself is drawn: the kinds of view it is hidden in
-                                  # (bits 0-3) and its own layers (bits 4-19; none: not drawn), as an
-                                  # instance's visibility code (engine/render/instances.py); layer 0 unless told
+    drawn: int = DRAWN_EVERYWHERE  # where the surface itself is drawn: the kinds of view it is hidden in
+                                   # and its own layers (none: not drawn), packed as an instance's code
+                                   # (engine/rules/visibility_rules.py entity_code); layer 0 unless told
     priority: int = 0            # the view budget keeps higher priorities first (Mirror.priority, Portal.priority)
     end_image: bool | str = "auto"  # past the depth limit, last frame's image: True, False, or "auto" (facing pairs)
     fade: tuple[float, float, float, float] | None = None  # a mirror's fades: distance start, end (m), angle
@@ -106,14 +111,6 @@ class Surfaces:
 
     mirrors: dict[int, SurfaceState]
     portals: dict[int, SurfaceState]
-    _table: SurfaceTable | None = field(default=None, init=False, repr=False)
-
-    @property
-    def table(self) -> SurfaceTable:
-        """All of them as the arrays a view tree culls with (built once a frame, on first use)."""
-        if self._table is None:
-            self._table = SurfaceTable([*self.mirrors.values(), *self.portals.values()])
-        return self._table
 
     def mirror_planes(self) -> dict[int, tuple[list[float], list[float]]]:
         """Each mirror's world plane as (point on it, unit normal towards its front)."""
@@ -122,14 +119,6 @@ class Surfaces:
             n = glm.vec3(state.plane)
             planes[entity] = (list(-state.plane.w * n), list(n))
         return planes
-
-
-@dataclass
-class FrameViews:
-    """The root views of this frame (a world resource): the main camera's, None when there is
-    no active camera or nothing to draw into."""
-
-    main: View | None = None
 
 
 @dataclass(frozen=True)

@@ -9,7 +9,9 @@
 // FIRST (the step from the HDR image): each box is weighted by 1 / (1 + luma) (Karis's
 // average), so a single very bright pixel cannot outweigh its neighbourhood and flicker
 // as it moves; THRESHOLD: then only light above the threshold, faded in over a soft knee,
-// goes on down the chain.
+// goes on down the chain.  HALF_MEANS: no filter, the mean of the image's 2 x 2 texels
+// under this half-size texel (one bilinear tap at their shared corner): a quarter-size
+// start (BloomPass.first_step) runs the chain on these.
 
 uniform sampler2D source;     // the level above (the HDR image for FIRST): bilinear
 #ifdef THRESHOLD
@@ -34,6 +36,9 @@ float karis_weight(vec3 c) {
 void main() {
     vec2 uv = v_uv;
     vec2 t = 1.0 / vec2(textureSize(source, 0));
+#ifdef HALF_MEANS
+    out_color = vec4(textureLod(source, uv, 0.0).rgb, 1.0);
+#else
     vec3 a = tap(uv, t, vec2(-2.0, 2.0)), b = tap(uv, t, vec2(0.0, 2.0)), c = tap(uv, t, vec2(2.0, 2.0));
     vec3 d = tap(uv, t, vec2(-2.0, 0.0)), e = tap(uv, t, vec2(0.0, 0.0)), f = tap(uv, t, vec2(2.0, 0.0));
     vec3 g = tap(uv, t, vec2(-2.0, -2.0)), h = tap(uv, t, vec2(0.0, -2.0)), i = tap(uv, t, vec2(2.0, -2.0));
@@ -60,4 +65,5 @@ void main() {
     sum *= max(soft, bright - threshold.x) / max(bright, 1e-5);
 #endif
     out_color = vec4(sum, 1.0);
+#endif
 }

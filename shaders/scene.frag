@@ -195,8 +195,7 @@ vec3 refract_environment(vec3 color, Surface s, bool solid) {
     // transmittance (twice, in and out, through a solid ball), blended with the surface
     // colour by alpha (alpha 0 = clear).
     float ior = v_reflect.y;
-    float f0 = pow((ior - 1.0) / (ior + 1.0), 2.0);
-    vec3 transmittance = vec3(1.0) - schlick_fresnel(s.to_eye, s.normal, vec3(f0));
+    vec3 transmittance = vec3(1.0) - schlick_fresnel(s.to_eye, s.normal, vec3(f0_from_ior(ior)));
     if (solid) transmittance *= transmittance;  // the exit's angle is the entry's
     // What lies behind: the probe's capture when one serves the object, else the sky.
     vec3 behind = probe_face_size > 0.0

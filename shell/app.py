@@ -8,7 +8,8 @@ does and where its code is), with the game's own systems (``Game.systems``: each
 Engine is made (``engine.core.game.schedule_order``); ``Engine.schedule`` is the result, the
 frame as it runs.  A new stage is a new entry here; what a later stage needs from an
 earlier one is a world resource (``Output``, ``FrameViews``, ``RenderStats``,
-``PortalCrossings``), never a reference to the other system.
+``PortalCrossings``), never a reference to the other system; the engine calls a system
+only through its own methods.
 """
 from __future__ import annotations
 
@@ -23,11 +24,12 @@ from engine.core.frame_io import Input, Output
 from engine.core.game import Game, GameSystem, schedule_order
 from engine.core.world import FrameEvents, World
 from engine.render.bindings import invalidate
+from engine.render.frame_views import FrameViews
 from engine.render.gl_context import prepare_context
 from engine.render.raw_gl import make_current
 from engine.render.renderer import Renderer
 from engine.render.views import View
-from engine.resources import FrameViews, RenderStats, ViewBudget
+from engine.resources import RenderStats, ViewBudget
 from engine.rules.frame_rules import active_camera_parts
 from shell.level_reload import POLL_INTERVAL as RELOAD_INTERVAL
 from shell.level_reload import LevelReload
@@ -161,7 +163,7 @@ class Engine:
         """Reload the game's level file when it is saved (``shell.level_reload``): the shell
         calls ``level_reload.poll()`` before each frame and says what it returns.  A game not
         built from a level file is refused (a SpeculumError)."""
-        self.level_reload = LevelReload(self, interval)
+        self.level_reload = LevelReload(self.game, self.world, interval)
         return self.level_reload
 
     @property
@@ -210,7 +212,7 @@ class Engine:
             scale = max((getattr(s, "resolution_scale", 1.0) for s in surfaces), default=None)
             self.renderer.prepare_programs(bool(surfaces) and self.reflection_system.path != "per_mirror", scale)
             if surfaces:
-                self.reflection_system.tree.passes.prepare()
+                self.reflection_system.prepare()
         error = self.ctx.error
         if error != "GL_NO_ERROR":
             raise RuntimeError(f"OpenGL error after frame {self.world.frame_index}: {error}")

@@ -26,19 +26,16 @@ import os
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 from pyglm import glm
 
 from components import ComponentValueError, FlyController, Transform
 from engine.core.errors import SpeculumError
 from engine.core.frame_io import Input
+from engine.core.game import Game
 from engine.core.world import World
 from engine.resources import ViewBudget
 from engine.rules.frame_rules import active_camera
-
-if TYPE_CHECKING:
-    from shell.app import Engine
 
 POLL_INTERVAL = 0.25  # seconds between two looks at the level file (windowed runs)
 
@@ -53,21 +50,23 @@ class CameraPose:
 
 
 class LevelReload:
-    """Watches ``engine``'s game's level file and rebuilds its world when the file is saved.
+    """Watches ``game``'s level file and rebuilds ``world`` (the one the game runs in) from it
+    when the file is saved (``shell.app.Engine.watch_level`` makes one for its game).
 
     ``interval``: seconds between two stats (0: every ``poll``).  ``reloads``: the saves
     loaded so far; ``error``: the message of the last save that failed (None once a save
     loads)."""
 
-    def __init__(self, engine: Engine, interval: float = POLL_INTERVAL) -> None:
+    def __init__(self, game: Game, world: World, interval: float = POLL_INTERVAL) -> None:
         from engine.assets.level_file import LevelGame
 
-        if not isinstance(engine.game, LevelGame):
-            raise SpeculumError(f"level reload: {engine.game.title!r} builds its own world in Python, not from a "
+        if not isinstance(game, LevelGame):
+            raise SpeculumError(f"level reload: {game.title!r} builds its own world in Python, not from a "
                                 "level file, so there is no file to reload")
-        self.engine = engine
+        self.game = game
+        self.world = world
         self.interval = float(interval)
-        self.path = Path(engine.game.level_path)
+        self.path = Path(game.level_path)
         self.reloads = 0
         self.error: str | None = None
         self._next_poll = 0.0
@@ -100,7 +99,7 @@ class LevelReload:
         if now < self._next_poll:
             return []
         self._next_poll = now + self.interval
-        playing = Path(self.engine.game.level_path)
+        playing = Path(self.game.level_path)
         if playing != self.path:  # the game went to another level ('n'): watch that file from now on
             self.follow(playing)
             return []
@@ -118,18 +117,17 @@ class LevelReload:
     def reload(self) -> str:
         """Build the level from the file now: the world rebuilt with the camera's pose kept,
         or (a file that fails) the old world kept and the error returned and held in ``error``."""
-        engine = self.engine
         try:
             self._try_build()
         except (SpeculumError, ComponentValueError, ValueError) as exc:
             self.error = f"level reload failed, previous level kept: {exc}"
             return self.error
-        world = engine.world
+        world = self.world
         pose = camera_pose(world)
         for entity in world.entities():
             world.delete_entity(entity)
         world.resources.pop(ViewBudget, None)  # the new file's [level] view_budget, or none
-        engine.game.build(world)
+        self.game.build(world)
         if pose is not None:
             place(world, pose)
         self.error = None
@@ -139,8 +137,8 @@ class LevelReload:
     def _try_build(self) -> None:
         """The game (a shallow copy) built from the file into a scratch world: every error
         a real build would raise, and nothing running touched."""
-        trial = copy.copy(self.engine.game)
-        scratch = World(f"{self.engine.world.name} reload check")
+        trial = copy.copy(self.game)
+        scratch = World(f"{self.world.name} reload check")
         scratch.resources[Input] = Input()
         try:
             trial.build(scratch)

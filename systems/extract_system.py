@@ -26,10 +26,11 @@ from components import (
 from components.transform import mirroring_seen
 from engine.core.errors import GLLimitError
 from engine.core.world import World
-from engine.render.instances import DRAWN_EVERYWHERE, InstanceBatch, visibility_code
+from engine.render.instances import PROBE_WEIGHTS, TINT_VISIBILITY, InstanceBatch
 from engine.render.renderer import Renderer
 from engine.resources import Surfaces
 from engine.rules.probe_rules import LookChanges, SurfaceProbes, probe_blend
+from engine.rules.visibility_rules import entity_code
 from systems.material_dispatch import choose_material
 
 NO_SLICE = (0.0, 0.0, 0.0, 1.0)
@@ -135,15 +136,14 @@ class ExtractSystem(esper.Processor):
         row["color"] = choice.color
         row["surface"] = choice.surface
         row["reflect"] = choice.reflect_params
-        row["reflect"][2:] = (*blend.weights, 0.0, 0.0)[:2]  # each probe's weight (the PROBE_BLEND build)
+        row["reflect"][PROBE_WEIGHTS] = (*blend.weights, 0.0, 0.0)[:2]  # each probe's weight (the PROBE_BLEND build)
         clone = world.try_get(entity, PortalClone)
         drawn_as = clone.source if clone else entity  # a clone stands in for its source past a portal
         row["tint"] = choice.tint
         # Where it is drawn: the views it is hidden in and its reflection layers (the scene
         # shaders leave it out of views of a hidden kind or sharing none of its layers).
         visibility = world.try_get(drawn_as, Visibility) if world.exists(drawn_as) else None
-        row["tint"][3] = DRAWN_EVERYWHERE if visibility is None else \
-            visibility_code(visibility.hidden_kinds, visibility.layer_mask)
+        row["tint"][TINT_VISIBILITY] = entity_code(visibility)
         slice_ = world.try_get(entity, Slice)
         row["slice"] = slice_.plane if slice_ is not None else NO_SLICE
         row["slots"] = (choice.emissive, choice.refract, choice.reflect, drawn_as)

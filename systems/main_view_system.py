@@ -1,8 +1,8 @@
 """Main: the active camera's view, drawn by the scene pass into the main view tree's level 0.
 
-It publishes the view as ``world.resources[FrameViews].main`` (None when there is no
-active camera or the output has no pixels, a minimised window): the reflect stage roots
-its view tree there and the present stage presents it.
+It publishes the view and the targets it drew into as ``world.resources[FrameViews]``
+(``main`` None when there is no active camera or the output has no pixels, a minimised
+window): the reflect stage roots its view tree there and the present stage presents it.
 """
 from __future__ import annotations
 
@@ -13,9 +13,9 @@ import esper
 from engine.core.errors import NoCameraWarning
 from engine.core.frame_io import Output
 from engine.core.world import World
+from engine.render.frame_views import FrameViews
 from engine.render.renderer import Renderer
 from engine.render.views import camera_view
-from engine.resources import FrameViews
 from engine.rules.frame_rules import active_camera_parts
 
 
@@ -40,7 +40,9 @@ class MainViewSystem(esper.Processor):
         if output is None or camera is None or output.size[0] <= 0 or output.size[1] <= 0:
             return  # minimised window or nothing to look through
         _, cam, cam_t = camera
-        targets = self.renderer.levels.get(0, output.size)
+        levels = self.renderer.levels  # the main view tree's targets (the renderer owns them)
+        targets = levels.get(0, output.size)
+        views.levels = levels
         views.main = camera_view(cam_t.world, cam.fov_y, cam.near, cam.far, output.size)
         views.main.layers = cam.layer_mask  # its culling mask (Camera.shows_layers / hides_layers)
         self.renderer.scene_pass.draw([views.main], targets)

@@ -38,14 +38,13 @@ the very next frame.  Each frame's crossings are published as ``world.resources[
 """
 from __future__ import annotations
 
-import math
 from collections.abc import Mapping
 from dataclasses import dataclass
 
 import esper
 from pyglm import glm
 
-from components import Camera, FlyController, Portal, Transform, Traveller
+from components import Camera, FlyController, Portal, Transform, Traveller, yaw_pitch_of
 from engine.core.frame_io import Output
 from engine.core.portal_math import near_plane_corners, pair_rotation, pair_transform, portal_plane
 from engine.core.reflection_math import signed_distance
@@ -223,7 +222,7 @@ class PortalTravelSystem(esper.Processor):
         fly = world.try_get(entity, FlyController)
         if fly is not None:
             forward = rotation * glm.vec3(0.0, 0.0, -1.0)
+            yaw, pitch = yaw_pitch_of(forward)
             if abs(forward.y) < 0.9999:  # straight up or down keeps the old yaw
-                yaw = math.degrees(math.atan2(-forward.x, -forward.z))
                 fly.yaw = fly.yaw + (yaw - fly.yaw + 180.0) % 360.0 - 180.0  # nearest turn: no jump
-            fly.pitch = max(-89.0, min(89.0, math.degrees(math.asin(max(-1.0, min(1.0, forward.y))))))
+            fly.pitch = max(-89.0, min(89.0, pitch))

@@ -9,8 +9,8 @@ import moderngl
 from components.post import TONEMAP_CURVES, Bloom, Tonemap
 from engine.core.frame_io import Output
 from engine.core.world import World
+from engine.render.frame_views import FrameViews
 from engine.render.renderer import Renderer
-from engine.resources import FrameViews
 from engine.rules.frame_rules import active_camera_parts
 
 
@@ -45,9 +45,10 @@ class PresentSystem(esper.Processor):
         self.present_into(output.framebuffer, output.size, dt)
 
     def present_into(self, framebuffer: moderngl.Framebuffer, size: tuple[int, int], dt: float = 0.0) -> None:
-        """Present the last finished frame into ``framebuffer`` as this stage does, with the
-        active camera's Bloom and Tonemap: the frame and a screenshot of it (``dt`` 0: an
-        automatic exposure does not move on for a second presentation)."""
+        """Present the last finished frame (the main stage's ``FrameViews.image``, with the
+        reflections composited in) into ``framebuffer`` as this stage does, with the active
+        camera's Bloom and Tonemap: the frame and a screenshot of it (``dt`` 0: an automatic
+        exposure does not move on for a second presentation)."""
         parts = active_camera_parts(self.world)
         camera = parts[0] if parts is not None else None
         tonemap = bloom = None
@@ -55,4 +56,6 @@ class PresentSystem(esper.Processor):
             tonemap = self.world.try_get(camera, Tonemap)
             bloom = self.world.try_get(camera, Bloom) if self.bloom else None
         self.tonemap, self.bloomed = tonemap, bloom
-        self.renderer.present(framebuffer, size, tonemap, bloom, self._curve, camera, dt)
+        views: FrameViews | None = self.world.resources.get(FrameViews)
+        self.renderer.present(framebuffer, size, tonemap, bloom, self._curve, camera, dt,
+                              views.image if views is not None else None)

@@ -32,8 +32,10 @@ import numpy as np
 from pyglm import glm
 
 from components import MeshRef, PointLight, ReflectionProbe, Transform, Visibility
-from components.limits import ALL_LAYERS, VIEW_PROBE
+from components.limits import VIEW_PROBE
 from components.tracking import warn_component
+from components.visibility import SEEN_BY_EVERY_VIEW, visibility_code
+from engine.core.budget import spending_order
 from engine.core.world import World
 from engine.resources import RenderStats, Surfaces, ViewBudget
 from engine.rules.frame_rules import active_camera_parts
@@ -51,29 +53,29 @@ from engine.rules.probe_rules import (
 )
 from engine.rules.probe_schedule import MAX_NAMED, ProbeDue, ProbeSchedule, ProbeState, ProbeStates
 from engine.rules.shadow_rules import ShadowCasters
+from engine.rules.visibility_rules import drawn_in, entity_code
 
 
 class ChangedBoxes:
     """The world boxes of this frame's changes, as rows: ``lo``, ``hi`` (world AABB corners),
     ``entity`` and ``what`` (how it changed) of each; an entity has a row where it was and
-    one where it is.  ``unseen`` and ``layers``: for a row of an entity that only moved, whether
-    its ``Visibility`` hides it in every probe capture and the reflection layers it is on
-    (a probe whose layers it is not on, or any probe where it is hidden in captures, cannot
-    see it move); every other row counts as seen by all (a look change may be the Visibility
-    itself, and what was seen before must go)."""
+    one where it is.  ``code``: for a row of an entity that only moved (its look unchanged), where it is drawn
+    (``visibility_rules.entity_code`` of its ``Visibility``: a probe whose captures do not draw
+    it cannot see it move); every other row counts as seen by all (``SEEN_BY_EVERY_VIEW``: a
+    look change may be the Visibility itself, and what was seen before must go)."""
 
-    def __init__(self, rows: list[tuple[int, str, np.ndarray, np.ndarray, bool, int]]) -> None:
+    def __init__(self, rows: list[tuple[int, str, np.ndarray, np.ndarray, int]]) -> None:
         rows.sort(key=lambda row: row[0])
         self.entity = np.array([row[0] for row in rows], np.int64)
         self.what = [row[1] for row in rows]
         self.lo = np.array([row[2] for row in rows], np.float64).reshape(-1, 3)
         self.hi = np.array([row[3] for row in rows], np.float64).reshape(-1, 3)
-        self.unseen = np.array([row[4] for row in rows], bool)
-        self.layers = np.array([row[5] for row in rows], np.int64)
+        self.code = np.array([row[4] for row in rows], np.int64)
 
     def seen_by(self, probe: ReflectionProbe) -> np.ndarray:
-        """The rows a probe with these settings may see."""
-        return ~self.unseen & ((self.layers & probe.layer_mask) != 0)
+        """The rows a probe with these settings may see: those its faces' views (kind probe,
+        the probe's layers) draw by the visibility rule."""
+        return drawn_in(self.code, visibility_code(VIEW_PROBE, probe.layer_mask))
 
 
 class ProbeScheduler:
@@ -129,14 +131,16 @@ class ProbeScheduler:
         return schedule
 
     def _within_budget(self, due: list[tuple[ProbeState, frozenset[int]]]) -> list[tuple[ProbeState, frozenset[int]]]:
-        """The due captures in the order the budget spends on them (first captures, then a
-        probe's own priority plus the frames it has waited, then nearest the camera) and,
+        """The due captures in the order the budget spends on them (``spending_order``: first
+        captures, then a probe's own priority plus the frames it has waited, then nearest the camera) and,
         under ``ViewBudget.probe_ms``, those that fit by ``ProbeStates.face_ms`` a face; the
         first always goes, and a probe gains a priority a frame it waits, so none starves.
         What does not fit stays pending, counted in ``RenderStats.probe_faces_deferred``."""
         eye = _camera_position(self.world)
-        due.sort(key=lambda item: (item[0].captures > 0, -(item[0].settings.priority + item[0].waiting),
-                                   float(np.linalg.norm(np.asarray(item[0].position) - eye))))
+        order = spending_order([state.settings.priority + state.waiting for state, _ in due],
+                               [-float(np.linalg.norm(np.asarray(state.position) - eye)) for state, _ in due],
+                               first=[not state.captures for state, _ in due])
+        due = [due[i] for i in order.tolist()]
         budget = ViewBudget.of(self.world.resources)
         face_ms = self.probes.face_ms
         if budget is None or budget.probe_ms is None or face_ms is None:
@@ -212,19 +216,19 @@ class ProbeScheduler:
         for entity in frame.moved | frame.added | removed | looks:
             what = ("removed" if entity in removed else "added" if entity in frame.added
                     else "moved" if entity in frame.moved else "look changed")
-            unseen, layers = False, ALL_LAYERS
-            if what == "moved":
+            code = SEEN_BY_EVERY_VIEW
+            if what == "moved" and entity not in looks:  # a move with a look change: its old look was seen
                 visibility = world.try_get(entity, Visibility)
                 if visibility is not None:
-                    unseen, layers = bool(visibility.hidden_kinds & VIEW_PROBE), visibility.layer_mask
+                    code = entity_code(visibility)
             old = self._bounds.pop(entity, None)
             if old is not None:
-                rows.append((entity, what, *old, unseen, layers))
+                rows.append((entity, what, *old, code))
             mesh_ref = world.try_get(entity, MeshRef) if world.exists(entity) else None
             transform = world.try_get(entity, Transform) if mesh_ref is not None else None
             if transform is not None:
                 new = self._bounds[entity] = world_bounds(mesh_ref.mesh, transform.world)
-                rows.append((entity, what, *new, unseen, layers))
+                rows.append((entity, what, *new, code))
         return ChangedBoxes(rows)
 
     def _all_boxes(self) -> ChangedBoxes:

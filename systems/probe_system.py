@@ -41,7 +41,8 @@ import esper
 
 from engine.core.world import World
 from engine.render.renderer import Renderer
-from engine.resources import Surfaces
+from engine.render.surface_table import surface_table
+from engine.resources import RenderStats, Surfaces
 from engine.rules.probe_schedule import ProbeDue, ProbeSchedule, ProbeState, ProbeStates
 from systems.probe_scheduler import ProbeScheduler
 
@@ -63,7 +64,7 @@ def capture_due(world: World, renderer: Renderer, due: ProbeDue, only: frozenset
     scheduler spends its time budget by."""
     probes = world.resources[ProbeStates]
     state = probes[due.owner]
-    stats = renderer.stats
+    stats: RenderStats = world.resources[RenderStats]
     faces = due.faces if only is None else only
     left = stats.views_left()
     if left is not None and len(faces) > left:
@@ -85,7 +86,10 @@ def capture_due(world: World, renderer: Renderer, due: ProbeDue, only: frozenset
         return
     stats.views_spent += len(faces)
     start = time.perf_counter()
-    renderer.probes.capture_probe(due.owner, faces, state.position, state.settings, world.resources.get(Surfaces))
+    surfaces: Surfaces | None = world.resources.get(Surfaces)
+    table = surface_table(world.resources, surfaces) if state.settings.depth > 0 and surfaces is not None and \
+        (surfaces.mirrors or surfaces.portals) else None  # its faces' view trees plan with it
+    renderer.probes.capture_probe(due.owner, faces, state.position, state.settings, table)
     spent_ms = (time.perf_counter() - start) * 1e3
     stats.probe_ms_spent += spent_ms
     probes.measured(spent_ms / len(faces))
@@ -112,10 +116,10 @@ def starving_face(state: ProbeState, due: ProbeDue) -> frozenset[int] | None:
     return None
 
 
-def report(renderer: Renderer) -> None:
+def report(world: World, renderer: Renderer) -> None:
     """The path in use, every frame there are probes, and the self-check's verdicts (the
     overlay and frame stats show them)."""
-    stats, checks = renderer.stats, renderer.path_checks
+    stats, checks = world.resources[RenderStats], renderer.path_checks
     stats.probe_path = renderer.probes.paths.in_use
     stats.paths_verified, stats.paths_refused = checks.verified(), checks.refused()
 
@@ -168,7 +172,7 @@ class ProbeSystem(esper.Processor):
             probes.drop(owner)
         if not self.probes:
             return
-        limited = self.renderer.stats.view_budget is not None
+        limited = self.world.resources[RenderStats].view_budget is not None
         for due in schedule.undrawn():
             if due.first or not self.recapture_after_present:
                 capture_due(self.world, self.renderer, due)  # a first capture now: nothing to sample yet
@@ -176,7 +180,7 @@ class ProbeSystem(esper.Processor):
                 # Waited past STARVING_FRAMES for the budget the reflections spend first:
                 # one face now, before them (the rest after present, as budget allows).
                 capture_due(self.world, self.renderer, due, only=face)
-        report(self.renderer)
+        report(self.world, self.renderer)
 
 
 class ProbeAfterPresentSystem(esper.Processor):
@@ -193,4 +197,4 @@ class ProbeAfterPresentSystem(esper.Processor):
             return
         for due in schedule.undrawn():
             capture_due(self.world, self.renderer, due)
-        report(self.renderer)
+        report(self.world, self.renderer)

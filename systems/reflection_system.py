@@ -2,7 +2,9 @@
 
 Each frame, after the main view is drawn, this system has the view tree
 (``engine/render/view_tree.py``) render and composite every level of the mirrors and
-portals (the ``Surfaces`` resource, from the surfaces stage) below the main view.  Its
+portals (the ``Surfaces`` resource, from the surfaces stage, as the planner's table:
+``engine/render/surface_table.py``) below the main view, rooted at the main stage's
+``FrameViews``.  Its
 settings are the main tree's limits and path; ``RenderStats`` reports the views drawn,
 dropped by the level budget and cut by the depth cap.
 """
@@ -13,9 +15,11 @@ from dataclasses import replace
 import esper
 
 from engine.core.world import World
+from engine.render.frame_views import FrameViews
 from engine.render.renderer import Renderer
+from engine.render.surface_table import surface_table
 from engine.render.view_tree import ReflectionView, TreeSettings, ViewTree
-from engine.resources import FrameViews, PortalCrossings, Surfaces
+from engine.resources import PortalCrossings, RenderStats, Surfaces
 from engine.rules.frame_rules import frame_rules
 from systems.surface_system import MirrorError
 
@@ -28,7 +32,7 @@ class ReflectionSystem(esper.Processor):
     def __init__(self, world: World, renderer: Renderer, max_depth_cap: int = 8) -> None:
         self.world = world
         self.renderer = renderer
-        self.tree = ViewTree(renderer, end_images=True)
+        self.tree = ViewTree(renderer, renderer.scene_pass, end_images=True)
         self.settings = TreeSettings(max_depth_cap)
         self.views: list[ReflectionView] = []   # last frame's view tree, level order
         self._cut = False                        # camera_cut() was called since the last frame
@@ -94,7 +98,7 @@ class ReflectionSystem(esper.Processor):
         surfaces: Surfaces = self.world.resources.get(Surfaces) or Surfaces({}, {})
         main = views.main if views is not None else None
         renderer = self.renderer
-        if main is None:
+        if main is None or views.levels is None:
             self.views = []
             return
         if surfaces.mirrors or surfaces.portals:
@@ -107,9 +111,9 @@ class ReflectionSystem(esper.Processor):
             self.tree.forget_visibility()
         self._cut, self._camera = False, camera
         settings = self.settings
-        result = self.tree.render(main, renderer.levels, surfaces.table, settings)
+        result = self.tree.render(main, views.levels, surface_table(self.world.resources, surfaces), settings)
         self.views = result.views
-        stats = renderer.stats
+        stats: RenderStats = self.world.resources[RenderStats]
         stats.reflection_views = len(result.views) - 1
         stats.reflection_views_dropped = result.dropped
         stats.reflection_depth_capped = result.capped
@@ -119,6 +123,12 @@ class ReflectionSystem(esper.Processor):
         stats.reflection_views_unseen = sum(1 for view in result.views if view.unseen)
         paths = result.paths
         stats.reflection_path = paths.pop() if len(paths) == 1 else ("mixed" if paths else "")
+
+    def prepare(self) -> None:
+        """Make the main tree's claim and composite buffers now (``Engine.frame`` calls it
+        when a level's batches get their programs) rather than when the first mirror comes
+        into view."""
+        self.tree.passes.prepare()
 
     def mirror_planes(self) -> dict[int, tuple[list[float], list[float]]]:
         """Each mirror's world plane as (point on it, unit normal towards its front)."""

@@ -24,7 +24,7 @@ from engine.core.world import World
 from engine.render.renderer import Renderer
 from engine.render.shadows import MAX_POINT_SHADOWS, VIRTUAL_RESOLUTION
 from engine.render.views import MAX_DIRECTIONAL_LIGHTS, MAX_POINT_LIGHTS
-from engine.resources import Surfaces
+from engine.resources import RenderStats, Surfaces
 from engine.rules.probe_rules import world_bounds
 from engine.rules.shadow_rules import (
     MAX_VIRTUAL_LIGHTS,
@@ -86,7 +86,7 @@ class ShadowSystem(esper.Processor):
     # --- directional lights -------------------------------------------------------------------
     def _directional_maps(self, casters_changed: bool, changed_box, level, published: ShadowCasters) -> None:
         maps = self.renderer.shadows
-        stats = self.renderer.stats
+        stats: RenderStats = self.world.resources[RenderStats]
         lights = [light for _, light in self.world.query_one(DirectionalLight)][:MAX_DIRECTIONAL_LIGHTS]
         casting = {slot: light for slot, light in enumerate(lights)
                    if self.enabled and light.shadows and level is not None}
@@ -128,7 +128,7 @@ class ShadowSystem(esper.Processor):
     def _point_maps(self, published: ShadowCasters) -> None:
         world = self.world
         maps = self.renderer.shadows
-        stats = self.renderer.stats
+        stats: RenderStats = self.world.resources[RenderStats]
         lights = [(entity, light, transform) for entity, (light, transform) in world.query(PointLight, Transform)]
         casting = [(index, entity, light, transform) for index, (entity, light, transform) in enumerate(lights)
                    if self.enabled and light.shadows]
@@ -197,7 +197,7 @@ class ShadowSystem(esper.Processor):
         world = self.world
         renderer = self.renderer
         maps = renderer.shadows
-        stats = renderer.stats
+        stats: RenderStats = world.resources[RenderStats]
         surfaces = world.resources.get(Surfaces)
         found: list[VirtualLight] = []
         if self.enabled and level is not None and surfaces is not None and (surfaces.mirrors or surfaces.portals):

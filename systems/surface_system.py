@@ -24,7 +24,7 @@ import esper
 import numpy as np
 
 from components import Material, MeshRef, Mirror, Portal, Transform, Visibility, Water
-from components.limits import VIEW_KINDS
+from components.visibility import DRAWN_EVERYWHERE
 from engine.core.errors import SpeculumError
 from engine.core.portal_math import pair_transform, portal_plane
 from engine.core.reflection_math import plane_from_point_normal, reflection_matrix, transform_plane
@@ -32,6 +32,7 @@ from engine.core.world import World
 from engine.resources import MirrorBumps, Surfaces, SurfaceState, WaterFlow, WaterLook
 from engine.rules.frame_rules import frame_rules, world_corners
 from engine.rules.mirror_rules import MirrorMeshError, mirror_mesh
+from engine.rules.visibility_rules import drawn_code
 
 # A mirror mesh thinner than this fraction of its size composites over its outline quad;
 # anything thicker (a mirror plane given explicitly on a solid mesh) over its rectangle.
@@ -56,8 +57,8 @@ class SurfaceSystem(esper.Processor):
         self._advance_waves(dt)
         changed |= self._refresh_portals()
         if changed or Surfaces not in self.world.resources:
-            # A new resource only when a surface changed: the view planner's arrays
-            # (``Surfaces.table``, built on first use) are kept while none does.
+            # A new resource only when a surface changed: the view planner's arrays made
+            # from it (``engine.render.surface_table``, on first use) are kept while none does.
             self.world.resources[Surfaces] = Surfaces(dict(self.mirrors), dict(self.portals))
 
     def _refresh_mirrors(self) -> bool:
@@ -154,7 +155,7 @@ class SurfaceSystem(esper.Processor):
     @staticmethod
     def _mirror_state(entity: int, mirror: Mirror, mesh_ref: MeshRef, transform: Transform,
                       material: Material | None = None, water: Water | None = None,
-                      flow: WaterFlow | None = None, drawn: int = 1 << VIEW_KINDS) -> SurfaceState:
+                      flow: WaterFlow | None = None, drawn: int = DRAWN_EVERYWHERE) -> SurfaceState:
         mesh = mesh_ref.mesh
         bumpy = material is not None and material.normal_map is not None
         try:
@@ -189,18 +190,6 @@ class SurfaceSystem(esper.Processor):
                             fade=_fades(mirror), layers=mirror.layer_mask, priority=mirror.priority,
                             end_image=mirror.end_image, drawn=drawn, carries_light=mirror.reflects_light)
 
-
-
-def drawn_code(world: World, entity: int) -> int:
-    """Where ``entity`` (a mirror or portal) is itself drawn: its Visibility's hidden kinds and
-    layers (layer 0 and every kind without one), and no layer at all with an invisible mesh."""
-    mesh_ref = world.try_get(entity, MeshRef)
-    if mesh_ref is not None and not mesh_ref.visible:
-        return 0
-    visibility = world.try_get(entity, Visibility)
-    if visibility is None:
-        return 1 << VIEW_KINDS
-    return visibility.hidden_kinds | (visibility.layer_mask << VIEW_KINDS)
 
 
 def _fades(mirror: Mirror) -> tuple[float, float, float, float] | None:

@@ -184,6 +184,9 @@ def render_case(ctx: moderngl.Context, case: GoldenCase) -> Frame:
     # The references are made on llvmpipe, where FXAA does not walk along edges; a GPU would
     # (engine/render/present.py): compare the same filter everywhere.
     engine.renderer.present_pass.search_steps = 0
+    # And the bloom chain: llvmpipe starts it at a quarter of the frame, a GPU at a half
+    # (engine/render/bloom.py BloomPass.first_step).
+    engine.renderer.present_pass.bloom.first_step = "quarter"
     # Likewise texture filtering: a GPU keeps 8x anisotropy inside reflections and on normal
     # maps, llvmpipe filters them trilinearly (Renderer.reflection_anisotropy and
     # normal_map_anisotropy).  Every machine renders the goldens with llvmpipe's policy, set

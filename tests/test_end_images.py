@@ -23,7 +23,7 @@ from components import (
 )
 from engine.assets.mesh import box, quad
 from engine.assets.texture_data import ripple_normal_map
-from engine.resources import Surfaces as SurfacesResource
+from engine.render.surface_table import PlannerSurfaces
 from engine.rules.frame_rules import active_camera
 from tests.support import SceneRunner, look_from
 
@@ -204,7 +204,7 @@ def test_auto_end_images_are_for_facing_pairs(ctx):
     def surfaces(build):
         runner = SceneRunner(ctx, build, (64, 48))
         runner.frame()
-        table = runner.engine.world.resources[SurfacesResource].table
+        table = runner.engine.world.resources[PlannerSurfaces].table
         found = dict(zip(table.entities.tolist(), table.end_image.tolist(), strict=True))
         runner.close()
         return found

@@ -1,7 +1,7 @@
 """Layering: every module imports on its own in a fresh interpreter; imports run only down
-the floors of the house (components, then the engine's core, assets, rules and render, then
-systems, the app shell, games and benchmarks), transitively; no two modules import each
-other, however far round."""
+the floors of the house (components, then the engine's core, assets, the frame's data, rules
+and render, then systems, the app shell, games and benchmarks), transitively; no two modules
+import each other, however far round."""
 from __future__ import annotations
 
 import ast
@@ -15,8 +15,8 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGES = ("components", "engine", "systems", "shell", "games", "benchmarks", "shaders")
 # The floors, lowest first: a module may import its own floor and the ones below.
-FLOORS = ("shaders", "components", "engine.core", "engine.assets", "engine.rules", "engine.render", "engine",
-          "systems", "shell", "games", "benchmarks")
+FLOORS = ("shaders", "components", "engine.core", "engine.assets", "engine.frame_stats", "engine.resources",
+          "engine.rules", "engine.render", "engine", "systems", "shell", "games", "benchmarks")
 
 
 def modules() -> list[str]:
@@ -110,13 +110,14 @@ def module_path(name: str) -> Path:
     return path if path.exists() else ROOT / name.replace(".", "/") / "__init__.py"
 
 
-def imported_modules(name: str, known: set[str]) -> set[str]:
+def imported_modules(name: str, known: set[str], typing_too: bool = False) -> set[str]:
     """The project modules ``name`` imports at run time, at its top or inside a function (an
-    ``if TYPE_CHECKING:`` block is for type checkers only); ``from a import b`` counts a.b
-    where that is a module, else a."""
+    ``if TYPE_CHECKING:`` block is for type checkers only: counted with ``typing_too``);
+    ``from a import b`` counts a.b where that is a module, else a."""
     tree = ast.parse(module_path(name).read_text())
-    typing_only = {id(node) for block in ast.walk(tree) if isinstance(block, ast.If)
-                   and getattr(block.test, "id", None) == "TYPE_CHECKING" for node in ast.walk(block)}
+    typing_only = set() if typing_too else {
+        id(node) for block in ast.walk(tree) if isinstance(block, ast.If)
+        and getattr(block.test, "id", None) == "TYPE_CHECKING" for node in ast.walk(block)}
     found = set()
     for node in ast.walk(tree):
         if id(node) in typing_only:
@@ -129,9 +130,9 @@ def imported_modules(name: str, known: set[str]) -> set[str]:
     return {m for m in found if m in known and m != name}
 
 
-def import_graph() -> dict[str, set[str]]:
+def import_graph(typing_too: bool = False) -> dict[str, set[str]]:
     known = set(modules())
-    return {name: imported_modules(name, known) for name in known}
+    return {name: imported_modules(name, known, typing_too) for name in known}
 
 
 def test_imports_run_only_down_the_floors_transitively():
@@ -152,8 +153,11 @@ def test_imports_run_only_down_the_floors_transitively():
 
 
 def test_no_two_modules_import_each_other():
-    """No import circle of any length (Tarjan's strongly connected components)."""
-    graph = import_graph()
+    """No import circle of any length (Tarjan's strongly connected components), type-only
+    imports included: a module that names another's type for its hints depends on it as
+    much as one that calls it (a pass takes the ``Gpu`` below it, not the ``Renderer``
+    above it that makes it)."""
+    graph = import_graph(typing_too=True)
     index, low, on_stack, stack, circles, counter = {}, {}, set(), [], [], [0]
 
     def visit(node: str) -> None:
@@ -189,6 +193,17 @@ def test_loading_a_level_file_imports_no_system_and_no_shell():
     interpreter: the layering of the imports, as Python runs them."""
     probe = ("import sys, engine.assets.level_file; "
              "print(sorted(m for m in sys.modules if m.split('.')[0] in ('systems', 'shell', 'games')))")
+    result = subprocess.run([sys.executable, "-c", probe], cwd=ROOT, env={**os.environ, "PYTHONPATH": str(ROOT)},
+                            capture_output=True, text=True, timeout=60)
+    assert result.returncode == 0, result.stderr[-2000:]
+    assert result.stdout.strip() == "[]", result.stdout
+
+
+def test_the_frame_data_imports_no_render_code_and_no_gl():
+    """``engine.resources`` (what games read) is plain data: importing it in a fresh
+    interpreter loads nothing of ``engine/render`` and no GL library."""
+    probe = ("import sys, engine.resources; "
+             "print(sorted(m for m in sys.modules if m.startswith(('engine.render', 'moderngl', 'glcontext'))))")
     result = subprocess.run([sys.executable, "-c", probe], cwd=ROOT, env={**os.environ, "PYTHONPATH": str(ROOT)},
                             capture_output=True, text=True, timeout=60)
     assert result.returncode == 0, result.stderr[-2000:]

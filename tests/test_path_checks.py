@@ -426,8 +426,8 @@ def test_the_layered_target_state_is_what_a_layered_draw_needs_here_and_names_a_
 def test_paths_that_both_draw_only_the_sky_prove_nothing_and_are_refused(scene, ctx, fresh_checks, monkeypatch):
     """With the check's quads hidden from every view, the plain capture and the alternative
     agree on a sky-only cube; the check must not take that for a verified path."""
+    from components.visibility import visibility_code
     from engine.render import path_checks
-    from engine.render.instances import visibility_code
 
     original = path_checks._fill_row
 

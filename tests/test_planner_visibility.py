@@ -1,18 +1,13 @@
-"""A mirror hidden by its own Visibility makes no view, in the array planner as in the
-small one: the planner makes no candidate for it (no claim, no query), not only the frame
-no view (the claims' pixel counts drop a candidate that shows nothing, so a planner that
+"""A mirror hidden by its own Visibility makes no view: the array planner (the one planner,
+``SurfaceTable.plan``) makes no candidate for it (no claim, no query), not only the frame no
+view (the claims' pixel counts drop a candidate that shows nothing, so a planner that
 ignored the Visibility would still draw the right frame, one query dearer a level).
 
-``SurfaceTable.plan`` takes a level of a few (parent x surface) pairs pair by pair in glm
-(``_plan_small``) and a larger one in arrays (``cull``); the behaviour tests' scenes are
-small, so they run the glm path only.  Here each case runs twice, the array planner forced
-(``view_plan.SMALL_LEVEL_PAIRS = 0``) and the glm one forced, and both must make the views
-worked out by hand: none into a mirror its parent view does not draw (hidden in direct
-views, on a layer the camera does not show, hidden in mirrors), and still the view into
-the mirror next to it, so an empty frame cannot pass."""
+Each case must make the views worked out by hand: none into a mirror its parent view does
+not draw (hidden in direct views, on a layer the camera does not show, hidden in mirrors),
+and still the view into the mirror next to it, so an empty frame cannot pass."""
 from __future__ import annotations
 
-import numpy as np
 import pytest
 from pyglm import glm
 
@@ -21,8 +16,6 @@ from engine.assets.mesh import quad
 from engine.render import view_plan
 from tests.support import look_from
 from tests.test_visibility import SIZE, in_surface, two_mirrors
-
-PLANNERS = {"arrays": 0, "small": 10**9}
 
 
 def facing_pair(ents):
@@ -48,29 +41,23 @@ CASES = {
 }
 
 
-def _run(scene, monkeypatch, planner: str, case: str,
-         hidden: bool) -> tuple[list[tuple[int, ...]], set[int], dict, object]:
-    """Two frames of ``case`` under ``planner``: each view's chain of surfaces (entities,
-    root first), the surfaces the planner made candidates of, the entities, and the runner;
-    the array planner's cull must have run and the glm one not (or the other way round)."""
+def _run(scene, monkeypatch, case: str, hidden: bool) -> tuple[list[tuple[int, ...]], set[int], dict, object]:
+    """Two frames of ``case``: each view's chain of surfaces (entities, root first), the
+    surfaces the planner made candidates of, the entities, and the runner; the planner's
+    cull must have run."""
     with monkeypatch.context() as patch:  # each run wraps the planner's own methods, not the last run's wrappers
-        return _frames(scene, patch, planner, case, hidden)
+        return _frames(scene, patch, case, hidden)
 
 
-def _frames(scene, monkeypatch, planner: str, case: str, hidden: bool):
+def _frames(scene, monkeypatch, case: str, hidden: bool):
     build, name, visibility, layers = CASES[case]
-    monkeypatch.setattr(view_plan, "SMALL_LEVEL_PAIRS", PLANNERS[planner])
-    calls = {"cull": 0, "small": 0}
-    cull, small = view_plan.SurfaceTable.cull, view_plan.SurfaceTable._plan_small
+    calls = {"cull": 0}
+    cull = view_plan.SurfaceTable.cull
 
     def counting_cull(self, *args, **kwargs):
         if not kwargs.get("fallback"):  # the fallback's own cull (which surfaces lost their view) plans nothing
             calls["cull"] += 1
         return cull(self, *args, **kwargs)
-
-    def counting_small(self, *args, **kwargs):
-        calls["small"] += 1
-        return small(self, *args, **kwargs)
 
     candidates = set()
     plan = view_plan.SurfaceTable.plan
@@ -82,7 +69,6 @@ def _frames(scene, monkeypatch, planner: str, case: str, hidden: bool):
         return planned
 
     monkeypatch.setattr(view_plan.SurfaceTable, "cull", counting_cull)
-    monkeypatch.setattr(view_plan.SurfaceTable, "_plan_small", counting_small)
     monkeypatch.setattr(view_plan.SurfaceTable, "plan", recording_plan)
     ents = {}
     runner = scene(build(ents), SIZE)
@@ -93,7 +79,7 @@ def _frames(scene, monkeypatch, planner: str, case: str, hidden: bool):
         runner.world.add_component(ents[name], Visibility(**visibility))
     runner.frame()
     runner.frame()
-    assert (calls["cull"] > 0, calls["small"] > 0) == ((True, False) if planner == "arrays" else (False, True)), calls
+    assert calls["cull"] > 0, calls
     chains = []
     for node in runner.engine.reflection_system.views[1:]:
         chain = []
@@ -105,24 +91,18 @@ def _frames(scene, monkeypatch, planner: str, case: str, hidden: bool):
 
 
 @pytest.mark.parametrize("case", CASES)
-def test_a_mirror_hidden_by_its_own_visibility_makes_no_view_in_either_planner(scene, monkeypatch, case):
+def test_a_mirror_hidden_by_its_own_visibility_makes_no_view(scene, monkeypatch, case):
     _, name, _, _ = CASES[case]
-    found = {}
-    for planner in PLANNERS:
-        shown, planned, ents, _ = _run(scene, monkeypatch, planner, case, hidden=False)
-        mirror = ents[name]
-        assert any(mirror in chain for chain in shown) and mirror in planned, (planner, shown)  # looked into
-        chains, planned, ents, runner = _run(scene, monkeypatch, planner, case, hidden=True)
-        mirror = ents[name]
-        assert mirror not in planned, (planner, planned)  # no candidate, so no claim
-        assert chains and not any(mirror in chain for chain in chains), (planner, chains)
-        if case == "hidden_in_mirrors":  # seen directly, not in the front mirror: its one view
-            assert chains == [(ents["front"],)], (planner, chains)
-        else:  # the other mirror's view stays; the hidden one is not drawn at all
-            assert chains == [(ents["right"],)], (planner, chains)
-            assert not in_surface(runner, mirror).any()
-            assert in_surface(runner, ents["right"]).sum() > 200
-        found[planner] = (chains, planned, runner.stats.reflection_views, runner.stats.passes, runner.ids())
-    arrays, small = found["arrays"], found["small"]
-    assert arrays[:4] == small[:4]
-    assert np.array_equal(arrays[4], small[4])  # the same frame's ids
+    shown, planned, ents, _ = _run(scene, monkeypatch, case, hidden=False)
+    mirror = ents[name]
+    assert any(mirror in chain for chain in shown) and mirror in planned, shown  # looked into
+    chains, planned, ents, runner = _run(scene, monkeypatch, case, hidden=True)
+    mirror = ents[name]
+    assert mirror not in planned, planned  # no candidate, so no claim
+    assert chains and not any(mirror in chain for chain in chains), chains
+    if case == "hidden_in_mirrors":  # seen directly, not in the front mirror: its one view
+        assert chains == [(ents["front"],)], chains
+    else:  # the other mirror's view stays; the hidden one is not drawn at all
+        assert chains == [(ents["right"],)], chains
+        assert not in_surface(runner, mirror).any()
+        assert in_surface(runner, ents["right"]).sum() > 200

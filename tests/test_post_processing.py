@@ -23,7 +23,7 @@ from components.tracking import ComponentValueError
 from engine.assets.level_file import load_level, save_level
 from engine.core.frame_io import Output
 from engine.core.game import Game, GameSystem
-from engine.render.bloom import level_sizes
+from engine.render.bloom import FIRST_STEPS, level_sizes
 from engine.render.post import adapt_blend
 from engine.render.targets import CaptureTarget
 from shell.app import Engine
@@ -271,14 +271,25 @@ def test_a_tonemap_replaces_the_renderers_exposure(known):
 
 # --- bloom -----------------------------------------------------------------------------------------
 
+def start_at(runner, first_step: str):
+    """The runner with its bloom chain starting at ``first_step`` (engine/render/bloom.py:
+    "half" is a GPU's default, "quarter" a software rasteriser's): tests run both."""
+    runner.engine.renderer.present_pass.bloom.first_step = first_step
+    return runner
+
+
+@pytest.mark.parametrize("first_step", FIRST_STEPS)
 @pytest.mark.parametrize("composite", BLOOM_COMPOSITES)
-def test_bloom_of_a_black_frame_is_black(known, composite):
+def test_bloom_of_a_black_frame_is_black(known, composite, first_step):
     image = np.zeros((90, 160, 4), np.float16)
-    runner = known(image, Tonemap(curve="none"), Bloom(intensity=1.0, composite=composite))
+    runner = start_at(known(image, Tonemap(curve="none"), Bloom(intensity=1.0, composite=composite)), first_step)
     assert not runner.frame().any()
     bloom = runner.engine.renderer.present_pass.bloom
-    assert bloom.levels == 5   # 80x45 .. 5x2: a sixth would be 2x1
-    for texture in bloom.textures:
+    # half: 80x45 .. 5x2, a sixth would be 2x1; quarter: 40x22 .. 5x2 (from the 80x45 means)
+    assert bloom.levels == {"half": 5, "quarter": 4}[first_step]
+    textures = [*bloom.textures, *([bloom._half[0]] if bloom._half else [])]
+    assert len(textures) == bloom.target_count() == bloom.levels + (first_step == "quarter")
+    for texture in textures:
         assert not np.frombuffer(texture.read(), np.float16).reshape(-1, 4)[:, :3].any()
 
 
@@ -291,7 +302,8 @@ def smooth_image(size=(320, 180)) -> np.ndarray:
     return image.astype(np.float16)
 
 
-def test_bloom_keeps_the_images_mean(known):
+@pytest.mark.parametrize("first_step", FIRST_STEPS)
+def test_bloom_keeps_the_images_mean(known, first_step):
     """The chain's result, divided by its levels, has the image's mean within 0.5% per channel
     on a smooth image: every filter's weights sum to 1, so what is lost is only at the
     edges (taps past them read the edge), the odd-sized levels' half-texel shifts, half-float
@@ -299,7 +311,7 @@ def test_bloom_keeps_the_images_mean(known):
     slope).  Energy-conserving at intensity 1 the frame is the bloom alone, and its mean
     (read as 8-bit sRGB, exposed by 1/8 so nothing clips) agrees within 1%."""
     image = smooth_image()
-    runner = known(image, Tonemap(curve="none", exposure=-3.0), Bloom(intensity=1.0, levels=5))
+    runner = start_at(known(image, Tonemap(curve="none", exposure=-3.0), Bloom(intensity=1.0, levels=5)), first_step)
     frame = runner.frame()
     bloom = runner.engine.renderer.present_pass.bloom
     assert bloom.levels == 5
@@ -315,7 +327,8 @@ def test_bloom_keeps_the_images_mean(known):
     assert np.abs(np.diff(srgb_to_linear(frame), axis=1)).mean() < 0.8 * np.abs(np.diff(plain, axis=1)).mean()
 
 
-def test_bloom_spreads_a_bright_point_and_leaves_level_0_as_it_was(known):
+@pytest.mark.parametrize("first_step", FIRST_STEPS)
+def test_bloom_spreads_a_bright_point_and_leaves_level_0_as_it_was(known, first_step):
     """A 4x4 patch of 200 on black: additive bloom lights pixels tens of pixels away (the
     deepest levels) falling off with distance; the threshold keeps dim light out; and the
     main image the end images keep is the image written, untouched."""
@@ -323,7 +336,7 @@ def test_bloom_spreads_a_bright_point_and_leaves_level_0_as_it_was(known):
     image[..., 3] = 1.0
     image[62:66, 94:98, :3] = 200.0
     bloom = Bloom(intensity=0.5, threshold=1.0, composite="additive")
-    runner = known(image, Tonemap(curve="none"), bloom)
+    runner = start_at(known(image, Tonemap(curve="none"), bloom), first_step)
     frame = runner.frame().astype(np.int16)
     row = frame[64, :, 0]
     assert row[96] == 255 and row[96 - 24] > row[96 - 48] > 0, row[40:100]
@@ -331,11 +344,11 @@ def test_bloom_spreads_a_bright_point_and_leaves_level_0_as_it_was(known):
     dim = np.zeros_like(image)
     dim[..., 3] = 1.0
     dim[62:66, 94:98, :3] = 0.9   # below the threshold: shown as it is, no glow
-    frame = known(dim, Tonemap(curve="none"), bloom).frame()
+    frame = start_at(known(dim, Tonemap(curve="none"), bloom), first_step).frame()
     assert frame[63, 95, 0] == expected_srgb8(np.array(0.9)) and not frame[:60].any() and not frame[:, :90].any()
     # Bloom comes before exposure: 2 EV up shows the patch at 3.6 (clipped white), and still
     # no glow, since the threshold is in the scene's units.
-    frame = known(dim, Tonemap(curve="none", exposure=2.0), bloom).frame()
+    frame = start_at(known(dim, Tonemap(curve="none", exposure=2.0), bloom), first_step).frame()
     assert frame[63, 95, 0] == 255 and not frame[:60].any() and not frame[:, :90].any()
 
 
@@ -357,6 +370,19 @@ def test_bloom_level_sizes_stop_at_two_pixels():
     assert level_sizes((640, 360), 6) == [(320, 180), (160, 90), (80, 45), (40, 22), (20, 11), (10, 5)]
     assert level_sizes((640, 360), 8) == level_sizes((640, 360), 7) == [*level_sizes((640, 360), 6), (5, 2)]
     assert level_sizes((3, 100), 4) == []
+    # A quarter start: the chain of the image's 2 x 2 means (320x180), one level shorter.
+    assert level_sizes((640, 360), 6, "quarter") == level_sizes((320, 180), 6) == level_sizes((640, 360), 7)[1:]
+    assert level_sizes((7, 100), 4, "quarter") == []
+
+
+def test_bloom_first_step_is_checked(ctx):
+    from engine.render.bloom import BloomPass
+    from engine.render.shader_library import ShaderLibrary
+
+    bloom = BloomPass(ctx, ShaderLibrary(ctx))
+    assert bloom.first_step == "half" and BloomPass(ctx, ShaderLibrary(ctx), software=True).first_step == "quarter"
+    with pytest.raises(ValueError, match="first_step"):
+        bloom.first_step = "eighth"
 
 
 def test_bloom_resources_go_with_the_component(known):
@@ -533,7 +559,7 @@ def test_the_present_stages_switches_turn_bloom_off_and_override_the_curve(known
         return "; ".join(post_lines(engine))
 
     image = ramp()
-    runner = known(image, Tonemap(curve="agx", auto_exposure=True), Bloom(intensity=0.3))
+    runner = start_at(known(image, Tonemap(curve="agx", auto_exposure=True), Bloom(intensity=0.3)), "half")
     present = runner.engine.stages["present"]
     bloomed = runner.frame()
     adapted = runner.engine.renderer.present_pass.auto_exposure.adapted_ev()

@@ -276,3 +276,19 @@ def test_probes_that_refresh_every_frame_watch_no_changes_until_one_turns_on_cha
     world.get(crate, Transform).position = glm.vec3(-2, 0, 0)
     world.step(1 / 60)
     assert due(world)[probe] == {f"moved: entity {crate}": {0, 1}}
+
+
+def test_hiding_an_object_as_it_moves_still_recaptures_where_it_was_seen(gl_free_world):
+    """Moved and hidden from probes in the same frame: what the probe saw before must go, so
+    the face that saw it is due (a move alone by a hidden object asks for nothing, by the
+    object's new Visibility; its old one drew it)."""
+    world = gl_free_world
+    probe = world.spawn(Transform(), ReflectionProbe(resolution=16, far=20.0))
+    plain = world.spawn(Transform(position=(2, 0, -1)), MeshRef(box((0.2, 0.2, 0.2))), Material())
+    world.step(1 / 60)
+    world.step(1 / 60)
+    assert due(world) == {}
+    world.get(plain, Transform).position = glm.vec3(2, 0.1, -1)
+    world.add_component(plain, Visibility(in_probes=False))
+    world.step(1 / 60)
+    assert probe in due(world) and 0 in set().union(*due(world)[probe].values())

@@ -145,7 +145,7 @@ def test_an_object_whose_probe_has_no_capture_yet_reflects_the_sky(scene, ctx):
     left on the probe's texture unit: drawn with the chrome sphere's cube map dropped and a
     red one left bound, the sphere is the sky's colours, as in a frame where it reflects
     the sky."""
-    from engine.render.bindings import PROBE_UNIT
+    from engine.render.bindings import PROBE_UNIT, bind_texture
 
     ents = {}
 
@@ -163,7 +163,7 @@ def test_an_object_whose_probe_has_no_capture_yet_reflects_the_sky(scene, ctx):
     renderer.probes.drop(ents["sphere"])  # as before its first capture
     red = ctx.texture_cube((1, 1), 4, np.tile(np.array([255, 0, 0, 255], np.uint8), 6).tobytes())
     try:
-        red.use(PROBE_UNIT)  # left there by another pass
+        bind_texture(ctx, red, PROBE_UNIT)  # left there by another pass (passes bind through the record)
         renderer.scene_pass.draw([runner.engine.main_view], renderer.targets)
     finally:
         red.release()

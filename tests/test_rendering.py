@@ -439,12 +439,62 @@ def test_camera_block_columns_named_in_views_hold_what_they_say():
     assert np.allclose(block[CAMERA_BLOCK_EYE], (1.0, 2.0, 3.0))
 
 
+def test_the_camera_glsl_block_is_the_camera_dtype():
+    """shaders/include/camera.glsl's Camera block and ``views.CAMERA_DTYPE`` (every writer's
+    and reader's schema) name the same members in the same order at the same std140 offsets
+    (worked out here from the GLSL types: a mat4 or a vec4 is 16-byte aligned), with the
+    same size, and a scalar type that agrees (float against f4, uint against u4)."""
+    import re
+    from pathlib import Path
+
+    from engine.render.views import CAMERA_BLOCK_BYTES, CAMERA_DTYPE
+
+    text = Path(__file__).resolve().parents[1].joinpath("shaders", "include", "camera.glsl").read_text()
+    body = re.search(r"uniform\s+Camera\s*\{(.*?)\}", text, re.S).group(1)
+    body = re.sub(r"//[^\n]*", "", body)
+    members = re.findall(r"\b(mat4|vec4|uvec4|ivec4)\s+(\w+)\s*;", body)
+    sizes = {"mat4": 64, "vec4": 16, "uvec4": 16, "ivec4": 16}
+    kinds = {"mat4": "f", "vec4": "f", "uvec4": "u", "ivec4": "i"}
+    offset, found = 0, []
+    for kind, name in members:
+        offset = -(-offset // 16) * 16
+        found.append((name, offset, sizes[kind], kinds[kind]))
+        offset += sizes[kind]
+    expected = [(name, CAMERA_DTYPE.fields[name][1], CAMERA_DTYPE.fields[name][0].itemsize,
+                 CAMERA_DTYPE.fields[name][0].base.kind) for name in CAMERA_DTYPE.names]
+    assert found == expected
+    assert offset == CAMERA_BLOCK_BYTES == CAMERA_DTYPE.itemsize
+
+
+def test_a_view_packs_its_camera_block_field_by_field_as_the_dtype_reads_it():
+    """``View.camera_block`` (joined bytes) read through ``CAMERA_DTYPE`` gives each of the
+    view's own values in its field."""
+    from engine.render.views import CAMERA_DTYPE, CAMERA_IDS, View
+
+    eye = glm.vec3(1.0, 2.0, 3.0)
+    view = View(glm.lookAt(eye, glm.vec3(0.0), glm.vec3(0, 1, 0)), glm.perspective(0.9, 1.5, 0.1, 40.0), eye,
+                (300, 200), clip_plane=glm.vec4(0.0, 1.0, 0.0, -0.5), node=7, skip=11, hide=13, kinds=2, layers=5)
+    record = np.frombuffer(view.camera_block(), CAMERA_DTYPE)[0]
+
+    def column_major(matrix: glm.mat4) -> np.ndarray:
+        return np.array(matrix.to_list(), np.float32).reshape(16)
+    assert np.array_equal(record["view"], column_major(view.view))
+    assert np.array_equal(record["proj"], column_major(view.proj))
+    assert np.array_equal(record["view_proj"], column_major(view.proj * view.view))
+    assert np.allclose(record["inv_view_proj"], column_major(glm.inverse(view.proj * view.view)), atol=1e-5)
+    assert record["eye"].tolist() == [1.0, 2.0, 3.0, 1.0]
+    assert record["viewport"].tolist() == [0.0, 0.0, 300.0, 200.0]
+    assert record["clip_plane"].tolist() == [0.0, 1.0, 0.0, -0.5]
+    assert dict(zip(CAMERA_IDS, record["skip"].tolist(), strict=True)) == \
+        {"skip": 11, "hide": 13, "view_mask": view.view_mask, "node": 7}
+
+
 def test_composite_rows_hold_each_views_quad_and_parameters_where_the_shader_reads_them():
     """composite_rows packs a row per view with struct (mirror_composite.vert's attributes,
     in order); checked here against numpy arithmetic done independently: the outline's
     corners in the parent's clip space flattened onto z = 0, a rectangle's corners in NDC,
     the parent's inverse view-projection and eye, and the surface's and tile's numbers."""
-    from engine.render.mirror_passes import Composite, composite_rows, composite_surface
+    from engine.render.mirror_passes import COMPOSITE_DTYPE, Composite, composite_rows, composite_surface
     from engine.render.rough_atlas import Tile
     from engine.render.views import camera_view
 
@@ -457,10 +507,14 @@ def test_composite_rows_hold_each_views_quad_and_parameters_where_the_shader_rea
         Composite(7, (10, 20, 30, 40), (11, 21, 31, 41), parent, mirror, Tile(256, 512, 0.5)),
         Composite(9, (50, 60, 20, 10), (50, 60, 20, 10), parent, portal),
     ], (200, 100))
-    table = np.frombuffer(rows, np.float32).reshape(2, 61)
-    corners, rect, inverse = table[:, 0:16].reshape(2, 4, 4), table[:, 16:20], table[:, 20:36].reshape(2, 4, 4)
-    eye, tint, params, normal = (table[:, i:i + 4] for i in (36, 40, 44, 48))
-    carried = table[:, 52:61]
+    table = np.frombuffer(rows, COMPOSITE_DTYPE)  # the row's schema, read by field name
+    assert len(table) == 2
+    corners, rect, inverse = table["corners"].reshape(2, 4, 4), table["rect"], table["inv_view_proj"].reshape(2, 4, 4)
+    eye = np.column_stack([table["eye"], table["tile_x"]])
+    tint = np.column_stack([table["tint"], table["tile_scale"]])
+    params = np.column_stack([table[name] for name in ("reflect_rate", "roughness", "params_z", "view_index")])
+    normal = np.column_stack([table["normal"], table["tile_y"]])
+    carried = table["carry"]
 
     view_proj = np.array(parent.view_proj.to_list(), np.float64)       # rows = columns of the GL matrix
     expected = outline @ view_proj

@@ -437,14 +437,13 @@ def test_bad_values_are_refused_when_given_naming_the_field(make):
 
 
 def test_the_shaders_read_the_masks_as_the_python_side_packs_them():
-    """The GLSL's kind-bit count is the one of components/limits.py, and the instance code is
-    exact in the float it rides in (all 16 layers and 4 kinds set)."""
-    from pathlib import Path
+    """The GLSL's kind-bit count is the one of components/limits.py (a define the shader
+    library makes from it), and the instance code is exact in the float it rides in (all 16
+    layers and 4 kinds set)."""
+    from components.visibility import DRAWN_EVERYWHERE, visibility_code
+    from engine.render.shader_library import engine_defines
 
-    from engine.render.instances import DRAWN_EVERYWHERE, visibility_code
-
-    text = (Path(__file__).parent.parent / "shaders" / "include" / "visibility.glsl").read_text()
-    assert f"#define VIEW_KIND_BITS {VIEW_KINDS}u" in text
+    assert engine_defines()["VIEW_KIND_BITS"] == f"{VIEW_KINDS}u"
     full = visibility_code((1 << VIEW_KINDS) - 1, ALL_LAYERS)
     assert int(np.float32(full)) == (1 << (VIEW_KINDS + REFLECTION_LAYERS)) - 1 < 2 ** 24
     assert DRAWN_EVERYWHERE == 1 << VIEW_KINDS

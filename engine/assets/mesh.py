@@ -45,6 +45,7 @@ from engine.assets.texture_data import (
     pillow_image_module,
     read_asset_file,
 )
+from engine.core.color import linear_to_srgb, srgb_to_linear
 from engine.core.errors import AssetError
 
 if TYPE_CHECKING:  # trimesh is imported when a mesh file is first loaded
@@ -492,7 +493,7 @@ def _read_material(tm, part: ModelPart, path: Path, maps: _MaterialMaps) -> None
     if material is None:
         if getattr(visual, "kind", None) in ("vertex", "face"):
             mean = np.asarray(visual.vertex_colors, np.float64).mean(axis=0) / 255.0
-            part.color = tuple(float(_srgb_to_linear(c)) for c in mean[:3]) + (float(mean[3]),)
+            part.color = tuple(float(c) for c in srgb_to_linear(mean[:3])) + (float(mean[3]),)
         return
     if hasattr(material, "baseColorFactor"):  # glTF PBR
         base = material.baseColorFactor
@@ -712,8 +713,8 @@ def tint_srgb(texture: TextureData, hue: Sequence[float], name: str | None = Non
     """``texture`` (sRGB colour) with each channel multiplied by ``hue`` in linear light, as
     8 bits: through a 256-entry table per channel (sRGB byte -> linear x hue -> sRGB byte), a
     block of rows at a time, so it costs the output image and no per-texel float temporaries."""
-    levels = _srgb_to_linear_array(np.arange(256, dtype=np.float64) / 255.0)
-    tables = [np.rint(_linear_to_srgb_array(levels * float(h)) * 255.0).astype(np.uint8) for h in hue[:3]]
+    levels = srgb_to_linear(np.arange(256, dtype=np.float64) / 255.0)
+    tables = [np.rint(linear_to_srgb(levels * float(h)) * 255.0).astype(np.uint8) for h in hue[:3]]
     source = texture.pixels
     out = np.empty(source.shape, np.uint8)
     rows = max(1, WORK_BLOCK // max(1, source.shape[1]))
@@ -725,15 +726,6 @@ def tint_srgb(texture: TextureData, hue: Sequence[float], name: str | None = Non
             out[top:top + rows, :, channel] = table[block[..., channel]]
         out[top:top + rows, :, 3] = block[..., 3]
     return TextureData(out, name=name or f"{texture.name} x {[round(h, 4) for h in hue[:3]]}")
-
-
-def _srgb_to_linear_array(c: np.ndarray) -> np.ndarray:
-    return np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
-
-
-def _linear_to_srgb_array(c: np.ndarray) -> np.ndarray:
-    c = np.clip(c, 0.0, 1.0)
-    return np.where(c <= 0.0031308, c * 12.92, 1.055 * c ** (1.0 / 2.4) - 0.055)
 
 
 def _floats(value) -> list[float] | None:
@@ -748,11 +740,6 @@ def _floats(value) -> list[float] | None:
 def _first(value, default: float) -> float:
     numbers = _floats(value)
     return numbers[0] if numbers else default
-
-
-def _srgb_to_linear(c: float) -> float:
-    c = float(c)
-    return c / 12.92 if c <= 0.04045 else ((c + 0.055) / 1.055) ** 2.4
 
 
 UV_FIT_TOLERANCE = 1e-3  # of the UVs' range: how far from an affine map of position they may be

@@ -1,9 +1,17 @@
 """The frame's one view budget (``ViewBudget``), plain data a game or a level file sets as a
 world resource; the stages that spend it and ``RenderStats`` report against it.  Kept in the
-core (not with ``engine.resources``, which re-exports it) so level files can make one."""
+core (not with ``engine.resources``, which re-exports it) so level files can make one.
+
+Two rules every spender shares are defined here once: the order a budget spends on what
+competes for it (``spending_order``: the view tree's candidates, the probes' due captures,
+the virtual lights), and a level's coverage at the screen's resolution
+(``screen_coverage``), which the pixel budget's downscale decision reads."""
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
+
+import numpy as np
 
 from engine.core.errors import SpeculumError
 
@@ -23,7 +31,8 @@ class ViewBudget:
     pixels: what does not fit is skipped, so the deepest levels go first), then the probes'
     recaptures.  ``probe_ms`` is a separate budget of time for the probe captures, spent by
     each probe's measured cost a face (``ProbeStates.face_ms``) in the scheduler's order:
-    first captures, then a probe's own ``priority``, then nearest the camera.  A probe that
+    first captures, then a probe's own ``priority``, then nearest the camera.  Every such
+    order is ``spending_order``'s (the virtual lights' too: priority, then brightness).  A probe that
     does not fit waits (its faces stay pending) and goes first later frames; one probe a
     frame is always captured, so none starves.  ``RenderStats`` reports what was spent and
     cut (``views_spent``, ``views_cut``, ``probe_ms_spent``, ``probe_faces_deferred``).
@@ -70,3 +79,35 @@ class ViewBudget:
             raise ViewBudgetError(f"world.resources[ViewBudget] must be a ViewBudget(views=..., pixels=..., "
                                   f"probe_ms=...), got {type(budget).__name__} {budget!r}")
         return budget
+
+
+def spending_order(priority: Sequence[float] | np.ndarray, worth: Sequence[float] | np.ndarray,
+                   *ties: Sequence[float] | np.ndarray,
+                   first: Sequence[bool] | np.ndarray | None = None) -> np.ndarray:
+    """The indices of competitors in the order a budget spends on them: those ``first``
+    (a probe's first capture: an object sampling it needs one) before the rest, then the
+    highest ``priority`` (``Mirror.priority``, ``Portal.priority``, a probe's priority plus
+    the frames it waited), then the greatest ``worth`` (a surface's claimed pixels, a virtual
+    light's brightness, a probe's nearness as its negated distance), then the smallest of
+    each of ``ties`` in turn, then the order given.  What does not fit a budget is the tail,
+    so the spenders cut from the end."""
+    count = len(priority)
+    if count < 2:  # most frames: nothing or one thing competes (a few microseconds of numpy saved)
+        return np.arange(count)
+    keys = [np.arange(count), *(np.asarray(tie) for tie in reversed(ties)), -np.asarray(worth, np.float64),
+            -np.asarray(priority, np.float64)]
+    if first is not None:
+        keys.append(~np.asarray(first, bool))
+    return np.lexsort(keys)
+
+
+def screen_coverage(claimed: int, level_size: tuple[int, int], screen: tuple[int, int]) -> int:
+    """A level's claimed pixels (``claimed``, at its own resolution ``level_size``) at the
+    screen's resolution: what the pixel budget compares with the pixels left to decide the
+    level's scale next frame.  Rounded to the nearest pixel: a level drawn at a scale is
+    an estimate of its full-resolution coverage, and truncating it (``int``) would bias it
+    low, by a whole pixel where float error leaves 1.9999 for 2, letting a level that does
+    not fit pass as fitting; at full resolution the count is exact either way.  The claims
+    are summed as integers first, so every caller gets the same number from the same claims."""
+    width, height = level_size
+    return round(int(claimed) * screen[0] * screen[1] / (width * height))

@@ -20,14 +20,11 @@ it only for the lightest scenes there.
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from typing import TYPE_CHECKING
 
 import numpy as np
 
+from engine.render.gpu import Gpu
 from engine.render.views import CAMERA_BLOCK_CLIP, CAMERA_BLOCK_EYE, CAMERA_BLOCK_IDS, CAMERA_BLOCK_VIEW_PROJ, View
-
-if TYPE_CHECKING:  # the renderer imports this module (through the scene pass)
-    from engine.render.renderer import Renderer
 
 PATHS = ("auto", "per_mirror", "batched")
 # Views one batched draw takes (a level with more is drawn in groups of this many).  The
@@ -113,7 +110,7 @@ def choose_path(setting: str, view_count: int, triangles: int | Callable[[], int
     return "per_mirror"
 
 
-def submitted_triangles(renderer: Renderer) -> int:
+def submitted_triangles(renderer: Gpu) -> int:
     """Triangles one scene pass submits: each batch's mesh triangles x its instances."""
     return sum(batch.mesh.index_count // 3 * batch.count for batch in renderer.batches.values())
 

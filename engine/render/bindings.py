@@ -24,14 +24,22 @@ framebuffers, or anyone setting them with moderngl's ``ctx.viewport``/``ctx.scis
 (as passes do per view or claim), needs nothing more.  Within a pass, a winding changed per
 view goes through ``set_front_face`` so the record stays true.  Uniform buffers are bound
 to their binding points likewise once (``bind_uniform_block``: once a frame for the camera
-and lights blocks, not once a view or pass).
+and lights blocks, not once a view or pass), and textures to their units (``bind_texture``:
+a unit keeps what it holds until a pass wants another texture there, so a frame's second
+and later scene passes bind no shadow map, irradiance table or sky already in place).  The
+record holds the texture object itself, per unit and kind (a unit has a 2D binding and a
+cube-map binding of its own), so a released texture whose GL name is reused by a new one
+is bound again (deleting a texture resets the units that held it to 0).  moderngl's own
+texture work (making, writing, filtering, reading) binds on its default unit (the last of
+the context's), which no pass uses.
 
 **``invalidate(ctx)``** must be called after any other GL state is set other than through
 these functions: moderngl's ``enable_only``/``enable``/``depth_func``/``blend_func``/
 ``front_face``/``enable_direct`` setters, or raw GL (``glViewport``, ``glDisable(GL_SCISSOR_TEST)``...).
-The next ``apply_pass_state`` then sets everything.  Where it is called: raw GL targets
-(engine/render/raw_gl.py) on binding, and ``Engine.frame`` (shell/app.py) at the start of
-every frame, which covers the debug overlay (shell/overlay.py draws after a frame, with
+The next ``apply_pass_state`` then sets everything, and every texture is bound again.
+Where it is called: raw GL targets (engine/render/raw_gl.py) on binding and where they bind
+textures themselves, and ``Engine.frame`` (shell/app.py) at the start of every frame,
+which covers the debug overlay (shell/overlay.py draws after a frame, with
 moderngl setters of its own) and any other code using the context between frames.  Code
 that sets state in the middle of a frame (a pass of a game's own) calls it itself.
 """
@@ -42,6 +50,8 @@ from dataclasses import dataclass
 import moderngl
 
 # --- texture units -----------------------------------------------------------------------
+# What binds to a texture unit (``use(location)``; bind_texture).
+Bindable = moderngl.Texture | moderngl.TextureCube | moderngl.TextureArray | moderngl.Texture3D
 ALBEDO_UNIT = 0          # scene: the batch's albedo map
 SKY_UNIT = 1             # scene, sky, composite: the sky cube map
 NODE_UNIT = 2            # scene (masked views): the level's node image
@@ -188,13 +198,14 @@ def _transition(known: int, wanted: int) -> tuple[tuple[str, object, bool], ...]
 class _StateCache:
     """What ``apply_pass_state`` last set on one context."""
 
-    __slots__ = ("fixed", "front_face", "rects_known", "blocks")
+    __slots__ = ("fixed", "front_face", "rects_known", "blocks", "textures")
 
     def __init__(self) -> None:
         self.fixed = _UNKNOWN        # the number of the (flags, functions, clips) set
         self.front_face: str | None = None
         self.rects_known = False     # False: set the viewport and scissor whatever moderngl says
         self.blocks: dict[int, moderngl.Buffer] = {}  # uniform-block binding point -> the buffer bound
+        self.textures: dict[tuple[int, type], Bindable] = {}  # (unit, texture class) -> the texture bound
 
 
 # False: every apply sets every piece of state, as before the cache (kept for the
@@ -220,6 +231,31 @@ def invalidate(ctx: moderngl.Context) -> None:
         cache.front_face = None
         cache.rects_known = False
         cache.blocks.clear()
+        cache.textures.clear()
+
+
+def bind_texture(ctx: moderngl.Context, texture: Bindable, unit: int) -> None:
+    """Bind ``texture`` (a moderngl Texture, TextureCube, TextureArray or Texture3D) on
+    ``unit`` unless it is what that unit holds already (the object itself is remembered, as
+    ``bind_uniform_block`` does for buffers).  Which unit is active afterwards is not
+    defined: code that then acts on the active unit (raw GL) uses ``bind_texture_now``.
+    With ``CACHE_STATE`` off it binds every time."""
+    try:
+        textures = ctx._speculum_pass_state.textures
+    except AttributeError:
+        textures = _cache(ctx).textures
+    key = (unit, texture.__class__)
+    if textures.get(key) is not texture or not CACHE_STATE:
+        texture.use(unit)
+        textures[key] = texture
+
+
+def bind_texture_now(ctx: moderngl.Context, texture: Bindable, unit: int) -> None:
+    """Bind ``texture`` on ``unit`` and make ``unit`` the active one, whatever the record says
+    (for raw GL that then sets parameters of, or copies into, the active unit's texture);
+    the record is kept true."""
+    texture.use(unit)
+    _cache(ctx).textures[unit, texture.__class__] = texture
 
 
 def bind_uniform_block(ctx: moderngl.Context, buffer: moderngl.Buffer, binding: int) -> None:

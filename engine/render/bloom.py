@@ -3,39 +3,50 @@ Advanced Warfare", SIGGRAPH 2014), run by the present pass on the finished HDR i
 
 Down: the image is halved ``levels`` times, each level drawn from the one above by the
 13-tap filter (``shaders/bloom_down.frag``; the first step with Karis's firefly weighting
-and the optional soft threshold).  Up: from the smallest, each level is added (blending
-ONE, ONE) into the next larger through a 3x3 tent (``shaders/bloom_up.frag``), so the
-half-size level ends up holding the sum of every level's blur.  The present shader takes
-that sum times ``1 / levels`` (the mean of the blurs: it keeps the image's mean) and mixes
-it in.  The image itself is only read: the main image the end images keep
+and the optional soft threshold).  Where the chain starts is ``BloomPass.first_step``:
+"half" (Jimenez's chain) or "quarter" (as Unity URP's quarter downscale: the image is
+first box-filtered to half its size, one bilinear tap a texel, the mean of its 2 x 2
+texels, and the chain, the Karis-weighted first step included, runs on that as it would on
+the image, so its levels are a quarter of the image's size and below; the half-start
+chain's tightest blur is left out).  Up: from
+the smallest, each level is added (blending ONE, ONE) into the next larger through a 3x3
+tent (``shaders/bloom_up.frag``), so the largest level ends up holding the sum of every
+level's blur.  The present shader takes that sum times ``1 / levels`` (the mean of the
+blurs: it keeps the image's mean) and mixes it in.  The image itself is only read: the main image the end images keep
 (``engine/render/end_images.py``) stays the linear HDR the views drew.
 
 Its cost is that of ``2 levels - 1`` small full-screen draws over at most a third of the
-screen's pixels, whatever the number of mirrors and portals composited into the image.
-The chain's textures are made at the first bloomed frame of a size and released when no
-camera asks for bloom (``release``).
+screen's pixels (a twelfth from a quarter), whatever the number of mirrors and portals
+composited into the image.  The half-size level is most of it: its 13-tap step reads the
+whole image and the last step up writes it.  On a software rasteriser, where that is pixel
+work of the CPU (about 4.5 of the chain's 5.5 ms at 640x360 on llvmpipe), the chain starts at
+a quarter; a GPU keeps the half-size start.  The chain's textures are made at the first
+bloomed frame of a size and released when no camera asks for bloom (``release``).
 """
 from __future__ import annotations
 
 import moderngl
 
 from components.post import Bloom
-from engine.render.bindings import PRESENT_UNIT, PassState, apply_pass_state
+from engine.render.bindings import PRESENT_UNIT, PassState, apply_pass_state, bind_texture
 from engine.render.shader_library import ShaderLibrary
 from engine.render.targets import release_framebuffer
 
 MIN_LEVEL_SIDE = 2   # no level smaller than this many pixels a side: fewer levels are made
+FIRST_STEPS = ("half", "quarter")   # where the chain starts (BloomPass.first_step)
 _DOWN = PassState()
 _UP = PassState(blend=(moderngl.ONE, moderngl.ONE))
 
 
-def level_sizes(size: tuple[int, int], levels: int) -> list[tuple[int, int]]:
-    """The chain's sizes below ``size``: each half the one above (rounded down), as many of
+def level_sizes(size: tuple[int, int], levels: int, first_step: str = "half") -> list[tuple[int, int]]:
+    """The chain's sizes below ``size``: the first half the image (a quarter with
+    ``first_step`` "quarter"), each next half the one above (rounded down), as many of
     ``levels`` as keep both sides at least ``MIN_LEVEL_SIDE``."""
     sizes = []
     width, height = size
-    for _ in range(levels):
-        width, height = width // 2, height // 2
+    for index in range(levels):
+        divisor = 4 if index == 0 and first_step == "quarter" else 2
+        width, height = width // divisor, height // divisor
         if width < MIN_LEVEL_SIDE or height < MIN_LEVEL_SIDE:
             break
         sizes.append((width, height))
@@ -45,14 +56,29 @@ def level_sizes(size: tuple[int, int], levels: int) -> list[tuple[int, int]]:
 class BloomPass:
     """The mip chain and its two programs (and the first step's builds)."""
 
-    def __init__(self, ctx: moderngl.Context, shaders: ShaderLibrary) -> None:
+    def __init__(self, ctx: moderngl.Context, shaders: ShaderLibrary, software: bool = False) -> None:
         self.ctx = ctx
         self.shaders = shaders
+        self.first_step = "quarter" if software else "half"
         self._vaos: dict[tuple, moderngl.VertexArray] = {}
         self.textures: list[moderngl.Texture] = []
         self._framebuffers: list[moderngl.Framebuffer] = []
+        self._half: tuple[moderngl.Texture, moderngl.Framebuffer] | None = None   # "quarter": the 2 x 2 means
         self.levels = 0   # levels drawn by the last ``draw``
         self._written: dict[tuple[int, str], object] = {}   # (vao id, uniform) -> the value last written
+
+    @property
+    def first_step(self) -> str:
+        """Where the chain starts: "half" (a GPU's default) or "quarter" (a software
+        rasteriser's: the two dearest steps draw a quarter of the pixels, and read the image
+        once, not 13 times a pixel; the look loses its tightest blur)."""
+        return self._first_step
+
+    @first_step.setter
+    def first_step(self, value: str) -> None:
+        if value not in FIRST_STEPS:
+            raise ValueError(f"bloom first_step must be one of {', '.join(map(repr, FIRST_STEPS))}, got {value!r}")
+        self._first_step = value
 
     def _vao(self, fragment: str, **defines: str) -> moderngl.VertexArray:
         key = (fragment, tuple(sorted(defines.items())))
@@ -70,27 +96,41 @@ class BloomPass:
             vao.program[name].value = value
             self._written[key] = value
 
-    def _chain(self, sizes: list[tuple[int, int]]) -> None:
-        if [t.size for t in self.textures] == sizes:
+    def _target(self, size: tuple[int, int]) -> tuple[moderngl.Texture, moderngl.Framebuffer]:
+        texture = self.ctx.texture(size, 4, dtype="f2")
+        texture.filter = (moderngl.LINEAR, moderngl.LINEAR)
+        texture.repeat_x = texture.repeat_y = False
+        return texture, self.ctx.framebuffer([texture])
+
+    def _chain(self, sizes: list[tuple[int, int]], half: tuple[int, int] | None) -> None:
+        if [t.size for t in self.textures] == sizes and (self._half[0].size if self._half else None) == half:
             return
         self.release_targets()
         for size in sizes:
-            texture = self.ctx.texture(size, 4, dtype="f2")
-            texture.filter = (moderngl.LINEAR, moderngl.LINEAR)
-            texture.repeat_x = texture.repeat_y = False
+            texture, framebuffer = self._target(size)
             self.textures.append(texture)
-            self._framebuffers.append(self.ctx.framebuffer([texture]))
+            self._framebuffers.append(framebuffer)
+        if half is not None:
+            self._half = self._target(half)
 
     def draw(self, hdr: moderngl.Texture, bloom: Bloom) -> moderngl.Texture | None:
-        """Bloom ``hdr`` (read only): returns the half-size texture holding the sum of the
-        levels' blurs (``self.levels`` of them), or None where the image is too small to
-        halve even once."""
-        sizes = level_sizes(hdr.size, bloom.levels)
+        """Bloom ``hdr`` (read only): returns the largest level (half or a quarter of the
+        image's size, ``first_step``), holding the sum of the levels' blurs (``self.levels``
+        of them), or None where the image is too small to halve even once."""
+        sizes = level_sizes(hdr.size, bloom.levels, self._first_step)
         self.levels = len(sizes)
         if not sizes:
             return None
-        self._chain(sizes)
+        quarter = self._first_step == "quarter"
+        self._chain(sizes, (hdr.size[0] // 2, hdr.size[1] // 2) if quarter else None)
         source = hdr
+        if quarter:   # the image's 2 x 2 means, which the chain then takes for the image
+            texture, framebuffer = self._half
+            framebuffer.use()
+            apply_pass_state(self.ctx, _DOWN, (0, 0, *texture.size))
+            bind_texture(self.ctx, hdr, PRESENT_UNIT)
+            self._vao("bloom_down.frag", HALF_MEANS="1").render(moderngl.TRIANGLES, vertices=3)
+            source = texture
         for index, (size, framebuffer) in enumerate(zip(sizes, self._framebuffers, strict=False)):
             if index == 0:
                 threshold = bloom.threshold > 0.0
@@ -103,7 +143,7 @@ class BloomPass:
                 vao = self._vao("bloom_down.frag")
             framebuffer.use()
             apply_pass_state(self.ctx, _DOWN, (0, 0, *size))
-            source.use(PRESENT_UNIT)
+            bind_texture(self.ctx, source, PRESENT_UNIT)
             vao.render(moderngl.TRIANGLES, vertices=3)
             source = self.textures[index]
         up = self._vao("bloom_up.frag")
@@ -111,13 +151,20 @@ class BloomPass:
         for index in range(len(sizes) - 2, -1, -1):
             self._framebuffers[index].use()
             apply_pass_state(self.ctx, _UP, (0, 0, *sizes[index]))
-            self.textures[index + 1].use(PRESENT_UNIT)
+            bind_texture(self.ctx, self.textures[index + 1], PRESENT_UNIT)
             up.render(moderngl.TRIANGLES, vertices=3)
         return self.textures[0]
 
     def passes(self) -> int:
-        """Draws the last ``draw`` made (levels down, levels - 1 up)."""
-        return max(0, 2 * self.levels - 1)
+        """Draws the last ``draw`` made (levels down, levels - 1 up, and the 2 x 2 means of a
+        quarter start)."""
+        if not self.levels:
+            return 0
+        return 2 * self.levels - 1 + (self._first_step == "quarter")
+
+    def target_count(self) -> int:
+        """Textures the chain holds now."""
+        return len(self.textures) + (self._half is not None)
 
     def release_targets(self) -> None:
         for framebuffer in self._framebuffers:
@@ -126,6 +173,10 @@ class BloomPass:
             texture.release()
         self._framebuffers.clear()
         self.textures.clear()
+        if self._half is not None:
+            release_framebuffer(self._half[1])
+            self._half[0].release()
+            self._half = None
 
     def release(self) -> None:
         self.release_targets()

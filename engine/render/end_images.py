@@ -22,17 +22,13 @@ Probe faces' trees draw none (their image is not the main view's).
 """
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
-
 import moderngl
 from pyglm import glm
 
-from engine.render.bindings import HISTORY_UNIT, NODE_UNIT, PassState, apply_pass_state
+from engine.render.bindings import HISTORY_UNIT, NODE_UNIT, PassState, apply_pass_state, bind_texture
+from engine.render.gpu import Gpu
 from engine.render.targets import RenderTargets, release_framebuffer
 from engine.render.views import View
-
-if TYPE_CHECKING:  # the renderer imports this module (through the view tree)
-    from engine.render.renderer import Renderer
 
 _END = PassState()  # no depth test, no blending: each pixel of a claim is written once
 
@@ -40,7 +36,7 @@ _END = PassState()  # no depth test, no blending: each pixel of a claim is writt
 class EndImages:
     """The previous frame's main image and the pass that fills end views from it."""
 
-    def __init__(self, renderer: Renderer) -> None:
+    def __init__(self, renderer: Gpu) -> None:
         self.renderer = renderer
         self.ctx = renderer.ctx
         self.program = renderer.shaders.program("fullscreen.vert", "end_image.frag")
@@ -64,8 +60,8 @@ class EndImages:
         ctx, renderer = self.ctx, self.renderer
         targets.view_framebuffer.use()
         apply_pass_state(ctx, _END, (0, 0, *targets.size))
-        targets.node.use(NODE_UNIT)
-        self.history.use(HISTORY_UNIT)
+        bind_texture(self.ctx, targets.node, NODE_UNIT)
+        bind_texture(self.ctx, self.history, HISTORY_UNIT)
         program = self.program
         program["reproject"].write(self.view_proj * glm.inverse(root.view))
         program["level_size"].value = targets.size

@@ -7,11 +7,12 @@ nothing.
 """
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import moderngl
 import numpy as np
 from pyglm import glm
 
-from components.limits import VIEW_KINDS
 from engine.assets.mesh import Mesh
 
 INSTANCE_DTYPE = np.dtype([
@@ -20,26 +21,25 @@ INSTANCE_DTYPE = np.dtype([
     ("color", "<f4", (4,)),
     ("surface", "<f4", (4,)),         # metallic, roughness, emissive power, normal-map scale
     ("reflect", "<f4", (4,)),         # reflection mix, refraction ior, weights of the batch's probe and second probe
-    ("tint", "<f4", (4,)),            # reflection tint rgb; w: where it is drawn (visibility_code)
+    ("tint", "<f4", (4,)),            # reflection tint rgb; w: where it is drawn (entity_code)
     ("slice", "<f4", (4,)),           # world plane; only its front is drawn ((0,0,0,1): all)
     ("slots", "<u4", (4,)),           # emissive, refract, reflect variants, entity id
 ])
+# Components of the vec4 fields above that carry a meaning of their own (the scene shaders
+# read them by these positions: in_reflect.y the index, in_reflect.zw the weights, in_tint.w).
+REFLECT_MIX, REFRACTION_IOR, PROBE_WEIGHTS = 0, 1, slice(2, 4)  # "reflect": mix, ior, each probe's weight
+TINT_VISIBILITY = 3                                             # "tint": visibility_code
 INSTANCE_FORMAT = "16f 9f 4f 4f 4f 4f 4f 4u/i"
 INSTANCE_ATTRIBUTES = ("in_model", "in_normal_matrix", "in_color", "in_surface", "in_reflect", "in_tint",
                        "in_slice", "in_slots")
 VERTEX_FORMAT = "3f 3f 2f"
 
 
-def visibility_code(hidden_kinds: int, layers: int) -> float:
-    """An instance's ``tint`` w: the kinds of view it is hidden in (bits 0-3) and the
-    reflection layers it belongs to (bits 4-19) (``components.visibility``).  Every vertex
-    attribute GL 4.1 guarantees is in use, so it rides in a float slot the scene shaders do
-    not read: an integer below 2^20 is exact in a float32 (24-bit significand), and
-    ``shaders/include/visibility.glsl`` reads it back as a uint."""
-    return float(hidden_kinds | (layers << VIEW_KINDS))
-
-
-DRAWN_EVERYWHERE = visibility_code(0, 1)  # no Visibility component: every view, layer 0
+# An instance's ``tint`` w is where it is drawn: ``engine.rules.visibility_rules.entity_code``,
+# the kinds of view it is hidden in and the reflection layers it belongs to.  Every vertex
+# attribute GL 4.1 guarantees is in use, so it rides in a float slot the scene shaders do not
+# read otherwise: an integer below 2^20 is exact in a float32 (24-bit significand), and
+# ``shaders/include/visibility.glsl`` reads it back as a uint.
 VERTEX_ATTRIBUTES = ("in_position", "in_normal", "in_uv")
 
 # Many separate dirty runs are sent as one span when the span is not much bigger than the
@@ -71,8 +71,23 @@ class GpuMesh:
         self.indices.release()
 
 
+class BatchKey(NamedTuple):
+    """What sorts an instance into its batch (``Renderer.batch_for``): instances that share
+    all of it are drawn together, with one program build and one set of textures.  Image
+    fields are the images' ``id`` (0: none)."""
+
+    mesh: int                       # Mesh.id
+    texture: int                    # the albedo texture
+    probes: tuple[int, int, bool, int]  # (probe, second probe, probe blend, rest probe): the probes it samples
+    transparent_entity: int         # a transparent entity's own batch (0: opaque, shared)
+    normal_map: int
+    emissive_map: int
+    metallic_roughness_map: int
+    mirrored: bool                  # a negative determinant: the other winding
+
+
 class InstanceBatch:
-    """The instances of one (mesh, texture, normal map) triple."""
+    """The instances of one ``BatchKey``."""
 
     def __init__(self, ctx: moderngl.Context, mesh: GpuMesh, texture: moderngl.Texture | None,
                  normal_map: moderngl.Texture | None = None, capacity: int = 16) -> None:
@@ -99,6 +114,7 @@ class InstanceBatch:
         # Where instances were and are whose rows changed since ``take_changed_box`` (the old
         # and the new boxes of moved, added and removed rows): what a shadow map must redraw.
         self._changed: tuple[np.ndarray, np.ndarray] | None = None
+        self.key: BatchKey | None = None  # set by Renderer.batch_for
         self.probe = 0  # the entity owning the reflection probe its instances sample (0: none)
         self.mirrored = False  # its instances' model matrices mirror them (drawn with the other winding)
         # Probe blending (probe_rules.probe_blend): a second probe (0: none), and whether the

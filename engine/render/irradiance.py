@@ -65,7 +65,6 @@ from __future__ import annotations
 import logging
 import math
 from collections.abc import Iterable
-from typing import TYPE_CHECKING
 
 import moderngl
 import numpy as np
@@ -77,13 +76,12 @@ from engine.render.bindings import (
     IRRADIANCE_UNIT,
     PassState,
     apply_pass_state,
+    bind_texture,
     bind_uniform_block,
 )
+from engine.render.gpu import Gpu, ProbeCube
 from engine.render.targets import release_framebuffer
-
-if TYPE_CHECKING:
-    from engine.render.probes import ProbeCube
-    from engine.render.renderer import Renderer
+from engine.render.views import MAX_IRRADIANCE_PROBES
 
 LOG = logging.getLogger("speculum")
 
@@ -94,7 +92,6 @@ _Y2, _Y20, _Y22 = 0.5 * math.sqrt(15.0 / math.pi), 0.25 * math.sqrt(5.0 / math.p
 SH_CONSTANTS = (_Y0, _Y1, _Y1, _Y1, _Y2, _Y2, _Y20, _Y2, _Y22)
 # The clamped cosine's band factors A_l, per coefficient (Ramamoorthi and Hanrahan, eq. 8).
 BAND_FACTORS = (math.pi,) + (2.0 * math.pi / 3.0,) * 3 + (math.pi / 4.0,) * 5
-MAX_IRRADIANCE_PROBES = 32   # influence boxes the scene shader blends from (more: the first kept, a warning)
 PROJECTION_FACE_SIZE = 16    # texels across a face at the cube level the GPU projection reads
 IRRADIANCE_BLOCK_BYTES = 16 + 2 * 16 * MAX_IRRADIANCE_PROBES
 
@@ -187,7 +184,7 @@ class IrradianceTable:
 
     STATE = PassState()  # no depth test, no blending, no clip distances
 
-    def __init__(self, renderer: Renderer) -> None:
+    def __init__(self, renderer: Gpu) -> None:
         self.renderer = renderer
         self.ctx = ctx = renderer.ctx
         self.table = ctx.texture((SH_COEFFICIENTS, MAX_IRRADIANCE_PROBES), 4, dtype="f4")
@@ -250,12 +247,12 @@ class IrradianceTable:
         program["source"].value = CUBE_MIP_UNIT  # again each time: a shader hot reload resets uniforms
         program["level"].value = float(level)
         program["level_size"].value = max(1, resolution >> level)
-        self._placeholder.use(IRRADIANCE_UNIT)  # the scene pass binds the table again
+        bind_texture(self.ctx, self._placeholder, IRRADIANCE_UNIT)  # the scene pass binds the table again
         self.framebuffer.use()
         apply_pass_state(self.ctx, self.STATE, (0, row, SH_COEFFICIENTS, 1))
-        cube.texture.use(CUBE_MIP_UNIT)
+        bind_texture(self.ctx, cube.texture, CUBE_MIP_UNIT)
         vao.render(moderngl.TRIANGLES, vertices=3)
-        self.renderer.sky.use(CUBE_MIP_UNIT)  # not left bound where the next capture draws into it
+        bind_texture(self.ctx, self.renderer.sky, CUBE_MIP_UNIT)  # not left bound where the next capture draws into it
         self.projections += 1
         self.renderer.checkpoint("probe irradiance projection")
         return True
@@ -300,7 +297,7 @@ class IrradianceTable:
         loop and the table's reads are a build of their own, since llvmpipe runs a loop's
         body once even when it has nothing to do: +25% of a frame of diffuse boxes)."""
         self._refresh()
-        self.table.use(IRRADIANCE_UNIT)
+        bind_texture(self.ctx, self.table, IRRADIANCE_UNIT)
         bind_uniform_block(self.ctx, self.empty_ubo if capturing else self.ubo, IRRADIANCE_BINDING)
         return not capturing and self._count > 0
 

@@ -30,7 +30,6 @@ from __future__ import annotations
 import struct
 import weakref
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
 
 import moderngl
 import numpy as np
@@ -51,7 +50,9 @@ from engine.render.bindings import (
     SKY_UNIT,
     PassState,
     apply_pass_state,
+    bind_texture,
 )
+from engine.render.gpu import Gpu
 from engine.render.rough_atlas import TILE, RoughAtlas, Tile, place_tiles
 from engine.render.targets import RenderTargets
 from engine.render.views import (
@@ -60,10 +61,7 @@ from engine.render.views import (
     CAMERA_BLOCK_VIEW_PROJ,
     View,
 )
-
-if TYPE_CHECKING:  # the renderer imports this module; the surfaces' records are a floor above
-    from engine.render.renderer import Renderer
-    from engine.resources import MirrorBumps, SurfaceState, WaterLook
+from engine.resources import MirrorBumps, SurfaceState, WaterLook
 
 # The claims and the reset write every depth they touch (depth test "always"); the
 # composite blends quads trimmed to their rectangles by clip distances 1-4.
@@ -194,16 +192,37 @@ class PreparedComposites:
     rows: dict[tuple[str, TextureData | None], bytes]    # packed instance rows per (variant, normal map)
 
 
-# One row per composite instance (mirror_composite.vert's attributes, in order): the 4 clip
-# corners, the view's rectangle in its level, the parent's inverse view-projection, then
-# eye.xyz + tile x, tint.rgb + tile scale, (reflect_rate, roughness, is_portal, view index),
-# normal.xyz + tile y, carry.  The tile and the index ride in spare components: a vertex
-# shader has 16 attribute slots and the rest of the row fills them.  A water row (never
-# rough, so it has no tile) carries the waves' offset u and v where the tile's x and y go,
-# the second layer's share where its scale goes, and F0 where the roughness goes.
+# One row per composite instance: mirror_composite.vert's attributes, in order, each one or
+# more of these fields.  A vertex shader has 16 attribute slots and the rest of the row fills
+# them, so the tile and the view's index ride in spare components; a water row (never rough,
+# so it has no tile) carries the waves' offset u and v where the tile's x and y go, the second
+# layer's share where its scale goes, and F0 where the roughness goes (composite_rows).
+COMPOSITE_DTYPE = np.dtype([
+    ("corners", "<f4", (16,)),        # the 4 clip-space corners of its quad
+    ("rect", "<f4", (4,)),            # the view's rectangle in its level
+    ("inv_view_proj", "<f4", (16,)),  # the parent view's
+    ("eye", "<f4", (3,)),             # the parent view's
+    ("tile_x", "<f4"),                # the rough atlas tile's x; water: the waves' offset u
+    ("tint", "<f4", (3,)),
+    ("tile_scale", "<f4"),            # the tile's scale; water: the second layer's share
+    ("reflect_rate", "<f4"),          # times the view's fade
+    ("roughness", "<f4"),             # water: F0
+    ("params_z", "<f4"),              # CompositeSurface.params_z: 1.0 for a portal, a bumpy mirror's plane offset
+    ("view_index", "<f4"),            # the view's node index
+    ("normal", "<f4", (3,)),
+    ("tile_y", "<f4"),                # the tile's y; water: the waves' offset v
+    ("carry", "<f4", (9,)),           # a portal's carry (a mirror: identity)
+])
+_COMPOSITE_ATTRIBUTES = (("in_corners", ("corners",)), ("in_rect", ("rect",)), ("in_inv_view_proj", ("inv_view_proj",)),
+                         ("in_eye", ("eye", "tile_x")), ("in_tint", ("tint", "tile_scale")),
+                         ("in_params", ("reflect_rate", "roughness", "params_z", "view_index")),
+                         ("in_normal", ("normal", "tile_y")), ("in_carry", ("carry",)))
+_COMPOSITE_COLUMNS = tuple((name, sum(COMPOSITE_DTYPE.fields[f][0].itemsize // 4 for f in fields))
+                           for name, fields in _COMPOSITE_ATTRIBUTES)
+assert [f for _, fields in _COMPOSITE_ATTRIBUTES for f in fields] == list(COMPOSITE_DTYPE.names)
+# Packed with struct, field by field in that order (composite_rows: cheaper than a record's fields).
 _COMPOSITE_ROW = struct.Struct("<64s4f64s12sf12sf4f12sf36s")
-_COMPOSITE_COLUMNS = (("in_corners", 16), ("in_rect", 4), ("in_inv_view_proj", 16), ("in_eye", 4), ("in_tint", 4),
-                      ("in_params", 4), ("in_normal", 4), ("in_carry", 9))
+assert _COMPOSITE_ROW.size == COMPOSITE_DTYPE.itemsize
 # The parts of a packed Camera block (views.py) a composite row copies, in bytes.
 _BLOCK_VIEW_PROJ = slice(4 * CAMERA_BLOCK_VIEW_PROJ.start, 4 * CAMERA_BLOCK_VIEW_PROJ.stop)
 _BLOCK_INVERSE = slice(4 * CAMERA_BLOCK_INVERSE.start, 4 * CAMERA_BLOCK_INVERSE.stop)
@@ -376,7 +395,7 @@ class Claims:
 
 
 class MirrorPasses:
-    def __init__(self, renderer: Renderer) -> None:
+    def __init__(self, renderer: Gpu) -> None:
         self.renderer = renderer
         ctx = renderer.ctx
         self.ctx = ctx
@@ -432,8 +451,8 @@ class MirrorPasses:
             self._reserve_claims(len(vertices))
         self._claim_buffer.write(vertices)
         self._reset_vao.render(moderngl.TRIANGLES, vertices=6 * count)
-        parent.node.use(PARENT_NODE_UNIT)
-        parent.surface.use(PARENT_SURFACE_UNIT)
+        bind_texture(self.ctx, parent.node, PARENT_NODE_UNIT)
+        bind_texture(self.ctx, parent.surface, PARENT_SURFACE_UNIT)
         self.claim["to_parent"].value = (parent.size[0] / level.size[0], parent.size[1] / level.size[1])
         render = self._claim_vao.render
         for at, query in enumerate(queries[:count]):
@@ -507,17 +526,17 @@ class MirrorPasses:
         # Colour: reflection x rate + own x (1 - rate); alpha (coverage) is kept.
         apply_pass_state(ctx, _COMPOSITE, (0, 0, *parent.size))
         for texture, unit in zip((level.color, level.seen, level.node), REFLECTION_UNITS, strict=True):
-            texture.use(unit)
-        self.renderer.sky.use(SKY_UNIT)
+            bind_texture(self.ctx, texture, unit)
+        bind_texture(self.ctx, self.renderer.sky, SKY_UNIT)
         if prepared.rough:
-            self.rough_atlas.texture.use(ATLAS_UNIT)
+            bind_texture(self.ctx, self.rough_atlas.texture, ATLAS_UNIT)
         for (variant, normal_map), variant_rows in prepared.rows.items():
             if normal_map is not None:
                 texture = self.renderer.normal_map_texture(normal_map)
                 if texture is None:  # the mirror's own batch holds it; none drawn: the flat build
                     variant = variant.removesuffix("_bumpy")
                 else:
-                    texture.use(NORMAL_UNIT)
+                    bind_texture(self.ctx, texture, NORMAL_UNIT)
             draw = self.composites[variant]
             program = draw.program
             if variant.startswith("rough"):
@@ -531,7 +550,7 @@ class MirrorPasses:
     def prepare_fallbacks(self, fallbacks: list[Fallback], size: tuple[int, int]) -> PreparedFallbacks:
         """The CPU half of a level's fallbacks (drawn into a level of ``size`` pixels): their
         rows, grouped by build, normal map and the probes of their surfaces
-        (``Renderer.surface_probes``: the probes are uniforms of a draw, their weights ride
+        (``Gpu.surface_probes``: the probes are uniforms of a draw, their weights ride
         in the row's extras)."""
         probes = self.renderer.surface_probes
         groups: dict[tuple[str, TextureData | None, int, int], list[tuple[Fallback, tuple[float, ...]]]] = {}
@@ -565,12 +584,12 @@ class MirrorPasses:
         renderer = self.renderer
         parent.composite_framebuffer.use()
         apply_pass_state(ctx, _COMPOSITE, (0, 0, *parent.size))
-        parent.node.use(FALLBACK_PARENT_UNITS[0])
-        parent.surface.use(FALLBACK_PARENT_UNITS[1])
+        bind_texture(self.ctx, parent.node, FALLBACK_PARENT_UNITS[0])
+        bind_texture(self.ctx, parent.surface, FALLBACK_PARENT_UNITS[1])
         if level is not None:
-            level.seen.use(REFLECTION_UNITS[1])
-            level.node.use(REFLECTION_UNITS[2])
-        renderer.sky.use(SKY_UNIT)
+            bind_texture(self.ctx, level.seen, REFLECTION_UNITS[1])
+            bind_texture(self.ctx, level.node, REFLECTION_UNITS[2])
+        bind_texture(self.ctx, renderer.sky, SKY_UNIT)
         to_child = (1.0, 1.0) if level is None else (level.size[0] / parent.size[0], level.size[1] / parent.size[1])
         for (variant, normal_map, first, second), chunks in prepared.groups.items():
             if normal_map is not None:
@@ -578,7 +597,7 @@ class MirrorPasses:
                 if texture is None:  # the mirror's own batch holds it; none drawn: the flat build
                     variant = variant.removesuffix("_bumpy")
                 else:
-                    texture.use(NORMAL_UNIT)
+                    bind_texture(self.ctx, texture, NORMAL_UNIT)
             draw = self.fallbacks[variant]
             program = draw.program
             for prefix, probe, unit in (("probe", first, PROBE_UNIT), ("probe2", second, PROBE2_UNIT)):
@@ -607,11 +626,11 @@ class MirrorPasses:
         samples a cube while it is drawn into: what would read it reads the sky, as in the
         scene pass)."""
         renderer = self.renderer
-        cube = renderer.probes.cubes.get(probe) if probe and probe != renderer.scene_pass.capturing else None
+        cube = renderer.probe_cubes.get(probe) if probe and probe != renderer.capturing else None
         if cube is not None:
-            cube.texture.use(unit)
+            bind_texture(self.ctx, cube.texture, unit)
             return cube.lookup()
-        renderer.sky.use(unit)
+        bind_texture(self.ctx, renderer.sky, unit)
         return _NO_PROBE
 
     def release(self) -> None:

@@ -8,7 +8,7 @@ from __future__ import annotations
 import moderngl
 
 from engine.core.world import World
-from engine.render.bindings import OUTLINE_UNIT, PassState, apply_pass_state
+from engine.render.bindings import OUTLINE_UNIT, PassState, apply_pass_state, bind_texture
 from engine.render.shader_library import ShaderLibrary
 from engine.render.targets import RenderTargets
 
@@ -43,7 +43,7 @@ class SelectionOutline:
             return
         output.use()
         apply_pass_state(self.ctx, _OUTLINE, (0, 0, *size))
-        seen_ids.use(OUTLINE_UNIT)
+        bind_texture(self.ctx, seen_ids, OUTLINE_UNIT)
         program = self._vao.program
         program["selected"].value = int(selected)
         program["outline_color"].value = tuple(float(c) for c in color)

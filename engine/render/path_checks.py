@@ -48,18 +48,19 @@ import weakref
 from collections.abc import Callable
 from contextlib import contextmanager
 from dataclasses import asdict, dataclass, fields
-from typing import TYPE_CHECKING
 
 import moderngl
 import numpy as np
 from pyglm import glm
 
+from components.visibility import DRAWN_EVERYWHERE
 from engine.assets.mesh import quad
 from engine.core.errors import GLPassError
 from engine.core.material_slots import EmissiveVariant, ReflectVariant, RefractVariant
 from engine.render.bindings import SCRATCH_UNIT, PassState, apply_pass_state
-from engine.render.instances import DRAWN_EVERYWHERE, InstanceBatch
-from engine.render.probes import face_view
+from engine.render.gpu import Gpu
+from engine.render.instances import InstanceBatch
+from engine.render.probes import ProbeCaptures, face_view
 from engine.render.raw_gl import (
     LayeredCubeTarget,
     MissingEntryPoints,
@@ -68,9 +69,6 @@ from engine.render.raw_gl import (
     write_cube_level,
 )
 from engine.render.views import lights_block
-
-if TYPE_CHECKING:  # the renderer imports this module
-    from engine.render.renderer import Renderer
 
 LOG = logging.getLogger("speculum")
 
@@ -103,10 +101,13 @@ _BY_CONTEXT: weakref.WeakKeyDictionary[moderngl.Context, dict[str, PathVerdict]]
 
 
 class PathChecks:
-    """The verdicts of this renderer's context, and the checks that make them (module docstring)."""
+    """The verdicts of this renderer's context, and the checks that make them (module
+    docstring): each check draws through the probe captures (``probes``) both ways.  The
+    passes below ask it as their ``Gpu.path_checks`` (``gpu.PathTrust``)."""
 
-    def __init__(self, renderer: Renderer) -> None:
+    def __init__(self, renderer: Gpu, probes: ProbeCaptures) -> None:
         self.renderer = renderer
+        self.probes = probes
         self.ctx = renderer.ctx
         self.verdicts: dict[str, PathVerdict] = _BY_CONTEXT.setdefault(
             renderer.ctx, {name: PathVerdict() for name in PATH_NAMES})
@@ -170,7 +171,7 @@ class PathChecks:
         """What the driver reports with a layered capture target bound as a capture binds it
         (``raw_gl.inspect_bound_target``), and what of it differs from what a layered draw
         needs: for reports from machines where the layered capture is refused."""
-        probes = self.renderer.probes
+        probes = self.probes
         key = CHECK_KEYS[1]
         cube = probes.cube(key, CHECK_SIZE).texture
         target = LayeredCubeTarget(self.ctx, cube)
@@ -188,7 +189,7 @@ class PathChecks:
 
     # --- the checks -------------------------------------------------------------------------
     def _check_direct_faces(self) -> str | None:
-        probes = self.renderer.probes
+        probes = self.probes
         if not probes.direct_faces:
             raise _Unavailable("attaching a cube-map face needs GL entry points the loader lacks")
         reference = self._capture(lambda key, views: probes.capture(key, views, None, 0, direct=False,
@@ -198,7 +199,7 @@ class PathChecks:
         return _compare_faces(drawn, reference, "faces drawn straight into the cube")
 
     def _check_layered_capture(self, into: str) -> str | None:
-        probes = self.renderer.probes
+        probes = self.probes
         reference = self._capture(lambda key, views: probes.capture(key, views, None, 0, direct=False,
                                                                      build_mips=False))
         try:
@@ -210,7 +211,7 @@ class PathChecks:
         return _compare_faces(drawn, reference, what)
 
     def _check_mips(self, way: str) -> str | None:
-        probes = self.renderer.probes
+        probes = self.probes
         if not probes.mips.layered:
             raise _Unavailable("drawing a cube map's mip levels needs GL entry points the loader lacks")
         key = CHECK_KEYS[0]
@@ -247,7 +248,7 @@ class PathChecks:
     def _capture(self, draw: Callable[[int, dict], None]) -> list[np.ndarray]:
         """Draw the six faces of a fresh check cube (filled with the sentinel first) with
         ``draw(key, views)`` and read them back."""
-        probes = self.renderer.probes
+        probes = self.probes
         key = CHECK_KEYS[0]
         cube = probes.cube(key, CHECK_SIZE).texture
         try:
@@ -264,7 +265,7 @@ class PathChecks:
         """Inside the block every scene pass draws the check scene only, lit by no light,
         and the frame's counters and stack of probe targets are as they were after it."""
         renderer = self.renderer
-        probes = renderer.probes
+        probes = self.probes
         batch = InstanceBatch(self.ctx, _check_mesh(self.ctx), None)
         for face in range(6):
             _fill_row(batch.add(CHECK_ENTITY + face), face)

@@ -24,7 +24,7 @@ import moderngl
 import numpy as np
 
 from components.post import Tonemap
-from engine.render.bindings import EXPOSURE_UNIT, PRESENT_UNIT, PassState, apply_pass_state
+from engine.render.bindings import EXPOSURE_UNIT, PRESENT_UNIT, PassState, apply_pass_state, bind_texture
 from engine.render.shader_library import ShaderLibrary
 from engine.render.targets import release_framebuffer
 
@@ -92,7 +92,7 @@ class AutoExposure:
         texture, framebuffer = self._targets[0]
         framebuffer.use()
         apply_pass_state(ctx, _PASS, (0, 0, LUMINANCE_SIDE, LUMINANCE_SIDE))
-        hdr.use(PRESENT_UNIT)
+        bind_texture(self.ctx, hdr, PRESENT_UNIT)
         self._set(self._luminance, "log_range", (key_log2 - tonemap.max_ev, key_log2 - tonemap.min_ev))
         self._luminance.render(moderngl.TRIANGLES, vertices=3)
         # 2. 4x4 means down to 4x4.
@@ -100,14 +100,14 @@ class AutoExposure:
             side = target.size[0]
             target.use()
             apply_pass_state(ctx, _PASS, (0, 0, side, side))
-            source.use(PRESENT_UNIT)
+            bind_texture(self.ctx, source, PRESENT_UNIT)
             self._reduce.render(moderngl.TRIANGLES, vertices=3)
         # 3. adapt: read last frame's 1x1, write the other.
         previous, (state, state_fbo) = self._state
         state_fbo.use()
         apply_pass_state(ctx, _PASS, (0, 0, 1, 1))
-        self._targets[-1][0].use(PRESENT_UNIT)
-        previous[0].use(EXPOSURE_UNIT)
+        bind_texture(self.ctx, self._targets[-1][0], PRESENT_UNIT)
+        bind_texture(self.ctx, previous[0], EXPOSURE_UNIT)
         self._set(self._adapt, "key_log2", key_log2)
         self._set(self._adapt, "ev_range", (tonemap.min_ev, tonemap.max_ev))
         self._set(self._adapt, "blend", 1.0 if reset else adapt_blend(tonemap.adapt_speed, dt))

@@ -22,7 +22,7 @@ from __future__ import annotations
 import moderngl
 
 from components.post import TONEMAP_CURVES, Bloom, Tonemap
-from engine.render.bindings import BLOOM_UNIT, EXPOSURE_UNIT, PRESENT_UNIT, PassState, apply_pass_state
+from engine.render.bindings import BLOOM_UNIT, EXPOSURE_UNIT, PRESENT_UNIT, PassState, apply_pass_state, bind_texture
 from engine.render.bloom import BloomPass
 from engine.render.post import AutoExposure
 from engine.render.shader_library import ShaderLibrary
@@ -47,7 +47,7 @@ class PresentPass:
         self.search_steps = 0 if software else GPU_SEARCH_STEPS
         self._post: dict[tuple, moderngl.VertexArray] = {}   # present.frag's POST builds, by their defines
         self._written: dict[tuple[int, str], object] = {}    # (vao id, uniform) -> the value last written
-        self.bloom = BloomPass(ctx, shaders)
+        self.bloom = BloomPass(ctx, shaders, software)
         self.auto_exposure = AutoExposure(ctx, shaders)
         self.post_passes = 0   # bloom and exposure draws in the last frame (the tone map is the present draw)
 
@@ -107,7 +107,7 @@ class PresentPass:
             encode = self._encode_luma if fxaa else self._encode
             (self._encoded.framebuffer if fxaa else output).use()
             apply_pass_state(self.ctx, _PRESENT, (0, 0, *size))
-            hdr.use(PRESENT_UNIT)
+            bind_texture(self.ctx, hdr, PRESENT_UNIT)
             encode.program["exposure"].value = exposure
         else:
             encode = self._post_encode(hdr, exposure, tonemap, bloom, curve, camera, dt, fxaa)
@@ -119,7 +119,7 @@ class PresentPass:
             # Its own pass: a framebuffer's use() brings back the viewport last set while
             # moderngl took it for bound, which raw-GL passes may have left at any size.
             apply_pass_state(self.ctx, _PRESENT, (0, 0, *size))
-            self._encoded.texture.use(PRESENT_UNIT)
+            bind_texture(self.ctx, self._encoded.texture, PRESENT_UNIT)
             self._fxaa.render(moderngl.TRIANGLES, vertices=3)
 
     def _post_encode(self, hdr: moderngl.Texture, exposure: float, tonemap: Tonemap | None, bloom: Bloom | None,
@@ -141,14 +141,14 @@ class PresentPass:
         curve = curve if curve is not None else (tonemap.curve if tonemap is not None else "none")
         encode = self._post_build(curve, bloomed is not None, auto, luma)
         self._set(encode, "exposure", 2.0 ** tonemap.exposure if tonemap is not None else exposure)
-        hdr.use(PRESENT_UNIT)
+        bind_texture(self.ctx, hdr, PRESENT_UNIT)
         if bloomed is not None:
-            bloomed.use(BLOOM_UNIT)
+            bind_texture(self.ctx, bloomed, BLOOM_UNIT)
             share = bloom.intensity / self.bloom.levels
             self._set(encode, "bloom_mix", ((1.0 - bloom.intensity) if bloom.composite == "energy_conserving"
                                             else 1.0, share))
         if state is not None:
-            state.use(EXPOSURE_UNIT)
+            bind_texture(self.ctx, state, EXPOSURE_UNIT)
         return encode
 
     def _set(self, vao: moderngl.VertexArray, name: str, value) -> None:
@@ -167,7 +167,7 @@ class PresentPass:
     def post_target_count(self) -> int:
         """Textures the bloom chain and automatic exposure hold now (0 without a camera
         that asks for them)."""
-        return len(self.bloom.textures) + len(self.auto_exposure._targets) + len(self.auto_exposure._state)
+        return self.bloom.target_count() + len(self.auto_exposure._targets) + len(self.auto_exposure._state)
 
     def release(self) -> None:
         if self._encoded is not None:

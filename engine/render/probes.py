@@ -42,19 +42,20 @@ from engine.render.bindings import (
     SCRATCH_UNIT,
     PassState,
     apply_pass_state,
+    bind_texture,
 )
+from engine.render.gpu import Gpu, ProbeCube
+from engine.render.irradiance import IrradianceTable
 from engine.render.raw_gl import CubeMipTarget, LayeredArrayTarget, LayeredCubeTarget, inspect_bound_target
-from engine.render.scene_pass import SceneOptions
+from engine.render.scene_pass import SceneOptions, ScenePass
 from engine.render.targets import LevelStack, release_framebuffer
 from engine.render.view_plan import SurfaceTable
 from engine.render.view_tree import TreeSettings, ViewTree
 from engine.render.views import View
 from engine.rules.probe_rules import projection_box
 
-if TYPE_CHECKING:  # the renderer imports this module; the frame's surfaces are a floor above
+if TYPE_CHECKING:
     from engine.render.raw_gl import RawGL
-    from engine.render.renderer import Renderer
-    from engine.resources import Surfaces
 
 LOG = logging.getLogger("speculum")
 PROBE_PATHS = ("auto", "six_pass", "layered")
@@ -80,39 +81,6 @@ def face_view(face: int, position: glm.vec3, near: float, far: float, size: int,
                 hide=skip, kinds=VIEW_PROBE, layers=layers)
 
 
-@dataclass
-class ProbeCube:
-    """One probe's cube map (RGBA16F, mipmapped, seamless) and where it was captured from.
-
-    ``box`` (world min, max corners), when set, makes lookups parallax-corrected: the
-    reflected ray is followed from the shaded point to the box's wall and the cube is
-    sampled towards that point from ``position`` (box projection)."""
-
-    texture: moderngl.TextureCube
-    resolution: int
-    position: tuple[float, float, float] = (0.0, 0.0, 0.0)
-    box: tuple[tuple[float, float, float], tuple[float, float, float]] | None = None
-    prefilter: str = "mips"
-
-    @property
-    def roughness_levels(self) -> float:
-        """For a GGX-prefiltered chain, its top level (level L holds roughness L / this);
-        0 for box mips (sampled with a roughness bias instead)."""
-        return float(self.resolution.bit_length() - 1) if self.prefilter == "ggx" else 0.0
-
-    def lookup(self) -> tuple[tuple[float, ...], tuple[float, ...], tuple[float, ...]]:
-        """The scene shader's probe_position (w: ``roughness_levels``), probe_box_min (w: 1 =
-        box projection on) and probe_box_max uniforms."""
-        position = (*self.position, self.roughness_levels)
-        if self.box is None:
-            return position, (0.0, 0.0, 0.0, 0.0), (0.0, 0.0, 0.0, 0.0)
-        return position, (*self.box[0], 1.0), (*self.box[1], 0.0)
-
-    @property
-    def face_size(self) -> int:
-        return self.resolution
-
-
 class CubeMipPass:
     """Rebuilds a cube map's mip chain with one layered draw a level (``cube_mip.geom`` and
     ``.frag``: a 2x2 box filter, as ``glGenerateMipmap``'s), where ``build_mipmaps`` costs six
@@ -128,7 +96,7 @@ class CubeMipPass:
 
     STATE = PassState()  # no depth test, no blending, no clip distances
 
-    def __init__(self, renderer: Renderer) -> None:
+    def __init__(self, renderer: Gpu) -> None:
         self.renderer = renderer
         self.ctx = renderer.ctx
         self._targets: dict[int, CubeMipTarget] = {}  # by probe key
@@ -173,8 +141,9 @@ class CubeMipPass:
         vao = self._program_vao(ggx, one_face)
         program = vao.program
         apply_pass_state(self.ctx, self.STATE, (0, 0, *cube.size))
-        for unit in (PROBE_UNIT, PROBE2_UNIT, PROBE_REST_UNIT, SCRATCH_UNIT, self.ctx.default_texture_unit):
-            self.renderer.sky.use(unit)  # the cube is bound only where the pass reads it (CUBE_MIP_UNIT)
+        for unit in (PROBE_UNIT, PROBE2_UNIT, PROBE_REST_UNIT, SCRATCH_UNIT):
+            bind_texture(self.ctx, self.renderer.sky, unit)  # the cube is bound only where the pass reads it
+        self.renderer.sky.use(self.ctx.default_texture_unit)  # moderngl's own unit: not in the record
         top = cube.size[0].bit_length() - 1
         try:
             for level in range(1, top + 1):
@@ -190,7 +159,8 @@ class CubeMipPass:
                     vao.render(moderngl.TRIANGLES, vertices=3)
         finally:
             target.done(CUBE_MIP_UNIT)
-            self.renderer.sky.use(CUBE_MIP_UNIT)  # not left bound where the next capture draws into it
+            # not left bound where the next capture draws into it
+            bind_texture(self.ctx, self.renderer.sky, CUBE_MIP_UNIT)
         self.used = way
         self.renderer.checkpoint("probe mip chain")
         return prefilter
@@ -301,7 +271,7 @@ class ProbePaths:
     is one of them, or ``auto`` (the default): both measured on the real scene, the faster
     kept.
 
-    Only a path the path self-check (``renderer.path_checks``) trusts on this context is
+    Only a path the path self-check (``Gpu.path_checks``) trusts on this context is
     drawn.  ``layered`` draws into the cube map itself where ``layered_capture`` is
     verified, else into a six-layer 2D array copied into the cube where
     ``layered_array_capture`` is (the NVIDIA H200's driver takes a layered draw into an
@@ -329,7 +299,7 @@ class ProbePaths:
     and the faster is kept for the rest of the run and said (``chosen``, ``timings``,
     ``in_use``, a log line)."""
 
-    def __init__(self, renderer: Renderer) -> None:
+    def __init__(self, renderer: Gpu) -> None:
         self.renderer = renderer
         self.path = "auto"
         self.used = ""  # the path that drew the last capture
@@ -427,19 +397,23 @@ class ProbePaths:
 
 
 class ProbeCaptures:
-    """The GPU side of every probe: cube maps by probe key, and the targets faces draw into
-    (one LevelStack per resolution, shared by all probes: captures run one after another)."""
+    """The GPU side of every probe: cube maps by probe key (``Gpu.probe_cubes``, which the
+    passes sample), and the targets faces draw into (one LevelStack per resolution, shared
+    by all probes: captures run one after another).  Faces are drawn through ``scene_pass``;
+    a probe with an influence box gets its irradiance from ``irradiance``."""
 
-    def __init__(self, renderer: Renderer) -> None:
+    def __init__(self, renderer: Gpu, scene_pass: ScenePass, irradiance: IrradianceTable) -> None:
         self.renderer = renderer
+        self.scene_pass = scene_pass
+        self.irradiance = irradiance
         self.ctx = renderer.ctx
-        self.cubes: dict[int, ProbeCube] = {}
+        self.cubes = renderer.probe_cubes  # made and released here alone
         # the one-pass path's targets, by probe (the cube map itself, or a 2D array copied into it)
         self._layered: dict[int, LayeredCubeTarget | LayeredArrayTarget] = {}
         self._faces: dict[int, CubeFaceTargets] = {}  # the six-pass path's face targets, by probe
         self.direct_faces = renderer.raw_gl.can_attach_cube_faces  # False: draw in a 2D target, copy
         self._stacks: dict[int, LevelStack] = {}
-        self.tree = ViewTree(renderer)
+        self.tree = ViewTree(renderer, scene_pass)
         self.mips = CubeMipPass(renderer)
         self.paths = ProbePaths(renderer)
 
@@ -459,18 +433,19 @@ class ProbeCaptures:
         return cube
 
     def capture_probe(self, key: int, faces: frozenset[int], position: glm.vec3, settings: ReflectionProbe,
-                      surfaces: Surfaces | None = None) -> str:
+                      surfaces: SurfaceTable | None = None) -> str:
         """Capture ``faces`` of probe ``key`` (the entity owning it, whose own object every
         face leaves out) from ``position`` with ``settings``, by the path ``paths`` takes
-        (``surfaces``: this frame's ``engine.resources.Surfaces``, the mirrors and portals a
-        face's view tree draws, up to ``settings.depth``); then the cube's record of where
+        (``surfaces``: the planner's table of this frame's mirrors and portals,
+        ``engine.render.surface_table``, that a face's view tree draws, up to
+        ``settings.depth``); then the cube's record of where
         it was captured from and its projection box (``probe_rules.projection_box``): the
         cube's fields are set here only.  Returns the path that drew it."""
         views = {face: face_view(face, position, settings.near, settings.far, settings.resolution, skip=key,
                                  layers=settings.layer_mask)
                  for face in faces}
-        sees_surfaces = settings.depth > 0 and surfaces is not None and bool(surfaces.mirrors or surfaces.portals)
-        table = surfaces.table if sees_surfaces else None
+        sees_surfaces = settings.depth > 0 and surfaces is not None and bool(surfaces.states)
+        table = surfaces if sees_surfaces else None
         draws = {"six_pass": lambda: self.capture(key, views, table, settings.depth, settings.prefilter),
                  "layered": lambda: self.capture_layered(key, views, prefilter=settings.prefilter)}
         path = self.paths.draw(draws, len(faces) == 6 and not sees_surfaces, settings.resolution)
@@ -478,7 +453,7 @@ class ProbeCaptures:
         cube.position = tuple(position)
         cube.box = projection_box(position, settings)
         if settings.influence is not None:  # its irradiance, from the new mip chain (engine/render/irradiance.py)
-            self.renderer.irradiance.project(key, cube)
+            self.irradiance.project(key, cube)
         self.renderer.stats.probe_captures += 1
         return path
 
@@ -500,11 +475,11 @@ class ProbeCaptures:
         with self._drawing_into(key):
             for face, view in sorted(views.items()):
                 if targets_direct is not None:
-                    renderer.scene_pass.draw([view], targets_direct.faces[face], FACE)
+                    self.scene_pass.draw([view], targets_direct.faces[face], FACE)
                 else:
                     levels = self._stacks.setdefault(resolution, LevelStack(self.ctx))
                     targets = levels.get(0, view.size)
-                    renderer.scene_pass.draw([view], targets, FACE)
+                    self.scene_pass.draw([view], targets, FACE)
                     if trees:
                         self.tree.render(view, levels, surfaces, TreeSettings(depth_cap=depth))
                     renderer.raw_gl.copy_to_cube_face(targets.framebuffer, cube.texture, face, SCRATCH_UNIT)
@@ -520,15 +495,15 @@ class ProbeCaptures:
         copy left it on (a texture drawn into while bound for sampling is a rendering
         feedback loop, undefined on a GPU; llvmpipe forgives it)."""
         renderer = self.renderer
-        for unit in (PROBE_UNIT, PROBE2_UNIT, PROBE_REST_UNIT, SCRATCH_UNIT, CUBE_MIP_UNIT,
-                     self.ctx.default_texture_unit):
-            renderer.sky.use(unit)
-        renderer.scene_pass.capturing = key
+        for unit in (PROBE_UNIT, PROBE2_UNIT, PROBE_REST_UNIT, SCRATCH_UNIT, CUBE_MIP_UNIT):
+            bind_texture(self.ctx, renderer.sky, unit)
+        renderer.sky.use(self.ctx.default_texture_unit)  # moderngl's own unit: not in the record
+        renderer.capturing = key
         try:
             yield
         finally:
-            renderer.scene_pass.capturing = 0
-            renderer.sky.use(SCRATCH_UNIT)  # the copies bound the cube there
+            renderer.capturing = 0
+            bind_texture(self.ctx, renderer.sky, SCRATCH_UNIT)  # the copies bound the cube there
 
     def _face_targets(self, key: int, cube: moderngl.TextureCube) -> CubeFaceTargets | None:
         """The probe's direct face targets (made, or remade for a new cube), or None where a
@@ -565,7 +540,7 @@ class ProbeCaptures:
                 del self._layered[key]
             target = self._layered[key] = kind(self.ctx, cube.texture)
         with self._drawing_into(key):
-            self.renderer.scene_pass.draw_layered([views[face] for face in range(6)], target, culled)
+            self.scene_pass.draw_layered([views[face] for face in range(6)], target, culled)
             if isinstance(target, LayeredArrayTarget):
                 target.copy_to_cube(SCRATCH_UNIT)  # a unit no pass reads; _drawing_into rebinds the sky there
                 self.renderer.checkpoint("layered capture's copy into the cube")
@@ -583,7 +558,7 @@ class ProbeCaptures:
 
     def drop(self, key: int) -> None:
         self.mips.drop(key)
-        self.renderer.irradiance.drop(key)
+        self.irradiance.drop(key)
         faces = self._faces.pop(key, None)
         if faces is not None:
             faces.release()

@@ -65,7 +65,7 @@ from dataclasses import dataclass
 import moderngl
 import numpy as np
 
-from engine.render.bindings import invalidate
+from engine.render.bindings import bind_texture_now, invalidate
 
 _VOID_CALL = ctypes.CFUNCTYPE(None)
 _COPY_TEX_SUB_IMAGE_2D = ctypes.CFUNCTYPE(None, ctypes.c_uint, ctypes.c_int, ctypes.c_int, ctypes.c_int,
@@ -135,7 +135,7 @@ _ARRAY_SIGNATURES = {
     "glReadBuffer": (None, _u),
     "glCopyTexSubImage2D": (None, _u, _i, _i, _i, _i, _i, _i, _i),
 }
-# Read-backs for debug mode (``inspect_target``): what the driver says is bound and attached.
+# Read-backs for debug mode (``inspect_bound_target``): what the driver says is bound and attached.
 _QUERY_SIGNATURES = {
     "glGetIntegerv": (None, _u, ctypes.POINTER(_i)),
     "glGetFramebufferAttachmentParameteriv": (None, _u, _u, _u, ctypes.POINTER(_i)),
@@ -208,7 +208,7 @@ class RawGL:
             pixels = source.read(components=cube.components, dtype=cube.dtype)
             cube.write(face, pixels)
             return
-        cube.use(unit)
+        bind_texture_now(self.ctx, cube, unit)  # the copy writes the active unit's cube
         self._copy_tex_sub_image(GL_TEXTURE_CUBE_MAP_POSITIVE_X + face, 0, 0, 0, 0, 0, size[0], size[1])
 
 
@@ -238,6 +238,7 @@ class LayeredCubeTarget:
         gl["glTexParameteri"](GL_TEXTURE_CUBE_MAP, GL_TEXTURE_MIN_FILTER, GL_NEAREST)
         gl["glTexParameteri"](GL_TEXTURE_CUBE_MAP, GL_TEXTURE_MAG_FILTER, GL_NEAREST)
         gl["glBindTexture"](GL_TEXTURE_CUBE_MAP, 0)
+        invalidate(ctx)  # the active unit's cube-map binding changed behind moderngl's back
         gl["glGenFramebuffers"](1, ctypes.byref(name))
         self.framebuffer = name.value
         gl["glBindFramebuffer"](GL_FRAMEBUFFER, self.framebuffer)
@@ -348,6 +349,7 @@ class LayeredArrayTarget:
         gl["glTexParameteri"](GL_TEXTURE_2D_ARRAY, GL_TEXTURE_MIN_FILTER, GL_NEAREST)  # one level: complete
         gl["glTexParameteri"](GL_TEXTURE_2D_ARRAY, GL_TEXTURE_MAG_FILTER, GL_NEAREST)
         gl["glBindTexture"](GL_TEXTURE_2D_ARRAY, 0)
+        invalidate(self.ctx)  # the active unit's array binding changed behind moderngl's back
         return name.value
 
     def _framebuffer(self) -> int:
@@ -368,7 +370,7 @@ class LayeredArrayTarget:
         RuntimeError naming the GL error a copy left."""
         gl = self.gl
         gl["glGetError"]()  # start clean: what follows is checked
-        self.cube.use(unit)
+        bind_texture_now(self.ctx, self.cube, unit)
         for face, read in enumerate(self.read_framebuffers):
             gl["glBindFramebuffer"](GL_READ_FRAMEBUFFER, read)
             gl["glCopyTexSubImage2D"](GL_TEXTURE_CUBE_MAP_POSITIVE_X + face, 0, 0, 0, 0, 0, self.size, self.size)
@@ -427,7 +429,7 @@ class CubeMipTarget:
             gl["glDrawBuffers"](1, (_u * 1)(GL_COLOR_ATTACHMENT0))
             gl["glDisable"](GL_SCISSOR_TEST)
             gl["glColorMask"](1, 1, 1, 1)
-            self.cube.use(unit)
+            bind_texture_now(self.ctx, self.cube, unit)
             gl["glTexParameteri"](GL_TEXTURE_CUBE_MAP, GL_TEXTURE_BASE_LEVEL, level - 1)
             gl["glTexParameteri"](GL_TEXTURE_CUBE_MAP, GL_TEXTURE_MAX_LEVEL, level - 1)
             gl["glViewport"](0, 0, size, size)
@@ -451,7 +453,7 @@ class CubeMipTarget:
     def done(self, unit: int) -> None:
         """Every level readable again; back to the framebuffer moderngl thinks is bound."""
         self._level = None
-        self.cube.use(unit)
+        bind_texture_now(self.ctx, self.cube, unit)
         self.gl["glTexParameteri"](GL_TEXTURE_CUBE_MAP, GL_TEXTURE_BASE_LEVEL, 0)
         self.gl["glTexParameteri"](GL_TEXTURE_CUBE_MAP, GL_TEXTURE_MAX_LEVEL, GL_MAX_LEVEL_DEFAULT)
         self.gl["glBindFramebuffer"](GL_FRAMEBUFFER, 0)
@@ -473,7 +475,7 @@ def read_cube_level(ctx: moderngl.Context, cube: moderngl.TextureCube, face: int
         raise RuntimeError("reading a cube-map mip level needs glGetTexImage, which the loader lacks")
     n = max(1, cube.size[0] >> level)
     out = np.zeros((n, n, 4), np.float32)
-    cube.use(unit)
+    bind_texture_now(ctx, cube, unit)
     get(GL_TEXTURE_CUBE_MAP_POSITIVE_X + face, level, GL_RGBA, GL_FLOAT, out.ctypes.data)
     return out
 
@@ -486,7 +488,7 @@ def write_cube_level(ctx: moderngl.Context, cube: moderngl.TextureCube, face: in
     if put is None:
         raise RuntimeError("writing a cube-map mip level needs glTexSubImage2D, which the loader lacks")
     data = np.ascontiguousarray(rgba, np.float32)
-    cube.use(unit)
+    bind_texture_now(ctx, cube, unit)
     put(GL_TEXTURE_CUBE_MAP_POSITIVE_X + face, level, 0, 0, data.shape[1], data.shape[0], GL_RGBA, GL_FLOAT,
         data.ctypes.data)
 

@@ -1,16 +1,15 @@
 """GL resources of one world's rendering.
 
-The systems decide what is drawn; this class owns what it is drawn with: uniform blocks,
-shared meshes and textures (reference counted, released when the last user goes), the
-instance batches and their draw order, the sky cube map, the main view tree's render
-targets and the scene pass (``engine/render/scene_pass.py``), through which every view
-is drawn.
+The systems decide what is drawn; the renderer owns what it is drawn with: the ``Gpu``
+every pass draws with (``engine/render/gpu.py``: uniform blocks, the sky cube map, the
+instance batches and their draw order), the shared meshes and textures (reference counted,
+released when the last user goes), the main view tree's render targets, and the passes:
+the scene pass (``engine/render/scene_pass.py``, through which every view is drawn),
+shadows, irradiance, probes, the path self-check, present and screen text.  It stands
+above every pass: a pass is given the ``Gpu`` and the passes it draws through, never the
+renderer.
 """
 from __future__ import annotations
-
-import os
-from collections.abc import Sequence
-from dataclasses import dataclass
 
 import moderngl
 import numpy as np
@@ -18,90 +17,22 @@ import numpy as np
 from components.post import Bloom, Tonemap
 from engine.assets.mesh import Mesh
 from engine.assets.texture_data import TextureData
-from engine.core.errors import GLLimitError, GLPassError
-from engine.render.bindings import CAMERA_BINDING, bind_uniform_range
+from engine.core.color import srgb_to_linear
+from engine.core.errors import GLLimitError
 from engine.render.gl_context import GLCapabilities
-from engine.render.instances import GpuMesh, InstanceBatch
+from engine.render.gpu import BACKGROUND, Gpu, Shared
+from engine.render.instances import BatchKey, GpuMesh, InstanceBatch
 from engine.render.irradiance import IrradianceTable
 from engine.render.path_checks import PathChecks
 from engine.render.present import ANTIALIAS_MODES, PresentPass
 from engine.render.probes import ProbeCaptures
-from engine.render.raw_gl import RawGL
 from engine.render.scene_pass import ScenePass
-from engine.render.shader_library import ShaderLibrary
 from engine.render.shadows import ShadowMaps
 from engine.render.sky import flat_cube, upload_cube
 from engine.render.targets import LevelStack, RenderTargets
 from engine.render.text import TextPass
-from engine.render.views import CAMERA_BLOCK_BYTES, LIGHTS_BLOCK_BYTES, View
-from engine.rules.probe_rules import ProbeBlend
 
 GL_SRGB8_ALPHA8 = 0x8C43
-TEXTURE_ANISOTROPY = 8.0
-BACKGROUND = (0.05, 0.05, 0.06)
-
-
-@dataclass
-class RenderStats:
-    """What the last frame cost: read by tests and benchmarks."""
-
-    passes: int = 0
-    draw_calls: int = 0
-    uploaded_bytes: int = 0
-    instances: int = 0
-    reflection_views: int = 0
-    probe_captures: int = 0   # probes that captured at least one face this frame
-    probe_faces: int = 0      # cube faces captured this frame
-    probe_path: str = ""      # the path of the last probe capture: "six_pass" or "layered" (while there are probes)
-    reflection_views_dropped: int = 0   # views with pixels a level's view budget left out
-    reflection_depth_capped: int = 0    # views the surfaces' own depth limits allowed below the tree's cap
-    reflection_views_faded: int = 0     # mirror views their fades took out (each cost nothing)
-    reflection_end_views: int = 0       # views past the depth limits shown as last frame's image
-    reflection_visibility: str = ""     # "exact" or "predicted": how the main tree's levels knew their pixels
-    reflection_views_unseen: int = 0    # views drawn that had no pixels last frame (predicted visibility)
-    # The frame's view budget (engine.resources.ViewBudget): its limits, and what was spent
-    # (reflection views of every tree and probe faces drawn) and cut (views with pixels and
-    # probe faces the budget left out; the faces wait for a later frame).
-    view_budget: int | None = None
-    views_spent: int = 0
-    views_cut: int = 0
-    probe_ms_budget: float | None = None
-    probe_ms_spent: float = 0.0         # the captures' cost by their measured ms a face
-    probe_faces_deferred: int = 0       # faces due that the budgets left for a later frame
-    pixel_budget: int | None = None
-    pixels_spent: int = 0               # reflection pixels drawn, at the screen's resolution
-    levels_downscaled: int = 0          # levels the pixel budget drew at a lower resolution
-
-    def pixels_left(self) -> int | None:
-        """Reflection pixels the frame's budget still allows (None: no limit)."""
-        return None if self.pixel_budget is None else max(self.pixel_budget - self.pixels_spent, 0)
-
-    def views_left(self) -> int | None:
-        """Views the frame's budget still allows (None: no limit)."""
-        return None if self.view_budget is None else max(self.view_budget - self.views_spent, 0)
-    # How reflection levels were drawn: "per_mirror", "batched", "mixed" (auto chose both in
-    # one frame), or "" when no reflection view was drawn (ReflectionSystem.path).
-    reflection_path: str = ""
-    # The path self-check's verdicts so far on this context (engine/render/path_checks.py):
-    # the alternative GL paths compared with their plain counterparts and trusted, or refused.
-    paths_verified: tuple[str, ...] = ()
-    paths_refused: tuple[str, ...] = ()
-    # Shadow maps (systems/shadow_system.py): drawn this frame, kept from an earlier frame (no
-    # caster or light changed), and lights whose shadows a limit left out (point lights past
-    # MAX_POINT_SHADOWS); how the last point light's cube was drawn ("layered" or "six_pass").
-    shadow_maps_drawn: int = 0           # (their draws: shadow_draw_calls, not in passes or draw_calls)
-    shadow_draw_calls: int = 0
-    shadow_texels_drawn: int = 0         # of directional maps: a moved caster redraws only its footprint's
-    shadow_maps_kept: int = 0
-    shadows_cut: int = 0
-    virtual_lights: int = 0              # lights shining through mirrors and portals this frame
-    virtual_lights_cut: int = 0          # ... that the limit or the view budget left out
-    shadow_path: str = ""
-    # Mirrors and portals seen without a view of their own (cut by a budget, faded, past the
-    # depth limit, switched off), or partly faded, or an end view's pixels last frame's image
-    # did not hold, that showed the fallback (the probe's or the sky's reflection) this
-    # frame, in every tree: one per (parent view, surface).
-    reflection_fallbacks: int = 0
 
 
 def checker_look(texture: TextureData | None) -> tuple[float, tuple, tuple] | None:
@@ -118,87 +49,42 @@ def checker_look(texture: TextureData | None) -> tuple[float, tuple, tuple] | No
     size, squares = source["checker"]
     if size % squares:
         return None
-    a = _srgb_to_linear(source.get("a", (230, 230, 230)))
-    b = _srgb_to_linear(source.get("b", (40, 40, 48)))
+    a = _srgb_bytes_to_linear(source.get("a", (230, 230, 230)))
+    b = _srgb_bytes_to_linear(source.get("b", (40, 40, 48)))
     even, odd = (b, a) if squares % 2 == 0 else (a, b)
     return float(squares), even, odd
 
 
-def _srgb_to_linear(rgb) -> tuple[float, float, float]:
+def _srgb_bytes_to_linear(rgb) -> tuple[float, ...]:
     """Bytes of an sRGB colour as the GL's sRGB texture decode gives them."""
-    out = []
-    for byte in rgb:
-        c = byte / 255.0
-        out.append(c / 12.92 if c <= 0.04045 else ((c + 0.055) / 1.055) ** 2.4)
-    return tuple(out)
+    return tuple(float(c) for c in srgb_to_linear(np.asarray(rgb, np.float64) / 255.0))
 
 
-class _Shared:
-    """A GL object shared by reference count."""
+class Renderer(Gpu):
+    """A world's rendering: the ``Gpu`` every pass draws with; the passes, each made after
+    those it draws through and given them (irradiance and shadows, then the scene pass,
+    the probe captures, the path self-check); the main view tree's targets, present and
+    screen text; and the shared meshes, textures and batches, made and released by
+    reference count."""
 
-    __slots__ = ("obj", "users")
-
-    def __init__(self, obj) -> None:
-        self.obj = obj
-        self.users = 0
-
-
-class Renderer:
     def __init__(self, ctx: moderngl.Context, caps: GLCapabilities) -> None:
-        self.ctx = ctx
-        self.caps = caps
-        self.raw_gl = RawGL(ctx)
-        self.shaders = ShaderLibrary(ctx)
-        self.present_pass = PresentPass(ctx, self.shaders, caps.software)
-        self.text_pass: TextPass | None = None  # made when text is first drawn (its atlas costs a few ms)
-        self.screen_quads = np.zeros((0, 12), np.float32)  # the last frame's screen text (a screenshot draws it again)
-        # A pass's Camera blocks, one after another at the alignment a uniform range needs.
-        align = max(1, int(ctx.info.get("GL_UNIFORM_BUFFER_OFFSET_ALIGNMENT", 256)))
-        self.camera_stride = -(-CAMERA_BLOCK_BYTES // align) * align
-        self._camera_padding = bytes(self.camera_stride - CAMERA_BLOCK_BYTES)
-        self.cameras_ubo = ctx.buffer(reserve=self.camera_stride * 16)
-        self.lights_ubo = ctx.buffer(reserve=LIGHTS_BLOCK_BYTES)
-        self._meshes: dict[int, _Shared] = {}
-        # id(TextureData); ("normal", id): uploaded linear (normal and metallic-roughness maps)
-        self._textures: dict[object, _Shared] = {}
-        # (mesh, texture, probe, transparent entity, normal map, emissive map, metallic-roughness map) -> batch
-        self.batches: dict[tuple[int, int, int, int, int, int, int], InstanceBatch] = {}
-        self._draw_order: list[InstanceBatch] = []   # non-empty batches, smallest extent first
-        self._order_stale = True
-        self.sky = flat_cube(ctx, BACKGROUND)
-        self.levels = LevelStack(ctx)   # the main view tree's: [0] the main view, then its reflection levels
-        self.stats = RenderStats()
-        # Each mirror's and portal's fallback probes (probe_rules.surface_blend), by entity: the
-        # extract stage's, read by the view trees' composites.
-        self.surface_probes: dict[int, ProbeBlend] = {}
-        self.exposure = 1.0
-        self._antialias = "fxaa"
-        self.texture_anisotropy = min(TEXTURE_ANISOTROPY, ctx.max_anisotropy)
-        # Texture filtering inside mirror and portal views.  A software rasteriser spends
-        # about 60% of a reflection view's time in the anisotropic filter (measured on
-        # llvmpipe, benchmarks/mirrors.py), so there reflections filter trilinearly; a GPU
-        # filters them like the main view.  Set it to texture_anisotropy for equal quality.
-        self.reflection_anisotropy = 1.0 if caps.software else self.texture_anisotropy
-        # Normal maps likewise: on llvmpipe an 8x anisotropic normal map on the benchmark
-        # ground cost +36-41% of the frame, trilinear +4-5% (benchmarks/normal_maps.py).  Set
-        # before the first normal map is uploaded.
-        self.normal_map_anisotropy = 1.0 if caps.software else self.texture_anisotropy
-        # Debug mode: every pass checks for an OpenGL error when it ends and names itself
-        # (checkpoint); glGetError is cheap on the CPU but makes no sense to pay in a game.
-        self.debug = os.environ.get("SPECULUM_DEBUG", "") not in ("", "0")
-        self.scene_pass = ScenePass(self)
-        self.irradiance = IrradianceTable(self)  # the probes' diffuse light (engine/render/irradiance.py)
-        self.probes = ProbeCaptures(self)
-        self.shadows = ShadowMaps(self)
+        super().__init__(ctx, caps)
+        self._meshes: dict[int, Shared] = {}  # GpuMesh by Mesh.id, shared by reference count
         # Counts uploads that wrote instance rows, and batches made or dropped: the shadows
         # stage draws a map again when it moves on (a caster moved, came, went or changed).
         self.casters_version = 0
         self._dropped_changes: tuple[np.ndarray, np.ndarray] | None = None  # boxes of batches dropped
-        self.path_checks = PathChecks(self)
-        # When set, the only batches scene passes draw (the path self-check's own scene).
-        self.scene_only: list[InstanceBatch] | None = None
-        # A batch was made since prepare_programs last ran (Engine.frame calls it then).
-        self.needs_preparing = False
+        self.present_pass = PresentPass(ctx, self.shaders, caps.software)
+        self.text_pass: TextPass | None = None  # made when text is first drawn (its atlas costs a few ms)
+        self.screen_quads = np.zeros((0, 12), np.float32)  # the last frame's screen text (a screenshot draws it again)
+        self.levels = LevelStack(ctx)   # the main view tree's: [0] the main view, then its reflection levels
+        self.exposure = 1.0
+        self._antialias = "fxaa"
+        self.irradiance = IrradianceTable(self)  # the probes' diffuse light (engine/render/irradiance.py)
+        self.shadows = ShadowMaps(self)
+        self.scene_pass = ScenePass(self, self.shadows, self.irradiance)
+        self.probes = ProbeCaptures(self, self.scene_pass, self.irradiance)
+        self.path_checks: PathChecks = PathChecks(self, self.probes)
 
     @property
     def antialias(self) -> str:
@@ -230,10 +116,11 @@ class Renderer:
         # ``rest_probe``: a probe, not the sky, takes what the weights leave (PROBE_REST).
         # ``mirrored``: instances whose model matrix has a negative determinant, drawn with the
         # other winding (ScenePass), so they get batches of their own.
-        key = (mesh.id, id(texture) if texture is not None else 0, (probe, second_probe, probe_blend, rest_probe),
-               transparent_entity,
-               id(normal_map) if normal_map is not None else 0, id(emissive_map) if emissive_map is not None else 0,
-               id(metallic_roughness_map) if metallic_roughness_map is not None else 0, mirrored)
+        key = BatchKey(mesh.id, id(texture) if texture is not None else 0,
+                       (probe, second_probe, probe_blend, rest_probe), transparent_entity,
+                       id(normal_map) if normal_map is not None else 0,
+                       id(emissive_map) if emissive_map is not None else 0,
+                       id(metallic_roughness_map) if metallic_roughness_map is not None else 0, mirrored)
         batch = self.batches.get(key)
         if batch is None:
             for name, image in (("Material.texture", texture), ("Material.normal_map", normal_map),
@@ -292,33 +179,27 @@ class Renderer:
         self._order_stale = True
         self._note_dropped(batch.take_changed_box())
         batch.release()
-        mesh_id, texture_id, _, _, normal_map_id, emissive_map_id, metallic_roughness_id, _ = batch.key
-        self._release(self._meshes, mesh_id)
-        if texture_id:
-            self._release(self._textures, texture_id)
-        if normal_map_id:
-            self._release(self._textures, ("normal", normal_map_id))
-        if emissive_map_id:
-            self._release(self._textures, emissive_map_id)
-        if metallic_roughness_id:
-            self._release(self._textures, ("normal", metallic_roughness_id))
-
-    def normal_map_texture(self, normal_map: TextureData) -> moderngl.Texture | None:
-        """The uploaded normal map of ``normal_map`` while a batch draws with it (a mirror's
-        composite reads the one its scene-pass batch holds), else None."""
-        shared = self._textures.get(("normal", id(normal_map)))
-        return shared.obj if shared is not None else None
+        key = batch.key
+        self._release(self._meshes, key.mesh)
+        if key.texture:
+            self._release(self._textures, key.texture)
+        if key.normal_map:
+            self._release(self._textures, ("normal", key.normal_map))
+        if key.emissive_map:
+            self._release(self._textures, key.emissive_map)
+        if key.metallic_roughness_map:
+            self._release(self._textures, ("normal", key.metallic_roughness_map))
 
     @staticmethod
-    def _acquire(table: dict[int, _Shared], key: int, make):
+    def _acquire(table: dict[int, Shared], key: int, make):
         shared = table.get(key)
         if shared is None:
-            shared = table[key] = _Shared(make())
+            shared = table[key] = Shared(make())
         shared.users += 1
         return shared.obj
 
     @staticmethod
-    def _release(table: dict[int, _Shared], key: int) -> None:
+    def _release(table: dict[int, Shared], key: int) -> None:
         shared = table[key]
         shared.users -= 1
         if shared.users == 0:
@@ -415,68 +296,17 @@ class Renderer:
     def set_lights(self, block: bytes) -> None:
         self.lights_ubo.write(block)
 
-    def bind_view(self, view: View) -> None:
-        """Make ``view`` the Camera block every program reads (a pass of one view)."""
-        self.upload_views((view,))
-        self.bind_view_at(0)
-
-    def upload_views(self, views: Sequence[View]) -> None:
-        """The Camera blocks of a pass's views in one buffer, in one upload (``bind_view_at``
-        then binds view i's range): one write a pass, not one a view, and into fresh storage
-        (orphaned), so a GPU driver never waits for, or copies, a block the pass before
-        still reads."""
-        padding = self._camera_padding
-        data = b"".join(view.camera_block() + padding for view in views)
-        if len(data) > self.cameras_ubo.size:
-            reserve = max(len(data), 2 * self.cameras_ubo.size)
-            self.cameras_ubo.release()
-            self.cameras_ubo = self.ctx.buffer(reserve=reserve)
-        else:
-            self.cameras_ubo.orphan()
-        self.cameras_ubo.write(data)
-
-    def bind_view_at(self, index: int) -> None:
-        """Make the ``index``-th view of the last ``upload_views`` the Camera block."""
-        bind_uniform_range(self.ctx, self.cameras_ubo, CAMERA_BINDING, index * self.camera_stride,
-                           CAMERA_BLOCK_BYTES)
-
-    def opaque_batches(self) -> list[InstanceBatch]:
-        """Non-empty opaque batches, smallest extent first (re-sorted after uploads)."""
-        if self.scene_only is not None:
-            return self.scene_only
-        if self._order_stale:
-            self._draw_order = sorted((b for b in self.batches.values() if b.count and not b.transparent),
-                                      key=lambda b: b.extent)
-            self._order_stale = False
-        return self._draw_order
-
-    def transparent_batches(self) -> list[InstanceBatch]:
-        """Non-empty batches drawn in the scene pass's transparent slot (none until a
-        material is transparent: refraction fills the slot)."""
-        if self.scene_only is not None:
-            return []
-        return [b for b in self.batches.values() if b.count and b.transparent]
-
-    def checkpoint(self, name: str) -> None:
-        """In debug mode, raise ``GLPassError`` naming pass ``name`` if it left a GL error."""
-        if self.debug:
-            error = self.ctx.error
-            if error != "GL_NO_ERROR":
-                raise GLPassError(f"OpenGL error {error} in the {name} pass")
-
-    def flush(self) -> None:
-        """Start the GPU on the passes queued so far, before CPU-only work (``RawGL.flush``)."""
-        self.raw_gl.flush()
-
     def present(self, output: moderngl.Framebuffer, size: tuple[int, int], tonemap: Tonemap | None = None,
                 bloom: Bloom | None = None, curve: str | None = None, camera: int | None = None,
-                dt: float = 0.0) -> None:
-        """Encode the HDR image to sRGB into ``output`` (a window's or a capture target),
-        anti-aliased unless ``antialias`` is "off"; with the active camera's ``tonemap`` and
-        ``bloom`` (``components/post.py``), bloomed, exposed and tone mapped first
-        (``PresentPass.draw``; ``exposure`` is used only without a Tonemap)."""
-        assert self.targets is not None
-        self.present_pass.draw(self.targets.color, self.exposure, self._antialias, output, size, tonemap, bloom,
+                dt: float = 0.0, image: RenderTargets | None = None) -> None:
+        """Encode the HDR ``image`` (the present stage's: the main view's, ``FrameViews.image``;
+        None: level 0 of the main view tree) to sRGB into ``output`` (a window's or a capture
+        target), anti-aliased unless ``antialias`` is "off"; with the active camera's
+        ``tonemap`` and ``bloom`` (``components/post.py``), bloomed, exposed and tone mapped
+        first (``PresentPass.draw``; ``exposure`` is used only without a Tonemap)."""
+        image = image if image is not None else self.targets
+        assert image is not None
+        self.present_pass.draw(image.color, self.exposure, self._antialias, output, size, tonemap, bloom,
                                curve, camera, dt)
         self.checkpoint("present")
 

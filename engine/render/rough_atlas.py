@@ -14,16 +14,13 @@ A rectangle larger than T is scaled down into its tile (a rough mirror is blurre
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
 
 import moderngl
 import numpy as np
 
-from engine.render.bindings import LEVEL_UNITS, PassState, apply_pass_state
+from engine.render.bindings import LEVEL_UNITS, PassState, apply_pass_state, bind_texture
+from engine.render.gpu import Gpu
 from engine.render.targets import RenderTargets, release_framebuffer
-
-if TYPE_CHECKING:  # the renderer imports this module (through the mirror passes)
-    from engine.render.renderer import Renderer
 
 TILE = 256
 COLUMNS = 8
@@ -53,7 +50,7 @@ def place_tiles(views: list[tuple[int, tuple[int, int, int, int]]]) -> dict[int,
 
 
 class RoughAtlas:
-    def __init__(self, renderer: Renderer) -> None:
+    def __init__(self, renderer: Gpu) -> None:
         self.renderer = renderer
         self.ctx = renderer.ctx
         self.program = renderer.shaders.program("rough_isolate.vert", "rough_isolate.frag")
@@ -91,8 +88,8 @@ class RoughAtlas:
         self._rows.write(rows.tobytes())
         self._framebuffer.use()
         apply_pass_state(ctx, _COPY, (0, 0, width, height))
-        level.color.use(LEVEL_UNITS[0])
-        level.node.use(LEVEL_UNITS[1])
+        bind_texture(self.ctx, level.color, LEVEL_UNITS[0])
+        bind_texture(self.ctx, level.node, LEVEL_UNITS[1])
         self._vao.render(moderngl.TRIANGLE_STRIP, vertices=4, instances=len(views))
         self.texture.build_mipmaps(0, int(np.log2(TILE)))
         self.renderer.checkpoint("rough atlas")

@@ -63,17 +63,20 @@ from engine.render.bindings import (
     VIRTUAL_SHADOW_UNIT,
     PassState,
     apply_pass_state,
+    bind_texture,
     bind_uniform_block,
     flip_front_face,
     set_front_face,
 )
+from engine.render.gpu import Gpu
+from engine.render.irradiance import IrradianceTable
 from engine.render.raw_gl import LayeredArrayTarget, LayeredCubeTarget, inspect_bound_target
+from engine.render.shadows import ShadowMaps
 from engine.render.targets import RenderTargets
 from engine.render.views import View, union_rect
 
-if TYPE_CHECKING:  # the renderer imports this module
+if TYPE_CHECKING:
     from engine.render.instances import InstanceBatch
-    from engine.render.renderer import Renderer
 
 _ALWAYS = nullcontext()  # a view drawn whatever its claim counted
 
@@ -86,7 +89,7 @@ class SceneOptions:
     masked: bool = False        # only pixels whose node image names the view (the claimed pixels)
     sky: bool = True            # the sky behind; reflection views leave it to their composite
     batched: bool = False       # all views in one draw per batch (the geometry-shader path)
-    reflection_filter: bool = False  # albedo filtered as reflections are (Renderer.reflection_anisotropy)
+    reflection_filter: bool = False  # albedo filtered as reflections are (Gpu.reflection_anisotropy)
 
 
 ROOT_VIEW = SceneOptions()
@@ -115,10 +118,13 @@ _TRANSPARENT = PassState(depth_func="<", cull=True, clips=SCENE_CLIPS, blend=BLE
 
 class ScenePass:
     """The scene programs and the one ``draw`` every view goes through (``draw_layered``
-    is the same scene for the six faces of a cube map at once)."""
+    is the same scene for the six faces of a cube map at once).  Every pass binds the
+    shadow maps (``shadows``) and the probes' irradiance (``irradiance``) it shades with."""
 
-    def __init__(self, renderer: Renderer) -> None:
+    def __init__(self, renderer: Gpu, shadows: ShadowMaps, irradiance: IrradianceTable) -> None:
         self.renderer = renderer
+        self.shadows = shadows
+        self.irradiance = irradiance
         self.ctx = renderer.ctx
         shaders = renderer.shaders
         self.sky_program = shaders.program("sky.vert", "sky.frag")
@@ -139,9 +145,6 @@ class ScenePass:
         self._sky_size = 0
         self._sky_layered: moderngl.VertexArray | None = None
         self._views_ubo: moderngl.Buffer | None = None
-        # The probe whose cube map is being drawn into (ProbeCaptures sets it for a capture):
-        # batches sampling it read the sky instead (no rendering feedback loop).
-        self.capturing = 0
         self._ambient_probes = False  # this pass draws the AMBIENT_PROBES builds (IrradianceTable.bind)
         self._reflection_sampler: moderngl.Sampler | None = None
         # Whether a virtual light shines this frame (the shadows stage sets it): the scene
@@ -250,7 +253,7 @@ class ScenePass:
         Returns how many programs were built (0 when all were there)."""
         before = len(self._programs)
         counts = (0, *BATCHED_INVOCATIONS) if reflections else (0,)
-        ambient = (False, True) if self.renderer.irradiance.has_boxes() else (False,)  # captures: False
+        ambient = (False, True) if self.irradiance.has_boxes() else (False,)  # captures: False
         for batch in batches:
             for invocations in counts:
                 for probes in ambient:
@@ -272,8 +275,9 @@ class ScenePass:
         A batch whose one instance is the view's ``skip`` or ``hide`` entity (a mirror's own
         quad, a probe's own sphere) is not drawn at all: its vertices would all be clipped
         away (0: none; entities start at 1)."""
+        ctx = self.ctx
         stats = self.renderer.stats
-        cubes = self.renderer.probes.cubes
+        cubes = self.renderer.probe_cubes
         written = self._written
         per_pass = (masked, self._sky_size)
         for batch in batches:
@@ -289,13 +293,13 @@ class ScenePass:
                 values = written[glo] = [None] * len(_PER_DRAW_UNIFORMS)
             textured = batch.texture is not None
             if textured:
-                batch.texture.use(ALBEDO_UNIT)
+                bind_texture(ctx, batch.texture, ALBEDO_UNIT)
             if batch.normal_map is not None:
-                batch.normal_map.use(NORMAL_UNIT)
+                bind_texture(ctx, batch.normal_map, NORMAL_UNIT)
             if batch.emissive_map is not None:
-                batch.emissive_map.use(EMISSIVE_MAP_UNIT)
+                bind_texture(ctx, batch.emissive_map, EMISSIVE_MAP_UNIT)
             if batch.metallic_roughness_map is not None:
-                batch.metallic_roughness_map.use(METALLIC_ROUGHNESS_UNIT)
+                bind_texture(ctx, batch.metallic_roughness_map, METALLIC_ROUGHNESS_UNIT)
             probe_size, lookup = self._bind_probe(batch.probe, PROBE_UNIT, cubes) if batch.probe else (0, _NO_PROBE)
             probe2_size, lookup2 = 0, _NO_PROBE
             if batch.probe_blend:  # the second probe's unit (the sky where the blend is a probe and the sky)
@@ -337,11 +341,13 @@ class ScenePass:
         no capture yet (one whose first capture comes later in this stage), that one, and no
         probe (0) bind the sky, as an object with no probe reflects, rather than whatever cube
         another pass left on the unit."""
-        cube = cubes.get(probe) if probe and probe != self.capturing else None
+        # Gpu.capturing: the probe whose cube map is being drawn into (ProbeCaptures sets it):
+        # batches sampling it read the sky instead (no rendering feedback loop).
+        cube = cubes.get(probe) if probe and probe != self.renderer.capturing else None
         if cube is not None:
-            cube.texture.use(unit)
+            bind_texture(self.ctx, cube.texture, unit)
             return cube.face_size, cube.lookup()
-        self.renderer.sky.use(unit)
+        bind_texture(self.ctx, self.renderer.sky, unit)
         return self._sky_size, _NO_PROBE
 
     # --- the pass ------------------------------------------------------------------------------
@@ -366,13 +372,13 @@ class ScenePass:
         targets.view_framebuffer.use()  # colour, surface and seen ids, depth
         apply_pass_state(self.ctx, _BATCHED_SCENE if options.batched else _SCENE, viewport)
         if options.masked:
-            targets.node.use(NODE_UNIT)
+            bind_texture(self.ctx, targets.node, NODE_UNIT)
         bind_uniform_block(self.ctx, renderer.lights_ubo, LIGHTS_BINDING)
-        renderer.shadows.bind()
+        self.shadows.bind()
         # The irradiance table (unit 5 serves other passes between) and the boxes; a probe's
         # capture, and a world without boxes, draw the build without them (sky only).
-        self._ambient_probes = renderer.irradiance.bind(capturing=self.capturing != 0)
-        renderer.sky.use(SKY_UNIT)
+        self._ambient_probes = self.irradiance.bind(capturing=renderer.capturing != 0)
+        bind_texture(self.ctx, renderer.sky, SKY_UNIT)
         sampler = self._reflection_filter() if options.reflection_filter else None
         if sampler is not None:
             sampler.use(ALBEDO_UNIT)  # a bound sampler object overrides the textures' own filter
@@ -464,9 +470,9 @@ class ScenePass:
         self._views_ubo.write(views_block(views))
         bind_uniform_block(ctx, self._views_ubo, VIEWS_BINDING)
         bind_uniform_block(self.ctx, renderer.lights_ubo, LIGHTS_BINDING)
-        renderer.shadows.bind()
-        self._ambient_probes = renderer.irradiance.bind(capturing=True)  # a capture: the sky's irradiance alone
-        renderer.sky.use(SKY_UNIT)
+        self.shadows.bind()
+        self._ambient_probes = self.irradiance.bind(capturing=True)  # a capture: the sky's irradiance alone
+        bind_texture(self.ctx, renderer.sky, SKY_UNIT)
         renderer.bind_view(views[0])  # the shared eye, for what reads the Camera block
         size = (0, 0, target.size, target.size)
         # moderngl's state setters first (they write to the framebuffer moderngl thinks is

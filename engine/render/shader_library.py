@@ -4,7 +4,8 @@ Shared GLSL (camera block, lights, GGX, colour encoding) lives in ``shaders/incl
 included, never pasted.  Defines are inserted after the ``#version`` line: a program's own
 switches, and for every program the numbers GLSL shares with Python, generated from the
 Python that owns them (``engine_defines``: the material slot indices, the cube-face table,
-the clip-distance indices).
+the clip-distance indices, the visibility code's kind bits, the
+blocks' array sizes, the tone curves' numbers).
 
 Compile errors name the file and line a person edits, not the line of the expanded text the
 driver saw.  Every file of a program gets a number k, and a ``#line`` directive starts each
@@ -62,10 +63,13 @@ from pathlib import Path
 import moderngl
 
 import shaders
+from components.post import TONEMAP_CURVES
 from engine.core import cube_faces, material_slots
 from engine.core.errors import ShaderError
+from engine.render import views
 from engine.render.bindings import clip_glsl_defines
 from engine.render.raw_gl import _load as load_gl_function
+from engine.rules import shadow_rules, visibility_rules
 
 _INCLUDE = re.compile(r'^\s*#include\s+"([^"]+)"\s*$')
 _BRANCH = re.compile(r"^\s*#\s*(else|elif|endif)\b")  # after these the line numbering is resumed
@@ -251,8 +255,24 @@ def load_source(name: str, defines: dict[str, str] | None = None, *, root: Path 
 def engine_defines() -> dict[str, str]:
     """The defines every program is built with: numbers the GLSL shares with Python, each
     made from its one Python owner (the material slot indices, the cube-face table, the
-    clip-distance indices of ``engine/render/bindings.py``)."""
-    return {**material_slots.glsl_defines(), **cube_faces.glsl_defines(), **clip_glsl_defines()}
+    clip-distance indices of ``engine/render/bindings.py``, the visibility code's kind bits,
+    the blocks' array sizes and the tone curves' numbers: ``limit_glsl_defines``)."""
+    return {**material_slots.glsl_defines(), **cube_faces.glsl_defines(), **clip_glsl_defines(),
+            **visibility_rules.glsl_defines(), **limit_glsl_defines()}
+
+
+def limit_glsl_defines() -> dict[str, str]:
+    """The sizes of the arrays a uniform block or a shader's samplers hold, from the Python
+    that packs them (the Lights block: ``views``; the point lights' shadow cubes:
+    ``shadows``; the irradiance boxes: ``irradiance``; the virtual lights and the outlines
+    each one's line crosses: ``shadow_rules``), and each tone curve's number (its index in ``TONEMAP_CURVES``, the
+    number a build's ``TONEMAP_CURVE`` is)."""
+    return {"MAX_DIRECTIONAL_LIGHTS": str(views.MAX_DIRECTIONAL_LIGHTS),
+            "MAX_POINT_LIGHTS": str(views.MAX_POINT_LIGHTS), "MAX_POINT_SHADOWS": str(views.MAX_POINT_SHADOWS),
+            "MAX_IRRADIANCE_PROBES": str(views.MAX_IRRADIANCE_PROBES),
+            "MAX_VIRTUAL_LIGHTS": str(shadow_rules.MAX_VIRTUAL_LIGHTS),
+            "MAX_APERTURES": str(shadow_rules.MAX_APERTURES),
+            **{f"TONEMAP_{curve.upper()}": str(index) for index, curve in enumerate(TONEMAP_CURVES)}}
 
 
 def _line(line: int, number: int) -> str:

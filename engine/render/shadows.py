@@ -17,8 +17,6 @@ a map is drawn or a light's shadows are turned off.
 """
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
-
 import moderngl
 import numpy as np
 from pyglm import glm
@@ -36,18 +34,15 @@ from engine.render.bindings import (
     VIRTUAL_SHADOW_UNIT,
     PassState,
     apply_pass_state,
+    bind_texture,
     bind_uniform_block,
 )
+from engine.render.gpu import Gpu
 from engine.render.raw_gl import LayeredCubeTarget
 from engine.render.targets import release_framebuffer
-from engine.render.views import MAX_DIRECTIONAL_LIGHTS, MAX_POINT_LIGHTS, View
-from engine.rules.shadow_rules import MAX_APERTURES, MAX_VIRTUAL_LIGHTS, Leg
+from engine.render.views import MAX_DIRECTIONAL_LIGHTS, MAX_POINT_LIGHTS, MAX_POINT_SHADOWS, View
+from engine.rules.shadow_rules import MAX_APERTURES, MAX_VIRTUAL_LIGHTS, DirectionalFit, Leg, VirtualLight
 
-if TYPE_CHECKING:
-    from engine.render.renderer import Renderer
-    from engine.rules.shadow_rules import DirectionalFit, VirtualLight
-
-MAX_POINT_SHADOWS = 2  # cube samplers in shaders/include/shadows.glsl
 SHADOW_FILTERS = ("grid", "single")
 VIRTUAL_RESOLUTION = 1024   # texels a side of a virtual light's map (a tile of the virtual atlas)
 # The VirtualLights block (shaders/include/virtual_lights.glsl): a count, then per light a
@@ -81,7 +76,7 @@ class ShadowMaps:
     """The shadow maps' GL objects: the directional atlas, the point lights' cubes, the
     Shadows block, and the caster programs."""
 
-    def __init__(self, renderer: Renderer) -> None:
+    def __init__(self, renderer: Gpu) -> None:
         self.renderer = renderer
         ctx = self.ctx = renderer.ctx
         self.block = np.zeros(SHADOWS_BLOCK_BYTES // 4, np.float32)
@@ -371,11 +366,11 @@ class ShadowMaps:
     def bind(self) -> None:
         """Bind the maps and the Shadows block for a scene pass (every pass: the units are
         shared with passes that are not scene passes)."""
-        self.atlas.use(SHADOW_ATLAS_UNIT)
+        bind_texture(self.ctx, self.atlas, SHADOW_ATLAS_UNIT)
         for slot, unit in enumerate(POINT_SHADOW_UNITS):
-            self.cubes.get(slot, self._empty_cube).use(unit)
+            bind_texture(self.ctx, self.cubes.get(slot, self._empty_cube), unit)
         bind_uniform_block(self.ctx, self.ubo, SHADOWS_BINDING)
-        (self.virtual_atlas or self._virtual_empty).use(VIRTUAL_SHADOW_UNIT)
+        bind_texture(self.ctx, self.virtual_atlas or self._virtual_empty, VIRTUAL_SHADOW_UNIT)
         bind_uniform_block(self.ctx, self.virtual_ubo, VIRTUAL_LIGHTS_BINDING)
 
     def _drop_cube(self, slot: int) -> None:

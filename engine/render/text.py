@@ -31,7 +31,8 @@ from dataclasses import dataclass
 import moderngl
 import numpy as np
 
-from engine.render.bindings import TEXT_UNIT, PassState, apply_pass_state
+from engine.core.color import linear_to_srgb
+from engine.render.bindings import TEXT_UNIT, PassState, apply_pass_state, bind_texture
 from engine.render.shader_library import ShaderLibrary
 
 FONT_SIZE = 16              # pixels of the atlas's font (ScreenText.scale multiplies them)
@@ -101,12 +102,6 @@ def make_atlas(size: int = FONT_SIZE) -> FontAtlas:
     return FontAtlas(np.asarray(image, np.uint8).copy(), cell, -left, atlas.advances, line)
 
 
-def srgb_encode(linear: np.ndarray) -> np.ndarray:
-    """Linear 0-1 to the sRGB-encoded 0-1 the output holds (IEC 61966-2-1)."""
-    c = np.clip(np.asarray(linear, np.float64), 0.0, 1.0)
-    return np.where(c <= 0.0031308, c * 12.92, 1.055 * np.power(c, 1.0 / 2.4) - 0.055)
-
-
 @dataclass(frozen=True)
 class ScreenItem:
     """One ScreenText (``text`` not None) or ScreenPanel, as layout reads it (plain values)."""
@@ -138,7 +133,7 @@ def box_corner(item: ScreenItem, box: tuple[float, float], output: tuple[int, in
 
 
 def _encoded(color: tuple[float, ...]) -> list[float]:
-    rgb = srgb_encode(np.array(color[:3]))
+    rgb = linear_to_srgb(np.array(color[:3]))  # the output holds encoded values
     return [float(rgb[0]), float(rgb[1]), float(rgb[2]), float(color[3])]
 
 
@@ -214,7 +209,7 @@ class TextPass:
         self.quads.write(np.ascontiguousarray(quads, np.float32).tobytes())
         framebuffer.use()
         apply_pass_state(self.ctx, _TEXT, (0, 0, *size))
-        self.texture.use(TEXT_UNIT)
+        bind_texture(self.ctx, self.texture, TEXT_UNIT)
         self.program["output_size"].value = (float(size[0]), float(size[1]))
         self.vao.render(moderngl.TRIANGLE_STRIP, vertices=4, instances=self.drawn)
 

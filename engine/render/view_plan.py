@@ -3,11 +3,13 @@ where on screen, and each view's camera, for all pairs of a level at once.
 
 A view tree level is planned in a fixed number of numpy operations whatever its number of
 views: the parents of a level are rows of arrays (``LevelRows``), every mirror and portal
-is a row of ``SurfaceTable``, and ``SurfaceTable.cull`` and ``plan_candidates`` work on
+is a row of ``SurfaceTable``, and ``SurfaceTable.cull`` and ``SurfaceTable.plan`` work on
 (parents x surfaces) blocks.  Per view, only what the draws need is made in Python (a
-``View`` holding its packed camera block).  Planning a view one at a
-time with glm cost ~30 us a view on llvmpipe's machine (one glm call is ~0.3 us, and a
-view took about a hundred); a level in arrays costs a few us a view.
+``View`` holding its packed camera block).  This is the one planner, for levels of every
+size: a level costs some 70 numpy calls whatever its views (about 50 us on llvmpipe's
+machine for a level of one view, measured warm; planning pair by pair in glm cost some
+15 us a view, so a level of one or two views was cheaper that way, and dearer from about
+six: the second planner that did so is gone, for one set of rules).
 
 Conventions: matrices here are numpy (..., 4, 4) arrays in the usual row-major math
 layout (``M @ x``); glm's and GL's are column-major, so they are transposed at the edges.
@@ -15,23 +17,23 @@ layout (``M @ x``); glm's and GL's are column-major, so they are transposed at t
 from __future__ import annotations
 
 import functools
-import math
-import struct
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
 from pyglm import glm
 
-from components.limits import VIEW_DIRECT, VIEW_KINDS, VIEW_MIRROR, VIEW_PORTAL
+from components.limits import VIEW_DIRECT, VIEW_MIRROR, VIEW_PORTAL
+from components.visibility import KIND_MASK, visibility_code
 from engine.core.reflection_math import OBLIQUE_SAFE_NEARS
-from engine.render.views import CAMERA_BLOCK_BYTES, View
+from engine.render.views import CAMERA_BLOCK_BYTES, CAMERA_DTYPE, CAMERA_FLOATS, CAMERA_IDS, View, field_columns
+from engine.rules.visibility_rules import drawn_in
 
-if TYPE_CHECKING:  # the surfaces stage's records, a floor above: read here by their fields
+if TYPE_CHECKING:  # the surfaces stage's records (engine/resources.py): read here by their fields
     from engine.resources import SurfaceState
 
 _CAMERA_FLOATS = CAMERA_BLOCK_BYTES // 4
-_KINDS_BUT_DIRECT = ((1 << VIEW_KINDS) - 1) & ~VIEW_DIRECT  # a view through a surface is no longer direct
+_KINDS_BUT_DIRECT = KIND_MASK & ~VIEW_DIRECT  # a view through a surface is no longer direct
 
 
 def _mat(matrix: glm.mat4) -> np.ndarray:
@@ -39,15 +41,36 @@ def _mat(matrix: glm.mat4) -> np.ndarray:
     return np.frombuffer(matrix.to_bytes(), np.float32).reshape(4, 4).T.astype(np.float64)
 
 
+# One row of ``LevelRows``: a view of a level, in float64.  Eye, viewport and clip plane side
+# by side are the Camera block's (one copy, ``CAMERA_DTYPE``), and the clip plane above the
+# view matrix makes the 5 x 4 block ``SurfaceTable.cull`` multiplies once a level.
+LEVEL_ROW = np.dtype([
+    ("eye", "<f8", (4,)),          # homogeneous world position
+    ("viewport", "<f8", (4,)),     # 0, 0, the level's width and height
+    ("clip_plane", "<f8", (4,)),   # world clip plane (what the view keeps)
+    ("view", "<f8", (16,)),        # world -> eye, row by row
+    ("inv_view", "<f8", (16,)),    # eye -> world, row by row
+    ("rect", "<f8", (4,)),         # x0, y0, x1, y1 where it shows, screen pixels
+    ("exit_row", "<f8"),           # the SurfaceTable row of the surface it looks out of (-1: none)
+    ("view_mask", "<f8"),          # its kinds and the layers it shows (View.view_mask)
+    ("mirrored", "<f8"),           # 1.0 where front faces wind clockwise
+    ("node", "<f8"),               # its index in the tree
+])
+ROW = field_columns(LEVEL_ROW, 8)  # each field's columns
+_EYE, _VIEWPORT, _CLIP, _VIEW, _INV_VIEW, _RECT = (ROW[name] for name in (
+    "eye", "viewport", "clip_plane", "view", "inv_view", "rect"))
+_EXIT_ROW, _MASK, _MIRRORED, _NODE = (ROW[name].start for name in ("exit_row", "view_mask", "mirrored", "node"))
+_CAMERA_PART = slice(_EYE.start, _CLIP.stop)   # eye, viewport, clip plane: the Camera block's, in its order
+_CLIP_VIEW = slice(_CLIP.start, _VIEW.stop)    # the cull's 5 x 4 block
+_IDS_PART = slice(_EXIT_ROW, _MASK + 1)        # exit row and view mask: what decides which surfaces it may see
+
+
 class LevelRows:
     """The views of one level of a tree as arrays, a row each (the root: one row), packed
-    in one float64 array so that a level's rows are gathered in one operation.  The columns
-    are laid out for the planner's products: eye, viewport and clip plane side by side are
-    the Camera block's (one copy), and the clip plane above the view matrix makes the 5 x 4
-    block ``SurfaceTable.cull`` multiplies once a level."""
+    in one float64 array (``LEVEL_ROW``'s fields, read by name through ``ROW``) so that a
+    level's rows are gathered in one operation."""
 
-    WIDTH = 52  # eye 0-3, viewport 4-7, clip 8-11, view 12-27, inv_view 28-43, rect 44-47, exit row 48,
-    # view mask 49 (its kinds and layers: View.view_mask), mirrored 50, node 51
+    WIDTH = LEVEL_ROW.itemsize // 8
 
     def __init__(self, data: np.ndarray) -> None:
         self.data = data
@@ -55,55 +78,61 @@ class LevelRows:
     @property
     def view(self) -> np.ndarray:
         """(n, 4, 4) world -> eye."""
-        return self.data[:, 12:28].reshape(-1, 4, 4)
+        return self.data[:, _VIEW].reshape(-1, 4, 4)
 
     @property
     def inv_view(self) -> np.ndarray:
         """(n, 4, 4) eye -> world."""
-        return self.data[:, 28:44].reshape(-1, 4, 4)
+        return self.data[:, _INV_VIEW].reshape(-1, 4, 4)
 
     @property
     def eye(self) -> np.ndarray:
         """(n, 4) homogeneous world position."""
-        return self.data[:, 0:4]
+        return self.data[:, _EYE]
 
     @property
     def clip(self) -> np.ndarray:
         """(n, 4) world clip plane (what the view keeps)."""
-        return self.data[:, 8:12]
+        return self.data[:, _CLIP]
 
     @property
     def rect(self) -> np.ndarray:
         """(n, 4) x0, y0, x1, y1 where it shows, screen pixels."""
-        return self.data[:, 44:48]
+        return self.data[:, _RECT]
 
     @property
     def exit_row(self) -> np.ndarray:
         """(n,) the SurfaceTable row of the surface the view looks out of (-1: none)."""
-        return self.data[:, 48]
+        return self.data[:, _EXIT_ROW]
 
     @property
     def mask(self) -> np.ndarray:
         """(n,) int64: the view's kinds and the layers it shows (``View.view_mask``)."""
-        return self.data[:, 49].astype(np.int64)
+        return self.data[:, _MASK].astype(np.int64)
 
     @property
     def mirrored(self) -> np.ndarray:
         """(n,) 1.0 where front faces wind clockwise."""
-        return self.data[:, 50]
+        return self.data[:, _MIRRORED]
 
     @property
     def node(self) -> np.ndarray:
         """(n,) the view's index in the tree."""
-        return self.data[:, 51]
+        return self.data[:, _NODE]
 
     @staticmethod
     def root(view: View) -> LevelRows:
         """A root view's row, made from its glm values in one array (each a float64 of the
         float32 glm holds)."""
-        return LevelRows(np.array([[*view.eye, 1.0, 0.0, 0.0, *view.size, *view.clip_plane,
-                                    *_rows(view.view), *_rows(glm.inverse(view.view)),
-                                    0.0, 0.0, *view.size, -1.0, float(view.view_mask), float(view.mirrored), 0.0]]))
+        row = np.zeros((1, LevelRows.WIDTH))
+        row[0, _EYE] = (*view.eye, 1.0)
+        row[0, _VIEWPORT] = (0.0, 0.0, *view.size)
+        row[0, _CLIP] = tuple(view.clip_plane)
+        row[0, _VIEW] = _rows(view.view)
+        row[0, _INV_VIEW] = _rows(glm.inverse(view.view))
+        row[0, _RECT] = (0.0, 0.0, *view.size)
+        row[0, [_EXIT_ROW, _MASK, _MIRRORED, _NODE]] = (-1.0, float(view.view_mask), float(view.mirrored), 0.0)
+        return LevelRows(row)
 
 
 @dataclass
@@ -200,17 +229,14 @@ class SurfaceTable:
         for i, c in enumerate(distinct):
             self.corner_columns[:, :, i] = np.concatenate([c, np.repeat(c[:1], self.corner_count - len(c), axis=0)])
         self.planes_t = np.ascontiguousarray(self.planes.T)
-        # ... the floats of each surface's views (carry 0-15, its inverse 16-31, exit plane
-        # 32-35, is a mirror 36, resolution scale 37) and their integers, in the order the
-        # view's rows and Camera block take them: the exit's row, the view mask bits a view
-        # through it keeps (its layers and every kind but direct), the exit entity, the kind
-        # bit it adds.
+        # ... the floats of each surface's views (``SURFACE_ROW``) and their integers
+        # (``_SURFACE_INTS``), in the order the view's rows and Camera block take them.
         self.float_rows = np.concatenate([self.carry.reshape(count, 16), self.inv_carry.reshape(count, 16),
                                           self.exit_planes, self.is_mirror[:, None], self.scale[:, None]], axis=1)
-        self.int_rows = np.stack([self.exit_rows, _KINDS_BUT_DIRECT | (self.layers << VIEW_KINDS),
-                                  self.exit_entities, self.kind_bit], axis=1).reshape(count, 4)
-        self._depths: dict[tuple[int, int], tuple[np.ndarray, np.ndarray, list[bool]]] = {}
-        self._biases: dict[tuple, tuple[np.ndarray | None, np.ndarray | None, np.ndarray]] = {}
+        self.int_rows = np.stack([self.exit_rows, visibility_code(_KINDS_BUT_DIRECT, self.layers),
+                                  self.exit_entities, self.kind_bit], axis=1).reshape(count, len(_SURFACE_INTS))
+        self._depths: dict[tuple[int, int], tuple[np.ndarray, np.ndarray, list[bool], bool]] = {}
+        self._biases: dict[tuple, tuple[np.ndarray | None, np.ndarray]] = {}  # _pair_bias's
         self._plans: dict[tuple, tuple[np.ndarray | None, tuple[Candidates | None, int]]] = {}  # plan's, least
         # recently used first
         self._ends: dict[tuple[int, int], tuple[np.ndarray, np.ndarray, list[bool]]] = {}
@@ -249,36 +275,23 @@ class SurfaceTable:
 
     def drawn_in(self, view_mask: int) -> np.ndarray | None:
         """(S,) bool: the surfaces a view of ``view_mask`` (``View.view_mask``) draws, by the
-        rule of ``shaders/include/visibility.glsl`` (None: all of them)."""
+        visibility rule (``engine.rules.visibility_rules.drawn_in``; None: all of them)."""
         found = self._drawn_in.get(view_mask, False)
         if found is False:
-            kinds = (1 << VIEW_KINDS) - 1
-            shares_a_layer = ((self.drawn >> VIEW_KINDS) & (view_mask >> VIEW_KINDS)) != 0
-            found = ((self.drawn & view_mask & kinds) == 0) & shares_a_layer
+            found = drawn_in(self.drawn, view_mask)
             found = self._drawn_in[view_mask] = None if found.all() else found
         return found
 
-    def _drawn_by(self, masks: np.ndarray) -> np.ndarray | None:
-        """(P, S) bool, or (S,) when every parent has the same view mask: the surfaces each
-        parent view draws (None: every parent draws every surface)."""
-        masks = masks.astype(np.int64).tolist()
-        if len(set(masks)) == 1:
-            return self.drawn_in(masks[0])
-        rows = [self.drawn_in(mask) for mask in masks]
-        if all(row is None for row in rows):
-            return None
-        return np.array([np.ones(len(self.states), bool) if row is None else row for row in rows])
-
-    def _within(self, depth: int, depth_cap: int) -> tuple[np.ndarray, np.ndarray, list[bool]]:
+    def _within(self, depth: int, depth_cap: int) -> tuple[np.ndarray, np.ndarray, list[bool], bool]:
         """Per surface: enabled and allowed at ``depth`` by its own limit and the cap, and
-        cut there by them, and the first as a list (the same for every level of that depth:
-        kept)."""
+        cut there by them, the first as a list, and whether any is allowed (the same for
+        every level of that depth: kept)."""
         key = (depth, depth_cap)
         found = self._depths.get(key)
         if found is None:
             cut = depth > np.minimum(self.max_depth, depth_cap)
             allowed = self.enabled & ~cut
-            found = self._depths[key] = (allowed, cut, allowed.tolist())
+            found = self._depths[key] = (allowed, cut, allowed.tolist(), bool(allowed.any()))
         return found
 
     def _with_ends(self, depth: int, depth_cap: int, ends: np.ndarray) -> tuple[np.ndarray, list[bool]]:
@@ -291,32 +304,35 @@ class SurfaceTable:
             found = self._ends[key] = (ends, allowed, allowed.tolist())
         return found[1], found[2]
 
-    def _seen_bias(self, depth: int, depth_cap: int, ends: np.ndarray | None,
-                   drawn: np.ndarray | None, fallback: bool = False) -> np.ndarray:
-        """(S + 1, S): what the cull adds to each (parent, surface) facing value, by the
-        parent's exit row (the last row: a view looking out of nothing): 0 where the surface
-        may be seen at ``depth`` (enabled, within its limits or one of ``ends``, drawn by
-        the view: ``drawn``, None for all; with ``fallback``, any surface that
-        ``falls_back``, whatever its limits), -inf where not, and on the surface the view
-        looks out of.  Kept per depth, cap, ``ends`` and ``drawn`` (arrays the table and
-        the view tree keep while nothing changes)."""
-        key = (depth, depth_cap, id(ends), id(drawn), fallback)
+    def _pair_bias(self, data: np.ndarray, depth: int, depth_cap: int, ends: np.ndarray | None,
+                   fallback: bool) -> np.ndarray:
+        """(P, S): what the cull adds to each (parent, surface) facing value: 0 where the
+        parent view may see the surface at ``depth`` (enabled, within its limits or one of
+        ``ends``; with ``fallback``, any surface that ``falls_back``, whatever its limits;
+        and drawn by the view: ``drawn_in`` its mask), -inf where not, and on the surface the
+        view looks out of.  A function of each parent's exit row and mask alone, so kept by
+        their bytes (a level's parents see through the same surfaces frame after frame) with
+        the depth, cap and ``ends`` (an array the view tree keeps while nothing changes)."""
+        ids = data[:, _IDS_PART]
+        key = (ids.tobytes(), depth, depth_cap, id(ends), fallback)
         found = self._biases.get(key)
-        if found is None or found[0] is not ends or found[1] is not drawn:
+        if found is None or found[0] is not ends:
             if fallback:
                 allowed = self.falls_back
             else:
                 allowed = self._within(depth, depth_cap)[0] if ends is None else self._with_ends(depth, depth_cap,
                                                                                                   ends)[0]
-            if drawn is not None:
-                allowed = allowed & drawn
-            count = len(self.states)
-            bias = np.repeat(np.where(allowed, 0.0, -np.inf)[None, :], count + 1, axis=0)
-            bias[np.arange(count), np.arange(count)] = -np.inf
-            if len(self._biases) > 64:
+            bias = np.empty((len(data), len(self.states)))
+            for row, (exit_row, mask) in zip(bias, ids.astype(np.int64).tolist(), strict=True):
+                drawn = self.drawn_in(mask)
+                row[:] = np.where(allowed if drawn is None else allowed & drawn, 0.0, -np.inf)
+                if exit_row >= 0:
+                    row[exit_row] = -np.inf
+            bias.flags.writeable = False
+            if len(self._biases) > 256:
                 self._biases.clear()
-            found = self._biases[key] = (ends, drawn, bias)
-        return found[2]
+            found = self._biases[key] = (ends, bias)
+        return found[1]
 
     def cull(self, parents: LevelRows, depth: int, root_proj: np.ndarray, root_size: tuple[int, int],
              depth_cap: int, ends: np.ndarray | None = None,
@@ -344,44 +360,44 @@ class SurfaceTable:
         pair's frustum and clip-plane tests, and, with x and y divided by w first, its
         rectangle's four sides as minima (x0, y0, -x1, -y1: the same rounding rule, floor
         then one pixel out, for each side)."""
-        count = len(parents.data)
-        if not count or not len(self.states):
+        count, surfaces = len(parents.data), len(self.states)
+        if not count or not surfaces:
             return _NONE, _NONE, _NO_RECTS, None
-        if ends is None and not fallback and not any(self._within(depth, depth_cap)[2]):
+        if ends is None and not fallback and not self._within(depth, depth_cap)[3]:
             return _NONE, _NONE, _NO_RECTS, None  # nothing enabled may be seen this deep
         data = parents.data
         # First what needs no corners: facing the view's eye, and allowed (enabled, within
         # its depth, drawn by the view, not the surface the view looks out of): one product
-        # and a bias row per parent, -inf where a surface is not allowed (_seen_bias).
-        drawn = self._drawn_by(data[:, 49])
-        each_parent = drawn is not None and drawn.ndim == 2  # parents that draw different surfaces
-        facing = data[:, 0:4] @ self.planes_t                                        # P x S
-        facing += self._seen_bias(depth, depth_cap, ends, None if each_parent else drawn, fallback).take(
-            data[:, 48].astype(np.int64), axis=0)
-        seen = facing > 0.0
-        if each_parent:
-            seen &= drawn
-        if not seen.any():
+        # and a bias per pair, -inf where a surface is not allowed (_pair_bias).
+        facing = data[:, _EYE] @ self.planes_t                                       # P x S
+        facing += self._pair_bias(data, depth, depth_cap, ends, fallback)
+        if not facing.max() > 0.0:
             return _NONE, _NONE, _NO_RECTS, None
-        # Rows first: (12, P) x 4 times each corner's (4, S) gives (corners, 12, P, S), so x
-        # and y are divided by w, and the minimum over the corners taken, in whole blocks.
-        block = data[:, 8:28].reshape(count, 5, 4).transpose(1, 0, 2).reshape(5, 4 * count)
+        # Rows first: (12, 5) times every parent's (5, 4) block side by side, then (12 P, 4)
+        # times each corner's (4, S) gives (corners, 12, P, S), so x and y are divided by w,
+        # and the minima over the corners and over the rows taken, along the first axis
+        # (numpy's fast one for small arrays), in whole blocks.
+        block = data[:, _CLIP_VIEW].reshape(count, 5, 4).transpose(1, 0, 2).reshape(5, 4 * count)
         clip = (_cull_rows(root_proj) @ block).reshape(12 * count, 4) @ self.corner_columns
-        clip = clip.reshape(self.corner_count, 12, count, len(self.states))
+        clip = clip.reshape(self.corner_count, 12, count, surfaces)
         np.divide(clip[:, 0:4], np.maximum(clip[:, 4:5], 1e-6), out=clip[:, 0:4])  # a w <= 0: see straddles
-        least = clip.min(axis=0)                                                         # 12 x P x S
-        # Culled: every corner outside one side of the frustum, or behind the clip plane (on
-        # a side counts as outside: one test for all seven).
-        seen &= least[5:12].max(axis=0) < 0.0
+        least = _MIN(clip, axis=0)                                                       # 12 x P x S
         # x0, y0, -x1, -y1 in pixels, rounded outwards with a pixel's margin; a pair with a
         # corner behind the eye is conservative (the parent's whole rectangle).
-        rects = np.floor((least[0:4] + _OUTWARDS) * _half_sizes(root_size))
+        rects = least[0:4] + _OUTWARDS
+        rects *= _half_sizes(root_size)
+        np.floor(rects, out=rects)
         rects -= 1.0
         np.copyto(rects, -np.inf, where=least[4] <= 1e-6)
-        np.maximum(rects, (data[:, 44:48] * _SIGNS).T[:, :, None], out=rects)  # inside the parent's
-        seen &= (rects[0:2] + rects[2:4]).max(axis=0) < 0.0                       # x1 > x0 and y1 > y0
-        p, s = np.nonzero(seen)
-        rects = rects[:, p, s].T * _SIGNS
+        np.maximum(rects, (data[:, _RECT] * _SIGNS).T[:, :, None], out=rects)  # inside the parent's
+        # Seen: facing and allowed, not culled (every corner outside one side of the frustum,
+        # or behind the clip plane; on a side counts as outside) and a rectangle with pixels
+        # (x1 > x0 and y1 > y0): one maximum over the rows 2-11, written over, each < 0 to keep.
+        np.negative(facing, out=least[2])
+        np.add(rects[0:2], rects[2:4], out=least[3:5])
+        p, s = np.nonzero(_MAX(least[2:12], axis=0) < 0.0)
+        rects = rects[:, p, s].T
+        rects *= _SIGNS
         if not self.fading:
             return p, s, rects, None
         fade = self.fade_weights(parents.eye[p], s)
@@ -480,9 +496,6 @@ class SurfaceTable:
         Like the cull, a fixed number of array operations whatever the number of views:
         each candidate's parent row and surface rows are gathered once (``take``), and the
         results are written where they are read next (the level's rows, the Camera blocks)."""
-        if len(parents.data) * len(self.states) <= SMALL_LEVEL_PAIRS and not self.fading:
-            return self._plan_small(parents, depth, root, root_proj, inv_root_proj, first_index, depth_cap, hide,
-                                    ends, size, scale), 0
         p, s, rects, weights = self.cull(parents, depth, root_proj, root.size, depth_cap, ends)
         if weights is None:
             faded, fade = 0, None
@@ -496,156 +509,41 @@ class SurfaceTable:
         ints = self.int_rows.take(s, axis=0)
         parent = parents.data.take(p, axis=0)
         if size is None:
-            scale *= self.one_scale if self.one_scale is not None else float(surface[:, 37].max())
+            scale *= self.one_scale if self.one_scale is not None else float(surface[:, _SCALE].max())
             size = (max(1, round(root.size[0] * scale)), max(1, round(root.size[1] * scale)))
         data = np.empty((k, LevelRows.WIDTH))
-        view = data[:, 12:28].reshape(k, 4, 4)
-        inv_view = data[:, 28:44].reshape(k, 4, 4)
-        np.matmul(parent[:, 12:28].reshape(k, 4, 4), surface[:, 16:32].reshape(k, 4, 4), out=view)
-        np.matmul(surface[:, 0:16].reshape(k, 4, 4), parent[:, 28:44].reshape(k, 4, 4), out=inv_view)
-        eye = data[:, 0:4]
-        eye[:] = inv_view[:, :, 3]  # where the carried camera is: its eye-to-world translation
-        data[:, 4:8] = (0.0, 0.0, *size)
-        data[:, 8:12] = clip = surface[:, 32:36]
-        data[:, 44:48] = rects
-        mask = ints[:, 1]  # a view shows the layers every surface of its chain shows
-        np.bitwise_and(parent[:, 49].astype(np.int64), mask, out=mask)
-        mask |= ints[:, 3]
-        data[:, 48:50] = ints[:, 0:2]  # the exit's row, the mask
-        np.not_equal(parent[:, 50], surface[:, 36], out=data[:, 50])
-        np.add(_counting(k), first_index, out=data[:, 51])
+        view = data[:, _VIEW].reshape(k, 4, 4)
+        inv_view = data[:, _INV_VIEW].reshape(k, 4, 4)
+        np.matmul(parent[:, _VIEW].reshape(k, 4, 4), surface[:, _INV_CARRY].reshape(k, 4, 4), out=view)
+        np.matmul(surface[:, _CARRY].reshape(k, 4, 4), parent[:, _INV_VIEW].reshape(k, 4, 4), out=inv_view)
+        data[:, _EYE] = inv_view[:, :, 3]  # where the carried camera is: its eye-to-world translation
+        data[:, _VIEWPORT] = (0.0, 0.0, *size)
+        data[:, _CLIP] = clip = surface[:, _EXIT_PLANE]
+        data[:, _RECT] = rects
+        mask = ints[:, _KEEP]  # a view shows the layers every surface of its chain shows
+        np.bitwise_and(parent[:, _MASK].astype(np.int64), mask, out=mask)
+        mask |= ints[:, _KIND_BIT]
+        data[:, _IDS_PART] = ints[:, _EXIT_ROW_AND_KEEP]  # the exit's row, the mask
+        np.not_equal(parent[:, _MIRRORED], surface[:, _IS_MIRROR], out=data[:, _MIRRORED])
+        data[:, _NODE] = np.arange(first_index, first_index + k)
         proj, inv_proj = _oblique_projections(root_proj, inv_root_proj, inv_view, clip)
-        # The Camera blocks (camera.glsl): four column-major matrices, then eye, viewport,
-        # clip plane and ids; the matrices are written straight into their columns.
-        blocks = np.empty((k, _CAMERA_FLOATS), np.float32)
-        matrices = blocks[:, 0:64].reshape(k, 4, 4, 4).transpose(0, 1, 3, 2)
+        # The Camera blocks (CAMERA_DTYPE) as float32 columns: the four matrices written
+        # straight into their columns (column-major: each seen transposed), then the eye,
+        # viewport and clip plane in one copy, then the ids.
+        blocks = np.empty((k, _CAMERA_WIDTH), np.float32)
+        matrices = blocks[:, _MATRICES].reshape(k, 4, 4, 4).transpose(0, 1, 3, 2)
         matrices[:, 0] = view
         matrices[:, 1] = proj
         np.matmul(proj, view, out=matrices[:, 2])
         np.matmul(inv_view, inv_proj, out=matrices[:, 3])
-        blocks[:, 64:76] = data[:, 0:12]
-        ids = blocks[:, 76:80].view(np.uint32)
-        ids[:, 0::2] = ints[:, 2:0:-1]  # skip (the exit entity), mask
-        ids[:, 1] = hide
-        ids[:, 3] = data[:, 51]  # the view's node (the node image's value for its pixels)
+        blocks[:, _CAMERA_ROWS] = data[:, _CAMERA_PART]
+        ids = blocks[:, _CAMERA_ID_COLUMNS].view(np.uint32)
+        ids[:, _ID_SKIP_AND_MASK] = ints[:, _EXIT_ENTITY_AND_KEEP]  # skip (the exit entity), mask
+        ids[:, _ID_HIDE] = hide
+        ids[:, _ID_NODE] = data[:, _NODE]  # the view's node (the node image's value for its pixels)
         end = None if ends is None else self._within(depth, depth_cap)[1].take(s)
         return Candidates(p, s, LevelRows(data), level_rects(rects, root.size, size), blocks, size,
                           fade if fade is not None else _ones(k), end), faded
-
-    @functools.cached_property
-    def _small(self) -> list[_SmallSurface]:
-        """Each surface as ``_plan_small`` reads it (glm doubles of the table's own float64s)."""
-        mat = _dmat
-        keep = (_KINDS_BUT_DIRECT | (self.layers << VIEW_KINDS)).tolist()
-        return [_SmallSurface(int(self.entities[i]), int(self.exit_entities[i]), glm.dvec4(*self.planes[i].tolist()),
-                              glm.dvec4(*self.exit_planes[i].tolist()), mat(self.carry[i]), mat(self.inv_carry[i]),
-                              _corner_blocks(np.unique(self.corners[i], axis=0)),
-                              float(self.is_mirror[i]), keep[i], int(self.kind_bit[i]), int(self.exit_rows[i]))
-                for i in range(len(self.states))]
-
-    def _plan_small(self, parents: LevelRows, depth: int, root: View, root_proj: np.ndarray,
-                    inv_root_proj: np.ndarray, first_index: int, depth_cap: int, hide: int, ends: np.ndarray | None,
-                    size: tuple[int, int] | None, scale: float) -> Candidates | None:
-        """``plan`` for a level of a few (parent x surface) pairs (``SMALL_LEVEL_PAIRS``: the
-        first level of a tree with one or two surfaces, every level of a portal pair), pair
-        by pair in glm doubles: the same tests, rectangles and cameras as the arrays (the same
-        formulas, in the same order), for a fraction of their fixed cost.  In a frame, after
-        the rasteriser has run, the first call of each kind of numpy operation costs several
-        microseconds (measured: 4-10 us against 0.5-1 warm), a glm call under one; a level in
-        arrays takes some 70 of them whatever its size.  Levels with fades take the arrays."""
-        allowed, cut, listed = self._within(depth, depth_cap)
-        if ends is not None:
-            allowed = self._with_ends(depth, depth_cap, ends)[1]
-        elif not any(listed):
-            return None
-        else:
-            allowed = listed
-        surfaces = self._small
-        projection = _projection(root_proj, inv_root_proj)
-        small = projection.small
-        half_w, half_h = 0.5 * root.size[0], 0.5 * root.size[1]
-        pairs = []
-        for p, row in enumerate(parents.data.tolist()):
-            drawn = self.drawn_in(int(row[49]))
-            view = glm.transpose(glm.dmat4(*row[12:28]))
-            clip = glm.dvec4(*row[8:12])
-            eye = glm.dvec4(*row[0:4])
-            view_proj = small.proj * view
-            for s, surface in enumerate(surfaces):
-                if not allowed[s] or s == row[48] or glm.dot(eye, surface.plane) <= 0.0 \
-                        or (drawn is not None and not drawn[s]):
-                    continue
-                # Every corner outside one side of the frustum (on it counts as outside), or
-                # behind the clip plane: culled.  Four corners at a time, the columns of one
-                # matrix, so each clip-space coordinate is a vector over them; per side, the
-                # least over every corner.
-                sides = None
-                projected = []
-                for block in surface.corners:
-                    x, y, z, w = glm.transpose(view_proj * block)
-                    least = (min(x - w), min(y - w), min(z - w), min(-x - w), min(-y - w), min(-z - w),
-                             -max(clip * block))
-                    sides = least if sides is None else tuple(map(min, sides, least))
-                    projected.append((x, y, w))
-                if max(sides) >= 0.0:
-                    continue
-                straddles = False
-                lo_x = lo_y = float("inf")
-                hi_x = hi_y = -float("inf")
-                for x, y, w in projected:
-                    straddles = straddles or min(w) <= 1e-6
-                    w = glm.max(w, 1e-6)
-                    x, y = x / w, y / w
-                    lo_x, hi_x, lo_y, hi_y = min(lo_x, *x), max(hi_x, *x), min(lo_y, *y), max(hi_y, *y)
-                if straddles:  # a corner behind the eye: the parent's whole rectangle
-                    x0, y0, x1, y1 = row[44:48]
-                else:
-                    x0 = max(math.floor((lo_x + 1.0) * half_w) - 1.0, row[44])
-                    y0 = max(math.floor((lo_y + 1.0) * half_h) - 1.0, row[45])
-                    x1 = min(-(math.floor((-hi_x - 1.0) * half_w) - 1.0), row[46])
-                    y1 = min(-(math.floor((-hi_y - 1.0) * half_h) - 1.0), row[47])
-                if x1 > x0 and y1 > y0:
-                    pairs.append((p, s, row, view, (float(x0), float(y0), float(x1), float(y1))))
-        if not pairs:
-            return None
-        if size is None:
-            scale *= self.one_scale if self.one_scale is not None else float(max(self.scale[s] for _, s, *_ in pairs))
-            size = (max(1, round(root.size[0] * scale)), max(1, round(root.size[1] * scale)))
-        rows, blocks, scissors = [], [], []
-        viewport = glm.vec4(0.0, 0.0, *size)
-        for i, (_, s, row, view, rect) in enumerate(pairs):
-            surface = surfaces[s]
-            # (+ 0: a sum that cancels is +0.0, as the arrays' products give it, not glm's -0.0)
-            view = view * surface.inv_carry + _ZERO
-            inv_view = surface.carry * glm.transpose(glm.dmat4(*row[28:44])) + _ZERO
-            eye = inv_view[3]  # where the carried camera is: its eye-to-world translation
-            clip = surface.exit_plane
-            # Lengyel's oblique near plane and its Sherman-Morrison inverse (_oblique_projections).
-            plane = clip * inv_view
-            q = small.inv * glm.dvec4(_sign(plane.x), _sign(plane.y), 1.0, 1.0)
-            change = plane * (2.0 / glm.dot(plane, q))
-            change -= small.row_3
-            change -= small.row_2
-            if not abs(plane.w) > projection.safe_distance:
-                change = glm.dvec4(0.0)
-            proj = small.proj + glm.outerProduct(_E2, change)
-            inv_proj = small.inv - glm.outerProduct(small.column, (change * small.inv) /
-                                                    (1.0 + glm.dot(change, small.column)))
-            mask = (int(row[49]) & surface.keep) | surface.kind_bit
-            blocks += (glm.mat4(view).to_bytes(), glm.mat4(proj).to_bytes(), glm.mat4(proj * view + _ZERO).to_bytes(),
-                       glm.mat4(inv_view * inv_proj + _ZERO).to_bytes(), glm.vec4(eye).to_bytes(), viewport.to_bytes(),
-                       glm.vec4(clip).to_bytes(), _IDS.pack(surface.exit & 0xFFFFFFFF, hide & 0xFFFFFFFF,
-                                                            mask & 0xFFFFFFFF, first_index + i))
-            rows.append([*eye, 0.0, 0.0, *size, *clip, *_rows(view), *_rows(inv_view), *rect, surface.exit_row, mask,
-                         float(row[50] != surface.mirror), first_index + i])
-            scissors.append(rect)
-        k = len(pairs)
-        surface_rows = np.array([s for _, s, *_ in pairs], np.int64)
-        return Candidates(np.array([p for p, *_ in pairs], np.int64), surface_rows, LevelRows(np.array(rows)),
-                          np.array([(int(x0), int(y0), int(x1 - x0), int(y1 - y0)) for x0, y0, x1, y1 in scissors],
-                                   np.int64) if size == root.size else level_rects(np.array(scissors), root.size, size),
-                          np.frombuffer(b"".join(blocks), np.float32).reshape(k, _CAMERA_FLOATS), size, _ones(k),
-                          None if ends is None else cut.take(surface_rows))
 
 
 def _oblique_projections(root_proj: np.ndarray, inv_root_proj: np.ndarray, inv_view: np.ndarray,
@@ -661,11 +559,10 @@ def _oblique_projections(root_proj: np.ndarray, inv_root_proj: np.ndarray, inv_v
     safe = np.abs(plane[:, 3]) > root.safe_distance  # the eye's distance to the plane: clip . eye
     q = np.sign(plane[:, :2]) @ root.inv_xy_t
     q += root.inv_zw
-    c = plane * (2.0 / (plane * q).sum(axis=1))[:, None]
-    c -= root_proj[3]
-    c -= root_proj[2]
+    c = plane * (2.0 / np.vecdot(plane, q))[:, None]
+    c -= root.rows_2_3
     change = np.where(safe[:, None], c, 0.0)  # the third row's change
-    proj = np.repeat(root_proj[None], len(plane), axis=0)
+    proj = root_proj[None].repeat(len(plane), 0)
     proj[:, 2] += change
     # The inverse: P = P0 + e2 change^T, so P^-1 = P0^-1 - (P0^-1 e2)(change^T P0^-1) / (1 + change^T P0^-1 e2),
     # both products of the change in one (root.inv_and_column: P0^-1 with its third column after it).
@@ -688,6 +585,31 @@ def level_rects(rects: np.ndarray, screen: tuple[int, int], level: tuple[int, in
     return np.concatenate([x0y0, np.maximum(1.0, x1y1 - x0y0)], axis=1).astype(np.int64)
 
 
+# SurfaceTable.float_rows: each surface's carry and its inverse (row by row), the plane its
+# views look out of, 1.0 for a mirror, its resolution scale.
+SURFACE_ROW = np.dtype([("carry", "<f8", (16,)), ("inv_carry", "<f8", (16,)), ("exit_plane", "<f8", (4,)),
+                        ("is_mirror", "<f8"), ("resolution_scale", "<f8")])
+_SURFACE = field_columns(SURFACE_ROW, 8)
+_CARRY, _INV_CARRY, _EXIT_PLANE = _SURFACE["carry"], _SURFACE["inv_carry"], _SURFACE["exit_plane"]
+_IS_MIRROR, _SCALE = _SURFACE["is_mirror"].start, _SURFACE["resolution_scale"].start
+# SurfaceTable.int_rows: the row of the surface its views look out of, the view mask bits a view
+# through it keeps (its layers and every kind but direct), the entity they look out of, the
+# kind bit it adds.  Laid out so that the pairs the rows and blocks take together are slices.
+_SURFACE_INTS = ("exit_row", "keep", "exit_entity", "kind_bit")
+_KEEP, _KIND_BIT = _SURFACE_INTS.index("keep"), _SURFACE_INTS.index("kind_bit")
+_EXIT_ROW_AND_KEEP = slice(_SURFACE_INTS.index("exit_row"), _KEEP + 1)  # LevelRows' exit_row, view_mask
+_EXIT_ENTITY_AND_KEEP = slice(_SURFACE_INTS.index("exit_entity"), _KEEP - 1, -1)  # the Camera ids' skip, mask
+assert _MASK == _EXIT_ROW + 1 and _KEEP == 1 and _SURFACE_INTS.index("exit_entity") == 2
+# The Camera block's float32 columns (CAMERA_DTYPE) the planner writes.
+_CAMERA_WIDTH = CAMERA_BLOCK_BYTES // 4
+_MATRICES = slice(CAMERA_FLOATS["view"].start, CAMERA_FLOATS["inv_view_proj"].stop)
+_CAMERA_ROWS = slice(CAMERA_FLOATS["eye"].start, CAMERA_FLOATS["clip_plane"].stop)
+_CAMERA_ID_COLUMNS = CAMERA_FLOATS["skip"]
+_ID_SKIP_AND_MASK = slice(CAMERA_IDS.index("skip"), None, CAMERA_IDS.index("view_mask") - CAMERA_IDS.index("skip"))
+_ID_HIDE, _ID_NODE = CAMERA_IDS.index("hide"), CAMERA_IDS.index("node")
+assert CAMERA_DTYPE.names[:4] == ("view", "proj", "view_proj", "inv_view_proj")  # the matrices, in order
+assert _CAMERA_ROWS.stop - _CAMERA_ROWS.start == _CAMERA_PART.stop - _CAMERA_PART.start  # eye, viewport, clip
+
 _NONE = np.zeros(0, np.int64)
 _NO_RECTS = np.zeros((0, 4))
 _NEVER = (1e30, 2e30, 1e30, 2e30)  # fade starts no distance or angle reaches
@@ -696,10 +618,11 @@ _NEVER = (1e30, 2e30, 1e30, 2e30)  # fade starts no distance or angle reaches
 _SIGNS = np.array([1.0, 1.0, -1.0, -1.0])
 _XYXY = np.array([0, 1, 0, 1])
 _OUTWARDS = np.array([1.0, 1.0, -1.0, -1.0])[:, None, None]
+_MIN, _MAX = np.minimum.reduce, np.maximum.reduce
 
 # From the rows of a projection (x, y, z, w) and a view's clip plane, the rows
-# SurfaceTable.cull applies to the block (clip plane; view matrix) of a view (LevelRows
-# columns 8-27) and then to every corner: x, y, -x, -y, w, then x - w, y - w, z - w, -x - w,
+# SurfaceTable.cull applies to the block (clip plane; view matrix) of a view (LevelRows'
+# clip_plane and view) and then to every corner: x, y, -x, -y, w, then x - w, y - w, z - w, -x - w,
 # -y - w, -z - w (each > 0 outside one side of the frustum), then minus the clip plane.
 _CULL_ROWS = np.array([
     [1, 0, 0, 0], [0, 1, 0, 0], [-1, 0, 0, 0], [0, -1, 0, 0], [0, 0, 0, 1],
@@ -715,42 +638,25 @@ class _Projection:
     inv_zw: np.ndarray       # the inverse's last two columns, summed
     column: np.ndarray       # the inverse's third column
     inv_and_column: np.ndarray  # 4 x 5: the inverse, then its third column
-    small: _SmallProjection  # the same in glm doubles, for SurfaceTable._plan_small
-
-
-@dataclass
-class _SmallProjection:
-    proj: glm.dmat4
-    inv: glm.dmat4
-    row_2: glm.dvec4
-    row_3: glm.dvec4
-    column: glm.dvec4
-
-
-@dataclass
-class _SmallSurface:
-    """A surface as ``SurfaceTable._plan_small`` reads it."""
-
-    entity: int
-    exit: int                # the entity its view looks out of
-    plane: glm.dvec4
-    exit_plane: glm.dvec4
-    carry: glm.dmat4
-    inv_carry: glm.dmat4
-    corners: list[glm.dmat4]  # its distinct corners, four to a matrix as its columns (_corner_blocks)
-    mirror: float            # 1.0 for a mirror
-    keep: int                # the view mask bits a view through it keeps
-    kind_bit: int            # the kind bit it adds
-    exit_row: int            # the table row of its exit (-1: none)
+    rows_2_3: np.ndarray     # the projection's third and fourth rows, summed
+    of: tuple[np.ndarray, np.ndarray]  # the projection and its inverse it was made from
 
 
 # Kept per root projection (the main camera's, a probe face's: a few a frame).
 _PROJECTIONS: dict[bytes, _Projection] = {}
 _CULLS: dict[bytes, np.ndarray] = {}
+_LAST_PROJECTION: list[_Projection | None] = [None]
+_LAST_CULL: list = [None, None]  # the last root projection asked for and its rows
 
 
 def _projection(root_proj: np.ndarray, inv_root_proj: np.ndarray) -> _Projection:
-    """The oblique near planes' constants of ``root_proj`` (with its inverse)."""
+    """The oblique near planes' constants of ``root_proj`` (with its inverse): the last one's
+    again for the same read-only arrays (the view tree's, kept while its root's projection
+    stays), else found by their bytes."""
+    last = _LAST_PROJECTION[0]
+    if last is not None and last.of[0] is root_proj and last.of[1] is inv_root_proj \
+            and not root_proj.flags.writeable and not inv_root_proj.flags.writeable:
+        return last
     key = root_proj.tobytes() + inv_root_proj.tobytes()
     found = _PROJECTIONS.get(key)
     if found is None:
@@ -761,16 +667,18 @@ def _projection(root_proj: np.ndarray, inv_root_proj: np.ndarray) -> _Projection
                                                 inv_root_proj[:, 2] + inv_root_proj[:, 3],
                                                 inv_root_proj[:, 2].copy(),
                                                 np.concatenate([inv_root_proj, inv_root_proj[:, 2:3]], axis=1),
-                                                _SmallProjection(_dmat(root_proj), _dmat(inv_root_proj),
-                                                                 glm.dvec4(*root_proj[2].tolist()),
-                                                                 glm.dvec4(*root_proj[3].tolist()),
-                                                                 glm.dvec4(*inv_root_proj[:, 2].tolist())))
+                                                root_proj[2] + root_proj[3], (root_proj, inv_root_proj))
+    _LAST_PROJECTION[0] = found
     return found
 
 
 def _cull_rows(root_proj: np.ndarray) -> np.ndarray:
     """``SurfaceTable.cull``'s 12 x 5 rows for ``root_proj``: ``_CULL_ROWS`` through it, and
-    minus the clip plane (column 0: the clip plane comes first in a view's block)."""
+    minus the clip plane (column 0: the clip plane comes first in a view's block); the last
+    one's again for the same read-only array."""
+    last = _LAST_CULL
+    if last[0] is root_proj and not root_proj.flags.writeable:
+        return last[1]
     key = root_proj.tobytes()
     rows = _CULLS.get(key)
     if rows is None:
@@ -779,6 +687,7 @@ def _cull_rows(root_proj: np.ndarray) -> np.ndarray:
         rows = _CULLS[key] = np.zeros((12, 5))
         rows[:11, 1:] = _CULL_ROWS @ root_proj
         rows[11, 0] = -1.0
+    last[:] = root_proj, rows
     return rows
 
 
@@ -795,16 +704,7 @@ def _half_sizes(size: tuple[int, int]) -> np.ndarray:
     return found
 
 
-_COUNTING = np.arange(256, dtype=np.float64)
 _ONES = np.ones(256)
-
-
-def _counting(k: int) -> np.ndarray:
-    """0, 1, ..., k - 1 as float64 (read only)."""
-    global _COUNTING
-    if len(_COUNTING) < k:
-        _COUNTING = np.arange(2 * k, dtype=np.float64)
-    return _COUNTING[:k]
 
 
 def _ones(k: int) -> np.ndarray:
@@ -815,37 +715,12 @@ def _ones(k: int) -> np.ndarray:
     return _ONES[:k]
 
 
-# The most (parent x surface) pairs a level plans pair by pair in glm (SurfaceTable._plan_small)
-# rather than in arrays.  Measured in frames on llvmpipe (LP_NUM_THREADS=0, 32x18, the mirrors
-# benchmark): a level in arrays costs some 150 us whatever its size, a pair in glm a few us
-# (faced away) to some 20 (a view); against 4, a limit of 8 made planning 0.91x at 4 mirrors,
-# 16 made it 0.82x at 4 mirrors again and changed nothing at 8 and 16 (0.98x, 1.02x).
-SMALL_LEVEL_PAIRS = 16
 # How many level plans a SurfaceTable keeps (SurfaceTable.plan): a frame's main tree and a
 # probe's six faces, a few levels each, with room for a second probe.
 PLANS_KEPT = 96
-_E2 = glm.dvec4(0.0, 0.0, 1.0, 0.0)
-_ZERO = glm.dmat4(0.0)
-_IDS = struct.Struct("<4I")
-
-
-def _corner_blocks(corners: np.ndarray) -> list[glm.dmat4]:
-    """A surface's distinct corners (homogeneous rows) four to a glm matrix, as its columns;
-    the last padded with the first corner (the extremes of a set do not change with repeats)."""
-    rows = corners.tolist()
-    rows += [rows[0]] * (-len(rows) % 4)
-    return [glm.dmat4(*(glm.dvec4(*row) for row in rows[at:at + 4])) for at in range(0, len(rows), 4)]
-
-
-def _dmat(matrix: np.ndarray) -> glm.dmat4:
-    """A row-major numpy matrix as a glm double one."""
-    return glm.dmat4(*matrix.T.reshape(16).tolist())
 
 
 def _rows(matrix: glm.dmat4 | glm.mat4) -> list[float]:
     """A glm matrix's 16 values row by row (LevelRows' layout)."""
     return [value for row in glm.transpose(matrix).to_list() for value in row]
 
-
-def _sign(x: float) -> float:
-    return 1.0 if x > 0.0 else (-1.0 if x < 0.0 else 0.0)

@@ -41,15 +41,16 @@ import functools
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING
 
 import moderngl
 import numpy as np
 from pyglm import glm
 
 from components.limits import MAX_VIEW_DEPTH
+from engine.core.budget import screen_coverage, spending_order
 from engine.render.batched_mirrors import PATHS, choose_path, submitted_triangles
 from engine.render.end_images import EndImages
+from engine.render.gpu import Gpu
 from engine.render.mirror_passes import (
     Claims,
     Composite,
@@ -60,14 +61,11 @@ from engine.render.mirror_passes import (
     surface_look,
     take_samples_queries,
 )
-from engine.render.scene_pass import REFLECTION_LEVEL, SceneOptions
+from engine.render.scene_pass import REFLECTION_LEVEL, SceneOptions, ScenePass
 from engine.render.targets import LevelStack, RenderTargets
-from engine.render.view_plan import Candidates, LevelRows, SurfaceTable, _mat, level_rects
+from engine.render.view_plan import ROW, Candidates, LevelRows, SurfaceTable, _mat, level_rects
 from engine.render.views import CAMERA_BLOCK_BYTES, PlannedView, View
-
-if TYPE_CHECKING:  # the renderer imports this module; the surfaces' records are a floor above
-    from engine.render.renderer import Renderer
-    from engine.resources import SurfaceState
+from engine.resources import SurfaceState
 
 # The deepest a tree may go (each level is one more set of root-sized targets); the depth
 # limits of Mirror and Portal components take values up to this.
@@ -181,15 +179,55 @@ class _Level:
                                                    # views, only claims)
     prepared: PreparedComposites | None = None
     pixels: list[int] | None = None               # exact: each candidate's claimed pixels
+    # What the choice made of the candidates (_choose): the views (rows of ``candidates``), those
+    # of them that get views below (rows of ``chosen``), the views' candidates, their nodes, and
+    # (predicted) each candidate's chain of surfaces from the root.
+    keep: list[int] | np.ndarray = field(default_factory=list)
+    grow: list[int] | range = field(default_factory=list)
+    chosen: Candidates | None = None
+    children: list[ReflectionView] = field(default_factory=list)
+    claim_keys: list[tuple[int, ...]] = field(default_factory=list)
+
+
+@dataclass
+class _Walk:
+    """One render of a tree on its way down: the root and its settings, and what each level
+    hands the next (its parents as nodes and rows, their chains of surfaces, their indices
+    in the tree's views, and with end views the seers of each surface)."""
+
+    root: View
+    surfaces: SurfaceTable
+    settings: TreeSettings
+    result: TreeResult
+    root_proj: np.ndarray
+    inv_root_proj: np.ndarray
+    ends: tuple[np.ndarray, int] | None      # _end_surfaces
+    exact: bool                              # this frame's claim counts (else last frame's)
+    record: RootVisibility
+    triangles: Callable[[], int]             # what a scene pass submits (counted once, if asked)
+    nodes: list[ReflectionView]              # the parents of the level planned next
+    rows: LevelRows                          # their rows
+    seers: list[list[int]] | None            # with end views: _end_seers
+    keys: list[tuple[int, ...]] = field(default_factory=lambda: [()])  # each parent row's chain of surfaces
+    parent_at: list[int] = field(default_factory=lambda: [0])          # each parent row's index in the views
+    end_seers: list[int] | None = None       # the planned level's end views' seers
+    scale: float = 1.0                       # the planned level's resolution factor
+    level: int = 0                           # the deepest level drawn
+    steps: list[_Level] = field(default_factory=list)  # the levels, in order (exact: drawn as they come;
+                                                       # predicted: drawn after the last is planned)
+    fallbacks: dict[int, list[Fallback]] = field(default_factory=dict)  # each level's, by the level they
+                                                                        # are drawn into
 
 
 class ViewTree:
     """Renders the reflection levels below a root view into a ``LevelStack`` and composites
-    them back into the root's targets.  With ``end_images`` (the main view's tree) a view the
-    depth limits cut shows its surface's image from the previous frame (``EndImages``)."""
+    them back into the root's targets, drawing every view through ``scene_pass``.  With
+    ``end_images`` (the main view's tree) a view the depth limits cut shows its surface's
+    image from the previous frame (``EndImages``)."""
 
-    def __init__(self, renderer: Renderer, end_images: bool = False) -> None:
+    def __init__(self, renderer: Gpu, scene_pass: ScenePass, end_images: bool = False) -> None:
         self.renderer = renderer
+        self.scene_pass = scene_pass
         self.passes = MirrorPasses(renderer)
         self.ends = EndImages(renderer) if end_images else None
         self.coverage: dict[int, int] = {}  # level -> its views' claimed pixels last frame (screen pixels)
@@ -203,135 +241,178 @@ class ViewTree:
 
     def render(self, root: View, levels: LevelStack, surfaces: SurfaceTable,
                settings: TreeSettings = TreeSettings()) -> TreeResult:
-        """Draw every level below ``root`` (already drawn into ``levels[0]``) and composite them."""
-        renderer = self.renderer
+        """Draw every level below ``root`` (already drawn into ``levels[0]``) and composite
+        them: the module's five steps, a level at a time."""
         root_node = ReflectionView(0, 0, root, (0, 0, *root.size))
         result = TreeResult([root_node], set())
         if not surfaces.states:  # no mirror or portal anywhere: the root is the whole tree
             if self.ends is not None:
                 self.ends.forget()
             return result
+        walk = self._start(root, root_node, surfaces, settings, result)
+        candidates = self._plan(walk, first_index=1)                  # 1. plan the first level
+        while candidates is not None:
+            step = self._choose(walk, levels, candidates)             # 2. claim (exact), 3. choose
+            if step is None:
+                break
+            if walk.exact:
+                self._draw_level(step, root)                          # 4. draw, level by level
+            candidates = self._descend(walk, step)                    # 1. plan the next level
+        if not walk.exact:  # predicted: the whole tree, planned, claimed and drawn in one run (2, 4)
+            for step in walk.steps:
+                self._claim(surfaces, step)  # (a last level without views still counts its claims)
+                if step.composite is not None:
+                    self._draw_level(step, root)
+        self._note_cap(walk)
+        self._composite(walk, levels)                                 # 5. composite
+        self._keep_end_images(walk, levels)
+        return result
+
+    def _start(self, root: View, root_node: ReflectionView, surfaces: SurfaceTable, settings: TreeSettings,
+               result: TreeResult) -> _Walk:
+        """A render's walk from its root: the root's projection and row, the end views it may
+        have, how it learns its views' pixels."""
         root_proj, inv_root_proj = self._projection(root.proj)
-        planning = (root, root_proj, inv_root_proj)
         ends = self._end_surfaces(surfaces, root, settings.depth_cap)
-        # With end views: for each row of the level, the index in result.views of the view
-        # that saw each surface last up its chain (-1: none), what an end view repeats.
-        seers = None if ends is None else [[-1] * len(surfaces.states)]
-        nodes = [root_node]
-        rows = self._root_rows(root)
-        # What a scene pass submits, for the auto path's choice: counted once a tree, where a
-        # level has views enough to batch (a probe face's levels seldom have).
-        triangles = functools.cache(lambda: submitted_triangles(renderer))
-        scale = self._level_scale(1)
-        candidates, result.faded = surfaces.plan(rows, 1, *planning, 1, settings.depth_cap, root.hide,
-                                                 ends=_ends_at(ends, 1), scale=scale)
-        # Each level's fallbacks (the surfaces its views see that get no view of their own),
-        # by the level they are drawn into.
-        fallbacks: dict[int, list[Fallback]] = {}
-        self._unviewed(fallbacks, surfaces, rows, [root_node], 0, root_proj, root, settings.depth_cap, ends)
-        candidates, end_seers = self._end_seers(candidates, seers)
         exact = self._waits_for_counts(settings)
         result.visibility = "exact" if exact else "predicted"
-        record = self._visibility_of(root)
-        keys: list[tuple[int, ...]] = [()]  # each parent row's chain of surfaces from the root
-        parent_at = [0]                      # each parent row's index in result.views
-        steps: list[_Level] = []             # the levels, in order (exact: drawn as they come; predicted:
-                                             # drawn after the last is planned)
-        level = 0
-        while candidates is not None:
-            if scale < 1.0:
-                renderer.stats.levels_downscaled += 1
-            step = _Level(candidates, levels.get(level + 1, candidates.size), levels[level], nodes,
-                          record.take(len(candidates), self.renderer.ctx))
-            steps.append(step)
-            is_end = candidates.end.tolist() if candidates.end is not None else [False] * len(candidates)
-            if exact:  # this frame's counts: the CPU waits for the GPU to draw the claims
-                keep, grow, end_rows = self._chosen_by_counts(surfaces, step, is_end, settings, result, level + 1,
-                                                              root.size)
-            else:  # last frame's counts: nothing waits; the GPU counts this frame's for the next
-                keep, grow, end_rows, claim_keys = self._chosen_by_prediction(surfaces, step, is_end, keys, record,
-                                                                              level + 1, root.size)
-            chosen = candidates if len(keep) == len(candidates) else candidates.select(np.asarray(keep, np.int64))
-            step.views, children = self._level_nodes(surfaces, chosen, nodes, level + 1, root.hide)
-            if len(grow) < len(children):
-                grown = set(grow)
-                for at, child in enumerate(children):
-                    child.unseen = at not in grown
-                # A view drawn unseen gets no views of its surfaces this frame: should it show
-                # now, they show their fallback (every surface it sees, as if past every limit).
-                unseen = [at for at in range(len(children)) if at not in grown]
-                self._unviewed(fallbacks, surfaces, chosen.select(np.asarray(unseen, np.int64)).rows,
-                               [children[at] for at in unseen], level + 1, root_proj, root, 0, None)
-            self._fallbacks_of_level(fallbacks, surfaces, step, keep, is_end, children, level, exact)
-            if end_rows:
-                chosen_ends = candidates.select(np.asarray(end_rows, np.int64))
-                step.end_views, step.ended = self._level_nodes(surfaces, chosen_ends, nodes, level + 1, root.hide)
-                inverse_carry = surfaces.inv_carry_glm
-                step.end_matrices = [result.views[end_seers[i]].view.view * inverse_carry[s] for i, s in
-                                     zip(end_rows, chosen_ends.surface.tolist(), strict=True)]
-                result.end_views.extend(step.ended)
-                fallbacks.setdefault(level, []).extend(  # the end views' pixels their images do not hold
-                    self._fallback(node.parent, node.surface, end=node.index) for node in step.ended)
-            if not children and not step.ended:
-                break
-            if children:
-                step.path = choose_path(settings.path, len(children), triangles, renderer.caps.software)
-                result.paths.add(step.path)
-            step.composite = children + step.ended
-            if exact:
-                self._draw_level(step, root)
-            child_offset = len(result.views)
-            result.views.extend(children)
-            level += 1
-            next_index = int(candidates.rows.node[-1]) + 1
-            candidates = None
-            if grow:
-                parents = chosen if len(grow) == len(children) else chosen.select(np.asarray(grow, np.int64))
-                if seers is not None:  # each child saw its own surface from its parent
-                    seers = self._child_seers(seers, parents, parent_at)
-                if not exact:
-                    keys = [claim_keys[keep[at]] for at in grow]
-                parent_at = [child_offset + at for at in grow]
-                nodes, rows = [children[at] for at in grow], parents.rows
-                # Exact: while the GPU draws the views, the next level's cull and cameras
-                # (measured: on the critical path when done after the views finish).
-                # Predicted: every level is planned before any is drawn, the planner's
-                # array work back to back (in a frame, numpy calls between GL calls cost
-                # 2-3 times what they cost in a row), and the GPU gets the tree in one run.
-                scale = self._level_scale(level + 1)
-                candidates, faded = surfaces.plan(rows, level + 1, *planning, next_index, settings.depth_cap,
-                                                  root.hide, ends=_ends_at(ends, level + 1), scale=scale)
-                self._unviewed(fallbacks, surfaces, rows, nodes, level, root_proj, root, settings.depth_cap, ends)
-                result.faded += faded
-                candidates, end_seers = self._end_seers(candidates, seers)
-        for step in steps if not exact else ():  # predicted: the whole tree, planned, drawn in one run
-            self._claim(surfaces, step)  # (a last level without views still counts its claims)
-            if step.composite is not None:
-                self._draw_level(step, root)
+        renderer = self.renderer
+        return _Walk(root, surfaces, settings, result, root_proj, inv_root_proj, ends, exact,
+                     self._visibility_of(root), functools.cache(lambda: submitted_triangles(renderer)), [root_node],
+                     self._root_rows(root),
+                     # With end views: for each row of the level, the index in result.views of the
+                     # view that saw each surface last up its chain (-1: none), what an end view repeats.
+                     None if ends is None else [[-1] * len(surfaces.states)])
+
+    def _plan(self, walk: _Walk, first_index: int) -> Candidates | None:
+        """Step 1: the candidates of the level below ``walk``'s parents (``SurfaceTable.plan``),
+        and the fallbacks of the surfaces those parents see that get no view there."""
+        depth = walk.level + 1
+        settings, surfaces, root = walk.settings, walk.surfaces, walk.root
+        walk.scale = self._level_scale(depth)
+        candidates, faded = surfaces.plan(walk.rows, depth, root, walk.root_proj, walk.inv_root_proj, first_index,
+                                          settings.depth_cap, root.hide, ends=_ends_at(walk.ends, depth),
+                                          scale=walk.scale)
+        self._unviewed(walk.fallbacks, surfaces, walk.rows, walk.nodes, walk.level, walk.root_proj, root,
+                       settings.depth_cap, walk.ends)
+        walk.result.faded += faded
+        candidates, walk.end_seers = self._end_seers(candidates, walk.seers)
+        return candidates
+
+    def _choose(self, walk: _Walk, levels: LevelStack, candidates: Candidates) -> _Level | None:
+        """Steps 2 and 3 for a planned level: its candidates' claims (exact: drawn and read
+        now; predicted: last frame's counts), which become views, which of those grow views
+        below, its end views and fallbacks, and its drawing path; None where it has no view
+        (the tree ends there)."""
+        surfaces, settings, result, root = walk.surfaces, walk.settings, walk.result, walk.root
+        level = walk.level
+        if walk.scale < 1.0:
+            self.renderer.stats.levels_downscaled += 1
+        step = _Level(candidates, levels.get(level + 1, candidates.size), levels[level], walk.nodes,
+                      walk.record.take(len(candidates), self.renderer.ctx))
+        walk.steps.append(step)
+        is_end = candidates.end.tolist() if candidates.end is not None else [False] * len(candidates)
+        if walk.exact:  # this frame's counts: the CPU waits for the GPU to draw the claims
+            step.keep, step.grow, end_rows = self._chosen_by_counts(surfaces, step, is_end, settings, result,
+                                                                    level + 1, root.size)
+        else:  # last frame's counts: nothing waits; the GPU counts this frame's for the next
+            step.keep, step.grow, end_rows, step.claim_keys = self._chosen_by_prediction(
+                surfaces, step, is_end, walk.keys, walk.record, level + 1, root.size)
+        keep, grow = step.keep, step.grow
+        chosen = step.chosen = candidates if len(keep) == len(candidates) else \
+            candidates.select(np.asarray(keep, np.int64))
+        step.views, step.children = self._level_nodes(surfaces, chosen, walk.nodes, level + 1, root.hide)
+        children = step.children
+        if len(grow) < len(children):
+            grown = set(grow)
+            for at, child in enumerate(children):
+                child.unseen = at not in grown
+            # A view drawn unseen gets no views of its surfaces this frame: should it show
+            # now, they show their fallback (every surface it sees, as if past every limit).
+            unseen = [at for at in range(len(children)) if at not in grown]
+            self._unviewed(walk.fallbacks, surfaces, chosen.select(np.asarray(unseen, np.int64)).rows,
+                           [children[at] for at in unseen], level + 1, walk.root_proj, root, 0, None)
+        self._fallbacks_of_level(walk.fallbacks, surfaces, step, keep, is_end, children, level, walk.exact)
+        if end_rows:
+            self._end_views(walk, step, end_rows)
+        if not children and not step.ended:
+            return None
+        if children:
+            step.path = choose_path(settings.path, len(children), walk.triangles, self.renderer.caps.software)
+            result.paths.add(step.path)
+        step.composite = children + step.ended
+        return step
+
+    def _end_views(self, walk: _Walk, step: _Level, end_rows: list[int]) -> None:
+        """A level's end views (rows ``end_rows`` of its candidates): their nodes, the matrix
+        to the eye of the view that saw each surface last, and their fallbacks (the pixels
+        their images do not hold)."""
+        chosen_ends = step.candidates.select(np.asarray(end_rows, np.int64))
+        step.end_views, step.ended = self._level_nodes(walk.surfaces, chosen_ends, walk.nodes, walk.level + 1,
+                                                       walk.root.hide)
+        inverse_carry, views = walk.surfaces.inv_carry_glm, walk.result.views
+        step.end_matrices = [views[walk.end_seers[i]].view.view * inverse_carry[s] for i, s in
+                             zip(end_rows, chosen_ends.surface.tolist(), strict=True)]
+        walk.result.end_views.extend(step.ended)
+        walk.fallbacks.setdefault(walk.level, []).extend(
+            self._fallback(node.parent, node.surface, end=node.index) for node in step.ended)
+
+    def _descend(self, walk: _Walk, step: _Level) -> Candidates | None:
+        """A chosen level's views join the tree, and those that grow become the parents of
+        the next level, planned now (step 1): exact, while the GPU draws this level's views
+        (measured: on the critical path when done after the views finish); predicted, every
+        level before any is drawn, the planner's array work back to back (in a frame, numpy
+        calls between GL calls cost 2-3 times what they cost in a row), and the GPU gets the
+        tree in one run.  None where no view grows."""
+        result, grow, children = walk.result, step.grow, step.children
+        child_offset = len(result.views)
+        result.views.extend(children)
+        walk.level += 1
+        if not grow:
+            return None
+        chosen = step.chosen
+        parents = chosen if len(grow) == len(children) else chosen.select(np.asarray(grow, np.int64))
+        if walk.seers is not None:  # each child saw its own surface from its parent
+            walk.seers = self._child_seers(walk.seers, parents, walk.parent_at)
+        if not walk.exact:
+            walk.keys = [step.claim_keys[step.keep[at]] for at in grow]
+        walk.parent_at = [child_offset + at for at in grow]
+        walk.nodes, walk.rows = [children[at] for at in grow], parents.rows
+        return self._plan(walk, first_index=int(step.candidates.rows.node[-1]) + 1)
+
+    def _note_cap(self, walk: _Walk) -> None:
+        """Reaching the depth cap is reported: how many views the surfaces' own limits still
+        allowed below it (counted when asked: ``TreeResult.capped``)."""
+        deepest = max((node.level for node in walk.result.views), default=0)
+        if deepest and deepest == walk.settings.depth_cap:
+            surfaces, rows, root_proj, size = walk.surfaces, walk.rows, walk.root_proj, walk.root.size
+            walk.result.count_capped = lambda: len(surfaces.cull(rows, deepest + 1, root_proj, size,
+                                                                 MAX_TREE_DEPTH)[0])
+
+    def _composite(self, walk: _Walk, levels: LevelStack) -> None:
+        """Step 5, deepest level first: a level's fallbacks, then the views of the level
+        below composited over it (a partly faded view's over its fallback)."""
+        steps, fallbacks = walk.steps, walk.fallbacks
         composites = [step.prepared for step in steps if step.prepared is not None]
-        deepest = max((node.level for node in result.views), default=0)
-        if deepest and deepest == settings.depth_cap:
-            # Reaching the cap is reported: how many views the surfaces' own limits still allowed
-            # (counted when asked: TreeResult.capped).
-            result.count_capped = lambda: len(surfaces.cull(rows, deepest + 1, root_proj, root.size, MAX_TREE_DEPTH)[0])
-        # Deepest first: a level's fallbacks, then the views of the level below composited
-        # over it (a partly faded view's over its fallback).
-        for depth in range(level, -1, -1):
+        for depth in range(walk.level, -1, -1):
             if fallbacks.get(depth):
                 child = steps[depth].targets if depth < len(steps) else None
                 self.passes.draw_fallbacks(levels[depth], child,
                                            self.passes.prepare_fallbacks(fallbacks[depth], levels[depth].size))
-            if depth < level:
+            if depth < walk.level:
                 self.passes.composite_level(levels[depth], levels[depth + 1], composites[depth])
-        if self.ends is not None:
-            if surfaces.has_end_images:
-                # The surfaces this image shows (an unseen view's may well not be in it).
-                self.ends.keep(levels[0], root, frozenset(node.surface.entity for node in
-                                                          (*result.views[1:], *result.end_views)
-                                                          if not node.unseen))
-            else:
-                self.ends.forget()
-        return result
+
+    def _keep_end_images(self, walk: _Walk, levels: LevelStack) -> None:
+        """The main view's image kept for next frame's end views, with the surfaces it shows
+        (an unseen view's may well not be in it)."""
+        if self.ends is None:
+            return
+        if walk.surfaces.has_end_images:
+            result = walk.result
+            self.ends.keep(levels[0], walk.root, frozenset(node.surface.entity for node in
+                                                           (*result.views[1:], *result.end_views) if not node.unseen))
+        else:
+            self.ends.forget()
 
     def _chosen_by_counts(self, surfaces: SurfaceTable, step: _Level, is_end: list[bool], settings: TreeSettings,
                           result: TreeResult, level: int,
@@ -368,8 +449,7 @@ class ViewTree:
         # a frame that counts pixels for it.
         grow = [at for at, i in enumerate(keep) if seen[i] != 0]
         drawn = sum(seen[i] or 0 for i in keep)
-        width, height = candidates.size
-        self.coverage[level] = round(drawn * screen[0] * screen[1] / (width * height))
+        self.coverage[level] = screen_coverage(drawn, candidates.size, screen)
         stats = self.renderer.stats
         stats.views_spent += len(keep)
         stats.pixels_spent += drawn
@@ -475,6 +555,8 @@ class ViewTree:
         key = proj.to_bytes()
         if self._projections is None or self._projections[0] != key:
             self._projections = (key, _mat(proj), _mat(glm.inverse(proj)))
+            for kept in self._projections[1:]:  # read-only: the planner knows them again by identity
+                kept.flags.writeable = False
         return self._projections[1], self._projections[2]
 
     def _end_surfaces(self, surfaces: SurfaceTable, root: View, depth_cap: int) -> tuple[np.ndarray, int] | None:
@@ -536,7 +618,7 @@ class ViewTree:
         entities, parents = surfaces.entity_list, step.parents
         ids = [(parents[p].index, entities[s], node) for p, s, node in
                zip(candidates.parent.tolist(), candidates.surface.tolist(),
-                   candidates.rows.data[:, 51].astype(np.int64).tolist(), strict=True)]
+                   candidates.rows.node.astype(np.int64).tolist(), strict=True)]
         self.passes.prepare_level(step.targets, step.parent_targets,
                                   Claims(ids, list(map(tuple, candidates.scissor.tolist()))), step.queries)
 
@@ -545,8 +627,8 @@ class ViewTree:
         rows (CPU work while the GPU draws)."""
         renderer = self.renderer
         if step.views:
-            renderer.scene_pass.draw(step.views, step.targets, _BATCHED if step.path == "batched"
-                                     else REFLECTION_LEVEL, step.conditions)
+            self.scene_pass.draw(step.views, step.targets, _BATCHED if step.path == "batched"
+                                 else REFLECTION_LEVEL, step.conditions)
         if step.ended:
             self.ends.draw(step.end_views, [node.surface.entity for node in step.ended], step.end_matrices,
                            step.targets, root)
@@ -575,24 +657,20 @@ class ViewTree:
         in Python: a level's claims are a list, and a few numpy calls cost more than it."""
         stats = self.renderer.stats
         pixel_budget = stats.pixels_left()
-        width, height = candidates.size
-        to_screen = screen[0] * screen[1] / (width * height)
         if settings.level_budget is None and stats.view_budget is None and pixel_budget is None:
             keep = [i for i, n in enumerate(pixels) if n]  # no budget: every view with pixels
             drawn = sum(pixels)
-            self.coverage[level] = round(drawn * to_screen)
+            self.coverage[level] = screen_coverage(drawn, candidates.size, screen)
             stats.views_spent += len(keep)
             stats.pixels_spent += drawn
             return keep
         pixels = np.asarray(pixels, np.int64)
         keep = np.flatnonzero(pixels)
-        on_screen = pixels * to_screen  # the claims' pixels, at screen resolution
-        self.coverage[level] = int(on_screen.sum())
+        self.coverage[level] = screen_coverage(pixels.sum(), candidates.size, screen)
         if len(keep) > 1:
             # Budgets keep the surfaces of highest priority, then those covering the most
             # pixels (this frame's claims), in claim order after.
-            rank = np.lexsort((keep, -pixels[keep], -surfaces.priority[candidates.surface[keep]]))
-            keep = keep[rank]
+            keep = keep[spending_order(surfaces.priority[candidates.surface[keep]], pixels[keep])]
         if settings.level_budget is not None and len(keep) > settings.level_budget:
             result.dropped += len(keep) - settings.level_budget
             keep = keep[: settings.level_budget]
@@ -619,10 +697,10 @@ class ViewTree:
         size = chosen.size
         blocks = chosen.blocks.tobytes()
         step = CAMERA_BLOCK_BYTES
-        columns = chosen.rows.data[:, 44:52].astype(np.int64)  # rect, exit, mask, mirrored, node
+        columns = chosen.rows.data.take(_NODE_COLUMNS, axis=1).astype(np.int64)
         views, nodes = [], []
         at = 0
-        for (x0, y0, x1, y1, _, _, mirrored, node), s, p, scissor, fade in zip(
+        for (x0, y0, x1, y1, mirrored, node), s, p, scissor, fade in zip(
                 columns.tolist(), chosen.surface.tolist(), chosen.parent.tolist(), chosen.scissor.tolist(),
                 chosen.fade.tolist(), strict=True):
             state = states[s]
@@ -654,6 +732,10 @@ class ViewTree:
         self.passes.release()
         if self.ends is not None:
             self.ends.release()
+
+
+# The LevelRows columns a level's nodes read (_level_nodes), as whole numbers: the rectangle, mirrored, node.
+_NODE_COLUMNS = np.array([*range(ROW["rect"].start, ROW["rect"].stop), ROW["mirrored"].start, ROW["node"].start])
 
 
 def _ends_at(ends: tuple[np.ndarray, int] | None, depth: int) -> np.ndarray | None:

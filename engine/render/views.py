@@ -9,18 +9,54 @@ import numpy as np
 from pyglm import glm
 
 from components.limits import ALL_LAYERS, VIEW_DIRECT, VIEW_KINDS
+from components.visibility import KIND_MASK, visibility_code
 
-CAMERA_BLOCK_BYTES = 4 * 64 + 4 * 16
-# Float columns of a packed Camera block (View.camera_block; camera.glsl): view 0-15,
-# proj 16-31, then these, then viewport and clip plane.
-CAMERA_BLOCK_VIEW_PROJ = slice(32, 48)
-CAMERA_BLOCK_INVERSE = slice(48, 64)
-CAMERA_BLOCK_EYE = slice(64, 67)
-CAMERA_BLOCK_CLIP = slice(72, 76)
-CAMERA_BLOCK_IDS = slice(76, 80)   # uint32 skip, hide, view mask, node
+# The Camera uniform block (shaders/include/camera.glsl, std140), the one schema of every
+# writer (View.camera_block, the planner's packed blocks) and reader (PlannedView, the
+# composite rows, the batched Views block); tests/test_rendering.py checks the GLSL block
+# against it (names, order, std140 offsets).  Matrices are column-major, as GL reads them.
+CAMERA_DTYPE = np.dtype([
+    ("view", "<f4", (16,)),
+    ("proj", "<f4", (16,)),
+    ("view_proj", "<f4", (16,)),
+    ("inv_view_proj", "<f4", (16,)),
+    ("eye", "<f4", (4,)),          # xyz: the eye, w: 1
+    ("viewport", "<f4", (4,)),     # 0, 0, width, height
+    ("clip_plane", "<f4", (4,)),   # world space
+    ("skip", "<u4", (4,)),         # CAMERA_IDS
+])
+CAMERA_BLOCK_BYTES = CAMERA_DTYPE.itemsize
+# What each component of the block's uvec4 ``skip`` holds, in order: the entity the view never
+# draws (the surface it looks out of), one no view of its tree draws (a probe's own object),
+# the view's mask (View.view_mask) and its index in its tree (View.node).
+CAMERA_IDS = ("skip", "hide", "view_mask", "node")
+
+
+def field_columns(dtype: np.dtype, unit: int) -> dict[str, slice]:
+    """Each field of a packed record ``dtype`` as the slice of its columns in an array of
+    ``unit``-byte scalars (4: a float32 view of a Camera block; 8: LevelRows' float64s)."""
+    return {name: slice(dtype.fields[name][1] // unit, (dtype.fields[name][1] + dtype.fields[name][0].itemsize) // unit)
+            for name in dtype.names}
+
+
+CAMERA_FLOATS = field_columns(CAMERA_DTYPE, 4)  # each field's float32 columns
+CAMERA_BYTES = field_columns(CAMERA_DTYPE, 1)   # each field's bytes
+CAMERA_BLOCK_VIEW_PROJ = CAMERA_FLOATS["view_proj"]
+CAMERA_BLOCK_INVERSE = CAMERA_FLOATS["inv_view_proj"]
+CAMERA_BLOCK_EYE = slice(CAMERA_FLOATS["eye"].start, CAMERA_FLOATS["eye"].start + 3)  # xyz
+CAMERA_BLOCK_CLIP = CAMERA_FLOATS["clip_plane"]
+CAMERA_BLOCK_IDS = CAMERA_FLOATS["skip"]  # uint32, CAMERA_IDS
+_VIEW_MASK_BYTES = slice(CAMERA_BYTES["skip"].start + 4 * CAMERA_IDS.index("view_mask"),
+                         CAMERA_BYTES["skip"].start + 4 * CAMERA_IDS.index("view_mask") + 4)
+_EYE_BYTES = slice(CAMERA_BYTES["eye"].start, CAMERA_BYTES["eye"].start + 12)  # xyz
 NO_CLIP = glm.vec4(0.0, 0.0, 0.0, 1.0)
+# The shaders' array sizes (the shader library makes them defines): lights, point lights that
+# cast shadows (engine/render/shadows.py), probes whose irradiance the scene blends
+# (engine/render/irradiance.py).
 MAX_DIRECTIONAL_LIGHTS = 4
 MAX_POINT_LIGHTS = 16
+MAX_POINT_SHADOWS = 2  # cube samplers in shaders/include/shadows.glsl
+MAX_IRRADIANCE_PROBES = 32   # influence boxes the scene shader blends from (more: the first kept, a warning)
 SKY_SH_COEFFICIENTS = 9  # the sky's irradiance coefficients (engine/render/irradiance.py)
 LIGHTS_BLOCK_BYTES = 16 * SKY_SH_COEFFICIENTS + 16 + 2 * 16 * MAX_DIRECTIONAL_LIGHTS + 2 * 16 * MAX_POINT_LIGHTS
 
@@ -55,20 +91,22 @@ class View:
 
     @property
     def view_mask(self) -> int:
-        """Its kinds (bits 0-3) and the layers it shows (bits 4-19), as the shaders read them."""
-        return self.kinds | (self.layers << VIEW_KINDS)
+        """Its kinds and the layers it shows, packed as the shaders read them
+        (``engine.rules.visibility_rules.visibility_code``)."""
+        return visibility_code(self.kinds, self.layers)
 
     def camera_block(self) -> bytes:
-        """The Camera uniform block of this view, packed once: a View is made for one pass
-        and not changed after (the ReflectionSystem packs its views while the GPU is busy)."""
+        """The Camera uniform block of this view (``CAMERA_DTYPE``), packed once: a View is
+        made for one pass and not changed after (the ReflectionSystem packs its views while
+        the GPU is busy).  Joined bytes, in the dtype's order: cheaper than a record's fields."""
         if self._block is None:
             vp = self.view_proj
             w, h = self.size
-            self._block = b"".join([
-                self.view.to_bytes(), self.proj.to_bytes(), vp.to_bytes(), glm.inverse(vp).to_bytes(),
-                glm.vec4(self.eye, 1.0).to_bytes(), glm.vec4(0.0, 0.0, w, h).to_bytes(), self.clip_plane.to_bytes(),
-                glm.uvec4(self.skip, self.hide, self.view_mask, self.node).to_bytes(),
-            ])
+            parts = {"view": self.view.to_bytes(), "proj": self.proj.to_bytes(), "view_proj": vp.to_bytes(),
+                     "inv_view_proj": glm.inverse(vp).to_bytes(), "eye": glm.vec4(self.eye, 1.0).to_bytes(),
+                     "viewport": glm.vec4(0.0, 0.0, w, h).to_bytes(), "clip_plane": self.clip_plane.to_bytes(),
+                     "skip": glm.uvec4(self.skip, self.hide, self.view_mask, self.node).to_bytes()}  # CAMERA_IDS
+            self._block = b"".join([parts[name] for name in CAMERA_DTYPE.names])
         return self._block
 
 
@@ -97,23 +135,23 @@ class PlannedView(View):
 
     @property
     def view(self) -> glm.mat4:
-        return glm.mat4.from_bytes(self._block[0:64])
+        return glm.mat4.from_bytes(self._block[CAMERA_BYTES["view"]])
 
     @property
     def proj(self) -> glm.mat4:
-        return glm.mat4.from_bytes(self._block[64:128])
+        return glm.mat4.from_bytes(self._block[CAMERA_BYTES["proj"]])
 
     @property
     def view_proj(self) -> glm.mat4:
-        return glm.mat4.from_bytes(self._block[128:192])
+        return glm.mat4.from_bytes(self._block[CAMERA_BYTES["view_proj"]])
 
     @property
     def eye(self) -> glm.vec3:
-        return glm.vec3.from_bytes(self._block[256:268])
+        return glm.vec3.from_bytes(self._block[_EYE_BYTES])
 
     @property
     def kinds(self) -> int:
-        return self.view_mask & ((1 << VIEW_KINDS) - 1)
+        return self.view_mask & KIND_MASK
 
     @property
     def layers(self) -> int:
@@ -121,7 +159,7 @@ class PlannedView(View):
 
     @property
     def view_mask(self) -> int:
-        return int.from_bytes(self._block[312:316], "little")
+        return int.from_bytes(self._block[_VIEW_MASK_BYTES], "little")
 
 
 def camera_view(world_matrix: glm.mat4, fov_y_deg: float, near: float, far: float,

@@ -34,7 +34,6 @@ from __future__ import annotations
 
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
 
 import numpy as np
 from pyglm import glm
@@ -59,10 +58,8 @@ from components import (
 from engine.assets.mesh import Mesh, flat_plane
 from engine.core.cube_faces import CUBE_FACES
 from engine.core.world import World
+from engine.resources import SurfaceState
 from engine.rules.frame_rules import world_corners
-
-if TYPE_CHECKING:  # the surfaces stage's records, two floors above: read here by their fields
-    from engine.resources import SurfaceState
 
 _FLAT: dict[int, bool] = {}  # mesh id -> flat (meshes do not change once made)
 

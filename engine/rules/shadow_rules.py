@@ -10,15 +10,13 @@ block.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING
 
 import numpy as np
 from pyglm import glm
 
 from components.limits import MAX_LIGHT_BOUNCES
-
-if TYPE_CHECKING:  # the frame's data is a floor above the rules
-    from engine.resources import Surfaces
+from engine.core.budget import spending_order
+from engine.resources import Surfaces
 
 # A directional light's map covers the level's box grown by this share of its diagonal (and
 # at least SHADOW_MARGIN metres), so a caster resting on the box's edge still has texels
@@ -441,7 +439,7 @@ def virtual_lights(directional: list[tuple[int, glm.vec3, glm.vec3]],
     return found
 
 
-def light_path(light: VirtualLight, point: np.ndarray, real: np.ndarray | None = None) -> list[np.ndarray] | None:
+def light_path(light: VirtualLight, point: np.ndarray) -> list[np.ndarray] | None:
     """The way the light of ``light`` takes to ``point`` (world), as the shader's aperture
     test decides it (``shaders/include/virtual_lights.glsl``; no shadows): None when it does
     not light the point, else the real corners from the point back towards the light: the
@@ -508,10 +506,13 @@ def light_origin(light: VirtualLight) -> tuple[float, float, float]:
 
 
 def rank_virtual_lights(lights: list[VirtualLight]) -> list[VirtualLight]:
-    """The order the budget spends on them: the priority of the surfaces on the way (their
-    ``priority`` summed: a way through two preferred mirrors before a way through one), then
-    fewer bounces (an image's own image after it), then the brightest."""
-    return sorted(lights, key=lambda v: (-v.priority, v.bounces, -max(v.color), v.path, v.light))
+    """The order the budget spends on them (``spending_order``): the priority of the
+    surfaces on the way (their ``priority`` summed: a way through two preferred mirrors before
+    a way through one), then the brightest (an image of an image is never brighter than the
+    image: tints and rates are at most 1), then fewer bounces, then by surface and light."""
+    order = spending_order([v.priority for v in lights], [max(v.color) for v in lights],
+                           [v.bounces for v in lights], [v.surface for v in lights], [v.light for v in lights])
+    return [lights[i] for i in order.tolist()]
 
 
 def virtual_shadow_camera(light: VirtualLight, level_lo: np.ndarray, level_hi: np.ndarray,

@@ -53,6 +53,7 @@ from components import (
     Tonemap,
     Transform,
     look_rotation,
+    yaw_pitch_of,
 )
 from components.limits import MAX_LIGHT_BOUNCES
 from engine.assets.level_file import LevelGame
@@ -61,7 +62,8 @@ from engine.core.errors import SpeculumError
 from engine.core.frame_io import Input, Output
 from engine.core.game import GameSystem, spawn_camera
 from engine.core.world import World
-from engine.resources import FrameViews, Surfaces
+from engine.render.frame_views import FrameViews
+from engine.resources import Surfaces
 from engine.rules.raycast import raycast
 from engine.rules.shadow_rules import VirtualLight, light_path, virtual_lights
 from games.mirror_beam.beam import BeamPath, FirstSolid, hit_mirror, trace_beam
@@ -548,9 +550,7 @@ class MirrorBeam(LevelGame):
         rules = parse_rules(level.rules, names, world, f"level file {str(self.level_path)!r}")
         if not world.query_one(Camera):
             eye, at = glm.vec3(rules.camera["position"]), glm.vec3(rules.camera["look_at"])
-            forward = glm.normalize(at - eye)
-            yaw = glm.degrees(glm.atan(-forward.x, -forward.z))
-            pitch = glm.degrees(glm.asin(forward.y))
+            yaw, pitch = yaw_pitch_of(at - eye)
             spawn_camera(world, position=eye, yaw=yaw, pitch=pitch, fly=False)
         for camera, _ in world.query_one(Camera):
             # Khronos PBR Neutral (it keeps the red beam and the green target their colours,

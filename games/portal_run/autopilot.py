@@ -23,6 +23,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Protocol
 
+from components import yaw_pitch_of
 from engine.core.errors import SpeculumError
 from engine.core.frame_io import Input
 
@@ -118,8 +119,7 @@ class Autopilot:
         if verb == "aim":
             x, y, z = (float(a) for a in args)
             dx, dy, dz = x - eye[0], y - eye[1], z - eye[2]
-            self._turn(state, yaw, pitch, math.degrees(math.atan2(-dx, -dz)),
-                       math.degrees(math.atan2(dy, math.hypot(dx, dz))), sensitivity)
+            self._turn(state, yaw, pitch, *yaw_pitch_of((dx, dy, dz)), sensitivity)
             return True
         if verb == "look":
             self._turn(state, yaw, pitch, float(args[0]), float(args[1]), sensitivity)
@@ -142,7 +142,7 @@ class Autopilot:
         if math.hypot(dx, dz) <= ARRIVED or game.travel_count() != self._travels or self._frames >= limit:
             return None if self._frames == 0 else True
         level = pitch - max(-10.0, min(10.0, pitch))  # eyes back to the horizon, 10 degrees a frame
-        self._turn(state, yaw, pitch, math.degrees(math.atan2(-dx, -dz)), level, sensitivity)
+        self._turn(state, yaw, pitch, yaw_pitch_of((dx, 0.0, dz))[0], level, sensitivity)
         state.press("w")
         return False
 

@@ -59,6 +59,7 @@ from components import (
     look_rotation,
     yaw_pitch_rotation,
 )
+from components.transform import heading
 from engine.assets.level_file import LevelGame
 from engine.assets.mesh import box, quad
 from engine.assets.portals import spawn_portal_pair
@@ -194,11 +195,10 @@ class RunEvent:
     point: tuple[float, float, float] | None = None
 
 
-def heading(rotation: glm.quat) -> tuple[float, float]:
-    """(yaw, pitch) in degrees of the direction an orientation looks (its -Z); roll is dropped."""
-    forward = rotation * glm.vec3(0.0, 0.0, -1.0)
-    yaw = math.degrees(math.atan2(-forward.x, -forward.z))
-    pitch = math.degrees(math.asin(max(-1.0, min(1.0, forward.y))))
+def body_heading(rotation: glm.quat) -> tuple[float, float]:
+    """(yaw, pitch) in degrees of the direction an orientation looks (``heading``: its -Z,
+    roll dropped), the pitch kept within the body's +-89 degrees."""
+    yaw, pitch = heading(rotation)
     return yaw, max(-89.0, min(89.0, pitch))
 
 
@@ -547,7 +547,7 @@ class PortalRun(LevelGame):
         since the game last wrote it) and mouse sensitivity, for a scripted player."""
         transform = self.world.get(self.player, Transform)
         eye = transform.position
-        yaw, pitch = heading(transform.rotation)
+        yaw, pitch = body_heading(transform.rotation)
         return (eye.x, eye.y, eye.z), yaw, pitch, self.world.get(self.player, PlayerBody).mouse_sensitivity
 
     def travel_count(self) -> int:
@@ -575,7 +575,7 @@ class PortalRun(LevelGame):
                 continue
             v = crossing.turn * glm.vec3(*body.velocity)  # the pair's turn, which turned the camera
             body.velocity = np.array([v.x, v.y, v.z])
-            body.yaw, body.pitch = heading(transform.rotation)
+            body.yaw, body.pitch = body_heading(transform.rotation)
             body.on_ground = False  # the contact was on the other side: the next move finds the new one
             body.rotation = yaw_pitch_rotation(body.yaw, body.pitch)
             transform.rotation = body.rotation

@@ -4,8 +4,8 @@
 // the boxes are weighed per pixel: engine/render/irradiance.py. Coefficients are the
 // irradiance's, E_lm = A_l L_lm, in the order (0,0), (1,-1), (1,0), (1,1), (2,-2), (2,-1),
 // (2,0), (2,1), (2,2); a Lambertian surface of albedo a reflects a E(n) / pi.
-// Needs lights.glsl (lights.sky_sh).
-#define MAX_IRRADIANCE_PROBES 32
+// Needs lights.glsl (lights.sky_sh).  MAX_IRRADIANCE_PROBES is engine/render/irradiance.py's,
+// defined by the shader library.
 layout(std140) uniform Irradiance {
     ivec4 count;                              // x: boxes (0 while a probe is captured: sky only)
     vec4 centre[MAX_IRRADIANCE_PROBES];       // xyz: the box's centre; w: its blend distance

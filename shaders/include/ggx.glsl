@@ -1,10 +1,19 @@
 // GGX microfacet specular (Walter et al. 2007, "Microfacet Models for Refraction through Rough
-// Surfaces"): Schlick Fresnel, GGX distribution, Smith visibility.
+// Surfaces"): Schlick Fresnel, GGX distribution, Smith visibility.  The one Schlick Fresnel and
+// F0-from-index of the shaders (water.glsl and scene.frag's refraction call these).
 const float PI = 3.14159265358979;
 
+// Schlick's approximation of the reflectance with reflectance f0 at normal incidence, at the
+// angle between unit vectors l and h.
 vec3 schlick_fresnel(vec3 l, vec3 h, vec3 f0) {
     float lh = clamp(dot(l, h), 0.0, 1.0);
     return f0 + (1.0 - f0) * pow(1.0 - lh, 5.0);
+}
+
+// Schlick's F0 of a dielectric of index ior against air: ((ior - 1) / (ior + 1))^2, as
+// components/water.py f0_from_ior (tests/test_one_owner.py holds them equal).
+float f0_from_ior(float ior) {
+    return pow((ior - 1.0) / (ior + 1.0), 2.0);
 }
 
 float ggx_distribution(vec3 n, vec3 h, float roughness) {

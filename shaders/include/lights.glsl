@@ -1,7 +1,6 @@
 // Scene lights, packed by engine/render/views.py lights_block (keep the two in step:
-// tests/test_ambient_light.py reads the block back as GLSL lays it out).
-#define MAX_DIRECTIONAL_LIGHTS 4
-#define MAX_POINT_LIGHTS 16
+// tests/test_ambient_light.py reads the block back as GLSL lays it out).  Its array sizes,
+// MAX_DIRECTIONAL_LIGHTS and MAX_POINT_LIGHTS, are views.py's, defined by the shader library.
 layout(std140) uniform Lights {
     vec4 sky_sh[9];                                 // rgb: the sky's irradiance coefficients E_lm (engine/render/irradiance.py)
     ivec4 counts;                                   // x: directional, y: point

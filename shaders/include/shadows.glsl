@@ -6,7 +6,8 @@
 // up is moved off the surface along its geometric normal, more at grazing light, by the
 // texel's world size: Holbein's "normal offset shadows", 2011) plus the slope-scaled depth
 // offset the caster pass draws with; nothing is offset along the light, so contact is kept.
-#define MAX_POINT_SHADOWS 2   // engine/render/shadows.py MAX_POINT_SHADOWS: the cube samplers below
+// MAX_POINT_SHADOWS (the cube samplers below) is engine/render/shadows.py's, defined by the
+// shader library.
 layout(std140) uniform Shadows {
     mat4 directional_matrix[MAX_DIRECTIONAL_LIGHTS];  // world -> atlas uv (xy) and depth (z), each in [0, 1]
     vec4 directional_params[MAX_DIRECTIONAL_LIGHTS];  // x: a texel's world size, y: softness (texels),

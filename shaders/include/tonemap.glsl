@@ -1,15 +1,12 @@
 // Tone curves: linear HDR (Rec. 709 primaries, exposed) in, linear [0, 1] out; the sRGB
 // encoding comes after (color.glsl).  TONEMAP_CURVE picks one at build time
-// (components/post.py TONEMAP_CURVES: 0 none, 1 aces, 2 agx, 3 pbr_neutral), so a frame runs
-// one curve's code, not all four (llvmpipe runs every branch).
+// (components/post.py TONEMAP_CURVES: 0 none, 1 aces, 2 agx, 3 pbr_neutral, defined as
+// TONEMAP_NONE and so on by the shader library from that tuple), so a frame runs one
+// curve's code, not all four (llvmpipe runs every branch).
 //
 // GLSL matrices are built column by column: each vec3 below is a column of the matrix as
 // its reference writes it in rows.
 
-#define TONEMAP_NONE 0
-#define TONEMAP_ACES 1
-#define TONEMAP_AGX 2
-#define TONEMAP_PBR_NEUTRAL 3
 #ifndef TONEMAP_CURVE
 #define TONEMAP_CURVE TONEMAP_NONE
 #endif

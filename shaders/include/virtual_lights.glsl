@@ -8,8 +8,9 @@
 // each entered from its front (virtual_more: up to MAX_APERTURES - 1 of them a light).
 // Only the VIRTUAL_LIGHTS builds hold it (engine/render/scene_pass.py): frames where one shines.
 #ifdef VIRTUAL_LIGHTS
-#define MAX_VIRTUAL_LIGHTS 4   // engine/rules/shadow_rules.py MAX_VIRTUAL_LIGHTS
-#define VIRTUAL_MORE 3         // MAX_APERTURES - 1 (components/limits.py MAX_LIGHT_BOUNCES - 1)
+// MAX_VIRTUAL_LIGHTS: engine/rules/shadow_rules.py's, defined by the shader library; so is
+// MAX_APERTURES (components/limits.py MAX_LIGHT_BOUNCES): the exit's outline and
+// MAX_APERTURES - 1 more a light.
 layout(std140) uniform VirtualLights {
     ivec4 virtual_count;                            // x: how many
     mat4 virtual_matrix[MAX_VIRTUAL_LIGHTS];        // world -> atlas uv and depth (divide by w)
@@ -22,7 +23,7 @@ layout(std140) uniform VirtualLights {
     vec4 virtual_v[MAX_VIRTUAL_LIGHTS];             // xyz: the other edge likewise
     vec4 virtual_params[MAX_VIRTUAL_LIGHTS];        // x: an atlas texel in uv, y: softness, z: taps a side,
                                                     // w: how many further outlines (virtual_more)
-    vec4 virtual_more[MAX_VIRTUAL_LIGHTS * VIRTUAL_MORE * 4];  // per outline: plane, corner, u, v (as above)
+    vec4 virtual_more[MAX_VIRTUAL_LIGHTS * (MAX_APERTURES - 1) * 4];  // per outline: plane, corner, u, v (as above)
 } virtual_lights;
 
 // Whether the line from ``position`` along ``l`` (towards the image), already through the
@@ -31,7 +32,7 @@ layout(std140) uniform VirtualLights {
 bool virtual_through(int i, vec3 position, vec3 l, float t, float dist) {
     int count = int(virtual_lights.virtual_params[i].w);
     for (int k = 0; k < count; ++k) {
-        int at = (i * VIRTUAL_MORE + k) * 4;
+        int at = (i * (MAX_APERTURES - 1) + k) * 4;
         vec4 plane = virtual_lights.virtual_more[at];
         float towards = dot(plane.xyz, l);
         float h = dot(plane.xyz, position) + plane.w;

@@ -1,11 +1,13 @@
-// Show and hide in reflections (components/visibility.py).  An instance's code (tint.w,
-// engine/render/instances.py visibility_code) holds the kinds of view it is hidden in (bits
-// 0-3) and the reflection layers it belongs to (bits 4-19), an integer exact in a float; a
-// view's mask (View.view_mask) holds the kinds of view it is (bits 0-3: direct, mirror,
-// portal, probe, accumulated along its chain of surfaces) and the layers it shows (bits 4-19).
+// Show and hide in reflections (components/visibility.py): the visibility rule of
+// engine/rules/visibility_rules.py, its one owner (tests/test_one_owner.py runs these
+// functions against its drawn_in and hidden_everywhere).  An instance's code (tint.w,
+// entity_code) holds the kinds of view it is hidden in (the low VIEW_KIND_BITS bits) and the
+// reflection layers it belongs to (the bits above), an integer exact in a float; a view's
+// mask (View.view_mask) holds the kinds of view it is (direct, mirror, portal, probe,
+// accumulated along its chain of surfaces) and the layers it shows, packed the same way.
 // The view leaves the instance out when it is of a kind the instance is hidden in, or when
-// they share no layer.
-#define VIEW_KIND_BITS 4u  // components/limits.py VIEW_KINDS
+// they share no layer.  VIEW_KIND_BITS is defined by the shader library (engine_defines,
+// from components/limits.py VIEW_KINDS).
 
 bool hidden_in_view(float instance_code, uint view_mask) {
     uint code = uint(instance_code + 0.5);

@@ -1,6 +1,6 @@
 // Water (components/water.py) in the reflection's composite: the rippled normal from two
 // scrolling layers of the mirror's normal map, and the reflection's Fresnel weight.
-// Needs normal_map.glsl (the map). Included by every build of the composite, only
+// Needs normal_map.glsl (the map) and ggx.glsl (schlick_fresnel). Included by every build of the composite, only
 // COMPOSITE_WATER calls it: an include inside an #ifdef would hide its errors from every
 // build that leaves it out.
 
@@ -28,6 +28,5 @@ vec3 water_normal(vec3 t, vec3 b, vec3 n, vec2 uv, vec2 flow, float share, float
 // Schlick's approximation of the reflectance of a dielectric with reflectance f0 at normal
 // incidence, for a surface of normal n seen from direction to_eye (both unit).
 float water_fresnel(vec3 n, vec3 to_eye, float f0) {
-    float c = clamp(dot(n, to_eye), 0.0, 1.0);
-    return f0 + (1.0 - f0) * pow(1.0 - c, 5.0);
+    return schlick_fresnel(n, to_eye, vec3(f0)).x;
 }

@@ -1,0 +1,88 @@
+"""The frame report and the budget ledger: what one frame cost (``RenderStats``, a world
+resource made fresh by ``shell.app.Engine.frame``; re-exported by ``engine.resources``) and
+what its ``ViewBudget`` allowed and what was spent of it (``BudgetLedger``).
+
+Plain data, no GL.  The passes count into the report while the frame runs (the renderer
+holds the frame's object); the stages that draw extra views spend the ledger in the order
+the frame runs them (the shadows stage's virtual lights, the probes stage's faces, the
+reflect stage's view trees, the recaptures after present), each asking ``views_left`` (the
+view trees ``pixels_left`` too) before it draws, and the probes' scheduler defers the faces
+``probe_ms_budget`` leaves out; tests, benchmarks and the overlay read both after the frame.
+The report is a ledger (one object a frame, so every spender and reader sees the same
+counts): its fields are the ledger's and its own.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+__all__ = ["BudgetLedger", "RenderStats"]
+
+
+@dataclass
+class BudgetLedger:
+    """The frame's view budget (``engine.resources.ViewBudget``): its limits (None: none),
+    and what was spent (reflection views of every tree and probe faces drawn) and cut
+    (views with pixels and probe faces the budget left out; the faces wait for a later
+    frame)."""
+
+    view_budget: int | None = None
+    views_spent: int = 0
+    views_cut: int = 0
+    probe_ms_budget: float | None = None
+    probe_ms_spent: float = 0.0         # the captures' cost by their measured ms a face
+    probe_faces_deferred: int = 0       # faces due that the budgets left for a later frame
+    pixel_budget: int | None = None
+    pixels_spent: int = 0               # reflection pixels drawn, at the screen's resolution
+    levels_downscaled: int = 0          # levels the pixel budget drew at a lower resolution
+
+    def pixels_left(self) -> int | None:
+        """Reflection pixels the frame's budget still allows (None: no limit)."""
+        return None if self.pixel_budget is None else max(self.pixel_budget - self.pixels_spent, 0)
+
+    def views_left(self) -> int | None:
+        """Views the frame's budget still allows (None: no limit)."""
+        return None if self.view_budget is None else max(self.view_budget - self.views_spent, 0)
+
+
+@dataclass
+class RenderStats(BudgetLedger):
+    """What the last frame cost, and its budget ledger: read by tests, benchmarks and the
+    overlay."""
+
+    passes: int = 0
+    draw_calls: int = 0
+    uploaded_bytes: int = 0
+    instances: int = 0
+    reflection_views: int = 0
+    probe_captures: int = 0   # probes that captured at least one face this frame
+    probe_faces: int = 0      # cube faces captured this frame
+    probe_path: str = ""      # the path of the last probe capture: "six_pass" or "layered" (while there are probes)
+    reflection_views_dropped: int = 0   # views with pixels a level's view budget left out
+    reflection_depth_capped: int = 0    # views the surfaces' own depth limits allowed below the tree's cap
+    reflection_views_faded: int = 0     # mirror views their fades took out (each cost nothing)
+    reflection_end_views: int = 0       # views past the depth limits shown as last frame's image
+    reflection_visibility: str = ""     # "exact" or "predicted": how the main tree's levels knew their pixels
+    reflection_views_unseen: int = 0    # views drawn that had no pixels last frame (predicted visibility)
+    # How reflection levels were drawn: "per_mirror", "batched", "mixed" (auto chose both in
+    # one frame), or "" when no reflection view was drawn (ReflectionSystem.path).
+    reflection_path: str = ""
+    # The path self-check's verdicts so far on this context (engine/render/path_checks.py):
+    # the alternative GL paths compared with their plain counterparts and trusted, or refused.
+    paths_verified: tuple[str, ...] = ()
+    paths_refused: tuple[str, ...] = ()
+    # Shadow maps (systems/shadow_system.py): drawn this frame, kept from an earlier frame (no
+    # caster or light changed), and lights whose shadows a limit left out (point lights past
+    # MAX_POINT_SHADOWS); how the last point light's cube was drawn ("layered" or "six_pass").
+    shadow_maps_drawn: int = 0           # (their draws: shadow_draw_calls, not in passes or draw_calls)
+    shadow_draw_calls: int = 0
+    shadow_texels_drawn: int = 0         # of directional maps: a moved caster redraws only its footprint's
+    shadow_maps_kept: int = 0
+    shadows_cut: int = 0
+    virtual_lights: int = 0              # lights shining through mirrors and portals this frame
+    virtual_lights_cut: int = 0          # ... that the limit or the view budget left out
+    shadow_path: str = ""
+    # Mirrors and portals seen without a view of their own (cut by a budget, faded, past the
+    # depth limit, switched off), or partly faded, or an end view's pixels last frame's image
+    # did not hold, that showed the fallback (the probe's or the sky's reflection) this
+    # frame, in every tree: one per (parent view, surface).
+    reflection_fallbacks: int = 0

@@ -1,0 +1,208 @@
+"""What every pass draws with: the GL context and its capabilities, the shader library, the
+Camera and Lights blocks, the sky, the instance batches in their draw order, the probes'
+cube maps, the path self-check's verdicts, and the frame's ``RenderStats`` while a frame
+runs.
+
+The passes (the scene pass, shadows, irradiance, probes, the view tree's passes, the path
+self-check) are given this and the passes they draw through, never the whole renderer:
+``Renderer`` (``engine/render/renderer.py``) is a ``Gpu`` that also makes the passes and
+makes and releases the shared meshes, textures and batches (by reference count), so it
+stands above every pass and no pass imports it.
+"""
+from __future__ import annotations
+
+import os
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Protocol
+
+import moderngl
+
+from engine.assets.texture_data import TextureData
+from engine.core.errors import GLPassError
+from engine.frame_stats import RenderStats
+from engine.render.bindings import CAMERA_BINDING, bind_uniform_range
+from engine.render.gl_context import GLCapabilities
+from engine.render.instances import GpuMesh, InstanceBatch
+from engine.render.raw_gl import RawGL
+from engine.render.shader_library import ShaderLibrary
+from engine.render.sky import flat_cube
+from engine.render.views import CAMERA_BLOCK_BYTES, LIGHTS_BLOCK_BYTES, View
+from engine.rules.probe_rules import ProbeBlend
+
+__all__ = ["BACKGROUND", "Gpu", "PathTrust", "ProbeCube", "Shared"]
+
+TEXTURE_ANISOTROPY = 8.0
+BACKGROUND = (0.05, 0.05, 0.06)
+
+
+@dataclass
+class ProbeCube:
+    """One probe's cube map (RGBA16F, mipmapped, seamless) and where it was captured from.
+
+    ``box`` (world min, max corners), when set, makes lookups parallax-corrected: the
+    reflected ray is followed from the shaded point to the box's wall and the cube is
+    sampled towards that point from ``position`` (box projection)."""
+
+    texture: moderngl.TextureCube
+    resolution: int
+    position: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    box: tuple[tuple[float, float, float], tuple[float, float, float]] | None = None
+    prefilter: str = "mips"
+
+    @property
+    def roughness_levels(self) -> float:
+        """For a GGX-prefiltered chain, its top level (level L holds roughness L / this);
+        0 for box mips (sampled with a roughness bias instead)."""
+        return float(self.resolution.bit_length() - 1) if self.prefilter == "ggx" else 0.0
+
+    def lookup(self) -> tuple[tuple[float, ...], tuple[float, ...], tuple[float, ...]]:
+        """The scene shader's probe_position (w: ``roughness_levels``), probe_box_min (w: 1 =
+        box projection on) and probe_box_max uniforms."""
+        position = (*self.position, self.roughness_levels)
+        if self.box is None:
+            return position, (0.0, 0.0, 0.0, 0.0), (0.0, 0.0, 0.0, 0.0)
+        return position, (*self.box[0], 1.0), (*self.box[1], 0.0)
+
+    @property
+    def face_size(self) -> int:
+        return self.resolution
+
+
+class PathTrust(Protocol):
+    """Whether an alternative GL path (a name of ``path_checks.PATH_NAMES``) may be used on
+    this context: the path self-check answers, checking it at its first use."""
+
+    def trusted(self, path: str) -> bool: ...
+
+
+class _TrustNone:
+    """The verdicts before the self-check is made: no alternative path is trusted."""
+
+    def trusted(self, path: str) -> bool:
+        return False
+
+
+_TRUST_NONE = _TrustNone()
+
+
+class Shared:
+    """A GL object shared by reference count."""
+
+    __slots__ = ("obj", "users")
+
+    def __init__(self, obj: moderngl.Texture | GpuMesh) -> None:
+        self.obj = obj
+        self.users = 0
+
+
+class Gpu:
+    """The GL objects every pass draws with, and the frame's counters (module docstring)."""
+
+    def __init__(self, ctx: moderngl.Context, caps: GLCapabilities) -> None:
+        self.ctx = ctx
+        self.caps = caps
+        self.raw_gl = RawGL(ctx)
+        self.shaders = ShaderLibrary(ctx)
+        # A pass's Camera blocks, one after another at the alignment a uniform range needs.
+        align = max(1, int(ctx.info.get("GL_UNIFORM_BUFFER_OFFSET_ALIGNMENT", 256)))
+        self.camera_stride = -(-CAMERA_BLOCK_BYTES // align) * align
+        self._camera_padding = bytes(self.camera_stride - CAMERA_BLOCK_BYTES)
+        self.cameras_ubo = ctx.buffer(reserve=self.camera_stride * 16)
+        self.lights_ubo = ctx.buffer(reserve=LIGHTS_BLOCK_BYTES)
+        # Textures shared by reference count (the Renderer makes and releases them), by
+        # id(TextureData); ("normal", id): uploaded linear (normal and metallic-roughness maps)
+        self._textures: dict[object, Shared] = {}
+        # (mesh, texture, probe, transparent entity, normal map, emissive map, metallic-roughness map) -> batch
+        self.batches: dict[tuple[int, int, int, int, int, int, int], InstanceBatch] = {}
+        self._draw_order: list[InstanceBatch] = []   # non-empty batches, smallest extent first
+        self._order_stale = True
+        self.sky = flat_cube(ctx, BACKGROUND)
+        self.stats = RenderStats()  # the frame's, while a frame runs (Engine.frame gives it)
+        # Each mirror's and portal's fallback probes (probe_rules.surface_blend), by entity: the
+        # extract stage's, read by the view trees' composites.
+        self.surface_probes: dict[int, ProbeBlend] = {}
+        # Every probe's cube map by probe key: made and released by the probe captures
+        # (engine/render/probes.py), sampled by the scene pass and the composites.
+        self.probe_cubes: dict[int, ProbeCube] = {}
+        self.capturing = 0  # the probe whose cube is being drawn into (0: none): no pass samples it
+        # The path self-check (engine/render/path_checks.py, made by the Renderer above every
+        # pass): which alternative GL paths this context draws right.  Until it is made, none.
+        self.path_checks: PathTrust = _TRUST_NONE
+        self.texture_anisotropy = min(TEXTURE_ANISOTROPY, ctx.max_anisotropy)
+        # Texture filtering inside mirror and portal views.  A software rasteriser spends
+        # about 60% of a reflection view's time in the anisotropic filter (measured on
+        # llvmpipe, benchmarks/mirrors.py), so there reflections filter trilinearly; a GPU
+        # filters them like the main view.  Set it to texture_anisotropy for equal quality.
+        self.reflection_anisotropy = 1.0 if caps.software else self.texture_anisotropy
+        # Normal maps likewise: on llvmpipe an 8x anisotropic normal map on the benchmark
+        # ground cost +36-41% of the frame, trilinear +4-5% (benchmarks/normal_maps.py).  Set
+        # before the first normal map is uploaded.
+        self.normal_map_anisotropy = 1.0 if caps.software else self.texture_anisotropy
+        # Debug mode: every pass checks for an OpenGL error when it ends and names itself
+        # (checkpoint); glGetError is cheap on the CPU but makes no sense to pay in a game.
+        self.debug = os.environ.get("SPECULUM_DEBUG", "") not in ("", "0")
+        # When set, the only batches scene passes draw (the path self-check's own scene).
+        self.scene_only: list[InstanceBatch] | None = None
+        # A batch was made since prepare_programs last ran (Engine.frame calls it then).
+        self.needs_preparing = False
+
+    def normal_map_texture(self, normal_map: TextureData) -> moderngl.Texture | None:
+        """The uploaded normal map of ``normal_map`` while a batch draws with it (a mirror's
+        composite reads the one its scene-pass batch holds), else None."""
+        shared = self._textures.get(("normal", id(normal_map)))
+        return shared.obj if shared is not None else None
+
+
+    def bind_view(self, view: View) -> None:
+        """Make ``view`` the Camera block every program reads (a pass of one view)."""
+        self.upload_views((view,))
+        self.bind_view_at(0)
+
+    def upload_views(self, views: Sequence[View]) -> None:
+        """The Camera blocks of a pass's views in one buffer, in one upload (``bind_view_at``
+        then binds view i's range): one write a pass, not one a view, and into fresh storage
+        (orphaned), so a GPU driver never waits for, or copies, a block the pass before
+        still reads."""
+        padding = self._camera_padding
+        data = b"".join(view.camera_block() + padding for view in views)
+        if len(data) > self.cameras_ubo.size:
+            reserve = max(len(data), 2 * self.cameras_ubo.size)
+            self.cameras_ubo.release()
+            self.cameras_ubo = self.ctx.buffer(reserve=reserve)
+        else:
+            self.cameras_ubo.orphan()
+        self.cameras_ubo.write(data)
+
+    def bind_view_at(self, index: int) -> None:
+        """Make the ``index``-th view of the last ``upload_views`` the Camera block."""
+        bind_uniform_range(self.ctx, self.cameras_ubo, CAMERA_BINDING, index * self.camera_stride,
+                           CAMERA_BLOCK_BYTES)
+
+    def opaque_batches(self) -> list[InstanceBatch]:
+        """Non-empty opaque batches, smallest extent first (re-sorted after uploads)."""
+        if self.scene_only is not None:
+            return self.scene_only
+        if self._order_stale:
+            self._draw_order = sorted((b for b in self.batches.values() if b.count and not b.transparent),
+                                      key=lambda b: b.extent)
+            self._order_stale = False
+        return self._draw_order
+
+    def transparent_batches(self) -> list[InstanceBatch]:
+        """Non-empty batches drawn in the scene pass's transparent slot (none until a
+        material is transparent: refraction fills the slot)."""
+        if self.scene_only is not None:
+            return []
+        return [b for b in self.batches.values() if b.count and b.transparent]
+
+    def checkpoint(self, name: str) -> None:
+        """In debug mode, raise ``GLPassError`` naming pass ``name`` if it left a GL error."""
+        if self.debug:
+            error = self.ctx.error
+            if error != "GL_NO_ERROR":
+                raise GLPassError(f"OpenGL error {error} in the {name} pass")
+
+    def flush(self) -> None:
+        """Start the GPU on the passes queued so far, before CPU-only work (``RawGL.flush``)."""
+        self.raw_gl.flush()

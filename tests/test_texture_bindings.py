@@ -1,0 +1,204 @@
+"""Texture units remember what they hold (``bindings.bind_texture``): a pass binds only what
+another pass displaced, so a frame's second and later scene passes bind no shadow map,
+irradiance table or sky already in place; and the record never takes a texture for another:
+a released texture whose GL name a new texture reuses is bound again, and after
+``invalidate`` (raw GL, state set outside the engine) everything is bound again.
+
+GL calls are counted with the cpu benchmark's ``GLCallCounter`` (every call into moderngl's
+GL objects); which texture went to which unit is recorded by a spy that passes every call
+on to moderngl (the frames are real).  Checked by breaking the record: keyed by the GL name
+(``texture.glo``) instead of the object, the reused-name test draws black; with
+``invalidate`` not clearing it, the raw-GL test draws the other texture; binding every time
+(``CACHE_STATE = False``) fails the counts.
+"""
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import moderngl
+import numpy as np
+import pytest
+
+from benchmarks.cpu import GLCallCounter
+from benchmarks.mirrors import DT, MirrorRing
+from components import DirectionalLight
+from engine.core.frame_io import Output
+from engine.render import bindings
+from engine.render.bindings import SHADOW_ATLAS_UNIT, bind_texture, invalidate
+from engine.render.targets import CaptureTarget
+from shell.app import Engine
+
+SIZE = (96, 54)
+REPO = Path(__file__).resolve().parent.parent
+UNIT = 6
+
+_VERTEX = """#version 410 core
+void main() { gl_Position = vec4(vec2(gl_VertexID & 1, gl_VertexID >> 1) * 4.0 - 1.0, 0.0, 1.0); }
+"""
+_FRAGMENT = """#version 410 core
+uniform sampler2D image;
+out vec4 colour;
+void main() { colour = texelFetch(image, ivec2(0), 0); }
+"""
+
+
+def _texture(ctx: moderngl.Context, rgba: tuple[int, int, int, int]) -> moderngl.Texture:
+    return ctx.texture((1, 1), 4, bytes(rgba))
+
+
+def _draw(ctx: moderngl.Context, vao: moderngl.VertexArray, target: CaptureTarget,
+          forget: bool = True) -> tuple[int, ...]:
+    """One full-screen draw sampling ``UNIT``; the centre pixel.  The fixed-function state is
+    set here outside ``apply_pass_state``; ``forget``: then ``invalidate`` (which forgets the
+    textures too)."""
+    target.framebuffer.use()
+    ctx.viewport = (0, 0, *target.size)
+    ctx.disable(moderngl.BLEND | moderngl.DEPTH_TEST | moderngl.CULL_FACE)
+    if forget:
+        invalidate(ctx)
+    vao.render(moderngl.TRIANGLES, vertices=3)
+    return tuple(int(v) for v in target.read_rgb()[2, 2])
+
+
+@pytest.fixture
+def sampling(ctx):
+    program = ctx.program(vertex_shader=_VERTEX, fragment_shader=_FRAGMENT)
+    program["image"].value = UNIT
+    vao = ctx.vertex_array(program, [])
+    target = CaptureTarget(ctx, (4, 4))
+    yield vao, target
+    target.release()
+    vao.release()
+    program.release()
+
+
+def reused_name_case() -> str:
+    """In a context whose driver reuses released names: bind red, release it, make green
+    (it gets red's GL name), bind green; the pixel drawn, and whether the name was reused."""
+    from engine.render.gl_context import create_headless_context
+
+    ctx = create_headless_context()
+    program = ctx.program(vertex_shader=_VERTEX, fragment_shader=_FRAGMENT)
+    program["image"].value = UNIT
+    vao = ctx.vertex_array(program, [])
+    target = CaptureTarget(ctx, (4, 4))
+    red = _texture(ctx, (255, 0, 0, 255))
+    bind_texture(ctx, red, UNIT)
+    first = _draw(ctx, vao, target, forget=False)
+    name = red.glo
+    red.release()   # the unit now holds texture 0
+    green = _texture(ctx, (0, 255, 0, 255))
+    bind_texture(ctx, green, UNIT)
+    second = _draw(ctx, vao, target, forget=False)
+    return f"{green.glo == name} {first} {second}".replace(", ", ",")
+
+
+def test_a_released_texture_whose_name_a_new_one_reuses_is_bound_again():
+    """Mesa reuses released texture names when asked (driconf ``force_gl_names_reuse``, read
+    when the process makes its first context), as GPU drivers do: so in a process of its own."""
+    code = "from tests.test_texture_bindings import reused_name_case; print(reused_name_case())"
+    env = {**os.environ, "force_gl_names_reuse": "true"}
+    done = subprocess.run([sys.executable, "-c", code], cwd=REPO, env=env, capture_output=True, text=True,
+                          timeout=120)
+    assert done.returncode == 0, done.stderr
+    reused, first, second = done.stdout.strip().splitlines()[-1].split(" ", 2)
+    assert reused == "True", "the driver did not reuse the released name: the case is not set up"
+    assert first == "(255,0,0)"
+    assert second == "(0,255,0)", second   # a record keyed by the GL name skips the bind: black
+
+
+def test_after_invalidate_every_texture_is_bound_again(ctx, sampling):
+    vao, target = sampling
+    red, blue = _texture(ctx, (255, 0, 0, 255)), _texture(ctx, (0, 0, 255, 255))
+    try:
+        invalidate(ctx)
+        bind_texture(ctx, red, UNIT)
+        assert _draw(ctx, vao, target) == (255, 0, 0)
+        bind_texture(ctx, red, UNIT)
+        blue.use(UNIT)  # GL outside the record (raw GL, a game's own pass)...
+        invalidate(ctx)  # ...followed by invalidate, as bindings' contract asks
+        bind_texture(ctx, red, UNIT)
+        assert _draw(ctx, vao, target) == (255, 0, 0)
+    finally:
+        red.release()
+        blue.release()
+
+
+def _ring(ctx, mirrors: int) -> Engine:
+    engine = Engine(MirrorRing(mirrors), ctx)
+    for _, light in engine.world.query_one(DirectionalLight):
+        light.shadows = True
+    engine.game.spinning.clear()
+    return engine
+
+
+class _BindSpy:
+    """Which texture each ``use`` call bound on which unit (every call passed on)."""
+
+    def __init__(self, monkeypatch) -> None:
+        self.binds: list[tuple[object, int]] = []
+        for cls in (moderngl.Texture, moderngl.TextureCube):
+            original = cls.use
+
+            def use(texture, location=0, _original=original):
+                self.binds.append((texture, location))
+                return _original(texture, location)
+            monkeypatch.setattr(cls, "use", use)
+
+
+def test_a_second_identical_scene_pass_binds_nothing(ctx):
+    engine = _ring(ctx, 0)
+    capture = CaptureTarget(ctx, SIZE)
+    try:
+        output = Output(capture.framebuffer, SIZE)
+        engine.frame(DT, output)
+        renderer = engine.renderer
+        first = np.frombuffer(renderer.targets.color.read(), np.float16).copy()
+        assert renderer.shadows.atlas is not None and np.isfinite(first).all() and first.max() > 0.05
+        counter = GLCallCounter()
+        with counter:
+            renderer.scene_pass.draw([engine.main_view], renderer.targets)
+            bound_first = counter.calls["Texture.use"] + counter.calls["TextureCube.use"]
+            counter.reset()
+            renderer.scene_pass.draw([engine.main_view], renderer.targets)
+            bound_again = counter.calls["Texture.use"] + counter.calls["TextureCube.use"]
+        assert bound_first > 0   # a batch's albedo map again: the present pass took its unit (0) since
+        assert bound_again == 0, dict(counter.calls)
+        again = np.frombuffer(renderer.targets.color.read(), np.float16)
+        np.testing.assert_array_equal(again, first)
+    finally:
+        capture.release()
+        engine.close()
+
+
+def test_a_mirror_frame_binds_the_shadow_atlas_once(ctx, monkeypatch):
+    """Eight mirrors: the main pass and the reflection passes each read the shadow atlas; it
+    is bound at the frame's first pass only, and the frame equals that of a twin engine
+    whose passes bind every texture every time (``CACHE_STATE`` off), frame by frame."""
+    engines = [_ring(ctx, 8), _ring(ctx, 8)]
+    captures = [CaptureTarget(ctx, SIZE), CaptureTarget(ctx, SIZE)]
+    try:
+        outputs = [Output(capture.framebuffer, SIZE) for capture in captures]
+        spy = _BindSpy(monkeypatch)
+        for _ in range(3):
+            frames, atlas_binds = [], []
+            for engine, output, capture, cache in zip(engines, outputs, captures, (True, False), strict=True):
+                monkeypatch.setattr(bindings, "CACHE_STATE", cache)
+                spy.binds.clear()
+                engine.frame(DT, output)
+                atlas = engine.renderer.shadows.atlas
+                atlas_binds.append([unit for texture, unit in spy.binds if texture is atlas])
+                frames.append(capture.read_rgb().copy())
+            assert engines[0].renderer.stats.passes > 4, "the frame has reflection passes"
+            assert atlas_binds[0] == [SHADOW_ATLAS_UNIT]
+            assert len(atlas_binds[1]) > 1   # binding every time: once a scene pass
+            assert frames[0].mean() > 10
+            np.testing.assert_array_equal(frames[0], frames[1])
+    finally:
+        for capture in captures:
+            capture.release()
+        for engine in engines:
+            engine.close()
