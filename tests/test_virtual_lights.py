@@ -516,3 +516,36 @@ def test_light_bounces_is_checked_and_carried_by_level_files(tmp_path):
     names_again = load_level(save_level(world, tmp_path / "again.toml", names)).spawn(again)
     assert again.get(names_again["sun"], DirectionalLight).bounces == 3
     assert again.get(names_again["lamp"], PointLight).bounces == 2
+
+
+def test_light_path_is_the_shaders_aperture_test_on_the_cpu(scene):
+    """``shadow_rules.light_path`` (what a game asks, e.g. mirror beam's target) says the
+    doubly reflected sun reaches exactly the floor points the float64 rays say it reaches
+    through both outlines (no occluders: it tests no shadows), and its corners are where
+    those rays cross B and A."""
+    from engine.rules.shadow_rules import ShadowCasters, light_path
+
+    def build(world):
+        world.resources["ids"] = _two_mirror_scene(world)
+
+    runner = scene(build)
+    runner.frame()
+    twice = [v for v in runner.world.resources[ShadowCasters].virtual if v.bounces == 2]
+    assert len(twice) == 1
+    ids = runner.world.resources["ids"]
+    assert twice[0].path == (ids["a"], ids["b"])
+    rng = np.random.default_rng(7)
+    points = np.column_stack([rng.uniform(-3.0, 2.0, 4000), np.zeros(4000), rng.uniform(-2.5, 2.5, 4000)])
+    rays = _twice_lit(points, 0.0, ())
+    ways = [light_path(twice[0], p) for p in points]
+    says = np.array([w is not None for w in ways])
+    near_edge = _twice_lit(points, 0.01, ()) != _twice_lit(points, -0.01, ())
+    assert rays.sum() > 500 and np.array_equal(says[~near_edge], rays[~near_edge])
+    lit = int(np.flatnonzero(rays & ~near_edge)[0])
+    back = -SUN
+    at_b = points[lit] + back * (B_X - points[lit][0]) / back[0]
+    at_a_image = points[lit] + back * (2 * B_X - A_X - points[lit][0]) / back[0]
+    at_a = at_a_image * np.array([-1.0, 1.0, 1.0]) + np.array([2 * B_X, 0.0, 0.0])
+    np.testing.assert_allclose(ways[lit][1], at_b, atol=1e-4)
+    np.testing.assert_allclose(ways[lit][2], at_a, atol=1e-4)
+    np.testing.assert_allclose((ways[lit][3] - at_a) / np.linalg.norm(ways[lit][3] - at_a), back, atol=1e-4)
