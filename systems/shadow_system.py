@@ -244,8 +244,7 @@ class ShadowSystem(esper.Processor):
         for slot in [s for s in self._virtual if s >= drawn]:
             del self._virtual[slot]
         stats.virtual_lights = drawn
-        maps.set_virtual_count(drawn)
-        renderer.scene_pass.virtual_lights = drawn > 0
+        maps.set_virtual_count(drawn)  # the scene pass builds the virtual lights' loop while any shine
         return shining
 
 

@@ -147,10 +147,6 @@ class ScenePass:
         self._views_ubo: moderngl.Buffer | None = None
         self._ambient_probes = False  # this pass draws the AMBIENT_PROBES builds (IrradianceTable.bind)
         self._reflection_sampler: moderngl.Sampler | None = None
-        # Whether a virtual light shines this frame (the shadows stage sets it): the scene
-        # programs are built with its loop only then (llvmpipe runs a loop's body for every
-        # pixel even when it has nothing to do).
-        self.virtual_lights = False
 
     def program(self, variants: tuple[int, int, int] | None = None, invocations: int = 0,
                 layered: str = "", normal_mapped: bool = False, checker: bool = False,
@@ -179,7 +175,7 @@ class ScenePass:
             for batch in self.renderer.batches.values():
                 batch.drop_vertex_arrays()  # made again for the relinked programs' inputs
             self._reloads_seen = reloads
-        virtual = self.virtual_lights
+        virtual = self.shadows.virtual_shining  # the shadows stage set how many shine
         key = (invocations, layered, variants, normal_mapped, checker, material_maps, probe_blend, virtual,
                ambient_probes, probe_rest)
         program = self._programs.get(key)

@@ -257,6 +257,13 @@ class ShadowMaps:
         """How many virtual lights shine (slots 0 to count - 1)."""
         self.virtual_block[:4].view(np.int32)[0] = count
 
+    @property
+    def virtual_shining(self) -> bool:
+        """Whether a virtual light shines this frame: the scene pass builds its programs with
+        the virtual lights' loop only then (llvmpipe runs a loop's body for every pixel even
+        when it has nothing to do)."""
+        return bool(self.virtual_block[:4].view(np.int32)[0])
+
     # --- point lights ---------------------------------------------------------------------
     def draw_point(self, slot: int, light_index: int, position: glm.vec3, light_range: float, resolution: int,
                    softness: float, layered: bool) -> str:
