@@ -161,6 +161,12 @@ BAD_ASSIGNMENTS = [
     (Transform, "scale", (0.0, 1.0, 1.0)),
     (Transform, "position", (NAN, 0.0, 0.0)),
     (Transform, "rotation", glm.quat(0.0, 0.0, 0.0, 0.0)),
+    # glm values take Transform's inline checks (its __setattr__): refused the same way.
+    (Transform, "position", glm.vec3(NAN, 0.0, 0.0)),
+    (Transform, "position", glm.vec3(0.0, 0.0, -INF)),
+    (Transform, "position", glm.vec3(0.0, 2e9, 0.0)),     # past POSITION_MAX
+    (Transform, "rotation", glm.quat(NAN, 0.0, 0.0, 0.0)),
+    (Transform, "rotation", glm.quat(1.0, INF, 0.0, 0.0)),
     (Material, "roughness", 2.0),
     (Material, "color", (NAN, NAN, NAN)),
     (Emissive, "power", -1.0),
@@ -247,6 +253,30 @@ def test_field_writes_are_reported_to_the_world(world):
     assert world.changed(Material) == set()
     mat.touch()                           # ... until touched
     assert world.changed(Material) == {e}
+
+
+def test_glm_writes_are_checked_copied_and_reported_like_any_other(world):
+    """Transform's inline path for glm positions and rotations (its ``__setattr__``) keeps
+    what the general one does: a copy of the vector, the rotation normalised, the write
+    reported, a bound value kept, a refused one not reported."""
+    from components.transform import POSITION_MAX
+    e = world.spawn(Transform())
+    world.step(0.0)
+    t = world.get(e, Transform)
+    p = glm.vec3(POSITION_MAX, -POSITION_MAX, 1.0)
+    t.position = p
+    assert t.position == p and t.position is not p        # a copy: editing p later is not the field
+    assert world.changed(Transform) == {e}
+    t.rotation = glm.quat(2.0, 0.0, 0.0, 0.0)
+    assert t.rotation == glm.quat(1.0, 0.0, 0.0, 0.0)
+    assert t.rotation == Transform(rotation=(2.0, 0.0, 0.0, 0.0)).rotation  # as the general path gives
+    world.step(0.0)
+    with pytest.raises(ComponentValueError, match=r"Transform\.position must be within"):
+        t.position = glm.vec3(0.0, 0.0, POSITION_MAX * 2.0)
+    with pytest.raises(ComponentValueError, match=r"Transform\.rotation must not be the zero quaternion"):
+        t.rotation = glm.quat(0.0, 0.0, 0.0, 0.0)
+    assert world.changed(Transform) == set()
+    assert t.position == p and t.rotation == glm.quat(1.0, 0.0, 0.0, 0.0)
 
 
 def test_failed_write_is_not_reported(world):
