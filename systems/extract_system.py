@@ -84,22 +84,29 @@ class ExtractSystem(esper.Processor):
                 batch = self._batch_of.get(entity)
                 if batch is not None and batch.mirrored != _mirrors(component(entity, Transform).world):
                     self._refresh_instance(entity)
+        worlds = frame.worlds  # the matrices the transform stage wrote (the others: their Transform's)
         for entities, moving in ((frame.moved, True), ((frame.added | joined) - frame.moved, False)):
-            for batch, group in self._by_batch(entities).items():
-                batch.write_transforms(group, [component(entity, Transform).world for entity in group], moving)
+            for batch, (group, models) in self._by_batch(entities, worlds, component).items():
+                batch.write_transforms(group, models, moving)
 
-    def _by_batch(self, entities: set[int]) -> dict[InstanceBatch, list[int]]:
-        """``entities`` that have a row, by their batch."""
+    def _by_batch(self, entities: set[int], worlds: dict[int, glm.mat4],
+                  component) -> dict[InstanceBatch, tuple[list[int], list[glm.mat4]]]:
+        """``entities`` that have a row, by their batch, with their world matrices (from
+        ``worlds`` where it has them, else from their Transform): one pass over the entities."""
         batch_of = self._batch_of
-        groups: dict[InstanceBatch, list[int]] = {}
+        groups: dict[InstanceBatch, tuple[list[int], list[glm.mat4]]] = {}
         for entity in entities:
             batch = batch_of.get(entity)
             if batch is not None:
+                model = worlds.get(entity)
+                if model is None:
+                    model = component(entity, Transform).world
                 group = groups.get(batch)
                 if group is None:
-                    groups[batch] = [entity]
+                    groups[batch] = ([entity], [model])
                 else:
-                    group.append(entity)
+                    group[0].append(entity)
+                    group[1].append(model)
         return groups
 
     def _refresh_instance(self, entity: int) -> None:

@@ -81,6 +81,10 @@ class FrameEvents:
     moved: set[int] = field(default_factory=set)
     added: set[int] = field(default_factory=set)
     removed: set[int] = field(default_factory=set)
+    # The world matrix the TransformSystem wrote this frame, by entity (``Transform.world``,
+    # handed on so the extract stage does not look a thousand movers' components up again);
+    # an entity missing here is read from its Transform.
+    worlds: dict[int, Any] = field(default_factory=dict)
 
 
 class World:

@@ -57,6 +57,47 @@ _SPAN_SLACK = 4
 _GATHER_AT = 16
 
 
+# Rows from which write_transforms works the normal matrices out on arrays (normal_matrices)
+# rather than one glm call chain a row: a dozen numpy calls cost about what 30 rows' glm do.
+_NORMALS_ON_ARRAYS = 32
+
+
+def _inverse_terms() -> tuple[np.ndarray, ...]:
+    """Index tables for ``normal_matrices``: for each element of the normal matrix (column-major
+    3x3, element (c, r) = inverse (r, c)), the four model elements (indices into the flat
+    column-major 4x4) of its cofactor ``a * b - c * d``, and its sign, in the order and form
+    GLM's ``inverse(mat3)`` writes them (``Inverse[i][j]`` below, column i, row j)."""
+    glm_inverse = {  # Inverse[i][j]: sign, then m[.][.] of "a * b - c * d" (m[column][row])
+        (0, 0): (1, (1, 1), (2, 2), (2, 1), (1, 2)), (1, 0): (-1, (1, 0), (2, 2), (2, 0), (1, 2)),
+        (2, 0): (1, (1, 0), (2, 1), (2, 0), (1, 1)), (0, 1): (-1, (0, 1), (2, 2), (2, 1), (0, 2)),
+        (1, 1): (1, (0, 0), (2, 2), (2, 0), (0, 2)), (2, 1): (-1, (0, 0), (2, 1), (2, 0), (0, 1)),
+        (0, 2): (1, (0, 1), (1, 2), (1, 1), (0, 2)), (1, 2): (-1, (0, 0), (1, 2), (1, 0), (0, 2)),
+        (2, 2): (1, (0, 0), (1, 1), (1, 0), (0, 1)),
+    }
+    terms = [glm_inverse[(r, c)] for c in range(3) for r in range(3)]  # normal (c, r) = Inverse[r][c]
+    index = [np.array([t[k][0] * 4 + t[k][1] for t in terms]) for k in range(1, 5)]
+    return (*index, np.array([t[0] for t in terms], np.float32))
+
+
+_COFACTOR_A, _COFACTOR_B, _COFACTOR_C, _COFACTOR_D, _COFACTOR_SIGN = _inverse_terms()
+
+
+def normal_matrices(models: np.ndarray) -> np.ndarray:
+    """The normal matrices (n, 9), column-major, of float32 model matrices (n, 16): the inverse
+    transpose of each upper 3x3 by cofactors over determinant, all rows at once, with GLM's
+    ``transpose(inverse(mat3(m)))`` arithmetic in float32 step for step (the same operands,
+    order and rounding), so a row is the same bits whichever path wrote it."""
+    u = models[:, _COFACTOR_A] * models[:, _COFACTOR_B] - models[:, _COFACTOR_C] * models[:, _COFACTOR_D]
+    # GLM's determinant: + m00 (m11 m22 - m21 m12) - m10 (m01 m22 - m21 m02) + m20 (m01 m12 - m11 m02),
+    # those cofactors being the normal matrix's elements 0, 3 and 6 before their signs.
+    det = models[:, 0] * u[:, 0] - models[:, 4] * u[:, 3] + models[:, 8] * u[:, 6]
+    with np.errstate(divide="ignore"):
+        one = np.float32(1.0) / det
+    u *= one[:, None]
+    u *= _COFACTOR_SIGN  # a sign flip is exact: (-x) * one == -(x * one)
+    return u
+
+
 class GpuMesh:
     """Vertex and index buffers of one Mesh, shared by every batch that draws it."""
 
@@ -71,6 +112,9 @@ class GpuMesh:
         hi = mesh.positions.max(axis=0) if len(mesh.positions) else np.zeros(3)
         self.corners = np.array([[x, y, z, 1.0] for x in (lo[0], hi[0]) for y in (lo[1], hi[1])
                                  for z in (lo[2], hi[2])], np.float64)
+        # The same box as columns (c, 1), to scale a model matrix's axes by (InstanceBatch._grow_box).
+        self.box_lo = np.asarray(lo, np.float64).reshape(3, 1)
+        self.box_hi = np.asarray(hi, np.float64).reshape(3, 1)
 
     def release(self) -> None:
         self.vertices.release()
@@ -177,10 +221,14 @@ class InstanceBatch:
         if moving and len(rows) >= _GATHER_AT and rows.max() >= self._moving:  # some outside the block
             self._gather(rows)
             rows = np.array([index[entity] for entity in entities], np.int64)
-        self.rows["model"][rows] = np.frombuffer(glm.array(models).to_bytes(), np.float32).reshape(-1, 16)
-        self.rows["normal_matrix"][rows] = np.frombuffer(
-            glm.array([glm.transpose(glm.inverse(glm.mat3(model))) for model in models]).to_bytes(),
-            np.float32).reshape(-1, 9)
+        flat = np.frombuffer(glm.array(models).to_bytes(), np.float32).reshape(-1, 16)
+        self.rows["model"][rows] = flat
+        if len(models) >= _NORMALS_ON_ARRAYS:
+            self.rows["normal_matrix"][rows] = normal_matrices(flat)
+        else:
+            self.rows["normal_matrix"][rows] = np.frombuffer(
+                glm.array([glm.transpose(glm.inverse(glm.mat3(model))) for model in models]).to_bytes(),
+                np.float32).reshape(-1, 9)
         self._dirty.update(rows.tolist())
 
     def _gather(self, movers: np.ndarray) -> None:
@@ -257,26 +305,42 @@ class InstanceBatch:
             return glm.vec3()
         return glm.vec3(*self.rows["model"][: self.count, 12:15].mean(axis=0).tolist())
 
-    def _grow_scale(self, rows: np.ndarray) -> None:
+    def _grow_scale(self, rows: np.ndarray | slice) -> None:
         model = self.rows["model"][rows]
         if len(model):
             squares = [np.einsum("ij,ij->i", model[:, c:c + 3], model[:, c:c + 3]).max() for c in (0, 4, 8)]
             self._max_scale = max(self._max_scale, float(np.sqrt(max(squares))))
 
-    def _grow_box(self, rows: np.ndarray) -> None:
-        """Measure the world boxes of ``rows`` (just sent) and forget the union."""
+    def _grow_box(self, rows: np.ndarray | slice) -> None:
+        """Measure the world boxes of ``rows`` (just sent: indices, or a slice when they are
+        one run) and forget the union.
+
+        A row's box is that of its mesh's box corners placed by its model matrix, worked out
+        axis by axis without placing the eight corners: along world axis r the lowest corner
+        is the translation plus, for each model axis c, the lower of ``lo_c * M[c][r]`` and
+        ``hi_c * M[c][r]`` (the sum of the smallest terms is the smallest sum; rounding is
+        monotonic, so it is the same float64 number as the least of the eight corners')."""
         self._boxes_for(len(self.rows))
         models = self.rows["model"][rows].astype(np.float64).reshape(-1, 4, 4)  # [instance, column, row]
-        world = np.einsum("kc,ncr->nkr", self.mesh.corners, models)[..., :3]
-        old = self._row_boxes[rows]
-        lo, hi = world.min(axis=1), world.max(axis=1)
-        changed = ~np.all((old[:, 0] == lo) & (old[:, 1] == hi), axis=1)  # rewritten in place: no change
-        if changed.any():
-            with np.errstate(invalid="ignore"):
-                self._note_changed(np.nanmin(np.concatenate([old[changed, 0], lo[changed]]), axis=0),
-                                   np.nanmax(np.concatenate([old[changed, 1], hi[changed]]), axis=0))
-        self._row_boxes[rows, 0] = lo
-        self._row_boxes[rows, 1] = hi
+        axes = models[:, :3, :3]
+        low, high = axes * self.mesh.box_lo, axes * self.mesh.box_hi  # (n, c, r): each corner's terms
+        near, far = np.minimum(low, high), np.maximum(low, high)
+        lo = near[:, 0] + near[:, 1]
+        lo += near[:, 2]
+        lo += models[:, 3, :3]
+        hi = far[:, 0] + far[:, 1]
+        hi += far[:, 2]
+        hi += models[:, 3, :3]
+        boxes = self._row_boxes
+        old = boxes[rows]
+        same = (old[:, 0] == lo) & (old[:, 1] == hi)  # rewritten in place: no change
+        if not same.all():
+            changed = ~same.all(axis=1)
+            # The old boxes (NaN: never measured, left out by fmin/fmax) and the new ones.
+            self._note_changed(np.fmin(np.fmin.reduce(old[changed, 0]), np.fmin.reduce(lo[changed])),
+                               np.fmax(np.fmax.reduce(old[changed, 1]), np.fmax.reduce(hi[changed])))
+        boxes[rows, 0] = lo
+        boxes[rows, 1] = hi
         self._box = None
 
     def _boxes_for(self, rows: int) -> np.ndarray:
@@ -326,8 +390,12 @@ class InstanceBatch:
         dirty = np.fromiter(self._dirty, np.int64, len(self._dirty))
         dirty.sort()
         self._dirty.clear()
-        self._grow_scale(dirty)
-        self._grow_box(dirty)
+        first, last = int(dirty[0]), int(dirty[-1])
+        # One run (the movers' block at the front, gathered by write_transforms): measured
+        # through views of the rows, not copies picked out by index.
+        measured = slice(first, last + 1) if last - first + 1 == len(dirty) else dirty
+        self._grow_scale(measured)
+        self._grow_box(measured)
         breaks = np.flatnonzero(np.diff(dirty) != 1) + 1
         starts = np.concatenate([[dirty[0]], dirty[breaks]])
         ends = np.concatenate([dirty[breaks - 1], [dirty[-1]]]) + 1
