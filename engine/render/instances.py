@@ -112,9 +112,8 @@ class GpuMesh:
         hi = mesh.positions.max(axis=0) if len(mesh.positions) else np.zeros(3)
         self.corners = np.array([[x, y, z, 1.0] for x in (lo[0], hi[0]) for y in (lo[1], hi[1])
                                  for z in (lo[2], hi[2])], np.float64)
-        # The same box as columns (c, 1), to scale a model matrix's axes by (InstanceBatch._grow_box).
-        self.box_lo = np.asarray(lo, np.float64).reshape(3, 1)
-        self.box_hi = np.asarray(hi, np.float64).reshape(3, 1)
+        # The same box as (lo/hi, column, 1), to scale a model matrix's axes by (InstanceBatch._grow_box).
+        self.box_ends = np.array([lo, hi], np.float64).reshape(2, 3, 1)
 
     def release(self) -> None:
         self.vertices.release()
@@ -308,8 +307,9 @@ class InstanceBatch:
     def _grow_scale(self, rows: np.ndarray | slice) -> None:
         model = self.rows["model"][rows]
         if len(model):
-            squares = [np.einsum("ij,ij->i", model[:, c:c + 3], model[:, c:c + 3]).max() for c in (0, 4, 8)]
-            self._max_scale = max(self._max_scale, float(np.sqrt(max(squares))))
+            axes = model[:, :12].reshape(-1, 3, 4)[:, :, :3]  # [instance, column, row]: the three axes
+            longest = np.einsum("ncr,ncr->nc", axes, axes).max()  # squared lengths, the largest
+            self._max_scale = max(self._max_scale, float(np.sqrt(longest)))
 
     def _grow_box(self, rows: np.ndarray | slice) -> None:
         """Measure the world boxes of ``rows`` (just sent: indices, or a slice when they are
@@ -319,28 +319,24 @@ class InstanceBatch:
         axis by axis without placing the eight corners: along world axis r the lowest corner
         is the translation plus, for each model axis c, the lower of ``lo_c * M[c][r]`` and
         ``hi_c * M[c][r]`` (the sum of the smallest terms is the smallest sum; rounding is
-        monotonic, so it is the same float64 number as the least of the eight corners')."""
+        monotonic, so it is the same float64 number as the least of the eight corners');
+        the highest likewise.  Lows and highs are worked out together, as the rows' boxes
+        are kept ([row, lo/hi, axis])."""
         self._boxes_for(len(self.rows))
         models = self.rows["model"][rows].astype(np.float64).reshape(-1, 4, 4)  # [instance, column, row]
-        axes = models[:, :3, :3]
-        low, high = axes * self.mesh.box_lo, axes * self.mesh.box_hi  # (n, c, r): each corner's terms
-        near, far = np.minimum(low, high), np.maximum(low, high)
-        lo = near[:, 0] + near[:, 1]
-        lo += near[:, 2]
-        lo += models[:, 3, :3]
-        hi = far[:, 0] + far[:, 1]
-        hi += far[:, 2]
-        hi += models[:, 3, :3]
+        terms = models[:, None, :3, :3] * self.mesh.box_ends  # [instance, lo/hi corner, column, row]
+        terms.sort(axis=1)  # each term's lower value first: the low corner's, then the high one's
+        box = terms[:, :, 0] + terms[:, :, 1]
+        box += terms[:, :, 2]
+        box += models[:, None, 3, :3]
         boxes = self._row_boxes
         old = boxes[rows]
-        same = (old[:, 0] == lo) & (old[:, 1] == hi)  # rewritten in place: no change
-        if not same.all():
-            changed = ~same.all(axis=1)
+        changed = (old != box).any(axis=(1, 2))  # rewritten in place: no change
+        if changed.any():
             # The old boxes (NaN: never measured, left out by fmin/fmax) and the new ones.
-            self._note_changed(np.fmin(np.fmin.reduce(old[changed, 0]), np.fmin.reduce(lo[changed])),
-                               np.fmax(np.fmax.reduce(old[changed, 1]), np.fmax.reduce(hi[changed])))
-        boxes[rows, 0] = lo
-        boxes[rows, 1] = hi
+            both = np.concatenate((old, box) if changed.all() else (old[changed], box[changed]))
+            self._note_changed(np.fmin.reduce(both[:, 0]), np.fmax.reduce(both[:, 1]))
+        boxes[rows] = box
         self._box = None
 
     def _boxes_for(self, rows: int) -> np.ndarray:
@@ -385,26 +381,32 @@ class InstanceBatch:
         if self._rescale:
             self._max_scale, self._rescale, self._box = 0.0, False, None
             self._grow_scale(np.arange(self.count))
-        if not self._dirty:
+        dirty = self._dirty
+        if not dirty:
             return 0
-        dirty = np.fromiter(self._dirty, np.int64, len(self._dirty))
-        dirty.sort()
-        self._dirty.clear()
-        first, last = int(dirty[0]), int(dirty[-1])
-        # One run (the movers' block at the front, gathered by write_transforms): measured
-        # through views of the rows, not copies picked out by index.
-        measured = slice(first, last + 1) if last - first + 1 == len(dirty) else dirty
+        self._dirty = set()
+        first, last, count = min(dirty), max(dirty), len(dirty)
+        if last - first + 1 == count:
+            # One run (the movers' block at the front, gathered by write_transforms): measured
+            # through views of the rows, not copies picked out by index, and sent in one write.
+            measured = slice(first, last + 1)
+            starts, ends = [first], [last + 1]
+        else:
+            measured = np.fromiter(dirty, np.int64, count)
+            measured.sort()
+            if last + 1 - first <= _SPAN_SLACK * count:
+                starts, ends = [first], [last + 1]  # the span is not much more than the rows
+            else:
+                breaks = np.flatnonzero(np.diff(measured) != 1) + 1
+                starts = [first, *measured[breaks].tolist()]
+                ends = [*(measured[breaks - 1] + 1).tolist(), last + 1]
         self._grow_scale(measured)
         self._grow_box(measured)
-        breaks = np.flatnonzero(np.diff(dirty) != 1) + 1
-        starts = np.concatenate([[dirty[0]], dirty[breaks]])
-        ends = np.concatenate([dirty[breaks - 1], [dirty[-1]]]) + 1
-        if len(starts) > 1 and (ends[-1] - starts[0]) <= _SPAN_SLACK * len(dirty):
-            starts, ends = starts[:1], ends[-1:]
         sent = 0
         data = memoryview(self.rows.view(np.uint8))  # rows as bytes: a run is a slice, not a copy
         write = self._buffer.write
-        for start, end in zip((starts * size).tolist(), (ends * size).tolist(), strict=True):
+        for start, end in zip(starts, ends, strict=True):
+            start, end = start * size, end * size
             write(data[start:end], offset=start)
             sent += end - start
         return sent
