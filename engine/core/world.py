@@ -347,8 +347,10 @@ class World:
     # --- change sets -----------------------------------------------------------------------
     def changed(self, kind: type) -> set[int]:
         """Entities whose ``kind`` component was added, removed or written since last step."""
-        self._check_open()
-        return self._changed.get(kind, set())
+        if self._closed:  # _check_open, inlined: dozens of calls a frame
+            self._check_open()
+        found = self._changed.get(kind)
+        return set() if found is None else found
 
     def deleted(self) -> set[int]:
         """Entities deleted since the last step (their components are gone now)."""
