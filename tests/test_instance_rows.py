@@ -85,3 +85,74 @@ def test_rows_and_boxes_agree_with_placed_corners_on_both_paths(ctx):
         assert now[0][0] > was[0][0] + 499.0
     finally:
         batch.release()
+
+
+def test_the_same_movers_every_frame_keep_their_rows_right_when_one_changes_batch_or_goes(scene):
+    """The extract stage reuses last frame's movers by batch, and a batch its movers' rows,
+    while the same entities move and none changed batch or place: each row must still hold
+    its entity's world matrix when a mover changes mesh (another batch), one is deleted (a
+    row filled from the last) and one more starts moving."""
+    from components import Material, MeshRef, Transform
+    from engine.assets.mesh import sphere
+
+    cube, ball, post = box((0.3, 0.3, 0.3)), sphere(0.2), box((0.1, 0.5, 0.1))
+    movers: list[int] = []
+    posts: list[int] = []
+    clock = [0.0]
+
+    def build(world):
+        from engine.core.game import spawn_camera
+        spawn_camera(world, position=(0.0, 6.0, 12.0), pitch=-25.0, fly=False)
+        for i in range(60):
+            entity = world.spawn(Transform(position=(i % 10 - 5.0, 0.0, i // 10 - 3.0)), MeshRef(cube), Material())
+            if i % 3 == 0:
+                movers.append(entity)
+        for i in range(5):  # a batch of few movers (their rows stay where they are), the last one moving
+            posts.append(world.spawn(Transform(position=(i - 2.0, 0.0, 4.0)), MeshRef(post), Material()))
+            if i % 2 == 0:
+                movers.append(posts[-1])
+
+    def update(world, dt):
+        clock[0] += dt
+        for n, entity in enumerate(movers):
+            if world.exists(entity):
+                t = world.get(entity, Transform)
+                t.rotation = glm.angleAxis(clock[0] * (1.0 + n), glm.vec3(0.0, 1.0, 0.0))
+                t.position = glm.vec3(t.position.x, 0.3 * np.sin(clock[0] * 3.0 + n), t.position.z)
+
+    runner = scene(build)
+    runner.engine.game._update = update  # tests.support.FunctionGame's update
+    world = runner.world
+
+    def check():
+        batches = runner.engine.renderer.batches.values()
+        seen = 0
+        for batch in batches:
+            for entity, row in batch.row_of.items():
+                t = world.get(entity, Transform)  # a root: its pose is its world matrix
+                pose = glm.translate(t.position) * glm.mat4_cast(t.rotation) * glm.scale(t.scale)
+                model = np.frombuffer(glm.array([pose]).to_bytes(), np.float32)
+                assert np.array_equal(batch.rows["model"][row], model), entity
+                normal = glm.transpose(glm.inverse(glm.mat3(pose)))
+                assert np.array_equal(batch.rows["normal_matrix"][row],
+                                      np.frombuffer(glm.array([normal]).to_bytes(), np.float32)), entity
+                seen += 1
+        assert seen == len([e for e, _ in world.query(MeshRef, Transform)])
+
+    for _ in range(4):
+        runner.frame()
+    check()
+    world.get(movers[3], MeshRef).mesh = ball    # a mover to another batch
+    runner.frame()
+    check()
+    world.delete_entity(movers[0])               # a mover's row refilled from the batch's last
+    runner.frame()
+    check()
+    # A still post deleted: its row is refilled from the batch's last, a mover's (the same
+    # movers, one on another row).
+    batch = next(b for b in runner.engine.renderer.batches.values() if posts[0] in b.row_of)
+    assert batch.entity_at[-1] == posts[-1] and posts[-1] in movers and batch.count == 5
+    world.delete_entity(posts[1])
+    for _ in range(3):
+        runner.frame()
+        check()

@@ -150,6 +150,11 @@ class InstanceBatch:
         self.entity_at: list[int] = []
         self._dirty: set[int] = set()
         self._moving = 0  # rows [0, _moving) are those of instances that have moved (write_transforms)
+        # Counts changes of existing rows' places (a removal's fill, a gather's swaps): the
+        # last movers' rows, (layout, entities, rows, rows as a list), hold while it stands
+        # (a game's movers write the same entities every frame: their rows are not looked up again).
+        self._layout = 0
+        self._rows_of: tuple[int, list[int], np.ndarray, list[int]] | None = None
         self._buffer = ctx.buffer(reserve=capacity * INSTANCE_DTYPE.itemsize)
         self._buffer_rows = capacity
         self._vaos: dict[int, moderngl.VertexArray] = {}
@@ -215,11 +220,17 @@ class InstanceBatch:
         the rows a frame's movers write lie together and go up in one write, not one per
         scattered row (1,000 movers among 100,000 rows: 4 writes a frame, not 1,000).  A few
         movers keep their rows: a few writes cost less than the swaps."""
-        index = self.row_of
-        rows = np.array([index[entity] for entity in entities], np.int64)
-        if moving and len(rows) >= _GATHER_AT and rows.max() >= self._moving:  # some outside the block
-            self._gather(rows)
+        kept = self._rows_of
+        if kept is not None and kept[0] == self._layout and kept[1] == entities:
+            rows, listed = kept[2], kept[3]  # the same entities as last time, on the same rows
+        else:
+            index = self.row_of
             rows = np.array([index[entity] for entity in entities], np.int64)
+            if moving and len(rows) >= _GATHER_AT and rows.max() >= self._moving:  # some outside the block
+                self._gather(rows)
+                rows = np.array([index[entity] for entity in entities], np.int64)
+            listed = rows.tolist()
+            self._rows_of = (self._layout, list(entities), rows, listed) if moving else None
         flat = np.frombuffer(glm.array(models).to_bytes(), np.float32).reshape(-1, 16)
         self.rows["model"][rows] = flat
         if len(models) >= _NORMALS_ON_ARRAYS:
@@ -228,7 +239,7 @@ class InstanceBatch:
             self.rows["normal_matrix"][rows] = np.frombuffer(
                 glm.array([glm.transpose(glm.inverse(glm.mat3(model))) for model in models]).to_bytes(),
                 np.float32).reshape(-1, 9)
-        self._dirty.update(rows.tolist())
+        self._dirty.update(listed)
 
     def _gather(self, movers: np.ndarray) -> None:
         """Grow the front block of moving rows by the ``movers`` (distinct rows) outside it:
@@ -253,10 +264,12 @@ class InstanceBatch:
         self._dirty.update(free.tolist())
         self._dirty.update(far.tolist())
         self._moving = end
+        self._layout += 1
 
     def remove(self, entity: int) -> None:
         index = self.row_of.pop(entity)
         last = self.count - 1
+        self._layout += 1
         if index != last:
             moved = self.entity_at[last]
             self.rows[index] = self.rows[last]
