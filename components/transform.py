@@ -59,6 +59,7 @@ class Transform(TrackedComponent):
                 sink = self._sink
                 if sink is not None:
                     sink.update(self._entities)
+                    self._written[self._entity] = self  # World.written: found without a look-up
                 return
         elif kind is glm.quat and name == "rotation":
             w, x, y, z = value  # a glm.quat unpacks as (w, x, y, z)
@@ -68,6 +69,7 @@ class Transform(TrackedComponent):
                 sink = self._sink
                 if sink is not None:
                     sink.update(self._entities)
+                    self._written[self._entity] = self
                 return
         TrackedComponent.__setattr__(self, name, value)
 

@@ -41,11 +41,14 @@ class TransformSystem(esper.Processor):
         worlds = events.worlds
         translate, mat4_cast, scale = glm.translate, glm.mat4_cast, glm.scale
         dirty: set[int] = set()  # entities in a hierarchy: their subtrees are worked out below
+        written = world.written(Transform)  # the movers' components, as their writes left them
         for entity in changed:
-            try:
-                transform = None if deleted and entity in deleted else component(entity, Transform)
-            except KeyError:  # gone from the world (deleted, and cleared, since it changed)
-                transform = None
+            transform = written.get(entity)
+            if transform is None or transform._sink is not changed or transform._entity != entity:
+                try:  # not a hot-path write, or the component has left the entity since
+                    transform = None if deleted and entity in deleted else component(entity, Transform)
+                except KeyError:  # gone from the world (deleted, and cleared, since it changed)
+                    transform = None
             if transform is None:
                 if entity in parent_of:
                     events.removed.add(entity)

@@ -279,6 +279,34 @@ def test_glm_writes_are_checked_copied_and_reported_like_any_other(world):
     assert t.position == p and t.rotation == glm.quat(1.0, 0.0, 0.0, 0.0)
 
 
+def test_the_transform_stage_uses_the_entitys_transform_whatever_happened_after_a_write(world):
+    """A glm write leaves its component in ``World.written`` (the transform stage finds it
+    there, not through esper): a component replaced, removed or deleted with its entity after
+    the write, in the same frame, must not be the one the stage places the entity by."""
+    from systems.transform_system import TransformSystem
+    system = TransformSystem(world)
+    a, b, c, d = (world.spawn(Transform(position=(float(i), 0.0, 0.0))) for i in range(4))
+    system.process(0.0)
+    world.step(0.0)
+    old_a, old_b = world.get(a, Transform), world.get(b, Transform)
+    old_a.position = glm.vec3(10.0, 0.0, 0.0)      # a hot write, then the component replaced
+    world.add_component(a, Transform(position=(20.0, 0.0, 0.0)))
+    old_b.rotation = glm.quat(0.0, 0.0, 1.0, 0.0)  # a hot write, then the component removed
+    world.remove_component(b, Transform)
+    world.get(c, Transform).position = glm.vec3(30.0, 0.0, 0.0)  # a hot write, then the entity deleted
+    world.delete_entity(c)
+    world.get(d, Transform).position = glm.vec3(40.0, 0.0, 0.0)  # a hot write alone
+    assert set(world.written(Transform)) == {a, b, c, d}
+    system.process(0.0)
+    assert world.get(a, Transform).world[3].xyz == glm.vec3(20.0, 0.0, 0.0)   # the new component's
+    assert old_a.world[3].xyz == glm.vec3(0.0, 0.0, 0.0)                      # the old one untouched
+    assert old_b.world[3].xyz == glm.vec3(1.0, 0.0, 0.0)
+    assert world.get(d, Transform).world[3].xyz == glm.vec3(40.0, 0.0, 0.0)
+    assert world.frame.removed == {b, c} and world.frame.moved == {a, d}
+    world.step(0.0)
+    assert world.written(Transform) == {}                  # a step's hint, forgotten with its changes
+
+
 def test_failed_write_is_not_reported(world):
     e = world.spawn(Emissive(1.0))
     world.step(0.0)
