@@ -57,9 +57,10 @@ class Transform(TrackedComponent):
             if -limit <= x <= limit and -limit <= y <= limit and -limit <= z <= limit:
                 self.__dict__["position"] = glm.vec3(value)
                 sink = self._sink
-                if sink is not None:
-                    sink.update(self._entities)
-                    self._written[self._entity] = self  # World.written: found without a look-up
+                if sink is not None:  # held by one entity (not SHAREABLE): _entities is {_entity}
+                    entity = self._entity
+                    sink.add(entity)
+                    self._written[entity] = self  # World.written: found without a look-up
                 return
         elif kind is glm.quat and name == "rotation":
             w, x, y, z = value  # a glm.quat unpacks as (w, x, y, z)
@@ -68,8 +69,9 @@ class Transform(TrackedComponent):
                 self.__dict__["rotation"] = glm.quat(w / norm, x / norm, y / norm, z / norm)
                 sink = self._sink
                 if sink is not None:
-                    sink.update(self._entities)
-                    self._written[self._entity] = self
+                    entity = self._entity
+                    sink.add(entity)
+                    self._written[entity] = self
                 return
         TrackedComponent.__setattr__(self, name, value)
 
