@@ -338,9 +338,11 @@ class InstanceBatch:
         self._boxes_for(len(self.rows))
         models = self.rows["model"][rows].astype(np.float64).reshape(-1, 4, 4)  # [instance, column, row]
         terms = models[:, None, :3, :3] * self.mesh.box_ends  # [instance, lo/hi corner, column, row]
-        terms.sort(axis=1)  # each term's lower value first: the low corner's, then the high one's
-        box = terms[:, :, 0] + terms[:, :, 1]
-        box += terms[:, :, 2]
+        ends = np.empty_like(terms)  # each term's lower value, then its higher one
+        np.minimum(terms[:, 0], terms[:, 1], out=ends[:, 0])
+        np.maximum(terms[:, 0], terms[:, 1], out=ends[:, 1])
+        box = ends[:, :, 0] + ends[:, :, 1]
+        box += ends[:, :, 2]
         box += models[:, None, 3, :3]
         boxes = self._row_boxes
         old = boxes[rows]
