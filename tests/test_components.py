@@ -307,6 +307,19 @@ def test_the_transform_stage_uses_the_entitys_transform_whatever_happened_after_
     assert world.written(Transform) == {}                  # a step's hint, forgotten with its changes
 
 
+def test_changed_any_is_the_union_of_the_change_sets_and_a_set_of_its_own(world):
+    a = world.spawn(Transform(), Material())
+    b = world.spawn(Emissive(1.0))
+    world.step(0.0)
+    world.get(a, Material).roughness = 0.5
+    world.get(b, Emissive).power = 2.0
+    found = world.changed_any((Material, Emissive, Camera))
+    assert found == world.changed(Material) | world.changed(Emissive) == {a, b}
+    found.add(99)                                   # the caller's to change
+    assert world.changed(Material) == {a} and world.changed(Emissive) == {b}
+    assert world.changed_any(()) == set() and world.changed_any((Camera,)) == set()
+
+
 def test_failed_write_is_not_reported(world):
     e = world.spawn(Emissive(1.0))
     world.step(0.0)

@@ -355,6 +355,19 @@ class World:
         found = self._changed.get(kind)
         return set() if found is None else found
 
+    def changed_any(self, kinds: Iterable[type]) -> set[int]:
+        """Entities with a component of any of ``kinds`` added, removed or written since the
+        last step: the union of ``changed`` over them, a new set (one call, not one a kind)."""
+        if self._closed:
+            self._check_open()
+        sets = self._changed
+        found: set[int] = set()
+        for kind in kinds:
+            entities = sets.get(kind)
+            if entities:
+                found |= entities
+        return found
+
     def written(self, kind: type) -> dict[int, Any]:
         """Components of ``kind`` whose writes came through a hot path this step (Transform's
         glm position and rotation writes), by entity: the object each write was made on, so
