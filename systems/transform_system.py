@@ -39,7 +39,6 @@ class TransformSystem(esper.Processor):
         moved, added = events.moved, events.added
         component, deleted = _lookups(world)
         worlds = events.worlds
-        translate, mat4_cast, scale = glm.translate, glm.mat4_cast, glm.scale
         dirty: set[int] = set()  # entities in a hierarchy: their subtrees are worked out below
         written = world.written(Transform)  # the movers' components, as their writes left them
         for entity in changed:
@@ -62,13 +61,10 @@ class TransformSystem(esper.Processor):
                 self._link(entity, transform.parent)
                 dirty.add(entity)
                 continue
-            # The common case, a root without children: its world matrix is its local one
-            # (Transform.local_matrix, inlined: a thousand movers a frame), written here
-            # without the subtree walk.
+            # The common case, a root without children: its world matrix is its local one,
+            # written here without the subtree walk.
             parent_of[entity] = None
-            state = transform.__dict__
-            worlds[entity] = state["_world"] = (translate(state["position"]) * mat4_cast(state["rotation"])
-                                                * scale(state["scale"]))
+            worlds[entity] = transform.__dict__["_world"] = transform.local_matrix()
         if dirty:
             self._expand(dirty)
             for entity in dirty:
