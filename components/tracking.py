@@ -73,6 +73,7 @@ class TrackedComponent:
     _sink: set[int] | None = None
     _entity: int = 0                      # the entity it last joined
     _entities: frozenset[int] = frozenset()  # every entity holding it (one unless shared)
+    _written: dict[int, Any] | None = None    # the world's hot-path writes of its kind (World.written)
     # False for components that are one entity's own state (see the module docstring).
     SHAREABLE: ClassVar[bool] = True
 

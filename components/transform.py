@@ -45,6 +45,36 @@ class Transform(TrackedComponent):
     def world(self) -> glm.mat4:
         return self._world
 
+    def __setattr__(self, name: str, value: Any) -> None:
+        # The hot writes, a game's every frame (``t.position = p``, ``t.rotation = q`` with
+        # glm values), checked inline: the same checks ``_validate`` makes, without its calls
+        # (a thousand movers write twice each a frame).  A value that fails them, or any other
+        # write, takes the general path (TrackedComponent.__setattr__), which says why.
+        kind = type(value)
+        if kind is glm.vec3 and name == "position":
+            x, y, z = value
+            limit = POSITION_MAX  # a NaN fails every comparison, an infinity the bound
+            if -limit <= x <= limit and -limit <= y <= limit and -limit <= z <= limit:
+                self.__dict__["position"] = glm.vec3(value)
+                sink = self._sink
+                if sink is not None:  # held by one entity (not SHAREABLE): _entities is {_entity}
+                    entity = self._entity
+                    sink.add(entity)
+                    self._written[entity] = self  # World.written: found without a look-up
+                return
+        elif kind is glm.quat and name == "rotation":
+            w, x, y, z = value  # a glm.quat unpacks as (w, x, y, z)
+            norm = math.sqrt(w * w + x * x + y * y + z * z)  # as rotation() does, in double
+            if norm != 0.0 and math.isfinite(norm):
+                self.__dict__["rotation"] = glm.quat(w / norm, x / norm, y / norm, z / norm)
+                sink = self._sink
+                if sink is not None:
+                    entity = self._entity
+                    sink.add(entity)
+                    self._written[entity] = self
+                return
+        TrackedComponent.__setattr__(self, name, value)
+
     def local_matrix(self) -> glm.mat4:
         # The fields read past the in-place watch (components.tracking): this is the engine's
         # own read, every changed transform every frame, and never edits them.

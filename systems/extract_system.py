@@ -50,6 +50,9 @@ class ExtractSystem(esper.Processor):
         self._looks = LookChanges()  # what changes a look, and which probe each object samples
         self._joined: set[int] = set()
         self._surface_probes = SurfaceProbes()  # each mirror's and portal's fallback probes
+        self._layout = 0  # counts changes of _batch_of (an entity given, moved to or taken from a batch)
+        # (layout, the entities, them by batch) of the last frame's movers (process).
+        self._moved_groups: tuple[int, set[int], dict[InstanceBatch, list[int]]] | None = None
 
     def process(self, dt: float) -> None:
         world = self.world
@@ -79,9 +82,22 @@ class ExtractSystem(esper.Processor):
                 batch = self._batch_of.get(entity)
                 if batch is not None and batch.mirrored != _mirrors(component(entity, Transform).world):
                     self._refresh_instance(entity)
-        for entities, moving in ((frame.moved, True), ((frame.added | joined) - frame.moved, False)):
-            for batch, group in self._by_batch(entities).items():
-                batch.write_transforms(group, [component(entity, Transform).world for entity in group], moving)
+        worlds = frame.worlds  # the matrices the transform stage wrote (the others: their Transform's)
+        # The movers by batch: last frame's grouping again when the same entities moved and no
+        # entity changed batch since (a game's movers are mostly the same every frame: a
+        # thousand batch look-ups saved, and each batch finds the same list, InstanceBatch.write_transforms).
+        moved = frame.moved
+        kept = self._moved_groups
+        if kept is not None and kept[0] == self._layout and kept[1] == moved:
+            groups = kept[2]
+        else:
+            groups = self._by_batch(moved)
+            self._moved_groups = (self._layout, set(moved), groups) if moved else None
+        for entities, moving in ((groups, True), (self._by_batch((frame.added | joined) - moved), False)):
+            for batch, group in entities.items():
+                models = [worlds[entity] if entity in worlds else component(entity, Transform).world
+                          for entity in group]
+                batch.write_transforms(group, models, moving)
 
     def _by_batch(self, entities: set[int]) -> dict[InstanceBatch, list[int]]:
         """``entities`` that have a row, by their batch."""
@@ -127,6 +143,7 @@ class ExtractSystem(esper.Processor):
                 self._remove_instance(entity, old)
             row = batch.add(entity)
             self._batch_of[entity] = batch
+            self._layout += 1
             self._joined.add(entity)
         else:
             row = batch.row(entity)
@@ -152,6 +169,7 @@ class ExtractSystem(esper.Processor):
     def _remove_instance(self, entity: int, batch: InstanceBatch) -> None:
         batch.remove(entity)
         del self._batch_of[entity]
+        self._layout += 1
         self.renderer.drop_batch_if_empty(batch)
 
     def close(self) -> None:

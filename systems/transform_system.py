@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import esper
+from pyglm import glm
 
 from components import Transform
 from engine.core.world import FrameEvents, World
@@ -37,13 +38,16 @@ class TransformSystem(esper.Processor):
         parent_of, children = self._parent_of, self._children
         moved, added = events.moved, events.added
         component, deleted = _lookups(world)
-        set_world = object.__setattr__
+        worlds = events.worlds
         dirty: set[int] = set()  # entities in a hierarchy: their subtrees are worked out below
+        written = world.written(Transform)  # the movers' components, as their writes left them
         for entity in changed:
-            try:
-                transform = None if entity in deleted else component(entity, Transform)
-            except KeyError:  # gone from the world (deleted, and cleared, since it changed)
-                transform = None
+            transform = written.get(entity)
+            if transform is None or transform._sink is not changed or transform._entity != entity:
+                try:  # not a hot-path write, or the component has left the entity since
+                    transform = None if deleted and entity in deleted else component(entity, Transform)
+                except KeyError:  # gone from the world (deleted, and cleared, since it changed)
+                    transform = None
             if transform is None:
                 if entity in parent_of:
                     events.removed.add(entity)
@@ -60,13 +64,13 @@ class TransformSystem(esper.Processor):
             # The common case, a root without children: its world matrix is its local one,
             # written here without the subtree walk.
             parent_of[entity] = None
-            set_world(transform, "_world", transform.local_matrix())
+            worlds[entity] = transform.__dict__["_world"] = transform.local_matrix()
         if dirty:
             self._expand(dirty)
             for entity in dirty:
                 parent = parent_of.get(entity)
                 if parent is None or parent not in dirty:
-                    self._update_subtree(entity)
+                    self._update_subtree(entity, worlds)
             moved |= dirty - added
         world.frame = events
 
@@ -96,7 +100,7 @@ class TransformSystem(esper.Processor):
                     dirty.add(child)
                     stack.append(child)
 
-    def _update_subtree(self, root: int) -> None:
+    def _update_subtree(self, root: int, worlds: dict[int, glm.mat4]) -> None:
         world = self.world
         stack = [root]
         while stack:
@@ -107,7 +111,8 @@ class TransformSystem(esper.Processor):
             parent = self._parent_of.get(entity)
             parent_t = world.try_get(parent, Transform) if parent is not None else None
             local = transform.local_matrix()
-            object.__setattr__(transform, "_world", parent_t.world * local if parent_t is not None else local)
+            matrix = worlds[entity] = parent_t.world * local if parent_t is not None else local
+            object.__setattr__(transform, "_world", matrix)
             stack.extend(self._children.get(entity, ()))
 
 

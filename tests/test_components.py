@@ -161,6 +161,12 @@ BAD_ASSIGNMENTS = [
     (Transform, "scale", (0.0, 1.0, 1.0)),
     (Transform, "position", (NAN, 0.0, 0.0)),
     (Transform, "rotation", glm.quat(0.0, 0.0, 0.0, 0.0)),
+    # glm values take Transform's inline checks (its __setattr__): refused the same way.
+    (Transform, "position", glm.vec3(NAN, 0.0, 0.0)),
+    (Transform, "position", glm.vec3(0.0, 0.0, -INF)),
+    (Transform, "position", glm.vec3(0.0, 2e9, 0.0)),     # past POSITION_MAX
+    (Transform, "rotation", glm.quat(NAN, 0.0, 0.0, 0.0)),
+    (Transform, "rotation", glm.quat(1.0, INF, 0.0, 0.0)),
     (Material, "roughness", 2.0),
     (Material, "color", (NAN, NAN, NAN)),
     (Emissive, "power", -1.0),
@@ -247,6 +253,71 @@ def test_field_writes_are_reported_to_the_world(world):
     assert world.changed(Material) == set()
     mat.touch()                           # ... until touched
     assert world.changed(Material) == {e}
+
+
+def test_glm_writes_are_checked_copied_and_reported_like_any_other(world):
+    """Transform's inline path for glm positions and rotations (its ``__setattr__``) keeps
+    what the general one does: a copy of the vector, the rotation normalised, the write
+    reported, a bound value kept, a refused one not reported."""
+    from components.transform import POSITION_MAX
+    e = world.spawn(Transform())
+    world.step(0.0)
+    t = world.get(e, Transform)
+    p = glm.vec3(POSITION_MAX, -POSITION_MAX, 1.0)
+    t.position = p
+    assert t.position == p and t.position is not p        # a copy: editing p later is not the field
+    assert world.changed(Transform) == {e}
+    t.rotation = glm.quat(2.0, 0.0, 0.0, 0.0)
+    assert t.rotation == glm.quat(1.0, 0.0, 0.0, 0.0)
+    assert t.rotation == Transform(rotation=(2.0, 0.0, 0.0, 0.0)).rotation  # as the general path gives
+    world.step(0.0)
+    with pytest.raises(ComponentValueError, match=r"Transform\.position must be within"):
+        t.position = glm.vec3(0.0, 0.0, POSITION_MAX * 2.0)
+    with pytest.raises(ComponentValueError, match=r"Transform\.rotation must not be the zero quaternion"):
+        t.rotation = glm.quat(0.0, 0.0, 0.0, 0.0)
+    assert world.changed(Transform) == set()
+    assert t.position == p and t.rotation == glm.quat(1.0, 0.0, 0.0, 0.0)
+
+
+def test_the_transform_stage_uses_the_entitys_transform_whatever_happened_after_a_write(world):
+    """A glm write leaves its component in ``World.written`` (the transform stage finds it
+    there, not through esper): a component replaced, removed or deleted with its entity after
+    the write, in the same frame, must not be the one the stage places the entity by."""
+    from systems.transform_system import TransformSystem
+    system = TransformSystem(world)
+    a, b, c, d = (world.spawn(Transform(position=(float(i), 0.0, 0.0))) for i in range(4))
+    system.process(0.0)
+    world.step(0.0)
+    old_a, old_b = world.get(a, Transform), world.get(b, Transform)
+    old_a.position = glm.vec3(10.0, 0.0, 0.0)      # a hot write, then the component replaced
+    world.add_component(a, Transform(position=(20.0, 0.0, 0.0)))
+    old_b.rotation = glm.quat(0.0, 0.0, 1.0, 0.0)  # a hot write, then the component removed
+    world.remove_component(b, Transform)
+    world.get(c, Transform).position = glm.vec3(30.0, 0.0, 0.0)  # a hot write, then the entity deleted
+    world.delete_entity(c)
+    world.get(d, Transform).position = glm.vec3(40.0, 0.0, 0.0)  # a hot write alone
+    assert set(world.written(Transform)) == {a, b, c, d}
+    system.process(0.0)
+    assert world.get(a, Transform).world[3].xyz == glm.vec3(20.0, 0.0, 0.0)   # the new component's
+    assert old_a.world[3].xyz == glm.vec3(0.0, 0.0, 0.0)                      # the old one untouched
+    assert old_b.world[3].xyz == glm.vec3(1.0, 0.0, 0.0)
+    assert world.get(d, Transform).world[3].xyz == glm.vec3(40.0, 0.0, 0.0)
+    assert world.frame.removed == {b, c} and world.frame.moved == {a, d}
+    world.step(0.0)
+    assert world.written(Transform) == {}                  # a step's hint, forgotten with its changes
+
+
+def test_changed_any_is_the_union_of_the_change_sets_and_a_set_of_its_own(world):
+    a = world.spawn(Transform(), Material())
+    b = world.spawn(Emissive(1.0))
+    world.step(0.0)
+    world.get(a, Material).roughness = 0.5
+    world.get(b, Emissive).power = 2.0
+    found = world.changed_any((Material, Emissive, Camera))
+    assert found == world.changed(Material) | world.changed(Emissive) == {a, b}
+    found.add(99)                                   # the caller's to change
+    assert world.changed(Material) == {a} and world.changed(Emissive) == {b}
+    assert world.changed_any(()) == set() and world.changed_any((Camera,)) == set()
 
 
 def test_failed_write_is_not_reported(world):

@@ -81,6 +81,10 @@ class FrameEvents:
     moved: set[int] = field(default_factory=set)
     added: set[int] = field(default_factory=set)
     removed: set[int] = field(default_factory=set)
+    # The world matrix the TransformSystem wrote this frame, by entity (``Transform.world``,
+    # handed on so the extract stage does not look a thousand movers' components up again);
+    # an entity missing here is read from its Transform.
+    worlds: dict[int, Any] = field(default_factory=dict)
 
 
 class World:
@@ -102,6 +106,8 @@ class World:
         # The in-place watch (components.tracking's docstring): (id, field) -> (component,
         # field, the value read, a copy of it), filled by reads, settled by the transform stage.
         self._handed: dict[tuple[int, str], tuple[TrackedComponent, str, Any, Any]] = {}
+        # Components a hot write path reported this step, by kind and entity (``written``).
+        self._written: dict[type, dict[int, Any]] = defaultdict(dict)
         self._closed = False
         self._use()
 
@@ -199,6 +205,7 @@ class World:
             object.__setattr__(component, "_sink", self._changed[kind])
             object.__setattr__(component, "_world_ref", self)
             object.__setattr__(component, "_handed", self._handed)
+            object.__setattr__(component, "_written", self._written[kind])
         self._changed[kind].add(entity)
 
     def _check_whole(self, entity: int, components: tuple[Any, ...]) -> None:
@@ -343,8 +350,36 @@ class World:
     # --- change sets -----------------------------------------------------------------------
     def changed(self, kind: type) -> set[int]:
         """Entities whose ``kind`` component was added, removed or written since last step."""
-        self._check_open()
-        return self._changed.get(kind, set())
+        if self._closed:  # _check_open, inlined: dozens of calls a frame
+            self._check_open()
+        found = self._changed.get(kind)
+        return set() if found is None else found
+
+    def changed_any(self, kinds: Iterable[type]) -> set[int]:
+        """Entities with a component of any of ``kinds`` added, removed or written since the
+        last step: the union of ``changed`` over them, a new set (one call, not one a kind)."""
+        if self._closed:
+            self._check_open()
+        sets = self._changed
+        found: set[int] = set()
+        for kind in kinds:
+            entities = sets.get(kind)
+            if entities:
+                found |= entities
+        return found
+
+    def written(self, kind: type) -> dict[int, Any]:
+        """Components of ``kind`` whose writes came through a hot path this step (Transform's
+        glm position and rotation writes), by entity: the object each write was made on, so
+        that the transform stage finds a thousand movers' components without a look-up each
+        in esper's table of every entity (which a frame of 100,000 leaves out of the caches).
+        A hint, not a change set: an entry whose component has since left its entity or this
+        world (``_sink`` not this world's set for ``kind``, ``_entity`` another) is stale;
+        ``changed`` stays the record of what changed."""
+        if self._closed:
+            self._check_open()
+        found = self._written.get(kind)
+        return {} if found is None else found
 
     def deleted(self) -> set[int]:
         """Entities deleted since the last step (their components are gone now)."""
@@ -375,4 +410,6 @@ class World:
         self.frame_index += 1
         for entities in self._changed.values():
             entities.clear()
+        for components in self._written.values():
+            components.clear()
         self._deleted = set()

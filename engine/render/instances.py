@@ -51,6 +51,47 @@ _SPAN_SLACK = 4
 _GATHER_AT = 16
 
 
+# Rows from which write_transforms works the normal matrices out on arrays (normal_matrices)
+# rather than one glm call chain a row: a dozen numpy calls cost about what 30 rows' glm do.
+_NORMALS_ON_ARRAYS = 32
+
+
+def _inverse_terms() -> tuple[np.ndarray, ...]:
+    """Index tables for ``normal_matrices``: for each element of the normal matrix (column-major
+    3x3, element (c, r) = inverse (r, c)), the four model elements (indices into the flat
+    column-major 4x4) of its cofactor ``a * b - c * d``, and its sign, in the order and form
+    GLM's ``inverse(mat3)`` writes them (``Inverse[i][j]`` below, column i, row j)."""
+    glm_inverse = {  # Inverse[i][j]: sign, then m[.][.] of "a * b - c * d" (m[column][row])
+        (0, 0): (1, (1, 1), (2, 2), (2, 1), (1, 2)), (1, 0): (-1, (1, 0), (2, 2), (2, 0), (1, 2)),
+        (2, 0): (1, (1, 0), (2, 1), (2, 0), (1, 1)), (0, 1): (-1, (0, 1), (2, 2), (2, 1), (0, 2)),
+        (1, 1): (1, (0, 0), (2, 2), (2, 0), (0, 2)), (2, 1): (-1, (0, 0), (2, 1), (2, 0), (0, 1)),
+        (0, 2): (1, (0, 1), (1, 2), (1, 1), (0, 2)), (1, 2): (-1, (0, 0), (1, 2), (1, 0), (0, 2)),
+        (2, 2): (1, (0, 0), (1, 1), (1, 0), (0, 1)),
+    }
+    terms = [glm_inverse[(r, c)] for c in range(3) for r in range(3)]  # normal (c, r) = Inverse[r][c]
+    index = [np.array([t[k][0] * 4 + t[k][1] for t in terms]) for k in range(1, 5)]
+    return (*index, np.array([t[0] for t in terms], np.float32))
+
+
+_COFACTOR_A, _COFACTOR_B, _COFACTOR_C, _COFACTOR_D, _COFACTOR_SIGN = _inverse_terms()
+
+
+def normal_matrices(models: np.ndarray) -> np.ndarray:
+    """The normal matrices (n, 9), column-major, of float32 model matrices (n, 16): the inverse
+    transpose of each upper 3x3 by cofactors over determinant, all rows at once, with GLM's
+    ``transpose(inverse(mat3(m)))`` arithmetic in float32 step for step (the same operands,
+    order and rounding), so a row is the same bits whichever path wrote it."""
+    u = models[:, _COFACTOR_A] * models[:, _COFACTOR_B] - models[:, _COFACTOR_C] * models[:, _COFACTOR_D]
+    # GLM's determinant: + m00 (m11 m22 - m21 m12) - m10 (m01 m22 - m21 m02) + m20 (m01 m12 - m11 m02),
+    # those cofactors being the normal matrix's elements 0, 3 and 6 before their signs.
+    det = models[:, 0] * u[:, 0] - models[:, 4] * u[:, 3] + models[:, 8] * u[:, 6]
+    with np.errstate(divide="ignore"):
+        one = np.float32(1.0) / det
+    u *= one[:, None]
+    u *= _COFACTOR_SIGN  # a sign flip is exact: (-x) * one == -(x * one)
+    return u
+
+
 class GpuMesh:
     """Vertex and index buffers of one Mesh, shared by every batch that draws it."""
 
@@ -65,6 +106,8 @@ class GpuMesh:
         hi = mesh.positions.max(axis=0) if len(mesh.positions) else np.zeros(3)
         self.corners = np.array([[x, y, z, 1.0] for x in (lo[0], hi[0]) for y in (lo[1], hi[1])
                                  for z in (lo[2], hi[2])], np.float64)
+        # The same box as (lo/hi, column, 1), to scale a model matrix's axes by (InstanceBatch._grow_box).
+        self.box_ends = np.array([lo, hi], np.float64).reshape(2, 3, 1)
 
     def release(self) -> None:
         self.vertices.release()
@@ -101,6 +144,11 @@ class InstanceBatch:
         self.entity_at: list[int] = []
         self._dirty: set[int] = set()
         self._moving = 0  # rows [0, _moving) are those of instances that have moved (write_transforms)
+        # Counts changes of existing rows' places (a removal's fill, a gather's swaps): the
+        # last movers' rows, (layout, entities, rows, rows as a list), hold while it stands
+        # (a game's movers write the same entities every frame: their rows are not looked up again).
+        self._layout = 0
+        self._rows_of: tuple[int, list[int], np.ndarray, list[int]] | None = None
         self._buffer = ctx.buffer(reserve=capacity * INSTANCE_DTYPE.itemsize)
         self._buffer_rows = capacity
         self._vaos: dict[int, moderngl.VertexArray] = {}
@@ -166,16 +214,26 @@ class InstanceBatch:
         the rows a frame's movers write lie together and go up in one write, not one per
         scattered row (1,000 movers among 100,000 rows: 4 writes a frame, not 1,000).  A few
         movers keep their rows: a few writes cost less than the swaps."""
-        index = self.row_of
-        rows = np.array([index[entity] for entity in entities], np.int64)
-        if moving and len(rows) >= _GATHER_AT and rows.max() >= self._moving:  # some outside the block
-            self._gather(rows)
+        kept = self._rows_of
+        if kept is not None and kept[0] == self._layout and kept[1] == entities:
+            rows, listed = kept[2], kept[3]  # the same entities as last time, on the same rows
+        else:
+            index = self.row_of
             rows = np.array([index[entity] for entity in entities], np.int64)
-        self.rows["model"][rows] = np.frombuffer(glm.array(models).to_bytes(), np.float32).reshape(-1, 16)
-        self.rows["normal_matrix"][rows] = np.frombuffer(
-            glm.array([glm.transpose(glm.inverse(glm.mat3(model))) for model in models]).to_bytes(),
-            np.float32).reshape(-1, 9)
-        self._dirty.update(rows.tolist())
+            if moving and len(rows) >= _GATHER_AT and rows.max() >= self._moving:  # some outside the block
+                self._gather(rows)
+                rows = np.array([index[entity] for entity in entities], np.int64)
+            listed = rows.tolist()
+            self._rows_of = (self._layout, list(entities), rows, listed) if moving else None
+        flat = np.frombuffer(glm.array(models).to_bytes(), np.float32).reshape(-1, 16)
+        self.rows["model"][rows] = flat
+        if len(models) >= _NORMALS_ON_ARRAYS:
+            self.rows["normal_matrix"][rows] = normal_matrices(flat)
+        else:
+            self.rows["normal_matrix"][rows] = np.frombuffer(
+                glm.array([glm.transpose(glm.inverse(glm.mat3(model))) for model in models]).to_bytes(),
+                np.float32).reshape(-1, 9)
+        self._dirty.update(listed)
 
     def _gather(self, movers: np.ndarray) -> None:
         """Grow the front block of moving rows by the ``movers`` (distinct rows) outside it:
@@ -200,10 +258,12 @@ class InstanceBatch:
         self._dirty.update(free.tolist())
         self._dirty.update(far.tolist())
         self._moving = end
+        self._layout += 1
 
     def remove(self, entity: int) -> None:
         index = self.row_of.pop(entity)
         last = self.count - 1
+        self._layout += 1
         if index != last:
             moved = self.entity_at[last]
             self.rows[index] = self.rows[last]
@@ -251,26 +311,41 @@ class InstanceBatch:
             return glm.vec3()
         return glm.vec3(*self.rows["model"][: self.count, 12:15].mean(axis=0).tolist())
 
-    def _grow_scale(self, rows: np.ndarray) -> None:
+    def _grow_scale(self, rows: np.ndarray | slice) -> None:
         model = self.rows["model"][rows]
         if len(model):
-            squares = [np.einsum("ij,ij->i", model[:, c:c + 3], model[:, c:c + 3]).max() for c in (0, 4, 8)]
-            self._max_scale = max(self._max_scale, float(np.sqrt(max(squares))))
+            axes = model[:, :12].reshape(-1, 3, 4)[:, :, :3]  # [instance, column, row]: the three axes
+            longest = np.einsum("ncr,ncr->nc", axes, axes).max()  # squared lengths, the largest
+            self._max_scale = max(self._max_scale, float(np.sqrt(longest)))
 
-    def _grow_box(self, rows: np.ndarray) -> None:
-        """Measure the world boxes of ``rows`` (just sent) and forget the union."""
+    def _grow_box(self, rows: np.ndarray | slice) -> None:
+        """Measure the world boxes of ``rows`` (just sent: indices, or a slice when they are
+        one run) and forget the union.
+
+        A row's box is that of its mesh's box corners placed by its model matrix, worked out
+        axis by axis without placing the eight corners: along world axis r the lowest corner
+        is the translation plus, for each model axis c, the lower of ``lo_c * M[c][r]`` and
+        ``hi_c * M[c][r]`` (the sum of the smallest terms is the smallest sum; rounding is
+        monotonic, so it is the same float64 number as the least of the eight corners');
+        the highest likewise.  Lows and highs are worked out together, as the rows' boxes
+        are kept ([row, lo/hi, axis])."""
         self._boxes_for(len(self.rows))
         models = self.rows["model"][rows].astype(np.float64).reshape(-1, 4, 4)  # [instance, column, row]
-        world = np.einsum("kc,ncr->nkr", self.mesh.corners, models)[..., :3]
-        old = self._row_boxes[rows]
-        lo, hi = world.min(axis=1), world.max(axis=1)
-        changed = ~np.all((old[:, 0] == lo) & (old[:, 1] == hi), axis=1)  # rewritten in place: no change
+        terms = models[:, None, :3, :3] * self.mesh.box_ends  # [instance, lo/hi corner, column, row]
+        ends = np.empty_like(terms)  # each term's lower value, then its higher one
+        np.minimum(terms[:, 0], terms[:, 1], out=ends[:, 0])
+        np.maximum(terms[:, 0], terms[:, 1], out=ends[:, 1])
+        box = ends[:, :, 0] + ends[:, :, 1]
+        box += ends[:, :, 2]
+        box += models[:, None, 3, :3]
+        boxes = self._row_boxes
+        old = boxes[rows]
+        changed = (old != box).any(axis=(1, 2))  # rewritten in place: no change
         if changed.any():
-            with np.errstate(invalid="ignore"):
-                self._note_changed(np.nanmin(np.concatenate([old[changed, 0], lo[changed]]), axis=0),
-                                   np.nanmax(np.concatenate([old[changed, 1], hi[changed]]), axis=0))
-        self._row_boxes[rows, 0] = lo
-        self._row_boxes[rows, 1] = hi
+            # The old boxes (NaN: never measured, left out by fmin/fmax) and the new ones.
+            both = np.concatenate((old, box) if changed.all() else (old[changed], box[changed]))
+            self._note_changed(np.fmin.reduce(both[:, 0]), np.fmax.reduce(both[:, 1]))
+        boxes[rows] = box
         self._box = None
 
     def _boxes_for(self, rows: int) -> np.ndarray:
@@ -315,22 +390,32 @@ class InstanceBatch:
         if self._rescale:
             self._max_scale, self._rescale, self._box = 0.0, False, None
             self._grow_scale(np.arange(self.count))
-        if not self._dirty:
+        dirty = self._dirty
+        if not dirty:
             return 0
-        dirty = np.fromiter(self._dirty, np.int64, len(self._dirty))
-        dirty.sort()
-        self._dirty.clear()
-        self._grow_scale(dirty)
-        self._grow_box(dirty)
-        breaks = np.flatnonzero(np.diff(dirty) != 1) + 1
-        starts = np.concatenate([[dirty[0]], dirty[breaks]])
-        ends = np.concatenate([dirty[breaks - 1], [dirty[-1]]]) + 1
-        if len(starts) > 1 and (ends[-1] - starts[0]) <= _SPAN_SLACK * len(dirty):
-            starts, ends = starts[:1], ends[-1:]
+        self._dirty = set()
+        first, last, count = min(dirty), max(dirty), len(dirty)
+        if last - first + 1 == count:
+            # One run (the movers' block at the front, gathered by write_transforms): measured
+            # through views of the rows, not copies picked out by index, and sent in one write.
+            measured = slice(first, last + 1)
+            starts, ends = [first], [last + 1]
+        else:
+            measured = np.fromiter(dirty, np.int64, count)
+            measured.sort()
+            if last + 1 - first <= _SPAN_SLACK * count:
+                starts, ends = [first], [last + 1]  # the span is not much more than the rows
+            else:
+                breaks = np.flatnonzero(np.diff(measured) != 1) + 1
+                starts = [first, *measured[breaks].tolist()]
+                ends = [*(measured[breaks - 1] + 1).tolist(), last + 1]
+        self._grow_scale(measured)
+        self._grow_box(measured)
         sent = 0
         data = memoryview(self.rows.view(np.uint8))  # rows as bytes: a run is a slice, not a copy
         write = self._buffer.write
-        for start, end in zip((starts * size).tolist(), (ends * size).tolist(), strict=True):
+        for start, end in zip(starts, ends, strict=True):
+            start, end = start * size, end * size
             write(data[start:end], offset=start)
             sent += end - start
         return sent

@@ -297,9 +297,7 @@ class LookChanges:
     def entities(self, world: World) -> set[int]:
         """This frame's entities whose look may have changed (each call follows on from the
         last: ask once a frame)."""
-        looks: set[int] = set()
-        for kind in LOOK_KINDS:
-            looks |= world.changed(kind)
+        looks = world.changed_any(LOOK_KINDS)
         return looks | self.resampled(world, looks)
 
     def resampled(self, world: World, looks: set[int]) -> set[int]:

@@ -9,6 +9,7 @@ block.
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -75,19 +76,27 @@ REGION_PAD = 2
 REGION_WHOLE_SHARE = 0.5
 
 
+# map_region's corner pick (which of a box's ends each corner takes, x slowest) and the last
+# fit it was given with its view-projection as an array (the fit held, so the identity is its own).
+_CORNER_HIGH = np.array([(x, y, z) for x in (0, 1) for y in (0, 1) for z in (0, 1)], bool)
+_REGION_MATRIX: list = [None, None]
+
+
 def map_region(fit: DirectionalFit, lo: np.ndarray, hi: np.ndarray,
                resolution: int) -> tuple[int, int, int, int] | None:
     """The texels (x, y, width, height) of a directional light's map that the world box
     [lo, hi] covers, seen along the light, padded; None when they are most of the map (draw
     it whole).  A caster's shadow is in the map only where its footprint is: moving it from
     one box to another changes only the texels under both."""
-    corners = np.array([[x, y, z, 1.0] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
-    clip = corners @ np.array(fit.view_proj.to_list(), np.float64)  # orthographic: w is 1
+    corners = np.ones((8, 4))
+    corners[:, :3] = np.where(_CORNER_HIGH, hi, lo)  # the box's eight corners, homogeneous
+    if _REGION_MATRIX[0] is not fit:  # a light's fit lasts until its map is fitted again: kept
+        _REGION_MATRIX[:] = fit, np.array(fit.view_proj.to_list(), np.float64)
+    clip = corners @ _REGION_MATRIX[1]  # orthographic: w is 1
     texel = (clip[:, :2] * 0.5 + 0.5) * resolution
-    x0, y0 = np.floor(texel.min(axis=0)).astype(int) - REGION_PAD
-    x1, y1 = np.ceil(texel.max(axis=0)).astype(int) + REGION_PAD
-    x0, y0 = max(int(x0), 0), max(int(y0), 0)
-    x1, y1 = min(int(x1), resolution), min(int(y1), resolution)
+    (low_x, low_y), (high_x, high_y) = texel.min(axis=0).tolist(), texel.max(axis=0).tolist()
+    x0, y0 = max(math.floor(low_x) - REGION_PAD, 0), max(math.floor(low_y) - REGION_PAD, 0)
+    x1, y1 = min(math.ceil(high_x) + REGION_PAD, resolution), min(math.ceil(high_y) + REGION_PAD, resolution)
     if x1 <= x0 or y1 <= y0:
         return (0, 0, 0, 0)
     if (x1 - x0) * (y1 - y0) > REGION_WHOLE_SHARE * resolution * resolution:
