@@ -28,6 +28,7 @@ from engine.core.errors import GLLimitError
 from engine.core.world import World
 from engine.render.instances import PROBE_WEIGHTS, TINT_VISIBILITY, InstanceBatch
 from engine.render.renderer import Renderer
+from engine.render.surface_table import SurfaceBlends
 from engine.resources import Surfaces
 from engine.rules.probe_rules import LookChanges, SurfaceProbes, probe_blend
 from engine.rules.visibility_rules import entity_code
@@ -68,8 +69,8 @@ class ExtractSystem(esper.Processor):
         # What each mirror and portal shows where it has no view: the probes whose influence
         # boxes hold it (probe_rules.surface_blend), for the view trees' composites.
         surfaces = world.resources.get(Surfaces)
-        self.renderer.surface_probes = self._surface_probes.update(
-            world, (*surfaces.mirrors.values(), *surfaces.portals.values()) if surfaces is not None else ())
+        world.resources[SurfaceBlends] = SurfaceBlends(self._surface_probes.update(
+            world, (*surfaces.mirrors.values(), *surfaces.portals.values()) if surfaces is not None else ()))
         # The transform of every moved entity, touched or not, and of every entity a refresh
         # gave a new row (a Slice removed in the frame it moved leaves it in another batch),
         # grouped by batch: each batch writes its rows in one go (InstanceBatch.write_transforms).

@@ -41,7 +41,7 @@ import esper
 
 from engine.core.world import World
 from engine.render.renderer import Renderer
-from engine.render.surface_table import surface_table
+from engine.render.surface_table import NO_BLENDS, SurfaceBlends, surface_table
 from engine.resources import RenderStats, Surfaces
 from engine.rules.probe_schedule import ProbeDue, ProbeSchedule, ProbeState, ProbeStates
 from systems.probe_scheduler import ProbeScheduler
@@ -89,7 +89,8 @@ def capture_due(world: World, renderer: Renderer, due: ProbeDue, only: frozenset
     surfaces: Surfaces | None = world.resources.get(Surfaces)
     table = surface_table(world.resources, surfaces) if state.settings.depth > 0 and surfaces is not None and \
         (surfaces.mirrors or surfaces.portals) else None  # its faces' view trees plan with it
-    renderer.probes.capture_probe(due.owner, faces, state.position, state.settings, table)
+    renderer.probes.capture_probe(due.owner, faces, state.position, state.settings, table,
+                                  world.resources.get(SurfaceBlends, NO_BLENDS))
     spent_ms = (time.perf_counter() - start) * 1e3
     stats.probe_ms_spent += spent_ms
     probes.measured(spent_ms / len(faces))

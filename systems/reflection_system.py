@@ -17,7 +17,7 @@ import esper
 from engine.core.world import World
 from engine.render.frame_views import FrameViews
 from engine.render.renderer import Renderer
-from engine.render.surface_table import surface_table
+from engine.render.surface_table import NO_BLENDS, SurfaceBlends, surface_table
 from engine.render.view_tree import ReflectionView, TreeSettings, ViewTree
 from engine.resources import PortalCrossings, RenderStats, Surfaces
 from engine.rules.frame_rules import frame_rules
@@ -111,7 +111,8 @@ class ReflectionSystem(esper.Processor):
             self.tree.forget_visibility()
         self._cut, self._camera = False, camera
         settings = self.settings
-        result = self.tree.render(main, views.levels, surface_table(self.world.resources, surfaces), settings)
+        result = self.tree.render(main, views.levels, surface_table(self.world.resources, surfaces), settings,
+                                  self.world.resources.get(SurfaceBlends, NO_BLENDS))
         self.views = result.views
         stats: RenderStats = self.world.resources[RenderStats]
         stats.reflection_views = len(result.views) - 1

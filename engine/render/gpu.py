@@ -28,7 +28,6 @@ from engine.render.raw_gl import RawGL
 from engine.render.shader_library import ShaderLibrary
 from engine.render.sky import flat_cube
 from engine.render.views import CAMERA_BLOCK_BYTES, LIGHTS_BLOCK_BYTES, View
-from engine.rules.probe_rules import ProbeBlend
 
 __all__ = ["BACKGROUND", "Gpu", "PathTrust", "ProbeCube", "Shared"]
 
@@ -119,9 +118,6 @@ class Gpu:
         self._order_stale = True
         self.sky = flat_cube(ctx, BACKGROUND)
         self.stats = RenderStats()  # the frame's, while a frame runs (Engine.frame gives it)
-        # Each mirror's and portal's fallback probes (probe_rules.surface_blend), by entity: the
-        # extract stage's, read by the view trees' composites.
-        self.surface_probes: dict[int, ProbeBlend] = {}
         # Every probe's cube map by probe key: made and released by the probe captures
         # (engine/render/probes.py), sampled by the scene pass and the composites.
         self.probe_cubes: dict[int, ProbeCube] = {}

@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import struct
 import weakref
+from collections.abc import Mapping
 from dataclasses import dataclass
 
 import moderngl
@@ -62,6 +63,7 @@ from engine.render.views import (
     View,
 )
 from engine.resources import MirrorBumps, SurfaceState, WaterLook
+from engine.rules.probe_rules import ProbeBlend
 
 # The claims and the reset write every depth they touch (depth test "always"); the
 # composite blends quads trimmed to their rectangles by clip distances 1-4.
@@ -547,12 +549,12 @@ class MirrorPasses:
         self.renderer.checkpoint("composite")
         self.renderer.flush()
 
-    def prepare_fallbacks(self, fallbacks: list[Fallback], size: tuple[int, int]) -> PreparedFallbacks:
+    def prepare_fallbacks(self, fallbacks: list[Fallback], size: tuple[int, int],
+                          probes: Mapping[int, ProbeBlend]) -> PreparedFallbacks:
         """The CPU half of a level's fallbacks (drawn into a level of ``size`` pixels): their
-        rows, grouped by build, normal map and the probes of their surfaces
-        (``Gpu.surface_probes``: the probes are uniforms of a draw, their weights ride
-        in the row's extras)."""
-        probes = self.renderer.surface_probes
+        rows, grouped by build, normal map and the probes of their surfaces (``probes``, by
+        surface entity: the extract stage's ``SurfaceBlends``; the probes are uniforms of a
+        draw, their weights ride in the row's extras)."""
         groups: dict[tuple[str, TextureData | None, int, int], list[tuple[Fallback, tuple[float, ...]]]] = {}
         for fallback in fallbacks:
             surface = fallback.surface

@@ -48,6 +48,7 @@ from engine.render.gpu import Gpu, ProbeCube
 from engine.render.irradiance import IrradianceTable
 from engine.render.raw_gl import CubeMipTarget, LayeredArrayTarget, LayeredCubeTarget, inspect_bound_target
 from engine.render.scene_pass import SceneOptions, ScenePass
+from engine.render.surface_table import NO_BLENDS, SurfaceBlends
 from engine.render.targets import LevelStack, release_framebuffer
 from engine.render.view_plan import SurfaceTable
 from engine.render.view_tree import TreeSettings, ViewTree
@@ -433,10 +434,11 @@ class ProbeCaptures:
         return cube
 
     def capture_probe(self, key: int, faces: frozenset[int], position: glm.vec3, settings: ReflectionProbe,
-                      surfaces: SurfaceTable | None = None) -> str:
+                      surfaces: SurfaceTable | None = None, blends: SurfaceBlends = NO_BLENDS) -> str:
         """Capture ``faces`` of probe ``key`` (the entity owning it, whose own object every
         face leaves out) from ``position`` with ``settings``, by the path ``paths`` takes
-        (``surfaces``: the planner's table of this frame's mirrors and portals,
+        (``blends``: what a surface no face view reaches shows, the extract stage's;
+        ``surfaces``: the planner's table of this frame's mirrors and portals,
         ``engine.render.surface_table``, that a face's view tree draws, up to
         ``settings.depth``); then the cube's record of where
         it was captured from and its projection box (``probe_rules.projection_box``): the
@@ -446,7 +448,8 @@ class ProbeCaptures:
                  for face in faces}
         sees_surfaces = settings.depth > 0 and surfaces is not None and bool(surfaces.states)
         table = surfaces if sees_surfaces else None
-        draws = {"six_pass": lambda: self.capture(key, views, table, settings.depth, settings.prefilter),
+        draws = {"six_pass": lambda: self.capture(key, views, table, settings.depth, settings.prefilter,
+                                                  blends=blends),
                  "layered": lambda: self.capture_layered(key, views, prefilter=settings.prefilter)}
         path = self.paths.draw(draws, len(faces) == 6 and not sees_surfaces, settings.resolution)
         cube = self.cubes[key]
@@ -458,7 +461,8 @@ class ProbeCaptures:
         return path
 
     def capture(self, key: int, views: dict[int, View], surfaces: SurfaceTable | None, depth: int,
-                prefilter: str = "mips", direct: bool | None = None, build_mips: bool = True) -> None:
+                prefilter: str = "mips", direct: bool | None = None, build_mips: bool = True,
+                blends: SurfaceBlends = NO_BLENDS) -> None:
         """Draw each face view of ``views`` (face -> view, all of the probe's resolution) into
         the probe's cube, then rebuild the cube's mips.  A face that sees mirrors or portals
         (``surfaces`` given, ``depth`` > 0) roots a view tree, which needs the id images of a
@@ -481,7 +485,7 @@ class ProbeCaptures:
                     targets = levels.get(0, view.size)
                     self.scene_pass.draw([view], targets, FACE)
                     if trees:
-                        self.tree.render(view, levels, surfaces, TreeSettings(depth_cap=depth))
+                        self.tree.render(view, levels, surfaces, TreeSettings(depth_cap=depth), blends)
                     renderer.raw_gl.copy_to_cube_face(targets.framebuffer, cube.texture, face, SCRATCH_UNIT)
                     renderer.checkpoint(f"probe face {face} copy")
                 renderer.stats.probe_faces += 1

@@ -9,13 +9,15 @@ plans (``SurfaceTable.plan``), and ``engine.resources`` stays plain data.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from collections.abc import Mapping
+from dataclasses import dataclass, field
 from typing import Any
 
 from engine.render.view_plan import SurfaceTable
 from engine.resources import Surfaces
+from engine.rules.probe_rules import ProbeBlend
 
-__all__ = ["PlannerSurfaces", "surface_table"]
+__all__ = ["NO_BLENDS", "PlannerSurfaces", "SurfaceBlends", "surface_table"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -25,6 +27,19 @@ class PlannerSurfaces:
 
     surfaces: Surfaces
     table: SurfaceTable
+
+
+@dataclass(frozen=True, eq=False)
+class SurfaceBlends:
+    """What each mirror and portal shows where it gets no view of its own (cut by the budget,
+    faded out, past the depth limits): the probes whose influence boxes hold it and their
+    weights (``probe_rules.surface_blend``, by surface entity; absent: the sky).  The extract
+    stage publishes it each frame; the view trees draw their fallbacks with it."""
+
+    by_surface: Mapping[int, ProbeBlend] = field(default_factory=dict)
+
+
+NO_BLENDS = SurfaceBlends()  # every surface without a view shows the sky (a tree drawn outside the stages)
 
 
 def surface_table(resources: dict[type, Any], surfaces: Surfaces) -> SurfaceTable:

@@ -39,7 +39,7 @@ from __future__ import annotations
 
 import functools
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 
 import moderngl
@@ -62,10 +62,12 @@ from engine.render.mirror_passes import (
     take_samples_queries,
 )
 from engine.render.scene_pass import REFLECTION_LEVEL, SceneOptions, ScenePass
+from engine.render.surface_table import NO_BLENDS, SurfaceBlends
 from engine.render.targets import LevelStack, RenderTargets
 from engine.render.view_plan import ROW, Candidates, LevelRows, SurfaceTable, _mat, level_rects
 from engine.render.views import CAMERA_BLOCK_BYTES, PlannedView, View
 from engine.resources import SurfaceState
+from engine.rules.probe_rules import ProbeBlend
 
 # The deepest a tree may go (each level is one more set of root-sized targets); the depth
 # limits of Mirror and Portal components take values up to this.
@@ -217,6 +219,7 @@ class _Walk:
                                                        # predicted: drawn after the last is planned)
     fallbacks: dict[int, list[Fallback]] = field(default_factory=dict)  # each level's, by the level they
                                                                         # are drawn into
+    blends: Mapping[int, ProbeBlend] = field(default_factory=dict)      # the fallbacks' probes (SurfaceBlends)
 
 
 class ViewTree:
@@ -240,9 +243,10 @@ class ViewTree:
         self._frame_stats: object | None = None
 
     def render(self, root: View, levels: LevelStack, surfaces: SurfaceTable,
-               settings: TreeSettings = TreeSettings()) -> TreeResult:
+               settings: TreeSettings = TreeSettings(), blends: SurfaceBlends = NO_BLENDS) -> TreeResult:
         """Draw every level below ``root`` (already drawn into ``levels[0]``) and composite
-        them: the module's five steps, a level at a time."""
+        them: the module's five steps, a level at a time.  A surface that gets no view shows
+        the probes ``blends`` gives it (the extract stage's), else the sky."""
         root_node = ReflectionView(0, 0, root, (0, 0, *root.size))
         result = TreeResult([root_node], set())
         if not surfaces.states:  # no mirror or portal anywhere: the root is the whole tree
@@ -250,6 +254,7 @@ class ViewTree:
                 self.ends.forget()
             return result
         walk = self._start(root, root_node, surfaces, settings, result)
+        walk.blends = blends.by_surface
         candidates = self._plan(walk, first_index=1)                  # 1. plan the first level
         while candidates is not None:
             step = self._choose(walk, levels, candidates)             # 2. claim (exact), 3. choose
@@ -398,7 +403,8 @@ class ViewTree:
             if fallbacks.get(depth):
                 child = steps[depth].targets if depth < len(steps) else None
                 self.passes.draw_fallbacks(levels[depth], child,
-                                           self.passes.prepare_fallbacks(fallbacks[depth], levels[depth].size))
+                                           self.passes.prepare_fallbacks(fallbacks[depth], levels[depth].size,
+                                                                                         walk.blends))
             if depth < walk.level:
                 self.passes.composite_level(levels[depth], levels[depth + 1], composites[depth])
 
