@@ -26,6 +26,8 @@ SUITES: dict[str, tuple[str, str]] = {
                 "mirrors, portals at depth 8, a dynamic probe"),
     "cpu": ("benchmarks.cpu", "the frame a GPU host pays for (32x18, LP_NUM_THREADS=0: the engine's CPU) with its "
             "GL calls and profile, and every speed target against its limit"),
+    "ab": ("benchmarks.ab", "the cpu suite's scenes from two code trees, interleaved in alternating processes: "
+           "new/old ratios and each process's median (how a speed change is judged)"),
     "lighting": ("benchmarks.lighting", "the mirrors scene with shadows and post-processing (tone mapping, "
                  "bloom) on and off, interleaved: medians, ratios and the lighting cost targets"),
     "gpu-report": ("benchmarks.gpu_report", "GL renderer and limits, rendering-path checks, the mirrors / portals / "

@@ -676,3 +676,22 @@ def test_the_cpu_part_runs_in_its_own_process_with_no_rasteriser_threads(capsys,
     assert list(targets) == list(cpu.TARGETS)
     assert {name for name, row in targets.items() if row["value"] is not None} == \
         {name for name, target in cpu.TARGETS.items() if target.part == "cpu"}
+
+
+def test_ab_runs_both_trees_in_alternating_processes_and_prints_their_ratio(capsys, tmp_path):
+    """``python -m benchmarks ab``: a tree against itself (A/A) gives one row a scene, each
+    side's median from its own processes (old, new, then new, old for the second pair) and
+    their ratio; a folder that is no checkout is refused by name before anything starts."""
+    from benchmarks import ab
+
+    parser, _ = build_parser()
+    assert ab.main(parser.parse_args(["ab", str(ROOT), str(ROOT), "--scenes", "mirrors_1,portals_d0", "--rounds", "2",
+                                      "--frames", "1", "--procs", "2", "--warmup", "0", "--json"])) == 0
+    rows = [json.loads(line) for line in capsys.readouterr().out.splitlines()]
+    assert [row["scene"] for row in rows] == ["mirrors_1", "portals_d0"]
+    for row in rows:
+        assert [side for side, _ in row["per_process"]] == ["old", "new", "new", "old"]
+        assert row["old_ms"] > 0 and row["new_ms"] > 0
+        assert row["ratio"] == pytest.approx(row["new_ms"] / row["old_ms"], abs=1e-3)
+    with pytest.raises(SystemExit, match="is not a Speculum checkout"):
+        ab.main(parser.parse_args(["ab", str(tmp_path), str(ROOT)]))
