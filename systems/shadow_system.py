@@ -200,7 +200,9 @@ class ShadowSystem(esper.Processor):
         stats: RenderStats = world.resources[RenderStats]
         surfaces = world.resources.get(Surfaces)
         found: list[VirtualLight] = []
-        if self.enabled and level is not None and surfaces is not None and (surfaces.mirrors or surfaces.portals):
+        if self.enabled and level is not None and surfaces is not None and (
+                any(state.carries_light for state in surfaces.mirrors.values())
+                or any(state.carries_light for state in surfaces.portals.values())):  # (none: no light list to make)
             suns = list(world.query_one(DirectionalLight))[:MAX_DIRECTIONAL_LIGHTS]
             lamps = list(world.query(PointLight, Transform))[:MAX_POINT_LIGHTS]
             directional = [(entity, raw_field(light, "direction"), raw_field(light, "color").xyz * light.intensity)
