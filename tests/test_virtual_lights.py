@@ -549,3 +549,81 @@ def test_light_path_is_the_shaders_aperture_test_on_the_cpu(scene):
     np.testing.assert_allclose(ways[lit][1], at_b, atol=1e-4)
     np.testing.assert_allclose(ways[lit][2], at_a, atol=1e-4)
     np.testing.assert_allclose((ways[lit][3] - at_a) / np.linalg.norm(ways[lit][3] - at_a), back, atol=1e-4)
+
+
+def test_a_lamp_carried_by_a_portal_then_reflected_by_a_mirror_lands_where_the_rays_say(scene):
+    """A chain of two kinds: a lamp in front of portal A (z = 4, facing +z) shines out of
+    portal B (x = -6, facing +x) onto mirror M (x = -3.5, facing -x), which throws it back on
+    the floor between them.  With ``bounces = 2`` the frame gains exactly the floor points
+    the float64 rays give: the line from the point to the lamp's image through the pair and
+    then M crosses M's outline from its front, and from there the line to the pair's image
+    crosses B's opening from its front (nothing else stands in the way)."""
+    lamp = np.array([0.0, 1.5, 8.0])             # far from A: B's opening, not only M's, bounds the patch
+    m_x, m_half = -3.5, np.array([1.5, 2.5])        # M: half height (y, centred at 1.5), half width (z)
+    b_half = np.array([1.5, 1.0])                   # the pair's opening: 2 m wide, 3 m tall
+
+    def build(world):
+        look_from(world, (-4.75, 6.0, 4.0), (-4.75, 0.0, 0.0))
+        ids = world.resources["ids"] = {}
+        ids["floor"] = world.spawn(Transform(), MeshRef(plane(20, 20)), Material(color=(0.8, 0.8, 0.8), roughness=1.0))
+        ids["lamp"] = world.spawn(Transform(position=lamp.tolist()), PointLight(intensity=80.0, range=14.0, bounces=2))
+        ids["a"], ids["b"] = spawn_portal_pair(world, (0.0, 1.5, 4.0), None, (-6.0, 1.5, 0.0),
+                                               look_rotation(glm.vec3(-1, 0, 0)))   # B's front: +x
+        world.get(ids["a"], Portal).carries_light = True
+        # (look_rotation points a surface's back along the direction: M's front is -x)
+        ids["m"] = world.spawn(Transform(position=(m_x, 1.5, 0.0), rotation=look_rotation(glm.vec3(1, 0, 0))),
+                               MeshRef(quad(2 * m_half[1], 2 * m_half[0])), Material(),
+                               Mirror(reflects_light=True))
+
+    runner = scene(build, (320, 240))
+    runner.engine.renderer.antialias = "off"
+    runner.engine.renderer.shadows.filter = "single"
+    ids = runner.world.resources["ids"]
+    light = runner.world.get(ids["lamp"], PointLight)
+    light.bounces = 1
+    once = runner.frame()
+    once_lights = runner.stats.virtual_lights
+    light.bounces = 2
+    twice = runner.frame()
+    assert (once_lights, runner.stats.virtual_lights) == (1, 2)   # the pair's light, then also M's of it
+    carry = glm.dmat4(pair_transform(runner.world.get(ids["a"], Transform).world,
+                                     runner.world.get(ids["b"], Transform).world))
+    image1 = np.array(glm.dvec3(carry * glm.dvec4(*lamp, 1.0)))   # the lamp seen through the pair
+    image2 = image1 * np.array([-1.0, 1.0, 1.0]) + np.array([2 * m_x, 0.0, 0.0])   # and then in M
+    points = _floor_points(runner)
+    to_image = image2 - points
+    distance = np.linalg.norm(to_image, axis=1)
+
+    def lit(margin, through_b=True):
+        t_m = (m_x - points[:, 0]) / to_image[:, 0]
+        at_m = points + to_image * t_m[:, None]
+        to_first = image1 - at_m
+        t_b = (-6.0 - at_m[:, 0]) / to_first[:, 0]
+        at_b = at_m + to_first * t_b[:, None]
+        by_m = (points[:, 0] < m_x) & (t_m > 0) & (t_m < 1) & (distance < 14.0) & \
+            (np.abs(at_m[:, 1] - 1.5) < m_half[0] - margin) & (np.abs(at_m[:, 2]) < m_half[1] - margin)
+        return by_m & (t_b > 0) & (t_b < 1) & (np.abs(at_b[:, 1] - 1.5) < b_half[0] - margin) & \
+            (np.abs(at_b[:, 2]) < b_half[1] - margin) if through_b else by_m
+
+    # Pixels whose primary ray meets M or B first show what those show, not this floor point.
+    eye, rays = pixel_rays(runner.engine.main_view, runner.size)
+    rays = rays.reshape(-1, 3)
+    origin = np.tile(eye, (len(rays), 1))
+    through = _box_hit(origin, rays, (np.array([m_x, 1.5, 0.0]), np.array([THIN, *m_half])), 0.05) | \
+        _box_hit(origin, rays, (np.array([-6.0, 1.5, 0.0]), np.array([THIN, *b_half])), 0.05)
+    seen = (runner.ids() == ids["floor"]).reshape(-1) & ~through
+    fade = np.clip(1.0 - (distance / 14.0) ** 4, 0.0, 1.0)
+    expected = 80.0 * fade * fade / (distance ** 2 + 1.0) * np.clip(to_image[:, 1] / distance, 0.0, 1.0) * 0.8 / np.pi
+    before = srgb_to_linear(once).mean(-1).reshape(-1)
+    ratio = srgb_to_linear(twice).mean(-1).reshape(-1) / np.maximum(before, 1e-6)
+    # Where the second bounce would add a visible share: the pair's own light out of B already
+    # lights this floor, brightest near B, where a few per cent more is within 8 bits' steps.
+    strong = (expected > 0.03) & (expected > 0.15 * before)
+    sure = seen & strong & (lit(EDGE) == lit(-EDGE))
+    says = np.where(ratio > 1.05, 1, np.where(ratio < 1.02, 0, -1))[sure]
+    rays_say = lit(EDGE)[sure].astype(int)
+    assert sure.sum() > 3000 and rays_say.sum() > 500, (int(sure.sum()), int(rays_say.sum()))
+    # B's opening, not M's outline alone, bounds the patch: a shader that tested only the last
+    # surface it crossed would light these too.
+    assert (sure & lit(-EDGE, through_b=False) & ~lit(-EDGE)).sum() > 1000
+    assert float((says == rays_say).mean()) >= 0.99, float((says == rays_say).mean())
