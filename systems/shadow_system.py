@@ -68,15 +68,15 @@ class ShadowSystem(esper.Processor):
         # The level's box only where a map is fitted to it (a sun that casts, a surface that
         # carries light): a world of 100,000 instances and no such light pays nothing for it.
         surfaces = self.world.resources.get(Surfaces)
-        needed = self.enabled and (
-            any(light.shadows for _, light in self.world.query_one(DirectionalLight))
-            or (surfaces is not None and any(s.carries_light for s in (*surfaces.mirrors.values(),
-                                                                       *surfaces.portals.values()))))
+        carrying = surfaces is not None and any(s.carries_light for s in (*surfaces.mirrors.values(),
+                                                                         *surfaces.portals.values()))
+        needed = self.enabled and (any(light.shadows for _, light in self.world.query_one(DirectionalLight))
+                                   or carrying)
         level = renderer.level_bounds() if needed else None
         published = ShadowCasters(level=level)
         self._directional_maps(casters_changed, changed_box, level, published)
         self._point_maps(published)
-        published.virtual = self._virtual_maps(casters_changed, level)
+        published.virtual = self._virtual_maps(casters_changed, level, carrying)
         self.world.resources[ShadowCasters] = published
         block = maps.block.tobytes() + maps.virtual_block.tobytes()
         if block != self._uploaded:
@@ -188,7 +188,7 @@ class ShadowSystem(esper.Processor):
         return np.array([lo for lo, _ in boxes]), np.array([hi for _, hi in boxes])
 
     # --- lights through mirrors and portals ---------------------------------------------------
-    def _virtual_maps(self, casters_changed: bool, level) -> list[VirtualLight]:
+    def _virtual_maps(self, casters_changed: bool, level, carrying: bool) -> list[VirtualLight]:
         """Each light's image through the mirrors and portals that carry light
         (``shadow_rules.virtual_lights``), brightest and highest priority first, at most
         ``MAX_VIRTUAL_LIGHTS``: a map each, drawn when it or a caster changed, a view of the
@@ -200,9 +200,7 @@ class ShadowSystem(esper.Processor):
         stats: RenderStats = world.resources[RenderStats]
         surfaces = world.resources.get(Surfaces)
         found: list[VirtualLight] = []
-        if self.enabled and level is not None and surfaces is not None and (
-                any(state.carries_light for state in surfaces.mirrors.values())
-                or any(state.carries_light for state in surfaces.portals.values())):  # (none: no light list to make)
+        if self.enabled and level is not None and carrying:  # no surface carries light: no list to make
             suns = list(world.query_one(DirectionalLight))[:MAX_DIRECTIONAL_LIGHTS]
             lamps = list(world.query(PointLight, Transform))[:MAX_POINT_LIGHTS]
             directional = [(entity, raw_field(light, "direction"), raw_field(light, "color").xyz * light.intensity)

@@ -109,6 +109,7 @@ class ShadowMaps:
         self.filter = "single" if renderer.caps.software else "grid"
         # Lights through mirrors and portals: a depth atlas of 2 x 2 tiles and their block.
         self.virtual_block = np.zeros(VIRTUAL_BLOCK_BYTES // 4, np.float32)
+        self.virtual_shining = False  # set_virtual_count's: the scene pass reads it each program look-up
         self.virtual_ubo = ctx.buffer(self.virtual_block.tobytes())
         self.virtual_atlas: moderngl.Texture | None = None
         self._virtual_framebuffer: moderngl.Framebuffer | None = None
@@ -254,15 +255,11 @@ class ShadowMaps:
         self.renderer.checkpoint(f"shadow map of virtual light {slot}")
 
     def set_virtual_count(self, count: int) -> None:
-        """How many virtual lights shine (slots 0 to count - 1)."""
+        """How many virtual lights shine (slots 0 to count - 1).  ``virtual_shining`` follows
+        it: the scene pass builds its programs with the virtual lights' loop only while one
+        shines (llvmpipe runs a loop's body for every pixel even when it has nothing to do)."""
         self.virtual_block[:4].view(np.int32)[0] = count
-
-    @property
-    def virtual_shining(self) -> bool:
-        """Whether a virtual light shines this frame: the scene pass builds its programs with
-        the virtual lights' loop only then (llvmpipe runs a loop's body for every pixel even
-        when it has nothing to do)."""
-        return bool(self.virtual_block[:4].view(np.int32)[0])
+        self.virtual_shining = count > 0
 
     # --- point lights ---------------------------------------------------------------------
     def draw_point(self, slot: int, light_index: int, position: glm.vec3, light_range: float, resolution: int,
