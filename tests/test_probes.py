@@ -1065,3 +1065,92 @@ def test_faces_touched_holds_every_face_a_point_of_the_boxes_lies_in():
         union |= found
     assert faces_touched(glm.vec3(*centre), 100.0, los, his) == union
     assert faces_touched(glm.vec3(*centre), 1.0, centre + 5.0, centre + 6.0) == set()
+
+
+def test_face_touches_leaves_a_box_out_of_a_face_only_where_no_point_of_it_is_in_that_face():
+    """``face_touches`` against points: every box is sampled densely (corners, edges, inside);
+    a point lies in face f's frustum where f's axis is its largest component, with f's sign
+    (the cube map's own rule).  A box holding such a point is never left out of that face,
+    and the test is not trivially met: most (box, face) pairs are left out."""
+    from engine.core.cube_faces import CUBE_FACES
+    from engine.render.probes import face_touches
+
+    rng = np.random.default_rng(7)
+    apex = np.array([0.3, 1.0, -0.2])
+    lo = rng.uniform(-6, 6, (400, 3))
+    hi = lo + rng.uniform(0.05, 3.0, (400, 3))
+    touched = face_touches(apex, lo, hi)
+    grid = np.stack(np.meshgrid(*[np.linspace(0.0, 1.0, 9)] * 3, indexing="ij"), -1).reshape(-1, 3)
+    axes = np.array([forward for forward, _, _ in CUBE_FACES], float)
+    for b in range(len(lo)):
+        d = lo[b] + grid * (hi[b] - lo[b]) - apex
+        along = d @ axes.T  # (point, face): the coordinate along each face's axis
+        inside = along >= np.abs(d).max(axis=1, keepdims=True) - 1e-12
+        inside &= along > 0.0
+        seen = inside.any(axis=0)
+        assert not (seen & ~touched[b]).any(), (b, seen, touched[b])
+    assert (~touched).mean() > 0.5
+
+
+def test_an_every_frame_probe_keeps_a_face_that_shows_the_sky_alone(scene):
+    """The chrome scene's wall is at +X: the -X face shows the sky alone.  Recaptured every
+    frame (six_pass), that face is drawn at the first capture and then kept (its pixels would
+    be the ones it holds): five faces a frame are drawn.  Every level of every face is, bit
+    for bit, what a capture drawing all six gives.  A box coming into the -X face's view, and
+    a new sky, each make it drawn again, and it shows them."""
+    from engine.render.probes import face_view
+    from engine.render.raw_gl import read_cube_level
+
+    ents = {}
+
+    def build(world):
+        chrome_scene(ents)(world)
+        world.add_component(ents["sphere"], ReflectionProbe(resolution=64, refresh="every_frame"))
+
+    runner = scene(build, (64, 48))
+    probe_stage(runner).path = "six_pass"
+    probes = runner.engine.renderer.probes
+    owner = ents["sphere"]
+    runner.frame()
+    assert runner.stats.probe_faces == 6 and probes.faces_kept == 0
+
+    def levels():
+        texture = probes.cubes[owner].texture
+        return [read_cube_level(runner.ctx, texture, face, level, 14) for face in range(6) for level in range(7)]
+
+    def drawn_whole():
+        """The cube as a capture drawing every face leaves it (the records forgotten)."""
+        state = probe_stage(runner).probes[owner]
+        settings = state.settings
+        views = {face: face_view(face, state.position, settings.near, settings.far, settings.resolution,
+                                 skip=owner, layers=settings.layer_mask) for face in range(6)}
+        probes._sky_faces.clear()
+        probes.capture(owner, views, None, 0, settings.prefilter)
+        return levels()
+
+    for frame in range(2):
+        runner.frame()
+        assert runner.stats.probe_faces == 5 and probes.faces_kept == frame + 1
+    kept = levels()
+    assert all(np.array_equal(a, b) for a, b in zip(kept, drawn_whole(), strict=True))
+    sky = probes.read_face(owner, 1).copy()
+
+    ents["box"] = runner.world.spawn(Transform(position=(-3.0, 0.0, 0.0)), MeshRef(box((1.0, 1.0, 1.0))),
+                                     Material(color=(0.1, 0.9, 0.1)), Emissive(2.0))
+    runner.frame()
+    assert runner.stats.probe_faces == 6
+    with_box = probes.read_face(owner, 1)
+    centre = with_box[28:36, 28:36]
+    assert (centre[..., 1] > 1.0).all() and not np.allclose(with_box, sky)  # the green box, face-on
+    assert all(np.array_equal(a, b) for a, b in zip(levels(), drawn_whole(), strict=True))
+
+    runner.world.delete_entity(ents["box"])
+    runner.frame()  # drawn again: the sky alone, as before
+    runner.frame()  # kept
+    assert runner.stats.probe_faces == 5 and np.array_equal(probes.read_face(owner, 1), sky)
+    for _, skybox in runner.world.query_one(Skybox):
+        skybox.zenith = (0.9, 0.1, 0.1, 1.0)
+    runner.frame()
+    assert runner.stats.probe_faces == 6
+    redder = probes.read_face(owner, 1)
+    assert redder[..., 0].mean() > sky[..., 0].mean() + 0.1

@@ -371,6 +371,12 @@ class InstanceBatch:
         return changed
 
     @property
+    def row_boxes(self) -> np.ndarray:
+        """Each instance's world box as of the last upload, ``[row, lo/hi, xyz]`` (a view of
+        the kept boxes, rows in ``entity_at``'s order; NaN: a row not measured yet)."""
+        return self._row_boxes[: self.count]
+
+    @property
     def box(self) -> tuple[np.ndarray, np.ndarray] | None:
         """The world box [lo, hi] holding every instance as of the last upload (None: empty)."""
         if not self.count:

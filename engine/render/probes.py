@@ -21,7 +21,7 @@ import logging
 import math
 import statistics
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
@@ -56,6 +56,7 @@ from engine.render.views import View
 from engine.rules.probe_rules import projection_box
 
 if TYPE_CHECKING:
+    from engine.render.instances import InstanceBatch
     from engine.render.raw_gl import RawGL
 
 LOG = logging.getLogger("speculum")
@@ -80,6 +81,81 @@ def face_view(face: int, position: glm.vec3, near: float, far: float, size: int,
     proj = glm.perspective(glm.radians(90.0), 1.0, near, far)
     return View(view=view, proj=proj, eye=eye, size=(size, size), name=f"probe face {face}", node=face, skip=skip,
                 hide=skip, kinds=VIEW_PROBE, layers=layers)
+
+
+def _face_planes() -> np.ndarray:
+    """(face, plane, xyz): inward normals of each face frustum's planes through its apex: the
+    four 45-degree sides (d.f >= |d.r|, d.f >= |d.u|) and the plane across the apex
+    (d.f >= 0, which the near plane lies in front of)."""
+    planes = []
+    for forward, _, up in CUBE_FACES:
+        f, u = np.array(forward, np.float64), np.array(up, np.float64)
+        r = np.cross(f, u)
+        planes.append([f - r, f + r, f - u, f + u, f])
+    return np.array(planes)
+
+
+_FACE_PLANES = _face_planes()
+_CORNERS = np.array([(x, y, z) for x in (0, 1) for y in (0, 1) for z in (0, 1)], dtype=bool)  # (8, 3)
+
+
+def face_touches(position: glm.vec3 | Sequence[float], lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    """(box, face) booleans: which cube faces from ``position`` each world box [lo, hi] (rows)
+    may show.  Conservative: a box is left out of a face only when all eight of its corners
+    are outside one of the face's planes through the apex (``_face_planes``); a fragment
+    lies at least half a pixel inside the frustum, far from that test's rounding."""
+    centre = np.asarray(tuple(position), np.float64)
+    lo, hi = np.atleast_2d(lo) - centre, np.atleast_2d(hi) - centre
+    corners = np.where(_CORNERS[None], hi[:, None, :], lo[:, None, :])  # (box, corner, xyz)
+    inside = np.einsum("bck,fpk->bcfp", corners, _FACE_PLANES) >= 0.0  # (box, corner, face, plane)
+    return ~(~inside).all(axis=1).any(axis=2)
+
+
+def sky_only_faces(position: glm.vec3, faces: frozenset[int] | set[int], skip: int,
+                   batches: Sequence[InstanceBatch]) -> frozenset[int]:
+    """The faces of ``faces`` (cube faces from ``position``) that no instance of ``batches``
+    can draw a pixel in: no instance's world box (``InstanceBatch.row_boxes``, as of the
+    frame's upload) touches the face's frustum (``face_touches``, conservative; the far
+    plane is not used, which only keeps more boxes in).  ``skip`` (the probe's own object,
+    which no face draws) is left out, as the scene pass leaves it out.  Such a face shows
+    the sky alone.  A row not measured yet (NaN) counts as touching every face."""
+    left = set(faces)
+    for batch in batches:
+        if not left:
+            break
+        if not batch.count or (batch.count == 1 and batch.entity_at[0] == skip):
+            continue
+        union = batch.box
+        if union is None or np.isnan(union[0]).any() or np.isnan(union[1]).any():
+            return frozenset()
+        near = face_touches(position, union[0], union[1])[0]
+        if not any(near[face] for face in left):
+            continue
+        boxes = batch.row_boxes
+        row = batch.row_of.get(skip) if skip else None
+        if row is not None:
+            boxes = np.delete(boxes, row, axis=0)
+        if not len(boxes):
+            continue
+        hits = face_touches(position, boxes[:, 0], boxes[:, 1]).any(axis=0)
+        left = {face for face in left if not hits[face]}
+    return frozenset(left)
+
+
+class _Same:
+    """Compares equal to a wrapper of the same object only (a GL object held in a record:
+    identity, whatever the object's own ``==`` says)."""
+
+    __slots__ = ("obj",)
+
+    def __init__(self, obj: object) -> None:
+        self.obj = obj
+
+    def __eq__(self, other: object) -> bool:
+        return isinstance(other, _Same) and other.obj is self.obj
+
+    def __hash__(self) -> int:
+        return id(self.obj)
 
 
 class CubeMipPass:
@@ -417,6 +493,11 @@ class ProbeCaptures:
         self.tree = ViewTree(renderer, scene_pass)
         self.mips = CubeMipPass(renderer)
         self.paths = ProbePaths(renderer)
+        # By probe, face -> what the face was last drawn with where it showed the sky alone
+        # (``_sky_record``): such a face is not drawn again while that holds (``capture``).
+        self._sky_faces: dict[int, dict[int, tuple]] = {}
+        self._mips_current: set[int] = set()  # probes whose mip chain was built from their faces as they are
+        self.faces_kept = 0  # faces left as they were, the sky alone as before (counted over the run)
 
     def cube(self, key: int, resolution: int) -> ProbeCube:
         """The cube map of probe ``key`` at ``resolution`` (made, or remade at a new size)."""
@@ -428,6 +509,8 @@ class ProbeCaptures:
                                    f"over this OpenGL's GL_MAX_CUBE_MAP_TEXTURE_SIZE {limit}")
             if cube is not None:
                 cube.texture.release()
+            self._sky_faces.pop(key, None)
+            self._mips_current.discard(key)
             texture = self.ctx.texture_cube((resolution, resolution), 4, dtype="f2")
             texture.filter = (moderngl.LINEAR_MIPMAP_LINEAR, moderngl.LINEAR)
             cube = self.cubes[key] = ProbeCube(texture, resolution)
@@ -468,7 +551,14 @@ class ProbeCaptures:
         (``surfaces`` given, ``depth`` > 0) roots a view tree, which needs the id images of a
         full level: it is drawn into a 2D level target and copied into its face; any other
         face is drawn straight into its face (``CubeFaceTargets``) once the path self-check
-        has verified that on this context (``direct`` forces one way: the check itself)."""
+        has verified that on this context (``direct`` forces one way: the check itself).
+
+        A face that shows the sky alone (``sky_only_faces``: no instance's box touches its
+        frustum) and showed the sky alone at its last drawing, with the same camera, sky,
+        sky program and path (``_sky_record``), is not drawn again: its pixels would be the
+        ones it holds.  It is still fresh (a capture of it now gives the same picture), so a
+        dynamic probe keeps its meaning.  Its mips are rebuilt with the others'; when no
+        face was drawn and the chain was built from the faces as they are, not even that."""
         renderer = self.renderer
         resolution = next(iter(views.values())).size[0]
         cube = self.cube(key, resolution)
@@ -476,8 +566,18 @@ class ProbeCaptures:
         if direct is None:
             direct = not trees and self.direct_faces and renderer.path_checks.trusted("direct_faces")
         targets_direct = self._face_targets(key, cube.texture) if direct and not trees else None
+        records = self._sky_faces.setdefault(key, {})
+        first = next(iter(views.values()))
+        sky_only = sky_only_faces(first.eye, frozenset(views), first.skip,
+                                  [*renderer.opaque_batches(), *renderer.transparent_batches()])
+        drawn = 0
         with self._drawing_into(key):
             for face, view in sorted(views.items()):
+                record = self._sky_record(view, targets_direct is not None) if face in sky_only else None
+                if record is not None and records.get(face) == record:
+                    self.faces_kept += 1
+                    continue
+                drawn += 1
                 if targets_direct is not None:
                     self.scene_pass.draw([view], targets_direct.faces[face], FACE)
                 else:
@@ -488,9 +588,25 @@ class ProbeCaptures:
                         self.tree.render(view, levels, surfaces, TreeSettings(depth_cap=depth), blends)
                     renderer.raw_gl.copy_to_cube_face(targets.framebuffer, cube.texture, face, SCRATCH_UNIT)
                     renderer.checkpoint(f"probe face {face} copy")
+                if record is None:
+                    records.pop(face, None)
+                else:
+                    records[face] = record
                 renderer.stats.probe_faces += 1
-        if build_mips:
+        if drawn:
+            self._mips_current.discard(key)
+        if build_mips and (key not in self._mips_current or cube.prefilter != prefilter):
             cube.prefilter = self.mips.build(key, cube.texture, prefilter)
+            self._mips_current.add(key)
+
+    def _sky_record(self, view: View, direct: bool) -> tuple:
+        """What a face showing the sky alone is drawn from: the view's camera (the sky pass's
+        directions), its size, the sky texture, the shader library's reloads (the sky
+        program) and the path (straight into the face, or copied from a 2D target).  Equal
+        records draw equal pixels."""
+        renderer = self.renderer
+        return (view.view.to_tuple(), view.proj.to_tuple(), tuple(view.eye), view.size, direct,
+                _Same(renderer.sky), renderer.shaders.reloads)
 
     @contextmanager
     def _drawing_into(self, key: int):
@@ -543,6 +659,8 @@ class ProbeCaptures:
                 target.release()
                 del self._layered[key]
             target = self._layered[key] = kind(self.ctx, cube.texture)
+        self._sky_faces.pop(key, None)  # every face drawn by the layered programs: no record holds
+        self._mips_current.discard(key)
         with self._drawing_into(key):
             self.scene_pass.draw_layered([views[face] for face in range(6)], target, culled)
             if isinstance(target, LayeredArrayTarget):
@@ -550,6 +668,7 @@ class ProbeCaptures:
                 self.renderer.checkpoint("layered capture's copy into the cube")
         if build_mips:
             cube.prefilter = self.mips.build(key, cube.texture, prefilter)
+            self._mips_current.add(key)
         self.renderer.stats.probe_faces += 6
 
     def read_face(self, key: int, face: int) -> np.ndarray:
@@ -561,6 +680,8 @@ class ProbeCaptures:
         return data[..., :3].astype(np.float32)
 
     def drop(self, key: int) -> None:
+        self._sky_faces.pop(key, None)
+        self._mips_current.discard(key)
         self.mips.drop(key)
         self.irradiance.drop(key)
         faces = self._faces.pop(key, None)
