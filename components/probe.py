@@ -25,7 +25,9 @@ class ReflectionProbe(ShownLayers):
     ``refresh``: ``once`` (captured the first frame only), ``on_change`` (the
     default: captured the first frame, then only the faces whose view holds something that
     was added, removed, moved or changed its material), ``every_frame``, ``every_n``
-    (every ``every_n`` frames) or ``scripted`` (only after ``request()``).
+    (every ``every_n`` frames) or ``scripted`` (only after ``request()``).  A due face that
+    shows the sky alone, as it did when last drawn from the same place under the same sky,
+    is kept rather than drawn again: it is the picture a capture would draw.
     ``time_slicing`` spreads a capture over six frames (one face each) instead of one.
     ``influence`` is the size of a box around the probe: objects inside it that reflect a
     cube map sample this probe (None: the probe serves only its own entity).
