@@ -599,6 +599,12 @@ class ProbeCaptures:
             cube.prefilter = self.mips.build(key, cube.texture, prefilter)
             self._mips_current.add(key)
 
+    def written_elsewhere(self, key: int) -> None:
+        """Probe ``key``'s cube was written by something other than a capture (a test's
+        sentinel, a tool): no face is kept as it is at its next capture, nor its mips."""
+        self._sky_faces.pop(key, None)
+        self._mips_current.discard(key)
+
     def _sky_record(self, view: View, direct: bool) -> tuple:
         """What a face showing the sky alone is drawn from: the view's camera (the sky pass's
         directions), its size, the sky texture, the shader library's reloads (the sky
