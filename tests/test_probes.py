@@ -1154,3 +1154,56 @@ def test_an_every_frame_probe_keeps_a_face_that_shows_the_sky_alone(scene):
     assert runner.stats.probe_faces == 6
     redder = probes.read_face(owner, 1)
     assert redder[..., 0].mean() > sky[..., 0].mean() + 0.1
+
+
+def test_a_probe_that_sees_only_the_sky_draws_nothing_after_its_first_capture(scene, monkeypatch):
+    """A probe recaptured every frame with nothing around it but its own sphere: every face
+    shows the sky alone, so after the first capture no face is drawn and the mip chain is
+    not built again (its faces are as it was built from); the cube, every level, is what a
+    capture drawing all six gives, and the sphere still shows the sky.  A box put beside it
+    is drawn into the faces that see it, and the chain is built again."""
+    from engine.render.probes import CubeMipPass, face_view
+    from engine.render.raw_gl import read_cube_level
+
+    builds = []
+    build = CubeMipPass.build
+    monkeypatch.setattr(CubeMipPass, "build", lambda self, *args, **kw: builds.append(1) or build(self, *args, **kw))
+    ents = {}
+
+    def world_of_sky(world):
+        world.spawn(Skybox())
+        look_from(world, (0.0, 0.0, 4.0), target=(0.0, 0.0, 0.0), fov=40.0)
+        ents["sphere"] = world.spawn(Transform(), MeshRef(sphere(0.6, 32, 16)),
+                                     Material(color=(1, 1, 1), metallic=1.0, roughness=0.0), Reflective("cube"),
+                                     ReflectionProbe(resolution=32, refresh="every_frame"))
+
+    runner = scene(world_of_sky, (64, 48))
+    probe_stage(runner).path = "six_pass"
+    probes = runner.engine.renderer.probes
+    owner = ents["sphere"]
+    runner.frame()
+    first = len(builds)  # the first capture's chain (and the path self-check's own, where it ran)
+    assert runner.stats.probe_faces == 6 and first >= 1
+    for _ in range(2):
+        rgb = runner.frame()
+        assert runner.stats.probe_captures == 1 and runner.stats.probe_faces == 0 and len(builds) == first
+    assert probes.faces_kept == 12
+    assert (rgb[runner.ids() == owner].astype(int).sum(axis=1) > 60).all()  # the sphere shows the sky
+
+    def levels():
+        return [read_cube_level(runner.ctx, probes.cubes[owner].texture, face, level, 14)
+                for face in range(6) for level in range(6)]
+
+    kept = levels()
+    state = probe_stage(runner).probes[owner]
+    views = {face: face_view(face, state.position, state.settings.near, state.settings.far, 32, skip=owner)
+             for face in range(6)}
+    probes.written_elsewhere(owner)
+    probes.capture(owner, views, None, 0)
+    assert len(builds) == first + 1 and all(np.array_equal(a, b) for a, b in zip(kept, levels(), strict=True))
+
+    runner.world.spawn(Transform(position=(0.0, 0.0, -3.0)), MeshRef(box((1.0, 1.0, 1.0))),
+                       Material(color=(0.9, 0.9, 0.1)), Emissive(2.0))
+    runner.frame()
+    assert 1 <= runner.stats.probe_faces < 6 and len(builds) == first + 2
+    assert probes.read_face(owner, 5)[14:18, 14:18, 0].min() > 1.0  # -Z: the yellow box, face-on
