@@ -44,7 +44,7 @@ class EndImages:
         self.program["history"].value = HISTORY_UNIT
         self.program["node_map"].value = NODE_UNIT
         self.vao = self.ctx.vertex_array(self.program, [])
-        self.uniforms = UniformValues(renderer.shaders)  # what the program holds (written where it differs)
+        self.uniforms = UniformValues.of(renderer)  # what the program holds (written where it differs)
         self.history: moderngl.Texture | None = None
         self._history_fbo: moderngl.Framebuffer | None = None
         self.view_proj: glm.mat4 | None = None   # the previous frame's main view-projection

@@ -268,14 +268,25 @@ _FALLBACK_WEIGHTS = struct.Struct("<8f")
 class UniformValues:
     """The values last written to programs' uniforms, so a pass writes one only where it
     differs (a program keeps its uniforms between draws and frames: a level's sizes and
-    scales are the same level after level, frame after frame).  Forgotten after a hot
-    reload (``ShaderLibrary.reloads``): a relinked program's uniforms start again from
+    scales are the same level after level, frame after frame).  One record a context
+    (``of``): the shader library hands every tree (the main view's, each probe's) the same
+    program objects, so every writer of them must keep the one record.  Forgotten after a
+    hot reload (``ShaderLibrary.reloads``): a relinked program's uniforms start again from
     their defaults."""
 
     def __init__(self, shaders: object) -> None:
         self.shaders = shaders
         self.reloads = getattr(shaders, "reloads", 0)
         self.values: dict[tuple[int, str], object] = {}
+
+    @staticmethod
+    def of(renderer: Gpu) -> UniformValues:
+        """The record of ``renderer``'s context (made at the first call)."""
+        ctx = renderer.ctx
+        record = getattr(ctx, "_speculum_uniform_values", None)
+        if record is None or record.shaders is not renderer.shaders:
+            record = ctx._speculum_uniform_values = UniformValues(renderer.shaders)
+        return record
 
     def set(self, program: moderngl.Program, name: str, value: object) -> None:
         """``program[name].value = value`` unless that is its value already."""
@@ -430,6 +441,7 @@ class Claims:
 
     ids: list[tuple[int, int, int]]
     rects: list[tuple[int, int, int, int]] | list[list[int]]
+    packed: tuple[tuple[int, int], bytes] | None = None  # (level size, claim.vert's vertices): packed once
 
     def __len__(self) -> int:
         return len(self.rects)
@@ -445,7 +457,7 @@ class MirrorPasses:
         self.claim = shaders.program("claim.vert", "mirror_claim.frag")
         self.claim["parent_node_map"].value = PARENT_NODE_UNIT
         self.claim["parent_surface_map"].value = PARENT_SURFACE_UNIT
-        self.uniforms = UniformValues(shaders)  # what the claim, composite and fallback programs hold
+        self.uniforms = UniformValues.of(renderer)  # what the claim, composite and fallback programs hold
         self.composites: dict[str, _CompositeDraw] = {}
         units = {**dict(zip(("reflection", "reflection_seen", "reflection_nodes"), REFLECTION_UNITS, strict=True)),
                  "sky_map": SKY_UNIT, "rough_atlas": ATLAS_UNIT, "normal_map": NORMAL_UNIT}
@@ -488,7 +500,10 @@ class MirrorPasses:
         # reset draws them all at once (a rectangle reset twice is reset the same), then
         # each claim draws its own six vertices inside its query.
         count = len(claims)
-        vertices = self._claim_vertices(claims, level.size)
+        packed = claims.packed
+        if packed is None or packed[0] != level.size:
+            packed = claims.packed = (level.size, self._claim_vertices(claims, level.size))
+        vertices = packed[1]
         if self._claim_buffer is None or self._claim_buffer.size < len(vertices):
             self._reserve_claims(len(vertices))
         self._claim_buffer.write(vertices)
@@ -661,7 +676,7 @@ class MirrorPasses:
                 for name, data, size in (("fallback_ids", ids, _FALLBACK_IDS.size),
                                          ("fallback_weights", weights, _FALLBACK_WEIGHTS.size)):
                     if name in program:  # (a build being edited may not read one: hot reload)
-                        program[name].write(data.ljust(FALLBACK_ROWS * size, b"\0"))
+                        uniforms.write(program, name, data.ljust(FALLBACK_ROWS * size, b"\0"))
                 draw.draw(rows, renderer.shaders.reloads)
         renderer.stats.reflection_fallbacks += prepared.count
         renderer.checkpoint("fallback")
