@@ -441,7 +441,6 @@ class Claims:
 
     ids: list[tuple[int, int, int]]
     rects: list[tuple[int, int, int, int]] | list[list[int]]
-    packed: tuple[tuple[int, int], bytes] | None = None  # (level size, claim.vert's vertices): packed once
 
     def __len__(self) -> int:
         return len(self.rects)
@@ -500,10 +499,7 @@ class MirrorPasses:
         # reset draws them all at once (a rectangle reset twice is reset the same), then
         # each claim draws its own six vertices inside its query.
         count = len(claims)
-        packed = claims.packed
-        if packed is None or packed[0] != level.size:
-            packed = claims.packed = (level.size, self._claim_vertices(claims, level.size))
-        vertices = packed[1]
+        vertices = self._claim_vertices(claims, level.size)
         if self._claim_buffer is None or self._claim_buffer.size < len(vertices):
             self._reserve_claims(len(vertices))
         self._claim_buffer.write(vertices)

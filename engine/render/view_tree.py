@@ -244,9 +244,6 @@ class ViewTree:
         self.coverage: dict[int, int] = {}  # level -> its views' claimed pixels last frame (screen pixels)
         self._projections: tuple[bytes, np.ndarray, np.ndarray] | None = None  # the last root's projection
         self._roots: dict[tuple, LevelRows] = {}  # each root's row, by its camera (_root_rows)
-        # The claims of the plans SurfaceTable.plan keeps, by the plan (_claim): a plan found again
-        # (a still camera, a probe face) has the same parents, so the same claims.
-        self._claims: dict[int, tuple[Candidates, Claims]] = {}
         # what _end_surfaces found last, and for what (table, surfaces seen, cap)
         self._ends_cache: tuple[tuple, tuple[np.ndarray, int] | None] | None = None
         self._visibility: dict[tuple[str, int], RootVisibility] = {}  # by root (its name and skipped entity)
@@ -635,19 +632,11 @@ class ViewTree:
         The claim shader's (parent view, surface, view index) of every candidate: a level's
         few claims, so lists (a few numpy calls cost more)."""
         candidates = step.candidates
-        kept = self._claims.get(id(candidates))
-        if kept is not None and kept[0] is candidates:
-            claims = kept[1]  # a kept plan (a still camera, a probe face): its claims, packed last time
-        else:
-            entities, parents = surfaces.entity_list, step.parents
-            ids = [(parents[p].index, entities[s], node) for p, s, node in
-                   zip(candidates.parent.tolist(), candidates.surface.tolist(),
-                       candidates.rows.node.astype(np.int64).tolist(), strict=True)]
-            claims = Claims(ids, candidates.scissor.tolist())
-            if not candidates.parent.flags.writeable:  # a plan SurfaceTable.plan keeps: found again
-                if len(self._claims) >= 64:
-                    self._claims.clear()
-                self._claims[id(candidates)] = (candidates, claims)
+        entities, parents = surfaces.entity_list, step.parents
+        ids = [(parents[p].index, entities[s], node) for p, s, node in
+               zip(candidates.parent.tolist(), candidates.surface.tolist(),
+                   candidates.rows.node.astype(np.int64).tolist(), strict=True)]
+        claims = Claims(ids, candidates.scissor.tolist())
         self.passes.prepare_level(step.targets, step.parent_targets, claims, step.queries)
 
     def _draw_level(self, step: _Level, root: View) -> None:
