@@ -67,6 +67,9 @@ class BloomPass:
         self.textures: list[moderngl.Texture] = []
         self._framebuffers: list[moderngl.Framebuffer] = []
         self.levels = 0   # levels drawn by the last ``draw``
+        self._sizes: list[tuple[int, int]] = []   # the chain's sizes for ``_sizes_for`` (image size, levels, start)
+        self._sizes_for: tuple | None = None
+        self._first_vaos: dict[bool, moderngl.VertexArray] = {}   # the first step's build, by threshold on
         self._written: dict[tuple[int, str], object] = {}   # (vao id, uniform) -> the value last written
 
     @property
@@ -82,6 +85,8 @@ class BloomPass:
         if value not in FIRST_STEPS:
             raise ValueError(f"bloom first_step must be one of {', '.join(map(repr, FIRST_STEPS))}, got {value!r}")
         self._first_step = value
+        self._first_vaos = {}      # the first step's builds differ by start
+        self._sizes_for = None
 
     def _vao(self, fragment: str, **defines: str) -> moderngl.VertexArray:
         key = (fragment, tuple(sorted(defines.items())))
@@ -118,38 +123,43 @@ class BloomPass:
         """Bloom ``hdr`` (read only): returns the largest level (half or a quarter of the
         image's size, ``first_step``), holding the sum of the levels' blurs (``self.levels``
         of them), or None where the image is too small to halve even once."""
-        sizes = level_sizes(hdr.size, bloom.levels, self._first_step)
+        key = (hdr.size, bloom.levels, self._first_step)
+        if key != self._sizes_for:   # the chain's sizes and targets, made again only when these change
+            self._sizes = level_sizes(*key)
+            self._sizes_for = key
+            if self._sizes:
+                self._chain(self._sizes)
+        sizes = self._sizes
         self.levels = len(sizes)
         if not sizes:
             return None
-        self._chain(sizes)
-        source = hdr
-        for index, (size, framebuffer) in enumerate(zip(sizes, self._framebuffers, strict=False)):
-            if index == 0:
-                threshold = bloom.threshold > 0.0
-                defines = {"FIRST": "1"}
-                if self._first_step == "quarter":
-                    defines["QUARTER"] = "1"
-                if threshold:
-                    defines["THRESHOLD"] = "1"
-                vao = self._vao("bloom_down.frag", **defines)
-                if threshold:
-                    knee = bloom.threshold * bloom.knee
-                    self._set(vao, "threshold", (bloom.threshold, bloom.threshold - knee, 2.0 * knee,
-                                                 0.25 / max(knee, 1e-5)))
-            else:
-                vao = self._vao("bloom_down.frag")
+        ctx = self.ctx
+        threshold = bloom.threshold > 0.0
+        first = self._first_vaos.get(threshold)
+        if first is None:
+            defines = {"FIRST": "1"}
+            if self._first_step == "quarter":
+                defines["QUARTER"] = "1"
+            if threshold:
+                defines["THRESHOLD"] = "1"
+            first = self._first_vaos[threshold] = self._vao("bloom_down.frag", **defines)
+        if threshold:
+            knee = bloom.threshold * bloom.knee
+            self._set(first, "threshold", (bloom.threshold, bloom.threshold - knee, 2.0 * knee, 0.25 / max(knee, 1e-5)))
+        down = self._vao("bloom_down.frag")
+        source, vao = hdr, first
+        for size, framebuffer, texture in zip(sizes, self._framebuffers, self.textures, strict=True):
             framebuffer.use()
-            apply_pass_state(self.ctx, _DOWN, (0, 0, *size))
-            bind_texture(self.ctx, source, PRESENT_UNIT)
+            apply_pass_state(ctx, _DOWN, (0, 0, *size))
+            bind_texture(ctx, source, PRESENT_UNIT)
             vao.render(moderngl.TRIANGLES, vertices=3)
-            source = self.textures[index]
+            source, vao = texture, down
         up = self._vao("bloom_up.frag")
         self._set(up, "radius", bloom.radius)
         for index in range(len(sizes) - 2, -1, -1):
             self._framebuffers[index].use()
-            apply_pass_state(self.ctx, _UP, (0, 0, *sizes[index]))
-            bind_texture(self.ctx, self.textures[index + 1], PRESENT_UNIT)
+            apply_pass_state(ctx, _UP, (0, 0, *sizes[index]))
+            bind_texture(ctx, self.textures[index + 1], PRESENT_UNIT)
             up.render(moderngl.TRIANGLES, vertices=3)
         return self.textures[0]
 
@@ -170,10 +180,12 @@ class BloomPass:
             texture.release()
         self._framebuffers.clear()
         self.textures.clear()
+        self._sizes_for = None
 
     def release(self) -> None:
         self.release_targets()
         for vao in self._vaos.values():
             vao.release()
         self._vaos.clear()
+        self._first_vaos.clear()
         self._written.clear()
