@@ -250,6 +250,52 @@ def test_a_still_scene_draws_no_shadow_pass_and_a_moved_caster_draws_one(scene):
     assert not np.array_equal(first, moved)
 
 
+def _scene_programs(runner) -> list:
+    """The scene programs built for the shadow lookups the maps now ask for."""
+    scene_pass = runner.engine.renderer.scene_pass
+    wanted = runner.engine.renderer.shadows.program_defines
+    return [program for key, program in scene_pass._programs.items() if key[-1] == wanted]
+
+
+def test_the_scene_programs_read_a_kind_of_map_only_while_a_light_of_that_kind_casts(scene):
+    """No light casts: the scene programs are built without the shadow lookups (no atlas or
+    cube sampler in them: llvmpipe would run a lookup that gives 1 for every pixel).  The sun
+    casts: its build reads the atlas and its shadow shows; the lamp too: the cubes as well;
+    both off again: the first frame's programs and pixels come back, byte for byte."""
+    def build(world):
+        world.resources["ids"] = _floor_scene(world, (0.5, 5.0, 6.5), (0.0, 0.0, 0.0), point=(0.5, 3.0, 1.5))
+
+    runner = scene(build, (320, 240))
+    runner.engine.renderer.antialias = "off"
+    ids = runner.world.resources["ids"]
+    sun = runner.world.get(ids["sun"], DirectionalLight)
+    lamp = runner.world.get(ids["lamp"], PointLight)
+    maps = runner.engine.renderer.shadows
+
+    def samplers() -> set[tuple[bool, bool]]:
+        built = _scene_programs(runner)
+        assert built, "no scene program was built for the maps' lookups"
+        return {("shadow_atlas" in program, "point_shadow0" in program) for program in built}
+
+    sun.shadows = lamp.shadows = False
+    plain = runner.frame()
+    assert not {"DIRECTIONAL_SHADOWS", "POINT_SHADOWS"} & {name for name, _ in maps.program_defines}
+    assert samplers() == {(False, False)}
+    sun.shadows = True
+    sunlit = runner.frame()
+    assert samplers() == {(True, False)}
+    shadowed, _ = _classified(plain, sunlit)
+    assert shadowed[runner.ids() == ids["floor"]].sum() > 800   # the sun's shadow on the floor
+    lamp.shadows = True
+    both = runner.frame()
+    assert samplers() == {(True, True)}
+    shadowed, _ = _classified(sunlit, both)
+    assert shadowed[runner.ids() == ids["floor"]].sum() > 200   # and now the lamp's
+    sun.shadows = lamp.shadows = False
+    assert np.array_equal(runner.frame(), plain)
+    assert samplers() == {(False, False)}
+
+
 @pytest.mark.parametrize("change", ["moved", "removed", "added"])
 def test_a_changed_caster_redraws_only_its_footprint_and_the_frame_is_a_fresh_engines(scene, change):
     """The box moves (is deleted, or a second box comes) inside the level's box: the map's
@@ -360,12 +406,16 @@ def test_the_filter_is_checked_and_a_new_one_draws_the_maps_again(scene):
 
     runner = scene(build)
     runner.frame()
-    runner.frame()
+    before = runner.frame()
     assert runner.stats.shadow_maps_drawn == 0
     maps = runner.engine.renderer.shadows
     maps.filter = "grid" if maps.filter == "single" else "single"
-    runner.frame()
+    after = runner.frame()
     assert runner.stats.shadow_maps_drawn == 1
+    # The scene programs are built for the new filter (one tap known at build time, or the
+    # grid): the shadow's edges change.
+    assert (("SHADOW_SINGLE_TAP", "1") in maps.program_defines) == (maps.filter == "single")
+    assert not np.array_equal(before, after)
     with pytest.raises(ValueError, match="shadow filter"):
         maps.filter = "pcss"
 

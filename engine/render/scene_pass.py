@@ -176,8 +176,9 @@ class ScenePass:
                 batch.drop_vertex_arrays()  # made again for the relinked programs' inputs
             self._reloads_seen = reloads
         virtual = self.shadows.virtual_shining  # the shadows stage set how many shine
+        shadowing = self.shadows.program_defines  # the lookups a program compiles (ShadowMaps.upload's)
         key = (invocations, layered, variants, normal_mapped, checker, material_maps, probe_blend, virtual,
-               ambient_probes, probe_rest)
+               ambient_probes, probe_rest, shadowing)
         program = self._programs.get(key)
         if program is None:
             defines = {}
@@ -199,6 +200,7 @@ class ScenePass:
                 defines["VIRTUAL_LIGHTS"] = "1"
             if ambient_probes:  # diffuse light from the probes' boxes too (shaders/include/ambient.glsl)
                 defines["AMBIENT_PROBES"] = "1"
+            defines.update(shadowing)
             geometry = None
             if invocations:
                 geometry = "scene_batched.geom"

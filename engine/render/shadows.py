@@ -103,9 +103,12 @@ class ShadowMaps:
         # How edges are filtered: "grid" (2 x 2 taps, 3 x 3 past a softness of 1, four on a
         # cube), each a bilinear percentage-closer comparison; "single" (one such tap: a
         # one-texel edge).  On a software rasteriser every tap is CPU time for every pixel a
-        # light reaches (the benchmark scene at 640x360: a still frame 1.24x the frame without
-        # shadows with the grid, 1.04x with one tap; benchmarks/lighting.py), so there the
+        # light reaches (the benchmark scene at 640x360 on llvmpipe, the sun's map 2048 a side:
+        # a still frame 1.43x the frame without shadows with the grid, 1.24x with one tap, the
+        # frame without building no lookup at all; benchmarks/lighting.py), so there the
         # default is "single"; set "grid" for equal quality (maps are drawn again).
+        self._casting = (False, False)   # (a directional light casts, a point light casts): upload's
+        self.program_defines: tuple[tuple[str, str], ...] = ()
         self.filter = "single" if renderer.caps.software else "grid"
         # Lights through mirrors and portals: a depth atlas of 2 x 2 tiles and their block.
         self.virtual_block = np.zeros(VIRTUAL_BLOCK_BYTES // 4, np.float32)
@@ -177,6 +180,19 @@ class ShadowMaps:
         if value not in SHADOW_FILTERS:
             raise ValueError(f"shadow filter must be one of {', '.join(map(repr, SHADOW_FILTERS))}, got {value!r}")
         self._filter = value
+        self._set_program_defines()
+
+    def _set_program_defines(self) -> None:
+        """``program_defines``: the shadow lookups the scene programs compile
+        (``shaders/include/shadows.glsl``): ``DIRECTIONAL_SHADOWS`` while a directional light
+        casts, ``POINT_SHADOWS`` while a point light does, ``SHADOW_SINGLE_TAP`` with the
+        "single" filter.  The scene pass builds (and caches) a program per combination; a
+        frame where nothing casts runs no lookup (llvmpipe runs every branch's code: a third of
+        such a frame at 640x360 went to lookups that returned 1)."""
+        directional, point = self._casting
+        self.program_defines = tuple((name, "1") for name, on in (
+            ("DIRECTIONAL_SHADOWS", directional), ("POINT_SHADOWS", point),
+            ("SHADOW_SINGLE_TAP", self._filter == "single")) if on)
 
     def _taps(self, softness: float) -> float:
         """Taps a side of a directional light's grid."""
@@ -365,6 +381,11 @@ class ShadowMaps:
 
     def upload(self) -> None:
         self.ubo.write(self.block.tobytes())
+        base = 16 * MAX_DIRECTIONAL_LIGHTS
+        casting = (bool(self.block[base + 3:base + 4 * MAX_DIRECTIONAL_LIGHTS:4].any()), bool((self._slots >= 0).any()))
+        if casting != self._casting:
+            self._casting = casting
+            self._set_program_defines()
         self.virtual_ubo.write(self.virtual_block.tobytes())
 
     def bind(self) -> None:
