@@ -152,6 +152,9 @@ class InstanceBatch:
         self._buffer = ctx.buffer(reserve=capacity * INSTANCE_DTYPE.itemsize)
         self._buffer_rows = capacity
         self._vaos: dict[int, moderngl.VertexArray] = {}
+        # What the scene pass draws this batch with, by kind of pass (ScenePass._record): its
+        # program, vertex array and uniforms, kept with the batch and gone with it.
+        self.draw_records: dict[tuple, tuple] = {}
         self._max_scale = 0.0
         self._rescale = False
         # Each row's world box, kept for the rows each upload sends (a removal's moved row
@@ -442,6 +445,7 @@ class InstanceBatch:
         for vao in self._vaos.values():
             vao.release()
         self._vaos.clear()
+        self.draw_records.clear()
 
     def draw(self, program: moderngl.Program) -> None:
         if self.count:
