@@ -7,6 +7,7 @@ nothing.
 """
 from __future__ import annotations
 
+import math
 from typing import NamedTuple
 
 import moderngl
@@ -49,6 +50,11 @@ _SPAN_SLACK = 4
 # Movers of one batch in a frame from which their rows are gathered at the batch's front
 # (InstanceBatch.write_transforms).
 _GATHER_AT = 16
+
+
+# Rows an upload measures (world boxes, largest scale) in Python floats rather than arrays
+# (InstanceBatch._measure_few): below it the arrays' fixed cost a call is most of the work.
+_FEW_ROWS = 8
 
 
 # Rows from which write_transforms works the normal matrices out on arrays (normal_matrices)
@@ -108,6 +114,7 @@ class GpuMesh:
                                  for z in (lo[2], hi[2])], np.float64)
         # The same box as (lo/hi, column, 1), to scale a model matrix's axes by (InstanceBatch._grow_box).
         self.box_ends = np.array([lo, hi], np.float64).reshape(2, 3, 1)
+        self.box_lo, self.box_hi = tuple(float(v) for v in lo), tuple(float(v) for v in hi)  # the same, as floats
 
     def release(self) -> None:
         self.vertices.release()
@@ -315,9 +322,10 @@ class InstanceBatch:
         return glm.vec3(*self.rows["model"][: self.count, 12:15].mean(axis=0).tolist())
 
     def _grow_scale(self, rows: np.ndarray | slice) -> None:
-        model = self.rows["model"][rows]
-        if len(model):
-            axes = model[:, :12].reshape(-1, 3, 4)[:, :, :3]  # [instance, column, row]: the three axes
+        """Grow the largest axis scale by ``rows``' model matrices: their axes' squared
+        lengths summed in float64 from the float32 rows (as ``_measure_few`` does a row at a time)."""
+        axes = self.rows["model"][rows][:, :12].reshape(-1, 3, 4)[:, :, :3].astype(np.float64)
+        if len(axes):
             longest = np.einsum("ncr,ncr->nc", axes, axes).max()  # squared lengths, the largest
             self._max_scale = max(self._max_scale, float(np.sqrt(longest)))
 
@@ -350,6 +358,54 @@ class InstanceBatch:
             self._note_changed(np.fmin.reduce(both[:, 0]), np.fmax.reduce(both[:, 1]))
         boxes[rows] = box
         self._box = None
+
+    def _measure_few(self, rows: np.ndarray | slice) -> None:
+        """``_grow_scale`` and ``_grow_box`` for a few rows (``_FEW_ROWS``: a frame's handful
+        of movers) in Python floats, row by row: a numpy call on a cold cache costs several
+        microseconds whatever its size, and the two take some thirty of them.  The same
+        float64 operations in the same order (a term's lower value is numpy's minimum, ``a``
+        when ``a < b`` else ``b``; the sums c = 0 + 1, + 2, + the translation), so the boxes
+        are the same numbers the array path writes; the changed box skips NaN (never
+        measured) as fmin and fmax do."""
+        boxes = self._boxes_for(len(self.rows))
+        lo_ends, hi_ends = self.mesh.box_lo, self.mesh.box_hi
+        longest = 0.0
+        measured = []
+        changed_lo = changed_hi = None
+        for m, (old_lo, old_hi) in zip(self.rows["model"][rows].tolist(), boxes[rows].tolist(), strict=True):
+            low, high = [], []
+            for r in range(3):
+                ends = []
+                for c in range(3):
+                    a, b = m[4 * c + r] * lo_ends[c], m[4 * c + r] * hi_ends[c]
+                    ends.append((a if a < b else b, a if a > b else b))
+                low.append(ends[0][0] + ends[1][0] + ends[2][0] + m[12 + r])
+                high.append(ends[0][1] + ends[1][1] + ends[2][1] + m[12 + r])
+            for c in range(3):
+                x, y, z = m[4 * c], m[4 * c + 1], m[4 * c + 2]
+                length = x * x + y * y + z * z
+                if length > longest:
+                    longest = length
+            measured.append((low, high))
+            if low != old_lo or high != old_hi:  # NaN (never measured) differs from everything
+                for lo_box, hi_box in ((old_lo, old_hi), (low, high)):
+                    if lo_box[0] != lo_box[0]:
+                        continue  # never measured
+                    if changed_lo is None:
+                        changed_lo, changed_hi = list(lo_box), list(hi_box)
+                        continue
+                    for i in range(3):
+                        if lo_box[i] < changed_lo[i]:
+                            changed_lo[i] = lo_box[i]
+                        if hi_box[i] > changed_hi[i]:
+                            changed_hi[i] = hi_box[i]
+        if not measured:
+            return
+        self._max_scale = max(self._max_scale, math.sqrt(longest))
+        boxes[rows] = measured
+        self._box = None
+        if changed_lo is not None:
+            self._note_changed(np.array(changed_lo), np.array(changed_hi))
 
     def _boxes_for(self, rows: int) -> np.ndarray:
         """The rows' boxes, grown to hold at least ``rows`` rows."""
@@ -412,8 +468,11 @@ class InstanceBatch:
                 breaks = np.flatnonzero(np.diff(measured) != 1) + 1
                 starts = [first, *measured[breaks].tolist()]
                 ends = [*(measured[breaks - 1] + 1).tolist(), last + 1]
-        self._grow_scale(measured)
-        self._grow_box(measured)
+        if count <= _FEW_ROWS:
+            self._measure_few(measured)
+        else:
+            self._grow_scale(measured)
+            self._grow_box(measured)
         sent = 0
         data = memoryview(self.rows.view(np.uint8))  # rows as bytes: a run is a slice, not a copy
         write = self._buffer.write
