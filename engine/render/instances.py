@@ -31,6 +31,8 @@ INSTANCE_DTYPE = np.dtype([
 REFLECT_MIX, REFRACTION_IOR, PROBE_WEIGHTS = 0, 1, slice(2, 4)  # "reflect": mix, ior, each probe's weight
 TINT_VISIBILITY = 3                                             # "tint": visibility_code
 INSTANCE_FORMAT = "16f 9f 4f 4f 4f 4f 4f 4u/i"
+_MATRIX_FLOATS = 25  # "model" then "normal_matrix": a row's first floats (InstanceBatch._matrices)
+assert INSTANCE_DTYPE.fields["model"][1] == 0 and INSTANCE_DTYPE.fields["normal_matrix"][1] == 64
 INSTANCE_ATTRIBUTES = ("in_model", "in_normal_matrix", "in_color", "in_surface", "in_reflect", "in_tint",
                        "in_slice", "in_slots")
 VERTEX_FORMAT = "3f 3f 2f"
@@ -150,6 +152,7 @@ class InstanceBatch:
         self.row_of: dict[int, int] = {}
         self.entity_at: list[int] = []
         self._dirty: set[int] = set()
+        self._matrix_view: np.ndarray | None = None  # _matrices' view of rows
         self._moving = 0  # rows [0, _moving) are those of instances that have moved (write_transforms)
         # Counts changes of existing rows' places (a removal's fill, a gather's swaps): the
         # last movers' rows, (layout, entities, rows, rows as a list), hold while it stands
@@ -171,7 +174,7 @@ class InstanceBatch:
         self._box: tuple[np.ndarray, np.ndarray] | None = None
         # Where instances were and are whose rows changed since ``take_changed_box`` (the old
         # and the new boxes of moved, added and removed rows): what a shadow map must redraw.
-        self._changed: tuple[np.ndarray, np.ndarray] | None = None
+        self._changed: tuple[list[float], list[float]] | None = None
         self.key: BatchKey | None = None  # set by Renderer.batch_for
         self.probe = 0  # the entity owning the reflection probe its instances sample (0: none)
         self.mirrored = False  # its instances' model matrices mirror them (drawn with the other winding)
@@ -235,15 +238,25 @@ class InstanceBatch:
                 rows = np.array([index[entity] for entity in entities], np.int64)
             listed = rows.tolist()
             self._rows_of = (self._layout, list(entities), rows, listed) if moving else None
-        flat = np.frombuffer(glm.array(models).to_bytes(), np.float32).reshape(-1, 16)
-        self.rows["model"][rows] = flat
         if len(models) >= _NORMALS_ON_ARRAYS:
+            flat = np.frombuffer(glm.array(models).to_bytes(), np.float32).reshape(-1, 16)
+            self.rows["model"][rows] = flat
             self.rows["normal_matrix"][rows] = normal_matrices(flat)
         else:
-            self.rows["normal_matrix"][rows] = np.frombuffer(
-                glm.array([glm.transpose(glm.inverse(glm.mat3(model))) for model in models]).to_bytes(),
-                np.float32).reshape(-1, 9)
+            # A few rows: each row's model and normal matrix (its first 25 floats) packed by
+            # glm and written in one go through a float view of the rows.
+            data = b"".join([model.to_bytes() + glm.transpose(glm.inverse(glm.mat3(model))).to_bytes()
+                             for model in models])
+            self._matrices()[rows] = np.frombuffer(data, np.float32).reshape(-1, _MATRIX_FLOATS)
         self._dirty.update(listed)
+
+    def _matrices(self) -> np.ndarray:
+        """The rows' model and normal matrices as one float32 array (row, 25): a view of
+        ``rows`` (kept while the table is), where both are written at once."""
+        view = self._matrix_view
+        if view is None or view.base is not self.rows:
+            view = self._matrix_view = self.rows.view(np.float32).reshape(len(self.rows), -1)[:, :_MATRIX_FLOATS]
+        return view
 
     def _gather(self, movers: np.ndarray) -> None:
         """Grow the front block of moving rows by the ``movers`` (distinct rows) outside it:
@@ -287,7 +300,7 @@ class InstanceBatch:
         self._rescale = True  # the largest instance may have gone: measure all rows again
         self._box = None      # and the union of the rows' boxes
         boxes = self._boxes_for(last + 1)
-        self._note_changed(boxes[index, 0], boxes[index, 1])  # where it was
+        self._note_changed(boxes[index, 0].tolist(), boxes[index, 1].tolist())  # where it was
         if index != last:
             boxes[index] = boxes[last]  # the moved row's box moves with it
         boxes[last] = np.nan
@@ -355,7 +368,7 @@ class InstanceBatch:
         if changed.any():
             # The old boxes (NaN: never measured, left out by fmin/fmax) and the new ones.
             both = np.concatenate((old, box) if changed.all() else (old[changed], box[changed]))
-            self._note_changed(np.fmin.reduce(both[:, 0]), np.fmax.reduce(both[:, 1]))
+            self._note_changed(np.fmin.reduce(both[:, 0]).tolist(), np.fmax.reduce(both[:, 1]).tolist())
         boxes[rows] = box
         self._box = None
 
@@ -405,7 +418,7 @@ class InstanceBatch:
         boxes[rows] = measured
         self._box = None
         if changed_lo is not None:
-            self._note_changed(np.array(changed_lo), np.array(changed_hi))
+            self._note_changed(changed_lo, changed_hi)
 
     def _boxes_for(self, rows: int) -> np.ndarray:
         """The rows' boxes, grown to hold at least ``rows`` rows."""
@@ -415,19 +428,23 @@ class InstanceBatch:
             self._row_boxes = grown
         return self._row_boxes
 
-    def _note_changed(self, lo: np.ndarray, hi: np.ndarray) -> None:
-        if np.isnan(lo).any() or np.isnan(hi).any():
+    def _note_changed(self, lo: list[float], hi: list[float]) -> None:
+        """Grow the changed box by [lo, hi] (floats; one with a NaN, never measured, adds
+        nothing): kept as floats, made arrays once when taken (a frame's few movers note it
+        without a numpy call)."""
+        if any(v != v for v in lo) or any(v != v for v in hi):
             return
-        lo, hi = np.array(lo, np.float64), np.array(hi, np.float64)  # copies: the rows' boxes change under views
-        if self._changed is not None:
-            lo, hi = np.minimum(lo, self._changed[0]), np.maximum(hi, self._changed[1])
-        self._changed = (lo, hi)
+        if self._changed is not None:  # numpy's minimum and maximum: a if a < b else b
+            old_lo, old_hi = self._changed
+            lo = [a if a < b else b for a, b in zip(lo, old_lo, strict=True)]
+            hi = [a if a > b else b for a, b in zip(hi, old_hi, strict=True)]
+        self._changed = (list(lo), list(hi))
 
     def take_changed_box(self) -> tuple[np.ndarray, np.ndarray] | None:
         """The box holding where instances were and are whose boxes changed since the last
         call (None: none), forgotten."""
         changed, self._changed = self._changed, None
-        return changed
+        return None if changed is None else (np.array(changed[0]), np.array(changed[1]))
 
     @property
     def box(self) -> tuple[np.ndarray, np.ndarray] | None:

@@ -95,6 +95,7 @@ class ShadowMaps:
         self.tile = 0
         # slot -> (the fit, resolution, the buffer holding its Camera block) (_bind_fit)
         self._fit_blocks: dict[int, tuple[DirectionalFit, int, moderngl.Buffer]] = {}
+        self._block_rows: dict[int, tuple] = {}  # slot -> what its Shadows block rows were written from
         self._atlas_framebuffer = ctx.framebuffer(depth_attachment=self.atlas)
         self._atlas_framebuffer.clear(depth=1.0)
         self._empty_cube = ctx.texture_cube((1, 1), 1, np.ones(6, np.float32).tobytes(), dtype="f4")
@@ -158,14 +159,18 @@ class ShadowMaps:
         framebuffer.clear(depth=1.0, viewport=rect)
         self._bind_fit(slot, fit, resolution)
         self._draw_casters(None, self._depth_program)
-        # World -> the tile's uv and depth in [0, 1].
+        # World -> the tile's uv and depth in [0, 1]; the block's rows written again only when
+        # what they are made of changed (a frame redrawing a region under moved casters keeps them).
         width = self.atlas.size[0]
-        scale = resolution / width
-        to_tile = glm.translate(glm.vec3(x / width + 0.5 * scale, y / width + 0.5 * scale, 0.5)) \
-            * glm.scale(glm.vec3(0.5 * scale, 0.5 * scale, 0.5))
-        self.block[16 * slot:16 * slot + 16] = np.array((to_tile * fit.view_proj).to_list(), np.float32).ravel()
-        base = 16 * MAX_DIRECTIONAL_LIGHTS + 4 * slot
-        self.block[base:base + 4] = (fit.texel, softness, 1.0 / width, self._taps(softness))
+        written = (fit, resolution, softness, width, self._filter)
+        if self._block_rows.get(slot) != written:
+            scale = resolution / width
+            to_tile = glm.translate(glm.vec3(x / width + 0.5 * scale, y / width + 0.5 * scale, 0.5)) \
+                * glm.scale(glm.vec3(0.5 * scale, 0.5 * scale, 0.5))
+            self.block[16 * slot:16 * slot + 16] = np.array((to_tile * fit.view_proj).to_list(), np.float32).ravel()
+            base = 16 * MAX_DIRECTIONAL_LIGHTS + 4 * slot
+            self.block[base:base + 4] = (fit.texel, softness, 1.0 / width, self._taps(softness))
+            self._block_rows[slot] = written
         self.renderer.checkpoint(f"shadow map of directional light {slot}")
         return rect[2] * rect[3]
 
@@ -202,6 +207,7 @@ class ShadowMaps:
     def clear_directional(self, slot: int) -> None:
         """Directional light ``slot`` casts no shadow (off, or no light there)."""
         self.block[16 * MAX_DIRECTIONAL_LIGHTS + 4 * slot + 3] = 0.0
+        self._block_rows.pop(slot, None)
         kept = self._fit_blocks.pop(slot, None)
         if kept is not None:
             kept[2].release()
