@@ -64,6 +64,26 @@ _FEW_ROWS = 8
 _NORMALS_ON_ARRAYS = 32
 
 
+def _union_holds(union: tuple[list[float], list[float]], old_lo: list[float], old_hi: list[float],
+                 new_lo: list[float], new_hi: list[float]) -> bool:
+    """Whether the union of a batch's row boxes is the same numbers after one row's box went
+    from [old_lo, old_hi] (NaN: the row was never measured) to [new_lo, new_hi]: face by face,
+    a row whose face did not move changes nothing; one that moved keeps the union's face if
+    it was not on it (strictly inside: another row holds the face) and is not past it now.
+    Exact: the union is the least and the greatest of the same floats."""
+    low, high = union
+    for i in range(3):
+        old, new = old_lo[i], new_lo[i]
+        if old != new and (new < low[i] or not old > low[i]):  # NaN: old > low is False
+            if old == old or new < low[i]:
+                return False
+        old, new = old_hi[i], new_hi[i]
+        if old != new and (new > high[i] or not old < high[i]):
+            if old == old or new > high[i]:
+                return False
+    return True
+
+
 def _inverse_terms() -> tuple[np.ndarray, ...]:
     """Index tables for ``normal_matrices``: for each element of the normal matrix (column-major
     3x3, element (c, r) = inverse (r, c)), the four model elements (indices into the flat
@@ -172,6 +192,7 @@ class InstanceBatch:
         # what the shadows' fit reads, exact whatever came and went before.
         self._row_boxes = np.full((capacity, 2, 3), np.nan)   # NaN: a row never measured
         self._box: tuple[np.ndarray, np.ndarray] | None = None
+        self._box_floats: tuple[list[float], list[float]] = ([], [])  # the same, as floats (_measure_few)
         # Where instances were and are whose rows changed since ``take_changed_box`` (the old
         # and the new boxes of moved, added and removed rows): what a shadow map must redraw.
         self._changed: tuple[list[float], list[float]] | None = None
@@ -210,6 +231,7 @@ class InstanceBatch:
         self.entity_at.append(entity)
         self._dirty.add(row)
         self._variants_stale = True
+        self._box = None  # the union holds the new row once it is measured
         return self.rows[row]
 
     def row(self, entity: int) -> np.void:
@@ -385,6 +407,7 @@ class InstanceBatch:
         longest = 0.0
         measured = []
         changed_lo = changed_hi = None
+        union = self._box_floats if self._box is not None else None  # the rows' union, while it holds
         for m, (old_lo, old_hi) in zip(self.rows["model"][rows].tolist(), boxes[rows].tolist(), strict=True):
             low, high = [], []
             for r in range(3):
@@ -401,6 +424,8 @@ class InstanceBatch:
                     longest = length
             measured.append((low, high))
             if low != old_lo or high != old_hi:  # NaN (never measured) differs from everything
+                if union is not None and not _union_holds(union, old_lo, old_hi, low, high):
+                    union = None
                 for lo_box, hi_box in ((old_lo, old_hi), (low, high)):
                     if lo_box[0] != lo_box[0]:
                         continue  # never measured
@@ -416,7 +441,8 @@ class InstanceBatch:
             return
         self._max_scale = max(self._max_scale, math.sqrt(longest))
         boxes[rows] = measured
-        self._box = None
+        if union is None:
+            self._box = None  # worked out again when asked
         if changed_lo is not None:
             self._note_changed(changed_lo, changed_hi)
 
@@ -454,6 +480,7 @@ class InstanceBatch:
         if self._box is None:
             boxes = self._row_boxes[: self.count]
             self._box = (boxes[:, 0].min(axis=0), boxes[:, 1].max(axis=0))
+            self._box_floats = (self._box[0].tolist(), self._box[1].tolist())
         return self._box
 
     def upload(self) -> int:

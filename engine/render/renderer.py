@@ -74,6 +74,7 @@ class Renderer(Gpu):
         # stage draws a map again when it moves on (a caster moved, came, went or changed).
         self.casters_version = 0
         self._dropped_changes: tuple[np.ndarray, np.ndarray] | None = None  # boxes of batches dropped
+        self._level_union: tuple[list, tuple[np.ndarray, np.ndarray] | None] | None = None  # level_bounds' last
         self.present_pass = PresentPass(ctx, self.shaders, caps.software)
         self.text_pass: TextPass | None = None  # made when text is first drawn (its atlas costs a few ms)
         self.screen_quads = np.zeros((0, 12), np.float32)  # the last frame's screen text (a screenshot draws it again)
@@ -286,7 +287,13 @@ class Renderer(Gpu):
     def level_bounds(self) -> tuple[np.ndarray, np.ndarray] | None:
         """The world box holding every opaque instance as of the last upload (None: none):
         what a directional light's shadow map is fitted to."""
-        return _union([box for b in self.opaque_batches() if (box := b.box) is not None])
+        boxes = [box for b in self.opaque_batches() if (box := b.box) is not None]
+        kept = self._level_union
+        if kept is not None and len(kept[0]) == len(boxes) and all(a is b for a, b in zip(kept[0], boxes, strict=True)):
+            return kept[1]  # the same batches' boxes as last time (a batch keeps its box while it holds)
+        union = _union(boxes)
+        self._level_union = (boxes, union)
+        return union
 
     def set_lights(self, block: bytes) -> None:
         self.lights_ubo.write(block)
