@@ -456,7 +456,8 @@ class ScenePass:
                                        skip=view.skip, hide=view.hide)
                     targets.view_framebuffer.depth_mask = True
                     targets.view_framebuffer.use()
-                if options.sky or transparent:
+                if (options.sky or transparent) and index + 1 < len(views):
+                    # The next view's state (the pass after the last applies its own).
                     apply_pass_state(ctx, _SCENE, viewport)
                 renderer.stats.passes += 1
 
