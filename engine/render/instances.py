@@ -408,17 +408,17 @@ class InstanceBatch:
         measured = []
         changed_lo = changed_hi = None
         union = self._box_floats if self._box is not None else None  # the rows' union, while it holds
+        lx, ly, lz = lo_ends
+        hx, hy, hz = hi_ends
         for m, (old_lo, old_hi) in zip(self.rows["model"][rows].tolist(), boxes[rows].tolist(), strict=True):
+            # m is column-major: column c (model axis c) is m[4c:4c + 3], the translation m[12:15].
+            m0, m1, m2, _, m4, m5, m6, _, m8, m9, m10, _, t0, t1, t2, _ = m
             low, high = [], []
-            for r in range(3):
-                ends = []
-                for c in range(3):
-                    a, b = m[4 * c + r] * lo_ends[c], m[4 * c + r] * hi_ends[c]
-                    ends.append((a if a < b else b, a if a > b else b))
-                low.append(ends[0][0] + ends[1][0] + ends[2][0] + m[12 + r])
-                high.append(ends[0][1] + ends[1][1] + ends[2][1] + m[12 + r])
-            for c in range(3):
-                x, y, z = m[4 * c], m[4 * c + 1], m[4 * c + 2]
+            for x, y, z, t in ((m0, m4, m8, t0), (m1, m5, m9, t1), (m2, m6, m10, t2)):  # world axis r: M[c][r]
+                a, b, c, d, e, f = x * lx, x * hx, y * ly, y * hy, z * lz, z * hz
+                low.append((a if a < b else b) + (c if c < d else d) + (e if e < f else f) + t)
+                high.append((a if a > b else b) + (c if c > d else d) + (e if e > f else f) + t)
+            for x, y, z in ((m0, m1, m2), (m4, m5, m6), (m8, m9, m10)):
                 length = x * x + y * y + z * z
                 if length > longest:
                     longest = length
