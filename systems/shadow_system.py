@@ -57,6 +57,7 @@ class ShadowSystem(esper.Processor):
         self._casters_seen = -1
         self._bounds: dict[int, tuple[np.ndarray, np.ndarray]] = {}  # entity -> world box (point lights only)
         self._uploaded = b""
+        self._points_clear = False  # no point light cast since the slots and cubes were last cleared
         self._level_seen: tuple = (None, (b"", b""))  # (level box, its bytes): _level_bytes
         world.resources[ShadowCasters] = ShadowCasters()
 
@@ -144,12 +145,16 @@ class ShadowSystem(esper.Processor):
         casting = [row for row in casting if row[0] < MAX_POINT_LIGHTS]
         stats.shadows_cut += len(casting[MAX_POINT_SHADOWS:]) + len(beyond)
         casting = casting[:MAX_POINT_SHADOWS]
-        maps.clear_points()
         if not casting:
-            self._point.clear()
-            self._bounds.clear()
-            maps.drop_unused_cubes(set())
+            if not self._points_clear:  # cleared once when the last one stops casting
+                maps.clear_points()
+                self._point.clear()
+                self._bounds.clear()
+                maps.drop_unused_cubes(set())
+                self._points_clear = True
             return
+        maps.clear_points()
+        self._points_clear = False
         changed_lo, changed_hi = self._changed_boxes()
         layered = self.renderer.path_checks.trusted("layered_capture")
         for slot, (index, entity, light, transform) in enumerate(casting):

@@ -421,7 +421,8 @@ class ScenePass:
         finally:
             if sampler is not None:
                 sampler.clear(ALBEDO_UNIT)
-        renderer.checkpoint(f"scene ({views[0].name}{' and others' if len(views) > 1 else ''})")
+        if renderer.debug:  # the name is made only where it is checked
+            renderer.checkpoint(f"scene ({views[0].name}{' and others' if len(views) > 1 else ''})")
 
     def _draw_each(self, views: Sequence[View], targets: RenderTargets, viewport: tuple[int, int, int, int],
                    options: SceneOptions, conditions: Sequence[moderngl.Query] | None = None) -> None:

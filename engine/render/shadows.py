@@ -171,7 +171,8 @@ class ShadowMaps:
             base = 16 * MAX_DIRECTIONAL_LIGHTS + 4 * slot
             self.block[base:base + 4] = (fit.texel, softness, 1.0 / width, self._taps(softness))
             self._block_rows[slot] = written
-        self.renderer.checkpoint(f"shadow map of directional light {slot}")
+        if self.renderer.debug:
+            self.renderer.checkpoint(f"shadow map of directional light {slot}")
         return rect[2] * rect[3]
 
     def _bind_fit(self, slot: int, fit: DirectionalFit, resolution: int) -> None:
