@@ -474,3 +474,45 @@ def test_level_files_carry_the_shadow_fields_and_refuse_bad_ones(tmp_path):
     path.write_text(LEVEL.replace("shadow_resolution = 1024", "shadow_resolution = 1000"))
     with pytest.raises(LevelError, match="shadow_resolution"):
         load_level(path)
+
+
+def test_a_redrawn_region_holds_the_box_corners_texels_and_only_its_padding_more():
+    """``shadow_rules.map_region`` works the footprint out from the fit's two rows (lower and
+    higher term per axis); the eight corners placed by glm, one at a time, say the same: the
+    region holds every corner's texel with ``REGION_PAD`` around it and no more (a texel of
+    rounding either side), and is None exactly when that padded box is most of the map."""
+    import math
+
+    from engine.rules.shadow_rules import REGION_PAD, REGION_WHOLE_SHARE, directional_fit, map_region
+
+    rng = np.random.default_rng(11)
+    wholes = 0
+    for _ in range(2000):
+        level_lo = rng.uniform(-30.0, 0.0, 3)
+        level_hi = level_lo + rng.uniform(1.0, 60.0, 3)
+        resolution = int(rng.choice([64, 512, 2048]))
+        fit = directional_fit(glm.vec3(*[float(v) for v in rng.normal(size=3)]), level_lo, level_hi, resolution)
+        lo = rng.uniform(level_lo, level_hi)
+        hi = lo + rng.uniform(0.0, 4.0, 3) if rng.random() < 0.8 else level_hi  # some most of the level
+        texels = []
+        for x in (lo[0], hi[0]):
+            for y in (lo[1], hi[1]):
+                for z in (lo[2], hi[2]):
+                    clip = fit.view_proj * glm.vec4(float(x), float(y), float(z), 1.0)
+                    texels.append(((clip.x * 0.5 + 0.5) * resolution, (clip.y * 0.5 + 0.5) * resolution))
+        xs, ys = [t[0] for t in texels], [t[1] for t in texels]
+        x0, y0 = max(math.floor(min(xs)) - REGION_PAD, 0), max(math.floor(min(ys)) - REGION_PAD, 0)
+        x1, y1 = min(math.ceil(max(xs)) + REGION_PAD, resolution), min(math.ceil(max(ys)) + REGION_PAD, resolution)
+        region = map_region(fit, lo, hi, resolution)
+        area = max(x1 - x0, 0) * max(y1 - y0, 0)
+        if region is None:
+            wholes += 1
+            assert area >= REGION_WHOLE_SHARE * resolution * resolution * 0.99
+            continue
+        rx, ry, rw, rh = region
+        assert rw > 0 and rh > 0
+        assert abs(rx - x0) <= 1 and abs(ry - y0) <= 1 and abs(rx + rw - x1) <= 1 and abs(ry + rh - y1) <= 1
+        # Every corner's texel is inside (the padding covers rounding).
+        assert rx <= max(math.floor(min(xs)), 0) and rx + rw >= min(math.ceil(max(xs)), resolution)
+        assert ry <= max(math.floor(min(ys)), 0) and ry + rh >= min(math.ceil(max(ys)), resolution)
+    assert 0 < wholes < 2000
