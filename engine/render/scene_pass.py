@@ -278,7 +278,8 @@ class ScenePass:
         What a batch draws with in passes of one kind (its program, vertex array, uniforms,
         textures, and its uniform values where no probe's lookup can change them) is looked up
         once and kept on the batch (``InstanceBatch.draw_records``, ``_record``) until a shader
-        reload, a virtual light starting or ending, or its variants change: a view's draws then
+        reload, a virtual light starting or ending, a kind of light starting or ending to cast
+        (``ShadowMaps.program_defines``), or its variants change: a view's draws then
         cost a dictionary look-up and a comparison a batch, not a program key built and found.
         A batch whose one instance is the view's ``skip`` or ``hide`` entity (a mirror's own
         quad, a probe's own sphere) is not drawn at all: its vertices would all be clipped
@@ -288,7 +289,8 @@ class ScenePass:
         stats = renderer.stats
         if renderer.shaders.reloads != self._reloads_seen:
             self._forget_programs()
-        stamp = (self._reloads_seen, self.shadows.virtual_shining)
+        # What else picks a batch's program: a virtual light shining, the shadow lookups compiled.
+        stamp = (self._reloads_seen, self.shadows.virtual_shining, self.shadows.program_defines)
         kind = (invocations, layered, self._ambient_probes)
         sky_size = self._sky_size
         last_own = self._last_own
