@@ -89,8 +89,9 @@ class Bloom(TrackedComponent):
     1 / (1 + luma), so a lone bright pixel does not flicker into a blob), then each level is
     added into the next larger one through a 3x3 tent of ``radius`` texels; the result is
     the mean of the levels' blurs, so it keeps the image's mean brightness.  A software
-    rasteriser runs the chain on the image's 2 x 2 means (its levels a quarter of the screen
-    and below: ``engine/render/bloom.py`` ``BloomPass.first_step``).
+    rasteriser starts the chain at a quarter of the screen, drawn straight from the image
+    (its levels a quarter of the screen and below: ``engine/render/bloom.py``
+    ``BloomPass.first_step``).
 
     - ``intensity`` (0..1): the bloom's share.  ``composite`` "energy_conserving" (the
       default) mixes: ``image * (1 - intensity) + bloom * intensity`` (the mean is kept:

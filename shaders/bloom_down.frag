@@ -9,9 +9,12 @@
 // FIRST (the step from the HDR image): each box is weighted by 1 / (1 + luma) (Karis's
 // average), so a single very bright pixel cannot outweigh its neighbourhood and flicker
 // as it moves; THRESHOLD: then only light above the threshold, faded in over a soft knee,
-// goes on down the chain.  HALF_MEANS: no filter, the mean of the image's 2 x 2 texels
-// under this half-size texel (one bilinear tap at their shared corner): a quarter-size
-// start (BloomPass.first_step) runs the chain on these.
+// goes on down the chain.  QUARTER (with FIRST: the quarter-size start, BloomPass.first_step):
+// this level is a quarter of the image's size, each texel over 4 x 4 of the image's, and is
+// drawn from the image by the nine outer taps alone, one texel apart (each a bilinear tap at
+// a corner, so the mean of 2 x 2 texels): the four overlapping corner boxes, a quarter each
+// and Karis-weighted, a tent over the 6 x 6 texels around this texel's 4 x 4 (every texel of
+// its own and a one-texel ring of its neighbours'), in one draw from the image.
 
 uniform sampler2D source;     // the level above (the HDR image for FIRST): bilinear
 #ifdef THRESHOLD
@@ -36,17 +39,19 @@ float karis_weight(vec3 c) {
 void main() {
     vec2 uv = v_uv;
     vec2 t = 1.0 / vec2(textureSize(source, 0));
-#ifdef HALF_MEANS
-    out_color = vec4(textureLod(source, uv, 0.0).rgb, 1.0);
-#else
     vec3 a = tap(uv, t, vec2(-2.0, 2.0)), b = tap(uv, t, vec2(0.0, 2.0)), c = tap(uv, t, vec2(2.0, 2.0));
     vec3 d = tap(uv, t, vec2(-2.0, 0.0)), e = tap(uv, t, vec2(0.0, 0.0)), f = tap(uv, t, vec2(2.0, 0.0));
     vec3 g = tap(uv, t, vec2(-2.0, -2.0)), h = tap(uv, t, vec2(0.0, -2.0)), i = tap(uv, t, vec2(2.0, -2.0));
+    vec3 top_left = (a + b + d + e) * 0.25, top_right = (b + c + e + f) * 0.25;
+    vec3 bottom_left = (d + e + g + h) * 0.25, bottom_right = (e + f + h + i) * 0.25;
+#if defined(FIRST) && defined(QUARTER)
+    float w0 = karis_weight(top_left), w1 = karis_weight(top_right);
+    float w2 = karis_weight(bottom_left), w3 = karis_weight(bottom_right);
+    vec3 sum = (top_left * w0 + top_right * w1 + bottom_left * w2 + bottom_right * w3) / (w0 + w1 + w2 + w3);
+#else
     vec3 j = tap(uv, t, vec2(-1.0, 1.0)), k = tap(uv, t, vec2(1.0, 1.0));
     vec3 l = tap(uv, t, vec2(-1.0, -1.0)), m = tap(uv, t, vec2(1.0, -1.0));
     vec3 centre = (j + k + l + m) * 0.25;
-    vec3 top_left = (a + b + d + e) * 0.25, top_right = (b + c + e + f) * 0.25;
-    vec3 bottom_left = (d + e + g + h) * 0.25, bottom_right = (e + f + h + i) * 0.25;
 #ifdef FIRST
     float wc = 0.5 * karis_weight(centre);
     float w0 = 0.125 * karis_weight(top_left), w1 = 0.125 * karis_weight(top_right);
@@ -55,6 +60,7 @@ void main() {
              / (wc + w0 + w1 + w2 + w3);
 #else
     vec3 sum = centre * 0.5 + (top_left + top_right + bottom_left + bottom_right) * 0.125;
+#endif
 #endif
 #ifdef THRESHOLD
     // The soft threshold of Unity's and Unreal's bloom: a quadratic from threshold - knee
@@ -65,5 +71,4 @@ void main() {
     sum *= max(soft, bright - threshold.x) / max(bright, 1e-5);
 #endif
     out_color = vec4(sum, 1.0);
-#endif
 }

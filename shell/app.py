@@ -124,6 +124,7 @@ class Engine:
                                reserved=("transform_late",))
         make_current(ctx)  # everything below makes GL objects on it
         caps = prepare_context(ctx)
+        invalidate(ctx)  # whatever used the context before this engine: its first passes set everything
         self.game = game
         self.ctx = ctx
         self.world = World(game.title)
@@ -182,15 +183,19 @@ class Engine:
 
         The engine's context is made current first (``raw_gl.make_current``): another GL
         context made in the process (a window, a tool's) would otherwise receive this
-        engine's draws."""
+        engine's draws.  Code that sets GL state on the context between frames other than
+        through ``engine.render.bindings`` (its own moderngl draws, raw GL) calls
+        ``bindings.invalidate(ctx)`` after it, as the debug overlay does: the state the
+        engine's passes set is kept from frame to frame and only what changed is set again."""
         if output is None:
             self.world.resources.pop(Output, None)
         else:
             self.world.resources[Output] = output
         make_current(self.ctx)
-        # GL state set since the last frame by code outside the engine (the debug overlay, a
-        # tool) is unknown to the pass-state cache: every pass state is set afresh once.
-        invalidate(self.ctx)
+        # The pass-state cache (engine/render/bindings.py) carries over from the last frame:
+        # what it holds is still bound unless code outside the engine set GL state since, and
+        # such code says so with ``bindings.invalidate`` (the debug overlay does after it
+        # draws), so a frame binds only what another pass displaced, not everything again.
         pending = self.ctx.error
         if pending != "GL_NO_ERROR":
             # Not this engine's: left by code that used the context since the last frame.

@@ -41,6 +41,7 @@ from pyglm import glm
 from components.post import TONEMAP_CURVES
 from engine.assets.level_file import LevelGame
 from engine.assets.values import json_value
+from engine.render.bindings import invalidate
 from shell.editor import Editor
 from shell.overlay_text import overlay_lines
 
@@ -128,6 +129,9 @@ class OverlayRenderer(ModernGLRenderer):
                 self.ctx.scissor = int(x), int(fb_height - w), int(z - x), int(w - y)
                 self._vao.render(moderngl.TRIANGLES, vertices=command.elem_count, first=command.idx_offset)
         self.ctx.scissor = None
+        # Blending, the scissor and unit 0 were set past the engine's pass-state cache: its
+        # next frame sets every pass state and binding afresh (Engine.frame keeps them otherwise).
+        invalidate(self.ctx)
 
     def shutdown(self) -> None:
         for tex in imgui.get_platform_io().textures:

@@ -57,6 +57,8 @@ class ShadowSystem(esper.Processor):
         self._casters_seen = -1
         self._bounds: dict[int, tuple[np.ndarray, np.ndarray]] = {}  # entity -> world box (point lights only)
         self._uploaded = b""
+        self._points_clear = False  # no point light cast since the slots and cubes were last cleared
+        self._level_seen: tuple = (None, (b"", b""))  # (level box, its bytes): _level_bytes
         world.resources[ShadowCasters] = ShadowCasters()
 
     def process(self, dt: float) -> None:
@@ -83,6 +85,13 @@ class ShadowSystem(esper.Processor):
             maps.upload()
             self._uploaded = block
 
+    def _level_bytes(self, level: tuple[np.ndarray, np.ndarray]) -> tuple[bytes, bytes]:
+        """The level's box as bytes, for the maps' keys (made again only for another box:
+        ``Renderer.level_bounds`` gives the same one while no batch's union changed)."""
+        if self._level_seen[0] is not level:
+            self._level_seen = (level, (level[0].tobytes(), level[1].tobytes()))
+        return self._level_seen[1]
+
     # --- directional lights -------------------------------------------------------------------
     def _directional_maps(self, casters_changed: bool, changed_box, level, published: ShadowCasters) -> None:
         maps = self.renderer.shadows
@@ -102,7 +111,7 @@ class ShadowSystem(esper.Processor):
             direction = raw_field(light, "direction")  # past the in-place watch: a read, not a game's edit
             published.directional.append(tuple(direction))
             key = (tuple(direction), light.shadow_resolution, light.shadow_softness, maps.tile, maps.filter,
-                   level[0].tobytes(), level[1].tobytes())
+                   *self._level_bytes(level))
             same = key == self._directional.get(slot)
             if same and not casters_changed:
                 stats.shadow_maps_kept += 1
@@ -136,12 +145,16 @@ class ShadowSystem(esper.Processor):
         casting = [row for row in casting if row[0] < MAX_POINT_LIGHTS]
         stats.shadows_cut += len(casting[MAX_POINT_SHADOWS:]) + len(beyond)
         casting = casting[:MAX_POINT_SHADOWS]
-        maps.clear_points()
         if not casting:
-            self._point.clear()
-            self._bounds.clear()
-            maps.drop_unused_cubes(set())
+            if not self._points_clear:  # cleared once when the last one stops casting
+                maps.clear_points()
+                self._point.clear()
+                self._bounds.clear()
+                maps.drop_unused_cubes(set())
+                self._points_clear = True
             return
+        maps.clear_points()
+        self._points_clear = False
         changed_lo, changed_hi = self._changed_boxes()
         layered = self.renderer.path_checks.trusted("layered_capture")
         for slot, (index, entity, light, transform) in enumerate(casting):
@@ -222,7 +235,7 @@ class ShadowSystem(esper.Processor):
                    light.exit_plane, light.aperture, light.apertures,
                    tuple((leg.carry.to_bytes(), tuple(p.to_bytes() for p in leg.planes), leg.skip)
                          for leg in light.legs),
-                   level[0].tobytes(), level[1].tobytes(), maps.filter)
+                   *self._level_bytes(level), maps.filter)
             if key != self._virtual.get(slot) or casters_changed:
                 left = stats.views_left()
                 if left is not None and left <= 0:

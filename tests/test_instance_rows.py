@@ -156,3 +156,53 @@ def test_the_same_movers_every_frame_keep_their_rows_right_when_one_changes_batc
     for _ in range(3):
         runner.frame()
         check()
+
+
+def test_a_few_movers_rows_are_the_array_paths_bits_and_a_kept_union_is_the_rows_union(ctx, monkeypatch):
+    """A frame's few movers are measured in Python floats (``_measure_few``), many on arrays:
+    two batches given the same moves, one each way, hold the same boxes bit for bit and the
+    same changed box; the union a batch keeps while its movers leave it the same numbers
+    is, every frame, the least and greatest of its rows (moves that reach past the union,
+    leave its faces, and stay inside it)."""
+    import engine.render.instances as instances
+
+    mesh = box((0.8, 1.2, 0.4))
+    few, arrays = (InstanceBatch(ctx, GpuMesh(ctx, mesh), None) for _ in range(2))
+    rng = np.random.default_rng(5)
+    entities = list(range(1, 21))
+    poses = _models(20, seed=3)
+    few_rows = instances._FEW_ROWS
+    assert few_rows >= 5  # the movers below are a few
+    try:
+        for batch in (few, arrays):
+            for entity in entities:
+                batch.add(entity)
+            batch.write_transforms(entities, poses)
+            batch.upload()
+            assert batch.box is not None  # the union, worked out once: later frames may keep it
+        kept = 0
+        for frame in range(300):
+            movers = sorted(int(e) for e in rng.choice(entities, size=int(rng.integers(1, 6)), replace=False))
+            models = []
+            for entity in movers:
+                if rng.random() < 0.3:  # a jump, sometimes past the union
+                    poses[entity - 1] = glm.translate(glm.vec3(*[float(v) for v in rng.normal(size=3) * 60.0])) \
+                        * poses[entity - 1]
+                spin = glm.rotate(float(rng.uniform(0.0, 6.3)), glm.vec3(0.0, 1.0, 0.0))
+                models.append(poses[entity - 1] * spin)
+            for batch, limit in ((few, few_rows), (arrays, 0)):
+                monkeypatch.setattr(instances, "_FEW_ROWS", limit)
+                batch.write_transforms(movers, models, moving=True)
+                batch.upload()
+            assert np.array_equal(few._row_boxes[:20], arrays._row_boxes[:20]), frame
+            got, want = few.take_changed_box(), arrays.take_changed_box()
+            assert np.array_equal(got[0], want[0]) and np.array_equal(got[1], want[1]), frame
+            assert np.isclose(few.extent, arrays.extent, rtol=1e-12)
+            kept += few._box is not None
+            rows = few._row_boxes[:20]
+            union = few.box
+            assert np.array_equal(union[0], rows[:, 0].min(axis=0)) and np.array_equal(union[1], rows[:, 1].max(axis=0))
+        assert 0 < kept < 300  # the union was kept on some frames and worked out again on others
+    finally:
+        few.release()
+        arrays.release()

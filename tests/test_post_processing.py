@@ -285,11 +285,10 @@ def test_bloom_of_a_black_frame_is_black(known, composite, first_step):
     runner = start_at(known(image, Tonemap(curve="none"), Bloom(intensity=1.0, composite=composite)), first_step)
     assert not runner.frame().any()
     bloom = runner.engine.renderer.present_pass.bloom
-    # half: 80x45 .. 5x2, a sixth would be 2x1; quarter: 40x22 .. 5x2 (from the 80x45 means)
+    # half: 80x45 .. 5x2, a sixth would be 2x1; quarter: 40x22 .. 5x2 (drawn from the image)
     assert bloom.levels == {"half": 5, "quarter": 4}[first_step]
-    textures = [*bloom.textures, *([bloom._half[0]] if bloom._half else [])]
-    assert len(textures) == bloom.target_count() == bloom.levels + (first_step == "quarter")
-    for texture in textures:
+    assert len(bloom.textures) == bloom.target_count() == bloom.levels
+    for texture in bloom.textures:
         assert not np.frombuffer(texture.read(), np.float16).reshape(-1, 4)[:, :3].any()
 
 
@@ -370,7 +369,7 @@ def test_bloom_level_sizes_stop_at_two_pixels():
     assert level_sizes((640, 360), 6) == [(320, 180), (160, 90), (80, 45), (40, 22), (20, 11), (10, 5)]
     assert level_sizes((640, 360), 8) == level_sizes((640, 360), 7) == [*level_sizes((640, 360), 6), (5, 2)]
     assert level_sizes((3, 100), 4) == []
-    # A quarter start: the chain of the image's 2 x 2 means (320x180), one level shorter.
+    # A quarter start: the half start's chain less its first level (as of a 320x180 image).
     assert level_sizes((640, 360), 6, "quarter") == level_sizes((320, 180), 6) == level_sizes((640, 360), 7)[1:]
     assert level_sizes((7, 100), 4, "quarter") == []
 
@@ -389,7 +388,10 @@ def test_bloom_resources_go_with_the_component(known):
     runner = known(smooth_image((64, 48)), Bloom(), Tonemap(auto_exposure=True))
     runner.frame()
     counts = runner.engine.renderer.resource_counts()
-    assert counts["post_targets"] == 4 + 5  # 32x24 .. 4x3; luminance 64, 16, 4 and two 1x1
+    # The chain (a half start: 32x24 .. 4x3; a quarter start: 16x12 .. 4x3); luminance 64,
+    # 16, 4 and two 1x1.
+    levels = {"half": 4, "quarter": 3}[runner.engine.renderer.present_pass.bloom.first_step]
+    assert counts["post_targets"] == levels + 5
     runner.world.remove_component(runner.game.camera, Bloom)
     runner.frame()
     assert runner.engine.renderer.resource_counts()["post_targets"] == 5

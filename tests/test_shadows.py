@@ -250,6 +250,52 @@ def test_a_still_scene_draws_no_shadow_pass_and_a_moved_caster_draws_one(scene):
     assert not np.array_equal(first, moved)
 
 
+def _scene_programs(runner) -> list:
+    """The scene programs built for the shadow lookups the maps now ask for."""
+    scene_pass = runner.engine.renderer.scene_pass
+    wanted = runner.engine.renderer.shadows.program_defines
+    return [program for key, program in scene_pass._programs.items() if key[-1] == wanted]
+
+
+def test_the_scene_programs_read_a_kind_of_map_only_while_a_light_of_that_kind_casts(scene):
+    """No light casts: the scene programs are built without the shadow lookups (no atlas or
+    cube sampler in them: llvmpipe would run a lookup that gives 1 for every pixel).  The sun
+    casts: its build reads the atlas and its shadow shows; the lamp too: the cubes as well;
+    both off again: the first frame's programs and pixels come back, byte for byte."""
+    def build(world):
+        world.resources["ids"] = _floor_scene(world, (0.5, 5.0, 6.5), (0.0, 0.0, 0.0), point=(0.5, 3.0, 1.5))
+
+    runner = scene(build, (320, 240))
+    runner.engine.renderer.antialias = "off"
+    ids = runner.world.resources["ids"]
+    sun = runner.world.get(ids["sun"], DirectionalLight)
+    lamp = runner.world.get(ids["lamp"], PointLight)
+    maps = runner.engine.renderer.shadows
+
+    def samplers() -> set[tuple[bool, bool]]:
+        built = _scene_programs(runner)
+        assert built, "no scene program was built for the maps' lookups"
+        return {("shadow_atlas" in program, "point_shadow0" in program) for program in built}
+
+    sun.shadows = lamp.shadows = False
+    plain = runner.frame()
+    assert not {"DIRECTIONAL_SHADOWS", "POINT_SHADOWS"} & {name for name, _ in maps.program_defines}
+    assert samplers() == {(False, False)}
+    sun.shadows = True
+    sunlit = runner.frame()
+    assert samplers() == {(True, False)}
+    shadowed, _ = _classified(plain, sunlit)
+    assert shadowed[runner.ids() == ids["floor"]].sum() > 800   # the sun's shadow on the floor
+    lamp.shadows = True
+    both = runner.frame()
+    assert samplers() == {(True, True)}
+    shadowed, _ = _classified(sunlit, both)
+    assert shadowed[runner.ids() == ids["floor"]].sum() > 200   # and now the lamp's
+    sun.shadows = lamp.shadows = False
+    assert np.array_equal(runner.frame(), plain)
+    assert samplers() == {(False, False)}
+
+
 @pytest.mark.parametrize("change", ["moved", "removed", "added"])
 def test_a_changed_caster_redraws_only_its_footprint_and_the_frame_is_a_fresh_engines(scene, change):
     """The box moves (is deleted, or a second box comes) inside the level's box: the map's
@@ -360,12 +406,16 @@ def test_the_filter_is_checked_and_a_new_one_draws_the_maps_again(scene):
 
     runner = scene(build)
     runner.frame()
-    runner.frame()
+    before = runner.frame()
     assert runner.stats.shadow_maps_drawn == 0
     maps = runner.engine.renderer.shadows
     maps.filter = "grid" if maps.filter == "single" else "single"
-    runner.frame()
+    after = runner.frame()
     assert runner.stats.shadow_maps_drawn == 1
+    # The scene programs are built for the new filter (one tap known at build time, or the
+    # grid): the shadow's edges change.
+    assert (("SHADOW_SINGLE_TAP", "1") in maps.program_defines) == (maps.filter == "single")
+    assert not np.array_equal(before, after)
     with pytest.raises(ValueError, match="shadow filter"):
         maps.filter = "pcss"
 
@@ -424,3 +474,45 @@ def test_level_files_carry_the_shadow_fields_and_refuse_bad_ones(tmp_path):
     path.write_text(LEVEL.replace("shadow_resolution = 1024", "shadow_resolution = 1000"))
     with pytest.raises(LevelError, match="shadow_resolution"):
         load_level(path)
+
+
+def test_a_redrawn_region_holds_the_box_corners_texels_and_only_its_padding_more():
+    """``shadow_rules.map_region`` works the footprint out from the fit's two rows (lower and
+    higher term per axis); the eight corners placed by glm, one at a time, say the same: the
+    region holds every corner's texel with ``REGION_PAD`` around it and no more (a texel of
+    rounding either side), and is None exactly when that padded box is most of the map."""
+    import math
+
+    from engine.rules.shadow_rules import REGION_PAD, REGION_WHOLE_SHARE, directional_fit, map_region
+
+    rng = np.random.default_rng(11)
+    wholes = 0
+    for _ in range(2000):
+        level_lo = rng.uniform(-30.0, 0.0, 3)
+        level_hi = level_lo + rng.uniform(1.0, 60.0, 3)
+        resolution = int(rng.choice([64, 512, 2048]))
+        fit = directional_fit(glm.vec3(*[float(v) for v in rng.normal(size=3)]), level_lo, level_hi, resolution)
+        lo = rng.uniform(level_lo, level_hi)
+        hi = lo + rng.uniform(0.0, 4.0, 3) if rng.random() < 0.8 else level_hi  # some most of the level
+        texels = []
+        for x in (lo[0], hi[0]):
+            for y in (lo[1], hi[1]):
+                for z in (lo[2], hi[2]):
+                    clip = fit.view_proj * glm.vec4(float(x), float(y), float(z), 1.0)
+                    texels.append(((clip.x * 0.5 + 0.5) * resolution, (clip.y * 0.5 + 0.5) * resolution))
+        xs, ys = [t[0] for t in texels], [t[1] for t in texels]
+        x0, y0 = max(math.floor(min(xs)) - REGION_PAD, 0), max(math.floor(min(ys)) - REGION_PAD, 0)
+        x1, y1 = min(math.ceil(max(xs)) + REGION_PAD, resolution), min(math.ceil(max(ys)) + REGION_PAD, resolution)
+        region = map_region(fit, lo, hi, resolution)
+        area = max(x1 - x0, 0) * max(y1 - y0, 0)
+        if region is None:
+            wholes += 1
+            assert area >= REGION_WHOLE_SHARE * resolution * resolution * 0.99
+            continue
+        rx, ry, rw, rh = region
+        assert rw > 0 and rh > 0
+        assert abs(rx - x0) <= 1 and abs(ry - y0) <= 1 and abs(rx + rw - x1) <= 1 and abs(ry + rh - y1) <= 1
+        # Every corner's texel is inside (the padding covers rounding).
+        assert rx <= max(math.floor(min(xs)), 0) and rx + rw >= min(math.ceil(max(xs)), resolution)
+        assert ry <= max(math.floor(min(ys)), 0) and ry + rh >= min(math.ceil(max(ys)), resolution)
+    assert 0 < wholes < 2000

@@ -214,7 +214,8 @@ def test_passes_draw_the_same_pixels_after_raw_gl_state_and_invalidate(ctx):
 
 def test_the_frame_after_the_overlay_is_the_frame_without_it(ctx):
     """The debug overlay sets blending, scissor and viewport with moderngl's setters after a
-    frame; ``Engine.frame`` invalidates the cache, so the next frame is the same picture."""
+    frame and then invalidates the cache (``Engine.frame`` keeps it), so the next frame is
+    the same picture."""
     pytest.importorskip("imgui_bundle", reason="the debug overlay needs imgui-bundle")
     from shell.overlay import DebugOverlay
 
@@ -316,3 +317,48 @@ def test_without_preparing_the_first_mirror_compiles(scene):
     runner.frame()
     assert runner.stats.reflection_views > 0
     assert built
+
+
+def _plain_room(world) -> None:
+    """A lit box on a floor under a sun that casts."""
+    from components import DirectionalLight, Material, MeshRef, Skybox, Transform
+    from engine import spawn_camera
+    from engine.assets.mesh import box, plane
+
+    world.spawn(DirectionalLight(direction=(-0.3, -1.0, -0.4)))
+    world.spawn(Skybox())
+    world.spawn(Transform(), MeshRef(plane(8, 8)), Material(color=(0.6, 0.6, 0.6)))
+    world.spawn(Transform(position=(0.0, 0.5, 0.0)), MeshRef(box()), Material(color=(0.9, 0.3, 0.2)))
+    spawn_camera(world, position=(0.0, 2.0, 5.0), pitch=-15.0, fly=False)
+
+
+def test_a_frame_binds_only_what_another_pass_displaced(ctx, monkeypatch):
+    """The record carries over from one frame to the next (``Engine.frame`` does not forget
+    it): a still frame binds fewer textures and uniform blocks than the same frame after
+    ``invalidate``, and draws the same picture."""
+    from tests.support import SceneRunner
+
+    calls = {"binds": 0}
+    for owner, name in ((moderngl.Texture, "use"), (moderngl.TextureCube, "use"),
+                        (moderngl.Buffer, "bind_to_uniform_block")):
+        method = getattr(owner, name)
+
+        def counted(self, *args, _method=method, **kwargs):
+            calls["binds"] += 1
+            return _method(self, *args, **kwargs)
+        monkeypatch.setattr(owner, name, counted)
+    runner = SceneRunner(ctx, _plain_room, (96, 64))
+    try:
+        runner.frame()
+        kept_picture = runner.frame()
+        calls["binds"] = 0
+        runner.frame()
+        kept = calls["binds"]
+        invalidate(ctx)
+        calls["binds"] = 0
+        forgot_picture = runner.frame()
+        forgot = calls["binds"]
+        np.testing.assert_array_equal(forgot_picture, kept_picture)
+        assert kept < forgot, (kept, forgot)
+    finally:
+        runner.close()

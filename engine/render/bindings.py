@@ -38,10 +38,12 @@ these functions: moderngl's ``enable_only``/``enable``/``depth_func``/``blend_fu
 ``front_face``/``enable_direct`` setters, or raw GL (``glViewport``, ``glDisable(GL_SCISSOR_TEST)``...).
 The next ``apply_pass_state`` then sets everything, and every texture is bound again.
 Where it is called: raw GL targets (engine/render/raw_gl.py) on binding and where they bind
-textures themselves, and ``Engine.frame`` (shell/app.py) at the start of every frame,
-which covers the debug overlay (shell/overlay.py draws after a frame, with
-moderngl setters of its own) and any other code using the context between frames.  Code
-that sets state in the middle of a frame (a pass of a game's own) calls it itself.
+textures themselves, an ``Engine`` when it is made (whatever used the context before it),
+and the debug overlay after it draws (shell/overlay.py, moderngl setters of its own, after
+a frame).  The record is kept from one frame to the next (``Engine.frame`` does not forget
+it: a frame binds only what another pass displaced, not every texture and block again), so
+any other code that sets state on the context, between frames or in the middle of one (a
+pass of a game's own), calls it itself.
 """
 from __future__ import annotations
 

@@ -4,11 +4,11 @@ Advanced Warfare", SIGGRAPH 2014), run by the present pass on the finished HDR i
 Down: the image is halved ``levels`` times, each level drawn from the one above by the
 13-tap filter (``shaders/bloom_down.frag``; the first step with Karis's firefly weighting
 and the optional soft threshold).  Where the chain starts is ``BloomPass.first_step``:
-"half" (Jimenez's chain) or "quarter" (as Unity URP's quarter downscale: the image is
-first box-filtered to half its size, one bilinear tap a texel, the mean of its 2 x 2
-texels, and the chain, the Karis-weighted first step included, runs on that as it would on
-the image, so its levels are a quarter of the image's size and below; the half-start
-chain's tightest blur is left out).  Up: from
+"half" (Jimenez's chain) or "quarter" (as Unity URP's quarter downscale: the first level is
+a quarter of the image's size, drawn straight from the image by a 9-tap tent, four
+Karis-weighted boxes of 2 x 2 texel means over the 6 x 6 texels around the level's texel,
+so the levels are a quarter of the image's size and below; the half-start chain's tightest
+blur is left out).  Up: from
 the smallest, each level is added (blending ONE, ONE) into the next larger through a 3x3
 tent (``shaders/bloom_up.frag``), so the largest level ends up holding the sum of every
 level's blur.  The present shader takes that sum times ``1 / levels`` (the mean of the
@@ -20,8 +20,11 @@ screen's pixels (a twelfth from a quarter), whatever the number of mirrors and p
 composited into the image.  The half-size level is most of it: its 13-tap step reads the
 whole image and the last step up writes it.  On a software rasteriser, where that is pixel
 work of the CPU (about 4.5 of the chain's 5.5 ms at 640x360 on llvmpipe), the chain starts at
-a quarter; a GPU keeps the half-size start.  The chain's textures are made at the first
-bloomed frame of a size and released when no camera asks for bloom (``release``).
+a quarter; a GPU keeps the half-size start.  The quarter start is one draw from the image
+(an earlier form drew the image's 2 x 2 means at half size first, then the 13-tap step on
+them: two draws, 1.4 ms of CPU at 640x360 on llvmpipe against 0.55 for the one 9-tap draw).
+The chain's textures are made at the first bloomed frame of a size and released when no
+camera asks for bloom (``release``).
 """
 from __future__ import annotations
 
@@ -63,15 +66,18 @@ class BloomPass:
         self._vaos: dict[tuple, moderngl.VertexArray] = {}
         self.textures: list[moderngl.Texture] = []
         self._framebuffers: list[moderngl.Framebuffer] = []
-        self._half: tuple[moderngl.Texture, moderngl.Framebuffer] | None = None   # "quarter": the 2 x 2 means
         self.levels = 0   # levels drawn by the last ``draw``
+        self._sizes: list[tuple[int, int]] = []   # the chain's sizes for ``_sizes_for`` (image size, levels, start)
+        self._sizes_for: tuple | None = None
+        self._first_vaos: dict[bool, moderngl.VertexArray] = {}   # the first step's build, by threshold on
         self._written: dict[tuple[int, str], object] = {}   # (vao id, uniform) -> the value last written
 
     @property
     def first_step(self) -> str:
         """Where the chain starts: "half" (a GPU's default) or "quarter" (a software
-        rasteriser's: the two dearest steps draw a quarter of the pixels, and read the image
-        once, not 13 times a pixel; the look loses its tightest blur)."""
+        rasteriser's: the two dearest steps draw a quarter of the pixels, and the first reads
+        the image 9 times a quarter-size pixel, not 13 times a half-size one; the look loses
+        its tightest blur)."""
         return self._first_step
 
     @first_step.setter
@@ -79,6 +85,8 @@ class BloomPass:
         if value not in FIRST_STEPS:
             raise ValueError(f"bloom first_step must be one of {', '.join(map(repr, FIRST_STEPS))}, got {value!r}")
         self._first_step = value
+        self._first_vaos = {}      # the first step's builds differ by start
+        self._sizes_for = None
 
     def _vao(self, fragment: str, **defines: str) -> moderngl.VertexArray:
         key = (fragment, tuple(sorted(defines.items())))
@@ -102,69 +110,68 @@ class BloomPass:
         texture.repeat_x = texture.repeat_y = False
         return texture, self.ctx.framebuffer([texture])
 
-    def _chain(self, sizes: list[tuple[int, int]], half: tuple[int, int] | None) -> None:
-        if [t.size for t in self.textures] == sizes and (self._half[0].size if self._half else None) == half:
+    def _chain(self, sizes: list[tuple[int, int]]) -> None:
+        if [t.size for t in self.textures] == sizes:
             return
         self.release_targets()
         for size in sizes:
             texture, framebuffer = self._target(size)
             self.textures.append(texture)
             self._framebuffers.append(framebuffer)
-        if half is not None:
-            self._half = self._target(half)
 
     def draw(self, hdr: moderngl.Texture, bloom: Bloom) -> moderngl.Texture | None:
         """Bloom ``hdr`` (read only): returns the largest level (half or a quarter of the
         image's size, ``first_step``), holding the sum of the levels' blurs (``self.levels``
         of them), or None where the image is too small to halve even once."""
-        sizes = level_sizes(hdr.size, bloom.levels, self._first_step)
+        key = (hdr.size, bloom.levels, self._first_step)
+        if key != self._sizes_for:   # the chain's sizes and targets, made again only when these change
+            self._sizes = level_sizes(*key)
+            self._sizes_for = key
+            if self._sizes:
+                self._chain(self._sizes)
+        sizes = self._sizes
         self.levels = len(sizes)
         if not sizes:
             return None
-        quarter = self._first_step == "quarter"
-        self._chain(sizes, (hdr.size[0] // 2, hdr.size[1] // 2) if quarter else None)
-        source = hdr
-        if quarter:   # the image's 2 x 2 means, which the chain then takes for the image
-            texture, framebuffer = self._half
+        ctx = self.ctx
+        threshold = bloom.threshold > 0.0
+        first = self._first_vaos.get(threshold)
+        if first is None:
+            defines = {"FIRST": "1"}
+            if self._first_step == "quarter":
+                defines["QUARTER"] = "1"
+            if threshold:
+                defines["THRESHOLD"] = "1"
+            first = self._first_vaos[threshold] = self._vao("bloom_down.frag", **defines)
+        if threshold:
+            knee = bloom.threshold * bloom.knee
+            self._set(first, "threshold", (bloom.threshold, bloom.threshold - knee, 2.0 * knee, 0.25 / max(knee, 1e-5)))
+        down = self._vao("bloom_down.frag")
+        source, vao = hdr, first
+        for size, framebuffer, texture in zip(sizes, self._framebuffers, self.textures, strict=True):
             framebuffer.use()
-            apply_pass_state(self.ctx, _DOWN, (0, 0, *texture.size))
-            bind_texture(self.ctx, hdr, PRESENT_UNIT)
-            self._vao("bloom_down.frag", HALF_MEANS="1").render(moderngl.TRIANGLES, vertices=3)
-            source = texture
-        for index, (size, framebuffer) in enumerate(zip(sizes, self._framebuffers, strict=False)):
-            if index == 0:
-                threshold = bloom.threshold > 0.0
-                vao = self._vao("bloom_down.frag", FIRST="1", **({"THRESHOLD": "1"} if threshold else {}))
-                if threshold:
-                    knee = bloom.threshold * bloom.knee
-                    self._set(vao, "threshold", (bloom.threshold, bloom.threshold - knee, 2.0 * knee,
-                                                 0.25 / max(knee, 1e-5)))
-            else:
-                vao = self._vao("bloom_down.frag")
-            framebuffer.use()
-            apply_pass_state(self.ctx, _DOWN, (0, 0, *size))
-            bind_texture(self.ctx, source, PRESENT_UNIT)
+            apply_pass_state(ctx, _DOWN, (0, 0, *size))
+            bind_texture(ctx, source, PRESENT_UNIT)
             vao.render(moderngl.TRIANGLES, vertices=3)
-            source = self.textures[index]
+            source, vao = texture, down
         up = self._vao("bloom_up.frag")
         self._set(up, "radius", bloom.radius)
         for index in range(len(sizes) - 2, -1, -1):
             self._framebuffers[index].use()
-            apply_pass_state(self.ctx, _UP, (0, 0, *sizes[index]))
-            bind_texture(self.ctx, self.textures[index + 1], PRESENT_UNIT)
+            apply_pass_state(ctx, _UP, (0, 0, *sizes[index]))
+            bind_texture(ctx, self.textures[index + 1], PRESENT_UNIT)
             up.render(moderngl.TRIANGLES, vertices=3)
         return self.textures[0]
 
     def passes(self) -> int:
-        """Draws the last ``draw`` made (levels down, levels - 1 up, and the 2 x 2 means of a
-        quarter start)."""
+        """Draws the last ``draw`` made (levels down, levels - 1 up)."""
         if not self.levels:
             return 0
-        return 2 * self.levels - 1 + (self._first_step == "quarter")
+        return 2 * self.levels - 1
 
     def target_count(self) -> int:
         """Textures the chain holds now."""
-        return len(self.textures) + (self._half is not None)
+        return len(self.textures)
 
     def release_targets(self) -> None:
         for framebuffer in self._framebuffers:
@@ -173,14 +180,12 @@ class BloomPass:
             texture.release()
         self._framebuffers.clear()
         self.textures.clear()
-        if self._half is not None:
-            release_framebuffer(self._half[1])
-            self._half[0].release()
-            self._half = None
+        self._sizes_for = None
 
     def release(self) -> None:
         self.release_targets()
         for vao in self._vaos.values():
             vao.release()
         self._vaos.clear()
+        self._first_vaos.clear()
         self._written.clear()

@@ -27,6 +27,7 @@ from pyglm import glm
 
 from engine.render.bindings import HISTORY_UNIT, NODE_UNIT, PassState, apply_pass_state, bind_texture
 from engine.render.gpu import Gpu
+from engine.render.mirror_passes import UniformValues
 from engine.render.targets import RenderTargets, release_framebuffer
 from engine.render.views import View
 
@@ -43,6 +44,7 @@ class EndImages:
         self.program["history"].value = HISTORY_UNIT
         self.program["node_map"].value = NODE_UNIT
         self.vao = self.ctx.vertex_array(self.program, [])
+        self.uniforms = UniformValues.of(renderer)  # what the program holds (written where it differs)
         self.history: moderngl.Texture | None = None
         self._history_fbo: moderngl.Framebuffer | None = None
         self.view_proj: glm.mat4 | None = None   # the previous frame's main view-projection
@@ -63,15 +65,16 @@ class EndImages:
         bind_texture(self.ctx, targets.node, NODE_UNIT)
         bind_texture(self.ctx, self.history, HISTORY_UNIT)
         program = self.program
-        program["reproject"].write(self.view_proj * glm.inverse(root.view))
-        program["level_size"].value = targets.size
-        index, surface, to_ancestor = program["view_index"], program["surface"], program["to_ancestor"]
+        uniforms = self.uniforms
+        uniforms.write(program, "reproject", (self.view_proj * glm.inverse(root.view)).to_bytes())
+        uniforms.set(program, "level_size", targets.size)
         renderer.upload_views(views)  # every view's Camera block in one write; each binds its range
         for at, (view, entity, matrix) in enumerate(zip(views, surfaces, to_ancestors, strict=True)):
             ctx.scissor = view.scissor
             renderer.bind_view_at(at)
-            index.value, surface.value = view.node, entity
-            to_ancestor.write(matrix)
+            uniforms.set(program, "view_index", view.node)
+            uniforms.set(program, "surface", entity)
+            uniforms.write(program, "to_ancestor", matrix.to_bytes())
             self.vao.render(moderngl.TRIANGLES, vertices=3)
             renderer.stats.draw_calls += 1
         renderer.stats.passes += 1

@@ -7,6 +7,7 @@ nothing.
 """
 from __future__ import annotations
 
+import math
 from typing import NamedTuple
 
 import moderngl
@@ -30,6 +31,8 @@ INSTANCE_DTYPE = np.dtype([
 REFLECT_MIX, REFRACTION_IOR, PROBE_WEIGHTS = 0, 1, slice(2, 4)  # "reflect": mix, ior, each probe's weight
 TINT_VISIBILITY = 3                                             # "tint": visibility_code
 INSTANCE_FORMAT = "16f 9f 4f 4f 4f 4f 4f 4u/i"
+_MATRIX_FLOATS = 25  # "model" then "normal_matrix": a row's first floats (InstanceBatch._matrices)
+assert INSTANCE_DTYPE.fields["model"][1] == 0 and INSTANCE_DTYPE.fields["normal_matrix"][1] == 64
 INSTANCE_ATTRIBUTES = ("in_model", "in_normal_matrix", "in_color", "in_surface", "in_reflect", "in_tint",
                        "in_slice", "in_slots")
 VERTEX_FORMAT = "3f 3f 2f"
@@ -51,9 +54,34 @@ _SPAN_SLACK = 4
 _GATHER_AT = 16
 
 
+# Rows an upload measures (world boxes, largest scale) in Python floats rather than arrays
+# (InstanceBatch._measure_few): below it the arrays' fixed cost a call is most of the work.
+_FEW_ROWS = 8
+
+
 # Rows from which write_transforms works the normal matrices out on arrays (normal_matrices)
 # rather than one glm call chain a row: a dozen numpy calls cost about what 30 rows' glm do.
 _NORMALS_ON_ARRAYS = 32
+
+
+def _union_holds(union: tuple[list[float], list[float]], old_lo: list[float], old_hi: list[float],
+                 new_lo: list[float], new_hi: list[float]) -> bool:
+    """Whether the union of a batch's row boxes is the same numbers after one row's box went
+    from [old_lo, old_hi] (NaN: the row was never measured) to [new_lo, new_hi]: face by face,
+    a row whose face did not move changes nothing; one that moved keeps the union's face if
+    it was not on it (strictly inside: another row holds the face) and is not past it now.
+    Exact: the union is the least and the greatest of the same floats."""
+    low, high = union
+    for i in range(3):
+        old, new = old_lo[i], new_lo[i]
+        if old != new and (new < low[i] or not old > low[i]):  # NaN: old > low is False
+            if old == old or new < low[i]:
+                return False
+        old, new = old_hi[i], new_hi[i]
+        if old != new and (new > high[i] or not old < high[i]):
+            if old == old or new > high[i]:
+                return False
+    return True
 
 
 def _inverse_terms() -> tuple[np.ndarray, ...]:
@@ -108,6 +136,7 @@ class GpuMesh:
                                  for z in (lo[2], hi[2])], np.float64)
         # The same box as (lo/hi, column, 1), to scale a model matrix's axes by (InstanceBatch._grow_box).
         self.box_ends = np.array([lo, hi], np.float64).reshape(2, 3, 1)
+        self.box_lo, self.box_hi = tuple(float(v) for v in lo), tuple(float(v) for v in hi)  # the same, as floats
 
     def release(self) -> None:
         self.vertices.release()
@@ -143,6 +172,7 @@ class InstanceBatch:
         self.row_of: dict[int, int] = {}
         self.entity_at: list[int] = []
         self._dirty: set[int] = set()
+        self._matrix_view: np.ndarray | None = None  # _matrices' view of rows
         self._moving = 0  # rows [0, _moving) are those of instances that have moved (write_transforms)
         # Counts changes of existing rows' places (a removal's fill, a gather's swaps): the
         # last movers' rows, (layout, entities, rows, rows as a list), hold while it stands
@@ -152,6 +182,9 @@ class InstanceBatch:
         self._buffer = ctx.buffer(reserve=capacity * INSTANCE_DTYPE.itemsize)
         self._buffer_rows = capacity
         self._vaos: dict[int, moderngl.VertexArray] = {}
+        # What the scene pass draws this batch with, by kind of pass (ScenePass._record): its
+        # program, vertex array and uniforms, kept with the batch and gone with it.
+        self.draw_records: dict[tuple, tuple] = {}
         self._max_scale = 0.0
         self._rescale = False
         # Each row's world box, kept for the rows each upload sends (a removal's moved row
@@ -159,9 +192,10 @@ class InstanceBatch:
         # what the shadows' fit reads, exact whatever came and went before.
         self._row_boxes = np.full((capacity, 2, 3), np.nan)   # NaN: a row never measured
         self._box: tuple[np.ndarray, np.ndarray] | None = None
+        self._box_floats: tuple[list[float], list[float]] = ([], [])  # the same, as floats (_measure_few)
         # Where instances were and are whose rows changed since ``take_changed_box`` (the old
         # and the new boxes of moved, added and removed rows): what a shadow map must redraw.
-        self._changed: tuple[np.ndarray, np.ndarray] | None = None
+        self._changed: tuple[list[float], list[float]] | None = None
         self.key: BatchKey | None = None  # set by Renderer.batch_for
         self.probe = 0  # the entity owning the reflection probe its instances sample (0: none)
         self.mirrored = False  # its instances' model matrices mirror them (drawn with the other winding)
@@ -197,6 +231,7 @@ class InstanceBatch:
         self.entity_at.append(entity)
         self._dirty.add(row)
         self._variants_stale = True
+        self._box = None  # the union holds the new row once it is measured
         return self.rows[row]
 
     def row(self, entity: int) -> np.void:
@@ -225,15 +260,25 @@ class InstanceBatch:
                 rows = np.array([index[entity] for entity in entities], np.int64)
             listed = rows.tolist()
             self._rows_of = (self._layout, list(entities), rows, listed) if moving else None
-        flat = np.frombuffer(glm.array(models).to_bytes(), np.float32).reshape(-1, 16)
-        self.rows["model"][rows] = flat
         if len(models) >= _NORMALS_ON_ARRAYS:
+            flat = np.frombuffer(glm.array(models).to_bytes(), np.float32).reshape(-1, 16)
+            self.rows["model"][rows] = flat
             self.rows["normal_matrix"][rows] = normal_matrices(flat)
         else:
-            self.rows["normal_matrix"][rows] = np.frombuffer(
-                glm.array([glm.transpose(glm.inverse(glm.mat3(model))) for model in models]).to_bytes(),
-                np.float32).reshape(-1, 9)
+            # A few rows: each row's model and normal matrix (its first 25 floats) packed by
+            # glm and written in one go through a float view of the rows.
+            data = b"".join([model.to_bytes() + glm.transpose(glm.inverse(glm.mat3(model))).to_bytes()
+                             for model in models])
+            self._matrices()[rows] = np.frombuffer(data, np.float32).reshape(-1, _MATRIX_FLOATS)
         self._dirty.update(listed)
+
+    def _matrices(self) -> np.ndarray:
+        """The rows' model and normal matrices as one float32 array (row, 25): a view of
+        ``rows`` (kept while the table is), where both are written at once."""
+        view = self._matrix_view
+        if view is None or view.base is not self.rows:
+            view = self._matrix_view = self.rows.view(np.float32).reshape(len(self.rows), -1)[:, :_MATRIX_FLOATS]
+        return view
 
     def _gather(self, movers: np.ndarray) -> None:
         """Grow the front block of moving rows by the ``movers`` (distinct rows) outside it:
@@ -277,7 +322,7 @@ class InstanceBatch:
         self._rescale = True  # the largest instance may have gone: measure all rows again
         self._box = None      # and the union of the rows' boxes
         boxes = self._boxes_for(last + 1)
-        self._note_changed(boxes[index, 0], boxes[index, 1])  # where it was
+        self._note_changed(boxes[index, 0].tolist(), boxes[index, 1].tolist())  # where it was
         if index != last:
             boxes[index] = boxes[last]  # the moved row's box moves with it
         boxes[last] = np.nan
@@ -312,9 +357,10 @@ class InstanceBatch:
         return glm.vec3(*self.rows["model"][: self.count, 12:15].mean(axis=0).tolist())
 
     def _grow_scale(self, rows: np.ndarray | slice) -> None:
-        model = self.rows["model"][rows]
-        if len(model):
-            axes = model[:, :12].reshape(-1, 3, 4)[:, :, :3]  # [instance, column, row]: the three axes
+        """Grow the largest axis scale by ``rows``' model matrices: their axes' squared
+        lengths summed in float64 from the float32 rows (as ``_measure_few`` does a row at a time)."""
+        axes = self.rows["model"][rows][:, :12].reshape(-1, 3, 4)[:, :, :3].astype(np.float64)
+        if len(axes):
             longest = np.einsum("ncr,ncr->nc", axes, axes).max()  # squared lengths, the largest
             self._max_scale = max(self._max_scale, float(np.sqrt(longest)))
 
@@ -344,9 +390,61 @@ class InstanceBatch:
         if changed.any():
             # The old boxes (NaN: never measured, left out by fmin/fmax) and the new ones.
             both = np.concatenate((old, box) if changed.all() else (old[changed], box[changed]))
-            self._note_changed(np.fmin.reduce(both[:, 0]), np.fmax.reduce(both[:, 1]))
+            self._note_changed(np.fmin.reduce(both[:, 0]).tolist(), np.fmax.reduce(both[:, 1]).tolist())
         boxes[rows] = box
         self._box = None
+
+    def _measure_few(self, rows: np.ndarray | slice) -> None:
+        """``_grow_scale`` and ``_grow_box`` for a few rows (``_FEW_ROWS``: a frame's handful
+        of movers) in Python floats, row by row: a numpy call on a cold cache costs several
+        microseconds whatever its size, and the two take some thirty of them.  The same
+        float64 operations in the same order (a term's lower value is numpy's minimum, ``a``
+        when ``a < b`` else ``b``; the sums c = 0 + 1, + 2, + the translation), so the boxes
+        are the same numbers the array path writes; the changed box skips NaN (never
+        measured) as fmin and fmax do."""
+        boxes = self._boxes_for(len(self.rows))
+        lo_ends, hi_ends = self.mesh.box_lo, self.mesh.box_hi
+        longest = 0.0
+        measured = []
+        changed_lo = changed_hi = None
+        union = self._box_floats if self._box is not None else None  # the rows' union, while it holds
+        lx, ly, lz = lo_ends
+        hx, hy, hz = hi_ends
+        for m, (old_lo, old_hi) in zip(self.rows["model"][rows].tolist(), boxes[rows].tolist(), strict=True):
+            # m is column-major: column c (model axis c) is m[4c:4c + 3], the translation m[12:15].
+            m0, m1, m2, _, m4, m5, m6, _, m8, m9, m10, _, t0, t1, t2, _ = m
+            low, high = [], []
+            for x, y, z, t in ((m0, m4, m8, t0), (m1, m5, m9, t1), (m2, m6, m10, t2)):  # world axis r: M[c][r]
+                a, b, c, d, e, f = x * lx, x * hx, y * ly, y * hy, z * lz, z * hz
+                low.append((a if a < b else b) + (c if c < d else d) + (e if e < f else f) + t)
+                high.append((a if a > b else b) + (c if c > d else d) + (e if e > f else f) + t)
+            for x, y, z in ((m0, m1, m2), (m4, m5, m6), (m8, m9, m10)):
+                length = x * x + y * y + z * z
+                if length > longest:
+                    longest = length
+            measured.append((low, high))
+            if low != old_lo or high != old_hi:  # NaN (never measured) differs from everything
+                if union is not None and not _union_holds(union, old_lo, old_hi, low, high):
+                    union = None
+                for lo_box, hi_box in ((old_lo, old_hi), (low, high)):
+                    if lo_box[0] != lo_box[0]:
+                        continue  # never measured
+                    if changed_lo is None:
+                        changed_lo, changed_hi = list(lo_box), list(hi_box)
+                        continue
+                    for i in range(3):
+                        if lo_box[i] < changed_lo[i]:
+                            changed_lo[i] = lo_box[i]
+                        if hi_box[i] > changed_hi[i]:
+                            changed_hi[i] = hi_box[i]
+        if not measured:
+            return
+        self._max_scale = max(self._max_scale, math.sqrt(longest))
+        boxes[rows] = measured
+        if union is None:
+            self._box = None  # worked out again when asked
+        if changed_lo is not None:
+            self._note_changed(changed_lo, changed_hi)
 
     def _boxes_for(self, rows: int) -> np.ndarray:
         """The rows' boxes, grown to hold at least ``rows`` rows."""
@@ -356,19 +454,23 @@ class InstanceBatch:
             self._row_boxes = grown
         return self._row_boxes
 
-    def _note_changed(self, lo: np.ndarray, hi: np.ndarray) -> None:
-        if np.isnan(lo).any() or np.isnan(hi).any():
+    def _note_changed(self, lo: list[float], hi: list[float]) -> None:
+        """Grow the changed box by [lo, hi] (floats; one with a NaN, never measured, adds
+        nothing): kept as floats, made arrays once when taken (a frame's few movers note it
+        without a numpy call)."""
+        if any(v != v for v in lo) or any(v != v for v in hi):
             return
-        lo, hi = np.array(lo, np.float64), np.array(hi, np.float64)  # copies: the rows' boxes change under views
-        if self._changed is not None:
-            lo, hi = np.minimum(lo, self._changed[0]), np.maximum(hi, self._changed[1])
-        self._changed = (lo, hi)
+        if self._changed is not None:  # numpy's minimum and maximum: a if a < b else b
+            old_lo, old_hi = self._changed
+            lo = [a if a < b else b for a, b in zip(lo, old_lo, strict=True)]
+            hi = [a if a > b else b for a, b in zip(hi, old_hi, strict=True)]
+        self._changed = (list(lo), list(hi))
 
     def take_changed_box(self) -> tuple[np.ndarray, np.ndarray] | None:
         """The box holding where instances were and are whose boxes changed since the last
         call (None: none), forgotten."""
         changed, self._changed = self._changed, None
-        return changed
+        return None if changed is None else (np.array(changed[0]), np.array(changed[1]))
 
     @property
     def row_boxes(self) -> np.ndarray:
@@ -384,6 +486,7 @@ class InstanceBatch:
         if self._box is None:
             boxes = self._row_boxes[: self.count]
             self._box = (boxes[:, 0].min(axis=0), boxes[:, 1].max(axis=0))
+            self._box_floats = (self._box[0].tolist(), self._box[1].tolist())
         return self._box
 
     def upload(self) -> int:
@@ -415,8 +518,11 @@ class InstanceBatch:
                 breaks = np.flatnonzero(np.diff(measured) != 1) + 1
                 starts = [first, *measured[breaks].tolist()]
                 ends = [*(measured[breaks - 1] + 1).tolist(), last + 1]
-        self._grow_scale(measured)
-        self._grow_box(measured)
+        if count <= _FEW_ROWS:
+            self._measure_few(measured)
+        else:
+            self._grow_scale(measured)
+            self._grow_box(measured)
         sent = 0
         data = memoryview(self.rows.view(np.uint8))  # rows as bytes: a run is a slice, not a copy
         write = self._buffer.write
@@ -448,6 +554,7 @@ class InstanceBatch:
         for vao in self._vaos.values():
             vao.release()
         self._vaos.clear()
+        self.draw_records.clear()
 
     def draw(self, program: moderngl.Program) -> None:
         if self.count:

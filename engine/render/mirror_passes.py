@@ -48,6 +48,7 @@ from engine.render.bindings import (
     PROBE_UNIT,
     RECT_CLIPS,
     REFLECTION_UNITS,
+    SCENE_CLIPS,
     SKY_UNIT,
     PassState,
     apply_pass_state,
@@ -66,8 +67,11 @@ from engine.resources import MirrorBumps, SurfaceState, WaterLook
 from engine.rules.probe_rules import ProbeBlend
 
 # The claims and the reset write every depth they touch (depth test "always"); the
-# composite blends quads trimmed to their rectangles by clip distances 1-4.
-_CLAIM = PassState(depth_func="1")
+# composite blends quads trimmed to their rectangles by clip distances 1-4.  The claims keep
+# the scene pass's culling and clip distances (their rectangles face the front, their
+# vertices keep every clip distance: claim.vert, rects.vert), so between a level's claims and
+# its views only the depth function changes: 2 GL calls a level, not 8.
+_CLAIM = PassState(depth_func="1", cull=True, clips=SCENE_CLIPS)
 _COMPOSITE = PassState(blend=BLEND_OVER, clips=RECT_CLIPS)
 
 
@@ -261,6 +265,52 @@ _FALLBACK_IDS = struct.Struct("<4I")
 _FALLBACK_WEIGHTS = struct.Struct("<8f")
 
 
+class UniformValues:
+    """The values last written to programs' uniforms, so a pass writes one only where it
+    differs (a program keeps its uniforms between draws and frames: a level's sizes and
+    scales are the same level after level, frame after frame).  One record a context
+    (``of``): the shader library hands every tree (the main view's, each probe's) the same
+    program objects, so every writer of them must keep the one record.  Forgotten after a
+    hot reload (``ShaderLibrary.reloads``): a relinked program's uniforms start again from
+    their defaults."""
+
+    def __init__(self, shaders: object) -> None:
+        self.shaders = shaders
+        self.reloads = getattr(shaders, "reloads", 0)
+        self.values: dict[tuple[int, str], object] = {}
+
+    @staticmethod
+    def of(renderer: Gpu) -> UniformValues:
+        """The record of ``renderer``'s context (made at the first call)."""
+        ctx = renderer.ctx
+        record = getattr(ctx, "_speculum_uniform_values", None)
+        if record is None or record.shaders is not renderer.shaders:
+            record = ctx._speculum_uniform_values = UniformValues(renderer.shaders)
+        return record
+
+    def set(self, program: moderngl.Program, name: str, value: object) -> None:
+        """``program[name].value = value`` unless that is its value already."""
+        reloads = self.shaders.reloads
+        if reloads != self.reloads:
+            self.reloads = reloads
+            self.values.clear()
+        key = (program.glo, name)
+        if self.values.get(key) != value:
+            program[name].value = value
+            self.values[key] = value
+
+    def write(self, program: moderngl.Program, name: str, data: bytes) -> None:
+        """``program[name].write(data)`` unless those are its bytes already."""
+        reloads = self.shaders.reloads
+        if reloads != self.reloads:
+            self.reloads = reloads
+            self.values.clear()
+        key = (program.glo, name)
+        if self.values.get(key) != data:
+            program[name].write(data)
+            self.values[key] = data
+
+
 def _instance_format(program: moderngl.Program) -> tuple[str, list[str]]:
     """The composite rows' vertex format for ``program``: a variant's shader may not read
     every column, and the linker drops those attributes, so they are skipped as padding."""
@@ -390,7 +440,7 @@ class Claims:
     surface entity, view index)."""
 
     ids: list[tuple[int, int, int]]
-    rects: list[tuple[int, int, int, int]]
+    rects: list[tuple[int, int, int, int]] | list[list[int]]
 
     def __len__(self) -> int:
         return len(self.rects)
@@ -406,6 +456,7 @@ class MirrorPasses:
         self.claim = shaders.program("claim.vert", "mirror_claim.frag")
         self.claim["parent_node_map"].value = PARENT_NODE_UNIT
         self.claim["parent_surface_map"].value = PARENT_SURFACE_UNIT
+        self.uniforms = UniformValues.of(renderer)  # what the claim, composite and fallback programs hold
         self.composites: dict[str, _CompositeDraw] = {}
         units = {**dict(zip(("reflection", "reflection_seen", "reflection_nodes"), REFLECTION_UNITS, strict=True)),
                  "sky_map": SKY_UNIT, "rough_atlas": ATLAS_UNIT, "normal_map": NORMAL_UNIT}
@@ -455,7 +506,7 @@ class MirrorPasses:
         self._reset_vao.render(moderngl.TRIANGLES, vertices=6 * count)
         bind_texture(self.ctx, parent.node, PARENT_NODE_UNIT)
         bind_texture(self.ctx, parent.surface, PARENT_SURFACE_UNIT)
-        self.claim["to_parent"].value = (parent.size[0] / level.size[0], parent.size[1] / level.size[1])
+        self.uniforms.set(self.claim, "to_parent", (parent.size[0] / level.size[0], parent.size[1] / level.size[1]))
         render = self._claim_vao.render
         for at, query in enumerate(queries[:count]):
             with query:
@@ -467,9 +518,10 @@ class MirrorPasses:
         """Each claim's rectangle as two clip-space triangles, each vertex with the claim's
         three ids (claim.vert's attributes)."""
         pack = _CLAIM_VERTICES.pack
+        sx, sy = 2.0 / size[0], 2.0 / size[1]  # _ndc_rect's, inline: a level's claims in one loop
         out = []
-        for (a, b, c), rect in zip(claims.ids, claims.rects, strict=True):
-            x0, y0, x1, y1 = _ndc_rect(rect, size)
+        for (a, b, c), (x, y, w, h) in zip(claims.ids, claims.rects, strict=True):
+            x0, y0, x1, y1 = x * sx - 1.0, y * sy - 1.0, (x + w) * sx - 1.0, (y + h) * sy - 1.0
             out.append(pack(x0, y0, a, b, c, x1, y0, a, b, c, x1, y1, a, b, c,
                             x0, y0, a, b, c, x1, y1, a, b, c, x0, y1, a, b, c))
         return b"".join(out)
@@ -517,8 +569,10 @@ class MirrorPasses:
         """Blend every view of ``level`` into its surface's pixels of ``parent``: one instanced
         draw per composite variant present, a quad per view over its surface (each pixel
         belongs to one view, so the quads never blend over each other's pixels).  Rough
-        views first get their own blur source (``RoughAtlas``).  The draws are flushed: the
-        CPU prepares the next level's composite while the GPU blends this one."""
+        views first get their own blur source (``RoughAtlas``).  Not flushed: a tree's
+        composites go to the GPU together (``ViewTree``'s step 5 flushes once after the
+        last; each composite reads what the one before wrote, so a flush between them gained
+        the GPU nothing and cost a GL call a level)."""
         if not prepared.rows:
             return
         ctx = self.ctx
@@ -541,13 +595,13 @@ class MirrorPasses:
                     bind_texture(self.ctx, texture, NORMAL_UNIT)
             draw = self.composites[variant]
             program = draw.program
+            uniforms = self.uniforms
             if variant.startswith("rough"):
-                program["atlas_size"].value = self.rough_atlas.texture.size
-            program["parent_size"].value = parent.size
-            program["to_reflection"].value = (level.size[0] / parent.size[0], level.size[1] / parent.size[1])
+                uniforms.set(program, "atlas_size", self.rough_atlas.texture.size)
+            uniforms.set(program, "parent_size", parent.size)
+            uniforms.set(program, "to_reflection", (level.size[0] / parent.size[0], level.size[1] / parent.size[1]))
             draw.draw(variant_rows, self.renderer.shaders.reloads)
         self.renderer.checkpoint("composite")
-        self.renderer.flush()
 
     def prepare_fallbacks(self, fallbacks: list[Fallback], size: tuple[int, int],
                           probes: Mapping[int, ProbeBlend]) -> PreparedFallbacks:
@@ -592,6 +646,7 @@ class MirrorPasses:
             bind_texture(self.ctx, level.seen, REFLECTION_UNITS[1])
             bind_texture(self.ctx, level.node, REFLECTION_UNITS[2])
         bind_texture(self.ctx, renderer.sky, SKY_UNIT)
+        uniforms = self.uniforms
         to_child = (1.0, 1.0) if level is None else (level.size[0] / parent.size[0], level.size[1] / parent.size[1])
         for (variant, normal_map, first, second), chunks in prepared.groups.items():
             if normal_map is not None:
@@ -608,16 +663,16 @@ class MirrorPasses:
                 for name, value in zip(("position", "box_min", "box_max"), self._bind_probe(probe, unit),
                                        strict=True):
                     if f"{prefix}_{name}" in program:
-                        program[f"{prefix}_{name}"].value = value
-            program["parent_size"].value = parent.size
-            program["to_reflection"].value = (1.0, 1.0)
+                        uniforms.set(program, f"{prefix}_{name}", value)
+            uniforms.set(program, "parent_size", parent.size)
+            uniforms.set(program, "to_reflection", (1.0, 1.0))
             if "to_child" in program:
-                program["to_child"].value = to_child
+                uniforms.set(program, "to_child", to_child)
             for rows, ids, weights in chunks:
                 for name, data, size in (("fallback_ids", ids, _FALLBACK_IDS.size),
                                          ("fallback_weights", weights, _FALLBACK_WEIGHTS.size)):
                     if name in program:  # (a build being edited may not read one: hot reload)
-                        program[name].write(data.ljust(FALLBACK_ROWS * size, b"\0"))
+                        uniforms.write(program, name, data.ljust(FALLBACK_ROWS * size, b"\0"))
                 draw.draw(rows, renderer.shaders.reloads)
         renderer.stats.reflection_fallbacks += prepared.count
         renderer.checkpoint("fallback")

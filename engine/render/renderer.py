@@ -74,6 +74,7 @@ class Renderer(Gpu):
         # stage draws a map again when it moves on (a caster moved, came, went or changed).
         self.casters_version = 0
         self._dropped_changes: tuple[np.ndarray, np.ndarray] | None = None  # boxes of batches dropped
+        self._level_union: tuple[list, tuple[np.ndarray, np.ndarray] | None] | None = None  # level_bounds' last
         self.present_pass = PresentPass(ctx, self.shaders, caps.software)
         self.text_pass: TextPass | None = None  # made when text is first drawn (its atlas costs a few ms)
         self.screen_quads = np.zeros((0, 12), np.float32)  # the last frame's screen text (a screenshot draws it again)
@@ -281,17 +282,18 @@ class Renderer(Gpu):
         if self._dropped_changes is not None:
             boxes.append(self._dropped_changes)
             self._dropped_changes = None
-        if not boxes:
-            return None
-        return np.min([lo for lo, _ in boxes], axis=0), np.max([hi for _, hi in boxes], axis=0)
+        return _union(boxes)
 
     def level_bounds(self) -> tuple[np.ndarray, np.ndarray] | None:
         """The world box holding every opaque instance as of the last upload (None: none):
         what a directional light's shadow map is fitted to."""
-        boxes = [b.box for b in self.opaque_batches() if b.box is not None]
-        if not boxes:
-            return None
-        return np.min([lo for lo, _ in boxes], axis=0), np.max([hi for _, hi in boxes], axis=0)
+        boxes = [box for b in self.opaque_batches() if (box := b.box) is not None]
+        kept = self._level_union
+        if kept is not None and len(kept[0]) == len(boxes) and all(a is b for a, b in zip(kept[0], boxes, strict=True)):
+            return kept[1]  # the same batches' boxes as last time (a batch keeps its box while it holds)
+        union = _union(boxes)
+        self._level_union = (boxes, union)
+        return union
 
     def set_lights(self, block: bytes) -> None:
         self.lights_ubo.write(block)
@@ -345,3 +347,15 @@ class Renderer(Gpu):
         for obj in (self.sky, self.cameras_ubo, self.lights_ubo):
             obj.release()
         self.shaders.release()
+
+
+def _union(boxes: list[tuple[np.ndarray, np.ndarray]]) -> tuple[np.ndarray, np.ndarray] | None:
+    """The box holding ``boxes`` ([lo, hi] each; None: none), read-only like them: a box
+    alone is itself, more are folded pairwise (a frame has a few batches: a pairwise
+    minimum is one small numpy call where stacking a list first makes an array)."""
+    if not boxes:
+        return None
+    lo, hi = boxes[0]
+    for other_lo, other_hi in boxes[1:]:
+        lo, hi = np.minimum(lo, other_lo), np.maximum(hi, other_hi)
+    return lo, hi

@@ -166,18 +166,12 @@ class ScenePass:
         reload the set-up is done again and the batches' vertex arrays are made again (the
         relinked program may read uniforms, samplers and vertex inputs the first build
         dropped)."""
-        reloads = self.renderer.shaders.reloads
-        if reloads != self._reloads_seen:
-            self._programs.clear()
-            self._uniforms.clear()
-            self._written.clear()  # a relinked program's uniforms start again from the defaults
-            self._last_own.clear()
-            for batch in self.renderer.batches.values():
-                batch.drop_vertex_arrays()  # made again for the relinked programs' inputs
-            self._reloads_seen = reloads
+        if self.renderer.shaders.reloads != self._reloads_seen:
+            self._forget_programs()
         virtual = self.shadows.virtual_shining  # the shadows stage set how many shine
+        shadowing = self.shadows.program_defines  # the lookups a program compiles (ShadowMaps.upload's)
         key = (invocations, layered, variants, normal_mapped, checker, material_maps, probe_blend, virtual,
-               ambient_probes, probe_rest)
+               ambient_probes, probe_rest, shadowing)
         program = self._programs.get(key)
         if program is None:
             defines = {}
@@ -199,6 +193,7 @@ class ScenePass:
                 defines["VIRTUAL_LIGHTS"] = "1"
             if ambient_probes:  # diffuse light from the probes' boxes too (shaders/include/ambient.glsl)
                 defines["AMBIENT_PROBES"] = "1"
+            defines.update(shadowing)
             geometry = None
             if invocations:
                 geometry = "scene_batched.geom"
@@ -242,6 +237,18 @@ class ScenePass:
             self._uniforms[program.glo] = tuple(program.get(name, None) for name in _PER_DRAW_UNIFORMS)
         return program
 
+    def _forget_programs(self) -> None:
+        """After a shader hot reload: every program set-up, written value, batch vertex array
+        and draw record is made again (a relinked program may read uniforms, samplers and
+        vertex inputs the first build dropped)."""
+        self._programs.clear()
+        self._uniforms.clear()
+        self._written.clear()  # a relinked program's uniforms start again from the defaults
+        self._last_own.clear()
+        for batch in self.renderer.batches.values():
+            batch.drop_vertex_arrays()  # made again for the relinked programs' inputs
+        self._reloads_seen = self.renderer.shaders.reloads
+
     def prepare(self, batches: Iterable[InstanceBatch], reflections: bool) -> int:
         """Build the programs and vertex arrays ``batches`` will be drawn with: invocations 0
         (root and per-mirror views) and, with ``reflections``, every invocation count of the
@@ -268,67 +275,98 @@ class ScenePass:
         uniforms are written only when their value changes (``self._written``, kept for the
         program's life): each write is a moderngl call of a few microseconds on a view's
         critical path (about 490 a frame at 16 mirrors when they were written again every pass).
+        What a batch draws with in passes of one kind (its program, vertex array, uniforms,
+        textures, and its uniform values where no probe's lookup can change them) is looked up
+        once and kept on the batch (``InstanceBatch.draw_records``, ``_record``) until a shader
+        reload, a virtual light starting or ending, a kind of light starting or ending to cast
+        (``ShadowMaps.program_defines``), or its variants change: a view's draws then
+        cost a dictionary look-up and a comparison a batch, not a program key built and found.
         A batch whose one instance is the view's ``skip`` or ``hide`` entity (a mirror's own
         quad, a probe's own sphere) is not drawn at all: its vertices would all be clipped
         away (0: none; entities start at 1)."""
         ctx = self.ctx
-        stats = self.renderer.stats
-        cubes = self.renderer.probe_cubes
-        written = self._written
-        per_pass = (masked, self._sky_size)
+        renderer = self.renderer
+        stats = renderer.stats
+        if renderer.shaders.reloads != self._reloads_seen:
+            self._forget_programs()
+        # What else picks a batch's program: a virtual light shining, the shadow lookups compiled.
+        stamp = (self._reloads_seen, self.shadows.virtual_shining, self.shadows.program_defines)
+        kind = (invocations, layered, self._ambient_probes)
+        sky_size = self._sky_size
+        last_own = self._last_own
         for batch in batches:
-            if not batch.count or (batch.count == 1 and batch.entity_at[0] in (skip, hide)):
+            count = batch.count
+            if not count or (count == 1 and batch.entity_at[0] in (skip, hide)):
                 continue
-            program = self.program(batch.variants, invocations, layered, batch.normal_map is not None,
-                                   batch.checker is not None, _material_maps(batch), batch.probe_blend,
-                                   self._ambient_probes, bool(batch.rest_probe))
-            glo = program.glo
-            uniforms = self._uniforms[glo]
-            values = written.get(glo)
-            if values is None:
-                values = written[glo] = [None] * len(_PER_DRAW_UNIFORMS)
-            textured = batch.texture is not None
-            if textured:
-                bind_texture(ctx, batch.texture, ALBEDO_UNIT)
-            if batch.normal_map is not None:
-                bind_texture(ctx, batch.normal_map, NORMAL_UNIT)
-            if batch.emissive_map is not None:
-                bind_texture(ctx, batch.emissive_map, EMISSIVE_MAP_UNIT)
-            if batch.metallic_roughness_map is not None:
-                bind_texture(ctx, batch.metallic_roughness_map, METALLIC_ROUGHNESS_UNIT)
-            probe_size, lookup = self._bind_probe(batch.probe, PROBE_UNIT, cubes) if batch.probe else (0, _NO_PROBE)
-            probe2_size, lookup2 = 0, _NO_PROBE
-            if batch.probe_blend:  # the second probe's unit (the sky where the blend is a probe and the sky)
-                probe2_size, lookup2 = self._bind_probe(batch.second_probe, PROBE2_UNIT, cubes)
-            rest_size, lookup_rest = 0, _NO_PROBE
-            if batch.rest_probe:  # the probe taking what the weights leave (a curved object's own)
-                rest_size, lookup_rest = self._bind_probe(batch.rest_probe, PROBE_REST_UNIT, cubes)
-            for i in range(_PER_PASS_UNIFORMS):
-                if values[i] != per_pass[i] and uniforms[i] is not None:
-                    uniforms[i].value = values[i] = per_pass[i]
-            # The batch's own values: one tuple compared in C, and a uniform at a time only
-            # where it differs from what this program last drew with.
-            own = (textured, batch.transparent, probe_size, *lookup, probe2_size, *lookup2, rest_size, *lookup_rest,
-                   *(batch.checker or _NO_CHECKER))
-            last = self._last_own.get(glo)
-            if last != own:
+            variants = batch.variants
+            record = batch.draw_records.get(kind)
+            if record is None or record[0] != stamp or record[1] != variants:
+                record = batch.draw_records[kind] = self._record(batch, kind, stamp, variants)
+            _, _, glo, vao, uniforms, values, textures, own = record
+            for unit, texture in textures:
+                bind_texture(ctx, texture, unit)
+            if own is None:  # probes bound now: their lookups are read each draw
+                own = self._probe_values(batch)
+            if values[0] != masked and uniforms[0] is not None:
+                uniforms[0].value = values[0] = masked
+            if values[1] != sky_size and uniforms[1] is not None:
+                uniforms[1].value = values[1] = sky_size
+            # The batch's own values: one tuple compared (by identity first), and a uniform at
+            # a time only where it differs from what this program last drew with.
+            last = last_own.get(glo)
+            if last is not own and last != own:
                 for i, value in enumerate(own, _PER_PASS_UNIFORMS):
                     if values[i] != value and uniforms[i] is not None:
                         uniforms[i].value = values[i] = value
-                self._last_own[glo] = own
+                last_own[glo] = own
             if before_draw is not None:
                 before_draw()
             if batch.mirrored:
                 # A negative determinant (a negative Transform.scale, or a mirrored parent):
                 # its front faces wind the other way on screen, so the view's winding is
                 # turned for its draw (its own batch: extract keys batches by it).
-                restore = flip_front_face(self.ctx)
-                batch.draw(program)
-                set_front_face(self.ctx, restore)
+                restore = flip_front_face(ctx)
+                vao.render(moderngl.TRIANGLES, vertices=batch.mesh.index_count, instances=count)
+                set_front_face(ctx, restore)
             else:
-                batch.draw(program)
+                vao.render(moderngl.TRIANGLES, vertices=batch.mesh.index_count, instances=count)
             stats.draw_calls += 1
-            stats.instances += batch.count
+            stats.instances += count
+
+    def _record(self, batch: InstanceBatch, kind: tuple[int, str, bool], stamp: tuple, variants) -> tuple:
+        """What ``batch`` draws with in passes of ``kind`` (invocations, layered, ambient
+        probes): (stamp, variants, program name, vertex array, per-draw uniforms, the
+        program's written values, the (unit, texture) pairs to bind, its own uniform values
+        or None where probes give them per draw)."""
+        invocations, layered, ambient = kind
+        program = self.program(variants, invocations, layered, batch.normal_map is not None,
+                               batch.checker is not None, _material_maps(batch), batch.probe_blend,
+                               ambient, bool(batch.rest_probe))
+        glo = program.glo
+        values = self._written.get(glo)
+        if values is None:
+            values = self._written[glo] = [None] * len(_PER_DRAW_UNIFORMS)
+        textures = tuple((unit, texture) for unit, texture in (
+            (ALBEDO_UNIT, batch.texture), (NORMAL_UNIT, batch.normal_map), (EMISSIVE_MAP_UNIT, batch.emissive_map),
+            (METALLIC_ROUGHNESS_UNIT, batch.metallic_roughness_map)) if texture is not None)
+        own = None
+        if not batch.probe and not batch.probe_blend and not batch.rest_probe:
+            own = (batch.texture is not None, batch.transparent, 0, *_NO_PROBE, 0, *_NO_PROBE, 0, *_NO_PROBE,
+                   *(batch.checker or _NO_CHECKER))
+        return (stamp, variants, glo, batch.vao(program), self._uniforms[glo], values, textures, own)
+
+    def _probe_values(self, batch: InstanceBatch) -> tuple:
+        """Bind the probes ``batch`` samples; its own uniform values with their lookups."""
+        cubes = self.renderer.probe_cubes
+        probe_size, lookup = self._bind_probe(batch.probe, PROBE_UNIT, cubes) if batch.probe else (0, _NO_PROBE)
+        probe2_size, lookup2 = 0, _NO_PROBE
+        if batch.probe_blend:  # the second probe's unit (the sky where the blend is a probe and the sky)
+            probe2_size, lookup2 = self._bind_probe(batch.second_probe, PROBE2_UNIT, cubes)
+        rest_size, lookup_rest = 0, _NO_PROBE
+        if batch.rest_probe:  # the probe taking what the weights leave (a curved object's own)
+            rest_size, lookup_rest = self._bind_probe(batch.rest_probe, PROBE_REST_UNIT, cubes)
+        return (batch.texture is not None, batch.transparent, probe_size, *lookup, probe2_size, *lookup2, rest_size,
+                *lookup_rest, *(batch.checker or _NO_CHECKER))
 
     def _bind_probe(self, probe: int, unit: int, cubes) -> tuple[int, tuple]:
         """Bind the cube map of ``probe`` to ``unit``: its face size and lookup uniforms.  The
@@ -387,7 +425,8 @@ class ScenePass:
         finally:
             if sampler is not None:
                 sampler.clear(ALBEDO_UNIT)
-        renderer.checkpoint(f"scene ({views[0].name}{' and others' if len(views) > 1 else ''})")
+        if renderer.debug:  # the name is made only where it is checked
+            renderer.checkpoint(f"scene ({views[0].name}{' and others' if len(views) > 1 else ''})")
 
     def _draw_each(self, views: Sequence[View], targets: RenderTargets, viewport: tuple[int, int, int, int],
                    options: SceneOptions, conditions: Sequence[moderngl.Query] | None = None) -> None:
@@ -422,7 +461,8 @@ class ScenePass:
                                        skip=view.skip, hide=view.hide)
                     targets.view_framebuffer.depth_mask = True
                     targets.view_framebuffer.use()
-                if options.sky or transparent:
+                if (options.sky or transparent) and index + 1 < len(views):
+                    # The next view's state (the pass after the last applies its own).
                     apply_pass_state(ctx, _SCENE, viewport)
                 renderer.stats.passes += 1
 

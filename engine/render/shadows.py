@@ -40,7 +40,7 @@ from engine.render.bindings import (
 from engine.render.gpu import Gpu
 from engine.render.raw_gl import LayeredCubeTarget
 from engine.render.targets import release_framebuffer
-from engine.render.views import MAX_DIRECTIONAL_LIGHTS, MAX_POINT_LIGHTS, MAX_POINT_SHADOWS, View
+from engine.render.views import CAMERA_BLOCK_BYTES, MAX_DIRECTIONAL_LIGHTS, MAX_POINT_LIGHTS, MAX_POINT_SHADOWS, View
 from engine.rules.shadow_rules import MAX_APERTURES, MAX_VIRTUAL_LIGHTS, DirectionalFit, Leg, VirtualLight
 
 SHADOW_FILTERS = ("grid", "single")
@@ -93,6 +93,9 @@ class ShadowMaps:
         # (every lookup lit), so the scene programs always have something defined to read.
         self.atlas = self._make_atlas((1, 1))
         self.tile = 0
+        # slot -> (the fit, resolution, the buffer holding its Camera block) (_bind_fit)
+        self._fit_blocks: dict[int, tuple[DirectionalFit, int, moderngl.Buffer]] = {}
+        self._block_rows: dict[int, tuple] = {}  # slot -> what its Shadows block rows were written from
         self._atlas_framebuffer = ctx.framebuffer(depth_attachment=self.atlas)
         self._atlas_framebuffer.clear(depth=1.0)
         self._empty_cube = ctx.texture_cube((1, 1), 1, np.ones(6, np.float32).tobytes(), dtype="f4")
@@ -103,9 +106,12 @@ class ShadowMaps:
         # How edges are filtered: "grid" (2 x 2 taps, 3 x 3 past a softness of 1, four on a
         # cube), each a bilinear percentage-closer comparison; "single" (one such tap: a
         # one-texel edge).  On a software rasteriser every tap is CPU time for every pixel a
-        # light reaches (the benchmark scene at 640x360: a still frame 1.24x the frame without
-        # shadows with the grid, 1.04x with one tap; benchmarks/lighting.py), so there the
+        # light reaches (the benchmark scene at 640x360 on llvmpipe, the sun's map 2048 a side:
+        # a still frame 1.43x the frame without shadows with the grid, 1.24x with one tap, the
+        # frame without building no lookup at all; benchmarks/lighting.py), so there the
         # default is "single"; set "grid" for equal quality (maps are drawn again).
+        self._casting = (False, False)   # (a directional light casts, a point light casts): upload's
+        self.program_defines: tuple[tuple[str, str], ...] = ()
         self.filter = "single" if renderer.caps.software else "grid"
         # Lights through mirrors and portals: a depth atlas of 2 x 2 tiles and their block.
         self.virtual_block = np.zeros(VIRTUAL_BLOCK_BYTES // 4, np.float32)
@@ -154,19 +160,37 @@ class ShadowMaps:
         framebuffer.use()
         apply_pass_state(self.ctx, _CASTERS, tile, rect)
         framebuffer.clear(depth=1.0, viewport=rect)
-        view = View(view=fit.view, proj=fit.proj, eye=glm.vec3(0.0), size=(resolution, resolution),
-                    name=f"shadow {slot}", kinds=0, layers=ALL_LAYERS)
-        self._draw_casters(view, self._depth_program)
-        # World -> the tile's uv and depth in [0, 1].
+        self._bind_fit(slot, fit, resolution)
+        self._draw_casters(None, self._depth_program)
+        # World -> the tile's uv and depth in [0, 1]; the block's rows written again only when
+        # what they are made of changed (a frame redrawing a region under moved casters keeps them).
         width = self.atlas.size[0]
-        scale = resolution / width
-        to_tile = glm.translate(glm.vec3(x / width + 0.5 * scale, y / width + 0.5 * scale, 0.5)) \
-            * glm.scale(glm.vec3(0.5 * scale, 0.5 * scale, 0.5))
-        self.block[16 * slot:16 * slot + 16] = np.array((to_tile * fit.view_proj).to_list(), np.float32).ravel()
-        base = 16 * MAX_DIRECTIONAL_LIGHTS + 4 * slot
-        self.block[base:base + 4] = (fit.texel, softness, 1.0 / width, self._taps(softness))
-        self.renderer.checkpoint(f"shadow map of directional light {slot}")
+        written = (fit, resolution, softness, width, self._filter)
+        if self._block_rows.get(slot) != written:
+            scale = resolution / width
+            to_tile = glm.translate(glm.vec3(x / width + 0.5 * scale, y / width + 0.5 * scale, 0.5)) \
+                * glm.scale(glm.vec3(0.5 * scale, 0.5 * scale, 0.5))
+            self.block[16 * slot:16 * slot + 16] = np.array((to_tile * fit.view_proj).to_list(), np.float32).ravel()
+            base = 16 * MAX_DIRECTIONAL_LIGHTS + 4 * slot
+            self.block[base:base + 4] = (fit.texel, softness, 1.0 / width, self._taps(softness))
+            self._block_rows[slot] = written
+        if self.renderer.debug:
+            self.renderer.checkpoint(f"shadow map of directional light {slot}")
         return rect[2] * rect[3]
+
+    def _bind_fit(self, slot: int, fit: DirectionalFit, resolution: int) -> None:
+        """Bind the Camera block of directional light ``slot``'s map, drawn from ``fit``: a
+        buffer of the slot's own, packed and written when the light's map is fitted again
+        (a new ``fit``), so a frame that redraws only the texels under moved casters packs
+        and uploads no camera."""
+        kept = self._fit_blocks.get(slot)
+        if kept is None or kept[0] is not fit or kept[1] != resolution:
+            view = View(view=fit.view, proj=fit.proj, eye=glm.vec3(0.0), size=(resolution, resolution),
+                        name=f"shadow {slot}", kinds=0, layers=ALL_LAYERS)
+            buffer = kept[2] if kept is not None else self.ctx.buffer(reserve=CAMERA_BLOCK_BYTES)
+            buffer.write(view.camera_block())
+            kept = self._fit_blocks[slot] = (fit, resolution, buffer)
+        bind_uniform_block(self.ctx, kept[2], CAMERA_BINDING)
 
     @property
     def filter(self) -> str:
@@ -177,6 +201,19 @@ class ShadowMaps:
         if value not in SHADOW_FILTERS:
             raise ValueError(f"shadow filter must be one of {', '.join(map(repr, SHADOW_FILTERS))}, got {value!r}")
         self._filter = value
+        self._set_program_defines()
+
+    def _set_program_defines(self) -> None:
+        """``program_defines``: the shadow lookups the scene programs compile
+        (``shaders/include/shadows.glsl``): ``DIRECTIONAL_SHADOWS`` while a directional light
+        casts, ``POINT_SHADOWS`` while a point light does, ``SHADOW_SINGLE_TAP`` with the
+        "single" filter.  The scene pass builds (and caches) a program per combination; a
+        frame where nothing casts runs no lookup (llvmpipe runs every branch's code: a third of
+        such a frame at 640x360 went to lookups that returned 1)."""
+        directional, point = self._casting
+        self.program_defines = tuple((name, "1") for name, on in (
+            ("DIRECTIONAL_SHADOWS", directional), ("POINT_SHADOWS", point),
+            ("SHADOW_SINGLE_TAP", self._filter == "single")) if on)
 
     def _taps(self, softness: float) -> float:
         """Taps a side of a directional light's grid."""
@@ -187,6 +224,10 @@ class ShadowMaps:
     def clear_directional(self, slot: int) -> None:
         """Directional light ``slot`` casts no shadow (off, or no light there)."""
         self.block[16 * MAX_DIRECTIONAL_LIGHTS + 4 * slot + 3] = 0.0
+        self._block_rows.pop(slot, None)
+        kept = self._fit_blocks.pop(slot, None)
+        if kept is not None:
+            kept[2].release()
 
     # --- virtual lights (through mirrors and portals) -------------------------------------
     def draw_virtual(self, slot: int, light: VirtualLight, fit: DirectionalFit) -> None:
@@ -350,10 +391,12 @@ class ShadowMaps:
         return True
 
     # --- drawing --------------------------------------------------------------------------
-    def _draw_casters(self, view: View, program: moderngl.Program) -> None:
+    def _draw_casters(self, view: View | None, program: moderngl.Program) -> None:
+        """Every opaque batch into the bound map, from ``view`` (None: the Camera block bound already)."""
         renderer = self.renderer
         ctx = self.ctx
-        renderer.bind_view(view)
+        if view is not None:
+            renderer.bind_view(view)
         ctx.polygon_offset = SLOPE_BIAS
         try:
             for batch in renderer.opaque_batches():
@@ -365,6 +408,11 @@ class ShadowMaps:
 
     def upload(self) -> None:
         self.ubo.write(self.block.tobytes())
+        base = 16 * MAX_DIRECTIONAL_LIGHTS
+        casting = (bool(self.block[base + 3:base + 4 * MAX_DIRECTIONAL_LIGHTS:4].any()), bool((self._slots >= 0).any()))
+        if casting != self._casting:
+            self._casting = casting
+            self._set_program_defines()
         self.virtual_ubo.write(self.virtual_block.tobytes())
 
     def bind(self) -> None:
@@ -398,6 +446,9 @@ class ShadowMaps:
         release_framebuffer(self._atlas_framebuffer)
         if self._virtual_framebuffer is not None:
             release_framebuffer(self._virtual_framebuffer)
+        for _, _, buffer in self._fit_blocks.values():
+            buffer.release()
+        self._fit_blocks.clear()
         for obj in (self.atlas, self._empty_cube, self.ubo, self.virtual_ubo, self.virtual_atlas, self._virtual_empty):
             if obj is not None:
                 obj.release()

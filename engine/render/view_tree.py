@@ -206,7 +206,7 @@ class _Walk:
     ends: tuple[np.ndarray, int] | None      # _end_surfaces
     exact: bool                              # this frame's claim counts (else last frame's)
     record: RootVisibility
-    triangles: Callable[[], int]             # what a scene pass submits (counted once, if asked)
+    renderer: Gpu                            # what triangles() counts
     nodes: list[ReflectionView]              # the parents of the level planned next
     rows: LevelRows                          # their rows
     seers: list[list[int]] | None            # with end views: _end_seers
@@ -220,6 +220,14 @@ class _Walk:
     fallbacks: dict[int, list[Fallback]] = field(default_factory=dict)  # each level's, by the level they
                                                                         # are drawn into
     blends: Mapping[int, ProbeBlend] = field(default_factory=dict)      # the fallbacks' probes (SurfaceBlends)
+    triangle_count: int | None = None        # what a scene pass submits (triangles(): counted once, if asked)
+
+    def triangles(self) -> int:
+        """The triangles a scene pass submits, counted at the first level that asks (a level
+        of a few views never does: ``choose_path``), then kept for the render."""
+        if self.triangle_count is None:
+            self.triangle_count = submitted_triangles(self.renderer)
+        return self.triangle_count
 
 
 class ViewTree:
@@ -241,6 +249,7 @@ class ViewTree:
         self._visibility: dict[tuple[str, int], RootVisibility] = {}  # by root (its name and skipped entity)
         self._frame = 0                   # frames this tree has drawn in (a new RenderStats: a new frame)
         self._frame_stats: object | None = None
+        self._software = renderer.caps.software  # a software rasteriser (the context's, read once)
 
     def render(self, root: View, levels: LevelStack, surfaces: SurfaceTable,
                settings: TreeSettings = TreeSettings(), blends: SurfaceBlends = NO_BLENDS) -> TreeResult:
@@ -283,7 +292,7 @@ class ViewTree:
         result.visibility = "exact" if exact else "predicted"
         renderer = self.renderer
         return _Walk(root, surfaces, settings, result, root_proj, inv_root_proj, ends, exact,
-                     self._visibility_of(root), functools.cache(lambda: submitted_triangles(renderer)), [root_node],
+                     self._visibility_of(root), renderer, [root_node],
                      self._root_rows(root),
                      # With end views: for each row of the level, the index in result.views of the
                      # view that saw each surface last up its chain (-1: none), what an end view repeats.
@@ -343,7 +352,7 @@ class ViewTree:
         if not children and not step.ended:
             return None
         if children:
-            step.path = choose_path(settings.path, len(children), walk.triangles, self.renderer.caps.software)
+            step.path = choose_path(settings.path, len(children), walk.triangles, self._software)
             result.paths.add(step.path)
         step.composite = children + step.ended
         return step
@@ -407,6 +416,8 @@ class ViewTree:
                                                                                          walk.blends))
             if depth < walk.level:
                 self.passes.composite_level(levels[depth], levels[depth + 1], composites[depth])
+        if walk.level:
+            self.renderer.flush()  # the composites, level after level, to the GPU at once
 
     def _keep_end_images(self, walk: _Walk, levels: LevelStack) -> None:
         """The main view's image kept for next frame's end views, with the surfaces it shows
@@ -504,7 +515,7 @@ class ViewTree:
         if settings.level_budget is not None or stats.view_budget is not None or stats.pixel_budget is not None:
             return True
         if settings.visibility == "auto":
-            return self.renderer.caps.software
+            return self._software
         return settings.visibility == "exact"
 
     def _visibility_of(self, root: View) -> RootVisibility:
@@ -625,8 +636,8 @@ class ViewTree:
         ids = [(parents[p].index, entities[s], node) for p, s, node in
                zip(candidates.parent.tolist(), candidates.surface.tolist(),
                    candidates.rows.node.astype(np.int64).tolist(), strict=True)]
-        self.passes.prepare_level(step.targets, step.parent_targets,
-                                  Claims(ids, list(map(tuple, candidates.scissor.tolist()))), step.queries)
+        claims = Claims(ids, candidates.scissor.tolist())
+        self.passes.prepare_level(step.targets, step.parent_targets, claims, step.queries)
 
     def _draw_level(self, step: _Level, root: View) -> None:
         """A planned level's views (and end views) into its targets, then its composite's

@@ -76,10 +76,9 @@ REGION_PAD = 2
 REGION_WHOLE_SHARE = 0.5
 
 
-# map_region's corner pick (which of a box's ends each corner takes, x slowest) and the last
-# fit it was given with its view-projection as an array (the fit held, so the identity is its own).
-_CORNER_HIGH = np.array([(x, y, z) for x in (0, 1) for y in (0, 1) for z in (0, 1)], bool)
-_REGION_MATRIX: list = [None, None]
+# The last fit map_region was given and the two rows of its view-projection it reads (x and
+# y in clip space), as plain floats: a light's fit lasts until its map is fitted again.
+_REGION_ROWS: list = [None, None]
 
 
 def map_region(fit: DirectionalFit, lo: np.ndarray, hi: np.ndarray,
@@ -87,14 +86,26 @@ def map_region(fit: DirectionalFit, lo: np.ndarray, hi: np.ndarray,
     """The texels (x, y, width, height) of a directional light's map that the world box
     [lo, hi] covers, seen along the light, padded; None when they are most of the map (draw
     it whole).  A caster's shadow is in the map only where its footprint is: moving it from
-    one box to another changes only the texels under both."""
-    corners = np.ones((8, 4))
-    corners[:, :3] = np.where(_CORNER_HIGH, hi, lo)  # the box's eight corners, homogeneous
-    if _REGION_MATRIX[0] is not fit:  # a light's fit lasts until its map is fitted again: kept
-        _REGION_MATRIX[:] = fit, np.array(fit.view_proj.to_list(), np.float64)
-    clip = corners @ _REGION_MATRIX[1]  # orthographic: w is 1
-    texel = (clip[:, :2] * 0.5 + 0.5) * resolution
-    (low_x, low_y), (high_x, high_y) = texel.min(axis=0).tolist(), texel.max(axis=0).tolist()
+    one box to another changes only the texels under both.
+
+    The projection is orthographic (affine), so along each map axis the box's lowest corner
+    takes, axis by axis, the lower of ``m * lo`` and ``m * hi``, and the highest the higher:
+    the same bounds as the eight corners' (to rounding, which the padding covers), in a
+    dozen float operations rather than an array product a frame."""
+    if _REGION_ROWS[0] is not fit:
+        vp = fit.view_proj
+        _REGION_ROWS[:] = fit, tuple(tuple(float(vp[column][row]) for column in range(4)) for row in (0, 1))
+    lo_x, lo_y, lo_z = lo.tolist()
+    hi_x, hi_y, hi_z = hi.tolist()
+    ends = []
+    for m0, m1, m2, m3 in _REGION_ROWS[1]:
+        a, b = m0 * lo_x, m0 * hi_x
+        c, d = m1 * lo_y, m1 * hi_y
+        e, f = m2 * lo_z, m2 * hi_z
+        low = (a if a < b else b) + (c if c < d else d) + (e if e < f else f) + m3
+        high = (b if a < b else a) + (d if c < d else c) + (f if e < f else e) + m3
+        ends.append(((low * 0.5 + 0.5) * resolution, (high * 0.5 + 0.5) * resolution))
+    (low_x, high_x), (low_y, high_y) = ends
     x0, y0 = max(math.floor(low_x) - REGION_PAD, 0), max(math.floor(low_y) - REGION_PAD, 0)
     x1, y1 = min(math.ceil(high_x) + REGION_PAD, resolution), min(math.ceil(high_y) + REGION_PAD, resolution)
     if x1 <= x0 or y1 <= y0:

@@ -8,6 +8,15 @@
 // offset the caster pass draws with; nothing is offset along the light, so contact is kept.
 // MAX_POINT_SHADOWS (the cube samplers below) is engine/render/shadows.py's, defined by the
 // shader library.
+//
+// The lookups are compiled only into the program builds that need them
+// (ShadowMaps.program_defines, engine/render/shadows.py; the scene pass builds with them):
+// DIRECTIONAL_SHADOWS while a directional light casts, POINT_SHADOWS while a point light
+// does; without them a light's shadow is 1 and no map is read.  A GPU skips the lookup of a
+// light that casts nothing at its ``params.w == 0`` test, but a software rasteriser (llvmpipe)
+// runs every branch's code for every pixel, so there the lookups of a frame where nothing
+// casts cost a third of it.  SHADOW_SINGLE_TAP (the "single" filter) is the one tap known
+// when the program is built, not a loop over a count read from the block.
 layout(std140) uniform Shadows {
     mat4 directional_matrix[MAX_DIRECTIONAL_LIGHTS];  // world -> atlas uv (xy) and depth (z), each in [0, 1]
     vec4 directional_params[MAX_DIRECTIONAL_LIGHTS];  // x: a texel's world size, y: softness (texels),
@@ -26,6 +35,9 @@ uniform samplerCube point_shadow1;
 // ``softness`` atlas texels (``texel`` in uv) across: 2 x 2 taps half a softness apart (a
 // 3 x 3-texel tent at softness 1), 3 x 3 for wider edges; one tap on a software rasteriser.
 float filtered_shadow(sampler2DShadow atlas, vec3 p, int n, float texel, float softness) {
+#ifdef SHADOW_SINGLE_TAP
+    return texture(atlas, p);
+#else
     float step = n > 1 ? texel * softness / float(n - 1) : 0.0;
     vec2 start = p.xy - 0.5 * step * float(n - 1);
     float lit = 0.0;
@@ -33,11 +45,15 @@ float filtered_shadow(sampler2DShadow atlas, vec3 p, int n, float texel, float s
         for (int x = 0; x < n; ++x)
             lit += texture(atlas, vec3(start + step * vec2(x, y), p.z));
     return lit / float(n * n);
+#endif
 }
 
 // How much of directional light i reaches a point at ``position`` whose geometric normal
 // (facing the viewer) is ``normal`` and for which the light comes from ``l``: 0 (shadowed) to 1.
 float directional_shadow(int i, vec3 position, vec3 normal, vec3 l) {
+#ifndef DIRECTIONAL_SHADOWS
+    return 1.0;
+#else
     vec4 params = shadows.directional_params[i];
     if (params.w == 0.0) return 1.0;
     float nl = clamp(dot(normal, l), 0.0, 1.0);
@@ -46,6 +62,7 @@ float directional_shadow(int i, vec3 position, vec3 normal, vec3 l) {
     vec4 p = shadows.directional_matrix[i] * vec4(position + normal * offset, 1.0);
     if (any(lessThan(p.xyz, vec3(0.0))) || any(greaterThan(p.xyz, vec3(1.0)))) return 1.0;  // outside the map
     return filtered_shadow(shadow_atlas, p.xyz, int(params.w), params.z, params.y);
+#endif
 }
 
 float point_cube_shadow(samplerCube cube, vec4 params, vec3 from_light, vec3 normal, vec3 l) {
@@ -55,8 +72,11 @@ float point_cube_shadow(samplerCube cube, vec4 params, vec3 from_light, vec3 nor
     float texel = params.x * dist;
     vec3 p = from_light + normal * texel * (1.0 + params.y) * (1.5 - nl);
     float d = length(p) / params.z;
-    // Taps on a cross around the direction, in the plane facing the light.
     vec3 dir = normalize(p);
+#ifdef SHADOW_SINGLE_TAP
+    return d <= texture(cube, dir).r ? 1.0 : 0.0;
+#else
+    // Taps on a cross around the direction, in the plane facing the light.
     vec3 side = normalize(cross(dir, abs(dir.y) < 0.99 ? vec3(0.0, 1.0, 0.0) : vec3(1.0, 0.0, 0.0)));
     vec3 up = cross(dir, side);
     float spread = params.w > 1.0 ? params.x * max(params.y, 0.5) : 0.0;
@@ -68,12 +88,17 @@ float point_cube_shadow(samplerCube cube, vec4 params, vec3 from_light, vec3 nor
         lit += d <= texture(cube, tap).r ? 1.0 : 0.0;
     }
     return lit / float(taps);
+#endif
 }
 
 // How much of point light i (its position ``light_pos``) reaches ``position``.
 float point_shadow(int i, vec3 position, vec3 light_pos, vec3 normal, vec3 l) {
+#ifndef POINT_SHADOWS
+    return 1.0;
+#else
     int slot = shadows.point_slot[i / 4][i % 4];
     if (slot < 0) return 1.0;
     if (slot == 0) return point_cube_shadow(point_shadow0, shadows.point_params[0], position - light_pos, normal, l);
     return point_cube_shadow(point_shadow1, shadows.point_params[1], position - light_pos, normal, l);
+#endif
 }
