@@ -27,7 +27,6 @@ from pyglm import glm
 
 from engine.render.bindings import HISTORY_UNIT, NODE_UNIT, PassState, apply_pass_state, bind_texture
 from engine.render.gpu import Gpu
-from engine.render.mirror_passes import UniformValues
 from engine.render.targets import RenderTargets, release_framebuffer
 from engine.render.views import View
 
@@ -44,7 +43,7 @@ class EndImages:
         self.program["history"].value = HISTORY_UNIT
         self.program["node_map"].value = NODE_UNIT
         self.vao = self.ctx.vertex_array(self.program, [])
-        self.uniforms = UniformValues.of(renderer)  # what the program holds (written where it differs)
+        self.uniforms = renderer.shaders.uniforms  # what the program holds (written where it differs)
         self.history: moderngl.Texture | None = None
         self._history_fbo: moderngl.Framebuffer | None = None
         self.view_proj: glm.mat4 | None = None   # the previous frame's main view-projection

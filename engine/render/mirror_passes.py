@@ -265,52 +265,6 @@ _FALLBACK_IDS = struct.Struct("<4I")
 _FALLBACK_WEIGHTS = struct.Struct("<8f")
 
 
-class UniformValues:
-    """The values last written to programs' uniforms, so a pass writes one only where it
-    differs (a program keeps its uniforms between draws and frames: a level's sizes and
-    scales are the same level after level, frame after frame).  One record a context
-    (``of``): the shader library hands every tree (the main view's, each probe's) the same
-    program objects, so every writer of them must keep the one record.  Forgotten after a
-    hot reload (``ShaderLibrary.reloads``): a relinked program's uniforms start again from
-    their defaults."""
-
-    def __init__(self, shaders: object) -> None:
-        self.shaders = shaders
-        self.reloads = getattr(shaders, "reloads", 0)
-        self.values: dict[tuple[int, str], object] = {}
-
-    @staticmethod
-    def of(renderer: Gpu) -> UniformValues:
-        """The record of ``renderer``'s context (made at the first call)."""
-        ctx = renderer.ctx
-        record = getattr(ctx, "_speculum_uniform_values", None)
-        if record is None or record.shaders is not renderer.shaders:
-            record = ctx._speculum_uniform_values = UniformValues(renderer.shaders)
-        return record
-
-    def set(self, program: moderngl.Program, name: str, value: object) -> None:
-        """``program[name].value = value`` unless that is its value already."""
-        reloads = self.shaders.reloads
-        if reloads != self.reloads:
-            self.reloads = reloads
-            self.values.clear()
-        key = (program.glo, name)
-        if self.values.get(key) != value:
-            program[name].value = value
-            self.values[key] = value
-
-    def write(self, program: moderngl.Program, name: str, data: bytes) -> None:
-        """``program[name].write(data)`` unless those are its bytes already."""
-        reloads = self.shaders.reloads
-        if reloads != self.reloads:
-            self.reloads = reloads
-            self.values.clear()
-        key = (program.glo, name)
-        if self.values.get(key) != data:
-            program[name].write(data)
-            self.values[key] = data
-
-
 def _instance_format(program: moderngl.Program) -> tuple[str, list[str]]:
     """The composite rows' vertex format for ``program``: a variant's shader may not read
     every column, and the linker drops those attributes, so they are skipped as padding."""
@@ -456,7 +410,7 @@ class MirrorPasses:
         self.claim = shaders.program("claim.vert", "mirror_claim.frag")
         self.claim["parent_node_map"].value = PARENT_NODE_UNIT
         self.claim["parent_surface_map"].value = PARENT_SURFACE_UNIT
-        self.uniforms = UniformValues.of(renderer)  # what the claim, composite and fallback programs hold
+        self.uniforms = renderer.shaders.uniforms  # what the claim, composite and fallback programs hold
         self.composites: dict[str, _CompositeDraw] = {}
         units = {**dict(zip(("reflection", "reflection_seen", "reflection_nodes"), REFLECTION_UNITS, strict=True)),
                  "sky_map": SKY_UNIT, "rough_atlas": ATLAS_UNIT, "normal_map": NORMAL_UNIT}

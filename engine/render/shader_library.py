@@ -313,6 +313,36 @@ def _expand(name: str, stack: tuple[str, ...], root: Path, files: SourceFiles,
 ProgramKey = tuple  # (vertex, fragment, geometry, sorted defines)
 
 
+class UniformValues:
+    """The values last written to a library's programs' uniforms, so a pass writes one only
+    where it differs (a program keeps its uniforms between draws and frames: a level's sizes
+    and scales are the same level after level, frame after frame).  The library's own
+    (``ShaderLibrary.uniforms``): it hands every writer (the main view's tree, each probe's)
+    the same program objects, so they share the one record; it is forgotten when a program
+    is rebuilt (a relinked program's uniforms start again from their defaults)."""
+
+    def __init__(self) -> None:
+        self.values: dict[tuple[int, str], object] = {}
+
+    def set(self, program: moderngl.Program, name: str, value: object) -> None:
+        """``program[name].value = value`` unless that is its value already."""
+        key = (program.glo, name)
+        if self.values.get(key) != value:
+            program[name].value = value
+            self.values[key] = value
+
+    def write(self, program: moderngl.Program, name: str, data: bytes) -> None:
+        """``program[name].write(data)`` unless those are its bytes already."""
+        key = (program.glo, name)
+        if self.values.get(key) != data:
+            program[name].write(data)
+            self.values[key] = data
+
+    def forget(self) -> None:
+        """Nothing is known written (after a rebuild or a release)."""
+        self.values.clear()
+
+
 class ShaderLibrary:
     """Compiled programs of one context, cached by (files, defines), rebuilt in place when
     a file they were built from changes (``poll``)."""
@@ -327,6 +357,7 @@ class ShaderLibrary:
         self._inputs: dict[ProgramKey, dict[str, int]] = {}  # vertex input locations, kept across rebuilds
         self.errors: dict[ProgramKey, str] = {}          # programs whose edited files do not build
         self.reloads = 0                                  # programs rebuilt by poll
+        self.uniforms = UniformValues()                   # what its programs' uniforms hold, where recorded
         self._good: dict[str, bytes] = {}                # file -> the last contents every program built from
         self._news: list[str] = []                       # said by the next poll (variants built from _good)
         self._next_poll = 0.0
@@ -460,6 +491,7 @@ class ShaderLibrary:
                 continue
             self.errors.pop(key, None)
             self.reloads += 1
+            self.uniforms.forget()
             rebuilt.append(key)
             edited |= touched
         broken = set().union(*(self._uses[key] for key in failed)) if failed else set()
@@ -563,6 +595,7 @@ class ShaderLibrary:
         for program in self._programs.values():
             program.release()
         self._programs.clear()
+        self.uniforms.forget()
         self._uses.clear()
         self._seen.clear()
 
