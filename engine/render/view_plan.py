@@ -6,10 +6,14 @@ views: the parents of a level are rows of arrays (``LevelRows``), every mirror a
 is a row of ``SurfaceTable``, and ``SurfaceTable.cull`` and ``SurfaceTable.plan`` work on
 (parents x surfaces) blocks.  Per view, only what the draws need is made in Python (a
 ``View`` holding its packed camera block).  This is the one planner, for levels of every
-size: a level costs some 70 numpy calls whatever its views (about 50 us on llvmpipe's
-machine for a level of one view, measured warm; planning pair by pair in glm cost some
-15 us a view, so a level of one or two views was cheaper that way, and dearer from about
-six: the second planner that did so is gone, for one set of rules).
+size.  What it costs at a level of one or two views is its count of numpy calls (in a frame
+each costs 1-3 us, a call of a kind not made for a while the most), so the work is laid out
+to need few: each view's row holds every matrix its children and the cull read (``x``:
+carried through a surface by two products, the oblique near plane a scalar from them), what
+does not depend on the camera (the Camera block's projection, viewport, clip plane and ids;
+the exit row, mask, winding) is gathered per (parent, surface) from a grid kept while the
+parents' ids stay, and a candidate is one row: about 45 calls that compute or copy a level
+(17 of them the cull's), 5 of them products, where the first array planner took about 72.
 
 Conventions: matrices here are numpy (..., 4, 4) arrays in the usual row-major math
 layout (``M @ x``); glm's and GL's are column-major, so they are transposed at the edges.
@@ -32,7 +36,6 @@ from engine.rules.visibility_rules import drawn_in
 if TYPE_CHECKING:  # the surfaces stage's records (engine/resources.py): read here by their fields
     from engine.resources import SurfaceState
 
-_CAMERA_FLOATS = CAMERA_BLOCK_BYTES // 4
 _KINDS_BUT_DIRECT = KIND_MASK & ~VIEW_DIRECT  # a view through a surface is no longer direct
 
 
@@ -41,28 +44,66 @@ def _mat(matrix: glm.mat4) -> np.ndarray:
     return np.frombuffer(matrix.to_bytes(), np.float32).reshape(4, 4).T.astype(np.float64)
 
 
-# One row of ``LevelRows``: a view of a level, in float64.  Eye, viewport and clip plane side
-# by side are the Camera block's (one copy, ``CAMERA_DTYPE``), and the clip plane above the
-# view matrix makes the 5 x 4 block ``SurfaceTable.cull`` multiplies once a level.
+# One row of ``LevelRows``: a view of a level, everything the planner and the view tree read of
+# it side by side in one float64 row (ints and the float32 Camera block seen through views of
+# it), so that a level's rows are gathered, and its candidates chosen, with one ``take``.
+#
+# ``x`` holds the view's matrices as a 22 x 4 and an 8 x 5 block, so that two products a level
+# carry all of them through the surfaces (``SurfaceTable._plan``): with V the view matrix, IV its
+# inverse, P0 the root's projection and C the cull's rows (``_cull_rows``),
+#   x[0] = [V; P0 V; C P0 V; -clip plane; 0; 0]       (multiplied on the right by inv(carry))
+#   x[1] = [(IV inv(P0))^T | t; IV^T | p]            (multiplied on the right by [carry^T | carry^T e])
+# where e is the plane the view looks out of (world), p = e IV that plane in view space (the
+# oblique near plane's) and t = e IV inv(P0) (its Sherman-Morrison update).  The cull's 14
+# rows (C P0 V, minus the clip plane, two of scratch) are what it multiplies the corners by;
+# IV^T's last row is the eye.
+X_ROWS = 22   # x[0]'s; x[1] has 8
+_X0 = X_ROWS * 4
+_V, _P0V, _CULL, _NEG_CLIP = slice(0, 4), slice(4, 8), slice(8, 22), 19
 LEVEL_ROW = np.dtype([
-    ("eye", "<f8", (4,)),          # homogeneous world position
-    ("viewport", "<f8", (4,)),     # 0, 0, the level's width and height
-    ("clip_plane", "<f8", (4,)),   # world clip plane (what the view keeps)
-    ("view", "<f8", (16,)),        # world -> eye, row by row
-    ("inv_view", "<f8", (16,)),    # eye -> world, row by row
-    ("rect", "<f8", (4,)),         # x0, y0, x1, y1 where it shows, screen pixels
+    ("rect", "<f8", (4,)),         # x0, y0, -x1, -y1 where it shows, screen pixels (the cull's signs)
+    ("x", "<f8", (_X0 + 8 * 5,)),
+    ("node", "<f8"),               # its index in the tree
+    ("scissor", "<i8", (4,)),      # x, y, w, h in the level's pixels
+    ("block", "<f4", (CAMERA_FLOATS["skip"].stop,)),  # the packed Camera block (CAMERA_DTYPE)
     ("exit_row", "<f8"),           # the SurfaceTable row of the surface it looks out of (-1: none)
     ("view_mask", "<f8"),          # its kinds and the layers it shows (View.view_mask)
     ("mirrored", "<f8"),           # 1.0 where front faces wind clockwise
-    ("node", "<f8"),               # its index in the tree
+    ("parent", "<i8"),             # a candidate's row of its parent in the level above
+    ("surface", "<i8"),            # and of its surface in the SurfaceTable
+    ("fade", "<f8"),               # the reflection's weight (Mirror fades; 1: none)
 ])
 ROW = field_columns(LEVEL_ROW, 8)  # each field's columns
-_EYE, _VIEWPORT, _CLIP, _VIEW, _INV_VIEW, _RECT = (ROW[name] for name in (
-    "eye", "viewport", "clip_plane", "view", "inv_view", "rect"))
-_EXIT_ROW, _MASK, _MIRRORED, _NODE = (ROW[name].start for name in ("exit_row", "view_mask", "mirrored", "node"))
-_CAMERA_PART = slice(_EYE.start, _CLIP.stop)   # eye, viewport, clip plane: the Camera block's, in its order
-_CLIP_VIEW = slice(_CLIP.start, _VIEW.stop)    # the cull's 5 x 4 block
-_IDS_PART = slice(_EXIT_ROW, _MASK + 1)        # exit row and view mask: what decides which surfaces it may see
+_X, _RECT, _BLOCK = (ROW[name] for name in ("x", "rect", "block"))
+_EXIT_ROW, _MASK, _MIRRORED, _NODE, _FADE, _PARENT, _SURFACE = (ROW[name].start for name in (
+    "exit_row", "view_mask", "mirrored", "node", "fade", "parent", "surface"))
+_SCISSOR = ROW["scissor"]
+_ROOT_IDS = [_EXIT_ROW, _MASK, _MIRRORED, _NODE, _FADE]
+_IDS_PART = slice(_EXIT_ROW, _MIRRORED + 1)    # exit row, view mask, mirrored: what decides which surfaces
+# it may see and what its children's are
+_GRID_PART = slice(_BLOCK.start, _FADE + 1)    # what _child_ids holds for a level's rows: the block, then
+# the exit row, view mask, mirrored, parent, surface, fade
+_EYE = slice(_X.start + _X0 + 7 * 5, _X.start + _X0 + 7 * 5 + 4)  # IV^T's last row: the eye
+_CLIP = slice(_X.start + _NEG_CLIP * 4, _X.start + _NEG_CLIP * 4 + 4)       # minus the clip plane
+assert CAMERA_BLOCK_BYTES == 8 * (_BLOCK.stop - _BLOCK.start)
+assert _EXIT_ROW == _BLOCK.stop and _FADE == _EXIT_ROW + 5
+_GRID_WIDTH = _GRID_PART.stop - _GRID_PART.start
+_GRID_PARENT = _PARENT - _GRID_PART.start  # the parent's column in it
+# What a level's plan is a function of, of its parents' rows (with the clip plane and the ids,
+# _IDS_PART): the rectangle, then the view matrix (the rest of x follows from it, the root
+# projection and size, which key a plan too).  Kept plans are found by these bytes.
+_PLAN_KEY = slice(_RECT.start, _X.start + 16)
+assert _RECT.stop == _X.start
+
+
+def _x0(data: np.ndarray) -> np.ndarray:
+    """``x[0]`` of rows ``data``: (n, X_ROWS, 4)."""
+    return data[:, _X.start:_X.start + _X0].reshape(-1, X_ROWS, 4)
+
+
+def _x1(data: np.ndarray) -> np.ndarray:
+    """``x[1]`` of rows ``data``: (n, 8, 5)."""
+    return data[:, _X.start + _X0:_X.stop].reshape(-1, 8, 5)
 
 
 class LevelRows:
@@ -78,12 +119,12 @@ class LevelRows:
     @property
     def view(self) -> np.ndarray:
         """(n, 4, 4) world -> eye."""
-        return self.data[:, _VIEW].reshape(-1, 4, 4)
+        return _x0(self.data)[:, _V, 0:4]
 
     @property
     def inv_view(self) -> np.ndarray:
         """(n, 4, 4) eye -> world."""
-        return self.data[:, _INV_VIEW].reshape(-1, 4, 4)
+        return _x1(self.data)[:, 4:8, 0:4].transpose(0, 2, 1)
 
     @property
     def eye(self) -> np.ndarray:
@@ -93,12 +134,12 @@ class LevelRows:
     @property
     def clip(self) -> np.ndarray:
         """(n, 4) world clip plane (what the view keeps)."""
-        return self.data[:, _CLIP]
+        return -self.data[:, _CLIP]
 
     @property
     def rect(self) -> np.ndarray:
         """(n, 4) x0, y0, x1, y1 where it shows, screen pixels."""
-        return self.data[:, _RECT]
+        return self.data[:, _RECT] * _SIGNS
 
     @property
     def exit_row(self) -> np.ndarray:
@@ -122,48 +163,80 @@ class LevelRows:
 
     @staticmethod
     def root(view: View) -> LevelRows:
-        """A root view's row, made from its glm values in one array (each a float64 of the
-        float32 glm holds)."""
+        """A root view's row (its projection is the tree's root projection), its matrices
+        made in glm doubles of the float32 glm holds (the eye: the view's own; the cull's
+        rows as three 4 x 4 products, ``_cull_blocks``) and written in a few copies: glm's
+        bytes are column-major, so a matrix's are its transpose's rows."""
         row = np.zeros((1, LevelRows.WIDTH))
-        row[0, _EYE] = (*view.eye, 1.0)
-        row[0, _VIEWPORT] = (0.0, 0.0, *view.size)
-        row[0, _CLIP] = tuple(view.clip_plane)
-        row[0, _VIEW] = _rows(view.view)
-        row[0, _INV_VIEW] = _rows(glm.inverse(view.view))
-        row[0, _RECT] = (0.0, 0.0, *view.size)
-        row[0, [_EXIT_ROW, _MASK, _MIRRORED, _NODE]] = (-1.0, float(view.view_mask), float(view.mirrored), 0.0)
+        v, proj = glm.dmat4(view.view), glm.dmat4(view.proj)
+        inv_v = glm.dmat4(glm.inverse(view.view))
+        inv_v[3] = glm.dvec4(glm.dvec3(view.eye), 1.0)
+        clip_space = glm.transpose(proj * v)  # (P0 V)^T
+        cull = _cull_blocks(view.size)
+        values = np.frombuffer(b"".join((
+            glm.dvec4(0.0, 0.0, -view.size[0], -view.size[1]).to_bytes(),  # the rectangle, x0, y0, -x1, -y1
+            glm.transpose(v).to_bytes(), clip_space.to_bytes(), (clip_space * cull[0]).to_bytes(),
+            (clip_space * cull[1]).to_bytes(), (clip_space * cull[2]).to_bytes(),
+            (inv_v * glm.dmat4(glm.inverse(view.proj))).to_bytes(), inv_v.to_bytes())), np.float64)
+        row[0, _RECT.start:_X.start + 80] = values[0:84]  # the rectangle, x[0]'s first 20 rows
+        _x1(row)[0, :, 0:4] = values[84:116].reshape(8, 4)
+        row[0, _CLIP] = tuple(-view.clip_plane)
+        row[0, _ROOT_IDS] = (-1.0, float(view.view_mask), float(view.mirrored), 0.0, 1.0)
         return LevelRows(row)
 
 
-@dataclass
 class Candidates:
-    """A level's candidate views, before its claims say which have pixels: one row each,
-    in claim order (``parent`` rows of the level above, ``surface`` rows of the table)."""
+    """A level's candidate views, before its claims say which have pixels: one row each of
+    ``LevelRows`` (claim order), read through views of it made when first asked for (a
+    level's candidates, those it chooses and those that grow are each read for a few)."""
 
-    parent: np.ndarray       # (k,) row of the parent in the level above
-    surface: np.ndarray      # (k,) row in the SurfaceTable
-    rows: LevelRows          # their cameras and screen rectangles (node: claim order from first_index)
-    scissor: np.ndarray      # (k, 4) int x, y, w, h in the level's pixels
-    blocks: np.ndarray       # (k, CAMERA_BLOCK_BYTES / 4) float32: packed Camera blocks
-    size: tuple[int, int]    # the level's pixels
-    fade: np.ndarray         # (k,) the reflection's weight (Mirror fades; 1: none)
-    end: np.ndarray | None = None  # (k,) bool: an end view, cut by the depth limits (None: none asked for)
+    def __init__(self, rows: LevelRows, size: tuple[int, int], end: np.ndarray | None = None) -> None:
+        self.rows = rows          # their cameras, rectangles, blocks (node: claim order from first_index)
+        self.size = size          # the level's pixels
+        self.end = end            # (k,) bool: an end view, cut by the depth limits (None: none asked for)
 
     def __len__(self) -> int:
-        return len(self.parent)
+        return len(self.rows.data)
+
+    @functools.cached_property
+    def parent(self) -> np.ndarray:
+        """(k,) row of the parent in the level above."""
+        return self.rows.data.view(np.int64)[:, _PARENT]
+
+    @functools.cached_property
+    def surface(self) -> np.ndarray:
+        """(k,) row in the SurfaceTable."""
+        return self.rows.data.view(np.int64)[:, _SURFACE]
+
+    @functools.cached_property
+    def scissor(self) -> np.ndarray:
+        """(k, 4) int x, y, w, h in the level's pixels."""
+        return self.rows.data.view(np.int64)[:, _SCISSOR]
+
+    @functools.cached_property
+    def blocks(self) -> np.ndarray:
+        """(k, CAMERA_BLOCK_BYTES / 4) float32: the packed Camera blocks."""
+        return self.rows.data[:, _BLOCK].view(np.float32)
+
+    @functools.cached_property
+    def fade(self) -> np.ndarray:
+        """(k,) the reflection's weight (Mirror fades; 1: none)."""
+        return self.rows.data[:, _FADE]
 
     def freeze(self) -> None:
-        """Make every array read-only (a kept plan is shared by the frames that read it)."""
-        for array_ in (self.parent, self.surface, self.rows.data, self.scissor, self.blocks, self.fade, self.end):
+        """Make every array read-only (a kept plan is shared by the frames that read it; a
+        view made after this is read-only with its base)."""
+        self.rows.data.flags.writeable = False
+        for name in ("parent", "surface", "scissor", "blocks", "fade", "end"):
+            array_ = self.__dict__.get(name)
             if array_ is not None:
                 array_.flags.writeable = False
 
     def select(self, keep: np.ndarray) -> Candidates:
         """The candidates at ``keep`` (int64 indices), in their order (``take``: several
         times cheaper than fancy indexing for these small gathers)."""
-        return Candidates(self.parent.take(keep), self.surface.take(keep), LevelRows(self.rows.data.take(keep, axis=0)),
-                          self.scissor.take(keep, axis=0), self.blocks.take(keep, axis=0), self.size,
-                          self.fade.take(keep), None if self.end is None else self.end.take(keep))
+        return Candidates(LevelRows(self.rows.data.take(keep, axis=0)), self.size,
+                          None if self.end is None else self.end.take(keep))
 
 
 class SurfaceTable:
@@ -229,12 +302,18 @@ class SurfaceTable:
         for i, c in enumerate(distinct):
             self.corner_columns[:, :, i] = np.concatenate([c, np.repeat(c[:1], self.corner_count - len(c), axis=0)])
         self.planes_t = np.ascontiguousarray(self.planes.T)
-        # ... the floats of each surface's views (``SURFACE_ROW``) and their integers
-        # (``_SURFACE_INTS``), in the order the view's rows and Camera block take them.
-        self.float_rows = np.concatenate([self.carry.reshape(count, 16), self.inv_carry.reshape(count, 16),
-                                          self.exit_planes, self.is_mirror[:, None], self.scale[:, None]], axis=1)
-        self.int_rows = np.stack([self.exit_rows, visibility_code(_KINDS_BUT_DIRECT, self.layers),
-                                  self.exit_entities, self.kind_bit], axis=1).reshape(count, len(_SURFACE_INTS))
+        # ... and each surface's part of its views' rows (``SURFACE_ROW``): the blocks two
+        # products multiply a parent's ``x`` by (``LEVEL_ROW``), the plane its views look out
+        # of, its resolution scale.
+        self.float_rows = np.zeros((count, _SURFACE_WIDTH))
+        self.float_rows[:, _OPS0] = self.inv_carry.reshape(count, 16)
+        ops = self.float_rows[:, _OPS1].reshape(count, 4, 5)
+        ops[:, :, 0:4] = self.carry.transpose(0, 2, 1)
+        ops[:, :, 4] = np.einsum("sji,sj->si", self.carry, self.exit_planes)  # carry^T e
+        self.float_rows[:, _EXIT_PLANE] = self.exit_planes
+        self.float_rows[:, _NEG_EXIT_PLANE] = -self.exit_planes
+        self.float_rows[:, _SCALE] = self.scale
+        self.keep = visibility_code(_KINDS_BUT_DIRECT, self.layers)  # the mask bits a view through it keeps
         self._depths: dict[tuple[int, int], tuple[np.ndarray, np.ndarray, list[bool], bool]] = {}
         self._biases: dict[tuple, tuple[np.ndarray | None, np.ndarray]] = {}  # _pair_bias's
         self._plans: dict[tuple, tuple[np.ndarray | None, tuple[Candidates | None, int]]] = {}  # plan's, least
@@ -242,6 +321,10 @@ class SurfaceTable:
         self._ends: dict[tuple[int, int], tuple[np.ndarray, np.ndarray, list[bool]]] = {}
         self._unviewed: dict[tuple, tuple[np.ndarray | None, tuple[np.ndarray, np.ndarray]]] = {}  # unviewed's
         self._faded: tuple | None = None  # the last cull's pairs faded out, and for what (cull)
+        self._last_ids: tuple | None = None  # the last parents' rows _pair_bias read, and their ids' bytes
+        self._ids: dict[tuple, np.ndarray] = {}  # _child_ids'
+        self._child_rows: dict[tuple, np.ndarray] = {}  # _child_row's
+        self._cuts: dict[tuple, tuple[np.ndarray | None, np.ndarray, bool]] = {}  # _cut's
         # The resolution scale every surface shares (None: they differ; a level takes its largest).
         self.one_scale = float(self.scale[0]) if count and (self.scale == self.scale[0]).all() else None
 
@@ -304,17 +387,35 @@ class SurfaceTable:
             found = self._ends[key] = (ends, allowed, allowed.tolist())
         return found[1], found[2]
 
+    def _cut(self, depth: int, depth_cap: int, ends: np.ndarray | None) -> tuple[np.ndarray, bool]:
+        """(S,) the surfaces that ``falls_back`` but get no view at ``depth`` (cut by their
+        limits or the cap, not one of ``ends``; switched off), and whether there is one: kept
+        per depth, cap and ``ends`` (the same array while nothing changes)."""
+        key = (depth, depth_cap, id(ends))
+        found = self._cuts.get(key)
+        if found is None or found[0] is not ends:
+            viewable = self._within(depth, depth_cap)[0] if ends is None else \
+                self._with_ends(depth, depth_cap, ends)[0]
+            cut = self.falls_back & ~viewable
+            if len(self._cuts) > 64:
+                self._cuts.clear()
+            found = self._cuts[key] = (ends, cut, bool(cut.any()))
+        return found[1], found[2]
+
     def _pair_bias(self, data: np.ndarray, depth: int, depth_cap: int, ends: np.ndarray | None,
                    fallback: bool) -> np.ndarray:
         """(P, S): what the cull adds to each (parent, surface) facing value: 0 where the
         parent view may see the surface at ``depth`` (enabled, within its limits or one of
         ``ends``; with ``fallback``, any surface that ``falls_back``, whatever its limits;
-        and drawn by the view: ``drawn_in`` its mask), -inf where not, and on the surface the
-        view looks out of.  A function of each parent's exit row and mask alone, so kept by
-        their bytes (a level's parents see through the same surfaces frame after frame) with
-        the depth, cap and ``ends`` (an array the view tree keeps while nothing changes)."""
+        and drawn by the view: the visibility rule, ``drawn_in``, a row a parent), -inf where
+        not, and on the surface the view looks out of.  A function of each parent's exit row,
+        mask and winding alone, so kept by their bytes (a level's parents see through the
+        same surfaces frame after frame) with the depth, cap and ``ends`` (an array the view
+        tree keeps while nothing changes); the parents' bytes are kept for ``_child_ids``."""
         ids = data[:, _IDS_PART]
-        key = (ids.tobytes(), depth, depth_cap, id(ends), fallback)
+        id_bytes = ids.tobytes()
+        self._last_ids = (data, id_bytes)
+        key = (id_bytes, depth, depth_cap, id(ends), fallback)
         found = self._biases.get(key)
         if found is None or found[0] is not ends:
             if fallback:
@@ -322,17 +423,71 @@ class SurfaceTable:
             else:
                 allowed = self._within(depth, depth_cap)[0] if ends is None else self._with_ends(depth, depth_cap,
                                                                                                   ends)[0]
-            bias = np.empty((len(data), len(self.states)))
-            for row, (exit_row, mask) in zip(bias, ids.astype(np.int64).tolist(), strict=True):
-                drawn = self.drawn_in(mask)
-                row[:] = np.where(allowed if drawn is None else allowed & drawn, 0.0, -np.inf)
-                if exit_row >= 0:
-                    row[exit_row] = -np.inf
+            seen = allowed & drawn_in(self.drawn, ids[:, 1:2].astype(np.int64))  # the rule, a row a parent
+            exit_rows = ids[:, 0].astype(np.int64)
+            looks_out = np.flatnonzero(exit_rows >= 0)
+            seen[looks_out, exit_rows[looks_out]] = False
+            bias = np.where(seen, 0.0, -np.inf)
             bias.flags.writeable = False
             if len(self._biases) > 256:
                 self._biases.clear()
             found = self._biases[key] = (ends, bias)
         return found[1]
+
+    def _child_ids(self, data: np.ndarray, hide: int, root_rows: _RootRows,
+                   size: tuple[int, int]) -> np.ndarray:
+        """(P, S, _GRID_WIDTH) 8-byte words (int64), [p, s]: what a view through surface s from
+        parent row p of ``data`` holds that is not a matter of the camera, laid out as
+        ``LEVEL_ROW`` from its Camera block on: the block with its projection (the root's,
+        ``root_rows``: its third row is the view's own, written over), viewport (``size``),
+        clip plane and ids but the node (uint32 skip, hide, view mask); then its exit row,
+        view mask, winding, p, s (int64s) and a fade of 1.0.  Kept by the parents' ids (the
+        bytes the cull's ``_pair_bias`` read of them), ``hide``, the root projection and the
+        size; made, when a level's parents are new, from each parent's rows (``_child_row``,
+        kept too) and the parents' numbers."""
+        last = self._last_ids
+        id_bytes = last[1] if last is not None and last[0] is data else data[:, _IDS_PART].tobytes()
+        key = (id_bytes, hide, root_rows.key, size)
+        found = self._ids.get(key)
+        if found is None:
+            grid = np.concatenate([self._child_row(exit_row, mask, mirrored, hide, root_rows, size)
+                                   for exit_row, mask, mirrored in data[:, _IDS_PART].tolist()]).reshape(
+                len(data), len(self.states), _GRID_WIDTH)
+            grid[:, :, _GRID_PARENT] = np.arange(len(data))[:, None]
+            grid.flags.writeable = False
+            if len(self._ids) > 256:
+                self._ids.clear()
+            found = self._ids[key] = grid
+        return found
+
+    def _child_row(self, exit_row: float, mask: float, mirrored: float, hide: int, root_rows: _RootRows,
+                   size: tuple[int, int]) -> np.ndarray:
+        """(S, _GRID_WIDTH) int64: ``_child_ids``' rows of a parent with these ids (its row
+        number 0).  A view's mask: the kinds of its chain, the layers every surface of its
+        chain shows."""
+        key = (exit_row, mask, mirrored, hide, root_rows.key, size)
+        found = self._child_rows.get(key)
+        if found is None:
+            rows = np.zeros((len(self.states), _GRID_WIDTH))
+            block = rows[:, 0:_BLOCK.stop - _BLOCK.start].view(np.float32)
+            block[:, _MATRICES.start + 16:_MATRICES.start + 32] = root_rows.proj_t.reshape(16)
+            block[:, _CAMERA_VIEWPORT] = (0.0, 0.0, *size)
+            block[:, _CAMERA_CLIP] = self.exit_planes
+            child_mask = (int(mask) & self.keep) | self.kind_bit
+            ids = block[:, CAMERA_FLOATS["skip"]].view(np.uint32)
+            ids[:, _ID_SKIP] = self.exit_entities & 0xFFFFFFFF
+            ids[:, _ID_HIDE] = hide & 0xFFFFFFFF
+            ids[:, _ID_MASK] = child_mask & 0xFFFFFFFF
+            rest = rows[:, _BLOCK.stop - _BLOCK.start:]
+            rest[:, 0] = self.exit_rows
+            rest[:, 1] = child_mask
+            rest[:, 2] = mirrored != self.is_mirror
+            rest.view(np.int64)[:, 4] = np.arange(len(self.states))
+            rest[:, 5] = 1.0
+            if len(self._child_rows) > 1024:
+                self._child_rows.clear()
+            found = self._child_rows[key] = rows.view(np.int64)  # copied as integers: bit for bit
+        return found
 
     def cull(self, parents: LevelRows, depth: int, root_proj: np.ndarray, root_size: tuple[int, int],
              depth_cap: int, ends: np.ndarray | None = None,
@@ -342,24 +497,27 @@ class SurfaceTable:
         looks out of, facing the view's eye (a mirror facing away shows nothing, as the
         "Multiple Mirrors" project notes), not wholly behind the view's clip plane, inside
         the frustum and overlapping the parent's rectangle.  ``depth`` is the level the
-        views would be on.  Returns (parent rows, surface rows, rects x0 y0 x1 y1), parent
-        major, and the fade weights of the pairs seen before the fades (None: no surface
-        fades; a pair faded out, weight 0, is not returned).  With ``ends`` (a mask of
-        surfaces), the pairs of those surfaces the depth limits cut are kept too: the end
-        views (``engine/render/end_images.py``).  With ``fallback`` (``unviewed``), every
-        surface that ``falls_back`` is tested whatever its limits, and the pairs faded out
-        are returned too (their weight 0).
+        views would be on.  Returns (parent rows, surface rows, rects x0 y0 -x1 -y1 (the
+        signs ``LEVEL_ROW`` keeps them with)), parent major, and the fade weights of the
+        pairs seen before the fades (None: no surface fades; a pair faded out, weight 0, is
+        not returned).  With ``ends`` (a mask of surfaces), the pairs of those surfaces the
+        depth limits cut are kept too: the end views (``engine/render/end_images.py``).
+        With ``fallback`` (``unviewed``), every surface that ``falls_back`` is tested
+        whatever its limits, and the pairs faded out are returned too (their weight 0).
+        ``root_proj`` is the one the parents' rows were made with (their clip space).
 
         Every (parent x surface) pair goes through the same few array operations, the
         whole grid at once: in a frame, after the rasteriser has run, each numpy call costs
         about twice what it does in a warm loop (measured), so their number, not the pairs
         they hold, is what a level costs at these sizes.  One product takes every distinct
-        corner of every surface through 12 rows per parent (``_cull_rows``): x, y, -x, -y
-        and w in clip space, six values > 0 outside each side of the frustum, and minus the
-        side of the parent's clip plane.  Then one minimum over the corners gives each
-        pair's frustum and clip-plane tests, and, with x and y divided by w first, its
-        rectangle's four sides as minima (x0, y0, -x1, -y1: the same rounding rule, floor
-        then one pixel out, for each side)."""
+        corner of every surface through 14 rows per parent, kept in its ``x`` (``C P0 V``
+        from its clip space): the rectangle's sides x0, y0, -x1, -y1 in pixels, a pixel
+        outwards, times w, then w,
+        six values > 0 outside each side of the frustum, minus the side of the parent's clip
+        plane, and two rows of scratch.  Then one minimum over the corners gives each pair's
+        frustum and clip-plane tests, and, with the sides divided by w first, its
+        rectangle's four sides as minima (the same rounding rule, one pixel out then floor,
+        for each side)."""
         count, surfaces = len(parents.data), len(self.states)
         if not count or not surfaces:
             return _NONE, _NONE, _NO_RECTS, None
@@ -373,31 +531,26 @@ class SurfaceTable:
         facing += self._pair_bias(data, depth, depth_cap, ends, fallback)
         if not facing.max() > 0.0:
             return _NONE, _NONE, _NO_RECTS, None
-        # Rows first: (12, 5) times every parent's (5, 4) block side by side, then (12 P, 4)
-        # times each corner's (4, S) gives (corners, 12, P, S), so x and y are divided by w,
-        # and the minima over the corners and over the rows taken, along the first axis
-        # (numpy's fast one for small arrays), in whole blocks.
-        block = data[:, _CLIP_VIEW].reshape(count, 5, 4).transpose(1, 0, 2).reshape(5, 4 * count)
-        clip = (_cull_rows(root_proj) @ block).reshape(12 * count, 4) @ self.corner_columns
-        clip = clip.reshape(self.corner_count, 12, count, surfaces)
-        np.divide(clip[:, 0:4], np.maximum(clip[:, 4:5], 1e-6), out=clip[:, 0:4])  # a w <= 0: see straddles
-        least = _MIN(clip, axis=0)                                                       # 12 x P x S
+        # Each parent's 14 rows (kept in its ``x``) times each corner's (4, S) gives
+        # (corners, P, 14, S), so the sides are divided by w, and the minima over the corners.
+        clip = (_x0(data)[:, _CULL].reshape(14 * count, 4) @ self.corner_columns).reshape(
+            self.corner_count, count, 14, surfaces)  # one product a corner: (14 P, 4) x (4, S)
+        np.divide(clip[:, :, 0:4], np.maximum(clip[:, :, 4:5], 1e-6), out=clip[:, :, 0:4])  # w <= 0: straddles
+        least = _MIN(clip, axis=0)                                                       # P x 14 x S
         # x0, y0, -x1, -y1 in pixels, rounded outwards with a pixel's margin; a pair with a
         # corner behind the eye is conservative (the parent's whole rectangle).
-        rects = least[0:4] + _OUTWARDS
-        rects *= _half_sizes(root_size)
-        np.floor(rects, out=rects)
-        rects -= 1.0
-        np.copyto(rects, -np.inf, where=least[4] <= 1e-6)
-        np.maximum(rects, (data[:, _RECT] * _SIGNS).T[:, :, None], out=rects)  # inside the parent's
+        rects = least[:, 0:4]
+        np.floor(rects, out=rects)  # (the pixel's margin is in the rows: each side less w)
+        if least[:, 4].min() <= 1e-6:
+            np.copyto(rects, -np.inf, where=least[:, 4:5] <= 1e-6)
+        np.maximum(rects, data[:, _RECT, None], out=rects)  # inside the parent's
         # Seen: facing and allowed, not culled (every corner outside one side of the frustum,
         # or behind the clip plane; on a side counts as outside) and a rectangle with pixels
-        # (x1 > x0 and y1 > y0): one maximum over the rows 2-11, written over, each < 0 to keep.
-        np.negative(facing, out=least[2])
-        np.add(rects[0:2], rects[2:4], out=least[3:5])
-        p, s = np.nonzero(_MAX(least[2:12], axis=0) < 0.0)
-        rects = rects[:, p, s].T
-        rects *= _SIGNS
+        # (x1 > x0 and y1 > y0): one maximum over the rows 4-13, written over, each < 0 to keep.
+        np.negative(facing, out=least[:, 4])
+        np.add(rects[:, 0:2], rects[:, 2:4], out=least[:, 12:14])
+        p, s = np.nonzero(_MAX(least[:, 4:14], axis=1) < 0.0)
+        rects = rects[p, :, s]
         if not self.fading:
             return p, s, rects, None
         fade = self.fade_weights(parents.eye[p], s)
@@ -416,19 +569,18 @@ class SurfaceTable:
         switched off (a mirror), or faded out (weight 0).  Their pixels get the fallback
         (``engine/render/mirror_passes.py``).  No array work when nothing can be cut here
         and nothing fades (a level with every surface it sees within its limits)."""
-        viewable = self._within(depth, depth_cap)[0] if ends is None else self._with_ends(depth, depth_cap, ends)[0]
-        cut = self.falls_back & ~viewable
-        if not len(parents.data) or (not cut.any() and not self.fading):
+        cut, cuts_any = self._cut(depth, depth_cap, ends)
+        if not len(parents.data) or (not cuts_any and not self.fading):
             return _NONE, _NONE
         # Kept like the plans (``plan``): the same parent rows (a still camera, a probe face)
         # give the same pairs, for the price of comparing bytes.
-        key = (parents.data.tobytes(), root_proj.tobytes(), depth, depth_cap, root_size, id(ends))
+        key = (_plan_key(parents.data), root_proj.tobytes(), depth, depth_cap, root_size, id(ends))
         found = self._unviewed.pop(key, None)
         if found is not None and found[0] is ends:
             self._unviewed[key] = found
             return found[1]
         faded = self._faded
-        if not cut.any() and faded is not None and faded[0] is parents.data and faded[1:3] == (depth, depth_cap) \
+        if not cuts_any and faded is not None and faded[0] is parents.data and faded[1:3] == (depth, depth_cap) \
                 and faded[3] is ends:
             # Nothing cut here: the pairs without a view are those the plan's cull just faded out.
             pairs = (faded[4], faded[5])
@@ -464,7 +616,7 @@ class SurfaceTable:
         parent rows (a probe face's tree, whose camera stands still; a still main camera)
         is that plan again, read-only, for the price of comparing its inputs' bytes.  The
         ``PLANS_KEPT`` plans used last are kept."""
-        key = (parents.data.tobytes(), root_proj.tobytes(), depth, first_index, depth_cap, hide, size, scale,
+        key = (_plan_key(parents.data), root_proj.tobytes(), depth, first_index, depth_cap, hide, size, scale,
                root.size, id(ends))
         found = self._plans.pop(key, None)
         if found is not None and found[0] is ends:
@@ -493,83 +645,86 @@ class SurfaceTable:
         ``Candidates.end``); ``size``: the level's pixels, when given; ``scale``: a factor on
         the level's resolution (the frame's pixel budget, ``ViewTree``).
 
-        Like the cull, a fixed number of array operations whatever the number of views:
-        each candidate's parent row and surface rows are gathered once (``take``), and the
-        results are written where they are read next (the level's rows, the Camera blocks)."""
+        Like the cull, a fixed number of array operations whatever the number of views
+        (about 27 after the cull's, four of them products): each candidate's parent row and
+        surface row are gathered once (``take``); two products carry all of the parent's
+        matrices (``x``) through the surface, and give the plane it looks out of in view
+        space (p) and that plane through the inverse root projection (t), from which Lengyel's near plane is a
+        scalar a view: with P0 the root projection, s = (sign p.x, sign p.y, 1, 1) and
+        f = 2 / (t . s), the projection's third row is f p - P0[3], the view-projection's is
+        f e - (P0 V)[3] (p V = e, the world plane), and its inverse is Sherman-Morrison's
+        rank-one update of IV inv(P0), kept in ``x``.  What is not a matter of the camera
+        (the block's projection, viewport, clip plane and ids; the exit row, view mask,
+        winding) is gathered from ``_child_ids``.
+        Everything is written where it is read next: each candidate's ``LevelRows`` row,
+        its Camera block inside it."""
         p, s, rects, weights = self.cull(parents, depth, root_proj, root.size, depth_cap, ends)
         if weights is None:
-            faded, fade = 0, None
+            faded = 0
         else:
             faded = int((weights == 0.0).sum())
-            fade = weights[weights > 0.0]
         k = len(p)
         if not k:
             return None, faded
         surface = self.float_rows.take(s, axis=0)
-        ints = self.int_rows.take(s, axis=0)
-        parent = parents.data.take(p, axis=0)
+        parent = parents.data[:, _X].take(p, axis=0)  # the parents' matrices (no more of their rows)
         if size is None:
             scale *= self.one_scale if self.one_scale is not None else float(surface[:, _SCALE].max())
             size = (max(1, round(root.size[0] * scale)), max(1, round(root.size[1] * scale)))
         data = np.empty((k, LevelRows.WIDTH))
-        view = data[:, _VIEW].reshape(k, 4, 4)
-        inv_view = data[:, _INV_VIEW].reshape(k, 4, 4)
-        np.matmul(parent[:, _VIEW].reshape(k, 4, 4), surface[:, _INV_CARRY].reshape(k, 4, 4), out=view)
-        np.matmul(surface[:, _CARRY].reshape(k, 4, 4), parent[:, _INV_VIEW].reshape(k, 4, 4), out=inv_view)
-        data[:, _EYE] = inv_view[:, :, 3]  # where the carried camera is: its eye-to-world translation
-        data[:, _VIEWPORT] = (0.0, 0.0, *size)
-        data[:, _CLIP] = clip = surface[:, _EXIT_PLANE]
+        ints = data.view(np.int64)
+        x0, x1 = _x0(data), _x1(data)
+        np.matmul(parent[:, 0:_X0].reshape(k, X_ROWS, 4), surface[:, _OPS0].reshape(k, 4, 4), out=x0)
+        np.matmul(parent[:, _X0:].reshape(k, 8, 5)[..., 0:4], surface[:, _OPS1].reshape(k, 4, 5), out=x1)
+        data[:, _CLIP] = surface[:, _NEG_EXIT_PLANE]
         data[:, _RECT] = rects
-        mask = ints[:, _KEEP]  # a view shows the layers every surface of its chain shows
-        np.bitwise_and(parent[:, _MASK].astype(np.int64), mask, out=mask)
-        mask |= ints[:, _KIND_BIT]
-        data[:, _IDS_PART] = ints[:, _EXIT_ROW_AND_KEEP]  # the exit's row, the mask
-        np.not_equal(parent[:, _MIRRORED], surface[:, _IS_MIRROR], out=data[:, _MIRRORED])
-        data[:, _NODE] = np.arange(first_index, first_index + k)
-        proj, inv_proj = _oblique_projections(root_proj, inv_root_proj, inv_view, clip)
-        # The Camera blocks (CAMERA_DTYPE) as float32 columns: the four matrices written
-        # straight into their columns (column-major: each seen transposed), then the eye,
-        # viewport and clip plane in one copy, then the ids.
-        blocks = np.empty((k, _CAMERA_WIDTH), np.float32)
-        matrices = blocks[:, _MATRICES].reshape(k, 4, 4, 4).transpose(0, 1, 3, 2)
-        matrices[:, 0] = view
-        matrices[:, 1] = proj
-        np.matmul(proj, view, out=matrices[:, 2])
-        np.matmul(inv_view, inv_proj, out=matrices[:, 3])
-        blocks[:, _CAMERA_ROWS] = data[:, _CAMERA_PART]
-        ids = blocks[:, _CAMERA_ID_COLUMNS].view(np.uint32)
-        ids[:, _ID_SKIP_AND_MASK] = ints[:, _EXIT_ENTITY_AND_KEEP]  # skip (the exit entity), mask
-        ids[:, _ID_HIDE] = hide
-        ids[:, _ID_NODE] = data[:, _NODE]  # the view's node (the node image's value for its pixels)
+        root_rows = _root_rows(root_proj)
+        ints[:, _GRID_PART] = self._child_ids(parents.data, hide, root_rows, size)[p, s]
+        if weights is not None:
+            data[:, _FADE] = weights[weights > 0.0]
+        node = _node_numbers(first_index, k)
+        data[:, _NODE] = node
+        if size == root.size:  # whole pixels already: x, y, -(x1 + x0)... as x, y, w, h
+            np.matmul(rects, _TO_SCISSOR, out=ints[:, _SCISSOR], casting="unsafe")
+        else:
+            ints[:, _SCISSOR] = level_rects(rects * _SIGNS, root.size, size)
+        # The Camera blocks (CAMERA_DTYPE) as float32 columns: each matrix column-major (its
+        # transpose, row by row).
+        block = data[:, _BLOCK].view(np.float32)
+        block.view(np.uint32)[:, _ID_NODE_COLUMN] = node  # the node image's value for its pixels
+        matrices = block[:, _MATRICES].reshape(k, 4, 4, 4)
+        matrices[:, 0:3:2] = x0[:, 0:8, 0:4].reshape(k, 2, 4, 4).transpose(0, 1, 3, 2)  # V, P0 V
+        plane, through = x1[:, 4:8, 4], x1[:, 0:4, 4]  # p, t
+        signs = _signs(k)
+        np.sign(plane[:, 0:2], out=signs[:, 0:2])
+        f = np.vecdot(through, signs)
+        np.divide(2.0, f, out=f)
+        f = f[:, None]
+        scaled = x1[:, 0:8, 4] * f  # f t, f p
+        np.subtract(scaled[:, 4:8], root_proj[3], out=matrices[:, 1, :, 2])  # the third row: f p - P0[3]
+        np.subtract(surface[:, _EXIT_PLANE] * f, x0[:, 7, 0:4], out=matrices[:, 2, :, 2])  # f e - (P0 V)[3]
+        # (IV P^-1)^T = (IV inv(P0))^T - b a^T, with a = IV inv(P0) e2 (the third row of the
+        # kept transpose) and b = u / (1 + u . e2), u = (f p - P0[2] - P0[3]) inv(P0) = f t - e2 - e3
+        # (so 1 + u . e2 = f t . e2).
+        b = scaled[:, 0:4] - _E23
+        b /= scaled[:, 2:3]
+        np.subtract(x1[:, 0:4, 0:4], b[:, :, None] * x1[:, None, 2, 0:4], out=matrices[:, 3])
+        # Too close to its plane, a view keeps the root projection (the clip distance alone).
+        distance = np.abs(plane[:, 3])
+        if distance.min() <= root_rows.safe_distance:
+            close = distance <= root_rows.safe_distance
+            np.copyto(matrices[:, 1, :, 2], root_proj[2], where=close[:, None])
+            np.copyto(matrices[:, 2, :, 2], x0[:, 6, 0:4], where=close[:, None])
+            np.copyto(matrices[:, 3], x1[:, 0:4, 0:4], where=close[:, None, None])
+        block[:, _CAMERA_EYE] = x1[:, 7, 0:4]
         end = None if ends is None else self._within(depth, depth_cap)[1].take(s)
-        return Candidates(p, s, LevelRows(data), level_rects(rects, root.size, size), blocks, size,
-                          fade if fade is not None else _ones(k), end), faded
+        return Candidates(LevelRows(data), size, end), faded
 
 
-def _oblique_projections(root_proj: np.ndarray, inv_root_proj: np.ndarray, inv_view: np.ndarray,
-                         clip: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Lengyel's oblique near plane for each view (``reflection_math.oblique_projection``, in
-    arrays), and the projections' inverses: the root projection's third row replaced so that
-    the clip plane, in view space, is the near plane; the root projection where the eye is
-    too close to the plane.  One row changes, so each inverse is a rank-one update of the
-    root's (Sherman-Morrison), not a 4 x 4 inversion."""
-    plane = np.matmul(clip[:, None, :], inv_view)[:, 0]  # planes transform by the inverse transpose; the
-    # construction below is unchanged by the plane's (positive) scale, so it is not normalised
-    root = _projection(root_proj, inv_root_proj)
-    safe = np.abs(plane[:, 3]) > root.safe_distance  # the eye's distance to the plane: clip . eye
-    q = np.sign(plane[:, :2]) @ root.inv_xy_t
-    q += root.inv_zw
-    c = plane * (2.0 / np.vecdot(plane, q))[:, None]
-    c -= root.rows_2_3
-    change = np.where(safe[:, None], c, 0.0)  # the third row's change
-    proj = root_proj[None].repeat(len(plane), 0)
-    proj[:, 2] += change
-    # The inverse: P = P0 + e2 change^T, so P^-1 = P0^-1 - (P0^-1 e2)(change^T P0^-1) / (1 + change^T P0^-1 e2),
-    # both products of the change in one (root.inv_and_column: P0^-1 with its third column after it).
-    row = change @ root.inv_and_column
-    row[:, 0:4] /= 1.0 + row[:, 4:5]
-    inv_proj = inv_root_proj - root.column[None, :, None] * row[:, None, 0:4]
-    return proj, inv_proj
+def _plan_key(data: np.ndarray) -> bytes:
+    """The bytes of rows ``data`` a level planned from them is a function of (``_PLAN_KEY``,
+    then the clip plane and the ids)."""
+    return data[:, _PLAN_KEY].tobytes() + data[:, _CLIP].tobytes() + data[:, _IDS_PART].tobytes()
 
 
 def level_rects(rects: np.ndarray, screen: tuple[int, int], level: tuple[int, int]) -> np.ndarray:
@@ -585,142 +740,132 @@ def level_rects(rects: np.ndarray, screen: tuple[int, int], level: tuple[int, in
     return np.concatenate([x0y0, np.maximum(1.0, x1y1 - x0y0)], axis=1).astype(np.int64)
 
 
-# SurfaceTable.float_rows: each surface's carry and its inverse (row by row), the plane its
-# views look out of, 1.0 for a mirror, its resolution scale.
-SURFACE_ROW = np.dtype([("carry", "<f8", (16,)), ("inv_carry", "<f8", (16,)), ("exit_plane", "<f8", (4,)),
-                        ("is_mirror", "<f8"), ("resolution_scale", "<f8")])
-_SURFACE = field_columns(SURFACE_ROW, 8)
-_CARRY, _INV_CARRY, _EXIT_PLANE = _SURFACE["carry"], _SURFACE["inv_carry"], _SURFACE["exit_plane"]
-_IS_MIRROR, _SCALE = _SURFACE["is_mirror"].start, _SURFACE["resolution_scale"].start
-# SurfaceTable.int_rows: the row of the surface its views look out of, the view mask bits a view
-# through it keeps (its layers and every kind but direct), the entity they look out of, the
-# kind bit it adds.  Laid out so that the pairs the rows and blocks take together are slices.
-_SURFACE_INTS = ("exit_row", "keep", "exit_entity", "kind_bit")
-_KEEP, _KIND_BIT = _SURFACE_INTS.index("keep"), _SURFACE_INTS.index("kind_bit")
-_EXIT_ROW_AND_KEEP = slice(_SURFACE_INTS.index("exit_row"), _KEEP + 1)  # LevelRows' exit_row, view_mask
-_EXIT_ENTITY_AND_KEEP = slice(_SURFACE_INTS.index("exit_entity"), _KEEP - 1, -1)  # the Camera ids' skip, mask
-assert _MASK == _EXIT_ROW + 1 and _KEEP == 1 and _SURFACE_INTS.index("exit_entity") == 2
+# SurfaceTable.float_rows: what multiplies a parent's ``x`` (LEVEL_ROW) from the right: inv(carry)
+# (x[0]'s), then carry^T and carry^T e (x[1]'s, 4 x 5; e the plane its views look out of); that
+# plane and its negative; its resolution scale.
+SURFACE_ROW = np.dtype([("inv_carry", "<f8", (4, 4)), ("ops", "<f8", (4, 5)), ("exit_plane", "<f8", (4,)),
+                        ("neg_exit_plane", "<f8", (4,)), ("resolution_scale", "<f8")])
+_SURFACE_COLUMNS = field_columns(SURFACE_ROW, 8)
+_SURFACE_WIDTH = SURFACE_ROW.itemsize // 8
+_OPS, _EXIT_PLANE, _NEG_EXIT_PLANE = (_SURFACE_COLUMNS[name] for name in ("ops", "exit_plane", "neg_exit_plane"))
+_OPS0, _OPS1 = _SURFACE_COLUMNS["inv_carry"], _OPS
+_SCALE = _SURFACE_COLUMNS["resolution_scale"].start
 # The Camera block's float32 columns (CAMERA_DTYPE) the planner writes.
-_CAMERA_WIDTH = CAMERA_BLOCK_BYTES // 4
 _MATRICES = slice(CAMERA_FLOATS["view"].start, CAMERA_FLOATS["inv_view_proj"].stop)
-_CAMERA_ROWS = slice(CAMERA_FLOATS["eye"].start, CAMERA_FLOATS["clip_plane"].stop)
-_CAMERA_ID_COLUMNS = CAMERA_FLOATS["skip"]
-_ID_SKIP_AND_MASK = slice(CAMERA_IDS.index("skip"), None, CAMERA_IDS.index("view_mask") - CAMERA_IDS.index("skip"))
-_ID_HIDE, _ID_NODE = CAMERA_IDS.index("hide"), CAMERA_IDS.index("node")
+_CAMERA_EYE, _CAMERA_VIEWPORT, _CAMERA_CLIP = (CAMERA_FLOATS[name] for name in ("eye", "viewport", "clip_plane"))
+_ID_SKIP, _ID_HIDE, _ID_MASK, _ID_NODE = (CAMERA_IDS.index(name) for name in ("skip", "hide", "view_mask", "node"))
+_ID_NODE_COLUMN = CAMERA_FLOATS["skip"].start + _ID_NODE  # the node's uint32 column in a block
 assert CAMERA_DTYPE.names[:4] == ("view", "proj", "view_proj", "inv_view_proj")  # the matrices, in order
-assert _CAMERA_ROWS.stop - _CAMERA_ROWS.start == _CAMERA_PART.stop - _CAMERA_PART.start  # eye, viewport, clip
+assert CAMERA_FLOATS["skip"].stop == CAMERA_BLOCK_BYTES // 4 and CAMERA_FLOATS["skip"].start % 2 == 0
+assert _ID_NODE == 3  # the last: the ids but the node are the first three of the last two float64s
 
 _NONE = np.zeros(0, np.int64)
 _NO_RECTS = np.zeros((0, 4))
 _NEVER = (1e30, 2e30, 1e30, 2e30)  # fade starts no distance or angle reaches
-# A rectangle as the cull keeps it, x0, y0, -x1, -y1: its signs, the pixel axis of each
-# side, and what each side's NDC value gets before it is scaled to pixels and floored.
+# A rectangle as the cull keeps it, x0, y0, -x1, -y1: its signs, and what makes it x, y, w, h.
 _SIGNS = np.array([1.0, 1.0, -1.0, -1.0])
-_XYXY = np.array([0, 1, 0, 1])
-_OUTWARDS = np.array([1.0, 1.0, -1.0, -1.0])[:, None, None]
+_E23 = np.array([0.0, 0.0, 1.0, 1.0])
+_TO_SCISSOR = np.array([[1, 0, -1, 0], [0, 1, 0, -1], [0, 0, -1, 0], [0, 0, 0, -1]], np.float64)
 _MIN, _MAX = np.minimum.reduce, np.maximum.reduce
 
-# From the rows of a projection (x, y, z, w) and a view's clip plane, the rows
-# SurfaceTable.cull applies to the block (clip plane; view matrix) of a view (LevelRows'
-# clip_plane and view) and then to every corner: x, y, -x, -y, w, then x - w, y - w, z - w, -x - w,
-# -y - w, -z - w (each > 0 outside one side of the frustum), then minus the clip plane.
+# The rows SurfaceTable.cull applies to a view's clip space (x, y, z, w, the rows of P0 V) to
+# get, over each corner: x0, y0, -x1, -y1 in pixels times w (half the root's width or height
+# times x + w, y + w, -x - w, -y - w, less w: a pixel outwards), w, then x - w, y - w, z - w, -x - w, -y - w, -z - w
+# (each > 0 outside one side of the frustum).
 _CULL_ROWS = np.array([
-    [1, 0, 0, 0], [0, 1, 0, 0], [-1, 0, 0, 0], [0, -1, 0, 0], [0, 0, 0, 1],
+    [1, 0, 0, 1], [0, 1, 0, 1], [-1, 0, 0, -1], [0, -1, 0, -1], [0, 0, 0, 1],
     [1, 0, 0, -1], [0, 1, 0, -1], [0, 0, 1, -1], [-1, 0, 0, -1], [0, -1, 0, -1], [0, 0, -1, -1]], np.float64)
+_CULLS: dict[tuple[int, int], np.ndarray] = {}
+
+
+def _cull_rows(size: tuple[int, int]) -> np.ndarray:
+    """``_CULL_ROWS`` for a root of ``size`` pixels: its first four scaled by half of it,
+    less w (a pixel outwards once divided by w)."""
+    found = _CULLS.get(size)
+    if found is None:
+        if len(_CULLS) > 32:
+            _CULLS.clear()
+        found = _CULL_ROWS * np.array([0.5 * size[0], 0.5 * size[1]] * 2 + [1.0] * 7)[:, None]
+        found[0:4, 3] -= 1.0
+        _CULLS[size] = found
+    return found
+
+
+_CULL_BLOCKS: dict[tuple[int, int], list[glm.dmat4]] = {}
+
+
+def _cull_blocks(size: tuple[int, int]) -> list[glm.dmat4]:
+    """``_cull_rows(size)`` and a row of zeros as three glm matrices, each the transpose R^T
+    of four of those rows R (their row-major bytes read column-major): a root's
+    ``(P0 V)^T * R^T`` is (R P0 V)^T, whose column-major bytes are R P0 V's rows."""
+    found = _CULL_BLOCKS.get(size)
+    if found is None:
+        if len(_CULL_BLOCKS) > 32:
+            _CULL_BLOCKS.clear()
+        rows = np.zeros((12, 4))
+        rows[0:11] = _cull_rows(size)
+        found = _CULL_BLOCKS[size] = [glm.dmat4.from_bytes(rows[i:i + 4].tobytes()) for i in (0, 4, 8)]
+    return found
 
 
 @dataclass
-class _Projection:
+class _RootRows:
     """What the oblique near planes read of a root projection, worked out once per projection."""
 
     safe_distance: float     # closer to its plane, a view keeps the clip distance alone
-    inv_xy_t: np.ndarray     # the inverse's first two columns, transposed
-    inv_zw: np.ndarray       # the inverse's last two columns, summed
-    column: np.ndarray       # the inverse's third column
-    inv_and_column: np.ndarray  # 4 x 5: the inverse, then its third column
-    rows_2_3: np.ndarray     # the projection's third and fourth rows, summed
-    of: tuple[np.ndarray, np.ndarray]  # the projection and its inverse it was made from
+    key: bytes               # the projection's bytes
+    proj_t: np.ndarray       # the projection, transposed (its Camera block columns)
+    of: np.ndarray           # the projection
 
 
-# Kept per root projection (the main camera's, a probe face's: a few a frame).
-_PROJECTIONS: dict[bytes, _Projection] = {}
-_CULLS: dict[bytes, np.ndarray] = {}
-_LAST_PROJECTION: list[_Projection | None] = [None]
-_LAST_CULL: list = [None, None]  # the last root projection asked for and its rows
+_ROOTS: dict[bytes, _RootRows] = {}
+_LAST_ROOT: list[_RootRows | None] = [None]
 
 
-def _projection(root_proj: np.ndarray, inv_root_proj: np.ndarray) -> _Projection:
-    """The oblique near planes' constants of ``root_proj`` (with its inverse): the last one's
-    again for the same read-only arrays (the view tree's, kept while its root's projection
-    stays), else found by their bytes."""
-    last = _LAST_PROJECTION[0]
-    if last is not None and last.of[0] is root_proj and last.of[1] is inv_root_proj \
-            and not root_proj.flags.writeable and not inv_root_proj.flags.writeable:
+def _root_rows(root_proj: np.ndarray) -> _RootRows:
+    """The oblique near planes' constants of ``root_proj``: the last one's again for the same
+    read-only array (the view tree's, kept while its root's projection stays), else found by
+    its bytes."""
+    last = _LAST_ROOT[0]
+    if last is not None and last.of is root_proj and not root_proj.flags.writeable:
         return last
-    key = root_proj.tobytes() + inv_root_proj.tobytes()
-    found = _PROJECTIONS.get(key)
-    if found is None:
-        if len(_PROJECTIONS) > 32:
-            _PROJECTIONS.clear()
-        near = root_proj[2, 3] / (root_proj[2, 2] - 1.0)
-        found = _PROJECTIONS[key] = _Projection(OBLIQUE_SAFE_NEARS * near, inv_root_proj[:, :2].T.copy(),
-                                                inv_root_proj[:, 2] + inv_root_proj[:, 3],
-                                                inv_root_proj[:, 2].copy(),
-                                                np.concatenate([inv_root_proj, inv_root_proj[:, 2:3]], axis=1),
-                                                root_proj[2] + root_proj[3], (root_proj, inv_root_proj))
-    _LAST_PROJECTION[0] = found
-    return found
-
-
-def _cull_rows(root_proj: np.ndarray) -> np.ndarray:
-    """``SurfaceTable.cull``'s 12 x 5 rows for ``root_proj``: ``_CULL_ROWS`` through it, and
-    minus the clip plane (column 0: the clip plane comes first in a view's block); the last
-    one's again for the same read-only array."""
-    last = _LAST_CULL
-    if last[0] is root_proj and not root_proj.flags.writeable:
-        return last[1]
     key = root_proj.tobytes()
-    rows = _CULLS.get(key)
-    if rows is None:
-        if len(_CULLS) > 32:
-            _CULLS.clear()
-        rows = _CULLS[key] = np.zeros((12, 5))
-        rows[:11, 1:] = _CULL_ROWS @ root_proj
-        rows[11, 0] = -1.0
-    last[:] = root_proj, rows
-    return rows
-
-
-_HALVES: dict[tuple[int, int], np.ndarray] = {}
-
-
-def _half_sizes(size: tuple[int, int]) -> np.ndarray:
-    """Half a root's width and height, as the cull's 4 x 1 x 1 factor of x0, y0, -x1, -y1."""
-    found = _HALVES.get(size)
+    found = _ROOTS.get(key)
     if found is None:
-        if len(_HALVES) > 32:
-            _HALVES.clear()
-        found = _HALVES[size] = (0.5 * np.array(size, np.float64))[_XYXY, None, None]
+        if len(_ROOTS) > 32:
+            _ROOTS.clear()
+        near = root_proj[2, 3] / (root_proj[2, 2] - 1.0)
+        found = _ROOTS[key] = _RootRows(OBLIQUE_SAFE_NEARS * near, key, root_proj.T.copy(), root_proj)
+    _LAST_ROOT[0] = found
     return found
 
 
-_ONES = np.ones(256)
+_SIGN_ROWS = np.ones((256, 4))
 
 
-def _ones(k: int) -> np.ndarray:
-    """k ones (read only: a level's fades where no surface fades)."""
-    global _ONES
-    if len(_ONES) < k:
-        _ONES = np.ones(2 * k)
-    return _ONES[:k]
+def _signs(k: int) -> np.ndarray:
+    """Scratch of k rows of (., ., 1, 1) (the oblique near plane's signs of p.x and p.y go first)."""
+    global _SIGN_ROWS
+    if len(_SIGN_ROWS) < k:
+        _SIGN_ROWS = np.ones((2 * k, 4))
+    return _SIGN_ROWS[:k]
+
+
+_NODES = np.arange(1024, dtype=np.float64)
+
+
+def _node_numbers(first: int, k: int) -> np.ndarray:
+    """first, first + 1, ... k of them (read only, float64)."""
+    global _NODES
+    if len(_NODES) < first + k:
+        _NODES = np.arange(2 * (first + k), dtype=np.float64)
+        _NODES.flags.writeable = False
+    return _NODES[first:first + k]
+
+
+_NODES.flags.writeable = False
 
 
 # How many level plans a SurfaceTable keeps (SurfaceTable.plan): a frame's main tree and a
 # probe's six faces, a few levels each, with room for a second probe.
 PLANS_KEPT = 96
-
-
-def _rows(matrix: glm.dmat4 | glm.mat4) -> list[float]:
-    """A glm matrix's 16 values row by row (LevelRows' layout)."""
-    return [value for row in glm.transpose(matrix).to_list() for value in row]
-
