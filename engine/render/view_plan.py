@@ -78,7 +78,6 @@ _X, _RECT, _BLOCK = (ROW[name] for name in ("x", "rect", "block"))
 _EXIT_ROW, _MASK, _MIRRORED, _NODE, _FADE, _PARENT, _SURFACE = (ROW[name].start for name in (
     "exit_row", "view_mask", "mirrored", "node", "fade", "parent", "surface"))
 _SCISSOR = ROW["scissor"]
-_ROOT_IDS = [_EXIT_ROW, _MASK, _MIRRORED, _NODE, _FADE]
 _IDS_PART = slice(_EXIT_ROW, _MIRRORED + 1)    # exit row, view mask, mirrored: what decides which surfaces
 # it may see and what its children's are
 _GRID_PART = slice(_BLOCK.start, _FADE + 1)    # what _child_ids holds for a level's rows: the block, then
@@ -89,11 +88,6 @@ assert CAMERA_BLOCK_BYTES == 8 * (_BLOCK.stop - _BLOCK.start)
 assert _EXIT_ROW == _BLOCK.stop and _FADE == _EXIT_ROW + 5
 _GRID_WIDTH = _GRID_PART.stop - _GRID_PART.start
 _GRID_PARENT = _PARENT - _GRID_PART.start  # the parent's column in it
-# What a level's plan is a function of, of its parents' rows (with the clip plane and the ids,
-# _IDS_PART): the rectangle, then the view matrix (the rest of x follows from it, the root
-# projection and size, which key a plan too).  Kept plans are found by these bytes.
-_PLAN_KEY = slice(_RECT.start, _X.start + 16)
-assert _RECT.stop == _X.start
 
 
 def _x0(data: np.ndarray) -> np.ndarray:
@@ -165,24 +159,45 @@ class LevelRows:
     def root(view: View) -> LevelRows:
         """A root view's row (its projection is the tree's root projection), its matrices
         made in glm doubles of the float32 glm holds (the eye: the view's own; the cull's
-        rows as three 4 x 4 products, ``_cull_blocks``) and written in a few copies: glm's
-        bytes are column-major, so a matrix's are its transpose's rows."""
-        row = np.zeros((1, LevelRows.WIDTH))
+        rows as three 4 x 4 products, ``_cull_blocks``), their bytes joined and written in
+        one copy over a copy of a row kept per size, clip plane, mask and winding (the
+        rectangle, minus the clip plane, the ids): glm's bytes are column-major, so a
+        matrix's are its transpose's rows."""
         v, proj = glm.dmat4(view.view), glm.dmat4(view.proj)
         inv_v = glm.dmat4(glm.inverse(view.view))
         inv_v[3] = glm.dvec4(glm.dvec3(view.eye), 1.0)
         clip_space = glm.transpose(proj * v)  # (P0 V)^T
         cull = _cull_blocks(view.size)
-        values = np.frombuffer(b"".join((
-            glm.dvec4(0.0, 0.0, -view.size[0], -view.size[1]).to_bytes(),  # the rectangle, x0, y0, -x1, -y1
+        row = _root_template(view.size, view.clip_plane, view.view_mask, view.mirrored).copy()
+        row.reshape(-1)[_ROOT_COLUMNS] = np.frombuffer(b"".join((
             glm.transpose(v).to_bytes(), clip_space.to_bytes(), (clip_space * cull[0]).to_bytes(),
-            (clip_space * cull[1]).to_bytes(), (clip_space * cull[2]).to_bytes(),
+            (clip_space * cull[1]).to_bytes(), (clip_space * cull[2]).to_bytes()[:96],
             (inv_v * glm.dmat4(glm.inverse(view.proj))).to_bytes(), inv_v.to_bytes())), np.float64)
-        row[0, _RECT.start:_X.start + 80] = values[0:84]  # the rectangle, x[0]'s first 20 rows
-        _x1(row)[0, :, 0:4] = values[84:116].reshape(8, 4)
-        row[0, _CLIP] = tuple(-view.clip_plane)
-        row[0, _ROOT_IDS] = (-1.0, float(view.view_mask), float(view.mirrored), 0.0, 1.0)
         return LevelRows(row)
+
+
+_ROOT_TEMPLATES: dict[tuple, np.ndarray] = {}
+
+
+def _root_template(size: tuple[int, int], clip_plane: glm.vec4, view_mask: int, mirrored: bool) -> np.ndarray:
+    """A root row but its matrices: the rectangle (x0, y0, -x1, -y1), minus the clip plane,
+    the ids (no exit row, its mask and winding, node 0, a fade of 1)."""
+    key = (size, tuple(clip_plane), view_mask, mirrored)
+    found = _ROOT_TEMPLATES.get(key)
+    if found is None:
+        if len(_ROOT_TEMPLATES) > 64:
+            _ROOT_TEMPLATES.clear()
+        found = _ROOT_TEMPLATES[key] = np.zeros((1, LevelRows.WIDTH))
+        found[0, _RECT] = (0.0, 0.0, -size[0], -size[1])
+        found[0, _CLIP] = tuple(-clip_plane)
+        found[0, [_EXIT_ROW, _MASK, _MIRRORED, _NODE, _FADE]] = (-1.0, float(view_mask), float(mirrored), 0.0, 1.0)
+    return found
+
+
+# The columns of a root row LevelRows.root writes in one copy: x[0]'s first 19 rows (V, P0 V and the
+# cull's rows, not minus the clip plane), then x[1]'s first four columns.
+_ROOT_COLUMNS = np.concatenate([np.arange(_X.start, _X.start + 19 * 4),
+                                (_X.start + _X0 + np.arange(8)[:, None] * 5 + np.arange(4)[None, :]).reshape(-1)])
 
 
 class Candidates:
@@ -194,6 +209,7 @@ class Candidates:
         self.rows = rows          # their cameras, rectangles, blocks (node: claim order from first_index)
         self.size = size          # the level's pixels
         self.end = end            # (k,) bool: an end view, cut by the depth limits (None: none asked for)
+        self._chosen: dict[bytes, Candidates] = {}  # select's, once read-only
 
     def __len__(self) -> int:
         return len(self.rows.data)
@@ -234,9 +250,22 @@ class Candidates:
 
     def select(self, keep: np.ndarray) -> Candidates:
         """The candidates at ``keep`` (int64 indices), in their order (``take``: several
-        times cheaper than fancy indexing for these small gathers)."""
-        return Candidates(LevelRows(self.rows.data.take(keep, axis=0)), self.size,
-                          None if self.end is None else self.end.take(keep))
+        times cheaper than fancy indexing for these small gathers).  A kept plan's
+        (read-only) keeps its choices, read-only too: the frames that choose the same find
+        the same rows again, and so the plans kept for them (``SurfaceTable.plan``)."""
+        data = self.rows.data
+        if data.flags.writeable:
+            return Candidates(LevelRows(data.take(keep, axis=0)), self.size,
+                              None if self.end is None else self.end.take(keep))
+        key = keep.tobytes()
+        found = self._chosen.get(key)
+        if found is None:
+            if len(self._chosen) > 16:
+                self._chosen.clear()
+            found = self._chosen[key] = Candidates(LevelRows(data.take(keep, axis=0)), self.size,
+                                                   None if self.end is None else self.end.take(keep))
+            found.freeze()
+        return found
 
 
 class SurfaceTable:
@@ -572,13 +601,16 @@ class SurfaceTable:
         cut, cuts_any = self._cut(depth, depth_cap, ends)
         if not len(parents.data) or (not cuts_any and not self.fading):
             return _NONE, _NONE
-        # Kept like the plans (``plan``): the same parent rows (a still camera, a probe face)
-        # give the same pairs, for the price of comparing bytes.
-        key = (_plan_key(parents.data), root_proj.tobytes(), depth, depth_cap, root_size, id(ends))
-        found = self._unviewed.pop(key, None)
-        if found is not None and found[0] is ends:
-            self._unviewed[key] = found
-            return found[1]
+        # Kept like the plans (``plan``): the same read-only parent rows (a still camera, a
+        # probe face), known by identity, give the same pairs.
+        data = parents.data
+        key = None if data.flags.writeable or root_proj.flags.writeable else (
+            id(data), id(root_proj), depth, depth_cap, root_size, id(ends))
+        if key is not None:
+            found = self._unviewed.pop(key, None)
+            if found is not None and found[0][0] is data and found[0][1] is root_proj and found[0][2] is ends:
+                self._unviewed[key] = found
+                return found[1]
         faded = self._faded
         if not cuts_any and faded is not None and faded[0] is parents.data and faded[1:3] == (depth, depth_cap) \
                 and faded[3] is ends:
@@ -590,9 +622,10 @@ class SurfaceTable:
             pairs = (p[unviewed], s[unviewed])
         for array_ in pairs:
             array_.flags.writeable = False  # shared by the frames that find them again
-        if len(self._unviewed) >= PLANS_KEPT:
-            del self._unviewed[next(iter(self._unviewed))]
-        self._unviewed[key] = (ends, pairs)
+        if key is not None:
+            if len(self._unviewed) >= PLANS_KEPT:
+                del self._unviewed[next(iter(self._unviewed))]
+            self._unviewed[key] = ((data, root_proj, ends), pairs)
         return pairs
 
     def fade_weights(self, eyes: np.ndarray, s: np.ndarray) -> np.ndarray:
@@ -614,21 +647,29 @@ class SurfaceTable:
         """``_plan``, kept: a level's plan is a function of the table (made again when a
         surface changes) and these arguments alone, so a level planned before from the same
         parent rows (a probe face's tree, whose camera stands still; a still main camera)
-        is that plan again, read-only, for the price of comparing its inputs' bytes.  The
-        ``PLANS_KEPT`` plans used last are kept."""
-        key = (_plan_key(parents.data), root_proj.tobytes(), depth, first_index, depth_cap, hide, size, scale,
-               root.size, id(ends))
-        found = self._plans.pop(key, None)
-        if found is not None and found[0] is ends:
-            self._plans[key] = found  # the most recently used last
-            return found[1]
+        is that plan again, read-only.  The rows are known by identity, for the price of a
+        dictionary look-up (a moving camera's are new every frame: bytes compared would be
+        paid for nothing): read-only rows the view tree keeps while its root's camera stands
+        still (``ViewTree._root_rows``), and a kept plan's candidates, read-only with the
+        choices made from them (``Candidates.select``); rows that can still change are
+        planned afresh.  The ``PLANS_KEPT`` plans used last are kept, each holding the
+        arrays it is known by."""
+        data = parents.data
+        key = None if data.flags.writeable or root_proj.flags.writeable else (
+            id(data), id(root_proj), depth, first_index, depth_cap, hide, size, scale, root.size, id(ends))
+        if key is not None:
+            found = self._plans.pop(key, None)
+            if found is not None and found[0][0] is data and found[0][1] is root_proj and found[0][2] is ends:
+                self._plans[key] = found  # the most recently used last
+                return found[1]
         planned = self._plan(parents, depth, root, root_proj, inv_root_proj, first_index, depth_cap, hide, ends,
                              size, scale)
         if planned[0] is not None:
             planned[0].freeze()
-        if len(self._plans) >= PLANS_KEPT:
-            del self._plans[next(iter(self._plans))]  # the least recently used
-        self._plans[key] = (ends, planned)
+        if key is not None:
+            if len(self._plans) >= PLANS_KEPT:
+                del self._plans[next(iter(self._plans))]  # the least recently used
+            self._plans[key] = ((data, root_proj, ends), planned)
         return planned
 
     def _plan(self, parents: LevelRows, depth: int, root: View, root_proj: np.ndarray, inv_root_proj: np.ndarray,
@@ -719,12 +760,6 @@ class SurfaceTable:
         block[:, _CAMERA_EYE] = x1[:, 7, 0:4]
         end = None if ends is None else self._within(depth, depth_cap)[1].take(s)
         return Candidates(LevelRows(data), size, end), faded
-
-
-def _plan_key(data: np.ndarray) -> bytes:
-    """The bytes of rows ``data`` a level planned from them is a function of (``_PLAN_KEY``,
-    then the clip plane and the ids)."""
-    return data[:, _PLAN_KEY].tobytes() + data[:, _CLIP].tobytes() + data[:, _IDS_PART].tobytes()
 
 
 def level_rects(rects: np.ndarray, screen: tuple[int, int], level: tuple[int, int]) -> np.ndarray:
