@@ -60,6 +60,7 @@ def _mat(matrix: glm.mat4) -> np.ndarray:
 X_ROWS = 22   # x[0]'s; x[1] has 8
 _X0 = X_ROWS * 4
 _V, _P0V, _CULL, _NEG_CLIP = slice(0, 4), slice(4, 8), slice(8, 22), 19
+_EYE_ROW = 20  # x[0]'s copy of the eye (the cull's facing values: its row times the planes)
 LEVEL_ROW = np.dtype([
     ("rect", "<f8", (4,)),         # x0, y0, -x1, -y1 where it shows, screen pixels (the cull's signs)
     ("x", "<f8", (_X0 + 8 * 5,)),
@@ -171,7 +172,7 @@ class LevelRows:
         row = _root_template(view.size, view.clip_plane, view.view_mask, view.mirrored).copy()
         row.reshape(-1)[_ROOT_COLUMNS] = np.frombuffer(b"".join((
             glm.transpose(v).to_bytes(), clip_space.to_bytes(), (clip_space * cull[0]).to_bytes(),
-            (clip_space * cull[1]).to_bytes(), (clip_space * cull[2]).to_bytes()[:96],
+            (clip_space * cull[1]).to_bytes(), (clip_space * cull[2]).to_bytes()[:96], inv_v[3].to_bytes(),
             (inv_v * glm.dmat4(glm.inverse(view.proj))).to_bytes(), inv_v.to_bytes())), np.float64)
         return LevelRows(row)
 
@@ -195,8 +196,9 @@ def _root_template(size: tuple[int, int], clip_plane: glm.vec4, view_mask: int, 
 
 
 # The columns of a root row LevelRows.root writes in one copy: x[0]'s first 19 rows (V, P0 V and the
-# cull's rows, not minus the clip plane), then x[1]'s first four columns.
+# cull's rows, not minus the clip plane) and its eye row, then x[1]'s first four columns.
 _ROOT_COLUMNS = np.concatenate([np.arange(_X.start, _X.start + 19 * 4),
+                                np.arange(_X.start + _EYE_ROW * 4, _X.start + _EYE_ROW * 4 + 4),
                                 (_X.start + _X0 + np.arange(8)[:, None] * 5 + np.arange(4)[None, :]).reshape(-1)])
 
 
@@ -327,9 +329,11 @@ class SurfaceTable:
         # change when its repeats go), ...
         distinct = [np.unique(c, axis=0) for c in self.corners]
         self.corner_count = max((len(c) for c in distinct), default=1)
-        self.corner_columns = np.zeros((self.corner_count, 4, count))  # corner c of every surface: a 4 x S block
+        # corner c of every surface: a 4 x S block; then the planes (the facing values' columns)
+        self.corner_columns = np.zeros((self.corner_count + 1, 4, count))
         for i, c in enumerate(distinct):
-            self.corner_columns[:, :, i] = np.concatenate([c, np.repeat(c[:1], self.corner_count - len(c), axis=0)])
+            self.corner_columns[:-1, :, i] = np.concatenate([c, np.repeat(c[:1], self.corner_count - len(c), axis=0)])
+        self.corner_columns[-1] = self.planes.T
         self.planes_t = np.ascontiguousarray(self.planes.T)
         # ... and each surface's part of its views' rows (``SURFACE_ROW``): the blocks two
         # products multiply a parent's ``x`` by (``LEVEL_ROW``), the plane its views look out
@@ -354,6 +358,7 @@ class SurfaceTable:
         self._ids: dict[tuple, np.ndarray] = {}  # _child_ids'
         self._child_rows: dict[tuple, np.ndarray] = {}  # _child_row's
         self._cuts: dict[tuple, tuple[np.ndarray | None, np.ndarray, bool]] = {}  # _cut's
+        self._cull_work: dict[int, _CullWork] = {}  # the cull's scratch, by its count of parents
         # The resolution scale every surface shares (None: they differ; a level takes its largest).
         self.one_scale = float(self.scale[0]) if count and (self.scale == self.scale[0]).all() else None
 
@@ -432,11 +437,13 @@ class SurfaceTable:
         return found[1], found[2]
 
     def _pair_bias(self, data: np.ndarray, depth: int, depth_cap: int, ends: np.ndarray | None,
-                   fallback: bool) -> np.ndarray:
-        """(P, S): what the cull adds to each (parent, surface) facing value: 0 where the
+                   fallback: bool) -> tuple[np.ndarray, bool]:
+        """(P, S): what the cull takes each (parent, surface) facing value from (its bias,
+        negated: the cull keeps minus the facing value, each > 0 out), and whether any pair
+        may be seen at all: 0 where the
         parent view may see the surface at ``depth`` (enabled, within its limits or one of
         ``ends``; with ``fallback``, any surface that ``falls_back``, whatever its limits;
-        and drawn by the view: the visibility rule, ``drawn_in``, a row a parent), -inf where
+        and drawn by the view: the visibility rule, ``drawn_in``, a row a parent), +inf where
         not, and on the surface the view looks out of.  A function of each parent's exit row,
         mask and winding alone, so kept by their bytes (a level's parents see through the
         same surfaces frame after frame) with the depth, cap and ``ends`` (an array the view
@@ -456,11 +463,11 @@ class SurfaceTable:
             exit_rows = ids[:, 0].astype(np.int64)
             looks_out = np.flatnonzero(exit_rows >= 0)
             seen[looks_out, exit_rows[looks_out]] = False
-            bias = np.where(seen, 0.0, -np.inf)
+            bias = np.where(seen, 0.0, np.inf)
             bias.flags.writeable = False
             if len(self._biases) > 256:
                 self._biases.clear()
-            found = self._biases[key] = (ends, bias)
+            found = self._biases[key] = (ends, (bias, bool(seen.any())))
         return found[1]
 
     def _child_ids(self, data: np.ndarray, hide: int, root_rows: _RootRows,
@@ -553,32 +560,36 @@ class SurfaceTable:
         if ends is None and not fallback and not self._within(depth, depth_cap)[3]:
             return _NONE, _NONE, _NO_RECTS, None  # nothing enabled may be seen this deep
         data = parents.data
-        # First what needs no corners: facing the view's eye, and allowed (enabled, within
-        # its depth, drawn by the view, not the surface the view looks out of): one product
-        # and a bias per pair, -inf where a surface is not allowed (_pair_bias).
-        facing = data[:, _EYE] @ self.planes_t                                       # P x S
-        facing += self._pair_bias(data, depth, depth_cap, ends, fallback)
-        if not facing.max() > 0.0:
+        # First what needs no corners: allowed (enabled, within its depth, drawn by the view,
+        # not the surface the view looks out of): a bias per pair, +inf where a surface is
+        # not allowed (_pair_bias), and nothing to do where none is.
+        neg_bias, any_allowed = self._pair_bias(data, depth, depth_cap, ends, fallback)
+        if not any_allowed:
             return _NONE, _NONE, _NO_RECTS, None
         # Each parent's 14 rows (kept in its ``x``) times each corner's (4, S) gives
-        # (corners, P, 14, S), so the sides are divided by w, and the minima over the corners.
-        clip = (_x0(data)[:, _CULL].reshape(14 * count, 4) @ self.corner_columns).reshape(
-            self.corner_count, count, 14, surfaces)  # one product a corner: (14 P, 4) x (4, S)
-        np.divide(clip[:, :, 0:4], np.maximum(clip[:, :, 4:5], 1e-6), out=clip[:, :, 0:4])  # w <= 0: straddles
-        least = _MIN(clip, axis=0)                                                       # P x 14 x S
+        # (corners, P, 14, S), so the sides are divided by w, and the minima over the corners;
+        # the planes as one more corner give the facing values (the eye's row times them).
+        work = self._cull_work.get(count)
+        if work is None:
+            work = self._cull_work[count] = _CullWork(count, self.corner_count, surfaces)
+        np.matmul(_x0(data)[:, _CULL].reshape(14 * count, 4), self.corner_columns, out=work.product)
+        np.maximum(work.w, 1e-6, out=work.w_safe)  # w <= 0: see straddles
+        np.divide(work.sides, work.w_safe, out=work.sides)
+        least = _MIN(work.corners, axis=0, out=work.least)                                  # P x 14 x S
         # x0, y0, -x1, -y1 in pixels, rounded outwards with a pixel's margin; a pair with a
         # corner behind the eye is conservative (the parent's whole rectangle).
-        rects = least[:, 0:4]
+        rects = work.rects
         np.floor(rects, out=rects)  # (the pixel's margin is in the rows: each side less w)
-        if least[:, 4].min() <= 1e-6:
+        if work.least_w.min() <= 1e-6:
             np.copyto(rects, -np.inf, where=least[:, 4:5] <= 1e-6)
         np.maximum(rects, data[:, _RECT, None], out=rects)  # inside the parent's
         # Seen: facing and allowed, not culled (every corner outside one side of the frustum,
         # or behind the clip plane; on a side counts as outside) and a rectangle with pixels
         # (x1 > x0 and y1 > y0): one maximum over the rows 4-13, written over, each < 0 to keep.
-        np.negative(facing, out=least[:, 4])
-        np.add(rects[:, 0:2], rects[:, 2:4], out=least[:, 12:14])
-        p, s = np.nonzero(_MAX(least[:, 4:14], axis=1) < 0.0)
+        np.subtract(neg_bias, work.facing, out=work.least_w)
+        np.add(work.x0y0, work.x1y1, out=work.sizes)
+        np.less(_MAX(work.tests, axis=1, out=work.worst), 0.0, out=work.seen)
+        p, s = np.nonzero(work.seen)
         rects = rects[p, :, s]
         if not self.fading:
             return p, s, rects, None
@@ -717,6 +728,7 @@ class SurfaceTable:
         x0, x1 = _x0(data), _x1(data)
         np.matmul(parent[:, 0:_X0].reshape(k, X_ROWS, 4), surface[:, _OPS0].reshape(k, 4, 4), out=x0)
         np.matmul(parent[:, _X0:].reshape(k, 8, 5)[..., 0:4], surface[:, _OPS1].reshape(k, 4, 5), out=x1)
+        x0[:, _EYE_ROW] = x1[:, 7, 0:4]  # the cull's copy of the eye
         data[:, _CLIP] = surface[:, _NEG_EXIT_PLANE]
         data[:, _RECT] = rects
         root_rows = _root_rows(root_proj)
@@ -841,6 +853,28 @@ def _cull_blocks(size: tuple[int, int]) -> list[glm.dmat4]:
         rows[0:11] = _cull_rows(size)
         found = _CULL_BLOCKS[size] = [glm.dmat4.from_bytes(rows[i:i + 4].tobytes()) for i in (0, 4, 8)]
     return found
+
+
+class _CullWork:
+    """``SurfaceTable.cull``'s scratch for a count of parents: its arrays and every view of
+    them it reads, made once (a view costs about what a small numpy call does), so a cull
+    makes none and allocates only its results."""
+
+    def __init__(self, count: int, corners: int, surfaces: int) -> None:
+        clip = np.empty((corners + 1, count, 14, surfaces))
+        self.product = clip.reshape(corners + 1, 14 * count, surfaces)  # the corner product's
+        self.corners = clip[:corners]
+        self.sides, self.w = clip[:corners, :, 0:4], clip[:corners, :, 4:5]
+        self.w_safe = np.empty((corners, count, 1, surfaces))
+        self.facing = clip[corners, :, _EYE_ROW - _CULL.start, :]  # the eye's row times the planes
+        self.least = np.empty((count, 14, surfaces))
+        self.rects = self.least[:, 0:4]
+        self.x0y0, self.x1y1 = self.rects[:, 0:2], self.rects[:, 2:4]
+        self.least_w = self.least[:, 4]
+        self.sizes = self.least[:, 12:14]
+        self.tests = self.least[:, 4:14]
+        self.worst = np.empty((count, surfaces))
+        self.seen = np.empty((count, surfaces), bool)
 
 
 @dataclass
