@@ -359,6 +359,7 @@ class SurfaceTable:
         self._child_rows: dict[tuple, np.ndarray] = {}  # _child_row's
         self._cuts: dict[tuple, tuple[np.ndarray | None, np.ndarray, bool]] = {}  # _cut's
         self._cull_work: dict[int, _CullWork] = {}  # the cull's scratch, by its count of parents
+        self._plan_work: dict[int, _PlanWork] = {}  # _plan's, by its count of views
         # The resolution scale every surface shares (None: they differ; a level takes its largest).
         self.one_scale = float(self.scale[0]) if count and (self.scale == self.scale[0]).all() else None
 
@@ -571,7 +572,9 @@ class SurfaceTable:
         # the planes as one more corner give the facing values (the eye's row times them).
         work = self._cull_work.get(count)
         if work is None:
-            work = self._cull_work[count] = _CullWork(count, self.corner_count, surfaces)
+            work = _CullWork(count, self.corner_count, surfaces)
+            if count <= _WORK_KEPT:
+                self._cull_work[count] = work
         np.matmul(_x0(data)[:, _CULL].reshape(14 * count, 4), self.corner_columns, out=work.product)
         np.maximum(work.w, 1e-6, out=work.w_safe)  # w <= 0: see straddles
         np.divide(work.sides, work.w_safe, out=work.sides)
@@ -718,58 +721,58 @@ class SurfaceTable:
         k = len(p)
         if not k:
             return None, faded
-        surface = self.float_rows.take(s, axis=0)
-        parent = parents.data[:, _X].take(p, axis=0)  # the parents' matrices (no more of their rows)
+        w = self._plan_work.get(k)
+        if w is None:
+            w = _PlanWork(k)
+            if k <= _WORK_KEPT:
+                self._plan_work[k] = w
+        np.take(self.float_rows, s, axis=0, out=w.surface)
+        np.take(parents.data[:, _X], p, axis=0, out=w.parent)  # the parents' matrices (no more of their rows)
         if size is None:
-            scale *= self.one_scale if self.one_scale is not None else float(surface[:, _SCALE].max())
+            scale *= self.one_scale if self.one_scale is not None else float(w.scale.max())
             size = (max(1, round(root.size[0] * scale)), max(1, round(root.size[1] * scale)))
-        data = np.empty((k, LevelRows.WIDTH))
-        ints = data.view(np.int64)
-        x0, x1 = _x0(data), _x1(data)
-        np.matmul(parent[:, 0:_X0].reshape(k, X_ROWS, 4), surface[:, _OPS0].reshape(k, 4, 4), out=x0)
-        np.matmul(parent[:, _X0:].reshape(k, 8, 5)[..., 0:4], surface[:, _OPS1].reshape(k, 4, 5), out=x1)
-        x0[:, _EYE_ROW] = x1[:, 7, 0:4]  # the cull's copy of the eye
-        data[:, _CLIP] = surface[:, _NEG_EXIT_PLANE]
-        data[:, _RECT] = rects
+        np.matmul(w.parent_x0, w.ops0, out=w.x0)
+        np.matmul(w.parent_x1, w.ops1, out=w.x1)
+        np.copyto(w.eye_row, w.eye)  # the cull's copy of the eye
+        np.copyto(w.clip, w.neg_exit)
+        np.copyto(w.rect, rects)
         root_rows = _root_rows(root_proj)
-        ints[:, _GRID_PART] = self._child_ids(parents.data, hide, root_rows, size)[p, s]
+        w.grid[...] = self._child_ids(parents.data, hide, root_rows, size)[p, s]
         if weights is not None:
-            data[:, _FADE] = weights[weights > 0.0]
+            w.fade[...] = weights[weights > 0.0]
         node = _node_numbers(first_index, k)
-        data[:, _NODE] = node
+        np.copyto(w.node, node)
         if size == root.size:  # whole pixels already: x, y, -(x1 + x0)... as x, y, w, h
-            np.matmul(rects, _TO_SCISSOR, out=ints[:, _SCISSOR], casting="unsafe")
+            np.matmul(rects, _TO_SCISSOR, out=w.scissor, casting="unsafe")
         else:
-            ints[:, _SCISSOR] = level_rects(rects * _SIGNS, root.size, size)
+            w.scissor[...] = level_rects(rects * _SIGNS, root.size, size)
         # The Camera blocks (CAMERA_DTYPE) as float32 columns: each matrix column-major (its
         # transpose, row by row).
-        block = data[:, _BLOCK].view(np.float32)
-        block.view(np.uint32)[:, _ID_NODE_COLUMN] = node  # the node image's value for its pixels
-        matrices = block[:, _MATRICES].reshape(k, 4, 4, 4)
-        matrices[:, 0:3:2] = x0[:, 0:8, 0:4].reshape(k, 2, 4, 4).transpose(0, 1, 3, 2)  # V, P0 V
-        plane, through = x1[:, 4:8, 4], x1[:, 0:4, 4]  # p, t
-        signs = _signs(k)
-        np.sign(plane[:, 0:2], out=signs[:, 0:2])
-        f = np.vecdot(through, signs)
+        np.copyto(w.block_node, node, casting="unsafe")  # the node image's value for its pixels
+        np.copyto(w.v_p0v_block, w.v_p0v, casting="same_kind")  # V, P0 V
+        np.sign(w.plane_xy, out=w.signs_xy)
+        f = np.vecdot(w.through, w.signs, out=w.f)
         np.divide(2.0, f, out=f)
-        f = f[:, None]
-        scaled = x1[:, 0:8, 4] * f  # f t, f p
-        np.subtract(scaled[:, 4:8], root_proj[3], out=matrices[:, 1, :, 2])  # the third row: f p - P0[3]
-        np.subtract(surface[:, _EXIT_PLANE] * f, x0[:, 7, 0:4], out=matrices[:, 2, :, 2])  # f e - (P0 V)[3]
+        np.multiply(w.col4, w.f_col, out=w.scaled)  # f t, f p
+        np.subtract(w.fp, root_proj[3], out=w.proj_row, casting="same_kind")  # the third row: f p - P0[3]
+        np.multiply(w.exit, w.f_col, out=w.fe)
+        np.subtract(w.fe, w.p0v_row3, out=w.vp_row, casting="same_kind")  # f e - (P0 V)[3]
         # (IV P^-1)^T = (IV inv(P0))^T - b a^T, with a = IV inv(P0) e2 (the third row of the
         # kept transpose) and b = u / (1 + u . e2), u = (f p - P0[2] - P0[3]) inv(P0) = f t - e2 - e3
         # (so 1 + u . e2 = f t . e2).
-        b = scaled[:, 0:4] - _E23
-        b /= scaled[:, 2:3]
-        np.subtract(x1[:, 0:4, 0:4], b[:, :, None] * x1[:, None, 2, 0:4], out=matrices[:, 3])
+        np.subtract(w.ft, _E23, out=w.b)
+        np.divide(w.b, w.ft2, out=w.b)
+        np.multiply(w.b_col, w.a_row, out=w.outer)
+        np.subtract(w.inv_source, w.outer, out=w.inv, casting="same_kind")
         # Too close to its plane, a view keeps the root projection (the clip distance alone).
-        distance = np.abs(plane[:, 3])
-        if distance.min() <= root_rows.safe_distance:
-            close = distance <= root_rows.safe_distance
-            np.copyto(matrices[:, 1, :, 2], root_proj[2], where=close[:, None])
-            np.copyto(matrices[:, 2, :, 2], x0[:, 6, 0:4], where=close[:, None])
-            np.copyto(matrices[:, 3], x1[:, 0:4, 0:4], where=close[:, None, None])
-        block[:, _CAMERA_EYE] = x1[:, 7, 0:4]
+        safe = root_rows.safe_distance
+        if min(map(abs, w.plane_w.tolist())) <= safe:
+            close = np.abs(w.plane_w) <= safe
+            np.copyto(w.proj_row, root_proj[2], where=close[:, None], casting="same_kind")
+            np.copyto(w.vp_row, w.p0v_row2, where=close[:, None], casting="same_kind")
+            np.copyto(w.inv, w.inv_source, where=close[:, None, None], casting="same_kind")
+        np.copyto(w.block_eye, w.eye, casting="same_kind")
+        data = w.data.copy()
         end = None if ends is None else self._within(depth, depth_cap)[1].take(s)
         return Candidates(LevelRows(data), size, end), faded
 
@@ -877,6 +880,54 @@ class _CullWork:
         self.seen = np.empty((count, surfaces), bool)
 
 
+class _PlanWork:
+    """``SurfaceTable._plan``'s scratch for a count of views: the gathered parent and surface
+    rows, the level's rows (copied out at the end) and every view of them it writes or
+    reads, made once."""
+
+    def __init__(self, k: int) -> None:
+        self.parent = np.empty((k, _X.stop - _X.start))
+        self.surface = np.empty((k, _SURFACE_WIDTH))
+        self.parent_x0 = self.parent[:, 0:_X0].reshape(k, X_ROWS, 4)
+        self.parent_x1 = self.parent[:, _X0:].reshape(k, 8, 5)[..., 0:4]
+        self.ops0 = self.surface[:, _OPS0].reshape(k, 4, 4)
+        self.ops1 = self.surface[:, _OPS1].reshape(k, 4, 5)
+        self.exit, self.neg_exit = self.surface[:, _EXIT_PLANE], self.surface[:, _NEG_EXIT_PLANE]
+        self.scale = self.surface[:, _SCALE]
+        self.data = data = np.empty((k, LevelRows.WIDTH))
+        ints = data.view(np.int64)
+        self.x0, self.x1 = x0, x1 = _x0(data), _x1(data)
+        self.eye_row, self.eye = x0[:, _EYE_ROW], x1[:, 7, 0:4]
+        self.clip, self.rect = data[:, _CLIP], data[:, _RECT]
+        self.grid, self.scissor = ints[:, _GRID_PART], ints[:, _SCISSOR]
+        self.fade, self.node = data[:, _FADE], data[:, _NODE]
+        block = data[:, _BLOCK].view(np.float32)
+        self.block_node = block.view(np.uint32)[:, _ID_NODE_COLUMN]
+        self.block_eye = block[:, _CAMERA_EYE]
+        matrices = block[:, _MATRICES].reshape(k, 4, 4, 4)
+        self.v_p0v_block = matrices[:, 0:3:2]
+        self.v_p0v = x0[:, 0:8, 0:4].reshape(k, 2, 4, 4).transpose(0, 1, 3, 2)
+        self.proj_row, self.vp_row, self.inv = matrices[:, 1, :, 2], matrices[:, 2, :, 2], matrices[:, 3]
+        self.plane_xy, self.plane_w = x1[:, 4:6, 4], x1[:, 7, 4]  # p.x, p.y; p.w
+        self.through, self.col4 = x1[:, 0:4, 4], x1[:, 0:8, 4]  # t; t, p
+        self.signs = np.ones((k, 4))  # (sign p.x, sign p.y, 1, 1)
+        self.signs_xy = self.signs[:, 0:2]
+        self.f = np.empty(k)
+        self.f_col = self.f[:, None]
+        self.scaled = np.empty((k, 8))
+        self.ft, self.fp, self.ft2 = self.scaled[:, 0:4], self.scaled[:, 4:8], self.scaled[:, 2:3]
+        self.fe = np.empty((k, 4))
+        self.p0v_row2, self.p0v_row3 = x0[:, 6, 0:4], x0[:, 7, 0:4]
+        self.b = np.empty((k, 4))
+        self.b_col = self.b[:, :, None]
+        self.a_row = x1[:, None, 2, 0:4]
+        self.outer = np.empty((k, 4, 4))
+        self.inv_source = x1[:, 0:4, 0:4]
+
+
+_WORK_KEPT = 32  # the scratch kept per count (of parents, of views) up to this count
+
+
 @dataclass
 class _RootRows:
     """What the oblique near planes read of a root projection, worked out once per projection."""
@@ -907,17 +958,6 @@ def _root_rows(root_proj: np.ndarray) -> _RootRows:
         found = _ROOTS[key] = _RootRows(OBLIQUE_SAFE_NEARS * near, key, root_proj.T.copy(), root_proj)
     _LAST_ROOT[0] = found
     return found
-
-
-_SIGN_ROWS = np.ones((256, 4))
-
-
-def _signs(k: int) -> np.ndarray:
-    """Scratch of k rows of (., ., 1, 1) (the oblique near plane's signs of p.x and p.y go first)."""
-    global _SIGN_ROWS
-    if len(_SIGN_ROWS) < k:
-        _SIGN_ROWS = np.ones((2 * k, 4))
-    return _SIGN_ROWS[:k]
 
 
 _NODES = np.arange(1024, dtype=np.float64)
