@@ -159,14 +159,14 @@ class LevelRows:
     @staticmethod
     def root(view: View) -> LevelRows:
         """A root view's row (its projection is the tree's root projection), its matrices
-        made in glm doubles of the float32 glm holds (the eye: the view's own; the cull's
-        rows as three 4 x 4 products, ``_cull_blocks``), their bytes joined and written in
+        made in glm doubles of the float32 glm holds (the inverse view: glm's float32
+        inverse, its eye too, as the planner always took it; the cull's rows as three 4 x 4
+        products, ``_cull_blocks``), their bytes joined and written in
         one copy over a copy of a row kept per size, clip plane, mask and winding (the
         rectangle, minus the clip plane, the ids): glm's bytes are column-major, so a
         matrix's are its transpose's rows."""
         v, proj = glm.dmat4(view.view), glm.dmat4(view.proj)
         inv_v = glm.dmat4(glm.inverse(view.view))
-        inv_v[3] = glm.dvec4(glm.dvec3(view.eye), 1.0)
         clip_space = glm.transpose(proj * v)  # (P0 V)^T
         cull = _cull_blocks(view.size)
         row = _root_template(view.size, view.clip_plane, view.view_mask, view.mirrored).copy()
