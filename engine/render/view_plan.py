@@ -576,7 +576,7 @@ class SurfaceTable:
             if count <= _WORK_KEPT:
                 self._cull_work[count] = work
         np.matmul(_x0(data)[:, _CULL].reshape(14 * count, 4), self.corner_columns, out=work.product)
-        np.maximum(work.w, 1e-6, out=work.w_safe)  # w <= 0: see straddles
+        np.maximum(work.w, work.epsilon, out=work.w_safe)  # w <= 0: see straddles
         np.divide(work.sides, work.w_safe, out=work.sides)
         least = _MIN(work.corners, axis=0, out=work.least)                                  # P x 14 x S
         # x0, y0, -x1, -y1 in pixels, rounded outwards with a pixel's margin; a pair with a
@@ -726,8 +726,8 @@ class SurfaceTable:
             w = _PlanWork(k)
             if k <= _WORK_KEPT:
                 self._plan_work[k] = w
-        np.take(self.float_rows, s, axis=0, out=w.surface)
-        np.take(parents.data[:, _X], p, axis=0, out=w.parent)  # the parents' matrices (no more of their rows)
+        w.surface[...] = self.float_rows.take(s, axis=0)  # (take with out= costs more than take and a copy)
+        w.parent[...] = parents.data[:, _X].take(p, axis=0)  # the parents' matrices (no more of their rows)
         if size is None:
             scale *= self.one_scale if self.one_scale is not None else float(w.scale.max())
             size = (max(1, round(root.size[0] * scale)), max(1, round(root.size[1] * scale)))
@@ -752,7 +752,7 @@ class SurfaceTable:
         np.copyto(w.v_p0v_block, w.v_p0v, casting="same_kind")  # V, P0 V
         np.sign(w.plane_xy, out=w.signs_xy)
         f = np.vecdot(w.through, w.signs, out=w.f)
-        np.divide(2.0, f, out=f)
+        np.divide(w.two, f, out=f)  # (an array of twos: a scalar operand costs more)
         np.multiply(w.col4, w.f_col, out=w.scaled)  # f t, f p
         np.subtract(w.fp, root_proj[3], out=w.proj_row, casting="same_kind")  # the third row: f p - P0[3]
         np.multiply(w.exit, w.f_col, out=w.fe)
@@ -869,6 +869,7 @@ class _CullWork:
         self.corners = clip[:corners]
         self.sides, self.w = clip[:corners, :, 0:4], clip[:corners, :, 4:5]
         self.w_safe = np.empty((corners, count, 1, surfaces))
+        self.epsilon = np.full((corners, count, 1, surfaces), 1e-6)  # (a scalar operand costs more)
         self.facing = clip[corners, :, _EYE_ROW - _CULL.start, :]  # the eye's row times the planes
         self.least = np.empty((count, 14, surfaces))
         self.rects = self.least[:, 0:4]
@@ -913,6 +914,7 @@ class _PlanWork:
         self.signs = np.ones((k, 4))  # (sign p.x, sign p.y, 1, 1)
         self.signs_xy = self.signs[:, 0:2]
         self.f = np.empty(k)
+        self.two = np.full(k, 2.0)
         self.f_col = self.f[:, None]
         self.scaled = np.empty((k, 8))
         self.ft, self.fp, self.ft2 = self.scaled[:, 0:4], self.scaled[:, 4:8], self.scaled[:, 2:3]
