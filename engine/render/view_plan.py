@@ -21,8 +21,9 @@ layout (``M @ x``); glm's and GL's are column-major, so they are transposed at t
 from __future__ import annotations
 
 import functools
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, TypeVar
 
 import numpy as np
 from pyglm import glm
@@ -36,7 +37,8 @@ from engine.rules.visibility_rules import drawn_in
 if TYPE_CHECKING:  # the surfaces stage's records (engine/resources.py): read here by their fields
     from engine.resources import SurfaceState
 
-_KINDS_BUT_DIRECT = KIND_MASK & ~VIEW_DIRECT  # a view through a surface is no longer direct
+_KINDS_BUT_DIRECT = KIND_MASK & ~VIEW_DIRECT
+_Work = TypeVar("_Work")  # a view through a surface is no longer direct
 
 
 def _mat(matrix: glm.mat4) -> np.ndarray:
@@ -567,33 +569,33 @@ class SurfaceTable:
         neg_bias, any_allowed = self._pair_bias(data, depth, depth_cap, ends, fallback)
         if not any_allowed:
             return _NONE, _NONE, _NO_RECTS, None
-        # Each parent's 14 rows (kept in its ``x``) times each corner's (4, S) gives
-        # (corners, P, 14, S), so the sides are divided by w, and the minima over the corners;
-        # the planes as one more corner give the facing values (the eye's row times them).
-        work = self._cull_work.get(count)
-        if work is None:
-            work = _CullWork(count, self.corner_count, surfaces)
-            if count <= _WORK_KEPT:
-                self._cull_work[count] = work
-        np.matmul(_x0(data)[:, _CULL].reshape(14 * count, 4), self.corner_columns, out=work.product)
+        # Each parent's 14 rows (kept in its ``x``), row by row (the 14 P rows row major: a
+        # row's values of every parent and surface are one contiguous block below), times
+        # each corner's (4, S) gives (corners, 14, P, S), so the sides are divided by w, and
+        # the minima over the corners; the planes as one more corner give the facing values
+        # (the eye's row times them).
+        work = _kept_work(self._cull_work, count, functools.partial(_CullWork, corners=self.corner_count,
+                                                                     surfaces=surfaces))
+        np.matmul(_x0(data)[:, _CULL].transpose(1, 0, 2).reshape(14 * count, 4), self.corner_columns,
+                  out=work.product)
         np.maximum(work.w, work.epsilon, out=work.w_safe)  # w <= 0: see straddles
         np.divide(work.sides, work.w_safe, out=work.sides)
-        least = _MIN(work.corners, axis=0, out=work.least)                                  # P x 14 x S
+        least = _MIN(work.corners, axis=0, out=work.least)                                  # 14 x P x S
         # x0, y0, -x1, -y1 in pixels, rounded outwards with a pixel's margin; a pair with a
         # corner behind the eye is conservative (the parent's whole rectangle).
         rects = work.rects
         np.floor(rects, out=rects)  # (the pixel's margin is in the rows: each side less w)
         if work.least_w.min() <= 1e-6:
-            np.copyto(rects, -np.inf, where=least[:, 4:5] <= 1e-6)
-        np.maximum(rects, data[:, _RECT, None], out=rects)  # inside the parent's
+            np.copyto(rects, -np.inf, where=least[4] <= 1e-6)
+        np.maximum(rects, data[:, _RECT].T[:, :, None], out=rects)  # inside the parent's
         # Seen: facing and allowed, not culled (every corner outside one side of the frustum,
         # or behind the clip plane; on a side counts as outside) and a rectangle with pixels
         # (x1 > x0 and y1 > y0): one maximum over the rows 4-13, written over, each < 0 to keep.
         np.subtract(neg_bias, work.facing, out=work.least_w)
         np.add(work.x0y0, work.x1y1, out=work.sizes)
-        np.less(_MAX(work.tests, axis=1, out=work.worst), 0.0, out=work.seen)
+        np.less(_MAX(work.tests, axis=0, out=work.worst), 0.0, out=work.seen)
         p, s = np.nonzero(work.seen)
-        rects = rects[p, :, s]
+        rects = rects[:, p, s].T
         if not self.fading:
             return p, s, rects, None
         fade = self.fade_weights(parents.eye[p], s)
@@ -721,11 +723,7 @@ class SurfaceTable:
         k = len(p)
         if not k:
             return None, faded
-        w = self._plan_work.get(k)
-        if w is None:
-            w = _PlanWork(k)
-            if k <= _WORK_KEPT:
-                self._plan_work[k] = w
+        w = _kept_work(self._plan_work, k, _PlanWork)
         w.surface[...] = self.float_rows.take(s, axis=0)  # (take with out= costs more than take and a copy)
         w.parent[...] = parents.data[:, _X].take(p, axis=0)  # the parents' matrices (no more of their rows)
         if size is None:
@@ -864,19 +862,19 @@ class _CullWork:
     makes none and allocates only its results."""
 
     def __init__(self, count: int, corners: int, surfaces: int) -> None:
-        clip = np.empty((corners + 1, count, 14, surfaces))
+        clip = np.empty((corners + 1, 14, count, surfaces))
         self.product = clip.reshape(corners + 1, 14 * count, surfaces)  # the corner product's
         self.corners = clip[:corners]
-        self.sides, self.w = clip[:corners, :, 0:4], clip[:corners, :, 4:5]
-        self.w_safe = np.empty((corners, count, 1, surfaces))
-        self.epsilon = np.full((corners, count, 1, surfaces), 1e-6)  # (a scalar operand costs more)
-        self.facing = clip[corners, :, _EYE_ROW - _CULL.start, :]  # the eye's row times the planes
-        self.least = np.empty((count, 14, surfaces))
-        self.rects = self.least[:, 0:4]
-        self.x0y0, self.x1y1 = self.rects[:, 0:2], self.rects[:, 2:4]
-        self.least_w = self.least[:, 4]
-        self.sizes = self.least[:, 12:14]
-        self.tests = self.least[:, 4:14]
+        self.sides, self.w = clip[:corners, 0:4], clip[:corners, 4:5]
+        self.w_safe = np.empty((corners, 1, count, surfaces))
+        self.epsilon = np.full((corners, 1, count, surfaces), 1e-6)  # (a scalar operand costs more)
+        self.facing = clip[corners, _EYE_ROW - _CULL.start]  # the eye's row times the planes
+        self.least = np.empty((14, count, surfaces))
+        self.rects = self.least[0:4]
+        self.x0y0, self.x1y1 = self.rects[0:2], self.rects[2:4]
+        self.least_w = self.least[4]
+        self.sizes = self.least[12:14]
+        self.tests = self.least[4:14]
         self.worst = np.empty((count, surfaces))
         self.seen = np.empty((count, surfaces), bool)
 
@@ -927,7 +925,22 @@ class _PlanWork:
         self.inv_source = x1[:, 0:4, 0:4]
 
 
-_WORK_KEPT = 32  # the scratch kept per count (of parents, of views) up to this count
+# How many scratches a table keeps of each kind (_CullWork, _PlanWork), the least recently used
+# dropped first: a level's counts vary from frame to frame, and a scratch made afresh costs as
+# much as the views it saves (and, for a few hundred views, the first writes to new memory).
+WORK_KEPT = 48
+
+
+def _kept_work(kept: dict, count: int, make: Callable[[int], _Work]) -> _Work:
+    """The scratch for ``count`` in ``kept`` (made and kept when missing), now the most
+    recently used."""
+    found = kept.pop(count, None)
+    if found is None:
+        found = make(count)
+        if len(kept) >= WORK_KEPT:
+            del kept[next(iter(kept))]
+    kept[count] = found
+    return found
 
 
 @dataclass
