@@ -473,31 +473,44 @@ class SurfaceTable:
             found = self._biases[key] = (ends, (bias, bool(seen.any())))
         return found[1]
 
-    def _child_ids(self, data: np.ndarray, hide: int, root_rows: _RootRows,
-                   size: tuple[int, int]) -> np.ndarray:
-        """(P, S, _GRID_WIDTH) 8-byte words (int64), [p, s]: what a view through surface s from
-        parent row p of ``data`` holds that is not a matter of the camera, laid out as
-        ``LEVEL_ROW`` from its Camera block on: the block with its projection (the root's,
-        ``root_rows``: its third row is the view's own, written over), viewport (``size``),
-        clip plane and ids but the node (uint32 skip, hide, view mask); then its exit row,
-        view mask, winding, p, s (int64s) and a fade of 1.0.  Kept by the parents' ids (the
-        bytes the cull's ``_pair_bias`` read of them), ``hide``, the root projection and the
-        size; made, when a level's parents are new, from each parent's rows (``_child_row``,
-        kept too) and the parents' numbers."""
+    def _child_ids(self, data: np.ndarray, hide: int, root_rows: _RootRows, size: tuple[int, int],
+                   p: np.ndarray, s: np.ndarray) -> np.ndarray:
+        """(k, _GRID_WIDTH) 8-byte words (int64): for each pair (p, s), what a view through
+        surface s from parent row p of ``data`` holds that is not a matter of the camera,
+        laid out as ``LEVEL_ROW`` from its Camera block on: the block with its projection
+        (the root's, ``root_rows``: its third row is the view's own, written over), viewport
+        (``size``), clip plane and ids but the node (uint32 skip, hide, view mask); then its
+        exit row, view mask, winding, p, s (int64s) and a fade of 1.0.
+
+        Gathered from each parent's rows (``_child_row``, kept by its ids).  A level of a
+        few pairs (``GRID_KEPT_CELLS`` at most) keeps the whole (P, S) grid of them, by the
+        parents' ids (the bytes the cull's ``_pair_bias`` read of them), ``hide``, the root
+        projection and the size, and gathers from it in one operation the next frames; a
+        larger one (whose parents, chosen by their pixels, change from frame to frame)
+        gathers from the rows of its parents' distinct ids, and makes no grid."""
+        count, surfaces = len(data), len(self.states)
+        ids = data[:, _IDS_PART]
+        if count * surfaces > GRID_KEPT_CELLS:
+            distinct: dict[tuple[float, ...], int] = {}
+            at = [distinct.setdefault(tuple(row), len(distinct)) for row in ids.tolist()]
+            rows = np.stack([self._child_row(*row, hide, root_rows, size) for row in distinct])
+            found = rows[np.array(at).take(p), s]
+            found[:, _GRID_PARENT] = p
+            return found
         last = self._last_ids
-        id_bytes = last[1] if last is not None and last[0] is data else data[:, _IDS_PART].tobytes()
+        id_bytes = last[1] if last is not None and last[0] is data else ids.tobytes()
         key = (id_bytes, hide, root_rows.key, size)
-        found = self._ids.get(key)
-        if found is None:
+        grid = self._ids.get(key)
+        if grid is None:
             grid = np.concatenate([self._child_row(exit_row, mask, mirrored, hide, root_rows, size)
-                                   for exit_row, mask, mirrored in data[:, _IDS_PART].tolist()]).reshape(
-                len(data), len(self.states), _GRID_WIDTH)
-            grid[:, :, _GRID_PARENT] = np.arange(len(data))[:, None]
+                                   for exit_row, mask, mirrored in ids.tolist()]).reshape(
+                count, surfaces, _GRID_WIDTH)
+            grid[:, :, _GRID_PARENT] = np.arange(count)[:, None]
             grid.flags.writeable = False
-            if len(self._ids) > 256:
+            if len(self._ids) > 64:
                 self._ids.clear()
-            found = self._ids[key] = grid
-        return found
+            self._ids[key] = grid
+        return grid[p, s]
 
     def _child_row(self, exit_row: float, mask: float, mirrored: float, hide: int, root_rows: _RootRows,
                    size: tuple[int, int]) -> np.ndarray:
@@ -735,7 +748,7 @@ class SurfaceTable:
         np.copyto(w.clip, w.neg_exit)
         np.copyto(w.rect, rects)
         root_rows = _root_rows(root_proj)
-        w.grid[...] = self._child_ids(parents.data, hide, root_rows, size)[p, s]
+        w.grid[...] = self._child_ids(parents.data, hide, root_rows, size, p, s)
         if weights is not None:
             w.fade[...] = weights[weights > 0.0]
         node = _node_numbers(first_index, k)
@@ -924,6 +937,10 @@ class _PlanWork:
         self.outer = np.empty((k, 4, 4))
         self.inv_source = x1[:, 0:4, 0:4]
 
+
+# The most (parent, surface) pairs a level may have for its camera-free grid to be kept
+# (SurfaceTable._child_ids).
+GRID_KEPT_CELLS = 128
 
 # How many scratches a table keeps of each kind (_CullWork, _PlanWork), the least recently used
 # dropped first: a level's counts vary from frame to frame, and a scratch made afresh costs as
