@@ -85,3 +85,17 @@ def test_parents_in_another_order_give_the_same_views_with_their_own_parents():
         assert np.array_equal(again.blocks[i, :76], candidates.blocks[j, :76]), pair  # all but the ids
         assert again.rows.data[i, view_plan.ROW["view_mask"].start] == candidates.rows.data[j, view_plan.ROW[
             "view_mask"].start]
+
+
+def test_a_large_level_gathers_the_rows_a_kept_grid_holds(monkeypatch):
+    """A level of more pairs than ``GRID_KEPT_CELLS`` gathers its camera-free rows from its
+    parents' distinct ids (no grid kept): bit for bit the rows a kept grid gives, each
+    view with its own parent's number."""
+    view, root_proj, inv_root_proj, levels = _levels(_table(), (0.8, 1.0, 3.5), depth=6)
+    assert any(len(parents.data) >= 2 for parents, _ in levels)
+    monkeypatch.setattr(view_plan, "GRID_KEPT_CELLS", 0)
+    gathered = _table()
+    for level, (parents, candidates) in enumerate(levels, start=1):
+        again, _ = gathered._plan(parents, level, view, root_proj, inv_root_proj, int(candidates.rows.node[0]), 8, 0)
+        assert np.array_equal(again.rows.data.view(np.int64), candidates.rows.data.view(np.int64)), level
+    assert not gathered._ids  # no grid was kept
