@@ -439,6 +439,10 @@ class SurfaceTable:
             found = self._cuts[key] = (ends, cut, bool(cut.any()))
         return found[1], found[2]
 
+    def _new_cull_work(self, count: int) -> _CullWork:
+        """A cull's scratch for ``count`` parents of this table."""
+        return _CullWork(count, self.corner_count, len(self.states))
+
     def _pair_bias(self, data: np.ndarray, depth: int, depth_cap: int, ends: np.ndarray | None,
                    fallback: bool) -> tuple[np.ndarray, bool]:
         """(P, S): what the cull takes each (parent, surface) facing value from (its bias,
@@ -587,8 +591,7 @@ class SurfaceTable:
         # each corner's (4, S) gives (corners, 14, P, S), so the sides are divided by w, and
         # the minima over the corners; the planes as one more corner give the facing values
         # (the eye's row times them).
-        work = _kept_work(self._cull_work, count, functools.partial(_CullWork, corners=self.corner_count,
-                                                                     surfaces=surfaces))
+        work = self._cull_work.get(count) or _kept_work(self._cull_work, count, self._new_cull_work)
         np.matmul(_x0(data)[:, _CULL].transpose(1, 0, 2).reshape(14 * count, 4), self.corner_columns,
                   out=work.product)
         np.maximum(work.w, work.epsilon, out=work.w_safe)  # w <= 0: see straddles
@@ -736,12 +739,12 @@ class SurfaceTable:
         k = len(p)
         if not k:
             return None, faded
-        w = _kept_work(self._plan_work, k, _PlanWork)
+        w = self._plan_work.get(k) or _kept_work(self._plan_work, k, _PlanWork)
         w.surface[...] = self.float_rows.take(s, axis=0)  # (take with out= costs more than take and a copy)
         w.parent[...] = parents.data[:, _X].take(p, axis=0)  # the parents' matrices (no more of their rows)
         if size is None:
             scale *= self.one_scale if self.one_scale is not None else float(w.scale.max())
-            size = (max(1, round(root.size[0] * scale)), max(1, round(root.size[1] * scale)))
+            size = _level_size(root.size, scale)
         np.matmul(w.parent_x0, w.ops0, out=w.x0)
         np.matmul(w.parent_x1, w.ops1, out=w.x1)
         np.copyto(w.eye_row, w.eye)  # the cull's copy of the eye
@@ -942,8 +945,8 @@ class _PlanWork:
 # (SurfaceTable._child_ids).
 GRID_KEPT_CELLS = 128
 
-# How many scratches a table keeps of each kind (_CullWork, _PlanWork), the least recently used
-# dropped first (a level's counts vary from frame to frame), and for counts up to what: a
+# How many scratches a table keeps of each kind (_CullWork, _PlanWork), the first kept dropped
+# first, and for counts up to what: a
 # scratch made afresh costs as much as the views it saves, which is what a level of a few
 # views costs; a large level's work is in its arrays, and keeping its scratches (half a
 # megabyte each for a hundred views) measured slower, the memory they hold evicting the
@@ -953,16 +956,13 @@ WORK_KEPT_COUNT = 16
 
 
 def _kept_work(kept: dict, count: int, make: Callable[[int], _Work]) -> _Work:
-    """The scratch for ``count`` in ``kept`` (made and kept when missing), now the most
-    recently used."""
-    found = kept.pop(count, None)
-    if found is None:
-        found = make(count)
-        if count > WORK_KEPT_COUNT:
-            return found
+    """A new scratch for ``count``, kept in ``kept`` (the first kept dropped when full) for a
+    count up to ``WORK_KEPT_COUNT``."""
+    found = make(count)
+    if count <= WORK_KEPT_COUNT:
         if len(kept) >= WORK_KEPT:
             del kept[next(iter(kept))]
-    kept[count] = found
+        kept[count] = found
     return found
 
 
@@ -996,6 +996,12 @@ def _root_rows(root_proj: np.ndarray) -> _RootRows:
         found = _ROOTS[key] = _RootRows(OBLIQUE_SAFE_NEARS * near, key, root_proj.T.copy(), root_proj)
     _LAST_ROOT[0] = found
     return found
+
+
+@functools.lru_cache(maxsize=64)
+def _level_size(screen: tuple[int, int], scale: float) -> tuple[int, int]:
+    """A level's pixels: the root's scaled, at least one each way."""
+    return max(1, round(screen[0] * scale)), max(1, round(screen[1] * scale))
 
 
 _NODES = np.arange(1024, dtype=np.float64)
