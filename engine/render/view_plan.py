@@ -6,14 +6,20 @@ views: the parents of a level are rows of arrays (``LevelRows``), every mirror a
 is a row of ``SurfaceTable``, and ``SurfaceTable.cull`` and ``SurfaceTable.plan`` work on
 (parents x surfaces) blocks.  Per view, only what the draws need is made in Python (a
 ``View`` holding its packed camera block).  This is the one planner, for levels of every
-size.  What it costs at a level of one or two views is its count of numpy calls (in a frame
-each costs 1-3 us, a call of a kind not made for a while the most), so the work is laid out
-to need few: each view's row holds every matrix its children and the cull read (``x``:
+size.  What it costs at a level of one or two views is its numpy calls (in a frame each
+costs 1-3 us, a call of a kind not made for a while the most) and the views of arrays they
+read and write (a view costs about what a small call does), so the work is laid out to need
+few of both: each view's row holds every matrix its children and the cull read (``x``:
 carried through a surface by two products, the oblique near plane a scalar from them), what
 does not depend on the camera (the Camera block's projection, viewport, clip plane and ids;
-the exit row, mask, winding) is gathered per (parent, surface) from a grid kept while the
-parents' ids stay, and a candidate is one row: about 45 calls that compute or copy a level
-(17 of them the cull's), 5 of them products, where the first array planner took about 72.
+the exit row, mask, winding) is gathered per (parent, surface) from rows kept by the
+parents' ids, a candidate is one row, and the cull's and the plan's arrays and views are
+made once per count of parents or views (``_CullWork``, ``_PlanWork``) and written with
+``out=``: about 44 calls a level (13 of them the cull's), 5 of them products, where the
+first array planner took about 72 and made a view or a new array for most.  A call costs
+least on operands of one shape and dtype: a broadcast operand, a scalar one, a strided or
+converting output or ``take(out=)`` each cost about as much again (measured), so twos and
+epsilons are arrays and gathers are ``take`` then a copy.
 
 Conventions: matrices here are numpy (..., 4, 4) arrays in the usual row-major math
 layout (``M @ x``); glm's and GL's are column-major, so they are transposed at the edges.
@@ -53,12 +59,13 @@ def _mat(matrix: glm.mat4) -> np.ndarray:
 # ``x`` holds the view's matrices as a 22 x 4 and an 8 x 5 block, so that two products a level
 # carry all of them through the surfaces (``SurfaceTable._plan``): with V the view matrix, IV its
 # inverse, P0 the root's projection and C the cull's rows (``_cull_rows``),
-#   x[0] = [V; P0 V; C P0 V; -clip plane; 0; 0]       (multiplied on the right by inv(carry))
+#   x[0] = [V; P0 V; C P0 V; -clip plane; eye; 0]     (multiplied on the right by inv(carry))
 #   x[1] = [(IV inv(P0))^T | t; IV^T | p]            (multiplied on the right by [carry^T | carry^T e])
 # where e is the plane the view looks out of (world), p = e IV that plane in view space (the
 # oblique near plane's) and t = e IV inv(P0) (its Sherman-Morrison update).  The cull's 14
-# rows (C P0 V, minus the clip plane, two of scratch) are what it multiplies the corners by;
-# IV^T's last row is the eye.
+# rows (C P0 V, minus the clip plane, the eye, one of scratch) are what it multiplies the
+# corners (and the planes) by; IV^T's last row is the eye, copied into x[0] after the
+# products (a point is not carried as the rows of x[0] are: it is written, not multiplied).
 X_ROWS = 22   # x[0]'s; x[1] has 8
 _X0 = X_ROWS * 4
 _V, _P0V, _CULL, _NEG_CLIP = slice(0, 4), slice(4, 8), slice(8, 22), 19
@@ -568,12 +575,12 @@ class SurfaceTable:
         they hold, is what a level costs at these sizes.  One product takes every distinct
         corner of every surface through 14 rows per parent, kept in its ``x`` (``C P0 V``
         from its clip space): the rectangle's sides x0, y0, -x1, -y1 in pixels, a pixel
-        outwards, times w, then w,
-        six values > 0 outside each side of the frustum, minus the side of the parent's clip
-        plane, and two rows of scratch.  Then one minimum over the corners gives each pair's
-        frustum and clip-plane tests, and, with the sides divided by w first, its
-        rectangle's four sides as minima (the same rounding rule, one pixel out then floor,
-        for each side)."""
+        outwards, times w, then w, six values > 0 outside each side of the frustum, minus
+        the side of the parent's clip plane, the eye and a row of scratch; the surfaces'
+        planes are one more "corner", so the eye's row times them gives the facing values
+        in the same product.  Then one minimum over the corners gives each pair's frustum
+        and clip-plane tests, and, with the sides divided by w first, its rectangle's four
+        sides as minima (the same rounding rule, one pixel out then floor, for each side)."""
         count, surfaces = len(parents.data), len(self.states)
         if not count or not surfaces:
             return _NONE, _NONE, _NO_RECTS, None
