@@ -775,13 +775,16 @@ class SurfaceTable:
         f = np.vecdot(w.through, w.signs, out=w.f)
         np.divide(w.two, f, out=f)  # (an array of twos: a scalar operand costs more)
         np.multiply(w.col4, w.f_col, out=w.scaled)  # f t, f p
-        np.subtract(w.fp, root_proj[3], out=w.proj_row, casting="same_kind")  # the third row: f p - P0[3]
+        if w.fourth_of is not root_proj or root_proj.flags.writeable:
+            np.copyto(w.fourth, root_proj[3])  # P0[3] a row a view (a broadcast operand costs more)
+            w.fourth_of = root_proj
+        np.subtract(w.fp, w.fourth, out=w.proj_row, casting="same_kind")  # the third row: f p - P0[3]
         np.multiply(w.exit, w.f_col, out=w.fe)
         np.subtract(w.fe, w.p0v_row3, out=w.vp_row, casting="same_kind")  # f e - (P0 V)[3]
         # (IV P^-1)^T = (IV inv(P0))^T - b a^T, with a = IV inv(P0) e2 (the third row of the
         # kept transpose) and b = u / (1 + u . e2), u = (f p - P0[2] - P0[3]) inv(P0) = f t - e2 - e3
         # (so 1 + u . e2 = f t . e2).
-        np.subtract(w.ft, _E23, out=w.b)
+        np.subtract(w.ft, w.e23, out=w.b)
         np.divide(w.b, w.ft2, out=w.b)
         np.multiply(w.b_col, w.a_row, out=w.outer)
         np.subtract(w.inv_source, w.outer, out=w.inv, casting="same_kind")
@@ -936,6 +939,9 @@ class _PlanWork:
         self.signs_xy = self.signs[:, 0:2]
         self.f = np.empty(k)
         self.two = np.full(k, 2.0)
+        self.e23 = np.tile(_E23, (k, 1))
+        self.fourth = np.empty((k, 4))  # the root projection's fourth row, a row a view
+        self.fourth_of: np.ndarray | None = None  # the root projection it is of
         self.f_col = self.f[:, None]
         self.scaled = np.empty((k, 8))
         self.ft, self.fp, self.ft2 = self.scaled[:, 0:4], self.scaled[:, 4:8], self.scaled[:, 2:3]
