@@ -369,6 +369,8 @@ class SurfaceTable:
         self._cuts: dict[tuple, tuple[np.ndarray | None, np.ndarray, bool]] = {}  # _cut's
         self._cull_work: dict[int, _CullWork] = {}  # the cull's scratch, by its count of parents
         self._plan_work: dict[int, _PlanWork] = {}  # _plan's, by its count of views
+        self._plan_buffers: dict[int, _PlanBuffers] = {}  # their arrays, by capacity
+        self._child_tables: dict[tuple, _ChildTable] = {}  # _child_ids' for large levels
         # The resolution scale every surface shares (None: they differ; a level takes its largest).
         self.one_scale = float(self.scale[0]) if count and (self.scale == self.scale[0]).all() else None
 
@@ -446,6 +448,19 @@ class SurfaceTable:
             found = self._cuts[key] = (ends, cut, bool(cut.any()))
         return found[1], found[2]
 
+    def _new_plan_work(self, k: int) -> _PlanWork:
+        """A plan's scratch for ``k`` views, kept (views of the buffers of its capacity: the
+        least power of two not below ``k``, at least 16, kept too)."""
+        capacity = max(16, 1 << (k - 1).bit_length())
+        buffers = self._plan_buffers.get(capacity)
+        if buffers is None:
+            buffers = self._plan_buffers[capacity] = _PlanBuffers(capacity)
+        work = _PlanWork(k, buffers)
+        if len(self._plan_work) >= WORK_KEPT:
+            del self._plan_work[next(iter(self._plan_work))]
+        self._plan_work[k] = work
+        return work
+
     def _new_cull_work(self, count: int) -> _CullWork:
         """A cull's scratch for ``count`` parents of this table."""
         return _CullWork(count, self.corner_count, len(self.states))
@@ -498,14 +513,26 @@ class SurfaceTable:
         parents' ids (the bytes the cull's ``_pair_bias`` read of them), ``hide``, the root
         projection and the size, and gathers from it in one operation the next frames; a
         larger one (whose parents, chosen by their pixels, change from frame to frame)
-        gathers from the rows of its parents' distinct ids, and makes no grid."""
+        gathers from a table of every parent's rows seen with this ``hide``, projection and
+        size (``_ChildTable``), and makes no grid."""
         count, surfaces = len(data), len(self.states)
         ids = data[:, _IDS_PART]
         if count * surfaces > GRID_KEPT_CELLS:
-            distinct: dict[tuple[float, ...], int] = {}
-            at = [distinct.setdefault(tuple(row), len(distinct)) for row in ids.tolist()]
-            rows = np.stack([self._child_row(*row, hide, root_rows, size) for row in distinct])
-            found = rows[np.array(at).take(p), s]
+            table = self._child_tables.get((hide, root_rows.key, size))
+            if table is None:
+                if len(self._child_tables) > 16:
+                    self._child_tables.clear()
+                table = self._child_tables[(hide, root_rows.key, size)] = _ChildTable()
+            firsts = table.firsts
+            at = [firsts.get(row) for row in map(tuple, ids.tolist())]
+            if None in at:  # parents with ids not seen yet: their rows join the table
+                for row in map(tuple, ids.tolist()):
+                    if row not in firsts:
+                        firsts[row] = surfaces * len(table.rows)
+                        table.rows.append(self._child_row(*row, hide, root_rows, size))
+                table.stacked = np.concatenate(table.rows)
+                at = [firsts[row] for row in map(tuple, ids.tolist())]
+            found = table.stacked.take(np.array(at).take(p) + s, axis=0)
             found[:, _GRID_PARENT] = p
             return found
         last = self._last_ids
@@ -746,7 +773,7 @@ class SurfaceTable:
         k = len(p)
         if not k:
             return None, faded
-        w = self._plan_work.get(k) or _kept_work(self._plan_work, k, _PlanWork)
+        w = self._plan_work.get(k) or self._new_plan_work(k)
         w.surface[...] = self.float_rows.take(s, axis=0)  # (take with out= costs more than take and a copy)
         w.parent[...] = parents.data[:, _X].take(p, axis=0)  # the parents' matrices (no more of their rows)
         if size is None:
@@ -775,9 +802,9 @@ class SurfaceTable:
         f = np.vecdot(w.through, w.signs, out=w.f)
         np.divide(w.two, f, out=f)  # (an array of twos: a scalar operand costs more)
         np.multiply(w.col4, w.f_col, out=w.scaled)  # f t, f p
-        if w.fourth_of is not root_proj or root_proj.flags.writeable:
-            np.copyto(w.fourth, root_proj[3])  # P0[3] a row a view (a broadcast operand costs more)
-            w.fourth_of = root_proj
+        if w.buffers.fourth_of is not root_proj or root_proj.flags.writeable:
+            np.copyto(w.buffers.fourth, root_proj[3])  # P0[3] a row a view (a broadcast operand costs more)
+            w.buffers.fourth_of = root_proj
         np.subtract(w.fp, w.fourth, out=w.proj_row, casting="same_kind")  # the third row: f p - P0[3]
         np.multiply(w.exit, w.f_col, out=w.fe)
         np.subtract(w.fe, w.p0v_row3, out=w.vp_row, casting="same_kind")  # f e - (P0 V)[3]
@@ -905,21 +932,54 @@ class _CullWork:
         self.seen = np.empty((count, surfaces), bool)
 
 
+class _ChildTable:
+    """The camera-free rows (``SurfaceTable._child_row``) of every parent's ids seen with one
+    ``hide``, root projection and size, stacked (S rows each), and where each parent's
+    first row is: a large level gathers its candidates' rows from it in one ``take``."""
+
+    def __init__(self) -> None:
+        self.firsts: dict[tuple[float, ...], int] = {}
+        self.rows: list[np.ndarray] = []
+        self.stacked = np.zeros((0, _GRID_WIDTH), np.int64)
+
+
+class _PlanBuffers:
+    """The arrays of ``_PlanWork`` for up to ``capacity`` views (a power of two, at least
+    16): one set per capacity, so the scratches of every count are views of a few arrays
+    (not a set of arrays each: that memory, kept, evicted the frame's own from the caches;
+    made afresh, it cost its first writes)."""
+
+    def __init__(self, capacity: int) -> None:
+        self.parent = np.empty((capacity, _X.stop - _X.start))
+        self.surface = np.empty((capacity, _SURFACE_WIDTH))
+        self.data = np.empty((capacity, LevelRows.WIDTH))
+        self.signs = np.ones((capacity, 4))  # (sign p.x, sign p.y, 1, 1)
+        self.f = np.empty(capacity)
+        self.two = np.full(capacity, 2.0)
+        self.e23 = np.tile(_E23, (capacity, 1))
+        self.fourth = np.empty((capacity, 4))  # the root projection's fourth row, a row a view
+        self.fourth_of: np.ndarray | None = None  # the root projection it is of
+        self.scaled = np.empty((capacity, 8))
+        self.fe = np.empty((capacity, 4))
+        self.b = np.empty((capacity, 4))
+        self.outer = np.empty((capacity, 4, 4))
+
+
 class _PlanWork:
     """``SurfaceTable._plan``'s scratch for a count of views: the gathered parent and surface
     rows, the level's rows (copied out at the end) and every view of them it writes or
-    reads, made once."""
+    reads, made once (views of the first ``k`` rows of ``buffers``)."""
 
-    def __init__(self, k: int) -> None:
-        self.parent = np.empty((k, _X.stop - _X.start))
-        self.surface = np.empty((k, _SURFACE_WIDTH))
+    def __init__(self, k: int, buffers: _PlanBuffers) -> None:
+        self.buffers = buffers
+        self.parent, self.surface = buffers.parent[:k], buffers.surface[:k]
         self.parent_x0 = self.parent[:, 0:_X0].reshape(k, X_ROWS, 4)
         self.parent_x1 = self.parent[:, _X0:].reshape(k, 8, 5)[..., 0:4]
         self.ops0 = self.surface[:, _OPS0].reshape(k, 4, 4)
         self.ops1 = self.surface[:, _OPS1].reshape(k, 4, 5)
         self.exit, self.neg_exit = self.surface[:, _EXIT_PLANE], self.surface[:, _NEG_EXIT_PLANE]
         self.scale = self.surface[:, _SCALE]
-        self.data = data = np.empty((k, LevelRows.WIDTH))
+        self.data = data = buffers.data[:k]
         ints = data.view(np.int64)
         self.x0, self.x1 = x0, x1 = _x0(data), _x1(data)
         self.eye_row, self.eye = x0[:, _EYE_ROW], x1[:, 7, 0:4]
@@ -935,22 +995,16 @@ class _PlanWork:
         self.proj_row, self.vp_row, self.inv = matrices[:, 1, :, 2], matrices[:, 2, :, 2], matrices[:, 3]
         self.plane_xy, self.plane_w = x1[:, 4:6, 4], x1[:, 7, 4]  # p.x, p.y; p.w
         self.through, self.col4 = x1[:, 0:4, 4], x1[:, 0:8, 4]  # t; t, p
-        self.signs = np.ones((k, 4))  # (sign p.x, sign p.y, 1, 1)
+        self.signs = buffers.signs[:k]
         self.signs_xy = self.signs[:, 0:2]
-        self.f = np.empty(k)
-        self.two = np.full(k, 2.0)
-        self.e23 = np.tile(_E23, (k, 1))
-        self.fourth = np.empty((k, 4))  # the root projection's fourth row, a row a view
-        self.fourth_of: np.ndarray | None = None  # the root projection it is of
+        self.f, self.two, self.e23, self.fourth = buffers.f[:k], buffers.two[:k], buffers.e23[:k], buffers.fourth[:k]
         self.f_col = self.f[:, None]
-        self.scaled = np.empty((k, 8))
+        self.scaled = buffers.scaled[:k]
         self.ft, self.fp, self.ft2 = self.scaled[:, 0:4], self.scaled[:, 4:8], self.scaled[:, 2:3]
-        self.fe = np.empty((k, 4))
+        self.fe, self.b, self.outer = buffers.fe[:k], buffers.b[:k], buffers.outer[:k]
         self.p0v_row2, self.p0v_row3 = x0[:, 6, 0:4], x0[:, 7, 0:4]
-        self.b = np.empty((k, 4))
         self.b_col = self.b[:, :, None]
         self.a_row = x1[:, None, 2, 0:4]
-        self.outer = np.empty((k, 4, 4))
         self.inv_source = x1[:, 0:4, 0:4]
 
 
