@@ -825,7 +825,9 @@ class SurfaceTable:
         np.copyto(w.block_eye, w.eye, casting="same_kind")
         data = w.data.copy()
         end = None if ends is None else self._within(depth, depth_cap)[1].take(s)
-        return Candidates(LevelRows(data), size, end), faded
+        candidates = Candidates(LevelRows(data), size, end)
+        candidates.__dict__.update(parent=p, surface=s)  # the cull's arrays: no views to make when read
+        return candidates, faded
 
 
 def level_rects(rects: np.ndarray, screen: tuple[int, int], level: tuple[int, int]) -> np.ndarray:
