@@ -99,3 +99,23 @@ def test_a_large_level_gathers_the_rows_a_kept_grid_holds(monkeypatch):
         again, _ = gathered._plan(parents, level, view, root_proj, inv_root_proj, int(candidates.rows.node[0]), 8, 0)
         assert np.array_equal(again.rows.data.view(np.int64), candidates.rows.data.view(np.int64)), level
     assert not gathered._ids  # no grid was kept
+
+
+def test_a_kept_plans_choice_is_found_again_and_so_is_its_plan():
+    """A kept plan's candidates are read-only, and the choice made from them is the same
+    read-only rows when made again (``Candidates.select``): the plan kept for them is found
+    again by their identity (a still camera's deeper levels), and is the plan they give."""
+    table = _table()
+    view, root_proj, inv_root_proj, levels = _levels(table, (0.8, 1.0, 3.5), depth=2)
+    root_proj.flags.writeable = False  # as the view tree keeps it
+    _, first = levels[0]
+    assert len(first) >= 2 and not first.rows.data.flags.writeable
+    keep = np.array([len(first) - 1, 0], np.int64)
+    chosen = first.select(keep)
+    assert chosen is first.select(keep.copy()) and not chosen.rows.data.flags.writeable
+    assert np.array_equal(chosen.rows.data, first.rows.data[keep])
+    planned, _ = table.plan(chosen.rows, 2, view, root_proj, inv_root_proj, 10, 8, 0)
+    again, _ = table.plan(first.select(keep).rows, 2, view, root_proj, inv_root_proj, 10, 8, 0)
+    assert again is planned
+    fresh, _ = _table()._plan(chosen.rows, 2, view, root_proj, inv_root_proj, 10, 8, 0)
+    assert np.array_equal(fresh.rows.data.view(np.int64), planned.rows.data.view(np.int64))
