@@ -6,10 +6,22 @@ views: the parents of a level are rows of arrays (``LevelRows``), every mirror a
 is a row of ``SurfaceTable``, and ``SurfaceTable.cull`` and ``SurfaceTable.plan`` work on
 (parents x surfaces) blocks.  Per view, only what the draws need is made in Python (a
 ``View`` holding its packed camera block).  This is the one planner, for levels of every
-size: a level costs some 70 numpy calls whatever its views (about 50 us on llvmpipe's
-machine for a level of one view, measured warm; planning pair by pair in glm cost some
-15 us a view, so a level of one or two views was cheaper that way, and dearer from about
-six: the second planner that did so is gone, for one set of rules).
+size.  What it costs at a level of one or two views is its numpy calls (in a frame each
+costs 1-3 us, a call of a kind not made for a while the most) and the views of arrays they
+read and write (a view costs about what a small call does), so the work is laid out to need
+few of both: each view's row holds every matrix its children and the cull read (``x``:
+carried through a surface by two products, the oblique near plane a scalar from them), what
+does not depend on the camera (the Camera block's projection, viewport, clip plane and ids;
+the exit row, mask, winding) is gathered per (parent, surface) from rows kept by the
+parents' ids, a candidate is one row, and the cull's and the plan's arrays and views are
+made once per count of parents or views (``_CullWork``, ``_PlanWork``) and written with
+``out=``: about 44 calls a level (13 of them the cull's), 4 of them products, where the
+first array planner took about 72 and made a view or a new array for most (measured warm,
+a level of one view: about 31 us, against 53 for that planner and 20 for the glm one it
+replaced; of three or four views: 38 against 62 and 46-74).  A call costs
+least on operands of one shape and dtype: a broadcast operand, a scalar one, a strided or
+converting output or ``take(out=)`` each cost about as much again (measured), so twos and
+epsilons are arrays and gathers are ``take`` then a copy.
 
 Conventions: matrices here are numpy (..., 4, 4) arrays in the usual row-major math
 layout (``M @ x``); glm's and GL's are column-major, so they are transposed at the edges.
@@ -17,8 +29,9 @@ layout (``M @ x``); glm's and GL's are column-major, so they are transposed at t
 from __future__ import annotations
 
 import functools
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, TypeVar
 
 import numpy as np
 from pyglm import glm
@@ -32,8 +45,8 @@ from engine.rules.visibility_rules import drawn_in
 if TYPE_CHECKING:  # the surfaces stage's records (engine/resources.py): read here by their fields
     from engine.resources import SurfaceState
 
-_CAMERA_FLOATS = CAMERA_BLOCK_BYTES // 4
-_KINDS_BUT_DIRECT = KIND_MASK & ~VIEW_DIRECT  # a view through a surface is no longer direct
+_KINDS_BUT_DIRECT = KIND_MASK & ~VIEW_DIRECT
+_Work = TypeVar("_Work")  # a view through a surface is no longer direct
 
 
 def _mat(matrix: glm.mat4) -> np.ndarray:
@@ -41,28 +54,62 @@ def _mat(matrix: glm.mat4) -> np.ndarray:
     return np.frombuffer(matrix.to_bytes(), np.float32).reshape(4, 4).T.astype(np.float64)
 
 
-# One row of ``LevelRows``: a view of a level, in float64.  Eye, viewport and clip plane side
-# by side are the Camera block's (one copy, ``CAMERA_DTYPE``), and the clip plane above the
-# view matrix makes the 5 x 4 block ``SurfaceTable.cull`` multiplies once a level.
+# One row of ``LevelRows``: a view of a level, everything the planner and the view tree read of
+# it side by side in one float64 row (ints and the float32 Camera block seen through views of
+# it), so that a level's rows are gathered, and its candidates chosen, with one ``take``.
+#
+# ``x`` holds the view's matrices as a 22 x 4 and an 8 x 5 block, so that two products a level
+# carry all of them through the surfaces (``SurfaceTable._plan``): with V the view matrix, IV its
+# inverse, P0 the root's projection and C the cull's rows (``_cull_rows``),
+#   x[0] = [V; P0 V; C P0 V; -clip plane; eye; 0]     (multiplied on the right by inv(carry))
+#   x[1] = [(IV inv(P0))^T | t; IV^T | p]            (multiplied on the right by [carry^T | carry^T e])
+# where e is the plane the view looks out of (world), p = e IV that plane in view space (the
+# oblique near plane's) and t = e IV inv(P0) (its Sherman-Morrison update).  The cull's 14
+# rows (C P0 V, minus the clip plane, the eye, one of scratch) are what it multiplies the
+# corners (and the planes) by; IV^T's last row is the eye, copied into x[0] after the
+# products (a point is not carried as the rows of x[0] are: it is written, not multiplied).
+X_ROWS = 22   # x[0]'s; x[1] has 8
+_X0 = X_ROWS * 4
+_V, _P0V, _CULL, _NEG_CLIP = slice(0, 4), slice(4, 8), slice(8, 22), 19
+_EYE_ROW = 20  # x[0]'s copy of the eye (the cull's facing values: its row times the planes)
 LEVEL_ROW = np.dtype([
-    ("eye", "<f8", (4,)),          # homogeneous world position
-    ("viewport", "<f8", (4,)),     # 0, 0, the level's width and height
-    ("clip_plane", "<f8", (4,)),   # world clip plane (what the view keeps)
-    ("view", "<f8", (16,)),        # world -> eye, row by row
-    ("inv_view", "<f8", (16,)),    # eye -> world, row by row
-    ("rect", "<f8", (4,)),         # x0, y0, x1, y1 where it shows, screen pixels
+    ("rect", "<f8", (4,)),         # x0, y0, -x1, -y1 where it shows, screen pixels (the cull's signs)
+    ("x", "<f8", (_X0 + 8 * 5,)),
+    ("node", "<f8"),               # its index in the tree
+    ("scissor", "<i8", (4,)),      # x, y, w, h in the level's pixels
+    ("block", "<f4", (CAMERA_FLOATS["skip"].stop,)),  # the packed Camera block (CAMERA_DTYPE)
     ("exit_row", "<f8"),           # the SurfaceTable row of the surface it looks out of (-1: none)
     ("view_mask", "<f8"),          # its kinds and the layers it shows (View.view_mask)
     ("mirrored", "<f8"),           # 1.0 where front faces wind clockwise
-    ("node", "<f8"),               # its index in the tree
+    ("parent", "<i8"),             # a candidate's row of its parent in the level above
+    ("surface", "<i8"),            # and of its surface in the SurfaceTable
+    ("fade", "<f8"),               # the reflection's weight (Mirror fades; 1: none)
 ])
 ROW = field_columns(LEVEL_ROW, 8)  # each field's columns
-_EYE, _VIEWPORT, _CLIP, _VIEW, _INV_VIEW, _RECT = (ROW[name] for name in (
-    "eye", "viewport", "clip_plane", "view", "inv_view", "rect"))
-_EXIT_ROW, _MASK, _MIRRORED, _NODE = (ROW[name].start for name in ("exit_row", "view_mask", "mirrored", "node"))
-_CAMERA_PART = slice(_EYE.start, _CLIP.stop)   # eye, viewport, clip plane: the Camera block's, in its order
-_CLIP_VIEW = slice(_CLIP.start, _VIEW.stop)    # the cull's 5 x 4 block
-_IDS_PART = slice(_EXIT_ROW, _MASK + 1)        # exit row and view mask: what decides which surfaces it may see
+_X, _RECT, _BLOCK = (ROW[name] for name in ("x", "rect", "block"))
+_EXIT_ROW, _MASK, _MIRRORED, _NODE, _FADE, _PARENT, _SURFACE = (ROW[name].start for name in (
+    "exit_row", "view_mask", "mirrored", "node", "fade", "parent", "surface"))
+_SCISSOR = ROW["scissor"]
+_IDS_PART = slice(_EXIT_ROW, _MIRRORED + 1)    # exit row, view mask, mirrored: what decides which surfaces
+# it may see and what its children's are
+_GRID_PART = slice(_BLOCK.start, _FADE + 1)    # what _child_ids holds for a level's rows: the block, then
+# the exit row, view mask, mirrored, parent, surface, fade
+_EYE = slice(_X.start + _X0 + 7 * 5, _X.start + _X0 + 7 * 5 + 4)  # IV^T's last row: the eye
+_CLIP = slice(_X.start + _NEG_CLIP * 4, _X.start + _NEG_CLIP * 4 + 4)       # minus the clip plane
+assert CAMERA_BLOCK_BYTES == 8 * (_BLOCK.stop - _BLOCK.start)
+assert _EXIT_ROW == _BLOCK.stop and _FADE == _EXIT_ROW + 5
+_GRID_WIDTH = _GRID_PART.stop - _GRID_PART.start
+_GRID_PARENT = _PARENT - _GRID_PART.start  # the parent's column in it
+
+
+def _x0(data: np.ndarray) -> np.ndarray:
+    """``x[0]`` of rows ``data``: (n, X_ROWS, 4)."""
+    return data[:, _X.start:_X.start + _X0].reshape(-1, X_ROWS, 4)
+
+
+def _x1(data: np.ndarray) -> np.ndarray:
+    """``x[1]`` of rows ``data``: (n, 8, 5)."""
+    return data[:, _X.start + _X0:_X.stop].reshape(-1, 8, 5)
 
 
 class LevelRows:
@@ -78,12 +125,12 @@ class LevelRows:
     @property
     def view(self) -> np.ndarray:
         """(n, 4, 4) world -> eye."""
-        return self.data[:, _VIEW].reshape(-1, 4, 4)
+        return _x0(self.data)[:, _V, 0:4]
 
     @property
     def inv_view(self) -> np.ndarray:
         """(n, 4, 4) eye -> world."""
-        return self.data[:, _INV_VIEW].reshape(-1, 4, 4)
+        return _x1(self.data)[:, 4:8, 0:4].transpose(0, 2, 1)
 
     @property
     def eye(self) -> np.ndarray:
@@ -93,12 +140,12 @@ class LevelRows:
     @property
     def clip(self) -> np.ndarray:
         """(n, 4) world clip plane (what the view keeps)."""
-        return self.data[:, _CLIP]
+        return -self.data[:, _CLIP]
 
     @property
     def rect(self) -> np.ndarray:
         """(n, 4) x0, y0, x1, y1 where it shows, screen pixels."""
-        return self.data[:, _RECT]
+        return self.data[:, _RECT] * _SIGNS
 
     @property
     def exit_row(self) -> np.ndarray:
@@ -122,48 +169,116 @@ class LevelRows:
 
     @staticmethod
     def root(view: View) -> LevelRows:
-        """A root view's row, made from its glm values in one array (each a float64 of the
-        float32 glm holds)."""
-        row = np.zeros((1, LevelRows.WIDTH))
-        row[0, _EYE] = (*view.eye, 1.0)
-        row[0, _VIEWPORT] = (0.0, 0.0, *view.size)
-        row[0, _CLIP] = tuple(view.clip_plane)
-        row[0, _VIEW] = _rows(view.view)
-        row[0, _INV_VIEW] = _rows(glm.inverse(view.view))
-        row[0, _RECT] = (0.0, 0.0, *view.size)
-        row[0, [_EXIT_ROW, _MASK, _MIRRORED, _NODE]] = (-1.0, float(view.view_mask), float(view.mirrored), 0.0)
+        """A root view's row (its projection is the tree's root projection), its matrices
+        made in glm doubles of the float32 glm holds (the inverse view: glm's float32
+        inverse, its eye too, as the planner always took it; the cull's rows as three 4 x 4
+        products, ``_cull_blocks``), their bytes joined and written in
+        one copy over a copy of a row kept per size, clip plane, mask and winding (the
+        rectangle, minus the clip plane, the ids): glm's bytes are column-major, so a
+        matrix's are its transpose's rows."""
+        v, proj = glm.dmat4(view.view), glm.dmat4(view.proj)
+        inv_v = glm.dmat4(glm.inverse(view.view))
+        clip_space = glm.transpose(proj * v)  # (P0 V)^T
+        cull = _cull_blocks(view.size)
+        row = _root_template(view.size, view.clip_plane, view.view_mask, view.mirrored).copy()
+        row.reshape(-1)[_ROOT_COLUMNS] = np.frombuffer(b"".join((
+            glm.transpose(v).to_bytes(), clip_space.to_bytes(), (clip_space * cull[0]).to_bytes(),
+            (clip_space * cull[1]).to_bytes(), (clip_space * cull[2]).to_bytes()[:96], inv_v[3].to_bytes(),
+            (inv_v * glm.dmat4(glm.inverse(view.proj))).to_bytes(), inv_v.to_bytes())), np.float64)
         return LevelRows(row)
 
 
-@dataclass
-class Candidates:
-    """A level's candidate views, before its claims say which have pixels: one row each,
-    in claim order (``parent`` rows of the level above, ``surface`` rows of the table)."""
+_ROOT_TEMPLATES: dict[tuple, np.ndarray] = {}
 
-    parent: np.ndarray       # (k,) row of the parent in the level above
-    surface: np.ndarray      # (k,) row in the SurfaceTable
-    rows: LevelRows          # their cameras and screen rectangles (node: claim order from first_index)
-    scissor: np.ndarray      # (k, 4) int x, y, w, h in the level's pixels
-    blocks: np.ndarray       # (k, CAMERA_BLOCK_BYTES / 4) float32: packed Camera blocks
-    size: tuple[int, int]    # the level's pixels
-    fade: np.ndarray         # (k,) the reflection's weight (Mirror fades; 1: none)
-    end: np.ndarray | None = None  # (k,) bool: an end view, cut by the depth limits (None: none asked for)
+
+def _root_template(size: tuple[int, int], clip_plane: glm.vec4, view_mask: int, mirrored: bool) -> np.ndarray:
+    """A root row but its matrices: the rectangle (x0, y0, -x1, -y1), minus the clip plane,
+    the ids (no exit row, its mask and winding, node 0, a fade of 1)."""
+    key = (size, tuple(clip_plane), view_mask, mirrored)
+    found = _ROOT_TEMPLATES.get(key)
+    if found is None:
+        if len(_ROOT_TEMPLATES) > 64:
+            _ROOT_TEMPLATES.clear()
+        found = _ROOT_TEMPLATES[key] = np.zeros((1, LevelRows.WIDTH))
+        found[0, _RECT] = (0.0, 0.0, -size[0], -size[1])
+        found[0, _CLIP] = tuple(-clip_plane)
+        found[0, [_EXIT_ROW, _MASK, _MIRRORED, _NODE, _FADE]] = (-1.0, float(view_mask), float(mirrored), 0.0, 1.0)
+    return found
+
+
+# The columns of a root row LevelRows.root writes in one copy: x[0]'s first 19 rows (V, P0 V and the
+# cull's rows, not minus the clip plane) and its eye row, then x[1]'s first four columns.
+_ROOT_COLUMNS = np.concatenate([np.arange(_X.start, _X.start + 19 * 4),
+                                np.arange(_X.start + _EYE_ROW * 4, _X.start + _EYE_ROW * 4 + 4),
+                                (_X.start + _X0 + np.arange(8)[:, None] * 5 + np.arange(4)[None, :]).reshape(-1)])
+
+
+class Candidates:
+    """A level's candidate views, before its claims say which have pixels: one row each of
+    ``LevelRows`` (claim order), read through views of it made when first asked for (a
+    level's candidates, those it chooses and those that grow are each read for a few)."""
+
+    def __init__(self, rows: LevelRows, size: tuple[int, int], end: np.ndarray | None = None) -> None:
+        self.rows = rows          # their cameras, rectangles, blocks (node: claim order from first_index)
+        self.size = size          # the level's pixels
+        self.end = end            # (k,) bool: an end view, cut by the depth limits (None: none asked for)
+        self._chosen: dict[bytes, Candidates] = {}  # select's, once read-only
 
     def __len__(self) -> int:
-        return len(self.parent)
+        return len(self.rows.data)
+
+    @functools.cached_property
+    def parent(self) -> np.ndarray:
+        """(k,) row of the parent in the level above."""
+        return self.rows.data.view(np.int64)[:, _PARENT]
+
+    @functools.cached_property
+    def surface(self) -> np.ndarray:
+        """(k,) row in the SurfaceTable."""
+        return self.rows.data.view(np.int64)[:, _SURFACE]
+
+    @functools.cached_property
+    def scissor(self) -> np.ndarray:
+        """(k, 4) int x, y, w, h in the level's pixels."""
+        return self.rows.data.view(np.int64)[:, _SCISSOR]
+
+    @functools.cached_property
+    def blocks(self) -> np.ndarray:
+        """(k, CAMERA_BLOCK_BYTES / 4) float32: the packed Camera blocks."""
+        return self.rows.data[:, _BLOCK].view(np.float32)
+
+    @functools.cached_property
+    def fade(self) -> np.ndarray:
+        """(k,) the reflection's weight (Mirror fades; 1: none)."""
+        return self.rows.data[:, _FADE]
 
     def freeze(self) -> None:
-        """Make every array read-only (a kept plan is shared by the frames that read it)."""
-        for array_ in (self.parent, self.surface, self.rows.data, self.scissor, self.blocks, self.fade, self.end):
+        """Make every array read-only (a kept plan is shared by the frames that read it; a
+        view made after this is read-only with its base)."""
+        self.rows.data.flags.writeable = False
+        for name in ("parent", "surface", "scissor", "blocks", "fade", "end"):
+            array_ = self.__dict__.get(name)
             if array_ is not None:
                 array_.flags.writeable = False
 
     def select(self, keep: np.ndarray) -> Candidates:
         """The candidates at ``keep`` (int64 indices), in their order (``take``: several
-        times cheaper than fancy indexing for these small gathers)."""
-        return Candidates(self.parent.take(keep), self.surface.take(keep), LevelRows(self.rows.data.take(keep, axis=0)),
-                          self.scissor.take(keep, axis=0), self.blocks.take(keep, axis=0), self.size,
-                          self.fade.take(keep), None if self.end is None else self.end.take(keep))
+        times cheaper than fancy indexing for these small gathers).  A kept plan's
+        (read-only) keeps its choices, read-only too: the frames that choose the same find
+        the same rows again, and so the plans kept for them (``SurfaceTable.plan``)."""
+        data = self.rows.data
+        if data.flags.writeable:
+            return Candidates(LevelRows(data.take(keep, axis=0)), self.size,
+                              None if self.end is None else self.end.take(keep))
+        key = keep.tobytes()
+        found = self._chosen.get(key)
+        if found is None:
+            if len(self._chosen) > 16:
+                self._chosen.clear()
+            found = self._chosen[key] = Candidates(LevelRows(data.take(keep, axis=0)), self.size,
+                                                   None if self.end is None else self.end.take(keep))
+            found.freeze()
+        return found
 
 
 class SurfaceTable:
@@ -225,16 +340,24 @@ class SurfaceTable:
         # change when its repeats go), ...
         distinct = [np.unique(c, axis=0) for c in self.corners]
         self.corner_count = max((len(c) for c in distinct), default=1)
-        self.corner_columns = np.zeros((self.corner_count, 4, count))  # corner c of every surface: a 4 x S block
+        # corner c of every surface: a 4 x S block; then the planes (the facing values' columns)
+        self.corner_columns = np.zeros((self.corner_count + 1, 4, count))
         for i, c in enumerate(distinct):
-            self.corner_columns[:, :, i] = np.concatenate([c, np.repeat(c[:1], self.corner_count - len(c), axis=0)])
+            self.corner_columns[:-1, :, i] = np.concatenate([c, np.repeat(c[:1], self.corner_count - len(c), axis=0)])
+        self.corner_columns[-1] = self.planes.T
         self.planes_t = np.ascontiguousarray(self.planes.T)
-        # ... the floats of each surface's views (``SURFACE_ROW``) and their integers
-        # (``_SURFACE_INTS``), in the order the view's rows and Camera block take them.
-        self.float_rows = np.concatenate([self.carry.reshape(count, 16), self.inv_carry.reshape(count, 16),
-                                          self.exit_planes, self.is_mirror[:, None], self.scale[:, None]], axis=1)
-        self.int_rows = np.stack([self.exit_rows, visibility_code(_KINDS_BUT_DIRECT, self.layers),
-                                  self.exit_entities, self.kind_bit], axis=1).reshape(count, len(_SURFACE_INTS))
+        # ... and each surface's part of its views' rows (``SURFACE_ROW``): the blocks two
+        # products multiply a parent's ``x`` by (``LEVEL_ROW``), the plane its views look out
+        # of, its resolution scale.
+        self.float_rows = np.zeros((count, _SURFACE_WIDTH))
+        self.float_rows[:, _OPS0] = self.inv_carry.reshape(count, 16)
+        ops = self.float_rows[:, _OPS1].reshape(count, 4, 5)
+        ops[:, :, 0:4] = self.carry.transpose(0, 2, 1)
+        ops[:, :, 4] = np.einsum("sji,sj->si", self.carry, self.exit_planes)  # carry^T e
+        self.float_rows[:, _EXIT_PLANE] = self.exit_planes
+        self.float_rows[:, _NEG_EXIT_PLANE] = -self.exit_planes
+        self.float_rows[:, _SCALE] = self.scale
+        self.keep = visibility_code(_KINDS_BUT_DIRECT, self.layers)  # the mask bits a view through it keeps
         self._depths: dict[tuple[int, int], tuple[np.ndarray, np.ndarray, list[bool], bool]] = {}
         self._biases: dict[tuple, tuple[np.ndarray | None, np.ndarray]] = {}  # _pair_bias's
         self._plans: dict[tuple, tuple[np.ndarray | None, tuple[Candidates | None, int]]] = {}  # plan's, least
@@ -242,6 +365,14 @@ class SurfaceTable:
         self._ends: dict[tuple[int, int], tuple[np.ndarray, np.ndarray, list[bool]]] = {}
         self._unviewed: dict[tuple, tuple[np.ndarray | None, tuple[np.ndarray, np.ndarray]]] = {}  # unviewed's
         self._faded: tuple | None = None  # the last cull's pairs faded out, and for what (cull)
+        self._last_ids: tuple | None = None  # the last parents' rows _pair_bias read, and their ids' bytes
+        self._ids: dict[tuple, np.ndarray] = {}  # _child_ids'
+        self._child_rows: dict[tuple, np.ndarray] = {}  # _child_row's
+        self._cuts: dict[tuple, tuple[np.ndarray | None, np.ndarray, bool]] = {}  # _cut's
+        self._cull_work: dict[int, _CullWork] = {}  # the cull's scratch, by its count of parents
+        self._plan_work: dict[int, _PlanWork] = {}  # _plan's, by its count of views
+        self._plan_buffers: dict[int, _PlanBuffers] = {}  # their arrays, by capacity
+        self._child_tables: dict[tuple, _ChildTable] = {}  # _child_ids' for large levels
         # The resolution scale every surface shares (None: they differ; a level takes its largest).
         self.one_scale = float(self.scale[0]) if count and (self.scale == self.scale[0]).all() else None
 
@@ -304,17 +435,54 @@ class SurfaceTable:
             found = self._ends[key] = (ends, allowed, allowed.tolist())
         return found[1], found[2]
 
+    def _cut(self, depth: int, depth_cap: int, ends: np.ndarray | None) -> tuple[np.ndarray, bool]:
+        """(S,) the surfaces that ``falls_back`` but get no view at ``depth`` (cut by their
+        limits or the cap, not one of ``ends``; switched off), and whether there is one: kept
+        per depth, cap and ``ends`` (the same array while nothing changes)."""
+        key = (depth, depth_cap, id(ends))
+        found = self._cuts.get(key)
+        if found is None or found[0] is not ends:
+            viewable = self._within(depth, depth_cap)[0] if ends is None else \
+                self._with_ends(depth, depth_cap, ends)[0]
+            cut = self.falls_back & ~viewable
+            if len(self._cuts) > 64:
+                self._cuts.clear()
+            found = self._cuts[key] = (ends, cut, bool(cut.any()))
+        return found[1], found[2]
+
+    def _new_plan_work(self, k: int) -> _PlanWork:
+        """A plan's scratch for ``k`` views, kept (views of the buffers of its capacity: the
+        least power of two not below ``k``, at least 16, kept too)."""
+        capacity = max(16, 1 << (k - 1).bit_length())
+        buffers = self._plan_buffers.get(capacity)
+        if buffers is None:
+            buffers = self._plan_buffers[capacity] = _PlanBuffers(capacity)
+        work = _PlanWork(k, buffers)
+        if len(self._plan_work) >= WORK_KEPT:
+            del self._plan_work[next(iter(self._plan_work))]
+        self._plan_work[k] = work
+        return work
+
+    def _new_cull_work(self, count: int) -> _CullWork:
+        """A cull's scratch for ``count`` parents of this table."""
+        return _CullWork(count, self.corner_count, len(self.states))
+
     def _pair_bias(self, data: np.ndarray, depth: int, depth_cap: int, ends: np.ndarray | None,
-                   fallback: bool) -> np.ndarray:
-        """(P, S): what the cull adds to each (parent, surface) facing value: 0 where the
+                   fallback: bool) -> tuple[np.ndarray, bool]:
+        """(P, S): what the cull takes each (parent, surface) facing value from (its bias,
+        negated: the cull keeps minus the facing value, each > 0 out), and whether any pair
+        may be seen at all: 0 where the
         parent view may see the surface at ``depth`` (enabled, within its limits or one of
         ``ends``; with ``fallback``, any surface that ``falls_back``, whatever its limits;
-        and drawn by the view: ``drawn_in`` its mask), -inf where not, and on the surface the
-        view looks out of.  A function of each parent's exit row and mask alone, so kept by
-        their bytes (a level's parents see through the same surfaces frame after frame) with
-        the depth, cap and ``ends`` (an array the view tree keeps while nothing changes)."""
+        and drawn by the view: the visibility rule, ``drawn_in``, a row a parent), +inf where
+        not, and on the surface the view looks out of.  A function of each parent's exit row,
+        mask and winding alone, so kept by their bytes (a level's parents see through the
+        same surfaces frame after frame) with the depth, cap and ``ends`` (an array the view
+        tree keeps while nothing changes); the parents' bytes are kept for ``_child_ids``."""
         ids = data[:, _IDS_PART]
-        key = (ids.tobytes(), depth, depth_cap, id(ends), fallback)
+        id_bytes = ids.tobytes()
+        self._last_ids = (data, id_bytes)
+        key = (id_bytes, depth, depth_cap, id(ends), fallback)
         found = self._biases.get(key)
         if found is None or found[0] is not ends:
             if fallback:
@@ -322,17 +490,96 @@ class SurfaceTable:
             else:
                 allowed = self._within(depth, depth_cap)[0] if ends is None else self._with_ends(depth, depth_cap,
                                                                                                   ends)[0]
-            bias = np.empty((len(data), len(self.states)))
-            for row, (exit_row, mask) in zip(bias, ids.astype(np.int64).tolist(), strict=True):
-                drawn = self.drawn_in(mask)
-                row[:] = np.where(allowed if drawn is None else allowed & drawn, 0.0, -np.inf)
-                if exit_row >= 0:
-                    row[exit_row] = -np.inf
+            seen = allowed & drawn_in(self.drawn, ids[:, 1:2].astype(np.int64))  # the rule, a row a parent
+            exit_rows = ids[:, 0].astype(np.int64)
+            looks_out = np.flatnonzero(exit_rows >= 0)
+            seen[looks_out, exit_rows[looks_out]] = False
+            bias = np.where(seen, 0.0, np.inf)
             bias.flags.writeable = False
             if len(self._biases) > 256:
                 self._biases.clear()
-            found = self._biases[key] = (ends, bias)
+            found = self._biases[key] = (ends, (bias, bool(seen.any())))
         return found[1]
+
+    def _child_ids(self, data: np.ndarray, hide: int, root_rows: _RootRows, size: tuple[int, int],
+                   p: np.ndarray, s: np.ndarray) -> np.ndarray:
+        """(k, _GRID_WIDTH) 8-byte words (int64): for each pair (p, s), what a view through
+        surface s from parent row p of ``data`` holds that is not a matter of the camera,
+        laid out as ``LEVEL_ROW`` from its Camera block on: the block with its projection
+        (the root's, ``root_rows``: its third row is the view's own, written over), viewport
+        (``size``), clip plane and ids but the node (uint32 skip, hide, view mask); then its
+        exit row, view mask, winding, p, s (int64s) and a fade of 1.0.
+
+        Gathered from each parent's rows (``_child_row``, kept by its ids).  A level of a
+        few pairs (``GRID_KEPT_CELLS`` at most) keeps the whole (P, S) grid of them, by the
+        parents' ids (the bytes the cull's ``_pair_bias`` read of them), ``hide``, the root
+        projection and the size, and gathers from it in one operation the next frames; a
+        larger one (whose parents, chosen by their pixels, change from frame to frame)
+        gathers from a table of every parent's rows seen with this ``hide``, projection and
+        size (``_ChildTable``), and makes no grid."""
+        count, surfaces = len(data), len(self.states)
+        ids = data[:, _IDS_PART]
+        if count * surfaces > GRID_KEPT_CELLS:
+            table = self._child_tables.get((hide, root_rows.key, size))
+            if table is None:
+                if len(self._child_tables) > 16:
+                    self._child_tables.clear()
+                table = self._child_tables[(hide, root_rows.key, size)] = _ChildTable()
+            firsts = table.firsts
+            at = [firsts.get(row) for row in map(tuple, ids.tolist())]
+            if None in at:  # parents with ids not seen yet: their rows join the table
+                for row in map(tuple, ids.tolist()):
+                    if row not in firsts:
+                        firsts[row] = surfaces * len(table.rows)
+                        table.rows.append(self._child_row(*row, hide, root_rows, size))
+                table.stacked = np.concatenate(table.rows)
+                at = [firsts[row] for row in map(tuple, ids.tolist())]
+            found = table.stacked.take(np.array(at).take(p) + s, axis=0)
+            found[:, _GRID_PARENT] = p
+            return found
+        last = self._last_ids
+        id_bytes = last[1] if last is not None and last[0] is data else ids.tobytes()
+        key = (id_bytes, hide, root_rows.key, size)
+        grid = self._ids.get(key)
+        if grid is None:
+            grid = np.concatenate([self._child_row(exit_row, mask, mirrored, hide, root_rows, size)
+                                   for exit_row, mask, mirrored in ids.tolist()]).reshape(
+                count, surfaces, _GRID_WIDTH)
+            grid[:, :, _GRID_PARENT] = np.arange(count)[:, None]
+            grid.flags.writeable = False
+            if len(self._ids) > 64:
+                self._ids.clear()
+            self._ids[key] = grid
+        return grid[p, s]
+
+    def _child_row(self, exit_row: float, mask: float, mirrored: float, hide: int, root_rows: _RootRows,
+                   size: tuple[int, int]) -> np.ndarray:
+        """(S, _GRID_WIDTH) int64: ``_child_ids``' rows of a parent with these ids (its row
+        number 0).  A view's mask: the kinds of its chain, the layers every surface of its
+        chain shows."""
+        key = (exit_row, mask, mirrored, hide, root_rows.key, size)
+        found = self._child_rows.get(key)
+        if found is None:
+            rows = np.zeros((len(self.states), _GRID_WIDTH))
+            block = rows[:, 0:_BLOCK.stop - _BLOCK.start].view(np.float32)
+            block[:, _MATRICES.start + 16:_MATRICES.start + 32] = root_rows.proj_t.reshape(16)
+            block[:, _CAMERA_VIEWPORT] = (0.0, 0.0, *size)
+            block[:, _CAMERA_CLIP] = self.exit_planes
+            child_mask = (int(mask) & self.keep) | self.kind_bit
+            ids = block[:, CAMERA_FLOATS["skip"]].view(np.uint32)
+            ids[:, _ID_SKIP] = self.exit_entities & 0xFFFFFFFF
+            ids[:, _ID_HIDE] = hide & 0xFFFFFFFF
+            ids[:, _ID_MASK] = child_mask & 0xFFFFFFFF
+            rest = rows[:, _BLOCK.stop - _BLOCK.start:]
+            rest[:, 0] = self.exit_rows
+            rest[:, 1] = child_mask
+            rest[:, 2] = mirrored != self.is_mirror
+            rest.view(np.int64)[:, 4] = np.arange(len(self.states))
+            rest[:, 5] = 1.0
+            if len(self._child_rows) > 1024:
+                self._child_rows.clear()
+            found = self._child_rows[key] = rows.view(np.int64)  # copied as integers: bit for bit
+        return found
 
     def cull(self, parents: LevelRows, depth: int, root_proj: np.ndarray, root_size: tuple[int, int],
              depth_cap: int, ends: np.ndarray | None = None,
@@ -342,62 +589,65 @@ class SurfaceTable:
         looks out of, facing the view's eye (a mirror facing away shows nothing, as the
         "Multiple Mirrors" project notes), not wholly behind the view's clip plane, inside
         the frustum and overlapping the parent's rectangle.  ``depth`` is the level the
-        views would be on.  Returns (parent rows, surface rows, rects x0 y0 x1 y1), parent
-        major, and the fade weights of the pairs seen before the fades (None: no surface
-        fades; a pair faded out, weight 0, is not returned).  With ``ends`` (a mask of
-        surfaces), the pairs of those surfaces the depth limits cut are kept too: the end
-        views (``engine/render/end_images.py``).  With ``fallback`` (``unviewed``), every
-        surface that ``falls_back`` is tested whatever its limits, and the pairs faded out
-        are returned too (their weight 0).
+        views would be on.  Returns (parent rows, surface rows, rects x0 y0 -x1 -y1 (the
+        signs ``LEVEL_ROW`` keeps them with)), parent major, and the fade weights of the
+        pairs seen before the fades (None: no surface fades; a pair faded out, weight 0, is
+        not returned).  With ``ends`` (a mask of surfaces), the pairs of those surfaces the
+        depth limits cut are kept too: the end views (``engine/render/end_images.py``).
+        With ``fallback`` (``unviewed``), every surface that ``falls_back`` is tested
+        whatever its limits, and the pairs faded out are returned too (their weight 0).
+        ``root_proj`` is the one the parents' rows were made with (their clip space).
 
         Every (parent x surface) pair goes through the same few array operations, the
         whole grid at once: in a frame, after the rasteriser has run, each numpy call costs
         about twice what it does in a warm loop (measured), so their number, not the pairs
         they hold, is what a level costs at these sizes.  One product takes every distinct
-        corner of every surface through 12 rows per parent (``_cull_rows``): x, y, -x, -y
-        and w in clip space, six values > 0 outside each side of the frustum, and minus the
-        side of the parent's clip plane.  Then one minimum over the corners gives each
-        pair's frustum and clip-plane tests, and, with x and y divided by w first, its
-        rectangle's four sides as minima (x0, y0, -x1, -y1: the same rounding rule, floor
-        then one pixel out, for each side)."""
+        corner of every surface through 14 rows per parent, kept in its ``x`` (``C P0 V``
+        from its clip space): the rectangle's sides x0, y0, -x1, -y1 in pixels, a pixel
+        outwards, times w, then w, six values > 0 outside each side of the frustum, minus
+        the side of the parent's clip plane, the eye and a row of scratch; the surfaces'
+        planes are one more "corner", so the eye's row times them gives the facing values
+        in the same product.  Then one minimum over the corners gives each pair's frustum
+        and clip-plane tests, and, with the sides divided by w first, its rectangle's four
+        sides as minima (the same rounding rule, one pixel out then floor, for each side)."""
         count, surfaces = len(parents.data), len(self.states)
         if not count or not surfaces:
             return _NONE, _NONE, _NO_RECTS, None
         if ends is None and not fallback and not self._within(depth, depth_cap)[3]:
             return _NONE, _NONE, _NO_RECTS, None  # nothing enabled may be seen this deep
         data = parents.data
-        # First what needs no corners: facing the view's eye, and allowed (enabled, within
-        # its depth, drawn by the view, not the surface the view looks out of): one product
-        # and a bias per pair, -inf where a surface is not allowed (_pair_bias).
-        facing = data[:, _EYE] @ self.planes_t                                       # P x S
-        facing += self._pair_bias(data, depth, depth_cap, ends, fallback)
-        if not facing.max() > 0.0:
+        # First what needs no corners: allowed (enabled, within its depth, drawn by the view,
+        # not the surface the view looks out of): a bias per pair, +inf where a surface is
+        # not allowed (_pair_bias), and nothing to do where none is.
+        neg_bias, any_allowed = self._pair_bias(data, depth, depth_cap, ends, fallback)
+        if not any_allowed:
             return _NONE, _NONE, _NO_RECTS, None
-        # Rows first: (12, 5) times every parent's (5, 4) block side by side, then (12 P, 4)
-        # times each corner's (4, S) gives (corners, 12, P, S), so x and y are divided by w,
-        # and the minima over the corners and over the rows taken, along the first axis
-        # (numpy's fast one for small arrays), in whole blocks.
-        block = data[:, _CLIP_VIEW].reshape(count, 5, 4).transpose(1, 0, 2).reshape(5, 4 * count)
-        clip = (_cull_rows(root_proj) @ block).reshape(12 * count, 4) @ self.corner_columns
-        clip = clip.reshape(self.corner_count, 12, count, surfaces)
-        np.divide(clip[:, 0:4], np.maximum(clip[:, 4:5], 1e-6), out=clip[:, 0:4])  # a w <= 0: see straddles
-        least = _MIN(clip, axis=0)                                                       # 12 x P x S
+        # Each parent's 14 rows (kept in its ``x``), row by row (the 14 P rows row major: a
+        # row's values of every parent and surface are one contiguous block below), times
+        # each corner's (4, S) gives (corners, 14, P, S), so the sides are divided by w, and
+        # the minima over the corners; the planes as one more corner give the facing values
+        # (the eye's row times them).
+        work = self._cull_work.get(count) or _kept_work(self._cull_work, count, self._new_cull_work)
+        np.matmul(_x0(data)[:, _CULL].transpose(1, 0, 2).reshape(14 * count, 4), self.corner_columns,
+                  out=work.product)
+        np.maximum(work.w, work.epsilon, out=work.w_safe)  # w <= 0: see straddles
+        np.divide(work.sides, work.w_safe, out=work.sides)
+        least = _MIN(work.corners, axis=0, out=work.least)                                  # 14 x P x S
         # x0, y0, -x1, -y1 in pixels, rounded outwards with a pixel's margin; a pair with a
         # corner behind the eye is conservative (the parent's whole rectangle).
-        rects = least[0:4] + _OUTWARDS
-        rects *= _half_sizes(root_size)
-        np.floor(rects, out=rects)
-        rects -= 1.0
-        np.copyto(rects, -np.inf, where=least[4] <= 1e-6)
-        np.maximum(rects, (data[:, _RECT] * _SIGNS).T[:, :, None], out=rects)  # inside the parent's
+        rects = work.rects
+        np.floor(rects, out=rects)  # (the pixel's margin is in the rows: each side less w)
+        if work.least_w.min() <= 1e-6:
+            np.copyto(rects, -np.inf, where=least[4] <= 1e-6)
+        np.maximum(rects, data[:, _RECT].T[:, :, None], out=rects)  # inside the parent's
         # Seen: facing and allowed, not culled (every corner outside one side of the frustum,
         # or behind the clip plane; on a side counts as outside) and a rectangle with pixels
-        # (x1 > x0 and y1 > y0): one maximum over the rows 2-11, written over, each < 0 to keep.
-        np.negative(facing, out=least[2])
-        np.add(rects[0:2], rects[2:4], out=least[3:5])
-        p, s = np.nonzero(_MAX(least[2:12], axis=0) < 0.0)
+        # (x1 > x0 and y1 > y0): one maximum over the rows 4-13, written over, each < 0 to keep.
+        np.subtract(neg_bias, work.facing, out=work.least_w)
+        np.add(work.x0y0, work.x1y1, out=work.sizes)
+        np.less(_MAX(work.tests, axis=0, out=work.worst), 0.0, out=work.seen)
+        p, s = np.nonzero(work.seen)
         rects = rects[:, p, s].T
-        rects *= _SIGNS
         if not self.fading:
             return p, s, rects, None
         fade = self.fade_weights(parents.eye[p], s)
@@ -416,19 +666,21 @@ class SurfaceTable:
         switched off (a mirror), or faded out (weight 0).  Their pixels get the fallback
         (``engine/render/mirror_passes.py``).  No array work when nothing can be cut here
         and nothing fades (a level with every surface it sees within its limits)."""
-        viewable = self._within(depth, depth_cap)[0] if ends is None else self._with_ends(depth, depth_cap, ends)[0]
-        cut = self.falls_back & ~viewable
-        if not len(parents.data) or (not cut.any() and not self.fading):
+        cut, cuts_any = self._cut(depth, depth_cap, ends)
+        if not len(parents.data) or (not cuts_any and not self.fading):
             return _NONE, _NONE
-        # Kept like the plans (``plan``): the same parent rows (a still camera, a probe face)
-        # give the same pairs, for the price of comparing bytes.
-        key = (parents.data.tobytes(), root_proj.tobytes(), depth, depth_cap, root_size, id(ends))
-        found = self._unviewed.pop(key, None)
-        if found is not None and found[0] is ends:
-            self._unviewed[key] = found
-            return found[1]
+        # Kept like the plans (``plan``): the same read-only parent rows (a still camera, a
+        # probe face), known by identity, give the same pairs.
+        data = parents.data
+        key = None if data.flags.writeable or root_proj.flags.writeable else (
+            id(data), id(root_proj), depth, depth_cap, root_size, id(ends))
+        if key is not None:
+            found = self._unviewed.pop(key, None)
+            if found is not None and found[0][0] is data and found[0][1] is root_proj and found[0][2] is ends:
+                self._unviewed[key] = found
+                return found[1]
         faded = self._faded
-        if not cut.any() and faded is not None and faded[0] is parents.data and faded[1:3] == (depth, depth_cap) \
+        if not cuts_any and faded is not None and faded[0] is parents.data and faded[1:3] == (depth, depth_cap) \
                 and faded[3] is ends:
             # Nothing cut here: the pairs without a view are those the plan's cull just faded out.
             pairs = (faded[4], faded[5])
@@ -438,9 +690,10 @@ class SurfaceTable:
             pairs = (p[unviewed], s[unviewed])
         for array_ in pairs:
             array_.flags.writeable = False  # shared by the frames that find them again
-        if len(self._unviewed) >= PLANS_KEPT:
-            del self._unviewed[next(iter(self._unviewed))]
-        self._unviewed[key] = (ends, pairs)
+        if key is not None:
+            if len(self._unviewed) >= PLANS_KEPT:
+                del self._unviewed[next(iter(self._unviewed))]
+            self._unviewed[key] = ((data, root_proj, ends), pairs)
         return pairs
 
     def fade_weights(self, eyes: np.ndarray, s: np.ndarray) -> np.ndarray:
@@ -462,21 +715,29 @@ class SurfaceTable:
         """``_plan``, kept: a level's plan is a function of the table (made again when a
         surface changes) and these arguments alone, so a level planned before from the same
         parent rows (a probe face's tree, whose camera stands still; a still main camera)
-        is that plan again, read-only, for the price of comparing its inputs' bytes.  The
-        ``PLANS_KEPT`` plans used last are kept."""
-        key = (parents.data.tobytes(), root_proj.tobytes(), depth, first_index, depth_cap, hide, size, scale,
-               root.size, id(ends))
-        found = self._plans.pop(key, None)
-        if found is not None and found[0] is ends:
-            self._plans[key] = found  # the most recently used last
-            return found[1]
+        is that plan again, read-only.  The rows are known by identity, for the price of a
+        dictionary look-up (a moving camera's are new every frame: bytes compared would be
+        paid for nothing): read-only rows the view tree keeps while its root's camera stands
+        still (``ViewTree._root_rows``), and a kept plan's candidates, read-only with the
+        choices made from them (``Candidates.select``); rows that can still change are
+        planned afresh.  The ``PLANS_KEPT`` plans used last are kept, each holding the
+        arrays it is known by."""
+        data = parents.data
+        key = None if data.flags.writeable or root_proj.flags.writeable else (
+            id(data), id(root_proj), depth, first_index, depth_cap, hide, size, scale, root.size, id(ends))
+        if key is not None:
+            found = self._plans.pop(key, None)
+            if found is not None and found[0][0] is data and found[0][1] is root_proj and found[0][2] is ends:
+                self._plans[key] = found  # the most recently used last
+                return found[1]
         planned = self._plan(parents, depth, root, root_proj, inv_root_proj, first_index, depth_cap, hide, ends,
                              size, scale)
         if planned[0] is not None:
             planned[0].freeze()
-        if len(self._plans) >= PLANS_KEPT:
-            del self._plans[next(iter(self._plans))]  # the least recently used
-        self._plans[key] = (ends, planned)
+        if key is not None:
+            if len(self._plans) >= PLANS_KEPT:
+                del self._plans[next(iter(self._plans))]  # the least recently used
+            self._plans[key] = ((data, root_proj, ends), planned)
         return planned
 
     def _plan(self, parents: LevelRows, depth: int, root: View, root_proj: np.ndarray, inv_root_proj: np.ndarray,
@@ -493,83 +754,82 @@ class SurfaceTable:
         ``Candidates.end``); ``size``: the level's pixels, when given; ``scale``: a factor on
         the level's resolution (the frame's pixel budget, ``ViewTree``).
 
-        Like the cull, a fixed number of array operations whatever the number of views:
-        each candidate's parent row and surface rows are gathered once (``take``), and the
-        results are written where they are read next (the level's rows, the Camera blocks)."""
+        Like the cull, a fixed number of array operations whatever the number of views
+        (about 27 after the cull's, four of them products): each candidate's parent row and
+        surface row are gathered once (``take``); two products carry all of the parent's
+        matrices (``x``) through the surface, and give the plane it looks out of in view
+        space (p) and that plane through the inverse root projection (t), from which Lengyel's near plane is a
+        scalar a view: with P0 the root projection, s = (sign p.x, sign p.y, 1, 1) and
+        f = 2 / (t . s), the projection's third row is f p - P0[3], the view-projection's is
+        f e - (P0 V)[3] (p V = e, the world plane), and its inverse is Sherman-Morrison's
+        rank-one update of IV inv(P0), kept in ``x``.  What is not a matter of the camera
+        (the block's projection, viewport, clip plane and ids; the exit row, view mask,
+        winding) is gathered from ``_child_ids``.
+        Everything is written where it is read next: each candidate's ``LevelRows`` row,
+        its Camera block inside it."""
         p, s, rects, weights = self.cull(parents, depth, root_proj, root.size, depth_cap, ends)
         if weights is None:
-            faded, fade = 0, None
+            faded = 0
         else:
             faded = int((weights == 0.0).sum())
-            fade = weights[weights > 0.0]
         k = len(p)
         if not k:
             return None, faded
-        surface = self.float_rows.take(s, axis=0)
-        ints = self.int_rows.take(s, axis=0)
-        parent = parents.data.take(p, axis=0)
+        w = self._plan_work.get(k) or self._new_plan_work(k)
+        w.surface[...] = self.float_rows.take(s, axis=0)  # (take with out= costs more than take and a copy)
+        w.parent[...] = parents.data[:, _X].take(p, axis=0)  # the parents' matrices (no more of their rows)
         if size is None:
-            scale *= self.one_scale if self.one_scale is not None else float(surface[:, _SCALE].max())
-            size = (max(1, round(root.size[0] * scale)), max(1, round(root.size[1] * scale)))
-        data = np.empty((k, LevelRows.WIDTH))
-        view = data[:, _VIEW].reshape(k, 4, 4)
-        inv_view = data[:, _INV_VIEW].reshape(k, 4, 4)
-        np.matmul(parent[:, _VIEW].reshape(k, 4, 4), surface[:, _INV_CARRY].reshape(k, 4, 4), out=view)
-        np.matmul(surface[:, _CARRY].reshape(k, 4, 4), parent[:, _INV_VIEW].reshape(k, 4, 4), out=inv_view)
-        data[:, _EYE] = inv_view[:, :, 3]  # where the carried camera is: its eye-to-world translation
-        data[:, _VIEWPORT] = (0.0, 0.0, *size)
-        data[:, _CLIP] = clip = surface[:, _EXIT_PLANE]
-        data[:, _RECT] = rects
-        mask = ints[:, _KEEP]  # a view shows the layers every surface of its chain shows
-        np.bitwise_and(parent[:, _MASK].astype(np.int64), mask, out=mask)
-        mask |= ints[:, _KIND_BIT]
-        data[:, _IDS_PART] = ints[:, _EXIT_ROW_AND_KEEP]  # the exit's row, the mask
-        np.not_equal(parent[:, _MIRRORED], surface[:, _IS_MIRROR], out=data[:, _MIRRORED])
-        data[:, _NODE] = np.arange(first_index, first_index + k)
-        proj, inv_proj = _oblique_projections(root_proj, inv_root_proj, inv_view, clip)
-        # The Camera blocks (CAMERA_DTYPE) as float32 columns: the four matrices written
-        # straight into their columns (column-major: each seen transposed), then the eye,
-        # viewport and clip plane in one copy, then the ids.
-        blocks = np.empty((k, _CAMERA_WIDTH), np.float32)
-        matrices = blocks[:, _MATRICES].reshape(k, 4, 4, 4).transpose(0, 1, 3, 2)
-        matrices[:, 0] = view
-        matrices[:, 1] = proj
-        np.matmul(proj, view, out=matrices[:, 2])
-        np.matmul(inv_view, inv_proj, out=matrices[:, 3])
-        blocks[:, _CAMERA_ROWS] = data[:, _CAMERA_PART]
-        ids = blocks[:, _CAMERA_ID_COLUMNS].view(np.uint32)
-        ids[:, _ID_SKIP_AND_MASK] = ints[:, _EXIT_ENTITY_AND_KEEP]  # skip (the exit entity), mask
-        ids[:, _ID_HIDE] = hide
-        ids[:, _ID_NODE] = data[:, _NODE]  # the view's node (the node image's value for its pixels)
+            scale *= self.one_scale if self.one_scale is not None else float(w.scale.max())
+            size = _level_size(root.size, scale)
+        np.matmul(w.parent_x0, w.ops0, out=w.x0)
+        np.matmul(w.parent_x1, w.ops1, out=w.x1)
+        np.copyto(w.eye_row, w.eye)  # the cull's copy of the eye
+        np.copyto(w.clip, w.neg_exit)
+        np.copyto(w.rect, rects)
+        root_rows = _root_rows(root_proj)
+        w.grid[...] = self._child_ids(parents.data, hide, root_rows, size, p, s)
+        if weights is not None:
+            w.fade[...] = weights[weights > 0.0]
+        node = _node_numbers(first_index, k)
+        np.copyto(w.node, node)
+        if size == root.size:  # whole pixels already: x, y, -(x1 + x0)... as x, y, w, h
+            np.matmul(rects, _TO_SCISSOR, out=w.scissor, casting="unsafe")
+        else:
+            w.scissor[...] = level_rects(rects * _SIGNS, root.size, size)
+        # The Camera blocks (CAMERA_DTYPE) as float32 columns: each matrix column-major (its
+        # transpose, row by row).
+        np.copyto(w.block_node, node, casting="unsafe")  # the node image's value for its pixels
+        np.copyto(w.v_p0v_block, w.v_p0v, casting="same_kind")  # V, P0 V
+        np.sign(w.plane_xy, out=w.signs_xy)
+        f = np.vecdot(w.through, w.signs, out=w.f)
+        np.divide(w.two, f, out=f)  # (an array of twos: a scalar operand costs more)
+        np.multiply(w.col4, w.f_col, out=w.scaled)  # f t, f p
+        if w.buffers.fourth_of is not root_proj or root_proj.flags.writeable:
+            np.copyto(w.buffers.fourth, root_proj[3])  # P0[3] a row a view (a broadcast operand costs more)
+            w.buffers.fourth_of = root_proj
+        np.subtract(w.fp, w.fourth, out=w.proj_row, casting="same_kind")  # the third row: f p - P0[3]
+        np.multiply(w.exit, w.f_col, out=w.fe)
+        np.subtract(w.fe, w.p0v_row3, out=w.vp_row, casting="same_kind")  # f e - (P0 V)[3]
+        # (IV P^-1)^T = (IV inv(P0))^T - b a^T, with a = IV inv(P0) e2 (the third row of the
+        # kept transpose) and b = u / (1 + u . e2), u = (f p - P0[2] - P0[3]) inv(P0) = f t - e2 - e3
+        # (so 1 + u . e2 = f t . e2).
+        np.subtract(w.ft, w.e23, out=w.b)
+        np.divide(w.b, w.ft2, out=w.b)
+        np.multiply(w.b_col, w.a_row, out=w.outer)
+        np.subtract(w.inv_source, w.outer, out=w.inv, casting="same_kind")
+        # Too close to its plane, a view keeps the root projection (the clip distance alone).
+        safe = root_rows.safe_distance
+        if min(map(abs, w.plane_w.tolist())) <= safe:
+            close = np.abs(w.plane_w) <= safe
+            np.copyto(w.proj_row, root_proj[2], where=close[:, None], casting="same_kind")
+            np.copyto(w.vp_row, w.p0v_row2, where=close[:, None], casting="same_kind")
+            np.copyto(w.inv, w.inv_source, where=close[:, None, None], casting="same_kind")
+        np.copyto(w.block_eye, w.eye, casting="same_kind")
+        data = w.data.copy()
         end = None if ends is None else self._within(depth, depth_cap)[1].take(s)
-        return Candidates(p, s, LevelRows(data), level_rects(rects, root.size, size), blocks, size,
-                          fade if fade is not None else _ones(k), end), faded
-
-
-def _oblique_projections(root_proj: np.ndarray, inv_root_proj: np.ndarray, inv_view: np.ndarray,
-                         clip: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Lengyel's oblique near plane for each view (``reflection_math.oblique_projection``, in
-    arrays), and the projections' inverses: the root projection's third row replaced so that
-    the clip plane, in view space, is the near plane; the root projection where the eye is
-    too close to the plane.  One row changes, so each inverse is a rank-one update of the
-    root's (Sherman-Morrison), not a 4 x 4 inversion."""
-    plane = np.matmul(clip[:, None, :], inv_view)[:, 0]  # planes transform by the inverse transpose; the
-    # construction below is unchanged by the plane's (positive) scale, so it is not normalised
-    root = _projection(root_proj, inv_root_proj)
-    safe = np.abs(plane[:, 3]) > root.safe_distance  # the eye's distance to the plane: clip . eye
-    q = np.sign(plane[:, :2]) @ root.inv_xy_t
-    q += root.inv_zw
-    c = plane * (2.0 / np.vecdot(plane, q))[:, None]
-    c -= root.rows_2_3
-    change = np.where(safe[:, None], c, 0.0)  # the third row's change
-    proj = root_proj[None].repeat(len(plane), 0)
-    proj[:, 2] += change
-    # The inverse: P = P0 + e2 change^T, so P^-1 = P0^-1 - (P0^-1 e2)(change^T P0^-1) / (1 + change^T P0^-1 e2),
-    # both products of the change in one (root.inv_and_column: P0^-1 with its third column after it).
-    row = change @ root.inv_and_column
-    row[:, 0:4] /= 1.0 + row[:, 4:5]
-    inv_proj = inv_root_proj - root.column[None, :, None] * row[:, None, 0:4]
-    return proj, inv_proj
+        candidates = Candidates(LevelRows(data), size, end)
+        candidates.__dict__.update(parent=p, surface=s)  # the cull's arrays: no views to make when read
+        return candidates, faded
 
 
 def level_rects(rects: np.ndarray, screen: tuple[int, int], level: tuple[int, int]) -> np.ndarray:
@@ -585,142 +845,251 @@ def level_rects(rects: np.ndarray, screen: tuple[int, int], level: tuple[int, in
     return np.concatenate([x0y0, np.maximum(1.0, x1y1 - x0y0)], axis=1).astype(np.int64)
 
 
-# SurfaceTable.float_rows: each surface's carry and its inverse (row by row), the plane its
-# views look out of, 1.0 for a mirror, its resolution scale.
-SURFACE_ROW = np.dtype([("carry", "<f8", (16,)), ("inv_carry", "<f8", (16,)), ("exit_plane", "<f8", (4,)),
-                        ("is_mirror", "<f8"), ("resolution_scale", "<f8")])
-_SURFACE = field_columns(SURFACE_ROW, 8)
-_CARRY, _INV_CARRY, _EXIT_PLANE = _SURFACE["carry"], _SURFACE["inv_carry"], _SURFACE["exit_plane"]
-_IS_MIRROR, _SCALE = _SURFACE["is_mirror"].start, _SURFACE["resolution_scale"].start
-# SurfaceTable.int_rows: the row of the surface its views look out of, the view mask bits a view
-# through it keeps (its layers and every kind but direct), the entity they look out of, the
-# kind bit it adds.  Laid out so that the pairs the rows and blocks take together are slices.
-_SURFACE_INTS = ("exit_row", "keep", "exit_entity", "kind_bit")
-_KEEP, _KIND_BIT = _SURFACE_INTS.index("keep"), _SURFACE_INTS.index("kind_bit")
-_EXIT_ROW_AND_KEEP = slice(_SURFACE_INTS.index("exit_row"), _KEEP + 1)  # LevelRows' exit_row, view_mask
-_EXIT_ENTITY_AND_KEEP = slice(_SURFACE_INTS.index("exit_entity"), _KEEP - 1, -1)  # the Camera ids' skip, mask
-assert _MASK == _EXIT_ROW + 1 and _KEEP == 1 and _SURFACE_INTS.index("exit_entity") == 2
+# SurfaceTable.float_rows: what multiplies a parent's ``x`` (LEVEL_ROW) from the right: inv(carry)
+# (x[0]'s), then carry^T and carry^T e (x[1]'s, 4 x 5; e the plane its views look out of); that
+# plane and its negative; its resolution scale.
+SURFACE_ROW = np.dtype([("inv_carry", "<f8", (4, 4)), ("ops", "<f8", (4, 5)), ("exit_plane", "<f8", (4,)),
+                        ("neg_exit_plane", "<f8", (4,)), ("resolution_scale", "<f8")])
+_SURFACE_COLUMNS = field_columns(SURFACE_ROW, 8)
+_SURFACE_WIDTH = SURFACE_ROW.itemsize // 8
+_OPS, _EXIT_PLANE, _NEG_EXIT_PLANE = (_SURFACE_COLUMNS[name] for name in ("ops", "exit_plane", "neg_exit_plane"))
+_OPS0, _OPS1 = _SURFACE_COLUMNS["inv_carry"], _OPS
+_SCALE = _SURFACE_COLUMNS["resolution_scale"].start
 # The Camera block's float32 columns (CAMERA_DTYPE) the planner writes.
-_CAMERA_WIDTH = CAMERA_BLOCK_BYTES // 4
 _MATRICES = slice(CAMERA_FLOATS["view"].start, CAMERA_FLOATS["inv_view_proj"].stop)
-_CAMERA_ROWS = slice(CAMERA_FLOATS["eye"].start, CAMERA_FLOATS["clip_plane"].stop)
-_CAMERA_ID_COLUMNS = CAMERA_FLOATS["skip"]
-_ID_SKIP_AND_MASK = slice(CAMERA_IDS.index("skip"), None, CAMERA_IDS.index("view_mask") - CAMERA_IDS.index("skip"))
-_ID_HIDE, _ID_NODE = CAMERA_IDS.index("hide"), CAMERA_IDS.index("node")
+_CAMERA_EYE, _CAMERA_VIEWPORT, _CAMERA_CLIP = (CAMERA_FLOATS[name] for name in ("eye", "viewport", "clip_plane"))
+_ID_SKIP, _ID_HIDE, _ID_MASK, _ID_NODE = (CAMERA_IDS.index(name) for name in ("skip", "hide", "view_mask", "node"))
+_ID_NODE_COLUMN = CAMERA_FLOATS["skip"].start + _ID_NODE  # the node's uint32 column in a block
 assert CAMERA_DTYPE.names[:4] == ("view", "proj", "view_proj", "inv_view_proj")  # the matrices, in order
-assert _CAMERA_ROWS.stop - _CAMERA_ROWS.start == _CAMERA_PART.stop - _CAMERA_PART.start  # eye, viewport, clip
+assert CAMERA_FLOATS["skip"].stop == CAMERA_BLOCK_BYTES // 4 and CAMERA_FLOATS["skip"].start % 2 == 0
+assert _ID_NODE == 3  # the last: the ids but the node are the first three of the last two float64s
 
 _NONE = np.zeros(0, np.int64)
 _NO_RECTS = np.zeros((0, 4))
 _NEVER = (1e30, 2e30, 1e30, 2e30)  # fade starts no distance or angle reaches
-# A rectangle as the cull keeps it, x0, y0, -x1, -y1: its signs, the pixel axis of each
-# side, and what each side's NDC value gets before it is scaled to pixels and floored.
+# A rectangle as the cull keeps it, x0, y0, -x1, -y1: its signs, and what makes it x, y, w, h.
 _SIGNS = np.array([1.0, 1.0, -1.0, -1.0])
-_XYXY = np.array([0, 1, 0, 1])
-_OUTWARDS = np.array([1.0, 1.0, -1.0, -1.0])[:, None, None]
+_E23 = np.array([0.0, 0.0, 1.0, 1.0])
+_TO_SCISSOR = np.array([[1, 0, -1, 0], [0, 1, 0, -1], [0, 0, -1, 0], [0, 0, 0, -1]], np.float64)
 _MIN, _MAX = np.minimum.reduce, np.maximum.reduce
 
-# From the rows of a projection (x, y, z, w) and a view's clip plane, the rows
-# SurfaceTable.cull applies to the block (clip plane; view matrix) of a view (LevelRows'
-# clip_plane and view) and then to every corner: x, y, -x, -y, w, then x - w, y - w, z - w, -x - w,
-# -y - w, -z - w (each > 0 outside one side of the frustum), then minus the clip plane.
+# The rows SurfaceTable.cull applies to a view's clip space (x, y, z, w, the rows of P0 V) to
+# get, over each corner: x0, y0, -x1, -y1 in pixels times w (half the root's width or height
+# times x + w, y + w, -x - w, -y - w, less w: a pixel outwards), w, then x - w, y - w, z - w, -x - w, -y - w, -z - w
+# (each > 0 outside one side of the frustum).
 _CULL_ROWS = np.array([
-    [1, 0, 0, 0], [0, 1, 0, 0], [-1, 0, 0, 0], [0, -1, 0, 0], [0, 0, 0, 1],
+    [1, 0, 0, 1], [0, 1, 0, 1], [-1, 0, 0, -1], [0, -1, 0, -1], [0, 0, 0, 1],
     [1, 0, 0, -1], [0, 1, 0, -1], [0, 0, 1, -1], [-1, 0, 0, -1], [0, -1, 0, -1], [0, 0, -1, -1]], np.float64)
+_CULLS: dict[tuple[int, int], np.ndarray] = {}
+
+
+def _cull_rows(size: tuple[int, int]) -> np.ndarray:
+    """``_CULL_ROWS`` for a root of ``size`` pixels: its first four scaled by half of it,
+    less w (a pixel outwards once divided by w)."""
+    found = _CULLS.get(size)
+    if found is None:
+        if len(_CULLS) > 32:
+            _CULLS.clear()
+        found = _CULL_ROWS * np.array([0.5 * size[0], 0.5 * size[1]] * 2 + [1.0] * 7)[:, None]
+        found[0:4, 3] -= 1.0
+        _CULLS[size] = found
+    return found
+
+
+_CULL_BLOCKS: dict[tuple[int, int], list[glm.dmat4]] = {}
+
+
+def _cull_blocks(size: tuple[int, int]) -> list[glm.dmat4]:
+    """``_cull_rows(size)`` and a row of zeros as three glm matrices, each the transpose R^T
+    of four of those rows R (their row-major bytes read column-major): a root's
+    ``(P0 V)^T * R^T`` is (R P0 V)^T, whose column-major bytes are R P0 V's rows."""
+    found = _CULL_BLOCKS.get(size)
+    if found is None:
+        if len(_CULL_BLOCKS) > 32:
+            _CULL_BLOCKS.clear()
+        rows = np.zeros((12, 4))
+        rows[0:11] = _cull_rows(size)
+        found = _CULL_BLOCKS[size] = [glm.dmat4.from_bytes(rows[i:i + 4].tobytes()) for i in (0, 4, 8)]
+    return found
+
+
+class _CullWork:
+    """``SurfaceTable.cull``'s scratch for a count of parents: its arrays and every view of
+    them it reads, made once (a view costs about what a small numpy call does), so a cull
+    makes none and allocates only its results."""
+
+    def __init__(self, count: int, corners: int, surfaces: int) -> None:
+        clip = np.empty((corners + 1, 14, count, surfaces))
+        self.product = clip.reshape(corners + 1, 14 * count, surfaces)  # the corner product's
+        self.corners = clip[:corners]
+        self.sides, self.w = clip[:corners, 0:4], clip[:corners, 4:5]
+        self.w_safe = np.empty((corners, 1, count, surfaces))
+        self.epsilon = np.full((corners, 1, count, surfaces), 1e-6)  # (a scalar operand costs more)
+        self.facing = clip[corners, _EYE_ROW - _CULL.start]  # the eye's row times the planes
+        self.least = np.empty((14, count, surfaces))
+        self.rects = self.least[0:4]
+        self.x0y0, self.x1y1 = self.rects[0:2], self.rects[2:4]
+        self.least_w = self.least[4]
+        self.sizes = self.least[12:14]
+        self.tests = self.least[4:14]
+        self.worst = np.empty((count, surfaces))
+        self.seen = np.empty((count, surfaces), bool)
+
+
+class _ChildTable:
+    """The camera-free rows (``SurfaceTable._child_row``) of every parent's ids seen with one
+    ``hide``, root projection and size, stacked (S rows each), and where each parent's
+    first row is: a large level gathers its candidates' rows from it in one ``take``."""
+
+    def __init__(self) -> None:
+        self.firsts: dict[tuple[float, ...], int] = {}
+        self.rows: list[np.ndarray] = []
+        self.stacked = np.zeros((0, _GRID_WIDTH), np.int64)
+
+
+class _PlanBuffers:
+    """The arrays of ``_PlanWork`` for up to ``capacity`` views (a power of two, at least
+    16): one set per capacity, so the scratches of every count are views of a few arrays
+    (not a set of arrays each: that memory, kept, evicted the frame's own from the caches;
+    made afresh, it cost its first writes)."""
+
+    def __init__(self, capacity: int) -> None:
+        self.parent = np.empty((capacity, _X.stop - _X.start))
+        self.surface = np.empty((capacity, _SURFACE_WIDTH))
+        self.data = np.empty((capacity, LevelRows.WIDTH))
+        self.signs = np.ones((capacity, 4))  # (sign p.x, sign p.y, 1, 1)
+        self.f = np.empty(capacity)
+        self.two = np.full(capacity, 2.0)
+        self.e23 = np.tile(_E23, (capacity, 1))
+        self.fourth = np.empty((capacity, 4))  # the root projection's fourth row, a row a view
+        self.fourth_of: np.ndarray | None = None  # the root projection it is of
+        self.scaled = np.empty((capacity, 8))
+        self.fe = np.empty((capacity, 4))
+        self.b = np.empty((capacity, 4))
+        self.outer = np.empty((capacity, 4, 4))
+
+
+class _PlanWork:
+    """``SurfaceTable._plan``'s scratch for a count of views: the gathered parent and surface
+    rows, the level's rows (copied out at the end) and every view of them it writes or
+    reads, made once (views of the first ``k`` rows of ``buffers``)."""
+
+    def __init__(self, k: int, buffers: _PlanBuffers) -> None:
+        self.buffers = buffers
+        self.parent, self.surface = buffers.parent[:k], buffers.surface[:k]
+        self.parent_x0 = self.parent[:, 0:_X0].reshape(k, X_ROWS, 4)
+        self.parent_x1 = self.parent[:, _X0:].reshape(k, 8, 5)[..., 0:4]
+        self.ops0 = self.surface[:, _OPS0].reshape(k, 4, 4)
+        self.ops1 = self.surface[:, _OPS1].reshape(k, 4, 5)
+        self.exit, self.neg_exit = self.surface[:, _EXIT_PLANE], self.surface[:, _NEG_EXIT_PLANE]
+        self.scale = self.surface[:, _SCALE]
+        self.data = data = buffers.data[:k]
+        ints = data.view(np.int64)
+        self.x0, self.x1 = x0, x1 = _x0(data), _x1(data)
+        self.eye_row, self.eye = x0[:, _EYE_ROW], x1[:, 7, 0:4]
+        self.clip, self.rect = data[:, _CLIP], data[:, _RECT]
+        self.grid, self.scissor = ints[:, _GRID_PART], ints[:, _SCISSOR]
+        self.fade, self.node = data[:, _FADE], data[:, _NODE]
+        block = data[:, _BLOCK].view(np.float32)
+        self.block_node = block.view(np.uint32)[:, _ID_NODE_COLUMN]
+        self.block_eye = block[:, _CAMERA_EYE]
+        matrices = block[:, _MATRICES].reshape(k, 4, 4, 4)
+        self.v_p0v_block = matrices[:, 0:3:2]
+        self.v_p0v = x0[:, 0:8, 0:4].reshape(k, 2, 4, 4).transpose(0, 1, 3, 2)
+        self.proj_row, self.vp_row, self.inv = matrices[:, 1, :, 2], matrices[:, 2, :, 2], matrices[:, 3]
+        self.plane_xy, self.plane_w = x1[:, 4:6, 4], x1[:, 7, 4]  # p.x, p.y; p.w
+        self.through, self.col4 = x1[:, 0:4, 4], x1[:, 0:8, 4]  # t; t, p
+        self.signs = buffers.signs[:k]
+        self.signs_xy = self.signs[:, 0:2]
+        self.f, self.two, self.e23, self.fourth = buffers.f[:k], buffers.two[:k], buffers.e23[:k], buffers.fourth[:k]
+        self.f_col = self.f[:, None]
+        self.scaled = buffers.scaled[:k]
+        self.ft, self.fp, self.ft2 = self.scaled[:, 0:4], self.scaled[:, 4:8], self.scaled[:, 2:3]
+        self.fe, self.b, self.outer = buffers.fe[:k], buffers.b[:k], buffers.outer[:k]
+        self.p0v_row2, self.p0v_row3 = x0[:, 6, 0:4], x0[:, 7, 0:4]
+        self.b_col = self.b[:, :, None]
+        self.a_row = x1[:, None, 2, 0:4]
+        self.inv_source = x1[:, 0:4, 0:4]
+
+
+# The most (parent, surface) pairs a level may have for its camera-free grid to be kept
+# (SurfaceTable._child_ids).
+GRID_KEPT_CELLS = 128
+
+# How many scratches a table keeps of each kind (_CullWork, _PlanWork), the first kept dropped
+# first, and for counts up to what: a
+# scratch made afresh costs as much as the views it saves, which is what a level of a few
+# views costs; a large level's work is in its arrays, and keeping its scratches (half a
+# megabyte each for a hundred views) measured slower, the memory they hold evicting the
+# frame's own from the caches (16 mirrors: 1.048 -> 1.019 of the plan before them).
+WORK_KEPT = 48
+WORK_KEPT_COUNT = 16
+
+
+def _kept_work(kept: dict, count: int, make: Callable[[int], _Work]) -> _Work:
+    """A new scratch for ``count``, kept in ``kept`` (the first kept dropped when full) for a
+    count up to ``WORK_KEPT_COUNT``."""
+    found = make(count)
+    if count <= WORK_KEPT_COUNT:
+        if len(kept) >= WORK_KEPT:
+            del kept[next(iter(kept))]
+        kept[count] = found
+    return found
 
 
 @dataclass
-class _Projection:
+class _RootRows:
     """What the oblique near planes read of a root projection, worked out once per projection."""
 
     safe_distance: float     # closer to its plane, a view keeps the clip distance alone
-    inv_xy_t: np.ndarray     # the inverse's first two columns, transposed
-    inv_zw: np.ndarray       # the inverse's last two columns, summed
-    column: np.ndarray       # the inverse's third column
-    inv_and_column: np.ndarray  # 4 x 5: the inverse, then its third column
-    rows_2_3: np.ndarray     # the projection's third and fourth rows, summed
-    of: tuple[np.ndarray, np.ndarray]  # the projection and its inverse it was made from
+    key: bytes               # the projection's bytes
+    proj_t: np.ndarray       # the projection, transposed (its Camera block columns)
+    of: np.ndarray           # the projection
 
 
-# Kept per root projection (the main camera's, a probe face's: a few a frame).
-_PROJECTIONS: dict[bytes, _Projection] = {}
-_CULLS: dict[bytes, np.ndarray] = {}
-_LAST_PROJECTION: list[_Projection | None] = [None]
-_LAST_CULL: list = [None, None]  # the last root projection asked for and its rows
+_ROOTS: dict[bytes, _RootRows] = {}
+_LAST_ROOT: list[_RootRows | None] = [None]
 
 
-def _projection(root_proj: np.ndarray, inv_root_proj: np.ndarray) -> _Projection:
-    """The oblique near planes' constants of ``root_proj`` (with its inverse): the last one's
-    again for the same read-only arrays (the view tree's, kept while its root's projection
-    stays), else found by their bytes."""
-    last = _LAST_PROJECTION[0]
-    if last is not None and last.of[0] is root_proj and last.of[1] is inv_root_proj \
-            and not root_proj.flags.writeable and not inv_root_proj.flags.writeable:
+def _root_rows(root_proj: np.ndarray) -> _RootRows:
+    """The oblique near planes' constants of ``root_proj``: the last one's again for the same
+    read-only array (the view tree's, kept while its root's projection stays), else found by
+    its bytes."""
+    last = _LAST_ROOT[0]
+    if last is not None and last.of is root_proj and not root_proj.flags.writeable:
         return last
-    key = root_proj.tobytes() + inv_root_proj.tobytes()
-    found = _PROJECTIONS.get(key)
-    if found is None:
-        if len(_PROJECTIONS) > 32:
-            _PROJECTIONS.clear()
-        near = root_proj[2, 3] / (root_proj[2, 2] - 1.0)
-        found = _PROJECTIONS[key] = _Projection(OBLIQUE_SAFE_NEARS * near, inv_root_proj[:, :2].T.copy(),
-                                                inv_root_proj[:, 2] + inv_root_proj[:, 3],
-                                                inv_root_proj[:, 2].copy(),
-                                                np.concatenate([inv_root_proj, inv_root_proj[:, 2:3]], axis=1),
-                                                root_proj[2] + root_proj[3], (root_proj, inv_root_proj))
-    _LAST_PROJECTION[0] = found
-    return found
-
-
-def _cull_rows(root_proj: np.ndarray) -> np.ndarray:
-    """``SurfaceTable.cull``'s 12 x 5 rows for ``root_proj``: ``_CULL_ROWS`` through it, and
-    minus the clip plane (column 0: the clip plane comes first in a view's block); the last
-    one's again for the same read-only array."""
-    last = _LAST_CULL
-    if last[0] is root_proj and not root_proj.flags.writeable:
-        return last[1]
     key = root_proj.tobytes()
-    rows = _CULLS.get(key)
-    if rows is None:
-        if len(_CULLS) > 32:
-            _CULLS.clear()
-        rows = _CULLS[key] = np.zeros((12, 5))
-        rows[:11, 1:] = _CULL_ROWS @ root_proj
-        rows[11, 0] = -1.0
-    last[:] = root_proj, rows
-    return rows
-
-
-_HALVES: dict[tuple[int, int], np.ndarray] = {}
-
-
-def _half_sizes(size: tuple[int, int]) -> np.ndarray:
-    """Half a root's width and height, as the cull's 4 x 1 x 1 factor of x0, y0, -x1, -y1."""
-    found = _HALVES.get(size)
+    found = _ROOTS.get(key)
     if found is None:
-        if len(_HALVES) > 32:
-            _HALVES.clear()
-        found = _HALVES[size] = (0.5 * np.array(size, np.float64))[_XYXY, None, None]
+        if len(_ROOTS) > 32:
+            _ROOTS.clear()
+        near = root_proj[2, 3] / (root_proj[2, 2] - 1.0)
+        found = _ROOTS[key] = _RootRows(OBLIQUE_SAFE_NEARS * near, key, root_proj.T.copy(), root_proj)
+    _LAST_ROOT[0] = found
     return found
 
 
-_ONES = np.ones(256)
+@functools.lru_cache(maxsize=64)
+def _level_size(screen: tuple[int, int], scale: float) -> tuple[int, int]:
+    """A level's pixels: the root's scaled, at least one each way."""
+    return max(1, round(screen[0] * scale)), max(1, round(screen[1] * scale))
 
 
-def _ones(k: int) -> np.ndarray:
-    """k ones (read only: a level's fades where no surface fades)."""
-    global _ONES
-    if len(_ONES) < k:
-        _ONES = np.ones(2 * k)
-    return _ONES[:k]
+_NODES = np.arange(1024, dtype=np.float64)
+
+
+def _node_numbers(first: int, k: int) -> np.ndarray:
+    """first, first + 1, ... k of them (read only, float64)."""
+    global _NODES
+    if len(_NODES) < first + k:
+        _NODES = np.arange(2 * (first + k), dtype=np.float64)
+        _NODES.flags.writeable = False
+    return _NODES[first:first + k]
+
+
+_NODES.flags.writeable = False
 
 
 # How many level plans a SurfaceTable keeps (SurfaceTable.plan): a frame's main tree and a
 # probe's six faces, a few levels each, with room for a second probe.
 PLANS_KEPT = 96
-
-
-def _rows(matrix: glm.dmat4 | glm.mat4) -> list[float]:
-    """A glm matrix's 16 values row by row (LevelRows' layout)."""
-    return [value for row in glm.transpose(matrix).to_list() for value in row]
-

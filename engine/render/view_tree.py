@@ -556,8 +556,8 @@ class ViewTree:
         """``LevelRows.root(root)``, kept per root while its camera stands still (a probe
         face's every frame): the same row, so the plans kept for it are found again
         (``SurfaceTable.plan``)."""
-        key = (root.view.to_bytes(), tuple(root.eye), root.size, tuple(root.clip_plane), root.view_mask,
-               root.mirrored)
+        key = (root.view.to_bytes(), root.proj.to_bytes(), tuple(root.eye), root.size, tuple(root.clip_plane),
+               root.view_mask, root.mirrored)
         rows = self._roots.get(key)
         if rows is None:
             if len(self._roots) >= 64:
@@ -717,7 +717,7 @@ class ViewTree:
         columns = chosen.rows.data.take(_NODE_COLUMNS, axis=1).astype(np.int64)
         views, nodes = [], []
         at = 0
-        for (x0, y0, x1, y1, mirrored, node), s, p, scissor, fade in zip(
+        for (x0, y0, x1, y1, mirrored, node), s, p, scissor, fade in zip(  # x1, y1: negated (LEVEL_ROW)
                 columns.tolist(), chosen.surface.tolist(), chosen.parent.tolist(), chosen.scissor.tolist(),
                 chosen.fade.tolist(), strict=True):
             state = states[s]
@@ -725,7 +725,7 @@ class ViewTree:
                                tuple(scissor), node, state.exit_entity, hide)
             at += step
             views.append(view)
-            nodes.append(ReflectionView(node, level, view, (x0, y0, x1 - x0, y1 - y0), state, parents[p], fade))
+            nodes.append(ReflectionView(node, level, view, (x0, y0, -x1 - x0, -y1 - y0), state, parents[p], fade))
         return views, nodes
 
     def _prepare_composite(self, children: list[ReflectionView], root: View,

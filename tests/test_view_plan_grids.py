@@ -1,0 +1,121 @@
+"""The planner's camera-free grids (``SurfaceTable._child_ids`` and ``_pair_bias``, kept by
+the parents' ids and made from rows kept per parent): a level planned by a table that has
+planned other levels before (its grids and rows found again, in another order) is bit for
+bit the level a fresh table plans from the same parent rows, and a level's parents taken in
+another order give the same views, each with its own parent's number."""
+from __future__ import annotations
+
+import numpy as np
+from pyglm import glm
+
+import engine.render.view_plan as view_plan
+from engine.core.reflection_math import reflection_matrix
+from engine.render.views import View
+from engine.resources import SurfaceState
+
+
+def _mirror(entity: int, z: float, facing: float, x: float = 0.0, layers: int = 0xFFFF) -> SurfaceState:
+    plane = glm.vec4(0.0, 0.0, facing, -facing * z)
+    corners = np.array([(x + dx, y, z, 1.0) for dx in (-1.0, 1.0) for y in (0.0, 2.0)])
+    return SurfaceState(entity, "mirror", plane, corners, None, reflection_matrix(plane), plane, entity, 4,
+                        layers=layers)
+
+
+def _table() -> view_plan.SurfaceTable:
+    # Two facing pairs side by side (one of them shows other layers each): views through one see the other.
+    return view_plan.SurfaceTable([_mirror(3, 0.0, 1.0), _mirror(4, 6.0, -1.0), _mirror(5, 0.0, 1.0, x=2.1, layers=3),
+                                   _mirror(6, 6.0, -1.0, x=2.1, layers=5)])
+
+
+def _levels(table: view_plan.SurfaceTable, eye: tuple[float, float, float], depth: int = 3):
+    """``depth`` levels from a camera at ``eye`` looking between the pairs: each level's
+    candidates (all of them grow)."""
+    proj = glm.perspective(glm.radians(70.0), 16 / 9, 0.1, 60.0)
+    view = View(glm.lookAt(glm.vec3(eye), glm.vec3(1.5, 1.0, 0.0), glm.vec3(0, 1, 0)), proj, glm.vec3(eye), (320, 180))
+    root_proj, inv_root_proj = view_plan._mat(proj), view_plan._mat(glm.inverse(proj))
+    rows, first, levels = view_plan.LevelRows.root(view), 1, []
+    for level in range(1, depth + 1):
+        candidates, _ = table.plan(rows, level, view, root_proj, inv_root_proj, first, 8, 0)
+        if candidates is None:
+            break
+        levels.append((rows, candidates))
+        rows, first = candidates.rows, first + len(candidates)
+    return view, root_proj, inv_root_proj, levels
+
+
+def _parent_ids(levels) -> set[tuple[float, float]]:
+    """Each level's parents' (exit row, view mask)."""
+    return {tuple(row) for parents, _ in levels for row in parents.data[:, [view_plan.ROW[name].start for name in (
+        "exit_row", "view_mask")]].tolist()}
+
+
+def test_a_level_from_kept_grids_is_the_level_a_fresh_table_plans():
+    warm = _table()
+    *_, before = _levels(warm, (1.6, 1.0, 2.5), depth=6)  # another camera first: its grids and rows are kept
+    view, root_proj, inv_root_proj, levels = _levels(warm, (0.8, 1.0, 3.5), depth=6)
+    assert len(levels) >= 4, [len(c) for _, c in levels]
+    # Parents looking out of the same surface with other masks (through the pair that shows
+    # fewer layers first, or not), one camera's and the other's: one's rows must not be
+    # taken for the other's.
+    seen = _parent_ids(before) | _parent_ids(levels)
+    assert len({exit_row for exit_row, _ in seen}) < len(seen), seen
+    fresh = _table()
+    for level, (parents, candidates) in enumerate(levels, start=1):
+        first = int(candidates.rows.node[0])
+        again, _ = fresh._plan(parents, level, view, root_proj, inv_root_proj, first, 8, 0)
+        assert np.array_equal(again.rows.data.view(np.int64), candidates.rows.data.view(np.int64)), level
+
+
+def test_parents_in_another_order_give_the_same_views_with_their_own_parents():
+    table = _table()
+    view, root_proj, inv_root_proj, levels = _levels(table, (2.0, 0.8, 4.0))
+    parents, candidates = next((p, c) for p, c in levels if len(p.data) >= 2)
+    level = next(i for i, (p, _) in enumerate(levels, start=1) if p is parents)
+    order = np.arange(len(parents.data))[::-1].copy()
+    swapped = view_plan.LevelRows(parents.data.take(order, axis=0))
+    again, _ = table._plan(swapped, level, view, root_proj, inv_root_proj, 1, 8, 0)
+    assert len(again) == len(candidates)
+    # The same (parent, surface) pairs, parents numbered in the new order; the same cameras.
+    want = {(int(order.tolist().index(p)), s): i for i, (p, s) in
+            enumerate(zip(candidates.parent.tolist(), candidates.surface.tolist(), strict=True))}
+    got = list(zip(again.parent.tolist(), again.surface.tolist(), strict=True))
+    assert set(got) == set(want)
+    for i, pair in enumerate(got):
+        j = want[pair]
+        assert np.array_equal(again.blocks[i, :76], candidates.blocks[j, :76]), pair  # all but the ids
+        assert again.rows.data[i, view_plan.ROW["view_mask"].start] == candidates.rows.data[j, view_plan.ROW[
+            "view_mask"].start]
+
+
+def test_a_large_level_gathers_the_rows_a_kept_grid_holds(monkeypatch):
+    """A level of more pairs than ``GRID_KEPT_CELLS`` gathers its camera-free rows from its
+    parents' distinct ids (no grid kept): bit for bit the rows a kept grid gives, each
+    view with its own parent's number."""
+    view, root_proj, inv_root_proj, levels = _levels(_table(), (0.8, 1.0, 3.5), depth=6)
+    assert any(len(parents.data) >= 2 for parents, _ in levels)
+    monkeypatch.setattr(view_plan, "GRID_KEPT_CELLS", 0)
+    gathered = _table()
+    for level, (parents, candidates) in enumerate(levels, start=1):
+        again, _ = gathered._plan(parents, level, view, root_proj, inv_root_proj, int(candidates.rows.node[0]), 8, 0)
+        assert np.array_equal(again.rows.data.view(np.int64), candidates.rows.data.view(np.int64)), level
+    assert not gathered._ids  # no grid was kept
+
+
+def test_a_kept_plans_choice_is_found_again_and_so_is_its_plan():
+    """A kept plan's candidates are read-only, and the choice made from them is the same
+    read-only rows when made again (``Candidates.select``): the plan kept for them is found
+    again by their identity (a still camera's deeper levels), and is the plan they give."""
+    table = _table()
+    view, root_proj, inv_root_proj, levels = _levels(table, (0.8, 1.0, 3.5), depth=2)
+    root_proj.flags.writeable = False  # as the view tree keeps it
+    _, first = levels[0]
+    assert len(first) >= 2 and not first.rows.data.flags.writeable
+    keep = np.array([len(first) - 1, 0], np.int64)
+    chosen = first.select(keep)
+    assert chosen is first.select(keep.copy()) and not chosen.rows.data.flags.writeable
+    assert np.array_equal(chosen.rows.data, first.rows.data[keep])
+    planned, _ = table.plan(chosen.rows, 2, view, root_proj, inv_root_proj, 10, 8, 0)
+    again, _ = table.plan(first.select(keep).rows, 2, view, root_proj, inv_root_proj, 10, 8, 0)
+    assert again is planned
+    fresh, _ = _table()._plan(chosen.rows, 2, view, root_proj, inv_root_proj, 10, 8, 0)
+    assert np.array_equal(fresh.rows.data.view(np.int64), planned.rows.data.view(np.int64))
