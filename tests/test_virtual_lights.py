@@ -70,6 +70,18 @@ def _floor_points(runner):
     return (eye + rays * t[..., None]).reshape(-1, 3)
 
 
+def _rays_agree(before, after, pixels, lit_grown, lit_shrunk):
+    """What the frame says against what the rays say: of ``pixels`` where the rays agree with
+    the outlines grown and shrunk by a pixel's margin (``sure``), the share whose change from
+    ``before`` to ``after`` (brighter by 10%: lit; within 2%: not) is the rays' word.  Returns
+    the share, ``sure`` and the rays' word there (1: lit)."""
+    ratio = srgb_to_linear(after).mean(-1) / np.maximum(srgb_to_linear(before).mean(-1), 1e-6)
+    says = np.where(ratio > 1.1, 1, np.where(ratio < 1.02, 0, -1))
+    sure = pixels & (lit_grown == lit_shrunk)
+    rays = lit_grown[sure].astype(int)
+    return float((says[sure] == rays).mean()), sure, rays
+
+
 def _frames(scene, build, size=(320, 240), shadow_filter="single"):
     """The frame with the mirror's light off, then on."""
     runner = scene(build, size)
@@ -92,15 +104,9 @@ def test_a_mirror_throws_the_sun_where_the_rays_say(scene, shadow_filter):
     assert runner.stats.virtual_lights == 1
     ids = runner.world.resources["ids"]
     floor = runner.ids() == ids["floor"]
-    ratio = srgb_to_linear(on).mean(-1) / np.maximum(srgb_to_linear(off).mean(-1), 1e-6)
-    brighter, same = ratio > 1.1, ratio < 1.02
     points = _floor_points(runner)
-    lit_in = _mirror_lit(points, EDGE).reshape(floor.shape)
     lit_out = _mirror_lit(points, -EDGE).reshape(floor.shape)
-    sure = floor & (lit_in == lit_out)
-    frame_says = np.where(brighter, 1, np.where(same, 0, -1))[sure]
-    rays_say = lit_in[sure].astype(int)
-    share = float((frame_says == rays_say).mean())
+    share, sure, rays_say = _rays_agree(off, on, floor, _mirror_lit(points, EDGE).reshape(floor.shape), lit_out)
     assert sure.sum() > 40000 and rays_say.sum() > 1000, (int(sure.sum()), int(rays_say.sum()))
     # The cube's shadow inside the patch: lit by the sun's image except where the cube stands in the way.
     assert (floor & lit_out & ~_mirror_lit(points, 0.0).reshape(floor.shape)).any()
@@ -411,15 +417,9 @@ def test_the_sun_reflected_by_two_mirrors_lands_where_the_rays_say(scene):
     assert (once_lights, runner.stats.virtual_lights) == (1, 2)   # A's light, then also A's through B
     ids = runner.world.resources["ids"]
     floor = (runner.ids() == ids["floor"]) & ~_seen_in_a_mirror(runner)
-    ratio = srgb_to_linear(twice).mean(-1) / np.maximum(srgb_to_linear(once).mean(-1), 1e-6)
-    brighter, same = ratio > 1.1, ratio < 1.02
     points = _floor_points(runner)
-    lit_in = _twice_lit(points, EDGE).reshape(floor.shape)
     lit_out = _twice_lit(points, -EDGE).reshape(floor.shape)
-    sure = floor & (lit_in == lit_out)
-    frame_says = np.where(brighter, 1, np.where(same, 0, -1))[sure]
-    rays_say = lit_in[sure].astype(int)
-    share = float((frame_says == rays_say).mean())
+    share, sure, rays_say = _rays_agree(once, twice, floor, _twice_lit(points, EDGE).reshape(floor.shape), lit_out)
     assert sure.sum() > 40000 and rays_say.sum() > 600, (int(sure.sum()), int(rays_say.sum()))
     exact = _twice_lit(points, 0.0).reshape(floor.shape)
     # Both boxes shadow the patch: the cube on the last leg, the small box on the way from A to B.
