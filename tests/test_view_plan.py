@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 from pyglm import glm
 
+import engine.render.plan_rows as plan_rows
 import engine.render.view_plan as view_plan
 import engine.render.view_tree as view_tree
 from components.limits import VIEW_DIRECT, VIEW_MIRROR, VIEW_PORTAL
@@ -246,7 +247,7 @@ def test_a_surface_with_eight_corners_is_culled_on_all_of_them():
                         ((2.2, 1.0, 3.0), (-1.0, 1.0, 1.0))):
         view = View(glm.lookAt(glm.vec3(eye), glm.vec3(target), glm.vec3(0, 1, 0)), proj, glm.vec3(eye), (320, 180))
         root_proj, inv_root_proj = view_plan._mat(proj), view_plan._mat(glm.inverse(proj))
-        candidates, _ = table.plan(view_plan.LevelRows.root(view), 1, view, root_proj, inv_root_proj, 1, 8, 0)
+        candidates, _ = table.plan(plan_rows.LevelRows.root(view), 1, view, root_proj, inv_root_proj, 1, 8, 0)
         planned = [] if candidates is None else candidates.surface.tolist()
         expected = [i for i, state in enumerate(states) if kept(state, view, state.corners)]
         assert planned and planned == expected, (eye, planned, expected)

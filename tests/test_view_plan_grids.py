@@ -8,6 +8,7 @@ from __future__ import annotations
 import numpy as np
 from pyglm import glm
 
+import engine.render.plan_rows as plan_rows
 import engine.render.view_plan as view_plan
 from engine.core.reflection_math import reflection_matrix
 from engine.render.views import View
@@ -33,7 +34,7 @@ def _levels(table: view_plan.SurfaceTable, eye: tuple[float, float, float], dept
     proj = glm.perspective(glm.radians(70.0), 16 / 9, 0.1, 60.0)
     view = View(glm.lookAt(glm.vec3(eye), glm.vec3(1.5, 1.0, 0.0), glm.vec3(0, 1, 0)), proj, glm.vec3(eye), (320, 180))
     root_proj, inv_root_proj = view_plan._mat(proj), view_plan._mat(glm.inverse(proj))
-    rows, first, levels = view_plan.LevelRows.root(view), 1, []
+    rows, first, levels = plan_rows.LevelRows.root(view), 1, []
     for level in range(1, depth + 1):
         candidates, _ = table.plan(rows, level, view, root_proj, inv_root_proj, first, 8, 0)
         if candidates is None:
@@ -45,7 +46,7 @@ def _levels(table: view_plan.SurfaceTable, eye: tuple[float, float, float], dept
 
 def _parent_ids(levels) -> set[tuple[float, float]]:
     """Each level's parents' (exit row, view mask)."""
-    return {tuple(row) for parents, _ in levels for row in parents.data[:, [view_plan.ROW[name].start for name in (
+    return {tuple(row) for parents, _ in levels for row in parents.data[:, [plan_rows.ROW[name].start for name in (
         "exit_row", "view_mask")]].tolist()}
 
 
@@ -72,7 +73,7 @@ def test_parents_in_another_order_give_the_same_views_with_their_own_parents():
     parents, candidates = next((p, c) for p, c in levels if len(p.data) >= 2)
     level = next(i for i, (p, _) in enumerate(levels, start=1) if p is parents)
     order = np.arange(len(parents.data))[::-1].copy()
-    swapped = view_plan.LevelRows(parents.data.take(order, axis=0))
+    swapped = plan_rows.LevelRows(parents.data.take(order, axis=0))
     again, _ = table._plan(swapped, level, view, root_proj, inv_root_proj, 1, 8, 0)
     assert len(again) == len(candidates)
     # The same (parent, surface) pairs, parents numbered in the new order; the same cameras.
@@ -83,7 +84,7 @@ def test_parents_in_another_order_give_the_same_views_with_their_own_parents():
     for i, pair in enumerate(got):
         j = want[pair]
         assert np.array_equal(again.blocks[i, :76], candidates.blocks[j, :76]), pair  # all but the ids
-        assert again.rows.data[i, view_plan.ROW["view_mask"].start] == candidates.rows.data[j, view_plan.ROW[
+        assert again.rows.data[i, plan_rows.ROW["view_mask"].start] == candidates.rows.data[j, plan_rows.ROW[
             "view_mask"].start]
 
 

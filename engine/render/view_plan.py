@@ -2,26 +2,27 @@
 where on screen, and each view's camera, for all pairs of a level at once.
 
 A view tree level is planned in a fixed number of numpy operations whatever its number of
-views: the parents of a level are rows of arrays (``LevelRows``), every mirror and portal
-is a row of ``SurfaceTable``, and ``SurfaceTable.cull`` and ``SurfaceTable.plan`` work on
-(parents x surfaces) blocks.  Per view, only what the draws need is made in Python (a
-``View`` holding its packed camera block).  This is the one planner, for levels of every
-size.  What it costs at a level of one or two views is its numpy calls (in a frame each
-costs 1-3 us, a call of a kind not made for a while the most) and the views of arrays they
-read and write (a view costs about what a small call does), so the work is laid out to need
-few of both: each view's row holds every matrix its children and the cull read (``x``:
-carried through a surface by two products, the oblique near plane a scalar from them), what
-does not depend on the camera (the Camera block's projection, viewport, clip plane and ids;
-the exit row, mask, winding) is gathered per (parent, surface) from rows kept by the
-parents' ids, a candidate is one row, and the cull's and the plan's arrays and views are
-made once per count of parents or views (``_CullWork``, ``_PlanWork``) and written with
-``out=``: about 44 calls a level (13 of them the cull's), 4 of them products, where the
-first array planner took about 72 and made a view or a new array for most (measured warm,
-a level of one view: about 31 us, against 53 for that planner and 20 for the glm one it
-replaced; of three or four views: 38 against 62 and 46-74).  A call costs
-least on operands of one shape and dtype: a broadcast operand, a scalar one, a strided or
-converting output or ``take(out=)`` each cost about as much again (measured), so twos and
-epsilons are arrays and gathers are ``take`` then a copy.
+views: the parents of a level are rows of arrays (``LevelRows``; the rows' layouts are in
+``engine/render/plan_rows.py``), every mirror and portal is a row of ``SurfaceTable``, and
+``SurfaceTable.cull`` and ``SurfaceTable.plan`` work on (parents x surfaces) blocks.  Per
+view, only what the draws need is made in Python (a ``View`` holding its packed camera
+block).  This is the one planner, for levels of every size.  What it costs at a level of one
+or two views is its numpy calls (in a frame each costs 1-3 us, a call of a kind not made for
+a while the most) and the views of arrays they read and write (a view costs about what a
+small call does), so the work is laid out to need few of both: each view's row holds every
+matrix its children and the cull read (``x``: carried through a surface by two products, the
+oblique near plane a scalar from them), what does not depend on the camera (the Camera
+block's projection, viewport, clip plane and ids; the exit row, mask, winding) is gathered
+per (parent, surface) from rows kept by the parents' ids, a candidate is one row, and the
+cull's and the plan's arrays and views are made once per count of parents or views
+(``_CullWork``, ``_PlanWork``, kept with the other scratch in
+``engine/render/plan_scratch.py``) and written with ``out=``: about 44 calls a level (13 of
+them the cull's), 4 of them products, where the first array planner took about 72 and made a
+view or a new array for most (measured warm, a level of one view: about 31 us, against 53
+for that planner and 20 for the glm one it replaced; of three or four views: 38 against 62
+and 46-74).  A call costs least on operands of one shape and dtype: a broadcast operand, a
+scalar one, a strided or converting output or ``take(out=)`` each cost about as much again
+(measured), so twos and epsilons are arrays and gathers are ``take`` then a copy.
 
 Conventions: matrices here are numpy (..., 4, 4) arrays in the usual row-major math
 layout (``M @ x``); glm's and GL's are column-major, so they are transposed at the edges.
@@ -29,24 +30,56 @@ layout (``M @ x``); glm's and GL's are column-major, so they are transposed at t
 from __future__ import annotations
 
 import functools
-from collections.abc import Callable
-from dataclasses import dataclass
-from typing import TYPE_CHECKING, TypeVar
+from typing import TYPE_CHECKING
 
 import numpy as np
 from pyglm import glm
 
 from components.limits import VIEW_DIRECT, VIEW_MIRROR, VIEW_PORTAL
 from components.visibility import KIND_MASK, visibility_code
-from engine.core.reflection_math import OBLIQUE_SAFE_NEARS
-from engine.render.views import CAMERA_BLOCK_BYTES, CAMERA_DTYPE, CAMERA_FLOATS, CAMERA_IDS, View, field_columns
+from engine.render.plan_rows import (
+    _BLOCK,
+    _CAMERA_CLIP,
+    _CAMERA_VIEWPORT,
+    _CULL,
+    _EXIT_PLANE,
+    _GRID_PARENT,
+    _GRID_WIDTH,
+    _ID_HIDE,
+    _ID_MASK,
+    _ID_SKIP,
+    _IDS_PART,
+    _MATRICES,
+    _NEG_EXIT_PLANE,
+    _OPS0,
+    _OPS1,
+    _RECT,
+    _SCALE,
+    _SIGNS,
+    _SURFACE_WIDTH,
+    _X,
+    Candidates,
+    LevelRows,
+    _x0,
+)
+from engine.render.plan_scratch import (
+    WORK_KEPT,
+    _ChildTable,
+    _CullWork,
+    _kept_work,
+    _node_numbers,
+    _PlanBuffers,
+    _PlanWork,
+    _root_rows,
+    _RootRows,
+)
+from engine.render.views import CAMERA_FLOATS, View
 from engine.rules.visibility_rules import drawn_in
 
 if TYPE_CHECKING:  # the surfaces stage's records (engine/resources.py): read here by their fields
     from engine.resources import SurfaceState
 
-_KINDS_BUT_DIRECT = KIND_MASK & ~VIEW_DIRECT
-_Work = TypeVar("_Work")  # a view through a surface is no longer direct
+_KINDS_BUT_DIRECT = KIND_MASK & ~VIEW_DIRECT  # a view through a surface is no longer direct
 
 
 def _mat(matrix: glm.mat4) -> np.ndarray:
@@ -54,231 +87,20 @@ def _mat(matrix: glm.mat4) -> np.ndarray:
     return np.frombuffer(matrix.to_bytes(), np.float32).reshape(4, 4).T.astype(np.float64)
 
 
-# One row of ``LevelRows``: a view of a level, everything the planner and the view tree read of
-# it side by side in one float64 row (ints and the float32 Camera block seen through views of
-# it), so that a level's rows are gathered, and its candidates chosen, with one ``take``.
-#
-# ``x`` holds the view's matrices as a 22 x 4 and an 8 x 5 block, so that two products a level
-# carry all of them through the surfaces (``SurfaceTable._plan``): with V the view matrix, IV its
-# inverse, P0 the root's projection and C the cull's rows (``_cull_rows``),
-#   x[0] = [V; P0 V; C P0 V; -clip plane; eye; 0]     (multiplied on the right by inv(carry))
-#   x[1] = [(IV inv(P0))^T | t; IV^T | p]            (multiplied on the right by [carry^T | carry^T e])
-# where e is the plane the view looks out of (world), p = e IV that plane in view space (the
-# oblique near plane's) and t = e IV inv(P0) (its Sherman-Morrison update).  The cull's 14
-# rows (C P0 V, minus the clip plane, the eye, one of scratch) are what it multiplies the
-# corners (and the planes) by; IV^T's last row is the eye, copied into x[0] after the
-# products (a point is not carried as the rows of x[0] are: it is written, not multiplied).
-X_ROWS = 22   # x[0]'s; x[1] has 8
-_X0 = X_ROWS * 4
-_V, _P0V, _CULL, _NEG_CLIP = slice(0, 4), slice(4, 8), slice(8, 22), 19
-_EYE_ROW = 20  # x[0]'s copy of the eye (the cull's facing values: its row times the planes)
-LEVEL_ROW = np.dtype([
-    ("rect", "<f8", (4,)),         # x0, y0, -x1, -y1 where it shows, screen pixels (the cull's signs)
-    ("x", "<f8", (_X0 + 8 * 5,)),
-    ("node", "<f8"),               # its index in the tree
-    ("scissor", "<i8", (4,)),      # x, y, w, h in the level's pixels
-    ("block", "<f4", (CAMERA_FLOATS["skip"].stop,)),  # the packed Camera block (CAMERA_DTYPE)
-    ("exit_row", "<f8"),           # the SurfaceTable row of the surface it looks out of (-1: none)
-    ("view_mask", "<f8"),          # its kinds and the layers it shows (View.view_mask)
-    ("mirrored", "<f8"),           # 1.0 where front faces wind clockwise
-    ("parent", "<i8"),             # a candidate's row of its parent in the level above
-    ("surface", "<i8"),            # and of its surface in the SurfaceTable
-    ("fade", "<f8"),               # the reflection's weight (Mirror fades; 1: none)
-])
-ROW = field_columns(LEVEL_ROW, 8)  # each field's columns
-_X, _RECT, _BLOCK = (ROW[name] for name in ("x", "rect", "block"))
-_EXIT_ROW, _MASK, _MIRRORED, _NODE, _FADE, _PARENT, _SURFACE = (ROW[name].start for name in (
-    "exit_row", "view_mask", "mirrored", "node", "fade", "parent", "surface"))
-_SCISSOR = ROW["scissor"]
-_IDS_PART = slice(_EXIT_ROW, _MIRRORED + 1)    # exit row, view mask, mirrored: what decides which surfaces
-# it may see and what its children's are
-_GRID_PART = slice(_BLOCK.start, _FADE + 1)    # what _child_ids holds for a level's rows: the block, then
-# the exit row, view mask, mirrored, parent, surface, fade
-_EYE = slice(_X.start + _X0 + 7 * 5, _X.start + _X0 + 7 * 5 + 4)  # IV^T's last row: the eye
-_CLIP = slice(_X.start + _NEG_CLIP * 4, _X.start + _NEG_CLIP * 4 + 4)       # minus the clip plane
-assert CAMERA_BLOCK_BYTES == 8 * (_BLOCK.stop - _BLOCK.start)
-assert _EXIT_ROW == _BLOCK.stop and _FADE == _EXIT_ROW + 5
-_GRID_WIDTH = _GRID_PART.stop - _GRID_PART.start
-_GRID_PARENT = _PARENT - _GRID_PART.start  # the parent's column in it
+_NONE = np.zeros(0, np.int64)
+_NO_RECTS = np.zeros((0, 4))
+_NEVER = (1e30, 2e30, 1e30, 2e30)  # fade starts no distance or angle reaches
+# A rectangle as the cull keeps it (x0, y0, -x1, -y1, ``_SIGNS``): what makes it x, y, w, h.
+_TO_SCISSOR = np.array([[1, 0, -1, 0], [0, 1, 0, -1], [0, 0, -1, 0], [0, 0, 0, -1]], np.float64)
+_MIN, _MAX = np.minimum.reduce, np.maximum.reduce
 
+# The most (parent, surface) pairs a level may have for its camera-free grid to be kept
+# (SurfaceTable._child_ids).
+GRID_KEPT_CELLS = 128
 
-def _x0(data: np.ndarray) -> np.ndarray:
-    """``x[0]`` of rows ``data``: (n, X_ROWS, 4)."""
-    return data[:, _X.start:_X.start + _X0].reshape(-1, X_ROWS, 4)
-
-
-def _x1(data: np.ndarray) -> np.ndarray:
-    """``x[1]`` of rows ``data``: (n, 8, 5)."""
-    return data[:, _X.start + _X0:_X.stop].reshape(-1, 8, 5)
-
-
-class LevelRows:
-    """The views of one level of a tree as arrays, a row each (the root: one row), packed
-    in one float64 array (``LEVEL_ROW``'s fields, read by name through ``ROW``) so that a
-    level's rows are gathered in one operation."""
-
-    WIDTH = LEVEL_ROW.itemsize // 8
-
-    def __init__(self, data: np.ndarray) -> None:
-        self.data = data
-
-    @property
-    def view(self) -> np.ndarray:
-        """(n, 4, 4) world -> eye."""
-        return _x0(self.data)[:, _V, 0:4]
-
-    @property
-    def inv_view(self) -> np.ndarray:
-        """(n, 4, 4) eye -> world."""
-        return _x1(self.data)[:, 4:8, 0:4].transpose(0, 2, 1)
-
-    @property
-    def eye(self) -> np.ndarray:
-        """(n, 4) homogeneous world position."""
-        return self.data[:, _EYE]
-
-    @property
-    def clip(self) -> np.ndarray:
-        """(n, 4) world clip plane (what the view keeps)."""
-        return -self.data[:, _CLIP]
-
-    @property
-    def rect(self) -> np.ndarray:
-        """(n, 4) x0, y0, x1, y1 where it shows, screen pixels."""
-        return self.data[:, _RECT] * _SIGNS
-
-    @property
-    def exit_row(self) -> np.ndarray:
-        """(n,) the SurfaceTable row of the surface the view looks out of (-1: none)."""
-        return self.data[:, _EXIT_ROW]
-
-    @property
-    def mask(self) -> np.ndarray:
-        """(n,) int64: the view's kinds and the layers it shows (``View.view_mask``)."""
-        return self.data[:, _MASK].astype(np.int64)
-
-    @property
-    def mirrored(self) -> np.ndarray:
-        """(n,) 1.0 where front faces wind clockwise."""
-        return self.data[:, _MIRRORED]
-
-    @property
-    def node(self) -> np.ndarray:
-        """(n,) the view's index in the tree."""
-        return self.data[:, _NODE]
-
-    @staticmethod
-    def root(view: View) -> LevelRows:
-        """A root view's row (its projection is the tree's root projection), its matrices
-        made in glm doubles of the float32 glm holds (the inverse view: glm's float32
-        inverse, its eye too, as the planner always took it; the cull's rows as three 4 x 4
-        products, ``_cull_blocks``), their bytes joined and written in
-        one copy over a copy of a row kept per size, clip plane, mask and winding (the
-        rectangle, minus the clip plane, the ids): glm's bytes are column-major, so a
-        matrix's are its transpose's rows."""
-        v, proj = glm.dmat4(view.view), glm.dmat4(view.proj)
-        inv_v = glm.dmat4(glm.inverse(view.view))
-        clip_space = glm.transpose(proj * v)  # (P0 V)^T
-        cull = _cull_blocks(view.size)
-        row = _root_template(view.size, view.clip_plane, view.view_mask, view.mirrored).copy()
-        row.reshape(-1)[_ROOT_COLUMNS] = np.frombuffer(b"".join((
-            glm.transpose(v).to_bytes(), clip_space.to_bytes(), (clip_space * cull[0]).to_bytes(),
-            (clip_space * cull[1]).to_bytes(), (clip_space * cull[2]).to_bytes()[:96], inv_v[3].to_bytes(),
-            (inv_v * glm.dmat4(glm.inverse(view.proj))).to_bytes(), inv_v.to_bytes())), np.float64)
-        return LevelRows(row)
-
-
-_ROOT_TEMPLATES: dict[tuple, np.ndarray] = {}
-
-
-def _root_template(size: tuple[int, int], clip_plane: glm.vec4, view_mask: int, mirrored: bool) -> np.ndarray:
-    """A root row but its matrices: the rectangle (x0, y0, -x1, -y1), minus the clip plane,
-    the ids (no exit row, its mask and winding, node 0, a fade of 1)."""
-    key = (size, tuple(clip_plane), view_mask, mirrored)
-    found = _ROOT_TEMPLATES.get(key)
-    if found is None:
-        if len(_ROOT_TEMPLATES) > 64:
-            _ROOT_TEMPLATES.clear()
-        found = _ROOT_TEMPLATES[key] = np.zeros((1, LevelRows.WIDTH))
-        found[0, _RECT] = (0.0, 0.0, -size[0], -size[1])
-        found[0, _CLIP] = tuple(-clip_plane)
-        found[0, [_EXIT_ROW, _MASK, _MIRRORED, _NODE, _FADE]] = (-1.0, float(view_mask), float(mirrored), 0.0, 1.0)
-    return found
-
-
-# The columns of a root row LevelRows.root writes in one copy: x[0]'s first 19 rows (V, P0 V and the
-# cull's rows, not minus the clip plane) and its eye row, then x[1]'s first four columns.
-_ROOT_COLUMNS = np.concatenate([np.arange(_X.start, _X.start + 19 * 4),
-                                np.arange(_X.start + _EYE_ROW * 4, _X.start + _EYE_ROW * 4 + 4),
-                                (_X.start + _X0 + np.arange(8)[:, None] * 5 + np.arange(4)[None, :]).reshape(-1)])
-
-
-class Candidates:
-    """A level's candidate views, before its claims say which have pixels: one row each of
-    ``LevelRows`` (claim order), read through views of it made when first asked for (a
-    level's candidates, those it chooses and those that grow are each read for a few)."""
-
-    def __init__(self, rows: LevelRows, size: tuple[int, int], end: np.ndarray | None = None) -> None:
-        self.rows = rows          # their cameras, rectangles, blocks (node: claim order from first_index)
-        self.size = size          # the level's pixels
-        self.end = end            # (k,) bool: an end view, cut by the depth limits (None: none asked for)
-        self._chosen: dict[bytes, Candidates] = {}  # select's, once read-only
-
-    def __len__(self) -> int:
-        return len(self.rows.data)
-
-    @functools.cached_property
-    def parent(self) -> np.ndarray:
-        """(k,) row of the parent in the level above."""
-        return self.rows.data.view(np.int64)[:, _PARENT]
-
-    @functools.cached_property
-    def surface(self) -> np.ndarray:
-        """(k,) row in the SurfaceTable."""
-        return self.rows.data.view(np.int64)[:, _SURFACE]
-
-    @functools.cached_property
-    def scissor(self) -> np.ndarray:
-        """(k, 4) int x, y, w, h in the level's pixels."""
-        return self.rows.data.view(np.int64)[:, _SCISSOR]
-
-    @functools.cached_property
-    def blocks(self) -> np.ndarray:
-        """(k, CAMERA_BLOCK_BYTES / 4) float32: the packed Camera blocks."""
-        return self.rows.data[:, _BLOCK].view(np.float32)
-
-    @functools.cached_property
-    def fade(self) -> np.ndarray:
-        """(k,) the reflection's weight (Mirror fades; 1: none)."""
-        return self.rows.data[:, _FADE]
-
-    def freeze(self) -> None:
-        """Make every array read-only (a kept plan is shared by the frames that read it; a
-        view made after this is read-only with its base)."""
-        self.rows.data.flags.writeable = False
-        for name in ("parent", "surface", "scissor", "blocks", "fade", "end"):
-            array_ = self.__dict__.get(name)
-            if array_ is not None:
-                array_.flags.writeable = False
-
-    def select(self, keep: np.ndarray) -> Candidates:
-        """The candidates at ``keep`` (int64 indices), in their order (``take``: several
-        times cheaper than fancy indexing for these small gathers).  A kept plan's
-        (read-only) keeps its choices, read-only too: the frames that choose the same find
-        the same rows again, and so the plans kept for them (``SurfaceTable.plan``)."""
-        data = self.rows.data
-        if data.flags.writeable:
-            return Candidates(LevelRows(data.take(keep, axis=0)), self.size,
-                              None if self.end is None else self.end.take(keep))
-        key = keep.tobytes()
-        found = self._chosen.get(key)
-        if found is None:
-            if len(self._chosen) > 16:
-                self._chosen.clear()
-            found = self._chosen[key] = Candidates(LevelRows(data.take(keep, axis=0)), self.size,
-                                                   None if self.end is None else self.end.take(keep))
-            found.freeze()
-        return found
+# How many level plans a SurfaceTable keeps (SurfaceTable.plan): a frame's main tree and a
+# probe's six faces, a few levels each, with room for a second probe.
+PLANS_KEPT = 96
 
 
 class SurfaceTable:
@@ -845,251 +667,7 @@ def level_rects(rects: np.ndarray, screen: tuple[int, int], level: tuple[int, in
     return np.concatenate([x0y0, np.maximum(1.0, x1y1 - x0y0)], axis=1).astype(np.int64)
 
 
-# SurfaceTable.float_rows: what multiplies a parent's ``x`` (LEVEL_ROW) from the right: inv(carry)
-# (x[0]'s), then carry^T and carry^T e (x[1]'s, 4 x 5; e the plane its views look out of); that
-# plane and its negative; its resolution scale.
-SURFACE_ROW = np.dtype([("inv_carry", "<f8", (4, 4)), ("ops", "<f8", (4, 5)), ("exit_plane", "<f8", (4,)),
-                        ("neg_exit_plane", "<f8", (4,)), ("resolution_scale", "<f8")])
-_SURFACE_COLUMNS = field_columns(SURFACE_ROW, 8)
-_SURFACE_WIDTH = SURFACE_ROW.itemsize // 8
-_OPS, _EXIT_PLANE, _NEG_EXIT_PLANE = (_SURFACE_COLUMNS[name] for name in ("ops", "exit_plane", "neg_exit_plane"))
-_OPS0, _OPS1 = _SURFACE_COLUMNS["inv_carry"], _OPS
-_SCALE = _SURFACE_COLUMNS["resolution_scale"].start
-# The Camera block's float32 columns (CAMERA_DTYPE) the planner writes.
-_MATRICES = slice(CAMERA_FLOATS["view"].start, CAMERA_FLOATS["inv_view_proj"].stop)
-_CAMERA_EYE, _CAMERA_VIEWPORT, _CAMERA_CLIP = (CAMERA_FLOATS[name] for name in ("eye", "viewport", "clip_plane"))
-_ID_SKIP, _ID_HIDE, _ID_MASK, _ID_NODE = (CAMERA_IDS.index(name) for name in ("skip", "hide", "view_mask", "node"))
-_ID_NODE_COLUMN = CAMERA_FLOATS["skip"].start + _ID_NODE  # the node's uint32 column in a block
-assert CAMERA_DTYPE.names[:4] == ("view", "proj", "view_proj", "inv_view_proj")  # the matrices, in order
-assert CAMERA_FLOATS["skip"].stop == CAMERA_BLOCK_BYTES // 4 and CAMERA_FLOATS["skip"].start % 2 == 0
-assert _ID_NODE == 3  # the last: the ids but the node are the first three of the last two float64s
-
-_NONE = np.zeros(0, np.int64)
-_NO_RECTS = np.zeros((0, 4))
-_NEVER = (1e30, 2e30, 1e30, 2e30)  # fade starts no distance or angle reaches
-# A rectangle as the cull keeps it, x0, y0, -x1, -y1: its signs, and what makes it x, y, w, h.
-_SIGNS = np.array([1.0, 1.0, -1.0, -1.0])
-_E23 = np.array([0.0, 0.0, 1.0, 1.0])
-_TO_SCISSOR = np.array([[1, 0, -1, 0], [0, 1, 0, -1], [0, 0, -1, 0], [0, 0, 0, -1]], np.float64)
-_MIN, _MAX = np.minimum.reduce, np.maximum.reduce
-
-# The rows SurfaceTable.cull applies to a view's clip space (x, y, z, w, the rows of P0 V) to
-# get, over each corner: x0, y0, -x1, -y1 in pixels times w (half the root's width or height
-# times x + w, y + w, -x - w, -y - w, less w: a pixel outwards), w, then x - w, y - w, z - w, -x - w, -y - w, -z - w
-# (each > 0 outside one side of the frustum).
-_CULL_ROWS = np.array([
-    [1, 0, 0, 1], [0, 1, 0, 1], [-1, 0, 0, -1], [0, -1, 0, -1], [0, 0, 0, 1],
-    [1, 0, 0, -1], [0, 1, 0, -1], [0, 0, 1, -1], [-1, 0, 0, -1], [0, -1, 0, -1], [0, 0, -1, -1]], np.float64)
-_CULLS: dict[tuple[int, int], np.ndarray] = {}
-
-
-def _cull_rows(size: tuple[int, int]) -> np.ndarray:
-    """``_CULL_ROWS`` for a root of ``size`` pixels: its first four scaled by half of it,
-    less w (a pixel outwards once divided by w)."""
-    found = _CULLS.get(size)
-    if found is None:
-        if len(_CULLS) > 32:
-            _CULLS.clear()
-        found = _CULL_ROWS * np.array([0.5 * size[0], 0.5 * size[1]] * 2 + [1.0] * 7)[:, None]
-        found[0:4, 3] -= 1.0
-        _CULLS[size] = found
-    return found
-
-
-_CULL_BLOCKS: dict[tuple[int, int], list[glm.dmat4]] = {}
-
-
-def _cull_blocks(size: tuple[int, int]) -> list[glm.dmat4]:
-    """``_cull_rows(size)`` and a row of zeros as three glm matrices, each the transpose R^T
-    of four of those rows R (their row-major bytes read column-major): a root's
-    ``(P0 V)^T * R^T`` is (R P0 V)^T, whose column-major bytes are R P0 V's rows."""
-    found = _CULL_BLOCKS.get(size)
-    if found is None:
-        if len(_CULL_BLOCKS) > 32:
-            _CULL_BLOCKS.clear()
-        rows = np.zeros((12, 4))
-        rows[0:11] = _cull_rows(size)
-        found = _CULL_BLOCKS[size] = [glm.dmat4.from_bytes(rows[i:i + 4].tobytes()) for i in (0, 4, 8)]
-    return found
-
-
-class _CullWork:
-    """``SurfaceTable.cull``'s scratch for a count of parents: its arrays and every view of
-    them it reads, made once (a view costs about what a small numpy call does), so a cull
-    makes none and allocates only its results."""
-
-    def __init__(self, count: int, corners: int, surfaces: int) -> None:
-        clip = np.empty((corners + 1, 14, count, surfaces))
-        self.product = clip.reshape(corners + 1, 14 * count, surfaces)  # the corner product's
-        self.corners = clip[:corners]
-        self.sides, self.w = clip[:corners, 0:4], clip[:corners, 4:5]
-        self.w_safe = np.empty((corners, 1, count, surfaces))
-        self.epsilon = np.full((corners, 1, count, surfaces), 1e-6)  # (a scalar operand costs more)
-        self.facing = clip[corners, _EYE_ROW - _CULL.start]  # the eye's row times the planes
-        self.least = np.empty((14, count, surfaces))
-        self.rects = self.least[0:4]
-        self.x0y0, self.x1y1 = self.rects[0:2], self.rects[2:4]
-        self.least_w = self.least[4]
-        self.sizes = self.least[12:14]
-        self.tests = self.least[4:14]
-        self.worst = np.empty((count, surfaces))
-        self.seen = np.empty((count, surfaces), bool)
-
-
-class _ChildTable:
-    """The camera-free rows (``SurfaceTable._child_row``) of every parent's ids seen with one
-    ``hide``, root projection and size, stacked (S rows each), and where each parent's
-    first row is: a large level gathers its candidates' rows from it in one ``take``."""
-
-    def __init__(self) -> None:
-        self.firsts: dict[tuple[float, ...], int] = {}
-        self.rows: list[np.ndarray] = []
-        self.stacked = np.zeros((0, _GRID_WIDTH), np.int64)
-
-
-class _PlanBuffers:
-    """The arrays of ``_PlanWork`` for up to ``capacity`` views (a power of two, at least
-    16): one set per capacity, so the scratches of every count are views of a few arrays
-    (not a set of arrays each: that memory, kept, evicted the frame's own from the caches;
-    made afresh, it cost its first writes)."""
-
-    def __init__(self, capacity: int) -> None:
-        self.parent = np.empty((capacity, _X.stop - _X.start))
-        self.surface = np.empty((capacity, _SURFACE_WIDTH))
-        self.data = np.empty((capacity, LevelRows.WIDTH))
-        self.signs = np.ones((capacity, 4))  # (sign p.x, sign p.y, 1, 1)
-        self.f = np.empty(capacity)
-        self.two = np.full(capacity, 2.0)
-        self.e23 = np.tile(_E23, (capacity, 1))
-        self.fourth = np.empty((capacity, 4))  # the root projection's fourth row, a row a view
-        self.fourth_of: np.ndarray | None = None  # the root projection it is of
-        self.scaled = np.empty((capacity, 8))
-        self.fe = np.empty((capacity, 4))
-        self.b = np.empty((capacity, 4))
-        self.outer = np.empty((capacity, 4, 4))
-
-
-class _PlanWork:
-    """``SurfaceTable._plan``'s scratch for a count of views: the gathered parent and surface
-    rows, the level's rows (copied out at the end) and every view of them it writes or
-    reads, made once (views of the first ``k`` rows of ``buffers``)."""
-
-    def __init__(self, k: int, buffers: _PlanBuffers) -> None:
-        self.buffers = buffers
-        self.parent, self.surface = buffers.parent[:k], buffers.surface[:k]
-        self.parent_x0 = self.parent[:, 0:_X0].reshape(k, X_ROWS, 4)
-        self.parent_x1 = self.parent[:, _X0:].reshape(k, 8, 5)[..., 0:4]
-        self.ops0 = self.surface[:, _OPS0].reshape(k, 4, 4)
-        self.ops1 = self.surface[:, _OPS1].reshape(k, 4, 5)
-        self.exit, self.neg_exit = self.surface[:, _EXIT_PLANE], self.surface[:, _NEG_EXIT_PLANE]
-        self.scale = self.surface[:, _SCALE]
-        self.data = data = buffers.data[:k]
-        ints = data.view(np.int64)
-        self.x0, self.x1 = x0, x1 = _x0(data), _x1(data)
-        self.eye_row, self.eye = x0[:, _EYE_ROW], x1[:, 7, 0:4]
-        self.clip, self.rect = data[:, _CLIP], data[:, _RECT]
-        self.grid, self.scissor = ints[:, _GRID_PART], ints[:, _SCISSOR]
-        self.fade, self.node = data[:, _FADE], data[:, _NODE]
-        block = data[:, _BLOCK].view(np.float32)
-        self.block_node = block.view(np.uint32)[:, _ID_NODE_COLUMN]
-        self.block_eye = block[:, _CAMERA_EYE]
-        matrices = block[:, _MATRICES].reshape(k, 4, 4, 4)
-        self.v_p0v_block = matrices[:, 0:3:2]
-        self.v_p0v = x0[:, 0:8, 0:4].reshape(k, 2, 4, 4).transpose(0, 1, 3, 2)
-        self.proj_row, self.vp_row, self.inv = matrices[:, 1, :, 2], matrices[:, 2, :, 2], matrices[:, 3]
-        self.plane_xy, self.plane_w = x1[:, 4:6, 4], x1[:, 7, 4]  # p.x, p.y; p.w
-        self.through, self.col4 = x1[:, 0:4, 4], x1[:, 0:8, 4]  # t; t, p
-        self.signs = buffers.signs[:k]
-        self.signs_xy = self.signs[:, 0:2]
-        self.f, self.two, self.e23, self.fourth = buffers.f[:k], buffers.two[:k], buffers.e23[:k], buffers.fourth[:k]
-        self.f_col = self.f[:, None]
-        self.scaled = buffers.scaled[:k]
-        self.ft, self.fp, self.ft2 = self.scaled[:, 0:4], self.scaled[:, 4:8], self.scaled[:, 2:3]
-        self.fe, self.b, self.outer = buffers.fe[:k], buffers.b[:k], buffers.outer[:k]
-        self.p0v_row2, self.p0v_row3 = x0[:, 6, 0:4], x0[:, 7, 0:4]
-        self.b_col = self.b[:, :, None]
-        self.a_row = x1[:, None, 2, 0:4]
-        self.inv_source = x1[:, 0:4, 0:4]
-
-
-# The most (parent, surface) pairs a level may have for its camera-free grid to be kept
-# (SurfaceTable._child_ids).
-GRID_KEPT_CELLS = 128
-
-# How many scratches a table keeps of each kind (_CullWork, _PlanWork), the first kept dropped
-# first, and for counts up to what: a
-# scratch made afresh costs as much as the views it saves, which is what a level of a few
-# views costs; a large level's work is in its arrays, and keeping its scratches (half a
-# megabyte each for a hundred views) measured slower, the memory they hold evicting the
-# frame's own from the caches (16 mirrors: 1.048 -> 1.019 of the plan before them).
-WORK_KEPT = 48
-WORK_KEPT_COUNT = 16
-
-
-def _kept_work(kept: dict, count: int, make: Callable[[int], _Work]) -> _Work:
-    """A new scratch for ``count``, kept in ``kept`` (the first kept dropped when full) for a
-    count up to ``WORK_KEPT_COUNT``."""
-    found = make(count)
-    if count <= WORK_KEPT_COUNT:
-        if len(kept) >= WORK_KEPT:
-            del kept[next(iter(kept))]
-        kept[count] = found
-    return found
-
-
-@dataclass
-class _RootRows:
-    """What the oblique near planes read of a root projection, worked out once per projection."""
-
-    safe_distance: float     # closer to its plane, a view keeps the clip distance alone
-    key: bytes               # the projection's bytes
-    proj_t: np.ndarray       # the projection, transposed (its Camera block columns)
-    of: np.ndarray           # the projection
-
-
-_ROOTS: dict[bytes, _RootRows] = {}
-_LAST_ROOT: list[_RootRows | None] = [None]
-
-
-def _root_rows(root_proj: np.ndarray) -> _RootRows:
-    """The oblique near planes' constants of ``root_proj``: the last one's again for the same
-    read-only array (the view tree's, kept while its root's projection stays), else found by
-    its bytes."""
-    last = _LAST_ROOT[0]
-    if last is not None and last.of is root_proj and not root_proj.flags.writeable:
-        return last
-    key = root_proj.tobytes()
-    found = _ROOTS.get(key)
-    if found is None:
-        if len(_ROOTS) > 32:
-            _ROOTS.clear()
-        near = root_proj[2, 3] / (root_proj[2, 2] - 1.0)
-        found = _ROOTS[key] = _RootRows(OBLIQUE_SAFE_NEARS * near, key, root_proj.T.copy(), root_proj)
-    _LAST_ROOT[0] = found
-    return found
-
-
 @functools.lru_cache(maxsize=64)
 def _level_size(screen: tuple[int, int], scale: float) -> tuple[int, int]:
     """A level's pixels: the root's scaled, at least one each way."""
     return max(1, round(screen[0] * scale)), max(1, round(screen[1] * scale))
-
-
-_NODES = np.arange(1024, dtype=np.float64)
-
-
-def _node_numbers(first: int, k: int) -> np.ndarray:
-    """first, first + 1, ... k of them (read only, float64)."""
-    global _NODES
-    if len(_NODES) < first + k:
-        _NODES = np.arange(2 * (first + k), dtype=np.float64)
-        _NODES.flags.writeable = False
-    return _NODES[first:first + k]
-
-
-_NODES.flags.writeable = False
-
-
-# How many level plans a SurfaceTable keeps (SurfaceTable.plan): a frame's main tree and a
-# probe's six faces, a few levels each, with room for a second probe.
-PLANS_KEPT = 96

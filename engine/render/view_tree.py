@@ -61,10 +61,11 @@ from engine.render.mirror_passes import (
     surface_look,
     take_samples_queries,
 )
+from engine.render.plan_rows import ROW, Candidates, LevelRows
 from engine.render.scene_pass import REFLECTION_LEVEL, SceneOptions, ScenePass
 from engine.render.surface_table import NO_BLENDS, SurfaceBlends
 from engine.render.targets import LevelStack, RenderTargets
-from engine.render.view_plan import ROW, Candidates, LevelRows, SurfaceTable, _mat, level_rects
+from engine.render.view_plan import SurfaceTable, _mat, level_rects
 from engine.render.views import CAMERA_BLOCK_BYTES, PlannedView, View
 from engine.resources import SurfaceState
 from engine.rules.probe_rules import ProbeBlend
