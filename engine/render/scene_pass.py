@@ -5,7 +5,8 @@ level, and (next) each face of a cube-map probe.  For each view it draws
 
   1. the opaque batches, one instanced draw per (mesh, texture), smallest first, so big
      surfaces behind small things fail the depth test before they are shaded;
-  2. the sky behind them (a full-screen triangle at the far plane, depth test <=);
+  2. the sky behind them (a full-screen triangle at the far plane, depth test <=), into the
+     same framebuffer: it writes id 0 where it shows, the value the clear left there;
   3. the transparent slot: batches marked transparent, farthest first, blended over what
      is there.  No material is transparent yet; refraction (glass) fills this slot.
 
@@ -445,12 +446,15 @@ class ScenePass:
                 self._draw_batches(renderer.opaque_batches(), 0, options.masked, skip=view.skip,
                                    hide=view.hide)
                 if options.sky:
-                    # Colour only: the clear already put id 0 (nothing) where the sky shows.
-                    targets.sky_framebuffer.use()
+                    # Into the view's own framebuffer: the sky writes id 0 (nothing) to the
+                    # surface and seen images, the very values the clear put where no surface
+                    # drew (it draws only where depth is still the cleared far plane).  One
+                    # framebuffer for the draws and the sky: two binds fewer a view.  (The flush
+                    # llvmpipe did at the switch was its rasterising of the queued draws, which
+                    # the next flush now does: measured, no faster a frame; issue 40.)
                     apply_pass_state(ctx, _SKY, viewport, view.scissor)
                     self._sky.render(moderngl.TRIANGLES, vertices=3)
                     renderer.stats.draw_calls += 1
-                    targets.view_framebuffer.use()
                 if transparent:
                     # Blended over what is there, farthest first, testing depth but not writing it.
                     targets.view_framebuffer.depth_mask = False

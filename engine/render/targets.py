@@ -53,8 +53,10 @@ class RenderTargets:
         self.depth = ctx.depth_texture(size)
         self.framebuffer = ctx.framebuffer([self.color, self.surface, self.seen, self.node], self.depth)
         # Views write colour and ids but never the node image (the claims write it; a root's
-        # is cleared to 0), which masked views read; the sky writes colour only.
+        # is cleared to 0), which masked views read; the sky is drawn into it too, writing
+        # id 0 (nothing) where it shows, as the clear did (one framebuffer for a view's pass).
         self.view_framebuffer = ctx.framebuffer([self.color, self.surface, self.seen], self.depth)
+        # Colour alone (with depth): what copies the colour only read from (end_images' history).
         self.sky_framebuffer = ctx.framebuffer([self.color], self.depth)
         # Composites write the reflection's colour and seen-id only (they read surface and node).
         self.composite_framebuffer = ctx.framebuffer([self.color, self.seen])
