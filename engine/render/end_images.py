@@ -88,7 +88,7 @@ class EndImages:
             self.history = self.ctx.texture(size, 4, dtype="f2")
             self.history.filter = (moderngl.LINEAR, moderngl.LINEAR)
             self._history_fbo = self.ctx.framebuffer([self.history])
-        self.ctx.copy_framebuffer(self._history_fbo, root_targets.sky_framebuffer)  # its one attachment: colour
+        self.ctx.copy_framebuffer(self._history_fbo, root_targets.color_framebuffer)  # its one attachment: colour
         self.view_proj = root.view_proj
         self.seen = seen
 

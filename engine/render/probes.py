@@ -305,10 +305,6 @@ class FaceTarget:
     def view_framebuffer(self) -> moderngl.Framebuffer:
         return self.framebuffer
 
-    @property
-    def sky_framebuffer(self) -> moderngl.Framebuffer:
-        return self.framebuffer
-
 
 class CubeFaceTargets:
     """Six framebuffers drawing straight into the faces of one probe's cube map (raw GL:

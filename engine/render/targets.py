@@ -57,7 +57,7 @@ class RenderTargets:
         # id 0 (nothing) where it shows, as the clear did (one framebuffer for a view's pass).
         self.view_framebuffer = ctx.framebuffer([self.color, self.surface, self.seen], self.depth)
         # Colour alone (with depth): what copies the colour only read from (end_images' history).
-        self.sky_framebuffer = ctx.framebuffer([self.color], self.depth)
+        self.color_framebuffer = ctx.framebuffer([self.color], self.depth)
         # Composites write the reflection's colour and seen-id only (they read surface and node).
         self.composite_framebuffer = ctx.framebuffer([self.color, self.seen])
 
@@ -75,7 +75,7 @@ class RenderTargets:
 
     def release(self) -> None:
         release_framebuffer(self.composite_framebuffer)
-        release_framebuffer(self.sky_framebuffer)
+        release_framebuffer(self.color_framebuffer)
         release_framebuffer(self.view_framebuffer)
         release_framebuffer(self.framebuffer)
         for texture in (self.color, self.surface, self.seen, self.node, self.depth):
