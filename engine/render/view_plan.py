@@ -187,6 +187,8 @@ class SurfaceTable:
         self._ends: dict[tuple[int, int], tuple[np.ndarray, np.ndarray, list[bool]]] = {}
         self._unviewed: dict[tuple, tuple[np.ndarray | None, tuple[np.ndarray, np.ndarray]]] = {}  # unviewed's
         self._faded: tuple | None = None  # the last cull's pairs faded out, and for what (cull)
+        self._boxes: np.ndarray | None = None  # the last cull's rectangles before rounding (4 x P x S)
+        self.bounds_claims = bool(self.is_mirror.any())  # boxes are kept for claim_cull (a mirror's bound its claims)
         self._last_ids: tuple | None = None  # the last parents' rows _pair_bias read, and their ids' bytes
         self._ids: dict[tuple, np.ndarray] = {}  # _child_ids'
         self._child_rows: dict[tuple, np.ndarray] = {}  # _child_row's
@@ -458,9 +460,11 @@ class SurfaceTable:
         # x0, y0, -x1, -y1 in pixels, rounded outwards with a pixel's margin; a pair with a
         # corner behind the eye is conservative (the parent's whole rectangle).
         rects = work.rects
-        np.floor(rects, out=rects)  # (the pixel's margin is in the rows: each side less w)
         if work.least_w.min() <= 1e-6:
             np.copyto(rects, -np.inf, where=least[4] <= 1e-6)
+        if self.bounds_claims:
+            self._boxes = rects.copy()  # unrounded: what claim_cull bounds a claim's pixel centres by
+        np.floor(rects, out=rects)  # (the pixel's margin is in the rows: each side less w)
         np.maximum(rects, data[:, _RECT].T[:, :, None], out=rects)  # inside the parent's
         # Seen: facing and allowed, not culled (every corner outside one side of the frustum,
         # or behind the clip plane; on a side counts as outside) and a rectangle with pixels
@@ -651,6 +655,8 @@ class SurfaceTable:
         end = None if ends is None else self._within(depth, depth_cap)[1].take(s)
         candidates = Candidates(LevelRows(data), size, end)
         candidates.__dict__.update(parent=p, surface=s)  # the cull's arrays: no views to make when read
+        if self.bounds_claims:
+            candidates.box = self._boxes[:, p, s].T  # (claim_cull)
         return candidates, faded
 
 

@@ -49,6 +49,7 @@ from pyglm import glm
 from components.limits import MAX_VIEW_DEPTH
 from engine.core.budget import screen_coverage, spending_order
 from engine.render.batched_mirrors import PATHS, choose_path, submitted_triangles
+from engine.render.claim_cull import ChainBoxes, empty_claims
 from engine.render.end_images import EndImages
 from engine.render.gpu import Gpu
 from engine.render.mirror_passes import (
@@ -137,6 +138,7 @@ class RootVisibility:
     queries: list[moderngl.Query] = field(default_factory=list)
     used: int = 0                 # queries taken this frame
     pending: list[tuple[int, ...]] = field(default_factory=list)
+    counted: list[moderngl.Query] = field(default_factory=list)  # what counts each of ``pending``
     seen: dict[tuple[int, ...], int] = field(default_factory=dict)
     frame: int = -1               # the ViewTree frame it was last drawn in
 
@@ -222,6 +224,7 @@ class _Walk:
                                                                         # are drawn into
     blends: Mapping[int, ProbeBlend] = field(default_factory=dict)      # the fallbacks' probes (SurfaceBlends)
     triangle_count: int | None = None        # what a scene pass submits (triangles(): counted once, if asked)
+    chain: ChainBoxes | None = None          # the planned level's claims' bounds (claim_cull), for the next
 
     def triangles(self) -> int:
         """The triangles a scene pass submits, counted at the first level that asks (a level
@@ -326,6 +329,7 @@ class ViewTree:
         step = _Level(candidates, levels.get(level + 1, candidates.size), levels[level], walk.nodes,
                       walk.record.take(len(candidates), self.renderer.ctx))
         walk.steps.append(step)
+        self._skip_empty_claims(walk, step)
         is_end = candidates.end.tolist() if candidates.end is not None else [False] * len(candidates)
         if walk.exact:  # this frame's counts: the CPU waits for the GPU to draw the claims
             step.keep, step.grow, end_rows = self._chosen_by_counts(surfaces, step, is_end, settings, result,
@@ -357,6 +361,22 @@ class ViewTree:
             result.paths.add(step.path)
         step.composite = children + step.ended
         return step
+
+    def _skip_empty_claims(self, walk: _Walk, step: _Level) -> None:
+        """The claims of ``step`` that cannot take a pixel (``claim_cull``: no pixel centre in
+        the bounding boxes of its surface and its parents' up the chain) count 0 without a
+        draw: their queries become ``MirrorPasses.no_pixels``.  Levels at another resolution
+        than the root's break the chain."""
+        candidates = step.candidates
+        box = candidates.__dict__.get("box")  # the plan's (SurfaceTable._plan), or _end_seers'
+        if box is None or candidates.size != walk.root.size:
+            walk.chain = None
+            return
+        empty, walk.chain = empty_claims(walk.surfaces, box, candidates.surface, walk.rows.data, candidates.parent,
+                                         walk.chain, candidates.rows.node)
+        if empty is not None:
+            none = self.passes.no_pixels
+            step.queries = [none if skip else query for query, skip in zip(step.queries, empty, strict=True)]
 
     def _end_views(self, walk: _Walk, step: _Level, end_rows: list[int]) -> None:
         """A level's end views (rows ``end_rows`` of its candidates): their nodes, the matrix
@@ -461,6 +481,7 @@ class ViewTree:
         claim_keys = [keys[p] + (entities[s],) for p, s in
                       zip(candidates.parent.tolist(), candidates.surface.tolist(), strict=True)]
         record.pending.extend(claim_keys)
+        record.counted.extend(step.queries)
         seen = [record.seen.get(key) for key in claim_keys]
         keep = [i for i, end in enumerate(is_end) if not end]
         # A view hidden last frame is drawn (it may show now) but its own surfaces wait for
@@ -539,9 +560,9 @@ class ViewTree:
         # Last frame's counts, drawn by the GPU a frame ago (reading them waits for nothing
         # more); none where the root was not drawn last frame, or was drawn exactly.
         fresh = record.pending and record.frame == self._frame - 1
-        record.seen = dict(zip(record.pending, self.passes.claimed_pixels(record.queries[:len(record.pending)]),
+        record.seen = dict(zip(record.pending, self.passes.claimed_pixels(record.counted),
                                strict=True)) if fresh else {}
-        record.pending = []
+        record.pending, record.counted = [], []
         record.frame, record.used = self._frame, 0
         return record
 
@@ -551,7 +572,7 @@ class ViewTree:
         nothing: every candidate is drawn and grows views, as on a first frame (the image
         is exact; the frame draws more views)."""
         for record in self._visibility.values():
-            record.seen, record.pending = {}, []
+            record.seen, record.pending, record.counted = {}, [], []
 
     def _root_rows(self, root: View) -> LevelRows:
         """``LevelRows.root(root)``, kept per root while its camera stands still (a probe
@@ -625,7 +646,10 @@ class ViewTree:
         if len(kept) < len(found):
             if not kept:
                 return None, None
-            candidates, found = candidates.select(np.array(kept, np.int64)), [found[i] for i in kept]
+            rows, box = np.array(kept, np.int64), candidates.__dict__.get("box")
+            candidates, found = candidates.select(rows), [found[i] for i in kept]
+            if box is not None:  # the plan's unrounded rectangles (claim_cull), kept with their rows
+                candidates.__dict__["box"] = box.take(rows, axis=0)
         return candidates, found
 
     def _claim(self, surfaces: SurfaceTable, step: _Level) -> None:
@@ -637,7 +661,8 @@ class ViewTree:
         ids = [(parents[p].index, entities[s], node) for p, s, node in
                zip(candidates.parent.tolist(), candidates.surface.tolist(),
                    candidates.rows.node.astype(np.int64).tolist(), strict=True)]
-        claims = Claims(ids, candidates.scissor.tolist())
+        # (predicted visibility: a claim known empty is still a view, its rectangle reset)
+        claims = Claims(ids, candidates.scissor.tolist(), reset_empty=step.conditions is not None)
         self.passes.prepare_level(step.targets, step.parent_targets, claims, step.queries)
 
     def _draw_level(self, step: _Level, root: View) -> None:
