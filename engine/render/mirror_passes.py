@@ -395,7 +395,6 @@ class Claims:
 
     ids: list[tuple[int, int, int]]
     rects: list[tuple[int, int, int, int]] | list[list[int]]
-    reset_empty: bool = True  # reset the rectangles of claims known empty (predicted visibility: still views)
 
     def __len__(self) -> int:
         return len(self.rects)
@@ -449,19 +448,13 @@ class MirrorPasses:
         """Write ``level``'s node image and depth mask for the candidate views ``claims``,
         counting each one's pixels in ``queries[i]`` (0: the surface is hidden there, or off
         the pixels its parent view drew).  A claim whose query is ``no_pixels`` is known to
-        be empty (``engine/render/claim_cull.py``) and is not drawn; its rectangle is reset
-        only with ``claims.reset_empty`` (predicted visibility: it is still a view, drawn on that
-        query's condition, and its composite reads its rectangle; with exact visibility it
-        gets no view, and nothing reads a rectangle that is no view's).  Outside the
-        rectangles reset nothing is written or read this frame.  Nothing waits here: the
+        be empty (``engine/render/claim_cull.py``) and is not drawn, but its rectangle is
+        reset: it is still a view (predicted visibility: drawn on that query's condition),
+        and its composite reads its rectangle.  (Exact visibility leaves such claims out: no
+        view, and nothing reads a rectangle that is no view's.)  Outside the claims'
+        rectangles nothing is written or read this frame.  Nothing waits here: the
         counts are read by ``claimed_pixels``, now (the CPU waits for the GPU) or a frame
         later (``ViewTree``'s visibility)."""
-        empty = self.no_pixels
-        if not claims.reset_empty:
-            kept = [at for at, query in enumerate(queries) if query is not empty]
-            if len(kept) < len(queries):
-                claims = Claims([claims.ids[at] for at in kept], [claims.rects[at] for at in kept])
-                queries = [queries[at] for at in kept]
         if not claims:
             return
         ctx = self.ctx
@@ -479,7 +472,7 @@ class MirrorPasses:
         bind_texture(self.ctx, parent.node, PARENT_NODE_UNIT)
         bind_texture(self.ctx, parent.surface, PARENT_SURFACE_UNIT)
         self.uniforms.set(self.claim, "to_parent", (parent.size[0] / level.size[0], parent.size[1] / level.size[1]))
-        render = self._claim_vao.render
+        render, empty = self._claim_vao.render, self.no_pixels
         for at, query in enumerate(queries[:count]):
             if query is not empty:
                 with query:

@@ -460,7 +460,7 @@ class ViewTree:
         keep), which of those get views below them (all), and which end views have pixels;
         each a list of rows of ``step.candidates``."""
         self._claim(surfaces, step)
-        pixels = step.pixels = self.passes.claimed_pixels(step.queries)
+        pixels = step.pixels = self._claimed_pixels(step.queries)
         keep = self._within_budgets(surfaces, step.candidates,
                                     [0 if end else n for n, end in zip(pixels, is_end, strict=True)],
                                     settings, result, level, screen)
@@ -658,12 +658,23 @@ class ViewTree:
         few claims, so lists (a few numpy calls cost more)."""
         candidates = step.candidates
         entities, parents = surfaces.entity_list, step.parents
-        ids = [(parents[p].index, entities[s], node) for p, s, node in
-               zip(candidates.parent.tolist(), candidates.surface.tolist(),
-                   candidates.rows.node.astype(np.int64).tolist(), strict=True)]
-        # (predicted visibility: a claim known empty is still a view, its rectangle reset)
-        claims = Claims(ids, candidates.scissor.tolist(), reset_empty=step.conditions is not None)
-        self.passes.prepare_level(step.targets, step.parent_targets, claims, step.queries)
+        rows = list(zip(candidates.parent.tolist(), candidates.surface.tolist(),
+                        candidates.rows.node.astype(np.int64).tolist(), candidates.scissor.tolist(), step.queries,
+                        strict=True))
+        if step.conditions is None:  # exact: a claim known empty (claim_cull) gets no view, so no claim or reset
+            none = self.passes.no_pixels
+            rows = [row for row in rows if row[4] is not none]
+        claims = Claims([(parents[p].index, entities[s], node) for p, s, node, _, _ in rows], [row[3] for row in rows])
+        self.passes.prepare_level(step.targets, step.parent_targets, claims, [row[4] for row in rows])
+
+    def _claimed_pixels(self, queries: list[moderngl.Query]) -> list[int]:
+        """Each claim's pixels (the CPU waits for the GPU), 0 for one known empty
+        (``MirrorPasses.no_pixels``: never claimed in exact visibility, so never read)."""
+        none = self.passes.no_pixels
+        if none not in queries:
+            return self.passes.claimed_pixels(queries)
+        counted = iter(self.passes.claimed_pixels([query for query in queries if query is not none]))
+        return [0 if query is none else next(counted) for query in queries]
 
     def _draw_level(self, step: _Level, root: View) -> None:
         """A planned level's views (and end views) into its targets, then its composite's
