@@ -26,10 +26,14 @@ from __future__ import annotations
 
 import weakref
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from engine.render.plan_rows import ROW
+
+if TYPE_CHECKING:
+    from engine.render.view_plan import SurfaceTable
 
 MARGIN = 1.0 / 16.0   # pixels: a centre this near a box counts as inside
 _NODE = ROW["node"].start
@@ -51,7 +55,7 @@ class ChainBoxes:
     nodes: np.ndarray
 
 
-def _own_bounds(table) -> np.ndarray | None:
+def _own_bounds(table: SurfaceTable) -> np.ndarray | None:
     """What is added to each SurfaceTable row's box: 0 for a mirror, -inf for a portal (its
     box bounds nothing), as (S, 4) rows; None where every surface is a mirror (nothing to
     add).  Kept while the table lives."""
@@ -62,8 +66,9 @@ def _own_bounds(table) -> np.ndarray | None:
     return found
 
 
-def empty_claims(table, box: np.ndarray, surface_rows: np.ndarray, parents: np.ndarray, parent_rows: np.ndarray,
-                 above: ChainBoxes | None, nodes: np.ndarray) -> tuple[list[bool] | None, ChainBoxes]:
+def empty_claims(table: SurfaceTable, box: np.ndarray, surface_rows: np.ndarray, parents: np.ndarray,
+                 parent_rows: np.ndarray, above: ChainBoxes | None,
+                 nodes: np.ndarray) -> tuple[list[bool] | None, ChainBoxes]:
     """Which of a level's candidates cannot claim a pixel (None: none is known empty), and
     the chain boxes its children are tested against.  ``box``: the candidates' own boxes
     (``Candidates.box``, from a table with a mirror), ``surface_rows`` their SurfaceTable
