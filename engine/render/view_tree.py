@@ -365,11 +365,12 @@ class ViewTree:
     def _skip_empty_claims(self, walk: _Walk, step: _Level) -> None:
         """The claims of ``step`` that cannot take a pixel (``claim_cull``: no pixel centre in
         the bounding boxes of its surface and its parents' up the chain) count 0 without a
-        draw: their queries become ``MirrorPasses.no_pixels``.  Levels at another resolution
-        than the root's break the chain."""
+        draw: their queries become ``MirrorPasses.no_pixels``.  The boxes are in the root's
+        pixels: a level at another resolution than the root's, or below one, is not tested
+        and breaks the chain."""
         candidates = step.candidates
         box = candidates.__dict__.get("box")  # the plan's (SurfaceTable._plan), or _end_seers'
-        if box is None or candidates.size != walk.root.size:
+        if box is None or candidates.size != walk.root.size or step.parent_targets.size != walk.root.size:
             walk.chain = None
             return
         empty, walk.chain = empty_claims(walk.surfaces, box, candidates.surface, walk.rows.data, candidates.parent,
