@@ -19,8 +19,11 @@ y0 - 1, -x1 - 1, -y1 - 1, so intersecting is a maximum), -inf where a corner is 
 the eye plane (bounds nothing).  A mirror's mesh lies inside its box; a portal's mesh may be
 any shape (its corners are its ``Portal.size``), so a portal's own box bounds nothing.  A
 centre within ``MARGIN`` pixels of a box counts as inside (float32 on the GPU, float64 here;
-the rasteriser's sub-pixel snapping).  Levels at another resolution than the root's break
-the chain (``ViewTree``): their pixels are not the root's.
+the rasteriser's sub-pixel snapping).  The levels are single-sampled: a pixel is covered at
+its centre (multisampled levels would need the sample positions).  A level at another
+resolution than the root's, or below one, breaks the chain (``ViewTree``): its pixels, or its
+parent's, are not the root's.  Nothing here waits for the GPU or reads its images: the test
+is the planner's arrays, a handful of numpy calls a level.
 """
 from __future__ import annotations
 
