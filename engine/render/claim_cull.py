@@ -24,6 +24,12 @@ its centre (multisampled levels would need the sample positions).  A level at an
 resolution than the root's, or below one, breaks the chain (``ViewTree``): its pixels, or its
 parent's, are not the root's.  Nothing here waits for the GPU or reads its images: the test
 is the planner's arrays, a handful of numpy calls a level.
+
+One case differs from drawing every claim: a mirror that travels through a portal has a
+``PortalClone`` drawn as the mirror (its id in the surface image) where its box does not
+reach; a claim only ever covers its rectangle, the box rounded out by a pixel or two, so
+what the cull drops there is a clone's pixels in that border of a mirror that covers no pixel
+centre itself (before, they showed a view of the mirror's plane; now the clone's own look).
 """
 from __future__ import annotations
 
