@@ -555,8 +555,10 @@ class ViewTree:
 
     def _root_rows(self, root: View) -> LevelRows:
         """``LevelRows.root(root)``, kept per root while its camera stands still (a probe
-        face's every frame): the same row, so the plans kept for it are found again
-        (``SurfaceTable.plan``)."""
+        face's every frame): the same read-only row, so the plans kept for it are found again
+        (``SurfaceTable.plan``).  A camera seen for the first time (one that moves: every
+        frame) gets a writeable copy, for which nothing is kept: a moving camera's plans, and
+        what is made of them, would be found again by no later frame."""
         key = (root.view.to_bytes(), root.proj.to_bytes(), tuple(root.eye), root.size, tuple(root.clip_plane),
                root.view_mask, root.mirrored)
         rows = self._roots.get(key)
@@ -565,6 +567,7 @@ class ViewTree:
                 self._roots.clear()
             rows = self._roots[key] = LevelRows.root(root)
             rows.data.flags.writeable = False
+            return LevelRows(rows.data.copy())
         return rows
 
     def _projection(self, proj: glm.mat4) -> tuple[np.ndarray, np.ndarray]:
@@ -631,13 +634,19 @@ class ViewTree:
     def _claim(self, surfaces: SurfaceTable, step: _Level) -> None:
         """Every candidate's claim in the level's targets, its pixels counted in its query.
         The claim shader's (parent view, surface, view index) of every candidate: a level's
-        few claims, so lists (a few numpy calls cost more)."""
-        candidates = step.candidates
-        entities, parents = surfaces.entity_list, step.parents
-        ids = [(parents[p].index, entities[s], node) for p, s, node in
-               zip(candidates.parent.tolist(), candidates.surface.tolist(),
-                   candidates.rows.node.astype(np.int64).tolist(), strict=True)]
-        claims = Claims(ids, candidates.scissor.tolist())
+        few claims, so lists (a few numpy calls cost more), kept with a kept plan."""
+        candidates, parents = step.candidates, step.parents
+        kept = not candidates.rows.data.flags.writeable
+        columns = candidates.derived.get("claims") if kept else None
+        if columns is None:  # each candidate's parent row, surface entity and node, and its scissor
+            entities = surfaces.entity_list
+            columns = (candidates.parent.tolist(), [entities[s] for s in candidates.surface.tolist()],
+                       candidates.rows.node.astype(np.int64).tolist(), candidates.scissor.tolist())
+            if kept:  # a kept plan's: the same columns every frame it is found again
+                candidates.derived["claims"] = columns
+        rows, entities, nodes, scissors = columns
+        claims = Claims([(parents[p].index, entity, node) for p, entity, node in
+                         zip(rows, entities, nodes, strict=True)], scissors)
         self.passes.prepare_level(step.targets, step.parent_targets, claims, step.queries)
 
     def _draw_level(self, step: _Level, root: View) -> None:
@@ -710,7 +719,15 @@ class ViewTree:
         """The planned views of a level's chosen candidates (what the scene pass and the
         composite read: each with its Camera block already packed, its matrices read from the
         block only if something asks) and their tree nodes, in one pass: one ``tolist`` per
-        column, not one conversion per view."""
+        column, not one conversion per view.  A kept plan's candidates (read-only: a still
+        camera's, a probe face's) keep their views (a View is not changed after it is made)
+        and what their nodes are made of, so the frames that find the plan again make only
+        the nodes."""
+        kept = None if chosen.rows.data.flags.writeable else chosen.derived.get(("nodes", hide))
+        if kept is not None:  # a kept plan's: its views, and what its nodes are made of
+            views, rows = kept
+            return views, [ReflectionView(node, level, view, rect, state, parents[p], fade)
+                           for view, (node, rect, state, p, fade) in zip(views, rows, strict=True)]
         states = surfaces.states
         size = chosen.size
         blocks = chosen.blocks.tobytes()
@@ -727,6 +744,9 @@ class ViewTree:
             at += step
             views.append(view)
             nodes.append(ReflectionView(node, level, view, (x0, y0, -x1 - x0, -y1 - y0), state, parents[p], fade))
+        if not chosen.rows.data.flags.writeable:
+            chosen.derived[("nodes", hide)] = (views, [(n.index, n.rect, n.surface, p, n.fade) for n, p in
+                                                       zip(nodes, chosen.parent.tolist(), strict=True)])
         return views, nodes
 
     def _prepare_composite(self, children: list[ReflectionView], root: View,
