@@ -29,8 +29,10 @@ out vec4 out_color;
 
 void main() {
 #ifdef POST
-    // textureLod: neither image has mipmaps, and a software rasteriser skips the derivatives.
-    vec3 hdr = textureLod(hdr_image, v_uv, 0.0).rgb;
+    // The image is the output's size: its texel, fetched (no filter to run); the bloom
+    // image, smaller, through textureLod (no mipmaps, and a software rasteriser skips the
+    // derivatives).
+    vec3 hdr = texelFetch(hdr_image, ivec2(v_uv * vec2(textureSize(hdr_image, 0))), 0).rgb;
 #ifdef BLOOM
     hdr = hdr * bloom_mix.x + textureLod(bloom_image, v_uv, 0.0).rgb * bloom_mix.y;
 #endif

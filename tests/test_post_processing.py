@@ -24,12 +24,14 @@ from engine.assets.level_file import load_level, save_level
 from engine.core.frame_io import Output
 from engine.core.game import Game, GameSystem
 from engine.render.bloom import FIRST_STEPS, level_sizes
+from engine.render.bloom import LEVEL_DTYPE as LEVEL_GL_DTYPE
 from engine.render.post import adapt_blend
 from engine.render.targets import CaptureTarget
 from shell.app import Engine
 from tests.support import linear_to_srgb8, srgb_to_linear
 
 ROOT = Path(__file__).resolve().parents[1]
+LEVEL_DTYPE = {"f2": np.float16, "f4": np.float32}[LEVEL_GL_DTYPE]   # the bloom levels' texels
 
 
 # --- the curves, from their references (row-major matrices, as the references write them) ---
@@ -289,7 +291,7 @@ def test_bloom_of_a_black_frame_is_black(known, composite, first_step):
     assert bloom.levels == {"half": 5, "quarter": 4}[first_step]
     assert len(bloom.textures) == bloom.target_count() == bloom.levels
     for texture in bloom.textures:
-        assert not np.frombuffer(texture.read(), np.float16).reshape(-1, 4)[:, :3].any()
+        assert not np.frombuffer(texture.read(), LEVEL_DTYPE).reshape(-1, 4)[:, :3].any()
 
 
 def smooth_image(size=(320, 180)) -> np.ndarray:
@@ -315,7 +317,7 @@ def test_bloom_keeps_the_images_mean(known, first_step):
     bloom = runner.engine.renderer.present_pass.bloom
     assert bloom.levels == 5
     w, h = bloom.textures[0].size
-    summed = np.frombuffer(bloom.textures[0].read(), np.float16).reshape(h, w, 4)[..., :3].astype(np.float64)
+    summed = np.frombuffer(bloom.textures[0].read(), LEVEL_DTYPE).reshape(h, w, 4)[..., :3].astype(np.float64)
     mean_in = image[..., :3].astype(np.float64).mean(axis=(0, 1))
     mean_bloom = summed.mean(axis=(0, 1)) / bloom.levels
     assert np.all(np.abs(mean_bloom / mean_in - 1.0) < 0.005), (mean_bloom, mean_in)
