@@ -390,13 +390,13 @@ def test_bloom_resources_go_with_the_component(known):
     runner = known(smooth_image((64, 48)), Bloom(), Tonemap(auto_exposure=True))
     runner.frame()
     counts = runner.engine.renderer.resource_counts()
-    # The chain (a half start: 32x24 .. 4x3; a quarter start: 16x12 .. 4x3); luminance 64,
-    # 16, 4 and two 1x1.
+    # The chain (a half start: 32x24 .. 4x3; a quarter start: 16x12 .. 4x3); luminance 64
+    # and two 1x1.
     levels = {"half": 4, "quarter": 3}[runner.engine.renderer.present_pass.bloom.first_step]
-    assert counts["post_targets"] == levels + 5
+    assert counts["post_targets"] == levels + 3
     runner.world.remove_component(runner.game.camera, Bloom)
     runner.frame()
-    assert runner.engine.renderer.resource_counts()["post_targets"] == 5
+    assert runner.engine.renderer.resource_counts()["post_targets"] == 3
     runner.world.remove_component(runner.game.camera, Tonemap)
     runner.frame()
     assert runner.engine.renderer.resource_counts()["post_targets"] == 0
@@ -569,12 +569,12 @@ def test_the_present_stages_switches_turn_bloom_off_and_override_the_curve(known
     adapted = runner.engine.renderer.present_pass.auto_exposure.adapted_ev()
     line = post_line(runner.engine)
     assert line.startswith(f"post: agx (camera), +0.00 EV, auto {adapted:+.2f}; "), line
-    # 12 rows: levels 6x128 and 3x64 (3 passes), and 4 exposure passes
-    assert line.endswith("; bloom 0.3 x2, 7 passes"), line
+    # 12 rows: levels 6x128 and 3x64 (3 passes), and 2 exposure passes
+    assert line.endswith("; bloom 0.3 x2, 5 passes"), line
     present.bloom = False
     plain = runner.frame()
     assert not np.array_equal(plain, bloomed)
-    assert runner.engine.renderer.resource_counts()["post_targets"] == 5  # the exposure's only
+    assert runner.engine.renderer.resource_counts()["post_targets"] == 3  # the exposure's only
     assert "bloom off (set)" in post_line(runner.engine)
     present.curve = "none"
     runner.world.get(runner.game.camera, Tonemap).auto_exposure = False
