@@ -315,7 +315,7 @@ def test_bloom_keeps_the_images_mean(known, first_step):
     runner = start_at(known(image, Tonemap(curve="none", exposure=-3.0), Bloom(intensity=1.0, levels=5)), first_step)
     frame = runner.frame()
     bloom = runner.engine.renderer.present_pass.bloom
-    assert bloom.levels == 5
+    assert bloom.levels == {"half": 5, "quarter": 4}[first_step]   # both end at 10x5
     w, h = bloom.textures[0].size
     summed = np.frombuffer(bloom.textures[0].read(), LEVEL_DTYPE).reshape(h, w, 4)[..., :3].astype(np.float64)
     mean_in = image[..., :3].astype(np.float64).mean(axis=(0, 1))
@@ -372,7 +372,9 @@ def test_bloom_level_sizes_stop_at_two_pixels():
     assert level_sizes((640, 360), 8) == level_sizes((640, 360), 7) == [*level_sizes((640, 360), 6), (5, 2)]
     assert level_sizes((3, 100), 4) == []
     # A quarter start: the half start's chain less its first level (as of a 320x180 image).
-    assert level_sizes((640, 360), 6, "quarter") == level_sizes((320, 180), 6) == level_sizes((640, 360), 7)[1:]
+    # The quarter start leaves the half level out and ends where the half start does.
+    assert level_sizes((640, 360), 6, "quarter") == level_sizes((320, 180), 5) == level_sizes((640, 360), 6)[1:]
+    assert level_sizes((640, 360), 1, "quarter") == [(160, 90)]
     assert level_sizes((7, 100), 4, "quarter") == []
 
 

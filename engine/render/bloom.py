@@ -20,7 +20,9 @@ screen's pixels (a twelfth from a quarter), whatever the number of mirrors and p
 composited into the image.  The half-size level is most of it: its 13-tap step reads the
 whole image and the last step up writes it.  On a software rasteriser, where that is pixel
 work of the CPU (about 4.5 of the chain's 5.5 ms at 640x360 on llvmpipe), the chain starts at
-a quarter; a GPU keeps the half-size start.  The quarter start is one draw from the image
+a quarter; a GPU keeps the half-size start.  The quarter start's chain ends at the
+GPU's smallest level (``level_sizes``: one level fewer), so ``Bloom.levels`` spreads a glow
+as far on either.  The quarter start is one draw from the image
 (an earlier form drew the image's 2 x 2 means at half size first, then the 13-tap step on
 them: two draws, 1.4 ms of CPU at 640x360 on llvmpipe against 0.55 for the one 9-tap draw).
 The chain's textures are made at the first bloomed frame of a size and released when no
@@ -53,9 +55,13 @@ _UP = PassState(blend=(moderngl.ONE, moderngl.ONE))
 def level_sizes(size: tuple[int, int], levels: int, first_step: str = "half") -> list[tuple[int, int]]:
     """The chain's sizes below ``size``: the first half the image (a quarter with
     ``first_step`` "quarter"), each next half the one above (rounded down), as many of
-    ``levels`` as keep both sides at least ``MIN_LEVEL_SIDE``."""
+    ``levels`` as keep both sides at least ``MIN_LEVEL_SIDE``.  The quarter start leaves
+    the half-size level out and ends where the half start does (``levels - 1`` of them, at
+    least one): its widest glow reaches as far as a GPU's, not twice as far."""
     sizes = []
     width, height = size
+    if first_step == "quarter":
+        levels = max(levels - 1, 1)
     for index in range(levels):
         divisor = 4 if index == 0 and first_step == "quarter" else 2
         width, height = width // divisor, height // divisor
