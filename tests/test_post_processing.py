@@ -353,6 +353,29 @@ def test_bloom_spreads_a_bright_point_and_leaves_level_0_as_it_was(known, first_
     assert frame[63, 95, 0] == 255 and not frame[:60].any() and not frame[:, :90].any()
 
 
+@pytest.mark.parametrize("first_step", FIRST_STEPS)
+def test_the_up_steps_four_paired_taps_sum_the_nine_tap_tent(known, first_step):
+    """At radius 1 the up step reads its 3x3 tent in four bilinear taps, each weighing a pair
+    of texels (bloom_up.frag PAIRED); any other radius takes the nine taps.  On an odd-sized
+    image with bright specks (every level odd somewhere, so the taps' offsets vary texel to
+    texel) the chain's sum is the nine taps' to float rounding."""
+    rng = np.random.default_rng(7)
+    image = np.ones((117, 203, 4), np.float16)
+    image[..., :3] = rng.random((117, 203, 3)) ** 8 * 50.0
+    sums = {}
+    for radius in (1.0, 1.0 + 2.0 ** -20):   # the second rounds to no float32 1.0: the nine taps
+        runner = start_at(known(image, Tonemap(curve="none"), Bloom(radius=radius, levels=5)), first_step)
+        runner.frame()
+        bloom = runner.engine.renderer.present_pass.bloom
+        paired = any(("PAIRED", "1") in defines for _, defines in bloom._vaos)
+        assert paired == (radius == 1.0)
+        w, h = bloom.textures[0].size
+        sums[radius] = np.frombuffer(bloom.textures[0].read(), LEVEL_DTYPE).reshape(h, w, 4)[..., :3]
+    nine, four = sums[1.0 + 2.0 ** -20].astype(np.float64), sums[1.0].astype(np.float64)
+    assert nine.std() > 0.1 * nine.mean() > 0   # not a flat sum
+    assert np.abs(four - nine).max() <= 1e-5 * nine.max(), np.abs(four - nine).max()
+
+
 def test_fxaa_runs_after_the_tone_map(known):
     """With FXAA on, the tone-mapped frame is encoded with its luma and filtered: a flat
     image comes through unchanged, and an edge of two tone-mapped values is blended."""
