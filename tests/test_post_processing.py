@@ -25,6 +25,7 @@ from engine.core.frame_io import Output
 from engine.core.game import Game, GameSystem
 from engine.render.bloom import FIRST_STEPS, level_sizes
 from engine.render.bloom import LEVEL_DTYPE as LEVEL_GL_DTYPE
+from engine.render.gl_context import GLCapabilities
 from engine.render.post import adapt_blend
 from engine.render.targets import CaptureTarget
 from shell.app import Engine
@@ -373,7 +374,11 @@ def test_the_up_steps_four_paired_taps_sum_the_nine_tap_tent(known, first_step):
         sums[radius] = np.frombuffer(bloom.textures[0].read(), LEVEL_DTYPE).reshape(h, w, 4)[..., :3]
     nine, four = sums[1.0 + 2.0 ** -20].astype(np.float64), sums[1.0].astype(np.float64)
     assert nine.std() > 0.1 * nine.mean() > 0   # not a flat sum
-    assert np.abs(four - nine).max() <= 1e-5 * nine.max(), np.abs(four - nine).max()
+    # llvmpipe weighs a float texture's texels by float weights: the two agree to rounding.
+    # The GL spec leaves a filter's weight precision to the implementation (GPUs commonly
+    # keep 8 bits of the fraction), so there they agree to that.
+    tolerance = 1e-5 if GLCapabilities.read(runner.ctx).software else 1.0 / 128.0
+    assert np.abs(four - nine).max() <= tolerance * nine.max(), np.abs(four - nine).max() / nine.max()
 
 
 def test_fxaa_runs_after_the_tone_map(known):
