@@ -5,7 +5,7 @@
 // With POST (a camera with a Tonemap or a Bloom, components/post.py), in this order: the
 // bloom mixed in (BLOOM: the mean of the mip chain's blurs, engine/render/bloom.py), the
 // exposure (a linear scale; AUTO_EXPOSURE: times 2^EV from the adapted 1x1 exposure
-// texture, engine/render/post.py, read here on the GPU), the tone curve
+// texture, engine/render/post.py, read on the GPU by present.vert), the tone curve
 // (TONEMAP_CURVE, include/tonemap.glsl), then the sRGB encoding.  Without POST the
 // code is the plain look's, unchanged.
 #include "color.glsl"
@@ -20,7 +20,7 @@ uniform sampler2D bloom_image;
 uniform vec2 bloom_mix;   // (weight of the image, weight of the bloom image's sum of levels)
 #endif
 #ifdef AUTO_EXPOSURE
-uniform sampler2D exposure_state;   // 1x1, r: the adapted automatic exposure in EV
+flat in float v_scale;   // exposure * 2^EV of the adapted 1x1 exposure texture (present.vert)
 #endif
 #endif
 
@@ -36,9 +36,10 @@ void main() {
 #ifdef BLOOM
     hdr = hdr * bloom_mix.x + textureLod(bloom_image, v_uv, 0.0).rgb * bloom_mix.y;
 #endif
-    float scale = exposure;
 #ifdef AUTO_EXPOSURE
-    scale *= exp2(texelFetch(exposure_state, ivec2(0), 0).r);
+    float scale = v_scale;
+#else
+    float scale = exposure;
 #endif
     vec3 srgb = linear_to_srgb(tone_map(hdr * scale));
 #else
