@@ -110,7 +110,8 @@ class ShadowMaps:
         # a still frame 1.43x the frame without shadows with the grid, 1.24x with one tap, the
         # frame without building no lookup at all; benchmarks/lighting.py), so there the
         # default is "single"; set "grid" for equal quality (maps are drawn again).
-        self._casting = (False, False)   # (a directional light casts, a point light casts): upload's
+        # (the directional slots read: the last casting one's index + 1, a point light casts): upload's
+        self._casting = (0, False)
         self.program_defines: tuple[tuple[str, str], ...] = ()
         self.filter = "single" if renderer.caps.software else "grid"
         # Lights through mirrors and portals: a depth atlas of 2 x 2 tiles and their block.
@@ -206,14 +207,16 @@ class ShadowMaps:
     def _set_program_defines(self) -> None:
         """``program_defines``: the shadow lookups the scene programs compile
         (``shaders/include/shadows.glsl``): ``DIRECTIONAL_SHADOWS`` while a directional light
-        casts, ``POINT_SHADOWS`` while a point light does, ``SHADOW_SINGLE_TAP`` with the
-        "single" filter.  The scene pass builds (and caches) a program per combination; a
-        frame where nothing casts runs no lookup (llvmpipe runs every branch's code: a third of
-        such a frame at 640x360 went to lookups that returned 1)."""
+        casts (its value the directional slots looked up: the last casting one's index + 1,
+        each slot's lookup made outside the lights' loop), ``POINT_SHADOWS`` while a point
+        light does, ``SHADOW_SINGLE_TAP`` with the "single" filter.  The scene pass builds
+        (and caches) a program per combination; a frame where nothing casts runs no lookup
+        (llvmpipe runs every branch's code: a third of such a frame at 640x360 went to
+        lookups that returned 1)."""
         directional, point = self._casting
-        self.program_defines = tuple((name, "1") for name, on in (
-            ("DIRECTIONAL_SHADOWS", directional), ("POINT_SHADOWS", point),
-            ("SHADOW_SINGLE_TAP", self._filter == "single")) if on)
+        self.program_defines = tuple((name, value) for name, value, on in (
+            ("DIRECTIONAL_SHADOWS", str(directional), directional > 0), ("POINT_SHADOWS", "1", point),
+            ("SHADOW_SINGLE_TAP", "1", self._filter == "single")) if on)
 
     def _taps(self, softness: float) -> float:
         """Taps a side of a directional light's grid."""
@@ -409,7 +412,8 @@ class ShadowMaps:
     def upload(self) -> None:
         self.ubo.write(self.block.tobytes())
         base = 16 * MAX_DIRECTIONAL_LIGHTS
-        casting = (bool(self.block[base + 3:base + 4 * MAX_DIRECTIONAL_LIGHTS:4].any()), bool((self._slots >= 0).any()))
+        taps = np.flatnonzero(self.block[base + 3:base + 4 * MAX_DIRECTIONAL_LIGHTS:4])  # the casting slots
+        casting = (int(taps[-1]) + 1 if taps.size else 0, bool((self._slots >= 0).any()))
         if casting != self._casting:
             self._casting = casting
             self._set_program_defines()
