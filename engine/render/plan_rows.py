@@ -253,6 +253,9 @@ class Candidates:
         self.size = size          # the level's pixels
         self.end = end            # (k,) bool: an end view, cut by the depth limits (None: none asked for)
         self._chosen: dict[bytes, Candidates] = {}  # select's, once read-only
+        # What the view tree makes of a kept plan's (read-only) candidates that is a function
+        # of their rows alone, kept with them while they are (``ViewTree._level_nodes``).
+        self.derived: dict[tuple, object] = {}
 
     def __len__(self) -> int:
         return len(self.rows.data)

@@ -558,9 +558,9 @@ class SurfaceTable:
                 return found[1]
         planned = self._plan(parents, depth, root, root_proj, inv_root_proj, first_index, depth_cap, hide, ends,
                              size, scale)
-        if planned[0] is not None:
-            planned[0].freeze()
         if key is not None:
+            if planned[0] is not None:
+                planned[0].freeze()
             if len(self._plans) >= PLANS_KEPT:
                 del self._plans[next(iter(self._plans))]  # the least recently used
             self._plans[key] = ((data, root_proj, ends), planned)

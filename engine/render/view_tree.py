@@ -577,8 +577,10 @@ class ViewTree:
 
     def _root_rows(self, root: View) -> LevelRows:
         """``LevelRows.root(root)``, kept per root while its camera stands still (a probe
-        face's every frame): the same row, so the plans kept for it are found again
-        (``SurfaceTable.plan``)."""
+        face's every frame): the same read-only row, so the plans kept for it are found again
+        (``SurfaceTable.plan``).  A camera seen for the first time (one that moves: every
+        frame) gets a writeable copy, for which nothing is kept: a moving camera's plans, and
+        what is made of them, would be found again by no later frame."""
         key = (root.view.to_bytes(), root.proj.to_bytes(), tuple(root.eye), root.size, tuple(root.clip_plane),
                root.view_mask, root.mirrored)
         rows = self._roots.get(key)
@@ -587,6 +589,7 @@ class ViewTree:
                 self._roots.clear()
             rows = self._roots[key] = LevelRows.root(root)
             rows.data.flags.writeable = False
+            return LevelRows(rows.data.copy())
         return rows
 
     def _projection(self, proj: glm.mat4) -> tuple[np.ndarray, np.ndarray]:
@@ -656,17 +659,26 @@ class ViewTree:
     def _claim(self, surfaces: SurfaceTable, step: _Level) -> None:
         """Every candidate's claim in the level's targets, its pixels counted in its query.
         The claim shader's (parent view, surface, view index) of every candidate: a level's
-        few claims, so lists (a few numpy calls cost more)."""
-        candidates = step.candidates
-        entities, parents = surfaces.entity_list, step.parents
-        rows = list(zip(candidates.parent.tolist(), candidates.surface.tolist(),
-                        candidates.rows.node.astype(np.int64).tolist(), candidates.scissor.tolist(), step.queries,
-                        strict=True))
-        if step.conditions is None:  # exact: a claim known empty (claim_cull) gets no view, so no claim or reset
-            none = self.passes.no_pixels
-            rows = [row for row in rows if row[4] is not none]
-        claims = Claims([(parents[p].index, entities[s], node) for p, s, node, _, _ in rows], [row[3] for row in rows])
-        self.passes.prepare_level(step.targets, step.parent_targets, claims, [row[4] for row in rows])
+        few claims, so lists (a few numpy calls cost more), kept with a kept plan.  Exact
+        visibility leaves out the claims known empty (claim_cull): no view, so no claim or reset."""
+        candidates, parents = step.candidates, step.parents
+        kept = not candidates.rows.data.flags.writeable
+        columns = candidates.derived.get("claims") if kept else None
+        if columns is None:  # each candidate's parent row, surface entity and node, and its scissor
+            entities = surfaces.entity_list
+            columns = (candidates.parent.tolist(), [entities[s] for s in candidates.surface.tolist()],
+                       candidates.rows.node.astype(np.int64).tolist(), candidates.scissor.tolist())
+            if kept:  # a kept plan's: the same columns every frame it is found again
+                candidates.derived["claims"] = columns
+        rows, entities, nodes, scissors = columns
+        queries, none = step.queries, self.passes.no_pixels
+        if step.conditions is None and none in queries:
+            at = [i for i, query in enumerate(queries) if query is not none]
+            rows, entities, nodes, scissors, queries = ([column[i] for i in at] for column in
+                                                        (rows, entities, nodes, scissors, queries))
+        claims = Claims([(parents[p].index, entity, node) for p, entity, node in
+                         zip(rows, entities, nodes, strict=True)], scissors)
+        self.passes.prepare_level(step.targets, step.parent_targets, claims, queries)
 
     def _claimed_pixels(self, queries: list[moderngl.Query]) -> list[int]:
         """Each claim's pixels (the CPU waits for the GPU), 0 for one known empty
@@ -747,7 +759,15 @@ class ViewTree:
         """The planned views of a level's chosen candidates (what the scene pass and the
         composite read: each with its Camera block already packed, its matrices read from the
         block only if something asks) and their tree nodes, in one pass: one ``tolist`` per
-        column, not one conversion per view."""
+        column, not one conversion per view.  A kept plan's candidates (read-only: a still
+        camera's, a probe face's) keep their views (a View is not changed after it is made)
+        and what their nodes are made of, so the frames that find the plan again make only
+        the nodes."""
+        kept = None if chosen.rows.data.flags.writeable else chosen.derived.get(("nodes", hide))
+        if kept is not None:  # a kept plan's: its views, and what its nodes are made of
+            views, rows = kept
+            return views, [ReflectionView(node, level, view, rect, state, parents[p], fade)
+                           for view, (node, rect, state, p, fade) in zip(views, rows, strict=True)]
         states = surfaces.states
         size = chosen.size
         blocks = chosen.blocks.tobytes()
@@ -764,6 +784,9 @@ class ViewTree:
             at += step
             views.append(view)
             nodes.append(ReflectionView(node, level, view, (x0, y0, -x1 - x0, -y1 - y0), state, parents[p], fade))
+        if not chosen.rows.data.flags.writeable:
+            chosen.derived[("nodes", hide)] = (views, [(n.index, n.rect, n.surface, p, n.fade) for n, p in
+                                                       zip(nodes, chosen.parent.tolist(), strict=True)])
         return views, nodes
 
     def _prepare_composite(self, children: list[ReflectionView], root: View,
