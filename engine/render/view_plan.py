@@ -462,7 +462,7 @@ class SurfaceTable:
         rects = work.rects
         if work.least_w.min() <= 1e-6:
             np.copyto(rects, -np.inf, where=least[4] <= 1e-6)
-        if self.bounds_claims:
+        if self.bounds_claims and not fallback:  # (for the plan's candidates)
             self._boxes = rects.copy()  # unrounded: what claim_cull bounds a claim's pixel centres by
         np.floor(rects, out=rects)  # (the pixel's margin is in the rows: each side less w)
         np.maximum(rects, data[:, _RECT].T[:, :, None], out=rects)  # inside the parent's
