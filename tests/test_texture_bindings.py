@@ -202,3 +202,51 @@ def test_a_mirror_frame_binds_the_shadow_atlas_once(ctx, monkeypatch):
             capture.release()
         for engine in engines:
             engine.close()
+
+
+_FILTERED = """#version 410 core
+uniform sampler2D image;
+out vec4 colour;
+void main() { colour = texture(image, vec2(0.375, 0.5)); }
+"""
+
+
+def test_a_sampler_stays_bound_until_another_pass_binds_its_unit(ctx):
+    """``bind_sampler``: a sampler object bound again is not bound twice; a texture bound on
+    its unit with ``keep_sampler`` is filtered by it, and one bound by any other pass
+    (``bind_texture``, even a texture the record says is there) is filtered by its own
+    parameters again.  A 2x1 texture, black then white, NEAREST, sampled a quarter texel
+    right of the first texel's centre: NEAREST reads 0, the LINEAR sampler a quarter white."""
+    program = ctx.program(vertex_shader=_VERTEX, fragment_shader=_FILTERED)
+    program["image"].value = UNIT
+    vao = ctx.vertex_array(program, [])
+    target = CaptureTarget(ctx, (4, 4))
+    texture = ctx.texture((2, 1), 4, bytes((0, 0, 0, 255, 255, 255, 255, 255)))
+    texture.filter = (moderngl.NEAREST, moderngl.NEAREST)
+    sampler = ctx.sampler(filter=(moderngl.LINEAR, moderngl.LINEAR))
+    counter = GLCallCounter()
+    try:
+        invalidate(ctx)
+        bind_texture(ctx, texture, UNIT)
+        assert _draw(ctx, vao, target, forget=False)[0] == 0
+        with counter:
+            for _ in range(3):
+                bindings.bind_sampler(ctx, sampler, UNIT)
+                bind_texture(ctx, texture, UNIT, keep_sampler=True)
+        assert counter.calls["Sampler.use"] == 1 and counter.total == 1, dict(counter.calls)
+        assert abs(_draw(ctx, vao, target, forget=False)[0] - 64) <= 2
+        bind_texture(ctx, texture, UNIT)  # another pass: already bound, but the sampler comes off
+        assert _draw(ctx, vao, target, forget=False)[0] == 0
+        bindings.bind_sampler(ctx, sampler, UNIT)
+        assert abs(_draw(ctx, vao, target, forget=False)[0] - 64) <= 2
+        bindings.bind_sampler(ctx, None, UNIT)
+        assert _draw(ctx, vao, target, forget=False)[0] == 0
+        with counter:
+            counter.reset()
+            bindings.bind_sampler(ctx, None, UNIT)
+        assert counter.total == 0
+    finally:
+        bindings.forget_sampler(ctx, sampler)
+        for obj in (sampler, texture, vao, program):
+            obj.release()
+        target.release()
