@@ -304,7 +304,10 @@ def bind_uniform_block(ctx: moderngl.Context, buffer: moderngl.Buffer, binding: 
     (binding points are the context's, shared by every program; the buffer object itself
     is remembered, so a released buffer whose GL name is reused is bound again).  With
     ``CACHE_STATE`` off it binds every time."""
-    blocks = _cache(ctx).blocks
+    try:
+        blocks = ctx._speculum_pass_state.blocks
+    except AttributeError:
+        blocks = _cache(ctx).blocks
     if blocks.get(binding) is not buffer or not CACHE_STATE:
         buffer.bind_to_uniform_block(binding)
         blocks[binding] = buffer
