@@ -31,7 +31,13 @@ record holds the texture object itself, per unit and kind (a unit has a 2D bindi
 cube-map binding of its own), so a released texture whose GL name is reused by a new one
 is bound again (deleting a texture resets the units that held it to 0).  moderngl's own
 texture work (making, writing, filtering, reading) binds on its default unit (the last of
-the context's), which no pass uses.
+the context's), which no pass uses.  A uniform-block range (``bind_uniform_range``: a view's
+Camera block) is bound only where another is bound, so a level of one view binds none.  A
+sampler object (``bind_sampler``: the reflection levels' albedo filter) stays on its unit
+from one pass to the next until a pass binds otherwise with ``bind_sampler``, or binds a
+texture on that unit through ``bind_texture`` (which takes it off first, so no other pass
+is filtered by it); only ``bind_sampler`` binds sampler objects, so its record survives
+``invalidate``.
 
 **``invalidate(ctx)``** must be called after any other GL state is set other than through
 these functions: moderngl's ``enable_only``/``enable``/``depth_func``/``blend_func``/
