@@ -13,6 +13,7 @@ on to moderngl (the frames are real).  Checked by breaking the record: keyed by 
 """
 from __future__ import annotations
 
+import contextlib
 import os
 import subprocess
 import sys
@@ -26,7 +27,7 @@ from benchmarks.cpu import GLCallCounter
 from benchmarks.mirrors import DT, MirrorRing
 from components import DirectionalLight
 from engine.core.frame_io import Output
-from engine.render import bindings
+from engine.render import bindings, scene_pass
 from engine.render.bindings import SHADOW_ATLAS_UNIT, bind_texture, invalidate
 from engine.render.targets import CaptureTarget
 from shell.app import Engine
@@ -250,3 +251,48 @@ def test_a_sampler_stays_bound_until_another_pass_binds_its_unit(ctx):
         for obj in (sampler, texture, vao, program):
             obj.release()
         target.release()
+
+
+def test_a_frame_of_reflection_levels_binds_their_sampler_once(ctx, monkeypatch):
+    """Sixteen mirrors (reflection levels 1, 2 and 3, each a scene pass with the reflection
+    albedo sampler): a still frame binds the sampler once (the first level) and takes it off
+    once (the next frame's main view), not once and off again a level; and the frame equals
+    that of a twin engine
+    binding everything every time (``CACHE_STATE`` off)."""
+    engines = [_ring(ctx, 16), _ring(ctx, 16)]
+    captures = [CaptureTarget(ctx, SIZE), CaptureTarget(ctx, SIZE)]
+    try:
+        outputs = [Output(capture.framebuffer, SIZE) for capture in captures]
+        assert engines[0].renderer.reflection_anisotropy != engines[0].renderer.texture_anisotropy
+        levels = []  # the scene passes that asked for the reflection sampler
+        real = scene_pass.bind_sampler
+
+        def bind_sampler(ctx, sampler, unit):
+            if sampler is not None:
+                levels.append(unit)
+            real(ctx, sampler, unit)
+        monkeypatch.setattr(scene_pass, "bind_sampler", bind_sampler)
+        counter = GLCallCounter()
+        for frame in range(3):
+            pictures = []
+            for engine, output, capture, cache in zip(engines, outputs, captures, (True, False), strict=True):
+                monkeypatch.setattr(bindings, "CACHE_STATE", cache)
+                if cache:
+                    levels.clear()
+                    counter.reset()
+                    with counter if frame else contextlib.nullcontext():
+                        engine.frame(DT, output)
+                    calls = dict(counter.calls)
+                else:
+                    engine.frame(DT, output)
+                pictures.append(capture.read_rgb().copy())
+            if frame:  # the first frame draws no reflections (visibility is read a frame late)
+                assert len(levels) >= 2, levels  # two or more scene passes with the sampler this frame
+                assert calls.get("Sampler.use") == 1 and calls.get("Sampler.clear") == 1, calls
+            assert pictures[0].mean() > 10
+            np.testing.assert_array_equal(pictures[0], pictures[1])
+    finally:
+        for capture in captures:
+            capture.release()
+        for engine in engines:
+            engine.close()
