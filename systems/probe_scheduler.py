@@ -22,16 +22,26 @@ has a ``ProbeState``.  What is due each frame, per probe:
     changed, came, went or moved, its own Transform or a parent's ("light 7 moved");
   - ``every_frame``: all six; ``every_n``: all six every n frames; ``once``: nothing more;
     ``scripted``: all six after a request;
+  - a face due for ``every_frame`` or ``every_n`` alone that no change has reached since it
+    was last drawn is published ``unchanged`` (``ProbeDue.unchanged``: the captures keep it
+    as it is where nothing they draw with changed either, ``ProbeCaptures.capture``).  What
+    reaches a face here is wider than what ``on_change`` asks for: the boxes that changed
+    in its frustum, the shadows of every box that changed (one hidden from probes or the
+    probe's own object casts too), and every face when a light in reach or the sun or sky
+    changed, a point light came or went anywhere (the lights' slots and limits shift), or
+    the level has mirrors or portals (``_mark_changes``);
   - with ``time_slicing="one_face_per_frame"`` the waiting faces go one a frame (after a
     first capture of all six, so an object never shows a cube map with faces missing).
 A face leaves the waiting set (``ProbeState.pending``) when it is published as due.
 """
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from pyglm import glm
 
-from components import MeshRef, PointLight, ReflectionProbe, Transform, Visibility
+from components import DirectionalLight, MeshRef, PointLight, ReflectionProbe, Transform, Visibility
 from components.limits import VIEW_PROBE
 from components.tracking import warn_component
 from components.visibility import SEEN_BY_EVERY_VIEW, visibility_code
@@ -51,8 +61,8 @@ from engine.rules.probe_rules import (
     probe_samplers,
     world_bounds,
 )
-from engine.rules.probe_schedule import MAX_NAMED, ProbeDue, ProbeSchedule, ProbeState, ProbeStates
-from engine.rules.shadow_rules import ShadowCasters
+from engine.rules.probe_schedule import MAX_NAMED, PERIODIC, WATCHING, ProbeDue, ProbeSchedule, ProbeState, ProbeStates
+from engine.rules.shadow_rules import SHADOW_MARGIN, SHADOW_MARGIN_SHARE, ShadowCasters
 from engine.rules.visibility_rules import drawn_in, entity_code
 
 
@@ -88,7 +98,8 @@ class ProbeScheduler:
         self._bounds: dict[int, tuple[np.ndarray, np.ndarray]] = {}  # entity -> last world box
         self._lights: dict[int, tuple[np.ndarray, float]] = {}  # point light -> (position, range) last seen
         self._looks = LookChanges()
-        self._watching = False  # the boxes and lights are kept: an on_change probe was there last frame
+        self._lights_came_or_went = False  # this frame: a point light came or went (periodic probes' changes)
+        self._watching = False  # the boxes and lights are kept: a watching probe was there last frame
 
     def update(self) -> ProbeSchedule:
         """This frame's schedule, published as the world's ``ProbeSchedule``."""
@@ -100,19 +111,20 @@ class ProbeScheduler:
             self._bounds.clear()  # nothing to keep boxes for (a world without probes pays nothing)
             self._lights.clear()
             return schedule
-        if any(state.settings.refresh == "on_change" for state in self.probes.values()):
+        if any(state.settings.refresh in WATCHING for state in self.probes.values()):
             # Where every drawable was when the first probe came (its first capture saw them
-            # there), or when the first on_change probe did; after that, only what changed
-            # is looked at.
+            # there), or when the first on_change (or periodic) probe did; after that, only
+            # what changed is looked at.
             primed = had_probes and self._watching
             boxes = self._changed_boxes(looks) if primed else self._all_boxes()
             lights = self._changed_lights() if primed else self._all_lights()
+            self._lights_came_or_went = any(reason.endswith((" came", " went")) for reason, _, _ in lights)
             everything = [f"{kind.__name__} changed" for kind in LIGHTING_KINDS if world.changed(kind)]
             self._watching = True
         else:
-            # No probe refreshes on change: what moved matters to none (a probe that turns
-            # on_change recaptures every face for its new settings, and the boxes are taken
-            # afresh then).
+            # No probe refreshes on change or periodically: what moved matters to none (a
+            # probe that turns on_change recaptures every face for its new settings, and the
+            # boxes are taken afresh then).
             self._bounds.clear()
             self._lights.clear()
             self._watching = False
@@ -127,7 +139,14 @@ class ProbeScheduler:
             if faces:
                 due.append((state, faces))
         for state, faces in self._within_budget(due):
-            schedule.due[state.owner] = ProbeDue(state.owner, faces, state.take(faces), first=not state.captures)
+            reasons = state.take(faces)
+            unchanged = frozenset()
+            if state.captures and state.settings.refresh in PERIODIC:
+                # Due only because the period came round, and reached by no change since drawn.
+                unchanged = faces - state.changed - frozenset().union(
+                    *(waiting for reason, waiting in reasons.items() if reason not in PERIODIC))
+            schedule.due[state.owner] = ProbeDue(state.owner, faces, reasons, first=not state.captures,
+                                                 unchanged=unchanged)
         return schedule
 
     def _within_budget(self, due: list[tuple[ProbeState, frozenset[int]]]) -> list[tuple[ProbeState, frozenset[int]]]:
@@ -277,6 +296,8 @@ class ProbeScheduler:
         settings = state.settings
         state.frames += 1
         mode = settings.refresh
+        if mode in PERIODIC:
+            self._mark_changes(state, boxes, relit, surfaces)
         if mode == "every_frame":
             state.ask(ALL_FACES, "every_frame")
         elif mode == "every_n" and state.frames % settings.every_n == 0:
@@ -306,6 +327,57 @@ class ProbeScheduler:
                                lambda row: f"shadow of entity {entity[of[row]]} ({what[of[row]]})")
             if settings.depth > 0 and surfaces is not None and (surfaces.mirrors or surfaces.portals):
                 self._through_surfaces(state, lo, hi, entity, what, surfaces)
+
+    def _mark_changes(self, state: ProbeState, boxes: ChangedBoxes, relit: list[str],
+                      surfaces: Surfaces | None) -> None:
+        """A periodic probe's faces that this frame's changes reach join ``state.changed``
+        (the faces whose picture may differ from the one drawn last; the rest are published
+        ``unchanged`` when due).  Conservative: every face when anything relights what it
+        sees (a light in reach, the sun, the sky: ``relit``), a point light came or went
+        anywhere (the Lights block's order and limits and the shadow slots shift), or the
+        level has mirrors or portals (their pictures follow the whole level); else the
+        faces whose frustum holds a changed box the probe draws, and the faces where the
+        shadow of any changed box may fall (drawn by the probe or not: a thing hidden from
+        probes, or the probe's own object, casts in every view)."""
+        if state.changed >= ALL_FACES:
+            return
+        if relit or self._lights_came_or_went or (surfaces is not None and (surfaces.mirrors or surfaces.portals)):
+            state.changed |= ALL_FACES
+            return
+        if not len(boxes.entity):
+            return
+        settings = state.settings
+        seen = (boxes.entity != state.owner) & boxes.seen_by(settings)
+        hits = face_hits(state.position, settings.far, boxes.lo[seen], boxes.hi[seen]).any(axis=0)
+        casters = self.world.resources.get(ShadowCasters)
+        if casters is not None and (casters.directional or casters.points or casters.virtual):
+            shadow_lo, shadow_hi, _ = casters.shadow_bounds(boxes.lo, boxes.hi)
+            if len(shadow_lo):
+                reach = self._filter_reach(casters)
+                hits |= face_hits(state.position, settings.far, shadow_lo - reach, shadow_hi + reach).any(axis=0)
+        state.changed.update(np.flatnonzero(hits).tolist())
+
+    def _filter_reach(self, casters: ShadowCasters) -> float:
+        """How far (world units) past where a shadow falls its filtered edge can change a
+        pixel: a lookup reads its map ``(1 + softness) * 1.5`` texels off the surface (the
+        normal offset) and ``softness / 2`` texels plus a bilinear texel around that
+        (``shaders/include/shadows.glsl``), at most ``2.5 + 2 * softness`` texels; a
+        directional texel is at most the grown level box's diagonal over the map's side
+        (``shadow_rules.directional_fit``), a point light's at most ``2 / resolution`` of its
+        range.  The widest of the casting lights'."""
+        reach = 0.0
+        if casters.directional and casters.level is not None:
+            diagonal = float(np.linalg.norm(casters.level[1] - casters.level[0]))
+            grown = diagonal + 2.0 * math.sqrt(3.0) * max(SHADOW_MARGIN, SHADOW_MARGIN_SHARE * diagonal)
+            for _, light in self.world.query_one(DirectionalLight):
+                if light.shadows:
+                    reach = max(reach, grown / light.shadow_resolution * (2.5 + 2.0 * light.shadow_softness))
+        if casters.points:
+            for _, light in self.world.query_one(PointLight):
+                if light.shadows:
+                    reach = max(reach, 2.0 * light.range / light.shadow_resolution
+                                * (2.5 + 2.0 * light.shadow_softness))
+        return reach
 
     @staticmethod
     def _through_surfaces(state: ProbeState, lo: np.ndarray, hi: np.ndarray, entity: np.ndarray, what: list[str],

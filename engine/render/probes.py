@@ -350,8 +350,9 @@ class ProbePaths:
     ``layered_array_capture`` is (the NVIDIA H200's driver takes a layered draw into an
     array but not into a cube map: ``layered_target``); where neither is, a forced or
     chosen ``layered`` takes ``six_pass`` (a refused layered capture would leave faces
-    unwritten), and ``auto`` never times it.  A capture of some faces only, or of a probe
-    whose faces see mirrors or portals, takes ``six_pass``.
+    unwritten), and ``auto`` never times it.  A capture of some faces only (a face kept as
+    it is, or one the scheduler says no change reached, counts: ``ProbeCaptures.capture_probe``),
+    or of a probe whose faces see mirrors or portals, takes ``six_pass``.
 
     How ``auto`` measures, with no ``ctx.finish()`` in a frame stage.  On the first full
     capture either path could draw, each path draws it once untimed (programs built, targets
@@ -492,6 +493,10 @@ class ProbeCaptures:
         # By probe, face -> what the face was last drawn with where it showed the sky alone
         # (``_sky_record``): such a face is not drawn again while that holds (``capture``).
         self._sky_faces: dict[int, dict[int, tuple]] = {}
+        # By probe, face -> what the face was last drawn with (``_sky_record``, ``_scene_record``):
+        # a face the scheduler says no change reached is not drawn again while that holds.
+        self._scene_faces: dict[int, dict[int, tuple]] = {}
+        self._versions: dict[int, int] = {}  # by probe: counts writes of its cube (what samples it changes)
         self._mips_current: set[int] = set()  # probes whose mip chain was built from their faces as they are
         self.faces_kept = 0  # faces left as they were, the sky alone as before (counted over the run)
 
@@ -505,7 +510,7 @@ class ProbeCaptures:
                                    f"over this OpenGL's GL_MAX_CUBE_MAP_TEXTURE_SIZE {limit}")
             if cube is not None:
                 cube.texture.release()
-            self._sky_faces.pop(key, None)
+            self._forget_faces(key)
             self._mips_current.discard(key)
             texture = self.ctx.texture_cube((resolution, resolution), 4, dtype="f2")
             texture.filter = (moderngl.LINEAR_MIPMAP_LINEAR, moderngl.LINEAR)
@@ -513,24 +518,42 @@ class ProbeCaptures:
         return cube
 
     def capture_probe(self, key: int, faces: frozenset[int], position: glm.vec3, settings: ReflectionProbe,
-                      surfaces: SurfaceTable | None = None, blends: SurfaceBlends = NO_BLENDS) -> str:
+                      surfaces: SurfaceTable | None = None, blends: SurfaceBlends = NO_BLENDS,
+                      unchanged: frozenset[int] = frozenset()) -> str:
         """Capture ``faces`` of probe ``key`` (the entity owning it, whose own object every
         face leaves out) from ``position`` with ``settings``, by the path ``paths`` takes
         (``blends``: what a surface no face view reaches shows, the extract stage's;
         ``surfaces``: the planner's table of this frame's mirrors and portals,
         ``engine.render.surface_table``, that a face's view tree draws, up to
-        ``settings.depth``); then the cube's record of where
-        it was captured from and its projection box (``probe_rules.projection_box``): the
-        cube's fields are set here only.  Returns the path that drew it."""
+        ``settings.depth``; ``unchanged``: the faces no change reached since they were last
+        drawn, the scheduler's ``ProbeDue.unchanged``, kept as ``capture`` says); then the
+        cube's record of where it was captured from and its projection box
+        (``probe_rules.projection_box``): the cube's fields are set here only.  Returns the
+        path that drew it.
+
+        A capture where the six-pass path keeps a face, or where the scheduler says a face
+        is unchanged, is a capture of some faces: it takes ``six_pass`` (the layered pass
+        draws all six, and leaves no face a record to be kept by).  So a probe recaptured
+        every frame in a scene where some faces see no change draws six-pass from its
+        second capture on, whichever path ``auto`` timed faster on its first (at 128 texels
+        on llvmpipe the two are within a few per cent there, which is why ``auto``'s choice
+        flips from run to run: the choice no longer changes such a probe's frames)."""
         views = {face: face_view(face, position, settings.near, settings.far, settings.resolution, skip=key,
                                  layers=settings.layer_mask)
                  for face in faces}
         sees_surfaces = settings.depth > 0 and surfaces is not None and bool(surfaces.states)
         table = surfaces if sees_surfaces else None
+        kept = frozenset()
+        if key in self.cubes and self.cubes[key].resolution == settings.resolution:  # else a new cube: none
+            kept = self._kept_faces(key, views, frozenset() if sees_surfaces else unchanged,
+                                    self._direct(sees_surfaces))
         draws = {"six_pass": lambda: self.capture(key, views, table, settings.depth, settings.prefilter,
-                                                  blends=blends),
+                                                  blends=blends, kept=kept),
                  "layered": lambda: self.capture_layered(key, views, prefilter=settings.prefilter)}
-        path = self.paths.draw(draws, len(faces) == 6 and not sees_surfaces, settings.resolution)
+        # A face kept, or one no change reached (kept from the next capture on, once drawn
+        # with a record): a capture of some faces, which the six-pass path draws.
+        path = self.paths.draw(draws, len(faces) == 6 and not sees_surfaces and not kept and not unchanged,
+                               settings.resolution)
         cube = self.cubes[key]
         cube.position = tuple(position)
         cube.box = projection_box(position, settings)
@@ -541,7 +564,8 @@ class ProbeCaptures:
 
     def capture(self, key: int, views: dict[int, View], surfaces: SurfaceTable | None, depth: int,
                 prefilter: str = "mips", direct: bool | None = None, build_mips: bool = True,
-                blends: SurfaceBlends = NO_BLENDS) -> None:
+                blends: SurfaceBlends = NO_BLENDS, unchanged: frozenset[int] = frozenset(),
+                kept: frozenset[int] | None = None) -> None:
         """Draw each face view of ``views`` (face -> view, all of the probe's resolution) into
         the probe's cube, then rebuild the cube's mips.  A face that sees mirrors or portals
         (``surfaces`` given, ``depth`` > 0) roots a view tree, which needs the id images of a
@@ -553,26 +577,37 @@ class ProbeCaptures:
         frustum) and showed the sky alone at its last drawing, with the same camera, sky,
         sky program and path (``_sky_record``), is not drawn again: its pixels would be the
         ones it holds.  It is still fresh (a capture of it now gives the same picture), so a
-        dynamic probe keeps its meaning.  Its mips are rebuilt with the others'; when no
-        face was drawn and the chain was built from the faces as they are, not even that."""
+        dynamic probe keeps its meaning.  Likewise a face of ``unchanged`` (due for a period
+        alone, and no change the scheduler follows reached it since it was drawn:
+        ``ProbeDue.unchanged``) drawn last by this path with the same camera, sky and
+        programs and the same instances' order, shadow maps' blocks and lookups, filtering
+        and cubes of the probes it may show (``_scene_record``).  Its mips are rebuilt with
+        the others'; when no face was drawn and the chain was built from the faces as they
+        are, not even that.  ``kept``: the faces to keep, worked out already
+        (``capture_probe``); None works them out here."""
         renderer = self.renderer
         resolution = next(iter(views.values())).size[0]
         cube = self.cube(key, resolution)
         trees = surfaces is not None and depth > 0
         if direct is None:
-            direct = not trees and self.direct_faces and renderer.path_checks.trusted("direct_faces")
+            direct = self._direct(trees)
         targets_direct = self._face_targets(key, cube.texture) if direct and not trees else None
+        direct = targets_direct is not None
+        if kept is None:
+            kept = self._kept_faces(key, views, frozenset() if trees else unchanged, direct)
         records = self._sky_faces.setdefault(key, {})
+        scene_records = self._scene_faces.setdefault(key, {})
+        scene = None if trees else self._scene_record(key)
         first = next(iter(views.values()))
-        sky_only = sky_only_faces(first.eye, frozenset(views), first.skip,
+        sky_only = sky_only_faces(first.eye, frozenset(views) - kept, first.skip,
                                   [*renderer.opaque_batches(), *renderer.transparent_batches()])
         drawn = 0
         with self._drawing_into(key):
             for face, view in sorted(views.items()):
-                record = self._sky_record(view, targets_direct is not None) if face in sky_only else None
-                if record is not None and records.get(face) == record:
+                if face in kept:
                     self.faces_kept += 1
                     continue
+                record = self._sky_record(view, direct)
                 drawn += 1
                 if targets_direct is not None:
                     self.scene_pass.draw([view], targets_direct.faces[face], FACE)
@@ -584,22 +619,80 @@ class ProbeCaptures:
                         self.tree.render(view, levels, surfaces, TreeSettings(depth_cap=depth), blends)
                     renderer.raw_gl.copy_to_cube_face(targets.framebuffer, cube.texture, face, SCRATCH_UNIT)
                     renderer.checkpoint(f"probe face {face} copy")
-                if record is None:
-                    records.pop(face, None)
-                else:
+                if face in sky_only:
                     records[face] = record
+                else:
+                    records.pop(face, None)
+                if scene is None:
+                    scene_records.pop(face, None)
+                else:
+                    scene_records[face] = (record, scene)
                 renderer.stats.probe_faces += 1
         if drawn:
             self._mips_current.discard(key)
         if build_mips and (key not in self._mips_current or cube.prefilter != prefilter):
             cube.prefilter = self.mips.build(key, cube.texture, prefilter)
             self._mips_current.add(key)
+            drawn += 1
+        if drawn:
+            self._versions[key] = self._versions.get(key, 0) + 1
 
     def written_elsewhere(self, key: int) -> None:
         """Probe ``key``'s cube was written by something other than a capture (a test's
         sentinel, a tool): no face is kept as it is at its next capture, nor its mips."""
-        self._sky_faces.pop(key, None)
+        self._forget_faces(key)
         self._mips_current.discard(key)
+
+    def _forget_faces(self, key: int) -> None:
+        """No face of probe ``key`` holds what a record says: none is kept at its next
+        capture, and what samples its cube changed."""
+        self._sky_faces.pop(key, None)
+        self._scene_faces.pop(key, None)
+        self._versions[key] = self._versions.get(key, 0) + 1
+
+    def _direct(self, trees: bool) -> bool:
+        """Whether faces are drawn straight into the cube (else into a 2D target, copied)."""
+        return not trees and self.direct_faces and self.renderer.path_checks.trusted("direct_faces")
+
+    def _kept_faces(self, key: int, views: dict[int, View], unchanged: frozenset[int], direct: bool) -> frozenset[int]:
+        """The faces of ``views`` a six-pass capture keeps as they are (``capture``): those
+        showing the sky alone as they did at their last drawing from the same record, and
+        those of ``unchanged`` last drawn with the same records as now."""
+        renderer = self.renderer
+        sky_records = self._sky_faces.get(key, {})
+        scene_records = self._scene_faces.get(key, {})
+        kept = set()
+        if sky_records:
+            first = next(iter(views.values()))
+            for face in sky_only_faces(first.eye, frozenset(f for f in views if f in sky_records), first.skip,
+                                       [*renderer.opaque_batches(), *renderer.transparent_batches()]):
+                if sky_records[face] == self._sky_record(views[face], direct):
+                    kept.add(face)
+        candidates = [face for face in unchanged if face in views and face not in kept and face in scene_records]
+        if candidates:
+            scene = self._scene_record(key)
+            kept.update(face for face in candidates
+                        if scene_records[face] == (self._sky_record(views[face], direct), scene))
+        return frozenset(kept)
+
+    def _scene_record(self, key: int) -> tuple:
+        """What every face of probe ``key`` is drawn with besides its camera and the sky: the
+        batches in drawing order with their instances' order (``InstanceBatch.layout``), the
+        shadow maps' blocks (fits, slots, filter sizes), their lookups and filter, the
+        virtual lights shining, the reflection filtering, and the cubes (with how often each
+        was written) of the other probes the batches sample.  What the instances themselves
+        are, where shadows fall and the lights are the scheduler's to follow
+        (``ProbeDue.unchanged``)."""
+        renderer = self.renderer
+        shadows = self.scene_pass.shadows
+        batches = (*renderer.opaque_batches(), *renderer.transparent_batches())
+        cubes = renderer.probe_cubes
+        sampled = sorted({probe for batch in batches for probe in (batch.probe, batch.second_probe, batch.rest_probe)
+                          if probe and probe != key})
+        return (tuple((_Same(batch), batch.layout) for batch in batches), shadows.block.tobytes(),
+                shadows.virtual_block.tobytes(), shadows.program_defines, shadows.filter, shadows.virtual_shining,
+                renderer.reflection_anisotropy,
+                tuple((probe, _Same(cubes.get(probe)), self._versions.get(probe, 0)) for probe in sampled))
 
     def _sky_record(self, view: View, direct: bool) -> tuple:
         """What a face showing the sky alone is drawn from: the view's camera (the sky pass's
@@ -661,7 +754,7 @@ class ProbeCaptures:
                 target.release()
                 del self._layered[key]
             target = self._layered[key] = kind(self.ctx, cube.texture)
-        self._sky_faces.pop(key, None)  # every face drawn by the layered programs: no record holds
+        self._forget_faces(key)  # every face drawn by the layered programs: no record holds
         self._mips_current.discard(key)
         with self._drawing_into(key):
             self.scene_pass.draw_layered([views[face] for face in range(6)], target, culled)
@@ -682,7 +775,8 @@ class ProbeCaptures:
         return data[..., :3].astype(np.float32)
 
     def drop(self, key: int) -> None:
-        self._sky_faces.pop(key, None)
+        self._forget_faces(key)
+        self._versions.pop(key, None)
         self._mips_current.discard(key)
         self.mips.drop(key)
         self.irradiance.drop(key)

@@ -1,0 +1,124 @@
+"""A probe recaptured every frame keeps, as it is, a face no change reached since it was last
+drawn (``ProbeDue.unchanged``, ``ProbeCaptures.capture``), and draws again a face a moved box
+or a moved shadow reaches.  Each frame the whole cube, every level, is checked bit for bit
+against a capture that draws all six faces (the records forgotten): a face kept wrongly
+shows there."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from pyglm import glm
+
+from components import DirectionalLight, Material, MeshRef, ReflectionProbe, Transform, Visibility
+from engine.assets.mesh import box, plane
+from tests.support import look_from
+
+
+def _probe_stage(runner):
+    return runner.engine.stages["probes"]
+
+
+def _floor_with_probe(world, hidden_caster: bool = False) -> None:
+    """A lit floor, a probe 0.6 m above it that sees 2 m (its -Y face: the floor below), a
+    caster beside it out of its reach whose shadow falls into that face (hidden from probes
+    with ``hidden_caster``: it casts all the same), a small box inside its -X face (its
+    shadow falls away from the probe), and a box far away."""
+    look_from(world, (0, 3, 6), (0, 0, 0))
+    world.spawn(DirectionalLight(direction=(-1.0, -1.5, 0.0), intensity=2.0))
+    world.spawn(Transform(), MeshRef(plane(60, 60)), Material(color=(0.8, 0.8, 0.8)))
+    world.resources["probe"] = world.spawn(Transform(position=(0.0, 0.6, 0.0)),
+                                           ReflectionProbe(resolution=32, far=2.0, refresh="every_frame"))
+    caster = [Transform(position=(2.2, 2.6, 0.0)), MeshRef(box()), Material()]
+    if hidden_caster:
+        caster.append(Visibility(in_probes=False))
+    world.resources["caster"] = world.spawn(*caster)
+    world.resources["near"] = world.spawn(Transform(position=(-1.2, 0.6, 0.0)), MeshRef(box((0.3, 0.3, 0.3))),
+                                          Material(color=(0.9, 0.2, 0.1)))
+    world.resources["far"] = world.spawn(Transform(position=(20.0, 0.5, 20.0)), MeshRef(box()), Material())
+
+
+class _Cube:
+    """The probe's cube, every level of every face, and the same drawn whole."""
+
+    def __init__(self, runner) -> None:
+        self.runner = runner
+        self.probes = runner.engine.renderer.probes
+        self.owner = runner.world.resources["probe"]
+
+    def levels(self) -> list[np.ndarray]:
+        from engine.render.raw_gl import read_cube_level
+
+        texture = self.probes.cubes[self.owner].texture
+        return [read_cube_level(self.runner.ctx, texture, face, level, 14) for face in range(6) for level in range(6)]
+
+    def drawn_whole(self) -> list[np.ndarray]:
+        """What a capture drawing all six faces from the same state leaves."""
+        from engine.render.probes import face_view
+
+        state = _probe_stage(self.runner).probes[self.owner]
+        settings = state.settings
+        views = {face: face_view(face, state.position, settings.near, settings.far, settings.resolution,
+                                 skip=self.owner, layers=settings.layer_mask) for face in range(6)}
+        self.probes.written_elsewhere(self.owner)
+        self.probes.capture(self.owner, views, None, 0, settings.prefilter)
+        return self.levels()
+
+    def as_if_drawn_whole(self) -> bool:
+        kept = self.levels()
+        return all(np.array_equal(a, b) for a, b in zip(kept, self.drawn_whole(), strict=True))
+
+
+@pytest.mark.parametrize("hidden_caster", [False, True], ids=["caster", "caster_hidden_from_probes"])
+def test_an_every_frame_probe_draws_only_the_faces_a_change_reaches(scene, hidden_caster):
+    """Still frames draw no face (all six kept: the cube is what drawing them gives); a box
+    moving far away draws none; the box inside the -X face moving draws that face, which
+    shows it moved; the caster beside the probe, out of its reach, moving draws the -Y face,
+    where its shadow falls (also when it is hidden from probes: it casts all the same), and
+    that face changes.  After each frame the cube is, bit for bit, a capture of all six."""
+    runner = scene(lambda world: _floor_with_probe(world, hidden_caster), (64, 48))
+    _probe_stage(runner).path = "six_pass"
+    cube = _Cube(runner)
+    world = runner.world
+    runner.frame()
+    assert runner.stats.probe_faces == 6
+    for _ in range(2):
+        runner.frame()
+        assert runner.stats.probe_captures == 1 and runner.stats.probe_faces == 0
+    assert cube.as_if_drawn_whole()
+
+    world.get(world.resources["far"], Transform).position += glm.vec3(0.0, 0.0, 0.5)
+    runner.frame()
+    assert runner.stats.probe_faces == 0
+    assert cube.as_if_drawn_whole()
+
+    before = cube.probes.read_face(cube.owner, 1).copy()
+    world.get(world.resources["near"], Transform).position += glm.vec3(0.0, 0.15, 0.0)
+    runner.frame()
+    assert 1 <= runner.stats.probe_faces < 6
+    assert not np.array_equal(cube.probes.read_face(cube.owner, 1), before)  # -X: the box moved up
+    assert cube.as_if_drawn_whole()
+
+    runner.frame()
+    before = cube.probes.read_face(cube.owner, 3).copy()
+    world.get(world.resources["caster"], Transform).position += glm.vec3(0.0, 0.0, 0.4)
+    runner.frame()
+    assert runner.stats.probe_faces >= 1  # (the box its shadow may fall in, swept along the light, holds the probe)
+    assert not np.array_equal(cube.probes.read_face(cube.owner, 3), before)  # -Y: the shadow moved
+    assert cube.as_if_drawn_whole()
+
+
+def test_a_new_shadow_filter_draws_every_face_again(scene):
+    """What every face is drawn with changes (the shadow maps' filter: other lookups, other
+    programs): no face is kept (none shows the sky alone: the caster is in the +Y face's
+    frustum, past its far plane), and the cube is a capture of all six."""
+    runner = scene(_floor_with_probe, (64, 48))
+    _probe_stage(runner).path = "six_pass"
+    cube = _Cube(runner)
+    for _ in range(3):
+        runner.frame()
+    assert runner.stats.probe_faces == 0
+    maps = runner.engine.renderer.shadows
+    maps.filter = "grid" if maps.filter == "single" else "single"
+    runner.frame()
+    assert runner.stats.probe_faces == 6
+    assert cube.as_if_drawn_whole()
