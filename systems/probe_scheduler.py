@@ -54,6 +54,7 @@ from engine.rules.probe_rules import (
     LIGHTING_KINDS,
     LookChanges,
     face_hits,
+    face_hits_swept,
     faces_touched,
     has_own_probe,
     images_through_surfaces,
@@ -62,7 +63,15 @@ from engine.rules.probe_rules import (
     world_bounds,
 )
 from engine.rules.probe_schedule import MAX_NAMED, PERIODIC, WATCHING, ProbeDue, ProbeSchedule, ProbeState, ProbeStates
-from engine.rules.shadow_rules import SHADOW_MARGIN, SHADOW_MARGIN_SHARE, ShadowCasters
+from engine.rules.shadow_rules import (
+    SHADOW_MARGIN,
+    SHADOW_MARGIN_SHARE,
+    ShadowCasters,
+    boxes_in_reach,
+    directional_shadow_bounds,
+    directional_shadow_sweep,
+    point_shadow_bounds,
+)
 from engine.rules.visibility_rules import drawn_in, entity_code
 
 
@@ -350,11 +359,26 @@ class ProbeScheduler:
         seen = (boxes.entity != state.owner) & boxes.seen_by(settings)
         hits = face_hits(state.position, settings.far, boxes.lo[seen], boxes.hi[seen]).any(axis=0)
         casters = self.world.resources.get(ShadowCasters)
-        if casters is not None and (casters.directional or casters.points or casters.virtual):
-            shadow_lo, shadow_hi, _ = casters.shadow_bounds(boxes.lo, boxes.hi)
-            if len(shadow_lo):
-                reach = self._filter_reach(casters)
-                hits |= face_hits(state.position, settings.far, shadow_lo - reach, shadow_hi + reach).any(axis=0)
+        if casters is not None and (casters.directional or casters.points):
+            # Every box grown by how far a filtered shadow edge reaches, then swept along
+            # each sun to the level's walls: a face must touch both the sweep's hull
+            # (``face_hits_swept``) and the part of the box bounding it inside the level
+            # (``directional_shadow_bounds``: nothing outside the level receives a shadow),
+            # each holding every shadowed point; and into each point light's range
+            # (``point_shadow_bounds``).
+            reach = self._filter_reach(casters)
+            lo, hi = boxes.lo - reach, boxes.hi + reach
+            if casters.level is not None:
+                for direction in casters.directional:
+                    sweep = directional_shadow_sweep(lo, hi, direction, *casters.level)
+                    bound_lo, bound_hi = directional_shadow_bounds(lo, hi, direction, *casters.level)
+                    hits |= (face_hits_swept(state.position, settings.far, lo, hi, sweep)
+                             & face_hits(state.position, settings.far, bound_lo, bound_hi)).any(axis=0)
+            for position, light_range in casters.points:
+                near = boxes_in_reach(lo, hi, np.array(position), light_range)
+                if near.any():
+                    shadow_lo, shadow_hi = point_shadow_bounds(lo[near], hi[near], np.array(position), light_range)
+                    hits |= face_hits(state.position, settings.far, shadow_lo, shadow_hi).any(axis=0)
         state.changed.update(np.flatnonzero(hits).tolist())
 
     def _filter_reach(self, casters: ShadowCasters) -> float:

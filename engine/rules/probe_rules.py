@@ -386,6 +386,33 @@ def face_hits(position: glm.vec3, far: float, lo: np.ndarray, hi: np.ndarray) ->
     return hits
 
 
+def face_hits_swept(position: glm.vec3, far: float, lo: np.ndarray, hi: np.ndarray,
+                    sweep: np.ndarray) -> np.ndarray:
+    """(box, face) booleans: which faces' frustums (from ``position`` out to ``far``) may
+    touch the convex hull of each world box [lo, hi] (rows) and the same box moved by its
+    row of ``sweep`` (a box swept along a light: where its shadow may fall,
+    ``shadow_rules.directional_shadow_sweep``).  Conservative as ``face_hits``: a hull is
+    left out of a face only when all sixteen of its corners are outside one of the face's
+    planes (a plane through the apex: a convex hull is outside it when its corners are);
+    tighter than the box bounding the sweep, which a long diagonal sweep makes as wide as
+    the level."""
+    centre = np.array(position, dtype=np.float64)
+    lo = np.atleast_2d(np.asarray(lo, dtype=np.float64))
+    hi = np.atleast_2d(np.asarray(hi, dtype=np.float64))
+    sweep = np.atleast_2d(np.asarray(sweep, dtype=np.float64))
+    hits = np.zeros((len(lo), 6), dtype=bool)
+    box_lo, box_hi = np.minimum(lo, lo + sweep), np.maximum(hi, hi + sweep)  # the hull's bounding box
+    in_range = np.linalg.norm(np.clip(centre, box_lo, box_hi) - centre, axis=1) <= far
+    if not in_range.any():
+        return hits
+    near_lo, near_hi, moved = lo[in_range] - centre, hi[in_range] - centre, sweep[in_range]
+    corners = np.where(_CORNER_PICK[None], near_hi[:, None, :], near_lo[:, None, :])  # (box, corner, xyz)
+    corners = np.concatenate([corners, corners + moved[:, None, :]], axis=1)  # (box, 16, xyz)
+    inside = np.einsum("bck,fpk->bcfp", corners, _SIDE_NORMALS) >= 0.0  # (box, corner, face, plane)
+    hits[in_range] = ~(~inside).all(axis=1).any(axis=2)
+    return hits
+
+
 def faces_touched(position: glm.vec3, far: float, lo: np.ndarray, hi: np.ndarray) -> set[int]:
     """The faces any of the boxes [lo, hi] may touch (``face_hits``, all boxes together)."""
     return {int(face) for face in np.flatnonzero(face_hits(position, far, lo, hi).any(axis=0))}

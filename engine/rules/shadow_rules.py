@@ -137,6 +137,24 @@ def directional_shadow_bounds(lo: np.ndarray, hi: np.ndarray, direction: glm.vec
     hi = np.atleast_2d(np.asarray(hi, np.float64))
     level_lo = np.asarray(level_lo, np.float64)
     level_hi = np.asarray(level_hi, np.float64)
+    sweep = directional_shadow_sweep(lo, hi, direction, level_lo, level_hi)
+    far_lo, far_hi = lo + sweep, hi + sweep
+    out_lo = np.maximum(np.minimum(lo, far_lo), np.minimum(level_lo, lo))
+    out_hi = np.minimum(np.maximum(hi, far_hi), np.maximum(level_hi, hi))
+    return out_lo, out_hi
+
+
+def directional_shadow_sweep(lo: np.ndarray, hi: np.ndarray, direction: glm.vec3 | np.ndarray,
+                             level_lo: np.ndarray, level_hi: np.ndarray) -> np.ndarray:
+    """(box, xyz): how far each box [lo, hi] (rows) is swept along a light travelling along
+    ``direction`` until its last corner leaves the level's box: where its shadow may fall is
+    within the convex hull of the box and the box moved by that much (what
+    ``directional_shadow_bounds`` bounds with a box; ``probe_rules.face_hits_swept`` tests
+    the hull itself)."""
+    lo = np.atleast_2d(np.asarray(lo, np.float64))
+    hi = np.atleast_2d(np.asarray(hi, np.float64))
+    level_lo = np.asarray(level_lo, np.float64)
+    level_hi = np.asarray(level_hi, np.float64)
     d = np.asarray(direction, np.float64)
     d = d / np.linalg.norm(d)
     # How far each box's corners travel before leaving the level's box: per axis the distance
@@ -148,10 +166,7 @@ def directional_shadow_bounds(lo: np.ndarray, hi: np.ndarray, direction: glm.vec
         from_hi = np.where(moving, (wall - hi) / np.where(moving, d, 1.0), np.inf)
     travel = np.maximum(np.maximum(from_lo, from_hi).min(axis=1), 0.0)   # the corner farthest from the walls
     travel = np.minimum(travel, float(np.linalg.norm(level_hi - level_lo)))
-    far_lo, far_hi = lo + d * travel[:, None], hi + d * travel[:, None]
-    out_lo = np.maximum(np.minimum(lo, far_lo), np.minimum(level_lo, lo))
-    out_hi = np.minimum(np.maximum(hi, far_hi), np.maximum(level_hi, hi))
-    return out_lo, out_hi
+    return d * travel[:, None]
 
 
 def point_shadow_bounds(lo: np.ndarray, hi: np.ndarray, position: np.ndarray,
