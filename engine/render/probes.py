@@ -158,6 +158,19 @@ class _Same:
         return id(self.obj)
 
 
+@dataclass
+class _KeepPlan:
+    """A six-pass capture's faces kept as they are (``kept``), those showing the sky alone
+    (``sky_only``), what every face is drawn with (``scene``: ``ProbeCaptures._scene_record``,
+    None where faces draw view trees) and each face's own record (``records``:
+    ``ProbeCaptures._sky_record``)."""
+
+    kept: frozenset[int]
+    sky_only: frozenset[int]
+    scene: tuple | None
+    records: dict[int, tuple]
+
+
 class CubeMipPass:
     """Rebuilds a cube map's mip chain with one layered draw a level (``cube_mip.geom`` and
     ``.frag``: a 2x2 box filter, as ``glGenerateMipmap``'s), where ``build_mipmaps`` costs six
@@ -543,15 +556,15 @@ class ProbeCaptures:
                  for face in faces}
         sees_surfaces = settings.depth > 0 and surfaces is not None and bool(surfaces.states)
         table = surfaces if sees_surfaces else None
-        kept = frozenset()
-        if key in self.cubes and self.cubes[key].resolution == settings.resolution:  # else a new cube: none
-            kept = self._kept_faces(key, views, frozenset() if sees_surfaces else unchanged,
-                                    self._direct(sees_surfaces))
+        plan = None
+        if key in self.cubes and self.cubes[key].resolution == settings.resolution:  # else a new cube: none kept
+            plan = self._keep_plan(key, views, unchanged, self._direct(sees_surfaces), sees_surfaces)
         draws = {"six_pass": lambda: self.capture(key, views, table, settings.depth, settings.prefilter,
-                                                  blends=blends, kept=kept),
+                                                  blends=blends, unchanged=unchanged, plan=plan),
                  "layered": lambda: self.capture_layered(key, views, prefilter=settings.prefilter)}
         # A face kept, or one no change reached (kept from the next capture on, once drawn
         # with a record): a capture of some faces, which the six-pass path draws.
+        kept = plan is not None and plan.kept
         path = self.paths.draw(draws, len(faces) == 6 and not sees_surfaces and not kept and not unchanged,
                                settings.resolution)
         cube = self.cubes[key]
@@ -565,7 +578,7 @@ class ProbeCaptures:
     def capture(self, key: int, views: dict[int, View], surfaces: SurfaceTable | None, depth: int,
                 prefilter: str = "mips", direct: bool | None = None, build_mips: bool = True,
                 blends: SurfaceBlends = NO_BLENDS, unchanged: frozenset[int] = frozenset(),
-                kept: frozenset[int] | None = None) -> None:
+                plan: _KeepPlan | None = None) -> None:
         """Draw each face view of ``views`` (face -> view, all of the probe's resolution) into
         the probe's cube, then rebuild the cube's mips.  A face that sees mirrors or portals
         (``surfaces`` given, ``depth`` > 0) roots a view tree, which needs the id images of a
@@ -583,8 +596,8 @@ class ProbeCaptures:
         programs and the same instances' order, shadow maps' blocks and lookups, filtering
         and cubes of the probes it may show (``_scene_record``).  Its mips are rebuilt with
         the others'; when no face was drawn and the chain was built from the faces as they
-        are, not even that.  ``kept``: the faces to keep, worked out already
-        (``capture_probe``); None works them out here."""
+        are, not even that.  ``plan``: what is kept, worked out already (``capture_probe``,
+        for a capture drawn now, before any other); None works it out here."""
         renderer = self.renderer
         resolution = next(iter(views.values())).size[0]
         cube = self.cube(key, resolution)
@@ -593,21 +606,18 @@ class ProbeCaptures:
             direct = self._direct(trees)
         targets_direct = self._face_targets(key, cube.texture) if direct and not trees else None
         direct = targets_direct is not None
-        if kept is None:
-            kept = self._kept_faces(key, views, frozenset() if trees else unchanged, direct)
+        if plan is None:
+            plan = self._keep_plan(key, views, unchanged, direct, trees)
         records = self._sky_faces.setdefault(key, {})
         scene_records = self._scene_faces.setdefault(key, {})
-        scene = None if trees else self._scene_record(key)
-        first = next(iter(views.values()))
-        sky_only = sky_only_faces(first.eye, frozenset(views) - kept, first.skip,
-                                  [*renderer.opaque_batches(), *renderer.transparent_batches()])
+        kept, sky_only, scene = plan.kept, plan.sky_only, plan.scene
         drawn = 0
         with self._drawing_into(key):
             for face, view in sorted(views.items()):
                 if face in kept:
                     self.faces_kept += 1
                     continue
-                record = self._sky_record(view, direct)
+                record = plan.records[face]
                 drawn += 1
                 if targets_direct is not None:
                     self.scene_pass.draw([view], targets_direct.faces[face], FACE)
@@ -654,26 +664,25 @@ class ProbeCaptures:
         """Whether faces are drawn straight into the cube (else into a 2D target, copied)."""
         return not trees and self.direct_faces and self.renderer.path_checks.trusted("direct_faces")
 
-    def _kept_faces(self, key: int, views: dict[int, View], unchanged: frozenset[int], direct: bool) -> frozenset[int]:
-        """The faces of ``views`` a six-pass capture keeps as they are (``capture``): those
-        showing the sky alone as they did at their last drawing from the same record, and
-        those of ``unchanged`` last drawn with the same records as now."""
+    def _keep_plan(self, key: int, views: dict[int, View], unchanged: frozenset[int], direct: bool,
+                   trees: bool) -> _KeepPlan:
+        """Which faces of ``views`` a six-pass capture keeps as they are (``capture``): those
+        showing the sky alone as they did at their last drawing from the same record, and,
+        where no face draws a view tree (``trees``), those of ``unchanged`` last drawn with
+        the same records as now; and the records a face drawn now is given."""
         renderer = self.renderer
+        first = next(iter(views.values()))
+        sky_only = sky_only_faces(first.eye, frozenset(views), first.skip,
+                                  [*renderer.opaque_batches(), *renderer.transparent_batches()])
+        records = {face: self._sky_record(view, direct) for face, view in views.items()}
         sky_records = self._sky_faces.get(key, {})
-        scene_records = self._scene_faces.get(key, {})
-        kept = set()
-        if sky_records:
-            first = next(iter(views.values()))
-            for face in sky_only_faces(first.eye, frozenset(f for f in views if f in sky_records), first.skip,
-                                       [*renderer.opaque_batches(), *renderer.transparent_batches()]):
-                if sky_records[face] == self._sky_record(views[face], direct):
-                    kept.add(face)
-        candidates = [face for face in unchanged if face in views and face not in kept and face in scene_records]
-        if candidates:
-            scene = self._scene_record(key)
-            kept.update(face for face in candidates
-                        if scene_records[face] == (self._sky_record(views[face], direct), scene))
-        return frozenset(kept)
+        kept = {face for face in sky_only if face in sky_records and sky_records[face] == records[face]}
+        scene = None if trees else self._scene_record(key)
+        if scene is not None and unchanged:
+            scene_records = self._scene_faces.get(key, {})
+            kept.update(face for face in unchanged
+                        if face in views and scene_records.get(face) == (records[face], scene))
+        return _KeepPlan(frozenset(kept), sky_only, scene, records)
 
     def _scene_record(self, key: int) -> tuple:
         """What every face of probe ``key`` is drawn with besides its camera and the sky: the
