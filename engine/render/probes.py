@@ -21,7 +21,7 @@ import logging
 import math
 import statistics
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
@@ -510,6 +510,9 @@ class ProbeCaptures:
         # a face the scheduler says no change reached is not drawn again while that holds.
         self._scene_faces: dict[int, dict[int, tuple]] = {}
         self._versions: dict[int, int] = {}  # by probe: counts writes of its cube (what samples it changes)
+        # By probe: its six face views and each one's camera as a record reads it, for the
+        # place and settings they were made for (face_views).
+        self._views: dict[int, tuple[tuple, dict[int, View], dict[int, tuple]]] = {}
         self._mips_current: set[int] = set()  # probes whose mip chain was built from their faces as they are
         self.faces_kept = 0  # faces left as they were, the sky alone as before (counted over the run)
 
@@ -529,6 +532,21 @@ class ProbeCaptures:
             texture.filter = (moderngl.LINEAR_MIPMAP_LINEAR, moderngl.LINEAR)
             cube = self.cubes[key] = ProbeCube(texture, resolution)
         return cube
+
+    def face_views(self, key: int, faces: Iterable[int], position: glm.vec3,
+                   settings: ReflectionProbe) -> dict[int, View]:
+        """The views of ``faces`` of probe ``key`` from ``position`` (``face_view``), made
+        once for a place and the settings they depend on and given again while those hold
+        (a View is not changed after it is made; its Camera block is packed once)."""
+        ident = (tuple(position), settings.near, settings.far, settings.resolution, settings.layer_mask)
+        made = self._views.get(key)
+        if made is None or made[0] != ident:
+            views = {face: face_view(face, position, settings.near, settings.far, settings.resolution, skip=key,
+                                     layers=settings.layer_mask) for face in range(6)}
+            cameras = {face: (view.view.to_tuple(), view.proj.to_tuple(), tuple(view.eye), view.size)
+                       for face, view in views.items()}
+            made = self._views[key] = (ident, views, cameras)
+        return {face: made[1][face] for face in faces}
 
     def capture_probe(self, key: int, faces: frozenset[int], position: glm.vec3, settings: ReflectionProbe,
                       surfaces: SurfaceTable | None = None, blends: SurfaceBlends = NO_BLENDS,
@@ -551,9 +569,7 @@ class ProbeCaptures:
         second capture on, whichever path ``auto`` timed faster on its first (at 128 texels
         on llvmpipe the two are within a few per cent there, which is why ``auto``'s choice
         flips from run to run: the choice no longer changes such a probe's frames)."""
-        views = {face: face_view(face, position, settings.near, settings.far, settings.resolution, skip=key,
-                                 layers=settings.layer_mask)
-                 for face in faces}
+        views = self.face_views(key, faces, position, settings)
         sees_surfaces = settings.depth > 0 and surfaces is not None and bool(surfaces.states)
         table = surfaces if sees_surfaces else None
         plan = None
@@ -672,16 +688,22 @@ class ProbeCaptures:
         the same records as now; and the records a face drawn now is given."""
         renderer = self.renderer
         first = next(iter(views.values()))
-        sky_only = sky_only_faces(first.eye, frozenset(views), first.skip,
-                                  [*renderer.opaque_batches(), *renderer.transparent_batches()])
-        records = {face: self._sky_record(view, direct) for face, view in views.items()}
-        sky_records = self._sky_faces.get(key, {})
-        kept = {face for face in sky_only if face in sky_records and sky_records[face] == records[face]}
+        made = self._views.get(key)
+        cameras = made[2] if made is not None else {}
+        records = {face: self._sky_record(view, direct, cameras.get(face) if made[1][face] is view else None)
+                   if made is not None else self._sky_record(view, direct) for face, view in views.items()}
+        kept = set()
         scene = None if trees else self._scene_record(key)
         if scene is not None and unchanged:
             scene_records = self._scene_faces.get(key, {})
             kept.update(face for face in unchanged
                         if face in views and scene_records.get(face) == (records[face], scene))
+        # The sky-alone faces of the rest (the faces drawn need it too: their records).
+        rest = frozenset(views) - kept
+        sky_only = sky_only_faces(first.eye, rest, first.skip,
+                                  [*renderer.opaque_batches(), *renderer.transparent_batches()]) if rest else rest
+        sky_records = self._sky_faces.get(key, {})
+        kept.update(face for face in sky_only if face in sky_records and sky_records[face] == records[face])
         return _KeepPlan(frozenset(kept), sky_only, scene, records)
 
     def _scene_record(self, key: int) -> tuple:
@@ -703,14 +725,15 @@ class ProbeCaptures:
                 renderer.reflection_anisotropy,
                 tuple((probe, _Same(cubes.get(probe)), self._versions.get(probe, 0)) for probe in sampled))
 
-    def _sky_record(self, view: View, direct: bool) -> tuple:
+    def _sky_record(self, view: View, direct: bool, camera: tuple | None = None) -> tuple:
         """What a face showing the sky alone is drawn from: the view's camera (the sky pass's
         directions), its size, the sky texture, the shader library's reloads (the sky
         program) and the path (straight into the face, or copied from a 2D target).  Equal
-        records draw equal pixels."""
+        records draw equal pixels.  ``camera``: the view's part, made already (``face_views``)."""
         renderer = self.renderer
-        return (view.view.to_tuple(), view.proj.to_tuple(), tuple(view.eye), view.size, direct,
-                _Same(renderer.sky), renderer.shaders.reloads)
+        if camera is None:
+            camera = (view.view.to_tuple(), view.proj.to_tuple(), tuple(view.eye), view.size)
+        return (*camera, direct, _Same(renderer.sky), renderer.shaders.reloads)
 
     @contextmanager
     def _drawing_into(self, key: int):
@@ -786,6 +809,7 @@ class ProbeCaptures:
     def drop(self, key: int) -> None:
         self._forget_faces(key)
         self._versions.pop(key, None)
+        self._views.pop(key, None)
         self._mips_current.discard(key)
         self.mips.drop(key)
         self.irradiance.drop(key)
