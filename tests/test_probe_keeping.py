@@ -1,8 +1,9 @@
 """A probe recaptured every frame keeps, as it is, a face no change reached since it was last
 drawn (``ProbeDue.unchanged``, ``ProbeCaptures.capture``), and draws again a face a moved box
-or a moved shadow reaches.  Each frame the whole cube, every level, is checked bit for bit
-against a capture that draws all six faces (the records forgotten): a face kept wrongly
-shows there."""
+or a moved shadow reaches; the mip chains are built again for the faces drawn alone
+(``CubeMipPass.build``'s ``faces``).  Each frame the whole cube, every level, is checked bit
+for bit against a capture that draws all six faces and builds every chain (the records
+forgotten): a face kept wrongly, or a chain left as it was, shows there."""
 from __future__ import annotations
 
 import numpy as np

@@ -201,13 +201,18 @@ class CubeMipPass:
         around a capture counts them too; the per-face pass emits as many)."""
         return 6 * (size.bit_length() - 1)
 
-    def build(self, key: int, cube: moderngl.TextureCube, prefilter: str = "mips", way: str | None = None) -> str:
+    def build(self, key: int, cube: moderngl.TextureCube, prefilter: str = "mips", way: str | None = None,
+              faces: Iterable[int] | None = None) -> str:
         """Levels 1.. of ``cube`` from its level 0: box-filtered (``mips``), or each level the
         one above convolved with a GGX lobe so that level L holds roughness L / top level
         (``ggx``; ``ProbeCube.roughness_levels``).  ``way`` forces "layered" or "per_face"
         (the path self-check compares them); None chooses as the class docstring says.
-        Returns the prefilter built: "mips" where a GGX chain cannot be drawn here (neither
-        of the drawn passes is reachable or verified; a warning says so once)."""
+        ``faces``: box mips of these faces only (the others' chains are built from their
+        level 0 as it is: a texel's 2 x 2 box lies inside its face, so each face's chain
+        reads that face alone); None, and every GGX chain (its lobes cross the faces' edges),
+        all six; ``glGenerateMipmap`` builds all six whatever it is given.  Returns the
+        prefilter built: "mips" where a GGX chain cannot be drawn here (neither of the drawn
+        passes is reachable or verified; a warning says so once)."""
         ggx = prefilter == "ggx"
         target = self._target(key, cube)
         if target is None and ggx:
@@ -230,6 +235,9 @@ class CubeMipPass:
         one_face = way == "per_face"
         vao = self._program_vao(ggx, one_face)
         program = vao.program
+        drawn = range(6) if faces is None or ggx else sorted(faces)
+        if not one_face:
+            program["face_mask"].value = sum(1 << face for face in drawn)
         apply_pass_state(self.ctx, self.STATE, (0, 0, *cube.size))
         for unit in (PROBE_UNIT, PROBE2_UNIT, PROBE_REST_UNIT, SCRATCH_UNIT):
             bind_texture(self.ctx, self.renderer.sky, unit)  # the cube is bound only where the pass reads it
@@ -240,7 +248,7 @@ class CubeMipPass:
                 if ggx:
                     alpha, above = (level / top) ** 2, ((level - 1) / top) ** 2
                     program["alpha"].value = math.sqrt(alpha * alpha - above * above)
-                for face in (range(6) if one_face else (None,)):
+                for face in (drawn if one_face else (None,)):
                     program["level_size"].value = float(target.bind_level(level, CUBE_MIP_UNIT, face))
                     if face is not None:
                         program["face"].value = face
@@ -513,7 +521,9 @@ class ProbeCaptures:
         # By probe: its six face views and each one's camera as a record reads it, for the
         # place and settings they were made for (face_views).
         self._views: dict[int, tuple[tuple, dict[int, View], dict[int, tuple]]] = {}
-        self._mips_current: set[int] = set()  # probes whose mip chain was built from their faces as they are
+        # By probe whose mip chain was built from its faces: the faces drawn since (their
+        # chains are built again; absent: the whole chain is).
+        self._mips_stale: dict[int, set[int]] = {}
         self.faces_kept = 0  # faces left as they were, the sky alone as before (counted over the run)
 
     def cube(self, key: int, resolution: int) -> ProbeCube:
@@ -527,7 +537,7 @@ class ProbeCaptures:
             if cube is not None:
                 cube.texture.release()
             self._forget_faces(key)
-            self._mips_current.discard(key)
+            self._mips_stale.pop(key, None)
             texture = self.ctx.texture_cube((resolution, resolution), 4, dtype="f2")
             texture.filter = (moderngl.LINEAR_MIPMAP_LINEAR, moderngl.LINEAR)
             cube = self.cubes[key] = ProbeCube(texture, resolution)
@@ -627,14 +637,14 @@ class ProbeCaptures:
         records = self._sky_faces.setdefault(key, {})
         scene_records = self._scene_faces.setdefault(key, {})
         kept, sky_only, scene = plan.kept, plan.sky_only, plan.scene
-        drawn = 0
+        drawn = set()
         with self._drawing_into(key):
             for face, view in sorted(views.items()):
                 if face in kept:
                     self.faces_kept += 1
                     continue
                 record = plan.records[face]
-                drawn += 1
+                drawn.add(face)
                 if targets_direct is not None:
                     self.scene_pass.draw([view], targets_direct.faces[face], FACE)
                 else:
@@ -654,12 +664,14 @@ class ProbeCaptures:
                 else:
                     scene_records[face] = (record, scene)
                 renderer.stats.probe_faces += 1
-        if drawn:
-            self._mips_current.discard(key)
-        if build_mips and (key not in self._mips_current or cube.prefilter != prefilter):
-            cube.prefilter = self.mips.build(key, cube.texture, prefilter)
-            self._mips_current.add(key)
-            drawn += 1
+        stale = self._mips_stale.get(key)
+        if stale is not None:
+            stale |= drawn
+        if build_mips and (stale is None or stale or cube.prefilter != prefilter):
+            faces = stale if stale is not None and cube.prefilter == prefilter else None
+            cube.prefilter = self.mips.build(key, cube.texture, prefilter, faces=faces)
+            self._mips_stale[key] = set()
+            drawn.add(-1)
         if drawn:
             self._versions[key] = self._versions.get(key, 0) + 1
 
@@ -667,7 +679,7 @@ class ProbeCaptures:
         """Probe ``key``'s cube was written by something other than a capture (a test's
         sentinel, a tool): no face is kept as it is at its next capture, nor its mips."""
         self._forget_faces(key)
-        self._mips_current.discard(key)
+        self._mips_stale.pop(key, None)
 
     def _forget_faces(self, key: int) -> None:
         """No face of probe ``key`` holds what a record says: none is kept at its next
@@ -787,7 +799,7 @@ class ProbeCaptures:
                 del self._layered[key]
             target = self._layered[key] = kind(self.ctx, cube.texture)
         self._forget_faces(key)  # every face drawn by the layered programs: no record holds
-        self._mips_current.discard(key)
+        self._mips_stale.pop(key, None)
         with self._drawing_into(key):
             self.scene_pass.draw_layered([views[face] for face in range(6)], target, culled)
             if isinstance(target, LayeredArrayTarget):
@@ -795,7 +807,7 @@ class ProbeCaptures:
                 self.renderer.checkpoint("layered capture's copy into the cube")
         if build_mips:
             cube.prefilter = self.mips.build(key, cube.texture, prefilter)
-            self._mips_current.add(key)
+            self._mips_stale[key] = set()
         self.renderer.stats.probe_faces += 6
 
     def read_face(self, key: int, face: int) -> np.ndarray:
@@ -810,7 +822,7 @@ class ProbeCaptures:
         self._forget_faces(key)
         self._versions.pop(key, None)
         self._views.pop(key, None)
-        self._mips_current.discard(key)
+        self._mips_stale.pop(key, None)
         self.mips.drop(key)
         self.irradiance.drop(key)
         faces = self._faces.pop(key, None)
