@@ -53,10 +53,11 @@ from engine.rules.probe_rules import (
     ALL_FACES,
     LIGHTING_KINDS,
     LookChanges,
+    box_corners,
     face_hits,
-    face_hits_swept,
     faces_touched,
     has_own_probe,
+    hull_face_hits,
     images_through_surfaces,
     lights_reaching,
     probe_samplers,
@@ -347,7 +348,14 @@ class ProbeScheduler:
         level has mirrors or portals (their pictures follow the whole level); else the
         faces whose frustum holds a changed box the probe draws, and the faces where the
         shadow of any changed box may fall (drawn by the probe or not: a thing hidden from
-        probes, or the probe's own object, casts in every view)."""
+        probes, or the probe's own object, casts in every view).
+
+        Where a shadow may fall: every changed box grown by how far a filtered shadow edge
+        reaches (``_filter_reach``), then swept along each sun to the level's walls, where a
+        face must meet both the sweep's hull and the part of the box bounding it inside the
+        level (``directional_shadow_bounds``: nothing outside the level receives a shadow),
+        each holding every shadowed point; and within each point light's range
+        (``point_shadow_bounds``).  All the hulls through one ``hull_face_hits``."""
         if state.changed >= ALL_FACES:
             return
         if relit or self._lights_came_or_went or (surfaces is not None and (surfaces.mirrors or surfaces.portals)):
@@ -357,29 +365,43 @@ class ProbeScheduler:
             return
         settings = state.settings
         seen = (boxes.entity != state.owner) & boxes.seen_by(settings)
-        hits = face_hits(state.position, settings.far, boxes.lo[seen], boxes.hi[seen]).any(axis=0)
+        lo, hi = boxes.lo[seen], boxes.hi[seen]
+        corners = box_corners(lo, hi)
+        points, box_lo, box_hi = [np.concatenate([corners, corners], axis=1)], [lo], [hi]  # 16 points a hull
+        suns = 0
         casters = self.world.resources.get(ShadowCasters)
         if casters is not None and (casters.directional or casters.points):
-            # Every box grown by how far a filtered shadow edge reaches, then swept along
-            # each sun to the level's walls: a face must touch both the sweep's hull
-            # (``face_hits_swept``) and the part of the box bounding it inside the level
-            # (``directional_shadow_bounds``: nothing outside the level receives a shadow),
-            # each holding every shadowed point; and into each point light's range
-            # (``point_shadow_bounds``).
             reach = self._filter_reach(casters)
             lo, hi = boxes.lo - reach, boxes.hi + reach
+            corners = box_corners(lo, hi)
             if casters.level is not None:
                 for direction in casters.directional:
                     sweep = directional_shadow_sweep(lo, hi, direction, *casters.level)
-                    bound_lo, bound_hi = directional_shadow_bounds(lo, hi, direction, *casters.level)
-                    hits |= (face_hits_swept(state.position, settings.far, lo, hi, sweep)
-                             & face_hits(state.position, settings.far, bound_lo, bound_hi)).any(axis=0)
+                    bound_lo, bound_hi = directional_shadow_bounds(lo, hi, direction, *casters.level, sweep=sweep)
+                    bound = box_corners(bound_lo, bound_hi)
+                    points += [np.concatenate([corners, corners + sweep[:, None, :]], axis=1),
+                               np.concatenate([bound, bound], axis=1)]
+                    box_lo += [np.minimum(lo, lo + sweep), bound_lo]
+                    box_hi += [np.maximum(hi, hi + sweep), bound_hi]
+                    suns += 1
             for position, light_range in casters.points:
                 near = boxes_in_reach(lo, hi, np.array(position), light_range)
                 if near.any():
                     shadow_lo, shadow_hi = point_shadow_bounds(lo[near], hi[near], np.array(position), light_range)
-                    hits |= face_hits(state.position, settings.far, shadow_lo, shadow_hi).any(axis=0)
-        state.changed.update(np.flatnonzero(hits).tolist())
+                    shadow = box_corners(shadow_lo, shadow_hi)
+                    points.append(np.concatenate([shadow, shadow], axis=1))
+                    box_lo.append(shadow_lo)
+                    box_hi.append(shadow_hi)
+        hits = hull_face_hits(state.position, settings.far, np.concatenate(points), np.concatenate(box_lo),
+                              np.concatenate(box_hi))
+        rows = len(box_lo[0])
+        reached = hits[:rows].any(axis=0)
+        for sun in range(suns):
+            hull = hits[rows + 2 * sun * len(boxes.lo):][:len(boxes.lo)]
+            bound = hits[rows + (2 * sun + 1) * len(boxes.lo):][:len(boxes.lo)]
+            reached |= (hull & bound).any(axis=0)
+        reached |= hits[rows + 2 * suns * len(boxes.lo):].any(axis=0)  # the point lights' boxes
+        state.changed.update(np.flatnonzero(reached).tolist())
 
     def _filter_reach(self, casters: ShadowCasters) -> float:
         """How far (world units) past where a shadow falls its filtered edge can change a

@@ -123,3 +123,30 @@ def test_a_new_shadow_filter_draws_every_face_again(scene):
     runner.frame()
     assert runner.stats.probe_faces == 6
     assert cube.as_if_drawn_whole()
+
+
+def test_a_swept_box_is_left_out_only_of_faces_none_of_its_points_lie_in():
+    """``face_hits_swept`` against points sampled through each swept box (a point of the box
+    moved along its sweep by a share of it): every face one of them lies in (along the face's
+    axis, at least as far as across it, within ``far``) is a face hit; and the hull test
+    leaves out faces the box bounding the sweep does not."""
+    from engine.core.cube_faces import CUBE_FACES
+    from engine.rules.probe_rules import face_hits, face_hits_swept
+
+    rng = np.random.default_rng(7)
+    apex, far = np.array([0.3, -0.2, 0.1]), 7.0
+    lo = rng.uniform(-6, 6, (300, 3))
+    hi = lo + rng.uniform(0.05, 2.0, (300, 3))
+    sweep = rng.normal(0.0, 4.0, (300, 3))
+    hits = face_hits_swept(apex, far, lo, hi, sweep)
+    axes = np.array([forward for forward, _, _ in CUBE_FACES], float)
+    grid = np.stack(np.meshgrid(*[np.linspace(0.0, 1.0, 5)] * 3, indexing="ij"), -1).reshape(-1, 3)
+    for b in range(len(lo)):
+        points = (lo[b] + grid * (hi[b] - lo[b]))[:, None, :] + np.linspace(0.0, 1.0, 9)[None, :, None] * sweep[b]
+        d = points.reshape(-1, 3) - apex
+        d = d[np.linalg.norm(d, axis=1) <= far]
+        along = d @ axes.T
+        seen = ((along >= np.abs(d).max(axis=1, keepdims=True) - 1e-12) & (along > 0.0)).any(axis=0)
+        assert not (seen & ~hits[b]).any(), (b, seen, hits[b])
+    bounding = face_hits(apex, far, np.minimum(lo, lo + sweep), np.maximum(hi, hi + sweep))
+    assert not (hits & ~bounding).any() and (bounding & ~hits).sum() > 0

@@ -386,31 +386,49 @@ def face_hits(position: glm.vec3, far: float, lo: np.ndarray, hi: np.ndarray) ->
     return hits
 
 
+def box_corners(lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    """(box, 8, xyz): the corners of each box [lo, hi] (rows)."""
+    return np.where(_CORNER_PICK[None], np.asarray(hi)[:, None, :], np.asarray(lo)[:, None, :])
+
+
+_SIDE_NORMALS_BY_COLUMN = _SIDE_NORMALS.reshape(-1, 3).T.copy()  # (xyz, face * plane): one matrix product
+
+
+def hull_face_hits(position: glm.vec3 | Sequence[float], far: float, points: np.ndarray, lo: np.ndarray,
+                   hi: np.ndarray) -> np.ndarray:
+    """(hull, face) booleans: which faces' frustums (from ``position`` out to ``far``) may
+    touch the convex hull of each row of ``points`` (hull, point, xyz), whose bounding box
+    is [lo, hi] (rows).  Conservative as ``face_hits``: a hull is left out of a face only
+    when all its points are outside one of the face's planes (a plane through the apex: a
+    convex hull is outside it when its points are), or when its box is beyond ``far``.
+    ``face_hits_swept`` is one such hull: a box swept along a light, tighter than the box
+    bounding the sweep (a long diagonal sweep makes that as wide as the level)."""
+    centre = np.asarray(tuple(position), np.float64)
+    hits = np.zeros((len(points), 6), dtype=bool)
+    if not len(points):
+        return hits
+    reach = np.clip(centre, lo, hi) - centre
+    in_range = np.sqrt((reach * reach).sum(axis=1)) <= far
+    if not in_range.any():
+        return hits
+    near = points[in_range] - centre
+    inside = (near @ _SIDE_NORMALS_BY_COLUMN >= 0.0).reshape(len(near), near.shape[1], 6, -1)
+    hits[in_range] = ~(~inside).all(axis=1).any(axis=2)  # (hull, point, face, plane) -> (hull, face)
+    return hits
+
+
 def face_hits_swept(position: glm.vec3, far: float, lo: np.ndarray, hi: np.ndarray,
                     sweep: np.ndarray) -> np.ndarray:
-    """(box, face) booleans: which faces' frustums (from ``position`` out to ``far``) may
-    touch the convex hull of each world box [lo, hi] (rows) and the same box moved by its
-    row of ``sweep`` (a box swept along a light: where its shadow may fall,
-    ``shadow_rules.directional_shadow_sweep``).  Conservative as ``face_hits``: a hull is
-    left out of a face only when all sixteen of its corners are outside one of the face's
-    planes (a plane through the apex: a convex hull is outside it when its corners are);
-    tighter than the box bounding the sweep, which a long diagonal sweep makes as wide as
-    the level."""
-    centre = np.array(position, dtype=np.float64)
+    """(box, face) booleans: which faces' frustums may touch the convex hull of each world
+    box [lo, hi] (rows) and the same box moved by its row of ``sweep`` (a box swept along a
+    light: where its shadow may fall, ``shadow_rules.directional_shadow_sweep``): its
+    sixteen corners through ``hull_face_hits``."""
     lo = np.atleast_2d(np.asarray(lo, dtype=np.float64))
     hi = np.atleast_2d(np.asarray(hi, dtype=np.float64))
     sweep = np.atleast_2d(np.asarray(sweep, dtype=np.float64))
-    hits = np.zeros((len(lo), 6), dtype=bool)
-    box_lo, box_hi = np.minimum(lo, lo + sweep), np.maximum(hi, hi + sweep)  # the hull's bounding box
-    in_range = np.linalg.norm(np.clip(centre, box_lo, box_hi) - centre, axis=1) <= far
-    if not in_range.any():
-        return hits
-    near_lo, near_hi, moved = lo[in_range] - centre, hi[in_range] - centre, sweep[in_range]
-    corners = np.where(_CORNER_PICK[None], near_hi[:, None, :], near_lo[:, None, :])  # (box, corner, xyz)
-    corners = np.concatenate([corners, corners + moved[:, None, :]], axis=1)  # (box, 16, xyz)
-    inside = np.einsum("bck,fpk->bcfp", corners, _SIDE_NORMALS) >= 0.0  # (box, corner, face, plane)
-    hits[in_range] = ~(~inside).all(axis=1).any(axis=2)
-    return hits
+    corners = box_corners(lo, hi)
+    points = np.concatenate([corners, corners + sweep[:, None, :]], axis=1)
+    return hull_face_hits(position, far, points, np.minimum(lo, lo + sweep), np.maximum(hi, hi + sweep))
 
 
 def faces_touched(position: glm.vec3, far: float, lo: np.ndarray, hi: np.ndarray) -> set[int]:

@@ -129,15 +129,18 @@ def boxes_in_reach(lo: np.ndarray, hi: np.ndarray, position: np.ndarray, light_r
 
 
 def directional_shadow_bounds(lo: np.ndarray, hi: np.ndarray, direction: glm.vec3 | np.ndarray,
-                              level_lo: np.ndarray, level_hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+                              level_lo: np.ndarray, level_hi: np.ndarray,
+                              sweep: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """World boxes (rows) holding where the shadows of the boxes [lo, hi] fall under a light
     travelling along ``direction``: each box swept along the light until its last corner
-    leaves the level's box (nothing beyond it receives a shadow).  Conservative."""
+    leaves the level's box (nothing beyond it receives a shadow).  Conservative.  ``sweep``:
+    ``directional_shadow_sweep``'s rows, where worked out already."""
     lo = np.atleast_2d(np.asarray(lo, np.float64))
     hi = np.atleast_2d(np.asarray(hi, np.float64))
     level_lo = np.asarray(level_lo, np.float64)
     level_hi = np.asarray(level_hi, np.float64)
-    sweep = directional_shadow_sweep(lo, hi, direction, level_lo, level_hi)
+    if sweep is None:
+        sweep = directional_shadow_sweep(lo, hi, direction, level_lo, level_hi)
     far_lo, far_hi = lo + sweep, hi + sweep
     out_lo = np.maximum(np.minimum(lo, far_lo), np.minimum(level_lo, lo))
     out_hi = np.minimum(np.maximum(hi, far_hi), np.maximum(level_hi, hi))
@@ -161,9 +164,9 @@ def directional_shadow_sweep(lo: np.ndarray, hi: np.ndarray, direction: glm.vec3
     # to the wall the light runs towards, the nearest of those; the farthest corner's.
     moving = np.abs(d) > 1e-9
     wall = np.where(d > 0.0, level_hi, level_lo)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        from_lo = np.where(moving, (wall - lo) / np.where(moving, d, 1.0), np.inf)
-        from_hi = np.where(moving, (wall - hi) / np.where(moving, d, 1.0), np.inf)
+    step = np.where(moving, d, 1.0)  # no division by zero: an axis the light runs along is never reached
+    from_lo = np.where(moving, (wall - lo) / step, np.inf)
+    from_hi = np.where(moving, (wall - hi) / step, np.inf)
     travel = np.maximum(np.maximum(from_lo, from_hi).min(axis=1), 0.0)   # the corner farthest from the walls
     travel = np.minimum(travel, float(np.linalg.norm(level_hi - level_lo)))
     return d * travel[:, None]
