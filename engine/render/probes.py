@@ -720,7 +720,9 @@ class ProbeCaptures:
 
     def _scene_record(self, key: int) -> tuple:
         """What every face of probe ``key`` is drawn with besides its camera and the sky: the
-        batches in drawing order with their instances' order (``InstanceBatch.layout``), the
+        batches in drawing order with their instances' order (``InstanceBatch.layout``) and
+        material variants (which build of the scene program draws each: one instance's
+        change of variant may move its whole batch to the build that switches), the
         shadow maps' blocks (fits, slots, filter sizes), their lookups and filter, the
         virtual lights shining, the reflection filtering, and the cubes (with how often each
         was written) of the other probes the batches sample.  What the instances themselves
@@ -732,7 +734,7 @@ class ProbeCaptures:
         cubes = renderer.probe_cubes
         sampled = sorted({probe for batch in batches for probe in (batch.probe, batch.second_probe, batch.rest_probe)
                           if probe and probe != key})
-        return (tuple((_Same(batch), batch.layout) for batch in batches), shadows.block.tobytes(),
+        return (tuple((_Same(batch), batch.layout, batch.variants) for batch in batches), shadows.block.tobytes(),
                 shadows.virtual_block.tobytes(), shadows.program_defines, shadows.filter, shadows.virtual_shining,
                 renderer.reflection_anisotropy,
                 tuple((probe, _Same(cubes.get(probe)), self._versions.get(probe, 0)) for probe in sampled))
