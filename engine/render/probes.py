@@ -169,6 +169,7 @@ class _KeepPlan:
     sky_only: frozenset[int]
     scene: tuple | None
     records: dict[int, tuple]
+    direct: bool  # faces drawn straight into the cube (the records say so)
 
 
 class CubeMipPass:
@@ -632,7 +633,7 @@ class ProbeCaptures:
             direct = self._direct(trees)
         targets_direct = self._face_targets(key, cube.texture) if direct and not trees else None
         direct = targets_direct is not None
-        if plan is None:
+        if plan is None or plan.direct != direct:  # (a face target refused just now: the copy path)
             plan = self._keep_plan(key, views, unchanged, direct, trees)
         records = self._sky_faces.setdefault(key, {})
         scene_records = self._scene_faces.setdefault(key, {})
@@ -716,7 +717,7 @@ class ProbeCaptures:
                                   [*renderer.opaque_batches(), *renderer.transparent_batches()]) if rest else rest
         sky_records = self._sky_faces.get(key, {})
         kept.update(face for face in sky_only if face in sky_records and sky_records[face] == records[face])
-        return _KeepPlan(frozenset(kept), sky_only, scene, records)
+        return _KeepPlan(frozenset(kept), sky_only, scene, records, direct)
 
     def _scene_record(self, key: int) -> tuple:
         """What every face of probe ``key`` is drawn with besides its camera and the sky: the
