@@ -150,3 +150,88 @@ def test_a_swept_box_is_left_out_only_of_faces_none_of_its_points_lie_in():
         assert not (seen & ~hits[b]).any(), (b, seen, hits[b])
     bounding = face_hits(apex, far, np.minimum(lo, lo + sweep), np.maximum(hi, hi + sweep))
     assert not (hits & ~bounding).any() and (bounding & ~hits).sum() > 0
+
+
+def test_a_batch_drawn_with_another_build_draws_again_every_face_that_shows_it(scene):
+    """Two boxes of one batch, one in the probe's +X face and one in its -X face: the +X
+    box given an Emissive moves the whole batch to the build of the scene program that
+    switches per instance, so the -X face, where nothing changed, is drawn again too (with
+    another program its pixels may differ); the cube is a capture of all six."""
+    from components import Emissive, Skybox
+
+    def build(world):
+        look_from(world, (0, 3, 6), (0, 0, 0))
+        world.spawn(Skybox())
+        world.spawn(DirectionalLight(direction=(-0.3, -1.5, 0.2), intensity=2.0))
+        world.resources["probe"] = world.spawn(Transform(position=(0.0, 0.6, 0.0)),
+                                               ReflectionProbe(resolution=32, far=10.0, refresh="every_frame"))
+        mesh = box()  # one mesh: one batch
+        for name, x in (("east", 3.0), ("west", -3.0)):
+            world.resources[name] = world.spawn(Transform(position=(x, 0.6, 0.0)), MeshRef(mesh),
+                                                Material(color=(0.8, 0.3, 0.2), roughness=0.3))
+
+    runner = scene(build, (64, 48))
+    _probe_stage(runner).path = "six_pass"
+    cube = _Cube(runner)
+    drawn = []
+    draw = cube.probes.scene_pass.draw
+
+    def seen_drawing(views, *args, **kwargs):  # which probe faces are drawn (the drawing itself unchanged)
+        drawn.extend(view.node for view in views if view.name.startswith("probe face"))
+        return draw(views, *args, **kwargs)
+
+    cube.probes.scene_pass.draw = seen_drawing
+    for _ in range(3):
+        runner.frame()
+    assert runner.stats.probe_faces == 0
+    batches = runner.engine.renderer.opaque_batches()
+    before = [batch.variants for batch in batches]
+    drawn.clear()
+    runner.world.add_component(runner.world.resources["east"], Emissive(1.0))
+    runner.frame()
+    assert len(runner.engine.renderer.opaque_batches()) == 1
+    assert [batch.variants for batch in batches] != before  # the boxes' batch: mixed variants now
+    assert 0 in drawn and 1 in drawn, drawn  # +X: the box changed; -X: its batch's build did
+    assert cube.as_if_drawn_whole()
+
+
+def test_instances_drawn_in_another_order_draw_again_every_face_that_shows_their_batch(scene):
+    """Three boxes of one batch (+X, -X and +Z of the probe): the +X one deleted, the last
+    row fills its place, so the batch draws its instances in another order (which decides
+    ties of depth), and every face that shows the batch is drawn again, the -X face too;
+    the cube is a capture of all six."""
+    from components import Skybox
+
+    def build(world):
+        look_from(world, (0, 3, 6), (0, 0, 0))
+        world.spawn(Skybox())
+        world.spawn(DirectionalLight(direction=(-0.3, -1.5, 0.2), intensity=2.0))
+        world.resources["probe"] = world.spawn(Transform(position=(0.0, 0.6, 0.0)),
+                                               ReflectionProbe(resolution=32, far=10.0, refresh="every_frame"))
+        world.spawn(Transform(), MeshRef(plane(60, 60)), Material())  # the level's box, whatever goes
+        mesh = box()  # one mesh: one batch
+        for name, position in (("east", (3.0, 0.6, 0.0)), ("west", (-3.0, 0.6, 0.0)), ("south", (0.0, 0.6, 3.0))):
+            world.resources[name] = world.spawn(Transform(position=position), MeshRef(mesh),
+                                                Material(color=(0.8, 0.3, 0.2), roughness=0.3))
+
+    runner = scene(build, (64, 48))
+    _probe_stage(runner).path = "six_pass"
+    cube = _Cube(runner)
+    drawn = []
+    draw = cube.probes.scene_pass.draw
+
+    def seen_drawing(views, *args, **kwargs):  # which probe faces are drawn (the drawing itself unchanged)
+        drawn.extend(view.node for view in views if view.name.startswith("probe face"))
+        return draw(views, *args, **kwargs)
+
+    cube.probes.scene_pass.draw = seen_drawing
+    for _ in range(3):
+        runner.frame()
+    assert runner.stats.probe_faces == 0
+    drawn.clear()
+    boxes = next(batch for batch in runner.engine.renderer.opaque_batches() if batch.count == 3)
+    runner.world.delete_entity(runner.world.resources["east"])
+    runner.frame()
+    assert boxes.count == 2 and boxes.entity_at[0] == runner.world.resources["south"]  # the last row filled it
+    assert 0 in drawn and 1 in drawn, drawn  # +X: the box went; -X: its batch's order changed
+    assert cube.as_if_drawn_whole()
