@@ -109,6 +109,7 @@ class ProbeScheduler:
         self._lights: dict[int, tuple[np.ndarray, float]] = {}  # point light -> (position, range) last seen
         self._looks = LookChanges()
         self._lights_came_or_went = False  # this frame: a point light came or went (periodic probes' changes)
+        self._reach: tuple[ShadowCasters | None, float] = (None, 0.0)  # _filter_reach's, for these casters
         self._watching = False  # the boxes and lights are kept: a watching probe was there last frame
 
     def update(self) -> ProbeSchedule:
@@ -410,7 +411,10 @@ class ProbeScheduler:
         (``shaders/include/shadows.glsl``), at most ``2.5 + 2 * softness`` texels; a
         directional texel is at most the grown level box's diagonal over the map's side
         (``shadow_rules.directional_fit``), a point light's at most ``2 / resolution`` of its
-        range.  The widest of the casting lights'."""
+        range.  The widest of the casting lights' (worked out once a frame: the shadows
+        stage publishes new casters each frame)."""
+        if self._reach[0] is casters:
+            return self._reach[1]
         reach = 0.0
         if casters.directional and casters.level is not None:
             diagonal = float(np.linalg.norm(casters.level[1] - casters.level[0]))
@@ -423,6 +427,7 @@ class ProbeScheduler:
                 if light.shadows:
                     reach = max(reach, 2.0 * light.range / light.shadow_resolution
                                 * (2.5 + 2.0 * light.shadow_softness))
+        self._reach = (casters, reach)
         return reach
 
     @staticmethod
