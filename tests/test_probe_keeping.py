@@ -235,3 +235,25 @@ def test_instances_drawn_in_another_order_draw_again_every_face_that_shows_their
     assert boxes.count == 2 and boxes.entity_at[0] == runner.world.resources["south"]  # the last row filled it
     assert 0 in drawn and 1 in drawn, drawn  # +X: the box went; -X: its batch's order changed
     assert cube.as_if_drawn_whole()
+
+
+def test_a_probe_that_kept_every_face_leaves_its_irradiance_row_as_projected(scene):
+    """A probe with an influence box, recaptured every frame in a still room: once every
+    face and its chain are kept, its irradiance is not projected again (the row would be the
+    same); a request draws the faces and projects it again, to the same row."""
+    from tests.test_ambient_light import red_wall_room
+
+    ents = {}
+    runner = scene(red_wall_room(ents), (64, 48))
+    runner.world.get(ents["probe"], ReflectionProbe).refresh = "every_frame"
+    for _ in range(3):
+        runner.frame()
+    table = runner.engine.renderer.irradiance
+    projected, row = table.projections, table.read_row(ents["probe"]).copy()
+    for _ in range(2):
+        runner.frame()
+        assert runner.stats.probe_faces == 0 and table.projections == projected
+    runner.world.get(ents["probe"], ReflectionProbe).request()
+    runner.frame()
+    assert runner.stats.probe_faces >= 1 and table.projections == projected + 1  # (a face of sky alone is kept)
+    np.testing.assert_allclose(table.read_row(ents["probe"]), row, rtol=1e-5, atol=1e-6)

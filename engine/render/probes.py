@@ -522,6 +522,7 @@ class ProbeCaptures:
         # By probe: its six face views and each one's camera as a record reads it, for the
         # place and settings they were made for (face_views).
         self._views: dict[int, tuple[tuple, dict[int, View], dict[int, tuple]]] = {}
+        self._projected: dict[int, int] = {}  # by probe: its cube's version its irradiance row was projected from
         # By probe whose mip chain was built from its faces: the faces drawn since (their
         # chains are built again; absent: the whole chain is).
         self._mips_stale: dict[int, set[int]] = {}
@@ -597,8 +598,11 @@ class ProbeCaptures:
         cube = self.cubes[key]
         cube.position = tuple(position)
         cube.box = projection_box(position, settings)
-        if settings.influence is not None:  # its irradiance, from the new mip chain (engine/render/irradiance.py)
-            self.irradiance.project(key, cube)
+        if settings.influence is not None and self._projected.get(key) != self._versions.get(key, 0):
+            # Its irradiance, from the new mip chain (engine/render/irradiance.py); a capture
+            # that kept every face and its chain leaves the row as it was projected.
+            if self.irradiance.project(key, cube):
+                self._projected[key] = self._versions.get(key, 0)
         self.renderer.stats.probe_captures += 1
         return path
 
@@ -825,6 +829,7 @@ class ProbeCaptures:
         self._forget_faces(key)
         self._versions.pop(key, None)
         self._views.pop(key, None)
+        self._projected.pop(key, None)
         self._mips_stale.pop(key, None)
         self.mips.drop(key)
         self.irradiance.drop(key)
