@@ -45,6 +45,7 @@ from components import DirectionalLight, MeshRef, PointLight, ReflectionProbe, T
 from components.limits import VIEW_PROBE
 from components.tracking import warn_component
 from components.visibility import SEEN_BY_EVERY_VIEW, visibility_code
+from engine.assets.mesh import Mesh
 from engine.core.budget import spending_order
 from engine.core.world import World
 from engine.resources import RenderStats, Surfaces, ViewBudget
@@ -110,6 +111,7 @@ class ProbeScheduler:
         self._looks = LookChanges()
         self._lights_came_or_went = False  # this frame: a point light came or went (periodic probes' changes)
         self._reach: tuple[ShadowCasters | None, float] = (None, 0.0)  # _filter_reach's, for these casters
+        self._mesh_boxes: dict[int, tuple] = {}  # id(mesh) -> (mesh, lo, hi): _mesh_box
         self._watching = False  # the boxes and lights are kept: a watching probe was there last frame
 
     def update(self) -> ProbeSchedule:
@@ -242,7 +244,7 @@ class ProbeScheduler:
         world = self.world
         frame = world.frame
         removed = frame.removed | world.deleted()
-        rows = []
+        rows, placed = [], []
         for entity in frame.moved | frame.added | removed | looks:
             what = ("removed" if entity in removed else "added" if entity in frame.added
                     else "moved" if entity in frame.moved else "look changed")
@@ -257,9 +259,29 @@ class ProbeScheduler:
             mesh_ref = world.try_get(entity, MeshRef) if world.exists(entity) else None
             transform = world.try_get(entity, Transform) if mesh_ref is not None else None
             if transform is not None:
-                new = self._bounds[entity] = world_bounds(mesh_ref.mesh, transform.world)
+                placed.append((entity, what, code, mesh_ref.mesh, transform.world))
+        if placed:
+            # Where each is now, all in a few array operations (``world_bounds``' box, each
+            # mesh's own box carried by its model matrix).
+            local = [self._mesh_box(mesh) for _, _, _, mesh, _ in placed]
+            corners = box_corners(np.array([lo for lo, _ in local]), np.array([hi for _, hi in local]))
+            corners = np.concatenate([corners, np.ones((len(placed), 8, 1))], axis=2)
+            carried = corners @ np.array([model.to_list() for _, _, _, _, model in placed], np.float64)
+            lo, hi = carried[..., :3].min(axis=1), carried[..., :3].max(axis=1)
+            for i, (entity, what, code, _, _) in enumerate(placed):
+                new = self._bounds[entity] = (lo[i], hi[i])
                 rows.append((entity, what, *new, code))
         return ChangedBoxes(rows)
+
+    def _mesh_box(self, mesh: Mesh) -> tuple[np.ndarray, np.ndarray]:
+        """``mesh.bounds``, kept by mesh (its vertices are read once, as the renderer uploads
+        them once)."""
+        kept = self._mesh_boxes.get(id(mesh))
+        if kept is None or kept[0] is not mesh:
+            if len(self._mesh_boxes) > 4096:
+                self._mesh_boxes.clear()
+            kept = self._mesh_boxes[id(mesh)] = (mesh, *mesh.bounds)
+        return kept[1], kept[2]
 
     def _all_boxes(self) -> ChangedBoxes:
         self._bounds = {entity: world_bounds(mesh_ref.mesh, transform.world)

@@ -96,19 +96,21 @@ def _face_planes() -> np.ndarray:
 
 
 _FACE_PLANES = _face_planes()
+_FACE_PLANES_BY_COLUMN = _FACE_PLANES.reshape(-1, 3).T.copy()  # (xyz, face * plane): one matrix product
 _CORNERS = np.array([(x, y, z) for x in (0, 1) for y in (0, 1) for z in (0, 1)], dtype=bool)  # (8, 3)
 
 
 def face_touches(position: glm.vec3 | Sequence[float], lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
     """(box, face) booleans: which cube faces from ``position`` each world box [lo, hi] (rows)
     may show.  Conservative: a box is left out of a face only when all eight of its corners
-    are outside one of the face's planes through the apex (``_face_planes``); a fragment
-    lies at least half a pixel inside the frustum, far from that test's rounding."""
+    are outside one of the face's planes through the apex (``_face_planes``: the farthest
+    corner along the plane's normal is outside); a fragment lies at least half a pixel
+    inside the frustum, far from that test's rounding."""
     centre = np.asarray(tuple(position), np.float64)
     lo, hi = np.atleast_2d(lo) - centre, np.atleast_2d(hi) - centre
     corners = np.where(_CORNERS[None], hi[:, None, :], lo[:, None, :])  # (box, corner, xyz)
-    inside = np.einsum("bck,fpk->bcfp", corners, _FACE_PLANES) >= 0.0  # (box, corner, face, plane)
-    return ~(~inside).all(axis=1).any(axis=2)
+    farthest = (corners @ _FACE_PLANES_BY_COLUMN).max(axis=1)  # (box, face * plane)
+    return (farthest >= 0.0).reshape(len(corners), 6, -1).all(axis=2)
 
 
 def sky_only_faces(position: glm.vec3, faces: frozenset[int] | set[int], skip: int,
@@ -118,27 +120,39 @@ def sky_only_faces(position: glm.vec3, faces: frozenset[int] | set[int], skip: i
     frame's upload) touches the face's frustum (``face_touches``, conservative; the far
     plane is not used, which only keeps more boxes in).  ``skip`` (the probe's own object,
     which no face draws) is left out, as the scene pass leaves it out.  Such a face shows
-    the sky alone.  A row not measured yet (NaN) counts as touching every face."""
+    the sky alone.  A row not measured yet (NaN) counts as touching every face.  The
+    batches' boxes (their rows' union) are tested together first; only a batch of several
+    instances whose box touches a face still left has its rows tested."""
     left = set(faces)
-    for batch in batches:
+    if not left:
+        return frozenset()
+    live = [batch for batch in batches if batch.count and not (batch.count == 1 and batch.entity_at[0] == skip)]
+    if not live:
+        return frozenset(left)
+    unions = [batch.box for batch in live]
+    if any(union is None for union in unions):
+        return frozenset()
+    lo, hi = np.array([union[0] for union in unions]), np.array([union[1] for union in unions])
+    if np.isnan(lo).any() or np.isnan(hi).any():
+        return frozenset()
+    near = face_touches(position, lo, hi)  # (batch, face)
+    for index in np.flatnonzero(near[:, sorted(left)].any(axis=1)).tolist():
+        batch = live[index]
+        if not any(near[index, face] for face in left):
+            continue
+        if batch.count == 1:
+            hits = near[index]  # one instance (not the skipped one): its box is the batch's
+        else:
+            row = batch.row_of.get(skip) if skip else None
+            boxes = batch.row_boxes
+            if row is not None:
+                boxes = np.delete(boxes, row, axis=0)
+            if not len(boxes):
+                continue
+            hits = face_touches(position, boxes[:, 0], boxes[:, 1]).any(axis=0)
+        left = {face for face in left if not hits[face]}
         if not left:
             break
-        if not batch.count or (batch.count == 1 and batch.entity_at[0] == skip):
-            continue
-        union = batch.box
-        if union is None or np.isnan(union[0]).any() or np.isnan(union[1]).any():
-            return frozenset()
-        near = face_touches(position, union[0], union[1])[0]
-        if not any(near[face] for face in left):
-            continue
-        boxes = batch.row_boxes
-        row = batch.row_of.get(skip) if skip else None
-        if row is not None:
-            boxes = np.delete(boxes, row, axis=0)
-        if not len(boxes):
-            continue
-        hits = face_touches(position, boxes[:, 0], boxes[:, 1]).any(axis=0)
-        left = {face for face in left if not hits[face]}
     return frozenset(left)
 
 

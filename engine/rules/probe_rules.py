@@ -412,8 +412,11 @@ def hull_face_hits(position: glm.vec3 | Sequence[float], far: float, points: np.
     if not in_range.any():
         return hits
     near = points[in_range] - centre
-    inside = (near @ _SIDE_NORMALS_BY_COLUMN >= 0.0).reshape(len(near), near.shape[1], 6, -1)
-    hits[in_range] = ~(~inside).all(axis=1).any(axis=2)  # (hull, point, face, plane) -> (hull, face)
+    # A hull is outside a plane when its farthest point along the plane's normal is: (hull,
+    # face * plane) of those farthest reaches, and a face is hit when no plane of it has all
+    # the hull outside.
+    reach_along = (near @ _SIDE_NORMALS_BY_COLUMN).max(axis=1)
+    hits[in_range] = (reach_along >= 0.0).reshape(len(near), 6, -1).all(axis=2)
     return hits
 
 
