@@ -97,14 +97,18 @@ def test_a_culled_batch_draws_no_sample(ctx, case, monkeypatch):
     depth test passing every fragment and nothing written: it must count 0.  (The view's
     clip plane, scissor and claimed-pixels mask still apply: they are what the cull reads
     or what can only take samples away.)"""
-    original = ScenePass._draw_batches
-    counted: list[tuple[str, int]] = []
+    original_draw, original_reaching = ScenePass._draw_batches, ScenePass._reaching
+    counted: list[tuple[int, int, int]] = []
+    left_out: list = []  # what the view about to draw left out (ScenePass._reaching, then its draws)
 
-    def draw_batches(self, batches, invocations, masked, layered="", skip=0, before_draw=None, hide=0, reach=None):
-        original(self, batches, invocations, masked, layered, skip, before_draw, hide, reach)
-        if reach is None:
-            return
-        left = [batch for at, batch in enumerate(batches) if not reach[at]]
+    def reaching(self, batches, reach, view):
+        kept = original_reaching(self, batches, reach, view)
+        left_out[:] = [batch for batch in batches if batch not in kept]
+        return kept
+
+    def draw_batches(self, batches, invocations, masked, layered="", skip=0, before_draw=None, hide=0):
+        original_draw(self, batches, invocations, masked, layered, skip, before_draw, hide)
+        left, left_out[:] = list(left_out), []
         if not left:
             return
         ctx = self.ctx
@@ -118,12 +122,13 @@ def test_a_culled_batch_draws_no_sample(ctx, case, monkeypatch):
             query = ctx.query(samples=True)
             for batch in left:
                 with query:
-                    original(self, [batch], invocations, masked, layered, skip, before_draw, hide, None)
+                    original_draw(self, [batch], invocations, masked, layered, skip, before_draw, hide)
                 counted.append((batch.entity_at[0], batch.count, query.samples))
         finally:
             fbo.color_mask, fbo.depth_mask = colour, depth
             ctx.depth_func = "<"  # the per-view scene pass's (scene_pass._SCENE; moderngl cannot read it)
 
+    monkeypatch.setattr(ScenePass, "_reaching", reaching)
     monkeypatch.setattr(ScenePass, "_draw_batches", draw_batches)
     engine = _engine(ctx, case, True)
     capture = CaptureTarget(ctx, SIZE)

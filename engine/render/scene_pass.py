@@ -289,8 +289,7 @@ class ScenePass:
         return len(self._programs) - before
 
     def _draw_batches(self, batches, invocations: int, masked: bool, layered: str = "",
-                      skip: int = 0, before_draw: Callable[[], None] | None = None, hide: int = 0,
-                      reach: list[bool] | None = None) -> None:
+                      skip: int = 0, before_draw: Callable[[], None] | None = None, hide: int = 0) -> None:
         """One instanced draw per batch, each with the program of its variants.  A program's
         uniforms are written only when their value changes (``self._written``, kept for the
         program's life): each write is a moderngl call of a few microseconds on a view's
@@ -303,8 +302,7 @@ class ScenePass:
         cost a dictionary look-up and a comparison a batch, not a program key built and found.
         A batch whose one instance is the view's ``skip`` or ``hide`` entity (a mirror's own
         quad, a probe's own sphere) is not drawn at all: its vertices would all be clipped
-        away (0: none; entities start at 1); nor is one whose ``reach`` (by position in
-        ``batches``, ``batch_cull.batch_reach``) is False."""
+        away (0: none; entities start at 1)."""
         ctx = self.ctx
         renderer = self.renderer
         stats = renderer.stats
@@ -315,12 +313,9 @@ class ScenePass:
         kind = (invocations, layered, self._ambient_probes)
         sky_size = self._sky_size
         last_own = self._last_own
-        for at, batch in enumerate(batches):
+        for batch in batches:
             count = batch.count
             if not count or (count == 1 and batch.entity_at[0] in (skip, hide)):
-                continue
-            if reach is not None and not reach[at]:
-                stats.draws_culled += 1
                 continue
             variants = batch.variants
             record = batch.draw_records.get(kind)
@@ -469,8 +464,8 @@ class ScenePass:
                 set_scissor(ctx, view.scissor)  # unless in place (moderngl's own record: the cache reads it)
                 set_front_face(ctx, "cw" if view.mirrored else "ccw")
                 renderer.bind_view_at(index)
-                self._draw_batches(opaque, 0, options.masked, skip=view.skip, hide=view.hide,
-                                   reach=None if reach is None else reach[index])
+                self._draw_batches(opaque if reach is None else self._reaching(opaque, reach[index], view),
+                                   0, options.masked, skip=view.skip, hide=view.hide)
                 if options.sky:
                     # Into the view's own framebuffer: the sky writes id 0 (nothing) to the
                     # surface and seen images, the very values the clear put where no surface
@@ -495,6 +490,18 @@ class ScenePass:
                     # The next view's state (the pass after the last applies its own).
                     apply_pass_state(ctx, _SCENE, viewport, views[index + 1].scissor)
                 renderer.stats.passes += 1
+
+    def _reaching(self, batches: list[InstanceBatch], reach: list[bool], view: View) -> list[InstanceBatch]:
+        """The batches whose ``reach`` (batch_cull.batch_reach) in ``view`` is True; those
+        left out that ``_draw_batches`` would have drawn (not the view's own skipped one)
+        count in ``RenderStats.draws_culled``."""
+        kept = [batch for batch, reaches in zip(batches, reach, strict=True) if reaches]
+        if len(kept) < len(batches):
+            skipped = (view.skip, view.hide)
+            self.renderer.stats.draws_culled += sum(
+                1 for batch, reaches in zip(batches, reach, strict=True)
+                if not reaches and not (batch.count == 1 and batch.entity_at[0] in skipped))
+        return kept
 
     def _draw_batched(self, views: Sequence[View], options: SceneOptions) -> None:
         """Every batch once for all ``views`` (at most MAX_BATCHED_VIEWS): the geometry
