@@ -5,8 +5,9 @@ of its clip plane).  Checked against what it must not change and against the GL 
 * the frames, colours and entity ids, are the same bytes with the cull on (on every pass:
   its thresholds set to 1) and off, frame by frame over the benchmark's mirror ring (8 and
   16 mirrors, the camera orbiting, boxes spinning), the same ring with every box its own
-  mesh (its own batch: left at the scene pass's own thresholds) and the facing portal pair
-  (exact and predicted visibility);
+  mesh (its own batch: left at the scene pass's own thresholds; with auto and predicted
+  visibility, the latter drawing each view conditionally on its claim) and the facing
+  portal pair (exact and predicted visibility);
 * every draw it leaves out is one the unculled frame made (draw calls on + culled == draw
   calls off), and on the ring with a batch a box it leaves out draws
   (``RenderStats.draws_culled``);
@@ -43,10 +44,12 @@ class BoxPerBatch(MirrorRing):
 
 
 def _engine(ctx, case: str, cull: bool):
-    kind, arg = case.split("_")
+    kind, arg, *visibility = case.split("_")
     if kind in ("ring", "boxes"):
         engine = Engine((MirrorRing if kind == "ring" else BoxPerBatch)(int(arg)), ctx)
         engine.reflection_system.path = "per_mirror"
+        if visibility:  # the views' draws conditional on their claims (predicted: last frame's)
+            engine.reflection_system.visibility = visibility[0]
     else:
         engine = Engine(FacingPortals(), ctx)
         set_depth(engine, 8)
@@ -58,7 +61,7 @@ def _engine(ctx, case: str, cull: bool):
     return engine
 
 
-CASES = ("ring_8", "ring_16", "boxes_16", "portals_exact", "portals_predicted")
+CASES = ("ring_8", "ring_16", "boxes_16", "boxes_16_predicted", "portals_exact", "portals_predicted")
 
 
 @pytest.mark.parametrize("case", CASES)
@@ -79,6 +82,8 @@ def test_frames_are_the_same_with_the_cull_on_and_off(ctx, case):
             assert off.draws_culled == 0
             assert on.draw_calls + on.draws_culled == off.draw_calls, (case, frame)
             assert on.reflection_views == off.reflection_views > 0
+            if len(case.split("_")) == 3:
+                assert on.reflection_visibility == case.split("_")[2]
             culled += on.draws_culled
         rgb, ids, _ = images[0]
         assert rgb.std() > 10 and len(np.unique(ids)) > 5  # a real frame, not a blank one
@@ -87,7 +92,7 @@ def test_frames_are_the_same_with_the_cull_on_and_off(ctx, case):
             capture.release()
         for engine in engines:
             engine.close()
-    if case == "boxes_16":
+    if case.startswith("boxes"):
         assert culled > FRAMES * 16, culled  # a mirror's view reaches only some of the boxes
 
 

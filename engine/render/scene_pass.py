@@ -456,7 +456,7 @@ class ScenePass:
         renderer.upload_views(views)  # every view's Camera block in one write; each binds its range
         opaque = renderer.opaque_batches()
         reach = None
-        if (self.cull_batches and len(opaque) >= self.cull_min_batches
+        if (self.cull_batches and opaque and len(opaque) >= self.cull_min_batches
                 and len(views) * len(opaque) >= self.cull_min_draws):
             reach = batch_reach(views, targets.size, opaque)  # which batch can draw a sample in which view
         for index, view in enumerate(views):
