@@ -43,13 +43,13 @@ PLANES = 6
 # How much the boxes grow, as a share of the largest coordinate of the level's boxes (at
 # least of 1 world unit): float32 vertex placement is good to about 1e-7 of it.
 BOX_MARGIN = 1e-4
-# Scissor rectangle (x, y, width, height) in pixels to the side planes' (-l, r, -b, t) in NDC:
-# rect @ _EDGES * (1/size per column) + _EDGE_BIAS (l = 2 x / W - 1, r = 2 (x + w) / W - 1).
+# Scissor rectangle (x, y, width, height, 1) in pixels to the side planes' (-l, r, -b, t) in
+# NDC, at a viewport of (width, height) (``_edges``): l = 2 x / W - 1, r = 2 (x + w) / W - 1.
 _EDGES = np.array([[-2.0, 2.0, 0.0, 0.0],
                    [0.0, 0.0, -2.0, 2.0],
                    [0.0, 2.0, 0.0, 0.0],
-                   [0.0, 0.0, 0.0, 2.0]])
-_EDGE_BIAS = np.array([1.0, -1.0, 1.0, -1.0])
+                   [0.0, 0.0, 0.0, 2.0],
+                   [1.0, -1.0, 1.0, -1.0]])
 # Each plane as a combination of the clip-space rows (x, y, z, w); the scissor's edges fill
 # the w column of the first four: x - l w >= 0, r w - x >= 0, y - b w >= 0, t w - y >= 0,
 # z + w >= 0.
@@ -58,6 +58,11 @@ _COMBINATIONS = np.array([[1.0, 0.0, 0.0, 0.0],
                           [0.0, 1.0, 0.0, 0.0],
                           [0.0, -1.0, 0.0, 0.0],
                           [0.0, 0.0, 1.0, 1.0]])
+# Kept between passes (a numpy call costs several microseconds on a frame's cold caches, so
+# the fixed part is made once): the edge matrix of each viewport size, and by view count the
+# planes' combinations (their w column written each pass), the planes, and their rows.
+_edges: dict[tuple[int, int], np.ndarray] = {}
+_work: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
 
 
 def batch_reach(views: Sequence[View], size: tuple[int, int],
@@ -68,26 +73,39 @@ def batch_reach(views: Sequence[View], size: tuple[int, int],
     only where the batch cannot draw a sample in that view."""
     n = len(views)
     width, height = size
+    edges = _edges.get(size)
+    if edges is None:
+        edges = _edges[size] = _EDGES * [[1.0 / width], [1.0 / height], [1.0 / width], [1.0 / height], [1.0]]
+    work = _work.get(n)
+    if work is None:
+        combos = np.empty((n, PLANES - 1, 4))
+        combos[:] = _COMBINATIONS
+        work = _work[n] = (combos, np.empty((n, PLANES, 4)), np.empty((n * PLANES, 7)))
+    combos, planes, rows = work
     blocks = np.frombuffer(b"".join([view.camera_block() for view in views]), np.float32).reshape(n, -1)
-    rects = np.array([view.scissor or (0, 0, width, height) for view in views], np.float64)
-    combos = np.empty((n, PLANES - 1, 4))
-    combos[:] = _COMBINATIONS
-    np.add(rects @ (_EDGES * [1.0 / width, 1.0 / width, 1.0 / height, 1.0 / height]), _EDGE_BIAS,
-           out=combos[:, :4, 3])
-    planes = np.empty((n, PLANES, 4))
+    full = (0, 0, width, height)
+    rects = np.array([(*(view.scissor or full), 1.0) for view in views], np.float64)
+    np.matmul(rects, edges, out=combos[:, :4, 3])
     # view_proj is column-major ([column, row]): its rows are the transpose's.
     np.matmul(combos, blocks[:, CAMERA_BLOCK_VIEW_PROJ].reshape(n, 4, 4).transpose(0, 2, 1),
               out=planes[:, :PLANES - 1])
     planes[:, PLANES - 1] = blocks[:, CAMERA_BLOCK_CLIP]
     flat = planes.reshape(n * PLANES, 4)
     # Each plane as a row against a box's (lo, hi, 1): its highest value over the box.
-    rows = np.concatenate((np.minimum(flat[:, :3], 0.0), np.maximum(flat[:, :3], 0.0), flat[:, 3:]), axis=1)
+    np.minimum(flat[:, :3], 0.0, out=rows[:, :3])
+    np.maximum(flat[:, :3], 0.0, out=rows[:, 3:6])
+    rows[:, 6] = flat[:, 3]
     boxes = np.concatenate([batch.row_boxes for batch in batches])  # [box, lo/hi, xyz]
-    margin = BOX_MARGIN * max(float(np.abs(boxes).max()), 1.0)
+    margin = BOX_MARGIN * max(float(boxes.max()), -float(boxes.min()), 1.0)
     ends = np.empty((len(boxes), 7))
     ends[:, 6] = 1.0
     np.add(boxes.reshape(-1, 6), [-margin] * 3 + [margin] * 3, out=ends[:, :6])
-    highest = rows @ ends.T  # [view plane, box]
-    reach = ~(highest < 0.0).reshape(n, PLANES, -1).any(axis=1)  # [view, box]: no plane has it all outside
-    starts = np.cumsum([0] + [batch.count for batch in batches[:-1]])
-    return np.logical_or.reduceat(reach, starts, axis=1).tolist()
+    # A box is out of a view where some plane's highest value over it is below 0 (its least
+    # over the planes is); a batch, where all its boxes are.  NaN (a box not measured)
+    # carries through min and max and compares false: reached.
+    least = (rows @ ends.T).reshape(n, PLANES, -1).min(axis=1)  # [view, box]
+    starts = [0]
+    for batch in batches[:-1]:
+        starts.append(starts[-1] + batch.count)
+    out = np.less(np.maximum.reduceat(least, starts, axis=1), 0.0)
+    return np.logical_not(out, out=out).tolist()
