@@ -86,12 +86,15 @@ if TYPE_CHECKING:
 _ALWAYS = nullcontext()  # a view drawn whatever its claim counted
 # A per-view pass tests its opaque batches' boxes against each view (batch_cull.batch_reach)
 # and draws a batch only where it can reach, when it has at least CULL_MIN_BATCHES batches and
-# views x batches is at least CULL_MIN_DRAWS.  Measured (32x18, LP_NUM_THREADS=0): the test
-# costs about 30 us a pass whatever its size, a draw left out saves about 4-9 us; the
-# benchmark ring (3 batches: floor, 20 boxes, 16 mirrors) never has a batch wholly outside a
-# view (each batch's rows spread round the ring), so few batches cannot pay for it.
-CULL_MIN_BATCHES = 6
-CULL_MIN_DRAWS = 24
+# views x batches is at least CULL_MIN_DRAWS.  Measured on the benchmark ring at 32x18,
+# LP_NUM_THREADS=0, cull forced on against off, interleaved: the test and the kept lists cost
+# a fixed share a pass, a draw left out saves a few microseconds, and the share of draws left
+# out grows with the batches (the ring's boxes in 3, 5, 10, 20 meshes by angle: 16%, 27%,
+# 40%, 50% of the draws); 16 mirrors: 5 batches +6.8% a frame, 7 batches +2.3%, 12 -3.4%.  At
+# these thresholds: 12 batches -5.9%, 22 -11.8%, and the benchmark scenes (3 batches, each
+# reaching every view: its rows spread round the ring) never test.
+CULL_MIN_BATCHES = 10
+CULL_MIN_DRAWS = 64
 
 
 @dataclass(frozen=True)
