@@ -51,6 +51,7 @@ class RenderStats(BudgetLedger):
 
     passes: int = 0
     draw_calls: int = 0
+    draws_culled: int = 0     # scene draws left out of a view their batch's boxes cannot reach (batch_cull)
     uploaded_bytes: int = 0
     instances: int = 0
     reflection_views: int = 0
