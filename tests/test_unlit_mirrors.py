@@ -1,10 +1,11 @@
-"""Mirrors the view tree paints over entirely are drawn unlit in the main view (issue 40: less
-pixel work in the 8-mirror frame).  Checked by a second path: the same scene from an engine
-whose main view shades every mirror (``MainViewSystem.depth_cap`` None) must give the very
-same frame, pixel for pixel and id for id, in the cases the rule takes (reflect rate 1, no
-fade) and in those it must leave alone (a lower reflect rate, a fade, water-like weights, a
-smaller level, a pixel budget, views the depth limits cut); and by what the main view itself
-wrote under the mirrors before the composites: black where the rule took them, lit where not."""
+"""Mirrors the view tree paints over entirely are drawn unlit, in the main view and in the
+tree's levels (issue 40: less pixel work in the 8-mirror frame).  Checked by a second path:
+the same scene from an engine that shades every mirror (``MainViewSystem.depth_cap`` None,
+``ViewTree.unlit`` False) must give the very same frame, pixel for pixel and id for id, in
+the cases the rule takes (reflect rate 1, no fade) and in those it must leave alone (a lower
+reflect rate, a fade, a smaller level, a pixel budget, views the depth limits cut, glass in
+front of a mirror); and by what the main view itself wrote under the mirrors before the
+composites: black where the rule took them, lit where not."""
 from __future__ import annotations
 
 import numpy as np
@@ -13,6 +14,7 @@ import pytest
 from benchmarks.mirrors import MirrorRing
 from components import Mirror
 from engine.core.frame_io import Output
+from engine.core.game import Game
 from engine.render.frame_views import FrameViews
 from engine.render.scene_pass import shading_replaced
 from engine.render.targets import CaptureTarget
@@ -23,10 +25,11 @@ SIZE = (160, 90)
 FRAMES = 3
 
 
-def _engine(ctx, setup=None, shaded: bool = False) -> Engine:
-    engine = Engine(MirrorRing(8), ctx)
-    if shaded:
-        engine.stages["main"].depth_cap = None  # the second path: every mirror lit
+def _engine(ctx, setup=None, shaded: bool = False, game: Game | None = None) -> Engine:
+    engine = Engine(game or MirrorRing(8), ctx)
+    if shaded:  # the second path: every mirror lit, in the main view and in the tree's levels
+        engine.stages["main"].depth_cap = None
+        engine.reflection_system.tree.unlit = False
     if setup is not None:
         setup(engine)
     return engine
@@ -52,12 +55,12 @@ def _cap(depth: int):
     return setup
 
 
-def _frames(ctx, engine: Engine, frames: int = FRAMES) -> list[tuple[np.ndarray, np.ndarray]]:
-    capture = CaptureTarget(ctx, SIZE)
+def _frames(ctx, engine: Engine, frames: int = FRAMES, size=SIZE) -> list[tuple[np.ndarray, np.ndarray]]:
+    capture = CaptureTarget(ctx, size)
     try:
         out = []
         for _ in range(frames):
-            engine.frame(1.0 / 60.0, Output(capture.framebuffer, SIZE))
+            engine.frame(1.0 / 60.0, Output(capture.framebuffer, size))
             out.append((capture.read_rgb(), engine.renderer.targets.read_ids()))
         return out
     finally:
@@ -83,12 +86,61 @@ def test_the_frame_is_the_same_as_with_every_mirror_shaded(ctx, case):
     fast, shaded = _engine(ctx, setup), _engine(ctx, setup, shaded=True)
     try:
         got, want = _frames(ctx, fast), _frames(ctx, shaded)
-        for (image, ids), (image_ref, ids_ref) in zip(got, want, strict=True):
-            assert image.max() > 40  # a picture, not a black frame
-            assert np.array_equal(ids, ids_ref)
-            assert np.array_equal(image, image_ref), f"{int(np.any(image != image_ref, axis=2).sum())} pixels differ"
+        _same_frames(got, want)
         assert len(fast.stages["main"]._root_options().unlit) == expected_unlit
         assert shaded.stages["main"]._root_options().unlit == frozenset()
+    finally:
+        fast.close()
+        shaded.close()
+
+
+def _same_frames(got, want) -> None:
+    for (image, ids), (image_ref, ids_ref) in zip(got, want, strict=True):
+        assert image.max() > 40  # a picture, not a black frame
+        assert np.array_equal(ids, ids_ref)
+        assert np.array_equal(image, image_ref), f"{int(np.any(image != image_ref, axis=2).sum())} pixels differ"
+
+
+def _unlit_draws(engine: Engine) -> int:
+    """The batches with a draw record of the unlit build (ScenePass._draw_batches' kinds)."""
+    return sum(any(kind[3] for kind in batch.draw_records) for batch in engine.renderer.batches.values())
+
+
+def test_the_levels_draw_their_mirrors_unlit_and_every_claimed_pixel_is_composited(ctx):
+    """16 mirrors, frames 0-11 at 320x180: in frame 11 a level-1 pixel of a mirror seen in a
+    mirror was one the composite's quad (the outline through the parent's camera, rounded
+    apart from the mesh's own triangles) left out, so its own shading showed; the composite's
+    quad is now a pixel larger all round (mirror_composite.vert) and that pixel shows the
+    reflection, in both paths.  Only the levels draw unlit here (the main view shades)."""
+    def levels_only(engine: Engine) -> None:
+        engine.stages["main"].depth_cap = None
+
+    fast = _engine(ctx, levels_only, game=MirrorRing(16))
+    shaded = _engine(ctx, shaded=True, game=MirrorRing(16))
+    try:
+        got, want = _frames(ctx, fast, 12, (320, 180)), _frames(ctx, shaded, 12, (320, 180))
+        assert _unlit_draws(fast) == 1 and _unlit_draws(shaded) == 0
+        assert max(view.level for view in fast.reflection_system.views) >= 3
+        _same_frames(got, want)
+    finally:
+        fast.close()
+        shaded.close()
+
+
+def test_glass_in_front_of_a_mirror_keeps_every_mirror_shaded(ctx):
+    """The sample level's ghost (alpha 0.7, seen only in mirrors) stands before the mirror
+    wall: in a mirror's view it blends over the other mirrors' own colour, so with anything
+    transparent drawn no mirror is unlit."""
+    from tests.golden_scenes import HALL_POSES, _hall
+
+    def place(engine: Engine) -> None:
+        engine.place_camera(*HALL_POSES["mirror_wall"])
+
+    fast, shaded = _engine(ctx, place, game=_hall()), _engine(ctx, place, shaded=True, game=_hall())
+    try:
+        got, want = _frames(ctx, fast, 2, (320, 180)), _frames(ctx, shaded, 2, (320, 180))
+        assert fast.renderer.transparent_batches()
+        _same_frames(got, want)
     finally:
         fast.close()
         shaded.close()
@@ -136,9 +188,7 @@ def test_a_mirror_changed_at_run_time_is_shaded_again(ctx):
         got, want = _frames(ctx, fast, 2), _frames(ctx, shaded, 2)
         assert entity not in fast.stages["main"]._root_options().unlit
         assert len(fast.stages["main"]._root_options().unlit) == 7
-        for (image, ids), (image_ref, ids_ref) in zip(got, want, strict=True):
-            assert np.array_equal(ids, ids_ref)
-            assert np.array_equal(image, image_ref)
+        _same_frames(got, want)
     finally:
         fast.close()
         shaded.close()

@@ -458,6 +458,9 @@ class ScenePass:
         ctx = self.ctx
         renderer = self.renderer
         transparent = renderer.transparent_batches()
+        # A transparent thing blends over what is behind it, a mirror's own colour too: where
+        # one is drawn, every mirror is shaded (shading_replaced).
+        unlit = options.unlit if not transparent else frozenset()
         renderer.upload_views(views)  # every view's Camera block in one write; each binds its range
         for index, view in enumerate(views):
             with _ALWAYS if conditions is None else conditions[index].crender:
@@ -465,7 +468,7 @@ class ScenePass:
                 set_front_face(ctx, "cw" if view.mirrored else "ccw")
                 renderer.bind_view_at(index)
                 self._draw_batches(renderer.opaque_batches(), 0, options.masked, skip=view.skip,
-                                   hide=view.hide, unlit=options.unlit)
+                                   hide=view.hide, unlit=unlit)
                 if options.sky:
                     # Into the view's own framebuffer: the sky writes id 0 (nothing) to the
                     # surface and seen images, the very values the clear put where no surface
@@ -505,8 +508,9 @@ class ScenePass:
         ctx.scissor = scissor
         set_front_face(ctx, "ccw")  # mirrored views reverse their vertices in the geometry shader
         invocations = geometry_invocations(len(views))
-        self._draw_batches(renderer.opaque_batches(), invocations, options.masked, unlit=options.unlit)
         transparent = renderer.transparent_batches()
+        self._draw_batches(renderer.opaque_batches(), invocations, options.masked,
+                           unlit=options.unlit if not transparent else frozenset())  # as _draw_each
         if transparent:  # farthest from the first view's eye first (the views of a level are close)
             viewport = (0, 0, *views[0].size)
             apply_pass_state(ctx, _BATCHED_TRANSPARENT, viewport, scissor)
@@ -640,7 +644,9 @@ def shading_replaced(mirrors: Iterable[SurfaceState], depth: int, depth_cap: int
     views at ``depth`` are within its depth limits and the tree's cap (a view the limits cut
     becomes an end view, which can leave its own shading showing).  None under a pixel budget
     (``ViewBudget.pixels``: the tree decides later which levels it draws smaller).  A scene
-    pass draws these mirrors' batches unlit (``SceneOptions.unlit``)."""
+    pass draws these mirrors' batches unlit (``SceneOptions.unlit``) in a view where nothing
+    transparent is drawn (glass in front of a mirror blends over the mirror's own colour, and
+    the composite leaves those pixels, which are the glass's, alone)."""
     if pixel_budget:
         return frozenset()
     return frozenset(state.entity for state in mirrors

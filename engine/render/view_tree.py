@@ -40,7 +40,7 @@ from __future__ import annotations
 import functools
 import math
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import moderngl
 import numpy as np
@@ -62,7 +62,7 @@ from engine.render.mirror_passes import (
     take_samples_queries,
 )
 from engine.render.plan_rows import ROW, Candidates, LevelRows
-from engine.render.scene_pass import REFLECTION_LEVEL, SceneOptions, ScenePass
+from engine.render.scene_pass import REFLECTION_LEVEL, SceneOptions, ScenePass, shading_replaced
 from engine.render.surface_table import NO_BLENDS, SurfaceBlends
 from engine.render.targets import LevelStack, RenderTargets
 from engine.render.view_plan import SurfaceTable, _mat, level_rects
@@ -190,6 +190,7 @@ class _Level:
     chosen: Candidates | None = None
     children: list[ReflectionView] = field(default_factory=list)
     claim_keys: list[tuple[int, ...]] = field(default_factory=list)
+    unlit: frozenset[int] = frozenset()            # mirrors its views draw unlit (shading_replaced)
 
 
 @dataclass
@@ -251,6 +252,10 @@ class ViewTree:
         self._frame = 0                   # frames this tree has drawn in (a new RenderStats: a new frame)
         self._frame_stats: object | None = None
         self._software = renderer.caps.software  # a software rasteriser (the context's, read once)
+        # Draw the mirrors this tree paints over entirely unlit (scene_pass.shading_replaced);
+        # False: every view shades them (the second path the tests compare against).
+        self.unlit = True
+        self._unlit: tuple[tuple, frozenset[int]] = ((), frozenset())  # (what it was made from, the set)
 
     def render(self, root: View, levels: LevelStack, surfaces: SurfaceTable,
                settings: TreeSettings = TreeSettings(), blends: SurfaceBlends = NO_BLENDS) -> TreeResult:
@@ -355,8 +360,22 @@ class ViewTree:
         if children:
             step.path = choose_path(settings.path, len(children), walk.triangles, self._software)
             result.paths.add(step.path)
+            step.unlit = self._unlit_mirrors(surfaces, level + 2, settings.depth_cap)
         step.composite = children + step.ended
         return step
+
+    def _unlit_mirrors(self, surfaces: SurfaceTable, depth: int, depth_cap: int) -> frozenset[int]:
+        """The mirrors the views of a level draw unlit, those whose views at ``depth`` this
+        tree paints over entirely (``shading_replaced``), kept while the table, the depth, the
+        cap and whether a pixel budget applies stand."""
+        if not self.unlit:
+            return frozenset()
+        key = (surfaces, depth, depth_cap, self.renderer.stats.pixels_left() is not None)
+        kept, found = self._unlit
+        if len(kept) != len(key) or any(a is not b and a != b for a, b in zip(kept, key, strict=True)):
+            found = shading_replaced(surfaces.states, *key[1:])
+            self._unlit = (key, found)
+        return found
 
     def _end_views(self, walk: _Walk, step: _Level, end_rows: list[int]) -> None:
         """A level's end views (rows ``end_rows`` of its candidates): their nodes, the matrix
@@ -645,8 +664,10 @@ class ViewTree:
         rows (CPU work while the GPU draws)."""
         renderer = self.renderer
         if step.views:
-            self.scene_pass.draw(step.views, step.targets, _BATCHED if step.path == "batched"
-                                 else REFLECTION_LEVEL, step.conditions)
+            options = _BATCHED if step.path == "batched" else REFLECTION_LEVEL
+            if step.unlit:
+                options = replace(options, unlit=step.unlit)
+            self.scene_pass.draw(step.views, step.targets, options, step.conditions)
         if step.ended:
             self.ends.draw(step.end_views, [node.surface.entity for node in step.ended], step.end_matrices,
                            step.targets, root)
