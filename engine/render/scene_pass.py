@@ -288,7 +288,7 @@ class ScenePass:
 
     def _draw_batches(self, batches, invocations: int, masked: bool, layered: str = "",
                       skip: int = 0, before_draw: Callable[[], None] | None = None, hide: int = 0,
-                      unlit: frozenset[int] = frozenset()) -> None:
+                      unlit: frozenset | set = frozenset()) -> None:
         """One instanced draw per batch, each with the program of its variants.  A program's
         uniforms are written only when their value changes (``self._written``, kept for the
         program's life): each write is a moderngl call of a few microseconds on a view's
@@ -301,8 +301,8 @@ class ScenePass:
         cost a dictionary look-up and a comparison a batch, not a program key built and found.
         A batch whose one instance is the view's ``skip`` or ``hide`` entity (a mirror's own
         quad, a probe's own sphere) is not drawn at all: its vertices would all be clipped
-        away (0: none; entities start at 1).  A batch of mirrors all in ``unlit``
-        (``shading_replaced``) draws with its ``UNLIT_SURFACE`` build."""
+        away (0: none; entities start at 1).  A batch in ``unlit`` (``_unlit_batches``: its
+        mirrors all ``shading_replaced``) draws with its ``UNLIT_SURFACE`` build."""
         ctx = self.ctx
         renderer = self.renderer
         stats = renderer.stats
@@ -319,8 +319,7 @@ class ScenePass:
             if not count or (count == 1 and batch.entity_at[0] in (skip, hide)):
                 continue
             variants = batch.variants
-            # A batch of mirrors whose every pixel the composites paint over: the unlit build.
-            drawn_as = unlit_kind if unlit and _may_be_unlit(batch) and batch.row_of.keys() <= unlit else kind
+            drawn_as = unlit_kind if batch in unlit else kind  # a batch the composites paint over
             record = batch.draw_records.get(drawn_as)
             if record is None or record[0] != stamp or record[1] != variants:
                 record = batch.draw_records[drawn_as] = self._record(batch, drawn_as, stamp, variants)
@@ -458,9 +457,7 @@ class ScenePass:
         ctx = self.ctx
         renderer = self.renderer
         transparent = renderer.transparent_batches()
-        # A transparent thing blends over what is behind it, a mirror's own colour too: where
-        # one is drawn, every mirror is shaded (shading_replaced).
-        unlit = options.unlit if not transparent else frozenset()
+        unlit = _unlit_batches(renderer.opaque_batches(), options.unlit, transparent)
         renderer.upload_views(views)  # every view's Camera block in one write; each binds its range
         for index, view in enumerate(views):
             with _ALWAYS if conditions is None else conditions[index].crender:
@@ -509,8 +506,9 @@ class ScenePass:
         set_front_face(ctx, "ccw")  # mirrored views reverse their vertices in the geometry shader
         invocations = geometry_invocations(len(views))
         transparent = renderer.transparent_batches()
-        self._draw_batches(renderer.opaque_batches(), invocations, options.masked,
-                           unlit=options.unlit if not transparent else frozenset())  # as _draw_each
+        opaque = renderer.opaque_batches()
+        unlit = _unlit_batches(opaque, options.unlit, transparent)
+        self._draw_batches(opaque, invocations, options.masked, unlit=unlit)
         if transparent:  # farthest from the first view's eye first (the views of a level are close)
             viewport = (0, 0, *views[0].size)
             apply_pass_state(ctx, _BATCHED_TRANSPARENT, viewport, scissor)
@@ -653,6 +651,19 @@ def shading_replaced(mirrors: Iterable[SurfaceState], depth: int, depth_cap: int
                      if state.kind == "mirror" and state.enabled and state.reflect_rate == 1.0 and state.fade is None
                      and state.water is None and state.resolution_scale == 1.0
                      and depth <= min(state.max_depth, depth_cap))
+
+
+def _unlit_batches(opaque: Iterable[InstanceBatch], mirrors: frozenset[int], transparent: list) -> set:
+    """The batches of ``opaque`` a pass draws unlit: those whose instances are all in
+    ``mirrors`` (``SceneOptions.unlit``), worked out once a pass, not once a view; none where
+    something ``transparent`` is drawn (it blends over what is behind it, a mirror's own
+    colour too: ``shading_replaced``)."""
+    if not mirrors or transparent:
+        return _NO_BATCHES
+    return {batch for batch in opaque if _may_be_unlit(batch) and batch.row_of.keys() <= mirrors}
+
+
+_NO_BATCHES: frozenset = frozenset()
 
 
 def _may_be_unlit(batch: InstanceBatch) -> bool:

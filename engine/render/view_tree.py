@@ -255,7 +255,8 @@ class ViewTree:
         # Draw the mirrors this tree paints over entirely unlit (scene_pass.shading_replaced);
         # False: every view shades them (the second path the tests compare against).
         self.unlit = True
-        self._unlit: tuple[tuple, frozenset[int]] = ((), frozenset())  # (what it was made from, the set)
+        # (the table, cap and pixel budget they were found for, the sets by depth)
+        self._unlit: tuple[tuple, dict[int, frozenset[int]]] = ((None, -1, False), {})
 
     def render(self, root: View, levels: LevelStack, surfaces: SurfaceTable,
                settings: TreeSettings = TreeSettings(), blends: SurfaceBlends = NO_BLENDS) -> TreeResult:
@@ -370,11 +371,14 @@ class ViewTree:
         cap and whether a pixel budget applies stand."""
         if not self.unlit:
             return frozenset()
-        key = (surfaces, depth, depth_cap, self.renderer.stats.pixels_left() is not None)
-        kept, found = self._unlit
-        if len(kept) != len(key) or any(a is not b and a != b for a, b in zip(kept, key, strict=True)):
-            found = shading_replaced(surfaces.states, *key[1:])
-            self._unlit = (key, found)
+        pixel_budget = self.renderer.stats.pixels_left() is not None
+        (table, cap, budget), by_depth = self._unlit
+        if table is not surfaces or cap != depth_cap or budget != pixel_budget:
+            by_depth = {}
+            self._unlit = ((surfaces, depth_cap, pixel_budget), by_depth)
+        found = by_depth.get(depth)
+        if found is None:
+            found = by_depth[depth] = shading_replaced(surfaces.states, depth, depth_cap, pixel_budget)
         return found
 
     def _end_views(self, walk: _Walk, step: _Level, end_rows: list[int]) -> None:
