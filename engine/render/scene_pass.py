@@ -183,7 +183,7 @@ class ScenePass:
         virtual = self.shadows.virtual_shining  # the shadows stage set how many shine
         shadowing = self.shadows.program_defines  # the lookups a program compiles (ShadowMaps.upload's)
         key = (invocations, layered, variants, normal_mapped, checker, material_maps, probe_blend, virtual,
-               ambient_probes, probe_rest, shadowing, unlit)
+               ambient_probes, probe_rest, unlit, shadowing)
         program = self._programs.get(key)
         if program is None:
             defines = {}
