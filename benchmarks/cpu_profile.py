@@ -2,8 +2,9 @@
 
 Scenes, each its own engine, profiled one after the other: the mirrors benchmark's ring with
 16 mirrors (``mirrors_16``, the auto path and visibility), the portal pair at recursion depth
-8 (``portals_d8``) and the probes benchmark's dynamic probe (``probe_dynamic``, six faces a
-frame).  Each runs ``--warmup`` frames, then ``--frames`` frames with the profiler on around
+8 (``portals_d8``) and the probes benchmark's dynamic probe (``probe_dynamic``, every face
+due a frame, those no change reached kept).  Each runs ``--warmup`` frames, then ``--frames``
+frames with the profiler on around
 ``Engine.frame`` only (the ``ctx.finish()`` after each frame is outside it, so on a GPU a
 function's time is the CPU's, waits for the GPU inside the frame included).  Rows: per
 scene, the ``--top`` functions by their own time (``own_ms_per_frame``: in the function

@@ -11,8 +11,8 @@ draws on the calling thread at flushes) the GPU column is not a GPU's and is rep
 
 Scenes, each its own engine, their frames interleaved (frame i of every engine, then i + 1):
 the mirrors benchmark's ring (``benchmarks.mirrors.MirrorRing``) with 0, 8 and 16 mirrors
-(``--mirrors``), and the probes benchmark's dynamic probe (``ProbeRing``, six faces a
-frame; its capture path is fixed to ``six_pass``, since ``auto`` times its candidates with
+(``--mirrors``), and the probes benchmark's dynamic probe (``ProbeRing``, six faces due a
+frame, those no change reached kept; its capture path is fixed to ``six_pass``, since ``auto`` times its candidates with
 timer queries of its own, which cannot nest in these).  The engine has no timing code: the
 stages' ``process`` methods are wrapped on the instances for the run.
 

@@ -90,8 +90,8 @@ class Bloom(TrackedComponent):
     added into the next larger one through a 3x3 tent of ``radius`` texels; the result is
     the mean of the levels' blurs, so it keeps the image's mean brightness.  A software
     rasteriser starts the chain at a quarter of the screen, drawn straight from the image
-    (its levels a quarter of the screen and below: ``engine/render/bloom.py``
-    ``BloomPass.first_step``).
+    (its levels a quarter of the screen and below, one fewer, ending where a GPU's do:
+    ``engine/render/bloom.py`` ``BloomPass.first_step``).
 
     - ``intensity`` (0..1): the bloom's share.  ``composite`` "energy_conserving" (the
       default) mixes: ``image * (1 - intensity) + bloom * intensity`` (the mean is kept:

@@ -5,7 +5,7 @@
 // With POST (a camera with a Tonemap or a Bloom, components/post.py), in this order: the
 // bloom mixed in (BLOOM: the mean of the mip chain's blurs, engine/render/bloom.py), the
 // exposure (a linear scale; AUTO_EXPOSURE: times 2^EV from the adapted 1x1 exposure
-// texture, engine/render/post.py, read here on the GPU), the tone curve
+// texture, engine/render/post.py, read on the GPU by present.vert), the tone curve
 // (TONEMAP_CURVE, include/tonemap.glsl), then the sRGB encoding.  Without POST the
 // code is the plain look's, unchanged.
 #include "color.glsl"
@@ -20,7 +20,7 @@ uniform sampler2D bloom_image;
 uniform vec2 bloom_mix;   // (weight of the image, weight of the bloom image's sum of levels)
 #endif
 #ifdef AUTO_EXPOSURE
-uniform sampler2D exposure_state;   // 1x1, r: the adapted automatic exposure in EV
+flat in float v_scale;   // exposure * 2^EV of the adapted 1x1 exposure texture (present.vert)
 #endif
 #endif
 
@@ -29,14 +29,17 @@ out vec4 out_color;
 
 void main() {
 #ifdef POST
-    // textureLod: neither image has mipmaps, and a software rasteriser skips the derivatives.
-    vec3 hdr = textureLod(hdr_image, v_uv, 0.0).rgb;
+    // The image is the output's size: its texel, fetched (no filter to run); the bloom
+    // image, smaller, through textureLod (no mipmaps, and a software rasteriser skips the
+    // derivatives).
+    vec3 hdr = texelFetch(hdr_image, ivec2(v_uv * vec2(textureSize(hdr_image, 0))), 0).rgb;
 #ifdef BLOOM
     hdr = hdr * bloom_mix.x + textureLod(bloom_image, v_uv, 0.0).rgb * bloom_mix.y;
 #endif
-    float scale = exposure;
 #ifdef AUTO_EXPOSURE
-    scale *= exp2(texelFetch(exposure_state, ivec2(0), 0).r);
+    float scale = v_scale;
+#else
+    float scale = exposure;
 #endif
     vec3 srgb = linear_to_srgb(tone_map(hdr * scale));
 #else

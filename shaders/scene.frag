@@ -86,13 +86,15 @@ float cube_lod(vec3 direction, float n) {
 vec3 direct_lighting(Surface s) {
     vec3 diffuse = s.albedo * (1.0 - s.metallic) / PI;
     vec3 total = ambient_irradiance(s.position, s.normal) * diffuse;  // E(n) x albedo x (1 - metallic) / pi
+    vec4 directional_lit = directional_shadows(s.position, s.geometric_normal);  // before the loops (shadows.glsl)
+    vec4 point_lit = point_shadows(s.position, s.geometric_normal);
     for (int i = 0; i < lights.counts.x; ++i) {
         vec3 l = -lights.directional_dir[i].xyz;
         float nl = max(dot(s.normal, l), 0.0);
         if (nl > 0.0) {
             total += (diffuse + ggx_specular(s.normal, l, s.to_eye, s.f0, s.roughness))
                      * lights.directional_color[i].rgb * nl
-                     * directional_shadow(i, s.position, s.geometric_normal, l);
+                     * directional_lit[i];
         }
     }
     for (int i = 0; i < lights.counts.y; ++i) {
@@ -106,7 +108,7 @@ vec3 direct_lighting(Surface s) {
         if (nl > 0.0 && falloff > 0.0) {
             total += (diffuse + ggx_specular(s.normal, l, s.to_eye, s.f0, s.roughness))
                      * lights.point_color[i].rgb * nl * falloff
-                     * point_shadow(i, s.position, lights.point_pos[i].xyz, s.geometric_normal, l);
+                     * point_shadow(i, point_lit);
         }
     }
 #ifdef VIRTUAL_LIGHTS

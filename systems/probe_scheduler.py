@@ -22,19 +22,30 @@ has a ``ProbeState``.  What is due each frame, per probe:
     changed, came, went or moved, its own Transform or a parent's ("light 7 moved");
   - ``every_frame``: all six; ``every_n``: all six every n frames; ``once``: nothing more;
     ``scripted``: all six after a request;
+  - a face due for ``every_frame`` or ``every_n`` alone that no change has reached since it
+    was last drawn is published ``unchanged`` (``ProbeDue.unchanged``: the captures keep it
+    as it is where nothing they draw with changed either, ``ProbeCaptures.capture``).  What
+    reaches a face here is wider than what ``on_change`` asks for: the boxes that changed
+    in its frustum, the shadows of every box that changed (one hidden from probes or the
+    probe's own object casts too), and every face when a light in reach or the sun or sky
+    changed, a point light came or went anywhere (the lights' slots and limits shift), or
+    the level has mirrors or portals (``_mark_changes``);
   - with ``time_slicing="one_face_per_frame"`` the waiting faces go one a frame (after a
     first capture of all six, so an object never shows a cube map with faces missing).
 A face leaves the waiting set (``ProbeState.pending``) when it is published as due.
 """
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from pyglm import glm
 
-from components import MeshRef, PointLight, ReflectionProbe, Transform, Visibility
+from components import DirectionalLight, MeshRef, PointLight, ReflectionProbe, Transform, Visibility
 from components.limits import VIEW_PROBE
 from components.tracking import warn_component
 from components.visibility import SEEN_BY_EVERY_VIEW, visibility_code
+from engine.assets.mesh import Mesh
 from engine.core.budget import spending_order
 from engine.core.world import World
 from engine.resources import RenderStats, Surfaces, ViewBudget
@@ -43,16 +54,26 @@ from engine.rules.probe_rules import (
     ALL_FACES,
     LIGHTING_KINDS,
     LookChanges,
+    box_corners,
     face_hits,
     faces_touched,
     has_own_probe,
+    hull_face_hits,
     images_through_surfaces,
     lights_reaching,
     probe_samplers,
     world_bounds,
 )
-from engine.rules.probe_schedule import MAX_NAMED, ProbeDue, ProbeSchedule, ProbeState, ProbeStates
-from engine.rules.shadow_rules import ShadowCasters
+from engine.rules.probe_schedule import MAX_NAMED, PERIODIC, WATCHING, ProbeDue, ProbeSchedule, ProbeState, ProbeStates
+from engine.rules.shadow_rules import (
+    SHADOW_MARGIN,
+    SHADOW_MARGIN_SHARE,
+    ShadowCasters,
+    boxes_in_reach,
+    directional_shadow_bounds,
+    directional_shadow_sweep,
+    point_shadow_bounds,
+)
 from engine.rules.visibility_rules import drawn_in, entity_code
 
 
@@ -88,7 +109,10 @@ class ProbeScheduler:
         self._bounds: dict[int, tuple[np.ndarray, np.ndarray]] = {}  # entity -> last world box
         self._lights: dict[int, tuple[np.ndarray, float]] = {}  # point light -> (position, range) last seen
         self._looks = LookChanges()
-        self._watching = False  # the boxes and lights are kept: an on_change probe was there last frame
+        self._lights_came_or_went = False  # this frame: a point light came or went (periodic probes' changes)
+        self._reach: tuple[ShadowCasters | None, float] = (None, 0.0)  # _filter_reach's, for these casters
+        self._mesh_boxes: dict[int, tuple] = {}  # id(mesh) -> (mesh, lo, hi): _mesh_box
+        self._watching = False  # the boxes and lights are kept: a watching probe was there last frame
 
     def update(self) -> ProbeSchedule:
         """This frame's schedule, published as the world's ``ProbeSchedule``."""
@@ -100,19 +124,20 @@ class ProbeScheduler:
             self._bounds.clear()  # nothing to keep boxes for (a world without probes pays nothing)
             self._lights.clear()
             return schedule
-        if any(state.settings.refresh == "on_change" for state in self.probes.values()):
+        if any(state.settings.refresh in WATCHING for state in self.probes.values()):
             # Where every drawable was when the first probe came (its first capture saw them
-            # there), or when the first on_change probe did; after that, only what changed
-            # is looked at.
+            # there), or when the first on_change (or periodic) probe did; after that, only
+            # what changed is looked at.
             primed = had_probes and self._watching
             boxes = self._changed_boxes(looks) if primed else self._all_boxes()
             lights = self._changed_lights() if primed else self._all_lights()
+            self._lights_came_or_went = any(reason.endswith((" came", " went")) for reason, _, _ in lights)
             everything = [f"{kind.__name__} changed" for kind in LIGHTING_KINDS if world.changed(kind)]
             self._watching = True
         else:
-            # No probe refreshes on change: what moved matters to none (a probe that turns
-            # on_change recaptures every face for its new settings, and the boxes are taken
-            # afresh then).
+            # No probe refreshes on change or periodically: what moved matters to none (a
+            # probe that turns on_change recaptures every face for its new settings, and the
+            # boxes are taken afresh then).
             self._bounds.clear()
             self._lights.clear()
             self._watching = False
@@ -127,7 +152,14 @@ class ProbeScheduler:
             if faces:
                 due.append((state, faces))
         for state, faces in self._within_budget(due):
-            schedule.due[state.owner] = ProbeDue(state.owner, faces, state.take(faces), first=not state.captures)
+            reasons = state.take(faces)
+            unchanged = frozenset()
+            if state.captures and state.settings.refresh in PERIODIC:
+                # Due only because the period came round, and reached by no change since drawn.
+                unchanged = faces - state.changed - frozenset().union(
+                    *(waiting for reason, waiting in reasons.items() if reason not in PERIODIC))
+            schedule.due[state.owner] = ProbeDue(state.owner, faces, reasons, first=not state.captures,
+                                                 unchanged=unchanged)
         return schedule
 
     def _within_budget(self, due: list[tuple[ProbeState, frozenset[int]]]) -> list[tuple[ProbeState, frozenset[int]]]:
@@ -212,7 +244,7 @@ class ProbeScheduler:
         world = self.world
         frame = world.frame
         removed = frame.removed | world.deleted()
-        rows = []
+        rows, placed = [], []
         for entity in frame.moved | frame.added | removed | looks:
             what = ("removed" if entity in removed else "added" if entity in frame.added
                     else "moved" if entity in frame.moved else "look changed")
@@ -227,9 +259,29 @@ class ProbeScheduler:
             mesh_ref = world.try_get(entity, MeshRef) if world.exists(entity) else None
             transform = world.try_get(entity, Transform) if mesh_ref is not None else None
             if transform is not None:
-                new = self._bounds[entity] = world_bounds(mesh_ref.mesh, transform.world)
+                placed.append((entity, what, code, mesh_ref.mesh, transform.world))
+        if placed:
+            # Where each is now, all in a few array operations (``world_bounds``' box, each
+            # mesh's own box carried by its model matrix).
+            local = [self._mesh_box(mesh) for _, _, _, mesh, _ in placed]
+            corners = box_corners(np.array([lo for lo, _ in local]), np.array([hi for _, hi in local]))
+            corners = np.concatenate([corners, np.ones((len(placed), 8, 1))], axis=2)
+            carried = corners @ np.array([model.to_list() for _, _, _, _, model in placed], np.float64)
+            lo, hi = carried[..., :3].min(axis=1), carried[..., :3].max(axis=1)
+            for i, (entity, what, code, _, _) in enumerate(placed):
+                new = self._bounds[entity] = (lo[i], hi[i])
                 rows.append((entity, what, *new, code))
         return ChangedBoxes(rows)
+
+    def _mesh_box(self, mesh: Mesh) -> tuple[np.ndarray, np.ndarray]:
+        """``mesh.bounds``, kept by mesh (its vertices are read once, as the renderer uploads
+        them once)."""
+        kept = self._mesh_boxes.get(id(mesh))
+        if kept is None or kept[0] is not mesh:
+            if len(self._mesh_boxes) > 4096:
+                self._mesh_boxes.clear()
+            kept = self._mesh_boxes[id(mesh)] = (mesh, *mesh.bounds)
+        return kept[1], kept[2]
 
     def _all_boxes(self) -> ChangedBoxes:
         self._bounds = {entity: world_bounds(mesh_ref.mesh, transform.world)
@@ -277,6 +329,8 @@ class ProbeScheduler:
         settings = state.settings
         state.frames += 1
         mode = settings.refresh
+        if mode in PERIODIC:
+            self._mark_changes(state, boxes, relit, surfaces)
         if mode == "every_frame":
             state.ask(ALL_FACES, "every_frame")
         elif mode == "every_n" and state.frames % settings.every_n == 0:
@@ -306,6 +360,97 @@ class ProbeScheduler:
                                lambda row: f"shadow of entity {entity[of[row]]} ({what[of[row]]})")
             if settings.depth > 0 and surfaces is not None and (surfaces.mirrors or surfaces.portals):
                 self._through_surfaces(state, lo, hi, entity, what, surfaces)
+
+    def _mark_changes(self, state: ProbeState, boxes: ChangedBoxes, relit: list[str],
+                      surfaces: Surfaces | None) -> None:
+        """A periodic probe's faces that this frame's changes reach join ``state.changed``
+        (the faces whose picture may differ from the one drawn last; the rest are published
+        ``unchanged`` when due).  Conservative: every face when anything relights what it
+        sees (a light in reach, the sun, the sky: ``relit``), a point light came or went
+        anywhere (the Lights block's order and limits and the shadow slots shift), or the
+        level has mirrors or portals (their pictures follow the whole level); else the
+        faces whose frustum holds a changed box the probe draws, and the faces where the
+        shadow of any changed box may fall (drawn by the probe or not: a thing hidden from
+        probes, or the probe's own object, casts in every view).
+
+        Where a shadow may fall: every changed box grown by how far a filtered shadow edge
+        reaches (``_filter_reach``), then swept along each sun to the level's walls, where a
+        face must meet both the sweep's hull and the part of the box bounding it inside the
+        level (``directional_shadow_bounds``: nothing outside the level receives a shadow),
+        each holding every shadowed point; and within each point light's range
+        (``point_shadow_bounds``).  All the hulls through one ``hull_face_hits``."""
+        if state.changed >= ALL_FACES:
+            return
+        if relit or self._lights_came_or_went or (surfaces is not None and (surfaces.mirrors or surfaces.portals)):
+            state.changed |= ALL_FACES
+            return
+        if not len(boxes.entity):
+            return
+        settings = state.settings
+        seen = (boxes.entity != state.owner) & boxes.seen_by(settings)
+        lo, hi = boxes.lo[seen], boxes.hi[seen]
+        corners = box_corners(lo, hi)
+        points, box_lo, box_hi = [np.concatenate([corners, corners], axis=1)], [lo], [hi]  # 16 points a hull
+        suns = 0
+        casters = self.world.resources.get(ShadowCasters)
+        if casters is not None and (casters.directional or casters.points):
+            reach = self._filter_reach(casters)
+            lo, hi = boxes.lo - reach, boxes.hi + reach
+            corners = box_corners(lo, hi)
+            if casters.level is not None:
+                for direction in casters.directional:
+                    sweep = directional_shadow_sweep(lo, hi, direction, *casters.level)
+                    bound_lo, bound_hi = directional_shadow_bounds(lo, hi, direction, *casters.level, sweep=sweep)
+                    bound = box_corners(bound_lo, bound_hi)
+                    points += [np.concatenate([corners, corners + sweep[:, None, :]], axis=1),
+                               np.concatenate([bound, bound], axis=1)]
+                    box_lo += [np.minimum(lo, lo + sweep), bound_lo]
+                    box_hi += [np.maximum(hi, hi + sweep), bound_hi]
+                    suns += 1
+            for position, light_range in casters.points:
+                near = boxes_in_reach(lo, hi, np.array(position), light_range)
+                if near.any():
+                    shadow_lo, shadow_hi = point_shadow_bounds(lo[near], hi[near], np.array(position), light_range)
+                    shadow = box_corners(shadow_lo, shadow_hi)
+                    points.append(np.concatenate([shadow, shadow], axis=1))
+                    box_lo.append(shadow_lo)
+                    box_hi.append(shadow_hi)
+        hits = hull_face_hits(state.position, settings.far, np.concatenate(points), np.concatenate(box_lo),
+                              np.concatenate(box_hi))
+        rows = len(box_lo[0])
+        reached = hits[:rows].any(axis=0)
+        for sun in range(suns):
+            hull = hits[rows + 2 * sun * len(boxes.lo):][:len(boxes.lo)]
+            bound = hits[rows + (2 * sun + 1) * len(boxes.lo):][:len(boxes.lo)]
+            reached |= (hull & bound).any(axis=0)
+        reached |= hits[rows + 2 * suns * len(boxes.lo):].any(axis=0)  # the point lights' boxes
+        state.changed.update(np.flatnonzero(reached).tolist())
+
+    def _filter_reach(self, casters: ShadowCasters) -> float:
+        """How far (world units) past where a shadow falls its filtered edge can change a
+        pixel: a lookup reads its map ``(1 + softness) * 1.5`` texels off the surface (the
+        normal offset) and ``softness / 2`` texels plus a bilinear texel around that
+        (``shaders/include/shadows.glsl``), at most ``2.5 + 2 * softness`` texels; a
+        directional texel is at most the grown level box's diagonal over the map's side
+        (``shadow_rules.directional_fit``), a point light's at most ``2 / resolution`` of its
+        range.  The widest of the casting lights' (worked out once a frame: the shadows
+        stage publishes new casters each frame)."""
+        if self._reach[0] is casters:
+            return self._reach[1]
+        reach = 0.0
+        if casters.directional and casters.level is not None:
+            diagonal = float(np.linalg.norm(casters.level[1] - casters.level[0]))
+            grown = diagonal + 2.0 * math.sqrt(3.0) * max(SHADOW_MARGIN, SHADOW_MARGIN_SHARE * diagonal)
+            for _, light in self.world.query_one(DirectionalLight):
+                if light.shadows:
+                    reach = max(reach, grown / light.shadow_resolution * (2.5 + 2.0 * light.shadow_softness))
+        if casters.points:
+            for _, light in self.world.query_one(PointLight):
+                if light.shadows:
+                    reach = max(reach, 2.0 * light.range / light.shadow_resolution
+                                * (2.5 + 2.0 * light.shadow_softness))
+        self._reach = (casters, reach)
+        return reach
 
     @staticmethod
     def _through_surfaces(state: ProbeState, lo: np.ndarray, hi: np.ndarray, entity: np.ndarray, what: list[str],

@@ -90,7 +90,7 @@ def capture_due(world: World, renderer: Renderer, due: ProbeDue, only: frozenset
     table = surface_table(world.resources, surfaces) if state.settings.depth > 0 and surfaces is not None and \
         (surfaces.mirrors or surfaces.portals) else None  # its faces' view trees plan with it
     renderer.probes.capture_probe(due.owner, faces, state.position, state.settings, table,
-                                  world.resources.get(SurfaceBlends, NO_BLENDS))
+                                  world.resources.get(SurfaceBlends, NO_BLENDS), due.unchanged & faces)
     spent_ms = (time.perf_counter() - start) * 1e3
     stats.probe_ms_spent += spent_ms
     probes.measured(spent_ms / len(faces))

@@ -305,7 +305,9 @@ def test_a_still_scene_settles_in_one_capture(scene):
     """Captures are lit by the sky's irradiance alone (no probe's): a probe recaptured every
     frame writes the same coefficients each time.  Were the probe's own irradiance in its
     captures, the white floor that fills half of them would turn redder capture after
-    capture (one more bounce of the red wall's light each time)."""
+    capture (one more bounce of the red wall's light each time).  (Requested each frame:
+    an every-frame probe in a still scene keeps its faces as they are, tests/test_probe_keeping.py,
+    and projects nothing again.)"""
     ents = {}
     runner = scene(red_wall_room(ents), (64, 48))
     runner.frame()
@@ -313,6 +315,7 @@ def test_a_still_scene_settles_in_one_capture(scene):
     table = runner.engine.renderer.irradiance
     rows = []
     for _ in range(3):
+        runner.world.get(ents["probe"], ReflectionProbe).request()  # every face drawn again
         runner.frame()
         rows.append(table.read_row(ents["probe"]))
     projections = table.projections

@@ -24,12 +24,15 @@ from engine.assets.level_file import load_level, save_level
 from engine.core.frame_io import Output
 from engine.core.game import Game, GameSystem
 from engine.render.bloom import FIRST_STEPS, level_sizes
+from engine.render.bloom import LEVEL_DTYPE as LEVEL_GL_DTYPE
+from engine.render.gl_context import GLCapabilities
 from engine.render.post import adapt_blend
 from engine.render.targets import CaptureTarget
 from shell.app import Engine
 from tests.support import linear_to_srgb8, srgb_to_linear
 
 ROOT = Path(__file__).resolve().parents[1]
+LEVEL_DTYPE = {"f2": np.float16, "f4": np.float32}[LEVEL_GL_DTYPE]   # the bloom levels' texels
 
 
 # --- the curves, from their references (row-major matrices, as the references write them) ---
@@ -289,7 +292,7 @@ def test_bloom_of_a_black_frame_is_black(known, composite, first_step):
     assert bloom.levels == {"half": 5, "quarter": 4}[first_step]
     assert len(bloom.textures) == bloom.target_count() == bloom.levels
     for texture in bloom.textures:
-        assert not np.frombuffer(texture.read(), np.float16).reshape(-1, 4)[:, :3].any()
+        assert not np.frombuffer(texture.read(), LEVEL_DTYPE).reshape(-1, 4)[:, :3].any()
 
 
 def smooth_image(size=(320, 180)) -> np.ndarray:
@@ -313,9 +316,9 @@ def test_bloom_keeps_the_images_mean(known, first_step):
     runner = start_at(known(image, Tonemap(curve="none", exposure=-3.0), Bloom(intensity=1.0, levels=5)), first_step)
     frame = runner.frame()
     bloom = runner.engine.renderer.present_pass.bloom
-    assert bloom.levels == 5
+    assert bloom.levels == {"half": 5, "quarter": 4}[first_step]   # both end at 10x5
     w, h = bloom.textures[0].size
-    summed = np.frombuffer(bloom.textures[0].read(), np.float16).reshape(h, w, 4)[..., :3].astype(np.float64)
+    summed = np.frombuffer(bloom.textures[0].read(), LEVEL_DTYPE).reshape(h, w, 4)[..., :3].astype(np.float64)
     mean_in = image[..., :3].astype(np.float64).mean(axis=(0, 1))
     mean_bloom = summed.mean(axis=(0, 1)) / bloom.levels
     assert np.all(np.abs(mean_bloom / mean_in - 1.0) < 0.005), (mean_bloom, mean_in)
@@ -351,6 +354,33 @@ def test_bloom_spreads_a_bright_point_and_leaves_level_0_as_it_was(known, first_
     assert frame[63, 95, 0] == 255 and not frame[:60].any() and not frame[:, :90].any()
 
 
+@pytest.mark.parametrize("first_step", FIRST_STEPS)
+def test_the_up_steps_four_paired_taps_sum_the_nine_tap_tent(known, first_step):
+    """At radius 1 the up step reads its 3x3 tent in four bilinear taps, each weighing a pair
+    of texels (bloom_up.frag PAIRED); any other radius takes the nine taps.  On an odd-sized
+    image with bright specks (every level odd somewhere, so the taps' offsets vary texel to
+    texel) the chain's sum is the nine taps' to float rounding."""
+    rng = np.random.default_rng(7)
+    image = np.ones((117, 203, 4), np.float16)
+    image[..., :3] = rng.random((117, 203, 3)) ** 8 * 50.0
+    sums = {}
+    for radius in (1.0, 1.0 + 2.0 ** -20):   # the second rounds to no float32 1.0: the nine taps
+        runner = start_at(known(image, Tonemap(curve="none"), Bloom(radius=radius, levels=5)), first_step)
+        runner.frame()
+        bloom = runner.engine.renderer.present_pass.bloom
+        paired = any(("PAIRED", "1") in defines for _, defines in bloom._vaos)
+        assert paired == (radius == 1.0)
+        w, h = bloom.textures[0].size
+        sums[radius] = np.frombuffer(bloom.textures[0].read(), LEVEL_DTYPE).reshape(h, w, 4)[..., :3]
+    nine, four = sums[1.0 + 2.0 ** -20].astype(np.float64), sums[1.0].astype(np.float64)
+    assert nine.std() > 0.1 * nine.mean() > 0   # not a flat sum
+    # llvmpipe weighs a float texture's texels by float weights: the two agree to rounding.
+    # The GL spec leaves a filter's weight precision to the implementation (GPUs commonly
+    # keep 8 bits of the fraction), so there they agree to that.
+    tolerance = 1e-5 if GLCapabilities.read(runner.ctx).software else 1.0 / 128.0
+    assert np.abs(four - nine).max() <= tolerance * nine.max(), np.abs(four - nine).max() / nine.max()
+
+
 def test_fxaa_runs_after_the_tone_map(known):
     """With FXAA on, the tone-mapped frame is encoded with its luma and filtered: a flat
     image comes through unchanged, and an edge of two tone-mapped values is blended."""
@@ -370,7 +400,9 @@ def test_bloom_level_sizes_stop_at_two_pixels():
     assert level_sizes((640, 360), 8) == level_sizes((640, 360), 7) == [*level_sizes((640, 360), 6), (5, 2)]
     assert level_sizes((3, 100), 4) == []
     # A quarter start: the half start's chain less its first level (as of a 320x180 image).
-    assert level_sizes((640, 360), 6, "quarter") == level_sizes((320, 180), 6) == level_sizes((640, 360), 7)[1:]
+    # The quarter start leaves the half level out and ends where the half start does.
+    assert level_sizes((640, 360), 6, "quarter") == level_sizes((320, 180), 5) == level_sizes((640, 360), 6)[1:]
+    assert level_sizes((640, 360), 1, "quarter") == [(160, 90)]
     assert level_sizes((7, 100), 4, "quarter") == []
 
 
@@ -388,13 +420,13 @@ def test_bloom_resources_go_with_the_component(known):
     runner = known(smooth_image((64, 48)), Bloom(), Tonemap(auto_exposure=True))
     runner.frame()
     counts = runner.engine.renderer.resource_counts()
-    # The chain (a half start: 32x24 .. 4x3; a quarter start: 16x12 .. 4x3); luminance 64,
-    # 16, 4 and two 1x1.
+    # The chain (a half start: 32x24 .. 4x3; a quarter start: 16x12 .. 4x3); luminance 64
+    # and two 1x1.
     levels = {"half": 4, "quarter": 3}[runner.engine.renderer.present_pass.bloom.first_step]
-    assert counts["post_targets"] == levels + 5
+    assert counts["post_targets"] == levels + 3
     runner.world.remove_component(runner.game.camera, Bloom)
     runner.frame()
-    assert runner.engine.renderer.resource_counts()["post_targets"] == 5
+    assert runner.engine.renderer.resource_counts()["post_targets"] == 3
     runner.world.remove_component(runner.game.camera, Tonemap)
     runner.frame()
     assert runner.engine.renderer.resource_counts()["post_targets"] == 0
@@ -567,12 +599,12 @@ def test_the_present_stages_switches_turn_bloom_off_and_override_the_curve(known
     adapted = runner.engine.renderer.present_pass.auto_exposure.adapted_ev()
     line = post_line(runner.engine)
     assert line.startswith(f"post: agx (camera), +0.00 EV, auto {adapted:+.2f}; "), line
-    # 12 rows: levels 6x128 and 3x64 (3 passes), and 4 exposure passes
-    assert line.endswith("; bloom 0.3 x2, 7 passes"), line
+    # 12 rows: levels 6x128 and 3x64 (3 passes), and 2 exposure passes
+    assert line.endswith("; bloom 0.3 x2, 5 passes"), line
     present.bloom = False
     plain = runner.frame()
     assert not np.array_equal(plain, bloomed)
-    assert runner.engine.renderer.resource_counts()["post_targets"] == 5  # the exposure's only
+    assert runner.engine.renderer.resource_counts()["post_targets"] == 3  # the exposure's only
     assert "bloom off (set)" in post_line(runner.engine)
     present.curve = "none"
     runner.world.get(runner.game.camera, Tonemap).auto_exposure = False

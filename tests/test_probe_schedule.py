@@ -253,19 +253,20 @@ def test_every_component_the_extract_stage_draws_an_instance_from_is_a_look_kind
     assert all(isinstance(why, str) and why for why in LOOK_KINDS.values())
 
 
-def test_probes_that_refresh_every_frame_watch_no_changes_until_one_turns_on_change(gl_free_world):
-    """With only an every-frame probe the scheduler keeps no boxes (what moves matters to no
-    probe); once it turns on_change it recaptures every face for its new settings, and from
-    then on a box that moves from its +X side to its -X side asks for both faces: where the
-    box was (kept since the switch) and where it is."""
+def test_probes_that_refresh_by_request_watch_no_changes_until_one_turns_on_change(gl_free_world):
+    """With only a scripted probe the scheduler keeps no boxes (what moves matters to no
+    probe: an every-frame probe's does, ``test_an_every_frame_probes_unchanged_faces_are_those_no_change_reached``);
+    once it turns on_change it recaptures every face for its new settings, and from then on
+    a box that moves from its +X side to its -X side asks for both faces: where the box was
+    (kept since the switch) and where it is."""
     world = gl_free_world
-    probe = world.spawn(Transform(), ReflectionProbe(resolution=16, far=20.0, refresh="every_frame"))
+    probe = world.spawn(Transform(), ReflectionProbe(resolution=16, far=20.0, refresh="scripted"))
     crate = world.spawn(Transform(position=(2, 0, 0)), MeshRef(box((0.2, 0.2, 0.2))), Material())
     scheduler = world.get_system(Scheduling).scheduler
     for step in range(3):
         world.get(crate, Transform).position = glm.vec3(2, 0.1 * step, 0)
         world.step(1 / 60)
-        assert due(world)[probe]["every_frame"] == ALL_FACES
+        assert (probe in due(world)) == (step == 0)  # its first capture, then nothing unasked
     assert not scheduler._bounds
     world.get(probe, ReflectionProbe).refresh = "on_change"
     world.step(1 / 60)
@@ -292,3 +293,37 @@ def test_hiding_an_object_as_it_moves_still_recaptures_where_it_was_seen(gl_free
     world.add_component(plain, Visibility(in_probes=False))
     world.step(1 / 60)
     assert probe in due(world) and 0 in set().union(*due(world)[probe].values())
+
+
+def test_an_every_frame_probes_unchanged_faces_are_those_no_change_reached(gl_free_world):
+    """Every face of an every-frame probe is due each frame; those no change reached since
+    they were last drawn are published ``unchanged`` (the captures may keep them): none at
+    the first capture, all six in a still frame, all but the +X face when a box there moves,
+    both X faces when it crosses to -X, and a face a change reached stays out until it is
+    drawn (a face left undrawn, as a view budget may, is not unchanged the frame after).  A
+    point light coming anywhere, even out of the probe's reach, reaches every face (the
+    lights' order and limits shift)."""
+    world = gl_free_world
+    probe = world.spawn(Transform(), ReflectionProbe(resolution=16, far=20.0, refresh="every_frame"))
+    crate = world.spawn(Transform(position=(2, 0, 0)), MeshRef(box((0.2, 0.2, 0.2))), Material())
+    states = world.resources[ProbeStates]
+
+    def step(draw: frozenset[int] | None = None) -> frozenset[int]:
+        world.step(1 / 60)
+        this = world.resources[ProbeSchedule].due[probe]
+        assert this.faces == ALL_FACES and set(this.reasons) <= {"first capture", "every_frame"}
+        states[probe].record_capture(this.faces if draw is None else draw)  # what the captures do
+        return this.unchanged
+
+    assert step() == frozenset()
+    assert step() == ALL_FACES
+    world.get(crate, Transform).position = glm.vec3(2, 0.1, 0)
+    assert step() == ALL_FACES - {0}
+    assert step() == ALL_FACES
+    world.get(crate, Transform).position = glm.vec3(-2, 0.1, 0)
+    assert step(draw=ALL_FACES - {0, 1}) == ALL_FACES - {0, 1}  # the X faces not drawn: still changed
+    assert step() == ALL_FACES - {0, 1}
+    assert step() == ALL_FACES
+    world.spawn(Transform(position=(500, 0, 0)), PointLight(range=1.0))
+    assert step() == frozenset()
+    assert step() == ALL_FACES

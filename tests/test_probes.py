@@ -1095,9 +1095,10 @@ def test_face_touches_leaves_a_box_out_of_a_face_only_where_no_point_of_it_is_in
 def test_an_every_frame_probe_keeps_a_face_that_shows_the_sky_alone(scene):
     """The chrome scene's wall is at +X: the -X face shows the sky alone.  Recaptured every
     frame (six_pass), that face is drawn at the first capture and then kept (its pixels would
-    be the ones it holds): five faces a frame are drawn.  Every level of every face is, bit
-    for bit, what a capture drawing all six gives.  A box coming into the -X face's view, and
-    a new sky, each make it drawn again, and it shows them."""
+    be the ones it holds): with the sun changing every frame (which reaches every face that
+    shows anything but the sky, so they are drawn), five faces a frame are drawn.  Every
+    level of every face is, bit for bit, what a capture drawing all six gives.  A box coming
+    into the -X face's view, and a new sky, each make it drawn again, and it shows them."""
     from engine.render.probes import face_view
     from engine.render.raw_gl import read_cube_level
 
@@ -1114,6 +1115,12 @@ def test_an_every_frame_probe_keeps_a_face_that_shows_the_sky_alone(scene):
     runner.frame()
     assert runner.stats.probe_faces == 6 and probes.faces_kept == 0
 
+    def relit_frame():
+        """A frame with the sun a little brighter: no face but one of the sky alone is kept."""
+        for _, light in runner.world.query_one(DirectionalLight):
+            light.intensity += 0.01
+        return runner.frame()
+
     def levels():
         texture = probes.cubes[owner].texture
         return [read_cube_level(runner.ctx, texture, face, level, 14) for face in range(6) for level in range(7)]
@@ -1129,7 +1136,7 @@ def test_an_every_frame_probe_keeps_a_face_that_shows_the_sky_alone(scene):
         return levels()
 
     for frame in range(2):
-        runner.frame()
+        relit_frame()
         assert runner.stats.probe_faces == 5 and probes.faces_kept == frame + 1
     kept = levels()
     assert all(np.array_equal(a, b) for a, b in zip(kept, drawn_whole(), strict=True))
@@ -1137,7 +1144,7 @@ def test_an_every_frame_probe_keeps_a_face_that_shows_the_sky_alone(scene):
 
     ents["box"] = runner.world.spawn(Transform(position=(-3.0, 0.0, 0.0)), MeshRef(box((1.0, 1.0, 1.0))),
                                      Material(color=(0.1, 0.9, 0.1)), Emissive(2.0))
-    runner.frame()
+    relit_frame()
     assert runner.stats.probe_faces == 6
     with_box = probes.read_face(owner, 1)
     centre = with_box[28:36, 28:36]
@@ -1145,12 +1152,12 @@ def test_an_every_frame_probe_keeps_a_face_that_shows_the_sky_alone(scene):
     assert all(np.array_equal(a, b) for a, b in zip(levels(), drawn_whole(), strict=True))
 
     runner.world.delete_entity(ents["box"])
-    runner.frame()  # drawn again: the sky alone, as before
-    runner.frame()  # kept
+    relit_frame()  # drawn again: the sky alone, as before
+    relit_frame()  # kept
     assert runner.stats.probe_faces == 5 and np.array_equal(probes.read_face(owner, 1), sky)
     for _, skybox in runner.world.query_one(Skybox):
         skybox.zenith = (0.9, 0.1, 0.1, 1.0)
-    runner.frame()
+    relit_frame()
     assert runner.stats.probe_faces == 6
     redder = probes.read_face(owner, 1)
     assert redder[..., 0].mean() > sky[..., 0].mean() + 0.1

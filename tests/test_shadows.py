@@ -113,6 +113,31 @@ def test_directional_shadows_agree_with_shadow_rays(scene, shadow_filter):
     assert share >= 0.99, f"{share:.4f} of {counted} floor pixels agree with the shadow rays"
 
 
+def test_a_later_directional_lights_shadow_is_looked_up_when_an_earlier_one_casts_none(scene):
+    """Each directional slot's lookup is made before the lights' loop, for slots 0 to the last
+    casting one (``DIRECTIONAL_SHADOWS`` is that count): a second sun casting while the first
+    does not still has its shadow, and it agrees with the float64 shadow rays."""
+    def build(world):
+        world.spawn(DirectionalLight(direction=(0.3, -1.0, 0.2), intensity=0.3, shadows=False))  # slot 0: casts none
+        world.resources["ids"] = _floor_scene(world, (0.5, 5.0, 6.5), (0.0, 0.0, 0.0))
+
+    runner, ids, without, with_shadows = _render_both(scene, build)
+    assert ("DIRECTIONAL_SHADOWS", "2") in runner.engine.renderer.shadows.program_defines
+    shadowed, lit = _classified(without, with_shadows)
+    floor = runner.ids() == ids["floor"]
+    eye, rays = pixel_rays(runner.engine.main_view, runner.size)
+    t = -eye[1] / rays[..., 1]
+    points = (eye + rays * t[..., None]).reshape(-1, 3)
+    to_light = np.tile(-np.array(LIGHT, np.float64), (len(points), 1))
+    occluded_in = _hits(points, to_light, -PENUMBRA).reshape(floor.shape)
+    occluded_out = _hits(points, to_light, PENUMBRA).reshape(floor.shape)
+    share, counted, in_shadow = _agreement(shadowed, lit, floor, occluded_in, occluded_out)
+    assert counted > 40000 and in_shadow > 800, (counted, in_shadow, share)
+    assert share >= 0.99, f"{share:.4f} of {counted} floor pixels agree with the second sun's shadow rays"
+    umbra = floor & occluded_in & occluded_out
+    assert shadowed[umbra].mean() >= 0.95, f"{shadowed[umbra].mean():.3f} of the umbra's pixels are shadowed"
+
+
 @pytest.mark.parametrize("shadow_filter", ["single", "grid"])
 def test_the_shadow_seen_in_a_mirror_is_the_mirrored_points_shadow(scene, shadow_filter):
     def build(world):
@@ -197,6 +222,37 @@ def test_point_light_shadows_agree_with_shadow_rays(scene, monkeypatch, path, sh
     share, counted, in_shadow = _agreement(shadowed, lit, floor, occluded_in, occluded_out)
     assert counted > 10000 and in_shadow > 800, (counted, in_shadow, share)
     assert share >= 0.99, f"{share:.4f} of {counted} floor pixels agree with the shadow rays ({path})"
+
+
+def test_the_second_cubes_point_light_is_looked_up_at_its_own_position(scene):
+    """The cubes are looked up before the lights' loop, each at the position of the light it
+    holds (the Shadows block's point_light): a lamp in the second cube, third in the Lights
+    block (a lamp casting and one not before it), casts the shadow the float64 rays give."""
+    lamp = np.array([3.2, 1.3, 0.9])
+
+    def build(world):
+        world.spawn(Transform(position=(-4.0, 2.5, -3.0)), PointLight(intensity=1.0, range=6.0, shadows=True))
+        world.spawn(Transform(position=(0.0, 3.0, -4.0)), PointLight(intensity=1.0, range=6.0, shadows=False))
+        world.resources["ids"] = _floor_scene(world, (0.0, 5.5, 6.0), (0.0, 0.0, 0.0), sun=False,
+                                              point=lamp.tolist())
+
+    runner, ids, without, with_shadows = _render_both(scene, build, light="lamp")
+    assert ("POINT_SHADOWS", "2") in runner.engine.renderer.shadows.program_defines
+    shadowed, lit = _classified(without, with_shadows)
+    eye, rays = pixel_rays(runner.engine.main_view, runner.size)
+    t = -eye[1] / rays[..., 1]
+    points = (eye + rays * t[..., None]).reshape(-1, 3)
+    to_lamp = lamp - points
+    distance = np.linalg.norm(to_lamp, axis=1)
+    floor = (runner.ids() == ids["floor"]) & (distance < 5.0).reshape(runner.ids().shape)
+    direction = to_lamp / distance[:, None]
+    occluded_in = _hits(points, direction, -PENUMBRA, distance).reshape(floor.shape)
+    occluded_out = _hits(points, direction, PENUMBRA, distance).reshape(floor.shape)
+    share, counted, in_shadow = _agreement(shadowed, lit, floor, occluded_in, occluded_out)
+    assert counted > 10000 and in_shadow > 800, (counted, in_shadow, share)
+    assert share >= 0.99, f"{share:.4f} of {counted} floor pixels agree with the second cube's shadow rays"
+    umbra = floor & occluded_in & occluded_out
+    assert shadowed[umbra].mean() >= 0.95, f"{shadowed[umbra].mean():.3f} of the umbra's pixels are shadowed"
 
 
 @pytest.mark.parametrize("shadow_filter", ["single", "grid"])

@@ -105,6 +105,98 @@ def test_a_uniform_buffer_is_bound_once_until_another_or_invalidate(ctx, monkeyp
         two.release()
 
 
+_BLOCK_FS = "#version 410 core\nlayout(std140) uniform Block { vec4 tint; };\nout vec4 colour;" \
+            " void main() { colour = tint; }"
+
+
+def test_a_uniform_range_is_bound_once_and_holds_when_the_buffer_is_written_anew(ctx, monkeypatch):
+    """``bind_uniform_range`` binds a range only when another is bound there: the same range
+    again binds nothing and still reads the buffer's new contents after the storage is
+    orphaned and written (a binding names the buffer object), another offset or the whole
+    buffer (``bind_uniform_block``) binds again, and so does a buffer made anew."""
+    binds = []
+    method = moderngl.Buffer.bind_to_uniform_block
+
+    def counted(self, binding=0, **kwargs):
+        binds.append((self, binding, kwargs.get("offset", 0)))
+        return method(self, binding, **kwargs)
+    monkeypatch.setattr(moderngl.Buffer, "bind_to_uniform_block", counted)
+    program = ctx.program(vertex_shader=_WHITE_VS, fragment_shader=_BLOCK_FS)
+    program["Block"].binding = 3
+    vao = ctx.vertex_array(program, [])
+    target = ctx.simple_framebuffer((8, 8))
+    step = 256  # a multiple of any GL_UNIFORM_BUFFER_OFFSET_ALIGNMENT
+
+    def tints(*rows):
+        data = bytearray(2 * step)
+        for at, row in enumerate(rows):
+            data[at * step:at * step + 16] = np.array(row, "f4").tobytes()
+        return bytes(data)
+
+    def drawn() -> tuple:
+        target.use()
+        apply_pass_state(ctx, PassState(), (0, 0, 8, 8))
+        target.clear()
+        vao.render(vertices=3)
+        return tuple(np.frombuffer(target.read(components=4), np.uint8)[:4])
+
+    buffer = ctx.buffer(tints((1, 0, 0, 1), (0, 0, 1, 1)))
+    other = None
+    try:
+        invalidate(ctx)
+        bindings.bind_uniform_range(ctx, buffer, 3, 0, 16)
+        assert drawn() == (255, 0, 0, 255)
+        buffer.orphan()
+        buffer.write(tints((0, 1, 0, 1), (0, 0, 1, 1)))
+        bindings.bind_uniform_range(ctx, buffer, 3, 0, 16)
+        assert len(binds) == 1
+        assert drawn() == (0, 255, 0, 255)
+        bindings.bind_uniform_range(ctx, buffer, 3, step, 16)
+        assert drawn() == (0, 0, 255, 255)
+        bind_uniform_block(ctx, buffer, 3)  # the whole buffer: its first tint
+        assert drawn() == (0, 255, 0, 255)
+        bindings.bind_uniform_range(ctx, buffer, 3, 0, 16)
+        other = ctx.buffer(tints((1, 1, 0, 1)))
+        bindings.bind_uniform_range(ctx, other, 3, 0, 16)
+        assert drawn() == (255, 255, 0, 255)
+        assert [(b is other, offset) for b, _, offset in binds] == [
+            (False, 0), (False, step), (False, 0), (False, 0), (True, 0)]
+    finally:
+        for obj in (buffer, other, vao, program):
+            if obj is not None:
+                obj.release()
+        release_framebuffer(target)
+        invalidate(ctx)
+
+
+def test_a_scissor_in_place_is_not_set_again(ctx, setter_calls):
+    """``set_scissor`` (a view's scissor within a pass) sets nothing when moderngl's record
+    of the bound framebuffer already clips so, and sets one that differs: the pixels drawn
+    are the scissor's."""
+    program = ctx.program(vertex_shader=_WHITE_VS, fragment_shader=_WHITE_FS)
+    vao = ctx.vertex_array(program, [])
+    target = ctx.simple_framebuffer((32, 32))
+    try:
+        invalidate(ctx)
+        target.use()
+        apply_pass_state(ctx, PassState(), (0, 0, 32, 32), (0, 0, 10, 10))
+        before = setter_calls["scissor"]
+        bindings.set_scissor(ctx, (0, 0, 10, 10))
+        assert setter_calls["scissor"] == before
+        assert _covered(ctx, target, lambda: vao.render(vertices=3)).sum() == 100
+        bindings.set_scissor(ctx, (0, 0, 4, 4))
+        assert setter_calls["scissor"] == before + 1
+        assert _covered(ctx, target, lambda: vao.render(vertices=3)).sum() == 16
+        bindings.set_scissor(ctx, None)
+        bindings.set_scissor(ctx, None)
+        assert setter_calls["scissor"] == before + 2
+        assert _covered(ctx, target, lambda: vao.render(vertices=3)).all()
+    finally:
+        release_framebuffer(target)
+        vao.release()
+        program.release()
+
+
 def test_the_cache_holds_across_framebuffer_switches(ctx):
     """moderngl keeps a viewport and scissor per framebuffer and ``Framebuffer.use`` sets them
     again: a scissor left on one framebuffer is found there, not assumed gone."""

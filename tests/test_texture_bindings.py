@@ -13,6 +13,7 @@ on to moderngl (the frames are real).  Checked by breaking the record: keyed by 
 """
 from __future__ import annotations
 
+import contextlib
 import os
 import subprocess
 import sys
@@ -26,7 +27,7 @@ from benchmarks.cpu import GLCallCounter
 from benchmarks.mirrors import DT, MirrorRing
 from components import DirectionalLight
 from engine.core.frame_io import Output
-from engine.render import bindings
+from engine.render import bindings, scene_pass
 from engine.render.bindings import SHADOW_ATLAS_UNIT, bind_texture, invalidate
 from engine.render.targets import CaptureTarget
 from shell.app import Engine
@@ -197,6 +198,99 @@ def test_a_mirror_frame_binds_the_shadow_atlas_once(ctx, monkeypatch):
             assert len(atlas_binds[1]) > 1   # binding every time: once a scene pass
             assert frames[0].mean() > 10
             np.testing.assert_array_equal(frames[0], frames[1])
+    finally:
+        for capture in captures:
+            capture.release()
+        for engine in engines:
+            engine.close()
+
+
+_FILTERED = """#version 410 core
+uniform sampler2D image;
+out vec4 colour;
+void main() { colour = texture(image, vec2(0.375, 0.5)); }
+"""
+
+
+def test_a_sampler_stays_bound_until_another_pass_binds_its_unit(ctx):
+    """``bind_sampler``: a sampler object bound again is not bound twice; a texture bound on
+    its unit with ``keep_sampler`` is filtered by it, and one bound by any other pass
+    (``bind_texture``, even a texture the record says is there) is filtered by its own
+    parameters again.  A 2x1 texture, black then white, NEAREST, sampled a quarter texel
+    right of the first texel's centre: NEAREST reads 0, the LINEAR sampler a quarter white."""
+    program = ctx.program(vertex_shader=_VERTEX, fragment_shader=_FILTERED)
+    program["image"].value = UNIT
+    vao = ctx.vertex_array(program, [])
+    target = CaptureTarget(ctx, (4, 4))
+    texture = ctx.texture((2, 1), 4, bytes((0, 0, 0, 255, 255, 255, 255, 255)))
+    texture.filter = (moderngl.NEAREST, moderngl.NEAREST)
+    sampler = ctx.sampler(filter=(moderngl.LINEAR, moderngl.LINEAR))
+    counter = GLCallCounter()
+    try:
+        invalidate(ctx)
+        bind_texture(ctx, texture, UNIT)
+        assert _draw(ctx, vao, target, forget=False)[0] == 0
+        with counter:
+            for _ in range(3):
+                bindings.bind_sampler(ctx, sampler, UNIT)
+                bind_texture(ctx, texture, UNIT, keep_sampler=True)
+        assert counter.calls["Sampler.use"] == 1 and counter.total == 1, dict(counter.calls)
+        assert abs(_draw(ctx, vao, target, forget=False)[0] - 64) <= 2
+        bind_texture(ctx, texture, UNIT)  # another pass: already bound, but the sampler comes off
+        assert _draw(ctx, vao, target, forget=False)[0] == 0
+        bindings.bind_sampler(ctx, sampler, UNIT)
+        assert abs(_draw(ctx, vao, target, forget=False)[0] - 64) <= 2
+        bindings.bind_sampler(ctx, None, UNIT)
+        assert _draw(ctx, vao, target, forget=False)[0] == 0
+        with counter:
+            counter.reset()
+            bindings.bind_sampler(ctx, None, UNIT)
+        assert counter.total == 0
+    finally:
+        bindings.forget_sampler(ctx, sampler)
+        for obj in (sampler, texture, vao, program):
+            obj.release()
+        target.release()
+
+
+def test_a_frame_of_reflection_levels_binds_their_sampler_once(ctx, monkeypatch):
+    """Sixteen mirrors (reflection levels 1, 2 and 3, each a scene pass with the reflection
+    albedo sampler): a still frame binds the sampler once (the first level) and takes it off
+    once (the next frame's main view), not once and off again a level; and the frame equals
+    that of a twin engine
+    binding everything every time (``CACHE_STATE`` off)."""
+    engines = [_ring(ctx, 16), _ring(ctx, 16)]
+    captures = [CaptureTarget(ctx, SIZE), CaptureTarget(ctx, SIZE)]
+    try:
+        outputs = [Output(capture.framebuffer, SIZE) for capture in captures]
+        assert engines[0].renderer.reflection_anisotropy != engines[0].renderer.texture_anisotropy
+        levels = []  # the scene passes that asked for the reflection sampler
+        real = scene_pass.bind_sampler
+
+        def bind_sampler(ctx, sampler, unit):
+            if sampler is not None:
+                levels.append(unit)
+            real(ctx, sampler, unit)
+        monkeypatch.setattr(scene_pass, "bind_sampler", bind_sampler)
+        counter = GLCallCounter()
+        for frame in range(3):
+            pictures = []
+            for engine, output, capture, cache in zip(engines, outputs, captures, (True, False), strict=True):
+                monkeypatch.setattr(bindings, "CACHE_STATE", cache)
+                if cache:
+                    levels.clear()
+                    counter.reset()
+                    with counter if frame else contextlib.nullcontext():
+                        engine.frame(DT, output)
+                    calls = dict(counter.calls)
+                else:
+                    engine.frame(DT, output)
+                pictures.append(capture.read_rgb().copy())
+            if frame:  # the first frame draws no reflections (visibility is read a frame late)
+                assert len(levels) >= 2, levels  # two or more scene passes with the sampler this frame
+                assert calls.get("Sampler.use") == 1 and calls.get("Sampler.clear") == 1, calls
+            assert pictures[0].mean() > 10
+            np.testing.assert_array_equal(pictures[0], pictures[1])
     finally:
         for capture in captures:
             capture.release()

@@ -260,8 +260,10 @@ def test_a_surface_with_eight_corners_is_culled_on_all_of_them():
 
 def test_a_level_planned_from_the_same_rows_is_found_again_read_only(scene, monkeypatch):
     """``SurfaceTable.plan`` keeps its plans: with the camera and the surfaces still (a box
-    moving), the next frame computes no plan and draws the same image; a camera that moves,
-    or a surface that moves (a new table), plans again; a kept plan cannot be written."""
+    moving), the next frame computes no plan and draws the same image, with the views its
+    levels made the frame before (``Candidates.derived``); a camera that moves, or a surface
+    that moves (a new table), plans again, and a camera that moves every frame keeps no
+    plan (nothing would find it again); a kept plan cannot be written."""
     from components import Material, MeshRef, Mirror, Transform
     from engine.assets.mesh import box, quad
     from engine.render.surface_table import PlannerSurfaces
@@ -292,8 +294,13 @@ def test_a_level_planned_from_the_same_rows_is_found_again_read_only(scene, monk
     first = runner.frame()
     assert runner.stats.reflection_views >= 3 and computed  # mirror in mirror in mirror
     computed.clear()
+    views_before = [node.view for node in runner.engine.reflection_system.views[1:]]
     again = runner.frame()
     assert computed == [] and np.array_equal(first, again)
+    # The same views (a View is not changed once made), in new nodes of this frame's tree.
+    views = runner.engine.reflection_system.views[1:]
+    assert [node.view for node in views] == views_before and len(views) >= 3
+    assert all(a is b for a, b in zip((node.view for node in views), views_before, strict=True))
     # A kept plan is shared by the frames that find it: its arrays are read-only.
     table = runner.world.resources[PlannerSurfaces].table
     kept = next(candidates for _, (candidates, _) in table._plans.values() if candidates is not None)
@@ -303,11 +310,17 @@ def test_a_level_planned_from_the_same_rows_is_found_again_read_only(scene, monk
     runner.world.get(ents["box"], Transform).position = glm.vec3(-0.8, 0.5, 0.0)
     moved_box = runner.frame()
     assert computed == [] and not np.array_equal(moved_box, again)
-    # The camera moves: every level is planned again.
-    runner.world.get(ents["camera"], Transform).position = glm.vec3(0.4, 1.5, 2.5)
-    runner.frame()
-    assert computed and computed[0] == 1
+    # The camera moves: every level is planned again, and kept only from the second frame
+    # it stands there; a camera moving every frame keeps none.
+    kept_plans = len(table._plans)
+    for step in range(3):
+        runner.world.get(ents["camera"], Transform).position = glm.vec3(0.4 + 0.01 * step, 1.5, 2.5)
+        moving = runner.frame()
+        assert computed and computed[0] == 1 and len(table._plans) == kept_plans
+        computed.clear()
+    assert np.array_equal(runner.frame(), moving) and computed and len(table._plans) > kept_plans  # kept now
     computed.clear()
+    assert np.array_equal(runner.frame(), moving) and computed == []  # and found
     # A mirror moves: a new table, planned afresh.
     runner.world.get(ents["back"], Transform).position = glm.vec3(0.0, 1.5, 4.2)
     runner.frame()

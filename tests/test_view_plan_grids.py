@@ -28,13 +28,16 @@ def _table() -> view_plan.SurfaceTable:
                                    _mirror(6, 6.0, -1.0, x=2.1, layers=5)])
 
 
-def _levels(table: view_plan.SurfaceTable, eye: tuple[float, float, float], depth: int = 3):
+def _levels(table: view_plan.SurfaceTable, eye: tuple[float, float, float], depth: int = 3, kept: bool = False):
     """``depth`` levels from a camera at ``eye`` looking between the pairs: each level's
-    candidates (all of them grow)."""
+    candidates (all of them grow).  ``kept``: the root's row and projection read-only, as
+    the view tree keeps them for a camera that stands still (its plans are kept)."""
     proj = glm.perspective(glm.radians(70.0), 16 / 9, 0.1, 60.0)
     view = View(glm.lookAt(glm.vec3(eye), glm.vec3(1.5, 1.0, 0.0), glm.vec3(0, 1, 0)), proj, glm.vec3(eye), (320, 180))
     root_proj, inv_root_proj = view_plan._mat(proj), view_plan._mat(glm.inverse(proj))
     rows, first, levels = plan_rows.LevelRows.root(view), 1, []
+    if kept:
+        rows.data.flags.writeable = root_proj.flags.writeable = False
     for level in range(1, depth + 1):
         candidates, _ = table.plan(rows, level, view, root_proj, inv_root_proj, first, 8, 0)
         if candidates is None:
@@ -107,8 +110,7 @@ def test_a_kept_plans_choice_is_found_again_and_so_is_its_plan():
     read-only rows when made again (``Candidates.select``): the plan kept for them is found
     again by their identity (a still camera's deeper levels), and is the plan they give."""
     table = _table()
-    view, root_proj, inv_root_proj, levels = _levels(table, (0.8, 1.0, 3.5), depth=2)
-    root_proj.flags.writeable = False  # as the view tree keeps it
+    view, root_proj, inv_root_proj, levels = _levels(table, (0.8, 1.0, 3.5), depth=2, kept=True)
     _, first = levels[0]
     assert len(first) >= 2 and not first.rows.data.flags.writeable
     keep = np.array([len(first) - 1, 0], np.int64)

@@ -31,7 +31,13 @@ record holds the texture object itself, per unit and kind (a unit has a 2D bindi
 cube-map binding of its own), so a released texture whose GL name is reused by a new one
 is bound again (deleting a texture resets the units that held it to 0).  moderngl's own
 texture work (making, writing, filtering, reading) binds on its default unit (the last of
-the context's), which no pass uses.
+the context's), which no pass uses.  A uniform-block range (``bind_uniform_range``: a view's
+Camera block) is bound only where another is bound, so a level of one view binds none.  A
+sampler object (``bind_sampler``: the reflection levels' albedo filter) stays on its unit
+from one pass to the next until a pass binds otherwise with ``bind_sampler``, or binds a
+texture on that unit through ``bind_texture`` (which takes it off first, so no other pass
+is filtered by it); only ``bind_sampler`` binds sampler objects, so its record survives
+``invalidate``.
 
 **``invalidate(ctx)``** must be called after any other GL state is set other than through
 these functions: moderngl's ``enable_only``/``enable``/``depth_func``/``blend_func``/
@@ -200,14 +206,16 @@ def _transition(known: int, wanted: int) -> tuple[tuple[str, object, bool], ...]
 class _StateCache:
     """What ``apply_pass_state`` last set on one context."""
 
-    __slots__ = ("fixed", "front_face", "rects_known", "blocks", "textures")
+    __slots__ = ("fixed", "front_face", "rects_known", "blocks", "textures", "samplers")
 
     def __init__(self) -> None:
         self.fixed = _UNKNOWN        # the number of the (flags, functions, clips) set
         self.front_face: str | None = None
         self.rects_known = False     # False: set the viewport and scissor whatever moderngl says
-        self.blocks: dict[int, moderngl.Buffer] = {}  # uniform-block binding point -> the buffer bound
+        # uniform-block binding point -> the buffer bound, or (buffer, offset, size) for a range
+        self.blocks: dict[int, moderngl.Buffer | tuple[moderngl.Buffer, int, int]] = {}
         self.textures: dict[tuple[int, type], Bindable] = {}  # (unit, texture class) -> the texture bound
+        self.samplers: dict[int, moderngl.Sampler] = {}  # unit -> the sampler object bound there (bind_sampler)
 
 
 # False: every apply sets every piece of state, as before the cache (kept for the
@@ -236,16 +244,22 @@ def invalidate(ctx: moderngl.Context) -> None:
         cache.textures.clear()
 
 
-def bind_texture(ctx: moderngl.Context, texture: Bindable, unit: int) -> None:
+def bind_texture(ctx: moderngl.Context, texture: Bindable, unit: int, keep_sampler: bool = False) -> None:
     """Bind ``texture`` (a moderngl Texture, TextureCube, TextureArray or Texture3D) on
     ``unit`` unless it is what that unit holds already (the object itself is remembered, as
-    ``bind_uniform_block`` does for buffers).  Which unit is active afterwards is not
-    defined: code that then acts on the active unit (raw GL) uses ``bind_texture_now``.
-    With ``CACHE_STATE`` off it binds every time."""
+    ``bind_uniform_block`` does for buffers).  A sampler object left on ``unit`` by
+    ``bind_sampler`` is taken off first (the texture is then filtered by its own
+    parameters), unless ``keep_sampler`` (the pass that bound it, binding the textures it
+    filters).  Which unit is active afterwards is not defined: code that then acts on the
+    active unit (raw GL) uses ``bind_texture_now``.  With ``CACHE_STATE`` off it binds every
+    time."""
     try:
-        textures = ctx._speculum_pass_state.textures
+        cache = ctx._speculum_pass_state
     except AttributeError:
-        textures = _cache(ctx).textures
+        cache = _cache(ctx)
+    if cache.samplers and not keep_sampler and unit in cache.samplers:
+        cache.samplers.pop(unit).clear(unit)  # the texture's own filter again
+    textures = cache.textures
     key = (unit, texture.__class__)
     if textures.get(key) is not texture or not CACHE_STATE:
         texture.use(unit)
@@ -256,8 +270,39 @@ def bind_texture_now(ctx: moderngl.Context, texture: Bindable, unit: int) -> Non
     """Bind ``texture`` on ``unit`` and make ``unit`` the active one, whatever the record says
     (for raw GL that then sets parameters of, or copies into, the active unit's texture);
     the record is kept true."""
+    cache = _cache(ctx)
+    if unit in cache.samplers:
+        cache.samplers.pop(unit).clear(unit)
     texture.use(unit)
-    _cache(ctx).textures[unit, texture.__class__] = texture
+    cache.textures[unit, texture.__class__] = texture
+
+
+def bind_sampler(ctx: moderngl.Context, sampler: moderngl.Sampler | None, unit: int) -> None:
+    """Bind the sampler object ``sampler`` on ``unit`` (None: none, the textures' own
+    filtering) unless it is what is there.  It stays bound after the pass (the reflection
+    levels' scene passes of a frame bind it once, not once and off again a level) until a
+    pass binds with ``bind_sampler`` otherwise, or binds a texture on ``unit`` through
+    ``bind_texture`` (which takes it off first, so no other pass is filtered by it).  Only
+    this function binds sampler objects; ``forget_sampler`` before one is released."""
+    samplers = _cache(ctx).samplers
+    bound = samplers.get(unit)
+    if bound is sampler and CACHE_STATE:
+        return
+    if sampler is None:
+        if bound is not None:
+            bound.clear(unit)
+        samplers.pop(unit, None)
+    else:
+        sampler.use(unit)
+        samplers[unit] = sampler
+
+
+def forget_sampler(ctx: moderngl.Context, sampler: moderngl.Sampler) -> None:
+    """``sampler`` is about to be released: deleting a sampler object unbinds it from every
+    unit it is bound to (glDeleteSamplers), so the record of it goes without a GL call."""
+    samplers = _cache(ctx).samplers
+    for unit in [unit for unit, bound in samplers.items() if bound is sampler]:
+        del samplers[unit]
 
 
 def bind_uniform_block(ctx: moderngl.Context, buffer: moderngl.Buffer, binding: int) -> None:
@@ -265,7 +310,10 @@ def bind_uniform_block(ctx: moderngl.Context, buffer: moderngl.Buffer, binding: 
     (binding points are the context's, shared by every program; the buffer object itself
     is remembered, so a released buffer whose GL name is reused is bound again).  With
     ``CACHE_STATE`` off it binds every time."""
-    blocks = _cache(ctx).blocks
+    try:
+        blocks = ctx._speculum_pass_state.blocks
+    except AttributeError:
+        blocks = _cache(ctx).blocks
     if blocks.get(binding) is not buffer or not CACHE_STATE:
         buffer.bind_to_uniform_block(binding)
         blocks[binding] = buffer
@@ -273,11 +321,19 @@ def bind_uniform_block(ctx: moderngl.Context, buffer: moderngl.Buffer, binding: 
 
 def bind_uniform_range(ctx: moderngl.Context, buffer: moderngl.Buffer, binding: int, offset: int,
                        size: int) -> None:
-    """Bind ``size`` bytes of ``buffer`` from ``offset`` to uniform-block ``binding`` (every
-    time: ranges change view by view); the binding is then unknown to ``bind_uniform_block``,
-    which binds its buffer again."""
-    buffer.bind_to_uniform_block(binding, offset=offset, size=size)
-    _cache(ctx).blocks.pop(binding, None)
+    """Bind ``size`` bytes of ``buffer`` from ``offset`` to uniform-block ``binding`` unless that
+    very range is bound there (a pass of one view binds the first view's range of the
+    camera buffer, as the pass before it did: a binding names the buffer object, so it holds
+    when the buffer's storage is orphaned and written again; a buffer made anew is another
+    object and is bound).  The record then holds (buffer, offset, size), never the buffer
+    alone, so ``bind_uniform_block`` binds its whole buffer again.  With ``CACHE_STATE`` off
+    it binds every time."""
+    blocks = _cache(ctx).blocks
+    bound = blocks.get(binding)
+    if bound.__class__ is not tuple or bound[0] is not buffer or bound[1] != offset or bound[2] != size \
+            or not CACHE_STATE:
+        buffer.bind_to_uniform_block(binding, offset=offset, size=size)
+        blocks[binding] = (buffer, offset, size)
 
 
 def set_front_face(ctx: moderngl.Context, front_face: str) -> None:
@@ -293,6 +349,18 @@ def flip_front_face(ctx: moderngl.Context) -> str:
     current = _cache(ctx).front_face or ctx.front_face
     set_front_face(ctx, "cw" if current == "ccw" else "ccw")
     return current
+
+
+def set_scissor(ctx: moderngl.Context, scissor: tuple[int, int, int, int] | None) -> None:
+    """The scissor, within a pass (a view's), set only if moderngl's record for the bound
+    framebuffer does not already clip as ``scissor`` does (None: nothing): a pass that
+    applied its state with its first view's scissor sets nothing for that view."""
+    try:
+        known = ctx._speculum_pass_state.rects_known
+    except AttributeError:
+        known = False
+    if not known or not CACHE_STATE or not _scissor_is(ctx, ctx.mglo.fbo, scissor):
+        ctx.scissor = scissor
 
 
 def _scissor_is(ctx: moderngl.Context, bound, scissor: tuple[int, int, int, int] | None) -> bool:

@@ -328,6 +328,13 @@ class InstanceBatch:
         boxes[last] = np.nan
         self._variants_stale = True
 
+    @property
+    def layout(self) -> int:
+        """Counts changes of existing rows' places (a removal's fill, a gather's swaps): the
+        order instances are drawn in holds while it stands (a probe face kept as drawn
+        compares it, ``ProbeCaptures``)."""
+        return self._layout
+
     def variants_changed(self) -> None:
         """Say that some row's material variants (``slots`` 0-2) were written."""
         self._variants_stale = True

@@ -436,14 +436,25 @@ class MirrorPasses:
         self._claim_buffer: moderngl.Buffer | None = None  # the claims' triangles (claim.vert), grown as needed
         self._reset_vao: moderngl.VertexArray | None = None
         self._claim_vao: moderngl.VertexArray | None = None
+        # The query of every claim known to be empty before it is drawn (engine/render/claim_cull.py):
+        # begun and ended once around nothing, so it counts 0 samples, and a view drawn on its
+        # condition (predicted visibility) is skipped as that claim's would have skipped it.
+        self.no_pixels = take_samples_queries(ctx, 1)[0]
+        with self.no_pixels:
+            pass
 
     def prepare_level(self, level: RenderTargets, parent: RenderTargets, claims: Claims,
                       queries: list[moderngl.Query]) -> None:
         """Write ``level``'s node image and depth mask for the candidate views ``claims``,
         counting each one's pixels in ``queries[i]`` (0: the surface is hidden there, or off
-        the pixels its parent view drew).  Outside the claims' rectangles nothing is written
-        or read this frame.  Nothing waits here: the counts are read by ``claimed_pixels``,
-        now (the CPU waits for the GPU) or a frame later (``ViewTree``'s visibility)."""
+        the pixels its parent view drew).  A claim whose query is ``no_pixels`` is known to
+        be empty (``engine/render/claim_cull.py``) and is not drawn, but its rectangle is
+        reset: it is still a view (predicted visibility: drawn on that query's condition),
+        and its composite reads its rectangle.  (Exact visibility leaves such claims out: no
+        view, and nothing reads a rectangle that is no view's.)  Outside the claims'
+        rectangles nothing is written or read this frame.  Nothing waits here: the
+        counts are read by ``claimed_pixels``, now (the CPU waits for the GPU) or a frame
+        later (``ViewTree``'s visibility)."""
         if not claims:
             return
         ctx = self.ctx
@@ -461,10 +472,11 @@ class MirrorPasses:
         bind_texture(self.ctx, parent.node, PARENT_NODE_UNIT)
         bind_texture(self.ctx, parent.surface, PARENT_SURFACE_UNIT)
         self.uniforms.set(self.claim, "to_parent", (parent.size[0] / level.size[0], parent.size[1] / level.size[1]))
-        render = self._claim_vao.render
+        render, empty = self._claim_vao.render, self.no_pixels
         for at, query in enumerate(queries[:count]):
-            with query:
-                render(moderngl.TRIANGLES, vertices=6, first=6 * at)
+            if query is not empty:
+                with query:
+                    render(moderngl.TRIANGLES, vertices=6, first=6 * at)
         self.renderer.checkpoint("claims")
 
     @staticmethod
@@ -482,8 +494,10 @@ class MirrorPasses:
 
     def claimed_pixels(self, queries: list[moderngl.Query]) -> list[int]:
         """The pixels each claim of ``queries`` got: the CPU waits until the GPU has drawn
-        them (all issued before the first is read, so it waits once)."""
-        return [query.samples for query in queries]
+        them (all issued before the first is read, so it waits once); ``no_pixels``, read
+        without asking the GL, counted 0."""
+        empty = self.no_pixels
+        return [0 if query is empty else query.samples for query in queries]
 
     def _reserve_claims(self, size: int) -> None:
         """A claims buffer of at least ``size`` bytes (64 claims at least), with the reset's
@@ -648,6 +662,7 @@ class MirrorPasses:
         for obj in (self._reset_vao, self._claim_vao, self._claim_buffer):
             if obj is not None:
                 obj.release()
+        give_samples_queries(self.ctx, [self.no_pixels])
         for draw in (*self.composites.values(), *self.fallbacks.values()):
             draw.release()
         self.rough_atlas.release()

@@ -37,12 +37,12 @@ from engine.render.views import CAMERA_BLOCK_BYTES, CAMERA_DTYPE, CAMERA_FLOATS,
 # corners (and the planes) by; IV^T's last row is the eye, copied into x[0] after the
 # products (a point is not carried as the rows of x[0] are: it is written, not multiplied).
 X_ROWS = 22   # x[0]'s; x[1] has 8
-_X0 = X_ROWS * 4
-_V, _P0V, _CULL, _NEG_CLIP = slice(0, 4), slice(4, 8), slice(8, 22), 19
-_EYE_ROW = 20  # x[0]'s copy of the eye (the cull's facing values: its row times the planes)
+X0 = X_ROWS * 4
+_V, _P0V, CULL, _NEG_CLIP = slice(0, 4), slice(4, 8), slice(8, 22), 19
+EYE_ROW = 20  # x[0]'s copy of the eye (the cull's facing values: its row times the planes)
 LEVEL_ROW = np.dtype([
     ("rect", "<f8", (4,)),         # x0, y0, -x1, -y1 where it shows, screen pixels (the cull's signs)
-    ("x", "<f8", (_X0 + 8 * 5,)),
+    ("x", "<f8", (X0 + 8 * 5,)),
     ("node", "<f8"),               # its index in the tree
     ("scissor", "<i8", (4,)),      # x, y, w, h in the level's pixels
     ("block", "<f4", (CAMERA_FLOATS["skip"].stop,)),  # the packed Camera block (CAMERA_DTYPE)
@@ -54,30 +54,30 @@ LEVEL_ROW = np.dtype([
     ("fade", "<f8"),               # the reflection's weight (Mirror fades; 1: none)
 ])
 ROW = field_columns(LEVEL_ROW, 8)  # each field's columns
-_X, _RECT, _BLOCK = (ROW[name] for name in ("x", "rect", "block"))
-_EXIT_ROW, _MASK, _MIRRORED, _NODE, _FADE, _PARENT, _SURFACE = (ROW[name].start for name in (
+X_COLUMNS, RECT, BLOCK = (ROW[name] for name in ("x", "rect", "block"))
+_EXIT_ROW, _MASK, _MIRRORED, NODE, FADE, _PARENT, _SURFACE = (ROW[name].start for name in (
     "exit_row", "view_mask", "mirrored", "node", "fade", "parent", "surface"))
-_SCISSOR = ROW["scissor"]
-_IDS_PART = slice(_EXIT_ROW, _MIRRORED + 1)    # exit row, view mask, mirrored: what decides which surfaces
+SCISSOR = ROW["scissor"]
+IDS_PART = slice(_EXIT_ROW, _MIRRORED + 1)    # exit row, view mask, mirrored: what decides which surfaces
 # it may see and what its children's are
-_GRID_PART = slice(_BLOCK.start, _FADE + 1)    # what _child_ids holds for a level's rows: the block, then
+GRID_PART = slice(BLOCK.start, FADE + 1)    # what _child_ids holds for a level's rows: the block, then
 # the exit row, view mask, mirrored, parent, surface, fade
-_EYE = slice(_X.start + _X0 + 7 * 5, _X.start + _X0 + 7 * 5 + 4)  # IV^T's last row: the eye
-_CLIP = slice(_X.start + _NEG_CLIP * 4, _X.start + _NEG_CLIP * 4 + 4)       # minus the clip plane
-assert CAMERA_BLOCK_BYTES == 8 * (_BLOCK.stop - _BLOCK.start)
-assert _EXIT_ROW == _BLOCK.stop and _FADE == _EXIT_ROW + 5
-_GRID_WIDTH = _GRID_PART.stop - _GRID_PART.start
-_GRID_PARENT = _PARENT - _GRID_PART.start  # the parent's column in it
+_EYE = slice(X_COLUMNS.start + X0 + 7 * 5, X_COLUMNS.start + X0 + 7 * 5 + 4)  # IV^T's last row: the eye
+CLIP = slice(X_COLUMNS.start + _NEG_CLIP * 4, X_COLUMNS.start + _NEG_CLIP * 4 + 4)       # minus the clip plane
+assert CAMERA_BLOCK_BYTES == 8 * (BLOCK.stop - BLOCK.start)
+assert _EXIT_ROW == BLOCK.stop and FADE == _EXIT_ROW + 5
+GRID_WIDTH = GRID_PART.stop - GRID_PART.start
+GRID_PARENT = _PARENT - GRID_PART.start  # the parent's column in it
 
 
-def _x0(data: np.ndarray) -> np.ndarray:
+def x0_rows(data: np.ndarray) -> np.ndarray:
     """``x[0]`` of rows ``data``: (n, X_ROWS, 4)."""
-    return data[:, _X.start:_X.start + _X0].reshape(-1, X_ROWS, 4)
+    return data[:, X_COLUMNS.start:X_COLUMNS.start + X0].reshape(-1, X_ROWS, 4)
 
 
-def _x1(data: np.ndarray) -> np.ndarray:
+def x1_rows(data: np.ndarray) -> np.ndarray:
     """``x[1]`` of rows ``data``: (n, 8, 5)."""
-    return data[:, _X.start + _X0:_X.stop].reshape(-1, 8, 5)
+    return data[:, X_COLUMNS.start + X0:X_COLUMNS.stop].reshape(-1, 8, 5)
 
 
 # SurfaceTable.float_rows: what multiplies a parent's ``x`` (LEVEL_ROW) from the right: inv(carry)
@@ -86,21 +86,21 @@ def _x1(data: np.ndarray) -> np.ndarray:
 SURFACE_ROW = np.dtype([("inv_carry", "<f8", (4, 4)), ("ops", "<f8", (4, 5)), ("exit_plane", "<f8", (4,)),
                         ("neg_exit_plane", "<f8", (4,)), ("resolution_scale", "<f8")])
 _SURFACE_COLUMNS = field_columns(SURFACE_ROW, 8)
-_SURFACE_WIDTH = SURFACE_ROW.itemsize // 8
-_OPS, _EXIT_PLANE, _NEG_EXIT_PLANE = (_SURFACE_COLUMNS[name] for name in ("ops", "exit_plane", "neg_exit_plane"))
-_OPS0, _OPS1 = _SURFACE_COLUMNS["inv_carry"], _OPS
-_SCALE = _SURFACE_COLUMNS["resolution_scale"].start
+SURFACE_WIDTH = SURFACE_ROW.itemsize // 8
+_OPS, EXIT_PLANE, NEG_EXIT_PLANE = (_SURFACE_COLUMNS[name] for name in ("ops", "exit_plane", "neg_exit_plane"))
+OPS0, OPS1 = _SURFACE_COLUMNS["inv_carry"], _OPS
+SCALE = _SURFACE_COLUMNS["resolution_scale"].start
 # The Camera block's float32 columns (CAMERA_DTYPE) the planner writes.
-_MATRICES = slice(CAMERA_FLOATS["view"].start, CAMERA_FLOATS["inv_view_proj"].stop)
-_CAMERA_EYE, _CAMERA_VIEWPORT, _CAMERA_CLIP = (CAMERA_FLOATS[name] for name in ("eye", "viewport", "clip_plane"))
-_ID_SKIP, _ID_HIDE, _ID_MASK, _ID_NODE = (CAMERA_IDS.index(name) for name in ("skip", "hide", "view_mask", "node"))
-_ID_NODE_COLUMN = CAMERA_FLOATS["skip"].start + _ID_NODE  # the node's uint32 column in a block
+MATRICES = slice(CAMERA_FLOATS["view"].start, CAMERA_FLOATS["inv_view_proj"].stop)
+CAMERA_EYE, CAMERA_VIEWPORT, CAMERA_CLIP = (CAMERA_FLOATS[name] for name in ("eye", "viewport", "clip_plane"))
+ID_SKIP, ID_HIDE, ID_MASK, _ID_NODE = (CAMERA_IDS.index(name) for name in ("skip", "hide", "view_mask", "node"))
+ID_NODE_COLUMN = CAMERA_FLOATS["skip"].start + _ID_NODE  # the node's uint32 column in a block
 assert CAMERA_DTYPE.names[:4] == ("view", "proj", "view_proj", "inv_view_proj")  # the matrices, in order
 assert CAMERA_FLOATS["skip"].stop == CAMERA_BLOCK_BYTES // 4 and CAMERA_FLOATS["skip"].start % 2 == 0
 assert _ID_NODE == 3  # the last: the ids but the node are the first three of the last two float64s
 
 # A rectangle as the cull keeps it, x0, y0, -x1, -y1: its signs.
-_SIGNS = np.array([1.0, 1.0, -1.0, -1.0])
+SIGNS = np.array([1.0, 1.0, -1.0, -1.0])
 
 # The rows SurfaceTable.cull applies to a view's clip space (x, y, z, w, the rows of P0 V) to
 # get, over each corner: x0, y0, -x1, -y1 in pixels times w (half the root's width or height
@@ -155,12 +155,12 @@ class LevelRows:
     @property
     def view(self) -> np.ndarray:
         """(n, 4, 4) world -> eye."""
-        return _x0(self.data)[:, _V, 0:4]
+        return x0_rows(self.data)[:, _V, 0:4]
 
     @property
     def inv_view(self) -> np.ndarray:
         """(n, 4, 4) eye -> world."""
-        return _x1(self.data)[:, 4:8, 0:4].transpose(0, 2, 1)
+        return x1_rows(self.data)[:, 4:8, 0:4].transpose(0, 2, 1)
 
     @property
     def eye(self) -> np.ndarray:
@@ -170,12 +170,12 @@ class LevelRows:
     @property
     def clip(self) -> np.ndarray:
         """(n, 4) world clip plane (what the view keeps)."""
-        return -self.data[:, _CLIP]
+        return -self.data[:, CLIP]
 
     @property
     def rect(self) -> np.ndarray:
         """(n, 4) x0, y0, x1, y1 where it shows, screen pixels."""
-        return self.data[:, _RECT] * _SIGNS
+        return self.data[:, RECT] * SIGNS
 
     @property
     def exit_row(self) -> np.ndarray:
@@ -195,7 +195,7 @@ class LevelRows:
     @property
     def node(self) -> np.ndarray:
         """(n,) the view's index in the tree."""
-        return self.data[:, _NODE]
+        return self.data[:, NODE]
 
     @staticmethod
     def root(view: View) -> LevelRows:
@@ -230,17 +230,17 @@ def _root_template(size: tuple[int, int], clip_plane: glm.vec4, view_mask: int, 
         if len(_ROOT_TEMPLATES) > 64:
             _ROOT_TEMPLATES.clear()
         found = _ROOT_TEMPLATES[key] = np.zeros((1, LevelRows.WIDTH))
-        found[0, _RECT] = (0.0, 0.0, -size[0], -size[1])
-        found[0, _CLIP] = tuple(-clip_plane)
-        found[0, [_EXIT_ROW, _MASK, _MIRRORED, _NODE, _FADE]] = (-1.0, float(view_mask), float(mirrored), 0.0, 1.0)
+        found[0, RECT] = (0.0, 0.0, -size[0], -size[1])
+        found[0, CLIP] = tuple(-clip_plane)
+        found[0, [_EXIT_ROW, _MASK, _MIRRORED, NODE, FADE]] = (-1.0, float(view_mask), float(mirrored), 0.0, 1.0)
     return found
 
 
 # The columns of a root row LevelRows.root writes in one copy: x[0]'s first 19 rows (V, P0 V and the
 # cull's rows, not minus the clip plane) and its eye row, then x[1]'s first four columns.
-_ROOT_COLUMNS = np.concatenate([np.arange(_X.start, _X.start + 19 * 4),
-                                np.arange(_X.start + _EYE_ROW * 4, _X.start + _EYE_ROW * 4 + 4),
-                                (_X.start + _X0 + np.arange(8)[:, None] * 5 + np.arange(4)[None, :]).reshape(-1)])
+_ROOT_COLUMNS = np.concatenate([np.arange(X_COLUMNS.start, X_COLUMNS.start + 19 * 4),
+                                np.arange(X_COLUMNS.start + EYE_ROW * 4, X_COLUMNS.start + EYE_ROW * 4 + 4),
+                                (X_COLUMNS.start + X0 + np.arange(8)[:, None] * 5 + np.arange(4)[None, :]).reshape(-1)])
 
 
 class Candidates:
@@ -253,6 +253,9 @@ class Candidates:
         self.size = size          # the level's pixels
         self.end = end            # (k,) bool: an end view, cut by the depth limits (None: none asked for)
         self._chosen: dict[bytes, Candidates] = {}  # select's, once read-only
+        # What the view tree makes of a kept plan's (read-only) candidates that is a function
+        # of their rows alone, kept with them while they are (``ViewTree._level_nodes``).
+        self.derived: dict[tuple, object] = {}
 
     def __len__(self) -> int:
         return len(self.rows.data)
@@ -270,17 +273,17 @@ class Candidates:
     @functools.cached_property
     def scissor(self) -> np.ndarray:
         """(k, 4) int x, y, w, h in the level's pixels."""
-        return self.rows.data.view(np.int64)[:, _SCISSOR]
+        return self.rows.data.view(np.int64)[:, SCISSOR]
 
     @functools.cached_property
     def blocks(self) -> np.ndarray:
         """(k, CAMERA_BLOCK_BYTES / 4) float32: the packed Camera blocks."""
-        return self.rows.data[:, _BLOCK].view(np.float32)
+        return self.rows.data[:, BLOCK].view(np.float32)
 
     @functools.cached_property
     def fade(self) -> np.ndarray:
         """(k,) the reflection's weight (Mirror fades; 1: none)."""
-        return self.rows.data[:, _FADE]
+        return self.rows.data[:, FADE]
 
     def freeze(self) -> None:
         """Make every array read-only (a kept plan is shared by the frames that read it; a

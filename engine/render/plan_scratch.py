@@ -1,7 +1,7 @@
 """What the planner keeps so that a level makes few arrays and views of them: the cull's and
-the plan's scratch per count of parents or views (``_CullWork``; ``_PlanWork``, views of
-``_PlanBuffers``; kept by ``_kept_work``), the camera-free rows of a large level's parents
-(``_ChildTable``), each root projection's oblique near plane constants (``_RootRows``) and
+the plan's scratch per count of parents or views (``CullWork``; ``PlanWork``, views of
+``PlanBuffers``; kept by ``kept_work``), the camera-free rows of a large level's parents
+(``ChildTable``), each root projection's oblique near plane constants (``RootRows``) and
 read-only node numbers.
 
 A view of an array costs about what a small numpy call does (1-3 us in a frame), so each one
@@ -19,38 +19,38 @@ import numpy as np
 
 from engine.core.reflection_math import OBLIQUE_SAFE_NEARS
 from engine.render.plan_rows import (
-    _BLOCK,
-    _CAMERA_EYE,
-    _CLIP,
-    _CULL,
-    _EXIT_PLANE,
-    _EYE_ROW,
-    _FADE,
-    _GRID_PART,
-    _GRID_WIDTH,
-    _ID_NODE_COLUMN,
-    _MATRICES,
-    _NEG_EXIT_PLANE,
-    _NODE,
-    _OPS0,
-    _OPS1,
-    _RECT,
-    _SCALE,
-    _SCISSOR,
-    _SURFACE_WIDTH,
-    _X,
-    _X0,
+    BLOCK,
+    CAMERA_EYE,
+    CLIP,
+    CULL,
+    EXIT_PLANE,
+    EYE_ROW,
+    FADE,
+    GRID_PART,
+    GRID_WIDTH,
+    ID_NODE_COLUMN,
+    MATRICES,
+    NEG_EXIT_PLANE,
+    NODE,
+    OPS0,
+    OPS1,
+    RECT,
+    SCALE,
+    SCISSOR,
+    SURFACE_WIDTH,
+    X0,
+    X_COLUMNS,
     X_ROWS,
     LevelRows,
-    _x0,
-    _x1,
+    x0_rows,
+    x1_rows,
 )
 
-_Work = TypeVar("_Work")  # a kind of scratch (_kept_work)
-_E23 = np.array([0.0, 0.0, 1.0, 1.0])  # e2 + e3, a row a view (_PlanBuffers.e23)
+_Work = TypeVar("_Work")  # a kind of scratch (kept_work)
+_E23 = np.array([0.0, 0.0, 1.0, 1.0])  # e2 + e3, a row a view (PlanBuffers.e23)
 
 
-class _CullWork:
+class CullWork:
     """``SurfaceTable.cull``'s scratch for a count of parents: its arrays and every view of
     them it reads, made once (a view costs about what a small numpy call does), so a cull
     makes none and allocates only its results."""
@@ -62,7 +62,7 @@ class _CullWork:
         self.sides, self.w = clip[:corners, 0:4], clip[:corners, 4:5]
         self.w_safe = np.empty((corners, 1, count, surfaces))
         self.epsilon = np.full((corners, 1, count, surfaces), 1e-6)  # (a scalar operand costs more)
-        self.facing = clip[corners, _EYE_ROW - _CULL.start]  # the eye's row times the planes
+        self.facing = clip[corners, EYE_ROW - CULL.start]  # the eye's row times the planes
         self.least = np.empty((14, count, surfaces))
         self.rects = self.least[0:4]
         self.x0y0, self.x1y1 = self.rects[0:2], self.rects[2:4]
@@ -73,7 +73,7 @@ class _CullWork:
         self.seen = np.empty((count, surfaces), bool)
 
 
-class _ChildTable:
+class ChildTable:
     """The camera-free rows (``SurfaceTable._child_row``) of every parent's ids seen with one
     ``hide``, root projection and size, stacked (S rows each), and where each parent's
     first row is: a large level gathers its candidates' rows from it in one ``take``."""
@@ -81,18 +81,18 @@ class _ChildTable:
     def __init__(self) -> None:
         self.firsts: dict[tuple[float, ...], int] = {}
         self.rows: list[np.ndarray] = []
-        self.stacked = np.zeros((0, _GRID_WIDTH), np.int64)
+        self.stacked = np.zeros((0, GRID_WIDTH), np.int64)
 
 
-class _PlanBuffers:
-    """The arrays of ``_PlanWork`` for up to ``capacity`` views (a power of two, at least
+class PlanBuffers:
+    """The arrays of ``PlanWork`` for up to ``capacity`` views (a power of two, at least
     16): one set per capacity, so the scratches of every count are views of a few arrays
     (not a set of arrays each: that memory, kept, evicted the frame's own from the caches;
     made afresh, it cost its first writes)."""
 
     def __init__(self, capacity: int) -> None:
-        self.parent = np.empty((capacity, _X.stop - _X.start))
-        self.surface = np.empty((capacity, _SURFACE_WIDTH))
+        self.parent = np.empty((capacity, X_COLUMNS.stop - X_COLUMNS.start))
+        self.surface = np.empty((capacity, SURFACE_WIDTH))
         self.data = np.empty((capacity, LevelRows.WIDTH))
         self.signs = np.ones((capacity, 4))  # (sign p.x, sign p.y, 1, 1)
         self.f = np.empty(capacity)
@@ -106,31 +106,31 @@ class _PlanBuffers:
         self.outer = np.empty((capacity, 4, 4))
 
 
-class _PlanWork:
+class PlanWork:
     """``SurfaceTable._plan``'s scratch for a count of views: the gathered parent and surface
     rows, the level's rows (copied out at the end) and every view of them it writes or
     reads, made once (views of the first ``k`` rows of ``buffers``)."""
 
-    def __init__(self, k: int, buffers: _PlanBuffers) -> None:
+    def __init__(self, k: int, buffers: PlanBuffers) -> None:
         self.buffers = buffers
         self.parent, self.surface = buffers.parent[:k], buffers.surface[:k]
-        self.parent_x0 = self.parent[:, 0:_X0].reshape(k, X_ROWS, 4)
-        self.parent_x1 = self.parent[:, _X0:].reshape(k, 8, 5)[..., 0:4]
-        self.ops0 = self.surface[:, _OPS0].reshape(k, 4, 4)
-        self.ops1 = self.surface[:, _OPS1].reshape(k, 4, 5)
-        self.exit, self.neg_exit = self.surface[:, _EXIT_PLANE], self.surface[:, _NEG_EXIT_PLANE]
-        self.scale = self.surface[:, _SCALE]
+        self.parent_x0 = self.parent[:, 0:X0].reshape(k, X_ROWS, 4)
+        self.parent_x1 = self.parent[:, X0:].reshape(k, 8, 5)[..., 0:4]
+        self.ops0 = self.surface[:, OPS0].reshape(k, 4, 4)
+        self.ops1 = self.surface[:, OPS1].reshape(k, 4, 5)
+        self.exit, self.neg_exit = self.surface[:, EXIT_PLANE], self.surface[:, NEG_EXIT_PLANE]
+        self.scale = self.surface[:, SCALE]
         self.data = data = buffers.data[:k]
         ints = data.view(np.int64)
-        self.x0, self.x1 = x0, x1 = _x0(data), _x1(data)
-        self.eye_row, self.eye = x0[:, _EYE_ROW], x1[:, 7, 0:4]
-        self.clip, self.rect = data[:, _CLIP], data[:, _RECT]
-        self.grid, self.scissor = ints[:, _GRID_PART], ints[:, _SCISSOR]
-        self.fade, self.node = data[:, _FADE], data[:, _NODE]
-        block = data[:, _BLOCK].view(np.float32)
-        self.block_node = block.view(np.uint32)[:, _ID_NODE_COLUMN]
-        self.block_eye = block[:, _CAMERA_EYE]
-        matrices = block[:, _MATRICES].reshape(k, 4, 4, 4)
+        self.x0, self.x1 = x0, x1 = x0_rows(data), x1_rows(data)
+        self.eye_row, self.eye = x0[:, EYE_ROW], x1[:, 7, 0:4]
+        self.clip, self.rect = data[:, CLIP], data[:, RECT]
+        self.grid, self.scissor = ints[:, GRID_PART], ints[:, SCISSOR]
+        self.fade, self.node = data[:, FADE], data[:, NODE]
+        block = data[:, BLOCK].view(np.float32)
+        self.block_node = block.view(np.uint32)[:, ID_NODE_COLUMN]
+        self.block_eye = block[:, CAMERA_EYE]
+        matrices = block[:, MATRICES].reshape(k, 4, 4, 4)
         self.v_p0v_block = matrices[:, 0:3:2]
         self.v_p0v = x0[:, 0:8, 0:4].reshape(k, 2, 4, 4).transpose(0, 1, 3, 2)
         self.proj_row, self.vp_row, self.inv = matrices[:, 1, :, 2], matrices[:, 2, :, 2], matrices[:, 3]
@@ -149,7 +149,7 @@ class _PlanWork:
         self.inv_source = x1[:, 0:4, 0:4]
 
 
-# How many scratches a table keeps of each kind (_CullWork, _PlanWork), the first kept dropped
+# How many scratches a table keeps of each kind (CullWork, PlanWork), the first kept dropped
 # first, and for counts up to what: a
 # scratch made afresh costs as much as the views it saves, which is what a level of a few
 # views costs; a large level's work is in its arrays, and keeping its scratches (half a
@@ -159,7 +159,7 @@ WORK_KEPT = 48
 WORK_KEPT_COUNT = 16
 
 
-def _kept_work(kept: dict, count: int, make: Callable[[int], _Work]) -> _Work:
+def kept_work(kept: dict, count: int, make: Callable[[int], _Work]) -> _Work:
     """A new scratch for ``count``, kept in ``kept`` (the first kept dropped when full) for a
     count up to ``WORK_KEPT_COUNT``."""
     found = make(count)
@@ -171,7 +171,7 @@ def _kept_work(kept: dict, count: int, make: Callable[[int], _Work]) -> _Work:
 
 
 @dataclass
-class _RootRows:
+class RootRows:
     """What the oblique near planes read of a root projection, worked out once per projection."""
 
     safe_distance: float     # closer to its plane, a view keeps the clip distance alone
@@ -180,11 +180,11 @@ class _RootRows:
     of: np.ndarray           # the projection
 
 
-_ROOTS: dict[bytes, _RootRows] = {}
-_LAST_ROOT: list[_RootRows | None] = [None]
+_ROOTS: dict[bytes, RootRows] = {}
+_LAST_ROOT: list[RootRows | None] = [None]
 
 
-def _root_rows(root_proj: np.ndarray) -> _RootRows:
+def kept_root_rows(root_proj: np.ndarray) -> RootRows:
     """The oblique near planes' constants of ``root_proj``: the last one's again for the same
     read-only array (the view tree's, kept while its root's projection stays), else found by
     its bytes."""
@@ -197,7 +197,7 @@ def _root_rows(root_proj: np.ndarray) -> _RootRows:
         if len(_ROOTS) > 32:
             _ROOTS.clear()
         near = root_proj[2, 3] / (root_proj[2, 2] - 1.0)
-        found = _ROOTS[key] = _RootRows(OBLIQUE_SAFE_NEARS * near, key, root_proj.T.copy(), root_proj)
+        found = _ROOTS[key] = RootRows(OBLIQUE_SAFE_NEARS * near, key, root_proj.T.copy(), root_proj)
     _LAST_ROOT[0] = found
     return found
 
@@ -206,7 +206,7 @@ def _root_rows(root_proj: np.ndarray) -> _RootRows:
 _NODES = np.arange(1024, dtype=np.float64)
 
 
-def _node_numbers(first: int, k: int) -> np.ndarray:
+def node_numbers(first: int, k: int) -> np.ndarray:
     """first, first + 1, ... k of them (read only, float64)."""
     global _NODES
     if len(_NODES) < first + k:

@@ -4,12 +4,16 @@ Each frame, with no read back to the CPU and so no wait for the GPU:
 
 1. the HDR image's log2 luminance into a 64x64 texture (``shaders/exposure_luminance.frag``:
    four taps a texel, each clamped to the range the exposure limits can correct);
-2. reduced by 4x4 means to 16x16 and 4x4 (``shaders/exposure_reduce.frag``: exact means,
-   not a driver's ``glGenerateMipmap`` filter, which the GL spec leaves to the driver);
-3. the adapted exposure, a 1x1 texture (``shaders/exposure_adapt.frag``): the last 4x4
-   level's mean gives the target ``log2(key) - mean log2 L`` EV, clamped to
-   ``[min_ev, max_ev]``, and last frame's value moves ``1 - exp(-adapt_speed dt)`` of the
-   way to it (two 1x1 textures, written in turn, so a pass never reads what it writes).
+2. the adapted exposure, a 1x1 texture (``shaders/exposure_adapt.frag``): the 64x64
+   texture's mean (an exact mean, its own 32x32 bilinear taps at texel corners, not a
+   driver's ``glGenerateMipmap`` filter, which the GL spec leaves to the driver) gives the
+   target ``log2(key) - mean log2 L`` EV, clamped to ``[min_ev, max_ev]``, and last
+   frame's value moves ``1 - exp(-adapt_speed dt)`` of the way to it (two 1x1 textures,
+   written in turn, so a pass never reads what it writes).
+
+Two draws: an earlier form reduced 64 -> 16 -> 4 in draws of their own, two more passes
+(0.1 ms of the four's 0.4 at 640x360 on llvmpipe, where each pass is a flush and a wait);
+the one texel's loop of 1024 taps costs less than either.
 
 The present shader reads the new 1x1 value (``exposure_state``) as 2^EV.  A camera's first
 frame (or the first after the active camera changes) starts at its target.  ``adapted_ev``
@@ -28,8 +32,7 @@ from engine.render.bindings import EXPOSURE_UNIT, PRESENT_UNIT, PassState, apply
 from engine.render.shader_library import ShaderLibrary
 from engine.render.targets import release_framebuffer
 
-LUMINANCE_SIDE = 64
-REDUCE_SIDES = (16, 4)
+LUMINANCE_SIDE = 64   # shaders/exposure_adapt.frag SIDE
 _PASS = PassState()
 
 
@@ -45,7 +48,6 @@ class AutoExposure:
         self.ctx = ctx
         self.shaders = shaders
         self._luminance = self._vao("exposure_luminance.frag", hdr_image=PRESENT_UNIT)
-        self._reduce = self._vao("exposure_reduce.frag", source=PRESENT_UNIT)
         self._adapt = self._vao("exposure_adapt.frag", mean_source=PRESENT_UNIT, previous=EXPOSURE_UNIT)
         self._targets: list[tuple[moderngl.Texture, moderngl.Framebuffer]] = []
         self._state: list[tuple[moderngl.Texture, moderngl.Framebuffer]] = []
@@ -69,6 +71,7 @@ class AutoExposure:
 
     def _target(self, side: int, data: bytes | None = None) -> tuple[moderngl.Texture, moderngl.Framebuffer]:
         texture = self.ctx.texture((side, side), 1, data, dtype="f4")
+        # The luminance texture is read by bilinear taps at texel corners (exact 2x2 means).
         texture.filter = (moderngl.LINEAR, moderngl.LINEAR) if side == LUMINANCE_SIDE else (moderngl.NEAREST,
                                                                                             moderngl.NEAREST)
         texture.repeat_x = texture.repeat_y = False
@@ -77,7 +80,7 @@ class AutoExposure:
     def _make(self) -> None:
         if self._targets:
             return
-        self._targets = [self._target(side) for side in (LUMINANCE_SIDE, *REDUCE_SIDES)]
+        self._targets = [self._target(LUMINANCE_SIDE)]
         zero = np.zeros(1, np.float32).tobytes()   # a defined start (the adapt pass ignores it on a reset)
         self._state = [self._target(1, zero), self._target(1, zero)]
 
@@ -95,18 +98,11 @@ class AutoExposure:
         bind_texture(self.ctx, hdr, PRESENT_UNIT)
         self._set(self._luminance, "log_range", (key_log2 - tonemap.max_ev, key_log2 - tonemap.min_ev))
         self._luminance.render(moderngl.TRIANGLES, vertices=3)
-        # 2. 4x4 means down to 4x4.
-        for (source, _), (_, target) in zip(self._targets, self._targets[1:], strict=False):
-            side = target.size[0]
-            target.use()
-            apply_pass_state(ctx, _PASS, (0, 0, side, side))
-            bind_texture(self.ctx, source, PRESENT_UNIT)
-            self._reduce.render(moderngl.TRIANGLES, vertices=3)
-        # 3. adapt: read last frame's 1x1, write the other.
+        # 2. its mean, and adapt: read last frame's 1x1, write the other.
         previous, (state, state_fbo) = self._state
         state_fbo.use()
         apply_pass_state(ctx, _PASS, (0, 0, 1, 1))
-        bind_texture(self.ctx, self._targets[-1][0], PRESENT_UNIT)
+        bind_texture(self.ctx, texture, PRESENT_UNIT)
         bind_texture(self.ctx, previous[0], EXPOSURE_UNIT)
         self._set(self._adapt, "key_log2", key_log2)
         self._set(self._adapt, "ev_range", (tonemap.min_ev, tonemap.max_ev))
@@ -117,7 +113,7 @@ class AutoExposure:
         return state
 
     def passes(self) -> int:
-        return 2 + len(REDUCE_SIDES)
+        return 2
 
     def adapted_ev(self) -> float | None:
         """The exposure last written, in EV (read back: waits for the GPU; tests and the
@@ -135,5 +131,5 @@ class AutoExposure:
 
     def release(self) -> None:
         self.release_targets()
-        for vao in (self._luminance, self._reduce, self._adapt):
+        for vao in (self._luminance, self._adapt):
             vao.release()

@@ -16,6 +16,16 @@ already composited, get no seam at their edges.  Its walk along an edge (long ne
 edges become ramps) is ``search_steps`` long: 8 on a GPU; 0 on a software rasteriser,
 where each step costs ~4% of a mirrorless frame (every fetch is CPU time there), so it
 blends only the pixels that stand out at an edge (the stair steps).
+
+What post-processing adds to a frame, and where (640x360, no mirror, llvmpipe, process CPU
+time, variants interleaved; ``python -m benchmarks lighting``): against a camera without
+the components, which draws the same two full-screen passes (present and FXAA, the same
+half-float image read and the same RGBA8 targets written), ``Tonemap(curve="agx")`` alone
+adds about 10% (its curve: three log2 and three pow a pixel, ACES and PBR Neutral about a
+quarter of that), ``Bloom()`` alone about 10% (the chain's nine draws, the first reading the
+whole image, about 1.4 ms of CPU, and the present draw's one bilinear tap of the chain), so
+``post`` is about 1.2x.  No pass runs at full resolution that the plain frame lacks; the
+POST build fetches the image's texel where the plain one filters it.
 """
 from __future__ import annotations
 

@@ -21,7 +21,7 @@ import logging
 import math
 import statistics
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
@@ -96,19 +96,21 @@ def _face_planes() -> np.ndarray:
 
 
 _FACE_PLANES = _face_planes()
+_FACE_PLANES_BY_COLUMN = _FACE_PLANES.reshape(-1, 3).T.copy()  # (xyz, face * plane): one matrix product
 _CORNERS = np.array([(x, y, z) for x in (0, 1) for y in (0, 1) for z in (0, 1)], dtype=bool)  # (8, 3)
 
 
 def face_touches(position: glm.vec3 | Sequence[float], lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
     """(box, face) booleans: which cube faces from ``position`` each world box [lo, hi] (rows)
     may show.  Conservative: a box is left out of a face only when all eight of its corners
-    are outside one of the face's planes through the apex (``_face_planes``); a fragment
-    lies at least half a pixel inside the frustum, far from that test's rounding."""
+    are outside one of the face's planes through the apex (``_face_planes``: the farthest
+    corner along the plane's normal is outside); a fragment lies at least half a pixel
+    inside the frustum, far from that test's rounding."""
     centre = np.asarray(tuple(position), np.float64)
     lo, hi = np.atleast_2d(lo) - centre, np.atleast_2d(hi) - centre
     corners = np.where(_CORNERS[None], hi[:, None, :], lo[:, None, :])  # (box, corner, xyz)
-    inside = np.einsum("bck,fpk->bcfp", corners, _FACE_PLANES) >= 0.0  # (box, corner, face, plane)
-    return ~(~inside).all(axis=1).any(axis=2)
+    farthest = (corners @ _FACE_PLANES_BY_COLUMN).max(axis=1)  # (box, face * plane)
+    return (farthest >= 0.0).reshape(len(corners), 6, -1).all(axis=2)
 
 
 def sky_only_faces(position: glm.vec3, faces: frozenset[int] | set[int], skip: int,
@@ -118,27 +120,39 @@ def sky_only_faces(position: glm.vec3, faces: frozenset[int] | set[int], skip: i
     frame's upload) touches the face's frustum (``face_touches``, conservative; the far
     plane is not used, which only keeps more boxes in).  ``skip`` (the probe's own object,
     which no face draws) is left out, as the scene pass leaves it out.  Such a face shows
-    the sky alone.  A row not measured yet (NaN) counts as touching every face."""
+    the sky alone.  A row not measured yet (NaN) counts as touching every face.  The
+    batches' boxes (their rows' union) are tested together first; only a batch of several
+    instances whose box touches a face still left has its rows tested."""
     left = set(faces)
-    for batch in batches:
+    if not left:
+        return frozenset()
+    live = [batch for batch in batches if batch.count and not (batch.count == 1 and batch.entity_at[0] == skip)]
+    if not live:
+        return frozenset(left)
+    unions = [batch.box for batch in live]
+    if any(union is None for union in unions):
+        return frozenset()
+    lo, hi = np.array([union[0] for union in unions]), np.array([union[1] for union in unions])
+    if np.isnan(lo).any() or np.isnan(hi).any():
+        return frozenset()
+    near = face_touches(position, lo, hi)  # (batch, face)
+    for index in np.flatnonzero(near[:, sorted(left)].any(axis=1)).tolist():
+        batch = live[index]
+        if not any(near[index, face] for face in left):
+            continue
+        if batch.count == 1:
+            hits = near[index]  # one instance (not the skipped one): its box is the batch's
+        else:
+            row = batch.row_of.get(skip) if skip else None
+            boxes = batch.row_boxes
+            if row is not None:
+                boxes = np.delete(boxes, row, axis=0)
+            if not len(boxes):
+                continue
+            hits = face_touches(position, boxes[:, 0], boxes[:, 1]).any(axis=0)
+        left = {face for face in left if not hits[face]}
         if not left:
             break
-        if not batch.count or (batch.count == 1 and batch.entity_at[0] == skip):
-            continue
-        union = batch.box
-        if union is None or np.isnan(union[0]).any() or np.isnan(union[1]).any():
-            return frozenset()
-        near = face_touches(position, union[0], union[1])[0]
-        if not any(near[face] for face in left):
-            continue
-        boxes = batch.row_boxes
-        row = batch.row_of.get(skip) if skip else None
-        if row is not None:
-            boxes = np.delete(boxes, row, axis=0)
-        if not len(boxes):
-            continue
-        hits = face_touches(position, boxes[:, 0], boxes[:, 1]).any(axis=0)
-        left = {face for face in left if not hits[face]}
     return frozenset(left)
 
 
@@ -156,6 +170,20 @@ class _Same:
 
     def __hash__(self) -> int:
         return id(self.obj)
+
+
+@dataclass
+class _KeepPlan:
+    """A six-pass capture's faces kept as they are (``kept``), those showing the sky alone
+    (``sky_only``), what every face is drawn with (``scene``: ``ProbeCaptures._scene_record``,
+    None where faces draw view trees) and each face's own record (``records``:
+    ``ProbeCaptures._sky_record``)."""
+
+    kept: frozenset[int]
+    sky_only: frozenset[int]
+    scene: tuple | None
+    records: dict[int, tuple]
+    direct: bool  # faces drawn straight into the cube (the records say so)
 
 
 class CubeMipPass:
@@ -188,13 +216,18 @@ class CubeMipPass:
         around a capture counts them too; the per-face pass emits as many)."""
         return 6 * (size.bit_length() - 1)
 
-    def build(self, key: int, cube: moderngl.TextureCube, prefilter: str = "mips", way: str | None = None) -> str:
+    def build(self, key: int, cube: moderngl.TextureCube, prefilter: str = "mips", way: str | None = None,
+              faces: Iterable[int] | None = None) -> str:
         """Levels 1.. of ``cube`` from its level 0: box-filtered (``mips``), or each level the
         one above convolved with a GGX lobe so that level L holds roughness L / top level
         (``ggx``; ``ProbeCube.roughness_levels``).  ``way`` forces "layered" or "per_face"
         (the path self-check compares them); None chooses as the class docstring says.
-        Returns the prefilter built: "mips" where a GGX chain cannot be drawn here (neither
-        of the drawn passes is reachable or verified; a warning says so once)."""
+        ``faces``: box mips of these faces only (the others' chains are built from their
+        level 0 as it is: a texel's 2 x 2 box lies inside its face, so each face's chain
+        reads that face alone); None, and every GGX chain (its lobes cross the faces' edges),
+        all six; ``glGenerateMipmap`` builds all six whatever it is given.  Returns the
+        prefilter built: "mips" where a GGX chain cannot be drawn here (neither of the drawn
+        passes is reachable or verified; a warning says so once)."""
         ggx = prefilter == "ggx"
         target = self._target(key, cube)
         if target is None and ggx:
@@ -217,6 +250,9 @@ class CubeMipPass:
         one_face = way == "per_face"
         vao = self._program_vao(ggx, one_face)
         program = vao.program
+        drawn = range(6) if faces is None or ggx else sorted(faces)
+        if not one_face:
+            program["face_mask"].value = sum(1 << face for face in drawn)
         apply_pass_state(self.ctx, self.STATE, (0, 0, *cube.size))
         for unit in (PROBE_UNIT, PROBE2_UNIT, PROBE_REST_UNIT, SCRATCH_UNIT):
             bind_texture(self.ctx, self.renderer.sky, unit)  # the cube is bound only where the pass reads it
@@ -227,7 +263,7 @@ class CubeMipPass:
                 if ggx:
                     alpha, above = (level / top) ** 2, ((level - 1) / top) ** 2
                     program["alpha"].value = math.sqrt(alpha * alpha - above * above)
-                for face in (range(6) if one_face else (None,)):
+                for face in (drawn if one_face else (None,)):
                     program["level_size"].value = float(target.bind_level(level, CUBE_MIP_UNIT, face))
                     if face is not None:
                         program["face"].value = face
@@ -350,8 +386,9 @@ class ProbePaths:
     ``layered_array_capture`` is (the NVIDIA H200's driver takes a layered draw into an
     array but not into a cube map: ``layered_target``); where neither is, a forced or
     chosen ``layered`` takes ``six_pass`` (a refused layered capture would leave faces
-    unwritten), and ``auto`` never times it.  A capture of some faces only, or of a probe
-    whose faces see mirrors or portals, takes ``six_pass``.
+    unwritten), and ``auto`` never times it.  A capture of some faces only (a face kept as
+    it is, or one the scheduler says no change reached, counts: ``ProbeCaptures.capture_probe``),
+    or of a probe whose faces see mirrors or portals, takes ``six_pass``.
 
     How ``auto`` measures, with no ``ctx.finish()`` in a frame stage.  On the first full
     capture either path could draw, each path draws it once untimed (programs built, targets
@@ -492,7 +529,17 @@ class ProbeCaptures:
         # By probe, face -> what the face was last drawn with where it showed the sky alone
         # (``_sky_record``): such a face is not drawn again while that holds (``capture``).
         self._sky_faces: dict[int, dict[int, tuple]] = {}
-        self._mips_current: set[int] = set()  # probes whose mip chain was built from their faces as they are
+        # By probe, face -> what the face was last drawn with (``_sky_record``, ``_scene_record``):
+        # a face the scheduler says no change reached is not drawn again while that holds.
+        self._scene_faces: dict[int, dict[int, tuple]] = {}
+        self._versions: dict[int, int] = {}  # by probe: counts writes of its cube (what samples it changes)
+        # By probe: its six face views and each one's camera as a record reads it, for the
+        # place and settings they were made for (face_views).
+        self._views: dict[int, tuple[tuple, dict[int, View], dict[int, tuple]]] = {}
+        self._projected: dict[int, int] = {}  # by probe: its cube's version its irradiance row was projected from
+        # By probe whose mip chain was built from its faces: the faces drawn since (their
+        # chains are built again; absent: the whole chain is).
+        self._mips_stale: dict[int, set[int]] = {}
         self.faces_kept = 0  # faces left as they were, the sky alone as before (counted over the run)
 
     def cube(self, key: int, resolution: int) -> ProbeCube:
@@ -505,43 +552,78 @@ class ProbeCaptures:
                                    f"over this OpenGL's GL_MAX_CUBE_MAP_TEXTURE_SIZE {limit}")
             if cube is not None:
                 cube.texture.release()
-            self._sky_faces.pop(key, None)
-            self._mips_current.discard(key)
+            self._forget_faces(key)
+            self._mips_stale.pop(key, None)
             texture = self.ctx.texture_cube((resolution, resolution), 4, dtype="f2")
             texture.filter = (moderngl.LINEAR_MIPMAP_LINEAR, moderngl.LINEAR)
             cube = self.cubes[key] = ProbeCube(texture, resolution)
         return cube
 
+    def face_views(self, key: int, faces: Iterable[int], position: glm.vec3,
+                   settings: ReflectionProbe) -> dict[int, View]:
+        """The views of ``faces`` of probe ``key`` from ``position`` (``face_view``), made
+        once for a place and the settings they depend on and given again while those hold
+        (a View is not changed after it is made; its Camera block is packed once)."""
+        ident = (tuple(position), settings.near, settings.far, settings.resolution, settings.layer_mask)
+        made = self._views.get(key)
+        if made is None or made[0] != ident:
+            views = {face: face_view(face, position, settings.near, settings.far, settings.resolution, skip=key,
+                                     layers=settings.layer_mask) for face in range(6)}
+            cameras = {face: (view.view.to_tuple(), view.proj.to_tuple(), tuple(view.eye), view.size)
+                       for face, view in views.items()}
+            made = self._views[key] = (ident, views, cameras)
+        return {face: made[1][face] for face in faces}
+
     def capture_probe(self, key: int, faces: frozenset[int], position: glm.vec3, settings: ReflectionProbe,
-                      surfaces: SurfaceTable | None = None, blends: SurfaceBlends = NO_BLENDS) -> str:
+                      surfaces: SurfaceTable | None = None, blends: SurfaceBlends = NO_BLENDS,
+                      unchanged: frozenset[int] = frozenset()) -> str:
         """Capture ``faces`` of probe ``key`` (the entity owning it, whose own object every
         face leaves out) from ``position`` with ``settings``, by the path ``paths`` takes
         (``blends``: what a surface no face view reaches shows, the extract stage's;
         ``surfaces``: the planner's table of this frame's mirrors and portals,
         ``engine.render.surface_table``, that a face's view tree draws, up to
-        ``settings.depth``); then the cube's record of where
-        it was captured from and its projection box (``probe_rules.projection_box``): the
-        cube's fields are set here only.  Returns the path that drew it."""
-        views = {face: face_view(face, position, settings.near, settings.far, settings.resolution, skip=key,
-                                 layers=settings.layer_mask)
-                 for face in faces}
+        ``settings.depth``; ``unchanged``: the faces no change reached since they were last
+        drawn, the scheduler's ``ProbeDue.unchanged``, kept as ``capture`` says); then the
+        cube's record of where it was captured from and its projection box
+        (``probe_rules.projection_box``): the cube's fields are set here only.  Returns the
+        path that drew it.
+
+        A capture where the six-pass path keeps a face, or where the scheduler says a face
+        is unchanged, is a capture of some faces: it takes ``six_pass`` (the layered pass
+        draws all six, and leaves no face a record to be kept by).  So a probe recaptured
+        every frame in a scene where some faces see no change draws six-pass from its
+        second capture on, whichever path ``auto`` timed faster on its first (at 128 texels
+        on llvmpipe the two are within a few per cent there, which is why ``auto``'s choice
+        flips from run to run: the choice no longer changes such a probe's frames)."""
+        views = self.face_views(key, faces, position, settings)
         sees_surfaces = settings.depth > 0 and surfaces is not None and bool(surfaces.states)
         table = surfaces if sees_surfaces else None
+        plan = None
+        if key in self.cubes and self.cubes[key].resolution == settings.resolution:  # else a new cube: none kept
+            plan = self._keep_plan(key, views, unchanged, self._direct(sees_surfaces), sees_surfaces)
         draws = {"six_pass": lambda: self.capture(key, views, table, settings.depth, settings.prefilter,
-                                                  blends=blends),
+                                                  blends=blends, unchanged=unchanged, plan=plan),
                  "layered": lambda: self.capture_layered(key, views, prefilter=settings.prefilter)}
-        path = self.paths.draw(draws, len(faces) == 6 and not sees_surfaces, settings.resolution)
+        # A face kept, or one no change reached (kept from the next capture on, once drawn
+        # with a record): a capture of some faces, which the six-pass path draws.
+        kept = plan is not None and plan.kept
+        path = self.paths.draw(draws, len(faces) == 6 and not sees_surfaces and not kept and not unchanged,
+                               settings.resolution)
         cube = self.cubes[key]
         cube.position = tuple(position)
         cube.box = projection_box(position, settings)
-        if settings.influence is not None:  # its irradiance, from the new mip chain (engine/render/irradiance.py)
-            self.irradiance.project(key, cube)
+        if settings.influence is not None and self._projected.get(key) != self._versions.get(key, 0):
+            # Its irradiance, from the new mip chain (engine/render/irradiance.py); a capture
+            # that kept every face and its chain leaves the row as it was projected.
+            if self.irradiance.project(key, cube):
+                self._projected[key] = self._versions.get(key, 0)
         self.renderer.stats.probe_captures += 1
         return path
 
     def capture(self, key: int, views: dict[int, View], surfaces: SurfaceTable | None, depth: int,
                 prefilter: str = "mips", direct: bool | None = None, build_mips: bool = True,
-                blends: SurfaceBlends = NO_BLENDS) -> None:
+                blends: SurfaceBlends = NO_BLENDS, unchanged: frozenset[int] = frozenset(),
+                plan: _KeepPlan | None = None) -> None:
         """Draw each face view of ``views`` (face -> view, all of the probe's resolution) into
         the probe's cube, then rebuild the cube's mips.  A face that sees mirrors or portals
         (``surfaces`` given, ``depth`` > 0) roots a view tree, which needs the id images of a
@@ -553,27 +635,35 @@ class ProbeCaptures:
         frustum) and showed the sky alone at its last drawing, with the same camera, sky,
         sky program and path (``_sky_record``), is not drawn again: its pixels would be the
         ones it holds.  It is still fresh (a capture of it now gives the same picture), so a
-        dynamic probe keeps its meaning.  Its mips are rebuilt with the others'; when no
-        face was drawn and the chain was built from the faces as they are, not even that."""
+        dynamic probe keeps its meaning.  Likewise a face of ``unchanged`` (due for a period
+        alone, and no change the scheduler follows reached it since it was drawn:
+        ``ProbeDue.unchanged``) drawn last by this path with the same camera, sky and
+        programs and the same instances' order, shadow maps' blocks and lookups, filtering
+        and cubes of the probes it may show (``_scene_record``).  Its mips are rebuilt with
+        the others'; when no face was drawn and the chain was built from the faces as they
+        are, not even that.  ``plan``: what is kept, worked out already (``capture_probe``,
+        for a capture drawn now, before any other); None works it out here."""
         renderer = self.renderer
         resolution = next(iter(views.values())).size[0]
         cube = self.cube(key, resolution)
         trees = surfaces is not None and depth > 0
         if direct is None:
-            direct = not trees and self.direct_faces and renderer.path_checks.trusted("direct_faces")
+            direct = self._direct(trees)
         targets_direct = self._face_targets(key, cube.texture) if direct and not trees else None
+        direct = targets_direct is not None
+        if plan is None or plan.direct != direct:  # (a face target refused just now: the copy path)
+            plan = self._keep_plan(key, views, unchanged, direct, trees)
         records = self._sky_faces.setdefault(key, {})
-        first = next(iter(views.values()))
-        sky_only = sky_only_faces(first.eye, frozenset(views), first.skip,
-                                  [*renderer.opaque_batches(), *renderer.transparent_batches()])
-        drawn = 0
+        scene_records = self._scene_faces.setdefault(key, {})
+        kept, sky_only, scene = plan.kept, plan.sky_only, plan.scene
+        drawn = set()
         with self._drawing_into(key):
             for face, view in sorted(views.items()):
-                record = self._sky_record(view, targets_direct is not None) if face in sky_only else None
-                if record is not None and records.get(face) == record:
+                if face in kept:
                     self.faces_kept += 1
                     continue
-                drawn += 1
+                record = plan.records[face]
+                drawn.add(face)
                 if targets_direct is not None:
                     self.scene_pass.draw([view], targets_direct.faces[face], FACE)
                 else:
@@ -584,31 +674,99 @@ class ProbeCaptures:
                         self.tree.render(view, levels, surfaces, TreeSettings(depth_cap=depth), blends)
                     renderer.raw_gl.copy_to_cube_face(targets.framebuffer, cube.texture, face, SCRATCH_UNIT)
                     renderer.checkpoint(f"probe face {face} copy")
-                if record is None:
-                    records.pop(face, None)
-                else:
+                if face in sky_only:
                     records[face] = record
+                else:
+                    records.pop(face, None)
+                if scene is None:
+                    scene_records.pop(face, None)
+                else:
+                    scene_records[face] = (record, scene)
                 renderer.stats.probe_faces += 1
+        stale = self._mips_stale.get(key)
+        if stale is not None:
+            stale |= drawn
+        if build_mips and (stale is None or stale or cube.prefilter != prefilter):
+            faces = stale if stale is not None and cube.prefilter == prefilter else None
+            cube.prefilter = self.mips.build(key, cube.texture, prefilter, faces=faces)
+            self._mips_stale[key] = set()
+            drawn.add(-1)
         if drawn:
-            self._mips_current.discard(key)
-        if build_mips and (key not in self._mips_current or cube.prefilter != prefilter):
-            cube.prefilter = self.mips.build(key, cube.texture, prefilter)
-            self._mips_current.add(key)
+            self._versions[key] = self._versions.get(key, 0) + 1
 
     def written_elsewhere(self, key: int) -> None:
         """Probe ``key``'s cube was written by something other than a capture (a test's
         sentinel, a tool): no face is kept as it is at its next capture, nor its mips."""
-        self._sky_faces.pop(key, None)
-        self._mips_current.discard(key)
+        self._forget_faces(key)
+        self._mips_stale.pop(key, None)
 
-    def _sky_record(self, view: View, direct: bool) -> tuple:
+    def _forget_faces(self, key: int) -> None:
+        """No face of probe ``key`` holds what a record says: none is kept at its next
+        capture, and what samples its cube changed."""
+        self._sky_faces.pop(key, None)
+        self._scene_faces.pop(key, None)
+        self._versions[key] = self._versions.get(key, 0) + 1
+
+    def _direct(self, trees: bool) -> bool:
+        """Whether faces are drawn straight into the cube (else into a 2D target, copied)."""
+        return not trees and self.direct_faces and self.renderer.path_checks.trusted("direct_faces")
+
+    def _keep_plan(self, key: int, views: dict[int, View], unchanged: frozenset[int], direct: bool,
+                   trees: bool) -> _KeepPlan:
+        """Which faces of ``views`` a six-pass capture keeps as they are (``capture``): those
+        showing the sky alone as they did at their last drawing from the same record, and,
+        where no face draws a view tree (``trees``), those of ``unchanged`` last drawn with
+        the same records as now; and the records a face drawn now is given."""
+        renderer = self.renderer
+        first = next(iter(views.values()))
+        made = self._views.get(key)
+        cameras = made[2] if made is not None else {}
+        records = {face: self._sky_record(view, direct, cameras.get(face) if made[1][face] is view else None)
+                   if made is not None else self._sky_record(view, direct) for face, view in views.items()}
+        kept = set()
+        scene = None if trees else self._scene_record(key)
+        if scene is not None and unchanged:
+            scene_records = self._scene_faces.get(key, {})
+            kept.update(face for face in unchanged
+                        if face in views and scene_records.get(face) == (records[face], scene))
+        # The sky-alone faces of the rest (the faces drawn need it too: their records).
+        rest = frozenset(views) - kept
+        sky_only = sky_only_faces(first.eye, rest, first.skip,
+                                  [*renderer.opaque_batches(), *renderer.transparent_batches()]) if rest else rest
+        sky_records = self._sky_faces.get(key, {})
+        kept.update(face for face in sky_only if face in sky_records and sky_records[face] == records[face])
+        return _KeepPlan(frozenset(kept), sky_only, scene, records, direct)
+
+    def _scene_record(self, key: int) -> tuple:
+        """What every face of probe ``key`` is drawn with besides its camera and the sky: the
+        batches in drawing order with their instances' order (``InstanceBatch.layout``) and
+        material variants (which build of the scene program draws each: one instance's
+        change of variant may move its whole batch to the build that switches), the
+        shadow maps' blocks (fits, slots, filter sizes), their lookups and filter, the
+        virtual lights shining, the reflection filtering, and the cubes (with how often each
+        was written) of the other probes the batches sample.  What the instances themselves
+        are, where shadows fall and the lights are the scheduler's to follow
+        (``ProbeDue.unchanged``)."""
+        renderer = self.renderer
+        shadows = self.scene_pass.shadows
+        batches = (*renderer.opaque_batches(), *renderer.transparent_batches())
+        cubes = renderer.probe_cubes
+        sampled = sorted({probe for batch in batches for probe in (batch.probe, batch.second_probe, batch.rest_probe)
+                          if probe and probe != key})
+        return (tuple((_Same(batch), batch.layout, batch.variants) for batch in batches), shadows.block.tobytes(),
+                shadows.virtual_block.tobytes(), shadows.program_defines, shadows.filter, shadows.virtual_shining,
+                renderer.reflection_anisotropy,
+                tuple((probe, _Same(cubes.get(probe)), self._versions.get(probe, 0)) for probe in sampled))
+
+    def _sky_record(self, view: View, direct: bool, camera: tuple | None = None) -> tuple:
         """What a face showing the sky alone is drawn from: the view's camera (the sky pass's
         directions), its size, the sky texture, the shader library's reloads (the sky
         program) and the path (straight into the face, or copied from a 2D target).  Equal
-        records draw equal pixels."""
+        records draw equal pixels.  ``camera``: the view's part, made already (``face_views``)."""
         renderer = self.renderer
-        return (view.view.to_tuple(), view.proj.to_tuple(), tuple(view.eye), view.size, direct,
-                _Same(renderer.sky), renderer.shaders.reloads)
+        if camera is None:
+            camera = (view.view.to_tuple(), view.proj.to_tuple(), tuple(view.eye), view.size)
+        return (*camera, direct, _Same(renderer.sky), renderer.shaders.reloads)
 
     @contextmanager
     def _drawing_into(self, key: int):
@@ -661,8 +819,8 @@ class ProbeCaptures:
                 target.release()
                 del self._layered[key]
             target = self._layered[key] = kind(self.ctx, cube.texture)
-        self._sky_faces.pop(key, None)  # every face drawn by the layered programs: no record holds
-        self._mips_current.discard(key)
+        self._forget_faces(key)  # every face drawn by the layered programs: no record holds
+        self._mips_stale.pop(key, None)
         with self._drawing_into(key):
             self.scene_pass.draw_layered([views[face] for face in range(6)], target, culled)
             if isinstance(target, LayeredArrayTarget):
@@ -670,7 +828,7 @@ class ProbeCaptures:
                 self.renderer.checkpoint("layered capture's copy into the cube")
         if build_mips:
             cube.prefilter = self.mips.build(key, cube.texture, prefilter)
-            self._mips_current.add(key)
+            self._mips_stale[key] = set()
         self.renderer.stats.probe_faces += 6
 
     def read_face(self, key: int, face: int) -> np.ndarray:
@@ -682,8 +840,11 @@ class ProbeCaptures:
         return data[..., :3].astype(np.float32)
 
     def drop(self, key: int) -> None:
-        self._sky_faces.pop(key, None)
-        self._mips_current.discard(key)
+        self._forget_faces(key)
+        self._versions.pop(key, None)
+        self._views.pop(key, None)
+        self._projected.pop(key, None)
+        self._mips_stale.pop(key, None)
         self.mips.drop(key)
         self.irradiance.drop(key)
         faces = self._faces.pop(key, None)

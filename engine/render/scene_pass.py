@@ -71,10 +71,13 @@ from engine.render.bindings import (
     VIRTUAL_SHADOW_UNIT,
     PassState,
     apply_pass_state,
+    bind_sampler,
     bind_texture,
     bind_uniform_block,
     flip_front_face,
+    forget_sampler,
     set_front_face,
+    set_scissor,
 )
 from engine.render.gpu import Gpu
 from engine.render.irradiance import IrradianceTable
@@ -325,7 +328,7 @@ class ScenePass:
                 record = batch.draw_records[drawn_as] = self._record(batch, drawn_as, stamp, variants)
             _, _, glo, vao, uniforms, values, textures, own = record
             for unit, texture in textures:
-                bind_texture(ctx, texture, unit)
+                bind_texture(ctx, texture, unit, True)  # the pass's albedo sampler stays (bind_sampler)
             if own is None:  # probes bound now: their lookups are read each draw
                 own = self._probe_values(batch)
             if values[0] != masked and uniforms[0] is not None:
@@ -425,7 +428,9 @@ class ScenePass:
             apply_pass_state(self.ctx, _SCENE, viewport)
             targets.framebuffer.clear(depth=1.0)
         targets.view_framebuffer.use()  # colour, surface and seen ids, depth
-        apply_pass_state(self.ctx, _BATCHED_SCENE if options.batched else _SCENE, viewport)
+        # Per-view draws start with the first view's scissor (set once, not reset then set).
+        apply_pass_state(self.ctx, _BATCHED_SCENE if options.batched else _SCENE, viewport,
+                         None if options.batched else views[0].scissor)
         if options.masked:
             bind_texture(self.ctx, targets.node, NODE_UNIT)
         bind_uniform_block(self.ctx, renderer.lights_ubo, LIGHTS_BINDING)
@@ -434,18 +439,14 @@ class ScenePass:
         # capture, and a world without boxes, draw the build without them (sky only).
         self._ambient_probes = self.irradiance.bind(capturing=renderer.capturing != 0)
         bind_texture(self.ctx, renderer.sky, SKY_UNIT)
-        sampler = self._reflection_filter() if options.reflection_filter else None
-        if sampler is not None:
-            sampler.use(ALBEDO_UNIT)  # a bound sampler object overrides the textures' own filter
-        try:
-            if options.batched:
-                for first in range(0, len(views), MAX_BATCHED_VIEWS):
-                    self._draw_batched(views[first:first + MAX_BATCHED_VIEWS], options)
-            else:
-                self._draw_each(views, targets, viewport, options, conditions)
-        finally:
-            if sampler is not None:
-                sampler.clear(ALBEDO_UNIT)
+        # A bound sampler object overrides the textures' own filter; it stays bound from one
+        # reflection level to the next (bind_texture takes it off for any other pass).
+        bind_sampler(self.ctx, self._reflection_filter() if options.reflection_filter else None, ALBEDO_UNIT)
+        if options.batched:
+            for first in range(0, len(views), MAX_BATCHED_VIEWS):
+                self._draw_batched(views[first:first + MAX_BATCHED_VIEWS], options)
+        else:
+            self._draw_each(views, targets, viewport, options, conditions)
         if renderer.debug:  # the name is made only where it is checked
             renderer.checkpoint(f"scene ({views[0].name}{' and others' if len(views) > 1 else ''})")
 
@@ -461,7 +462,7 @@ class ScenePass:
         renderer.upload_views(views)  # every view's Camera block in one write; each binds its range
         for index, view in enumerate(views):
             with _ALWAYS if conditions is None else conditions[index].crender:
-                ctx.scissor = view.scissor  # moderngl's own record: the cache reads it
+                set_scissor(ctx, view.scissor)  # unless in place (moderngl's own record: the cache reads it)
                 set_front_face(ctx, "cw" if view.mirrored else "ccw")
                 renderer.bind_view_at(index)
                 self._draw_batches(renderer.opaque_batches(), 0, options.masked, skip=view.skip,
@@ -488,7 +489,7 @@ class ScenePass:
                     targets.view_framebuffer.use()
                 if (options.sky or transparent) and index + 1 < len(views):
                     # The next view's state (the pass after the last applies its own).
-                    apply_pass_state(ctx, _SCENE, viewport)
+                    apply_pass_state(ctx, _SCENE, viewport, views[index + 1].scissor)
                 renderer.stats.passes += 1
 
     def _draw_batched(self, views: Sequence[View], options: SceneOptions) -> None:
@@ -546,9 +547,7 @@ class ScenePass:
         if check is not None:
             check("clear")
         target.clear()
-        sampler = self._reflection_filter()
-        if sampler is not None:
-            sampler.use(ALBEDO_UNIT)
+        bind_sampler(ctx, self._reflection_filter(), ALBEDO_UNIT)
         skip = views[0].skip  # the probe's own object: in none of its faces (not drawn at all)
         draw_check = (lambda: check("draw")) if check is not None else None
         try:
@@ -564,8 +563,6 @@ class ScenePass:
                 check("sky")
             self._layered_sky().render(moderngl.TRIANGLES, vertices=3)
         finally:
-            if sampler is not None:
-                sampler.clear(ALBEDO_UNIT)
             target.unbind()
         renderer.stats.passes += 1
         renderer.checkpoint("layered cube-map capture")
@@ -604,12 +601,15 @@ class ScenePass:
         sampler = self._reflection_sampler
         if sampler is None or sampler.anisotropy != renderer.reflection_anisotropy:
             if sampler is not None:
+                forget_sampler(self.ctx, sampler)
                 sampler.release()
             sampler = self._reflection_sampler = self.ctx.sampler(
                 filter=(moderngl.LINEAR_MIPMAP_LINEAR, moderngl.LINEAR), anisotropy=renderer.reflection_anisotropy)
         return sampler
 
     def release(self) -> None:
+        if self._reflection_sampler is not None:
+            forget_sampler(self.ctx, self._reflection_sampler)
         for obj in (self._sky, self._sky_layered, self._views_ubo, self._reflection_sampler):
             if obj is not None:
                 obj.release()

@@ -54,7 +54,7 @@ VIRTUAL_MORE = MAX_APERTURES - 1
 VIRTUAL_BLOCK_BYTES = 16 + 64 * MAX_VIRTUAL_LIGHTS + 16 * MAX_VIRTUAL_LIGHTS * len(VIRTUAL_FIELDS) \
     + 16 * 4 * MAX_VIRTUAL_LIGHTS * VIRTUAL_MORE
 SHADOWS_BLOCK_BYTES = 64 * MAX_DIRECTIONAL_LIGHTS + 16 * MAX_DIRECTIONAL_LIGHTS + 4 * MAX_POINT_LIGHTS \
-    + 16 * MAX_POINT_SHADOWS
+    + 16 * MAX_POINT_SHADOWS + 16
 # The casters' slope-scaled depth offset (glPolygonOffset factor, units): with the normal
 # offset in the lookup, no acne on the sample level's slanted and curved surfaces.
 SLOPE_BIAS = (1.5, 2.0)
@@ -82,6 +82,10 @@ class ShadowMaps:
         self.block = np.zeros(SHADOWS_BLOCK_BYTES // 4, np.float32)
         self._slots = self.block[(64 + 16) * MAX_DIRECTIONAL_LIGHTS // 4:][:MAX_POINT_LIGHTS].view(np.int32)
         self._slots[:] = -1
+        # Per cube: the point light it holds, or -1 (the block's point_light; the lookups are
+        # made a cube at a time, before the lights' loop).
+        self._cube_lights = self.block[SHADOWS_BLOCK_BYTES // 4 - 4:].view(np.int32)
+        self._cube_lights[:] = -1
         self.ubo = ctx.buffer(self.block.tobytes())
         self._depth_program = renderer.shaders.program("shadow.vert", "shadow.frag")
         self._distance_program = renderer.shaders.program("shadow.vert", "shadow.frag", defines={"DISTANCE": "1"})
@@ -107,10 +111,14 @@ class ShadowMaps:
         # cube), each a bilinear percentage-closer comparison; "single" (one such tap: a
         # one-texel edge).  On a software rasteriser every tap is CPU time for every pixel a
         # light reaches (the benchmark scene at 640x360 on llvmpipe, the sun's map 2048 a side:
-        # a still frame 1.43x the frame without shadows with the grid, 1.24x with one tap, the
-        # frame without building no lookup at all; benchmarks/lighting.py), so there the
-        # default is "single"; set "grid" for equal quality (maps are drawn again).
-        self._casting = (False, False)   # (a directional light casts, a point light casts): upload's
+        # a still frame 1.43x the frame without shadows with the grid, 1.24x with one tap
+        # (1.16-1.18x since the lookups are made before the lights' loops), the frame without
+        # building no lookup at all; benchmarks/lighting.py), so there the default is
+        # "single"; set "grid" for equal quality (maps are drawn again).
+        #
+        # What upload found: (the directional slots read, the last casting one's index + 1;
+        # the cubes read, the last used one's index + 1).
+        self._casting = (0, 0)
         self.program_defines: tuple[tuple[str, str], ...] = ()
         self.filter = "single" if renderer.caps.software else "grid"
         # Lights through mirrors and portals: a depth atlas of 2 x 2 tiles and their block.
@@ -206,14 +214,17 @@ class ShadowMaps:
     def _set_program_defines(self) -> None:
         """``program_defines``: the shadow lookups the scene programs compile
         (``shaders/include/shadows.glsl``): ``DIRECTIONAL_SHADOWS`` while a directional light
-        casts, ``POINT_SHADOWS`` while a point light does, ``SHADOW_SINGLE_TAP`` with the
-        "single" filter.  The scene pass builds (and caches) a program per combination; a
-        frame where nothing casts runs no lookup (llvmpipe runs every branch's code: a third of
-        such a frame at 640x360 went to lookups that returned 1)."""
+        casts (its value the directional slots looked up: the last casting one's index + 1,
+        each slot's lookup made outside the lights' loop), ``POINT_SHADOWS`` while a point
+        light does (its value the cubes looked up, likewise), ``SHADOW_SINGLE_TAP`` with the
+        "single" filter.  The scene pass builds
+        (and caches) a program per combination; a frame where nothing casts runs no lookup
+        (llvmpipe runs every branch's code: a third of such a frame at 640x360 went to
+        lookups that returned 1)."""
         directional, point = self._casting
-        self.program_defines = tuple((name, "1") for name, on in (
-            ("DIRECTIONAL_SHADOWS", directional), ("POINT_SHADOWS", point),
-            ("SHADOW_SINGLE_TAP", self._filter == "single")) if on)
+        self.program_defines = tuple((name, value) for name, value, on in (
+            ("DIRECTIONAL_SHADOWS", str(directional), directional > 0), ("POINT_SHADOWS", str(point), point > 0),
+            ("SHADOW_SINGLE_TAP", "1", self._filter == "single")) if on)
 
     def _taps(self, softness: float) -> float:
         """Taps a side of a directional light's grid."""
@@ -324,6 +335,7 @@ class ShadowMaps:
                 framebuffer.clear(1.0, 1.0, 1.0, 1.0, depth=1.0)
                 self._draw_casters(view, self._distance_program)
         self._slots[light_index] = slot
+        self._cube_lights[slot] = light_index
         base = (64 + 16) * MAX_DIRECTIONAL_LIGHTS // 4 + MAX_POINT_LIGHTS + 4 * slot
         # A texel's angle: 90 degrees over the face's texels.
         self.block[base:base + 4] = (np.pi / 2.0 / resolution, softness, light_range,
@@ -334,12 +346,17 @@ class ShadowMaps:
     def keep_point(self, slot: int, light_index: int) -> None:
         """Point light ``light_index`` reads cube ``slot`` as drawn before."""
         self._slots[light_index] = slot
+        self._cube_lights[slot] = light_index
 
     def clear_points(self) -> None:
         """No point light casts (each drawn again sets its own slot)."""
         self._slots[:] = -1
+        self._cube_lights[:] = -1
 
     def forget_point(self, light_index: int) -> None:
+        slot = self._slots[light_index]
+        if slot >= 0 and self._cube_lights[slot] == light_index:
+            self._cube_lights[slot] = -1
         self._slots[light_index] = -1
 
     def _cube(self, slot: int, resolution: int) -> moderngl.TextureCube:
@@ -409,7 +426,9 @@ class ShadowMaps:
     def upload(self) -> None:
         self.ubo.write(self.block.tobytes())
         base = 16 * MAX_DIRECTIONAL_LIGHTS
-        casting = (bool(self.block[base + 3:base + 4 * MAX_DIRECTIONAL_LIGHTS:4].any()), bool((self._slots >= 0).any()))
+        taps = np.flatnonzero(self.block[base + 3:base + 4 * MAX_DIRECTIONAL_LIGHTS:4])  # the casting slots
+        cubes = np.flatnonzero(self._cube_lights >= 0)
+        casting = (int(taps[-1]) + 1 if taps.size else 0, int(cubes[-1]) + 1 if cubes.size else 0)
         if casting != self._casting:
             self._casting = casting
             self._set_program_defines()

@@ -15,7 +15,7 @@ oblique near plane a scalar from them), what does not depend on the camera (the 
 block's projection, viewport, clip plane and ids; the exit row, mask, winding) is gathered
 per (parent, surface) from rows kept by the parents' ids, a candidate is one row, and the
 cull's and the plan's arrays and views are made once per count of parents or views
-(``_CullWork``, ``_PlanWork``, kept with the other scratch in
+(``CullWork``, ``PlanWork``, kept with the other scratch in
 ``engine/render/plan_scratch.py``) and written with ``out=``: about 44 calls a level (13 of
 them the cull's), 4 of them products, where the first array planner took about 72 and made a
 view or a new array for most (measured warm, a level of one view: about 31 us, against 53
@@ -38,40 +38,40 @@ from pyglm import glm
 from components.limits import VIEW_DIRECT, VIEW_MIRROR, VIEW_PORTAL
 from components.visibility import KIND_MASK, visibility_code
 from engine.render.plan_rows import (
-    _BLOCK,
-    _CAMERA_CLIP,
-    _CAMERA_VIEWPORT,
-    _CULL,
-    _EXIT_PLANE,
-    _GRID_PARENT,
-    _GRID_WIDTH,
-    _ID_HIDE,
-    _ID_MASK,
-    _ID_SKIP,
-    _IDS_PART,
-    _MATRICES,
-    _NEG_EXIT_PLANE,
-    _OPS0,
-    _OPS1,
-    _RECT,
-    _SCALE,
-    _SIGNS,
-    _SURFACE_WIDTH,
-    _X,
+    BLOCK,
+    CAMERA_CLIP,
+    CAMERA_VIEWPORT,
+    CULL,
+    EXIT_PLANE,
+    GRID_PARENT,
+    GRID_WIDTH,
+    ID_HIDE,
+    ID_MASK,
+    ID_SKIP,
+    IDS_PART,
+    MATRICES,
+    NEG_EXIT_PLANE,
+    OPS0,
+    OPS1,
+    RECT,
+    SCALE,
+    SIGNS,
+    SURFACE_WIDTH,
+    X_COLUMNS,
     Candidates,
     LevelRows,
-    _x0,
+    x0_rows,
 )
 from engine.render.plan_scratch import (
     WORK_KEPT,
-    _ChildTable,
-    _CullWork,
-    _kept_work,
-    _node_numbers,
-    _PlanBuffers,
-    _PlanWork,
-    _root_rows,
-    _RootRows,
+    ChildTable,
+    CullWork,
+    PlanBuffers,
+    PlanWork,
+    RootRows,
+    kept_root_rows,
+    kept_work,
+    node_numbers,
 )
 from engine.render.views import CAMERA_FLOATS, View
 from engine.rules.visibility_rules import drawn_in
@@ -90,7 +90,7 @@ def _mat(matrix: glm.mat4) -> np.ndarray:
 _NONE = np.zeros(0, np.int64)
 _NO_RECTS = np.zeros((0, 4))
 _NEVER = (1e30, 2e30, 1e30, 2e30)  # fade starts no distance or angle reaches
-# A rectangle as the cull keeps it (x0, y0, -x1, -y1, ``_SIGNS``): what makes it x, y, w, h.
+# A rectangle as the cull keeps it (x0, y0, -x1, -y1, ``SIGNS``): what makes it x, y, w, h.
 _TO_SCISSOR = np.array([[1, 0, -1, 0], [0, 1, 0, -1], [0, 0, -1, 0], [0, 0, 0, -1]], np.float64)
 _MIN, _MAX = np.minimum.reduce, np.maximum.reduce
 
@@ -171,14 +171,14 @@ class SurfaceTable:
         # ... and each surface's part of its views' rows (``SURFACE_ROW``): the blocks two
         # products multiply a parent's ``x`` by (``LEVEL_ROW``), the plane its views look out
         # of, its resolution scale.
-        self.float_rows = np.zeros((count, _SURFACE_WIDTH))
-        self.float_rows[:, _OPS0] = self.inv_carry.reshape(count, 16)
-        ops = self.float_rows[:, _OPS1].reshape(count, 4, 5)
+        self.float_rows = np.zeros((count, SURFACE_WIDTH))
+        self.float_rows[:, OPS0] = self.inv_carry.reshape(count, 16)
+        ops = self.float_rows[:, OPS1].reshape(count, 4, 5)
         ops[:, :, 0:4] = self.carry.transpose(0, 2, 1)
         ops[:, :, 4] = np.einsum("sji,sj->si", self.carry, self.exit_planes)  # carry^T e
-        self.float_rows[:, _EXIT_PLANE] = self.exit_planes
-        self.float_rows[:, _NEG_EXIT_PLANE] = -self.exit_planes
-        self.float_rows[:, _SCALE] = self.scale
+        self.float_rows[:, EXIT_PLANE] = self.exit_planes
+        self.float_rows[:, NEG_EXIT_PLANE] = -self.exit_planes
+        self.float_rows[:, SCALE] = self.scale
         self.keep = visibility_code(_KINDS_BUT_DIRECT, self.layers)  # the mask bits a view through it keeps
         self._depths: dict[tuple[int, int], tuple[np.ndarray, np.ndarray, list[bool], bool]] = {}
         self._biases: dict[tuple, tuple[np.ndarray | None, np.ndarray]] = {}  # _pair_bias's
@@ -187,14 +187,16 @@ class SurfaceTable:
         self._ends: dict[tuple[int, int], tuple[np.ndarray, np.ndarray, list[bool]]] = {}
         self._unviewed: dict[tuple, tuple[np.ndarray | None, tuple[np.ndarray, np.ndarray]]] = {}  # unviewed's
         self._faded: tuple | None = None  # the last cull's pairs faded out, and for what (cull)
+        self._boxes: np.ndarray | None = None  # the last cull's rectangles before rounding (4 x P x S)
+        self.bounds_claims = bool(self.is_mirror.any())  # boxes are kept for claim_cull (a mirror's bound its claims)
         self._last_ids: tuple | None = None  # the last parents' rows _pair_bias read, and their ids' bytes
         self._ids: dict[tuple, np.ndarray] = {}  # _child_ids'
         self._child_rows: dict[tuple, np.ndarray] = {}  # _child_row's
         self._cuts: dict[tuple, tuple[np.ndarray | None, np.ndarray, bool]] = {}  # _cut's
-        self._cull_work: dict[int, _CullWork] = {}  # the cull's scratch, by its count of parents
-        self._plan_work: dict[int, _PlanWork] = {}  # _plan's, by its count of views
-        self._plan_buffers: dict[int, _PlanBuffers] = {}  # their arrays, by capacity
-        self._child_tables: dict[tuple, _ChildTable] = {}  # _child_ids' for large levels
+        self._cull_work: dict[int, CullWork] = {}  # the cull's scratch, by its count of parents
+        self._plan_work: dict[int, PlanWork] = {}  # _plan's, by its count of views
+        self._plan_buffers: dict[int, PlanBuffers] = {}  # their arrays, by capacity
+        self._child_tables: dict[tuple, ChildTable] = {}  # _child_ids' for large levels
         # The resolution scale every surface shares (None: they differ; a level takes its largest).
         self.one_scale = float(self.scale[0]) if count and (self.scale == self.scale[0]).all() else None
 
@@ -272,22 +274,22 @@ class SurfaceTable:
             found = self._cuts[key] = (ends, cut, bool(cut.any()))
         return found[1], found[2]
 
-    def _new_plan_work(self, k: int) -> _PlanWork:
+    def _new_plan_work(self, k: int) -> PlanWork:
         """A plan's scratch for ``k`` views, kept (views of the buffers of its capacity: the
         least power of two not below ``k``, at least 16, kept too)."""
         capacity = max(16, 1 << (k - 1).bit_length())
         buffers = self._plan_buffers.get(capacity)
         if buffers is None:
-            buffers = self._plan_buffers[capacity] = _PlanBuffers(capacity)
-        work = _PlanWork(k, buffers)
+            buffers = self._plan_buffers[capacity] = PlanBuffers(capacity)
+        work = PlanWork(k, buffers)
         if len(self._plan_work) >= WORK_KEPT:
             del self._plan_work[next(iter(self._plan_work))]
         self._plan_work[k] = work
         return work
 
-    def _new_cull_work(self, count: int) -> _CullWork:
+    def _new_cull_work(self, count: int) -> CullWork:
         """A cull's scratch for ``count`` parents of this table."""
-        return _CullWork(count, self.corner_count, len(self.states))
+        return CullWork(count, self.corner_count, len(self.states))
 
     def _pair_bias(self, data: np.ndarray, depth: int, depth_cap: int, ends: np.ndarray | None,
                    fallback: bool) -> tuple[np.ndarray, bool]:
@@ -301,7 +303,7 @@ class SurfaceTable:
         mask and winding alone, so kept by their bytes (a level's parents see through the
         same surfaces frame after frame) with the depth, cap and ``ends`` (an array the view
         tree keeps while nothing changes); the parents' bytes are kept for ``_child_ids``."""
-        ids = data[:, _IDS_PART]
+        ids = data[:, IDS_PART]
         id_bytes = ids.tobytes()
         self._last_ids = (data, id_bytes)
         key = (id_bytes, depth, depth_cap, id(ends), fallback)
@@ -323,9 +325,9 @@ class SurfaceTable:
             found = self._biases[key] = (ends, (bias, bool(seen.any())))
         return found[1]
 
-    def _child_ids(self, data: np.ndarray, hide: int, root_rows: _RootRows, size: tuple[int, int],
+    def _child_ids(self, data: np.ndarray, hide: int, root_rows: RootRows, size: tuple[int, int],
                    p: np.ndarray, s: np.ndarray) -> np.ndarray:
-        """(k, _GRID_WIDTH) 8-byte words (int64): for each pair (p, s), what a view through
+        """(k, GRID_WIDTH) 8-byte words (int64): for each pair (p, s), what a view through
         surface s from parent row p of ``data`` holds that is not a matter of the camera,
         laid out as ``LEVEL_ROW`` from its Camera block on: the block with its projection
         (the root's, ``root_rows``: its third row is the view's own, written over), viewport
@@ -338,15 +340,15 @@ class SurfaceTable:
         projection and the size, and gathers from it in one operation the next frames; a
         larger one (whose parents, chosen by their pixels, change from frame to frame)
         gathers from a table of every parent's rows seen with this ``hide``, projection and
-        size (``_ChildTable``), and makes no grid."""
+        size (``ChildTable``), and makes no grid."""
         count, surfaces = len(data), len(self.states)
-        ids = data[:, _IDS_PART]
+        ids = data[:, IDS_PART]
         if count * surfaces > GRID_KEPT_CELLS:
             table = self._child_tables.get((hide, root_rows.key, size))
             if table is None:
                 if len(self._child_tables) > 16:
                     self._child_tables.clear()
-                table = self._child_tables[(hide, root_rows.key, size)] = _ChildTable()
+                table = self._child_tables[(hide, root_rows.key, size)] = ChildTable()
             firsts = table.firsts
             at = [firsts.get(row) for row in map(tuple, ids.tolist())]
             if None in at:  # parents with ids not seen yet: their rows join the table
@@ -357,7 +359,7 @@ class SurfaceTable:
                 table.stacked = np.concatenate(table.rows)
                 at = [firsts[row] for row in map(tuple, ids.tolist())]
             found = table.stacked.take(np.array(at).take(p) + s, axis=0)
-            found[:, _GRID_PARENT] = p
+            found[:, GRID_PARENT] = p
             return found
         last = self._last_ids
         id_bytes = last[1] if last is not None and last[0] is data else ids.tobytes()
@@ -366,33 +368,33 @@ class SurfaceTable:
         if grid is None:
             grid = np.concatenate([self._child_row(exit_row, mask, mirrored, hide, root_rows, size)
                                    for exit_row, mask, mirrored in ids.tolist()]).reshape(
-                count, surfaces, _GRID_WIDTH)
-            grid[:, :, _GRID_PARENT] = np.arange(count)[:, None]
+                count, surfaces, GRID_WIDTH)
+            grid[:, :, GRID_PARENT] = np.arange(count)[:, None]
             grid.flags.writeable = False
             if len(self._ids) > 64:
                 self._ids.clear()
             self._ids[key] = grid
         return grid[p, s]
 
-    def _child_row(self, exit_row: float, mask: float, mirrored: float, hide: int, root_rows: _RootRows,
+    def _child_row(self, exit_row: float, mask: float, mirrored: float, hide: int, root_rows: RootRows,
                    size: tuple[int, int]) -> np.ndarray:
-        """(S, _GRID_WIDTH) int64: ``_child_ids``' rows of a parent with these ids (its row
+        """(S, GRID_WIDTH) int64: ``_child_ids``' rows of a parent with these ids (its row
         number 0).  A view's mask: the kinds of its chain, the layers every surface of its
         chain shows."""
         key = (exit_row, mask, mirrored, hide, root_rows.key, size)
         found = self._child_rows.get(key)
         if found is None:
-            rows = np.zeros((len(self.states), _GRID_WIDTH))
-            block = rows[:, 0:_BLOCK.stop - _BLOCK.start].view(np.float32)
-            block[:, _MATRICES.start + 16:_MATRICES.start + 32] = root_rows.proj_t.reshape(16)
-            block[:, _CAMERA_VIEWPORT] = (0.0, 0.0, *size)
-            block[:, _CAMERA_CLIP] = self.exit_planes
+            rows = np.zeros((len(self.states), GRID_WIDTH))
+            block = rows[:, 0:BLOCK.stop - BLOCK.start].view(np.float32)
+            block[:, MATRICES.start + 16:MATRICES.start + 32] = root_rows.proj_t.reshape(16)
+            block[:, CAMERA_VIEWPORT] = (0.0, 0.0, *size)
+            block[:, CAMERA_CLIP] = self.exit_planes
             child_mask = (int(mask) & self.keep) | self.kind_bit
             ids = block[:, CAMERA_FLOATS["skip"]].view(np.uint32)
-            ids[:, _ID_SKIP] = self.exit_entities & 0xFFFFFFFF
-            ids[:, _ID_HIDE] = hide & 0xFFFFFFFF
-            ids[:, _ID_MASK] = child_mask & 0xFFFFFFFF
-            rest = rows[:, _BLOCK.stop - _BLOCK.start:]
+            ids[:, ID_SKIP] = self.exit_entities & 0xFFFFFFFF
+            ids[:, ID_HIDE] = hide & 0xFFFFFFFF
+            ids[:, ID_MASK] = child_mask & 0xFFFFFFFF
+            rest = rows[:, BLOCK.stop - BLOCK.start:]
             rest[:, 0] = self.exit_rows
             rest[:, 1] = child_mask
             rest[:, 2] = mirrored != self.is_mirror
@@ -449,8 +451,8 @@ class SurfaceTable:
         # each corner's (4, S) gives (corners, 14, P, S), so the sides are divided by w, and
         # the minima over the corners; the planes as one more corner give the facing values
         # (the eye's row times them).
-        work = self._cull_work.get(count) or _kept_work(self._cull_work, count, self._new_cull_work)
-        np.matmul(_x0(data)[:, _CULL].transpose(1, 0, 2).reshape(14 * count, 4), self.corner_columns,
+        work = self._cull_work.get(count) or kept_work(self._cull_work, count, self._new_cull_work)
+        np.matmul(x0_rows(data)[:, CULL].transpose(1, 0, 2).reshape(14 * count, 4), self.corner_columns,
                   out=work.product)
         np.maximum(work.w, work.epsilon, out=work.w_safe)  # w <= 0: see straddles
         np.divide(work.sides, work.w_safe, out=work.sides)
@@ -458,10 +460,12 @@ class SurfaceTable:
         # x0, y0, -x1, -y1 in pixels, rounded outwards with a pixel's margin; a pair with a
         # corner behind the eye is conservative (the parent's whole rectangle).
         rects = work.rects
-        np.floor(rects, out=rects)  # (the pixel's margin is in the rows: each side less w)
         if work.least_w.min() <= 1e-6:
             np.copyto(rects, -np.inf, where=least[4] <= 1e-6)
-        np.maximum(rects, data[:, _RECT].T[:, :, None], out=rects)  # inside the parent's
+        if self.bounds_claims and not fallback:  # (for the plan's candidates)
+            self._boxes = rects.copy()  # unrounded: what claim_cull bounds a claim's pixel centres by
+        np.floor(rects, out=rects)  # (the pixel's margin is in the rows: each side less w)
+        np.maximum(rects, data[:, RECT].T[:, :, None], out=rects)  # inside the parent's
         # Seen: facing and allowed, not culled (every corner outside one side of the frustum,
         # or behind the clip plane; on a side counts as outside) and a rectangle with pixels
         # (x1 > x0 and y1 > y0): one maximum over the rows 4-13, written over, each < 0 to keep.
@@ -554,9 +558,9 @@ class SurfaceTable:
                 return found[1]
         planned = self._plan(parents, depth, root, root_proj, inv_root_proj, first_index, depth_cap, hide, ends,
                              size, scale)
-        if planned[0] is not None:
-            planned[0].freeze()
         if key is not None:
+            if planned[0] is not None:
+                planned[0].freeze()
             if len(self._plans) >= PLANS_KEPT:
                 del self._plans[next(iter(self._plans))]  # the least recently used
             self._plans[key] = ((data, root_proj, ends), planned)
@@ -599,7 +603,7 @@ class SurfaceTable:
             return None, faded
         w = self._plan_work.get(k) or self._new_plan_work(k)
         w.surface[...] = self.float_rows.take(s, axis=0)  # (take with out= costs more than take and a copy)
-        w.parent[...] = parents.data[:, _X].take(p, axis=0)  # the parents' matrices (no more of their rows)
+        w.parent[...] = parents.data[:, X_COLUMNS].take(p, axis=0)  # the parents' matrices (no more of their rows)
         if size is None:
             scale *= self.one_scale if self.one_scale is not None else float(w.scale.max())
             size = _level_size(root.size, scale)
@@ -608,16 +612,16 @@ class SurfaceTable:
         np.copyto(w.eye_row, w.eye)  # the cull's copy of the eye
         np.copyto(w.clip, w.neg_exit)
         np.copyto(w.rect, rects)
-        root_rows = _root_rows(root_proj)
+        root_rows = kept_root_rows(root_proj)
         w.grid[...] = self._child_ids(parents.data, hide, root_rows, size, p, s)
         if weights is not None:
             w.fade[...] = weights[weights > 0.0]
-        node = _node_numbers(first_index, k)
+        node = node_numbers(first_index, k)
         np.copyto(w.node, node)
         if size == root.size:  # whole pixels already: x, y, -(x1 + x0)... as x, y, w, h
             np.matmul(rects, _TO_SCISSOR, out=w.scissor, casting="unsafe")
         else:
-            w.scissor[...] = level_rects(rects * _SIGNS, root.size, size)
+            w.scissor[...] = level_rects(rects * SIGNS, root.size, size)
         # The Camera blocks (CAMERA_DTYPE) as float32 columns: each matrix column-major (its
         # transpose, row by row).
         np.copyto(w.block_node, node, casting="unsafe")  # the node image's value for its pixels
@@ -651,6 +655,8 @@ class SurfaceTable:
         end = None if ends is None else self._within(depth, depth_cap)[1].take(s)
         candidates = Candidates(LevelRows(data), size, end)
         candidates.__dict__.update(parent=p, surface=s)  # the cull's arrays: no views to make when read
+        if self.bounds_claims:
+            candidates.box = self._boxes[:, p, s].T  # (claim_cull)
         return candidates, faded
 
 

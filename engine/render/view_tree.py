@@ -49,6 +49,7 @@ from pyglm import glm
 from components.limits import MAX_VIEW_DEPTH
 from engine.core.budget import screen_coverage, spending_order
 from engine.render.batched_mirrors import PATHS, choose_path, submitted_triangles
+from engine.render.claim_cull import ChainBoxes, empty_claims
 from engine.render.end_images import EndImages
 from engine.render.gpu import Gpu
 from engine.render.mirror_passes import (
@@ -137,6 +138,7 @@ class RootVisibility:
     queries: list[moderngl.Query] = field(default_factory=list)
     used: int = 0                 # queries taken this frame
     pending: list[tuple[int, ...]] = field(default_factory=list)
+    counted: list[moderngl.Query] = field(default_factory=list)  # what counts each of ``pending``
     seen: dict[tuple[int, ...], int] = field(default_factory=dict)
     frame: int = -1               # the ViewTree frame it was last drawn in
 
@@ -223,6 +225,7 @@ class _Walk:
                                                                         # are drawn into
     blends: Mapping[int, ProbeBlend] = field(default_factory=dict)      # the fallbacks' probes (SurfaceBlends)
     triangle_count: int | None = None        # what a scene pass submits (triangles(): counted once, if asked)
+    chain: ChainBoxes | None = None          # the planned level's claims' bounds (claim_cull), for the next
 
     def triangles(self) -> int:
         """The triangles a scene pass submits, counted at the first level that asks (a level
@@ -332,6 +335,7 @@ class ViewTree:
         step = _Level(candidates, levels.get(level + 1, candidates.size), levels[level], walk.nodes,
                       walk.record.take(len(candidates), self.renderer.ctx))
         walk.steps.append(step)
+        self._skip_empty_claims(walk, step)
         is_end = candidates.end.tolist() if candidates.end is not None else [False] * len(candidates)
         if walk.exact:  # this frame's counts: the CPU waits for the GPU to draw the claims
             step.keep, step.grow, end_rows = self._chosen_by_counts(surfaces, step, is_end, settings, result,
@@ -380,6 +384,23 @@ class ViewTree:
         if found is None:
             found = by_depth[depth] = shading_replaced(surfaces.states, depth, depth_cap, pixel_budget)
         return found
+
+    def _skip_empty_claims(self, walk: _Walk, step: _Level) -> None:
+        """The claims of ``step`` that cannot take a pixel (``claim_cull``: no pixel centre in
+        the bounding boxes of its surface and its parents' up the chain) count 0 without a
+        draw: their queries become ``MirrorPasses.no_pixels``.  The boxes are in the root's
+        pixels: a level at another resolution than the root's, or below one, is not tested
+        and breaks the chain."""
+        candidates = step.candidates
+        box = candidates.__dict__.get("box")  # the plan's (SurfaceTable._plan), or _end_seers'
+        if box is None or candidates.size != walk.root.size or step.parent_targets.size != walk.root.size:
+            walk.chain = None
+            return
+        empty, walk.chain = empty_claims(walk.surfaces, box, candidates.surface, walk.rows.data, candidates.parent,
+                                         walk.chain, candidates.rows.node)
+        if empty is not None:
+            none = self.passes.no_pixels
+            step.queries = [none if skip else query for query, skip in zip(step.queries, empty, strict=True)]
 
     def _end_views(self, walk: _Walk, step: _Level, end_rows: list[int]) -> None:
         """A level's end views (rows ``end_rows`` of its candidates): their nodes, the matrix
@@ -463,7 +484,7 @@ class ViewTree:
         keep), which of those get views below them (all), and which end views have pixels;
         each a list of rows of ``step.candidates``."""
         self._claim(surfaces, step)
-        pixels = step.pixels = self.passes.claimed_pixels(step.queries)
+        pixels = step.pixels = self._claimed_pixels(step.queries)
         keep = self._within_budgets(surfaces, step.candidates,
                                     [0 if end else n for n, end in zip(pixels, is_end, strict=True)],
                                     settings, result, level, screen)
@@ -484,6 +505,7 @@ class ViewTree:
         claim_keys = [keys[p] + (entities[s],) for p, s in
                       zip(candidates.parent.tolist(), candidates.surface.tolist(), strict=True)]
         record.pending.extend(claim_keys)
+        record.counted.extend(step.queries)
         seen = [record.seen.get(key) for key in claim_keys]
         keep = [i for i, end in enumerate(is_end) if not end]
         # A view hidden last frame is drawn (it may show now) but its own surfaces wait for
@@ -562,9 +584,9 @@ class ViewTree:
         # Last frame's counts, drawn by the GPU a frame ago (reading them waits for nothing
         # more); none where the root was not drawn last frame, or was drawn exactly.
         fresh = record.pending and record.frame == self._frame - 1
-        record.seen = dict(zip(record.pending, self.passes.claimed_pixels(record.queries[:len(record.pending)]),
+        record.seen = dict(zip(record.pending, self.passes.claimed_pixels(record.counted),
                                strict=True)) if fresh else {}
-        record.pending = []
+        record.pending, record.counted = [], []
         record.frame, record.used = self._frame, 0
         return record
 
@@ -574,12 +596,14 @@ class ViewTree:
         nothing: every candidate is drawn and grows views, as on a first frame (the image
         is exact; the frame draws more views)."""
         for record in self._visibility.values():
-            record.seen, record.pending = {}, []
+            record.seen, record.pending, record.counted = {}, [], []
 
     def _root_rows(self, root: View) -> LevelRows:
         """``LevelRows.root(root)``, kept per root while its camera stands still (a probe
-        face's every frame): the same row, so the plans kept for it are found again
-        (``SurfaceTable.plan``)."""
+        face's every frame): the same read-only row, so the plans kept for it are found again
+        (``SurfaceTable.plan``).  A camera seen for the first time (one that moves: every
+        frame) gets a writeable copy, for which nothing is kept: a moving camera's plans, and
+        what is made of them, would be found again by no later frame."""
         key = (root.view.to_bytes(), root.proj.to_bytes(), tuple(root.eye), root.size, tuple(root.clip_plane),
                root.view_mask, root.mirrored)
         rows = self._roots.get(key)
@@ -588,6 +612,7 @@ class ViewTree:
                 self._roots.clear()
             rows = self._roots[key] = LevelRows.root(root)
             rows.data.flags.writeable = False
+            return LevelRows(rows.data.copy())
         return rows
 
     def _projection(self, proj: glm.mat4) -> tuple[np.ndarray, np.ndarray]:
@@ -648,20 +673,44 @@ class ViewTree:
         if len(kept) < len(found):
             if not kept:
                 return None, None
-            candidates, found = candidates.select(np.array(kept, np.int64)), [found[i] for i in kept]
+            rows, box = np.array(kept, np.int64), candidates.__dict__.get("box")
+            candidates, found = candidates.select(rows), [found[i] for i in kept]
+            if box is not None:  # the plan's unrounded rectangles (claim_cull), kept with their rows
+                candidates.__dict__["box"] = box.take(rows, axis=0)
         return candidates, found
 
     def _claim(self, surfaces: SurfaceTable, step: _Level) -> None:
         """Every candidate's claim in the level's targets, its pixels counted in its query.
         The claim shader's (parent view, surface, view index) of every candidate: a level's
-        few claims, so lists (a few numpy calls cost more)."""
-        candidates = step.candidates
-        entities, parents = surfaces.entity_list, step.parents
-        ids = [(parents[p].index, entities[s], node) for p, s, node in
-               zip(candidates.parent.tolist(), candidates.surface.tolist(),
-                   candidates.rows.node.astype(np.int64).tolist(), strict=True)]
-        claims = Claims(ids, candidates.scissor.tolist())
-        self.passes.prepare_level(step.targets, step.parent_targets, claims, step.queries)
+        few claims, so lists (a few numpy calls cost more), kept with a kept plan.  Exact
+        visibility leaves out the claims known empty (claim_cull): no view, so no claim or reset."""
+        candidates, parents = step.candidates, step.parents
+        kept = not candidates.rows.data.flags.writeable
+        columns = candidates.derived.get("claims") if kept else None
+        if columns is None:  # each candidate's parent row, surface entity and node, and its scissor
+            entities = surfaces.entity_list
+            columns = (candidates.parent.tolist(), [entities[s] for s in candidates.surface.tolist()],
+                       candidates.rows.node.astype(np.int64).tolist(), candidates.scissor.tolist())
+            if kept:  # a kept plan's: the same columns every frame it is found again
+                candidates.derived["claims"] = columns
+        rows, entities, nodes, scissors = columns
+        queries, none = step.queries, self.passes.no_pixels
+        if step.conditions is None and none in queries:
+            at = [i for i, query in enumerate(queries) if query is not none]
+            rows, entities, nodes, scissors, queries = ([column[i] for i in at] for column in
+                                                        (rows, entities, nodes, scissors, queries))
+        claims = Claims([(parents[p].index, entity, node) for p, entity, node in
+                         zip(rows, entities, nodes, strict=True)], scissors)
+        self.passes.prepare_level(step.targets, step.parent_targets, claims, queries)
+
+    def _claimed_pixels(self, queries: list[moderngl.Query]) -> list[int]:
+        """Each claim's pixels (the CPU waits for the GPU), 0 for one known empty
+        (``MirrorPasses.no_pixels``: never claimed in exact visibility, so never read)."""
+        none = self.passes.no_pixels
+        if none not in queries:
+            return self.passes.claimed_pixels(queries)
+        counted = iter(self.passes.claimed_pixels([query for query in queries if query is not none]))
+        return [0 if query is none else next(counted) for query in queries]
 
     def _draw_level(self, step: _Level, root: View) -> None:
         """A planned level's views (and end views) into its targets, then its composite's
@@ -735,7 +784,15 @@ class ViewTree:
         """The planned views of a level's chosen candidates (what the scene pass and the
         composite read: each with its Camera block already packed, its matrices read from the
         block only if something asks) and their tree nodes, in one pass: one ``tolist`` per
-        column, not one conversion per view."""
+        column, not one conversion per view.  A kept plan's candidates (read-only: a still
+        camera's, a probe face's) keep their views (a View is not changed after it is made)
+        and what their nodes are made of, so the frames that find the plan again make only
+        the nodes."""
+        kept = None if chosen.rows.data.flags.writeable else chosen.derived.get(("nodes", hide))
+        if kept is not None:  # a kept plan's: its views, and what its nodes are made of
+            views, rows = kept
+            return views, [ReflectionView(node, level, view, rect, state, parents[p], fade)
+                           for view, (node, rect, state, p, fade) in zip(views, rows, strict=True)]
         states = surfaces.states
         size = chosen.size
         blocks = chosen.blocks.tobytes()
@@ -752,6 +809,9 @@ class ViewTree:
             at += step
             views.append(view)
             nodes.append(ReflectionView(node, level, view, (x0, y0, -x1 - x0, -y1 - y0), state, parents[p], fade))
+        if not chosen.rows.data.flags.writeable:
+            chosen.derived[("nodes", hide)] = (views, [(n.index, n.rect, n.surface, p, n.fade) for n, p in
+                                                       zip(nodes, chosen.parent.tolist(), strict=True)])
         return views, nodes
 
     def _prepare_composite(self, children: list[ReflectionView], root: View,

@@ -386,6 +386,54 @@ def face_hits(position: glm.vec3, far: float, lo: np.ndarray, hi: np.ndarray) ->
     return hits
 
 
+def box_corners(lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    """(box, 8, xyz): the corners of each box [lo, hi] (rows)."""
+    return np.where(_CORNER_PICK[None], np.asarray(hi)[:, None, :], np.asarray(lo)[:, None, :])
+
+
+_SIDE_NORMALS_BY_COLUMN = _SIDE_NORMALS.reshape(-1, 3).T.copy()  # (xyz, face * plane): one matrix product
+
+
+def hull_face_hits(position: glm.vec3 | Sequence[float], far: float, points: np.ndarray, lo: np.ndarray,
+                   hi: np.ndarray) -> np.ndarray:
+    """(hull, face) booleans: which faces' frustums (from ``position`` out to ``far``) may
+    touch the convex hull of each row of ``points`` (hull, point, xyz), whose bounding box
+    is [lo, hi] (rows).  Conservative as ``face_hits``: a hull is left out of a face only
+    when all its points are outside one of the face's planes (a plane through the apex: a
+    convex hull is outside it when its points are), or when its box is beyond ``far``.
+    ``face_hits_swept`` is one such hull: a box swept along a light, tighter than the box
+    bounding the sweep (a long diagonal sweep makes that as wide as the level)."""
+    centre = np.asarray(tuple(position), np.float64)
+    hits = np.zeros((len(points), 6), dtype=bool)
+    if not len(points):
+        return hits
+    reach = np.clip(centre, lo, hi) - centre
+    in_range = np.sqrt((reach * reach).sum(axis=1)) <= far
+    if not in_range.any():
+        return hits
+    near = points[in_range] - centre
+    # A hull is outside a plane when its farthest point along the plane's normal is: (hull,
+    # face * plane) of those farthest reaches, and a face is hit when no plane of it has all
+    # the hull outside.
+    reach_along = (near @ _SIDE_NORMALS_BY_COLUMN).max(axis=1)
+    hits[in_range] = (reach_along >= 0.0).reshape(len(near), 6, -1).all(axis=2)
+    return hits
+
+
+def face_hits_swept(position: glm.vec3, far: float, lo: np.ndarray, hi: np.ndarray,
+                    sweep: np.ndarray) -> np.ndarray:
+    """(box, face) booleans: which faces' frustums may touch the convex hull of each world
+    box [lo, hi] (rows) and the same box moved by its row of ``sweep`` (a box swept along a
+    light: where its shadow may fall, ``shadow_rules.directional_shadow_sweep``): its
+    sixteen corners through ``hull_face_hits``."""
+    lo = np.atleast_2d(np.asarray(lo, dtype=np.float64))
+    hi = np.atleast_2d(np.asarray(hi, dtype=np.float64))
+    sweep = np.atleast_2d(np.asarray(sweep, dtype=np.float64))
+    corners = box_corners(lo, hi)
+    points = np.concatenate([corners, corners + sweep[:, None, :]], axis=1)
+    return hull_face_hits(position, far, points, np.minimum(lo, lo + sweep), np.maximum(hi, hi + sweep))
+
+
 def faces_touched(position: glm.vec3, far: float, lo: np.ndarray, hi: np.ndarray) -> set[int]:
     """The faces any of the boxes [lo, hi] may touch (``face_hits``, all boxes together)."""
     return {int(face) for face in np.flatnonzero(face_hits(position, far, lo, hi).any(axis=0))}

@@ -20,6 +20,10 @@ from components import ReflectionProbe
 from engine.rules.probe_rules import ALL_FACES
 
 MAX_NAMED = 8  # entities named in a probe's reasons a frame; the rest are counted in one reason
+# Refresh modes (and reasons) that recapture on a period, whatever changed: a face due for
+# them alone that no change reached since it was drawn is ``ProbeDue.unchanged``.
+PERIODIC = ("every_frame", "every_n")
+WATCHING = ("on_change", *PERIODIC)  # the modes whose probes follow what changed each frame
 
 
 @dataclass
@@ -43,6 +47,9 @@ class ProbeState:
     # The frame (``frames``) each face not yet drawn was first asked for: under a view budget
     # the faces that have waited longest go first, so none waits forever.
     asked_at: dict[int, int] = field(default_factory=dict)
+    # The faces a change may have reached since they were last drawn (a periodic probe's:
+    # the scheduler's ``_mark_changes``); every face until the first capture.
+    changed: set[int] = field(default_factory=lambda: set(ALL_FACES))
 
     def ask(self, faces: Iterable[int], reason: str) -> None:
         """Faces to capture, and why."""
@@ -74,6 +81,7 @@ class ProbeState:
         """The captures drew ``faces`` of this probe."""
         self.captures += 1
         self.faces_captured += len(faces)
+        self.changed -= faces  # drawn now (or kept: what a drawing now gives)
         for face in faces:
             self.asked_at.pop(face, None)
 
@@ -94,13 +102,17 @@ class ProbeStates(dict):
 class ProbeDue:
     """One probe's capture this frame: ``faces`` and the ``reasons`` (reason -> the faces it
     asked for).  ``first``: the probe's first capture (drawn before the main view samples
-    it); ``drawn`` once a capture stage has drawn it."""
+    it); ``drawn`` once a capture stage has drawn it.  ``unchanged``: the faces of ``faces``
+    due for a period alone (``PERIODIC``) that no change reached since they were last
+    drawn: the captures keep such a face as it is where nothing they draw with changed
+    either (``ProbeCaptures.capture``)."""
 
     owner: int
     faces: frozenset[int]
     reasons: dict[str, frozenset[int]]
     first: bool
     drawn: bool = False
+    unchanged: frozenset[int] = frozenset()
 
 
 @dataclass

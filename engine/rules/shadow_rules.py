@@ -129,10 +129,31 @@ def boxes_in_reach(lo: np.ndarray, hi: np.ndarray, position: np.ndarray, light_r
 
 
 def directional_shadow_bounds(lo: np.ndarray, hi: np.ndarray, direction: glm.vec3 | np.ndarray,
-                              level_lo: np.ndarray, level_hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+                              level_lo: np.ndarray, level_hi: np.ndarray,
+                              sweep: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """World boxes (rows) holding where the shadows of the boxes [lo, hi] fall under a light
     travelling along ``direction``: each box swept along the light until its last corner
-    leaves the level's box (nothing beyond it receives a shadow).  Conservative."""
+    leaves the level's box (nothing beyond it receives a shadow).  Conservative.  ``sweep``:
+    ``directional_shadow_sweep``'s rows, where worked out already."""
+    lo = np.atleast_2d(np.asarray(lo, np.float64))
+    hi = np.atleast_2d(np.asarray(hi, np.float64))
+    level_lo = np.asarray(level_lo, np.float64)
+    level_hi = np.asarray(level_hi, np.float64)
+    if sweep is None:
+        sweep = directional_shadow_sweep(lo, hi, direction, level_lo, level_hi)
+    far_lo, far_hi = lo + sweep, hi + sweep
+    out_lo = np.maximum(np.minimum(lo, far_lo), np.minimum(level_lo, lo))
+    out_hi = np.minimum(np.maximum(hi, far_hi), np.maximum(level_hi, hi))
+    return out_lo, out_hi
+
+
+def directional_shadow_sweep(lo: np.ndarray, hi: np.ndarray, direction: glm.vec3 | np.ndarray,
+                             level_lo: np.ndarray, level_hi: np.ndarray) -> np.ndarray:
+    """(box, xyz): how far each box [lo, hi] (rows) is swept along a light travelling along
+    ``direction`` until its last corner leaves the level's box: where its shadow may fall is
+    within the convex hull of the box and the box moved by that much (what
+    ``directional_shadow_bounds`` bounds with a box; ``probe_rules.face_hits_swept`` tests
+    the hull itself)."""
     lo = np.atleast_2d(np.asarray(lo, np.float64))
     hi = np.atleast_2d(np.asarray(hi, np.float64))
     level_lo = np.asarray(level_lo, np.float64)
@@ -143,15 +164,12 @@ def directional_shadow_bounds(lo: np.ndarray, hi: np.ndarray, direction: glm.vec
     # to the wall the light runs towards, the nearest of those; the farthest corner's.
     moving = np.abs(d) > 1e-9
     wall = np.where(d > 0.0, level_hi, level_lo)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        from_lo = np.where(moving, (wall - lo) / np.where(moving, d, 1.0), np.inf)
-        from_hi = np.where(moving, (wall - hi) / np.where(moving, d, 1.0), np.inf)
+    step = np.where(moving, d, 1.0)  # no division by zero: an axis the light runs along is never reached
+    from_lo = np.where(moving, (wall - lo) / step, np.inf)
+    from_hi = np.where(moving, (wall - hi) / step, np.inf)
     travel = np.maximum(np.maximum(from_lo, from_hi).min(axis=1), 0.0)   # the corner farthest from the walls
     travel = np.minimum(travel, float(np.linalg.norm(level_hi - level_lo)))
-    far_lo, far_hi = lo + d * travel[:, None], hi + d * travel[:, None]
-    out_lo = np.maximum(np.minimum(lo, far_lo), np.minimum(level_lo, lo))
-    out_hi = np.minimum(np.maximum(hi, far_hi), np.maximum(level_hi, hi))
-    return out_lo, out_hi
+    return d * travel[:, None]
 
 
 def point_shadow_bounds(lo: np.ndarray, hi: np.ndarray, position: np.ndarray,

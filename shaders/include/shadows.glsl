@@ -11,8 +11,10 @@
 //
 // The lookups are compiled only into the program builds that need them
 // (ShadowMaps.program_defines, engine/render/shadows.py; the scene pass builds with them):
-// DIRECTIONAL_SHADOWS while a directional light casts, POINT_SHADOWS while a point light
-// does; without them a light's shadow is 1 and no map is read.  A GPU skips the lookup of a
+// DIRECTIONAL_SHADOWS while a directional light casts (its value: how many of the first
+// directional slots are read, the last casting one's index + 1), POINT_SHADOWS while a point
+// light does (its value: how many cubes are read, the last used one's index + 1); without
+// them a light's shadow is 1 and no map is read.  A GPU skips the lookup of a
 // light that casts nothing at its ``params.w == 0`` test, but a software rasteriser (llvmpipe)
 // runs every branch's code for every pixel, so there the lookups of a frame where nothing
 // casts cost a third of it.  SHADOW_SINGLE_TAP (the "single" filter) is the one tap known
@@ -24,6 +26,7 @@ layout(std140) uniform Shadows {
     ivec4 point_slot[MAX_POINT_LIGHTS / 4];           // per point light: its cube (0, 1) or -1
     vec4 point_params[MAX_POINT_SHADOWS];             // x: a texel's angular size (radians), y: softness
                                                       // (texels), z: range, w: taps (1 or 4)
+    ivec4 point_light;                                // per cube (0, 1): the point light it is, or -1
 } shadows;
 
 uniform sampler2DShadow shadow_atlas;
@@ -65,6 +68,33 @@ float directional_shadow(int i, vec3 position, vec3 normal, vec3 l) {
 #endif
 }
 
+// Every directional light's shadow at a surface point (``directional_shadow`` of slots 0 to
+// DIRECTIONAL_SHADOWS - 1; 1 for the rest), one lookup a slot at the shader's top level, for
+// the lights' loop to read (scene.frag direct_lighting), not made inside that loop: llvmpipe
+// runs a texture lookup inside a loop at about twice its cost outside one (the lighting
+// benchmark's still shadows frame: lookups in the loop 1.23x the frame without shadows,
+// hoisted 1.17x).  The same value either way: a slot whose light does not reach the point
+// (or that is no light) is not read by the loop.  Reads the Lights block (lights.glsl).
+vec4 directional_shadows(vec3 position, vec3 normal) {
+    vec4 lit = vec4(1.0);
+#ifdef DIRECTIONAL_SHADOWS
+#if MAX_DIRECTIONAL_LIGHTS > 4
+#error "directional_shadows keeps a slot a component of a vec4"
+#endif
+    lit.x = directional_shadow(0, position, normal, -lights.directional_dir[0].xyz);
+#if DIRECTIONAL_SHADOWS > 1
+    lit.y = directional_shadow(1, position, normal, -lights.directional_dir[1].xyz);
+#endif
+#if DIRECTIONAL_SHADOWS > 2
+    lit.z = directional_shadow(2, position, normal, -lights.directional_dir[2].xyz);
+#endif
+#if DIRECTIONAL_SHADOWS > 3
+    lit.w = directional_shadow(3, position, normal, -lights.directional_dir[3].xyz);
+#endif
+#endif
+    return lit;
+}
+
 float point_cube_shadow(samplerCube cube, vec4 params, vec3 from_light, vec3 normal, vec3 l) {
     float dist = length(from_light);
     float nl = clamp(dot(normal, l), 0.0, 1.0);
@@ -91,14 +121,40 @@ float point_cube_shadow(samplerCube cube, vec4 params, vec3 from_light, vec3 nor
 #endif
 }
 
-// How much of point light i (its position ``light_pos``) reaches ``position``.
-float point_shadow(int i, vec3 position, vec3 light_pos, vec3 normal, vec3 l) {
+// How much of the point light whose distances cube ``slot`` holds reaches ``position``
+// (1 where the cube holds none).
+float point_cube_light_shadow(int slot, samplerCube cube, vec3 position, vec3 normal) {
+    int i = shadows.point_light[slot];
+    if (i < 0) return 1.0;
+    vec3 light_pos = lights.point_pos[i].xyz;
+    vec3 d = light_pos - position;
+    vec3 l = d / max(length(d), 1e-4);
+    return point_cube_shadow(cube, shadows.point_params[slot], position - light_pos, normal, l);
+}
+
+// Every point light cube's shadow at a point (cubes 0 to POINT_SHADOWS - 1; 1 for the rest),
+// looked up before the lights' loop as directional_shadows is (one lookup a cube, not one a
+// cube for every point light the loop visits).
+vec4 point_shadows(vec3 position, vec3 normal) {
+    vec4 lit = vec4(1.0);
+#ifdef POINT_SHADOWS
+#if MAX_POINT_SHADOWS > 2
+#error "point_shadows reads two cube samplers"
+#endif
+    lit.x = point_cube_light_shadow(0, point_shadow0, position, normal);
+#if POINT_SHADOWS > 1
+    lit.y = point_cube_light_shadow(1, point_shadow1, position, normal);
+#endif
+#endif
+    return lit;
+}
+
+// How much of point light i reaches the point ``point_shadows`` gave ``lit`` for.
+float point_shadow(int i, vec4 lit) {
 #ifndef POINT_SHADOWS
     return 1.0;
 #else
     int slot = shadows.point_slot[i / 4][i % 4];
-    if (slot < 0) return 1.0;
-    if (slot == 0) return point_cube_shadow(point_shadow0, shadows.point_params[0], position - light_pos, normal, l);
-    return point_cube_shadow(point_shadow1, shadows.point_params[1], position - light_pos, normal, l);
+    return slot == 0 ? lit.x : slot == 1 ? lit.y : 1.0;
 #endif
 }
