@@ -68,6 +68,9 @@ vec2 outward(vec2 a, vec2 b, vec2 c) {
 // keeps the reflection off the parent's pixels beside the surface).
 vec4 conservative_corner(int i) {
     vec4 p = in_corners[i];
+#if defined(COMPOSITE_PORTAL) || defined(COMPOSITE_FALLBACK)
+    return p;  // a portal is never drawn unlit; a fallback's quad is its pixel rectangle
+#endif
     if (to_reflection != vec2(1.0)) return p;
     vec2 px[4];
     for (int k = 0; k < 4; ++k) {

@@ -260,6 +260,7 @@ class ViewTree:
         self.unlit = True
         # (the table, cap and pixel budget they were found for, the sets by depth)
         self._unlit: tuple[tuple, dict[int, frozenset[int]]] = ((None, -1, False), {})
+        self._level_options: dict[tuple, SceneOptions] = {}  # a level's options with its unlit mirrors
 
     def render(self, root: View, levels: LevelStack, surfaces: SurfaceTable,
                settings: TreeSettings = TreeSettings(), blends: SurfaceBlends = NO_BLENDS) -> TreeResult:
@@ -380,6 +381,7 @@ class ViewTree:
         if table is not surfaces or cap != depth_cap or budget != pixel_budget:
             by_depth = {}
             self._unlit = ((surfaces, depth_cap, pixel_budget), by_depth)
+            self._level_options.clear()
         found = by_depth.get(depth)
         if found is None:
             found = by_depth[depth] = shading_replaced(surfaces.states, depth, depth_cap, pixel_budget)
@@ -719,7 +721,9 @@ class ViewTree:
         if step.views:
             options = _BATCHED if step.path == "batched" else REFLECTION_LEVEL
             if step.unlit:
-                options = replace(options, unlit=step.unlit)
+                key = (options, step.unlit)
+                options = self._level_options.get(key) or self._level_options.setdefault(
+                    key, replace(options, unlit=step.unlit))
             self.scene_pass.draw(step.views, step.targets, options, step.conditions)
         if step.ended:
             self.ends.draw(step.end_views, [node.surface.entity for node in step.ended], step.end_matrices,
