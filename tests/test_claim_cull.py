@@ -4,8 +4,9 @@ whose chain of bounding boxes holds no pixel centre is not claimed, and counts 0
 The facts, on the ring of mirrors at sizes where many claims are empty: every claim the
 cull calls empty counts 0 pixels when it is drawn anyway (the GPU's own count, a second
 path), and the cull calls a good share of the empty ones empty; a frame drawn with the
-cull equals the frame drawn without it (colours, ids, views, pixels spent), in exact and
-predicted visibility, with fewer claims drawn."""
+cull equals the frame drawn without it (colours, ids; views and pixels spent too in exact
+visibility, where predicted visibility draws no more), in exact and predicted visibility,
+with fewer claims drawn."""
 from __future__ import annotations
 
 import numpy as np
@@ -76,7 +77,8 @@ def test_claims_called_empty_count_no_pixels(ctx, monkeypatch, mirrors, size):
 @pytest.mark.parametrize("visibility, scale", [("exact", 1.0), ("predicted", 1.0), ("exact", 0.5)])
 def test_frames_with_the_cull_equal_frames_without(ctx, monkeypatch, visibility, scale):
     """The ring of 16 mirrors at 32x18 and 64x36, 12 frames each: the same colours, ids,
-    views and pixels with the cull and without it, with fewer claims drawn.  At half
+    views and pixels with the cull and without it (predicted: no more views, unseen views or
+    pixels spent), with fewer claims drawn.  At half
     resolution (every level's pixels are not the root's), nothing is culled, and nothing
     changes."""
     drawn = {"n": 0}
@@ -98,7 +100,11 @@ def test_frames_with_the_cull_equal_frames_without(ctx, monkeypatch, visibility,
         for frame, (a, b) in enumerate(zip(with_cull, without, strict=True)):
             assert np.array_equal(a[0], b[0]), f"{size} frame {frame}: colours differ"
             assert np.array_equal(a[1], b[1]), f"{size} frame {frame}: ids differ"
-            assert a[2:] == b[2:], f"{size} frame {frame}: views, unseen views, pixels spent {a[2:]} != {b[2:]}"
+            if visibility == "exact":
+                assert a[2:] == b[2:], f"{size} frame {frame}: views, unseen views, pixels spent {a[2:]} != {b[2:]}"
+            else:  # predicted: a claim known empty is no view (tests/test_predicted_claim_skip.py)
+                assert all(x <= y for x, y in zip(a[2:], b[2:], strict=True)), \
+                    f"{size} frame {frame}: views, unseen views, pixels spent {a[2:]} > {b[2:]}"
         assert with_cull[-1][2] > 0
         if scale == 1.0:
             assert claims_with < drawn["n"], f"{size}: {claims_with} claims drawn with the cull, {drawn['n']} without"

@@ -449,10 +449,11 @@ class MirrorPasses:
         counting each one's pixels in ``queries[i]`` (0: the surface is hidden there, or off
         the pixels its parent view drew).  A claim whose query is ``no_pixels`` is known to
         be empty (``engine/render/claim_cull.py``) and is not drawn, but its rectangle is
-        reset: it is still a view (predicted visibility: drawn on that query's condition),
-        and its composite reads its rectangle.  (Exact visibility leaves such claims out: no
-        view, and nothing reads a rectangle that is no view's.)  Outside the claims'
-        rectangles nothing is written or read this frame.  Nothing waits here: the
+        reset, as a view drawn on that query's condition would need (its composite, its
+        views' claims and its fallbacks read its node ids in its rectangle).  (``ViewTree``
+        leaves such claims out, in either visibility: no view, and nothing reads a
+        rectangle that is no view's.)  Outside the claims' rectangles nothing is written or
+        read this frame.  Nothing waits here: the
         counts are read by ``claimed_pixels``, now (the CPU waits for the GPU) or a frame
         later (``ViewTree``'s visibility)."""
         if not claims:

@@ -12,8 +12,9 @@ and portals:
               where level L shows it; a samples query counts them (MirrorPasses.prepare_level).
               With exact visibility the CPU reads the counts now and a candidate with none
               gets no view; with predicted visibility it reads them at the root's next
-              render and draws every candidate now, growing views below only those that had
-              pixels last frame (or were not claimed then) (VISIBILITY_MODES);
+              render and draws every candidate now (but those known empty: claim_cull),
+              growing views below only those that had pixels last frame (or were not
+              claimed then) (VISIBILITY_MODES);
   3. render - the level's views through the scene pass (``ScenePass.draw``): the parent's
               camera carried through the surface, oblique near plane (or clip distance
               close up), only its claimed pixels; view by view, or all in one draw per
@@ -390,7 +391,8 @@ class ViewTree:
     def _skip_empty_claims(self, walk: _Walk, step: _Level) -> None:
         """The claims of ``step`` that cannot take a pixel (``claim_cull``: no pixel centre in
         the bounding boxes of its surface and its parents' up the chain) count 0 without a
-        draw: their queries become ``MirrorPasses.no_pixels``.  The boxes are in the root's
+        draw: their queries become ``MirrorPasses.no_pixels``, and in either visibility they
+        get no view (no claim or reset, no draw, no views below).  The boxes are in the root's
         pixels: a level at another resolution than the root's, or below one, is not tested
         and breaks the chain."""
         candidates = step.candidates
@@ -468,7 +470,8 @@ class ViewTree:
 
     def _keep_end_images(self, walk: _Walk, levels: LevelStack) -> None:
         """The main view's image kept for next frame's end views, with the surfaces it shows
-        (an unseen view's may well not be in it)."""
+        (an unseen view's may well not be in it; a candidate known empty is no view, so a
+        surface only such candidates saw is not kept as shown, as in exact visibility)."""
         if self.ends is None:
             return
         if walk.surfaces.has_end_images:
@@ -498,18 +501,29 @@ class ViewTree:
                               screen: tuple[int, int]) -> tuple[list[int], list[int], list[int], list[tuple[int, ...]]]:
         """Predicted visibility: every candidate of the level becomes a view (or an end
         view), drawn on the GPU only if its claim counts pixels (conditional rendering:
-        ``step.conditions``); only those that had pixels last frame (or were not claimed
-        then) get views below them.  Returns (views, those of them that grow, end views) as
-        rows of ``step.candidates``, and each candidate's key (its chain of surfaces, from
-        its parent's in ``keys``), whose count the GPU keeps in ``record`` for next frame.
-        The frame's spending and the level's coverage go by last frame's counts."""
+        ``step.conditions``), except those known empty (``claim_cull``: their query is
+        ``MirrorPasses.no_pixels``), which get no view, as in exact visibility: no claim, no
+        draw, no views below, no composite; only those that had pixels last frame (or were
+        not claimed then) get views below them.  Returns (views, those of them that grow,
+        end views) as rows of ``step.candidates``, and each candidate's key (its chain of
+        surfaces, from its parent's in ``keys``), whose count the GPU keeps in ``record``
+        for next frame (a known-empty one's counted 0: the next frame predicts it hidden).
+        The frame's spending and the level's coverage go by last frame's counts (0 for a
+        known-empty one: it spends nothing)."""
         candidates, entities = step.candidates, surfaces.entity_list
         claim_keys = [keys[p] + (entities[s],) for p, s in
                       zip(candidates.parent.tolist(), candidates.surface.tolist(), strict=True)]
+        queries, none = step.queries, self.passes.no_pixels
         record.pending.extend(claim_keys)
-        record.counted.extend(step.queries)
+        record.counted.extend(queries)
         seen = [record.seen.get(key) for key in claim_keys]
-        keep = [i for i, end in enumerate(is_end) if not end]
+        if none in queries:  # the views and the end views, less the known empty
+            claimed = [query is not none for query in queries]
+            keep = [i for i, (end, has) in enumerate(zip(is_end, claimed, strict=True)) if has and not end]
+            ends = [i for i, (end, has) in enumerate(zip(is_end, claimed, strict=True)) if has and end]
+        else:
+            keep = [i for i, end in enumerate(is_end) if not end]
+            ends = [i for i, end in enumerate(is_end) if end]
         # A view hidden last frame is drawn (it may show now) but its own surfaces wait for
         # a frame that counts pixels for it.
         grow = [at for at, i in enumerate(keep) if seen[i] != 0]
@@ -518,8 +532,8 @@ class ViewTree:
         stats = self.renderer.stats
         stats.views_spent += len(keep)
         stats.pixels_spent += drawn
-        step.conditions = [step.queries[i] for i in keep]
-        return keep, grow, [i for i, end in enumerate(is_end) if end], claim_keys
+        step.conditions = [queries[i] for i in keep]
+        return keep, grow, ends, claim_keys
 
     @staticmethod
     def _fallback(parent: ReflectionView, surface: SurfaceState, share: float = 1.0, end: int = -1) -> Fallback:
@@ -586,7 +600,7 @@ class ViewTree:
         # Last frame's counts, drawn by the GPU a frame ago (reading them waits for nothing
         # more); none where the root was not drawn last frame, or was drawn exactly.
         fresh = record.pending and record.frame == self._frame - 1
-        record.seen = dict(zip(record.pending, self.passes.claimed_pixels(record.counted),
+        record.seen = dict(zip(record.pending, self._claimed_pixels(record.counted),
                                strict=True)) if fresh else {}
         record.pending, record.counted = [], []
         record.frame, record.used = self._frame, 0
@@ -684,8 +698,9 @@ class ViewTree:
     def _claim(self, surfaces: SurfaceTable, step: _Level) -> None:
         """Every candidate's claim in the level's targets, its pixels counted in its query.
         The claim shader's (parent view, surface, view index) of every candidate: a level's
-        few claims, so lists (a few numpy calls cost more), kept with a kept plan.  Exact
-        visibility leaves out the claims known empty (claim_cull): no view, so no claim or reset."""
+        few claims, so lists (a few numpy calls cost more), kept with a kept plan.  The claims
+        known empty (claim_cull) are left out: they get no view in either visibility, so
+        nothing reads their rectangles (no claim, no reset)."""
         candidates, parents = step.candidates, step.parents
         kept = not candidates.rows.data.flags.writeable
         columns = candidates.derived.get("claims") if kept else None
@@ -697,7 +712,7 @@ class ViewTree:
                 candidates.derived["claims"] = columns
         rows, entities, nodes, scissors = columns
         queries, none = step.queries, self.passes.no_pixels
-        if step.conditions is None and none in queries:
+        if none in queries:
             at = [i for i, query in enumerate(queries) if query is not none]
             rows, entities, nodes, scissors, queries = ([column[i] for i in at] for column in
                                                         (rows, entities, nodes, scissors, queries))
@@ -706,8 +721,8 @@ class ViewTree:
         self.passes.prepare_level(step.targets, step.parent_targets, claims, queries)
 
     def _claimed_pixels(self, queries: list[moderngl.Query]) -> list[int]:
-        """Each claim's pixels (the CPU waits for the GPU), 0 for one known empty
-        (``MirrorPasses.no_pixels``: never claimed in exact visibility, so never read)."""
+        """Each claim's pixels (the CPU waits for the GPU, if they are this frame's), 0 for
+        one known empty (``MirrorPasses.no_pixels``: never claimed, so never read)."""
         none = self.passes.no_pixels
         if none not in queries:
             return self.passes.claimed_pixels(queries)
