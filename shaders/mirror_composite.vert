@@ -42,8 +42,51 @@ flat out vec4 v_place;
 uniform vec2 parent_size;     // pixels of the level composited into
 uniform vec2 to_reflection;   // those pixels -> the reflection level's
 
+#define OUTLINE_MARGIN 0.125  // pixels
+// The quad's corners in the order they go round it (a 2 x 2 grid: 0 1 3 2).
+const int NEXT[4] = int[4](1, 3, 0, 2);
+const int PREVIOUS[4] = int[4](2, 0, 3, 1);
+
+// The unit normal of the edge a -> b pointing away from c (a point inside the quad), in pixels.
+vec2 outward(vec2 a, vec2 b, vec2 c) {
+    vec2 n = vec2(b.y - a.y, a.x - b.x);
+    float len = length(n);
+    if (len < 1e-6) return vec2(0.0);
+    n /= len;
+    return dot(n, c - a) > 0.0 ? -n : n;
+}
+
+// Corner ``i`` with both edges through it moved OUTLINE_MARGIN pixels outwards: every pixel
+// the surface's own triangles cover in the parent view is inside the quad, whatever the
+// rounding of its two transforms (the scene pass's of the mesh, this row's of the outline:
+// apart by far less than the margin), so no pixel of the surface keeps its own shading (a
+// mirror drawn unlit, scene_pass.shading_replaced, shows black there); the few pixels it
+// adds (centres within the margin of an edge) are not the view's and are discarded in
+// mirror_composite.frag (its node).
+// A corner behind the eye (w <= 0) leaves the quad as it is, and so does a level drawn at
+// another resolution than its parent (one of its pixels is several of the parent's: the quad
+// keeps the reflection off the parent's pixels beside the surface).
+vec4 conservative_corner(int i) {
+    vec4 p = in_corners[i];
+#if defined(COMPOSITE_PORTAL) || defined(COMPOSITE_FALLBACK)
+    return p;  // a portal is never drawn unlit; a fallback's quad is its pixel rectangle
+#endif
+    if (to_reflection != vec2(1.0)) return p;
+    vec2 px[4];
+    for (int k = 0; k < 4; ++k) {
+        vec4 q = in_corners[k];
+        if (q.w <= 1e-6) return p;
+        px[k] = (q.xy / q.w * 0.5 + 0.5) * parent_size;
+    }
+    vec2 c = 0.25 * (px[0] + px[1] + px[2] + px[3]);
+    vec2 n1 = outward(px[PREVIOUS[i]], px[i], c);
+    vec2 n2 = outward(px[i], px[NEXT[i]], c);
+    vec2 moved = px[i] + OUTLINE_MARGIN * (n1 + n2) / max(1.0 + dot(n1, n2), 0.25);  // each edge moved out
+    return vec4((moved / parent_size * 2.0 - 1.0) * p.w, p.z, p.w);
+}
+
 void main() {
-    vec4 position = in_corners[gl_VertexID];
+    vec4 position = conservative_corner(gl_VertexID);
     gl_Position = position;
     // The CLIP_RECT_* distances trim the quad to the view's rectangle, so the pixels of the
     // surface outside it (hidden by the parent's own rectangle) are never shaded; the

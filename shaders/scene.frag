@@ -246,6 +246,18 @@ vec3 checker_colour(vec2 uv) {
 
 void main() {
     if (masked && texelFetch(node_map, ivec2(gl_FragCoord.xy), 0).r != node_index) discard;
+#ifdef UNLIT_SURFACE
+    // A mirror the view tree's composites paint over at weight 1 (scene_pass.shading_replaced):
+    // its colour is never seen, so only its depth and ids count (the claims below read them).
+    out_color = vec4(0.0, 0.0, 0.0, 1.0);
+    out_surface = v_slots.w;
+    out_seen = v_slots.w;
+    out_node = node_index;
+    return;
+#endif
+#ifdef TRIVIAL
+    out_color = vec4(1000.0, 0.0, 1000.0, 1.0); out_surface = v_slots.w; out_seen = v_slots.w; out_node = node_index; return;
+#endif
     Surface s;
     s.position = v_world_pos;
     s.to_eye = normalize(VIEW_EYE - v_world_pos);

@@ -135,6 +135,8 @@ class Engine:
             self.stages[name] = make(self)
         # Light goes no deeper through mirrors and portals than the main view tree's views.
         self.stages["shadows"].depth_cap = lambda: self.stages["reflect"].max_depth_cap
+        # The main view draws unlit the mirrors that tree paints over entirely.
+        self.stages["main"].depth_cap = lambda: self.stages["reflect"].max_depth_cap
         # The frame as it runs: (name, system), stages and game systems in schedule order.
         self.schedule: list[tuple[str, esper.Processor]] = []
         stage_names = [name for name, _ in FRAME_STAGES]

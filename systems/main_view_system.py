@@ -6,7 +6,9 @@ window): the reflect stage roots its view tree there and the present stage prese
 """
 from __future__ import annotations
 
+import operator
 import warnings
+from collections.abc import Callable
 
 import esper
 
@@ -15,7 +17,9 @@ from engine.core.frame_io import Output
 from engine.core.world import World
 from engine.render.frame_views import FrameViews
 from engine.render.renderer import Renderer
+from engine.render.scene_pass import ROOT_VIEW, SceneOptions, shading_replaced
 from engine.render.views import camera_view
+from engine.resources import Surfaces, ViewBudget
 from engine.rules.frame_rules import active_camera_parts
 
 
@@ -25,6 +29,11 @@ class MainViewSystem(esper.Processor):
         self.renderer = renderer
         world.resources[FrameViews] = FrameViews()
         self._said_no_camera = False
+        # The depth cap of the view tree the reflect stage roots here (the Engine sets it):
+        # with it, mirrors the tree paints over entirely are drawn unlit
+        # (scene_pass.shading_replaced); None: every mirror is shaded.
+        self.depth_cap: Callable[[], int] | None = None
+        self._options: tuple[tuple, SceneOptions] = (((), ()), ROOT_VIEW)  # (what it was made from, the options)
 
     def process(self, dt: float) -> None:
         world = self.world
@@ -45,4 +54,22 @@ class MainViewSystem(esper.Processor):
         views.levels = levels
         views.main = camera_view(cam_t.world, cam.fov_y, cam.near, cam.far, output.size)
         views.main.layers = cam.layer_mask  # its culling mask (Camera.shows_layers / hides_layers)
-        self.renderer.scene_pass.draw([views.main], targets)
+        self.renderer.scene_pass.draw([views.main], targets, self._root_options())
+
+    def _root_options(self) -> SceneOptions:
+        """The main view's scene options: a root view, with the mirrors the reflect stage's
+        tree paints over entirely drawn unlit, worked out again only when a surface, the
+        depth cap or the pixel budget changed."""
+        surfaces = self.world.resources.get(Surfaces)
+        if self.depth_cap is None or surfaces is None or not surfaces.mirrors:
+            return ROOT_VIEW
+        budget = ViewBudget.of(self.world.resources)
+        pixel_budget = budget is not None and budget.pixels is not None
+        states = tuple(surfaces.mirrors.values())  # a state object stands while its surface is unchanged
+        limits = (self.depth_cap(), pixel_budget)
+        (kept_limits, kept_states), options = self._options
+        if kept_limits != limits or len(kept_states) != len(states) or any(map(operator.is_not, kept_states, states)):
+            unlit = shading_replaced(states, 1, limits[0], pixel_budget)
+            options = SceneOptions(unlit=unlit) if unlit else ROOT_VIEW
+            self._options = ((limits, states), options)
+        return options

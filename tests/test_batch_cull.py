@@ -111,8 +111,9 @@ def test_a_culled_batch_draws_no_sample(ctx, case, monkeypatch):
         left_out[:] = [batch for batch in batches if batch not in kept]
         return kept
 
-    def draw_batches(self, batches, invocations, masked, layered="", skip=0, before_draw=None, hide=0):
-        original_draw(self, batches, invocations, masked, layered, skip, before_draw, hide)
+    def draw_batches(self, batches, invocations, masked, layered="", skip=0, before_draw=None, hide=0,
+                     unlit=frozenset()):
+        original_draw(self, batches, invocations, masked, layered, skip, before_draw, hide, unlit)
         left, left_out[:] = list(left_out), []
         if not left:
             return
@@ -127,7 +128,7 @@ def test_a_culled_batch_draws_no_sample(ctx, case, monkeypatch):
             query = ctx.query(samples=True)
             for batch in left:
                 with query:
-                    original_draw(self, [batch], invocations, masked, layered, skip, before_draw, hide)
+                    original_draw(self, [batch], invocations, masked, layered, skip, before_draw, hide, unlit)
                 counted.append((batch.entity_at[0], batch.count, query.samples))
         finally:
             fbo.color_mask, fbo.depth_mask = colour, depth

@@ -25,6 +25,13 @@ level's views are drawn each with their own draws or all at once through the geo
 shader (``batched``: each triangle is emitted once per view that can see it, the one-draw
 path of the "Multiple Mirrors" OpenGL project; at most
 ``MAX_BATCHED_VIEWS`` views a draw, more are drawn in groups of that many).
+
+Less pixel work where a view's pixels are painted over anyway: a mirror whose reflection
+(or its fallback) the view tree composites over every pixel of it at weight 1 never shows
+its own shading (``shading_replaced`` says which, ``SceneOptions.unlit`` carries them), so a
+batch of such mirrors draws with the ``UNLIT_SURFACE`` build of ``scene.frag``: depth and
+ids as ever, a constant colour, no lighting (at 8 mirrors and 640x360 about 7% of the main
+view's shaded pixels on llvmpipe, which shades every pixel of every 2 x 4 group it touches).
 """
 from __future__ import annotations
 
@@ -37,7 +44,7 @@ import moderngl
 from pyglm import glm
 
 from engine.core.errors import GLPassError
-from engine.core.material_slots import SLOTS
+from engine.core.material_slots import SLOTS, ReflectVariant
 from engine.render.batch_cull import batch_reach
 from engine.render.batched_mirrors import MAX_BATCHED_VIEWS, VIEWS_BLOCK_BYTES, VIEWS_PER_INVOCATION, views_block
 from engine.render.bindings import (
@@ -82,6 +89,7 @@ from engine.render.views import View, union_rect
 
 if TYPE_CHECKING:
     from engine.render.instances import InstanceBatch
+    from engine.resources import SurfaceState
 
 _ALWAYS = nullcontext()  # a view drawn whatever its claim counted
 # A per-view pass tests its opaque batches' boxes against each view (batch_cull.batch_reach)
@@ -106,6 +114,7 @@ class SceneOptions:
     sky: bool = True            # the sky behind; reflection views leave it to their composite
     batched: bool = False       # all views in one draw per batch (the geometry-shader path)
     reflection_filter: bool = False  # albedo filtered as reflections are (Gpu.reflection_anisotropy)
+    unlit: frozenset[int] = frozenset()  # mirrors whose own shading the composites replace (shading_replaced)
 
 
 ROOT_VIEW = SceneOptions()
@@ -119,6 +128,7 @@ _PER_PASS_UNIFORMS = 2  # the first two change with the pass; the rest with the 
 # index is its Camera block's: nothing is written per view)
 _NO_PROBE = ((0.0, 0.0, 0.0, 0.0),) * 3
 _NO_CHECKER = (0.0, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
+_PLANAR = int(ReflectVariant.PLANAR)
 _SCENE = PassState(depth_func="<", cull=True, clips=SCENE_CLIPS)
 _BATCHED_SCENE = PassState(depth_func="<", cull=True, clips=BATCHED_SCENE_CLIPS)
 # The sky's shaders write no gl_ClipDistance: a clip distance left on with no value written
@@ -173,7 +183,7 @@ class ScenePass:
     def program(self, variants: tuple[int, int, int] | None = None, invocations: int = 0,
                 layered: str = "", normal_mapped: bool = False, checker: bool = False,
                 material_maps: tuple[bool, bool] = (False, False), probe_blend: bool = False,
-                ambient_probes: bool = False, probe_rest: bool = False) -> moderngl.Program:
+                ambient_probes: bool = False, probe_rest: bool = False, unlit: bool = False) -> moderngl.Program:
         """The scene program for a batch of ``variants`` (None: mixed, switched per
         instance): plain, batched (``invocations`` > 0: the geometry shader's) or a one-pass
         cube-map capture (``layered`` "culled" or "naive"), with or without a normal map
@@ -184,7 +194,8 @@ class ScenePass:
         (emissive, metallic-roughness: ``EMISSIVE_MAP`` and ``METALLIC_ROUGHNESS_MAP`` builds,
         shaders/include/material_maps.glsl; a batch without them samples nothing for them),
         blending probes (``probe_blend``: ``PROBE_BLEND``) with a probe instead of the sky
-        taking the rest (``probe_rest``: ``PROBE_REST``, a curved object's own), built once.  After a shader hot
+        taking the rest (``probe_rest``: ``PROBE_REST``, a curved object's own), or unlit
+        (``unlit``: ``UNLIT_SURFACE``, a mirror batch ``shading_replaced`` names), built once.  After a shader hot
         reload the set-up is done again and the batches' vertex arrays are made again (the
         relinked program may read uniforms, samplers and vertex inputs the first build
         dropped)."""
@@ -193,7 +204,7 @@ class ScenePass:
         virtual = self.shadows.virtual_shining  # the shadows stage set how many shine
         shadowing = self.shadows.program_defines  # the lookups a program compiles (ShadowMaps.upload's)
         key = (invocations, layered, variants, normal_mapped, checker, material_maps, probe_blend, virtual,
-               ambient_probes, probe_rest, shadowing)
+               ambient_probes, probe_rest, unlit, shadowing)
         program = self._programs.get(key)
         if program is None:
             defines = {}
@@ -215,6 +226,8 @@ class ScenePass:
                 defines["VIRTUAL_LIGHTS"] = "1"
             if ambient_probes:  # diffuse light from the probes' boxes too (shaders/include/ambient.glsl)
                 defines["AMBIENT_PROBES"] = "1"
+            if unlit:  # depth and ids only: the composites paint every pixel over (shading_replaced)
+                defines["UNLIT_SURFACE"] = "1"
             defines.update(shadowing)
             geometry = None
             if invocations:
@@ -275,16 +288,19 @@ class ScenePass:
         """Build the programs and vertex arrays ``batches`` will be drawn with: invocations 0
         (root and per-mirror views) and, with ``reflections``, every invocation count of the
         batched path (``BATCHED_INVOCATIONS``), its view table and the reflection sampler.
-        Returns how many programs were built (0 when all were there)."""
+        A batch of mirrors gets its ``UNLIT_SURFACE`` builds too.  Returns how many programs
+        were built (0 when all were there)."""
         before = len(self._programs)
         counts = (0, *BATCHED_INVOCATIONS) if reflections else (0,)
         ambient = (False, True) if self.irradiance.has_boxes() else (False,)  # captures: False
         for batch in batches:
+            unlit = (False, True) if _may_be_unlit(batch) else (False,)
             for invocations in counts:
                 for probes in ambient:
-                    batch.vao(self.program(batch.variants, invocations, "", batch.normal_map is not None,
-                                           batch.checker is not None, _material_maps(batch), batch.probe_blend,
-                                           probes, bool(batch.rest_probe)))
+                    for dark in unlit:
+                        batch.vao(self.program(batch.variants, invocations, "", batch.normal_map is not None,
+                                               batch.checker is not None, _material_maps(batch), batch.probe_blend,
+                                               probes, bool(batch.rest_probe), dark))
         if reflections:
             if self._views_ubo is None:
                 self._views_ubo = self.ctx.buffer(reserve=VIEWS_BLOCK_BYTES)
@@ -292,7 +308,8 @@ class ScenePass:
         return len(self._programs) - before
 
     def _draw_batches(self, batches, invocations: int, masked: bool, layered: str = "",
-                      skip: int = 0, before_draw: Callable[[], None] | None = None, hide: int = 0) -> None:
+                      skip: int = 0, before_draw: Callable[[], None] | None = None, hide: int = 0,
+                      unlit: frozenset | set = frozenset()) -> None:
         """One instanced draw per batch, each with the program of its variants.  A program's
         uniforms are written only when their value changes (``self._written``, kept for the
         program's life): each write is a moderngl call of a few microseconds on a view's
@@ -305,7 +322,8 @@ class ScenePass:
         cost a dictionary look-up and a comparison a batch, not a program key built and found.
         A batch whose one instance is the view's ``skip`` or ``hide`` entity (a mirror's own
         quad, a probe's own sphere) is not drawn at all: its vertices would all be clipped
-        away (0: none; entities start at 1)."""
+        away (0: none; entities start at 1).  A batch in ``unlit`` (``_unlit_batches``: its
+        mirrors all ``shading_replaced``) draws with its ``UNLIT_SURFACE`` build."""
         ctx = self.ctx
         renderer = self.renderer
         stats = renderer.stats
@@ -313,7 +331,8 @@ class ScenePass:
             self._forget_programs()
         # What else picks a batch's program: a virtual light shining, the shadow lookups compiled.
         stamp = (self._reloads_seen, self.shadows.virtual_shining, self.shadows.program_defines)
-        kind = (invocations, layered, self._ambient_probes)
+        kind = (invocations, layered, self._ambient_probes, False)
+        unlit_kind = (invocations, layered, self._ambient_probes, True)
         sky_size = self._sky_size
         last_own = self._last_own
         for batch in batches:
@@ -321,9 +340,10 @@ class ScenePass:
             if not count or (count == 1 and batch.entity_at[0] in (skip, hide)):
                 continue
             variants = batch.variants
-            record = batch.draw_records.get(kind)
+            drawn_as = unlit_kind if batch in unlit else kind  # a batch the composites paint over
+            record = batch.draw_records.get(drawn_as)
             if record is None or record[0] != stamp or record[1] != variants:
-                record = batch.draw_records[kind] = self._record(batch, kind, stamp, variants)
+                record = batch.draw_records[drawn_as] = self._record(batch, drawn_as, stamp, variants)
             _, _, glo, vao, uniforms, values, textures, own = record
             for unit, texture in textures:
                 bind_texture(ctx, texture, unit, True)  # the pass's albedo sampler stays (bind_sampler)
@@ -355,15 +375,15 @@ class ScenePass:
             stats.draw_calls += 1
             stats.instances += count
 
-    def _record(self, batch: InstanceBatch, kind: tuple[int, str, bool], stamp: tuple, variants) -> tuple:
+    def _record(self, batch: InstanceBatch, kind: tuple[int, str, bool, bool], stamp: tuple, variants) -> tuple:
         """What ``batch`` draws with in passes of ``kind`` (invocations, layered, ambient
-        probes): (stamp, variants, program name, vertex array, per-draw uniforms, the
+        probes, unlit): (stamp, variants, program name, vertex array, per-draw uniforms, the
         program's written values, the (unit, texture) pairs to bind, its own uniform values
         or None where probes give them per draw)."""
-        invocations, layered, ambient = kind
+        invocations, layered, ambient, unlit = kind
         program = self.program(variants, invocations, layered, batch.normal_map is not None,
                                batch.checker is not None, _material_maps(batch), batch.probe_blend,
-                               ambient, bool(batch.rest_probe))
+                               ambient, bool(batch.rest_probe), unlit)
         glo = program.glo
         values = self._written.get(glo)
         if values is None:
@@ -456,8 +476,9 @@ class ScenePass:
         ctx = self.ctx
         renderer = self.renderer
         transparent = renderer.transparent_batches()
-        renderer.upload_views(views)  # every view's Camera block in one write; each binds its range
         opaque = renderer.opaque_batches()
+        unlit = _unlit_batches(opaque, options.unlit, transparent)
+        renderer.upload_views(views)  # every view's Camera block in one write; each binds its range
         reach = None
         if (self.cull_batches and opaque and len(opaque) >= self.cull_min_batches
                 and len(views) * len(opaque) >= self.cull_min_draws):
@@ -468,7 +489,7 @@ class ScenePass:
                 set_front_face(ctx, "cw" if view.mirrored else "ccw")
                 renderer.bind_view_at(index)
                 self._draw_batches(opaque if reach is None else self._reaching(opaque, reach[index], view),
-                                   0, options.masked, skip=view.skip, hide=view.hide)
+                                   0, options.masked, skip=view.skip, hide=view.hide, unlit=unlit)
                 if options.sky:
                     # Into the view's own framebuffer: the sky writes id 0 (nothing) to the
                     # surface and seen images, the very values the clear put where no surface
@@ -520,8 +541,10 @@ class ScenePass:
         ctx.scissor = scissor
         set_front_face(ctx, "ccw")  # mirrored views reverse their vertices in the geometry shader
         invocations = geometry_invocations(len(views))
-        self._draw_batches(renderer.opaque_batches(), invocations, options.masked)
         transparent = renderer.transparent_batches()
+        opaque = renderer.opaque_batches()
+        unlit = _unlit_batches(opaque, options.unlit, transparent)
+        self._draw_batches(opaque, invocations, options.masked, unlit=unlit)
         if transparent:  # farthest from the first view's eye first (the views of a level are close)
             viewport = (0, 0, *views[0].size)
             apply_pass_state(ctx, _BATCHED_TRANSPARENT, viewport, scissor)
@@ -639,6 +662,50 @@ def geometry_invocations(view_count: int) -> int:
 
 # Every invocation count ``geometry_invocations`` gives (1 to MAX_BATCHED_VIEWS views).
 BATCHED_INVOCATIONS = tuple(sorted({geometry_invocations(n) for n in range(1, MAX_BATCHED_VIEWS + 1)}))
+
+
+def shading_replaced(mirrors: Iterable[SurfaceState], depth: int, depth_cap: int,
+                     pixel_budget: bool = False) -> frozenset[int]:
+    """The mirrors whose own shading no pixel of the finished frame shows, when drawn in a
+    view at level ``depth - 1`` of a view tree with ``depth_cap``: the view tree composites
+    each one's reflection, or its fallback where it gets no view (cut by a budget, faded
+    out), over every pixel of it that view shows, blending reflection x weight + own x
+    (1 - weight) with a weight of exactly 1.  That holds for an enabled mirror with a
+    reflect rate of 1, no fade (a partly faded mirror's weights are a quotient of floats),
+    not water (weighted by Fresnel), drawn at the screen's resolution (a level drawn
+    smaller misses pixels at the mirror's edges, whose own shading then shows), and whose
+    views at ``depth`` are within its depth limits and the tree's cap (a view the limits cut
+    becomes an end view, which can leave its own shading showing).  None under a pixel budget
+    (``ViewBudget.pixels``: the tree decides later which levels it draws smaller).  A scene
+    pass draws these mirrors' batches unlit (``SceneOptions.unlit``) in a view where nothing
+    transparent is drawn (glass in front of a mirror blends over the mirror's own colour, and
+    the composite leaves those pixels, which are the glass's, alone)."""
+    if pixel_budget:
+        return frozenset()
+    return frozenset(state.entity for state in mirrors
+                     if state.kind == "mirror" and state.enabled and state.reflect_rate == 1.0 and state.fade is None
+                     and state.water is None and state.resolution_scale == 1.0
+                     and depth <= min(state.max_depth, depth_cap))
+
+
+def _unlit_batches(opaque: Iterable[InstanceBatch], mirrors: frozenset[int], transparent: list) -> set:
+    """The batches of ``opaque`` a pass draws unlit: those whose instances are all in
+    ``mirrors`` (``SceneOptions.unlit``), worked out once a pass, not once a view; none where
+    something ``transparent`` is drawn (it blends over what is behind it, a mirror's own
+    colour too: ``shading_replaced``)."""
+    if not mirrors or transparent:
+        return _NO_BATCHES
+    return {batch for batch in opaque if _may_be_unlit(batch) and batch.row_of.keys() <= mirrors}
+
+
+_NO_BATCHES: frozenset = frozenset()
+
+
+def _may_be_unlit(batch: InstanceBatch) -> bool:
+    """Whether ``batch`` is drawn with an ``UNLIT_SURFACE`` build when its mirrors are
+    ``shading_replaced`` (an opaque batch of mirrors' variants)."""
+    variants = batch.variants
+    return variants is not None and variants[2] == _PLANAR and not batch.transparent
 
 
 def _material_maps(batch) -> tuple[bool, bool]:

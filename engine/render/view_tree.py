@@ -41,7 +41,7 @@ from __future__ import annotations
 import functools
 import math
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import moderngl
 import numpy as np
@@ -64,7 +64,7 @@ from engine.render.mirror_passes import (
     take_samples_queries,
 )
 from engine.render.plan_rows import ROW, Candidates, LevelRows
-from engine.render.scene_pass import REFLECTION_LEVEL, SceneOptions, ScenePass
+from engine.render.scene_pass import REFLECTION_LEVEL, SceneOptions, ScenePass, shading_replaced
 from engine.render.surface_table import NO_BLENDS, SurfaceBlends
 from engine.render.targets import LevelStack, RenderTargets
 from engine.render.view_plan import SurfaceTable, _mat, level_rects
@@ -193,6 +193,7 @@ class _Level:
     chosen: Candidates | None = None
     children: list[ReflectionView] = field(default_factory=list)
     claim_keys: list[tuple[int, ...]] = field(default_factory=list)
+    unlit: frozenset[int] = frozenset()            # mirrors its views draw unlit (shading_replaced)
 
 
 @dataclass
@@ -255,6 +256,12 @@ class ViewTree:
         self._frame = 0                   # frames this tree has drawn in (a new RenderStats: a new frame)
         self._frame_stats: object | None = None
         self._software = renderer.caps.software  # a software rasteriser (the context's, read once)
+        # Draw the mirrors this tree paints over entirely unlit (scene_pass.shading_replaced);
+        # False: every view shades them (the second path the tests compare against).
+        self.unlit = True
+        # (the table, cap and pixel budget they were found for, the sets by depth)
+        self._unlit: tuple[tuple, dict[int, frozenset[int]]] = ((None, -1, False), {})
+        self._level_options: dict[tuple, SceneOptions] = {}  # a level's options with its unlit mirrors
 
     def render(self, root: View, levels: LevelStack, surfaces: SurfaceTable,
                settings: TreeSettings = TreeSettings(), blends: SurfaceBlends = NO_BLENDS) -> TreeResult:
@@ -360,8 +367,26 @@ class ViewTree:
         if children:
             step.path = choose_path(settings.path, len(children), walk.triangles, self._software)
             result.paths.add(step.path)
+            step.unlit = self._unlit_mirrors(surfaces, level + 2, settings.depth_cap)
         step.composite = children + step.ended
         return step
+
+    def _unlit_mirrors(self, surfaces: SurfaceTable, depth: int, depth_cap: int) -> frozenset[int]:
+        """The mirrors the views of a level draw unlit, those whose views at ``depth`` this
+        tree paints over entirely (``shading_replaced``), kept while the table, the depth, the
+        cap and whether a pixel budget applies stand."""
+        if not self.unlit:
+            return frozenset()
+        pixel_budget = self.renderer.stats.pixels_left() is not None
+        (table, cap, budget), by_depth = self._unlit
+        if table is not surfaces or cap != depth_cap or budget != pixel_budget:
+            by_depth = {}
+            self._unlit = ((surfaces, depth_cap, pixel_budget), by_depth)
+            self._level_options.clear()
+        found = by_depth.get(depth)
+        if found is None:
+            found = by_depth[depth] = shading_replaced(surfaces.states, depth, depth_cap, pixel_budget)
+        return found
 
     def _skip_empty_claims(self, walk: _Walk, step: _Level) -> None:
         """The claims of ``step`` that cannot take a pixel (``claim_cull``: no pixel centre in
@@ -709,8 +734,12 @@ class ViewTree:
         rows (CPU work while the GPU draws)."""
         renderer = self.renderer
         if step.views:
-            self.scene_pass.draw(step.views, step.targets, _BATCHED if step.path == "batched"
-                                 else REFLECTION_LEVEL, step.conditions)
+            options = _BATCHED if step.path == "batched" else REFLECTION_LEVEL
+            if step.unlit:
+                key = (options, step.unlit)
+                options = self._level_options.get(key) or self._level_options.setdefault(
+                    key, replace(options, unlit=step.unlit))
+            self.scene_pass.draw(step.views, step.targets, options, step.conditions)
         if step.ended:
             self.ends.draw(step.end_views, [node.surface.entity for node in step.ended], step.end_matrices,
                            step.targets, root)

@@ -1,0 +1,215 @@
+"""Mirrors the view tree paints over entirely are drawn unlit, in the main view and in the
+tree's levels (issue 40: less pixel work in the 8-mirror frame).  Checked by a second path:
+the same scene from an engine that shades every mirror (``MainViewSystem.depth_cap`` None,
+``ViewTree.unlit`` False) must give the very same frame, pixel for pixel and id for id, in
+the cases the rule takes (reflect rate 1, no fade) and in those it must leave alone (a lower
+reflect rate, a fade, a smaller level, a pixel budget, views the depth limits cut, glass in
+front of a mirror); and by what the main view itself wrote under the mirrors before the
+composites: black where the rule took them, lit where not."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from benchmarks.mirrors import MirrorRing
+from components import Mirror
+from engine.core.frame_io import Output
+from engine.core.game import Game
+from engine.render.frame_views import FrameViews
+from engine.render.scene_pass import shading_replaced
+from engine.render.targets import CaptureTarget
+from engine.resources import Surfaces, ViewBudget
+from shell.app import Engine
+
+SIZE = (160, 90)
+FRAMES = 3
+
+
+def _engine(ctx, setup=None, shaded: bool = False, game: Game | None = None) -> Engine:
+    engine = Engine(game or MirrorRing(8), ctx)
+    if shaded:  # the second path: every mirror lit, in the main view and in the tree's levels
+        engine.stages["main"].depth_cap = None
+        engine.reflection_system.tree.unlit = False
+    if setup is not None:
+        setup(engine)
+    return engine
+
+
+def _mirrors(**fields):
+    def setup(engine: Engine) -> None:
+        for _, mirror in engine.world.query_one(Mirror):
+            for name, value in fields.items():
+                setattr(mirror, name, value)
+    return setup
+
+
+def _budget(**fields):
+    def setup(engine: Engine) -> None:
+        engine.world.resources[ViewBudget] = ViewBudget(**fields)
+    return setup
+
+
+def _cap(depth: int):
+    def setup(engine: Engine) -> None:
+        engine.reflection_system.max_depth_cap = depth
+    return setup
+
+
+def _frames(ctx, engine: Engine, frames: int = FRAMES, size=SIZE) -> list[tuple[np.ndarray, np.ndarray]]:
+    capture = CaptureTarget(ctx, size)
+    try:
+        out = []
+        for _ in range(frames):
+            engine.frame(1.0 / 60.0, Output(capture.framebuffer, size))
+            out.append((capture.read_rgb(), engine.renderer.targets.read_ids()))
+        return out
+    finally:
+        capture.release()
+
+
+CASES = {
+    "plain": (None, 8),                                     # rate 1, no fade: all eight unlit
+    "rough": (_mirrors(roughness=0.3), 8),                  # the rough composite weighs by the rate too
+    "half_rate": (_mirrors(reflect_rate=0.5), 0),           # own shading is half the pixel
+    "faded": (_mirrors(fade_distance=(5.0, 40.0)), 0),      # partly faded: weights are a quotient
+    "small_level": (_mirrors(resolution_scale=0.5), 0),     # a smaller level misses edge pixels
+    "no_depth": (_mirrors(max_depth=0), 0),                 # no view: end view or fallback
+    "cap_0": (_cap(0), 0),
+    "view_budget": (_budget(views=3), 8),                   # cut views show the fallback at weight 1
+    "pixel_budget": (_budget(pixels=2000), 0),              # levels drawn smaller, decided later
+}
+
+
+@pytest.mark.parametrize("case", list(CASES))
+def test_the_frame_is_the_same_as_with_every_mirror_shaded(ctx, case):
+    setup, expected_unlit = CASES[case]
+    fast, shaded = _engine(ctx, setup), _engine(ctx, setup, shaded=True)
+    try:
+        got, want = _frames(ctx, fast), _frames(ctx, shaded)
+        _same_frames(got, want)
+        assert len(fast.stages["main"]._root_options().unlit) == expected_unlit
+        assert shaded.stages["main"]._root_options().unlit == frozenset()
+    finally:
+        fast.close()
+        shaded.close()
+
+
+def _same_frames(got, want) -> None:
+    for (image, ids), (image_ref, ids_ref) in zip(got, want, strict=True):
+        assert image.max() > 40  # a picture, not a black frame
+        assert np.array_equal(ids, ids_ref)
+        assert np.array_equal(image, image_ref), f"{int(np.any(image != image_ref, axis=2).sum())} pixels differ"
+
+
+def _unlit_draws(engine: Engine) -> int:
+    """The batches with a draw record of the unlit build (ScenePass._draw_batches' kinds)."""
+    return sum(any(kind[3] for kind in batch.draw_records) for batch in engine.renderer.batches.values())
+
+
+def test_the_levels_draw_their_mirrors_unlit_and_every_claimed_pixel_is_composited(ctx):
+    """16 mirrors, frames 0-11 at 320x180: in frame 11 a level-1 pixel of a mirror seen in a
+    mirror was one the composite's quad (the outline through the parent's camera, rounded
+    apart from the mesh's own triangles) left out, so its own shading showed; the composite's
+    quad is now a pixel larger all round (mirror_composite.vert) and that pixel shows the
+    reflection, in both paths.  Only the levels draw unlit here (the main view shades)."""
+    def levels_only(engine: Engine) -> None:
+        engine.stages["main"].depth_cap = None
+
+    fast = _engine(ctx, levels_only, game=MirrorRing(16))
+    shaded = _engine(ctx, shaded=True, game=MirrorRing(16))
+    try:
+        got, want = _frames(ctx, fast, 12, (320, 180)), _frames(ctx, shaded, 12, (320, 180))
+        assert _unlit_draws(fast) == 1 and _unlit_draws(shaded) == 0
+        assert max(view.level for view in fast.reflection_system.views) >= 3
+        _same_frames(got, want)
+    finally:
+        fast.close()
+        shaded.close()
+
+
+def test_glass_in_front_of_a_mirror_keeps_every_mirror_shaded(ctx):
+    """The sample level's ghost (alpha 0.7, seen only in mirrors) stands before the mirror
+    wall: in a mirror's view it blends over the other mirrors' own colour, so with anything
+    transparent drawn no mirror is unlit."""
+    from tests.golden_scenes import HALL_POSES, _hall
+
+    def place(engine: Engine) -> None:
+        engine.place_camera(*HALL_POSES["mirror_wall"])
+
+    fast, shaded = _engine(ctx, place, game=_hall()), _engine(ctx, place, shaded=True, game=_hall())
+    try:
+        got, want = _frames(ctx, fast, 2, (320, 180)), _frames(ctx, shaded, 2, (320, 180))
+        assert fast.renderer.transparent_batches()
+        _same_frames(got, want)
+    finally:
+        fast.close()
+        shaded.close()
+
+
+def test_the_main_view_writes_no_light_under_the_mirrors_it_draws_unlit(ctx):
+    """What the main view drew under each mirror, read before the reflect stage paints over
+    it: the unlit build's black, and the mirror's lit shading from the engine that shades it."""
+    def main_view_colour(engine: Engine) -> tuple[np.ndarray, np.ndarray, set[int]]:
+        _frames(ctx, engine, 2)
+        mirrors = set(engine.world.resources[Surfaces].mirrors)
+        engine.stages["main"].process(1.0 / 60.0)  # the main view alone, into level 0
+        targets = engine.world.resources[FrameViews].levels[0]
+        w, h = targets.size
+        colour = np.frombuffer(targets.color.read(), np.float16).reshape(h, w, 4).astype(np.float32)
+        surface = np.frombuffer(targets.surface.read(), np.uint32).reshape(h, w)
+        return colour, surface, mirrors
+
+    fast, shaded = _engine(ctx), _engine(ctx, shaded=True)
+    try:
+        colour, surface, mirrors = main_view_colour(fast)
+        colour_ref, surface_ref, _ = main_view_colour(shaded)
+    finally:
+        fast.close()
+        shaded.close()
+    under = np.isin(surface, list(mirrors))
+    assert under.sum() > 200  # the mirrors cover pixels of the main view
+    assert np.array_equal(surface, surface_ref)  # the same ids and depth test outcome
+    assert np.all(colour[under] == (0.0, 0.0, 0.0, 1.0))
+    assert colour_ref[under][:, :3].max() > 0.01  # lit where the mirrors are shaded
+    assert np.array_equal(colour[~under], colour_ref[~under])  # everything else as it was
+
+
+def test_a_mirror_changed_at_run_time_is_shaded_again(ctx):
+    """The main view's set follows the surfaces: a reflect rate lowered after some frames
+    takes that mirror's batch back to the lit build, and the frame stays the second path's."""
+    fast, shaded = _engine(ctx), _engine(ctx, shaded=True)
+    try:
+        _frames(ctx, fast, 2)
+        _frames(ctx, shaded, 2)
+        assert len(fast.stages["main"]._root_options().unlit) == 8
+        for engine in (fast, shaded):
+            entity, mirror = next(iter(engine.world.query_one(Mirror)))
+            mirror.reflect_rate = 0.6
+        got, want = _frames(ctx, fast, 2), _frames(ctx, shaded, 2)
+        assert entity not in fast.stages["main"]._root_options().unlit
+        assert len(fast.stages["main"]._root_options().unlit) == 7
+        _same_frames(got, want)
+    finally:
+        fast.close()
+        shaded.close()
+
+
+def test_shading_replaced_takes_only_what_the_composites_paint_over_at_weight_one(ctx):
+    engine = _engine(ctx)
+    try:
+        _frames(ctx, engine, 1)
+        states = list(engine.world.resources[Surfaces].mirrors.values())
+    finally:
+        engine.close()
+    everyone = {state.entity for state in states}
+    assert shading_replaced(states, 1, 8) == everyone
+    assert shading_replaced(states, 1, 8, pixel_budget=True) == frozenset()
+    assert shading_replaced(states, 1, 0) == frozenset()      # the cap cuts every view
+    assert shading_replaced(states, 3, 8) == everyone         # Mirror.max_depth is 3
+    assert shading_replaced(states, 4, 8) == frozenset()
+    from dataclasses import replace
+    first = states[0]
+    for change in ({"reflect_rate": 0.99}, {"enabled": False}, {"fade": (1.0, 2.0, 1e30, 2e30)},
+                   {"resolution_scale": 0.5}, {"water": object()}, {"kind": "portal"}):
+        changed = [replace(first, **change), *states[1:]]
+        assert shading_replaced(changed, 1, 8) == everyone - {first.entity}, change
