@@ -25,7 +25,9 @@ Variants now (``VARIANTS``; add a row by appending a ``Variant``):
   light (``Mirror.reflects_light``: one virtual light with its own shadow map); still;
 * ``mirror_light_moving``: the same with the sliding box (at most two maps a frame: the
   sun's and the virtual light's);
-* ``post``: no shadows, the camera gets ``Tonemap(curve="agx")`` and ``Bloom()`` (six levels);
+* ``post``: no shadows, the camera gets ``Tonemap(curve="agx")`` and ``Bloom()`` (six levels on a
+  GPU; a software rasteriser's quarter-size start makes five, ending at the same smallest level:
+  ``engine/render/bloom.py``);
 * ``post_auto``: the same with ``Tonemap(auto_exposure=True)``.
 
 **Targets** (``TARGETS``), each a ratio of two variants' medians at a mirror count against
