@@ -44,7 +44,7 @@ def _expected_nodes(parent_node, parent_surface, level_size, claims) -> tuple[np
     expected = np.full((h, w), NO_NODE, np.uint32)
     in_rects = np.zeros((h, w), bool)
     counts = []
-    for (parent_view, surface, view), (x, y, rw, rh) in zip(claims.ids, claims.rects, strict=True):
+    for _, (x, y, rw, rh) in zip(claims.ids, claims.rects, strict=True):
         in_rects[y:y + rh, x:x + rw] = True
     for (parent_view, surface, view), (x, y, rw, rh) in zip(claims.ids, claims.rects, strict=True):
         mine = np.zeros((h, w), bool)
