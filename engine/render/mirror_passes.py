@@ -470,7 +470,6 @@ class MirrorPasses:
             self._reserve_claims(len(vertices))
         self._claim_buffer.write(vertices)
         self._reset_vao.render(moderngl.TRIANGLES, vertices=6 * count)
-        level.claim_framebuffer.use()  # the node image and depth: the reset wrote the rest
         bind_texture(self.ctx, parent.node, PARENT_NODE_UNIT)
         bind_texture(self.ctx, parent.surface, PARENT_SURFACE_UNIT)
         self.uniforms.set(self.claim, "to_parent", (parent.size[0] / level.size[0], parent.size[1] / level.size[1]))

@@ -60,10 +60,6 @@ class RenderTargets:
         self.color_framebuffer = ctx.framebuffer([self.color], self.depth)
         # Composites write the reflection's colour and seen-id only (they read surface and node).
         self.composite_framebuffer = ctx.framebuffer([self.color, self.seen])
-        # Claims write the node image and depth only: the reset before them (one draw over
-        # every claim's rectangle, mirror_passes.prepare_level) already wrote the colour and
-        # ids they would (zero), so a claimed pixel pays for two writes, not five.
-        self.claim_framebuffer = ctx.framebuffer([self.node], self.depth)
 
     def read_ids(self) -> np.ndarray:
         """Entity finally seen at each pixel, uint32 (height, width), row 0 at the top."""
@@ -78,7 +74,6 @@ class RenderTargets:
         return np.flipud(data.reshape(h, w)).copy()
 
     def release(self) -> None:
-        release_framebuffer(self.claim_framebuffer)
         release_framebuffer(self.composite_framebuffer)
         release_framebuffer(self.color_framebuffer)
         release_framebuffer(self.view_framebuffer)
