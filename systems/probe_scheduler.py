@@ -58,10 +58,10 @@ from engine.rules.probe_rules import (
     face_hits,
     faces_touched,
     has_own_probe,
-    hull_face_hits,
     images_through_surfaces,
     lights_reaching,
     probe_samplers,
+    swept_box_face_hits,
     world_bounds,
 )
 from engine.rules.probe_schedule import MAX_NAMED, PERIODIC, WATCHING, ProbeDue, ProbeSchedule, ProbeState, ProbeStates
@@ -378,7 +378,8 @@ class ProbeScheduler:
         face must meet both the sweep's hull and the part of the box bounding it inside the
         level (``directional_shadow_bounds``: nothing outside the level receives a shadow),
         each holding every shadowed point; and within each point light's range
-        (``point_shadow_bounds``).  All the hulls through one ``hull_face_hits``."""
+        (``point_shadow_bounds``).  All the hulls through one ``swept_box_face_hits``
+        (``hull_face_hits``' booleans, from the boxes and sweeps without their corners)."""
         if state.changed >= ALL_FACES:
             return
         if relit or self._lights_came_or_went or (surfaces is not None and (surfaces.mirrors or surfaces.portals)):
@@ -388,42 +389,42 @@ class ProbeScheduler:
             return
         settings = state.settings
         seen = (boxes.entity != state.owner) & boxes.seen_by(settings)
-        lo, hi = boxes.lo[seen], boxes.hi[seen]
-        corners = box_corners(lo, hi)
-        points, box_lo, box_hi = [np.concatenate([corners, corners], axis=1)], [lo], [hi]  # 16 points a hull
+        count = len(boxes.lo)
+        # Every hull as a box and its sweep (a zero sweep: the box alone), all through one
+        # ``swept_box_face_hits``: the boxes seen, then each sun's hull and clipped box, then
+        # each point light's boxes.
+        box_lo, box_hi, sweeps = [boxes.lo[seen]], [boxes.hi[seen]], []
         suns = 0
         casters = self.world.resources.get(ShadowCasters)
         if casters is not None and (casters.directional or casters.points):
             reach = self._filter_reach(casters)
             lo, hi = boxes.lo - reach, boxes.hi + reach
-            corners = box_corners(lo, hi)
             if casters.level is not None:
                 for direction in casters.directional:
                     sweep = directional_shadow_sweep(lo, hi, direction, *casters.level)
                     bound_lo, bound_hi = directional_shadow_bounds(lo, hi, direction, *casters.level, sweep=sweep)
-                    bound = box_corners(bound_lo, bound_hi)
-                    points += [np.concatenate([corners, corners + sweep[:, None, :]], axis=1),
-                               np.concatenate([bound, bound], axis=1)]
-                    box_lo += [np.minimum(lo, lo + sweep), bound_lo]
-                    box_hi += [np.maximum(hi, hi + sweep), bound_hi]
+                    box_lo += [lo, bound_lo]
+                    box_hi += [hi, bound_hi]
+                    sweeps.append(sweep)
                     suns += 1
             for position, light_range in casters.points:
                 near = boxes_in_reach(lo, hi, np.array(position), light_range)
                 if near.any():
                     shadow_lo, shadow_hi = point_shadow_bounds(lo[near], hi[near], np.array(position), light_range)
-                    shadow = box_corners(shadow_lo, shadow_hi)
-                    points.append(np.concatenate([shadow, shadow], axis=1))
                     box_lo.append(shadow_lo)
                     box_hi.append(shadow_hi)
-        hits = hull_face_hits(state.position, settings.far, np.concatenate(points), np.concatenate(box_lo),
-                              np.concatenate(box_hi))
         rows = len(box_lo[0])
+        sweep = np.zeros((sum(len(part) for part in box_lo), 3))
+        for sun, part in enumerate(sweeps):
+            sweep[rows + 2 * sun * count:][:count] = part
+        hits = swept_box_face_hits(state.position, settings.far, np.concatenate(box_lo), np.concatenate(box_hi),
+                                   sweep)
         reached = hits[:rows].any(axis=0)
         for sun in range(suns):
-            hull = hits[rows + 2 * sun * len(boxes.lo):][:len(boxes.lo)]
-            bound = hits[rows + (2 * sun + 1) * len(boxes.lo):][:len(boxes.lo)]
+            hull = hits[rows + 2 * sun * count:][:count]
+            bound = hits[rows + (2 * sun + 1) * count:][:count]
             reached |= (hull & bound).any(axis=0)
-        reached |= hits[rows + 2 * suns * len(boxes.lo):].any(axis=0)  # the point lights' boxes
+        reached |= hits[rows + 2 * suns * count:].any(axis=0)  # the point lights' boxes
         state.changed.update(np.flatnonzero(reached).tolist())
 
     def _filter_reach(self, casters: ShadowCasters) -> float:

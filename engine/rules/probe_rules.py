@@ -420,6 +420,38 @@ def hull_face_hits(position: glm.vec3 | Sequence[float], far: float, points: np.
     return hits
 
 
+# The side planes' normals split by sign: every entry is 0 or +-1, so a box's farthest reach
+# along a plane (the largest of its corners' dot products) is ``(hi - c) @ _PLANES_UP + (lo -
+# c) @ _PLANES_DOWN``: two exact terms and one rounding, the corner's own sum bit for bit.
+_PLANES_UP = np.maximum(_SIDE_NORMALS_BY_COLUMN, 0.0)
+_PLANES_DOWN = np.minimum(_SIDE_NORMALS_BY_COLUMN, 0.0)
+
+
+def swept_box_face_hits(position: glm.vec3 | Sequence[float], far: float, lo: np.ndarray, hi: np.ndarray,
+                        sweep: np.ndarray) -> np.ndarray:
+    """(box, face) booleans: ``hull_face_hits`` of each world box [lo, hi] (rows) and the same
+    box moved by its row of ``sweep`` (a zero row: the box alone), the same booleans bit for
+    bit, without the sixteen corners: the hull's farthest point along a plane is the box's
+    farthest corner or the moved box's, and a box's farthest corner takes, axis by axis,
+    ``hi`` where the normal is positive and ``lo`` where it is negative (``_PLANES_UP``,
+    ``_PLANES_DOWN``; rounding is monotonic, so the corner that wins is the same).  Four
+    small matrix products for any number of boxes: the probes scheduler tests every changed
+    box and its shadows' hulls a frame (``ProbeScheduler._mark_changes``)."""
+    centre = np.asarray(tuple(position), np.float64)
+    hits = np.zeros((len(lo), 6), dtype=bool)
+    if not len(lo):
+        return hits
+    far_lo, far_hi = lo + sweep, hi + sweep
+    reach = np.clip(centre, np.minimum(lo, far_lo), np.maximum(hi, far_hi)) - centre
+    in_range = np.sqrt((reach * reach).sum(axis=1)) <= far
+    if not in_range.any():
+        return hits
+    along = np.maximum((hi - centre) @ _PLANES_UP + (lo - centre) @ _PLANES_DOWN,
+                       (far_hi - centre) @ _PLANES_UP + (far_lo - centre) @ _PLANES_DOWN)
+    hits[in_range] = (along[in_range] >= 0.0).reshape(-1, 6, 4).all(axis=2)
+    return hits
+
+
 def face_hits_swept(position: glm.vec3, far: float, lo: np.ndarray, hi: np.ndarray,
                     sweep: np.ndarray) -> np.ndarray:
     """(box, face) booleans: which faces' frustums may touch the convex hull of each world

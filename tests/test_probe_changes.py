@@ -1,0 +1,68 @@
+"""The probes scheduler's change tests, made cheaper, give the same answers: the hulls tested
+from their boxes and sweeps (``swept_box_face_hits``) against their sixteen corners
+(``hull_face_hits``), and a sun's sweep, whose light-and-level parts are kept, against a
+walk of each corner to the level's walls, after the sun turned or the level grew."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from engine.rules.probe_rules import box_corners, hull_face_hits, swept_box_face_hits
+from engine.rules.shadow_rules import directional_shadow_sweep
+
+
+def test_boxes_and_sweeps_hit_the_faces_their_sixteen_corners_hit():
+    rng = np.random.default_rng(7)
+    hit_some = missed_some = 0
+    for trial in range(400):
+        n = int(rng.integers(1, 20))
+        centre = rng.normal(size=3) * 3.0
+        lo = rng.normal(size=(n, 3)) * 6.0
+        if trial % 2:
+            lo, centre = np.round(lo), np.round(centre)  # box faces lying in a face's planes
+        hi = lo + np.abs(rng.normal(size=(n, 3))) * 2.0
+        sweep = rng.normal(size=(n, 3)) * 8.0 * (rng.random((n, 1)) < 0.6)  # some rows a box alone
+        far = float(rng.uniform(2.0, 30.0))
+        corners = box_corners(lo, hi)
+        points = np.concatenate([corners, corners + sweep[:, None, :]], axis=1)
+        expected = hull_face_hits(centre, far, points, np.minimum(lo, lo + sweep), np.maximum(hi, hi + sweep))
+        got = swept_box_face_hits(centre, far, lo, hi, sweep)
+        np.testing.assert_array_equal(got, expected)
+        hit_some += int(expected.any())
+        missed_some += int((~expected).any())
+    assert hit_some > 100 and missed_some > 100  # both answers were asked for
+
+
+def _walked_sweep(lo, hi, direction, level_lo, level_hi):
+    """Each corner stepped along the light until it leaves the level (per axis the distance
+    to the wall ahead), the farthest corner's distance, at most the level's diagonal."""
+    d = np.asarray(direction, np.float64) / np.linalg.norm(direction)
+    out = []
+    for box_lo, box_hi in zip(lo, hi, strict=True):
+        longest = 0.0
+        for corner in box_corners(box_lo[None], box_hi[None])[0]:
+            ahead = [((level_hi if d[a] > 0 else level_lo)[a] - corner[a]) / d[a] for a in range(3) if abs(d[a]) > 1e-9]
+            longest = max(longest, min(ahead))
+        out.append(d * min(longest, float(np.linalg.norm(level_hi - level_lo))))
+    return np.array(out)
+
+
+@pytest.mark.parametrize("turned", [(0.3, -1.0, 0.5), (0.0, -1.0, 0.0), (-0.7, -0.2, 0.0), (1.0, -0.15, 0.2)])
+def test_a_turned_sun_or_a_grown_level_sweeps_anew(turned):
+    rng = np.random.default_rng(3)
+    lo = rng.uniform((-4.0, 0.0, -4.0), (3.0, 4.0, 3.0), (6, 3))  # inside the level: each casts
+    hi = lo + rng.uniform(0.2, 1.5, (6, 3))
+    level = (np.array([-5.0, -1.0, -5.0]), np.array([5.0, 6.0, 5.0]))
+    first = (-0.4, -1.0, -0.3)
+    assert not np.allclose(_walked_sweep(lo, hi, first, *level), _walked_sweep(lo, hi, turned, *level))
+    np.testing.assert_allclose(directional_shadow_sweep(lo, hi, first, *level), _walked_sweep(lo, hi, first, *level))
+    # The same level, the sun turned: the kept parts must be the new direction's.
+    np.testing.assert_allclose(directional_shadow_sweep(lo, hi, turned, *level), _walked_sweep(lo, hi, turned, *level))
+    # The same sun, the level grown on one side, then the other: the walls are the new level's.
+    # (The walls behind the sun move nothing: at least one side's growth must.)
+    moved = []
+    for grown in ((level[0] - 3.0, level[1]), (level[0], level[1] + 3.0)):
+        walked = _walked_sweep(lo, hi, turned, *grown)
+        np.testing.assert_allclose(directional_shadow_sweep(lo, hi, turned, *grown), walked)
+        moved.append(not np.allclose(walked, _walked_sweep(lo, hi, turned, *level)))
+    assert any(moved)
