@@ -66,3 +66,27 @@ def test_a_turned_sun_or_a_grown_level_sweeps_anew(turned):
         np.testing.assert_allclose(directional_shadow_sweep(lo, hi, turned, *grown), walked)
         moved.append(not np.allclose(walked, _walked_sweep(lo, hi, turned, *level)))
     assert any(moved)
+
+
+def test_a_cube_face_is_touched_where_a_corner_of_the_box_is_farthest_along_each_plane():
+    """``face_touches`` (the farthest corner taken axis by axis) against every corner's dot
+    product with each of ``_face_planes``' normals, bit for bit."""
+    from engine.render.probes import _face_planes, face_touches
+
+    planes = _face_planes()  # (face, plane, xyz)
+    rng = np.random.default_rng(11)
+    touched_some = missed_some = 0
+    for trial in range(400):
+        n = int(rng.integers(1, 25))
+        apex = rng.normal(size=3) * 2.0
+        lo = rng.normal(size=(n, 3)) * 5.0
+        if trial % 2:
+            lo, apex = np.round(lo), np.round(apex)  # box faces lying in a face's planes
+        hi = lo + np.abs(rng.normal(size=(n, 3))) * 2.0
+        corners = box_corners(lo - apex, hi - apex)  # (box, corner, xyz)
+        farthest = np.einsum("bck,fpk->bcfp", corners, planes).max(axis=1)
+        expected = (farthest >= 0.0).all(axis=2)
+        np.testing.assert_array_equal(face_touches(apex, lo, hi), expected)
+        touched_some += int(expected.any())
+        missed_some += int((~expected).any())
+    assert touched_some > 100 and missed_some > 100

@@ -97,7 +97,13 @@ def _face_planes() -> np.ndarray:
 
 _FACE_PLANES = _face_planes()
 _FACE_PLANES_BY_COLUMN = _FACE_PLANES.reshape(-1, 3).T.copy()  # (xyz, face * plane): one matrix product
-_CORNERS = np.array([(x, y, z) for x in (0, 1) for y in (0, 1) for z in (0, 1)], dtype=bool)  # (8, 3)
+
+
+# The planes' normals split by sign, stacked: every entry is 0 or +-1 (``_face_planes``), so a
+# box's farthest corner along a plane is ``(hi - c, lo - c) @ _FACE_PLANES_SPLIT``: at most two
+# exact terms and one rounding, the farthest corner's own sum bit for bit.
+_FACE_PLANES_SPLIT = np.concatenate([np.maximum(_FACE_PLANES_BY_COLUMN, 0.0), np.minimum(_FACE_PLANES_BY_COLUMN, 0.0)])
+_TWICE = np.array([0, 1, 2, 0, 1, 2])  # a point's xyz, twice (hi's and lo's)
 
 
 def face_touches(position: glm.vec3 | Sequence[float], lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
@@ -105,12 +111,13 @@ def face_touches(position: glm.vec3 | Sequence[float], lo: np.ndarray, hi: np.nd
     may show.  Conservative: a box is left out of a face only when all eight of its corners
     are outside one of the face's planes through the apex (``_face_planes``: the farthest
     corner along the plane's normal is outside); a fragment lies at least half a pixel
-    inside the frustum, far from that test's rounding."""
-    centre = np.asarray(tuple(position), np.float64)
-    lo, hi = np.atleast_2d(lo) - centre, np.atleast_2d(hi) - centre
-    corners = np.where(_CORNERS[None], hi[:, None, :], lo[:, None, :])  # (box, corner, xyz)
-    farthest = (corners @ _FACE_PLANES_BY_COLUMN).max(axis=1)  # (box, face * plane)
-    return (farthest >= 0.0).reshape(len(corners), 6, -1).all(axis=2)
+    inside the frustum, far from that test's rounding.  The farthest corner is taken axis by
+    axis (``hi`` where the normal is positive, ``lo`` where negative: rounding is monotonic,
+    so it is the corner whose sum is largest), one matrix product for all boxes and planes."""
+    centre = np.array(tuple(position), np.float64)
+    ends = np.concatenate([np.atleast_2d(hi), np.atleast_2d(lo)], axis=1) - centre[_TWICE]
+    out = (ends @ _FACE_PLANES_SPLIT >= 0.0).reshape(len(ends), 6, 5)
+    return out[..., 0] & out[..., 1] & out[..., 2] & out[..., 3] & out[..., 4]
 
 
 def sky_only_faces(position: glm.vec3, faces: frozenset[int] | set[int], skip: int,

@@ -420,11 +420,12 @@ def hull_face_hits(position: glm.vec3 | Sequence[float], far: float, points: np.
     return hits
 
 
-# The side planes' normals split by sign: every entry is 0 or +-1, so a box's farthest reach
-# along a plane (the largest of its corners' dot products) is ``(hi - c) @ _PLANES_UP + (lo -
-# c) @ _PLANES_DOWN``: two exact terms and one rounding, the corner's own sum bit for bit.
-_PLANES_UP = np.maximum(_SIDE_NORMALS_BY_COLUMN, 0.0)
-_PLANES_DOWN = np.minimum(_SIDE_NORMALS_BY_COLUMN, 0.0)
+# The side planes' normals split by sign, stacked: every entry is 0 or +-1, so a box's
+# farthest reach along a plane (the largest of its corners' dot products) is ``(hi - c, lo -
+# c) @ _PLANES_SPLIT``: two exact terms and one rounding, the farthest corner's own sum bit
+# for bit.
+_PLANES_SPLIT = np.concatenate([np.maximum(_SIDE_NORMALS_BY_COLUMN, 0.0), np.minimum(_SIDE_NORMALS_BY_COLUMN, 0.0)])
+_TWICE = np.array([0, 1, 2, 0, 1, 2])  # a point's xyz, twice (hi's and lo's)
 
 
 def swept_box_face_hits(position: glm.vec3 | Sequence[float], far: float, lo: np.ndarray, hi: np.ndarray,
@@ -433,23 +434,23 @@ def swept_box_face_hits(position: glm.vec3 | Sequence[float], far: float, lo: np
     box moved by its row of ``sweep`` (a zero row: the box alone), the same booleans bit for
     bit, without the sixteen corners: the hull's farthest point along a plane is the box's
     farthest corner or the moved box's, and a box's farthest corner takes, axis by axis,
-    ``hi`` where the normal is positive and ``lo`` where it is negative (``_PLANES_UP``,
-    ``_PLANES_DOWN``; rounding is monotonic, so the corner that wins is the same).  Four
-    small matrix products for any number of boxes: the probes scheduler tests every changed
-    box and its shadows' hulls a frame (``ProbeScheduler._mark_changes``)."""
-    centre = np.asarray(tuple(position), np.float64)
-    hits = np.zeros((len(lo), 6), dtype=bool)
-    if not len(lo):
-        return hits
+    ``hi`` where the normal is positive and ``lo`` where it is negative (``_PLANES_SPLIT``;
+    rounding is monotonic, so the corner that wins is the same).  One small matrix product
+    for any number of boxes: the probes scheduler tests every changed box and its shadows'
+    hulls a frame (``ProbeScheduler._mark_changes``)."""
+    centre = np.array(tuple(position), np.float64)
+    count = len(lo)
+    if not count:
+        return np.zeros((0, 6), dtype=bool)
     far_lo, far_hi = lo + sweep, hi + sweep
-    reach = np.clip(centre, np.minimum(lo, far_lo), np.maximum(hi, far_hi)) - centre
+    # np.clip's bounds, without its dispatch: the nearest point of the hull's box.
+    reach = np.minimum(np.maximum(centre, np.minimum(lo, far_lo)), np.maximum(hi, far_hi)) - centre
     in_range = np.sqrt((reach * reach).sum(axis=1)) <= far
-    if not in_range.any():
-        return hits
-    along = np.maximum((hi - centre) @ _PLANES_UP + (lo - centre) @ _PLANES_DOWN,
-                       (far_hi - centre) @ _PLANES_UP + (far_lo - centre) @ _PLANES_DOWN)
-    hits[in_range] = (along[in_range] >= 0.0).reshape(-1, 6, 4).all(axis=2)
-    return hits
+    # (box, the box and the moved one, hi and lo less the centre) rows through the planes.
+    ends = np.concatenate([hi, lo, far_hi, far_lo], axis=1).reshape(count * 2, 6) - centre[_TWICE]
+    along = (ends @ _PLANES_SPLIT).reshape(count, 2, 24)
+    out = (np.maximum(along[:, 0], along[:, 1]) >= 0.0).reshape(count, 6, 4)
+    return out[..., 0] & out[..., 1] & out[..., 2] & out[..., 3] & in_range[:, None]
 
 
 def face_hits_swept(position: glm.vec3, far: float, lo: np.ndarray, hi: np.ndarray,

@@ -182,7 +182,7 @@ def _sweep_constants(direction: glm.vec3 | np.ndarray, level_lo: np.ndarray,
     the level's diagonal (the longest sweep)."""
     level_lo = np.asarray(level_lo, np.float64)
     level_hi = np.asarray(level_hi, np.float64)
-    key = (tuple(float(v) for v in direction), level_lo.tobytes(), level_hi.tobytes())
+    key = (tuple(direction), level_lo.tobytes(), level_hi.tobytes())
     kept = _SWEEP_KEPT.get(key)
     if kept is None:
         d = np.asarray(direction, np.float64)
