@@ -55,13 +55,13 @@ from engine.rules.probe_rules import (
     LIGHTING_KINDS,
     LookChanges,
     box_corners,
+    box_pair_face_hits,
     face_hits,
     faces_touched,
     has_own_probe,
     images_through_surfaces,
     lights_reaching,
     probe_samplers,
-    swept_box_face_hits,
     world_bounds,
 )
 from engine.rules.probe_schedule import MAX_NAMED, PERIODIC, WATCHING, ProbeDue, ProbeSchedule, ProbeState, ProbeStates
@@ -70,8 +70,7 @@ from engine.rules.shadow_rules import (
     SHADOW_MARGIN_SHARE,
     ShadowCasters,
     boxes_in_reach,
-    directional_shadow_bounds,
-    directional_shadow_sweep,
+    directional_shadow_hull,
     point_shadow_bounds,
 )
 from engine.rules.visibility_rules import drawn_in, entity_code
@@ -92,6 +91,8 @@ class ChangedBoxes:
         self.lo = np.array([row[2] for row in rows], np.float64).reshape(-1, 3)
         self.hi = np.array([row[3] for row in rows], np.float64).reshape(-1, 3)
         self.code = np.array([row[4] for row in rows], np.int64)
+        self.entities = {row[0] for row in rows}
+        self.codes = {row[4] for row in rows}  # one code: every row seen by a probe, or none
 
     def seen_by(self, probe: ReflectionProbe) -> np.ndarray:
         """The rows a probe with these settings may see: those its faces' views (kind probe,
@@ -111,6 +112,7 @@ class ProbeScheduler:
         self._looks = LookChanges()
         self._lights_came_or_went = False  # this frame: a point light came or went (periodic probes' changes)
         self._reach: tuple[ShadowCasters | None, float] = (None, 0.0)  # _filter_reach's, for these casters
+        self._grown: tuple[tuple | None, float] = (None, 0.0)  # _filter_reach's level box (bytes) -> its grown diagonal
         self._mesh_boxes: dict[int, tuple] = {}  # id(mesh) -> (mesh, lo, hi): _mesh_box
         self._watching = False  # the boxes and lights are kept: a watching probe was there last frame
 
@@ -168,11 +170,12 @@ class ProbeScheduler:
         under ``ViewBudget.probe_ms``, those that fit by ``ProbeStates.face_ms`` a face; the
         first always goes, and a probe gains a priority a frame it waits, so none starves.
         What does not fit stays pending, counted in ``RenderStats.probe_faces_deferred``."""
-        eye = _camera_position(self.world)
-        order = spending_order([state.settings.priority + state.waiting for state, _ in due],
-                               [-float(np.linalg.norm(np.asarray(state.position) - eye)) for state, _ in due],
-                               first=[not state.captures for state, _ in due])
-        due = [due[i] for i in order.tolist()]
+        if len(due) > 1:  # (one alone is in order: no camera or distance asked for)
+            eye = _camera_position(self.world)
+            order = spending_order([state.settings.priority + state.waiting for state, _ in due],
+                                   [-float(np.linalg.norm(np.asarray(state.position) - eye)) for state, _ in due],
+                                   first=[not state.captures for state, _ in due])
+            due = [due[i] for i in order.tolist()]
         budget = ViewBudget.of(self.world.resources)
         face_ms = self.probes.face_ms
         if budget is None or budget.probe_ms is None or face_ms is None:
@@ -378,8 +381,8 @@ class ProbeScheduler:
         face must meet both the sweep's hull and the part of the box bounding it inside the
         level (``directional_shadow_bounds``: nothing outside the level receives a shadow),
         each holding every shadowed point; and within each point light's range
-        (``point_shadow_bounds``).  All the hulls through one ``swept_box_face_hits``
-        (``hull_face_hits``' booleans, from the boxes and sweeps without their corners)."""
+        (``point_shadow_bounds``).  All the hulls through one ``box_pair_face_hits``
+        (``hull_face_hits``' booleans, from each hull's two boxes without their corners)."""
         if state.changed >= ALL_FACES:
             return
         if relit or self._lights_came_or_went or (surfaces is not None and (surfaces.mirrors or surfaces.portals)):
@@ -388,12 +391,18 @@ class ProbeScheduler:
         if not len(boxes.entity):
             return
         settings = state.settings
-        seen = (boxes.entity != state.owner) & boxes.seen_by(settings)
         count = len(boxes.lo)
-        # Every hull as a box and its sweep (a zero sweep: the box alone), all through one
-        # ``swept_box_face_hits``: the boxes seen, then each sun's hull and clipped box, then
-        # each point light's boxes.
-        box_lo, box_hi, sweeps = [boxes.lo[seen]], [boxes.hi[seen]], []
+        if state.owner in boxes.entities or len(boxes.codes) > 1:
+            seen = (boxes.entity != state.owner) & boxes.seen_by(settings)
+            near_lo, near_hi = boxes.lo[seen], boxes.hi[seen]
+        elif drawn_in(next(iter(boxes.codes)), visibility_code(VIEW_PROBE, settings.layer_mask)):
+            near_lo, near_hi = boxes.lo, boxes.hi  # one code, which the probe draws: every row
+        else:
+            near_lo, near_hi = boxes.lo[:0], boxes.hi[:0]
+        # Every hull as the hull of two boxes (the same box twice: the box alone), all through
+        # one ``box_pair_face_hits``: the boxes seen, then each sun's hull and clipped box,
+        # then each point light's boxes.
+        box_lo, box_hi, far_lo, far_hi = [near_lo], [near_hi], [near_lo], [near_hi]
         suns = 0
         casters = self.world.resources.get(ShadowCasters)
         if casters is not None and (casters.directional or casters.points):
@@ -401,11 +410,11 @@ class ProbeScheduler:
             lo, hi = boxes.lo - reach, boxes.hi + reach
             if casters.level is not None:
                 for direction in casters.directional:
-                    sweep = directional_shadow_sweep(lo, hi, direction, *casters.level)
-                    bound_lo, bound_hi = directional_shadow_bounds(lo, hi, direction, *casters.level, sweep=sweep)
+                    moved_lo, moved_hi, bound_lo, bound_hi = directional_shadow_hull(lo, hi, direction, *casters.level)
                     box_lo += [lo, bound_lo]
                     box_hi += [hi, bound_hi]
-                    sweeps.append(sweep)
+                    far_lo += [moved_lo, bound_lo]
+                    far_hi += [moved_hi, bound_hi]
                     suns += 1
             for position, light_range in casters.points:
                 near = boxes_in_reach(lo, hi, np.array(position), light_range)
@@ -413,18 +422,21 @@ class ProbeScheduler:
                     shadow_lo, shadow_hi = point_shadow_bounds(lo[near], hi[near], np.array(position), light_range)
                     box_lo.append(shadow_lo)
                     box_hi.append(shadow_hi)
-        rows = len(box_lo[0])
-        sweep = np.zeros((sum(len(part) for part in box_lo), 3))
-        for sun, part in enumerate(sweeps):
-            sweep[rows + 2 * sun * count:][:count] = part
-        hits = swept_box_face_hits(state.position, settings.far, np.concatenate(box_lo), np.concatenate(box_hi),
-                                   sweep)
+                    far_lo.append(shadow_lo)
+                    far_hi.append(shadow_hi)
+        rows = len(near_lo)
+        if len(box_lo) == 1:
+            hits = box_pair_face_hits(state.position, settings.far, near_lo, near_hi, near_lo, near_hi)
+        else:
+            hits = box_pair_face_hits(state.position, settings.far, np.concatenate(box_lo), np.concatenate(box_hi),
+                                      np.concatenate(far_lo), np.concatenate(far_hi))
         reached = hits[:rows].any(axis=0)
         for sun in range(suns):
             hull = hits[rows + 2 * sun * count:][:count]
             bound = hits[rows + (2 * sun + 1) * count:][:count]
             reached |= (hull & bound).any(axis=0)
-        reached |= hits[rows + 2 * suns * count:].any(axis=0)  # the point lights' boxes
+        if len(hits) > rows + 2 * suns * count:
+            reached |= hits[rows + 2 * suns * count:].any(axis=0)  # the point lights' boxes
         state.changed.update(np.flatnonzero(reached).tolist())
 
     def _filter_reach(self, casters: ShadowCasters) -> float:
@@ -440,8 +452,12 @@ class ProbeScheduler:
             return self._reach[1]
         reach = 0.0
         if casters.directional and casters.level is not None:
-            diagonal = float(np.linalg.norm(casters.level[1] - casters.level[0]))
-            grown = diagonal + 2.0 * math.sqrt(3.0) * max(SHADOW_MARGIN, SHADOW_MARGIN_SHARE * diagonal)
+            level = (casters.level[0].tobytes(), casters.level[1].tobytes())
+            if self._grown[0] != level:  # the grown level's diagonal, kept until the level box changes
+                diagonal = float(np.linalg.norm(casters.level[1] - casters.level[0]))
+                margin = max(SHADOW_MARGIN, SHADOW_MARGIN_SHARE * diagonal)
+                self._grown = (level, diagonal + 2.0 * math.sqrt(3.0) * margin)
+            grown = self._grown[1]
             for _, light in self.world.query_one(DirectionalLight):
                 if light.shadows:
                     reach = max(reach, grown / light.shadow_resolution * (2.5 + 2.0 * light.shadow_softness))

@@ -90,3 +90,90 @@ def test_a_cube_face_is_touched_where_a_corner_of_the_box_is_farthest_along_each
         touched_some += int(expected.any())
         missed_some += int((~expected).any())
     assert touched_some > 100 and missed_some > 100
+
+
+@pytest.mark.parametrize("rows_seen", ["all", "none", "some", "own"])
+@pytest.mark.parametrize("sun", [False, True])
+def test_the_faces_a_change_reaches_are_its_corners_and_its_shadows_hulls(rows_seen, sun):
+    """``ProbeScheduler._mark_changes`` against the corners: the faces a changed box the probe
+    draws touches (``face_hits``), and with a sun each box's filtered shadow: the faces both
+    its sweep's hull (``face_hits_swept``) and its box clipped to the level
+    (``directional_shadow_bounds``) touch, for boxes hidden from probes too.  Rows all drawn
+    by the probe, none (hidden from probes), some, and the probe's own object among them."""
+    from pyglm import glm
+
+    from components import ReflectionProbe, Visibility
+    from engine.core.world import World
+    from engine.rules.probe_rules import face_hits, face_hits_swept
+    from engine.rules.probe_schedule import ProbeState
+    from engine.rules.shadow_rules import ShadowCasters, directional_shadow_bounds, directional_shadow_sweep
+    from engine.rules.visibility_rules import entity_code
+    from systems.probe_scheduler import ChangedBoxes, ProbeScheduler
+
+    hidden = entity_code(Visibility(in_probes=False))
+    shown = entity_code(Visibility())
+    rng = np.random.default_rng(5)
+    world = World("changes")
+    scheduler = ProbeScheduler(world)
+    level = (np.array([-12.0, 0.0, -12.0]), np.array([12.0, 4.0, 12.0]))
+    direction = (-0.5, -1.0, 0.2)
+    if sun:
+        world.resources[ShadowCasters] = ShadowCasters(level=level, directional=[direction])
+    position = glm.vec3(0.5, 1.0, -0.5)
+    reached_any = missed_any = 0
+    for _ in range(40):
+        n = int(rng.integers(1, 7))
+        lo = rng.uniform((-9.0, 0.0, -9.0), (8.0, 3.0, 8.0), (n, 3))
+        hi = lo + rng.uniform(0.1, 1.0, (n, 3))
+        seen = {"all": np.ones(n, bool), "none": np.zeros(n, bool), "some": rng.random(n) < 0.5,
+                "own": np.ones(n, bool)}[rows_seen]
+        entity = np.arange(10, 10 + n)
+        if rows_seen == "own":
+            entity[0], seen[0] = 7, False
+        # (The probe's own object is drawn by other views: left out by its entity alone.)
+        boxes = ChangedBoxes([(int(entity[i]), "moved", lo[i], hi[i],
+                               shown if seen[i] or rows_seen == "own" else hidden) for i in range(n)])
+        state = ProbeState(7, ReflectionProbe(far=6.0, refresh="every_frame"), False, position)
+        state.changed = set()
+        scheduler._mark_changes(state, boxes, [], None)
+        expected = face_hits(position, 6.0, lo[seen], hi[seen]).any(axis=0)
+        if sun:
+            reach = scheduler._filter_reach(world.resources[ShadowCasters])
+            grown_lo, grown_hi = lo - reach, hi + reach
+            bound_lo, bound_hi = directional_shadow_bounds(grown_lo, grown_hi, direction, *level)
+            sweep = directional_shadow_sweep(grown_lo, grown_hi, direction, *level)
+            expected |= (face_hits_swept(position, 6.0, grown_lo, grown_hi, sweep)
+                         & face_hits(position, 6.0, bound_lo, bound_hi)).any(axis=0)
+        assert state.changed == set(np.flatnonzero(expected).tolist())
+        reached_any += int(expected.any())
+        missed_any += int(not expected.all())
+    assert missed_any > 5 and (reached_any > 5 or (rows_seen == "none" and not sun))  # (nothing seen, no shadow)
+
+
+def test_the_filter_reach_follows_the_level_box_and_the_light():
+    """``ProbeScheduler._filter_reach`` keeps the grown level's diagonal by the level box:
+    a level grown on either side, or back as it was, and a light's map made finer, give
+    the reach worked out afresh (the grown diagonal over the map's side, times 2.5 + 2
+    softness texels)."""
+    from components import DirectionalLight
+    from engine.core.world import World
+    from engine.rules.shadow_rules import SHADOW_MARGIN, SHADOW_MARGIN_SHARE, ShadowCasters
+    from systems.probe_scheduler import ProbeScheduler
+
+    world = World("reach")
+    light = DirectionalLight(direction=(-0.3, -1.0, 0.2), shadows=True, shadow_resolution=512, shadow_softness=1.0)
+    world.spawn(light)
+    scheduler = ProbeScheduler(world)
+
+    def expected(level):
+        diagonal = float(np.sqrt(((level[1] - level[0]) ** 2).sum()))
+        grown = diagonal + 2.0 * np.sqrt(3.0) * max(SHADOW_MARGIN, SHADOW_MARGIN_SHARE * diagonal)
+        return grown / light.shadow_resolution * (2.5 + 2.0 * light.shadow_softness)
+
+    small = (np.array([-5.0, 0.0, -5.0]), np.array([5.0, 3.0, 5.0]))
+    for level in (small, (small[0] - 20.0, small[1]), (small[0], small[1] + 20.0), small):
+        casters = ShadowCasters(level=level, directional=[tuple(light.direction)])  # a new one a frame
+        assert scheduler._filter_reach(casters) == pytest.approx(expected(level), rel=1e-12)
+    light.shadow_resolution = 2048
+    assert scheduler._filter_reach(ShadowCasters(level=small, directional=[tuple(light.direction)])) == \
+        pytest.approx(expected(small), rel=1e-12)

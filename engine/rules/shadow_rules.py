@@ -170,6 +170,19 @@ def directional_shadow_sweep(lo: np.ndarray, hi: np.ndarray, direction: glm.vec3
     return d * travel[:, None]
 
 
+def directional_shadow_hull(lo: np.ndarray, hi: np.ndarray, direction: glm.vec3 | np.ndarray,
+                            level_lo: np.ndarray, level_hi: np.ndarray) -> tuple[np.ndarray, ...]:
+    """(far_lo, far_hi, bound_lo, bound_hi): each box [lo, hi] (rows, float64) moved by its
+    ``directional_shadow_sweep`` (the hull of the box and the moved box holds where its
+    shadow may fall) and ``directional_shadow_bounds``' boxes, the same values, made
+    together: the probes scheduler asks for both every frame for every changed box."""
+    sweep = directional_shadow_sweep(lo, hi, direction, level_lo, level_hi)
+    far_lo, far_hi = lo + sweep, hi + sweep
+    level_lo, level_hi = np.asarray(level_lo, np.float64), np.asarray(level_hi, np.float64)
+    return (far_lo, far_hi, np.maximum(np.minimum(lo, far_lo), np.minimum(level_lo, lo)),
+            np.minimum(np.maximum(hi, far_hi), np.maximum(level_hi, hi)))
+
+
 _SWEEP_KEPT: dict[tuple, tuple] = {}  # (direction, level box) -> _sweep_constants'
 
 
