@@ -113,7 +113,7 @@ class ProbeScheduler:
         self._lights_came_or_went = False  # this frame: a point light came or went (periodic probes' changes)
         self._reach: tuple[ShadowCasters | None, float] = (None, 0.0)  # _filter_reach's, for these casters
         self._grown: tuple[tuple | None, float] = (None, 0.0)  # _filter_reach's level box (bytes) -> its grown diagonal
-        self._mesh_boxes: dict[int, tuple] = {}  # id(mesh) -> (mesh, lo, hi): _mesh_box
+        self._mesh_boxes: dict[int, tuple] = {}  # id(mesh) -> (mesh, its box's corners): _mesh_corners
         self._watching = False  # the boxes and lights are kept: a watching probe was there last frame
 
     def update(self) -> ProbeSchedule:
@@ -266,25 +266,28 @@ class ProbeScheduler:
         if placed:
             # Where each is now, all in a few array operations (``world_bounds``' box, each
             # mesh's own box carried by its model matrix).
-            local = [self._mesh_box(mesh) for _, _, _, mesh, _ in placed]
-            corners = box_corners(np.array([lo for lo, _ in local]), np.array([hi for _, hi in local]))
-            corners = np.concatenate([corners, np.ones((len(placed), 8, 1))], axis=2)
-            carried = corners @ np.array([model.to_list() for _, _, _, _, model in placed], np.float64)
-            lo, hi = carried[..., :3].min(axis=1), carried[..., :3].max(axis=1)
+            corners = np.array([self._mesh_corners(mesh) for _, _, _, mesh, _ in placed])  # (entity, 8, xyzw)
+            # glm's buffer is the matrix's rows; a row vector takes its columns (its to_list).
+            models = np.ascontiguousarray(np.array([model for _, _, _, _, model in placed], np.float64)
+                                          .transpose(0, 2, 1))
+            carried = (corners @ models)[..., :3]
+            lo, hi = carried.min(axis=1), carried.max(axis=1)
             for i, (entity, what, code, _, _) in enumerate(placed):
                 new = self._bounds[entity] = (lo[i], hi[i])
                 rows.append((entity, what, *new, code))
         return ChangedBoxes(rows)
 
-    def _mesh_box(self, mesh: Mesh) -> tuple[np.ndarray, np.ndarray]:
-        """``mesh.bounds``, kept by mesh (its vertices are read once, as the renderer uploads
-        them once)."""
+    def _mesh_corners(self, mesh: Mesh) -> np.ndarray:
+        """The corners of ``mesh.bounds`` (8, xyzw: w = 1, as ``box_corners`` orders them), kept
+        by mesh (its vertices are read once, as the renderer uploads them once)."""
         kept = self._mesh_boxes.get(id(mesh))
         if kept is None or kept[0] is not mesh:
             if len(self._mesh_boxes) > 4096:
                 self._mesh_boxes.clear()
-            kept = self._mesh_boxes[id(mesh)] = (mesh, *mesh.bounds)
-        return kept[1], kept[2]
+            lo, hi = mesh.bounds
+            corners = box_corners(np.asarray(lo, np.float64)[None], np.asarray(hi, np.float64)[None])[0]
+            kept = self._mesh_boxes[id(mesh)] = (mesh, np.concatenate([corners, np.ones((8, 1))], axis=1))
+        return kept[1]
 
     def _all_boxes(self) -> ChangedBoxes:
         self._bounds = {entity: world_bounds(mesh_ref.mesh, transform.world)
