@@ -301,8 +301,10 @@ class ProbeScheduler:
         frame = world.frame
         entities = (frame.moved | frame.added | frame.removed | world.deleted() | world.changed(PointLight)
                     | world.changed(Transform))
+        # Only an entity with a point light now, or one when last seen, has a sphere to compare.
+        lights = self._lights.keys() | {entity for entity, _ in world.query_one(PointLight)}
         rows = []
-        for entity in entities:
+        for entity in entities & lights:
             old = self._lights.pop(entity, None)
             new = self._light_sphere(entity)
             if old is None and new is None:

@@ -139,16 +139,16 @@ def sky_only_faces(position: glm.vec3, faces: frozenset[int] | set[int], skip: i
     unions = [batch.box for batch in live]
     if any(union is None for union in unions):
         return frozenset()
-    lo, hi = np.array([union[0] for union in unions]), np.array([union[1] for union in unions])
-    if np.isnan(lo).any() or np.isnan(hi).any():
+    boxes = np.array(unions)  # (batch, lo/hi, xyz)
+    if np.isnan(boxes).any():
         return frozenset()
-    near = face_touches(position, lo, hi)  # (batch, face)
-    for index in np.flatnonzero(near[:, sorted(left)].any(axis=1)).tolist():
-        batch = live[index]
-        if not any(near[index, face] for face in left):
+    near = face_touches(position, boxes[:, 0], boxes[:, 1]).tolist()  # (batch, face): a few, as lists
+    for index, touched in enumerate(near):
+        if not any(touched[face] for face in left):
             continue
+        batch = live[index]
         if batch.count == 1:
-            hits = near[index]  # one instance (not the skipped one): its box is the batch's
+            hits = touched  # one instance (not the skipped one): its box is the batch's
         else:
             row = batch.row_of.get(skip) if skip else None
             boxes = batch.row_boxes
