@@ -177,3 +177,60 @@ def test_the_filter_reach_follows_the_level_box_and_the_light():
     light.shadow_resolution = 2048
     assert scheduler._filter_reach(ShadowCasters(level=small, directional=[tuple(light.direction)])) == \
         pytest.approx(expected(small), rel=1e-12)
+
+
+class _Rows:
+    """What ``sky_only_faces`` reads of an instance batch (``InstanceBatch``'s fields of the
+    same names): its entities in row order and each row's world box."""
+
+    def __init__(self, entities: list[int], boxes: np.ndarray) -> None:
+        self.count = len(entities)
+        self.entity_at = entities
+        self.row_of = {entity: row for row, entity in enumerate(entities)}
+        self.row_boxes = boxes
+        self.box = (boxes[:, 0].min(axis=0), boxes[:, 1].max(axis=0))
+
+
+@pytest.mark.parametrize("few", [True, False], ids=["every_row_at_once", "unions_first"])
+def test_sky_only_faces_are_those_no_rows_box_touches(monkeypatch, few):
+    """``sky_only_faces`` on a few instances (every row in one test) and on many (the
+    batches' unions first) against each row's corners: a face is sky-only where no row's
+    box (the skipped entity's left out) has a corner on the inner side of all its planes;
+    a row never measured (NaN) leaves none sky-only."""
+    import engine.render.probes as probes
+
+    if not few:
+        monkeypatch.setattr(probes, "SKY_ONLY_FEW_ROWS", 0)
+    planes = probes._face_planes()
+    rng = np.random.default_rng(13)
+    sky_some = sky_none = 0
+    for trial in range(60):
+        apex = rng.normal(size=3)
+        batches, entity = [], 1
+        for _ in range(int(rng.integers(1, 4))):
+            count = int(rng.integers(1, 5))
+            lo = rng.normal(size=(count, 3)) * 4.0 + rng.normal(size=3) * 6.0
+            boxes = np.stack([lo, lo + rng.uniform(0.1, 1.0, (count, 3))], axis=1)
+            batches.append(_Rows(list(range(entity, entity + count)), boxes))
+            entity += count
+        skip = int(rng.integers(0, entity))  # 0: nothing skipped
+        faces = frozenset(int(f) for f in np.flatnonzero(rng.random(6) < 0.7))
+        touched = set()
+        for batch in batches:
+            for row, owner in enumerate(batch.entity_at):
+                if owner == skip:
+                    continue
+                corners = box_corners(batch.row_boxes[row:row + 1, 0] - apex, batch.row_boxes[row:row + 1, 1] - apex)
+                inside = np.einsum("ck,fpk->cfp", corners[0], planes) >= 0.0  # (corner, face, plane)
+                touched |= set(np.flatnonzero(inside.any(axis=0).all(axis=1)).tolist())
+        expected = frozenset(faces - touched)
+        assert probes.sky_only_faces(apex, faces, skip, batches) == expected
+        sky_some += bool(expected)
+        sky_none += bool(faces - expected)  # some face shows a box
+        if trial % 10 == 0:  # a row not measured yet
+            batches[-1].row_boxes[0, 0, 1] = np.nan
+            batches[-1].box = (batches[-1].row_boxes[:, 0].min(axis=0), batches[-1].row_boxes[:, 1].max(axis=0))
+            skipped_alone = batches[-1].count == 1 and batches[-1].entity_at[0] == skip
+            assert probes.sky_only_faces(apex, faces, skip, batches) == (expected if skipped_alone or not faces
+                                                                          else frozenset())
+    assert sky_some > 5 and sky_none > 5  # both answers asked for
