@@ -93,7 +93,7 @@ def test_a_cube_face_is_touched_where_a_corner_of_the_box_is_farthest_along_each
 
 
 @pytest.mark.parametrize("rows_seen", ["all", "none", "some", "own"])
-@pytest.mark.parametrize("sun", [False, True])
+@pytest.mark.parametrize("sun", [False, True, "point", "both"])
 def test_the_faces_a_change_reaches_are_its_corners_and_its_shadows_hulls(rows_seen, sun):
     """``ProbeScheduler._mark_changes`` against the corners: the faces a changed box the probe
     draws touches (``face_hits``), and with a sun each box's filtered shadow: the faces both
@@ -102,11 +102,17 @@ def test_the_faces_a_change_reaches_are_its_corners_and_its_shadows_hulls(rows_s
     by the probe, none (hidden from probes), some, and the probe's own object among them."""
     from pyglm import glm
 
-    from components import ReflectionProbe, Visibility
+    from components import PointLight, ReflectionProbe, Transform, Visibility
     from engine.core.world import World
     from engine.rules.probe_rules import face_hits, face_hits_swept
     from engine.rules.probe_schedule import ProbeState
-    from engine.rules.shadow_rules import ShadowCasters, directional_shadow_bounds, directional_shadow_sweep
+    from engine.rules.shadow_rules import (
+        ShadowCasters,
+        boxes_in_reach,
+        directional_shadow_bounds,
+        directional_shadow_sweep,
+        point_shadow_bounds,
+    )
     from engine.rules.visibility_rules import entity_code
     from systems.probe_scheduler import ChangedBoxes, ProbeScheduler
 
@@ -117,8 +123,12 @@ def test_the_faces_a_change_reaches_are_its_corners_and_its_shadows_hulls(rows_s
     scheduler = ProbeScheduler(world)
     level = (np.array([-12.0, 0.0, -12.0]), np.array([12.0, 4.0, 12.0]))
     direction = (-0.5, -1.0, 0.2)
+    light = ((1.0, 3.0, 2.0), 7.0)  # a shadowed point light: (position, range)
     if sun:
-        world.resources[ShadowCasters] = ShadowCasters(level=level, directional=[direction])
+        world.resources[ShadowCasters] = ShadowCasters(level=level, directional=[] if sun == "point" else [direction],
+                                                       points=[light] if sun in ("point", "both") else [])
+        if sun in ("point", "both"):
+            world.spawn(PointLight(range=light[1], shadows=True), Transform(position=light[0]))
     position = glm.vec3(0.5, 1.0, -0.5)
     reached_any = missed_any = 0
     for _ in range(40):
@@ -140,10 +150,16 @@ def test_the_faces_a_change_reaches_are_its_corners_and_its_shadows_hulls(rows_s
         if sun:
             reach = scheduler._filter_reach(world.resources[ShadowCasters])
             grown_lo, grown_hi = lo - reach, hi + reach
+        if sun in (True, "both"):
             bound_lo, bound_hi = directional_shadow_bounds(grown_lo, grown_hi, direction, *level)
             sweep = directional_shadow_sweep(grown_lo, grown_hi, direction, *level)
             expected |= (face_hits_swept(position, 6.0, grown_lo, grown_hi, sweep)
                          & face_hits(position, 6.0, bound_lo, bound_hi)).any(axis=0)
+        if sun in ("point", "both"):
+            near = boxes_in_reach(grown_lo, grown_hi, np.array(light[0]), light[1])
+            if near.any():
+                expected |= face_hits(position, 6.0, *point_shadow_bounds(grown_lo[near], grown_hi[near],
+                                                                           np.array(light[0]), light[1])).any(axis=0)
         assert state.changed == set(np.flatnonzero(expected).tolist())
         reached_any += int(expected.any())
         missed_any += int(not expected.all())

@@ -210,6 +210,9 @@ def _sweep_constants(direction: glm.vec3 | np.ndarray, level_lo: np.ndarray,
     return kept
 
 
+_CORNER_PICK = np.array([[x, y, z] for x in (0, 1) for y in (0, 1) for z in (0, 1)], bool)  # (8, 3): hi where set
+
+
 def point_shadow_bounds(lo: np.ndarray, hi: np.ndarray, position: np.ndarray,
                         light_range: float) -> tuple[np.ndarray, np.ndarray]:
     """World boxes (rows) holding where the shadows of the boxes [lo, hi] fall under a point
@@ -219,10 +222,10 @@ def point_shadow_bounds(lo: np.ndarray, hi: np.ndarray, position: np.ndarray,
     lo = np.atleast_2d(np.asarray(lo, np.float64))
     hi = np.atleast_2d(np.asarray(hi, np.float64))
     p = np.asarray(position, np.float64)
-    pick = np.array([[x, y, z] for x in (0, 1) for y in (0, 1) for z in (0, 1)], bool)
-    corners = np.where(pick[None], hi[:, None, :], lo[:, None, :])  # (box, 8, 3)
+    corners = np.where(_CORNER_PICK[None], hi[:, None, :], lo[:, None, :])  # (box, 8, 3)
     away = corners - p
-    distance = np.maximum(np.linalg.norm(away, axis=2, keepdims=True), 1e-9)
+    # np.linalg.norm's own sum (its 2-norm along an axis), without its checks and dispatch.
+    distance = np.maximum(np.sqrt(np.add.reduce(away * away, axis=2, keepdims=True)), 1e-9)
     projected = p + away / distance * light_range
     points = np.concatenate([corners, projected], axis=1)
     pad = 0.1 * light_range
