@@ -85,6 +85,11 @@ class ChangedBoxes:
     look change may be the Visibility itself, and what was seen before must go)."""
 
     def __init__(self, rows: list[tuple[int, str, np.ndarray, np.ndarray, int]]) -> None:
+        if not rows:  # a still frame (or only the camera moved): no list made into arrays
+            self.entity, self.code = np.zeros(0, np.int64), np.zeros(0, np.int64)
+            self.what, self.lo, self.hi = [], np.zeros((0, 3)), np.zeros((0, 3))
+            self.entities, self.codes = set(), set()
+            return
         rows.sort(key=lambda row: row[0])
         self.entity = np.array([row[0] for row in rows], np.int64)
         self.what = [row[1] for row in rows]
