@@ -55,10 +55,10 @@ from engine.rules.probe_rules import (
     LIGHTING_KINDS,
     LookChanges,
     box_corners,
+    box_pair_face_hits,
     face_hits,
     faces_touched,
     has_own_probe,
-    hull_face_hits,
     images_through_surfaces,
     lights_reaching,
     probe_samplers,
@@ -70,8 +70,7 @@ from engine.rules.shadow_rules import (
     SHADOW_MARGIN_SHARE,
     ShadowCasters,
     boxes_in_reach,
-    directional_shadow_bounds,
-    directional_shadow_sweep,
+    directional_shadow_hull,
     point_shadow_bounds,
 )
 from engine.rules.visibility_rules import drawn_in, entity_code
@@ -86,12 +85,19 @@ class ChangedBoxes:
     look change may be the Visibility itself, and what was seen before must go)."""
 
     def __init__(self, rows: list[tuple[int, str, np.ndarray, np.ndarray, int]]) -> None:
+        if not rows:  # a still frame (or only the camera moved): no list made into arrays
+            self.entity, self.code = np.zeros(0, np.int64), np.zeros(0, np.int64)
+            self.what, self.lo, self.hi = [], np.zeros((0, 3)), np.zeros((0, 3))
+            self.entities, self.codes = set(), set()
+            return
         rows.sort(key=lambda row: row[0])
         self.entity = np.array([row[0] for row in rows], np.int64)
         self.what = [row[1] for row in rows]
         self.lo = np.array([row[2] for row in rows], np.float64).reshape(-1, 3)
         self.hi = np.array([row[3] for row in rows], np.float64).reshape(-1, 3)
         self.code = np.array([row[4] for row in rows], np.int64)
+        self.entities = {row[0] for row in rows}
+        self.codes = {row[4] for row in rows}  # one code: every row seen by a probe, or none
 
     def seen_by(self, probe: ReflectionProbe) -> np.ndarray:
         """The rows a probe with these settings may see: those its faces' views (kind probe,
@@ -111,7 +117,8 @@ class ProbeScheduler:
         self._looks = LookChanges()
         self._lights_came_or_went = False  # this frame: a point light came or went (periodic probes' changes)
         self._reach: tuple[ShadowCasters | None, float] = (None, 0.0)  # _filter_reach's, for these casters
-        self._mesh_boxes: dict[int, tuple] = {}  # id(mesh) -> (mesh, lo, hi): _mesh_box
+        self._grown: tuple[tuple | None, float] = (None, 0.0)  # _filter_reach's level box (bytes) -> its grown diagonal
+        self._mesh_boxes: dict[int, tuple] = {}  # id(mesh) -> (mesh, its box's corners): _mesh_corners
         self._watching = False  # the boxes and lights are kept: a watching probe was there last frame
 
     def update(self) -> ProbeSchedule:
@@ -168,11 +175,12 @@ class ProbeScheduler:
         under ``ViewBudget.probe_ms``, those that fit by ``ProbeStates.face_ms`` a face; the
         first always goes, and a probe gains a priority a frame it waits, so none starves.
         What does not fit stays pending, counted in ``RenderStats.probe_faces_deferred``."""
-        eye = _camera_position(self.world)
-        order = spending_order([state.settings.priority + state.waiting for state, _ in due],
-                               [-float(np.linalg.norm(np.asarray(state.position) - eye)) for state, _ in due],
-                               first=[not state.captures for state, _ in due])
-        due = [due[i] for i in order.tolist()]
+        if len(due) > 1:  # (one alone is in order: no camera or distance asked for)
+            eye = _camera_position(self.world)
+            order = spending_order([state.settings.priority + state.waiting for state, _ in due],
+                                   [-float(np.linalg.norm(np.asarray(state.position) - eye)) for state, _ in due],
+                                   first=[not state.captures for state, _ in due])
+            due = [due[i] for i in order.tolist()]
         budget = ViewBudget.of(self.world.resources)
         face_ms = self.probes.face_ms
         if budget is None or budget.probe_ms is None or face_ms is None:
@@ -263,25 +271,28 @@ class ProbeScheduler:
         if placed:
             # Where each is now, all in a few array operations (``world_bounds``' box, each
             # mesh's own box carried by its model matrix).
-            local = [self._mesh_box(mesh) for _, _, _, mesh, _ in placed]
-            corners = box_corners(np.array([lo for lo, _ in local]), np.array([hi for _, hi in local]))
-            corners = np.concatenate([corners, np.ones((len(placed), 8, 1))], axis=2)
-            carried = corners @ np.array([model.to_list() for _, _, _, _, model in placed], np.float64)
-            lo, hi = carried[..., :3].min(axis=1), carried[..., :3].max(axis=1)
+            corners = np.array([self._mesh_corners(mesh) for _, _, _, mesh, _ in placed])  # (entity, 8, xyzw)
+            # glm's buffer is the matrix's rows; a row vector takes its columns (its to_list).
+            models = np.ascontiguousarray(np.array([model for _, _, _, _, model in placed], np.float64)
+                                          .transpose(0, 2, 1))
+            carried = (corners @ models)[..., :3]
+            lo, hi = carried.min(axis=1), carried.max(axis=1)
             for i, (entity, what, code, _, _) in enumerate(placed):
                 new = self._bounds[entity] = (lo[i], hi[i])
                 rows.append((entity, what, *new, code))
         return ChangedBoxes(rows)
 
-    def _mesh_box(self, mesh: Mesh) -> tuple[np.ndarray, np.ndarray]:
-        """``mesh.bounds``, kept by mesh (its vertices are read once, as the renderer uploads
-        them once)."""
+    def _mesh_corners(self, mesh: Mesh) -> np.ndarray:
+        """The corners of ``mesh.bounds`` (8, xyzw: w = 1, as ``box_corners`` orders them), kept
+        by mesh (its vertices are read once, as the renderer uploads them once)."""
         kept = self._mesh_boxes.get(id(mesh))
         if kept is None or kept[0] is not mesh:
             if len(self._mesh_boxes) > 4096:
                 self._mesh_boxes.clear()
-            kept = self._mesh_boxes[id(mesh)] = (mesh, *mesh.bounds)
-        return kept[1], kept[2]
+            lo, hi = mesh.bounds
+            corners = box_corners(np.asarray(lo, np.float64)[None], np.asarray(hi, np.float64)[None])[0]
+            kept = self._mesh_boxes[id(mesh)] = (mesh, np.concatenate([corners, np.ones((8, 1))], axis=1))
+        return kept[1]
 
     def _all_boxes(self) -> ChangedBoxes:
         self._bounds = {entity: world_bounds(mesh_ref.mesh, transform.world)
@@ -295,8 +306,10 @@ class ProbeScheduler:
         frame = world.frame
         entities = (frame.moved | frame.added | frame.removed | world.deleted() | world.changed(PointLight)
                     | world.changed(Transform))
+        # Only an entity with a point light now, or one when last seen, has a sphere to compare.
+        lights = self._lights.keys() | {entity for entity, _ in world.query_one(PointLight)}
         rows = []
-        for entity in entities:
+        for entity in entities & lights:
             old = self._lights.pop(entity, None)
             new = self._light_sphere(entity)
             if old is None and new is None:
@@ -378,7 +391,8 @@ class ProbeScheduler:
         face must meet both the sweep's hull and the part of the box bounding it inside the
         level (``directional_shadow_bounds``: nothing outside the level receives a shadow),
         each holding every shadowed point; and within each point light's range
-        (``point_shadow_bounds``).  All the hulls through one ``hull_face_hits``."""
+        (``point_shadow_bounds``).  All the hulls through one ``box_pair_face_hits``
+        (``hull_face_hits``' booleans, from each hull's two boxes without their corners)."""
         if state.changed >= ALL_FACES:
             return
         if relit or self._lights_came_or_went or (surfaces is not None and (surfaces.mirrors or surfaces.portals)):
@@ -387,43 +401,52 @@ class ProbeScheduler:
         if not len(boxes.entity):
             return
         settings = state.settings
-        seen = (boxes.entity != state.owner) & boxes.seen_by(settings)
-        lo, hi = boxes.lo[seen], boxes.hi[seen]
-        corners = box_corners(lo, hi)
-        points, box_lo, box_hi = [np.concatenate([corners, corners], axis=1)], [lo], [hi]  # 16 points a hull
+        count = len(boxes.lo)
+        if state.owner in boxes.entities or len(boxes.codes) > 1:
+            seen = (boxes.entity != state.owner) & boxes.seen_by(settings)
+            near_lo, near_hi = boxes.lo[seen], boxes.hi[seen]
+        elif drawn_in(next(iter(boxes.codes)), visibility_code(VIEW_PROBE, settings.layer_mask)):
+            near_lo, near_hi = boxes.lo, boxes.hi  # one code, which the probe draws: every row
+        else:
+            near_lo, near_hi = boxes.lo[:0], boxes.hi[:0]
+        # Every hull as the hull of two boxes (the same box twice: the box alone), all through
+        # one ``box_pair_face_hits``: the boxes seen, then each sun's hull and clipped box,
+        # then each point light's boxes.
+        box_lo, box_hi, far_lo, far_hi = [near_lo], [near_hi], [near_lo], [near_hi]
         suns = 0
         casters = self.world.resources.get(ShadowCasters)
         if casters is not None and (casters.directional or casters.points):
             reach = self._filter_reach(casters)
             lo, hi = boxes.lo - reach, boxes.hi + reach
-            corners = box_corners(lo, hi)
             if casters.level is not None:
                 for direction in casters.directional:
-                    sweep = directional_shadow_sweep(lo, hi, direction, *casters.level)
-                    bound_lo, bound_hi = directional_shadow_bounds(lo, hi, direction, *casters.level, sweep=sweep)
-                    bound = box_corners(bound_lo, bound_hi)
-                    points += [np.concatenate([corners, corners + sweep[:, None, :]], axis=1),
-                               np.concatenate([bound, bound], axis=1)]
-                    box_lo += [np.minimum(lo, lo + sweep), bound_lo]
-                    box_hi += [np.maximum(hi, hi + sweep), bound_hi]
+                    moved_lo, moved_hi, bound_lo, bound_hi = directional_shadow_hull(lo, hi, direction, *casters.level)
+                    box_lo += [lo, bound_lo]
+                    box_hi += [hi, bound_hi]
+                    far_lo += [moved_lo, bound_lo]
+                    far_hi += [moved_hi, bound_hi]
                     suns += 1
             for position, light_range in casters.points:
                 near = boxes_in_reach(lo, hi, np.array(position), light_range)
                 if near.any():
                     shadow_lo, shadow_hi = point_shadow_bounds(lo[near], hi[near], np.array(position), light_range)
-                    shadow = box_corners(shadow_lo, shadow_hi)
-                    points.append(np.concatenate([shadow, shadow], axis=1))
                     box_lo.append(shadow_lo)
                     box_hi.append(shadow_hi)
-        hits = hull_face_hits(state.position, settings.far, np.concatenate(points), np.concatenate(box_lo),
-                              np.concatenate(box_hi))
-        rows = len(box_lo[0])
+                    far_lo.append(shadow_lo)
+                    far_hi.append(shadow_hi)
+        rows = len(near_lo)
+        if len(box_lo) == 1:
+            hits = box_pair_face_hits(state.position, settings.far, near_lo, near_hi, near_lo, near_hi)
+        else:
+            hits = box_pair_face_hits(state.position, settings.far, np.concatenate(box_lo), np.concatenate(box_hi),
+                                      np.concatenate(far_lo), np.concatenate(far_hi))
         reached = hits[:rows].any(axis=0)
         for sun in range(suns):
-            hull = hits[rows + 2 * sun * len(boxes.lo):][:len(boxes.lo)]
-            bound = hits[rows + (2 * sun + 1) * len(boxes.lo):][:len(boxes.lo)]
+            hull = hits[rows + 2 * sun * count:][:count]
+            bound = hits[rows + (2 * sun + 1) * count:][:count]
             reached |= (hull & bound).any(axis=0)
-        reached |= hits[rows + 2 * suns * len(boxes.lo):].any(axis=0)  # the point lights' boxes
+        if len(hits) > rows + 2 * suns * count:
+            reached |= hits[rows + 2 * suns * count:].any(axis=0)  # the point lights' boxes
         state.changed.update(np.flatnonzero(reached).tolist())
 
     def _filter_reach(self, casters: ShadowCasters) -> float:
@@ -439,8 +462,12 @@ class ProbeScheduler:
             return self._reach[1]
         reach = 0.0
         if casters.directional and casters.level is not None:
-            diagonal = float(np.linalg.norm(casters.level[1] - casters.level[0]))
-            grown = diagonal + 2.0 * math.sqrt(3.0) * max(SHADOW_MARGIN, SHADOW_MARGIN_SHARE * diagonal)
+            level = (casters.level[0].tobytes(), casters.level[1].tobytes())
+            if self._grown[0] != level:  # the grown level's diagonal, kept until the level box changes
+                diagonal = float(np.linalg.norm(casters.level[1] - casters.level[0]))
+                margin = max(SHADOW_MARGIN, SHADOW_MARGIN_SHARE * diagonal)
+                self._grown = (level, diagonal + 2.0 * math.sqrt(3.0) * margin)
+            grown = self._grown[1]
             for _, light in self.world.query_one(DirectionalLight):
                 if light.shadows:
                     reach = max(reach, grown / light.shadow_resolution * (2.5 + 2.0 * light.shadow_softness))

@@ -420,6 +420,47 @@ def hull_face_hits(position: glm.vec3 | Sequence[float], far: float, points: np.
     return hits
 
 
+# The side planes' normals split by sign, stacked: every entry is 0 or +-1, so a box's
+# farthest reach along a plane (the largest of its corners' dot products) is ``(hi - c, lo -
+# c) @ _PLANES_SPLIT``: two exact terms and one rounding, the farthest corner's own sum bit
+# for bit.
+_PLANES_SPLIT = np.concatenate([np.maximum(_SIDE_NORMALS_BY_COLUMN, 0.0), np.minimum(_SIDE_NORMALS_BY_COLUMN, 0.0)])
+_TWICE = np.array([0, 1, 2, 0, 1, 2])  # a point's xyz, twice (hi's and lo's)
+
+
+def box_pair_face_hits(position: glm.vec3 | Sequence[float], far: float, lo: np.ndarray, hi: np.ndarray,
+                       far_lo: np.ndarray, far_hi: np.ndarray) -> np.ndarray:
+    """(row, face) booleans: ``hull_face_hits`` of the convex hull of each row's two world
+    boxes, [lo, hi] and [far_lo, far_hi] (a box swept along a light: the box and the box
+    moved; the same box twice: the box alone), the same booleans bit for bit, without the
+    sixteen corners: the hull's farthest point along a plane is one box's farthest corner,
+    and a box's farthest corner takes, axis by axis, ``hi`` where the normal is positive and
+    ``lo`` where it is negative (``_PLANES_SPLIT``; rounding is monotonic, so the corner that
+    wins is the same).  One small matrix product for any number of rows: the probes
+    scheduler tests every changed box and its shadows' hulls a frame
+    (``ProbeScheduler._mark_changes``)."""
+    centre = np.array(tuple(position), np.float64)
+    count = len(lo)
+    if not count:
+        return np.zeros((0, 6), dtype=bool)
+    # np.clip's bounds, without its dispatch: the nearest point of the hull's box.
+    reach = np.minimum(np.maximum(centre, np.minimum(lo, far_lo)), np.maximum(hi, far_hi)) - centre
+    in_range = np.sqrt((reach * reach).sum(axis=1)) <= far
+    # (row, one box and the other, hi and lo less the centre) through the planes.
+    ends = np.concatenate([hi, lo, far_hi, far_lo], axis=1).reshape(count * 2, 6) - centre[_TWICE]
+    along = (ends @ _PLANES_SPLIT).reshape(count, 2, 24)
+    out = (np.maximum(along[:, 0], along[:, 1]) >= 0.0).reshape(count, 6, 4)
+    return out[..., 0] & out[..., 1] & out[..., 2] & out[..., 3] & in_range[:, None]
+
+
+def swept_box_face_hits(position: glm.vec3 | Sequence[float], far: float, lo: np.ndarray, hi: np.ndarray,
+                        sweep: np.ndarray) -> np.ndarray:
+    """(box, face) booleans: ``hull_face_hits`` of each world box [lo, hi] (rows) and the same
+    box moved by its row of ``sweep`` (a zero row: the box alone), bit for bit
+    (``box_pair_face_hits``)."""
+    return box_pair_face_hits(position, far, lo, hi, lo + sweep, hi + sweep)
+
+
 def face_hits_swept(position: glm.vec3, far: float, lo: np.ndarray, hi: np.ndarray,
                     sweep: np.ndarray) -> np.ndarray:
     """(box, face) booleans: which faces' frustums may touch the convex hull of each world

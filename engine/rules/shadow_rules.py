@@ -153,23 +153,64 @@ def directional_shadow_sweep(lo: np.ndarray, hi: np.ndarray, direction: glm.vec3
     ``direction`` until its last corner leaves the level's box: where its shadow may fall is
     within the convex hull of the box and the box moved by that much (what
     ``directional_shadow_bounds`` bounds with a box; ``probe_rules.face_hits_swept`` tests
-    the hull itself)."""
+    the hull itself).  What depends on the light and the level alone (``_sweep_constants``)
+    is kept until either changes: the probes scheduler sweeps every changed box a frame."""
     lo = np.atleast_2d(np.asarray(lo, np.float64))
     hi = np.atleast_2d(np.asarray(hi, np.float64))
-    level_lo = np.asarray(level_lo, np.float64)
-    level_hi = np.asarray(level_hi, np.float64)
-    d = np.asarray(direction, np.float64)
-    d = d / np.linalg.norm(d)
+    d, moving, wall, step, diagonal = _sweep_constants(direction, level_lo, level_hi)
     # How far each box's corners travel before leaving the level's box: per axis the distance
     # to the wall the light runs towards, the nearest of those; the farthest corner's.
-    moving = np.abs(d) > 1e-9
-    wall = np.where(d > 0.0, level_hi, level_lo)
-    step = np.where(moving, d, 1.0)  # no division by zero: an axis the light runs along is never reached
-    from_lo = np.where(moving, (wall - lo) / step, np.inf)
-    from_hi = np.where(moving, (wall - hi) / step, np.inf)
+    from_lo = (wall - lo) / step
+    from_hi = (wall - hi) / step
+    if moving is not None:  # an axis the light runs along is never reached
+        from_lo = np.where(moving, from_lo, np.inf)
+        from_hi = np.where(moving, from_hi, np.inf)
     travel = np.maximum(np.maximum(from_lo, from_hi).min(axis=1), 0.0)   # the corner farthest from the walls
-    travel = np.minimum(travel, float(np.linalg.norm(level_hi - level_lo)))
+    travel = np.minimum(travel, diagonal)
     return d * travel[:, None]
+
+
+def directional_shadow_hull(lo: np.ndarray, hi: np.ndarray, direction: glm.vec3 | np.ndarray,
+                            level_lo: np.ndarray, level_hi: np.ndarray) -> tuple[np.ndarray, ...]:
+    """(far_lo, far_hi, bound_lo, bound_hi): each box [lo, hi] (rows, float64) moved by its
+    ``directional_shadow_sweep`` (the hull of the box and the moved box holds where its
+    shadow may fall) and ``directional_shadow_bounds``' boxes, the same values, made
+    together: the probes scheduler asks for both every frame for every changed box."""
+    sweep = directional_shadow_sweep(lo, hi, direction, level_lo, level_hi)
+    far_lo, far_hi = lo + sweep, hi + sweep
+    level_lo, level_hi = np.asarray(level_lo, np.float64), np.asarray(level_hi, np.float64)
+    return (far_lo, far_hi, np.maximum(np.minimum(lo, far_lo), np.minimum(level_lo, lo)),
+            np.minimum(np.maximum(hi, far_hi), np.maximum(level_hi, hi)))
+
+
+_SWEEP_KEPT: dict[tuple, tuple] = {}  # (direction, level box) -> _sweep_constants'
+
+
+def _sweep_constants(direction: glm.vec3 | np.ndarray, level_lo: np.ndarray,
+                     level_hi: np.ndarray) -> tuple[np.ndarray, np.ndarray | None, np.ndarray, np.ndarray, float]:
+    """A sweep's parts that depend on the light's direction and the level's box alone, kept
+    by their values (a turned sun or a new level box is a new key): the unit direction, the
+    axes it moves along (None: all three), the walls it runs towards, the divisor a wall's
+    distance is taken with (1 on an axis it does not move along: no division by zero) and
+    the level's diagonal (the longest sweep)."""
+    level_lo = np.asarray(level_lo, np.float64)
+    level_hi = np.asarray(level_hi, np.float64)
+    key = (tuple(direction), level_lo.tobytes(), level_hi.tobytes())
+    kept = _SWEEP_KEPT.get(key)
+    if kept is None:
+        d = np.asarray(direction, np.float64)
+        d = d / np.linalg.norm(d)
+        moving = np.abs(d) > 1e-9
+        wall = np.where(d > 0.0, level_hi, level_lo)
+        step = np.where(moving, d, 1.0)
+        if len(_SWEEP_KEPT) > 64:
+            _SWEEP_KEPT.clear()
+        kept = _SWEEP_KEPT[key] = (d, None if moving.all() else moving, wall, step,
+                                   float(np.linalg.norm(level_hi - level_lo)))
+    return kept
+
+
+_CORNER_PICK = np.array([[x, y, z] for x in (0, 1) for y in (0, 1) for z in (0, 1)], bool)  # (8, 3): hi where set
 
 
 def point_shadow_bounds(lo: np.ndarray, hi: np.ndarray, position: np.ndarray,
@@ -181,10 +222,10 @@ def point_shadow_bounds(lo: np.ndarray, hi: np.ndarray, position: np.ndarray,
     lo = np.atleast_2d(np.asarray(lo, np.float64))
     hi = np.atleast_2d(np.asarray(hi, np.float64))
     p = np.asarray(position, np.float64)
-    pick = np.array([[x, y, z] for x in (0, 1) for y in (0, 1) for z in (0, 1)], bool)
-    corners = np.where(pick[None], hi[:, None, :], lo[:, None, :])  # (box, 8, 3)
+    corners = np.where(_CORNER_PICK[None], hi[:, None, :], lo[:, None, :])  # (box, 8, 3)
     away = corners - p
-    distance = np.maximum(np.linalg.norm(away, axis=2, keepdims=True), 1e-9)
+    # np.linalg.norm's own sum (its 2-norm along an axis), without its checks and dispatch.
+    distance = np.maximum(np.sqrt(np.add.reduce(away * away, axis=2, keepdims=True)), 1e-9)
     projected = p + away / distance * light_range
     points = np.concatenate([corners, projected], axis=1)
     pad = 0.1 * light_range
