@@ -198,6 +198,59 @@ def test_a_bent_lookup_never_carries_the_end_images_mark_up_a_level(ctx):
     assert all(counts[level] == 0 for level in range(4)), counts
 
 
+def _ring_frames(ctx, mirrors: int, visibility: str, own_color, frames: int
+                 ) -> tuple[list[np.ndarray], list[int], np.ndarray]:
+    """The mirrors benchmark's ring of ``mirrors`` (its camera orbiting), 320x180, FXAA off,
+    in ``visibility``, with every mirror's own ``Material`` colour set to ``own_color``: each
+    frame, its end views, and the last frame's surface image of the main view (which
+    entity's surface each pixel shows)."""
+    from benchmarks.mirrors import MirrorRing
+    from engine.core.frame_io import Output
+    from engine.render.targets import CaptureTarget
+    from shell.app import Engine
+
+    engine = Engine(MirrorRing(mirrors), ctx)
+    engine.renderer.antialias = "off"
+    engine.reflection_system.visibility = visibility
+    size = (320, 180)
+    capture = CaptureTarget(ctx, size)
+    for entity, _ in engine.world.query_one(Mirror):
+        engine.world.get(entity, Material).color = own_color
+    images, ends = [], []
+    try:
+        for _ in range(frames):
+            engine.frame(1.0 / 60.0, Output(capture.framebuffer, size))
+            images.append(capture.read_rgb().astype(float))
+            ends.append(engine.renderer.stats.reflection_end_views)
+        surfaces = engine.renderer.targets.read_surface_ids()
+        glass = np.array([entity for entity, _ in engine.world.query_one(Mirror)])
+        return images, ends, np.isin(surfaces, glass)
+    finally:
+        capture.release()
+        engine.close()
+
+
+@pytest.mark.parametrize(("mirrors", "visibility"), [(8, "exact"), (8, "predicted"), (16, "exact")])
+def test_no_mirror_pixel_of_a_ring_shows_the_mirrors_own_material(ctx, mirrors, visibility):
+    """Issue 36 item 4: a surface past the depth limit shows an end image or the fallback
+    (the probe's or the sky's reflection), never its bare material.  In a ring of mirrors
+    (max_depth 3, "auto" end images) a mirror first seen at the depth limit, not up its own
+    chain, gets an end candidate but no image to repeat: it was dropped without a fallback
+    and showed its own shading (the dark squares at the tops of the far reflections of the
+    mirror_ring_8 golden frame; here 82-142 pixels a frame at 8 mirrors, off by up to
+    141/255, and 1567-1644 at 16, in either visibility).  So the frames with the mirrors'
+    own colour dark grey and magenta are the same, every frame, where end views are drawn
+    (the mirrors' reflect_rate is 1: nothing of their material should show; two renderings
+    on one machine: exact on any driver)."""
+    grey, ends, on_mirror = _ring_frames(ctx, mirrors, visibility, (0.1, 0.1, 0.1), 4)
+    magenta, _, _ = _ring_frames(ctx, mirrors, visibility, (1.0, 0.0, 1.0), 4)
+    assert ends[0] == 0 and all(count >= 1 for count in ends[1:])  # the end-image path is taken
+    assert on_mirror.sum() >= 2000  # the mirrors fill a good part of the frame
+    for frame, (a, b) in enumerate(zip(grey, magenta, strict=True)):
+        changed = np.abs(a - b).max(axis=2) > 0
+        assert not changed.any(), (frame, int(changed.sum()), np.argwhere(changed)[:10].tolist())
+
+
 def test_auto_end_images_are_for_facing_pairs(ctx):
     """"auto" turns end images on for mirrors facing each other and a portal pair facing each
     other, not for a lone mirror or mirrors side by side."""

@@ -322,7 +322,11 @@ class ViewTree:
         self._unviewed(walk.fallbacks, surfaces, walk.rows, walk.nodes, walk.level, walk.root_proj, root,
                        settings.depth_cap, walk.ends)
         walk.result.faded += faded
-        candidates, walk.end_seers = self._end_seers(candidates, walk.seers)
+        candidates, walk.end_seers, dropped = self._end_seers(candidates, walk.seers)
+        if dropped:  # end candidates with nothing to repeat: their fallback, never the bare surface
+            states = surfaces.states
+            walk.fallbacks.setdefault(walk.level, []).extend(self._fallback(walk.nodes[p], states[s])
+                                                             for p, s in dropped)
         return candidates
 
     def _choose(self, walk: _Walk, levels: LevelStack, candidates: Candidates) -> _Level | None:
@@ -671,29 +675,34 @@ class ViewTree:
         return rows
 
     @staticmethod
-    def _end_seers(candidates: Candidates | None,
-                   seers: list[list[int]] | None) -> tuple[Candidates | None, list[int] | None]:
+    def _end_seers(candidates: Candidates | None, seers: list[list[int]] | None
+                   ) -> tuple[Candidates | None, list[int] | None, list[tuple[int, int]]]:
         """For each end view among ``candidates`` (a pair the depth limits cut), the index in
         the tree's views of the view that saw its surface the last time up its chain (the end
         image repeats that view's image, shrunk: ``EndImages``; -1 for the other candidates),
         from ``seers`` (a row of surfaces per row of the level).  An end view whose surface
-        is not up its chain is dropped (its closed look, as without one)."""
+        is not up its chain (a mirror of the pair seen first at the depth limit, as in a
+        ring of mirrors) has no image to repeat: it is dropped, and returned as a (parent
+        row, surface row) pair, whose pixels show the fallback, as a view the limits cut
+        without an end image does (``SurfaceTable.unviewed`` leaves end candidates out)."""
         if candidates is None or candidates.end is None or seers is None:
-            return candidates, None
+            return candidates, None, []
         ends = candidates.end.tolist()
         if not any(ends):
-            return candidates, None
-        found = [seers[p][s] if end else -1 for p, s, end in
-                 zip(candidates.parent.tolist(), candidates.surface.tolist(), ends, strict=True)]
+            return candidates, None, []
+        parents, surfaces = candidates.parent.tolist(), candidates.surface.tolist()
+        found = [seers[p][s] if end else -1 for p, s, end in zip(parents, surfaces, ends, strict=True)]
         kept = [i for i, (end, seer) in enumerate(zip(ends, found, strict=True)) if not end or seer >= 0]
+        dropped = [(parents[i], surfaces[i]) for i, (end, seer) in enumerate(zip(ends, found, strict=True))
+                   if end and seer < 0]
         if len(kept) < len(found):
             if not kept:
-                return None, None
+                return None, None, dropped
             rows, box = np.array(kept, np.int64), candidates.__dict__.get("box")
             candidates, found = candidates.select(rows), [found[i] for i in kept]
             if box is not None:  # the plan's unrounded rectangles (claim_cull), kept with their rows
                 candidates.__dict__["box"] = box.take(rows, axis=0)
-        return candidates, found
+        return candidates, found, dropped
 
     def _claim(self, surfaces: SurfaceTable, step: _Level) -> None:
         """Every candidate's claim in the level's targets, its pixels counted in its query.
