@@ -31,7 +31,8 @@ class MainViewSystem(esper.Processor):
         self._said_no_camera = False
         # The depth cap of the view tree the reflect stage roots here (the Engine sets it):
         # with it, mirrors the tree paints over entirely are drawn unlit
-        # (scene_pass.shading_replaced); None: every mirror is shaded.
+        # (scene_pass.shading_replaced, whatever the cap: a view it cuts shows its end view
+        # or fallback at weight 1 too); None: every mirror is shaded.
         self.depth_cap: Callable[[], int] | None = None
         self._options: tuple[tuple, SceneOptions] = (((), ()), ROOT_VIEW)  # (what it was made from, the options)
 
@@ -58,18 +59,18 @@ class MainViewSystem(esper.Processor):
 
     def _root_options(self) -> SceneOptions:
         """The main view's scene options: a root view, with the mirrors the reflect stage's
-        tree paints over entirely drawn unlit, worked out again only when a surface, the
-        depth cap or the pixel budget changed."""
+        tree paints over entirely drawn unlit, worked out again only when a surface or the
+        pixel budget changed."""
         surfaces = self.world.resources.get(Surfaces)
         if self.depth_cap is None or surfaces is None or not surfaces.mirrors:
             return ROOT_VIEW
         budget = ViewBudget.of(self.world.resources)
         pixel_budget = budget is not None and budget.pixels is not None
         states = tuple(surfaces.mirrors.values())  # a state object stands while its surface is unchanged
-        limits = (self.depth_cap(), pixel_budget)
+        limits = pixel_budget
         (kept_limits, kept_states), options = self._options
         if kept_limits != limits or len(kept_states) != len(states) or any(map(operator.is_not, kept_states, states)):
-            unlit = shading_replaced(states, 1, limits[0], pixel_budget)
+            unlit = shading_replaced(states, pixel_budget)
             options = SceneOptions(unlit=unlit) if unlit else ROOT_VIEW
             self._options = ((limits, states), options)
         return options

@@ -3,9 +3,10 @@ tree's levels (issue 40: less pixel work in the 8-mirror frame).  Checked by a s
 the same scene from an engine that shades every mirror (``MainViewSystem.depth_cap`` None,
 ``ViewTree.unlit`` False) must give the very same frame, pixel for pixel and id for id, in
 the cases the rule takes (reflect rate 1, no fade) and in those it must leave alone (a lower
-reflect rate, a fade, a smaller level, a pixel budget, views the depth limits cut, glass in
-front of a mirror); and by what the main view itself wrote under the mirrors before the
-composites: black where the rule took them, lit where not."""
+reflect rate, a fade, a smaller level, a pixel budget, glass in front of a mirror), with
+mirrors at and past the depth limits too (their end views and fallbacks paint over them);
+and by what the main view itself wrote under the mirrors before the composites: black
+where the rule took them, lit where not."""
 from __future__ import annotations
 
 import numpy as np
@@ -73,8 +74,8 @@ CASES = {
     "half_rate": (_mirrors(reflect_rate=0.5), 0),           # own shading is half the pixel
     "faded": (_mirrors(fade_distance=(5.0, 40.0)), 0),      # partly faded: weights are a quotient
     "small_level": (_mirrors(resolution_scale=0.5), 0),     # a smaller level misses edge pixels
-    "no_depth": (_mirrors(max_depth=0), 0),                 # no view: end view or fallback
-    "cap_0": (_cap(0), 0),
+    "no_depth": (_mirrors(max_depth=0), 8),                 # no view: end view or fallback, at weight 1
+    "cap_0": (_cap(0), 8),
     "view_budget": (_budget(views=3), 8),                   # cut views show the fallback at weight 1
     "pixel_budget": (_budget(pixels=2000), 0),              # levels drawn smaller, decided later
 }
@@ -202,14 +203,44 @@ def test_shading_replaced_takes_only_what_the_composites_paint_over_at_weight_on
     finally:
         engine.close()
     everyone = {state.entity for state in states}
-    assert shading_replaced(states, 1, 8) == everyone
-    assert shading_replaced(states, 1, 8, pixel_budget=True) == frozenset()
-    assert shading_replaced(states, 1, 0) == frozenset()      # the cap cuts every view
-    assert shading_replaced(states, 3, 8) == everyone         # Mirror.max_depth is 3
-    assert shading_replaced(states, 4, 8) == frozenset()
+    assert shading_replaced(states) == everyone
+    assert shading_replaced(states, pixel_budget=True) == frozenset()
     from dataclasses import replace
     first = states[0]
     for change in ({"reflect_rate": 0.99}, {"enabled": False}, {"fade": (1.0, 2.0, 1e30, 2e30)},
                    {"resolution_scale": 0.5}, {"water": object()}, {"kind": "portal"}):
         changed = [replace(first, **change), *states[1:]]
-        assert shading_replaced(changed, 1, 8) == everyone - {first.entity}, change
+        assert shading_replaced(changed) == everyone - {first.entity}, change
+
+
+def _ring_setup(max_depth: int, end_image: bool, visibility: str):
+    def setup(engine: Engine) -> None:
+        _mirrors(max_depth=max_depth, end_image=end_image)(engine)
+        engine.reflection_system.visibility = visibility
+    return setup
+
+
+RING_CASES = [(count, depth, end, vis) for count in (8, 16) for depth in (1, 2, 3)
+              for end in (True, False) for vis in ("exact", "predicted")]
+
+
+@pytest.mark.parametrize("count,depth,end,vis", RING_CASES)
+def test_mirrors_at_the_depth_limit_are_unlit_and_the_frame_is_the_same(ctx, count, depth, end, vis):
+    """Rings of 8 and 16 mirrors at max_depth 1-3, end images on and off, exact and
+    predicted visibility, four frames: every mirror unlit at every level, its views at the
+    limit shown by end views and fallbacks, the frames the all-lit path's bit for bit (they
+    differed before the end candidates with nothing to repeat got the fallback, b8de431)."""
+    setup = _ring_setup(depth, end, vis)
+    fast = _engine(ctx, setup, game=MirrorRing(count))
+    shaded = _engine(ctx, setup, shaded=True, game=MirrorRing(count))
+    try:
+        got, want = _frames(ctx, fast, 4, (320, 180)), _frames(ctx, shaded, 4, (320, 180))
+        assert len(fast.stages["main"]._root_options().unlit) == count
+        assert max(view.level for view in fast.reflection_system.views) == depth  # views reach the limit
+        assert fast.renderer.stats.reflection_fallbacks > 0
+        if end and depth == 3:  # the ring's end views (none at depths 1-2: nothing up their chains to repeat)
+            assert fast.renderer.stats.reflection_end_views > 0
+        _same_frames(got, want)
+    finally:
+        fast.close()
+        shaded.close()

@@ -664,18 +664,19 @@ def geometry_invocations(view_count: int) -> int:
 BATCHED_INVOCATIONS = tuple(sorted({geometry_invocations(n) for n in range(1, MAX_BATCHED_VIEWS + 1)}))
 
 
-def shading_replaced(mirrors: Iterable[SurfaceState], depth: int, depth_cap: int,
-                     pixel_budget: bool = False) -> frozenset[int]:
-    """The mirrors whose own shading no pixel of the finished frame shows, when drawn in a
-    view at level ``depth - 1`` of a view tree with ``depth_cap``: the view tree composites
-    each one's reflection, or its fallback where it gets no view (cut by a budget, faded
-    out), over every pixel of it that view shows, blending reflection x weight + own x
-    (1 - weight) with a weight of exactly 1.  That holds for an enabled mirror with a
-    reflect rate of 1, no fade (a partly faded mirror's weights are a quotient of floats),
-    not water (weighted by Fresnel), drawn at the screen's resolution (a level drawn
-    smaller misses pixels at the mirror's edges, whose own shading then shows), and whose
-    views at ``depth`` are within its depth limits and the tree's cap (a view the limits cut
-    becomes an end view, which can leave its own shading showing).  None under a pixel budget
+def shading_replaced(mirrors: Iterable[SurfaceState], pixel_budget: bool = False) -> frozenset[int]:
+    """The mirrors whose own shading no pixel of the finished frame shows, wherever a view
+    tree draws them: the tree composites each one's reflection, its end view or its fallback
+    (no view: cut by a budget, faded out, past the depth limits or the tree's cap, or an end
+    view's pixels last frame's image does not hold) over every pixel of it a view shows,
+    blending reflection x weight + own x (1 - weight) with a weight of exactly 1.  That holds
+    for an enabled mirror with a reflect rate of 1, no fade (a partly faded mirror's weights
+    are a quotient of floats), not water (weighted by Fresnel), drawn at the screen's
+    resolution (a level drawn smaller misses pixels at the mirror's edges, whose own shading
+    then shows), at any depth: since an end candidate with nothing to repeat gets the
+    fallback too (ViewTree._plan), a mirror at or past its depth limits is painted over like
+    any other (tests/test_unlit_mirrors.py compares rings of 8 and 16 at max_depth 1-3, end
+    images on and off, with the all-lit path).  None under a pixel budget
     (``ViewBudget.pixels``: the tree decides later which levels it draws smaller).  A scene
     pass draws these mirrors' batches unlit (``SceneOptions.unlit``) in a view where nothing
     transparent is drawn (glass in front of a mirror blends over the mirror's own colour, and
@@ -684,8 +685,7 @@ def shading_replaced(mirrors: Iterable[SurfaceState], depth: int, depth_cap: int
         return frozenset()
     return frozenset(state.entity for state in mirrors
                      if state.kind == "mirror" and state.enabled and state.reflect_rate == 1.0 and state.fade is None
-                     and state.water is None and state.resolution_scale == 1.0
-                     and depth <= min(state.max_depth, depth_cap))
+                     and state.water is None and state.resolution_scale == 1.0)
 
 
 def _unlit_batches(opaque: Iterable[InstanceBatch], mirrors: frozenset[int], transparent: list) -> set:

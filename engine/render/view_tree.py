@@ -259,8 +259,8 @@ class ViewTree:
         # Draw the mirrors this tree paints over entirely unlit (scene_pass.shading_replaced);
         # False: every view shades them (the second path the tests compare against).
         self.unlit = True
-        # (the table, cap and pixel budget they were found for, the sets by depth)
-        self._unlit: tuple[tuple, dict[int, frozenset[int]]] = ((None, -1, False), {})
+        # (the table and pixel budget they were found for, the set: the same at every depth)
+        self._unlit: tuple[tuple, frozenset[int]] = ((None, False), frozenset())
         self._level_options: dict[tuple, SceneOptions] = {}  # a level's options with its unlit mirrors
 
     def render(self, root: View, levels: LevelStack, surfaces: SurfaceTable,
@@ -371,25 +371,22 @@ class ViewTree:
         if children:
             step.path = choose_path(settings.path, len(children), walk.triangles, self._software)
             result.paths.add(step.path)
-            step.unlit = self._unlit_mirrors(surfaces, level + 2, settings.depth_cap)
+            step.unlit = self._unlit_mirrors(surfaces)
         step.composite = children + step.ended
         return step
 
-    def _unlit_mirrors(self, surfaces: SurfaceTable, depth: int, depth_cap: int) -> frozenset[int]:
-        """The mirrors the views of a level draw unlit, those whose views at ``depth`` this
-        tree paints over entirely (``shading_replaced``), kept while the table, the depth, the
-        cap and whether a pixel budget applies stand."""
+    def _unlit_mirrors(self, surfaces: SurfaceTable) -> frozenset[int]:
+        """The mirrors the views of a level draw unlit, those this tree paints over entirely
+        at any depth (``shading_replaced``), kept while the table and whether a pixel budget
+        applies stand."""
         if not self.unlit:
             return frozenset()
         pixel_budget = self.renderer.stats.pixels_left() is not None
-        (table, cap, budget), by_depth = self._unlit
-        if table is not surfaces or cap != depth_cap or budget != pixel_budget:
-            by_depth = {}
-            self._unlit = ((surfaces, depth_cap, pixel_budget), by_depth)
+        kept, found = self._unlit
+        if kept[0] is not surfaces or kept[1] != pixel_budget:
+            found = shading_replaced(surfaces.states, pixel_budget)
+            self._unlit = ((surfaces, pixel_budget), found)
             self._level_options.clear()
-        found = by_depth.get(depth)
-        if found is None:
-            found = by_depth[depth] = shading_replaced(surfaces.states, depth, depth_cap, pixel_budget)
         return found
 
     def _skip_empty_claims(self, walk: _Walk, step: _Level) -> None:
