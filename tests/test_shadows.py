@@ -192,6 +192,27 @@ def test_the_shadow_seen_through_a_portal_is_the_carried_points_shadow(scene):
     assert share >= 0.99, f"{share:.4f} of {counted} floor pixels through the portal agree with the shadow rays"
 
 
+def _lamp_rays_agree(runner, ids, without, with_shadows, lamp: np.ndarray) -> tuple[float, int, int, float]:
+    """The floor's pixels within 5 of ``lamp`` (where the lamp gives a visible share of the
+    light: near the end of its range the difference is below the 8-bit output's steps),
+    classified shadowed or lit from the frames ``without`` and ``with_shadows``, against
+    float64 shadow rays to the lamp: (agreeing share, pixels counted, pixels in shadow, share
+    of the umbra's pixels shadowed)."""
+    shadowed, lit = _classified(without, with_shadows)
+    eye, rays = pixel_rays(runner.engine.main_view, runner.size)
+    t = -eye[1] / rays[..., 1]
+    points = (eye + rays * t[..., None]).reshape(-1, 3)
+    to_lamp = lamp - points
+    distance = np.linalg.norm(to_lamp, axis=1)
+    floor = (runner.ids() == ids["floor"]) & (distance < 5.0).reshape(runner.ids().shape)
+    direction = to_lamp / distance[:, None]
+    occluded_in = _hits(points, direction, -PENUMBRA, distance).reshape(floor.shape)
+    occluded_out = _hits(points, direction, PENUMBRA, distance).reshape(floor.shape)
+    share, counted, in_shadow = _agreement(shadowed, lit, floor, occluded_in, occluded_out)
+    umbra = floor & occluded_in & occluded_out
+    return share, counted, in_shadow, float(shadowed[umbra].mean())
+
+
 @pytest.mark.parametrize("path, shadow_filter", [("layered", "single"), ("six_pass", "grid")])
 def test_point_light_shadows_agree_with_shadow_rays(scene, monkeypatch, path, shadow_filter):
     lamp = np.array([3.2, 1.3, 0.9])
@@ -207,19 +228,7 @@ def test_point_light_shadows_agree_with_shadow_rays(scene, monkeypatch, path, sh
 
     runner, ids, without, with_shadows = _render_both(scene, build, light="lamp", shadow_filter=shadow_filter)
     assert runner.stats.shadow_path == path
-    shadowed, lit = _classified(without, with_shadows)
-    # Only where the lamp gives a visible share of the light (near the end of its range
-    # the difference is below the 8-bit output's steps).
-    eye, rays = pixel_rays(runner.engine.main_view, runner.size)
-    t = -eye[1] / rays[..., 1]
-    points = (eye + rays * t[..., None]).reshape(-1, 3)
-    to_lamp = lamp - points
-    distance = np.linalg.norm(to_lamp, axis=1)
-    floor = (runner.ids() == ids["floor"]) & (distance < 5.0).reshape(runner.ids().shape)
-    direction = to_lamp / distance[:, None]
-    occluded_in = _hits(points, direction, -PENUMBRA, distance).reshape(floor.shape)
-    occluded_out = _hits(points, direction, PENUMBRA, distance).reshape(floor.shape)
-    share, counted, in_shadow = _agreement(shadowed, lit, floor, occluded_in, occluded_out)
+    share, counted, in_shadow, _ = _lamp_rays_agree(runner, ids, without, with_shadows, lamp)
     assert counted > 10000 and in_shadow > 800, (counted, in_shadow, share)
     assert share >= 0.99, f"{share:.4f} of {counted} floor pixels agree with the shadow rays ({path})"
 
@@ -238,21 +247,10 @@ def test_the_second_cubes_point_light_is_looked_up_at_its_own_position(scene):
 
     runner, ids, without, with_shadows = _render_both(scene, build, light="lamp")
     assert ("POINT_SHADOWS", "2") in runner.engine.renderer.shadows.program_defines
-    shadowed, lit = _classified(without, with_shadows)
-    eye, rays = pixel_rays(runner.engine.main_view, runner.size)
-    t = -eye[1] / rays[..., 1]
-    points = (eye + rays * t[..., None]).reshape(-1, 3)
-    to_lamp = lamp - points
-    distance = np.linalg.norm(to_lamp, axis=1)
-    floor = (runner.ids() == ids["floor"]) & (distance < 5.0).reshape(runner.ids().shape)
-    direction = to_lamp / distance[:, None]
-    occluded_in = _hits(points, direction, -PENUMBRA, distance).reshape(floor.shape)
-    occluded_out = _hits(points, direction, PENUMBRA, distance).reshape(floor.shape)
-    share, counted, in_shadow = _agreement(shadowed, lit, floor, occluded_in, occluded_out)
+    share, counted, in_shadow, umbra_shadowed = _lamp_rays_agree(runner, ids, without, with_shadows, lamp)
     assert counted > 10000 and in_shadow > 800, (counted, in_shadow, share)
     assert share >= 0.99, f"{share:.4f} of {counted} floor pixels agree with the second cube's shadow rays"
-    umbra = floor & occluded_in & occluded_out
-    assert shadowed[umbra].mean() >= 0.95, f"{shadowed[umbra].mean():.3f} of the umbra's pixels are shadowed"
+    assert umbra_shadowed >= 0.95, f"{umbra_shadowed:.3f} of the umbra's pixels are shadowed"
 
 
 @pytest.mark.parametrize("shadow_filter", ["single", "grid"])
