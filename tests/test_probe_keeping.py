@@ -38,6 +38,20 @@ def _floor_with_probe(world, hidden_caster: bool = False) -> None:
     world.resources["far"] = world.spawn(Transform(position=(20.0, 0.5, 20.0)), MeshRef(box()), Material())
 
 
+def _faces_drawn(cube: _Cube) -> list[int]:
+    """The probe faces drawn from now on, by node, appended as they are drawn (the drawing
+    itself unchanged)."""
+    drawn: list[int] = []
+    draw = cube.probes.scene_pass.draw
+
+    def seen_drawing(views, *args, **kwargs):
+        drawn.extend(view.node for view in views if view.name.startswith("probe face"))
+        return draw(views, *args, **kwargs)
+
+    cube.probes.scene_pass.draw = seen_drawing
+    return drawn
+
+
 class _Cube:
     """The probe's cube, every level of every face, and the same drawn whole."""
 
@@ -173,14 +187,7 @@ def test_a_batch_drawn_with_another_build_draws_again_every_face_that_shows_it(s
     runner = scene(build, (64, 48))
     _probe_stage(runner).path = "six_pass"
     cube = _Cube(runner)
-    drawn = []
-    draw = cube.probes.scene_pass.draw
-
-    def seen_drawing(views, *args, **kwargs):  # which probe faces are drawn (the drawing itself unchanged)
-        drawn.extend(view.node for view in views if view.name.startswith("probe face"))
-        return draw(views, *args, **kwargs)
-
-    cube.probes.scene_pass.draw = seen_drawing
+    drawn = _faces_drawn(cube)
     for _ in range(3):
         runner.frame()
     assert runner.stats.probe_faces == 0
@@ -217,14 +224,7 @@ def test_instances_drawn_in_another_order_draw_again_every_face_that_shows_their
     runner = scene(build, (64, 48))
     _probe_stage(runner).path = "six_pass"
     cube = _Cube(runner)
-    drawn = []
-    draw = cube.probes.scene_pass.draw
-
-    def seen_drawing(views, *args, **kwargs):  # which probe faces are drawn (the drawing itself unchanged)
-        drawn.extend(view.node for view in views if view.name.startswith("probe face"))
-        return draw(views, *args, **kwargs)
-
-    cube.probes.scene_pass.draw = seen_drawing
+    drawn = _faces_drawn(cube)
     for _ in range(3):
         runner.frame()
     assert runner.stats.probe_faces == 0
