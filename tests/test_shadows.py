@@ -79,6 +79,24 @@ def _agreement(shadowed, lit, mask, occluded_in, occluded_out):
     return float((frame_says == rays_say).mean()), int(sure.sum()), int(rays_say.sum())
 
 
+def _floor_points_seen(runner) -> np.ndarray:
+    """Where each pixel's ray from the main view meets the floor (y = 0), one row a pixel."""
+    eye, rays = pixel_rays(runner.engine.main_view, runner.size)
+    t = -eye[1] / rays[..., 1]
+    return (eye + rays * t[..., None]).reshape(-1, 3)
+
+
+def _sun_rays_agree(shadowed, lit, mask, points: np.ndarray) -> tuple[float, int, int, np.ndarray]:
+    """``mask``'s pixels, each showing the floor point of its row of ``points``, classified
+    by the frame against float64 shadow rays towards the sun (LIGHT): (agreeing share,
+    pixels counted, pixels in shadow, the umbra: pixels every ray of the band says shadowed)."""
+    to_light = np.tile(-np.array(LIGHT, np.float64), (len(points), 1))
+    occluded_in = _hits(points, to_light, -PENUMBRA).reshape(mask.shape)
+    occluded_out = _hits(points, to_light, PENUMBRA).reshape(mask.shape)
+    share, counted, in_shadow = _agreement(shadowed, lit, mask, occluded_in, occluded_out)
+    return share, counted, in_shadow, mask & occluded_in & occluded_out
+
+
 def _render_both(scene, build, size=(320, 240), light="sun", shadow_filter="single"):
     """The frame with the light's shadows off, then on (same scene, one runner), the edges
     filtered by ``shadow_filter`` (ShadowMaps.filter: the software default, or the GPU's)."""
@@ -102,13 +120,8 @@ def test_directional_shadows_agree_with_shadow_rays(scene, shadow_filter):
     runner, ids, without, with_shadows = _render_both(scene, build, shadow_filter=shadow_filter)
     shadowed, lit = _classified(without, with_shadows)
     floor = runner.ids() == ids["floor"]
-    eye, rays = pixel_rays(runner.engine.main_view, runner.size)
-    t = -eye[1] / rays[..., 1]
-    points = (eye + rays * t[..., None]).reshape(-1, 3)
-    to_light = np.tile(-np.array(LIGHT, np.float64), (len(points), 1))
-    occluded_in = _hits(points, to_light, -PENUMBRA).reshape(floor.shape)
-    occluded_out = _hits(points, to_light, PENUMBRA).reshape(floor.shape)
-    share, counted, in_shadow = _agreement(shadowed, lit, floor, occluded_in, occluded_out)
+    points = _floor_points_seen(runner)
+    share, counted, in_shadow, _ = _sun_rays_agree(shadowed, lit, floor, points)
     assert counted > 40000 and in_shadow > 800, (counted, in_shadow, share)   # a real floor, real shadows
     assert share >= 0.99, f"{share:.4f} of {counted} floor pixels agree with the shadow rays"
 
@@ -125,16 +138,10 @@ def test_a_later_directional_lights_shadow_is_looked_up_when_an_earlier_one_cast
     assert ("DIRECTIONAL_SHADOWS", "2") in runner.engine.renderer.shadows.program_defines
     shadowed, lit = _classified(without, with_shadows)
     floor = runner.ids() == ids["floor"]
-    eye, rays = pixel_rays(runner.engine.main_view, runner.size)
-    t = -eye[1] / rays[..., 1]
-    points = (eye + rays * t[..., None]).reshape(-1, 3)
-    to_light = np.tile(-np.array(LIGHT, np.float64), (len(points), 1))
-    occluded_in = _hits(points, to_light, -PENUMBRA).reshape(floor.shape)
-    occluded_out = _hits(points, to_light, PENUMBRA).reshape(floor.shape)
-    share, counted, in_shadow = _agreement(shadowed, lit, floor, occluded_in, occluded_out)
+    points = _floor_points_seen(runner)
+    share, counted, in_shadow, umbra = _sun_rays_agree(shadowed, lit, floor, points)
     assert counted > 40000 and in_shadow > 800, (counted, in_shadow, share)
     assert share >= 0.99, f"{share:.4f} of {counted} floor pixels agree with the second sun's shadow rays"
-    umbra = floor & occluded_in & occluded_out
     assert shadowed[umbra].mean() >= 0.95, f"{shadowed[umbra].mean():.3f} of the umbra's pixels are shadowed"
 
 
@@ -154,10 +161,7 @@ def test_the_shadow_seen_in_a_mirror_is_the_mirrored_points_shadow(scene, shadow
     turned = rays * np.array([1.0, 1.0, -1.0])
     s = -on_mirror[..., 1] / turned[..., 1]
     points = (on_mirror + turned * s[..., None]).reshape(-1, 3)
-    to_light = np.tile(-np.array(LIGHT, np.float64), (len(points), 1))
-    occluded_in = _hits(points, to_light, -PENUMBRA).reshape(in_mirror.shape)
-    occluded_out = _hits(points, to_light, PENUMBRA).reshape(in_mirror.shape)
-    share, counted, in_shadow = _agreement(shadowed, lit, in_mirror, occluded_in, occluded_out)
+    share, counted, in_shadow, _ = _sun_rays_agree(shadowed, lit, in_mirror, points)
     assert counted > 4000 and in_shadow > 300, (counted, in_shadow, share)
     assert share >= 0.99, f"{share:.4f} of {counted} floor pixels in the mirror agree with the shadow rays"
 
@@ -184,10 +188,7 @@ def test_the_shadow_seen_through_a_portal_is_the_carried_points_shadow(scene):
     turned = rays @ m[:3, :3].T
     s = -carried[..., 1] / turned[..., 1]
     points = (carried + turned * s[..., None]).reshape(-1, 3)
-    to_light = np.tile(-np.array(LIGHT, np.float64), (len(points), 1))
-    occluded_in = _hits(points, to_light, -PENUMBRA).reshape(through.shape)
-    occluded_out = _hits(points, to_light, PENUMBRA).reshape(through.shape)
-    share, counted, in_shadow = _agreement(shadowed, lit, through, occluded_in, occluded_out)
+    share, counted, in_shadow, _ = _sun_rays_agree(shadowed, lit, through, points)
     assert counted > 4000 and in_shadow > 200, (counted, in_shadow, share)
     assert share >= 0.99, f"{share:.4f} of {counted} floor pixels through the portal agree with the shadow rays"
 
@@ -199,9 +200,7 @@ def _lamp_rays_agree(runner, ids, without, with_shadows, lamp: np.ndarray) -> tu
     float64 shadow rays to the lamp: (agreeing share, pixels counted, pixels in shadow, share
     of the umbra's pixels shadowed)."""
     shadowed, lit = _classified(without, with_shadows)
-    eye, rays = pixel_rays(runner.engine.main_view, runner.size)
-    t = -eye[1] / rays[..., 1]
-    points = (eye + rays * t[..., None]).reshape(-1, 3)
+    points = _floor_points_seen(runner)
     to_lamp = lamp - points
     distance = np.linalg.norm(to_lamp, axis=1)
     floor = (runner.ids() == ids["floor"]) & (distance < 5.0).reshape(runner.ids().shape)
