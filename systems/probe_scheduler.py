@@ -57,11 +57,15 @@ from engine.rules.probe_rules import (
     box_corners,
     box_pair_face_hits,
     face_hits,
+    face_rects,
     faces_touched,
     has_own_probe,
+    hull_rects,
     images_through_surfaces,
+    intersect_rects,
     lights_reaching,
     probe_samplers,
+    union_rects,
     world_bounds,
 )
 from engine.rules.probe_schedule import MAX_NAMED, PERIODIC, WATCHING, ProbeDue, ProbeSchedule, ProbeState, ProbeStates
@@ -160,13 +164,17 @@ class ProbeScheduler:
                 due.append((state, faces))
         for state, faces in self._within_budget(due):
             reasons = state.take(faces)
-            unchanged = frozenset()
+            unchanged, regions = frozenset(), {}
             if state.captures and state.settings.refresh in PERIODIC:
-                # Due only because the period came round, and reached by no change since drawn.
-                unchanged = faces - state.changed - frozenset().union(
+                # Due only because the period came round, and reached by no change since drawn
+                # (unchanged), or by changes within a part of the face alone (regions).
+                periodic = faces - frozenset().union(
                     *(waiting for reason, waiting in reasons.items() if reason not in PERIODIC))
+                unchanged = periodic - state.changed
+                if state.regions:
+                    regions = {face: state.regions[face] for face in periodic if face in state.regions}
             schedule.due[state.owner] = ProbeDue(state.owner, faces, reasons, first=not state.captures,
-                                                 unchanged=unchanged)
+                                                 unchanged=unchanged, regions=regions)
         return schedule
 
     def _within_budget(self, due: list[tuple[ProbeState, frozenset[int]]]) -> list[tuple[ProbeState, frozenset[int]]]:
@@ -393,10 +401,11 @@ class ProbeScheduler:
         each holding every shadowed point; and within each point light's range
         (``point_shadow_bounds``).  All the hulls through one ``box_pair_face_hits``
         (``hull_face_hits``' booleans, from each hull's two boxes without their corners)."""
-        if state.changed >= ALL_FACES:
+        if state.changed >= ALL_FACES and not state.regions:
             return
         if relit or self._lights_came_or_went or (surfaces is not None and (surfaces.mirrors or surfaces.portals)):
             state.changed |= ALL_FACES
+            state.regions.clear()
             return
         if not len(boxes.entity):
             return
@@ -440,14 +449,42 @@ class ProbeScheduler:
         else:
             hits = box_pair_face_hits(state.position, settings.far, np.concatenate(box_lo), np.concatenate(box_hi),
                                       np.concatenate(far_lo), np.concatenate(far_hi))
-        reached = hits[:rows].any(axis=0)
+        # Where in each face: a row's box, a sun's hull within its clipped box (both hold
+        # every shadowed point: the rectangles of each, intersected), where the row reaches
+        # the face (face_rects, hull_rects, union_rects).
+        region_hits, region_lo, region_hi = [hits[:rows]], [near_lo], [near_hi]
+        swept_lo, swept_hi, moved_lo, moved_hi = box_lo[1::2][:suns], box_hi[1::2][:suns], \
+            far_lo[1::2][:suns], far_hi[1::2][:suns]
         for sun in range(suns):
             hull = hits[rows + 2 * sun * count:][:count]
             bound = hits[rows + (2 * sun + 1) * count:][:count]
-            reached |= (hull & bound).any(axis=0)
-        if len(hits) > rows + 2 * suns * count:
-            reached |= hits[rows + 2 * suns * count:].any(axis=0)  # the point lights' boxes
-        state.changed.update(np.flatnonzero(reached).tolist())
+            region_hits.append(hull & bound)
+            region_lo.append(np.maximum(np.minimum(swept_lo[sun], moved_lo[sun]), box_lo[2 + 2 * sun]))
+            region_hi.append(np.minimum(np.maximum(swept_hi[sun], moved_hi[sun]), box_hi[2 + 2 * sun]))
+        if len(hits) > rows + 2 * suns * count:  # the point lights' boxes
+            region_hits.append(hits[rows + 2 * suns * count:])
+            region_lo += box_lo[1 + 2 * suns:]
+            region_hi += box_hi[1 + 2 * suns:]
+        region_hits = np.concatenate(region_hits) if len(region_hits) > 1 else region_hits[0]
+        reached = region_hits.any(axis=0).tolist()
+        if not any(reached):
+            return
+        rects = face_rects(state.position, settings.near, np.concatenate(region_lo), np.concatenate(region_hi))
+        if suns:
+            swept = slice(rows, rows + suns * count)
+            rects[swept] = intersect_rects(rects[swept], hull_rects(
+                state.position, settings.near, np.concatenate(swept_lo), np.concatenate(swept_hi),
+                np.concatenate(moved_lo), np.concatenate(moved_hi)))
+        rects = union_rects(rects, region_hits).tolist()
+        for face in range(6):
+            if not reached[face] or (face in state.changed and face not in state.regions):
+                continue  # not reached, or changed anywhere in it already
+            rect, before = rects[face], state.regions.get(face)
+            if before is not None:
+                rect = [min(rect[0], before[0]), min(rect[1], before[1]), max(rect[2], before[2]),
+                        max(rect[3], before[3])]
+            state.regions[face] = tuple(rect)
+            state.changed.add(face)
 
     def _filter_reach(self, casters: ShadowCasters) -> float:
         """How far (world units) past where a shadow falls its filtered edge can change a

@@ -89,8 +89,9 @@ def capture_due(world: World, renderer: Renderer, due: ProbeDue, only: frozenset
     surfaces: Surfaces | None = world.resources.get(Surfaces)
     table = surface_table(world.resources, surfaces) if state.settings.depth > 0 and surfaces is not None and \
         (surfaces.mirrors or surfaces.portals) else None  # its faces' view trees plan with it
+    regions = {face: region for face, region in due.regions.items() if face in faces} if due.regions else None
     renderer.probes.capture_probe(due.owner, faces, state.position, state.settings, table,
-                                  world.resources.get(SurfaceBlends, NO_BLENDS), due.unchanged & faces)
+                                  world.resources.get(SurfaceBlends, NO_BLENDS), due.unchanged & faces, regions)
     spent_ms = (time.perf_counter() - start) * 1e3
     stats.probe_ms_spent += spent_ms
     probes.measured(spent_ms / len(faces))

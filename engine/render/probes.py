@@ -23,7 +23,7 @@ import statistics
 import time
 from collections.abc import Callable, Iterable, Sequence
 from contextlib import contextmanager
-from dataclasses import dataclass
+from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING
 
 import moderngl
@@ -67,6 +67,9 @@ AUTO_TIMED_CAPTURES = 3  # timed captures of each path before "auto" chooses (me
 # rasteriser, where anisotropic filtering is most of a view's cost: a probe is a
 # reflection, seen blurred by its mips and through a curved surface).
 FACE = SceneOptions(reflection_filter=True)
+# A face drawn in part: cleared within its scissor first (the scene pass's clear takes the whole face).
+FACE_PART = SceneOptions(clear=False, reflection_filter=True)
+FACE_CLEAR = PassState()
 
 
 def face_view(face: int, position: glm.vec3, near: float, far: float, size: int, skip: int = 0,
@@ -210,14 +213,34 @@ class _Same:
 class _KeepPlan:
     """A six-pass capture's faces kept as they are (``kept``), those showing the sky alone
     (``sky_only``), what every face is drawn with (``scene``: ``ProbeCaptures._scene_record``,
-    None where faces draw view trees) and each face's own record (``records``:
-    ``ProbeCaptures._sky_record``)."""
+    None where faces draw view trees), each face's own record (``records``:
+    ``ProbeCaptures._sky_record``) and the faces drawn in part (``parts``: face -> the
+    scissor rectangle, x, y, width, height in texels, where the changes since it was drawn lie)."""
 
     kept: frozenset[int]
     sky_only: frozenset[int]
     scene: tuple | None
     records: dict[int, tuple]
     direct: bool  # faces drawn straight into the cube (the records say so)
+    parts: dict[int, tuple[int, int, int, int]] = field(default_factory=dict)
+
+
+def texel_rect(region: Sequence[float], size: int) -> tuple[int, int, int, int] | None:
+    """The texels of a ``size``-texel face a region (s0, t0, s1, t1, in the face's normalised
+    coordinates: ``probe_rules.face_rects``) may cover, as a scissor rectangle (x, y, width,
+    height): grown by a texel on each side (a fragment's centre lies inside its primitive,
+    whose projection lies inside the region but for rounding) and out to even texels (every
+    2 x 2 quad, whose texels take their derivatives from one another, whole inside or
+    outside); None where the region is empty."""
+    s0, t0, s1, t1 = region
+    if not (s0 <= s1 and t0 <= t1):
+        return None
+    half = size / 2.0
+    x0 = max(0, (math.floor((s0 + 1.0) * half) - 1) & ~1)
+    y0 = max(0, (math.floor((t0 + 1.0) * half) - 1) & ~1)
+    x1 = min(size, (math.ceil((s1 + 1.0) * half) + 2) & ~1)
+    y1 = min(size, (math.ceil((t1 + 1.0) * half) + 2) & ~1)
+    return (x0, y0, x1 - x0, y1 - y0)
 
 
 class CubeMipPass:
@@ -575,6 +598,8 @@ class ProbeCaptures:
         # chains are built again; absent: the whole chain is).
         self._mips_stale: dict[int, set[int]] = {}
         self.faces_kept = 0  # faces left as they were, the sky alone as before (counted over the run)
+        self.faces_in_part = 0  # faces drawn in part (within the changes' rectangle), over the run
+        self.texels_in_part = 0  # the texels those parts covered
 
     def cube(self, key: int, resolution: int) -> ProbeCube:
         """The cube map of probe ``key`` at ``resolution`` (made, or remade at a new size)."""
@@ -610,7 +635,8 @@ class ProbeCaptures:
 
     def capture_probe(self, key: int, faces: frozenset[int], position: glm.vec3, settings: ReflectionProbe,
                       surfaces: SurfaceTable | None = None, blends: SurfaceBlends = NO_BLENDS,
-                      unchanged: frozenset[int] = frozenset()) -> str:
+                      unchanged: frozenset[int] = frozenset(),
+                      regions: dict[int, tuple[float, float, float, float]] | None = None) -> str:
         """Capture ``faces`` of probe ``key`` (the entity owning it, whose own object every
         face leaves out) from ``position`` with ``settings``, by the path ``paths`` takes
         (``blends``: what a surface no face view reaches shows, the extract stage's;
@@ -634,13 +660,14 @@ class ProbeCaptures:
         table = surfaces if sees_surfaces else None
         plan = None
         if key in self.cubes and self.cubes[key].resolution == settings.resolution:  # else a new cube: none kept
-            plan = self._keep_plan(key, views, unchanged, self._direct(sees_surfaces), sees_surfaces)
+            plan = self._keep_plan(key, views, unchanged, self._direct(sees_surfaces), sees_surfaces, regions)
         draws = {"six_pass": lambda: self.capture(key, views, table, settings.depth, settings.prefilter,
-                                                  blends=blends, unchanged=unchanged, plan=plan),
+                                                  blends=blends, unchanged=unchanged, plan=plan,
+                                                  regions=regions),
                  "layered": lambda: self.capture_layered(key, views, prefilter=settings.prefilter)}
         # A face kept, or one no change reached (kept from the next capture on, once drawn
         # with a record): a capture of some faces, which the six-pass path draws.
-        kept = plan is not None and plan.kept
+        kept = plan is not None and (plan.kept or plan.parts)
         path = self.paths.draw(draws, len(faces) == 6 and not sees_surfaces and not kept and not unchanged,
                                settings.resolution)
         cube = self.cubes[key]
@@ -657,7 +684,8 @@ class ProbeCaptures:
     def capture(self, key: int, views: dict[int, View], surfaces: SurfaceTable | None, depth: int,
                 prefilter: str = "mips", direct: bool | None = None, build_mips: bool = True,
                 blends: SurfaceBlends = NO_BLENDS, unchanged: frozenset[int] = frozenset(),
-                plan: _KeepPlan | None = None) -> None:
+                plan: _KeepPlan | None = None, regions: dict[int, tuple[float, float, float, float]] | None = None
+                ) -> None:
         """Draw each face view of ``views`` (face -> view, all of the probe's resolution) into
         the probe's cube, then rebuild the cube's mips.  A face that sees mirrors or portals
         (``surfaces`` given, ``depth`` > 0) roots a view tree, which needs the id images of a
@@ -686,7 +714,7 @@ class ProbeCaptures:
         targets_direct = self._face_targets(key, cube.texture) if direct and not trees else None
         direct = targets_direct is not None
         if plan is None or plan.direct != direct:  # (a face target refused just now: the copy path)
-            plan = self._keep_plan(key, views, unchanged, direct, trees)
+            plan = self._keep_plan(key, views, unchanged, direct, trees, regions)
         records = self._sky_faces.setdefault(key, {})
         scene_records = self._scene_faces.setdefault(key, {})
         kept, sky_only, scene = plan.kept, plan.sky_only, plan.scene
@@ -698,7 +726,10 @@ class ProbeCaptures:
                     continue
                 record = plan.records[face]
                 drawn.add(face)
-                if targets_direct is not None:
+                part = plan.parts.get(face)
+                if part is not None:
+                    self._draw_part(view, targets_direct.faces[face], part)
+                elif targets_direct is not None:
                     self.scene_pass.draw([view], targets_direct.faces[face], FACE)
                 else:
                     levels = self._stacks.setdefault(resolution, LevelStack(self.ctx))
@@ -728,6 +759,20 @@ class ProbeCaptures:
         if drawn:
             self._versions[key] = self._versions.get(key, 0) + 1
 
+    def _draw_part(self, view: View, target: FaceTarget, rect: tuple[int, int, int, int]) -> None:
+        """Draw the part ``rect`` (a scissor rectangle) of a face, the rest left as it is: the
+        colour and depth cleared within it, then the scene pass with the view scissored to it.
+        A fragment's value does not depend on the scissor (only which are written), so the
+        texels within are those a whole drawing gives."""
+        part = replace(view, scissor=rect)
+        part._block = view.camera_block()  # the same camera: the block as packed
+        target.framebuffer.use()
+        apply_pass_state(self.ctx, FACE_CLEAR, (0, 0, *target.size), rect)
+        target.framebuffer.clear(depth=1.0, viewport=rect)
+        self.scene_pass.draw([part], target, FACE_PART)
+        self.faces_in_part += 1
+        self.texels_in_part += rect[2] * rect[3]
+
     def written_elsewhere(self, key: int) -> None:
         """Probe ``key``'s cube was written by something other than a capture (a test's
         sentinel, a tool): no face is kept as it is at its next capture, nor its mips."""
@@ -746,7 +791,7 @@ class ProbeCaptures:
         return not trees and self.direct_faces and self.renderer.path_checks.trusted("direct_faces")
 
     def _keep_plan(self, key: int, views: dict[int, View], unchanged: frozenset[int], direct: bool,
-                   trees: bool) -> _KeepPlan:
+                   trees: bool, regions: dict[int, tuple[float, float, float, float]] | None = None) -> _KeepPlan:
         """Which faces of ``views`` a six-pass capture keeps as they are (``capture``): those
         showing the sky alone as they did at their last drawing from the same record, and,
         where no face draws a view tree (``trees``), those of ``unchanged`` last drawn with
@@ -769,7 +814,21 @@ class ProbeCaptures:
                                   [*renderer.opaque_batches(), *renderer.transparent_batches()]) if rest else rest
         sky_records = self._sky_faces.get(key, {})
         kept.update(face for face in sky_only if face in sky_records and sky_records[face] == records[face])
-        return _KeepPlan(frozenset(kept), sky_only, scene, records, direct)
+        parts = {}
+        if regions and scene is not None and direct:
+            # Faces every change since their drawing reached within a part (the scheduler's
+            # ``ProbeDue.regions``), drawn last with the same records as now: that part alone
+            # is drawn, straight into the face (the copy path's 2D target holds another face).
+            scene_records = self._scene_faces.get(key, {})
+            size = first.size[0]
+            for face, region in regions.items():
+                if face in views and face not in kept and scene_records.get(face) == (records[face], scene):
+                    rect = texel_rect(region, size)
+                    if rect is None:
+                        kept.add(face)  # no texel of it can show a change
+                    elif rect != (0, 0, size, size):
+                        parts[face] = rect
+        return _KeepPlan(frozenset(kept), sky_only, scene, records, direct, parts)
 
     def _scene_record(self, key: int) -> tuple:
         """What every face of probe ``key`` is drawn with besides its camera and the sky: the

@@ -480,6 +480,96 @@ def faces_touched(position: glm.vec3, far: float, lo: np.ndarray, hi: np.ndarray
     return {int(face) for face in np.flatnonzero(face_hits(position, far, lo, hi).any(axis=0))}
 
 
+# Each face's forward, s and t axes (``CUBE_FACES``: each is a world axis, signed): the axis
+# index and sign of each, (face, forward/s/t).
+_FACE_AXES = np.array([[int(np.flatnonzero(axis)[0]) for axis in face] for face in CUBE_FACES])
+_FACE_POSITIVE = np.array([[axis[int(np.flatnonzero(axis)[0])] > 0.0 for axis in face] for face in CUBE_FACES])
+NO_RECT = (np.inf, np.inf, -np.inf, -np.inf)  # the empty rectangle: any union with it is the other
+
+
+def face_rects(position: glm.vec3 | Sequence[float], near: float, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    """(box, face, 4): where in each cube face from ``position`` each world box [lo, hi]
+    (rows) may draw, as the face's rectangle (s0, t0, s1, t1) in its normalised coordinates
+    (-1..1 along ``CUBE_FACES``' s and t axes: a face view's NDC x and y), within [-1, 1];
+    ``NO_RECT`` where the box has no point at ``near`` or more along the face's axis (no
+    fragment in front of the near plane).  Conservative: a face's axes are world axes, so
+    the box's part in front of the near plane is a box, and s / depth over it is extreme at
+    its corners (s and depth ranges' ends).  The far plane is not used (it only leaves
+    more in)."""
+    centre = np.asarray(tuple(position), np.float64)
+    lo = np.atleast_2d(np.asarray(lo, np.float64)) - centre
+    hi = np.atleast_2d(np.asarray(hi, np.float64)) - centre
+    # Each face's three axes' ranges (box, face, forward/s/t): [lo, hi] along a positive
+    # axis, [-hi, -lo] along a negative one.
+    first, last = lo[:, _FACE_AXES], hi[:, _FACE_AXES]
+    start = np.where(_FACE_POSITIVE, first, -last)
+    end = np.where(_FACE_POSITIVE, last, -first)
+    depth_lo = np.maximum(start[..., 0], near)  # >= near > 0: no division by zero
+    depth_hi = np.maximum(end[..., 0], depth_lo)
+    seen = (end[..., 0] >= depth_lo) & (hi >= lo).all(axis=1)[:, None]  # (an empty box: no rectangle)
+    ends = np.stack([start[..., 1:] / depth_lo[..., None], start[..., 1:] / depth_hi[..., None],
+                     end[..., 1:] / depth_lo[..., None], end[..., 1:] / depth_hi[..., None]])  # (4, box, face, s/t)
+    rects = np.clip(np.concatenate([ends.min(axis=0), ends.max(axis=0)], axis=-1), -1.0, 1.0)
+    rects[~seen] = NO_RECT
+    return rects
+
+
+_PAIRS = np.array([(i, j) for i in range(16) for j in range(i + 1, 16)]).T  # (2, 120): two corners of 16
+
+
+def hull_rects(position: glm.vec3 | Sequence[float], near: float, lo: np.ndarray, hi: np.ndarray,
+               far_lo: np.ndarray, far_hi: np.ndarray) -> np.ndarray:
+    """(row, face, 4): ``face_rects`` of the convex hull of each row's two world boxes [lo,
+    hi] and [far_lo, far_hi] (a box swept along a light: where its shadow may fall), tighter
+    than the rectangle of the box bounding both (a long diagonal sweep's box may hold the
+    probe, and fill every face).  The hull's part in front of the near plane is the convex
+    hull of its sixteen corners in front of it and of the points where the segments
+    between a corner in front and one behind cross the plane (every edge of the clipped
+    hull is on one such segment or an edge of the hull); a convex set in front of the eye
+    projects inside the rectangle of its vertices' projections."""
+    centre = np.asarray(tuple(position), np.float64)
+    corners = np.concatenate([box_corners(np.atleast_2d(lo), np.atleast_2d(hi)),
+                              box_corners(np.atleast_2d(far_lo), np.atleast_2d(far_hi))], axis=1) - centre
+    signs = np.where(_FACE_POSITIVE, 1.0, -1.0)  # (face, forward/s/t)
+    # (row, face, corner, forward/s/t): each corner along each face's three signed axes.
+    along = corners[:, :, _FACE_AXES].transpose(0, 2, 1, 3) * signs[None, :, None, :]
+    depth, st = along[..., 0], along[..., 1:]
+    front = depth >= near
+    # The corners in front, projected (s / depth, t / depth); those behind left out (inf and -inf).
+    safe = np.where(front, depth, 1.0)[..., None]
+    low = np.where(front[..., None], st / safe, np.inf).min(axis=2)
+    high = np.where(front[..., None], st / safe, -np.inf).max(axis=2)
+    # Where the segments between a corner in front and one behind cross the near plane.
+    first, second = _PAIRS
+    crossing = front[..., first] != front[..., second]  # (row, face, pair)
+    if crossing.any():
+        d0, d1 = depth[..., first], depth[..., second]
+        share = np.where(crossing, (near - d0) / np.where(crossing, d1 - d0, 1.0), 0.0)[..., None]
+        points = (st[..., first, :] + share * (st[..., second, :] - st[..., first, :])) / near
+        low = np.minimum(low, np.where(crossing[..., None], points, np.inf).min(axis=2))
+        high = np.maximum(high, np.where(crossing[..., None], points, -np.inf).max(axis=2))
+    rects = np.clip(np.concatenate([low, high], axis=-1), -1.0, 1.0)
+    rects[~front.any(axis=2)] = NO_RECT
+    return rects
+
+
+def intersect_rects(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """(..., 4): each pair of rectangles' common part (both hold a region: so does it);
+    ``NO_RECT`` where they have none."""
+    rects = np.concatenate([np.maximum(a[..., :2], b[..., :2]), np.minimum(a[..., 2:], b[..., 2:])], axis=-1)
+    rects[(rects[..., 0] > rects[..., 2]) | (rects[..., 1] > rects[..., 3])] = NO_RECT
+    return rects
+
+
+def union_rects(rects: np.ndarray, hits: np.ndarray) -> np.ndarray:
+    """(face, 4): the union of each face's rectangles ``rects`` (row, face, 4: ``face_rects``)
+    of the rows ``hits`` (row, face) says reach it; ``NO_RECT`` for a face none reaches."""
+    rects = np.where(hits[..., None], rects, NO_RECT)
+    if not len(rects):
+        return np.array([NO_RECT] * 6)
+    return np.concatenate([rects[..., :2].min(axis=0), rects[..., 2:].max(axis=0)], axis=-1)
+
+
 MAX_SURFACE_IMAGES = 4096  # boxes seen through mirrors and portals a probe's schedule follows a frame
 
 

@@ -50,6 +50,10 @@ class ProbeState:
     # The faces a change may have reached since they were last drawn (a periodic probe's:
     # the scheduler's ``_mark_changes``); every face until the first capture.
     changed: set[int] = field(default_factory=lambda: set(ALL_FACES))
+    # Of ``changed``, the faces every change since they were drawn reached within a part of
+    # the face: face -> that part, (s0, t0, s1, t1) in the face's normalised coordinates
+    # (``probe_rules.face_rects``).  A changed face not here changed anywhere in it.
+    regions: dict[int, tuple[float, float, float, float]] = field(default_factory=dict)
 
     def ask(self, faces: Iterable[int], reason: str) -> None:
         """Faces to capture, and why."""
@@ -83,6 +87,8 @@ class ProbeState:
         self.faces_captured += len(faces)
         self.changed -= faces  # drawn now (or kept: what a drawing now gives)
         for face in faces:
+            self.regions.pop(face, None)
+        for face in faces:
             self.asked_at.pop(face, None)
 
 
@@ -105,7 +111,10 @@ class ProbeDue:
     it); ``drawn`` once a capture stage has drawn it.  ``unchanged``: the faces of ``faces``
     due for a period alone (``PERIODIC``) that no change reached since they were last
     drawn: the captures keep such a face as it is where nothing they draw with changed
-    either (``ProbeCaptures.capture``)."""
+    either (``ProbeCaptures.capture``).  ``regions``: of the rest due for a period alone, those
+    every change since they were drawn reached within a part of the face (``ProbeState.regions``):
+    face -> that part, (s0, t0, s1, t1) in the face's normalised coordinates; the captures
+    draw only that part of such a face where nothing they draw with changed either."""
 
     owner: int
     faces: frozenset[int]
@@ -113,6 +122,7 @@ class ProbeDue:
     first: bool
     drawn: bool = False
     unchanged: frozenset[int] = frozenset()
+    regions: dict[int, tuple[float, float, float, float]] = field(default_factory=dict)
 
 
 @dataclass

@@ -1,0 +1,229 @@
+"""A periodic probe draws only the part of a face its changes reach: the scheduler keeps, for
+each face a change reached, the rectangle of the face where the changes' boxes (and their
+shadows' boxes) lie (``ProbeState.regions``, ``probe_rules.face_rects``), and the captures
+draw that rectangle alone, scissored, the rest of the face left as it is
+(``ProbeCaptures._draw_part``).  Each capture is checked bit for bit, every level of every
+face, against a capture that draws all six faces whole (``tests/test_probe_keeping.py``'s
+``_Cube``): a rectangle too small, or one not grown over the frames a face waited, shows there."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from pyglm import glm
+
+from components import DirectionalLight, Material, MeshRef, ReflectionProbe, Transform
+from engine.assets.mesh import box, plane
+from engine.core.cube_faces import CUBE_FACES
+from engine.rules.probe_rules import NO_RECT, face_rects, union_rects
+from tests.support import look_from
+from tests.test_probe_keeping import _Cube, _probe_stage
+
+RESOLUTION = 64
+
+
+def test_every_point_of_a_box_in_front_of_the_near_plane_lies_in_its_face_rectangles():
+    """Points sampled through random boxes (some across the probe, some behind a face):
+    each point at least ``near`` along a face's axis and inside the face's frustum projects
+    (s / depth, t / depth along the face's axes) inside the box's rectangle for that face;
+    a box with no point in front of the near plane has ``NO_RECT``; the rectangles are
+    tight (a box's own corners reach their edges, within the face)."""
+    rng = np.random.default_rng(11)
+    apex, near = np.array([0.4, 1.0, -0.3]), 0.05
+    lo = rng.uniform(-5.0, 5.0, (250, 3))
+    hi = lo + rng.uniform(0.01, 3.0, (250, 3))
+    rects = face_rects(apex, near, lo, hi)
+    grid = np.stack(np.meshgrid(*[np.linspace(0.0, 1.0, 9)] * 3, indexing="ij"), -1).reshape(-1, 3)
+    widths = []
+    for b in range(len(lo)):
+        points = lo[b] + grid * (hi[b] - lo[b]) - apex
+        for face, (forward, s_axis, t_axis) in enumerate(CUBE_FACES):
+            depth = points @ np.array(forward)
+            front = depth >= near
+            rect = rects[b, face]
+            if not front.any():
+                assert tuple(rect) == NO_RECT, (b, face, rect)
+                continue
+            s = points[front] @ np.array(s_axis) / depth[front]
+            t = points[front] @ np.array(t_axis) / depth[front]
+            inside = (np.abs(s) <= 1.0) & (np.abs(t) <= 1.0)
+            if not inside.any():
+                continue
+            s, t = s[inside], t[inside]
+            assert rect[0] <= s.min() + 1e-12 and s.max() <= rect[2] + 1e-12, (b, face, rect, s.min(), s.max())
+            assert rect[1] <= t.min() + 1e-12 and t.max() <= rect[3] + 1e-12, (b, face, rect, t.min(), t.max())
+            widths.append((s.max() - s.min()) / max(rect[2] - rect[0], 1e-12))
+    assert np.median(widths) > 0.9  # (the grid holds the box's corners: the edges are reached)
+
+
+def test_the_union_of_a_faces_rectangles_takes_only_the_rows_that_reach_it():
+    rects = np.array([[(-0.5, -0.5, 0.0, 0.0)] * 6, [(0.2, 0.1, 0.6, 0.9)] * 6])
+    hits = np.zeros((2, 6), bool)
+    hits[0, 0] = hits[1, 0] = hits[1, 3] = True
+    union = union_rects(rects, hits)
+    assert tuple(union[0]) == (-0.5, -0.5, 0.6, 0.9)
+    assert tuple(union[3]) == (0.2, 0.1, 0.6, 0.9)
+    assert tuple(union[1]) == NO_RECT
+
+
+def test_a_texel_rectangle_holds_every_texel_whose_centre_lies_in_the_region_and_a_texel_more():
+    from engine.render.probes import texel_rect
+
+    rng = np.random.default_rng(3)
+    centres = (np.arange(RESOLUTION) + 0.5) / RESOLUTION * 2.0 - 1.0
+    for _ in range(200):
+        s0, s1 = np.sort(rng.uniform(-1.2, 1.2, 2))
+        t0, t1 = np.sort(rng.uniform(-1.2, 1.2, 2))
+        x, y, w, h = texel_rect((s0, t0, s1, t1), RESOLUTION)
+        assert x % 2 == 0 and y % 2 == 0 and w % 2 == 0 and h % 2 == 0  # whole 2 x 2 quads
+        assert 0 <= x and x + w <= RESOLUTION and 0 <= y and y + h <= RESOLUTION
+        step = 2.0 / RESOLUTION
+        cols = np.flatnonzero((centres >= s0 - step) & (centres <= s1 + step))
+        rows = np.flatnonzero((centres >= t0 - step) & (centres <= t1 + step))
+        assert (not len(cols) or (x <= cols.min() and cols.max() < x + w))
+        assert (not len(rows) or (y <= rows.min() and rows.max() < y + h))
+    assert texel_rect(NO_RECT, RESOLUTION) is None
+
+
+def _floor_and_boxes(refresh: str = "every_frame", every_n: int = 1):
+    """A lit floor, a probe 0.6 m above it seeing 6 m, a small box in its +X face and a
+    caster above and behind the probe whose shadow falls in its -Y face."""
+    def build(world):
+        look_from(world, (0, 3, 6), (0, 0, 0))
+        world.resources["sun"] = world.spawn(DirectionalLight(direction=(-1.0, -1.5, 0.3), intensity=2.0))
+        world.spawn(Transform(), MeshRef(plane(60, 60)), Material(color=(0.8, 0.8, 0.8)))
+        world.resources["probe"] = world.spawn(
+            Transform(position=(0.0, 0.6, 0.0)),
+            ReflectionProbe(resolution=RESOLUTION, far=6.0, refresh=refresh, every_n=every_n))
+        world.resources["near"] = world.spawn(Transform(position=(2.5, 0.5, -0.6)), MeshRef(box((0.3, 0.3, 0.3))),
+                                              Material(color=(0.9, 0.2, 0.1)))
+        world.resources["caster"] = world.spawn(Transform(position=(1.9, 2.4, -0.3)), MeshRef(box((0.4, 0.4, 0.4))),
+                                                Material(color=(0.2, 0.3, 0.9)))
+    return build
+
+
+def _parts_drawn(cube: _Cube) -> list[tuple[int, tuple[int, int, int, int]]]:
+    """The faces drawn in part from now on, with their rectangles (the drawing unchanged)."""
+    parts: list[tuple[int, tuple[int, int, int, int]]] = []
+    draw = cube.probes._draw_part
+
+    def recorded(view, target, rect):
+        parts.append((view.node, rect))
+        return draw(view, target, rect)
+
+    cube.probes._draw_part = recorded
+    return parts
+
+
+def _save(cube: _Cube, face: int, name: str) -> None:
+    from PIL import Image
+
+    rgb = np.clip(cube.probes.read_face(cube.owner, face), 0.0, 1.0) ** (1.0 / 2.2)
+    Image.fromarray((rgb[::-1] * 255).astype(np.uint8)).resize((256, 256), Image.NEAREST).save(f"/tmp/{name}.png")
+
+
+def test_a_box_moving_in_a_face_draws_the_part_of_it_the_box_and_its_shadow_cover(scene):
+    """The box in the +X face moves: the +X face is drawn in part, a rectangle smaller than
+    the face holding the box where it was and is, and shows the box moved; the caster
+    moves: the faces its shadow may fall in are drawn in part.  After each frame the cube
+    is, bit for bit, a capture of all six drawn whole."""
+    runner = scene(_floor_and_boxes(), (64, 48))
+    _probe_stage(runner).path = "six_pass"
+    cube = _Cube(runner)
+    world = runner.world
+    for _ in range(3):
+        runner.frame()
+    assert runner.stats.probe_faces == 0
+    parts = _parts_drawn(cube)
+
+    before = cube.probes.read_face(cube.owner, 0).copy()
+    world.get(world.resources["near"], Transform).position += glm.vec3(0.0, 0.0, 0.3)
+    runner.frame()
+    drawn = dict(parts)
+    assert 0 in drawn, parts
+    x, y, w, h = drawn[0]
+    assert w * h < RESOLUTION * RESOLUTION / 4, drawn[0]  # a small box: a small part
+    changed = np.argwhere((cube.probes.read_face(cube.owner, 0) != before).any(axis=2))
+    assert len(changed)  # the box moved in it ...
+    rows, cols = changed[:, 0], changed[:, 1]
+    assert x <= cols.min() and cols.max() < x + w and y <= rows.min() and rows.max() < y + h  # ... within the part
+    _save(cube, 0, "probe_part_face0")
+    assert cube.as_if_drawn_whole()
+
+    runner.frame()  # (the whole capture above forgot the faces' records: all drawn whole again)
+    parts.clear()
+    before = cube.probes.read_face(cube.owner, 3).copy()
+    world.get(world.resources["caster"], Transform).position += glm.vec3(0.0, 0.0, -0.3)
+    runner.frame()
+    drawn = dict(parts)
+    assert 3 in drawn, parts  # -Y: where its shadow falls
+    assert all(w * h < RESOLUTION * RESOLUTION for _, (_, _, w, h) in parts)
+    assert not np.array_equal(cube.probes.read_face(cube.owner, 3), before)
+    _save(cube, 3, "probe_part_face3")
+    assert cube.as_if_drawn_whole()
+
+
+def test_a_face_waiting_for_its_period_draws_the_part_every_change_since_reached(scene):
+    """``every_n`` = 3: the box moves on two frames between captures, far enough that its
+    three places do not overlap; the capture draws the +X face in part, the rectangle
+    holding all three places (only the last move's would leave the first place showing the
+    box), and the cube is a capture of all six."""
+    runner = scene(_floor_and_boxes("every_n", 3), (64, 48))
+    _probe_stage(runner).path = "six_pass"
+    cube = _Cube(runner)
+    world = runner.world
+    runner.frame()
+    state = _probe_stage(runner).probes[world.resources["probe"]]
+    while True:  # the first capture, then to a frame with a capture
+        runner.frame()
+        if state.captures >= 2 and runner.stats.probe_captures:
+            break
+    parts = _parts_drawn(cube)
+    for _ in range(2):
+        world.get(world.resources["near"], Transform).position += glm.vec3(0.0, 0.0, 0.45)
+        runner.frame()
+        assert runner.stats.probe_captures == 0
+    runner.frame()
+    assert runner.stats.probe_captures == 1
+    assert [face for face, _ in parts] == [0], parts
+    assert cube.as_if_drawn_whole()
+
+
+def test_a_relit_face_is_drawn_whole_though_a_move_reached_a_part_of_it_first(scene):
+    """``every_n`` = 3: the box moves (a part of the +X face), then the sun dims (every face
+    changes everywhere): the capture draws every face whole, none in part."""
+    runner = scene(_floor_and_boxes("every_n", 3), (64, 48))
+    _probe_stage(runner).path = "six_pass"
+    cube = _Cube(runner)
+    world = runner.world
+    runner.frame()
+    state = _probe_stage(runner).probes[world.resources["probe"]]
+    while True:
+        runner.frame()
+        if state.captures >= 2 and runner.stats.probe_captures:
+            break
+    parts = _parts_drawn(cube)
+    world.get(world.resources["near"], Transform).position += glm.vec3(0.0, 0.0, 0.3)
+    runner.frame()
+    assert state.regions.keys() == {0} or 0 in state.regions
+    world.get(world.resources["sun"], DirectionalLight).intensity = 1.5
+    runner.frame()
+    assert not state.regions and state.changed >= set(range(6))
+    runner.frame()
+    assert runner.stats.probe_captures == 1 and not parts
+    assert cube.as_if_drawn_whole()
+
+
+@pytest.mark.parametrize("path", ["layered", "auto"])
+def test_parts_take_the_six_pass_path(scene, path):
+    """A capture with faces drawn in part is a capture of some faces: six-pass whatever the
+    path setting (the layered pass draws all six whole)."""
+    runner = scene(_floor_and_boxes(), (64, 48))
+    _probe_stage(runner).path = path
+    cube = _Cube(runner)
+    for _ in range(3):
+        runner.frame()
+    parts = _parts_drawn(cube)
+    runner.world.get(runner.world.resources["near"], Transform).position += glm.vec3(0.0, 0.0, 0.3)
+    runner.frame()
+    assert parts and _probe_stage(runner).path_used == "six_pass"
+    assert cube.as_if_drawn_whole()
