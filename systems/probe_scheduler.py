@@ -449,32 +449,31 @@ class ProbeScheduler:
         else:
             hits = box_pair_face_hits(state.position, settings.far, np.concatenate(box_lo), np.concatenate(box_hi),
                                       np.concatenate(far_lo), np.concatenate(far_hi))
-        # Where in each face: a row's box, a sun's hull within its clipped box (both hold
+        # Where in each face: a row's box, or a sun's hull within its clipped box (both hold
         # every shadowed point: the rectangles of each, intersected), where the row reaches
-        # the face (face_rects, hull_rects, union_rects).
-        region_hits, region_lo, region_hi = [hits[:rows]], [near_lo], [near_hi]
-        swept_lo, swept_hi, moved_lo, moved_hi = box_lo[1::2][:suns], box_hi[1::2][:suns], \
-            far_lo[1::2][:suns], far_hi[1::2][:suns]
-        for sun in range(suns):
-            hull = hits[rows + 2 * sun * count:][:count]
-            bound = hits[rows + (2 * sun + 1) * count:][:count]
-            region_hits.append(hull & bound)
-            region_lo.append(np.maximum(np.minimum(swept_lo[sun], moved_lo[sun]), box_lo[2 + 2 * sun]))
-            region_hi.append(np.minimum(np.maximum(swept_hi[sun], moved_hi[sun]), box_hi[2 + 2 * sun]))
+        # the face (probe_rules.hull_rects, union_rects).
+        region_hits, plain_lo, plain_hi = [hits[:rows]], [near_lo], [near_hi]
         if len(hits) > rows + 2 * suns * count:  # the point lights' boxes
             region_hits.append(hits[rows + 2 * suns * count:])
-            region_lo += box_lo[1 + 2 * suns:]
-            region_hi += box_hi[1 + 2 * suns:]
+            plain_lo += box_lo[1 + 2 * suns:]
+            plain_hi += box_hi[1 + 2 * suns:]
+        for sun in range(suns):
+            region_hits.append(hits[rows + 2 * sun * count:][:count] & hits[rows + (2 * sun + 1) * count:][:count])
         region_hits = np.concatenate(region_hits) if len(region_hits) > 1 else region_hits[0]
         reached = region_hits.any(axis=0).tolist()
         if not any(reached):
             return
-        rects = face_rects(state.position, settings.near, np.concatenate(region_lo), np.concatenate(region_hi))
         if suns:
-            swept = slice(rows, rows + suns * count)
-            rects[swept] = intersect_rects(rects[swept], hull_rects(
-                state.position, settings.near, np.concatenate(swept_lo), np.concatenate(swept_hi),
-                np.concatenate(moved_lo), np.concatenate(moved_hi)))
+            plain = sum(len(lo) for lo in plain_lo)
+            swept_lo, swept_hi = np.concatenate(box_lo[1:1 + 2 * suns:2]), np.concatenate(box_hi[1:1 + 2 * suns:2])
+            bound_lo, bound_hi = np.concatenate(box_lo[2:2 + 2 * suns:2]), np.concatenate(box_hi[2:2 + 2 * suns:2])
+            moved_lo, moved_hi = np.concatenate(far_lo[1:1 + 2 * suns:2]), np.concatenate(far_hi[1:1 + 2 * suns:2])
+            rects = hull_rects(state.position, settings.near, swept_lo, swept_hi, moved_lo, moved_hi,
+                               np.concatenate([*plain_lo, bound_lo]), np.concatenate([*plain_hi, bound_hi]))
+            rects = np.concatenate([rects[:plain], intersect_rects(rects[plain:plain + len(bound_lo)],
+                                                                   rects[plain + len(bound_lo):])])
+        else:
+            rects = face_rects(state.position, settings.near, np.concatenate(plain_lo), np.concatenate(plain_hi))
         rects = union_rects(rects, region_hits).tolist()
         for face in range(6):
             if not reached[face] or (face in state.changed and face not in state.regions):

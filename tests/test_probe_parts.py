@@ -55,6 +55,48 @@ def test_every_point_of_a_box_in_front_of_the_near_plane_lies_in_its_face_rectan
     assert np.median(widths) > 0.9  # (the grid holds the box's corners: the edges are reached)
 
 
+def test_every_point_of_a_swept_box_in_front_of_the_near_plane_lies_in_its_hull_rectangles():
+    """``hull_rects`` against points sampled through random boxes swept by random vectors
+    (some along a face's plane, some not moving): each point in front of the near plane and
+    inside a face's frustum projects inside the hull's rectangle; the hull's rectangles are
+    smaller than those of the box bounding the sweep; a box not swept has its own
+    ``face_rects``, and boxes given first keep theirs, ahead of the hulls'."""
+    from engine.rules.probe_rules import hull_rects
+
+    rng = np.random.default_rng(5)
+    apex, near = np.array([0.3, 1.0, -0.2]), 0.05
+    lo = rng.uniform(-4.0, 4.0, (200, 3))
+    hi = lo + rng.uniform(0.01, 2.0, (200, 3))
+    sweep = rng.normal(0.0, 3.0, (200, 3))
+    sweep[:20, 1] = 0.0  # along the +-Y faces' planes
+    sweep[20:30] = 0.0
+    rects = hull_rects(apex, near, lo, hi, lo + sweep, hi + sweep)
+    bounding = face_rects(apex, near, np.minimum(lo, lo + sweep), np.maximum(hi, hi + sweep))
+    grid = np.stack(np.meshgrid(*[np.linspace(0.0, 1.0, 5)] * 3, indexing="ij"), -1).reshape(-1, 3)
+    shares = np.linspace(0.0, 1.0, 17)
+    for b in range(len(lo)):
+        points = ((lo[b] + grid * (hi[b] - lo[b]))[:, None, :] + shares[None, :, None] * sweep[b]).reshape(-1, 3) - apex
+        for face, (forward, s_axis, t_axis) in enumerate(CUBE_FACES):
+            depth = points @ np.array(forward)
+            front = depth >= near
+            s = points[front] @ np.array(s_axis) / depth[front]
+            t = points[front] @ np.array(t_axis) / depth[front]
+            inside = (np.abs(s) <= 1.0) & (np.abs(t) <= 1.0)
+            if not inside.any():
+                continue
+            rect = rects[b, face]
+            assert rect[0] <= s[inside].min() + 1e-12 and s[inside].max() <= rect[2] + 1e-12, (b, face)
+            assert rect[1] <= t[inside].min() + 1e-12 and t[inside].max() <= rect[3] + 1e-12, (b, face)
+    area = np.clip(rects[..., 2] - rects[..., 0], 0, None) * np.clip(rects[..., 3] - rects[..., 1], 0, None)
+    box_area = np.clip(bounding[..., 2] - bounding[..., 0], 0, None) * np.clip(bounding[..., 3] - bounding[..., 1],
+                                                                                0, None)
+    assert area.sum() < 0.9 * box_area.sum()
+    np.testing.assert_array_equal(hull_rects(apex, near, lo, hi, lo, hi), face_rects(apex, near, lo, hi))
+    both = hull_rects(apex, near, lo[:5], hi[:5], lo[:5] + sweep[:5], hi[:5] + sweep[:5], lo[5:9], hi[5:9])
+    np.testing.assert_array_equal(both[:4], face_rects(apex, near, lo[5:9], hi[5:9]))
+    np.testing.assert_array_equal(both[4:], rects[:5])
+
+
 def test_the_union_of_a_faces_rectangles_takes_only_the_rows_that_reach_it():
     rects = np.array([[(-0.5, -0.5, 0.0, 0.0)] * 6, [(0.2, 0.1, 0.6, 0.9)] * 6])
     hits = np.zeros((2, 6), bool)

@@ -487,70 +487,84 @@ _FACE_POSITIVE = np.array([[axis[int(np.flatnonzero(axis)[0])] > 0.0 for axis in
 NO_RECT = (np.inf, np.inf, -np.inf, -np.inf)  # the empty rectangle: any union with it is the other
 
 
-def face_rects(position: glm.vec3 | Sequence[float], near: float, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
-    """(box, face, 4): where in each cube face from ``position`` each world box [lo, hi]
-    (rows) may draw, as the face's rectangle (s0, t0, s1, t1) in its normalised coordinates
-    (-1..1 along ``CUBE_FACES``' s and t axes: a face view's NDC x and y), within [-1, 1];
-    ``NO_RECT`` where the box has no point at ``near`` or more along the face's axis (no
-    fragment in front of the near plane).  Conservative: a face's axes are world axes, so
-    the box's part in front of the near plane is a box, and s / depth over it is extreme at
-    its corners (s and depth ranges' ends).  The far plane is not used (it only leaves
-    more in)."""
-    centre = np.asarray(tuple(position), np.float64)
-    lo = np.atleast_2d(np.asarray(lo, np.float64)) - centre
-    hi = np.atleast_2d(np.asarray(hi, np.float64)) - centre
-    # Each face's three axes' ranges (box, face, forward/s/t): [lo, hi] along a positive
-    # axis, [-hi, -lo] along a negative one.
-    first, last = lo[:, _FACE_AXES], hi[:, _FACE_AXES]
-    start = np.where(_FACE_POSITIVE, first, -last)
-    end = np.where(_FACE_POSITIVE, last, -first)
-    depth_lo = np.maximum(start[..., 0], near)  # >= near > 0: no division by zero
-    depth_hi = np.maximum(end[..., 0], depth_lo)
-    seen = (end[..., 0] >= depth_lo) & (hi >= lo).all(axis=1)[:, None]  # (an empty box: no rectangle)
-    ends = np.stack([start[..., 1:] / depth_lo[..., None], start[..., 1:] / depth_hi[..., None],
-                     end[..., 1:] / depth_lo[..., None], end[..., 1:] / depth_hi[..., None]])  # (4, box, face, s/t)
-    rects = np.clip(np.concatenate([ends.min(axis=0), ends.max(axis=0)], axis=-1), -1.0, 1.0)
-    rects[~seen] = NO_RECT
+# Gathers from a box's [lo, hi, -lo, -hi] (less the probe's centre: 12 numbers) of each
+# face's ranges along its forward, s and t axes: [lo, hi] along a positive axis, [-hi, -lo]
+# along a negative one; (start/end, face, forward/s/t).
+_RANGES = np.stack([np.where(_FACE_POSITIVE, _FACE_AXES, 9 + _FACE_AXES),
+                    np.where(_FACE_POSITIVE, 3 + _FACE_AXES, 6 + _FACE_AXES)])
+
+
+def _face_ranges(position: glm.vec3 | Sequence[float], lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    """(box, start/end, face, forward/s/t): each box's ranges along each face's axes."""
+    ends = np.concatenate([lo, hi], axis=1) - np.asarray(tuple(position), np.float64)[_TWICE]
+    return np.concatenate([ends, -ends], axis=1)[:, _RANGES]
+
+
+def _ranges_rects(ranges: np.ndarray, near: float) -> np.ndarray:
+    """``face_rects`` of boxes given by their ranges (``_face_ranges``)."""
+    start, end = ranges[:, 0], ranges[:, 1]
+    depth_lo = np.maximum(start[..., 0], near)[..., None]  # >= near > 0: no division by zero
+    depth_hi = np.maximum(end[..., 0:1], depth_lo)
+    # s / depth grows with s (depth > 0): least at the start of s's range, at one end of depth's.
+    rects = np.concatenate([np.minimum(start[..., 1:] / depth_lo, start[..., 1:] / depth_hi),
+                            np.maximum(end[..., 1:] / depth_lo, end[..., 1:] / depth_hi)], axis=-1)
+    rects = np.minimum(np.maximum(rects, -1.0), 1.0)
+    rects[end[..., 0] < depth_lo[..., 0]] = NO_RECT
     return rects
 
 
-_PAIRS = np.array([(i, j) for i in range(16) for j in range(i + 1, 16)]).T  # (2, 120): two corners of 16
+def face_rects(position: glm.vec3 | Sequence[float], near: float, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    """(box, face, 4): where in each cube face from ``position`` each world box [lo, hi]
+    (rows, lo <= hi) may draw, as the face's rectangle (s0, t0, s1, t1) in its normalised
+    coordinates (-1..1 along ``CUBE_FACES``' s and t axes: a face view's NDC x and y), within
+    [-1, 1]; ``NO_RECT`` where the box has no point at ``near`` or more along the face's
+    axis (no fragment in front of the near plane).  Conservative: a face's axes are world
+    axes, so the box's part in front of the near plane is a box, and s / depth over it is
+    extreme at its corners (s and depth ranges' ends).  The far plane is not used (it only
+    leaves more in)."""
+    lo = np.atleast_2d(np.asarray(lo, np.float64))
+    hi = np.atleast_2d(np.asarray(hi, np.float64))
+    return _ranges_rects(_face_ranges(position, lo, hi), near)
 
 
 def hull_rects(position: glm.vec3 | Sequence[float], near: float, lo: np.ndarray, hi: np.ndarray,
-               far_lo: np.ndarray, far_hi: np.ndarray) -> np.ndarray:
+               far_lo: np.ndarray, far_hi: np.ndarray, box_lo: np.ndarray | None = None,
+               box_hi: np.ndarray | None = None) -> np.ndarray:
     """(row, face, 4): ``face_rects`` of the convex hull of each row's two world boxes [lo,
-    hi] and [far_lo, far_hi] (a box swept along a light: where its shadow may fall), tighter
-    than the rectangle of the box bounding both (a long diagonal sweep's box may hold the
-    probe, and fill every face).  The hull's part in front of the near plane is the convex
-    hull of its sixteen corners in front of it and of the points where the segments
-    between a corner in front and one behind cross the plane (every edge of the clipped
-    hull is on one such segment or an edge of the hull); a convex set in front of the eye
-    projects inside the rectangle of its vertices' projections."""
-    centre = np.asarray(tuple(position), np.float64)
-    corners = np.concatenate([box_corners(np.atleast_2d(lo), np.atleast_2d(hi)),
-                              box_corners(np.atleast_2d(far_lo), np.atleast_2d(far_hi))], axis=1) - centre
-    signs = np.where(_FACE_POSITIVE, 1.0, -1.0)  # (face, forward/s/t)
-    # (row, face, corner, forward/s/t): each corner along each face's three signed axes.
-    along = corners[:, :, _FACE_AXES].transpose(0, 2, 1, 3) * signs[None, :, None, :]
-    depth, st = along[..., 0], along[..., 1:]
-    front = depth >= near
-    # The corners in front, projected (s / depth, t / depth); those behind left out (inf and -inf).
-    safe = np.where(front, depth, 1.0)[..., None]
-    low = np.where(front[..., None], st / safe, np.inf).min(axis=2)
-    high = np.where(front[..., None], st / safe, -np.inf).max(axis=2)
-    # Where the segments between a corner in front and one behind cross the near plane.
-    first, second = _PAIRS
-    crossing = front[..., first] != front[..., second]  # (row, face, pair)
-    if crossing.any():
-        d0, d1 = depth[..., first], depth[..., second]
-        share = np.where(crossing, (near - d0) / np.where(crossing, d1 - d0, 1.0), 0.0)[..., None]
-        points = (st[..., first, :] + share * (st[..., second, :] - st[..., first, :])) / near
-        low = np.minimum(low, np.where(crossing[..., None], points, np.inf).min(axis=2))
-        high = np.maximum(high, np.where(crossing[..., None], points, -np.inf).max(axis=2))
-    rects = np.clip(np.concatenate([low, high], axis=-1), -1.0, 1.0)
-    rects[~front.any(axis=2)] = NO_RECT
-    return rects
+    hi] and [far_lo, far_hi] = [lo, hi] moved by one vector v (a box swept along a light:
+    where its shadow may fall), tighter than the rectangle of the box bounding both (a long
+    diagonal sweep's box may hold the probe, and fill every face); first, where given, the
+    ``face_rects`` of the boxes [box_lo, box_hi] (one pass for both kinds of row).  The hull
+    is the box swept, {b + l v: b in the box, 0 <= l <= 1}; its part in front of the near
+    plane is the convex hull of its corners in front (the two boxes' corners: ``face_rects``
+    of each) and of its section by the plane, whose s and t ranges are linear in l over the
+    l that reach the plane, so taken at that range's ends (with v along the plane, the
+    section is the box's own, in its rectangle already)."""
+    boxes = 0 if box_lo is None else len(box_lo)
+    count = len(lo)
+    ranges = _face_ranges(position, np.concatenate([*([box_lo] if boxes else []), lo, far_lo]),
+                          np.concatenate([*([box_hi] if boxes else []), hi, far_hi]))
+    rects = _ranges_rects(ranges, near)
+    ends, moved = rects[boxes:boxes + count], rects[boxes + count:]
+    hull = np.concatenate([np.minimum(ends[..., :2], moved[..., :2]), np.maximum(ends[..., 2:], moved[..., 2:])],
+                          axis=-1)
+    start, end = ranges[boxes:boxes + count, 0], ranges[boxes:boxes + count, 1]
+    step = ranges[boxes + count:, 0] - start  # v along each face's axes
+    w = step[..., 0]
+    moving = w != 0.0
+    safe = np.where(moving, w, 1.0)
+    # The l where the swept box spans depth ``near``: start + l w <= near <= end + l w.
+    a, b = (near - end[..., 0]) / safe, (near - start[..., 0]) / safe
+    low, high = np.maximum(np.minimum(a, b), 0.0), np.minimum(np.maximum(a, b), 1.0)
+    cut = moving & (low <= high)
+    if cut.any():
+        low, high = low[cut][:, None] * step[cut][:, 1:], high[cut][:, None] * step[cut][:, 1:]
+        section = np.concatenate([start[cut][:, 1:] + np.minimum(low, high), end[cut][:, 1:] + np.maximum(low, high)],
+                                 axis=-1) / near
+        section = np.minimum(np.maximum(section, -1.0), 1.0)
+        hull[cut] = np.concatenate([np.minimum(hull[cut][:, :2], section[:, :2]),
+                                    np.maximum(hull[cut][:, 2:], section[:, 2:])], axis=-1)
+    return np.concatenate([rects[:boxes], hull]) if boxes else hull
 
 
 def intersect_rects(a: np.ndarray, b: np.ndarray) -> np.ndarray:
