@@ -168,6 +168,11 @@ class ProbeSystem(esper.Processor):
 
     def process(self, dt: float) -> None:
         probes = self.renderer.probes
+        if probes.cubes:
+            # The shadow maps drawn just before, to the rasteriser now: it draws them while
+            # the scheduler works (on llvmpipe nothing starts them before the main view's
+            # first draw waits for them).
+            self.renderer.flush()
         probes.paths.settle()  # the timed captures of an earlier frame, if any wait to be read
         schedule = self.scheduler.update()
         for owner in schedule.gone:

@@ -412,9 +412,11 @@ class CubeMipTarget:
         """Draw into mip ``level`` (>= 1) of every face (layered: ``glFramebufferTexture``),
         or of ``face`` alone (``glFramebufferTexture2D``: the per-face pass, for a driver
         whose layered draw was refused), reading only level ``level - 1`` through ``unit``;
-        returns the level's face size.  The level's state (framebuffer, source levels,
-        viewport, masks) is set at its first face; the next faces of the same level only
-        re-point the attachment.  Each attachment's completeness and GL errors are checked
+        returns the level's face size.  The framebuffer, its draw buffer, scissor and colour
+        mask are set at a build's first level (nothing between the levels' draws changes
+        them: a uniform and a draw); a level's source levels and viewport at its first face;
+        the next faces of the same level only re-point the attachment.  Each attachment's
+        completeness and GL errors are checked
         the first time it is bound (it cannot change while the cube's storage stands): on a
         GPU driver each raw call is a ctypes call of several microseconds, and the per-face
         pass binds 42 attachments for a 128 cube."""
@@ -423,13 +425,14 @@ class CubeMipTarget:
         first = (level, face) not in self._complete
         if first:
             gl["glGetError"]()  # start clean: what follows is checked
-        if self._level != level:
+        if self._level is None:  # a build's first level
             invalidate(self.ctx)  # the viewport and scissor below are set behind moderngl's back
             gl["glBindFramebuffer"](GL_FRAMEBUFFER, self.framebuffer)
             gl["glDrawBuffers"](1, (_u * 1)(GL_COLOR_ATTACHMENT0))
             gl["glDisable"](GL_SCISSOR_TEST)
             gl["glColorMask"](1, 1, 1, 1)
-            bind_texture_now(self.ctx, self.cube, unit)
+        if self._level != level:
+            bind_texture_now(self.ctx, self.cube, unit)  # (the active unit: the parameters below are its texture's)
             gl["glTexParameteri"](GL_TEXTURE_CUBE_MAP, GL_TEXTURE_BASE_LEVEL, level - 1)
             gl["glTexParameteri"](GL_TEXTURE_CUBE_MAP, GL_TEXTURE_MAX_LEVEL, level - 1)
             gl["glViewport"](0, 0, size, size)
