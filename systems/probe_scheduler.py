@@ -29,7 +29,9 @@ has a ``ProbeState``.  What is due each frame, per probe:
     in its frustum, the shadows of every box that changed (one hidden from probes or the
     probe's own object casts too), and every face when a light in reach or the sun or sky
     changed, a point light came or went anywhere (the lights' slots and limits shift), or
-    the level has mirrors or portals (``_mark_changes``);
+    the level has mirrors or portals (``_mark_changes``); a face changes reached is published
+    with the rectangle of it they reached since it was drawn (``ProbeDue.regions``: the
+    captures draw that part alone where nothing they draw with changed);
   - with ``time_slicing="one_face_per_frame"`` the waiting faces go one a frame (after a
     first capture of all six, so an object never shows a cube map with faces missing).
 A face leaves the waiting set (``ProbeState.pending``) when it is published as due.
@@ -400,7 +402,12 @@ class ProbeScheduler:
         level (``directional_shadow_bounds``: nothing outside the level receives a shadow),
         each holding every shadowed point; and within each point light's range
         (``point_shadow_bounds``).  All the hulls through one ``box_pair_face_hits``
-        (``hull_face_hits``' booleans, from each hull's two boxes without their corners)."""
+        (``hull_face_hits``' booleans, from each hull's two boxes without their corners).
+
+        Where in a face: each row's rectangle in each face it reaches (a box's, a sun hull's
+        within its clipped box's: ``face_rects``, ``hull_rects``), their union joining the
+        face's ``state.regions`` (grown over the frames until it is drawn); a face changed
+        everywhere (relit, or reached so before) has none, and is drawn whole."""
         if state.changed >= ALL_FACES and not state.regions:
             return
         if relit or self._lights_came_or_went or (surfaces is not None and (surfaces.mirrors or surfaces.portals)):

@@ -643,7 +643,8 @@ class ProbeCaptures:
         ``surfaces``: the planner's table of this frame's mirrors and portals,
         ``engine.render.surface_table``, that a face's view tree draws, up to
         ``settings.depth``; ``unchanged``: the faces no change reached since they were last
-        drawn, the scheduler's ``ProbeDue.unchanged``, kept as ``capture`` says); then the
+        drawn, the scheduler's ``ProbeDue.unchanged``, kept as ``capture`` says; ``regions``:
+        the part of a face changes reached, ``ProbeDue.regions``, drawn alone); then the
         cube's record of where it was captured from and its projection box
         (``probe_rules.projection_box``): the cube's fields are set here only.  Returns the
         path that drew it.
@@ -701,7 +702,10 @@ class ProbeCaptures:
         alone, and no change the scheduler follows reached it since it was drawn:
         ``ProbeDue.unchanged``) drawn last by this path with the same camera, sky and
         programs and the same instances' order, shadow maps' blocks and lookups, filtering
-        and cubes of the probes it may show (``_scene_record``).  Its mips are rebuilt with
+        and cubes of the probes it may show (``_scene_record``); and a face of ``regions``
+        (the rectangle of the face every change since its drawing reached:
+        ``ProbeDue.regions``) drawn last with those same records is drawn within that
+        rectangle alone (``_draw_part``; straight into the face only).  Its mips are rebuilt with
         the others'; when no face was drawn and the chain was built from the faces as they
         are, not even that.  ``plan``: what is kept, worked out already (``capture_probe``,
         for a capture drawn now, before any other); None works it out here."""
