@@ -470,6 +470,12 @@ class ProbeScheduler:
         reached = region_hits.any(axis=0).tolist()
         if not any(reached):
             return
+        if not state.parts:  # no part can be drawn at the next capture: no rectangles
+            for face in range(6):
+                if reached[face]:
+                    state.changed.add(face)
+                    state.regions.pop(face, None)
+            return
         if suns:
             plain = sum(len(lo) for lo in plain_lo)
             swept_lo, swept_hi = np.concatenate(box_lo[1:1 + 2 * suns:2]), np.concatenate(box_hi[1:1 + 2 * suns:2])

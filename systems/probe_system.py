@@ -96,6 +96,7 @@ def capture_due(world: World, renderer: Renderer, due: ProbeDue, only: frozenset
     stats.probe_ms_spent += spent_ms
     probes.measured(spent_ms / len(faces))
     state.record_capture(faces)
+    state.parts = renderer.probes.parts_possible(due.owner)
 
 
 _SAID_SMALL: set[int] = set()

@@ -15,6 +15,7 @@ from components import DirectionalLight, Material, MeshRef, ReflectionProbe, Tra
 from engine.assets.mesh import box, plane
 from engine.core.cube_faces import CUBE_FACES
 from engine.rules.probe_rules import NO_RECT, face_rects, union_rects
+from engine.rules.probe_schedule import ProbeSchedule
 from tests.support import look_from
 from tests.test_probe_keeping import _Cube, _probe_stage
 
@@ -268,4 +269,27 @@ def test_parts_take_the_six_pass_path(scene, path):
     runner.world.get(runner.world.resources["near"], Transform).position += glm.vec3(0.0, 0.0, 0.3)
     runner.frame()
     assert parts and _probe_stage(runner).path_used == "six_pass"
+    assert cube.as_if_drawn_whole()
+
+
+def test_no_rectangles_are_worked_out_where_no_part_can_be_drawn(scene):
+    """Faces copied from a 2D target (no face target straight into the cube: a part would
+    leave the copy's other texels wrong) are drawn whole: the captures say no part can be
+    drawn (``ProbeState.parts``), so the scheduler works out no rectangle for the faces the
+    box reaches; the cube is a capture of all six."""
+    runner = scene(_floor_and_boxes(), (64, 48))
+    _probe_stage(runner).path = "six_pass"
+    cube = _Cube(runner)
+    cube.probes.direct_faces = False
+    world = runner.world
+    for _ in range(3):
+        runner.frame()
+    state = _probe_stage(runner).probes[world.resources["probe"]]
+    assert not state.parts
+    parts = _parts_drawn(cube)
+    world.get(world.resources["near"], Transform).position += glm.vec3(0.0, 0.0, 0.3)
+    runner.frame()
+    due = world.resources[ProbeSchedule].due[world.resources["probe"]]
+    assert 0 in due.faces and 0 not in due.unchanged and not due.regions  # reached, drawn whole
+    assert not parts and runner.stats.probe_faces >= 1
     assert cube.as_if_drawn_whole()

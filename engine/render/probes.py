@@ -777,6 +777,12 @@ class ProbeCaptures:
         self.faces_in_part += 1
         self.texels_in_part += rect[2] * rect[3]
 
+    def parts_possible(self, key: int) -> bool:
+        """Whether a face of probe ``key`` could be drawn in part at its next capture: its
+        faces are drawn straight into its cube (``CubeFaceTargets``) and some face holds the
+        records a part is drawn by (a six-pass capture without view trees drew it)."""
+        return key in self._faces and bool(self._scene_faces.get(key))
+
     def written_elsewhere(self, key: int) -> None:
         """Probe ``key``'s cube was written by something other than a capture (a test's
         sentinel, a tool): no face is kept as it is at its next capture, nor its mips."""

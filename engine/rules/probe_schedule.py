@@ -54,6 +54,10 @@ class ProbeState:
     # the face: face -> that part, (s0, t0, s1, t1) in the face's normalised coordinates
     # (``probe_rules.face_rects``).  A changed face not here changed anywhere in it.
     regions: dict[int, tuple[float, float, float, float]] = field(default_factory=dict)
+    # Whether the captures could draw a part of a face at its next capture (the last drew
+    # faces straight into the cube, six-pass, with the records a part is drawn by): where
+    # not, the scheduler works out no rectangles (every face a change reaches is drawn whole).
+    parts: bool = False
 
     def ask(self, faces: Iterable[int], reason: str) -> None:
         """Faces to capture, and why."""
