@@ -58,16 +58,13 @@ from engine.rules.probe_rules import (
     LookChanges,
     box_corners,
     box_pair_face_hits,
+    change_rects,
     face_hits,
-    face_rects,
     faces_touched,
     has_own_probe,
-    hull_rects,
     images_through_surfaces,
-    intersect_rects,
     lights_reaching,
     probe_samplers,
-    union_rects,
     world_bounds,
 )
 from engine.rules.probe_schedule import MAX_NAMED, PERIODIC, WATCHING, ProbeDue, ProbeSchedule, ProbeState, ProbeStates
@@ -458,7 +455,7 @@ class ProbeScheduler:
                                       np.concatenate(far_lo), np.concatenate(far_hi))
         # Where in each face: a row's box, or a sun's hull within its clipped box (both hold
         # every shadowed point: the rectangles of each, intersected), where the row reaches
-        # the face (probe_rules.hull_rects, union_rects).
+        # the face (probe_rules.change_rects).
         region_hits, plain_lo, plain_hi = [hits[:rows]], [near_lo], [near_hi]
         if len(hits) > rows + 2 * suns * count:  # the point lights' boxes
             region_hits.append(hits[rows + 2 * suns * count:])
@@ -476,18 +473,13 @@ class ProbeScheduler:
                     state.changed.add(face)
                     state.regions.pop(face, None)
             return
-        if suns:
-            plain = sum(len(lo) for lo in plain_lo)
-            swept_lo, swept_hi = np.concatenate(box_lo[1:1 + 2 * suns:2]), np.concatenate(box_hi[1:1 + 2 * suns:2])
-            bound_lo, bound_hi = np.concatenate(box_lo[2:2 + 2 * suns:2]), np.concatenate(box_hi[2:2 + 2 * suns:2])
-            moved_lo, moved_hi = np.concatenate(far_lo[1:1 + 2 * suns:2]), np.concatenate(far_hi[1:1 + 2 * suns:2])
-            rects = hull_rects(state.position, settings.near, swept_lo, swept_hi, moved_lo, moved_hi,
-                               np.concatenate([*plain_lo, bound_lo]), np.concatenate([*plain_hi, bound_hi]))
-            rects = np.concatenate([rects[:plain], intersect_rects(rects[plain:plain + len(bound_lo)],
-                                                                   rects[plain + len(bound_lo):])])
-        else:
-            rects = face_rects(state.position, settings.near, np.concatenate(plain_lo), np.concatenate(plain_hi))
-        rects = union_rects(rects, region_hits).tolist()
+        swept = None
+        if suns:  # each sun's hulls (the grown boxes and the boxes moved) and clipped boxes
+            hulls, bounds = slice(1, 1 + 2 * suns, 2), slice(2, 2 + 2 * suns, 2)
+            swept = (np.concatenate(box_lo[hulls]), np.concatenate(box_hi[hulls]), np.concatenate(far_lo[hulls]),
+                     np.concatenate(far_hi[hulls]), np.concatenate(box_lo[bounds]), np.concatenate(box_hi[bounds]))
+        rects = change_rects(state.position, settings.near, np.concatenate(plain_lo), np.concatenate(plain_hi),
+                             region_hits, swept).tolist()
         for face in range(6):
             if not reached[face] or (face in state.changed and face not in state.regions):
                 continue  # not reached, or changed anywhere in it already

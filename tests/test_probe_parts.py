@@ -98,6 +98,46 @@ def test_every_point_of_a_swept_box_in_front_of_the_near_plane_lies_in_its_hull_
     np.testing.assert_array_equal(both[4:], rects[:5])
 
 
+def test_a_faces_change_rectangle_is_the_union_of_its_rows_rectangles_that_reach_it():
+    """``change_rects`` (the scheduler's one pass) against the rows' own rectangles: each
+    box's ``face_rects``, each sun row's ``hull_rects`` cut to its clipped box's, unioned
+    over the rows ``hits`` says reach the face; a face none reaches has ``NO_RECT``."""
+    from engine.rules.probe_rules import change_rects, hull_rects
+
+    rng = np.random.default_rng(9)
+    apex, near = (0.0, 1.0, 0.0), 0.05
+    lo = rng.uniform(-8.0, 8.0, (12, 3))
+    lo[:, 1] = rng.uniform(0.0, 3.0, 12)
+    hi = lo + rng.uniform(0.2, 1.0, (12, 3))
+    sweep = rng.normal(0.0, 1.0, (12, 3))
+    sweep[:, 1] = -4.0  # down through the floor (y = 0), as a sun's sweep to the level's walls
+    # Each hull's box cut at the floor: the part of it a shadow can fall in.
+    bound_lo = np.maximum(np.minimum(lo[6:], lo[6:] + sweep[6:]), [-20.0, 0.0, -20.0])
+    bound_hi = np.maximum(hi[6:], hi[6:] + sweep[6:])
+    hits = rng.uniform(0.0, 1.0, (12, 6)) > 0.4
+    hits[:, 2] = False  # a face no row reaches
+    got = change_rects(apex, near, lo[:6], hi[:6], hits, (lo[6:], hi[6:], lo[6:] + sweep[6:], hi[6:] + sweep[6:],
+                                                         bound_lo, bound_hi))
+    rows = list(face_rects(apex, near, lo[:6], hi[:6]))
+    hulls = hull_rects(apex, near, lo[6:], hi[6:], lo[6:] + sweep[6:], hi[6:] + sweep[6:])
+    bounds = face_rects(apex, near, bound_lo, bound_hi)
+    for hull, bound in zip(hulls, bounds, strict=True):
+        cut = np.concatenate([np.maximum(hull[:, :2], bound[:, :2]), np.minimum(hull[:, 2:], bound[:, 2:])], axis=1)
+        cut[(cut[:, 0] > cut[:, 2]) | (cut[:, 1] > cut[:, 3])] = NO_RECT
+        rows.append(cut)
+    rows = np.array(rows)
+    for face in range(6):
+        reaching = rows[hits[:, face], face]
+        reaching = reaching[np.isfinite(reaching[:, 0])]
+        if not len(reaching):
+            assert tuple(got[face]) == NO_RECT, face
+            continue
+        want = (*reaching[:, :2].min(axis=0), *reaching[:, 2:].max(axis=0))
+        np.testing.assert_allclose(got[face], want, atol=1e-12, err_msg=f"face {face}")
+    assert tuple(got[2]) == NO_RECT
+    assert (hulls != bounds).any()  # (the cut matters)
+
+
 def test_the_union_of_a_faces_rectangles_takes_only_the_rows_that_reach_it():
     rects = np.array([[(-0.5, -0.5, 0.0, 0.0)] * 6, [(0.2, 0.1, 0.6, 0.9)] * 6])
     hits = np.zeros((2, 6), bool)

@@ -487,30 +487,50 @@ _FACE_POSITIVE = np.array([[axis[int(np.flatnonzero(axis)[0])] > 0.0 for axis in
 NO_RECT = (np.inf, np.inf, -np.inf, -np.inf)  # the empty rectangle: any union with it is the other
 
 
+# Rectangles are worked out as (s0, t0, -s1, -t1) ("low form"): a union is then the least of
+# each number, a common part the greatest, and the face's own [-1, 1] a floor of -1 on all four.
+_LOW_EMPTY = np.inf  # an empty rectangle in low form: all four infinite
+_NORMAL = np.array([1.0, 1.0, -1.0, -1.0])
 # Gathers from a box's [lo, hi, -lo, -hi] (less the probe's centre: 12 numbers) of each
-# face's ranges along its forward, s and t axes: [lo, hi] along a positive axis, [-hi, -lo]
-# along a negative one; (start/end, face, forward/s/t).
-_RANGES = np.stack([np.where(_FACE_POSITIVE, _FACE_AXES, 9 + _FACE_AXES),
-                    np.where(_FACE_POSITIVE, 3 + _FACE_AXES, 6 + _FACE_AXES)])
+# face's depth range (start, end) and its s and t ranges in low form (s0, t0, -s1, -t1):
+# along a positive axis the range is [lo, hi], along a negative one [-hi, -lo].
+_START = np.where(_FACE_POSITIVE, _FACE_AXES, 9 + _FACE_AXES)  # (face, forward/s/t): where the range starts
+_END = np.where(_FACE_POSITIVE, 3 + _FACE_AXES, 6 + _FACE_AXES)
+_MINUS_END = np.where(_FACE_POSITIVE, 9 + _FACE_AXES, _FACE_AXES)  # its end, negated
+_GATHER = np.concatenate([_START[:, :1], _END[:, :1], _START[:, 1:], _MINUS_END[:, 1:]], axis=1)  # (face, 6)
 
 
 def _face_ranges(position: glm.vec3 | Sequence[float], lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
-    """(box, start/end, face, forward/s/t): each box's ranges along each face's axes."""
+    """(box, face, 6): each box's depth range along each face's axis (start, end) and its s
+    and t ranges in low form."""
     ends = np.concatenate([lo, hi], axis=1) - np.asarray(tuple(position), np.float64)[_TWICE]
-    return np.concatenate([ends, -ends], axis=1)[:, _RANGES]
+    return np.concatenate([ends, -ends], axis=1)[:, _GATHER]
 
 
-def _ranges_rects(ranges: np.ndarray, near: float) -> np.ndarray:
-    """``face_rects`` of boxes given by their ranges (``_face_ranges``)."""
-    start, end = ranges[:, 0], ranges[:, 1]
-    depth_lo = np.maximum(start[..., 0], near)[..., None]  # >= near > 0: no division by zero
-    depth_hi = np.maximum(end[..., 0:1], depth_lo)
-    # s / depth grows with s (depth > 0): least at the start of s's range, at one end of depth's.
-    rects = np.concatenate([np.minimum(start[..., 1:] / depth_lo, start[..., 1:] / depth_hi),
-                            np.maximum(end[..., 1:] / depth_lo, end[..., 1:] / depth_hi)], axis=-1)
-    rects = np.minimum(np.maximum(rects, -1.0), 1.0)
-    rects[end[..., 0] < depth_lo[..., 0]] = NO_RECT
+def _low_rects(ranges: np.ndarray, near: float) -> np.ndarray:
+    """(box, face, 4): ``face_rects`` in low form, of boxes given by their ranges
+    (``_face_ranges``); ``_LOW_EMPTY`` where a box shows nothing of a face."""
+    depth_lo = np.maximum(ranges[..., 0:1], near)  # >= near > 0: no division by zero
+    depth_hi = np.maximum(ranges[..., 1:2], depth_lo)
+    # s / depth grows with s (depth > 0): least at the start of s's range, at one end of
+    # depth's; -s1 likewise.
+    sides = ranges[..., 2:]
+    rects = np.maximum(np.minimum(sides / depth_lo, sides / depth_hi), -1.0)
+    rects[ranges[..., 1] < depth_lo[..., 0]] = _LOW_EMPTY  # nothing in front of the near plane
     return rects
+
+
+def _outside_emptied(rects: np.ndarray) -> np.ndarray:
+    """Low-form rectangles, those wholly outside their face (a range ending before the
+    face's other edge) made empty.  Only for a whole row's: the corners of a hull may all
+    lie outside a face that the hull crosses."""
+    rects[(rects[..., 0] + rects[..., 2] > 0.0) | (rects[..., 1] + rects[..., 3] > 0.0)] = _LOW_EMPTY
+    return rects
+
+
+def _normal_form(low: np.ndarray) -> np.ndarray:
+    """Rectangles in low form as (s0, t0, s1, t1), ``NO_RECT`` where empty."""
+    return low * _NORMAL  # (an empty one, all four infinite, is NO_RECT)
 
 
 def face_rects(position: glm.vec3 | Sequence[float], near: float, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
@@ -518,13 +538,40 @@ def face_rects(position: glm.vec3 | Sequence[float], near: float, lo: np.ndarray
     (rows, lo <= hi) may draw, as the face's rectangle (s0, t0, s1, t1) in its normalised
     coordinates (-1..1 along ``CUBE_FACES``' s and t axes: a face view's NDC x and y), within
     [-1, 1]; ``NO_RECT`` where the box has no point at ``near`` or more along the face's
-    axis (no fragment in front of the near plane).  Conservative: a face's axes are world
-    axes, so the box's part in front of the near plane is a box, and s / depth over it is
-    extreme at its corners (s and depth ranges' ends).  The far plane is not used (it only
-    leaves more in)."""
+    axis (no fragment in front of the near plane) or none within the face.  Conservative: a
+    face's axes are world axes, so the box's part in front of the near plane is a box, and
+    s / depth over it is extreme at its corners (s and depth ranges' ends).  The far plane
+    is not used (it only leaves more in)."""
     lo = np.atleast_2d(np.asarray(lo, np.float64))
     hi = np.atleast_2d(np.asarray(hi, np.float64))
-    return _ranges_rects(_face_ranges(position, lo, hi), near)
+    return _normal_form(_outside_emptied(_low_rects(_face_ranges(position, lo, hi), near)))
+
+
+def _hull_low_rects(position: glm.vec3 | Sequence[float], near: float, lo: np.ndarray, hi: np.ndarray,
+                    far_lo: np.ndarray, far_hi: np.ndarray, box_lo: np.ndarray | None = None,
+                    box_hi: np.ndarray | None = None) -> np.ndarray:
+    """``hull_rects`` in low form."""
+    boxes = 0 if box_lo is None else len(box_lo)
+    count = len(lo)
+    ranges = _face_ranges(position, np.concatenate([*([box_lo] if boxes else []), lo, far_lo]),
+                          np.concatenate([*([box_hi] if boxes else []), hi, far_hi]))
+    rects = _low_rects(ranges, near)
+    hull = np.minimum(rects[boxes:boxes + count], rects[boxes + count:])
+    box = ranges[boxes:boxes + count]
+    step = ranges[boxes + count:] - box  # v along each face's axis (twice), its s and t in low form
+    w = step[..., 0]
+    moving = w != 0.0
+    safe = np.where(moving, w, 1.0)
+    # The l where the swept box spans depth ``near``: start + l w <= near <= end + l w.
+    a, b = (near - box[..., 1]) / safe, (near - box[..., 0]) / safe
+    low, high = np.maximum(np.minimum(a, b), 0.0), np.minimum(np.maximum(a, b), 1.0)
+    cut = moving & (low <= high)
+    if cut.any():
+        sides = step[..., 2:]
+        section = np.maximum((box[..., 2:] + np.minimum(low[..., None] * sides, high[..., None] * sides)) / near,
+                             -1.0)
+        hull = np.minimum(hull, np.where(cut[..., None], section, _LOW_EMPTY))
+    return np.concatenate([rects[:boxes], hull]) if boxes else hull
 
 
 def hull_rects(position: glm.vec3 | Sequence[float], near: float, lo: np.ndarray, hi: np.ndarray,
@@ -540,39 +587,30 @@ def hull_rects(position: glm.vec3 | Sequence[float], near: float, lo: np.ndarray
     of each) and of its section by the plane, whose s and t ranges are linear in l over the
     l that reach the plane, so taken at that range's ends (with v along the plane, the
     section is the box's own, in its rectangle already)."""
-    boxes = 0 if box_lo is None else len(box_lo)
-    count = len(lo)
-    ranges = _face_ranges(position, np.concatenate([*([box_lo] if boxes else []), lo, far_lo]),
-                          np.concatenate([*([box_hi] if boxes else []), hi, far_hi]))
-    rects = _ranges_rects(ranges, near)
-    ends, moved = rects[boxes:boxes + count], rects[boxes + count:]
-    hull = np.concatenate([np.minimum(ends[..., :2], moved[..., :2]), np.maximum(ends[..., 2:], moved[..., 2:])],
-                          axis=-1)
-    start, end = ranges[boxes:boxes + count, 0], ranges[boxes:boxes + count, 1]
-    step = ranges[boxes + count:, 0] - start  # v along each face's axes
-    w = step[..., 0]
-    moving = w != 0.0
-    safe = np.where(moving, w, 1.0)
-    # The l where the swept box spans depth ``near``: start + l w <= near <= end + l w.
-    a, b = (near - end[..., 0]) / safe, (near - start[..., 0]) / safe
-    low, high = np.maximum(np.minimum(a, b), 0.0), np.minimum(np.maximum(a, b), 1.0)
-    cut = moving & (low <= high)
-    if cut.any():
-        low, high = low[cut][:, None] * step[cut][:, 1:], high[cut][:, None] * step[cut][:, 1:]
-        section = np.concatenate([start[cut][:, 1:] + np.minimum(low, high), end[cut][:, 1:] + np.maximum(low, high)],
-                                 axis=-1) / near
-        section = np.minimum(np.maximum(section, -1.0), 1.0)
-        hull[cut] = np.concatenate([np.minimum(hull[cut][:, :2], section[:, :2]),
-                                    np.maximum(hull[cut][:, 2:], section[:, 2:])], axis=-1)
-    return np.concatenate([rects[:boxes], hull]) if boxes else hull
+    lo = np.atleast_2d(np.asarray(lo, np.float64))
+    return _normal_form(_outside_emptied(_hull_low_rects(position, near, lo, np.atleast_2d(hi), np.atleast_2d(far_lo),
+                                                         np.atleast_2d(far_hi), box_lo, box_hi)))
 
 
-def intersect_rects(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """(..., 4): each pair of rectangles' common part (both hold a region: so does it);
-    ``NO_RECT`` where they have none."""
-    rects = np.concatenate([np.maximum(a[..., :2], b[..., :2]), np.minimum(a[..., 2:], b[..., 2:])], axis=-1)
-    rects[(rects[..., 0] > rects[..., 2]) | (rects[..., 1] > rects[..., 3])] = NO_RECT
-    return rects
+def change_rects(position: glm.vec3 | Sequence[float], near: float, lo: np.ndarray, hi: np.ndarray,
+                 hits: np.ndarray, swept: tuple[np.ndarray, ...] | None = None) -> np.ndarray:
+    """(face, 4): where in each face a probe's changes may draw, as (s0, t0, s1, t1)
+    (``NO_RECT`` for none): the union, over the rows ``hits`` (row, face) says reach a face,
+    of the boxes [lo, hi]'s rectangles then, with ``swept`` = (lo, hi, far_lo, far_hi,
+    bound_lo, bound_hi), each sun's hull's (``hull_rects``) within its clipped box's (both
+    hold every point it shades): the probes scheduler's rows in one pass."""
+    if swept is None:
+        rects = _low_rects(_face_ranges(position, lo, hi), near)
+    else:
+        swept_lo, swept_hi, far_lo, far_hi, bound_lo, bound_hi = swept
+        plain = len(lo)
+        rects = _hull_low_rects(position, near, swept_lo, swept_hi, far_lo, far_hi, np.concatenate([lo, bound_lo]),
+                                np.concatenate([hi, bound_hi]))
+        rects = np.concatenate([rects[:plain], np.maximum(rects[plain:plain + len(bound_lo)],
+                                                          rects[plain + len(bound_lo):])])
+    if not len(rects):
+        return _normal_form(np.full((6, 4), _LOW_EMPTY))
+    return _normal_form(np.where(hits[..., None], _outside_emptied(rects), _LOW_EMPTY).min(axis=0))
 
 
 def union_rects(rects: np.ndarray, hits: np.ndarray) -> np.ndarray:
