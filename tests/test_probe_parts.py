@@ -14,7 +14,7 @@ from pyglm import glm
 from components import DirectionalLight, Material, MeshRef, ReflectionProbe, Transform
 from engine.assets.mesh import box, plane
 from engine.core.cube_faces import CUBE_FACES
-from engine.rules.probe_rules import NO_RECT, face_rects, union_rects
+from engine.rules.probe_rules import NO_RECT, face_rects
 from engine.rules.probe_schedule import ProbeSchedule
 from tests.support import look_from
 from tests.test_probe_keeping import _Cube, _probe_stage
@@ -136,16 +136,6 @@ def test_a_faces_change_rectangle_is_the_union_of_its_rows_rectangles_that_reach
         np.testing.assert_allclose(got[face], want, atol=1e-12, err_msg=f"face {face}")
     assert tuple(got[2]) == NO_RECT
     assert (hulls != bounds).any()  # (the cut matters)
-
-
-def test_the_union_of_a_faces_rectangles_takes_only_the_rows_that_reach_it():
-    rects = np.array([[(-0.5, -0.5, 0.0, 0.0)] * 6, [(0.2, 0.1, 0.6, 0.9)] * 6])
-    hits = np.zeros((2, 6), bool)
-    hits[0, 0] = hits[1, 0] = hits[1, 3] = True
-    union = union_rects(rects, hits)
-    assert tuple(union[0]) == (-0.5, -0.5, 0.6, 0.9)
-    assert tuple(union[3]) == (0.2, 0.1, 0.6, 0.9)
-    assert tuple(union[1]) == NO_RECT
 
 
 def test_a_texel_rectangle_holds_every_texel_whose_centre_lies_in_the_region_and_a_texel_more():

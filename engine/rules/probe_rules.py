@@ -613,15 +613,6 @@ def change_rects(position: glm.vec3 | Sequence[float], near: float, lo: np.ndarr
     return _normal_form(np.where(hits[..., None], _outside_emptied(rects), _LOW_EMPTY).min(axis=0))
 
 
-def union_rects(rects: np.ndarray, hits: np.ndarray) -> np.ndarray:
-    """(face, 4): the union of each face's rectangles ``rects`` (row, face, 4: ``face_rects``)
-    of the rows ``hits`` (row, face) says reach it; ``NO_RECT`` for a face none reaches."""
-    rects = np.where(hits[..., None], rects, NO_RECT)
-    if not len(rects):
-        return np.array([NO_RECT] * 6)
-    return np.concatenate([rects[..., :2].min(axis=0), rects[..., 2:].max(axis=0)], axis=-1)
-
-
 MAX_SURFACE_IMAGES = 4096  # boxes seen through mirrors and portals a probe's schedule follows a frame
 
 
