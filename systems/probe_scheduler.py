@@ -31,7 +31,9 @@ has a ``ProbeState``.  What is due each frame, per probe:
     changed, a point light came or went anywhere (the lights' slots and limits shift), or
     the level has mirrors or portals (``_mark_changes``); a face changes reached is published
     with the rectangle of it they reached since it was drawn (``ProbeDue.regions``: the
-    captures draw that part alone where nothing they draw with changed);
+    captures draw that part alone where nothing they draw with changed); an ``on_change``
+    probe's faces asked for by changes alone get theirs by the same rule (any other reason,
+    a request, the probe moving, the view budget, changes a face everywhere: ``ProbeState.ask``);
   - with ``time_slicing="one_face_per_frame"`` the waiting faces go one a frame (after a
     first capture of all six, so an object never shows a cube map with faces missing).
 A face leaves the waiting set (``ProbeState.pending``) when it is published as due.
@@ -172,6 +174,10 @@ class ProbeScheduler:
                 unchanged = periodic - state.changed
                 if state.regions:
                     regions = {face: state.regions[face] for face in periodic if face in state.regions}
+            elif state.captures and state.settings.refresh == "on_change" and state.regions:
+                # Every reason a face waits for is a change whose part the regions follow (any
+                # other made it changed everywhere: ProbeState.ask).
+                regions = {face: state.regions[face] for face in faces if face in state.regions}
             schedule.due[state.owner] = ProbeDue(state.owner, faces, reasons, first=not state.captures,
                                                  unchanged=unchanged, regions=regions)
         return schedule
@@ -351,6 +357,15 @@ class ProbeScheduler:
         mode = settings.refresh
         if mode in PERIODIC:
             self._mark_changes(state, boxes, relit, surfaces)
+        elif mode == "on_change" and state.captures:
+            # Where in its faces the changes reach, for the faces drawn in part (the same
+            # rule as a periodic probe's, wider than the faces asked for below); where no
+            # part can be drawn, every face counts as changed everywhere (nothing to work out).
+            if state.parts:
+                self._mark_changes(state, boxes, relit, surfaces)
+            else:
+                state.changed |= ALL_FACES
+                state.regions.clear()
         if mode == "every_frame":
             state.ask(ALL_FACES, "every_frame")
         elif mode == "every_n" and state.frames % settings.every_n == 0:
@@ -557,10 +572,11 @@ def _ask_named(state: ProbeState, hits: np.ndarray, keys: np.ndarray, label) -> 
         return
     named = np.isin(keys[rows], np.unique(keys[rows])[:MAX_NAMED])
     for row in rows[named]:
-        state.ask(np.flatnonzero(hits[row]).tolist(), label(int(row)))
+        state.ask(np.flatnonzero(hits[row]).tolist(), label(int(row)), part=True)
     rest = rows[~named]
     if len(rest):
-        state.ask(np.flatnonzero(hits[rest].any(axis=0)).tolist(), f"{len(np.unique(keys[rest]))} more changes")
+        state.ask(np.flatnonzero(hits[rest].any(axis=0)).tolist(), f"{len(np.unique(keys[rest]))} more changes",
+                  part=True)
 
 
 def _warn_blend_without_box(owner: int, probe: ReflectionProbe) -> None:

@@ -323,3 +323,27 @@ def test_no_rectangles_are_worked_out_where_no_part_can_be_drawn(scene):
     assert 0 in due.faces and 0 not in due.unchanged and not due.regions  # reached, drawn whole
     assert not parts and runner.stats.probe_faces >= 1
     assert cube.as_if_drawn_whole()
+
+
+def test_an_on_change_probe_draws_the_part_of_a_face_a_moved_box_reaches(scene):
+    """An ``on_change`` probe (the default refresh) recaptures the faces a change asks for;
+    the +X face, asked for by the box moving in it, is drawn in part, and the cube is a
+    capture of all six.  A request (a reason that is no change's) draws every face whole."""
+    runner = scene(_floor_and_boxes("on_change"), (64, 48))
+    _probe_stage(runner).path = "six_pass"
+    cube = _Cube(runner)
+    world = runner.world
+    for _ in range(3):
+        runner.frame()
+    parts = _parts_drawn(cube)
+    world.get(world.resources["near"], Transform).position += glm.vec3(0.0, 0.0, 0.3)
+    runner.frame()
+    assert 0 in dict(parts), parts
+    assert cube.as_if_drawn_whole()
+    runner.frame()
+    parts.clear()
+    world.get(world.resources["near"], Transform).position += glm.vec3(0.0, 0.0, 0.3)
+    world.get(world.resources["probe"], ReflectionProbe).request()
+    runner.frame()
+    assert runner.stats.probe_faces >= 1 and not parts
+    assert cube.as_if_drawn_whole()

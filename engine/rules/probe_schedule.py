@@ -59,9 +59,15 @@ class ProbeState:
     # not, the scheduler works out no rectangles (every face a change reaches is drawn whole).
     parts: bool = False
 
-    def ask(self, faces: Iterable[int], reason: str) -> None:
-        """Faces to capture, and why."""
+    def ask(self, faces: Iterable[int], reason: str, part: bool = False) -> None:
+        """Faces to capture, and why.  A reason that is no period's, and not a change whose
+        part of the face the scheduler follows (``part``: ``_mark_changes`` works out where
+        it reaches), changes the faces everywhere: none is drawn in part."""
         faces = set(faces)
+        if faces and not part and reason not in PERIODIC:
+            self.changed |= faces
+            for face in faces:
+                self.regions.pop(face, None)
         if faces:
             self.pending |= faces
             self.why.setdefault(reason, set()).update(faces)
