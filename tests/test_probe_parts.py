@@ -347,3 +347,28 @@ def test_an_on_change_probe_draws_the_part_of_a_face_a_moved_box_reaches(scene):
     runner.frame()
     assert runner.stats.probe_faces >= 1 and not parts
     assert cube.as_if_drawn_whole()
+
+
+@pytest.mark.parametrize("gpu_ms", [0.1, 5.0], ids=["issuing_bound", "fill_bound"])
+def test_parts_are_drawn_only_where_the_gpu_takes_longer_than_issuing_a_capture(scene, gpu_ms):
+    """A host whose GPU drew the timed captures faster than the CPU issued them (a GPU:
+    fill is nearly free, the CPU is what a capture costs) draws no parts and works out no
+    rectangles; one whose GPU took longer (llvmpipe: fill is most of a capture) does.  The
+    timings are ``ProbePaths``' (auto's timed captures: the GPU's by timer query, the
+    issuing thread's CPU time), set here as such a host would have measured them."""
+    runner = scene(_floor_and_boxes(), (64, 48))
+    stage = _probe_stage(runner)
+    stage.path = "six_pass"
+    cube = _Cube(runner)
+    paths = cube.probes.paths
+    paths.samples, paths.thread_ms = {"six_pass": [(gpu_ms, 6.0)] * 3}, {"six_pass": [1.0] * 3}
+    assert paths.fill_bound == (gpu_ms > 1.0)
+    world = runner.world
+    for _ in range(3):
+        runner.frame()
+    parts = _parts_drawn(cube)
+    world.get(world.resources["near"], Transform).position += glm.vec3(0.0, 0.0, 0.3)
+    runner.frame()
+    due = world.resources[ProbeSchedule].due[world.resources["probe"]]
+    assert bool(parts) == bool(due.regions) == paths.fill_bound
+    assert cube.as_if_drawn_whole()

@@ -24,6 +24,7 @@ import time
 from collections.abc import Callable, Iterable, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass, field, replace
+from time import thread_time
 from typing import TYPE_CHECKING
 
 import moderngl
@@ -475,6 +476,7 @@ class ProbePaths:
         # timed, not read yet: each capture's timer query and its CPU ms, by path
         self._queries: dict[str, list[tuple[moderngl.Query, float]]] | None = None
         self.samples: dict[str, list[tuple[float, float]]] = {}  # (GPU ms, CPU ms) of each timed capture
+        self.thread_ms: dict[str, list[float]] = {}  # the issuing thread's CPU ms of each timed capture
         self._resolution = 0
 
     @property
@@ -489,6 +491,21 @@ class ProbePaths:
         time and its CPU time (empty before ``auto`` timed them)."""
         self.settle()
         return dict(self._timings)
+
+    @property
+    def fill_bound(self) -> bool:
+        """Whether drawing fewer texels of a capture saves time here: the GPU took longer
+        over the timed six-pass captures than the CPU spent issuing them (their medians; the
+        thread's CPU time, not the wall clock, which holds a software rasteriser's waits), or
+        nothing was timed (a software rasteriser, where fill is most of a capture, is the
+        case to serve).  False on a GPU that draws a capture faster than it is issued: there
+        a face drawn in part saves nothing, and working out its part costs CPU.  Timings not
+        read yet count as none (they are read at the next frame's probes stage, ``settle``:
+        reading them now would wait for the GPU)."""
+        timed, own = self.samples.get("six_pass"), self.thread_ms.get("six_pass")
+        if self._queries is not None or not timed or not own:
+            return True
+        return statistics.median(gpu for gpu, _ in timed) > statistics.median(own)
 
     @property
     def in_use(self) -> str:
@@ -553,13 +570,15 @@ class ProbePaths:
         for draw in draws.values():
             draw()  # untimed: programs built, targets made
         queries: dict[str, list[tuple[moderngl.Query, float]]] = {name: [] for name in draws}
+        self.thread_ms = {name: [] for name in draws}
         for _ in range(AUTO_TIMED_CAPTURES):
             for name, draw in draws.items():
                 query = ctx.query(time=True)
-                start = time.perf_counter()
+                start, own = time.perf_counter(), thread_time()
                 with query:
                     draw()
                 queries[name].append((query, (time.perf_counter() - start) * 1e3))
+                self.thread_ms[name].append((thread_time() - own) * 1e3)
         self._queries, self._resolution = queries, resolution
 
 
@@ -780,8 +799,9 @@ class ProbeCaptures:
     def parts_possible(self, key: int) -> bool:
         """Whether a face of probe ``key`` could be drawn in part at its next capture: its
         faces are drawn straight into its cube (``CubeFaceTargets``) and some face holds the
-        records a part is drawn by (a six-pass capture without view trees drew it)."""
-        return key in self._faces and bool(self._scene_faces.get(key))
+        records a part is drawn by (a six-pass capture without view trees drew it), and
+        drawing fewer texels saves time here (``ProbePaths.fill_bound``)."""
+        return key in self._faces and bool(self._scene_faces.get(key)) and self.paths.fill_bound
 
     def written_elsewhere(self, key: int) -> None:
         """Probe ``key``'s cube was written by something other than a capture (a test's
