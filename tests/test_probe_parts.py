@@ -207,6 +207,14 @@ def test_a_box_moving_in_a_face_draws_the_part_of_it_the_box_and_its_shadow_cove
         runner.frame()
     assert runner.stats.probe_faces == 0
     parts = _parts_drawn(cube)
+    chains = []  # the mip builds' rectangles (None: whole)
+    build = cube.probes.mips.build
+
+    def built(*args, **kwargs):
+        chains.append(kwargs.get("rect"))
+        return build(*args, **kwargs)
+
+    cube.probes.mips.build = built
 
     before = cube.probes.read_face(cube.owner, 0).copy()
     world.get(world.resources["near"], Transform).position += glm.vec3(0.0, 0.0, 0.3)
@@ -215,6 +223,7 @@ def test_a_box_moving_in_a_face_draws_the_part_of_it_the_box_and_its_shadow_cove
     assert 0 in drawn, parts
     x, y, w, h = drawn[0]
     assert w * h < RESOLUTION * RESOLUTION / 4, drawn[0]  # a small box: a small part
+    assert len(parts) == 1 and chains == [(x, y, x + w, y + h)], chains  # its mip chain within the part
     changed = np.argwhere((cube.probes.read_face(cube.owner, 0) != before).any(axis=2))
     assert len(changed)  # the box moved in it ...
     rows, cols = changed[:, 0], changed[:, 1]

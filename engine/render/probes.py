@@ -275,7 +275,7 @@ class CubeMipPass:
         return 6 * (size.bit_length() - 1)
 
     def build(self, key: int, cube: moderngl.TextureCube, prefilter: str = "mips", way: str | None = None,
-              faces: Iterable[int] | None = None) -> str:
+              faces: Iterable[int] | None = None, rect: tuple[int, int, int, int] | None = None) -> str:
         """Levels 1.. of ``cube`` from its level 0: box-filtered (``mips``), or each level the
         one above convolved with a GGX lobe so that level L holds roughness L / top level
         (``ggx``; ``ProbeCube.roughness_levels``).  ``way`` forces "layered" or "per_face"
@@ -283,7 +283,10 @@ class CubeMipPass:
         ``faces``: box mips of these faces only (the others' chains are built from their
         level 0 as it is: a texel's 2 x 2 box lies inside its face, so each face's chain
         reads that face alone); None, and every GGX chain (its lobes cross the faces' edges),
-        all six; ``glGenerateMipmap`` builds all six whatever it is given.  Returns the
+        all six; ``glGenerateMipmap`` builds all six whatever it is given.  ``rect`` (x0, y0,
+        x1, y1 in level 0's texels): box mips where level 0 of those faces changed within it
+        alone; each level is drawn within it, halved a level and grown out to whole texels
+        (a texel's 2 x 2 box lies in the level above's rectangle), the rest kept.  Returns the
         prefilter built: "mips" where a GGX chain cannot be drawn here (neither of the drawn
         passes is reachable or verified; a warning says so once)."""
         ggx = prefilter == "ggx"
@@ -321,12 +324,19 @@ class CubeMipPass:
                 if ggx:
                     alpha, above = (level / top) ** 2, ((level - 1) / top) ** 2
                     program["alpha"].value = math.sqrt(alpha * alpha - above * above)
+                scissor = None
+                if rect is not None and not ggx:
+                    step = 1 << level
+                    x0, y0 = rect[0] >> level, rect[1] >> level
+                    scissor = (x0, y0, -(-rect[2] // step) - x0, -(-rect[3] // step) - y0)
                 for face in (drawn if one_face else (None,)):
-                    program["level_size"].value = float(target.bind_level(level, CUBE_MIP_UNIT, face))
+                    size = (target.bind_level(level, CUBE_MIP_UNIT, face) if scissor is None else
+                            target.bind_level(level, CUBE_MIP_UNIT, face, scissor))
+                    program["level_size"].value = float(size)
                     if face is not None:
                         program["face"].value = face
                     elif self.renderer.debug:
-                        self._check_bound(target, level)
+                        self._check_bound(target, level, scissor)
                     vao.render(moderngl.TRIANGLES, vertices=3)
         finally:
             target.done(CUBE_MIP_UNIT)
@@ -336,13 +346,14 @@ class CubeMipPass:
         self.renderer.checkpoint("probe mip chain")
         return prefilter
 
-    def _check_bound(self, target: CubeMipTarget, level: int) -> None:
+    def _check_bound(self, target: CubeMipTarget, level: int,
+                     scissor: tuple[int, int, int, int] | None = None) -> None:
         """Debug mode: the driver has the level attached layered, the framebuffer bound, the
         cube sampled only through the pass's source unit (``raw_gl.inspect_bound_target``)."""
         size = max(1, target.cube.size[0] >> level)
         state = inspect_bound_target(self.ctx, target.cube, depth=False)
         problems = state.problems(target.framebuffer, target.cube.glo, level, size, depth=False,
-                                  source_units=(CUBE_MIP_UNIT,))
+                                  source_units=(CUBE_MIP_UNIT,), scissor=scissor)
         if problems:
             raise GLPassError(f"probe mip pass, level {level}: " + "; ".join(problems))
 
@@ -772,11 +783,19 @@ class ProbeCaptures:
                     scene_records[face] = (record, scene)
                 renderer.stats.probe_faces += 1
         stale = self._mips_stale.get(key)
+        # The chains were built from the faces as they were, and every face drawn now was
+        # drawn in part: the chains change within the parts' rectangle alone (their union).
+        parts = [plan.parts[face] for face in drawn] if stale == set() and drawn <= plan.parts.keys() else []
+        rect = None
+        if parts:
+            rect = (min(x for x, _, _, _ in parts), min(y for _, y, _, _ in parts),
+                    max(x + w for x, _, w, _ in parts), max(y + h for _, y, _, h in parts))
         if stale is not None:
             stale |= drawn
         if build_mips and (stale is None or stale or cube.prefilter != prefilter):
             faces = stale if stale is not None and cube.prefilter == prefilter else None
-            cube.prefilter = self.mips.build(key, cube.texture, prefilter, faces=faces)
+            cube.prefilter = self.mips.build(key, cube.texture, prefilter, faces=faces,
+                                             rect=rect if faces is not None and prefilter == "mips" else None)
             self._mips_stale[key] = set()
             drawn.add(-1)
         if drawn:

@@ -125,6 +125,8 @@ _SIGNATURES = {
     "glViewport": (None, _i, _i, _i, _i),
     "glGetError": (_u,),
     "glDisable": (None, _u),
+    "glEnable": (None, _u),
+    "glScissor": (None, _i, _i, _i, _i),
     "glColorMask": (None, ctypes.c_ubyte, ctypes.c_ubyte, ctypes.c_ubyte, ctypes.c_ubyte),
     "glDepthMask": (None, ctypes.c_ubyte),
 }
@@ -406,16 +408,20 @@ class CubeMipTarget:
         self.gl["glGenFramebuffers"](1, ctypes.byref(name))
         self.framebuffer = name.value
         self._level: int | None = None  # the level whose state is set (None: none, after done)
+        self._scissored = False  # the scissor test on (a level drawn in part)
         self._complete: set[tuple[int, int | None]] = set()  # (level, face) attachments checked complete
 
-    def bind_level(self, level: int, unit: int, face: int | None = None) -> int:
+    def bind_level(self, level: int, unit: int, face: int | None = None,
+                   scissor: tuple[int, int, int, int] | None = None) -> int:
         """Draw into mip ``level`` (>= 1) of every face (layered: ``glFramebufferTexture``),
         or of ``face`` alone (``glFramebufferTexture2D``: the per-face pass, for a driver
         whose layered draw was refused), reading only level ``level - 1`` through ``unit``;
         returns the level's face size.  The framebuffer, its draw buffer, scissor and colour
         mask are set at a build's first level (nothing between the levels' draws changes
         them: a uniform and a draw); a level's source levels and viewport at its first face;
-        the next faces of the same level only re-point the attachment.  Each attachment's
+        the next faces of the same level only re-point the attachment.  ``scissor`` (x, y,
+        width, height in the level's texels): the level is drawn there alone (None: all of
+        it).  Each attachment's
         completeness and GL errors are checked
         the first time it is bound (it cannot change while the cube's storage stands): on a
         GPU driver each raw call is a ctypes call of several microseconds, and the per-face
@@ -431,7 +437,15 @@ class CubeMipTarget:
             gl["glDrawBuffers"](1, (_u * 1)(GL_COLOR_ATTACHMENT0))
             gl["glDisable"](GL_SCISSOR_TEST)
             gl["glColorMask"](1, 1, 1, 1)
+            self._scissored = False
         if self._level != level:
+            if scissor is not None:
+                gl["glEnable"](GL_SCISSOR_TEST)
+                gl["glScissor"](*scissor)
+                self._scissored = True
+            elif self._scissored:
+                gl["glDisable"](GL_SCISSOR_TEST)
+                self._scissored = False
             bind_texture_now(self.ctx, self.cube, unit)  # (the active unit: the parameters below are its texture's)
             gl["glTexParameteri"](GL_TEXTURE_CUBE_MAP, GL_TEXTURE_BASE_LEVEL, level - 1)
             gl["glTexParameteri"](GL_TEXTURE_CUBE_MAP, GL_TEXTURE_MAX_LEVEL, level - 1)
@@ -456,6 +470,9 @@ class CubeMipTarget:
     def done(self, unit: int) -> None:
         """Every level readable again; back to the framebuffer moderngl thinks is bound."""
         self._level = None
+        if self._scissored:
+            self.gl["glDisable"](GL_SCISSOR_TEST)
+            self._scissored = False
         bind_texture_now(self.ctx, self.cube, unit)
         self.gl["glTexParameteri"](GL_TEXTURE_CUBE_MAP, GL_TEXTURE_BASE_LEVEL, 0)
         self.gl["glTexParameteri"](GL_TEXTURE_CUBE_MAP, GL_TEXTURE_MAX_LEVEL, GL_MAX_LEVEL_DEFAULT)
@@ -515,11 +532,11 @@ class BoundTargetState:
     framebuffer_texture_entry: int
 
     def problems(self, framebuffer: int, cube: int, level: int, size: int, depth: bool,
-                 source_units: tuple[int, ...] = ()) -> list[str]:
+                 source_units: tuple[int, ...] = (), scissor: tuple[int, int, int, int] | None = None) -> list[str]:
         """Each way this state differs from what a layered draw into every face of ``cube``'s
         mip ``level`` (``size`` texels) through ``framebuffer`` needs, in words
         (``source_units``: where the cube may be bound, limited to other levels: the mip
-        pass's source)."""
+        pass's source; ``scissor``: the part of the faces drawn, None: all of them)."""
         found = []
         if self.draw_framebuffer != framebuffer:
             found.append(f"draw framebuffer {self.draw_framebuffer} is bound, not the layered target {framebuffer}")
@@ -530,8 +547,12 @@ class BoundTargetState:
         if (self.colour_texture, self.colour_level) != (cube, level):
             found.append(f"the colour attachment is texture {self.colour_texture} level {self.colour_level}, "
                          f"not the texture drawn into ({cube}) level {level}")
-        if self.scissor_test and not (self.scissor_box[:2] <= (0, 0) and self.scissor_box[2] >= size
-                                      and self.scissor_box[3] >= size):
+        if scissor is not None:
+            if not self.scissor_test or tuple(self.scissor_box) != tuple(scissor):
+                found.append(f"the scissor box is {self.scissor_box if self.scissor_test else 'off'}, not the part "
+                             f"{scissor} drawn")
+        elif self.scissor_test and not (self.scissor_box[:2] <= (0, 0) and self.scissor_box[2] >= size
+                                        and self.scissor_box[3] >= size):
             found.append(f"the scissor box {self.scissor_box} cuts the {size}-texel faces")
         if self.viewport != (0, 0, size, size):
             found.append(f"the viewport is {self.viewport}, not the {size}-texel face")
