@@ -282,13 +282,13 @@ class ViewTree:
             if step is None:
                 break
             if walk.exact:
-                self._draw_level(step, root)                          # 4. draw, level by level
+                self._draw_level(step, root, walk)                    # 4. draw, level by level
             candidates = self._descend(walk, step)                    # 1. plan the next level
         if not walk.exact:  # predicted: the whole tree, planned, claimed and drawn in one run (2, 4)
             for step in walk.steps:
                 self._claim(surfaces, step)  # (a last level without views still counts its claims)
                 if step.composite is not None:
-                    self._draw_level(step, root)
+                    self._draw_level(step, root, walk)
         self._note_cap(walk)
         self._composite(walk, levels)                                 # 5. composite
         self._keep_end_images(walk, levels)
@@ -731,9 +731,10 @@ class ViewTree:
         counted = iter(self.passes.claimed_pixels([query for query in queries if query is not none]))
         return [0 if query is none else next(counted) for query in queries]
 
-    def _draw_level(self, step: _Level, root: View) -> None:
+    def _draw_level(self, step: _Level, root: View, walk: _Walk) -> None:
         """A planned level's views (and end views) into its targets, then its composite's
-        rows (CPU work while the GPU draws)."""
+        rows (CPU work while the GPU draws).  The levels of one render are one scene-pass
+        run (``ScenePass.draw``: the pass-wide bindings once, while nothing rebinds them)."""
         renderer = self.renderer
         if step.views:
             options = _BATCHED if step.path == "batched" else REFLECTION_LEVEL
@@ -741,7 +742,7 @@ class ViewTree:
                 key = (options, step.unlit)
                 options = self._level_options.get(key) or self._level_options.setdefault(
                     key, replace(options, unlit=step.unlit))
-            self.scene_pass.draw(step.views, step.targets, options, step.conditions)
+            self.scene_pass.draw(step.views, step.targets, options, step.conditions, run=walk)
         if step.ended:
             self.ends.draw(step.end_views, [node.surface.entity for node in step.ended], step.end_matrices,
                            step.targets, root)
