@@ -351,7 +351,7 @@ class ViewTree:
                 surfaces, step, is_end, walk.keys, walk.record, level + 1, root.size)
         keep, grow = step.keep, step.grow
         chosen = step.chosen = candidates if len(keep) == len(candidates) else \
-            _select(candidates, np.asarray(keep, np.int64))
+            candidates.select(np.asarray(keep, np.int64))
         step.views, step.children = self._level_nodes(surfaces, chosen, walk.nodes, level + 1, root.hide)
         children = step.children
         if len(grow) < len(children):
@@ -411,7 +411,7 @@ class ViewTree:
         """A level's end views (rows ``end_rows`` of its candidates): their nodes, the matrix
         to the eye of the view that saw each surface last, and their fallbacks (the pixels
         their images do not hold)."""
-        chosen_ends = _select(step.candidates, np.asarray(end_rows, np.int64))
+        chosen_ends = step.candidates.select(np.asarray(end_rows, np.int64))
         step.end_views, step.ended = self._level_nodes(walk.surfaces, chosen_ends, walk.nodes, walk.level + 1,
                                                        walk.root.hide)
         inverse_carry, views = walk.surfaces.inv_carry_glm, walk.result.views
@@ -708,18 +708,22 @@ class ViewTree:
         known empty (claim_cull) are left out: they get no view in either visibility, so
         nothing reads their rectangles (no claim, no reset)."""
         candidates, parents = step.candidates, step.parents
-        columns = candidates.derived.get("claims")
-        if columns is None:  # each candidate's (parent row, surface entity, node) and its scissor
-            (x, y, w, h, parent, surface), floats = _row_lists(candidates)
-            columns = candidates.derived["claims"] = (
-                list(zip(parent, map(surfaces.entity_list.__getitem__, surface), map(int, floats[5]), strict=True)),
-                list(zip(x, y, w, h, strict=True)))
-        ids, scissors = columns
+        kept = not candidates.rows.data.flags.writeable
+        columns = candidates.derived.get("claims") if kept else None
+        if columns is None:  # each candidate's parent row, surface entity and node, and its scissor
+            entities = surfaces.entity_list
+            columns = (candidates.parent.tolist(), [entities[s] for s in candidates.surface.tolist()],
+                       candidates.rows.node.astype(np.int64).tolist(), candidates.scissor.tolist())
+            if kept:  # a kept plan's: the same columns every frame it is found again
+                candidates.derived["claims"] = columns
+        rows, entities, nodes, scissors = columns
         queries, none = step.queries, self.passes.no_pixels
         if none in queries:
             at = [i for i, query in enumerate(queries) if query is not none]
-            ids, scissors, queries = ([column[i] for i in at] for column in (ids, scissors, queries))
-        claims = Claims([(parents[p].index, entity, node) for p, entity, node in ids], scissors)
+            rows, entities, nodes, scissors, queries = ([column[i] for i in at] for column in
+                                                        (rows, entities, nodes, scissors, queries))
+        claims = Claims([(parents[p].index, entity, node) for p, entity, node in
+                         zip(rows, entities, nodes, strict=True)], scissors)
         self.passes.prepare_level(step.targets, step.parent_targets, claims, queries)
 
     def _claimed_pixels(self, queries: list[moderngl.Query]) -> list[int]:
@@ -819,22 +823,21 @@ class ViewTree:
         size = chosen.size
         blocks = chosen.blocks.tobytes()
         step = CAMERA_BLOCK_BYTES
-        ints, floats = _row_lists(chosen)
+        columns = chosen.rows.data.take(_NODE_COLUMNS, axis=1).astype(np.int64)
         views, nodes = [], []
         at = 0
-        for sx, sy, sw, sh, p, s, x0, y0, x1, y1, mirrored, node, fade in zip(*ints, *floats, strict=True):
-            state = states[s]  # (x1, y1: negated, LEVEL_ROW; whole numbers as floats)
-            node = int(node)
-            view = PlannedView(blocks[at:at + step], size, state.kind, state.entity, state.exit_plane, mirrored == 1.0,
-                               (sx, sy, sw, sh), node, state.exit_entity, hide)
+        for (x0, y0, x1, y1, mirrored, node), s, p, scissor, fade in zip(  # x1, y1: negated (LEVEL_ROW)
+                columns.tolist(), chosen.surface.tolist(), chosen.parent.tolist(), chosen.scissor.tolist(),
+                chosen.fade.tolist(), strict=True):
+            state = states[s]
+            view = PlannedView(blocks[at:at + step], size, state.kind, state.entity, state.exit_plane, mirrored == 1,
+                               tuple(scissor), node, state.exit_entity, hide)
             at += step
             views.append(view)
-            x, y = int(x0), int(y0)
-            nodes.append(ReflectionView(node, level, view, (x, y, int(-x1) - x, int(-y1) - y), state, parents[p],
-                                        fade))
+            nodes.append(ReflectionView(node, level, view, (x0, y0, -x1 - x0, -y1 - y0), state, parents[p], fade))
         if not chosen.rows.data.flags.writeable:
             chosen.derived[("nodes", hide)] = (views, [(n.index, n.rect, n.surface, p, n.fade) for n, p in
-                                                       zip(nodes, ints[4], strict=True)])
+                                                       zip(nodes, chosen.parent.tolist(), strict=True)])
         return views, nodes
 
     def _prepare_composite(self, children: list[ReflectionView], root: View,
@@ -860,37 +863,8 @@ class ViewTree:
             self.ends.release()
 
 
-# The LevelRows columns the claims and the nodes of a level read (_row_lists): its whole numbers
-# (the scissor, the parent's row, the surface's), then its floats (the rectangle, mirrored, node, fade).
-_INT_COLUMNS = np.array([*range(ROW["scissor"].start, ROW["scissor"].stop), ROW["parent"].start,
-                         ROW["surface"].start])
-_FLOAT_COLUMNS = np.array([*range(ROW["rect"].start, ROW["rect"].stop), ROW["mirrored"].start, ROW["node"].start,
-                           ROW["fade"].start])
-
-
-def _select(candidates: Candidates, rows: np.ndarray) -> Candidates:
-    """``candidates.select(rows)``, with the lists ``_row_lists`` made of them picked out too
-    (a level of many claims chooses a few)."""
-    chosen = candidates.select(rows)
-    lists = candidates.derived.get("lists")
-    if lists is not None and "lists" not in chosen.derived:
-        at = rows.tolist()
-        chosen.derived["lists"] = tuple([[column[i] for i in at] for column in part] for part in lists)
-    return chosen
-
-
-def _row_lists(candidates: Candidates) -> tuple[list[list[int]], list[list[float]]]:
-    """What a level's claims and nodes read of its candidates, as Python lists, a column each:
-    the whole numbers (scissor x, y, w, h, parent row, surface row) and the floats (rectangle
-    x0, y0, -x1, -y1, mirrored, node, fade), in two gathers and two ``tolist`` (a conversion
-    per field cost several numpy calls a level, each 1-3 us in a frame), made once per
-    candidates (``Candidates.derived``: kept with a kept plan, one frame's otherwise)."""
-    found = candidates.derived.get("lists")
-    if found is None:
-        data = candidates.rows.data
-        found = candidates.derived["lists"] = (data.view(np.int64).take(_INT_COLUMNS, axis=1).T.tolist(),
-                                               data.take(_FLOAT_COLUMNS, axis=1).T.tolist())
-    return found
+# The LevelRows columns a level's nodes read (_level_nodes), as whole numbers: the rectangle, mirrored, node.
+_NODE_COLUMNS = np.array([*range(ROW["rect"].start, ROW["rect"].stop), ROW["mirrored"].start, ROW["node"].start])
 
 
 def _ends_at(ends: tuple[np.ndarray, int] | None, depth: int) -> np.ndarray | None:
