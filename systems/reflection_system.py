@@ -112,7 +112,7 @@ class ReflectionSystem(esper.Processor):
         self._cut, self._camera = False, camera
         settings = self.settings
         result = self.tree.render(main, views.levels, surface_table(self.world.resources, surfaces), settings,
-                                  self.world.resources.get(SurfaceBlends, NO_BLENDS))
+                                  self.world.resources.get(SurfaceBlends, NO_BLENDS), views.options)
         self.views = result.views
         stats: RenderStats = self.world.resources[RenderStats]
         stats.reflection_views = len(result.views) - 1

@@ -67,6 +67,8 @@ AUTO_TIMED_CAPTURES = 3  # timed captures of each path before "auto" chooses (me
 # rasteriser, where anisotropic filtering is most of a view's cost: a probe is a
 # reflection, seen blurred by its mips and through a curved surface).
 FACE = SceneOptions(reflection_filter=True)
+FACE_TREE = SceneOptions(reflection_filter=True, transparent=False)  # a face rooting a view tree (it draws the
+                                                                      # face's transparent slot after its composites)
 
 
 def face_view(face: int, position: glm.vec3, near: float, far: float, size: int, skip: int = 0,
@@ -703,9 +705,11 @@ class ProbeCaptures:
                 else:
                     levels = self._stacks.setdefault(resolution, LevelStack(self.ctx))
                     targets = levels.get(0, view.size)
-                    self.scene_pass.draw([view], targets, FACE)
                     if trees:
-                        self.tree.render(view, levels, surfaces, TreeSettings(depth_cap=depth), blends)
+                        self.scene_pass.draw([view], targets, FACE_TREE)
+                        self.tree.render(view, levels, surfaces, TreeSettings(depth_cap=depth), blends, FACE_TREE)
+                    else:
+                        self.scene_pass.draw([view], targets, FACE)
                     renderer.raw_gl.copy_to_cube_face(targets.framebuffer, cube.texture, face, SCRATCH_UNIT)
                     renderer.checkpoint(f"probe face {face} copy")
                 if face in sky_only:

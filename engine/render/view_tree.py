@@ -28,7 +28,11 @@ and portals:
               faded out, past the depth limits without an end image, a mirror switched off)
               shows the probe's or the sky's reflection at its reflect rate, tint and
               roughness (``MirrorPasses.draw_fallbacks``), as does the faded share of a partly
-              faded mirror and an end view's pixel its image does not hold.
+              faded mirror and an end view's pixel its image does not hold; then the
+              level's transparent slot (``ScenePass.draw_transparent``; the root's too, at
+              level 0), which its views were drawn without (``SceneOptions.transparent``):
+              what is see-through blends over the reflections behind it, as over anything
+              else behind it, before the level is composited into the one above.
 
 Levels are the size of the root's targets (times the largest resolution_scale of their
 surfaces), so memory is bounded by (levels x one root image), however many surfaces.
@@ -64,7 +68,7 @@ from engine.render.mirror_passes import (
     take_samples_queries,
 )
 from engine.render.plan_rows import ROW, Candidates, LevelRows
-from engine.render.scene_pass import REFLECTION_LEVEL, SceneOptions, ScenePass, shading_replaced
+from engine.render.scene_pass import REFLECTION_LEVEL, TREE_ROOT, SceneOptions, ScenePass, shading_replaced
 from engine.render.surface_table import NO_BLENDS, SurfaceBlends
 from engine.render.targets import LevelStack, RenderTargets
 from engine.render.view_plan import SurfaceTable, _mat, level_rects
@@ -81,7 +85,7 @@ MIN_LEVEL_SCALE = 0.25  # the lowest resolution factor the pixel budget draws a 
 # "auto" is exact on a software rasteriser (the CPU draws anyway: waiting costs nothing and
 # the counts save views) and predicted on a GPU.
 VISIBILITY_MODES = ("auto", "exact", "predicted")
-_BATCHED = SceneOptions(clear=False, masked=True, sky=False, batched=True, reflection_filter=True)
+_BATCHED = SceneOptions(clear=False, masked=True, sky=False, batched=True, reflection_filter=True, transparent=False)
 
 
 @dataclass(frozen=True)
@@ -194,6 +198,7 @@ class _Level:
     children: list[ReflectionView] = field(default_factory=list)
     claim_keys: list[tuple[int, ...]] = field(default_factory=list)
     unlit: frozenset[int] = frozenset()            # mirrors its views draw unlit (shading_replaced)
+    options: SceneOptions = REFLECTION_LEVEL       # what its views were drawn with (their transparent slot's)
 
 
 @dataclass
@@ -264,15 +269,22 @@ class ViewTree:
         self._level_options: dict[tuple, SceneOptions] = {}  # a level's options with its unlit mirrors
 
     def render(self, root: View, levels: LevelStack, surfaces: SurfaceTable,
-               settings: TreeSettings = TreeSettings(), blends: SurfaceBlends = NO_BLENDS) -> TreeResult:
-        """Draw every level below ``root`` (already drawn into ``levels[0]``) and composite
-        them: the module's five steps, a level at a time.  A surface that gets no view shows
-        the probes ``blends`` gives it (the extract stage's), else the sky."""
+               settings: TreeSettings = TreeSettings(), blends: SurfaceBlends = NO_BLENDS,
+               root_options: SceneOptions = TREE_ROOT) -> TreeResult:
+        """Draw every level below ``root`` (already drawn into ``levels[0]`` with
+        ``root_options``, its transparent slot left to the tree) and composite them: the
+        module's five steps, a level at a time, each level's transparent slot drawn once the
+        level below is composited into it (the root's last).  A surface that gets no view
+        shows the probes ``blends`` gives it (the extract stage's), else the sky."""
+        if root_options.transparent:
+            raise ValueError("ViewTree.render: the root must be drawn with SceneOptions(transparent=False): the "
+                             "tree draws its transparent slot over the reflections composited into it")
         root_node = ReflectionView(0, 0, root, (0, 0, *root.size))
         result = TreeResult([root_node], set())
         if not surfaces.states:  # no mirror or portal anywhere: the root is the whole tree
             if self.ends is not None:
                 self.ends.forget()
+            self.scene_pass.draw_transparent([root], levels[0], root_options)
             return result
         walk = self._start(root, root_node, surfaces, settings, result)
         walk.blends = blends.by_surface
@@ -290,7 +302,7 @@ class ViewTree:
                 if step.composite is not None:
                     self._draw_level(step, root)
         self._note_cap(walk)
-        self._composite(walk, levels)                                 # 5. composite
+        self._composite(walk, levels, root_options)                   # 5. composite
         self._keep_end_images(walk, levels)
         return result
 
@@ -453,11 +465,14 @@ class ViewTree:
             walk.result.count_capped = lambda: len(surfaces.cull(rows, deepest + 1, root_proj, size,
                                                                  MAX_TREE_DEPTH)[0])
 
-    def _composite(self, walk: _Walk, levels: LevelStack) -> None:
+    def _composite(self, walk: _Walk, levels: LevelStack, root_options: SceneOptions) -> None:
         """Step 5, deepest level first: a level's fallbacks, then the views of the level
-        below composited over it (a partly faded view's over its fallback)."""
+        below composited over it (a partly faded view's over its fallback), then the level's
+        own transparent slot over both (its views', the root's at level 0: they were drawn
+        without it), before the level is composited into the one above."""
         steps, fallbacks = walk.steps, walk.fallbacks
         composites = [step.prepared for step in steps if step.prepared is not None]
+        see_through = bool(self.renderer.transparent_batches())  # else no level has a slot to draw
         for depth in range(walk.level, -1, -1):
             if fallbacks.get(depth):
                 child = steps[depth].targets if depth < len(steps) else None
@@ -466,6 +481,12 @@ class ViewTree:
                                                                                          walk.blends))
             if depth < walk.level:
                 self.passes.composite_level(levels[depth], levels[depth + 1], composites[depth])
+            if see_through:
+                if depth:
+                    step = steps[depth - 1]
+                    self.scene_pass.draw_transparent(step.views, step.targets, step.options, step.conditions)
+                else:
+                    self.scene_pass.draw_transparent([walk.root], levels[0], root_options)
         if walk.level:
             self.renderer.flush()  # the composites, level after level, to the GPU at once
 
@@ -745,6 +766,7 @@ class ViewTree:
                 key = (options, step.unlit)
                 options = self._level_options.get(key) or self._level_options.setdefault(
                     key, replace(options, unlit=step.unlit))
+            step.options = options  # its transparent slot is drawn with them (_composite)
             self.scene_pass.draw(step.views, step.targets, options, step.conditions)
         if step.ended:
             self.ends.draw(step.end_views, [node.surface.entity for node in step.ended], step.end_matrices,
