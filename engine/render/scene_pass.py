@@ -753,9 +753,11 @@ def shading_replaced(mirrors: Iterable[SurfaceState], pixel_budget: bool = False
     images on and off, with the all-lit path).  None under a pixel budget
     (``ViewBudget.pixels``: the tree decides later which levels it draws smaller).  A scene
     pass draws these mirrors' batches unlit (``SceneOptions.unlit``), with glass in front of
-    them too: a view tree draws its views' transparent slot after compositing into them
-    (``ScenePass.draw_transparent``), so glass blends over the reflection, never over a
-    mirror's own colour."""
+    them too: a view tree draws its views' glass after compositing into them
+    (``ScenePass.draw_transparent``), so it blends over the reflection, never over a
+    mirror's own colour; not where a see-through mirror or portal (water) is in the
+    transparent slot (``_drawn_now``: it and what lies behind it are drawn with the opaque
+    batches, before the composites)."""
     if pixel_budget:
         return frozenset()
     return frozenset(state.entity for state in mirrors
