@@ -41,8 +41,7 @@ def _room(ents: dict, alpha: float | None, probe: bool = False, see_through: boo
     a 1 m pane of emissive red glass half a metre in front of B.  ``see_through``: B is a
     see-through mirror (alpha 0.6, as water is; reflect rate 0.7, so its own blend shows),
     drawn in the transparent slot before its claims, the pane after its composite, with a
-    blue wall behind it (what shows through it: not the sky, whose share under something
-    see-through in a reflection level is another matter, left out here)."""
+    blue wall behind it (what shows through it)."""
     def build(world) -> None:
         world.spawn(Skybox())
         ents["camera"] = look_from(world, (0.0, 1.5, 4.0), target=(-1.0, 1.5, 0.0))
@@ -163,3 +162,34 @@ def test_mirrors_behind_glass_are_drawn_unlit_and_the_frame_is_the_all_lit_one(s
     assert under.sum() > 1000 and np.all(colour[under] == (0.0, 0.0, 0.0, 1.0))
     # The pane is not drawn yet: the reflect stage draws it over the reflections.
     assert not (surface == ents["glass"]).any()
+
+
+def test_glass_with_only_the_sky_behind_it_in_a_mirror(scene):
+    """A pane behind the camera, seen only in the mirror, with nothing but the sky behind
+    it: a reflection level draws no sky (its composite adds it where the level's coverage,
+    its alpha, is short of 1), so the pane's blend must add its own alpha to the coverage
+    (``bindings.BLEND_OVER``); kept at 0, the sky came through it in full.  The pane over
+    the sky is its blend rule, as in the main view: a x opaque + (1 - a) x without."""
+    def room(alpha: float | None):
+        def build(world) -> None:
+            world.spawn(Skybox())
+            look_from(world, (0.0, 1.5, 4.0), target=(0.0, 1.5, -3.0))
+            world.spawn(Transform(position=(0.0, 1.5, -3.0)), MeshRef(quad(4.0, 3.0)), Material(color=(0.3, 0.3, 0.3)),
+                        Mirror())
+            if alpha is not None:  # behind the camera, facing the mirror
+                world.spawn(Transform(position=(0.0, 1.5, 6.0), rotation=glm.angleAxis(glm.pi(), Y)),
+                            MeshRef(quad(2.0, 2.0)), Material(color=(0.9, 0.15, 0.1, alpha)), Emissive(0.6))
+        return build
+
+    colour = {}
+    for alpha in (ALPHA, None, 1.0):
+        runner = scene(room(alpha), SIZE)
+        runner.engine.renderer.antialias = "off"
+        for _ in range(2):
+            runner.frame()
+        w, h = SIZE
+        colour[alpha] = np.frombuffer(runner.engine.renderer.levels[0].color.read(),
+                                      np.float16).reshape(h, w, 4)[..., :3].astype(np.float64)
+    pane = np.abs(colour[1.0] - colour[None]).max(axis=-1) > 0.05
+    assert pane.sum() > 150  # the pane, in the mirror, over the sky
+    _blend_agrees(colour[ALPHA], colour[1.0], colour[None])

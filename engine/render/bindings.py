@@ -132,9 +132,11 @@ def clip_glsl_defines() -> dict[str, str]:
             "CLIP_DISTANCE_COUNT": str(CLIP_DISTANCE_COUNT)}
 
 
-# Blending "over", alpha kept: the composite's (reflection x rate + own x (1 - rate)) and the
-# transparent slot's.
-BLEND_OVER = (moderngl.SRC_ALPHA, moderngl.ONE_MINUS_SRC_ALPHA, moderngl.ZERO, moderngl.ONE)
+# Blending "over": the composite's (reflection x rate + own x (1 - rate)) and the transparent
+# slot's.  Alpha is a level's coverage (premultiplied: 0 where nothing is drawn, which the
+# composite above fills with the sky), and over it too: a + dst x (1 - a), so the sky shows
+# behind something see-through in a reflection by 1 - a, not in full.
+BLEND_OVER = (moderngl.SRC_ALPHA, moderngl.ONE_MINUS_SRC_ALPHA, moderngl.ONE, moderngl.ONE_MINUS_SRC_ALPHA)
 
 
 @dataclass(frozen=True)
