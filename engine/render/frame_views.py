@@ -5,8 +5,9 @@ The main stage draws the active camera's view into level 0 of the main view tree
 ``LevelStack`` (the renderer owns the stack: its GPU targets live as long as the renderer)
 and publishes both here, with the scene options it drew it with; the reflect stage roots its
 view tree at ``main`` in ``levels``, composites into level 0 and draws the main view's
-transparent slot there (``ScenePass.draw_transparent``), and the present stage presents level 0.  A game picks through
-the last frame's main view (``main.view_proj``), as mirror beam does.
+transparent slot there (``ScenePass.draw_transparent``), and the present stage presents
+level 0.  A game picks through the last frame's main view (``main.view_proj``), as mirror
+beam does.
 """
 from __future__ import annotations
 
