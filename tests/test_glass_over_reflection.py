@@ -193,3 +193,50 @@ def test_glass_with_only_the_sky_behind_it_in_a_mirror(scene):
     pane = np.abs(colour[1.0] - colour[None]).max(axis=-1) > 0.05
     assert pane.sum() > 150  # the pane, in the mirror, over the sky
     _blend_agrees(colour[ALPHA], colour[1.0], colour[None])
+
+
+def test_a_switched_off_see_through_mirror_keeps_its_fallback(scene):
+    """A see-through mirror switched off (Mirror.enabled False: drawn as its plain material)
+    is still a surface of the tree: its fallback (the sky's reflection, at its reflect rate
+    w) is drawn over its pixels, so it is drawn with the opaque batches, not after the
+    composites as glass is.  The fallback's colour F over whatever the pixel holds is
+    w F + (1 - w) x under, so from the same quad opaque (switched off, and without the
+    Mirror): w F = opaque_off - (1 - w) opaque_plain, and the see-through one switched off
+    must be w F + (1 - w) see_through_plain."""
+    rate = 0.6
+
+    def room(ents: dict, alpha: float, mirror: bool):
+        def build(world) -> None:
+            world.spawn(Skybox())
+            look_from(world, (0.0, 1.5, 4.0), target=(0.0, 1.5, -3.0))
+            world.spawn(Transform(position=(0.0, 1.5, -4.0)), MeshRef(quad(8.0, 6.0)),
+                        Material(color=(0.1, 0.2, 0.8)), Emissive(0.5))  # behind it
+            parts = [Transform(position=(0.0, 1.5, -3.0)), MeshRef(quad(3.0, 2.0)),
+                     Material(color=(0.8, 0.3, 0.1, alpha))]
+            if mirror:
+                parts.append(Mirror(enabled=False, reflect_rate=rate))
+            ents["quad"] = world.spawn(*parts)
+        return build
+
+    colour, on_quad = {}, None
+    for alpha in (0.5, 1.0):
+        for mirror in (True, False):
+            ents: dict = {}
+            runner = scene(room(ents, alpha, mirror), SIZE)
+            runner.engine.renderer.antialias = "off"
+            for _ in range(2):
+                runner.frame()
+            w, h = SIZE
+            levels = runner.engine.renderer.levels
+            colour[alpha, mirror] = np.frombuffer(levels[0].color.read(), np.float16).reshape(
+                h, w, 4)[::-1, :, :3].astype(np.float64)
+            if mirror:
+                assert runner.stats.reflection_fallbacks >= 1
+                if alpha == 0.5:
+                    on_quad = levels[0].read_surface_ids() == ents["quad"]
+    weighted_fallback = colour[1.0, True] - (1.0 - rate) * colour[1.0, False]
+    want = weighted_fallback + (1.0 - rate) * colour[0.5, False]
+    assert on_quad.sum() > 1000
+    assert np.abs(colour[0.5, True] - colour[0.5, False])[on_quad].max() > 0.05  # the fallback shows
+    bad = ~np.isclose(colour[0.5, True], want, rtol=RTOL, atol=ATOL).all(axis=-1)
+    assert not bad.any(), f"{int(bad.sum())} pixels differ; worst {np.abs(colour[0.5, True] - want).max():.4f}"

@@ -797,8 +797,11 @@ def _back_to_front(batches, eye: glm.vec3) -> list:
 
 def _see_through_surface(batch: InstanceBatch) -> bool:
     """Whether a transparent ``batch`` is a mirror or a portal (water, a see-through
-    portal): a view tree's claims find its pixels by the ids it writes and its composite
-    paints over them, so it is drawn before them (a batch of mixed variants counts too)."""
+    portal; ``InstanceBatch.surface``, a switched-off mirror too): a view tree's claims and
+    fallbacks find its pixels by the ids it writes and its composite paints over them, so it
+    is drawn before them (so is a batch drawn as a mirror or portal, or of mixed variants)."""
+    if batch.surface:
+        return True
     variants = batch.variants
     return variants is None or variants[2] in _SURFACE_VARIANTS
 
