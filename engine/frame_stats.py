@@ -64,6 +64,8 @@ class RenderStats(BudgetLedger):
     reflection_end_views: int = 0       # views past the depth limits shown as last frame's image
     reflection_visibility: str = ""     # "exact" or "predicted": how the main tree's levels knew their pixels
     reflection_views_unseen: int = 0    # views drawn that had no pixels last frame (predicted visibility)
+    reflection_views_kept: int = 0      # main-tree views kept as last drawn: nothing they show changed
+                                        # (ReflectionSystem.keep_still_views; not in passes)
     # How reflection levels were drawn: "per_mirror", "batched", "mixed" (auto chose both in
     # one frame), or "" when no reflection view was drawn (ReflectionSystem.path).
     reflection_path: str = ""

@@ -59,6 +59,7 @@ from engine.render.mirror_passes import (
     Fallback,
     MirrorPasses,
     PreparedComposites,
+    PreparedFallbacks,
     give_samples_queries,
     surface_look,
     take_samples_queries,
@@ -166,6 +167,25 @@ class ReflectionView:
 
 
 @dataclass
+class KeptTree:
+    """What a tree's last render left for a frame that keeps its levels (``ViewTree.keep``):
+    the targets it drew into (levels 0 to its deepest, each as it was), what it did into the
+    root (the root's own fallbacks, then level 1 composited over them), and the counts it
+    added to the frame's report and budget ledger, added again by a kept frame (a probe face
+    drawn after it spends the same budget either way)."""
+
+    result: TreeResult
+    targets: tuple[RenderTargets, ...]
+    composite: PreparedComposites | None               # level 1 into the root (None: no views)
+    fallbacks: tuple[RenderTargets | None, PreparedFallbacks] | None  # the root's own, with level 1
+    spent: tuple[int, int, int, int, int]              # views, pixels, cut, downscaled, fallbacks
+    settled: bool  # nothing of it depends on last frame: no end view drawn, no view drawn unseen
+
+
+_LEDGER = ("views_spent", "pixels_spent", "views_cut", "levels_downscaled", "reflection_fallbacks")
+
+
+@dataclass
 class _Level:
     """One level of a tree as planned, and what its GL half reads: the claims of its
     candidates, the views kept, the end views, and its composite."""
@@ -227,6 +247,7 @@ class _Walk:
     blends: Mapping[int, ProbeBlend] = field(default_factory=dict)      # the fallbacks' probes (SurfaceBlends)
     triangle_count: int | None = None        # what a scene pass submits (triangles(): counted once, if asked)
     chain: ChainBoxes | None = None          # the planned level's claims' bounds (claim_cull), for the next
+    root_fallbacks: tuple[RenderTargets | None, PreparedFallbacks] | None = None  # drawn into the root (KeptTree)
 
     def triangles(self) -> int:
         """The triangles a scene pass submits, counted at the first level that asks (a level
@@ -262,6 +283,10 @@ class ViewTree:
         # (the table and pixel budget they were found for, the set: the same at every depth)
         self._unlit: tuple[tuple, frozenset[int]] = ((None, False), frozenset())
         self._level_options: dict[tuple, SceneOptions] = {}  # a level's options with its unlit mirrors
+        # With ``remember`` (the main view's tree), what the last render left (``KeptTree``),
+        # for a frame whose views show nothing new (``keep``); None after any other render.
+        self.remember = False
+        self.kept: KeptTree | None = None
 
     def render(self, root: View, levels: LevelStack, surfaces: SurfaceTable,
                settings: TreeSettings = TreeSettings(), blends: SurfaceBlends = NO_BLENDS) -> TreeResult:
@@ -270,10 +295,13 @@ class ViewTree:
         the probes ``blends`` gives it (the extract stage's), else the sky."""
         root_node = ReflectionView(0, 0, root, (0, 0, *root.size))
         result = TreeResult([root_node], set())
+        self.kept = None
         if not surfaces.states:  # no mirror or portal anywhere: the root is the whole tree
             if self.ends is not None:
                 self.ends.forget()
             return result
+        stats = self.renderer.stats
+        ledger = tuple(getattr(stats, name) for name in _LEDGER) if self.remember else None
         walk = self._start(root, root_node, surfaces, settings, result)
         walk.blends = blends.by_surface
         candidates = self._plan(walk, first_index=1)                  # 1. plan the first level
@@ -292,7 +320,40 @@ class ViewTree:
         self._note_cap(walk)
         self._composite(walk, levels)                                 # 5. composite
         self._keep_end_images(walk, levels)
+        if ledger is not None:
+            self.kept = KeptTree(result, (levels[0], *(step.targets for step in walk.steps)),
+                                 walk.steps[0].prepared if walk.steps else None, walk.root_fallbacks,
+                                 tuple(getattr(stats, name) - before for name, before in zip(_LEDGER, ledger,
+                                                                                             strict=True)),
+                                 not result.end_views and not any(node.unseen for node in result.views))
         return result
+
+    def keep(self, levels: LevelStack) -> TreeResult | None:
+        """The last render's tree again without drawing it: its levels 1 and below hold what
+        they held (their images already hold the deeper levels' composites, fallbacks and end
+        views), and only what the root needs again is done (the root is drawn anew each
+        frame): its own fallbacks, then level 1 composited over them.  The frame's report
+        and ledger get the counts the render added.  None (nothing done) where there is
+        nothing kept or a level's targets are not those drawn into (remade, resized).  The
+        caller decides that nothing those levels show changed (``ReflectionSystem``)."""
+        kept = self.kept
+        if kept is None or len(levels) < len(kept.targets) or any(
+                levels[level] is not targets for level, targets in enumerate(kept.targets)):
+            self.kept = None
+            return None
+        stats = self.renderer.stats
+        fallbacks_before = stats.reflection_fallbacks
+        if kept.fallbacks is not None:
+            child, prepared = kept.fallbacks
+            self.passes.draw_fallbacks(levels[0], child, prepared)
+        if kept.composite is not None:
+            self.passes.composite_level(levels[0], levels[1], kept.composite)
+        if kept.fallbacks is not None or kept.composite is not None:
+            self.renderer.flush()
+        for name, spent in zip(_LEDGER, kept.spent, strict=True):
+            setattr(stats, name, getattr(stats, name) + spent)
+        stats.reflection_fallbacks = fallbacks_before + kept.spent[-1]  # the root's drawn now, the rest kept
+        return kept.result
 
     def _start(self, root: View, root_node: ReflectionView, surfaces: SurfaceTable, settings: TreeSettings,
                result: TreeResult) -> _Walk:
@@ -461,9 +522,10 @@ class ViewTree:
         for depth in range(walk.level, -1, -1):
             if fallbacks.get(depth):
                 child = steps[depth].targets if depth < len(steps) else None
-                self.passes.draw_fallbacks(levels[depth], child,
-                                           self.passes.prepare_fallbacks(fallbacks[depth], levels[depth].size,
-                                                                                         walk.blends))
+                prepared = self.passes.prepare_fallbacks(fallbacks[depth], levels[depth].size, walk.blends)
+                self.passes.draw_fallbacks(levels[depth], child, prepared)
+                if depth == 0:
+                    walk.root_fallbacks = (child, prepared)
             if depth < walk.level:
                 self.passes.composite_level(levels[depth], levels[depth + 1], composites[depth])
         if walk.level:
