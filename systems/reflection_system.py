@@ -20,10 +20,13 @@ root's Camera block, this stage's settings, the budgets left, the water's waves,
 planner's table, the surfaces' probes and the level targets as the same objects (each
 remade when a surface, its fallback probes or a level's size changes); besides, no component
 of the world was written, added or removed since the last render looked (``World.change_count``,
-``World.last_step_changes``: a write the version missed still redraws).  A render that drew
-an end view (it shows last frame's image, which the render changes) or a view on last
-frame's counts is not kept.  ``RenderStats.reflection_views_kept`` counts the views kept;
-``keep_still_views = False`` draws every frame.
+``World.last_step_changes``: a write the version missed still redraws).  A render that drew a
+view on last frame's counts is not kept, nor one that drew an end view (it shows last
+frame's image, which the render changes) until that image settles: a frame that saw no
+change draws its tree and counts the pixels where its image differs from last frame's
+(``EndImages.keep(compare=True)``); none, and the next frame keeps the tree.
+``RenderStats.reflection_views_kept`` counts the views kept; ``keep_still_views = False``
+draws every frame.
 """
 from __future__ import annotations
 
@@ -59,6 +62,10 @@ class ReflectionSystem(esper.Processor):
         self._camera: int | None = None          # the camera last frame's tree was seen from
         # Keep a still frame's levels (the module docstring): the tree remembers its renders.
         self.keep_still_views = True
+        # Also redraw on any world change (written, added, removed) since the last look, which
+        # ``scene_version`` may not follow; False: the version and the key alone (tests check
+        # that they suffice for what reaches the GPU).
+        self.watch_world = True
         self.tree.remember = True
         self._still: tuple[tuple, tuple] | None = None  # (values, objects) the tree was last drawn for
         self._changes_seen = -1  # World.change_count() when this stage last looked (-1: never)
@@ -146,15 +153,19 @@ class ReflectionSystem(esper.Processor):
         # Nothing written, added or removed in the world since this stage last looked: not
         # after it in the last frame, nor before it in this one.
         changes = world.change_count()
-        unchanged = changes == 0 and world.last_step_changes == self._changes_seen
+        unchanged = not self.watch_world or (changes == 0 and world.last_step_changes == self._changes_seen)
         self._changes_seen = changes
         still = self._still_key(main, views.levels, table, blends, stats)
         result = None
-        if self.keep_still_views and unchanged and not cut and self._still is not None and \
-                self.tree.kept is not None and self.tree.kept.settled and _same(still, self._still):
+        # Nothing changed since the tree was last drawn (or kept): keep it if it settled;
+        # else draw it, comparing its end images (if any) to know when it settles.
+        same = self.keep_still_views and unchanged and not cut and self._still is not None and \
+            _same(still, self._still)
+        if same and self.tree.kept is not None and self.tree.kept.settled:
             result = self.tree.keep(views.levels)
         kept = result is not None
         if not kept:
+            self.tree.check_history = same
             result = self.tree.render(main, views.levels, table, settings, blends)
         self._still = still if self.keep_still_views else None
         stats.reflection_views_kept = len(result.views) - 1 if kept else 0
@@ -166,8 +177,8 @@ class ReflectionSystem(esper.Processor):
         stats.reflection_end_views = len(result.end_views)
         stats.reflection_visibility = result.visibility
         stats.reflection_views_unseen = sum(1 for view in result.views if view.unseen)
-        paths = result.paths
-        stats.reflection_path = paths.pop() if len(paths) == 1 else ("mixed" if paths else "")
+        paths = result.paths  # (a kept tree's: the paths it was drawn by)
+        stats.reflection_path = next(iter(paths)) if len(paths) == 1 else ("mixed" if paths else "")
 
     def _still_key(self, main: View, levels: LevelStack, table: SurfaceTable, blends: SurfaceBlends,
                    stats: RenderStats) -> tuple[tuple, tuple]:

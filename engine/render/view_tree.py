@@ -179,7 +179,13 @@ class KeptTree:
     composite: PreparedComposites | None               # level 1 into the root (None: no views)
     fallbacks: tuple[RenderTargets | None, PreparedFallbacks] | None  # the root's own, with level 1
     spent: tuple[int, int, int, int, int]              # views, pixels, cut, downscaled, fallbacks
-    settled: bool  # nothing of it depends on last frame: no end view drawn, no view drawn unseen
+    # Nothing of it depends on last frame (exact visibility, or predicted from last frame's
+    # counts with no view drawn unseen: a first or cut frame's tree is not the one the next
+    # frame draws; and no end view drawn, or ``history``: end views drawn from an image the
+    # settle check may find this one equal to).
+    settled: bool
+    history: moderngl.Query | None = None  # the settle check of its end images (EndImages.compared)
+    ends: tuple | None = None  # the end images' state it was drawn with (_ends_state): the same, or redraw
 
 
 _LEDGER = ("views_spent", "pixels_spent", "views_cut", "levels_downscaled", "reflection_fallbacks")
@@ -287,6 +293,9 @@ class ViewTree:
         # for a frame whose views show nothing new (``keep``); None after any other render.
         self.remember = False
         self.kept: KeptTree | None = None
+        # The next render compares its finished image with the end images' history (the
+        # reflect stage sets it where the frame's views show what the last frame's did).
+        self.check_history = False
 
     def render(self, root: View, levels: LevelStack, surfaces: SurfaceTable,
                settings: TreeSettings = TreeSettings(), blends: SurfaceBlends = NO_BLENDS) -> TreeResult:
@@ -302,6 +311,7 @@ class ViewTree:
             return result
         stats = self.renderer.stats
         ledger = tuple(getattr(stats, name) for name in _LEDGER) if self.remember else None
+        ends_before = self._ends_state(root.size) if self.remember else None
         walk = self._start(root, root_node, surfaces, settings, result)
         walk.blends = blends.by_surface
         candidates = self._plan(walk, first_index=1)                  # 1. plan the first level
@@ -321,12 +331,24 @@ class ViewTree:
         self._composite(walk, levels)                                 # 5. composite
         self._keep_end_images(walk, levels)
         if ledger is not None:
+            history = self.ends.compared if result.end_views and self.ends is not None else None
             self.kept = KeptTree(result, (levels[0], *(step.targets for step in walk.steps)),
                                  walk.steps[0].prepared if walk.steps else None, walk.root_fallbacks,
                                  tuple(getattr(stats, name) - before for name, before in zip(_LEDGER, ledger,
                                                                                              strict=True)),
-                                 not result.end_views and not any(node.unseen for node in result.views))
+                                 (not result.end_views or history is not None)
+                                 and (walk.exact or bool(walk.record.seen))
+                                 and not any(node.unseen for node in result.views), history, ends_before)
         return result
+
+    def _ends_state(self, size: tuple[int, int]) -> tuple | None:
+        """What end views would be drawn from: whether an image is kept, the surfaces it
+        shows, its camera (a render that finds them other than its own left them draws other
+        end views, or any at all, next frame)."""
+        ends = self.ends
+        if ends is None:
+            return None
+        return ends.ready(size), ends.seen, ends.view_proj
 
     def keep(self, levels: LevelStack) -> TreeResult | None:
         """The last render's tree again without drawing it: its levels 1 and below hold what
@@ -338,7 +360,9 @@ class ViewTree:
         caller decides that nothing those levels show changed (``ReflectionSystem``)."""
         kept = self.kept
         if kept is None or len(levels) < len(kept.targets) or any(
-                levels[level] is not targets for level, targets in enumerate(kept.targets)):
+                levels[level] is not targets for level, targets in enumerate(kept.targets)) or (
+                kept.history is not None and not EndImages.settled(kept.history)) or \
+                self._ends_state(levels[0].size) != kept.ends:
             self.kept = None
             return None
         stats = self.renderer.stats
@@ -540,7 +564,8 @@ class ViewTree:
         if walk.surfaces.has_end_images:
             result = walk.result
             self.ends.keep(levels[0], walk.root, frozenset(node.surface.entity for node in
-                                                           (*result.views[1:], *result.end_views) if not node.unseen))
+                                                           (*result.views[1:], *result.end_views) if not node.unseen),
+                           compare=self.check_history and bool(result.end_views))
         else:
             self.ends.forget()
 
