@@ -208,10 +208,15 @@ def _water(speed: float):
     return build
 
 
-def test_animated_water_draws_its_tree_every_frame_and_still_water_keeps_it(scene):
+@pytest.mark.parametrize("watch_world", [True, False], ids=["rule", "key_alone"])
+def test_animated_water_draws_its_tree_every_frame_and_still_water_keeps_it(scene, watch_world):
+    """The waves move on every frame (the composite's rows read their offset): no frame
+    keeps.  Still water (speed 0) keeps from the second frame."""
     moving = _Pair(scene, _water(0.5))
+    moving.keeping.engine.reflection_system.watch_world = watch_world
     assert not any(moving.frame() for _ in range(4))
     still = _Pair(scene, _water(0.0))
+    still.keeping.engine.reflection_system.watch_world = watch_world
     assert [still.frame() for _ in range(3)] == [False, True, True]
 
 
