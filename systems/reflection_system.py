@@ -155,12 +155,13 @@ class ReflectionSystem(esper.Processor):
         changes = world.change_count()
         unchanged = not self.watch_world or (changes == 0 and world.last_step_changes == self._changes_seen)
         self._changes_seen = changes
-        still = self._still_key(main, views.levels, table, blends, stats)
+        # (no mirror or portal: nothing to keep, and the key is not worth making)
+        still = self._still_key(main, views.levels, table, blends, stats) if table.states else None
         result = None
         # Nothing changed since the tree was last drawn (or kept): keep it if it settled;
         # else draw it, comparing its end images (if any) to know when it settles.
-        same = self.keep_still_views and unchanged and not cut and self._still is not None and \
-            _same(still, self._still)
+        same = self.keep_still_views and unchanged and not cut and still is not None and self._still is not None \
+            and _same(still, self._still)
         if same and self.tree.kept is not None and self.tree.kept.settled:
             result = self.tree.keep(views.levels)
         kept = result is not None

@@ -240,3 +240,17 @@ def test_a_level_resized_is_not_kept(scene):
     renderer = pair.keeping.engine.renderer
     renderer.levels.get(1, (SIZE[0] // 2, SIZE[1] // 2))  # another size: remade (what a level drawn smaller does)
     assert pair.keeping.engine.reflection_system.tree.keep(renderer.levels) is None
+
+
+def test_a_shader_hot_reload_draws_the_tree_again(scene):
+    """A program rebuilt from its files (the window shell's hot reload) may draw otherwise:
+    the frame after draws its tree again, then still frames keep it."""
+    pair = _Pair(scene, _hall)
+    pair.frame()
+    assert pair.frame()
+    shaders = pair.keeping.engine.renderer.shaders
+    before = shaders.reloads
+    shaders.reload({"scene.frag"})
+    assert shaders.reloads > before
+    assert not pair.frame()
+    assert pair.frame()

@@ -35,6 +35,11 @@ surfaces), so memory is bounded by (levels x one root image), however many surfa
 Limits, each a setting and each reported in ``RenderStats`` when reached: the depth cap
 (``TreeSettings.depth_cap``, at most ``MAX_TREE_DEPTH``) and an optional view budget per
 level (``TreeSettings.level_budget``: the views with the most claimed pixels are kept).
+
+A tree that ``remember``s (the main view's) leaves what its render did as a ``KeptTree``;
+on a frame whose views show nothing new (the reflect stage decides:
+``systems/reflection_system.py``) ``keep`` does only what the root, drawn anew each frame,
+needs again (its fallbacks, level 1's composite) and levels 1 and below stay as they are.
 """
 from __future__ import annotations
 
