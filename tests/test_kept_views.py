@@ -90,6 +90,11 @@ class _Pair:
         stats = self.keeping.stats
         drawn_views = self.drawing.stats.reflection_views
         assert stats.reflection_views == drawn_views
+        # The report and the budget ledger as a drawn frame's (a probe face after the tree
+        # spends what the tree left either way).
+        for name in ("views_spent", "pixels_spent", "views_cut", "levels_downscaled", "reflection_fallbacks",
+                     "reflection_end_views", "reflection_views_faded", "reflection_depth_capped"):
+            assert getattr(stats, name) == getattr(self.drawing.stats, name), name
         if stats.reflection_views_kept:
             assert stats.reflection_views_kept == drawn_views > 0
             assert stats.passes == 1  # the main view alone: no reflection view drawn
