@@ -259,3 +259,14 @@ def test_a_shader_hot_reload_draws_the_tree_again(scene):
     assert shaders.reloads > before
     assert not pair.frame()
     assert pair.frame()
+
+
+def test_a_predicted_tree_is_kept_from_the_first_frame_drawn_on_counts(scene):
+    """Predicted visibility: the first frame has no counts (every candidate drawn and grown,
+    not the tree the next frame draws), so the second draws again, from its counts; the third
+    keeps, with the pixels and the report of a drawn frame."""
+    pair = _Pair(scene, _hall)
+    for runner in (pair.keeping, pair.drawing):
+        runner.engine.reflection_system.visibility = "predicted"
+    assert [pair.frame() for _ in range(4)] == [False, False, True, True]
+    assert pair.keeping.stats.reflection_visibility == "predicted"
