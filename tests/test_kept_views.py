@@ -12,6 +12,7 @@ renderer's ``scene_version`` alone must catch each change made on the GPU side."
 from __future__ import annotations
 
 import math
+import random
 
 import numpy as np
 import pytest
@@ -270,3 +271,18 @@ def test_a_predicted_tree_is_kept_from_the_first_frame_drawn_on_counts(scene):
         runner.engine.reflection_system.visibility = "predicted"
     assert [pair.frame() for _ in range(4)] == [False, False, True, True]
     assert pair.keeping.stats.reflection_visibility == "predicted"
+
+
+@pytest.mark.parametrize("seed", [3, 7])
+def test_changes_at_random_among_still_frames_always_show_a_drawn_frames_pixels(scene, seed):
+    """The kinds of change at random, between runs of still frames (end images on, so some
+    runs end before the image settles): every frame equals the frame drawn whole, and the
+    still runs keep."""
+    rng = random.Random(seed)
+    pair = _Pair(scene, lambda world: _hall(world, end_image=True), size=(48, 32))
+    kept = []
+    for _ in range(40):
+        if rng.random() < 0.3:
+            pair.both(CHANGES[rng.choice(list(CHANGES))])
+        kept.append(pair.frame())
+    assert any(kept) and not all(kept)
