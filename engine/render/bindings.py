@@ -75,6 +75,7 @@ PROBE_UNIT = 7           # scene: the cube map of the batch's reflection probe; 
 PROBE2_UNIT = 9          # scene: the cube map of the batch's second probe (probe blending); composite (fallback): the
                          # draw's second
 HISTORY_UNIT = 10        # end images: the previous frame's main image (engine/render/end_images.py)
+SETTLE_IMAGE_UNIT = 2    # end images' settle check: this frame's finished main image (history at HISTORY_UNIT)
 PROBE_REST_UNIT = 10     # scene (PROBE_REST builds): the probe taking what the blend's weights leave (a curved
                          # object's own, probe_rules.probe_blend)
 NORMAL_UNIT = 8          # scene: the batch's normal map; composite (bumpy mirrors): the mirror's

@@ -142,6 +142,17 @@ class Gpu:
         self.scene_only: list[InstanceBatch] | None = None
         # A batch was made since prepare_programs last ran (Engine.frame calls it then).
         self.needs_preparing = False
+        # What the views show, as a version (``note_scene_change``): moved on by every
+        # upload or redraw that changes what a scene pass, a fallback or a composite draws.
+        self.scene_version = 0
+
+    def note_scene_change(self) -> None:
+        """Something a view shows changed on the GPU (instance rows, a batch made or dropped,
+        the Lights block, the sky, the irradiance table, a shadow map or its block, a probe's
+        cube): ``scene_version`` moves on, so the main view tree keeps no level drawn before
+        (``ReflectionSystem.keep_still_views``).  Every place that writes such data calls
+        it; one missed is a stale reflection, so a doubtful write calls it too."""
+        self.scene_version += 1
 
     def normal_map_texture(self, normal_map: TextureData) -> moderngl.Texture | None:
         """The uploaded normal map of ``normal_map`` while a batch draws with it (a mirror's

@@ -39,6 +39,11 @@ surfaces), so memory is bounded by (levels x one root image), however many surfa
 Limits, each a setting and each reported in ``RenderStats`` when reached: the depth cap
 (``TreeSettings.depth_cap``, at most ``MAX_TREE_DEPTH``) and an optional view budget per
 level (``TreeSettings.level_budget``: the views with the most claimed pixels are kept).
+
+A tree that ``remember``s (the main view's) leaves what its render did as a ``KeptTree``;
+on a frame whose views show nothing new (the reflect stage decides:
+``systems/reflection_system.py``) ``keep`` does only what the root, drawn anew each frame,
+needs again (its fallbacks, level 1's composite) and levels 1 and below stay as they are.
 """
 from __future__ import annotations
 
@@ -63,6 +68,7 @@ from engine.render.mirror_passes import (
     Fallback,
     MirrorPasses,
     PreparedComposites,
+    PreparedFallbacks,
     give_samples_queries,
     surface_look,
     take_samples_queries,
@@ -170,6 +176,31 @@ class ReflectionView:
 
 
 @dataclass
+class KeptTree:
+    """What a tree's last render left for a frame that keeps its levels (``ViewTree.keep``):
+    the targets it drew into (levels 0 to its deepest, each as it was), what it did into the
+    root (the root's own fallbacks, then level 1 composited over them), and the counts it
+    added to the frame's report and budget ledger, added again by a kept frame (a probe face
+    drawn after it spends the same budget either way)."""
+
+    result: TreeResult
+    targets: tuple[RenderTargets, ...]
+    composite: PreparedComposites | None               # level 1 into the root (None: no views)
+    fallbacks: tuple[RenderTargets | None, PreparedFallbacks] | None  # the root's own, with level 1
+    spent: tuple[int, int, int, int, int]              # views, pixels, cut, downscaled, fallbacks
+    # Nothing of it depends on last frame (exact visibility, or predicted from last frame's
+    # counts with no view drawn unseen: a first or cut frame's tree is not the one the next
+    # frame draws; and no end view drawn, or ``history``: end views drawn from an image the
+    # settle check may find this one equal to).
+    settled: bool
+    history: moderngl.Query | None = None  # the settle check of its end images (EndImages.compared)
+    ends: tuple | None = None  # the end images' state it was drawn with (_ends_state): the same, or redraw
+
+
+_LEDGER = ("views_spent", "pixels_spent", "views_cut", "levels_downscaled", "reflection_fallbacks")
+
+
+@dataclass
 class _Level:
     """One level of a tree as planned, and what its GL half reads: the claims of its
     candidates, the views kept, the end views, and its composite."""
@@ -232,6 +263,7 @@ class _Walk:
     blends: Mapping[int, ProbeBlend] = field(default_factory=dict)      # the fallbacks' probes (SurfaceBlends)
     triangle_count: int | None = None        # what a scene pass submits (triangles(): counted once, if asked)
     chain: ChainBoxes | None = None          # the planned level's claims' bounds (claim_cull), for the next
+    root_fallbacks: tuple[RenderTargets | None, PreparedFallbacks] | None = None  # drawn into the root (KeptTree)
 
     def triangles(self) -> int:
         """The triangles a scene pass submits, counted at the first level that asks (a level
@@ -267,6 +299,13 @@ class ViewTree:
         # (the table and pixel budget they were found for, the set: the same at every depth)
         self._unlit: tuple[tuple, frozenset[int]] = ((None, False), frozenset())
         self._level_options: dict[tuple, SceneOptions] = {}  # a level's options with its unlit mirrors
+        # With ``remember`` (the main view's tree), what the last render left (``KeptTree``),
+        # for a frame whose views show nothing new (``keep``); None after any other render.
+        self.remember = False
+        self.kept: KeptTree | None = None
+        # The next render compares its finished image with the end images' history (the
+        # reflect stage sets it where the frame's views show what the last frame's did).
+        self.check_history = False
 
     def render(self, root: View, levels: LevelStack, surfaces: SurfaceTable,
                settings: TreeSettings = TreeSettings(), blends: SurfaceBlends = NO_BLENDS,
@@ -281,11 +320,15 @@ class ViewTree:
                              "tree draws its transparent slot over the reflections composited into it")
         root_node = ReflectionView(0, 0, root, (0, 0, *root.size))
         result = TreeResult([root_node], set())
+        self.kept = None
         if not surfaces.states:  # no mirror or portal anywhere: the root is the whole tree
             if self.ends is not None:
                 self.ends.forget()
             self.scene_pass.draw_transparent([root], levels[0], root_options)
             return result
+        stats = self.renderer.stats
+        ledger = tuple(getattr(stats, name) for name in _LEDGER) if self.remember else None
+        ends_before = self._ends_state(root.size) if self.remember else None
         walk = self._start(root, root_node, surfaces, settings, result)
         walk.blends = blends.by_surface
         candidates = self._plan(walk, first_index=1)                  # 1. plan the first level
@@ -304,7 +347,58 @@ class ViewTree:
         self._note_cap(walk)
         self._composite(walk, levels, root_options)                   # 5. composite
         self._keep_end_images(walk, levels)
+        if ledger is not None:
+            history = self.ends.compared if result.end_views and self.ends is not None else None
+            self.kept = KeptTree(result, (levels[0], *(step.targets for step in walk.steps)),
+                                 walk.steps[0].prepared if walk.steps else None, walk.root_fallbacks,
+                                 tuple(getattr(stats, name) - before for name, before in zip(_LEDGER, ledger,
+                                                                                             strict=True)),
+                                 (not result.end_views or history is not None)
+                                 and (walk.exact or bool(walk.record.seen))
+                                 and not any(node.unseen for node in result.views), history, ends_before)
         return result
+
+    def _ends_state(self, size: tuple[int, int]) -> tuple | None:
+        """What end views would be drawn from: whether an image is kept, the surfaces it
+        shows, its camera (a render that finds them other than its own left them draws other
+        end views, or any at all, next frame)."""
+        ends = self.ends
+        if ends is None:
+            return None
+        return ends.ready(size), ends.seen, ends.view_proj
+
+    def keep(self, levels: LevelStack, root: View | None = None,
+             root_options: SceneOptions = TREE_ROOT) -> TreeResult | None:
+        """The last render's tree again without drawing it: its levels 1 and below hold what
+        they held (their images already hold the deeper levels' composites, fallbacks, end
+        views and their own transparent slots), and only what the root needs again is done
+        (the root is drawn anew each frame, with ``root_options``): its own fallbacks, then
+        level 1 composited over them, then its transparent slot (``root``'s: the kept
+        render's root view where None).  The frame's report and ledger get the counts the
+        render added.  None (nothing done) where there is nothing kept or a level's targets
+        are not those drawn into (remade, resized).  The caller decides that nothing those
+        levels show changed (``ReflectionSystem``)."""
+        kept = self.kept
+        if kept is None or len(levels) < len(kept.targets) or any(
+                levels[level] is not targets for level, targets in enumerate(kept.targets)) or (
+                kept.history is not None and not EndImages.settled(kept.history)) or \
+                self._ends_state(levels[0].size) != kept.ends:
+            self.kept = None
+            return None
+        stats = self.renderer.stats
+        fallbacks_before = stats.reflection_fallbacks
+        if kept.fallbacks is not None:
+            child, prepared = kept.fallbacks
+            self.passes.draw_fallbacks(levels[0], child, prepared)
+        if kept.composite is not None:
+            self.passes.composite_level(levels[0], levels[1], kept.composite)
+        self.scene_pass.draw_transparent([root or kept.result.views[0].view], levels[0], root_options)
+        if kept.fallbacks is not None or kept.composite is not None:
+            self.renderer.flush()
+        for name, spent in zip(_LEDGER, kept.spent, strict=True):
+            setattr(stats, name, getattr(stats, name) + spent)
+        stats.reflection_fallbacks = fallbacks_before + kept.spent[-1]  # the root's drawn now, the rest kept
+        return kept.result
 
     def _start(self, root: View, root_node: ReflectionView, surfaces: SurfaceTable, settings: TreeSettings,
                result: TreeResult) -> _Walk:
@@ -476,9 +570,10 @@ class ViewTree:
         for depth in range(walk.level, -1, -1):
             if fallbacks.get(depth):
                 child = steps[depth].targets if depth < len(steps) else None
-                self.passes.draw_fallbacks(levels[depth], child,
-                                           self.passes.prepare_fallbacks(fallbacks[depth], levels[depth].size,
-                                                                                         walk.blends))
+                prepared = self.passes.prepare_fallbacks(fallbacks[depth], levels[depth].size, walk.blends)
+                self.passes.draw_fallbacks(levels[depth], child, prepared)
+                if depth == 0:
+                    walk.root_fallbacks = (child, prepared)
             if depth < walk.level:
                 self.passes.composite_level(levels[depth], levels[depth + 1], composites[depth])
             if see_through:
@@ -499,7 +594,8 @@ class ViewTree:
         if walk.surfaces.has_end_images:
             result = walk.result
             self.ends.keep(levels[0], walk.root, frozenset(node.surface.entity for node in
-                                                           (*result.views[1:], *result.end_views) if not node.unseen))
+                                                           (*result.views[1:], *result.end_views) if not node.unseen),
+                           compare=self.check_history and bool(result.end_views))
         else:
             self.ends.forget()
 
