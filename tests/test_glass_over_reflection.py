@@ -240,3 +240,24 @@ def test_a_switched_off_see_through_mirror_keeps_its_fallback(scene):
     assert np.abs(colour[0.5, True] - colour[0.5, False])[on_quad].max() > 0.05  # the fallback shows
     bad = ~np.isclose(colour[0.5, True], want, rtol=RTOL, atol=ATOL).all(axis=-1)
     assert not bad.any(), f"{int(bad.sum())} pixels differ; worst {np.abs(colour[0.5, True] - want).max():.4f}"
+
+
+def test_a_kept_tree_draws_the_roots_glass_over_its_composite(scene):
+    """A still frame keeps the tree (``ViewTree.keep``): levels 1 and below hold their own
+    glass already, and the root, drawn anew without its transparent slot, gets its glass
+    after level 1's composite, so a kept frame is the frame drawn whole (keeping off), bit
+    for bit: colour, HDR image and ids."""
+    ents: dict = {}
+    keeping, drawing = scene(_room(ents, ALPHA), SIZE), scene(_room({}, ALPHA), SIZE)
+    drawing.engine.reflection_system.keep_still_views = False
+    kept = 0
+    for _ in range(4):
+        images = []
+        for runner in (keeping, drawing):
+            rgb = runner.frame()
+            images.append((rgb, np.frombuffer(runner.engine.renderer.targets.color.read(), np.float16), runner.ids()))
+        for kept_image, drawn_image in zip(images[0], images[1], strict=True):
+            assert np.array_equal(kept_image, drawn_image)
+        kept += keeping.stats.reflection_views_kept > 0
+    assert kept >= 2 and drawing.stats.reflection_views_kept == 0
+    assert (keeping.ids() == ents["glass"]).sum() > 300  # the pane, directly and in A
