@@ -11,8 +11,8 @@ dropped by the level budget and cut by the depth cap.
 Still views are kept (dirty flags, as the probes keep faces no change reached: the design's
 "dirty flags to skip static cubemaps"): when nothing the tree's views show changed since
 its last render, its levels 1 and below keep the images they hold and only the root's part
-is done again (``ViewTree.keep``: the root's fallbacks and level 1's composite; the main
-stage draws level 0 anew every frame).  "Nothing changed" is one comparison
+is done again (``ViewTree.keep``: the root's fallbacks, level 1's composite and the root's
+transparent slot over it; the main stage draws level 0 anew every frame).  "Nothing changed" is one comparison
 (``_still_key``): the renderer's ``scene_version`` (moved on by every upload or redraw of
 what a scene pass, fallback or composite reads: instance rows and batches, lights, sky,
 irradiance, shadow maps, probe cubes; ``Gpu.note_scene_change``), shader hot reloads, the
