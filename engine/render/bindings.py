@@ -77,6 +77,7 @@ PROBE_UNIT = 7           # scene: the cube map of the batch's reflection probe; 
 PROBE2_UNIT = 9          # scene: the cube map of the batch's second probe (probe blending); composite (fallback): the
                          # draw's second
 HISTORY_UNIT = 10        # end images: the previous frame's main image (engine/render/end_images.py)
+SETTLE_IMAGE_UNIT = 2    # end images' settle check: this frame's finished main image (history at HISTORY_UNIT)
 PROBE_REST_UNIT = 10     # scene (PROBE_REST builds): the probe taking what the blend's weights leave (a curved
                          # object's own, probe_rules.probe_blend)
 NORMAL_UNIT = 8          # scene: the batch's normal map; composite (bumpy mirrors): the mirror's
@@ -134,9 +135,11 @@ def clip_glsl_defines() -> dict[str, str]:
             "CLIP_DISTANCE_COUNT": str(CLIP_DISTANCE_COUNT)}
 
 
-# Blending "over", alpha kept: the composite's (reflection x rate + own x (1 - rate)) and the
-# transparent slot's.
-BLEND_OVER = (moderngl.SRC_ALPHA, moderngl.ONE_MINUS_SRC_ALPHA, moderngl.ZERO, moderngl.ONE)
+# Blending "over": the composite's (reflection x rate + own x (1 - rate)) and the transparent
+# slot's.  Alpha is a level's coverage (premultiplied: 0 where nothing is drawn, which the
+# composite above fills with the sky), and over it too: a + dst x (1 - a), so the sky shows
+# behind something see-through in a reflection by 1 - a, not in full.
+BLEND_OVER = (moderngl.SRC_ALPHA, moderngl.ONE_MINUS_SRC_ALPHA, moderngl.ONE, moderngl.ONE_MINUS_SRC_ALPHA)
 
 
 @dataclass(frozen=True)
