@@ -126,8 +126,8 @@ TARGETS: dict[str, Target] = {
 # -- scenes -----------------------------------------------------------------------------------
 
 def make_scene(name: str, ctx):
-    """The engine of scene ``name`` (``mirrors_<n>``, ``portals_d<depth>``, ``probe_none``,
-    ``probe_dynamic``), each with its suite's default settings."""
+    """The engine of scene ``name`` (``mirrors_<n>``, ``portals_d<depth>``, ``portals_d<depth>_sway``
+    with a swaying camera, ``probe_none``, ``probe_dynamic``), each with its suite's default settings."""
     from shell.app import Engine
 
     kind, _, arg = name.partition("_")
@@ -135,11 +135,14 @@ def make_scene(name: str, ctx):
         from benchmarks.mirrors import MirrorRing
 
         return Engine(MirrorRing(int(arg)), ctx)
-    if kind == "portals":
+    if kind == "portals":  # portals_d<depth>, or portals_d<depth>_sway: the camera sways (FacingPortals)
         from benchmarks.portals import FacingPortals, set_depth
 
-        engine = Engine(FacingPortals(), ctx)
-        set_depth(engine, int(arg.removeprefix("d")))
+        depth, _, sway = arg.partition("_")
+        if sway not in ("", "sway"):
+            raise ValueError(f"no scene {name!r}")
+        engine = Engine(FacingPortals(sway=sway == "sway"), ctx)
+        set_depth(engine, int(depth.removeprefix("d")))
         return engine
     if kind == "probe":
         from benchmarks.probes import MODES, ProbeRing

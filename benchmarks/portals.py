@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import statistics
 import time
 
@@ -26,6 +27,7 @@ from pyglm import glm
 from benchmarks import add_size_argument
 from benchmarks.mirrors import PlanClock, plan_median
 from components import DirectionalLight, Material, MeshRef, Portal, Skybox, Transform
+from components.transform import yaw_pitch_rotation
 from engine.assets.mesh import box, plane
 from engine.assets.portals import spawn_portal_pair
 from engine.assets.texture_data import checker_texture
@@ -39,15 +41,26 @@ from shell.app import Engine
 
 SIZE = (640, 360)
 DEPTHS = range(0, 9)
+SWAY_CENTRE = glm.vec3(0.3, 1.5, 3.0)  # the camera's place (FacingPortals), the centre of its sway
+SWAY_PERIOD = 2.0                      # seconds a sway takes
 
 
 class FacingPortals(Game):
+    """The portal pair; with ``sway`` the camera turns and drifts a little every frame (a
+    game's usual camera, which finds no plan or view of the frame before to keep)."""
+
     title = "portal benchmark"
+
+    def __init__(self, sway: bool = False) -> None:
+        self.sway = sway
+        self.camera: Transform | None = None
+        self.time = 0.0
 
     def build(self, world: World) -> None:
         from engine.core.game import spawn_camera
 
-        spawn_camera(world, position=(0.3, 1.5, 3.0), yaw=3.0, pitch=-2.0, fly=False)
+        camera = spawn_camera(world, position=SWAY_CENTRE, yaw=3.0, pitch=-2.0, fly=False)
+        self.camera = world.get(camera, Transform)
         world.spawn(Skybox())
         world.spawn(DirectionalLight(direction=(-0.3, -1.0, -0.4), intensity=2.5))
         world.spawn(Transform(), MeshRef(plane(40, 40, uv_repeat=10)), Material(texture=checker_texture(128, 8)))
@@ -57,6 +70,16 @@ class FacingPortals(Game):
         for i, (x, z) in enumerate(((-0.6, 1.0), (0.7, 2.0), (-0.3, 4.5), (0.5, 5.2))):
             world.spawn(Transform(position=(x, 0.25, z)), MeshRef(crate),
                         Material(color=(0.2 + 0.2 * i, 0.5, 0.9 - 0.2 * i)))
+
+    def update(self, world: World, dt: float) -> None:
+        if not self.sway:
+            return
+        # A slow sway of a degree or two and a few centimetres: every level still sees the
+        # other portal (the same views as the still camera), but no frame's cameras repeat.
+        self.time += dt
+        phase = 2.0 * math.pi * self.time / SWAY_PERIOD
+        self.camera.position = SWAY_CENTRE + glm.vec3(0.05 * math.sin(phase), 0.02 * math.cos(2.0 * phase), 0.0)
+        self.camera.rotation = yaw_pitch_rotation(3.0 + 1.5 * math.sin(phase), -2.0 + 0.5 * math.cos(phase))
 
 
 def set_depth(engine: Engine, depth: int) -> None:

@@ -64,8 +64,11 @@ class RenderStats(BudgetLedger):
     reflection_end_views: int = 0       # views past the depth limits shown as last frame's image
     reflection_visibility: str = ""     # "exact" or "predicted": how the main tree's levels knew their pixels
     reflection_views_unseen: int = 0    # views drawn that had no pixels last frame (predicted visibility)
+    reflection_views_kept: int = 0      # main-tree views kept as last drawn: nothing they show changed
+                                        # (ReflectionSystem.keep_still_views; not in passes)
     # How reflection levels were drawn: "per_mirror", "batched", "mixed" (auto chose both in
-    # one frame), or "" when no reflection view was drawn (ReflectionSystem.path).
+    # one frame), or "" when no reflection view was drawn (ReflectionSystem.path); a frame that
+    # kept its tree (reflection_views_kept) reports the path the kept views were drawn by.
     reflection_path: str = ""
     # The path self-check's verdicts so far on this context (engine/render/path_checks.py):
     # the alternative GL paths compared with their plain counterparts and trusted, or refused.

@@ -139,6 +139,8 @@ class ExtractSystem(esper.Processor):
                                             mirrored=mirroring_seen() and _mirrors(transform.world))
         except GLLimitError as exc:
             raise GLLimitError(f"entity {entity}: {exc}") from None
+        if transparent:  # a see-through mirror or portal (water): drawn before the view trees' claims
+            batch.surface = world.has(entity, Mirror) or world.has(entity, Portal)
         if old is not batch:
             if old is not None:
                 self._remove_instance(entity, old)

@@ -1,4 +1,5 @@
-"""Main: the active camera's view, drawn by the scene pass into the main view tree's level 0.
+"""Main: the active camera's view, drawn by the scene pass into the main view tree's level 0
+(all but its transparent slot, which the reflect stage's tree draws over the reflections).
 
 It publishes the view and the targets it drew into as ``world.resources[FrameViews]``
 (``main`` None when there is no active camera or the output has no pixels, a minimised
@@ -17,7 +18,7 @@ from engine.core.frame_io import Output
 from engine.core.world import World
 from engine.render.frame_views import FrameViews
 from engine.render.renderer import Renderer
-from engine.render.scene_pass import ROOT_VIEW, SceneOptions, shading_replaced
+from engine.render.scene_pass import TREE_ROOT, SceneOptions, shading_replaced
 from engine.render.views import camera_view
 from engine.resources import Surfaces, ViewBudget
 from engine.rules.frame_rules import active_camera_parts
@@ -34,7 +35,7 @@ class MainViewSystem(esper.Processor):
         # (scene_pass.shading_replaced, whatever the cap: a view it cuts shows its end view
         # or fallback at weight 1 too); None: every mirror is shaded.
         self.depth_cap: Callable[[], int] | None = None
-        self._options: tuple[tuple, SceneOptions] = (((), ()), ROOT_VIEW)  # (what it was made from, the options)
+        self._options: tuple[tuple, SceneOptions] = (((), ()), TREE_ROOT)  # (what it was made from, the options)
 
     def process(self, dt: float) -> None:
         world = self.world
@@ -55,15 +56,17 @@ class MainViewSystem(esper.Processor):
         views.levels = levels
         views.main = camera_view(cam_t.world, cam.fov_y, cam.near, cam.far, output.size)
         views.main.layers = cam.layer_mask  # its culling mask (Camera.shows_layers / hides_layers)
-        self.renderer.scene_pass.draw([views.main], targets, self._root_options())
+        views.options = self._root_options()
+        self.renderer.scene_pass.draw([views.main], targets, views.options)
 
     def _root_options(self) -> SceneOptions:
-        """The main view's scene options: a root view, with the mirrors the reflect stage's
-        tree paints over entirely drawn unlit, worked out again only when a surface or the
-        pixel budget changed."""
+        """The main view's scene options: the root of the reflect stage's tree, which draws
+        its transparent slot after compositing the reflections into it
+        (``SceneOptions.transparent``), with the mirrors that tree paints over entirely
+        drawn unlit, worked out again only when a surface or the pixel budget changed."""
         surfaces = self.world.resources.get(Surfaces)
         if self.depth_cap is None or surfaces is None or not surfaces.mirrors:
-            return ROOT_VIEW
+            return TREE_ROOT
         budget = ViewBudget.of(self.world.resources)
         pixel_budget = budget is not None and budget.pixels is not None
         states = tuple(surfaces.mirrors.values())  # a state object stands while its surface is unchanged
@@ -71,6 +74,6 @@ class MainViewSystem(esper.Processor):
         (kept_limits, kept_states), options = self._options
         if kept_limits != limits or len(kept_states) != len(states) or any(map(operator.is_not, kept_states, states)):
             unlit = shading_replaced(states, pixel_budget)
-            options = SceneOptions(unlit=unlit) if unlit else ROOT_VIEW
+            options = SceneOptions(unlit=unlit, transparent=False) if unlit else TREE_ROOT
             self._options = ((limits, states), options)
         return options

@@ -7,6 +7,26 @@ portals (the ``Surfaces`` resource, from the surfaces stage, as the planner's ta
 ``FrameViews``.  Its
 settings are the main tree's limits and path; ``RenderStats`` reports the views drawn,
 dropped by the level budget and cut by the depth cap.
+
+Still views are kept (dirty flags, as the probes keep faces no change reached: the design's
+"dirty flags to skip static cubemaps"): when nothing the tree's views show changed since
+its last render, its levels 1 and below keep the images they hold and only the root's part
+is done again (``ViewTree.keep``: the root's fallbacks, level 1's composite and the root's
+transparent slot over it; the main stage draws level 0 anew every frame).  "Nothing changed" is one comparison
+(``_still_key``): the renderer's ``scene_version`` (moved on by every upload or redraw of
+what a scene pass, fallback or composite reads: instance rows and batches, lights, sky,
+irradiance, shadow maps, probe cubes; ``Gpu.note_scene_change``), shader hot reloads, the
+root's Camera block, this stage's settings, the budgets left, the water's waves, and the
+planner's table, the surfaces' probes and the level targets as the same objects (each
+remade when a surface, its fallback probes or a level's size changes); besides, no component
+of the world was written, added or removed since the last render looked (``World.change_count``,
+``World.last_step_changes``: a write the version missed still redraws).  A render that drew a
+view on last frame's counts is not kept, nor one that drew an end view (it shows last
+frame's image, which the render changes) until that image settles: a frame that saw no
+change draws its tree and counts the pixels where its image differs from last frame's
+(``EndImages.keep(compare=True)``); none, and the next frame keeps the tree.
+``RenderStats.reflection_views_kept`` counts the views kept; ``keep_still_views = False``
+draws every frame.
 """
 from __future__ import annotations
 
@@ -18,7 +38,10 @@ from engine.core.world import World
 from engine.render.frame_views import FrameViews
 from engine.render.renderer import Renderer
 from engine.render.surface_table import NO_BLENDS, SurfaceBlends, surface_table
+from engine.render.targets import LevelStack
+from engine.render.view_plan import SurfaceTable
 from engine.render.view_tree import ReflectionView, TreeSettings, ViewTree
+from engine.render.views import View
 from engine.resources import PortalCrossings, RenderStats, Surfaces
 from engine.rules.frame_rules import frame_rules
 from systems.surface_system import MirrorError
@@ -37,6 +60,16 @@ class ReflectionSystem(esper.Processor):
         self.views: list[ReflectionView] = []   # last frame's view tree, level order
         self._cut = False                        # camera_cut() was called since the last frame
         self._camera: int | None = None          # the camera last frame's tree was seen from
+        # Keep a still frame's levels (the module docstring): the tree remembers its renders.
+        self.keep_still_views = True
+        # Also redraw on any world change (written, added, removed) since the last look, which
+        # ``scene_version`` may not follow; False: the version and the key alone (tests check
+        # that they suffice for what reaches the GPU).
+        self.watch_world = True
+        self.tree.remember = True
+        self._still: tuple[tuple, tuple] | None = None  # (values, objects) the tree was last drawn for
+        self._changes_seen = -1  # World.change_count() when this stage last looked (-1: never)
+        self._waves: tuple[SurfaceTable | None, list] = (None, [])  # the water flows of a table
 
     # --- the main tree's settings, checked when they are set --------------------------------------
     @property
@@ -100,6 +133,7 @@ class ReflectionSystem(esper.Processor):
         renderer = self.renderer
         if main is None or views.levels is None:
             self.views = []
+            self._still = None
             return
         if surfaces.mirrors or surfaces.portals:
             # The main view rasterises while the CPU culls and works out the first level's
@@ -107,14 +141,36 @@ class ReflectionSystem(esper.Processor):
             renderer.flush()
         camera = frame_rules(self.world).active_camera
         crossed = any(crossing.entity == camera for crossing in self.world.resources.get(PortalCrossings, ()))
-        if self._cut or crossed or camera != self._camera:
+        cut = self._cut or crossed or camera != self._camera
+        if cut:
             self.tree.forget_visibility()
         self._cut, self._camera = False, camera
         settings = self.settings
-        result = self.tree.render(main, views.levels, surface_table(self.world.resources, surfaces), settings,
-                                  self.world.resources.get(SurfaceBlends, NO_BLENDS))
-        self.views = result.views
+        table = surface_table(self.world.resources, surfaces)
+        blends = self.world.resources.get(SurfaceBlends, NO_BLENDS)
         stats: RenderStats = self.world.resources[RenderStats]
+        world = self.world
+        # Nothing written, added or removed in the world since this stage last looked: not
+        # after it in the last frame, nor before it in this one.
+        changes = world.change_count()
+        unchanged = not self.watch_world or (changes == 0 and world.last_step_changes == self._changes_seen)
+        self._changes_seen = changes
+        # (no mirror or portal: nothing to keep, and the key is not worth making)
+        still = self._still_key(main, views.levels, table, blends, stats) if table.states else None
+        result = None
+        # Nothing changed since the tree was last drawn (or kept): keep it if it settled;
+        # else draw it, comparing its end images (if any) to know when it settles.
+        same = self.keep_still_views and unchanged and not cut and still is not None and self._still is not None \
+            and _same(still, self._still)
+        if same and self.tree.kept is not None and self.tree.kept.settled:
+            result = self.tree.keep(views.levels, main, views.options)
+        kept = result is not None
+        if not kept:
+            self.tree.check_history = same
+            result = self.tree.render(main, views.levels, table, settings, blends, views.options)
+        self._still = still if self.keep_still_views else None
+        stats.reflection_views_kept = len(result.views) - 1 if kept else 0
+        self.views = result.views
         stats.reflection_views = len(result.views) - 1
         stats.reflection_views_dropped = result.dropped
         stats.reflection_depth_capped = result.capped
@@ -122,8 +178,22 @@ class ReflectionSystem(esper.Processor):
         stats.reflection_end_views = len(result.end_views)
         stats.reflection_visibility = result.visibility
         stats.reflection_views_unseen = sum(1 for view in result.views if view.unseen)
-        paths = result.paths
-        stats.reflection_path = paths.pop() if len(paths) == 1 else ("mixed" if paths else "")
+        paths = result.paths  # (a kept tree's: the paths it was drawn by)
+        stats.reflection_path = next(iter(paths)) if len(paths) == 1 else ("mixed" if paths else "")
+
+    def _still_key(self, main: View, levels: LevelStack, table: SurfaceTable, blends: SurfaceBlends,
+                   stats: RenderStats) -> tuple[tuple, tuple]:
+        """What the tree's views show, as (values compared equal, objects compared as the same
+        object): the module docstring's list.  Equal to the last render's: nothing changed."""
+        renderer = self.renderer
+        waves = self._waves
+        if waves[0] is not table:
+            waves = self._waves = (table, [state.water.flow for state in table.states if state.water is not None])
+        values = (renderer.scene_version, renderer.shaders.reloads, main.camera_block(), main.name, main.mirrored,
+                  main.scissor, self.settings, self.tree.unlit, renderer.texture_anisotropy,
+                  renderer.reflection_anisotropy, renderer.normal_map_anisotropy, renderer.scene_pass.cull_batches,
+                  stats.views_left(), stats.pixels_left(), tuple(flow.offset for flow in waves[1]))
+        return values, (table, blends.by_surface, levels)
 
     def prepare(self) -> None:
         """Make the main tree's claim and composite buffers now (``Engine.frame`` calls it
@@ -138,3 +208,8 @@ class ReflectionSystem(esper.Processor):
 
     def close(self) -> None:
         self.tree.release()
+
+
+def _same(key: tuple[tuple, tuple], other: tuple[tuple, tuple]) -> bool:
+    """Two ``_still_key``s agree: values equal, objects the same."""
+    return key[0] == other[0] and all(a is b for a, b in zip(key[1], other[1], strict=True))

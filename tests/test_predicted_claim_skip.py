@@ -75,9 +75,9 @@ def _run(ctx, monkeypatch, scene: str, size: tuple[int, int], cull: bool, end_im
             current["skipped"] |= {key for key, query in zip(found[3], step.queries, strict=True) if query is none}
             return found
 
-        def kept(self, targets, root, seen):
+        def kept(self, targets, root, seen, compare=False):
             current["seen"] = seen
-            return keep(self, targets, root, seen)
+            return keep(self, targets, root, seen, compare)
 
         patch.setattr(MirrorPasses, "prepare_level", prepare_level)
         patch.setattr(view_tree.ViewTree, "render", rendered)

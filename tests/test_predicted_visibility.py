@@ -260,10 +260,11 @@ def test_a_view_drawn_unseen_costs_the_gpu_no_primitives_while_hidden(scene, mon
     counted: list[tuple[bool, int]] = []
     draw = ScenePass.draw
 
-    def counting(self, views, targets, options=None, conditions=None):
+    def counting(self, views, targets, options=None, conditions=None, **more):
         query = ctx.query(primitives=True)
         with query:
-            draw(self, views, targets, options, conditions) if options is not None else draw(self, views, targets)
+            draw(self, views, targets, options, conditions, **more) if options is not None else \
+                draw(self, views, targets, **more)
         counted.append((conditions is not None, query.primitives))
     monkeypatch.setattr(ScenePass, "draw", counting)
     for _ in range(3):

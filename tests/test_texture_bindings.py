@@ -296,3 +296,49 @@ def test_a_frame_of_reflection_levels_binds_their_sampler_once(ctx, monkeypatch)
             capture.release()
         for engine in engines:
             engine.close()
+
+
+def test_a_run_binds_its_pass_wide_state_once_and_again_after_another_pass_rebinds_it(ctx, monkeypatch):
+    """``ScenePass.draw`` with a ``run`` (a view tree's levels in one render): the second pass
+    of the run leaves the pass-wide bindings (lights, shadow maps, irradiance, sky, sampler)
+    as they are, without asking for them (``ShadowMaps.bind`` is not called); after another
+    pass binds something else on one of their units (here the shadow atlas's), the next pass
+    of the run binds it again, and draws what the first drew.  A pass of another run binds
+    its own again.  Checked by breaking it: a run that ignores ``bindings_epoch`` draws the
+    other texture's shadows here (the pixels differ) and binds no atlas."""
+    engine = _ring(ctx, 0)
+    capture = CaptureTarget(ctx, SIZE)
+    other = ctx.depth_texture((4, 4), data=np.zeros(16, np.float32).tobytes())
+    try:
+        output = Output(capture.framebuffer, SIZE)
+        engine.frame(DT, output)
+        renderer = engine.renderer
+        atlas = renderer.shadows.atlas
+        asked = []
+        real_bind = type(renderer.shadows).bind
+
+        def shadows_bind(shadows):
+            asked.append(1)
+            real_bind(shadows)
+        monkeypatch.setattr(type(renderer.shadows), "bind", shadows_bind)
+        spy = _BindSpy(monkeypatch)
+        run = object()
+        renderer.scene_pass.draw([engine.main_view], renderer.targets, run=run)
+        first = np.frombuffer(renderer.targets.color.read(), np.float16).copy()
+        assert np.isfinite(first).all() and first.max() > 0.05
+        assert len(asked) == 1
+        renderer.scene_pass.draw([engine.main_view], renderer.targets, run=run)
+        assert len(asked) == 1, "the run's second pass asked for its pass-wide bindings again"
+        np.testing.assert_array_equal(np.frombuffer(renderer.targets.color.read(), np.float16), first)
+        bind_texture(ctx, other, SHADOW_ATLAS_UNIT)  # another pass, between two levels
+        spy.binds.clear()
+        renderer.scene_pass.draw([engine.main_view], renderer.targets, run=run)
+        np.testing.assert_array_equal(np.frombuffer(renderer.targets.color.read(), np.float16), first)
+        assert len(asked) == 2
+        assert (atlas, SHADOW_ATLAS_UNIT) in spy.binds
+        renderer.scene_pass.draw([engine.main_view], renderer.targets, run=object())
+        assert len(asked) == 3  # another run: its own bindings
+    finally:
+        other.release()
+        capture.release()
+        engine.close()

@@ -130,8 +130,10 @@ def test_the_levels_draw_their_mirrors_unlit_and_every_claimed_pixel_is_composit
 
 def test_glass_in_front_of_a_mirror_keeps_every_mirror_shaded(ctx):
     """The sample level's ghost (alpha 0.7, seen only in mirrors) stands before the mirror
-    wall: in a mirror's view it blends over the other mirrors' own colour, so with anything
-    transparent drawn no mirror is unlit."""
+    wall, and its pond is a see-through mirror: the transparent slot's mirrors are drawn
+    with the opaque batches (the claims find their pixels; ScenePass._drawn_now), so no
+    mirror is unlit there, and the frame is the all-lit path's.  (Glass alone keeps them
+    unlit: tests/test_glass_over_reflection.py.)"""
     from tests.golden_scenes import HALL_POSES, _hall
 
     def place(engine: Engine) -> None:

@@ -290,6 +290,9 @@ def test_a_level_planned_from_the_same_rows_is_found_again_read_only(scene, monk
         return plan(self, *args, **kwargs)
     monkeypatch.setattr(view_plan.SurfaceTable, "_plan", counting)
     runner = scene(build, (96, 64))
+    # The planner's own keeping, on frames that draw the tree: a still frame would keep the
+    # whole tree and plan nothing (ReflectionSystem.keep_still_views, tests/test_kept_views.py).
+    runner.engine.reflection_system.keep_still_views = False
     runner.frame()
     first = runner.frame()
     assert runner.stats.reflection_views >= 3 and computed  # mirror in mirror in mirror

@@ -109,6 +109,8 @@ class World:
         # Components a hot write path reported this step, by kind and entity (``written``).
         self._written: dict[type, dict[int, Any]] = defaultdict(dict)
         self._closed = False
+        # ``change_count()`` when the last step ended, before its change sets were forgotten.
+        self.last_step_changes = 0
         self._use()
 
     # --- context -------------------------------------------------------------------------
@@ -368,6 +370,15 @@ class World:
                 found |= entities
         return found
 
+    def change_count(self) -> int:
+        """How many changes this step recorded so far: entries of the change sets (an entity
+        whose component of a kind was added, removed or written) and deletions.  Only grows
+        within a step, so two counts that agree say nothing changed between them (the reflect
+        stage's still frames: ``last_step_changes`` is the count a step ended with)."""
+        if self._closed:
+            self._check_open()
+        return sum(map(len, self._changed.values())) + len(self._deleted)
+
     def written(self, kind: type) -> dict[int, Any]:
         """Components of ``kind`` whose writes came through a hot path this step (Transform's
         glm position and rotation writes), by entity: the object each write was made on, so
@@ -408,6 +419,7 @@ class World:
         esper.process(dt)
         esper.clear_dead_entities()  # what systems deleted this frame is gone before the next
         self.frame_index += 1
+        self.last_step_changes = self.change_count()
         for entities in self._changed.values():
             entities.clear()
         for components in self._written.values():

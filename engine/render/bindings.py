@@ -53,6 +53,8 @@ pass of a game's own), calls it itself.
 """
 from __future__ import annotations
 
+import contextlib
+from collections.abc import Iterator
 from dataclasses import dataclass
 
 import moderngl
@@ -75,6 +77,7 @@ PROBE_UNIT = 7           # scene: the cube map of the batch's reflection probe; 
 PROBE2_UNIT = 9          # scene: the cube map of the batch's second probe (probe blending); composite (fallback): the
                          # draw's second
 HISTORY_UNIT = 10        # end images: the previous frame's main image (engine/render/end_images.py)
+SETTLE_IMAGE_UNIT = 2    # end images' settle check: this frame's finished main image (history at HISTORY_UNIT)
 PROBE_REST_UNIT = 10     # scene (PROBE_REST builds): the probe taking what the blend's weights leave (a curved
                          # object's own, probe_rules.probe_blend)
 NORMAL_UNIT = 8          # scene: the batch's normal map; composite (bumpy mirrors): the mirror's
@@ -132,9 +135,11 @@ def clip_glsl_defines() -> dict[str, str]:
             "CLIP_DISTANCE_COUNT": str(CLIP_DISTANCE_COUNT)}
 
 
-# Blending "over", alpha kept: the composite's (reflection x rate + own x (1 - rate)) and the
-# transparent slot's.
-BLEND_OVER = (moderngl.SRC_ALPHA, moderngl.ONE_MINUS_SRC_ALPHA, moderngl.ZERO, moderngl.ONE)
+# Blending "over": the composite's (reflection x rate + own x (1 - rate)) and the transparent
+# slot's.  Alpha is a level's coverage (premultiplied: 0 where nothing is drawn, which the
+# composite above fills with the sky), and over it too: a + dst x (1 - a), so the sky shows
+# behind something see-through in a reflection by 1 - a, not in full.
+BLEND_OVER = (moderngl.SRC_ALPHA, moderngl.ONE_MINUS_SRC_ALPHA, moderngl.ONE, moderngl.ONE_MINUS_SRC_ALPHA)
 
 
 @dataclass(frozen=True)
@@ -206,7 +211,8 @@ def _transition(known: int, wanted: int) -> tuple[tuple[str, object, bool], ...]
 class _StateCache:
     """What ``apply_pass_state`` last set on one context."""
 
-    __slots__ = ("fixed", "front_face", "rects_known", "blocks", "textures", "samplers")
+    __slots__ = ("fixed", "front_face", "rects_known", "blocks", "textures", "samplers", "epoch", "watched",
+                 "recording")
 
     def __init__(self) -> None:
         self.fixed = _UNKNOWN        # the number of the (flags, functions, clips) set
@@ -216,6 +222,12 @@ class _StateCache:
         self.blocks: dict[int, moderngl.Buffer | tuple[moderngl.Buffer, int, int]] = {}
         self.textures: dict[tuple[int, type], Bindable] = {}  # (unit, texture class) -> the texture bound
         self.samplers: dict[int, moderngl.Sampler] = {}  # unit -> the sampler object bound there (bind_sampler)
+        # ``watching``: the keys (a texture's (unit, class), a block's binding, a sampler's ("sampler",
+        # unit)) whose binding changing moves ``epoch`` on (as ``invalidate`` does), and those being
+        # recorded now (None: none)
+        self.epoch = 0
+        self.watched: set = set()
+        self.recording: set | None = None
 
 
 # False: every apply sets every piece of state, as before the cache (kept for the
@@ -237,6 +249,7 @@ def invalidate(ctx: moderngl.Context) -> None:
     overlay, a test scrambling state)."""
     cache = getattr(ctx, "_speculum_pass_state", None)
     if cache is not None:
+        cache.epoch += 1
         cache.fixed = _UNKNOWN
         cache.front_face = None
         cache.rects_known = False
@@ -259,11 +272,16 @@ def bind_texture(ctx: moderngl.Context, texture: Bindable, unit: int, keep_sampl
         cache = _cache(ctx)
     if cache.samplers and not keep_sampler and unit in cache.samplers:
         cache.samplers.pop(unit).clear(unit)  # the texture's own filter again
+        _changed(cache, ("sampler", unit))
     textures = cache.textures
     key = (unit, texture.__class__)
+    if cache.recording is not None:
+        cache.recording.add(key)
     if textures.get(key) is not texture or not CACHE_STATE:
         texture.use(unit)
         textures[key] = texture
+        if key in cache.watched:
+            cache.epoch += 1
 
 
 def bind_texture_now(ctx: moderngl.Context, texture: Bindable, unit: int) -> None:
@@ -273,8 +291,10 @@ def bind_texture_now(ctx: moderngl.Context, texture: Bindable, unit: int) -> Non
     cache = _cache(ctx)
     if unit in cache.samplers:
         cache.samplers.pop(unit).clear(unit)
+        _changed(cache, ("sampler", unit))
     texture.use(unit)
     cache.textures[unit, texture.__class__] = texture
+    _changed(cache, (unit, texture.__class__))
 
 
 def bind_sampler(ctx: moderngl.Context, sampler: moderngl.Sampler | None, unit: int) -> None:
@@ -284,10 +304,14 @@ def bind_sampler(ctx: moderngl.Context, sampler: moderngl.Sampler | None, unit: 
     pass binds with ``bind_sampler`` otherwise, or binds a texture on ``unit`` through
     ``bind_texture`` (which takes it off first, so no other pass is filtered by it).  Only
     this function binds sampler objects; ``forget_sampler`` before one is released."""
-    samplers = _cache(ctx).samplers
+    cache = _cache(ctx)
+    samplers = cache.samplers
+    if cache.recording is not None:
+        cache.recording.add(("sampler", unit))
     bound = samplers.get(unit)
     if bound is sampler and CACHE_STATE:
         return
+    _changed(cache, ("sampler", unit))
     if sampler is None:
         if bound is not None:
             bound.clear(unit)
@@ -300,9 +324,11 @@ def bind_sampler(ctx: moderngl.Context, sampler: moderngl.Sampler | None, unit: 
 def forget_sampler(ctx: moderngl.Context, sampler: moderngl.Sampler) -> None:
     """``sampler`` is about to be released: deleting a sampler object unbinds it from every
     unit it is bound to (glDeleteSamplers), so the record of it goes without a GL call."""
-    samplers = _cache(ctx).samplers
+    cache = _cache(ctx)
+    samplers = cache.samplers
     for unit in [unit for unit, bound in samplers.items() if bound is sampler]:
         del samplers[unit]
+        _changed(cache, ("sampler", unit))
 
 
 def bind_uniform_block(ctx: moderngl.Context, buffer: moderngl.Buffer, binding: int) -> None:
@@ -311,12 +337,17 @@ def bind_uniform_block(ctx: moderngl.Context, buffer: moderngl.Buffer, binding: 
     is remembered, so a released buffer whose GL name is reused is bound again).  With
     ``CACHE_STATE`` off it binds every time."""
     try:
-        blocks = ctx._speculum_pass_state.blocks
+        cache = ctx._speculum_pass_state
     except AttributeError:
-        blocks = _cache(ctx).blocks
+        cache = _cache(ctx)
+    blocks = cache.blocks
+    if cache.recording is not None:
+        cache.recording.add(binding)
     if blocks.get(binding) is not buffer or not CACHE_STATE:
         buffer.bind_to_uniform_block(binding)
         blocks[binding] = buffer
+        if binding in cache.watched:
+            cache.epoch += 1
 
 
 def bind_uniform_range(ctx: moderngl.Context, buffer: moderngl.Buffer, binding: int, offset: int,
@@ -328,12 +359,46 @@ def bind_uniform_range(ctx: moderngl.Context, buffer: moderngl.Buffer, binding: 
     object and is bound).  The record then holds (buffer, offset, size), never the buffer
     alone, so ``bind_uniform_block`` binds its whole buffer again.  With ``CACHE_STATE`` off
     it binds every time."""
-    blocks = _cache(ctx).blocks
+    cache = _cache(ctx)
+    blocks = cache.blocks
+    if cache.recording is not None:
+        cache.recording.add(binding)
     bound = blocks.get(binding)
     if bound.__class__ is not tuple or bound[0] is not buffer or bound[1] != offset or bound[2] != size \
             or not CACHE_STATE:
         buffer.bind_to_uniform_block(binding, offset=offset, size=size)
         blocks[binding] = (buffer, offset, size)
+        if binding in cache.watched:
+            cache.epoch += 1
+
+
+def _changed(cache: _StateCache, key: object) -> None:
+    """A binding of ``key`` changed: ``epoch`` moves on if it is watched."""
+    if key in cache.watched:
+        cache.epoch += 1
+
+
+def bindings_epoch(ctx: moderngl.Context) -> int:
+    """A number that stays the same while no binding ``watching`` recorded changes (texture,
+    uniform block or sampler object; ``invalidate`` moves it on too): a pass that bound a
+    set of things, and finds the same number at its next run (with the same things to
+    bind), can leave them as they are (``ScenePass``'s pass-wide bindings, a reflection
+    level after another: the claims between bind other units)."""
+    return _cache(ctx).epoch
+
+
+@contextlib.contextmanager
+def watching(ctx: moderngl.Context) -> Iterator[None]:
+    """Inside: every binding asked for (``bind_texture``, ``bind_uniform_block``,
+    ``bind_uniform_range``, ``bind_sampler``), bound now or already in place, is watched from
+    then on (``bindings_epoch``)."""
+    cache = _cache(ctx)
+    cache.recording = recorded = set()
+    try:
+        yield
+    finally:
+        cache.recording = None
+        cache.watched |= recorded
 
 
 def set_front_face(ctx: moderngl.Context, front_face: str) -> None:

@@ -19,14 +19,21 @@ after a quick turn): the end view marks it (``NO_END_IMAGE``,
 ``shaders/include/end_image.glsl``), the composite leaves it alone (stretching the image's
 edge over it drew streaks) and the fallback fills it.
 Probe faces' trees draw none (their image is not the main view's).
+
+So a still view's image changes a little every frame for a while, and its tree may not be
+kept as it was drawn until it settles: ``keep(..., compare=True)`` (a frame whose views show
+what the last frame's showed) first counts the pixels where the finished image differs
+from the one kept (``shaders/history_same.frag`` in a samples query, ``settled``: read at
+the next frame, nothing waits now); none, and the next frame's tree would repeat this one's.
 """
 from __future__ import annotations
 
 import moderngl
 from pyglm import glm
 
-from engine.render.bindings import HISTORY_UNIT, NODE_UNIT, PassState, apply_pass_state, bind_texture
+from engine.render.bindings import HISTORY_UNIT, NODE_UNIT, SETTLE_IMAGE_UNIT, PassState, apply_pass_state, bind_texture
 from engine.render.gpu import Gpu
+from engine.render.mirror_passes import give_samples_queries, take_samples_queries
 from engine.render.targets import RenderTargets, release_framebuffer
 from engine.render.views import View
 
@@ -48,6 +55,11 @@ class EndImages:
         self._history_fbo: moderngl.Framebuffer | None = None
         self.view_proj: glm.mat4 | None = None   # the previous frame's main view-projection
         self.seen: frozenset[int] = frozenset()  # surfaces with a view (or end view) last frame
+        # The settle check (keep(compare=True)): its program, a depth-only target of the
+        # image's size to run it in (nothing is written), and its query (None: not made yet).
+        self._same: tuple[moderngl.VertexArray, moderngl.Query] | None = None
+        self._same_target: tuple[moderngl.Renderbuffer, moderngl.Framebuffer] | None = None
+        self.compared: moderngl.Query | None = None  # the last keep's count (None: it compared nothing)
 
     def ready(self, size: tuple[int, int]) -> bool:
         """Whether a previous frame of this size is kept."""
@@ -79,10 +91,15 @@ class EndImages:
         renderer.stats.passes += 1
         renderer.checkpoint("end images")
 
-    def keep(self, root_targets: RenderTargets, root: View, seen: frozenset[int]) -> None:
+    def keep(self, root_targets: RenderTargets, root: View, seen: frozenset[int], compare: bool = False) -> None:
         """This frame's finished main image (after every composite), its view-projection and
-        the surfaces that had a view: what the next frame's end views read."""
+        the surfaces that had a view: what the next frame's end views read.  With
+        ``compare``, where the image kept is of the same size, camera and surfaces, first
+        count the pixels where this one differs from it (``compared``, ``settled``)."""
         size = root_targets.size
+        self.compared = None
+        if compare and self.ready(size) and self.view_proj == root.view_proj and self.seen == seen:
+            self._compare(root_targets)
         if self.history is None or self.history.size != size:
             self._release_history()
             self.history = self.ctx.texture(size, 4, dtype="f2")
@@ -91,6 +108,39 @@ class EndImages:
         self.ctx.copy_framebuffer(self._history_fbo, root_targets.color_framebuffer)  # its one attachment: colour
         self.view_proj = root.view_proj
         self.seen = seen
+
+    def _compare(self, root_targets: RenderTargets) -> None:
+        """The pixels of ``root_targets``' colour that differ from the history, counted in
+        the settle query (a full-screen pass into a depth-only target, no depth test)."""
+        ctx = self.ctx
+        if self._same is None:
+            program = self.renderer.shaders.program("fullscreen.vert", "history_same.frag")
+            self._same = (ctx.vertex_array(program, []), take_samples_queries(ctx, 1)[0])
+        vao, query = self._same
+        size = root_targets.size
+        if self._same_target is None or self._same_target[0].size != size:
+            if self._same_target is not None:
+                release_framebuffer(self._same_target[1])
+                self._same_target[0].release()
+            depth = ctx.depth_renderbuffer(size)
+            self._same_target = (depth, ctx.framebuffer(depth_attachment=depth))
+        self._same_target[1].use()
+        apply_pass_state(ctx, _END, (0, 0, *size))
+        bind_texture(ctx, root_targets.color, SETTLE_IMAGE_UNIT)
+        bind_texture(ctx, self.history, HISTORY_UNIT)
+        program = vao.program
+        self.uniforms.set(program, "image", SETTLE_IMAGE_UNIT)
+        self.uniforms.set(program, "history", HISTORY_UNIT)
+        with query:
+            vao.render(moderngl.TRIANGLES, vertices=3)
+        self.compared = query
+        self.renderer.checkpoint("end images' settle check")
+
+    @staticmethod
+    def settled(query: moderngl.Query) -> bool:
+        """Whether a compare (``compared``, of an earlier frame: the GPU has drawn it) found
+        no pixel that differs."""
+        return query.samples == 0
 
     def forget(self) -> None:
         """No previous frame (a tree without end views this frame): the next starts closed."""
@@ -106,3 +156,11 @@ class EndImages:
     def release(self) -> None:
         self._release_history()
         self.vao.release()
+        if self._same is not None:
+            self._same[0].release()
+            give_samples_queries(self.ctx, [self._same[1]])  # (moderngl cannot release a query)
+            self._same = None
+        if self._same_target is not None:
+            release_framebuffer(self._same_target[1])
+            self._same_target[0].release()
+            self._same_target = None

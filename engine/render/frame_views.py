@@ -3,14 +3,17 @@ view and the targets it was drawn into.
 
 The main stage draws the active camera's view into level 0 of the main view tree's
 ``LevelStack`` (the renderer owns the stack: its GPU targets live as long as the renderer)
-and publishes both here; the reflect stage roots its view tree at ``main`` in ``levels``
-and composites into level 0, and the present stage presents level 0.  A game picks through
-the last frame's main view (``main.view_proj``), as mirror beam does.
+and publishes both here, with the scene options it drew it with; the reflect stage roots its
+view tree at ``main`` in ``levels``, composites into level 0 and draws the main view's
+transparent slot there (``ScenePass.draw_transparent``), and the present stage presents
+level 0.  A game picks through the last frame's main view (``main.view_proj``), as mirror
+beam does.
 """
 from __future__ import annotations
 
 from dataclasses import dataclass
 
+from engine.render.scene_pass import TREE_ROOT, SceneOptions
 from engine.render.targets import LevelStack, RenderTargets
 from engine.render.views import View
 
@@ -25,6 +28,9 @@ class FrameViews:
 
     main: View | None = None
     levels: LevelStack | None = None
+    # What ``main`` was drawn with: the root of the reflect stage's tree, which draws its
+    # transparent slot with them once the reflections are composited into level 0.
+    options: SceneOptions = TREE_ROOT
 
     @property
     def image(self) -> RenderTargets | None:

@@ -115,6 +115,7 @@ class Gpu:
         # (mesh, texture, probe, transparent entity, normal map, emissive map, metallic-roughness map) -> batch
         self.batches: dict[tuple[int, int, int, int, int, int, int], InstanceBatch] = {}
         self._draw_order: list[InstanceBatch] = []   # non-empty batches, smallest extent first
+        self._transparent: list[InstanceBatch] = []  # the non-empty transparent ones (found with it)
         self._order_stale = True
         self.sky = flat_cube(ctx, BACKGROUND)
         self.stats = RenderStats()  # the frame's, while a frame runs (Engine.frame gives it)
@@ -142,6 +143,17 @@ class Gpu:
         self.scene_only: list[InstanceBatch] | None = None
         # A batch was made since prepare_programs last ran (Engine.frame calls it then).
         self.needs_preparing = False
+        # What the views show, as a version (``note_scene_change``): moved on by every
+        # upload or redraw that changes what a scene pass, a fallback or a composite draws.
+        self.scene_version = 0
+
+    def note_scene_change(self) -> None:
+        """Something a view shows changed on the GPU (instance rows, a batch made or dropped,
+        the Lights block, the sky, the irradiance table, a shadow map or its block, a probe's
+        cube): ``scene_version`` moves on, so the main view tree keeps no level drawn before
+        (``ReflectionSystem.keep_still_views``).  Every place that writes such data calls
+        it; one missed is a stale reflection, so a doubtful write calls it too."""
+        self.scene_version += 1
 
     def normal_map_texture(self, normal_map: TextureData) -> moderngl.Texture | None:
         """The uploaded normal map of ``normal_map`` while a batch draws with it (a mirror's
@@ -180,17 +192,24 @@ class Gpu:
         if self.scene_only is not None:
             return self.scene_only
         if self._order_stale:
-            self._draw_order = sorted((b for b in self.batches.values() if b.count and not b.transparent),
-                                      key=lambda b: b.extent)
-            self._order_stale = False
+            self._sort_batches()
         return self._draw_order
 
     def transparent_batches(self) -> list[InstanceBatch]:
-        """Non-empty batches drawn in the scene pass's transparent slot (none until a
-        material is transparent: refraction fills the slot)."""
+        """Non-empty batches drawn in the scene pass's transparent slot (a material's alpha
+        below 1), found with the opaque ones' order (asked by each view tree's levels, so
+        kept, not looked for every time)."""
         if self.scene_only is not None:
             return []
-        return [b for b in self.batches.values() if b.count and b.transparent]
+        if self._order_stale:
+            self._sort_batches()
+        return self._transparent
+
+    def _sort_batches(self) -> None:
+        drawn = [b for b in self.batches.values() if b.count]
+        self._draw_order = sorted((b for b in drawn if not b.transparent), key=lambda b: b.extent)
+        self._transparent = [b for b in drawn if b.transparent]
+        self._order_stale = False
 
     def checkpoint(self, name: str) -> None:
         """In debug mode, raise ``GLPassError`` naming pass ``name`` if it left a GL error."""

@@ -209,6 +209,10 @@ class InstanceBatch:
         # Drawn in the scene pass's transparent slot (blended, farthest first) instead of
         # with the opaque batches: a material whose alpha is below 1 (Renderer.batch_for).
         self.transparent = False
+        # A transparent batch whose entity is a mirror or portal, switched off or not (water):
+        # a view tree's surface, drawn before its claims and fallbacks, which find its pixels
+        # by its id (scene_pass._see_through_surface; the extract stage sets it).
+        self.surface = False
         # A generated checker texture drawn analytically (scene.frag's CHECKER build): its
         # cells across the UV square, and the linear colours of the cells whose integer
         # coordinates sum even and odd (``checker_look``); None: sampled as any texture.

@@ -219,6 +219,7 @@ class IrradianceTable:
         if kept != self._boxes:
             self._boxes = kept
             self._stale = True
+            self.renderer.note_scene_change()
 
     def _row_for(self, owner: int) -> int | None:
         row = self.rows.get(owner)
@@ -229,6 +230,7 @@ class IrradianceTable:
                 return None
             row = self.rows[owner] = free
             self._stale = True
+            self.renderer.note_scene_change()
         return row
 
     # --- the GPU projection ----------------------------------------------------------------------
@@ -254,6 +256,7 @@ class IrradianceTable:
         vao.render(moderngl.TRIANGLES, vertices=3)
         bind_texture(self.ctx, self.renderer.sky, CUBE_MIP_UNIT)  # not left bound where the next capture draws into it
         self.projections += 1
+        self.renderer.note_scene_change()
         self.renderer.checkpoint("probe irradiance projection")
         return True
 
@@ -284,6 +287,7 @@ class IrradianceTable:
             if block != self._block:
                 self.ubo.write(block)
                 self._block = block
+                self.renderer.note_scene_change()
             count = min(len(boxes), MAX_IRRADIANCE_PROBES)
             if count and not self._count:
                 self.renderer.needs_preparing = True  # the AMBIENT_PROBES builds, made before a mirror needs them
@@ -305,6 +309,7 @@ class IrradianceTable:
         """Probe ``owner`` is gone: its row is free (and no box names it)."""
         if self.rows.pop(owner, None) is not None:
             self._stale = True
+            self.renderer.note_scene_change()
 
     def release(self) -> None:
         if self._vao is not None:

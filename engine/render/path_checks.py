@@ -160,6 +160,7 @@ class PathChecks:
             verdict = PathVerdict("refused", problem) if problem else PathVerdict("verified")
         finally:
             self._running.discard(path)
+            self.renderer.note_scene_change()  # its own scene drew with the shared state: redraw after
         self.verdicts[path] = verdict
         if verdict.status == "refused":
             info = self.ctx.info

@@ -15,8 +15,6 @@ layout (``M @ x``); glm's and GL's are column-major, so they are transposed at t
 """
 from __future__ import annotations
 
-import functools
-
 import numpy as np
 from pyglm import glm
 
@@ -243,6 +241,24 @@ _ROOT_COLUMNS = np.concatenate([np.arange(X_COLUMNS.start, X_COLUMNS.start + 19 
                                 (X_COLUMNS.start + X0 + np.arange(8)[:, None] * 5 + np.arange(4)[None, :]).reshape(-1)])
 
 
+class _kept:  # noqa: N801 (a decorator, named as functools.cached_property is)
+    """``functools.cached_property`` without its lock: Python 3.11's takes a lock at every
+    first read, and a level's candidates are read for a few arrays each (about 30 first
+    reads a frame at portal depth 8).  The value goes into the instance's ``__dict__``, which
+    later reads find first (a descriptor without ``__set__``)."""
+
+    def __init__(self, function) -> None:
+        self.function = function
+        self.name = function.__name__
+        self.__doc__ = function.__doc__
+
+    def __get__(self, instance, owner=None):
+        if instance is None:
+            return self
+        value = instance.__dict__[self.name] = self.function(instance)
+        return value
+
+
 class Candidates:
     """A level's candidate views, before its claims say which have pixels: one row each of
     ``LevelRows`` (claim order), read through views of it made when first asked for (a
@@ -260,27 +276,27 @@ class Candidates:
     def __len__(self) -> int:
         return len(self.rows.data)
 
-    @functools.cached_property
+    @_kept
     def parent(self) -> np.ndarray:
         """(k,) row of the parent in the level above."""
         return self.rows.data.view(np.int64)[:, _PARENT]
 
-    @functools.cached_property
+    @_kept
     def surface(self) -> np.ndarray:
         """(k,) row in the SurfaceTable."""
         return self.rows.data.view(np.int64)[:, _SURFACE]
 
-    @functools.cached_property
+    @_kept
     def scissor(self) -> np.ndarray:
         """(k, 4) int x, y, w, h in the level's pixels."""
         return self.rows.data.view(np.int64)[:, SCISSOR]
 
-    @functools.cached_property
+    @_kept
     def blocks(self) -> np.ndarray:
         """(k, CAMERA_BLOCK_BYTES / 4) float32: the packed Camera blocks."""
         return self.rows.data[:, BLOCK].view(np.float32)
 
-    @functools.cached_property
+    @_kept
     def fade(self) -> np.ndarray:
         """(k,) the reflection's weight (Mirror fades; 1: none)."""
         return self.rows.data[:, FADE]

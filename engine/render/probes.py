@@ -68,6 +68,8 @@ AUTO_TIMED_CAPTURES = 3  # timed captures of each path before "auto" chooses (me
 # rasteriser, where anisotropic filtering is most of a view's cost: a probe is a
 # reflection, seen blurred by its mips and through a curved surface).
 FACE = SceneOptions(reflection_filter=True)
+FACE_TREE = SceneOptions(reflection_filter=True, transparent=False)  # a face rooting a view tree (it draws the
+                                                                      # face's transparent slot after its composites)
 # A face drawn in part: cleared within its scissor first (the scene pass's clear takes the whole face).
 FACE_PART = SceneOptions(clear=False, reflection_filter=True)
 FACE_CLEAR = PassState()
@@ -646,6 +648,7 @@ class ProbeCaptures:
             texture = self.ctx.texture_cube((resolution, resolution), 4, dtype="f2")
             texture.filter = (moderngl.LINEAR_MIPMAP_LINEAR, moderngl.LINEAR)
             cube = self.cubes[key] = ProbeCube(texture, resolution)
+            self.renderer.note_scene_change()
         return cube
 
     def face_views(self, key: int, faces: Iterable[int], position: glm.vec3,
@@ -702,8 +705,11 @@ class ProbeCaptures:
         path = self.paths.draw(draws, len(faces) == 6 and not sees_surfaces and not kept and not unchanged,
                                settings.resolution)
         cube = self.cubes[key]
+        box = projection_box(position, settings)
+        if cube.position != tuple(position) or cube.box != box:
+            self.renderer.note_scene_change()  # where its lookups are parallax-corrected from
         cube.position = tuple(position)
-        cube.box = projection_box(position, settings)
+        cube.box = box
         if settings.influence is not None and self._projected.get(key) != self._versions.get(key, 0):
             # Its irradiance, from the new mip chain (engine/render/irradiance.py); a capture
             # that kept every face and its chain leaves the row as it was projected.
@@ -768,9 +774,11 @@ class ProbeCaptures:
                 else:
                     levels = self._stacks.setdefault(resolution, LevelStack(self.ctx))
                     targets = levels.get(0, view.size)
-                    self.scene_pass.draw([view], targets, FACE)
                     if trees:
-                        self.tree.render(view, levels, surfaces, TreeSettings(depth_cap=depth), blends)
+                        self.scene_pass.draw([view], targets, FACE_TREE)
+                        self.tree.render(view, levels, surfaces, TreeSettings(depth_cap=depth), blends, FACE_TREE)
+                    else:
+                        self.scene_pass.draw([view], targets, FACE)
                     renderer.raw_gl.copy_to_cube_face(targets.framebuffer, cube.texture, face, SCRATCH_UNIT)
                     renderer.checkpoint(f"probe face {face} copy")
                 if face in sky_only:
@@ -800,6 +808,7 @@ class ProbeCaptures:
             drawn.add(-1)
         if drawn:
             self._versions[key] = self._versions.get(key, 0) + 1
+            renderer.note_scene_change()
 
     def _draw_part(self, view: View, target: FaceTarget, rect: tuple[int, int, int, int]) -> None:
         """Draw the part ``rect`` (a scissor rectangle) of a face, the rest left as it is: the
@@ -825,6 +834,7 @@ class ProbeCaptures:
     def written_elsewhere(self, key: int) -> None:
         """Probe ``key``'s cube was written by something other than a capture (a test's
         sentinel, a tool): no face is kept as it is at its next capture, nor its mips."""
+        self.renderer.note_scene_change()
         self._forget_faces(key)
         self._mips_stale.pop(key, None)
 
@@ -972,6 +982,7 @@ class ProbeCaptures:
             cube.prefilter = self.mips.build(key, cube.texture, prefilter)
             self._mips_stale[key] = set()
         self.renderer.stats.probe_faces += 6
+        self.renderer.note_scene_change()
 
     def read_face(self, key: int, face: int) -> np.ndarray:
         """Face ``face`` of probe ``key``'s cube map, linear RGB float32 (rows in texture order:
@@ -982,6 +993,7 @@ class ProbeCaptures:
         return data[..., :3].astype(np.float32)
 
     def drop(self, key: int) -> None:
+        self.renderer.note_scene_change()
         self._forget_faces(key)
         self._versions.pop(key, None)
         self._views.pop(key, None)

@@ -152,6 +152,7 @@ class Renderer(Gpu):
             batch.transparent = bool(transparent_entity)
             self._order_stale = True
             self.needs_preparing = True
+            self.note_scene_change()
         return batch
 
     def prepare_programs(self, reflections: bool, level_scale: float | None = None) -> int:
@@ -178,6 +179,7 @@ class Renderer(Gpu):
             return
         del self.batches[batch.key]
         self._order_stale = True
+        self.note_scene_change()
         self._note_dropped(batch.take_changed_box())
         batch.release()
         key = batch.key
@@ -234,6 +236,7 @@ class Renderer(Gpu):
         old = self.sky
         self.sky = upload_cube(self.ctx, faces) if faces is not None else flat_cube(self.ctx, BACKGROUND)
         old.release()
+        self.note_scene_change()
 
     def resource_counts(self) -> dict[str, int]:
         """Live GL resources this renderer owns, by kind (soak and churn runs check that they
@@ -266,6 +269,8 @@ class Renderer(Gpu):
         self.stats.uploaded_bytes += sent
         if self._order_stale:
             self.casters_version += 1
+        if sent or self._order_stale:
+            self.note_scene_change()
         return sent
 
     def _note_dropped(self, box: tuple[np.ndarray, np.ndarray] | None) -> None:
@@ -297,6 +302,7 @@ class Renderer(Gpu):
 
     def set_lights(self, block: bytes) -> None:
         self.lights_ubo.write(block)
+        self.note_scene_change()
 
     def present(self, output: moderngl.Framebuffer, size: tuple[int, int], tonemap: Tonemap | None = None,
                 bloom: Bloom | None = None, curve: str | None = None, camera: int | None = None,

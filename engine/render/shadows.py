@@ -147,6 +147,7 @@ class ShadowMaps:
             return
         release_framebuffer(self._atlas_framebuffer)
         self.atlas.release()
+        self.renderer.note_scene_change()
         self.atlas = self._make_atlas((2 * tile, 2 * tile))
         self._atlas_framebuffer = self.ctx.framebuffer(depth_attachment=self.atlas)
         self.tile = tile
@@ -222,6 +223,7 @@ class ShadowMaps:
         (llvmpipe runs every branch's code: a third of such a frame at 640x360 went to
         lookups that returned 1)."""
         directional, point = self._casting
+        self.renderer.note_scene_change()
         self.program_defines = tuple((name, value) for name, value, on in (
             ("DIRECTIONAL_SHADOWS", str(directional), directional > 0), ("POINT_SHADOWS", str(point), point > 0),
             ("SHADOW_SINGLE_TAP", "1", self._filter == "single")) if on)
@@ -310,6 +312,8 @@ class ShadowMaps:
         """How many virtual lights shine (slots 0 to count - 1).  ``virtual_shining`` follows
         it: the scene pass builds its programs with the virtual lights' loop only while one
         shines (llvmpipe runs a loop's body for every pixel even when it has nothing to do)."""
+        if self.virtual_block[:4].view(np.int32)[0] != count:
+            self.renderer.note_scene_change()
         self.virtual_block[:4].view(np.int32)[0] = count
         self.virtual_shining = count > 0
 
@@ -345,15 +349,20 @@ class ShadowMaps:
 
     def keep_point(self, slot: int, light_index: int) -> None:
         """Point light ``light_index`` reads cube ``slot`` as drawn before."""
+        if self._slots[light_index] != slot or self._cube_lights[slot] != light_index:
+            self.renderer.note_scene_change()
         self._slots[light_index] = slot
         self._cube_lights[slot] = light_index
 
     def clear_points(self) -> None:
         """No point light casts (each drawn again sets its own slot)."""
+        if (self._slots >= 0).any() or (self._cube_lights >= 0).any():
+            self.renderer.note_scene_change()
         self._slots[:] = -1
         self._cube_lights[:] = -1
 
     def forget_point(self, light_index: int) -> None:
+        self.renderer.note_scene_change()
         slot = self._slots[light_index]
         if slot >= 0 and self._cube_lights[slot] == light_index:
             self._cube_lights[slot] = -1
@@ -412,6 +421,7 @@ class ShadowMaps:
         """Every opaque batch into the bound map, from ``view`` (None: the Camera block bound already)."""
         renderer = self.renderer
         ctx = self.ctx
+        renderer.note_scene_change()  # a map drawn again: what the views' shadows read
         if view is not None:
             renderer.bind_view(view)
         ctx.polygon_offset = SLOPE_BIAS
@@ -424,6 +434,7 @@ class ShadowMaps:
             ctx.polygon_offset = (0.0, 0.0)
 
     def upload(self) -> None:
+        self.renderer.note_scene_change()
         self.ubo.write(self.block.tobytes())
         base = 16 * MAX_DIRECTIONAL_LIGHTS
         taps = np.flatnonzero(self.block[base + 3:base + 4 * MAX_DIRECTIONAL_LIGHTS:4])  # the casting slots
@@ -445,6 +456,7 @@ class ShadowMaps:
         bind_uniform_block(self.ctx, self.virtual_ubo, VIRTUAL_LIGHTS_BINDING)
 
     def _drop_cube(self, slot: int) -> None:
+        self.renderer.note_scene_change()
         for framebuffer in self._face_framebuffers.pop(slot, []):
             release_framebuffer(framebuffer)
         for table in (self.cubes, self._face_depth):

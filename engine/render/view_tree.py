@@ -28,13 +28,22 @@ and portals:
               faded out, past the depth limits without an end image, a mirror switched off)
               shows the probe's or the sky's reflection at its reflect rate, tint and
               roughness (``MirrorPasses.draw_fallbacks``), as does the faded share of a partly
-              faded mirror and an end view's pixel its image does not hold.
+              faded mirror and an end view's pixel its image does not hold; then the
+              level's transparent slot (``ScenePass.draw_transparent``; the root's too, at
+              level 0), which its views were drawn without (``SceneOptions.transparent``):
+              what is see-through blends over the reflections behind it, as over anything
+              else behind it, before the level is composited into the one above.
 
 Levels are the size of the root's targets (times the largest resolution_scale of their
 surfaces), so memory is bounded by (levels x one root image), however many surfaces.
 Limits, each a setting and each reported in ``RenderStats`` when reached: the depth cap
 (``TreeSettings.depth_cap``, at most ``MAX_TREE_DEPTH``) and an optional view budget per
 level (``TreeSettings.level_budget``: the views with the most claimed pixels are kept).
+
+A tree that ``remember``s (the main view's) leaves what its render did as a ``KeptTree``;
+on a frame whose views show nothing new (the reflect stage decides:
+``systems/reflection_system.py``) ``keep`` does only what the root, drawn anew each frame,
+needs again (its fallbacks, level 1's composite) and levels 1 and below stay as they are.
 """
 from __future__ import annotations
 
@@ -59,12 +68,13 @@ from engine.render.mirror_passes import (
     Fallback,
     MirrorPasses,
     PreparedComposites,
+    PreparedFallbacks,
     give_samples_queries,
     surface_look,
     take_samples_queries,
 )
 from engine.render.plan_rows import ROW, Candidates, LevelRows
-from engine.render.scene_pass import REFLECTION_LEVEL, SceneOptions, ScenePass, shading_replaced
+from engine.render.scene_pass import REFLECTION_LEVEL, TREE_ROOT, SceneOptions, ScenePass, shading_replaced
 from engine.render.surface_table import NO_BLENDS, SurfaceBlends
 from engine.render.targets import LevelStack, RenderTargets
 from engine.render.view_plan import SurfaceTable, _mat, level_rects
@@ -81,7 +91,7 @@ MIN_LEVEL_SCALE = 0.25  # the lowest resolution factor the pixel budget draws a 
 # "auto" is exact on a software rasteriser (the CPU draws anyway: waiting costs nothing and
 # the counts save views) and predicted on a GPU.
 VISIBILITY_MODES = ("auto", "exact", "predicted")
-_BATCHED = SceneOptions(clear=False, masked=True, sky=False, batched=True, reflection_filter=True)
+_BATCHED = SceneOptions(clear=False, masked=True, sky=False, batched=True, reflection_filter=True, transparent=False)
 
 
 @dataclass(frozen=True)
@@ -166,6 +176,31 @@ class ReflectionView:
 
 
 @dataclass
+class KeptTree:
+    """What a tree's last render left for a frame that keeps its levels (``ViewTree.keep``):
+    the targets it drew into (levels 0 to its deepest, each as it was), what it did into the
+    root (the root's own fallbacks, then level 1 composited over them), and the counts it
+    added to the frame's report and budget ledger, added again by a kept frame (a probe face
+    drawn after it spends the same budget either way)."""
+
+    result: TreeResult
+    targets: tuple[RenderTargets, ...]
+    composite: PreparedComposites | None               # level 1 into the root (None: no views)
+    fallbacks: tuple[RenderTargets | None, PreparedFallbacks] | None  # the root's own, with level 1
+    spent: tuple[int, int, int, int, int]              # views, pixels, cut, downscaled, fallbacks
+    # Nothing of it depends on last frame (exact visibility, or predicted from last frame's
+    # counts with no view drawn unseen: a first or cut frame's tree is not the one the next
+    # frame draws; and no end view drawn, or ``history``: end views drawn from an image the
+    # settle check may find this one equal to).
+    settled: bool
+    history: moderngl.Query | None = None  # the settle check of its end images (EndImages.compared)
+    ends: tuple | None = None  # the end images' state it was drawn with (_ends_state): the same, or redraw
+
+
+_LEDGER = ("views_spent", "pixels_spent", "views_cut", "levels_downscaled", "reflection_fallbacks")
+
+
+@dataclass
 class _Level:
     """One level of a tree as planned, and what its GL half reads: the claims of its
     candidates, the views kept, the end views, and its composite."""
@@ -194,6 +229,7 @@ class _Level:
     children: list[ReflectionView] = field(default_factory=list)
     claim_keys: list[tuple[int, ...]] = field(default_factory=list)
     unlit: frozenset[int] = frozenset()            # mirrors its views draw unlit (shading_replaced)
+    options: SceneOptions = REFLECTION_LEVEL       # what its views were drawn with (their transparent slot's)
 
 
 @dataclass
@@ -227,6 +263,7 @@ class _Walk:
     blends: Mapping[int, ProbeBlend] = field(default_factory=dict)      # the fallbacks' probes (SurfaceBlends)
     triangle_count: int | None = None        # what a scene pass submits (triangles(): counted once, if asked)
     chain: ChainBoxes | None = None          # the planned level's claims' bounds (claim_cull), for the next
+    root_fallbacks: tuple[RenderTargets | None, PreparedFallbacks] | None = None  # drawn into the root (KeptTree)
 
     def triangles(self) -> int:
         """The triangles a scene pass submits, counted at the first level that asks (a level
@@ -262,18 +299,36 @@ class ViewTree:
         # (the table and pixel budget they were found for, the set: the same at every depth)
         self._unlit: tuple[tuple, frozenset[int]] = ((None, False), frozenset())
         self._level_options: dict[tuple, SceneOptions] = {}  # a level's options with its unlit mirrors
+        # With ``remember`` (the main view's tree), what the last render left (``KeptTree``),
+        # for a frame whose views show nothing new (``keep``); None after any other render.
+        self.remember = False
+        self.kept: KeptTree | None = None
+        # The next render compares its finished image with the end images' history (the
+        # reflect stage sets it where the frame's views show what the last frame's did).
+        self.check_history = False
 
     def render(self, root: View, levels: LevelStack, surfaces: SurfaceTable,
-               settings: TreeSettings = TreeSettings(), blends: SurfaceBlends = NO_BLENDS) -> TreeResult:
-        """Draw every level below ``root`` (already drawn into ``levels[0]``) and composite
-        them: the module's five steps, a level at a time.  A surface that gets no view shows
-        the probes ``blends`` gives it (the extract stage's), else the sky."""
+               settings: TreeSettings = TreeSettings(), blends: SurfaceBlends = NO_BLENDS,
+               root_options: SceneOptions = TREE_ROOT) -> TreeResult:
+        """Draw every level below ``root`` (already drawn into ``levels[0]`` with
+        ``root_options``, its transparent slot left to the tree) and composite them: the
+        module's five steps, a level at a time, each level's transparent slot drawn once the
+        level below is composited into it (the root's last).  A surface that gets no view
+        shows the probes ``blends`` gives it (the extract stage's), else the sky."""
+        if root_options.transparent:
+            raise ValueError("ViewTree.render: the root must be drawn with SceneOptions(transparent=False): the "
+                             "tree draws its transparent slot over the reflections composited into it")
         root_node = ReflectionView(0, 0, root, (0, 0, *root.size))
         result = TreeResult([root_node], set())
+        self.kept = None
         if not surfaces.states:  # no mirror or portal anywhere: the root is the whole tree
             if self.ends is not None:
                 self.ends.forget()
+            self.scene_pass.draw_transparent([root], levels[0], root_options)
             return result
+        stats = self.renderer.stats
+        ledger = tuple(getattr(stats, name) for name in _LEDGER) if self.remember else None
+        ends_before = self._ends_state(root.size) if self.remember else None
         walk = self._start(root, root_node, surfaces, settings, result)
         walk.blends = blends.by_surface
         candidates = self._plan(walk, first_index=1)                  # 1. plan the first level
@@ -282,17 +337,68 @@ class ViewTree:
             if step is None:
                 break
             if walk.exact:
-                self._draw_level(step, root)                          # 4. draw, level by level
+                self._draw_level(step, root, walk)                    # 4. draw, level by level
             candidates = self._descend(walk, step)                    # 1. plan the next level
         if not walk.exact:  # predicted: the whole tree, planned, claimed and drawn in one run (2, 4)
             for step in walk.steps:
                 self._claim(surfaces, step)  # (a last level without views still counts its claims)
                 if step.composite is not None:
-                    self._draw_level(step, root)
+                    self._draw_level(step, root, walk)
         self._note_cap(walk)
-        self._composite(walk, levels)                                 # 5. composite
+        self._composite(walk, levels, root_options)                   # 5. composite
         self._keep_end_images(walk, levels)
+        if ledger is not None:
+            history = self.ends.compared if result.end_views and self.ends is not None else None
+            self.kept = KeptTree(result, (levels[0], *(step.targets for step in walk.steps)),
+                                 walk.steps[0].prepared if walk.steps else None, walk.root_fallbacks,
+                                 tuple(getattr(stats, name) - before for name, before in zip(_LEDGER, ledger,
+                                                                                             strict=True)),
+                                 (not result.end_views or history is not None)
+                                 and (walk.exact or bool(walk.record.seen))
+                                 and not any(node.unseen for node in result.views), history, ends_before)
         return result
+
+    def _ends_state(self, size: tuple[int, int]) -> tuple | None:
+        """What end views would be drawn from: whether an image is kept, the surfaces it
+        shows, its camera (a render that finds them other than its own left them draws other
+        end views, or any at all, next frame)."""
+        ends = self.ends
+        if ends is None:
+            return None
+        return ends.ready(size), ends.seen, ends.view_proj
+
+    def keep(self, levels: LevelStack, root: View | None = None,
+             root_options: SceneOptions = TREE_ROOT) -> TreeResult | None:
+        """The last render's tree again without drawing it: its levels 1 and below hold what
+        they held (their images already hold the deeper levels' composites, fallbacks, end
+        views and their own transparent slots), and only what the root needs again is done
+        (the root is drawn anew each frame, with ``root_options``): its own fallbacks, then
+        level 1 composited over them, then its transparent slot (``root``'s: the kept
+        render's root view where None).  The frame's report and ledger get the counts the
+        render added.  None (nothing done) where there is nothing kept or a level's targets
+        are not those drawn into (remade, resized).  The caller decides that nothing those
+        levels show changed (``ReflectionSystem``)."""
+        kept = self.kept
+        if kept is None or len(levels) < len(kept.targets) or any(
+                levels[level] is not targets for level, targets in enumerate(kept.targets)) or (
+                kept.history is not None and not EndImages.settled(kept.history)) or \
+                self._ends_state(levels[0].size) != kept.ends:
+            self.kept = None
+            return None
+        stats = self.renderer.stats
+        fallbacks_before = stats.reflection_fallbacks
+        if kept.fallbacks is not None:
+            child, prepared = kept.fallbacks
+            self.passes.draw_fallbacks(levels[0], child, prepared)
+        if kept.composite is not None:
+            self.passes.composite_level(levels[0], levels[1], kept.composite)
+        self.scene_pass.draw_transparent([root or kept.result.views[0].view], levels[0], root_options)
+        if kept.fallbacks is not None or kept.composite is not None:
+            self.renderer.flush()
+        for name, spent in zip(_LEDGER, kept.spent, strict=True):
+            setattr(stats, name, getattr(stats, name) + spent)
+        stats.reflection_fallbacks = fallbacks_before + kept.spent[-1]  # the root's drawn now, the rest kept
+        return kept.result
 
     def _start(self, root: View, root_node: ReflectionView, surfaces: SurfaceTable, settings: TreeSettings,
                result: TreeResult) -> _Walk:
@@ -453,19 +559,29 @@ class ViewTree:
             walk.result.count_capped = lambda: len(surfaces.cull(rows, deepest + 1, root_proj, size,
                                                                  MAX_TREE_DEPTH)[0])
 
-    def _composite(self, walk: _Walk, levels: LevelStack) -> None:
+    def _composite(self, walk: _Walk, levels: LevelStack, root_options: SceneOptions) -> None:
         """Step 5, deepest level first: a level's fallbacks, then the views of the level
-        below composited over it (a partly faded view's over its fallback)."""
+        below composited over it (a partly faded view's over its fallback), then the level's
+        own transparent slot over both (its views', the root's at level 0: they were drawn
+        without it), before the level is composited into the one above."""
         steps, fallbacks = walk.steps, walk.fallbacks
         composites = [step.prepared for step in steps if step.prepared is not None]
+        see_through = bool(self.renderer.transparent_batches())  # else no level has a slot to draw
         for depth in range(walk.level, -1, -1):
             if fallbacks.get(depth):
                 child = steps[depth].targets if depth < len(steps) else None
-                self.passes.draw_fallbacks(levels[depth], child,
-                                           self.passes.prepare_fallbacks(fallbacks[depth], levels[depth].size,
-                                                                                         walk.blends))
+                prepared = self.passes.prepare_fallbacks(fallbacks[depth], levels[depth].size, walk.blends)
+                self.passes.draw_fallbacks(levels[depth], child, prepared)
+                if depth == 0:
+                    walk.root_fallbacks = (child, prepared)
             if depth < walk.level:
                 self.passes.composite_level(levels[depth], levels[depth + 1], composites[depth])
+            if see_through:
+                if depth:
+                    step = steps[depth - 1]
+                    self.scene_pass.draw_transparent(step.views, step.targets, step.options, step.conditions)
+                else:
+                    self.scene_pass.draw_transparent([walk.root], levels[0], root_options)
         if walk.level:
             self.renderer.flush()  # the composites, level after level, to the GPU at once
 
@@ -478,7 +594,8 @@ class ViewTree:
         if walk.surfaces.has_end_images:
             result = walk.result
             self.ends.keep(levels[0], walk.root, frozenset(node.surface.entity for node in
-                                                           (*result.views[1:], *result.end_views) if not node.unseen))
+                                                           (*result.views[1:], *result.end_views) if not node.unseen),
+                           compare=self.check_history and bool(result.end_views))
         else:
             self.ends.forget()
 
@@ -735,9 +852,10 @@ class ViewTree:
         counted = iter(self.passes.claimed_pixels([query for query in queries if query is not none]))
         return [0 if query is none else next(counted) for query in queries]
 
-    def _draw_level(self, step: _Level, root: View) -> None:
+    def _draw_level(self, step: _Level, root: View, walk: _Walk) -> None:
         """A planned level's views (and end views) into its targets, then its composite's
-        rows (CPU work while the GPU draws)."""
+        rows (CPU work while the GPU draws).  The levels of one render are one scene-pass
+        run (``ScenePass.draw``: the pass-wide bindings once, while nothing rebinds them)."""
         renderer = self.renderer
         if step.views:
             options = _BATCHED if step.path == "batched" else REFLECTION_LEVEL
@@ -745,7 +863,8 @@ class ViewTree:
                 key = (options, step.unlit)
                 options = self._level_options.get(key) or self._level_options.setdefault(
                     key, replace(options, unlit=step.unlit))
-            self.scene_pass.draw(step.views, step.targets, options, step.conditions)
+            step.options = options  # its transparent slot is drawn with them (_composite)
+            self.scene_pass.draw(step.views, step.targets, options, step.conditions, run=walk)
         if step.ended:
             self.ends.draw(step.end_views, [node.surface.entity for node in step.ended], step.end_matrices,
                            step.targets, root)
