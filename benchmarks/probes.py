@@ -33,7 +33,9 @@ again; an ``on_change`` probe in a still scene does the same work, tests/test_pr
 counts one capture in 100 frames), ``on_change`` (the default refresh in this scene, where
 5 boxes spin: the faces that see one are recaptured, 3 a frame), ``dynamic``
 (``every_frame`` at 128: all six due a frame; those no change
-reached since drawn are kept, ``ProbeDue.unchanged``: 3 drawn a frame here).  Ratios are to
+reached since drawn are kept, ``ProbeDue.unchanged``: 3 drawn a frame here, each within the
+part of it the spinning boxes and their shadows reach, ``ProbeDue.regions``: about a quarter
+of its texels).  Ratios are to
 ``none``.  Recaptures are drawn
 after present (``ProbeSystem.recapture_after_present``).  ``cpu_ms_median``: until
 ``Engine.frame`` returns, without the ``ctx.finish()``; ``plan_us_per_view``: the view
