@@ -29,8 +29,9 @@ from __future__ import annotations
 
 import struct
 import weakref
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
+from typing import Protocol
 
 import moderngl
 import numpy as np
@@ -168,17 +169,73 @@ class Composite:
     fade: float = 1.0                                          # the reflection's weight (a mirror's fades)
 
 
-@dataclass(slots=True)
-class Fallback:
-    """A surface seen by a view with no view of its own (or a partly faded one, or an end
-    view's holes), as its fallback composite sees it (``MirrorPasses.prepare_fallbacks``)."""
+class FallbackParent(Protocol):
+    """A view whose pixels show fallbacks (``ViewTree``'s ``ReflectionView``)."""
 
-    parent_view: View                      # the view that sees the surface
-    node: int                              # its index in the tree (its pixels in its level's node image)
-    rect: tuple[int, int, int, int]        # its rectangle in its level's pixels (x, y, width, height)
-    surface: CompositeSurface
-    share: float = 1.0                     # the fallback's share of the reflection (1 - the view's fade)
-    end: int = -1                          # an end view's index: only the pixels its image did not hold
+    index: int   # its node: its pixels in its level's node image
+    level: int   # 0: a root, whose rectangle is its whole target
+    view: View
+
+
+class Fallbacks:
+    """A level's fallbacks, as columns: each a surface seen by a view with no view of its own
+    (or a partly faded one, or an end view's holes), its parent the view that sees it.  The
+    view tree adds them in blocks as it finds them (the planner's (parent, surface) pairs, a
+    level's cut or faded candidates, its end views), each block as arrays; ``MirrorPasses.
+    prepare_fallbacks`` packs them all into rows in a fixed number of numpy calls, whatever
+    their count (an object and a packed row a fallback cost the 16-mirror ring ~3 us each,
+    with ~200 of them a frame in predicted visibility)."""
+
+    __slots__ = ("states", "parents", "count", "_blocks", "_from", "_offset")
+
+    def __init__(self, states: Sequence[SurfaceState]) -> None:
+        self.states = states                    # the frame's surfaces (``add``'s rows are theirs)
+        self.parents: list[FallbackParent] = []  # the blocks' parents, a list after another
+        self.count = 0
+        self._blocks: list[tuple[np.ndarray, np.ndarray, np.ndarray | float, np.ndarray | int]] = []
+        self._from: Sequence[FallbackParent] | None = None  # the last block's parents (added once)
+        self._offset = 0
+
+    def __len__(self) -> int:
+        return self.count
+
+    def add(self, parents: Sequence[FallbackParent], at: np.ndarray | Sequence[int],
+            surface: np.ndarray | Sequence[int], share: np.ndarray | float = 1.0,
+            end: np.ndarray | Sequence[int] | int = -1) -> None:
+        """Fallbacks of surfaces ``surface`` (rows of ``states``) seen by ``parents[at]``, with
+        the fallback's ``share`` of the reflection (1 - the view's fade; 1: no view) and the
+        end view whose holes it fills (its node; -1: none), each one value or one a
+        fallback.  Consecutive blocks of the same ``parents`` (the same list) share them."""
+        count = len(at)
+        if not count:
+            return
+        if parents is not self._from:
+            self._from, self._offset = parents, len(self.parents)
+            self.parents.extend(parents)
+        at = np.asarray(at, np.int64)
+        self._blocks.append((at + self._offset if self._offset else at, np.asarray(surface, np.int64),
+                             share if isinstance(share, float) else np.asarray(share, np.float64),
+                             end if isinstance(end, int) else np.asarray(end, np.int64)))
+        self.count += count
+
+    def columns(self) -> tuple[np.ndarray, np.ndarray, np.ndarray | float, np.ndarray | int]:
+        """Every fallback's parent (an index of ``parents``), surface row, share and end view,
+        in the order added (each share and end view one value where every block's is it)."""
+        blocks = self._blocks
+        if len(blocks) == 1:
+            return blocks[0]
+        at, surface, shares, ends = zip(*blocks, strict=True)
+        return (np.concatenate(at), np.concatenate(surface), _column(shares, [len(a) for a in at], np.float64),
+                _column(ends, [len(a) for a in at], np.int64))
+
+
+def _column(values: tuple, counts: list[int], dtype: type) -> np.ndarray | float | int:
+    """Blocks' values (each one value or an array) as one column, or one value if all are it."""
+    first = values[0]
+    if all(type(v) is type(first) and not isinstance(v, np.ndarray) and v == first for v in values):
+        return first
+    return np.concatenate([np.full(n, v, dtype) if not isinstance(v, np.ndarray) else v
+                           for v, n in zip(values, counts, strict=True)])
 
 
 @dataclass
@@ -236,6 +293,7 @@ _BLOCK_EYE = slice(4 * CAMERA_BLOCK_EYE.start, 4 * CAMERA_BLOCK_EYE.stop)
 # Flattens clip-space corners onto z = 0: every depth is kept (an oblique near plane would
 # cut the quad) while clipping still drops w <= 0.
 _FLATTEN_Z = glm.mat4(1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0)
+_FLATTEN_Z_ROWS = np.frombuffer(_FLATTEN_Z.to_bytes(), np.float32).reshape(1, 4, 4)  # (prepare_fallbacks)
 _NO_TILE = Tile(0, 0, 0.0)
 _NO_PROBE = ((0.0, 0.0, 0.0, 0.0),) * 3  # a probe's lookup uniforms where the sky stands in for it
 # A claim as two clip-space triangles, each vertex its position and the claim's ids (claim.vert).
@@ -350,14 +408,95 @@ def composite_rows(composites: list[Composite], size: tuple[int, int]) -> bytes:
     return b"".join(rows)
 
 
-def fallback_extras(fallback: Fallback, weights: tuple[float, ...]) -> tuple[bytes, bytes]:
-    """A fallback row's values in the uniform arrays of its draw (mirror_composite.vert):
-    (entity, end view + 1, 0, 0) and (the probes' two ``weights``, the share, 0, the plane's
-    w, the portal's offset)."""
-    surface = fallback.surface
-    w1, w2 = (*weights, 0.0, 0.0)[:2]
-    return (_FALLBACK_IDS.pack(surface.entity & 0xFFFFFFFF, fallback.end + 1, 0, 0),
-            _FALLBACK_WEIGHTS.pack(w1, w2, fallback.share, 0.0, surface.plane_w, *surface.offset))
+@dataclass
+class _FallbackSurfaces:
+    """What a fallback's row reads of each surface of a frame's states, as columns (a row
+    each, by surface row), kept while the states are (``MirrorPasses._fallback_surfaces``;
+    a water surface's waves are read again each frame)."""
+
+    head: np.ndarray          # (S, 8) float32: tile x, tint, tile scale, reflect rate, roughness, params z
+    tail: np.ndarray          # (S, 13) float32: normal, tile y, carry
+    outline: np.ndarray       # (S, 4, 4) float32: the outline's corners as a glm mat4's columns
+    outlined: np.ndarray      # (S,) bool: it has an outline
+    ids: np.ndarray           # (S, 4) uint32: entity, 0, 0, 0 (the row's ids, less its end view)
+    weights: np.ndarray       # (S, 8) float32: 0, 0, 0, 0, the plane's w, the offset (less probes, share)
+    keys: list[tuple[str, TextureData | None, int, int]]  # its draw's, without probes
+    entities: list[int]
+    water: list[tuple[int, WaterLook]]
+
+    @property
+    def outlined_any(self) -> bool:
+        return bool(self.outlined.any())
+
+    @property
+    def outlined_all(self) -> bool:
+        return bool(self.outlined.all())
+
+
+def fallback_surfaces(states: Sequence[SurfaceState]) -> _FallbackSurfaces:
+    """The fallback columns of ``states`` (``_FallbackSurfaces``): each surface's composite
+    values as ``composite_rows`` packs them for a fallback (no tile, no fade; a water
+    surface's waves where the tile goes) and its fallback's extras (``fallback_ids``,
+    ``fallback_weights`` in mirror_composite.vert)."""
+    looks = [surface_look(state) for state in states]
+    count = len(looks)
+    head = np.zeros((count, 8), np.float32)
+    tail = np.zeros((count, 13), np.float32)
+    outline = np.zeros((count, 4, 4), np.float32)
+    outlined = np.zeros(count, bool)
+    ids = np.zeros((count, 4), np.uint32)
+    weights = np.zeros((count, 8), np.float32)
+    water = []
+    for row, look in enumerate(looks):
+        head[row, 1:4] = np.frombuffer(look.tint, np.float32)
+        head[row, 5:8] = look.reflect_rate, look.roughness, look.params_z
+        tail[row, 0:3] = np.frombuffer(look.normal, np.float32)
+        tail[row, 4:13] = np.frombuffer(look.carry, np.float32)
+        if look.outline is not None:
+            outline[row] = np.frombuffer(look.outline.to_bytes(), np.float32).reshape(4, 4)
+            outlined[row] = True
+        if look.water is not None:
+            water.append((row, look.water))
+        ids[row, 0] = look.entity & 0xFFFFFFFF
+        weights[row, 4:8] = look.plane_w, *look.offset
+    return _FallbackSurfaces(head, tail, outline, outlined, ids, weights,
+                             [(look.fallback_variant, look.normal_map, 0, 0) for look in looks],
+                             [look.entity for look in looks], water)
+
+
+def _mat4_products(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """``a[i] * b[i]`` for stacks of float32 mat4s as glm keeps them (``[column][row]``; a
+    stack of one broadcasts), rounded as glm's product rounds it: column j is the sum over
+    k of a's column k times b[j][k], added in order, so its bits are glm's, row for row."""
+    out = b[:, :, 0, None] * a[:, None, 0, :]
+    for k in (1, 2, 3):
+        out += b[:, :, k, None] * a[:, None, k, :]
+    return out
+
+
+def _fallback_groups(keys: list[tuple[str, TextureData | None, int, int]], surface: np.ndarray, rows: np.ndarray,
+                     ids: np.ndarray, weights: np.ndarray, count: int) -> PreparedFallbacks:
+    """Rows grouped by their surfaces' ``keys`` (a draw's build, normal map and probes), the
+    groups in the order of their first row and each group's rows in order, in chunks of at
+    most FALLBACK_ROWS (a draw's uniform arrays)."""
+    found: dict[tuple, int] = {}
+    group = [found.setdefault(key, len(found)) for key in keys]
+    if len(found) == 1:
+        parts = [(keys[0], rows, ids, weights)]
+    else:
+        of_row = np.array(group, np.int64).take(surface)
+        firsts = {}
+        for at, g in enumerate(of_row.tolist()):
+            firsts.setdefault(g, at)
+        named = {g: key for key, g in found.items()}
+        parts = []
+        for g in firsts:  # in the order of their first row
+            where = np.flatnonzero(of_row == g)
+            parts.append((named[g], rows.take(where, axis=0), ids.take(where, axis=0), weights.take(where, axis=0)))
+    chunk = FALLBACK_ROWS
+    return PreparedFallbacks({key: [(rows_[at:at + chunk].tobytes(), ids_[at:at + chunk].tobytes(),
+                                     weights_[at:at + chunk].tobytes()) for at in range(0, len(rows_), chunk)]
+                              for key, rows_, ids_, weights_ in parts}, count)
 
 
 def _ndc_rect(rect: tuple[int, int, int, int], size: tuple[int, int]) -> tuple[float, float, float, float]:
@@ -433,6 +572,7 @@ class MirrorPasses:
                     program[name].value = unit
             self.fallbacks[variant] = _CompositeDraw(ctx, program)
         self.rough_atlas = RoughAtlas(renderer)
+        self._fallback_table: tuple[Sequence[SurfaceState], _FallbackSurfaces] | None = None  # (prepare_fallbacks)
         self._claim_buffer: moderngl.Buffer | None = None  # the claims' triangles (claim.vert), grown as needed
         self._reset_vao: moderngl.VertexArray | None = None
         self._claim_vao: moderngl.VertexArray | None = None
@@ -572,32 +712,79 @@ class MirrorPasses:
             draw.draw(variant_rows, self.renderer.shaders.reloads)
         self.renderer.checkpoint("composite")
 
-    def prepare_fallbacks(self, fallbacks: list[Fallback], size: tuple[int, int],
+    def prepare_fallbacks(self, fallbacks: Fallbacks, size: tuple[int, int],
                           probes: Mapping[int, ProbeBlend]) -> PreparedFallbacks:
         """The CPU half of a level's fallbacks (drawn into a level of ``size`` pixels): their
         rows, grouped by build, normal map and the probes of their surfaces (``probes``, by
         surface entity: the extract stage's ``SurfaceBlends``; the probes are uniforms of a
-        draw, their weights ride in the row's extras)."""
-        groups: dict[tuple[str, TextureData | None, int, int], list[tuple[Fallback, tuple[float, ...]]]] = {}
-        for fallback in fallbacks:
-            surface = fallback.surface
-            blend = probes.get(surface.entity)
-            owners = (*blend.probes, 0, 0)[:2] if blend is not None else (0, 0)
-            variant = surface.fallback_variant
-            if owners != (0, 0):
-                variant = variant.replace("fallback", "fallback_probes", 1)
-            key = (variant, surface.normal_map, *owners)
-            groups.setdefault(key, []).append((fallback, blend.weights if blend is not None else ()))
-        prepared = PreparedFallbacks({}, len(fallbacks))
-        for key, group in groups.items():
-            chunks = prepared.groups[key] = []
-            for at in range(0, len(group), FALLBACK_ROWS):
-                part = group[at:at + FALLBACK_ROWS]
-                rows = composite_rows([Composite(f.node, f.rect, f.rect, f.parent_view, f.surface) for f, _ in part],
-                                      size)
-                extras = [fallback_extras(f, weights) for f, weights in part]
-                chunks.append((rows, b"".join(ids for ids, _ in extras), b"".join(w for _, w in extras)))
-        return prepared
+        draw, their weights ride in the row's extras), in the order they were added.
+
+        A row is a composite's (``composite_rows``, with the parent's rectangle as the view's
+        and no fade or tile) and its extras (mirror_composite.vert's uniform arrays), built a
+        column at a time: each parent's part (its rectangle, camera, node) and each surface's
+        (``_FallbackSurfaces``, kept while the states are) gathered by the fallbacks' columns,
+        and the outline's corners in the parent's clip space as glm multiplies them (the same
+        bits: ``_mat4_products``)."""
+        count = len(fallbacks)
+        if not count:
+            return PreparedFallbacks({}, 0)
+        table = self._fallback_surfaces(fallbacks.states)
+        at, surface, share, end = fallbacks.columns()
+        parents = fallbacks.parents
+        # Each parent's part: its rectangle in the level (a root's: its whole target), camera, node.
+        blocks = np.frombuffer(b"".join([parent.view.camera_block() for parent in parents]),
+                               np.float32).reshape(len(parents), -1)
+        rects = np.array([parent.view.scissor if parent.level and parent.view.scissor is not None
+                          else (0, 0, *parent.view.size) for parent in parents], np.float64)
+        rects[:, 2:] += rects[:, :2]  # x0, y0, x1, y1
+        head = np.concatenate([rects.astype(np.float32), blocks[:, CAMERA_BLOCK_INVERSE],
+                               blocks[:, CAMERA_BLOCK_EYE]], axis=1)
+        nodes = np.array([parent.index for parent in parents], np.float32)
+        # The corners: the surface's outline in the parent's clip space flattened onto z = 0, or
+        # (no outline) the parent's rectangle.
+        if table.outlined_any:
+            to_clip = _mat4_products(_FLATTEN_Z_ROWS, blocks[:, CAMERA_BLOCK_VIEW_PROJ].reshape(-1, 4, 4))
+            corners = _mat4_products(to_clip.take(at, axis=0), table.outline.take(surface, axis=0)).reshape(count, 16)
+        if not table.outlined_all:
+            x0, y0, x1, y1 = (rects[:, i] * (2.0 / size[i % 2]) - 1.0 for i in range(4))  # _ndc_rect's
+            zero, one = np.zeros_like(x0), np.ones_like(x0)
+            flat = np.stack([x0, y0, zero, one, x0, y1, zero, one, x1, y0, zero, one, x1, y1, zero, one],
+                            axis=1).astype(np.float32).take(at, axis=0)
+            corners = flat if not table.outlined_any else np.where(table.outlined[surface, None], corners, flat)
+        for row, water in table.water:  # this frame's waves (the surfaces stage moves them in place)
+            x, y = water.flow.offset
+            table.head[row, 0], table.head[row, 4], table.head[row, 6] = x, water.cross, water.f0
+            table.tail[row, 3] = y
+        rows = np.concatenate([corners, head.take(at, axis=0), table.head.take(surface, axis=0),
+                               nodes.take(at)[:, None], table.tail.take(surface, axis=0)], axis=1)
+        ids = table.ids.take(surface, axis=0)
+        if not isinstance(end, int) or end != -1:
+            ids[:, 1] = np.asarray(end, np.int64) + 1
+        weights = table.weights.take(surface, axis=0)
+        weights[:, 2] = share
+        keys = table.keys
+        if probes:  # each surface's probes (a draw's uniforms: its key) and their weights (its row's)
+            keys, by_surface = [], np.zeros((len(table.keys), 2), np.float32)
+            for row, (entity, (variant, normal_map, _, _)) in enumerate(zip(table.entities, table.keys,
+                                                                            strict=True)):
+                blend = probes.get(entity)
+                owners = (*blend.probes, 0, 0)[:2] if blend is not None else (0, 0)
+                if owners != (0, 0):
+                    variant = variant.replace("fallback", "fallback_probes", 1)
+                if blend is not None:
+                    by_surface[row] = (*blend.weights, 0.0, 0.0)[:2]
+                keys.append((variant, normal_map, *owners))
+            weights[:, :2] = by_surface.take(surface, axis=0)
+        return _fallback_groups(keys, surface, rows, ids, weights, count)
+
+    def _fallback_surfaces(self, states: Sequence[SurfaceState]) -> _FallbackSurfaces:
+        """``fallback_surfaces(states)``, kept while the states are the same list (a frame's
+        table's, the same every frame while no surface changes: ``surface_look`` keeps a
+        state's look as long)."""
+        kept = self._fallback_table
+        if kept is None or kept[0] is not states:
+            kept = self._fallback_table = (states, fallback_surfaces(states))
+        return kept[1]
 
     def draw_fallbacks(self, parent: RenderTargets, level: RenderTargets | None, prepared: PreparedFallbacks) -> None:
         """Blend each fallback of ``prepared`` over its surface's pixels in ``parent`` (before
