@@ -14,7 +14,6 @@ from __future__ import annotations
 import math
 import struct
 
-import numpy as np
 import pytest
 from pyglm import glm
 
@@ -33,11 +32,10 @@ def _packed_one_at_a_time(fallbacks, size, probes) -> dict:
     (``composite_rows``, glm's matrices) and its extras packed with ``struct``, grouped by
     (build, normal map, probes) in the order of each group's first row, in chunks of
     FALLBACK_ROWS."""
-    at, surface, share, end = fallbacks.columns()
     count = len(fallbacks)
     groups: dict[tuple, list] = {}
-    for p, s, fallback_share, end_view in zip(at.tolist(), surface.tolist(), np.broadcast_to(share, count).tolist(),
-                                              np.broadcast_to(end, count).tolist(), strict=True):
+    for p, s, fallback_share, end_view in zip(fallbacks.at, fallbacks.surface, fallbacks.share or [1.0] * count,
+                                              fallbacks.end or [-1] * count, strict=True):
         parent, look = fallbacks.parents[p], surface_look(fallbacks.states[s])
         view = parent.view
         rect = view.scissor if parent.level and view.scissor is not None else (0, 0, *view.size)
@@ -75,9 +73,8 @@ def compared(monkeypatch):
                 for name, a, b in zip(("rows", "ids", "weights"), got, want, strict=True):
                     assert a == b, f"{key}: the {name} differ"
         assert prepared.count == len(fallbacks)
-        _, _, share, end = fallbacks.columns()
         seen.append((len(fallbacks), sum(len(chunks) for chunks in expected.values()), set(expected),
-                     bool(np.any(np.asarray(share) < 1.0)), bool(np.any(np.asarray(end) >= 0))))
+                     any(share < 1.0 for share in fallbacks.share or ()), any(end >= 0 for end in fallbacks.end or ())))
         return prepared
 
     monkeypatch.setattr(MirrorPasses, "prepare_fallbacks", checked)

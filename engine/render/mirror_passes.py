@@ -30,7 +30,7 @@ from __future__ import annotations
 import struct
 import weakref
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Protocol
 
 import moderngl
@@ -181,23 +181,24 @@ class Fallbacks:
     """A level's fallbacks, as columns: each a surface seen by a view with no view of its own
     (or a partly faded one, or an end view's holes), its parent the view that sees it.  The
     view tree adds them in blocks as it finds them (the planner's (parent, surface) pairs, a
-    level's cut or faded candidates, its end views), each block as arrays; ``MirrorPasses.
-    prepare_fallbacks`` packs them all into rows in a fixed number of numpy calls, whatever
-    their count (an object and a packed row a fallback cost the 16-mirror ring ~3 us each,
-    with ~200 of them a frame in predicted visibility)."""
+    level's cut or faded candidates, its end views), each block as columns, never an object
+    a fallback; ``MirrorPasses.prepare_fallbacks`` packs them (the 16-mirror ring has 130-230
+    of them a frame at 320 x 180: an object and a Composite a fallback cost ~3 us each)."""
 
-    __slots__ = ("states", "parents", "count", "_blocks", "_from", "_offset")
+    __slots__ = ("states", "parents", "at", "surface", "share", "end", "_from", "_offset")
 
     def __init__(self, states: Sequence[SurfaceState]) -> None:
-        self.states = states                    # the frame's surfaces (``add``'s rows are theirs)
+        self.states = states                     # the frame's surfaces (``surface`` are rows of them)
         self.parents: list[FallbackParent] = []  # the blocks' parents, a list after another
-        self.count = 0
-        self._blocks: list[tuple[np.ndarray, np.ndarray, np.ndarray | float, np.ndarray | int]] = []
+        self.at: list[int] = []                  # each fallback's parent: an index of ``parents``
+        self.surface: list[int] = []             # each one's surface row
+        self.share: list[float] | None = None    # each one's share of the reflection (None: all 1)
+        self.end: list[int] | None = None        # each one's end view, whose holes it fills (None: all -1)
         self._from: Sequence[FallbackParent] | None = None  # the last block's parents (added once)
         self._offset = 0
 
     def __len__(self) -> int:
-        return self.count
+        return len(self.at)
 
     def add(self, parents: Sequence[FallbackParent], at: np.ndarray | Sequence[int],
             surface: np.ndarray | Sequence[int], share: np.ndarray | float = 1.0,
@@ -212,30 +213,22 @@ class Fallbacks:
         if parents is not self._from:
             self._from, self._offset = parents, len(self.parents)
             self.parents.extend(parents)
-        at = np.asarray(at, np.int64)
-        self._blocks.append((at + self._offset if self._offset else at, np.asarray(surface, np.int64),
-                             share if isinstance(share, float) else np.asarray(share, np.float64),
-                             end if isinstance(end, int) else np.asarray(end, np.int64)))
-        self.count += count
-
-    def columns(self) -> tuple[np.ndarray, np.ndarray, np.ndarray | float, np.ndarray | int]:
-        """Every fallback's parent (an index of ``parents``), surface row, share and end view,
-        in the order added (each share and end view one value where every block's is it)."""
-        blocks = self._blocks
-        if len(blocks) == 1:
-            return blocks[0]
-        at, surface, shares, ends = zip(*blocks, strict=True)
-        return (np.concatenate(at), np.concatenate(surface), _column(shares, [len(a) for a in at], np.float64),
-                _column(ends, [len(a) for a in at], np.int64))
-
-
-def _column(values: tuple, counts: list[int], dtype: type) -> np.ndarray | float | int:
-    """Blocks' values (each one value or an array) as one column, or one value if all are it."""
-    first = values[0]
-    if all(type(v) is type(first) and not isinstance(v, np.ndarray) and v == first for v in values):
-        return first
-    return np.concatenate([np.full(n, v, dtype) if not isinstance(v, np.ndarray) else v
-                           for v, n in zip(values, counts, strict=True)])
+        before = len(self.at)
+        at = at.tolist() if isinstance(at, np.ndarray) else list(at)
+        self.at += [a + self._offset for a in at] if self._offset else at
+        self.surface += surface.tolist() if isinstance(surface, np.ndarray) else surface
+        if not isinstance(share, float) or share != 1.0:
+            if self.share is None:
+                self.share = [1.0] * before
+            self.share += [share] * count if isinstance(share, float) else np.asarray(share, np.float64).tolist()
+        elif self.share is not None:
+            self.share += [1.0] * count
+        if not isinstance(end, int) or end != -1:
+            if self.end is None:
+                self.end = [-1] * before
+            self.end += [end] * count if isinstance(end, int) else np.asarray(end, np.int64).tolist()
+        elif self.end is not None:
+            self.end += [-1] * count
 
 
 @dataclass
@@ -293,7 +286,6 @@ _BLOCK_EYE = slice(4 * CAMERA_BLOCK_EYE.start, 4 * CAMERA_BLOCK_EYE.stop)
 # Flattens clip-space corners onto z = 0: every depth is kept (an oblique near plane would
 # cut the quad) while clipping still drops w <= 0.
 _FLATTEN_Z = glm.mat4(1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0)
-_FLATTEN_Z_ROWS = np.frombuffer(_FLATTEN_Z.to_bytes(), np.float32).reshape(1, 4, 4)  # (prepare_fallbacks)
 _NO_TILE = Tile(0, 0, 0.0)
 _NO_PROBE = ((0.0, 0.0, 0.0, 0.0),) * 3  # a probe's lookup uniforms where the sky stands in for it
 # A claim as two clip-space triangles, each vertex its position and the claim's ids (claim.vert).
@@ -321,6 +313,13 @@ FALLBACK_VARIANTS = {f"fallback{probes}{name}": {"COMPOSITE_FALLBACK": "1", **ex
 FALLBACK_ROWS = 32  # rows a fallback draw takes (its uniform arrays' length); more are drawn in chunks
 _FALLBACK_IDS = struct.Struct("<4I")
 _FALLBACK_WEIGHTS = struct.Struct("<8f")
+# A composite row (_COMPOSITE_ROW) as a fallback's is joined: its corners, the parent's head
+# (rectangle, inverse, eye), the surface's head, the parent's node, the surface's tail.
+_PIECE_PARENT = struct.Struct("<4f64s12s")
+_PIECE_HEAD = struct.Struct("<f12s4f")
+_PIECE_NODE = struct.Struct("<f")
+_PIECE_TAIL = struct.Struct("<12sf36s")
+assert 64 + _PIECE_PARENT.size + _PIECE_HEAD.size + _PIECE_NODE.size + _PIECE_TAIL.size == _COMPOSITE_ROW.size
 
 
 def _instance_format(program: moderngl.Program) -> tuple[str, list[str]]:
@@ -409,94 +408,42 @@ def composite_rows(composites: list[Composite], size: tuple[int, int]) -> bytes:
 
 
 @dataclass
-class _FallbackSurfaces:
-    """What a fallback's row reads of each surface of a frame's states, as columns (a row
-    each, by surface row), kept while the states are (``MirrorPasses._fallback_surfaces``;
-    a water surface's waves are read again each frame)."""
+class _FallbackSurface:
+    """What a fallback's row reads of one surface (``fallback_surfaces``), packed once: the
+    composite row's pieces around the parent's (``composite_rows``'s fields, with no tile
+    and no fade) and its extras with no end view, a share of 1 and no probes."""
 
-    head: np.ndarray          # (S, 8) float32: tile x, tint, tile scale, reflect rate, roughness, params z
-    tail: np.ndarray          # (S, 13) float32: normal, tile y, carry
-    outline: np.ndarray       # (S, 4, 4) float32: the outline's corners as a glm mat4's columns
-    outlined: np.ndarray      # (S,) bool: it has an outline
-    ids: np.ndarray           # (S, 4) uint32: entity, 0, 0, 0 (the row's ids, less its end view)
-    weights: np.ndarray       # (S, 8) float32: 0, 0, 0, 0, the plane's w, the offset (less probes, share)
-    keys: list[tuple[str, TextureData | None, int, int]]  # its draw's, without probes
-    entities: list[int]
-    water: list[tuple[int, WaterLook]]
-
-    @property
-    def outlined_any(self) -> bool:
-        return bool(self.outlined.any())
-
-    @property
-    def outlined_all(self) -> bool:
-        return bool(self.outlined.all())
+    head: bytes                   # tile x, tint, tile scale, reflect rate, roughness, params z
+    tail: bytes                   # normal, tile y, carry
+    outline: glm.mat4 | None
+    ids: bytes                    # _FALLBACK_IDS: entity, 0, 0, 0
+    weights: bytes                # _FALLBACK_WEIGHTS: 0, 0, 1, 0, the plane's w, the offset
+    key: tuple[str, TextureData | None, int, int]  # its draw's (build, normal map), without probes
+    look: CompositeSurface
 
 
-def fallback_surfaces(states: Sequence[SurfaceState]) -> _FallbackSurfaces:
-    """The fallback columns of ``states`` (``_FallbackSurfaces``): each surface's composite
-    values as ``composite_rows`` packs them for a fallback (no tile, no fade; a water
-    surface's waves where the tile goes) and its fallback's extras (``fallback_ids``,
-    ``fallback_weights`` in mirror_composite.vert)."""
-    looks = [surface_look(state) for state in states]
-    count = len(looks)
-    head = np.zeros((count, 8), np.float32)
-    tail = np.zeros((count, 13), np.float32)
-    outline = np.zeros((count, 4, 4), np.float32)
-    outlined = np.zeros(count, bool)
-    ids = np.zeros((count, 4), np.uint32)
-    weights = np.zeros((count, 8), np.float32)
-    water = []
-    for row, look in enumerate(looks):
-        head[row, 1:4] = np.frombuffer(look.tint, np.float32)
-        head[row, 5:8] = look.reflect_rate, look.roughness, look.params_z
-        tail[row, 0:3] = np.frombuffer(look.normal, np.float32)
-        tail[row, 4:13] = np.frombuffer(look.carry, np.float32)
-        if look.outline is not None:
-            outline[row] = np.frombuffer(look.outline.to_bytes(), np.float32).reshape(4, 4)
-            outlined[row] = True
-        if look.water is not None:
-            water.append((row, look.water))
-        ids[row, 0] = look.entity & 0xFFFFFFFF
-        weights[row, 4:8] = look.plane_w, *look.offset
-    return _FallbackSurfaces(head, tail, outline, outlined, ids, weights,
-                             [(look.fallback_variant, look.normal_map, 0, 0) for look in looks],
-                             [look.entity for look in looks], water)
+def fallback_surfaces(states: Sequence[SurfaceState]) -> list[_FallbackSurface]:
+    """Each surface's fallback pieces (``_FallbackSurface``); a water surface's head and tail
+    are packed again each frame (its waves move: ``_water_pieces``)."""
+    found = []
+    for state in states:
+        look = surface_look(state)
+        head, tail = _water_pieces(look) if look.water is not None else (
+            _PIECE_HEAD.pack(0.0, look.tint, 0.0, look.reflect_rate, look.roughness, look.params_z),
+            _PIECE_TAIL.pack(look.normal, 0.0, look.carry))
+        found.append(_FallbackSurface(head, tail, look.outline, _FALLBACK_IDS.pack(look.entity & 0xFFFFFFFF, 0, 0, 0),
+                                      _FALLBACK_WEIGHTS.pack(0.0, 0.0, 1.0, 0.0, look.plane_w, *look.offset),
+                                      (look.fallback_variant, look.normal_map, 0, 0), look))
+    return found
 
 
-def _mat4_products(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """``a[i] * b[i]`` for stacks of float32 mat4s as glm keeps them (``[column][row]``; a
-    stack of one broadcasts), rounded as glm's product rounds it: column j is the sum over
-    k of a's column k times b[j][k], added in order, so its bits are glm's, row for row."""
-    out = b[:, :, 0, None] * a[:, None, 0, :]
-    for k in (1, 2, 3):
-        out += b[:, :, k, None] * a[:, None, k, :]
-    return out
-
-
-def _fallback_groups(keys: list[tuple[str, TextureData | None, int, int]], surface: np.ndarray, rows: np.ndarray,
-                     ids: np.ndarray, weights: np.ndarray, count: int) -> PreparedFallbacks:
-    """Rows grouped by their surfaces' ``keys`` (a draw's build, normal map and probes), the
-    groups in the order of their first row and each group's rows in order, in chunks of at
-    most FALLBACK_ROWS (a draw's uniform arrays)."""
-    found: dict[tuple, int] = {}
-    group = [found.setdefault(key, len(found)) for key in keys]
-    if len(found) == 1:
-        parts = [(keys[0], rows, ids, weights)]
-    else:
-        of_row = np.array(group, np.int64).take(surface)
-        firsts = {}
-        for at, g in enumerate(of_row.tolist()):
-            firsts.setdefault(g, at)
-        named = {g: key for key, g in found.items()}
-        parts = []
-        for g in firsts:  # in the order of their first row
-            where = np.flatnonzero(of_row == g)
-            parts.append((named[g], rows.take(where, axis=0), ids.take(where, axis=0), weights.take(where, axis=0)))
-    chunk = FALLBACK_ROWS
-    return PreparedFallbacks({key: [(rows_[at:at + chunk].tobytes(), ids_[at:at + chunk].tobytes(),
-                                     weights_[at:at + chunk].tobytes()) for at in range(0, len(rows_), chunk)]
-                              for key, rows_, ids_, weights_ in parts}, count)
+def _water_pieces(look: CompositeSurface) -> tuple[bytes, bytes]:
+    """A water surface's head and tail: this frame's waves where the tile goes and F0 where
+    the roughness goes (as ``composite_rows`` packs them)."""
+    water = look.water
+    (x, y), scale, rough = water.flow.offset, water.cross, water.f0
+    return (_PIECE_HEAD.pack(x, look.tint, scale, look.reflect_rate, rough, look.params_z),
+            _PIECE_TAIL.pack(look.normal, y, look.carry))
 
 
 def _ndc_rect(rect: tuple[int, int, int, int], size: tuple[int, int]) -> tuple[float, float, float, float]:
@@ -572,7 +519,7 @@ class MirrorPasses:
                     program[name].value = unit
             self.fallbacks[variant] = _CompositeDraw(ctx, program)
         self.rough_atlas = RoughAtlas(renderer)
-        self._fallback_table: tuple[Sequence[SurfaceState], _FallbackSurfaces] | None = None  # (prepare_fallbacks)
+        self._fallback_table: tuple | None = None  # (states, probes, their pieces, water rows: prepare_fallbacks)
         self._claim_buffer: moderngl.Buffer | None = None  # the claims' triangles (claim.vert), grown as needed
         self._reset_vao: moderngl.VertexArray | None = None
         self._claim_vao: moderngl.VertexArray | None = None
@@ -720,71 +667,96 @@ class MirrorPasses:
         draw, their weights ride in the row's extras), in the order they were added.
 
         A row is a composite's (``composite_rows``, with the parent's rectangle as the view's
-        and no fade or tile) and its extras (mirror_composite.vert's uniform arrays), built a
-        column at a time: each parent's part (its rectangle, camera, node) and each surface's
-        (``_FallbackSurfaces``, kept while the states are) gathered by the fallbacks' columns,
-        and the outline's corners in the parent's clip space as glm multiplies them (the same
-        bits: ``_mat4_products``)."""
+        and no fade or tile) and its extras (mirror_composite.vert's uniform arrays), joined
+        from pieces packed once: each parent's (its rectangle, camera and node, once a
+        level) and each surface's (``_FallbackSurface``, kept while the states are); a row
+        packs only its corners (the outline in the parent's clip space: one glm product,
+        ~0.07 us; numpy's for 40 rows at once, rounded as glm's, cost 3 times as much, and a
+        level's rows a column at a time cost ~25 us whatever their count).  The 16-mirror
+        ring's 36 rows a level at 32 x 18 took 62 us packed through a Composite each, 22 us so."""
         count = len(fallbacks)
         if not count:
             return PreparedFallbacks({}, 0)
-        table = self._fallback_surfaces(fallbacks.states)
-        at, surface, share, end = fallbacks.columns()
+        surfaces, water = self._fallback_surfaces(fallbacks.states, probes)
         parents = fallbacks.parents
-        # Each parent's part: its rectangle in the level (a root's: its whole target), camera, node.
-        blocks = np.frombuffer(b"".join([parent.view.camera_block() for parent in parents]),
-                               np.float32).reshape(len(parents), -1)
-        rects = np.array([parent.view.scissor if parent.level and parent.view.scissor is not None
-                          else (0, 0, *parent.view.size) for parent in parents], np.float64)
-        rects[:, 2:] += rects[:, :2]  # x0, y0, x1, y1
-        head = np.concatenate([rects.astype(np.float32), blocks[:, CAMERA_BLOCK_INVERSE],
-                               blocks[:, CAMERA_BLOCK_EYE]], axis=1)
-        nodes = np.array([parent.index for parent in parents], np.float32)
-        # The corners: the surface's outline in the parent's clip space flattened onto z = 0, or
-        # (no outline) the parent's rectangle.
-        if table.outlined_any:
-            to_clip = _mat4_products(_FLATTEN_Z_ROWS, blocks[:, CAMERA_BLOCK_VIEW_PROJ].reshape(-1, 4, 4))
-            corners = _mat4_products(to_clip.take(at, axis=0), table.outline.take(surface, axis=0)).reshape(count, 16)
-        if not table.outlined_all:
-            x0, y0, x1, y1 = (rects[:, i] * (2.0 / size[i % 2]) - 1.0 for i in range(4))  # _ndc_rect's
-            zero, one = np.zeros_like(x0), np.ones_like(x0)
-            flat = np.stack([x0, y0, zero, one, x0, y1, zero, one, x1, y0, zero, one, x1, y1, zero, one],
-                            axis=1).astype(np.float32).take(at, axis=0)
-            corners = flat if not table.outlined_any else np.where(table.outlined[surface, None], corners, flat)
-        for row, water in table.water:  # this frame's waves (the surfaces stage moves them in place)
-            x, y = water.flow.offset
-            table.head[row, 0], table.head[row, 4], table.head[row, 6] = x, water.cross, water.f0
-            table.tail[row, 3] = y
-        rows = np.concatenate([corners, head.take(at, axis=0), table.head.take(surface, axis=0),
-                               nodes.take(at)[:, None], table.tail.take(surface, axis=0)], axis=1)
-        ids = table.ids.take(surface, axis=0)
-        if not isinstance(end, int) or end != -1:
-            ids[:, 1] = np.asarray(end, np.int64) + 1
-        weights = table.weights.take(surface, axis=0)
-        weights[:, 2] = share
-        keys = table.keys
-        if probes:  # each surface's probes (a draw's uniforms: its key) and their weights (its row's)
-            keys, by_surface = [], np.zeros((len(table.keys), 2), np.float32)
-            for row, (entity, (variant, normal_map, _, _)) in enumerate(zip(table.entities, table.keys,
-                                                                            strict=True)):
-                blend = probes.get(entity)
-                owners = (*blend.probes, 0, 0)[:2] if blend is not None else (0, 0)
-                if owners != (0, 0):
-                    variant = variant.replace("fallback", "fallback_probes", 1)
-                if blend is not None:
-                    by_surface[row] = (*blend.weights, 0.0, 0.0)[:2]
-                keys.append((variant, normal_map, *owners))
-            weights[:, :2] = by_surface.take(surface, axis=0)
-        return _fallback_groups(keys, surface, rows, ids, weights, count)
+        pieces: list[tuple | None] = [None] * len(parents)  # each parent's, packed when first read
+        if water:  # this frame's waves
+            surfaces = list(surfaces)
+            for row in water:
+                head, tail = _water_pieces(surfaces[row].look)
+                surfaces[row] = replace(surfaces[row], head=head, tail=tail)
+        groups: dict[tuple, tuple[list[bytes], list[bytes], list[bytes]]] = {}
+        last_key, last = None, None
+        shares, ends = fallbacks.share, fallbacks.end
+        for i, (p, s) in enumerate(zip(fallbacks.at, fallbacks.surface, strict=True)):
+            surface = surfaces[s]
+            parent = pieces[p]
+            if parent is None:
+                parent = pieces[p] = self._fallback_parent(parents[p], size)
+            if surface.key is not last_key:
+                last_key = surface.key
+                last = groups.get(last_key)
+                if last is None:
+                    last = groups[last_key] = ([], [], [])
+            rows, ids, weights = last
+            outline = surface.outline
+            rows += ((parent[0] * outline).to_bytes() if outline is not None else parent[1], parent[2],
+                     surface.head, parent[3], surface.tail)
+            if ends is None or ends[i] < 0:
+                ids.append(surface.ids)
+            else:
+                look = surface.look
+                ids.append(_FALLBACK_IDS.pack(look.entity & 0xFFFFFFFF, ends[i] + 1, 0, 0))
+            if shares is None or shares[i] == 1.0:
+                weights.append(surface.weights)
+            else:
+                w1, w2, _, _, plane_w, *offset = _FALLBACK_WEIGHTS.unpack(surface.weights)
+                weights.append(_FALLBACK_WEIGHTS.pack(w1, w2, shares[i], 0.0, plane_w, *offset))
+        chunk = FALLBACK_ROWS
+        return PreparedFallbacks({key: [(b"".join(rows[5 * at:5 * (at + chunk)]), b"".join(ids[at:at + chunk]),
+                                         b"".join(weights[at:at + chunk])) for at in range(0, len(ids), chunk)]
+                                  for key, (rows, ids, weights) in groups.items()}, count)
 
-    def _fallback_surfaces(self, states: Sequence[SurfaceState]) -> _FallbackSurfaces:
-        """``fallback_surfaces(states)``, kept while the states are the same list (a frame's
-        table's, the same every frame while no surface changes: ``surface_look`` keeps a
-        state's look as long)."""
+    @staticmethod
+    def _fallback_parent(parent: FallbackParent, size: tuple[int, int]) -> tuple[glm.mat4, bytes, bytes, bytes]:
+        """A parent view's pieces of its fallbacks' rows: its view-projection flattened onto
+        z = 0 (times an outline: the corners), the corners of its rectangle (a surface with
+        no outline), its head and its node (``_PIECE_PARENT``, ``_PIECE_NODE``)."""
+        view = parent.view
+        block = view.camera_block()
+        x, y, w, h = rect = view.scissor if parent.level and view.scissor is not None else (0, 0, *view.size)
+        x0, y0, x1, y1 = _ndc_rect(rect, size)
+        return (_FLATTEN_Z * glm.mat4.from_bytes(block[_BLOCK_VIEW_PROJ]),
+                struct.pack("<16f", x0, y0, 0.0, 1.0, x0, y1, 0.0, 1.0, x1, y0, 0.0, 1.0, x1, y1, 0.0, 1.0),
+                _PIECE_PARENT.pack(x, y, x + w, y + h, block[_BLOCK_INVERSE], block[_BLOCK_EYE]),
+                _PIECE_NODE.pack(float(parent.index)))
+
+    def _fallback_surfaces(self, states: Sequence[SurfaceState], probes: Mapping[int, ProbeBlend]
+                           ) -> tuple[list[_FallbackSurface], list[int]]:
+        """``fallback_surfaces(states)`` with each surface's probes of ``probes`` in its key
+        and weights, and the rows of water surfaces (whose pieces the caller packs again),
+        kept while the states and the probes are the same objects (the table's, the same every
+        frame while no surface changes: ``surface_look`` keeps a state's look as long; the
+        extract stage's blends, while no probe or surface moves)."""
         kept = self._fallback_table
-        if kept is None or kept[0] is not states:
-            kept = self._fallback_table = (states, fallback_surfaces(states))
-        return kept[1]
+        if kept is not None and kept[0] is states and kept[1] is probes:
+            return kept[2], kept[3]
+        found = fallback_surfaces(states)
+        for row, piece in enumerate(found):
+            blend = probes.get(piece.look.entity)
+            if blend is None or not (blend.probes or blend.weights):
+                continue  # the sky alone: as no blend
+            owners = (*blend.probes, 0, 0)[:2]
+            variant, normal_map, _, _ = piece.key
+            if owners != (0, 0):
+                variant = variant.replace("fallback", "fallback_probes", 1)
+            w1, w2 = (*blend.weights, 0.0, 0.0)[:2]
+            look = piece.look
+            found[row] = replace(piece, key=(variant, normal_map, *owners),
+                                 weights=_FALLBACK_WEIGHTS.pack(w1, w2, 1.0, 0.0, look.plane_w, *look.offset))
+        water = [row for row, piece in enumerate(found) if piece.look.water is not None]
+        self._fallback_table = (states, probes, found, water)
+        return found, water
 
     def draw_fallbacks(self, parent: RenderTargets, level: RenderTargets | None, prepared: PreparedFallbacks) -> None:
         """Blend each fallback of ``prepared`` over its surface's pixels in ``parent`` (before
