@@ -14,24 +14,25 @@ from __future__ import annotations
 import math
 import struct
 
+import numpy as np
 import pytest
 from pyglm import glm
 
 from components import Material, Mirror, Transform
 from engine.assets.texture_data import ripple_normal_map
 from engine.core.frame_io import Output
-from engine.render.mirror_passes import FALLBACK_ROWS, Composite, MirrorPasses, composite_rows, surface_look
+from engine.render.mirror_passes import Composite, MirrorPasses, composite_rows, surface_look
 from engine.render.targets import CaptureTarget
 from engine.resources import ViewBudget
 from shell.app import Engine
 from tests.support import SceneRunner
 
 
-def _packed_one_at_a_time(fallbacks, size, probes) -> dict:
+def _packed_one_at_a_time(fallbacks, size, probes, chunk: int) -> dict:
     """Each fallback's row as a Composite of its parent view over the parent's rectangle
     (``composite_rows``, glm's matrices) and its extras packed with ``struct``, grouped by
     (build, normal map, probes) in the order of each group's first row, in chunks of
-    FALLBACK_ROWS."""
+    ``chunk`` (a draw's rows)."""
     count = len(fallbacks)
     groups: dict[tuple, list] = {}
     for p, s, fallback_share, end_view in zip(fallbacks.at, fallbacks.surface, fallbacks.share or [1.0] * count,
@@ -49,10 +50,9 @@ def _packed_one_at_a_time(fallbacks, size, probes) -> dict:
             Composite(parent.index, rect, rect, view, look),
             struct.pack("<4I", look.entity & 0xFFFFFFFF, end_view + 1, 0, 0),
             struct.pack("<8f", w1, w2, fallback_share, 0.0, look.plane_w, *look.offset)))
-    return {key: [(composite_rows([row[0] for row in group[at:at + FALLBACK_ROWS]], size),
-                   b"".join(row[1] for row in group[at:at + FALLBACK_ROWS]),
-                   b"".join(row[2] for row in group[at:at + FALLBACK_ROWS]))
-                  for at in range(0, len(group), FALLBACK_ROWS)] for key, group in groups.items()}
+    return {key: [(composite_rows([row[0] for row in group[at:at + chunk]], size),
+                   b"".join(row[1] for row in group[at:at + chunk]), b"".join(row[2] for row in group[at:at + chunk]))
+                  for at in range(0, len(group), chunk)] for key, group in groups.items()}
 
 
 @pytest.fixture
@@ -65,7 +65,7 @@ def compared(monkeypatch):
 
     def checked(self, fallbacks, size, probes):
         prepared = prepare(self, fallbacks, size, probes)
-        expected = _packed_one_at_a_time(fallbacks, size, probes)
+        expected = _packed_one_at_a_time(fallbacks, size, probes, self.fallback_chunk)
         assert list(prepared.groups) == list(expected)
         for key, chunks in expected.items():
             assert len(prepared.groups[key]) == len(chunks)
@@ -81,23 +81,41 @@ def compared(monkeypatch):
     return seen
 
 
-@pytest.mark.parametrize("visibility", ["exact", "predicted"])
-def test_the_ring_of_16_mirrors_rows_are_those_packed_one_at_a_time(ctx, compared, visibility):
+def _ring_frames(ctx, visibility: str, chunk: int | None = None, frames: int = 6) -> list[np.ndarray]:
+    """The 16-mirror ring's first ``frames`` frames at 320 x 180 (100 fallbacks and more each),
+    its fallbacks drawn ``chunk`` rows a draw (None: as many as a draw takes)."""
     from benchmarks.mirrors import MirrorRing
 
     engine = Engine(MirrorRing(16), ctx)
     engine.reflection_system.visibility = visibility
+    if chunk is not None:
+        engine.reflection_system.tree.passes.fallback_chunk = chunk
     size = (320, 180)
     capture = CaptureTarget(ctx, size)
+    images = []
     try:
-        for _ in range(6):
+        for _ in range(frames):
             engine.frame(1.0 / 60.0, Output(capture.framebuffer, size))
             assert engine.renderer.stats.reflection_fallbacks >= 100
+            images.append(capture.read_rgb())
     finally:
         capture.release()
         engine.close()
-    assert len(compared) >= 6 and max(entry[1] for entry in compared) >= 2  # more than one draw's worth
+    return images
+
+
+@pytest.mark.parametrize("visibility", ["exact", "predicted"])
+def test_the_ring_of_16_mirrors_rows_are_those_packed_one_at_a_time(ctx, compared, visibility):
+    """In chunks of 16 rows (several draws a build), and the frames are those drawn with a
+    draw a build (FALLBACK_ROWS: a level's fallbacks of one build in one draw)."""
+    whole = _ring_frames(ctx, visibility)
+    assert max(entry[1] for entry in compared) == max(len(entry[2]) for entry in compared)  # a draw a build
+    compared.clear()
+    chunked = _ring_frames(ctx, visibility, chunk=16)
+    assert len(compared) >= 6 and max(entry[1] for entry in compared) >= 4  # several draws of one build
     assert sum(entry[0] for entry in compared) >= 600
+    for a, b in zip(whole, chunked, strict=True):
+        assert a.std() > 10 and np.array_equal(a, b)
 
 
 def test_a_probes_water_portal_and_faded_rows_are_those_packed_one_at_a_time(scene, compared):

@@ -41,6 +41,7 @@ from engine.assets.texture_data import TextureData
 from engine.render.bindings import (
     ATLAS_UNIT,
     BLEND_OVER,
+    FALLBACK_BINDING,
     FALLBACK_PARENT_UNITS,
     NORMAL_UNIT,
     PARENT_NODE_UNIT,
@@ -54,6 +55,7 @@ from engine.render.bindings import (
     PassState,
     apply_pass_state,
     bind_texture,
+    bind_uniform_block,
 )
 from engine.render.gpu import Gpu
 from engine.render.rough_atlas import TILE, RoughAtlas, Tile, place_tiles
@@ -310,7 +312,8 @@ _FALLBACK_BUILDS = (("", {}), ("_portal", {"COMPOSITE_PORTAL": "1"}), ("_bumpy",
 FALLBACK_VARIANTS = {f"fallback{probes}{name}": {"COMPOSITE_FALLBACK": "1", **extra, **defines}
                      for probes, extra in (("", {}), ("_probes", {"FALLBACK_PROBES": "1"}))
                      for name, defines in _FALLBACK_BUILDS}
-FALLBACK_ROWS = 32  # rows a fallback draw takes (its uniform arrays' length); more are drawn in chunks
+FALLBACK_ROWS = 256  # rows a fallback draw takes (its uniform block's arrays); more are drawn in chunks
+_FALLBACK_IDS_BYTES = 16 * FALLBACK_ROWS  # the block's ids array (std140: a uvec4 a row), then its weights
 _FALLBACK_IDS = struct.Struct("<4I")
 _FALLBACK_WEIGHTS = struct.Struct("<8f")
 # A composite row (_COMPOSITE_ROW) as a fallback's is joined: its corners, the parent's head
@@ -517,7 +520,12 @@ class MirrorPasses:
                                           strict=True))}.items():
                 if name in program:
                     program[name].value = unit
+            if "FallbackRows" in program:
+                program["FallbackRows"].binding = FALLBACK_BINDING
             self.fallbacks[variant] = _CompositeDraw(ctx, program)
+        # The fallback draws' ids and weights (FallbackRows: a chunk's, written before its draw).
+        self._fallback_block = ctx.buffer(reserve=_FALLBACK_IDS_BYTES + 32 * FALLBACK_ROWS)
+        self.fallback_chunk = FALLBACK_ROWS  # rows a fallback draw takes, at most FALLBACK_ROWS (fewer: more draws)
         self.rough_atlas = RoughAtlas(renderer)
         self._fallback_table: tuple | None = None  # (states, probes, their pieces, water rows: prepare_fallbacks)
         self._claim_buffer: moderngl.Buffer | None = None  # the claims' triangles (claim.vert), grown as needed
@@ -712,7 +720,7 @@ class MirrorPasses:
             else:
                 w1, w2, _, _, plane_w, *offset = _FALLBACK_WEIGHTS.unpack(surface.weights)
                 weights.append(_FALLBACK_WEIGHTS.pack(w1, w2, shares[i], 0.0, plane_w, *offset))
-        chunk = FALLBACK_ROWS
+        chunk = self.fallback_chunk
         return PreparedFallbacks({key: [(b"".join(rows[5 * at:5 * (at + chunk)]), b"".join(ids[at:at + chunk]),
                                          b"".join(weights[at:at + chunk])) for at in range(0, len(ids), chunk)]
                                   for key, (rows, ids, weights) in groups.items()}, count)
@@ -774,6 +782,8 @@ class MirrorPasses:
             bind_texture(self.ctx, level.seen, REFLECTION_UNITS[1])
             bind_texture(self.ctx, level.node, REFLECTION_UNITS[2])
         bind_texture(self.ctx, renderer.sky, SKY_UNIT)
+        block = self._fallback_block
+        bind_uniform_block(ctx, block, FALLBACK_BINDING)
         uniforms = self.uniforms
         to_child = (1.0, 1.0) if level is None else (level.size[0] / parent.size[0], level.size[1] / parent.size[1])
         for (variant, normal_map, first, second), chunks in prepared.groups.items():
@@ -797,10 +807,7 @@ class MirrorPasses:
             if "to_child" in program:
                 uniforms.set(program, "to_child", to_child)
             for rows, ids, weights in chunks:
-                for name, data, size in (("fallback_ids", ids, _FALLBACK_IDS.size),
-                                         ("fallback_weights", weights, _FALLBACK_WEIGHTS.size)):
-                    if name in program:  # (a build being edited may not read one: hot reload)
-                        uniforms.write(program, name, data.ljust(FALLBACK_ROWS * size, b"\0"))
+                block.write(ids.ljust(_FALLBACK_IDS_BYTES, b"\0") + weights)  # (a draw reads its instances' only)
                 draw.draw(rows, renderer.shaders.reloads)
         renderer.stats.reflection_fallbacks += prepared.count
         renderer.checkpoint("fallback")
@@ -823,6 +830,7 @@ class MirrorPasses:
             if obj is not None:
                 obj.release()
         give_samples_queries(self.ctx, [self.no_pixels])
+        self._fallback_block.release()
         for draw in (*self.composites.values(), *self.fallbacks.values()):
             draw.release()
         self.rough_atlas.release()
