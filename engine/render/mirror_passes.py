@@ -7,8 +7,14 @@ view of its own shows what the composite would show with an empty reflection, it
 environment (``COMPOSITE_FALLBACK`` builds of the same shader, one code path).  It is drawn
 over the parent view's own pixels of the surface, found by the parent level's node and
 surface images, so it needs no claim; the probes are uniforms of a draw and each row's
-weights and ids ride in uniform arrays (the composite's row fills a vertex shader's 16
-attribute slots).  Why there and not in the scene pass: the scene pass cannot know which
+weights and ids ride in a uniform block (FallbackRows: the composite's row fills a vertex
+shader's 16 attribute slots).  A row is a (parent view, surface) pair's, not a surface's
+for every parent of a level: its pixels' rays start from the parent's camera (the row's
+inverse view-projection and eye) and its quad is the surface's outline in the parent's clip
+space, so one row for several parents would need each pixel's camera found by its node and a
+quad over every parent's outline: more pixels shaded, and the edge pixels that one parent's
+outline leaves out now (no margin: ``conservative_corner``) could get it.
+Why there and not in the scene pass: the scene pass cannot know which
 mirrors will get views (the budgets choose after it has drawn them), so writing the fallback
 there would cost every mirror pixel its probe lookups and need the composite to take it out
 again where a view is drawn, changing drawn mirrors' pixels; here a drawn view's pixels are
@@ -236,7 +242,8 @@ class Fallbacks:
 @dataclass
 class PreparedFallbacks:
     """A level's fallbacks, ready to draw: per (variant, normal map, first probe, second
-    probe), chunks of at most FALLBACK_ROWS rows, each (composite rows, ids, weights)."""
+    probe), chunks of ``MirrorPasses.fallback_chunk`` rows (a draw each), each (composite
+    rows, ids, weights: the FallbackRows block's arrays)."""
 
     groups: dict[tuple[str, TextureData | None, int, int], list[tuple[bytes, bytes, bytes]]]
     count: int = 0
@@ -675,7 +682,7 @@ class MirrorPasses:
         draw, their weights ride in the row's extras), in the order they were added.
 
         A row is a composite's (``composite_rows``, with the parent's rectangle as the view's
-        and no fade or tile) and its extras (mirror_composite.vert's uniform arrays), joined
+        and no fade or tile) and its extras (mirror_composite.vert's FallbackRows), joined
         from pieces packed once: each parent's (its rectangle, camera and node, once a
         level) and each surface's (``_FallbackSurface``, kept while the states are); a row
         packs only its corners (the outline in the parent's clip space: one glm product,
