@@ -8,7 +8,8 @@ visibility (fallbacks at several levels, past the depth limits and below views d
 unseen, more than one draw's worth), a mirror inside a probe's box (the probes' build and
 weights), cut water (its waves where the tile goes), a portal (its carry and offset), a
 partly faded mirror (a share below 1), the end views' holes of a normal-mapped pair (an
-end view's node, a normal map's draw)."""
+end view's node, a normal map's draw).  And drawn 16 rows a draw, the ring's frames are those
+drawn with every row of a build in one draw (the FallbackRows block's 256)."""
 from __future__ import annotations
 
 import math

@@ -214,7 +214,8 @@ class Fallbacks:
         """Fallbacks of surfaces ``surface`` (rows of ``states``) seen by ``parents[at]``, with
         the fallback's ``share`` of the reflection (1 - the view's fade; 1: no view) and the
         end view whose holes it fills (its node; -1: none), each one value or one a
-        fallback.  Consecutive blocks of the same ``parents`` (the same list) share them."""
+        fallback.  Consecutive blocks of the same ``parents`` (the same list, not changed
+        since) share them."""
         count = len(at)
         if not count:
             return
