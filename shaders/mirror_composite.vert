@@ -28,12 +28,17 @@ flat out mat3 v_project_dir; // rows x, y, w of the parent's view-projection for
 #endif
 #ifdef COMPOSITE_FALLBACK
 // A fallback row's values the composite's row has no room for (a vertex shader has 16
-// attribute slots, all taken), by instance (mirror_passes.fallback_extras): ids x the
+// attribute slots, all taken), by instance (mirror_passes.prepare_fallbacks): ids x the
 // surface's entity, y its end view + 1 (0: none); weights[2i] the probes' weights (x, y)
 // and the fallback's share (z), weights[2i + 1] the plane's w and, for a portal, the pair's
-// offset (yzw: the translation of the carry).
-uniform uvec4 fallback_ids[FALLBACK_ROWS];
-uniform vec4 fallback_weights[2 * FALLBACK_ROWS];
+// offset (yzw: the translation of the carry).  A uniform block (FALLBACK_ROWS of 256 rows is
+// 12 KiB, inside GL 4.1's least block size of 16 KiB), so a level's fallbacks of one build
+// are one draw: as uniform arrays (1024 components at least, 32 rows) they were a draw each
+// 32 rows, 5 to 9 draws a frame for the 16-mirror ring in predicted visibility.
+layout(std140) uniform FallbackRows {
+    uvec4 fallback_ids[FALLBACK_ROWS];
+    vec4 fallback_weights[2 * FALLBACK_ROWS];
+};
 flat out uvec4 v_ids;
 flat out vec4 v_weights;
 flat out vec4 v_place;

@@ -104,6 +104,7 @@ VIEWS_BINDING = 2        # the batched scene program's table of a level's views
 SHADOWS_BINDING = 3      # scene: the lights' shadow matrices and atlas rectangles
 IRRADIANCE_BINDING = 4   # scene: the probes' influence boxes for diffuse image lighting
 VIRTUAL_LIGHTS_BINDING = 5  # scene: lights seen through mirrors and portals (shadow_rules.VirtualLight)
+FALLBACK_BINDING = 6     # composite (fallback): each row's ids and weights (mirror_composite.vert's FallbackRows)
 
 # --- clip distances ------------------------------------------------------------------------
 # The GLSL writes gl_ClipDistance[CLIP_VIEW_PLANE] and so on: the names below, defined for

@@ -7,8 +7,14 @@ view of its own shows what the composite would show with an empty reflection, it
 environment (``COMPOSITE_FALLBACK`` builds of the same shader, one code path).  It is drawn
 over the parent view's own pixels of the surface, found by the parent level's node and
 surface images, so it needs no claim; the probes are uniforms of a draw and each row's
-weights and ids ride in uniform arrays (the composite's row fills a vertex shader's 16
-attribute slots).  Why there and not in the scene pass: the scene pass cannot know which
+weights and ids ride in a uniform block (FallbackRows: the composite's row fills a vertex
+shader's 16 attribute slots).  A row is a (parent view, surface) pair's, not a surface's
+for every parent of a level: its pixels' rays start from the parent's camera (the row's
+inverse view-projection and eye) and its quad is the surface's outline in the parent's clip
+space, so one row for several parents would need each pixel's camera found by its node and a
+quad over every parent's outline: more pixels shaded, and the edge pixels that one parent's
+outline leaves out now (no margin: ``conservative_corner``) could get it.
+Why there and not in the scene pass: the scene pass cannot know which
 mirrors will get views (the budgets choose after it has drawn them), so writing the fallback
 there would cost every mirror pixel its probe lookups and need the composite to take it out
 again where a view is drawn, changing drawn mirrors' pixels; here a drawn view's pixels are
@@ -29,8 +35,9 @@ from __future__ import annotations
 
 import struct
 import weakref
-from collections.abc import Mapping
-from dataclasses import dataclass
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, replace
+from typing import Protocol
 
 import moderngl
 import numpy as np
@@ -40,6 +47,7 @@ from engine.assets.texture_data import TextureData
 from engine.render.bindings import (
     ATLAS_UNIT,
     BLEND_OVER,
+    FALLBACK_BINDING,
     FALLBACK_PARENT_UNITS,
     NORMAL_UNIT,
     PARENT_NODE_UNIT,
@@ -53,6 +61,7 @@ from engine.render.bindings import (
     PassState,
     apply_pass_state,
     bind_texture,
+    bind_uniform_block,
 )
 from engine.render.gpu import Gpu
 from engine.render.rough_atlas import TILE, RoughAtlas, Tile, place_tiles
@@ -168,23 +177,74 @@ class Composite:
     fade: float = 1.0                                          # the reflection's weight (a mirror's fades)
 
 
-@dataclass(slots=True)
-class Fallback:
-    """A surface seen by a view with no view of its own (or a partly faded one, or an end
-    view's holes), as its fallback composite sees it (``MirrorPasses.prepare_fallbacks``)."""
+class FallbackParent(Protocol):
+    """A view whose pixels show fallbacks (``ViewTree``'s ``ReflectionView``)."""
 
-    parent_view: View                      # the view that sees the surface
-    node: int                              # its index in the tree (its pixels in its level's node image)
-    rect: tuple[int, int, int, int]        # its rectangle in its level's pixels (x, y, width, height)
-    surface: CompositeSurface
-    share: float = 1.0                     # the fallback's share of the reflection (1 - the view's fade)
-    end: int = -1                          # an end view's index: only the pixels its image did not hold
+    index: int   # its node: its pixels in its level's node image
+    level: int   # 0: a root, whose rectangle is its whole target
+    view: View
+
+
+class Fallbacks:
+    """A level's fallbacks, as columns: each a surface seen by a view with no view of its own
+    (or a partly faded one, or an end view's holes), its parent the view that sees it.  The
+    view tree adds them in blocks as it finds them (the planner's (parent, surface) pairs, a
+    level's cut or faded candidates, its end views), each block as columns, never an object
+    a fallback; ``MirrorPasses.prepare_fallbacks`` packs them (the 16-mirror ring has 130-230
+    of them a frame at 320 x 180: an object and a Composite a fallback cost ~3 us each)."""
+
+    __slots__ = ("states", "parents", "at", "surface", "share", "end", "_from", "_offset")
+
+    def __init__(self, states: Sequence[SurfaceState]) -> None:
+        self.states = states                     # the frame's surfaces (``surface`` are rows of them)
+        self.parents: list[FallbackParent] = []  # the blocks' parents, a list after another
+        self.at: list[int] = []                  # each fallback's parent: an index of ``parents``
+        self.surface: list[int] = []             # each one's surface row
+        self.share: list[float] | None = None    # each one's share of the reflection (None: all 1)
+        self.end: list[int] | None = None        # each one's end view, whose holes it fills (None: all -1)
+        self._from: Sequence[FallbackParent] | None = None  # the last block's parents (added once)
+        self._offset = 0
+
+    def __len__(self) -> int:
+        return len(self.at)
+
+    def add(self, parents: Sequence[FallbackParent], at: np.ndarray | Sequence[int],
+            surface: np.ndarray | Sequence[int], share: np.ndarray | float = 1.0,
+            end: np.ndarray | Sequence[int] | int = -1) -> None:
+        """Fallbacks of surfaces ``surface`` (rows of ``states``) seen by ``parents[at]``, with
+        the fallback's ``share`` of the reflection (1 - the view's fade; 1: no view) and the
+        end view whose holes it fills (its node; -1: none), each one value or one a
+        fallback.  Consecutive blocks of the same ``parents`` (the same list, not changed
+        since) share them."""
+        count = len(at)
+        if not count:
+            return
+        if parents is not self._from:
+            self._from, self._offset = parents, len(self.parents)
+            self.parents.extend(parents)
+        before = len(self.at)
+        at = at.tolist() if isinstance(at, np.ndarray) else list(at)
+        self.at += [a + self._offset for a in at] if self._offset else at
+        self.surface += surface.tolist() if isinstance(surface, np.ndarray) else surface
+        if not isinstance(share, float) or share != 1.0:
+            if self.share is None:
+                self.share = [1.0] * before
+            self.share += [share] * count if isinstance(share, float) else np.asarray(share, np.float64).tolist()
+        elif self.share is not None:
+            self.share += [1.0] * count
+        if not isinstance(end, int) or end != -1:
+            if self.end is None:
+                self.end = [-1] * before
+            self.end += [end] * count if isinstance(end, int) else np.asarray(end, np.int64).tolist()
+        elif self.end is not None:
+            self.end += [-1] * count
 
 
 @dataclass
 class PreparedFallbacks:
     """A level's fallbacks, ready to draw: per (variant, normal map, first probe, second
-    probe), chunks of at most FALLBACK_ROWS rows, each (composite rows, ids, weights)."""
+    probe), chunks of ``MirrorPasses.fallback_chunk`` rows (a draw each), each (composite
+    rows, ids, weights: the FallbackRows block's arrays)."""
 
     groups: dict[tuple[str, TextureData | None, int, int], list[tuple[bytes, bytes, bytes]]]
     count: int = 0
@@ -260,9 +320,17 @@ _FALLBACK_BUILDS = (("", {}), ("_portal", {"COMPOSITE_PORTAL": "1"}), ("_bumpy",
 FALLBACK_VARIANTS = {f"fallback{probes}{name}": {"COMPOSITE_FALLBACK": "1", **extra, **defines}
                      for probes, extra in (("", {}), ("_probes", {"FALLBACK_PROBES": "1"}))
                      for name, defines in _FALLBACK_BUILDS}
-FALLBACK_ROWS = 32  # rows a fallback draw takes (its uniform arrays' length); more are drawn in chunks
+FALLBACK_ROWS = 256  # rows a fallback draw takes (its uniform block's arrays); more are drawn in chunks
+_FALLBACK_IDS_BYTES = 16 * FALLBACK_ROWS  # the block's ids array (std140: a uvec4 a row), then its weights
 _FALLBACK_IDS = struct.Struct("<4I")
 _FALLBACK_WEIGHTS = struct.Struct("<8f")
+# A composite row (_COMPOSITE_ROW) as a fallback's is joined: its corners, the parent's head
+# (rectangle, inverse, eye), the surface's head, the parent's node, the surface's tail.
+_PIECE_PARENT = struct.Struct("<4f64s12s")
+_PIECE_HEAD = struct.Struct("<f12s4f")
+_PIECE_NODE = struct.Struct("<f")
+_PIECE_TAIL = struct.Struct("<12sf36s")
+assert 64 + _PIECE_PARENT.size + _PIECE_HEAD.size + _PIECE_NODE.size + _PIECE_TAIL.size == _COMPOSITE_ROW.size
 
 
 def _instance_format(program: moderngl.Program) -> tuple[str, list[str]]:
@@ -350,14 +418,43 @@ def composite_rows(composites: list[Composite], size: tuple[int, int]) -> bytes:
     return b"".join(rows)
 
 
-def fallback_extras(fallback: Fallback, weights: tuple[float, ...]) -> tuple[bytes, bytes]:
-    """A fallback row's values in the uniform arrays of its draw (mirror_composite.vert):
-    (entity, end view + 1, 0, 0) and (the probes' two ``weights``, the share, 0, the plane's
-    w, the portal's offset)."""
-    surface = fallback.surface
-    w1, w2 = (*weights, 0.0, 0.0)[:2]
-    return (_FALLBACK_IDS.pack(surface.entity & 0xFFFFFFFF, fallback.end + 1, 0, 0),
-            _FALLBACK_WEIGHTS.pack(w1, w2, fallback.share, 0.0, surface.plane_w, *surface.offset))
+@dataclass
+class _FallbackSurface:
+    """What a fallback's row reads of one surface (``fallback_surfaces``), packed once: the
+    composite row's pieces around the parent's (``composite_rows``'s fields, with no tile
+    and no fade) and its extras with no end view, a share of 1 and no probes."""
+
+    head: bytes                   # tile x, tint, tile scale, reflect rate, roughness, params z
+    tail: bytes                   # normal, tile y, carry
+    outline: glm.mat4 | None
+    ids: bytes                    # _FALLBACK_IDS: entity, 0, 0, 0
+    weights: bytes                # _FALLBACK_WEIGHTS: 0, 0, 1, 0, the plane's w, the offset
+    key: tuple[str, TextureData | None, int, int]  # its draw's (build, normal map), without probes
+    look: CompositeSurface
+
+
+def fallback_surfaces(states: Sequence[SurfaceState]) -> list[_FallbackSurface]:
+    """Each surface's fallback pieces (``_FallbackSurface``); a water surface's head and tail
+    are packed again each frame (its waves move: ``_water_pieces``)."""
+    found = []
+    for state in states:
+        look = surface_look(state)
+        head, tail = _water_pieces(look) if look.water is not None else (
+            _PIECE_HEAD.pack(0.0, look.tint, 0.0, look.reflect_rate, look.roughness, look.params_z),
+            _PIECE_TAIL.pack(look.normal, 0.0, look.carry))
+        found.append(_FallbackSurface(head, tail, look.outline, _FALLBACK_IDS.pack(look.entity & 0xFFFFFFFF, 0, 0, 0),
+                                      _FALLBACK_WEIGHTS.pack(0.0, 0.0, 1.0, 0.0, look.plane_w, *look.offset),
+                                      (look.fallback_variant, look.normal_map, 0, 0), look))
+    return found
+
+
+def _water_pieces(look: CompositeSurface) -> tuple[bytes, bytes]:
+    """A water surface's head and tail: this frame's waves where the tile goes and F0 where
+    the roughness goes (as ``composite_rows`` packs them)."""
+    water = look.water
+    (x, y), scale, rough = water.flow.offset, water.cross, water.f0
+    return (_PIECE_HEAD.pack(x, look.tint, scale, look.reflect_rate, rough, look.params_z),
+            _PIECE_TAIL.pack(look.normal, y, look.carry))
 
 
 def _ndc_rect(rect: tuple[int, int, int, int], size: tuple[int, int]) -> tuple[float, float, float, float]:
@@ -431,8 +528,14 @@ class MirrorPasses:
                                           strict=True))}.items():
                 if name in program:
                     program[name].value = unit
+            if "FallbackRows" in program:
+                program["FallbackRows"].binding = FALLBACK_BINDING
             self.fallbacks[variant] = _CompositeDraw(ctx, program)
+        # The fallback draws' ids and weights (FallbackRows: a chunk's, written before its draw).
+        self._fallback_block = ctx.buffer(reserve=_FALLBACK_IDS_BYTES + 32 * FALLBACK_ROWS)
+        self.fallback_chunk = FALLBACK_ROWS  # rows a fallback draw takes, at most FALLBACK_ROWS (fewer: more draws)
         self.rough_atlas = RoughAtlas(renderer)
+        self._fallback_table: tuple | None = None  # (states, probes, their pieces, water rows: prepare_fallbacks)
         self._claim_buffer: moderngl.Buffer | None = None  # the claims' triangles (claim.vert), grown as needed
         self._reset_vao: moderngl.VertexArray | None = None
         self._claim_vao: moderngl.VertexArray | None = None
@@ -572,32 +675,104 @@ class MirrorPasses:
             draw.draw(variant_rows, self.renderer.shaders.reloads)
         self.renderer.checkpoint("composite")
 
-    def prepare_fallbacks(self, fallbacks: list[Fallback], size: tuple[int, int],
+    def prepare_fallbacks(self, fallbacks: Fallbacks, size: tuple[int, int],
                           probes: Mapping[int, ProbeBlend]) -> PreparedFallbacks:
         """The CPU half of a level's fallbacks (drawn into a level of ``size`` pixels): their
         rows, grouped by build, normal map and the probes of their surfaces (``probes``, by
         surface entity: the extract stage's ``SurfaceBlends``; the probes are uniforms of a
-        draw, their weights ride in the row's extras)."""
-        groups: dict[tuple[str, TextureData | None, int, int], list[tuple[Fallback, tuple[float, ...]]]] = {}
-        for fallback in fallbacks:
-            surface = fallback.surface
-            blend = probes.get(surface.entity)
-            owners = (*blend.probes, 0, 0)[:2] if blend is not None else (0, 0)
-            variant = surface.fallback_variant
+        draw, their weights ride in the row's extras), in the order they were added.
+
+        A row is a composite's (``composite_rows``, with the parent's rectangle as the view's
+        and no fade or tile) and its extras (mirror_composite.vert's FallbackRows), joined
+        from pieces packed once: each parent's (its rectangle, camera and node, once a
+        level) and each surface's (``_FallbackSurface``, kept while the states are); a row
+        packs only its corners (the outline in the parent's clip space: one glm product,
+        ~0.07 us; numpy's for 40 rows at once, rounded as glm's, cost 3 times as much, and a
+        level's rows a column at a time cost ~25 us whatever their count).  The 16-mirror
+        ring's 36 rows a level at 32 x 18 took 62 us packed through a Composite each, 22 us so."""
+        count = len(fallbacks)
+        if not count:
+            return PreparedFallbacks({}, 0)
+        surfaces, water = self._fallback_surfaces(fallbacks.states, probes)
+        parents = fallbacks.parents
+        pieces: list[tuple | None] = [None] * len(parents)  # each parent's, packed when first read
+        if water:  # this frame's waves
+            surfaces = list(surfaces)
+            for row in water:
+                head, tail = _water_pieces(surfaces[row].look)
+                surfaces[row] = replace(surfaces[row], head=head, tail=tail)
+        groups: dict[tuple, tuple[list[bytes], list[bytes], list[bytes]]] = {}
+        last_key, last = None, None
+        shares, ends = fallbacks.share, fallbacks.end
+        for i, (p, s) in enumerate(zip(fallbacks.at, fallbacks.surface, strict=True)):
+            surface = surfaces[s]
+            parent = pieces[p]
+            if parent is None:
+                parent = pieces[p] = self._fallback_parent(parents[p], size)
+            if surface.key is not last_key:
+                last_key = surface.key
+                last = groups.get(last_key)
+                if last is None:
+                    last = groups[last_key] = ([], [], [])
+            rows, ids, weights = last
+            outline = surface.outline
+            rows += ((parent[0] * outline).to_bytes() if outline is not None else parent[1], parent[2],
+                     surface.head, parent[3], surface.tail)
+            if ends is None or ends[i] < 0:
+                ids.append(surface.ids)
+            else:
+                look = surface.look
+                ids.append(_FALLBACK_IDS.pack(look.entity & 0xFFFFFFFF, ends[i] + 1, 0, 0))
+            if shares is None or shares[i] == 1.0:
+                weights.append(surface.weights)
+            else:
+                w1, w2, _, _, plane_w, *offset = _FALLBACK_WEIGHTS.unpack(surface.weights)
+                weights.append(_FALLBACK_WEIGHTS.pack(w1, w2, shares[i], 0.0, plane_w, *offset))
+        chunk = self.fallback_chunk
+        return PreparedFallbacks({key: [(b"".join(rows[5 * at:5 * (at + chunk)]), b"".join(ids[at:at + chunk]),
+                                         b"".join(weights[at:at + chunk])) for at in range(0, len(ids), chunk)]
+                                  for key, (rows, ids, weights) in groups.items()}, count)
+
+    @staticmethod
+    def _fallback_parent(parent: FallbackParent, size: tuple[int, int]) -> tuple[glm.mat4, bytes, bytes, bytes]:
+        """A parent view's pieces of its fallbacks' rows: its view-projection flattened onto
+        z = 0 (times an outline: the corners), the corners of its rectangle (a surface with
+        no outline), its head and its node (``_PIECE_PARENT``, ``_PIECE_NODE``)."""
+        view = parent.view
+        block = view.camera_block()
+        x, y, w, h = rect = view.scissor if parent.level and view.scissor is not None else (0, 0, *view.size)
+        x0, y0, x1, y1 = _ndc_rect(rect, size)
+        return (_FLATTEN_Z * glm.mat4.from_bytes(block[_BLOCK_VIEW_PROJ]),
+                struct.pack("<16f", x0, y0, 0.0, 1.0, x0, y1, 0.0, 1.0, x1, y0, 0.0, 1.0, x1, y1, 0.0, 1.0),
+                _PIECE_PARENT.pack(x, y, x + w, y + h, block[_BLOCK_INVERSE], block[_BLOCK_EYE]),
+                _PIECE_NODE.pack(float(parent.index)))
+
+    def _fallback_surfaces(self, states: Sequence[SurfaceState], probes: Mapping[int, ProbeBlend]
+                           ) -> tuple[list[_FallbackSurface], list[int]]:
+        """``fallback_surfaces(states)`` with each surface's probes of ``probes`` in its key
+        and weights, and the rows of water surfaces (whose pieces the caller packs again),
+        kept while the states and the probes are the same objects (the table's, the same every
+        frame while no surface changes: ``surface_look`` keeps a state's look as long; the
+        extract stage's blends, while no probe or surface moves)."""
+        kept = self._fallback_table
+        if kept is not None and kept[0] is states and kept[1] is probes:
+            return kept[2], kept[3]
+        found = fallback_surfaces(states)
+        for row, piece in enumerate(found):
+            blend = probes.get(piece.look.entity)
+            if blend is None or not (blend.probes or blend.weights):
+                continue  # the sky alone: as no blend
+            owners = (*blend.probes, 0, 0)[:2]
+            variant, normal_map, _, _ = piece.key
             if owners != (0, 0):
                 variant = variant.replace("fallback", "fallback_probes", 1)
-            key = (variant, surface.normal_map, *owners)
-            groups.setdefault(key, []).append((fallback, blend.weights if blend is not None else ()))
-        prepared = PreparedFallbacks({}, len(fallbacks))
-        for key, group in groups.items():
-            chunks = prepared.groups[key] = []
-            for at in range(0, len(group), FALLBACK_ROWS):
-                part = group[at:at + FALLBACK_ROWS]
-                rows = composite_rows([Composite(f.node, f.rect, f.rect, f.parent_view, f.surface) for f, _ in part],
-                                      size)
-                extras = [fallback_extras(f, weights) for f, weights in part]
-                chunks.append((rows, b"".join(ids for ids, _ in extras), b"".join(w for _, w in extras)))
-        return prepared
+            w1, w2 = (*blend.weights, 0.0, 0.0)[:2]
+            look = piece.look
+            found[row] = replace(piece, key=(variant, normal_map, *owners),
+                                 weights=_FALLBACK_WEIGHTS.pack(w1, w2, 1.0, 0.0, look.plane_w, *look.offset))
+        water = [row for row, piece in enumerate(found) if piece.look.water is not None]
+        self._fallback_table = (states, probes, found, water)
+        return found, water
 
     def draw_fallbacks(self, parent: RenderTargets, level: RenderTargets | None, prepared: PreparedFallbacks) -> None:
         """Blend each fallback of ``prepared`` over its surface's pixels in ``parent`` (before
@@ -615,6 +790,8 @@ class MirrorPasses:
             bind_texture(self.ctx, level.seen, REFLECTION_UNITS[1])
             bind_texture(self.ctx, level.node, REFLECTION_UNITS[2])
         bind_texture(self.ctx, renderer.sky, SKY_UNIT)
+        block = self._fallback_block
+        bind_uniform_block(ctx, block, FALLBACK_BINDING)
         uniforms = self.uniforms
         to_child = (1.0, 1.0) if level is None else (level.size[0] / parent.size[0], level.size[1] / parent.size[1])
         for (variant, normal_map, first, second), chunks in prepared.groups.items():
@@ -638,10 +815,7 @@ class MirrorPasses:
             if "to_child" in program:
                 uniforms.set(program, "to_child", to_child)
             for rows, ids, weights in chunks:
-                for name, data, size in (("fallback_ids", ids, _FALLBACK_IDS.size),
-                                         ("fallback_weights", weights, _FALLBACK_WEIGHTS.size)):
-                    if name in program:  # (a build being edited may not read one: hot reload)
-                        uniforms.write(program, name, data.ljust(FALLBACK_ROWS * size, b"\0"))
+                block.write(ids.ljust(_FALLBACK_IDS_BYTES, b"\0") + weights)  # (a draw reads its instances' only)
                 draw.draw(rows, renderer.shaders.reloads)
         renderer.stats.reflection_fallbacks += prepared.count
         renderer.checkpoint("fallback")
@@ -664,6 +838,7 @@ class MirrorPasses:
             if obj is not None:
                 obj.release()
         give_samples_queries(self.ctx, [self.no_pixels])
+        self._fallback_block.release()
         for draw in (*self.composites.values(), *self.fallbacks.values()):
             draw.release()
         self.rough_atlas.release()

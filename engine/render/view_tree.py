@@ -65,7 +65,7 @@ from engine.render.gpu import Gpu
 from engine.render.mirror_passes import (
     Claims,
     Composite,
-    Fallback,
+    Fallbacks,
     MirrorPasses,
     PreparedComposites,
     PreparedFallbacks,
@@ -258,8 +258,8 @@ class _Walk:
     level: int = 0                           # the deepest level drawn
     steps: list[_Level] = field(default_factory=list)  # the levels, in order (exact: drawn as they come;
                                                        # predicted: drawn after the last is planned)
-    fallbacks: dict[int, list[Fallback]] = field(default_factory=dict)  # each level's, by the level they
-                                                                        # are drawn into
+    fallbacks: dict[int, Fallbacks] = field(default_factory=dict)  # each level's, by the level they
+                                                                   # are drawn into (_fallbacks_at)
     blends: Mapping[int, ProbeBlend] = field(default_factory=dict)      # the fallbacks' probes (SurfaceBlends)
     triangle_count: int | None = None        # what a scene pass submits (triangles(): counted once, if asked)
     chain: ChainBoxes | None = None          # the planned level's claims' bounds (claim_cull), for the next
@@ -430,9 +430,8 @@ class ViewTree:
         walk.result.faded += faded
         candidates, walk.end_seers, dropped = self._end_seers(candidates, walk.seers)
         if dropped:  # end candidates with nothing to repeat: their fallback, never the bare surface
-            states = surfaces.states
-            walk.fallbacks.setdefault(walk.level, []).extend(self._fallback(walk.nodes[p], states[s])
-                                                             for p, s in dropped)
+            _fallbacks_at(walk.fallbacks, walk.level, surfaces).add(walk.nodes, [p for p, _ in dropped],
+                                                                    [s for _, s in dropped])
         return candidates
 
     def _choose(self, walk: _Walk, levels: LevelStack, candidates: Candidates) -> _Level | None:
@@ -524,8 +523,8 @@ class ViewTree:
         step.end_matrices = [views[walk.end_seers[i]].view.view * inverse_carry[s] for i, s in
                              zip(end_rows, chosen_ends.surface.tolist(), strict=True)]
         walk.result.end_views.extend(step.ended)
-        walk.fallbacks.setdefault(walk.level, []).extend(
-            self._fallback(node.parent, node.surface, end=node.index) for node in step.ended)
+        _fallbacks_at(walk.fallbacks, walk.level, walk.surfaces).add(
+            walk.nodes, chosen_ends.parent, chosen_ends.surface, end=[node.index for node in step.ended])
 
     def _descend(self, walk: _Walk, step: _Level) -> Candidates | None:
         """A chosen level's views join the tree, and those that grow become the parents of
@@ -654,39 +653,37 @@ class ViewTree:
         return keep, grow, ends, claim_keys
 
     @staticmethod
-    def _fallback(parent: ReflectionView, surface: SurfaceState, share: float = 1.0, end: int = -1) -> Fallback:
-        """The fallback of ``surface`` in ``parent``'s pixels (``Fallback``)."""
-        view = parent.view
-        rect = view.scissor if parent.level and view.scissor is not None else (0, 0, *view.size)
-        return Fallback(view, parent.index, rect, surface_look(surface), share, end)
-
-    def _unviewed(self, fallbacks: dict[int, list[Fallback]], surfaces: SurfaceTable, rows: LevelRows,
+    def _unviewed(fallbacks: dict[int, Fallbacks], surfaces: SurfaceTable, rows: LevelRows,
                   nodes: list[ReflectionView], level: int, root_proj: np.ndarray, root: View, depth_cap: int,
                   ends: tuple[np.ndarray, int] | None) -> None:
         """The fallbacks of the surfaces the views ``nodes`` (``rows``, of ``level``) see but
         that the next level plans no view for (``SurfaceTable.unviewed``: past their depth
-        limits, switched off, faded out; a ``depth_cap`` of 0: all of them)."""
+        limits, switched off, faded out; a ``depth_cap`` of 0: all of them), as the planner's
+        columns: its parent rows are rows of ``nodes``."""
         p, s = surfaces.unviewed(rows, level + 1, root_proj, root.size, depth_cap, _ends_at(ends, level + 1))
         if len(p):
-            states = surfaces.states
-            fallbacks.setdefault(level, []).extend(self._fallback(nodes[i], states[j])
-                                                   for i, j in zip(p.tolist(), s.tolist(), strict=True))
+            _fallbacks_at(fallbacks, level, surfaces).add(nodes, p, s)
 
-    def _fallbacks_of_level(self, fallbacks: dict[int, list[Fallback]], surfaces: SurfaceTable, step: _Level,
+    @staticmethod
+    def _fallbacks_of_level(fallbacks: dict[int, Fallbacks], surfaces: SurfaceTable, step: _Level,
                             keep: list[int] | np.ndarray, is_end: list[bool], children: list[ReflectionView],
                             level: int, exact: bool) -> None:
-        """The fallbacks of a level's candidates: those with pixels the budgets cut (their
-        whole reflection) and the views kept partly faded (the faded share)."""
-        found = [self._fallback(child.parent, child.surface, 1.0 - child.fade) for child in children
-                 if child.fade < 1.0]
+        """The fallbacks of a level's candidates: the views kept partly faded (the faded
+        share) and those with pixels the budgets cut (their whole reflection), as rows of its
+        candidates (whose parents are ``step.parents``)."""
+        faded = [at for at, child in enumerate(children) if child.fade < 1.0]
+        if faded:
+            chosen, rows = step.chosen, np.asarray(faded, np.int64)
+            _fallbacks_at(fallbacks, level, surfaces).add(step.parents, chosen.parent.take(rows),
+                                                          chosen.surface.take(rows), 1.0 - chosen.fade.take(rows))
         if exact and step.pixels is not None and len(keep) < sum(1 for n in step.pixels if n):
             kept = set(np.asarray(keep).tolist())
-            candidates, states, parents = step.candidates, surfaces.states, step.parents
-            found += [self._fallback(parents[p], states[s]) for i, (n, end, p, s) in enumerate(zip(
-                step.pixels, is_end, candidates.parent.tolist(), candidates.surface.tolist(), strict=True))
-                if n and not end and i not in kept]
-        if found:
-            fallbacks.setdefault(level, []).extend(found)
+            cut = np.array([i for i, (n, end) in enumerate(zip(step.pixels, is_end, strict=True))
+                            if n and not end and i not in kept], np.int64)
+            if len(cut):
+                candidates = step.candidates
+                _fallbacks_at(fallbacks, level, surfaces).add(step.parents, candidates.parent.take(cut),
+                                                              candidates.surface.take(cut))
 
     def _waits_for_counts(self, settings: TreeSettings) -> bool:
         """Whether the levels read this frame's claim counts (the CPU waits for the GPU once
@@ -983,6 +980,14 @@ class ViewTree:
 
 # The LevelRows columns a level's nodes read (_level_nodes), as whole numbers: the rectangle, mirrored, node.
 _NODE_COLUMNS = np.array([*range(ROW["rect"].start, ROW["rect"].stop), ROW["mirrored"].start, ROW["node"].start])
+
+
+def _fallbacks_at(fallbacks: dict[int, Fallbacks], level: int, surfaces: SurfaceTable) -> Fallbacks:
+    """The fallbacks drawn into ``level`` (made empty when first asked for)."""
+    found = fallbacks.get(level)
+    if found is None:
+        found = fallbacks[level] = Fallbacks(surfaces.states)
+    return found
 
 
 def _ends_at(ends: tuple[np.ndarray, int] | None, depth: int) -> np.ndarray | None:
