@@ -244,22 +244,29 @@ def test_a_box_moving_in_a_face_draws_the_part_of_it_the_box_and_its_shadow_cove
     assert cube.as_if_drawn_whole()
 
 
+def _every_third_frame_probe(scene):
+    """The floor-and-boxes scene with an ``every_n`` = 3 probe on the six-pass path, run past
+    its first capture to a frame with a capture: the runner, the cube recorder, the probe's
+    state and the parts recorder."""
+    runner = scene(_floor_and_boxes("every_n", 3), (64, 48))
+    _probe_stage(runner).path = "six_pass"
+    cube = _Cube(runner)
+    runner.frame()
+    state = _probe_stage(runner).probes[runner.world.resources["probe"]]
+    while True:  # the first capture, then to a frame with a capture
+        runner.frame()
+        if state.captures >= 2 and runner.stats.probe_captures:
+            break
+    return runner, cube, state, _parts_drawn(cube)
+
+
 def test_a_face_waiting_for_its_period_draws_the_part_every_change_since_reached(scene):
     """``every_n`` = 3: the box moves on two frames between captures, far enough that its
     three places do not overlap; the capture draws the +X face in part, the rectangle
     holding all three places (only the last move's would leave the first place showing the
     box), and the cube is a capture of all six."""
-    runner = scene(_floor_and_boxes("every_n", 3), (64, 48))
-    _probe_stage(runner).path = "six_pass"
-    cube = _Cube(runner)
+    runner, cube, state, parts = _every_third_frame_probe(scene)
     world = runner.world
-    runner.frame()
-    state = _probe_stage(runner).probes[world.resources["probe"]]
-    while True:  # the first capture, then to a frame with a capture
-        runner.frame()
-        if state.captures >= 2 and runner.stats.probe_captures:
-            break
-    parts = _parts_drawn(cube)
     for _ in range(2):
         world.get(world.resources["near"], Transform).position += glm.vec3(0.0, 0.0, 0.45)
         runner.frame()
@@ -273,17 +280,8 @@ def test_a_face_waiting_for_its_period_draws_the_part_every_change_since_reached
 def test_a_relit_face_is_drawn_whole_though_a_move_reached_a_part_of_it_first(scene):
     """``every_n`` = 3: the box moves (a part of the +X face), then the sun dims (every face
     changes everywhere): the capture draws every face whole, none in part."""
-    runner = scene(_floor_and_boxes("every_n", 3), (64, 48))
-    _probe_stage(runner).path = "six_pass"
-    cube = _Cube(runner)
+    runner, cube, state, parts = _every_third_frame_probe(scene)
     world = runner.world
-    runner.frame()
-    state = _probe_stage(runner).probes[world.resources["probe"]]
-    while True:
-        runner.frame()
-        if state.captures >= 2 and runner.stats.probe_captures:
-            break
-    parts = _parts_drawn(cube)
     world.get(world.resources["near"], Transform).position += glm.vec3(0.0, 0.0, 0.3)
     runner.frame()
     assert state.regions.keys() == {0} or 0 in state.regions
