@@ -481,6 +481,55 @@ def test_stages_time_every_stage_inside_its_frame(ctx):
     assert reflect["mirrors_16"] > 5 * reflect["mirrors_0"]
     probes = {r["scene"]: r["cpu_ms_median"] for r in rows if r["stage"] == "probes"}
     assert probes["probe_dynamic"] > probes["mirrors_0"]
+    # The rasteriser's CPU time: llvmpipe's threads, where it has any (None elsewhere); the
+    # stages' shares are parts of the frame's, which has some (its shadow maps, its views).
+    if stages.rasteriser_clocks():
+        for scene in scenes:
+            by_stage = {r["stage"]: r for r in rows if r["scene"] == scene}
+            frame = by_stage.pop("frame")
+            assert frame["raster_ms_median"] > 0, scene
+            assert sum(r["raster_ms_median"] for r in by_stage.values()) <= 1.2 * frame["raster_ms_median"] + 0.05
+            assert all(r["raster_ms_median"] >= 0 for r in by_stage.values())
+    else:
+        assert all(r["raster_ms_median"] is None for r in rows)
+
+
+def test_the_rasteriser_clock_counts_llvmpipes_threads_not_this_one(ctx):
+    """A draw that llvmpipe's threads shade for milliseconds shows in ``RasterClock`` and
+    hardly in this thread's CPU time (which issued it and waited)."""
+    import time
+
+    import moderngl
+
+    from benchmarks.stages import RasterClock
+    from engine.render.bindings import invalidate
+    from engine.render.targets import release_framebuffer
+
+    clock = RasterClock()
+    if not clock.clocks:
+        pytest.skip("no llvmpipe rasteriser threads in this process (a GPU, LP_NUM_THREADS=0, or not Linux)")
+    target = ctx.texture((320, 180), 4)
+    framebuffer = ctx.framebuffer([target])
+    program = ctx.program(vertex_shader="#version 410 core\nvoid main() { vec2 p = vec2(gl_VertexID & 1, "
+                                        "gl_VertexID >> 1) * 4.0 - 1.0; gl_Position = vec4(p, 0.0, 1.0); }",
+                          fragment_shader="#version 410 core\nout vec4 colour; void main() { float s = 0.0; "
+                                          "for (int i = 0; i < 400; i++) s += sin(gl_FragCoord.x * 0.01 * float(i)); "
+                                          "colour = vec4(s); }")
+    vao = ctx.vertex_array(program, [])
+    try:
+        framebuffer.use()
+        vao.render(moderngl.TRIANGLES, vertices=3)  # the shader's compile (this thread's) out of the way
+        ctx.finish()
+        raster, own = clock(), time.thread_time()
+        vao.render(moderngl.TRIANGLES, vertices=3)
+        ctx.finish()
+        raster, own = clock() - raster, time.thread_time() - own
+        assert raster > 0.002 and raster > 5 * own, (raster, own)
+    finally:
+        release_framebuffer(framebuffer)  # the bound one: moderngl would bind its deleted name again
+        for thing in (vao, program, target):
+            thing.release()
+        invalidate(ctx)  # the engines' state cache: this test set state behind it
 
 
 FAILING_TEST = """
