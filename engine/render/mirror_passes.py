@@ -579,7 +579,13 @@ class MirrorPasses:
         # The claim loop calls the GL objects' own methods (``mglo``: a Query's begin and end,
         # what its ``with`` does; the vertex array's draw, which its ``render`` calls when it
         # has no scope): a level's claims are many (mirrors_16: 11, 28 and 34), and the
-        # wrappers' Python cost a claim is a quarter of its GL calls' on llvmpipe.
+        # wrappers' Python cost a claim is a quarter of its GL calls' on llvmpipe.  A claim's
+        # cost there is linear in the claims, no cliff at some count: each query's begin and
+        # end re-validate the fragment state (a new ~20 KB rasteriser state in the scene per
+        # claim, as any state change between draws does).  The cliff a small standalone
+        # script shows past ~12-16 of them is glibc handing that scene memory back and
+        # faulting it in again each scene (~170 page faults at 32 claims); the engine's
+        # frames take ~0-4 faults, so splitting a level's claims into chunks gains nothing.
         render, empty, triangles = self._claim_vao.mglo.render, self.no_pixels, moderngl.TRIANGLES
         for at, query in enumerate(queries[:count]):
             if query is not empty:
