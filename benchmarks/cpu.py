@@ -7,8 +7,13 @@ the driver calls).  That is measured here by rendering at 32x18 in a process sta
 almost nothing to rasterise), so the frame is the engine's CPU.  Parts (``--parts``):
 
 * ``cpu``: the mirrors ring (``benchmarks.mirrors``) with 0, 8 and 16 mirrors and the
-  facing portal pair (``benchmarks.portals``) at depth 0 and 8, 32x18, in a subprocess with
+  facing portal pair (``benchmarks.portals``) at depth 0 and 8, still and with a camera
+  that sways a little every frame (``_sway``), 32x18, in a subprocess with
   ``LP_NUM_THREADS=0``; then a cProfile table of each scene's top functions (``--top``).
+  The still pair keeps its reflection views once its end images settle (about frame 52 at
+  32x18: ``ReflectionSystem.keep_still_views``), so its depth-8 frames are drawn whole
+  before that and cost about depth 0's after; the swaying pair plans and draws every level
+  every frame, what a moving camera pays a level.
 * ``frames``: 640x360 with the rasteriser in (this process's environment): the mirrors
   ring with 0 and 8 mirrors, the probes suite's sphere with no probe and with a probe
   recaptured every frame, the portal pair at depth 0 and 8.
@@ -42,6 +47,7 @@ target                          measured                                      li
 ``cpu_frame_8_mirrors``         8 mirrors, the same                           2.0 ms    software
 ``cpu_frame_16_mirrors``        16 mirrors, the same                          3.5 ms    software
 ``cpu_portal_depth_8_ratio``    portals at depth 8 over depth 0, the same     2.5 x     software
+``cpu_portal_moving_ratio``     the same with the swaying camera              2.5 x     software
 ``ratio_8_to_0_mirrors``        640x360: 8 mirrors' frame over 0 mirrors'     1.4 x     software
 ``dynamic_probe_share``         640x360: what a probe recaptured every frame  0.3 x     software
                                 adds, over the frame without it
@@ -91,7 +97,8 @@ ECS_ENTITIES = 100_000
 DT = 1.0 / 60.0
 COUNTED_FRAMES = 3  # frames per scene with the GL call counter on, after the timed ones
 PARTS = ("cpu", "frames", "hd", "ecs")
-CPU_SCENES = ("mirrors_0", "mirrors_8", "mirrors_16", "portals_d0", "portals_d8")
+CPU_SCENES = ("mirrors_0", "mirrors_8", "mirrors_16", "portals_d0", "portals_d8", "portals_d0_sway",
+              "portals_d8_sway")
 FRAME_SCENES = ("mirrors_0", "mirrors_8", "probe_none", "probe_dynamic", "portals_d0", "portals_d8")
 HD_SCENES = ("mirrors_16",)
 
@@ -112,6 +119,8 @@ TARGETS: dict[str, Target] = {
                                    "16 mirrors, 32x18, LP_NUM_THREADS=0: frame median"),
     "cpu_portal_depth_8_ratio": Target(2.5, "x", "software", "cpu",
                                        "portals, 32x18, LP_NUM_THREADS=0: depth 8 over depth 0"),
+    "cpu_portal_moving_ratio": Target(2.5, "x", "software", "cpu",
+                                      "portals, camera swaying, 32x18, LP_NUM_THREADS=0: depth 8 over depth 0"),
     "ratio_8_to_0_mirrors": Target(1.4, "x", "software", "frames", "640x360: 8 mirrors over 0 mirrors"),
     "dynamic_probe_share": Target(0.3, "x", "software", "frames",
                                   "640x360: a probe recaptured every frame, what it adds over the frame without"),
@@ -427,6 +436,7 @@ def values(rows: list[dict]) -> dict[str, float | None]:
         "cpu_frame_8_mirrors": frame.get(("mirrors_8", cpu)),
         "cpu_frame_16_mirrors": frame.get(("mirrors_16", cpu)),
         "cpu_portal_depth_8_ratio": ratio("portals_d8", "portals_d0", cpu),
+        "cpu_portal_moving_ratio": ratio("portals_d8_sway", "portals_d0_sway", cpu),
         "ratio_8_to_0_mirrors": ratio("mirrors_8", "mirrors_0", small),
         "dynamic_probe_share": ratio("probe_dynamic", "probe_none", small, less=1.0),
         "ecs_cpu_ms": ecs,

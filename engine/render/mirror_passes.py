@@ -576,23 +576,19 @@ class MirrorPasses:
         bind_texture(self.ctx, parent.node, PARENT_NODE_UNIT)
         bind_texture(self.ctx, parent.surface, PARENT_SURFACE_UNIT)
         self.uniforms.set(self.claim, "to_parent", (parent.size[0] / level.size[0], parent.size[1] / level.size[1]))
-        # The claim loop calls the GL objects' own methods (``mglo``: a Query's begin and end,
-        # what its ``with`` does; the vertex array's draw, which its ``render`` calls when it
-        # has no scope): a level's claims are many (mirrors_16: 11, 28 and 34), and the
-        # wrappers' Python cost a claim is a quarter of its GL calls' on llvmpipe.  A claim's
-        # cost there is linear in the claims, no cliff at some count: each query's begin and
-        # end re-validate the fragment state (a new ~20 KB rasteriser state in the scene per
-        # claim, as any state change between draws does).  The cliff a small standalone
-        # script shows past ~12-16 of them is glibc handing that scene memory back and
-        # faulting it in again each scene (~170 page faults at 32 claims); the engine's
+        # A claim's cost on llvmpipe is linear in the claims, no cliff at some count: each
+        # query's begin and end re-validate the fragment state (a new ~20 KB rasteriser state
+        # in the scene per claim, as any state change between draws does).  The cliff a small
+        # standalone script shows past ~12-16 of them is glibc handing that scene memory back
+        # and faulting it in again each scene (~170 page faults at 32 claims); the engine's
         # frames take ~0-4 faults, so splitting a level's claims into chunks gains nothing.
-        render, empty, triangles = self._claim_vao.mglo.render, self.no_pixels, moderngl.TRIANGLES
+        # (Calling the objects' ``mglo`` methods instead of the wrappers saved ~1% at 16
+        # mirrors, within the noise, and hid the calls from benchmarks' GLCallCounter.)
+        render, empty = self._claim_vao.render, self.no_pixels
         for at, query in enumerate(queries[:count]):
             if query is not empty:
-                gl_query = query.mglo
-                gl_query.begin()
-                render(triangles, 6, 6 * at, -1)
-                gl_query.end()
+                with query:
+                    render(moderngl.TRIANGLES, vertices=6, first=6 * at)
         self.renderer.checkpoint("claims")
 
     @staticmethod
@@ -613,7 +609,7 @@ class MirrorPasses:
         them (all issued before the first is read, so it waits once); ``no_pixels``, read
         without asking the GL, counted 0."""
         empty = self.no_pixels
-        return [0 if query is empty else query.mglo.samples for query in queries]  # .samples's own read
+        return [0 if query is empty else query.samples for query in queries]
 
     def _reserve_claims(self, size: int) -> None:
         """A claims buffer of at least ``size`` bytes (64 claims at least), with the reset's
