@@ -31,8 +31,7 @@ def test_claims_apart_matches_a_pixel_count():
     seen = {True: 0, False: 0}
     for _ in range(400):
         n = int(rng.integers(1, 7))
-        rects = [(int(rng.integers(0, 48)), int(rng.integers(0, 48)), int(rng.integers(0, 16)), int(rng.integers(0, 16)))
-                 for _ in range(n)]
+        rects = [tuple(int(v) for v in (*rng.integers(0, 48, 2), *rng.integers(0, 16, 2))) for _ in range(n)]
         apart = view_tree._claims_apart(rects)
         assert apart == (not _overlap_by_pixels(rects)), rects
         seen[apart] += 1
