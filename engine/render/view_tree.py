@@ -99,6 +99,10 @@ _BATCHED = SceneOptions(clear=False, masked=True, sky=False, batched=True, refle
 # only on its own view's claimed pixels, as the node image's test would let it through; the
 # build without that test (ScenePass.program's MASKED) runs no fetch and no discard a pixel,
 # and llvmpipe's depth test, before the shader, rejects the other pixels' fragments unshaded.
+# A level drawn on its claims' conditions (predicted visibility) keeps the node test: its views
+# are skipped by the GPU only where the claims' counts are in when they draw (GL_QUERY_NO_WAIT
+# may draw anyway), and llvmpipe finishes the claims before a pass samples the node image they
+# wrote (measured: without that read a hidden view's draws were made, tests/test_predicted_visibility.py).
 _APART = {options: replace(options, masked=False) for options in (REFLECTION_LEVEL, _BATCHED)}
 
 
@@ -866,7 +870,7 @@ class ViewTree:
         renderer = self.renderer
         if step.views:
             options = _BATCHED if step.path == "batched" else REFLECTION_LEVEL
-            if step.apart:  # depth alone tells the claimed pixels (_APART)
+            if step.apart and step.conditions is None:  # depth alone tells the claimed pixels (_APART)
                 options = _APART[options]
             if step.unlit:
                 key = (options, step.unlit)
