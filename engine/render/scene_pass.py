@@ -227,7 +227,7 @@ class ScenePass:
         virtual = self.shadows.virtual_shining  # the shadows stage set how many shine
         shadowing = self.shadows.program_defines  # the lookups a program compiles (ShadowMaps.upload's)
         key = (invocations, layered, variants, normal_mapped, checker, material_maps, probe_blend, virtual,
-               ambient_probes, probe_rest, unlit, shadowing, masked)
+               ambient_probes, probe_rest, unlit, masked, shadowing)
         program = self._programs.get(key)
         if program is None:
             defines = {}
@@ -314,7 +314,8 @@ class ScenePass:
         (root and per-mirror views) and, with ``reflections``, every invocation count of the
         batched path (``BATCHED_INVOCATIONS``), its view table and the reflection sampler.
         A batch of mirrors gets its ``UNLIT_SURFACE`` builds too, and with ``reflections``
-        the per-mirror views' ``MASKED`` builds (the batched path draws levels only: masked).  Returns how many programs
+        the ``MASKED`` builds (a level whose claims overlap draws masked, one whose claims
+        lie apart unmasked: ``view_tree._APART``).  Returns how many programs
         were built (0 when all were there)."""
         before = len(self._programs)
         counts = (0, *BATCHED_INVOCATIONS) if reflections else (0,)
@@ -322,7 +323,7 @@ class ScenePass:
         for batch in batches:
             unlit = (False, True) if _may_be_unlit(batch) else (False,)
             for invocations in counts:
-                for masked in ((False, True) if reflections else (False,)) if invocations == 0 else (True,):
+                for masked in (False, True) if reflections else (False,):
                     for probes in ambient:
                         for dark in unlit:
                             batch.vao(self.program(batch.variants, invocations, "", batch.normal_map is not None,
