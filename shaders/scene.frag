@@ -22,9 +22,13 @@ flat in vec4 v_reflect;
 flat in vec4 v_tint;
 flat in uvec4 v_slots;
 
-// Reflection levels draw only the pixels of their own view (the node image mirror_claim.frag wrote).
-uniform bool masked;
+// Reflection levels draw only the pixels of their own view (the node image mirror_claim.frag
+// wrote): the MASKED build (engine/render/scene_pass.py), so a root view's program has neither
+// the fetch nor the discard (llvmpipe would run the fetch for every pixel behind a uniform
+// test, and a program that may discard writes depth only after the shader has run).
+#ifdef MASKED
 uniform usampler2D node_map;
+#endif
 #ifdef BATCHED_VIEWS
 // The batched mirror program draws every view of a level in one draw: scene_batched.geom
 // says which view (node index and eye) each triangle was emitted for.
@@ -245,7 +249,9 @@ vec3 checker_colour(vec2 uv) {
 #endif
 
 void main() {
-    if (masked && texelFetch(node_map, ivec2(gl_FragCoord.xy), 0).r != node_index) discard;
+#ifdef MASKED
+    if (texelFetch(node_map, ivec2(gl_FragCoord.xy), 0).r != node_index) discard;
+#endif
 #ifdef UNLIT_SURFACE
     // A mirror the view tree's composites paint over at weight 1 (scene_pass.shading_replaced):
     // its colour is never seen, so only its depth and ids count (the claims below read them).

@@ -134,12 +134,12 @@ class SceneOptions:
 ROOT_VIEW = SceneOptions()
 TREE_ROOT = SceneOptions(transparent=False)  # a root whose view tree draws its transparent slot
 REFLECTION_LEVEL = SceneOptions(clear=False, masked=True, sky=False, reflection_filter=True, transparent=False)
-_PER_DRAW_UNIFORMS = ("masked", "sky_face_size", "has_albedo_map", "transparent",
+_PER_DRAW_UNIFORMS = ("sky_face_size", "has_albedo_map", "transparent",
                       "probe_face_size", "probe_position", "probe_box_min", "probe_box_max",
                       "probe2_face_size", "probe2_position", "probe2_box_min", "probe2_box_max",
                       "probe_rest_face_size", "probe_rest_position", "probe_rest_box_min", "probe_rest_box_max",
                       "checker_cells", "checker_even", "checker_odd")
-_PER_PASS_UNIFORMS = 2  # the first two change with the pass; the rest with the batch (a view's node
+_PER_PASS_UNIFORMS = 1  # the first changes with the pass; the rest with the batch (a view's node
 # index is its Camera block's: nothing is written per view)
 _NO_PROBE = ((0.0, 0.0, 0.0, 0.0),) * 3
 _NO_CHECKER = (0.0, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
@@ -201,7 +201,8 @@ class ScenePass:
     def program(self, variants: tuple[int, int, int] | None = None, invocations: int = 0,
                 layered: str = "", normal_mapped: bool = False, checker: bool = False,
                 material_maps: tuple[bool, bool] = (False, False), probe_blend: bool = False,
-                ambient_probes: bool = False, probe_rest: bool = False, unlit: bool = False) -> moderngl.Program:
+                ambient_probes: bool = False, probe_rest: bool = False, unlit: bool = False,
+                masked: bool = False) -> moderngl.Program:
         """The scene program for a batch of ``variants`` (None: mixed, switched per
         instance): plain, batched (``invocations`` > 0: the geometry shader's) or a one-pass
         cube-map capture (``layered`` "culled" or "naive"), with or without a normal map
@@ -213,7 +214,11 @@ class ScenePass:
         shaders/include/material_maps.glsl; a batch without them samples nothing for them),
         blending probes (``probe_blend``: ``PROBE_BLEND``) with a probe instead of the sky
         taking the rest (``probe_rest``: ``PROBE_REST``, a curved object's own), or unlit
-        (``unlit``: ``UNLIT_SURFACE``, a mirror batch ``shading_replaced`` names), built once.  After a shader hot
+        (``unlit``: ``UNLIT_SURFACE``, a mirror batch ``shading_replaced`` names), and
+        masked or not (``masked``: ``MASKED``, a reflection level's: only the pixels its node
+        image gives the view; a root view's build has no node-image fetch and no discard, so
+        llvmpipe neither runs the fetch for every pixel nor defers the depth write past the
+        shader, as a discarding program makes it), built once.  After a shader hot
         reload the set-up is done again and the batches' vertex arrays are made again (the
         relinked program may read uniforms, samplers and vertex inputs the first build
         dropped)."""
@@ -222,7 +227,7 @@ class ScenePass:
         virtual = self.shadows.virtual_shining  # the shadows stage set how many shine
         shadowing = self.shadows.program_defines  # the lookups a program compiles (ShadowMaps.upload's)
         key = (invocations, layered, variants, normal_mapped, checker, material_maps, probe_blend, virtual,
-               ambient_probes, probe_rest, unlit, shadowing)
+               ambient_probes, probe_rest, unlit, masked, shadowing)
         program = self._programs.get(key)
         if program is None:
             defines = {}
@@ -246,6 +251,8 @@ class ScenePass:
                 defines["AMBIENT_PROBES"] = "1"
             if unlit:  # depth and ids only: the composites paint every pixel over (shading_replaced)
                 defines["UNLIT_SURFACE"] = "1"
+            if masked:  # the claimed pixels only (a reflection level's views)
+                defines["MASKED"] = "1"
             defines.update(shadowing)
             geometry = None
             if invocations:
@@ -306,7 +313,9 @@ class ScenePass:
         """Build the programs and vertex arrays ``batches`` will be drawn with: invocations 0
         (root and per-mirror views) and, with ``reflections``, every invocation count of the
         batched path (``BATCHED_INVOCATIONS``), its view table and the reflection sampler.
-        A batch of mirrors gets its ``UNLIT_SURFACE`` builds too.  Returns how many programs
+        A batch of mirrors gets its ``UNLIT_SURFACE`` builds too, and with ``reflections``
+        the ``MASKED`` builds (a level whose claims overlap draws masked, one whose claims
+        lie apart unmasked: ``view_tree._APART``).  Returns how many programs
         were built (0 when all were there)."""
         before = len(self._programs)
         counts = (0, *BATCHED_INVOCATIONS) if reflections else (0,)
@@ -314,11 +323,12 @@ class ScenePass:
         for batch in batches:
             unlit = (False, True) if _may_be_unlit(batch) else (False,)
             for invocations in counts:
-                for probes in ambient:
-                    for dark in unlit:
-                        batch.vao(self.program(batch.variants, invocations, "", batch.normal_map is not None,
-                                               batch.checker is not None, _material_maps(batch), batch.probe_blend,
-                                               probes, bool(batch.rest_probe), dark))
+                for masked in (False, True) if reflections else (False,):
+                    for probes in ambient:
+                        for dark in unlit:
+                            batch.vao(self.program(batch.variants, invocations, "", batch.normal_map is not None,
+                                                   batch.checker is not None, _material_maps(batch),
+                                                   batch.probe_blend, probes, bool(batch.rest_probe), dark, masked))
         if reflections:
             if self._views_ubo is None:
                 self._views_ubo = self.ctx.buffer(reserve=VIEWS_BLOCK_BYTES)
@@ -349,8 +359,8 @@ class ScenePass:
             self._forget_programs()
         # What else picks a batch's program: a virtual light shining, the shadow lookups compiled.
         stamp = (self._reloads_seen, self.shadows.virtual_shining, self.shadows.program_defines)
-        kind = (invocations, layered, self._ambient_probes, False)
-        unlit_kind = (invocations, layered, self._ambient_probes, True)
+        kind = (invocations, layered, self._ambient_probes, False, masked)
+        unlit_kind = (invocations, layered, self._ambient_probes, True, masked)
         sky_size = self._sky_size
         last_own = self._last_own
         for batch in batches:
@@ -367,10 +377,8 @@ class ScenePass:
                 bind_texture(ctx, texture, unit, True)  # the pass's albedo sampler stays (bind_sampler)
             if own is None:  # probes bound now: their lookups are read each draw
                 own = self._probe_values(batch)
-            if values[0] != masked and uniforms[0] is not None:
-                uniforms[0].value = values[0] = masked
-            if values[1] != sky_size and uniforms[1] is not None:
-                uniforms[1].value = values[1] = sky_size
+            if values[0] != sky_size and uniforms[0] is not None:
+                uniforms[0].value = values[0] = sky_size
             # The batch's own values: one tuple compared (by identity first), and a uniform at
             # a time only where it differs from what this program last drew with.
             last = last_own.get(glo)
@@ -393,15 +401,15 @@ class ScenePass:
             stats.draw_calls += 1
             stats.instances += count
 
-    def _record(self, batch: InstanceBatch, kind: tuple[int, str, bool, bool], stamp: tuple, variants) -> tuple:
+    def _record(self, batch: InstanceBatch, kind: tuple[int, str, bool, bool, bool], stamp: tuple, variants) -> tuple:
         """What ``batch`` draws with in passes of ``kind`` (invocations, layered, ambient
-        probes, unlit): (stamp, variants, program name, vertex array, per-draw uniforms, the
+        probes, unlit, masked): (stamp, variants, program name, vertex array, per-draw uniforms, the
         program's written values, the (unit, texture) pairs to bind, its own uniform values
         or None where probes give them per draw)."""
-        invocations, layered, ambient, unlit = kind
+        invocations, layered, ambient, unlit, masked = kind
         program = self.program(variants, invocations, layered, batch.normal_map is not None,
                                batch.checker is not None, _material_maps(batch), batch.probe_blend,
-                               ambient, bool(batch.rest_probe), unlit)
+                               ambient, bool(batch.rest_probe), unlit, masked)
         glo = program.glo
         values = self._written.get(glo)
         if values is None:

@@ -49,7 +49,7 @@ from __future__ import annotations
 
 import functools
 import math
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 
 import moderngl
@@ -92,6 +92,18 @@ MIN_LEVEL_SCALE = 0.25  # the lowest resolution factor the pixel budget draws a 
 # the counts save views) and predicted on a GPU.
 VISIBILITY_MODES = ("auto", "exact", "predicted")
 _BATCHED = SceneOptions(clear=False, masked=True, sky=False, batched=True, reflection_filter=True, transparent=False)
+# A level whose claims' rectangles overlap none of the others' (_claims_apart) draws unmasked:
+# there its depth alone is the claim test.  The reset wrote the near plane (depth 0) over every
+# claim's rectangle and each claim the far plane (1) where it took the pixel, so within a
+# view's rectangle, which no other claim's reaches, a fragment passes the depth test ("<")
+# only on its own view's claimed pixels, as the node image's test would let it through; the
+# build without that test (ScenePass.program's MASKED) runs no fetch and no discard a pixel,
+# and llvmpipe's depth test, before the shader, rejects the other pixels' fragments unshaded.
+# A level drawn on its claims' conditions (predicted visibility) keeps the node test: its views
+# are skipped by the GPU only where the claims' counts are in when they draw (GL_QUERY_NO_WAIT
+# may draw anyway), and llvmpipe finishes the claims before a pass samples the node image they
+# wrote (measured: without that read a hidden view's draws were made, tests/test_predicted_visibility.py).
+_APART = {options: replace(options, masked=False) for options in (REFLECTION_LEVEL, _BATCHED)}
 
 
 @dataclass(frozen=True)
@@ -230,6 +242,7 @@ class _Level:
     claim_keys: list[tuple[int, ...]] = field(default_factory=list)
     unlit: frozenset[int] = frozenset()            # mirrors its views draw unlit (shading_replaced)
     options: SceneOptions = REFLECTION_LEVEL       # what its views were drawn with (their transparent slot's)
+    apart: bool = False                           # its claims' rectangles overlap none of the others' (_APART)
 
 
 @dataclass
@@ -838,6 +851,7 @@ class ViewTree:
                                                         (rows, entities, nodes, scissors, queries))
         claims = Claims([(parents[p].index, entity, node) for p, entity, node in
                          zip(rows, entities, nodes, strict=True)], scissors)
+        step.apart = _claims_apart(scissors)
         self.passes.prepare_level(step.targets, step.parent_targets, claims, queries)
 
     def _claimed_pixels(self, queries: list[moderngl.Query]) -> list[int]:
@@ -856,6 +870,8 @@ class ViewTree:
         renderer = self.renderer
         if step.views:
             options = _BATCHED if step.path == "batched" else REFLECTION_LEVEL
+            if step.apart and step.conditions is None:  # depth alone tells the claimed pixels (_APART)
+                options = _APART[options]
             if step.unlit:
                 key = (options, step.unlit)
                 options = self._level_options.get(key) or self._level_options.setdefault(
@@ -993,3 +1009,21 @@ def _fallbacks_at(fallbacks: dict[int, Fallbacks], level: int, surfaces: Surface
 def _ends_at(ends: tuple[np.ndarray, int] | None, depth: int) -> np.ndarray | None:
     """The end-image surfaces to plan at ``depth`` (None before the first level a depth limit cuts)."""
     return ends[0] if ends is not None and depth >= ends[1] else None
+
+
+def _claims_apart(rects: Sequence[Sequence[int]]) -> bool:
+    """Whether no two of a level's claim rectangles (x, y, width, height) share a pixel:
+    a sweep along x over them sorted (a level's few claims; it stops at the first overlap).
+    An empty rectangle covers no pixel."""
+    ordered = sorted(rect for rect in rects if rect[2] > 0 and rect[3] > 0)
+    count = len(ordered)
+    for i in range(count):
+        x, y, w, h = ordered[i]
+        right, top = x + w, y + h
+        for j in range(i + 1, count):
+            other_x, other_y, _, other_h = ordered[j]
+            if other_x >= right:
+                break
+            if other_y < top and y < other_y + other_h:
+                return False
+    return True
