@@ -60,12 +60,8 @@ class ReflectionSystem(esper.Processor):
         self.views: list[ReflectionView] = []   # last frame's view tree, level order
         self._cut = False                        # camera_cut() was called since the last frame
         self._camera: int | None = None          # the camera last frame's tree was seen from
-        # Keep a still frame's levels (the module docstring): the tree remembers its renders.
-        self.keep_still_views = True
-        # Also redraw on any world change (written, added, removed) since the last look, which
-        # ``scene_version`` may not follow; False: the version and the key alone (tests check
-        # that they suffice for what reaches the GPU).
-        self.watch_world = True
+        self._keep_still_views = True
+        self._watch_world = True
         self.tree.remember = True
         self._still: tuple[tuple, tuple] | None = None  # (values, objects) the tree was last drawn for
         self._changes_seen = -1  # World.change_count() when this stage last looked (-1: never)
@@ -117,6 +113,27 @@ class ReflectionSystem(esper.Processor):
     @visibility.setter
     def visibility(self, value: str) -> None:
         self.settings = replace(self.settings, visibility=value)
+
+    @property
+    def keep_still_views(self) -> bool:
+        """Keep a still frame's reflection levels (the module docstring); False: the tree is
+        drawn every frame."""
+        return self._keep_still_views
+
+    @keep_still_views.setter
+    def keep_still_views(self, value: bool) -> None:
+        self._keep_still_views = _flag("keep_still_views", value)
+
+    @property
+    def watch_world(self) -> bool:
+        """Also redraw on any world change (written, added, removed) since the last look,
+        which ``scene_version`` may not follow; False: the version and the key alone (tests
+        check that they suffice for what reaches the GPU)."""
+        return self._watch_world
+
+    @watch_world.setter
+    def watch_world(self, value: bool) -> None:
+        self._watch_world = _flag("watch_world", value)
 
     def camera_cut(self) -> None:
         """Say the camera jumps this frame (a teleport, a cut to another shot): predicted
@@ -213,3 +230,10 @@ class ReflectionSystem(esper.Processor):
 def _same(key: tuple[tuple, tuple], other: tuple[tuple, tuple]) -> bool:
     """Two ``_still_key``s agree: values equal, objects the same."""
     return key[0] == other[0] and all(a is b for a, b in zip(key[1], other[1], strict=True))
+
+
+def _flag(name: str, value: object) -> bool:
+    """``value`` for the switch ``ReflectionSystem.<name>``, refused unless a bool."""
+    if not isinstance(value, bool):
+        raise TypeError(f"ReflectionSystem.{name} must be True or False, got {value!r}")
+    return value

@@ -286,3 +286,16 @@ def test_changes_at_random_among_still_frames_always_show_a_drawn_frames_pixels(
             pair.both(CHANGES[rng.choice(list(CHANGES))])
         kept.append(pair.frame())
     assert any(kept) and not all(kept)
+
+
+@pytest.mark.parametrize("name", ["keep_still_views", "watch_world"])
+def test_the_switches_refuse_what_is_not_a_bool_when_set(scene, name):
+    """``keep_still_views`` and ``watch_world`` take True or False; anything else (a string
+    such as "no", truthy) is refused when given, naming the switch, and the switch keeps its value."""
+    pair = _Pair(scene, _hall)
+    system = pair.keeping.engine.reflection_system
+    with pytest.raises(TypeError, match=rf"ReflectionSystem\.{name} must be True or False, got 'no'"):
+        setattr(system, name, "no")
+    assert getattr(system, name) is True
+    setattr(system, name, False)
+    assert getattr(system, name) is False
