@@ -12,10 +12,14 @@ draws the still tree (never on a frame whose camera or scene moved), and each re
 them back before the level's composites are done again: a blit of the colour, surface-id and
 seen-id images (what the end views, fallbacks, composites and transparent slot write; the
 depth and node images they only read), within the rectangle of the level's views (where
-those passes write), which glBlitFramebuffer keeps to by the scissor test.
+those passes write), which glBlitFramebuffer keeps to by the scissor test.  A level whose
+composites and fallbacks paint every pixel they write whole (portals, mirrors of reflect
+rate 1 unfaded: ``view_tree._painted_whole``) and that has no transparent slot needs no copy:
+what they write does not depend on what the pixel held.
 """
 from __future__ import annotations
 
+from collections.abc import Container
 from dataclasses import dataclass
 
 import moderngl
@@ -69,6 +73,11 @@ class LevelCopies:
         if copy.targets is not targets:
             raise ValueError(f"level {level}'s copy is of other targets than those restored")
         self._blit(copy.level, copy.framebuffer, targets.size, rect)
+
+    def keep_only(self, levels: Container[int]) -> None:
+        """Let go the copies of the levels not in ``levels``."""
+        for level in [level for level in self._copies if level not in levels]:
+            self._copies.pop(level).release()
 
     def _make(self, targets: RenderTargets) -> _Copy:
         ctx = self.ctx

@@ -420,16 +420,18 @@ class ViewTree:
                 self.copies.release()
             return None
         deepest = max(node.level for node in result.end_views)
+        see_through = bool(self.renderer.transparent_batches())
         rects, transparent, filled = {}, {}, {}
         for level in range(1, deepest + 1):
             step = walk.steps[level - 1]
-            rects[level] = rect = _bounds([view.scissor for view in (*step.views, *step.end_views)])
-            self.copies.save(level, step.targets, rect)
+            if see_through or not _painted_whole(walk, level):
+                rects[level] = rect = _bounds([view.scissor for view in (*step.views, *step.end_views)])
+                self.copies.save(level, step.targets, rect)
             transparent[level] = (step.views, step.options, step.conditions)
             if step.ended:
                 filled[level] = (step.end_views, [node.surface.entity for node in step.ended], step.end_matrices)
-        return _Refill(deepest, rects, filled, transparent, _seen_surfaces(result),
-                       bool(self.renderer.transparent_batches()))
+        self.copies.keep_only(rects)
+        return _Refill(deepest, rects, filled, transparent, _seen_surfaces(result), see_through)
 
     def _ends_state(self, size: tuple[int, int]) -> tuple | None:
         """What end views would be drawn from: whether an image is kept, the surfaces it
@@ -491,7 +493,8 @@ class ViewTree:
         for depth in range(refill.deepest, -1, -1):
             targets = levels[depth]
             if depth:
-                self.copies.restore(depth, targets, refill.rects[depth])
+                if depth in refill.rects:  # (else every pixel the level's composites write is painted whole)
+                    self.copies.restore(depth, targets, refill.rects[depth])
                 filled = refill.ends.get(depth)
                 if filled is not None:
                     self.ends.draw(*filled, targets, root)
@@ -1109,6 +1112,33 @@ def _seen_surfaces(result: TreeResult) -> frozenset[int]:
     well not be in it; a candidate known empty is no view, so a surface only such candidates
     saw is not kept as shown, as in exact visibility): what ``EndImages.keep`` keeps with it."""
     return frozenset(node.surface.entity for node in (*result.views[1:], *result.end_views) if not node.unseen)
+
+
+def _painted_whole(walk: _Walk, level: int) -> bool:
+    """Whether every pixel ``level``'s fallbacks and the composite of the level below write
+    is written whole: a blend weight of exactly 1 (reflection x 1 + own x 0), so what the
+    pixel held before does not matter (a refill need not put the level back, given no
+    transparent slot, which blends over what its pixels hold, and the end views' fill,
+    which blends nothing).  That holds for a portal (mirror_composite.frag writes alpha 1)
+    and for a mirror of reflect rate 1 (times a view's fade of 1), unfaded, not water
+    (Fresnel), the weights ``shading_replaced`` trusts; a partly faded share is a quotient
+    of floats.  (A pixel's own colour is finite: an infinite one times 0 is no number.)"""
+    below = walk.steps[level] if level < len(walk.steps) else None
+    if below is not None and below.composite is not None and any(
+            node.fade != 1.0 or not _weighs_one(node.surface) for node in below.composite):
+        return False
+    fallbacks = walk.fallbacks.get(level)
+    if fallbacks:
+        states = fallbacks.states
+        if (fallbacks.share is not None and any(share != 1.0 for share in fallbacks.share)) or not all(
+                _weighs_one(states[row]) for row in set(fallbacks.surface)):
+            return False
+    return True
+
+
+def _weighs_one(state: SurfaceState) -> bool:
+    """A surface whose composite and fallback blend at a weight of exactly 1 (``_painted_whole``)."""
+    return state.kind == "portal" or (state.reflect_rate == 1.0 and state.fade is None and state.water is None)
 
 
 def _bounds(rects: Sequence[tuple[int, int, int, int]]) -> tuple[int, int, int, int]:
