@@ -205,3 +205,16 @@ def test_a_change_while_refilling_draws_the_tree_whole(scene, name, change):
     assert pair.frame() == "drawn"
     assert [pair.frame() for _ in range(3)] == ["refilled"] * 3
     assert (len(tree.copies) > 0) == (name == "glass")
+
+
+def test_a_predicted_tree_refills_too(scene):
+    """Predicted visibility: a tree drawn on last frame's counts (from the second frame) is
+    refilled as an exact one is, its levels' transparent slots on the render's conditions,
+    every frame the drawn engine's."""
+    pair = _Pair(scene, SCENES["glass"])
+    for runner in (pair.keeping, pair.drawing):
+        runner.engine.reflection_system.visibility = "predicted"
+    kinds = [pair.frame() for _ in range(12)]
+    assert pair.keeping.stats.reflection_visibility == "predicted"
+    # (the first frame has no counts: every candidate drawn, not the tree the next one draws)
+    assert kinds[:2] == ["drawn"] * 2 and kinds[2:8] == ["refilled"] * 6

@@ -44,6 +44,10 @@ A tree that ``remember``s (the main view's) leaves what its render did as a ``Ke
 on a frame whose views show nothing new (the reflect stage decides:
 ``systems/reflection_system.py``) ``keep`` does only what the root, drawn anew each frame,
 needs again (its fallbacks, level 1's composite) and levels 1 and below stay as they are.
+A still tree with end views whose image has not settled yet is kept too, less what depends
+on the end images: those are filled again from the new image and step 5 is done again from
+the deepest level with end views up, over each level as its views drew it (``_Refill``,
+``engine/render/level_copies.py``).
 """
 from __future__ import annotations
 
@@ -469,7 +473,8 @@ class ViewTree:
         if unsettled:
             self._refill(kept, levels, root or kept.result.views[0].view, root_options)
         else:
-            if len(self.copies):  # settled: no frame refills it any more
+            if kept.refill is not None:  # settled: no frame refills it any more
+                self.kept = replace(kept, refill=None)
                 self.copies.release()
             if kept.fallbacks is not None:
                 child, prepared = kept.fallbacks
