@@ -747,3 +747,32 @@ def test_ab_runs_both_trees_in_alternating_processes_and_prints_their_ratio(caps
         assert row["ratio"] == pytest.approx(row["new_ms"] / row["old_ms"], abs=1e-3)
     with pytest.raises(SystemExit, match="is not a Speculum checkout"):
         ab.main(parser.parse_args(["ab", str(tmp_path), str(ROOT)]))
+
+
+def test_ab_at_another_size_times_frames_with_the_rasteriser_in_and_gives_the_8_to_0_ratio(capsys):
+    """``--size`` other than 32x18: the scenes at that size with the rasteriser in, each row
+    with the wall-clock medians (and their ratio), each side's thread and rasteriser CPU, and a
+    last row with each side's 8-mirror over 0-mirror wall ratio, read from the rows above."""
+    from benchmarks import ab
+
+    parser, _ = build_parser()
+    assert ab.main(parser.parse_args(["ab", str(ROOT), str(ROOT), "--scenes", "mirrors_0,mirrors_8", "--size",
+                                      "64x36", "--rounds", "2", "--frames", "1", "--procs", "1", "--warmup", "1",
+                                      "--json"])) == 0
+    lines = [json.loads(line) for line in capsys.readouterr().out.splitlines()]
+    rows, summary = lines[:-1], lines[-1]
+    assert [row["scene"] for row in rows] == ["mirrors_0", "mirrors_8"]
+    for row in rows:
+        assert [side for side, _ in row["per_process"]] == ["old", "new"]
+        assert row["old_ms"] > 0 and row["new_ms"] > 0
+        assert row["ratio"] == pytest.approx(row["new_ms"] / row["old_ms"], abs=1e-3)
+        for side in ("old", "new"):
+            # one process a side: its median is the side's; the thread's CPU is part of the wall time
+            assert dict(row["per_process"])[side] == row[f"{side}_ms"]
+            assert 0 < row[f"{side}_thread_ms"] <= row[f"{side}_ms"] + 0.5
+            assert row[f"{side}_raster_ms"] >= 0
+    by_scene = {row["scene"]: row for row in rows}
+    assert summary["size"] == "64x36"
+    for side in ("old", "new"):
+        assert summary["ratio_8_to_0_mirrors"][side] == pytest.approx(
+            by_scene["mirrors_8"][f"{side}_ms"] / by_scene["mirrors_0"][f"{side}_ms"], abs=1e-3)
