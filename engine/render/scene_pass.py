@@ -99,6 +99,8 @@ from engine.render.targets import RenderTargets
 from engine.render.views import View, union_rect
 
 if TYPE_CHECKING:
+    import numpy as np
+
     from engine.render.instances import InstanceBatch
     from engine.resources import SurfaceState
 
@@ -510,16 +512,17 @@ class ScenePass:
         try:
             if options.batched:
                 for first in range(0, len(views), MAX_BATCHED_VIEWS):
-                    group = views[first:first + MAX_BATCHED_VIEWS]
-                    scissor = self._views_table(group)
-                    apply_pass_state(self.ctx, state, (0, 0, *targets.size), scissor)
-                    set_front_face(self.ctx, "ccw")  # mirrored views reverse their vertices in the geometry shader
-                    self._draw_batches(_split_slot(transparent, group)[1], geometry_invocations(len(group)),
-                                       options.masked)
+                    for group, _, rest in _slot_groups(transparent, views[first:first + MAX_BATCHED_VIEWS]):
+                        if not rest:
+                            continue
+                        scissor = self._views_table(group)
+                        apply_pass_state(self.ctx, state, (0, 0, *targets.size), scissor)
+                        set_front_face(self.ctx, "ccw")  # mirrored views reverse their vertices in the geometry shader
+                        self._draw_batches(rest, geometry_invocations(len(group)), options.masked)
             else:
                 renderer.upload_views(views)
                 for index, view in enumerate(views):
-                    batches = _split_slot(transparent, (view,))[1]
+                    batches = _split_slot(transparent, view)[1]
                     if batches:  # (else all behind its see-through surfaces: drawn with them)
                         with _ALWAYS if conditions is None else conditions[index].crender:
                             self._transparent_view(view, index, batches, options.masked)
@@ -618,8 +621,9 @@ class ScenePass:
                     targets.view_framebuffer.depth_mask = False
                     targets.view_framebuffer.use()
                     apply_pass_state(ctx, _TRANSPARENT, viewport, view.scissor)
-                    self._transparent_view(view, index, _back_to_front(transparent, view.eye) if options.transparent
-                                           else _split_slot(transparent, (view,))[0], options.masked)
+                    self._transparent_view(view, index, _back_to_front(transparent, view.eye, view)
+                                           if options.transparent else _split_slot(transparent, view)[0],
+                                           options.masked)
                     targets.view_framebuffer.depth_mask = True
                     targets.view_framebuffer.use()
                 if (options.sky or now) and index + 1 < len(views):
@@ -654,11 +658,20 @@ class ScenePass:
         opaque = renderer.opaque_batches()
         unlit = _unlit_batches(opaque, options.unlit, now)
         self._draw_batches(opaque, invocations, options.masked, unlit=unlit)
-        if now:  # farthest from the first view's eye first (the views of a level are close)
+        if now:
             viewport = (0, 0, *views[0].size)
-            apply_pass_state(ctx, _BATCHED_TRANSPARENT, viewport, scissor)
-            self._draw_batches(_back_to_front(transparent, views[0].eye) if options.transparent
-                               else _split_slot(transparent, views)[0], invocations, options.masked)
+            if options.transparent:  # farthest from the first view's eye first (the views of a level are close)
+                apply_pass_state(ctx, _BATCHED_TRANSPARENT, viewport, scissor)
+                self._draw_batches(_back_to_front(transparent, views[0].eye), invocations, options.masked)
+            else:  # each group of views with the same part of the slot before the claims, in one draw a batch
+                groups = _slot_groups(transparent, views)
+                for group, first, _ in groups:
+                    if not first:
+                        continue
+                    if len(groups) > 1:
+                        scissor = self._views_table(group)
+                    apply_pass_state(ctx, _BATCHED_TRANSPARENT, viewport, scissor)
+                    self._draw_batches(first, geometry_invocations(len(group)), options.masked)
             apply_pass_state(ctx, _BATCHED_SCENE, viewport)
         renderer.stats.passes += 1
 
@@ -835,9 +848,127 @@ def _material_maps(batch) -> tuple[bool, bool]:
     return batch.emissive_map is not None, batch.metallic_roughness_map is not None
 
 
-def _back_to_front(batches, eye: glm.vec3) -> list:
-    """Transparent batches, the farthest (by its instances' centre) first."""
-    return sorted(batches, key=lambda batch: -glm.distance(batch.centre(), eye))
+def _back_to_front(batches, eye: glm.vec3, view: View | None = None) -> list:
+    """Transparent batches in the order they blend, the farthest first: by their instances'
+    centre, except where a see-through surface's plane (water, a see-through mirror or
+    portal: ``InstanceBatch.plane``) says which of two is in front (``_slot_graph``), so a
+    pane standing on a pond blends over it and a pane under it under it, wherever the
+    pond's centre is.  ``view``: only batches whose boxes overlap on its screen are ordered
+    against each other (None: all are, as from a probe's centre for six faces)."""
+    ordered = sorted(batches, key=lambda batch: -glm.distance(batch.centre(), eye))
+    if len(ordered) < 2 or not any(batch.surface and batch.plane is not None for batch in ordered):
+        return ordered
+    before = _slot_graph(ordered, eye, view)
+    return [ordered[i] for i in _topological(before)]
+
+
+# How far (m) a box may reach past a plane and still count as on one side of it: what
+# float32 corners of a batch lying on the plane (a mirror's own quad) are off by.
+_PLANE_EPS = 1e-4
+
+
+def _side(plane: glm.vec4, box: tuple[np.ndarray, np.ndarray] | None, centre: glm.vec3) -> int:
+    """Which side of ``plane`` a batch's world ``box`` lies on: 1 (where its normal points)
+    or -1 wholly, else the side of its ``centre`` (a pane standing in the water: by where
+    most of it is), 0 on the plane (coplanar, or no box)."""
+    n = glm.vec3(plane)
+    if box is not None:
+        lo, hi = box[0].tolist(), box[1].tolist()
+        if lo[0] == lo[0]:  # (NaN: not measured yet)
+            low = high = float(plane.w)
+            for axis in range(3):
+                a, b = n[axis] * lo[axis], n[axis] * hi[axis]
+                low += a if a < b else b
+                high += b if a < b else a
+            if low > -_PLANE_EPS and high > _PLANE_EPS:
+                return 1
+            if high < _PLANE_EPS and low < -_PLANE_EPS:
+                return -1
+            if high - low < 2.0 * _PLANE_EPS:
+                return 0  # on the plane: no side
+    d = glm.dot(n, centre) + plane.w
+    return 1 if d > _PLANE_EPS else -1 if d < -_PLANE_EPS else 0
+
+
+def _screen_rect(batch, view_proj: glm.mat4) -> tuple[float, float, float, float] | None:
+    """The rectangle (NDC x0, y0, x1, y1) holding ``batch``'s world box on a view's screen;
+    None where a corner is at or behind the eye (the whole screen, conservatively)."""
+    box = batch.box
+    if box is None:
+        return None
+    lo, hi = box[0].tolist(), box[1].tolist()
+    if lo[0] != lo[0]:
+        return None
+    xs, ys = [], []
+    for x in (lo[0], hi[0]):
+        for y in (lo[1], hi[1]):
+            for z in (lo[2], hi[2]):
+                clip = view_proj * glm.vec4(x, y, z, 1.0)
+                if clip.w <= 1e-6:
+                    return None
+                xs.append(clip.x / clip.w)
+                ys.append(clip.y / clip.w)
+    return min(xs), min(ys), max(xs), max(ys)
+
+
+def _overlap(a: tuple[float, float, float, float] | None, b: tuple[float, float, float, float] | None) -> bool:
+    if a is None or b is None:
+        return True
+    return a[0] <= b[2] and b[0] <= a[2] and a[1] <= b[3] and b[1] <= a[3]
+
+
+def _slot_graph(ordered: list, eye: glm.vec3, view: View | None) -> list[set[int]]:
+    """For each of ``ordered`` (farthest centre first) the indices of those that must blend
+    before it.  Two batches are ordered only where they can cover the same pixels (their
+    boxes' rectangles on ``view``'s screen overlap; None: always): by a see-through
+    surface's plane where one has it (a batch on the eye's side of it is in front of it;
+    one wholly on the other side, behind: the painter's test of a BSP), both planes agreeing
+    where both have one; else, or where they disagree, by their centres, the farther first."""
+    count = len(ordered)
+    planes = [batch.plane if batch.surface else None for batch in ordered]
+    eye_side = [0 if plane is None else (1 if glm.dot(glm.vec3(plane), eye) + plane.w > 0.0 else -1)
+                for plane in planes]
+    boxes = [batch.box for batch in ordered]
+    centres = [batch.centre() for batch in ordered]
+    rects = None
+    if view is not None:
+        view_proj = view.view_proj
+        rects = [_screen_rect(batch, view_proj) for batch in ordered]
+    before: list[set[int]] = [set() for _ in range(count)]
+    for i in range(count):
+        for j in range(i + 1, count):
+            if rects is not None and not _overlap(rects[i], rects[j]):
+                continue
+            verdicts = set()  # True: i first (as the centres say), False: j first
+            if planes[i] is not None:
+                side = _side(planes[i], boxes[j], centres[j])
+                if side:
+                    verdicts.add(side == eye_side[i])  # j on the eye's side of i: i behind it, first
+            if planes[j] is not None:
+                side = _side(planes[j], boxes[i], centres[i])
+                if side:
+                    verdicts.add(side != eye_side[j])  # i behind j's plane: i first
+            if verdicts == {False}:
+                before[i].add(j)
+            else:
+                before[j].add(i)
+    return before
+
+
+def _topological(before: list[set[int]]) -> list[int]:
+    """An order of ``len(before)`` indices in which each comes after those ``before`` names,
+    the lowest index first among those free to go (so the centres' order where nothing
+    says otherwise); where a cycle leaves none free, the lowest index left goes."""
+    count = len(before)
+    placed = [False] * count
+    order: list[int] = []
+    while len(order) < count:
+        free = next((i for i in range(count) if not placed[i] and all(placed[j] for j in before[i])), None)
+        if free is None:
+            free = placed.index(False)
+        placed[free] = True
+        order.append(free)
+    return order
 
 
 def _see_through_surface(batch: InstanceBatch) -> bool:
@@ -863,23 +994,44 @@ def _drawn_now(transparent: list, options: SceneOptions) -> list:
     return [batch for batch in transparent if _see_through_surface(batch)]
 
 
-def _split_slot(transparent: list, views: Sequence[View]) -> tuple[list, list]:
-    """A tree's views' transparent slot, farthest from the first view's eye first (the
-    views of a batched level are close), in two: what is drawn with the opaque batches, up
-    to and with the nearest see-through surface a view draws (not its own mirror: skipped;
-    what lies behind a surface blends under it, as before it), and the rest, nearer than
-    those surfaces in every one of ``views``, drawn by ``draw_transparent`` after the
-    composites (all of it where no see-through surface is drawn: glass)."""
-    ordered = _back_to_front(transparent, views[0].eye)
-    if not any(map(_see_through_surface, transparent)):
+def _split_slot(transparent: list, view: View) -> tuple[list, list]:
+    """A tree's view's transparent slot in two, each in blending order (``_back_to_front``):
+    what ``draw`` blends with the opaque batches, before the view tree claims the view's
+    pixels (the see-through surfaces the view draws, not its own mirror, and every batch
+    that must blend before one of them: what is behind a surface and on its pixels, and so
+    on back), and the rest, which ``draw_transparent`` blends after the levels below are
+    composited into the view (glass in front of every surface it covers blends over their
+    reflections; all of the slot where the view draws no see-through surface)."""
+    ordered = sorted(transparent, key=lambda batch: -glm.distance(batch.centre(), view.eye))
+    skipped = (view.skip, view.hide)
+    seeds = [i for i, batch in enumerate(ordered) if _see_through_surface(batch)
+             and not (batch.count == 1 and batch.entity_at[0] in skipped)]
+    if not seeds:
         return [], ordered
-    now = set()
+    if len(ordered) == 1:
+        return ordered, []
+    before = _slot_graph(ordered, view.eye, view)
+    needed, stack = set(seeds), list(seeds)
+    while stack:  # what blends before a surface, and before that, ...
+        for j in before[stack.pop()]:
+            if j not in needed:
+                needed.add(j)
+                stack.append(j)
+    order = _topological(before)
+    return [ordered[i] for i in order if i in needed], [ordered[i] for i in order if i not in needed]
+
+
+def _slot_groups(transparent: list, views: Sequence[View]) -> list[tuple[list[View], list, list]]:
+    """A batched level's ``views`` grouped by their ``_split_slot`` (the same batches in
+    the same order in both parts): each group's views draw their slot in one draw per
+    batch; most levels are one group."""
+    groups: dict[tuple, tuple[list[View], list, list]] = {}
     for view in views:
-        in_order = ordered if view is views[0] else _back_to_front(transparent, view.eye)
-        skipped = (view.skip, view.hide)
-        for at in range(len(in_order) - 1, -1, -1):
-            batch = in_order[at]
-            if _see_through_surface(batch) and not (batch.count == 1 and batch.entity_at[0] in skipped):
-                now.update(in_order[:at + 1])
-                break
-    return [batch for batch in ordered if batch in now], [batch for batch in ordered if batch not in now]
+        first, rest = _split_slot(transparent, view)
+        key = (tuple(map(id, first)), tuple(map(id, rest)))
+        group = groups.get(key)
+        if group is None:
+            groups[key] = ([view], first, rest)
+        else:
+            group[0].append(view)
+    return list(groups.values())
