@@ -858,8 +858,7 @@ def _back_to_front(batches, eye: glm.vec3, view: View | None = None) -> list:
     ordered = sorted(batches, key=lambda batch: -glm.distance(batch.centre(), eye))
     if len(ordered) < 2 or not any(batch.surface and batch.plane is not None for batch in ordered):
         return ordered
-    before = _slot_graph(ordered, eye, view)
-    return [ordered[i] for i in _topological(before)]
+    return [ordered[i] for i in _slot_sorted(ordered, eye, view)[0]]
 
 
 # How far (m) a box may reach past a plane and still count as on one side of it: what
@@ -917,13 +916,14 @@ def _overlap(a: tuple[float, float, float, float] | None, b: tuple[float, float,
     return a[0] <= b[2] and b[0] <= a[2] and a[1] <= b[3] and b[1] <= a[3]
 
 
-def _slot_graph(ordered: list, eye: glm.vec3, view: View | None) -> list[set[int]]:
+def _slot_graph(ordered: list, eye: glm.vec3, view: View | None) -> tuple[list[set[int]], list[set[int]]]:
     """For each of ``ordered`` (farthest centre first) the indices of those that must blend
-    before it.  Two batches are ordered only where they can cover the same pixels (their
-    boxes' rectangles on ``view``'s screen overlap; None: always): by a see-through
-    surface's plane where one has it (a batch on the eye's side of it is in front of it;
-    one wholly on the other side, behind: the painter's test of a BSP), both planes agreeing
-    where both have one; else, or where they disagree, by their centres, the farther first."""
+    before it, by planes and by centres.  Two batches are ordered only where they can cover
+    the same pixels (their boxes' rectangles on ``view``'s screen overlap; None: always): by
+    a see-through surface's plane where one has it (a batch on the eye's side of it is in
+    front of it; one wholly on the other side, behind: the painter's test of a BSP), both
+    planes agreeing where both have one; else, or where they disagree, by their centres, the
+    farther first (the second list: what gives way where the two make a cycle)."""
     count = len(ordered)
     planes = [batch.plane if batch.surface else None for batch in ordered]
     eye_side = [0 if plane is None else (1 if glm.dot(glm.vec3(plane), eye) + plane.w > 0.0 else -1)
@@ -935,6 +935,7 @@ def _slot_graph(ordered: list, eye: glm.vec3, view: View | None) -> list[set[int
         view_proj = view.view_proj
         rects = [_screen_rect(batch, view_proj) for batch in ordered]
     before: list[set[int]] = [set() for _ in range(count)]
+    by_centre: list[set[int]] = [set() for _ in range(count)]
     for i in range(count):
         for j in range(i + 1, count):
             if rects is not None and not _overlap(rects[i], rects[j]):
@@ -948,23 +949,44 @@ def _slot_graph(ordered: list, eye: glm.vec3, view: View | None) -> list[set[int
                 side = _side(planes[j], boxes[i], centres[i])
                 if side:
                     verdicts.add(side != eye_side[j])  # i behind j's plane: i first
-            if verdicts == {False}:
+            if verdicts == {True}:
+                before[j].add(i)
+            elif verdicts == {False}:
                 before[i].add(j)
             else:
-                before[j].add(i)
-    return before
+                by_centre[j].add(i)
+    return before, by_centre
 
 
-def _topological(before: list[set[int]]) -> list[int]:
+def _slot_sorted(ordered: list, eye: glm.vec3, view: View | None) -> tuple[list[int], list[set[int]]]:
+    """``ordered``'s blending order (indices) and the edges it keeps (``_slot_graph``): both
+    kinds, or where they make a cycle the planes' alone (a centre gives way to a plane: a
+    pane under a pond before the pond, and the pond before a pane standing on it, whatever
+    the panes' centres say), or where those do too, the order breaking their cycles."""
+    planes, centres = _slot_graph(ordered, eye, view)
+    both = [a | b for a, b in zip(planes, centres, strict=True)]
+    order = _topological(both)
+    if order is not None:
+        return order, both
+    order = _topological(planes)
+    if order is not None:
+        return order, planes
+    return _topological(planes, cycles=True), planes
+
+
+def _topological(before: list[set[int]], cycles: bool = False) -> list[int] | None:
     """An order of ``len(before)`` indices in which each comes after those ``before`` names,
     the lowest index first among those free to go (so the centres' order where nothing
-    says otherwise); where a cycle leaves none free, the lowest index left goes."""
+    says otherwise); None where a cycle leaves none free, or with ``cycles``, the lowest
+    index left goes."""
     count = len(before)
     placed = [False] * count
     order: list[int] = []
     while len(order) < count:
         free = next((i for i in range(count) if not placed[i] and all(placed[j] for j in before[i])), None)
         if free is None:
+            if not cycles:
+                return None
             free = placed.index(False)
         placed[free] = True
         order.append(free)
@@ -1010,14 +1032,13 @@ def _split_slot(transparent: list, view: View) -> tuple[list, list]:
         return [], ordered
     if len(ordered) == 1:
         return ordered, []
-    before = _slot_graph(ordered, view.eye, view)
+    order, before = _slot_sorted(ordered, view.eye, view)
     needed, stack = set(seeds), list(seeds)
     while stack:  # what blends before a surface, and before that, ...
         for j in before[stack.pop()]:
             if j not in needed:
                 needed.add(j)
                 stack.append(j)
-    order = _topological(before)
     return [ordered[i] for i in order if i in needed], [ordered[i] for i in order if i not in needed]
 
 
