@@ -133,6 +133,7 @@ def test_panes_on_and_under_a_pond_blend_in_depth_order(scene, path, visibility,
     # shows (the water is in front of the pane: what is seen there is reflected), never the pane.
     assert (glass["surface"][under] == pond).all() and not (glass["seen"][under] == ents["under"]).any()
     assert glass["rgb"].max() > 100  # a picture, not a black frame
+    assert stats.glass_between_surfaces == 0
 
 
 @pytest.mark.parametrize("depth,probe_path", [(2, "six_pass"), (0, "six_pass"), (0, "layered")])
@@ -233,3 +234,43 @@ def test_a_pane_in_front_of_a_far_see_through_mirror_beside_a_near_pond(scene):
     assert (without["seen"][pane] == ents["floor"]).all()  # behind the pane: the far mirror's reflection
     assert not ((glass["seen"] == ents["pane"]) & (without["surface"] == ents["pond"])).any()
     _blend_agrees(glass["colour"], opaque["colour"], without["colour"])
+
+
+def test_a_pane_under_a_pond_and_in_front_of_a_far_see_through_mirror_is_reported(scene):
+    """The limit of one claim a pixel (``scene_pass._split_slot``): a pane under a near pond
+    and in front of a far see-through mirror, covering both on the screen, must blend after
+    the far mirror's reflection and before the pond's own colour; the claims come before
+    either composite, so it is blended with the pond, before them, and where it covers the
+    far mirror (not the pond) it shows over the mirror's own colour.  Reported a view:
+    ``RenderStats.glass_between_surfaces``; every other pixel is still the blend rule (under
+    the pond, what is behind it blends in order), and the scenes above report none."""
+    def room(ents: dict, alpha: float | None):
+        def build(world) -> None:
+            world.spawn(Skybox())
+            look_from(world, (0.0, 2.0, 5.0), target=(0.0, 0.0, -3.0))
+            world.spawn(Transform(position=(0.0, -2.0, -2.0), rotation=FLAT), MeshRef(quad(14.0, 16.0)),
+                        Material(color=(0.8, 0.5, 0.2)), Emissive(0.4))
+            world.spawn(Transform(position=(0.0, 2.0, 9.0), rotation=glm.angleAxis(glm.pi(), Y)),
+                        MeshRef(quad(30.0, 12.0)), Material(color=(0.1, 0.8, 0.1)), Emissive(1.0))
+            ents["pond"] = world.spawn(Transform(position=(-1.0, 0.0, 0.0), rotation=FLAT), MeshRef(quad(4.0, 4.0)),
+                                       Material(color=(0.2, 0.3, 0.6, 0.6)), Mirror(reflect_rate=0.7))
+            ents["far"] = world.spawn(Transform(position=(0.0, 0.0, -6.0)), MeshRef(quad(8.0, 4.0)),
+                                      Material(color=(0.3, 0.3, 0.3, 0.6)), Mirror(reflect_rate=0.7))
+            if alpha is not None:  # under the pond's plane, reaching past its right edge onto the far mirror
+                ents["pane"] = world.spawn(Transform(position=(0.8, -0.5, -1.0)), MeshRef(quad(2.4, 1.0)),
+                                           Material(color=(0.9, 0.15, 0.1, alpha)), Emissive(0.6))
+        return build
+
+    glass, without, opaque = _three(scene, room)
+    ents = glass["ents"]
+    assert glass["runner"].stats.glass_between_surfaces >= 1
+    for rendered in (without, opaque):
+        assert rendered["runner"].stats.glass_between_surfaces == 0
+    pane = glass["seen"] == ents["pane"]
+    over_far = pane & (without["surface"] == ents["far"])
+    under_pond = (glass["surface"] == ents["pond"]) & (np.abs(opaque["colour"] - without["colour"]).max(axis=-1) > 0.05)
+    assert over_far.sum() > 50 and under_pond.sum() > 50, (over_far.sum(), under_pond.sum())
+    # The far mirror's claim lost the pane's pixels: its reflection is not behind the pane there.
+    assert (glass["surface"][over_far] == ents["pane"]).all()
+    # Everywhere else, the blend rule.
+    _blend_agrees(glass["colour"][~over_far], opaque["colour"][~over_far], without["colour"][~over_far])

@@ -46,7 +46,7 @@ from __future__ import annotations
 from collections.abc import Callable, Iterable, Sequence
 from contextlib import nullcontext
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, NamedTuple
 
 import moderngl
 from pyglm import glm
@@ -514,7 +514,8 @@ class ScenePass:
         try:
             if options.batched:
                 for first in range(0, len(views), MAX_BATCHED_VIEWS):
-                    for group, _, rest in _slot_groups(transparent, views[first:first + MAX_BATCHED_VIEWS], geometry):
+                    groups = _slot_groups(transparent, views[first:first + MAX_BATCHED_VIEWS], geometry)
+                    for group, _, rest, _ in groups:
                         if not rest:
                             continue
                         scissor = self._views_table(group)
@@ -635,9 +636,12 @@ class ScenePass:
                     targets.view_framebuffer.depth_mask = False
                     targets.view_framebuffer.use()
                     apply_pass_state(ctx, _TRANSPARENT, viewport, view.scissor)
-                    self._transparent_view(view, index, _back_to_front(transparent, view.eye, view, geometry)
-                                           if options.transparent else _split_slot(transparent, view, geometry)[0],
-                                           options.masked)
+                    if options.transparent:
+                        batches = _back_to_front(transparent, view.eye, view, geometry)
+                    else:
+                        batches, _, torn = _split_slot(transparent, view, geometry)
+                        renderer.stats.glass_between_surfaces += torn
+                    self._transparent_view(view, index, batches, options.masked)
                     targets.view_framebuffer.depth_mask = True
                     targets.view_framebuffer.use()
                 if (options.sky or now) and index + 1 < len(views):
@@ -680,7 +684,8 @@ class ScenePass:
                                    invocations, options.masked)
             else:  # each group of views with the same part of the slot before the claims, in one draw a batch
                 groups = _slot_groups(transparent, views, self._slot_geometry(transparent))
-                for group, first, _ in groups:
+                for group, first, _, torn in groups:
+                    renderer.stats.glass_between_surfaces += torn
                     if not first:
                         continue
                     if len(groups) > 1:
@@ -1085,7 +1090,16 @@ def _drawn_now(transparent: list, options: SceneOptions) -> list:
     return [batch for batch in transparent if _see_through_surface(batch)]
 
 
-def _split_slot(transparent: list, view: View, geometry: SlotGeometry | None = None) -> tuple[list, list]:
+class SlotSplit(NamedTuple):
+    """A tree's view's transparent slot in two (``_split_slot``), and how many of the first
+    part are torn between two see-through surfaces."""
+
+    first: list    # blended with the opaque batches, before the claims
+    rest: list     # blended after the levels below are composited into the view
+    torn: int      # batches of ``first`` that must blend after one of its surfaces too
+
+
+def _split_slot(transparent: list, view: View, geometry: SlotGeometry | None = None) -> SlotSplit:
     """A tree's view's transparent slot in two, each in blending order (``_back_to_front``):
     what ``draw`` blends with the opaque batches, before the view tree claims the view's
     pixels (the see-through surfaces the view draws, not its own mirror, and every batch
@@ -1093,7 +1107,16 @@ def _split_slot(transparent: list, view: View, geometry: SlotGeometry | None = N
     on back), and the rest, which ``draw_transparent`` blends after the levels below are
     composited into the view (glass in front of every surface it covers blends over their
     reflections; all of the slot where the view draws no see-through surface).
-    ``geometry``: ``transparent``'s (``SlotGeometry``), else worked out here."""
+    ``geometry``: ``transparent``'s (``SlotGeometry``), else worked out here.
+
+    The limit of one claim a pixel: a batch that must blend before one surface and after
+    another (a pane under a near pond and in front of a far see-through mirror, covering
+    both on the screen) is blended before the claims, so where it covers the far surface
+    it takes its pixels from its claim and blends over its own colour, not its reflection
+    (the surfaces' composites would have to be drawn apart, each after what lies behind
+    it); each such batch counts in ``torn`` (``RenderStats.glass_between_surfaces``).
+    Likewise a see-through surface behind another shows its own colour, not its
+    reflection, where the nearer one covers it."""
     geometry = geometry or SlotGeometry(transparent)
     batches = geometry.batches
     ordered = geometry.back_to_front(view.eye)
@@ -1101,9 +1124,9 @@ def _split_slot(transparent: list, view: View, geometry: SlotGeometry | None = N
     seeds = [i for i, k in enumerate(ordered) if geometry.see_through[k]
              and not (batches[k].count == 1 and batches[k].entity_at[0] in skipped)]
     if not seeds:
-        return [], [batches[k] for k in ordered]
+        return SlotSplit([], [batches[k] for k in ordered], 0)
     if len(ordered) == 1:
-        return [batches[ordered[0]]], []
+        return SlotSplit([batches[ordered[0]]], [], 0)
     # Every pair ordered first, as if all covered the same pixels: where that keeps the
     # centres' order and puts nothing but the surfaces before the claims, so does the
     # view's screen (a subset of the same edges), and no rectangle is worked out.
@@ -1112,8 +1135,12 @@ def _split_slot(transparent: list, view: View, geometry: SlotGeometry | None = N
     if len(needed) > len(seeds) or any(i != at for at, i in enumerate(order)):
         order, before = _slot_sorted(geometry, ordered, view.eye, view)
         needed = _before_any(before, seeds)
-    return ([batches[ordered[i]] for i in order if i in needed],
-            [batches[ordered[i]] for i in order if i not in needed])
+    torn = 0
+    if len(needed) > len(seeds):  # what of the first part comes after one of its surfaces too
+        surfaces = set(seeds)
+        torn = sum(1 for i in needed - surfaces if not surfaces.isdisjoint(_before_any(before, [i]) - {i}))
+    return SlotSplit([batches[ordered[i]] for i in order if i in needed],
+                     [batches[ordered[i]] for i in order if i not in needed], torn)
 
 
 def _before_any(before: list[set[int]], seeds: list[int]) -> set[int]:
@@ -1129,18 +1156,19 @@ def _before_any(before: list[set[int]], seeds: list[int]) -> set[int]:
 
 
 def _slot_groups(transparent: list, views: Sequence[View],
-                 geometry: SlotGeometry | None = None) -> list[tuple[list[View], list, list]]:
+                 geometry: SlotGeometry | None = None) -> list[tuple[list[View], list, list, int]]:
     """A batched level's ``views`` grouped by their ``_split_slot`` (the same batches in
     the same order in both parts): each group's views draw their slot in one draw per
-    batch; most levels are one group."""
+    batch (most levels are one group), with the sum of their splits' ``torn``."""
     geometry = geometry or SlotGeometry(transparent)
-    groups: dict[tuple, tuple[list[View], list, list]] = {}
+    groups: dict[tuple, list] = {}
     for view in views:
-        first, rest = _split_slot(transparent, view, geometry)
+        first, rest, torn = _split_slot(transparent, view, geometry)
         key = (tuple(map(id, first)), tuple(map(id, rest)))
         group = groups.get(key)
         if group is None:
-            groups[key] = ([view], first, rest)
+            groups[key] = [[view], first, rest, torn]
         else:
             group[0].append(view)
-    return list(groups.values())
+            group[3] += torn
+    return [tuple(group) for group in groups.values()]
