@@ -8,15 +8,17 @@ level, and (next) each face of a cube-map probe.  For each view it draws
   2. the sky behind them (a full-screen triangle at the far plane, depth test <=), into the
      same framebuffer: it writes id 0 where it shows, the value the clear left there;
   3. the transparent slot: batches marked transparent (a material's alpha below 1),
-     farthest first, blended over what is there, testing depth but not writing it.  A view
-     a view tree roots or draws (``SceneOptions.transparent`` False) draws here only the
-     slot's batches up to its nearest see-through mirror or portal (water: the tree's claims
-     must find its pixels, and its composite goes over them), and leaves the nearer rest
-     (glass) to the tree, which draws it with ``draw_transparent`` once the levels below are
-     composited into the view's pixels: glass in front of a mirror blends over its
-     reflection, at every level, as in an engine that draws its planar reflections before
-     the view that shows them (drawn before the composite, glass held the mirror's own
-     colour, and its ids, which the claims read, kept the mirror's reflection out).
+     farthest first (by centre, and around a see-through mirror or portal by its plane:
+     ``_back_to_front``), blended over what is there, testing depth but not writing it.  A
+     view a view tree roots or draws (``SceneOptions.transparent`` False) draws here only
+     its see-through mirrors and portals (water: the tree's claims must find their pixels,
+     and their composites go over them) and what must blend before one of them
+     (``_split_slot``), and leaves the rest (glass) to the tree, which draws it with
+     ``draw_transparent`` once the levels below are composited into the view's pixels:
+     glass in front of a mirror blends over its reflection, at every level, as in an engine
+     that draws its planar reflections before the view that shows them (drawn before the
+     composite, glass held the mirror's own colour, and its ids, which the claims read, kept
+     the mirror's reflection out).
 
 Programs are specialised: a batch whose instances all use the same material variants is
 drawn with a build of ``scene.frag`` whose slots are those variants as constants (the
@@ -1084,7 +1086,7 @@ _SURFACE_VARIANTS = frozenset({_PLANAR, int(ReflectVariant.PORTAL)})
 def _drawn_now(transparent: list, options: SceneOptions) -> list:
     """What of the transparent slot ``draw`` may draw with the opaque batches: all of it,
     or, for a tree's view (``options.transparent`` False), its see-through surfaces (and,
-    view by view, what is farther than the nearest of them: ``_split_slot``)."""
+    view by view, what must blend before one of them: ``_split_slot``)."""
     if options.transparent or not transparent:
         return transparent
     return [batch for batch in transparent if _see_through_surface(batch)]
