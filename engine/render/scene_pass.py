@@ -45,6 +45,7 @@ view's shaded pixels on llvmpipe, which shades every pixel of every 2 x 4 group 
 """
 from __future__ import annotations
 
+import heapq
 from collections.abc import Callable, Iterable, Sequence
 from contextlib import nullcontext
 from dataclasses import dataclass
@@ -101,7 +102,6 @@ from engine.render.targets import RenderTargets
 from engine.render.views import View, union_rect
 
 if TYPE_CHECKING:
-
     from engine.render.instances import InstanceBatch
     from engine.resources import SurfaceState
 
@@ -932,13 +932,18 @@ def _back_to_front(batches: list[InstanceBatch], eye: glm.vec3, view: View | Non
     geometry = geometry or SlotGeometry(batches)
     ordered = geometry.back_to_front(eye)
     if geometry.planar:
-        order = _slot_sorted(geometry, ordered, eye, None)[0]  # every pair: the view's screen only drops edges
-        if view is not None and any(i != at for at, i in enumerate(order)):
+        # A few batches: every pair first (the view's screen only drops edges; _split_slot).
+        order = _slot_sorted(geometry, ordered, eye, None)[0] if view is None or len(ordered) <= _SHORTCUT_MOST \
+            else None
+        if view is not None and (order is None or any(i != at for at, i in enumerate(order))):
             order = _slot_sorted(geometry, ordered, eye, view)[0]
         ordered = [ordered[i] for i in order]
     return [geometry.batches[k] for k in ordered]
 
 
+# Up to this many batches in a slot, a view orders every pair first and works out its screen
+# rectangles only where that answer may differ (_split_slot); more, and it seldom is the same.
+_SHORTCUT_MOST = 8
 # How far (m) a box may reach past a plane and still count as on one side of it: what
 # float32 corners of a batch lying on the plane (a mirror's own quad) are off by.
 _PLANE_EPS = 1e-4
@@ -1010,12 +1015,17 @@ def _slot_graph(geometry: SlotGeometry, ordered: list[int], eye: glm.vec3,
     by_centre: list[set[int]] = [set() for _ in range(count)]
     for i in range(count):
         a = ordered[i]
+        plane_a = planes[a]
+        rect = None if rects is None else rects[i]
         for j in range(i + 1, count):
+            if rect is not None and not _overlap(rect, rects[j]):
+                continue
             b = ordered[j]
-            if rects is not None and not _overlap(rects[i], rects[j]):
+            if plane_a is None and planes[b] is None:  # two panes: their centres
+                by_centre[j].add(i)
                 continue
             verdicts = set()  # True: i first (as the centres say), False: j first
-            if planes[a] is not None:
+            if plane_a is not None:
                 side = sides[a][b]
                 if side:
                     verdicts.add(side == eye_side[a])  # j on the eye's side of i: i behind it, first
@@ -1056,16 +1066,29 @@ def _topological(before: list[set[int]], cycles: bool = False) -> list[int] | No
     says otherwise); None where a cycle leaves none free, or with ``cycles``, the lowest
     index left goes."""
     count = len(before)
+    waiting = [len(names) for names in before]
+    after: list[list[int]] = [[] for _ in range(count)]
+    for i, names in enumerate(before):
+        for j in names:
+            after[j].append(i)
+    free = [i for i in range(count) if not waiting[i]]  # a heap (Kahn's algorithm, the lowest first)
     placed = [False] * count
     order: list[int] = []
     while len(order) < count:
-        free = next((i for i in range(count) if not placed[i] and all(placed[j] for j in before[i])), None)
-        if free is None:
-            if not cycles:
-                return None
-            free = placed.index(False)
-        placed[free] = True
-        order.append(free)
+        if free:
+            i = heapq.heappop(free)
+            if placed[i]:
+                continue  # (placed to break a cycle before it was free)
+        elif cycles:
+            i = placed.index(False)
+        else:
+            return None
+        placed[i] = True
+        order.append(i)
+        for k in after[i]:
+            waiting[k] -= 1
+            if not waiting[k] and not placed[k]:
+                heapq.heappush(free, k)
     return order
 
 
@@ -1129,12 +1152,14 @@ def _split_slot(transparent: list, view: View, geometry: SlotGeometry | None = N
         return SlotSplit([], [batches[k] for k in ordered], 0)
     if len(ordered) == 1:
         return SlotSplit([batches[ordered[0]]], [], 0)
-    # Every pair ordered first, as if all covered the same pixels: where that keeps the
-    # centres' order and puts nothing but the surfaces before the claims, so does the
-    # view's screen (a subset of the same edges), and no rectangle is worked out.
-    order, before = _slot_sorted(geometry, ordered, view.eye, None)
-    needed = _before_any(before, seeds)
-    if len(needed) > len(seeds) or any(i != at for at, i in enumerate(order)):
+    # A few batches: every pair ordered first, as if all covered the same pixels; where that
+    # keeps the centres' order and puts nothing but the surfaces before the claims, so does
+    # the view's screen (a subset of the same edges), and no rectangle is worked out.
+    order = None
+    if len(ordered) <= _SHORTCUT_MOST:
+        order, before = _slot_sorted(geometry, ordered, view.eye, None)
+        needed = _before_any(before, seeds)
+    if order is None or len(needed) > len(seeds) or any(i != at for at, i in enumerate(order)):
         order, before = _slot_sorted(geometry, ordered, view.eye, view)
         needed = _before_any(before, seeds)
     torn = 0
