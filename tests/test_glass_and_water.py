@@ -13,7 +13,8 @@ engine shows at a pixel is an "over" blend of the pane on whatever lies behind i
 whatever lies in front of it (the pond's material and its reflection, at their weights),
 each affine in what is under it, so with the panes at alpha ``a`` every pixel of the
 composited HDR image (level 0, linear, before present) must be
-``a x (the panes opaque) + (1 - a) x (no panes)``, the same scene drawn twice more.  A pane
+``a x (the panes opaque) + (1 - a) x (no panes)``, the same scene drawn twice more (no
+pane is seen through another, which would blend a x a: the scenes keep them apart).  A pane
 blended in the wrong place (water drawn over a pane standing on it, a pane under the water
 blended over its reflection, a pane taking a far mirror's pixels before its claim) misses
 by tenths."""
