@@ -30,6 +30,7 @@ from components import Emissive, Material, MeshRef, Mirror, ReflectionProbe, Sky
 from engine.assets.mesh import quad
 from engine.assets.portals import spawn_portal_pair
 from engine.core.cube_faces import FACE_NAMES
+from engine.resources import ViewBudget
 from tests.support import look_from
 
 SIZE = (240, 135)
@@ -135,6 +136,24 @@ def test_panes_on_and_under_a_pond_blend_in_depth_order(scene, path, visibility,
     assert (glass["surface"][under] == pond).all() and not (glass["seen"][under] == ents["under"]).any()
     assert glass["rgb"].max() > 100  # a picture, not a black frame
     assert stats.glass_between_surfaces == 0
+
+
+def test_panes_around_a_pond_the_budget_cuts(scene):
+    """With no views in the frame's budget, the pond and mirror A show their fallbacks (the
+    sky's reflection) instead of views: drawn over their pixels before the tree's glass, so
+    the panes still blend in depth order around them."""
+    def make(ents: dict, alpha: float | None):
+        pond = _pond(ents, alpha)
+
+        def build(world) -> None:
+            pond(world)
+            world.resources[ViewBudget] = ViewBudget(views=0)
+        return build
+
+    glass, without, opaque = _three(scene, make)
+    assert glass["runner"].stats.reflection_fallbacks == 2 and glass["runner"].stats.views_cut == 2
+    assert (glass["seen"] == glass["ents"]["standing"]).sum() > 60
+    _blend_agrees(glass["colour"], opaque["colour"], without["colour"])
 
 
 @pytest.mark.parametrize("depth,probe_path", [(2, "six_pass"), (0, "six_pass"), (0, "layered")])
