@@ -93,7 +93,13 @@ IRRADIANCE_UNIT = 5      # scene: the irradiance table (sky and probes' spherica
 VIRTUAL_SHADOW_UNIT = 14  # scene: the virtual lights' shadow maps, one depth atlas (the mip pass's unit)
 # Post-processing (the present stage; these passes bind nothing else, so they reuse the
 # scene's units).  Bloom and exposure passes read their source at PRESENT_UNIT.
-BLOOM_UNIT = 1           # present: the bloom chain's sum of levels (engine/render/bloom.py)
+# The bloom chain's levels: every step but the first reads its source level here, and the
+# present pass the chain's sum.  A unit of its own, past the 16 the scene's samplers use (a
+# sampler may name any unit below GL_MAX_COMBINED_TEXTURE_IMAGE_UNITS, at least 80 in
+# OpenGL 4.1): the chain's binds displace no other pass's texture (the sky on 1, which the
+# next frame's scene pass would bind again), and the HDR image stays on PRESENT_UNIT from
+# the chain's first step to the present draw.
+BLOOM_UNIT = 16          # bloom steps after the first, present: a level of the chain (engine/render/bloom.py)
 EXPOSURE_UNIT = 2        # present, exposure adaptation: the 1x1 adapted exposure (engine/render/post.py)
 TEXT_UNIT = 0            # screen text (after present): the font atlas (engine/render/text.py)
 
