@@ -59,6 +59,7 @@ class ShadowSystem(esper.Processor):
         self._uploaded = b""
         self._points_clear = False  # no point light cast since the slots and cubes were last cleared
         self._level_seen: tuple = (None, (b"", b""))  # (level box, its bytes): _level_bytes
+        self._level: tuple[np.ndarray, np.ndarray] | None = None  # the level's box as last asked (process)
         world.resources[ShadowCasters] = ShadowCasters()
 
     def process(self, dt: float) -> None:
@@ -75,7 +76,14 @@ class ShadowSystem(esper.Processor):
                                                                          *surfaces.portals.values()))
         suns = [light for _, light in world.query_one(DirectionalLight)]
         needed = self.enabled and (carrying or any(light.shadows for light in suns))
-        level = renderer.level_bounds() if needed else None
+        if not needed:
+            level = self._level = None
+        elif casters_changed or changed_box is not None or self._level is None:
+            # A batch's box changes only with an upload that writes rows (which moves
+            # ``casters_version`` on) or a row or batch gone (a changed box): else last frame's.
+            level = self._level = renderer.level_bounds()
+        else:
+            level = self._level
         published = ShadowCasters(level=level)
         self._directional_maps(suns[:MAX_DIRECTIONAL_LIGHTS], casters_changed, changed_box, level, published)
         self._point_maps(published)
@@ -102,20 +110,25 @@ class ShadowSystem(esper.Processor):
         that stopped casting cleared."""
         maps = self.renderer.shadows
         stats: RenderStats = self.world.resources[RenderStats]
-        casting = {slot: light for slot, light in enumerate(lights) if light.shadows} \
-            if self.enabled and level is not None else {}
-        for slot in [slot for slot in self._directional if slot not in casting]:
-            del self._directional[slot]
-            maps.clear_directional(slot)
+        kept = self._directional
+        casting = [(slot, light) for slot, light in enumerate(lights) if light.shadows] \
+            if self.enabled and level is not None else []
+        if len(kept) != len(casting) or any(slot not in kept for slot, _ in casting):
+            for slot in [slot for slot in kept if slot not in dict(casting)]:
+                del kept[slot]
+                maps.clear_directional(slot)
         if not casting:
             return
-        maps.fit_atlas(max(light.shadow_resolution for light in casting.values()))
-        for slot, light in casting.items():
+        tile = max(light.shadow_resolution for _, light in casting) if len(casting) > 1 else \
+            casting[0][1].shadow_resolution
+        if tile != maps.tile:
+            maps.fit_atlas(tile)
+        level_bytes = self._level_bytes(level)
+        for slot, light in casting:
             direction = raw_field(light, "direction")  # past the in-place watch: a read, not a game's edit
             facing = tuple(direction)
             published.directional.append(facing)
-            key = (facing, light.shadow_resolution, light.shadow_softness, maps.tile, maps.filter,
-                   self._level_bytes(level))
+            key = (facing, light.shadow_resolution, light.shadow_softness, maps.tile, maps.filter, level_bytes)
             same = key == self._directional.get(slot)
             if same and not casters_changed:
                 stats.shadow_maps_kept += 1

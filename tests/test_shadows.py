@@ -390,6 +390,41 @@ def test_a_changed_caster_redraws_only_its_footprint_and_the_frame_is_a_fresh_en
     assert np.array_equal(changed, fresh.frame())
 
 
+@pytest.mark.parametrize("change", ["raised", "removed"])
+def test_a_caster_that_grows_or_shrinks_the_level_fits_the_map_again(scene, change):
+    """The map covers the level's box, which the shadows stage keeps from frame to frame
+    while no upload wrote a row and no row or batch went: a box raised above the level's top
+    (a row written), or the tallest box removed (its batch's last row: nothing is written,
+    its old box is what changed), fits the map to the new box, a whole map is drawn again,
+    and the frame is the one an engine built that way draws."""
+    def build_with(tall: bool, raised: bool = False):
+        def build(world):
+            ids = world.resources["ids"] = _floor_scene(world, (0.5, 5.0, 6.5), (0.0, 0.0, 0.0))
+            if raised:
+                world.get(ids["box"], Transform).position = glm.vec3(-1.0, 4.0, 0.0)
+            if tall:  # the box's twin (its batch), high over the floor: the level's top
+                ids["tall"] = world.spawn(Transform(position=(2.0, 4.0, -2.0)),
+                                          MeshRef(world.get(ids["box"], MeshRef).mesh), world.get(ids["box"], Material))
+        return build
+
+    runner = scene(build_with(change == "removed"), (320, 240))
+    runner.engine.renderer.antialias = "off"
+    runner.frame()
+    runner.frame()
+    assert runner.stats.shadow_maps_drawn == 0 and runner.stats.shadow_maps_kept == 1
+    ids = runner.world.resources["ids"]
+    if change == "raised":
+        runner.world.get(ids["box"], Transform).position = glm.vec3(-1.0, 4.0, 0.0)
+    else:
+        runner.world.delete_entity(ids["tall"])
+    changed = runner.frame()
+    resolution = DirectionalLight().shadow_resolution
+    assert runner.stats.shadow_maps_drawn == 1 and runner.stats.shadow_texels_drawn == resolution * resolution
+    fresh = scene(build_with(False, raised=change == "raised"), (320, 240))
+    fresh.engine.renderer.antialias = "off"
+    assert np.array_equal(changed, fresh.frame())
+
+
 def test_a_point_light_ignores_changes_outside_its_reach(scene):
     def build(world):
         world.resources["ids"] = _floor_scene(world, (0.0, 5.5, 6.0), (0.0, 0.0, 0.0), sun=False,
