@@ -60,6 +60,9 @@ class ShadowSystem(esper.Processor):
         self._points_clear = False  # no point light cast since the slots and cubes were last cleared
         self._level_seen: tuple = (None, (b"", b""))  # (level box, its bytes): _level_bytes
         self._level: tuple[np.ndarray, np.ndarray] | None = None  # the level's box as last asked (process)
+        # What the directional maps were last made or kept from: (level box, the lights, (atlas
+        # tile, filter, enabled), the casting lights' directions as published); None: look again.
+        self._still: tuple | None = None
         world.resources[ShadowCasters] = ShadowCasters()
 
     def process(self, dt: float) -> None:
@@ -110,6 +113,18 @@ class ShadowSystem(esper.Processor):
         that stopped casting cleared."""
         maps = self.renderer.shadows
         stats: RenderStats = self.world.resources[RenderStats]
+        # A still frame: no caster changed, the same level box and lights, none of them
+        # written (the prepare stage's test for the Lights block), the same atlas and filter:
+        # every casting light's map is kept as it was.
+        lights = tuple(lights)
+        still = self._still
+        if (still is not None and not casters_changed and changed_box is None and still[0] is level
+                and still[1] == lights and still[2] == (maps.tile, maps.filter, self.enabled)
+                and not self.world.changed(DirectionalLight)):
+            published.directional.extend(still[3])
+            stats.shadow_maps_kept += len(still[3])
+            return
+        self._still = None
         kept = self._directional
         casting = [(slot, light) for slot, light in enumerate(lights) if light.shadows] \
             if self.enabled and level is not None else []
@@ -118,6 +133,7 @@ class ShadowSystem(esper.Processor):
                 del kept[slot]
                 maps.clear_directional(slot)
         if not casting:
+            self._still = (level, lights, (maps.tile, maps.filter, self.enabled), ())
             return
         tile = max(light.shadow_resolution for _, light in casting) if len(casting) > 1 else \
             casting[0][1].shadow_resolution
@@ -149,6 +165,7 @@ class ShadowSystem(esper.Processor):
                                                                light.shadow_softness, region)
             self._directional[slot] = key
             stats.shadow_maps_drawn += 1
+        self._still = (level, lights, (maps.tile, maps.filter, self.enabled), tuple(published.directional))
 
     # --- point lights -------------------------------------------------------------------------
     def _point_maps(self, published: ShadowCasters) -> None:

@@ -303,6 +303,46 @@ def test_a_still_scene_draws_no_shadow_pass_and_a_moved_caster_draws_one(scene):
     assert not np.array_equal(first, moved)
 
 
+def test_a_still_suns_map_is_drawn_again_when_the_sun_changes_and_kept_otherwise(scene):
+    """A still frame keeps the sun's map without looking at the sun's fields (the prepare
+    stage's test: no DirectionalLight written this frame); each change to the sun draws it
+    again: its direction assigned or edited in place (seen by the in-place watch), its
+    softness, its resolution, and its shadows turned off and on; the frames before and after
+    a turn differ, and turning back draws the first frame again."""
+    def build(world):
+        world.resources["ids"] = _floor_scene(world, (0.5, 5.0, 6.5), (0.0, 0.0, 0.0))
+
+    runner = scene(build)
+    runner.engine.renderer.antialias = "off"
+    sun = runner.world.get(runner.world.resources["ids"]["sun"], DirectionalLight)
+    runner.frame()
+    runner.frame()
+    first = runner.frame()
+    assert (runner.stats.shadow_maps_drawn, runner.stats.shadow_maps_kept) == (0, 1)
+
+    def drawn_after(change) -> np.ndarray:
+        change()
+        frame = runner.frame()
+        assert runner.stats.shadow_maps_drawn == 1, change
+        runner.frame()
+        assert (runner.stats.shadow_maps_drawn, runner.stats.shadow_maps_kept) == (0, 1), change
+        return frame
+
+    turned = drawn_after(lambda: setattr(sun, "direction", glm.normalize(glm.vec3(1.0, -0.75, -0.5))))
+    assert not np.array_equal(turned, first)
+    back = drawn_after(lambda: setattr(sun, "direction", LIGHT))
+    assert np.array_equal(back, first)
+    direction = sun.direction
+    edited = drawn_after(lambda: setattr(direction, "x", 0.4))   # in place, as a game's ``sun.direction.x = 0.4``
+    assert not np.array_equal(edited, first)
+    drawn_after(lambda: setattr(sun, "shadow_softness", 2.0))
+    drawn_after(lambda: setattr(sun, "shadow_resolution", 1024))
+    sun.shadows = False
+    runner.frame()
+    assert runner.stats.shadow_maps_drawn == runner.stats.shadow_maps_kept == 0
+    drawn_after(lambda: setattr(sun, "shadows", True))
+
+
 def _scene_programs(runner) -> list:
     """The scene programs built for the shadow lookups the maps now ask for."""
     scene_pass = runner.engine.renderer.scene_pass
