@@ -71,7 +71,6 @@ REFLECTION_UNITS = (3, 4, 5)  # composite: the level's colour, seen-id and node 
 ATLAS_UNIT = 6           # composite (rough variant): the rough-reflection atlas
 FALLBACK_PARENT_UNITS = (0, 2)  # composite (fallback variants): the parent level's node and surface images
 LEVEL_UNITS = (3, 5)     # rough-atlas copy: a level's colour and node images (the composite's units for them)
-PRESENT_UNIT = 0         # present: the HDR image
 OUTLINE_UNIT = 0         # selection outline (the editor): the main view's seen-id image (engine/render/outline.py)
 PROBE_UNIT = 7           # scene: the cube map of the batch's reflection probe; composite (fallback): its draw's first
 PROBE2_UNIT = 9          # scene: the cube map of the batch's second probe (probe blending); composite (fallback): the
@@ -91,10 +90,19 @@ SHADOW_ATLAS_UNIT = 11   # scene: the directional lights' shadow maps, one depth
 POINT_SHADOW_UNITS = (3, 4)  # scene: the shadowed point lights' distance cube maps, one a light
 IRRADIANCE_UNIT = 5      # scene: the irradiance table (sky and probes' spherical harmonics)
 VIRTUAL_SHADOW_UNIT = 14  # scene: the virtual lights' shadow maps, one depth atlas (the mip pass's unit)
-# Post-processing (the present stage; these passes bind nothing else, so they reuse the
-# scene's units).  Bloom and exposure passes read their source at PRESENT_UNIT.
-BLOOM_UNIT = 1           # present: the bloom chain's sum of levels (engine/render/bloom.py)
+# Post-processing (the present stage).  The bloom levels and the HDR image are read on units
+# of their own, past the 16 the scene's samplers use (a sampler may name any unit below
+# GL_MAX_COMBINED_TEXTURE_IMAGE_UNITS, at least 80 in OpenGL 4.1): the chain's binds displace
+# no other pass's texture (the sky on 1, bound again by the next frame's scene pass), and the
+# HDR image stays bound from frame to frame.  FXAA and exposure keep units the scene uses:
+# FXAA's input on a unit of its own as well (a still frame then binds no texture at all)
+# cost llvmpipe 15% more CPU a 640x360 frame (interleaved A/B, 15.5 -> 17.9 ms; FXAA on 15
+# the same; the cause, inside llvmpipe, not found), and its bind is one call a frame.
+BLOOM_UNIT = 16          # bloom steps after the first, present: a level of the chain (engine/render/bloom.py)
+PRESENT_UNIT = 17        # present, bloom's first step, exposure's luminance step: the HDR image
+FXAA_UNIT = 0            # FXAA: the encoded frame (engine/render/present.py)
 EXPOSURE_UNIT = 2        # present, exposure adaptation: the 1x1 adapted exposure (engine/render/post.py)
+EXPOSURE_MEAN_UNIT = 0   # exposure adaptation: the 64x64 log-luminance image it averages
 TEXT_UNIT = 0            # screen text (after present): the font atlas (engine/render/text.py)
 
 # --- uniform-block binding points ----------------------------------------------------------
