@@ -61,6 +61,7 @@ from engine.render.bindings import (
     PassState,
     apply_pass_state,
     bind_texture,
+    bind_textures,
     bind_uniform_block,
 )
 from engine.render.gpu import Gpu
@@ -297,6 +298,7 @@ _BLOCK_EYE = slice(4 * CAMERA_BLOCK_EYE.start, 4 * CAMERA_BLOCK_EYE.stop)
 # cut the quad) while clipping still drops w <= 0.
 _FLATTEN_Z = glm.mat4(1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0)
 _NO_TILE = Tile(0, 0, 0.0)
+_COLOR_UNIT, _SEEN_UNIT, _NODE_UNIT = REFLECTION_UNITS  # the composite's units for a level's images
 _NO_PROBE = ((0.0, 0.0, 0.0, 0.0),) * 3  # a probe's lookup uniforms where the sky stands in for it
 # A claim as two clip-space triangles, each vertex its position and the claim's ids (claim.vert).
 _CLAIM_VERTICES = struct.Struct("<" + "2f3I" * 6)
@@ -573,8 +575,7 @@ class MirrorPasses:
             self._reserve_claims(len(vertices))
         self._claim_buffer.write(vertices)
         self._reset_vao.render(moderngl.TRIANGLES, vertices=6 * count)
-        bind_texture(self.ctx, parent.node, PARENT_NODE_UNIT)
-        bind_texture(self.ctx, parent.surface, PARENT_SURFACE_UNIT)
+        bind_textures(ctx, ((parent.node, PARENT_NODE_UNIT), (parent.surface, PARENT_SURFACE_UNIT)))
         self.uniforms.set(self.claim, "to_parent", (parent.size[0] / level.size[0], parent.size[1] / level.size[1]))
         # A claim's cost on llvmpipe is linear in the claims, no cliff at some count: each
         # query's begin and end re-validate the fragment state (a new ~20 KB rasteriser state
@@ -661,9 +662,8 @@ class MirrorPasses:
         parent.composite_framebuffer.use()
         # Colour: reflection x rate + own x (1 - rate); alpha (coverage) is kept.
         apply_pass_state(ctx, _COMPOSITE, (0, 0, *parent.size))
-        for texture, unit in zip((level.color, level.seen, level.node), REFLECTION_UNITS, strict=True):
-            bind_texture(self.ctx, texture, unit)
-        bind_texture(self.ctx, self.renderer.sky, SKY_UNIT)
+        bind_textures(ctx, ((level.color, _COLOR_UNIT), (level.seen, _SEEN_UNIT), (level.node, _NODE_UNIT),
+                            (self.renderer.sky, SKY_UNIT)))
         if prepared.rough:
             bind_texture(self.ctx, self.rough_atlas.texture, ATLAS_UNIT)
         for (variant, normal_map), variant_rows in prepared.rows.items():
@@ -792,12 +792,10 @@ class MirrorPasses:
         renderer = self.renderer
         parent.composite_framebuffer.use()
         apply_pass_state(ctx, _COMPOSITE, (0, 0, *parent.size))
-        bind_texture(self.ctx, parent.node, FALLBACK_PARENT_UNITS[0])
-        bind_texture(self.ctx, parent.surface, FALLBACK_PARENT_UNITS[1])
-        if level is not None:
-            bind_texture(self.ctx, level.seen, REFLECTION_UNITS[1])
-            bind_texture(self.ctx, level.node, REFLECTION_UNITS[2])
-        bind_texture(self.ctx, renderer.sky, SKY_UNIT)
+        bind_textures(ctx, ((parent.node, FALLBACK_PARENT_UNITS[0]), (parent.surface, FALLBACK_PARENT_UNITS[1]),
+                            (renderer.sky, SKY_UNIT)) if level is None else
+                      ((parent.node, FALLBACK_PARENT_UNITS[0]), (parent.surface, FALLBACK_PARENT_UNITS[1]),
+                       (level.seen, _SEEN_UNIT), (level.node, _NODE_UNIT), (renderer.sky, SKY_UNIT)))
         block = self._fallback_block
         bind_uniform_block(ctx, block, FALLBACK_BINDING)
         uniforms = self.uniforms
