@@ -64,13 +64,11 @@ from engine.render.end_images import EndImages
 from engine.render.gpu import Gpu
 from engine.render.mirror_passes import (
     Claims,
-    Composite,
     Fallbacks,
     MirrorPasses,
     PreparedComposites,
     PreparedFallbacks,
     give_samples_queries,
-    surface_look,
     take_samples_queries,
 )
 from engine.render.plan_rows import ROW, Candidates, LevelRows
@@ -981,9 +979,7 @@ class ViewTree:
             rects = list(map(tuple, level_rects(np.array([(x, y, x + w, y + h) for x, y, w, h in
                                                           (c.rect for c in children)], np.float64),
                                                 root.size, parent_size).tolist()))
-        return self.passes.prepare_composites([Composite(
-            child.index, rect, child.view.scissor, child.parent.view, surface_look(child.surface),
-            fade=child.fade) for child, rect in zip(children, rects, strict=True)], parent_size)
+        return self.passes.prepare_views(children, rects, parent_size)
 
     def release(self) -> None:
         for record in self._visibility.values():
