@@ -843,12 +843,17 @@ class ViewTree:
                 candidates.derived["claims"] = columns
         rows, entities, nodes, scissors = columns
         queries, none = step.queries, self.passes.no_pixels
-        if none in queries:
-            at = [i for i, query in enumerate(queries) if query is not none]
-            rows, entities, nodes, scissors, queries = ([column[i] for i in at] for column in
-                                                        (rows, entities, nodes, scissors, queries))
-        claims = Claims([(parents[p].index, entity, node) for p, entity, node in
-                         zip(rows, entities, nodes, strict=True)], scissors)
+        if none in queries:  # the claims drawn, in one pass over the columns
+            ids, rects, drawn = [], [], []
+            for p, entity, node, rect, query in zip(rows, entities, nodes, scissors, queries, strict=True):
+                if query is not none:
+                    ids.append((parents[p].index, entity, node))
+                    rects.append(rect)
+                    drawn.append(query)
+            claims, scissors, queries = Claims(ids, rects), rects, drawn
+        else:
+            claims = Claims([(parents[p].index, entity, node) for p, entity, node in
+                             zip(rows, entities, nodes, strict=True)], scissors)
         step.apart = _claims_apart(scissors)
         self.passes.prepare_level(step.targets, step.parent_targets, claims, queries)
 
