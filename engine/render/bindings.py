@@ -65,8 +65,13 @@ Bindable = moderngl.Texture | moderngl.TextureCube | moderngl.TextureArray | mod
 ALBEDO_UNIT = 0          # scene: the batch's albedo map
 SKY_UNIT = 1             # scene, sky, composite: the sky cube map
 NODE_UNIT = 2            # scene (masked views): the level's node image
-PARENT_NODE_UNIT = 3     # claim: the parent level's node image
-PARENT_SURFACE_UNIT = 4  # claim: the parent level's surface image
+# The claims read the parent level's node image where a masked scene pass of that level left
+# it (NODE_UNIT: the next level's claims follow it, so it is bound already), and its surface
+# image on a unit no scene pass samples: the claims between two levels' scene passes then
+# displace none of the pass-wide bindings (point shadows on 3 and 4, irradiance on 5), which
+# the next level's pass would bind again.
+PARENT_NODE_UNIT = NODE_UNIT  # claim: the parent level's node image
+PARENT_SURFACE_UNIT = 6  # claim: the parent level's surface image (the composite's ATLAS_UNIT)
 REFLECTION_UNITS = (3, 4, 5)  # composite: the level's colour, seen-id and node images
 ATLAS_UNIT = 6           # composite (rough variant): the rough-reflection atlas
 FALLBACK_PARENT_UNITS = (0, 2)  # composite (fallback variants): the parent level's node and surface images
@@ -291,6 +296,28 @@ def bind_texture(ctx: moderngl.Context, texture: Bindable, unit: int, keep_sampl
         textures[key] = texture
         if key in cache.watched:
             cache.epoch += 1
+
+
+def bind_textures(ctx: moderngl.Context, textures: tuple[tuple[Bindable, int], ...]) -> None:
+    """``bind_texture`` for each (texture, unit) pair of ``textures`` (a pass's images: one
+    look-up of the record for all of them)."""
+    try:
+        cache = ctx._speculum_pass_state
+    except AttributeError:
+        cache = _cache(ctx)
+    bound, samplers, recording = cache.textures, cache.samplers, cache.recording
+    for texture, unit in textures:
+        if samplers and unit in samplers:
+            samplers.pop(unit).clear(unit)  # the texture's own filter again
+            _changed(cache, ("sampler", unit))
+        key = (unit, texture.__class__)
+        if recording is not None:
+            recording.add(key)
+        if bound.get(key) is not texture or not CACHE_STATE:
+            texture.use(unit)
+            bound[key] = texture
+            if key in cache.watched:
+                cache.epoch += 1
 
 
 def bind_texture_now(ctx: moderngl.Context, texture: Bindable, unit: int) -> None:

@@ -186,6 +186,8 @@ class ScenePass:
         # _draw_batches writes these, so a value is written only when it changes.
         self._written: dict[int, list] = {}
         self._last_own: dict[int, tuple] = {}  # program -> the batch values it last drew with
+        # (invocations, layered, ambient probes, masked) -> a batch's draw-record keys (lit, unlit)
+        self._kinds: dict[tuple, tuple[tuple, tuple]] = {}
         self._sky_size = 0
         self._sky_layered: moderngl.VertexArray | None = None
         self._views_ubo: moderngl.Buffer | None = None
@@ -359,25 +361,31 @@ class ScenePass:
         mirrors all ``shading_replaced``) draws with its ``UNLIT_SURFACE`` build."""
         ctx = self.ctx
         renderer = self.renderer
-        stats = renderer.stats
         if renderer.shaders.reloads != self._reloads_seen:
             self._forget_programs()
         # What else picks a batch's program: a virtual light shining, the shadow lookups compiled.
-        stamp = (self._reloads_seen, self.shadows.virtual_shining, self.shadows.program_defines)
-        kind = (invocations, layered, self._ambient_probes, False, masked)
-        unlit_kind = (invocations, layered, self._ambient_probes, True, masked)
+        shadows = self.shadows
+        stamp = (self._reloads_seen, shadows.virtual_shining, shadows.program_defines)
+        kinds = self._kinds.get((invocations, layered, self._ambient_probes, masked))
+        if kinds is None:
+            kinds = self._kinds[invocations, layered, self._ambient_probes, masked] = (
+                (invocations, layered, self._ambient_probes, False, masked),
+                (invocations, layered, self._ambient_probes, True, masked))
+        kind, unlit_kind = kinds
         sky_size = self._sky_size
         last_own = self._last_own
+        draws = instances = 0
+        skipped = (skip, hide)
         for batch in batches:
             count = batch.count
-            if not count or (count == 1 and batch.entity_at[0] in (skip, hide)):
+            if not count or (count == 1 and batch.entity_at[0] in skipped):
                 continue
             variants = batch.variants
-            drawn_as = unlit_kind if batch in unlit else kind  # a batch the composites paint over
+            drawn_as = unlit_kind if unlit and batch in unlit else kind  # a batch the composites paint over
             record = batch.draw_records.get(drawn_as)
             if record is None or record[0] != stamp or record[1] != variants:
                 record = batch.draw_records[drawn_as] = self._record(batch, drawn_as, stamp, variants)
-            _, _, glo, vao, uniforms, values, textures, own = record
+            _, _, glo, vao, uniforms, values, textures, own, vertices = record
             for unit, texture in textures:
                 bind_texture(ctx, texture, unit, True)  # the pass's albedo sampler stays (bind_sampler)
             if own is None:  # probes bound now: their lookups are read each draw
@@ -399,18 +407,22 @@ class ScenePass:
                 # its front faces wind the other way on screen, so the view's winding is
                 # turned for its draw (its own batch: extract keys batches by it).
                 restore = flip_front_face(ctx)
-                vao.render(moderngl.TRIANGLES, vertices=batch.mesh.index_count, instances=count)
+                vao.render(moderngl.TRIANGLES, vertices=vertices, instances=count)
                 set_front_face(ctx, restore)
             else:
-                vao.render(moderngl.TRIANGLES, vertices=batch.mesh.index_count, instances=count)
-            stats.draw_calls += 1
-            stats.instances += count
+                vao.render(moderngl.TRIANGLES, vertices=vertices, instances=count)
+            draws += 1
+            instances += count
+        if draws:
+            stats = renderer.stats
+            stats.draw_calls += draws
+            stats.instances += instances
 
     def _record(self, batch: InstanceBatch, kind: tuple[int, str, bool, bool, bool], stamp: tuple, variants) -> tuple:
         """What ``batch`` draws with in passes of ``kind`` (invocations, layered, ambient
         probes, unlit, masked): (stamp, variants, program name, vertex array, per-draw uniforms, the
         program's written values, the (unit, texture) pairs to bind, its own uniform values
-        or None where probes give them per draw)."""
+        or None where probes give them per draw, its mesh's vertex count)."""
         invocations, layered, ambient, unlit, masked = kind
         program = self.program(variants, invocations, layered, batch.normal_map is not None,
                                batch.checker is not None, _material_maps(batch), batch.probe_blend,
@@ -426,7 +438,8 @@ class ScenePass:
         if not batch.probe and not batch.probe_blend and not batch.rest_probe:
             own = (batch.texture is not None, batch.transparent, 0, *_NO_PROBE, 0, *_NO_PROBE, 0, *_NO_PROBE,
                    *(batch.checker or _NO_CHECKER))
-        return (stamp, variants, glo, batch.vao(program), self._uniforms[glo], values, textures, own)
+        return (stamp, variants, glo, batch.vao(program), self._uniforms[glo], values, textures, own,
+                batch.mesh.index_count)
 
     def _probe_values(self, batch: InstanceBatch) -> tuple:
         """Bind the probes ``batch`` samples; its own uniform values with their lookups."""
@@ -617,13 +630,26 @@ class ScenePass:
         if (self.cull_batches and opaque and len(opaque) >= self.cull_min_batches
                 and len(views) * len(opaque) >= self.cull_min_draws):
             reach = batch_reach(views, targets.size, opaque)  # which batch can draw a sample in which view
+        masked = options.masked
+        if conditions is None and not options.sky and not now:
+            # A reflection level's views (exact visibility), drawn whatever their claims
+            # count: per view its scissor, winding, camera and draws, nothing else.
+            draw, bind_view_at = self._draw_batches, renderer.bind_view_at
+            for index, view in enumerate(views):
+                set_scissor(ctx, view.scissor)
+                set_front_face(ctx, "cw" if view.mirrored else "ccw")
+                bind_view_at(index)
+                draw(opaque if reach is None else self._reaching(opaque, reach[index], view),
+                     0, masked, skip=view.skip, hide=view.hide, unlit=unlit)
+            renderer.stats.passes += len(views)
+            return
         for index, view in enumerate(views):
             with _ALWAYS if conditions is None else conditions[index].crender:
                 set_scissor(ctx, view.scissor)  # unless in place (moderngl's own record: the cache reads it)
                 set_front_face(ctx, "cw" if view.mirrored else "ccw")
                 renderer.bind_view_at(index)
                 self._draw_batches(opaque if reach is None else self._reaching(opaque, reach[index], view),
-                                   0, options.masked, skip=view.skip, hide=view.hide, unlit=unlit)
+                                   0, masked, skip=view.skip, hide=view.hide, unlit=unlit)
                 if options.sky:
                     # Into the view's own framebuffer: the sky writes id 0 (nothing) to the
                     # surface and seen images, the very values the clear put where no surface

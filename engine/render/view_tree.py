@@ -69,13 +69,11 @@ from engine.render.gpu import Gpu
 from engine.render.level_copies import LevelCopies
 from engine.render.mirror_passes import (
     Claims,
-    Composite,
     Fallbacks,
     MirrorPasses,
     PreparedComposites,
     PreparedFallbacks,
     give_samples_queries,
-    surface_look,
     take_samples_queries,
 )
 from engine.render.plan_rows import ROW, Candidates, LevelRows
@@ -950,12 +948,17 @@ class ViewTree:
                 candidates.derived["claims"] = columns
         rows, entities, nodes, scissors = columns
         queries, none = step.queries, self.passes.no_pixels
-        if none in queries:
-            at = [i for i, query in enumerate(queries) if query is not none]
-            rows, entities, nodes, scissors, queries = ([column[i] for i in at] for column in
-                                                        (rows, entities, nodes, scissors, queries))
-        claims = Claims([(parents[p].index, entity, node) for p, entity, node in
-                         zip(rows, entities, nodes, strict=True)], scissors)
+        if none in queries:  # the claims drawn, in one pass over the columns
+            ids, rects, drawn = [], [], []
+            for p, entity, node, rect, query in zip(rows, entities, nodes, scissors, queries, strict=True):
+                if query is not none:
+                    ids.append((parents[p].index, entity, node))
+                    rects.append(rect)
+                    drawn.append(query)
+            claims, scissors, queries = Claims(ids, rects), rects, drawn
+        else:
+            claims = Claims([(parents[p].index, entity, node) for p, entity, node in
+                             zip(rows, entities, nodes, strict=True)], scissors)
         step.apart = _claims_apart(scissors)
         self.passes.prepare_level(step.targets, step.parent_targets, claims, queries)
 
@@ -1086,9 +1089,7 @@ class ViewTree:
             rects = list(map(tuple, level_rects(np.array([(x, y, x + w, y + h) for x, y, w, h in
                                                           (c.rect for c in children)], np.float64),
                                                 root.size, parent_size).tolist()))
-        return self.passes.prepare_composites([Composite(
-            child.index, rect, child.view.scissor, child.parent.view, surface_look(child.surface),
-            fade=child.fade) for child, rect in zip(children, rects, strict=True)], parent_size)
+        return self.passes.prepare_views(children, rects, parent_size)
 
     def release(self) -> None:
         for record in self._visibility.values():
