@@ -98,3 +98,24 @@ def non_negative_int(text: str) -> int:
     if value < 0:
         raise argparse.ArgumentTypeError(f"{text} is not >= 0")
     return value
+
+
+def rows_without_rasteriser(arguments: list[str]) -> list[dict]:
+    """The JSON rows a benchmark's ``--child`` run prints, from a subprocess started with
+    ``LP_NUM_THREADS=0`` (llvmpipe reads it when it starts, so it cannot be set in this
+    process): the frame is then the engine's CPU, llvmpipe rasterising on the calling thread
+    almost nothing at a tiny output.  ``arguments`` follow ``python -m benchmarks``."""
+    import json
+    import os
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1]
+    command = [sys.executable, "-m", "benchmarks", *arguments]
+    path = os.pathsep.join(p for p in (str(root), os.environ.get("PYTHONPATH", "")) if p)
+    done = subprocess.run(command, cwd=root, env={**os.environ, "LP_NUM_THREADS": "0", "PYTHONPATH": path},
+                          capture_output=True, text=True, timeout=3600)
+    if done.returncode != 0:
+        raise RuntimeError(f"the LP_NUM_THREADS=0 process failed (exit {done.returncode}):\n{done.stderr[-3000:]}")
+    return [json.loads(line) for line in done.stdout.splitlines() if line.startswith("{")]

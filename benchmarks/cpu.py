@@ -79,7 +79,6 @@ import json
 import os
 import random
 import statistics
-import subprocess
 import sys
 import time
 from collections import Counter
@@ -87,7 +86,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
-from benchmarks import format_size, names_from, non_negative_int, positive_int
+from benchmarks import format_size, names_from, non_negative_int, positive_int, rows_without_rasteriser
 
 ROOT = Path(__file__).resolve().parents[1]
 CPU_SIZE = (32, 18)
@@ -400,16 +399,9 @@ def run_ecs(ctx, frames: int, warmup: int) -> list[dict]:
 
 
 def cpu_part(frames: int, warmup: int, top: int) -> list[dict]:
-    """The ``cpu`` part's rows, from a subprocess started with ``LP_NUM_THREADS=0`` (llvmpipe
-    reads it when it starts)."""
-    command = [sys.executable, "-m", "benchmarks", "cpu", "--json", "--child", "--frames", str(frames),
-               "--warmup", str(warmup), "--top", str(top)]
-    path = os.pathsep.join(p for p in (str(ROOT), os.environ.get("PYTHONPATH", "")) if p)
-    done = subprocess.run(command, cwd=ROOT, env={**os.environ, "LP_NUM_THREADS": "0", "PYTHONPATH": path},
-                          capture_output=True, text=True, timeout=3600)
-    if done.returncode != 0:
-        raise RuntimeError(f"the LP_NUM_THREADS=0 process failed (exit {done.returncode}):\n{done.stderr[-3000:]}")
-    return [json.loads(line) for line in done.stdout.splitlines() if line.startswith("{")]
+    """The ``cpu`` part's rows, from a subprocess started with ``LP_NUM_THREADS=0``."""
+    return rows_without_rasteriser(["cpu", "--json", "--child", "--frames", str(frames), "--warmup", str(warmup),
+                                    "--top", str(top)])
 
 
 # -- targets ----------------------------------------------------------------------------------

@@ -88,7 +88,6 @@ import math
 import os
 import random
 import statistics
-import subprocess
 import sys
 import time
 from collections.abc import Callable
@@ -97,7 +96,14 @@ from pathlib import Path
 
 from pyglm import glm
 
-from benchmarks import add_size_argument, format_size, names_from, non_negative_int, positive_int
+from benchmarks import (
+    add_size_argument,
+    format_size,
+    names_from,
+    non_negative_int,
+    positive_int,
+    rows_without_rasteriser,
+)
 from benchmarks.mirrors import DT, OUTPUT_SIZE, MirrorRing
 from components import Bloom, Camera, DirectionalLight, Material, MeshRef, Mirror, Tonemap, Transform
 from engine.assets.mesh import box
@@ -424,16 +430,10 @@ def stand_in_rows(ctx, frames: int, warmup: int) -> list[Row]:
 
 
 def cpu_part(frames: int, warmup: int) -> list[dict]:
-    """The cpu part's rows, from a subprocess started with ``LP_NUM_THREADS=0`` (llvmpipe
-    reads it when it starts), as the cpu suite runs its own."""
-    command = [sys.executable, "-m", "benchmarks", "lighting", "--json", "--child", "--cpu-frames", str(frames),
-               "--warmup", str(warmup)]
-    path = os.pathsep.join(p for p in (str(ROOT), os.environ.get("PYTHONPATH", "")) if p)
-    done = subprocess.run(command, cwd=ROOT, env={**os.environ, "LP_NUM_THREADS": "0", "PYTHONPATH": path},
-                          capture_output=True, text=True, timeout=3600)
-    if done.returncode != 0:
-        raise RuntimeError(f"the LP_NUM_THREADS=0 process failed (exit {done.returncode}):\n{done.stderr[-3000:]}")
-    return [json.loads(line) for line in done.stdout.splitlines() if line.startswith("{")]
+    """The cpu part's rows, from a subprocess started with ``LP_NUM_THREADS=0``, as the cpu
+    suite runs its own."""
+    return rows_without_rasteriser(["lighting", "--json", "--child", "--cpu-frames", str(frames),
+                                    "--warmup", str(warmup)])
 
 
 def target_rows(rows: list[Row], size: tuple[int, int], software: bool) -> list[dict]:
