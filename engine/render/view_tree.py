@@ -74,7 +74,7 @@ from engine.render.mirror_passes import (
     surface_look,
     take_samples_queries,
 )
-from engine.render.plan_rows import ROW, Candidates, LevelRows
+from engine.render.plan_rows import Candidates, LevelRows
 from engine.render.scene_pass import REFLECTION_LEVEL, TREE_ROOT, SceneOptions, ScenePass, shading_replaced
 from engine.render.surface_table import NO_BLENDS, SurfaceBlends
 from engine.render.targets import LevelStack, RenderTargets
@@ -686,8 +686,8 @@ class ViewTree:
         The frame's spending and the level's coverage go by last frame's counts (0 for a
         known-empty one: it spends nothing)."""
         candidates, entities = step.candidates, surfaces.entity_list
-        claim_keys = [keys[p] + (entities[s],) for p, s in
-                      zip(candidates.parent.tolist(), candidates.surface.tolist(), strict=True)]
+        numbers = candidates.numbers[0]
+        claim_keys = [keys[p] + (entities[s],) for p, s in zip(numbers[0], numbers[1], strict=True)]
         queries, none = step.queries, self.passes.no_pixels
         record.pending.extend(claim_keys)
         record.counted.extend(queries)
@@ -837,7 +837,8 @@ class ViewTree:
         surface was last seen by its parent (``parent_at``: each parent row's index in the
         tree's views).  Lists, a level's worth of copies: a few numpy calls cost more."""
         rows = []
-        for p, s in zip(chosen.parent.tolist(), chosen.surface.tolist(), strict=True):
+        numbers = chosen.numbers[0]
+        for p, s in zip(numbers[0], numbers[1], strict=True):
             row = seers[p].copy()
             row[s] = parent_at[p]
             rows.append(row)
@@ -884,8 +885,9 @@ class ViewTree:
         columns = candidates.derived.get("claims") if kept else None
         if columns is None:  # each candidate's parent row, surface entity and node, and its scissor
             entities = surfaces.entity_list
-            columns = (candidates.parent.tolist(), [entities[s] for s in candidates.surface.tolist()],
-                       candidates.rows.node.astype(np.int64).tolist(), candidates.scissor.tolist())
+            numbers = candidates.numbers[0]
+            columns = (numbers[0], [entities[s] for s in numbers[1]], numbers[11],
+                       list(zip(*numbers[2:6], strict=True)))
             if kept:  # a kept plan's: the same columns every frame it is found again
                 candidates.derived["claims"] = columns
         rows, entities, nodes, scissors = columns
@@ -999,21 +1001,20 @@ class ViewTree:
         size = chosen.size
         blocks = chosen.blocks.tobytes()
         step = CAMERA_BLOCK_BYTES
-        columns = chosen.rows.data.take(_NODE_COLUMNS, axis=1).astype(np.int64)
+        numbers, fades = chosen.numbers
         views, nodes = [], []
         at = 0
-        for (x0, y0, x1, y1, mirrored, node), s, p, scissor, fade in zip(  # x1, y1: negated (LEVEL_ROW)
-                columns.tolist(), chosen.surface.tolist(), chosen.parent.tolist(), chosen.scissor.tolist(),
-                chosen.fade.tolist(), strict=True):
+        for p, s, scissor, x0, y0, x1, y1, mirrored, node, fade in zip(  # x1, y1: negated (LEVEL_ROW)
+                numbers[0], numbers[1], zip(*numbers[2:6], strict=True), *numbers[6:], fades, strict=True):
             state = states[s]
             view = PlannedView(blocks[at:at + step], size, state.kind, state.entity, state.exit_plane, mirrored == 1,
-                               tuple(scissor), node, state.exit_entity, hide)
+                               scissor, node, state.exit_entity, hide)
             at += step
             views.append(view)
             nodes.append(ReflectionView(node, level, view, (x0, y0, -x1 - x0, -y1 - y0), state, parents[p], fade))
         if not chosen.rows.data.flags.writeable:
             chosen.derived[("nodes", hide)] = (views, [(n.index, n.rect, n.surface, p, n.fade) for n, p in
-                                                       zip(nodes, chosen.parent.tolist(), strict=True)])
+                                                       zip(nodes, numbers[0], strict=True)])
         return views, nodes
 
     def _prepare_composite(self, children: list[ReflectionView], root: View,
@@ -1037,10 +1038,6 @@ class ViewTree:
         self.passes.release()
         if self.ends is not None:
             self.ends.release()
-
-
-# The LevelRows columns a level's nodes read (_level_nodes), as whole numbers: the rectangle, mirrored, node.
-_NODE_COLUMNS = np.array([*range(ROW["rect"].start, ROW["rect"].stop), ROW["mirrored"].start, ROW["node"].start])
 
 
 def _fallbacks_at(fallbacks: dict[int, Fallbacks], level: int, surfaces: SurfaceTable) -> Fallbacks:
