@@ -41,7 +41,6 @@ from engine.render.plan_rows import (
     BLOCK,
     CAMERA_CLIP,
     CAMERA_VIEWPORT,
-    CULL,
     EXIT_PLANE,
     GRID_PARENT,
     GRID_WIDTH,
@@ -60,7 +59,7 @@ from engine.render.plan_rows import (
     X_COLUMNS,
     Candidates,
     LevelRows,
-    x0_rows,
+    cull_rows,
 )
 from engine.render.plan_scratch import (
     WORK_KEPT,
@@ -374,7 +373,7 @@ class SurfaceTable:
             if len(self._ids) > 64:
                 self._ids.clear()
             self._ids[key] = grid
-        return grid[p, s]
+        return grid[0].take(s, axis=0) if count == 1 else grid[p, s]
 
     def _child_row(self, exit_row: float, mask: float, mirrored: float, hide: int, root_rows: RootRows,
                    size: tuple[int, int]) -> np.ndarray:
@@ -452,8 +451,7 @@ class SurfaceTable:
         # the minima over the corners; the planes as one more corner give the facing values
         # (the eye's row times them).
         work = self._cull_work.get(count) or kept_work(self._cull_work, count, self._new_cull_work)
-        np.matmul(x0_rows(data)[:, CULL].transpose(1, 0, 2).reshape(14 * count, 4), self.corner_columns,
-                  out=work.product)
+        np.matmul(cull_rows(data), self.corner_columns, out=work.product)
         np.maximum(work.w, work.epsilon, out=work.w_safe)  # w <= 0: see straddles
         np.divide(work.sides, work.w_safe, out=work.sides)
         least = _MIN(work.corners, axis=0, out=work.least)                                  # 14 x P x S
@@ -465,15 +463,20 @@ class SurfaceTable:
         if self.bounds_claims and not fallback:  # (for the plan's candidates)
             self._boxes = rects.copy()  # unrounded: what claim_cull bounds a claim's pixel centres by
         np.floor(rects, out=rects)  # (the pixel's margin is in the rows: each side less w)
-        np.maximum(rects, data[:, RECT].T[:, :, None], out=rects)  # inside the parent's
+        np.maximum(rects, data.T[RECT, :, None], out=rects)  # inside the parent's
         # Seen: facing and allowed, not culled (every corner outside one side of the frustum,
         # or behind the clip plane; on a side counts as outside) and a rectangle with pixels
         # (x1 > x0 and y1 > y0): one maximum over the rows 4-13, written over, each < 0 to keep.
         np.subtract(neg_bias, work.facing, out=work.least_w)
         np.add(work.x0y0, work.x1y1, out=work.sizes)
         np.less(_MAX(work.tests, axis=0, out=work.worst), 0.0, out=work.seen)
-        p, s = np.nonzero(work.seen)
-        rects = rects[:, p, s].T
+        if count == 1:  # (a take costs a third of a fancy index's two arrays)
+            s = work.seen[0].nonzero()[0]
+            p = np.zeros(len(s), np.int64)
+            rects = rects[:, 0].take(s, axis=1).T
+        else:
+            p, s = np.nonzero(work.seen)
+            rects = rects[:, p, s].T
         if not self.fading:
             return p, s, rects, None
         fade = self.fade_weights(parents.eye[p], s)
@@ -603,7 +606,10 @@ class SurfaceTable:
             return None, faded
         w = self._plan_work.get(k) or self._new_plan_work(k)
         w.surface[...] = self.float_rows.take(s, axis=0)  # (take with out= costs more than take and a copy)
-        w.parent[...] = parents.data[:, X_COLUMNS].take(p, axis=0)  # the parents' matrices (no more of their rows)
+        if len(parents.data) == 1:  # one parent: its row for every view (a broadcast copy, no gather)
+            w.parent[...] = parents.data[:, X_COLUMNS]
+        else:
+            w.parent[...] = parents.data[:, X_COLUMNS].take(p, axis=0)  # the parents' matrices (no more of their rows)
         if size is None:
             scale *= self.one_scale if self.one_scale is not None else float(w.scale.max())
             size = _level_size(root.size, scale)
@@ -656,7 +662,8 @@ class SurfaceTable:
         candidates = Candidates(LevelRows(data), size, end)
         candidates.__dict__.update(parent=p, surface=s)  # the cull's arrays: no views to make when read
         if self.bounds_claims:
-            candidates.box = self._boxes[:, p, s].T  # (claim_cull)
+            boxes = self._boxes  # (claim_cull)
+            candidates.box = (boxes[:, 0].take(s, axis=1) if len(parents.data) == 1 else boxes[:, p, s]).T
         return candidates, faded
 
 
