@@ -62,7 +62,7 @@ from engine.render.plan_rows import (
     cull_rows,
 )
 from engine.render.plan_scratch import (
-    WORK_KEPT,
+    PLAN_WORK_KEPT,
     ChildTable,
     CullWork,
     PlanBuffers,
@@ -281,7 +281,7 @@ class SurfaceTable:
         if buffers is None:
             buffers = self._plan_buffers[capacity] = PlanBuffers(capacity)
         work = PlanWork(k, buffers)
-        if len(self._plan_work) >= WORK_KEPT:
+        if len(self._plan_work) >= PLAN_WORK_KEPT:
             del self._plan_work[next(iter(self._plan_work))]
         self._plan_work[k] = work
         return work
