@@ -253,6 +253,9 @@ _ROOT_COLUMNS = np.concatenate([np.arange(X_COLUMNS.start, X_COLUMNS.start + 19 
                                 (X_COLUMNS.start + X0 + np.arange(8)[:, None] * 5 + np.arange(4)[None, :]).reshape(-1)])
 
 
+# Candidates.numbers' lists (the first of its two) by what they hold: the parents, surfaces,
+# scissors' four, then the rectangles' four, mirrored, nodes.
+NUMBER_PARENT, NUMBER_SURFACE, NUMBER_SCISSOR, NUMBER_RECT, NUMBER_NODE = 0, 1, slice(2, 6), slice(6, 10), 11
 # The columns of ``Candidates.numbers``: int64 ones (parent, surface, scissor), then whole numbers
 # kept as float64 (the rectangle, mirrored, node).
 _INT_NUMBERS = np.array([_PARENT, _SURFACE, *range(SCISSOR.start, SCISSOR.stop)])

@@ -74,7 +74,15 @@ from engine.render.mirror_passes import (
     surface_look,
     take_samples_queries,
 )
-from engine.render.plan_rows import Candidates, LevelRows
+from engine.render.plan_rows import (
+    NUMBER_NODE,
+    NUMBER_PARENT,
+    NUMBER_RECT,
+    NUMBER_SCISSOR,
+    NUMBER_SURFACE,
+    Candidates,
+    LevelRows,
+)
 from engine.render.scene_pass import REFLECTION_LEVEL, TREE_ROOT, SceneOptions, ScenePass, shading_replaced
 from engine.render.surface_table import NO_BLENDS, SurfaceBlends
 from engine.render.targets import LevelStack, RenderTargets
@@ -605,7 +613,7 @@ class ViewTree:
             walk.keys = [step.claim_keys[step.keep[at]] for at in grow]
         walk.parent_at = [child_offset + at for at in grow]
         walk.nodes, walk.rows = [children[at] for at in grow], parents.rows
-        return self._plan(walk, first_index=int(step.candidates.rows.node[-1]) + 1)
+        return self._plan(walk, first_index=step.candidates.numbers[0][NUMBER_NODE][-1] + 1)
 
     def _note_cap(self, walk: _Walk) -> None:
         """Reaching the depth cap is reported: how many views the surfaces' own limits still
@@ -687,7 +695,8 @@ class ViewTree:
         known-empty one: it spends nothing)."""
         candidates, entities = step.candidates, surfaces.entity_list
         numbers = candidates.numbers[0]
-        claim_keys = [keys[p] + (entities[s],) for p, s in zip(numbers[0], numbers[1], strict=True)]
+        claim_keys = [keys[p] + (entities[s],) for p, s in
+                      zip(numbers[NUMBER_PARENT], numbers[NUMBER_SURFACE], strict=True)]
         queries, none = step.queries, self.passes.no_pixels
         record.pending.extend(claim_keys)
         record.counted.extend(queries)
@@ -838,7 +847,7 @@ class ViewTree:
         tree's views).  Lists, a level's worth of copies: a few numpy calls cost more."""
         rows = []
         numbers = chosen.numbers[0]
-        for p, s in zip(numbers[0], numbers[1], strict=True):
+        for p, s in zip(numbers[NUMBER_PARENT], numbers[NUMBER_SURFACE], strict=True):
             row = seers[p].copy()
             row[s] = parent_at[p]
             rows.append(row)
@@ -886,8 +895,8 @@ class ViewTree:
         if columns is None:  # each candidate's parent row, surface entity and node, and its scissor
             entities = surfaces.entity_list
             numbers = candidates.numbers[0]
-            columns = (numbers[0], [entities[s] for s in numbers[1]], numbers[11],
-                       list(zip(*numbers[2:6], strict=True)))
+            columns = (numbers[NUMBER_PARENT], [entities[s] for s in numbers[NUMBER_SURFACE]], numbers[NUMBER_NODE],
+                       list(zip(*numbers[NUMBER_SCISSOR], strict=True)))
             if kept:  # a kept plan's: the same columns every frame it is found again
                 candidates.derived["claims"] = columns
         rows, entities, nodes, scissors = columns
@@ -1005,7 +1014,8 @@ class ViewTree:
         views, nodes = [], []
         at = 0
         for p, s, scissor, x0, y0, x1, y1, mirrored, node, fade in zip(  # x1, y1: negated (LEVEL_ROW)
-                numbers[0], numbers[1], zip(*numbers[2:6], strict=True), *numbers[6:], fades, strict=True):
+                numbers[NUMBER_PARENT], numbers[NUMBER_SURFACE], zip(*numbers[NUMBER_SCISSOR], strict=True),
+                *numbers[NUMBER_RECT.start:], fades, strict=True):
             state = states[s]
             view = PlannedView(blocks[at:at + step], size, state.kind, state.entity, state.exit_plane, mirrored == 1,
                                scissor, node, state.exit_entity, hide)
@@ -1014,7 +1024,7 @@ class ViewTree:
             nodes.append(ReflectionView(node, level, view, (x0, y0, -x1 - x0, -y1 - y0), state, parents[p], fade))
         if not chosen.rows.data.flags.writeable:
             chosen.derived[("nodes", hide)] = (views, [(n.index, n.rect, n.surface, p, n.fade) for n, p in
-                                                       zip(nodes, numbers[0], strict=True)])
+                                                       zip(nodes, numbers[NUMBER_PARENT], strict=True)])
         return views, nodes
 
     def _prepare_composite(self, children: list[ReflectionView], root: View,
