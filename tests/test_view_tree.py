@@ -151,16 +151,17 @@ def test_a_world_without_mirrors_or_portals_plans_nothing(scene, monkeypatch):
     assert planned and runner.stats.reflection_views == 1
 
 
-def _pair_and_side_mirror(ents):
-    """``facing_pair``'s mirrors (depth 6) and a third on the left wall, seen at level 1 beside
-    the pair's first, and an occluder kept far below until a test moves it."""
+def _pair_and_side_mirror(ents, end_image="auto", depth=6):
+    """``facing_pair``'s mirrors (``depth``, with ``end_image``) and a third on the left wall,
+    seen at level 1 beside the pair's first, and an occluder kept far below until a test
+    moves it."""
     def build(world):
         world.spawn(DirectionalLight(direction=(0.2, -1.0, -0.5), intensity=2.0))
         ents["camera"] = look_from(world, (0.3, 1.5, 2.0), target=(0.0, 1.5, -4.0), fov=50.0)
         for z, turn in ((-4.0, None), (4.0, FACING_BACK)):
             ents.setdefault("pair", []).append(world.spawn(
                 Transform(position=(0, 1.5, z), rotation=turn or glm.quat()), MeshRef(quad(4, 3)),
-                Material(color=(0.1, 0.1, 0.1)), Mirror(max_depth=6)))
+                Material(color=(0.1, 0.1, 0.1)), Mirror(max_depth=depth, end_image=end_image)))
         ents["side"] = world.spawn(Transform(position=(-2.5, 1.5, -1.5),
                                              rotation=glm.angleAxis(glm.pi() / 2, glm.vec3(0, 1, 0))),
                                    MeshRef(quad(1.5, 1.5)), Material(color=(0.1, 0.1, 0.1)), Mirror(max_depth=6))
@@ -179,14 +180,18 @@ def _planned_tree(runner) -> list[tuple]:
              node.view.eye.to_bytes()) for node in runner.engine.reflection_system.views[1:]]
 
 
-def test_levels_planned_ahead_are_the_levels_planned_one_at_a_time(scene, monkeypatch):
+@pytest.mark.parametrize(("end_image", "depth"), (("auto", 6), (False, 3)))
+def test_levels_planned_ahead_are_the_levels_planned_one_at_a_time(scene, monkeypatch, end_image, depth):
     """Exact visibility plans each level from its parent level's claim counts; where the
     root's last render made every candidate of a level a view that grew, the levels below
     it are planned ahead, back to back, before its claims (``ViewTree._plan_ahead``), and
     used only where the counts make every candidate a view again.  The trees equal, frame
     by frame, those of a tree that plans each level after its parent's claims (``plan_ahead``
     False) while the camera moves, and when an occluder hides the side mirror seen at
-    level 1 (its plans made ahead are made again, from the pair's view alone)."""
+    level 1 (its plans made ahead are made again, from the pair's view alone), and so do
+    the frames: with the pair's end images (planning ahead stops at a level with end
+    views) and without (the pair past its depth limit, 3, shows its fallback there, whose
+    pairs are found ahead too)."""
     from engine.render.view_plan import SurfaceTable
 
     events: list[str] = []
@@ -195,26 +200,29 @@ def test_levels_planned_ahead_are_the_levels_planned_one_at_a_time(scene, monkey
         monkeypatch.setattr(owner, name, lambda *a, _original=original, _label=label, **k:
                             events.append(_label) or _original(*a, **k))
     ents = {True: {}, False: {}}
-    runners = {ahead: scene(_pair_and_side_mirror(ents[ahead]), (160, 120)) for ahead in (True, False)}
+    runners = {ahead: scene(_pair_and_side_mirror(ents[ahead], end_image, depth), (160, 120))
+               for ahead in (True, False)}
     for ahead, runner in runners.items():
         runner.engine.reflection_system.tree.plan_ahead = ahead
     orders: dict[bool, list[list[str]]] = {True: [], False: []}
     for frame in range(4):
-        trees = {}
+        trees, images = {}, {}
         for ahead, runner in runners.items():
             transform = runner.world.get(ents[ahead]["camera"], Transform)
             transform.position = glm.vec3(0.3 + 0.02 * frame, 1.5, 2.0)  # a moving camera: nothing kept
             if frame == 2:  # in front of the side mirror
                 runner.world.get(ents[ahead]["occluder"], Transform).position = glm.vec3(-1.3, 1.5, 0.2)
             events.clear()
-            runner.frame()
+            images[ahead] = runner.frame()
             orders[ahead].append(list(events))
             trees[ahead] = _planned_tree(runner)
             level_1 = {node.surface.entity for node in runner.engine.reflection_system.views if node.level == 1}
             first, side = ents[ahead]["pair"][0], ents[ahead]["side"]
             assert level_1 == ({first} if frame >= 2 else {first, side})  # the occluder hides the side mirror
-            assert max(node.level for node in runner.engine.reflection_system.views) >= 4
+            assert max(node.level for node in runner.engine.reflection_system.views) >= min(depth, 4)
         assert trees[True] == trees[False], f"frame {frame}: the trees differ"
+        # and so the frames, fallbacks past the pair's depth limit and all
+        assert images[True].std() > 5.0 and np.array_equal(images[True], images[False]), f"frame {frame}"
     for frame, order in enumerate(orders[False]):  # one level at a time: one plan before the first claims
         assert order.index("claim") == 1, (frame, order)
     ahead_orders = orders[True]

@@ -461,8 +461,9 @@ class ViewTree:
         settings, surfaces, root = walk.settings, walk.surfaces, walk.root
         walk.scale = self._level_scale(depth)
         ahead = walk.ahead.pop(depth, None) if walk.ahead else None
+        unviewed = None
         if ahead is not None and ahead[0] is walk.rows.data and ahead[1] == first_index and ahead[2] == walk.scale:
-            candidates, faded = ahead[3]
+            (candidates, faded), unviewed = ahead[3], ahead[4]
         else:
             candidates, faded = surfaces.plan(walk.rows, depth, root, walk.root_proj, walk.inv_root_proj,
                                               first_index, settings.depth_cap, root.hide,
@@ -471,7 +472,7 @@ class ViewTree:
                     and not surfaces.fading and self.renderer.stats.pixels_left() is None:
                 self._plan_ahead(walk, depth, candidates)
         self._unviewed(walk.fallbacks, surfaces, walk.rows, walk.nodes, walk.level, walk.root_proj, root,
-                       settings.depth_cap, walk.ends)
+                       settings.depth_cap, walk.ends, unviewed)
         walk.result.faded += faded
         candidates, walk.end_seers, dropped = self._end_seers(candidates, walk.seers)
         if dropped:  # end candidates with nothing to repeat: their fallback, never the bare surface
@@ -486,15 +487,19 @@ class ViewTree:
         (and its first index and scale are those it was planned with), else plans afresh.
         In a frame, a numpy call made among GL calls costs about half as much again as one
         made after another (measured: 44 against 30 us a level of one view), and exact
-        visibility plans each level after its parent's claims and draws."""
+        visibility plans each level after its parent's claims and draws.  The pairs the
+        level's parents see without a view there (``SurfaceTable.unviewed``, its fallbacks:
+        a cull at the depth limit) are found with it."""
         settings, surfaces, root = walk.settings, walk.surfaces, walk.root
         whole = walk.whole_before
         while whole.get(depth) and (candidates.end is None or not candidates.end.any()):
             depth += 1
             rows, first_index, scale = candidates.rows, int(candidates.rows.node[-1]) + 1, self._level_scale(depth)
+            ends = _ends_at(walk.ends, depth)
             planned = surfaces.plan(rows, depth, root, walk.root_proj, walk.inv_root_proj, first_index,
-                                    settings.depth_cap, root.hide, ends=_ends_at(walk.ends, depth), scale=scale)
-            walk.ahead[depth] = (rows.data, first_index, scale, planned)
+                                    settings.depth_cap, root.hide, ends=ends, scale=scale)
+            walk.ahead[depth] = (rows.data, first_index, scale, planned,
+                                 surfaces.unviewed(rows, depth, walk.root_proj, root.size, settings.depth_cap, ends))
             candidates = planned[0]
             if candidates is None:
                 break
@@ -722,12 +727,14 @@ class ViewTree:
     @staticmethod
     def _unviewed(fallbacks: dict[int, Fallbacks], surfaces: SurfaceTable, rows: LevelRows,
                   nodes: list[ReflectionView], level: int, root_proj: np.ndarray, root: View, depth_cap: int,
-                  ends: tuple[np.ndarray, int] | None) -> None:
+                  ends: tuple[np.ndarray, int] | None, found: tuple[np.ndarray, np.ndarray] | None = None) -> None:
         """The fallbacks of the surfaces the views ``nodes`` (``rows``, of ``level``) see but
         that the next level plans no view for (``SurfaceTable.unviewed``: past their depth
         limits, switched off, faded out; a ``depth_cap`` of 0: all of them), as the planner's
-        columns: its parent rows are rows of ``nodes``."""
-        p, s = surfaces.unviewed(rows, level + 1, root_proj, root.size, depth_cap, _ends_at(ends, level + 1))
+        columns: its parent rows are rows of ``nodes``; ``found``: those pairs, found already
+        (a level planned ahead)."""
+        p, s = found if found is not None else surfaces.unviewed(rows, level + 1, root_proj, root.size, depth_cap,
+                                                                 _ends_at(ends, level + 1))
         if len(p):
             _fallbacks_at(fallbacks, level, surfaces).add(nodes, p, s)
 
