@@ -75,6 +75,7 @@ from engine.render.mirror_passes import (
     take_samples_queries,
 )
 from engine.render.plan_rows import (
+    BLOCK,
     NUMBER_NODE,
     NUMBER_PARENT,
     NUMBER_RECT,
@@ -1015,7 +1016,7 @@ class ViewTree:
                            for view, (node, rect, state, p, fade) in zip(views, rows, strict=True)]
         states = surfaces.states
         size = chosen.size
-        blocks = chosen.blocks.tobytes()
+        blocks = chosen.rows.data[:, BLOCK].tobytes()  # the float32 blocks' bytes (Candidates.blocks')
         step = CAMERA_BLOCK_BYTES
         numbers, fades = chosen.numbers
         views, nodes = [], []
@@ -1074,6 +1075,8 @@ def _claims_apart(rects: Sequence[Sequence[int]]) -> bool:
     """Whether no two of a level's claim rectangles (x, y, width, height) share a pixel:
     a sweep along x over them sorted (a level's few claims; it stops at the first overlap).
     An empty rectangle covers no pixel."""
+    if len(rects) < 2:  # (a chain's levels: one claim each)
+        return True
     ordered = sorted(rect for rect in rects if rect[2] > 0 and rect[3] > 0)
     count = len(ordered)
     for i in range(count):
