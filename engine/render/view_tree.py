@@ -490,20 +490,30 @@ class ViewTree:
         made after another (measured: 44 against 30 us a level of one view), and exact
         visibility plans each level after its parent's claims and draws.  The pairs the
         level's parents see without a view there (``SurfaceTable.unviewed``, its fallbacks:
-        a cull at the depth limit) are found with it."""
+        a cull at the depth limit) are found with it, and the levels' Camera blocks, which
+        no plan below reads, are worked out for all of them at once at the end
+        (``SurfaceTable.finish_blocks``: one run of its operations, not one a level)."""
         settings, surfaces, root = walk.settings, walk.surfaces, walk.root
         whole = walk.whole_before
+        deferred: list[Candidates] = []
         while whole.get(depth) and (candidates.end is None or not candidates.end.any()):
             depth += 1
             rows, first_index, scale = candidates.rows, int(candidates.rows.node[-1]) + 1, self._level_scale(depth)
             ends = _ends_at(walk.ends, depth)
+            # Blocks left to one run for the levels planned ahead where there are two or more
+            # (a kept plan's rows, read-only: its plans are kept whole).
+            defer = rows.data.flags.writeable and bool(deferred or whole.get(depth))
             planned = surfaces.plan(rows, depth, root, walk.root_proj, walk.inv_root_proj, first_index,
-                                    settings.depth_cap, root.hide, ends=ends, scale=scale)
+                                    settings.depth_cap, root.hide, ends=ends, scale=scale, defer=defer)
             walk.ahead[depth] = (rows.data, first_index, scale, planned,
                                  surfaces.unviewed(rows, depth, walk.root_proj, root.size, settings.depth_cap, ends))
             candidates = planned[0]
             if candidates is None:
                 break
+            if defer:
+                deferred.append(candidates)
+        if deferred:
+            surfaces.finish_blocks(deferred, walk.root_proj)
 
     def _choose(self, walk: _Walk, levels: LevelStack, candidates: Candidates) -> _Level | None:
         """Steps 2 and 3 for a planned level: its candidates' claims (exact: drawn and read
