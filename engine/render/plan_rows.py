@@ -253,15 +253,6 @@ _ROOT_COLUMNS = np.concatenate([np.arange(X_COLUMNS.start, X_COLUMNS.start + 19 
                                 (X_COLUMNS.start + X0 + np.arange(8)[:, None] * 5 + np.arange(4)[None, :]).reshape(-1)])
 
 
-# Candidates.numbers' lists (the first of its two) by what they hold: the parents, surfaces,
-# scissors' four, then the rectangles' four, mirrored, nodes.
-NUMBER_PARENT, NUMBER_SURFACE, NUMBER_SCISSOR, NUMBER_RECT, NUMBER_NODE = 0, 1, slice(2, 6), slice(6, 10), 11
-# The columns of ``Candidates.numbers``: int64 ones (parent, surface, scissor), then whole numbers
-# kept as float64 (the rectangle, mirrored, node).
-_INT_NUMBERS = np.array([_PARENT, _SURFACE, *range(SCISSOR.start, SCISSOR.stop)])
-_WHOLE_NUMBERS = np.array([*range(RECT.start, RECT.stop), _MIRRORED, NODE])
-
-
 class _kept:  # noqa: N801 (a decorator, named as functools.cached_property is)
     """``functools.cached_property`` without its lock: Python 3.11's takes a lock at every
     first read, and a level's candidates are read for a few arrays each (about 30 first
@@ -321,19 +312,6 @@ class Candidates:
     def fade(self) -> np.ndarray:
         """(k,) the reflection's weight (Mirror fades; 1: none)."""
         return self.rows.data[:, FADE]
-
-    @_kept
-    def numbers(self) -> tuple[list[list[int]], list[float]]:
-        """The candidates' numbers as Python lists, a list a column, what the view tree
-        makes a level's claims, nodes and views of (a few each, so in Python), converted
-        once for the level, a kind at a time (a few numpy calls whatever the count, where
-        a conversion a column cost one or two each): the parents, surfaces, scissors' x, y,
-        w, h, rectangles' x0, y0, -x1, -y1, mirrored and nodes as ints, then the fades (a
-        kept plan's: read, never changed)."""
-        data = self.rows.data
-        ints = data.view(np.int64).take(_INT_NUMBERS, axis=1).T.tolist()
-        ints += data.take(_WHOLE_NUMBERS, axis=1).astype(np.int64).T.tolist()
-        return ints, data[:, FADE].tolist()
 
     def freeze(self) -> None:
         """Make every array read-only (a kept plan is shared by the frames that read it; a

@@ -74,16 +74,7 @@ from engine.render.mirror_passes import (
     surface_look,
     take_samples_queries,
 )
-from engine.render.plan_rows import (
-    BLOCK,
-    NUMBER_NODE,
-    NUMBER_PARENT,
-    NUMBER_RECT,
-    NUMBER_SCISSOR,
-    NUMBER_SURFACE,
-    Candidates,
-    LevelRows,
-)
+from engine.render.plan_rows import BLOCK, ROW, Candidates, LevelRows
 from engine.render.scene_pass import REFLECTION_LEVEL, TREE_ROOT, SceneOptions, ScenePass, shading_replaced
 from engine.render.surface_table import NO_BLENDS, SurfaceBlends
 from engine.render.targets import LevelStack, RenderTargets
@@ -629,7 +620,7 @@ class ViewTree:
             walk.keys = [step.claim_keys[step.keep[at]] for at in grow]
         walk.parent_at = [child_offset + at for at in grow]
         walk.nodes, walk.rows = [children[at] for at in grow], parents.rows
-        return self._plan(walk, first_index=step.candidates.numbers[0][NUMBER_NODE][-1] + 1)
+        return self._plan(walk, first_index=int(step.candidates.rows.node[-1]) + 1)
 
     def _note_cap(self, walk: _Walk) -> None:
         """Reaching the depth cap is reported: how many views the surfaces' own limits still
@@ -710,9 +701,8 @@ class ViewTree:
         The frame's spending and the level's coverage go by last frame's counts (0 for a
         known-empty one: it spends nothing)."""
         candidates, entities = step.candidates, surfaces.entity_list
-        numbers = candidates.numbers[0]
         claim_keys = [keys[p] + (entities[s],) for p, s in
-                      zip(numbers[NUMBER_PARENT], numbers[NUMBER_SURFACE], strict=True)]
+                      zip(candidates.parent.tolist(), candidates.surface.tolist(), strict=True)]
         queries, none = step.queries, self.passes.no_pixels
         record.pending.extend(claim_keys)
         record.counted.extend(queries)
@@ -864,8 +854,7 @@ class ViewTree:
         surface was last seen by its parent (``parent_at``: each parent row's index in the
         tree's views).  Lists, a level's worth of copies: a few numpy calls cost more."""
         rows = []
-        numbers = chosen.numbers[0]
-        for p, s in zip(numbers[NUMBER_PARENT], numbers[NUMBER_SURFACE], strict=True):
+        for p, s in zip(chosen.parent.tolist(), chosen.surface.tolist(), strict=True):
             row = seers[p].copy()
             row[s] = parent_at[p]
             rows.append(row)
@@ -912,9 +901,8 @@ class ViewTree:
         columns = candidates.derived.get("claims") if kept else None
         if columns is None:  # each candidate's parent row, surface entity and node, and its scissor
             entities = surfaces.entity_list
-            numbers = candidates.numbers[0]
-            columns = (numbers[NUMBER_PARENT], [entities[s] for s in numbers[NUMBER_SURFACE]], numbers[NUMBER_NODE],
-                       list(zip(*numbers[NUMBER_SCISSOR], strict=True)))
+            columns = (candidates.parent.tolist(), [entities[s] for s in candidates.surface.tolist()],
+                       candidates.rows.node.astype(np.int64).tolist(), candidates.scissor.tolist())
             if kept:  # a kept plan's: the same columns every frame it is found again
                 candidates.derived["claims"] = columns
         rows, entities, nodes, scissors = columns
@@ -1028,21 +1016,21 @@ class ViewTree:
         size = chosen.size
         blocks = chosen.rows.data[:, BLOCK].tobytes()  # the float32 blocks' bytes (Candidates.blocks')
         step = CAMERA_BLOCK_BYTES
-        numbers, fades = chosen.numbers
+        columns = chosen.rows.data.take(_NODE_COLUMNS, axis=1).astype(np.int64)
         views, nodes = [], []
         at = 0
-        for p, s, scissor, x0, y0, x1, y1, mirrored, node, fade in zip(  # x1, y1: negated (LEVEL_ROW)
-                numbers[NUMBER_PARENT], numbers[NUMBER_SURFACE], zip(*numbers[NUMBER_SCISSOR], strict=True),
-                *numbers[NUMBER_RECT.start:], fades, strict=True):
+        for (x0, y0, x1, y1, mirrored, node), s, p, scissor, fade in zip(  # x1, y1: negated (LEVEL_ROW)
+                columns.tolist(), chosen.surface.tolist(), chosen.parent.tolist(), chosen.scissor.tolist(),
+                chosen.fade.tolist(), strict=True):
             state = states[s]
             view = PlannedView(blocks[at:at + step], size, state.kind, state.entity, state.exit_plane, mirrored == 1,
-                               scissor, node, state.exit_entity, hide)
+                               tuple(scissor), node, state.exit_entity, hide)
             at += step
             views.append(view)
             nodes.append(ReflectionView(node, level, view, (x0, y0, -x1 - x0, -y1 - y0), state, parents[p], fade))
         if not chosen.rows.data.flags.writeable:
             chosen.derived[("nodes", hide)] = (views, [(n.index, n.rect, n.surface, p, n.fade) for n, p in
-                                                       zip(nodes, numbers[NUMBER_PARENT], strict=True)])
+                                                       zip(nodes, chosen.parent.tolist(), strict=True)])
         return views, nodes
 
     def _prepare_composite(self, children: list[ReflectionView], root: View,
@@ -1066,6 +1054,10 @@ class ViewTree:
         self.passes.release()
         if self.ends is not None:
             self.ends.release()
+
+
+# The LevelRows columns a level's nodes read (_level_nodes), as whole numbers: the rectangle, mirrored, node.
+_NODE_COLUMNS = np.array([*range(ROW["rect"].start, ROW["rect"].stop), ROW["mirrored"].start, ROW["node"].start])
 
 
 def _fallbacks_at(fallbacks: dict[int, Fallbacks], level: int, surfaces: SurfaceTable) -> Fallbacks:
