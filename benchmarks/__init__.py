@@ -29,7 +29,8 @@ SUITES: dict[str, tuple[str, str]] = {
     "ab": ("benchmarks.ab", "the cpu suite's scenes from two code trees, interleaved in alternating processes: "
            "new/old ratios and each process's median (how a speed change is judged)"),
     "lighting": ("benchmarks.lighting", "the mirrors scene with shadows and post-processing (tone mapping, "
-                 "bloom) on and off, interleaved: medians, ratios and the lighting cost targets"),
+                 "bloom) on and off, interleaved, and a 4x2 LP_NUM_THREADS=0 stand-in issuing a GPU's 640x360 "
+                 "passes: medians, ratios and the lighting cost targets"),
     "gpu-report": ("benchmarks.gpu_report", "GL renderer and limits, rendering-path checks, the mirrors / portals / "
                    "probes / stages / profile / lighting benchmarks at two sizes, the cpu suite and its targets, "
                    "and the whole test suite (minutes: --no-tests leaves it out), as report.md + report.json; exit 1 "

@@ -15,7 +15,9 @@ way leaves what came before, with ``"complete": false``):
   ``verified``, ``refused``, ``unavailable`` or ``unchecked``, with its detail).  A checkout
   without the self-check reports each path ``unchecked``.
 * ``benchmarks``: ``mirrors``, ``portals``, ``probes``, ``stages``, ``profile`` and ``lighting``
-  (shadows and post-processing on and off; its targets are ``target`` rows) (``--benchmarks``) at each
+  (shadows and post-processing on and off, and its LP_NUM_THREADS=0 stand-in of a GPU's
+  640x360 frame; its targets are ``target`` rows, judged here: it runs with
+  ``--report-only``) (``--benchmarks``) at each
   ``--size`` (default 640x360 and 1920x1080), and ``cpu`` once at the sizes it names (its
   targets tabled first, as "Targets", then its scenes' frames and GL calls), each run as
   ``python -m benchmarks <suite> --json --size WxH --frames N --warmup M`` would run it
@@ -76,7 +78,7 @@ ROOT = Path(__file__).resolve().parents[1]
 DEFAULT_SIZES = ((640, 360), (1920, 1080))
 BENCHMARKS = ("mirrors", "portals", "probes", "stages", "profile", "lighting", "cpu")
 FIXED_SIZE = ("cpu",)  # suites that run at the sizes they name: once, not at each --size
-JUDGED = ("cpu",)  # suites with target rows, run with --report-only: the report judges them
+JUDGED = ("cpu", "lighting")  # suites with target rows, run with --report-only: the report judges them
 FIXED = "own sizes"  # their runs' key where the others' is a size
 PROFILE_ROWS = 15  # functions per scene and size in report.md (report.json keeps every row)
 PATHS = ("layered_capture", "layered_mips", "direct_faces")
@@ -95,8 +97,9 @@ MEDIANS: dict[str, tuple[tuple[tuple[str, ...], str], ...]] = {
                (("path", "culled", "size"), "capture_ms_median"), (("prefilter", "size"), "prefilter_ms_median")),
     "stages": ((("scene", "stage"), "gpu_ms_median"), (("scene", "stage"), "cpu_ms_median"),
                (("scene", "stage"), "frame_ms_median")),
-    "lighting": ((("n_mirrors", "variant"), "frame_ms_median"), (("n_mirrors", "variant"), "ratio_to_off"),
-                 (("n_mirrors", "variant"), "cpu_ms_median"), (("target",), "value")),
+    "lighting": ((("part", "n_mirrors", "variant"), "frame_ms_median"),
+                 (("part", "n_mirrors", "variant"), "ratio_to_off"),
+                 (("part", "n_mirrors", "variant"), "cpu_ms_median"), (("target",), "value")),
 }
 
 
@@ -456,6 +459,15 @@ def markdown(report: dict) -> str:
         ecs = [row for row in cpu["rows"] if row.get("scene") == "ecs"]
         if ecs:
             out += _table(["scene", "entities", "moving", "cpu_ms_median", "frame_ms_median", "draw_calls"], ecs)
+    lighting = [{"size": size, **row} for size, run in report.get("benchmarks", {}).get("lighting", {}).items()
+                for row in run.get("rows", ()) if "target" in row]
+    if lighting:
+        out += ["## Lighting targets", "",
+                "`python -m benchmarks lighting` at each size: the ratios set for a GPU at 640x360 (`frames`) and "
+                "their LP_NUM_THREADS=0 stand-in on a software rasteriser (`cpu`: a 4x2 frame issuing a GPU's "
+                "640x360 passes), and the shadow maps a frame draws.", ""]
+        out += _table(["size", "target", "value", "limit", "unit", "met", "set_for", "part", "applies", "measured"],
+                      lighting)
     if "benchmarks" in report:
         sizes = report["sizes"]
         out += ["## Benchmarks", "",

@@ -7,7 +7,10 @@ timed (``Engine.frame`` then ``ctx.finish()``, wall clock: llvmpipe's GPU timers
 usable), 640x360 (``--size``).  ``passes`` counts scene renders (1 main + 1 per portal view).
 ``cpu_ms_median``: until ``Engine.frame`` returns, without the ``ctx.finish()``;
 ``plan_us_per_view``: the view tree's planning time per reflection view
-(``benchmarks.mirrors.PlanClock``; None at depth 0, which has no views).  ``--visibility
+(``benchmarks.mirrors.PlanClock``; None at depth 0, which has no views).  The tree is drawn
+whole every frame (``ReflectionSystem.keep_still_views = False``): a still camera's frames
+would otherwise keep it, or refill only its end images until they settle, and time that
+instead (the ``cpu`` suite's ``portals_d8`` does: ``benchmarks/cpu.py``).  ``--visibility
 exact,predicted`` runs one engine per ``ReflectionSystem.visibility`` mode, frames interleaved.
 
     python -m benchmarks portals            # table
@@ -110,6 +113,7 @@ def main(args: argparse.Namespace) -> int:
         for visibility in args.visibility:
             engine = Engine(FacingPortals(), ctx)
             engine.reflection_system.visibility = visibility
+            engine.reflection_system.keep_still_views = False  # the recursion drawn (module docstring)
             engines.append(engine)
             captures.append(CaptureTarget(ctx, args.size))
         outputs = [Output(capture.framebuffer, args.size) for capture in captures]

@@ -66,6 +66,8 @@ class RenderStats(BudgetLedger):
     reflection_views_unseen: int = 0    # views drawn that had no pixels last frame (predicted visibility)
     reflection_views_kept: int = 0      # main-tree views kept as last drawn: nothing they show changed
                                         # (ReflectionSystem.keep_still_views; not in passes)
+    reflection_end_refills: int = 0     # end views filled again over a main tree otherwise kept: still, its
+                                        # end images not settled yet (ViewTree.keep; its views not kept above)
     # How reflection levels were drawn: "per_mirror", "batched", "mixed" (auto chose both in
     # one frame), or "" when no reflection view was drawn (ReflectionSystem.path); a frame that
     # kept its tree (reflection_views_kept) reports the path the kept views were drawn by.
@@ -90,3 +92,8 @@ class RenderStats(BudgetLedger):
     # did not hold, that showed the fallback (the probe's or the sky's reflection) this
     # frame, in every tree: one per (parent view, surface).
     reflection_fallbacks: int = 0
+    # Transparent batches a view blended between two see-through surfaces they cover (behind
+    # one, in front of the other: scene_pass._split_slot's limit of one claim a pixel), so
+    # where they cover the farther surface it shows its own colour, not its reflection: one
+    # per (view, batch) this frame.
+    glass_between_surfaces: int = 0

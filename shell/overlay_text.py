@@ -47,8 +47,8 @@ def overlay_lines(engine: Engine, frame_times: Sequence[float]) -> list[str]:
         f"reflection path {stats.reflection_path or '-'} (set: {reflect.path}, budget {budget})",
         f"visibility {stats.reflection_visibility or '-'} (set: {reflect.visibility}), "
         f"{stats.reflection_views_unseen} views drawn unseen",
-        f"views kept {stats.reflection_views_kept} (nothing they show changed; keep still views: "
-        f"{'on' if reflect.keep_still_views else 'off'})",
+        f"views kept {stats.reflection_views_kept}, end views refilled {stats.reflection_end_refills} "
+        f"(keep still views: {'on' if reflect.keep_still_views else 'off'})",
         f"probe path {stats.probe_path or '-'} (set: {probes.path}{chosen})",
         f"GL paths verified: {', '.join(stats.paths_verified) or '-'}; "
         f"refused: {', '.join(stats.paths_refused) or '-'}",

@@ -51,6 +51,7 @@ class ExtractSystem(esper.Processor):
         self._looks = LookChanges()  # what changes a look, and which probe each object samples
         self._joined: set[int] = set()
         self._surface_probes = SurfaceProbes()  # each mirror's and portal's fallback probes
+        self._see_through: dict[int, InstanceBatch] = {}  # see-through mirrors' and portals' batches (water)
         self._layout = 0  # counts changes of _batch_of (an entity given, moved to or taken from a batch)
         # (layout, the entities, them by batch) of the last frame's movers (process).
         self._moved_groups: tuple[int, set[int], dict[InstanceBatch, list[int]]] | None = None
@@ -71,6 +72,9 @@ class ExtractSystem(esper.Processor):
         surfaces = world.resources.get(Surfaces)
         world.resources[SurfaceBlends] = SurfaceBlends(self._surface_probes.update(
             world, (*surfaces.mirrors.values(), *surfaces.portals.values()) if surfaces is not None else ()))
+        for entity, batch in self._see_through.items():  # the planes the transparent slot is ordered around
+            state = None if surfaces is None else surfaces.mirrors.get(entity) or surfaces.portals.get(entity)
+            batch.plane = None if state is None else state.plane
         # The transform of every moved entity, touched or not, and of every entity a refresh
         # gave a new row (a Slice removed in the frame it moved leaves it in another batch),
         # grouped by batch: each batch writes its rows in one go (InstanceBatch.write_transforms).
@@ -141,6 +145,10 @@ class ExtractSystem(esper.Processor):
             raise GLLimitError(f"entity {entity}: {exc}") from None
         if transparent:  # a see-through mirror or portal (water): drawn before the view trees' claims
             batch.surface = world.has(entity, Mirror) or world.has(entity, Portal)
+        if transparent and batch.surface:
+            self._see_through[entity] = batch
+        else:
+            self._see_through.pop(entity, None)
         if old is not batch:
             if old is not None:
                 self._remove_instance(entity, old)
@@ -170,6 +178,7 @@ class ExtractSystem(esper.Processor):
         batch.variants_changed()
 
     def _remove_instance(self, entity: int, batch: InstanceBatch) -> None:
+        self._see_through.pop(entity, None)
         batch.remove(entity)
         del self._batch_of[entity]
         self._layout += 1

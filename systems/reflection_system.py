@@ -24,8 +24,12 @@ of the world was written, added or removed since the last render looked (``World
 view on last frame's counts is not kept, nor one that drew an end view (it shows last
 frame's image, which the render changes) until that image settles: a frame that saw no
 change draws its tree and counts the pixels where its image differs from last frame's
-(``EndImages.keep(compare=True)``); none, and the next frame keeps the tree.
-``RenderStats.reflection_views_kept`` counts the views kept; ``keep_still_views = False``
+(``EndImages.keep(compare=True)``); none, and the next frame keeps the tree.  Until then the
+frames that see no change keep it too but do again what depends on the end images (the end
+views filled from the new image, each level's composites over the copy of its views' pixels
+the first still frame made: ``ViewTree.keep``, ``engine/render/level_copies.py``), and count
+again.  ``RenderStats.reflection_views_kept`` counts the views kept whole,
+``reflection_end_refills`` the end views filled again over a kept tree; ``keep_still_views = False``
 draws every frame.
 """
 from __future__ import annotations
@@ -186,7 +190,9 @@ class ReflectionSystem(esper.Processor):
             self.tree.check_history = same
             result = self.tree.render(main, views.levels, table, settings, blends, views.options)
         self._still = still if self.keep_still_views else None
-        stats.reflection_views_kept = len(result.views) - 1 if kept else 0
+        refilled = self.tree.refilled if kept else 0
+        stats.reflection_views_kept = len(result.views) - 1 if kept and not refilled else 0
+        stats.reflection_end_refills = refilled
         self.views = result.views
         stats.reflection_views = len(result.views) - 1
         stats.reflection_views_dropped = result.dropped

@@ -59,27 +59,39 @@ class ShadowSystem(esper.Processor):
         self._uploaded = b""
         self._points_clear = False  # no point light cast since the slots and cubes were last cleared
         self._level_seen: tuple = (None, (b"", b""))  # (level box, its bytes): _level_bytes
+        self._level: tuple[np.ndarray, np.ndarray] | None = None  # the level's box as last asked (process)
+        # What the directional maps were last made or kept from: (level box, the lights, (atlas
+        # tile, filter, enabled), the casting lights' directions as published); None: look again.
+        self._still: tuple | None = None
         world.resources[ShadowCasters] = ShadowCasters()
 
     def process(self, dt: float) -> None:
         renderer = self.renderer
         maps = renderer.shadows
+        world = self.world
         casters_changed = renderer.casters_version != self._casters_seen
         self._casters_seen = renderer.casters_version
         changed_box = renderer.take_changed_box()
         # The level's box only where a map is fitted to it (a sun that casts, a surface that
         # carries light): a world of 100,000 instances and no such light pays nothing for it.
-        surfaces = self.world.resources.get(Surfaces)
+        surfaces = world.resources.get(Surfaces)
         carrying = surfaces is not None and any(s.carries_light for s in (*surfaces.mirrors.values(),
                                                                          *surfaces.portals.values()))
-        needed = self.enabled and (any(light.shadows for _, light in self.world.query_one(DirectionalLight))
-                                   or carrying)
-        level = renderer.level_bounds() if needed else None
+        suns = [light for _, light in world.query_one(DirectionalLight)]
+        needed = self.enabled and (carrying or any(light.shadows for light in suns))
+        if not needed:
+            level = self._level = None
+        elif casters_changed or changed_box is not None or self._level is None:
+            # A batch's box changes only with an upload that writes rows (which moves
+            # ``casters_version`` on) or a row or batch gone (a changed box): else last frame's.
+            level = self._level = renderer.level_bounds()
+        else:
+            level = self._level
         published = ShadowCasters(level=level)
-        self._directional_maps(casters_changed, changed_box, level, published)
+        self._directional_maps(suns[:MAX_DIRECTIONAL_LIGHTS], casters_changed, changed_box, level, published)
         self._point_maps(published)
         published.virtual = self._virtual_maps(casters_changed, level, carrying)
-        self.world.resources[ShadowCasters] = published
+        world.resources[ShadowCasters] = published
         block = maps.block.tobytes() + maps.virtual_block.tobytes()
         if block != self._uploaded:
             maps.upload()
@@ -88,30 +100,51 @@ class ShadowSystem(esper.Processor):
     def _level_bytes(self, level: tuple[np.ndarray, np.ndarray]) -> tuple[bytes, bytes]:
         """The level's box as bytes, for the maps' keys (made again only for another box:
         ``Renderer.level_bounds`` gives the same one while no batch's union changed)."""
-        if self._level_seen[0] is not level:
-            self._level_seen = (level, (level[0].tobytes(), level[1].tobytes()))
-        return self._level_seen[1]
+        seen = self._level_seen
+        if seen[0] is not level:
+            seen = self._level_seen = (level, (level[0].tobytes(), level[1].tobytes()))
+        return seen[1]
 
     # --- directional lights -------------------------------------------------------------------
-    def _directional_maps(self, casters_changed: bool, changed_box, level, published: ShadowCasters) -> None:
+    def _directional_maps(self, lights: list[DirectionalLight], casters_changed: bool, changed_box, level,
+                          published: ShadowCasters) -> None:
+        """Each of ``lights`` (the first ``MAX_DIRECTIONAL_LIGHTS``, slot by slot) that casts:
+        its map kept, drawn again where casters changed, or drawn whole for a new fit; a slot
+        that stopped casting cleared."""
         maps = self.renderer.shadows
         stats: RenderStats = self.world.resources[RenderStats]
-        lights = [light for _, light in self.world.query_one(DirectionalLight)][:MAX_DIRECTIONAL_LIGHTS]
-        casting = {slot: light for slot, light in enumerate(lights)
-                   if self.enabled and light.shadows and level is not None}
-        tile = max((light.shadow_resolution for light in casting.values()), default=0)
-        if tile:
+        # A still frame: no caster changed, the same level box and lights, none of them
+        # written (the prepare stage's test for the Lights block), the same atlas and filter:
+        # every casting light's map is kept as it was.
+        lights = tuple(lights)
+        still = self._still
+        if (still is not None and not casters_changed and changed_box is None and still[0] is level
+                and still[1] == lights and still[2] == (maps.tile, maps.filter, self.enabled)
+                and not self.world.changed(DirectionalLight)):
+            published.directional.extend(still[3])
+            stats.shadow_maps_kept += len(still[3])
+            return
+        self._still = None
+        kept = self._directional
+        casting = [(slot, light) for slot, light in enumerate(lights) if light.shadows] \
+            if self.enabled and level is not None else []
+        if len(kept) != len(casting) or any(slot not in kept for slot, _ in casting):
+            for slot in [slot for slot in kept if slot not in dict(casting)]:
+                del kept[slot]
+                maps.clear_directional(slot)
+        if not casting:
+            self._still = (level, lights, (maps.tile, maps.filter, self.enabled), ())
+            return
+        tile = max(light.shadow_resolution for _, light in casting) if len(casting) > 1 else \
+            casting[0][1].shadow_resolution
+        if tile != maps.tile:
             maps.fit_atlas(tile)
-        for slot in range(MAX_DIRECTIONAL_LIGHTS):
-            light = casting.get(slot)
-            if light is None:
-                if self._directional.pop(slot, None) is not None:
-                    maps.clear_directional(slot)
-                continue
+        level_bytes = self._level_bytes(level)
+        for slot, light in casting:
             direction = raw_field(light, "direction")  # past the in-place watch: a read, not a game's edit
-            published.directional.append(tuple(direction))
-            key = (tuple(direction), light.shadow_resolution, light.shadow_softness, maps.tile, maps.filter,
-                   *self._level_bytes(level))
+            facing = tuple(direction)
+            published.directional.append(facing)
+            key = (facing, light.shadow_resolution, light.shadow_softness, maps.tile, maps.filter, level_bytes)
             same = key == self._directional.get(slot)
             if same and not casters_changed:
                 stats.shadow_maps_kept += 1
@@ -132,19 +165,21 @@ class ShadowSystem(esper.Processor):
                                                                light.shadow_softness, region)
             self._directional[slot] = key
             stats.shadow_maps_drawn += 1
+        self._still = (level, lights, (maps.tile, maps.filter, self.enabled), tuple(published.directional))
 
     # --- point lights -------------------------------------------------------------------------
     def _point_maps(self, published: ShadowCasters) -> None:
         world = self.world
         maps = self.renderer.shadows
         stats: RenderStats = self.world.resources[RenderStats]
-        lights = [(entity, light, transform) for entity, (light, transform) in world.query(PointLight, Transform)]
-        casting = [(index, entity, light, transform) for index, (entity, light, transform) in enumerate(lights)
-                   if self.enabled and light.shadows]
-        beyond = [row for row in casting if row[0] >= MAX_POINT_LIGHTS]  # not lit at all: the Lights block's limit
-        casting = [row for row in casting if row[0] < MAX_POINT_LIGHTS]
-        stats.shadows_cut += len(casting[MAX_POINT_SHADOWS:]) + len(beyond)
-        casting = casting[:MAX_POINT_SHADOWS]
+        casting = [(index, entity, light, transform)
+                   for index, (entity, (light, transform)) in enumerate(world.query(PointLight, Transform))
+                   if light.shadows] if self.enabled else []
+        if casting:
+            beyond = [row for row in casting if row[0] >= MAX_POINT_LIGHTS]  # not lit at all: the Lights block's limit
+            casting = [row for row in casting if row[0] < MAX_POINT_LIGHTS]
+            stats.shadows_cut += len(casting[MAX_POINT_SHADOWS:]) + len(beyond)
+            casting = casting[:MAX_POINT_SHADOWS]
         if not casting:
             if not self._points_clear:  # cleared once when the last one stops casting
                 maps.clear_points()
@@ -224,6 +259,9 @@ class ShadowSystem(esper.Processor):
             bounces.update({entity: light.bounces for entity, (light, _) in lamps})
             cap = self.depth_cap() if callable(self.depth_cap) else self.depth_cap
             found = rank_virtual_lights(virtual_lights(directional, points, surfaces, bounces, cap))
+        if not found and not self._virtual and not maps.virtual_shining:
+            stats.virtual_lights = 0   # none shines, none did: nothing to draw, clear or count
+            return []
         drawn = 0
         shining: list[VirtualLight] = []
         for light in found:

@@ -91,7 +91,7 @@ def _spy_on_capture_targets(monkeypatch, module) -> list[tuple[int, int]]:
     ["ecs", "--sizes", "100", "--frames", "1", "--warmup", "1"],
     ["churn", "--entities", "5", "--waves", "1", "--frames", "1"],
     ["profile", "--scenes", "portals_d8", "--frames", "1", "--warmup", "0"],
-    ["lighting", "--frames", "1", "--warmup", "0"],
+    ["lighting", "--frames", "1", "--warmup", "0", "--parts", "frames", "--report-only"],
 ], ids=lambda argv: argv[0])
 def test_the_size_reaches_the_render_target(argv, monkeypatch, capsys, own_contexts):
     parser, modules = build_parser()
@@ -101,6 +101,40 @@ def test_the_size_reaches_the_render_target(argv, monkeypatch, capsys, own_conte
     assert made and set(made) == {(48, 27)}, made
     rows = [json.loads(line) for line in capsys.readouterr().out.splitlines()]
     assert rows
+
+
+def test_the_lighting_stand_in_issues_a_gpus_640x360_passes_at_4x2(ctx, capsys, own_contexts):
+    """The lighting suite's cpu part: a process of its own with LP_NUM_THREADS=0, its frames
+    at 4x2 with the passes, draws and GL calls of a GPU's 640x360 frame (the bloom chain of
+    640x360 from a half start: six levels, eleven draws; the process checks them against a
+    640x360 frame it draws itself and fails where they differ), and its two targets judged on
+    a software rasteriser.  What the values are is timing: not asserted."""
+    from benchmarks.lighting import STAND_IN_VARIANTS, TARGETS
+
+    parser, modules = build_parser()
+    args = parser.parse_args(["lighting", "--json", "--parts", "cpu", "--cpu-frames", "3", "--warmup", "1",
+                              "--report-only"])
+    assert modules["lighting"].main(args) == 0
+    rows = [json.loads(line) for line in capsys.readouterr().out.splitlines()]
+    frames = {row["variant"]: row for row in rows if "variant" in row}
+    assert list(frames) == list(STAND_IN_VARIANTS)
+    for row in frames.values():
+        assert (row["part"], row["size"], row["stands_in_for"], row["lp_num_threads"]) == ("cpu", "4x2", "640x360", "0")
+        assert row["frames"] == 3 and row["frame_ms_median"] > 0 and row["gl_calls"] > 0
+    # The post variant's frame: the scene pass, then 11 bloom draws (the present and FXAA draws
+    # are not counted as passes); the others only the scene pass.
+    assert frames["post"]["passes"] == frames["off"]["passes"] + 11 == frames["shadows"]["passes"] + 11
+    assert frames["shadows"]["gl_calls"] == frames["off"]["gl_calls"] < frames["post"]["gl_calls"]
+    targets = {row["target"]: row for row in rows if "target" in row}
+    software = GLCapabilities.read(ctx).software
+    for name in ("cpu_post_0_mirrors", "cpu_shadows_still"):
+        target, spec = targets[name], TARGETS[name]
+        assert target["limit"] == spec.limit and target["set_for"] == "software" and target["part"] == "cpu"
+        assert target["applies"] == software and target["at_its_size"]
+        assert target["met"] == (target["value"] <= target["limit"])
+        assert target["value"] == round(frames[spec.variant]["frame_ms_median"]
+                                        / frames[spec.over]["frame_ms_median"], 3)
+    assert "post_0_mirrors" not in targets   # the frames part did not run
 
 
 @pytest.mark.parametrize("argv", [
@@ -240,10 +274,16 @@ def test_gpu_report_writes_markdown_and_json_without_imgui(ctx, tmp_path):
     stage_rows = runs["stages"]["160x90"]["rows"]
     assert {r["scene"] for r in stage_rows} == {"mirrors_0", "mirrors_8", "mirrors_16", "probe_dynamic"}
     lighting = runs["lighting"]["160x90"]["rows"]
-    from benchmarks.lighting import VARIANTS
-    assert [r["variant"] for r in lighting if "variant" in r] == [v.name for v in VARIANTS]
+    from benchmarks.lighting import STAND_IN_VARIANTS, VARIANTS
+    frame_rows = [r for r in lighting if "variant" in r]
+    assert [r["variant"] for r in frame_rows if r["part"] == "frames"] == [v.name for v in VARIANTS]
+    assert [r["variant"] for r in frame_rows if r["part"] == "cpu"] == list(STAND_IN_VARIANTS)
     targets = {r["target"]: r for r in lighting if "target" in r}
     assert not targets["post_0_mirrors"]["applies"]  # set for 640x360 on a GPU
+    # Its LP_NUM_THREADS=0 stand-in of a GPU's 640x360 frame, judged on a software rasteriser.
+    for name in ("cpu_post_0_mirrors", "cpu_shadows_still"):
+        assert targets[name]["applies"] == report["gl"]["software"] and targets[name]["part"] == "cpu"
+    assert "## Lighting targets" in markdown and "cpu_shadows_still" in markdown
     assert "### lighting: ratio_to_off by size" in markdown
     profiled = runs["profile"]["160x90"]["rows"]
     assert {r["scene"] for r in profiled if "rank" not in r} == {"mirrors_16", "portals_d8", "probe_dynamic"}
@@ -747,3 +787,32 @@ def test_ab_runs_both_trees_in_alternating_processes_and_prints_their_ratio(caps
         assert row["ratio"] == pytest.approx(row["new_ms"] / row["old_ms"], abs=1e-3)
     with pytest.raises(SystemExit, match="is not a Speculum checkout"):
         ab.main(parser.parse_args(["ab", str(tmp_path), str(ROOT)]))
+
+
+def test_ab_at_another_size_times_frames_with_the_rasteriser_in_and_gives_the_8_to_0_ratio(capsys):
+    """``--size`` other than 32x18: the scenes at that size with the rasteriser in, each row
+    with the wall-clock medians (and their ratio), each side's thread and rasteriser CPU, and a
+    last row with each side's 8-mirror over 0-mirror wall ratio, read from the rows above."""
+    from benchmarks import ab
+
+    parser, _ = build_parser()
+    assert ab.main(parser.parse_args(["ab", str(ROOT), str(ROOT), "--scenes", "mirrors_0,mirrors_8", "--size",
+                                      "64x36", "--rounds", "2", "--frames", "1", "--procs", "1", "--warmup", "1",
+                                      "--json"])) == 0
+    lines = [json.loads(line) for line in capsys.readouterr().out.splitlines()]
+    rows, summary = lines[:-1], lines[-1]
+    assert [row["scene"] for row in rows] == ["mirrors_0", "mirrors_8"]
+    for row in rows:
+        assert [side for side, _ in row["per_process"]] == ["old", "new"]
+        assert row["old_ms"] > 0 and row["new_ms"] > 0
+        assert row["ratio"] == pytest.approx(row["new_ms"] / row["old_ms"], abs=1e-3)
+        for side in ("old", "new"):
+            # one process a side: its median is the side's; the thread's CPU is part of the wall time
+            assert dict(row["per_process"])[side] == row[f"{side}_ms"]
+            assert 0 < row[f"{side}_thread_ms"] <= row[f"{side}_ms"] + 0.5
+            assert row[f"{side}_raster_ms"] >= 0
+    by_scene = {row["scene"]: row for row in rows}
+    assert summary["size"] == "64x36"
+    for side in ("old", "new"):
+        assert summary["ratio_8_to_0_mirrors"][side] == pytest.approx(
+            by_scene["mirrors_8"][f"{side}_ms"] / by_scene["mirrors_0"][f"{side}_ms"], abs=1e-3)

@@ -416,6 +416,84 @@ def test_bloom_first_step_is_checked(ctx):
         bloom.first_step = "eighth"
 
 
+def test_a_bloomed_frame_is_the_same_whatever_state_came_before(known, ctx):
+    """The chain is two passes (down, up), each applying its state once at its start; from
+    level to level only the target (whose framebuffer sets its own viewport) and the source
+    change.  With blending, depth, culling, clip distances, scissor and viewport scrambled
+    before each present (as tests/test_pass_state.py does to the scene passes), the frame and
+    the chain's sum are those of a clean run, bit for bit.  (The down pass's state left
+    unapplied, its steps blend into the levels: this fails.)"""
+    import random
+
+    import moderngl
+
+    from engine.render.bindings import invalidate
+
+    image = np.zeros((90, 160, 4), np.float16)
+    image[..., 3] = 1.0
+    image[40:50, 70:90, :3] = 30.0
+    components = (Tonemap(curve="agx"), Bloom(intensity=0.3, threshold=1.0, composite="additive"))
+
+    def run(scramble: bool):
+        runner = known(image, *components)
+        rng = random.Random(3)
+        renderer = runner.engine.renderer
+        present = renderer.present
+
+        def scrambled_present(*args, **kwargs):
+            ctx.enable_only(moderngl.BLEND | moderngl.DEPTH_TEST | moderngl.CULL_FACE)
+            ctx.blend_func = rng.choice([moderngl.ADDITIVE_BLENDING, moderngl.PREMULTIPLIED_ALPHA])
+            ctx.depth_func = ">"
+            for index in range(6):
+                ctx.enable_direct(0x3000 + index)
+            invalidate(ctx)
+            ctx.scissor = (rng.randrange(20), rng.randrange(20), rng.randrange(1, 30), rng.randrange(1, 30))
+            ctx.viewport = (rng.randrange(20), rng.randrange(20), rng.randrange(1, 60), rng.randrange(1, 40))
+            return present(*args, **kwargs)
+
+        if scramble:
+            renderer.present = scrambled_present
+        shots = []
+        for _ in range(3):
+            frame = runner.frame()
+            bloom = runner.engine.renderer.present_pass.bloom
+            w, h = bloom.textures[0].size
+            shots.append((frame, np.frombuffer(bloom.textures[0].read(), LEVEL_DTYPE).reshape(h, w, 4).copy()))
+        return shots
+
+    clean, scrambled = run(False), run(True)
+    assert clean[0][0][45, 80].max() > 0 and clean[0][1][..., :3].max() > 0   # a lit frame and a bloom
+    for (frame, summed), (want_frame, want_summed) in zip(scrambled, clean, strict=True):
+        np.testing.assert_array_equal(summed, want_summed)
+        np.testing.assert_array_equal(frame, want_frame)
+
+
+def test_a_bloom_chain_can_stand_in_for_another_sizes(known):
+    """``BloomPass.chain_of`` (for measuring: benchmarks/lighting.py): a tiny frame draws the
+    chain a frame of another size would, as many levels and draws, each level that size's
+    scaled to this image (no side under two pixels); off again, the image's own chain."""
+    from engine.render.bloom import MIN_LEVEL_SIDE, stand_in_sizes
+
+    assert stand_in_sizes((4, 2), (640, 360), 6) == [(MIN_LEVEL_SIDE, MIN_LEVEL_SIDE)] * 6
+    assert stand_in_sizes((64, 36), (640, 360), 6) == [(32, 18), (16, 9), (8, 4), (4, 2), (2, 2), (2, 2)]
+    assert stand_in_sizes((64, 36), (640, 360), 6, "quarter") == [(16, 9), (8, 4), (4, 2), (2, 2), (2, 2)]
+    runner = start_at(known(grey(0.5, (8, 4)), Tonemap(curve="none"), Bloom()), "half")
+    bloom = runner.engine.renderer.present_pass.bloom
+    runner.frame()
+    assert bloom.levels == len(level_sizes((8, 4), 6)) == 1 == bloom.passes()   # 4x2 (then 2x1: too small)
+    bloom.chain_of = (640, 360)
+    runner.frame()
+    assert bloom.levels == len(level_sizes((640, 360), 6)) == 6
+    assert runner.engine.renderer.present_pass.post_passes == bloom.passes() == 11
+    assert [t.size for t in bloom.textures] == stand_in_sizes((8, 4), (640, 360), 6)
+    bloom.chain_of = None
+    runner.frame()
+    assert bloom.levels == 1 and [t.size for t in bloom.textures] == [(4, 2)]
+    for bad in ((640,), (0, 360), (640.0, 360), "640x360"):
+        with pytest.raises(ValueError, match="chain_of"):
+            bloom.chain_of = bad
+
+
 def test_bloom_resources_go_with_the_component(known):
     runner = known(smooth_image((64, 48)), Bloom(), Tonemap(auto_exposure=True))
     runner.frame()

@@ -303,6 +303,46 @@ def test_a_still_scene_draws_no_shadow_pass_and_a_moved_caster_draws_one(scene):
     assert not np.array_equal(first, moved)
 
 
+def test_a_still_suns_map_is_drawn_again_when_the_sun_changes_and_kept_otherwise(scene):
+    """A still frame keeps the sun's map without looking at the sun's fields (the prepare
+    stage's test: no DirectionalLight written this frame); each change to the sun draws it
+    again: its direction assigned or edited in place (seen by the in-place watch), its
+    softness, its resolution, and its shadows turned off and on; the frames before and after
+    a turn differ, and turning back draws the first frame again."""
+    def build(world):
+        world.resources["ids"] = _floor_scene(world, (0.5, 5.0, 6.5), (0.0, 0.0, 0.0))
+
+    runner = scene(build)
+    runner.engine.renderer.antialias = "off"
+    sun = runner.world.get(runner.world.resources["ids"]["sun"], DirectionalLight)
+    runner.frame()
+    runner.frame()
+    first = runner.frame()
+    assert (runner.stats.shadow_maps_drawn, runner.stats.shadow_maps_kept) == (0, 1)
+
+    def drawn_after(change) -> np.ndarray:
+        change()
+        frame = runner.frame()
+        assert runner.stats.shadow_maps_drawn == 1, change
+        runner.frame()
+        assert (runner.stats.shadow_maps_drawn, runner.stats.shadow_maps_kept) == (0, 1), change
+        return frame
+
+    turned = drawn_after(lambda: setattr(sun, "direction", glm.normalize(glm.vec3(1.0, -0.75, -0.5))))
+    assert not np.array_equal(turned, first)
+    back = drawn_after(lambda: setattr(sun, "direction", LIGHT))
+    assert np.array_equal(back, first)
+    direction = sun.direction
+    edited = drawn_after(lambda: setattr(direction, "x", 0.4))   # in place, as a game's ``sun.direction.x = 0.4``
+    assert not np.array_equal(edited, first)
+    drawn_after(lambda: setattr(sun, "shadow_softness", 2.0))
+    drawn_after(lambda: setattr(sun, "shadow_resolution", 1024))
+    sun.shadows = False
+    runner.frame()
+    assert runner.stats.shadow_maps_drawn == runner.stats.shadow_maps_kept == 0
+    drawn_after(lambda: setattr(sun, "shadows", True))
+
+
 def _scene_programs(runner) -> list:
     """The scene programs built for the shadow lookups the maps now ask for."""
     scene_pass = runner.engine.renderer.scene_pass
@@ -386,6 +426,41 @@ def test_a_changed_caster_redraws_only_its_footprint_and_the_frame_is_a_fresh_en
     assert runner.stats.shadow_maps_drawn == 1
     assert 0 < runner.stats.shadow_texels_drawn < 0.1 * resolution * resolution
     fresh = scene(fresh_build, (320, 240))
+    fresh.engine.renderer.antialias = "off"
+    assert np.array_equal(changed, fresh.frame())
+
+
+@pytest.mark.parametrize("change", ["raised", "removed"])
+def test_a_caster_that_grows_or_shrinks_the_level_fits_the_map_again(scene, change):
+    """The map covers the level's box, which the shadows stage keeps from frame to frame
+    while no upload wrote a row and no row or batch went: a box raised above the level's top
+    (a row written), or the tallest box removed (its batch's last row: nothing is written,
+    its old box is what changed), fits the map to the new box, a whole map is drawn again,
+    and the frame is the one an engine built that way draws."""
+    def build_with(tall: bool, raised: bool = False):
+        def build(world):
+            ids = world.resources["ids"] = _floor_scene(world, (0.5, 5.0, 6.5), (0.0, 0.0, 0.0))
+            if raised:
+                world.get(ids["box"], Transform).position = glm.vec3(-1.0, 4.0, 0.0)
+            if tall:  # the box's twin (its batch), high over the floor: the level's top
+                ids["tall"] = world.spawn(Transform(position=(2.0, 4.0, -2.0)),
+                                          MeshRef(world.get(ids["box"], MeshRef).mesh), world.get(ids["box"], Material))
+        return build
+
+    runner = scene(build_with(change == "removed"), (320, 240))
+    runner.engine.renderer.antialias = "off"
+    runner.frame()
+    runner.frame()
+    assert runner.stats.shadow_maps_drawn == 0 and runner.stats.shadow_maps_kept == 1
+    ids = runner.world.resources["ids"]
+    if change == "raised":
+        runner.world.get(ids["box"], Transform).position = glm.vec3(-1.0, 4.0, 0.0)
+    else:
+        runner.world.delete_entity(ids["tall"])
+    changed = runner.frame()
+    resolution = DirectionalLight().shadow_resolution
+    assert runner.stats.shadow_maps_drawn == 1 and runner.stats.shadow_texels_drawn == resolution * resolution
+    fresh = scene(build_with(False, raised=change == "raised"), (320, 240))
     fresh.engine.renderer.antialias = "off"
     assert np.array_equal(changed, fresh.frame())
 

@@ -166,7 +166,7 @@ def test_a_second_identical_scene_pass_binds_nothing(ctx):
             counter.reset()
             renderer.scene_pass.draw([engine.main_view], renderer.targets)
             bound_again = counter.calls["Texture.use"] + counter.calls["TextureCube.use"]
-        assert bound_first > 0   # a batch's albedo map again: the present pass took its unit (0) since
+        assert bound_first > 0   # a batch's albedo map again: FXAA took its unit (0) since
         assert bound_again == 0, dict(counter.calls)
         again = np.frombuffer(renderer.targets.color.read(), np.float16)
         np.testing.assert_array_equal(again, first)

@@ -65,13 +65,17 @@ Bindable = moderngl.Texture | moderngl.TextureCube | moderngl.TextureArray | mod
 ALBEDO_UNIT = 0          # scene: the batch's albedo map
 SKY_UNIT = 1             # scene, sky, composite: the sky cube map
 NODE_UNIT = 2            # scene (masked views): the level's node image
-PARENT_NODE_UNIT = 3     # claim: the parent level's node image
-PARENT_SURFACE_UNIT = 4  # claim: the parent level's surface image
+# The claims read the parent level's node image where a masked scene pass of that level left
+# it (NODE_UNIT: the next level's claims follow it, so it is bound already), and its surface
+# image on a unit no scene pass samples: the claims between two levels' scene passes then
+# displace none of the pass-wide bindings (point shadows on 3 and 4, irradiance on 5), which
+# the next level's pass would bind again.
+PARENT_NODE_UNIT = NODE_UNIT  # claim: the parent level's node image
+PARENT_SURFACE_UNIT = 6  # claim: the parent level's surface image (the composite's ATLAS_UNIT)
 REFLECTION_UNITS = (3, 4, 5)  # composite: the level's colour, seen-id and node images
 ATLAS_UNIT = 6           # composite (rough variant): the rough-reflection atlas
 FALLBACK_PARENT_UNITS = (0, 2)  # composite (fallback variants): the parent level's node and surface images
 LEVEL_UNITS = (3, 5)     # rough-atlas copy: a level's colour and node images (the composite's units for them)
-PRESENT_UNIT = 0         # present: the HDR image
 OUTLINE_UNIT = 0         # selection outline (the editor): the main view's seen-id image (engine/render/outline.py)
 PROBE_UNIT = 7           # scene: the cube map of the batch's reflection probe; composite (fallback): its draw's first
 PROBE2_UNIT = 9          # scene: the cube map of the batch's second probe (probe blending); composite (fallback): the
@@ -91,10 +95,19 @@ SHADOW_ATLAS_UNIT = 11   # scene: the directional lights' shadow maps, one depth
 POINT_SHADOW_UNITS = (3, 4)  # scene: the shadowed point lights' distance cube maps, one a light
 IRRADIANCE_UNIT = 5      # scene: the irradiance table (sky and probes' spherical harmonics)
 VIRTUAL_SHADOW_UNIT = 14  # scene: the virtual lights' shadow maps, one depth atlas (the mip pass's unit)
-# Post-processing (the present stage; these passes bind nothing else, so they reuse the
-# scene's units).  Bloom and exposure passes read their source at PRESENT_UNIT.
-BLOOM_UNIT = 1           # present: the bloom chain's sum of levels (engine/render/bloom.py)
+# Post-processing (the present stage).  The bloom levels and the HDR image are read on units
+# of their own, past the 16 the scene's samplers use (a sampler may name any unit below
+# GL_MAX_COMBINED_TEXTURE_IMAGE_UNITS, at least 80 in OpenGL 4.1): the chain's binds displace
+# no other pass's texture (the sky on 1, bound again by the next frame's scene pass), and the
+# HDR image stays bound from frame to frame.  FXAA and exposure keep units the scene uses:
+# FXAA's input on a unit of its own as well (a still frame then binds no texture at all)
+# cost llvmpipe 15% more CPU a 640x360 frame (interleaved A/B, 15.5 -> 17.9 ms; FXAA on 15
+# the same; the cause, inside llvmpipe, not found), and its bind is one call a frame.
+BLOOM_UNIT = 16          # bloom steps after the first, present: a level of the chain (engine/render/bloom.py)
+PRESENT_UNIT = 17        # present, bloom's first step, exposure's luminance step: the HDR image
+FXAA_UNIT = 0            # FXAA: the encoded frame (engine/render/present.py)
 EXPOSURE_UNIT = 2        # present, exposure adaptation: the 1x1 adapted exposure (engine/render/post.py)
+EXPOSURE_MEAN_UNIT = 0   # exposure adaptation: the 64x64 log-luminance image it averages
 TEXT_UNIT = 0            # screen text (after present): the font atlas (engine/render/text.py)
 
 # --- uniform-block binding points ----------------------------------------------------------
@@ -283,6 +296,28 @@ def bind_texture(ctx: moderngl.Context, texture: Bindable, unit: int, keep_sampl
         textures[key] = texture
         if key in cache.watched:
             cache.epoch += 1
+
+
+def bind_textures(ctx: moderngl.Context, textures: tuple[tuple[Bindable, int], ...]) -> None:
+    """``bind_texture`` for each (texture, unit) pair of ``textures`` (a pass's images: one
+    look-up of the record for all of them)."""
+    try:
+        cache = ctx._speculum_pass_state
+    except AttributeError:
+        cache = _cache(ctx)
+    bound, samplers, recording = cache.textures, cache.samplers, cache.recording
+    for texture, unit in textures:
+        if samplers and unit in samplers:
+            samplers.pop(unit).clear(unit)  # the texture's own filter again
+            _changed(cache, ("sampler", unit))
+        key = (unit, texture.__class__)
+        if recording is not None:
+            recording.add(key)
+        if bound.get(key) is not texture or not CACHE_STATE:
+            texture.use(unit)
+            bound[key] = texture
+            if key in cache.watched:
+                cache.epoch += 1
 
 
 def bind_texture_now(ctx: moderngl.Context, texture: Bindable, unit: int) -> None:

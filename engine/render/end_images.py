@@ -25,6 +25,11 @@ kept as it was drawn until it settles: ``keep(..., compare=True)`` (a frame whos
 what the last frame's showed) first counts the pixels where the finished image differs
 from the one kept (``shaders/history_same.frag`` in a samples query, ``settled``: read at
 the next frame, nothing waits now); none, and the next frame's tree would repeat this one's.
+Until then each such frame changes only what depends on the end images: every view's scene
+pass draws what it drew the frame before.  So the tree drawn on the first still frame copies
+its levels before their composites (``engine/render/level_copies.py``), and the frames after
+keep it, filling its end views from the new image and doing each level's composites again
+over its copy, up to the root (``ViewTree.keep``), then keep and compare the image again.
 """
 from __future__ import annotations
 
@@ -98,7 +103,7 @@ class EndImages:
         count the pixels where this one differs from it (``compared``, ``settled``)."""
         size = root_targets.size
         self.compared = None
-        if compare and self.ready(size) and self.view_proj == root.view_proj and self.seen == seen:
+        if compare and self.compares(root, seen):
             self._compare(root_targets)
         if self.history is None or self.history.size != size:
             self._release_history()
@@ -108,6 +113,11 @@ class EndImages:
         self.ctx.copy_framebuffer(self._history_fbo, root_targets.color_framebuffer)  # its one attachment: colour
         self.view_proj = root.view_proj
         self.seen = seen
+
+    def compares(self, root: View, seen: frozenset[int]) -> bool:
+        """Whether ``keep(..., compare=True)`` of ``root``'s image showing ``seen`` would
+        count its differences: the image kept is of its size, camera and surfaces."""
+        return self.ready(root.size) and self.view_proj == root.view_proj and self.seen == seen
 
     def _compare(self, root_targets: RenderTargets) -> None:
         """The pixels of ``root_targets``' colour that differ from the history, counted in

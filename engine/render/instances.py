@@ -213,6 +213,10 @@ class InstanceBatch:
         # a view tree's surface, drawn before its claims and fallbacks, which find its pixels
         # by its id (scene_pass._see_through_surface; the extract stage sets it).
         self.surface = False
+        # Such a surface's world plane (SurfaceState.plane, set by the extract stage each
+        # frame; None: not known): what orders the slot's blending by depth around it
+        # (scene_pass._back_to_front).
+        self.plane: glm.vec4 | None = None
         # A generated checker texture drawn analytically (scene.frag's CHECKER build): its
         # cells across the UV square, and the linear colours of the cells whose integer
         # coordinates sum even and odd (``checker_look``); None: sampled as any texture.

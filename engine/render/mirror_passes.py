@@ -61,6 +61,7 @@ from engine.render.bindings import (
     PassState,
     apply_pass_state,
     bind_texture,
+    bind_textures,
     bind_uniform_block,
 )
 from engine.render.gpu import Gpu
@@ -175,6 +176,16 @@ class Composite:
     surface: CompositeSurface
     tile: Tile | None = None                                   # a rough view's blur source (RoughAtlas)
     fade: float = 1.0                                          # the reflection's weight (a mirror's fades)
+
+
+class CompositeView(Protocol):
+    """A view a level's composite draws (``ViewTree``'s ``ReflectionView``)."""
+
+    index: int               # its node: its pixels in its level's node image
+    view: View               # its scissor: its rectangle in its level
+    surface: SurfaceState    # the surface it is seen in
+    parent: FallbackParent   # the view that sees the surface
+    fade: float              # its reflection's weight
 
 
 class FallbackParent(Protocol):
@@ -297,6 +308,7 @@ _BLOCK_EYE = slice(4 * CAMERA_BLOCK_EYE.start, 4 * CAMERA_BLOCK_EYE.stop)
 # cut the quad) while clipping still drops w <= 0.
 _FLATTEN_Z = glm.mat4(1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0)
 _NO_TILE = Tile(0, 0, 0.0)
+_COLOR_UNIT, _SEEN_UNIT, _NODE_UNIT = REFLECTION_UNITS  # the composite's units for a level's images
 _NO_PROBE = ((0.0, 0.0, 0.0, 0.0),) * 3  # a probe's lookup uniforms where the sky stands in for it
 # A claim as two clip-space triangles, each vertex its position and the claim's ids (claim.vert).
 _CLAIM_VERTICES = struct.Struct("<" + "2f3I" * 6)
@@ -390,32 +402,36 @@ def composite_rows(composites: list[Composite], size: tuple[int, int]) -> bytes:
     camera block) and one matrix product for an outlined surface: in a frame, after the
     rasteriser has run, the numpy version of this cost ~0.27 ms a level (measured on
     llvmpipe), several times its warm cost, for a handful of rows."""
-    rows = []
     flattened: dict[bytes, glm.mat4] = {}  # per parent view (a parent has a view into each surface it sees)
-    for c in composites:
-        surface = c.surface
-        block = c.parent_view.camera_block()
-        if surface.outline is not None:
-            # The surface's own quad in the parent's clip space, flattened onto z = 0.
-            to_clip = flattened.get(block)
-            if to_clip is None:
-                to_clip = flattened[block] = _FLATTEN_Z * glm.mat4.from_bytes(block[_BLOCK_VIEW_PROJ])
-            corners = (to_clip * surface.outline).to_bytes()
-        else:
-            x0, y0, x1, y1 = _ndc_rect(c.rect, size)
-            corners = struct.pack("<16f", x0, y0, 0.0, 1.0, x0, y1, 0.0, 1.0, x1, y0, 0.0, 1.0, x1, y1, 0.0, 1.0)
-        lx, ly, lw, lh = c.level_rect
-        water = surface.water
-        if water is None:
-            tile = c.tile or _NO_TILE
-            x, y, scale, rough = tile.x, tile.y, tile.scale, surface.roughness
-        else:  # this frame's offset of the waves (the surfaces stage moves it in place)
-            (x, y), scale, rough = water.flow.offset, water.cross, water.f0
-        rows.append(_COMPOSITE_ROW.pack(
-            corners, lx, ly, lx + lw, ly + lh, block[_BLOCK_INVERSE], block[_BLOCK_EYE], x,
-            surface.tint, scale, surface.reflect_rate * c.fade, rough, surface.params_z, float(c.view_index),
-            surface.normal, y, surface.carry))
-    return b"".join(rows)
+    return b"".join([_composite_row(c.surface, c.parent_view.camera_block(), c.rect, c.level_rect, c.tile, c.fade,
+                                    c.view_index, size, flattened) for c in composites])
+
+
+def _composite_row(surface: CompositeSurface, block: bytes, rect: tuple[int, int, int, int],
+                   level_rect: tuple[int, int, int, int], tile: Tile | None, fade: float, view_index: int,
+                   size: tuple[int, int], flattened: dict[bytes, glm.mat4]) -> bytes:
+    """One row of ``composite_rows`` (a view of ``surface`` seen from the parent view whose
+    Camera block is ``block``; ``flattened``: the parents' flattened view-projections so far)."""
+    if surface.outline is not None:
+        # The surface's own quad in the parent's clip space, flattened onto z = 0.
+        to_clip = flattened.get(block)
+        if to_clip is None:
+            to_clip = flattened[block] = _FLATTEN_Z * glm.mat4.from_bytes(block[_BLOCK_VIEW_PROJ])
+        corners = (to_clip * surface.outline).to_bytes()
+    else:
+        x0, y0, x1, y1 = _ndc_rect(rect, size)
+        corners = struct.pack("<16f", x0, y0, 0.0, 1.0, x0, y1, 0.0, 1.0, x1, y0, 0.0, 1.0, x1, y1, 0.0, 1.0)
+    lx, ly, lw, lh = level_rect
+    water = surface.water
+    if water is None:
+        tile = tile or _NO_TILE
+        x, y, scale, rough = tile.x, tile.y, tile.scale, surface.roughness
+    else:  # this frame's offset of the waves (the surfaces stage moves it in place)
+        (x, y), scale, rough = water.flow.offset, water.cross, water.f0
+    return _COMPOSITE_ROW.pack(
+        corners, lx, ly, lx + lw, ly + lh, block[_BLOCK_INVERSE], block[_BLOCK_EYE], x,
+        surface.tint, scale, surface.reflect_rate * fade, rough, surface.params_z, float(view_index),
+        surface.normal, y, surface.carry)
 
 
 @dataclass
@@ -573,8 +589,7 @@ class MirrorPasses:
             self._reserve_claims(len(vertices))
         self._claim_buffer.write(vertices)
         self._reset_vao.render(moderngl.TRIANGLES, vertices=6 * count)
-        bind_texture(self.ctx, parent.node, PARENT_NODE_UNIT)
-        bind_texture(self.ctx, parent.surface, PARENT_SURFACE_UNIT)
+        bind_textures(ctx, ((parent.node, PARENT_NODE_UNIT), (parent.surface, PARENT_SURFACE_UNIT)))
         self.uniforms.set(self.claim, "to_parent", (parent.size[0] / level.size[0], parent.size[1] / level.size[1]))
         # A claim's cost on llvmpipe is linear in the claims, no cliff at some count: each
         # query's begin and end re-validate the fragment state (a new ~20 KB rasteriser state
@@ -645,6 +660,29 @@ class MirrorPasses:
         rows = {key: composite_rows(group, parent_size) for key, group in groups.items()}
         return PreparedComposites(rough, rows)
 
+    def prepare_views(self, views: Sequence[CompositeView], rects: Sequence[tuple[int, int, int, int]],
+                      parent_size: tuple[int, int]) -> PreparedComposites:
+        """``prepare_composites`` for a level's views as the view tree holds them (``rects``:
+        each one's rectangle in the parent level's pixels), their rows packed straight from
+        them, grouped by build and normal map: no ``Composite`` a view (a level with a rough
+        view, whose tile is placed first, goes through them)."""
+        looks = [surface_look(view.surface) for view in views]
+        if any(look.variant.startswith("rough") for look in looks):
+            return self.prepare_composites([Composite(view.index, rect, view.view.scissor, view.parent.view, look,
+                                                      fade=view.fade)
+                                            for view, rect, look in zip(views, rects, looks, strict=True)],
+                                           parent_size)
+        groups: dict[tuple[str, TextureData | None], list[bytes]] = {}
+        flattened: dict[bytes, glm.mat4] = {}
+        last_key, rows = None, []
+        for view, rect, look in zip(views, rects, looks, strict=True):
+            key = (look.variant, look.normal_map)
+            if key != last_key:
+                last_key, rows = key, groups.setdefault(key, [])
+            rows.append(_composite_row(look, view.parent.view.camera_block(), rect, view.view.scissor, None,
+                                       view.fade, view.index, parent_size, flattened))
+        return PreparedComposites([], {key: b"".join(rows) for key, rows in groups.items()})
+
     def composite_level(self, parent: RenderTargets, level: RenderTargets, prepared: PreparedComposites) -> None:
         """Blend every view of ``level`` into its surface's pixels of ``parent``: one instanced
         draw per composite variant present, a quad per view over its surface (each pixel
@@ -661,9 +699,8 @@ class MirrorPasses:
         parent.composite_framebuffer.use()
         # Colour: reflection x rate + own x (1 - rate); alpha (coverage) is kept.
         apply_pass_state(ctx, _COMPOSITE, (0, 0, *parent.size))
-        for texture, unit in zip((level.color, level.seen, level.node), REFLECTION_UNITS, strict=True):
-            bind_texture(self.ctx, texture, unit)
-        bind_texture(self.ctx, self.renderer.sky, SKY_UNIT)
+        bind_textures(ctx, ((level.color, _COLOR_UNIT), (level.seen, _SEEN_UNIT), (level.node, _NODE_UNIT),
+                            (self.renderer.sky, SKY_UNIT)))
         if prepared.rough:
             bind_texture(self.ctx, self.rough_atlas.texture, ATLAS_UNIT)
         for (variant, normal_map), variant_rows in prepared.rows.items():
@@ -792,12 +829,10 @@ class MirrorPasses:
         renderer = self.renderer
         parent.composite_framebuffer.use()
         apply_pass_state(ctx, _COMPOSITE, (0, 0, *parent.size))
-        bind_texture(self.ctx, parent.node, FALLBACK_PARENT_UNITS[0])
-        bind_texture(self.ctx, parent.surface, FALLBACK_PARENT_UNITS[1])
-        if level is not None:
-            bind_texture(self.ctx, level.seen, REFLECTION_UNITS[1])
-            bind_texture(self.ctx, level.node, REFLECTION_UNITS[2])
-        bind_texture(self.ctx, renderer.sky, SKY_UNIT)
+        bind_textures(ctx, ((parent.node, FALLBACK_PARENT_UNITS[0]), (parent.surface, FALLBACK_PARENT_UNITS[1]),
+                            (renderer.sky, SKY_UNIT)) if level is None else
+                      ((parent.node, FALLBACK_PARENT_UNITS[0]), (parent.surface, FALLBACK_PARENT_UNITS[1]),
+                       (level.seen, _SEEN_UNIT), (level.node, _NODE_UNIT), (renderer.sky, SKY_UNIT)))
         block = self._fallback_block
         bind_uniform_block(ctx, block, FALLBACK_BINDING)
         uniforms = self.uniforms

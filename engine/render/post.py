@@ -28,7 +28,14 @@ import moderngl
 import numpy as np
 
 from components.post import Tonemap
-from engine.render.bindings import EXPOSURE_UNIT, PRESENT_UNIT, PassState, apply_pass_state, bind_texture
+from engine.render.bindings import (
+    EXPOSURE_MEAN_UNIT,
+    EXPOSURE_UNIT,
+    PRESENT_UNIT,
+    PassState,
+    apply_pass_state,
+    bind_texture,
+)
 from engine.render.shader_library import ShaderLibrary
 from engine.render.targets import release_framebuffer
 
@@ -48,7 +55,8 @@ class AutoExposure:
         self.ctx = ctx
         self.shaders = shaders
         self._luminance = self._vao("exposure_luminance.frag", hdr_image=PRESENT_UNIT)
-        self._adapt = self._vao("exposure_adapt.frag", mean_source=PRESENT_UNIT, previous=EXPOSURE_UNIT)
+        self._adapt = self._vao("exposure_adapt.frag", mean_source=EXPOSURE_MEAN_UNIT,
+                                 previous=EXPOSURE_UNIT)
         self._targets: list[tuple[moderngl.Texture, moderngl.Framebuffer]] = []
         self._state: list[tuple[moderngl.Texture, moderngl.Framebuffer]] = []
         self.current: moderngl.Texture | None = None   # the 1x1 exposure written last
@@ -102,7 +110,7 @@ class AutoExposure:
         previous, (state, state_fbo) = self._state
         state_fbo.use()
         apply_pass_state(ctx, _PASS, (0, 0, 1, 1))
-        bind_texture(self.ctx, texture, PRESENT_UNIT)
+        bind_texture(self.ctx, texture, EXPOSURE_MEAN_UNIT)
         bind_texture(self.ctx, previous[0], EXPOSURE_UNIT)
         self._set(self._adapt, "key_log2", key_log2)
         self._set(self._adapt, "ev_range", (tonemap.min_ev, tonemap.max_ev))

@@ -32,7 +32,15 @@ from __future__ import annotations
 import moderngl
 
 from components.post import TONEMAP_CURVES, Bloom, Tonemap
-from engine.render.bindings import BLOOM_UNIT, EXPOSURE_UNIT, PRESENT_UNIT, PassState, apply_pass_state, bind_texture
+from engine.render.bindings import (
+    BLOOM_UNIT,
+    EXPOSURE_UNIT,
+    FXAA_UNIT,
+    PRESENT_UNIT,
+    PassState,
+    apply_pass_state,
+    bind_texture,
+)
 from engine.render.bloom import BloomPass
 from engine.render.post import AutoExposure
 from engine.render.shader_library import ShaderLibrary
@@ -73,7 +81,7 @@ class PresentPass:
         if self._fxaa is not None:
             self._fxaa.release()
         self._fxaa = self._fullscreen("fxaa.frag", SEARCH_STEPS=str(steps))
-        self._fxaa.program["frame"].value = PRESENT_UNIT
+        self._fxaa.program["frame"].value = FXAA_UNIT
         self._search_steps = steps
 
     def _fullscreen(self, fragment: str, **defines: str) -> moderngl.VertexArray:
@@ -129,7 +137,7 @@ class PresentPass:
             # Its own pass: a framebuffer's use() brings back the viewport last set while
             # moderngl took it for bound, which raw-GL passes may have left at any size.
             apply_pass_state(self.ctx, _PRESENT, (0, 0, *size))
-            bind_texture(self.ctx, self._encoded.texture, PRESENT_UNIT)
+            bind_texture(self.ctx, self._encoded.texture, FXAA_UNIT)
             self._fxaa.render(moderngl.TRIANGLES, vertices=3)
 
     def _post_encode(self, hdr: moderngl.Texture, exposure: float, tonemap: Tonemap | None, bloom: Bloom | None,

@@ -292,11 +292,16 @@ class Renderer(Gpu):
     def level_bounds(self) -> tuple[np.ndarray, np.ndarray] | None:
         """The world box holding every opaque instance as of the last upload (None: none):
         what a directional light's shadow map is fitted to."""
-        boxes = [box for b in self.opaque_batches() if (box := b.box) is not None]
+        batches = self.opaque_batches()
         kept = self._level_union
-        if kept is not None and len(kept[0]) == len(boxes) and all(a is b for a, b in zip(kept[0], boxes, strict=True)):
-            return kept[1]  # the same batches' boxes as last time (a batch keeps its box while it holds)
-        union = _union(boxes)
+        if kept is not None and len(kept[0]) == len(batches):
+            for batch, box in zip(batches, kept[0], strict=True):
+                if batch.box is not box:
+                    break
+            else:  # the same batches' boxes as last time (a batch keeps its box object while it holds)
+                return kept[1]
+        boxes = [batch.box for batch in batches]
+        union = _union([box for box in boxes if box is not None])
         self._level_union = (boxes, union)
         return union
 

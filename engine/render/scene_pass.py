@@ -8,15 +8,17 @@ level, and (next) each face of a cube-map probe.  For each view it draws
   2. the sky behind them (a full-screen triangle at the far plane, depth test <=), into the
      same framebuffer: it writes id 0 where it shows, the value the clear left there;
   3. the transparent slot: batches marked transparent (a material's alpha below 1),
-     farthest first, blended over what is there, testing depth but not writing it.  A view
-     a view tree roots or draws (``SceneOptions.transparent`` False) draws here only the
-     slot's batches up to its nearest see-through mirror or portal (water: the tree's claims
-     must find its pixels, and its composite goes over them), and leaves the nearer rest
-     (glass) to the tree, which draws it with ``draw_transparent`` once the levels below are
-     composited into the view's pixels: glass in front of a mirror blends over its
-     reflection, at every level, as in an engine that draws its planar reflections before
-     the view that shows them (drawn before the composite, glass held the mirror's own
-     colour, and its ids, which the claims read, kept the mirror's reflection out).
+     farthest first (by centre, and around a see-through mirror or portal by its plane:
+     ``_back_to_front``), blended over what is there, testing depth but not writing it.  A
+     view a view tree roots or draws (``SceneOptions.transparent`` False) draws here only
+     its see-through mirrors and portals (water: the tree's claims must find their pixels,
+     and their composites go over them) and what must blend before one of them
+     (``_split_slot``), and leaves the rest (glass) to the tree, which draws it with
+     ``draw_transparent`` once the levels below are composited into the view's pixels:
+     glass in front of a mirror blends over its reflection, at every level, as in an engine
+     that draws its planar reflections before the view that shows them (drawn before the
+     composite, glass held the mirror's own colour, and its ids, which the claims read, kept
+     the mirror's reflection out).
 
 Programs are specialised: a batch whose instances all use the same material variants is
 drawn with a build of ``scene.frag`` whose slots are those variants as constants (the
@@ -43,10 +45,11 @@ view's shaded pixels on llvmpipe, which shades every pixel of every 2 x 4 group 
 """
 from __future__ import annotations
 
+import heapq
 from collections.abc import Callable, Iterable, Sequence
 from contextlib import nullcontext
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, NamedTuple
 
 import moderngl
 from pyglm import glm
@@ -183,6 +186,8 @@ class ScenePass:
         # _draw_batches writes these, so a value is written only when it changes.
         self._written: dict[int, list] = {}
         self._last_own: dict[int, tuple] = {}  # program -> the batch values it last drew with
+        # (invocations, layered, ambient probes, masked) -> a batch's draw-record keys (lit, unlit)
+        self._kinds: dict[tuple, tuple[tuple, tuple]] = {}
         self._sky_size = 0
         self._sky_layered: moderngl.VertexArray | None = None
         self._views_ubo: moderngl.Buffer | None = None
@@ -194,6 +199,8 @@ class ScenePass:
         self.cull_batches = True
         self.cull_min_batches = CULL_MIN_BATCHES
         self.cull_min_draws = CULL_MIN_DRAWS
+        # The transparent slot's SlotGeometry and the scene_version it was worked out at.
+        self._slot_kept: tuple[int, SlotGeometry] | None = None
         # A run's pass-wide bindings (draw's run): (run, (capturing, reflection filter), bindings_epoch
         # after them), or None.
         self._pass_wide: tuple | None = None
@@ -354,25 +361,31 @@ class ScenePass:
         mirrors all ``shading_replaced``) draws with its ``UNLIT_SURFACE`` build."""
         ctx = self.ctx
         renderer = self.renderer
-        stats = renderer.stats
         if renderer.shaders.reloads != self._reloads_seen:
             self._forget_programs()
         # What else picks a batch's program: a virtual light shining, the shadow lookups compiled.
-        stamp = (self._reloads_seen, self.shadows.virtual_shining, self.shadows.program_defines)
-        kind = (invocations, layered, self._ambient_probes, False, masked)
-        unlit_kind = (invocations, layered, self._ambient_probes, True, masked)
+        shadows = self.shadows
+        stamp = (self._reloads_seen, shadows.virtual_shining, shadows.program_defines)
+        kinds = self._kinds.get((invocations, layered, self._ambient_probes, masked))
+        if kinds is None:
+            kinds = self._kinds[invocations, layered, self._ambient_probes, masked] = (
+                (invocations, layered, self._ambient_probes, False, masked),
+                (invocations, layered, self._ambient_probes, True, masked))
+        kind, unlit_kind = kinds
         sky_size = self._sky_size
         last_own = self._last_own
+        draws = instances = 0
+        skipped = (skip, hide)
         for batch in batches:
             count = batch.count
-            if not count or (count == 1 and batch.entity_at[0] in (skip, hide)):
+            if not count or (count == 1 and batch.entity_at[0] in skipped):
                 continue
             variants = batch.variants
-            drawn_as = unlit_kind if batch in unlit else kind  # a batch the composites paint over
+            drawn_as = unlit_kind if unlit and batch in unlit else kind  # a batch the composites paint over
             record = batch.draw_records.get(drawn_as)
             if record is None or record[0] != stamp or record[1] != variants:
                 record = batch.draw_records[drawn_as] = self._record(batch, drawn_as, stamp, variants)
-            _, _, glo, vao, uniforms, values, textures, own = record
+            _, _, glo, vao, uniforms, values, textures, own, vertices = record
             for unit, texture in textures:
                 bind_texture(ctx, texture, unit, True)  # the pass's albedo sampler stays (bind_sampler)
             if own is None:  # probes bound now: their lookups are read each draw
@@ -394,18 +407,22 @@ class ScenePass:
                 # its front faces wind the other way on screen, so the view's winding is
                 # turned for its draw (its own batch: extract keys batches by it).
                 restore = flip_front_face(ctx)
-                vao.render(moderngl.TRIANGLES, vertices=batch.mesh.index_count, instances=count)
+                vao.render(moderngl.TRIANGLES, vertices=vertices, instances=count)
                 set_front_face(ctx, restore)
             else:
-                vao.render(moderngl.TRIANGLES, vertices=batch.mesh.index_count, instances=count)
-            stats.draw_calls += 1
-            stats.instances += count
+                vao.render(moderngl.TRIANGLES, vertices=vertices, instances=count)
+            draws += 1
+            instances += count
+        if draws:
+            stats = renderer.stats
+            stats.draw_calls += draws
+            stats.instances += instances
 
     def _record(self, batch: InstanceBatch, kind: tuple[int, str, bool, bool, bool], stamp: tuple, variants) -> tuple:
         """What ``batch`` draws with in passes of ``kind`` (invocations, layered, ambient
         probes, unlit, masked): (stamp, variants, program name, vertex array, per-draw uniforms, the
         program's written values, the (unit, texture) pairs to bind, its own uniform values
-        or None where probes give them per draw)."""
+        or None where probes give them per draw, its mesh's vertex count)."""
         invocations, layered, ambient, unlit, masked = kind
         program = self.program(variants, invocations, layered, batch.normal_map is not None,
                                batch.checker is not None, _material_maps(batch), batch.probe_blend,
@@ -421,7 +438,8 @@ class ScenePass:
         if not batch.probe and not batch.probe_blend and not batch.rest_probe:
             own = (batch.texture is not None, batch.transparent, 0, *_NO_PROBE, 0, *_NO_PROBE, 0, *_NO_PROBE,
                    *(batch.checker or _NO_CHECKER))
-        return (stamp, variants, glo, batch.vao(program), self._uniforms[glo], values, textures, own)
+        return (stamp, variants, glo, batch.vao(program), self._uniforms[glo], values, textures, own,
+                batch.mesh.index_count)
 
     def _probe_values(self, batch: InstanceBatch) -> tuple:
         """Bind the probes ``batch`` samples; its own uniform values with their lookups."""
@@ -503,6 +521,7 @@ class ScenePass:
         if not views or not transparent:
             return
         renderer = self.renderer
+        geometry = self._slot_geometry(transparent)
         self._sky_size = renderer.sky.size[0]
         state = _BATCHED_TRANSPARENT if options.batched else _TRANSPARENT
         targets.view_framebuffer.depth_mask = False
@@ -510,16 +529,18 @@ class ScenePass:
         try:
             if options.batched:
                 for first in range(0, len(views), MAX_BATCHED_VIEWS):
-                    group = views[first:first + MAX_BATCHED_VIEWS]
-                    scissor = self._views_table(group)
-                    apply_pass_state(self.ctx, state, (0, 0, *targets.size), scissor)
-                    set_front_face(self.ctx, "ccw")  # mirrored views reverse their vertices in the geometry shader
-                    self._draw_batches(_split_slot(transparent, group)[1], geometry_invocations(len(group)),
-                                       options.masked)
+                    groups = _slot_groups(transparent, views[first:first + MAX_BATCHED_VIEWS], geometry)
+                    for group, _, rest, _ in groups:
+                        if not rest:
+                            continue
+                        scissor = self._views_table(group)
+                        apply_pass_state(self.ctx, state, (0, 0, *targets.size), scissor)
+                        set_front_face(self.ctx, "ccw")  # mirrored views reverse their vertices in the geometry shader
+                        self._draw_batches(rest, geometry_invocations(len(group)), options.masked)
             else:
                 renderer.upload_views(views)
                 for index, view in enumerate(views):
-                    batches = _split_slot(transparent, (view,))[1]
+                    batches = _split_slot(transparent, view, geometry)[1]
                     if batches:  # (else all behind its see-through surfaces: drawn with them)
                         with _ALWAYS if conditions is None else conditions[index].crender:
                             self._transparent_view(view, index, batches, options.masked)
@@ -572,6 +593,17 @@ class ScenePass:
         # reflection level to the next (bind_texture takes it off for any other pass).
         bind_sampler(ctx, self._reflection_filter() if options.reflection_filter else None, ALBEDO_UNIT)
 
+    def _slot_geometry(self, transparent: list[InstanceBatch]) -> SlotGeometry:
+        """``transparent``'s ``SlotGeometry``, worked out again only when an upload or another
+        change moved the Gpu's ``scene_version`` on or the batches or their planes are others
+        (a frame's views, levels and probe faces share it)."""
+        kept, version = self._slot_kept, self.renderer.scene_version
+        if kept is not None and kept[0] == version and kept[1].matches(transparent):
+            return kept[1]
+        geometry = SlotGeometry(transparent)
+        self._slot_kept = (version, geometry)
+        return geometry
+
     def _transparent_view(self, view: View, index: int, batches: list[InstanceBatch], masked: bool) -> None:
         """One view's transparent ``batches``, in their order (the pass state is _TRANSPARENT,
         the depth mask off): its scissor, winding and Camera block (``index`` of the last
@@ -590,6 +622,7 @@ class ScenePass:
         renderer = self.renderer
         transparent = renderer.transparent_batches()
         now = _drawn_now(transparent, options)
+        geometry = self._slot_geometry(transparent) if now else None
         opaque = renderer.opaque_batches()
         unlit = _unlit_batches(opaque, options.unlit, now)
         renderer.upload_views(views)  # every view's Camera block in one write; each binds its range
@@ -597,13 +630,26 @@ class ScenePass:
         if (self.cull_batches and opaque and len(opaque) >= self.cull_min_batches
                 and len(views) * len(opaque) >= self.cull_min_draws):
             reach = batch_reach(views, targets.size, opaque)  # which batch can draw a sample in which view
+        masked = options.masked
+        if conditions is None and not options.sky and not now:
+            # A reflection level's views (exact visibility), drawn whatever their claims
+            # count: per view its scissor, winding, camera and draws, nothing else.
+            draw, bind_view_at = self._draw_batches, renderer.bind_view_at
+            for index, view in enumerate(views):
+                set_scissor(ctx, view.scissor)
+                set_front_face(ctx, "cw" if view.mirrored else "ccw")
+                bind_view_at(index)
+                draw(opaque if reach is None else self._reaching(opaque, reach[index], view),
+                     0, masked, skip=view.skip, hide=view.hide, unlit=unlit)
+            renderer.stats.passes += len(views)
+            return
         for index, view in enumerate(views):
             with _ALWAYS if conditions is None else conditions[index].crender:
                 set_scissor(ctx, view.scissor)  # unless in place (moderngl's own record: the cache reads it)
                 set_front_face(ctx, "cw" if view.mirrored else "ccw")
                 renderer.bind_view_at(index)
                 self._draw_batches(opaque if reach is None else self._reaching(opaque, reach[index], view),
-                                   0, options.masked, skip=view.skip, hide=view.hide, unlit=unlit)
+                                   0, masked, skip=view.skip, hide=view.hide, unlit=unlit)
                 if options.sky:
                     # Into the view's own framebuffer: the sky writes id 0 (nothing) to the
                     # surface and seen images, the very values the clear put where no surface
@@ -618,8 +664,12 @@ class ScenePass:
                     targets.view_framebuffer.depth_mask = False
                     targets.view_framebuffer.use()
                     apply_pass_state(ctx, _TRANSPARENT, viewport, view.scissor)
-                    self._transparent_view(view, index, _back_to_front(transparent, view.eye) if options.transparent
-                                           else _split_slot(transparent, (view,))[0], options.masked)
+                    if options.transparent:
+                        batches = _back_to_front(transparent, view.eye, view, geometry)
+                    else:
+                        batches, _, torn = _split_slot(transparent, view, geometry)
+                        renderer.stats.glass_between_surfaces += torn
+                    self._transparent_view(view, index, batches, options.masked)
                     targets.view_framebuffer.depth_mask = True
                     targets.view_framebuffer.use()
                 if (options.sky or now) and index + 1 < len(views):
@@ -654,11 +704,22 @@ class ScenePass:
         opaque = renderer.opaque_batches()
         unlit = _unlit_batches(opaque, options.unlit, now)
         self._draw_batches(opaque, invocations, options.masked, unlit=unlit)
-        if now:  # farthest from the first view's eye first (the views of a level are close)
+        if now:
             viewport = (0, 0, *views[0].size)
-            apply_pass_state(ctx, _BATCHED_TRANSPARENT, viewport, scissor)
-            self._draw_batches(_back_to_front(transparent, views[0].eye) if options.transparent
-                               else _split_slot(transparent, views)[0], invocations, options.masked)
+            if options.transparent:  # farthest from the first view's eye first (the views of a level are close)
+                apply_pass_state(ctx, _BATCHED_TRANSPARENT, viewport, scissor)
+                self._draw_batches(_back_to_front(transparent, views[0].eye, None, self._slot_geometry(transparent)),
+                                   invocations, options.masked)
+            else:  # each group of views with the same part of the slot before the claims, in one draw a batch
+                groups = _slot_groups(transparent, views, self._slot_geometry(transparent))
+                for group, first, _, torn in groups:
+                    renderer.stats.glass_between_surfaces += torn
+                    if not first:
+                        continue
+                    if len(groups) > 1:
+                        scissor = self._views_table(group)
+                    apply_pass_state(ctx, _BATCHED_TRANSPARENT, viewport, scissor)
+                    self._draw_batches(first, geometry_invocations(len(group)), options.masked)
             apply_pass_state(ctx, _BATCHED_SCENE, viewport)
         renderer.stats.passes += 1
 
@@ -710,7 +771,8 @@ class ScenePass:
             transparent = renderer.transparent_batches()
             if transparent:
                 apply_pass_state(ctx, _LAYERED_TRANSPARENT, size)
-                self._draw_batches(_back_to_front(transparent, views[0].eye), 6, False, layered, skip=skip,
+                self._draw_batches(_back_to_front(transparent, views[0].eye, None, self._slot_geometry(transparent)),
+                                   6, False, layered, skip=skip,
                                    before_draw=draw_check)
             apply_pass_state(ctx, _LAYERED_SKY, size)
             if check is not None:
@@ -835,9 +897,225 @@ def _material_maps(batch) -> tuple[bool, bool]:
     return batch.emissive_map is not None, batch.metallic_roughness_map is not None
 
 
-def _back_to_front(batches, eye: glm.vec3) -> list:
-    """Transparent batches, the farthest (by its instances' centre) first."""
-    return sorted(batches, key=lambda batch: -glm.distance(batch.centre(), eye))
+class SlotGeometry:
+    """What ordering the transparent slot needs of its batches, worked out once for as long
+    as the scene stands (``ScenePass._slot_geometry``: the Gpu's ``scene_version``, the
+    batch list, the see-through surfaces' planes), not once a view: each batch's centre
+    (what back-to-front sorting compares: its instances' mean position), its world box's
+    corners, whether it is a see-through surface and its plane (``InstanceBatch.plane``),
+    and on which side of each such plane every other batch lies (``_side``: the eye moves
+    from view to view, the boxes do not)."""
+
+    __slots__ = ("batches", "centres", "corners", "planes", "see_through", "sides", "planar")
+
+    def __init__(self, batches: Sequence[InstanceBatch]) -> None:
+        self.batches = list(batches)
+        self.centres = [batch.centre() for batch in self.batches]
+        self.see_through = [_see_through_surface(batch) for batch in self.batches]
+        self.planes = [batch.plane if batch.surface else None for batch in self.batches]
+        self.planar = any(plane is not None for plane in self.planes) and len(self.batches) > 1
+        boxes = [_box_floats(batch) for batch in self.batches]
+        self.corners = [None if box is None else [glm.vec4(x, y, z, 1.0) for x in (box[0][0], box[1][0])
+                                                  for y in (box[0][1], box[1][1]) for z in (box[0][2], box[1][2])]
+                        for box in boxes]
+        count = len(self.batches)
+        self.sides = [None if plane is None else [0 if j == i else _side(plane, boxes[j], self.centres[j])
+                                                  for j in range(count)]
+                      for i, plane in enumerate(self.planes)] if self.planar else None
+
+    def matches(self, batches: list[InstanceBatch]) -> bool:
+        """Whether ``batches`` are still those this was worked out for, with the same planes."""
+        return len(batches) == len(self.batches) and all(
+            a is b and (b.plane if b.surface else None) is plane
+            for a, b, plane in zip(batches, self.batches, self.planes, strict=True))
+
+    def back_to_front(self, eye: glm.vec3) -> list[int]:
+        """The batches' indices by their centres' distance from ``eye``, the farthest first."""
+        centres = self.centres
+        return sorted(range(len(centres)), key=lambda k: -glm.distance(centres[k], eye))
+
+
+def _box_floats(batch: InstanceBatch) -> tuple[list[float], list[float]] | None:
+    """``batch``'s world box as two lists of floats; None: empty or not measured yet."""
+    box = batch.box
+    if box is None:
+        return None
+    lo, hi = box[0].tolist(), box[1].tolist()
+    return None if lo[0] != lo[0] else (lo, hi)
+
+
+def _back_to_front(batches: list[InstanceBatch], eye: glm.vec3, view: View | None = None,
+                   geometry: SlotGeometry | None = None) -> list:
+    """Transparent batches in the order they blend, the farthest first: by their instances'
+    centre, except where a see-through surface's plane (water, a see-through mirror or
+    portal: ``InstanceBatch.plane``) says which of two is in front (``_slot_graph``), so a
+    pane standing on a pond blends over it and a pane under it under it, wherever the
+    pond's centre is.  ``view``: only batches whose boxes overlap on its screen are ordered
+    against each other (None: all are, as from a probe's centre for six faces).
+    ``geometry``: ``batches``' (``SlotGeometry``), else worked out here."""
+    if len(batches) < 2:
+        return list(batches)
+    geometry = geometry or SlotGeometry(batches)
+    ordered = geometry.back_to_front(eye)
+    if geometry.planar:
+        # A few batches: every pair first (the view's screen only drops edges; _split_slot).
+        order = _slot_sorted(geometry, ordered, eye, None)[0] if view is None or len(ordered) <= _SHORTCUT_MOST \
+            else None
+        if view is not None and (order is None or any(i != at for at, i in enumerate(order))):
+            order = _slot_sorted(geometry, ordered, eye, view)[0]
+        ordered = [ordered[i] for i in order]
+    return [geometry.batches[k] for k in ordered]
+
+
+# Up to this many batches in a slot, a view orders every pair first and works out its screen
+# rectangles only where that answer may differ (_split_slot); more, and it seldom is the same.
+_SHORTCUT_MOST = 8
+# How far (m) a box may reach past a plane and still count as on one side of it: what
+# float32 corners of a batch lying on the plane (a mirror's own quad) are off by.
+_PLANE_EPS = 1e-4
+
+
+def _side(plane: glm.vec4, box: tuple[list[float], list[float]] | None, centre: glm.vec3) -> int:
+    """Which side of ``plane`` a batch's world ``box`` lies on: 1 (where its normal points)
+    or -1 wholly, else the side of its ``centre`` (a pane standing in the water: by where
+    most of it is), 0 on the plane (coplanar, or no box and the centre on it)."""
+    n = glm.vec3(plane)
+    if box is not None:
+        lo, hi = box
+        low = high = float(plane.w)
+        for axis in range(3):
+            a, b = n[axis] * lo[axis], n[axis] * hi[axis]
+            low += a if a < b else b
+            high += b if a < b else a
+        if low > -_PLANE_EPS and high > _PLANE_EPS:
+            return 1
+        if high < _PLANE_EPS and low < -_PLANE_EPS:
+            return -1
+        if high - low < 2.0 * _PLANE_EPS:
+            return 0  # on the plane: no side
+    d = glm.dot(n, centre) + plane.w
+    return 1 if d > _PLANE_EPS else -1 if d < -_PLANE_EPS else 0
+
+
+def _screen_rect(corners: list[glm.vec4] | None, view_proj: glm.mat4) -> tuple[float, float, float, float] | None:
+    """The rectangle (NDC x0, y0, x1, y1) holding a batch's world box (its ``corners``) on
+    a view's screen; None where a corner is at or behind the eye, or there is no box (the
+    whole screen, conservatively)."""
+    if corners is None:
+        return None
+    xs, ys = [], []
+    for corner in corners:
+        clip = view_proj * corner
+        if clip.w <= 1e-6:
+            return None
+        xs.append(clip.x / clip.w)
+        ys.append(clip.y / clip.w)
+    return min(xs), min(ys), max(xs), max(ys)
+
+
+def _overlap(a: tuple[float, float, float, float] | None, b: tuple[float, float, float, float] | None) -> bool:
+    if a is None or b is None:
+        return True
+    return a[0] <= b[2] and b[0] <= a[2] and a[1] <= b[3] and b[1] <= a[3]
+
+
+def _slot_graph(geometry: SlotGeometry, ordered: list[int], eye: glm.vec3,
+                view: View | None) -> tuple[list[set[int]], list[set[int]]]:
+    """For each position of ``ordered`` (``geometry``'s indices, farthest centre first) the
+    positions of those that must blend before it, by planes and by centres.  Two batches
+    are ordered only where they can cover the same pixels (their boxes' rectangles on
+    ``view``'s screen overlap; None: always): by a see-through surface's plane where one has
+    it (a batch on the eye's side of it is in front of it; one wholly on the other side,
+    behind: the painter's test of a BSP), both planes agreeing where both have one; else,
+    or where they disagree, by their centres, the farther first (the second list: what
+    gives way where the two make a cycle)."""
+    count = len(ordered)
+    planes, sides = geometry.planes, geometry.sides
+    eye_side = [0 if plane is None else (1 if glm.dot(glm.vec3(plane), eye) + plane.w > 0.0 else -1)
+                for plane in planes]
+    rects = None
+    if view is not None:
+        view_proj, corners = view.view_proj, geometry.corners
+        rects = [_screen_rect(corners[k], view_proj) for k in ordered]
+    before: list[set[int]] = [set() for _ in range(count)]
+    by_centre: list[set[int]] = [set() for _ in range(count)]
+    for i in range(count):
+        a = ordered[i]
+        plane_a = planes[a]
+        rect = None if rects is None else rects[i]
+        for j in range(i + 1, count):
+            if rect is not None and not _overlap(rect, rects[j]):
+                continue
+            b = ordered[j]
+            if plane_a is None and planes[b] is None:  # two panes: their centres
+                by_centre[j].add(i)
+                continue
+            verdicts = set()  # True: i first (as the centres say), False: j first
+            if plane_a is not None:
+                side = sides[a][b]
+                if side:
+                    verdicts.add(side == eye_side[a])  # j on the eye's side of i: i behind it, first
+            if planes[b] is not None:
+                side = sides[b][a]
+                if side:
+                    verdicts.add(side != eye_side[b])  # i behind j's plane: i first
+            if verdicts == {True}:
+                before[j].add(i)
+            elif verdicts == {False}:
+                before[i].add(j)
+            else:
+                by_centre[j].add(i)
+    return before, by_centre
+
+
+def _slot_sorted(geometry: SlotGeometry, ordered: list[int], eye: glm.vec3,
+                 view: View | None) -> tuple[list[int], list[set[int]]]:
+    """The blending order of ``ordered`` (positions in it) and the edges it keeps
+    (``_slot_graph``): both kinds, or where they make a cycle the planes' alone (a centre
+    gives way to a plane: a pane under a pond before the pond, and the pond before a pane
+    standing on it, whatever the panes' centres say), or where those do too, the order
+    breaking their cycles."""
+    planes, centres = _slot_graph(geometry, ordered, eye, view)
+    both = [a | b for a, b in zip(planes, centres, strict=True)]
+    order = _topological(both)
+    if order is not None:
+        return order, both
+    order = _topological(planes)
+    if order is not None:
+        return order, planes
+    return _topological(planes, cycles=True), planes
+
+
+def _topological(before: list[set[int]], cycles: bool = False) -> list[int] | None:
+    """An order of ``len(before)`` indices in which each comes after those ``before`` names,
+    the lowest index first among those free to go (so the centres' order where nothing
+    says otherwise); None where a cycle leaves none free, or with ``cycles``, the lowest
+    index left goes."""
+    count = len(before)
+    waiting = [len(names) for names in before]
+    after: list[list[int]] = [[] for _ in range(count)]
+    for i, names in enumerate(before):
+        for j in names:
+            after[j].append(i)
+    free = [i for i in range(count) if not waiting[i]]  # a heap (Kahn's algorithm, the lowest first)
+    placed = [False] * count
+    order: list[int] = []
+    while len(order) < count:
+        if free:
+            i = heapq.heappop(free)
+            if placed[i]:
+                continue  # (placed to break a cycle before it was free)
+        elif cycles:
+            i = placed.index(False)
+        else:
+            return None
+        placed[i] = True
+        order.append(i)
+        for k in after[i]:
+            waiting[k] -= 1
+            if not waiting[k] and not placed[k]:
+                heapq.heappush(free, k)
+    return order
 
 
 def _see_through_surface(batch: InstanceBatch) -> bool:
@@ -857,29 +1135,93 @@ _SURFACE_VARIANTS = frozenset({_PLANAR, int(ReflectVariant.PORTAL)})
 def _drawn_now(transparent: list, options: SceneOptions) -> list:
     """What of the transparent slot ``draw`` may draw with the opaque batches: all of it,
     or, for a tree's view (``options.transparent`` False), its see-through surfaces (and,
-    view by view, what is farther than the nearest of them: ``_split_slot``)."""
+    view by view, what must blend before one of them: ``_split_slot``)."""
     if options.transparent or not transparent:
         return transparent
     return [batch for batch in transparent if _see_through_surface(batch)]
 
 
-def _split_slot(transparent: list, views: Sequence[View]) -> tuple[list, list]:
-    """A tree's views' transparent slot, farthest from the first view's eye first (the
-    views of a batched level are close), in two: what is drawn with the opaque batches, up
-    to and with the nearest see-through surface a view draws (not its own mirror: skipped;
-    what lies behind a surface blends under it, as before it), and the rest, nearer than
-    those surfaces in every one of ``views``, drawn by ``draw_transparent`` after the
-    composites (all of it where no see-through surface is drawn: glass)."""
-    ordered = _back_to_front(transparent, views[0].eye)
-    if not any(map(_see_through_surface, transparent)):
-        return [], ordered
-    now = set()
+class SlotSplit(NamedTuple):
+    """A tree's view's transparent slot in two (``_split_slot``), and how many of the first
+    part are torn between two see-through surfaces."""
+
+    first: list    # blended with the opaque batches, before the claims
+    rest: list     # blended after the levels below are composited into the view
+    torn: int      # batches of ``first`` that must blend after one of its surfaces too
+
+
+def _split_slot(transparent: list, view: View, geometry: SlotGeometry | None = None) -> SlotSplit:
+    """A tree's view's transparent slot in two, each in blending order (``_back_to_front``):
+    what ``draw`` blends with the opaque batches, before the view tree claims the view's
+    pixels (the see-through surfaces the view draws, not its own mirror, and every batch
+    that must blend before one of them: what is behind a surface and on its pixels, and so
+    on back), and the rest, which ``draw_transparent`` blends after the levels below are
+    composited into the view (glass in front of every surface it covers blends over their
+    reflections; all of the slot where the view draws no see-through surface).
+    ``geometry``: ``transparent``'s (``SlotGeometry``), else worked out here.
+
+    The limit of one claim a pixel: a batch that must blend before one surface and after
+    another (a pane under a near pond and in front of a far see-through mirror, covering
+    both on the screen) is blended before the claims, so where it covers the far surface
+    it takes its pixels from its claim and blends over its own colour, not its reflection
+    (the surfaces' composites would have to be drawn apart, each after what lies behind
+    it); each such batch counts in ``torn`` (``RenderStats.glass_between_surfaces``).
+    Likewise a see-through surface behind another shows its own colour, not its
+    reflection, where the nearer one covers it."""
+    geometry = geometry or SlotGeometry(transparent)
+    batches = geometry.batches
+    ordered = geometry.back_to_front(view.eye)
+    skipped = (view.skip, view.hide)
+    seeds = [i for i, k in enumerate(ordered) if geometry.see_through[k]
+             and not (batches[k].count == 1 and batches[k].entity_at[0] in skipped)]
+    if not seeds:
+        return SlotSplit([], [batches[k] for k in ordered], 0)
+    if len(ordered) == 1:
+        return SlotSplit([batches[ordered[0]]], [], 0)
+    # A few batches: every pair ordered first, as if all covered the same pixels; where that
+    # keeps the centres' order and puts nothing but the surfaces before the claims, so does
+    # the view's screen (a subset of the same edges), and no rectangle is worked out.
+    order = None
+    if len(ordered) <= _SHORTCUT_MOST:
+        order, before = _slot_sorted(geometry, ordered, view.eye, None)
+        needed = _before_any(before, seeds)
+    if order is None or len(needed) > len(seeds) or any(i != at for at, i in enumerate(order)):
+        order, before = _slot_sorted(geometry, ordered, view.eye, view)
+        needed = _before_any(before, seeds)
+    torn = 0
+    if len(needed) > len(seeds):  # what of the first part comes after one of its surfaces too
+        surfaces = set(seeds)
+        torn = sum(1 for i in needed - surfaces if not surfaces.isdisjoint(_before_any(before, [i]) - {i}))
+    return SlotSplit([batches[ordered[i]] for i in order if i in needed],
+                     [batches[ordered[i]] for i in order if i not in needed], torn)
+
+
+def _before_any(before: list[set[int]], seeds: list[int]) -> set[int]:
+    """``seeds`` and every position that must blend before one of them (``before``), and
+    before that, and so on."""
+    needed, stack = set(seeds), list(seeds)
+    while stack:
+        for j in before[stack.pop()]:
+            if j not in needed:
+                needed.add(j)
+                stack.append(j)
+    return needed
+
+
+def _slot_groups(transparent: list, views: Sequence[View],
+                 geometry: SlotGeometry | None = None) -> list[tuple[list[View], list, list, int]]:
+    """A batched level's ``views`` grouped by their ``_split_slot`` (the same batches in
+    the same order in both parts): each group's views draw their slot in one draw per
+    batch (most levels are one group), with the sum of their splits' ``torn``."""
+    geometry = geometry or SlotGeometry(transparent)
+    groups: dict[tuple, list] = {}
     for view in views:
-        in_order = ordered if view is views[0] else _back_to_front(transparent, view.eye)
-        skipped = (view.skip, view.hide)
-        for at in range(len(in_order) - 1, -1, -1):
-            batch = in_order[at]
-            if _see_through_surface(batch) and not (batch.count == 1 and batch.entity_at[0] in skipped):
-                now.update(in_order[:at + 1])
-                break
-    return [batch for batch in ordered if batch in now], [batch for batch in ordered if batch not in now]
+        first, rest, torn = _split_slot(transparent, view, geometry)
+        key = (tuple(map(id, first)), tuple(map(id, rest)))
+        group = groups.get(key)
+        if group is None:
+            groups[key] = [[view], first, rest, torn]
+        else:
+            group[0].append(view)
+            group[3] += torn
+    return [tuple(group) for group in groups.values()]

@@ -124,6 +124,7 @@ class ShadowMaps:
         # Lights through mirrors and portals: a depth atlas of 2 x 2 tiles and their block.
         self.virtual_block = np.zeros(VIRTUAL_BLOCK_BYTES // 4, np.float32)
         self.virtual_shining = False  # set_virtual_count's: the scene pass reads it each program look-up
+        self._virtual_count = 0       # the count in the block (set_virtual_count)
         self.virtual_ubo = ctx.buffer(self.virtual_block.tobytes())
         self.virtual_atlas: moderngl.Texture | None = None
         self._virtual_framebuffer: moderngl.Framebuffer | None = None
@@ -312,9 +313,9 @@ class ShadowMaps:
         """How many virtual lights shine (slots 0 to count - 1).  ``virtual_shining`` follows
         it: the scene pass builds its programs with the virtual lights' loop only while one
         shines (llvmpipe runs a loop's body for every pixel even when it has nothing to do)."""
-        if self.virtual_block[:4].view(np.int32)[0] != count:
+        if self._virtual_count != count:
             self.renderer.note_scene_change()
-        self.virtual_block[:4].view(np.int32)[0] = count
+            self.virtual_block[:4].view(np.int32)[0] = self._virtual_count = count
         self.virtual_shining = count > 0
 
     # --- point lights ---------------------------------------------------------------------

@@ -45,6 +45,10 @@ A tree that ``remember``s (the main view's) leaves what its render did as a ``Ke
 on a frame whose views show nothing new (the reflect stage decides:
 ``systems/reflection_system.py``) ``keep`` does only what the root, drawn anew each frame,
 needs again (its fallbacks, level 1's composite) and levels 1 and below stay as they are.
+A still tree with end views whose image has not settled yet is kept too, less what depends
+on the end images: those are filled again from the new image and step 5 is done again from
+the deepest level with end views up, over each level as its views drew it (``_Refill``,
+``engine/render/level_copies.py``).
 """
 from __future__ import annotations
 
@@ -63,15 +67,14 @@ from engine.render.batched_mirrors import PATHS, choose_path, submitted_triangle
 from engine.render.claim_cull import ChainBoxes, empty_claims
 from engine.render.end_images import EndImages
 from engine.render.gpu import Gpu
+from engine.render.level_copies import LevelCopies
 from engine.render.mirror_passes import (
     Claims,
-    Composite,
     Fallbacks,
     MirrorPasses,
     PreparedComposites,
     PreparedFallbacks,
     give_samples_queries,
-    surface_look,
     take_samples_queries,
 )
 from engine.render.plan_rows import BLOCK, ROW, Candidates, LevelRows
@@ -208,6 +211,26 @@ class KeptTree:
     settled: bool
     history: moderngl.Query | None = None  # the settle check of its end images (EndImages.compared)
     ends: tuple | None = None  # the end images' state it was drawn with (_ends_state): the same, or redraw
+    refill: _Refill | None = None  # with end views not settled yet: what a kept frame does again (keep)
+
+
+@dataclass
+class _Refill:
+    """What a frame that keeps a still tree whose end images have not settled does again
+    (``ViewTree.keep``): from the deepest level with end views up to the root, each level
+    put back as its views drew it (``LevelCopies``, within ``rects``), its end views filled
+    from the new image, its fallbacks, the level below composited in, its transparent slot;
+    then the finished image kept and compared again (``EndImages.keep``).  Levels below the
+    deepest with end views do not change: they stay as they are, composited anew into it."""
+
+    deepest: int                                        # the deepest level with end views
+    rects: dict[int, tuple[int, int, int, int]]         # each level's copy (1 to deepest): its views' bounds
+    ends: dict[int, tuple[list[PlannedView], list[int], list[glm.mat4]]]  # each level's end views
+    transparent: dict[int, tuple[list[PlannedView], SceneOptions, list[moderngl.Query] | None]]  # levels >= 1
+    seen: frozenset[int]                                # the surfaces the image shows (EndImages.keep)
+    see_through: bool                                   # some batch is transparent: the slots are drawn
+    fallbacks: dict[int, tuple[RenderTargets | None, PreparedFallbacks]] = field(default_factory=dict)
+    composites: list[PreparedComposites] = field(default_factory=list)  # [d]: level d + 1 into level d
 
 
 _LEDGER = ("views_spent", "pixels_spent", "views_cut", "levels_downscaled", "reflection_fallbacks")
@@ -277,7 +300,9 @@ class _Walk:
     blends: Mapping[int, ProbeBlend] = field(default_factory=dict)      # the fallbacks' probes (SurfaceBlends)
     triangle_count: int | None = None        # what a scene pass submits (triangles(): counted once, if asked)
     chain: ChainBoxes | None = None          # the planned level's claims' bounds (claim_cull), for the next
-    root_fallbacks: tuple[RenderTargets | None, PreparedFallbacks] | None = None  # drawn into the root (KeptTree)
+    # each level's fallbacks as drawn (the root's: KeptTree; every level's: _Refill), by level
+    drawn_fallbacks: dict[int, tuple[RenderTargets | None, PreparedFallbacks]] = field(default_factory=dict)
+    composited: list[PreparedComposites] = field(default_factory=list)  # [d]: level d + 1 into level d
     ahead: dict[int, tuple] = field(default_factory=dict)  # levels planned ahead (ViewTree._plan_ahead), by depth
     whole: dict[int, bool] = field(default_factory=dict)   # the levels whose candidates all grew (ViewTree._whole)
     whole_before: dict[int, bool] = field(default_factory=dict)  # the same root's last render's
@@ -330,6 +355,10 @@ class ViewTree:
         # The next render compares its finished image with the end images' history (the
         # reflect stage sets it where the frame's views show what the last frame's did).
         self.check_history = False
+        # The levels of a still tree as its views drew them, while its end images settle
+        # (_save_for_refill), and the end views the last ``keep`` filled again (0: none).
+        self.copies = LevelCopies(renderer.ctx)
+        self.refilled = 0
 
     def render(self, root: View, levels: LevelStack, surfaces: SurfaceTable,
                settings: TreeSettings = TreeSettings(), blends: SurfaceBlends = NO_BLENDS,
@@ -369,18 +398,53 @@ class ViewTree:
                 if step.composite is not None:
                     self._draw_level(step, root, walk)
         self._note_cap(walk)
+        refill = self._save_for_refill(walk) if ledger is not None else None  # (a still tree's levels)
         self._composite(walk, levels, root_options)                   # 5. composite
+        if refill is not None:
+            refill.fallbacks, refill.composites = walk.drawn_fallbacks, walk.composited
         self._keep_end_images(walk, levels)
         if ledger is not None:
             history = self.ends.compared if result.end_views and self.ends is not None else None
             self.kept = KeptTree(result, (levels[0], *(step.targets for step in walk.steps)),
-                                 walk.steps[0].prepared if walk.steps else None, walk.root_fallbacks,
+                                 walk.steps[0].prepared if walk.steps else None, walk.drawn_fallbacks.get(0),
                                  tuple(getattr(stats, name) - before for name, before in zip(_LEDGER, ledger,
                                                                                              strict=True)),
-                                 (not result.end_views or history is not None)
-                                 and (walk.exact or bool(walk.record.seen))
-                                 and not any(node.unseen for node in result.views), history, ends_before)
+                                 (not result.end_views or history is not None) and self._drawn_on_counts(walk),
+                                 history, ends_before, refill if history is not None else None)
         return result
+
+    @staticmethod
+    def _drawn_on_counts(walk: _Walk) -> bool:
+        """Whether the views drawn depend on nothing of last frame's counts (exact, or
+        predicted from last frame's with no view drawn unseen: a first or cut frame's tree is
+        not the one the next frame draws)."""
+        return (walk.exact or bool(walk.record.seen)) and not any(node.unseen for node in walk.result.views)
+
+    def _save_for_refill(self, walk: _Walk) -> _Refill | None:
+        """For a tree drawn on a still frame (``check_history``) whose end views the settle
+        check will compare: each level down to the deepest with end views copied as its views
+        drew it, before its composites (``LevelCopies``), and what the frames that keep the
+        tree until it settles do again (``_Refill``).  None otherwise, and the copies are let
+        go: a frame whose camera or scene moved copies nothing."""
+        result, ends = walk.result, self.ends
+        if not (self.check_history and ends is not None and result.end_views and walk.surfaces.has_end_images
+                and self._drawn_on_counts(walk)) or not ends.compares(walk.root, _seen_surfaces(result)):
+            if len(self.copies):
+                self.copies.release()
+            return None
+        deepest = max(node.level for node in result.end_views)
+        see_through = bool(self.renderer.transparent_batches())
+        rects, transparent, filled = {}, {}, {}
+        for level in range(1, deepest + 1):
+            step = walk.steps[level - 1]
+            if see_through or not _painted_whole(walk, level):
+                rects[level] = rect = _bounds([view.scissor for view in (*step.views, *step.end_views)])
+                self.copies.save(level, step.targets, rect)
+            transparent[level] = (step.views, step.options, step.conditions)
+            if step.ended:
+                filled[level] = (step.end_views, [node.surface.entity for node in step.ended], step.end_matrices)
+        self.copies.keep_only(rects)
+        return _Refill(deepest, rects, filled, transparent, _seen_surfaces(result), see_through)
 
     def _ends_state(self, size: tuple[int, int]) -> tuple | None:
         """What end views would be drawn from: whether an image is kept, the surfaces it
@@ -403,26 +467,67 @@ class ViewTree:
         are not those drawn into (remade, resized).  The caller decides that nothing those
         levels show changed (``ReflectionSystem``)."""
         kept = self.kept
+        self.refilled = 0
         if kept is None or len(levels) < len(kept.targets) or any(
-                levels[level] is not targets for level, targets in enumerate(kept.targets)) or (
-                kept.history is not None and not EndImages.settled(kept.history)) or \
+                levels[level] is not targets for level, targets in enumerate(kept.targets)) or \
                 self._ends_state(levels[0].size) != kept.ends:
             self.kept = None
             return None
+        unsettled = kept.history is not None and not EndImages.settled(kept.history)
+        if unsettled and kept.refill is None:
+            self.kept = None
+            return None
         stats = self.renderer.stats
-        fallbacks_before = stats.reflection_fallbacks
-        if kept.fallbacks is not None:
-            child, prepared = kept.fallbacks
-            self.passes.draw_fallbacks(levels[0], child, prepared)
-        if kept.composite is not None:
-            self.passes.composite_level(levels[0], levels[1], kept.composite)
-        self.scene_pass.draw_transparent([root or kept.result.views[0].view], levels[0], root_options)
-        if kept.fallbacks is not None or kept.composite is not None:
-            self.renderer.flush()
-        for name, spent in zip(_LEDGER, kept.spent, strict=True):
-            setattr(stats, name, getattr(stats, name) + spent)
-        stats.reflection_fallbacks = fallbacks_before + kept.spent[-1]  # the root's drawn now, the rest kept
+        ledger = [getattr(stats, name) for name in _LEDGER]
+        if unsettled:
+            self._refill(kept, levels, root or kept.result.views[0].view, root_options)
+        else:
+            if kept.refill is not None:  # settled: no frame refills it any more
+                self.kept = replace(kept, refill=None)
+                self.copies.release()
+            if kept.fallbacks is not None:
+                child, prepared = kept.fallbacks
+                self.passes.draw_fallbacks(levels[0], child, prepared)
+            if kept.composite is not None:
+                self.passes.composite_level(levels[0], levels[1], kept.composite)
+            self.scene_pass.draw_transparent([root or kept.result.views[0].view], levels[0], root_options)
+            if kept.fallbacks is not None or kept.composite is not None:
+                self.renderer.flush()
+        # The render's counts (fallbacks too: those drawn now are of the render's, the rest kept).
+        for name, before, spent in zip(_LEDGER, ledger, kept.spent, strict=True):
+            setattr(stats, name, before + spent)
         return kept.result
+
+    def _refill(self, kept: KeptTree, levels: LevelStack, root: View, root_options: SceneOptions) -> None:
+        """A kept still tree whose end images have not settled (``_Refill``): what depends on
+        them done again, level by level from the deepest with end views up, as the render's
+        step 5 did it over each level put back as its views drew it; then the finished image
+        kept and compared again, and the tree kept with that check."""
+        refill, passes = kept.refill, self.passes
+        for depth in range(refill.deepest, -1, -1):
+            targets = levels[depth]
+            if depth:
+                if depth in refill.rects:  # (else every pixel the level's composites write is painted whole)
+                    self.copies.restore(depth, targets, refill.rects[depth])
+                filled = refill.ends.get(depth)
+                if filled is not None:
+                    self.ends.draw(*filled, targets, root)
+            drawn = refill.fallbacks.get(depth)
+            if drawn is not None:
+                passes.draw_fallbacks(targets, *drawn)
+            if depth < len(refill.composites):
+                passes.composite_level(targets, levels[depth + 1], refill.composites[depth])
+            if refill.see_through:
+                if depth:
+                    views, options, conditions = refill.transparent[depth]
+                    self.scene_pass.draw_transparent(views, targets, options, conditions)
+                else:
+                    self.scene_pass.draw_transparent([root], targets, root_options)
+        self.renderer.flush()
+        ends_before = self._ends_state(levels[0].size)
+        self.ends.keep(levels[0], root, refill.seen, compare=True)
+        self.kept = replace(kept, history=self.ends.compared, ends=ends_before)
+        self.refilled = sum(len(filled[0]) for filled in refill.ends.values())
 
     def _start(self, root: View, root_node: ReflectionView, surfaces: SurfaceTable, settings: TreeSettings,
                result: TreeResult) -> _Walk:
@@ -637,15 +742,14 @@ class ViewTree:
         own transparent slot over both (its views', the root's at level 0: they were drawn
         without it), before the level is composited into the one above."""
         steps, fallbacks = walk.steps, walk.fallbacks
-        composites = [step.prepared for step in steps if step.prepared is not None]
+        composites = walk.composited = [step.prepared for step in steps if step.prepared is not None][:walk.level]
         see_through = bool(self.renderer.transparent_batches())  # else no level has a slot to draw
         for depth in range(walk.level, -1, -1):
             if fallbacks.get(depth):
                 child = steps[depth].targets if depth < len(steps) else None
                 prepared = self.passes.prepare_fallbacks(fallbacks[depth], levels[depth].size, walk.blends)
                 self.passes.draw_fallbacks(levels[depth], child, prepared)
-                if depth == 0:
-                    walk.root_fallbacks = (child, prepared)
+                walk.drawn_fallbacks[depth] = (child, prepared)
             if depth < walk.level:
                 self.passes.composite_level(levels[depth], levels[depth + 1], composites[depth])
             if see_through:
@@ -665,8 +769,7 @@ class ViewTree:
             return
         if walk.surfaces.has_end_images:
             result = walk.result
-            self.ends.keep(levels[0], walk.root, frozenset(node.surface.entity for node in
-                                                           (*result.views[1:], *result.end_views) if not node.unseen),
+            self.ends.keep(levels[0], walk.root, _seen_surfaces(result),
                            compare=self.check_history and bool(result.end_views))
         else:
             self.ends.forget()
@@ -907,12 +1010,17 @@ class ViewTree:
                 candidates.derived["claims"] = columns
         rows, entities, nodes, scissors = columns
         queries, none = step.queries, self.passes.no_pixels
-        if none in queries:
-            at = [i for i, query in enumerate(queries) if query is not none]
-            rows, entities, nodes, scissors, queries = ([column[i] for i in at] for column in
-                                                        (rows, entities, nodes, scissors, queries))
-        claims = Claims([(parents[p].index, entity, node) for p, entity, node in
-                         zip(rows, entities, nodes, strict=True)], scissors)
+        if none in queries:  # the claims drawn, in one pass over the columns
+            ids, rects, drawn = [], [], []
+            for p, entity, node, rect, query in zip(rows, entities, nodes, scissors, queries, strict=True):
+                if query is not none:
+                    ids.append((parents[p].index, entity, node))
+                    rects.append(rect)
+                    drawn.append(query)
+            claims, scissors, queries = Claims(ids, rects), rects, drawn
+        else:
+            claims = Claims([(parents[p].index, entity, node) for p, entity, node in
+                             zip(rows, entities, nodes, strict=True)], scissors)
         step.apart = _claims_apart(scissors)
         self.passes.prepare_level(step.targets, step.parent_targets, claims, queries)
 
@@ -1043,9 +1151,7 @@ class ViewTree:
             rects = list(map(tuple, level_rects(np.array([(x, y, x + w, y + h) for x, y, w, h in
                                                           (c.rect for c in children)], np.float64),
                                                 root.size, parent_size).tolist()))
-        return self.passes.prepare_composites([Composite(
-            child.index, rect, child.view.scissor, child.parent.view, surface_look(child.surface),
-            fade=child.fade) for child, rect in zip(children, rects, strict=True)], parent_size)
+        return self.passes.prepare_views(children, rects, parent_size)
 
     def release(self) -> None:
         for record in self._visibility.values():
@@ -1054,6 +1160,7 @@ class ViewTree:
         self.passes.release()
         if self.ends is not None:
             self.ends.release()
+        self.copies.release()
 
 
 # The LevelRows columns a level's nodes read (_level_nodes), as whole numbers: the rectangle, mirrored, node.
@@ -1066,6 +1173,46 @@ def _fallbacks_at(fallbacks: dict[int, Fallbacks], level: int, surfaces: Surface
     if found is None:
         found = fallbacks[level] = Fallbacks(surfaces.states)
     return found
+
+
+def _seen_surfaces(result: TreeResult) -> frozenset[int]:
+    """The surfaces a tree's image shows through a view or an end view (an unseen view's may
+    well not be in it; a candidate known empty is no view, so a surface only such candidates
+    saw is not kept as shown, as in exact visibility): what ``EndImages.keep`` keeps with it."""
+    return frozenset(node.surface.entity for node in (*result.views[1:], *result.end_views) if not node.unseen)
+
+
+def _painted_whole(walk: _Walk, level: int) -> bool:
+    """Whether every pixel ``level``'s fallbacks and the composite of the level below write
+    is written whole: a blend weight of exactly 1 (reflection x 1 + own x 0), so what the
+    pixel held before does not matter (a refill need not put the level back, given no
+    transparent slot, which blends over what its pixels hold, and the end views' fill,
+    which blends nothing).  That holds for a portal (mirror_composite.frag writes alpha 1)
+    and for a mirror of reflect rate 1 (times a view's fade of 1), unfaded, not water
+    (Fresnel), the weights ``shading_replaced`` trusts; a partly faded share is a quotient
+    of floats.  (A pixel's own colour is finite: an infinite one times 0 is no number.)"""
+    below = walk.steps[level] if level < len(walk.steps) else None
+    if below is not None and below.composite is not None and any(
+            node.fade != 1.0 or not _weighs_one(node.surface) for node in below.composite):
+        return False
+    fallbacks = walk.fallbacks.get(level)
+    if fallbacks:
+        states = fallbacks.states
+        if (fallbacks.share is not None and any(share != 1.0 for share in fallbacks.share)) or not all(
+                _weighs_one(states[row]) for row in set(fallbacks.surface)):
+            return False
+    return True
+
+
+def _weighs_one(state: SurfaceState) -> bool:
+    """A surface whose composite and fallback blend at a weight of exactly 1 (``_painted_whole``)."""
+    return state.kind == "portal" or (state.reflect_rate == 1.0 and state.fade is None and state.water is None)
+
+
+def _bounds(rects: Sequence[tuple[int, int, int, int]]) -> tuple[int, int, int, int]:
+    """The smallest rectangle (x, y, width, height) holding every one of ``rects``."""
+    x0, y0 = min(x for x, _, _, _ in rects), min(y for _, y, _, _ in rects)
+    return x0, y0, max(x + w for x, _, w, _ in rects) - x0, max(y + h for _, y, _, h in rects) - y0
 
 
 def _ends_at(ends: tuple[np.ndarray, int] | None, depth: int) -> np.ndarray | None:
