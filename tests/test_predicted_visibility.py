@@ -106,7 +106,10 @@ def test_predicted_mode_reads_only_counts_of_earlier_frames(ctx, monkeypatch, mo
 def test_a_predicted_tree_is_planned_whole_before_any_of_it_is_drawn(ctx, monkeypatch, mode):
     """Predicted: within a tree's render, every level's plan comes before the first claim,
     then each level's claims come before its views and before the next level's claims.
-    Exact: a level's claims come before the next level is planned (it reads their counts)."""
+    Exact: a level's claims come before the next level is planned (it reads their counts);
+    the tree's planning ahead is switched off here (a level planned ahead of its parent's
+    claims is used only where they make every candidate a view:
+    tests/test_view_tree.py::test_levels_planned_ahead_are_the_levels_planned_one_at_a_time)."""
     from engine.render.scene_pass import ScenePass
     from engine.render.view_plan import SurfaceTable
 
@@ -125,6 +128,7 @@ def test_a_predicted_tree_is_planned_whole_before_any_of_it_is_drawn(ctx, monkey
 
     def tree(self, *args, **kwargs):
         events.append([])
+        self.plan_ahead = False
         return render(self, *args, **kwargs)
     monkeypatch.setattr(view_tree.ViewTree, "render", tree)
     golden.render_case(ctx, _with_visibility(case, mode, []))

@@ -8,6 +8,7 @@ from pyglm import glm
 
 from components import ComponentValueError, DirectionalLight, Emissive, Material, MeshRef, Mirror, Portal, Transform
 from engine.assets.mesh import box, quad, sphere
+from engine.render.mirror_passes import MirrorPasses
 from engine.render.view_tree import MAX_TREE_DEPTH
 from tests.support import look_from
 
@@ -148,3 +149,85 @@ def test_a_world_without_mirrors_or_portals_plans_nothing(scene, monkeypatch):
     runner.world.spawn(Transform(position=(0, 1.5, -2)), MeshRef(quad(3, 3)), Material(), Mirror())
     runner.frame()
     assert planned and runner.stats.reflection_views == 1
+
+
+def _pair_and_side_mirror(ents, end_image="auto", depth=6):
+    """``facing_pair``'s mirrors (``depth``, with ``end_image``) and a third on the left wall,
+    seen at level 1 beside the pair's first, and an occluder kept far below until a test
+    moves it."""
+    def build(world):
+        world.spawn(DirectionalLight(direction=(0.2, -1.0, -0.5), intensity=2.0))
+        ents["camera"] = look_from(world, (0.3, 1.5, 2.0), target=(0.0, 1.5, -4.0), fov=50.0)
+        for z, turn in ((-4.0, None), (4.0, FACING_BACK)):
+            ents.setdefault("pair", []).append(world.spawn(
+                Transform(position=(0, 1.5, z), rotation=turn or glm.quat()), MeshRef(quad(4, 3)),
+                Material(color=(0.1, 0.1, 0.1)), Mirror(max_depth=depth, end_image=end_image)))
+        ents["side"] = world.spawn(Transform(position=(-2.5, 1.5, -1.5),
+                                             rotation=glm.angleAxis(glm.pi() / 2, glm.vec3(0, 1, 0))),
+                                   MeshRef(quad(1.5, 1.5)), Material(color=(0.1, 0.1, 0.1)), Mirror(max_depth=6))
+        ents["ball"] = world.spawn(Transform(position=(0.8, 1.2, 0.0)), MeshRef(sphere(0.3)),
+                                   Material(color=(0.1, 0.8, 0.2)), Emissive(0.5))
+        ents["occluder"] = world.spawn(Transform(position=(0.0, -50.0, 0.0)), MeshRef(box((1.2, 2.0, 1.2))),
+                                       Material(color=(0.8, 0.2, 0.2)))
+    return build
+
+
+def _planned_tree(runner) -> list[tuple]:
+    """What a render planned, view by view: its place in the tree, surface, rectangles,
+    node, fade and camera (from its packed block)."""
+    return [(node.index, node.level, node.parent.index, node.surface.entity, node.rect, node.fade, node.view.scissor,
+             node.view.node, node.view.view.to_bytes(), node.view.proj.to_bytes(), node.view.view_proj.to_bytes(),
+             node.view.eye.to_bytes()) for node in runner.engine.reflection_system.views[1:]]
+
+
+@pytest.mark.parametrize(("end_image", "depth"), (("auto", 6), (False, 3)))
+def test_levels_planned_ahead_are_the_levels_planned_one_at_a_time(scene, monkeypatch, end_image, depth):
+    """Exact visibility plans each level from its parent level's claim counts; where the
+    root's last render made every candidate of a level a view that grew, the levels below
+    it are planned ahead, back to back, before its claims (``ViewTree._plan_ahead``), and
+    used only where the counts make every candidate a view again.  The trees equal, frame
+    by frame, those of a tree that plans each level after its parent's claims (``plan_ahead``
+    False) while the camera moves, and when an occluder hides the side mirror seen at
+    level 1 (its plans made ahead are made again, from the pair's view alone), and so do
+    the frames: with the pair's end images (planning ahead stops at a level with end
+    views) and without (the pair past its depth limit, 3, shows its fallback there, whose
+    pairs are found ahead too)."""
+    from engine.render.view_plan import SurfaceTable
+
+    events: list[str] = []
+    for owner, name, label in ((SurfaceTable, "plan", "plan"), (MirrorPasses, "prepare_level", "claim")):
+        original = getattr(owner, name)
+        monkeypatch.setattr(owner, name, lambda *a, _original=original, _label=label, **k:
+                            events.append(_label) or _original(*a, **k))
+    ents = {True: {}, False: {}}
+    runners = {ahead: scene(_pair_and_side_mirror(ents[ahead], end_image, depth), (160, 120))
+               for ahead in (True, False)}
+    for ahead, runner in runners.items():
+        runner.engine.reflection_system.tree.plan_ahead = ahead
+    orders: dict[bool, list[list[str]]] = {True: [], False: []}
+    for frame in range(4):
+        trees, images = {}, {}
+        for ahead, runner in runners.items():
+            transform = runner.world.get(ents[ahead]["camera"], Transform)
+            transform.position = glm.vec3(0.3 + 0.02 * frame, 1.5, 2.0)  # a moving camera: nothing kept
+            if frame == 2:  # in front of the side mirror
+                runner.world.get(ents[ahead]["occluder"], Transform).position = glm.vec3(-1.3, 1.5, 0.2)
+            events.clear()
+            images[ahead] = runner.frame()
+            orders[ahead].append(list(events))
+            trees[ahead] = _planned_tree(runner)
+            level_1 = {node.surface.entity for node in runner.engine.reflection_system.views if node.level == 1}
+            first, side = ents[ahead]["pair"][0], ents[ahead]["side"]
+            assert level_1 == ({first} if frame >= 2 else {first, side})  # the occluder hides the side mirror
+            assert max(node.level for node in runner.engine.reflection_system.views) >= min(depth, 4)
+        assert trees[True] == trees[False], f"frame {frame}: the trees differ"
+        # and so the frames, fallbacks past the pair's depth limit and all
+        assert images[True].std() > 5.0 and np.array_equal(images[True], images[False]), f"frame {frame}"
+    for frame, order in enumerate(orders[False]):  # one level at a time: one plan before the first claims
+        assert order.index("claim") == 1, (frame, order)
+    ahead_orders = orders[True]
+    assert ahead_orders[0].index("claim") == 1  # a first render knows nothing of its levels
+    assert ahead_orders[1].index("claim") >= 3, ahead_orders[1]  # levels 2 and below planned before level 1's claims
+    # The occluder takes a candidate from level 1: the levels planned ahead are planned again.
+    assert ahead_orders[2].index("claim") >= 2 and "plan" in ahead_orders[2][ahead_orders[2].index("claim"):]
+    assert sum(label == "plan" for label in ahead_orders[3]) <= sum(label == "plan" for label in orders[False][3])

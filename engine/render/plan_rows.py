@@ -73,6 +73,18 @@ def x0_rows(data: np.ndarray) -> np.ndarray:
     return data[:, X_COLUMNS.start:X_COLUMNS.start + X0].reshape(-1, X_ROWS, 4)
 
 
+# x[0]'s cull rows (C P0 V, minus the clip plane, the eye, scratch) as columns of a row: contiguous.
+CULL_COLUMNS = slice(X_COLUMNS.start + CULL.start * 4, X_COLUMNS.start + CULL.stop * 4)
+
+
+def cull_rows(data: np.ndarray) -> np.ndarray:
+    """The cull's rows of rows ``data``, row by row, as one (14 P, 4) operand: row r of
+    parent i at r P + i (a view for one parent; else a copy)."""
+    if len(data) == 1:
+        return data[0, CULL_COLUMNS].reshape(14, 4)
+    return data[:, CULL_COLUMNS].reshape(-1, 14, 4).transpose(1, 0, 2).reshape(-1, 4)
+
+
 def x1_rows(data: np.ndarray) -> np.ndarray:
     """``x[1]`` of rows ``data``: (n, 8, 5)."""
     return data[:, X_COLUMNS.start + X0:X_COLUMNS.stop].reshape(-1, 8, 5)

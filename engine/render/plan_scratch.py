@@ -157,6 +157,11 @@ class PlanWork:
 # frame's own from the caches (16 mirrors: 1.048 -> 1.019 of the plan before them).
 WORK_KEPT = 48
 WORK_KEPT_COUNT = 16
+# How many PlanWorks a table keeps, of any count: views of the PlanBuffers of their capacity,
+# no memory of their own to speak of, so the counts of a frame's large levels, which change
+# by a few from frame to frame, are kept too (with 48, a 16-mirror frame made a new one
+# most frames, about fifty views each).
+PLAN_WORK_KEPT = 256
 
 
 def kept_work(kept: dict, count: int, make: Callable[[int], _Work]) -> _Work:

@@ -41,7 +41,6 @@ from engine.render.plan_rows import (
     BLOCK,
     CAMERA_CLIP,
     CAMERA_VIEWPORT,
-    CULL,
     EXIT_PLANE,
     GRID_PARENT,
     GRID_WIDTH,
@@ -60,10 +59,10 @@ from engine.render.plan_rows import (
     X_COLUMNS,
     Candidates,
     LevelRows,
-    x0_rows,
+    cull_rows,
 )
 from engine.render.plan_scratch import (
-    WORK_KEPT,
+    PLAN_WORK_KEPT,
     ChildTable,
     CullWork,
     PlanBuffers,
@@ -282,7 +281,7 @@ class SurfaceTable:
         if buffers is None:
             buffers = self._plan_buffers[capacity] = PlanBuffers(capacity)
         work = PlanWork(k, buffers)
-        if len(self._plan_work) >= WORK_KEPT:
+        if len(self._plan_work) >= PLAN_WORK_KEPT:
             del self._plan_work[next(iter(self._plan_work))]
         self._plan_work[k] = work
         return work
@@ -374,7 +373,7 @@ class SurfaceTable:
             if len(self._ids) > 64:
                 self._ids.clear()
             self._ids[key] = grid
-        return grid[p, s]
+        return grid[0].take(s, axis=0) if count == 1 else grid[p, s]
 
     def _child_row(self, exit_row: float, mask: float, mirrored: float, hide: int, root_rows: RootRows,
                    size: tuple[int, int]) -> np.ndarray:
@@ -452,8 +451,7 @@ class SurfaceTable:
         # the minima over the corners; the planes as one more corner give the facing values
         # (the eye's row times them).
         work = self._cull_work.get(count) or kept_work(self._cull_work, count, self._new_cull_work)
-        np.matmul(x0_rows(data)[:, CULL].transpose(1, 0, 2).reshape(14 * count, 4), self.corner_columns,
-                  out=work.product)
+        np.matmul(cull_rows(data), self.corner_columns, out=work.product)
         np.maximum(work.w, work.epsilon, out=work.w_safe)  # w <= 0: see straddles
         np.divide(work.sides, work.w_safe, out=work.sides)
         least = _MIN(work.corners, axis=0, out=work.least)                                  # 14 x P x S
@@ -465,15 +463,20 @@ class SurfaceTable:
         if self.bounds_claims and not fallback:  # (for the plan's candidates)
             self._boxes = rects.copy()  # unrounded: what claim_cull bounds a claim's pixel centres by
         np.floor(rects, out=rects)  # (the pixel's margin is in the rows: each side less w)
-        np.maximum(rects, data[:, RECT].T[:, :, None], out=rects)  # inside the parent's
+        np.maximum(rects, data.T[RECT, :, None], out=rects)  # inside the parent's
         # Seen: facing and allowed, not culled (every corner outside one side of the frustum,
         # or behind the clip plane; on a side counts as outside) and a rectangle with pixels
         # (x1 > x0 and y1 > y0): one maximum over the rows 4-13, written over, each < 0 to keep.
         np.subtract(neg_bias, work.facing, out=work.least_w)
         np.add(work.x0y0, work.x1y1, out=work.sizes)
         np.less(_MAX(work.tests, axis=0, out=work.worst), 0.0, out=work.seen)
-        p, s = np.nonzero(work.seen)
-        rects = rects[:, p, s].T
+        if count == 1:  # (a take costs a third of a fancy index's two arrays)
+            s = work.seen[0].nonzero()[0]
+            p = np.zeros(len(s), np.int64)
+            rects = rects[:, 0].take(s, axis=1).T
+        else:
+            p, s = np.nonzero(work.seen)
+            rects = rects[:, p, s].T
         if not self.fading:
             return p, s, rects, None
         fade = self.fade_weights(parents.eye[p], s)
@@ -537,7 +540,8 @@ class SurfaceTable:
 
     def plan(self, parents: LevelRows, depth: int, root: View, root_proj: np.ndarray, inv_root_proj: np.ndarray,
              first_index: int, depth_cap: int, hide: int, ends: np.ndarray | None = None,
-             size: tuple[int, int] | None = None, scale: float = 1.0) -> tuple[Candidates | None, int]:
+             size: tuple[int, int] | None = None, scale: float = 1.0,
+             defer: bool = False) -> tuple[Candidates | None, int]:
         """``_plan``, kept: a level's plan is a function of the table (made again when a
         surface changes) and these arguments alone, so a level planned before from the same
         parent rows (a probe face's tree, whose camera stands still; a still main camera)
@@ -557,7 +561,7 @@ class SurfaceTable:
                 self._plans[key] = found  # the most recently used last
                 return found[1]
         planned = self._plan(parents, depth, root, root_proj, inv_root_proj, first_index, depth_cap, hide, ends,
-                             size, scale)
+                             size, scale, defer and key is None)
         if key is not None:
             if planned[0] is not None:
                 planned[0].freeze()
@@ -568,7 +572,8 @@ class SurfaceTable:
 
     def _plan(self, parents: LevelRows, depth: int, root: View, root_proj: np.ndarray, inv_root_proj: np.ndarray,
               first_index: int, depth_cap: int, hide: int, ends: np.ndarray | None = None,
-              size: tuple[int, int] | None = None, scale: float = 1.0) -> tuple[Candidates | None, int]:
+              size: tuple[int, int] | None = None, scale: float = 1.0,
+              defer: bool = False) -> tuple[Candidates | None, int]:
         """The next level's candidate views from ``parents`` (level ``depth - 1``): the
         cull's pairs, each with its camera (the parent's carried through the surface: for a
         mirror its reflection, for a portal look-out x half turn x inverse(look-in), as in
@@ -578,7 +583,9 @@ class SurfaceTable:
         block (None when nothing can be seen), and how many pairs the
         fades took out.  ``ends``: those surfaces' end views too (``cull``; marked in
         ``Candidates.end``); ``size``: the level's pixels, when given; ``scale``: a factor on
-        the level's resolution (the frame's pixel budget, ``ViewTree``).
+        the level's resolution (the frame's pixel budget, ``ViewTree``); ``defer``: the
+        Camera blocks' camera parts are left to ``finish_blocks`` (no later level's plan
+        reads them).
 
         Like the cull, a fixed number of array operations whatever the number of views
         (about 27 after the cull's, four of them products): each candidate's parent row and
@@ -603,7 +610,10 @@ class SurfaceTable:
             return None, faded
         w = self._plan_work.get(k) or self._new_plan_work(k)
         w.surface[...] = self.float_rows.take(s, axis=0)  # (take with out= costs more than take and a copy)
-        w.parent[...] = parents.data[:, X_COLUMNS].take(p, axis=0)  # the parents' matrices (no more of their rows)
+        if len(parents.data) == 1:  # one parent: its row for every view (a broadcast copy, no gather)
+            w.parent[...] = parents.data[:, X_COLUMNS]
+        else:
+            w.parent[...] = parents.data[:, X_COLUMNS].take(p, axis=0)  # the parents' matrices (no more of their rows)
         if size is None:
             scale *= self.one_scale if self.one_scale is not None else float(w.scale.max())
             size = _level_size(root.size, scale)
@@ -622,9 +632,23 @@ class SurfaceTable:
             np.matmul(rects, _TO_SCISSOR, out=w.scissor, casting="unsafe")
         else:
             w.scissor[...] = level_rects(rects * SIGNS, root.size, size)
-        # The Camera blocks (CAMERA_DTYPE) as float32 columns: each matrix column-major (its
-        # transpose, row by row).
-        np.copyto(w.block_node, node, casting="unsafe")  # the node image's value for its pixels
+        if not defer:
+            self._camera_blocks(w, root_proj, root_rows.safe_distance)
+        data = w.data.copy()
+        end = None if ends is None else self._within(depth, depth_cap)[1].take(s)
+        candidates = Candidates(LevelRows(data), size, end)
+        candidates.__dict__.update(parent=p, surface=s)  # the cull's arrays: no views to make when read
+        if self.bounds_claims:
+            boxes = self._boxes  # (claim_cull)
+            candidates.box = (boxes[:, 0].take(s, axis=1) if len(parents.data) == 1 else boxes[:, p, s]).T
+        return candidates, faded
+
+    def _camera_blocks(self, w: PlanWork, root_proj: np.ndarray, safe: float) -> None:
+        """The camera parts of the Camera blocks (CAMERA_DTYPE) of the views in ``w`` (their
+        rows' ``x`` and nodes, their surfaces' rows), as float32 columns: each matrix
+        column-major (its transpose, row by row); ``safe``: the distance from its plane
+        within which a view keeps the root projection (``RootRows.safe_distance``)."""
+        np.copyto(w.block_node, w.node, casting="unsafe")  # the node image's value for its pixels
         np.copyto(w.v_p0v_block, w.v_p0v, casting="same_kind")  # V, P0 V
         np.sign(w.plane_xy, out=w.signs_xy)
         f = np.vecdot(w.through, w.signs, out=w.f)
@@ -644,20 +668,29 @@ class SurfaceTable:
         np.multiply(w.b_col, w.a_row, out=w.outer)
         np.subtract(w.inv_source, w.outer, out=w.inv, casting="same_kind")
         # Too close to its plane, a view keeps the root projection (the clip distance alone).
-        safe = root_rows.safe_distance
         if min(map(abs, w.plane_w.tolist())) <= safe:
             close = np.abs(w.plane_w) <= safe
             np.copyto(w.proj_row, root_proj[2], where=close[:, None], casting="same_kind")
             np.copyto(w.vp_row, w.p0v_row2, where=close[:, None], casting="same_kind")
             np.copyto(w.inv, w.inv_source, where=close[:, None, None], casting="same_kind")
         np.copyto(w.block_eye, w.eye, casting="same_kind")
-        data = w.data.copy()
-        end = None if ends is None else self._within(depth, depth_cap)[1].take(s)
-        candidates = Candidates(LevelRows(data), size, end)
-        candidates.__dict__.update(parent=p, surface=s)  # the cull's arrays: no views to make when read
-        if self.bounds_claims:
-            candidates.box = self._boxes[:, p, s].T  # (claim_cull)
-        return candidates, faded
+
+    def finish_blocks(self, levels: list[Candidates], root_proj: np.ndarray) -> None:
+        """The Camera blocks of levels planned with ``defer`` (``plan``), all at once: their
+        rows gathered in one plan scratch, the blocks' camera parts worked out there by one
+        run of ``_camera_blocks``' operations (about 16) for all of them, not one a level,
+        and copied back into each level's rows (elementwise: the same values as a level's
+        own run)."""
+        count = sum(len(candidates) for candidates in levels)
+        w = self._plan_work.get(count) or self._new_plan_work(count)
+        np.concatenate([candidates.rows.data for candidates in levels], out=w.data)
+        w.surface[...] = self.float_rows.take(np.concatenate([candidates.surface for candidates in levels]), axis=0)
+        self._camera_blocks(w, root_proj, kept_root_rows(root_proj).safe_distance)
+        at = 0
+        for candidates in levels:
+            k = len(candidates)
+            candidates.rows.data[:, BLOCK] = w.data[at:at + k, BLOCK]
+            at += k
 
 
 def level_rects(rects: np.ndarray, screen: tuple[int, int], level: tuple[int, int]) -> np.ndarray:
