@@ -122,3 +122,22 @@ def box_hits(origin: np.ndarray, direction: np.ndarray, centre: np.ndarray, half
     if limit is not None:
         hit &= near < limit
     return hit
+
+
+def kept_frames_equal_drawn(keeping, drawing, frames: int = 4) -> int:
+    """Run two scene runners (``conftest.scene``) of the same scene side by side, ``drawing``
+    with ``keep_still_views`` off, asserting every frame's colour, HDR image and ids equal bit
+    for bit; returns how many of ``keeping``'s frames kept their reflection levels (the
+    drawing runner must keep none)."""
+    drawing.engine.reflection_system.keep_still_views = False
+    kept = 0
+    for _ in range(frames):
+        images = []
+        for runner in (keeping, drawing):
+            rgb = runner.frame()
+            images.append((rgb, np.frombuffer(runner.engine.renderer.targets.color.read(), np.float16), runner.ids()))
+        for kept_image, drawn_image in zip(images[0], images[1], strict=True):
+            assert np.array_equal(kept_image, drawn_image)
+        kept += keeping.stats.reflection_views_kept > 0
+        assert drawing.stats.reflection_views_kept == 0
+    return kept
