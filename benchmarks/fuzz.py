@@ -22,7 +22,13 @@ symlink loops, FIFOs, a directory, /dev/zero, image bombs, deep nesting, 16-bit 
 images, paths outside the level's folder): each refused saying what it is, or loaded with
 the right texel and drawn clean.  ``--model-cases`` (default 100) runs the model fuzz
 (``benchmarks/model_fuzz.py``: model files and the maps they name made at random, loaded and
-spawned with ``spawn_model`` outside any level).
+spawned with ``spawn_model`` outside any level).  ``--still-cases`` (default 50) runs the
+still-frame fuzz (``benchmarks/still_fuzz.py``: a facing mirror or portal pair with end
+images, glass of random alpha, still water; the camera still until the tree is kept and its
+end images refill, then one random change (an awkward component value, an entity removed
+mid-refill, a resize, a depth cap, keep_still_views toggled, a see-through surface added, a
+light edited in place, the camera off); every frame equal bit for bit to an engine drawing
+its whole tree each frame, and the resource counts back once the case's entities go).
 """
 from __future__ import annotations
 
@@ -431,6 +437,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "(default 100)")
     parser.add_argument("--level-cases", type=int, default=0,
                         help="also run this many level-file cases (mutated level files; default 0)")
+    parser.add_argument("--still-cases", type=int, default=50,
+                        help="still-frame cases: a mirror or portal pair with end images kept and refilled by a "
+                             "still camera, one random change, every frame equal to an engine drawing its whole "
+                             "tree, resources back after (benchmarks/still_fuzz.py; default 50)")
     add_model_arguments(parser)
 
 
@@ -466,6 +476,7 @@ def main(args: argparse.Namespace) -> int:
     from pathlib import Path
 
     from benchmarks.level_fuzz import fuzz_files, fuzz_levels
+    from benchmarks.still_fuzz import fuzz_still
     from engine.render.gl_context import create_headless_context
 
     ctx = create_headless_context()
@@ -483,6 +494,7 @@ def main(args: argparse.Namespace) -> int:
         with tempfile.TemporaryDirectory() as folder:
             file_ran, file_failures, file_passes = fuzz_files(ctx, Path(folder), report)
         model_ran, model_failures, model_passes = run_model_fuzz(ctx, args, report)
+        still_ran, still_failures, still_passes = fuzz_still(ctx, args.still_cases, args.seed, report)
     finally:
         ctx.release()
     if args.json:
@@ -508,4 +520,12 @@ def main(args: argparse.Namespace) -> int:
         print(f"file cases: {file_ran} ran, {len(file_failures)} failed ({file_passes['refused']} refused saying what "
               f"the file is, {file_passes['rendered']} loaded right and rendered clean)")
     print_model_fuzz(args, model_ran, model_failures, model_passes)
-    return 1 if failures or level_failures or file_failures or model_failures else 0
+    if args.json:
+        print(json.dumps({"still_cases": still_ran, "failed": len(still_failures), **still_passes,
+                          "failures": still_failures[:50]}))
+    else:
+        print(f"still fuzz: {still_ran} cases ran, {len(still_failures)} failed ({still_passes['refused']} refused "
+              f"naming the field, {still_passes['rendered']} rendered equal to a whole-drawn engine with resources "
+              f"back after; {still_passes['refill_frames']} refilled frames, {still_passes['glass_between_frames']} "
+              f"with glass between see-through surfaces; seed {args.seed})")
+    return 1 if failures or level_failures or file_failures or model_failures or still_failures else 0
