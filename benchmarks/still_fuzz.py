@@ -5,15 +5,20 @@ among the refilled frames, and still frames again.
 
 Each case is run in two engines of the same level, in lockstep (as
 ``tests/test_end_image_settle.py`` does): one keeps still views, the other
-(``keep_still_views = False``) draws its whole tree every frame.  The level, around the pair,
+(``keep_still_views = False``) draws its whole tree every frame, and draws every shadow map
+whole every frame too (its shadow stage's record of what each map was drawn from wiped before
+each frame), so a map kept on a still frame, or drawn again only where casters moved, must
+equal one drawn from scratch.  The level, around the pair,
 has glass panes of random alpha (the transparent slot ordered by the planes of see-through
 surfaces, ``scene_pass._back_to_front``), now and then still water (a see-through mirror:
 ``InstanceBatch.plane``) or a see-through mirror, or a pane of random alpha between a raised
-pond and a far see-through mirror (``RenderStats.glass_between_surfaces``), and a lit box.  The change is one of:
+pond and a far see-through mirror (``RenderStats.glass_between_surfaces``), a lit box, now
+and then a point light casting shadows and Bloom on the camera.  The change is one of:
 
-- ``component``: a field of the pair, a pane, the water, the light or the box written with a
+- ``component``: a field of the pair, a pane, the water, a light or the box written with a
   value from the component fuzz's pool (``benchmarks.fuzz.random_value``), or a light's colour
-  or direction edited in place (``light.color.r = ...``, seen one stage later);
+  or direction edited in place (``light.color.r = ...``, seen one stage later), or the point
+  light moved in place (its shadow cube drawn again);
 - ``remove``: a mirror or portal of the pair, a pane, the water, the far see-through mirror or
   the box deleted mid-refill;
 - ``resize``: the output's size changed;
@@ -46,6 +51,7 @@ from pyglm import glm
 
 from benchmarks.fuzz import _ripples
 from components import (
+    Bloom,
     Camera,
     ComponentValueError,
     DirectionalLight,
@@ -90,11 +96,13 @@ class StillCase:
     detail: dict[str, Any]
     after: int
     rate: float = 1.0  # the mirror pair's reflect_rate (below 1: composites blend over the level's own pixels)
+    point_light: bool = False  # a point light casting shadows (a shadow cube) between the mirrors
+    bloom: bool = False  # Bloom on the camera (its chain planned once a size: a resize changes it)
 
     def describe(self) -> str:
         return (f"still {self.pair} depth {self.depth}, {len(self.panes)} panes {self.panes}, water {self.water}, "
                 f"see-through mirror {self.see_through_mirror}, sandwich {self.sandwich}; {self.still} still frames, "
-                f"rate {self.rate}, then {self.change} "
+                f"rate {self.rate}, point light {self.point_light}, bloom {self.bloom}, then {self.change} "
                 f"{self.detail}, {self.after} frames")
 
 
@@ -113,14 +121,16 @@ def random_still_case(rng: random.Random) -> StillCase:
     change = rng.choice(CHANGES)
     detail: dict[str, Any] = {}
     if change == "component":
-        target = rng.choice(("pair", "pane", "water", "light", "box", "light_in_place"))
+        target = rng.choice(("pair", "pane", "water", "light", "box", "light_in_place", "point", "point_in_place"))
         classes = {"pair": (Mirror, Material, Transform), "pane": (Material, Transform),
                    "water": (Water, Mirror, Material), "light": (DirectionalLight,), "box": (Transform, Material),
-                   "light_in_place": (DirectionalLight,)}[target]
+                   "light_in_place": (DirectionalLight,), "point": (PointLight, Transform),
+                   "point_in_place": (Transform,)}[target]
         cls = rng.choice(classes)
         names = [f.name for f in dataclasses.fields(cls) if f.init and not f.name.startswith("_")]
-        if target == "light_in_place":
-            detail = {"target": target, "field": rng.choice(("color", "direction")),
+        if target in ("light_in_place", "point_in_place"):
+            detail = {"target": target, "field": rng.choice(("color", "direction") if target == "light_in_place"
+                                                            else ("position",)),
                       "value": rng.choice((rng.uniform(0.0, 2.0), float("nan"), 1e39, -1.0, 0.0))}
         else:
             field = rng.choice(names)
@@ -143,7 +153,8 @@ def random_still_case(rng: random.Random) -> StillCase:
                      panes=[_pane(rng) for _ in range(rng.randint(0, 3))], water=rng.random() < 0.4,
                      see_through_mirror=rng.random() < 0.3,
                      sandwich=_alpha(rng) if rng.random() < 0.35 else None, still=rng.randint(3, 7), change=change,
-                     detail=detail, after=rng.randint(3, 6), rate=rng.choice((1.0, 1.0, 0.95, 0.7)))
+                     detail=detail, after=rng.randint(3, 6), rate=rng.choice((1.0, 1.0, 0.95, 0.7)),
+                     point_light=rng.random() < 0.4, bloom=rng.random() < 0.3)
 
 
 def _plausible(rng: random.Random) -> Any:
@@ -162,8 +173,9 @@ class _Base(Game):
         eye = glm.vec3(0.4, 1.5, 1.2)
         self.camera = world.spawn(Transform(position=eye, rotation=look_rotation(glm.vec3(-0.2, 1.3, -3.0) - eye)),
                                   Camera())
+        world.resources["camera"] = self.camera
         world.spawn(Skybox(face_size=8))
-        self.light = world.spawn(DirectionalLight(direction=(0.2, -1.0, -0.5), intensity=1.5))
+        self.light = world.spawn(DirectionalLight(direction=(0.2, -1.0, -0.5), intensity=1.5, shadow_resolution=512))
         world.spawn(Transform(), MeshRef(plane(20, 20, uv_repeat=4)), Material(color=(0.5, 0.5, 0.45)))
 
 
@@ -178,8 +190,14 @@ class _Side:
         self.size = SIZE
         self.capture = CaptureTarget(ctx, SIZE)
         self.named: dict[str, int] = {}
+        self.redraw_shadows = False
 
     def frame(self) -> tuple[np.ndarray, ...]:
+        if self.redraw_shadows:  # the second path: every shadow map drawn whole, none kept
+            shadows = self.engine.stages["shadows"]
+            shadows._still = None
+            for kept in (shadows._directional, shadows._point, shadows._virtual):
+                kept.clear()
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             self.engine.frame(1.0 / 60.0, Output(self.capture.framebuffer, self.size))
@@ -220,6 +238,12 @@ def _spawn(world, case: StillCase) -> dict[str, int]:
                                                             size=(2.0, 2.5), max_depth=case.depth)
         for name in ("first", "second"):
             world.get(named[name], Portal).end_image = True
+    if case.point_light:
+        named["point"] = world.spawn(Transform(position=(-0.3, 2.2, 0.4)),
+                                     PointLight(color=(1.0, 0.8, 0.6), intensity=3.0, range=6.0, shadows=True,
+                                                shadow_resolution=64))
+    if case.bloom:
+        world.add_component(world.resources["camera"], Bloom(intensity=0.2))
     named["box"] = world.spawn(Transform(position=(0.8, 0.6, 0.0), scale=(0.4, 1.2, 0.4)), MeshRef(box()),
                                Material(color=(0.9, 0.2, 0.1)), Emissive(0.6))
     for i, pane in enumerate(case.panes):
@@ -268,6 +292,7 @@ class StillFuzzer:
         self.keeping = _Side(ctx)
         self.drawing = _Side(ctx)
         self.drawing.engine.reflection_system.keep_still_views = False
+        self.drawing.redraw_shadows = True
         for _ in range(2):
             self.keeping.frame()
             self.drawing.frame()
@@ -332,8 +357,9 @@ class StillFuzzer:
                 for side in sides:
                     side.world.get(side.game.camera, Camera).active = True
             if problem is None:
-                in_place = case.detail.get("target") == "light_in_place"
-                problem = self._frames(case.after, f"DirectionalLight.{case.detail['field']}" if in_place else None)
+                in_place = {"light_in_place": "DirectionalLight", "point_in_place": "Transform"}.get(
+                    case.detail.get("target"))
+                problem = self._frames(case.after, f"{in_place}.{case.detail['field']}" if in_place else None)
                 if problem == "refused":
                     problem, refused = None, True
         except Exception as exc:  # noqa: BLE001 - any exception is what the fuzz is looking for
@@ -385,6 +411,8 @@ class StillFuzzer:
         target = detail["target"]
         if target in ("light", "light_in_place"):
             entity = side.game.light
+        elif target in ("point", "point_in_place"):
+            entity = side.named.get("point")
         elif target == "pane":
             entity = next((e for n, e in side.named.items() if n.startswith("pane")), None)
         elif target == "pair":
@@ -397,6 +425,9 @@ class StillFuzzer:
             light = world.get(entity, DirectionalLight)
             vector = light.color if detail["field"] == "color" else light.direction
             vector.x = detail["value"]  # an in-place edit: checked at the transform stage
+            return None
+        if target == "point_in_place":
+            world.get(entity, Transform).position.x = detail["value"]  # the light moved, in place
             return None
         cls = {"Mirror": Mirror, "Material": Material, "Transform": Transform, "Water": Water,
                "DirectionalLight": DirectionalLight, "PointLight": PointLight}[detail["cls"]]
@@ -430,7 +461,9 @@ class StillFuzzer:
             if side.size != SIZE:
                 side.resize(SIZE)
             light = side.world.get(side.game.light, DirectionalLight)
-            side.world.add_component(side.game.light, DirectionalLight(direction=(0.2, -1.0, -0.5), intensity=1.5))
+            side.world.add_component(side.game.light, DirectionalLight(direction=(0.2, -1.0, -0.5), intensity=1.5,
+                                                                        shadow_resolution=512))
+            side.world.remove_component(side.game.camera, Bloom)
             del light
         self.keeping.engine.reflection_system.keep_still_views = True
         problem = self._frames(3)

@@ -184,8 +184,9 @@ def _glass_pair_case(change: str, detail: dict):
 
 def test_the_still_fuzz_catches_a_refill_that_does_not_put_a_level_back(ctx, monkeypatch):
     """The checks can fail: a refill that skips putting its levels back (their old composites
-    left in) differs from the whole-drawn frame, and a level copy kept after the pair went is
-    reported as resources that did not come back."""
+    left in) differs from the whole-drawn frame, a level copy kept after the pair went is
+    reported as resources that did not come back, and a shadow map kept after its light
+    turned differs from the other engine's, drawn whole every frame."""
     from benchmarks.still_fuzz import StillFuzzer
     from engine.render.level_copies import LevelCopies
 
@@ -201,5 +202,11 @@ def test_the_still_fuzz_catches_a_refill_that_does_not_put_a_level_back(ctx, mon
             patch.setattr(LevelCopies, "release", lambda self: None)
             why = fuzzer.run(_glass_pair_case("remove", {"target": "box"}))
         assert why is not None and "level_copies" in why, why
+        # A shadow stage that keeps its maps though the light turned (edited in place):
+        # the other engine draws every map whole, so the stale shadows show.
+        monkeypatch.setattr(fuzzer.keeping.engine.stages["shadows"], "_directional_maps", lambda *args: None)
+        why = fuzzer.run(_glass_pair_case("component", {"target": "light_in_place", "field": "direction",
+                                                        "value": 0.9}))
+        assert why is not None and "differs from the frame drawn whole" in why, why
     finally:
         fuzzer.close()
