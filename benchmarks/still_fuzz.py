@@ -8,7 +8,10 @@ Each case is run in two engines of the same level, in lockstep (as
 (``keep_still_views = False``) draws its whole tree every frame, and draws every shadow map
 whole every frame too (its shadow stage's record of what each map was drawn from wiped before
 each frame), so a map kept on a still frame, or drawn again only where casters moved, must
-equal one drawn from scratch.  The level, around the pair,
+equal one drawn from scratch; and it plans each reflection level after its parent's claims
+(``ViewTree.plan_ahead = False``), so levels the keeping engine planned ahead
+(``ViewTree._plan_ahead``) must come out the same.  A case runs exact or predicted
+visibility (``ReflectionSystem.visibility``) in both.  The level, around the pair,
 has glass panes of random alpha (the transparent slot ordered by the planes of see-through
 surfaces, ``scene_pass._back_to_front``), now and then still water (a see-through mirror:
 ``InstanceBatch.plane``) or a see-through mirror, or a pane of random alpha between a raised
@@ -98,12 +101,13 @@ class StillCase:
     rate: float = 1.0  # the mirror pair's reflect_rate (below 1: composites blend over the level's own pixels)
     point_light: bool = False  # a point light casting shadows (a shadow cube) between the mirrors
     bloom: bool = False  # Bloom on the camera (its chain planned once a size: a resize changes it)
+    visibility: str = "exact"  # the reflect stage's visibility mode, in both engines
 
     def describe(self) -> str:
         return (f"still {self.pair} depth {self.depth}, {len(self.panes)} panes {self.panes}, water {self.water}, "
                 f"see-through mirror {self.see_through_mirror}, sandwich {self.sandwich}; {self.still} still frames, "
-                f"rate {self.rate}, point light {self.point_light}, bloom {self.bloom}, then {self.change} "
-                f"{self.detail}, {self.after} frames")
+                f"rate {self.rate}, point light {self.point_light}, bloom {self.bloom}, {self.visibility}; then "
+                f"{self.change} {self.detail}, {self.after} frames")
 
 
 def _alpha(rng: random.Random) -> float:
@@ -154,7 +158,8 @@ def random_still_case(rng: random.Random) -> StillCase:
                      see_through_mirror=rng.random() < 0.3,
                      sandwich=_alpha(rng) if rng.random() < 0.35 else None, still=rng.randint(3, 7), change=change,
                      detail=detail, after=rng.randint(3, 6), rate=rng.choice((1.0, 1.0, 0.95, 0.7)),
-                     point_light=rng.random() < 0.4, bloom=rng.random() < 0.3)
+                     point_light=rng.random() < 0.4, bloom=rng.random() < 0.3,
+                     visibility="predicted" if rng.random() < 0.25 else "exact")
 
 
 def _plausible(rng: random.Random) -> Any:
@@ -293,6 +298,7 @@ class StillFuzzer:
         self.drawing = _Side(ctx)
         self.drawing.engine.reflection_system.keep_still_views = False
         self.drawing.redraw_shadows = True
+        self.drawing.engine.reflection_system.tree.plan_ahead = False  # each level planned after its parent's claims
         for _ in range(2):
             self.keeping.frame()
             self.drawing.frame()
@@ -343,6 +349,7 @@ class StillFuzzer:
                 warnings.simplefilter("ignore")
                 for side in sides:
                     side.named = _spawn(side.world, case)
+                    side.engine.reflection_system.visibility = case.visibility
             problem = self._frames(case.still)
             if problem is None:
                 outcome = [self._change(side, case) for side in sides]
@@ -458,6 +465,7 @@ class StillFuzzer:
             side.named = {}
             system = side.engine.reflection_system
             system.max_depth_cap = 8
+            system.visibility = "exact"
             if side.size != SIZE:
                 side.resize(SIZE)
             light = side.world.get(side.game.light, DirectionalLight)
