@@ -19,7 +19,7 @@ pond and a far see-through mirror (``RenderStats.glass_between_surfaces``), a li
 and then a point light casting shadows and Bloom on the camera.  The change is one of:
 
 - ``component``: a field of the pair, a pane, the water, a light or the box written with a
-  value from the component fuzz's pool (``benchmarks.fuzz.random_value``), or a light's colour
+  value from the component fuzz's pool (``benchmarks.fuzz_cases.random_value``), or a light's colour
   or direction edited in place (``light.color.r = ...``, seen one stage later), or the point
   light moved in place (its shadow cube drawn again);
 - ``remove``: a mirror or portal of the pair, a pane, the water, the far see-through mirror or
@@ -52,7 +52,7 @@ from typing import Any
 import numpy as np
 from pyglm import glm
 
-from benchmarks.fuzz import _ripples
+from benchmarks.fuzz_cases import _ripples
 from components import (
     Bloom,
     Camera,
@@ -120,7 +120,7 @@ def _pane(rng: random.Random) -> tuple[tuple[float, float, float], float, tuple[
 
 
 def random_still_case(rng: random.Random) -> StillCase:
-    from benchmarks.fuzz import random_value
+    from benchmarks.fuzz_cases import random_value
 
     change = rng.choice(CHANGES)
     detail: dict[str, Any] = {}
