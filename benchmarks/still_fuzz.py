@@ -1,7 +1,8 @@
 """Still-frame fuzz: a facing mirror or portal pair with end images, seen by a camera that
 stands still long enough for its view tree to be kept and its end images refilled
 (``ViewTree.keep``'s refill, ``engine/render/level_copies.py``), then one random change
-among the refilled frames, and still frames again.
+among the refilled frames, and still frames again (now and then a second and third change,
+each after the frames of the one before).
 
 Each case is run in two engines of the same level, in lockstep (as
 ``tests/test_end_image_settle.py`` does): one keeps still views, the other
@@ -102,12 +103,16 @@ class StillCase:
     point_light: bool = False  # a point light casting shadows (a shadow cube) between the mirrors
     bloom: bool = False  # Bloom on the camera (its chain planned once a size: a resize changes it)
     visibility: str = "exact"  # the reflect stage's visibility mode, in both engines
+    # Further changes, each (change, detail) after the last one's ``after`` frames (the tree
+    # kept again, or refilling again, when the next comes); none after a refused one.
+    then: list[tuple[str, dict[str, Any]]] = dataclasses.field(default_factory=list)
 
     def describe(self) -> str:
         return (f"still {self.pair} depth {self.depth}, {len(self.panes)} panes {self.panes}, water {self.water}, "
                 f"see-through mirror {self.see_through_mirror}, sandwich {self.sandwich}; {self.still} still frames, "
                 f"rate {self.rate}, point light {self.point_light}, bloom {self.bloom}, {self.visibility}; then "
-                f"{self.change} {self.detail}, {self.after} frames")
+                f"{self.change} {self.detail}, {self.after} frames" + "".join(
+                    f"; then {change} {detail}, {self.after} frames" for change, detail in self.then))
 
 
 def _alpha(rng: random.Random) -> float:
@@ -120,6 +125,18 @@ def _pane(rng: random.Random) -> tuple[tuple[float, float, float], float, tuple[
 
 
 def random_still_case(rng: random.Random) -> StillCase:
+    change, detail = _random_change(rng)
+    then = [_random_change(rng) for _ in range(rng.choice((0, 0, 1, 2)))]
+    return StillCase(pair=rng.choice(("mirrors", "portals")), depth=rng.randint(1, 6),
+                     panes=[_pane(rng) for _ in range(rng.randint(0, 3))], water=rng.random() < 0.4,
+                     see_through_mirror=rng.random() < 0.3,
+                     sandwich=_alpha(rng) if rng.random() < 0.35 else None, still=rng.randint(3, 7), change=change,
+                     detail=detail, after=rng.randint(3, 6), rate=rng.choice((1.0, 1.0, 0.95, 0.7)),
+                     point_light=rng.random() < 0.4, bloom=rng.random() < 0.3,
+                     visibility="predicted" if rng.random() < 0.25 else "exact", then=then)
+
+
+def _random_change(rng: random.Random) -> tuple[str, dict[str, Any]]:
     from benchmarks.fuzz_cases import random_value
 
     change = rng.choice(CHANGES)
@@ -153,13 +170,7 @@ def random_still_case(rng: random.Random) -> StillCase:
         detail = {"off_frames": rng.randint(1, 3)}
     else:
         detail = {"add": rng.choice(("water", "mirror", "pane")), "pane": _pane(rng), "alpha": _alpha(rng)}
-    return StillCase(pair=rng.choice(("mirrors", "portals")), depth=rng.randint(1, 6),
-                     panes=[_pane(rng) for _ in range(rng.randint(0, 3))], water=rng.random() < 0.4,
-                     see_through_mirror=rng.random() < 0.3,
-                     sandwich=_alpha(rng) if rng.random() < 0.35 else None, still=rng.randint(3, 7), change=change,
-                     detail=detail, after=rng.randint(3, 6), rate=rng.choice((1.0, 1.0, 0.95, 0.7)),
-                     point_light=rng.random() < 0.4, bloom=rng.random() < 0.3,
-                     visibility="predicted" if rng.random() < 0.25 else "exact")
+    return change, detail
 
 
 def _plausible(rng: random.Random) -> Any:
@@ -351,24 +362,10 @@ class StillFuzzer:
                     side.named = _spawn(side.world, case)
                     side.engine.reflection_system.visibility = case.visibility
             problem = self._frames(case.still)
-            if problem is None:
-                outcome = [self._change(side, case) for side in sides]
-                if outcome[0] != outcome[1]:
-                    problem = f"the two engines took the change differently: {outcome}"
-                elif outcome[0] is not None and outcome[0] != "refused":
-                    problem = outcome[0]
-                refused = outcome[0] == "refused"
-            if problem is None and case.change in ("keep_toggle", "camera_off"):
-                problem = self._frames(case.detail["off_frames"])
-                self.keeping.engine.reflection_system.keep_still_views = True
-                for side in sides:
-                    side.world.get(side.game.camera, Camera).active = True
-            if problem is None:
-                in_place = {"light_in_place": "DirectionalLight", "point_in_place": "Transform"}.get(
-                    case.detail.get("target"))
-                problem = self._frames(case.after, f"{in_place}.{case.detail['field']}" if in_place else None)
-                if problem == "refused":
-                    problem, refused = None, True
+            for change, detail in ((case.change, case.detail), *case.then):
+                if problem is not None or refused:
+                    break
+                problem, refused = self._phase(dataclasses.replace(case, change=change, detail=detail))
         except Exception as exc:  # noqa: BLE001 - any exception is what the fuzz is looking for
             problem = f"raised {type(exc).__name__}: {exc}\n{traceback.format_exc(limit=-4)}"
         problem = self._undo() or problem if problem is None else problem
@@ -380,6 +377,26 @@ class StillFuzzer:
         else:
             self._restart()
         return problem
+
+    def _phase(self, case: StillCase) -> tuple[str | None, bool]:
+        """The case's change in both engines, then its frames: (why it failed or None,
+        whether the change was refused naming its field)."""
+        sides = (self.keeping, self.drawing)
+        outcome = [self._change(side, case) for side in sides]
+        if outcome[0] != outcome[1]:
+            return f"the two engines took the change differently: {outcome}", False
+        if outcome[0] is not None:
+            return (None, True) if outcome[0] == "refused" else (outcome[0], False)
+        if case.change in ("keep_toggle", "camera_off"):
+            problem = self._frames(case.detail["off_frames"])
+            if problem is not None:
+                return problem, False
+            self.keeping.engine.reflection_system.keep_still_views = True
+            for side in sides:
+                side.world.get(side.game.camera, Camera).active = True
+        in_place = {"light_in_place": "DirectionalLight", "point_in_place": "Transform"}.get(case.detail.get("target"))
+        problem = self._frames(case.after, f"{in_place}.{case.detail['field']}" if in_place else None)
+        return (None, True) if problem == "refused" else (problem, False)
 
     def _change(self, side: _Side, case: StillCase) -> str | None:
         """The case's change in one engine: None, "refused" (a ComponentValueError naming the
@@ -400,15 +417,15 @@ class StillFuzzer:
             if name in side.named:
                 world.delete_entity(side.named.pop(name))
         elif change == "surface":
-            add = detail["add"]
+            add, name = detail["add"], f"added{len(side.named)}"  # (a name of its own: a case may add two)
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
                 if add == "water":
-                    side.named["added"] = _spawn_water(world, detail["alpha"])
+                    side.named[name] = _spawn_water(world, detail["alpha"])
                 elif add == "mirror":
-                    side.named["added"] = _spawn_see_through_mirror(world, detail["alpha"])
+                    side.named[name] = _spawn_see_through_mirror(world, detail["alpha"])
                 else:
-                    side.named["added"] = _spawn_pane(world, detail["pane"])
+                    side.named[name] = _spawn_pane(world, detail["pane"])
         else:
             return self._write(side, case)
         return None
