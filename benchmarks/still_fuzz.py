@@ -417,7 +417,8 @@ class StillFuzzer:
             if name in side.named:
                 world.delete_entity(side.named.pop(name))
         elif change == "surface":
-            add, name = detail["add"], f"added{len(side.named)}"  # (a name of its own: a case may add two)
+            # (a name of its own: a case may add two, and remove others between)
+            add, name = detail["add"], f"added{sum(1 for other in side.named if other.startswith('added'))}"
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
                 if add == "water":
