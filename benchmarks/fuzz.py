@@ -22,7 +22,13 @@ symlink loops, FIFOs, a directory, /dev/zero, image bombs, deep nesting, 16-bit 
 images, paths outside the level's folder): each refused saying what it is, or loaded with
 the right texel and drawn clean.  ``--model-cases`` (default 100) runs the model fuzz
 (``benchmarks/model_fuzz.py``: model files and the maps they name made at random, loaded and
-spawned with ``spawn_model`` outside any level).
+spawned with ``spawn_model`` outside any level).  ``--still-cases`` (default 50) runs the
+still-frame fuzz (``benchmarks/still_fuzz.py``: a facing mirror or portal pair with end
+images, glass of random alpha, still water; the camera still until the tree is kept and its
+end images refill, then one random change (an awkward component value, an entity removed
+mid-refill, a resize, a depth cap, keep_still_views toggled, a see-through surface added, a
+light edited in place, the camera off); every frame equal bit for bit to an engine drawing
+its whole tree each frame, and the resource counts back once the case's entities go).
 """
 from __future__ import annotations
 
@@ -37,7 +43,7 @@ from typing import Any
 import numpy as np
 from pyglm import glm
 
-from benchmarks.fuzz_cases import FRAMES, run_cases
+from benchmarks.fuzz_cases import FRAMES, _ripples, random_value, run_cases
 from components import (
     Bloom,
     Camera,
@@ -64,7 +70,6 @@ from components import (
     look_rotation,
 )
 from engine.assets.mesh import box, quad, sphere
-from engine.assets.texture_data import checker_texture
 from engine.core.frame_io import Output
 from engine.core.game import Game
 from engine.render.targets import CaptureTarget
@@ -74,43 +79,6 @@ SIZE = (48, 32)
 CLASSES: tuple[type, ...] = (Transform, MeshRef, Material, Emissive, Reflective, Refractive, Mirror, Portal,
                              Traveller, Slice, PortalClone, ReflectionProbe, Camera, FlyController,
                              DirectionalLight, PointLight, Skybox, Tonemap, Bloom, Visibility, Water)
-
-_NUMBERS: list[Any] = [0, 1, -1, 0.5, 2.0, 1e-30, 1e-4, 3.0, 16, 100.0, 1e5, 65504.0, 65505.0, 1e7, 1e20,
-                       3.4e38, 1e39, float("nan"), float("inf"), -float("inf"), 10 ** 400, 2 ** 63, 2 ** 64 + 5,
-                       -(2 ** 63), 179.0, 0.1]
-_OTHER: list[Any] = [None, True, False, "x", "skybox", "cube", "on_change", b"1", [], {}, (), object()]
-
-
-def _vectors(rng: random.Random) -> Any:
-    n = rng.choice((2, 3, 3, 4, 4, 5))
-    return tuple(rng.choice(_NUMBERS) for _ in range(n))
-
-
-def random_value(rng: random.Random) -> Any:
-    """One adversarial value for any field (kinds mixed on purpose)."""
-    if rng.random() < 0.35:
-        # Plausible values too, so a good share of cases get as far as a frame.
-        return rng.choice((rng.uniform(0.0, 1.0), rng.randint(1, 8), rng.random() < 0.5,
-                           tuple(rng.uniform(0.0, 1.0) for _ in range(3)),
-                           tuple(rng.uniform(0.0, 1.0) for _ in range(4)),
-                           (1.0, rng.uniform(-1, 1), rng.uniform(-1, 1), rng.uniform(-1, 1)),
-                           rng.choice((64, 128)), rng.uniform(1.0, 3.0)))
-    roll = rng.random()
-    if roll < 0.35:
-        return rng.choice(_NUMBERS)
-    if roll < 0.65:
-        return _vectors(rng)
-    if roll < 0.75:
-        return rng.choice(_OTHER)
-    if roll < 0.82:
-        return rng.choice((glm.quat(1e20, 0, 1e20, 0), glm.quat(0, 0, 0, 0), glm.quat(), (0, 90, 0),
-                           glm.vec3(1e39, 0, 0), glm.vec3(0), glm.vec4(1, 1, 1, 1)))
-    if roll < 0.88:
-        return rng.choice((box(), quad(0, 0), quad(1, 1), sphere(0.5, 8, 4), checker_texture(8, 2)))
-    if roll < 0.94:
-        return rng.choice(("skybox", "planar", "cube", "portal", "once", "every_frame", "never"))
-    return rng.uniform(-10, 10)
-
 
 @dataclasses.dataclass
 class Case:
@@ -259,17 +227,6 @@ class Fuzzer:
 def fuzz(ctx, cases: int, seed: int = 0, report=None) -> tuple[int, list[tuple[str, str]], dict[str, int]]:
     """Run ``cases`` component cases (``run_cases``)."""
     return run_cases(Fuzzer(ctx), random_case, cases, seed, report)
-
-
-_RIPPLES: list = []
-
-
-def _ripples():
-    """One small normal map for every water the fuzz makes (made once)."""
-    if not _RIPPLES:
-        from engine.assets.texture_data import ripple_normal_map
-        _RIPPLES.append(ripple_normal_map(16))
-    return _RIPPLES[0]
 
 
 # --- budgets, with the surfaces that spend them ----------------------------------------------
@@ -431,6 +388,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "(default 100)")
     parser.add_argument("--level-cases", type=int, default=0,
                         help="also run this many level-file cases (mutated level files; default 0)")
+    parser.add_argument("--still-cases", type=int, default=50,
+                        help="still-frame cases: a mirror or portal pair with end images kept and refilled by a "
+                             "still camera, one random change, every frame equal to an engine drawing its whole "
+                             "tree, resources back after (benchmarks/still_fuzz.py; default 50)")
     add_model_arguments(parser)
 
 
@@ -466,6 +427,7 @@ def main(args: argparse.Namespace) -> int:
     from pathlib import Path
 
     from benchmarks.level_fuzz import fuzz_files, fuzz_levels
+    from benchmarks.still_fuzz import fuzz_still
     from engine.render.gl_context import create_headless_context
 
     ctx = create_headless_context()
@@ -483,6 +445,7 @@ def main(args: argparse.Namespace) -> int:
         with tempfile.TemporaryDirectory() as folder:
             file_ran, file_failures, file_passes = fuzz_files(ctx, Path(folder), report)
         model_ran, model_failures, model_passes = run_model_fuzz(ctx, args, report)
+        still_ran, still_failures, still_passes = fuzz_still(ctx, args.still_cases, args.seed, report)
     finally:
         ctx.release()
     if args.json:
@@ -508,4 +471,12 @@ def main(args: argparse.Namespace) -> int:
         print(f"file cases: {file_ran} ran, {len(file_failures)} failed ({file_passes['refused']} refused saying what "
               f"the file is, {file_passes['rendered']} loaded right and rendered clean)")
     print_model_fuzz(args, model_ran, model_failures, model_passes)
-    return 1 if failures or level_failures or file_failures or model_failures else 0
+    if args.json:
+        print(json.dumps({"still_cases": still_ran, "failed": len(still_failures), **still_passes,
+                          "failures": still_failures[:50]}))
+    else:
+        print(f"still fuzz: {still_ran} cases ran, {len(still_failures)} failed ({still_passes['refused']} refused "
+              f"naming the field, {still_passes['rendered']} rendered equal to a whole-drawn engine with resources "
+              f"back after; {still_passes['refill_frames']} refilled frames, {still_passes['glass_between_frames']} "
+              f"with glass between see-through surfaces; seed {args.seed})")
+    return 1 if failures or level_failures or file_failures or model_failures or still_failures else 0

@@ -1,8 +1,15 @@
-"""Running fuzz cases: the loop the component fuzz (``benchmarks/fuzz.py``) and the level-file
-fuzz (``benchmarks/level_fuzz.py``) share."""
+"""Running fuzz cases: the loop the component fuzz (``benchmarks/fuzz.py``), the level-file
+fuzz (``benchmarks/level_fuzz.py``) and the still-frame fuzz (``benchmarks/still_fuzz.py``)
+share, and the pool of awkward values the component and still-frame fuzzes draw from."""
 from __future__ import annotations
 
 import random
+from typing import Any
+
+from pyglm import glm
+
+from engine.assets.mesh import box, quad, sphere
+from engine.assets.texture_data import checker_texture
 
 FRAMES = 3  # frames each fuzz renders a case: probes, time-sliced captures and uploads settle over a few
 
@@ -25,3 +32,51 @@ def run_cases(fuzzer, make_case, cases: int, seed: int, report=None) -> tuple[in
     finally:
         fuzzer.close()
     return cases, failures, passes
+
+
+_NUMBERS: list[Any] = [0, 1, -1, 0.5, 2.0, 1e-30, 1e-4, 3.0, 16, 100.0, 1e5, 65504.0, 65505.0, 1e7, 1e20,
+                       3.4e38, 1e39, float("nan"), float("inf"), -float("inf"), 10 ** 400, 2 ** 63, 2 ** 64 + 5,
+                       -(2 ** 63), 179.0, 0.1]
+_OTHER: list[Any] = [None, True, False, "x", "skybox", "cube", "on_change", b"1", [], {}, (), object()]
+
+
+def _vectors(rng: random.Random) -> Any:
+    n = rng.choice((2, 3, 3, 4, 4, 5))
+    return tuple(rng.choice(_NUMBERS) for _ in range(n))
+
+
+def random_value(rng: random.Random) -> Any:
+    """One adversarial value for any field (kinds mixed on purpose)."""
+    if rng.random() < 0.35:
+        # Plausible values too, so a good share of cases get as far as a frame.
+        return rng.choice((rng.uniform(0.0, 1.0), rng.randint(1, 8), rng.random() < 0.5,
+                           tuple(rng.uniform(0.0, 1.0) for _ in range(3)),
+                           tuple(rng.uniform(0.0, 1.0) for _ in range(4)),
+                           (1.0, rng.uniform(-1, 1), rng.uniform(-1, 1), rng.uniform(-1, 1)),
+                           rng.choice((64, 128)), rng.uniform(1.0, 3.0)))
+    roll = rng.random()
+    if roll < 0.35:
+        return rng.choice(_NUMBERS)
+    if roll < 0.65:
+        return _vectors(rng)
+    if roll < 0.75:
+        return rng.choice(_OTHER)
+    if roll < 0.82:
+        return rng.choice((glm.quat(1e20, 0, 1e20, 0), glm.quat(0, 0, 0, 0), glm.quat(), (0, 90, 0),
+                           glm.vec3(1e39, 0, 0), glm.vec3(0), glm.vec4(1, 1, 1, 1)))
+    if roll < 0.88:
+        return rng.choice((box(), quad(0, 0), quad(1, 1), sphere(0.5, 8, 4), checker_texture(8, 2)))
+    if roll < 0.94:
+        return rng.choice(("skybox", "planar", "cube", "portal", "once", "every_frame", "never"))
+    return rng.uniform(-10, 10)
+
+
+_RIPPLES: list = []
+
+
+def _ripples():
+    """One small normal map for every water the fuzz makes (made once)."""
+    if not _RIPPLES:
+        from engine.assets.texture_data import ripple_normal_map
+        _RIPPLES.append(ripple_normal_map(16))
+    return _RIPPLES[0]

@@ -218,3 +218,22 @@ def test_a_predicted_tree_refills_too(scene):
     assert pair.keeping.stats.reflection_visibility == "predicted"
     # (the first frame has no counts: every candidate drawn, not the tree the next one draws)
     assert kinds[:2] == ["drawn"] * 2 and kinds[2:8] == ["refilled"] * 6
+
+
+def test_the_level_copies_go_when_the_pair_is_removed_mid_refill(scene):
+    """The facing mirrors deleted while their still tree refills (copies of its levels held):
+    the next frame has no mirror to draw, and lets the copies go rather than holding a
+    level's colour and id images until some later still tree is drawn (found by
+    ``benchmarks/still_fuzz.py``, which checks resource counts come back after each case)."""
+    pair = _Pair(scene, SCENES["glass"])
+    assert [pair.frame() for _ in range(4)] == ["drawn", "drawn", "refilled", "refilled"]
+    tree = pair.keeping.engine.reflection_system.tree
+    assert len(tree.copies) > 0
+
+    def remove_mirrors(runner):
+        for entity, _ in runner.world.query_one(Mirror):
+            runner.world.delete_entity(entity)
+
+    pair.both(remove_mirrors)
+    assert [pair.frame() for _ in range(2)] == ["drawn", "drawn"]
+    assert pair.keeping.stats.reflection_views == 0 and len(tree.copies) == 0

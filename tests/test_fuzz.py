@@ -158,3 +158,55 @@ def test_the_level_fuzzer_renders_the_base_level_and_catches_a_silent_failure(le
         assert why is not None and "left entities" in why
     finally:
         level_fuzzer.world.delete_entity(keep)
+
+
+# --- still frames: kept and refilled view trees (benchmarks/still_fuzz.py) -----------------------
+
+def test_still_cases_refill_and_draw_what_a_whole_drawn_engine_draws(ctx):
+    """A few seeded still-frame cases: a facing pair with end images kept and refilled by a
+    still camera, glass between see-through surfaces, one random change mid-refill; every
+    frame bit for bit the frame of an engine drawing its whole tree, resources back after
+    each case (the big runs are ``python -m benchmarks fuzz --still-cases N``)."""
+    from benchmarks.still_fuzz import fuzz_still
+
+    ran, failures, passes = fuzz_still(ctx, 8, seed=5)
+    assert ran == 8 and failures == [], failures
+    assert passes["rendered"] > 0 and passes["refill_frames"] >= 8 and passes["glass_between_frames"] > 0, passes
+
+
+def _glass_pair_case(change: str, detail: dict):
+    from benchmarks.still_fuzz import StillCase
+
+    return StillCase(pair="mirrors", depth=3, panes=[((-0.6, 1.0, -1.0), 1.4, (0.9, 0.2, 0.1, 0.5))], water=False,
+                     see_through_mirror=False, sandwich=None, still=5, change=change, detail=detail, after=3,
+                     rate=0.8)
+
+
+def test_the_still_fuzz_catches_a_refill_that_does_not_put_a_level_back(ctx, monkeypatch):
+    """The checks can fail: a refill that skips putting its levels back (their old composites
+    left in) differs from the whole-drawn frame, a level copy kept after the pair went is
+    reported as resources that did not come back, and a shadow map kept after its light
+    turned differs from the other engine's, drawn whole every frame."""
+    from benchmarks.still_fuzz import StillFuzzer
+    from engine.render.level_copies import LevelCopies
+
+    fuzzer = StillFuzzer(ctx)
+    try:
+        case = _glass_pair_case("depth_cap", {"cap": 8})
+        assert fuzzer.run(case) is None and fuzzer.refills >= 3
+        with monkeypatch.context() as patch:
+            patch.setattr(LevelCopies, "restore", lambda self, level, targets, rect: None)
+            why = fuzzer.run(case)
+        assert why is not None and "differs from the frame drawn whole" in why, why
+        with monkeypatch.context() as patch:
+            patch.setattr(LevelCopies, "release", lambda self: None)
+            why = fuzzer.run(_glass_pair_case("remove", {"target": "box"}))
+        assert why is not None and "level_copies" in why, why
+        # A shadow stage that keeps its maps though the light turned (edited in place):
+        # the other engine draws every map whole, so the stale shadows show.
+        monkeypatch.setattr(fuzzer.keeping.engine.stages["shadows"], "_directional_maps", lambda *args: None)
+        why = fuzzer.run(_glass_pair_case("component", {"target": "light_in_place", "field": "direction",
+                                                        "value": 0.9}))
+        assert why is not None and "differs from the frame drawn whole" in why, why
+    finally:
+        fuzzer.close()

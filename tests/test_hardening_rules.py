@@ -595,6 +595,43 @@ def test_a_colour_edited_in_place_between_frames_is_drawn_the_next_frame(ctx):
         runner.close()
 
 
+@pytest.mark.parametrize("mend", ["replace", "delete"])
+def test_a_bad_in_place_edit_is_refused_until_what_held_it_is_replaced_or_deleted(ctx, mend):
+    """A NaN put in ``material.color.x`` is refused at the next frame's transform stage,
+    naming the field, and at every frame after while the world holds it; a game that then
+    replaces the Material (or deletes the crate) has mended its world: the next frame renders
+    (the new colour on the crate, or no crate), not the same refusal again for a component
+    the world no longer holds (found by ``benchmarks/still_fuzz.py``: a light edited in place
+    with a NaN, then replaced, failed every frame after)."""
+    from components import ComponentValueError
+
+    ents = {}
+    runner = _runner(ctx, _crate_room(ents))
+    try:
+        runner.frame()
+        bad = runner.world.get(ents["crate"], Material)
+        bad.color.x = float("nan")
+        for _ in range(2):
+            with pytest.raises(ComponentValueError, match=r"in-place edit of Material\.color"):
+                runner.frame()
+        if mend == "replace":
+            runner.world.add_component(ents["crate"], Material(color=(0.1, 0.2, 0.9)))
+        else:
+            runner.world.delete_entity(ents["crate"])
+        rgb = runner.frame()
+        assert runner.ctx.error == "GL_NO_ERROR"
+        assert np.isfinite(np.frombuffer(runner.engine.renderer.targets.color.read(), np.float16)).all()
+        at = runner.ids() == ents["crate"]
+        if mend == "replace":
+            blue = rgb[at].mean(axis=0)
+            assert at.sum() > 20 and blue[2] > 2 * blue[0], blue
+        else:
+            assert not at.any()
+        assert all(watched[0] is not bad for watched in runner.world._handed.values())  # let go
+    finally:
+        runner.close()
+
+
 def test_a_vector_a_game_keeps_is_watched_while_it_keeps_it_and_dropped_after(ctx):
     """A game that keeps ``p = t.position`` and edits ``p.x`` every frame without reading the
     field again: still seen (the value is held elsewhere, so the watch keeps it); vectors

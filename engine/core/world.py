@@ -227,7 +227,9 @@ class World:
         it was read; one that differs is checked by the component's own rules (a NaN put in
         ``t.position.x`` is refused here, naming the field) and reported as a write of its
         field.  A value the component no longer holds (the field was assigned since: that
-        write was reported) is dropped; one still held elsewhere (a game keeps ``p =
+        write was reported) is dropped, and so is one of a component this world no longer holds
+        (replaced, or its entity deleted: a bad edit refused at one frame is not refused again
+        at every frame after the game replaced what held it); one still held elsewhere (a game keeps ``p =
         t.position``) stays watched with a fresh copy.  Returns how many edits were found.
         Called by the transform stage, before it reads the change sets."""
         handed = self._handed
@@ -238,6 +240,8 @@ class World:
         for key, (component, name, value, copy) in handed.items():
             if component.__dict__.get(name) is not value:
                 continue  # assigned since: reported by that write; the old value is not the field's
+            if component.__dict__.get("_world_ref") is not self:
+                continue  # replaced or its entity deleted since: no longer this world's to check or report
             if value != copy:
                 found += 1
                 try:

@@ -377,6 +377,8 @@ class ViewTree:
         if not surfaces.states:  # no mirror or portal anywhere: the root is the whole tree
             if self.ends is not None:
                 self.ends.forget()
+            if len(self.copies):  # (the pair whose levels were copied went mid-refill: let the copies go)
+                self.copies.release()
             self.scene_pass.draw_transparent([root], levels[0], root_options)
             return result
         stats = self.renderer.stats
