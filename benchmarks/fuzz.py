@@ -43,7 +43,7 @@ from typing import Any
 import numpy as np
 from pyglm import glm
 
-from benchmarks.fuzz_cases import FRAMES, _ripples, random_value, run_cases
+from benchmarks.fuzz_cases import FRAMES, fuzz_ripples, random_value, run_cases
 from components import (
     Bloom,
     Camera,
@@ -161,7 +161,7 @@ class Fuzzer:
                                               Material: Material()}
                     if case.cls is Water:  # the surface it makes water, with waves
                         parts[Mirror] = Mirror()
-                        parts[Material] = Material(color=(0.2, 0.3, 0.4, 0.6), normal_map=_ripples())
+                        parts[Material] = Material(color=(0.2, 0.3, 0.4, 0.6), normal_map=fuzz_ripples())
                     parts[case.cls] = component
                     spawned = world.spawn(*parts.values())
         except ComponentValueError as exc:
@@ -332,7 +332,7 @@ class BudgetFuzzer:
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
                 parts = [Transform(position=(0, 0.02, 1.0), rotation=glm.angleAxis(-1.5708, glm.vec3(1, 0, 0))),
-                         MeshRef(quad(2.0, 2.0)), Material(color=(0.2, 0.3, 0.4, 0.6), normal_map=_ripples())]
+                         MeshRef(quad(2.0, 2.0)), Material(color=(0.2, 0.3, 0.4, 0.6), normal_map=fuzz_ripples())]
                 for cls, values in ((Mirror, case.mirror), (Water, case.water), (Visibility, case.visibility)):
                     try:
                         parts.append(cls(**values))

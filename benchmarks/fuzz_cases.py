@@ -71,12 +71,12 @@ def random_value(rng: random.Random) -> Any:
     return rng.uniform(-10, 10)
 
 
-_RIPPLES: list = []
+_FUZZ_RIPPLES: list = []
 
 
-def _ripples():
+def fuzz_ripples():
     """One small normal map for every water the fuzz makes (made once)."""
-    if not _RIPPLES:
+    if not _FUZZ_RIPPLES:
         from engine.assets.texture_data import ripple_normal_map
-        _RIPPLES.append(ripple_normal_map(16))
-    return _RIPPLES[0]
+        _FUZZ_RIPPLES.append(ripple_normal_map(16))
+    return _FUZZ_RIPPLES[0]

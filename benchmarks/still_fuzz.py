@@ -53,7 +53,7 @@ from typing import Any
 import numpy as np
 from pyglm import glm
 
-from benchmarks.fuzz_cases import _ripples
+from benchmarks.fuzz_cases import fuzz_ripples
 from components import (
     Bloom,
     Camera,
@@ -272,7 +272,7 @@ def _spawn(world, case: StillCase) -> dict[str, int]:
         # A pane under a raised pond, reaching onto a far see-through mirror behind it: glass
         # between two see-through surfaces (RenderStats.glass_between_surfaces).
         named["pond"] = world.spawn(Transform(position=(-0.4, 0.6, -0.6), rotation=FLAT), MeshRef(quad(1.6, 1.6)),
-                                     Material(color=(0.2, 0.3, 0.6, 0.6), normal_map=_ripples()),
+                                     Material(color=(0.2, 0.3, 0.6, 0.6), normal_map=fuzz_ripples()),
                                      Mirror(reflect_rate=0.7), Water(speed=0.0))
         named["far_glass_mirror"] = world.spawn(Transform(position=(0.2, 0.9, -2.4)), MeshRef(quad(2.6, 1.6)),
                                                 Material(color=(0.3, 0.3, 0.3, 0.6)),
@@ -289,7 +289,7 @@ def _spawn_pane(world, pane) -> int:
 
 def _spawn_water(world, alpha: float) -> int:
     return world.spawn(Transform(position=(-0.5, 0.05, 0.5), rotation=FLAT), MeshRef(quad(2.0, 2.0)),
-                       Material(color=(0.2, 0.3, 0.4, alpha), normal_map=_ripples()), Mirror(), Water(speed=0.0))
+                       Material(color=(0.2, 0.3, 0.4, alpha), normal_map=fuzz_ripples()), Mirror(), Water(speed=0.0))
 
 
 def _spawn_see_through_mirror(world, alpha: float) -> int:
