@@ -63,6 +63,13 @@ its limit, printed as value, limit, met, and judged on the kind of machine it is
   aspect (2:1) draws the same batches as 16:9 here, which the check above confirms.  Each
   engine draws ``STAND_IN_BLOCK`` frames in a row, the first untimed: engines share the
   context, and a frame after another engine's binds again what that one displaced;
+  the process also times ``pass_floor_ms``: as many bare passes as the GPU's chain has (a
+  framebuffer switch and a 3-vertex draw each, nothing bound), the least such a chain can
+  cost llvmpipe, which flushes and draws on the calling thread at every switch where a GPU
+  driver queues.  The post target prints it as ``least_possible``: (off + floor) / off.
+  Measured at 4x2: the floor is about 21 us, 1.16x the 0.13 ms ``off`` frame, so no chain of
+  eleven dependent passes meets the 1.10 limit on this stand-in; the post variant adds about
+  twice the floor (its texture binds, and Python);
 * ``shadow_maps_moving`` (a count, judged everywhere): the shadow maps a frame of
   ``shadows_moving`` draws, at most 1 whatever the number of mirrors; ``shadows`` draws 0;
   ``mirror_light`` 0 and ``mirror_light_moving`` at most 2 (one more for the virtual light).
@@ -404,6 +411,12 @@ def frame_passes(ctx, variants: list[Variant], size: tuple[int, int], warmup: in
     return found
 
 
+def _gpu_bloom_draws() -> int:
+    """The draws of a GPU's bloom chain at ``STAND_IN_FOR``: from a half-size start, as many
+    levels as fit."""
+    return 2 * len(level_sizes(STAND_IN_FOR, Bloom().levels, "half")) - 1
+
+
 def stand_in_rows(ctx, frames: int, warmup: int) -> list[Row]:
     """The cpu part (run in an ``LP_NUM_THREADS=0`` process): ``STAND_IN_VARIANTS`` with no
     mirror at ``STAND_IN_SIZE``, each drawing what a GPU's ``STAND_IN_FOR`` frame draws;
@@ -414,8 +427,7 @@ def stand_in_rows(ctx, frames: int, warmup: int) -> list[Row]:
     rows = run_variants(ctx, chosen, (0,), frames, warmup, STAND_IN_SIZE, stand_in_for=STAND_IN_FOR,
                         block=STAND_IN_BLOCK)
     wanted = frame_passes(ctx, chosen, STAND_IN_FOR, max(warmup, 3))
-    # A GPU's chain at that size: from a half-size start, as many levels as fit.
-    bloom_draws = 2 * len(level_sizes(STAND_IN_FOR, Bloom().levels, "half")) - 1
+    bloom_draws = _gpu_bloom_draws()
     by = {row.variant: row for row in rows}
     if by["post"].passes - by["off"].passes != bloom_draws:
         raise RuntimeError(f"the stand-in's bloom made {by['post'].passes - by['off'].passes} draws, a GPU's chain "
@@ -429,6 +441,40 @@ def stand_in_rows(ctx, frames: int, warmup: int) -> list[Row]:
     return rows
 
 
+# A bare pass of ``pass_floor_ms``: a 3-vertex draw of a one-line program, no texture read.
+_BARE_VERTEX = ("#version 410 core\nvoid main() { gl_Position = vec4(vec2(gl_VertexID & 1, gl_VertexID >> 1) "
+                "* 4.0 - 1.0, 0.0, 1.0); }")
+_BARE_FRAGMENT = "#version 410 core\nout vec4 colour;\nvoid main() { colour = vec4(1.0); }"
+
+
+def pass_floor_ms(ctx, passes: int, repeats: int = 2000) -> float:
+    """The least ``passes`` dependent full-screen passes cost here, in ms (median of
+    ``repeats``, ``ctx.finish()`` included): each binds a framebuffer of its own (a 2 x 2
+    target) and draws a bare program, with no texture bound, no uniform written and no state
+    changed; nothing a bloom step could do less of.  In the stand-in's process it is what
+    llvmpipe charges a pass for leaving one target for the next (it flushes, and with no
+    rasteriser threads draws, on the calling thread), which a GPU driver queues instead: a
+    bloom chain of that many steps costs the stand-in at least this much over the ``off``
+    frame, whatever its shaders."""
+    program = ctx.program(vertex_shader=_BARE_VERTEX, fragment_shader=_BARE_FRAGMENT)
+    vao = ctx.vertex_array(program, [])
+    textures = [ctx.texture((2, 2), 4, dtype="f4") for _ in range(passes)]
+    framebuffers = [ctx.framebuffer([texture]) for texture in textures]
+    times = []
+    try:
+        for _ in range(repeats):
+            start = time.perf_counter()
+            for framebuffer in framebuffers:
+                framebuffer.use()
+                vao.render(vertices=3)
+            ctx.finish()
+            times.append(time.perf_counter() - start)
+    finally:
+        for item in (*framebuffers, *textures, vao, program):
+            item.release()
+    return round(statistics.median(times) * 1e3, 4)
+
+
 def cpu_part(frames: int, warmup: int) -> list[dict]:
     """The cpu part's rows, from a subprocess started with ``LP_NUM_THREADS=0``, as the cpu
     suite runs its own."""
@@ -436,11 +482,13 @@ def cpu_part(frames: int, warmup: int) -> list[dict]:
                                     "--warmup", str(warmup)])
 
 
-def target_rows(rows: list[Row], size: tuple[int, int], software: bool) -> list[dict]:
+def target_rows(rows: list[Row], size: tuple[int, int], software: bool, floor: dict | None = None) -> list[dict]:
     """Each target measured in ``rows`` (a frames part target from the frames rows, at
     ``size``; a cpu part target from the stand-in's): value, limit, met, and whether it
     applies here (a gpu target at its size on a GPU, a software target on a software
-    rasteriser)."""
+    rasteriser).  With ``floor`` (the stand-in's ``pass_floor_ms`` of a GPU's chain), the
+    post target also gives ``least_possible``: the ratio a chain of that many passes cannot
+    go under on the stand-in, (off + floor) / off."""
     found = []
     for name, target in TARGETS.items():
         by = {(r.n_mirrors, r.variant): r for r in rows if r.part == target.part}
@@ -458,6 +506,12 @@ def target_rows(rows: list[Row], size: tuple[int, int], software: bool) -> list[
                       "applies": at_size and (target.set_for == "software") == software,
                       "measured": f"{target.variant} {by[key].frame_ms_median} ms / {target.over} "
                                   f"{by[over].frame_ms_median} ms, {target.mirrors} mirrors, {where}"})
+        if floor is not None and target.part == "cpu" and target.variant == "post":
+            off = by[over].frame_ms_median
+            found[-1]["least_possible"] = round((off + floor["pass_floor_ms"]) / off, 3)
+            found[-1]["measured"] += (f"; {floor['passes']} bare passes cost {floor['pass_floor_ms']} ms here "
+                                      f"(pass_floor_ms), so that chain cannot go under "
+                                      f"{found[-1]['least_possible']}x")
     frames = [r for r in rows if r.part == "frames"]
     for name, (variant, limit) in COUNT_TARGETS.items():
         measured = [r for r in frames if r.variant == variant]
@@ -516,10 +570,12 @@ def main(args: argparse.Namespace) -> int:
         ctx = create_headless_context()
         try:
             rows = stand_in_rows(ctx, args.cpu_frames, max(args.warmup, 20))
+            floor = {"pass_floor_ms": pass_floor_ms(ctx, _gpu_bloom_draws()), "passes": _gpu_bloom_draws()}
         finally:
             ctx.release()
         for row in rows:
             print(json.dumps(asdict(row)), flush=True)
+        print(json.dumps(floor), flush=True)
         return 0
     if any(n < 0 for n in args.mirrors):
         raise SystemExit("--mirrors must be >= 0")
@@ -527,8 +583,13 @@ def main(args: argparse.Namespace) -> int:
     if BASELINE not in args.variants:
         chosen.insert(0, next(v for v in VARIANTS if v.name == BASELINE))  # every ratio is to it
     rows: list[Row] = []
+    floor = None
     if "cpu" in args.parts:
-        rows += [Row(**row) for row in cpu_part(args.cpu_frames, args.warmup)]
+        for row in cpu_part(args.cpu_frames, args.warmup):
+            if "pass_floor_ms" in row:
+                floor = row
+            else:
+                rows.append(Row(**row))
     ctx = create_headless_context()
     try:
         renderer = ctx.info.get("GL_RENDERER", "?")
@@ -537,7 +598,7 @@ def main(args: argparse.Namespace) -> int:
             rows = run_variants(ctx, chosen, args.mirrors, args.frames, args.warmup, args.size) + rows
     finally:
         ctx.release()
-    targets = target_rows(rows, args.size, software)
+    targets = target_rows(rows, args.size, software, floor)
     missed = [t for t in targets if t["applies"] and not t["met"]]
     if args.json:
         for row in rows:

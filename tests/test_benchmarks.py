@@ -135,6 +135,9 @@ def test_the_lighting_stand_in_issues_a_gpus_640x360_passes_at_4x2(ctx, capsys, 
         assert target["value"] == round(frames[spec.variant]["frame_ms_median"]
                                         / frames[spec.over]["frame_ms_median"], 3)
     assert "post_0_mirrors" not in targets   # the frames part did not run
+    # The bare passes' floor under the post target: (off + 11 bare passes) / off, above 1.
+    assert targets["cpu_post_0_mirrors"]["least_possible"] > 1.0
+    assert "11 bare passes" in targets["cpu_post_0_mirrors"]["measured"]
 
 
 @pytest.mark.parametrize("argv", [
