@@ -42,6 +42,12 @@ Limits, each a setting and each reported in ``RenderStats`` when reached: the de
 (``TreeSettings.depth_cap``, at most ``MAX_TREE_DEPTH``) and an optional view budget per
 level (``TreeSettings.level_budget``: the views with the most claimed pixels are kept).
 
+Ordering, for the CPU and the GPU to overlap: on llvmpipe a draw that samples a texture a
+queued pass still writes waits for that pass, so each level costs the CPU two waits (the
+claims read the level above, the counts read the claims) and the composites one each.
+Work that needs no pixels (the next level's plan, this level's composite rows) is done
+between a flush and the next wait.
+
 A tree that ``remember``s (the main view's) leaves what its render did as a ``KeptTree``;
 on a frame whose views show nothing new (the reflect stage decides:
 ``systems/reflection_system.py``) ``keep`` does only what the root, drawn anew each frame,
