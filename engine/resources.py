@@ -12,9 +12,14 @@ import of ``engine/render`` (importing this module imports no GL library).
   the frame cost, and, as a ``BudgetLedger``, what its ``ViewBudget`` allowed and was spent on.
 - ``ViewBudget`` (``engine/core/budget.py``): the frame's budget a game or level file sets.
 
-What the render stages hand each other is theirs, beside the passes: the main view and
-the targets it was drawn into (``engine.render.frame_views.FrameViews``), the planner's
-table of these surfaces (``engine.render.surface_table``).  Games import engine data from
+Other resources live with their owners: ``Input`` and ``Output`` (``engine/core/frame_io.py``,
+the shell's), ``FrameRules`` (the rules stage: ``engine/rules/frame_rules.py``),
+``ShadowCasters`` (the shadows stage: ``engine/rules/shadow_rules.py``), ``ProbeSchedule`` and
+``ProbeStates`` (the probes' scheduler: ``engine/rules/probe_schedule.py``).  What the render
+stages hand each other is theirs, beside the passes: the main view and the targets it was
+drawn into (``engine.render.frame_views.FrameViews``), the planner's table of these surfaces
+(``PlannerSurfaces``) and the probes each surface falls back to (``SurfaceBlends``, the
+extract stage's), both in ``engine.render.surface_table``.  Games import engine data from
 here and from ``components``; one that picks through the last frame's main view reads
 ``FrameViews`` (mirror beam).
 """

@@ -2,7 +2,11 @@
 
 The first render stage of a frame.  It reads the ECS through the world's change sets (a
 frame where nothing changed touches nothing), chooses each instance's material variants
-(``material_dispatch``) and writes the rows the GPU batches upload in the prepare stage.
+(``material_dispatch``) and writes the rows the GPU batches upload in the prepare stage:
+the rows of entities that moved or whose look changed (``probe_rules.LookChanges``, the
+kinds in ``LOOK_KINDS``), with the probes each one samples (``probe_rules.probe_blend``).
+It also publishes which probes each mirror and portal shows where it gets no view
+(``SurfaceBlends``, ``probe_rules.surface_blend``), which the view trees' fallbacks draw.
 Nothing here writes game state.
 """
 from __future__ import annotations

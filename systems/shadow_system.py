@@ -6,7 +6,12 @@ through a portal.  Maps are cached like probe faces: a directional light's map i
 again only when the light changed or a caster changed (an instance row was written: it
 moved, came, went or changed its look; the map covers the whole level, so every caster is in
 its reach); a point light's only when the light changed or moved, or a caster whose old or
-new box reaches into its range changed.  A still scene draws no shadow pass.
+new box reaches into its range changed.  A still scene draws no shadow pass.  When the
+changed casters lie inside the level's box, a directional map is drawn again only under
+where they were and are (``shadow_rules.map_region``: the casters' draws scissored there,
+the same depths a whole redraw writes).  Virtual lights (``shadow_rules.virtual_lights``:
+lights through mirrors and portals) get their maps here too, each a view of the frame's
+``ViewBudget``, at most ``MAX_VIRTUAL_LIGHTS`` (the rest: ``RenderStats.virtual_lights_cut``).
 
 It publishes ``ShadowCasters`` (``engine/rules/shadow_rules.py``): the lights casting this
 frame, so the probes' scheduler can recapture a face where a moved caster's shadow falls.

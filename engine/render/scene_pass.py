@@ -1,7 +1,9 @@
 """The scene pass: the one function that draws the world for a set of views into a target.
 
 Every view goes through it: the main camera, each mirror and portal view of a reflection
-level, and (next) each face of a cube-map probe.  For each view it draws
+level, and each face of a cube-map probe (``draw_layered``: all six in one pass, colour
+only, so such a face roots no view tree); shadow maps are depth views drawn by a pass of
+their own (``engine/render/shadows.py``).  For each view it draws
 
   1. the opaque batches, one instanced draw per (mesh, texture), smallest first, so big
      surfaces behind small things fail the depth test before they are shaded;

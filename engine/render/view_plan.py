@@ -6,7 +6,8 @@ views: the parents of a level are rows of arrays (``LevelRows``; the rows' layou
 ``engine/render/plan_rows.py``), every mirror and portal is a row of ``SurfaceTable``, and
 ``SurfaceTable.cull`` and ``SurfaceTable.plan`` work on (parents x surfaces) blocks.  Per
 view, only what the draws need is made in Python (a ``View`` holding its packed camera
-block).  This is the one planner, for levels of every size.  What it costs at a level of one
+block).  This is the one planner, for levels of every size (``tests/test_view_plan.py`` holds
+its cameras to glm's, worked out one view at a time).  What it costs at a level of one
 or two views is its numpy calls (in a frame each costs 1-3 us, a call of a kind not made for
 a while the most) and the views of arrays they read and write (a view costs about what a
 small call does), so the work is laid out to need few of both: each view's row holds every

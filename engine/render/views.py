@@ -1,5 +1,12 @@
-"""Views as data: what a pass renders from (the main camera now; mirror, portal and cube-face
-views later), and the std140 packing of the Camera and Lights uniform blocks."""
+"""Views as data: what a pass renders from (the main camera, each mirror and portal view of a
+view tree, each face of a probe, a light's shadow camera), and the std140 packing of the
+Camera and Lights uniform blocks.
+
+A ``View`` is view and projection, eye, size, clip plane, scissor, its node in its tree, the
+entity it never draws (``skip``: the surface it looks out of) and the one no view of its
+tree draws (``hide``: a probe's own object, inherited down the tree), and its kinds and
+layers: direct, mirror, portal or probe, and the reflection layers every surface of its
+chain shows (``view_mask``)."""
 from __future__ import annotations
 
 from collections.abc import Iterable, Sequence

@@ -1,7 +1,12 @@
 """What the shadow stage and the probes' scheduler must agree on about shadows, defined once:
 the box a directional light's shadow map covers and its light-space camera, a point light's
 reach, and where the shadow of a box can fall (a probe face that shows that place must be
-captured again when the box moves, even when the box itself is outside the face).
+captured again when the box moves, even when the box itself is outside the face).  Light
+through mirrors and portals is defined here too: each light reaching the front of a mirror
+with ``reflects_light`` or a portal with ``carries_light`` becomes a ``VirtualLight`` (its
+image by the surface's carry, and the image of an image for ``bounces`` > 1), ranked for the
+budget by ``rank_virtual_lights``; ``light_path`` makes the shader's aperture test on the CPU
+(mirror beam decides its target with it).
 
 GL-free: numpy and glm only.  The render side (``engine/render/shadows.py``) draws what
 these give; the shader side (``shaders/include/shadows.glsl``) reads them from the Shadows
