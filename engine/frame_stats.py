@@ -84,6 +84,10 @@ class RenderStats(BudgetLedger):
     shadow_texels_drawn: int = 0         # of directional maps: a moved caster redraws only its footprint's
     shadow_maps_kept: int = 0
     shadows_cut: int = 0
+    # Lights past the Lights block's slots (views.MAX_DIRECTIONAL_LIGHTS directional,
+    # MAX_POINT_LIGHTS point: the first made of each kind are kept), which light nothing this
+    # frame; set every frame while it lasts (the prepare stage warns when it starts).
+    lights_cut: int = 0
     virtual_lights: int = 0              # lights shining through mirrors and portals this frame
     virtual_lights_cut: int = 0          # ... that the limit or the view budget left out
     shadow_path: str = ""

@@ -7,21 +7,28 @@ changed), the sky's cube map when the Skybox changes.
 Ambient light (``engine/render/irradiance.py``): the sky's irradiance as nine
 spherical-harmonic coefficients in the Lights block, projected from the Skybox's faces when
 the Skybox changes; without a Skybox, the ``HemisphereLight``'s (a dim default without one).
+Lights past the block's slots (``MAX_DIRECTIONAL_LIGHTS`` directional and
+``MAX_POINT_LIGHTS`` point lights: the first made of each kind are kept) light nothing: they
+are counted in ``RenderStats.lights_cut`` every frame, and a ``LightLimitWarning`` names
+them when the count goes up.
 The probes' influence boxes go to the irradiance table when a probe comes, goes, changes or
 moves; their coefficients are projected on the GPU after each capture (the probes stages).
 """
 from __future__ import annotations
+
+import warnings
 
 import esper
 import numpy as np
 
 from components import DirectionalLight, HemisphereLight, PointLight, ReflectionProbe, Skybox, Transform
 from components.ambient import DEFAULT_GROUND, DEFAULT_SKY
+from engine.core.errors import LightLimitWarning
 from engine.core.world import World
 from engine.render.irradiance import hemisphere_sh, project_faces
 from engine.render.renderer import Renderer
 from engine.render.sky import build_faces
-from engine.render.views import lights_block
+from engine.render.views import MAX_DIRECTIONAL_LIGHTS, MAX_POINT_LIGHTS, lights_block
 
 
 def ambient_sh(world: World, faces: np.ndarray | None = None) -> np.ndarray:
@@ -44,6 +51,7 @@ class PrepareSystem(esper.Processor):
         self.renderer = renderer
         self._lights = b""
         self._sky_sh: np.ndarray | None = None
+        self._cut = (0, 0)   # (directional, point) lights the last block left out
 
     def process(self, dt: float) -> None:
         world = self.world
@@ -59,16 +67,27 @@ class PrepareSystem(esper.Processor):
             sky_changed = True
         renderer.upload_instances()
         self._probe_boxes()
-        if self._lights and not sky_changed and self._lights_stand_still():
-            return
-        directional = [(light.direction, light.color.xyz * light.intensity)
-                       for _, light in world.query_one(DirectionalLight)]
-        point = [(t.world[3].xyz, light.range, light.color.xyz * light.intensity)
-                 for _, (light, t) in world.query(PointLight, Transform)]
-        block = lights_block(self._sky_sh, directional, point)
-        if block != self._lights:
-            renderer.set_lights(block)
-            self._lights = block
+        if not (self._lights and not sky_changed and self._lights_stand_still()):
+            directional = [(light.direction, light.color.xyz * light.intensity)
+                           for _, light in world.query_one(DirectionalLight)]
+            point = [(t.world[3].xyz, light.range, light.color.xyz * light.intensity)
+                     for _, (light, t) in world.query(PointLight, Transform)]
+            block = lights_block(self._sky_sh, directional, point)
+            if block != self._lights:
+                renderer.set_lights(block)
+                self._lights = block
+            self._count_cut(len(directional), len(point))
+        renderer.stats.lights_cut = sum(self._cut)
+
+    def _count_cut(self, directional: int, point: int) -> None:
+        """Keep how many lights of each kind the block left out; warn when either grows."""
+        cut = (max(directional - MAX_DIRECTIONAL_LIGHTS, 0), max(point - MAX_POINT_LIGHTS, 0))
+        if cut[0] > self._cut[0] or cut[1] > self._cut[1]:
+            warnings.warn(LightLimitWarning(
+                f"{directional} directional and {point} point lights: at most {MAX_DIRECTIONAL_LIGHTS} directional "
+                f"and {MAX_POINT_LIGHTS} point lights light the scene (the first made of each kind), so {cut[0]} "
+                f"directional and {cut[1]} point lights light nothing (RenderStats.lights_cut)"), stacklevel=2)
+        self._cut = cut
 
     def _probe_boxes(self) -> None:
         """The influence boxes to the irradiance table when a probe came, went, changed or

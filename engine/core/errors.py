@@ -27,3 +27,8 @@ class ShaderError(SpeculumError):
 
 class NoCameraWarning(UserWarning):
     """Frames are drawn with no active camera: they show nothing (said once until one comes)."""
+
+
+class LightLimitWarning(UserWarning):
+    """More lights of a kind than the Lights block holds: those past it light nothing
+    (said when their count grows; counted every frame in ``RenderStats.lights_cut``)."""
