@@ -38,6 +38,7 @@ from dataclasses import replace
 
 import esper
 
+from engine.core.errors import MirrorError  # raised by the surfaces stage; named here as before
 from engine.core.world import World
 from engine.render.frame_views import FrameViews
 from engine.render.renderer import Renderer
@@ -48,7 +49,6 @@ from engine.render.view_tree import ReflectionView, TreeSettings, ViewTree
 from engine.render.views import View
 from engine.resources import PortalCrossings, RenderStats, Surfaces
 from engine.rules.frame_rules import frame_rules
-from systems.surface_system import MirrorError
 
 __all__ = ["MirrorError", "ReflectionSystem"]
 

@@ -25,7 +25,7 @@ import numpy as np
 
 from components import Material, MeshRef, Mirror, Portal, Transform, Visibility, Water
 from components.visibility import DRAWN_EVERYWHERE
-from engine.core.errors import SpeculumError
+from engine.core.errors import MirrorError
 from engine.core.portal_math import pair_transform, portal_plane
 from engine.core.reflection_math import plane_from_point_normal, reflection_matrix, transform_plane
 from engine.core.world import World
@@ -37,10 +37,6 @@ from engine.rules.visibility_rules import drawn_code
 # A mirror mesh thinner than this fraction of its size composites over its outline quad;
 # anything thicker (a mirror plane given explicitly on a solid mesh) over its rectangle.
 FLAT_OUTLINE_TOLERANCE = 1e-3
-
-
-class MirrorError(SpeculumError, ValueError):
-    """A Mirror component on something that cannot be a mirror."""
 
 
 class SurfaceSystem(esper.Processor):

@@ -21,6 +21,10 @@ class GLPassError(SpeculumError):
     """An OpenGL error raised by a named pass (seen in debug mode, ``Renderer.debug``)."""
 
 
+class MirrorError(SpeculumError, ValueError):
+    """A Mirror component on something that cannot be a mirror."""
+
+
 class ShaderError(SpeculumError):
     """A shader failed to load, include, compile or link."""
 
