@@ -23,6 +23,7 @@ from engine.render.gl_context import GLCapabilities
 from engine.render.gpu import BACKGROUND, Gpu, Shared
 from engine.render.instances import BatchKey, GpuMesh, InstanceBatch
 from engine.render.irradiance import IrradianceTable
+from engine.render.level_copies import LevelCopies
 from engine.render.path_checks import PathChecks
 from engine.render.present import ANTIALIAS_MODES, PresentPass
 from engine.render.probes import ProbeCaptures
@@ -79,6 +80,9 @@ class Renderer(Gpu):
         self.text_pass: TextPass | None = None  # made when text is first drawn (its atlas costs a few ms)
         self.screen_quads = np.zeros((0, 12), np.float32)  # the last frame's screen text (a screenshot draws it again)
         self.levels = LevelStack(ctx)   # the main view tree's: [0] the main view, then its reflection levels
+        # Copies of the main view tree's levels while a still tree's end images settle (the
+        # reflect stage's tree makes and lets go of them: ViewTree.keep, level_copies.py).
+        self.level_copies = LevelCopies(ctx)
         self.exposure = 1.0
         self._antialias = "fxaa"
         self.irradiance = IrradianceTable(self)  # the probes' diffuse light (engine/render/irradiance.py)
@@ -245,7 +249,8 @@ class Renderer(Gpu):
                 "probe_cubes": len(self.probes.cubes), "shadow_cubes": len(self.shadows.cubes),
                 "layered_targets": len(self.probes._layered),
                 "face_targets": len(self.probes._faces),
-                "levels": len(self.levels), "probe_levels": sum(len(s) for s in self.probes._stacks.values()),
+                "levels": len(self.levels), "level_copies": len(self.level_copies),
+                "probe_levels": sum(len(s) for s in self.probes._stacks.values()),
                 "programs": len(self.shaders._programs), "post_targets": self.present_pass.post_target_count(),
                 "irradiance_rows": len(self.irradiance.rows)}
 
@@ -346,6 +351,7 @@ class Renderer(Gpu):
                 shared.obj.release()
             table.clear()
         self.levels.release()
+        self.level_copies.release()
         self._draw_order.clear()
         self.probes.release()
         self.shadows.release()
