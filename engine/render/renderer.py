@@ -11,10 +11,12 @@ renderer.
 """
 from __future__ import annotations
 
+import math
+
 import moderngl
 import numpy as np
 
-from components.post import Bloom, Tonemap
+from components.post import MAX_EXPOSURE_EV, Bloom, Tonemap
 from engine.assets.mesh import Mesh
 from engine.assets.texture_data import TextureData
 from engine.core.color import srgb_to_linear
@@ -34,6 +36,7 @@ from engine.render.targets import LevelStack, RenderTargets
 from engine.render.text import TextPass
 
 GL_SRGB8_ALPHA8 = 0x8C43
+_MAX_EXPOSURE = 2.0 ** MAX_EXPOSURE_EV
 
 
 def checker_look(texture: TextureData | None) -> tuple[float, tuple, tuple] | None:
@@ -83,13 +86,28 @@ class Renderer(Gpu):
         # Copies of the main view tree's levels while a still tree's end images settle (the
         # reflect stage's tree makes and lets go of them: ViewTree.keep, level_copies.py).
         self.level_copies = LevelCopies(ctx)
-        self.exposure = 1.0
+        self._exposure = 1.0
         self._antialias = "fxaa"
         self.irradiance = IrradianceTable(self)  # the probes' diffuse light (engine/render/irradiance.py)
         self.shadows = ShadowMaps(self)
         self.scene_pass = ScenePass(self, self.shadows, self.irradiance)
         self.probes = ProbeCaptures(self, self.scene_pass, self.irradiance)
         self.path_checks: PathChecks = PathChecks(self, self.probes)
+
+    @property
+    def exposure(self) -> float:
+        """The linear scale of the image of a camera without a ``Tonemap`` (1: as drawn), in
+        [0, 2**MAX_EXPOSURE_EV] (a Tonemap's +-24 EV reach), checked when set: a NaN or
+        infinite one presented a black or white frame with no word."""
+        return self._exposure
+
+    @exposure.setter
+    def exposure(self, value: float) -> None:
+        if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, float, np.integer, np.floating)) \
+                or not math.isfinite(value) or not 0.0 <= value <= _MAX_EXPOSURE:
+            raise ValueError(f"Renderer.exposure must be a finite number in [0, 2**{MAX_EXPOSURE_EV:g}] (a linear "
+                             f"scale: 1 shows the image as drawn), got {value!r}")
+        self._exposure = float(value)
 
     @property
     def antialias(self) -> str:
