@@ -104,3 +104,32 @@ def test_the_refill_of_a_float32_level_is_the_drawn_frames_bit_for_bit(scene, fl
     assert kinds == ["drawn", "drawn"] + ["refilled"] * 4
     assert len(keeping.engine.reflection_system.tree.copies) > 0
     assert keeping.engine.reflection_system.tree.copies._copies[1].textures[0].dtype == "f4"
+
+
+def test_a_generated_sky_brighter_than_a_half_float_is_stored_at_65504_not_as_inf(scene):
+    """A generated sky's colours are each at most 65504, but the sky adds them (the horizon or
+    zenith, the sun's glow and its disc): past 65504 the half-float cube held +inf, and the
+    frame looking at the sun held NaN where its filtering met it (15 values), with only a
+    numpy overflow warning.  The cube keeps the sky within a half float (``upload_cube``):
+    where ``sky_radiance`` (numpy, float64) is past 65504 the frame holds 65504 itself."""
+    import warnings
+
+    from components import Skybox
+    from engine.render.sky import sky_radiance
+
+    sky = Skybox(horizon=(65504.0,) * 3, zenith=(65504.0,) * 3, sun_color=(65504.0,) * 3)
+    sun = glm.vec3(sky.sun_direction)
+
+    def build(world) -> None:
+        look_from(world, (0.0, 0.0, 0.0), tuple(sun))
+        world.spawn(sky)
+
+    runner = scene(build, (48, 32))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # (an overflow cast is a warning, not a pass)
+        runner.frame()
+    image = _hdr(runner)
+    assert np.isfinite(image).all(), f"{int((~np.isfinite(image)).sum())} values of the frame are not finite"
+    assert image[..., :3].max() == 65504.0
+    assert sky_radiance(sky, np.array([tuple(sun)])).max() > 65504.0 * 1.5  # (the sun: past a half float)
+    assert runner.capture.read_rgb().mean() > 200  # (a white sky, not black)
