@@ -53,7 +53,7 @@ from typing import Any
 import numpy as np
 from pyglm import glm
 
-from benchmarks.fuzz_cases import fuzz_ripples
+from benchmarks.fuzz_cases import fuzz_ripples, hdr_image, hdr_problem
 from components import (
     Bloom,
     Camera,
@@ -220,7 +220,7 @@ class _Side:
         error = self.ctx.error
         if error != "GL_NO_ERROR":
             raise AssertionError(f"ctx.error {error}")
-        hdr = np.frombuffer(self.engine.renderer.targets.color.read(), np.float16)
+        hdr = hdr_image(self.engine.renderer.targets)
         return self.capture.read_rgb(), hdr, self.engine.renderer.targets.read_ids()
 
     def resize(self, size: tuple[int, int]) -> None:
@@ -344,8 +344,9 @@ class StillFuzzer:
                                   (drawn[1], drawn[0], drawn[2]), strict=True):
                 if a.shape != b.shape or not np.array_equal(a, b):
                     return f"the kept engine's {name} differs from the frame drawn whole"
-            if not np.isfinite(kept[1]).all():
-                return f"{int((~np.isfinite(kept[1])).sum())} non-finite values in the HDR colour target"
+            problem = hdr_problem(kept[1])
+            if problem is not None:
+                return problem
             stats = self.keeping.engine.renderer.stats
             self.refills += stats.reflection_end_refills > 0
             self.glass_between += stats.glass_between_surfaces > 0
