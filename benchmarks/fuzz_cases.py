@@ -1,13 +1,16 @@
 """Running fuzz cases: the loop the component fuzz (``benchmarks/fuzz.py``), the level-file
 fuzz (``benchmarks/level_fuzz.py``) and the still-frame fuzz (``benchmarks/still_fuzz.py``)
-share, and the pool of awkward values the component and still-frame fuzzes draw from."""
+share, the check of a frame's HDR image they all make, and the pool of awkward values the
+component and still-frame fuzzes draw from."""
 from __future__ import annotations
 
 import random
 from typing import Any
 
+import numpy as np
 from pyglm import glm
 
+from components.tracking import HALF_MAX
 from engine.assets.mesh import box, quad, sphere
 from engine.assets.texture_data import checker_texture
 
@@ -32,6 +35,27 @@ def run_cases(fuzzer, make_case, cases: int, seed: int, report=None) -> tuple[in
     finally:
         fuzzer.close()
     return cases, failures, passes
+
+
+def hdr_image(targets) -> np.ndarray:
+    """The main image's HDR colour as stored (flat): half floats, or float32 where
+    ``--hdr32`` widened the colour images (``engine.render.targets.HDR_FORMAT``)."""
+    texture = targets.color
+    return np.frombuffer(texture.read(), np.dtype(texture.dtype))
+
+
+def hdr_problem(hdr: np.ndarray) -> str | None:
+    """What is wrong with an HDR image: values not finite, or (float32 images: ``--hdr32``)
+    past a half float's 65504, which a GPU whose conversion rounds correctly stores as +inf
+    (llvmpipe saturates them: only float32 images show them).  None: nothing."""
+    bad = ~np.isfinite(hdr)
+    if bad.any():
+        return f"{int(bad.sum())} non-finite values in the HDR colour target"
+    past = hdr > HALF_MAX
+    if past.any():
+        return (f"{int(past.sum())} values past 65504 in the HDR colour target (up to {float(hdr.max()):.6g}: "
+                f"a half float stores them as +inf where its conversion rounds correctly)")
+    return None
 
 
 _NUMBERS: list[Any] = [0, 1, -1, 0.5, 2.0, 1e-30, 1e-4, 3.0, 16, 100.0, 1e5, 65504.0, 65505.0, 1e7, 1e20,

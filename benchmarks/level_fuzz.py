@@ -38,7 +38,7 @@ from pathlib import Path
 
 import numpy as np
 
-from benchmarks.fuzz_cases import FRAMES
+from benchmarks.fuzz_cases import FRAMES, hdr_image, hdr_problem
 from engine.assets.level_file import LevelError, load_level
 from engine.core.frame_io import Output
 from engine.core.game import Game
@@ -267,7 +267,6 @@ def make_model_files(assets: Path) -> None:
 
 def make_files(level_folder: Path, outside: Path) -> None:
     """The files FILE_CASES name: in ``level_folder / "assets"``, and ``outside``."""
-    import numpy as np
     from PIL import Image
 
     assets = level_folder / "assets"
@@ -414,17 +413,15 @@ def render_checked(ctx, engine, framebuffer, problem: str | None = None) -> str 
 
 def frame_problem(ctx, engine) -> str | None:
     """What is wrong with the frame just drawn: a GL error left, or a NaN or infinity in the
-    HDR colour target (None: nothing, or nothing drawn)."""
+    HDR colour target, or a value past a half float's range (``hdr_problem``); None: nothing,
+    or nothing drawn."""
     error = ctx.error
     if error != "GL_NO_ERROR":
         return f"ctx.error {error}"
     targets = engine.renderer.targets
     if targets is None:
         return None  # nothing drawn (no camera left): nothing to be NaN
-    hdr = np.frombuffer(targets.color.read(), np.float16)
-    if not np.isfinite(hdr).all():
-        return f"{int((~np.isfinite(hdr)).sum())} non-finite values in the HDR colour target"
-    return None
+    return hdr_problem(hdr_image(targets))
 
 
 @contextlib.contextmanager

@@ -6,7 +6,7 @@ from typing import Any
 
 from pyglm import glm
 
-from components.limits import MAX_LIGHT_BOUNCES, check_near_far
+from components.limits import MAX_FAR, MAX_LIGHT_BOUNCES, check_near_far
 from components.tracking import (
     HALF_MAX,
     ComponentValueError,
@@ -130,7 +130,8 @@ class DirectionalLight(TrackedComponent):
 
 @dataclass(eq=False)
 class PointLight(TrackedComponent):
-    """Light from the entity's position, falling off smoothly to zero at ``range``.
+    """Light from the entity's position, falling off smoothly to zero at ``range`` (metres, at
+    most ``MAX_FAR``, as a camera's far plane: it is the shadow cube's).
 
     ``shadows`` (off by default, as in most engines: six views a light): things within its
     range cast shadows, from a cube shadow map of ``shadow_resolution`` texels a face,
@@ -151,6 +152,8 @@ class PointLight(TrackedComponent):
         if name == "intensity":
             return finite(self, name, value, low=0.0, high=HALF_MAX)  # lit colour lands in half floats
         if name == "range":
-            return finite(self, name, value, positive=True)
+            # At most a camera's far plane: the range is the shadow cube's far plane, whose
+            # perspective overflows float32 near its top (3.4e38 cast no shadow, silently).
+            return finite(self, name, value, positive=True, high=MAX_FAR)
         shadow = _shadow_field(self, name, value)
         return value if shadow is None else shadow

@@ -33,6 +33,7 @@
 #include "water.glsl"
 #include "end_image.glsl"
 #include "probe_lookup.glsl"
+#include "hdr.glsl"
 #ifdef COMPOSITE_BUMPY
 flat in mat3 v_project_dir;
 #endif
@@ -140,11 +141,11 @@ void main() {
 #ifdef COMPOSITE_PORTAL
 #ifdef COMPOSITE_FALLBACK
     // What lies beyond the partner along the carried ray, from the probes there or the sky.
-    out_color = vec4(fallback_environment(v_carry * at + v_place.yzw, v_carry * view_dir, 0.0), 1.0);
+    out_color = vec4(hdr_store(fallback_environment(v_carry * at + v_place.yzw, v_carry * view_dir, 0.0)), 1.0);
 #else
     vec4 through = textureLod(reflection, uv, 0.0);
     vec3 beyond = textureLod(sky_map, v_carry * view_dir, 0.0).rgb;
-    out_color = vec4(through.rgb + beyond * (1.0 - through.a), 1.0);
+    out_color = vec4(hdr_store(through.rgb + beyond * (1.0 - through.a)), 1.0);
 #endif
 #else
     float reflect_rate = v_params.x;
@@ -222,9 +223,9 @@ void main() {
     weight = fallback_alpha(weight);
 #endif
 #ifdef COMPOSITE_WATER
-    out_color = vec4(radiance * v_tint.rgb, weight);
+    out_color = vec4(hdr_store(radiance * v_tint.rgb), weight);
 #else
-    out_color = vec4(reflected, weight);
+    out_color = vec4(hdr_store(reflected), weight);
 #endif
 #endif
 }

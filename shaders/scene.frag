@@ -6,6 +6,7 @@
 #include "shadows.glsl"
 #include "ggx.glsl"
 #include "ambient.glsl"
+#include "hdr.glsl"
 
 uniform sampler2D albedo_map;
 uniform bool has_albedo_map;
@@ -302,7 +303,7 @@ void main() {
     vec3 color = mapped_reflection(SLOT_REFLECT, lit, apply_reflect(SLOT_REFLECT, lit, s), metal_share);
     color = apply_refract(SLOT_REFRACT, color, s);
     color = apply_emissive(SLOT_EMISSIVE, color, s);
-    out_color = vec4(color, transparent ? s.alpha : 1.0);
+    out_color = vec4(hdr_store(color), transparent ? s.alpha : 1.0);
     out_surface = v_slots.w;
     out_seen = v_slots.w;
     out_node = node_index;

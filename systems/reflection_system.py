@@ -59,7 +59,7 @@ class ReflectionSystem(esper.Processor):
     def __init__(self, world: World, renderer: Renderer, max_depth_cap: int = 8) -> None:
         self.world = world
         self.renderer = renderer
-        self.tree = ViewTree(renderer, renderer.scene_pass, end_images=True)
+        self.tree = ViewTree(renderer, renderer.scene_pass, end_images=True, copies=renderer.level_copies)
         self.settings = TreeSettings(max_depth_cap)
         self.views: list[ReflectionView] = []   # last frame's view tree, level order
         self._cut = False                        # camera_cut() was called since the last frame
@@ -155,6 +155,7 @@ class ReflectionSystem(esper.Processor):
         if main is None or views.levels is None:
             self.views = []
             self._still = None
+            self.tree.let_go()
             return
         if surfaces.mirrors or surfaces.portals:
             # The main view rasterises while the CPU culls and works out the first level's

@@ -21,7 +21,7 @@ import numpy as np
 import pytest
 from pyglm import glm
 
-from components import DirectionalLight, Emissive, Material, MeshRef, Mirror, Skybox, Transform
+from components import Camera, DirectionalLight, Emissive, Material, MeshRef, Mirror, Skybox, Transform, Visibility
 from engine.assets.mesh import box, plane, quad
 from engine.assets.portals import spawn_portal_pair
 from engine.assets.texture_data import checker_texture
@@ -237,3 +237,66 @@ def test_the_level_copies_go_when_the_pair_is_removed_mid_refill(scene):
     pair.both(remove_mirrors)
     assert [pair.frame() for _ in range(2)] == ["drawn", "drawn"]
     assert pair.keeping.stats.reflection_views == 0 and len(tree.copies) == 0
+
+
+def _camera(runner, active: bool) -> None:
+    runner.world.get(runner.world.resources["camera"], Camera).active = active
+
+
+def _mirrors_on(runner, enabled: bool) -> None:
+    for _, mirror in runner.world.query_one(Mirror):
+        mirror.enabled = enabled
+
+
+def _mirrors_shown(runner, shown: bool) -> None:
+    for entity, _ in runner.world.query_one(Mirror):
+        if shown:
+            runner.world.remove_component(entity, Visibility)
+        else:
+            runner.world.add_component(entity, Visibility(direct=False))
+
+
+def _size(runner, other: bool) -> None:
+    runner.capture.release()
+    runner.size = (SIZE[0] + 8, SIZE[1] + 6) if other else SIZE
+    runner.capture = CaptureTarget(runner.ctx, runner.size)
+
+
+def _minimised(runner, shown: bool) -> None:
+    runner.size = SIZE if shown else (0, 0)  # (a minimised window's output: no pixels to draw)
+
+
+# What takes away the frame a still tree's level copies are for, and gives it back.
+TOGGLES = {"camera_inactive": _camera, "minimised": _minimised, "mirrors_disabled": _mirrors_on,
+           "mirrors_hidden": _mirrors_shown, "resized": _size}
+
+
+@pytest.mark.filterwarnings("ignore::engine.core.errors.NoCameraWarning")
+@pytest.mark.parametrize("toggle", list(TOGGLES))
+def test_level_copies_go_with_the_frame_they_are_for_and_never_pile_up(scene, toggle):
+    """The frame that refills a still tree gone (its camera switched off, the window
+    minimised, its mirrors switched off or hidden from the camera) or of another size (the
+    window resized): the next frame holds no level copy (``Renderer.resource_counts``'
+    "level_copies") rather than keeping a level's colour and id images for a frame that may
+    never come (resized: until the next still frame copies the new size's levels); given
+    back, it draws, copies and refills again.
+    Toggled again and again, the renderer's resources come back to the same counts each time,
+    and every frame is the drawn engine's."""
+    pair = _Pair(scene, SCENES["glass"])
+    renderer = pair.keeping.engine.reflection_system.tree.renderer
+    off, on = (lambda runner: TOGGLES[toggle](runner, False)), (lambda runner: TOGGLES[toggle](runner, True))
+    if toggle == "resized":  # (its "off" is the other size)
+        off, on = on, off
+    counts = []
+    for _ in range(4):
+        assert [pair.frame() for _ in range(4)] == ["drawn", "drawn", "refilled", "refilled"]
+        held = renderer.resource_counts()
+        assert held["level_copies"] > 0
+        counts.append(held)
+        pair.both(off)
+        pair.frame()
+        assert renderer.resource_counts()["level_copies"] == 0
+        pair.frame()  # (resized: the next still frame, of the new size, copies its levels again)
+        assert renderer.resource_counts()["level_copies"] == (held["level_copies"] if toggle == "resized" else 0)
+        pair.both(on)
+    assert all(held == counts[0] for held in counts[1:]), counts

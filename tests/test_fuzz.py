@@ -210,3 +210,28 @@ def test_the_still_fuzz_catches_a_refill_that_does_not_put_a_level_back(ctx, mon
         assert why is not None and "differs from the frame drawn whole" in why, why
     finally:
         fuzzer.close()
+
+
+def test_in_float32_images_the_check_finds_values_past_a_half_float(ctx, monkeypatch):
+    """``--hdr32``: the colour images float32, the frame check (``fuzz_cases.hdr_problem``) also
+    finds a value past 65504 (which llvmpipe saturates and a correctly rounding GPU stores as
+    +inf); a white-hot material lit by the fuzz scene's light renders clean, its pixels kept
+    within a half float by the shaders (broken on purpose, hdr_store returning its input, this
+    case reports "6 values past 65504", up to 84952)."""
+    import numpy as np
+
+    import engine.render.targets as targets
+    from benchmarks.fuzz_cases import hdr_problem
+    from components import Material
+
+    assert hdr_problem(np.array([0.0, 65504.0], np.float32)) is None
+    assert "past 65504" in hdr_problem(np.array([1.0, 65504.5], np.float32))
+    assert "non-finite" in hdr_problem(np.array([1.0, np.inf], np.float16))
+    assert "non-finite" in hdr_problem(np.array([np.nan, 1.0], np.float32))
+    monkeypatch.setattr(targets, "HDR_FORMAT", "f4")
+    wide = Fuzzer(ctx)
+    try:
+        assert wide.run(Case(Material, {"color": (65504.0, 65504.0, 65504.0)})) is None
+        assert wide.engine.renderer.targets.color.dtype == "f4" and wide.rendered == 1
+    finally:
+        wide.close()

@@ -29,6 +29,7 @@ from engine.render.shader_library import POLL_INTERVAL, ShaderLibrary, load_sour
 from tests.support import linear_to_srgb8, look_from
 
 SIZE = (96, 72)
+SCENE_COLOUR = "out_color = vec4(hdr_store(color),"  # scene.frag's colour write, where edits go before
 BOX_AT = (0.9, 0.5, 0.5)
 
 
@@ -72,7 +73,7 @@ def test_a_broken_edit_keeps_the_old_program_and_names_file_and_line_then_a_fix_
     assert library.poll(now=1000.0) == []  # nothing edited, nothing rebuilt or said
 
     # A name that does not exist, on a known line of scene.frag, after its three includes.
-    line = edit(shader_copy, "scene.frag", "out_color = vec4(color,", "    color += undefined_hot_reload_name;")
+    line = edit(shader_copy, "scene.frag", SCENE_COLOUR, "    color += undefined_hot_reload_name;")
     messages = library.poll(now=1001.0)
     scene_programs = [key for key in library._programs if key[1] == "scene.frag"]
     assert len(scene_programs) > 1 and len(messages) == 1, messages  # the variants fail alike: said once
@@ -85,7 +86,7 @@ def test_a_broken_edit_keeps_the_old_program_and_names_file_and_line_then_a_fix_
 
     # The fix, with a visible change: every lit surface magenta.
     edit(shader_copy, "scene.frag", "    color += undefined_hot_reload_name;", None)
-    edit(shader_copy, "scene.frag", "out_color = vec4(color,", "    color = vec3(1.0, 0.0, 1.0);")
+    edit(shader_copy, "scene.frag", SCENE_COLOUR, "    color = vec3(1.0, 0.0, 1.0);")
     messages = library.poll(now=1003.0)
     assert messages == [f"shader reloaded: scene.frag ({len(scene_programs)} programs rebuilt)"], messages
     assert library.errors == {} and library.reloads == len(scene_programs)
@@ -250,7 +251,7 @@ def test_the_window_shell_polls_and_says_each_reload_once(shader_copy, capsys):
         library = config.engine.renderer.shaders
         config.on_render(0.0, 1 / 60)
         before = np.frombuffer(config.wnd.fbo.read(components=3), np.uint8).copy()
-        edit(shader_copy, "scene.frag", "out_color = vec4(color,", "    color = vec3(0.0, 1.0, 1.0);")
+        edit(shader_copy, "scene.frag", SCENE_COLOUR, "    color = vec3(0.0, 1.0, 1.0);")
         library._next_poll = 0.0  # as if half a second had passed
         for _ in range(3):
             config.on_render(0.0, 1 / 60)
@@ -269,7 +270,7 @@ def test_a_uniform_the_first_build_dropped_is_fed_after_a_reload(scene, shader_c
     runner.frame()
     sky_size = runner.engine.renderer.sky.size[0]
     assert sky_size > 0
-    edit(shader_copy, "scene.frag", "out_color = vec4(color,", "    color = vec3(sky_face_size / 1024.0, 0.0, 0.0);")
+    edit(shader_copy, "scene.frag", SCENE_COLOUR, "    color = vec3(sky_face_size / 1024.0, 0.0, 0.0);")
     assert library.poll(now=1000.0) and library.errors == {}
     rgb = runner.frame()
     column, row = runner.project(BOX_AT)
@@ -286,7 +287,7 @@ def test_a_vertex_input_the_first_build_dropped_is_fed_after_a_reload(scene, sha
     runner = scene(room, SIZE)
     library = runner.engine.renderer.shaders
     runner.frame()
-    edit(shader_copy, "scene.frag", "out_color = vec4(color,", "    color = v_tint.rgb * 0.5;")
+    edit(shader_copy, "scene.frag", SCENE_COLOUR, "    color = v_tint.rgb * 0.5;")
     assert library.poll(now=1000.0) and library.errors == {}
     rgb = runner.frame()
     column, row = runner.project(BOX_AT)
@@ -306,7 +307,7 @@ def test_a_composite_column_the_first_build_dropped_is_fed_after_a_reload(scene,
     library = runner.engine.renderer.shaders
     before = runner.frame()
     column, row = runner.project((0.0, 1.3, -1.5))  # the mirror's centre
-    edit(shader_copy, "mirror_composite.frag", "out_color = vec4(reflected, weight);",
+    edit(shader_copy, "mirror_composite.frag", "out_color = vec4(hdr_store(reflected), weight);",
          "    reflected = v_carry[0];")
     assert library.poll(now=1000.0) and library.errors == {}
     rgb = runner.frame().astype(int)
@@ -482,7 +483,7 @@ def test_a_variant_first_needed_after_a_broken_edit_is_built_from_the_files_befo
     library: ShaderLibrary = runner.engine.renderer.shaders
     runner.frame()
     before = set(library._programs)
-    edit(shader_copy, "scene.frag", "out_color = vec4(color,", "    color += undefined_hot_reload_name;")
+    edit(shader_copy, "scene.frag", SCENE_COLOUR, "    color += undefined_hot_reload_name;")
     assert library.poll(now=1001.0)  # the existing variants: kept, said
     entity = crate(runner.world)
     shown = runner.frame()  # no ShaderError: the new variant comes from the files before the edit

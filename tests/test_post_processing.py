@@ -264,6 +264,24 @@ def test_a_camera_without_the_components_presents_todays_frame_byte_for_byte(kno
     assert np.array_equal(runner.frame(), plain_one)
 
 
+@pytest.mark.parametrize("bad", [float("nan"), float("inf"), -0.5, 2.0 ** 25, "2", None, True, np.array([1.0, 2.0])])
+def test_the_renderers_exposure_refuses_a_bad_value_when_it_is_given(known, bad):
+    """``Renderer.exposure`` (the camera without a Tonemap) is checked as it is set, naming it:
+    a NaN or negative one presented a black frame and an infinite one a white frame, with no
+    word, and a string failed later, inside the present stage.  A refused value leaves the
+    last good one, which the next frame presents (the same picture as before the bad write)."""
+    image = ramp(low=-6.0, high=0.0)
+    runner = known(image)
+    runner.engine.renderer.exposure = 0.5
+    before = runner.frame()
+    with pytest.raises(ValueError, match=r"Renderer\.exposure must be a finite number in \[0, 2\*\*24\]"):
+        runner.engine.renderer.exposure = bad
+    assert runner.engine.renderer.exposure == 0.5
+    assert np.array_equal(runner.frame(), before)
+    got = before.astype(np.int16)
+    assert np.abs(got - expected_srgb8(image[..., :3].astype(np.float64) * 0.5)).max() <= 1
+
+
 def test_a_tonemap_replaces_the_renderers_exposure(known):
     image = ramp(low=-6.0, high=0.0)
     runner = known(image, Tonemap(curve="none", exposure=-1.0))

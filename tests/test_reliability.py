@@ -148,10 +148,13 @@ def test_values_the_gpu_or_the_simulation_cannot_hold_are_refused_naming_the_fie
 
 
 def test_a_huge_int_is_kept_as_its_float_not_wrapped_by_glm():
-    from components import PointLight
+    from components import PointLight, ReflectionProbe
 
-    # glm would wrap (2**64 + 5) to 5; a float32 field keeps it as its float
-    assert PointLight(range=2**64 + 5).range == pytest.approx(float(2**64))
+    # glm would wrap (2**64 + 5) to 5; a float32 field keeps it as its float, or refuses it
+    # past its bound (a point light's range is at most MAX_FAR), never 5
+    assert ReflectionProbe(influence=(2**64 + 5, 1, 1)).influence.x == pytest.approx(float(2**64))
+    with pytest.raises(ComponentValueError, match=r"PointLight\.range must be <= "):
+        PointLight(range=2**64 + 5)
     assert Transform(position=(10**8 + 5, 0, 0)).position.x == pytest.approx(1e8)
     with pytest.raises(ComponentValueError, match=r"Transform\.position"):
         Transform(position=(2**64 + 5, 0, 0))  # past the position bound, not silently 5

@@ -18,6 +18,7 @@ from components import (
     ReflectionProbe,
     Transform,
 )
+from components.limits import MAX_FAR
 from engine.assets.mesh import box, plane, quad, sphere
 from engine.assets.portals import spawn_portal_pair
 from engine.core.portal_math import pair_transform
@@ -558,6 +559,34 @@ def test_shadow_fields_refuse_bad_values():
     with pytest.raises(ComponentValueError, match="shadows"):
         PointLight(shadows="yes")
     assert DirectionalLight().shadows and not PointLight().shadows
+
+
+def _lamp_over_a_box(light_range: float, shadows: bool):
+    def build(world) -> None:
+        look_from(world, (0.0, 2.0, 4.0), (0.0, 0.5, 0.0))
+        world.spawn(Transform(), MeshRef(plane(10, 10)), Material(color=(0.8, 0.8, 0.8), roughness=1.0))
+        world.spawn(Transform(position=(0.0, 0.5, 0.0)), MeshRef(box()), Material(color=(0.5, 0.2, 0.2)))
+        world.spawn(Transform(position=(0.5, 1.5, 0.5)), PointLight(intensity=10.0, range=light_range,
+                                                                     shadows=shadows))
+    return build
+
+
+def test_a_point_lights_range_is_at_most_max_far_and_casts_its_shadow_there(scene):
+    """A point light's range is its shadow cube's far plane: past float32's half range its
+    perspective overflowed and the light cast no shadow at all, silently (a range of 3.4e38
+    drew the frame of a light without shadows).  Refused past ``MAX_FAR`` as a camera's far
+    plane is, naming the field; at ``MAX_FAR`` the box's shadow darkens the floor."""
+    for bad in (3.4e38, 1e20, MAX_FAR * 1.5):
+        with pytest.raises(ComponentValueError, match=r"PointLight\.range must be <= "):
+            PointLight(range=bad)
+    lamp = PointLight()
+    with pytest.raises(ComponentValueError, match=r"PointLight\.range"):
+        lamp.range = 1e30
+    frames = [scene(_lamp_over_a_box(MAX_FAR, shadows), (48, 32)) for shadows in (True, False)]
+    shadowed, lit = (runner.frame().astype(np.int32) for runner in frames)
+    assert lit.mean() > 20
+    darker = (lit - shadowed).sum(axis=-1)
+    assert (darker > 0).sum() > 20 and (darker < 0).sum() == 0
 
 
 LEVEL = """

@@ -81,7 +81,7 @@ class LevelCopies:
 
     def _make(self, targets: RenderTargets) -> _Copy:
         ctx = self.ctx
-        textures = (ctx.texture(targets.size, 4, dtype="f2"), ctx.texture(targets.size, 1, dtype="u4"),
+        textures = (ctx.texture(targets.size, 4, dtype=targets.color.dtype), ctx.texture(targets.size, 1, dtype="u4"),
                     ctx.texture(targets.size, 1, dtype="u4"))
         for texture in textures:
             texture.filter = (moderngl.NEAREST, moderngl.NEAREST)

@@ -11,10 +11,12 @@ renderer.
 """
 from __future__ import annotations
 
+import math
+
 import moderngl
 import numpy as np
 
-from components.post import Bloom, Tonemap
+from components.post import MAX_EXPOSURE_EV, Bloom, Tonemap
 from engine.assets.mesh import Mesh
 from engine.assets.texture_data import TextureData
 from engine.core.color import srgb_to_linear
@@ -23,6 +25,7 @@ from engine.render.gl_context import GLCapabilities
 from engine.render.gpu import BACKGROUND, Gpu, Shared
 from engine.render.instances import BatchKey, GpuMesh, InstanceBatch
 from engine.render.irradiance import IrradianceTable
+from engine.render.level_copies import LevelCopies
 from engine.render.path_checks import PathChecks
 from engine.render.present import ANTIALIAS_MODES, PresentPass
 from engine.render.probes import ProbeCaptures
@@ -33,6 +36,7 @@ from engine.render.targets import LevelStack, RenderTargets
 from engine.render.text import TextPass
 
 GL_SRGB8_ALPHA8 = 0x8C43
+_MAX_EXPOSURE = 2.0 ** MAX_EXPOSURE_EV
 
 
 def checker_look(texture: TextureData | None) -> tuple[float, tuple, tuple] | None:
@@ -79,13 +83,31 @@ class Renderer(Gpu):
         self.text_pass: TextPass | None = None  # made when text is first drawn (its atlas costs a few ms)
         self.screen_quads = np.zeros((0, 12), np.float32)  # the last frame's screen text (a screenshot draws it again)
         self.levels = LevelStack(ctx)   # the main view tree's: [0] the main view, then its reflection levels
-        self.exposure = 1.0
+        # Copies of the main view tree's levels while a still tree's end images settle (the
+        # reflect stage's tree makes and lets go of them: ViewTree.keep, level_copies.py).
+        self.level_copies = LevelCopies(ctx)
+        self._exposure = 1.0
         self._antialias = "fxaa"
         self.irradiance = IrradianceTable(self)  # the probes' diffuse light (engine/render/irradiance.py)
         self.shadows = ShadowMaps(self)
         self.scene_pass = ScenePass(self, self.shadows, self.irradiance)
         self.probes = ProbeCaptures(self, self.scene_pass, self.irradiance)
         self.path_checks: PathChecks = PathChecks(self, self.probes)
+
+    @property
+    def exposure(self) -> float:
+        """The linear scale of the image of a camera without a ``Tonemap`` (1: as drawn), in
+        [0, 2**MAX_EXPOSURE_EV] (a Tonemap's +-24 EV reach), checked when set: a NaN or
+        infinite one presented a black or white frame with no word."""
+        return self._exposure
+
+    @exposure.setter
+    def exposure(self, value: float) -> None:
+        if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, float, np.integer, np.floating)) \
+                or not math.isfinite(value) or not 0.0 <= value <= _MAX_EXPOSURE:
+            raise ValueError(f"Renderer.exposure must be a finite number in [0, 2**{MAX_EXPOSURE_EV:g}] (a linear "
+                             f"scale: 1 shows the image as drawn), got {value!r}")
+        self._exposure = float(value)
 
     @property
     def antialias(self) -> str:
@@ -245,7 +267,8 @@ class Renderer(Gpu):
                 "probe_cubes": len(self.probes.cubes), "shadow_cubes": len(self.shadows.cubes),
                 "layered_targets": len(self.probes._layered),
                 "face_targets": len(self.probes._faces),
-                "levels": len(self.levels), "probe_levels": sum(len(s) for s in self.probes._stacks.values()),
+                "levels": len(self.levels), "level_copies": len(self.level_copies),
+                "probe_levels": sum(len(s) for s in self.probes._stacks.values()),
                 "programs": len(self.shaders._programs), "post_targets": self.present_pass.post_target_count(),
                 "irradiance_rows": len(self.irradiance.rows)}
 
@@ -346,6 +369,7 @@ class Renderer(Gpu):
                 shared.obj.release()
             table.clear()
         self.levels.release()
+        self.level_copies.release()
         self._draw_order.clear()
         self.probes.release()
         self.shadows.release()

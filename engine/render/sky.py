@@ -11,6 +11,7 @@ from typing import TYPE_CHECKING
 import moderngl
 import numpy as np
 
+from components.tracking import HALF_MAX
 from engine.core.cube_faces import face_directions
 
 if TYPE_CHECKING:
@@ -52,9 +53,14 @@ def build_faces(skybox: Skybox) -> np.ndarray:
 
 
 def upload_cube(ctx: moderngl.Context, faces: np.ndarray) -> moderngl.TextureCube:
-    """A mipmapped RGB16F cube map with seamless filtering (reflections sample its mips)."""
+    """A mipmapped RGB16F cube map with seamless filtering (reflections sample its mips).
+    Its texels are kept within a half float (65504, as the shaders keep what they write:
+    shaders/include/hdr.glsl): a generated sky adds colours that are each within it (the
+    horizon, the sun's glow and disc), and past it the cast gave +inf, which the cube's
+    filtering and mips turned into NaN in the frame."""
     size = faces.shape[1]
-    cube = ctx.texture_cube((size, size), 3, faces.astype(np.float16).tobytes(), dtype="f2")
+    texels = np.minimum(faces, HALF_MAX).astype(np.float16)
+    cube = ctx.texture_cube((size, size), 3, texels.tobytes(), dtype="f2")
     cube.build_mipmaps()
     cube.filter = (moderngl.LINEAR_MIPMAP_LINEAR, moderngl.LINEAR)
     ctx.enable_direct(SEAMLESS_CUBE_MAP)

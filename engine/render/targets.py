@@ -11,6 +11,14 @@ import numpy as np
 
 from engine.core.errors import GLLimitError
 
+# The HDR colour images' texel format: half floats, whose largest finite value is 65504.  What
+# the shaders write there is kept within it at the source (shaders/include/hdr.glsl), never left
+# to the conversion, which the GL spec leaves to the implementation: llvmpipe saturates to 65504,
+# a correctly rounded conversion (Vulkan's rule) makes +inf from 65520 up, and an inf pixel
+# breaks every blend over it (inf x 0 is NaN), exposure and bloom.  tests/test_hdr_range.py
+# widens it to float32 to see what the shaders write before a half float would round it.
+HDR_FORMAT = "f2"
+
 
 def check_target_size(ctx: moderngl.Context, size: tuple[int, int], what: str) -> None:
     """Refuse a render target this context cannot make (before any GL object is made, so no
@@ -43,7 +51,7 @@ class RenderTargets:
     def __init__(self, ctx: moderngl.Context, size: tuple[int, int]) -> None:
         check_target_size(ctx, size, "a render target")
         self.size = size
-        self.color = ctx.texture(size, 4, dtype="f2")
+        self.color = ctx.texture(size, 4, dtype=HDR_FORMAT)
         self.color.filter = (moderngl.LINEAR, moderngl.LINEAR)
         self.surface = ctx.texture(size, 1, dtype="u4")
         self.seen = ctx.texture(size, 1, dtype="u4")

@@ -328,7 +328,8 @@ class ViewTree:
     ``end_images`` (the main view's tree) a view the depth limits cut shows its surface's
     image from the previous frame (``EndImages``)."""
 
-    def __init__(self, renderer: Gpu, scene_pass: ScenePass, end_images: bool = False) -> None:
+    def __init__(self, renderer: Gpu, scene_pass: ScenePass, end_images: bool = False,
+                 copies: LevelCopies | None = None) -> None:
         self.renderer = renderer
         self.scene_pass = scene_pass
         self.passes = MirrorPasses(renderer)
@@ -364,7 +365,8 @@ class ViewTree:
         self.check_history = False
         # The levels of a still tree as its views drew them, while its end images settle
         # (_save_for_refill), and the end views the last ``keep`` filled again (0: none).
-        self.copies = LevelCopies(renderer.ctx)
+        # (``copies``: where the renderer counts them, the main view's tree's; else the tree's own)
+        self.copies = copies if copies is not None else LevelCopies(renderer.ctx)
         self.refilled = 0
 
     def render(self, root: View, levels: LevelStack, surfaces: SurfaceTable,
@@ -463,6 +465,14 @@ class ViewTree:
         if ends is None:
             return None
         return ends.ready(size), ends.seen, ends.view_proj
+
+    def let_go(self) -> None:
+        """No frame draws or keeps this tree now (its camera switched off, no pixels to draw
+        into): the kept tree and the copies of its levels are let go, not held for a still
+        frame that may never come (the next frame with a view draws the tree whole)."""
+        self.kept = None
+        if len(self.copies):
+            self.copies.release()
 
     def keep(self, levels: LevelStack, root: View | None = None,
              root_options: SceneOptions = TREE_ROOT) -> TreeResult | None:
