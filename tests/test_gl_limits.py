@@ -68,3 +68,30 @@ def test_an_error_left_by_other_code_is_reported_as_not_the_engines(scene, ctx):
     with pytest.raises(GLPassError, match="pending before frame 2 .*not by the engine"):
         runner.frame()
     runner.frame()  # the report cleared it; the engine goes on
+
+
+@pytest.mark.parametrize("name", ["texture_anisotropy", "reflection_anisotropy", "normal_map_anisotropy"])
+@pytest.mark.parametrize("bad", [float("nan"), float("inf"), 0.5, 0, "8", None, True, "past"])
+def test_a_filtering_setting_refuses_what_the_driver_cannot_filter_with(scene, ctx, name, bad):
+    """The renderer's anisotropy settings are checked when set, naming the setting and the
+    context's reach: a NaN or a value past max_anisotropy was clamped in silence, and a
+    string failed inside a scene pass.  A refused value leaves the one before, and the next
+    frame draws as the one before it."""
+    most = max(float(ctx.max_anisotropy), 1.0)
+    if bad == "past":
+        bad = most + 1.0
+
+    def build(world):
+        world.spawn(Transform(position=(0, 0, 3)), Camera())
+        world.spawn(Transform(), MeshRef(box()), Material(color=(0.8, 0.4, 0.2)))
+
+    runner = scene(build, (32, 32))
+    renderer = runner.engine.renderer
+    before = runner.frame()
+    kept = getattr(renderer, name)
+    with pytest.raises(ValueError, match=rf"{name} must be a number from 1 \(off\) to {most:g}"):
+        setattr(renderer, name, bad)
+    assert getattr(renderer, name) == kept
+    assert np.array_equal(runner.frame(), before)
+    setattr(renderer, name, most)   # the context's own reach is taken
+    assert getattr(renderer, name) == most

@@ -11,6 +11,7 @@ stands above every pass and no pass imports it.
 """
 from __future__ import annotations
 
+import math
 import os
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -95,8 +96,34 @@ class Shared:
         self.users = 0
 
 
+def _anisotropy(name: str, about: str) -> property:
+    """A texture-filtering setting of the ``Gpu``, checked when set: a number from 1 (no
+    anisotropic filtering) to the context's ``max_anisotropy`` (a NaN, a string or a value
+    the driver cannot filter with was clamped in silence, or failed inside a scene pass)."""
+    key = "_" + name
+
+    def get(gpu: Gpu) -> float:
+        return getattr(gpu, key)
+
+    def set_(gpu: Gpu, value: float) -> None:
+        most = max(float(gpu.ctx.max_anisotropy), 1.0)
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) \
+                or not 1.0 <= value <= most:
+            raise ValueError(f"{name} must be a number from 1 (off) to {most:g} (this context's max_anisotropy), "
+                             f"got {value!r}")
+        setattr(gpu, key, float(value))
+
+    return property(get, set_, doc=about)
+
+
 class Gpu:
     """The GL objects every pass draws with, and the frame's counters (module docstring)."""
+
+    texture_anisotropy = _anisotropy("texture_anisotropy", "Anisotropic filtering of textures in the main view.")
+    reflection_anisotropy = _anisotropy("reflection_anisotropy",
+                                        "Anisotropic filtering of albedo inside mirror and portal views.")
+    normal_map_anisotropy = _anisotropy("normal_map_anisotropy",
+                                        "Anisotropic filtering of normal maps (set before the first is uploaded).")
 
     def __init__(self, ctx: moderngl.Context, caps: GLCapabilities) -> None:
         self.ctx = ctx
@@ -126,7 +153,7 @@ class Gpu:
         # The path self-check (engine/render/path_checks.py, made by the Renderer above every
         # pass): which alternative GL paths this context draws right.  Until it is made, none.
         self.path_checks: PathTrust = _TRUST_NONE
-        self.texture_anisotropy = min(TEXTURE_ANISOTROPY, ctx.max_anisotropy)
+        self.texture_anisotropy = max(min(TEXTURE_ANISOTROPY, ctx.max_anisotropy), 1.0)
         # Texture filtering inside mirror and portal views.  A software rasteriser spends
         # about 60% of a reflection view's time in the anisotropic filter (measured on
         # llvmpipe, benchmarks/mirrors.py), so there reflections filter trilinearly; a GPU
