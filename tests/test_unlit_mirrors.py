@@ -9,13 +9,19 @@ and by what the main view itself wrote under the mirrors before the composites: 
 where the rule took them, lit where not."""
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
+from pyglm import glm
 
-from benchmarks.mirrors import MirrorRing
-from components import Mirror
+from benchmarks.glass import GlassHouse
+from benchmarks.mirrors import START_ANGLE, MirrorRing
+from components import Material, MeshRef, Mirror, Transform, look_rotation
+from engine.assets.mesh import quad
 from engine.core.frame_io import Output
 from engine.core.game import Game
+from engine.render import scene_pass
 from engine.render.frame_views import FrameViews
 from engine.render.scene_pass import shading_replaced
 from engine.render.targets import CaptureTarget
@@ -243,6 +249,56 @@ def test_mirrors_at_the_depth_limit_are_unlit_and_the_frame_is_the_same(ctx, cou
         if end and depth == 3:  # the ring's end views (none at depths 1-2: nothing up their chains to repeat)
             assert fast.renderer.stats.reflection_end_views > 0
         _same_frames(got, want)
+    finally:
+        fast.close()
+        shaded.close()
+
+
+class _RingWithSeeThrough(GlassHouse):
+    """The glass benchmark's ring of 8 (``benchmarks.glass``: a see-through pond at the
+    centre, ``panes`` glass panes round it) and a see-through mirror standing at the centre
+    facing the camera's start, in front of the far side of the ring: a tree draws it before
+    its claims, so where it covers a mirror it blends over that mirror's own colour."""
+
+    def build(self, world) -> None:
+        super().build(world)
+        towards = glm.normalize(glm.vec3(math.cos(START_ANGLE), 0.0, math.sin(START_ANGLE)))
+        world.spawn(Transform(position=(0.0, 1.6, 0.0), rotation=look_rotation(-towards)), MeshRef(quad(3.0, 2.0)),
+                    Material(color=(0.3, 0.35, 0.4, 0.5)), Mirror(reflect_rate=0.7))
+
+
+@pytest.mark.parametrize("panes,path", [(0, "per_mirror"), (6, "per_mirror"), (6, "batched")])
+def test_see_through_surfaces_keep_lit_only_the_mirrors_they_can_blend_over(ctx, monkeypatch, panes, path):
+    """A see-through surface is drawn before the claims (its pixels are claimed), so a mirror
+    it blends over must be shaded in that view; every other view draws the ring's mirrors
+    unlit (``scene_pass._unlit_in_view``: screen rectangles and depth), and the frames are
+    the all-lit path's, pixel for pixel and id for id.  (A batched level draws its views
+    at once: unlit only where no view's surfaces can blend over them, here seldom.)"""
+    seen = {"kept": 0, "lost": 0}
+    narrowed = scene_pass._unlit_in_view
+
+    def counting(unlit, drawn, view):
+        kept = narrowed(unlit, drawn, view)
+        if unlit and drawn:
+            seen["kept"] += len(kept)
+            seen["lost"] += len(unlit) - len(kept)
+        return kept
+
+    monkeypatch.setattr(scene_pass, "_unlit_in_view", counting)
+
+    def setup(engine: Engine) -> None:
+        engine.reflection_system.path = path
+
+    fast = _engine(ctx, setup, game=_RingWithSeeThrough(panes))
+    shaded = _engine(ctx, setup, shaded=True, game=_RingWithSeeThrough(panes))
+    try:
+        got, want = _frames(ctx, fast, 4, (320, 180)), _frames(ctx, shaded, 4, (320, 180))
+        _same_frames(got, want)
+        assert len(fast.stages["main"]._root_options().unlit) == 8
+        if path == "per_mirror":
+            assert seen["kept"] > 10 and seen["lost"] > 2, seen  # unlit in most views, lit where covered
+        else:
+            assert seen["kept"] + seen["lost"] > 2, seen
     finally:
         fast.close()
         shaded.close()

@@ -41,7 +41,9 @@ Less pixel work where a view's pixels are painted over anyway: a mirror whose re
 its own shading (``shading_replaced`` says which, ``SceneOptions.unlit`` carries them), so a
 batch of such mirrors draws with the ``UNLIT_SURFACE`` build of ``scene.frag``: depth and
 ids as ever, a constant colour, no lighting (at 8 mirrors and 640x360 about 7% of the main
-view's shaded pixels on llvmpipe, which shades every pixel of every 2 x 4 group it touches).
+view's shaded pixels on llvmpipe, which shades every pixel of every 2 x 4 group it touches),
+except in a view whose see-through surfaces, drawn before the composites, may blend over
+one of the batch's mirrors (``_unlit_in_view``).
 """
 from __future__ import annotations
 
@@ -626,7 +628,7 @@ class ScenePass:
         now = _drawn_now(transparent, options)
         geometry = self._slot_geometry(transparent) if now else None
         opaque = renderer.opaque_batches()
-        unlit = _unlit_batches(opaque, options.unlit, now)
+        unlit = _unlit_batches(opaque, options.unlit)
         renderer.upload_views(views)  # every view's Camera block in one write; each binds its range
         reach = None
         if (self.cull_batches and opaque and len(opaque) >= self.cull_min_batches
@@ -646,12 +648,20 @@ class ScenePass:
             renderer.stats.passes += len(views)
             return
         for index, view in enumerate(views):
+            view_unlit = unlit
+            if now:  # the slot, or (a tree's view) its part up to its see-through surfaces
+                if options.transparent:
+                    batches = _back_to_front(transparent, view.eye, view, geometry)
+                else:
+                    batches, _, torn = _split_slot(transparent, view, geometry)
+                    renderer.stats.glass_between_surfaces += torn
+                view_unlit = _unlit_in_view(unlit, batches, view)
             with _ALWAYS if conditions is None else conditions[index].crender:
                 set_scissor(ctx, view.scissor)  # unless in place (moderngl's own record: the cache reads it)
                 set_front_face(ctx, "cw" if view.mirrored else "ccw")
                 renderer.bind_view_at(index)
                 self._draw_batches(opaque if reach is None else self._reaching(opaque, reach[index], view),
-                                   0, masked, skip=view.skip, hide=view.hide, unlit=unlit)
+                                   0, masked, skip=view.skip, hide=view.hide, unlit=view_unlit)
                 if options.sky:
                     # Into the view's own framebuffer: the sky writes id 0 (nothing) to the
                     # surface and seen images, the very values the clear put where no surface
@@ -662,15 +672,10 @@ class ScenePass:
                     apply_pass_state(ctx, _SKY, viewport, view.scissor)
                     self._sky.render(moderngl.TRIANGLES, vertices=3)
                     renderer.stats.draw_calls += 1
-                if now:  # the slot, or (a tree's view) its part up to its see-through surfaces
+                if now:
                     targets.view_framebuffer.depth_mask = False
                     targets.view_framebuffer.use()
                     apply_pass_state(ctx, _TRANSPARENT, viewport, view.scissor)
-                    if options.transparent:
-                        batches = _back_to_front(transparent, view.eye, view, geometry)
-                    else:
-                        batches, _, torn = _split_slot(transparent, view, geometry)
-                        renderer.stats.glass_between_surfaces += torn
                     self._transparent_view(view, index, batches, options.masked)
                     targets.view_framebuffer.depth_mask = True
                     targets.view_framebuffer.use()
@@ -704,16 +709,22 @@ class ScenePass:
         transparent = renderer.transparent_batches()
         now = _drawn_now(transparent, options)
         opaque = renderer.opaque_batches()
-        unlit = _unlit_batches(opaque, options.unlit, now)
+        unlit = _unlit_batches(opaque, options.unlit)
+        groups = None
+        if now and not options.transparent:  # each group of views with the same part of the slot before the claims
+            groups = _slot_groups(transparent, views, self._slot_geometry(transparent))
+        if now and unlit:  # one draw for every view: unlit where no view's slot can blend over it
+            for group, first in ([(views, transparent)] if groups is None else [group[:2] for group in groups]):
+                for view in group:
+                    unlit = _unlit_in_view(unlit, first, view)
         self._draw_batches(opaque, invocations, options.masked, unlit=unlit)
         if now:
             viewport = (0, 0, *views[0].size)
-            if options.transparent:  # farthest from the first view's eye first (the views of a level are close)
+            if groups is None:  # farthest from the first view's eye first (the views of a level are close)
                 apply_pass_state(ctx, _BATCHED_TRANSPARENT, viewport, scissor)
                 self._draw_batches(_back_to_front(transparent, views[0].eye, None, self._slot_geometry(transparent)),
                                    invocations, options.masked)
-            else:  # each group of views with the same part of the slot before the claims, in one draw a batch
-                groups = _slot_groups(transparent, views, self._slot_geometry(transparent))
+            else:  # in one draw a batch a group
                 for group, first, _, torn in groups:
                     renderer.stats.glass_between_surfaces += torn
                     if not first:
@@ -864,9 +875,9 @@ def shading_replaced(mirrors: Iterable[SurfaceState], pixel_budget: bool = False
     pass draws these mirrors' batches unlit (``SceneOptions.unlit``), with glass in front of
     them too: a view tree draws its views' glass after compositing into them
     (``ScenePass.draw_transparent``), so it blends over the reflection, never over a
-    mirror's own colour; not where a see-through mirror or portal (water) is in the
-    transparent slot (``_drawn_now``: it and what lies behind it are drawn with the opaque
-    batches, before the composites)."""
+    mirror's own colour; not in a view where a see-through mirror or portal (water), or
+    what lies behind it, can blend over the mirror (``_unlit_in_view``: those are drawn with
+    the opaque batches, before the composites)."""
     if pixel_budget:
         return frozenset()
     return frozenset(state.entity for state in mirrors
@@ -874,14 +885,93 @@ def shading_replaced(mirrors: Iterable[SurfaceState], pixel_budget: bool = False
                      and state.water is None and state.resolution_scale == 1.0)
 
 
-def _unlit_batches(opaque: Iterable[InstanceBatch], mirrors: frozenset[int], transparent: list) -> set:
-    """The batches of ``opaque`` a pass draws unlit: those whose instances are all in
-    ``mirrors`` (``SceneOptions.unlit``), worked out once a pass, not once a view; none where
-    ``transparent`` batches may be drawn with them (``_drawn_now``: they would blend over a
-    mirror's colour before its composite, not over its reflection)."""
-    if not mirrors or transparent:
+def _unlit_batches(opaque: Iterable[InstanceBatch], mirrors: frozenset[int]) -> set:
+    """The batches of ``opaque`` a pass may draw unlit: those whose instances are all in
+    ``mirrors`` (``SceneOptions.unlit``), worked out once a pass, not once a view; a view
+    keeps of them those no transparent batch it draws before the composites can blend over
+    (``_unlit_in_view``)."""
+    if not mirrors:
         return _NO_BATCHES
     return {batch for batch in opaque if _may_be_unlit(batch) and batch.row_of.keys() <= mirrors}
+
+
+def _unlit_in_view(unlit: set, drawn: list, view: View) -> set:
+    """What of ``unlit`` (``_unlit_batches``) ``view`` may draw unlit where it blends the
+    transparent batches ``drawn`` before the composites (a tree's see-through surfaces and
+    what is behind them: ``_drawn_now``, ``_split_slot``): those no batch of ``drawn`` can
+    blend over.  One that does would blend over the mirror's constant colour, and take its
+    pixels from the mirror's claim (its ids), so the colour would show; a batch can blend
+    over a mirror only where it covers it on the screen and is nearer than it somewhere.
+    So a batch of ``unlit`` stays unlit unless an instance's box and a batch of ``drawn``
+    have overlapping screen rectangles (``_screen_rect``, a margin wider) and the drawn
+    batch's box comes nearer the eye than the instance's farthest corner: a pond at the
+    centre of a ring keeps the ring's mirrors it is not in front of unlit (it turned every
+    mirror lit, in every view, before).  Conservative both ways (boxes, a box reaching behind
+    the eye covers the screen): the image is the all-lit path's, bit for bit
+    (tests/test_unlit_mirrors.py)."""
+    if not unlit or not drawn:
+        return unlit
+    view_proj, eye = view.view_proj, view.eye
+    fronts = []  # each drawn batch's rectangle and nearest distance
+    for batch in drawn:
+        box = _box_floats(batch)
+        if box is None:
+            continue  # empty: draws nothing
+        fronts.append((_screen_rect(_box_corners(box), view_proj), _nearest(box, eye)))
+    kept = set()
+    for batch in unlit:
+        box = _box_floats(batch)
+        if box is None:
+            continue  # (not measured yet: lit)
+        if not _covered(box, fronts, view_proj, eye):
+            kept.add(batch)
+        elif batch.count > 1:  # by the instances' own boxes (a ring's batch of mirrors spans the ring)
+            rows = batch.row_boxes.tolist()
+            if not any(lo[0] != lo[0] or _covered((lo, hi), fronts, view_proj, eye) for lo, hi in rows):
+                kept.add(batch)
+    return kept
+
+
+def _covered(box: tuple[list[float], list[float]], fronts: list, view_proj: glm.mat4, eye: glm.vec3) -> bool:
+    """Whether a batch of ``fronts`` (rectangle, nearest distance) can blend over ``box``:
+    nearer the eye than its farthest corner, the rectangles overlapping."""
+    far = _farthest(box, eye) + _DEPTH_MARGIN
+    rect = None
+    for front, nearest in fronts:
+        if nearest < far:
+            if rect is None:
+                rect = _screen_rect(_box_corners(box), view_proj)
+            if _overlap(_widened(front), rect):
+                return True
+    return False
+
+
+# How much nearer (m) and wider (NDC) a drawn batch's box counts than it is, in
+# _unlit_in_view: what float32 corners and a vertex's own transform may be off by.
+_DEPTH_MARGIN = 1e-3
+_RECT_MARGIN = 1e-3
+
+
+def _box_corners(box: tuple[list[float], list[float]]) -> list[glm.vec4]:
+    lo, hi = box
+    return [glm.vec4(x, y, z, 1.0) for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])]
+
+
+def _nearest(box: tuple[list[float], list[float]], eye: glm.vec3) -> float:
+    """How near the box comes to ``eye`` (0: the eye is in it)."""
+    lo, hi = box
+    return math.sqrt(sum(max(lo[axis] - eye[axis], 0.0, eye[axis] - hi[axis]) ** 2 for axis in range(3)))
+
+
+def _farthest(box: tuple[list[float], list[float]], eye: glm.vec3) -> float:
+    lo, hi = box
+    return math.sqrt(sum(max(abs(lo[axis] - eye[axis]), abs(hi[axis] - eye[axis])) ** 2 for axis in range(3)))
+
+
+def _widened(rect: tuple[float, float, float, float] | None) -> tuple[float, float, float, float] | None:
+    if rect is None:
+        return None
+    return rect[0] - _RECT_MARGIN, rect[1] - _RECT_MARGIN, rect[2] + _RECT_MARGIN, rect[3] + _RECT_MARGIN
 
 
 _NO_BATCHES: frozenset = frozenset()
