@@ -134,21 +134,27 @@ def test_the_levels_draw_their_mirrors_unlit_and_every_claimed_pixel_is_composit
         shaded.close()
 
 
-def test_glass_in_front_of_a_mirror_keeps_every_mirror_shaded(ctx):
+@pytest.mark.parametrize("pose", ["start", "mirror_wall", "doorway", "back_mirror"])
+def test_the_sample_level_with_its_ghost_and_pond_is_the_all_lit_frame(ctx, monkeypatch, pose):
     """The sample level's ghost (alpha 0.7, seen only in mirrors) stands before the mirror
-    wall, and its pond is a see-through mirror: the transparent slot's mirrors are drawn
-    with the opaque batches (the claims find their pixels; ScenePass._drawn_now), so no
-    mirror is unlit there, and the frame is the all-lit path's.  (Glass alone keeps them
-    unlit: tests/test_glass_over_reflection.py.)"""
+    wall, and its pond is a see-through mirror.  The ghost is glass: a tree draws it after
+    the composites, over the reflections.  The pond is drawn with the opaque batches (the
+    claims find its pixels; ScenePass._drawn_now), so a view keeps lit the mirrors it can
+    blend over and draws the others unlit (scene_pass._UnlitViews); the frame is the
+    all-lit path's.  (Glass alone keeps them unlit: tests/test_glass_over_reflection.py.)"""
     from tests.golden_scenes import HALL_POSES, _hall
 
     def place(engine: Engine) -> None:
-        engine.place_camera(*HALL_POSES["mirror_wall"])
+        if HALL_POSES[pose] is not None:
+            engine.place_camera(*HALL_POSES[pose])
 
+    seen = _count_kept(monkeypatch)
     fast, shaded = _engine(ctx, place, game=_hall()), _engine(ctx, place, shaded=True, game=_hall())
     try:
         got, want = _frames(ctx, fast, 2, (320, 180)), _frames(ctx, shaded, 2, (320, 180))
         assert fast.renderer.transparent_batches()
+        kept, lost = seen[fast.renderer.scene_pass]
+        assert kept > 10, (kept, lost)  # views with the pond drawn before their claims drew mirrors unlit
         _same_frames(got, want)
     finally:
         fast.close()
@@ -254,6 +260,24 @@ def test_mirrors_at_the_depth_limit_are_unlit_and_the_frame_is_the_same(ctx, cou
         shaded.close()
 
 
+def _count_kept(monkeypatch) -> dict:
+    """Per scene pass, [candidates kept unlit, made lit] over the views that drew transparent
+    batches before their composites (``scene_pass._UnlitViews.keep``), counted as frames run."""
+    counts: dict = {}
+    narrowed = scene_pass._UnlitViews.keep
+
+    def counting(check, view, drawn):
+        kept = narrowed(check, view, drawn)
+        if check.unlit and drawn:
+            count = counts.setdefault(check.scene, [0, 0])
+            count[0] += len(kept)
+            count[1] += len(check.unlit) - len(kept)
+        return kept
+
+    monkeypatch.setattr(scene_pass._UnlitViews, "keep", counting)
+    return counts
+
+
 class _RingWithSeeThrough(GlassHouse):
     """The glass benchmark's ring of 8 (``benchmarks.glass``: a see-through pond at the
     centre, ``panes`` glass panes round it) and a see-through mirror standing at the centre
@@ -271,20 +295,10 @@ class _RingWithSeeThrough(GlassHouse):
 def test_see_through_surfaces_keep_lit_only_the_mirrors_they_can_blend_over(ctx, monkeypatch, panes, path):
     """A see-through surface is drawn before the claims (its pixels are claimed), so a mirror
     it blends over must be shaded in that view; every other view draws the ring's mirrors
-    unlit (``scene_pass._unlit_in_view``: screen rectangles and depth), and the frames are
+    unlit (``scene_pass._UnlitViews``: screen rectangles and depth), and the frames are
     the all-lit path's, pixel for pixel and id for id.  (A batched level draws its views
     at once: unlit only where no view's surfaces can blend over them, here seldom.)"""
-    seen = {"kept": 0, "lost": 0}
-    narrowed = scene_pass._unlit_in_view
-
-    def counting(unlit, drawn, view):
-        kept = narrowed(unlit, drawn, view)
-        if unlit and drawn:
-            seen["kept"] += len(kept)
-            seen["lost"] += len(unlit) - len(kept)
-        return kept
-
-    monkeypatch.setattr(scene_pass, "_unlit_in_view", counting)
+    counts = _count_kept(monkeypatch)
 
     def setup(engine: Engine) -> None:
         engine.reflection_system.path = path
@@ -294,6 +308,8 @@ def test_see_through_surfaces_keep_lit_only_the_mirrors_they_can_blend_over(ctx,
     try:
         got, want = _frames(ctx, fast, 4, (320, 180)), _frames(ctx, shaded, 4, (320, 180))
         _same_frames(got, want)
+        kept, lost = counts[fast.renderer.scene_pass]
+        seen = {"kept": kept, "lost": lost}
         assert len(fast.stages["main"]._root_options().unlit) == 8
         if path == "per_mirror":
             assert seen["kept"] > 10 and seen["lost"] > 2, seen  # unlit in most views, lit where covered

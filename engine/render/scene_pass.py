@@ -43,7 +43,7 @@ batch of such mirrors draws with the ``UNLIT_SURFACE`` build of ``scene.frag``: 
 ids as ever, a constant colour, no lighting (at 8 mirrors and 640x360 about 7% of the main
 view's shaded pixels on llvmpipe, which shades every pixel of every 2 x 4 group it touches),
 except in a view whose see-through surfaces, drawn before the composites, may blend over
-one of the batch's mirrors (``_unlit_in_view``).
+one of the batch's mirrors (``_UnlitViews``).
 """
 from __future__ import annotations
 
@@ -205,6 +205,11 @@ class ScenePass:
         self.cull_min_draws = CULL_MIN_DRAWS
         # The transparent slot's SlotGeometry and the scene_version it was worked out at.
         self._slot_kept: tuple[int, SlotGeometry] | None = None
+        # The unlit candidates' instances' boxes (_instance_boxes) and the scene_version they
+        # were worked out at.
+        self._boxes: dict[InstanceBatch, list | None] = {}
+        self._beyond: dict[tuple, tuple] = {}  # (surface, batch) -> its plane, beyond()
+        self._boxes_at = -1
         # A run's pass-wide bindings (draw's run): (run, (capturing, reflection filter), bindings_epoch
         # after them), or None.
         self._pass_wide: tuple | None = None
@@ -628,7 +633,7 @@ class ScenePass:
         now = _drawn_now(transparent, options)
         geometry = self._slot_geometry(transparent) if now else None
         opaque = renderer.opaque_batches()
-        unlit = _unlit_batches(opaque, options.unlit)
+        unlit = self._unlit_views(opaque, options, geometry) if now else _unlit_batches(opaque, options.unlit)
         renderer.upload_views(views)  # every view's Camera block in one write; each binds its range
         reach = None
         if (self.cull_batches and opaque and len(opaque) >= self.cull_min_batches
@@ -655,7 +660,7 @@ class ScenePass:
                 else:
                     batches, _, torn = _split_slot(transparent, view, geometry)
                     renderer.stats.glass_between_surfaces += torn
-                view_unlit = _unlit_in_view(unlit, batches, view)
+                view_unlit = unlit.keep(view, batches)
             with _ALWAYS if conditions is None else conditions[index].crender:
                 set_scissor(ctx, view.scissor)  # unless in place (moderngl's own record: the cache reads it)
                 set_front_face(ctx, "cw" if view.mirrored else "ccw")
@@ -683,6 +688,35 @@ class ScenePass:
                     # The next view's state (the pass after the last applies its own).
                     apply_pass_state(ctx, _SCENE, viewport, views[index + 1].scissor)
                 renderer.stats.passes += 1
+
+    def _unlit_views(self, opaque: list[InstanceBatch], options: SceneOptions,
+                     geometry: SlotGeometry | None) -> _UnlitViews:
+        """The pass's unlit candidates (``_unlit_batches``) and what says which each view
+        keeps (``_UnlitViews``), their instances' boxes worked out once while the scene
+        stands (the Gpu's ``scene_version``)."""
+        version = self.renderer.scene_version
+        if self._boxes_at != version:
+            self._boxes.clear()
+            self._beyond.clear()
+            self._boxes_at = version
+        return _UnlitViews(_unlit_batches(opaque, options.unlit), self, geometry)
+
+    def instance_boxes(self, batch: InstanceBatch) -> list[tuple[float, ...]] | None:
+        """``_instance_boxes`` of ``batch``, kept while the scene stands (``_unlit_views``)."""
+        boxes = self._boxes.get(batch, _UNKNOWN)
+        if boxes is _UNKNOWN:
+            boxes = self._boxes[batch] = _instance_boxes(batch)
+        return boxes
+
+    def beyond(self, surface: InstanceBatch, batch: InstanceBatch) -> list[tuple[float, float, float]]:
+        """For each instance of ``batch``, how far its box reaches past ``surface``'s plane on
+        the side its normal points to and on the other (0: not at all), and the gap between
+        its box and the surface's: kept while the scene stands and the plane is the same."""
+        key = (surface, batch)
+        kept = self._beyond.get(key)
+        if kept is None or kept[0] is not surface.plane:
+            kept = self._beyond[key] = (surface.plane, _beyond(surface, batch))
+        return kept[1]
 
     def _reaching(self, batches: list[InstanceBatch], reach: list[bool], view: View) -> list[InstanceBatch]:
         """The batches whose ``reach`` (batch_cull.batch_reach) in ``view`` is True; those
@@ -714,9 +748,11 @@ class ScenePass:
         if now and not options.transparent:  # each group of views with the same part of the slot before the claims
             groups = _slot_groups(transparent, views, self._slot_geometry(transparent))
         if now and unlit:  # one draw for every view: unlit where no view's slot can blend over it
+            check = self._unlit_views(opaque, options, self._slot_geometry(transparent))
             for group, first in ([(views, transparent)] if groups is None else [group[:2] for group in groups]):
                 for view in group:
-                    unlit = _unlit_in_view(unlit, first, view)
+                    check.unlit = check.keep(view, first)
+            unlit = check.unlit
         self._draw_batches(opaque, invocations, options.masked, unlit=unlit)
         if now:
             viewport = (0, 0, *views[0].size)
@@ -876,7 +912,7 @@ def shading_replaced(mirrors: Iterable[SurfaceState], pixel_budget: bool = False
     them too: a view tree draws its views' glass after compositing into them
     (``ScenePass.draw_transparent``), so it blends over the reflection, never over a
     mirror's own colour; not in a view where a see-through mirror or portal (water), or
-    what lies behind it, can blend over the mirror (``_unlit_in_view``: those are drawn with
+    what lies behind it, can blend over the mirror (``_UnlitViews``: those are drawn with
     the opaque batches, before the composites)."""
     if pixel_budget:
         return frozenset()
@@ -889,89 +925,179 @@ def _unlit_batches(opaque: Iterable[InstanceBatch], mirrors: frozenset[int]) -> 
     """The batches of ``opaque`` a pass may draw unlit: those whose instances are all in
     ``mirrors`` (``SceneOptions.unlit``), worked out once a pass, not once a view; a view
     keeps of them those no transparent batch it draws before the composites can blend over
-    (``_unlit_in_view``)."""
+    (``_UnlitViews``)."""
     if not mirrors:
         return _NO_BATCHES
     return {batch for batch in opaque if _may_be_unlit(batch) and batch.row_of.keys() <= mirrors}
 
 
-def _unlit_in_view(unlit: set, drawn: list, view: View) -> set:
-    """What of ``unlit`` (``_unlit_batches``) ``view`` may draw unlit where it blends the
-    transparent batches ``drawn`` before the composites (a tree's see-through surfaces and
-    what is behind them: ``_drawn_now``, ``_split_slot``): those no batch of ``drawn`` can
-    blend over.  One that does would blend over the mirror's constant colour, and take its
-    pixels from the mirror's claim (its ids), so the colour would show; a batch can blend
-    over a mirror only where it covers it on the screen and is nearer than it somewhere.
-    So a batch of ``unlit`` stays unlit unless an instance's box and a batch of ``drawn``
-    have overlapping screen rectangles (``_screen_rect``, a margin wider) and the drawn
-    batch's box comes nearer the eye than the instance's farthest corner: a pond at the
-    centre of a ring keeps the ring's mirrors it is not in front of unlit (it turned every
-    mirror lit, in every view, before).  Conservative both ways (boxes, a box reaching behind
-    the eye covers the screen): the image is the all-lit path's, bit for bit
-    (tests/test_unlit_mirrors.py)."""
-    if not unlit or not drawn:
-        return unlit
-    view_proj, eye = view.view_proj, view.eye
-    fronts = []  # each drawn batch's rectangle and nearest distance
-    for batch in drawn:
-        box = _box_floats(batch)
-        if box is None:
-            continue  # empty: draws nothing
-        fronts.append((_screen_rect(_box_corners(box), view_proj), _nearest(box, eye)))
-    kept = set()
-    for batch in unlit:
-        box = _box_floats(batch)
-        if box is None:
-            continue  # (not measured yet: lit)
-        if not _covered(box, fronts, view_proj, eye):
-            kept.add(batch)
-        elif batch.count > 1:  # by the instances' own boxes (a ring's batch of mirrors spans the ring)
-            rows = batch.row_boxes.tolist()
-            if not any(lo[0] != lo[0] or _covered((lo, hi), fronts, view_proj, eye) for lo, hi in rows):
+class _UnlitViews:
+    """Which of a pass's unlit candidates (``_unlit_batches``) each view may draw unlit
+    (``keep``), given the transparent batches it blends before the composites (a tree's
+    see-through surfaces and what is behind them: ``_drawn_now``, ``_split_slot``): those
+    no such batch can blend over.  One that does would blend over the mirror's constant
+    colour, and take its pixels from the mirror's claim (its ids), so the colour would
+    show.  A drawn batch covers a point of a mirror only if it is nearer on the ray from the
+    eye; so, instance by instance (a ring's mirrors are one batch), a candidate stays unlit
+    unless
+
+    - for a see-through surface (planar): the instance reaches beyond the surface's plane,
+      seen from the eye, and not so far from the surface's box that no ray from the eye
+      could cross the plane within it (the ray to a point a depth d beyond the plane, the
+      eye a height h before it, crosses it within d / (d + h) of its length of the point:
+      worked out once while the scene stands, the depth and the gap, and a view's height
+      and farthest distance: a few operations an instance); and then
+    - the drawn batch comes nearer the eye than the instance box's farthest corner, and its
+      box's screen rectangle (``_screen_rect``) meets the instance box's (bounded first by
+      interval arithmetic on the projection, then by its eight corners).
+
+    A pond at the centre of a ring of mirrors, below their tops and above their feet, keeps
+    them unlit in nearly every view (it turned every mirror lit, in every view, before).
+    Conservative throughout (a margin wider and nearer; a box reaching behind the eye covers
+    the screen), so the image is the all-lit path's, bit for bit (tests/test_unlit_mirrors.py)."""
+
+    __slots__ = ("unlit", "scene", "geometry")
+
+    def __init__(self, unlit: set, scene: ScenePass, geometry: SlotGeometry | None) -> None:
+        self.unlit, self.scene, self.geometry = unlit, scene, geometry
+
+    def keep(self, view: View, drawn: list) -> set:
+        unlit = self.unlit
+        if not unlit or not drawn:
+            return unlit
+        eye = view.eye
+        ex, ey, ez = eye.x, eye.y, eye.z
+        fronts = []  # [batch, box, unit plane and the eye's height over it (or None), rectangle, nearest]
+        for batch in drawn:
+            box = _box_floats(batch)
+            if box is None:
+                continue  # empty: draws nothing
+            plane = batch.plane if batch.surface and batch.count == 1 else None
+            height = None
+            if plane is not None:
+                length = glm.length(glm.vec3(plane))
+                height = (plane.x * ex + plane.y * ey + plane.z * ez + plane.w) / length if length > 0.0 else 0.0
+            fronts.append([batch, box, height, _UNKNOWN, _UNKNOWN])
+        if not fronts:
+            return unlit
+        kept = set()
+        scene = self.scene
+        for batch in unlit:
+            boxes = scene.instance_boxes(batch)
+            if boxes is None:
+                continue  # a row not measured yet: lit
+            lo, hi = _box_floats(batch)
+            farthest = math.sqrt(sum(max(abs(lo[axis] - eye[axis]), abs(hi[axis] - eye[axis])) ** 2
+                                     for axis in range(3)))
+            covered = False
+            for front in fronts:
+                height = front[2]
+                if height is None or abs(height) <= 1e-6:
+                    covered = any(self._covers(front, instance, view) for instance in boxes)
+                else:  # by the surface's plane first
+                    side, reach = (1, height) if height > 0.0 else (0, -height)  # the depth past it, the eye's height
+                    for i, past in enumerate(scene.beyond(front[0], batch)):
+                        depth = past[side]  # how far the instance reaches past the plane, seen from the eye
+                        if depth > 0.0 and past[2] <= farthest * depth / (depth + reach) + _DEPTH_MARGIN \
+                                and self._covers(front, boxes[i], view):
+                            covered = True
+                            break
+                if covered:
+                    break
+            if not covered:
                 kept.add(batch)
-    return kept
+        return kept
+
+    def _covers(self, front: list, instance: tuple, view: View) -> bool:
+        """Whether ``front`` (a drawn batch) may blend over ``instance`` (centre, half sizes):
+        nearer the eye than its box's farthest corner, and their screen rectangles meeting."""
+        eye = view.eye
+        cx, cy, cz, hx, hy, hz = instance
+        far = math.sqrt((abs(cx - eye.x) + hx) ** 2 + (abs(cy - eye.y) + hy) ** 2 + (abs(cz - eye.z) + hz) ** 2)
+        if front[4] is _UNKNOWN:
+            lo, hi = front[1]
+            front[4] = math.sqrt(sum(max(lo[axis] - eye[axis], 0.0, eye[axis] - hi[axis]) ** 2
+                                     for axis in range(3))) - _DEPTH_MARGIN
+        if front[4] >= far:
+            return False
+        view_proj = view.view_proj
+        if front[3] is _UNKNOWN:
+            front[3] = _widened(_screen_rect(_box_corners(front[1]), view_proj))
+        rect = front[3]
+        if rect is None:
+            return True
+        # The projection's rows (x, y, w): over a box each is row . c + row[3], give or take
+        # |row| . h, exactly; x and y (their quotients by w) lie within the four quotients of
+        # those ends (w above 0: the box before the eye).
+        ends = []
+        for r in (0, 1, 3):
+            a, b, c = view_proj[0][r], view_proj[1][r], view_proj[2][r]
+            middle, spread = a * cx + b * cy + c * cz + view_proj[3][r], abs(a) * hx + abs(b) * hy + abs(c) * hz
+            ends.append((middle - spread, middle + spread))
+        (nx0, nx1), (ny0, ny1), (d0, d1) = ends
+        if d0 <= 1e-6:
+            return True  # reaching behind the eye: anywhere on the screen
+        if (max(nx1 / d0, nx1 / d1) < rect[0] or min(nx0 / d0, nx0 / d1) > rect[2]
+                or max(ny1 / d0, ny1 / d1) < rect[1] or min(ny0 / d0, ny0 / d1) > rect[3]):
+            return False
+        # Then by the box's eight corners (where its depth varies, much tighter).
+        corners = _box_corners(((cx - hx, cy - hy, cz - hz), (cx + hx, cy + hy, cz + hz)))
+        return _overlap(rect, _screen_rect(corners, view_proj))
 
 
-def _covered(box: tuple[list[float], list[float]], fronts: list, view_proj: glm.mat4, eye: glm.vec3) -> bool:
-    """Whether a batch of ``fronts`` (rectangle, nearest distance) can blend over ``box``:
-    nearer the eye than its farthest corner, the rectangles overlapping."""
-    far = _farthest(box, eye) + _DEPTH_MARGIN
-    rect = None
-    for front, nearest in fronts:
-        if nearest < far:
-            if rect is None:
-                rect = _screen_rect(_box_corners(box), view_proj)
-            if _overlap(_widened(front), rect):
-                return True
-    return False
+_UNKNOWN = object()  # (not worked out yet)
 
 
-# How much nearer (m) and wider (NDC) a drawn batch's box counts than it is, in
-# _unlit_in_view: what float32 corners and a vertex's own transform may be off by.
+def _beyond(surface: InstanceBatch, batch: InstanceBatch) -> list[tuple[float, float, float]]:
+    """``ScenePass.beyond`` worked out: each instance box's corners' distances to the
+    surface's (unit) plane, the farthest on either side, and the boxes' gap."""
+    plane = surface.plane
+    normal = glm.vec3(plane)
+    length = glm.length(normal)
+    nx, ny, nz, w = (plane.x / length, plane.y / length, plane.z / length, plane.w / length) if length > 0.0 \
+        else (0.0, 0.0, 0.0, 0.0)
+    box = _box_floats(surface)
+    out = []
+    for lo, hi in batch.row_boxes.tolist():
+        low = high = w
+        for n, a, b in ((nx, lo[0], hi[0]), (ny, lo[1], hi[1]), (nz, lo[2], hi[2])):
+            low += min(n * a, n * b)
+            high += max(n * a, n * b)
+        gap = 0.0 if box is None else math.sqrt(sum(max(lo[axis] - box[1][axis], box[0][axis] - hi[axis], 0.0) ** 2
+                                                    for axis in range(3)))
+        if length == 0.0:
+            low, high, gap = -math.inf, math.inf, 0.0
+        out.append((max(high, 0.0), max(-low, 0.0), gap))
+    return out
+
+
+def _instance_boxes(batch: InstanceBatch) -> list[tuple[float, ...]] | None:
+    """Each instance's world box (``InstanceBatch.row_boxes``) as its centre and half sizes
+    (a hair larger: what float32 rows are off by); None where a row is not measured yet."""
+    boxes = []
+    for lo, hi in batch.row_boxes.tolist():
+        if lo[0] != lo[0]:
+            return None
+        boxes.append((*((l + h) * 0.5 for l, h in zip(lo, hi, strict=True)),
+                      *((h - l) * 0.5 * (1.0 + 1e-6) + 1e-6 for l, h in zip(lo, hi, strict=True))))
+    return boxes
+
+
+# How much nearer (m) and wider (NDC) a drawn batch counts than its box, in _UnlitViews:
+# what float32 corners and a vertex's own transform may be off by.
 _DEPTH_MARGIN = 1e-3
 _RECT_MARGIN = 1e-3
-
-
-def _box_corners(box: tuple[list[float], list[float]]) -> list[glm.vec4]:
-    lo, hi = box
-    return [glm.vec4(x, y, z, 1.0) for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])]
-
-
-def _nearest(box: tuple[list[float], list[float]], eye: glm.vec3) -> float:
-    """How near the box comes to ``eye`` (0: the eye is in it)."""
-    lo, hi = box
-    return math.sqrt(sum(max(lo[axis] - eye[axis], 0.0, eye[axis] - hi[axis]) ** 2 for axis in range(3)))
-
-
-def _farthest(box: tuple[list[float], list[float]], eye: glm.vec3) -> float:
-    lo, hi = box
-    return math.sqrt(sum(max(abs(lo[axis] - eye[axis]), abs(hi[axis] - eye[axis])) ** 2 for axis in range(3)))
 
 
 def _widened(rect: tuple[float, float, float, float] | None) -> tuple[float, float, float, float] | None:
     if rect is None:
         return None
     return rect[0] - _RECT_MARGIN, rect[1] - _RECT_MARGIN, rect[2] + _RECT_MARGIN, rect[3] + _RECT_MARGIN
+
+
+def _box_corners(box: tuple) -> list[glm.vec4]:
+    lo, hi = box
+    return [glm.vec4(x, y, z, 1.0) for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])]
 
 
 _NO_BATCHES: frozenset = frozenset()
@@ -1000,8 +1126,8 @@ class SlotGeometry:
     ``splits``: the views' ``_split_slot`` answers, kept from a view's ``draw`` to its
     ``draw_transparent`` (``ScenePass._split``)."""
 
-    __slots__ = ("batches", "centres", "corners", "planes", "see_through", "sides", "planar", "corner_columns",
-                 "boxed", "planar_at", "splits")
+    __slots__ = ("batches", "centres", "boxes", "corners", "planes", "see_through", "sides", "planar",
+                 "corner_columns", "boxed", "planar_at", "index_of", "splits")
 
     def __init__(self, batches: Sequence[InstanceBatch]) -> None:
         self.batches = list(batches)
@@ -1009,7 +1135,8 @@ class SlotGeometry:
         self.see_through = [_see_through_surface(batch) for batch in self.batches]
         self.planes = [batch.plane if batch.surface else None for batch in self.batches]
         self.planar = any(plane is not None for plane in self.planes) and len(self.batches) > 1
-        boxes = [_box_floats(batch) for batch in self.batches]
+        boxes = self.boxes = [_box_floats(batch) for batch in self.batches]
+        self.index_of = {id(batch): i for i, batch in enumerate(self.batches)}
         count = len(self.batches)
         # Each box's 8 corners, x, y, z as float32 (what a glm.vec4 of them holds), 8 rows a batch.
         rows = np.zeros((count * 8, 3), np.float32)
