@@ -284,3 +284,34 @@ def test_many_panes_around_a_pond_blend_in_depth_order(scene, path):
     _blend_agrees(glass["colour"], opaque["colour"], without["colour"])
     assert glass["rgb"].max() > 100
     assert glass["runner"].stats.glass_between_surfaces == 0
+
+
+def test_the_slot_geometry_is_kept_while_the_glass_stands_and_worked_out_when_a_pane_moves(scene):
+    """``ScenePass._slot_geometry`` keeps its ``SlotGeometry`` across frames while the
+    transparent batches stand (other things moving), and works it out again when a pane
+    moves (its uploads), with the pane's new centre; the frames' blend order follows."""
+    ents: dict = {}
+    spinning: list = []
+
+    def build(world) -> None:
+        _random_level(3, 14, 1, 1, ents)(world)
+        spinning.append(world.spawn(Transform(position=(0.0, 8.0, 0.0)), MeshRef(quad(1.0, 1.0)),
+                                    Material(color=(0.5, 0.5, 0.5))))
+
+    runner = scene(build, (64, 36))
+    runner.frame()
+    passes = runner.engine.renderer.scene_pass
+    kept = passes._slot_kept
+    assert kept is not None and len(kept.batches) == 16
+    spinner = runner.world.get(spinning[0], Transform)
+    spinner.position = (1.0, 8.0, 0.0)  # an opaque thing moves: the glass stands
+    runner.frame()
+    assert passes._slot_kept is kept
+    batches = runner.engine.renderer.transparent_batches()
+    pane = next(b for b in batches if not b.surface)
+    entity = pane.entity_at[0]
+    runner.world.get(entity, Transform).position = (0.5, 7.0, -0.5)
+    runner.frame()
+    assert passes._slot_kept is not kept
+    at = passes._slot_kept.batches.index(pane)
+    assert glm.distance(passes._slot_kept.centres[at], glm.vec3(0.5, 7.0, -0.5)) < 1e-5

@@ -203,8 +203,8 @@ class ScenePass:
         self.cull_batches = True
         self.cull_min_batches = CULL_MIN_BATCHES
         self.cull_min_draws = CULL_MIN_DRAWS
-        # The transparent slot's SlotGeometry and the scene_version it was worked out at.
-        self._slot_kept: tuple[int, SlotGeometry] | None = None
+        # The transparent slot's SlotGeometry (_slot_geometry).
+        self._slot_kept: SlotGeometry | None = None
         # The unlit candidates' instances' boxes (_instance_boxes) and the scene_version they
         # were worked out at.
         self._boxes: dict[InstanceBatch, list | None] = {}
@@ -603,14 +603,14 @@ class ScenePass:
         bind_sampler(ctx, self._reflection_filter() if options.reflection_filter else None, ALBEDO_UNIT)
 
     def _slot_geometry(self, transparent: list[InstanceBatch]) -> SlotGeometry:
-        """``transparent``'s ``SlotGeometry``, worked out again only when an upload or another
-        change moved the Gpu's ``scene_version`` on or the batches or their planes are others
-        (a frame's views, levels and probe faces share it)."""
-        kept, version = self._slot_kept, self.renderer.scene_version
-        if kept is not None and kept[0] == version and kept[1].matches(transparent):
-            return kept[1]
-        geometry = SlotGeometry(transparent)
-        self._slot_kept = (version, geometry)
+        """``transparent``'s ``SlotGeometry``, worked out again only when the batches, their
+        planes, instances or variants are others (``SlotGeometry.matches``; a frame's views,
+        levels and probe faces share it, and so do frames while the glass stands, whatever
+        else moves: at 51 batches it costs about 0.4 ms)."""
+        kept = self._slot_kept
+        if kept is not None and kept.matches(transparent):
+            return kept
+        geometry = self._slot_kept = SlotGeometry(transparent)
         return geometry
 
     def _transparent_view(self, view: View, index: int, batches: list[InstanceBatch], masked: bool) -> None:
@@ -633,7 +633,8 @@ class ScenePass:
         now = _drawn_now(transparent, options)
         geometry = self._slot_geometry(transparent) if now else None
         opaque = renderer.opaque_batches()
-        unlit = self._unlit_views(opaque, options, geometry) if now else _unlit_batches(opaque, options.unlit)
+        unlit = _unlit_batches(opaque, options.unlit)
+        check = self._unlit_views(unlit) if now and unlit else None  # what each view keeps of them
         renderer.upload_views(views)  # every view's Camera block in one write; each binds its range
         reach = None
         if (self.cull_batches and opaque and len(opaque) >= self.cull_min_batches
@@ -653,14 +654,13 @@ class ScenePass:
             renderer.stats.passes += len(views)
             return
         for index, view in enumerate(views):
-            view_unlit = unlit
             if now:  # the slot, or (a tree's view) its part up to its see-through surfaces
                 if options.transparent:
                     batches = _back_to_front(transparent, view.eye, view, geometry)
                 else:
                     batches, _, torn = _split_slot(transparent, view, geometry)
                     renderer.stats.glass_between_surfaces += torn
-                view_unlit = unlit.keep(view, batches)
+            view_unlit = unlit if check is None else check.keep(view, batches)
             with _ALWAYS if conditions is None else conditions[index].crender:
                 set_scissor(ctx, view.scissor)  # unless in place (moderngl's own record: the cache reads it)
                 set_front_face(ctx, "cw" if view.mirrored else "ccw")
@@ -689,9 +689,8 @@ class ScenePass:
                     apply_pass_state(ctx, _SCENE, viewport, views[index + 1].scissor)
                 renderer.stats.passes += 1
 
-    def _unlit_views(self, opaque: list[InstanceBatch], options: SceneOptions,
-                     geometry: SlotGeometry | None) -> _UnlitViews:
-        """The pass's unlit candidates (``_unlit_batches``) and what says which each view
+    def _unlit_views(self, unlit: set) -> _UnlitViews:
+        """What says which of a pass's ``unlit`` candidates (``_unlit_batches``) each view
         keeps (``_UnlitViews``), their instances' boxes worked out once while the scene
         stands (the Gpu's ``scene_version``)."""
         version = self.renderer.scene_version
@@ -699,7 +698,7 @@ class ScenePass:
             self._boxes.clear()
             self._beyond.clear()
             self._boxes_at = version
-        return _UnlitViews(_unlit_batches(opaque, options.unlit), self, geometry)
+        return _UnlitViews(unlit, self)
 
     def instance_boxes(self, batch: InstanceBatch) -> list[tuple[float, ...]] | None:
         """``_instance_boxes`` of ``batch``, kept while the scene stands (``_unlit_views``)."""
@@ -748,7 +747,7 @@ class ScenePass:
         if now and not options.transparent:  # each group of views with the same part of the slot before the claims
             groups = _slot_groups(transparent, views, self._slot_geometry(transparent))
         if now and unlit:  # one draw for every view: unlit where no view's slot can blend over it
-            check = self._unlit_views(opaque, options, self._slot_geometry(transparent))
+            check = self._unlit_views(unlit)
             for group, first in ([(views, transparent)] if groups is None else [group[:2] for group in groups]):
                 for view in group:
                     check.unlit = check.keep(view, first)
@@ -956,18 +955,20 @@ class _UnlitViews:
     Conservative throughout (a margin wider and nearer; a box reaching behind the eye covers
     the screen), so the image is the all-lit path's, bit for bit (tests/test_unlit_mirrors.py)."""
 
-    __slots__ = ("unlit", "scene", "geometry")
+    __slots__ = ("unlit", "scene")
 
-    def __init__(self, unlit: set, scene: ScenePass, geometry: SlotGeometry | None) -> None:
-        self.unlit, self.scene, self.geometry = unlit, scene, geometry
+    def __init__(self, unlit: set, scene: ScenePass) -> None:
+        self.unlit, self.scene = unlit, scene
 
     def keep(self, view: View, drawn: list) -> set:
+        """What of ``unlit`` ``view`` may draw unlit where it blends ``drawn`` before the
+        composites."""
         unlit = self.unlit
         if not unlit or not drawn:
             return unlit
         eye = view.eye
         ex, ey, ez = eye.x, eye.y, eye.z
-        fronts = []  # [batch, box, unit plane and the eye's height over it (or None), rectangle, nearest]
+        fronts = []  # [batch, box, the eye's height over its plane (None: no plane), rectangle, nearest]
         for batch in drawn:
             box = _box_floats(batch)
             if box is None:
@@ -1117,26 +1118,26 @@ def _material_maps(batch) -> tuple[bool, bool]:
 
 class SlotGeometry:
     """What ordering the transparent slot needs of its batches, worked out once for as long
-    as the scene stands (``ScenePass._slot_geometry``: the Gpu's ``scene_version``, the
-    batch list, the see-through surfaces' planes), not once a view: each batch's centre
+    as they stand (``ScenePass._slot_geometry``: the batch list, the see-through surfaces'
+    planes, each batch's uploads, instances and variants), not once a view: each batch's centre
     (what back-to-front sorting compares: its instances' mean position), its world box's
     corners (glm vectors, and float32 rows for ``_screen_rects``), whether it is a see-through
     surface and its plane (``InstanceBatch.plane``), and on which side of each such plane
     every other batch lies (``_side``: the eye moves from view to view, the boxes do not).
     ``splits``: the views' ``_split_slot`` answers, kept from a view's ``draw`` to its
-    ``draw_transparent`` (``ScenePass._split``)."""
+    ``draw_transparent`` (``_split_slot``)."""
 
-    __slots__ = ("batches", "centres", "boxes", "corners", "planes", "see_through", "sides", "planar",
-                 "corner_columns", "boxed", "planar_at", "index_of", "splits")
+    __slots__ = ("batches", "states", "centres", "corners", "planes", "see_through", "sides", "planar",
+                 "corner_columns", "boxed", "planar_at", "splits")
 
     def __init__(self, batches: Sequence[InstanceBatch]) -> None:
         self.batches = list(batches)
+        self.states = [(batch.uploads, batch.count, batch.variants) for batch in self.batches]
         self.centres = [batch.centre() for batch in self.batches]
         self.see_through = [_see_through_surface(batch) for batch in self.batches]
         self.planes = [batch.plane if batch.surface else None for batch in self.batches]
         self.planar = any(plane is not None for plane in self.planes) and len(self.batches) > 1
-        boxes = self.boxes = [_box_floats(batch) for batch in self.batches]
-        self.index_of = {id(batch): i for i, batch in enumerate(self.batches)}
+        boxes = [_box_floats(batch) for batch in self.batches]
         count = len(self.batches)
         # Each box's 8 corners, x, y, z as float32 (what a glm.vec4 of them holds), 8 rows a batch.
         rows = np.zeros((count * 8, 3), np.float32)
@@ -1156,10 +1157,12 @@ class SlotGeometry:
         self.splits: dict[int, tuple[View, SlotSplit]] = {}
 
     def matches(self, batches: list[InstanceBatch]) -> bool:
-        """Whether ``batches`` are still those this was worked out for, with the same planes."""
+        """Whether ``batches`` are still those this was worked out for, with the same planes,
+        instances (``InstanceBatch.uploads``: rows sent or measured since) and variants."""
         return len(batches) == len(self.batches) and all(
-            a is b and (b.plane if b.surface else None) is plane
-            for a, b, plane in zip(batches, self.batches, self.planes, strict=True))
+            a is b and (b.plane if b.surface else None) is plane and b.uploads == state[0] and b.count == state[1]
+            and b.variants == state[2]
+            for a, b, plane, state in zip(batches, self.batches, self.planes, self.states, strict=True))
 
     def back_to_front(self, eye: glm.vec3) -> list[int]:
         """The batches' indices by their centres' distance from ``eye``, the farthest first."""
