@@ -318,3 +318,45 @@ def test_see_through_surfaces_keep_lit_only_the_mirrors_they_can_blend_over(ctx,
     finally:
         fast.close()
         shaded.close()
+
+
+class _RandomGlassAndMirrors(Game):
+    """``tests.test_slot_order``'s random panes, ponds and see-through mirrors, with six
+    opaque mirrors (reflect rate 1: drawn unlit where nothing blends over them) among them,
+    a light, a floor and the camera at a random place looking in."""
+
+    def __init__(self, seed: int) -> None:
+        self.seed = seed
+
+    def build(self, world) -> None:
+        import random
+
+        from components import Camera, DirectionalLight, Skybox
+        from tests.test_slot_order import _random_level
+        rng = random.Random(self.seed)
+        _random_level(self.seed, 10, 2, 1, {})(world)
+        world.spawn(DirectionalLight(direction=(-0.4, -1.0, -0.3), intensity=1.5))
+        world.spawn(Skybox())
+        for _ in range(6):
+            yaw = glm.angleAxis(rng.uniform(0, 2 * math.pi), glm.vec3(0, 1, 0))
+            world.spawn(Transform(position=(rng.uniform(-4, 4), rng.uniform(-1, 2), rng.uniform(-5, 3)), rotation=yaw),
+                        MeshRef(quad(rng.uniform(2, 4), rng.uniform(2, 3))), Material(color=(0.1, 0.1, 0.1)), Mirror())
+        eye = glm.vec3(rng.uniform(-4, 4), rng.uniform(0, 3), rng.uniform(5, 8))
+        world.spawn(Transform(position=eye, rotation=look_rotation(glm.vec3(0, 0, 0) - eye)), Camera(fov_y=70.0))
+
+
+@pytest.mark.parametrize("seed", [11, 12, 13])
+def test_random_glass_among_mirrors_is_the_all_lit_frame(ctx, monkeypatch, seed):
+    """Random see-through surfaces and panes among opaque mirrors, from a random place: the
+    mirrors each view keeps unlit (``scene_pass._UnlitViews``) leave the frames the all-lit
+    path's, pixel for pixel and id for id."""
+    counts = _count_kept(monkeypatch)
+    fast = _engine(ctx, game=_RandomGlassAndMirrors(seed))
+    shaded = _engine(ctx, shaded=True, game=_RandomGlassAndMirrors(seed))
+    try:
+        got, want = _frames(ctx, fast, 2, (192, 108)), _frames(ctx, shaded, 2, (192, 108))
+        _same_frames(got, want)
+        assert sum(counts.get(fast.renderer.scene_pass, [0, 0])) > 0  # views chose
+    finally:
+        fast.close()
+        shaded.close()
