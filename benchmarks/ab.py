@@ -25,6 +25,7 @@ scenes hold ``mirrors_0`` and ``mirrors_8`` a last line gives each side's 8/0 wa
 
     python -m benchmarks ab /tmp/old . --scenes mirrors_1,mirrors_2,portals_d8
     python -m benchmarks ab /tmp/old . --scenes mirrors_0,mirrors_8 --size 640x360 --procs 1
+    python -m benchmarks ab /tmp/old . --scenes glass_0,glass_20,glass_50   # many see-through batches
 """
 from __future__ import annotations
 
@@ -93,7 +94,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("old", type=Path, help="the tree measured first (the commit before)")
     parser.add_argument("new", type=Path, help="the tree with the change")
     parser.add_argument("--scenes", default=DEFAULT_SCENES,
-                        help=f"cpu suite scenes, comma-separated (default {DEFAULT_SCENES}; mirrors_N for any N)")
+                        help=f"cpu suite scenes, comma-separated (default {DEFAULT_SCENES}; mirrors_N for any N; "
+                             "glass_N: the 8-mirror ring, a see-through pond and N glass panes)")
     parser.add_argument("--rounds", type=int, default=10, help="rounds, each side's processes in turn (default 10)")
     parser.add_argument("--frames", type=int, default=10, help="frames of every scene a process a round (default 10)")
     parser.add_argument("--procs", type=int, default=2, help="processes a side (default 2)")

@@ -135,7 +135,9 @@ TARGETS: dict[str, Target] = {
 
 def make_scene(name: str, ctx):
     """The engine of scene ``name`` (``mirrors_<n>``, ``portals_d<depth>``, ``portals_d<depth>_sway``
-    with a swaying camera, ``probe_none``, ``probe_dynamic``), each with its suite's default settings."""
+    with a swaying camera, ``probe_none``, ``probe_dynamic``, ``glass_<panes>``: the 8-mirror ring
+    with a see-through pond and that many panes, ``benchmarks.glass``), each with its suite's
+    default settings."""
     from shell.app import Engine
 
     kind, _, arg = name.partition("_")
@@ -152,6 +154,10 @@ def make_scene(name: str, ctx):
         engine = Engine(FacingPortals(sway=sway == "sway"), ctx)
         set_depth(engine, int(depth.removeprefix("d")))
         return engine
+    if kind == "glass":
+        from benchmarks.glass import GlassHouse
+
+        return Engine(GlassHouse(int(arg)), ctx)
     if kind == "probe":
         from benchmarks.probes import MODES, ProbeRing
 

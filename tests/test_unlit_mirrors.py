@@ -9,13 +9,19 @@ and by what the main view itself wrote under the mirrors before the composites: 
 where the rule took them, lit where not."""
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
+from pyglm import glm
 
-from benchmarks.mirrors import MirrorRing
-from components import Mirror
+from benchmarks.glass import GlassHouse
+from benchmarks.mirrors import START_ANGLE, MirrorRing
+from components import Material, MeshRef, Mirror, Transform, look_rotation
+from engine.assets.mesh import quad
 from engine.core.frame_io import Output
 from engine.core.game import Game
+from engine.render import scene_pass
 from engine.render.frame_views import FrameViews
 from engine.render.scene_pass import shading_replaced
 from engine.render.targets import CaptureTarget
@@ -128,21 +134,27 @@ def test_the_levels_draw_their_mirrors_unlit_and_every_claimed_pixel_is_composit
         shaded.close()
 
 
-def test_glass_in_front_of_a_mirror_keeps_every_mirror_shaded(ctx):
+@pytest.mark.parametrize("pose", ["start", "mirror_wall", "doorway", "back_mirror"])
+def test_the_sample_level_with_its_ghost_and_pond_is_the_all_lit_frame(ctx, monkeypatch, pose):
     """The sample level's ghost (alpha 0.7, seen only in mirrors) stands before the mirror
-    wall, and its pond is a see-through mirror: the transparent slot's mirrors are drawn
-    with the opaque batches (the claims find their pixels; ScenePass._drawn_now), so no
-    mirror is unlit there, and the frame is the all-lit path's.  (Glass alone keeps them
-    unlit: tests/test_glass_over_reflection.py.)"""
+    wall, and its pond is a see-through mirror.  The ghost is glass: a tree draws it after
+    the composites, over the reflections.  The pond is drawn with the opaque batches (the
+    claims find its pixels; ScenePass._drawn_now), so a view keeps lit the mirrors it can
+    blend over and draws the others unlit (scene_pass._UnlitViews); the frame is the
+    all-lit path's.  (Glass alone keeps them unlit: tests/test_glass_over_reflection.py.)"""
     from tests.golden_scenes import HALL_POSES, _hall
 
     def place(engine: Engine) -> None:
-        engine.place_camera(*HALL_POSES["mirror_wall"])
+        if HALL_POSES[pose] is not None:
+            engine.place_camera(*HALL_POSES[pose])
 
+    seen = _count_kept(monkeypatch)
     fast, shaded = _engine(ctx, place, game=_hall()), _engine(ctx, place, shaded=True, game=_hall())
     try:
         got, want = _frames(ctx, fast, 2, (320, 180)), _frames(ctx, shaded, 2, (320, 180))
         assert fast.renderer.transparent_batches()
+        kept, lost = seen[fast.renderer.scene_pass]
+        assert kept > 10, (kept, lost)  # views with the pond drawn before their claims drew mirrors unlit
         _same_frames(got, want)
     finally:
         fast.close()
@@ -243,6 +255,108 @@ def test_mirrors_at_the_depth_limit_are_unlit_and_the_frame_is_the_same(ctx, cou
         if end and depth == 3:  # the ring's end views (none at depths 1-2: nothing up their chains to repeat)
             assert fast.renderer.stats.reflection_end_views > 0
         _same_frames(got, want)
+    finally:
+        fast.close()
+        shaded.close()
+
+
+def _count_kept(monkeypatch) -> dict:
+    """Per scene pass, [candidates kept unlit, made lit] over the views that drew transparent
+    batches before their composites (``scene_pass._UnlitViews.keep``), counted as frames run."""
+    counts: dict = {}
+    narrowed = scene_pass._UnlitViews.keep
+
+    def counting(check, view, drawn):
+        kept = narrowed(check, view, drawn)
+        if check.unlit and drawn:
+            count = counts.setdefault(check.scene, [0, 0])
+            count[0] += len(kept)
+            count[1] += len(check.unlit) - len(kept)
+        return kept
+
+    monkeypatch.setattr(scene_pass._UnlitViews, "keep", counting)
+    return counts
+
+
+class _RingWithSeeThrough(GlassHouse):
+    """The glass benchmark's ring of 8 (``benchmarks.glass``: a see-through pond at the
+    centre, ``panes`` glass panes round it) and a see-through mirror standing at the centre
+    facing the camera's start, in front of the far side of the ring: a tree draws it before
+    its claims, so where it covers a mirror it blends over that mirror's own colour."""
+
+    def build(self, world) -> None:
+        super().build(world)
+        towards = glm.normalize(glm.vec3(math.cos(START_ANGLE), 0.0, math.sin(START_ANGLE)))
+        world.spawn(Transform(position=(0.0, 1.6, 0.0), rotation=look_rotation(-towards)), MeshRef(quad(3.0, 2.0)),
+                    Material(color=(0.3, 0.35, 0.4, 0.5)), Mirror(reflect_rate=0.7))
+
+
+@pytest.mark.parametrize("panes,path", [(0, "per_mirror"), (6, "per_mirror"), (6, "batched")])
+def test_see_through_surfaces_keep_lit_only_the_mirrors_they_can_blend_over(ctx, monkeypatch, panes, path):
+    """A see-through surface is drawn before the claims (its pixels are claimed), so a mirror
+    it blends over must be shaded in that view; every other view draws the ring's mirrors
+    unlit (``scene_pass._UnlitViews``: screen rectangles and depth), and the frames are
+    the all-lit path's, pixel for pixel and id for id.  (A batched level draws its views
+    at once: unlit only where no view's surfaces can blend over them, here seldom.)"""
+    counts = _count_kept(monkeypatch)
+
+    def setup(engine: Engine) -> None:
+        engine.reflection_system.path = path
+
+    fast = _engine(ctx, setup, game=_RingWithSeeThrough(panes))
+    shaded = _engine(ctx, setup, shaded=True, game=_RingWithSeeThrough(panes))
+    try:
+        got, want = _frames(ctx, fast, 4, (320, 180)), _frames(ctx, shaded, 4, (320, 180))
+        _same_frames(got, want)
+        kept, lost = counts[fast.renderer.scene_pass]
+        seen = {"kept": kept, "lost": lost}
+        assert len(fast.stages["main"]._root_options().unlit) == 8
+        if path == "per_mirror":
+            assert seen["kept"] > 10 and seen["lost"] > 2, seen  # unlit in most views, lit where covered
+        else:
+            assert seen["kept"] + seen["lost"] > 2, seen
+    finally:
+        fast.close()
+        shaded.close()
+
+
+class _RandomGlassAndMirrors(Game):
+    """``tests.test_slot_order``'s random panes, ponds and see-through mirrors, with six
+    opaque mirrors (reflect rate 1: drawn unlit where nothing blends over them) among them,
+    a light, a floor and the camera at a random place looking in."""
+
+    def __init__(self, seed: int) -> None:
+        self.seed = seed
+
+    def build(self, world) -> None:
+        import random
+
+        from components import Camera, DirectionalLight, Skybox
+        from tests.test_slot_order import _random_level
+        rng = random.Random(self.seed)
+        _random_level(self.seed, 10, 2, 1, {})(world)
+        world.spawn(DirectionalLight(direction=(-0.4, -1.0, -0.3), intensity=1.5))
+        world.spawn(Skybox())
+        for _ in range(6):
+            yaw = glm.angleAxis(rng.uniform(0, 2 * math.pi), glm.vec3(0, 1, 0))
+            world.spawn(Transform(position=(rng.uniform(-4, 4), rng.uniform(-1, 2), rng.uniform(-5, 3)), rotation=yaw),
+                        MeshRef(quad(rng.uniform(2, 4), rng.uniform(2, 3))), Material(color=(0.1, 0.1, 0.1)), Mirror())
+        eye = glm.vec3(rng.uniform(-4, 4), rng.uniform(0, 3), rng.uniform(5, 8))
+        world.spawn(Transform(position=eye, rotation=look_rotation(glm.vec3(0, 0, 0) - eye)), Camera(fov_y=70.0))
+
+
+@pytest.mark.parametrize("seed", [11, 12, 13])
+def test_random_glass_among_mirrors_is_the_all_lit_frame(ctx, monkeypatch, seed):
+    """Random see-through surfaces and panes among opaque mirrors, from a random place: the
+    mirrors each view keeps unlit (``scene_pass._UnlitViews``) leave the frames the all-lit
+    path's, pixel for pixel and id for id."""
+    counts = _count_kept(monkeypatch)
+    fast = _engine(ctx, game=_RandomGlassAndMirrors(seed))
+    shaded = _engine(ctx, shaded=True, game=_RandomGlassAndMirrors(seed))
+    try:
+        got, want = _frames(ctx, fast, 2, (192, 108)), _frames(ctx, shaded, 2, (192, 108))
+        _same_frames(got, want)
+        assert sum(counts.get(fast.renderer.scene_pass, [0, 0])) > 0  # views chose
     finally:
         fast.close()
         shaded.close()

@@ -217,6 +217,9 @@ class InstanceBatch:
         # frame; None: not known): what orders the slot's blending by depth around it
         # (scene_pass._back_to_front).
         self.plane: glm.vec4 | None = None
+        # How many uploads sent rows or measured them again: what the scene pass's
+        # transparent slot keeps its geometry by (scene_pass.SlotGeometry.matches).
+        self.uploads = 0
         # A generated checker texture drawn analytically (scene.frag's CHECKER build): its
         # cells across the UV square, and the linear colours of the cells whose integer
         # coordinates sum even and odd (``checker_look``); None: sampled as any texture.
@@ -514,10 +517,12 @@ class InstanceBatch:
         if self._rescale:
             self._max_scale, self._rescale, self._box = 0.0, False, None
             self._grow_scale(np.arange(self.count))
+            self.uploads += 1
         dirty = self._dirty
         if not dirty:
             return 0
         self._dirty = set()
+        self.uploads += 1
         first, last, count = min(dirty), max(dirty), len(dirty)
         if last - first + 1 == count:
             # One run (the movers' block at the front, gathered by write_transforms): measured

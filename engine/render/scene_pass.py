@@ -43,17 +43,21 @@ Less pixel work where a view's pixels are painted over anyway: a mirror whose re
 its own shading (``shading_replaced`` says which, ``SceneOptions.unlit`` carries them), so a
 batch of such mirrors draws with the ``UNLIT_SURFACE`` build of ``scene.frag``: depth and
 ids as ever, a constant colour, no lighting (at 8 mirrors and 640x360 about 7% of the main
-view's shaded pixels on llvmpipe, which shades every pixel of every 2 x 4 group it touches).
+view's shaded pixels on llvmpipe, which shades every pixel of every 2 x 4 group it touches),
+except in a view whose see-through surfaces, drawn before the composites, may blend over
+one of the batch's mirrors (``_UnlitViews``).
 """
 from __future__ import annotations
 
 import heapq
+import math
 from collections.abc import Callable, Iterable, Sequence
 from contextlib import nullcontext
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, NamedTuple
 
 import moderngl
+import numpy as np
 from pyglm import glm
 
 from engine.core.errors import GLPassError
@@ -201,8 +205,13 @@ class ScenePass:
         self.cull_batches = True
         self.cull_min_batches = CULL_MIN_BATCHES
         self.cull_min_draws = CULL_MIN_DRAWS
-        # The transparent slot's SlotGeometry and the scene_version it was worked out at.
-        self._slot_kept: tuple[int, SlotGeometry] | None = None
+        # The transparent slot's SlotGeometry (_slot_geometry).
+        self._slot_kept: SlotGeometry | None = None
+        # The unlit candidates' instances' boxes (_instance_boxes) and the scene_version they
+        # were worked out at.
+        self._boxes: dict[InstanceBatch, list | None] = {}
+        self._beyond: dict[tuple, tuple] = {}  # (surface, batch) -> its plane, beyond()
+        self._boxes_at = -1
         # A run's pass-wide bindings (draw's run): (run, (capturing, reflection filter), bindings_epoch
         # after them), or None.
         self._pass_wide: tuple | None = None
@@ -596,14 +605,14 @@ class ScenePass:
         bind_sampler(ctx, self._reflection_filter() if options.reflection_filter else None, ALBEDO_UNIT)
 
     def _slot_geometry(self, transparent: list[InstanceBatch]) -> SlotGeometry:
-        """``transparent``'s ``SlotGeometry``, worked out again only when an upload or another
-        change moved the Gpu's ``scene_version`` on or the batches or their planes are others
-        (a frame's views, levels and probe faces share it)."""
-        kept, version = self._slot_kept, self.renderer.scene_version
-        if kept is not None and kept[0] == version and kept[1].matches(transparent):
-            return kept[1]
-        geometry = SlotGeometry(transparent)
-        self._slot_kept = (version, geometry)
+        """``transparent``'s ``SlotGeometry``, worked out again only when the batches, their
+        planes, instances or variants are others (``SlotGeometry.matches``; a frame's views,
+        levels and probe faces share it, and so do frames while the glass stands, whatever
+        else moves: at 51 batches it costs about 0.4 ms)."""
+        kept = self._slot_kept
+        if kept is not None and kept.matches(transparent):
+            return kept
+        geometry = self._slot_kept = SlotGeometry(transparent)
         return geometry
 
     def _transparent_view(self, view: View, index: int, batches: list[InstanceBatch], masked: bool) -> None:
@@ -626,7 +635,8 @@ class ScenePass:
         now = _drawn_now(transparent, options)
         geometry = self._slot_geometry(transparent) if now else None
         opaque = renderer.opaque_batches()
-        unlit = _unlit_batches(opaque, options.unlit, now)
+        unlit = _unlit_batches(opaque, options.unlit)
+        check = self._unlit_views(unlit) if now and unlit else None  # what each view keeps of them
         renderer.upload_views(views)  # every view's Camera block in one write; each binds its range
         reach = None
         if (self.cull_batches and opaque and len(opaque) >= self.cull_min_batches
@@ -646,12 +656,19 @@ class ScenePass:
             renderer.stats.passes += len(views)
             return
         for index, view in enumerate(views):
+            if now:  # the slot, or (a tree's view) its part up to its see-through surfaces
+                if options.transparent:
+                    batches = _back_to_front(transparent, view.eye, view, geometry)
+                else:
+                    batches, _, torn = _split_slot(transparent, view, geometry)
+                    renderer.stats.glass_between_surfaces += torn
+            view_unlit = unlit if check is None else check.keep(view, batches)
             with _ALWAYS if conditions is None else conditions[index].crender:
                 set_scissor(ctx, view.scissor)  # unless in place (moderngl's own record: the cache reads it)
                 set_front_face(ctx, "cw" if view.mirrored else "ccw")
                 renderer.bind_view_at(index)
                 self._draw_batches(opaque if reach is None else self._reaching(opaque, reach[index], view),
-                                   0, masked, skip=view.skip, hide=view.hide, unlit=unlit)
+                                   0, masked, skip=view.skip, hide=view.hide, unlit=view_unlit)
                 if options.sky:
                     # Into the view's own framebuffer: the sky writes id 0 (nothing) to the
                     # surface and seen images, the very values the clear put where no surface
@@ -662,15 +679,10 @@ class ScenePass:
                     apply_pass_state(ctx, _SKY, viewport, view.scissor)
                     self._sky.render(moderngl.TRIANGLES, vertices=3)
                     renderer.stats.draw_calls += 1
-                if now:  # the slot, or (a tree's view) its part up to its see-through surfaces
+                if now:
                     targets.view_framebuffer.depth_mask = False
                     targets.view_framebuffer.use()
                     apply_pass_state(ctx, _TRANSPARENT, viewport, view.scissor)
-                    if options.transparent:
-                        batches = _back_to_front(transparent, view.eye, view, geometry)
-                    else:
-                        batches, _, torn = _split_slot(transparent, view, geometry)
-                        renderer.stats.glass_between_surfaces += torn
                     self._transparent_view(view, index, batches, options.masked)
                     targets.view_framebuffer.depth_mask = True
                     targets.view_framebuffer.use()
@@ -678,6 +690,34 @@ class ScenePass:
                     # The next view's state (the pass after the last applies its own).
                     apply_pass_state(ctx, _SCENE, viewport, views[index + 1].scissor)
                 renderer.stats.passes += 1
+
+    def _unlit_views(self, unlit: set) -> _UnlitViews:
+        """What says which of a pass's ``unlit`` candidates (``_unlit_batches``) each view
+        keeps (``_UnlitViews``), their instances' boxes worked out once while the scene
+        stands (the Gpu's ``scene_version``)."""
+        version = self.renderer.scene_version
+        if self._boxes_at != version:
+            self._boxes.clear()
+            self._beyond.clear()
+            self._boxes_at = version
+        return _UnlitViews(unlit, self)
+
+    def instance_boxes(self, batch: InstanceBatch) -> list[tuple[float, ...]] | None:
+        """``_instance_boxes`` of ``batch``, kept while the scene stands (``_unlit_views``)."""
+        boxes = self._boxes.get(batch, _UNKNOWN)
+        if boxes is _UNKNOWN:
+            boxes = self._boxes[batch] = _instance_boxes(batch)
+        return boxes
+
+    def beyond(self, surface: InstanceBatch, batch: InstanceBatch) -> list[tuple[float, float, float]]:
+        """For each instance of ``batch``, how far its box reaches past ``surface``'s plane on
+        the side its normal points to and on the other (0: not at all), and the gap between
+        its box and the surface's: kept while the scene stands and the plane is the same."""
+        key = (surface, batch)
+        kept = self._beyond.get(key)
+        if kept is None or kept[0] is not surface.plane:
+            kept = self._beyond[key] = (surface.plane, _beyond(surface, batch))
+        return kept[1]
 
     def _reaching(self, batches: list[InstanceBatch], reach: list[bool], view: View) -> list[InstanceBatch]:
         """The batches whose ``reach`` (batch_cull.batch_reach) in ``view`` is True; those
@@ -704,16 +744,24 @@ class ScenePass:
         transparent = renderer.transparent_batches()
         now = _drawn_now(transparent, options)
         opaque = renderer.opaque_batches()
-        unlit = _unlit_batches(opaque, options.unlit, now)
+        unlit = _unlit_batches(opaque, options.unlit)
+        groups = None
+        if now and not options.transparent:  # each group of views with the same part of the slot before the claims
+            groups = _slot_groups(transparent, views, self._slot_geometry(transparent))
+        if now and unlit:  # one draw for every view: unlit where no view's slot can blend over it
+            check = self._unlit_views(unlit)
+            for group, first in ([(views, transparent)] if groups is None else [group[:2] for group in groups]):
+                for view in group:
+                    check.unlit = check.keep(view, first)
+            unlit = check.unlit
         self._draw_batches(opaque, invocations, options.masked, unlit=unlit)
         if now:
             viewport = (0, 0, *views[0].size)
-            if options.transparent:  # farthest from the first view's eye first (the views of a level are close)
+            if groups is None:  # farthest from the first view's eye first (the views of a level are close)
                 apply_pass_state(ctx, _BATCHED_TRANSPARENT, viewport, scissor)
                 self._draw_batches(_back_to_front(transparent, views[0].eye, None, self._slot_geometry(transparent)),
                                    invocations, options.masked)
-            else:  # each group of views with the same part of the slot before the claims, in one draw a batch
-                groups = _slot_groups(transparent, views, self._slot_geometry(transparent))
+            else:  # in one draw a batch a group
                 for group, first, _, torn in groups:
                     renderer.stats.glass_between_surfaces += torn
                     if not first:
@@ -864,9 +912,9 @@ def shading_replaced(mirrors: Iterable[SurfaceState], pixel_budget: bool = False
     pass draws these mirrors' batches unlit (``SceneOptions.unlit``), with glass in front of
     them too: a view tree draws its views' glass after compositing into them
     (``ScenePass.draw_transparent``), so it blends over the reflection, never over a
-    mirror's own colour; not where a see-through mirror or portal (water) is in the
-    transparent slot (``_drawn_now``: it and what lies behind it are drawn with the opaque
-    batches, before the composites)."""
+    mirror's own colour; not in a view where a see-through mirror or portal (water), or
+    what lies behind it, can blend over the mirror (``_UnlitViews``: those are drawn with
+    the opaque batches, before the composites)."""
     if pixel_budget:
         return frozenset()
     return frozenset(state.entity for state in mirrors
@@ -874,14 +922,185 @@ def shading_replaced(mirrors: Iterable[SurfaceState], pixel_budget: bool = False
                      and state.water is None and state.resolution_scale == 1.0)
 
 
-def _unlit_batches(opaque: Iterable[InstanceBatch], mirrors: frozenset[int], transparent: list) -> set:
-    """The batches of ``opaque`` a pass draws unlit: those whose instances are all in
-    ``mirrors`` (``SceneOptions.unlit``), worked out once a pass, not once a view; none where
-    ``transparent`` batches may be drawn with them (``_drawn_now``: they would blend over a
-    mirror's colour before its composite, not over its reflection)."""
-    if not mirrors or transparent:
+def _unlit_batches(opaque: Iterable[InstanceBatch], mirrors: frozenset[int]) -> set:
+    """The batches of ``opaque`` a pass may draw unlit: those whose instances are all in
+    ``mirrors`` (``SceneOptions.unlit``), worked out once a pass, not once a view; a view
+    keeps of them those no transparent batch it draws before the composites can blend over
+    (``_UnlitViews``)."""
+    if not mirrors:
         return _NO_BATCHES
     return {batch for batch in opaque if _may_be_unlit(batch) and batch.row_of.keys() <= mirrors}
+
+
+class _UnlitViews:
+    """Which of a pass's unlit candidates (``_unlit_batches``) each view may draw unlit
+    (``keep``), given the transparent batches it blends before the composites (a tree's
+    see-through surfaces and what is behind them: ``_drawn_now``, ``_split_slot``): those
+    no such batch can blend over.  One that does would blend over the mirror's constant
+    colour, and take its pixels from the mirror's claim (its ids), so the colour would
+    show.  A drawn batch covers a point of a mirror only if it is nearer on the ray from the
+    eye; so, instance by instance (a ring's mirrors are one batch), a candidate stays unlit
+    unless
+
+    - for a see-through surface (planar): the instance reaches beyond the surface's plane,
+      seen from the eye, and not so far from the surface's box that no ray from the eye
+      could cross the plane within it (the ray to a point a depth d beyond the plane, the
+      eye a height h before it, crosses it within d / (d + h) of its length of the point:
+      worked out once while the scene stands, the depth and the gap, and a view's height
+      and farthest distance: a few operations an instance); and then
+    - the drawn batch comes nearer the eye than the instance box's farthest corner, and its
+      box's screen rectangle (``_screen_rect``) meets the instance box's (bounded first by
+      interval arithmetic on the projection, then by its eight corners).
+
+    A pond at the centre of a ring of mirrors, below their tops and above their feet, keeps
+    them unlit in nearly every view (it turned every mirror lit, in every view, before).
+    Conservative throughout (a margin wider and nearer; a box reaching behind the eye covers
+    the screen), so the image is the all-lit path's, bit for bit (tests/test_unlit_mirrors.py)."""
+
+    __slots__ = ("unlit", "scene")
+
+    def __init__(self, unlit: set, scene: ScenePass) -> None:
+        self.unlit, self.scene = unlit, scene
+
+    def keep(self, view: View, drawn: list) -> set:
+        """What of ``unlit`` ``view`` may draw unlit where it blends ``drawn`` before the
+        composites."""
+        unlit = self.unlit
+        if not unlit or not drawn:
+            return unlit
+        eye = view.eye
+        ex, ey, ez = eye.x, eye.y, eye.z
+        fronts = []  # [batch, box, the eye's height over its plane (None: no plane), rectangle, nearest]
+        for batch in drawn:
+            box = _box_floats(batch)
+            if box is None:
+                continue  # empty: draws nothing
+            plane = batch.plane if batch.surface and batch.count == 1 else None
+            height = None
+            if plane is not None:
+                length = glm.length(glm.vec3(plane))
+                height = (plane.x * ex + plane.y * ey + plane.z * ez + plane.w) / length if length > 0.0 else 0.0
+            fronts.append([batch, box, height, _UNKNOWN, _UNKNOWN])
+        if not fronts:
+            return unlit
+        kept = set()
+        scene = self.scene
+        for batch in unlit:
+            boxes = scene.instance_boxes(batch)
+            if boxes is None:
+                continue  # a row not measured yet: lit
+            lo, hi = _box_floats(batch)
+            farthest = math.sqrt(sum(max(abs(lo[axis] - eye[axis]), abs(hi[axis] - eye[axis])) ** 2
+                                     for axis in range(3)))
+            covered = False
+            for front in fronts:
+                height = front[2]
+                if height is None or abs(height) <= 1e-6:
+                    covered = any(self._covers(front, instance, view) for instance in boxes)
+                else:  # by the surface's plane first
+                    side, reach = (1, height) if height > 0.0 else (0, -height)  # the depth past it, the eye's height
+                    for i, past in enumerate(scene.beyond(front[0], batch)):
+                        depth = past[side]  # how far the instance reaches past the plane, seen from the eye
+                        if depth > 0.0 and past[2] <= farthest * depth / (depth + reach) + _DEPTH_MARGIN \
+                                and self._covers(front, boxes[i], view):
+                            covered = True
+                            break
+                if covered:
+                    break
+            if not covered:
+                kept.add(batch)
+        return kept
+
+    def _covers(self, front: list, instance: tuple, view: View) -> bool:
+        """Whether ``front`` (a drawn batch) may blend over ``instance`` (centre, half sizes):
+        nearer the eye than its box's farthest corner, and their screen rectangles meeting."""
+        eye = view.eye
+        cx, cy, cz, hx, hy, hz = instance
+        far = math.sqrt((abs(cx - eye.x) + hx) ** 2 + (abs(cy - eye.y) + hy) ** 2 + (abs(cz - eye.z) + hz) ** 2)
+        if front[4] is _UNKNOWN:
+            lo, hi = front[1]
+            front[4] = math.sqrt(sum(max(lo[axis] - eye[axis], 0.0, eye[axis] - hi[axis]) ** 2
+                                     for axis in range(3))) - _DEPTH_MARGIN
+        if front[4] >= far:
+            return False
+        view_proj = view.view_proj
+        if front[3] is _UNKNOWN:
+            front[3] = _widened(_screen_rect(_box_corners(front[1]), view_proj))
+        rect = front[3]
+        if rect is None:
+            return True
+        # The projection's rows (x, y, w): over a box each is row . c + row[3], give or take
+        # |row| . h, exactly; x and y (their quotients by w) lie within the four quotients of
+        # those ends (w above 0: the box before the eye).
+        ends = []
+        for r in (0, 1, 3):
+            a, b, c = view_proj[0][r], view_proj[1][r], view_proj[2][r]
+            middle, spread = a * cx + b * cy + c * cz + view_proj[3][r], abs(a) * hx + abs(b) * hy + abs(c) * hz
+            ends.append((middle - spread, middle + spread))
+        (nx0, nx1), (ny0, ny1), (d0, d1) = ends
+        if d0 <= 1e-6:
+            return True  # reaching behind the eye: anywhere on the screen
+        if (max(nx1 / d0, nx1 / d1) < rect[0] or min(nx0 / d0, nx0 / d1) > rect[2]
+                or max(ny1 / d0, ny1 / d1) < rect[1] or min(ny0 / d0, ny0 / d1) > rect[3]):
+            return False
+        # Then by the box's eight corners (where its depth varies, much tighter).
+        corners = _box_corners(((cx - hx, cy - hy, cz - hz), (cx + hx, cy + hy, cz + hz)))
+        return _overlap(rect, _screen_rect(corners, view_proj))
+
+
+_UNKNOWN = object()  # (not worked out yet)
+
+
+def _beyond(surface: InstanceBatch, batch: InstanceBatch) -> list[tuple[float, float, float]]:
+    """``ScenePass.beyond`` worked out: each instance box's corners' distances to the
+    surface's (unit) plane, the farthest on either side, and the boxes' gap."""
+    plane = surface.plane
+    normal = glm.vec3(plane)
+    length = glm.length(normal)
+    nx, ny, nz, w = (plane.x / length, plane.y / length, plane.z / length, plane.w / length) if length > 0.0 \
+        else (0.0, 0.0, 0.0, 0.0)
+    box = _box_floats(surface)
+    out = []
+    for lo, hi in batch.row_boxes.tolist():
+        low = high = w
+        for n, a, b in ((nx, lo[0], hi[0]), (ny, lo[1], hi[1]), (nz, lo[2], hi[2])):
+            low += min(n * a, n * b)
+            high += max(n * a, n * b)
+        gap = 0.0 if box is None else math.sqrt(sum(max(lo[axis] - box[1][axis], box[0][axis] - hi[axis], 0.0) ** 2
+                                                    for axis in range(3)))
+        if length == 0.0:
+            low, high, gap = -math.inf, math.inf, 0.0
+        out.append((max(high, 0.0), max(-low, 0.0), gap))
+    return out
+
+
+def _instance_boxes(batch: InstanceBatch) -> list[tuple[float, ...]] | None:
+    """Each instance's world box (``InstanceBatch.row_boxes``) as its centre and half sizes
+    (a hair larger: what float32 rows are off by); None where a row is not measured yet."""
+    boxes = []
+    for lo, hi in batch.row_boxes.tolist():
+        if lo[0] != lo[0]:
+            return None
+        boxes.append((*((l + h) * 0.5 for l, h in zip(lo, hi, strict=True)),
+                      *((h - l) * 0.5 * (1.0 + 1e-6) + 1e-6 for l, h in zip(lo, hi, strict=True))))
+    return boxes
+
+
+# How much nearer (m) and wider (NDC) a drawn batch counts than its box, in _UnlitViews:
+# what float32 corners and a vertex's own transform may be off by.
+_DEPTH_MARGIN = 1e-3
+_RECT_MARGIN = 1e-3
+
+
+def _widened(rect: tuple[float, float, float, float] | None) -> tuple[float, float, float, float] | None:
+    if rect is None:
+        return None
+    return rect[0] - _RECT_MARGIN, rect[1] - _RECT_MARGIN, rect[2] + _RECT_MARGIN, rect[3] + _RECT_MARGIN
+
+
+def _box_corners(box: tuple) -> list[glm.vec4]:
+    lo, hi = box
+    return [glm.vec4(x, y, z, 1.0) for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])]
 
 
 _NO_BATCHES: frozenset = frozenset()
@@ -901,35 +1120,51 @@ def _material_maps(batch) -> tuple[bool, bool]:
 
 class SlotGeometry:
     """What ordering the transparent slot needs of its batches, worked out once for as long
-    as the scene stands (``ScenePass._slot_geometry``: the Gpu's ``scene_version``, the
-    batch list, the see-through surfaces' planes), not once a view: each batch's centre
+    as they stand (``ScenePass._slot_geometry``: the batch list, the see-through surfaces'
+    planes, each batch's uploads, instances and variants), not once a view: each batch's centre
     (what back-to-front sorting compares: its instances' mean position), its world box's
-    corners, whether it is a see-through surface and its plane (``InstanceBatch.plane``),
-    and on which side of each such plane every other batch lies (``_side``: the eye moves
-    from view to view, the boxes do not)."""
+    corners (glm vectors, and float32 rows for ``_screen_rects``), whether it is a see-through
+    surface and its plane (``InstanceBatch.plane``), and on which side of each such plane
+    every other batch lies (``_side``: the eye moves from view to view, the boxes do not).
+    ``splits``: the views' ``_split_slot`` answers, kept from a view's ``draw`` to its
+    ``draw_transparent`` (``_split_slot``)."""
 
-    __slots__ = ("batches", "centres", "corners", "planes", "see_through", "sides", "planar")
+    __slots__ = ("batches", "states", "centres", "corners", "planes", "see_through", "sides", "planar",
+                 "corner_columns", "boxed", "planar_at", "splits")
 
     def __init__(self, batches: Sequence[InstanceBatch]) -> None:
         self.batches = list(batches)
+        self.states = [(batch.uploads, batch.count, batch.variants) for batch in self.batches]
         self.centres = [batch.centre() for batch in self.batches]
         self.see_through = [_see_through_surface(batch) for batch in self.batches]
         self.planes = [batch.plane if batch.surface else None for batch in self.batches]
         self.planar = any(plane is not None for plane in self.planes) and len(self.batches) > 1
         boxes = [_box_floats(batch) for batch in self.batches]
-        self.corners = [None if box is None else [glm.vec4(x, y, z, 1.0) for x in (box[0][0], box[1][0])
-                                                  for y in (box[0][1], box[1][1]) for z in (box[0][2], box[1][2])]
-                        for box in boxes]
         count = len(self.batches)
+        # Each box's 8 corners, x, y, z as float32 (what a glm.vec4 of them holds), 8 rows a batch.
+        rows = np.zeros((count * 8, 3), np.float32)
+        for i, box in enumerate(boxes):
+            if box is not None:
+                lo, hi = box
+                rows[8 * i:8 * i + 8] = [(x, y, z) for x in (lo[0], hi[0]) for y in (lo[1], hi[1])
+                                         for z in (lo[2], hi[2])]
+        self.corner_columns = (rows[:, 0:1], rows[:, 1:2], rows[:, 2:3])
+        self.boxed = np.array([box is not None for box in boxes], bool)
+        self.corners = [None if box is None else [glm.vec4(*corner, 1.0) for corner in rows[8 * i:8 * i + 8].tolist()]
+                        for i, box in enumerate(boxes)]
         self.sides = [None if plane is None else [0 if j == i else _side(plane, boxes[j], self.centres[j])
                                                   for j in range(count)]
                       for i, plane in enumerate(self.planes)] if self.planar else None
+        self.planar_at = [i for i, plane in enumerate(self.planes) if plane is not None] if self.planar else []
+        self.splits: dict[int, tuple[View, SlotSplit]] = {}
 
     def matches(self, batches: list[InstanceBatch]) -> bool:
-        """Whether ``batches`` are still those this was worked out for, with the same planes."""
+        """Whether ``batches`` are still those this was worked out for, with the same planes,
+        instances (``InstanceBatch.uploads``: rows sent or measured since) and variants."""
         return len(batches) == len(self.batches) and all(
-            a is b and (b.plane if b.surface else None) is plane
-            for a, b, plane in zip(batches, self.batches, self.planes, strict=True))
+            a is b and (b.plane if b.surface else None) is plane and b.uploads == state[0] and b.count == state[1]
+            and b.variants == state[2]
+            for a, b, plane, state in zip(batches, self.batches, self.planes, self.states, strict=True))
 
     def back_to_front(self, eye: glm.vec3) -> list[int]:
         """The batches' indices by their centres' distance from ``eye``, the farthest first."""
@@ -950,7 +1185,7 @@ def _back_to_front(batches: list[InstanceBatch], eye: glm.vec3, view: View | Non
                    geometry: SlotGeometry | None = None) -> list:
     """Transparent batches in the order they blend, the farthest first: by their instances'
     centre, except where a see-through surface's plane (water, a see-through mirror or
-    portal: ``InstanceBatch.plane``) says which of two is in front (``_slot_graph``), so a
+    portal: ``InstanceBatch.plane``) says which of two is in front (``_slot_order``), so a
     pane standing on a pond blends over it and a pane under it under it, wherever the
     pond's centre is.  ``view``: only batches whose boxes overlap on its screen are ordered
     against each other (None: all are, as from a probe's centre for six faces).
@@ -960,18 +1195,23 @@ def _back_to_front(batches: list[InstanceBatch], eye: glm.vec3, view: View | Non
     geometry = geometry or SlotGeometry(batches)
     ordered = geometry.back_to_front(eye)
     if geometry.planar:
-        # A few batches: every pair first (the view's screen only drops edges; _split_slot).
-        order = _slot_sorted(geometry, ordered, eye, None)[0] if view is None or len(ordered) <= _SHORTCUT_MOST \
-            else None
+        # A few batches: every pair first (the view's screen only drops edges: where that
+        # keeps the centres' order, so does the screen's, and no rectangle is worked out).
+        order = _slot_order(geometry, ordered, eye, None).order \
+            if view is None or len(ordered) <= _FEW_BATCHES else None
         if view is not None and (order is None or any(i != at for at, i in enumerate(order))):
-            order = _slot_sorted(geometry, ordered, eye, view)[0]
+            order = _slot_order(geometry, ordered, eye, view).order
         ordered = [ordered[i] for i in order]
     return [geometry.batches[k] for k in ordered]
 
 
-# Up to this many batches in a slot, a view orders every pair first and works out its screen
-# rectangles only where that answer may differ (_split_slot); more, and it seldom is the same.
-_SHORTCUT_MOST = 8
+# Up to this many batches in a slot, its order is worked out pair by pair in Python (what a
+# numpy call costs, about a microsecond, a few pairs cost), and a view orders every pair
+# first, working out its screen rectangles only where that answer may differ (_split_slot);
+# more, in arrays (SlotOrder).  A view's split, on the glass_N benchmark's views (1 pond and
+# N panes), interleaved, pairwise against arrays: 9 batches 27 / 35 us, 11: 34 / 35, 13:
+# 40 / 37, 17: 53 / 45, 51: 231 / 89, 101: 893 / 176.
+_FEW_BATCHES = 10
 # How far (m) a box may reach past a plane and still count as on one side of it: what
 # float32 corners of a batch lying on the plane (a mirror's own quad) are off by.
 _PLANE_EPS = 1e-4
@@ -1015,22 +1255,62 @@ def _screen_rect(corners: list[glm.vec4] | None, view_proj: glm.mat4) -> tuple[f
     return min(xs), min(ys), max(xs), max(ys)
 
 
+def _screen_rects(geometry: SlotGeometry, view: View, ordered: list[int]) -> tuple[list[float], ...]:
+    """``_screen_rect`` of every batch of ``ordered`` in one set of numpy calls: x0, y0, x1,
+    y1, a list each (by position), the whole plane (-inf to inf) for None.  The corners go
+    through the matrix in float32 summed pairwise as glm sums a matrix times a vector (the
+    same bits), divided in float64 as there."""
+    m = np.array(view.view_proj, np.float32).T  # m[c]: column c
+    x, y, z = geometry.corner_columns
+    clip = ((x * m[0] + y * m[1]) + (z * m[2] + m[3])).astype(np.float64)
+    w = clip[:, 3:4]
+    whole = (w.reshape(-1, 8).min(axis=1) <= 1e-6) | ~geometry.boxed
+    xy = (clip[:, 0:2] / np.maximum(w, 1e-6)).reshape(-1, 8, 2)
+    rects = np.concatenate([xy.min(axis=1), xy.max(axis=1)], axis=1)
+    if whole.any():
+        rects[whole] = _WHOLE_PLANE
+    return tuple(rects[ordered].T.tolist())
+
+
+_WHOLE_PLANE = (-math.inf, -math.inf, math.inf, math.inf)
+
+
 def _overlap(a: tuple[float, float, float, float] | None, b: tuple[float, float, float, float] | None) -> bool:
     if a is None or b is None:
         return True
     return a[0] <= b[2] and b[0] <= a[2] and a[1] <= b[3] and b[1] <= a[3]
 
 
+def _slot_order(geometry: SlotGeometry, ordered: list[int], eye: glm.vec3, view: View | None) -> SlotOrder:
+    """The blending order of ``ordered`` (``geometry``'s indices, farthest centre first) seen
+    from ``eye``, and the graph it keeps (``SlotOrder``): the order both kinds of edge
+    allow, the lowest position first among those free to go (so the centres' order where
+    nothing says otherwise); where they make a cycle the planes' alone (a centre gives way
+    to a plane: a pane under a pond before the pond, and the pond before a pane standing
+    on it, whatever the panes' centres say); where those do too, the order breaking their
+    cycles (``_topological``).  Which edges: two batches are ordered only where they can
+    cover the same pixels (their boxes' rectangles on ``view``'s screen overlap; None:
+    always): by a see-through surface's plane where one has it (a batch on the eye's side
+    of it is in front of it; one wholly on the other side, behind: the painter's test of a
+    BSP), both planes agreeing where both have one; else, or where they disagree, by
+    their centres, the farther first.  A few batches (``_FEW_BATCHES``): every pair in
+    Python; more: in arrays, the panes' pairs only where needed (``SlotOrder``)."""
+    if len(ordered) > _FEW_BATCHES:
+        return SlotOrder(geometry, ordered, eye, view)
+    planes, centres = _slot_graph(geometry, ordered, eye, view)
+    both = [a | b for a, b in zip(planes, centres, strict=True)]
+    order = _topological(both)
+    if order is not None:
+        return _PairOrder(order, both, False)
+    order = _topological(planes)
+    return _PairOrder(_topological(planes, cycles=True) if order is None else order, planes, True)
+
+
 def _slot_graph(geometry: SlotGeometry, ordered: list[int], eye: glm.vec3,
                 view: View | None) -> tuple[list[set[int]], list[set[int]]]:
-    """For each position of ``ordered`` (``geometry``'s indices, farthest centre first) the
-    positions of those that must blend before it, by planes and by centres.  Two batches
-    are ordered only where they can cover the same pixels (their boxes' rectangles on
-    ``view``'s screen overlap; None: always): by a see-through surface's plane where one has
-    it (a batch on the eye's side of it is in front of it; one wholly on the other side,
-    behind: the painter's test of a BSP), both planes agreeing where both have one; else,
-    or where they disagree, by their centres, the farther first (the second list: what
-    gives way where the two make a cycle)."""
+    """For each position of ``ordered`` the positions of those that must blend before it
+    (``_slot_order``'s edges), by planes and by centres (the second list: what gives way
+    where the two make a cycle), every pair tested in turn."""
     count = len(ordered)
     planes, sides = geometry.planes, geometry.sides
     eye_side = [0 if plane is None else (1 if glm.dot(glm.vec3(plane), eye) + plane.w > 0.0 else -1)
@@ -1070,22 +1350,251 @@ def _slot_graph(geometry: SlotGeometry, ordered: list[int], eye: glm.vec3,
     return before, by_centre
 
 
-def _slot_sorted(geometry: SlotGeometry, ordered: list[int], eye: glm.vec3,
-                 view: View | None) -> tuple[list[int], list[set[int]]]:
-    """The blending order of ``ordered`` (positions in it) and the edges it keeps
-    (``_slot_graph``): both kinds, or where they make a cycle the planes' alone (a centre
-    gives way to a plane: a pane under a pond before the pond, and the pond before a pane
-    standing on it, whatever the panes' centres say), or where those do too, the order
-    breaking their cycles."""
-    planes, centres = _slot_graph(geometry, ordered, eye, view)
-    both = [a | b for a, b in zip(planes, centres, strict=True)]
-    order = _topological(both)
-    if order is not None:
-        return order, both
-    order = _topological(planes)
-    if order is not None:
-        return order, planes
-    return _topological(planes, cycles=True), planes
+class _PairOrder:
+    """``_slot_order`` of a few batches: the order, the edges it keeps (``before``: for each
+    position those that must blend before it), and whether the centres gave way."""
+
+    __slots__ = ("order", "planes_only", "_before", "_after")
+
+    def __init__(self, order: list[int], before: list[set[int]], planes_only: bool) -> None:
+        self.order, self._before, self.planes_only = order, before, planes_only
+        self._after: list[list[int]] | None = None
+
+    def before_any(self, seeds: list[int]) -> set[int]:
+        """``seeds`` and every position that must blend before one of them, and before
+        that, and so on."""
+        before = self._before
+        return _reach(seeds, lambda j: before[j])
+
+    def torn(self, seeds: list[int], needed: set[int]) -> int:
+        """How many of ``needed`` (``before_any(seeds)``), not seeds, must blend after one of
+        ``seeds`` too (a path from a seed to one lies in ``needed``: all of it is before it)."""
+        if self._after is None:
+            self._after = [[] for _ in self._before]
+            for j, names in enumerate(self._before):
+                for i in names:
+                    self._after[i].append(j)
+        after = self._after
+        return _after_seeds(seeds, needed, lambda i: after[i])
+
+
+def _reach(seeds: list[int], preds: Callable[[int], Iterable[int]]) -> set[int]:
+    """``seeds`` and every position ``preds`` names for one of them, and for those, and so on."""
+    needed, stack = set(seeds), list(seeds)
+    while stack:
+        for j in preds(stack.pop()):
+            if j not in needed:
+                needed.add(j)
+                stack.append(j)
+    return needed
+
+
+def _after_seeds(seeds: list[int], needed: set[int], succs: Callable[[int], Iterable[int]]) -> int:
+    """How many of ``needed``, not ``seeds``, a path of ``succs`` reaches from a seed."""
+    reached: set[int] = set()
+    stack = list(seeds)
+    while stack:
+        for j in succs(stack.pop()):
+            if j in needed and j not in reached:
+                reached.add(j)
+                stack.append(j)
+    return len(reached.difference(seeds))
+
+
+class SlotOrder:
+    """``_slot_order`` of more than a few batches: ``order`` (positions, as there),
+    ``planes_only`` (the centres gave way), and what must blend before what (``before_any``,
+    ``torn``), at a cost that grows with the pairs that overlap, not with every pair.  The
+    screen rectangles are one set of numpy calls (``_screen_rects``); the pairs with a
+    plane, the see-through surfaces' (few) x the batches, are tested each; the pairs of two
+    panes (no plane) are only ever the centres' order, so where no plane puts a batch before
+    one with a farther centre the order is the centres' own without them, and they are
+    found only where something needs them (``_pane_edges``: a sort and sweep of the
+    rectangles, and where many overlap one another only the edges that keep what reaches
+    what, which is all the order and the parts depend on)."""
+
+    __slots__ = ("order", "planes_only", "_count", "_pane", "_rects", "_plane_edges", "_centre_edges",
+                 "_lists", "_pane_lists")
+
+    def __init__(self, geometry: SlotGeometry, ordered: list[int], eye: glm.vec3, view: View | None) -> None:
+        count = self._count = len(ordered)
+        rects = self._rects = None if view is None else _screen_rects(geometry, view, ordered)
+        pane = self._pane = [True] * count
+        plane_src: list[int] = []
+        plane_dst: list[int] = []
+        centre_src: list[int] = []
+        centre_dst: list[int] = []
+        backward = False
+        if geometry.planar_at:
+            where = [0] * count  # each batch's position
+            for at, k in enumerate(ordered):
+                where[k] = at
+            planes, sides = geometry.planes, geometry.sides
+            for a in geometry.planar_at:
+                pane[where[a]] = False
+            x0, y0, x1, y1 = rects if rects is not None else (None,) * 4
+            for a in geometry.planar_at:
+                i = where[a]
+                plane = planes[a]
+                # From its plane: where the other batch lies on the eye's side, the surface first.
+                eye_side = 1 if glm.dot(glm.vec3(plane), eye) + plane.w > 0.0 else -1
+                own = sides[a]
+                if rects is not None:
+                    ax0, ay0, ax1, ay1 = x0[i], y0[i], x1[i], y1[i]
+                for j, b in enumerate(ordered):
+                    if j == i or (not pane[j] and j < i):  # (a pair of surfaces once)
+                        continue
+                    if rects is not None and not (ax0 <= x1[j] and x0[j] <= ax1 and ay0 <= y1[j] and y0[j] <= ay1):
+                        continue
+                    first = own[b] * eye_side  # 1: a first, -1: b first, 0: no verdict
+                    if not pane[j]:  # both planes: where they disagree, no verdict
+                        theirs = -sides[b][a] * (1 if glm.dot(glm.vec3(planes[b]), eye) + planes[b].w > 0.0 else -1)
+                        if not first:
+                            first = theirs
+                        elif theirs and theirs != first:
+                            first = 0
+                    lo, hi = (i, j) if i < j else (j, i)
+                    if not first:
+                        centre_src.append(lo)
+                        centre_dst.append(hi)
+                    elif (first > 0) == (i < j):  # the farther by centre first
+                        plane_src.append(lo)
+                        plane_dst.append(hi)
+                    else:
+                        plane_src.append(hi)
+                        plane_dst.append(lo)
+                        backward = True
+        self._plane_edges, self._centre_edges = (plane_src, plane_dst), (centre_src, centre_dst)
+        self._lists: tuple[list[list[int]], list[list[int]]] | None = None
+        self._pane_lists: tuple[list[list[int]], list[list[int]]] | None = None
+        self.planes_only = False
+        if not backward:  # every edge keeps the centres' order
+            self.order = list(range(count))
+            return
+        # Those before the first a plane holds back, and those after the last a plane puts
+        # first, keep their places (no path leaves the span between and comes back): the
+        # order is worked out between them, of the edges there.
+        low = min(j for i, j in zip(plane_src, plane_dst, strict=True) if i > j)
+        high = max(i for i, j in zip(plane_src, plane_dst, strict=True) if i > j)
+        src, dst = [], []
+        for i, j in zip(plane_src + centre_src, plane_dst + centre_dst, strict=True):
+            if low <= i <= high and low <= j <= high:
+                src.append(i - low)
+                dst.append(j - low)
+        pane_src, pane_dst = _pane_edges(pane[low:high + 1], None if rects is None else
+                                         tuple(part[low:high + 1] for part in rects))
+        order = _lowest_first(high + 1 - low, src + pane_src, dst + pane_dst)
+        if order is not None:
+            order = [*range(low), *(low + i for i in order), *range(high + 1, count)]
+        else:  # a cycle: the centres give way to the planes
+            self.planes_only = True
+            before: list[set[int]] = [set() for _ in range(count)]
+            for i, j in zip(plane_src, plane_dst, strict=True):
+                before[j].add(i)
+            order = _topological(before)
+            if order is None:
+                order = _topological(before, cycles=True)
+        self.order = order
+
+    def _edge_lists(self, *edges: tuple[list[int], list[int]]) -> tuple[list[list[int]], list[list[int]]]:
+        preds: list[list[int]] = [[] for _ in range(self._count)]
+        succs: list[list[int]] = [[] for _ in range(self._count)]
+        for src, dst in edges:
+            for i, j in zip(src, dst, strict=True):
+                preds[j].append(i)
+                succs[i].append(j)
+        return preds, succs
+
+    def _neighbours(self, which: int) -> Callable[[int], list[int]]:
+        """A position's edges' sources (``which`` 0) or targets (1): those with a plane,
+        and a pane's with other panes (found the first time a pane asks)."""
+        if self._lists is None:
+            self._lists = self._edge_lists(self._plane_edges) if self.planes_only \
+                else self._edge_lists(self._plane_edges, self._centre_edges)
+        kept, pane = self._lists[which], self._pane
+        if self.planes_only:
+            return kept.__getitem__
+
+        def neighbours(j: int) -> list[int]:
+            if not pane[j]:
+                return kept[j]
+            if self._pane_lists is None:
+                self._pane_lists = self._edge_lists(_pane_edges(pane, self._rects))
+            return kept[j] + self._pane_lists[which][j]
+        return neighbours
+
+    def before_any(self, seeds: list[int]) -> set[int]:
+        """``seeds`` and every position that must blend before one of them, and before
+        that, and so on."""
+        return _reach(seeds, self._neighbours(0))
+
+    def torn(self, seeds: list[int], needed: set[int]) -> int:
+        """As ``_PairOrder.torn``."""
+        return _after_seeds(seeds, needed, self._neighbours(1))
+
+
+def _pane_edges(pane: list[bool], rects: tuple | None) -> tuple[list[int], list[int]]:
+    """The centres' edges between two panes (``pane``: which positions have no plane): the
+    farther first, for each pair whose rectangles overlap (``rects``, by position; None:
+    every pair).  Only the edges that keep what reaches what: panes that all overlap one
+    another are a chain in their order, so every pane (no view), and those whose rectangle
+    is the whole plane, are joined each to the next such alone, and each other pane to the
+    nearest of those before and after it; the other pairs, of rectangles that overlap, are
+    found by a sort and sweep along x in arrays (a broad phase's sweep and prune)."""
+    panes = [i for i, is_pane in enumerate(pane) if is_pane]
+    if rects is None or len(panes) < 2:
+        return panes[:-1], panes[1:]
+    x0, y0, x1, y1 = rects
+    chain = [i for i in panes if x0[i] == -math.inf]
+    some = [i for i in panes if x0[i] != -math.inf]
+    src, dst = chain[:-1], chain[1:]
+    if chain:
+        at = 0  # of the chain, how many are before the pane
+        for i in some:
+            while at < len(chain) and chain[at] < i:
+                at += 1
+            if at:
+                src.append(chain[at - 1])
+                dst.append(i)
+            if at < len(chain):
+                src.append(i)
+                dst.append(chain[at])
+    if len(some) > 1:
+        some_at = np.array(some)
+        sx0, sy0, sx1, sy1 = (np.array(part)[some_at] for part in rects)
+        by_x = np.argsort(sx0, kind="stable")
+        ends = np.searchsorted(sx0[by_x], sx1[by_x], side="right")  # those starting within each one's width
+        counts = ends - np.arange(1, len(some) + 1)
+        a = np.repeat(np.arange(len(some)), counts)
+        b = np.arange(len(a)) - np.repeat(np.cumsum(counts) - counts, counts) + a + 1
+        a, b = by_x[a], by_x[b]
+        keep = (sy0[a] <= sy1[b]) & (sy0[b] <= sy1[a])
+        a, b = some_at[a[keep]], some_at[b[keep]]
+        src += np.minimum(a, b).tolist()
+        dst += np.maximum(a, b).tolist()
+    return src, dst
+
+
+def _lowest_first(count: int, src: list[int], dst: list[int]) -> list[int] | None:
+    """The order of ``count`` positions in which each comes after its edges' sources
+    (``src[k]`` before ``dst[k]``), the lowest position first among those free to go (Kahn's
+    algorithm with a heap, as ``_topological``: the least such order, which depends only
+    on what reaches what); None where a cycle leaves none free."""
+    waiting = [0] * count
+    succs: list[list[int]] = [[] for _ in range(count)]
+    for i, j in zip(src, dst, strict=True):
+        succs[i].append(j)
+        waiting[j] += 1
+    free = [i for i in range(count) if not waiting[i]]  # rising: a heap
+    order: list[int] = []
+    while free:
+        i = heapq.heappop(free)
+        order.append(i)
+        for k in succs[i]:
+            waiting[k] -= 1
+            if not waiting[k]:
+                heapq.heappush(free, k)
+    return order if len(order) == count else None
 
 
 def _topological(before: list[set[int]], cycles: bool = False) -> list[int] | None:
@@ -1160,7 +1669,9 @@ def _split_slot(transparent: list, view: View, geometry: SlotGeometry | None = N
     on back), and the rest, which ``draw_transparent`` blends after the levels below are
     composited into the view (glass in front of every surface it covers blends over their
     reflections; all of the slot where the view draws no see-through surface).
-    ``geometry``: ``transparent``'s (``SlotGeometry``), else worked out here.
+    ``geometry``: ``transparent``'s (``SlotGeometry``), else worked out here; a view's
+    answer is kept in its ``splits`` for the view's second call (its ``draw_transparent``:
+    a View is not changed after it is made).
 
     The limit of one claim a pixel: a batch that must blend before one surface and after
     another (a pane under a near pond and in front of a far see-through mirror, covering
@@ -1171,6 +1682,21 @@ def _split_slot(transparent: list, view: View, geometry: SlotGeometry | None = N
     Likewise a see-through surface behind another shows its own colour, not its
     reflection, where the nearer one covers it."""
     geometry = geometry or SlotGeometry(transparent)
+    kept = geometry.splits.get(id(view))
+    if kept is not None and kept[0] is view:
+        return kept[1]
+    if len(geometry.splits) >= _SPLITS_KEPT:
+        geometry.splits.clear()
+    split = geometry.splits[id(view)] = (view, _split_now(geometry, view))
+    return split[1]
+
+
+# Views whose split a SlotGeometry keeps at most (a frame's trees have a few dozen; the
+# dictionary is emptied when full: a view's two calls are a few passes apart).
+_SPLITS_KEPT = 256
+
+
+def _split_now(geometry: SlotGeometry, view: View) -> SlotSplit:
     batches = geometry.batches
     ordered = geometry.back_to_front(view.eye)
     skipped = (view.skip, view.hide)
@@ -1181,33 +1707,23 @@ def _split_slot(transparent: list, view: View, geometry: SlotGeometry | None = N
     if len(ordered) == 1:
         return SlotSplit([batches[ordered[0]]], [], 0)
     # A few batches: every pair ordered first, as if all covered the same pixels; where that
-    # keeps the centres' order and puts nothing but the surfaces before the claims, so does
-    # the view's screen (a subset of the same edges), and no rectangle is worked out.
-    order = None
-    if len(ordered) <= _SHORTCUT_MOST:
-        order, before = _slot_sorted(geometry, ordered, view.eye, None)
-        needed = _before_any(before, seeds)
-    if order is None or len(needed) > len(seeds) or any(i != at for at, i in enumerate(order)):
-        order, before = _slot_sorted(geometry, ordered, view.eye, view)
-        needed = _before_any(before, seeds)
-    torn = 0
-    if len(needed) > len(seeds):  # what of the first part comes after one of its surfaces too
-        surfaces = set(seeds)
-        torn = sum(1 for i in needed - surfaces if not surfaces.isdisjoint(_before_any(before, [i]) - {i}))
+    # keeps the centres' order, with both kinds of edge, and puts nothing but the surfaces
+    # before the claims, so does the view's screen (a subset of the same edges), and no
+    # rectangle is worked out.  (Where the centres gave way to the planes, the screen's
+    # fewer edges may keep the centres' and put more before the claims.)
+    slot = None
+    if len(ordered) <= _FEW_BATCHES:
+        slot = _slot_order(geometry, ordered, view.eye, None)
+        needed = slot.before_any(seeds)
+        if slot.planes_only or len(needed) > len(seeds) or any(i != at for at, i in enumerate(slot.order)):
+            slot = None
+    if slot is None:
+        slot = _slot_order(geometry, ordered, view.eye, view)
+        needed = slot.before_any(seeds)
+    torn = slot.torn(seeds, needed) if len(needed) > len(seeds) else 0
+    order = slot.order
     return SlotSplit([batches[ordered[i]] for i in order if i in needed],
                      [batches[ordered[i]] for i in order if i not in needed], torn)
-
-
-def _before_any(before: list[set[int]], seeds: list[int]) -> set[int]:
-    """``seeds`` and every position that must blend before one of them (``before``), and
-    before that, and so on."""
-    needed, stack = set(seeds), list(seeds)
-    while stack:
-        for j in before[stack.pop()]:
-            if j not in needed:
-                needed.add(j)
-                stack.append(j)
-    return needed
 
 
 def _slot_groups(transparent: list, views: Sequence[View],
