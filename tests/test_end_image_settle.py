@@ -279,7 +279,8 @@ def test_level_copies_go_with_the_frame_they_are_for_and_never_pile_up(scene, to
     window resized): the next frame holds no level copy (``Renderer.resource_counts``'
     "level_copies") rather than keeping a level's colour and id images for a frame that may
     never come (resized: until the next still frame copies the new size's levels); given
-    back, it draws, copies and refills again.
+    back, it draws, copies and refills again.  With no frame to draw at all (camera off,
+    minimised) the end images' history is let go too.
     Toggled again and again, the renderer's resources come back to the same counts each time,
     and every frame is the drawn engine's."""
     pair = _Pair(scene, SCENES["glass"])
@@ -296,6 +297,8 @@ def test_level_copies_go_with_the_frame_they_are_for_and_never_pile_up(scene, to
         pair.both(off)
         pair.frame()
         assert renderer.resource_counts()["level_copies"] == 0
+        if toggle in ("camera_inactive", "minimised"):  # no frame to draw: the end images' history goes too
+            assert pair.keeping.engine.reflection_system.tree.ends.history is None
         pair.frame()  # (resized: the next still frame, of the new size, copies its levels again)
         assert renderer.resource_counts()["level_copies"] == (held["level_copies"] if toggle == "resized" else 0)
         pair.both(on)

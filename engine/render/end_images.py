@@ -157,6 +157,12 @@ class EndImages:
         self.view_proj = None
         self.seen = frozenset()
 
+    def let_go(self) -> None:
+        """No frame draws this tree now (``ViewTree.let_go``): the history image, which would
+        be stale when a frame comes again, is released, and the next frame starts closed."""
+        self.forget()
+        self._release_history()
+
     def _release_history(self) -> None:
         if self._history_fbo is not None:
             release_framebuffer(self._history_fbo)

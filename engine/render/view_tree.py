@@ -468,11 +468,14 @@ class ViewTree:
 
     def let_go(self) -> None:
         """No frame draws or keeps this tree now (its camera switched off, no pixels to draw
-        into): the kept tree and the copies of its levels are let go, not held for a still
-        frame that may never come (the next frame with a view draws the tree whole)."""
+        into): the kept tree, the copies of its levels and the end images' history are let go,
+        not held for a still frame that may never come (the next frame with a view draws the
+        tree whole, its end views closed until a history is kept again)."""
         self.kept = None
         if len(self.copies):
             self.copies.release()
+        if self.ends is not None:
+            self.ends.let_go()
 
     def keep(self, levels: LevelStack, root: View | None = None,
              root_options: SceneOptions = TREE_ROOT) -> TreeResult | None:
