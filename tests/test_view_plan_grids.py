@@ -10,16 +10,20 @@ from pyglm import glm
 
 import engine.render.plan_rows as plan_rows
 import engine.render.view_plan as view_plan
+from components.limits import VIEW_MIRROR
+from components.visibility import DRAWN_EVERYWHERE, visibility_code
 from engine.core.reflection_math import reflection_matrix
 from engine.render.views import View
 from engine.resources import SurfaceState
+from engine.rules.visibility_rules import drawn_in
 
 
-def _mirror(entity: int, z: float, facing: float, x: float = 0.0, layers: int = 0xFFFF) -> SurfaceState:
+def _mirror(entity: int, z: float, facing: float, x: float = 0.0, layers: int = 0xFFFF,
+            drawn: int = DRAWN_EVERYWHERE) -> SurfaceState:
     plane = glm.vec4(0.0, 0.0, facing, -facing * z)
     corners = np.array([(x + dx, y, z, 1.0) for dx in (-1.0, 1.0) for y in (0.0, 2.0)])
     return SurfaceState(entity, "mirror", plane, corners, None, reflection_matrix(plane), plane, entity, 4,
-                        layers=layers)
+                        layers=layers, drawn=drawn)
 
 
 def _table() -> view_plan.SurfaceTable:
@@ -122,3 +126,34 @@ def test_a_kept_plans_choice_is_found_again_and_so_is_its_plan():
     assert again is planned
     fresh, _ = _table()._plan(chosen.rows, 2, view, root_proj, inv_root_proj, 10, 8, 0)
     assert np.array_equal(fresh.rows.data.view(np.int64), planned.rows.data.view(np.int64))
+
+
+def test_parents_through_one_surface_with_other_masks_each_get_their_own_bias():
+    """The cull's bias (``SurfaceTable._pair_bias``: which surfaces each parent may see) is
+    kept a parent at a time, by its exit row and view mask (``_bias_rows``): parents looking
+    out of the same mirror, one showing the layer a surface is drawn on and one not, each get
+    their own row, whichever was seen first, alone or with the other, in either order, as
+    the visibility rule says surface by surface (worked out here pair by pair in Python)."""
+    on_layer_2 = _mirror(5, 0.0, 1.0, x=2.1, drawn=visibility_code(0, 1 << 2))
+    states = [_mirror(3, 0.0, 1.0), _mirror(4, 6.0, -1.0), on_layer_2, _mirror(6, 6.0, -1.0, x=2.1)]
+    masks = {"shows_layer_2": visibility_code(VIEW_MIRROR, 1 | 1 << 2), "not": visibility_code(VIEW_MIRROR, 1)}
+    exit_row = 1  # both look out of mirror 4
+
+    def parents(*names: str) -> np.ndarray:
+        data = np.zeros((len(names), plan_rows.LevelRows.WIDTH))
+        data[:, plan_rows.ROW["exit_row"].start] = exit_row
+        data[:, plan_rows.ROW["view_mask"].start] = [masks[name] for name in names]
+        return data
+
+    def wanted(names: tuple[str, ...], fallback: bool) -> np.ndarray:
+        return np.array([[0.0 if (fallback or state.max_depth >= 1) and drawn_in(state.drawn, masks[name])
+                          and row != exit_row else np.inf for row, state in enumerate(states)] for name in names])
+
+    table = view_plan.SurfaceTable(states)
+    assert not np.array_equal(wanted(("shows_layer_2",), False), wanted(("not",), False))  # the rows differ
+    for names in (("shows_layer_2",), ("not", "shows_layer_2"), ("shows_layer_2", "not"), ("not",),
+                  ("not", "not", "shows_layer_2")):
+        for fallback in (False, True):
+            bias, any_seen = table._pair_bias(parents(*names), 1, 8, None, fallback)
+            assert np.array_equal(bias, wanted(names, fallback)), (names, fallback)
+            assert any_seen

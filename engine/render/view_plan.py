@@ -181,6 +181,7 @@ class SurfaceTable:
         self.keep = visibility_code(_KINDS_BUT_DIRECT, self.layers)  # the mask bits a view through it keeps
         self._depths: dict[tuple[int, int], tuple[np.ndarray, np.ndarray, list[bool], bool]] = {}
         self._biases: dict[tuple, tuple[np.ndarray | None, np.ndarray]] = {}  # _pair_bias's
+        self._bias_rows_kept: dict[bytes, dict] = {}  # _bias_rows', a parent's each, by the surfaces allowed
         self._plans: dict[tuple, tuple[np.ndarray | None, tuple[Candidates | None, int]]] = {}  # plan's, least
         # recently used first
         self._ends: dict[tuple[int, int], tuple[np.ndarray, np.ndarray, list[bool]]] = {}
@@ -193,6 +194,8 @@ class SurfaceTable:
         self._child_rows: dict[tuple, np.ndarray] = {}  # _child_row's
         self._cuts: dict[tuple, tuple[np.ndarray | None, np.ndarray, bool]] = {}  # _cut's
         self._cull_work: dict[int, CullWork] = {}  # the cull's scratch, by its count of parents
+        # The last cull's parents and its work, while no cull came after it (cull: a fallback cull takes it)
+        self._cull_geometry: tuple[np.ndarray, CullWork] | None = None
         self._plan_work: dict[int, PlanWork] = {}  # _plan's, by its count of views
         self._plan_buffers: dict[int, PlanBuffers] = {}  # their arrays, by capacity
         self._child_tables: dict[tuple, ChildTable] = {}  # _child_ids' for large levels
@@ -308,21 +311,50 @@ class SurfaceTable:
         key = (id_bytes, depth, depth_cap, id(ends), fallback)
         found = self._biases.get(key)
         if found is None or found[0] is not ends:
-            if fallback:
-                allowed = self.falls_back
-            else:
-                allowed = self._within(depth, depth_cap)[0] if ends is None else self._with_ends(depth, depth_cap,
-                                                                                                  ends)[0]
-            seen = allowed & drawn_in(self.drawn, ids[:, 1:2].astype(np.int64))  # the rule, a row a parent
-            exit_rows = ids[:, 0].astype(np.int64)
+            if len(self._biases) > 256:
+                self._biases.clear()
+            found = self._biases[key] = (ends, self._bias_rows(ids, depth, depth_cap, ends, fallback))
+        return found[1]
+
+    def _bias_rows(self, ids: np.ndarray, depth: int, depth_cap: int, ends: np.ndarray | None,
+                   fallback: bool) -> tuple[np.ndarray, bool]:
+        """``_pair_bias``'s (P, S) bias and whether any pair may be seen, for parents of
+        ``ids`` (exit row, view mask, winding) not seen together before: stacked from each
+        parent's own row, kept by its exit row and mask (a deep level's parents change from
+        frame to frame as a camera moves, each parent's own row seldom: at 16 mirrors about
+        three levels a frame found no bias kept for their parents together, each row of them
+        one kept), the rows not kept worked out together.  Kept by the surfaces allowed (the
+        depth's, with the end images' or not, or those that fall back), whatever array says
+        so: the end images' mask is made anew whenever the surfaces they show change."""
+        if fallback:
+            allowed = self.falls_back
+        else:
+            allowed = self._within(depth, depth_cap)[0] if ends is None else self._with_ends(depth, depth_cap, ends)[0]
+        rows = self._bias_rows_kept.get(allowed.tobytes())
+        if rows is None:
+            if len(self._bias_rows_kept) > 64:
+                self._bias_rows_kept.clear()
+            rows = self._bias_rows_kept[allowed.tobytes()] = {}
+        keys = [(exit_row, mask) for exit_row, mask, _ in ids.tolist()]
+        found = [rows.get(key) for key in keys]
+        if None in found:
+            missing = [at for at, row in enumerate(found) if row is None]
+            part = ids.take(missing, axis=0)
+            seen = allowed & drawn_in(self.drawn, part[:, 1:2].astype(np.int64))  # the rule, a row a parent
+            exit_rows = part[:, 0].astype(np.int64)
             looks_out = np.flatnonzero(exit_rows >= 0)
             seen[looks_out, exit_rows[looks_out]] = False
             bias = np.where(seen, 0.0, np.inf)
             bias.flags.writeable = False
-            if len(self._biases) > 256:
-                self._biases.clear()
-            found = self._biases[key] = (ends, (bias, bool(seen.any())))
-        return found[1]
+            if len(rows) > 1024:
+                rows.clear()
+            for at, row, any_seen in zip(missing, bias, seen.any(axis=1).tolist(), strict=True):
+                found[at] = rows[keys[at]] = (row, any_seen)
+            if len(missing) == len(found):
+                return bias, any(any_seen for _, any_seen in found)
+        bias = np.array([row for row, _ in found])
+        bias.flags.writeable = False
+        return bias, any(any_seen for _, any_seen in found)
 
     def _child_ids(self, data: np.ndarray, hide: int, root_rows: RootRows, size: tuple[int, int],
                    p: np.ndarray, s: np.ndarray) -> np.ndarray:
@@ -449,26 +481,38 @@ class SurfaceTable:
         # row's values of every parent and surface are one contiguous block below), times
         # each corner's (4, S) gives (corners, 14, P, S), so the sides are divided by w, and
         # the minima over the corners; the planes as one more corner give the facing values
-        # (the eye's row times them).
-        work = self._cull_work.get(count) or kept_work(self._cull_work, count, self._new_cull_work)
-        np.matmul(cull_rows(data), self.corner_columns, out=work.product)
-        np.maximum(work.w, work.epsilon, out=work.w_safe)  # w <= 0: see straddles
-        np.divide(work.sides, work.w_safe, out=work.sides)
-        least = _MIN(work.corners, axis=0, out=work.least)                                  # 14 x P x S
-        # x0, y0, -x1, -y1 in pixels, rounded outwards with a pixel's margin; a pair with a
-        # corner behind the eye is conservative (the parent's whole rectangle).
+        # (the eye's row times them).  None of it reads the depth or which surfaces are
+        # allowed: a fallback cull (``unviewed``) of the parents the last cull tested, with
+        # no cull between (the level at the depth limits: its plan's cull, then its
+        # fallbacks'), takes the work it left, written over by nothing since, and only
+        # tests its own bias.
+        cull_work = self._cull_geometry
+        self._cull_geometry = None
+        if fallback and cull_work is not None and cull_work[0] is data:
+            work = cull_work[1]
+        else:
+            work = self._cull_work.get(count) or kept_work(self._cull_work, count, self._new_cull_work)
+            np.matmul(cull_rows(data), self.corner_columns, out=work.product)
+            np.maximum(work.w, work.epsilon, out=work.w_safe)  # w <= 0: see straddles
+            np.divide(work.sides, work.w_safe, out=work.sides)
+            least = _MIN(work.corners, axis=0, out=work.least)                                  # 14 x P x S
+            # x0, y0, -x1, -y1 in pixels, rounded outwards with a pixel's margin; a pair with a
+            # corner behind the eye is conservative (the parent's whole rectangle).
+            rects = work.rects
+            if work.least_w.min() <= 1e-6:
+                np.copyto(rects, -np.inf, where=least[4] <= 1e-6)
+            if self.bounds_claims and not fallback:  # (for the plan's candidates)
+                self._boxes = rects.copy()  # unrounded: what claim_cull bounds a claim's pixel centres by
+            np.floor(rects, out=rects)  # (the pixel's margin is in the rows: each side less w)
+            np.maximum(rects, data.T[RECT, :, None], out=rects)  # inside the parent's
+            np.add(work.x0y0, work.x1y1, out=work.sizes)
+            if not fallback:
+                self._cull_geometry = (data, work)
         rects = work.rects
-        if work.least_w.min() <= 1e-6:
-            np.copyto(rects, -np.inf, where=least[4] <= 1e-6)
-        if self.bounds_claims and not fallback:  # (for the plan's candidates)
-            self._boxes = rects.copy()  # unrounded: what claim_cull bounds a claim's pixel centres by
-        np.floor(rects, out=rects)  # (the pixel's margin is in the rows: each side less w)
-        np.maximum(rects, data.T[RECT, :, None], out=rects)  # inside the parent's
         # Seen: facing and allowed, not culled (every corner outside one side of the frustum,
         # or behind the clip plane; on a side counts as outside) and a rectangle with pixels
         # (x1 > x0 and y1 > y0): one maximum over the rows 4-13, written over, each < 0 to keep.
         np.subtract(neg_bias, work.facing, out=work.least_w)
-        np.add(work.x0y0, work.x1y1, out=work.sizes)
         np.less(_MAX(work.tests, axis=0, out=work.worst), 0.0, out=work.seen)
         if count == 1:  # (a take costs a third of a fancy index's two arrays)
             s = work.seen[0].nonzero()[0]
