@@ -157,3 +157,45 @@ def test_parents_through_one_surface_with_other_masks_each_get_their_own_bias():
             bias, any_seen = table._pair_bias(parents(*names), 1, 8, None, fallback)
             assert np.array_equal(bias, wanted(names, fallback)), (names, fallback)
             assert any_seen
+
+
+def test_a_chain_is_planned_in_one_run_as_far_as_each_level_finds_the_surface_named():
+    """``SurfaceTable.plan_chain``: the levels below one view, each of one view through the
+    surface named, planned in one run, are bit for bit the levels ``plan`` makes one after
+    another (their Camera blocks finished by ``finish_blocks`` either way), with each
+    level's pairs, claim boxes and nodes; the run stops at the first level whose cull does
+    not find exactly the surface named (another surface, or nothing), and plans nothing
+    where the first does not."""
+    table = _table()
+    view, root_proj, inv_root_proj, levels = _levels(table, (0.8, 1.0, 3.5), depth=1)
+    first = levels[0][1].select(np.array([1], np.int64))  # through the second pair's near mirror
+    one_at_a_time, parent = [], first
+    for depth in range(2, 6):
+        planned, _ = table.plan(parent.rows, depth, view, root_proj, inv_root_proj, int(parent.rows.node[-1]) + 1,
+                                8, 0, defer=True)
+        if planned is None:
+            break
+        assert len(planned) == 1
+        one_at_a_time.append(planned)
+        parent = planned
+    through = [int(candidates.surface[0]) for candidates in one_at_a_time]
+    assert len(through) == 3 and through[0] != through[1], through  # back and forth, then out of sight
+    table.finish_blocks(one_at_a_time, root_proj)
+    for asked, wanted in ((through, 3), (through + [through[1]], 3), (through[:2] + [through[1]], 2),
+                          ([through[1]] + through[1:], 0)):
+        fresh = _table()
+        chain = fresh.plan_chain(first, 1, asked, view, root_proj, 8, 0, [None] * len(asked))
+        assert len(chain) == wanted, (asked, len(chain))
+        if chain:
+            fresh.finish_blocks(chain, root_proj)
+        for got, want in zip(chain, one_at_a_time, strict=False):
+            assert np.array_equal(got.rows.data.view(np.int64), want.rows.data.view(np.int64))
+            assert got.parent.tolist() == want.parent.tolist() and got.surface.tolist() == want.surface.tolist()
+            assert np.array_equal(got.box, want.box) and got.size == want.size and got.end is want.end is None
+    # Through the first pair's near mirror the next level sees both far mirrors: the surface
+    # named is one of them, but a level of two views is no chain.
+    other = levels[0][1].select(np.array([0], np.int64))
+    seen, _ = table.plan(other.rows, 2, view, root_proj, inv_root_proj, 10, 8, 0)
+    assert len(seen) == 2, seen.surface
+    for named in seen.surface.tolist():
+        assert _table().plan_chain(other, 1, [named, through[0]], view, root_proj, 8, 0, [None, None]) == []

@@ -306,6 +306,10 @@ class _Walk:
     ahead: dict[int, tuple] = field(default_factory=dict)  # levels planned ahead (ViewTree._plan_ahead), by depth
     whole: dict[int, bool] = field(default_factory=dict)   # the levels whose candidates all grew (ViewTree._whole)
     whole_before: dict[int, bool] = field(default_factory=dict)  # the same root's last render's
+    # Each level's one candidate's surface row (-1: none, or more than one), and the same root's
+    # last render's (ViewTree._plan_ahead: a chain planned in one run)
+    singles: dict[int, int] = field(default_factory=dict)
+    singles_before: dict[int, int] = field(default_factory=dict)
 
     def triangles(self) -> int:
         """The triangles a scene pass submits, counted at the first level that asks (a level
@@ -348,6 +352,10 @@ class ViewTree:
         # Per root (as _visibility), per level, whether its last render's level made every
         # candidate a view that grew (its rows the parents of the next level).
         self._whole: dict[tuple[str, int], dict[int, bool]] = {}
+        self._singles: dict[tuple[str, int], dict[int, int]] = {}  # per root as _whole: _Walk.singles
+        # Plan a chain of one view a level ahead in one run (SurfaceTable.plan_chain); False:
+        # level by level (the second path the tests compare against).
+        self.plan_chains = True
         # With ``remember`` (the main view's tree), what the last render left (``KeptTree``),
         # for a frame whose views show nothing new (``keep``); None after any other render.
         self.remember = False
@@ -548,9 +556,12 @@ class ViewTree:
                      None if ends is None else [[-1] * len(surfaces.states)])
         key = (root.name, root.skip)
         walk.whole_before = self._whole.get(key) or walk.whole_before
+        walk.singles_before = self._singles.get(key) or walk.singles_before
         if len(self._whole) > 64:
             self._whole.clear()
+            self._singles.clear()
         self._whole[key] = walk.whole
+        self._singles[key] = walk.singles
         return walk
 
     def _plan(self, walk: _Walk, first_index: int) -> Candidates | None:
@@ -573,6 +584,7 @@ class ViewTree:
         self._unviewed(walk.fallbacks, surfaces, walk.rows, walk.nodes, walk.level, walk.root_proj, root,
                        settings.depth_cap, walk.ends, unviewed)
         walk.result.faded += faded
+        walk.singles[depth] = int(candidates.surface[0]) if candidates is not None and len(candidates) == 1 else -1
         candidates, walk.end_seers, dropped = self._end_seers(candidates, walk.seers)
         if dropped:  # end candidates with nothing to repeat: their fallback, never the bare surface
             _fallbacks_at(walk.fallbacks, walk.level, surfaces).add(walk.nodes, [p for p, _ in dropped],
@@ -594,6 +606,24 @@ class ViewTree:
         settings, surfaces, root = walk.settings, walk.surfaces, walk.root
         whole = walk.whole_before
         deferred: list[Candidates] = []
+        if self.plan_chains and len(candidates) == 1 and (candidates.end is None or not candidates.end.any()):
+            # A chain of one view a level last render (a portal pair, facing mirrors): planned
+            # in one run through the surfaces it went through (SurfaceTable.plan_chain), as
+            # far as each level finds the same one; the loop below plans on from there.
+            through, singles, level = [], walk.singles_before, depth
+            while whole.get(level) and singles.get(level + 1, -1) >= 0 and self._level_scale(level + 1) == 1.0:
+                level += 1
+                through.append(singles[level])
+            ends = [_ends_at(walk.ends, depth + 1 + i) for i in range(len(through))]
+            for planned in surfaces.plan_chain(candidates, depth, through, root, walk.root_proj, settings.depth_cap,
+                                               root.hide, ends) if len(through) >= 2 else ():
+                depth += 1
+                rows = candidates.rows
+                walk.ahead[depth] = (rows.data, int(rows.node[-1]) + 1, 1.0, (planned, 0),
+                                     surfaces.unviewed(rows, depth, walk.root_proj, root.size, settings.depth_cap,
+                                                       ends[len(deferred)]))
+                deferred.append(planned)
+                candidates = planned
         while whole.get(depth) and (candidates.end is None or not candidates.end.any()):
             depth += 1
             rows, first_index, scale = candidates.rows, int(candidates.rows.node[-1]) + 1, self._level_scale(depth)
