@@ -205,9 +205,9 @@ def test_a_chain_planned_in_one_run_draws_the_tree_planned_level_by_level(scene,
     """A facing pair (mirrors: claim boxes kept; portals: none) seen head on is a chain of
     one view a level, which the levels planned ahead plan in one run from the surfaces of
     the root's last render's levels (``SurfaceTable.plan_chain``).  While the camera moves,
-    the trees and the frames equal, frame by frame, those of a tree planning the same
-    levels ahead one at a time (``plan_chains`` False), with the pair's end images or
-    without them (past its depth limit it shows its fallback)."""
+    the trees and the frames equal, frame by frame, those of a tree planning each level
+    after its parent's claims (``plan_ahead`` False), with the pair's end images or without
+    them (past its depth limit it shows its fallback)."""
     from engine.render.view_plan import SurfaceTable
 
     chained: list[int] = []  # levels planned a run
@@ -217,7 +217,7 @@ def test_a_chain_planned_in_one_run_draws_the_tree_planned_level_by_level(scene,
     ents = {True: {}, False: {}}
     runners = {chains: scene(_facing_pair(ents[chains], kind, end_image), (160, 120)) for chains in (True, False)}
     for chains, runner in runners.items():
-        runner.engine.reflection_system.tree.plan_chains = chains
+        runner.engine.reflection_system.tree.plan_ahead = chains
     runs = []
     for frame in range(4):
         trees, images = {}, {}

@@ -642,6 +642,40 @@ class ViewTree:
                 deferred.append(candidates)
         if deferred:
             surfaces.finish_blocks(deferred, walk.root_proj)
+            self._ahead_columns(surfaces, deferred, root.hide)
+
+    @staticmethod
+    def _ahead_columns(surfaces: SurfaceTable, levels: list[Candidates], hide: int) -> None:
+        """What ``_level_nodes`` and ``_claim`` make of each level planned ahead (their rows
+        final once their blocks are: nothing writes them after), made for all of them at
+        once and kept with each (``Candidates.derived``, as for a kept plan's): the columns
+        read as Python numbers in one conversion each for every level (a chain at portal
+        depth 8: seven levels of one view), not each level's own few."""
+        rows = np.concatenate([candidates.rows.data for candidates in levels])
+        ints = rows.view(np.int64)
+        blocks = rows[:, BLOCK].tobytes()
+        step = CAMERA_BLOCK_BYTES
+        columns = rows.take(_NODE_COLUMNS, axis=1).astype(np.int64).tolist()
+        numbers = ints.take(_INT_COLUMNS, axis=1).tolist()
+        fades = rows[:, ROW["fade"].start].tolist()
+        states, entities = surfaces.states, surfaces.entity_list
+        at = 0
+        for candidates in levels:
+            size = candidates.size
+            views, nodes, claims = [], [], ([], [], [], [])
+            for i in range(at, at + len(candidates)):
+                x0, y0, x1, y1, mirrored, node = columns[i]  # x1, y1: negated (LEVEL_ROW)
+                p, s, *scissor = numbers[i]
+                state = states[s]
+                views.append(PlannedView(blocks[i * step:(i + 1) * step], size, state.kind, state.entity,
+                                         state.exit_plane, mirrored == 1, tuple(scissor), node, state.exit_entity,
+                                         hide))
+                nodes.append((node, (x0, y0, -x1 - x0, -y1 - y0), state, p, fades[i]))
+                for column, value in zip(claims, (p, entities[s], node, scissor), strict=True):
+                    column.append(value)
+            candidates.derived[("nodes", hide)] = (views, nodes)
+            candidates.derived["claims"] = claims
+            at += len(candidates)
 
     def _choose(self, walk: _Walk, levels: LevelStack, candidates: Candidates) -> _Level | None:
         """Steps 2 and 3 for a planned level: its candidates' claims (exact: drawn and read
@@ -1033,7 +1067,7 @@ class ViewTree:
         nothing reads their rectangles (no claim, no reset)."""
         candidates, parents = step.candidates, step.parents
         kept = not candidates.rows.data.flags.writeable
-        columns = candidates.derived.get("claims") if kept else None
+        columns = candidates.derived.get("claims")  # a kept plan's, or one planned ahead (_ahead_columns)
         if columns is None:  # each candidate's parent row, surface entity and node, and its scissor
             entities = surfaces.entity_list
             columns = (candidates.parent.tolist(), [entities[s] for s in candidates.surface.tolist()],
@@ -1147,8 +1181,8 @@ class ViewTree:
         camera's, a probe face's) keep their views (a View is not changed after it is made)
         and what their nodes are made of, so the frames that find the plan again make only
         the nodes."""
-        kept = None if chosen.rows.data.flags.writeable else chosen.derived.get(("nodes", hide))
-        if kept is not None:  # a kept plan's: its views, and what its nodes are made of
+        kept = chosen.derived.get(("nodes", hide))
+        if kept is not None:  # a kept plan's, or one planned ahead: its views, and what its nodes are made of
             views, rows = kept
             return views, [ReflectionView(node, level, view, rect, state, parents[p], fade)
                            for view, (node, rect, state, p, fade) in zip(views, rows, strict=True)]
@@ -1197,6 +1231,8 @@ class ViewTree:
 
 # The LevelRows columns a level's nodes read (_level_nodes), as whole numbers: the rectangle, mirrored, node.
 _NODE_COLUMNS = np.array([*range(ROW["rect"].start, ROW["rect"].stop), ROW["mirrored"].start, ROW["node"].start])
+# Its int64 columns (_ahead_columns): the parent row, the surface row, the scissor.
+_INT_COLUMNS = np.array([ROW["parent"].start, ROW["surface"].start, *range(ROW["scissor"].start, ROW["scissor"].stop)])
 
 
 def _fallbacks_at(fallbacks: dict[int, Fallbacks], level: int, surfaces: SurfaceTable) -> Fallbacks:
