@@ -162,7 +162,7 @@ def test_parents_through_one_surface_with_other_masks_each_get_their_own_bias():
 def test_a_chain_is_planned_in_one_run_as_far_as_each_level_finds_the_surface_named():
     """``SurfaceTable.plan_chain``: the levels below one view, each of one view through the
     surface named, planned in one run, are bit for bit the levels ``plan`` makes one after
-    another (their Camera blocks finished by ``finish_blocks`` either way), with each
+    another (from a root's row too) (their Camera blocks finished by ``finish_blocks`` either way), with each
     level's pairs, claim boxes and nodes; the run stops at the first level whose cull does
     not find exactly the surface named (another surface, or nothing), and plans nothing
     where the first does not."""
@@ -184,7 +184,8 @@ def test_a_chain_is_planned_in_one_run_as_far_as_each_level_finds_the_surface_na
     for asked, wanted in ((through, 3), (through + [through[1]], 3), (through[:2] + [through[1]], 2),
                           ([through[1]] + through[1:], 0)):
         fresh = _table()
-        chain = fresh.plan_chain(first, 1, asked, view, root_proj, 8, 0, [None] * len(asked))
+        chain = fresh.plan_chain(first.rows, 1, asked, view, root_proj, 8, 0, [None] * len(asked),
+                                 int(first.rows.node[-1]) + 1)
         assert len(chain) == wanted, (asked, len(chain))
         if chain:
             fresh.finish_blocks(chain, root_proj)
@@ -198,4 +199,4 @@ def test_a_chain_is_planned_in_one_run_as_far_as_each_level_finds_the_surface_na
     seen, _ = table.plan(other.rows, 2, view, root_proj, inv_root_proj, 10, 8, 0)
     assert len(seen) == 2, seen.surface
     for named in seen.surface.tolist():
-        assert _table().plan_chain(other, 1, [named, through[0]], view, root_proj, 8, 0, [None, None]) == []
+        assert _table().plan_chain(other.rows, 1, [named, through[0]], view, root_proj, 8, 0, [None, None], 10) == []

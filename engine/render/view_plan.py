@@ -790,15 +790,16 @@ class SurfaceTable:
         return [(self.float_rows[s:s + 1, OPS0].reshape(1, 4, 4), self.float_rows[s:s + 1, OPS1].reshape(1, 4, 5))
                 for s in range(len(self.states))]
 
-    def plan_chain(self, first: Candidates, depth: int, through: list[int], root: View, root_proj: np.ndarray,
-                   depth_cap: int, hide: int, ends: list[np.ndarray | None]) -> list[Candidates]:
-        """The levels below ``first`` (one candidate of level ``depth``) planned as a chain of
-        one view a level, each through the surface ``through`` names (row i: level
-        ``depth + 1 + i``'s, what the root's last render's levels had), with ``ends`` each
-        level's end images (``plan``'s): the plans ``plan`` makes one level after another
-        (their Camera blocks left to ``finish_blocks``), for as many levels as each cull
-        finds exactly the surface named (none where the first does not), and the last
-        where its one candidate is an end view.
+    def plan_chain(self, parents: LevelRows, depth: int, through: list[int], root: View, root_proj: np.ndarray,
+                   depth_cap: int, hide: int, ends: list[np.ndarray | None], first_index: int) -> list[Candidates]:
+        """The levels below ``parents`` (one view of level ``depth``: a root, or a level's one
+        candidate) planned as a chain of one view a level, each through the surface
+        ``through`` names (row i: level ``depth + 1 + i``'s, what the root's last render's
+        levels had), numbered from ``first_index``, with ``ends`` each level's end images
+        (``plan``'s): the plans ``plan`` makes one level after another (their Camera blocks
+        left to ``finish_blocks``), for as many levels as each cull finds exactly the
+        surface named (none where the first does not), and the last where its one
+        candidate is an end view.
 
         A level of one view from one parent costs its ~30 numpy calls, whatever it holds (a
         portal pair at depth 8: seven levels planned ahead a frame).  Here only what one
@@ -813,13 +814,13 @@ class SurfaceTable:
         rectangles, scissors and nodes at once.  Needs every surface at the resolution
         scale 1 (the level is the root's size), no fades and writeable rows."""
         count = len(through)
-        if count < 2 or len(first) != 1 or self.fading or self.one_scale != 1.0 or \
-                not first.rows.data.flags.writeable:
+        if count < 2 or len(parents.data) != 1 or self.fading or self.one_scale != 1.0 or \
+                not parents.data.flags.writeable:
             return []
         size = root.size
         root_rows = kept_root_rows(root_proj)
         data = np.empty((count + 1, LevelRows.WIDTH))  # the parent, then a row a level
-        data[0] = first.rows.data[0]
+        data[0] = parents.data[0]
         ints = data.view(np.int64)
         count, biases, grids = self._chain_ids(tuple(data[0, IDS_PART].tolist()), depth, tuple(through), depth_cap,
                                                ends, hide, root_rows, size)
@@ -873,7 +874,7 @@ class SurfaceTable:
         below = data[1:planned + 1]
         below[:, RECT] = chosen
         np.matmul(chosen, _TO_SCISSOR, out=ints[1:planned + 1, SCISSOR], casting="unsafe")
-        below[:, NODE] = node_numbers(int(data[0, NODE]) + 1, planned)
+        below[:, NODE] = node_numbers(first_index, planned)
         levels = []
         zeros = np.zeros(planned, np.int64)
         for i in range(planned):

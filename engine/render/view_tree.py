@@ -571,6 +571,15 @@ class ViewTree:
         settings, surfaces, root = walk.settings, walk.surfaces, walk.root
         walk.scale = self._level_scale(depth)
         ahead = walk.ahead.pop(depth, None) if walk.ahead else None
+        if ahead is None and len(walk.rows.data) == 1 and walk.whole_before.get(depth) and walk.exact \
+                and self.plan_ahead and self.plan_chains and walk.rows.data.flags.writeable \
+                and not surfaces.fading and self.renderer.stats.pixels_left() is None:
+            # One parent (a moving root's row), and its level a chain last render: planned as
+            # one from here, with the levels below it ahead (_plan_ahead).
+            chain = self._plan_chain(walk, depth - 1, walk.rows, first_index)
+            if chain:
+                self._plan_ahead(walk, depth - 1 + len(chain), chain[-1], chain)
+                ahead = walk.ahead.pop(depth, None)
         unviewed = None
         if ahead is not None and ahead[0] is walk.rows.data and ahead[1] == first_index and ahead[2] == walk.scale:
             (candidates, faded), unviewed = ahead[3], ahead[4]
@@ -591,7 +600,34 @@ class ViewTree:
                                                                     [s for _, s in dropped])
         return candidates
 
-    def _plan_ahead(self, walk: _Walk, depth: int, candidates: Candidates) -> None:
+    def _plan_chain(self, walk: _Walk, depth: int, parents: LevelRows, first_index: int) -> list[Candidates]:
+        """The levels below ``parents`` (one view of level ``depth``) that were a chain of one
+        view a level in the root's last render (``_Walk.singles``; below the first, each
+        grew), planned in one run through the surfaces they went through then
+        (``SurfaceTable.plan_chain``: as far as each level finds the same one), each kept for
+        ``_plan`` in ``walk.ahead`` with its unviewed pairs; their Camera blocks are left to
+        ``_plan_ahead``'s ``finish_blocks``.  At portal depth 8 with a swaying camera, seven
+        levels of ~30 numpy calls each became one run of about as many."""
+        surfaces, settings, root = walk.surfaces, walk.settings, walk.root
+        whole, singles = walk.whole_before, walk.singles_before
+        through, level = [], depth
+        while (level == depth or whole.get(level)) and singles.get(level + 1, -1) >= 0:
+            level += 1
+            through.append(singles[level])
+        if len(through) < 2:
+            return []
+        ends = [_ends_at(walk.ends, depth + 1 + i) for i in range(len(through))]
+        levels = surfaces.plan_chain(parents, depth, through, root, walk.root_proj, settings.depth_cap, root.hide,
+                                     ends, first_index)
+        for i, planned in enumerate(levels):
+            rows = parents if i == 0 else levels[i - 1].rows
+            walk.ahead[depth + 1 + i] = (rows.data, first_index + i, 1.0, (planned, 0),
+                                         surfaces.unviewed(rows, depth + 1 + i, walk.root_proj, root.size,
+                                                           settings.depth_cap, ends[i]))
+        return levels
+
+    def _plan_ahead(self, walk: _Walk, depth: int, candidates: Candidates,
+                    deferred: list[Candidates] | None = None) -> None:
         """The levels below ``depth`` planned now, back to back, as if every candidate of
         each became a view that grows (what the root's last render's levels did: ``_whole``), each from
         the rows of the one above: ``_plan`` takes one where its parents are those very rows
@@ -602,28 +638,21 @@ class ViewTree:
         level's parents see without a view there (``SurfaceTable.unviewed``, its fallbacks:
         a cull at the depth limit) are found with it, and the levels' Camera blocks, which
         no plan below reads, are worked out for all of them at once at the end
-        (``SurfaceTable.finish_blocks``: one run of its operations, not one a level)."""
+        (``SurfaceTable.finish_blocks``: one run of its operations, not one a level).
+        Levels of one view each last render are planned as a chain in one run
+        (``_plan_chain``); ``deferred``: such a chain's levels, planned already (``depth``
+        the last's): the levels below it planned on from there."""
         settings, surfaces, root = walk.settings, walk.surfaces, walk.root
         whole = walk.whole_before
-        deferred: list[Candidates] = []
-        if self.plan_chains and len(candidates) == 1 and (candidates.end is None or not candidates.end.any()):
-            # A chain of one view a level last render (a portal pair, facing mirrors): planned
-            # in one run through the surfaces it went through (SurfaceTable.plan_chain), as
-            # far as each level finds the same one; the loop below plans on from there.
-            through, singles, level = [], walk.singles_before, depth
-            while whole.get(level) and singles.get(level + 1, -1) >= 0 and self._level_scale(level + 1) == 1.0:
-                level += 1
-                through.append(singles[level])
-            ends = [_ends_at(walk.ends, depth + 1 + i) for i in range(len(through))]
-            for planned in surfaces.plan_chain(candidates, depth, through, root, walk.root_proj, settings.depth_cap,
-                                               root.hide, ends) if len(through) >= 2 else ():
-                depth += 1
-                rows = candidates.rows
-                walk.ahead[depth] = (rows.data, int(rows.node[-1]) + 1, 1.0, (planned, 0),
-                                     surfaces.unviewed(rows, depth, walk.root_proj, root.size, settings.depth_cap,
-                                                       ends[len(deferred)]))
-                deferred.append(planned)
-                candidates = planned
+        if deferred is None:
+            deferred = []
+            if self.plan_chains and len(candidates) == 1 and whole.get(depth) and \
+                    (candidates.end is None or not candidates.end.any()):
+                deferred = self._plan_chain(walk, depth, candidates.rows, int(candidates.rows.node[-1]) + 1)
+                if deferred:
+                    depth, candidates = depth + len(deferred), deferred[-1]
+        else:
+            deferred = list(deferred)
         while whole.get(depth) and (candidates.end is None or not candidates.end.any()):
             depth += 1
             rows, first_index, scale = candidates.rows, int(candidates.rows.node[-1]) + 1, self._level_scale(depth)
