@@ -283,12 +283,18 @@ def test_a_level_planned_from_the_same_rows_is_found_again_read_only(scene, monk
                                    Material(), Mirror(end_image=False))
         ents["box"] = world.spawn(Transform(position=(0.8, 0.5, 0.0)), MeshRef(box()), Material(color=(0.9, 0.2, 0.1)))
     computed = []
-    plan = view_plan.SurfaceTable._plan
+    plan, chain = view_plan.SurfaceTable._plan, view_plan.SurfaceTable.plan_chain
 
     def counting(self, *args, **kwargs):
         computed.append(args[1])  # the depth
         return plan(self, *args, **kwargs)
+
+    def counting_chain(self, *args, **kwargs):  # the levels of one view each, planned in one run
+        levels = chain(self, *args, **kwargs)
+        computed.extend(range(args[1] + 1, args[1] + 1 + len(levels)))
+        return levels
     monkeypatch.setattr(view_plan.SurfaceTable, "_plan", counting)
+    monkeypatch.setattr(view_plan.SurfaceTable, "plan_chain", counting_chain)
     runner = scene(build, (96, 64))
     # The planner's own keeping, on frames that draw the tree: a still frame would keep the
     # whole tree and plan nothing (ReflectionSystem.keep_still_views, tests/test_kept_views.py).

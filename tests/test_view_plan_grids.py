@@ -10,16 +10,20 @@ from pyglm import glm
 
 import engine.render.plan_rows as plan_rows
 import engine.render.view_plan as view_plan
+from components.limits import VIEW_MIRROR
+from components.visibility import DRAWN_EVERYWHERE, visibility_code
 from engine.core.reflection_math import reflection_matrix
 from engine.render.views import View
 from engine.resources import SurfaceState
+from engine.rules.visibility_rules import drawn_in
 
 
-def _mirror(entity: int, z: float, facing: float, x: float = 0.0, layers: int = 0xFFFF) -> SurfaceState:
+def _mirror(entity: int, z: float, facing: float, x: float = 0.0, layers: int = 0xFFFF,
+            drawn: int = DRAWN_EVERYWHERE) -> SurfaceState:
     plane = glm.vec4(0.0, 0.0, facing, -facing * z)
     corners = np.array([(x + dx, y, z, 1.0) for dx in (-1.0, 1.0) for y in (0.0, 2.0)])
     return SurfaceState(entity, "mirror", plane, corners, None, reflection_matrix(plane), plane, entity, 4,
-                        layers=layers)
+                        layers=layers, drawn=drawn)
 
 
 def _table() -> view_plan.SurfaceTable:
@@ -122,3 +126,77 @@ def test_a_kept_plans_choice_is_found_again_and_so_is_its_plan():
     assert again is planned
     fresh, _ = _table()._plan(chosen.rows, 2, view, root_proj, inv_root_proj, 10, 8, 0)
     assert np.array_equal(fresh.rows.data.view(np.int64), planned.rows.data.view(np.int64))
+
+
+def test_parents_through_one_surface_with_other_masks_each_get_their_own_bias():
+    """The cull's bias (``SurfaceTable._pair_bias``: which surfaces each parent may see) is
+    kept a parent at a time, by its exit row and view mask (``_bias_rows``): parents looking
+    out of the same mirror, one showing the layer a surface is drawn on and one not, each get
+    their own row, whichever was seen first, alone or with the other, in either order, as
+    the visibility rule says surface by surface (worked out here pair by pair in Python)."""
+    on_layer_2 = _mirror(5, 0.0, 1.0, x=2.1, drawn=visibility_code(0, 1 << 2))
+    states = [_mirror(3, 0.0, 1.0), _mirror(4, 6.0, -1.0), on_layer_2, _mirror(6, 6.0, -1.0, x=2.1)]
+    masks = {"shows_layer_2": visibility_code(VIEW_MIRROR, 1 | 1 << 2), "not": visibility_code(VIEW_MIRROR, 1)}
+    exit_row = 1  # both look out of mirror 4
+
+    def parents(*names: str) -> np.ndarray:
+        data = np.zeros((len(names), plan_rows.LevelRows.WIDTH))
+        data[:, plan_rows.ROW["exit_row"].start] = exit_row
+        data[:, plan_rows.ROW["view_mask"].start] = [masks[name] for name in names]
+        return data
+
+    def wanted(names: tuple[str, ...], fallback: bool) -> np.ndarray:
+        return np.array([[0.0 if (fallback or state.max_depth >= 1) and drawn_in(state.drawn, masks[name])
+                          and row != exit_row else np.inf for row, state in enumerate(states)] for name in names])
+
+    table = view_plan.SurfaceTable(states)
+    assert not np.array_equal(wanted(("shows_layer_2",), False), wanted(("not",), False))  # the rows differ
+    for names in (("shows_layer_2",), ("not", "shows_layer_2"), ("shows_layer_2", "not"), ("not",),
+                  ("not", "not", "shows_layer_2")):
+        for fallback in (False, True):
+            bias, any_seen = table._pair_bias(parents(*names), 1, 8, None, fallback)
+            assert np.array_equal(bias, wanted(names, fallback)), (names, fallback)
+            assert any_seen
+
+
+def test_a_chain_is_planned_in_one_run_as_far_as_each_level_finds_the_surface_named():
+    """``SurfaceTable.plan_chain``: the levels below one view, each of one view through the
+    surface named, planned in one run, are bit for bit the levels ``plan`` makes one after
+    another (from a root's row too) (their Camera blocks finished by ``finish_blocks`` either way), with each
+    level's pairs, claim boxes and nodes; the run stops at the first level whose cull does
+    not find exactly the surface named (another surface, or nothing), and plans nothing
+    where the first does not."""
+    table = _table()
+    view, root_proj, inv_root_proj, levels = _levels(table, (0.8, 1.0, 3.5), depth=1)
+    first = levels[0][1].select(np.array([1], np.int64))  # through the second pair's near mirror
+    one_at_a_time, parent = [], first
+    for depth in range(2, 6):
+        planned, _ = table.plan(parent.rows, depth, view, root_proj, inv_root_proj, int(parent.rows.node[-1]) + 1,
+                                8, 0, defer=True)
+        if planned is None:
+            break
+        assert len(planned) == 1
+        one_at_a_time.append(planned)
+        parent = planned
+    through = [int(candidates.surface[0]) for candidates in one_at_a_time]
+    assert len(through) == 3 and through[0] != through[1], through  # back and forth, then out of sight
+    table.finish_blocks(one_at_a_time, root_proj)
+    for asked, wanted in ((through, 3), (through + [through[1]], 3), (through[:2] + [through[1]], 2),
+                          ([through[1]] + through[1:], 0)):
+        fresh = _table()
+        chain = fresh.plan_chain(first.rows, 1, asked, view, root_proj, 8, 0, [None] * len(asked),
+                                 int(first.rows.node[-1]) + 1)
+        assert len(chain) == wanted, (asked, len(chain))
+        if chain:
+            fresh.finish_blocks(chain, root_proj)
+        for got, want in zip(chain, one_at_a_time, strict=False):
+            assert np.array_equal(got.rows.data.view(np.int64), want.rows.data.view(np.int64))
+            assert got.parent.tolist() == want.parent.tolist() and got.surface.tolist() == want.surface.tolist()
+            assert np.array_equal(got.box, want.box) and got.size == want.size and got.end is want.end is None
+    # Through the first pair's near mirror the next level sees both far mirrors: the surface
+    # named is one of them, but a level of two views is no chain.
+    other = levels[0][1].select(np.array([0], np.int64))
+    seen, _ = table.plan(other.rows, 2, view, root_proj, inv_root_proj, 10, 8, 0)
+    assert len(seen) == 2, seen.surface
+    for named in seen.surface.tolist():
+        assert _table().plan_chain(other.rows, 1, [named, through[0]], view, root_proj, 8, 0, [None, None], 10) == []

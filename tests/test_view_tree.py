@@ -180,6 +180,61 @@ def _planned_tree(runner) -> list[tuple]:
              node.view.eye.to_bytes()) for node in runner.engine.reflection_system.views[1:]]
 
 
+def _facing_pair(ents, kind, end_image):
+    """A facing pair of mirrors, or of portals each other's exit, and a ball between."""
+    def build(world):
+        world.spawn(DirectionalLight(direction=(0.2, -1.0, -0.5), intensity=2.0))
+        ents["camera"] = look_from(world, (0.3, 1.5, 2.0), target=(0.0, 1.5, -4.0), fov=50.0)
+        for z, turn in ((-4.0, None), (4.0, FACING_BACK)):
+            surface = Mirror(max_depth=6, end_image=end_image) if kind == "mirror" else \
+                Portal(size=(4.0, 3.0), max_depth=6, end_image=end_image)
+            ents.setdefault("pair", []).append(world.spawn(
+                Transform(position=(0, 1.5, z), rotation=turn or glm.quat()), MeshRef(quad(4, 3)),
+                Material(color=(0.1, 0.1, 0.1)), surface))
+        if kind == "portal":
+            front, back = ents["pair"]
+            world.get(front, Portal).partner = back
+            world.get(back, Portal).partner = front
+        world.spawn(Transform(position=(0.8, 1.2, 0.0)), MeshRef(sphere(0.3)), Material(color=(0.1, 0.8, 0.2)),
+                    Emissive(0.5))
+    return build
+
+
+@pytest.mark.parametrize(("kind", "end_image"), (("mirror", False), ("mirror", "auto"), ("portal", False)))
+def test_a_chain_planned_in_one_run_draws_the_tree_planned_level_by_level(scene, monkeypatch, kind, end_image):
+    """A facing pair (mirrors: claim boxes kept; portals: none) seen head on is a chain of
+    one view a level, which the levels planned ahead plan in one run from the surfaces of
+    the root's last render's levels (``SurfaceTable.plan_chain``).  While the camera moves,
+    the trees and the frames equal, frame by frame, those of a tree planning each level
+    after its parent's claims (``plan_ahead`` False), with the pair's end images or without
+    them (past its depth limit it shows its fallback)."""
+    from engine.render.view_plan import SurfaceTable
+
+    chained: list[int] = []  # levels planned a run
+    original = SurfaceTable.plan_chain
+    monkeypatch.setattr(SurfaceTable, "plan_chain", lambda *a, **k: chained.append(len(planned := original(
+        *a, **k))) or planned)
+    ents = {True: {}, False: {}}
+    runners = {chains: scene(_facing_pair(ents[chains], kind, end_image), (160, 120)) for chains in (True, False)}
+    for chains, runner in runners.items():
+        runner.engine.reflection_system.tree.plan_ahead = chains
+    runs = []
+    for frame in range(4):
+        trees, images = {}, {}
+        for chains, runner in runners.items():
+            transform = runner.world.get(ents[chains]["camera"], Transform)
+            transform.position = glm.vec3(0.3 + 0.02 * frame, 1.5, 2.0)  # a moving camera: nothing kept
+            chained.clear()
+            images[chains] = runner.frame()
+            if chains:
+                runs.append(list(chained))
+            trees[chains] = _planned_tree(runner)
+        assert len(trees[True]) >= 4, (frame, len(trees[True]))
+        assert trees[True] == trees[False], f"frame {frame}: the trees differ"
+        assert images[True].std() > 5.0 and np.array_equal(images[True], images[False]), f"frame {frame}"
+    assert runs[0] == [] and all(run and min(run) >= 2 for run in runs[1:]), runs  # (a first render: nothing before)
+
+
 @pytest.mark.parametrize(("end_image", "depth"), (("auto", 6), (False, 3)))
 def test_levels_planned_ahead_are_the_levels_planned_one_at_a_time(scene, monkeypatch, end_image, depth):
     """Exact visibility plans each level from its parent level's claim counts; where the

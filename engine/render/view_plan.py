@@ -42,8 +42,11 @@ from engine.render.plan_rows import (
     BLOCK,
     CAMERA_CLIP,
     CAMERA_VIEWPORT,
+    CLIP,
     EXIT_PLANE,
+    EYE_ROW,
     GRID_PARENT,
+    GRID_PART,
     GRID_WIDTH,
     ID_HIDE,
     ID_MASK,
@@ -51,16 +54,20 @@ from engine.render.plan_rows import (
     IDS_PART,
     MATRICES,
     NEG_EXIT_PLANE,
+    NODE,
     OPS0,
     OPS1,
     RECT,
     SCALE,
+    SCISSOR,
     SIGNS,
     SURFACE_WIDTH,
     X_COLUMNS,
     Candidates,
     LevelRows,
     cull_rows,
+    x0_rows,
+    x1_rows,
 )
 from engine.render.plan_scratch import (
     PLAN_WORK_KEPT,
@@ -182,6 +189,12 @@ class SurfaceTable:
         self.keep = visibility_code(_KINDS_BUT_DIRECT, self.layers)  # the mask bits a view through it keeps
         self._depths: dict[tuple[int, int], tuple[np.ndarray, np.ndarray, list[bool], bool]] = {}
         self._biases: dict[tuple, tuple[np.ndarray | None, np.ndarray]] = {}  # _pair_bias's
+        self._bias_rows_kept: dict[bytes, dict] = {}  # _bias_rows', a parent's each, by the surfaces allowed
+        # What plan_chain reads of each surface row as Python numbers: its views' exit row, the
+        # mask bits they keep, the kind bit they gain, whether it is a mirror.
+        self._chain_lists = (self.exit_rows.tolist(), self.keep.tolist(), self.kind_bit.tolist(),
+                             self.is_mirror.tolist())
+        self._chains: dict[tuple, tuple] = {}  # _chain_ids', by the chain and what else it reads
         self._plans: dict[tuple, tuple[np.ndarray | None, tuple[Candidates | None, int]]] = {}  # plan's, least
         # recently used first
         self._ends: dict[tuple[int, int], tuple[np.ndarray, np.ndarray, list[bool]]] = {}
@@ -194,6 +207,8 @@ class SurfaceTable:
         self._child_rows: dict[tuple, np.ndarray] = {}  # _child_row's
         self._cuts: dict[tuple, tuple[np.ndarray | None, np.ndarray, bool]] = {}  # _cut's
         self._cull_work: dict[int, CullWork] = {}  # the cull's scratch, by its count of parents
+        # The last cull's parents and its work, while no cull came after it (cull: a fallback cull takes it)
+        self._cull_geometry: tuple[np.ndarray, CullWork] | None = None
         self._plan_work: dict[int, PlanWork] = {}  # _plan's, by its count of views
         self._plan_buffers: dict[int, PlanBuffers] = {}  # their arrays, by capacity
         self._child_tables: dict[tuple, ChildTable] = {}  # _child_ids' for large levels
@@ -309,21 +324,50 @@ class SurfaceTable:
         key = (id_bytes, depth, depth_cap, id(ends), fallback)
         found = self._biases.get(key)
         if found is None or found[0] is not ends:
-            if fallback:
-                allowed = self.falls_back
-            else:
-                allowed = self._within(depth, depth_cap)[0] if ends is None else self._with_ends(depth, depth_cap,
-                                                                                                  ends)[0]
-            seen = allowed & drawn_in(self.drawn, ids[:, 1:2].astype(np.int64))  # the rule, a row a parent
-            exit_rows = ids[:, 0].astype(np.int64)
+            if len(self._biases) > 256:
+                self._biases.clear()
+            found = self._biases[key] = (ends, self._bias_rows(ids, depth, depth_cap, ends, fallback))
+        return found[1]
+
+    def _bias_rows(self, ids: np.ndarray, depth: int, depth_cap: int, ends: np.ndarray | None,
+                   fallback: bool) -> tuple[np.ndarray, bool]:
+        """``_pair_bias``'s (P, S) bias and whether any pair may be seen, for parents of
+        ``ids`` (exit row, view mask, winding) not seen together before: stacked from each
+        parent's own row, kept by its exit row and mask (a deep level's parents change from
+        frame to frame as a camera moves, each parent's own row seldom: at 16 mirrors about
+        three levels a frame found no bias kept for their parents together, each row of them
+        one kept), the rows not kept worked out together.  Kept by the surfaces allowed (the
+        depth's, with the end images' or not, or those that fall back), whatever array says
+        so: the end images' mask is made anew whenever the surfaces they show change."""
+        if fallback:
+            allowed = self.falls_back
+        else:
+            allowed = self._within(depth, depth_cap)[0] if ends is None else self._with_ends(depth, depth_cap, ends)[0]
+        rows = self._bias_rows_kept.get(allowed.tobytes())
+        if rows is None:
+            if len(self._bias_rows_kept) > 64:
+                self._bias_rows_kept.clear()
+            rows = self._bias_rows_kept[allowed.tobytes()] = {}
+        keys = [(exit_row, mask) for exit_row, mask, _ in ids.tolist()]
+        found = [rows.get(key) for key in keys]
+        if None in found:
+            missing = [at for at, row in enumerate(found) if row is None]
+            part = ids.take(missing, axis=0)
+            seen = allowed & drawn_in(self.drawn, part[:, 1:2].astype(np.int64))  # the rule, a row a parent
+            exit_rows = part[:, 0].astype(np.int64)
             looks_out = np.flatnonzero(exit_rows >= 0)
             seen[looks_out, exit_rows[looks_out]] = False
             bias = np.where(seen, 0.0, np.inf)
             bias.flags.writeable = False
-            if len(self._biases) > 256:
-                self._biases.clear()
-            found = self._biases[key] = (ends, (bias, bool(seen.any())))
-        return found[1]
+            if len(rows) > 1024:
+                rows.clear()
+            for at, row, any_seen in zip(missing, bias, seen.any(axis=1).tolist(), strict=True):
+                found[at] = rows[keys[at]] = (row, any_seen)
+            if len(missing) == len(found):
+                return bias, any(any_seen for _, any_seen in found)
+        bias = np.array([row for row, _ in found])
+        bias.flags.writeable = False
+        return bias, any(any_seen for _, any_seen in found)
 
     def _child_ids(self, data: np.ndarray, hide: int, root_rows: RootRows, size: tuple[int, int],
                    p: np.ndarray, s: np.ndarray) -> np.ndarray:
@@ -450,26 +494,38 @@ class SurfaceTable:
         # row's values of every parent and surface are one contiguous block below), times
         # each corner's (4, S) gives (corners, 14, P, S), so the sides are divided by w, and
         # the minima over the corners; the planes as one more corner give the facing values
-        # (the eye's row times them).
-        work = self._cull_work.get(count) or kept_work(self._cull_work, count, self._new_cull_work)
-        np.matmul(cull_rows(data), self.corner_columns, out=work.product)
-        np.maximum(work.w, work.epsilon, out=work.w_safe)  # w <= 0: see straddles
-        np.divide(work.sides, work.w_safe, out=work.sides)
-        least = _MIN(work.corners, axis=0, out=work.least)                                  # 14 x P x S
-        # x0, y0, -x1, -y1 in pixels, rounded outwards with a pixel's margin; a pair with a
-        # corner behind the eye is conservative (the parent's whole rectangle).
+        # (the eye's row times them).  None of it reads the depth or which surfaces are
+        # allowed: a fallback cull (``unviewed``) of the parents the last cull tested, with
+        # no cull between (the level at the depth limits: its plan's cull, then its
+        # fallbacks'), takes the work it left, written over by nothing since, and only
+        # tests its own bias.
+        cull_work = self._cull_geometry
+        self._cull_geometry = None
+        if fallback and cull_work is not None and cull_work[0] is data:
+            work = cull_work[1]
+        else:
+            work = self._cull_work.get(count) or kept_work(self._cull_work, count, self._new_cull_work)
+            np.matmul(cull_rows(data), self.corner_columns, out=work.product)
+            np.maximum(work.w, work.epsilon, out=work.w_safe)  # w <= 0: see straddles
+            np.divide(work.sides, work.w_safe, out=work.sides)
+            least = _MIN(work.corners, axis=0, out=work.least)                                  # 14 x P x S
+            # x0, y0, -x1, -y1 in pixels, rounded outwards with a pixel's margin; a pair with a
+            # corner behind the eye is conservative (the parent's whole rectangle).
+            rects = work.rects
+            if work.least_w.min() <= 1e-6:
+                np.copyto(rects, -np.inf, where=least[4] <= 1e-6)
+            if self.bounds_claims and not fallback:  # (for the plan's candidates)
+                self._boxes = rects.copy()  # unrounded: what claim_cull bounds a claim's pixel centres by
+            np.floor(rects, out=rects)  # (the pixel's margin is in the rows: each side less w)
+            np.maximum(rects, data.T[RECT, :, None], out=rects)  # inside the parent's
+            np.add(work.x0y0, work.x1y1, out=work.sizes)
+            if not fallback:
+                self._cull_geometry = (data, work)
         rects = work.rects
-        if work.least_w.min() <= 1e-6:
-            np.copyto(rects, -np.inf, where=least[4] <= 1e-6)
-        if self.bounds_claims and not fallback:  # (for the plan's candidates)
-            self._boxes = rects.copy()  # unrounded: what claim_cull bounds a claim's pixel centres by
-        np.floor(rects, out=rects)  # (the pixel's margin is in the rows: each side less w)
-        np.maximum(rects, data.T[RECT, :, None], out=rects)  # inside the parent's
         # Seen: facing and allowed, not culled (every corner outside one side of the frustum,
         # or behind the clip plane; on a side counts as outside) and a rectangle with pixels
         # (x1 > x0 and y1 > y0): one maximum over the rows 4-13, written over, each < 0 to keep.
         np.subtract(neg_bias, work.facing, out=work.least_w)
-        np.add(work.x0y0, work.x1y1, out=work.sizes)
         np.less(_MAX(work.tests, axis=0, out=work.worst), 0.0, out=work.seen)
         if count == 1:  # (a take costs a third of a fancy index's two arrays)
             s = work.seen[0].nonzero()[0]
@@ -692,6 +748,146 @@ class SurfaceTable:
             k = len(candidates)
             candidates.rows.data[:, BLOCK] = w.data[at:at + k, BLOCK]
             at += k
+
+    def _chain_ids(self, ids: tuple[float, float, float], depth: int, through: tuple[int, ...], depth_cap: int,
+                   ends: list[np.ndarray | None], hide: int, root_rows: RootRows,
+                   size: tuple[int, int]) -> tuple[int, np.ndarray, np.ndarray]:
+        """What ``plan_chain`` reads of a chain that is not a matter of the camera: how many of
+        its levels may see anything (the cull's early outs), their parents' bias rows
+        (``_pair_bias``'s) and their rows' camera-free part (``_child_ids``'), from the first
+        parent's ``ids`` (exit row, view mask, winding) down through the surfaces ``through``.
+        Kept by all of that (``ends`` by identity): a chain goes through the same surfaces
+        frame after frame."""
+        key = (ids, depth, through, depth_cap, tuple(map(id, ends)), hide, root_rows.key, size)
+        found = self._chains.get(key)
+        if found is not None and all(a is b for a, b in zip(found[0], ends, strict=True)):
+            return found[1]
+        exit_row, mask, mirrored = ids
+        exit_rows, keep, kind_bit, is_mirror = self._chain_lists
+        grids, biases = [], []
+        for i, s in enumerate(through):
+            level = depth + 1 + i
+            if ends[i] is None and not self._within(level, depth_cap)[3]:
+                break  # nothing may be seen this deep
+            bias, any_seen = self._bias_rows(np.array([[exit_row, mask, mirrored]]), level, depth_cap, ends[i], False)
+            if not any_seen:
+                break  # the cull sees nothing here
+            biases.append(bias[0])
+            grids.append(self._child_row(exit_row, mask, mirrored, hide, root_rows, size)[s])
+            exit_row, mask, mirrored = (float(exit_rows[s]), float((int(mask) & keep[s]) | kind_bit[s]),
+                                        float(mirrored != is_mirror[s]))
+        result = (len(biases), np.array(biases), np.array(grids))
+        for array_ in result[1:]:
+            array_.flags.writeable = False
+        if len(self._chains) > 64:
+            self._chains.clear()
+        self._chains[key] = (tuple(ends), result)
+        return result
+
+    @functools.cached_property
+    def _chain_ops(self) -> list[tuple[np.ndarray, np.ndarray]]:
+        """Each surface row's two product operands as ``_plan``'s scratch of one view holds
+        them (views of its ``float_rows`` row: inv(carry), then carry^T | carry^T e)."""
+        return [(self.float_rows[s:s + 1, OPS0].reshape(1, 4, 4), self.float_rows[s:s + 1, OPS1].reshape(1, 4, 5))
+                for s in range(len(self.states))]
+
+    def plan_chain(self, parents: LevelRows, depth: int, through: list[int], root: View, root_proj: np.ndarray,
+                   depth_cap: int, hide: int, ends: list[np.ndarray | None], first_index: int) -> list[Candidates]:
+        """The levels below ``parents`` (one view of level ``depth``: a root, or a level's one
+        candidate) planned as a chain of one view a level, each through the surface
+        ``through`` names (row i: level ``depth + 1 + i``'s, what the root's last render's
+        levels had), numbered from ``first_index``, with ``ends`` each level's end images
+        (``plan``'s): the plans ``plan`` makes one level after another (their Camera blocks
+        left to ``finish_blocks``), for as many levels as each cull finds exactly the
+        surface named (none where the first does not), and the last where its one
+        candidate is an end view.
+
+        A level of one view from one parent costs its ~30 numpy calls, whatever it holds (a
+        portal pair at depth 8: seven levels planned ahead a frame).  Here only what one
+        level's products need of the one above is done level by level: the two products
+        carrying the parent's ``x`` through the surface (``_plan``'s, in its scratch of one
+        view: the same operands, the same numbers), the ids its children's rows and bias
+        are kept by (Python, from the kept rows), then every level's cull in one run over
+        the chain's parents, as a level of that many parents (each parent row's values are
+        its own: the products are row by row, the rest elementwise), its parents'
+        rectangles, which each level's cull clips by and which come out of the cull above,
+        being the running maximum down the chain of the rectangles it finds, and the rows'
+        rectangles, scissors and nodes at once.  Needs every surface at the resolution
+        scale 1 (the level is the root's size), no fades and writeable rows."""
+        count = len(through)
+        if count < 2 or len(parents.data) != 1 or self.fading or self.one_scale != 1.0 or \
+                not parents.data.flags.writeable:
+            return []
+        size = root.size
+        root_rows = kept_root_rows(root_proj)
+        data = np.empty((count + 1, LevelRows.WIDTH))  # the parent, then a row a level
+        data[0] = parents.data[0]
+        ints = data.view(np.int64)
+        count, biases, grids = self._chain_ids(tuple(data[0, IDS_PART].tolist()), depth, tuple(through), depth_cap,
+                                               ends, hide, root_rows, size)
+        if count < 2:
+            return []
+        # Each level's x from its parent's: _plan's two products, operands laid out as its
+        # scratch of one view lays them (a row's x, a surface's row), from row to row.
+        x0, x1 = x0_rows(data), x1_rows(data)
+        x1_in = x1[:, :, 0:4]
+        ops = self._chain_ops
+        for i, s in enumerate(through[:count]):
+            ops0, ops1 = ops[s]
+            np.matmul(x0[i:i + 1], ops0, out=x0[i + 1:i + 2])
+            np.matmul(x1_in[i:i + 1], ops1, out=x1[i + 1:i + 2])
+        rows_s = np.array(through[:count], np.int64)
+        below = data[1:count + 1]
+        np.copyto(x0[1:count + 1, EYE_ROW], x1[1:count + 1, 7, 0:4])  # (the products do not read them)
+        below[:, CLIP] = self.float_rows[rows_s][:, NEG_EXIT_PLANE]
+        ints[1:count + 1, GRID_PART] = grids
+        # Every level's cull at once (``cull``'s operations over the chain's parents).
+        parents = data[:count]
+        self._cull_geometry = None
+        work = self._cull_work.get(count) or kept_work(self._cull_work, count, self._new_cull_work)
+        np.matmul(cull_rows(parents), self.corner_columns, out=work.product)
+        np.maximum(work.w, work.epsilon, out=work.w_safe)
+        np.divide(work.sides, work.w_safe, out=work.sides)
+        least = _MIN(work.corners, axis=0, out=work.least)
+        rects = work.rects
+        if work.least_w.min() <= 1e-6:
+            np.copyto(rects, -np.inf, where=least[4] <= 1e-6)
+        boxes = rects.copy() if self.bounds_claims else None
+        np.floor(rects, out=rects)
+        steps = np.arange(count)
+        # Each parent's rectangle: the first's, then the running maximum of the rectangles the
+        # levels above found for the surfaces named (each level's is its own, clipped by its parent's).
+        clipped = np.concatenate([parents[0:1, RECT].T, rects[:, steps[:-1], rows_s[:-1]]], axis=1)
+        np.maximum.accumulate(clipped, axis=1, out=clipped)
+        np.maximum(rects, clipped[:, :, None], out=rects)
+        np.subtract(biases, work.facing, out=work.least_w)
+        np.add(work.x0y0, work.x1y1, out=work.sizes)
+        seen = np.less(_MAX(work.tests, axis=0, out=work.worst), 0.0, out=work.seen)
+        planned = 0
+        for hit, many in zip(seen[steps, rows_s].tolist(), seen.sum(axis=1).tolist(), strict=True):
+            if not hit or many != 1:
+                break
+            planned += 1
+        if not planned:
+            return []
+        rows_s, steps = rows_s[:planned], steps[:planned]
+        chosen = rects[:, steps, rows_s].T
+        below = data[1:planned + 1]
+        below[:, RECT] = chosen
+        np.matmul(chosen, _TO_SCISSOR, out=ints[1:planned + 1, SCISSOR], casting="unsafe")
+        below[:, NODE] = node_numbers(first_index, planned)
+        levels = []
+        zeros = np.zeros(planned, np.int64)
+        for i in range(planned):
+            end = None if ends[i] is None else self._within(depth + 1 + i, depth_cap)[1].take(rows_s[i:i + 1])
+            candidates = Candidates(LevelRows(data[i + 1:i + 2]), size, end)
+            candidates.__dict__.update(parent=zeros[i:i + 1], surface=rows_s[i:i + 1])
+            if boxes is not None:
+                candidates.box = boxes[:, i, rows_s[i]][None, :]
+            levels.append(candidates)
+            if end is not None and end.any():
+                break  # (the levels below an end view are not planned ahead)
+        return levels
 
 
 def level_rects(rects: np.ndarray, screen: tuple[int, int], level: tuple[int, int]) -> np.ndarray:

@@ -313,6 +313,10 @@ class _Walk:
     ahead: dict[int, tuple] = field(default_factory=dict)  # levels planned ahead (ViewTree._plan_ahead), by depth
     whole: dict[int, bool] = field(default_factory=dict)   # the levels whose candidates all grew (ViewTree._whole)
     whole_before: dict[int, bool] = field(default_factory=dict)  # the same root's last render's
+    # Each level's one candidate's surface row (-1: none, or more than one), and the same root's
+    # last render's (ViewTree._plan_ahead: a chain planned in one run)
+    singles: dict[int, int] = field(default_factory=dict)
+    singles_before: dict[int, int] = field(default_factory=dict)
 
     def triangles(self) -> int:
         """The triangles a scene pass submits, counted at the first level that asks (a level
@@ -356,6 +360,10 @@ class ViewTree:
         # Per root (as _visibility), per level, whether its last render's level made every
         # candidate a view that grew (its rows the parents of the next level).
         self._whole: dict[tuple[str, int], dict[int, bool]] = {}
+        self._singles: dict[tuple[str, int], dict[int, int]] = {}  # per root as _whole: _Walk.singles
+        # Plan a chain of one view a level ahead in one run (SurfaceTable.plan_chain); False:
+        # level by level (the second path the tests compare against).
+        self.plan_chains = True
         # With ``remember`` (the main view's tree), what the last render left (``KeptTree``),
         # for a frame whose views show nothing new (``keep``); None after any other render.
         self.remember = False
@@ -568,9 +576,12 @@ class ViewTree:
                      None if ends is None else [[-1] * len(surfaces.states)])
         key = (root.name, root.skip)
         walk.whole_before = self._whole.get(key) or walk.whole_before
+        walk.singles_before = self._singles.get(key) or walk.singles_before
         if len(self._whole) > 64:
             self._whole.clear()
+            self._singles.clear()
         self._whole[key] = walk.whole
+        self._singles[key] = walk.singles
         return walk
 
     def _plan(self, walk: _Walk, first_index: int) -> Candidates | None:
@@ -580,6 +591,15 @@ class ViewTree:
         settings, surfaces, root = walk.settings, walk.surfaces, walk.root
         walk.scale = self._level_scale(depth)
         ahead = walk.ahead.pop(depth, None) if walk.ahead else None
+        if ahead is None and len(walk.rows.data) == 1 and walk.whole_before.get(depth) and walk.exact \
+                and self.plan_ahead and self.plan_chains and walk.rows.data.flags.writeable \
+                and not surfaces.fading and self.renderer.stats.pixels_left() is None:
+            # One parent (a moving root's row), and its level a chain last render: planned as
+            # one from here, with the levels below it ahead (_plan_ahead).
+            chain = self._plan_chain(walk, depth - 1, walk.rows, first_index)
+            if chain:
+                self._plan_ahead(walk, depth - 1 + len(chain), chain[-1], chain)
+                ahead = walk.ahead.pop(depth, None)
         unviewed = None
         if ahead is not None and ahead[0] is walk.rows.data and ahead[1] == first_index and ahead[2] == walk.scale:
             (candidates, faded), unviewed = ahead[3], ahead[4]
@@ -593,13 +613,41 @@ class ViewTree:
         self._unviewed(walk.fallbacks, surfaces, walk.rows, walk.nodes, walk.level, walk.root_proj, root,
                        settings.depth_cap, walk.ends, unviewed)
         walk.result.faded += faded
+        walk.singles[depth] = int(candidates.surface[0]) if candidates is not None and len(candidates) == 1 else -1
         candidates, walk.end_seers, dropped = self._end_seers(candidates, walk.seers)
         if dropped:  # end candidates with nothing to repeat: their fallback, never the bare surface
             _fallbacks_at(walk.fallbacks, walk.level, surfaces).add(walk.nodes, [p for p, _ in dropped],
                                                                     [s for _, s in dropped])
         return candidates
 
-    def _plan_ahead(self, walk: _Walk, depth: int, candidates: Candidates) -> None:
+    def _plan_chain(self, walk: _Walk, depth: int, parents: LevelRows, first_index: int) -> list[Candidates]:
+        """The levels below ``parents`` (one view of level ``depth``) that were a chain of one
+        view a level in the root's last render (``_Walk.singles``; below the first, each
+        grew), planned in one run through the surfaces they went through then
+        (``SurfaceTable.plan_chain``: as far as each level finds the same one), each kept for
+        ``_plan`` in ``walk.ahead`` with its unviewed pairs; their Camera blocks are left to
+        ``_plan_ahead``'s ``finish_blocks``.  At portal depth 8 with a swaying camera, seven
+        levels of ~30 numpy calls each became one run of about as many."""
+        surfaces, settings, root = walk.surfaces, walk.settings, walk.root
+        whole, singles = walk.whole_before, walk.singles_before
+        through, level = [], depth
+        while (level == depth or whole.get(level)) and singles.get(level + 1, -1) >= 0:
+            level += 1
+            through.append(singles[level])
+        if len(through) < 2:
+            return []
+        ends = [_ends_at(walk.ends, depth + 1 + i) for i in range(len(through))]
+        levels = surfaces.plan_chain(parents, depth, through, root, walk.root_proj, settings.depth_cap, root.hide,
+                                     ends, first_index)
+        for i, planned in enumerate(levels):
+            rows = parents if i == 0 else levels[i - 1].rows
+            walk.ahead[depth + 1 + i] = (rows.data, first_index + i, 1.0, (planned, 0),
+                                         surfaces.unviewed(rows, depth + 1 + i, walk.root_proj, root.size,
+                                                           settings.depth_cap, ends[i]))
+        return levels
+
+    def _plan_ahead(self, walk: _Walk, depth: int, candidates: Candidates,
+                    deferred: list[Candidates] | None = None) -> None:
         """The levels below ``depth`` planned now, back to back, as if every candidate of
         each became a view that grows (what the root's last render's levels did: ``_whole``), each from
         the rows of the one above: ``_plan`` takes one where its parents are those very rows
@@ -611,10 +659,21 @@ class ViewTree:
         a cull at the depth limit) are found with it, and the levels' Camera blocks, which
         no plan below reads, are worked out for all of them at once at the end
         (``SurfaceTable.finish_blocks``: one run of its operations, not one a level).  A
-        swaying portal pair at depth 8, 32x18: about 10% off the frame."""
+        swaying portal pair at depth 8, 32x18: about 10% off the frame.  Levels of one view
+        each last render are planned as a chain in one run (``_plan_chain``); ``deferred``:
+        such a chain's levels, planned already (``depth`` the last's): the levels below it
+        planned on from there."""
         settings, surfaces, root = walk.settings, walk.surfaces, walk.root
         whole = walk.whole_before
-        deferred: list[Candidates] = []
+        if deferred is None:
+            deferred = []
+            if self.plan_chains and len(candidates) == 1 and whole.get(depth) and \
+                    (candidates.end is None or not candidates.end.any()):
+                deferred = self._plan_chain(walk, depth, candidates.rows, int(candidates.rows.node[-1]) + 1)
+                if deferred:
+                    depth, candidates = depth + len(deferred), deferred[-1]
+        else:
+            deferred = list(deferred)
         while whole.get(depth) and (candidates.end is None or not candidates.end.any()):
             depth += 1
             rows, first_index, scale = candidates.rows, int(candidates.rows.node[-1]) + 1, self._level_scale(depth)
@@ -633,6 +692,40 @@ class ViewTree:
                 deferred.append(candidates)
         if deferred:
             surfaces.finish_blocks(deferred, walk.root_proj)
+            self._ahead_columns(surfaces, deferred, root.hide)
+
+    @staticmethod
+    def _ahead_columns(surfaces: SurfaceTable, levels: list[Candidates], hide: int) -> None:
+        """What ``_level_nodes`` and ``_claim`` make of each level planned ahead (their rows
+        final once their blocks are: nothing writes them after), made for all of them at
+        once and kept with each (``Candidates.derived``, as for a kept plan's): the columns
+        read as Python numbers in one conversion each for every level (a chain at portal
+        depth 8: seven levels of one view), not each level's own few."""
+        rows = np.concatenate([candidates.rows.data for candidates in levels])
+        ints = rows.view(np.int64)
+        blocks = rows[:, BLOCK].tobytes()
+        step = CAMERA_BLOCK_BYTES
+        columns = rows.take(_NODE_COLUMNS, axis=1).astype(np.int64).tolist()
+        numbers = ints.take(_INT_COLUMNS, axis=1).tolist()
+        fades = rows[:, ROW["fade"].start].tolist()
+        states, entities = surfaces.states, surfaces.entity_list
+        at = 0
+        for candidates in levels:
+            size = candidates.size
+            views, nodes, claims = [], [], ([], [], [], [])
+            for i in range(at, at + len(candidates)):
+                x0, y0, x1, y1, mirrored, node = columns[i]  # x1, y1: negated (LEVEL_ROW)
+                p, s, *scissor = numbers[i]
+                state = states[s]
+                views.append(PlannedView(blocks[i * step:(i + 1) * step], size, state.kind, state.entity,
+                                         state.exit_plane, mirrored == 1, tuple(scissor), node, state.exit_entity,
+                                         hide))
+                nodes.append((node, (x0, y0, -x1 - x0, -y1 - y0), state, p, fades[i]))
+                for column, value in zip(claims, (p, entities[s], node, scissor), strict=True):
+                    column.append(value)
+            candidates.derived[("nodes", hide)] = (views, nodes)
+            candidates.derived["claims"] = claims
+            at += len(candidates)
 
     def _choose(self, walk: _Walk, levels: LevelStack, candidates: Candidates) -> _Level | None:
         """Steps 2 and 3 for a planned level: its candidates' claims (exact: drawn and read
@@ -1026,7 +1119,7 @@ class ViewTree:
         nothing reads their rectangles (no claim, no reset)."""
         candidates, parents = step.candidates, step.parents
         kept = not candidates.rows.data.flags.writeable
-        columns = candidates.derived.get("claims") if kept else None
+        columns = candidates.derived.get("claims")  # a kept plan's, or one planned ahead (_ahead_columns)
         if columns is None:  # each candidate's parent row, surface entity and node, and its scissor
             entities = surfaces.entity_list
             columns = (candidates.parent.tolist(), [entities[s] for s in candidates.surface.tolist()],
@@ -1140,8 +1233,8 @@ class ViewTree:
         camera's, a probe face's) keep their views (a View is not changed after it is made)
         and what their nodes are made of, so the frames that find the plan again make only
         the nodes."""
-        kept = None if chosen.rows.data.flags.writeable else chosen.derived.get(("nodes", hide))
-        if kept is not None:  # a kept plan's: its views, and what its nodes are made of
+        kept = chosen.derived.get(("nodes", hide))
+        if kept is not None:  # a kept plan's, or one planned ahead: its views, and what its nodes are made of
             views, rows = kept
             return views, [ReflectionView(node, level, view, rect, state, parents[p], fade)
                            for view, (node, rect, state, p, fade) in zip(views, rows, strict=True)]
@@ -1190,6 +1283,8 @@ class ViewTree:
 
 # The LevelRows columns a level's nodes read (_level_nodes), as whole numbers: the rectangle, mirrored, node.
 _NODE_COLUMNS = np.array([*range(ROW["rect"].start, ROW["rect"].stop), ROW["mirrored"].start, ROW["node"].start])
+# Its int64 columns (_ahead_columns): the parent row, the surface row, the scissor.
+_INT_COLUMNS = np.array([ROW["parent"].start, ROW["surface"].start, *range(ROW["scissor"].start, ROW["scissor"].stop)])
 
 
 def _fallbacks_at(fallbacks: dict[int, Fallbacks], level: int, surfaces: SurfaceTable) -> Fallbacks:
