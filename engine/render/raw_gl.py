@@ -46,6 +46,13 @@ its colour attachment 0 is then re-pointed at the face with ``glFramebufferTextu
 moderngl still binds, clears and sets the viewport of it as its own; the copy's wait for
 each face's rasterisation (llvmpipe) is gone with the copy.
 
+Clearing integer colour attachments (``RawGL.clear_level``): moderngl's ``Framebuffer.clear``
+is one ``glClear`` with a float clear colour, and GL 4.1 (4.2.3) leaves what ``glClear`` writes
+into an integer colour buffer undefined (llvmpipe writes the bits of 0.0, a GPU driver need
+not): a level's id and node images are cleared with ``glClearBufferuiv``, its colour and
+depth with ``glClearBufferfv``, after moderngl bound the framebuffer (its draw buffers,
+colour and depth masks and scissor, all of which the clear obeys; it changes no state).
+
 ``glFlush``.  moderngl has ``finish`` (wait for everything) but no flush (start
 the GPU on what is queued, without waiting).  On llvmpipe that difference is frame time:
 draws are binned on the calling thread and rasterised only at a flush, a framebuffer
@@ -122,6 +129,7 @@ _SIGNATURES = {
     "glCheckFramebufferStatus": (_u, _u),
     "glDrawBuffers": (None, _i, ctypes.POINTER(_u)),
     "glClearBufferfv": (None, _u, _i, ctypes.POINTER(ctypes.c_float)),
+    "glClearBufferuiv": (None, _u, _i, ctypes.POINTER(_u)),
     "glViewport": (None, _i, _i, _i, _i),
     "glGetError": (_u,),
     "glDisable": (None, _u),
@@ -151,6 +159,31 @@ class MissingEntryPoints(RuntimeError):
     not broken)."""
 
 
+def clear_images(ctx: moderngl.Context, framebuffer: moderngl.Framebuffer) -> None:
+    """Clear the bound ``framebuffer`` to colour 0, integer ids 0 and depth far, each
+    attachment with the clear call of its kind (glClearBufferfv for float colour and depth,
+    glClearBufferuiv for unsigned-integer images: the module's docstring).  The framebuffer
+    must be bound (``use``): the clear obeys its draw buffers, masks and scissor, and changes
+    no state.  Where the loader does not give glClearBuffer*, moderngl's clear (glClear)."""
+    calls = getattr(ctx, "_speculum_clear_calls", None)
+    if calls is None:
+        calls = ctx._speculum_clear_calls = (
+            _load(ctx, "glClearBufferfv", ctypes.CFUNCTYPE(*_SIGNATURES["glClearBufferfv"])),
+            _load(ctx, "glClearBufferuiv", ctypes.CFUNCTYPE(*_SIGNATURES["glClearBufferuiv"])),
+            (ctypes.c_float * 4)(), (_u * 4)(), (ctypes.c_float * 1)(1.0))
+    clear_float, clear_uint, zero_floats, zero_uints, far = calls
+    if clear_float is None or clear_uint is None:
+        framebuffer.clear(depth=1.0)
+        return
+    for index, texture in enumerate(framebuffer.color_attachments):
+        if texture.dtype[0] == "u":
+            clear_uint(GL_COLOR, index, zero_uints)
+        else:
+            clear_float(GL_COLOR, index, zero_floats)
+    if framebuffer.depth_attachment is not None:
+        clear_float(GL_DEPTH, 0, far)
+
+
 def make_current(ctx: moderngl.Context) -> None:
     """Make ``ctx`` the calling thread's current context."""
     ctx.__enter__()
@@ -166,6 +199,10 @@ class RawGL:
         self._attach = {name: _load(ctx, name, ctypes.CFUNCTYPE(*_SIGNATURES[name]))
                         for name in ("glBindFramebuffer", "glFramebufferTexture2D", "glCheckFramebufferStatus",
                                      "glGetError")}
+
+    def clear_level(self, framebuffer: moderngl.Framebuffer) -> None:
+        """``clear_images`` on this context (the scene pass's clear of a level)."""
+        clear_images(self.ctx, framebuffer)
 
     @property
     def can_attach_cube_faces(self) -> bool:

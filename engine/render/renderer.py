@@ -355,7 +355,7 @@ class Renderer(Gpu):
         if self.text_pass is not None:
             self.text_pass.release()
             self.text_pass = None
-        for obj in (self.sky, self.cameras_ubo, self.lights_ubo):
+        for obj in (self.sky, self.blank_color, self.blank_ids, self.cameras_ubo, self.lights_ubo):
             obj.release()
         self.shaders.release()
 

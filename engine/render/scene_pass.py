@@ -433,8 +433,11 @@ class ScenePass:
         values = self._written.get(glo)
         if values is None:
             values = self._written[glo] = [None] * len(_PER_DRAW_UNIFORMS)
+        # A batch with no albedo map binds the blank one: the program's sampler is there all
+        # the same (``Gpu.blank_color``).
+        albedo = batch.texture if batch.texture is not None else self.renderer.blank_color
         textures = tuple((unit, texture) for unit, texture in (
-            (ALBEDO_UNIT, batch.texture), (NORMAL_UNIT, batch.normal_map), (EMISSIVE_MAP_UNIT, batch.emissive_map),
+            (ALBEDO_UNIT, albedo), (NORMAL_UNIT, batch.normal_map), (EMISSIVE_MAP_UNIT, batch.emissive_map),
             (METALLIC_ROUGHNESS_UNIT, batch.metallic_roughness_map)) if texture is not None)
         own = None
         if not batch.probe and not batch.probe_blend and not batch.rest_probe:
@@ -496,9 +499,10 @@ class ScenePass:
         if options.clear:
             # Every image: colour and alpha 0, ids 0, the node image 0 (a root is view 0 of
             # its tree), depth far.  The views then write colour and ids, never the node image.
+            # Each image with the clear of its kind: glClear leaves integer images undefined.
             targets.framebuffer.use()
             apply_pass_state(self.ctx, _SCENE, viewport)
-            targets.framebuffer.clear(depth=1.0)
+            renderer.raw_gl.clear_level(targets.framebuffer)
         # Per-view draws start with the first view's scissor (set once, not reset then set).
         self._begin(views, targets, options, _BATCHED_SCENE if options.batched else _SCENE, run)
         if options.batched:

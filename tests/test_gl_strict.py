@@ -1,0 +1,209 @@
+"""What llvmpipe forgives and a GPU driver may not, checked on real frames of the sample
+level, the README examples, the games and the benchmark scenes (mirrors, portals, shadows,
+virtual lights, probes, post-processing, a resize).
+
+1. **Every draw is legal GL 4.1** (``tests/gl_strict.py``, wrapping ``VertexArray.render`` and
+   ``Framebuffer.clear`` for the test only): each active sampler finds a complete texture of
+   its own type on its unit (mip levels, integer formats filtered NEAREST, shadow samplers on
+   depth textures with comparison on and the reverse), no two sampler types share a unit, no
+   sampled image is attached to the framebuffer drawn into (a rendering feedback loop), and
+   no integer image is cleared with glClear.  Broken on purpose: with the scene pass binding
+   no blank albedo map for batches without one, the check names the float sampler finding
+   the node image another pass left on unit 0; with the fallback composite binding no blank
+   id images, it names the feedback loop on the parent's seen image; with the level clear
+   back to ``Framebuffer.clear``, the glClear of the id images.
+2. **No texel is read before it is written**: every texture the engine makes without data
+   is made full of noise instead (a test-only hook around moderngl's texture constructors,
+   where llvmpipe would zero-fill; a GPU hands back whatever memory held), and the frames,
+   colour and ids, must be those of a run without it, bit for bit.  Broken on purpose:
+   with the level clear skipped for the node image, the frames differ.
+"""
+from __future__ import annotations
+
+import contextlib
+from collections.abc import Callable, Iterator
+
+import moderngl
+import numpy as np
+import pytest
+
+from engine.core.frame_io import Output
+from engine.render.targets import CaptureTarget
+from shell.app import Engine
+from tests import golden
+from tests.gl_strict import strict_draws
+from tests.golden_scenes import cases
+
+DT = 1.0 / 60.0
+SIZE = (160, 90)
+CASE_BY_NAME = {case.name: case for case in cases()}
+
+
+def _golden(name: str) -> Callable[[moderngl.Context], list[np.ndarray]]:
+    def run(ctx: moderngl.Context) -> list[np.ndarray]:
+        frame = golden.render_case(ctx, CASE_BY_NAME[name])
+        return [frame.rgb, frame.ids]
+    return run
+
+
+def _engine_frames(ctx: moderngl.Context, game, frames: int, configure=None, step=None,
+                   sizes: tuple[tuple[int, int], ...] = (SIZE,)) -> list[np.ndarray]:
+    """Run ``game`` for ``frames`` frames at each of ``sizes`` in turn (a resize between);
+    every size's last frame and ids."""
+    engine = Engine(game, ctx)
+    out = []
+    try:
+        if configure is not None:
+            configure(engine)
+        count = 0
+        for size in sizes:
+            capture = CaptureTarget(ctx, size)
+            try:
+                for _ in range(frames):
+                    if step is not None:
+                        step(engine, count)
+                    engine.frame(DT, Output(capture.framebuffer, size))
+                    count += 1
+                out += [capture.read_rgb(), engine.renderer.targets.read_ids()]
+            finally:
+                capture.release()
+    finally:
+        engine.close()
+    return out
+
+
+def _lighting(variant: str, mirrors: int = 2, gpu: bool = False):
+    def run(ctx):
+        from benchmarks.lighting import VARIANTS, gpu_passes
+        from benchmarks.mirrors import MirrorRing
+
+        chosen = next(v for v in VARIANTS if v.name == variant)
+
+        def configure(engine):
+            chosen.configure(engine)
+            if gpu:
+                gpu_passes(engine, None)
+        return _engine_frames(ctx, MirrorRing(mirrors), 3, configure, chosen.step)
+    return run
+
+
+def _probes(refresh: str, resolution: int = 32):
+    def run(ctx):
+        from benchmarks.probes import ProbeRing
+
+        return _engine_frames(ctx, ProbeRing(refresh, resolution), 3)
+    return run
+
+
+def _mirror_beam(ctx):
+    from games.mirror_beam.game import MirrorBeam, levels
+
+    return _engine_frames(ctx, MirrorBeam(levels()[-1], autopilot=True, verbose=False), 3)
+
+
+def _portal_run(ctx):
+    from games.portal_run.game import PortalRun, levels
+
+    return _engine_frames(ctx, PortalRun(levels()[-1], autopilot=True, verbose=False), 3)
+
+
+def _resized(ctx):
+    from benchmarks.mirrors import MirrorRing
+
+    return _engine_frames(ctx, MirrorRing(4), 2, sizes=((160, 90), (96, 120), (160, 90)))
+
+
+SCENES: dict[str, Callable[[moderngl.Context], list[np.ndarray]]] = {
+    **{name: _golden(name) for name in ("hall_start", "hall_mirror_wall", "hall_doorway", "hall_partner_side",
+                                        "mirror_ring_8_batched", "portals_depth_8", "portals_partner_disabled")},
+    "shadows_moving": _lighting("shadows_moving"),
+    "mirror_light_moving": _lighting("mirror_light_moving"),
+    "post_auto_gpu_passes": _lighting("post_auto", gpu=True),
+    "post": _lighting("post"),
+    "probes_dynamic": _probes("every_frame"),
+    "probes_once": _probes("once"),
+    "mirror_beam": _mirror_beam,
+    "portal_run": _portal_run,
+    "resized": _resized,
+}
+
+
+@pytest.mark.parametrize("name", SCENES)
+def test_every_draw_is_legal_gl_41(ctx, name):
+    with strict_draws(ctx) as strict:
+        SCENES[name](ctx)
+    assert strict.draws > 0
+    assert not strict.problems, f"{name}: " + "\n".join(f"{where}: {problem}"
+                                                        for problem, where in strict.problems.items())
+
+
+# --- texels never written ---------------------------------------------------------------------
+_CONSTRUCTORS = ("texture", "depth_texture", "texture_cube", "texture_array", "texture3d")
+
+
+def _noise(size: tuple[int, ...], components: int, dtype: str, faces: int, rng: np.random.Generator) -> bytes:
+    count = int(np.prod(size)) * components * faces
+    if dtype[0] == "f" and dtype != "f1":
+        return rng.uniform(-40.0, 60.0, count).astype(np.float16 if dtype == "f2" else np.float32).tobytes()
+    if dtype in ("u4", "i4"):
+        return rng.integers(0, 2**32, count, dtype=np.uint32).tobytes()
+    itemsize = {"f1": 1, "u1": 1, "i1": 1, "u2": 2, "i2": 2}[dtype]
+    return rng.integers(0, 256, count * itemsize, dtype=np.uint8).tobytes()
+
+
+@contextlib.contextmanager
+def noisy_textures(seed: int = 7) -> Iterator[list[str]]:
+    """Inside: every texture moderngl makes without data is made full of noise (float
+    images in [-40, 60), ids random, depth in [0, 1)); yields the list of what was filled."""
+    rng = np.random.default_rng(seed)
+    filled: list[str] = []
+    originals = {name: getattr(moderngl.Context, name) for name in _CONSTRUCTORS}
+
+    def wrap(name: str):
+        original = originals[name]
+
+        def make(self, size, *args, **kwargs):
+            if name == "depth_texture":
+                data = kwargs.get("data", args[0] if args else None)
+                if data is None and not kwargs.get("samples") and not kwargs.get("renderbuffer"):
+                    kwargs.pop("data", None)
+                    data = rng.uniform(0.0, 1.0, int(np.prod(size))).astype(np.float32).tobytes()
+                    filled.append(f"depth {size}")
+                    return original(self, size, data, *args[1:], **kwargs)
+                return original(self, size, *args, **kwargs)
+            components = kwargs.get("components", args[0] if args else None)
+            rest = args[1:]
+            data = kwargs.pop("data", rest[0] if rest else None)
+            rest = rest[1:]
+            if data is None and not kwargs.get("samples") and not kwargs.get("renderbuffer"):
+                dtype = kwargs.get("dtype", "f1")
+                faces = 6 if name == "texture_cube" else 1
+                data = _noise(tuple(size), components, dtype, faces, rng)
+                filled.append(f"{name} {tuple(size)} {components}x{dtype}")
+            kwargs.pop("components", None)
+            return original(self, size, components, data, *rest, **kwargs)
+        return make
+
+    for name in _CONSTRUCTORS:
+        setattr(moderngl.Context, name, wrap(name))
+    try:
+        yield filled
+    finally:
+        for name, original in originals.items():
+            setattr(moderngl.Context, name, original)
+
+
+@pytest.mark.parametrize("name", SCENES)
+def test_no_texel_is_read_before_it_is_written(ctx, name):
+    plain = SCENES[name](ctx)
+    with noisy_textures() as filled:
+        noisy = SCENES[name](ctx)
+    assert filled, "no texture was made without data: the hook saw nothing"
+    assert plain[0].max() > 0, f"{name}: the frame is black"
+    for index, (a, b) in enumerate(zip(plain, noisy, strict=True)):
+        kind = "ids" if index % 2 else "colour"
+        differ = a != b if a.ndim == 2 else (a != b).any(axis=-1)
+        assert not differ.any(), (f"{name}: {kind} of frame {index // 2} differs at {int(differ.sum())} pixels "
+                                  f"with new textures made full of noise (first at row, column "
+                                  f"{tuple(int(v) for v in np.argwhere(differ)[0])}): a texel read before it is "
+                                  "written")
