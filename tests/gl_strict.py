@@ -21,6 +21,13 @@ draw, reads back from the driver (glGet calls) the state the draw used:
 - **rendering feedback loops** (GL 4.1 4.4.3): an image of a texture the draw may sample
   (the levels its filter reaches) attached to the bound draw framebuffer, colour or depth,
   whether or not the draw writes that attachment;
+- **uniform blocks**: each active block of the program has a buffer bound at its binding,
+  the bound range at least the block's std140 size, inside the buffer, its offset a
+  multiple of GL_UNIFORM_BUFFER_OFFSET_ALIGNMENT (GL 4.1 2.11.7);
+- **clip distances**: every enabled GL_CLIP_DISTANCEi is written by the program's last
+  stage before rasterisation (geometry, else vertex: GL 4.1 2.20, an enabled distance not
+  written is undefined), read from the sources of programs made while the check is on
+  (``ctx.program`` is wrapped too: the shader library's #defines and #ifdefs resolved);
 - **clears**: ``Framebuffer.clear`` (glClear with float clear values) on a framebuffer with
   an integer colour attachment in its draw buffers (GL 4.1 4.2.3: undefined).
 
@@ -34,6 +41,7 @@ from __future__ import annotations
 import contextlib
 import ctypes
 import os
+import re
 import sys
 from collections.abc import Iterator
 
@@ -58,6 +66,7 @@ _SIGNATURES = {
     "glGetActiveUniformBlockName": (None, _u, _u, _i, _P(_i), ctypes.c_char_p),
     "glGetIntegeri_v": (None, _u, _u, _P(_i)),
     "glGetNamedBufferParameteriv": (None, _u, _u, _P(_i)),  # 4.5, the test context's (never the engine's)
+    "glIsEnabled": (ctypes.c_ubyte, _u),
 }
 
 GL_CURRENT_PROGRAM = 0x8B8D
@@ -100,6 +109,8 @@ GL_UNIFORM_BUFFER_START = 0x8A29
 GL_UNIFORM_BUFFER_SIZE = 0x8A2A
 GL_UNIFORM_BUFFER_OFFSET_ALIGNMENT = 0x8A34
 GL_BUFFER_SIZE = 0x8764
+GL_CLIP_DISTANCE0 = 0x3000
+CLIP_DISTANCES = 8
 
 GL_TEXTURE_2D, GL_TEXTURE_3D, GL_TEXTURE_CUBE_MAP, GL_TEXTURE_2D_ARRAY = 0x0DE1, 0x806F, 0x8513, 0x8C1A
 GL_TEXTURE_CUBE_MAP_POSITIVE_X = 0x8515
@@ -163,6 +174,72 @@ def _where() -> str:
     return "outside the engine"
 
 
+_DIRECTIVE = re.compile(r"^\s*#\s*(\w+)\s*(.*?)\s*(//.*)?$")
+_CLIP_WRITE = re.compile(r"gl_ClipDistance\s*\[\s*([^\]]+?)\s*\]\s*=(?!=)")
+
+
+def _condition(expression: str, defines: dict[str, str]) -> bool:
+    """A #if expression of the shaders (defined(X), names, integers, !, &&, ||, comparisons)."""
+    text = re.sub(r"defined\s*\(\s*(\w+)\s*\)|defined\s+(\w+)",
+                  lambda m: " 1 " if (m.group(1) or m.group(2)) in defines else " 0 ", expression)
+
+    def value(match: re.Match) -> str:
+        word = match.group(0)
+        if word.isdigit():
+            return word
+        seen = set()
+        while word in defines and word not in seen:
+            seen.add(word)
+            word = defines[word].strip() or "1"
+        return word if re.fullmatch(r"\d+", word) else "0"
+    text = re.sub(r"\b\w+\b", value, text)
+    text = text.replace("&&", " and ").replace("||", " or ")
+    text = re.sub(r"!(?!=)", " not ", text)
+    return bool(eval(text, {"__builtins__": {}}))  # noqa: S307 - the engine's own shader text
+
+
+def clip_writes(source: str) -> set[int] | None:
+    """The gl_ClipDistance indices ``source`` (one stage, includes and #defines in place)
+    writes outside inactive #if blocks; None where an index is not a constant (a loop)."""
+    defines: dict[str, str] = {}
+    stack: list[tuple[bool, bool]] = []  # (this branch on, some branch of the group taken)
+    written: set[int] = set()
+    for line in source.splitlines():
+        on = all(active for active, _ in stack)
+        directive = _DIRECTIVE.match(line)
+        if directive:
+            word, rest = directive.group(1), directive.group(2)
+            if word in ("ifdef", "ifndef", "if"):
+                hit = (rest.split()[0] in defines) if word == "ifdef" else \
+                    (rest.split()[0] not in defines) if word == "ifndef" else _condition(rest, defines)
+                stack.append((hit, hit))
+            elif word == "elif":
+                taken = stack[-1][1]
+                hit = not taken and _condition(rest, defines)
+                stack[-1] = (hit, taken or hit)
+            elif word == "else":
+                stack[-1] = (not stack[-1][1], True)
+            elif word == "endif":
+                stack.pop()
+            elif word == "define" and on:
+                parts = rest.split(None, 1)
+                if parts and "(" not in parts[0]:
+                    defines[parts[0]] = parts[1] if len(parts) > 1 else ""
+            continue
+        if not on:
+            continue
+        for match in _CLIP_WRITE.finditer(line.split("//")[0]):
+            index = match.group(1)
+            seen = set()
+            while index in defines and index not in seen:
+                seen.add(index)
+                index = defines[index].strip()
+            if not index.isdigit():
+                return None
+            written.add(int(index))
+    return written
+
+
 class StrictGL:
     """The checks of the module docstring on one context."""
 
@@ -180,6 +257,10 @@ class StrictGL:
         self.clears = 0
         self._programs: dict[int, list[tuple[str, int, int]]] = {}  # program -> (name, location, type)
         self._blocks: dict[int, list[tuple[str, int]]] = {}  # program -> (block name, its index)
+        self.block_sizes: dict[str, set[int]] = {}  # block name -> its std140 sizes in the programs drawn with
+        self.sources: dict[int, dict[str, str]] = {}  # program -> its stages' sources (made while checking)
+        self._clips: dict[int, set[int] | None] = {}
+        self.unknown_programs: set[int] = set()  # drawn with, made before the check: clips not checked
         self.alignment = self._int(GL_UNIFORM_BUFFER_OFFSET_ALIGNMENT)
 
     # --- GL read-backs ------------------------------------------------------------------
@@ -274,6 +355,7 @@ class StrictGL:
             binding = value.value
             self.gl["glGetActiveUniformBlockiv"](program, index, GL_UNIFORM_BLOCK_DATA_SIZE, ctypes.byref(value))
             need = value.value
+            self.block_sizes.setdefault(name, set()).add(need)
             self.gl["glGetIntegeri_v"](GL_UNIFORM_BUFFER_BINDING, binding, ctypes.byref(value))
             buffer = value.value
             if buffer == 0:
@@ -297,12 +379,32 @@ class StrictGL:
                 self._note(f"uniform block {name} (binding {binding}): offset {start} not a multiple of "
                            f"GL_UNIFORM_BUFFER_OFFSET_ALIGNMENT ({self.alignment})", where)
 
+    def check_clips(self, program: int, where: str) -> None:
+        """Every enabled clip distance is written by the program's last stage before
+        rasterisation."""
+        if program not in self._clips:
+            sources = self.sources.get(program)
+            if sources is None:
+                self.unknown_programs.add(program)
+                return
+            last = sources.get("geometry_shader") or sources.get("vertex_shader") or ""
+            self._clips[program] = clip_writes(last)
+        written = self._clips[program]
+        if written is None:
+            return
+        enabled = {i for i in range(CLIP_DISTANCES) if self.gl["glIsEnabled"](GL_CLIP_DISTANCE0 + i)}
+        if enabled - written:
+            first = (self.sources[program].get("vertex_shader") or "").split("\n", 3)[:3]
+            self._note(f"clip distances {sorted(enabled - written)} enabled, the program writes only "
+                       f"{sorted(written)} (undefined clipping) [{' / '.join(line.strip() for line in first)}]", where)
+
     def check_draw(self, where: str) -> None:
         self.draws += 1
         program = self._int(GL_CURRENT_PROGRAM)
         if not program:
             return
         self.check_blocks(program, where)
+        self.check_clips(program, where)
         samplers = self._samplers(program)
         if not samplers:
             return
@@ -415,6 +517,13 @@ def strict_draws(ctx: moderngl.Context) -> Iterator[StrictGL]:
     docstring); yields the ``StrictGL`` collecting the problems."""
     checker = StrictGL(ctx)
     render, clear = moderngl.VertexArray.render, moderngl.Framebuffer.clear
+    make_program = moderngl.Context.program
+
+    def recorded_program(self, *args, **kwargs):
+        program = make_program(self, *args, **kwargs)
+        names = ("vertex_shader", "fragment_shader", "geometry_shader")
+        checker.sources[program.glo] = {**dict(zip(names, args)), **{k: v for k, v in kwargs.items() if v}}
+        return program
 
     def checked_render(self, *args, **kwargs):
         result = render(self, *args, **kwargs)
@@ -427,7 +536,9 @@ def strict_draws(ctx: moderngl.Context) -> Iterator[StrictGL]:
 
     moderngl.VertexArray.render = checked_render
     moderngl.Framebuffer.clear = checked_clear
+    moderngl.Context.program = recorded_program
     try:
         yield checker
     finally:
         moderngl.VertexArray.render, moderngl.Framebuffer.clear = render, clear
+        moderngl.Context.program = make_program

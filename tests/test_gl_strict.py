@@ -28,7 +28,8 @@ import numpy as np
 import pytest
 
 from engine.core.frame_io import Output
-from engine.render.targets import CaptureTarget
+from engine.render import bindings
+from engine.render.targets import CaptureTarget, release_framebuffer
 from shell.app import Engine
 from tests import golden
 from tests.gl_strict import strict_draws
@@ -135,6 +136,80 @@ def test_every_draw_is_legal_gl_41(ctx, name):
     assert strict.draws > 0
     assert not strict.problems, f"{name}: " + "\n".join(f"{where}: {problem}"
                                                         for problem, where in strict.problems.items())
+
+
+def test_uniform_blocks_are_the_size_the_engine_writes(ctx):
+    """Every uniform block the scenes draw with has, in the GLSL (std140, as the driver lays it
+    out), the size of the bytes the engine packs for it: a block the blocks of tests/
+    test_rendering.py and test_ambient_light.py do not cover (Views, Shadows, VirtualLights,
+    FallbackRows) included."""
+    from engine.render.batched_mirrors import VIEWS_BLOCK_BYTES
+    from engine.render.irradiance import IRRADIANCE_BLOCK_BYTES
+    from engine.render.mirror_passes import _FALLBACK_IDS_BYTES, _FALLBACK_WEIGHTS, FALLBACK_ROWS
+    from engine.render.shadows import SHADOWS_BLOCK_BYTES, VIRTUAL_BLOCK_BYTES
+    from engine.render.views import CAMERA_BLOCK_BYTES, LIGHTS_BLOCK_BYTES
+
+    packed = {"Camera": CAMERA_BLOCK_BYTES, "Lights": LIGHTS_BLOCK_BYTES, "Irradiance": IRRADIANCE_BLOCK_BYTES,
+              "Views": VIEWS_BLOCK_BYTES, "Shadows": SHADOWS_BLOCK_BYTES, "VirtualLights": VIRTUAL_BLOCK_BYTES,
+              "FallbackRows": _FALLBACK_IDS_BYTES + FALLBACK_ROWS * _FALLBACK_WEIGHTS.size}
+    with strict_draws(ctx) as strict:
+        for name in ("hall_start", "mirror_ring_8_batched", "mirror_light_moving"):
+            SCENES[name](ctx)
+    assert set(strict.block_sizes) == set(packed), "a uniform block with no packed size here, or one not drawn"
+    for name, sizes in strict.block_sizes.items():
+        assert sizes == {packed[name]}, f"uniform block {name}: the GLSL lays out {sizes} bytes, the engine packs " \
+                                        f"{packed[name]}"
+
+
+_CHECK_VS = "#version 410 core\nvoid main() { gl_Position = vec4(vec2(gl_VertexID & 1, gl_VertexID >> 1) * 4.0 - 1.0, " \
+            "0.0, 1.0); }\n"
+_CHECK_FS = {"float": "uniform sampler2D image;", "uint": "uniform usampler2D image;"}
+
+
+@pytest.mark.parametrize("case", ["legal", "no_mips", "linear_ids", "float_on_ids", "feedback"])
+def test_the_check_names_each_kind_of_illegal_draw(ctx, case):
+    """The checker itself, on hand-made draws: a legal one passes, each broken one is named."""
+    kind = "uint" if case in ("linear_ids", "legal") else "float"
+    fragment = (f"#version 410 core\n{_CHECK_FS[kind]}\nout vec4 colour;\n"
+                "void main() { colour = vec4(texture(image, vec2(0.5))); }\n")
+    program = ctx.program(vertex_shader=_CHECK_VS, fragment_shader=fragment)
+    vao = ctx.vertex_array(program, [])
+    target = CaptureTarget(ctx, (4, 4))
+    objects = [vao, program, target]
+    try:
+        if case in ("legal", "linear_ids", "float_on_ids"):
+            texture = ctx.texture((8, 8), 1, bytes(4 * 64), dtype="u4")
+            texture.filter = (moderngl.LINEAR, moderngl.LINEAR) if case == "linear_ids" else \
+                (moderngl.NEAREST, moderngl.NEAREST)
+        else:
+            texture = ctx.texture((8, 8), 4, bytes(4 * 64))
+            texture.filter = (moderngl.LINEAR_MIPMAP_LINEAR, moderngl.LINEAR)  # no mip levels made
+        objects.append(texture)
+        framebuffer = target.framebuffer
+        if case == "feedback":
+            texture.filter = (moderngl.LINEAR, moderngl.LINEAR)
+            framebuffer = ctx.framebuffer([texture])
+            objects.insert(0, framebuffer)
+        texture.use(3)
+        program["image"].value = 3
+        with strict_draws(ctx) as strict:
+            framebuffer.use()
+            vao.render(moderngl.TRIANGLES, vertices=3)
+        text = " ".join(strict.problems)
+        expected = {"legal": None, "no_mips": "reaches level 1", "linear_ids": "integer format filtered",
+                    "float_on_ids": "a float sampler on a uint format", "feedback": "rendering feedback loop"}[case]
+        if expected is None:
+            assert not strict.problems, text
+        else:
+            assert expected in text, text
+    finally:
+        for obj in objects:
+            if isinstance(obj, moderngl.Framebuffer):
+                release_framebuffer(obj)  # (the bound one: framebuffer 0 bound first)
+            else:
+                obj.release()
+        bindings.invalidate(ctx)
+    assert ctx.error == "GL_NO_ERROR"
 
 
 # --- texels never written ---------------------------------------------------------------------
