@@ -522,7 +522,8 @@ def strict_draws(ctx: moderngl.Context) -> Iterator[StrictGL]:
     def recorded_program(self, *args, **kwargs):
         program = make_program(self, *args, **kwargs)
         names = ("vertex_shader", "fragment_shader", "geometry_shader")
-        checker.sources[program.glo] = {**dict(zip(names, args)), **{k: v for k, v in kwargs.items() if v}}
+        given = dict(zip(names, args, strict=False))  # (positional: the stages in moderngl's order)
+        checker.sources[program.glo] = {**given, **{k: v for k, v in kwargs.items() if v}}
         return program
 
     def checked_render(self, *args, **kwargs):

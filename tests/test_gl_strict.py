@@ -161,8 +161,8 @@ def test_uniform_blocks_are_the_size_the_engine_writes(ctx):
                                         f"{packed[name]}"
 
 
-_CHECK_VS = "#version 410 core\nvoid main() { gl_Position = vec4(vec2(gl_VertexID & 1, gl_VertexID >> 1) * 4.0 - 1.0, " \
-            "0.0, 1.0); }\n"
+_CHECK_VS = ("#version 410 core\nvoid main() { "
+             "gl_Position = vec4(vec2(gl_VertexID & 1, gl_VertexID >> 1) * 4.0 - 1.0, 0.0, 1.0); }\n")
 _CHECK_FS = {"float": "uniform sampler2D image;", "uint": "uniform usampler2D image;"}
 
 
