@@ -36,6 +36,23 @@ def _no_gl_error(request):
     assert context.error == "GL_NO_ERROR"
 
 
+@pytest.fixture(autouse=True)
+def _strict_gl(request):
+    """With SPECULUM_STRICT_GL=1, every test that draws on the shared context runs under the
+    GL 4.1 draw check (tests/gl_strict.py) and fails naming what a GPU driver may not
+    forgive: a sweep of every feature the suite draws, too slow to be on by default."""
+    if os.environ.get("SPECULUM_STRICT_GL", "") in ("", "0") or "ctx" not in request.fixturenames:
+        yield
+        return
+    from tests.gl_strict import strict_draws
+
+    with strict_draws(request.getfixturevalue("ctx")) as strict:
+        yield
+    if strict.problems:
+        pytest.fail("GL 4.1 draw check:\n" + "\n".join(f"{where}: {problem}"
+                                                      for problem, where in strict.problems.items()))
+
+
 @pytest.fixture
 def scene(ctx):
     """``scene(build, size=(w, h))`` -> a SceneRunner; closed (world and GL objects) after the test."""

@@ -28,6 +28,10 @@ draw, reads back from the driver (glGet calls) the state the draw used:
   stage before rasterisation (geometry, else vertex: GL 4.1 2.20, an enabled distance not
   written is undefined), read from the sources of programs made while the check is on
   (``ctx.program`` is wrapped too: the shader library's #defines and #ifdefs resolved);
+- **fragment outputs against draw buffers** (GL 4.1 4.2.1, 3.9.2): every draw buffer with a
+  colour attachment and its write mask on gets a fragment output at its location (else
+  the value written is undefined), of the attachment's kind (float for float and
+  normalised formats, uint for unsigned-integer ones, int for signed);
 - **clears**: ``Framebuffer.clear`` (glClear with float clear values) on a framebuffer with
   an integer colour attachment in its draw buffers (GL 4.1 4.2.3: undefined).
 
@@ -67,6 +71,11 @@ _SIGNATURES = {
     "glGetIntegeri_v": (None, _u, _u, _P(_i)),
     "glGetNamedBufferParameteriv": (None, _u, _u, _P(_i)),  # 4.5, the test context's (never the engine's)
     "glIsEnabled": (ctypes.c_ubyte, _u),
+    "glGetBooleani_v": (None, _u, _u, _P(ctypes.c_ubyte)),
+    # program interface queries (4.3; the test context's only): the fragment outputs
+    "glGetProgramInterfaceiv": (None, _u, _u, _u, _P(_i)),
+    "glGetProgramResourceiv": (None, _u, _u, _u, _i, _P(_u), _i, _P(_i), _P(_i)),
+    "glGetProgramResourceName": (None, _u, _u, _u, _i, _P(_i), ctypes.c_char_p),
 }
 
 GL_CURRENT_PROGRAM = 0x8B8D
@@ -110,6 +119,19 @@ GL_UNIFORM_BUFFER_SIZE = 0x8A2A
 GL_UNIFORM_BUFFER_OFFSET_ALIGNMENT = 0x8A34
 GL_BUFFER_SIZE = 0x8764
 GL_CLIP_DISTANCE0 = 0x3000
+GL_PROGRAM_OUTPUT = 0x92E4
+GL_ACTIVE_RESOURCES = 0x92F5
+GL_LOCATION = 0x930E
+GL_TYPE = 0x92FA
+GL_ARRAY_SIZE = 0x92FB
+GL_COLOR_WRITEMASK = 0x0C23
+GL_MAX_DRAW_BUFFERS = 0x8824
+GL_UNSIGNED_NORMALIZED = 0x8C17
+GL_SIGNED_NORMALIZED = 0x8F9C
+# an output's GLSL type -> "float", "int" or "uint"
+_OUTPUT_KIND = {**{t: "float" for t in (0x1406, 0x8B50, 0x8B51, 0x8B52)},
+                **{t: "int" for t in (0x1404, 0x8B53, 0x8B54, 0x8B55)},
+                **{t: "uint" for t in (0x1405, 0x8DC6, 0x8DC7, 0x8DC8)}}
 CLIP_DISTANCES = 8
 
 GL_TEXTURE_2D, GL_TEXTURE_3D, GL_TEXTURE_CUBE_MAP, GL_TEXTURE_2D_ARRAY = 0x0DE1, 0x806F, 0x8513, 0x8C1A
@@ -260,6 +282,7 @@ class StrictGL:
         self.block_sizes: dict[str, set[int]] = {}  # block name -> its std140 sizes in the programs drawn with
         self.sources: dict[int, dict[str, str]] = {}  # program -> its stages' sources (made while checking)
         self._clips: dict[int, set[int] | None] = {}
+        self._outputs_of: dict[int, dict[int, tuple[str, str]]] = {}
         self.unknown_programs: set[int] = set()  # drawn with, made before the check: clips not checked
         self.alignment = self._int(GL_UNIFORM_BUFFER_OFFSET_ALIGNMENT)
 
@@ -398,6 +421,55 @@ class StrictGL:
             self._note(f"clip distances {sorted(enabled - written)} enabled, the program writes only "
                        f"{sorted(written)} (undefined clipping) [{' / '.join(line.strip() for line in first)}]", where)
 
+    def _outputs(self, program: int) -> dict[int, tuple[str, str]]:
+        """The program's active fragment outputs: location -> (name, kind)."""
+        known = self._outputs_of.get(program)
+        if known is not None:
+            return known
+        count = _i(0)
+        self.gl["glGetProgramInterfaceiv"](program, GL_PROGRAM_OUTPUT, GL_ACTIVE_RESOURCES, ctypes.byref(count))
+        known = {}
+        props = (_u * 3)(GL_LOCATION, GL_TYPE, GL_ARRAY_SIZE)
+        for index in range(count.value):
+            values = (_i * 3)()
+            self.gl["glGetProgramResourceiv"](program, GL_PROGRAM_OUTPUT, index, 3, props, 3, None, values)
+            name = ctypes.create_string_buffer(128)
+            self.gl["glGetProgramResourceName"](program, GL_PROGRAM_OUTPUT, index, 128, None, name)
+            location, kind, size = values
+            if location < 0:
+                continue
+            for element in range(max(1, size)):
+                known[location + element] = (name.value.decode(), _OUTPUT_KIND.get(kind, hex(kind)))
+        self._outputs_of[program] = known
+        return known
+
+    def check_outputs(self, program: int, where: str, attached) -> None:
+        """Each enabled draw buffer with a colour attachment has an output of its kind."""
+        if self._int(GL_DRAW_FRAMEBUFFER_BINDING) == 0:
+            return
+        outputs = self._outputs(program)
+        by_point = {point: label for label, _, _, _, point in attached}
+        for buffer in range(self._int(GL_MAX_DRAW_BUFFERS)):
+            point = self._int(GL_DRAW_BUFFER0 + buffer)
+            if point == GL_NONE:
+                continue
+            if point not in by_point:
+                if self._attachment(point, GL_FRAMEBUFFER_ATTACHMENT_OBJECT_TYPE) == GL_NONE:
+                    continue
+            mask = (ctypes.c_ubyte * 4)()
+            self.gl["glGetBooleani_v"](GL_COLOR_WRITEMASK, buffer, mask)
+            if not any(mask):
+                continue
+            component = self._attachment(point, GL_FRAMEBUFFER_ATTACHMENT_COMPONENT_TYPE)
+            kind = {GL_UNSIGNED_INT: "uint", GL_INT: "int"}.get(component, "float")
+            output = outputs.get(buffer)
+            if output is None:
+                self._note(f"draw buffer {buffer} ({kind} attachment, write mask on) has no fragment output "
+                           f"at location {buffer}: the value written is undefined", where)
+            elif output[1] != kind:
+                self._note(f"fragment output '{output[0]}' ({output[1]}) at location {buffer} writes a {kind} "
+                           "attachment: undefined", where)
+
     def check_draw(self, where: str) -> None:
         self.draws += 1
         program = self._int(GL_CURRENT_PROGRAM)
@@ -405,11 +477,12 @@ class StrictGL:
             return
         self.check_blocks(program, where)
         self.check_clips(program, where)
+        attached = self.attachments()
+        self.check_outputs(program, where, attached)
         samplers = self._samplers(program)
         if not samplers:
             return
         active = self._int(GL_ACTIVE_TEXTURE)
-        attached = self.attachments()
         unit_types: dict[int, tuple[str, int]] = {}
         try:
             for name, location, kind in samplers:

@@ -166,7 +166,7 @@ _CHECK_VS = ("#version 410 core\nvoid main() { "
 _CHECK_FS = {"float": "uniform sampler2D image;", "uint": "uniform usampler2D image;"}
 
 
-@pytest.mark.parametrize("case", ["legal", "no_mips", "linear_ids", "float_on_ids", "feedback"])
+@pytest.mark.parametrize("case", ["legal", "no_mips", "linear_ids", "float_on_ids", "feedback", "unwritten_ids"])
 def test_the_check_names_each_kind_of_illegal_draw(ctx, case):
     """The checker itself, on hand-made draws: a legal one passes, each broken one is named."""
     kind = "uint" if case in ("linear_ids", "legal") else "float"
@@ -190,6 +190,11 @@ def test_the_check_names_each_kind_of_illegal_draw(ctx, case):
             texture.filter = (moderngl.LINEAR, moderngl.LINEAR)
             framebuffer = ctx.framebuffer([texture])
             objects.insert(0, framebuffer)
+        if case == "unwritten_ids":  # a second, integer, attachment no output writes
+            texture.filter = (moderngl.LINEAR, moderngl.LINEAR)
+            ids = ctx.texture((4, 4), 1, dtype="u4")
+            framebuffer = ctx.framebuffer([target.texture, ids])
+            objects[:0] = [framebuffer, ids]
         texture.use(3)
         program["image"].value = 3
         with strict_draws(ctx) as strict:
@@ -197,7 +202,8 @@ def test_the_check_names_each_kind_of_illegal_draw(ctx, case):
             vao.render(moderngl.TRIANGLES, vertices=3)
         text = " ".join(strict.problems)
         expected = {"legal": None, "no_mips": "reaches level 1", "linear_ids": "integer format filtered",
-                    "float_on_ids": "a float sampler on a uint format", "feedback": "rendering feedback loop"}[case]
+                    "float_on_ids": "a float sampler on a uint format", "feedback": "rendering feedback loop",
+                    "unwritten_ids": "draw buffer 1 (uint attachment, write mask on) has no fragment output"}[case]
         if expected is None:
             assert not strict.problems, text
         else:
