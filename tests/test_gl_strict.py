@@ -13,10 +13,14 @@ virtual lights, probes, post-processing, a resize).
    id images, it names the feedback loop on the parent's seen image; with the level clear
    back to ``Framebuffer.clear``, the glClear of the id images.
 2. **No texel is read before it is written**: every texture the engine makes without data
-   is made full of noise instead (a test-only hook around moderngl's texture constructors,
-   where llvmpipe would zero-fill; a GPU hands back whatever memory held), and the frames,
-   colour and ids, must be those of a run without it, bit for bit.  Broken on purpose:
-   with the level clear skipped for the node image, the frames differ.
+   is made full of NaN (float images) or noise instead (a test-only hook around moderngl's
+   texture constructors, where llvmpipe would zero-fill; a GPU hands back whatever memory
+   held), and the frames, colour and ids, must be those of a run without it, bit for bit.
+   Broken on purpose: without the clear of a level's images when they are made
+   (``RenderTargets``), hall_start's frame 2 differs in every pixel with NaN (the water
+   composite's bilinear taps beside the claimed pixels read the first frame's unwritten
+   texels, and the NaN spreads through the next frame's end images and bloom), and in 21
+   pixels of the water's edge with finite noise.
 """
 from __future__ import annotations
 
@@ -88,6 +92,20 @@ def _lighting(variant: str, mirrors: int = 2, gpu: bool = False):
     return run
 
 
+def _point_shadows(ctx):
+    """The mirror ring with its lamp's shadows on (distance cube maps) and a mirror throwing
+    the sun (a virtual light), the boxes spinning."""
+    from benchmarks.lighting import _mirror_light
+    from benchmarks.mirrors import MirrorRing
+    from components import PointLight
+
+    def configure(engine):
+        _mirror_light(engine)
+        for _, light in engine.world.query_one(PointLight):
+            light.shadows = True
+    return _engine_frames(ctx, MirrorRing(3), 3, configure)
+
+
 def _probes(refresh: str, resolution: int = 32):
     def run(ctx):
         from benchmarks.probes import ProbeRing
@@ -121,6 +139,7 @@ SCENES: dict[str, Callable[[moderngl.Context], list[np.ndarray]]] = {
     "mirror_light_moving": _lighting("mirror_light_moving"),
     "post_auto_gpu_passes": _lighting("post_auto", gpu=True),
     "post": _lighting("post"),
+    "point_shadows": _point_shadows,
     "probes_dynamic": _probes("every_frame"),
     "probes_once": _probes("once"),
     "mirror_beam": _mirror_beam,
@@ -222,10 +241,12 @@ def test_the_check_names_each_kind_of_illegal_draw(ctx, case):
 _CONSTRUCTORS = ("texture", "depth_texture", "texture_cube", "texture_array", "texture3d")
 
 
-def _noise(size: tuple[int, ...], components: int, dtype: str, faces: int, rng: np.random.Generator) -> bytes:
+def _noise(size: tuple[int, ...], components: int, dtype: str, faces: int, rng: np.random.Generator,
+           nan: bool = False) -> bytes:
     count = int(np.prod(size)) * components * faces
     if dtype[0] == "f" and dtype != "f1":
-        return rng.uniform(-40.0, 60.0, count).astype(np.float16 if dtype == "f2" else np.float32).tobytes()
+        values = np.full(count, np.nan) if nan else rng.uniform(-40.0, 60.0, count)
+        return values.astype(np.float16 if dtype == "f2" else np.float32).tobytes()
     if dtype in ("u4", "i4"):
         return rng.integers(0, 2**32, count, dtype=np.uint32).tobytes()
     itemsize = {"f1": 1, "u1": 1, "i1": 1, "u2": 2, "i2": 2}[dtype]
@@ -233,9 +254,11 @@ def _noise(size: tuple[int, ...], components: int, dtype: str, faces: int, rng: 
 
 
 @contextlib.contextmanager
-def noisy_textures(seed: int = 7) -> Iterator[list[str]]:
+def noisy_textures(seed: int = 7, nan: bool = False) -> Iterator[list[str]]:
     """Inside: every texture moderngl makes without data is made full of noise (float
-    images in [-40, 60), ids random, depth in [0, 1)); yields the list of what was filled."""
+    images in [-40, 60), or NaN with ``nan``: what a GPU's garbage may hold, which even a
+    lookup weighted 0 carries on; ids random, depth in [0, 1)); yields the list of what was
+    filled."""
     rng = np.random.default_rng(seed)
     filled: list[str] = []
     originals = {name: getattr(moderngl.Context, name) for name in _CONSTRUCTORS}
@@ -259,7 +282,7 @@ def noisy_textures(seed: int = 7) -> Iterator[list[str]]:
             if data is None and not kwargs.get("samples") and not kwargs.get("renderbuffer"):
                 dtype = kwargs.get("dtype", "f1")
                 faces = 6 if name == "texture_cube" else 1
-                data = _noise(tuple(size), components, dtype, faces, rng)
+                data = _noise(tuple(size), components, dtype, faces, rng, nan)
                 filled.append(f"{name} {tuple(size)} {components}x{dtype}")
             kwargs.pop("components", None)
             return original(self, size, components, data, *rest, **kwargs)
@@ -274,10 +297,16 @@ def noisy_textures(seed: int = 7) -> Iterator[list[str]]:
             setattr(moderngl.Context, name, original)
 
 
-@pytest.mark.parametrize("name", SCENES)
-def test_no_texel_is_read_before_it_is_written(ctx, name):
+# NaN everywhere a float image is made; finite noise on a few scenes too (a NaN a shader
+# clamps or compares away would hide a read that finite noise shows).
+_NOISE = [(name, True) for name in SCENES] + [(name, False) for name in ("hall_start", "portals_depth_8",
+                                                                          "post_auto_gpu_passes", "probes_dynamic")]
+
+
+@pytest.mark.parametrize("name,nan", _NOISE, ids=[f"{name}-{'nan' if nan else 'noise'}" for name, nan in _NOISE])
+def test_no_texel_is_read_before_it_is_written(ctx, name, nan):
     plain = SCENES[name](ctx)
-    with noisy_textures() as filled:
+    with noisy_textures(nan=nan) as filled:
         noisy = SCENES[name](ctx)
     assert filled, "no texture was made without data: the hook saw nothing"
     assert plain[0].max() > 0, f"{name}: the frame is black"
