@@ -15,7 +15,8 @@ virtual lights, probes, post-processing, a resize).
 2. **No texel is read before it is written**: every texture the engine makes without data
    is made full of NaN (float images) or noise instead (a test-only hook around moderngl's
    texture constructors, where llvmpipe would zero-fill; a GPU hands back whatever memory
-   held), and the frames, colour and ids, must be those of a run without it, bit for bit.
+   held), every buffer made with room only (``reserve``) full of random bytes, and the
+   frames, colour and ids, must be those of a run without it, bit for bit.
    Broken on purpose: without the clear of a level's images when they are made
    (``RenderTargets``), hall_start's frame 2 differs in every pixel with NaN (the water
    composite's bilinear taps beside the claimed pixels read the first frame's unwritten
@@ -288,13 +289,25 @@ def noisy_textures(seed: int = 7, nan: bool = False) -> Iterator[list[str]]:
             return original(self, size, components, data, *rest, **kwargs)
         return make
 
+    make_buffer = moderngl.Context.buffer
+
+    def buffer(self, data=None, *, reserve=0, dynamic=False):
+        # A buffer made with room only (``reserve``): its bytes are undefined until written
+        # (glBufferData with no data): noise (random bytes: NaNs among them as floats).
+        if data is None and reserve:
+            data = rng.integers(0, 256, int(reserve), dtype=np.uint8).tobytes()
+            filled.append(f"buffer {reserve}")
+        return make_buffer(self, data, dynamic=dynamic)
+
     for name in _CONSTRUCTORS:
         setattr(moderngl.Context, name, wrap(name))
+    moderngl.Context.buffer = buffer
     try:
         yield filled
     finally:
         for name, original in originals.items():
             setattr(moderngl.Context, name, original)
+        moderngl.Context.buffer = make_buffer
 
 
 # NaN everywhere a float image is made; finite noise on a few scenes too (a NaN a shader
