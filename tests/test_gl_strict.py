@@ -25,8 +25,7 @@ virtual lights, probes, post-processing, a resize).
 """
 from __future__ import annotations
 
-import contextlib
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 
 import moderngl
 import numpy as np
@@ -37,7 +36,7 @@ from engine.render import bindings
 from engine.render.targets import CaptureTarget, release_framebuffer
 from shell.app import Engine
 from tests import golden
-from tests.gl_strict import strict_draws
+from tests.gl_strict import noisy_textures, strict_draws
 from tests.golden_scenes import cases
 
 DT = 1.0 / 60.0
@@ -239,77 +238,6 @@ def test_the_check_names_each_kind_of_illegal_draw(ctx, case):
 
 
 # --- texels never written ---------------------------------------------------------------------
-_CONSTRUCTORS = ("texture", "depth_texture", "texture_cube", "texture_array", "texture3d")
-
-
-def _noise(size: tuple[int, ...], components: int, dtype: str, faces: int, rng: np.random.Generator,
-           nan: bool = False) -> bytes:
-    count = int(np.prod(size)) * components * faces
-    if dtype[0] == "f" and dtype != "f1":
-        values = np.full(count, np.nan) if nan else rng.uniform(-40.0, 60.0, count)
-        return values.astype(np.float16 if dtype == "f2" else np.float32).tobytes()
-    if dtype in ("u4", "i4"):
-        return rng.integers(0, 2**32, count, dtype=np.uint32).tobytes()
-    itemsize = {"f1": 1, "u1": 1, "i1": 1, "u2": 2, "i2": 2}[dtype]
-    return rng.integers(0, 256, count * itemsize, dtype=np.uint8).tobytes()
-
-
-@contextlib.contextmanager
-def noisy_textures(seed: int = 7, nan: bool = False) -> Iterator[list[str]]:
-    """Inside: every texture moderngl makes without data is made full of noise (float
-    images in [-40, 60), or NaN with ``nan``: what a GPU's garbage may hold, which even a
-    lookup weighted 0 carries on; ids random, depth in [0, 1)); yields the list of what was
-    filled."""
-    rng = np.random.default_rng(seed)
-    filled: list[str] = []
-    originals = {name: getattr(moderngl.Context, name) for name in _CONSTRUCTORS}
-
-    def wrap(name: str):
-        original = originals[name]
-
-        def make(self, size, *args, **kwargs):
-            if name == "depth_texture":
-                data = kwargs.get("data", args[0] if args else None)
-                if data is None and not kwargs.get("samples") and not kwargs.get("renderbuffer"):
-                    kwargs.pop("data", None)
-                    data = rng.uniform(0.0, 1.0, int(np.prod(size))).astype(np.float32).tobytes()
-                    filled.append(f"depth {size}")
-                    return original(self, size, data, *args[1:], **kwargs)
-                return original(self, size, *args, **kwargs)
-            components = kwargs.get("components", args[0] if args else None)
-            rest = args[1:]
-            data = kwargs.pop("data", rest[0] if rest else None)
-            rest = rest[1:]
-            if data is None and not kwargs.get("samples") and not kwargs.get("renderbuffer"):
-                dtype = kwargs.get("dtype", "f1")
-                faces = 6 if name == "texture_cube" else 1
-                data = _noise(tuple(size), components, dtype, faces, rng, nan)
-                filled.append(f"{name} {tuple(size)} {components}x{dtype}")
-            kwargs.pop("components", None)
-            return original(self, size, components, data, *rest, **kwargs)
-        return make
-
-    make_buffer = moderngl.Context.buffer
-
-    def buffer(self, data=None, *, reserve=0, dynamic=False):
-        # A buffer made with room only (``reserve``): its bytes are undefined until written
-        # (glBufferData with no data): noise (random bytes: NaNs among them as floats).
-        if data is None and reserve:
-            data = rng.integers(0, 256, int(reserve), dtype=np.uint8).tobytes()
-            filled.append(f"buffer {reserve}")
-        return make_buffer(self, data, dynamic=dynamic)
-
-    for name in _CONSTRUCTORS:
-        setattr(moderngl.Context, name, wrap(name))
-    moderngl.Context.buffer = buffer
-    try:
-        yield filled
-    finally:
-        for name, original in originals.items():
-            setattr(moderngl.Context, name, original)
-        moderngl.Context.buffer = make_buffer
-
-
 # NaN everywhere a float image is made; finite noise on a few scenes too (a NaN a shader
 # clamps or compares away would hide a read that finite noise shows).
 _NOISE = [(name, True) for name in SCENES] + [(name, False) for name in ("hall_start", "portals_depth_8",
