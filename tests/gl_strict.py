@@ -32,6 +32,11 @@ draw, reads back from the driver (glGet calls) the state the draw used:
   colour attachment and its write mask on gets a fragment output at its location (else
   the value written is undefined), of the attachment's kind (float for float and
   normalised formats, uint for unsigned-integer ones, int for signed);
+- **GL 4.1's minimum limits** (what every 4.1 driver gives; Apple's is near them): at most
+  16 samplers a program (GL_MAX_TEXTURE_IMAGE_UNITS), 12 uniform blocks (per stage, so
+  this counts the program's), each at most 16384 bytes (GL_MAX_UNIFORM_BLOCK_SIZE), and
+  at most 1024 components of default-block uniforms (GL_MAX_FRAGMENT_UNIFORM_COMPONENTS,
+  counted over the program: conservative);
 - **clears**: ``Framebuffer.clear`` (glClear with float clear values) on a framebuffer with
   an integer colour attachment in its draw buffers (GL 4.1 4.2.3: undefined).
 
@@ -173,6 +178,11 @@ _INT_FORMATS = {0x8231: "R8I", 0x8233: "R16I", 0x8235: "R32I", 0x8237: "RG8I", 0
 _DEPTH_FORMATS = {0x1902: "DEPTH_COMPONENT", 0x81A5: "DEPTH_COMPONENT16", 0x81A6: "DEPTH_COMPONENT24",
                   0x81A7: "DEPTH_COMPONENT32", 0x8CAC: "DEPTH_COMPONENT32F", 0x88F0: "DEPTH24_STENCIL8",
                   0x8CAD: "DEPTH32F_STENCIL8"}
+# a uniform's GLSL type -> its components (matrices: columns x rows)
+_UNIFORM_COMPONENTS = {0x1406: 1, 0x8B50: 2, 0x8B51: 3, 0x8B52: 4, 0x1404: 1, 0x8B53: 2, 0x8B54: 3, 0x8B55: 4,
+                       0x1405: 1, 0x8DC6: 2, 0x8DC7: 3, 0x8DC8: 4, 0x8B56: 1, 0x8B57: 2, 0x8B58: 3, 0x8B59: 4,
+                       0x8B5A: 4, 0x8B5B: 9, 0x8B5C: 16, 0x8B65: 6, 0x8B66: 8, 0x8B67: 6, 0x8B68: 12,
+                       0x8B69: 8, 0x8B6A: 12}
 _MIPMAPPED = {0x2700, 0x2701, 0x2702, 0x2703}
 _ENGINE_ROOT = os.path.normpath(os.path.join(os.path.dirname(__file__), ".."))
 
@@ -289,6 +299,8 @@ class StrictGL:
         self.sources: dict[int, dict[str, str]] = {}  # program -> its stages' sources (made while checking)
         self._clips: dict[int, set[int] | None] = {}
         self._outputs_of: dict[int, dict[int, tuple[str, str]]] = {}
+        self._limits_checked: set[int] = set()
+        self.largest: dict[str, tuple[int, str]] = {}  # the most of each limit a program used, and where
         self.unknown_programs: set[int] = set()  # drawn with, made before the check: clips not checked
         self.alignment = self._int(GL_UNIFORM_BUFFER_OFFSET_ALIGNMENT)
 
@@ -373,6 +385,43 @@ class StrictGL:
                 known.append((name.value.decode(), index))
             self._blocks[program] = known
         return known
+
+    def check_limits(self, program: int, where: str) -> None:
+        """GL 4.1's minimum limits (module docstring), once a program."""
+        if program in self._limits_checked:
+            return
+        self._limits_checked.add(program)
+        samplers = self._samplers(program)
+        if len(samplers) > 16:
+            self._note(f"{len(samplers)} samplers in one program: past GL 4.1's minimum of 16 texture image "
+                       "units a stage", where)
+        blocks = self._block_list(program)
+        if len(blocks) > 12:
+            self._note(f"{len(blocks)} uniform blocks in one program: past GL 4.1's minimum of 12 a stage", where)
+        for name, index in blocks:
+            value = _i(0)
+            self.gl["glGetActiveUniformBlockiv"](program, index, GL_UNIFORM_BLOCK_DATA_SIZE, ctypes.byref(value))
+            if value.value > 16384:
+                self._note(f"uniform block {name}: {value.value} bytes, past GL 4.1's minimum "
+                           "GL_MAX_UNIFORM_BLOCK_SIZE of 16384", where)
+        count = _i(0)
+        self.gl["glGetProgramiv"](program, GL_ACTIVE_UNIFORMS, ctypes.byref(count))
+        components = 0
+        for index in range(count.value):
+            name = ctypes.create_string_buffer(256)
+            length, size, kind = _i(0), _i(0), _u(0)
+            self.gl["glGetActiveUniform"](program, index, 256, ctypes.byref(length), ctypes.byref(size),
+                                          ctypes.byref(kind), name)
+            location = self.gl["glGetUniformLocation"](program, name.value)
+            if location < 0 or kind.value in _SAMPLERS:  # in a block (no location), or a sampler
+                continue
+            components += size.value * _UNIFORM_COMPONENTS.get(kind.value, 4)
+        for what, amount in (("samplers", len(samplers)), ("blocks", len(blocks)), ("uniform components", components)):
+            if amount > self.largest.get(what, (0, ""))[0]:
+                self.largest[what] = (amount, where)
+        if components > 1024:
+            self._note(f"{components} components of default-block uniforms: past GL 4.1's minimum of 1024 a stage",
+                       where)
 
     def check_blocks(self, program: int, where: str) -> None:
         """Each active uniform block of ``program``: a buffer bound at its binding point, the
@@ -481,6 +530,7 @@ class StrictGL:
         program = self._int(GL_CURRENT_PROGRAM)
         if not program:
             return
+        self.check_limits(program, where)
         self.check_blocks(program, where)
         self.check_clips(program, where)
         attached = self.attachments()
