@@ -114,6 +114,21 @@ def _probes(refresh: str, resolution: int = 32):
     return run
 
 
+def _probes_sliced_ggx(ctx):
+    """A probe captured a face a frame, GGX-prefiltered, box-projected, an influence box the
+    ring's boxes sample it through (eight frames: past a whole slicing round)."""
+    from benchmarks.probes import ProbeRing
+    from components import ReflectionProbe
+
+    def configure(engine):
+        for _, probe in engine.world.query_one(ReflectionProbe):
+            probe.time_slicing = "one_face_per_frame"
+            probe.prefilter = "ggx"
+            probe.influence = (30.0, 10.0, 30.0)
+            probe.box_projection = True
+    return _engine_frames(ctx, ProbeRing("every_frame", 32), 8, configure)
+
+
 def _mirror_beam(ctx):
     from games.mirror_beam.game import MirrorBeam, levels
 
@@ -142,6 +157,7 @@ SCENES: dict[str, Callable[[moderngl.Context], list[np.ndarray]]] = {
     "point_shadows": _point_shadows,
     "probes_dynamic": _probes("every_frame"),
     "probes_once": _probes("once"),
+    "probes_sliced_ggx": _probes_sliced_ggx,
     "mirror_beam": _mirror_beam,
     "portal_run": _portal_run,
     "resized": _resized,
