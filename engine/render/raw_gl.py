@@ -75,6 +75,7 @@ import numpy as np
 from engine.render.bindings import bind_texture_now, invalidate
 
 _VOID_CALL = ctypes.CFUNCTYPE(None)
+_CLEAR_BUFFER = ctypes.CFUNCTYPE(None, ctypes.c_uint, ctypes.c_int, ctypes.c_void_p)  # glClearBuffer{f,ui}v
 _COPY_TEX_SUB_IMAGE_2D = ctypes.CFUNCTYPE(None, ctypes.c_uint, ctypes.c_int, ctypes.c_int, ctypes.c_int,
                                           ctypes.c_int, ctypes.c_int, ctypes.c_int, ctypes.c_int)
 GL_TEXTURE_CUBE_MAP_POSITIVE_X = 0x8515
@@ -164,24 +165,38 @@ def clear_images(ctx: moderngl.Context, framebuffer: moderngl.Framebuffer) -> No
     attachment with the clear call of its kind (glClearBufferfv for float colour and depth,
     glClearBufferuiv for unsigned-integer images: the module's docstring).  The framebuffer
     must be bound (``use``): the clear obeys its draw buffers, masks and scissor, and changes
-    no state.  Where the loader does not give glClearBuffer*, moderngl's clear (glClear)."""
-    calls = getattr(ctx, "_speculum_clear_calls", None)
+    no state.  The calls are worked out once a framebuffer (its attachments never change).
+    Where the loader does not give glClearBuffer*, moderngl's clear (glClear)."""
+    try:
+        calls = framebuffer._speculum_clears
+    except AttributeError:
+        calls = framebuffer._speculum_clears = _clear_calls(ctx, framebuffer)
     if calls is None:
-        calls = ctx._speculum_clear_calls = (
-            _load(ctx, "glClearBufferfv", ctypes.CFUNCTYPE(*_SIGNATURES["glClearBufferfv"])),
-            _load(ctx, "glClearBufferuiv", ctypes.CFUNCTYPE(*_SIGNATURES["glClearBufferuiv"])),
-            (ctypes.c_float * 4)(), (_u * 4)(), (ctypes.c_float * 1)(1.0))
-    clear_float, clear_uint, zero_floats, zero_uints, far = calls
-    if clear_float is None or clear_uint is None:
         framebuffer.clear(depth=1.0)
         return
-    for index, texture in enumerate(framebuffer.color_attachments):
-        if texture.dtype[0] == "u":
-            clear_uint(GL_COLOR, index, zero_uints)
-        else:
-            clear_float(GL_COLOR, index, zero_floats)
+    for call, buffer, index, values in calls:
+        call(buffer, index, values)
+
+
+def _clear_calls(ctx: moderngl.Context, framebuffer: moderngl.Framebuffer) -> tuple | None:
+    """(function, buffer, draw buffer, values) for each clear ``clear_images`` makes of
+    ``framebuffer``; None without glClearBuffer*."""
+    # The values by address (a plain int crosses into C faster than an array does); the
+    # arrays live on the context, as long as the calls.
+    clear = _load(ctx, "glClearBufferfv", _CLEAR_BUFFER)
+    clear_uint = _load(ctx, "glClearBufferuiv", _CLEAR_BUFFER)
+    if clear is None or clear_uint is None:
+        return None
+    values = getattr(ctx, "_speculum_clear_values", None)
+    if values is None:
+        values = ctx._speculum_clear_values = ((ctypes.c_float * 4)(), (_u * 4)(), (ctypes.c_float * 1)(1.0))
+    zero_floats, zero_uints, far = (ctypes.addressof(v) for v in values)
+    calls = [(clear_uint, GL_COLOR, index, zero_uints) if texture.dtype[0] == "u" else
+             (clear, GL_COLOR, index, zero_floats)
+             for index, texture in enumerate(framebuffer.color_attachments)]
     if framebuffer.depth_attachment is not None:
-        clear_float(GL_DEPTH, 0, far)
+        calls.append((clear, GL_DEPTH, 0, far))
+    return tuple(calls)
 
 
 def make_current(ctx: moderngl.Context) -> None:
