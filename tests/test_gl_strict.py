@@ -276,3 +276,27 @@ def test_no_texel_is_read_before_it_is_written(ctx, name, nan):
                                   f"with new textures made full of noise (first at row, column "
                                   f"{tuple(int(v) for v in np.argwhere(differ)[0])}): a texel read before it is "
                                   "written")
+
+
+def test_the_debug_overlay_draws_legal_gl_after_a_frame(scene, ctx):
+    """The overlay draws after the engine's frame, which leaves the reflections' mipmapped
+    albedo sampler object on unit 0: the overlay's font atlas (no mip levels) must not be
+    filtered by it (incomplete: no text on a GPU).  Broken on purpose: binding the atlas with
+    ``texture.use(0)`` (the sampler stays) is named here."""
+    pytest.importorskip("imgui_bundle", reason="the debug overlay needs imgui-bundle (not installed here)")
+    from shell.overlay import DebugOverlay
+    from tests.test_overlay import SIZE as OVERLAY_SIZE
+    from tests.test_overlay import room_with_probe
+
+    runner = scene(room_with_probe, OVERLAY_SIZE)
+    runner.frame()
+    runner.frame()
+    overlay = DebugOverlay(ctx)
+    try:
+        with strict_draws(ctx) as strict:
+            overlay.record(0.02)
+            overlay.draw(runner.engine, runner.capture.framebuffer, OVERLAY_SIZE)
+    finally:
+        overlay.release()
+    assert strict.draws > 0
+    assert not strict.problems, "\n".join(f"{where}: {problem}" for problem, where in strict.problems.items())

@@ -302,6 +302,16 @@ def bind_texture(ctx: moderngl.Context, texture: Bindable, unit: int, keep_sampl
             cache.epoch += 1
 
 
+def bound_texture(ctx: moderngl.Context, unit: int, kind: type = moderngl.Texture) -> Bindable | None:
+    """The texture of class ``kind`` the record holds on ``unit`` (None: none known, as after
+    ``invalidate``)."""
+    try:
+        cache = ctx._speculum_pass_state
+    except AttributeError:
+        return None
+    return cache.textures.get((unit, kind))
+
+
 def bind_textures(ctx: moderngl.Context, textures: tuple[tuple[Bindable, int], ...]) -> None:
     """``bind_texture`` for each (texture, unit) pair of ``textures`` (a pass's images: one
     look-up of the record for all of them)."""

@@ -12,6 +12,7 @@ stands above every pass and no pass imports it.
 from __future__ import annotations
 
 import os
+import weakref
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Protocol
@@ -126,9 +127,14 @@ class Gpu:
         # feedback loop), which GL 4.1 leaves undefined even unread, and which GL drivers
         # layered on other APIs (Apple's 4.1 over Metal) reject.  1x1, so complete whatever the
         # filter (the reflections' mipmapped albedo sampler included).
+        # A batch with no albedo map needs none bound where its unit holds any colour map
+        # already (``colour_maps``: the material maps uploaded, mipmapped, and the blank one):
+        # the blank is bound only over something else, so batches with and without maps in
+        # turn do not bind it and their maps again at every switch.
         self.blank_color = ctx.texture((1, 1), 4, b"\xff\xff\xff\xff")
         self.blank_ids = ctx.texture((1, 1), 1, bytes(4), dtype="u4")
         self.blank_ids.filter = (moderngl.NEAREST, moderngl.NEAREST)
+        self.colour_maps: weakref.WeakSet[moderngl.Texture] = weakref.WeakSet((self.blank_color,))
         self.stats = RenderStats()  # the frame's, while a frame runs (Engine.frame gives it)
         # Every probe's cube map by probe key: made and released by the probe captures
         # (engine/render/probes.py), sampled by the scene pass and the composites.

@@ -201,11 +201,11 @@ class Renderer(Gpu):
         shared.users += 1
         return shared.obj
 
-    @staticmethod
-    def _release(table: dict[int, Shared], key: int) -> None:
+    def _release(self, table: dict[int, Shared], key: int) -> None:
         shared = table[key]
         shared.users -= 1
         if shared.users == 0:
+            self.colour_maps.discard(shared.obj)  # (a texture: no longer one to leave bound)
             shared.obj.release()
             del table[key]
 
@@ -230,6 +230,7 @@ class Renderer(Gpu):
         gl_texture.build_mipmaps()
         gl_texture.filter = (moderngl.LINEAR_MIPMAP_LINEAR, moderngl.LINEAR)
         gl_texture.anisotropy = self.normal_map_anisotropy if linear else self.texture_anisotropy
+        self.colour_maps.add(gl_texture)  # complete (mipmapped), a float format: a stand-in albedo map too
         return gl_texture
 
     def set_sky_faces(self, faces: np.ndarray | None) -> None:

@@ -90,6 +90,7 @@ from engine.render.bindings import (
     bind_texture,
     bind_uniform_block,
     bindings_epoch,
+    bound_texture,
     flip_front_face,
     forget_sampler,
     set_front_face,
@@ -376,6 +377,7 @@ class ScenePass:
         kind, unlit_kind = kinds
         sky_size = self._sky_size
         last_own = self._last_own
+        blank, colour_maps = renderer.blank_color, renderer.colour_maps
         draws = instances = 0
         skipped = (skip, hide)
         for batch in batches:
@@ -389,6 +391,8 @@ class ScenePass:
                 record = batch.draw_records[drawn_as] = self._record(batch, drawn_as, stamp, variants)
             _, _, glo, vao, uniforms, values, textures, own, vertices = record
             for unit, texture in textures:
+                if texture is blank and bound_texture(ctx, unit) in colour_maps:
+                    continue  # (no map: any colour map there serves, unread)
                 bind_texture(ctx, texture, unit, True)  # the pass's albedo sampler stays (bind_sampler)
             if own is None:  # probes bound now: their lookups are read each draw
                 own = self._probe_values(batch)
