@@ -302,14 +302,12 @@ def bind_texture(ctx: moderngl.Context, texture: Bindable, unit: int, keep_sampl
             cache.epoch += 1
 
 
-def bound_texture(ctx: moderngl.Context, unit: int, kind: type = moderngl.Texture) -> Bindable | None:
-    """The texture of class ``kind`` the record holds on ``unit`` (None: none known, as after
-    ``invalidate``)."""
-    try:
-        cache = ctx._speculum_pass_state
-    except AttributeError:
-        return None
-    return cache.textures.get((unit, kind))
+def texture_record(ctx: moderngl.Context) -> dict[tuple[int, type], Bindable]:
+    """The record of what each unit holds, (unit, texture class) -> texture, as kept by
+    ``bind_texture`` (read only; the same dict for the context's life, emptied by
+    ``invalidate``): a pass that may leave a unit as it is when it holds a suitable texture
+    looks there once rather than calling per draw."""
+    return _cache(ctx).textures
 
 
 def bind_textures(ctx: moderngl.Context, textures: tuple[tuple[Bindable, int], ...]) -> None:

@@ -12,7 +12,6 @@ stands above every pass and no pass imports it.
 from __future__ import annotations
 
 import os
-import weakref
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Protocol
@@ -134,7 +133,7 @@ class Gpu:
         self.blank_color = ctx.texture((1, 1), 4, b"\xff\xff\xff\xff")
         self.blank_ids = ctx.texture((1, 1), 1, bytes(4), dtype="u4")
         self.blank_ids.filter = (moderngl.NEAREST, moderngl.NEAREST)
-        self.colour_maps: weakref.WeakSet[moderngl.Texture] = weakref.WeakSet((self.blank_color,))
+        self.colour_maps: set[moderngl.Texture] = {self.blank_color}  # (a texture leaves it when released)
         self.stats = RenderStats()  # the frame's, while a frame runs (Engine.frame gives it)
         # Every probe's cube map by probe key: made and released by the probe captures
         # (engine/render/probes.py), sampled by the scene pass and the composites.

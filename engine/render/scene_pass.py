@@ -90,11 +90,11 @@ from engine.render.bindings import (
     bind_texture,
     bind_uniform_block,
     bindings_epoch,
-    bound_texture,
     flip_front_face,
     forget_sampler,
     set_front_face,
     set_scissor,
+    texture_record,
     watching,
 )
 from engine.render.gpu import Gpu
@@ -156,6 +156,7 @@ _BATCHED_SCENE = PassState(depth_func="<", cull=True, clips=BATCHED_SCENE_CLIPS)
 # is undefined (llvmpipe reads 0 and keeps the pixel; a GPU may clip the sky away), so its
 # pass turns none on.  It needs none: the sky lies on the far plane, behind any view's plane.
 _SKY = PassState(depth_func="<=")
+_ALBEDO_KEY = (ALBEDO_UNIT, moderngl.Texture)  # the albedo unit's 2D binding in the texture record
 _LAYERED_SCENE = PassState(depth_func="<", cull=True, clips=BATCHED_SCENE_CLIPS)
 _LAYERED_SKY = PassState(depth_func="<=")
 _BATCHED_TRANSPARENT = PassState(depth_func="<", cull=True, clips=BATCHED_SCENE_CLIPS, blend=BLEND_OVER)
@@ -377,7 +378,7 @@ class ScenePass:
         kind, unlit_kind = kinds
         sky_size = self._sky_size
         last_own = self._last_own
-        blank, colour_maps = renderer.blank_color, renderer.colour_maps
+        blank, colour_maps, recorded = renderer.blank_color, renderer.colour_maps, texture_record(ctx)
         draws = instances = 0
         skipped = (skip, hide)
         for batch in batches:
@@ -391,7 +392,7 @@ class ScenePass:
                 record = batch.draw_records[drawn_as] = self._record(batch, drawn_as, stamp, variants)
             _, _, glo, vao, uniforms, values, textures, own, vertices = record
             for unit, texture in textures:
-                if texture is blank and bound_texture(ctx, unit) in colour_maps:
+                if texture is blank and recorded.get(_ALBEDO_KEY) in colour_maps:
                     continue  # (no map: any colour map there serves, unread)
                 bind_texture(ctx, texture, unit, True)  # the pass's albedo sampler stays (bind_sampler)
             if own is None:  # probes bound now: their lookups are read each draw
