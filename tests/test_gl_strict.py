@@ -300,3 +300,48 @@ def test_the_debug_overlay_draws_legal_gl_after_a_frame(scene, ctx):
         overlay.release()
     assert strict.draws > 0
     assert not strict.problems, "\n".join(f"{where}: {problem}" for problem, where in strict.problems.items())
+
+
+def test_a_level_is_made_and_cleared_with_each_image_at_its_clear_value(ctx):
+    """A level's images made full of noise (as a GPU may hand them back) are colour 0, ids 0
+    and depth far once made (``RenderTargets`` clears them), and again after ``clear_images``
+    (glClearBufferuiv for the id images, glClearBufferfv for colour and depth) over noise
+    written into every image; the framebuffer bound before stays bound.  Broken on purpose:
+    ``clear_images`` skipping the id images fails here (glClearBufferfv on them instead
+    would not: llvmpipe converts, as GL leaves it undefined)."""
+    from engine.render.raw_gl import clear_images
+    from engine.render.targets import RenderTargets
+
+    size = (24, 10)
+    rng = np.random.default_rng(3)
+    other = CaptureTarget(ctx, (4, 4))
+    other.framebuffer.use()
+    with noisy_textures(nan=True):
+        targets = RenderTargets(ctx, size)
+    try:
+        assert ctx.fbo is other.framebuffer
+
+        def read_all() -> list[np.ndarray]:
+            ids = [np.frombuffer(t.read(), np.uint32) for t in (targets.surface, targets.seen, targets.node)]
+            return [np.frombuffer(targets.color.read(), np.float16), *ids,
+                    np.frombuffer(targets.depth.read(), np.float32)]
+
+        def check() -> None:
+            colour, surface, seen, node, depth = read_all()
+            assert (colour == 0).all(), "colour not 0"
+            for name, ids in (("surface", surface), ("seen", seen), ("node", node)):
+                assert (ids == 0).all(), f"{name} ids not 0"
+            assert (depth == 1.0).all(), "depth not far"
+
+        check()
+        for texture in (targets.surface, targets.seen, targets.node):
+            texture.write(rng.integers(1, 2**32, size[0] * size[1], dtype=np.uint32).tobytes())
+        targets.color.write(rng.uniform(1.0, 5.0, size[0] * size[1] * 4).astype(np.float16).tobytes())
+        targets.depth.write(np.full(size[0] * size[1], 0.25, np.float32).tobytes())
+        targets.framebuffer.use()
+        clear_images(ctx, targets.framebuffer)
+        check()
+    finally:
+        targets.release()
+        other.release()
+        bindings.invalidate(ctx)
