@@ -457,6 +457,15 @@ class StrictGL:
                 self._note(f"uniform block {name} (binding {binding}): offset {start} not a multiple of "
                            f"GL_UNIFORM_BUFFER_OFFSET_ALIGNMENT ({self.alignment})", where)
 
+    def forget(self, program: int, source: int) -> None:
+        """``program`` was linked again with the shaders of ``source`` (a hot reload)."""
+        for known in (self._programs, self._blocks, self._clips, self._outputs_of):
+            known.pop(program, None)
+        self._limits_checked.discard(program)
+        self.sources.pop(program, None)
+        if source in self.sources:
+            self.sources[program] = self.sources[source]
+
     def check_clips(self, program: int, where: str) -> None:
         """Every enabled clip distance is written by the program's last stage before
         rasterisation."""
@@ -664,14 +673,28 @@ def strict_draws(ctx: moderngl.Context) -> Iterator[StrictGL]:
         checker.check_clear(self, _where())
         return clear(self, *args, **kwargs)
 
+    # A hot reload links the same GL program again with new shaders (ShaderLibrary's relink):
+    # what is known of it (uniform locations, blocks, outputs, sources) is the old build's.
+    from engine.render import shader_library
+
+    relink = shader_library._RelinkGL.relink
+
+    def forgetting_relink(self, program, source, attributes):
+        try:
+            return relink(self, program, source, attributes)
+        finally:
+            checker.forget(program, source)
+
     moderngl.VertexArray.render = checked_render
     moderngl.Framebuffer.clear = checked_clear
     moderngl.Context.program = recorded_program
+    shader_library._RelinkGL.relink = forgetting_relink
     try:
         yield checker
     finally:
         moderngl.VertexArray.render, moderngl.Framebuffer.clear = render, clear
         moderngl.Context.program = make_program
+        shader_library._RelinkGL.relink = relink
 
 
 # --- memory never written ---------------------------------------------------------------------
