@@ -41,7 +41,7 @@ from pyglm import glm
 from components.post import TONEMAP_CURVES
 from engine.assets.level_file import LevelGame
 from engine.assets.values import json_value
-from engine.render.bindings import invalidate
+from engine.render.bindings import bind_texture, invalidate
 from shell.editor import Editor
 from shell.overlay_text import overlay_lines
 
@@ -124,7 +124,10 @@ class OverlayRenderer(ModernGLRenderer):
                 if texture is None:
                     raise ValueError(f"overlay: ImGui drew with texture {command.get_tex_id()}, which it never "
                                      f"asked to create (known: {list(self._textures)})")
-                texture.use(0)
+                # Through the record: it takes off a sampler object the engine left on unit 0
+                # (the reflections' mipmapped albedo filter), which would leave the font
+                # atlas, with no mip levels, incomplete (black on a GPU).
+                bind_texture(self.ctx, texture, 0)
                 x, y, z, w = command.clip_rect
                 self.ctx.scissor = int(x), int(fb_height - w), int(z - x), int(w - y)
                 self._vao.render(moderngl.TRIANGLES, vertices=command.elem_count, first=command.idx_offset)

@@ -2,6 +2,7 @@
 its own world and must leave the context without a GL error."""
 from __future__ import annotations
 
+import contextlib
 import os
 import re
 import shutil
@@ -34,6 +35,32 @@ def _no_gl_error(request):
     assert context.error == "GL_NO_ERROR"
     yield
     assert context.error == "GL_NO_ERROR"
+
+
+@pytest.fixture(autouse=True)
+def _strict_gl(request):
+    """With SPECULUM_STRICT_GL=1, every test that draws on the shared context runs under the
+    GL 4.1 draw check (tests/gl_strict.py) and fails naming what a GPU driver may not
+    forgive: a sweep of every feature the suite draws, too slow to be on by default.
+    With SPECULUM_NOISY_GL=1, every texture made without data is made full of NaN (float
+    images) or noise, every buffer made with room only full of random bytes, as a GPU may
+    hand them back (tests/gl_strict.py noisy_textures): a test whose pixels then differ
+    reads what no pass wrote (or makes such a texture itself)."""
+    strict_on = os.environ.get("SPECULUM_STRICT_GL", "") not in ("", "0")
+    noisy_on = os.environ.get("SPECULUM_NOISY_GL", "") not in ("", "0")
+    if not (strict_on or noisy_on) or "ctx" not in request.fixturenames:
+        yield
+        return
+    from tests.gl_strict import noisy_textures, strict_draws
+
+    with contextlib.ExitStack() as stack:
+        if noisy_on:
+            stack.enter_context(noisy_textures(nan=True))
+        strict = stack.enter_context(strict_draws(request.getfixturevalue("ctx"))) if strict_on else None
+        yield
+    if strict is not None and strict.problems:
+        pytest.fail("GL 4.1 draw check:\n" + "\n".join(f"{where}: {problem}"
+                                                      for problem, where in strict.problems.items()))
 
 
 @pytest.fixture

@@ -74,7 +74,11 @@ PARENT_NODE_UNIT = NODE_UNIT  # claim: the parent level's node image
 PARENT_SURFACE_UNIT = 6  # claim: the parent level's surface image (the composite's ATLAS_UNIT)
 REFLECTION_UNITS = (3, 4, 5)  # composite: the level's colour, seen-id and node images
 ATLAS_UNIT = 6           # composite (rough variant): the rough-reflection atlas
-FALLBACK_PARENT_UNITS = (0, 2)  # composite (fallback variants): the parent level's node and surface images
+# composite (fallback variants): the parent level's node and surface images, on the claims'
+# units for them (the level's claims bound them there already), and never on the scene's
+# albedo unit: a scene pass after a fallback would otherwise find an id image under its
+# float albedo sampler (a batch with no map binds the blank one, Gpu.blank_color, again).
+FALLBACK_PARENT_UNITS = (PARENT_NODE_UNIT, PARENT_SURFACE_UNIT)
 LEVEL_UNITS = (3, 5)     # rough-atlas copy: a level's colour and node images (the composite's units for them)
 OUTLINE_UNIT = 0         # selection outline (the editor): the main view's seen-id image (engine/render/outline.py)
 PROBE_UNIT = 7           # scene: the cube map of the batch's reflection probe; composite (fallback): its draw's first
@@ -296,6 +300,14 @@ def bind_texture(ctx: moderngl.Context, texture: Bindable, unit: int, keep_sampl
         textures[key] = texture
         if key in cache.watched:
             cache.epoch += 1
+
+
+def texture_record(ctx: moderngl.Context) -> dict[tuple[int, type], Bindable]:
+    """The record of what each unit holds, (unit, texture class) -> texture, as kept by
+    ``bind_texture`` (read only; the same dict for the context's life, emptied by
+    ``invalidate``): a pass that may leave a unit as it is when it holds a suitable texture
+    looks there once rather than calling per draw."""
+    return _cache(ctx).textures
 
 
 def bind_textures(ctx: moderngl.Context, textures: tuple[tuple[Bindable, int], ...]) -> None:

@@ -145,6 +145,22 @@ class Gpu:
         self._transparent: list[InstanceBatch] = []  # the non-empty transparent ones (found with it)
         self._order_stale = True
         self.sky = flat_cube(ctx, BACKGROUND)
+        # Stand-ins for an image a program samples in a branch its draw does not take (a batch
+        # with no albedo map; a fallback with no reflection level below it).  A sampler the
+        # program uses statically must still find a complete texture of its own type on its
+        # unit: otherwise it reads whatever another pass left there (an integer id image under
+        # a float sampler, a texture attached to the framebuffer drawn into: a rendering
+        # feedback loop), which GL 4.1 leaves undefined even unread, and which GL drivers
+        # layered on other APIs (Apple's 4.1 over Metal) reject.  1x1, so complete whatever the
+        # filter (the reflections' mipmapped albedo sampler included).
+        # A batch with no albedo map needs none bound where its unit holds any colour map
+        # already (``colour_maps``: the material maps uploaded, mipmapped, and the blank one):
+        # the blank is bound only over something else, so batches with and without maps in
+        # turn do not bind it and their maps again at every switch.
+        self.blank_color = ctx.texture((1, 1), 4, b"\xff\xff\xff\xff")
+        self.blank_ids = ctx.texture((1, 1), 1, bytes(4), dtype="u4")
+        self.blank_ids.filter = (moderngl.NEAREST, moderngl.NEAREST)
+        self.colour_maps: set[moderngl.Texture] = {self.blank_color}  # (a texture leaves it when released)
         self.stats = RenderStats()  # the frame's, while a frame runs (Engine.frame gives it)
         # Every probe's cube map by probe key: made and released by the probe captures
         # (engine/render/probes.py), sampled by the scene pass and the composites.

@@ -829,7 +829,11 @@ class MirrorPasses:
         renderer = self.renderer
         parent.composite_framebuffer.use()
         apply_pass_state(ctx, _COMPOSITE, (0, 0, *parent.size))
+        # With no level below, the level's images are blank (``Gpu.blank_ids``): the program
+        # reads them only for end views, but its samplers must not find what is left on their
+        # units (the parent's own seen image, attached here: a rendering feedback loop).
         bind_textures(ctx, ((parent.node, FALLBACK_PARENT_UNITS[0]), (parent.surface, FALLBACK_PARENT_UNITS[1]),
+                            (renderer.blank_ids, _SEEN_UNIT), (renderer.blank_ids, _NODE_UNIT),
                             (renderer.sky, SKY_UNIT)) if level is None else
                       ((parent.node, FALLBACK_PARENT_UNITS[0]), (parent.surface, FALLBACK_PARENT_UNITS[1]),
                        (level.seen, _SEEN_UNIT), (level.node, _NODE_UNIT), (renderer.sky, SKY_UNIT)))

@@ -46,6 +46,13 @@ its colour attachment 0 is then re-pointed at the face with ``glFramebufferTextu
 moderngl still binds, clears and sets the viewport of it as its own; the copy's wait for
 each face's rasterisation (llvmpipe) is gone with the copy.
 
+Clearing integer colour attachments (``RawGL.clear_level``): moderngl's ``Framebuffer.clear``
+is one ``glClear`` with a float clear colour, and GL 4.1 (4.2.3) leaves what ``glClear`` writes
+into an integer colour buffer undefined (llvmpipe writes the bits of 0.0, a GPU driver need
+not): a level's id and node images are cleared with ``glClearBufferuiv``, its colour and
+depth with ``glClearBufferfv``, after moderngl bound the framebuffer (its draw buffers,
+colour and depth masks and scissor, all of which the clear obeys; it changes no state).
+
 ``glFlush``.  moderngl has ``finish`` (wait for everything) but no flush (start
 the GPU on what is queued, without waiting).  On llvmpipe that difference is frame time:
 draws are binned on the calling thread and rasterised only at a flush, a framebuffer
@@ -68,6 +75,7 @@ import numpy as np
 from engine.render.bindings import bind_texture_now, invalidate
 
 _VOID_CALL = ctypes.CFUNCTYPE(None)
+_CLEAR_BUFFER = ctypes.CFUNCTYPE(None, ctypes.c_uint, ctypes.c_int, ctypes.c_void_p)  # glClearBuffer{f,ui}v
 _COPY_TEX_SUB_IMAGE_2D = ctypes.CFUNCTYPE(None, ctypes.c_uint, ctypes.c_int, ctypes.c_int, ctypes.c_int,
                                           ctypes.c_int, ctypes.c_int, ctypes.c_int, ctypes.c_int)
 GL_TEXTURE_CUBE_MAP_POSITIVE_X = 0x8515
@@ -122,6 +130,7 @@ _SIGNATURES = {
     "glCheckFramebufferStatus": (_u, _u),
     "glDrawBuffers": (None, _i, ctypes.POINTER(_u)),
     "glClearBufferfv": (None, _u, _i, ctypes.POINTER(ctypes.c_float)),
+    "glClearBufferuiv": (None, _u, _i, ctypes.POINTER(_u)),
     "glViewport": (None, _i, _i, _i, _i),
     "glGetError": (_u,),
     "glDisable": (None, _u),
@@ -151,6 +160,45 @@ class MissingEntryPoints(RuntimeError):
     not broken)."""
 
 
+def clear_images(ctx: moderngl.Context, framebuffer: moderngl.Framebuffer) -> None:
+    """Clear the bound ``framebuffer`` to colour 0, integer ids 0 and depth far, each
+    attachment with the clear call of its kind (glClearBufferfv for float colour and depth,
+    glClearBufferuiv for unsigned-integer images: the module's docstring).  The framebuffer
+    must be bound (``use``): the clear obeys its draw buffers, masks and scissor, and changes
+    no state.  The calls are worked out once a framebuffer (its attachments never change).
+    Where the loader does not give glClearBuffer*, moderngl's clear (glClear)."""
+    try:
+        calls = framebuffer._speculum_clears
+    except AttributeError:
+        calls = framebuffer._speculum_clears = _clear_calls(ctx, framebuffer)
+    if calls is None:
+        framebuffer.clear(depth=1.0)
+        return
+    for call, buffer, index, values in calls:
+        call(buffer, index, values)
+
+
+def _clear_calls(ctx: moderngl.Context, framebuffer: moderngl.Framebuffer) -> tuple | None:
+    """(function, buffer, draw buffer, values) for each clear ``clear_images`` makes of
+    ``framebuffer``; None without glClearBuffer*."""
+    # The values by address (a plain int crosses into C faster than an array does); the
+    # arrays live on the context, as long as the calls.
+    clear = _load(ctx, "glClearBufferfv", _CLEAR_BUFFER)
+    clear_uint = _load(ctx, "glClearBufferuiv", _CLEAR_BUFFER)
+    if clear is None or clear_uint is None:
+        return None
+    values = getattr(ctx, "_speculum_clear_values", None)
+    if values is None:
+        values = ctx._speculum_clear_values = ((ctypes.c_float * 4)(), (_u * 4)(), (ctypes.c_float * 1)(1.0))
+    zero_floats, zero_uints, far = (ctypes.addressof(v) for v in values)
+    calls = [(clear_uint, GL_COLOR, index, zero_uints) if texture.dtype[0] == "u" else
+             (clear, GL_COLOR, index, zero_floats)
+             for index, texture in enumerate(framebuffer.color_attachments)]
+    if framebuffer.depth_attachment is not None:
+        calls.append((clear, GL_DEPTH, 0, far))
+    return tuple(calls)
+
+
 def make_current(ctx: moderngl.Context) -> None:
     """Make ``ctx`` the calling thread's current context."""
     ctx.__enter__()
@@ -166,6 +214,10 @@ class RawGL:
         self._attach = {name: _load(ctx, name, ctypes.CFUNCTYPE(*_SIGNATURES[name]))
                         for name in ("glBindFramebuffer", "glFramebufferTexture2D", "glCheckFramebufferStatus",
                                      "glGetError")}
+
+    def clear_level(self, framebuffer: moderngl.Framebuffer) -> None:
+        """``clear_images`` on this context (the scene pass's clear of a level)."""
+        clear_images(self.ctx, framebuffer)
 
     @property
     def can_attach_cube_faces(self) -> bool:

@@ -223,11 +223,11 @@ class Renderer(Gpu):
         shared.users += 1
         return shared.obj
 
-    @staticmethod
-    def _release(table: dict[int, Shared], key: int) -> None:
+    def _release(self, table: dict[int, Shared], key: int) -> None:
         shared = table[key]
         shared.users -= 1
         if shared.users == 0:
+            self.colour_maps.discard(shared.obj)  # (a texture: no longer one to leave bound)
             shared.obj.release()
             del table[key]
 
@@ -252,6 +252,7 @@ class Renderer(Gpu):
         gl_texture.build_mipmaps()
         gl_texture.filter = (moderngl.LINEAR_MIPMAP_LINEAR, moderngl.LINEAR)
         gl_texture.anisotropy = self.normal_map_anisotropy if linear else self.texture_anisotropy
+        self.colour_maps.add(gl_texture)  # complete (mipmapped), a float format: a stand-in albedo map too
         return gl_texture
 
     def set_sky_faces(self, faces: np.ndarray | None) -> None:
@@ -379,7 +380,7 @@ class Renderer(Gpu):
         if self.text_pass is not None:
             self.text_pass.release()
             self.text_pass = None
-        for obj in (self.sky, self.cameras_ubo, self.lights_ubo):
+        for obj in (self.sky, self.blank_color, self.blank_ids, self.cameras_ubo, self.lights_ubo):
             obj.release()
         self.shaders.release()
 

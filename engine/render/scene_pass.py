@@ -98,6 +98,7 @@ from engine.render.bindings import (
     forget_sampler,
     set_front_face,
     set_scissor,
+    texture_record,
     watching,
 )
 from engine.render.gpu import Gpu
@@ -159,6 +160,7 @@ _BATCHED_SCENE = PassState(depth_func="<", cull=True, clips=BATCHED_SCENE_CLIPS)
 # is undefined (llvmpipe reads 0 and keeps the pixel; a GPU may clip the sky away), so its
 # pass turns none on.  It needs none: the sky lies on the far plane, behind any view's plane.
 _SKY = PassState(depth_func="<=")
+_ALBEDO_KEY = (ALBEDO_UNIT, moderngl.Texture)  # the albedo unit's 2D binding in the texture record
 _LAYERED_SCENE = PassState(depth_func="<", cull=True, clips=BATCHED_SCENE_CLIPS)
 _LAYERED_SKY = PassState(depth_func="<=")
 _BATCHED_TRANSPARENT = PassState(depth_func="<", cull=True, clips=BATCHED_SCENE_CLIPS, blend=BLEND_OVER)
@@ -385,6 +387,7 @@ class ScenePass:
         kind, unlit_kind = kinds
         sky_size = self._sky_size
         last_own = self._last_own
+        blank, colour_maps, recorded = renderer.blank_color, renderer.colour_maps, texture_record(ctx)
         draws = instances = 0
         skipped = (skip, hide)
         for batch in batches:
@@ -398,6 +401,8 @@ class ScenePass:
                 record = batch.draw_records[drawn_as] = self._record(batch, drawn_as, stamp, variants)
             _, _, glo, vao, uniforms, values, textures, own, vertices = record
             for unit, texture in textures:
+                if texture is blank and recorded.get(_ALBEDO_KEY) in colour_maps:
+                    continue  # (no map: any colour map there serves, unread)
                 bind_texture(ctx, texture, unit, True)  # the pass's albedo sampler stays (bind_sampler)
             if own is None:  # probes bound now: their lookups are read each draw
                 own = self._probe_values(batch)
@@ -442,8 +447,11 @@ class ScenePass:
         values = self._written.get(glo)
         if values is None:
             values = self._written[glo] = [None] * len(_PER_DRAW_UNIFORMS)
+        # A batch with no albedo map binds the blank one: the program's sampler is there all
+        # the same (``Gpu.blank_color``).
+        albedo = batch.texture if batch.texture is not None else self.renderer.blank_color
         textures = tuple((unit, texture) for unit, texture in (
-            (ALBEDO_UNIT, batch.texture), (NORMAL_UNIT, batch.normal_map), (EMISSIVE_MAP_UNIT, batch.emissive_map),
+            (ALBEDO_UNIT, albedo), (NORMAL_UNIT, batch.normal_map), (EMISSIVE_MAP_UNIT, batch.emissive_map),
             (METALLIC_ROUGHNESS_UNIT, batch.metallic_roughness_map)) if texture is not None)
         own = None
         if not batch.probe and not batch.probe_blend and not batch.rest_probe:
@@ -505,9 +513,10 @@ class ScenePass:
         if options.clear:
             # Every image: colour and alpha 0, ids 0, the node image 0 (a root is view 0 of
             # its tree), depth far.  The views then write colour and ids, never the node image.
+            # Each image with the clear of its kind: glClear leaves integer images undefined.
             targets.framebuffer.use()
             apply_pass_state(self.ctx, _SCENE, viewport)
-            targets.framebuffer.clear(depth=1.0)
+            renderer.raw_gl.clear_level(targets.framebuffer)
         # Per-view draws start with the first view's scissor (set once, not reset then set).
         self._begin(views, targets, options, _BATCHED_SCENE if options.batched else _SCENE, run)
         if options.batched:

@@ -10,6 +10,7 @@ import moderngl
 import numpy as np
 
 from engine.core.errors import GLLimitError
+from engine.render.raw_gl import clear_images
 
 # The HDR colour images' texel format: half floats, whose largest finite value is 65504.  What
 # the shaders write there is kept within it at the source (shaders/include/hdr.glsl), never left
@@ -68,6 +69,15 @@ class RenderTargets:
         self.color_framebuffer = ctx.framebuffer([self.color], self.depth)
         # Composites write the reflection's colour and seen-id only (they read surface and node).
         self.composite_framebuffer = ctx.framebuffer([self.color, self.seen])
+        # Every image cleared once when made (colour 0, ids 0, depth far): a GPU hands back new
+        # textures holding whatever its memory held (llvmpipe zero-fills them), and a
+        # reflection's bilinear lookups (a water surface's bent rays, a scaled level) take
+        # texels beside the claimed pixels, which no pass of the first frame writes.
+        bound = ctx.fbo
+        self.framebuffer.use()
+        clear_images(ctx, self.framebuffer)
+        if bound is not None:
+            bound.use()
 
     def read_ids(self) -> np.ndarray:
         """Entity finally seen at each pixel, uint32 (height, width), row 0 at the top."""

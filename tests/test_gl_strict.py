@@ -1,0 +1,347 @@
+"""What llvmpipe forgives and a GPU driver may not, checked on real frames of the sample
+level, the README examples, the games and the benchmark scenes (mirrors, portals, shadows,
+virtual lights, probes, post-processing, a resize).
+
+1. **Every draw is legal GL 4.1** (``tests/gl_strict.py``, wrapping ``VertexArray.render`` and
+   ``Framebuffer.clear`` for the test only): each active sampler finds a complete texture of
+   its own type on its unit (mip levels, integer formats filtered NEAREST, shadow samplers on
+   depth textures with comparison on and the reverse), no two sampler types share a unit, no
+   sampled image is attached to the framebuffer drawn into (a rendering feedback loop), and
+   no integer image is cleared with glClear.  Broken on purpose: with the scene pass binding
+   no blank albedo map for batches without one, the check names the float sampler finding
+   the node image another pass left on unit 0; with the fallback composite binding no blank
+   id images, it names the feedback loop on the parent's seen image; with the level clear
+   back to ``Framebuffer.clear``, the glClear of the id images.
+2. **No texel is read before it is written**: every texture the engine makes without data
+   is made full of NaN (float images) or noise instead (a test-only hook around moderngl's
+   texture constructors, where llvmpipe would zero-fill; a GPU hands back whatever memory
+   held), every buffer made with room only (``reserve``) full of random bytes, and the
+   frames, colour and ids, must be those of a run without it, bit for bit.
+   Broken on purpose: without the clear of a level's images when they are made
+   (``RenderTargets``), hall_start's frame 2 differs in every pixel with NaN (the water
+   composite's bilinear taps beside the claimed pixels read the first frame's unwritten
+   texels, and the NaN spreads through the next frame's end images and bloom), and in 21
+   pixels of the water's edge with finite noise.
+"""
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import moderngl
+import numpy as np
+import pytest
+
+from engine.core.frame_io import Output
+from engine.render import bindings
+from engine.render.targets import CaptureTarget, release_framebuffer
+from shell.app import Engine
+from tests import golden
+from tests.gl_strict import noisy_textures, strict_draws
+from tests.golden_scenes import cases
+
+DT = 1.0 / 60.0
+SIZE = (160, 90)
+CASE_BY_NAME = {case.name: case for case in cases()}
+
+
+def _golden(name: str) -> Callable[[moderngl.Context], list[np.ndarray]]:
+    def run(ctx: moderngl.Context) -> list[np.ndarray]:
+        frame = golden.render_case(ctx, CASE_BY_NAME[name])
+        return [frame.rgb, frame.ids]
+    return run
+
+
+def _engine_frames(ctx: moderngl.Context, game, frames: int, configure=None, step=None,
+                   sizes: tuple[tuple[int, int], ...] = (SIZE,)) -> list[np.ndarray]:
+    """Run ``game`` for ``frames`` frames at each of ``sizes`` in turn (a resize between);
+    every size's last frame and ids."""
+    engine = Engine(game, ctx)
+    out = []
+    try:
+        if configure is not None:
+            configure(engine)
+        count = 0
+        for size in sizes:
+            capture = CaptureTarget(ctx, size)
+            try:
+                for _ in range(frames):
+                    if step is not None:
+                        step(engine, count)
+                    engine.frame(DT, Output(capture.framebuffer, size))
+                    count += 1
+                out += [capture.read_rgb(), engine.renderer.targets.read_ids()]
+            finally:
+                capture.release()
+    finally:
+        engine.close()
+    return out
+
+
+def _lighting(variant: str, mirrors: int = 2, gpu: bool = False):
+    def run(ctx):
+        from benchmarks.lighting import VARIANTS, gpu_passes
+        from benchmarks.mirrors import MirrorRing
+
+        chosen = next(v for v in VARIANTS if v.name == variant)
+
+        def configure(engine):
+            chosen.configure(engine)
+            if gpu:
+                gpu_passes(engine, None)
+        return _engine_frames(ctx, MirrorRing(mirrors), 3, configure, chosen.step)
+    return run
+
+
+def _point_shadows(ctx):
+    """The mirror ring with its lamp's shadows on (distance cube maps) and a mirror throwing
+    the sun (a virtual light), the boxes spinning."""
+    from benchmarks.lighting import _mirror_light
+    from benchmarks.mirrors import MirrorRing
+    from components import PointLight
+
+    def configure(engine):
+        _mirror_light(engine)
+        for _, light in engine.world.query_one(PointLight):
+            light.shadows = True
+    return _engine_frames(ctx, MirrorRing(3), 3, configure)
+
+
+def _probes(refresh: str, resolution: int = 32):
+    def run(ctx):
+        from benchmarks.probes import ProbeRing
+
+        return _engine_frames(ctx, ProbeRing(refresh, resolution), 3)
+    return run
+
+
+def _probes_sliced_ggx(ctx):
+    """A probe captured a face a frame, GGX-prefiltered, box-projected, an influence box the
+    ring's boxes sample it through (eight frames: past a whole slicing round)."""
+    from benchmarks.probes import ProbeRing
+    from components import ReflectionProbe
+
+    def configure(engine):
+        for _, probe in engine.world.query_one(ReflectionProbe):
+            probe.time_slicing = "one_face_per_frame"
+            probe.prefilter = "ggx"
+            probe.influence = (30.0, 10.0, 30.0)
+            probe.box_projection = True
+    return _engine_frames(ctx, ProbeRing("every_frame", 32), 8, configure)
+
+
+def _mirror_beam(ctx):
+    from games.mirror_beam.game import MirrorBeam, levels
+
+    return _engine_frames(ctx, MirrorBeam(levels()[-1], autopilot=True, verbose=False), 3)
+
+
+def _portal_run(ctx):
+    from games.portal_run.game import PortalRun, levels
+
+    return _engine_frames(ctx, PortalRun(levels()[-1], autopilot=True, verbose=False), 3)
+
+
+def _resized(ctx):
+    from benchmarks.mirrors import MirrorRing
+
+    return _engine_frames(ctx, MirrorRing(4), 2, sizes=((160, 90), (96, 120), (160, 90)))
+
+
+SCENES: dict[str, Callable[[moderngl.Context], list[np.ndarray]]] = {
+    **{name: _golden(name) for name in ("hall_start", "hall_mirror_wall", "hall_doorway", "hall_partner_side",
+                                        "mirror_ring_8_batched", "portals_depth_8", "portals_partner_disabled")},
+    "shadows_moving": _lighting("shadows_moving"),
+    "mirror_light_moving": _lighting("mirror_light_moving"),
+    "post_auto_gpu_passes": _lighting("post_auto", gpu=True),
+    "post": _lighting("post"),
+    "point_shadows": _point_shadows,
+    "probes_dynamic": _probes("every_frame"),
+    "probes_once": _probes("once"),
+    "probes_sliced_ggx": _probes_sliced_ggx,
+    "mirror_beam": _mirror_beam,
+    "portal_run": _portal_run,
+    "resized": _resized,
+}
+
+
+@pytest.mark.parametrize("name", SCENES)
+def test_every_draw_is_legal_gl_41(ctx, name):
+    with strict_draws(ctx) as strict:
+        SCENES[name](ctx)
+    assert strict.draws > 0
+    # A sampler finding no texture at all reads (0, 0, 0, 1), defined, yet no pass means it:
+    # a texture never given, or released while the record held it.
+    found = {**strict.problems, **strict.unbound}
+    assert not found, f"{name}: " + "\n".join(f"{where}: {problem}" for problem, where in found.items())
+
+
+def test_uniform_blocks_are_the_size_the_engine_writes(ctx):
+    """Every uniform block the scenes draw with has, in the GLSL (std140, as the driver lays it
+    out), the size of the bytes the engine packs for it: a block the blocks of tests/
+    test_rendering.py and test_ambient_light.py do not cover (Views, Shadows, VirtualLights,
+    FallbackRows) included."""
+    from engine.render.batched_mirrors import VIEWS_BLOCK_BYTES
+    from engine.render.irradiance import IRRADIANCE_BLOCK_BYTES
+    from engine.render.mirror_passes import _FALLBACK_IDS_BYTES, _FALLBACK_WEIGHTS, FALLBACK_ROWS
+    from engine.render.shadows import SHADOWS_BLOCK_BYTES, VIRTUAL_BLOCK_BYTES
+    from engine.render.views import CAMERA_BLOCK_BYTES, LIGHTS_BLOCK_BYTES
+
+    packed = {"Camera": CAMERA_BLOCK_BYTES, "Lights": LIGHTS_BLOCK_BYTES, "Irradiance": IRRADIANCE_BLOCK_BYTES,
+              "Views": VIEWS_BLOCK_BYTES, "Shadows": SHADOWS_BLOCK_BYTES, "VirtualLights": VIRTUAL_BLOCK_BYTES,
+              "FallbackRows": _FALLBACK_IDS_BYTES + FALLBACK_ROWS * _FALLBACK_WEIGHTS.size}
+    with strict_draws(ctx) as strict:
+        for name in ("hall_start", "mirror_ring_8_batched", "mirror_light_moving"):
+            SCENES[name](ctx)
+    assert set(strict.block_sizes) == set(packed), "a uniform block with no packed size here, or one not drawn"
+    for name, sizes in strict.block_sizes.items():
+        assert sizes == {packed[name]}, f"uniform block {name}: the GLSL lays out {sizes} bytes, the engine packs " \
+                                        f"{packed[name]}"
+
+
+_CHECK_VS = ("#version 410 core\nvoid main() { "
+             "gl_Position = vec4(vec2(gl_VertexID & 1, gl_VertexID >> 1) * 4.0 - 1.0, 0.0, 1.0); }\n")
+_CHECK_FS = {"float": "uniform sampler2D image;", "uint": "uniform usampler2D image;"}
+
+
+@pytest.mark.parametrize("case", ["legal", "no_mips", "linear_ids", "float_on_ids", "feedback", "unwritten_ids"])
+def test_the_check_names_each_kind_of_illegal_draw(ctx, case):
+    """The checker itself, on hand-made draws: a legal one passes, each broken one is named."""
+    kind = "uint" if case in ("linear_ids", "legal") else "float"
+    fragment = (f"#version 410 core\n{_CHECK_FS[kind]}\nout vec4 colour;\n"
+                "void main() { colour = vec4(texture(image, vec2(0.5))); }\n")
+    program = ctx.program(vertex_shader=_CHECK_VS, fragment_shader=fragment)
+    vao = ctx.vertex_array(program, [])
+    target = CaptureTarget(ctx, (4, 4))
+    objects = [vao, program, target]
+    try:
+        if case in ("legal", "linear_ids", "float_on_ids"):
+            texture = ctx.texture((8, 8), 1, bytes(4 * 64), dtype="u4")
+            texture.filter = (moderngl.LINEAR, moderngl.LINEAR) if case == "linear_ids" else \
+                (moderngl.NEAREST, moderngl.NEAREST)
+        else:
+            texture = ctx.texture((8, 8), 4, bytes(4 * 64))
+            texture.filter = (moderngl.LINEAR_MIPMAP_LINEAR, moderngl.LINEAR)  # no mip levels made
+        objects.append(texture)
+        framebuffer = target.framebuffer
+        if case == "feedback":
+            texture.filter = (moderngl.LINEAR, moderngl.LINEAR)
+            framebuffer = ctx.framebuffer([texture])
+            objects.insert(0, framebuffer)
+        if case == "unwritten_ids":  # a second, integer, attachment no output writes
+            texture.filter = (moderngl.LINEAR, moderngl.LINEAR)
+            ids = ctx.texture((4, 4), 1, dtype="u4")
+            framebuffer = ctx.framebuffer([target.texture, ids])
+            objects[:0] = [framebuffer, ids]
+        texture.use(3)
+        program["image"].value = 3
+        with strict_draws(ctx) as strict:
+            framebuffer.use()
+            vao.render(moderngl.TRIANGLES, vertices=3)
+        text = " ".join(strict.problems)
+        expected = {"legal": None, "no_mips": "reaches level 1", "linear_ids": "integer format filtered",
+                    "float_on_ids": "a float sampler on a uint format", "feedback": "rendering feedback loop",
+                    "unwritten_ids": "draw buffer 1 (uint attachment, write mask on) has no fragment output"}[case]
+        if expected is None:
+            assert not strict.problems, text
+        else:
+            assert expected in text, text
+    finally:
+        for obj in objects:
+            if isinstance(obj, moderngl.Framebuffer):
+                release_framebuffer(obj)  # (the bound one: framebuffer 0 bound first)
+            else:
+                obj.release()
+        bindings.invalidate(ctx)
+    assert ctx.error == "GL_NO_ERROR"
+
+
+# --- texels never written ---------------------------------------------------------------------
+# NaN everywhere a float image is made; finite noise on a few scenes too (a NaN a shader
+# clamps or compares away would hide a read that finite noise shows).
+_NOISE = [(name, True) for name in SCENES] + [(name, False) for name in ("hall_start", "portals_depth_8",
+                                                                          "post_auto_gpu_passes", "probes_dynamic")]
+
+
+@pytest.mark.parametrize("name,nan", _NOISE, ids=[f"{name}-{'nan' if nan else 'noise'}" for name, nan in _NOISE])
+def test_no_texel_is_read_before_it_is_written(ctx, name, nan):
+    plain = SCENES[name](ctx)
+    with noisy_textures(nan=nan) as filled:
+        noisy = SCENES[name](ctx)
+    assert filled, "no texture was made without data: the hook saw nothing"
+    assert plain[0].max() > 0, f"{name}: the frame is black"
+    for index, (a, b) in enumerate(zip(plain, noisy, strict=True)):
+        kind = "ids" if index % 2 else "colour"
+        differ = a != b if a.ndim == 2 else (a != b).any(axis=-1)
+        assert not differ.any(), (f"{name}: {kind} of frame {index // 2} differs at {int(differ.sum())} pixels "
+                                  f"with new textures made full of noise (first at row, column "
+                                  f"{tuple(int(v) for v in np.argwhere(differ)[0])}): a texel read before it is "
+                                  "written")
+
+
+def test_the_debug_overlay_draws_legal_gl_after_a_frame(scene, ctx):
+    """The overlay draws after the engine's frame, which leaves the reflections' mipmapped
+    albedo sampler object on unit 0: the overlay's font atlas (no mip levels) must not be
+    filtered by it (incomplete: no text on a GPU).  Broken on purpose: binding the atlas with
+    ``texture.use(0)`` (the sampler stays) is named here."""
+    pytest.importorskip("imgui_bundle", reason="the debug overlay needs imgui-bundle (not installed here)")
+    from shell.overlay import DebugOverlay
+    from tests.test_overlay import SIZE as OVERLAY_SIZE
+    from tests.test_overlay import room_with_probe
+
+    runner = scene(room_with_probe, OVERLAY_SIZE)
+    runner.frame()
+    runner.frame()
+    overlay = DebugOverlay(ctx)
+    try:
+        with strict_draws(ctx) as strict:
+            overlay.record(0.02)
+            overlay.draw(runner.engine, runner.capture.framebuffer, OVERLAY_SIZE)
+    finally:
+        overlay.release()
+    assert strict.draws > 0
+    assert not strict.problems, "\n".join(f"{where}: {problem}" for problem, where in strict.problems.items())
+
+
+def test_a_level_is_made_and_cleared_with_each_image_at_its_clear_value(ctx):
+    """A level's images made full of noise (as a GPU may hand them back) are colour 0, ids 0
+    and depth far once made (``RenderTargets`` clears them), and again after ``clear_images``
+    (glClearBufferuiv for the id images, glClearBufferfv for colour and depth) over noise
+    written into every image; the framebuffer bound before stays bound.  Broken on purpose:
+    ``clear_images`` skipping the id images fails here (glClearBufferfv on them instead
+    would not: llvmpipe converts, as GL leaves it undefined)."""
+    from engine.render.raw_gl import clear_images
+    from engine.render.targets import RenderTargets
+
+    size = (24, 10)
+    rng = np.random.default_rng(3)
+    other = CaptureTarget(ctx, (4, 4))
+    other.framebuffer.use()
+    with noisy_textures(nan=True):
+        targets = RenderTargets(ctx, size)
+    try:
+        assert ctx.fbo is other.framebuffer
+
+        def read_all() -> list[np.ndarray]:
+            ids = [np.frombuffer(t.read(), np.uint32) for t in (targets.surface, targets.seen, targets.node)]
+            return [np.frombuffer(targets.color.read(), np.float16), *ids,
+                    np.frombuffer(targets.depth.read(), np.float32)]
+
+        def check() -> None:
+            colour, surface, seen, node, depth = read_all()
+            assert (colour == 0).all(), "colour not 0"
+            for name, ids in (("surface", surface), ("seen", seen), ("node", node)):
+                assert (ids == 0).all(), f"{name} ids not 0"
+            assert (depth == 1.0).all(), "depth not far"
+
+        check()
+        for texture in (targets.surface, targets.seen, targets.node):
+            texture.write(rng.integers(1, 2**32, size[0] * size[1], dtype=np.uint32).tobytes())
+        targets.color.write(rng.uniform(1.0, 5.0, size[0] * size[1] * 4).astype(np.float16).tobytes())
+        targets.depth.write(np.full(size[0] * size[1], 0.25, np.float32).tobytes())
+        targets.framebuffer.use()
+        clear_images(ctx, targets.framebuffer)
+        check()
+    finally:
+        targets.release()
+        other.release()
+        bindings.invalidate(ctx)
