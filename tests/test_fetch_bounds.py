@@ -1,0 +1,176 @@
+"""Every ``texelFetch`` the engine's shaders run stays inside its texture, or its value does
+not matter (the pixel is discarded, a select throws it away): out of range, GL 4.1 core
+leaves the result undefined, and where llvmpipe returns zeros a GPU may return garbage.
+
+The second path (``tests/fetch_bounds.py``): the same frames built with every fetch bounded,
+an outside one returning a poison (a float of 4093, a uint that is no id), must be the
+frames of the plain build bit for bit, colour and ids.  The scenes are those where level
+and texture sizes part: odd frame sizes (161x97, 97x161), a resize mid-run, the pixel
+budget drawing levels downscaled (and at two sizes in turn), mirrors at resolution scales
+that divide nothing, rough mirrors (the atlas copy), water and normal-mapped composites (the
+bent lookup), end images (the fallback's look into the child level), portals, probes, post
+(present's and FXAA's fetches), the selection outline.
+
+Broken on purpose: the claim reading its parent one pixel to the right (``px + ivec2(1, 0)``
+in mirror_claim.frag) fails every scene with a reflection: the column past the parent's
+last one reads the poison, which is no view, where llvmpipe's zero is the root's node.
+"""
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import moderngl
+import numpy as np
+import pytest
+
+from engine.core.frame_io import Output
+from engine.render.targets import CaptureTarget, release_framebuffer
+from engine.resources import ViewBudget
+from shell.app import Engine
+from tests.fetch_bounds import MODES, POISON_UINT, poisoned_fetches
+from tests.golden_scenes import cases
+
+DT = 1.0 / 60.0
+ODD = ((161, 97), (97, 161), (161, 97))
+CASE_BY_NAME = {case.name: case for case in cases()}
+
+
+def _run(ctx: moderngl.Context, game, sizes, frames: int, setup=None, budget: float | None = None,
+         step=None) -> tuple[list[np.ndarray], int]:
+    """``game`` run ``frames`` frames at each of ``sizes`` (a resize between), from the
+    second frame on with a pixel budget of ``budget`` x the reflection pixels the first drew,
+    halved every other frame (levels downscaled, and drawn at two sizes in turn); every
+    size's last frame and ids, and the levels downscaled over the run."""
+    engine = Engine(game, ctx)
+    engine.renderer.present_pass.search_steps = 2  # FXAA's walk too (textureGather, its clamped fetches)
+    out, downscaled, count, full = [], 0, 0, None
+    try:
+        if setup is not None:
+            setup(engine)
+        for size in sizes:
+            capture = CaptureTarget(ctx, size)
+            try:
+                for _ in range(frames):
+                    if budget is not None and full:
+                        pixels = max(1, int(budget * full / (1 + count % 2)))
+                        engine.world.resources[ViewBudget] = ViewBudget(pixels=pixels)
+                    if step is not None:
+                        step(engine, count)
+                    engine.frame(DT, Output(capture.framebuffer, size))
+                    stats = engine.renderer.stats
+                    full = full or stats.pixels_spent
+                    downscaled += stats.levels_downscaled
+                    count += 1
+                out += [capture.read_rgb(), engine.renderer.targets.read_ids()]
+            finally:
+                capture.release()
+    finally:
+        engine.close()
+    return out, downscaled
+
+
+def _case(name: str, budget: float | None = 0.6, frames: int = 3):
+    def run(ctx):
+        case = CASE_BY_NAME[name]
+
+        def setup(engine):
+            if case.camera is not None:
+                engine.place_camera(*case.camera)
+            if case.setup is not None:
+                case.setup(engine)
+        return _run(ctx, case.game(), ODD, frames, setup, budget)
+    return run
+
+
+def _ring_scaled(ctx):
+    """Four mirrors at resolution scales that divide neither odd size, two of them rough
+    (their atlas tiles)."""
+    from benchmarks.mirrors import MirrorRing
+    from components import Mirror
+
+    def setup(engine):
+        mirrors = sorted(engine.world.query_one(Mirror), key=lambda item: item[0])
+        for (_, mirror), scale, rough in zip(mirrors, (0.37, 0.73, 0.61, 0.51), (0.0, 0.45, 0.0, 0.3),
+                                                  strict=True):
+            mirror.resolution_scale = scale
+            mirror.roughness = rough
+    return _run(ctx, MirrorRing(4), ODD, 3, setup, budget=0.6)
+
+
+def _post(ctx):
+    """Bloom and automatic exposure (present's fetch of the HDR image, the 1x1 exposure)."""
+    from benchmarks.lighting import VARIANTS
+    from benchmarks.mirrors import MirrorRing
+
+    chosen = next(v for v in VARIANTS if v.name == "post_auto")
+    return _run(ctx, MirrorRing(2), ODD, 3, chosen.configure, budget=0.5, step=chosen.step)
+
+
+def _probes(ctx):
+    from benchmarks.probes import ProbeRing
+
+    return _run(ctx, ProbeRing("every_frame", 32), ODD[:2], 2, budget=0.5)
+
+
+SCENES: dict[str, Callable[[moderngl.Context], tuple[list[np.ndarray], int]]] = {
+    "hall_start": _case("hall_start"),              # water (bent lookup), portals, probes
+    "hall_mirror_wall": _case("hall_mirror_wall"),  # tinted, rough, the facing pair (end images)
+    "hall_doorway": _case("hall_doorway"),
+    "portals_depth_8": _case("portals_depth_8"),
+    "ring_scaled": _ring_scaled,
+    "post": _post,
+    "probes": _probes,
+}
+
+
+@pytest.mark.parametrize("name", SCENES)
+def test_no_fetch_leaves_its_texture(ctx, name):
+    plain, downscaled = SCENES[name](ctx)
+    assert plain[0].max() > 0, f"{name}: the frame is black"
+    for mode in MODES:
+        with poisoned_fetches(mode) as rewritten:
+            poisoned, _ = SCENES[name](ctx)
+        assert rewritten, "no program calls texelFetch: the hook saw nothing"
+        for index, (a, b) in enumerate(zip(plain, poisoned, strict=True)):
+            kind = "ids" if index % 2 else "colour"
+            differ = a != b if a.ndim == 2 else (a != b).any(axis=-1)
+            assert not differ.any(), (
+                f"{name}: {kind} of frame {index // 2} ({a.shape[1]}x{a.shape[0]}) differs at {int(differ.sum())} "
+                f"pixels with out-of-range texelFetch returning {mode} values (first at row, column "
+                f"{tuple(int(v) for v in np.argwhere(differ)[0])}): a fetch outside its texture whose value is used")
+    if name not in ("post", "probes"):
+        assert downscaled > 0, f"{name}: the pixel budget downscaled no level"
+
+
+@pytest.mark.parametrize("mode,expected", [("constant", [5, POISON_UINT, POISON_UINT, POISON_UINT]),
+                                           ("edge", [5, 5, 0, 3])])
+def test_the_poison_shows_an_out_of_range_fetch(ctx, mode, expected):
+    """The hook itself: a fetch inside reads its texel, one a texel past an edge the poison
+    (or the edge's texel)."""
+    from tests.fetch_bounds import with_prelude
+
+    source = ("#version 410 core\nuniform usampler2D ids;\nuniform ivec2 at;\nout uvec4 value;\n"
+              "void main() { value = texelFetch(ids, at, 0); }\n")
+    vertex = ("#version 410 core\nvoid main() { gl_Position = vec4(vec2(gl_VertexID & 1, gl_VertexID >> 1) * 4.0 - 1.0,"
+              " 0.0, 1.0); }\n")
+    program = ctx.program(vertex_shader=vertex, fragment_shader=with_prelude(source, mode))
+    ids = ctx.texture((3, 2), 1, np.arange(6, dtype=np.uint32).tobytes(), dtype="u4")
+    ids.filter = (moderngl.NEAREST, moderngl.NEAREST)
+    out = ctx.texture((1, 1), 4, dtype="u4")
+    fbo = ctx.framebuffer([out])
+    vao = ctx.vertex_array(program, [])
+    try:
+        ids.use(0)
+        program["ids"].value = 0
+        seen = []
+        for at in ((2, 1), (3, 1), (-1, 0), (0, 2)):
+            program["at"].value = at
+            fbo.use()
+            ctx.viewport = (0, 0, 1, 1)
+            vao.render(moderngl.TRIANGLES, vertices=3)
+            seen.append(int(np.frombuffer(out.read(), np.uint32)[0]))
+        assert seen == expected
+    finally:
+        release_framebuffer(fbo)
+        for obj in (vao, out, ids, program):
+            obj.release()
