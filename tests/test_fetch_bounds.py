@@ -174,3 +174,44 @@ def test_the_poison_shows_an_out_of_range_fetch(ctx, mode, expected):
         release_framebuffer(fbo)
         for obj in (vao, out, ids, program):
             obj.release()
+
+
+# --- the invariants the shaders' fetches rest on -------------------------------------------------
+def test_a_pixel_centre_scaled_into_another_level_lands_inside_it():
+    """mirror_claim.frag (``gl_FragCoord * to_parent``), mirror_composite.frag
+    (``* to_reflection``, a fallback's ``* to_child``): a pixel centre of a level ``c`` pixels
+    wide times the float32 of ``p / c`` (Python's quotient, uploaded as a float) truncates to a
+    pixel of the level ``p`` wide: the last centre, (c - 0.5) p / c = p - p / 2c, lies half a
+    source pixel inside, far more than float32's rounding.  Every pair of sizes up to 2048,
+    and random ones up to GL's 16384."""
+    sizes = np.arange(1, 2049, dtype=np.float64)
+    grid = np.meshgrid(sizes, sizes, indexing="ij")
+    rng = np.random.default_rng(3)
+    big = rng.integers(1, 16385, (2, 200_000)).astype(np.float64)
+    for p, c in ((grid[0].ravel(), grid[1].ravel()), (big[0], big[1])):
+        scale = (p / c).astype(np.float32)
+        last = np.float32(c - 0.5).astype(np.float32) * scale  # float32 product, as the GPU's
+        assert last.dtype == np.float32
+        assert (last.astype(np.int64) <= p - 1).all()
+
+
+def test_a_views_rectangle_in_a_level_of_another_size_stays_inside_it():
+    """mirror_composite.frag's bent lookup (water, normal maps) fetches wherever the bent ray
+    lands once it is inside the view's rectangle in the level (``v_rect``), and
+    rough_isolate.frag copies inside it: ``level_rects`` keeps every rectangle of the screen
+    inside every level size the pixel budget and resolution scales make (``_level_size``)."""
+    from engine.render.view_plan import _level_size, level_rects
+
+    rng = np.random.default_rng(5)
+    for _ in range(300):
+        screen = (int(rng.integers(1, 400)), int(rng.integers(1, 400)))
+        level = _level_size(screen, float(rng.uniform(0.1, 1.0)))
+        x0 = rng.integers(0, screen[0], 50)
+        y0 = rng.integers(0, screen[1], 50)
+        x1 = x0 + 1 + (rng.integers(0, screen[0], 50) % (screen[0] - x0))
+        y1 = y0 + 1 + (rng.integers(0, screen[1], 50) % (screen[1] - y0))
+        rects = level_rects(np.stack([x0, y0, x1, y1], axis=1).astype(np.float64), screen, level)
+        assert (rects[:, 0:2] >= 0).all() and (rects[:, 2:4] >= 1).all()
+        assert (rects[:, 0] + rects[:, 2] <= level[0]).all() and (rects[:, 1] + rects[:, 3] <= level[1]).all(), (
+            screen, level)
+
