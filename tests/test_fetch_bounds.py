@@ -12,8 +12,11 @@ bent lookup), end images (the fallback's look into the child level), portals, pr
 (present's and FXAA's fetches), the selection outline.
 
 Broken on purpose: the claim reading its parent one pixel to the right (``px + ivec2(1, 0)``
-in mirror_claim.frag) fails every scene with a reflection: the column past the parent's
-last one reads the poison, which is no view, where llvmpipe's zero is the root's node.
+in mirror_claim.frag) fails hall_start, hall_mirror_wall and hall_doorway with the edge
+mode (374, 1 and 709 pixels of frame 0): past the parent's last column the edge texel is a
+surface the claim takes, where llvmpipe's zero is none (the constant poison, no id either,
+passes: the check needs both modes).  Without the water's bent lookup's rectangle test
+(mirror_composite.frag), hall_start's ids differ at 2 pixels with the edge mode.
 """
 from __future__ import annotations
 
