@@ -25,7 +25,7 @@ layout(location = 1) out uint out_surface;
 layout(location = 2) out uint out_seen;
 
 void main() {
-    if (texelFetch(node_map, ivec2(gl_FragCoord.xy), 0).r != view_index) discard;
+    if (texelFetch(node_map, ivec2(gl_FragCoord.xy), 0).r != view_index) discard;  // (drawn at the level's size)
     vec2 ndc = gl_FragCoord.xy / level_size * 2.0 - 1.0;
     vec4 a = camera.inv_view_proj * vec4(ndc, -1.0, 1.0);
     vec4 b = camera.inv_view_proj * vec4(ndc, 1.0, 1.0);

@@ -16,6 +16,8 @@ layout(location = 2) out uint out_seen;
 layout(location = 3) out uint out_node;
 
 void main() {
+    // Inside the parent whatever the two sizes: the last centre, (c - 0.5) p / c, is half a
+    // pixel of this level inside p (tests/test_fetch_bounds.py checks that and the fetches).
     ivec2 px = ivec2(gl_FragCoord.xy * to_parent);
     if (texelFetch(parent_node_map, px, 0).r != v_claim.x ||
         texelFetch(parent_surface_map, px, 0).r != v_claim.y) discard;

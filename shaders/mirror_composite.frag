@@ -111,12 +111,12 @@ void main() {
     // Only this frame's claims wrote the node image, inside the views' rectangles.
     vec2 level_px = gl_FragCoord.xy * to_reflection;
     if (any(lessThan(level_px, v_rect.xy)) || any(greaterThanEqual(level_px, v_rect.zw))) discard;
-    ivec2 px = ivec2(level_px);
+    ivec2 px = ivec2(level_px);  // inside the level: a pixel centre scaled (mirror_claim.frag), in v_rect
 #ifdef COMPOSITE_FALLBACK
     // The parent view's own pixels of the surface; for an end view, those of them its image
     // from last frame did not hold.
     if (texelFetch(parent_nodes, px, 0).r != v_view || texelFetch(parent_surfaces, px, 0).r != v_ids.x) discard;
-    if (v_ids.y != 0u) {
+    if (v_ids.y != 0u) {  // (an end view's: its level was drawn, so the child images are its, not blank)
         ivec2 child = ivec2(gl_FragCoord.xy * to_child);
         if (texelFetch(reflection_nodes, child, 0).r != v_ids.y - 1u
                 || texelFetch(reflection_seen, child, 0).r != NO_END_IMAGE) discard;
@@ -177,7 +177,8 @@ void main() {
         vec2 bent_level_px = bent_uv * parent_size * to_reflection;
         ivec2 bent_px = ivec2(bent_level_px);
         // Inside the view's rectangle (outside it the node image is an older frame's), on a
-        // pixel the view shows.
+        // pixel the view shows.  The rectangle lies inside the level (view_plan.level_rects),
+        // so the bent fetches are tested in range before they are read (&& short-circuits).
         if (all(greaterThanEqual(bent_level_px, v_rect.xy)) && all(lessThan(bent_level_px, v_rect.zw))
                 && texelFetch(reflection_nodes, bent_px, 0).r == v_view
                 && texelFetch(reflection_seen, bent_px, 0).r != NO_END_IMAGE) {

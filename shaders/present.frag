@@ -31,7 +31,7 @@ void main() {
 #ifdef POST
     // The image is the output's size: its texel, fetched (no filter to run); the bloom
     // image, smaller, through textureLod (no mipmaps, and a software rasteriser skips the
-    // derivatives).
+    // derivatives).  v_uv is below 1 at every pixel centre, so the texel is inside.
     vec3 hdr = texelFetch(hdr_image, ivec2(v_uv * vec2(textureSize(hdr_image, 0))), 0).rgb;
 #ifdef BLOOM
     hdr = hdr * bloom_mix.x + textureLod(bloom_image, v_uv, 0.0).rgb * bloom_mix.y;

@@ -16,6 +16,6 @@ out vec4 out_color;
 void main() {
     vec2 local = (gl_FragCoord.xy - v_origin) / v_scale;   // level pixels from the rectangle's corner
     ivec2 px = ivec2(v_source.xy + local);
-    bool inside = all(lessThan(local, v_source.zw));
+    bool inside = all(lessThan(local, v_source.zw));  // then px is in the view's rectangle, in the level
     out_color = inside && texelFetch(level_nodes, px, 0).r == v_view ? texelFetch(level_color, px, 0) : vec4(0.0);
 }

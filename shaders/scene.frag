@@ -251,7 +251,7 @@ vec3 checker_colour(vec2 uv) {
 
 void main() {
 #ifdef MASKED
-    if (texelFetch(node_map, ivec2(gl_FragCoord.xy), 0).r != node_index) discard;
+    if (texelFetch(node_map, ivec2(gl_FragCoord.xy), 0).r != node_index) discard;  // (the level's own size)
 #endif
 #ifdef UNLIT_SURFACE
     // A mirror the view tree's composites paint over at weight 1 (scene_pass.shading_replaced):

@@ -70,6 +70,7 @@ vec3 ambient_irradiance(vec3 p, vec3 n) {
     float scale = 1.0 / max(1.0, w0 + w1);
     vec3 probes = vec3(0.0);
     // A loop as long as the boxes found: a quad outside every box reads no texel of the table.
+    // (A box's row is one IrradianceTable._row_for gave, below MAX_IRRADIANCE_PROBES: inside.)
     for (int k = 0; k < found; ++k) {
         int box = k == 0 ? best0 : best1;
         probes += table_irradiance(int(irradiance.half_size[box].w), n) * ((k == 0 ? w0 : w1) * scale);
