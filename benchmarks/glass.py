@@ -6,7 +6,7 @@ The mirrors benchmark's ring of 8 mirrors, boxes and orbiting camera
 material is see-through, 5 x 5 m at the centre, reflect rate 0.7) and ``panes`` glass panes
 of 1.2 x 1.2 m standing round it (each its own transparent batch: ``Renderer.batch_for``),
 on a circle of radius 5 in two rows, facing out.  Every view that sees the pond orders its
-transparent slot against the pond's plane (``scene_pass._back_to_front``, ``_split_slot``):
+transparent slot against the pond's plane (``slot_order.back_to_front``, ``split_slot``):
 panes behind the pond by their centres stand above it, in front of it by its plane, so the
 order is not the centres' in most views.  ``glass_0`` is the ring with the pond alone.
 """

@@ -14,7 +14,7 @@ equal one drawn from scratch; and it plans each reflection level after its paren
 (``ViewTree._plan_ahead``) must come out the same.  A case runs exact or predicted
 visibility (``ReflectionSystem.visibility``) in both.  The level, around the pair,
 has glass panes of random alpha (the transparent slot ordered by the planes of see-through
-surfaces, ``scene_pass._back_to_front``), now and then still water (a see-through mirror:
+surfaces, ``slot_order.back_to_front``), now and then still water (a see-through mirror:
 ``InstanceBatch.plane``) or a see-through mirror, or a pane of random alpha between a raised
 pond and a far see-through mirror (``RenderStats.glass_between_surfaces``), a lit box, now
 and then a point light casting shadows and Bloom on the camera.  The change is one of:

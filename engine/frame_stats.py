@@ -97,7 +97,7 @@ class RenderStats(BudgetLedger):
     # frame, in every tree: one per (parent view, surface).
     reflection_fallbacks: int = 0
     # Transparent batches a view blended between two see-through surfaces they cover (behind
-    # one, in front of the other: scene_pass._split_slot's limit of one claim a pixel), so
+    # one, in front of the other: slot_order.split_slot's limit of one claim a pixel), so
     # where they cover the farther surface it shows its own colour, not its reflection: one
     # per (view, batch) this frame.
     glass_between_surfaces: int = 0

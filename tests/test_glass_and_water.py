@@ -4,7 +4,7 @@ where it belongs: a pane standing on the pond blends over the pond's composited 
 a pane under the pond is seen through the water and under its reflection, wherever their
 centres are (a pond's centre says little about what is in front of it: the transparent
 slot orders a batch against a see-through surface by the surface's plane,
-``scene_pass._back_to_front``).  Directly, in a mirror (level 1), in a probe face's own
+``slot_order.back_to_front``).  Directly, in a mirror (level 1), in a probe face's own
 view tree, per mirror and batched, exact and predicted, kept frames; glass seen through a
 portal; a pane in front of a far see-through mirror beside a near pond.
 
@@ -247,7 +247,7 @@ def test_a_pane_in_front_of_a_far_see_through_mirror_beside_a_near_pond(scene):
 
 
 def test_a_pane_under_a_pond_and_in_front_of_a_far_see_through_mirror_is_reported(scene):
-    """The limit of one claim a pixel (``scene_pass._split_slot``): a pane under a near pond
+    """The limit of one claim a pixel (``slot_order.split_slot``): a pane under a near pond
     and in front of a far see-through mirror, covering both on the screen, must blend after
     the far mirror's reflection and before the pond's own colour; the claims come before
     either composite, so it is blended with the pond, before them, and where it covers the

@@ -1,4 +1,4 @@
-"""The transparent slot's blending order (``scene_pass._back_to_front``, ``_split_slot``) on
+"""The transparent slot's blending order (``slot_order.back_to_front``, ``split_slot``) on
 random scenes of glass panes, ponds and see-through mirrors, from random eyes (outside the
 scene and among its batches, where boxes reach behind the eye), is the order a brute-force
 reference written here gives: every pair of batches tested in turn (their boxes' screen
@@ -23,13 +23,13 @@ from components import Emissive, Material, MeshRef, Mirror, Skybox, Transform, W
 from engine.assets.mesh import quad
 from engine.assets.texture_data import ripple_normal_map
 from engine.core.material_slots import ReflectVariant
-from engine.render import scene_pass
-from engine.render.scene_pass import SlotGeometry, _back_to_front, _split_slot
+from engine.render import slot_order
+from engine.render.slot_order import SlotGeometry, back_to_front, split_slot
 from engine.render.views import View
 from tests.support import look_from
 from tests.test_glass_and_water import ALPHA, FLAT, Y, _blend_agrees, _render
 
-EPS = 1e-4  # scene_pass._PLANE_EPS: how far a box may reach past a plane and still lie on one side
+EPS = 1e-4  # slot_order.PLANE_EPS: how far a box may reach past a plane and still lie on one side
 
 
 # -- the reference ---------------------------------------------------------------------------
@@ -216,17 +216,17 @@ def test_the_slot_order_is_the_every_pair_reference_on_random_scenes(scene, seed
     kinds = {"reordered": 0, "held back": 0, "cycles": 0, "torn": 0, "behind the eye": 0}
     for view in _random_views(rng, 60, ents["surfaces"]):
         want, (first, rest, torn) = _reference(batches, view.eye, view)
-        assert _back_to_front(batches, view.eye, view, geometry) == want
-        assert _back_to_front(batches, view.eye, None, geometry) == _reference(batches, view.eye, None)[0]
-        got = _split_slot(batches, view, geometry)
+        assert back_to_front(batches, view.eye, view, geometry) == want
+        assert back_to_front(batches, view.eye, None, geometry) == _reference(batches, view.eye, None)[0]
+        got = split_slot(batches, view, geometry)
         assert (got.first, got.rest, got.torn) == (first, rest, torn)
-        assert _split_slot(batches, view, geometry) is got  # kept for the view's second call
+        assert split_slot(batches, view, geometry) is got  # kept for the view's second call
         centres = sorted(batches, key=lambda b: -glm.distance(b.centre(), view.eye))
         kinds["reordered"] += want != centres
         kinds["held back"] += len(first) > sum(b.surface for b in first)
         kinds["torn"] += torn > 0
         kinds["behind the eye"] += any(_rect(_corners(b), view.view_proj) is None for b in batches)
-        kinds["cycles"] += scene_pass._slot_order(geometry, geometry.back_to_front(view.eye), view.eye,
+        kinds["cycles"] += slot_order.slot_order(geometry, geometry.back_to_front(view.eye), view.eye,
                                                   view).planes_only
     # What the order must get right is there (in every scene with a surface; cycles and
     # batches torn between two surfaces where there are two).
@@ -267,7 +267,7 @@ def _many_panes(ents: dict, alpha: float | None):
 
 @pytest.mark.parametrize("path", ["per_mirror", "batched"])
 def test_many_panes_around_a_pond_blend_in_depth_order(scene, path):
-    """More batches than the pairwise order takes (``scene_pass._FEW_BATCHES``): the slot
+    """More batches than the pairwise order takes (``slot_order.FEW_BATCHES``): the slot
     is ordered in arrays, and every pixel of the frame is still the blend rule of
     ``tests/test_glass_and_water.py``."""
     out = []
@@ -275,7 +275,7 @@ def test_many_panes_around_a_pond_blend_in_depth_order(scene, path):
         ents: dict = {}
         out.append(_render(scene, _many_panes(ents, alpha), ents, path=path))
     glass, without, opaque = out
-    assert len(glass["runner"].engine.renderer.transparent_batches()) == 11 > scene_pass._FEW_BATCHES
+    assert len(glass["runner"].engine.renderer.transparent_batches()) == 11 > slot_order.FEW_BATCHES
     pond = glass["ents"]["pond"]
     standing = np.isin(glass["seen"], glass["ents"]["panes"][1::2])
     under = (glass["surface"] == pond) & (np.abs(opaque["colour"] - without["colour"]).max(axis=-1) > 0.05) \

@@ -211,11 +211,11 @@ class InstanceBatch:
         self.transparent = False
         # A transparent batch whose entity is a mirror or portal, switched off or not (water):
         # a view tree's surface, drawn before its claims and fallbacks, which find its pixels
-        # by its id (scene_pass._see_through_surface; the extract stage sets it).
+        # by its id (slot_order.see_through_surface; the extract stage sets it).
         self.surface = False
         # Such a surface's world plane (SurfaceState.plane, set by the extract stage each
         # frame; None: not known): what orders the slot's blending by depth around it
-        # (scene_pass._back_to_front).
+        # (slot_order.back_to_front).
         self.plane: glm.vec4 | None = None
         # How many uploads sent rows or measured them again: what the scene pass's
         # transparent slot keeps its geometry by (scene_pass.SlotGeometry.matches).
