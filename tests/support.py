@@ -141,3 +141,32 @@ def kept_frames_equal_drawn(keeping, drawing, frames: int = 4) -> int:
         kept += keeping.stats.reflection_views_kept > 0
         assert drawing.stats.reflection_views_kept == 0
     return kept
+
+
+def engine_frames(ctx, game, frames: int, sizes, configure=None, step=None, after=None,
+                  dt: float = 1.0 / 60.0) -> list[np.ndarray]:
+    """Run ``game`` for ``frames`` frames at each of ``sizes`` in turn (a resize between):
+    ``configure(engine)`` once first, ``step(engine, i)`` before and ``after(engine, i)``
+    after frame i (counted over the whole run); every size's last frame and ids."""
+    engine = Engine(game, ctx)
+    out = []
+    try:
+        if configure is not None:
+            configure(engine)
+        count = 0
+        for size in sizes:
+            capture = CaptureTarget(ctx, size)
+            try:
+                for _ in range(frames):
+                    if step is not None:
+                        step(engine, count)
+                    engine.frame(dt, Output(capture.framebuffer, size))
+                    if after is not None:
+                        after(engine, count)
+                    count += 1
+                out += [capture.read_rgb(), engine.renderer.targets.read_ids()]
+            finally:
+                capture.release()
+    finally:
+        engine.close()
+    return out

@@ -26,12 +26,11 @@ import moderngl
 import numpy as np
 import pytest
 
-from engine.core.frame_io import Output
-from engine.render.targets import CaptureTarget, release_framebuffer
+from engine.render.targets import release_framebuffer
 from engine.resources import ViewBudget
-from shell.app import Engine
 from tests.fetch_bounds import MODES, POISON_UINT, poisoned_fetches
 from tests.golden_scenes import cases
+from tests.support import engine_frames
 
 DT = 1.0 / 60.0
 ODD = ((161, 97), (97, 161), (161, 97))
@@ -44,32 +43,27 @@ def _run(ctx: moderngl.Context, game, sizes, frames: int, setup=None, budget: fl
     second frame on with a pixel budget of ``budget`` x the reflection pixels the first drew,
     halved every other frame (levels downscaled, and drawn at two sizes in turn); every
     size's last frame and ids, and the levels downscaled over the run."""
-    engine = Engine(game, ctx)
-    engine.renderer.present_pass.search_steps = 2  # FXAA's walk too (textureGather, its clamped fetches)
-    out, downscaled, count, full = [], 0, 0, None
-    try:
+    seen = {"full": None, "downscaled": 0}
+
+    def configure(engine) -> None:
+        engine.renderer.present_pass.search_steps = 2  # FXAA's walk too (textureGather, its clamped fetches)
         if setup is not None:
             setup(engine)
-        for size in sizes:
-            capture = CaptureTarget(ctx, size)
-            try:
-                for _ in range(frames):
-                    if budget is not None and full:
-                        pixels = max(1, int(budget * full / (1 + count % 2)))
-                        engine.world.resources[ViewBudget] = ViewBudget(pixels=pixels)
-                    if step is not None:
-                        step(engine, count)
-                    engine.frame(DT, Output(capture.framebuffer, size))
-                    stats = engine.renderer.stats
-                    full = full or stats.pixels_spent
-                    downscaled += stats.levels_downscaled
-                    count += 1
-                out += [capture.read_rgb(), engine.renderer.targets.read_ids()]
-            finally:
-                capture.release()
-    finally:
-        engine.close()
-    return out, downscaled
+
+    def before(engine, count: int) -> None:
+        if budget is not None and seen["full"]:
+            pixels = max(1, int(budget * seen["full"] / (1 + count % 2)))
+            engine.world.resources[ViewBudget] = ViewBudget(pixels=pixels)
+        if step is not None:
+            step(engine, count)
+
+    def after(engine, count: int) -> None:
+        stats = engine.renderer.stats
+        seen["full"] = seen["full"] or stats.pixels_spent
+        seen["downscaled"] += stats.levels_downscaled
+
+    out = engine_frames(ctx, game, frames, sizes, configure, before, after, dt=DT)
+    return out, seen["downscaled"]
 
 
 def _case(name: str, budget: float | None = 0.6, frames: int = 3):

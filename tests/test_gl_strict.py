@@ -31,13 +31,12 @@ import moderngl
 import numpy as np
 import pytest
 
-from engine.core.frame_io import Output
 from engine.render import bindings
 from engine.render.targets import CaptureTarget, release_framebuffer
-from shell.app import Engine
 from tests import golden
 from tests.gl_strict import noisy_textures, strict_draws
 from tests.golden_scenes import cases
+from tests.support import engine_frames
 
 DT = 1.0 / 60.0
 SIZE = (160, 90)
@@ -55,26 +54,7 @@ def _engine_frames(ctx: moderngl.Context, game, frames: int, configure=None, ste
                    sizes: tuple[tuple[int, int], ...] = (SIZE,)) -> list[np.ndarray]:
     """Run ``game`` for ``frames`` frames at each of ``sizes`` in turn (a resize between);
     every size's last frame and ids."""
-    engine = Engine(game, ctx)
-    out = []
-    try:
-        if configure is not None:
-            configure(engine)
-        count = 0
-        for size in sizes:
-            capture = CaptureTarget(ctx, size)
-            try:
-                for _ in range(frames):
-                    if step is not None:
-                        step(engine, count)
-                    engine.frame(DT, Output(capture.framebuffer, size))
-                    count += 1
-                out += [capture.read_rgb(), engine.renderer.targets.read_ids()]
-            finally:
-                capture.release()
-    finally:
-        engine.close()
-    return out
+    return engine_frames(ctx, game, frames, sizes, configure, step, dt=DT)
 
 
 def _lighting(variant: str, mirrors: int = 2, gpu: bool = False):
