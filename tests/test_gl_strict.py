@@ -325,3 +325,19 @@ def test_a_level_is_made_and_cleared_with_each_image_at_its_clear_value(ctx):
         targets.release()
         other.release()
         bindings.invalidate(ctx)
+
+
+@pytest.mark.parametrize("name", ["glClearBufferuiv", "glClearBufferfv", "glFlush"])
+def test_a_loader_without_an_entry_point_every_frame_needs_is_refused_at_start(ctx, name, monkeypatch):
+    """The raw GL calls every frame makes (a level's clears, the flush) are looked up when
+    the engine's GL state is made, and a loader that lacks one is refused there, naming it:
+    before, a missing glClearBuffer* fell back to glClear, which leaves the id images
+    undefined (GL 4.1), and a missing glFlush did nothing, both silently."""
+    from engine.render import raw_gl
+
+    real = raw_gl._load
+    monkeypatch.setattr(raw_gl, "_load", lambda c, n, p: None if n == name else real(c, n, p))
+    with pytest.raises(raw_gl.MissingEntryPoints, match=name):
+        raw_gl.RawGL(ctx)
+    monkeypatch.undo()
+    raw_gl.RawGL(ctx).flush()  # the real loader gives all three

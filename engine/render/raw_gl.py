@@ -166,27 +166,24 @@ def clear_images(ctx: moderngl.Context, framebuffer: moderngl.Framebuffer) -> No
     glClearBufferuiv for unsigned-integer images: the module's docstring).  The framebuffer
     must be bound (``use``): the clear obeys its draw buffers, masks and scissor, and changes
     no state.  The calls are worked out once a framebuffer (its attachments never change).
-    Where the loader does not give glClearBuffer*, moderngl's clear (glClear)."""
+    Raises ``MissingEntryPoints`` where the loader does not give glClearBuffer* (core since
+    GL 3.0: a broken loader; moderngl's glClear instead would leave the integer id images
+    undefined, so nothing falls back silently)."""
     try:
         calls = framebuffer._speculum_clears
     except AttributeError:
         calls = framebuffer._speculum_clears = _clear_calls(ctx, framebuffer)
-    if calls is None:
-        framebuffer.clear(depth=1.0)
-        return
     for call, buffer, index, values in calls:
         call(buffer, index, values)
 
 
-def _clear_calls(ctx: moderngl.Context, framebuffer: moderngl.Framebuffer) -> tuple | None:
+def _clear_calls(ctx: moderngl.Context, framebuffer: moderngl.Framebuffer) -> tuple:
     """(function, buffer, draw buffer, values) for each clear ``clear_images`` makes of
-    ``framebuffer``; None without glClearBuffer*."""
+    ``framebuffer``."""
     # The values by address (a plain int crosses into C faster than an array does); the
     # arrays live on the context, as long as the calls.
-    clear = _load(ctx, "glClearBufferfv", _CLEAR_BUFFER)
-    clear_uint = _load(ctx, "glClearBufferuiv", _CLEAR_BUFFER)
-    if clear is None or clear_uint is None:
-        return None
+    clear = _required(ctx, "glClearBufferfv", _CLEAR_BUFFER)
+    clear_uint = _required(ctx, "glClearBufferuiv", _CLEAR_BUFFER)
     values = getattr(ctx, "_speculum_clear_values", None)
     if values is None:
         values = ctx._speculum_clear_values = ((ctypes.c_float * 4)(), (_u * 4)(), (ctypes.c_float * 1)(1.0))
@@ -209,7 +206,10 @@ class RawGL:
 
     def __init__(self, ctx: moderngl.Context) -> None:
         self.ctx = ctx
-        self._flush = _load(ctx, "glFlush", _VOID_CALL)
+        # What every frame calls is checked now, at start-up, not when a level first clears.
+        self._flush = _required(ctx, "glFlush", _VOID_CALL)
+        for name in ("glClearBufferfv", "glClearBufferuiv"):
+            _required(ctx, name, _CLEAR_BUFFER)
         self._copy_tex_sub_image = _load(ctx, "glCopyTexSubImage2D", _COPY_TEX_SUB_IMAGE_2D)
         self._attach = {name: _load(ctx, name, ctypes.CFUNCTYPE(*_SIGNATURES[name]))
                         for name in ("glBindFramebuffer", "glFramebufferTexture2D", "glCheckFramebufferStatus",
@@ -248,8 +248,7 @@ class RawGL:
 
     def flush(self) -> None:
         """Start the GPU (or llvmpipe's rasteriser threads) on every queued command."""
-        if self._flush is not None:
-            self._flush()
+        self._flush()
 
 
     def copy_to_cube_face(self, source: moderngl.Framebuffer, cube: moderngl.TextureCube, face: int,
@@ -663,6 +662,16 @@ def inspect_bound_target(ctx: moderngl.Context, cube: moderngl.TextureCube | int
 def _address(ctx: moderngl.Context, name: str) -> int | None:
     loader = getattr(getattr(ctx.mglo, "_context", None), "load_opengl_function", None)
     return loader(name) if loader is not None else None
+
+
+def _required(ctx: moderngl.Context, name: str, prototype):
+    """GL function ``name``, which every frame needs (core in GL 4.1): ``MissingEntryPoints``
+    naming it where the context's loader does not give it."""
+    function = _load(ctx, name, prototype)
+    if function is None:
+        raise MissingEntryPoints(f"{name} is not given by this context's GL loader; Speculum needs it every "
+                                 f"frame (core since OpenGL 3.0, and the engine needs OpenGL 4.1 core)")
+    return function
 
 
 def _load(ctx: moderngl.Context, name: str, prototype):
