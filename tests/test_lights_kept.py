@@ -39,16 +39,16 @@ def _filler_positions(count: int, centre=(20.0, 8.0, -10.0), radius: float = 0.5
 
 
 def _two_boxes(world, lamp_a: bool = True, lamp_b: bool = True, fillers: int = FILLERS) -> dict:
-    """Two white boxes 40 m apart, ``fillers`` dim far lamps made first, then LAMP_B, then
-    LAMP_A (the 17th made, in front of box A)."""
+    """Two white boxes 40 m apart; LAMP_B (in front of box B) made first, then ``fillers`` dim
+    far lamps, then LAMP_A (the 17th made, in front of box A)."""
     ids = {"camera": look_from(world, EYE_A, target=BOX_A.tolist())}
     for position in (BOX_A, BOX_B):
         world.spawn(Transform(position=position.tolist()), MeshRef(box()), Material(color=(1, 1, 1), roughness=1.0))
-    ids["fillers"] = [world.spawn(Transform(position=p), PointLight(intensity=2.0, range=1.0))
-                      for p in _filler_positions(fillers)]
     if lamp_b:
         ids["lamp_b"] = world.spawn(Transform(position=LAMP_B), PointLight(color=(1.0, 0.8, 0.6), intensity=3.0,
                                                                            range=4.0))
+    ids["fillers"] = [world.spawn(Transform(position=p), PointLight(intensity=2.0, range=1.0))
+                      for p in _filler_positions(fillers)]
     if lamp_a:
         ids["lamp_a"] = world.spawn(Transform(position=LAMP_A), PointLight(color=(1.0, 0.8, 0.6), intensity=3.0,
                                                                            range=4.0))
