@@ -175,16 +175,20 @@ def choose_lights(world: World, previous: KeptLights | None, limits: LightLimits
     if camera is not None:
         position = world.get(camera, Transform).world[3]
         eye = (float(position.x), float(position.y), float(position.z))
+    # Importance is worked out only where there are more lights than places (most scenes:
+    # never), the slots alone otherwise.
     suns = sorted(world.query_one(DirectionalLight), key=lambda pair: pair[0])
     sun_ids = [entity for entity, _ in suns]
-    sun_rgb = np.array([raw_field(light, "color").xyz * light.intensity for _, light in suns],
-                       np.float64).reshape(-1, 3)
-    directional = _keep(sun_ids, np.zeros(len(suns), bool), luminance(sun_rgb), previous.directional,
-                        limits.directional)
+    brightness = np.zeros(len(suns))
+    if len(suns) > limits.directional:
+        brightness = luminance(np.array([raw_field(light, "color").xyz * light.intensity for _, light in suns],
+                                        np.float64).reshape(-1, 3))
+    directional = _keep(sun_ids, np.zeros(len(suns), bool), brightness, previous.directional, limits.directional)
     lamps = sorted(world.query(PointLight, Transform), key=lambda pair: pair[0])
     lamp_ids = [entity for entity, _ in lamps]
-    holds, importance = np.zeros(0, bool), np.zeros(0)
-    if lamps:
+    shadowed = sum(1 for _, (light, _) in lamps if light.shadows)
+    holds, importance = np.zeros(len(lamps), bool), np.zeros(len(lamps))
+    if len(lamps) > limits.point or shadowed > limits.point_shadows:
         holds, importance = point_importance(
             np.array([t.world[3].xyz for _, (_, t) in lamps], np.float64),
             np.array([light.range for _, (light, _) in lamps], np.float64),
@@ -194,7 +198,6 @@ def choose_lights(world: World, previous: KeptLights | None, limits: LightLimits
     casting = [i for i, (entity, (light, _)) in enumerate(lamps) if light.shadows and entity in kept]
     cubes = _keep([lamp_ids[i] for i in casting], holds[casting], importance[casting], previous.point_shadows,
                   limits.point_shadows)
-    shadowed = sum(1 for _, (light, _) in lamps if light.shadows)
     return KeptLights(directional=directional, point=point, point_shadows=cubes,
                       cut=(len(suns) - sum(e is not None for e in directional), len(lamps) - len(kept)),
                       shadows_cut=shadowed - sum(e is not None for e in cubes),
