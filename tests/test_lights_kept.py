@@ -281,3 +281,41 @@ def test_a_still_scene_keeps_its_slots_block_and_shadow_maps(scene):
     assert runner.stats.lights_cut == 0 and runner.stats.shadow_maps_drawn == 0
     changed = np.flatnonzero((_point_rows(runner)[1] != rows).any(axis=(1, 2)))
     assert changed.tolist() == [slot]
+
+
+def test_the_rules_falloff_is_the_scene_shaders(scene):
+    """The importance the rule gives a point light is measured with the scene shader's own
+    falloff (``light_rules.falloff``): a floor under one lamp, nothing else lighting it (a
+    black sky), shows at each pixel albedo / pi x intensity x cos x ``falloff(distance)``
+    (a rough dielectric's specular adds a few percent), across the lamp's whole range, and
+    black past it."""
+    from components import Skybox
+    from engine.rules.light_rules import falloff
+    from tests.support import linear_to_srgb8
+
+    lamp, light_range, intensity, albedo = np.array([0.0, 1.5, 0.0]), 4.0, 6.0, 0.8
+
+    def build(world):
+        world.spawn(Skybox(faces=np.zeros((6, 16, 16, 3), np.float32)))
+        world.resources["ids"] = {"camera": look_from(world, (0.0, 6.0, 6.0), target=(0.0, 0.0, 0.0)),
+                                  "floor": world.spawn(Transform(), MeshRef(plane(14, 14)),
+                                                       Material(color=(albedo,) * 3, roughness=1.0))}
+        world.spawn(Transform(position=lamp.tolist()), PointLight(intensity=intensity, range=light_range))
+
+    runner = scene(build, (320, 240))
+    runner.engine.renderer.antialias = "off"
+    rgb = runner.frame()
+    _save("falloff", rgb)
+    eye, rays = pixel_rays(runner.engine.main_view, runner.size)
+    points = eye + rays * (-eye[1] / rays[..., 1])[..., None]
+    to_lamp = lamp - points
+    distance = np.linalg.norm(to_lamp, axis=-1)
+    expected = albedo / np.pi * intensity * (to_lamp[..., 1] / distance) * falloff(distance, light_range)
+    floor = runner.ids() == runner.world.resources["ids"]["floor"]
+    shown = srgb_to_linear(rgb).mean(axis=-1)
+    steps = np.abs(srgb_to_linear(linear_to_srgb8(expected) + 1.5) - expected)  # 1.5 sRGB steps at each value
+    inside = floor & (distance < light_range) & (expected > 0.01)
+    assert inside.sum() > 10000, inside.sum()
+    error = np.abs(shown[inside] - expected[inside]) - steps[inside]
+    assert (error <= 0.06 * expected[inside]).mean() >= 0.99, np.percentile(error / expected[inside], [50, 99])
+    assert (shown[floor & (distance > light_range + 0.05)] == 0.0).all()
