@@ -142,10 +142,15 @@ class PrepareSystem(esper.Processor):
         return camera != kept.camera or (camera is not None and camera in world.frame.moved)
 
     def _lights_stand_still(self) -> bool:
-        """No light came, went or changed, and no point light moved (its own Transform or a
-        parent's: the transform stage lists both in ``frame.moved``): last frame's block holds."""
+        """No light came, went or changed, and no point light moved, got or lost its Transform
+        (its own or a parent's: the transform stage lists both in ``frame.moved``): last
+        frame's block holds."""
         world = self.world
         if world.changed(DirectionalLight) or world.changed(PointLight):
             return False
-        moved = world.frame.moved
-        return not moved or not any(entity in moved for entity, _ in world.query_one(PointLight))
+        frame = world.frame
+        moved, added, removed = frame.moved, frame.added, frame.removed
+        if not (moved or added or removed):
+            return True
+        return not any(entity in moved or entity in added or entity in removed
+                       for entity, _ in world.query_one(PointLight))

@@ -319,3 +319,22 @@ def test_the_rules_falloff_is_the_scene_shaders(scene):
     error = np.abs(shown[inside] - expected[inside]) - steps[inside]
     assert (error <= 0.06 * expected[inside]).mean() >= 0.99, np.percentile(error / expected[inside], [50, 99])
     assert (shown[floor & (distance > light_range + 0.05)] == 0.0).all()
+
+
+def test_a_lamp_that_loses_or_gets_its_transform_leaves_or_takes_a_slot(scene):
+    """A PointLight lights from its Transform: a kept lamp whose Transform is taken away
+    leaves its slot to the lamp left out (no frame reads the gone Transform), and given one
+    back it is ranked again (here: the least important, so it stays out)."""
+    runner = scene(_two_boxes)
+    ids = runner.world.resources["ids"]
+    runner.frame()
+    before = runner.world.resources[KeptLights].point
+    slot = before.index(ids["lamp_a"])
+    runner.world.remove_component(ids["lamp_a"], Transform)
+    runner.frame()
+    after = runner.world.resources[KeptLights].point
+    assert after == before[:slot] + (ids["lamp_b"],) + before[slot + 1:]
+    assert runner.stats.lights_cut == 0
+    runner.world.add_component(ids["lamp_a"], Transform(position=(20.0, 30.0, -60.0)))
+    runner.frame()
+    assert runner.world.resources[KeptLights].point == after and runner.stats.lights_cut == 1
