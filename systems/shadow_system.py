@@ -76,6 +76,8 @@ class ShadowSystem(esper.Processor):
         # What the directional maps were last made or kept from: (level box, the lights, (atlas
         # tile, filter, enabled), the casting lights' directions as published); None: look again.
         self._still: tuple | None = None
+        # The light rule's choice last read, and its directional lights slot by slot.
+        self._kept: tuple[KeptLights | None, list[DirectionalLight | None]] = (None, [])
         world.resources[ShadowCasters] = ShadowCasters()
 
     def process(self, dt: float) -> None:
@@ -91,7 +93,10 @@ class ShadowSystem(esper.Processor):
         carrying = surfaces is not None and any(s.carries_light for s in (*surfaces.mirrors.values(),
                                                                          *surfaces.portals.values()))
         kept = kept_lights(world, LIGHT_LIMITS)
-        suns = [None if entity is None else world.get(entity, DirectionalLight) for entity in kept.directional]
+        if kept is not self._kept[0]:   # a new choice (a light came, went, changed or moved)
+            self._kept = (kept, [None if entity is None else world.get(entity, DirectionalLight)
+                                 for entity in kept.directional])
+        suns = self._kept[1]
         needed = self.enabled and (carrying or any(light is not None and light.shadows for light in suns))
         if not needed:
             level = self._level = None
