@@ -31,12 +31,12 @@ from engine.core.errors import LightLimitWarning
 from engine.core.world import World
 from engine.render.irradiance import hemisphere_sh, project_faces
 from engine.render.renderer import Renderer
+from engine.render.shadows import LIGHT_LIMITS
 from engine.render.sky import build_faces
-from engine.render.views import MAX_DIRECTIONAL_LIGHTS, MAX_POINT_LIGHTS, MAX_POINT_SHADOWS, lights_block
+from engine.render.views import MAX_DIRECTIONAL_LIGHTS, MAX_POINT_LIGHTS, lights_block
 from engine.rules.frame_rules import frame_rules
-from engine.rules.light_rules import KeptLights, LightLimits, choose_lights
+from engine.rules.light_rules import KeptLights, choose_lights
 
-LIGHT_LIMITS = LightLimits(MAX_DIRECTIONAL_LIGHTS, MAX_POINT_LIGHTS, MAX_POINT_SHADOWS)
 # A freed slot no light took yet: black (no light), its range 1 (no division by zero).
 _NO_SUN = ((0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
 _NO_LAMP = ((0.0, 0.0, 0.0), 1.0, (0.0, 0.0, 0.0))

@@ -33,10 +33,9 @@ from components import DirectionalLight, Material, MeshRef, PointLight, Refracti
 from components.tracking import raw_field
 from engine.core.world import World
 from engine.render.renderer import Renderer
-from engine.render.shadows import MAX_POINT_SHADOWS, VIRTUAL_RESOLUTION
-from engine.render.views import MAX_DIRECTIONAL_LIGHTS, MAX_POINT_LIGHTS
+from engine.render.shadows import LIGHT_LIMITS, VIRTUAL_RESOLUTION
 from engine.resources import RenderStats, Surfaces
-from engine.rules.light_rules import KeptLights, LightLimits, kept_lights
+from engine.rules.light_rules import KeptLights, kept_lights
 from engine.rules.probe_rules import world_bounds
 from engine.rules.shadow_rules import (
     MAX_VIRTUAL_LIGHTS,
@@ -52,7 +51,6 @@ from engine.rules.shadow_rules import (
 )
 
 _LOOKS = (MeshRef, Material, Visibility, Refractive)  # what decides whether, and what shape, a thing casts
-LIGHT_LIMITS = LightLimits(MAX_DIRECTIONAL_LIGHTS, MAX_POINT_LIGHTS, MAX_POINT_SHADOWS)
 
 
 class ShadowSystem(esper.Processor):
