@@ -85,8 +85,9 @@ class RenderStats(BudgetLedger):
     shadow_maps_kept: int = 0
     shadows_cut: int = 0
     # Lights past the Lights block's slots (views.MAX_DIRECTIONAL_LIGHTS directional,
-    # MAX_POINT_LIGHTS point: the first made of each kind are kept), which light nothing this
-    # frame; set every frame while it lasts (the prepare stage warns when it starts).
+    # MAX_POINT_LIGHTS point: those that matter most are kept, engine/rules/light_rules.py),
+    # which light nothing this frame; set every frame while it lasts (the prepare stage warns
+    # when it starts).
     lights_cut: int = 0
     virtual_lights: int = 0              # lights shining through mirrors and portals this frame
     virtual_lights_cut: int = 0          # ... that the limit or the view budget left out

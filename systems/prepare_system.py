@@ -7,10 +7,14 @@ changed), the sky's cube map when the Skybox changes.
 Ambient light (``engine/render/irradiance.py``): the sky's irradiance as nine
 spherical-harmonic coefficients in the Lights block, projected from the Skybox's faces when
 the Skybox changes; without a Skybox, the ``HemisphereLight``'s (a dim default without one).
-Lights past the block's slots (``MAX_DIRECTIONAL_LIGHTS`` directional and
-``MAX_POINT_LIGHTS`` point lights: the first made of each kind are kept) light nothing: they
-are counted in ``RenderStats.lights_cut`` every frame, and a ``LightLimitWarning`` names
-them when the count goes up.
+Which lights fill the block's slots (``MAX_DIRECTIONAL_LIGHTS`` directional and
+``MAX_POINT_LIGHTS`` point lights) is ``engine/rules/light_rules.py``'s rule: point lights by
+their importance to the active camera, directional ones by luminance, each kept light in a
+stable slot.  It is asked again when a light came, went, changed or moved, or, while the
+answer depends on the camera (more point lights than slots), when the camera moved; the
+answer is published as ``KeptLights`` for the shadows stage.  Lights left out light
+nothing: they are counted in ``RenderStats.lights_cut`` every frame, and a
+``LightLimitWarning`` names them when the count goes up.
 The probes' influence boxes go to the irradiance table when a probe comes, goes, changes or
 moves; their coefficients are projected on the GPU after each capture (the probes stages).
 """
@@ -27,8 +31,15 @@ from engine.core.errors import LightLimitWarning
 from engine.core.world import World
 from engine.render.irradiance import hemisphere_sh, project_faces
 from engine.render.renderer import Renderer
+from engine.render.shadows import LIGHT_LIMITS
 from engine.render.sky import build_faces
 from engine.render.views import MAX_DIRECTIONAL_LIGHTS, MAX_POINT_LIGHTS, lights_block
+from engine.rules.frame_rules import frame_rules
+from engine.rules.light_rules import KeptLights, choose_lights
+
+# A freed slot no light took yet: black (no light), its range 1 (no division by zero).
+_NO_SUN = ((0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
+_NO_LAMP = ((0.0, 0.0, 0.0), 1.0, (0.0, 0.0, 0.0))
 
 
 def ambient_sh(world: World, faces: np.ndarray | None = None) -> np.ndarray:
@@ -52,6 +63,7 @@ class PrepareSystem(esper.Processor):
         self._lights = b""
         self._sky_sh: np.ndarray | None = None
         self._cut = (0, 0)   # (directional, point) lights the last block left out
+        self._kept: KeptLights | None = None   # the last choice of lights (light_rules)
 
     def process(self, dt: float) -> None:
         world = self.world
@@ -67,25 +79,47 @@ class PrepareSystem(esper.Processor):
             sky_changed = True
         renderer.upload_instances()
         self._probe_boxes()
-        if not (self._lights and not sky_changed and self._lights_stand_still()):
-            directional = [(light.direction, light.color.xyz * light.intensity)
-                           for _, light in world.query_one(DirectionalLight)]
-            point = [(t.world[3].xyz, light.range, light.color.xyz * light.intensity)
-                     for _, (light, t) in world.query(PointLight, Transform)]
-            block = lights_block(self._sky_sh, directional, point)
+        kept = self._kept
+        if not (self._lights and not sky_changed and self._lights_stand_still()
+                and not (kept.by_eye and self._camera_moved(kept))):
+            kept = self._kept = choose_lights(world, kept, LIGHT_LIMITS)
+            block = lights_block(self._sky_sh, *self._rows(kept))
             if block != self._lights:
                 renderer.set_lights(block)
                 self._lights = block
-            self._count_cut(len(directional), len(point))
+            self._count_cut(kept)
+        world.resources[KeptLights] = kept   # every frame: what the shadows stage reads
         renderer.stats.lights_cut = sum(self._cut)
 
-    def _count_cut(self, directional: int, point: int) -> None:
+    def _rows(self, kept: KeptLights) -> tuple[list[tuple], list[tuple]]:
+        """The Lights block's rows of the kept lights, slot by slot (a freed slot black)."""
+        world = self.world
+        directional = []
+        for entity in kept.directional:
+            if entity is None:
+                directional.append(_NO_SUN)
+                continue
+            light = world.get(entity, DirectionalLight)
+            directional.append((light.direction, light.color.xyz * light.intensity))
+        point = []
+        for entity in kept.point:
+            if entity is None:
+                point.append(_NO_LAMP)
+                continue
+            light, t = world.get(entity, PointLight), world.get(entity, Transform)
+            point.append((t.world[3].xyz, light.range, light.color.xyz * light.intensity))
+        return directional, point
+
+    def _count_cut(self, kept: KeptLights) -> None:
         """Keep how many lights of each kind the block left out; warn when either grows."""
-        cut = (max(directional - MAX_DIRECTIONAL_LIGHTS, 0), max(point - MAX_POINT_LIGHTS, 0))
+        cut = kept.cut
         if cut[0] > self._cut[0] or cut[1] > self._cut[1]:
+            directional = cut[0] + sum(entity is not None for entity in kept.directional)
+            point = cut[1] + sum(entity is not None for entity in kept.point)
             warnings.warn(LightLimitWarning(
                 f"{directional} directional and {point} point lights: at most {MAX_DIRECTIONAL_LIGHTS} directional "
-                f"and {MAX_POINT_LIGHTS} point lights light the scene (the first made of each kind), so {cut[0]} "
+                f"and {MAX_POINT_LIGHTS} point lights light the scene (the point lights that matter most to the "
+                f"active camera, the brightest directional ones: engine/rules/light_rules.py), so {cut[0]} "
                 f"directional and {cut[1]} point lights light nothing (RenderStats.lights_cut)"), stacklevel=2)
         self._cut = cut
 
@@ -101,11 +135,22 @@ class PrepareSystem(esper.Processor):
             (entity, tuple(t.world[3].xyz), tuple(probe.influence), probe.blend_distance)
             for entity, (probe, t) in probes if probe.influence is not None)
 
+    def _camera_moved(self, kept: KeptLights) -> bool:
+        """The active camera moved (or another became active) since ``kept`` was chosen."""
+        world = self.world
+        camera = frame_rules(world).active_camera
+        return camera != kept.camera or (camera is not None and camera in world.frame.moved)
+
     def _lights_stand_still(self) -> bool:
-        """No light came, went or changed, and no point light moved (its own Transform or a
-        parent's: the transform stage lists both in ``frame.moved``): last frame's block holds."""
+        """No light came, went or changed, and no point light moved, got or lost its Transform
+        (its own or a parent's: the transform stage lists both in ``frame.moved``): last
+        frame's block holds."""
         world = self.world
         if world.changed(DirectionalLight) or world.changed(PointLight):
             return False
-        moved = world.frame.moved
-        return not moved or not any(entity in moved for entity, _ in world.query_one(PointLight))
+        frame = world.frame
+        moved, added, removed = frame.moved, frame.added, frame.removed
+        if not (moved or added or removed):
+            return True
+        return not any(entity in moved or entity in added or entity in removed
+                       for entity, _ in world.query_one(PointLight))

@@ -13,6 +13,12 @@ the same depths a whole redraw writes).  Virtual lights (``shadow_rules.virtual_
 lights through mirrors and portals) get their maps here too, each a view of the frame's
 ``ViewBudget``, at most ``MAX_VIRTUAL_LIGHTS`` (the rest: ``RenderStats.virtual_lights_cut``).
 
+Which lights have maps, and in which slot, is ``engine/rules/light_rules.py``'s choice, the
+one the prepare stage filled the Lights block with (``KeptLights``): a directional map's
+slot is its light's slot in the block, and the point lights' cubes go to the kept lights the
+rule gives them to (the most important to the camera that cast), each kept in its cube while
+it stays chosen; a light left out of the block casts nothing (``RenderStats.shadows_cut``).
+
 It publishes ``ShadowCasters`` (``engine/rules/shadow_rules.py``): the lights casting this
 frame, so the probes' scheduler can recapture a face where a moved caster's shadow falls.
 """
@@ -27,9 +33,9 @@ from components import DirectionalLight, Material, MeshRef, PointLight, Refracti
 from components.tracking import raw_field
 from engine.core.world import World
 from engine.render.renderer import Renderer
-from engine.render.shadows import MAX_POINT_SHADOWS, VIRTUAL_RESOLUTION
-from engine.render.views import MAX_DIRECTIONAL_LIGHTS, MAX_POINT_LIGHTS
+from engine.render.shadows import LIGHT_LIMITS, VIRTUAL_RESOLUTION
 from engine.resources import RenderStats, Surfaces
+from engine.rules.light_rules import KeptLights, kept_lights
 from engine.rules.probe_rules import world_bounds
 from engine.rules.shadow_rules import (
     MAX_VIRTUAL_LIGHTS,
@@ -68,6 +74,8 @@ class ShadowSystem(esper.Processor):
         # What the directional maps were last made or kept from: (level box, the lights, (atlas
         # tile, filter, enabled), the casting lights' directions as published); None: look again.
         self._still: tuple | None = None
+        # The light rule's choice last read, and its directional lights slot by slot.
+        self._kept: tuple[KeptLights | None, list[DirectionalLight | None]] = (None, [])
         world.resources[ShadowCasters] = ShadowCasters()
 
     def process(self, dt: float) -> None:
@@ -82,8 +90,12 @@ class ShadowSystem(esper.Processor):
         surfaces = world.resources.get(Surfaces)
         carrying = surfaces is not None and any(s.carries_light for s in (*surfaces.mirrors.values(),
                                                                          *surfaces.portals.values()))
-        suns = [light for _, light in world.query_one(DirectionalLight)]
-        needed = self.enabled and (carrying or any(light.shadows for light in suns))
+        kept = kept_lights(world, LIGHT_LIMITS)
+        if kept is not self._kept[0]:   # a new choice (a light came, went, changed or moved)
+            self._kept = (kept, [None if entity is None else world.get(entity, DirectionalLight)
+                                 for entity in kept.directional])
+        suns = self._kept[1]
+        needed = self.enabled and (carrying or any(light is not None and light.shadows for light in suns))
         if not needed:
             level = self._level = None
         elif casters_changed or changed_box is not None or self._level is None:
@@ -93,9 +105,9 @@ class ShadowSystem(esper.Processor):
         else:
             level = self._level
         published = ShadowCasters(level=level)
-        self._directional_maps(suns[:MAX_DIRECTIONAL_LIGHTS], casters_changed, changed_box, level, published)
-        self._point_maps(published)
-        published.virtual = self._virtual_maps(casters_changed, level, carrying)
+        self._directional_maps(suns, casters_changed, changed_box, level, published)
+        self._point_maps(kept, published)
+        published.virtual = self._virtual_maps(kept, casters_changed, level, carrying)
         world.resources[ShadowCasters] = published
         block = maps.block.tobytes() + maps.virtual_block.tobytes()
         if block != self._uploaded:
@@ -111,9 +123,10 @@ class ShadowSystem(esper.Processor):
         return seen[1]
 
     # --- directional lights -------------------------------------------------------------------
-    def _directional_maps(self, lights: list[DirectionalLight], casters_changed: bool, changed_box, level,
+    def _directional_maps(self, lights: list[DirectionalLight | None], casters_changed: bool, changed_box, level,
                           published: ShadowCasters) -> None:
-        """Each of ``lights`` (the first ``MAX_DIRECTIONAL_LIGHTS``, slot by slot) that casts:
+        """Each of ``lights`` (the kept ones, slot by slot as in the Lights block; None: a
+        freed slot) that casts:
         its map kept, drawn again where casters changed, or drawn whole for a new fit; a slot
         that stopped casting cleared."""
         maps = self.renderer.shadows
@@ -131,7 +144,7 @@ class ShadowSystem(esper.Processor):
             return
         self._still = None
         kept = self._directional
-        casting = [(slot, light) for slot, light in enumerate(lights) if light.shadows] \
+        casting = [(slot, light) for slot, light in enumerate(lights) if light is not None and light.shadows] \
             if self.enabled and level is not None else []
         if len(kept) != len(casting) or any(slot not in kept for slot, _ in casting):
             for slot in [slot for slot in kept if slot not in dict(casting)]:
@@ -173,18 +186,17 @@ class ShadowSystem(esper.Processor):
         self._still = (level, lights, (maps.tile, maps.filter, self.enabled), tuple(published.directional))
 
     # --- point lights -------------------------------------------------------------------------
-    def _point_maps(self, published: ShadowCasters) -> None:
+    def _point_maps(self, kept: KeptLights, published: ShadowCasters) -> None:
+        """The cube of each point light the rule gives one (``KeptLights.point_shadows``: cube
+        slot -> light), read at the light's slot of the Lights block; kept while the light,
+        its range and the casters in its reach stand still."""
         world = self.world
         maps = self.renderer.shadows
         stats: RenderStats = self.world.resources[RenderStats]
-        casting = [(index, entity, light, transform)
-                   for index, (entity, (light, transform)) in enumerate(world.query(PointLight, Transform))
-                   if light.shadows] if self.enabled else []
-        if casting:
-            beyond = [row for row in casting if row[0] >= MAX_POINT_LIGHTS]  # not lit at all: the Lights block's limit
-            casting = [row for row in casting if row[0] < MAX_POINT_LIGHTS]
-            stats.shadows_cut += len(casting[MAX_POINT_SHADOWS:]) + len(beyond)
-            casting = casting[:MAX_POINT_SHADOWS]
+        casting = [(slot, kept.point_slot(entity), entity, world.get(entity, PointLight), world.get(entity, Transform))
+                   for slot, entity in enumerate(kept.point_shadows) if entity is not None] if self.enabled else []
+        if self.enabled:
+            stats.shadows_cut += kept.shadows_cut   # left out of the block, or kept past the cubes
         if not casting:
             if not self._points_clear:  # cleared once when the last one stops casting
                 maps.clear_points()
@@ -197,7 +209,7 @@ class ShadowSystem(esper.Processor):
         self._points_clear = False
         changed_lo, changed_hi = self._changed_boxes()
         layered = self.renderer.path_checks.trusted("layered_capture")
-        for slot, (index, entity, light, transform) in enumerate(casting):
+        for slot, index, entity, light, transform in casting:
             position = transform.world[3].xyz
             published.points.append((tuple(position), light.range))
             key = (entity, tuple(position), light.range, light.shadow_resolution, light.shadow_softness, maps.filter)
@@ -210,8 +222,9 @@ class ShadowSystem(esper.Processor):
                                                 light.shadow_softness, layered)
             self._point[slot] = key
             stats.shadow_maps_drawn += 1
-        maps.drop_unused_cubes(set(range(len(casting))))
-        for slot in [s for s in self._point if s >= len(casting)]:
+        used = {row[0] for row in casting}
+        maps.drop_unused_cubes(used)
+        for slot in [s for s in self._point if s not in used]:
             del self._point[slot]
 
     def _changed_boxes(self) -> tuple[np.ndarray, np.ndarray]:
@@ -241,8 +254,8 @@ class ShadowSystem(esper.Processor):
         return np.array([lo for lo, _ in boxes]), np.array([hi for _, hi in boxes])
 
     # --- lights through mirrors and portals ---------------------------------------------------
-    def _virtual_maps(self, casters_changed: bool, level, carrying: bool) -> list[VirtualLight]:
-        """Each light's image through the mirrors and portals that carry light
+    def _virtual_maps(self, kept: KeptLights, casters_changed: bool, level, carrying: bool) -> list[VirtualLight]:
+        """Each kept light's image through the mirrors and portals that carry light
         (``shadow_rules.virtual_lights``), brightest and highest priority first, at most
         ``MAX_VIRTUAL_LIGHTS``: a map each, drawn when it or a caster changed, a view of the
         frame's ``ViewBudget`` each time it is drawn; one the limit or the budget leaves out
@@ -254,8 +267,9 @@ class ShadowSystem(esper.Processor):
         surfaces = world.resources.get(Surfaces)
         found: list[VirtualLight] = []
         if self.enabled and level is not None and carrying:  # no surface carries light: no list to make
-            suns = list(world.query_one(DirectionalLight))[:MAX_DIRECTIONAL_LIGHTS]
-            lamps = list(world.query(PointLight, Transform))[:MAX_POINT_LIGHTS]
+            suns = [(entity, world.get(entity, DirectionalLight)) for entity in kept.directional if entity is not None]
+            lamps = [(entity, (world.get(entity, PointLight), world.get(entity, Transform)))
+                     for entity in kept.point if entity is not None]
             directional = [(entity, raw_field(light, "direction"), raw_field(light, "color").xyz * light.intensity)
                            for entity, light in suns]
             points = [(entity, transform.world[3].xyz, light.range, raw_field(light, "color").xyz * light.intensity)

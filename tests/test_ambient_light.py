@@ -476,11 +476,12 @@ def test_more_boxes_than_the_shader_blends_are_reported(scene, caplog):
 
 
 def test_lights_past_the_blocks_slots_light_nothing_and_are_counted(scene):
-    """Four dark suns, then a bright one: the block keeps the first MAX_DIRECTIONAL_LIGHTS
-    (the dark ones), so the white box's sunward face shows the sky's light alone, as with no
-    fifth sun; the fifth is counted in RenderStats.lights_cut every frame and warned about
-    once, when it comes; so are point lights past MAX_POINT_LIGHTS.  Taking lights away
-    brings the count back to 0."""
+    """Four bright suns shining up (they light no top face), then a dim one shining down: the
+    block keeps the MAX_DIRECTIONAL_LIGHTS brightest (engine/rules/light_rules.py), so the
+    white box's top face shows the sky's light alone, as with no fifth sun; the fifth is
+    counted in RenderStats.lights_cut every frame and warned about once, when it comes; so
+    are point lights past MAX_POINT_LIGHTS.  Made the brightest, the fifth sun is kept in
+    place of one of the four and lights the top; taking lights away brings the count to 0."""
     from engine.core.errors import LightLimitWarning
 
     radiance = np.array([0.2, 0.2, 0.2])
@@ -491,7 +492,7 @@ def test_lights_past_the_blocks_slots_light_nothing_and_are_counted(scene):
         look_from(world, (2.5, 2.0, 3.0), target=(0, 0.5, 0))
         world.spawn(Transform(position=(0, 0.5, 0)), MeshRef(box()), Material(color=(1, 1, 1), roughness=1.0))
         for _ in range(MAX_DIRECTIONAL_LIGHTS):
-            suns.append(world.spawn(DirectionalLight(direction=(0, -1, 0), intensity=0.0)))
+            suns.append(world.spawn(DirectionalLight(direction=(0, 1, 0), intensity=1.0, shadows=False)))
 
     runner = scene(build)
     rgb = runner.frame()
@@ -500,7 +501,7 @@ def test_lights_past_the_blocks_slots_light_nothing_and_are_counted(scene):
     dark = pixel_linear(rgb, *top, 1)
     np.testing.assert_allclose(dark, radiance, atol=float(srgb_tolerance(radiance).max()))
     world = runner.world
-    suns.append(world.spawn(DirectionalLight(direction=(0, -1, 0), intensity=3.0)))
+    suns.append(world.spawn(DirectionalLight(direction=(0, -1, 0), intensity=0.5)))
     with pytest.warns(LightLimitWarning, match="1 directional and 0 point lights light nothing"):
         rgb = runner.frame()
     assert runner.stats.lights_cut == 1
@@ -510,15 +511,23 @@ def test_lights_past_the_blocks_slots_light_nothing_and_are_counted(scene):
         warnings_module.simplefilter("error")   # said once: a still frame counts without a warning
         runner.frame()
     assert runner.stats.lights_cut == 1
+    # Brighter than the four: kept in place of one of them (still one cut), it lights the top.
+    world.get(suns[-1], DirectionalLight).intensity = 3.0
+    rgb = runner.frame()
+    assert runner.stats.lights_cut == 1
+    assert (pixel_linear(rgb, *top, 1) > dark + 0.3).all()
+    world.get(suns[-1], DirectionalLight).intensity = 0.5
+    rgb = runner.frame()
+    np.testing.assert_array_equal(pixel_linear(rgb, *top, 1), dark)
     for i in range(MAX_POINT_LIGHTS + 2):
         lamps.append(world.spawn(Transform(position=(5.0 + i, 3.0, 0.0)), PointLight(intensity=1.0, range=0.5)))
     with pytest.warns(LightLimitWarning, match="1 directional and 2 point lights light nothing"):
         runner.frame()
     assert runner.stats.lights_cut == 3
-    # A dark sun goes: the bright one takes its slot and lights the top face.
+    # A bright sun goes: the dim one takes its slot and lights the top face.
     world.delete_entity(suns[0])
     for lamp in lamps[:2]:
         world.delete_entity(lamp)
     rgb = runner.frame()
     assert runner.stats.lights_cut == 0
-    assert (pixel_linear(rgb, *top, 1) > dark + 0.3).all()
+    assert (pixel_linear(rgb, *top, 1) > dark + 0.05).all()

@@ -34,5 +34,7 @@ class NoCameraWarning(UserWarning):
 
 
 class LightLimitWarning(UserWarning):
-    """More lights of a kind than the Lights block holds: those past it light nothing
-    (said when their count grows; counted every frame in ``RenderStats.lights_cut``)."""
+    """More lights of a kind than the Lights block holds: those that matter least light
+    nothing (``engine/rules/light_rules.py``: point lights by their importance to the active
+    camera, directional ones by luminance; said when the count grows, counted every frame in
+    ``RenderStats.lights_cut``)."""

@@ -41,9 +41,12 @@ from engine.render.gpu import Gpu
 from engine.render.raw_gl import LayeredCubeTarget
 from engine.render.targets import release_framebuffer
 from engine.render.views import CAMERA_BLOCK_BYTES, MAX_DIRECTIONAL_LIGHTS, MAX_POINT_LIGHTS, MAX_POINT_SHADOWS, View
+from engine.rules.light_rules import LightLimits
 from engine.rules.shadow_rules import MAX_APERTURES, MAX_VIRTUAL_LIGHTS, DirectionalFit, Leg, VirtualLight
 
 SHADOW_FILTERS = ("grid", "single")
+# The slots the light rule (engine/rules/light_rules.py) fills: the Lights block's and the cubes.
+LIGHT_LIMITS = LightLimits(MAX_DIRECTIONAL_LIGHTS, MAX_POINT_LIGHTS, MAX_POINT_SHADOWS)
 VIRTUAL_RESOLUTION = 1024   # texels a side of a virtual light's map (a tile of the virtual atlas)
 # The VirtualLights block (shaders/include/virtual_lights.glsl): a count, then per light a
 # matrix and seven vectors.

@@ -1,0 +1,212 @@
+"""Which lights light the scene when there are more than the Lights block has slots for,
+and which slot each one takes, defined once for the prepare stage (the Lights block) and
+the shadows stage (which lights' maps are drawn, into which slot): a light's shadow is
+always the shadow of a light that is lit, read at that light's slot.
+
+The rule is the per-object light importance of the engines users know (Unity's "important"
+pixel lights, Godot's and Unreal's light culling) made for one camera: a level with forty
+torches lights the sixteen that matter where the camera is, not the first sixteen made.
+
+- **Point lights** by their importance to the active camera (``point_importance``): those
+  whose range sphere holds the camera first, each by the light it brings to the camera's
+  point (luminance of colour x intensity times the scene shader's own falloff at that
+  distance, ``falloff``: the windowed inverse square of ``shaders/scene.frag``); then the
+  rest, each by its luminance over 1 + the squared distance from the camera to its range
+  sphere (the same inverse square, measured to the nearest point it lights).  Without an
+  active camera, by luminance alone.
+- **Directional lights** by luminance.
+- **Ties** by creation order (entity id): the same answer every run.
+- **Shadow cubes** (``MAX_POINT_SHADOWS`` of them): among the kept point lights that cast
+  shadows, by the same importance.
+
+**Stable slots.**  A light kept from one choice to the next keeps its slot (its row of the
+Lights block and its shadow slot), so a still scene's block and cached shadow maps stay as
+they are and nothing flickers; a light coming in takes a freed slot, the lowest first, and
+lights coming in together take them in creation order (with room for every light, the
+slots are the lights in the order they were made, as before this rule).  A freed slot no
+light takes stays in the block as a black light until one does (the count ends at the
+highest slot in use).
+
+**Hysteresis.**  A light left out replaces a kept one only when it is clearly more
+important: its range sphere holds the camera and the kept one's does not, or, of the same
+kind, its importance is more than ``HYSTERESIS`` times the kept one's.  Two lights of about
+equal importance do not swap every frame as the camera sways between them: the one kept
+stays kept until the other matters a quarter more.  (Ranking only past a camera-distance
+threshold was the other way; it would still swap at the threshold's edge every frame the
+camera crosses it, and does not hold for lights that move.)
+
+**When.**  The prepare stage asks for a choice only when a light came, went, changed or
+moved, or, while the answer depends on the camera (``KeptLights.by_eye``: more point lights
+than slots, or more casting ones kept than cubes), when the active camera moved or another
+became active; a still scene ranks nothing.  It publishes the answer as
+``world.resources[KeptLights]``; ``kept_lights(world)`` reads it.
+
+GL-free: numpy only (the limits are the render side's, given by the callers).
+"""
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from components import DirectionalLight, PointLight, Transform
+from components.tracking import raw_field
+from engine.core.budget import spending_order
+from engine.core.world import World
+from engine.rules.frame_rules import frame_rules
+
+# A light left out replaces a kept one only at more than this times its importance.
+HYSTERESIS = 1.25
+# Rec. 709 luminance of linear RGB: how bright a colour x intensity looks.
+LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
+
+
+@dataclass(frozen=True)
+class LightLimits:
+    """How many lights of each kind the render side has slots for
+    (``engine/render/views.py``: ``MAX_DIRECTIONAL_LIGHTS``, ``MAX_POINT_LIGHTS``,
+    ``MAX_POINT_SHADOWS``)."""
+
+    directional: int
+    point: int
+    point_shadows: int
+
+
+@dataclass(frozen=True)
+class KeptLights:
+    """One choice of the lights that light the scene (``choose_lights``).
+
+    ``directional`` and ``point``: slot -> the light's entity (None: a freed slot, black),
+    as long as the highest slot in use; ``point_shadows``: shadow cube -> the kept point
+    light's entity (None: a free cube); ``cut``: (directional, point) lights left out;
+    ``shadows_cut``: point lights casting shadows with no cube (left out, or kept past the
+    cubes); ``by_eye``: whether the choice depends on the camera (``camera``, whose position
+    it was made from: ``eye``)."""
+
+    directional: tuple[int | None, ...] = ()
+    point: tuple[int | None, ...] = ()
+    point_shadows: tuple[int | None, ...] = ()
+    cut: tuple[int, int] = (0, 0)
+    shadows_cut: int = 0
+    by_eye: bool = False
+    camera: int | None = None
+    eye: tuple[float, float, float] | None = None
+
+    def point_slot(self, entity: int) -> int:
+        """The Lights block slot of kept point light ``entity`` (-1: not kept)."""
+        return self.point.index(entity) if entity in self.point else -1
+
+
+def luminance(rgb: np.ndarray) -> np.ndarray:
+    """Rec. 709 luminance of linear colours (..., 3)."""
+    return np.asarray(rgb, np.float64) @ LUMINANCE
+
+
+def falloff(distance: np.ndarray, light_range: np.ndarray) -> np.ndarray:
+    """The scene shader's point-light falloff (``shaders/scene.frag`` ``direct_lighting``):
+    (1 - (d / range)^4)^2 clamped, over d^2 + 1."""
+    d = np.asarray(distance, np.float64)
+    fade = np.clip(1.0 - np.power(d / np.asarray(light_range, np.float64), 4), 0.0, 1.0)
+    return fade * fade / (d * d + 1.0)
+
+
+def point_importance(positions: np.ndarray, ranges: np.ndarray, rgb: np.ndarray,
+                     eye: Sequence[float] | None) -> tuple[np.ndarray, np.ndarray]:
+    """(holds, importance) of point lights to a camera at ``eye``: whether each one's range
+    sphere holds the camera, and the light it brings there (inside: luminance x ``falloff``
+    at the camera; outside: luminance / (1 + gap^2), gap the distance from the camera to the
+    sphere).  Without ``eye``: no sphere holds it, importance is luminance."""
+    lum = luminance(np.asarray(rgb, np.float64).reshape(-1, 3))
+    if eye is None:
+        return np.zeros(len(lum), bool), lum
+    ranges = np.asarray(ranges, np.float64)
+    distance = np.linalg.norm(np.asarray(positions, np.float64).reshape(-1, 3) - np.asarray(eye, np.float64), axis=1)
+    holds = distance < ranges
+    gap = np.maximum(distance - ranges, 0.0)
+    return holds, np.where(holds, lum * falloff(distance, ranges), lum / (1.0 + gap * gap))
+
+
+def _keep(ids: list[int], holds: np.ndarray, importance: np.ndarray, slots: tuple[int | None, ...],
+          limit: int) -> tuple[int | None, ...]:
+    """The slots of the ``limit`` lights kept of ``ids`` (importance and holds by row), from
+    the last choice's ``slots``: the most important, with hysteresis, each in its old slot."""
+    if len(ids) <= limit:
+        kept = set(ids)
+    else:
+        order = [ids[i] for i in spending_order(holds.astype(np.float64), importance, ids).tolist()]
+        rank = {entity: place for place, entity in enumerate(order)}
+        row = {entity: i for i, entity in enumerate(ids)}
+        kept = {entity for entity in slots if entity is not None and entity in rank}
+        outside = [entity for entity in order if entity not in kept]
+        while len(kept) < limit:
+            kept.add(outside.pop(0))
+
+        def beats(a: int, b: int) -> bool:
+            i, j = row[a], row[b]
+            if holds[i] != holds[j]:
+                return bool(holds[i])
+            return bool(importance[i] > HYSTERESIS * importance[j])
+
+        while outside:
+            worst = max(kept, key=rank.__getitem__)
+            if not beats(outside[0], worst):
+                break
+            kept.remove(worst)
+            kept.add(outside.pop(0))
+            outside.append(worst)
+            outside.sort(key=rank.__getitem__)
+    placed = [entity if entity in kept else None for entity in slots[:limit]]
+    placed += [None] * (limit - len(placed))
+    free = iter([i for i, entity in enumerate(placed) if entity is None])
+    for entity in sorted(kept - set(placed)):
+        placed[next(free)] = entity
+    while placed and placed[-1] is None:
+        placed.pop()
+    return tuple(placed)
+
+
+def choose_lights(world: World, previous: KeptLights | None, limits: LightLimits) -> KeptLights:
+    """The lights that light the scene now and their slots (the module's rule), from the last
+    choice ``previous`` (None: the first)."""
+    previous = previous or KeptLights()
+    camera = frame_rules(world).active_camera
+    eye = None
+    if camera is not None:
+        position = world.get(camera, Transform).world[3]
+        eye = (float(position.x), float(position.y), float(position.z))
+    # Importance is worked out only where there are more lights than places (most scenes:
+    # never), the slots alone otherwise.
+    suns = sorted(world.query_one(DirectionalLight), key=lambda pair: pair[0])
+    sun_ids = [entity for entity, _ in suns]
+    brightness = np.zeros(len(suns))
+    if len(suns) > limits.directional:
+        brightness = luminance(np.array([raw_field(light, "color").xyz * light.intensity for _, light in suns],
+                                        np.float64).reshape(-1, 3))
+    directional = _keep(sun_ids, np.zeros(len(suns), bool), brightness, previous.directional, limits.directional)
+    lamps = sorted(world.query(PointLight, Transform), key=lambda pair: pair[0])
+    lamp_ids = [entity for entity, _ in lamps]
+    shadowed = sum(1 for _, (light, _) in lamps if light.shadows)
+    holds, importance = np.zeros(len(lamps), bool), np.zeros(len(lamps))
+    if len(lamps) > limits.point or shadowed > limits.point_shadows:
+        holds, importance = point_importance(
+            np.array([t.world[3].xyz for _, (_, t) in lamps], np.float64),
+            np.array([light.range for _, (light, _) in lamps], np.float64),
+            np.array([raw_field(light, "color").xyz * light.intensity for _, (light, _) in lamps], np.float64), eye)
+    point = _keep(lamp_ids, holds, importance, previous.point, limits.point)
+    kept = set(point) - {None}
+    casting = [i for i, (entity, (light, _)) in enumerate(lamps) if light.shadows and entity in kept]
+    cubes = _keep([lamp_ids[i] for i in casting], holds[casting], importance[casting], previous.point_shadows,
+                  limits.point_shadows)
+    return KeptLights(directional=directional, point=point, point_shadows=cubes,
+                      cut=(len(suns) - sum(e is not None for e in directional), len(lamps) - len(kept)),
+                      shadows_cut=shadowed - sum(e is not None for e in cubes),
+                      by_eye=len(lamps) > limits.point or len(casting) > limits.point_shadows,
+                      camera=camera, eye=eye)
+
+
+def kept_lights(world: World, limits: LightLimits) -> KeptLights:
+    """The choice the prepare stage published this frame, or, where it has not run (a stage
+    run alone), a first choice made now (not stored)."""
+    kept = world.resources.get(KeptLights)
+    return kept if kept is not None else choose_lights(world, None, limits)
