@@ -46,7 +46,13 @@ plane.  So a test of the quads can find at most ~26% of them (~8.6 x 4-5 us a cl
 level of separating-axis tests (the quad's edges against the chain box) costs ~15-40 us in a
 warm loop, about twice that in a frame, on each of the two or three tested levels: more than
 it saves, so the boxes are where this cull stops.  (At 64x36: 30.8 of 99 empty, 15.6
-occluded in the parent view, 7.9 without a centre in the chain of quads.)
+occluded in the parent view, 7.9 without a centre in the chain of quads.)  Counted again
+later (100 frames after 20, 16 mirrors at 32x18), level by level: candidates, culled here,
+drawn and empty, views: level 1 11.5, 0, 0.2, 11.3; level 2 59.6, 31.2, 12.3, 16.1; level 3
+87.2, 57.9, 19.4, 9.9 (the deepest with views: each is drawn and composited); level 4 1.3,
+1.1, 0.2, 0.  A surface facing away from its parent view is no candidate (the planner's
+cull).  Reading a level's counts costs the wait for its first one (~30-45 us: llvmpipe
+rasterising the reset and the claims); the other reads ~0.14 us each.
 """
 from __future__ import annotations
 
