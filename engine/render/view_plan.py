@@ -14,7 +14,8 @@ small call does), so the work is laid out to need few of both: each view's row h
 matrix its children and the cull read (``x``: carried through a surface by two products, the
 oblique near plane a scalar from them), what does not depend on the camera (the Camera
 block's projection, viewport, clip plane and ids; the exit row, mask, winding) is gathered
-per (parent, surface) from rows kept by the parents' ids, a candidate is one row, and the
+per (parent, surface) in one ``take`` from rows kept by the number of the parents' ids (a
+column of every row, ``plan_rows.IDS``: no look-up a parent), a candidate is one row, and the
 cull's and the plan's arrays and views are made once per count of parents or views
 (``CullWork``, ``PlanWork``, kept with the other scratch in
 ``engine/render/plan_scratch.py``) and written with ``out=``: about 44 calls a level (13 of
@@ -23,7 +24,11 @@ view or a new array for most (measured warm, a level of one view: about 31 us, a
 for that planner and 20 for the glm one it replaced; of three or four views: 38 against 62
 and 46-74).  A call costs least on operands of one shape and dtype: a broadcast operand, a
 scalar one, a strided or converting output or ``take(out=)`` each cost about as much again
-(measured), so twos and epsilons are arrays and gathers are ``take`` then a copy.
+(measured), so twos and epsilons are arrays and gathers are ``take`` then a copy.  Below
+the first level, most candidates are claims that turn out empty (16 mirrors: 60 and 87
+candidates for 16 and 9 views), so the view tree plans those levels lazily
+(``SurfaceTable.plan(lazy=True)``): their cameras, about 25 calls, are worked out for the
+views chosen (``LevelRows.finish``), and not at all for a level where none is.
 
 Conventions: matrices here are numpy (..., 4, 4) arrays in the usual row-major math
 layout (``M @ x``); glm's and GL's are column-major, so they are transposed at the edges.
