@@ -1,5 +1,5 @@
-"""The planner's camera-free grids (``SurfaceTable._child_ids`` and ``_pair_bias``, kept by
-the parents' ids and made from rows kept per parent): a level planned by a table that has
+"""The planner's camera-free grids (``SurfaceTable._child_ids`` and ``_pair_bias``, gathered
+by the parents' ids numbers from rows kept per number): a level planned by a table that has
 planned other levels before (its grids and rows found again, in another order) is bit for
 bit the level a fresh table plans from the same parent rows, and a level's parents taken in
 another order give the same views, each with its own parent's number."""
@@ -95,18 +95,27 @@ def test_parents_in_another_order_give_the_same_views_with_their_own_parents():
             "view_mask"].start]
 
 
-def test_a_large_level_gathers_the_rows_a_kept_grid_holds(monkeypatch):
-    """A level of more pairs than ``GRID_KEPT_CELLS`` gathers its camera-free rows from its
-    parents' distinct ids (no grid kept): bit for bit the rows a kept grid gives, each
-    view with its own parent's number."""
-    view, root_proj, inv_root_proj, levels = _levels(_table(), (0.8, 1.0, 3.5), depth=6)
-    assert any(len(parents.data) >= 2 for parents, _ in levels)
-    monkeypatch.setattr(view_plan, "GRID_KEPT_CELLS", 0)
-    gathered = _table()
+def test_every_rows_ids_number_names_its_own_exit_row_mask_and_winding():
+    """What the planner keeps of a parent by its ids (its children's camera-free rows, its
+    cull bias) is gathered by the number in its row (``plan_rows.IDS``): every row's, the
+    root's and each planned level's, is the number of its own exit row, view mask and
+    winding (``plan_rows.IDS_OF``), and the rows planned by a table that has planned other
+    levels before (its tables made for fewer numbers, then grown) are bit for bit a fresh
+    table's."""
+    warm = _table()
+    _levels(warm, (1.6, 1.0, 2.5), depth=6)
+    view, root_proj, inv_root_proj, levels = _levels(warm, (0.8, 1.0, 3.5), depth=6)
+    assert len(levels) >= 4 and any(len(parents.data) >= 2 for parents, _ in levels)
+    columns = [plan_rows.ROW[name].start for name in ("exit_row", "view_mask", "mirrored")]
+    rows = [parents.data for parents, _ in levels] + [levels[-1][1].rows.data]
+    for data in rows:
+        numbers = data.view(np.int64)[:, plan_rows.IDS].tolist()
+        assert [plan_rows.IDS_OF[n] for n in numbers] == [tuple(row) for row in data[:, columns].tolist()]
+    assert len({n for data in rows for n in data.view(np.int64)[:, plan_rows.IDS].tolist()}) >= 3
+    fresh = _table()
     for level, (parents, candidates) in enumerate(levels, start=1):
-        again, _ = gathered._plan(parents, level, view, root_proj, inv_root_proj, int(candidates.rows.node[0]), 8, 0)
+        again, _ = fresh._plan(parents, level, view, root_proj, inv_root_proj, int(candidates.rows.node[0]), 8, 0)
         assert np.array_equal(again.rows.data.view(np.int64), candidates.rows.data.view(np.int64)), level
-    assert not gathered._ids  # no grid was kept
 
 
 def test_a_kept_plans_choice_is_found_again_and_so_is_its_plan():
@@ -130,7 +139,7 @@ def test_a_kept_plans_choice_is_found_again_and_so_is_its_plan():
 
 def test_parents_through_one_surface_with_other_masks_each_get_their_own_bias():
     """The cull's bias (``SurfaceTable._pair_bias``: which surfaces each parent may see) is
-    kept a parent at a time, by its exit row and view mask (``_bias_rows``): parents looking
+    kept a parent at a time, by the number of its ids (``_bias_rows``): parents looking
     out of the same mirror, one showing the layer a surface is drawn on and one not, each get
     their own row, whichever was seen first, alone or with the other, in either order, as
     the visibility rule says surface by surface (worked out here pair by pair in Python)."""
@@ -143,6 +152,7 @@ def test_parents_through_one_surface_with_other_masks_each_get_their_own_bias():
         data = np.zeros((len(names), plan_rows.LevelRows.WIDTH))
         data[:, plan_rows.ROW["exit_row"].start] = exit_row
         data[:, plan_rows.ROW["view_mask"].start] = [masks[name] for name in names]
+        data.view(np.int64)[:, plan_rows.IDS] = [plan_rows.ids_number(exit_row, masks[name], 0.0) for name in names]
         return data
 
     def wanted(names: tuple[str, ...], fallback: bool) -> np.ndarray:
@@ -154,9 +164,8 @@ def test_parents_through_one_surface_with_other_masks_each_get_their_own_bias():
     for names in (("shows_layer_2",), ("not", "shows_layer_2"), ("shows_layer_2", "not"), ("not",),
                   ("not", "not", "shows_layer_2")):
         for fallback in (False, True):
-            bias, any_seen = table._pair_bias(parents(*names), 1, 8, None, fallback)
+            bias = table._pair_bias(parents(*names), 1, 8, None, fallback)
             assert np.array_equal(bias, wanted(names, fallback)), (names, fallback)
-            assert any_seen
 
 
 def test_a_chain_is_planned_in_one_run_as_far_as_each_level_finds_the_surface_named():
@@ -200,3 +209,48 @@ def test_a_chain_is_planned_in_one_run_as_far_as_each_level_finds_the_surface_na
     assert len(seen) == 2, seen.surface
     for named in seen.surface.tolist():
         assert _table().plan_chain(other.rows, 1, [named, through[0]], view, root_proj, 8, 0, [None, None], 10) == []
+
+
+def test_a_lazy_plans_cameras_worked_out_when_read_are_the_eager_plans():
+    """``plan(lazy=True)`` leaves its candidates' cameras (their ``x`` and their Camera
+    blocks) to ``LevelRows.finish`` (the view tree finishes the views it
+    chooses): the rest of each row is there at once, and a choice finished alone, the whole
+    level finished, and the level planned below from the lazy rows (finished first) are bit
+    for bit what the eager plan gives.  A kept plan (read-only rows) and a level of one
+    parent are never lazy."""
+    def table() -> view_plan.SurfaceTable:  # the pairs at other depths: each surface its own camera
+        return view_plan.SurfaceTable([_mirror(3, 0.0, 1.0), _mirror(4, 6.0, -1.0), _mirror(5, 0.5, 1.0, x=2.1),
+                                       _mirror(6, 6.5, -1.0, x=2.1)])
+
+    view, root_proj, inv_root_proj, levels = _levels(table(), (0.8, 1.0, 3.5), depth=3)
+    assert any(len(candidates) >= 3 and len(parents.data) >= 2 for parents, candidates in levels)
+    assert any(len(set(map(tuple, parents.view.reshape(-1, 16).tolist()))) >= 2 for parents, _ in levels)
+    camera = np.zeros(plan_rows.LevelRows.WIDTH, bool)
+    camera[plan_rows.X_COLUMNS] = True
+    camera[plan_rows.BLOCK] = True
+    lazy_table = table()
+    for level, (parents, eager) in enumerate(levels, start=1):
+        lazy, _ = lazy_table.plan(parents, level, view, root_proj, inv_root_proj, int(eager.rows.node[0]), 8, 0,
+                                  lazy=True)
+        if len(parents.data) == 1:  # the first level (one parent) is planned whole
+            assert lazy.rows.pending is None and np.array_equal(lazy.rows.data, eager.rows.data)
+            continue
+        assert lazy.rows.pending is not None
+        want = eager.rows.data.view(np.int64)
+        assert np.array_equal(lazy.rows.data.view(np.int64)[:, ~camera], want[:, ~camera]), level
+        keep = np.arange(len(lazy))[::-2].copy()
+        chosen = lazy.select(keep)
+        assert chosen.rows.pending is not None
+        assert np.array_equal(chosen.blocks.view(np.int32), eager.blocks[keep].view(np.int32)), level  # finished
+        assert chosen.rows.pending is None and np.array_equal(chosen.rows.data.view(np.int64), want[keep])
+        assert lazy.rows.pending is not None  # the choice's rows alone
+        below, _ = lazy_table.plan(lazy.rows, level + 1, view, root_proj, inv_root_proj, 100, 8, 0)
+        assert lazy.rows.pending is None and np.array_equal(lazy.rows.data.view(np.int64), want), level
+        again, _ = table().plan(eager.rows, level + 1, view, root_proj, inv_root_proj, 100, 8, 0)
+        assert (below is None) == (again is None)
+        if below is not None:
+            assert np.array_equal(below.rows.data.view(np.int64), again.rows.data.view(np.int64)), level
+    view, root_proj, inv_root_proj, kept_levels = _levels(lazy_table, (0.8, 1.0, 3.5), depth=1, kept=True)
+    parents, _ = kept_levels[0]
+    kept, _ = lazy_table.plan(parents, 1, view, root_proj, inv_root_proj, 1, 8, 0, lazy=True)
+    assert kept.rows.pending is None and not kept.rows.data.flags.writeable

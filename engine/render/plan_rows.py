@@ -50,22 +50,44 @@ LEVEL_ROW = np.dtype([
     ("parent", "<i8"),             # a candidate's row of its parent in the level above
     ("surface", "<i8"),            # and of its surface in the SurfaceTable
     ("fade", "<f8"),               # the reflection's weight (Mirror fades; 1: none)
+    ("ids", "<i8"),                # the number of its exit row, view mask and winding (ids_number)
 ])
 ROW = field_columns(LEVEL_ROW, 8)  # each field's columns
 X_COLUMNS, RECT, BLOCK = (ROW[name] for name in ("x", "rect", "block"))
-_EXIT_ROW, _MASK, _MIRRORED, NODE, FADE, _PARENT, _SURFACE = (ROW[name].start for name in (
-    "exit_row", "view_mask", "mirrored", "node", "fade", "parent", "surface"))
+_EXIT_ROW, _MASK, _MIRRORED, NODE, FADE, _PARENT, _SURFACE, IDS = (ROW[name].start for name in (
+    "exit_row", "view_mask", "mirrored", "node", "fade", "parent", "surface", "ids"))
 SCISSOR = ROW["scissor"]
 IDS_PART = slice(_EXIT_ROW, _MIRRORED + 1)    # exit row, view mask, mirrored: what decides which surfaces
 # it may see and what its children's are
-GRID_PART = slice(BLOCK.start, FADE + 1)    # what _child_ids holds for a level's rows: the block, then
-# the exit row, view mask, mirrored, parent, surface, fade
+GRID_PART = slice(BLOCK.start, IDS + 1)    # what _child_ids holds for a level's rows: the block, then
+# the exit row, view mask, mirrored, parent, surface, fade, ids number
 _EYE = slice(X_COLUMNS.start + X0 + 7 * 5, X_COLUMNS.start + X0 + 7 * 5 + 4)  # IV^T's last row: the eye
 CLIP = slice(X_COLUMNS.start + _NEG_CLIP * 4, X_COLUMNS.start + _NEG_CLIP * 4 + 4)       # minus the clip plane
 assert CAMERA_BLOCK_BYTES == 8 * (BLOCK.stop - BLOCK.start)
-assert _EXIT_ROW == BLOCK.stop and FADE == _EXIT_ROW + 5
+assert _EXIT_ROW == BLOCK.stop and FADE == _EXIT_ROW + 5 and IDS == FADE + 1
 GRID_WIDTH = GRID_PART.stop - GRID_PART.start
 GRID_PARENT = _PARENT - GRID_PART.start  # the parent's column in it
+
+# Every distinct (exit row, view mask, winding) a row has held, numbered in the order first
+# seen: a row's ``ids`` column, so that what the planner keeps of a parent by its ids (its
+# children's camera-free rows, its cull bias: ``SurfaceTable._child_ids``, ``_pair_bias``)
+# is gathered for a level's parents in one ``take`` by their numbers, with no look-up a
+# parent.  One numbering for every table (rows keep their numbers from table to table):
+# what a number means never changes.  It grows with the distinct ids rows are made with (a
+# root's; a surface's views' from their parents': exit rows times the kinds and layers a
+# chain can show, times two windings), a few dozen for the 16-mirror ring.
+IDS_NUMBERS: dict[tuple[float, float, float], int] = {}
+IDS_OF: list[tuple[float, float, float]] = []  # IDS_NUMBERS' keys by number
+
+
+def ids_number(exit_row: float, mask: float, mirrored: float) -> int:
+    """The number of a row's ids (``IDS_NUMBERS``), given one when first seen."""
+    key = (float(exit_row), float(mask), float(mirrored))
+    found = IDS_NUMBERS.get(key)
+    if found is None:
+        found = IDS_NUMBERS[key] = len(IDS_OF)
+        IDS_OF.append(key)
+    return found
 
 
 def x0_rows(data: np.ndarray) -> np.ndarray:
@@ -158,28 +180,47 @@ class LevelRows:
     level's rows are gathered in one operation."""
 
     WIDTH = LEVEL_ROW.itemsize // 8
+    # A lazy plan's rows (``SurfaceTable.plan(lazy=True)``) whose cameras are still to be
+    # worked out: what ``finish`` works them out from (the table, its parents' rows, the root
+    # projection); None: worked out.  Their ``x`` and their Camera blocks are not the views'
+    # until then; every other column is.
+    pending: tuple | None = None
 
     def __init__(self, data: np.ndarray) -> None:
         self.data = data
 
+    def finish(self) -> None:
+        """Work out the rows' cameras if they are pending (``SurfaceTable.finish_rows``, in
+        place: views of the rows made before stay theirs).  A lazy plan's candidates are
+        mostly claims that turn out empty, so the view tree finishes only those it chooses
+        (``ViewTree._level_nodes``), and the planner those that become parents."""
+        pending = self.pending
+        if pending is not None:
+            self.pending = None
+            pending[0].finish_rows(self.data, pending[1], pending[2])
+
     @property
     def view(self) -> np.ndarray:
         """(n, 4, 4) world -> eye."""
+        self.finish()
         return x0_rows(self.data)[:, _V, 0:4]
 
     @property
     def inv_view(self) -> np.ndarray:
         """(n, 4, 4) eye -> world."""
+        self.finish()
         return x1_rows(self.data)[:, 4:8, 0:4].transpose(0, 2, 1)
 
     @property
     def eye(self) -> np.ndarray:
         """(n, 4) homogeneous world position."""
+        self.finish()
         return self.data[:, _EYE]
 
     @property
     def clip(self) -> np.ndarray:
         """(n, 4) world clip plane (what the view keeps)."""
+        self.finish()
         return -self.data[:, CLIP]
 
     @property
@@ -233,7 +274,7 @@ _ROOT_TEMPLATES: dict[tuple, np.ndarray] = {}
 
 def _root_template(size: tuple[int, int], clip_plane: glm.vec4, view_mask: int, mirrored: bool) -> np.ndarray:
     """A root row but its matrices: the rectangle (x0, y0, -x1, -y1), minus the clip plane,
-    the ids (no exit row, its mask and winding, node 0, a fade of 1)."""
+    the ids (no exit row, its mask and winding, node 0, a fade of 1, their number)."""
     key = (size, tuple(clip_plane), view_mask, mirrored)
     found = _ROOT_TEMPLATES.get(key)
     if found is None:
@@ -243,6 +284,7 @@ def _root_template(size: tuple[int, int], clip_plane: glm.vec4, view_mask: int, 
         found[0, RECT] = (0.0, 0.0, -size[0], -size[1])
         found[0, CLIP] = tuple(-clip_plane)
         found[0, [_EXIT_ROW, _MASK, _MIRRORED, NODE, FADE]] = (-1.0, float(view_mask), float(mirrored), 0.0, 1.0)
+        found.view(np.int64)[0, IDS] = ids_number(-1.0, view_mask, mirrored)
     return found
 
 
@@ -305,7 +347,9 @@ class Candidates:
 
     @_kept
     def blocks(self) -> np.ndarray:
-        """(k, CAMERA_BLOCK_BYTES / 4) float32: the packed Camera blocks."""
+        """(k, CAMERA_BLOCK_BYTES / 4) float32: the packed Camera blocks (a lazy plan's
+        worked out first: ``LevelRows.finish``)."""
+        self.rows.finish()
         return self.rows.data[:, BLOCK].view(np.float32)
 
     @_kept
@@ -315,7 +359,8 @@ class Candidates:
 
     def freeze(self) -> None:
         """Make every array read-only (a kept plan is shared by the frames that read it; a
-        view made after this is read-only with its base)."""
+        view made after this is read-only with its base); a lazy plan's rows are finished first."""
+        self.rows.finish()
         self.rows.data.flags.writeable = False
         for name in ("parent", "surface", "scissor", "blocks", "fade", "end"):
             array_ = self.__dict__.get(name)
@@ -328,9 +373,11 @@ class Candidates:
         (read-only) keeps its choices, read-only too: the frames that choose the same find
         the same rows again, and so the plans kept for them (``SurfaceTable.plan``)."""
         data = self.rows.data
-        if data.flags.writeable:
-            return Candidates(LevelRows(data.take(keep, axis=0)), self.size,
-                              None if self.end is None else self.end.take(keep))
+        if data.flags.writeable:  # (a lazy plan's choice is lazy too: its rows are finished when read)
+            found = Candidates(LevelRows(data.take(keep, axis=0)), self.size,
+                               None if self.end is None else self.end.take(keep))
+            found.rows.pending = self.rows.pending
+            return found
         key = keep.tobytes()
         found = self._chosen.get(key)
         if found is None:

@@ -1,6 +1,6 @@
 """What the planner keeps so that a level makes few arrays and views of them: the cull's and
 the plan's scratch per count of parents or views (``CullWork``; ``PlanWork``, views of
-``PlanBuffers``; kept by ``kept_work``), the camera-free rows of a large level's parents
+``PlanBuffers``; kept by ``kept_work``), the camera-free rows of the parents' ids numbers
 (``ChildTable``), each root projection's oblique near plane constants (``RootRows``) and
 read-only node numbers.
 
@@ -74,12 +74,12 @@ class CullWork:
 
 
 class ChildTable:
-    """The camera-free rows (``SurfaceTable._child_row``) of every parent's ids seen with one
-    ``hide``, root projection and size, stacked (S rows each), and where each parent's
-    first row is: a large level gathers its candidates' rows from it in one ``take``."""
+    """The camera-free rows (``SurfaceTable._child_row``) of every ids number
+    (``plan_rows.IDS``) seen with one ``hide``, root projection and size, stacked in the
+    order of the numbers (S rows each): a level gathers its candidates' rows from it in one
+    ``take`` by their parents' numbers."""
 
     def __init__(self) -> None:
-        self.firsts: dict[tuple[float, ...], int] = {}
         self.rows: list[np.ndarray] = []
         self.stacked = np.zeros((0, GRID_WIDTH), np.int64)
 

@@ -14,7 +14,8 @@ small call does), so the work is laid out to need few of both: each view's row h
 matrix its children and the cull read (``x``: carried through a surface by two products, the
 oblique near plane a scalar from them), what does not depend on the camera (the Camera
 block's projection, viewport, clip plane and ids; the exit row, mask, winding) is gathered
-per (parent, surface) from rows kept by the parents' ids, a candidate is one row, and the
+per (parent, surface) in one ``take`` from rows kept by the number of the parents' ids (a
+column of every row, ``plan_rows.IDS``: no look-up a parent), a candidate is one row, and the
 cull's and the plan's arrays and views are made once per count of parents or views
 (``CullWork``, ``PlanWork``, kept with the other scratch in
 ``engine/render/plan_scratch.py``) and written with ``out=``: about 44 calls a level (13 of
@@ -23,7 +24,11 @@ view or a new array for most (measured warm, a level of one view: about 31 us, a
 for that planner and 20 for the glm one it replaced; of three or four views: 38 against 62
 and 46-74).  A call costs least on operands of one shape and dtype: a broadcast operand, a
 scalar one, a strided or converting output or ``take(out=)`` each cost about as much again
-(measured), so twos and epsilons are arrays and gathers are ``take`` then a copy.
+(measured), so twos and epsilons are arrays and gathers are ``take`` then a copy.  Below
+the first level, most candidates are claims that turn out empty (16 mirrors: 60 and 87
+candidates for 16 and 9 views), so the view tree plans those levels lazily
+(``SurfaceTable.plan(lazy=True)``): their cameras, about 25 calls, are worked out for the
+views chosen (``LevelRows.finish``), and not at all for a level where none is.
 
 Conventions: matrices here are numpy (..., 4, 4) arrays in the usual row-major math
 layout (``M @ x``); glm's and GL's are column-major, so they are transposed at the edges.
@@ -39,6 +44,8 @@ from pyglm import glm
 from components.limits import VIEW_DIRECT, VIEW_MIRROR, VIEW_PORTAL
 from components.visibility import KIND_MASK, visibility_code
 from engine.render.plan_rows import (
+    _PARENT,
+    _SURFACE,
     BLOCK,
     CAMERA_CLIP,
     CAMERA_VIEWPORT,
@@ -51,6 +58,8 @@ from engine.render.plan_rows import (
     ID_HIDE,
     ID_MASK,
     ID_SKIP,
+    IDS,
+    IDS_OF,
     IDS_PART,
     MATRICES,
     NEG_EXIT_PLANE,
@@ -66,6 +75,7 @@ from engine.render.plan_rows import (
     Candidates,
     LevelRows,
     cull_rows,
+    ids_number,
     x0_rows,
     x1_rows,
 )
@@ -100,10 +110,6 @@ _NEVER = (1e30, 2e30, 1e30, 2e30)  # fade starts no distance or angle reaches
 # A rectangle as the cull keeps it (x0, y0, -x1, -y1, ``SIGNS``): what makes it x, y, w, h.
 _TO_SCISSOR = np.array([[1, 0, -1, 0], [0, 1, 0, -1], [0, 0, -1, 0], [0, 0, 0, -1]], np.float64)
 _MIN, _MAX = np.minimum.reduce, np.maximum.reduce
-
-# The most (parent, surface) pairs a level may have for its camera-free grid to be kept
-# (SurfaceTable._child_ids).
-GRID_KEPT_CELLS = 128
 
 # How many level plans a SurfaceTable keeps (SurfaceTable.plan): a frame's main tree and a
 # probe's six faces, a few levels each, with room for a second probe.
@@ -188,8 +194,8 @@ class SurfaceTable:
         self.float_rows[:, SCALE] = self.scale
         self.keep = visibility_code(_KINDS_BUT_DIRECT, self.layers)  # the mask bits a view through it keeps
         self._depths: dict[tuple[int, int], tuple[np.ndarray, np.ndarray, list[bool], bool]] = {}
-        self._biases: dict[tuple, tuple[np.ndarray | None, np.ndarray]] = {}  # _pair_bias's
-        self._bias_rows_kept: dict[bytes, dict] = {}  # _bias_rows', a parent's each, by the surfaces allowed
+        self._biases: dict[tuple, tuple[np.ndarray | None, list]] = {}  # _bias_rows' tables, by depth, cap, ends
+        self._bias_tables: dict[bytes, list] = {}  # [allowed, rows]: _bias_rows', by the surfaces allowed
         # What plan_chain reads of each surface row as Python numbers: its views' exit row, the
         # mask bits they keep, the kind bit they gain, whether it is a mirror.
         self._chain_lists = (self.exit_rows.tolist(), self.keep.tolist(), self.kind_bit.tolist(),
@@ -202,8 +208,7 @@ class SurfaceTable:
         self._faded: tuple | None = None  # the last cull's pairs faded out, and for what (cull)
         self._boxes: np.ndarray | None = None  # the last cull's rectangles before rounding (4 x P x S)
         self.bounds_claims = bool(self.is_mirror.any())  # boxes are kept for claim_cull (a mirror's bound its claims)
-        self._last_ids: tuple | None = None  # the last parents' rows _pair_bias read, and their ids' bytes
-        self._ids: dict[tuple, np.ndarray] = {}  # _child_ids'
+        self._last_numbers: tuple | None = None  # the last parents' rows _pair_bias read, and their ids numbers
         self._child_rows: dict[tuple, np.ndarray] = {}  # _child_row's
         self._cuts: dict[tuple, tuple[np.ndarray | None, np.ndarray, bool]] = {}  # _cut's
         self._cull_work: dict[int, CullWork] = {}  # the cull's scratch, by its count of parents
@@ -211,7 +216,7 @@ class SurfaceTable:
         self._cull_geometry: tuple[np.ndarray, CullWork] | None = None
         self._plan_work: dict[int, PlanWork] = {}  # _plan's, by its count of views
         self._plan_buffers: dict[int, PlanBuffers] = {}  # their arrays, by capacity
-        self._child_tables: dict[tuple, ChildTable] = {}  # _child_ids' for large levels
+        self._child_tables: dict[tuple, ChildTable] = {}  # _child_ids', by hide, root projection and size
         # The resolution scale every surface shares (None: they differ; a level takes its largest).
         self.one_scale = float(self.scale[0]) if count and (self.scale == self.scale[0]).all() else None
 
@@ -307,67 +312,61 @@ class SurfaceTable:
         return CullWork(count, self.corner_count, len(self.states))
 
     def _pair_bias(self, data: np.ndarray, depth: int, depth_cap: int, ends: np.ndarray | None,
-                   fallback: bool) -> tuple[np.ndarray, bool]:
+                   fallback: bool) -> np.ndarray:
         """(P, S): what the cull takes each (parent, surface) facing value from (its bias,
-        negated: the cull keeps minus the facing value, each > 0 out), and whether any pair
-        may be seen at all: 0 where the
-        parent view may see the surface at ``depth`` (enabled, within its limits or one of
+        negated: the cull keeps minus the facing value, each > 0 out): 0 where the parent
+        view may see the surface at ``depth`` (enabled, within its limits or one of
         ``ends``; with ``fallback``, any surface that ``falls_back``, whatever its limits;
         and drawn by the view: the visibility rule, ``drawn_in``, a row a parent), +inf where
-        not, and on the surface the view looks out of.  A function of each parent's exit row,
-        mask and winding alone, so kept by their bytes (a level's parents see through the
-        same surfaces frame after frame) with the depth, cap and ``ends`` (an array the view
-        tree keeps while nothing changes); the parents' bytes are kept for ``_child_ids``."""
-        ids = data[:, IDS_PART]
-        id_bytes = ids.tobytes()
-        self._last_ids = (data, id_bytes)
-        key = (id_bytes, depth, depth_cap, id(ends), fallback)
+        not, and on the surface the view looks out of.  A function of each parent's exit row
+        and mask alone, so gathered by the parents' ids numbers (``plan_rows.IDS``) from a
+        table of a row per number (``_bias_table``) in one ``take``; the numbers are kept
+        for ``_child_ids``."""
+        numbers = data.view(np.int64)[:, IDS]
+        self._last_numbers = (data, numbers)
+        return self._bias_rows(numbers, depth, depth_cap, ends, fallback)
+
+    def _bias_rows(self, numbers: np.ndarray, depth: int, depth_cap: int, ends: np.ndarray | None,
+                   fallback: bool) -> np.ndarray:
+        """``_pair_bias``' rows of the ids ``numbers``, gathered from the table of the surfaces
+        allowed (the depth's, with the end images' or not, or those that fall back), made
+        for more numbers when one is not in it yet."""
+        key = (depth, depth_cap, id(ends), fallback)
         found = self._biases.get(key)
         if found is None or found[0] is not ends:
+            if fallback:
+                allowed = self.falls_back
+            else:
+                allowed = self._within(depth, depth_cap)[0] if ends is None else \
+                    self._with_ends(depth, depth_cap, ends)[0]
+            # Kept by the surfaces allowed, whatever array says so: the end images' mask is
+            # made anew whenever the surfaces they show change.
+            table = self._bias_tables.get(allowed.tobytes())
+            if table is None:
+                if len(self._bias_tables) > 64:
+                    self._bias_tables.clear()
+                table = self._bias_tables[allowed.tobytes()] = [allowed, np.zeros((0, len(self.states)))]
             if len(self._biases) > 256:
                 self._biases.clear()
-            found = self._biases[key] = (ends, self._bias_rows(ids, depth, depth_cap, ends, fallback))
-        return found[1]
+            found = self._biases[key] = (ends, table)
+        table = found[1]
+        try:
+            return table[1].take(numbers, axis=0)
+        except IndexError:  # ids first seen since the table was made: their rows join it
+            table[1] = self._more_bias(table[0], table[1])
+            return table[1].take(numbers, axis=0)
 
-    def _bias_rows(self, ids: np.ndarray, depth: int, depth_cap: int, ends: np.ndarray | None,
-                   fallback: bool) -> tuple[np.ndarray, bool]:
-        """``_pair_bias``'s (P, S) bias and whether any pair may be seen, for parents of
-        ``ids`` (exit row, view mask, winding) not seen together before: stacked from each
-        parent's own row, kept by its exit row and mask (a deep level's parents change from
-        frame to frame as a camera moves, each parent's own row seldom: at 16 mirrors about
-        three levels a frame found no bias kept for their parents together, each row of them
-        one kept), the rows not kept worked out together.  Kept by the surfaces allowed (the
-        depth's, with the end images' or not, or those that fall back), whatever array says
-        so: the end images' mask is made anew whenever the surfaces they show change."""
-        if fallback:
-            allowed = self.falls_back
-        else:
-            allowed = self._within(depth, depth_cap)[0] if ends is None else self._with_ends(depth, depth_cap, ends)[0]
-        rows = self._bias_rows_kept.get(allowed.tobytes())
-        if rows is None:
-            if len(self._bias_rows_kept) > 64:
-                self._bias_rows_kept.clear()
-            rows = self._bias_rows_kept[allowed.tobytes()] = {}
-        keys = [(exit_row, mask) for exit_row, mask, _ in ids.tolist()]
-        found = [rows.get(key) for key in keys]
-        if None in found:
-            missing = [at for at, row in enumerate(found) if row is None]
-            part = ids.take(missing, axis=0)
-            seen = allowed & drawn_in(self.drawn, part[:, 1:2].astype(np.int64))  # the rule, a row a parent
-            exit_rows = part[:, 0].astype(np.int64)
-            looks_out = np.flatnonzero(exit_rows >= 0)
-            seen[looks_out, exit_rows[looks_out]] = False
-            bias = np.where(seen, 0.0, np.inf)
-            bias.flags.writeable = False
-            if len(rows) > 1024:
-                rows.clear()
-            for at, row, any_seen in zip(missing, bias, seen.any(axis=1).tolist(), strict=True):
-                found[at] = rows[keys[at]] = (row, any_seen)
-            if len(missing) == len(found):
-                return bias, any(any_seen for _, any_seen in found)
-        bias = np.array([row for row, _ in found])
-        bias.flags.writeable = False
-        return bias, any(any_seen for _, any_seen in found)
+    def _more_bias(self, allowed: np.ndarray, rows: np.ndarray) -> np.ndarray:
+        """``rows`` (``_bias_rows``' table of the surfaces ``allowed``) with the rows of every
+        ids number given since (the rule worked out for all of them at once), read-only."""
+        ids = np.array(IDS_OF[len(rows):], np.float64).reshape(-1, 3)
+        seen = allowed & drawn_in(self.drawn, ids[:, 1:2].astype(np.int64))  # the rule, a row a parent
+        exit_rows = ids[:, 0].astype(np.int64)
+        looks_out = np.flatnonzero((exit_rows >= 0) & (exit_rows < len(self.states)))
+        seen[looks_out, exit_rows[looks_out]] = False
+        found = np.concatenate([rows, np.where(seen, 0.0, np.inf)])
+        found.flags.writeable = False
+        return found
 
     def _child_ids(self, data: np.ndarray, hide: int, root_rows: RootRows, size: tuple[int, int],
                    p: np.ndarray, s: np.ndarray) -> np.ndarray:
@@ -376,49 +375,36 @@ class SurfaceTable:
         laid out as ``LEVEL_ROW`` from its Camera block on: the block with its projection
         (the root's, ``root_rows``: its third row is the view's own, written over), viewport
         (``size``), clip plane and ids but the node (uint32 skip, hide, view mask); then its
-        exit row, view mask, winding, p, s (int64s) and a fade of 1.0.
+        exit row, view mask, winding, p, s (int64s), a fade of 1.0 and its ids number.
 
-        Gathered from each parent's rows (``_child_row``, kept by its ids).  A level of a
-        few pairs (``GRID_KEPT_CELLS`` at most) keeps the whole (P, S) grid of them, by the
-        parents' ids (the bytes the cull's ``_pair_bias`` read of them), ``hide``, the root
-        projection and the size, and gathers from it in one operation the next frames; a
-        larger one (whose parents, chosen by their pixels, change from frame to frame)
-        gathers from a table of every parent's rows seen with this ``hide``, projection and
-        size (``ChildTable``), and makes no grid."""
-        count, surfaces = len(data), len(self.states)
-        ids = data[:, IDS_PART]
-        if count * surfaces > GRID_KEPT_CELLS:
-            table = self._child_tables.get((hide, root_rows.key, size))
-            if table is None:
-                if len(self._child_tables) > 16:
-                    self._child_tables.clear()
-                table = self._child_tables[(hide, root_rows.key, size)] = ChildTable()
-            firsts = table.firsts
-            at = [firsts.get(row) for row in map(tuple, ids.tolist())]
-            if None in at:  # parents with ids not seen yet: their rows join the table
-                for row in map(tuple, ids.tolist()):
-                    if row not in firsts:
-                        firsts[row] = surfaces * len(table.rows)
-                        table.rows.append(self._child_row(*row, hide, root_rows, size))
-                table.stacked = np.concatenate(table.rows)
-                at = [firsts[row] for row in map(tuple, ids.tolist())]
-            found = table.stacked.take(np.array(at).take(p) + s, axis=0)
+        Gathered in one ``take`` from a table of every ids number's rows (``_child_row``,
+        S a number, in the order of the numbers) seen with this ``hide``, projection and size
+        (``ChildTable``), by the parents' numbers (those the cull's ``_pair_bias`` read):
+        no look-up a parent."""
+        surfaces = len(self.states)
+        last = self._last_numbers
+        numbers = last[1] if last is not None and last[0] is data else data.view(np.int64)[:, IDS]
+        table = self._child_tables.get((hide, root_rows.key, size))
+        if table is None:
+            if len(self._child_tables) > 16:
+                self._child_tables.clear()
+            table = self._child_tables[(hide, root_rows.key, size)] = ChildTable()
+        if len(data) == 1:
+            at = s + int(numbers[0]) * surfaces
+        else:
+            at = numbers.take(p)
+            at *= surfaces
+            at += s
+        try:
+            found = table.stacked.take(at, axis=0)
+        except IndexError:  # ids first seen since the table was made: their rows join it
+            for number in range(len(table.rows), len(IDS_OF)):
+                table.rows.append(self._child_row(*IDS_OF[number], hide, root_rows, size))
+            table.stacked = np.concatenate(table.rows)
+            found = table.stacked.take(at, axis=0)
+        if len(data) > 1:
             found[:, GRID_PARENT] = p
-            return found
-        last = self._last_ids
-        id_bytes = last[1] if last is not None and last[0] is data else ids.tobytes()
-        key = (id_bytes, hide, root_rows.key, size)
-        grid = self._ids.get(key)
-        if grid is None:
-            grid = np.concatenate([self._child_row(exit_row, mask, mirrored, hide, root_rows, size)
-                                   for exit_row, mask, mirrored in ids.tolist()]).reshape(
-                count, surfaces, GRID_WIDTH)
-            grid[:, :, GRID_PARENT] = np.arange(count)[:, None]
-            grid.flags.writeable = False
-            if len(self._ids) > 64:
-                self._ids.clear()
-            self._ids[key] = grid
-        return grid[0].take(s, axis=0) if count == 1 else grid[p, s]
+        return found
 
     def _child_row(self, exit_row: float, mask: float, mirrored: float, hide: int, root_rows: RootRows,
                    size: tuple[int, int]) -> np.ndarray:
@@ -444,6 +430,7 @@ class SurfaceTable:
             rest[:, 2] = mirrored != self.is_mirror
             rest.view(np.int64)[:, 4] = np.arange(len(self.states))
             rest[:, 5] = 1.0
+            rest.view(np.int64)[:, 6] = [ids_number(*row) for row in rest[:, 0:3].tolist()]
             if len(self._child_rows) > 1024:
                 self._child_rows.clear()
             found = self._child_rows[key] = rows.view(np.int64)  # copied as integers: bit for bit
@@ -478,6 +465,7 @@ class SurfaceTable:
         in the same product.  Then one minimum over the corners gives each pair's frustum
         and clip-plane tests, and, with the sides divided by w first, its rectangle's four
         sides as minima (the same rounding rule, one pixel out then floor, for each side)."""
+        parents.finish()  # (a lazy plan's rows: their cameras first)
         count, surfaces = len(parents.data), len(self.states)
         if not count or not surfaces:
             return _NONE, _NONE, _NO_RECTS, None
@@ -486,10 +474,9 @@ class SurfaceTable:
         data = parents.data
         # First what needs no corners: allowed (enabled, within its depth, drawn by the view,
         # not the surface the view looks out of): a bias per pair, +inf where a surface is
-        # not allowed (_pair_bias), and nothing to do where none is.
-        neg_bias, any_allowed = self._pair_bias(data, depth, depth_cap, ends, fallback)
-        if not any_allowed:
-            return _NONE, _NONE, _NO_RECTS, None
+        # not allowed (_pair_bias; a level where none is finds no pair, as the tests below
+        # find none: no early way out, which would cost a look at every parent).
+        neg_bias = self._pair_bias(data, depth, depth_cap, ends, fallback)
         # Each parent's 14 rows (kept in its ``x``), row by row (the 14 P rows row major: a
         # row's values of every parent and surface are one contiguous block below), times
         # each corner's (4, S) gives (corners, 14, P, S), so the sides are divided by w, and
@@ -598,7 +585,7 @@ class SurfaceTable:
     def plan(self, parents: LevelRows, depth: int, root: View, root_proj: np.ndarray, inv_root_proj: np.ndarray,
              first_index: int, depth_cap: int, hide: int, ends: np.ndarray | None = None,
              size: tuple[int, int] | None = None, scale: float = 1.0,
-             defer: bool = False) -> tuple[Candidates | None, int]:
+             defer: bool = False, lazy: bool = False) -> tuple[Candidates | None, int]:
         """``_plan``, kept: a level's plan is a function of the table (made again when a
         surface changes) and these arguments alone, so a level planned before from the same
         parent rows (a probe face's tree, whose camera stands still; a still main camera)
@@ -608,7 +595,16 @@ class SurfaceTable:
         still (``ViewTree._root_rows``), and a kept plan's candidates, read-only with the
         choices made from them (``Candidates.select``); rows that can still change are
         planned afresh.  The ``PLANS_KEPT`` plans used last are kept, each holding the
-        arrays it is known by."""
+        arrays it is known by.
+
+        ``lazy``: the candidates' cameras (their ``x`` and Camera blocks, about 25 numpy
+        calls) are left to their rows' ``LevelRows.finish``, for those chosen (the view tree
+        finishes the views it makes; a plan or cull from the rows finishes them first).  A
+        level below the first is mostly claims that turn out empty (16 mirrors: 60 and 87
+        candidates for 16 and 9 views, the deepest level's 35 for none), and a level with no
+        view then costs no camera at all; the first level (one parent) is planned whole, its
+        candidates mostly all views.  Not for a kept plan (its rows are read-only) nor with
+        ``defer``."""
         data = parents.data
         key = None if data.flags.writeable or root_proj.flags.writeable else (
             id(data), id(root_proj), depth, first_index, depth_cap, hide, size, scale, root.size, id(ends))
@@ -618,7 +614,8 @@ class SurfaceTable:
                 self._plans[key] = found  # the most recently used last
                 return found[1]
         planned = self._plan(parents, depth, root, root_proj, inv_root_proj, first_index, depth_cap, hide, ends,
-                             size, scale, defer and key is None)
+                             size, scale, defer and key is None,
+                             lazy and key is None and not defer and len(data) > 1)
         if key is not None:
             if planned[0] is not None:
                 planned[0].freeze()
@@ -630,7 +627,7 @@ class SurfaceTable:
     def _plan(self, parents: LevelRows, depth: int, root: View, root_proj: np.ndarray, inv_root_proj: np.ndarray,
               first_index: int, depth_cap: int, hide: int, ends: np.ndarray | None = None,
               size: tuple[int, int] | None = None, scale: float = 1.0,
-              defer: bool = False) -> tuple[Candidates | None, int]:
+              defer: bool = False, lazy: bool = False) -> tuple[Candidates | None, int]:
         """The next level's candidate views from ``parents`` (level ``depth - 1``): the
         cull's pairs, each with its camera (the parent's carried through the surface: for a
         mirror its reflection, for a portal look-out x half turn x inverse(look-in), as in
@@ -666,18 +663,11 @@ class SurfaceTable:
         if not k:
             return None, faded
         w = self._plan_work.get(k) or self._new_plan_work(k)
-        w.surface[...] = self.float_rows.take(s, axis=0)  # (take with out= costs more than take and a copy)
-        if len(parents.data) == 1:  # one parent: its row for every view (a broadcast copy, no gather)
-            w.parent[...] = parents.data[:, X_COLUMNS]
-        else:
-            w.parent[...] = parents.data[:, X_COLUMNS].take(p, axis=0)  # the parents' matrices (no more of their rows)
         if size is None:
-            scale *= self.one_scale if self.one_scale is not None else float(w.scale.max())
+            scale *= self.one_scale if self.one_scale is not None else float(self.scale.take(s).max())
             size = _level_size(root.size, scale)
-        np.matmul(w.parent_x0, w.ops0, out=w.x0)
-        np.matmul(w.parent_x1, w.ops1, out=w.x1)
-        np.copyto(w.eye_row, w.eye)  # the cull's copy of the eye
-        np.copyto(w.clip, w.neg_exit)
+        if not lazy:
+            self._carry(w, parents.data, p, s)
         np.copyto(w.rect, rects)
         root_rows = kept_root_rows(root_proj)
         w.grid[...] = self._child_ids(parents.data, hide, root_rows, size, p, s)
@@ -689,16 +679,49 @@ class SurfaceTable:
             np.matmul(rects, _TO_SCISSOR, out=w.scissor, casting="unsafe")
         else:
             w.scissor[...] = level_rects(rects * SIGNS, root.size, size)
-        if not defer:
+        if not defer and not lazy:
             self._camera_blocks(w, root_proj, root_rows.safe_distance)
         data = w.data.copy()
         end = None if ends is None else self._within(depth, depth_cap)[1].take(s)
         candidates = Candidates(LevelRows(data), size, end)
+        if lazy:
+            candidates.rows.pending = (self, parents.data, root_proj)
         candidates.__dict__.update(parent=p, surface=s)  # the cull's arrays: no views to make when read
         if self.bounds_claims:
             boxes = self._boxes  # (claim_cull)
             candidates.box = (boxes[:, 0].take(s, axis=1) if len(parents.data) == 1 else boxes[:, p, s]).T
         return candidates, faded
+
+    def _carry(self, w: PlanWork, parents: np.ndarray, p: np.ndarray, s: np.ndarray) -> None:
+        """The views' ``x`` in ``w`` (their rows but ``x`` and the Camera blocks' camera parts
+        may be there already): each pair's parent row (of ``parents``) and surface row
+        gathered, then carried through the surface by the two products, and the cull's copies
+        of the eye and the clip plane."""
+        w.surface[...] = self.float_rows.take(s, axis=0)  # (take with out= costs more than take and a copy)
+        if len(parents) == 1:  # one parent: its row for every view (a broadcast copy, no gather)
+            w.parent[...] = parents[:, X_COLUMNS]
+        else:
+            w.parent[...] = parents[:, X_COLUMNS].take(p, axis=0)  # the parents' matrices (no more of their rows)
+        np.matmul(w.parent_x0, w.ops0, out=w.x0)
+        np.matmul(w.parent_x1, w.ops1, out=w.x1)
+        np.copyto(w.eye_row, w.eye)  # the cull's copy of the eye
+        np.copyto(w.clip, w.neg_exit)
+
+    def finish_rows(self, data: np.ndarray, parents: np.ndarray, root_proj: np.ndarray) -> None:
+        """The cameras of a lazy plan's rows ``data`` (``plan(lazy=True)``; all its rows, or
+        those a choice took), worked out in place from their parents' rows ``parents`` (the
+        level above's, standing as they were) and surfaces, with the operations ``_plan``
+        works out every candidate's with (row by row or elementwise: the same numbers), in
+        the plan scratch of their count."""
+        k = len(data)
+        if not k:
+            return
+        w = self._plan_work.get(k) or self._new_plan_work(k)
+        np.copyto(w.data, data)
+        ints = data.view(np.int64)
+        self._carry(w, parents, ints[:, _PARENT], ints[:, _SURFACE])
+        self._camera_blocks(w, root_proj, kept_root_rows(root_proj).safe_distance)
+        np.copyto(data, w.data)
 
     def _camera_blocks(self, w: PlanWork, root_proj: np.ndarray, safe: float) -> None:
         """The camera parts of the Camera blocks (CAMERA_DTYPE) of the views in ``w`` (their
@@ -738,6 +761,8 @@ class SurfaceTable:
         run of ``_camera_blocks``' operations (about 16) for all of them, not one a level,
         and copied back into each level's rows (elementwise: the same values as a level's
         own run)."""
+        for candidates in levels:
+            candidates.rows.finish()
         count = sum(len(candidates) for candidates in levels)
         w = self._plan_work.get(count) or self._new_plan_work(count)
         np.concatenate([candidates.rows.data for candidates in levels], out=w.data)
@@ -769,8 +794,8 @@ class SurfaceTable:
             level = depth + 1 + i
             if ends[i] is None and not self._within(level, depth_cap)[3]:
                 break  # nothing may be seen this deep
-            bias, any_seen = self._bias_rows(np.array([[exit_row, mask, mirrored]]), level, depth_cap, ends[i], False)
-            if not any_seen:
+            bias = self._bias_rows(np.array([ids_number(exit_row, mask, mirrored)]), level, depth_cap, ends[i], False)
+            if not np.isfinite(bias).any():
                 break  # the cull sees nothing here
             biases.append(bias[0])
             grids.append(self._child_row(exit_row, mask, mirrored, hide, root_rows, size)[s])
@@ -814,6 +839,7 @@ class SurfaceTable:
         being the running maximum down the chain of the rectangles it finds, and the rows'
         rectangles, scissors and nodes at once.  Needs every surface at the resolution
         scale 1 (the level is the root's size), no fades and writeable rows."""
+        parents.finish()
         count = len(through)
         if count < 2 or len(parents.data) != 1 or self.fading or self.one_scale != 1.0 or \
                 not parents.data.flags.writeable:

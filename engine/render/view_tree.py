@@ -606,7 +606,7 @@ class ViewTree:
         else:
             candidates, faded = surfaces.plan(walk.rows, depth, root, walk.root_proj, walk.inv_root_proj,
                                               first_index, settings.depth_cap, root.hide,
-                                              ends=_ends_at(walk.ends, depth), scale=walk.scale)
+                                              ends=_ends_at(walk.ends, depth), scale=walk.scale, lazy=True)
             if candidates is not None and walk.whole_before.get(depth) and walk.exact and self.plan_ahead \
                     and not surfaces.fading and self.renderer.stats.pixels_left() is None:
                 self._plan_ahead(walk, depth, candidates)
@@ -1240,6 +1240,7 @@ class ViewTree:
                            for view, (node, rect, state, p, fade) in zip(views, rows, strict=True)]
         states = surfaces.states
         size = chosen.size
+        chosen.rows.finish()  # a lazy plan's cameras: those of the views chosen
         blocks = chosen.rows.data[:, BLOCK].tobytes()  # the float32 blocks' bytes (Candidates.blocks')
         step = CAMERA_BLOCK_BYTES
         columns = chosen.rows.data.take(_NODE_COLUMNS, axis=1).astype(np.int64)
