@@ -716,7 +716,9 @@ class ViewTree:
         read as Python numbers in one conversion each for every level (a chain at portal
         depth 8: seven levels of one view), not each level's own few; a level of one
         candidate's straight from them, with its parent and surface rows
-        (``_parent_and_surface``).  With three levels or more, the claims of every level
+        (``_parent_and_surface``), and the views of all such levels, whose Camera blocks
+        the first of them to draw uploads together (``Gpu.upload_run``).  With three levels
+        or more, the claims of every level
         below the first as one run (``MirrorPasses.prepare_level``'s ``run``: written to the
         GPU once, by the first of them that draws): a parent's node is its row's one level
         up (the levels planned ahead are used only where every candidate of the level above
@@ -759,6 +761,11 @@ class ViewTree:
             derived[("nodes", hide)] = (views, nodes)
             derived["claims"] = claims
             at += len(candidates)
+        ones = [candidates.derived[("nodes", hide)][0][0] for candidates in levels if len(candidates) == 1]
+        if len(ones) > 1:  # the Camera blocks of the levels of one view, in one upload (_draw_level)
+            for candidates in levels:
+                if len(candidates) == 1:
+                    candidates.derived["view_run"] = ones
         if len(levels) > 2:  # the claims below the first level, in one run (MirrorPasses.prepare_level)
             ids, rects, starts = [], [], []
             above = 0  # the first row of the level above, in ``columns``
@@ -1297,6 +1304,10 @@ class ViewTree:
                 options = self._level_options.get(key) or self._level_options.setdefault(
                     key, replace(options, unlit=step.unlit))
             step.options = options  # its transparent slot is drawn with them (_composite)
+            derived = step.candidates.derived
+            run = derived.get("view_run") if self.lean_levels else None
+            if run is not None and step.views is derived[("nodes", walk.root.hide)][0]:  # (the views planned)
+                renderer.upload_run(run)  # every level of one view's Camera block, at the first
             self.scene_pass.draw(step.views, step.targets, options, step.conditions, run=walk)
         if step.ended:
             self.ends.draw(step.end_views, [node.surface.entity for node in step.ended], step.end_matrices,
