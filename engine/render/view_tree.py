@@ -1261,8 +1261,11 @@ class ViewTree:
         run = candidates.derived.get("claim_run") if self.lean_levels else None  # (planned ahead: _ahead_columns)
         if len(queries) == 1 and queries[0] is not none:  # (a chain's level: one claim, apart from any other)
             step.apart = True
-            self.passes.prepare_level(step.targets, step.parent_targets,
-                                      Claims([(parents[rows[0]].index, entities[0], nodes[0])], scissors), queries, run)
+            claims = Claims([(parents[rows[0]].index, entities[0], nodes[0])], scissors)
+            if run is None:
+                self.passes.prepare_level(step.targets, step.parent_targets, claims, queries)
+            else:
+                self.passes.prepare_level(step.targets, step.parent_targets, claims, queries, run)
             return
         if none in queries:  # the claims drawn, in one pass over the columns
             ids, rects, drawn = [], [], []
@@ -1276,8 +1279,10 @@ class ViewTree:
             claims = Claims([(parents[p].index, entity, node) for p, entity, node in
                              zip(rows, entities, nodes, strict=True)], scissors)
         step.apart = _claims_apart(scissors)
-        self.passes.prepare_level(step.targets, step.parent_targets, claims, queries,
-                                  run if len(claims) == len(candidates) else None)
+        if run is None or len(claims) < len(candidates):
+            self.passes.prepare_level(step.targets, step.parent_targets, claims, queries)
+        else:
+            self.passes.prepare_level(step.targets, step.parent_targets, claims, queries, run)
 
     def _claimed_pixels(self, queries: list[moderngl.Query]) -> list[int]:
         """Each claim's pixels (the CPU waits for the GPU, if they are this frame's), 0 for
