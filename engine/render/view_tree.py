@@ -855,8 +855,7 @@ class ViewTree:
         step.pixels = [pixels]
         drawn = 0 if end else pixels
         root = walk.root
-        self.coverage[level + 1] = drawn if candidates.size == root.size else \
-            screen_coverage(drawn, candidates.size, root.size)
+        self.coverage[level + 1] = screen_coverage(drawn, candidates.size, root.size)
         if drawn:
             stats.views_spent += 1
             stats.pixels_spent += drawn
