@@ -303,11 +303,19 @@ def test_levels_of_one_view_on_the_lean_path_draw_what_the_general_path_draws(sc
     import dataclasses
 
     from benchmarks.portals import FacingPortals
+    from engine.render.gpu import Gpu
     from engine.render.view_tree import ViewTree
 
-    lean: list[int] = []
-    original = ViewTree._choose_one
-    monkeypatch.setattr(ViewTree, "_choose_one", lambda self, *a: lean.append(1) or original(self, *a))
+    # What each frame took of the lean path: levels chosen on it, claims drawn from a run,
+    # and the uploads of Camera blocks (a run's once).
+    lean: list[str] = []
+    for owner, name, label in ((ViewTree, "_choose_one", "level"), (Gpu, "_write_views", "views")):
+        original = getattr(owner, name)
+        monkeypatch.setattr(owner, name, lambda self, *a, _original=original, _label=label:
+                            lean.append(_label) or _original(self, *a))
+    prepare = MirrorPasses.prepare_level
+    monkeypatch.setattr(MirrorPasses, "prepare_level", lambda self, *a: lean.append(
+        "claims" if len(a) > 4 else "claim") or prepare(self, *a))
 
     def build(game):
         def level(world):
@@ -326,7 +334,7 @@ def test_levels_of_one_view_on_the_lean_path_draw_what_the_general_path_draws(sc
         runner.engine.reflection_system.tree.lean_levels = lean_levels
     kept = 0
     for frame in range(11):
-        trees, images, stats = {}, {}, {}
+        trees, images, stats, uploads = {}, {}, {}, {}
         for lean_levels, runner in runners.items():
             if frame < 5:  # the camera sways, then stands still (the tree kept, its end images refilled)
                 games[lean_levels].update(runner.world, 1.0 / 60.0)
@@ -334,10 +342,15 @@ def test_levels_of_one_view_on_the_lean_path_draw_what_the_general_path_draws(sc
             images[lean_levels] = runner.frame()
             stats[lean_levels] = dataclasses.asdict(runner.stats)
             trees[lean_levels] = _planned_tree(runner)
+            uploads[lean_levels] = lean.count("views")
             if not lean_levels:
-                assert not lean
+                assert set(lean) <= {"claim", "views"}, lean
             elif not (runner.stats.reflection_views_kept or runner.stats.reflection_end_refills):  # drawn
-                assert len(lean) >= 6, (frame, len(lean))
+                if 0 < frame < 5:  # moving (a first render plans nothing ahead; a still camera's plans are kept)
+                    assert lean.count("claims") >= 4, (frame, lean)
+                assert lean.count("level") >= 6, (frame, lean)
+        if 0 < frame < 5:  # (a level of one view's Camera block: uploaded with its run's)
+            assert uploads[True] <= uploads[False] - 4, (frame, uploads)
         kept += bool(stats[True]["reflection_views_kept"] or stats[True]["reflection_end_refills"])
         assert len(trees[True]) >= 6, (frame, len(trees[True]))
         assert trees[True] == trees[False], f"frame {frame}: the trees differ"
