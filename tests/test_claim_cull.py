@@ -84,9 +84,9 @@ def test_frames_with_the_cull_equal_frames_without(ctx, monkeypatch, visibility,
     drawn = {"n": 0}
     prepare = MirrorPasses.prepare_level
 
-    def counting(self, level, parent, claims, queries):
+    def counting(self, level, parent, claims, queries, *run):
         drawn["n"] += sum(1 for query in queries if query is not self.no_pixels)
-        return prepare(self, level, parent, claims, queries)
+        return prepare(self, level, parent, claims, queries, *run)
 
     monkeypatch.setattr(MirrorPasses, "prepare_level", counting)
     for size in ((32, 18), (64, 36)):

@@ -61,8 +61,8 @@ def test_prepared_level_images(ctx, monkeypatch, mirrors, size, scale):
     checked = []
     prepare = MirrorPasses.prepare_level
 
-    def checking(self, level, parent, claims, queries):
-        prepare(self, level, parent, claims, queries)
+    def checking(self, level, parent, claims, queries, *run):
+        prepare(self, level, parent, claims, queries, *run)
         if not claims:
             return
         ctx.finish()

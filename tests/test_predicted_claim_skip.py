@@ -53,9 +53,9 @@ def _run(ctx, monkeypatch, scene: str, size: tuple[int, int], cull: bool, end_im
         visibility_of, predicted = view_tree.ViewTree._visibility_of, view_tree.ViewTree._chosen_by_prediction
         keep = EndImages.keep
 
-        def prepare_level(self, level, parent, claims, queries):
+        def prepare_level(self, level, parent, claims, queries, *run):
             current["claims"] += sum(1 for query in queries[:len(claims)] if query is not self.no_pixels)
-            return prepare(self, level, parent, claims, queries)
+            return prepare(self, level, parent, claims, queries, *run)
 
         def rendered(self, *args, **kwargs):
             result = render(self, *args, **kwargs)

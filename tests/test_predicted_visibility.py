@@ -77,10 +77,10 @@ def test_predicted_mode_reads_only_counts_of_earlier_frames(ctx, monkeypatch, mo
     read_ages: list[int] = []
     prepare, counts = MirrorPasses.prepare_level, MirrorPasses.claimed_pixels
 
-    def prepare_level(self, level, parent, claims, queries):
+    def prepare_level(self, level, parent, claims, queries, *run):
         for query in queries:
             claimed_in[id(query)] = frame["n"]
-        return prepare(self, level, parent, claims, queries)
+        return prepare(self, level, parent, claims, queries, *run)
 
     def claimed_pixels(self, queries):
         read_ages.extend(frame["n"] - claimed_in[id(query)] for query in queries)

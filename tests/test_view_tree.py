@@ -286,3 +286,74 @@ def test_levels_planned_ahead_are_the_levels_planned_one_at_a_time(scene, monkey
     # The occluder takes a candidate from level 1: the levels planned ahead are planned again.
     assert ahead_orders[2].index("claim") >= 2 and "plan" in ahead_orders[2][ahead_orders[2].index("claim"):]
     assert sum(label == "plan" for label in ahead_orders[3]) <= sum(label == "plan" for label in orders[False][3])
+
+
+
+@pytest.mark.parametrize("pair", ("portals", "mirrors", "portals_closed"))
+def test_levels_of_one_view_on_the_lean_path_draw_what_the_general_path_draws(scene, monkeypatch, pair):
+    """A facing pair seen head on is a chain of one view a level, which the view tree
+    chooses, descends from and plans on a lean path (``ViewTree._choose_one``: none of the
+    lists a level of many views is chosen through), packing each level's composite row
+    with the others' in step 5.  While the camera sways and then stands still (the tree
+    kept, its end images refilled until they settle), the trees, the frames' counts and the
+    frames equal, frame by frame, those of a tree that chooses every level through the
+    general path (``lean_levels`` False): the benchmark's portal pair at depth 8 (its floor
+    and crates in every level), as mirrors, and with its end images off (the fallback past
+    the depth limit)."""
+    import dataclasses
+
+    from benchmarks.portals import FacingPortals
+    from engine.render.gpu import Gpu
+    from engine.render.view_tree import ViewTree
+
+    # What each frame took of the lean path: levels chosen on it, claims drawn from a run,
+    # and the uploads of Camera blocks (a run's once).
+    lean: list[str] = []
+    for owner, name, label in ((ViewTree, "_choose_one", "level"), (Gpu, "_write_views", "views")):
+        original = getattr(owner, name)
+        monkeypatch.setattr(owner, name, lambda self, *a, _original=original, _label=label:
+                            lean.append(_label) or _original(self, *a))
+    prepare = MirrorPasses.prepare_level
+    monkeypatch.setattr(MirrorPasses, "prepare_level", lambda self, *a: lean.append(
+        "claims" if len(a) > 4 else "claim") or prepare(self, *a))
+
+    def build(game):
+        def level(world):
+            game.build(world)
+            for entity, portal in list(world.query_one(Portal)):
+                if pair == "mirrors":  # the same quads, each a mirror
+                    world.remove_component(entity, Portal)
+                    world.add_component(entity, Mirror(max_depth=8))
+                elif pair == "portals_closed":
+                    portal.end_image = False
+        return level
+
+    games = {lean_levels: FacingPortals(sway=True) for lean_levels in (True, False)}
+    runners = {lean_levels: scene(build(game), (160, 120)) for lean_levels, game in games.items()}
+    for lean_levels, runner in runners.items():
+        runner.engine.reflection_system.tree.lean_levels = lean_levels
+    kept = 0
+    for frame in range(11):
+        trees, images, stats, uploads = {}, {}, {}, {}
+        for lean_levels, runner in runners.items():
+            if frame < 5:  # the camera sways, then stands still (the tree kept, its end images refilled)
+                games[lean_levels].update(runner.world, 1.0 / 60.0)
+            lean.clear()
+            images[lean_levels] = runner.frame()
+            stats[lean_levels] = dataclasses.asdict(runner.stats)
+            trees[lean_levels] = _planned_tree(runner)
+            uploads[lean_levels] = lean.count("views")
+            if not lean_levels:
+                assert set(lean) <= {"claim", "views"}, lean
+            elif not (runner.stats.reflection_views_kept or runner.stats.reflection_end_refills):  # drawn
+                if 0 < frame < 5:  # moving (a first render plans nothing ahead; a still camera's plans are kept)
+                    assert lean.count("claims") >= 4, (frame, lean)
+                assert lean.count("level") >= 6, (frame, lean)
+        if 0 < frame < 5:  # (a level of one view's Camera block: uploaded with its run's)
+            assert uploads[True] <= uploads[False] - 4, (frame, uploads)
+        kept += bool(stats[True]["reflection_views_kept"] or stats[True]["reflection_end_refills"])
+        assert len(trees[True]) >= 6, (frame, len(trees[True]))
+        assert trees[True] == trees[False], f"frame {frame}: the trees differ"
+        assert stats[True] == stats[False], f"frame {frame}: the counts differ"
+        assert images[True].std() > 5.0 and np.array_equal(images[True], images[False]), f"frame {frame}"
+    assert kept >= 3, kept

@@ -135,6 +135,10 @@ class Gpu:
         self.camera_stride = -(-CAMERA_BLOCK_BYTES // align) * align
         self._camera_padding = bytes(self.camera_stride - CAMERA_BLOCK_BYTES)
         self.cameras_ubo = ctx.buffer(reserve=self.camera_stride * 16)
+        # The views of the last ``upload_run`` (their blocks in ``cameras_ubo`` now) by id, and
+        # where the views of the pass drawing now start in it (``upload_views``, ``bind_view_at``).
+        self._view_run: tuple[Sequence[View], dict[int, int]] | None = None
+        self._view_base = 0
         self.lights_ubo = ctx.buffer(reserve=LIGHTS_BLOCK_BYTES)
         # Textures shared by reference count (the Renderer makes and releases them), by
         # id(TextureData); ("normal", id): uploaded linear (normal and metallic-roughness maps)
@@ -215,6 +219,27 @@ class Gpu:
         then binds view i's range): one write a pass, not one a view, and into fresh storage
         (orphaned), so a GPU driver never waits for, or copies, a block the pass before
         still reads."""
+        run = self._view_run
+        if run is not None and len(views) == 1:
+            at = run[1].get(id(views[0]))
+            if at is not None:  # (uploaded with its run: upload_run)
+                self._view_base = at
+                return
+        self._write_views(views)
+        self._view_run, self._view_base = None, 0
+
+    def upload_run(self, views: Sequence[View]) -> None:
+        """The Camera blocks of the views of several passes of one view each, drawn one after
+        another with no other pass uploading views between (a chain of reflection levels
+        planned ahead: the claims between them upload none), in one upload: ``upload_views``
+        of one of them then writes nothing, and its pass binds its block where the run put
+        it.  Kept until another pass uploads views."""
+        if self._view_run is not None and self._view_run[0] is views:
+            return
+        self._write_views(views)
+        self._view_run, self._view_base = (views, {id(view): at for at, view in enumerate(views)}), 0
+
+    def _write_views(self, views: Sequence[View]) -> None:
         padding = self._camera_padding
         data = b"".join(view.camera_block() + padding for view in views)
         if len(data) > self.cameras_ubo.size:
@@ -227,7 +252,7 @@ class Gpu:
 
     def bind_view_at(self, index: int) -> None:
         """Make the ``index``-th view of the last ``upload_views`` the Camera block."""
-        bind_uniform_range(self.ctx, self.cameras_ubo, CAMERA_BINDING, index * self.camera_stride,
+        bind_uniform_range(self.ctx, self.cameras_ubo, CAMERA_BINDING, (self._view_base + index) * self.camera_stride,
                            CAMERA_BLOCK_BYTES)
 
     def opaque_batches(self) -> list[InstanceBatch]:

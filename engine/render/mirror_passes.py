@@ -555,6 +555,7 @@ class MirrorPasses:
         self._claim_buffer: moderngl.Buffer | None = None  # the claims' triangles (claim.vert), grown as needed
         self._reset_vao: moderngl.VertexArray | None = None
         self._claim_vao: moderngl.VertexArray | None = None
+        self._claims_written: tuple[Claims, tuple[int, int]] | None = None  # the run the buffer holds (prepare_level)
         # The query of every claim known to be empty before it is drawn (engine/render/claim_cull.py):
         # begun and ended once around nothing, so it counts 0 samples, and a view drawn on its
         # condition (predicted visibility) is skipped as that claim's would have skipped it.
@@ -563,7 +564,7 @@ class MirrorPasses:
             pass
 
     def prepare_level(self, level: RenderTargets, parent: RenderTargets, claims: Claims,
-                      queries: list[moderngl.Query]) -> None:
+                      queries: list[moderngl.Query], run: tuple[Claims, int] | None = None) -> None:
         """Write ``level``'s node image and depth mask for the candidate views ``claims``,
         counting each one's pixels in ``queries[i]`` (0: the surface is hidden there, or off
         the pixels its parent view drew).  A claim whose query is ``no_pixels`` is known to
@@ -574,7 +575,12 @@ class MirrorPasses:
         rectangle that is no view's.)  Outside the claims' rectangles nothing is written or
         read this frame.  Nothing waits here: the
         counts are read by ``claimed_pixels``, now (the CPU waits for the GPU) or a frame
-        later (``ViewTree``'s visibility)."""
+        later (``ViewTree``'s visibility).
+
+        ``run``: (the claims of several levels drawn one after another, where ``claims``
+        start among them): their triangles are written once, by the first of those levels
+        (of this size) that draws, and the others draw theirs from where they lie, so a level
+        writes nothing (a chain of levels planned ahead: ``ViewTree._ahead_columns``)."""
         if not claims:
             return
         ctx = self.ctx
@@ -583,12 +589,14 @@ class MirrorPasses:
         # Every claim's rectangle as two triangles, its ids on each vertex: one write.  The
         # reset draws them all at once (a rectangle reset twice is reset the same), then
         # each claim draws its own six vertices inside its query.
-        count = len(claims)
-        vertices = self._claim_vertices(claims, level.size)
-        if self._claim_buffer is None or self._claim_buffer.size < len(vertices):
-            self._reserve_claims(len(vertices))
-        self._claim_buffer.write(vertices)
-        self._reset_vao.render(moderngl.TRIANGLES, vertices=6 * count)
+        count, first = len(claims), 0
+        if run is None:
+            self._write_claims(claims, level.size, None)
+        else:
+            written, first = self._claims_written, run[1]
+            if written is None or written[0] is not run[0] or written[1] != level.size:
+                self._write_claims(run[0], level.size, run[0])
+        self._reset_vao.render(moderngl.TRIANGLES, vertices=6 * count, first=6 * first)
         bind_textures(ctx, ((parent.node, PARENT_NODE_UNIT), (parent.surface, PARENT_SURFACE_UNIT)))
         self.uniforms.set(self.claim, "to_parent", (parent.size[0] / level.size[0], parent.size[1] / level.size[1]))
         # A claim's cost on llvmpipe is linear in the claims, no cliff at some count: each
@@ -607,8 +615,17 @@ class MirrorPasses:
         for at, query in enumerate(queries[:count]):
             if query is not empty:
                 with query:
-                    render(moderngl.TRIANGLES, vertices=6, first=6 * at)
+                    render(moderngl.TRIANGLES, vertices=6, first=6 * (first + at))
         self.renderer.checkpoint("claims")
+
+    def _write_claims(self, claims: Claims, size: tuple[int, int], run: Claims | None) -> None:
+        """``claims``' triangles into the claims buffer, from its start; ``run``: the run they
+        are (``prepare_level``), None: one level's."""
+        vertices = self._claim_vertices(claims, size)
+        if self._claim_buffer is None or self._claim_buffer.size < len(vertices):
+            self._reserve_claims(len(vertices))
+        self._claim_buffer.write(vertices)
+        self._claims_written = None if run is None else (run, size)
 
     @staticmethod
     def _claim_vertices(claims: Claims, size: tuple[int, int]) -> bytes:
@@ -670,6 +687,12 @@ class MirrorPasses:
         each one's rectangle in the parent level's pixels), their rows packed straight from
         them, grouped by build and normal map: no ``Composite`` a view (a level with a rough
         view, whose tile is placed first, goes through them)."""
+        if len(views) == 1:  # (a chain's level: one row, no grouping)
+            view, look = views[0], surface_look(views[0].surface)
+            if not look.variant.startswith("rough"):
+                return PreparedComposites([], {(look.variant, look.normal_map): _composite_row(
+                    look, view.parent.view.camera_block(), rects[0], view.view.scissor, None, view.fade, view.index,
+                    parent_size, {})})
         looks = [surface_look(view.surface) for view in views]
         if any(look.variant.startswith("rough") for look in looks):
             return self.prepare_composites([Composite(view.index, rect, view.view.scissor, view.parent.view, look,

@@ -46,7 +46,13 @@ Ordering, for the CPU and the GPU to overlap: on llvmpipe a draw that samples a 
 queued pass still writes waits for that pass, so each level costs the CPU two waits (the
 claims read the level above, the counts read the claims) and the composites one each.
 Work that needs no pixels (the next level's plan, this level's composite rows) is done
-between a flush and the next wait.
+between a flush and the next wait.  A chain of levels of one view each (a facing pair) goes
+on a lean path (``ViewTree.lean_levels``): what a level of one candidate is chosen by, with
+no lists of a level of many; the nodes, claims and Camera blocks of the levels planned ahead
+read out for all of them at once, their claims written to the GPU in one run; their
+composite rows packed together in step 5, one after another (in a frame, CPU work done
+between GL calls costs two to four times what it costs in a row, measured), and no flush
+after a level whose next level is planned already (no CPU work there to overlap).
 
 A tree that ``remember``s (the main view's) leaves what its render did as a ``KeptTree``;
 on a frame whose views show nothing new (the reflect stage decides:
@@ -317,6 +323,7 @@ class _Walk:
     # last render's (ViewTree._plan_ahead: a chain planned in one run)
     singles: dict[int, int] = field(default_factory=dict)
     singles_before: dict[int, int] = field(default_factory=dict)
+    one: tuple[str, frozenset[int]] | None = None  # a level of one view's path and unlit mirrors (_choose_one)
 
     def triangles(self) -> int:
         """The triangles a scene pass submits, counted at the first level that asks (a level
@@ -364,6 +371,9 @@ class ViewTree:
         # Plan a chain of one view a level ahead in one run (SurfaceTable.plan_chain); False:
         # level by level (the second path the tests compare against).
         self.plan_chains = True
+        # Choose a level of one candidate on a lean path (_choose_one); False: through the
+        # lists of a level of many (the second path the tests compare against).
+        self.lean_levels = True
         # With ``remember`` (the main view's tree), what the last render left (``KeptTree``),
         # for a frame whose views show nothing new (``keep``); None after any other render.
         self.remember = False
@@ -610,10 +620,14 @@ class ViewTree:
             if candidates is not None and walk.whole_before.get(depth) and walk.exact and self.plan_ahead \
                     and not surfaces.fading and self.renderer.stats.pixels_left() is None:
                 self._plan_ahead(walk, depth, candidates)
-        self._unviewed(walk.fallbacks, surfaces, walk.rows, walk.nodes, walk.level, walk.root_proj, root,
-                       settings.depth_cap, walk.ends, unviewed)
+        if unviewed is None:
+            self._unviewed(walk.fallbacks, surfaces, walk.rows, walk.nodes, walk.level, walk.root_proj, root,
+                           settings.depth_cap, walk.ends)
+        elif len(unviewed[0]):  # (found with the level, planned ahead)
+            _fallbacks_at(walk.fallbacks, walk.level, surfaces).add(walk.nodes, *unviewed)
         walk.result.faded += faded
-        walk.singles[depth] = int(candidates.surface[0]) if candidates is not None and len(candidates) == 1 else -1
+        walk.singles[depth] = _parent_and_surface(candidates)[1] if candidates is not None and len(candidates) == 1 \
+            else -1
         candidates, walk.end_seers, dropped = self._end_seers(candidates, walk.seers)
         if dropped:  # end candidates with nothing to repeat: their fallback, never the bare surface
             _fallbacks_at(walk.fallbacks, walk.level, surfaces).add(walk.nodes, [p for p, _ in dropped],
@@ -700,7 +714,15 @@ class ViewTree:
         final once their blocks are: nothing writes them after), made for all of them at
         once and kept with each (``Candidates.derived``, as for a kept plan's): the columns
         read as Python numbers in one conversion each for every level (a chain at portal
-        depth 8: seven levels of one view), not each level's own few."""
+        depth 8: seven levels of one view), not each level's own few; a level of one
+        candidate's straight from them, with its parent and surface rows
+        (``_parent_and_surface``), and the views of all such levels, whose Camera blocks
+        the first of them to draw uploads together (``Gpu.upload_run``).  With three levels
+        or more, the claims of every level
+        below the first as one run (``MirrorPasses.prepare_level``'s ``run``: written to the
+        GPU once, by the first of them that draws): a parent's node is its row's one level
+        up (the levels planned ahead are used only where every candidate of the level above
+        became a view that grew, in its rows' order)."""
         rows = np.concatenate([candidates.rows.data for candidates in levels])
         ints = rows.view(np.int64)
         blocks = rows[:, BLOCK].tobytes()
@@ -712,6 +734,19 @@ class ViewTree:
         at = 0
         for candidates in levels:
             size = candidates.size
+            derived = candidates.derived
+            if len(candidates) == 1:  # (a chain's level: one view, its columns as they are)
+                x0, y0, x1, y1, mirrored, node = columns[at]
+                p, s, *scissor = numbers[at]
+                state = states[s]
+                derived[("nodes", hide)] = ([PlannedView(blocks[at * step:(at + 1) * step], size, state.kind,
+                                                         state.entity, state.exit_plane, mirrored == 1, tuple(scissor),
+                                                         node, state.exit_entity, hide)],
+                                            [(node, (x0, y0, -x1 - x0, -y1 - y0), state, p, fades[at])])
+                derived["claims"] = ([p], [entities[s]], [node], [scissor])
+                derived["one"] = (p, s)
+                at += 1
+                continue
             views, nodes, claims = [], [], ([], [], [], [])
             for i in range(at, at + len(candidates)):
                 x0, y0, x1, y1, mirrored, node = columns[i]  # x1, y1: negated (LEVEL_ROW)
@@ -723,9 +758,28 @@ class ViewTree:
                 nodes.append((node, (x0, y0, -x1 - x0, -y1 - y0), state, p, fades[i]))
                 for column, value in zip(claims, (p, entities[s], node, scissor), strict=True):
                     column.append(value)
-            candidates.derived[("nodes", hide)] = (views, nodes)
-            candidates.derived["claims"] = claims
+            derived[("nodes", hide)] = (views, nodes)
+            derived["claims"] = claims
             at += len(candidates)
+        ones = [candidates.derived[("nodes", hide)][0][0] for candidates in levels if len(candidates) == 1]
+        if len(ones) > 1:  # the Camera blocks of the levels of one view, in one upload (_draw_level)
+            for candidates in levels:
+                if len(candidates) == 1:
+                    candidates.derived["view_run"] = ones
+        if len(levels) > 2:  # the claims below the first level, in one run (MirrorPasses.prepare_level)
+            ids, rects, starts = [], [], []
+            above = 0  # the first row of the level above, in ``columns``
+            for upper, candidates in zip(levels[:-1], levels[1:], strict=True):
+                starts.append(len(ids))
+                at = above + len(upper)
+                for i in range(at, at + len(candidates)):
+                    p, s, *scissor = numbers[i]  # (a parent's node: its row's, one level up)
+                    ids.append((columns[above + p][5], entities[s], columns[i][5]))
+                    rects.append(scissor)
+                above = at
+            run = Claims(ids, rects)
+            for candidates, start in zip(levels[1:], starts, strict=True):
+                candidates.derived["claim_run"] = (run, start)
 
     def _choose(self, walk: _Walk, levels: LevelStack, candidates: Candidates) -> _Level | None:
         """Steps 2 and 3 for a planned level: its candidates' claims (exact: drawn and read
@@ -733,6 +787,10 @@ class ViewTree:
         below, its end views and fallbacks, and its drawing path; None where it has no view
         (the tree ends there)."""
         surfaces, settings, result, root = walk.surfaces, walk.settings, walk.result, walk.root
+        if walk.exact and len(candidates) == 1 and self.lean_levels and settings.level_budget is None:
+            stats = self.renderer.stats
+            if stats.view_budget is None and stats.pixels_left() is None:
+                return self._choose_one(walk, levels, candidates)
         level = walk.level
         if walk.scale < 1.0:
             self.renderer.stats.levels_downscaled += 1
@@ -773,6 +831,61 @@ class ViewTree:
         step.composite = children + step.ended
         return step
 
+    def _choose_one(self, walk: _Walk, levels: LevelStack, candidates: Candidates) -> _Level | None:
+        """``_choose`` for a level of one candidate, exact visibility, no budget (a chain's
+        levels): the same steps and the same level, without the lists a level of many views
+        is chosen through (its node straight from what its planning kept, the path and the
+        unlit mirrors found once a render: the same for every level of one view).  At portal
+        depth 8 with a swaying camera, 32x18, ``lean_levels`` in all (this path, the lean
+        descent and plan, the claims' and Camera blocks' runs, the composite rows in step 5)
+        takes about 11% off the frame (measured: one process, frames alternating)."""
+        renderer = self.renderer
+        stats = renderer.stats
+        level = walk.level
+        if walk.scale < 1.0:
+            stats.levels_downscaled += 1
+        step = _Level(candidates, levels.get(level + 1, candidates.size), levels[level], walk.nodes,
+                      walk.record.take(1, renderer.ctx))
+        walk.steps.append(step)
+        self._skip_empty_claims(walk, step)
+        end = candidates.end is not None and bool(candidates.end[0])
+        surfaces = walk.surfaces
+        self._claim(surfaces, step)
+        query = step.queries[0]
+        pixels = 0 if query is self.passes.no_pixels else query.samples
+        step.pixels = [pixels]
+        drawn = 0 if end else pixels
+        root = walk.root
+        self.coverage[level + 1] = screen_coverage(drawn, candidates.size, root.size)
+        if drawn:
+            stats.views_spent += 1
+            stats.pixels_spent += drawn
+            step.keep, step.grow, step.chosen = [0], range(1), candidates
+            kept = candidates.derived.get(("nodes", root.hide))  # (planned ahead: _ahead_columns)
+            if kept is not None:
+                (view,), ((node, rect, state, p, fade),) = kept
+                step.views, children = kept[0], [ReflectionView(node, level + 1, view, rect, state, walk.nodes[p],
+                                                                fade)]
+            else:
+                step.views, children = self._level_nodes(surfaces, candidates, walk.nodes, level + 1, root.hide)
+            step.children = children
+            if children[0].fade < 1.0:  # its faded share shows the fallback
+                _fallbacks_at(walk.fallbacks, level, surfaces).add(step.parents, candidates.parent, candidates.surface,
+                                                                   1.0 - candidates.fade)
+            if walk.one is None:  # the path and unlit mirrors of a level of one view: the same at every depth
+                walk.one = (choose_path(walk.settings.path, 1, walk.triangles, self._software),
+                            self._unlit_mirrors(surfaces))
+                walk.result.paths.add(walk.one[0])
+            step.path, step.unlit = walk.one
+            step.composite = children
+            return step
+        step.keep, step.grow, step.chosen = [], range(0), candidates.select(_NO_ROWS)
+        if not (end and pixels):
+            return None
+        self._end_views(walk, step, [0])
+        step.composite = list(step.ended)
+        return step
+
     def _unlit_mirrors(self, surfaces: SurfaceTable) -> frozenset[int]:
         """The mirrors the views of a level draw unlit, those this tree paints over entirely
         at any depth (``shading_replaced``), kept while the table and whether a pixel budget
@@ -809,7 +922,9 @@ class ViewTree:
         """A level's end views (rows ``end_rows`` of its candidates): their nodes, the matrix
         to the eye of the view that saw each surface last, and their fallbacks (the pixels
         their images do not hold)."""
-        chosen_ends = step.candidates.select(np.asarray(end_rows, np.int64))
+        candidates = step.candidates  # (all of them: their nodes as kept with them, if they are: _ahead_columns)
+        chosen_ends = candidates if len(end_rows) == len(candidates) else \
+            candidates.select(np.asarray(end_rows, np.int64))
         step.end_views, step.ended = self._level_nodes(walk.surfaces, chosen_ends, walk.nodes, walk.level + 1,
                                                        walk.root.hide)
         inverse_carry, views = walk.surfaces.inv_carry_glm, walk.result.views
@@ -832,6 +947,17 @@ class ViewTree:
         walk.level += 1
         if not grow:
             return None
+        if step.chosen is step.candidates and len(children) == 1 and walk.exact and self.lean_levels:
+            # A level of one candidate that became a view (a chain's): the same, for one row.
+            walk.whole[walk.level] = True
+            if walk.seers is not None:
+                p, s = _parent_and_surface(step.candidates)
+                row = walk.seers[p].copy()
+                row[s] = walk.parent_at[p]
+                walk.seers = [row]
+            walk.parent_at = [child_offset]
+            walk.nodes, walk.rows = children, step.candidates.rows
+            return self._plan(walk, first_index=children[0].index + 1)
         chosen = step.chosen
         parents = chosen if len(grow) == len(children) else chosen.select(np.asarray(grow, np.int64))
         walk.whole[walk.level] = parents is step.candidates  # the next level planned from its candidates' rows
@@ -856,8 +982,14 @@ class ViewTree:
         """Step 5, deepest level first: a level's fallbacks, then the views of the level
         below composited over it (a partly faded view's over its fallback), then the level's
         own transparent slot over both (its views', the root's at level 0: they were drawn
-        without it), before the level is composited into the one above."""
+        without it), before the level is composited into the one above.  First the rows of
+        the levels of one view, which ``_draw_level`` left: packed one after another, not
+        each between GL calls (a chain at portal depth 8, 32x18: with the flushes that had
+        no CPU work to overlap left out, about 2% of the frame)."""
         steps, fallbacks = walk.steps, walk.fallbacks
+        for step in steps:
+            if step.prepared is None and step.composite is not None:
+                step.prepared = self._prepare_composite(step.composite, walk.root, step.parent_targets.size)
         composites = walk.composited = [step.prepared for step in steps if step.prepared is not None][:walk.level]
         see_through = bool(self.renderer.transparent_batches())  # else no level has a slot to draw
         for depth in range(walk.level, -1, -1):
@@ -947,14 +1079,13 @@ class ViewTree:
     @staticmethod
     def _unviewed(fallbacks: dict[int, Fallbacks], surfaces: SurfaceTable, rows: LevelRows,
                   nodes: list[ReflectionView], level: int, root_proj: np.ndarray, root: View, depth_cap: int,
-                  ends: tuple[np.ndarray, int] | None, found: tuple[np.ndarray, np.ndarray] | None = None) -> None:
+                  ends: tuple[np.ndarray, int] | None) -> None:
         """The fallbacks of the surfaces the views ``nodes`` (``rows``, of ``level``) see but
         that the next level plans no view for (``SurfaceTable.unviewed``: past their depth
         limits, switched off, faded out; a ``depth_cap`` of 0: all of them), as the planner's
-        columns: its parent rows are rows of ``nodes``; ``found``: those pairs, found already
-        (a level planned ahead)."""
-        p, s = found if found is not None else surfaces.unviewed(rows, level + 1, root_proj, root.size, depth_cap,
-                                                                 _ends_at(ends, level + 1))
+        columns: its parent rows are rows of ``nodes`` (a level planned ahead found them with
+        it: ``_plan`` adds those)."""
+        p, s = surfaces.unviewed(rows, level + 1, root_proj, root.size, depth_cap, _ends_at(ends, level + 1))
         if len(p):
             _fallbacks_at(fallbacks, level, surfaces).add(nodes, p, s)
 
@@ -1128,6 +1259,15 @@ class ViewTree:
                 candidates.derived["claims"] = columns
         rows, entities, nodes, scissors = columns
         queries, none = step.queries, self.passes.no_pixels
+        run = candidates.derived.get("claim_run") if self.lean_levels else None  # (planned ahead: _ahead_columns)
+        if len(queries) == 1 and queries[0] is not none:  # (a chain's level: one claim, apart from any other)
+            step.apart = True
+            claims = Claims([(parents[rows[0]].index, entities[0], nodes[0])], scissors)
+            if run is None:
+                self.passes.prepare_level(step.targets, step.parent_targets, claims, queries)
+            else:
+                self.passes.prepare_level(step.targets, step.parent_targets, claims, queries, run)
+            return
         if none in queries:  # the claims drawn, in one pass over the columns
             ids, rects, drawn = [], [], []
             for p, entity, node, rect, query in zip(rows, entities, nodes, scissors, queries, strict=True):
@@ -1140,7 +1280,10 @@ class ViewTree:
             claims = Claims([(parents[p].index, entity, node) for p, entity, node in
                              zip(rows, entities, nodes, strict=True)], scissors)
         step.apart = _claims_apart(scissors)
-        self.passes.prepare_level(step.targets, step.parent_targets, claims, queries)
+        if run is None or len(claims) < len(candidates):
+            self.passes.prepare_level(step.targets, step.parent_targets, claims, queries)
+        else:
+            self.passes.prepare_level(step.targets, step.parent_targets, claims, queries, run)
 
     def _claimed_pixels(self, queries: list[moderngl.Query]) -> list[int]:
         """Each claim's pixels (the CPU waits for the GPU, if they are this frame's), 0 for
@@ -1154,7 +1297,9 @@ class ViewTree:
     def _draw_level(self, step: _Level, root: View, walk: _Walk) -> None:
         """A planned level's views (and end views) into its targets, then its composite's
         rows (CPU work while the GPU draws).  The levels of one render are one scene-pass
-        run (``ScenePass.draw``: the pass-wide bindings once, while nothing rebinds them)."""
+        run (``ScenePass.draw``: the pass-wide bindings once, while nothing rebinds them).
+        A level of one view (``lean_levels``) leaves its row to step 5 (``_composite``), and
+        is flushed only where the next level's plan is still to be made."""
         renderer = self.renderer
         if step.views:
             options = _BATCHED if step.path == "batched" else REFLECTION_LEVEL
@@ -1165,12 +1310,19 @@ class ViewTree:
                 options = self._level_options.get(key) or self._level_options.setdefault(
                     key, replace(options, unlit=step.unlit))
             step.options = options  # its transparent slot is drawn with them (_composite)
+            derived = step.candidates.derived
+            run = derived.get("view_run") if self.lean_levels else None
+            if run is not None and step.views is derived[("nodes", walk.root.hide)][0]:  # (the views planned)
+                renderer.upload_run(run)  # every level of one view's Camera block, at the first
             self.scene_pass.draw(step.views, step.targets, options, step.conditions, run=walk)
         if step.ended:
             self.ends.draw(step.end_views, [node.surface.entity for node in step.ended], step.end_matrices,
                            step.targets, root)
-        renderer.flush()
-        step.prepared = self._prepare_composite(step.composite, root, step.parent_targets.size)
+        if len(step.composite) > 1 or not self.lean_levels:
+            renderer.flush()
+            step.prepared = self._prepare_composite(step.composite, root, step.parent_targets.size)
+        elif not walk.exact or walk.level + 2 not in walk.ahead:  # (walk.level: the level above this one)
+            renderer.flush()  # the next level's plan is CPU work to overlap (planned ahead, it is done)
 
     def _level_scale(self, level: int) -> float:
         """The resolution factor of ``level`` under the frame's pixel budget: 1, or the scale
@@ -1282,10 +1434,20 @@ class ViewTree:
         self.copies.release()
 
 
+_NO_ROWS = np.zeros(0, np.int64)
 # The LevelRows columns a level's nodes read (_level_nodes), as whole numbers: the rectangle, mirrored, node.
 _NODE_COLUMNS = np.array([*range(ROW["rect"].start, ROW["rect"].stop), ROW["mirrored"].start, ROW["node"].start])
 # Its int64 columns (_ahead_columns): the parent row, the surface row, the scissor.
 _INT_COLUMNS = np.array([ROW["parent"].start, ROW["surface"].start, *range(ROW["scissor"].start, ROW["scissor"].stop)])
+
+
+def _parent_and_surface(candidates: Candidates) -> tuple[int, int]:
+    """The parent row and surface row of a level's one candidate, as Python numbers (those
+    ``_ahead_columns`` read already, else from its rows)."""
+    found = candidates.derived.get("one")
+    if found is None:
+        found = candidates.derived["one"] = (int(candidates.parent[0]), int(candidates.surface[0]))
+    return found
 
 
 def _fallbacks_at(fallbacks: dict[int, Fallbacks], level: int, surfaces: SurfaceTable) -> Fallbacks:
