@@ -208,7 +208,6 @@ class Gpu:
         shared = self._textures.get(("normal", id(normal_map)))
         return shared.obj if shared is not None else None
 
-
     def bind_view(self, view: View) -> None:
         """Make ``view`` the Camera block every program reads (a pass of one view)."""
         self.upload_views((view,))
