@@ -167,7 +167,9 @@ class Skybox(TrackedComponent):
     """The world's background cube map: six face images, or a generated gradient sky.
 
     ``faces`` is None (generate from the colours below) or six HxWx3 float arrays in GL
-    face order +X, -X, +Y, -Y, +Z, -Z, linear colour.
+    face order +X, -X, +Y, -Y, +Z, -Z, linear colour.  A generated sky's background is
+    drawn from the colours per pixel (``engine/render/sky.py``); ``face_size`` is the side of
+    the cube map made from them, which reflections, refraction and the sky's light read.
     """
 
     zenith: Any = field(default_factory=lambda: glm.vec4(0.10, 0.25, 0.65, 1.0))

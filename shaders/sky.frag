@@ -1,7 +1,15 @@
 #version 410 core
+// The sky of a view: a generated Skybox evaluated along the pixel's ray (GENERATED_SKY:
+// include/sky_model.glsl, sharp at any resolution), else the cube map (given faces, or no
+// Skybox: the flat background).
 #include "camera.glsl"
+#include "hdr.glsl"
 
+#ifdef GENERATED_SKY
+#include "sky_model.glsl"
+#else
 uniform samplerCube sky_map;
+#endif
 
 #ifdef LAYERED
 in vec3 g_direction;  // sky_layered.geom: this face's world direction
@@ -20,7 +28,11 @@ void main() {
     vec4 far_point = camera.inv_view_proj * vec4(v_ndc, 1.0, 1.0);
     vec3 direction = far_point.xyz / far_point.w - camera.eye.xyz;
 #endif
+#ifdef GENERATED_SKY
+    out_color = vec4(hdr_store(generated_sky(normalize(direction))), 1.0);
+#else
     out_color = vec4(textureLod(sky_map, normalize(direction), 0.0).rgb, 1.0);
+#endif
     out_surface = 0u;
     out_seen = 0u;
     out_node = 0u;

@@ -32,7 +32,7 @@ from engine.core.world import World
 from engine.render.irradiance import hemisphere_sh, project_faces
 from engine.render.renderer import Renderer
 from engine.render.shadows import LIGHT_LIMITS
-from engine.render.sky import build_faces
+from engine.render.sky import build_faces, sky_model
 from engine.render.views import MAX_DIRECTIONAL_LIGHTS, MAX_POINT_LIGHTS, lights_block
 from engine.rules.frame_rules import frame_rules
 from engine.rules.light_rules import KeptLights, choose_lights
@@ -72,7 +72,7 @@ class PrepareSystem(esper.Processor):
         if sky_changed:
             skies = world.query_one(Skybox)
             faces = build_faces(skies[0][1]) if skies else None
-            renderer.set_sky_faces(faces)
+            renderer.set_sky_faces(faces, sky_model(skies[0][1]) if skies else None)
             self._sky_sh = ambient_sh(world, faces)
         elif self._sky_sh is None or world.changed(HemisphereLight):
             self._sky_sh = ambient_sh(world)

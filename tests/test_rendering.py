@@ -18,7 +18,7 @@ from components import (
 )
 from engine.assets.mesh import box, plane, quad, sphere
 from engine.assets.texture_data import checker_texture
-from engine.render.sky import sky_radiance
+from engine.render.sky import build_faces, sky_radiance
 from tests.support import srgb_to_linear
 
 SIZE = (160, 120)
@@ -140,14 +140,16 @@ def test_chrome_sphere_shows_sky_along_the_reflected_direction(scene):
 
 
 def test_sky_faces_are_oriented(scene):
-    """Looking along each axis shows the sky of that axis (a wrong face order fails this)."""
+    """Looking along each axis shows the sky of that axis (a wrong face order fails this).
+    The cube map is the generated sky's faces given as faces: a generated Skybox's background
+    is drawn from its function, not its cube (tests/test_generated_sky.py)."""
     sky = Skybox(zenith=(0.0, 0.0, 0.9), horizon=(0.5, 0.5, 0.5), ground=(0.0, 0.6, 0.0),
                  sun_direction=(1.0, 0.2, 0.0))
     cam = {}
 
     def build(world):
         cam["e"] = camera(world, eye=glm.vec3(0.0), fov=30.0)
-        world.spawn(sky)
+        world.spawn(Skybox(faces=build_faces(sky)))
 
     runner = scene(build, (32, 32))
     from components import look_rotation

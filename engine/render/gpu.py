@@ -27,7 +27,7 @@ from engine.render.gl_context import GLCapabilities
 from engine.render.instances import GpuMesh, InstanceBatch
 from engine.render.raw_gl import RawGL
 from engine.render.shader_library import ShaderLibrary
-from engine.render.sky import flat_cube
+from engine.render.sky import SkyModel, flat_cube
 from engine.render.views import CAMERA_BLOCK_BYTES, LIGHTS_BLOCK_BYTES, View
 
 __all__ = ["BACKGROUND", "Gpu", "PathTrust", "ProbeCube", "Shared"]
@@ -149,6 +149,10 @@ class Gpu:
         self._transparent: list[InstanceBatch] = []  # the non-empty transparent ones (found with it)
         self._order_stale = True
         self.sky = flat_cube(ctx, BACKGROUND)
+        # The generated sky the sky pass evaluates per pixel (None: it samples ``sky``), and a
+        # count of the skies set, so a pass writes a sky's colours into its programs once.
+        self.sky_model: SkyModel | None = None
+        self.sky_version = 0
         # Stand-ins for an image a program samples in a branch its draw does not take (a batch
         # with no albedo map; a fallback with no reflection level below it).  A sampler the
         # program uses statically must still find a complete texture of its own type on its

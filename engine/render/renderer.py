@@ -31,7 +31,7 @@ from engine.render.present import ANTIALIAS_MODES, PresentPass
 from engine.render.probes import ProbeCaptures
 from engine.render.scene_pass import ScenePass
 from engine.render.shadows import ShadowMaps
-from engine.render.sky import flat_cube, upload_cube
+from engine.render.sky import SkyModel, flat_cube, upload_cube
 from engine.render.targets import LevelStack, RenderTargets
 from engine.render.text import TextPass
 
@@ -255,10 +255,14 @@ class Renderer(Gpu):
         self.colour_maps.add(gl_texture)  # complete (mipmapped), a float format: a stand-in albedo map too
         return gl_texture
 
-    def set_sky_faces(self, faces: np.ndarray | None) -> None:
+    def set_sky_faces(self, faces: np.ndarray | None, model: SkyModel | None = None) -> None:
+        """The world's sky: its cube map's ``faces`` (None: the flat background), and for a
+        generated Skybox the ``model`` the sky pass draws it from per pixel (``sky_model``)."""
         old = self.sky
         self.sky = upload_cube(self.ctx, faces) if faces is not None else flat_cube(self.ctx, BACKGROUND)
         old.release()
+        self.sky_model = model
+        self.sky_version += 1
         self.note_scene_change()
 
     def resource_counts(self) -> dict[str, int]:

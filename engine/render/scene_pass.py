@@ -186,11 +186,10 @@ class ScenePass:
         self.shadows = shadows
         self.irradiance = irradiance
         self.ctx = renderer.ctx
-        shaders = renderer.shaders
-        self.sky_program = shaders.program("sky.vert", "sky.frag")
-        self.sky_program["Camera"].binding = CAMERA_BINDING
-        self.sky_program["sky_map"].value = SKY_UNIT
-        self._sky = self.ctx.vertex_array(self.sky_program, [])
+        # The sky's vertex arrays by (layered, generated) (``_sky_draw``), and the sky version
+        # each one's program was last given (``Gpu.sky_version``).
+        self._skies: dict[tuple[bool, bool], moderngl.VertexArray] = {}
+        self._sky_written: dict[tuple[bool, bool], int] = {}
         # Scene programs by (geometry-shader invocations or 0, "" / "culled" / "naive" for a
         # layered capture, the batch's variants or None, whether it reads a normal map, draws
         # the analytic checker, reads an emissive map, a metallic-roughness map).
@@ -205,7 +204,6 @@ class ScenePass:
         # (invocations, layered, ambient probes, masked) -> a batch's draw-record keys (lit, unlit)
         self._kinds: dict[tuple, tuple[tuple, tuple]] = {}
         self._sky_size = 0
-        self._sky_layered: moderngl.VertexArray | None = None
         self._views_ubo: moderngl.Buffer | None = None
         self._ambient_probes = False  # this pass draws the AMBIENT_PROBES builds (IrradianceTable.bind)
         self._reflection_sampler: moderngl.Sampler | None = None
@@ -694,7 +692,7 @@ class ScenePass:
                     # llvmpipe did at the switch was its rasterising of the queued draws, which
                     # the next flush now does: measured, no faster a frame; issue 40.)
                     apply_pass_state(ctx, _SKY, viewport, view.scissor)
-                    self._sky.render(moderngl.TRIANGLES, vertices=3)
+                    self._sky_draw(layered=False).render(moderngl.TRIANGLES, vertices=3)
                     renderer.stats.draw_calls += 1
                 if now:
                     targets.view_framebuffer.depth_mask = False
@@ -844,7 +842,7 @@ class ScenePass:
             apply_pass_state(ctx, _LAYERED_SKY, size)
             if check is not None:
                 check("sky")
-            self._layered_sky().render(moderngl.TRIANGLES, vertices=3)
+            self._sky_draw(layered=True).render(moderngl.TRIANGLES, vertices=3)
         finally:
             target.unbind()
         renderer.stats.passes += 1
@@ -867,14 +865,37 @@ class ScenePass:
 
         return check
 
+    def _sky_draw(self, layered: bool) -> moderngl.VertexArray:
+        """The sky's full-screen triangle for the renderer's sky: a generated Skybox
+        evaluated per pixel (the GENERATED_SKY build, its colours written to the program
+        when the sky changed: ``Gpu.sky_model``), else the cube map; ``layered``: the
+        six-face build of a one-pass cube-map capture (``sky_layered.geom``)."""
+        renderer = self.renderer
+        model = renderer.sky_model
+        key = (layered, model is not None)
+        vao = self._skies.get(key)
+        if vao is None:
+            defines = {"LAYERED": "1", "MAX_LEVEL_VIEWS": str(MAX_BATCHED_VIEWS)} if layered else {}
+            if model is not None:
+                defines["GENERATED_SKY"] = "1"
+            program = renderer.shaders.program("sky.vert", "sky.frag", "sky_layered.geom" if layered else None,
+                                               defines=defines)
+            if layered:
+                program["Views"].binding = VIEWS_BINDING
+            else:
+                program["Camera"].binding = CAMERA_BINDING
+            if model is None:
+                program["sky_map"].value = SKY_UNIT
+            vao = self._skies[key] = self.ctx.vertex_array(program, [])
+        if model is not None and self._sky_written.get(key) != renderer.sky_version:
+            for name, value in model.uniforms().items():
+                vao.program[name].value = value  # (a shader reload writes them back: ShaderLibrary)
+            self._sky_written[key] = renderer.sky_version
+        return vao
+
     def _layered_sky(self) -> moderngl.VertexArray:
-        if self._sky_layered is None:
-            program = self.renderer.shaders.program("sky.vert", "sky.frag", "sky_layered.geom",
-                                                    defines={"LAYERED": "1", "MAX_LEVEL_VIEWS": str(MAX_BATCHED_VIEWS)})
-            program["Views"].binding = VIEWS_BINDING
-            program["sky_map"].value = SKY_UNIT
-            self._sky_layered = self.ctx.vertex_array(program, [])
-        return self._sky_layered
+        """The layered capture's sky (its programs built even where that path is refused)."""
+        return self._sky_draw(layered=True)
 
     def _reflection_filter(self) -> moderngl.Sampler | None:
         """The albedo sampler of reflection views, or None when they filter like the main view."""
@@ -893,10 +914,12 @@ class ScenePass:
     def release(self) -> None:
         if self._reflection_sampler is not None:
             forget_sampler(self.ctx, self._reflection_sampler)
-        for obj in (self._sky, self._sky_layered, self._views_ubo, self._reflection_sampler):
+        for obj in (*self._skies.values(), self._views_ubo, self._reflection_sampler):
             if obj is not None:
                 obj.release()
-        self._views_ubo = self._reflection_sampler = self._sky_layered = None
+        self._skies.clear()
+        self._sky_written.clear()
+        self._views_ubo = self._reflection_sampler = None
         self._programs.clear()  # the shader library owns and releases the programs
 
 

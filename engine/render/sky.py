@@ -3,13 +3,23 @@
 ``sky_radiance`` is the generated sky as a function of direction; tests use it to know
 what colour a reflected ray must show.  The faces are in GL's order, their texels in the
 directions of ``engine.core.cube_faces.face_directions`` (GL's cube-map table, kept there).
+
+A generated sky is also drawn as that function (``SkyModel``, evaluated per pixel by
+``shaders/include/sky_model.glsl``, the GLSL twin of ``sky_radiance``): the sky pass of every
+view shows it at the screen's own resolution, so the sun is a round disc with a smooth edge
+however far the view magnifies it, as in the procedural skies of Unity and Bevy.  Sampled
+from the cube (a face of 128 texels spans 90 degrees: at 1280x720 a texel covers seven
+pixels) the disc was a blocky blob.  Reflections, refraction and probes' irradiance still
+read the cube: they sample it blurred by roughness, where its resolution is enough.
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import moderngl
 import numpy as np
+from pyglm import glm
 
 from components.tracking import HALF_MAX
 from engine.core.cube_faces import face_directions
@@ -37,6 +47,36 @@ def sky_radiance(skybox: Skybox, directions: np.ndarray) -> np.ndarray:
     glow = 0.25 * np.clip(cos_sun, 0.0, 1.0) ** 4 * np.array([1.0, 0.55, 0.25])
     disc = np.clip((cos_sun - 0.9990) / 0.0005, 0.0, 1.0) * np.array(skybox.sun_color)[:3]
     return color + glow + disc
+
+
+@dataclass(frozen=True)
+class SkyModel:
+    """What ``sky_radiance`` needs of a generated Skybox: linear RGB colours and the unit
+    direction towards the sun (``shaders/include/sky_model.glsl``'s uniforms)."""
+
+    zenith: tuple[float, float, float]
+    horizon: tuple[float, float, float]
+    ground: tuple[float, float, float]
+    sun_direction: tuple[float, float, float]
+    sun_color: tuple[float, float, float]
+
+    def uniforms(self) -> dict[str, tuple[float, float, float]]:
+        """The sky pass's uniforms, by name."""
+        return {"sky_zenith": self.zenith, "sky_horizon": self.horizon, "sky_ground": self.ground,
+                "sky_sun_direction": self.sun_direction, "sky_sun_color": self.sun_color}
+
+
+def sky_model(skybox: Skybox | None) -> SkyModel | None:
+    """The generated sky of ``skybox`` as the sky pass draws it; None for given faces or no
+    Skybox (the pass samples the cube map)."""
+    if skybox is None or skybox.faces is not None:
+        return None
+
+    def rgb(value) -> tuple[float, float, float]:
+        return tuple(float(c) for c in tuple(value)[:3])
+
+    return SkyModel(rgb(skybox.zenith), rgb(skybox.horizon), rgb(skybox.ground),
+                    rgb(glm.normalize(glm.vec3(skybox.sun_direction))), rgb(skybox.sun_color))
 
 
 def build_faces(skybox: Skybox) -> np.ndarray:

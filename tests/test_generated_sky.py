@@ -1,0 +1,97 @@
+"""The generated sky is drawn from its function at the screen's resolution: the sky pass
+evaluates ``shaders/include/sky_model.glsl`` per pixel, and that must give what
+``engine.render.sky.sky_radiance`` (the rule's owner) gives along each pixel's ray, the sun's
+disc included, however far a narrow lens magnifies it (from the 128-texel cube it was a
+blocky blob); a Skybox of given faces is still drawn from its cube map."""
+from __future__ import annotations
+
+import numpy as np
+from pyglm import glm
+
+from components import Camera, Skybox, Transform, look_rotation
+from engine.render.sky import build_faces, sky_radiance
+
+SIZE = (160, 120)
+SUN = glm.normalize(glm.vec3(0.3, 0.5, -0.8))
+SKY = dict(zenith=(0.10, 0.25, 0.65), horizon=(0.65, 0.75, 0.90), ground=(0.18, 0.14, 0.10),
+           sun_direction=tuple(SUN), sun_color=(6.0, 5.4, 4.2))
+
+
+def _hdr_frame(scene, skybox: Skybox, fov: float, look: glm.vec3):
+    """A frame of ``skybox`` through a camera of ``fov`` looking along ``look``: level 0's
+    colour and rays (``_read``), and the runner."""
+
+    def build(world):
+        world.spawn(Transform(rotation=look_rotation(look)), Camera(fov_y=fov, near=0.1, far=100.0))
+        world.spawn(skybox)
+
+    runner = scene(build, SIZE)
+    runner.engine.renderer.antialias = "off"
+    runner.frame()
+    return (*_read(runner), runner)
+
+
+def _read(runner):
+    """Level 0's linear HDR colour (h, w, 3; row 0 at the top) and each pixel centre's
+    world ray, from the camera's own matrices (numpy, float64)."""
+    w, h = SIZE
+    colour = np.frombuffer(runner.engine.renderer.levels[0].color.read(), np.float16)
+    colour = colour.reshape(h, w, 4)[::-1, :, :3].astype(np.float64)
+    view = runner.engine.main_view
+    to_world = np.array(glm.inverse(view.view_proj).to_list(), np.float64).T  # glm is column-major
+    cols, rows = np.meshgrid(np.arange(w), np.arange(h))
+    ndc = np.stack([(cols + 0.5) / w * 2 - 1, 1 - (rows + 0.5) / h * 2, np.ones((h, w)), np.ones((h, w))], -1)
+    far = ndc @ to_world.T
+    rays = far[..., :3] / far[..., 3:] - np.array(view.eye, np.float64)
+    return colour, rays / np.linalg.norm(rays, axis=-1, keepdims=True)
+
+
+def test_the_sun_is_drawn_from_the_skys_function_at_the_screens_resolution(scene):
+    """A 10-degree lens on the sun: its disc is about 60 pixels across, 30 cube texels' worth
+    of screen a texel.  Every pixel is the function's value along its ray (a half float's
+    rounding apart), and the disc covers exactly the pixels the function says."""
+    skybox = Skybox(**SKY)
+    colour, rays, _ = _hdr_frame(scene, skybox, fov=10.0, look=SUN)
+    want = sky_radiance(skybox, rays)
+    np.testing.assert_allclose(colour, want, rtol=4e-3, atol=4e-3)
+    lit = colour[..., 0] > 3.0               # brighter than half the sun: inside the disc's ramp
+    inside = want[..., 0] > 3.0
+    assert inside.sum() > 2000               # the disc is in view, and large
+    assert (lit == inside).all(), f"{int((lit != inside).sum())} pixels on the wrong side of the disc's edge"
+
+
+def test_the_sky_away_from_the_sun_is_the_function_too(scene):
+    """A wide lens across the horizon (where the ground's fade bends): the function again."""
+    skybox = Skybox(**SKY)
+    colour, rays, _ = _hdr_frame(scene, skybox, fov=90.0, look=glm.vec3(-0.3, 0.05, 1.0))
+    np.testing.assert_allclose(colour, sky_radiance(skybox, rays), rtol=4e-3, atol=4e-3)
+
+
+def test_a_skybox_of_given_faces_is_drawn_from_its_cube_map(scene):
+    """Given faces are drawn as given: here the generated sky's own faces with the zenith's
+    face painted red, so the top of a view up the +Y axis is red, as the cube map says."""
+    generated = Skybox(**SKY)
+    faces = build_faces(generated).copy()
+    faces[2] = (1.0, 0.0, 0.0)  # +Y
+    colour, rays, _ = _hdr_frame(scene, Skybox(faces=faces), fov=40.0, look=glm.vec3(0.0, 1.0, 0.001))
+    np.testing.assert_allclose(colour[SIZE[1] // 2, SIZE[0] // 2], (1.0, 0.0, 0.0), atol=2e-3)
+    # Sideways, below the +Y face's reach, the generated faces' colours (bilinear texels of
+    # 128 a face, not the exact function: near, not equal).
+    colour, rays, _ = _hdr_frame(scene, Skybox(faces=faces), fov=40.0, look=glm.vec3(-1.0, -0.1, 0.0))
+    np.testing.assert_allclose(colour[SIZE[1] // 2, SIZE[0] // 2],
+                               sky_radiance(generated, rays[SIZE[1] // 2, SIZE[0] // 2]), atol=0.02)
+
+
+def test_a_changed_sky_is_drawn_changed(scene):
+    """The sun moved and recoloured and the zenith changed after a frame: the next frame
+    draws the new sky (the sky pass's program is given the new colours), not the first."""
+    skybox = Skybox(**SKY)
+    _, _, runner = _hdr_frame(scene, skybox, fov=20.0, look=SUN)
+    skybox.sun_direction = SUN + glm.vec3(0.05, -0.04, 0.0)
+    skybox.sun_color = (2.0, 6.0, 1.0)
+    skybox.zenith = (0.3, 0.1, 0.1)
+    runner.frame()
+    colour, rays = _read(runner)
+    want = sky_radiance(skybox, rays)
+    assert (want[..., 1] > 3.0).sum() > 500  # the moved, green sun is in view
+    np.testing.assert_allclose(colour, want, rtol=4e-3, atol=4e-3)
