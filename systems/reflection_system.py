@@ -165,7 +165,7 @@ class ReflectionSystem(esper.Processor):
         crossed = any(crossing.entity == camera for crossing in self.world.resources.get(PortalCrossings, ()))
         cut = self._cut or crossed or camera != self._camera
         if cut:
-            self.tree.forget_visibility()
+            self.tree.visibility.forget()
         self._cut, self._camera = False, camera
         settings = self.settings
         table = surface_table(self.world.resources, surfaces)

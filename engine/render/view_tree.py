@@ -66,7 +66,6 @@ the deepest level with end views up, over each level as its views drew it (``_Re
 from __future__ import annotations
 
 import functools
-import math
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 
@@ -75,7 +74,7 @@ import numpy as np
 from pyglm import glm
 
 from components.limits import MAX_VIEW_DEPTH
-from engine.core.budget import screen_coverage, spending_order
+from engine.core.budget import screen_coverage
 from engine.render.batched_mirrors import PATHS, choose_path, submitted_triangles
 from engine.render.claim_cull import ChainBoxes, empty_claims
 from engine.render.end_images import EndImages
@@ -87,13 +86,21 @@ from engine.render.mirror_passes import (
     MirrorPasses,
     PreparedComposites,
     PreparedFallbacks,
-    give_samples_queries,
-    take_samples_queries,
 )
 from engine.render.plan_rows import BLOCK, ROW, Candidates, LevelRows
 from engine.render.scene_pass import REFLECTION_LEVEL, TREE_ROOT, SceneOptions, ScenePass, shading_replaced
 from engine.render.surface_table import NO_BLENDS, SurfaceBlends
 from engine.render.targets import LevelStack, RenderTargets
+from engine.render.tree_visibility import (
+    VISIBILITY_MODES,
+    RootVisibility,
+    TreeVisibility,
+    chosen_by_prediction,
+    claimed_pixels,
+    level_scale,
+    waits_for_counts,
+    within_budgets,
+)
 from engine.render.view_plan import SurfaceTable, _mat, level_rects
 from engine.render.views import CAMERA_BLOCK_BYTES, PlannedView, View
 from engine.resources import SurfaceState
@@ -102,12 +109,6 @@ from engine.rules.probe_rules import ProbeBlend
 # The deepest a tree may go (each level is one more set of root-sized targets); the depth
 # limits of Mirror and Portal components take values up to this.
 MAX_TREE_DEPTH = MAX_VIEW_DEPTH  # the depth cap's limit: the components' own
-MIN_LEVEL_SCALE = 0.25  # the lowest resolution factor the pixel budget draws a level at
-# How a level learns which candidates have pixels: "exact" reads this frame's claim counts
-# (the CPU waits for the GPU once a level), "predicted" uses last frame's (nothing waits), and
-# "auto" is exact on a software rasteriser (the CPU draws anyway: waiting costs nothing and
-# the counts save views) and predicted on a GPU.
-VISIBILITY_MODES = ("auto", "exact", "predicted")
 _BATCHED = SceneOptions(clear=False, masked=True, sky=False, batched=True, reflection_filter=True, transparent=False)
 # A level whose claims' rectangles overlap none of the others' (_claims_apart) draws unmasked:
 # there its depth alone is the claim test.  The reset wrote the near plane (depth 0) over every
@@ -165,29 +166,6 @@ class TreeResult:
         reached), counted when first asked: one more cull, which the main view's tree
         reports (``RenderStats.reflection_depth_capped``) and a probe face's never needs."""
         return self.count_capped() if self.count_capped is not None else 0
-
-
-@dataclass
-class RootVisibility:
-    """One root's claim queries and, for predicted visibility, its claim counts, each keyed by
-    the claim's chain of surface entities from the root: ``seen``, last frame's; ``pending``,
-    this frame's keys in the order of ``queries``, read at the root's next render, when the
-    GPU has long drawn them.  An exact frame counts nothing for the next: after it, nothing
-    is predicted."""
-
-    queries: list[moderngl.Query] = field(default_factory=list)
-    used: int = 0                 # queries taken this frame
-    pending: list[tuple[int, ...]] = field(default_factory=list)
-    counted: list[moderngl.Query] = field(default_factory=list)  # what counts each of ``pending``
-    seen: dict[tuple[int, ...], int] = field(default_factory=dict)
-    frame: int = -1               # the ViewTree frame it was last drawn in
-
-    def take(self, count: int, ctx: moderngl.Context) -> list[moderngl.Query]:
-        """The next ``count`` of this frame's queries (the root's pool grows as needed)."""
-        if len(self.queries) < self.used + count:
-            self.queries += take_samples_queries(ctx, self.used + count - len(self.queries))
-        self.used += count
-        return self.queries[self.used - count:self.used]
 
 
 @dataclass
@@ -350,9 +328,7 @@ class ViewTree:
         self._roots: dict[tuple, LevelRows] = {}  # each root's row, by its camera (_root_rows)
         # what _end_surfaces found last, and for what (table, surfaces seen, cap)
         self._ends_cache: tuple[tuple, tuple[np.ndarray, int] | None] | None = None
-        self._visibility: dict[tuple[str, int], RootVisibility] = {}  # by root (its name and skipped entity)
-        self._frame = 0                   # frames this tree has drawn in (a new RenderStats: a new frame)
-        self._frame_stats: object | None = None
+        self.visibility = TreeVisibility(renderer, self.passes)  # each root's claim counts, frame to frame
         self._software = renderer.caps.software  # a software rasteriser (the context's, read once)
         # Draw the mirrors this tree paints over entirely unlit (scene_pass.shading_replaced);
         # False: every view shades them (the second path the tests compare against).
@@ -575,11 +551,11 @@ class ViewTree:
         have, how it learns its views' pixels."""
         root_proj, inv_root_proj = self._projection(root.proj)
         ends = self._end_surfaces(surfaces, root, settings.depth_cap)
-        exact = self._waits_for_counts(settings)
+        exact = waits_for_counts(settings.visibility, settings.level_budget, self.renderer.stats, self._software)
         result.visibility = "exact" if exact else "predicted"
         renderer = self.renderer
         walk = _Walk(root, surfaces, settings, result, root_proj, inv_root_proj, ends, exact,
-                     self._visibility_of(root), renderer, [root_node],
+                     self.visibility.of(root), renderer, [root_node],
                      self._root_rows(root),
                      # With end views: for each row of the level, the index in result.views of the
                      # view that saw each surface last up its chain (-1: none), what an end view repeats.
@@ -599,7 +575,7 @@ class ViewTree:
         and the fallbacks of the surfaces those parents see that get no view there."""
         depth = walk.level + 1
         settings, surfaces, root = walk.settings, walk.surfaces, walk.root
-        walk.scale = self._level_scale(depth)
+        walk.scale = level_scale(self.renderer.stats, self.coverage, depth)
         ahead = walk.ahead.pop(depth, None) if walk.ahead else None
         if ahead is None and len(walk.rows.data) == 1 and walk.whole_before.get(depth) and walk.exact \
                 and self.plan_ahead and self.plan_chains and walk.rows.data.flags.writeable \
@@ -690,7 +666,8 @@ class ViewTree:
             deferred = list(deferred)
         while whole.get(depth) and (candidates.end is None or not candidates.end.any()):
             depth += 1
-            rows, first_index, scale = candidates.rows, int(candidates.rows.node[-1]) + 1, self._level_scale(depth)
+            rows, first_index = candidates.rows, int(candidates.rows.node[-1]) + 1
+            scale = level_scale(self.renderer.stats, self.coverage, depth)
             ends = _ends_at(walk.ends, depth)
             # Blocks left to one run for the levels planned ahead where there are two or more
             # (a kept plan's rows, read-only: its plans are kept whole).
@@ -803,8 +780,9 @@ class ViewTree:
             step.keep, step.grow, end_rows = self._chosen_by_counts(surfaces, step, is_end, settings, result,
                                                                     level + 1, root.size)
         else:  # last frame's counts: nothing waits; the GPU counts this frame's for the next
-            step.keep, step.grow, end_rows, step.claim_keys = self._chosen_by_prediction(
-                surfaces, step, is_end, walk.keys, walk.record, level + 1, root.size)
+            step.keep, step.grow, end_rows, step.claim_keys, step.conditions = chosen_by_prediction(
+                candidates, step.queries, self.passes.no_pixels, is_end, walk.keys, walk.record,
+                surfaces.entity_list, self.renderer.stats, self.coverage, level + 1, root.size)
         keep, grow = step.keep, step.grow
         chosen = step.chosen = candidates if len(keep) == len(candidates) else \
             candidates.select(np.asarray(keep, np.int64))
@@ -1030,51 +1008,13 @@ class ViewTree:
         keep), which of those get views below them (all), and which end views have pixels;
         each a list of rows of ``step.candidates``."""
         self._claim(surfaces, step)
-        pixels = step.pixels = self._claimed_pixels(step.queries)
-        keep = self._within_budgets(surfaces, step.candidates,
-                                    [0 if end else n for n, end in zip(pixels, is_end, strict=True)],
-                                    settings, result, level, screen)
+        pixels = step.pixels = claimed_pixels(self.passes, step.queries)
+        keep, dropped = within_budgets(surfaces, step.candidates,
+                                       [0 if end else n for n, end in zip(pixels, is_end, strict=True)],
+                                       settings.level_budget, self.renderer.stats, self.coverage, level, screen)
+        result.dropped += dropped
         end_rows = [i for i, (n, end) in enumerate(zip(pixels, is_end, strict=True)) if end and n > 0]
         return keep, range(len(keep)), end_rows  # every view kept has pixels: each gets its own surfaces
-
-    def _chosen_by_prediction(self, surfaces: SurfaceTable, step: _Level, is_end: list[bool],
-                              keys: list[tuple[int, ...]], record: RootVisibility, level: int,
-                              screen: tuple[int, int]) -> tuple[list[int], list[int], list[int], list[tuple[int, ...]]]:
-        """Predicted visibility: every candidate of the level becomes a view (or an end
-        view), drawn on the GPU only if its claim counts pixels (conditional rendering:
-        ``step.conditions``), except those known empty (``claim_cull``: their query is
-        ``MirrorPasses.no_pixels``), which get no view, as in exact visibility: no claim, no
-        draw, no views below, no composite; only those that had pixels last frame (or were
-        not claimed then) get views below them.  Returns (views, those of them that grow,
-        end views) as rows of ``step.candidates``, and each candidate's key (its chain of
-        surfaces, from its parent's in ``keys``), whose count the GPU keeps in ``record``
-        for next frame (a known-empty one's counted 0: the next frame predicts it hidden).
-        The frame's spending and the level's coverage go by last frame's counts (0 for a
-        known-empty one: it spends nothing)."""
-        candidates, entities = step.candidates, surfaces.entity_list
-        claim_keys = [keys[p] + (entities[s],) for p, s in
-                      zip(candidates.parent.tolist(), candidates.surface.tolist(), strict=True)]
-        queries, none = step.queries, self.passes.no_pixels
-        record.pending.extend(claim_keys)
-        record.counted.extend(queries)
-        seen = [record.seen.get(key) for key in claim_keys]
-        if none in queries:  # the views and the end views, less the known empty
-            claimed = [query is not none for query in queries]
-            keep = [i for i, (end, has) in enumerate(zip(is_end, claimed, strict=True)) if has and not end]
-            ends = [i for i, (end, has) in enumerate(zip(is_end, claimed, strict=True)) if has and end]
-        else:
-            keep = [i for i, end in enumerate(is_end) if not end]
-            ends = [i for i, end in enumerate(is_end) if end]
-        # A view hidden last frame is drawn (it may show now) but its own surfaces wait for
-        # a frame that counts pixels for it.
-        grow = [at for at, i in enumerate(keep) if seen[i] != 0]
-        drawn = sum(seen[i] or 0 for i in keep)
-        self.coverage[level] = screen_coverage(drawn, candidates.size, screen)
-        stats = self.renderer.stats
-        stats.views_spent += len(keep)
-        stats.pixels_spent += drawn
-        step.conditions = [queries[i] for i in keep]
-        return keep, grow, ends, claim_keys
 
     @staticmethod
     def _unviewed(fallbacks: dict[int, Fallbacks], surfaces: SurfaceTable, rows: LevelRows,
@@ -1109,52 +1049,6 @@ class ViewTree:
                 candidates = step.candidates
                 _fallbacks_at(fallbacks, level, surfaces).add(step.parents, candidates.parent.take(cut),
                                                               candidates.surface.take(cut))
-
-    def _waits_for_counts(self, settings: TreeSettings) -> bool:
-        """Whether the levels read this frame's claim counts (the CPU waits for the GPU once
-        a level).  Budgets rank views by this frame's pixels, so any budget waits.  "auto"
-        waits on a software rasteriser only: on a GPU, not waiting made a 16-mirror frame at
-        1080p 22-28% faster (an H200)."""
-        stats = self.renderer.stats
-        if settings.level_budget is not None or stats.view_budget is not None or stats.pixel_budget is not None:
-            return True
-        if settings.visibility == "auto":
-            return self._software
-        return settings.visibility == "exact"
-
-    def _visibility_of(self, root: View) -> RootVisibility:
-        """``root``'s claim counts, with last frame's read (``RootVisibility.seen``: empty
-        where the root was not drawn last frame, and nothing is predicted from them).  At a
-        tree's first render in a frame, roots it did not draw last frame hand their queries
-        back to the context's pool."""
-        stats = self.renderer.stats
-        if stats is not self._frame_stats:
-            self._frame_stats = stats
-            self._frame += 1
-            for key, old in list(self._visibility.items()):
-                if old.frame < self._frame - 1:
-                    give_samples_queries(self.renderer.ctx, old.queries)
-                    del self._visibility[key]
-        key = (root.name, root.skip)
-        record = self._visibility.get(key)
-        if record is None:
-            record = self._visibility[key] = RootVisibility()
-        # Last frame's counts, drawn by the GPU a frame ago (reading them waits for nothing
-        # more); none where the root was not drawn last frame, or was drawn exactly.
-        fresh = record.pending and record.frame == self._frame - 1
-        record.seen = dict(zip(record.pending, self._claimed_pixels(record.counted),
-                               strict=True)) if fresh else {}
-        record.pending, record.counted = [], []
-        record.frame, record.used = self._frame, 0
-        return record
-
-    def forget_visibility(self) -> None:
-        """A camera cut: what last frame's claims counted no longer says what this frame's
-        views see (the camera went through a portal, or jumped), so the next render predicts
-        nothing: every candidate is drawn and grows views, as on a first frame (the image
-        is exact; the frame draws more views)."""
-        for record in self._visibility.values():
-            record.seen, record.pending, record.counted = {}, [], []
 
     def _root_rows(self, root: View) -> LevelRows:
         """``LevelRows.root(root)``, kept per root while its camera stands still (a probe
@@ -1285,15 +1179,6 @@ class ViewTree:
         else:
             self.passes.prepare_level(step.targets, step.parent_targets, claims, queries, run)
 
-    def _claimed_pixels(self, queries: list[moderngl.Query]) -> list[int]:
-        """Each claim's pixels (the CPU waits for the GPU, if they are this frame's), 0 for
-        one known empty (``MirrorPasses.no_pixels``: never claimed, so never read)."""
-        none = self.passes.no_pixels
-        if none not in queries:
-            return self.passes.claimed_pixels(queries)
-        counted = iter(self.passes.claimed_pixels([query for query in queries if query is not none]))
-        return [0 if query is none else next(counted) for query in queries]
-
     def _draw_level(self, step: _Level, root: View, walk: _Walk) -> None:
         """A planned level's views (and end views) into its targets, then its composite's
         rows (CPU work while the GPU draws).  The levels of one render are one scene-pass
@@ -1323,57 +1208,6 @@ class ViewTree:
             step.prepared = self._prepare_composite(step.composite, root, step.parent_targets.size)
         elif not walk.exact or walk.level + 2 not in walk.ahead:  # (walk.level: the level above this one)
             renderer.flush()  # the next level's plan is CPU work to overlap (planned ahead, it is done)
-
-    def _level_scale(self, level: int) -> float:
-        """The resolution factor of ``level`` under the frame's pixel budget: 1, or the scale
-        at which last frame's coverage of the level (its pixels at the screen's resolution)
-        fits in the pixels left (at least ``MIN_LEVEL_SCALE``; what still does not fit is cut
-        after the claims)."""
-        left, needed = self.renderer.stats.pixels_left(), self.coverage.get(level)
-        if left is None or not needed or needed <= left:
-            return 1.0
-        # In steps of a square root of two (1, 0.71, 0.5, 0.35, 0.25): a level's size changes
-        # only when its coverage crosses a step, not with every pixel.
-        step = math.ceil(-2.0 * math.log2(max(math.sqrt(left / needed), MIN_LEVEL_SCALE)) - 1e-9)
-        return 2.0 ** (-step / 2.0)
-
-    def _within_budgets(self, surfaces: SurfaceTable, candidates: Candidates, pixels: list[int],
-                        settings: TreeSettings, result: TreeResult, level: int,
-                        screen: tuple[int, int]) -> list[int] | np.ndarray:
-        """The candidates with pixels that the level's and the frame's budgets keep (highest
-        priority first, then the most pixels), in claim order; spends the frame's budgets and
-        records the level's coverage for the next frame's pixel budget.  Without a budget,
-        in Python: a level's claims are a list, and a few numpy calls cost more than it."""
-        stats = self.renderer.stats
-        pixel_budget = stats.pixels_left()
-        if settings.level_budget is None and stats.view_budget is None and pixel_budget is None:
-            keep = [i for i, n in enumerate(pixels) if n]  # no budget: every view with pixels
-            drawn = sum(pixels)
-            self.coverage[level] = screen_coverage(drawn, candidates.size, screen)
-            stats.views_spent += len(keep)
-            stats.pixels_spent += drawn
-            return keep
-        pixels = np.asarray(pixels, np.int64)
-        keep = np.flatnonzero(pixels)
-        self.coverage[level] = screen_coverage(pixels.sum(), candidates.size, screen)
-        if len(keep) > 1:
-            # Budgets keep the surfaces of highest priority, then those covering the most
-            # pixels (this frame's claims), in claim order after.
-            keep = keep[spending_order(surfaces.priority[candidates.surface[keep]], pixels[keep])]
-        if settings.level_budget is not None and len(keep) > settings.level_budget:
-            result.dropped += len(keep) - settings.level_budget
-            keep = keep[: settings.level_budget]
-        left = stats.views_left()
-        if left is not None and len(keep) > left:
-            stats.views_cut += len(keep) - left
-            keep = keep[:left]
-        if pixel_budget is not None:  # spent by the pixels drawn, at the level's resolution
-            fits = np.cumsum(pixels[keep]) <= pixel_budget
-            stats.views_cut += int(len(keep) - fits.sum())
-            keep = keep[fits]
-        stats.views_spent += len(keep)
-        stats.pixels_spent += int(pixels[keep].sum())
-        return np.sort(keep)
 
     @staticmethod
     def _level_nodes(surfaces: SurfaceTable, chosen: Candidates, parents: list[ReflectionView], level: int,
@@ -1425,9 +1259,7 @@ class ViewTree:
         return self.passes.prepare_views(children, rects, parent_size)
 
     def release(self) -> None:
-        for record in self._visibility.values():
-            give_samples_queries(self.renderer.ctx, record.queries)
-        self._visibility.clear()
+        self.visibility.release()
         self.passes.release()
         if self.ends is not None:
             self.ends.release()
