@@ -44,8 +44,9 @@ from engine.render.frame_views import FrameViews
 from engine.render.renderer import Renderer
 from engine.render.surface_table import NO_BLENDS, SurfaceBlends, surface_table
 from engine.render.targets import LevelStack
+from engine.render.tree_walk import ReflectionView, TreeSettings
 from engine.render.view_plan import SurfaceTable
-from engine.render.view_tree import ReflectionView, TreeSettings, ViewTree
+from engine.render.view_tree import ViewTree
 from engine.render.views import View
 from engine.resources import PortalCrossings, RenderStats, Surfaces
 from engine.rules.frame_rules import frame_rules

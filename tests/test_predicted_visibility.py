@@ -18,7 +18,7 @@ from engine.assets.mesh import box
 from engine.render import view_tree
 from engine.render.mirror_passes import MirrorPasses
 from engine.render.tree_visibility import TreeVisibility
-from engine.render.view_tree import TreeSettings
+from engine.render.tree_walk import TreeSettings
 from tests import golden
 from tests.golden_scenes import cases
 from tests.support import look_from

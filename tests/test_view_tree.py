@@ -9,7 +9,7 @@ from pyglm import glm
 from components import ComponentValueError, DirectionalLight, Emissive, Material, MeshRef, Mirror, Portal, Transform
 from engine.assets.mesh import box, quad, sphere
 from engine.render.mirror_passes import MirrorPasses
-from engine.render.view_tree import MAX_TREE_DEPTH
+from engine.render.tree_walk import MAX_TREE_DEPTH
 from tests.support import look_from
 
 FACING_BACK = glm.angleAxis(glm.pi(), glm.vec3(0, 1, 0))

@@ -65,18 +65,16 @@ the deepest level with end views up, over each level as its views drew it (``_Re
 """
 from __future__ import annotations
 
-import functools
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 
 import moderngl
 import numpy as np
 from pyglm import glm
 
-from components.limits import MAX_VIEW_DEPTH
 from engine.core.budget import screen_coverage
-from engine.render.batched_mirrors import PATHS, choose_path, submitted_triangles
-from engine.render.claim_cull import ChainBoxes, empty_claims
+from engine.render.batched_mirrors import choose_path
+from engine.render.claim_cull import empty_claims
 from engine.render.end_images import EndImages
 from engine.render.gpu import Gpu
 from engine.render.level_copies import LevelCopies
@@ -92,8 +90,6 @@ from engine.render.scene_pass import REFLECTION_LEVEL, TREE_ROOT, SceneOptions, 
 from engine.render.surface_table import NO_BLENDS, SurfaceBlends
 from engine.render.targets import LevelStack, RenderTargets
 from engine.render.tree_visibility import (
-    VISIBILITY_MODES,
-    RootVisibility,
     TreeVisibility,
     chosen_by_prediction,
     claimed_pixels,
@@ -101,14 +97,21 @@ from engine.render.tree_visibility import (
     waits_for_counts,
     within_budgets,
 )
+from engine.render.tree_walk import (
+    MAX_TREE_DEPTH,
+    ReflectionView,
+    TreeLevel,
+    TreeResult,
+    TreeSettings,
+    TreeWalk,
+    ends_at,
+    fallbacks_at,
+    seen_surfaces,
+)
 from engine.render.view_plan import SurfaceTable, _mat, level_rects
 from engine.render.views import CAMERA_BLOCK_BYTES, PlannedView, View
 from engine.resources import SurfaceState
-from engine.rules.probe_rules import ProbeBlend
 
-# The deepest a tree may go (each level is one more set of root-sized targets); the depth
-# limits of Mirror and Portal components take values up to this.
-MAX_TREE_DEPTH = MAX_VIEW_DEPTH  # the depth cap's limit: the components' own
 _BATCHED = SceneOptions(clear=False, masked=True, sky=False, batched=True, reflection_filter=True, transparent=False)
 # A level whose claims' rectangles overlap none of the others' (_claims_apart) draws unmasked:
 # there its depth alone is the claim test.  The reset wrote the near plane (depth 0) over every
@@ -122,64 +125,6 @@ _BATCHED = SceneOptions(clear=False, masked=True, sky=False, batched=True, refle
 # may draw anyway), and llvmpipe finishes the claims before a pass samples the node image they
 # wrote (measured: without that read a hidden view's draws were made, tests/test_predicted_visibility.py).
 _APART = {options: replace(options, masked=False) for options in (REFLECTION_LEVEL, _BATCHED)}
-
-
-@dataclass(frozen=True)
-class TreeSettings:
-    """The limits and the drawing path of one view tree."""
-
-    depth_cap: int = 8                 # levels below the root, whatever the surfaces' own limits
-    level_budget: int | None = None    # most views a level draws (None: every view with pixels)
-    path: str = "auto"                 # "per_mirror", "batched" or "auto" (batched_mirrors.choose_path)
-    visibility: str = "auto"           # "exact", "predicted" or "auto" (VISIBILITY_MODES, ViewTree says how)
-
-    def __post_init__(self) -> None:
-        if not isinstance(self.depth_cap, int) or isinstance(self.depth_cap, bool) \
-                or not 0 <= self.depth_cap <= MAX_TREE_DEPTH:
-            raise ValueError(f"view tree depth_cap must be an int in [0, {MAX_TREE_DEPTH}], got {self.depth_cap!r}")
-        if self.level_budget is not None and (not isinstance(self.level_budget, int) or self.level_budget < 1):
-            raise ValueError(f"view tree level_budget must be None or an int >= 1, got {self.level_budget!r}")
-        if self.path not in PATHS:
-            raise ValueError(f"view tree path must be one of {PATHS}, got {self.path!r}")
-        if self.visibility not in VISIBILITY_MODES:
-            raise ValueError(f"view tree visibility (ReflectionSystem.visibility, TreeSettings.visibility) must be "
-                             f"one of {VISIBILITY_MODES}, got {self.visibility!r}")
-
-
-@dataclass
-class TreeResult:
-    """What one render of a tree drew, and what its limits cut."""
-
-    views: list[ReflectionView]   # the root first, then level by level
-    paths: set[str]               # how the levels were drawn
-    dropped: int = 0              # views with pixels left out by the level budget
-    faded: int = 0                # views the mirrors' fades took out (each costs nothing)
-    end_views: list[ReflectionView] = field(default_factory=list)  # views past the depth limits shown
-                                                                   # as last frame's image (EndImages)
-    visibility: str = ""          # "exact" or "predicted": how the levels knew their views' pixels
-    count_capped: Callable[[], int] | None = field(default=None, repr=False)  # counts ``capped`` (the
-                                                                               # cap was reached)
-
-    @functools.cached_property
-    def capped(self) -> int:
-        """Views the surfaces' own limits allowed below the depth cap (0: the cap was not
-        reached), counted when first asked: one more cull, which the main view's tree
-        reports (``RenderStats.reflection_depth_capped``) and a probe face's never needs."""
-        return self.count_capped() if self.count_capped is not None else 0
-
-
-@dataclass
-class ReflectionView:
-    """One node of the view tree: a view at some level, looking into one mirror or portal."""
-
-    index: int
-    level: int
-    view: View
-    rect: tuple[int, int, int, int]   # where it shows, in screen (level 0) pixels
-    surface: SurfaceState | None = None
-    parent: ReflectionView | None = None
-    fade: float = 1.0                 # the reflection's weight (a mirror's fades)
-    unseen: bool = False              # drawn on last frame's word that it had no pixels (predicted visibility)
 
 
 @dataclass
@@ -224,91 +169,8 @@ class _Refill:
     composites: list[PreparedComposites] = field(default_factory=list)  # [d]: level d + 1 into level d
 
 
+_DEFAULT_SETTINGS = TreeSettings()  # (frozen: one for every render given none)
 _LEDGER = ("views_spent", "pixels_spent", "views_cut", "levels_downscaled", "reflection_fallbacks")
-
-
-@dataclass
-class _Level:
-    """One level of a tree as planned, and what its GL half reads: the claims of its
-    candidates, the views kept, the end views, and its composite."""
-
-    candidates: Candidates
-    targets: RenderTargets
-    parent_targets: RenderTargets
-    parents: list[ReflectionView]                 # the level above's views, by candidate parent row
-    queries: list[moderngl.Query]                 # each candidate's claim count
-    views: list[PlannedView] = field(default_factory=list)
-    path: str | None = None                       # how its views are drawn (batched_mirrors.PATHS)
-    conditions: list[moderngl.Query] | None = None  # predicted: each view drawn if its claim has pixels
-    ended: list[ReflectionView] = field(default_factory=list)  # end views (EndImages)
-    end_views: list[PlannedView] = field(default_factory=list)
-    end_matrices: list[glm.mat4] = field(default_factory=list)
-    composite: list[ReflectionView] | None = None  # what it composites into the level above (None: no
-                                                   # views, only claims)
-    prepared: PreparedComposites | None = None
-    pixels: list[int] | None = None               # exact: each candidate's claimed pixels
-    # What the choice made of the candidates (_choose): the views (rows of ``candidates``), those
-    # of them that get views below (rows of ``chosen``), the views' candidates, their nodes, and
-    # (predicted) each candidate's chain of surfaces from the root.
-    keep: list[int] | np.ndarray = field(default_factory=list)
-    grow: list[int] | range = field(default_factory=list)
-    chosen: Candidates | None = None
-    children: list[ReflectionView] = field(default_factory=list)
-    claim_keys: list[tuple[int, ...]] = field(default_factory=list)
-    unlit: frozenset[int] = frozenset()            # mirrors its views draw unlit (shading_replaced)
-    options: SceneOptions = REFLECTION_LEVEL       # what its views were drawn with (their transparent slot's)
-    apart: bool = False                           # its claims' rectangles overlap none of the others' (_APART)
-
-
-@dataclass
-class _Walk:
-    """One render of a tree on its way down: the root and its settings, and what each level
-    hands the next (its parents as nodes and rows, their chains of surfaces, their indices
-    in the tree's views, and with end views the seers of each surface)."""
-
-    root: View
-    surfaces: SurfaceTable
-    settings: TreeSettings
-    result: TreeResult
-    root_proj: np.ndarray
-    inv_root_proj: np.ndarray
-    ends: tuple[np.ndarray, int] | None      # _end_surfaces
-    exact: bool                              # this frame's claim counts (else last frame's)
-    record: RootVisibility
-    renderer: Gpu                            # what triangles() counts
-    nodes: list[ReflectionView]              # the parents of the level planned next
-    rows: LevelRows                          # their rows
-    seers: list[list[int]] | None            # with end views: _end_seers
-    keys: list[tuple[int, ...]] = field(default_factory=lambda: [()])  # each parent row's chain of surfaces
-    parent_at: list[int] = field(default_factory=lambda: [0])          # each parent row's index in the views
-    end_seers: list[int] | None = None       # the planned level's end views' seers
-    scale: float = 1.0                       # the planned level's resolution factor
-    level: int = 0                           # the deepest level drawn
-    steps: list[_Level] = field(default_factory=list)  # the levels, in order (exact: drawn as they come;
-                                                       # predicted: drawn after the last is planned)
-    fallbacks: dict[int, Fallbacks] = field(default_factory=dict)  # each level's, by the level they
-                                                                   # are drawn into (_fallbacks_at)
-    blends: Mapping[int, ProbeBlend] = field(default_factory=dict)      # the fallbacks' probes (SurfaceBlends)
-    triangle_count: int | None = None        # what a scene pass submits (triangles(): counted once, if asked)
-    chain: ChainBoxes | None = None          # the planned level's claims' bounds (claim_cull), for the next
-    # each level's fallbacks as drawn (the root's: KeptTree; every level's: _Refill), by level
-    drawn_fallbacks: dict[int, tuple[RenderTargets | None, PreparedFallbacks]] = field(default_factory=dict)
-    composited: list[PreparedComposites] = field(default_factory=list)  # [d]: level d + 1 into level d
-    ahead: dict[int, tuple] = field(default_factory=dict)  # levels planned ahead (ViewTree._plan_ahead), by depth
-    whole: dict[int, bool] = field(default_factory=dict)   # the levels whose candidates all grew (ViewTree._whole)
-    whole_before: dict[int, bool] = field(default_factory=dict)  # the same root's last render's
-    # Each level's one candidate's surface row (-1: none, or more than one), and the same root's
-    # last render's (ViewTree._plan_ahead: a chain planned in one run)
-    singles: dict[int, int] = field(default_factory=dict)
-    singles_before: dict[int, int] = field(default_factory=dict)
-    one: tuple[str, frozenset[int]] | None = None  # a level of one view's path and unlit mirrors (_choose_one)
-
-    def triangles(self) -> int:
-        """The triangles a scene pass submits, counted at the first level that asks (a level
-        of a few views never does: ``choose_path``), then kept for the render."""
-        if self.triangle_count is None:
-            self.triangle_count = submitted_triangles(self.renderer)
-        return self.triangle_count
 
 
 class ViewTree:
@@ -343,7 +205,7 @@ class ViewTree:
         # Per root (as _visibility), per level, whether its last render's level made every
         # candidate a view that grew (its rows the parents of the next level).
         self._whole: dict[tuple[str, int], dict[int, bool]] = {}
-        self._singles: dict[tuple[str, int], dict[int, int]] = {}  # per root as _whole: _Walk.singles
+        self._singles: dict[tuple[str, int], dict[int, int]] = {}  # per root as _whole: TreeWalk.singles
         # Plan a chain of one view a level ahead in one run (SurfaceTable.plan_chain); False:
         # level by level (the second path the tests compare against).
         self.plan_chains = True
@@ -364,7 +226,7 @@ class ViewTree:
         self.refilled = 0
 
     def render(self, root: View, levels: LevelStack, surfaces: SurfaceTable,
-               settings: TreeSettings = TreeSettings(), blends: SurfaceBlends = NO_BLENDS,
+               settings: TreeSettings = _DEFAULT_SETTINGS, blends: SurfaceBlends = NO_BLENDS,
                root_options: SceneOptions = TREE_ROOT) -> TreeResult:
         """Draw every level below ``root`` (already drawn into ``levels[0]`` with
         ``root_options``, its transparent slot left to the tree) and composite them: the
@@ -419,13 +281,13 @@ class ViewTree:
         return result
 
     @staticmethod
-    def _drawn_on_counts(walk: _Walk) -> bool:
+    def _drawn_on_counts(walk: TreeWalk) -> bool:
         """Whether the views drawn depend on nothing of last frame's counts (exact, or
         predicted from last frame's with no view drawn unseen: a first or cut frame's tree is
         not the one the next frame draws)."""
         return (walk.exact or bool(walk.record.seen)) and not any(node.unseen for node in walk.result.views)
 
-    def _save_for_refill(self, walk: _Walk) -> _Refill | None:
+    def _save_for_refill(self, walk: TreeWalk) -> _Refill | None:
         """For a tree drawn on a still frame (``check_history``) whose end views the settle
         check will compare: each level down to the deepest with end views copied as its views
         drew it, before its composites (``LevelCopies``), and what the frames that keep the
@@ -433,7 +295,7 @@ class ViewTree:
         go: a frame whose camera or scene moved copies nothing."""
         result, ends = walk.result, self.ends
         if not (self.check_history and ends is not None and result.end_views and walk.surfaces.has_end_images
-                and self._drawn_on_counts(walk)) or not ends.compares(walk.root, _seen_surfaces(result)):
+                and self._drawn_on_counts(walk)) or not ends.compares(walk.root, seen_surfaces(result)):
             if len(self.copies):
                 self.copies.release()
             return None
@@ -449,7 +311,7 @@ class ViewTree:
             if step.ended:
                 filled[level] = (step.end_views, [node.surface.entity for node in step.ended], step.end_matrices)
         self.copies.keep_only(rects)
-        return _Refill(deepest, rects, filled, transparent, _seen_surfaces(result), see_through)
+        return _Refill(deepest, rects, filled, transparent, seen_surfaces(result), see_through)
 
     def _ends_state(self, size: tuple[int, int]) -> tuple | None:
         """What end views would be drawn from: whether an image is kept, the surfaces it
@@ -546,7 +408,7 @@ class ViewTree:
         self.refilled = sum(len(filled[0]) for filled in refill.ends.values())
 
     def _start(self, root: View, root_node: ReflectionView, surfaces: SurfaceTable, settings: TreeSettings,
-               result: TreeResult) -> _Walk:
+               result: TreeResult) -> TreeWalk:
         """A render's walk from its root: the root's projection and row, the end views it may
         have, how it learns its views' pixels."""
         root_proj, inv_root_proj = self._projection(root.proj)
@@ -554,7 +416,7 @@ class ViewTree:
         exact = waits_for_counts(settings.visibility, settings.level_budget, self.renderer.stats, self._software)
         result.visibility = "exact" if exact else "predicted"
         renderer = self.renderer
-        walk = _Walk(root, surfaces, settings, result, root_proj, inv_root_proj, ends, exact,
+        walk = TreeWalk(root, surfaces, settings, result, root_proj, inv_root_proj, ends, exact,
                      self.visibility.of(root), renderer, [root_node],
                      self._root_rows(root),
                      # With end views: for each row of the level, the index in result.views of the
@@ -570,7 +432,7 @@ class ViewTree:
         self._singles[key] = walk.singles
         return walk
 
-    def _plan(self, walk: _Walk, first_index: int) -> Candidates | None:
+    def _plan(self, walk: TreeWalk, first_index: int) -> Candidates | None:
         """Step 1: the candidates of the level below ``walk``'s parents (``SurfaceTable.plan``),
         and the fallbacks of the surfaces those parents see that get no view there."""
         depth = walk.level + 1
@@ -592,7 +454,7 @@ class ViewTree:
         else:
             candidates, faded = surfaces.plan(walk.rows, depth, root, walk.root_proj, walk.inv_root_proj,
                                               first_index, settings.depth_cap, root.hide,
-                                              ends=_ends_at(walk.ends, depth), scale=walk.scale, lazy=True)
+                                              ends=ends_at(walk.ends, depth), scale=walk.scale, lazy=True)
             if candidates is not None and walk.whole_before.get(depth) and walk.exact and self.plan_ahead \
                     and not surfaces.fading and self.renderer.stats.pixels_left() is None:
                 self._plan_ahead(walk, depth, candidates)
@@ -600,19 +462,19 @@ class ViewTree:
             self._unviewed(walk.fallbacks, surfaces, walk.rows, walk.nodes, walk.level, walk.root_proj, root,
                            settings.depth_cap, walk.ends)
         elif len(unviewed[0]):  # (found with the level, planned ahead)
-            _fallbacks_at(walk.fallbacks, walk.level, surfaces).add(walk.nodes, *unviewed)
+            fallbacks_at(walk.fallbacks, walk.level, surfaces).add(walk.nodes, *unviewed)
         walk.result.faded += faded
         walk.singles[depth] = _parent_and_surface(candidates)[1] if candidates is not None and len(candidates) == 1 \
             else -1
         candidates, walk.end_seers, dropped = self._end_seers(candidates, walk.seers)
         if dropped:  # end candidates with nothing to repeat: their fallback, never the bare surface
-            _fallbacks_at(walk.fallbacks, walk.level, surfaces).add(walk.nodes, [p for p, _ in dropped],
+            fallbacks_at(walk.fallbacks, walk.level, surfaces).add(walk.nodes, [p for p, _ in dropped],
                                                                     [s for _, s in dropped])
         return candidates
 
-    def _plan_chain(self, walk: _Walk, depth: int, parents: LevelRows, first_index: int) -> list[Candidates]:
+    def _plan_chain(self, walk: TreeWalk, depth: int, parents: LevelRows, first_index: int) -> list[Candidates]:
         """The levels below ``parents`` (one view of level ``depth``) that were a chain of one
-        view a level in the root's last render (``_Walk.singles``; below the first, each
+        view a level in the root's last render (``TreeWalk.singles``; below the first, each
         grew), planned in one run through the surfaces they went through then
         (``SurfaceTable.plan_chain``: as far as each level finds the same one), each kept for
         ``_plan`` in ``walk.ahead`` with its unviewed pairs; their Camera blocks are left to
@@ -626,7 +488,7 @@ class ViewTree:
             through.append(singles[level])
         if len(through) < 2:
             return []
-        ends = [_ends_at(walk.ends, depth + 1 + i) for i in range(len(through))]
+        ends = [ends_at(walk.ends, depth + 1 + i) for i in range(len(through))]
         levels = surfaces.plan_chain(parents, depth, through, root, walk.root_proj, settings.depth_cap, root.hide,
                                      ends, first_index)
         for i, planned in enumerate(levels):
@@ -636,7 +498,7 @@ class ViewTree:
                                                            settings.depth_cap, ends[i]))
         return levels
 
-    def _plan_ahead(self, walk: _Walk, depth: int, candidates: Candidates,
+    def _plan_ahead(self, walk: TreeWalk, depth: int, candidates: Candidates,
                     deferred: list[Candidates] | None = None) -> None:
         """The levels below ``depth`` planned now, back to back, as if every candidate of
         each became a view that grows (what the root's last render's levels did: ``_whole``), each from
@@ -668,7 +530,7 @@ class ViewTree:
             depth += 1
             rows, first_index = candidates.rows, int(candidates.rows.node[-1]) + 1
             scale = level_scale(self.renderer.stats, self.coverage, depth)
-            ends = _ends_at(walk.ends, depth)
+            ends = ends_at(walk.ends, depth)
             # Blocks left to one run for the levels planned ahead where there are two or more
             # (a kept plan's rows, read-only: its plans are kept whole).
             defer = rows.data.flags.writeable and bool(deferred or whole.get(depth))
@@ -758,7 +620,7 @@ class ViewTree:
             for candidates, start in zip(levels[1:], starts, strict=True):
                 candidates.derived["claim_run"] = (run, start)
 
-    def _choose(self, walk: _Walk, levels: LevelStack, candidates: Candidates) -> _Level | None:
+    def _choose(self, walk: TreeWalk, levels: LevelStack, candidates: Candidates) -> TreeLevel | None:
         """Steps 2 and 3 for a planned level: its candidates' claims (exact: drawn and read
         now; predicted: last frame's counts), which become views, which of those grow views
         below, its end views and fallbacks, and its drawing path; None where it has no view
@@ -771,7 +633,7 @@ class ViewTree:
         level = walk.level
         if walk.scale < 1.0:
             self.renderer.stats.levels_downscaled += 1
-        step = _Level(candidates, levels.get(level + 1, candidates.size), levels[level], walk.nodes,
+        step = TreeLevel(candidates, levels.get(level + 1, candidates.size), levels[level], walk.nodes,
                       walk.record.take(len(candidates), self.renderer.ctx))
         walk.steps.append(step)
         self._skip_empty_claims(walk, step)
@@ -809,7 +671,7 @@ class ViewTree:
         step.composite = children + step.ended
         return step
 
-    def _choose_one(self, walk: _Walk, levels: LevelStack, candidates: Candidates) -> _Level | None:
+    def _choose_one(self, walk: TreeWalk, levels: LevelStack, candidates: Candidates) -> TreeLevel | None:
         """``_choose`` for a level of one candidate, exact visibility, no budget (a chain's
         levels): the same steps and the same level, without the lists a level of many views
         is chosen through (its node straight from what its planning kept, the path and the
@@ -822,7 +684,7 @@ class ViewTree:
         level = walk.level
         if walk.scale < 1.0:
             stats.levels_downscaled += 1
-        step = _Level(candidates, levels.get(level + 1, candidates.size), levels[level], walk.nodes,
+        step = TreeLevel(candidates, levels.get(level + 1, candidates.size), levels[level], walk.nodes,
                       walk.record.take(1, renderer.ctx))
         walk.steps.append(step)
         self._skip_empty_claims(walk, step)
@@ -848,7 +710,7 @@ class ViewTree:
                 step.views, children = self._level_nodes(surfaces, candidates, walk.nodes, level + 1, root.hide)
             step.children = children
             if children[0].fade < 1.0:  # its faded share shows the fallback
-                _fallbacks_at(walk.fallbacks, level, surfaces).add(step.parents, candidates.parent, candidates.surface,
+                fallbacks_at(walk.fallbacks, level, surfaces).add(step.parents, candidates.parent, candidates.surface,
                                                                    1.0 - candidates.fade)
             if walk.one is None:  # the path and unlit mirrors of a level of one view: the same at every depth
                 walk.one = (choose_path(walk.settings.path, 1, walk.triangles, self._software),
@@ -878,7 +740,7 @@ class ViewTree:
             self._level_options.clear()
         return found
 
-    def _skip_empty_claims(self, walk: _Walk, step: _Level) -> None:
+    def _skip_empty_claims(self, walk: TreeWalk, step: TreeLevel) -> None:
         """The claims of ``step`` that cannot take a pixel (``claim_cull``: no pixel centre in
         the bounding boxes of its surface and its parents' up the chain) count 0 without a
         draw: their queries become ``MirrorPasses.no_pixels``, and in either visibility they
@@ -896,7 +758,7 @@ class ViewTree:
             none = self.passes.no_pixels
             step.queries = [none if skip else query for query, skip in zip(step.queries, empty, strict=True)]
 
-    def _end_views(self, walk: _Walk, step: _Level, end_rows: list[int]) -> None:
+    def _end_views(self, walk: TreeWalk, step: TreeLevel, end_rows: list[int]) -> None:
         """A level's end views (rows ``end_rows`` of its candidates): their nodes, the matrix
         to the eye of the view that saw each surface last, and their fallbacks (the pixels
         their images do not hold)."""
@@ -909,10 +771,10 @@ class ViewTree:
         step.end_matrices = [views[walk.end_seers[i]].view.view * inverse_carry[s] for i, s in
                              zip(end_rows, chosen_ends.surface.tolist(), strict=True)]
         walk.result.end_views.extend(step.ended)
-        _fallbacks_at(walk.fallbacks, walk.level, walk.surfaces).add(
+        fallbacks_at(walk.fallbacks, walk.level, walk.surfaces).add(
             walk.nodes, chosen_ends.parent, chosen_ends.surface, end=[node.index for node in step.ended])
 
-    def _descend(self, walk: _Walk, step: _Level) -> Candidates | None:
+    def _descend(self, walk: TreeWalk, step: TreeLevel) -> Candidates | None:
         """A chosen level's views join the tree, and those that grow become the parents of
         the next level, planned now (step 1): exact, while the GPU draws this level's views
         (measured: on the critical path when done after the views finish); predicted, every
@@ -947,7 +809,7 @@ class ViewTree:
         walk.nodes, walk.rows = [children[at] for at in grow], parents.rows
         return self._plan(walk, first_index=int(step.candidates.rows.node[-1]) + 1)
 
-    def _note_cap(self, walk: _Walk) -> None:
+    def _note_cap(self, walk: TreeWalk) -> None:
         """Reaching the depth cap is reported: how many views the surfaces' own limits still
         allowed below it (counted when asked: ``TreeResult.capped``)."""
         deepest = max((node.level for node in walk.result.views), default=0)
@@ -956,7 +818,7 @@ class ViewTree:
             walk.result.count_capped = lambda: len(surfaces.cull(rows, deepest + 1, root_proj, size,
                                                                  MAX_TREE_DEPTH)[0])
 
-    def _composite(self, walk: _Walk, levels: LevelStack, root_options: SceneOptions) -> None:
+    def _composite(self, walk: TreeWalk, levels: LevelStack, root_options: SceneOptions) -> None:
         """Step 5, deepest level first: a level's fallbacks, then the views of the level
         below composited over it (a partly faded view's over its fallback), then the level's
         own transparent slot over both (its views', the root's at level 0: they were drawn
@@ -987,7 +849,7 @@ class ViewTree:
         if walk.level:
             self.renderer.flush()  # the composites, level after level, to the GPU at once
 
-    def _keep_end_images(self, walk: _Walk, levels: LevelStack) -> None:
+    def _keep_end_images(self, walk: TreeWalk, levels: LevelStack) -> None:
         """The main view's image kept for next frame's end views, with the surfaces it shows
         (an unseen view's may well not be in it; a candidate known empty is no view, so a
         surface only such candidates saw is not kept as shown, as in exact visibility)."""
@@ -995,12 +857,12 @@ class ViewTree:
             return
         if walk.surfaces.has_end_images:
             result = walk.result
-            self.ends.keep(levels[0], walk.root, _seen_surfaces(result),
+            self.ends.keep(levels[0], walk.root, seen_surfaces(result),
                            compare=self.check_history and bool(result.end_views))
         else:
             self.ends.forget()
 
-    def _chosen_by_counts(self, surfaces: SurfaceTable, step: _Level, is_end: list[bool], settings: TreeSettings,
+    def _chosen_by_counts(self, surfaces: SurfaceTable, step: TreeLevel, is_end: list[bool], settings: TreeSettings,
                           result: TreeResult, level: int,
                           screen: tuple[int, int]) -> tuple[list[int] | np.ndarray, range, list[int]]:
         """Exact visibility: a level's candidates claimed and their counts read now (the CPU
@@ -1025,12 +887,12 @@ class ViewTree:
         limits, switched off, faded out; a ``depth_cap`` of 0: all of them), as the planner's
         columns: its parent rows are rows of ``nodes`` (a level planned ahead found them with
         it: ``_plan`` adds those)."""
-        p, s = surfaces.unviewed(rows, level + 1, root_proj, root.size, depth_cap, _ends_at(ends, level + 1))
+        p, s = surfaces.unviewed(rows, level + 1, root_proj, root.size, depth_cap, ends_at(ends, level + 1))
         if len(p):
-            _fallbacks_at(fallbacks, level, surfaces).add(nodes, p, s)
+            fallbacks_at(fallbacks, level, surfaces).add(nodes, p, s)
 
     @staticmethod
-    def _fallbacks_of_level(fallbacks: dict[int, Fallbacks], surfaces: SurfaceTable, step: _Level,
+    def _fallbacks_of_level(fallbacks: dict[int, Fallbacks], surfaces: SurfaceTable, step: TreeLevel,
                             keep: list[int] | np.ndarray, is_end: list[bool], children: list[ReflectionView],
                             level: int, exact: bool) -> None:
         """The fallbacks of a level's candidates: the views kept partly faded (the faded
@@ -1039,7 +901,7 @@ class ViewTree:
         faded = [at for at, child in enumerate(children) if child.fade < 1.0]
         if faded:
             chosen, rows = step.chosen, np.asarray(faded, np.int64)
-            _fallbacks_at(fallbacks, level, surfaces).add(step.parents, chosen.parent.take(rows),
+            fallbacks_at(fallbacks, level, surfaces).add(step.parents, chosen.parent.take(rows),
                                                           chosen.surface.take(rows), 1.0 - chosen.fade.take(rows))
         if exact and step.pixels is not None and len(keep) < sum(1 for n in step.pixels if n):
             kept = set(np.asarray(keep).tolist())
@@ -1047,7 +909,7 @@ class ViewTree:
                             if n and not end and i not in kept], np.int64)
             if len(cut):
                 candidates = step.candidates
-                _fallbacks_at(fallbacks, level, surfaces).add(step.parents, candidates.parent.take(cut),
+                fallbacks_at(fallbacks, level, surfaces).add(step.parents, candidates.parent.take(cut),
                                                               candidates.surface.take(cut))
 
     def _root_rows(self, root: View) -> LevelRows:
@@ -1136,7 +998,7 @@ class ViewTree:
                 candidates.__dict__["box"] = box.take(rows, axis=0)
         return candidates, found, dropped
 
-    def _claim(self, surfaces: SurfaceTable, step: _Level) -> None:
+    def _claim(self, surfaces: SurfaceTable, step: TreeLevel) -> None:
         """Every candidate's claim in the level's targets, its pixels counted in its query.
         The claim shader's (parent view, surface, view index) of every candidate: a level's
         few claims, so lists (a few numpy calls cost more), kept with a kept plan.  The claims
@@ -1179,7 +1041,7 @@ class ViewTree:
         else:
             self.passes.prepare_level(step.targets, step.parent_targets, claims, queries, run)
 
-    def _draw_level(self, step: _Level, root: View, walk: _Walk) -> None:
+    def _draw_level(self, step: TreeLevel, root: View, walk: TreeWalk) -> None:
         """A planned level's views (and end views) into its targets, then its composite's
         rows (CPU work while the GPU draws).  The levels of one render are one scene-pass
         run (``ScenePass.draw``: the pass-wide bindings once, while nothing rebinds them).
@@ -1282,22 +1144,7 @@ def _parent_and_surface(candidates: Candidates) -> tuple[int, int]:
     return found
 
 
-def _fallbacks_at(fallbacks: dict[int, Fallbacks], level: int, surfaces: SurfaceTable) -> Fallbacks:
-    """The fallbacks drawn into ``level`` (made empty when first asked for)."""
-    found = fallbacks.get(level)
-    if found is None:
-        found = fallbacks[level] = Fallbacks(surfaces.states)
-    return found
-
-
-def _seen_surfaces(result: TreeResult) -> frozenset[int]:
-    """The surfaces a tree's image shows through a view or an end view (an unseen view's may
-    well not be in it; a candidate known empty is no view, so a surface only such candidates
-    saw is not kept as shown, as in exact visibility): what ``EndImages.keep`` keeps with it."""
-    return frozenset(node.surface.entity for node in (*result.views[1:], *result.end_views) if not node.unseen)
-
-
-def _painted_whole(walk: _Walk, level: int) -> bool:
+def _painted_whole(walk: TreeWalk, level: int) -> bool:
     """Whether every pixel ``level``'s fallbacks and the composite of the level below write
     is written whole: a blend weight of exactly 1 (reflection x 1 + own x 0), so what the
     pixel held before does not matter (a refill need not put the level back, given no
@@ -1328,11 +1175,6 @@ def _bounds(rects: Sequence[tuple[int, int, int, int]]) -> tuple[int, int, int, 
     """The smallest rectangle (x, y, width, height) holding every one of ``rects``."""
     x0, y0 = min(x for x, _, _, _ in rects), min(y for _, y, _, _ in rects)
     return x0, y0, max(x + w for x, _, w, _ in rects) - x0, max(y + h for _, y, _, h in rects) - y0
-
-
-def _ends_at(ends: tuple[np.ndarray, int] | None, depth: int) -> np.ndarray | None:
-    """The end-image surfaces to plan at ``depth`` (None before the first level a depth limit cuts)."""
-    return ends[0] if ends is not None and depth >= ends[1] else None
 
 
 def _claims_apart(rects: Sequence[Sequence[int]]) -> bool:
