@@ -78,6 +78,7 @@ from engine.render.claim_cull import empty_claims
 from engine.render.end_images import EndImages
 from engine.render.gpu import Gpu
 from engine.render.level_copies import LevelCopies
+from engine.render.level_nodes import level_nodes, parent_and_surface
 from engine.render.mirror_passes import (
     Claims,
     Fallbacks,
@@ -85,7 +86,8 @@ from engine.render.mirror_passes import (
     PreparedComposites,
     PreparedFallbacks,
 )
-from engine.render.plan_rows import BLOCK, ROW, Candidates, LevelRows
+from engine.render.plan_ahead import plan_ahead, plan_chain
+from engine.render.plan_rows import Candidates, LevelRows
 from engine.render.scene_pass import REFLECTION_LEVEL, TREE_ROOT, SceneOptions, ScenePass, shading_replaced
 from engine.render.surface_table import NO_BLENDS, SurfaceBlends
 from engine.render.targets import LevelStack, RenderTargets
@@ -109,7 +111,7 @@ from engine.render.tree_walk import (
     seen_surfaces,
 )
 from engine.render.view_plan import SurfaceTable, _mat, level_rects
-from engine.render.views import CAMERA_BLOCK_BYTES, PlannedView, View
+from engine.render.views import PlannedView, View
 from engine.resources import SurfaceState
 
 _BATCHED = SceneOptions(clear=False, masked=True, sky=False, batched=True, reflection_filter=True, transparent=False)
@@ -199,7 +201,7 @@ class ViewTree:
         self._unlit: tuple[tuple, frozenset[int]] = ((None, False), frozenset())
         self._level_options: dict[tuple, SceneOptions] = {}  # a level's options with its unlit mirrors
         # Plan the levels below a level ahead where the root's last render made every candidate
-        # of theirs a view that grew (_plan_ahead); False: each level after its parent's claims
+        # of theirs a view that grew (plan_ahead); False: each level after its parent's claims
         # (the second path the tests compare against).
         self.plan_ahead = True
         # Per root (as _visibility), per level, whether its last render's level made every
@@ -443,10 +445,10 @@ class ViewTree:
                 and self.plan_ahead and self.plan_chains and walk.rows.data.flags.writeable \
                 and not surfaces.fading and self.renderer.stats.pixels_left() is None:
             # One parent (a moving root's row), and its level a chain last render: planned as
-            # one from here, with the levels below it ahead (_plan_ahead).
-            chain = self._plan_chain(walk, depth - 1, walk.rows, first_index)
+            # one from here, with the levels below it ahead (plan_ahead).
+            chain = plan_chain(walk, depth - 1, walk.rows, first_index)
             if chain:
-                self._plan_ahead(walk, depth - 1 + len(chain), chain[-1], chain)
+                plan_ahead(walk, depth - 1 + len(chain), chain[-1], self.coverage, self.plan_chains, chain)
                 ahead = walk.ahead.pop(depth, None)
         unviewed = None
         if ahead is not None and ahead[0] is walk.rows.data and ahead[1] == first_index and ahead[2] == walk.scale:
@@ -457,168 +459,20 @@ class ViewTree:
                                               ends=ends_at(walk.ends, depth), scale=walk.scale, lazy=True)
             if candidates is not None and walk.whole_before.get(depth) and walk.exact and self.plan_ahead \
                     and not surfaces.fading and self.renderer.stats.pixels_left() is None:
-                self._plan_ahead(walk, depth, candidates)
+                plan_ahead(walk, depth, candidates, self.coverage, self.plan_chains)
         if unviewed is None:
             self._unviewed(walk.fallbacks, surfaces, walk.rows, walk.nodes, walk.level, walk.root_proj, root,
                            settings.depth_cap, walk.ends)
         elif len(unviewed[0]):  # (found with the level, planned ahead)
             fallbacks_at(walk.fallbacks, walk.level, surfaces).add(walk.nodes, *unviewed)
         walk.result.faded += faded
-        walk.singles[depth] = _parent_and_surface(candidates)[1] if candidates is not None and len(candidates) == 1 \
+        walk.singles[depth] = parent_and_surface(candidates)[1] if candidates is not None and len(candidates) == 1 \
             else -1
         candidates, walk.end_seers, dropped = self._end_seers(candidates, walk.seers)
         if dropped:  # end candidates with nothing to repeat: their fallback, never the bare surface
             fallbacks_at(walk.fallbacks, walk.level, surfaces).add(walk.nodes, [p for p, _ in dropped],
                                                                     [s for _, s in dropped])
         return candidates
-
-    def _plan_chain(self, walk: TreeWalk, depth: int, parents: LevelRows, first_index: int) -> list[Candidates]:
-        """The levels below ``parents`` (one view of level ``depth``) that were a chain of one
-        view a level in the root's last render (``TreeWalk.singles``; below the first, each
-        grew), planned in one run through the surfaces they went through then
-        (``SurfaceTable.plan_chain``: as far as each level finds the same one), each kept for
-        ``_plan`` in ``walk.ahead`` with its unviewed pairs; their Camera blocks are left to
-        ``_plan_ahead``'s ``finish_blocks``.  At portal depth 8 with a swaying camera, seven
-        levels of ~30 numpy calls each became one run of about as many."""
-        surfaces, settings, root = walk.surfaces, walk.settings, walk.root
-        whole, singles = walk.whole_before, walk.singles_before
-        through, level = [], depth
-        while (level == depth or whole.get(level)) and singles.get(level + 1, -1) >= 0:
-            level += 1
-            through.append(singles[level])
-        if len(through) < 2:
-            return []
-        ends = [ends_at(walk.ends, depth + 1 + i) for i in range(len(through))]
-        levels = surfaces.plan_chain(parents, depth, through, root, walk.root_proj, settings.depth_cap, root.hide,
-                                     ends, first_index)
-        for i, planned in enumerate(levels):
-            rows = parents if i == 0 else levels[i - 1].rows
-            walk.ahead[depth + 1 + i] = (rows.data, first_index + i, 1.0, (planned, 0),
-                                         surfaces.unviewed(rows, depth + 1 + i, walk.root_proj, root.size,
-                                                           settings.depth_cap, ends[i]))
-        return levels
-
-    def _plan_ahead(self, walk: TreeWalk, depth: int, candidates: Candidates,
-                    deferred: list[Candidates] | None = None) -> None:
-        """The levels below ``depth`` planned now, back to back, as if every candidate of
-        each became a view that grows (what the root's last render's levels did: ``_whole``), each from
-        the rows of the one above: ``_plan`` takes one where its parents are those very rows
-        (and its first index and scale are those it was planned with), else plans afresh.
-        In a frame, a numpy call made among GL calls costs about half as much again as one
-        made after another (measured: 44 against 30 us a level of one view), and exact
-        visibility plans each level after its parent's claims and draws.  The pairs the
-        level's parents see without a view there (``SurfaceTable.unviewed``, its fallbacks:
-        a cull at the depth limit) are found with it, and the levels' Camera blocks, which
-        no plan below reads, are worked out for all of them at once at the end
-        (``SurfaceTable.finish_blocks``: one run of its operations, not one a level).  A
-        swaying portal pair at depth 8, 32x18: about 10% off the frame.  Levels of one view
-        each last render are planned as a chain in one run (``_plan_chain``); ``deferred``:
-        such a chain's levels, planned already (``depth`` the last's): the levels below it
-        planned on from there."""
-        settings, surfaces, root = walk.settings, walk.surfaces, walk.root
-        whole = walk.whole_before
-        if deferred is None:
-            deferred = []
-            if self.plan_chains and len(candidates) == 1 and whole.get(depth) and \
-                    (candidates.end is None or not candidates.end.any()):
-                deferred = self._plan_chain(walk, depth, candidates.rows, int(candidates.rows.node[-1]) + 1)
-                if deferred:
-                    depth, candidates = depth + len(deferred), deferred[-1]
-        else:
-            deferred = list(deferred)
-        while whole.get(depth) and (candidates.end is None or not candidates.end.any()):
-            depth += 1
-            rows, first_index = candidates.rows, int(candidates.rows.node[-1]) + 1
-            scale = level_scale(self.renderer.stats, self.coverage, depth)
-            ends = ends_at(walk.ends, depth)
-            # Blocks left to one run for the levels planned ahead where there are two or more
-            # (a kept plan's rows, read-only: its plans are kept whole).
-            defer = rows.data.flags.writeable and bool(deferred or whole.get(depth))
-            planned = surfaces.plan(rows, depth, root, walk.root_proj, walk.inv_root_proj, first_index,
-                                    settings.depth_cap, root.hide, ends=ends, scale=scale, defer=defer)
-            walk.ahead[depth] = (rows.data, first_index, scale, planned,
-                                 surfaces.unviewed(rows, depth, walk.root_proj, root.size, settings.depth_cap, ends))
-            candidates = planned[0]
-            if candidates is None:
-                break
-            if defer:
-                deferred.append(candidates)
-        if deferred:
-            surfaces.finish_blocks(deferred, walk.root_proj)
-            self._ahead_columns(surfaces, deferred, root.hide)
-
-    @staticmethod
-    def _ahead_columns(surfaces: SurfaceTable, levels: list[Candidates], hide: int) -> None:
-        """What ``_level_nodes`` and ``_claim`` make of each level planned ahead (their rows
-        final once their blocks are: nothing writes them after), made for all of them at
-        once and kept with each (``Candidates.derived``, as for a kept plan's): the columns
-        read as Python numbers in one conversion each for every level (a chain at portal
-        depth 8: seven levels of one view), not each level's own few; a level of one
-        candidate's straight from them, with its parent and surface rows
-        (``_parent_and_surface``), and the views of all such levels, whose Camera blocks
-        the first of them to draw uploads together (``Gpu.upload_run``).  With three levels
-        or more, the claims of every level
-        below the first as one run (``MirrorPasses.prepare_level``'s ``run``: written to the
-        GPU once, by the first of them that draws): a parent's node is its row's one level
-        up (the levels planned ahead are used only where every candidate of the level above
-        became a view that grew, in its rows' order)."""
-        rows = np.concatenate([candidates.rows.data for candidates in levels])
-        ints = rows.view(np.int64)
-        blocks = rows[:, BLOCK].tobytes()
-        step = CAMERA_BLOCK_BYTES
-        columns = rows.take(_NODE_COLUMNS, axis=1).astype(np.int64).tolist()
-        numbers = ints.take(_INT_COLUMNS, axis=1).tolist()
-        fades = rows[:, ROW["fade"].start].tolist()
-        states, entities = surfaces.states, surfaces.entity_list
-        at = 0
-        for candidates in levels:
-            size = candidates.size
-            derived = candidates.derived
-            if len(candidates) == 1:  # (a chain's level: one view, its columns as they are)
-                x0, y0, x1, y1, mirrored, node = columns[at]
-                p, s, *scissor = numbers[at]
-                state = states[s]
-                derived[("nodes", hide)] = ([PlannedView(blocks[at * step:(at + 1) * step], size, state.kind,
-                                                         state.entity, state.exit_plane, mirrored == 1, tuple(scissor),
-                                                         node, state.exit_entity, hide)],
-                                            [(node, (x0, y0, -x1 - x0, -y1 - y0), state, p, fades[at])])
-                derived["claims"] = ([p], [entities[s]], [node], [scissor])
-                derived["one"] = (p, s)
-                at += 1
-                continue
-            views, nodes, claims = [], [], ([], [], [], [])
-            for i in range(at, at + len(candidates)):
-                x0, y0, x1, y1, mirrored, node = columns[i]  # x1, y1: negated (LEVEL_ROW)
-                p, s, *scissor = numbers[i]
-                state = states[s]
-                views.append(PlannedView(blocks[i * step:(i + 1) * step], size, state.kind, state.entity,
-                                         state.exit_plane, mirrored == 1, tuple(scissor), node, state.exit_entity,
-                                         hide))
-                nodes.append((node, (x0, y0, -x1 - x0, -y1 - y0), state, p, fades[i]))
-                for column, value in zip(claims, (p, entities[s], node, scissor), strict=True):
-                    column.append(value)
-            derived[("nodes", hide)] = (views, nodes)
-            derived["claims"] = claims
-            at += len(candidates)
-        ones = [candidates.derived[("nodes", hide)][0][0] for candidates in levels if len(candidates) == 1]
-        if len(ones) > 1:  # the Camera blocks of the levels of one view, in one upload (_draw_level)
-            for candidates in levels:
-                if len(candidates) == 1:
-                    candidates.derived["view_run"] = ones
-        if len(levels) > 2:  # the claims below the first level, in one run (MirrorPasses.prepare_level)
-            ids, rects, starts = [], [], []
-            above = 0  # the first row of the level above, in ``columns``
-            for upper, candidates in zip(levels[:-1], levels[1:], strict=True):
-                starts.append(len(ids))
-                at = above + len(upper)
-                for i in range(at, at + len(candidates)):
-                    p, s, *scissor = numbers[i]  # (a parent's node: its row's, one level up)
-                    ids.append((columns[above + p][5], entities[s], columns[i][5]))
-                    rects.append(scissor)
-                above = at
-            run = Claims(ids, rects)
-            for candidates, start in zip(levels[1:], starts, strict=True):
-                candidates.derived["claim_run"] = (run, start)
 
     def _choose(self, walk: TreeWalk, levels: LevelStack, candidates: Candidates) -> TreeLevel | None:
         """Steps 2 and 3 for a planned level: its candidates' claims (exact: drawn and read
@@ -648,7 +502,7 @@ class ViewTree:
         keep, grow = step.keep, step.grow
         chosen = step.chosen = candidates if len(keep) == len(candidates) else \
             candidates.select(np.asarray(keep, np.int64))
-        step.views, step.children = self._level_nodes(surfaces, chosen, walk.nodes, level + 1, root.hide)
+        step.views, step.children = level_nodes(surfaces, chosen, walk.nodes, level + 1, root.hide)
         children = step.children
         if len(grow) < len(children):
             grown = set(grow)
@@ -701,13 +555,13 @@ class ViewTree:
             stats.views_spent += 1
             stats.pixels_spent += drawn
             step.keep, step.grow, step.chosen = [0], range(1), candidates
-            kept = candidates.derived.get(("nodes", root.hide))  # (planned ahead: _ahead_columns)
+            kept = candidates.derived.get(("nodes", root.hide))  # (planned ahead: ahead_columns)
             if kept is not None:
                 (view,), ((node, rect, state, p, fade),) = kept
                 step.views, children = kept[0], [ReflectionView(node, level + 1, view, rect, state, walk.nodes[p],
                                                                 fade)]
             else:
-                step.views, children = self._level_nodes(surfaces, candidates, walk.nodes, level + 1, root.hide)
+                step.views, children = level_nodes(surfaces, candidates, walk.nodes, level + 1, root.hide)
             step.children = children
             if children[0].fade < 1.0:  # its faded share shows the fallback
                 fallbacks_at(walk.fallbacks, level, surfaces).add(step.parents, candidates.parent, candidates.surface,
@@ -762,11 +616,11 @@ class ViewTree:
         """A level's end views (rows ``end_rows`` of its candidates): their nodes, the matrix
         to the eye of the view that saw each surface last, and their fallbacks (the pixels
         their images do not hold)."""
-        candidates = step.candidates  # (all of them: their nodes as kept with them, if they are: _ahead_columns)
+        candidates = step.candidates  # (all of them: their nodes as kept with them, if they are: ahead_columns)
         chosen_ends = candidates if len(end_rows) == len(candidates) else \
             candidates.select(np.asarray(end_rows, np.int64))
-        step.end_views, step.ended = self._level_nodes(walk.surfaces, chosen_ends, walk.nodes, walk.level + 1,
-                                                       walk.root.hide)
+        step.end_views, step.ended = level_nodes(walk.surfaces, chosen_ends, walk.nodes, walk.level + 1,
+                                                 walk.root.hide)
         inverse_carry, views = walk.surfaces.inv_carry_glm, walk.result.views
         step.end_matrices = [views[walk.end_seers[i]].view.view * inverse_carry[s] for i, s in
                              zip(end_rows, chosen_ends.surface.tolist(), strict=True)]
@@ -791,7 +645,7 @@ class ViewTree:
             # A level of one candidate that became a view (a chain's): the same, for one row.
             walk.whole[walk.level] = True
             if walk.seers is not None:
-                p, s = _parent_and_surface(step.candidates)
+                p, s = parent_and_surface(step.candidates)
                 row = walk.seers[p].copy()
                 row[s] = walk.parent_at[p]
                 walk.seers = [row]
@@ -1006,7 +860,7 @@ class ViewTree:
         nothing reads their rectangles (no claim, no reset)."""
         candidates, parents = step.candidates, step.parents
         kept = not candidates.rows.data.flags.writeable
-        columns = candidates.derived.get("claims")  # a kept plan's, or one planned ahead (_ahead_columns)
+        columns = candidates.derived.get("claims")  # a kept plan's, or one planned ahead (ahead_columns)
         if columns is None:  # each candidate's parent row, surface entity and node, and its scissor
             entities = surfaces.entity_list
             columns = (candidates.parent.tolist(), [entities[s] for s in candidates.surface.tolist()],
@@ -1015,7 +869,7 @@ class ViewTree:
                 candidates.derived["claims"] = columns
         rows, entities, nodes, scissors = columns
         queries, none = step.queries, self.passes.no_pixels
-        run = candidates.derived.get("claim_run") if self.lean_levels else None  # (planned ahead: _ahead_columns)
+        run = candidates.derived.get("claim_run") if self.lean_levels else None  # (planned ahead: ahead_columns)
         if len(queries) == 1 and queries[0] is not none:  # (a chain's level: one claim, apart from any other)
             step.apart = True
             claims = Claims([(parents[rows[0]].index, entities[0], nodes[0])], scissors)
@@ -1071,43 +925,6 @@ class ViewTree:
         elif not walk.exact or walk.level + 2 not in walk.ahead:  # (walk.level: the level above this one)
             renderer.flush()  # the next level's plan is CPU work to overlap (planned ahead, it is done)
 
-    @staticmethod
-    def _level_nodes(surfaces: SurfaceTable, chosen: Candidates, parents: list[ReflectionView], level: int,
-                     hide: int) -> tuple[list[PlannedView], list[ReflectionView]]:
-        """The planned views of a level's chosen candidates (what the scene pass and the
-        composite read: each with its Camera block already packed, its matrices read from the
-        block only if something asks) and their tree nodes, in one pass: one ``tolist`` per
-        column, not one conversion per view.  A kept plan's candidates (read-only: a still
-        camera's, a probe face's) keep their views (a View is not changed after it is made)
-        and what their nodes are made of, so the frames that find the plan again make only
-        the nodes."""
-        kept = chosen.derived.get(("nodes", hide))
-        if kept is not None:  # a kept plan's, or one planned ahead: its views, and what its nodes are made of
-            views, rows = kept
-            return views, [ReflectionView(node, level, view, rect, state, parents[p], fade)
-                           for view, (node, rect, state, p, fade) in zip(views, rows, strict=True)]
-        states = surfaces.states
-        size = chosen.size
-        chosen.rows.finish()  # a lazy plan's cameras: those of the views chosen
-        blocks = chosen.rows.data[:, BLOCK].tobytes()  # the float32 blocks' bytes (Candidates.blocks')
-        step = CAMERA_BLOCK_BYTES
-        columns = chosen.rows.data.take(_NODE_COLUMNS, axis=1).astype(np.int64)
-        views, nodes = [], []
-        at = 0
-        for (x0, y0, x1, y1, mirrored, node), s, p, scissor, fade in zip(  # x1, y1: negated (LEVEL_ROW)
-                columns.tolist(), chosen.surface.tolist(), chosen.parent.tolist(), chosen.scissor.tolist(),
-                chosen.fade.tolist(), strict=True):
-            state = states[s]
-            view = PlannedView(blocks[at:at + step], size, state.kind, state.entity, state.exit_plane, mirrored == 1,
-                               tuple(scissor), node, state.exit_entity, hide)
-            at += step
-            views.append(view)
-            nodes.append(ReflectionView(node, level, view, (x0, y0, -x1 - x0, -y1 - y0), state, parents[p], fade))
-        if not chosen.rows.data.flags.writeable:
-            chosen.derived[("nodes", hide)] = (views, [(n.index, n.rect, n.surface, p, n.fade) for n, p in
-                                                       zip(nodes, chosen.parent.tolist(), strict=True)])
-        return views, nodes
-
     def _prepare_composite(self, children: list[ReflectionView], root: View,
                            parent_size: tuple[int, int]) -> PreparedComposites:
         """The composite of a level's views into the level above (``parent_size`` pixels: a
@@ -1129,19 +946,7 @@ class ViewTree:
 
 
 _NO_ROWS = np.zeros(0, np.int64)
-# The LevelRows columns a level's nodes read (_level_nodes), as whole numbers: the rectangle, mirrored, node.
-_NODE_COLUMNS = np.array([*range(ROW["rect"].start, ROW["rect"].stop), ROW["mirrored"].start, ROW["node"].start])
-# Its int64 columns (_ahead_columns): the parent row, the surface row, the scissor.
-_INT_COLUMNS = np.array([ROW["parent"].start, ROW["surface"].start, *range(ROW["scissor"].start, ROW["scissor"].stop)])
 
-
-def _parent_and_surface(candidates: Candidates) -> tuple[int, int]:
-    """The parent row and surface row of a level's one candidate, as Python numbers (those
-    ``_ahead_columns`` read already, else from its rows)."""
-    found = candidates.derived.get("one")
-    if found is None:
-        found = candidates.derived["one"] = (int(candidates.parent[0]), int(candidates.surface[0]))
-    return found
 
 
 def _painted_whole(walk: TreeWalk, level: int) -> bool:
