@@ -76,6 +76,7 @@ from engine.core.budget import screen_coverage
 from engine.render.batched_mirrors import choose_path
 from engine.render.claim_cull import empty_claims
 from engine.render.end_images import EndImages
+from engine.render.end_views import EndSurfaces, child_seers, end_seers, end_views, keep_end_images
 from engine.render.gpu import Gpu
 from engine.render.level_copies import LevelCopies
 from engine.render.level_nodes import level_nodes, parent_and_surface
@@ -190,8 +191,7 @@ class ViewTree:
         self.coverage: dict[int, int] = {}  # level -> its views' claimed pixels last frame (screen pixels)
         self._projections: tuple[bytes, np.ndarray, np.ndarray] | None = None  # the last root's projection
         self._roots: dict[tuple, LevelRows] = {}  # each root's row, by its camera (_root_rows)
-        # what _end_surfaces found last, and for what (table, surfaces seen, cap)
-        self._ends_cache: tuple[tuple, tuple[np.ndarray, int] | None] | None = None
+        self._end_surfaces = EndSurfaces(self.ends)  # the surfaces that may get end views, kept
         self.visibility = TreeVisibility(renderer, self.passes)  # each root's claim counts, frame to frame
         self._software = renderer.caps.software  # a software rasteriser (the context's, read once)
         # Draw the mirrors this tree paints over entirely unlit (scene_pass.shading_replaced);
@@ -271,7 +271,7 @@ class ViewTree:
         self._composite(walk, levels, root_options)                   # 5. composite
         if refill is not None:
             refill.fallbacks, refill.composites = walk.drawn_fallbacks, walk.composited
-        self._keep_end_images(walk, levels)
+        keep_end_images(self.ends, walk, levels, self.check_history)
         if ledger is not None:
             history = self.ends.compared if result.end_views and self.ends is not None else None
             self.kept = KeptTree(result, (levels[0], *(step.targets for step in walk.steps)),
@@ -414,7 +414,7 @@ class ViewTree:
         """A render's walk from its root: the root's projection and row, the end views it may
         have, how it learns its views' pixels."""
         root_proj, inv_root_proj = self._projection(root.proj)
-        ends = self._end_surfaces(surfaces, root, settings.depth_cap)
+        ends = self._end_surfaces.find(surfaces, root, settings.depth_cap)
         exact = waits_for_counts(settings.visibility, settings.level_budget, self.renderer.stats, self._software)
         result.visibility = "exact" if exact else "predicted"
         renderer = self.renderer
@@ -468,7 +468,7 @@ class ViewTree:
         walk.result.faded += faded
         walk.singles[depth] = parent_and_surface(candidates)[1] if candidates is not None and len(candidates) == 1 \
             else -1
-        candidates, walk.end_seers, dropped = self._end_seers(candidates, walk.seers)
+        candidates, walk.end_seers, dropped = end_seers(candidates, walk.seers)
         if dropped:  # end candidates with nothing to repeat: their fallback, never the bare surface
             fallbacks_at(walk.fallbacks, walk.level, surfaces).add(walk.nodes, [p for p, _ in dropped],
                                                                     [s for _, s in dropped])
@@ -515,7 +515,7 @@ class ViewTree:
                            [children[at] for at in unseen], level + 1, walk.root_proj, root, 0, None)
         self._fallbacks_of_level(walk.fallbacks, surfaces, step, keep, is_end, children, level, walk.exact)
         if end_rows:
-            self._end_views(walk, step, end_rows)
+            end_views(walk, step, end_rows)
         if not children and not step.ended:
             return None
         if children:
@@ -576,7 +576,7 @@ class ViewTree:
         step.keep, step.grow, step.chosen = [], range(0), candidates.select(_NO_ROWS)
         if not (end and pixels):
             return None
-        self._end_views(walk, step, [0])
+        end_views(walk, step, [0])
         step.composite = list(step.ended)
         return step
 
@@ -602,7 +602,7 @@ class ViewTree:
         pixels: a level at another resolution than the root's, or below one, is not tested
         and breaks the chain."""
         candidates = step.candidates
-        box = candidates.__dict__.get("box")  # the plan's (SurfaceTable._plan), or _end_seers'
+        box = candidates.__dict__.get("box")  # the plan's (SurfaceTable._plan), or end_seers'
         if box is None or candidates.size != walk.root.size or step.parent_targets.size != walk.root.size:
             walk.chain = None
             return
@@ -611,22 +611,6 @@ class ViewTree:
         if empty is not None:
             none = self.passes.no_pixels
             step.queries = [none if skip else query for query, skip in zip(step.queries, empty, strict=True)]
-
-    def _end_views(self, walk: TreeWalk, step: TreeLevel, end_rows: list[int]) -> None:
-        """A level's end views (rows ``end_rows`` of its candidates): their nodes, the matrix
-        to the eye of the view that saw each surface last, and their fallbacks (the pixels
-        their images do not hold)."""
-        candidates = step.candidates  # (all of them: their nodes as kept with them, if they are: ahead_columns)
-        chosen_ends = candidates if len(end_rows) == len(candidates) else \
-            candidates.select(np.asarray(end_rows, np.int64))
-        step.end_views, step.ended = level_nodes(walk.surfaces, chosen_ends, walk.nodes, walk.level + 1,
-                                                 walk.root.hide)
-        inverse_carry, views = walk.surfaces.inv_carry_glm, walk.result.views
-        step.end_matrices = [views[walk.end_seers[i]].view.view * inverse_carry[s] for i, s in
-                             zip(end_rows, chosen_ends.surface.tolist(), strict=True)]
-        walk.result.end_views.extend(step.ended)
-        fallbacks_at(walk.fallbacks, walk.level, walk.surfaces).add(
-            walk.nodes, chosen_ends.parent, chosen_ends.surface, end=[node.index for node in step.ended])
 
     def _descend(self, walk: TreeWalk, step: TreeLevel) -> Candidates | None:
         """A chosen level's views join the tree, and those that grow become the parents of
@@ -656,7 +640,7 @@ class ViewTree:
         parents = chosen if len(grow) == len(children) else chosen.select(np.asarray(grow, np.int64))
         walk.whole[walk.level] = parents is step.candidates  # the next level planned from its candidates' rows
         if walk.seers is not None:  # each child saw its own surface from its parent
-            walk.seers = self._child_seers(walk.seers, parents, walk.parent_at)
+            walk.seers = child_seers(walk.seers, parents, walk.parent_at)
         if not walk.exact:
             walk.keys = [step.claim_keys[step.keep[at]] for at in grow]
         walk.parent_at = [child_offset + at for at in grow]
@@ -702,19 +686,6 @@ class ViewTree:
                     self.scene_pass.draw_transparent([walk.root], levels[0], root_options)
         if walk.level:
             self.renderer.flush()  # the composites, level after level, to the GPU at once
-
-    def _keep_end_images(self, walk: TreeWalk, levels: LevelStack) -> None:
-        """The main view's image kept for next frame's end views, with the surfaces it shows
-        (an unseen view's may well not be in it; a candidate known empty is no view, so a
-        surface only such candidates saw is not kept as shown, as in exact visibility)."""
-        if self.ends is None:
-            return
-        if walk.surfaces.has_end_images:
-            result = walk.result
-            self.ends.keep(levels[0], walk.root, seen_surfaces(result),
-                           compare=self.check_history and bool(result.end_views))
-        else:
-            self.ends.forget()
 
     def _chosen_by_counts(self, surfaces: SurfaceTable, step: TreeLevel, is_end: list[bool], settings: TreeSettings,
                           result: TreeResult, level: int,
@@ -792,65 +763,6 @@ class ViewTree:
             for kept in self._projections[1:]:  # read-only: the planner knows them again by identity
                 kept.flags.writeable = False
         return self._projections[1], self._projections[2]
-
-    def _end_surfaces(self, surfaces: SurfaceTable, root: View, depth_cap: int) -> tuple[np.ndarray, int] | None:
-        """The surfaces that may get end views this frame (an end image, and a view last
-        frame) and the first level where one can (None: no end views, as in a probe's tree,
-        on the first frame or after a resize).  Kept while the table, the surfaces seen last
-        frame and the cap are the same (a still scene: every frame)."""
-        if self.ends is None or not surfaces.has_end_images or not self.ends.ready(root.size):
-            return None
-        seen = self.ends.seen
-        key = (surfaces, seen, depth_cap)
-        cached = self._ends_cache
-        if cached is not None and cached[0][0] is surfaces and cached[0][1:] == key[1:]:
-            return cached[1]
-        ends = surfaces.end_image & np.array([entity in seen for entity in surfaces.entities.tolist()], bool)
-        found = (ends, int(np.minimum(surfaces.max_depth[ends], depth_cap).min()) + 1) if ends.any() else None
-        self._ends_cache = (key, found)
-        return found
-
-    @staticmethod
-    def _child_seers(seers: list[list[int]], chosen: Candidates, parent_at: list[int]) -> list[list[int]]:
-        """Each chosen view's row of seers (``_end_seers``): its parent's, where its own
-        surface was last seen by its parent (``parent_at``: each parent row's index in the
-        tree's views).  Lists, a level's worth of copies: a few numpy calls cost more."""
-        rows = []
-        for p, s in zip(chosen.parent.tolist(), chosen.surface.tolist(), strict=True):
-            row = seers[p].copy()
-            row[s] = parent_at[p]
-            rows.append(row)
-        return rows
-
-    @staticmethod
-    def _end_seers(candidates: Candidates | None, seers: list[list[int]] | None
-                   ) -> tuple[Candidates | None, list[int] | None, list[tuple[int, int]]]:
-        """For each end view among ``candidates`` (a pair the depth limits cut), the index in
-        the tree's views of the view that saw its surface the last time up its chain (the end
-        image repeats that view's image, shrunk: ``EndImages``; -1 for the other candidates),
-        from ``seers`` (a row of surfaces per row of the level).  An end view whose surface
-        is not up its chain (a mirror of the pair seen first at the depth limit, as in a
-        ring of mirrors) has no image to repeat: it is dropped, and returned as a (parent
-        row, surface row) pair, whose pixels show the fallback, as a view the limits cut
-        without an end image does (``SurfaceTable.unviewed`` leaves end candidates out)."""
-        if candidates is None or candidates.end is None or seers is None:
-            return candidates, None, []
-        ends = candidates.end.tolist()
-        if not any(ends):
-            return candidates, None, []
-        parents, surfaces = candidates.parent.tolist(), candidates.surface.tolist()
-        found = [seers[p][s] if end else -1 for p, s, end in zip(parents, surfaces, ends, strict=True)]
-        kept = [i for i, (end, seer) in enumerate(zip(ends, found, strict=True)) if not end or seer >= 0]
-        dropped = [(parents[i], surfaces[i]) for i, (end, seer) in enumerate(zip(ends, found, strict=True))
-                   if end and seer < 0]
-        if len(kept) < len(found):
-            if not kept:
-                return None, None, dropped
-            rows, box = np.array(kept, np.int64), candidates.__dict__.get("box")
-            candidates, found = candidates.select(rows), [found[i] for i in kept]
-            if box is not None:  # the plan's unrounded rectangles (claim_cull), kept with their rows
-                candidates.__dict__["box"] = box.take(rows, axis=0)
-        return candidates, found, dropped
 
     def _claim(self, surfaces: SurfaceTable, step: TreeLevel) -> None:
         """Every candidate's claim in the level's targets, its pixels counted in its query.
