@@ -1,6 +1,6 @@
 """Still-frame fuzz: a facing mirror or portal pair with end images, seen by a camera that
 stands still long enough for its view tree to be kept and its end images refilled
-(``ViewTree.keep``'s refill, ``engine/render/level_copies.py``), then one random change
+(``StillTree.keep``'s refill, ``engine/render/level_copies.py``), then one random change
 among the refilled frames, and still frames again (now and then a second and third change,
 each after the frames of the one before).
 

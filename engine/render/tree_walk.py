@@ -163,7 +163,7 @@ class TreeWalk:
     blends: Mapping[int, ProbeBlend] = field(default_factory=dict)      # the fallbacks' probes (SurfaceBlends)
     triangle_count: int | None = None        # what a scene pass submits (triangles(): counted once, if asked)
     chain: ChainBoxes | None = None          # the planned level's claims' bounds (claim_cull), for the next
-    # each level's fallbacks as drawn (the root's: KeptTree; every level's: _Refill), by level
+    # each level's fallbacks as drawn (the root's: KeptTree; every level's: Refill), by level
     drawn_fallbacks: dict[int, tuple[RenderTargets | None, PreparedFallbacks]] = field(default_factory=dict)
     composited: list[PreparedComposites] = field(default_factory=list)  # [d]: level d + 1 into level d
     ahead: dict[int, tuple] = field(default_factory=dict)  # levels planned ahead (ViewTree._plan_ahead), by depth

@@ -54,21 +54,18 @@ composite rows packed together in step 5, one after another (in a frame, CPU wor
 between GL calls costs two to four times what it costs in a row, measured), and no flush
 after a level whose next level is planned already (no CPU work there to overlap).
 
-A tree that ``remember``s (the main view's) leaves what its render did as a ``KeptTree``;
-on a frame whose views show nothing new (the reflect stage decides:
-``systems/reflection_system.py``) ``keep`` does only what the root, drawn anew each frame,
-needs again (its fallbacks, level 1's composite) and levels 1 and below stay as they are.
-A still tree with end views whose image has not settled yet is kept too, less what depends
-on the end images: those are filled again from the new image and step 5 is done again from
-the deepest level with end views up, over each level as its views drew it (``_Refill``,
-``engine/render/level_copies.py``).
+``ViewTree`` runs those steps in order; the pieces live beside it: what a render carries
+from level to level (``engine/render/tree_walk.py``), which candidates have pixels and the
+budgets (``tree_visibility.py``), the levels planned ahead (``plan_ahead.py``), a level's
+views and nodes (``level_nodes.py``), end views (``end_views.py``).  A tree that
+``remember``s (the main view's) is kept on frames whose views show nothing new, its levels
+1 and below as they are (``StillTree``, ``engine/render/kept_tree.py``).
 """
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass, field, replace
+from dataclasses import replace
 
-import moderngl
 import numpy as np
 from pyglm import glm
 
@@ -78,6 +75,7 @@ from engine.render.claim_cull import empty_claims
 from engine.render.end_images import EndImages
 from engine.render.end_views import EndSurfaces, child_seers, end_seers, end_views, keep_end_images
 from engine.render.gpu import Gpu
+from engine.render.kept_tree import StillTree
 from engine.render.level_copies import LevelCopies
 from engine.render.level_nodes import level_nodes, parent_and_surface
 from engine.render.mirror_passes import (
@@ -85,13 +83,12 @@ from engine.render.mirror_passes import (
     Fallbacks,
     MirrorPasses,
     PreparedComposites,
-    PreparedFallbacks,
 )
 from engine.render.plan_ahead import plan_ahead, plan_chain
 from engine.render.plan_rows import Candidates, LevelRows
 from engine.render.scene_pass import REFLECTION_LEVEL, TREE_ROOT, SceneOptions, ScenePass, shading_replaced
 from engine.render.surface_table import NO_BLENDS, SurfaceBlends
-from engine.render.targets import LevelStack, RenderTargets
+from engine.render.targets import LevelStack
 from engine.render.tree_visibility import (
     TreeVisibility,
     chosen_by_prediction,
@@ -109,11 +106,9 @@ from engine.render.tree_walk import (
     TreeWalk,
     ends_at,
     fallbacks_at,
-    seen_surfaces,
 )
 from engine.render.view_plan import SurfaceTable, _mat, level_rects
-from engine.render.views import PlannedView, View
-from engine.resources import SurfaceState
+from engine.render.views import View
 
 _BATCHED = SceneOptions(clear=False, masked=True, sky=False, batched=True, reflection_filter=True, transparent=False)
 # A level whose claims' rectangles overlap none of the others' (_claims_apart) draws unmasked:
@@ -130,52 +125,7 @@ _BATCHED = SceneOptions(clear=False, masked=True, sky=False, batched=True, refle
 _APART = {options: replace(options, masked=False) for options in (REFLECTION_LEVEL, _BATCHED)}
 
 
-@dataclass
-class KeptTree:
-    """What a tree's last render left for a frame that keeps its levels (``ViewTree.keep``):
-    the targets it drew into (levels 0 to its deepest, each as it was), what it did into the
-    root (the root's own fallbacks, then level 1 composited over them), and the counts it
-    added to the frame's report and budget ledger, added again by a kept frame (a probe face
-    drawn after it spends the same budget either way)."""
-
-    result: TreeResult
-    targets: tuple[RenderTargets, ...]
-    composite: PreparedComposites | None               # level 1 into the root (None: no views)
-    fallbacks: tuple[RenderTargets | None, PreparedFallbacks] | None  # the root's own, with level 1
-    spent: tuple[int, int, int, int, int]              # views, pixels, cut, downscaled, fallbacks
-    # Nothing of it depends on last frame (exact visibility, or predicted from last frame's
-    # counts with no view drawn unseen: a first or cut frame's tree is not the one the next
-    # frame draws; and no end view drawn, or ``history``: end views drawn from an image the
-    # settle check may find this one equal to).
-    settled: bool
-    history: moderngl.Query | None = None  # the settle check of its end images (EndImages.compared)
-    ends: tuple | None = None  # the end images' state it was drawn with (_ends_state): the same, or redraw
-    refill: _Refill | None = None  # with end views not settled yet: what a kept frame does again (keep)
-
-
-@dataclass
-class _Refill:
-    """What a frame that keeps a still tree whose end images have not settled does again
-    (``ViewTree.keep``): from the deepest level with end views up to the root, each level
-    put back as its views drew it (``LevelCopies``, within ``rects``), its end views filled
-    from the new image, its fallbacks, the level below composited in, its transparent slot;
-    then the finished image kept and compared again (``EndImages.keep``).  Levels below the
-    deepest with end views do not change: they stay as they are, composited anew into it."""
-
-    deepest: int                                        # the deepest level with end views
-    rects: dict[int, tuple[int, int, int, int]]         # each level's copy (1 to deepest): its views' bounds
-    ends: dict[int, tuple[list[PlannedView], list[int], list[glm.mat4]]]  # each level's end views
-    transparent: dict[int, tuple[list[PlannedView], SceneOptions, list[moderngl.Query] | None]]  # levels >= 1
-    seen: frozenset[int]                                # the surfaces the image shows (EndImages.keep)
-    see_through: bool                                   # some batch is transparent: the slots are drawn
-    fallbacks: dict[int, tuple[RenderTargets | None, PreparedFallbacks]] = field(default_factory=dict)
-    composites: list[PreparedComposites] = field(default_factory=list)  # [d]: level d + 1 into level d
-
-
 _DEFAULT_SETTINGS = TreeSettings()  # (frozen: one for every render given none)
-_LEDGER = ("views_spent", "pixels_spent", "views_cut", "levels_downscaled", "reflection_fallbacks")
-
-
 class ViewTree:
     """Renders the reflection levels below a root view into a ``LevelStack`` and composites
     them back into the root's targets, drawing every view through ``scene_pass``.  With
@@ -214,18 +164,17 @@ class ViewTree:
         # Choose a level of one candidate on a lean path (_choose_one); False: through the
         # lists of a level of many (the second path the tests compare against).
         self.lean_levels = True
-        # With ``remember`` (the main view's tree), what the last render left (``KeptTree``),
-        # for a frame whose views show nothing new (``keep``); None after any other render.
+        # With ``remember`` (the main view's tree), what the last render left, for a frame
+        # whose views show nothing new (``still``: ``StillTree.keep``).
         self.remember = False
-        self.kept: KeptTree | None = None
         # The next render compares its finished image with the end images' history (the
         # reflect stage sets it where the frame's views show what the last frame's did).
         self.check_history = False
-        # The levels of a still tree as its views drew them, while its end images settle
-        # (_save_for_refill), and the end views the last ``keep`` filled again (0: none).
-        # (``copies``: where the renderer counts them, the main view's tree's; else the tree's own)
-        self.copies = copies if copies is not None else LevelCopies(renderer.ctx)
-        self.refilled = 0
+        # What it keeps for still frames, with the copies of its levels while its end images
+        # settle (``copies``: where the renderer counts them, the main view's tree's; else the
+        # tree's own).
+        self.still = StillTree(renderer, self.passes, scene_pass, self.ends,
+                               copies if copies is not None else LevelCopies(renderer.ctx))
 
     def render(self, root: View, levels: LevelStack, surfaces: SurfaceTable,
                settings: TreeSettings = _DEFAULT_SETTINGS, blends: SurfaceBlends = NO_BLENDS,
@@ -240,17 +189,15 @@ class ViewTree:
                              "tree draws its transparent slot over the reflections composited into it")
         root_node = ReflectionView(0, 0, root, (0, 0, *root.size))
         result = TreeResult([root_node], set())
-        self.kept = None
+        self.still.kept = None
         if not surfaces.states:  # no mirror or portal anywhere: the root is the whole tree
             if self.ends is not None:
                 self.ends.forget()
-            if len(self.copies):  # (the pair whose levels were copied went mid-refill: let the copies go)
-                self.copies.release()
+            if len(self.still.copies):  # (the pair whose levels were copied went mid-refill: let the copies go)
+                self.still.copies.release()
             self.scene_pass.draw_transparent([root], levels[0], root_options)
             return result
-        stats = self.renderer.stats
-        ledger = tuple(getattr(stats, name) for name in _LEDGER) if self.remember else None
-        ends_before = self._ends_state(root.size) if self.remember else None
+        before = self.still.before(root.size) if self.remember else None  # (what a kept frame adds again)
         walk = self._start(root, root_node, surfaces, settings, result)
         walk.blends = blends.by_surface
         candidates = self._plan(walk, first_index=1)                  # 1. plan the first level
@@ -267,147 +214,12 @@ class ViewTree:
                 if step.composite is not None:
                     self._draw_level(step, root, walk)
         self._note_cap(walk)
-        refill = self._save_for_refill(walk) if ledger is not None else None  # (a still tree's levels)
+        refill = self.still.save_for_refill(walk, self.check_history) if before is not None else None
         self._composite(walk, levels, root_options)                   # 5. composite
-        if refill is not None:
-            refill.fallbacks, refill.composites = walk.drawn_fallbacks, walk.composited
         keep_end_images(self.ends, walk, levels, self.check_history)
-        if ledger is not None:
-            history = self.ends.compared if result.end_views and self.ends is not None else None
-            self.kept = KeptTree(result, (levels[0], *(step.targets for step in walk.steps)),
-                                 walk.steps[0].prepared if walk.steps else None, walk.drawn_fallbacks.get(0),
-                                 tuple(getattr(stats, name) - before for name, before in zip(_LEDGER, ledger,
-                                                                                             strict=True)),
-                                 (not result.end_views or history is not None) and self._drawn_on_counts(walk),
-                                 history, ends_before, refill if history is not None else None)
+        if before is not None:  # kept for a frame whose views show nothing new (StillTree.keep)
+            self.still.remember(walk, levels, before, refill)
         return result
-
-    @staticmethod
-    def _drawn_on_counts(walk: TreeWalk) -> bool:
-        """Whether the views drawn depend on nothing of last frame's counts (exact, or
-        predicted from last frame's with no view drawn unseen: a first or cut frame's tree is
-        not the one the next frame draws)."""
-        return (walk.exact or bool(walk.record.seen)) and not any(node.unseen for node in walk.result.views)
-
-    def _save_for_refill(self, walk: TreeWalk) -> _Refill | None:
-        """For a tree drawn on a still frame (``check_history``) whose end views the settle
-        check will compare: each level down to the deepest with end views copied as its views
-        drew it, before its composites (``LevelCopies``), and what the frames that keep the
-        tree until it settles do again (``_Refill``).  None otherwise, and the copies are let
-        go: a frame whose camera or scene moved copies nothing."""
-        result, ends = walk.result, self.ends
-        if not (self.check_history and ends is not None and result.end_views and walk.surfaces.has_end_images
-                and self._drawn_on_counts(walk)) or not ends.compares(walk.root, seen_surfaces(result)):
-            if len(self.copies):
-                self.copies.release()
-            return None
-        deepest = max(node.level for node in result.end_views)
-        see_through = bool(self.renderer.transparent_batches())
-        rects, transparent, filled = {}, {}, {}
-        for level in range(1, deepest + 1):
-            step = walk.steps[level - 1]
-            if see_through or not _painted_whole(walk, level):
-                rects[level] = rect = _bounds([view.scissor for view in (*step.views, *step.end_views)])
-                self.copies.save(level, step.targets, rect)
-            transparent[level] = (step.views, step.options, step.conditions)
-            if step.ended:
-                filled[level] = (step.end_views, [node.surface.entity for node in step.ended], step.end_matrices)
-        self.copies.keep_only(rects)
-        return _Refill(deepest, rects, filled, transparent, seen_surfaces(result), see_through)
-
-    def _ends_state(self, size: tuple[int, int]) -> tuple | None:
-        """What end views would be drawn from: whether an image is kept, the surfaces it
-        shows, its camera (a render that finds them other than its own left them draws other
-        end views, or any at all, next frame)."""
-        ends = self.ends
-        if ends is None:
-            return None
-        return ends.ready(size), ends.seen, ends.view_proj
-
-    def let_go(self) -> None:
-        """No frame draws or keeps this tree now (its camera switched off, no pixels to draw
-        into): the kept tree, the copies of its levels and the end images' history are let go,
-        not held for a still frame that may never come (the next frame with a view draws the
-        tree whole, its end views closed until a history is kept again)."""
-        self.kept = None
-        if len(self.copies):
-            self.copies.release()
-        if self.ends is not None:
-            self.ends.let_go()
-
-    def keep(self, levels: LevelStack, root: View | None = None,
-             root_options: SceneOptions = TREE_ROOT) -> TreeResult | None:
-        """The last render's tree again without drawing it: its levels 1 and below hold what
-        they held (their images already hold the deeper levels' composites, fallbacks, end
-        views and their own transparent slots), and only what the root needs again is done
-        (the root is drawn anew each frame, with ``root_options``): its own fallbacks, then
-        level 1 composited over them, then its transparent slot (``root``'s: the kept
-        render's root view where None).  The frame's report and ledger get the counts the
-        render added.  None (nothing done) where there is nothing kept or a level's targets
-        are not those drawn into (remade, resized).  The caller decides that nothing those
-        levels show changed (``ReflectionSystem``)."""
-        kept = self.kept
-        self.refilled = 0
-        if kept is None or len(levels) < len(kept.targets) or any(
-                levels[level] is not targets for level, targets in enumerate(kept.targets)) or \
-                self._ends_state(levels[0].size) != kept.ends:
-            self.kept = None
-            return None
-        unsettled = kept.history is not None and not EndImages.settled(kept.history)
-        if unsettled and kept.refill is None:
-            self.kept = None
-            return None
-        stats = self.renderer.stats
-        ledger = [getattr(stats, name) for name in _LEDGER]
-        if unsettled:
-            self._refill(kept, levels, root or kept.result.views[0].view, root_options)
-        else:
-            if kept.refill is not None:  # settled: no frame refills it any more
-                self.kept = replace(kept, refill=None)
-                self.copies.release()
-            if kept.fallbacks is not None:
-                child, prepared = kept.fallbacks
-                self.passes.draw_fallbacks(levels[0], child, prepared)
-            if kept.composite is not None:
-                self.passes.composite_level(levels[0], levels[1], kept.composite)
-            self.scene_pass.draw_transparent([root or kept.result.views[0].view], levels[0], root_options)
-            if kept.fallbacks is not None or kept.composite is not None:
-                self.renderer.flush()
-        # The render's counts (fallbacks too: those drawn now are of the render's, the rest kept).
-        for name, before, spent in zip(_LEDGER, ledger, kept.spent, strict=True):
-            setattr(stats, name, before + spent)
-        return kept.result
-
-    def _refill(self, kept: KeptTree, levels: LevelStack, root: View, root_options: SceneOptions) -> None:
-        """A kept still tree whose end images have not settled (``_Refill``): what depends on
-        them done again, level by level from the deepest with end views up, as the render's
-        step 5 did it over each level put back as its views drew it; then the finished image
-        kept and compared again, and the tree kept with that check."""
-        refill, passes = kept.refill, self.passes
-        for depth in range(refill.deepest, -1, -1):
-            targets = levels[depth]
-            if depth:
-                if depth in refill.rects:  # (else every pixel the level's composites write is painted whole)
-                    self.copies.restore(depth, targets, refill.rects[depth])
-                filled = refill.ends.get(depth)
-                if filled is not None:
-                    self.ends.draw(*filled, targets, root)
-            drawn = refill.fallbacks.get(depth)
-            if drawn is not None:
-                passes.draw_fallbacks(targets, *drawn)
-            if depth < len(refill.composites):
-                passes.composite_level(targets, levels[depth + 1], refill.composites[depth])
-            if refill.see_through:
-                if depth:
-                    views, options, conditions = refill.transparent[depth]
-                    self.scene_pass.draw_transparent(views, targets, options, conditions)
-                else:
-                    self.scene_pass.draw_transparent([root], targets, root_options)
-        self.renderer.flush()
-        ends_before = self._ends_state(levels[0].size)
-        self.ends.keep(levels[0], root, refill.seen, compare=True)
-        self.kept = replace(kept, history=self.ends.compared, ends=ends_before)
-        self.refilled = sum(len(filled[0]) for filled in refill.ends.values())
 
     def _start(self, root: View, root_node: ReflectionView, surfaces: SurfaceTable, settings: TreeSettings,
                result: TreeResult) -> TreeWalk:
@@ -854,44 +666,10 @@ class ViewTree:
         self.passes.release()
         if self.ends is not None:
             self.ends.release()
-        self.copies.release()
+        self.still.copies.release()
 
 
 _NO_ROWS = np.zeros(0, np.int64)
-
-
-
-def _painted_whole(walk: TreeWalk, level: int) -> bool:
-    """Whether every pixel ``level``'s fallbacks and the composite of the level below write
-    is written whole: a blend weight of exactly 1 (reflection x 1 + own x 0), so what the
-    pixel held before does not matter (a refill need not put the level back, given no
-    transparent slot, which blends over what its pixels hold, and the end views' fill,
-    which blends nothing).  That holds for a portal (mirror_composite.frag writes alpha 1)
-    and for a mirror of reflect rate 1 (times a view's fade of 1), unfaded, not water
-    (Fresnel), the weights ``shading_replaced`` trusts; a partly faded share is a quotient
-    of floats.  (A pixel's own colour is finite: an infinite one times 0 is no number.)"""
-    below = walk.steps[level] if level < len(walk.steps) else None
-    if below is not None and below.composite is not None and any(
-            node.fade != 1.0 or not _weighs_one(node.surface) for node in below.composite):
-        return False
-    fallbacks = walk.fallbacks.get(level)
-    if fallbacks:
-        states = fallbacks.states
-        if (fallbacks.share is not None and any(share != 1.0 for share in fallbacks.share)) or not all(
-                _weighs_one(states[row]) for row in set(fallbacks.surface)):
-            return False
-    return True
-
-
-def _weighs_one(state: SurfaceState) -> bool:
-    """A surface whose composite and fallback blend at a weight of exactly 1 (``_painted_whole``)."""
-    return state.kind == "portal" or (state.reflect_rate == 1.0 and state.fade is None and state.water is None)
-
-
-def _bounds(rects: Sequence[tuple[int, int, int, int]]) -> tuple[int, int, int, int]:
-    """The smallest rectangle (x, y, width, height) holding every one of ``rects``."""
-    x0, y0 = min(x for x, _, _, _ in rects), min(y for _, y, _, _ in rects)
-    return x0, y0, max(x + w for x, _, w, _ in rects) - x0, max(y + h for _, y, _, h in rects) - y0
 
 
 def _claims_apart(rects: Sequence[Sequence[int]]) -> bool:
