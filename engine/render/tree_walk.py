@@ -119,7 +119,7 @@ class TreeLevel:
                                                    # views, only claims)
     prepared: PreparedComposites | None = None
     pixels: list[int] | None = None               # exact: each candidate's claimed pixels
-    # What the choice made of the candidates (_choose): the views (rows of ``candidates``), those
+    # What the choice made of the candidates (ViewTree._choose): the views (rows of ``candidates``), those
     # of them that get views below (rows of ``chosen``), the views' candidates, their nodes, and
     # (predicted) each candidate's chain of surfaces from the root.
     keep: list[int] | np.ndarray = field(default_factory=list)
@@ -129,7 +129,7 @@ class TreeLevel:
     claim_keys: list[tuple[int, ...]] = field(default_factory=list)
     unlit: frozenset[int] = frozenset()            # mirrors its views draw unlit (shading_replaced)
     options: SceneOptions = REFLECTION_LEVEL       # what its views were drawn with (their transparent slot's)
-    apart: bool = False                           # its claims' rectangles overlap none of the others' (_APART)
+    apart: bool = False                           # its claims' rectangles overlap no other's (view_tree._APART)
 
 
 @dataclass
@@ -144,13 +144,13 @@ class TreeWalk:
     result: TreeResult
     root_proj: np.ndarray
     inv_root_proj: np.ndarray
-    ends: tuple[np.ndarray, int] | None      # _end_surfaces
+    ends: tuple[np.ndarray, int] | None      # EndSurfaces.find
     exact: bool                              # this frame's claim counts (else last frame's)
     record: RootVisibility
     renderer: Gpu                            # what triangles() counts
     nodes: list[ReflectionView]              # the parents of the level planned next
     rows: LevelRows                          # their rows
-    seers: list[list[int]] | None            # with end views: _end_seers
+    seers: list[list[int]] | None            # with end views: end_seers
     keys: list[tuple[int, ...]] = field(default_factory=lambda: [()])  # each parent row's chain of surfaces
     parent_at: list[int] = field(default_factory=lambda: [0])          # each parent row's index in the views
     end_seers: list[int] | None = None       # the planned level's end views' seers
@@ -159,21 +159,22 @@ class TreeWalk:
     steps: list[TreeLevel] = field(default_factory=list)  # the levels, in order (exact: drawn as they come;
                                                        # predicted: drawn after the last is planned)
     fallbacks: dict[int, Fallbacks] = field(default_factory=dict)  # each level's, by the level they
-                                                                   # are drawn into (_fallbacks_at)
+                                                                   # are drawn into (fallbacks_at)
     blends: Mapping[int, ProbeBlend] = field(default_factory=dict)      # the fallbacks' probes (SurfaceBlends)
     triangle_count: int | None = None        # what a scene pass submits (triangles(): counted once, if asked)
     chain: ChainBoxes | None = None          # the planned level's claims' bounds (claim_cull), for the next
     # each level's fallbacks as drawn (the root's: KeptTree; every level's: Refill), by level
     drawn_fallbacks: dict[int, tuple[RenderTargets | None, PreparedFallbacks]] = field(default_factory=dict)
     composited: list[PreparedComposites] = field(default_factory=list)  # [d]: level d + 1 into level d
-    ahead: dict[int, tuple] = field(default_factory=dict)  # levels planned ahead (ViewTree._plan_ahead), by depth
+    ahead: dict[int, tuple] = field(default_factory=dict)  # levels planned ahead (plan_ahead), by depth
     whole: dict[int, bool] = field(default_factory=dict)   # the levels whose candidates all grew (ViewTree._whole)
     whole_before: dict[int, bool] = field(default_factory=dict)  # the same root's last render's
     # Each level's one candidate's surface row (-1: none, or more than one), and the same root's
-    # last render's (ViewTree._plan_ahead: a chain planned in one run)
+    # last render's (plan_ahead.plan_chain: a chain planned in one run)
     singles: dict[int, int] = field(default_factory=dict)
     singles_before: dict[int, int] = field(default_factory=dict)
-    one: tuple[str, frozenset[int]] | None = None  # a level of one view's path and unlit mirrors (_choose_one)
+    one: tuple[str, frozenset[int]] | None = None  # a level of one view's path and unlit mirrors
+                                                   # (ViewTree._choose_one)
 
     def triangles(self) -> int:
         """The triangles a scene pass submits, counted at the first level that asks (a level

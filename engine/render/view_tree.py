@@ -15,7 +15,7 @@ and portals:
               gets no view; with predicted visibility it reads them at the root's next
               render and draws every candidate now (but those known empty: claim_cull),
               growing views below only those that had pixels last frame (or were not
-              claimed then) (VISIBILITY_MODES);
+              claimed then) (``tree_visibility.py``);
   3. render - the level's views through the scene pass (``ScenePass.draw``): the parent's
               camera carried through the surface, oblique near plane (or clip distance
               close up), only its claimed pixels; view by view, or all in one draw per
@@ -78,12 +78,7 @@ from engine.render.gpu import Gpu
 from engine.render.kept_tree import StillTree
 from engine.render.level_copies import LevelCopies
 from engine.render.level_nodes import level_nodes, parent_and_surface
-from engine.render.mirror_passes import (
-    Claims,
-    Fallbacks,
-    MirrorPasses,
-    PreparedComposites,
-)
+from engine.render.mirror_passes import Claims, Fallbacks, MirrorPasses, PreparedComposites
 from engine.render.plan_ahead import plan_ahead, plan_chain
 from engine.render.plan_rows import Candidates, LevelRows
 from engine.render.scene_pass import REFLECTION_LEVEL, TREE_ROOT, SceneOptions, ScenePass, shading_replaced
@@ -123,9 +118,9 @@ _BATCHED = SceneOptions(clear=False, masked=True, sky=False, batched=True, refle
 # may draw anyway), and llvmpipe finishes the claims before a pass samples the node image they
 # wrote (measured: without that read a hidden view's draws were made, tests/test_predicted_visibility.py).
 _APART = {options: replace(options, masked=False) for options in (REFLECTION_LEVEL, _BATCHED)}
-
-
 _DEFAULT_SETTINGS = TreeSettings()  # (frozen: one for every render given none)
+
+
 class ViewTree:
     """Renders the reflection levels below a root view into a ``LevelStack`` and composites
     them back into the root's targets, drawing every view through ``scene_pass``.  With
@@ -154,7 +149,7 @@ class ViewTree:
         # of theirs a view that grew (plan_ahead); False: each level after its parent's claims
         # (the second path the tests compare against).
         self.plan_ahead = True
-        # Per root (as _visibility), per level, whether its last render's level made every
+        # Per root (as TreeVisibility.roots), per level, whether its last render's level made every
         # candidate a view that grew (its rows the parents of the next level).
         self._whole: dict[tuple[str, int], dict[int, bool]] = {}
         self._singles: dict[tuple[str, int], dict[int, int]] = {}  # per root as _whole: TreeWalk.singles
