@@ -73,7 +73,8 @@ from engine.render.mirror_passes import MirrorPasses
 from engine.render.present import ANTIALIAS_MODES
 from engine.render.scene_pass import ScenePass
 from engine.render.targets import CaptureTarget
-from engine.render.view_tree import VISIBILITY_MODES, ViewTree
+from engine.render.tree_visibility import VISIBILITY_MODES
+from engine.render.view_tree import ViewTree
 from shell.app import Engine
 
 MIRROR_COUNTS = (0, 1, 2, 4, 8, 16)

@@ -39,7 +39,7 @@ from engine.core.game import Game
 from engine.core.world import World
 from engine.render.gl_context import create_headless_context
 from engine.render.targets import CaptureTarget
-from engine.render.view_tree import VISIBILITY_MODES
+from engine.render.tree_visibility import VISIBILITY_MODES
 from shell.app import Engine
 
 SIZE = (640, 360)

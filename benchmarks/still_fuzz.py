@@ -1,6 +1,6 @@
 """Still-frame fuzz: a facing mirror or portal pair with end images, seen by a camera that
 stands still long enough for its view tree to be kept and its end images refilled
-(``ViewTree.keep``'s refill, ``engine/render/level_copies.py``), then one random change
+(``StillTree.keep``'s refill, ``engine/render/level_copies.py``), then one random change
 among the refilled frames, and still frames again (now and then a second and third change,
 each after the frames of the one before).
 
@@ -11,7 +11,7 @@ whole every frame too (its shadow stage's record of what each map was drawn from
 each frame), so a map kept on a still frame, or drawn again only where casters moved, must
 equal one drawn from scratch; and it plans each reflection level after its parent's claims
 (``ViewTree.plan_ahead = False``), so levels the keeping engine planned ahead
-(``ViewTree._plan_ahead``) must come out the same.  A case runs exact or predicted
+(``plan_ahead.plan_ahead``) must come out the same.  A case runs exact or predicted
 visibility (``ReflectionSystem.visibility``) in both.  The level, around the pair,
 has glass panes of random alpha (the transparent slot ordered by the planes of see-through
 surfaces, ``slot_order.back_to_front``), now and then still water (a see-through mirror:

@@ -67,7 +67,7 @@ class RenderStats(BudgetLedger):
     reflection_views_kept: int = 0      # main-tree views kept as last drawn: nothing they show changed
                                         # (ReflectionSystem.keep_still_views; not in passes)
     reflection_end_refills: int = 0     # end views filled again over a main tree otherwise kept: still, its
-                                        # end images not settled yet (ViewTree.keep; its views not kept above)
+                                        # end images not settled yet (StillTree.keep; its views not kept above)
     # How reflection levels were drawn: "per_mirror", "batched", "mixed" (auto chose both in
     # one frame), or "" when no reflection view was drawn (ReflectionSystem.path); a frame that
     # kept its tree (reflection_views_kept) reports the path the kept views were drawn by.

@@ -11,7 +11,7 @@ dropped by the level budget and cut by the depth cap.
 Still views are kept (dirty flags, as the probes keep faces no change reached: the design's
 "dirty flags to skip static cubemaps"): when nothing the tree's views show changed since
 its last render, its levels 1 and below keep the images they hold and only the root's part
-is done again (``ViewTree.keep``: the root's fallbacks, level 1's composite and the root's
+is done again (``StillTree.keep``: the root's fallbacks, level 1's composite and the root's
 transparent slot over it; the main stage draws level 0 anew every frame).  "Nothing changed" is one comparison
 (``_still_key``): the renderer's ``scene_version`` (moved on by every upload or redraw of
 what a scene pass, fallback or composite reads: instance rows and batches, lights, sky,
@@ -27,7 +27,7 @@ change draws its tree and counts the pixels where its image differs from last fr
 (``EndImages.keep(compare=True)``); none, and the next frame keeps the tree.  Until then the
 frames that see no change keep it too but do again what depends on the end images (the end
 views filled from the new image, each level's composites over the copy of its views' pixels
-the first still frame made: ``ViewTree.keep``, ``engine/render/level_copies.py``), and count
+the first still frame made: ``StillTree.keep``, ``engine/render/level_copies.py``), and count
 again.  ``RenderStats.reflection_views_kept`` counts the views kept whole,
 ``reflection_end_refills`` the end views filled again over a kept tree; ``keep_still_views = False``
 draws every frame.
@@ -44,8 +44,9 @@ from engine.render.frame_views import FrameViews
 from engine.render.renderer import Renderer
 from engine.render.surface_table import NO_BLENDS, SurfaceBlends, surface_table
 from engine.render.targets import LevelStack
+from engine.render.tree_walk import ReflectionView, TreeSettings
 from engine.render.view_plan import SurfaceTable
-from engine.render.view_tree import ReflectionView, TreeSettings, ViewTree
+from engine.render.view_tree import ViewTree
 from engine.render.views import View
 from engine.resources import PortalCrossings, RenderStats, Surfaces
 from engine.rules.frame_rules import frame_rules
@@ -155,7 +156,7 @@ class ReflectionSystem(esper.Processor):
         if main is None or views.levels is None:
             self.views = []
             self._still = None
-            self.tree.let_go()
+            self.tree.still.let_go()
             return
         if surfaces.mirrors or surfaces.portals:
             # The main view rasterises while the CPU culls and works out the first level's
@@ -165,7 +166,7 @@ class ReflectionSystem(esper.Processor):
         crossed = any(crossing.entity == camera for crossing in self.world.resources.get(PortalCrossings, ()))
         cut = self._cut or crossed or camera != self._camera
         if cut:
-            self.tree.forget_visibility()
+            self.tree.visibility.forget()
         self._cut, self._camera = False, camera
         settings = self.settings
         table = surface_table(self.world.resources, surfaces)
@@ -184,14 +185,14 @@ class ReflectionSystem(esper.Processor):
         # else draw it, comparing its end images (if any) to know when it settles.
         same = self.keep_still_views and unchanged and not cut and still is not None and self._still is not None \
             and _same(still, self._still)
-        if same and self.tree.kept is not None and self.tree.kept.settled:
-            result = self.tree.keep(views.levels, main, views.options)
+        if same and self.tree.still.kept is not None and self.tree.still.kept.settled:
+            result = self.tree.still.keep(views.levels, main, views.options)
         kept = result is not None
         if not kept:
             self.tree.check_history = same
             result = self.tree.render(main, views.levels, table, settings, blends, views.options)
         self._still = still if self.keep_still_views else None
-        refilled = self.tree.refilled if kept else 0
+        refilled = self.tree.still.refilled if kept else 0
         stats.reflection_views_kept = len(result.views) - 1 if kept and not refilled else 0
         stats.reflection_end_refills = refilled
         self.views = result.views

@@ -1,5 +1,5 @@
 """A still tree whose end images have not settled keeps what its views drew and redoes only
-what depends on the end images (``ViewTree.keep``'s refill, ``engine/render/level_copies.py``):
+what depends on the end images (``StillTree.keep``'s refill, ``engine/render/level_copies.py``):
 the end views filled from the new image, then from the deepest level with end views up,
 each level put back as its views drew it, its fallbacks, the level below composited in and
 its transparent slot, the root's last.
@@ -132,7 +132,7 @@ def test_a_still_tree_refills_its_end_images_until_they_settle_with_a_drawn_fram
     (a still frame: it compares its image), and from the third every frame until the image
     settles refills; once kept whole it stays kept."""
     pair = _Pair(scene, SCENES[name])
-    tree = pair.keeping.engine.reflection_system.tree
+    tree = pair.keeping.engine.reflection_system.tree.still
     kinds = [pair.frame() for _ in range(5)]
     # A level down to the deepest with end views is copied where its composites or
     # fallbacks blend over its own pixels (a reflect rate or fade below 1) or glass is drawn
@@ -200,7 +200,7 @@ def test_a_change_while_refilling_draws_the_tree_whole(scene, name, change):
     assert [pair.frame() for _ in range(5)] == ["drawn", "drawn", "refilled", "refilled", "refilled"]
     pair.both(CHANGES[change])
     assert pair.frame() == "drawn"
-    tree = pair.keeping.engine.reflection_system.tree
+    tree = pair.keeping.engine.reflection_system.tree.still
     assert len(tree.copies) == 0
     assert pair.frame() == "drawn"
     assert [pair.frame() for _ in range(3)] == ["refilled"] * 3
@@ -227,7 +227,7 @@ def test_the_level_copies_go_when_the_pair_is_removed_mid_refill(scene):
     ``benchmarks/still_fuzz.py``, which checks resource counts come back after each case)."""
     pair = _Pair(scene, SCENES["glass"])
     assert [pair.frame() for _ in range(4)] == ["drawn", "drawn", "refilled", "refilled"]
-    tree = pair.keeping.engine.reflection_system.tree
+    tree = pair.keeping.engine.reflection_system.tree.still
     assert len(tree.copies) > 0
 
     def remove_mirrors(runner):

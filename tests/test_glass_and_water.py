@@ -176,7 +176,7 @@ def test_panes_around_a_pond_in_a_probe_face(scene, depth, probe_path):
 
 
 def test_a_kept_pond_frame_is_the_frame_drawn_whole(scene):
-    """A still frame keeps levels 1 and below (``ViewTree.keep``) and draws the root's slot
+    """A still frame keeps levels 1 and below (``StillTree.keep``) and draws the root's slot
     again: the panes around the pond come out bit for bit as in frames drawn whole (a
     see-through mirror: water's waves move on every frame, so nothing it shows is kept)."""
     keeping, drawing = scene(_pond({}, ALPHA, water=False), SIZE), scene(_pond({}, ALPHA, water=False), SIZE)

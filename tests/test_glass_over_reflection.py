@@ -243,7 +243,7 @@ def test_a_switched_off_see_through_mirror_keeps_its_fallback(scene):
 
 
 def test_a_kept_tree_draws_the_roots_glass_over_its_composite(scene):
-    """A still frame keeps the tree (``ViewTree.keep``): levels 1 and below hold their own
+    """A still frame keeps the tree (``StillTree.keep``): levels 1 and below hold their own
     glass already, and the root, drawn anew without its transparent slot, gets its glass
     after level 1's composite, so a kept frame is the frame drawn whole (keeping off), bit
     for bit: colour, HDR image and ids."""

@@ -5,7 +5,7 @@ Every input that lands in those images is checked to be at most 65504 (component
 HALF_MAX), but sums and products of them are not: a lamp of emissive power 65504 that a light
 also falls on, a mirror tinted brighter than 1 reflecting it.  How a half-float image stores a
 value past 65504 is the implementation's: llvmpipe saturates it to 65504, a correctly rounded
-conversion gives +inf, and a still tree's refill (``ViewTree.keep``) blends composites over a
+conversion gives +inf, and a still tree's refill (``StillTree.keep``) blends composites over a
 pixel it assumes finite (inf x 0 is NaN).  So these tests widen the colour images to float32,
 which keeps what the shaders wrote exactly, and check that no pixel holds more than 65504:
 the lamp and its reflections hold 65504 itself (the largest finite half float, where
@@ -102,8 +102,8 @@ def test_the_refill_of_a_float32_level_is_the_drawn_frames_bit_for_bit(scene, fl
             assert np.array_equal(kept, drawn), f"the {name} differs from the frame drawn whole"
         kinds.append("refilled" if keeping.stats.reflection_end_refills else "drawn")
     assert kinds == ["drawn", "drawn"] + ["refilled"] * 4
-    assert len(keeping.engine.reflection_system.tree.copies) > 0
-    assert keeping.engine.reflection_system.tree.copies._copies[1].textures[0].dtype == "f4"
+    assert len(keeping.engine.reflection_system.tree.still.copies) > 0
+    assert keeping.engine.reflection_system.tree.still.copies._copies[1].textures[0].dtype == "f4"
 
 
 def test_a_generated_sky_brighter_than_a_half_float_is_stored_at_65504_not_as_inf(scene):

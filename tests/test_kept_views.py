@@ -1,5 +1,5 @@
 """A still frame keeps the main view tree's levels (``ReflectionSystem.keep_still_views``,
-``ViewTree.keep``): when nothing its views show changed since they were drawn, levels 1 and
+``StillTree.keep``): when nothing its views show changed since they were drawn, levels 1 and
 below stay as they are and only the root's fallbacks and level 1's composite are done again.
 
 Every test runs the same level twice on the test context, in lockstep: one engine keeps
@@ -250,7 +250,7 @@ def test_a_level_resized_is_not_kept(scene):
     assert pair.frame()
     renderer = pair.keeping.engine.renderer
     renderer.levels.get(1, (SIZE[0] // 2, SIZE[1] // 2))  # another size: remade (what a level drawn smaller does)
-    assert pair.keeping.engine.reflection_system.tree.keep(renderer.levels) is None
+    assert pair.keeping.engine.reflection_system.tree.still.keep(renderer.levels) is None
 
 
 def test_a_shader_hot_reload_draws_the_tree_again(scene):

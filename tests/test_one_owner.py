@@ -509,7 +509,7 @@ def test_the_budgets_rank_by_one_order_and_the_spenders_call_it():
     assert screen_coverage(1, (3, 3), (5, 5)) == round(25 / 9) == 3 != int(25 / 9)
     assert screen_coverage(np.int64(7), (64, 36), (128, 72)) == 28
 
-    spenders = {"engine/render/view_tree.py": "_within_budgets", "systems/probe_scheduler.py": "_within_budget",
+    spenders = {"engine/render/tree_visibility.py": "within_budgets", "systems/probe_scheduler.py": "_within_budget",
                 "engine/rules/shadow_rules.py": "rank_virtual_lights"}
     for name, function in spenders.items():
         tree = ast.parse((ROOT / name).read_text(encoding="utf-8"))
@@ -521,10 +521,12 @@ def test_the_budgets_rank_by_one_order_and_the_spenders_call_it():
         keyed = [c for c in ast.walk(found[0]) if isinstance(c, ast.Call) and any(k.arg == "key" for k in c.keywords)]
         assert "spending_order" in calls and not calls & {"sorted", "lexsort", "argsort"} and not keyed, \
             f"{name}: {function} ranks by itself ({sorted(calls)})"
-    tree = ast.parse((ROOT / "engine/render/view_tree.py").read_text(encoding="utf-8"))
-    written = [node.value for node in ast.walk(tree) if isinstance(node, ast.Assign) and any(
-        isinstance(t, ast.Subscript) and isinstance(t.value, ast.Attribute) and t.value.attr == "coverage"
-        for t in node.targets)]
+    written = [node.value for name in ("engine/render/view_tree.py", "engine/render/tree_visibility.py")
+               for node in ast.walk(ast.parse((ROOT / name).read_text(encoding="utf-8")))
+               if isinstance(node, ast.Assign) and any(
+                   isinstance(t, ast.Subscript) and "coverage" in (getattr(t.value, "attr", None),
+                                                                   getattr(t.value, "id", None))
+                   for t in node.targets)]
     assert len(written) >= 2 and all(isinstance(v, ast.Call) and getattr(v.func, "id", None) == "screen_coverage"
                                      for v in written), ast.dump(written[0]) if written else "no coverage written"
 

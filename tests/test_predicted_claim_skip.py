@@ -1,5 +1,5 @@
 """Predicted visibility leaves out the candidates the claim cull knows empty
-(``engine/render/claim_cull.py``, ``ViewTree._chosen_by_prediction``): no view, no claim or
+(``engine/render/claim_cull.py``, ``tree_visibility.chosen_by_prediction``): no view, no claim or
 reset, no draws, no views below, as exact visibility treats them; their claims count 0 for
 the next frame.
 
@@ -26,6 +26,7 @@ from engine.render import view_tree
 from engine.render.end_images import EndImages
 from engine.render.mirror_passes import MirrorPasses
 from engine.render.targets import CaptureTarget
+from engine.render.tree_visibility import TreeVisibility
 
 FRAMES = 40
 SCENES = [("mirrors_8", (32, 18)), ("mirrors_16", (32, 18)), ("mirrors_16", (64, 36)), ("portals_d8", (32, 18))]
@@ -50,7 +51,7 @@ def _run(ctx, monkeypatch, scene: str, size: tuple[int, int], cull: bool, end_im
         if not cull:
             patch.setattr(view_tree, "empty_claims", lambda *args: (None, None))
         prepare, render = MirrorPasses.prepare_level, view_tree.ViewTree.render
-        visibility_of, predicted = view_tree.ViewTree._visibility_of, view_tree.ViewTree._chosen_by_prediction
+        visibility_of, predicted = TreeVisibility.of, view_tree.chosen_by_prediction
         keep = EndImages.keep
 
         def prepare_level(self, level, parent, claims, queries, *run):
@@ -69,10 +70,9 @@ def _run(ctx, monkeypatch, scene: str, size: tuple[int, int], cull: bool, end_im
             current["counts"].update(record.seen)
             return record
 
-        def chosen(self, surfaces, step, is_end, keys, record, level, screen):
-            found = predicted(self, surfaces, step, is_end, keys, record, level, screen)
-            none = self.passes.no_pixels
-            current["skipped"] |= {key for key, query in zip(found[3], step.queries, strict=True) if query is none}
+        def chosen(candidates, queries, none, *args):
+            found = predicted(candidates, queries, none, *args)
+            current["skipped"] |= {key for key, query in zip(found[3], queries, strict=True) if query is none}
             return found
 
         def kept(self, targets, root, seen, compare=False):
@@ -81,8 +81,8 @@ def _run(ctx, monkeypatch, scene: str, size: tuple[int, int], cull: bool, end_im
 
         patch.setattr(MirrorPasses, "prepare_level", prepare_level)
         patch.setattr(view_tree.ViewTree, "render", rendered)
-        patch.setattr(view_tree.ViewTree, "_visibility_of", visibility)
-        patch.setattr(view_tree.ViewTree, "_chosen_by_prediction", chosen)
+        patch.setattr(TreeVisibility, "of", visibility)
+        patch.setattr(view_tree, "chosen_by_prediction", chosen)
         patch.setattr(EndImages, "keep", kept)
         engine = make_scene(scene, ctx)
         engine.reflection_system.visibility = "predicted"

@@ -17,7 +17,8 @@ from components import Material, MeshRef, Transform
 from engine.assets.mesh import box
 from engine.render import view_tree
 from engine.render.mirror_passes import MirrorPasses
-from engine.render.view_tree import TreeSettings
+from engine.render.tree_visibility import TreeVisibility
+from engine.render.tree_walk import TreeSettings
 from tests import golden
 from tests.golden_scenes import cases
 from tests.support import look_from
@@ -239,7 +240,7 @@ def test_the_queries_are_reused_frame_after_frame(scene):
     ctx = runner.engine.ctx
 
     def held() -> tuple[int, int]:
-        return (sum(len(record.queries) for record in tree._visibility.values()),
+        return (sum(len(record.queries) for record in tree.visibility.roots.values()),
                 len(ctx.extra.get("speculum.samples_queries", [])))
     for _ in range(3):
         runner.frame()
@@ -324,12 +325,12 @@ def test_the_camera_going_through_a_portal_is_a_cut(scene, monkeypatch):
     from tests.test_portal_travel import DT, crossings, portal_scene
 
     forgot: list[int] = []
-    forget = view_tree.ViewTree.forget_visibility
+    forget = TreeVisibility.forget
 
     def counting(self):
         forgot.append(frame["n"])
         forget(self)
-    monkeypatch.setattr(view_tree.ViewTree, "forget_visibility", counting)
+    monkeypatch.setattr(TreeVisibility, "forget", counting)
     frame = {"n": 0}
     ents: dict = {}
     runner = scene(portal_scene(ents), (96, 72))

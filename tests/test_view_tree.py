@@ -9,7 +9,7 @@ from pyglm import glm
 from components import ComponentValueError, DirectionalLight, Emissive, Material, MeshRef, Mirror, Portal, Transform
 from engine.assets.mesh import box, quad, sphere
 from engine.render.mirror_passes import MirrorPasses
-from engine.render.view_tree import MAX_TREE_DEPTH
+from engine.render.tree_walk import MAX_TREE_DEPTH
 from tests.support import look_from
 
 FACING_BACK = glm.angleAxis(glm.pi(), glm.vec3(0, 1, 0))
@@ -239,7 +239,7 @@ def test_a_chain_planned_in_one_run_draws_the_tree_planned_level_by_level(scene,
 def test_levels_planned_ahead_are_the_levels_planned_one_at_a_time(scene, monkeypatch, end_image, depth):
     """Exact visibility plans each level from its parent level's claim counts; where the
     root's last render made every candidate of a level a view that grew, the levels below
-    it are planned ahead, back to back, before its claims (``ViewTree._plan_ahead``), and
+    it are planned ahead, back to back, before its claims (``plan_ahead.plan_ahead``), and
     used only where the counts make every candidate a view again.  The trees equal, frame
     by frame, those of a tree that plans each level after its parent's claims (``plan_ahead``
     False) while the camera moves, and when an occluder hides the side mirror seen at

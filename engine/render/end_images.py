@@ -29,7 +29,7 @@ Until then each such frame changes only what depends on the end images: every vi
 pass draws what it drew the frame before.  So the tree drawn on the first still frame copies
 its levels before their composites (``engine/render/level_copies.py``), and the frames after
 keep it, filling its end views from the new image and doing each level's composites again
-over its copy, up to the root (``ViewTree.keep``), then keep and compare the image again.
+over its copy, up to the root (``StillTree.keep``), then keep and compare the image again.
 """
 from __future__ import annotations
 
@@ -158,7 +158,7 @@ class EndImages:
         self.seen = frozenset()
 
     def let_go(self) -> None:
-        """No frame draws this tree now (``ViewTree.let_go``): the history image, which would
+        """No frame draws this tree now (``StillTree.let_go``): the history image, which would
         be stale when a frame comes again, is released, and the next frame starts closed."""
         self.forget()
         self._release_history()

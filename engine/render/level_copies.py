@@ -1,5 +1,5 @@
 """Copies of reflection levels as they were before their composites, for a still tree whose
-end images have not settled yet (``ViewTree.keep``'s refill).
+end images have not settled yet (``StillTree.keep``'s refill).
 
 A still view tree with end views changes a little every frame until its image settles
 (``engine/render/end_images.py``): each frame's end views repeat the last frame's image, one
@@ -14,7 +14,7 @@ seen-id images (what the end views, fallbacks, composites and transparent slot w
 depth and node images they only read), within the rectangle of the level's views (where
 those passes write), which glBlitFramebuffer keeps to by the scissor test.  A level whose
 composites and fallbacks paint every pixel they write whole (portals, mirrors of reflect
-rate 1 unfaded: ``view_tree._painted_whole``) and that has no transparent slot needs no copy:
+rate 1 unfaded: ``kept_tree.painted_whole``) and that has no transparent slot needs no copy:
 what they write does not depend on what the pixel held.
 """
 from __future__ import annotations

@@ -580,7 +580,7 @@ class MirrorPasses:
         ``run``: (the claims of several levels drawn one after another, where ``claims``
         start among them): their triangles are written once, by the first of those levels
         (of this size) that draws, and the others draw theirs from where they lie, so a level
-        writes nothing (a chain of levels planned ahead: ``ViewTree._ahead_columns``)."""
+        writes nothing (a chain of levels planned ahead: ``plan_ahead.ahead_columns``)."""
         if not claims:
             return
         ctx = self.ctx

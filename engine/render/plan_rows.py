@@ -193,7 +193,7 @@ class LevelRows:
         """Work out the rows' cameras if they are pending (``SurfaceTable.finish_rows``, in
         place: views of the rows made before stay theirs).  A lazy plan's candidates are
         mostly claims that turn out empty, so the view tree finishes only those it chooses
-        (``ViewTree._level_nodes``), and the planner those that become parents."""
+        (``level_nodes.level_nodes``), and the planner those that become parents."""
         pending = self.pending
         if pending is not None:
             self.pending = None
@@ -324,7 +324,7 @@ class Candidates:
         self.end = end            # (k,) bool: an end view, cut by the depth limits (None: none asked for)
         self._chosen: dict[bytes, Candidates] = {}  # select's, once read-only
         # What the view tree makes of a kept plan's (read-only) candidates that is a function
-        # of their rows alone, kept with them while they are (``ViewTree._level_nodes``).
+        # of their rows alone, kept with them while they are (``level_nodes.level_nodes``).
         self.derived: dict[tuple, object] = {}
 
     def __len__(self) -> int:

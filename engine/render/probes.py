@@ -51,8 +51,9 @@ from engine.render.raw_gl import CubeMipTarget, LayeredArrayTarget, LayeredCubeT
 from engine.render.scene_pass import SceneOptions, ScenePass
 from engine.render.surface_table import NO_BLENDS, SurfaceBlends
 from engine.render.targets import LevelStack, release_framebuffer
+from engine.render.tree_walk import TreeSettings
 from engine.render.view_plan import SurfaceTable
-from engine.render.view_tree import TreeSettings, ViewTree
+from engine.render.view_tree import ViewTree
 from engine.render.views import View
 from engine.rules.probe_rules import projection_box
 

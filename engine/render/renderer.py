@@ -84,7 +84,7 @@ class Renderer(Gpu):
         self.screen_quads = np.zeros((0, 12), np.float32)  # the last frame's screen text (a screenshot draws it again)
         self.levels = LevelStack(ctx)   # the main view tree's: [0] the main view, then its reflection levels
         # Copies of the main view tree's levels while a still tree's end images settle (the
-        # reflect stage's tree makes and lets go of them: ViewTree.keep, level_copies.py).
+        # reflect stage's tree makes and lets go of them: StillTree.keep, level_copies.py).
         self.level_copies = LevelCopies(ctx)
         self._exposure = 1.0
         self._antialias = "fxaa"

@@ -15,7 +15,7 @@ and portals:
               gets no view; with predicted visibility it reads them at the root's next
               render and draws every candidate now (but those known empty: claim_cull),
               growing views below only those that had pixels last frame (or were not
-              claimed then) (VISIBILITY_MODES);
+              claimed then) (``tree_visibility.py``);
   3. render - the level's views through the scene pass (``ScenePass.draw``): the parent's
               camera carried through the surface, oblique near plane (or clip distance
               close up), only its claimed pixels; view by view, or all in one draw per
@@ -54,60 +54,57 @@ composite rows packed together in step 5, one after another (in a frame, CPU wor
 between GL calls costs two to four times what it costs in a row, measured), and no flush
 after a level whose next level is planned already (no CPU work there to overlap).
 
-A tree that ``remember``s (the main view's) leaves what its render did as a ``KeptTree``;
-on a frame whose views show nothing new (the reflect stage decides:
-``systems/reflection_system.py``) ``keep`` does only what the root, drawn anew each frame,
-needs again (its fallbacks, level 1's composite) and levels 1 and below stay as they are.
-A still tree with end views whose image has not settled yet is kept too, less what depends
-on the end images: those are filled again from the new image and step 5 is done again from
-the deepest level with end views up, over each level as its views drew it (``_Refill``,
-``engine/render/level_copies.py``).
+``ViewTree`` runs those steps in order; the pieces live beside it: what a render carries
+from level to level (``engine/render/tree_walk.py``), which candidates have pixels and the
+budgets (``tree_visibility.py``), the levels planned ahead (``plan_ahead.py``), a level's
+views and nodes (``level_nodes.py``), end views (``end_views.py``).  A tree that
+``remember``s (the main view's) is kept on frames whose views show nothing new, its levels
+1 and below as they are (``StillTree``, ``engine/render/kept_tree.py``).
 """
 from __future__ import annotations
 
-import functools
-import math
-from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, field, replace
+from collections.abc import Sequence
+from dataclasses import replace
 
-import moderngl
 import numpy as np
 from pyglm import glm
 
-from components.limits import MAX_VIEW_DEPTH
-from engine.core.budget import screen_coverage, spending_order
-from engine.render.batched_mirrors import PATHS, choose_path, submitted_triangles
-from engine.render.claim_cull import ChainBoxes, empty_claims
+from engine.core.budget import screen_coverage
+from engine.render.batched_mirrors import choose_path
+from engine.render.claim_cull import empty_claims
 from engine.render.end_images import EndImages
+from engine.render.end_views import EndSurfaces, child_seers, end_seers, end_views, keep_end_images
 from engine.render.gpu import Gpu
+from engine.render.kept_tree import StillTree
 from engine.render.level_copies import LevelCopies
-from engine.render.mirror_passes import (
-    Claims,
-    Fallbacks,
-    MirrorPasses,
-    PreparedComposites,
-    PreparedFallbacks,
-    give_samples_queries,
-    take_samples_queries,
-)
-from engine.render.plan_rows import BLOCK, ROW, Candidates, LevelRows
+from engine.render.level_nodes import level_nodes, parent_and_surface
+from engine.render.mirror_passes import Claims, Fallbacks, MirrorPasses, PreparedComposites
+from engine.render.plan_ahead import plan_ahead, plan_chain
+from engine.render.plan_rows import Candidates, LevelRows
 from engine.render.scene_pass import REFLECTION_LEVEL, TREE_ROOT, SceneOptions, ScenePass, shading_replaced
 from engine.render.surface_table import NO_BLENDS, SurfaceBlends
-from engine.render.targets import LevelStack, RenderTargets
+from engine.render.targets import LevelStack
+from engine.render.tree_visibility import (
+    TreeVisibility,
+    chosen_by_prediction,
+    claimed_pixels,
+    level_scale,
+    waits_for_counts,
+    within_budgets,
+)
+from engine.render.tree_walk import (
+    MAX_TREE_DEPTH,
+    ReflectionView,
+    TreeLevel,
+    TreeResult,
+    TreeSettings,
+    TreeWalk,
+    ends_at,
+    fallbacks_at,
+)
 from engine.render.view_plan import SurfaceTable, _mat, level_rects
-from engine.render.views import CAMERA_BLOCK_BYTES, PlannedView, View
-from engine.resources import SurfaceState
-from engine.rules.probe_rules import ProbeBlend
+from engine.render.views import View
 
-# The deepest a tree may go (each level is one more set of root-sized targets); the depth
-# limits of Mirror and Portal components take values up to this.
-MAX_TREE_DEPTH = MAX_VIEW_DEPTH  # the depth cap's limit: the components' own
-MIN_LEVEL_SCALE = 0.25  # the lowest resolution factor the pixel budget draws a level at
-# How a level learns which candidates have pixels: "exact" reads this frame's claim counts
-# (the CPU waits for the GPU once a level), "predicted" uses last frame's (nothing waits), and
-# "auto" is exact on a software rasteriser (the CPU draws anyway: waiting costs nothing and
-# the counts save views) and predicted on a GPU.
-VISIBILITY_MODES = ("auto", "exact", "predicted")
 _BATCHED = SceneOptions(clear=False, masked=True, sky=False, batched=True, reflection_filter=True, transparent=False)
 # A level whose claims' rectangles overlap none of the others' (_claims_apart) draws unmasked:
 # there its depth alone is the claim test.  The reset wrote the near plane (depth 0) over every
@@ -121,216 +118,7 @@ _BATCHED = SceneOptions(clear=False, masked=True, sky=False, batched=True, refle
 # may draw anyway), and llvmpipe finishes the claims before a pass samples the node image they
 # wrote (measured: without that read a hidden view's draws were made, tests/test_predicted_visibility.py).
 _APART = {options: replace(options, masked=False) for options in (REFLECTION_LEVEL, _BATCHED)}
-
-
-@dataclass(frozen=True)
-class TreeSettings:
-    """The limits and the drawing path of one view tree."""
-
-    depth_cap: int = 8                 # levels below the root, whatever the surfaces' own limits
-    level_budget: int | None = None    # most views a level draws (None: every view with pixels)
-    path: str = "auto"                 # "per_mirror", "batched" or "auto" (batched_mirrors.choose_path)
-    visibility: str = "auto"           # "exact", "predicted" or "auto" (VISIBILITY_MODES, ViewTree says how)
-
-    def __post_init__(self) -> None:
-        if not isinstance(self.depth_cap, int) or isinstance(self.depth_cap, bool) \
-                or not 0 <= self.depth_cap <= MAX_TREE_DEPTH:
-            raise ValueError(f"view tree depth_cap must be an int in [0, {MAX_TREE_DEPTH}], got {self.depth_cap!r}")
-        if self.level_budget is not None and (not isinstance(self.level_budget, int) or self.level_budget < 1):
-            raise ValueError(f"view tree level_budget must be None or an int >= 1, got {self.level_budget!r}")
-        if self.path not in PATHS:
-            raise ValueError(f"view tree path must be one of {PATHS}, got {self.path!r}")
-        if self.visibility not in VISIBILITY_MODES:
-            raise ValueError(f"view tree visibility (ReflectionSystem.visibility, TreeSettings.visibility) must be "
-                             f"one of {VISIBILITY_MODES}, got {self.visibility!r}")
-
-
-@dataclass
-class TreeResult:
-    """What one render of a tree drew, and what its limits cut."""
-
-    views: list[ReflectionView]   # the root first, then level by level
-    paths: set[str]               # how the levels were drawn
-    dropped: int = 0              # views with pixels left out by the level budget
-    faded: int = 0                # views the mirrors' fades took out (each costs nothing)
-    end_views: list[ReflectionView] = field(default_factory=list)  # views past the depth limits shown
-                                                                   # as last frame's image (EndImages)
-    visibility: str = ""          # "exact" or "predicted": how the levels knew their views' pixels
-    count_capped: Callable[[], int] | None = field(default=None, repr=False)  # counts ``capped`` (the
-                                                                               # cap was reached)
-
-    @functools.cached_property
-    def capped(self) -> int:
-        """Views the surfaces' own limits allowed below the depth cap (0: the cap was not
-        reached), counted when first asked: one more cull, which the main view's tree
-        reports (``RenderStats.reflection_depth_capped``) and a probe face's never needs."""
-        return self.count_capped() if self.count_capped is not None else 0
-
-
-@dataclass
-class RootVisibility:
-    """One root's claim queries and, for predicted visibility, its claim counts, each keyed by
-    the claim's chain of surface entities from the root: ``seen``, last frame's; ``pending``,
-    this frame's keys in the order of ``queries``, read at the root's next render, when the
-    GPU has long drawn them.  An exact frame counts nothing for the next: after it, nothing
-    is predicted."""
-
-    queries: list[moderngl.Query] = field(default_factory=list)
-    used: int = 0                 # queries taken this frame
-    pending: list[tuple[int, ...]] = field(default_factory=list)
-    counted: list[moderngl.Query] = field(default_factory=list)  # what counts each of ``pending``
-    seen: dict[tuple[int, ...], int] = field(default_factory=dict)
-    frame: int = -1               # the ViewTree frame it was last drawn in
-
-    def take(self, count: int, ctx: moderngl.Context) -> list[moderngl.Query]:
-        """The next ``count`` of this frame's queries (the root's pool grows as needed)."""
-        if len(self.queries) < self.used + count:
-            self.queries += take_samples_queries(ctx, self.used + count - len(self.queries))
-        self.used += count
-        return self.queries[self.used - count:self.used]
-
-
-@dataclass
-class ReflectionView:
-    """One node of the view tree: a view at some level, looking into one mirror or portal."""
-
-    index: int
-    level: int
-    view: View
-    rect: tuple[int, int, int, int]   # where it shows, in screen (level 0) pixels
-    surface: SurfaceState | None = None
-    parent: ReflectionView | None = None
-    fade: float = 1.0                 # the reflection's weight (a mirror's fades)
-    unseen: bool = False              # drawn on last frame's word that it had no pixels (predicted visibility)
-
-
-@dataclass
-class KeptTree:
-    """What a tree's last render left for a frame that keeps its levels (``ViewTree.keep``):
-    the targets it drew into (levels 0 to its deepest, each as it was), what it did into the
-    root (the root's own fallbacks, then level 1 composited over them), and the counts it
-    added to the frame's report and budget ledger, added again by a kept frame (a probe face
-    drawn after it spends the same budget either way)."""
-
-    result: TreeResult
-    targets: tuple[RenderTargets, ...]
-    composite: PreparedComposites | None               # level 1 into the root (None: no views)
-    fallbacks: tuple[RenderTargets | None, PreparedFallbacks] | None  # the root's own, with level 1
-    spent: tuple[int, int, int, int, int]              # views, pixels, cut, downscaled, fallbacks
-    # Nothing of it depends on last frame (exact visibility, or predicted from last frame's
-    # counts with no view drawn unseen: a first or cut frame's tree is not the one the next
-    # frame draws; and no end view drawn, or ``history``: end views drawn from an image the
-    # settle check may find this one equal to).
-    settled: bool
-    history: moderngl.Query | None = None  # the settle check of its end images (EndImages.compared)
-    ends: tuple | None = None  # the end images' state it was drawn with (_ends_state): the same, or redraw
-    refill: _Refill | None = None  # with end views not settled yet: what a kept frame does again (keep)
-
-
-@dataclass
-class _Refill:
-    """What a frame that keeps a still tree whose end images have not settled does again
-    (``ViewTree.keep``): from the deepest level with end views up to the root, each level
-    put back as its views drew it (``LevelCopies``, within ``rects``), its end views filled
-    from the new image, its fallbacks, the level below composited in, its transparent slot;
-    then the finished image kept and compared again (``EndImages.keep``).  Levels below the
-    deepest with end views do not change: they stay as they are, composited anew into it."""
-
-    deepest: int                                        # the deepest level with end views
-    rects: dict[int, tuple[int, int, int, int]]         # each level's copy (1 to deepest): its views' bounds
-    ends: dict[int, tuple[list[PlannedView], list[int], list[glm.mat4]]]  # each level's end views
-    transparent: dict[int, tuple[list[PlannedView], SceneOptions, list[moderngl.Query] | None]]  # levels >= 1
-    seen: frozenset[int]                                # the surfaces the image shows (EndImages.keep)
-    see_through: bool                                   # some batch is transparent: the slots are drawn
-    fallbacks: dict[int, tuple[RenderTargets | None, PreparedFallbacks]] = field(default_factory=dict)
-    composites: list[PreparedComposites] = field(default_factory=list)  # [d]: level d + 1 into level d
-
-
-_LEDGER = ("views_spent", "pixels_spent", "views_cut", "levels_downscaled", "reflection_fallbacks")
-
-
-@dataclass
-class _Level:
-    """One level of a tree as planned, and what its GL half reads: the claims of its
-    candidates, the views kept, the end views, and its composite."""
-
-    candidates: Candidates
-    targets: RenderTargets
-    parent_targets: RenderTargets
-    parents: list[ReflectionView]                 # the level above's views, by candidate parent row
-    queries: list[moderngl.Query]                 # each candidate's claim count
-    views: list[PlannedView] = field(default_factory=list)
-    path: str | None = None                       # how its views are drawn (batched_mirrors.PATHS)
-    conditions: list[moderngl.Query] | None = None  # predicted: each view drawn if its claim has pixels
-    ended: list[ReflectionView] = field(default_factory=list)  # end views (EndImages)
-    end_views: list[PlannedView] = field(default_factory=list)
-    end_matrices: list[glm.mat4] = field(default_factory=list)
-    composite: list[ReflectionView] | None = None  # what it composites into the level above (None: no
-                                                   # views, only claims)
-    prepared: PreparedComposites | None = None
-    pixels: list[int] | None = None               # exact: each candidate's claimed pixels
-    # What the choice made of the candidates (_choose): the views (rows of ``candidates``), those
-    # of them that get views below (rows of ``chosen``), the views' candidates, their nodes, and
-    # (predicted) each candidate's chain of surfaces from the root.
-    keep: list[int] | np.ndarray = field(default_factory=list)
-    grow: list[int] | range = field(default_factory=list)
-    chosen: Candidates | None = None
-    children: list[ReflectionView] = field(default_factory=list)
-    claim_keys: list[tuple[int, ...]] = field(default_factory=list)
-    unlit: frozenset[int] = frozenset()            # mirrors its views draw unlit (shading_replaced)
-    options: SceneOptions = REFLECTION_LEVEL       # what its views were drawn with (their transparent slot's)
-    apart: bool = False                           # its claims' rectangles overlap none of the others' (_APART)
-
-
-@dataclass
-class _Walk:
-    """One render of a tree on its way down: the root and its settings, and what each level
-    hands the next (its parents as nodes and rows, their chains of surfaces, their indices
-    in the tree's views, and with end views the seers of each surface)."""
-
-    root: View
-    surfaces: SurfaceTable
-    settings: TreeSettings
-    result: TreeResult
-    root_proj: np.ndarray
-    inv_root_proj: np.ndarray
-    ends: tuple[np.ndarray, int] | None      # _end_surfaces
-    exact: bool                              # this frame's claim counts (else last frame's)
-    record: RootVisibility
-    renderer: Gpu                            # what triangles() counts
-    nodes: list[ReflectionView]              # the parents of the level planned next
-    rows: LevelRows                          # their rows
-    seers: list[list[int]] | None            # with end views: _end_seers
-    keys: list[tuple[int, ...]] = field(default_factory=lambda: [()])  # each parent row's chain of surfaces
-    parent_at: list[int] = field(default_factory=lambda: [0])          # each parent row's index in the views
-    end_seers: list[int] | None = None       # the planned level's end views' seers
-    scale: float = 1.0                       # the planned level's resolution factor
-    level: int = 0                           # the deepest level drawn
-    steps: list[_Level] = field(default_factory=list)  # the levels, in order (exact: drawn as they come;
-                                                       # predicted: drawn after the last is planned)
-    fallbacks: dict[int, Fallbacks] = field(default_factory=dict)  # each level's, by the level they
-                                                                   # are drawn into (_fallbacks_at)
-    blends: Mapping[int, ProbeBlend] = field(default_factory=dict)      # the fallbacks' probes (SurfaceBlends)
-    triangle_count: int | None = None        # what a scene pass submits (triangles(): counted once, if asked)
-    chain: ChainBoxes | None = None          # the planned level's claims' bounds (claim_cull), for the next
-    # each level's fallbacks as drawn (the root's: KeptTree; every level's: _Refill), by level
-    drawn_fallbacks: dict[int, tuple[RenderTargets | None, PreparedFallbacks]] = field(default_factory=dict)
-    composited: list[PreparedComposites] = field(default_factory=list)  # [d]: level d + 1 into level d
-    ahead: dict[int, tuple] = field(default_factory=dict)  # levels planned ahead (ViewTree._plan_ahead), by depth
-    whole: dict[int, bool] = field(default_factory=dict)   # the levels whose candidates all grew (ViewTree._whole)
-    whole_before: dict[int, bool] = field(default_factory=dict)  # the same root's last render's
-    # Each level's one candidate's surface row (-1: none, or more than one), and the same root's
-    # last render's (ViewTree._plan_ahead: a chain planned in one run)
-    singles: dict[int, int] = field(default_factory=dict)
-    singles_before: dict[int, int] = field(default_factory=dict)
-    one: tuple[str, frozenset[int]] | None = None  # a level of one view's path and unlit mirrors (_choose_one)
-
-    def triangles(self) -> int:
-        """The triangles a scene pass submits, counted at the first level that asks (a level
-        of a few views never does: ``choose_path``), then kept for the render."""
-        if self.triangle_count is None:
-            self.triangle_count = submitted_triangles(self.renderer)
-        return self.triangle_count
+_DEFAULT_SETTINGS = TreeSettings()  # (frozen: one for every render given none)
 
 
 class ViewTree:
@@ -348,11 +136,8 @@ class ViewTree:
         self.coverage: dict[int, int] = {}  # level -> its views' claimed pixels last frame (screen pixels)
         self._projections: tuple[bytes, np.ndarray, np.ndarray] | None = None  # the last root's projection
         self._roots: dict[tuple, LevelRows] = {}  # each root's row, by its camera (_root_rows)
-        # what _end_surfaces found last, and for what (table, surfaces seen, cap)
-        self._ends_cache: tuple[tuple, tuple[np.ndarray, int] | None] | None = None
-        self._visibility: dict[tuple[str, int], RootVisibility] = {}  # by root (its name and skipped entity)
-        self._frame = 0                   # frames this tree has drawn in (a new RenderStats: a new frame)
-        self._frame_stats: object | None = None
+        self._end_surfaces = EndSurfaces(self.ends)  # the surfaces that may get end views, kept
+        self.visibility = TreeVisibility(renderer, self.passes)  # each root's claim counts, frame to frame
         self._software = renderer.caps.software  # a software rasteriser (the context's, read once)
         # Draw the mirrors this tree paints over entirely unlit (scene_pass.shading_replaced);
         # False: every view shades them (the second path the tests compare against).
@@ -361,34 +146,33 @@ class ViewTree:
         self._unlit: tuple[tuple, frozenset[int]] = ((None, False), frozenset())
         self._level_options: dict[tuple, SceneOptions] = {}  # a level's options with its unlit mirrors
         # Plan the levels below a level ahead where the root's last render made every candidate
-        # of theirs a view that grew (_plan_ahead); False: each level after its parent's claims
+        # of theirs a view that grew (plan_ahead); False: each level after its parent's claims
         # (the second path the tests compare against).
         self.plan_ahead = True
-        # Per root (as _visibility), per level, whether its last render's level made every
+        # Per root (as TreeVisibility.roots), per level, whether its last render's level made every
         # candidate a view that grew (its rows the parents of the next level).
         self._whole: dict[tuple[str, int], dict[int, bool]] = {}
-        self._singles: dict[tuple[str, int], dict[int, int]] = {}  # per root as _whole: _Walk.singles
+        self._singles: dict[tuple[str, int], dict[int, int]] = {}  # per root as _whole: TreeWalk.singles
         # Plan a chain of one view a level ahead in one run (SurfaceTable.plan_chain); False:
         # level by level (the second path the tests compare against).
         self.plan_chains = True
         # Choose a level of one candidate on a lean path (_choose_one); False: through the
         # lists of a level of many (the second path the tests compare against).
         self.lean_levels = True
-        # With ``remember`` (the main view's tree), what the last render left (``KeptTree``),
-        # for a frame whose views show nothing new (``keep``); None after any other render.
+        # With ``remember`` (the main view's tree), what the last render left, for a frame
+        # whose views show nothing new (``still``: ``StillTree.keep``).
         self.remember = False
-        self.kept: KeptTree | None = None
         # The next render compares its finished image with the end images' history (the
         # reflect stage sets it where the frame's views show what the last frame's did).
         self.check_history = False
-        # The levels of a still tree as its views drew them, while its end images settle
-        # (_save_for_refill), and the end views the last ``keep`` filled again (0: none).
-        # (``copies``: where the renderer counts them, the main view's tree's; else the tree's own)
-        self.copies = copies if copies is not None else LevelCopies(renderer.ctx)
-        self.refilled = 0
+        # What it keeps for still frames, with the copies of its levels while its end images
+        # settle (``copies``: where the renderer counts them, the main view's tree's; else the
+        # tree's own).
+        self.still = StillTree(renderer, self.passes, scene_pass, self.ends,
+                               copies if copies is not None else LevelCopies(renderer.ctx))
 
     def render(self, root: View, levels: LevelStack, surfaces: SurfaceTable,
-               settings: TreeSettings = TreeSettings(), blends: SurfaceBlends = NO_BLENDS,
+               settings: TreeSettings = _DEFAULT_SETTINGS, blends: SurfaceBlends = NO_BLENDS,
                root_options: SceneOptions = TREE_ROOT) -> TreeResult:
         """Draw every level below ``root`` (already drawn into ``levels[0]`` with
         ``root_options``, its transparent slot left to the tree) and composite them: the
@@ -400,17 +184,15 @@ class ViewTree:
                              "tree draws its transparent slot over the reflections composited into it")
         root_node = ReflectionView(0, 0, root, (0, 0, *root.size))
         result = TreeResult([root_node], set())
-        self.kept = None
+        self.still.kept = None
         if not surfaces.states:  # no mirror or portal anywhere: the root is the whole tree
             if self.ends is not None:
                 self.ends.forget()
-            if len(self.copies):  # (the pair whose levels were copied went mid-refill: let the copies go)
-                self.copies.release()
+            if len(self.still.copies):  # (the pair whose levels were copied went mid-refill: let the copies go)
+                self.still.copies.release()
             self.scene_pass.draw_transparent([root], levels[0], root_options)
             return result
-        stats = self.renderer.stats
-        ledger = tuple(getattr(stats, name) for name in _LEDGER) if self.remember else None
-        ends_before = self._ends_state(root.size) if self.remember else None
+        before = self.still.before(root.size) if self.remember else None  # (what a kept frame adds again)
         walk = self._start(root, root_node, surfaces, settings, result)
         walk.blends = blends.by_surface
         candidates = self._plan(walk, first_index=1)                  # 1. plan the first level
@@ -427,159 +209,24 @@ class ViewTree:
                 if step.composite is not None:
                     self._draw_level(step, root, walk)
         self._note_cap(walk)
-        refill = self._save_for_refill(walk) if ledger is not None else None  # (a still tree's levels)
+        refill = self.still.save_for_refill(walk, self.check_history) if before is not None else None
         self._composite(walk, levels, root_options)                   # 5. composite
-        if refill is not None:
-            refill.fallbacks, refill.composites = walk.drawn_fallbacks, walk.composited
-        self._keep_end_images(walk, levels)
-        if ledger is not None:
-            history = self.ends.compared if result.end_views and self.ends is not None else None
-            self.kept = KeptTree(result, (levels[0], *(step.targets for step in walk.steps)),
-                                 walk.steps[0].prepared if walk.steps else None, walk.drawn_fallbacks.get(0),
-                                 tuple(getattr(stats, name) - before for name, before in zip(_LEDGER, ledger,
-                                                                                             strict=True)),
-                                 (not result.end_views or history is not None) and self._drawn_on_counts(walk),
-                                 history, ends_before, refill if history is not None else None)
+        keep_end_images(self.ends, walk, levels, self.check_history)
+        if before is not None:  # kept for a frame whose views show nothing new (StillTree.keep)
+            self.still.remember(walk, levels, before, refill)
         return result
 
-    @staticmethod
-    def _drawn_on_counts(walk: _Walk) -> bool:
-        """Whether the views drawn depend on nothing of last frame's counts (exact, or
-        predicted from last frame's with no view drawn unseen: a first or cut frame's tree is
-        not the one the next frame draws)."""
-        return (walk.exact or bool(walk.record.seen)) and not any(node.unseen for node in walk.result.views)
-
-    def _save_for_refill(self, walk: _Walk) -> _Refill | None:
-        """For a tree drawn on a still frame (``check_history``) whose end views the settle
-        check will compare: each level down to the deepest with end views copied as its views
-        drew it, before its composites (``LevelCopies``), and what the frames that keep the
-        tree until it settles do again (``_Refill``).  None otherwise, and the copies are let
-        go: a frame whose camera or scene moved copies nothing."""
-        result, ends = walk.result, self.ends
-        if not (self.check_history and ends is not None and result.end_views and walk.surfaces.has_end_images
-                and self._drawn_on_counts(walk)) or not ends.compares(walk.root, _seen_surfaces(result)):
-            if len(self.copies):
-                self.copies.release()
-            return None
-        deepest = max(node.level for node in result.end_views)
-        see_through = bool(self.renderer.transparent_batches())
-        rects, transparent, filled = {}, {}, {}
-        for level in range(1, deepest + 1):
-            step = walk.steps[level - 1]
-            if see_through or not _painted_whole(walk, level):
-                rects[level] = rect = _bounds([view.scissor for view in (*step.views, *step.end_views)])
-                self.copies.save(level, step.targets, rect)
-            transparent[level] = (step.views, step.options, step.conditions)
-            if step.ended:
-                filled[level] = (step.end_views, [node.surface.entity for node in step.ended], step.end_matrices)
-        self.copies.keep_only(rects)
-        return _Refill(deepest, rects, filled, transparent, _seen_surfaces(result), see_through)
-
-    def _ends_state(self, size: tuple[int, int]) -> tuple | None:
-        """What end views would be drawn from: whether an image is kept, the surfaces it
-        shows, its camera (a render that finds them other than its own left them draws other
-        end views, or any at all, next frame)."""
-        ends = self.ends
-        if ends is None:
-            return None
-        return ends.ready(size), ends.seen, ends.view_proj
-
-    def let_go(self) -> None:
-        """No frame draws or keeps this tree now (its camera switched off, no pixels to draw
-        into): the kept tree, the copies of its levels and the end images' history are let go,
-        not held for a still frame that may never come (the next frame with a view draws the
-        tree whole, its end views closed until a history is kept again)."""
-        self.kept = None
-        if len(self.copies):
-            self.copies.release()
-        if self.ends is not None:
-            self.ends.let_go()
-
-    def keep(self, levels: LevelStack, root: View | None = None,
-             root_options: SceneOptions = TREE_ROOT) -> TreeResult | None:
-        """The last render's tree again without drawing it: its levels 1 and below hold what
-        they held (their images already hold the deeper levels' composites, fallbacks, end
-        views and their own transparent slots), and only what the root needs again is done
-        (the root is drawn anew each frame, with ``root_options``): its own fallbacks, then
-        level 1 composited over them, then its transparent slot (``root``'s: the kept
-        render's root view where None).  The frame's report and ledger get the counts the
-        render added.  None (nothing done) where there is nothing kept or a level's targets
-        are not those drawn into (remade, resized).  The caller decides that nothing those
-        levels show changed (``ReflectionSystem``)."""
-        kept = self.kept
-        self.refilled = 0
-        if kept is None or len(levels) < len(kept.targets) or any(
-                levels[level] is not targets for level, targets in enumerate(kept.targets)) or \
-                self._ends_state(levels[0].size) != kept.ends:
-            self.kept = None
-            return None
-        unsettled = kept.history is not None and not EndImages.settled(kept.history)
-        if unsettled and kept.refill is None:
-            self.kept = None
-            return None
-        stats = self.renderer.stats
-        ledger = [getattr(stats, name) for name in _LEDGER]
-        if unsettled:
-            self._refill(kept, levels, root or kept.result.views[0].view, root_options)
-        else:
-            if kept.refill is not None:  # settled: no frame refills it any more
-                self.kept = replace(kept, refill=None)
-                self.copies.release()
-            if kept.fallbacks is not None:
-                child, prepared = kept.fallbacks
-                self.passes.draw_fallbacks(levels[0], child, prepared)
-            if kept.composite is not None:
-                self.passes.composite_level(levels[0], levels[1], kept.composite)
-            self.scene_pass.draw_transparent([root or kept.result.views[0].view], levels[0], root_options)
-            if kept.fallbacks is not None or kept.composite is not None:
-                self.renderer.flush()
-        # The render's counts (fallbacks too: those drawn now are of the render's, the rest kept).
-        for name, before, spent in zip(_LEDGER, ledger, kept.spent, strict=True):
-            setattr(stats, name, before + spent)
-        return kept.result
-
-    def _refill(self, kept: KeptTree, levels: LevelStack, root: View, root_options: SceneOptions) -> None:
-        """A kept still tree whose end images have not settled (``_Refill``): what depends on
-        them done again, level by level from the deepest with end views up, as the render's
-        step 5 did it over each level put back as its views drew it; then the finished image
-        kept and compared again, and the tree kept with that check."""
-        refill, passes = kept.refill, self.passes
-        for depth in range(refill.deepest, -1, -1):
-            targets = levels[depth]
-            if depth:
-                if depth in refill.rects:  # (else every pixel the level's composites write is painted whole)
-                    self.copies.restore(depth, targets, refill.rects[depth])
-                filled = refill.ends.get(depth)
-                if filled is not None:
-                    self.ends.draw(*filled, targets, root)
-            drawn = refill.fallbacks.get(depth)
-            if drawn is not None:
-                passes.draw_fallbacks(targets, *drawn)
-            if depth < len(refill.composites):
-                passes.composite_level(targets, levels[depth + 1], refill.composites[depth])
-            if refill.see_through:
-                if depth:
-                    views, options, conditions = refill.transparent[depth]
-                    self.scene_pass.draw_transparent(views, targets, options, conditions)
-                else:
-                    self.scene_pass.draw_transparent([root], targets, root_options)
-        self.renderer.flush()
-        ends_before = self._ends_state(levels[0].size)
-        self.ends.keep(levels[0], root, refill.seen, compare=True)
-        self.kept = replace(kept, history=self.ends.compared, ends=ends_before)
-        self.refilled = sum(len(filled[0]) for filled in refill.ends.values())
-
     def _start(self, root: View, root_node: ReflectionView, surfaces: SurfaceTable, settings: TreeSettings,
-               result: TreeResult) -> _Walk:
+               result: TreeResult) -> TreeWalk:
         """A render's walk from its root: the root's projection and row, the end views it may
         have, how it learns its views' pixels."""
         root_proj, inv_root_proj = self._projection(root.proj)
-        ends = self._end_surfaces(surfaces, root, settings.depth_cap)
-        exact = self._waits_for_counts(settings)
+        ends = self._end_surfaces.find(surfaces, root, settings.depth_cap)
+        exact = waits_for_counts(settings.visibility, settings.level_budget, self.renderer.stats, self._software)
         result.visibility = "exact" if exact else "predicted"
         renderer = self.renderer
-        walk = _Walk(root, surfaces, settings, result, root_proj, inv_root_proj, ends, exact,
-                     self._visibility_of(root), renderer, [root_node],
+        walk = TreeWalk(root, surfaces, settings, result, root_proj, inv_root_proj, ends, exact,
+                     self.visibility.of(root), renderer, [root_node],
                      self._root_rows(root),
                      # With end views: for each row of the level, the index in result.views of the
                      # view that saw each surface last up its chain (-1: none), what an end view repeats.
@@ -594,21 +241,21 @@ class ViewTree:
         self._singles[key] = walk.singles
         return walk
 
-    def _plan(self, walk: _Walk, first_index: int) -> Candidates | None:
+    def _plan(self, walk: TreeWalk, first_index: int) -> Candidates | None:
         """Step 1: the candidates of the level below ``walk``'s parents (``SurfaceTable.plan``),
         and the fallbacks of the surfaces those parents see that get no view there."""
         depth = walk.level + 1
         settings, surfaces, root = walk.settings, walk.surfaces, walk.root
-        walk.scale = self._level_scale(depth)
+        walk.scale = level_scale(self.renderer.stats, self.coverage, depth)
         ahead = walk.ahead.pop(depth, None) if walk.ahead else None
         if ahead is None and len(walk.rows.data) == 1 and walk.whole_before.get(depth) and walk.exact \
                 and self.plan_ahead and self.plan_chains and walk.rows.data.flags.writeable \
                 and not surfaces.fading and self.renderer.stats.pixels_left() is None:
             # One parent (a moving root's row), and its level a chain last render: planned as
-            # one from here, with the levels below it ahead (_plan_ahead).
-            chain = self._plan_chain(walk, depth - 1, walk.rows, first_index)
+            # one from here, with the levels below it ahead (plan_ahead).
+            chain = plan_chain(walk, depth - 1, walk.rows, first_index)
             if chain:
-                self._plan_ahead(walk, depth - 1 + len(chain), chain[-1], chain)
+                plan_ahead(walk, depth - 1 + len(chain), chain[-1], self.coverage, self.plan_chains, chain)
                 ahead = walk.ahead.pop(depth, None)
         unviewed = None
         if ahead is not None and ahead[0] is walk.rows.data and ahead[1] == first_index and ahead[2] == walk.scale:
@@ -616,172 +263,25 @@ class ViewTree:
         else:
             candidates, faded = surfaces.plan(walk.rows, depth, root, walk.root_proj, walk.inv_root_proj,
                                               first_index, settings.depth_cap, root.hide,
-                                              ends=_ends_at(walk.ends, depth), scale=walk.scale, lazy=True)
+                                              ends=ends_at(walk.ends, depth), scale=walk.scale, lazy=True)
             if candidates is not None and walk.whole_before.get(depth) and walk.exact and self.plan_ahead \
                     and not surfaces.fading and self.renderer.stats.pixels_left() is None:
-                self._plan_ahead(walk, depth, candidates)
+                plan_ahead(walk, depth, candidates, self.coverage, self.plan_chains)
         if unviewed is None:
             self._unviewed(walk.fallbacks, surfaces, walk.rows, walk.nodes, walk.level, walk.root_proj, root,
                            settings.depth_cap, walk.ends)
         elif len(unviewed[0]):  # (found with the level, planned ahead)
-            _fallbacks_at(walk.fallbacks, walk.level, surfaces).add(walk.nodes, *unviewed)
+            fallbacks_at(walk.fallbacks, walk.level, surfaces).add(walk.nodes, *unviewed)
         walk.result.faded += faded
-        walk.singles[depth] = _parent_and_surface(candidates)[1] if candidates is not None and len(candidates) == 1 \
+        walk.singles[depth] = parent_and_surface(candidates)[1] if candidates is not None and len(candidates) == 1 \
             else -1
-        candidates, walk.end_seers, dropped = self._end_seers(candidates, walk.seers)
+        candidates, walk.end_seers, dropped = end_seers(candidates, walk.seers)
         if dropped:  # end candidates with nothing to repeat: their fallback, never the bare surface
-            _fallbacks_at(walk.fallbacks, walk.level, surfaces).add(walk.nodes, [p for p, _ in dropped],
+            fallbacks_at(walk.fallbacks, walk.level, surfaces).add(walk.nodes, [p for p, _ in dropped],
                                                                     [s for _, s in dropped])
         return candidates
 
-    def _plan_chain(self, walk: _Walk, depth: int, parents: LevelRows, first_index: int) -> list[Candidates]:
-        """The levels below ``parents`` (one view of level ``depth``) that were a chain of one
-        view a level in the root's last render (``_Walk.singles``; below the first, each
-        grew), planned in one run through the surfaces they went through then
-        (``SurfaceTable.plan_chain``: as far as each level finds the same one), each kept for
-        ``_plan`` in ``walk.ahead`` with its unviewed pairs; their Camera blocks are left to
-        ``_plan_ahead``'s ``finish_blocks``.  At portal depth 8 with a swaying camera, seven
-        levels of ~30 numpy calls each became one run of about as many."""
-        surfaces, settings, root = walk.surfaces, walk.settings, walk.root
-        whole, singles = walk.whole_before, walk.singles_before
-        through, level = [], depth
-        while (level == depth or whole.get(level)) and singles.get(level + 1, -1) >= 0:
-            level += 1
-            through.append(singles[level])
-        if len(through) < 2:
-            return []
-        ends = [_ends_at(walk.ends, depth + 1 + i) for i in range(len(through))]
-        levels = surfaces.plan_chain(parents, depth, through, root, walk.root_proj, settings.depth_cap, root.hide,
-                                     ends, first_index)
-        for i, planned in enumerate(levels):
-            rows = parents if i == 0 else levels[i - 1].rows
-            walk.ahead[depth + 1 + i] = (rows.data, first_index + i, 1.0, (planned, 0),
-                                         surfaces.unviewed(rows, depth + 1 + i, walk.root_proj, root.size,
-                                                           settings.depth_cap, ends[i]))
-        return levels
-
-    def _plan_ahead(self, walk: _Walk, depth: int, candidates: Candidates,
-                    deferred: list[Candidates] | None = None) -> None:
-        """The levels below ``depth`` planned now, back to back, as if every candidate of
-        each became a view that grows (what the root's last render's levels did: ``_whole``), each from
-        the rows of the one above: ``_plan`` takes one where its parents are those very rows
-        (and its first index and scale are those it was planned with), else plans afresh.
-        In a frame, a numpy call made among GL calls costs about half as much again as one
-        made after another (measured: 44 against 30 us a level of one view), and exact
-        visibility plans each level after its parent's claims and draws.  The pairs the
-        level's parents see without a view there (``SurfaceTable.unviewed``, its fallbacks:
-        a cull at the depth limit) are found with it, and the levels' Camera blocks, which
-        no plan below reads, are worked out for all of them at once at the end
-        (``SurfaceTable.finish_blocks``: one run of its operations, not one a level).  A
-        swaying portal pair at depth 8, 32x18: about 10% off the frame.  Levels of one view
-        each last render are planned as a chain in one run (``_plan_chain``); ``deferred``:
-        such a chain's levels, planned already (``depth`` the last's): the levels below it
-        planned on from there."""
-        settings, surfaces, root = walk.settings, walk.surfaces, walk.root
-        whole = walk.whole_before
-        if deferred is None:
-            deferred = []
-            if self.plan_chains and len(candidates) == 1 and whole.get(depth) and \
-                    (candidates.end is None or not candidates.end.any()):
-                deferred = self._plan_chain(walk, depth, candidates.rows, int(candidates.rows.node[-1]) + 1)
-                if deferred:
-                    depth, candidates = depth + len(deferred), deferred[-1]
-        else:
-            deferred = list(deferred)
-        while whole.get(depth) and (candidates.end is None or not candidates.end.any()):
-            depth += 1
-            rows, first_index, scale = candidates.rows, int(candidates.rows.node[-1]) + 1, self._level_scale(depth)
-            ends = _ends_at(walk.ends, depth)
-            # Blocks left to one run for the levels planned ahead where there are two or more
-            # (a kept plan's rows, read-only: its plans are kept whole).
-            defer = rows.data.flags.writeable and bool(deferred or whole.get(depth))
-            planned = surfaces.plan(rows, depth, root, walk.root_proj, walk.inv_root_proj, first_index,
-                                    settings.depth_cap, root.hide, ends=ends, scale=scale, defer=defer)
-            walk.ahead[depth] = (rows.data, first_index, scale, planned,
-                                 surfaces.unviewed(rows, depth, walk.root_proj, root.size, settings.depth_cap, ends))
-            candidates = planned[0]
-            if candidates is None:
-                break
-            if defer:
-                deferred.append(candidates)
-        if deferred:
-            surfaces.finish_blocks(deferred, walk.root_proj)
-            self._ahead_columns(surfaces, deferred, root.hide)
-
-    @staticmethod
-    def _ahead_columns(surfaces: SurfaceTable, levels: list[Candidates], hide: int) -> None:
-        """What ``_level_nodes`` and ``_claim`` make of each level planned ahead (their rows
-        final once their blocks are: nothing writes them after), made for all of them at
-        once and kept with each (``Candidates.derived``, as for a kept plan's): the columns
-        read as Python numbers in one conversion each for every level (a chain at portal
-        depth 8: seven levels of one view), not each level's own few; a level of one
-        candidate's straight from them, with its parent and surface rows
-        (``_parent_and_surface``), and the views of all such levels, whose Camera blocks
-        the first of them to draw uploads together (``Gpu.upload_run``).  With three levels
-        or more, the claims of every level
-        below the first as one run (``MirrorPasses.prepare_level``'s ``run``: written to the
-        GPU once, by the first of them that draws): a parent's node is its row's one level
-        up (the levels planned ahead are used only where every candidate of the level above
-        became a view that grew, in its rows' order)."""
-        rows = np.concatenate([candidates.rows.data for candidates in levels])
-        ints = rows.view(np.int64)
-        blocks = rows[:, BLOCK].tobytes()
-        step = CAMERA_BLOCK_BYTES
-        columns = rows.take(_NODE_COLUMNS, axis=1).astype(np.int64).tolist()
-        numbers = ints.take(_INT_COLUMNS, axis=1).tolist()
-        fades = rows[:, ROW["fade"].start].tolist()
-        states, entities = surfaces.states, surfaces.entity_list
-        at = 0
-        for candidates in levels:
-            size = candidates.size
-            derived = candidates.derived
-            if len(candidates) == 1:  # (a chain's level: one view, its columns as they are)
-                x0, y0, x1, y1, mirrored, node = columns[at]
-                p, s, *scissor = numbers[at]
-                state = states[s]
-                derived[("nodes", hide)] = ([PlannedView(blocks[at * step:(at + 1) * step], size, state.kind,
-                                                         state.entity, state.exit_plane, mirrored == 1, tuple(scissor),
-                                                         node, state.exit_entity, hide)],
-                                            [(node, (x0, y0, -x1 - x0, -y1 - y0), state, p, fades[at])])
-                derived["claims"] = ([p], [entities[s]], [node], [scissor])
-                derived["one"] = (p, s)
-                at += 1
-                continue
-            views, nodes, claims = [], [], ([], [], [], [])
-            for i in range(at, at + len(candidates)):
-                x0, y0, x1, y1, mirrored, node = columns[i]  # x1, y1: negated (LEVEL_ROW)
-                p, s, *scissor = numbers[i]
-                state = states[s]
-                views.append(PlannedView(blocks[i * step:(i + 1) * step], size, state.kind, state.entity,
-                                         state.exit_plane, mirrored == 1, tuple(scissor), node, state.exit_entity,
-                                         hide))
-                nodes.append((node, (x0, y0, -x1 - x0, -y1 - y0), state, p, fades[i]))
-                for column, value in zip(claims, (p, entities[s], node, scissor), strict=True):
-                    column.append(value)
-            derived[("nodes", hide)] = (views, nodes)
-            derived["claims"] = claims
-            at += len(candidates)
-        ones = [candidates.derived[("nodes", hide)][0][0] for candidates in levels if len(candidates) == 1]
-        if len(ones) > 1:  # the Camera blocks of the levels of one view, in one upload (_draw_level)
-            for candidates in levels:
-                if len(candidates) == 1:
-                    candidates.derived["view_run"] = ones
-        if len(levels) > 2:  # the claims below the first level, in one run (MirrorPasses.prepare_level)
-            ids, rects, starts = [], [], []
-            above = 0  # the first row of the level above, in ``columns``
-            for upper, candidates in zip(levels[:-1], levels[1:], strict=True):
-                starts.append(len(ids))
-                at = above + len(upper)
-                for i in range(at, at + len(candidates)):
-                    p, s, *scissor = numbers[i]  # (a parent's node: its row's, one level up)
-                    ids.append((columns[above + p][5], entities[s], columns[i][5]))
-                    rects.append(scissor)
-                above = at
-            run = Claims(ids, rects)
-            for candidates, start in zip(levels[1:], starts, strict=True):
-                candidates.derived["claim_run"] = (run, start)
-
-    def _choose(self, walk: _Walk, levels: LevelStack, candidates: Candidates) -> _Level | None:
+    def _choose(self, walk: TreeWalk, levels: LevelStack, candidates: Candidates) -> TreeLevel | None:
         """Steps 2 and 3 for a planned level: its candidates' claims (exact: drawn and read
         now; predicted: last frame's counts), which become views, which of those grow views
         below, its end views and fallbacks, and its drawing path; None where it has no view
@@ -794,7 +294,7 @@ class ViewTree:
         level = walk.level
         if walk.scale < 1.0:
             self.renderer.stats.levels_downscaled += 1
-        step = _Level(candidates, levels.get(level + 1, candidates.size), levels[level], walk.nodes,
+        step = TreeLevel(candidates, levels.get(level + 1, candidates.size), levels[level], walk.nodes,
                       walk.record.take(len(candidates), self.renderer.ctx))
         walk.steps.append(step)
         self._skip_empty_claims(walk, step)
@@ -803,12 +303,13 @@ class ViewTree:
             step.keep, step.grow, end_rows = self._chosen_by_counts(surfaces, step, is_end, settings, result,
                                                                     level + 1, root.size)
         else:  # last frame's counts: nothing waits; the GPU counts this frame's for the next
-            step.keep, step.grow, end_rows, step.claim_keys = self._chosen_by_prediction(
-                surfaces, step, is_end, walk.keys, walk.record, level + 1, root.size)
+            step.keep, step.grow, end_rows, step.claim_keys, step.conditions = chosen_by_prediction(
+                candidates, step.queries, self.passes.no_pixels, is_end, walk.keys, walk.record,
+                surfaces.entity_list, self.renderer.stats, self.coverage, level + 1, root.size)
         keep, grow = step.keep, step.grow
         chosen = step.chosen = candidates if len(keep) == len(candidates) else \
             candidates.select(np.asarray(keep, np.int64))
-        step.views, step.children = self._level_nodes(surfaces, chosen, walk.nodes, level + 1, root.hide)
+        step.views, step.children = level_nodes(surfaces, chosen, walk.nodes, level + 1, root.hide)
         children = step.children
         if len(grow) < len(children):
             grown = set(grow)
@@ -821,7 +322,7 @@ class ViewTree:
                            [children[at] for at in unseen], level + 1, walk.root_proj, root, 0, None)
         self._fallbacks_of_level(walk.fallbacks, surfaces, step, keep, is_end, children, level, walk.exact)
         if end_rows:
-            self._end_views(walk, step, end_rows)
+            end_views(walk, step, end_rows)
         if not children and not step.ended:
             return None
         if children:
@@ -831,7 +332,7 @@ class ViewTree:
         step.composite = children + step.ended
         return step
 
-    def _choose_one(self, walk: _Walk, levels: LevelStack, candidates: Candidates) -> _Level | None:
+    def _choose_one(self, walk: TreeWalk, levels: LevelStack, candidates: Candidates) -> TreeLevel | None:
         """``_choose`` for a level of one candidate, exact visibility, no budget (a chain's
         levels): the same steps and the same level, without the lists a level of many views
         is chosen through (its node straight from what its planning kept, the path and the
@@ -844,7 +345,7 @@ class ViewTree:
         level = walk.level
         if walk.scale < 1.0:
             stats.levels_downscaled += 1
-        step = _Level(candidates, levels.get(level + 1, candidates.size), levels[level], walk.nodes,
+        step = TreeLevel(candidates, levels.get(level + 1, candidates.size), levels[level], walk.nodes,
                       walk.record.take(1, renderer.ctx))
         walk.steps.append(step)
         self._skip_empty_claims(walk, step)
@@ -861,16 +362,16 @@ class ViewTree:
             stats.views_spent += 1
             stats.pixels_spent += drawn
             step.keep, step.grow, step.chosen = [0], range(1), candidates
-            kept = candidates.derived.get(("nodes", root.hide))  # (planned ahead: _ahead_columns)
+            kept = candidates.derived.get(("nodes", root.hide))  # (planned ahead: ahead_columns)
             if kept is not None:
                 (view,), ((node, rect, state, p, fade),) = kept
                 step.views, children = kept[0], [ReflectionView(node, level + 1, view, rect, state, walk.nodes[p],
                                                                 fade)]
             else:
-                step.views, children = self._level_nodes(surfaces, candidates, walk.nodes, level + 1, root.hide)
+                step.views, children = level_nodes(surfaces, candidates, walk.nodes, level + 1, root.hide)
             step.children = children
             if children[0].fade < 1.0:  # its faded share shows the fallback
-                _fallbacks_at(walk.fallbacks, level, surfaces).add(step.parents, candidates.parent, candidates.surface,
+                fallbacks_at(walk.fallbacks, level, surfaces).add(step.parents, candidates.parent, candidates.surface,
                                                                    1.0 - candidates.fade)
             if walk.one is None:  # the path and unlit mirrors of a level of one view: the same at every depth
                 walk.one = (choose_path(walk.settings.path, 1, walk.triangles, self._software),
@@ -882,7 +383,7 @@ class ViewTree:
         step.keep, step.grow, step.chosen = [], range(0), candidates.select(_NO_ROWS)
         if not (end and pixels):
             return None
-        self._end_views(walk, step, [0])
+        end_views(walk, step, [0])
         step.composite = list(step.ended)
         return step
 
@@ -900,7 +401,7 @@ class ViewTree:
             self._level_options.clear()
         return found
 
-    def _skip_empty_claims(self, walk: _Walk, step: _Level) -> None:
+    def _skip_empty_claims(self, walk: TreeWalk, step: TreeLevel) -> None:
         """The claims of ``step`` that cannot take a pixel (``claim_cull``: no pixel centre in
         the bounding boxes of its surface and its parents' up the chain) count 0 without a
         draw: their queries become ``MirrorPasses.no_pixels``, and in either visibility they
@@ -908,7 +409,7 @@ class ViewTree:
         pixels: a level at another resolution than the root's, or below one, is not tested
         and breaks the chain."""
         candidates = step.candidates
-        box = candidates.__dict__.get("box")  # the plan's (SurfaceTable._plan), or _end_seers'
+        box = candidates.__dict__.get("box")  # the plan's (SurfaceTable._plan), or end_seers'
         if box is None or candidates.size != walk.root.size or step.parent_targets.size != walk.root.size:
             walk.chain = None
             return
@@ -918,23 +419,7 @@ class ViewTree:
             none = self.passes.no_pixels
             step.queries = [none if skip else query for query, skip in zip(step.queries, empty, strict=True)]
 
-    def _end_views(self, walk: _Walk, step: _Level, end_rows: list[int]) -> None:
-        """A level's end views (rows ``end_rows`` of its candidates): their nodes, the matrix
-        to the eye of the view that saw each surface last, and their fallbacks (the pixels
-        their images do not hold)."""
-        candidates = step.candidates  # (all of them: their nodes as kept with them, if they are: _ahead_columns)
-        chosen_ends = candidates if len(end_rows) == len(candidates) else \
-            candidates.select(np.asarray(end_rows, np.int64))
-        step.end_views, step.ended = self._level_nodes(walk.surfaces, chosen_ends, walk.nodes, walk.level + 1,
-                                                       walk.root.hide)
-        inverse_carry, views = walk.surfaces.inv_carry_glm, walk.result.views
-        step.end_matrices = [views[walk.end_seers[i]].view.view * inverse_carry[s] for i, s in
-                             zip(end_rows, chosen_ends.surface.tolist(), strict=True)]
-        walk.result.end_views.extend(step.ended)
-        _fallbacks_at(walk.fallbacks, walk.level, walk.surfaces).add(
-            walk.nodes, chosen_ends.parent, chosen_ends.surface, end=[node.index for node in step.ended])
-
-    def _descend(self, walk: _Walk, step: _Level) -> Candidates | None:
+    def _descend(self, walk: TreeWalk, step: TreeLevel) -> Candidates | None:
         """A chosen level's views join the tree, and those that grow become the parents of
         the next level, planned now (step 1): exact, while the GPU draws this level's views
         (measured: on the critical path when done after the views finish); predicted, every
@@ -951,7 +436,7 @@ class ViewTree:
             # A level of one candidate that became a view (a chain's): the same, for one row.
             walk.whole[walk.level] = True
             if walk.seers is not None:
-                p, s = _parent_and_surface(step.candidates)
+                p, s = parent_and_surface(step.candidates)
                 row = walk.seers[p].copy()
                 row[s] = walk.parent_at[p]
                 walk.seers = [row]
@@ -962,14 +447,14 @@ class ViewTree:
         parents = chosen if len(grow) == len(children) else chosen.select(np.asarray(grow, np.int64))
         walk.whole[walk.level] = parents is step.candidates  # the next level planned from its candidates' rows
         if walk.seers is not None:  # each child saw its own surface from its parent
-            walk.seers = self._child_seers(walk.seers, parents, walk.parent_at)
+            walk.seers = child_seers(walk.seers, parents, walk.parent_at)
         if not walk.exact:
             walk.keys = [step.claim_keys[step.keep[at]] for at in grow]
         walk.parent_at = [child_offset + at for at in grow]
         walk.nodes, walk.rows = [children[at] for at in grow], parents.rows
         return self._plan(walk, first_index=int(step.candidates.rows.node[-1]) + 1)
 
-    def _note_cap(self, walk: _Walk) -> None:
+    def _note_cap(self, walk: TreeWalk) -> None:
         """Reaching the depth cap is reported: how many views the surfaces' own limits still
         allowed below it (counted when asked: ``TreeResult.capped``)."""
         deepest = max((node.level for node in walk.result.views), default=0)
@@ -978,7 +463,7 @@ class ViewTree:
             walk.result.count_capped = lambda: len(surfaces.cull(rows, deepest + 1, root_proj, size,
                                                                  MAX_TREE_DEPTH)[0])
 
-    def _composite(self, walk: _Walk, levels: LevelStack, root_options: SceneOptions) -> None:
+    def _composite(self, walk: TreeWalk, levels: LevelStack, root_options: SceneOptions) -> None:
         """Step 5, deepest level first: a level's fallbacks, then the views of the level
         below composited over it (a partly faded view's over its fallback), then the level's
         own transparent slot over both (its views', the root's at level 0: they were drawn
@@ -1009,20 +494,7 @@ class ViewTree:
         if walk.level:
             self.renderer.flush()  # the composites, level after level, to the GPU at once
 
-    def _keep_end_images(self, walk: _Walk, levels: LevelStack) -> None:
-        """The main view's image kept for next frame's end views, with the surfaces it shows
-        (an unseen view's may well not be in it; a candidate known empty is no view, so a
-        surface only such candidates saw is not kept as shown, as in exact visibility)."""
-        if self.ends is None:
-            return
-        if walk.surfaces.has_end_images:
-            result = walk.result
-            self.ends.keep(levels[0], walk.root, _seen_surfaces(result),
-                           compare=self.check_history and bool(result.end_views))
-        else:
-            self.ends.forget()
-
-    def _chosen_by_counts(self, surfaces: SurfaceTable, step: _Level, is_end: list[bool], settings: TreeSettings,
+    def _chosen_by_counts(self, surfaces: SurfaceTable, step: TreeLevel, is_end: list[bool], settings: TreeSettings,
                           result: TreeResult, level: int,
                           screen: tuple[int, int]) -> tuple[list[int] | np.ndarray, range, list[int]]:
         """Exact visibility: a level's candidates claimed and their counts read now (the CPU
@@ -1030,51 +502,13 @@ class ViewTree:
         keep), which of those get views below them (all), and which end views have pixels;
         each a list of rows of ``step.candidates``."""
         self._claim(surfaces, step)
-        pixels = step.pixels = self._claimed_pixels(step.queries)
-        keep = self._within_budgets(surfaces, step.candidates,
-                                    [0 if end else n for n, end in zip(pixels, is_end, strict=True)],
-                                    settings, result, level, screen)
+        pixels = step.pixels = claimed_pixels(self.passes, step.queries)
+        keep, dropped = within_budgets(surfaces, step.candidates,
+                                       [0 if end else n for n, end in zip(pixels, is_end, strict=True)],
+                                       settings.level_budget, self.renderer.stats, self.coverage, level, screen)
+        result.dropped += dropped
         end_rows = [i for i, (n, end) in enumerate(zip(pixels, is_end, strict=True)) if end and n > 0]
         return keep, range(len(keep)), end_rows  # every view kept has pixels: each gets its own surfaces
-
-    def _chosen_by_prediction(self, surfaces: SurfaceTable, step: _Level, is_end: list[bool],
-                              keys: list[tuple[int, ...]], record: RootVisibility, level: int,
-                              screen: tuple[int, int]) -> tuple[list[int], list[int], list[int], list[tuple[int, ...]]]:
-        """Predicted visibility: every candidate of the level becomes a view (or an end
-        view), drawn on the GPU only if its claim counts pixels (conditional rendering:
-        ``step.conditions``), except those known empty (``claim_cull``: their query is
-        ``MirrorPasses.no_pixels``), which get no view, as in exact visibility: no claim, no
-        draw, no views below, no composite; only those that had pixels last frame (or were
-        not claimed then) get views below them.  Returns (views, those of them that grow,
-        end views) as rows of ``step.candidates``, and each candidate's key (its chain of
-        surfaces, from its parent's in ``keys``), whose count the GPU keeps in ``record``
-        for next frame (a known-empty one's counted 0: the next frame predicts it hidden).
-        The frame's spending and the level's coverage go by last frame's counts (0 for a
-        known-empty one: it spends nothing)."""
-        candidates, entities = step.candidates, surfaces.entity_list
-        claim_keys = [keys[p] + (entities[s],) for p, s in
-                      zip(candidates.parent.tolist(), candidates.surface.tolist(), strict=True)]
-        queries, none = step.queries, self.passes.no_pixels
-        record.pending.extend(claim_keys)
-        record.counted.extend(queries)
-        seen = [record.seen.get(key) for key in claim_keys]
-        if none in queries:  # the views and the end views, less the known empty
-            claimed = [query is not none for query in queries]
-            keep = [i for i, (end, has) in enumerate(zip(is_end, claimed, strict=True)) if has and not end]
-            ends = [i for i, (end, has) in enumerate(zip(is_end, claimed, strict=True)) if has and end]
-        else:
-            keep = [i for i, end in enumerate(is_end) if not end]
-            ends = [i for i, end in enumerate(is_end) if end]
-        # A view hidden last frame is drawn (it may show now) but its own surfaces wait for
-        # a frame that counts pixels for it.
-        grow = [at for at, i in enumerate(keep) if seen[i] != 0]
-        drawn = sum(seen[i] or 0 for i in keep)
-        self.coverage[level] = screen_coverage(drawn, candidates.size, screen)
-        stats = self.renderer.stats
-        stats.views_spent += len(keep)
-        stats.pixels_spent += drawn
-        step.conditions = [queries[i] for i in keep]
-        return keep, grow, ends, claim_keys
 
     @staticmethod
     def _unviewed(fallbacks: dict[int, Fallbacks], surfaces: SurfaceTable, rows: LevelRows,
@@ -1085,12 +519,12 @@ class ViewTree:
         limits, switched off, faded out; a ``depth_cap`` of 0: all of them), as the planner's
         columns: its parent rows are rows of ``nodes`` (a level planned ahead found them with
         it: ``_plan`` adds those)."""
-        p, s = surfaces.unviewed(rows, level + 1, root_proj, root.size, depth_cap, _ends_at(ends, level + 1))
+        p, s = surfaces.unviewed(rows, level + 1, root_proj, root.size, depth_cap, ends_at(ends, level + 1))
         if len(p):
-            _fallbacks_at(fallbacks, level, surfaces).add(nodes, p, s)
+            fallbacks_at(fallbacks, level, surfaces).add(nodes, p, s)
 
     @staticmethod
-    def _fallbacks_of_level(fallbacks: dict[int, Fallbacks], surfaces: SurfaceTable, step: _Level,
+    def _fallbacks_of_level(fallbacks: dict[int, Fallbacks], surfaces: SurfaceTable, step: TreeLevel,
                             keep: list[int] | np.ndarray, is_end: list[bool], children: list[ReflectionView],
                             level: int, exact: bool) -> None:
         """The fallbacks of a level's candidates: the views kept partly faded (the faded
@@ -1099,7 +533,7 @@ class ViewTree:
         faded = [at for at, child in enumerate(children) if child.fade < 1.0]
         if faded:
             chosen, rows = step.chosen, np.asarray(faded, np.int64)
-            _fallbacks_at(fallbacks, level, surfaces).add(step.parents, chosen.parent.take(rows),
+            fallbacks_at(fallbacks, level, surfaces).add(step.parents, chosen.parent.take(rows),
                                                           chosen.surface.take(rows), 1.0 - chosen.fade.take(rows))
         if exact and step.pixels is not None and len(keep) < sum(1 for n in step.pixels if n):
             kept = set(np.asarray(keep).tolist())
@@ -1107,54 +541,8 @@ class ViewTree:
                             if n and not end and i not in kept], np.int64)
             if len(cut):
                 candidates = step.candidates
-                _fallbacks_at(fallbacks, level, surfaces).add(step.parents, candidates.parent.take(cut),
+                fallbacks_at(fallbacks, level, surfaces).add(step.parents, candidates.parent.take(cut),
                                                               candidates.surface.take(cut))
-
-    def _waits_for_counts(self, settings: TreeSettings) -> bool:
-        """Whether the levels read this frame's claim counts (the CPU waits for the GPU once
-        a level).  Budgets rank views by this frame's pixels, so any budget waits.  "auto"
-        waits on a software rasteriser only: on a GPU, not waiting made a 16-mirror frame at
-        1080p 22-28% faster (an H200)."""
-        stats = self.renderer.stats
-        if settings.level_budget is not None or stats.view_budget is not None or stats.pixel_budget is not None:
-            return True
-        if settings.visibility == "auto":
-            return self._software
-        return settings.visibility == "exact"
-
-    def _visibility_of(self, root: View) -> RootVisibility:
-        """``root``'s claim counts, with last frame's read (``RootVisibility.seen``: empty
-        where the root was not drawn last frame, and nothing is predicted from them).  At a
-        tree's first render in a frame, roots it did not draw last frame hand their queries
-        back to the context's pool."""
-        stats = self.renderer.stats
-        if stats is not self._frame_stats:
-            self._frame_stats = stats
-            self._frame += 1
-            for key, old in list(self._visibility.items()):
-                if old.frame < self._frame - 1:
-                    give_samples_queries(self.renderer.ctx, old.queries)
-                    del self._visibility[key]
-        key = (root.name, root.skip)
-        record = self._visibility.get(key)
-        if record is None:
-            record = self._visibility[key] = RootVisibility()
-        # Last frame's counts, drawn by the GPU a frame ago (reading them waits for nothing
-        # more); none where the root was not drawn last frame, or was drawn exactly.
-        fresh = record.pending and record.frame == self._frame - 1
-        record.seen = dict(zip(record.pending, self._claimed_pixels(record.counted),
-                               strict=True)) if fresh else {}
-        record.pending, record.counted = [], []
-        record.frame, record.used = self._frame, 0
-        return record
-
-    def forget_visibility(self) -> None:
-        """A camera cut: what last frame's claims counted no longer says what this frame's
-        views see (the camera went through a portal, or jumped), so the next render predicts
-        nothing: every candidate is drawn and grows views, as on a first frame (the image
-        is exact; the frame draws more views)."""
-        for record in self._visibility.values():
-            record.seen, record.pending, record.counted = {}, [], []
 
     def _root_rows(self, root: View) -> LevelRows:
         """``LevelRows.root(root)``, kept per root while its camera stands still (a probe
@@ -1183,66 +571,7 @@ class ViewTree:
                 kept.flags.writeable = False
         return self._projections[1], self._projections[2]
 
-    def _end_surfaces(self, surfaces: SurfaceTable, root: View, depth_cap: int) -> tuple[np.ndarray, int] | None:
-        """The surfaces that may get end views this frame (an end image, and a view last
-        frame) and the first level where one can (None: no end views, as in a probe's tree,
-        on the first frame or after a resize).  Kept while the table, the surfaces seen last
-        frame and the cap are the same (a still scene: every frame)."""
-        if self.ends is None or not surfaces.has_end_images or not self.ends.ready(root.size):
-            return None
-        seen = self.ends.seen
-        key = (surfaces, seen, depth_cap)
-        cached = self._ends_cache
-        if cached is not None and cached[0][0] is surfaces and cached[0][1:] == key[1:]:
-            return cached[1]
-        ends = surfaces.end_image & np.array([entity in seen for entity in surfaces.entities.tolist()], bool)
-        found = (ends, int(np.minimum(surfaces.max_depth[ends], depth_cap).min()) + 1) if ends.any() else None
-        self._ends_cache = (key, found)
-        return found
-
-    @staticmethod
-    def _child_seers(seers: list[list[int]], chosen: Candidates, parent_at: list[int]) -> list[list[int]]:
-        """Each chosen view's row of seers (``_end_seers``): its parent's, where its own
-        surface was last seen by its parent (``parent_at``: each parent row's index in the
-        tree's views).  Lists, a level's worth of copies: a few numpy calls cost more."""
-        rows = []
-        for p, s in zip(chosen.parent.tolist(), chosen.surface.tolist(), strict=True):
-            row = seers[p].copy()
-            row[s] = parent_at[p]
-            rows.append(row)
-        return rows
-
-    @staticmethod
-    def _end_seers(candidates: Candidates | None, seers: list[list[int]] | None
-                   ) -> tuple[Candidates | None, list[int] | None, list[tuple[int, int]]]:
-        """For each end view among ``candidates`` (a pair the depth limits cut), the index in
-        the tree's views of the view that saw its surface the last time up its chain (the end
-        image repeats that view's image, shrunk: ``EndImages``; -1 for the other candidates),
-        from ``seers`` (a row of surfaces per row of the level).  An end view whose surface
-        is not up its chain (a mirror of the pair seen first at the depth limit, as in a
-        ring of mirrors) has no image to repeat: it is dropped, and returned as a (parent
-        row, surface row) pair, whose pixels show the fallback, as a view the limits cut
-        without an end image does (``SurfaceTable.unviewed`` leaves end candidates out)."""
-        if candidates is None or candidates.end is None or seers is None:
-            return candidates, None, []
-        ends = candidates.end.tolist()
-        if not any(ends):
-            return candidates, None, []
-        parents, surfaces = candidates.parent.tolist(), candidates.surface.tolist()
-        found = [seers[p][s] if end else -1 for p, s, end in zip(parents, surfaces, ends, strict=True)]
-        kept = [i for i, (end, seer) in enumerate(zip(ends, found, strict=True)) if not end or seer >= 0]
-        dropped = [(parents[i], surfaces[i]) for i, (end, seer) in enumerate(zip(ends, found, strict=True))
-                   if end and seer < 0]
-        if len(kept) < len(found):
-            if not kept:
-                return None, None, dropped
-            rows, box = np.array(kept, np.int64), candidates.__dict__.get("box")
-            candidates, found = candidates.select(rows), [found[i] for i in kept]
-            if box is not None:  # the plan's unrounded rectangles (claim_cull), kept with their rows
-                candidates.__dict__["box"] = box.take(rows, axis=0)
-        return candidates, found, dropped
-
-    def _claim(self, surfaces: SurfaceTable, step: _Level) -> None:
+    def _claim(self, surfaces: SurfaceTable, step: TreeLevel) -> None:
         """Every candidate's claim in the level's targets, its pixels counted in its query.
         The claim shader's (parent view, surface, view index) of every candidate: a level's
         few claims, so lists (a few numpy calls cost more), kept with a kept plan.  The claims
@@ -1250,7 +579,7 @@ class ViewTree:
         nothing reads their rectangles (no claim, no reset)."""
         candidates, parents = step.candidates, step.parents
         kept = not candidates.rows.data.flags.writeable
-        columns = candidates.derived.get("claims")  # a kept plan's, or one planned ahead (_ahead_columns)
+        columns = candidates.derived.get("claims")  # a kept plan's, or one planned ahead (ahead_columns)
         if columns is None:  # each candidate's parent row, surface entity and node, and its scissor
             entities = surfaces.entity_list
             columns = (candidates.parent.tolist(), [entities[s] for s in candidates.surface.tolist()],
@@ -1259,7 +588,7 @@ class ViewTree:
                 candidates.derived["claims"] = columns
         rows, entities, nodes, scissors = columns
         queries, none = step.queries, self.passes.no_pixels
-        run = candidates.derived.get("claim_run") if self.lean_levels else None  # (planned ahead: _ahead_columns)
+        run = candidates.derived.get("claim_run") if self.lean_levels else None  # (planned ahead: ahead_columns)
         if len(queries) == 1 and queries[0] is not none:  # (a chain's level: one claim, apart from any other)
             step.apart = True
             claims = Claims([(parents[rows[0]].index, entities[0], nodes[0])], scissors)
@@ -1285,16 +614,7 @@ class ViewTree:
         else:
             self.passes.prepare_level(step.targets, step.parent_targets, claims, queries, run)
 
-    def _claimed_pixels(self, queries: list[moderngl.Query]) -> list[int]:
-        """Each claim's pixels (the CPU waits for the GPU, if they are this frame's), 0 for
-        one known empty (``MirrorPasses.no_pixels``: never claimed, so never read)."""
-        none = self.passes.no_pixels
-        if none not in queries:
-            return self.passes.claimed_pixels(queries)
-        counted = iter(self.passes.claimed_pixels([query for query in queries if query is not none]))
-        return [0 if query is none else next(counted) for query in queries]
-
-    def _draw_level(self, step: _Level, root: View, walk: _Walk) -> None:
+    def _draw_level(self, step: TreeLevel, root: View, walk: TreeWalk) -> None:
         """A planned level's views (and end views) into its targets, then its composite's
         rows (CPU work while the GPU draws).  The levels of one render are one scene-pass
         run (``ScenePass.draw``: the pass-wide bindings once, while nothing rebinds them).
@@ -1324,94 +644,6 @@ class ViewTree:
         elif not walk.exact or walk.level + 2 not in walk.ahead:  # (walk.level: the level above this one)
             renderer.flush()  # the next level's plan is CPU work to overlap (planned ahead, it is done)
 
-    def _level_scale(self, level: int) -> float:
-        """The resolution factor of ``level`` under the frame's pixel budget: 1, or the scale
-        at which last frame's coverage of the level (its pixels at the screen's resolution)
-        fits in the pixels left (at least ``MIN_LEVEL_SCALE``; what still does not fit is cut
-        after the claims)."""
-        left, needed = self.renderer.stats.pixels_left(), self.coverage.get(level)
-        if left is None or not needed or needed <= left:
-            return 1.0
-        # In steps of a square root of two (1, 0.71, 0.5, 0.35, 0.25): a level's size changes
-        # only when its coverage crosses a step, not with every pixel.
-        step = math.ceil(-2.0 * math.log2(max(math.sqrt(left / needed), MIN_LEVEL_SCALE)) - 1e-9)
-        return 2.0 ** (-step / 2.0)
-
-    def _within_budgets(self, surfaces: SurfaceTable, candidates: Candidates, pixels: list[int],
-                        settings: TreeSettings, result: TreeResult, level: int,
-                        screen: tuple[int, int]) -> list[int] | np.ndarray:
-        """The candidates with pixels that the level's and the frame's budgets keep (highest
-        priority first, then the most pixels), in claim order; spends the frame's budgets and
-        records the level's coverage for the next frame's pixel budget.  Without a budget,
-        in Python: a level's claims are a list, and a few numpy calls cost more than it."""
-        stats = self.renderer.stats
-        pixel_budget = stats.pixels_left()
-        if settings.level_budget is None and stats.view_budget is None and pixel_budget is None:
-            keep = [i for i, n in enumerate(pixels) if n]  # no budget: every view with pixels
-            drawn = sum(pixels)
-            self.coverage[level] = screen_coverage(drawn, candidates.size, screen)
-            stats.views_spent += len(keep)
-            stats.pixels_spent += drawn
-            return keep
-        pixels = np.asarray(pixels, np.int64)
-        keep = np.flatnonzero(pixels)
-        self.coverage[level] = screen_coverage(pixels.sum(), candidates.size, screen)
-        if len(keep) > 1:
-            # Budgets keep the surfaces of highest priority, then those covering the most
-            # pixels (this frame's claims), in claim order after.
-            keep = keep[spending_order(surfaces.priority[candidates.surface[keep]], pixels[keep])]
-        if settings.level_budget is not None and len(keep) > settings.level_budget:
-            result.dropped += len(keep) - settings.level_budget
-            keep = keep[: settings.level_budget]
-        left = stats.views_left()
-        if left is not None and len(keep) > left:
-            stats.views_cut += len(keep) - left
-            keep = keep[:left]
-        if pixel_budget is not None:  # spent by the pixels drawn, at the level's resolution
-            fits = np.cumsum(pixels[keep]) <= pixel_budget
-            stats.views_cut += int(len(keep) - fits.sum())
-            keep = keep[fits]
-        stats.views_spent += len(keep)
-        stats.pixels_spent += int(pixels[keep].sum())
-        return np.sort(keep)
-
-    @staticmethod
-    def _level_nodes(surfaces: SurfaceTable, chosen: Candidates, parents: list[ReflectionView], level: int,
-                     hide: int) -> tuple[list[PlannedView], list[ReflectionView]]:
-        """The planned views of a level's chosen candidates (what the scene pass and the
-        composite read: each with its Camera block already packed, its matrices read from the
-        block only if something asks) and their tree nodes, in one pass: one ``tolist`` per
-        column, not one conversion per view.  A kept plan's candidates (read-only: a still
-        camera's, a probe face's) keep their views (a View is not changed after it is made)
-        and what their nodes are made of, so the frames that find the plan again make only
-        the nodes."""
-        kept = chosen.derived.get(("nodes", hide))
-        if kept is not None:  # a kept plan's, or one planned ahead: its views, and what its nodes are made of
-            views, rows = kept
-            return views, [ReflectionView(node, level, view, rect, state, parents[p], fade)
-                           for view, (node, rect, state, p, fade) in zip(views, rows, strict=True)]
-        states = surfaces.states
-        size = chosen.size
-        chosen.rows.finish()  # a lazy plan's cameras: those of the views chosen
-        blocks = chosen.rows.data[:, BLOCK].tobytes()  # the float32 blocks' bytes (Candidates.blocks')
-        step = CAMERA_BLOCK_BYTES
-        columns = chosen.rows.data.take(_NODE_COLUMNS, axis=1).astype(np.int64)
-        views, nodes = [], []
-        at = 0
-        for (x0, y0, x1, y1, mirrored, node), s, p, scissor, fade in zip(  # x1, y1: negated (LEVEL_ROW)
-                columns.tolist(), chosen.surface.tolist(), chosen.parent.tolist(), chosen.scissor.tolist(),
-                chosen.fade.tolist(), strict=True):
-            state = states[s]
-            view = PlannedView(blocks[at:at + step], size, state.kind, state.entity, state.exit_plane, mirrored == 1,
-                               tuple(scissor), node, state.exit_entity, hide)
-            at += step
-            views.append(view)
-            nodes.append(ReflectionView(node, level, view, (x0, y0, -x1 - x0, -y1 - y0), state, parents[p], fade))
-        if not chosen.rows.data.flags.writeable:
-            chosen.derived[("nodes", hide)] = (views, [(n.index, n.rect, n.surface, p, n.fade) for n, p in
-                                                       zip(nodes, chosen.parent.tolist(), strict=True)])
-        return views, nodes
-
     def _prepare_composite(self, children: list[ReflectionView], root: View,
                            parent_size: tuple[int, int]) -> PreparedComposites:
         """The composite of a level's views into the level above (``parent_size`` pixels: a
@@ -1425,82 +657,14 @@ class ViewTree:
         return self.passes.prepare_views(children, rects, parent_size)
 
     def release(self) -> None:
-        for record in self._visibility.values():
-            give_samples_queries(self.renderer.ctx, record.queries)
-        self._visibility.clear()
+        self.visibility.release()
         self.passes.release()
         if self.ends is not None:
             self.ends.release()
-        self.copies.release()
+        self.still.copies.release()
 
 
 _NO_ROWS = np.zeros(0, np.int64)
-# The LevelRows columns a level's nodes read (_level_nodes), as whole numbers: the rectangle, mirrored, node.
-_NODE_COLUMNS = np.array([*range(ROW["rect"].start, ROW["rect"].stop), ROW["mirrored"].start, ROW["node"].start])
-# Its int64 columns (_ahead_columns): the parent row, the surface row, the scissor.
-_INT_COLUMNS = np.array([ROW["parent"].start, ROW["surface"].start, *range(ROW["scissor"].start, ROW["scissor"].stop)])
-
-
-def _parent_and_surface(candidates: Candidates) -> tuple[int, int]:
-    """The parent row and surface row of a level's one candidate, as Python numbers (those
-    ``_ahead_columns`` read already, else from its rows)."""
-    found = candidates.derived.get("one")
-    if found is None:
-        found = candidates.derived["one"] = (int(candidates.parent[0]), int(candidates.surface[0]))
-    return found
-
-
-def _fallbacks_at(fallbacks: dict[int, Fallbacks], level: int, surfaces: SurfaceTable) -> Fallbacks:
-    """The fallbacks drawn into ``level`` (made empty when first asked for)."""
-    found = fallbacks.get(level)
-    if found is None:
-        found = fallbacks[level] = Fallbacks(surfaces.states)
-    return found
-
-
-def _seen_surfaces(result: TreeResult) -> frozenset[int]:
-    """The surfaces a tree's image shows through a view or an end view (an unseen view's may
-    well not be in it; a candidate known empty is no view, so a surface only such candidates
-    saw is not kept as shown, as in exact visibility): what ``EndImages.keep`` keeps with it."""
-    return frozenset(node.surface.entity for node in (*result.views[1:], *result.end_views) if not node.unseen)
-
-
-def _painted_whole(walk: _Walk, level: int) -> bool:
-    """Whether every pixel ``level``'s fallbacks and the composite of the level below write
-    is written whole: a blend weight of exactly 1 (reflection x 1 + own x 0), so what the
-    pixel held before does not matter (a refill need not put the level back, given no
-    transparent slot, which blends over what its pixels hold, and the end views' fill,
-    which blends nothing).  That holds for a portal (mirror_composite.frag writes alpha 1)
-    and for a mirror of reflect rate 1 (times a view's fade of 1), unfaded, not water
-    (Fresnel), the weights ``shading_replaced`` trusts; a partly faded share is a quotient
-    of floats.  (A pixel's own colour is finite: an infinite one times 0 is no number.)"""
-    below = walk.steps[level] if level < len(walk.steps) else None
-    if below is not None and below.composite is not None and any(
-            node.fade != 1.0 or not _weighs_one(node.surface) for node in below.composite):
-        return False
-    fallbacks = walk.fallbacks.get(level)
-    if fallbacks:
-        states = fallbacks.states
-        if (fallbacks.share is not None and any(share != 1.0 for share in fallbacks.share)) or not all(
-                _weighs_one(states[row]) for row in set(fallbacks.surface)):
-            return False
-    return True
-
-
-def _weighs_one(state: SurfaceState) -> bool:
-    """A surface whose composite and fallback blend at a weight of exactly 1 (``_painted_whole``)."""
-    return state.kind == "portal" or (state.reflect_rate == 1.0 and state.fade is None and state.water is None)
-
-
-def _bounds(rects: Sequence[tuple[int, int, int, int]]) -> tuple[int, int, int, int]:
-    """The smallest rectangle (x, y, width, height) holding every one of ``rects``."""
-    x0, y0 = min(x for x, _, _, _ in rects), min(y for _, y, _, _ in rects)
-    return x0, y0, max(x + w for x, _, w, _ in rects) - x0, max(y + h for _, y, _, h in rects) - y0
-
-
-def _ends_at(ends: tuple[np.ndarray, int] | None, depth: int) -> np.ndarray | None:
-    """The end-image surfaces to plan at ``depth`` (None before the first level a depth limit cuts)."""
-    return ends[0] if ends is not None and depth >= ends[1] else None
 
 
 def _claims_apart(rects: Sequence[Sequence[int]]) -> bool:
