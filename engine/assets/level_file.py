@@ -28,6 +28,8 @@ as games and users import them. Each job has its own module:
 
 - engine.assets.level_read: reading and checking a file (``load_level``, ``Level``,
   ``LevelError``, ``ENGINE_COMPONENTS``: the components a file may hold);
+- engine.assets.level_lines: the line of each entity, table and field in the text (for
+  the errors' line numbers), and the nesting limit;
 - engine.assets.level_assets: the meshes and textures a level names, its asset roots
   (``set_asset_roots``) and its memory budget;
 - engine.assets.level_save: writing a world back (``save_level``), keeping the file's own

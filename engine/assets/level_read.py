@@ -8,11 +8,11 @@ docs/level_files.md.
 
 Loading checks everything before anything is made (``load_level``): a mistake is a
 ``LevelError`` naming the file, the line, the entity and the field (tomllib gives no
-positions, so the lines come from a map of the text, ``_line_map``). A level is data a
-stranger may have written: whatever file it names (a symlink loop, a FIFO, a device, an
-image bomb, a file nested past any parser's depth, a path outside its folder), loading ends
-in the level or in a LevelError, within ``LEVEL_MEMORY_BUDGET`` (engine.assets.level_assets
-loads the meshes and textures it names). Each component is built once from its fields while
+positions: the lines come from engine.assets.level_lines). A level is data a stranger may
+have written: whatever file it names (a symlink loop, a FIFO, a device, an image bomb, a
+file nested past any parser's depth, a path outside its folder), loading ends in the level
+or in a LevelError, within ``LEVEL_MEMORY_BUDGET`` (engine.assets.level_assets loads the
+meshes and textures it names). Each component is built once from its fields while
 checking, so its own ``_validate`` speaks with the file's line; ``Level.spawn`` then creates
 the entities all or nothing.
 """
@@ -32,6 +32,7 @@ from pyglm import glm
 import components as _components
 from components import ComponentValueError, look_rotation, yaw_pitch_rotation
 from engine.assets.level_assets import LevelAssets, level_mesh, level_texture, user_asset_roots
+from engine.assets.level_lines import MAX_NESTING, deep_line, line_map, nesting_depth
 from engine.assets.texture_data import file_problem
 from engine.core.budget import ViewBudget, ViewBudgetError
 from engine.core.errors import AssetError, SpeculumError
@@ -54,7 +55,6 @@ DERIVED_COMPONENTS = ("PortalClone", "Slice")
 # Fields holding another entity: a name in the file, an id in the world.
 REFERENCE_FIELDS = {("Transform", "parent"), ("Portal", "partner")}
 MAX_LEVEL_BYTES = 4 << 20  # a level file's size (the shipped ones are a few KB)
-MAX_NESTING = 16  # arrays and inline tables inside one value (a level needs three at most)
 
 
 class LevelError(SpeculumError):
@@ -70,99 +70,6 @@ class LevelError(SpeculumError):
         if field is not None:
             parts.append(field)
         super().__init__(": ".join(parts) + f": {reason}")
-
-
-# --- where things are in the text (tomllib gives no positions) ------------------------------
-
-_TABLE = re.compile(r"^\s*\[\s*entity\.([A-Za-z_]\w*)\s*\]")
-_KEY = re.compile(r"^\s*([A-Za-z_][\w-]*)\s*=")
-_HEADER = re.compile(r"^\s*\[\[?\s*([A-Za-z0-9_-]+)")
-
-
-def _line_map(text: str) -> dict[tuple, int]:
-    """Line numbers of each ``[[entity]]`` (key (i,)), component table ((i, Class)) and field
-    ((i, Class, field)), by the entity's index in the file; of the other tables' headers
-    (("table", name): ``[level]``, a misspelt ``[[entitty]]``, and a key before any table),
-    and their keys (("level", key), ("rules", key))."""
-    lines: dict[tuple, int] = {}
-    entity, table, section = -1, None, None
-    for number, raw in enumerate(text.splitlines(), start=1):
-        stripped = raw.strip()
-        header = _HEADER.match(raw) if stripped.startswith("[") else None
-        if header:
-            lines.setdefault(("table", header.group(1)), number)
-        if stripped.startswith("[[entity]]"):
-            entity, table, section = entity + 1, None, None
-            lines[(entity,)] = number
-            continue
-        match = _TABLE.match(raw)
-        if match and entity >= 0:
-            table = match.group(1)
-            lines[(entity, table)] = number
-            continue
-        if stripped.startswith("["):
-            entity, table = (entity if stripped.startswith("[entity") else -1), None
-            section = None if stripped.startswith("[entity") or not header else header.group(1)
-            continue
-        match = _KEY.match(raw)
-        if match and entity >= 0:
-            key = match.group(1)
-            if table is None:
-                lines.setdefault((entity, key), number)  # an inline component table, or name
-            else:
-                lines.setdefault((entity, table, key), number)
-        elif match:
-            lines.setdefault((section, match.group(1)) if section else ("table", match.group(1)), number)
-    return lines
-
-
-def _depth(value: Any) -> int:
-    """How deep arrays and tables nest in ``value`` (a number is 0, ``[1]`` is 1; past
-    MAX_NESTING the walk stops at MAX_NESTING + 1), without recursion."""
-    deepest, stack = 0, [(value, 0)]
-    while stack:
-        item, depth = stack.pop()
-        if isinstance(item, (list, dict)):
-            deepest = max(deepest, depth + 1)
-            if deepest > MAX_NESTING:
-                return deepest
-            stack.extend((child, depth + 1) for child in (item.values() if isinstance(item, dict) else item))
-    return deepest
-
-
-def _deep_line(text: str) -> int | None:
-    """The first line where brackets and braces outside strings and comments nest past
-    ``MAX_NESTING`` (for a file too deep for the TOML parser to say where)."""
-    depth, line, i, n = 0, 1, 0, len(text)
-    while i < n:
-        c = text[i]
-        if c == "\n":
-            line += 1
-        elif c == "#":
-            end = text.find("\n", i)
-            i = n if end < 0 else end
-            continue
-        elif c in "\"'":
-            quote = text[i:i + 3] if text[i:i + 3] in ('"""', "'''") else c
-            j = i + len(quote)
-            while j < n and not text.startswith(quote, j):
-                if text[j] == "\\" and c == '"':
-                    j += 1
-                elif text[j] == "\n":
-                    if len(quote) == 1:
-                        break
-                    line += 1
-                j += 1
-            i = j + len(quote)
-            continue
-        elif c in "[{":
-            depth += 1
-            if depth > MAX_NESTING + 2:  # a [[table]] header is two of them
-                return line
-        elif c in "]}":
-            depth = max(0, depth - 1)
-        i += 1
-    return None
 
 
 def _rotation(value: Any) -> glm.quat:
@@ -266,10 +173,10 @@ def load_level(path: str | Path, extra_components: Mapping[str, type] | None = N
         raise LevelError(path, f"not valid TOML ({exc})", int(match.group(1)) if match else None) from None
     except RecursionError:
         raise LevelError(path, f"arrays or inline tables nested too deeply (at most {MAX_NESTING})",
-                         _deep_line(text)) from None
+                         deep_line(text)) from None
     except MemoryError:
         raise LevelError(path, "does not fit in memory") from None
-    lines = _line_map(text)
+    lines = line_map(text)
     known = {**ENGINE_COMPONENTS, **(extra_components or {})}
     unknown_top = [key for key in data if key not in ("level", "rules", "entity")]
     if unknown_top:
@@ -294,7 +201,7 @@ def load_level(path: str | Path, extra_components: Mapping[str, type] | None = N
     if not isinstance(rules, dict):
         raise LevelError(path, "[rules] must be a table", lines.get(("table", "rules")))
     for key, value in rules.items():
-        if _depth(value) > MAX_NESTING:
+        if nesting_depth(value) > MAX_NESTING:
             raise LevelError(path, f"[rules] {key}: arrays or inline tables nested too deeply (at most {MAX_NESTING})",
                              lines.get(("rules", key), lines.get(("table", "rules"))))
     tables = data.get("entity", [])
@@ -366,8 +273,8 @@ def _entity(path: Path, assets: LevelAssets, index: int, name: str, table: dict[
         cls = known.get(key)
         if cls is None:
             raise LevelError(path, f"no component {key!r} (components: {', '.join(sorted(known))})", line, name)
-        deep = [f for f, v in fields.items() if _depth(v) > MAX_NESTING] if isinstance(fields, dict) else \
-            ([None] if _depth(fields) > MAX_NESTING else [])
+        deep = [f for f, v in fields.items() if nesting_depth(v) > MAX_NESTING] if isinstance(fields, dict) else \
+            ([None] if nesting_depth(fields) > MAX_NESTING else [])
         if deep:
             raise LevelError(path, f"arrays or inline tables nested too deeply (at most {MAX_NESTING})",
                              lines.get((index, key, deep[0]), line), name, f"{key}.{deep[0]}" if deep[0] else key)
