@@ -23,7 +23,8 @@ import numpy as np
 from pyglm import glm
 
 from components import ComponentValueError
-from engine.assets.level_file import DERIVED_COMPONENTS, ENGINE_COMPONENTS, save_level
+from engine.assets.level_read import DERIVED_COMPONENTS, ENGINE_COMPONENTS
+from engine.assets.level_save import save_level
 from engine.core.errors import SpeculumError
 from engine.core.world import World, check_components
 

@@ -160,7 +160,7 @@ def _pose(text: str) -> tuple[float, ...]:
 def main(game: Game, argv: Sequence[str] | None = None, parser: argparse.ArgumentParser | None = None) -> int:
     """Run ``game`` as ``argv`` says; the exit status (0, or 2 after one error line).
     ``parser``: ``build_parser``'s with the game's own options added."""
-    from engine.assets.level_file import set_asset_roots, user_asset_roots
+    from engine.assets.level_assets import set_asset_roots, user_asset_roots
 
     args = parse_args(game, argv, parser)
     before = user_asset_roots()

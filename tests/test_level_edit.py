@@ -12,7 +12,8 @@ import pytest
 from pyglm import glm
 
 from components import ComponentValueError, Material, MeshRef, Mirror, Transform, Visibility
-from engine.assets.level_file import load_level, same_floats, save_level
+from engine.assets.level_file import load_level, save_level
+from engine.assets.level_save import same_floats
 from engine.assets.mesh import box
 from engine.core.world import World
 from games.hall_of_mirrors.level import Spin

@@ -10,7 +10,8 @@ import numpy as np
 import pytest
 
 from components import Camera, MeshRef, Mirror, Portal, Transform, look_rotation
-from engine.assets.level_file import LevelError, _encode_component, load_level, same_floats, save_level
+from engine.assets.level_file import LevelError, load_level, save_level
+from engine.assets.level_save import _encode_component, same_floats
 from engine.assets.mesh import load_model
 from engine.assets.texture_data import ripple_normal_map
 from engine.core.world import World

@@ -21,7 +21,7 @@ import pytest
 from PIL import Image
 
 from components import Reflective, Transform
-from engine.assets import level_file, texture_data
+from engine.assets import level_assets, level_file, texture_data
 from engine.assets.level_file import load_level
 from engine.assets.mesh import load_model, model_bytes, sphere, tint_srgb
 from engine.assets.model_files import MAX_MTL_BYTES
@@ -340,9 +340,9 @@ def test_a_level_never_decodes_or_caches_a_models_textures(tmp_path):
         load_model(path)  # drawn: decoded, and refused
     (tmp_path / "level.toml").write_text('[level]\nname = "mesh only"\n\n[[entity]]\nname = "thing"\n'
                                          '[entity.Transform]\n[entity.MeshRef]\nmesh = { file = "model.obj" }\n')
-    level_file._ASSETS.clear()
+    level_assets._ASSETS.clear()
     load_level(tmp_path / "level.toml")
-    (parts,) = [v for k, v in level_file._ASSETS.items() if k[0] == "model"]
+    (parts,) = [v for k, v in level_assets._ASSETS.items() if k[0] == "model"]
     assert all(p.texture is None and p.normal_map is None for p in parts)
     assert model_bytes(parts) == sum(a.nbytes for a in (parts[0].mesh.positions, parts[0].mesh.normals,
                                                          parts[0].mesh.uvs, parts[0].mesh.indices))

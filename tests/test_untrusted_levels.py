@@ -158,12 +158,12 @@ def test_a_file_the_process_may_not_read_is_named(tmp_path, monkeypatch):
 
 
 def test_running_out_of_memory_is_an_error_line_naming_the_field(tmp_path, monkeypatch):
-    import engine.assets.level_file as level_file
+    import engine.assets.level_assets as level_assets
 
     def no_memory(*args, **kwargs):
         raise MemoryError
 
-    monkeypatch.setattr(level_file, "checker_texture", no_memory)
+    monkeypatch.setattr(level_assets, "checker_texture", no_memory)
     path = write_level(tmp_path, HEAD + entity(texture="{ checker = [64, 8] }"))
     error = refusal(path)
     assert error.field == "Material.texture" and "memory" in error.reason
@@ -224,9 +224,9 @@ def test_the_memory_budget_is_checked_before_allocating(monkeypatch):
 
 
 def test_a_level_of_many_big_textures_stays_in_its_budget(tmp_path, monkeypatch):
-    import engine.assets.level_file as level_file
+    import engine.assets.level_assets as level_assets
 
-    monkeypatch.setattr(level_file, "LEVEL_MEMORY_BUDGET", 3 << 20)
+    monkeypatch.setattr(level_assets, "LEVEL_MEMORY_BUDGET", 3 << 20)
     text = HEAD + "".join(f'[[entity]]\nname = "t{i}"\n[entity.Material]\ntexture = {{ checker = [512, {i + 1}] }}\n'
                           for i in range(4))
     path = write_level(tmp_path, text)
@@ -278,13 +278,13 @@ def test_asset_roots_let_a_level_use_shared_assets(outside):
     path = write_level(folder, HEAD + entity(texture='{ file = "../../secret.png" }'))
     level = load_level(path, asset_roots=[outside])
     assert level.entity_names == ["thing"]
-    import engine.assets.level_file as level_file
+    from engine.assets.level_assets import set_asset_roots
 
-    level_file.set_asset_roots([outside])
+    set_asset_roots([outside])
     try:
         load_level(path)
     finally:
-        level_file.set_asset_roots([])
+        set_asset_roots([])
     refusal(path)
 
 

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import sys
 
-from engine.assets.level_file import set_asset_roots
+from engine.assets.level_assets import set_asset_roots
 from engine.core.errors import SpeculumError
 from engine.render.gl_context import have_display
 from games.portal_run.game import PortalRun

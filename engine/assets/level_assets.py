@@ -1,0 +1,253 @@
+"""The meshes and textures a level file names, loaded for it within a budget.
+
+A level's ``MeshRef.mesh`` and ``Material`` textures are tables (engine.assets.level_read
+decodes the rest of the file): a generator (``{ box = [w, h, d] }``, ``{ checker = [size,
+squares] }``, ``{ ripples = [size, rings] }``, ...) or ``{ file = "x.obj" }``. They live
+apart from the reader because they are the part of a level that reaches the disk and the
+memory: a file is followed only inside the level's folder or an asset root (the game's
+``LevelGame.asset_roots``, the user's ``--asset-root DIR``: ``set_asset_roots``), each file
+is checked before it is read (engine.assets.texture_data.check_asset_file), and what a
+level's assets take together is held to ``LEVEL_MEMORY_BUDGET``, counted before a generator
+runs. The same file (and the same generator call) loaded twice is one object, so the
+renderer uploads it once. A mistake is a ValueError (or an AssetError) the reader turns
+into a LevelError naming the file, line, entity and field.
+"""
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Iterable, Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+from engine.assets.mesh import Mesh, box, load_model, model_bytes, plane, quad, sphere
+from engine.assets.texture_data import (
+    MAX_TEXTURE_SIDE,
+    TextureData,
+    check_asset_file,
+    checker_texture,
+    contained_path,
+    load_texture,
+    ripple_normal_map,
+    texture_bytes,
+)
+
+_MESH_MAKERS: dict[str, Callable[..., Mesh]] = {"box": box, "quad": quad, "plane": plane, "sphere": sphere}
+LEVEL_MEMORY_BUDGET = 2 << 30  # bytes a level's meshes and textures may take together (each is held to
+#                                 engine.assets.texture_data.ASSET_MEMORY_BUDGET), counted before a generator runs
+
+_ASSETS: dict[tuple, Any] = {}  # one Mesh / TextureData per file (and modification time) or generator call
+
+
+def _cached(key: tuple, make: Callable[[], Any]) -> Any:
+    value = _ASSETS.get(key)
+    if value is None:
+        value = _ASSETS[key] = make()
+    return value
+
+
+class _Budget:
+    """What a level's assets take together (each distinct asset once), checked against
+    LEVEL_MEMORY_BUDGET before a generator runs (files: once loaded, each held to the
+    asset budget as it loads)."""
+
+    def __init__(self) -> None:
+        self.used, self.keys = 0, set()
+
+    def take(self, key: tuple, size: int) -> None:
+        if key in self.keys:
+            return
+        if self.used + size > LEVEL_MEMORY_BUDGET:
+            raise ValueError(f"the level's meshes and textures would take {_mib(self.used + size)} MiB, over the "
+                             f"memory budget of {_mib(LEVEL_MEMORY_BUDGET)} MiB a level may have "
+                             "(engine.assets.level_file.LEVEL_MEMORY_BUDGET)")
+        self.keys.add(key)
+        self.used += size
+
+
+def _mib(size: int) -> str:
+    return f"{size / (1 << 20):.0f}"
+
+
+class LevelAssets:
+    """Where a level's assets are looked for: its folder and any asset roots (the game's and
+    the user's), and what they take so far."""
+
+    def __init__(self, folder: Path, roots: Sequence[Path]) -> None:
+        self.folder = folder
+        self.roots = [folder, *roots]
+        self.budget = _Budget()
+
+
+def is_number(value: Any) -> bool:
+    """A TOML number (an int or a float, not a bool)."""
+    return isinstance(value, (int, float)) and not isinstance(value, bool)
+
+
+def _is_int(value: Any) -> bool:
+    return isinstance(value, int) and not isinstance(value, bool)
+
+
+def level_mesh(spec: Any, where: LevelAssets) -> Mesh:
+    """The mesh a ``MeshRef.mesh`` table names: a generator's (cached by its arguments) or a
+    model file's (one part of it, ``part = "..."`` where it has several)."""
+    if not isinstance(spec, Mapping):
+        raise ValueError(f"a mesh is a table such as {{ box = [1, 1, 1] }} or {{ file = \"x.obj\" }}, got {spec!r}")
+    spec = dict(spec)
+    name = spec.pop("name", None)
+    if name is not None and not isinstance(name, str):
+        raise ValueError(f"a mesh's name must be a string, got {name!r}")
+    if "file" in spec:
+        path = _asset_path(spec.pop("file"), where)
+        part = spec.pop("part", None)
+        _no_more(spec, "mesh file")
+        info = check_asset_file(path, f"mesh file {str(path)!r}")
+        key = ("model", str(path), info.st_mtime_ns, info.st_size, info.st_ino, tuple(map(str, where.roots)))
+        # The mesh alone: a level draws a file's mesh with its own Material, so the images the
+        # model's materials name are checked but neither decoded nor cached.
+        parts = _cached(key, lambda: load_model(path, roots=where.roots, materials=False))
+        where.budget.take(key, model_bytes(parts))
+        names = [p.name for p in parts]
+        if part is None and len(parts) > 1:
+            raise ValueError(f"mesh file {str(path)!r} has {len(parts)} parts {names}: say which with part = \"...\"")
+        # A part by its name in the file ("left") or as the engine names it ("two.obj:left").
+        chosen = parts[0] if part is None else next(
+            (p for p in parts if part in (p.name, p.name.split(":", 1)[-1])), None)
+        if chosen is None:
+            raise ValueError(f"mesh file {str(path)!r} has no part {part!r} (parts: {names})")
+        chosen.mesh.source = {"file": str(path), **({"part": part} if part is not None else {})}
+        return chosen.mesh
+    kinds = [k for k in spec if k in _MESH_MAKERS]
+    if len(kinds) != 1:
+        raise ValueError(f"a mesh names one of {sorted(_MESH_MAKERS)} or file, got {sorted(spec)}")
+    kind = kinds[0]
+    size = spec.pop(kind)
+    options = {k: spec.pop(k) for k in ("uv_repeat", "segments", "rings") if k in spec}
+    _no_more(spec, f"{kind} mesh")
+    allowed = {"plane": ("uv_repeat",), "sphere": ("segments", "rings")}.get(kind, ())
+    for option, value in options.items():
+        if option not in allowed:
+            raise ValueError(f"a {kind} mesh has no {option} ({kind} takes {', '.join(allowed) or 'no options'})")
+        if option == "uv_repeat" and not (is_number(value) and math.isfinite(value)):
+            raise ValueError(f"plane mesh: uv_repeat must be a finite number, got {value!r}")
+        if option in ("segments", "rings") and not _is_int(value):
+            raise ValueError(f"sphere mesh: {option} must be an int, got {value!r}")
+    if kind == "sphere":
+        if not is_number(size):
+            raise ValueError(f"sphere = r (a number, the radius), got {size!r}")
+        args: tuple = (float(size),)
+    else:
+        count = 3 if kind == "box" else 2
+        if not isinstance(size, list) or len(size) != count or not all(is_number(v) for v in size):
+            shape = {"box": "[w, h, d] (three numbers)", "quad": "[w, h] (two numbers)",
+                     "plane": "[w, d] (two numbers)"}[kind]
+            raise ValueError(f"{kind} = {shape}, got {size!r}")
+        args = (tuple(float(v) for v in size),) if kind == "box" else tuple(float(v) for v in size)
+    if name is not None:
+        options["name"] = name
+    key = ("mesh", kind, args, tuple(sorted(options.items())))
+    if kind == "sphere":  # the others are a few hundred bytes
+        segments, rings = options.get("segments", 48), options.get("rings", 24)
+        where.budget.take(key, (segments + 1) * (rings + 1) * 32 + segments * rings * 24)
+    return _cached(key, lambda: _MESH_MAKERS[kind](*args, **options))  # the generator records its source
+
+
+def level_texture(spec: Any, where: LevelAssets, normal_map: bool = False) -> TextureData:
+    """The texture a ``Material`` table names (``texture`` or a map): checker, ripples or an
+    image file; ``normal_map``: a linear map, which keeps a 16-bit file's 16 bits."""
+    if not isinstance(spec, Mapping):
+        raise ValueError(f"a texture is a table such as {{ checker = [128, 8] }}, {{ ripples = [256, 6] }} or "
+                         f"{{ file = \"x.png\" }}, got {spec!r}")
+    spec = dict(spec)
+    name = spec.pop("name", None)
+    if name is not None and not isinstance(name, str):
+        raise ValueError(f"a texture's name must be a string, got {name!r}")
+    if "file" in spec:
+        path = _asset_path(spec.pop("file"), where)
+        _no_more(spec, "texture file")
+        info = check_asset_file(path, f"texture file {str(path)!r}")
+        # A normal map keeps a 16-bit file's finer slopes (no terraces); a colour is 8 bits.
+        key = ("texture", str(path), info.st_mtime_ns, info.st_size, info.st_ino, normal_map)
+        texture = _cached(key, lambda: load_texture(path, keep_16_bits=normal_map))
+        where.budget.take(key, texture.pixels.nbytes)
+        return texture
+    if "ripples" in spec and "checker" not in spec:
+        return _ripples(spec, name, where)
+    if "checker" not in spec:
+        raise ValueError(f"a texture names one of checker, ripples or file, got {sorted(spec)}")
+    size_squares = spec.pop("checker")
+    if not isinstance(size_squares, list) or len(size_squares) != 2 or not all(_is_int(v) for v in size_squares):
+        raise ValueError(f"checker = [size, squares] (two integers), got {size_squares!r}")
+    size, squares = size_squares
+    colours: dict[str, Any] = {}
+    for k in ("a", "b"):
+        if k in spec:
+            value = spec.pop(k)
+            if not isinstance(value, list) or len(value) != 3 or not all(_is_int(c) and 0 <= c <= 255 for c in value):
+                raise ValueError(f"checker texture: {k} must be three integers in [0, 255], got {value!r}")
+            colours[k] = tuple(value)
+    _no_more(spec, "checker texture")
+    if name is not None:
+        colours["name"] = name
+    key = ("checker", size, squares, tuple(sorted(colours.items())))
+    if 1 <= size <= MAX_TEXTURE_SIDE:  # else checker_texture says what is wrong
+        where.budget.take(key, texture_bytes(size, size))
+    return _cached(key, lambda: checker_texture(size, squares, **colours))
+
+
+def _ripples(spec: dict, name: Any, where: LevelAssets) -> TextureData:
+    """``{ ripples = [size, rings] }`` with optional ``slope`` and ``name``: engine.assets.texture_data's
+    ripple_normal_map (it checks the ranges; here only the kinds, so the cache key is plain)."""
+    size_rings = spec.pop("ripples")
+    if not isinstance(size_rings, list) or len(size_rings) != 2 or not all(_is_int(v) for v in size_rings):
+        raise ValueError(f"ripples = [size, rings] (two integers), got {size_rings!r}")
+    options: dict[str, Any] = {}
+    if "slope" in spec:
+        slope = spec.pop("slope")
+        if not is_number(slope):
+            raise ValueError(f"ripples normal map: slope must be a number, got {slope!r}")
+        options["slope"] = float(slope)
+    _no_more(spec, "ripples normal map")
+    if name is not None:
+        options["name"] = name
+    size, rings = size_rings
+    defaults = {"slope": 0.5, "name": "ripples"}  # written or left out: one map
+    options = {k: v for k, v in options.items() if v != defaults[k]}
+    key = ("ripples", size, rings, tuple(sorted(options.items())))
+    if 1 <= size <= MAX_TEXTURE_SIDE:
+        where.budget.take(key, texture_bytes(size, size))
+    return _cached(key, lambda: ripple_normal_map(size, rings, **options))
+
+
+def _asset_path(value: Any, where: LevelAssets) -> Path:
+    """The file a level names, made absolute with its links followed, when it is inside the
+    level's folder or an asset root; the refusal reads the same whether the file is there or not."""
+    if not isinstance(value, str):
+        raise ValueError(f"a file is a path string, got {value!r}")
+    if not value or "\0" in value:
+        raise ValueError(f"a file is a path, got {value!r}")
+    path = contained_path(where.folder / value, where.roots)
+    if path is None:
+        roots = "" if len(where.roots) == 1 else f" and its asset roots ({', '.join(str(r) for r in where.roots[1:])})"
+        raise ValueError(f"file {value!r} is outside the level's folder{roots}: a level's assets stay inside it "
+                         "(a game may declare more asset roots, a player may pass --asset-root DIR)")
+    return path
+
+
+def _no_more(spec: dict, what: str) -> None:
+    if spec:
+        raise ValueError(f"{what}: unknown keys {sorted(spec)}")
+
+
+_USER_ASSET_ROOTS: list[Path] = []
+
+
+def set_asset_roots(roots: Iterable[str | Path]) -> None:
+    """Folders every level loaded from now on may take assets from, besides its own folder
+    and its game's ``asset_roots`` (the runner's ``--asset-root DIR``, the user's choice)."""
+    _USER_ASSET_ROOTS[:] = [Path(root) for root in roots]
+
+
+def user_asset_roots() -> list[Path]:
+    """The folders ``set_asset_roots`` gave (what ``--asset-root`` allows)."""
+    return list(_USER_ASSET_ROOTS)
+
