@@ -441,7 +441,7 @@ class StillFuzzer:
         elif target == "pane":
             entity = next((e for n, e in side.named.items() if n.startswith("pane")), None)
         elif target == "pair":
-            entity = side.named["first"]
+            entity = side.named.get("first")  # (None once a change before removed it)
         else:
             entity = side.named.get(target)
         if entity is None:
