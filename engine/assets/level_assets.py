@@ -59,7 +59,7 @@ class _Budget:
         if self.used + size > LEVEL_MEMORY_BUDGET:
             raise ValueError(f"the level's meshes and textures would take {_mib(self.used + size)} MiB, over the "
                              f"memory budget of {_mib(LEVEL_MEMORY_BUDGET)} MiB a level may have "
-                             "(engine.assets.level_file.LEVEL_MEMORY_BUDGET)")
+                             "(engine.assets.level_assets.LEVEL_MEMORY_BUDGET)")
         self.keys.add(key)
         self.used += size
 

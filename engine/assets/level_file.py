@@ -23,8 +23,9 @@ creates the entities all or nothing. The same asset file (and the same generated
 texture) loaded twice is one object, so the renderer uploads it once.
 
 This module is the level file's public face: ``LevelGame``, and ``load_level``, ``Level``,
-``LevelError``, ``save_level`` and ``LEVEL_MEMORY_BUDGET`` re-exported from where they live,
-as games and users import them. Each job has its own module:
+``LevelError`` and ``save_level`` re-exported from where they live, as games and users
+import them (the memory budget is a setting of the module that counts it:
+``engine.assets.level_assets.LEVEL_MEMORY_BUDGET``). Each job has its own module:
 
 - engine.assets.level_read: reading and checking a file (``load_level``, ``Level``,
   ``LevelError``, ``ENGINE_COMPONENTS``: the components a file may hold);
@@ -40,7 +41,6 @@ from __future__ import annotations
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 
-from engine.assets.level_assets import LEVEL_MEMORY_BUDGET as LEVEL_MEMORY_BUDGET  # named by its error and docs
 from engine.assets.level_read import Level as Level
 from engine.assets.level_read import LevelError as LevelError
 from engine.assets.level_read import load_level as load_level
