@@ -18,7 +18,8 @@ from engine.core.frame_io import Output
 from engine.core.world import World
 from engine.render.frame_views import FrameViews
 from engine.render.renderer import Renderer
-from engine.render.scene_pass import TREE_ROOT, SceneOptions, shading_replaced
+from engine.render.scene_options import TREE_ROOT, SceneOptions
+from engine.render.scene_pass import shading_replaced
 from engine.render.views import camera_view
 from engine.resources import Surfaces, ViewBudget
 from engine.rules.frame_rules import active_camera_parts

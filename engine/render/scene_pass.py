@@ -52,7 +52,6 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Iterable, Sequence
 from contextlib import nullcontext
-from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import moderngl
@@ -102,6 +101,7 @@ from engine.render.bindings import (
 from engine.render.gpu import Gpu
 from engine.render.irradiance import IrradianceTable
 from engine.render.raw_gl import LayeredArrayTarget, LayeredCubeTarget, inspect_bound_target
+from engine.render.scene_options import ROOT_VIEW, SceneOptions
 from engine.render.shadows import ShadowMaps
 from engine.render.slot_order import (
     SlotGeometry,
@@ -134,24 +134,6 @@ CULL_MIN_BATCHES = 10
 CULL_MIN_DRAWS = 64
 
 
-@dataclass(frozen=True)
-class SceneOptions:
-    """How ``ScenePass.draw`` draws its views (defaults: a root view such as the main camera)."""
-
-    clear: bool = True          # clear colour, ids and depth first; False keeps a level's claim mask
-    masked: bool = False        # only pixels whose node image names the view (the claimed pixels)
-    sky: bool = True            # the sky behind; reflection views leave it to their composite
-    batched: bool = False       # all views in one draw per batch (the geometry-shader path)
-    reflection_filter: bool = False  # albedo filtered as reflections are (Gpu.reflection_anisotropy)
-    unlit: frozenset[int] = frozenset()  # mirrors whose own shading the composites replace (shading_replaced)
-    # Draw the transparent slot now; False: a view tree's root or level view, whose slot the
-    # tree draws (draw_transparent) after the levels below are composited into its pixels.
-    transparent: bool = True
-
-
-ROOT_VIEW = SceneOptions()
-TREE_ROOT = SceneOptions(transparent=False)  # a root whose view tree draws its transparent slot
-REFLECTION_LEVEL = SceneOptions(clear=False, masked=True, sky=False, reflection_filter=True, transparent=False)
 _PER_DRAW_UNIFORMS = ("sky_face_size", "has_albedo_map", "transparent",
                       "probe_face_size", "probe_position", "probe_box_min", "probe_box_max",
                       "probe2_face_size", "probe2_position", "probe2_box_min", "probe2_box_max",

@@ -81,7 +81,8 @@ from engine.render.level_nodes import level_nodes, parent_and_surface
 from engine.render.mirror_passes import Claims, Fallbacks, MirrorPasses, PreparedComposites
 from engine.render.plan_ahead import plan_ahead, plan_chain
 from engine.render.plan_rows import Candidates, LevelRows
-from engine.render.scene_pass import REFLECTION_LEVEL, TREE_ROOT, SceneOptions, ScenePass, shading_replaced
+from engine.render.scene_options import REFLECTION_LEVEL, TREE_ROOT, SceneOptions
+from engine.render.scene_pass import ScenePass, shading_replaced
 from engine.render.surface_table import NO_BLENDS, SurfaceBlends
 from engine.render.targets import LevelStack
 from engine.render.tree_visibility import (
