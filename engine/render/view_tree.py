@@ -82,7 +82,7 @@ from engine.render.mirror_passes import Claims, Fallbacks, MirrorPasses, Prepare
 from engine.render.plan_ahead import plan_ahead, plan_chain
 from engine.render.plan_rows import Candidates, LevelRows
 from engine.render.scene_options import REFLECTION_LEVEL, TREE_ROOT, SceneOptions
-from engine.render.scene_pass import ScenePass, shading_replaced
+from engine.render.scene_pass import ScenePass
 from engine.render.surface_table import NO_BLENDS, SurfaceBlends
 from engine.render.targets import LevelStack
 from engine.render.tree_visibility import (
@@ -103,6 +103,7 @@ from engine.render.tree_walk import (
     ends_at,
     fallbacks_at,
 )
+from engine.render.unlit_mirrors import shading_replaced
 from engine.render.view_plan import SurfaceTable, _mat, level_rects
 from engine.render.views import View
 
@@ -140,7 +141,7 @@ class ViewTree:
         self._end_surfaces = EndSurfaces(self.ends)  # the surfaces that may get end views, kept
         self.visibility = TreeVisibility(renderer, self.passes)  # each root's claim counts, frame to frame
         self._software = renderer.caps.software  # a software rasteriser (the context's, read once)
-        # Draw the mirrors this tree paints over entirely unlit (scene_pass.shading_replaced);
+        # Draw the mirrors this tree paints over entirely unlit (unlit_mirrors.shading_replaced);
         # False: every view shades them (the second path the tests compare against).
         self.unlit = True
         # (the table and pixel budget they were found for, the set: the same at every depth)
