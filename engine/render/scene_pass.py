@@ -22,13 +22,9 @@ their own (``engine/render/shadows.py``).  For each view it draws
      composite, glass held the mirror's own colour, and its ids, which the claims read, kept
      the mirror's reflection out).
 
-Programs are specialised: a batch whose instances all use the same material variants is
-drawn with a build of ``scene.frag`` whose slots are those variants as constants (the
-other cases of each slot's switch compile away; llvmpipe would otherwise run every case
-of every slot for every pixel), built once and cached; a batch of mixed variants uses the
-build that switches per instance.  A level's batches get every build a view may need
-(``prepare``: root and per-mirror views, each batched invocation count) after its first
-frame, so a mirror first coming into view compiles nothing.
+Each batch draws with a build of ``scene.frag`` specialised to its material variants and
+maps (``engine/render/scene_programs.py``: the builds, their per-draw uniforms, the draw
+records the pass keeps on each batch), all built by ``prepare`` before a view needs them.
 
 ``SceneOptions`` says how: clear the target first (a root view) or keep the depth mask a
 reflection level's claims wrote; draw only the pixels the target's node image gives each
@@ -50,33 +46,22 @@ from typing import TYPE_CHECKING
 import moderngl
 
 from engine.core.errors import GLPassError
-from engine.core.material_slots import SLOTS
 from engine.render import bindings
 from engine.render.batch_cull import batch_reach
-from engine.render.batched_mirrors import MAX_BATCHED_VIEWS, VIEWS_BLOCK_BYTES, VIEWS_PER_INVOCATION, views_block
+from engine.render.batched_mirrors import MAX_BATCHED_VIEWS, VIEWS_BLOCK_BYTES, views_block
 from engine.render.bindings import (
     ALBEDO_UNIT,
     BATCHED_SCENE_CLIPS,
     BLEND_OVER,
     CAMERA_BINDING,
-    EMISSIVE_MAP_UNIT,
-    IRRADIANCE_BINDING,
-    IRRADIANCE_UNIT,
     LIGHTS_BINDING,
-    METALLIC_ROUGHNESS_UNIT,
     NODE_UNIT,
-    NORMAL_UNIT,
-    POINT_SHADOW_UNITS,
     PROBE2_UNIT,
     PROBE_REST_UNIT,
     PROBE_UNIT,
     SCENE_CLIPS,
-    SHADOW_ATLAS_UNIT,
-    SHADOWS_BINDING,
     SKY_UNIT,
     VIEWS_BINDING,
-    VIRTUAL_LIGHTS_BINDING,
-    VIRTUAL_SHADOW_UNIT,
     PassState,
     apply_pass_state,
     bind_sampler,
@@ -94,6 +79,13 @@ from engine.render.gpu import Gpu
 from engine.render.irradiance import IrradianceTable
 from engine.render.raw_gl import LayeredArrayTarget, LayeredCubeTarget, inspect_bound_target
 from engine.render.scene_options import ROOT_VIEW, SceneOptions
+from engine.render.scene_programs import (
+    NO_CHECKER,
+    NO_PROBE_LOOKUP,
+    PER_PASS_UNIFORMS,
+    ScenePrograms,
+    geometry_invocations,
+)
 from engine.render.shadows import ShadowMaps
 from engine.render.slot_order import (
     SlotGeometry,
@@ -103,7 +95,7 @@ from engine.render.slot_order import (
     split_slot,
 )
 from engine.render.targets import RenderTargets
-from engine.render.unlit_mirrors import UnlitBoxes, may_be_unlit, unlit_batches
+from engine.render.unlit_mirrors import UnlitBoxes, unlit_batches
 from engine.render.views import View, union_rect
 
 if TYPE_CHECKING:
@@ -123,15 +115,6 @@ CULL_MIN_BATCHES = 10
 CULL_MIN_DRAWS = 64
 
 
-_PER_DRAW_UNIFORMS = ("sky_face_size", "has_albedo_map", "transparent",
-                      "probe_face_size", "probe_position", "probe_box_min", "probe_box_max",
-                      "probe2_face_size", "probe2_position", "probe2_box_min", "probe2_box_max",
-                      "probe_rest_face_size", "probe_rest_position", "probe_rest_box_min", "probe_rest_box_max",
-                      "checker_cells", "checker_even", "checker_odd")
-_PER_PASS_UNIFORMS = 1  # the first changes with the pass; the rest with the batch (a view's node
-# index is its Camera block's: nothing is written per view)
-_NO_PROBE = ((0.0, 0.0, 0.0, 0.0),) * 3
-_NO_CHECKER = (0.0, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
 _SCENE = PassState(depth_func="<", cull=True, clips=SCENE_CLIPS)
 _BATCHED_SCENE = PassState(depth_func="<", cull=True, clips=BATCHED_SCENE_CLIPS)
 # The sky's shaders write no gl_ClipDistance: a clip distance left on with no value written
@@ -147,8 +130,8 @@ _TRANSPARENT = PassState(depth_func="<", cull=True, clips=SCENE_CLIPS, blend=BLE
 
 
 class ScenePass:
-    """The scene programs and the one ``draw`` every view goes through (``draw_layered``
-    is the same scene for the six faces of a cube map at once).  Every pass binds the
+    """The one ``draw`` every view goes through (``draw_layered`` is the same scene for the
+    six faces of a cube map at once), with the scene programs (``programs``).  Every pass binds the
     shadow maps (``shadows``) and the probes' irradiance (``irradiance``) it shades with."""
 
     def __init__(self, renderer: Gpu, shadows: ShadowMaps, irradiance: IrradianceTable) -> None:
@@ -160,17 +143,7 @@ class ScenePass:
         # each one's program was last given (``Gpu.sky_version``).
         self._skies: dict[tuple[bool, bool], moderngl.VertexArray] = {}
         self._sky_written: dict[tuple[bool, bool], int] = {}
-        # Scene programs by (geometry-shader invocations or 0, "" / "culled" / "naive" for a
-        # layered capture, the batch's variants or None, whether it reads a normal map, draws
-        # the analytic checker, reads an emissive map, a metallic-roughness map).
-        self._programs: dict[tuple, moderngl.Program] = {}
-        self._uniforms: dict[int, tuple] = {}  # program -> its _PER_DRAW_UNIFORMS (None where dropped)
-        self._reloads_seen = 0  # ShaderLibrary.reloads when the two caches above were made
-        # program -> the values last written to its per-draw uniforms: a program keeps its
-        # uniforms' values between passes and frames (GL program state), and only
-        # _draw_batches writes these, so a value is written only when it changes.
-        self._written: dict[int, list] = {}
-        self._last_own: dict[int, tuple] = {}  # program -> the batch values it last drew with
+        self.programs = ScenePrograms(renderer, shadows)  # the builds and their per-draw uniforms
         # (invocations, layered, ambient probes, masked) -> a batch's draw-record keys (lit, unlit)
         self._kinds: dict[tuple, tuple[tuple, tuple]] = {}
         self._sky_size = 0
@@ -190,153 +163,28 @@ class ScenePass:
         # after them), or None.
         self._pass_wide: tuple | None = None
 
-    def program(self, variants: tuple[int, int, int] | None = None, invocations: int = 0,
-                layered: str = "", normal_mapped: bool = False, checker: bool = False,
-                material_maps: tuple[bool, bool] = (False, False), probe_blend: bool = False,
-                ambient_probes: bool = False, probe_rest: bool = False, unlit: bool = False,
-                masked: bool = False) -> moderngl.Program:
-        """The scene program for a batch of ``variants`` (None: mixed, switched per
-        instance): plain, batched (``invocations`` > 0: the geometry shader's) or a one-pass
-        cube-map capture (``layered`` "culled" or "naive"), with or without a normal map
-        (a build of its own: llvmpipe would run the map's derivatives and fetch for every
-        pixel behind a uniform branch), and with or without the analytic checker (``CHECKER``:
-        a generated checker texture drawn from its cells, filtered by the pixel's footprint,
-        instead of sampled), and with or without each of the material maps ``material_maps``
-        (emissive, metallic-roughness: ``EMISSIVE_MAP`` and ``METALLIC_ROUGHNESS_MAP`` builds,
-        shaders/include/material_maps.glsl; a batch without them samples nothing for them),
-        blending probes (``probe_blend``: ``PROBE_BLEND``) with a probe instead of the sky
-        taking the rest (``probe_rest``: ``PROBE_REST``, a curved object's own), or unlit
-        (``unlit``: ``UNLIT_SURFACE``, a mirror batch ``shading_replaced`` names), and
-        masked or not (``masked``: ``MASKED``, a reflection level's: only the pixels its node
-        image gives the view; a root view's build has no node-image fetch and no discard, so
-        llvmpipe neither runs the fetch for every pixel nor defers the depth write past the
-        shader, as a discarding program makes it), built once.  After a shader hot
-        reload the set-up is done again and the batches' vertex arrays are made again (the
-        relinked program may read uniforms, samplers and vertex inputs the first build
-        dropped)."""
-        if self.renderer.shaders.reloads != self._reloads_seen:
-            self._forget_programs()
-        virtual = self.shadows.virtual_shining  # the shadows stage set how many shine
-        shadowing = self.shadows.program_defines  # the lookups a program compiles (ShadowMaps.upload's)
-        key = (invocations, layered, variants, normal_mapped, checker, material_maps, probe_blend, virtual,
-               ambient_probes, probe_rest, unlit, masked, shadowing)
-        program = self._programs.get(key)
-        if program is None:
-            defines = {}
-            if variants is not None:
-                defines = {f"FIXED_{slot}": f"{value}u" for slot, value in zip(SLOTS, variants, strict=True)}
-            if normal_mapped:
-                defines["NORMAL_MAP"] = "1"
-            if checker:
-                defines["CHECKER"] = "1"
-            if material_maps[0]:
-                defines["EMISSIVE_MAP"] = "1"
-            if material_maps[1]:
-                defines["METALLIC_ROUGHNESS_MAP"] = "1"
-            if probe_blend:  # two probes and the sky by the instances' weights (shaders/include/probe.glsl)
-                defines["PROBE_BLEND"] = "1"
-                if probe_rest:  # a probe, not the sky, takes what the weights leave
-                    defines["PROBE_REST"] = "1"
-            if virtual:  # light through mirrors and portals (shaders/include/virtual_lights.glsl)
-                defines["VIRTUAL_LIGHTS"] = "1"
-            if ambient_probes:  # diffuse light from the probes' boxes too (shaders/include/ambient.glsl)
-                defines["AMBIENT_PROBES"] = "1"
-            if unlit:  # depth and ids only: the composites paint every pixel over (shading_replaced)
-                defines["UNLIT_SURFACE"] = "1"
-            if masked:  # the claimed pixels only (a reflection level's views)
-                defines["MASKED"] = "1"
-            defines.update(shadowing)
-            geometry = None
-            if invocations:
-                geometry = "scene_batched.geom"
-                per_invocation = 1 if layered else VIEWS_PER_INVOCATION
-                defines.update({
-                    "BATCHED_VIEWS": "1",
-                    "MAX_LEVEL_VIEWS": str(MAX_BATCHED_VIEWS),
-                    "VIEWS_PER_INVOCATION": str(per_invocation),
-                    "GS_INVOCATIONS": str(invocations),
-                    "GS_MAX_VERTICES": str(3 * per_invocation),
-                })
-                if layered:
-                    defines["LAYERED"] = "1"
-                if layered == "naive":
-                    defines["NO_FACE_CULLING"] = "1"
-            program = self.renderer.shaders.program("scene.vert", "scene.frag", geometry, defines=defines)
-            if "Camera" in program:  # the batched stages read their cameras from Views
-                program["Camera"].binding = CAMERA_BINDING
-            if invocations:
-                program["Views"].binding = VIEWS_BINDING
-            # A build may not read every input (the linker drops what a variant never uses).
-            for name, unit in (("albedo_map", ALBEDO_UNIT), ("sky_map", SKY_UNIT), ("node_map", NODE_UNIT),
-                               ("probe_map", PROBE_UNIT), ("probe2_map", PROBE2_UNIT),
-                               ("probe_rest_map", PROBE_REST_UNIT), ("normal_map", NORMAL_UNIT),
-                               ("emissive_map", EMISSIVE_MAP_UNIT),
-                               ("metallic_roughness_map", METALLIC_ROUGHNESS_UNIT),
-                               ("shadow_atlas", SHADOW_ATLAS_UNIT), ("point_shadow0", POINT_SHADOW_UNITS[0]),
-                               ("point_shadow1", POINT_SHADOW_UNITS[1]),
-                               ("irradiance_table", IRRADIANCE_UNIT), ("virtual_atlas", VIRTUAL_SHADOW_UNIT)):
-                if name in program:
-                    program[name].value = unit
-            if "Lights" in program:
-                program["Lights"].binding = LIGHTS_BINDING
-            if "Shadows" in program:
-                program["Shadows"].binding = SHADOWS_BINDING
-            if "VirtualLights" in program:
-                program["VirtualLights"].binding = VIRTUAL_LIGHTS_BINDING
-            if "Irradiance" in program:
-                program["Irradiance"].binding = IRRADIANCE_BINDING
-            self._programs[key] = program
-            self._uniforms[program.glo] = tuple(program.get(name, None) for name in _PER_DRAW_UNIFORMS)
-        return program
-
-    def _forget_programs(self) -> None:
-        """After a shader hot reload: every program set-up, written value, batch vertex array
-        and draw record is made again (a relinked program may read uniforms, samplers and
-        vertex inputs the first build dropped)."""
-        self._programs.clear()
-        self._uniforms.clear()
-        self._written.clear()  # a relinked program's uniforms start again from the defaults
-        self._last_own.clear()
-        for batch in self.renderer.batches.values():
-            batch.drop_vertex_arrays()  # made again for the relinked programs' inputs
-        self._reloads_seen = self.renderer.shaders.reloads
-
     def prepare(self, batches: Iterable[InstanceBatch], reflections: bool) -> int:
-        """Build the programs and vertex arrays ``batches`` will be drawn with: invocations 0
-        (root and per-mirror views) and, with ``reflections``, every invocation count of the
-        batched path (``BATCHED_INVOCATIONS``), its view table and the reflection sampler.
-        A batch of mirrors gets its ``UNLIT_SURFACE`` builds too, and with ``reflections``
-        the ``MASKED`` builds (a level whose claims overlap draws masked, one whose claims
-        lie apart unmasked: ``view_tree._APART``).  Returns how many programs
-        were built (0 when all were there)."""
-        before = len(self._programs)
-        counts = (0, *BATCHED_INVOCATIONS) if reflections else (0,)
-        ambient = (False, True) if self.irradiance.has_boxes() else (False,)  # captures: False
-        for batch in batches:
-            unlit = (False, True) if may_be_unlit(batch) else (False,)
-            for invocations in counts:
-                for masked in (False, True) if reflections else (False,):
-                    for probes in ambient:
-                        for dark in unlit:
-                            batch.vao(self.program(batch.variants, invocations, "", batch.normal_map is not None,
-                                                   batch.checker is not None, _material_maps(batch),
-                                                   batch.probe_blend, probes, bool(batch.rest_probe), dark, masked))
+        """Build the programs and vertex arrays ``batches`` will be drawn with
+        (``ScenePrograms.prepare``) and, with ``reflections``, the batched path's view table
+        and the reflection sampler.  Returns how many programs were built (0 when all were
+        there)."""
+        built = self.programs.prepare(batches, reflections, self.irradiance.has_boxes())
         if reflections:
             if self._views_ubo is None:
                 self._views_ubo = self.ctx.buffer(reserve=VIEWS_BLOCK_BYTES)
             self._reflection_filter()
-        return len(self._programs) - before
+        return built
 
     def _draw_batches(self, batches, invocations: int, masked: bool, layered: str = "",
                       skip: int = 0, before_draw: Callable[[], None] | None = None, hide: int = 0,
                       unlit: frozenset | set = frozenset()) -> None:
         """One instanced draw per batch, each with the program of its variants.  A program's
-        uniforms are written only when their value changes (``self._written``, kept for the
+        uniforms are written only when their value changes (``ScenePrograms.written``, kept for the
         program's life): each write is a moderngl call of a few microseconds on a view's
         critical path (about 490 a frame at 16 mirrors when they were written again every pass).
         What a batch draws with in passes of one kind (its program, vertex array, uniforms,
         textures, and its uniform values where no probe's lookup can change them) is looked up
-        once and kept on the batch (``InstanceBatch.draw_records``, ``_record``) until a shader
+        once and kept on the batch (``InstanceBatch.draw_records``, ``ScenePrograms.record``) until a shader
         reload, a virtual light starting or ending, a kind of light starting or ending to cast
         (``ShadowMaps.program_defines``), or its variants change: a view's draws then
         cost a dictionary look-up and a comparison a batch, not a program key built and found.
@@ -346,11 +194,14 @@ class ScenePass:
         mirrors all ``shading_replaced``) draws with its ``UNLIT_SURFACE`` build."""
         ctx = self.ctx
         renderer = self.renderer
-        if renderer.shaders.reloads != self._reloads_seen:
-            self._forget_programs()
+        programs = self.programs
+        seen = programs.reloads_seen
+        if renderer.shaders.reloads != seen:
+            programs.forget()
+            seen = programs.reloads_seen
         # What else picks a batch's program: a virtual light shining, the shadow lookups compiled.
         shadows = self.shadows
-        stamp = (self._reloads_seen, shadows.virtual_shining, shadows.program_defines)
+        stamp = (seen, shadows.virtual_shining, shadows.program_defines)
         kinds = self._kinds.get((invocations, layered, self._ambient_probes, masked))
         if kinds is None:
             kinds = self._kinds[invocations, layered, self._ambient_probes, masked] = (
@@ -358,7 +209,7 @@ class ScenePass:
                 (invocations, layered, self._ambient_probes, True, masked))
         kind, unlit_kind = kinds
         sky_size = self._sky_size
-        last_own = self._last_own
+        last_own = programs.last_own
         blank, colour_maps, recorded = renderer.blank_color, renderer.colour_maps, texture_record(ctx)
         draws = instances = 0
         skipped = (skip, hide)
@@ -370,7 +221,7 @@ class ScenePass:
             drawn_as = unlit_kind if unlit and batch in unlit else kind  # a batch the composites paint over
             record = batch.draw_records.get(drawn_as)
             if record is None or record[0] != stamp or record[1] != variants:
-                record = batch.draw_records[drawn_as] = self._record(batch, drawn_as, stamp, variants)
+                record = batch.draw_records[drawn_as] = programs.record(batch, drawn_as, stamp, variants)
             _, _, glo, vao, uniforms, values, textures, own, vertices = record
             for unit, texture in textures:
                 if texture is blank and recorded.get(_ALBEDO_KEY) in colour_maps:
@@ -384,7 +235,7 @@ class ScenePass:
             # a time only where it differs from what this program last drew with.
             last = last_own.get(glo)
             if last is not own and last != own:
-                for i, value in enumerate(own, _PER_PASS_UNIFORMS):
+                for i, value in enumerate(own, PER_PASS_UNIFORMS):
                     if values[i] != value and uniforms[i] is not None:
                         uniforms[i].value = values[i] = value
                 last_own[glo] = own
@@ -406,44 +257,18 @@ class ScenePass:
             stats.draw_calls += draws
             stats.instances += instances
 
-    def _record(self, batch: InstanceBatch, kind: tuple[int, str, bool, bool, bool], stamp: tuple, variants) -> tuple:
-        """What ``batch`` draws with in passes of ``kind`` (invocations, layered, ambient
-        probes, unlit, masked): (stamp, variants, program name, vertex array, per-draw uniforms, the
-        program's written values, the (unit, texture) pairs to bind, its own uniform values
-        or None where probes give them per draw, its mesh's vertex count)."""
-        invocations, layered, ambient, unlit, masked = kind
-        program = self.program(variants, invocations, layered, batch.normal_map is not None,
-                               batch.checker is not None, _material_maps(batch), batch.probe_blend,
-                               ambient, bool(batch.rest_probe), unlit, masked)
-        glo = program.glo
-        values = self._written.get(glo)
-        if values is None:
-            values = self._written[glo] = [None] * len(_PER_DRAW_UNIFORMS)
-        # A batch with no albedo map binds the blank one: the program's sampler is there all
-        # the same (``Gpu.blank_color``).
-        albedo = batch.texture if batch.texture is not None else self.renderer.blank_color
-        textures = tuple((unit, texture) for unit, texture in (
-            (ALBEDO_UNIT, albedo), (NORMAL_UNIT, batch.normal_map), (EMISSIVE_MAP_UNIT, batch.emissive_map),
-            (METALLIC_ROUGHNESS_UNIT, batch.metallic_roughness_map)) if texture is not None)
-        own = None
-        if not batch.probe and not batch.probe_blend and not batch.rest_probe:
-            own = (batch.texture is not None, batch.transparent, 0, *_NO_PROBE, 0, *_NO_PROBE, 0, *_NO_PROBE,
-                   *(batch.checker or _NO_CHECKER))
-        return (stamp, variants, glo, batch.vao(program), self._uniforms[glo], values, textures, own,
-                batch.mesh.index_count)
-
     def _probe_values(self, batch: InstanceBatch) -> tuple:
         """Bind the probes ``batch`` samples; its own uniform values with their lookups."""
         cubes = self.renderer.probe_cubes
-        probe_size, lookup = self._bind_probe(batch.probe, PROBE_UNIT, cubes) if batch.probe else (0, _NO_PROBE)
-        probe2_size, lookup2 = 0, _NO_PROBE
+        probe_size, lookup = self._bind_probe(batch.probe, PROBE_UNIT, cubes) if batch.probe else (0, NO_PROBE_LOOKUP)
+        probe2_size, lookup2 = 0, NO_PROBE_LOOKUP
         if batch.probe_blend:  # the second probe's unit (the sky where the blend is a probe and the sky)
             probe2_size, lookup2 = self._bind_probe(batch.second_probe, PROBE2_UNIT, cubes)
-        rest_size, lookup_rest = 0, _NO_PROBE
+        rest_size, lookup_rest = 0, NO_PROBE_LOOKUP
         if batch.rest_probe:  # the probe taking what the weights leave (a curved object's own)
             rest_size, lookup_rest = self._bind_probe(batch.rest_probe, PROBE_REST_UNIT, cubes)
         return (batch.texture is not None, batch.transparent, probe_size, *lookup, probe2_size, *lookup2, rest_size,
-                *lookup_rest, *(batch.checker or _NO_CHECKER))
+                *lookup_rest, *(batch.checker or NO_CHECKER))
 
     def _bind_probe(self, probe: int, unit: int, cubes) -> tuple[int, tuple]:
         """Bind the cube map of ``probe`` to ``unit``: its face size and lookup uniforms.  The
@@ -459,7 +284,7 @@ class ScenePass:
             bind_texture(self.ctx, cube.texture, unit)
             return cube.face_size, cube.lookup()
         bind_texture(self.ctx, self.renderer.sky, unit)
-        return self._sky_size, _NO_PROBE
+        return self._sky_size, NO_PROBE_LOOKUP
 
     # --- the pass ------------------------------------------------------------------------------
     def draw(self, views: Sequence[View], targets: RenderTargets, options: SceneOptions = ROOT_VIEW,
@@ -859,24 +684,8 @@ class ScenePass:
         self._skies.clear()
         self._sky_written.clear()
         self._views_ubo = self._reflection_sampler = None
-        self._programs.clear()  # the shader library owns and releases the programs
+        self.programs.release()
 
-
-def geometry_invocations(view_count: int) -> int:
-    """Invocations of the batched geometry shader for ``view_count`` views:
-    ceil(view_count / VIEWS_PER_INVOCATION) rounded up to a power of two (invocations with
-    no view still cost a pass over the triangles; the rounding bounds the programs built)."""
-    needed = -(-view_count // VIEWS_PER_INVOCATION)
-    return min(1 << max(0, needed - 1).bit_length(), -(-MAX_BATCHED_VIEWS // VIEWS_PER_INVOCATION))
-
-
-# Every invocation count ``geometry_invocations`` gives (1 to MAX_BATCHED_VIEWS views).
-BATCHED_INVOCATIONS = tuple(sorted({geometry_invocations(n) for n in range(1, MAX_BATCHED_VIEWS + 1)}))
-
-
-def _material_maps(batch) -> tuple[bool, bool]:
-    """Which material maps a batch's program samples: (emissive, metallic-roughness)."""
-    return batch.emissive_map is not None, batch.metallic_roughness_map is not None
 
 def _drawn_now(transparent: list, options: SceneOptions) -> list:
     """What of the transparent slot ``draw`` may draw with the opaque batches: all of it,

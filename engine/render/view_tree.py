@@ -113,7 +113,7 @@ _BATCHED = SceneOptions(clear=False, masked=True, sky=False, batched=True, refle
 # claim's rectangle and each claim the far plane (1) where it took the pixel, so within a
 # view's rectangle, which no other claim's reaches, a fragment passes the depth test ("<")
 # only on its own view's claimed pixels, as the node image's test would let it through; the
-# build without that test (ScenePass.program's MASKED) runs no fetch and no discard a pixel,
+# build without that test (ScenePrograms.program's MASKED) runs no fetch and no discard a pixel,
 # and llvmpipe's depth test, before the shader, rejects the other pixels' fragments unshaded.
 # A level drawn on its claims' conditions (predicted visibility) keeps the node test: its views
 # are skipped by the GPU only where the claims' counts are in when they draw (GL_QUERY_NO_WAIT
