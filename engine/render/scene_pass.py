@@ -7,8 +7,9 @@ their own (``engine/render/shadows.py``).  For each view it draws
 
   1. the opaque batches, one instanced draw per (mesh, texture), smallest first, so big
      surfaces behind small things fail the depth test before they are shaded;
-  2. the sky behind them (a full-screen triangle at the far plane, depth test <=), into the
-     same framebuffer: it writes id 0 where it shows, the value the clear left there;
+  2. the sky behind them (a full-screen triangle at the far plane, depth test <=:
+     ``engine/render/sky_draw.py``), into the same framebuffer: it writes id 0 where it
+     shows, the value the clear left there;
   3. the transparent slot: batches marked transparent (a material's alpha below 1),
      farthest first (by centre, and around a see-through mirror or portal by its plane:
      ``slot_order.back_to_front``), blended over what is there, testing depth but not writing it.  A
@@ -53,7 +54,6 @@ from engine.render.bindings import (
     ALBEDO_UNIT,
     BATCHED_SCENE_CLIPS,
     BLEND_OVER,
-    CAMERA_BINDING,
     LIGHTS_BINDING,
     NODE_UNIT,
     PROBE2_UNIT,
@@ -87,6 +87,7 @@ from engine.render.scene_programs import (
     geometry_invocations,
 )
 from engine.render.shadows import ShadowMaps
+from engine.render.sky_draw import SkyDraw
 from engine.render.slot_order import (
     SlotGeometry,
     back_to_front,
@@ -131,18 +132,16 @@ _TRANSPARENT = PassState(depth_func="<", cull=True, clips=SCENE_CLIPS, blend=BLE
 
 class ScenePass:
     """The one ``draw`` every view goes through (``draw_layered`` is the same scene for the
-    six faces of a cube map at once), with the scene programs (``programs``).  Every pass binds the
-    shadow maps (``shadows``) and the probes' irradiance (``irradiance``) it shades with."""
+    six faces of a cube map at once), drawn with the scene programs (``programs``) and the
+    sky's (``sky_draw``).  Every pass binds the shadow maps (``shadows``) and the probes'
+    irradiance (``irradiance``) it shades with."""
 
     def __init__(self, renderer: Gpu, shadows: ShadowMaps, irradiance: IrradianceTable) -> None:
         self.renderer = renderer
         self.shadows = shadows
         self.irradiance = irradiance
         self.ctx = renderer.ctx
-        # The sky's vertex arrays by (layered, generated) (``_sky_draw``), and the sky version
-        # each one's program was last given (``Gpu.sky_version``).
-        self._skies: dict[tuple[bool, bool], moderngl.VertexArray] = {}
-        self._sky_written: dict[tuple[bool, bool], int] = {}
+        self.sky_draw = SkyDraw(renderer)  # the sky's triangle behind every view
         self.programs = ScenePrograms(renderer, shadows)  # the builds and their per-draw uniforms
         # (invocations, layered, ambient probes, masked) -> a batch's draw-record keys (lit, unlit)
         self._kinds: dict[tuple, tuple[tuple, tuple]] = {}
@@ -462,6 +461,7 @@ class ScenePass:
                      0, masked, skip=view.skip, hide=view.hide, unlit=unlit)
             renderer.stats.passes += len(views)
             return
+        sky_draw = self.sky_draw
         for index, view in enumerate(views):
             if now:  # the slot, or (a tree's view) its part up to its see-through surfaces
                 if options.transparent:
@@ -484,7 +484,7 @@ class ScenePass:
                     # llvmpipe did at the switch was its rasterising of the queued draws, which
                     # the next flush now does: measured, no faster a frame; issue 40.)
                     apply_pass_state(ctx, _SKY, viewport, view.scissor)
-                    self._sky_draw(layered=False).render(moderngl.TRIANGLES, vertices=3)
+                    sky_draw.vertex_array(layered=False).render(moderngl.TRIANGLES, vertices=3)
                     renderer.stats.draw_calls += 1
                 if now:
                     targets.view_framebuffer.depth_mask = False
@@ -606,7 +606,7 @@ class ScenePass:
             apply_pass_state(ctx, _LAYERED_SKY, size)
             if check is not None:
                 check("sky")
-            self._sky_draw(layered=True).render(moderngl.TRIANGLES, vertices=3)
+            self.sky_draw.vertex_array(layered=True).render(moderngl.TRIANGLES, vertices=3)
         finally:
             target.unbind()
         renderer.stats.passes += 1
@@ -629,38 +629,6 @@ class ScenePass:
 
         return check
 
-    def _sky_draw(self, layered: bool) -> moderngl.VertexArray:
-        """The sky's full-screen triangle for the renderer's sky: a generated Skybox
-        evaluated per pixel (the GENERATED_SKY build, its colours written to the program
-        when the sky changed: ``Gpu.sky_model``), else the cube map; ``layered``: the
-        six-face build of a one-pass cube-map capture (``sky_layered.geom``)."""
-        renderer = self.renderer
-        model = renderer.sky_model
-        key = (layered, model is not None)
-        vao = self._skies.get(key)
-        if vao is None:
-            defines = {"LAYERED": "1", "MAX_LEVEL_VIEWS": str(MAX_BATCHED_VIEWS)} if layered else {}
-            if model is not None:
-                defines["GENERATED_SKY"] = "1"
-            program = renderer.shaders.program("sky.vert", "sky.frag", "sky_layered.geom" if layered else None,
-                                               defines=defines)
-            if layered:
-                program["Views"].binding = VIEWS_BINDING
-            else:
-                program["Camera"].binding = CAMERA_BINDING
-            if model is None:
-                program["sky_map"].value = SKY_UNIT
-            vao = self._skies[key] = self.ctx.vertex_array(program, [])
-        if model is not None and self._sky_written.get(key) != renderer.sky_version:
-            for name, value in model.uniforms().items():
-                vao.program[name].value = value  # (a shader reload writes them back: ShaderLibrary)
-            self._sky_written[key] = renderer.sky_version
-        return vao
-
-    def _layered_sky(self) -> moderngl.VertexArray:
-        """The layered capture's sky (its programs built even where that path is refused)."""
-        return self._sky_draw(layered=True)
-
     def _reflection_filter(self) -> moderngl.Sampler | None:
         """The albedo sampler of reflection views, or None when they filter like the main view."""
         renderer = self.renderer
@@ -678,11 +646,10 @@ class ScenePass:
     def release(self) -> None:
         if self._reflection_sampler is not None:
             forget_sampler(self.ctx, self._reflection_sampler)
-        for obj in (*self._skies.values(), self._views_ubo, self._reflection_sampler):
+        self.sky_draw.release()
+        for obj in (self._views_ubo, self._reflection_sampler):
             if obj is not None:
                 obj.release()
-        self._skies.clear()
-        self._sky_written.clear()
         self._views_ubo = self._reflection_sampler = None
         self.programs.release()
 
