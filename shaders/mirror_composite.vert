@@ -65,7 +65,7 @@ vec2 outward(vec2 a, vec2 b, vec2 c) {
 // the surface's own triangles cover in the parent view is inside the quad, whatever the
 // rounding of its two transforms (the scene pass's of the mesh, this row's of the outline:
 // apart by far less than the margin), so no pixel of the surface keeps its own shading (a
-// mirror drawn unlit, scene_pass.shading_replaced, shows black there); the few pixels it
+// mirror drawn unlit, unlit_mirrors.shading_replaced, shows black there); the few pixels it
 // adds (centres within the margin of an edge) are not the view's and are discarded in
 // mirror_composite.frag (its node).
 // A corner behind the eye (w <= 0) leaves the quad as it is, and so does a level drawn at

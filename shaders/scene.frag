@@ -254,7 +254,7 @@ void main() {
     if (texelFetch(node_map, ivec2(gl_FragCoord.xy), 0).r != node_index) discard;  // (the level's own size)
 #endif
 #ifdef UNLIT_SURFACE
-    // A mirror the view tree's composites paint over at weight 1 (scene_pass.shading_replaced):
+    // A mirror the view tree's composites paint over at weight 1 (unlit_mirrors.shading_replaced):
     // its colour is never seen, so only its depth and ids count (the claims below read them).
     out_color = vec4(0.0, 0.0, 0.0, 1.0);
     out_surface = v_slots.w;

@@ -18,7 +18,8 @@ from engine.core.frame_io import Output
 from engine.core.world import World
 from engine.render.frame_views import FrameViews
 from engine.render.renderer import Renderer
-from engine.render.scene_pass import TREE_ROOT, SceneOptions, shading_replaced
+from engine.render.scene_options import TREE_ROOT, SceneOptions
+from engine.render.unlit_mirrors import shading_replaced
 from engine.render.views import camera_view
 from engine.resources import Surfaces, ViewBudget
 from engine.rules.frame_rules import active_camera_parts
@@ -32,7 +33,7 @@ class MainViewSystem(esper.Processor):
         self._said_no_camera = False
         # The depth cap of the view tree the reflect stage roots here (the Engine sets it):
         # with it, mirrors the tree paints over entirely are drawn unlit
-        # (scene_pass.shading_replaced, whatever the cap: a view it cuts shows its end view
+        # (unlit_mirrors.shading_replaced, whatever the cap: a view it cuts shows its end view
         # or fallback at weight 1 too); None: every mirror is shaded.
         self.depth_cap: Callable[[], int] | None = None
         self._options: tuple[tuple, SceneOptions] = (((), ()), TREE_ROOT)  # (what it was made from, the options)

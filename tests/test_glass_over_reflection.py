@@ -137,7 +137,7 @@ def test_glass_in_front_of_a_mirror_in_a_probe_face(scene):
 
 
 def test_mirrors_behind_glass_are_drawn_unlit_and_the_frame_is_the_all_lit_one(scene):
-    """Glass no longer keeps the mirrors behind it shaded (scene_pass.shading_replaced): it
+    """Glass no longer keeps the mirrors behind it shaded (unlit_mirrors.shading_replaced): it
     is drawn over their composited reflections, so the main view writes the unlit build's
     black under both mirrors, and the frame, pixel for pixel and id for id, is the one of an
     engine that shades every mirror (``MainViewSystem.depth_cap`` None, ``ViewTree.unlit``

@@ -199,7 +199,8 @@ def test_every_program_the_engine_builds_reports_errors_at_the_edited_file_and_l
     layered.frame()
     renderer = layered.engine.renderer
     if not renderer.path_checks.trusted("layered_capture"):  # a driver whose layered draws were refused
-        renderer.scene_pass._layered_sky()  # (the H200's): its programs are still built and reported
+        # (the H200's): its programs are still built and reported
+        renderer.scene_pass.sky_draw.vertex_array(layered=True)
     if not renderer.path_checks.trusted("layered_mips"):
         renderer.probes.mips._program_vao(ggx=False, one_face=False)
     programs = list(dict.fromkeys([*runner.engine.renderer.shaders._programs,

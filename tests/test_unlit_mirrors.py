@@ -21,10 +21,10 @@ from components import Material, MeshRef, Mirror, Transform, look_rotation
 from engine.assets.mesh import quad
 from engine.core.frame_io import Output
 from engine.core.game import Game
-from engine.render import scene_pass
+from engine.render import unlit_mirrors
 from engine.render.frame_views import FrameViews
-from engine.render.scene_pass import shading_replaced
 from engine.render.targets import CaptureTarget
+from engine.render.unlit_mirrors import shading_replaced
 from engine.resources import Surfaces, ViewBudget
 from shell.app import Engine
 
@@ -140,7 +140,7 @@ def test_the_sample_level_with_its_ghost_and_pond_is_the_all_lit_frame(ctx, monk
     wall, and its pond is a see-through mirror.  The ghost is glass: a tree draws it after
     the composites, over the reflections.  The pond is drawn with the opaque batches (the
     claims find its pixels; ScenePass._drawn_now), so a view keeps lit the mirrors it can
-    blend over and draws the others unlit (scene_pass._UnlitViews); the frame is the
+    blend over and draws the others unlit (unlit_mirrors._UnlitViews); the frame is the
     all-lit path's.  (Glass alone keeps them unlit: tests/test_glass_over_reflection.py.)"""
     from tests.golden_scenes import HALL_POSES, _hall
 
@@ -153,7 +153,7 @@ def test_the_sample_level_with_its_ghost_and_pond_is_the_all_lit_frame(ctx, monk
     try:
         got, want = _frames(ctx, fast, 2, (320, 180)), _frames(ctx, shaded, 2, (320, 180))
         assert fast.renderer.transparent_batches()
-        kept, lost = seen[fast.renderer.scene_pass]
+        kept, lost = seen[fast.renderer.scene_pass.unlit_boxes]
         assert kept > 10, (kept, lost)  # views with the pond drawn before their claims drew mirrors unlit
         _same_frames(got, want)
     finally:
@@ -261,20 +261,20 @@ def test_mirrors_at_the_depth_limit_are_unlit_and_the_frame_is_the_same(ctx, cou
 
 
 def _count_kept(monkeypatch) -> dict:
-    """Per scene pass, [candidates kept unlit, made lit] over the views that drew transparent
-    batches before their composites (``scene_pass._UnlitViews.keep``), counted as frames run."""
+    """Per scene pass (its ``unlit_boxes``), [candidates kept unlit, made lit] over the views that drew transparent
+    batches before their composites (``unlit_mirrors._UnlitViews.keep``), counted as frames run."""
     counts: dict = {}
-    narrowed = scene_pass._UnlitViews.keep
+    narrowed = unlit_mirrors._UnlitViews.keep
 
     def counting(check, view, drawn):
         kept = narrowed(check, view, drawn)
         if check.unlit and drawn:
-            count = counts.setdefault(check.scene, [0, 0])
+            count = counts.setdefault(check.boxes, [0, 0])
             count[0] += len(kept)
             count[1] += len(check.unlit) - len(kept)
         return kept
 
-    monkeypatch.setattr(scene_pass._UnlitViews, "keep", counting)
+    monkeypatch.setattr(unlit_mirrors._UnlitViews, "keep", counting)
     return counts
 
 
@@ -295,7 +295,7 @@ class _RingWithSeeThrough(GlassHouse):
 def test_see_through_surfaces_keep_lit_only_the_mirrors_they_can_blend_over(ctx, monkeypatch, panes, path):
     """A see-through surface is drawn before the claims (its pixels are claimed), so a mirror
     it blends over must be shaded in that view; every other view draws the ring's mirrors
-    unlit (``scene_pass._UnlitViews``: screen rectangles and depth), and the frames are
+    unlit (``unlit_mirrors._UnlitViews``: screen rectangles and depth), and the frames are
     the all-lit path's, pixel for pixel and id for id.  (A batched level draws its views
     at once: unlit only where no view's surfaces can blend over them, here seldom.)"""
     counts = _count_kept(monkeypatch)
@@ -308,7 +308,7 @@ def test_see_through_surfaces_keep_lit_only_the_mirrors_they_can_blend_over(ctx,
     try:
         got, want = _frames(ctx, fast, 4, (320, 180)), _frames(ctx, shaded, 4, (320, 180))
         _same_frames(got, want)
-        kept, lost = counts[fast.renderer.scene_pass]
+        kept, lost = counts[fast.renderer.scene_pass.unlit_boxes]
         seen = {"kept": kept, "lost": lost}
         assert len(fast.stages["main"]._root_options().unlit) == 8
         if path == "per_mirror":
@@ -348,7 +348,7 @@ class _RandomGlassAndMirrors(Game):
 @pytest.mark.parametrize("seed", [11, 12, 13])
 def test_random_glass_among_mirrors_is_the_all_lit_frame(ctx, monkeypatch, seed):
     """Random see-through surfaces and panes among opaque mirrors, from a random place: the
-    mirrors each view keeps unlit (``scene_pass._UnlitViews``) leave the frames the all-lit
+    mirrors each view keeps unlit (``unlit_mirrors._UnlitViews``) leave the frames the all-lit
     path's, pixel for pixel and id for id."""
     counts = _count_kept(monkeypatch)
     fast = _engine(ctx, game=_RandomGlassAndMirrors(seed))
@@ -356,7 +356,7 @@ def test_random_glass_among_mirrors_is_the_all_lit_frame(ctx, monkeypatch, seed)
     try:
         got, want = _frames(ctx, fast, 2, (192, 108)), _frames(ctx, shaded, 2, (192, 108))
         _same_frames(got, want)
-        assert sum(counts.get(fast.renderer.scene_pass, [0, 0])) > 0  # views chose
+        assert sum(counts.get(fast.renderer.scene_pass.unlit_boxes, [0, 0])) > 0  # views chose
     finally:
         fast.close()
         shaded.close()

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from engine.render.scene_pass import TREE_ROOT, SceneOptions
+from engine.render.scene_options import TREE_ROOT, SceneOptions
 from engine.render.targets import LevelStack, RenderTargets
 from engine.render.views import View
 

@@ -182,7 +182,7 @@ class InstanceBatch:
         self._buffer = ctx.buffer(reserve=capacity * INSTANCE_DTYPE.itemsize)
         self._buffer_rows = capacity
         self._vaos: dict[int, moderngl.VertexArray] = {}
-        # What the scene pass draws this batch with, by kind of pass (ScenePass._record): its
+        # What the scene pass draws this batch with, by kind of pass (ScenePrograms.record): its
         # program, vertex array and uniforms, kept with the batch and gone with it.
         self.draw_records: dict[tuple, tuple] = {}
         self._max_scale = 0.0

@@ -23,7 +23,8 @@ from engine.render.end_images import EndImages
 from engine.render.gpu import Gpu
 from engine.render.level_copies import LevelCopies
 from engine.render.mirror_passes import MirrorPasses, PreparedComposites, PreparedFallbacks
-from engine.render.scene_pass import TREE_ROOT, SceneOptions, ScenePass
+from engine.render.scene_options import TREE_ROOT, SceneOptions
+from engine.render.scene_pass import ScenePass
 from engine.render.targets import LevelStack, RenderTargets
 from engine.render.tree_walk import TreeResult, TreeWalk, seen_surfaces
 from engine.render.views import PlannedView, View

@@ -48,7 +48,8 @@ from engine.render.bindings import (
 from engine.render.gpu import Gpu, ProbeCube
 from engine.render.irradiance import IrradianceTable
 from engine.render.raw_gl import CubeMipTarget, LayeredArrayTarget, LayeredCubeTarget, inspect_bound_target
-from engine.render.scene_pass import SceneOptions, ScenePass
+from engine.render.scene_options import SceneOptions
+from engine.render.scene_pass import ScenePass
 from engine.render.surface_table import NO_BLENDS, SurfaceBlends
 from engine.render.targets import LevelStack, release_framebuffer
 from engine.render.tree_walk import TreeSettings

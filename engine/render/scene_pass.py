@@ -7,8 +7,9 @@ their own (``engine/render/shadows.py``).  For each view it draws
 
   1. the opaque batches, one instanced draw per (mesh, texture), smallest first, so big
      surfaces behind small things fail the depth test before they are shaded;
-  2. the sky behind them (a full-screen triangle at the far plane, depth test <=), into the
-     same framebuffer: it writes id 0 where it shows, the value the clear left there;
+  2. the sky behind them (a full-screen triangle at the far plane, depth test <=:
+     ``engine/render/sky_draw.py``), into the same framebuffer: it writes id 0 where it
+     shows, the value the clear left there;
   3. the transparent slot: batches marked transparent (a material's alpha below 1),
      farthest first (by centre, and around a see-through mirror or portal by its plane:
      ``slot_order.back_to_front``), blended over what is there, testing depth but not writing it.  A
@@ -22,13 +23,9 @@ their own (``engine/render/shadows.py``).  For each view it draws
      composite, glass held the mirror's own colour, and its ids, which the claims read, kept
      the mirror's reflection out).
 
-Programs are specialised: a batch whose instances all use the same material variants is
-drawn with a build of ``scene.frag`` whose slots are those variants as constants (the
-other cases of each slot's switch compile away; llvmpipe would otherwise run every case
-of every slot for every pixel), built once and cached; a batch of mixed variants uses the
-build that switches per instance.  A level's batches get every build a view may need
-(``prepare``: root and per-mirror views, each batched invocation count) after its first
-frame, so a mirror first coming into view compiles nothing.
+Each batch draws with a build of ``scene.frag`` specialised to its material variants and
+maps (``engine/render/scene_programs.py``: the builds, their per-draw uniforms, the draw
+records the pass keeps on each batch), all built by ``prepare`` before a view needs them.
 
 ``SceneOptions`` says how: clear the target first (a root view) or keep the depth mask a
 reflection level's claims wrote; draw only the pixels the target's node image gives each
@@ -38,54 +35,33 @@ shader (``batched``: each triangle is emitted once per view that can see it, the
 path of the "Multiple Mirrors" OpenGL project; at most
 ``MAX_BATCHED_VIEWS`` views a draw, more are drawn in groups of that many).
 
-Less pixel work where a view's pixels are painted over anyway: a mirror whose reflection
-(or its fallback) the view tree composites over every pixel of it at weight 1 never shows
-its own shading (``shading_replaced`` says which, ``SceneOptions.unlit`` carries them), so a
-batch of such mirrors draws with the ``UNLIT_SURFACE`` build of ``scene.frag``: depth and
-ids as ever, a constant colour, no lighting (at 8 mirrors and 640x360 about 7% of the main
-view's shaded pixels on llvmpipe, which shades every pixel of every 2 x 4 group it touches),
-except in a view whose see-through surfaces, drawn before the composites, may blend over
-one of the batch's mirrors (``_UnlitViews``).
+Mirrors whose reflection paints over every pixel of them draw unlit (``SceneOptions.unlit``;
+``engine/render/unlit_mirrors.py`` says which, view by view).
 """
 from __future__ import annotations
 
-import math
 from collections.abc import Callable, Iterable, Sequence
 from contextlib import nullcontext
-from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import moderngl
-from pyglm import glm
 
 from engine.core.errors import GLPassError
-from engine.core.material_slots import SLOTS, ReflectVariant
 from engine.render import bindings
-from engine.render.batch_cull import batch_reach
-from engine.render.batched_mirrors import MAX_BATCHED_VIEWS, VIEWS_BLOCK_BYTES, VIEWS_PER_INVOCATION, views_block
+from engine.render.batch_cull import CULL_MIN_BATCHES, CULL_MIN_DRAWS, batch_reach
+from engine.render.batched_mirrors import MAX_BATCHED_VIEWS, VIEWS_BLOCK_BYTES, views_block
 from engine.render.bindings import (
     ALBEDO_UNIT,
     BATCHED_SCENE_CLIPS,
     BLEND_OVER,
-    CAMERA_BINDING,
-    EMISSIVE_MAP_UNIT,
-    IRRADIANCE_BINDING,
-    IRRADIANCE_UNIT,
     LIGHTS_BINDING,
-    METALLIC_ROUGHNESS_UNIT,
     NODE_UNIT,
-    NORMAL_UNIT,
-    POINT_SHADOW_UNITS,
     PROBE2_UNIT,
     PROBE_REST_UNIT,
     PROBE_UNIT,
     SCENE_CLIPS,
-    SHADOW_ATLAS_UNIT,
-    SHADOWS_BINDING,
     SKY_UNIT,
     VIEWS_BINDING,
-    VIRTUAL_LIGHTS_BINDING,
-    VIRTUAL_SHADOW_UNIT,
     PassState,
     apply_pass_state,
     bind_sampler,
@@ -102,66 +78,31 @@ from engine.render.bindings import (
 from engine.render.gpu import Gpu
 from engine.render.irradiance import IrradianceTable
 from engine.render.raw_gl import LayeredArrayTarget, LayeredCubeTarget, inspect_bound_target
+from engine.render.scene_options import ROOT_VIEW, SceneOptions
+from engine.render.scene_programs import (
+    NO_CHECKER,
+    NO_PROBE_LOOKUP,
+    PER_PASS_UNIFORMS,
+    ScenePrograms,
+    geometry_invocations,
+)
 from engine.render.shadows import ShadowMaps
+from engine.render.sky_draw import SkyDraw
 from engine.render.slot_order import (
     SlotGeometry,
     back_to_front,
-    box_floats,
-    rects_overlap,
-    screen_rect,
     see_through_surface,
     slot_groups,
     split_slot,
 )
 from engine.render.targets import RenderTargets
+from engine.render.unlit_mirrors import UnlitBoxes, unlit_batches
 from engine.render.views import View, union_rect
 
 if TYPE_CHECKING:
     from engine.render.instances import InstanceBatch
-    from engine.resources import SurfaceState
 
 _ALWAYS = nullcontext()  # a view drawn whatever its claim counted
-# A per-view pass tests its opaque batches' boxes against each view (batch_cull.batch_reach)
-# and draws a batch only where it can reach, when it has at least CULL_MIN_BATCHES batches and
-# views x batches is at least CULL_MIN_DRAWS.  Measured on the benchmark ring at 32x18,
-# LP_NUM_THREADS=0, cull forced on against off, interleaved: the test and the kept lists cost
-# a fixed share a pass, a draw left out saves a few microseconds, and the share of draws left
-# out grows with the batches (the ring's boxes in 3, 5, 10, 20 meshes by angle: 16%, 27%,
-# 40%, 50% of the draws); 16 mirrors: 5 batches +6.8% a frame, 7 batches +2.3%, 12 -3.4%.  At
-# these thresholds: 12 batches -5.9%, 22 -11.8%, and the benchmark scenes (3 batches, each
-# reaching every view: its rows spread round the ring) never test.
-CULL_MIN_BATCHES = 10
-CULL_MIN_DRAWS = 64
-
-
-@dataclass(frozen=True)
-class SceneOptions:
-    """How ``ScenePass.draw`` draws its views (defaults: a root view such as the main camera)."""
-
-    clear: bool = True          # clear colour, ids and depth first; False keeps a level's claim mask
-    masked: bool = False        # only pixels whose node image names the view (the claimed pixels)
-    sky: bool = True            # the sky behind; reflection views leave it to their composite
-    batched: bool = False       # all views in one draw per batch (the geometry-shader path)
-    reflection_filter: bool = False  # albedo filtered as reflections are (Gpu.reflection_anisotropy)
-    unlit: frozenset[int] = frozenset()  # mirrors whose own shading the composites replace (shading_replaced)
-    # Draw the transparent slot now; False: a view tree's root or level view, whose slot the
-    # tree draws (draw_transparent) after the levels below are composited into its pixels.
-    transparent: bool = True
-
-
-ROOT_VIEW = SceneOptions()
-TREE_ROOT = SceneOptions(transparent=False)  # a root whose view tree draws its transparent slot
-REFLECTION_LEVEL = SceneOptions(clear=False, masked=True, sky=False, reflection_filter=True, transparent=False)
-_PER_DRAW_UNIFORMS = ("sky_face_size", "has_albedo_map", "transparent",
-                      "probe_face_size", "probe_position", "probe_box_min", "probe_box_max",
-                      "probe2_face_size", "probe2_position", "probe2_box_min", "probe2_box_max",
-                      "probe_rest_face_size", "probe_rest_position", "probe_rest_box_min", "probe_rest_box_max",
-                      "checker_cells", "checker_even", "checker_odd")
-_PER_PASS_UNIFORMS = 1  # the first changes with the pass; the rest with the batch (a view's node
-# index is its Camera block's: nothing is written per view)
-_NO_PROBE = ((0.0, 0.0, 0.0, 0.0),) * 3
-_NO_CHECKER = (0.0, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
-_PLANAR = int(ReflectVariant.PLANAR)
 _SCENE = PassState(depth_func="<", cull=True, clips=SCENE_CLIPS)
 _BATCHED_SCENE = PassState(depth_func="<", cull=True, clips=BATCHED_SCENE_CLIPS)
 # The sky's shaders write no gl_ClipDistance: a clip distance left on with no value written
@@ -177,30 +118,18 @@ _TRANSPARENT = PassState(depth_func="<", cull=True, clips=SCENE_CLIPS, blend=BLE
 
 
 class ScenePass:
-    """The scene programs and the one ``draw`` every view goes through (``draw_layered``
-    is the same scene for the six faces of a cube map at once).  Every pass binds the
-    shadow maps (``shadows``) and the probes' irradiance (``irradiance``) it shades with."""
+    """The one ``draw`` every view goes through (``draw_layered`` is the same scene for the
+    six faces of a cube map at once), drawn with the scene programs (``programs``) and the
+    sky's (``sky_draw``).  Every pass binds the shadow maps (``shadows``) and the probes'
+    irradiance (``irradiance``) it shades with."""
 
     def __init__(self, renderer: Gpu, shadows: ShadowMaps, irradiance: IrradianceTable) -> None:
         self.renderer = renderer
         self.shadows = shadows
         self.irradiance = irradiance
         self.ctx = renderer.ctx
-        # The sky's vertex arrays by (layered, generated) (``_sky_draw``), and the sky version
-        # each one's program was last given (``Gpu.sky_version``).
-        self._skies: dict[tuple[bool, bool], moderngl.VertexArray] = {}
-        self._sky_written: dict[tuple[bool, bool], int] = {}
-        # Scene programs by (geometry-shader invocations or 0, "" / "culled" / "naive" for a
-        # layered capture, the batch's variants or None, whether it reads a normal map, draws
-        # the analytic checker, reads an emissive map, a metallic-roughness map).
-        self._programs: dict[tuple, moderngl.Program] = {}
-        self._uniforms: dict[int, tuple] = {}  # program -> its _PER_DRAW_UNIFORMS (None where dropped)
-        self._reloads_seen = 0  # ShaderLibrary.reloads when the two caches above were made
-        # program -> the values last written to its per-draw uniforms: a program keeps its
-        # uniforms' values between passes and frames (GL program state), and only
-        # _draw_batches writes these, so a value is written only when it changes.
-        self._written: dict[int, list] = {}
-        self._last_own: dict[int, tuple] = {}  # program -> the batch values it last drew with
+        self.sky_draw = SkyDraw(renderer)  # the sky's triangle behind every view
+        self.programs = ScenePrograms(renderer, shadows)  # the builds and their per-draw uniforms
         # (invocations, layered, ambient probes, masked) -> a batch's draw-record keys (lit, unlit)
         self._kinds: dict[tuple, tuple[tuple, tuple]] = {}
         self._sky_size = 0
@@ -215,176 +144,50 @@ class ScenePass:
         self.cull_min_draws = CULL_MIN_DRAWS
         # The transparent slot's SlotGeometry (_slot_geometry).
         self._slot_kept: SlotGeometry | None = None
-        # The unlit candidates' instances' boxes (_instance_boxes) and the scene_version they
-        # were worked out at.
-        self._boxes: dict[InstanceBatch, list | None] = {}
-        self._beyond: dict[tuple, tuple] = {}  # (surface, batch) -> its plane, beyond()
-        self._boxes_at = -1
+        self.unlit_boxes = UnlitBoxes()  # what each view keeps unlit of a pass's unlit mirrors
         # A run's pass-wide bindings (draw's run): (run, (capturing, reflection filter), bindings_epoch
         # after them), or None.
         self._pass_wide: tuple | None = None
 
-    def program(self, variants: tuple[int, int, int] | None = None, invocations: int = 0,
-                layered: str = "", normal_mapped: bool = False, checker: bool = False,
-                material_maps: tuple[bool, bool] = (False, False), probe_blend: bool = False,
-                ambient_probes: bool = False, probe_rest: bool = False, unlit: bool = False,
-                masked: bool = False) -> moderngl.Program:
-        """The scene program for a batch of ``variants`` (None: mixed, switched per
-        instance): plain, batched (``invocations`` > 0: the geometry shader's) or a one-pass
-        cube-map capture (``layered`` "culled" or "naive"), with or without a normal map
-        (a build of its own: llvmpipe would run the map's derivatives and fetch for every
-        pixel behind a uniform branch), and with or without the analytic checker (``CHECKER``:
-        a generated checker texture drawn from its cells, filtered by the pixel's footprint,
-        instead of sampled), and with or without each of the material maps ``material_maps``
-        (emissive, metallic-roughness: ``EMISSIVE_MAP`` and ``METALLIC_ROUGHNESS_MAP`` builds,
-        shaders/include/material_maps.glsl; a batch without them samples nothing for them),
-        blending probes (``probe_blend``: ``PROBE_BLEND``) with a probe instead of the sky
-        taking the rest (``probe_rest``: ``PROBE_REST``, a curved object's own), or unlit
-        (``unlit``: ``UNLIT_SURFACE``, a mirror batch ``shading_replaced`` names), and
-        masked or not (``masked``: ``MASKED``, a reflection level's: only the pixels its node
-        image gives the view; a root view's build has no node-image fetch and no discard, so
-        llvmpipe neither runs the fetch for every pixel nor defers the depth write past the
-        shader, as a discarding program makes it), built once.  After a shader hot
-        reload the set-up is done again and the batches' vertex arrays are made again (the
-        relinked program may read uniforms, samplers and vertex inputs the first build
-        dropped)."""
-        if self.renderer.shaders.reloads != self._reloads_seen:
-            self._forget_programs()
-        virtual = self.shadows.virtual_shining  # the shadows stage set how many shine
-        shadowing = self.shadows.program_defines  # the lookups a program compiles (ShadowMaps.upload's)
-        key = (invocations, layered, variants, normal_mapped, checker, material_maps, probe_blend, virtual,
-               ambient_probes, probe_rest, unlit, masked, shadowing)
-        program = self._programs.get(key)
-        if program is None:
-            defines = {}
-            if variants is not None:
-                defines = {f"FIXED_{slot}": f"{value}u" for slot, value in zip(SLOTS, variants, strict=True)}
-            if normal_mapped:
-                defines["NORMAL_MAP"] = "1"
-            if checker:
-                defines["CHECKER"] = "1"
-            if material_maps[0]:
-                defines["EMISSIVE_MAP"] = "1"
-            if material_maps[1]:
-                defines["METALLIC_ROUGHNESS_MAP"] = "1"
-            if probe_blend:  # two probes and the sky by the instances' weights (shaders/include/probe.glsl)
-                defines["PROBE_BLEND"] = "1"
-                if probe_rest:  # a probe, not the sky, takes what the weights leave
-                    defines["PROBE_REST"] = "1"
-            if virtual:  # light through mirrors and portals (shaders/include/virtual_lights.glsl)
-                defines["VIRTUAL_LIGHTS"] = "1"
-            if ambient_probes:  # diffuse light from the probes' boxes too (shaders/include/ambient.glsl)
-                defines["AMBIENT_PROBES"] = "1"
-            if unlit:  # depth and ids only: the composites paint every pixel over (shading_replaced)
-                defines["UNLIT_SURFACE"] = "1"
-            if masked:  # the claimed pixels only (a reflection level's views)
-                defines["MASKED"] = "1"
-            defines.update(shadowing)
-            geometry = None
-            if invocations:
-                geometry = "scene_batched.geom"
-                per_invocation = 1 if layered else VIEWS_PER_INVOCATION
-                defines.update({
-                    "BATCHED_VIEWS": "1",
-                    "MAX_LEVEL_VIEWS": str(MAX_BATCHED_VIEWS),
-                    "VIEWS_PER_INVOCATION": str(per_invocation),
-                    "GS_INVOCATIONS": str(invocations),
-                    "GS_MAX_VERTICES": str(3 * per_invocation),
-                })
-                if layered:
-                    defines["LAYERED"] = "1"
-                if layered == "naive":
-                    defines["NO_FACE_CULLING"] = "1"
-            program = self.renderer.shaders.program("scene.vert", "scene.frag", geometry, defines=defines)
-            if "Camera" in program:  # the batched stages read their cameras from Views
-                program["Camera"].binding = CAMERA_BINDING
-            if invocations:
-                program["Views"].binding = VIEWS_BINDING
-            # A build may not read every input (the linker drops what a variant never uses).
-            for name, unit in (("albedo_map", ALBEDO_UNIT), ("sky_map", SKY_UNIT), ("node_map", NODE_UNIT),
-                               ("probe_map", PROBE_UNIT), ("probe2_map", PROBE2_UNIT),
-                               ("probe_rest_map", PROBE_REST_UNIT), ("normal_map", NORMAL_UNIT),
-                               ("emissive_map", EMISSIVE_MAP_UNIT),
-                               ("metallic_roughness_map", METALLIC_ROUGHNESS_UNIT),
-                               ("shadow_atlas", SHADOW_ATLAS_UNIT), ("point_shadow0", POINT_SHADOW_UNITS[0]),
-                               ("point_shadow1", POINT_SHADOW_UNITS[1]),
-                               ("irradiance_table", IRRADIANCE_UNIT), ("virtual_atlas", VIRTUAL_SHADOW_UNIT)):
-                if name in program:
-                    program[name].value = unit
-            if "Lights" in program:
-                program["Lights"].binding = LIGHTS_BINDING
-            if "Shadows" in program:
-                program["Shadows"].binding = SHADOWS_BINDING
-            if "VirtualLights" in program:
-                program["VirtualLights"].binding = VIRTUAL_LIGHTS_BINDING
-            if "Irradiance" in program:
-                program["Irradiance"].binding = IRRADIANCE_BINDING
-            self._programs[key] = program
-            self._uniforms[program.glo] = tuple(program.get(name, None) for name in _PER_DRAW_UNIFORMS)
-        return program
-
-    def _forget_programs(self) -> None:
-        """After a shader hot reload: every program set-up, written value, batch vertex array
-        and draw record is made again (a relinked program may read uniforms, samplers and
-        vertex inputs the first build dropped)."""
-        self._programs.clear()
-        self._uniforms.clear()
-        self._written.clear()  # a relinked program's uniforms start again from the defaults
-        self._last_own.clear()
-        for batch in self.renderer.batches.values():
-            batch.drop_vertex_arrays()  # made again for the relinked programs' inputs
-        self._reloads_seen = self.renderer.shaders.reloads
-
     def prepare(self, batches: Iterable[InstanceBatch], reflections: bool) -> int:
-        """Build the programs and vertex arrays ``batches`` will be drawn with: invocations 0
-        (root and per-mirror views) and, with ``reflections``, every invocation count of the
-        batched path (``BATCHED_INVOCATIONS``), its view table and the reflection sampler.
-        A batch of mirrors gets its ``UNLIT_SURFACE`` builds too, and with ``reflections``
-        the ``MASKED`` builds (a level whose claims overlap draws masked, one whose claims
-        lie apart unmasked: ``view_tree._APART``).  Returns how many programs
-        were built (0 when all were there)."""
-        before = len(self._programs)
-        counts = (0, *BATCHED_INVOCATIONS) if reflections else (0,)
-        ambient = (False, True) if self.irradiance.has_boxes() else (False,)  # captures: False
-        for batch in batches:
-            unlit = (False, True) if _may_be_unlit(batch) else (False,)
-            for invocations in counts:
-                for masked in (False, True) if reflections else (False,):
-                    for probes in ambient:
-                        for dark in unlit:
-                            batch.vao(self.program(batch.variants, invocations, "", batch.normal_map is not None,
-                                                   batch.checker is not None, _material_maps(batch),
-                                                   batch.probe_blend, probes, bool(batch.rest_probe), dark, masked))
+        """Build the programs and vertex arrays ``batches`` will be drawn with
+        (``ScenePrograms.prepare``) and, with ``reflections``, the batched path's view table
+        and the reflection sampler.  Returns how many programs were built (0 when all were
+        there)."""
+        built = self.programs.prepare(batches, reflections, self.irradiance.has_boxes())
         if reflections:
             if self._views_ubo is None:
                 self._views_ubo = self.ctx.buffer(reserve=VIEWS_BLOCK_BYTES)
             self._reflection_filter()
-        return len(self._programs) - before
+        return built
 
     def _draw_batches(self, batches, invocations: int, masked: bool, layered: str = "",
                       skip: int = 0, before_draw: Callable[[], None] | None = None, hide: int = 0,
                       unlit: frozenset | set = frozenset()) -> None:
         """One instanced draw per batch, each with the program of its variants.  A program's
-        uniforms are written only when their value changes (``self._written``, kept for the
+        uniforms are written only when their value changes (``ScenePrograms.written``, kept for the
         program's life): each write is a moderngl call of a few microseconds on a view's
         critical path (about 490 a frame at 16 mirrors when they were written again every pass).
         What a batch draws with in passes of one kind (its program, vertex array, uniforms,
         textures, and its uniform values where no probe's lookup can change them) is looked up
-        once and kept on the batch (``InstanceBatch.draw_records``, ``_record``) until a shader
+        once and kept on the batch (``InstanceBatch.draw_records``, ``ScenePrograms.record``) until a shader
         reload, a virtual light starting or ending, a kind of light starting or ending to cast
         (``ShadowMaps.program_defines``), or its variants change: a view's draws then
         cost a dictionary look-up and a comparison a batch, not a program key built and found.
         A batch whose one instance is the view's ``skip`` or ``hide`` entity (a mirror's own
         quad, a probe's own sphere) is not drawn at all: its vertices would all be clipped
-        away (0: none; entities start at 1).  A batch in ``unlit`` (``_unlit_batches``: its
+        away (0: none; entities start at 1).  A batch in ``unlit`` (``unlit_batches``: its
         mirrors all ``shading_replaced``) draws with its ``UNLIT_SURFACE`` build."""
         ctx = self.ctx
         renderer = self.renderer
-        if renderer.shaders.reloads != self._reloads_seen:
-            self._forget_programs()
+        programs = self.programs
+        seen = programs.reloads_seen
+        if renderer.shaders.reloads != seen:
+            programs.forget()
+            seen = programs.reloads_seen
         # What else picks a batch's program: a virtual light shining, the shadow lookups compiled.
         shadows = self.shadows
-        stamp = (self._reloads_seen, shadows.virtual_shining, shadows.program_defines)
+        stamp = (seen, shadows.virtual_shining, shadows.program_defines)
         kinds = self._kinds.get((invocations, layered, self._ambient_probes, masked))
         if kinds is None:
             kinds = self._kinds[invocations, layered, self._ambient_probes, masked] = (
@@ -392,7 +195,7 @@ class ScenePass:
                 (invocations, layered, self._ambient_probes, True, masked))
         kind, unlit_kind = kinds
         sky_size = self._sky_size
-        last_own = self._last_own
+        last_own = programs.last_own
         blank, colour_maps, recorded = renderer.blank_color, renderer.colour_maps, texture_record(ctx)
         draws = instances = 0
         skipped = (skip, hide)
@@ -404,7 +207,7 @@ class ScenePass:
             drawn_as = unlit_kind if unlit and batch in unlit else kind  # a batch the composites paint over
             record = batch.draw_records.get(drawn_as)
             if record is None or record[0] != stamp or record[1] != variants:
-                record = batch.draw_records[drawn_as] = self._record(batch, drawn_as, stamp, variants)
+                record = batch.draw_records[drawn_as] = programs.record(batch, drawn_as, stamp, variants)
             _, _, glo, vao, uniforms, values, textures, own, vertices = record
             for unit, texture in textures:
                 if texture is blank and recorded.get(_ALBEDO_KEY) in colour_maps:
@@ -418,7 +221,7 @@ class ScenePass:
             # a time only where it differs from what this program last drew with.
             last = last_own.get(glo)
             if last is not own and last != own:
-                for i, value in enumerate(own, _PER_PASS_UNIFORMS):
+                for i, value in enumerate(own, PER_PASS_UNIFORMS):
                     if values[i] != value and uniforms[i] is not None:
                         uniforms[i].value = values[i] = value
                 last_own[glo] = own
@@ -440,44 +243,18 @@ class ScenePass:
             stats.draw_calls += draws
             stats.instances += instances
 
-    def _record(self, batch: InstanceBatch, kind: tuple[int, str, bool, bool, bool], stamp: tuple, variants) -> tuple:
-        """What ``batch`` draws with in passes of ``kind`` (invocations, layered, ambient
-        probes, unlit, masked): (stamp, variants, program name, vertex array, per-draw uniforms, the
-        program's written values, the (unit, texture) pairs to bind, its own uniform values
-        or None where probes give them per draw, its mesh's vertex count)."""
-        invocations, layered, ambient, unlit, masked = kind
-        program = self.program(variants, invocations, layered, batch.normal_map is not None,
-                               batch.checker is not None, _material_maps(batch), batch.probe_blend,
-                               ambient, bool(batch.rest_probe), unlit, masked)
-        glo = program.glo
-        values = self._written.get(glo)
-        if values is None:
-            values = self._written[glo] = [None] * len(_PER_DRAW_UNIFORMS)
-        # A batch with no albedo map binds the blank one: the program's sampler is there all
-        # the same (``Gpu.blank_color``).
-        albedo = batch.texture if batch.texture is not None else self.renderer.blank_color
-        textures = tuple((unit, texture) for unit, texture in (
-            (ALBEDO_UNIT, albedo), (NORMAL_UNIT, batch.normal_map), (EMISSIVE_MAP_UNIT, batch.emissive_map),
-            (METALLIC_ROUGHNESS_UNIT, batch.metallic_roughness_map)) if texture is not None)
-        own = None
-        if not batch.probe and not batch.probe_blend and not batch.rest_probe:
-            own = (batch.texture is not None, batch.transparent, 0, *_NO_PROBE, 0, *_NO_PROBE, 0, *_NO_PROBE,
-                   *(batch.checker or _NO_CHECKER))
-        return (stamp, variants, glo, batch.vao(program), self._uniforms[glo], values, textures, own,
-                batch.mesh.index_count)
-
     def _probe_values(self, batch: InstanceBatch) -> tuple:
         """Bind the probes ``batch`` samples; its own uniform values with their lookups."""
         cubes = self.renderer.probe_cubes
-        probe_size, lookup = self._bind_probe(batch.probe, PROBE_UNIT, cubes) if batch.probe else (0, _NO_PROBE)
-        probe2_size, lookup2 = 0, _NO_PROBE
+        probe_size, lookup = self._bind_probe(batch.probe, PROBE_UNIT, cubes) if batch.probe else (0, NO_PROBE_LOOKUP)
+        probe2_size, lookup2 = 0, NO_PROBE_LOOKUP
         if batch.probe_blend:  # the second probe's unit (the sky where the blend is a probe and the sky)
             probe2_size, lookup2 = self._bind_probe(batch.second_probe, PROBE2_UNIT, cubes)
-        rest_size, lookup_rest = 0, _NO_PROBE
+        rest_size, lookup_rest = 0, NO_PROBE_LOOKUP
         if batch.rest_probe:  # the probe taking what the weights leave (a curved object's own)
             rest_size, lookup_rest = self._bind_probe(batch.rest_probe, PROBE_REST_UNIT, cubes)
         return (batch.texture is not None, batch.transparent, probe_size, *lookup, probe2_size, *lookup2, rest_size,
-                *lookup_rest, *(batch.checker or _NO_CHECKER))
+                *lookup_rest, *(batch.checker or NO_CHECKER))
 
     def _bind_probe(self, probe: int, unit: int, cubes) -> tuple[int, tuple]:
         """Bind the cube map of ``probe`` to ``unit``: its face size and lookup uniforms.  The
@@ -493,7 +270,7 @@ class ScenePass:
             bind_texture(self.ctx, cube.texture, unit)
             return cube.face_size, cube.lookup()
         bind_texture(self.ctx, self.renderer.sky, unit)
-        return self._sky_size, _NO_PROBE
+        return self._sky_size, NO_PROBE_LOOKUP
 
     # --- the pass ------------------------------------------------------------------------------
     def draw(self, views: Sequence[View], targets: RenderTargets, options: SceneOptions = ROOT_VIEW,
@@ -650,8 +427,9 @@ class ScenePass:
         now = _drawn_now(transparent, options)
         geometry = self._slot_geometry(transparent) if now else None
         opaque = renderer.opaque_batches()
-        unlit = _unlit_batches(opaque, options.unlit)
-        check = self._unlit_views(unlit) if now and unlit else None  # what each view keeps of them
+        unlit = unlit_batches(opaque, options.unlit)
+        # What each view keeps of them.
+        check = self.unlit_boxes.views(unlit, renderer.scene_version) if now and unlit else None
         renderer.upload_views(views)  # every view's Camera block in one write; each binds its range
         reach = None
         if (self.cull_batches and opaque and len(opaque) >= self.cull_min_batches
@@ -670,6 +448,7 @@ class ScenePass:
                      0, masked, skip=view.skip, hide=view.hide, unlit=unlit)
             renderer.stats.passes += len(views)
             return
+        sky_draw = self.sky_draw
         for index, view in enumerate(views):
             if now:  # the slot, or (a tree's view) its part up to its see-through surfaces
                 if options.transparent:
@@ -692,7 +471,7 @@ class ScenePass:
                     # llvmpipe did at the switch was its rasterising of the queued draws, which
                     # the next flush now does: measured, no faster a frame; issue 40.)
                     apply_pass_state(ctx, _SKY, viewport, view.scissor)
-                    self._sky_draw(layered=False).render(moderngl.TRIANGLES, vertices=3)
+                    sky_draw.vertex_array(layered=False).render(moderngl.TRIANGLES, vertices=3)
                     renderer.stats.draw_calls += 1
                 if now:
                     targets.view_framebuffer.depth_mask = False
@@ -705,34 +484,6 @@ class ScenePass:
                     # The next view's state (the pass after the last applies its own).
                     apply_pass_state(ctx, _SCENE, viewport, views[index + 1].scissor)
                 renderer.stats.passes += 1
-
-    def _unlit_views(self, unlit: set) -> _UnlitViews:
-        """What says which of a pass's ``unlit`` candidates (``_unlit_batches``) each view
-        keeps (``_UnlitViews``), their instances' boxes worked out once while the scene
-        stands (the Gpu's ``scene_version``)."""
-        version = self.renderer.scene_version
-        if self._boxes_at != version:
-            self._boxes.clear()
-            self._beyond.clear()
-            self._boxes_at = version
-        return _UnlitViews(unlit, self)
-
-    def instance_boxes(self, batch: InstanceBatch) -> list[tuple[float, ...]] | None:
-        """``_instance_boxes`` of ``batch``, kept while the scene stands (``_unlit_views``)."""
-        boxes = self._boxes.get(batch, _UNKNOWN)
-        if boxes is _UNKNOWN:
-            boxes = self._boxes[batch] = _instance_boxes(batch)
-        return boxes
-
-    def beyond(self, surface: InstanceBatch, batch: InstanceBatch) -> list[tuple[float, float, float]]:
-        """For each instance of ``batch``, how far its box reaches past ``surface``'s plane on
-        the side its normal points to and on the other (0: not at all), and the gap between
-        its box and the surface's: kept while the scene stands and the plane is the same."""
-        key = (surface, batch)
-        kept = self._beyond.get(key)
-        if kept is None or kept[0] is not surface.plane:
-            kept = self._beyond[key] = (surface.plane, _beyond(surface, batch))
-        return kept[1]
 
     def _reaching(self, batches: list[InstanceBatch], reach: list[bool], view: View) -> list[InstanceBatch]:
         """The batches whose ``reach`` (batch_cull.batch_reach) in ``view`` is True; those
@@ -759,12 +510,12 @@ class ScenePass:
         transparent = renderer.transparent_batches()
         now = _drawn_now(transparent, options)
         opaque = renderer.opaque_batches()
-        unlit = _unlit_batches(opaque, options.unlit)
+        unlit = unlit_batches(opaque, options.unlit)
         groups = None
         if now and not options.transparent:  # each group of views with the same part of the slot before the claims
             groups = slot_groups(transparent, views, self._slot_geometry(transparent))
         if now and unlit:  # one draw for every view: unlit where no view's slot can blend over it
-            check = self._unlit_views(unlit)
+            check = self.unlit_boxes.views(unlit, renderer.scene_version)
             for group, first in ([(views, transparent)] if groups is None else [group[:2] for group in groups]):
                 for view in group:
                     check.unlit = check.keep(view, first)
@@ -842,7 +593,7 @@ class ScenePass:
             apply_pass_state(ctx, _LAYERED_SKY, size)
             if check is not None:
                 check("sky")
-            self._sky_draw(layered=True).render(moderngl.TRIANGLES, vertices=3)
+            self.sky_draw.vertex_array(layered=True).render(moderngl.TRIANGLES, vertices=3)
         finally:
             target.unbind()
         renderer.stats.passes += 1
@@ -865,38 +616,6 @@ class ScenePass:
 
         return check
 
-    def _sky_draw(self, layered: bool) -> moderngl.VertexArray:
-        """The sky's full-screen triangle for the renderer's sky: a generated Skybox
-        evaluated per pixel (the GENERATED_SKY build, its colours written to the program
-        when the sky changed: ``Gpu.sky_model``), else the cube map; ``layered``: the
-        six-face build of a one-pass cube-map capture (``sky_layered.geom``)."""
-        renderer = self.renderer
-        model = renderer.sky_model
-        key = (layered, model is not None)
-        vao = self._skies.get(key)
-        if vao is None:
-            defines = {"LAYERED": "1", "MAX_LEVEL_VIEWS": str(MAX_BATCHED_VIEWS)} if layered else {}
-            if model is not None:
-                defines["GENERATED_SKY"] = "1"
-            program = renderer.shaders.program("sky.vert", "sky.frag", "sky_layered.geom" if layered else None,
-                                               defines=defines)
-            if layered:
-                program["Views"].binding = VIEWS_BINDING
-            else:
-                program["Camera"].binding = CAMERA_BINDING
-            if model is None:
-                program["sky_map"].value = SKY_UNIT
-            vao = self._skies[key] = self.ctx.vertex_array(program, [])
-        if model is not None and self._sky_written.get(key) != renderer.sky_version:
-            for name, value in model.uniforms().items():
-                vao.program[name].value = value  # (a shader reload writes them back: ShaderLibrary)
-            self._sky_written[key] = renderer.sky_version
-        return vao
-
-    def _layered_sky(self) -> moderngl.VertexArray:
-        """The layered capture's sky (its programs built even where that path is refused)."""
-        return self._sky_draw(layered=True)
-
     def _reflection_filter(self) -> moderngl.Sampler | None:
         """The albedo sampler of reflection views, or None when they filter like the main view."""
         renderer = self.renderer
@@ -914,248 +633,13 @@ class ScenePass:
     def release(self) -> None:
         if self._reflection_sampler is not None:
             forget_sampler(self.ctx, self._reflection_sampler)
-        for obj in (*self._skies.values(), self._views_ubo, self._reflection_sampler):
+        self.sky_draw.release()
+        for obj in (self._views_ubo, self._reflection_sampler):
             if obj is not None:
                 obj.release()
-        self._skies.clear()
-        self._sky_written.clear()
         self._views_ubo = self._reflection_sampler = None
-        self._programs.clear()  # the shader library owns and releases the programs
+        self.programs.release()
 
-
-def geometry_invocations(view_count: int) -> int:
-    """Invocations of the batched geometry shader for ``view_count`` views:
-    ceil(view_count / VIEWS_PER_INVOCATION) rounded up to a power of two (invocations with
-    no view still cost a pass over the triangles; the rounding bounds the programs built)."""
-    needed = -(-view_count // VIEWS_PER_INVOCATION)
-    return min(1 << max(0, needed - 1).bit_length(), -(-MAX_BATCHED_VIEWS // VIEWS_PER_INVOCATION))
-
-
-# Every invocation count ``geometry_invocations`` gives (1 to MAX_BATCHED_VIEWS views).
-BATCHED_INVOCATIONS = tuple(sorted({geometry_invocations(n) for n in range(1, MAX_BATCHED_VIEWS + 1)}))
-
-
-def shading_replaced(mirrors: Iterable[SurfaceState], pixel_budget: bool = False) -> frozenset[int]:
-    """The mirrors whose own shading no pixel of the finished frame shows, wherever a view
-    tree draws them: the tree composites each one's reflection, its end view or its fallback
-    (no view: cut by a budget, faded out, past the depth limits or the tree's cap, or an end
-    view's pixels last frame's image does not hold) over every pixel of it a view shows,
-    blending reflection x weight + own x (1 - weight) with a weight of exactly 1.  That holds
-    for an enabled mirror with a reflect rate of 1, no fade (a partly faded mirror's weights
-    are a quotient of floats), not water (weighted by Fresnel), drawn at the screen's
-    resolution (a level drawn smaller misses pixels at the mirror's edges, whose own shading
-    then shows), at any depth: since an end candidate with nothing to repeat gets the
-    fallback too (ViewTree._plan), a mirror at or past its depth limits is painted over like
-    any other (tests/test_unlit_mirrors.py compares rings of 8 and 16 at max_depth 1-3, end
-    images on and off, with the all-lit path).  None under a pixel budget
-    (``ViewBudget.pixels``: the tree decides later which levels it draws smaller).  A scene
-    pass draws these mirrors' batches unlit (``SceneOptions.unlit``), with glass in front of
-    them too: a view tree draws its views' glass after compositing into them
-    (``ScenePass.draw_transparent``), so it blends over the reflection, never over a
-    mirror's own colour; not in a view where a see-through mirror or portal (water), or
-    what lies behind it, can blend over the mirror (``_UnlitViews``: those are drawn with
-    the opaque batches, before the composites)."""
-    if pixel_budget:
-        return frozenset()
-    return frozenset(state.entity for state in mirrors
-                     if state.kind == "mirror" and state.enabled and state.reflect_rate == 1.0 and state.fade is None
-                     and state.water is None and state.resolution_scale == 1.0)
-
-
-def _unlit_batches(opaque: Iterable[InstanceBatch], mirrors: frozenset[int]) -> set:
-    """The batches of ``opaque`` a pass may draw unlit: those whose instances are all in
-    ``mirrors`` (``SceneOptions.unlit``), worked out once a pass, not once a view; a view
-    keeps of them those no transparent batch it draws before the composites can blend over
-    (``_UnlitViews``)."""
-    if not mirrors:
-        return _NO_BATCHES
-    return {batch for batch in opaque if _may_be_unlit(batch) and batch.row_of.keys() <= mirrors}
-
-
-class _UnlitViews:
-    """Which of a pass's unlit candidates (``_unlit_batches``) each view may draw unlit
-    (``keep``), given the transparent batches it blends before the composites (a tree's
-    see-through surfaces and what is behind them: ``_drawn_now``, ``split_slot``): those
-    no such batch can blend over.  One that does would blend over the mirror's constant
-    colour, and take its pixels from the mirror's claim (its ids), so the colour would
-    show.  A drawn batch covers a point of a mirror only if it is nearer on the ray from the
-    eye; so, instance by instance (a ring's mirrors are one batch), a candidate stays unlit
-    unless
-
-    - for a see-through surface (planar): the instance reaches beyond the surface's plane,
-      seen from the eye, and not so far from the surface's box that no ray from the eye
-      could cross the plane within it (the ray to a point a depth d beyond the plane, the
-      eye a height h before it, crosses it within d / (d + h) of its length of the point:
-      worked out once while the scene stands, the depth and the gap, and a view's height
-      and farthest distance: a few operations an instance); and then
-    - the drawn batch comes nearer the eye than the instance box's farthest corner, and its
-      box's screen rectangle (``screen_rect``) meets the instance box's (bounded first by
-      interval arithmetic on the projection, then by its eight corners).
-
-    A pond at the centre of a ring of mirrors, below their tops and above their feet, keeps
-    them unlit in nearly every view (it turned every mirror lit, in every view, before).
-    Conservative throughout (a margin wider and nearer; a box reaching behind the eye covers
-    the screen), so the image is the all-lit path's, bit for bit (tests/test_unlit_mirrors.py)."""
-
-    __slots__ = ("unlit", "scene")
-
-    def __init__(self, unlit: set, scene: ScenePass) -> None:
-        self.unlit, self.scene = unlit, scene
-
-    def keep(self, view: View, drawn: list) -> set:
-        """What of ``unlit`` ``view`` may draw unlit where it blends ``drawn`` before the
-        composites."""
-        unlit = self.unlit
-        if not unlit or not drawn:
-            return unlit
-        eye = view.eye
-        ex, ey, ez = eye.x, eye.y, eye.z
-        fronts = []  # [batch, box, the eye's height over its plane (None: no plane), rectangle, nearest]
-        for batch in drawn:
-            box = box_floats(batch)
-            if box is None:
-                continue  # empty: draws nothing
-            plane = batch.plane if batch.surface and batch.count == 1 else None
-            height = None
-            if plane is not None:
-                length = glm.length(glm.vec3(plane))
-                height = (plane.x * ex + plane.y * ey + plane.z * ez + plane.w) / length if length > 0.0 else 0.0
-            fronts.append([batch, box, height, _UNKNOWN, _UNKNOWN])
-        if not fronts:
-            return unlit
-        kept = set()
-        scene = self.scene
-        for batch in unlit:
-            boxes = scene.instance_boxes(batch)
-            if boxes is None:
-                continue  # a row not measured yet: lit
-            lo, hi = box_floats(batch)
-            farthest = math.sqrt(sum(max(abs(lo[axis] - eye[axis]), abs(hi[axis] - eye[axis])) ** 2
-                                     for axis in range(3)))
-            covered = False
-            for front in fronts:
-                height = front[2]
-                if height is None or abs(height) <= 1e-6:
-                    covered = any(self._covers(front, instance, view) for instance in boxes)
-                else:  # by the surface's plane first
-                    side, reach = (1, height) if height > 0.0 else (0, -height)  # the depth past it, the eye's height
-                    for i, past in enumerate(scene.beyond(front[0], batch)):
-                        depth = past[side]  # how far the instance reaches past the plane, seen from the eye
-                        if depth > 0.0 and past[2] <= farthest * depth / (depth + reach) + _DEPTH_MARGIN \
-                                and self._covers(front, boxes[i], view):
-                            covered = True
-                            break
-                if covered:
-                    break
-            if not covered:
-                kept.add(batch)
-        return kept
-
-    def _covers(self, front: list, instance: tuple, view: View) -> bool:
-        """Whether ``front`` (a drawn batch) may blend over ``instance`` (centre, half sizes):
-        nearer the eye than its box's farthest corner, and their screen rectangles meeting."""
-        eye = view.eye
-        cx, cy, cz, hx, hy, hz = instance
-        far = math.sqrt((abs(cx - eye.x) + hx) ** 2 + (abs(cy - eye.y) + hy) ** 2 + (abs(cz - eye.z) + hz) ** 2)
-        if front[4] is _UNKNOWN:
-            lo, hi = front[1]
-            front[4] = math.sqrt(sum(max(lo[axis] - eye[axis], 0.0, eye[axis] - hi[axis]) ** 2
-                                     for axis in range(3))) - _DEPTH_MARGIN
-        if front[4] >= far:
-            return False
-        view_proj = view.view_proj
-        if front[3] is _UNKNOWN:
-            front[3] = _widened(screen_rect(_box_corners(front[1]), view_proj))
-        rect = front[3]
-        if rect is None:
-            return True
-        # The projection's rows (x, y, w): over a box each is row . c + row[3], give or take
-        # |row| . h, exactly; x and y (their quotients by w) lie within the four quotients of
-        # those ends (w above 0: the box before the eye).
-        ends = []
-        for r in (0, 1, 3):
-            a, b, c = view_proj[0][r], view_proj[1][r], view_proj[2][r]
-            middle, spread = a * cx + b * cy + c * cz + view_proj[3][r], abs(a) * hx + abs(b) * hy + abs(c) * hz
-            ends.append((middle - spread, middle + spread))
-        (nx0, nx1), (ny0, ny1), (d0, d1) = ends
-        if d0 <= 1e-6:
-            return True  # reaching behind the eye: anywhere on the screen
-        if (max(nx1 / d0, nx1 / d1) < rect[0] or min(nx0 / d0, nx0 / d1) > rect[2]
-                or max(ny1 / d0, ny1 / d1) < rect[1] or min(ny0 / d0, ny0 / d1) > rect[3]):
-            return False
-        # Then by the box's eight corners (where its depth varies, much tighter).
-        corners = _box_corners(((cx - hx, cy - hy, cz - hz), (cx + hx, cy + hy, cz + hz)))
-        return rects_overlap(rect, screen_rect(corners, view_proj))
-
-
-_UNKNOWN = object()  # (not worked out yet)
-
-
-def _beyond(surface: InstanceBatch, batch: InstanceBatch) -> list[tuple[float, float, float]]:
-    """``ScenePass.beyond`` worked out: each instance box's corners' distances to the
-    surface's (unit) plane, the farthest on either side, and the boxes' gap."""
-    plane = surface.plane
-    normal = glm.vec3(plane)
-    length = glm.length(normal)
-    nx, ny, nz, w = (plane.x / length, plane.y / length, plane.z / length, plane.w / length) if length > 0.0 \
-        else (0.0, 0.0, 0.0, 0.0)
-    box = box_floats(surface)
-    out = []
-    for lo, hi in batch.row_boxes.tolist():
-        low = high = w
-        for n, a, b in ((nx, lo[0], hi[0]), (ny, lo[1], hi[1]), (nz, lo[2], hi[2])):
-            low += min(n * a, n * b)
-            high += max(n * a, n * b)
-        gap = 0.0 if box is None else math.sqrt(sum(max(lo[axis] - box[1][axis], box[0][axis] - hi[axis], 0.0) ** 2
-                                                    for axis in range(3)))
-        if length == 0.0:
-            low, high, gap = -math.inf, math.inf, 0.0
-        out.append((max(high, 0.0), max(-low, 0.0), gap))
-    return out
-
-
-def _instance_boxes(batch: InstanceBatch) -> list[tuple[float, ...]] | None:
-    """Each instance's world box (``InstanceBatch.row_boxes``) as its centre and half sizes
-    (a hair larger: what float32 rows are off by); None where a row is not measured yet."""
-    boxes = []
-    for lo, hi in batch.row_boxes.tolist():
-        if lo[0] != lo[0]:
-            return None
-        boxes.append((*((l + h) * 0.5 for l, h in zip(lo, hi, strict=True)),
-                      *((h - l) * 0.5 * (1.0 + 1e-6) + 1e-6 for l, h in zip(lo, hi, strict=True))))
-    return boxes
-
-
-# How much nearer (m) and wider (NDC) a drawn batch counts than its box, in _UnlitViews:
-# what float32 corners and a vertex's own transform may be off by.
-_DEPTH_MARGIN = 1e-3
-_RECT_MARGIN = 1e-3
-
-
-def _widened(rect: tuple[float, float, float, float] | None) -> tuple[float, float, float, float] | None:
-    if rect is None:
-        return None
-    return rect[0] - _RECT_MARGIN, rect[1] - _RECT_MARGIN, rect[2] + _RECT_MARGIN, rect[3] + _RECT_MARGIN
-
-
-def _box_corners(box: tuple) -> list[glm.vec4]:
-    lo, hi = box
-    return [glm.vec4(x, y, z, 1.0) for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])]
-
-
-_NO_BATCHES: frozenset = frozenset()
-
-
-def _may_be_unlit(batch: InstanceBatch) -> bool:
-    """Whether ``batch`` is drawn with an ``UNLIT_SURFACE`` build when its mirrors are
-    ``shading_replaced`` (an opaque batch of mirrors' variants)."""
-    variants = batch.variants
-    return variants is not None and variants[2] == _PLANAR and not batch.transparent
-
-
-def _material_maps(batch) -> tuple[bool, bool]:
-    """Which material maps a batch's program samples: (emissive, metallic-roughness)."""
-    return batch.emissive_map is not None, batch.metallic_roughness_map is not None
 
 def _drawn_now(transparent: list, options: SceneOptions) -> list:
     """What of the transparent slot ``draw`` may draw with the opaque batches: all of it,

@@ -27,7 +27,7 @@ from engine.render.claim_cull import ChainBoxes
 from engine.render.gpu import Gpu
 from engine.render.mirror_passes import Fallbacks, PreparedComposites, PreparedFallbacks
 from engine.render.plan_rows import Candidates, LevelRows
-from engine.render.scene_pass import REFLECTION_LEVEL, SceneOptions
+from engine.render.scene_options import REFLECTION_LEVEL, SceneOptions
 from engine.render.targets import RenderTargets
 from engine.render.tree_visibility import VISIBILITY_MODES, RootVisibility
 from engine.render.view_plan import SurfaceTable

@@ -81,7 +81,8 @@ from engine.render.level_nodes import level_nodes, parent_and_surface
 from engine.render.mirror_passes import Claims, Fallbacks, MirrorPasses, PreparedComposites
 from engine.render.plan_ahead import plan_ahead, plan_chain
 from engine.render.plan_rows import Candidates, LevelRows
-from engine.render.scene_pass import REFLECTION_LEVEL, TREE_ROOT, SceneOptions, ScenePass, shading_replaced
+from engine.render.scene_options import REFLECTION_LEVEL, TREE_ROOT, SceneOptions
+from engine.render.scene_pass import ScenePass
 from engine.render.surface_table import NO_BLENDS, SurfaceBlends
 from engine.render.targets import LevelStack
 from engine.render.tree_visibility import (
@@ -102,6 +103,7 @@ from engine.render.tree_walk import (
     ends_at,
     fallbacks_at,
 )
+from engine.render.unlit_mirrors import shading_replaced
 from engine.render.view_plan import SurfaceTable, _mat, level_rects
 from engine.render.views import View
 
@@ -111,7 +113,7 @@ _BATCHED = SceneOptions(clear=False, masked=True, sky=False, batched=True, refle
 # claim's rectangle and each claim the far plane (1) where it took the pixel, so within a
 # view's rectangle, which no other claim's reaches, a fragment passes the depth test ("<")
 # only on its own view's claimed pixels, as the node image's test would let it through; the
-# build without that test (ScenePass.program's MASKED) runs no fetch and no discard a pixel,
+# build without that test (ScenePrograms.program's MASKED) runs no fetch and no discard a pixel,
 # and llvmpipe's depth test, before the shader, rejects the other pixels' fragments unshaded.
 # A level drawn on its claims' conditions (predicted visibility) keeps the node test: its views
 # are skipped by the GPU only where the claims' counts are in when they draw (GL_QUERY_NO_WAIT
@@ -139,7 +141,7 @@ class ViewTree:
         self._end_surfaces = EndSurfaces(self.ends)  # the surfaces that may get end views, kept
         self.visibility = TreeVisibility(renderer, self.passes)  # each root's claim counts, frame to frame
         self._software = renderer.caps.software  # a software rasteriser (the context's, read once)
-        # Draw the mirrors this tree paints over entirely unlit (scene_pass.shading_replaced);
+        # Draw the mirrors this tree paints over entirely unlit (unlit_mirrors.shading_replaced);
         # False: every view shades them (the second path the tests compare against).
         self.unlit = True
         # (the table and pixel budget they were found for, the set: the same at every depth)

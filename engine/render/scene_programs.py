@@ -1,0 +1,267 @@
+"""The scene programs: the builds of ``scene.vert``/``scene.frag`` (and
+``scene_batched.geom``) a scene pass draws with, and the per-draw uniforms each one keeps.
+
+Programs are specialised: a batch whose instances all use the same material variants is
+drawn with a build of ``scene.frag`` whose slots are those variants as constants (the
+other cases of each slot's switch compile away; llvmpipe would otherwise run every case
+of every slot for every pixel), built once and cached; a batch of mixed variants uses the
+build that switches per instance.  A level's batches get every build a view may need
+(``prepare``: root and per-mirror views, each batched invocation count) after its first
+frame, so a mirror first coming into view compiles nothing.
+
+Apart from the pass (``engine/render/scene_pass.py``, which draws with them) because
+choosing, building and wiring a build (defines, units, blocks, a hot reload's rebuild) is
+one job, done once a build, and drawing the views is another, done every frame: the pass
+asks for a batch's draw record (``ScenePrograms.record``) once and then only draws."""
+from __future__ import annotations
+
+from collections.abc import Iterable
+from typing import TYPE_CHECKING
+
+import moderngl
+
+from engine.core.material_slots import SLOTS
+from engine.render.batched_mirrors import MAX_BATCHED_VIEWS, VIEWS_PER_INVOCATION
+from engine.render.bindings import (
+    ALBEDO_UNIT,
+    CAMERA_BINDING,
+    EMISSIVE_MAP_UNIT,
+    IRRADIANCE_BINDING,
+    IRRADIANCE_UNIT,
+    LIGHTS_BINDING,
+    METALLIC_ROUGHNESS_UNIT,
+    NODE_UNIT,
+    NORMAL_UNIT,
+    POINT_SHADOW_UNITS,
+    PROBE2_UNIT,
+    PROBE_REST_UNIT,
+    PROBE_UNIT,
+    SHADOW_ATLAS_UNIT,
+    SHADOWS_BINDING,
+    SKY_UNIT,
+    VIEWS_BINDING,
+    VIRTUAL_LIGHTS_BINDING,
+    VIRTUAL_SHADOW_UNIT,
+)
+from engine.render.gpu import Gpu
+from engine.render.shadows import ShadowMaps
+from engine.render.unlit_mirrors import may_be_unlit
+
+if TYPE_CHECKING:
+    from engine.render.instances import InstanceBatch
+
+# The uniforms a draw may write, in the order a draw record keeps them.
+PER_DRAW_UNIFORMS = ("sky_face_size", "has_albedo_map", "transparent",
+                     "probe_face_size", "probe_position", "probe_box_min", "probe_box_max",
+                     "probe2_face_size", "probe2_position", "probe2_box_min", "probe2_box_max",
+                     "probe_rest_face_size", "probe_rest_position", "probe_rest_box_min", "probe_rest_box_max",
+                     "checker_cells", "checker_even", "checker_odd")
+PER_PASS_UNIFORMS = 1  # the first changes with the pass; the rest with the batch (a view's node
+# index is its Camera block's: nothing is written per view)
+NO_PROBE_LOOKUP = ((0.0, 0.0, 0.0, 0.0),) * 3  # a probe's lookup uniforms where the sky stands in for it
+NO_CHECKER = (0.0, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
+
+
+class ScenePrograms:
+    """The scene programs by what picks a build, each one's per-draw uniforms (``uniforms``)
+    and the values last written to them (``written``, ``last_own``), made again after a
+    shader hot reload (``forget``).  The shadows stage says which shadow lookups and how
+    many virtual lights a build compiles (``shadows``)."""
+
+    def __init__(self, renderer: Gpu, shadows: ShadowMaps) -> None:
+        self.renderer = renderer
+        self.shadows = shadows
+        # Scene programs by (geometry-shader invocations or 0, "" / "culled" / "naive" for a
+        # layered capture, the batch's variants or None, whether it reads a normal map, draws
+        # the analytic checker, reads an emissive map, a metallic-roughness map, ...: ``program``).
+        self.built: dict[tuple, moderngl.Program] = {}
+        self.uniforms: dict[int, tuple] = {}  # program -> its PER_DRAW_UNIFORMS (None where dropped)
+        self.reloads_seen = 0  # ShaderLibrary.reloads when the caches here were made
+        # program -> the values last written to its per-draw uniforms: a program keeps its
+        # uniforms' values between passes and frames (GL program state), and only
+        # ScenePass._draw_batches writes these, so a value is written only when it changes.
+        self.written: dict[int, list] = {}
+        self.last_own: dict[int, tuple] = {}  # program -> the batch values it last drew with
+
+    def program(self, variants: tuple[int, int, int] | None = None, invocations: int = 0,
+                layered: str = "", normal_mapped: bool = False, checker: bool = False,
+                material_maps: tuple[bool, bool] = (False, False), probe_blend: bool = False,
+                ambient_probes: bool = False, probe_rest: bool = False, unlit: bool = False,
+                masked: bool = False) -> moderngl.Program:
+        """The scene program for a batch of ``variants`` (None: mixed, switched per
+        instance): plain, batched (``invocations`` > 0: the geometry shader's) or a one-pass
+        cube-map capture (``layered`` "culled" or "naive"), with or without a normal map
+        (a build of its own: llvmpipe would run the map's derivatives and fetch for every
+        pixel behind a uniform branch), and with or without the analytic checker (``CHECKER``:
+        a generated checker texture drawn from its cells, filtered by the pixel's footprint,
+        instead of sampled), and with or without each of the material maps ``material_maps``
+        (emissive, metallic-roughness: ``EMISSIVE_MAP`` and ``METALLIC_ROUGHNESS_MAP`` builds,
+        shaders/include/material_maps.glsl; a batch without them samples nothing for them),
+        blending probes (``probe_blend``: ``PROBE_BLEND``) with a probe instead of the sky
+        taking the rest (``probe_rest``: ``PROBE_REST``, a curved object's own), or unlit
+        (``unlit``: ``UNLIT_SURFACE``, a mirror batch ``shading_replaced`` names), and
+        masked or not (``masked``: ``MASKED``, a reflection level's: only the pixels its node
+        image gives the view; a root view's build has no node-image fetch and no discard, so
+        llvmpipe neither runs the fetch for every pixel nor defers the depth write past the
+        shader, as a discarding program makes it), built once.  After a shader hot
+        reload the set-up is done again and the batches' vertex arrays are made again (the
+        relinked program may read uniforms, samplers and vertex inputs the first build
+        dropped)."""
+        if self.renderer.shaders.reloads != self.reloads_seen:
+            self.forget()
+        virtual = self.shadows.virtual_shining  # the shadows stage set how many shine
+        shadowing = self.shadows.program_defines  # the lookups a program compiles (ShadowMaps.upload's)
+        key = (invocations, layered, variants, normal_mapped, checker, material_maps, probe_blend, virtual,
+               ambient_probes, probe_rest, unlit, masked, shadowing)
+        program = self.built.get(key)
+        if program is None:
+            defines = {}
+            if variants is not None:
+                defines = {f"FIXED_{slot}": f"{value}u" for slot, value in zip(SLOTS, variants, strict=True)}
+            if normal_mapped:
+                defines["NORMAL_MAP"] = "1"
+            if checker:
+                defines["CHECKER"] = "1"
+            if material_maps[0]:
+                defines["EMISSIVE_MAP"] = "1"
+            if material_maps[1]:
+                defines["METALLIC_ROUGHNESS_MAP"] = "1"
+            if probe_blend:  # two probes and the sky by the instances' weights (shaders/include/probe.glsl)
+                defines["PROBE_BLEND"] = "1"
+                if probe_rest:  # a probe, not the sky, takes what the weights leave
+                    defines["PROBE_REST"] = "1"
+            if virtual:  # light through mirrors and portals (shaders/include/virtual_lights.glsl)
+                defines["VIRTUAL_LIGHTS"] = "1"
+            if ambient_probes:  # diffuse light from the probes' boxes too (shaders/include/ambient.glsl)
+                defines["AMBIENT_PROBES"] = "1"
+            if unlit:  # depth and ids only: the composites paint every pixel over (shading_replaced)
+                defines["UNLIT_SURFACE"] = "1"
+            if masked:  # the claimed pixels only (a reflection level's views)
+                defines["MASKED"] = "1"
+            defines.update(shadowing)
+            geometry = None
+            if invocations:
+                geometry = "scene_batched.geom"
+                per_invocation = 1 if layered else VIEWS_PER_INVOCATION
+                defines.update({
+                    "BATCHED_VIEWS": "1",
+                    "MAX_LEVEL_VIEWS": str(MAX_BATCHED_VIEWS),
+                    "VIEWS_PER_INVOCATION": str(per_invocation),
+                    "GS_INVOCATIONS": str(invocations),
+                    "GS_MAX_VERTICES": str(3 * per_invocation),
+                })
+                if layered:
+                    defines["LAYERED"] = "1"
+                if layered == "naive":
+                    defines["NO_FACE_CULLING"] = "1"
+            program = self.renderer.shaders.program("scene.vert", "scene.frag", geometry, defines=defines)
+            if "Camera" in program:  # the batched stages read their cameras from Views
+                program["Camera"].binding = CAMERA_BINDING
+            if invocations:
+                program["Views"].binding = VIEWS_BINDING
+            # A build may not read every input (the linker drops what a variant never uses).
+            for name, unit in (("albedo_map", ALBEDO_UNIT), ("sky_map", SKY_UNIT), ("node_map", NODE_UNIT),
+                               ("probe_map", PROBE_UNIT), ("probe2_map", PROBE2_UNIT),
+                               ("probe_rest_map", PROBE_REST_UNIT), ("normal_map", NORMAL_UNIT),
+                               ("emissive_map", EMISSIVE_MAP_UNIT),
+                               ("metallic_roughness_map", METALLIC_ROUGHNESS_UNIT),
+                               ("shadow_atlas", SHADOW_ATLAS_UNIT), ("point_shadow0", POINT_SHADOW_UNITS[0]),
+                               ("point_shadow1", POINT_SHADOW_UNITS[1]),
+                               ("irradiance_table", IRRADIANCE_UNIT), ("virtual_atlas", VIRTUAL_SHADOW_UNIT)):
+                if name in program:
+                    program[name].value = unit
+            if "Lights" in program:
+                program["Lights"].binding = LIGHTS_BINDING
+            if "Shadows" in program:
+                program["Shadows"].binding = SHADOWS_BINDING
+            if "VirtualLights" in program:
+                program["VirtualLights"].binding = VIRTUAL_LIGHTS_BINDING
+            if "Irradiance" in program:
+                program["Irradiance"].binding = IRRADIANCE_BINDING
+            self.built[key] = program
+            self.uniforms[program.glo] = tuple(program.get(name, None) for name in PER_DRAW_UNIFORMS)
+        return program
+
+    def forget(self) -> None:
+        """After a shader hot reload: every program set-up, written value, batch vertex array
+        and draw record is made again (a relinked program may read uniforms, samplers and
+        vertex inputs the first build dropped)."""
+        self.built.clear()
+        self.uniforms.clear()
+        self.written.clear()  # a relinked program's uniforms start again from the defaults
+        self.last_own.clear()
+        for batch in self.renderer.batches.values():
+            batch.drop_vertex_arrays()  # made again for the relinked programs' inputs
+        self.reloads_seen = self.renderer.shaders.reloads
+
+    def prepare(self, batches: Iterable[InstanceBatch], reflections: bool, ambient_boxes: bool) -> int:
+        """Build the programs and vertex arrays ``batches`` will be drawn with: invocations 0
+        (root and per-mirror views) and, with ``reflections``, every invocation count of the
+        batched path (``BATCHED_INVOCATIONS``); each without the
+        ``AMBIENT_PROBES`` lookups and, given ``ambient_boxes`` (``IrradianceTable.has_boxes``),
+        with them.
+        A batch of mirrors gets its ``UNLIT_SURFACE`` builds too, and with ``reflections``
+        the ``MASKED`` builds (a level whose claims overlap draws masked, one whose claims
+        lie apart unmasked: ``view_tree._APART``).  Returns how many programs
+        were built (0 when all were there)."""
+        before = len(self.built)
+        counts = (0, *BATCHED_INVOCATIONS) if reflections else (0,)
+        ambient = (False, True) if ambient_boxes else (False,)  # captures: False
+        for batch in batches:
+            unlit = (False, True) if may_be_unlit(batch) else (False,)
+            for invocations in counts:
+                for masked in (False, True) if reflections else (False,):
+                    for probes in ambient:
+                        for dark in unlit:
+                            batch.vao(self.program(batch.variants, invocations, "", batch.normal_map is not None,
+                                                   batch.checker is not None, _material_maps(batch),
+                                                   batch.probe_blend, probes, bool(batch.rest_probe), dark, masked))
+        return len(self.built) - before
+
+    def record(self, batch: InstanceBatch, kind: tuple[int, str, bool, bool, bool], stamp: tuple,
+               variants: tuple[int, int, int] | None) -> tuple:
+        """What ``batch`` draws with in passes of ``kind`` (invocations, layered, ambient
+        probes, unlit, masked): (stamp, variants, program name, vertex array, per-draw uniforms, the
+        program's written values, the (unit, texture) pairs to bind, its own uniform values
+        or None where probes give them per draw, its mesh's vertex count)."""
+        invocations, layered, ambient, unlit, masked = kind
+        program = self.program(variants, invocations, layered, batch.normal_map is not None,
+                               batch.checker is not None, _material_maps(batch), batch.probe_blend,
+                               ambient, bool(batch.rest_probe), unlit, masked)
+        glo = program.glo
+        values = self.written.get(glo)
+        if values is None:
+            values = self.written[glo] = [None] * len(PER_DRAW_UNIFORMS)
+        # A batch with no albedo map binds the blank one: the program's sampler is there all
+        # the same (``Gpu.blank_color``).
+        albedo = batch.texture if batch.texture is not None else self.renderer.blank_color
+        textures = tuple((unit, texture) for unit, texture in (
+            (ALBEDO_UNIT, albedo), (NORMAL_UNIT, batch.normal_map), (EMISSIVE_MAP_UNIT, batch.emissive_map),
+            (METALLIC_ROUGHNESS_UNIT, batch.metallic_roughness_map)) if texture is not None)
+        own = None
+        if not batch.probe and not batch.probe_blend and not batch.rest_probe:
+            own = (batch.texture is not None, batch.transparent, 0, *NO_PROBE_LOOKUP, 0, *NO_PROBE_LOOKUP,
+                   0, *NO_PROBE_LOOKUP, *(batch.checker or NO_CHECKER))
+        return (stamp, variants, glo, batch.vao(program), self.uniforms[glo], values, textures, own,
+                batch.mesh.index_count)
+
+    def release(self) -> None:
+        """Forget the programs (the shader library owns and releases them)."""
+        self.built.clear()
+
+
+def geometry_invocations(view_count: int) -> int:
+    """Invocations of the batched geometry shader for ``view_count`` views:
+    ceil(view_count / VIEWS_PER_INVOCATION) rounded up to a power of two (invocations with
+    no view still cost a pass over the triangles; the rounding bounds the programs built)."""
+    needed = -(-view_count // VIEWS_PER_INVOCATION)
+    return min(1 << max(0, needed - 1).bit_length(), -(-MAX_BATCHED_VIEWS // VIEWS_PER_INVOCATION))
+
+
+# Every invocation count ``geometry_invocations`` gives (1 to MAX_BATCHED_VIEWS views).
+BATCHED_INVOCATIONS = tuple(sorted({geometry_invocations(n) for n in range(1, MAX_BATCHED_VIEWS + 1)}))
+
+
+def _material_maps(batch: InstanceBatch) -> tuple[bool, bool]:
+    """Which material maps a batch's program samples: (emissive, metallic-roughness)."""
+    return batch.emissive_map is not None, batch.metallic_roughness_map is not None
