@@ -87,15 +87,22 @@ def _is_int(value: Any) -> bool:
     return isinstance(value, int) and not isinstance(value, bool)
 
 
-def level_mesh(spec: Any, where: LevelAssets) -> Mesh:
-    """The mesh a ``MeshRef.mesh`` table names: a generator's (cached by its arguments) or a
-    model file's (one part of it, ``part = "..."`` where it has several)."""
+def _asset_table(spec: Any, what: str, examples: str) -> tuple[dict, Any]:
+    """A mesh's or texture's table (``what``) as a dict of its own, and its ``name`` taken out
+    of it (None, or a string)."""
     if not isinstance(spec, Mapping):
-        raise ValueError(f"a mesh is a table such as {{ box = [1, 1, 1] }} or {{ file = \"x.obj\" }}, got {spec!r}")
+        raise ValueError(f"a {what} is a table such as {examples}, got {spec!r}")
     spec = dict(spec)
     name = spec.pop("name", None)
     if name is not None and not isinstance(name, str):
-        raise ValueError(f"a mesh's name must be a string, got {name!r}")
+        raise ValueError(f"a {what}'s name must be a string, got {name!r}")
+    return spec, name
+
+
+def level_mesh(spec: Any, where: LevelAssets) -> Mesh:
+    """The mesh a ``MeshRef.mesh`` table names: a generator's (cached by its arguments) or a
+    model file's (one part of it, ``part = "..."`` where it has several)."""
+    spec, name = _asset_table(spec, "mesh", '{ box = [1, 1, 1] } or { file = "x.obj" }')
     if "file" in spec:
         path = _asset_path(spec.pop("file"), where)
         part = spec.pop("part", None)
@@ -154,13 +161,7 @@ def level_mesh(spec: Any, where: LevelAssets) -> Mesh:
 def level_texture(spec: Any, where: LevelAssets, normal_map: bool = False) -> TextureData:
     """The texture a ``Material`` table names (``texture`` or a map): checker, ripples or an
     image file; ``normal_map``: a linear map, which keeps a 16-bit file's 16 bits."""
-    if not isinstance(spec, Mapping):
-        raise ValueError(f"a texture is a table such as {{ checker = [128, 8] }}, {{ ripples = [256, 6] }} or "
-                         f"{{ file = \"x.png\" }}, got {spec!r}")
-    spec = dict(spec)
-    name = spec.pop("name", None)
-    if name is not None and not isinstance(name, str):
-        raise ValueError(f"a texture's name must be a string, got {name!r}")
+    spec, name = _asset_table(spec, "texture", '{ checker = [128, 8] }, { ripples = [256, 6] } or { file = "x.png" }')
     if "file" in spec:
         path = _asset_path(spec.pop("file"), where)
         _no_more(spec, "texture file")
