@@ -19,7 +19,6 @@ from typing import TYPE_CHECKING
 
 import moderngl
 import numpy as np
-from pyglm import glm
 
 from components.tracking import HALF_MAX
 from engine.core.cube_faces import face_directions
@@ -76,7 +75,7 @@ def sky_model(skybox: Skybox | None) -> SkyModel | None:
         return tuple(float(c) for c in tuple(value)[:3])
 
     return SkyModel(rgb(skybox.zenith), rgb(skybox.horizon), rgb(skybox.ground),
-                    rgb(glm.normalize(glm.vec3(skybox.sun_direction))), rgb(skybox.sun_color))
+                    rgb(skybox.sun_direction), rgb(skybox.sun_color))  # (unit: the Skybox's check)
 
 
 def build_faces(skybox: Skybox) -> np.ndarray:
