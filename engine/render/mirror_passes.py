@@ -617,7 +617,10 @@ class MirrorPasses:
         # 0.04 ms sampling another texture).  So on a software rasteriser a frame's levels
         # run their CPU work and their rasterising one after the other, in either visibility
         # (8 mirrors at 640x360: ~5.4 ms of a 13.7 ms frame waits in these draws, predicted
-        # or exact); a GPU orders the read after the write without the CPU.
+        # or exact); a GPU orders the read after the write without the CPU.  Taking the wait
+        # away (claims reading last frame's images, an experiment) left the frame as it was:
+        # the wait moves to the first composite, and the frame is bound by its work
+        # (benchmarks/README.md, "Where an 8-mirror frame's time goes").
 
         render, empty = self._claim_vao.render, self.no_pixels
         for at, query in enumerate(queries[:count]):
