@@ -34,6 +34,7 @@ draws every frame.
 """
 from __future__ import annotations
 
+import weakref
 from dataclasses import replace
 
 import esper
@@ -70,7 +71,9 @@ class ReflectionSystem(esper.Processor):
         self.tree.remember = True
         self._still: tuple[tuple, tuple] | None = None  # (values, objects) the tree was last drawn for
         self._changes_seen = -1  # World.change_count() when this stage last looked (-1: never)
-        self._waves: tuple[SurfaceTable | None, list] = (None, [])  # the water flows of a table
+        # the water flows of a table, which it names weakly (a table of hundreds of surfaces
+        # holds tens of MB, and no render may come to replace it: every mirror deleted)
+        self._waves: tuple[weakref.ref | None, list] = (None, [])
 
     # --- the main tree's settings, checked when they are set --------------------------------------
     @property
@@ -212,8 +215,9 @@ class ReflectionSystem(esper.Processor):
         object): the module docstring's list.  Equal to the last render's: nothing changed."""
         renderer = self.renderer
         waves = self._waves
-        if waves[0] is not table:
-            waves = self._waves = (table, [state.water.flow for state in table.states if state.water is not None])
+        if waves[0] is None or waves[0]() is not table:
+            flows = [state.water.flow for state in table.states if state.water is not None]
+            waves = self._waves = (weakref.ref(table), flows)
         values = (renderer.scene_version, renderer.shaders.reloads, main.camera_block(), main.name, main.mirrored,
                   main.scissor, self.settings, self.tree.unlit, renderer.texture_anisotropy,
                   renderer.reflection_anisotropy, renderer.normal_map_anisotropy, renderer.scene_pass.cull_batches,

@@ -19,3 +19,75 @@ def test_waves_of_mirrors_portals_probes_meshes_and_textures_all_go_back():
     assert peak["probe_cubes"] == 8 and peak["textures"] == 1 + 8 and peak["meshes"] >= 1 + 8 + 8
     assert churn.leftovers(rows, rss_slack=40.0) == []
     assert rows[-1]["gl_resources"]["batches"] == rows[0]["gl_resources"]["batches"]
+
+
+def _arena_with_a_wave(count: int):
+    """The churn benchmark's arena with one wave of ``count`` things (a fifth each mirrors,
+    portal pairs, chrome spheres with their own probe, new meshes, new textures) spawned."""
+    from engine.core.frame_io import Output
+    from engine.render.gl_context import create_headless_context
+    from engine.render.targets import CaptureTarget
+    from shell.app import Engine
+
+    ctx = create_headless_context()
+    engine = Engine(churn.Arena(), ctx)
+    capture = CaptureTarget(ctx, (96, 54))
+    output = Output(capture.framebuffer, (96, 54))
+    engine.frame(1 / 60, output)
+    return ctx, engine, capture, output
+
+
+def test_the_planners_memory_grows_with_the_surfaces_not_with_their_square():
+    """A hundred things (20 mirrors, 20 portal pairs, 20 probes whose faces see them): the
+    planner keeps each view's camera-free rows by its view mask and winding, not by the
+    surface it looks out of, so what it keeps is (classes x surfaces) rows, not (surfaces x
+    surfaces) for each probe's face tree.  Kept by exit row, these frames peaked at 313 MiB
+    of Python memory (the churn benchmark's thousand things: 24 GiB, and the process was
+    killed); now about 18."""
+    import tracemalloc
+
+    ctx, engine, capture, output = _arena_with_a_wave(0)
+    try:
+        tracemalloc.start()
+        try:
+            churn.spawn_wave(engine.world, 100, 1)
+            for _ in range(3):
+                engine.frame(1 / 60, output)
+            ctx.finish()
+            peak = tracemalloc.get_traced_memory()[1]
+        finally:
+            tracemalloc.stop()
+        assert engine.renderer.stats.reflection_views > 0  # the surfaces were planned and drawn
+        assert peak < 60 * 2**20, f"{peak / 2**20:.0f} MiB of Python memory at the peak"
+    finally:
+        capture.release()
+        engine.close()
+        ctx.release()
+
+
+def test_deleting_every_mirror_and_portal_lets_the_planners_table_go():
+    """The planner's table of the surfaces (tens of MB for hundreds of them) is named weakly by
+    the caches that key on it (the water flows, the unlit mirrors, the end surfaces), so once
+    every surface is deleted nothing keeps it: no later render comes to replace it."""
+    import gc
+    import weakref
+
+    from engine.render.surface_table import PlannerSurfaces
+
+    ctx, engine, capture, output = _arena_with_a_wave(0)
+    try:
+        made = churn.spawn_wave(engine.world, 40, 1)
+        for _ in range(2):
+            engine.frame(1 / 60, output)
+        table = weakref.ref(engine.world.resources[PlannerSurfaces].table)
+        assert len(table().states) == 8 + 2 * 8
+        for entity in made:
+            engine.world.delete_entity(entity)
+        for _ in range(2):
+            engine.frame(1 / 60, output)
+        gc.collect()
+        assert table() is None, [type(r).__name__ for r in gc.get_referrers(table())]
+    finally:
+        capture.release()
+        engine.close()
+        ctx.release()

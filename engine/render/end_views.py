@@ -11,6 +11,8 @@ the main view's finished image kept for the next frame (``keep_end_images``).
 """
 from __future__ import annotations
 
+import weakref
+
 import numpy as np
 
 from engine.render.end_images import EndImages
@@ -40,9 +42,9 @@ class EndSurfaces:
         if self.ends is None or not surfaces.has_end_images or not self.ends.ready(root.size):
             return None
         seen = self.ends.seen
-        key = (surfaces, seen, depth_cap)
+        key = (weakref.ref(surfaces), seen, depth_cap)  # the table named weakly: it goes with its surfaces
         cached = self._cache
-        if cached is not None and cached[0][0] is surfaces and cached[0][1:] == key[1:]:
+        if cached is not None and cached[0][0]() is surfaces and cached[0][1:] == key[1:]:
             return cached[1]
         ends = surfaces.end_image & np.array([entity in seen for entity in surfaces.entities.tolist()], bool)
         found = (ends, int(np.minimum(surfaces.max_depth[ends], depth_cap).min()) + 1) if ends.any() else None

@@ -78,16 +78,40 @@ GRID_PARENT = _PARENT - GRID_PART.start  # the parent's column in it
 # chain can show, times two windings), a few dozen for the 16-mirror ring.
 IDS_NUMBERS: dict[tuple[float, float, float], int] = {}
 IDS_OF: list[tuple[float, float, float]] = []  # IDS_NUMBERS' keys by number
+# What a view's children's camera-free rows depend on is its view mask and winding alone, not
+# the surface it looks out of (``SurfaceTable._child_ids``), so those rows are kept by the
+# number of that pair, its ids number's class: a few dozen classes however many surfaces
+# there are.  (Kept by ids number, a table of S rows a number grows with the exit rows,
+# S x S x 376 bytes: 24 GiB for 600 surfaces.)
+IDS_CLASS: list[int] = []  # each ids number's class
+CLASS_OF: list[tuple[float, float]] = []  # each class's (view mask, winding)
+_CLASS_NUMBERS: dict[tuple[float, float], int] = {}
+_CLASSES = np.zeros(0, np.int64)  # IDS_CLASS as an array (ids_classes)
 
 
 def ids_number(exit_row: float, mask: float, mirrored: float) -> int:
-    """The number of a row's ids (``IDS_NUMBERS``), given one when first seen."""
+    """The number of a row's ids (``IDS_NUMBERS``), given one (and its class) when first seen."""
     key = (float(exit_row), float(mask), float(mirrored))
     found = IDS_NUMBERS.get(key)
     if found is None:
         found = IDS_NUMBERS[key] = len(IDS_OF)
         IDS_OF.append(key)
+        pair = key[1:]
+        kind = _CLASS_NUMBERS.get(pair)
+        if kind is None:
+            kind = _CLASS_NUMBERS[pair] = len(CLASS_OF)
+            CLASS_OF.append(pair)
+        IDS_CLASS.append(kind)
     return found
+
+
+def ids_classes() -> np.ndarray:
+    """Each ids number's class (``IDS_CLASS``) as an int64 array, remade when numbers came."""
+    global _CLASSES
+    if len(_CLASSES) != len(IDS_CLASS):
+        _CLASSES = np.array(IDS_CLASS, np.int64)
+        _CLASSES.flags.writeable = False
+    return _CLASSES
 
 
 def x0_rows(data: np.ndarray) -> np.ndarray:

@@ -49,6 +49,7 @@ from engine.render.plan_rows import (
     BLOCK,
     CAMERA_CLIP,
     CAMERA_VIEWPORT,
+    CLASS_OF,
     CLIP,
     EXIT_PLANE,
     EYE_ROW,
@@ -75,6 +76,7 @@ from engine.render.plan_rows import (
     Candidates,
     LevelRows,
     cull_rows,
+    ids_classes,
     ids_number,
     x0_rows,
     x1_rows,
@@ -377,10 +379,10 @@ class SurfaceTable:
         (``size``), clip plane and ids but the node (uint32 skip, hide, view mask); then its
         exit row, view mask, winding, p, s (int64s), a fade of 1.0 and its ids number.
 
-        Gathered in one ``take`` from a table of every ids number's rows (``_child_row``,
-        S a number, in the order of the numbers) seen with this ``hide``, projection and size
-        (``ChildTable``), by the parents' numbers (those the cull's ``_pair_bias`` read):
-        no look-up a parent."""
+        Gathered in one ``take`` from a table of every ids class's rows (``_child_row``,
+        S a class, in the order of the classes: ``plan_rows.IDS_CLASS``) seen with this
+        ``hide``, projection and size (``ChildTable``), by the classes of the parents'
+        numbers (those the cull's ``_pair_bias`` read): no look-up a parent."""
         surfaces = len(self.states)
         last = self._last_numbers
         numbers = last[1] if last is not None and last[0] is data else data.view(np.int64)[:, IDS]
@@ -389,29 +391,30 @@ class SurfaceTable:
             if len(self._child_tables) > 16:
                 self._child_tables.clear()
             table = self._child_tables[(hide, root_rows.key, size)] = ChildTable()
+        classes = ids_classes()
         if len(data) == 1:
-            at = s + int(numbers[0]) * surfaces
+            at = s + int(classes[numbers[0]]) * surfaces
         else:
-            at = numbers.take(p)
+            at = classes.take(numbers.take(p))
             at *= surfaces
             at += s
         try:
             found = table.stacked.take(at, axis=0)
-        except IndexError:  # ids first seen since the table was made: their rows join it
-            for number in range(len(table.rows), len(IDS_OF)):
-                table.rows.append(self._child_row(*IDS_OF[number], hide, root_rows, size))
+        except IndexError:  # classes first seen since the table was made: their rows join it
+            for kind in range(len(table.rows), len(CLASS_OF)):
+                table.rows.append(self._child_row(*CLASS_OF[kind], hide, root_rows, size))
             table.stacked = np.concatenate(table.rows)
             found = table.stacked.take(at, axis=0)
         if len(data) > 1:
             found[:, GRID_PARENT] = p
         return found
 
-    def _child_row(self, exit_row: float, mask: float, mirrored: float, hide: int, root_rows: RootRows,
+    def _child_row(self, mask: float, mirrored: float, hide: int, root_rows: RootRows,
                    size: tuple[int, int]) -> np.ndarray:
-        """(S, GRID_WIDTH) int64: ``_child_ids``' rows of a parent with these ids (its row
-        number 0).  A view's mask: the kinds of its chain, the layers every surface of its
-        chain shows."""
-        key = (exit_row, mask, mirrored, hide, root_rows.key, size)
+        """(S, GRID_WIDTH) int64: ``_child_ids``' rows of a parent with this view mask and
+        winding (its row number 0), whatever surface it looks out of.  A view's mask: the
+        kinds of its chain, the layers every surface of its chain shows."""
+        key = (mask, mirrored, hide, root_rows.key, size)
         found = self._child_rows.get(key)
         if found is None:
             rows = np.zeros((len(self.states), GRID_WIDTH))
@@ -798,7 +801,7 @@ class SurfaceTable:
             if not np.isfinite(bias).any():
                 break  # the cull sees nothing here
             biases.append(bias[0])
-            grids.append(self._child_row(exit_row, mask, mirrored, hide, root_rows, size)[s])
+            grids.append(self._child_row(mask, mirrored, hide, root_rows, size)[s])
             exit_row, mask, mirrored = (float(exit_rows[s]), float((int(mask) & keep[s]) | kind_bit[s]),
                                         float(mirrored != is_mirror[s]))
         result = (len(biases), np.array(biases), np.array(grids))

@@ -63,6 +63,7 @@ views and nodes (``level_nodes.py``), end views (``end_views.py``).  A tree that
 """
 from __future__ import annotations
 
+import weakref
 from collections.abc import Sequence
 from dataclasses import replace
 
@@ -397,9 +398,9 @@ class ViewTree:
             return frozenset()
         pixel_budget = self.renderer.stats.pixels_left() is not None
         kept, found = self._unlit
-        if kept[0] is not surfaces or kept[1] != pixel_budget:
+        if kept[0] is None or kept[0]() is not surfaces or kept[1] != pixel_budget:
             found = shading_replaced(surfaces.states, pixel_budget)
-            self._unlit = ((surfaces, pixel_budget), found)
+            self._unlit = ((weakref.ref(surfaces), pixel_budget), found)
             self._level_options.clear()
         return found
 
