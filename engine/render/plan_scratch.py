@@ -82,6 +82,7 @@ class ChildTable:
     def __init__(self) -> None:
         self.rows: list[np.ndarray] = []
         self.stacked = np.zeros((0, GRID_WIDTH), np.int64)
+        self.offsets = np.zeros(0, np.int64)  # by ids number: its class's first row in ``stacked``
 
 
 class PlanBuffers:

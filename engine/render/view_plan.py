@@ -391,23 +391,27 @@ class SurfaceTable:
             if len(self._child_tables) > 16:
                 self._child_tables.clear()
             table = self._child_tables[(hide, root_rows.key, size)] = ChildTable()
-        classes = ids_classes()
-        if len(data) == 1:
-            at = s + int(classes[numbers[0]]) * surfaces
-        else:
-            at = classes.take(numbers.take(p))
-            at *= surfaces
-            at += s
         try:
-            found = table.stacked.take(at, axis=0)
-        except IndexError:  # classes first seen since the table was made: their rows join it
+            found = table.stacked.take(self._child_at(table.offsets, numbers, p, s), axis=0)
+        except IndexError:  # numbers or classes first seen since the table was made: they join it
             for kind in range(len(table.rows), len(CLASS_OF)):
                 table.rows.append(self._child_row(*CLASS_OF[kind], hide, root_rows, size))
             table.stacked = np.concatenate(table.rows)
-            found = table.stacked.take(at, axis=0)
+            table.offsets = ids_classes() * surfaces
+            found = table.stacked.take(self._child_at(table.offsets, numbers, p, s), axis=0)
         if len(data) > 1:
             found[:, GRID_PARENT] = p
         return found
+
+    @staticmethod
+    def _child_at(offsets: np.ndarray, numbers: np.ndarray, p: np.ndarray, s: np.ndarray) -> np.ndarray:
+        """Each pair's row in a ``ChildTable``: its parent's class's first row (``offsets``, by
+        ids number) plus its surface (IndexError: a number the table does not know yet)."""
+        if len(numbers) == 1:
+            return s + int(offsets[numbers[0]])
+        at = offsets.take(numbers.take(p))
+        at += s
+        return at
 
     def _child_row(self, mask: float, mirrored: float, hide: int, root_rows: RootRows,
                    size: tuple[int, int]) -> np.ndarray:
