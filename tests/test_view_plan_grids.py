@@ -6,6 +6,7 @@ another order give the same views, each with its own parent's number."""
 from __future__ import annotations
 
 import numpy as np
+import pytest
 from pyglm import glm
 
 import engine.render.plan_rows as plan_rows
@@ -13,9 +14,13 @@ import engine.render.view_plan as view_plan
 from components.limits import VIEW_MIRROR
 from components.visibility import DRAWN_EVERYWHERE, visibility_code
 from engine.core.reflection_math import reflection_matrix
-from engine.render.views import View
+from engine.render.views import CAMERA_FLOATS, CAMERA_IDS, View
 from engine.resources import SurfaceState
 from engine.rules.visibility_rules import drawn_in
+
+# A level row's hidden entity as a uint32: its Camera block's place in the row, then the
+# block's ids (View.camera_block's layout: skip, hide, view mask, node).
+_HIDE_AT = plan_rows.LEVEL_ROW.fields["block"][1] // 4 + CAMERA_FLOATS["skip"].start + CAMERA_IDS.index("hide")
 
 
 def _mirror(entity: int, z: float, facing: float, x: float = 0.0, layers: int = 0xFFFF,
@@ -168,20 +173,23 @@ def test_parents_through_one_surface_with_other_masks_each_get_their_own_bias():
             assert np.array_equal(bias, wanted(names, fallback)), (names, fallback)
 
 
-def test_a_chain_is_planned_in_one_run_as_far_as_each_level_finds_the_surface_named():
+@pytest.mark.parametrize("hide", [0, 4242])
+def test_a_chain_is_planned_in_one_run_as_far_as_each_level_finds_the_surface_named(hide):
     """``SurfaceTable.plan_chain``: the levels below one view, each of one view through the
     surface named, planned in one run, are bit for bit the levels ``plan`` makes one after
     another (from a root's row too) (their Camera blocks finished by ``finish_blocks`` either way), with each
     level's pairs, claim boxes and nodes; the run stops at the first level whose cull does
     not find exactly the surface named (another surface, or nothing), and plans nothing
-    where the first does not."""
+    where the first does not.  Both write the entity the tree hides (a probe's own object:
+    4242) into every view's Camera block, though the rows they gather it into are kept
+    whatever it is."""
     table = _table()
     view, root_proj, inv_root_proj, levels = _levels(table, (0.8, 1.0, 3.5), depth=1)
     first = levels[0][1].select(np.array([1], np.int64))  # through the second pair's near mirror
     one_at_a_time, parent = [], first
     for depth in range(2, 6):
         planned, _ = table.plan(parent.rows, depth, view, root_proj, inv_root_proj, int(parent.rows.node[-1]) + 1,
-                                8, 0, defer=True)
+                                8, hide, defer=True)
         if planned is None:
             break
         assert len(planned) == 1
@@ -193,13 +201,14 @@ def test_a_chain_is_planned_in_one_run_as_far_as_each_level_finds_the_surface_na
     for asked, wanted in ((through, 3), (through + [through[1]], 3), (through[:2] + [through[1]], 2),
                           ([through[1]] + through[1:], 0)):
         fresh = _table()
-        chain = fresh.plan_chain(first.rows, 1, asked, view, root_proj, 8, 0, [None] * len(asked),
+        chain = fresh.plan_chain(first.rows, 1, asked, view, root_proj, 8, hide, [None] * len(asked),
                                  int(first.rows.node[-1]) + 1)
         assert len(chain) == wanted, (asked, len(chain))
         if chain:
             fresh.finish_blocks(chain, root_proj)
         for got, want in zip(chain, one_at_a_time, strict=False):
             assert np.array_equal(got.rows.data.view(np.int64), want.rows.data.view(np.int64))
+            assert got.rows.data.view(np.uint32)[:, _HIDE_AT].tolist() == [hide] * len(got.rows.data)
             assert got.parent.tolist() == want.parent.tolist() and got.surface.tolist() == want.surface.tolist()
             assert np.array_equal(got.box, want.box) and got.size == want.size and got.end is want.end is None
     # Through the first pair's near mirror the next level sees both far mirrors: the surface

@@ -110,6 +110,8 @@ _NONE = np.zeros(0, np.int64)
 _NO_RECTS = np.zeros((0, 4))
 _NEVER = (1e30, 2e30, 1e30, 2e30)  # fade starts no distance or angle reaches
 # A rectangle as the cull keeps it (x0, y0, -x1, -y1, ``SIGNS``): what makes it x, y, w, h.
+# The hidden entity's uint32 in a row of ``SurfaceTable._child_ids`` (its Camera block's ids)
+_HIDE_WORD = CAMERA_FLOATS["skip"].start + ID_HIDE
 _TO_SCISSOR = np.array([[1, 0, -1, 0], [0, 1, 0, -1], [0, 0, -1, 0], [0, 0, 0, -1]], np.float64)
 _MIN, _MAX = np.minimum.reduce, np.maximum.reduce
 
@@ -218,7 +220,7 @@ class SurfaceTable:
         self._cull_geometry: tuple[np.ndarray, CullWork] | None = None
         self._plan_work: dict[int, PlanWork] = {}  # _plan's, by its count of views
         self._plan_buffers: dict[int, PlanBuffers] = {}  # their arrays, by capacity
-        self._child_tables: dict[tuple, ChildTable] = {}  # _child_ids', by hide, root projection and size
+        self._child_tables: dict[tuple, ChildTable] = {}  # _child_ids', by root projection and size
         # The resolution scale every surface shares (None: they differ; a level takes its largest).
         self.one_scale = float(self.scale[0]) if count and (self.scale == self.scale[0]).all() else None
 
@@ -381,26 +383,30 @@ class SurfaceTable:
 
         Gathered in one ``take`` from a table of every ids class's rows (``_child_row``,
         S a class, in the order of the classes: ``plan_rows.IDS_CLASS``) seen with this
-        ``hide``, projection and size (``ChildTable``), by the classes of the parents'
-        numbers (those the cull's ``_pair_bias`` read): no look-up a parent."""
+        projection and size (``ChildTable``), by the classes of the parents' numbers (those
+        the cull's ``_pair_bias`` read): no look-up a parent; then ``hide`` written in (a
+        probe's face trees each hide their own object: kept by it, the tables were as many
+        as the probes)."""
         surfaces = len(self.states)
         last = self._last_numbers
         numbers = last[1] if last is not None and last[0] is data else data.view(np.int64)[:, IDS]
-        table = self._child_tables.get((hide, root_rows.key, size))
+        table = self._child_tables.get((root_rows.key, size))
         if table is None:
             if len(self._child_tables) > 16:
                 self._child_tables.clear()
-            table = self._child_tables[(hide, root_rows.key, size)] = ChildTable()
+            table = self._child_tables[(root_rows.key, size)] = ChildTable()
         try:
             found = table.stacked.take(self._child_at(table.offsets, numbers, p, s), axis=0)
         except IndexError:  # numbers or classes first seen since the table was made: they join it
             for kind in range(len(table.rows), len(CLASS_OF)):
-                table.rows.append(self._child_row(*CLASS_OF[kind], hide, root_rows, size))
+                table.rows.append(self._child_row(*CLASS_OF[kind], root_rows, size))
             table.stacked = np.concatenate(table.rows)
             table.offsets = ids_classes() * surfaces
             found = table.stacked.take(self._child_at(table.offsets, numbers, p, s), axis=0)
         if len(data) > 1:
             found[:, GRID_PARENT] = p
+        if hide:
+            found.view(np.uint32)[:, _HIDE_WORD] = hide & 0xFFFFFFFF
         return found
 
     @staticmethod
@@ -413,12 +419,12 @@ class SurfaceTable:
         at += s
         return at
 
-    def _child_row(self, mask: float, mirrored: float, hide: int, root_rows: RootRows,
-                   size: tuple[int, int]) -> np.ndarray:
+    def _child_row(self, mask: float, mirrored: float, root_rows: RootRows, size: tuple[int, int]) -> np.ndarray:
         """(S, GRID_WIDTH) int64: ``_child_ids``' rows of a parent with this view mask and
-        winding (its row number 0), whatever surface it looks out of.  A view's mask: the
-        kinds of its chain, the layers every surface of its chain shows."""
-        key = (mask, mirrored, hide, root_rows.key, size)
+        winding (its row number 0), whatever surface it looks out of, hiding nothing (the
+        caller writes its ``hide`` in).  A view's mask: the kinds of its chain, the layers
+        every surface of its chain shows."""
+        key = (mask, mirrored, root_rows.key, size)
         found = self._child_rows.get(key)
         if found is None:
             rows = np.zeros((len(self.states), GRID_WIDTH))
@@ -429,7 +435,6 @@ class SurfaceTable:
             child_mask = (int(mask) & self.keep) | self.kind_bit
             ids = block[:, CAMERA_FLOATS["skip"]].view(np.uint32)
             ids[:, ID_SKIP] = self.exit_entities & 0xFFFFFFFF
-            ids[:, ID_HIDE] = hide & 0xFFFFFFFF
             ids[:, ID_MASK] = child_mask & 0xFFFFFFFF
             rest = rows[:, BLOCK.stop - BLOCK.start:]
             rest[:, 0] = self.exit_rows
@@ -805,10 +810,12 @@ class SurfaceTable:
             if not np.isfinite(bias).any():
                 break  # the cull sees nothing here
             biases.append(bias[0])
-            grids.append(self._child_row(mask, mirrored, hide, root_rows, size)[s])
+            grids.append(self._child_row(mask, mirrored, root_rows, size)[s])
             exit_row, mask, mirrored = (float(exit_rows[s]), float((int(mask) & keep[s]) | kind_bit[s]),
                                         float(mirrored != is_mirror[s]))
         result = (len(biases), np.array(biases), np.array(grids))
+        if hide and grids:
+            result[2].view(np.uint32)[:, _HIDE_WORD] = hide & 0xFFFFFFFF
         for array_ in result[1:]:
             array_.flags.writeable = False
         if len(self._chains) > 64:
