@@ -75,9 +75,9 @@ class CullWork:
 
 class ChildTable:
     """The camera-free rows (``SurfaceTable._child_row``) of every ids class
-    (``plan_rows.IDS_CLASS``: a view mask and winding) seen with one ``hide``, root
-    projection and size, stacked in the order of the classes (S rows each): a level gathers
-    its candidates' rows from it in one ``take`` by their parents' classes."""
+    (``plan_rows.IDS_CLASS``: a view mask and winding) seen with one root projection and
+    size, stacked in the order of the classes (S rows each): a level gathers its candidates'
+    rows from it in one ``take`` by their parents' numbers' offsets."""
 
     def __init__(self) -> None:
         self.rows: list[np.ndarray] = []

@@ -109,9 +109,9 @@ def _mat(matrix: glm.mat4) -> np.ndarray:
 _NONE = np.zeros(0, np.int64)
 _NO_RECTS = np.zeros((0, 4))
 _NEVER = (1e30, 2e30, 1e30, 2e30)  # fade starts no distance or angle reaches
-# A rectangle as the cull keeps it (x0, y0, -x1, -y1, ``SIGNS``): what makes it x, y, w, h.
 # The hidden entity's uint32 in a row of ``SurfaceTable._child_ids`` (its Camera block's ids)
 _HIDE_WORD = CAMERA_FLOATS["skip"].start + ID_HIDE
+# A rectangle as the cull keeps it (x0, y0, -x1, -y1, ``SIGNS``): what makes it x, y, w, h.
 _TO_SCISSOR = np.array([[1, 0, -1, 0], [0, 1, 0, -1], [0, 0, -1, 0], [0, 0, 0, -1]], np.float64)
 _MIN, _MAX = np.minimum.reduce, np.maximum.reduce
 
