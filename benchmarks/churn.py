@@ -137,11 +137,11 @@ def run(entities: int, waves: int, frames: int, size: tuple[int, int] = SIZE) ->
 
 def leftovers(rows: list[dict], rss_slack: float) -> list[str]:
     """GL resources and entities against before the first wave; memory against after the
-    second (the first two waves warm the driver's caches and the allocator: measured 130 ->
-    181 MiB for 100 things, then 160-185 MiB over seven more waves, no trend; for 400 things
-    491 -> 565 MiB, then 530-596 over five more; for 1000, 722 -> 1008, then 1017-1045).
-    With two waves, against after the first; with one, memory is not judged (what the first
-    wave warms is not a leak, and there is nothing after it to compare)."""
+    second (the first two waves warm the driver's caches and the allocator: measured, heap
+    trimmed, 400 things 353 -> 374 MiB, then 376-393 over five more waves, no trend; 1000
+    things 516 -> 614, then 627-636).  With two waves, against after the first; with one,
+    memory is not judged (what the first wave warms is not a leak, and there is nothing
+    after it to compare)."""
     first, last = rows[0], rows[-1]
     warm = rows[min(2, len(rows) - 2)] if len(rows) > 2 else None
     found = [f"{kind} {first['gl_resources'][kind]} -> {count}" for kind, count in last["gl_resources"].items()
