@@ -21,9 +21,9 @@ def test_waves_of_mirrors_portals_probes_meshes_and_textures_all_go_back():
     assert rows[-1]["gl_resources"]["batches"] == rows[0]["gl_resources"]["batches"]
 
 
-def _arena_with_a_wave(count: int):
-    """The churn benchmark's arena with one wave of ``count`` things (a fifth each mirrors,
-    portal pairs, chrome spheres with their own probe, new meshes, new textures) spawned."""
+def _churn_arena():
+    """The churn benchmark's arena, one frame drawn (a test spawns its waves with
+    ``churn.spawn_wave``): the context, the engine, its capture target and output."""
     from engine.core.frame_io import Output
     from engine.render.gl_context import create_headless_context
     from engine.render.targets import CaptureTarget
@@ -46,7 +46,7 @@ def test_the_planners_memory_grows_with_the_surfaces_not_with_their_square():
     killed); now about 18."""
     import tracemalloc
 
-    ctx, engine, capture, output = _arena_with_a_wave(0)
+    ctx, engine, capture, output = _churn_arena()
     try:
         tracemalloc.start()
         try:
@@ -74,7 +74,7 @@ def test_deleting_every_mirror_and_portal_lets_the_planners_table_go():
 
     from engine.render.surface_table import PlannerSurfaces
 
-    ctx, engine, capture, output = _arena_with_a_wave(0)
+    ctx, engine, capture, output = _churn_arena()
     try:
         made = churn.spawn_wave(engine.world, 40, 1)
         for _ in range(2):
