@@ -162,6 +162,11 @@ class Refractive(TrackedComponent):
         return value
 
 
+# Where a generated sky's sun stands when it follows no light (``Skybox.sun_direction``):
+# high in the -z half of the sky, towards the sun.
+DEFAULT_SUN_DIRECTION: tuple[float, float, float] = tuple(glm.normalize(glm.vec3(0.4, 0.6, -0.7)))
+
+
 @dataclass(eq=False)
 class Skybox(TrackedComponent):
     """The world's background cube map: six face images, or a generated gradient sky.
@@ -170,12 +175,21 @@ class Skybox(TrackedComponent):
     face order +X, -X, +Y, -Y, +Z, -Z, linear colour.  A generated sky's background is
     drawn from the colours per pixel (``engine/render/sky.py``); ``face_size`` is the side of
     the cube map made from them, which reflections, refraction and the sky's light read.
+
+    ``sun_direction`` (towards the sun): None, the default, puts the generated sky's sun
+    disc and its warm glow where the world's brightest ``DirectionalLight`` comes from (the
+    light's ``direction`` negated; ``engine.rules.light_rules.sky_sun``), as Unity's sun
+    source and Godot's procedural sky do, so the disc, a chrome ball's glint of it and the
+    shadows agree; the sky is made again when that light turns or another becomes the
+    brightest (a few milliseconds: a day-night cycle pays it each frame the sun moves).
+    With no lit ``DirectionalLight`` the sun stands at ``DEFAULT_SUN_DIRECTION``.  A vector
+    pins the sun there, whatever the lights do.
     """
 
     zenith: Any = field(default_factory=lambda: glm.vec4(0.10, 0.25, 0.65, 1.0))
     horizon: Any = field(default_factory=lambda: glm.vec4(0.65, 0.75, 0.90, 1.0))
     ground: Any = field(default_factory=lambda: glm.vec4(0.18, 0.14, 0.10, 1.0))
-    sun_direction: Any = field(default_factory=lambda: glm.vec3(0.4, 0.6, -0.7))
+    sun_direction: Any = None
     sun_color: Any = field(default_factory=lambda: glm.vec4(6.0, 5.4, 4.2, 1.0))
     face_size: int = 128
     faces: Any = None
@@ -186,7 +200,7 @@ class Skybox(TrackedComponent):
         if name == "sun_direction":
             from components.tracking import vec3
 
-            return glm.normalize(vec3(self, name, value, nonzero=True))
+            return None if value is None else glm.normalize(vec3(self, name, value, nonzero=True))
         if name == "face_size":
             return integer(self, name, value, low=4, high=2048)
         if name == "faces" and value is not None:

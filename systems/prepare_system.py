@@ -2,7 +2,9 @@
 
 Only the instance rows written this frame go to the GPU, the lights when their block
 changes (worked out again only when a light came, went, changed or moved, or the sky
-changed), the sky's cube map when the Skybox changes.
+changed), the sky's cube map when the Skybox changes or, for a generated sky whose sun
+follows the brightest directional light (``Skybox.sun_direction`` None), when that light
+turns or another takes its place.
 
 Ambient light (``engine/render/irradiance.py``): the sky's irradiance as nine
 spherical-harmonic coefficients in the Lights block, projected from the Skybox's faces when
@@ -35,7 +37,7 @@ from engine.render.shadows import LIGHT_LIMITS
 from engine.render.sky import build_faces, sky_model
 from engine.render.views import MAX_DIRECTIONAL_LIGHTS, MAX_POINT_LIGHTS, lights_block
 from engine.rules.frame_rules import frame_rules
-from engine.rules.light_rules import KeptLights, choose_lights
+from engine.rules.light_rules import KeptLights, choose_lights, sky_sun
 
 # A freed slot no light took yet: black (no light), its range 1 (no division by zero).
 _NO_SUN = ((0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
@@ -48,7 +50,7 @@ def ambient_sh(world: World, faces: np.ndarray | None = None) -> np.ndarray:
     hemisphere (``components.ambient.DEFAULT_SKY`` and ``DEFAULT_GROUND``)."""
     skies = world.query_one(Skybox)
     if skies:
-        return project_faces(build_faces(skies[0][1]) if faces is None else faces)
+        return project_faces(build_faces(skies[0][1], sky_sun(world, skies[0][1])) if faces is None else faces)
     hemispheres = world.query_one(HemisphereLight)
     if hemispheres:
         light = min(hemispheres, key=lambda pair: pair[0])[1]
@@ -64,15 +66,21 @@ class PrepareSystem(esper.Processor):
         self._sky_sh: np.ndarray | None = None
         self._cut = (0, 0)   # (directional, point) lights the last block left out
         self._kept: KeptLights | None = None   # the last choice of lights (light_rules)
+        self._sun: tuple[float, float, float] | None = None   # where the sky's sun was put (sky_sun)
+        self._sun_follows = False   # the generated sky's sun follows the brightest directional light
 
     def process(self, dt: float) -> None:
         world = self.world
         renderer = self.renderer
-        sky_changed = world.changed(Skybox)
+        sky_changed = world.changed(Skybox) or (self._sun_follows and world.changed(DirectionalLight)
+                                                and self._sun != self._sky_sun())
         if sky_changed:
             skies = world.query_one(Skybox)
-            faces = build_faces(skies[0][1]) if skies else None
-            renderer.set_sky_faces(faces, sky_model(skies[0][1]) if skies else None)
+            sky = skies[0][1] if skies else None
+            self._sun_follows = sky is not None and sky.faces is None and sky.sun_direction is None
+            self._sun = self._sky_sun()
+            faces = build_faces(sky, self._sun) if sky is not None else None
+            renderer.set_sky_faces(faces, sky_model(sky, self._sun))
             self._sky_sh = ambient_sh(world, faces)
         elif self._sky_sh is None or world.changed(HemisphereLight):
             self._sky_sh = ambient_sh(world)
@@ -90,6 +98,11 @@ class PrepareSystem(esper.Processor):
             self._count_cut(kept)
         world.resources[KeptLights] = kept   # every frame: what the shadows stage reads
         renderer.stats.lights_cut = sum(self._cut)
+
+    def _sky_sun(self) -> tuple[float, float, float] | None:
+        """Where the world's generated sky puts its sun now (``sky_sun``; None: no Skybox)."""
+        skies = self.world.query_one(Skybox)
+        return sky_sun(self.world, skies[0][1]) if skies else None
 
     def _rows(self, kept: KeptLights) -> tuple[list[tuple], list[tuple]]:
         """The Lights block's rows of the kept lights, slot by slot (a freed slot black)."""

@@ -8,7 +8,8 @@ from __future__ import annotations
 import numpy as np
 from pyglm import glm
 
-from components import Camera, Skybox, Transform, look_rotation
+from components import Camera, DirectionalLight, Skybox, Transform, look_rotation
+from components.rendering import DEFAULT_SUN_DIRECTION
 from engine.render.sky import build_faces, sky_radiance
 
 SIZE = (160, 120)
@@ -95,3 +96,100 @@ def test_a_changed_sky_is_drawn_changed(scene):
     want = sky_radiance(skybox, rays)
     assert (want[..., 1] > 3.0).sum() > 500  # the moved, green sun is in view
     np.testing.assert_allclose(colour, want, rtol=4e-3, atol=4e-3)
+
+
+# -- the sun follows the brightest directional light (Skybox.sun_direction None) ---------------
+
+FOLLOWING = {k: v for k, v in SKY.items() if k != "sun_direction"}  # sun_direction None: follow
+
+
+def _cube_faces(runner) -> np.ndarray:
+    """The sky cube map the renderer holds (what reflections, refraction and the sky's light
+    read), as (6, n, n, 3) float32 in GL face order."""
+    cube = runner.engine.renderer.sky
+    n = cube.size[0]
+    return np.stack([np.frombuffer(cube.read(face), np.float16).reshape(n, n, 3) for face in range(6)]
+                    ).astype(np.float32)
+
+
+def _following_scene(scene, lights: list[DirectionalLight], look: glm.vec3, skybox: Skybox | None = None):
+    """A 10-degree lens along ``look`` under a generated sky (``FOLLOWING`` unless given) and
+    ``lights``: (colour, rays, runner) of its first frame."""
+    skybox = skybox or Skybox(**FOLLOWING)
+
+    def build(world):
+        world.spawn(Transform(rotation=look_rotation(look)), Camera(fov_y=10.0, near=0.1, far=100.0))
+        world.spawn(skybox)
+        for light in lights:
+            world.spawn(light)
+
+    runner = scene(build, SIZE)
+    runner.engine.renderer.antialias = "off"
+    runner.frame()
+    return (*_read(runner), runner)
+
+
+def _disc_pixels(colour: np.ndarray) -> int:
+    """Pixels brighter than half the sun's red (inside its disc's ramp)."""
+    return int((colour[..., 0] > 3.0).sum())
+
+
+def test_an_unpinned_sun_stands_where_the_brightest_directional_light_shines_from(scene):
+    """Two suns, the brighter made second: the sky's disc and glow are drawn against the
+    brighter one's direction (the sky pass, pixel by pixel), and the cube map that
+    reflections and the sky's light read is the sky made with that sun, not the default."""
+    dim = DirectionalLight(direction=(0.2, -1.0, 0.6), intensity=1.0)
+    bright = DirectionalLight(direction=(-0.5, -0.6, 0.4), color=(1.0, 0.9, 0.8), intensity=3.0)
+    towards = -glm.normalize(glm.vec3(-0.5, -0.6, 0.4))
+    colour, rays, runner = _following_scene(scene, [dim, bright], towards)
+    skybox = Skybox(**FOLLOWING)
+    want = sky_radiance(skybox, rays, sun=tuple(towards))
+    np.testing.assert_allclose(colour, want, rtol=4e-3, atol=4e-3)
+    assert _disc_pixels(colour) > 2000  # the disc is where the light comes from
+    faces = _cube_faces(runner)
+    np.testing.assert_allclose(faces, build_faces(skybox, tuple(towards)).astype(np.float16), rtol=2e-3, atol=2e-3)
+    assert np.abs(faces - build_faces(skybox)).max() > 1.0  # (the default sun's sky differs: the disc)
+
+
+def test_the_sky_follows_when_its_sun_turns_and_only_then(scene):
+    """Turning the brightest light moves the disc the next frame (the sky made again);
+    turning a dimmer one, or the brightest one by nothing, makes no sky; deleting the
+    brightest hands the sun to the next."""
+    first = glm.normalize(glm.vec3(0.3, -0.8, 0.5))
+    dim = DirectionalLight(direction=(0.2, -1.0, -0.6), intensity=0.5)
+    bright = DirectionalLight(direction=first, intensity=2.0)
+    colour, _, runner = _following_scene(scene, [dim, bright], -first)
+    assert _disc_pixels(colour) > 2000
+    renderer = runner.engine.renderer
+    made = renderer.sky_version
+    dim.direction = (0.0, -1.0, -0.6)        # not the sun: no new sky
+    bright.direction = first                 # written, the same way: no new sky
+    runner.frame()
+    assert renderer.sky_version == made
+    bright.direction = (0.3, -0.8, -0.5)     # the sun turns away from the lens
+    runner.frame()
+    colour, rays = _read(runner)
+    assert renderer.sky_version == made + 1
+    assert _disc_pixels(colour) == 0
+    np.testing.assert_allclose(colour, sky_radiance(Skybox(**FOLLOWING), rays, sun=(-0.3, 0.8, 0.5)),
+                               rtol=4e-3, atol=4e-3)
+    sun_entity = next(e for e, light in runner.world.query_one(DirectionalLight) if light is bright)
+    runner.world.delete_entity(sun_entity)
+    runner.frame()
+    colour, rays = _read(runner)
+    np.testing.assert_allclose(colour, sky_radiance(Skybox(**FOLLOWING), rays, sun=(0.0, 1.0, 0.6)),
+                               rtol=4e-3, atol=4e-3)
+
+
+def test_a_pinned_sun_stays_and_no_lit_sun_means_the_default(scene):
+    """``sun_direction`` given: the disc stays there whatever the light; a black light is no
+    sun, so with no other the disc stands at ``DEFAULT_SUN_DIRECTION``."""
+    light = DirectionalLight(direction=(0.3, -0.8, 0.5), intensity=2.0)
+    colour, _, _ = _following_scene(scene, [light], SUN, skybox=Skybox(**SKY))
+    assert _disc_pixels(colour) > 2000
+    black = DirectionalLight(direction=(0.3, -0.8, 0.5), intensity=0.0)
+    default = glm.vec3(*DEFAULT_SUN_DIRECTION)
+    colour, rays, _ = _following_scene(scene, [black], default)
+    assert _disc_pixels(colour) > 2000
+    np.testing.assert_allclose(colour, sky_radiance(Skybox(**FOLLOWING), rays, sun=DEFAULT_SUN_DIRECTION),
+                               rtol=4e-3, atol=4e-3)

@@ -115,10 +115,11 @@ def test_a_generated_sky_brighter_than_a_half_float_is_stored_at_65504_not_as_in
     import warnings
 
     from components import Skybox
+    from components.rendering import DEFAULT_SUN_DIRECTION
     from engine.render.sky import sky_radiance
 
     sky = Skybox(horizon=(65504.0,) * 3, zenith=(65504.0,) * 3, sun_color=(65504.0,) * 3)
-    sun = glm.vec3(sky.sun_direction)
+    sun = glm.vec3(*DEFAULT_SUN_DIRECTION)  # (no directional light: the sun stands there)
 
     def build(world) -> None:
         look_from(world, (0.0, 0.0, 0.0), tuple(sun))

@@ -41,6 +41,8 @@ EYE = (0.0, 2.2, 2.6)
 TINT = (0.95, 0.85, 1.0)
 FACING_UP = glm.angleAxis(-math.pi / 2, glm.vec3(1, 0, 0))  # a quad's +Z turned to +Y
 MATERIAL = (0.6, 0.08, 0.08)  # the mirror's own colour: red, far from the sky's
+SUN_LIGHT = (0.3, -1.0, -0.4)  # the way the sun's light travels: the sky's sun stands against it
+SKY_SUN = tuple(-glm.normalize(glm.vec3(SUN_LIGHT)))
 
 
 def _floor_mirror(ents: dict, mirror: Mirror, budget: ViewBudget | None = None, probe: bool = False,
@@ -51,7 +53,7 @@ def _floor_mirror(ents: dict, mirror: Mirror, budget: ViewBudget | None = None, 
     glowing ceiling, so the probe's reflection differs from the sky's."""
     def build(world) -> None:
         world.spawn(Skybox())
-        world.spawn(DirectionalLight(direction=(0.3, -1.0, -0.4), intensity=1.5))
+        world.spawn(DirectionalLight(direction=SUN_LIGHT, intensity=1.5))
         ents["camera"] = look_from(world, eye, target=(0.0, 0.0, 0.0), fov=50.0)
         ents["mirror"] = world.spawn(Transform(rotation=FACING_UP), MeshRef(quad(3.0, 3.0)),
                                      Material(color=MATERIAL), mirror)
@@ -112,14 +114,14 @@ def _reflected_sky(runner, rate: float = 1.0, own: np.ndarray | None = None) -> 
     rays = _rays(runner)
     normal = np.array([0.0, 1.0, 0.0])
     reflected = rays - 2.0 * (rays * normal).sum(axis=-1, keepdims=True) * normal
-    radiance = _fresnel(reflected, normal, TINT) * sky_radiance(Skybox(), reflected)
+    radiance = _fresnel(reflected, normal, TINT) * sky_radiance(Skybox(), reflected, sun=SKY_SUN)
     expected = rate * radiance + (0.0 if own is None else (1.0 - rate) * own)
     return expected, reflected
 
 
 def _away_from_the_sun(reflected: np.ndarray) -> np.ndarray:
     """Pixels whose reflection is far from the sun's glow and disc (steep there)."""
-    sun = np.array(Skybox().sun_direction, np.float64)
+    sun = np.array(SKY_SUN, np.float64)
     return (reflected @ (sun / np.linalg.norm(sun))) < 0.8
 
 
@@ -267,7 +269,7 @@ def test_a_portal_cut_by_the_budget_shows_the_sky_beyond_its_partner(scene):
 
     def build(world) -> None:
         world.spawn(Skybox())
-        world.spawn(DirectionalLight(direction=(0.3, -1.0, -0.4), intensity=1.5))
+        world.spawn(DirectionalLight(direction=SUN_LIGHT, intensity=1.5))
         look_from(world, (0.3, 1.4, 3.0), target=(0.0, 1.8, 0.0), fov=50.0)
         ents["a"], ents["b"] = spawn_portal_pair(world, (0.0, 1.5, 0.0), None, (10.0, 1.5, 0.0), turn,
                                                  size=(2.0, 2.5))
@@ -277,7 +279,7 @@ def test_a_portal_cut_by_the_budget_shows_the_sky_beyond_its_partner(scene):
     assert runner.stats.reflection_views == 0 and runner.stats.reflection_fallbacks == 1
     rotation = np.array(glm.mat3_cast(turn * glm.angleAxis(glm.pi(), glm.vec3(0, 1, 0))).to_list(), np.float64).T
     carried = _rays(runner) @ rotation.T
-    expected = sky_radiance(Skybox(), carried)
+    expected = sky_radiance(Skybox(), carried, sun=SKY_SUN)
     # (Away from the sun and the horizon, where the sky's formula is steep for its cube's texels.)
     mask = _mirror_pixels(runner, ents["a"]) & _away_from_the_sun(carried) & (np.abs(carried[..., 1]) > 0.1)
     assert mask.sum() > 1000
@@ -404,7 +406,8 @@ def test_a_cut_water_surface_weighs_its_fallback_by_fresnel(scene):
     reflected = rays - 2.0 * (rays * normal).sum(axis=-1, keepdims=True) * normal
     cosine = np.clip(-(rays * normal).sum(axis=-1, keepdims=True), 0.0, 1.0)
     weight = f0 + (1.0 - f0) * (1.0 - cosine) ** 5
-    expected = weight * np.asarray(TINT) * sky_radiance(Skybox(), reflected) + (1.0 - weight) * srgb_to_linear(own)
+    sky = sky_radiance(Skybox(), reflected, sun=SKY_SUN)
+    expected = weight * np.asarray(TINT) * sky + (1.0 - weight) * srgb_to_linear(own)
     mask = _mirror_pixels(runner, ents["mirror"]) & _away_from_the_sun(reflected)
     assert mask.sum() > 2000
     difference = np.abs(image[mask].astype(float) - linear_to_srgb8(expected[mask]))

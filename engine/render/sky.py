@@ -14,12 +14,14 @@ read the cube: they sample it blurred by roughness, where its resolution is enou
 """
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import moderngl
 import numpy as np
 
+from components.rendering import DEFAULT_SUN_DIRECTION
 from components.tracking import HALF_MAX
 from engine.core.cube_faces import face_directions
 
@@ -29,8 +31,19 @@ if TYPE_CHECKING:
 SEAMLESS_CUBE_MAP = 0x884F  # GL_TEXTURE_CUBE_MAP_SEAMLESS, core since 3.2
 
 
-def sky_radiance(skybox: Skybox, directions: np.ndarray) -> np.ndarray:
-    """Linear RGB of the generated sky along each unit direction (..., 3)."""
+def sun_of(skybox: Skybox, sun: Sequence[float] | None = None) -> np.ndarray:
+    """The unit direction towards a generated sky's sun: ``sun`` (what the world's lights made
+    of it: ``engine.rules.light_rules.sky_sun``), else the Skybox's pinned
+    ``sun_direction``, else ``DEFAULT_SUN_DIRECTION`` (a sky that follows no light)."""
+    if sun is None:
+        sun = DEFAULT_SUN_DIRECTION if skybox.sun_direction is None else skybox.sun_direction
+    found = np.array(tuple(sun)[:3], np.float64)
+    return found / np.linalg.norm(found)
+
+
+def sky_radiance(skybox: Skybox, directions: np.ndarray, sun: Sequence[float] | None = None) -> np.ndarray:
+    """Linear RGB of the generated sky along each unit direction (..., 3), its sun towards
+    ``sun`` (``sun_of``)."""
     d = np.asarray(directions, np.float64)
     d = d / np.linalg.norm(d, axis=-1, keepdims=True)
     y = d[..., 1:2]
@@ -41,7 +54,7 @@ def sky_radiance(skybox: Skybox, directions: np.ndarray) -> np.ndarray:
     down = np.clip(-y * 4.0, 0.0, 1.0)
     color = np.where(y >= 0.0, horizon + (zenith - horizon) * up, horizon + (ground - horizon) * down)
     # A warm band around the sun's azimuth so that left and right of the sky differ.
-    sun = np.array(skybox.sun_direction, np.float64)
+    sun = sun_of(skybox, sun)
     cos_sun = np.clip((d * sun).sum(axis=-1, keepdims=True), -1.0, 1.0)
     glow = 0.25 * np.clip(cos_sun, 0.0, 1.0) ** 4 * np.array([1.0, 0.55, 0.25])
     disc = np.clip((cos_sun - 0.9990) / 0.0005, 0.0, 1.0) * np.array(skybox.sun_color)[:3]
@@ -65,9 +78,9 @@ class SkyModel:
                 "sky_sun_direction": self.sun_direction, "sky_sun_color": self.sun_color}
 
 
-def sky_model(skybox: Skybox | None) -> SkyModel | None:
-    """The generated sky of ``skybox`` as the sky pass draws it; None for given faces or no
-    Skybox (the pass samples the cube map)."""
+def sky_model(skybox: Skybox | None, sun: Sequence[float] | None = None) -> SkyModel | None:
+    """The generated sky of ``skybox`` as the sky pass draws it, its sun towards ``sun``
+    (``sun_of``); None for given faces or no Skybox (the pass samples the cube map)."""
     if skybox is None or skybox.faces is not None:
         return None
 
@@ -75,11 +88,12 @@ def sky_model(skybox: Skybox | None) -> SkyModel | None:
         return tuple(float(c) for c in tuple(value)[:3])
 
     return SkyModel(rgb(skybox.zenith), rgb(skybox.horizon), rgb(skybox.ground),
-                    rgb(skybox.sun_direction), rgb(skybox.sun_color))  # (unit: the Skybox's check)
+                    rgb(sun_of(skybox, sun)), rgb(skybox.sun_color))
 
 
-def build_faces(skybox: Skybox) -> np.ndarray:
-    """Six faces (6, size, size, 3) float32 in GL order, from ``skybox.faces`` or generated."""
+def build_faces(skybox: Skybox, sun: Sequence[float] | None = None) -> np.ndarray:
+    """Six faces (6, size, size, 3) float32 in GL order, from ``skybox.faces`` or generated
+    (its sun towards ``sun``: ``sun_of``)."""
     if skybox.faces is not None:
         faces = np.asarray(skybox.faces, np.float32)
         if faces.ndim != 4 or faces.shape[0] != 6 or faces.shape[1] != faces.shape[2] or faces.shape[3] != 3:
@@ -88,7 +102,7 @@ def build_faces(skybox: Skybox) -> np.ndarray:
             raise ValueError("Skybox.faces must hold finite linear colours >= 0")
         return faces
     n = skybox.face_size
-    return np.stack([sky_radiance(skybox, face_directions(f, n)) for f in range(6)]).astype(np.float32)
+    return np.stack([sky_radiance(skybox, face_directions(f, n), sun) for f in range(6)]).astype(np.float32)
 
 
 def upload_cube(ctx: moderngl.Context, faces: np.ndarray) -> moderngl.TextureCube:

@@ -16,6 +16,8 @@ torches lights the sixteen that matter where the camera is, not the first sixtee
   active camera, by luminance alone.
 - **Directional lights** by luminance.
 - **Ties** by creation order (entity id): the same answer every run.
+- **The sky's sun** (``sky_sun``): a generated sky whose ``Skybox.sun_direction`` is not
+  pinned draws its disc against the brightest directional light, by the same luminance.
 - **Shadow cubes** (``MAX_POINT_SHADOWS`` of them): among the kept point lights that cast
   shadows, by the same importance.
 
@@ -50,7 +52,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from components import DirectionalLight, PointLight, Transform
+from components import DirectionalLight, PointLight, Skybox, Transform
+from components.rendering import DEFAULT_SUN_DIRECTION
 from components.tracking import raw_field
 from engine.core.budget import spending_order
 from engine.core.world import World
@@ -203,6 +206,23 @@ def choose_lights(world: World, previous: KeptLights | None, limits: LightLimits
                       shadows_cut=shadowed - sum(e is not None for e in cubes),
                       by_eye=len(lamps) > limits.point or len(casting) > limits.point_shadows,
                       camera=camera, eye=eye)
+
+
+def sky_sun(world: World, skybox: Skybox) -> tuple[float, float, float]:
+    """Where a generated sky's sun stands (unit, towards it): ``skybox.sun_direction`` when
+    pinned, else against the brightest ``DirectionalLight`` (luminance of colour x
+    intensity, the directional lights' rank above; ties to the first made), else
+    ``DEFAULT_SUN_DIRECTION``.  A black light (luminance 0) is no sun."""
+    if skybox.sun_direction is not None:
+        return tuple(float(c) for c in skybox.sun_direction)
+    best, brightest = None, 0.0
+    for _, light in sorted(world.query_one(DirectionalLight), key=lambda pair: pair[0]):
+        bright = float(luminance(raw_field(light, "color").xyz * light.intensity))
+        if bright > brightest:
+            best, brightest = light, bright
+    if best is None:
+        return DEFAULT_SUN_DIRECTION
+    return tuple(-float(c) for c in best.direction)
 
 
 def kept_lights(world: World, limits: LightLimits) -> KeptLights:
