@@ -178,10 +178,12 @@ class Skybox(TrackedComponent):
 
     ``sun_direction`` (towards the sun): None, the default, puts the generated sky's sun
     disc and its warm glow where the world's brightest ``DirectionalLight`` comes from (the
-    light's ``direction`` negated; ``engine.rules.light_rules.sky_sun``), as Unity's sun
-    source and Godot's procedural sky do, so the disc, a chrome ball's glint of it and the
-    shadows agree; the sky is made again when that light turns or another becomes the
-    brightest (a few milliseconds: a day-night cycle pays it each frame the sun moves).
+    light's ``direction`` negated; ``engine.rules.light_rules.sky_sun``), the disc
+    ``sun_color`` times that light's colour, as Unity's sun source and Godot's procedural
+    sky do, so the disc, a chrome ball's glint of it and the shadows agree.  While that light
+    turns or recolours the sky pass follows it every frame; the cube map and the sky's light
+    (tens of milliseconds to make on a software rasteriser's machine) follow within a degree,
+    and exactly once it stands still.
     With no lit ``DirectionalLight`` the sun stands at ``DEFAULT_SUN_DIRECTION``.  A vector
     pins the sun there, whatever the lights do.
     """

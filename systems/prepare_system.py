@@ -4,7 +4,8 @@ Only the instance rows written this frame go to the GPU, the lights when their b
 changes (worked out again only when a light came, went, changed or moved, or the sky
 changed), the sky's cube map when the Skybox changes or, for a generated sky whose sun
 follows the brightest directional light (``Skybox.sun_direction`` None), when that light
-turns or another takes its place.
+turns or another takes its place (while it turns, the cube up to a degree behind the sky
+pass: ``_sky``).
 
 Ambient light (``engine/render/irradiance.py``): the sky's irradiance as nine
 spherical-harmonic coefficients in the Lights block, projected from the Skybox's faces when
@@ -37,7 +38,7 @@ from engine.render.shadows import LIGHT_LIMITS
 from engine.render.sky import build_faces, sky_model
 from engine.render.views import MAX_DIRECTIONAL_LIGHTS, MAX_POINT_LIGHTS, lights_block
 from engine.rules.frame_rules import frame_rules
-from engine.rules.light_rules import KeptLights, choose_lights, sky_sun
+from engine.rules.light_rules import KeptLights, SkySun, choose_lights, cube_serves, sky_sun
 
 # A freed slot no light took yet: black (no light), its range 1 (no division by zero).
 _NO_SUN = ((0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
@@ -66,23 +67,15 @@ class PrepareSystem(esper.Processor):
         self._sky_sh: np.ndarray | None = None
         self._cut = (0, 0)   # (directional, point) lights the last block left out
         self._kept: KeptLights | None = None   # the last choice of lights (light_rules)
-        self._sun: tuple[float, float, float] | None = None   # where the sky's sun was put (sky_sun)
+        self._sun: SkySun | None = None   # where the sky pass draws the sun, and its tint (sky_sun)
+        self._cube_sun: SkySun | None = None   # ... and where the sky's cube map and light have it
         self._sun_follows = False   # the generated sky's sun follows the brightest directional light
 
     def process(self, dt: float) -> None:
         world = self.world
         renderer = self.renderer
-        sky_changed = world.changed(Skybox) or (self._sun_follows and world.changed(DirectionalLight)
-                                                and self._sun != self._sky_sun())
-        if sky_changed:
-            skies = world.query_one(Skybox)
-            sky = skies[0][1] if skies else None
-            self._sun_follows = sky is not None and sky.faces is None and sky.sun_direction is None
-            self._sun = self._sky_sun()
-            faces = build_faces(sky, self._sun) if sky is not None else None
-            renderer.set_sky_faces(faces, sky_model(sky, self._sun))
-            self._sky_sh = ambient_sh(world, faces)
-        elif self._sky_sh is None or world.changed(HemisphereLight):
+        sky_changed = self._sky()
+        if not sky_changed and (self._sky_sh is None or world.changed(HemisphereLight)):
             self._sky_sh = ambient_sh(world)
             sky_changed = True
         renderer.upload_instances()
@@ -99,8 +92,44 @@ class PrepareSystem(esper.Processor):
         world.resources[KeptLights] = kept   # every frame: what the shadows stage reads
         renderer.stats.lights_cut = sum(self._cut)
 
-    def _sky_sun(self) -> tuple[float, float, float] | None:
-        """Where the world's generated sky puts its sun now (``sky_sun``; None: no Skybox)."""
+    def _sky(self) -> bool:
+        """The sky made anew where it changed: the Skybox came, went or changed, or the light a
+        generated sky's sun follows turned or recoloured.  While that sun turns the sky pass
+        follows it every frame (a few uniforms) and the cube map and the sky's light (tens of
+        milliseconds of numpy on this machine) only once the sun is past what the cube serves
+        (``cube_serves``: a degree) or stands still again.  True when the cube was made."""
+        world = self.world
+        if world.changed(Skybox):
+            skies = world.query_one(Skybox)
+            sky = skies[0][1] if skies else None
+            self._sun_follows = sky is not None and sky.faces is None and sky.sun_direction is None
+            self._make_sky(sky, self._sky_sun())
+            return True
+        if not self._sun_follows or not (world.changed(DirectionalLight) or self._sun != self._cube_sun):
+            return False
+        sun, sky = self._sky_sun(), world.query_one(Skybox)[0][1]
+        if sun == self._cube_sun:
+            if sun != self._sun:  # back where the cube has it
+                self._sun = sun
+                self.renderer.set_sky_model(sky_model(sky, sun))
+            return False
+        if sun != self._sun and cube_serves(self._cube_sun, sun):  # turning: the cube a moment later
+            self._sun = sun
+            self.renderer.set_sky_model(sky_model(sky, sun))
+            return False
+        self._make_sky(sky, sun)
+        return True
+
+    def _make_sky(self, sky: Skybox | None, sun: SkySun | None) -> None:
+        """The sky's cube map, the sky pass's model and the sky's light, of ``sky`` with ``sun``."""
+        faces = build_faces(sky, sun) if sky is not None else None
+        self.renderer.set_sky_faces(faces, sky_model(sky, sun))
+        self._sky_sh = ambient_sh(self.world, faces)
+        self._sun = self._cube_sun = sun
+
+    def _sky_sun(self) -> SkySun | None:
+        """Where the world's generated sky puts its sun now, and its tint (``sky_sun``; None:
+        no Skybox)."""
         skies = self.world.query_one(Skybox)
         return sky_sun(self.world, skies[0][1]) if skies else None
 

@@ -29,6 +29,7 @@ from engine.core.cube_faces import face_directions
 from engine.render.irradiance import evaluate_sh, hemisphere_sh, project_faces
 from engine.render.sky import build_faces
 from engine.render.views import LIGHTS_BLOCK_BYTES, MAX_DIRECTIONAL_LIGHTS, MAX_POINT_LIGHTS, lights_block
+from engine.rules.light_rules import SkySun
 from tests.support import linear_to_srgb8, look_from, srgb_to_linear
 
 
@@ -253,7 +254,7 @@ def test_the_side_of_a_box_away_from_the_sun_is_lit_by_the_sky(scene):
     rgb = runner.frame()
     column, row = runner.project((0.5, 0.5, 0.0))
     seen = pixel_linear(rgb, column, row)
-    sun = (-math.sqrt(0.5), math.sqrt(0.5), 0.0)  # the sky's sun stands against the light (Skybox.sun_direction)
+    sun = SkySun((-math.sqrt(0.5), math.sqrt(0.5), 0.0))  # the sky's sun: against the light (sun_direction)
     expected = albedo * cosine_irradiance(build_faces(skybox, sun), (1, 0, 0)) / math.pi
     # The harmonics' error under a sideways normal (under 1%) and the sRGB steps.
     np.testing.assert_allclose(seen, expected, rtol=0.02, atol=float(srgb_tolerance(expected).max()))

@@ -11,6 +11,7 @@ from pyglm import glm
 from components import Camera, DirectionalLight, Skybox, Transform, look_rotation
 from components.rendering import DEFAULT_SUN_DIRECTION
 from engine.render.sky import build_faces, sky_radiance
+from engine.rules.light_rules import SkySun
 
 SIZE = (160, 120)
 SUN = glm.normalize(glm.vec3(0.3, 0.5, -0.8))
@@ -135,19 +136,24 @@ def _disc_pixels(colour: np.ndarray) -> int:
 
 
 def test_an_unpinned_sun_stands_where_the_brightest_directional_light_shines_from(scene):
-    """Two suns, the brighter made second: the sky's disc and glow are drawn against the
-    brighter one's direction (the sky pass, pixel by pixel), and the cube map that
+    """Two suns, the brighter made second, evening red: the sky's disc and glow are drawn
+    against the brighter one's direction, the disc in its colour (the sky pass, pixel by
+    pixel; the disc's centre is sun_color x the light's colour), and the cube map that
     reflections and the sky's light read is the sky made with that sun, not the default."""
+    red = (1.0, 0.45, 0.2)
     dim = DirectionalLight(direction=(0.2, -1.0, 0.6), intensity=1.0)
-    bright = DirectionalLight(direction=(-0.5, -0.6, 0.4), color=(1.0, 0.9, 0.8), intensity=3.0)
+    bright = DirectionalLight(direction=(-0.5, -0.6, 0.4), color=red, intensity=3.0)
     towards = -glm.normalize(glm.vec3(-0.5, -0.6, 0.4))
     colour, rays, runner = _following_scene(scene, [dim, bright], towards)
     skybox = Skybox(**FOLLOWING)
-    want = sky_radiance(skybox, rays, sun=tuple(towards))
-    np.testing.assert_allclose(colour, want, rtol=4e-3, atol=4e-3)
+    sun = SkySun(tuple(towards), red)
+    np.testing.assert_allclose(colour, sky_radiance(skybox, rays, sun=sun), rtol=4e-3, atol=4e-3)
     assert _disc_pixels(colour) > 2000  # the disc is where the light comes from
+    glow = 0.25 * np.array([1.0, 0.55, 0.25])  # (at the disc's centre, the sun's warm band is whole)
+    centre = colour[SIZE[1] // 2, SIZE[0] // 2] - glow - np.array(SKY["zenith"])  # less the sky, about
+    np.testing.assert_allclose(centre / np.array(SKY["sun_color"]), red, atol=0.06)
     faces = _cube_faces(runner)
-    np.testing.assert_allclose(faces, build_faces(skybox, tuple(towards)).astype(np.float16), rtol=2e-3, atol=2e-3)
+    np.testing.assert_allclose(faces, build_faces(skybox, sun).astype(np.float16), rtol=2e-3, atol=2e-3)
     assert np.abs(faces - build_faces(skybox)).max() > 1.0  # (the default sun's sky differs: the disc)
 
 
@@ -171,13 +177,13 @@ def test_the_sky_follows_when_its_sun_turns_and_only_then(scene):
     colour, rays = _read(runner)
     assert renderer.sky_version == made + 1
     assert _disc_pixels(colour) == 0
-    np.testing.assert_allclose(colour, sky_radiance(Skybox(**FOLLOWING), rays, sun=(-0.3, 0.8, 0.5)),
+    np.testing.assert_allclose(colour, sky_radiance(Skybox(**FOLLOWING), rays, sun=SkySun((-0.3, 0.8, 0.5))),
                                rtol=4e-3, atol=4e-3)
     sun_entity = next(e for e, light in runner.world.query_one(DirectionalLight) if light is bright)
     runner.world.delete_entity(sun_entity)
     runner.frame()
     colour, rays = _read(runner)
-    np.testing.assert_allclose(colour, sky_radiance(Skybox(**FOLLOWING), rays, sun=(0.0, 1.0, 0.6)),
+    np.testing.assert_allclose(colour, sky_radiance(Skybox(**FOLLOWING), rays, sun=SkySun((0.0, 1.0, 0.6))),
                                rtol=4e-3, atol=4e-3)
 
 
@@ -191,5 +197,40 @@ def test_a_pinned_sun_stays_and_no_lit_sun_means_the_default(scene):
     default = glm.vec3(*DEFAULT_SUN_DIRECTION)
     colour, rays, _ = _following_scene(scene, [black], default)
     assert _disc_pixels(colour) > 2000
-    np.testing.assert_allclose(colour, sky_radiance(Skybox(**FOLLOWING), rays, sun=DEFAULT_SUN_DIRECTION),
+    np.testing.assert_allclose(colour, sky_radiance(Skybox(**FOLLOWING), rays, sun=SkySun(DEFAULT_SUN_DIRECTION)),
                                rtol=4e-3, atol=4e-3)
+
+
+def test_while_the_sun_turns_the_sky_pass_follows_each_frame_and_the_cube_within_a_degree(scene):
+    """A sun turning 0.3 degrees a frame: every frame the sky pass draws the disc where the
+    light is now (pixel by pixel); the cube map (reflections, the sky's light: tens of
+    milliseconds to make) is made again only once the sun is past a degree from it, and once
+    more when the sun stands still, so a still sky's cube is exact."""
+    start = glm.normalize(glm.vec3(-0.3, 0.8, -0.5))
+    axis = glm.normalize(glm.cross(start, glm.vec3(0, 1, 0)))  # square to it: it turns by the angle
+
+    def light_towards(degrees: float) -> glm.vec3:  # the sun's direction, turned on
+        return glm.vec3(glm.rotate(glm.radians(degrees), axis) * glm.vec4(start, 0.0))
+
+    sun = DirectionalLight(direction=-light_towards(0.0), intensity=2.0)
+    _, _, runner = _following_scene(scene, [sun], light_towards(0.0))
+    renderer = runner.engine.renderer
+    made = [renderer.sky]
+    for step in range(1, 6):
+        sun.direction = -light_towards(0.3 * step)
+        runner.frame()
+        colour, rays = _read(runner)
+        np.testing.assert_allclose(colour, sky_radiance(Skybox(**FOLLOWING), rays, sun=SkySun(tuple(
+            glm.normalize(light_towards(0.3 * step))))), rtol=4e-3, atol=4e-3)
+        if renderer.sky is not made[-1]:
+            made.append(renderer.sky)
+            assert step == 4, f"the cube was made again {0.3 * step:.1f} degrees on"  # past 1 degree: 1.2
+    assert len(made) == 2
+    runner.frame()  # standing still at 1.5 degrees, 0.3 from the cube: made exact
+    assert renderer.sky is not made[-1]
+    faces = _cube_faces(runner)
+    want = build_faces(Skybox(**FOLLOWING), SkySun(tuple(glm.normalize(light_towards(1.5)))))
+    np.testing.assert_allclose(faces, want.astype(np.float16), rtol=2e-3, atol=2e-3)
+    still = renderer.sky
+    runner.frame()
+    assert renderer.sky is still  # and then left alone

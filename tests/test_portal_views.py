@@ -18,6 +18,7 @@ from engine.assets.mesh import box, plane, quad
 from engine.assets.portals import spawn_portal_pair
 from engine.assets.texture_data import checker_texture
 from engine.render.sky import sky_radiance
+from engine.rules.light_rules import SkySun
 from tests.support import look_from, srgb_to_linear
 
 SIZE = (200, 150)
@@ -26,7 +27,7 @@ HALF_TURN = glm.angleAxis(glm.pi(), glm.vec3(0, 1, 0))
 
 
 SUN_LIGHT = (0.3, -1.0, -0.4)  # the way the sun's light travels: the sky's sun stands against it
-SKY_SUN = tuple(-glm.normalize(glm.vec3(SUN_LIGHT)))
+SKY_SUN = SkySun(tuple(-glm.normalize(glm.vec3(SUN_LIGHT))))
 
 
 def lit(world):

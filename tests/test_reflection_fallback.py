@@ -34,6 +34,7 @@ from engine.core.world import World
 from engine.render.mirror_passes import MirrorPasses
 from engine.render.sky import sky_radiance
 from engine.resources import ViewBudget
+from engine.rules.light_rules import SkySun
 from tests.support import linear_to_srgb8, look_from, srgb_to_linear
 
 SIZE = (160, 120)
@@ -42,7 +43,7 @@ TINT = (0.95, 0.85, 1.0)
 FACING_UP = glm.angleAxis(-math.pi / 2, glm.vec3(1, 0, 0))  # a quad's +Z turned to +Y
 MATERIAL = (0.6, 0.08, 0.08)  # the mirror's own colour: red, far from the sky's
 SUN_LIGHT = (0.3, -1.0, -0.4)  # the way the sun's light travels: the sky's sun stands against it
-SKY_SUN = tuple(-glm.normalize(glm.vec3(SUN_LIGHT)))
+SKY_SUN = SkySun(tuple(-glm.normalize(glm.vec3(SUN_LIGHT))))
 
 
 def _floor_mirror(ents: dict, mirror: Mirror, budget: ViewBudget | None = None, probe: bool = False,
@@ -121,7 +122,7 @@ def _reflected_sky(runner, rate: float = 1.0, own: np.ndarray | None = None) -> 
 
 def _away_from_the_sun(reflected: np.ndarray) -> np.ndarray:
     """Pixels whose reflection is far from the sun's glow and disc (steep there)."""
-    sun = np.array(SKY_SUN, np.float64)
+    sun = np.array(SKY_SUN.direction, np.float64)
     return (reflected @ (sun / np.linalg.norm(sun))) < 0.8
 
 

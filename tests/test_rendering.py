@@ -19,6 +19,7 @@ from components import (
 from engine.assets.mesh import box, plane, quad, sphere
 from engine.assets.texture_data import checker_texture
 from engine.render.sky import build_faces, sky_radiance
+from engine.rules.light_rules import SkySun
 from tests.support import srgb_to_linear
 
 SIZE = (160, 120)
@@ -182,7 +183,7 @@ def test_textured_reflector_is_the_average_of_texture_and_sky(scene):
     mixed = srgb_to_linear(runner.frame()[row, col])
     d = pixel_ray(runner, col, row)
     r = d - 2 * np.dot(d, [0, 0, 1]) * np.array([0, 0, 1])
-    expected = 0.5 * plain + 0.5 * sky_radiance(sky, r, sun=(0, 0, 1))  # (the sky's sun: against the light)
+    expected = 0.5 * plain + 0.5 * sky_radiance(sky, r, sun=SkySun((0, 0, 1)))  # (the sky's sun: against the light)
     np.testing.assert_allclose(mixed, expected, atol=0.02)
 
 

@@ -265,6 +265,13 @@ class Renderer(Gpu):
         self.sky_version += 1
         self.note_scene_change()
 
+    def set_sky_model(self, model: SkyModel | None) -> None:
+        """The ``model`` the sky pass draws a generated Skybox from, the cube map kept (its
+        sun turning: the prepare stage makes the cube again a moment later)."""
+        self.sky_model = model
+        self.sky_version += 1
+        self.note_scene_change()
+
     def resource_counts(self) -> dict[str, int]:
         """Live GL resources this renderer owns, by kind (soak and churn runs check that they
         come back to their baseline; tests that they go back to zero)."""

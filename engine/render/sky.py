@@ -14,7 +14,6 @@ read the cube: they sample it blurred by roughness, where its resolution is enou
 """
 from __future__ import annotations
 
-from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
@@ -24,6 +23,7 @@ import numpy as np
 from components.rendering import DEFAULT_SUN_DIRECTION
 from components.tracking import HALF_MAX
 from engine.core.cube_faces import face_directions
+from engine.rules.light_rules import SkySun
 
 if TYPE_CHECKING:
     from components import Skybox
@@ -31,19 +31,20 @@ if TYPE_CHECKING:
 SEAMLESS_CUBE_MAP = 0x884F  # GL_TEXTURE_CUBE_MAP_SEAMLESS, core since 3.2
 
 
-def sun_of(skybox: Skybox, sun: Sequence[float] | None = None) -> np.ndarray:
-    """The unit direction towards a generated sky's sun: ``sun`` (what the world's lights made
-    of it: ``engine.rules.light_rules.sky_sun``), else the Skybox's pinned
-    ``sun_direction``, else ``DEFAULT_SUN_DIRECTION`` (a sky that follows no light)."""
+def sun_of(skybox: Skybox, sun: SkySun | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """A generated sky's sun: the unit direction towards it and its disc's linear colour.
+    ``sun`` is what the world's lights made of it (``engine.rules.light_rules.sky_sun``);
+    None: the Skybox's pinned ``sun_direction``, else ``DEFAULT_SUN_DIRECTION`` (a sky that
+    follows no light), untinted."""
     if sun is None:
-        sun = DEFAULT_SUN_DIRECTION if skybox.sun_direction is None else skybox.sun_direction
-    found = np.array(tuple(sun)[:3], np.float64)
-    return found / np.linalg.norm(found)
+        sun = SkySun(DEFAULT_SUN_DIRECTION if skybox.sun_direction is None else tuple(skybox.sun_direction))
+    direction = np.array(sun.direction, np.float64)
+    return direction / np.linalg.norm(direction), np.array(skybox.sun_color)[:3] * np.array(sun.tint, np.float64)
 
 
-def sky_radiance(skybox: Skybox, directions: np.ndarray, sun: Sequence[float] | None = None) -> np.ndarray:
-    """Linear RGB of the generated sky along each unit direction (..., 3), its sun towards
-    ``sun`` (``sun_of``)."""
+def sky_radiance(skybox: Skybox, directions: np.ndarray, sun: SkySun | None = None) -> np.ndarray:
+    """Linear RGB of the generated sky along each unit direction (..., 3), with ``sun``
+    (``sun_of``)."""
     d = np.asarray(directions, np.float64)
     d = d / np.linalg.norm(d, axis=-1, keepdims=True)
     y = d[..., 1:2]
@@ -54,10 +55,10 @@ def sky_radiance(skybox: Skybox, directions: np.ndarray, sun: Sequence[float] | 
     down = np.clip(-y * 4.0, 0.0, 1.0)
     color = np.where(y >= 0.0, horizon + (zenith - horizon) * up, horizon + (ground - horizon) * down)
     # A warm band around the sun's azimuth so that left and right of the sky differ.
-    sun = sun_of(skybox, sun)
-    cos_sun = np.clip((d * sun).sum(axis=-1, keepdims=True), -1.0, 1.0)
+    towards, disc_color = sun_of(skybox, sun)
+    cos_sun = np.clip((d * towards).sum(axis=-1, keepdims=True), -1.0, 1.0)
     glow = 0.25 * np.clip(cos_sun, 0.0, 1.0) ** 4 * np.array([1.0, 0.55, 0.25])
-    disc = np.clip((cos_sun - 0.9990) / 0.0005, 0.0, 1.0) * np.array(skybox.sun_color)[:3]
+    disc = np.clip((cos_sun - 0.9990) / 0.0005, 0.0, 1.0) * disc_color
     return color + glow + disc
 
 
@@ -78,22 +79,22 @@ class SkyModel:
                 "sky_sun_direction": self.sun_direction, "sky_sun_color": self.sun_color}
 
 
-def sky_model(skybox: Skybox | None, sun: Sequence[float] | None = None) -> SkyModel | None:
-    """The generated sky of ``skybox`` as the sky pass draws it, its sun towards ``sun``
-    (``sun_of``); None for given faces or no Skybox (the pass samples the cube map)."""
+def sky_model(skybox: Skybox | None, sun: SkySun | None = None) -> SkyModel | None:
+    """The generated sky of ``skybox`` as the sky pass draws it, with ``sun`` (``sun_of``);
+    None for given faces or no Skybox (the pass samples the cube map)."""
     if skybox is None or skybox.faces is not None:
         return None
 
     def rgb(value) -> tuple[float, float, float]:
         return tuple(float(c) for c in tuple(value)[:3])
 
-    return SkyModel(rgb(skybox.zenith), rgb(skybox.horizon), rgb(skybox.ground),
-                    rgb(sun_of(skybox, sun)), rgb(skybox.sun_color))
+    towards, disc_color = sun_of(skybox, sun)
+    return SkyModel(rgb(skybox.zenith), rgb(skybox.horizon), rgb(skybox.ground), rgb(towards), rgb(disc_color))
 
 
-def build_faces(skybox: Skybox, sun: Sequence[float] | None = None) -> np.ndarray:
+def build_faces(skybox: Skybox, sun: SkySun | None = None) -> np.ndarray:
     """Six faces (6, size, size, 3) float32 in GL order, from ``skybox.faces`` or generated
-    (its sun towards ``sun``: ``sun_of``)."""
+    (with ``sun``: ``sun_of``)."""
     if skybox.faces is not None:
         faces = np.asarray(skybox.faces, np.float32)
         if faces.ndim != 4 or faces.shape[0] != 6 or faces.shape[1] != faces.shape[2] or faces.shape[3] != 3:

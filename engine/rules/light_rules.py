@@ -49,6 +49,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
@@ -208,21 +209,49 @@ def choose_lights(world: World, previous: KeptLights | None, limits: LightLimits
                       camera=camera, eye=eye)
 
 
-def sky_sun(world: World, skybox: Skybox) -> tuple[float, float, float]:
-    """Where a generated sky's sun stands (unit, towards it): ``skybox.sun_direction`` when
-    pinned, else against the brightest ``DirectionalLight`` (luminance of colour x
-    intensity, the directional lights' rank above; ties to the first made), else
-    ``DEFAULT_SUN_DIRECTION``.  A black light (luminance 0) is no sun."""
+class SkySun(NamedTuple):
+    """Where a generated sky's sun stands and what colour its disc takes (``sky_sun``)."""
+
+    direction: tuple[float, float, float]               # unit, towards the sun
+    tint: tuple[float, float, float] = (1.0, 1.0, 1.0)  # times ``Skybox.sun_color``: the light's colour
+
+
+def sky_sun(world: World, skybox: Skybox) -> SkySun:
+    """A generated sky's sun: at ``skybox.sun_direction`` when pinned; else against the
+    brightest ``DirectionalLight`` (luminance of colour x intensity, the directional lights'
+    rank above; ties to the first made), its disc tinted by that light's colour (a red
+    evening light, a red disc; its intensity lights the scene, the disc keeps
+    ``Skybox.sun_color``'s brightness); else at ``DEFAULT_SUN_DIRECTION``.  A black light
+    (luminance 0) is no sun."""
     if skybox.sun_direction is not None:
-        return tuple(float(c) for c in skybox.sun_direction)
+        return SkySun(tuple(float(c) for c in skybox.sun_direction))
     best, brightest = None, 0.0
     for _, light in sorted(world.query_one(DirectionalLight), key=lambda pair: pair[0]):
         bright = float(luminance(raw_field(light, "color").xyz * light.intensity))
         if bright > brightest:
             best, brightest = light, bright
     if best is None:
-        return DEFAULT_SUN_DIRECTION
-    return tuple(-float(c) for c in best.direction)
+        return SkySun(DEFAULT_SUN_DIRECTION)
+    return SkySun(tuple(-float(c) for c in best.direction), tuple(float(c) for c in raw_field(best, "color").xyz))
+
+
+# How far a generated sky's cube map may lag its sun while the sun turns: the cube's
+# texels are 0.7 degrees at 128 a face, the disc's edge 1.8-2.6 degrees from its centre.
+SKY_CUBE_LAG_DEGREES = 1.0
+SKY_CUBE_TINT_LAG = 0.02  # ... and its tint, each channel
+
+
+def cube_serves(made: SkySun | None, now: SkySun) -> bool:
+    """Whether a sky cube map made with the sun ``made`` still serves a sky whose sun is
+    ``now`` while it turns (within ``SKY_CUBE_LAG_DEGREES`` and ``SKY_CUBE_TINT_LAG``): the sky
+    pass draws the sun where it is every frame, and reflections and the sky's light, read
+    from the cube, follow a moment later, not every frame of a day's turn."""
+    if made is None:
+        return False
+    a, b = np.array(made.direction, np.float64), np.array(now.direction, np.float64)
+    cosine = float(a @ b) / float(np.linalg.norm(a) * np.linalg.norm(b))
+    return (cosine >= np.cos(np.radians(SKY_CUBE_LAG_DEGREES))
+            and float(np.abs(np.subtract(made.tint, now.tint)).max()) <= SKY_CUBE_TINT_LAG)
 
 
 def kept_lights(world: World, limits: LightLimits) -> KeptLights:
