@@ -62,6 +62,7 @@ capture, never still, and two probes that see each other would recapture each ot
 """
 from __future__ import annotations
 
+import functools
 import logging
 import math
 from collections.abc import Iterable
@@ -69,7 +70,7 @@ from collections.abc import Iterable
 import moderngl
 import numpy as np
 
-from engine.core.cube_faces import face_directions
+from engine.core.cube_faces import KEPT_FACE_SIZE, face_directions
 from engine.render.bindings import (
     CUBE_MIP_UNIT,
     IRRADIANCE_BINDING,
@@ -130,16 +131,35 @@ def project_faces(faces: np.ndarray) -> np.ndarray:
         half = faces.shape[1] // 2
         faces = faces.astype(np.float32).reshape(6, half, 2, half, 2, 3).mean(axis=(2, 4))
     n = faces.shape[1]
-    weights = texel_solid_angles(n)
     coefficients = np.zeros((SH_COEFFICIENTS, 3))
     rows = max(1, (1 << 20) // (n * SH_COEFFICIENTS))  # a few MB at a time, for 2048-texel faces too
     for face in range(6):
-        directions = face_directions(face, n)
         for start in range(0, n, rows):
             part = slice(start, start + rows)
-            basis = sh_basis(directions[part]) * weights[part, :, None]  # (rows, n, 9)
+            basis = _weighted_basis(face, n, start, rows)  # (rows, n, 9)
             coefficients += np.einsum("tsk,tsc->kc", basis, faces[face, part, :, :3].astype(np.float64))
     return coefficients * np.array(BAND_FACTORS)[:, None]
+
+
+def _weighted_basis(face: int, n: int, start: int, rows: int) -> np.ndarray:
+    """The nine Y_lm times each texel's solid angle, rows ``start`` to ``start + rows`` of a
+    face of ``n`` texels (rows, n, 9): kept for faces of up to ``KEPT_FACE_SIZE`` (7 MB for
+    six 128-texel faces), whose sky is projected again each time its sun turns a degree."""
+    if n <= KEPT_FACE_SIZE:
+        return _kept_basis(face, n, start, rows)
+    return _basis(face, n, start, rows)
+
+
+@functools.lru_cache(maxsize=6 * 2)
+def _kept_basis(face: int, n: int, start: int, rows: int) -> np.ndarray:
+    basis = _basis(face, n, start, rows)
+    basis.flags.writeable = False
+    return basis
+
+
+def _basis(face: int, n: int, start: int, rows: int) -> np.ndarray:
+    part = slice(start, start + rows)
+    return sh_basis(face_directions(face, n)[part]) * texel_solid_angles(n)[part, :, None]
 
 
 def hemisphere_sh(sky: Iterable[float], ground: Iterable[float]) -> np.ndarray:
