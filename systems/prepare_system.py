@@ -38,7 +38,7 @@ from engine.render.shadows import LIGHT_LIMITS
 from engine.render.sky import build_faces, sky_model
 from engine.render.views import MAX_DIRECTIONAL_LIGHTS, MAX_POINT_LIGHTS, lights_block
 from engine.rules.frame_rules import frame_rules
-from engine.rules.light_rules import KeptLights, SkySun, choose_lights, cube_serves, sky_sun
+from engine.rules.light_rules import KeptLights, SkySun, choose_lights, cube_serves, sky_sun, view_eyes
 
 # A freed slot no light took yet: black (no light), its range 1 (no division by zero).
 _NO_SUN = ((0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
@@ -178,10 +178,12 @@ class PrepareSystem(esper.Processor):
             for entity, (probe, t) in probes if probe.influence is not None)
 
     def _camera_moved(self, kept: KeptLights) -> bool:
-        """The active camera moved (or another became active) since ``kept`` was chosen."""
+        """The active camera moved (or another became active), or the eyes of its mirror and
+        portal views did (``view_eyes``), since ``kept`` was chosen."""
         world = self.world
         camera = frame_rules(world).active_camera
-        return camera != kept.camera or (camera is not None and camera in world.frame.moved)
+        return camera != kept.camera or (camera is not None and camera in world.frame.moved) \
+            or view_eyes(world) != kept.views
 
     def _lights_stand_still(self) -> bool:
         """No light came, went or changed, and no point light moved, got or lost its Transform

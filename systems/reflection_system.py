@@ -51,6 +51,7 @@ from engine.render.view_tree import ViewTree
 from engine.render.views import View
 from engine.resources import PortalCrossings, RenderStats, Surfaces
 from engine.rules.frame_rules import frame_rules
+from engine.rules.light_rules import ViewEyes
 
 __all__ = ["MirrorError", "ReflectionSystem"]
 
@@ -158,6 +159,7 @@ class ReflectionSystem(esper.Processor):
         renderer = self.renderer
         if main is None or views.levels is None:
             self.views = []
+            self.world.resources.pop(ViewEyes, None)
             self._still = None
             self.tree.still.let_go()
             return
@@ -199,6 +201,7 @@ class ReflectionSystem(esper.Processor):
         stats.reflection_views_kept = len(result.views) - 1 if kept and not refilled else 0
         stats.reflection_end_refills = refilled
         self.views = result.views
+        self.world.resources[ViewEyes] = ViewEyes(result.views, main.size)  # for next frame's lights
         stats.reflection_views = len(result.views) - 1
         stats.reflection_views_dropped = result.dropped
         stats.reflection_depth_capped = result.capped

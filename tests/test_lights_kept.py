@@ -15,9 +15,11 @@ import math
 import numpy as np
 import pytest
 from pyglm import glm
+from scipy import ndimage
 
 from components import Material, MeshRef, PointLight, Transform, look_rotation
 from engine.assets.mesh import box, plane
+from engine.assets.portals import spawn_portal_pair
 from engine.core.errors import LightLimitWarning
 from engine.render.views import LIGHTS_BLOCK_BYTES, MAX_DIRECTIONAL_LIGHTS, MAX_POINT_LIGHTS, SKY_SH_COEFFICIENTS
 from engine.rules.light_rules import KeptLights
@@ -338,3 +340,51 @@ def test_a_lamp_that_loses_or_gets_its_transform_leaves_or_takes_a_slot(scene):
     runner.world.add_component(ids["lamp_a"], Transform(position=(20.0, 30.0, -60.0)))
     runner.frame()
     assert runner.world.resources[KeptLights].point == after and runner.stats.lights_cut == 1
+
+
+# -- lights that matter in what a portal shows -------------------------------------------------
+
+HALF_TURN = glm.angleAxis(glm.pi(), glm.vec3(0, 1, 0))
+
+
+def _portal_to_box_b(world, fillers: bool = True, lamp_b: bool = True) -> dict:
+    """``_two_boxes`` with a portal between the camera and box A whose partner, 40 m off,
+    looks back at box B's lit face: through it the camera sees what LAMP_B lights, though
+    LAMP_B is the lamp farthest from the camera (the portal's view's eye is 6 m from it)."""
+    ids = _two_boxes(world, lamp_b=lamp_b, fillers=FILLERS if fillers else 0)
+    ids["portals"] = spawn_portal_pair(world, (0.0, 1.6, 2.0), None, (40.0, 1.6, 4.5), HALF_TURN, size=(2.4, 2.4))
+    ids["box_b"] = next(entity for entity, (t, _) in world.query(Transform, MeshRef)
+                        if tuple(t.position) == tuple(BOX_B))
+    return ids
+
+
+def test_a_lamp_far_from_the_camera_is_kept_when_a_portal_shows_what_it_lights(scene):
+    """Seventeen lamps, the camera before a portal onto box B: from the second frame (the
+    first portal view's eye published) LAMP_B, 40 m away, is kept instead of a filler lamp
+    (each lights nothing in view), and box B through the portal is lit pixel for pixel as in
+    the scene with no fillers (every lamp kept), brighter than without LAMP_B.  The
+    camera's choice alone (the first frame's) cut LAMP_B."""
+    runner = scene(_portal_to_box_b)
+    ids = runner.world.resources["ids"]
+    runner.frame()
+    assert ids["lamp_b"] not in runner.world.resources[KeptLights].point  # no view seen yet
+    runner.frame()
+    kept = runner.world.resources[KeptLights]
+    assert ids["lamp_b"] in kept.point and ids["lamp_a"] in kept.point and kept.cut == (0, 1)
+    assert len(kept.views) == 1 and kept.views[0][3] > 0.2  # the portal's view, a fifth of the screen
+    rgb = runner.frame()
+    # Box B's pixels, all of them through the portal (box A stands behind it, the id image
+    # follows the portal's view), its edges left out.
+    box_b = ndimage.binary_erosion(runner.ids() == ids["box_b"])
+    assert box_b.sum() > 100
+    every_lamp = scene(lambda world: _portal_to_box_b(world, fillers=False))
+    every_lamp.frame()
+    every_lamp.frame()
+    no_lamp_b = scene(lambda world: _portal_to_box_b(world, lamp_b=False))
+    no_lamp_b.frame()
+    no_lamp_b.frame()
+    np.testing.assert_array_equal(rgb[box_b], every_lamp.frame()[box_b])
+    lit, unlit = srgb_to_linear(rgb[box_b]).mean(), srgb_to_linear(no_lamp_b.frame()[box_b]).mean()
+    assert lit > unlit + 0.1, (lit, unlit)
+    runner.frame()
+    assert runner.world.resources[KeptLights] is kept  # still: nothing ranked again

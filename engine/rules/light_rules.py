@@ -4,8 +4,9 @@ the shadows stage (which lights' maps are drawn, into which slot): a light's sha
 always the shadow of a light that is lit, read at that light's slot.
 
 The rule is the per-object light importance of the engines users know (Unity's "important"
-pixel lights, Godot's and Unreal's light culling) made for one camera: a level with forty
-torches lights the sixteen that matter where the camera is, not the first sixteen made.
+pixel lights, Godot's and Unreal's light culling) made for the camera and what its mirrors
+and portals show: a level with forty torches lights the sixteen that matter where the camera
+is and in the rooms its portals open on, not the first sixteen made.
 
 - **Point lights** by their importance to the active camera (``point_importance``): those
   whose range sphere holds the camera first, each by the light it brings to the camera's
@@ -13,7 +14,13 @@ torches lights the sixteen that matter where the camera is, not the first sixtee
   distance, ``falloff``: the windowed inverse square of ``shaders/scene.frag``); then the
   rest, each by its luminance over 1 + the squared distance from the camera to its range
   sphere (the same inverse square, measured to the nearest point it lights).  Without an
-  active camera, by luminance alone.
+  active camera, by luminance alone.  A light counts by the same measure at the eye of each
+  mirror and portal view of last frame's tree (``ViewEyes``, published by the reflect
+  stage), times the share of the screen the view showed (its rectangle's, from
+  ``MIN_VIEW_SHARE`` of it up), where that is more than it brings to the camera: a torch in
+  the room a portal opens on, far from the camera, matters as much as the portal is large.
+  (A frame has one Lights block for all its views, so a view's lights compete with the
+  camera's.)
 - **Directional lights** by luminance.
 - **Ties** by creation order (entity id): the same answer every run.
 - **The sky's sun** (``sky_sun``): a generated sky whose ``Skybox.sun_direction`` is not
@@ -40,16 +47,17 @@ camera crosses it, and does not hold for lights that move.)
 **When.**  The prepare stage asks for a choice only when a light came, went, changed or
 moved, or, while the answer depends on the camera (``KeptLights.by_eye``: more point lights
 than slots, or more casting ones kept than cubes), when the active camera moved or another
-became active; a still scene ranks nothing.  It publishes the answer as
+became active, or the views' eyes moved; a still scene ranks nothing.  It publishes the answer as
 ``world.resources[KeptLights]``; ``kept_lights(world)`` reads it.
 
 GL-free: numpy only (the limits are the render side's, given by the callers).
 """
 from __future__ import annotations
 
+import functools
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -62,6 +70,8 @@ from engine.rules.frame_rules import frame_rules
 
 # A light left out replaces a kept one only at more than this times its importance.
 HYSTERESIS = 1.25
+# A mirror or portal view counts for the lights from this share of the screen up.
+MIN_VIEW_SHARE = 0.01
 # Rec. 709 luminance of linear RGB: how bright a colour x intensity looks.
 LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
 
@@ -86,7 +96,7 @@ class KeptLights:
     light's entity (None: a free cube); ``cut``: (directional, point) lights left out;
     ``shadows_cut``: point lights casting shadows with no cube (left out, or kept past the
     cubes); ``by_eye``: whether the choice depends on the camera (``camera``, whose position
-    it was made from: ``eye``)."""
+    it was made from: ``eye``) and the views' eyes (``views``: ``ViewEyes.points``)."""
 
     directional: tuple[int | None, ...] = ()
     point: tuple[int | None, ...] = ()
@@ -96,10 +106,36 @@ class KeptLights:
     by_eye: bool = False
     camera: int | None = None
     eye: tuple[float, float, float] | None = None
+    views: tuple[tuple[float, float, float, float], ...] = ()
 
     def point_slot(self, entity: int) -> int:
         """The Lights block slot of kept point light ``entity`` (-1: not kept)."""
         return self.point.index(entity) if entity in self.point else -1
+
+
+@dataclass(frozen=True, eq=False)
+class ViewEyes:
+    """The mirror and portal views the reflect stage drew last (objects with ``.level``,
+    ``.view.eye`` and ``.rect``, screen pixels: ``engine.render.tree_walk.ReflectionView``;
+    level 0, the camera's own, is left out) and the
+    screen's ``size``: published as ``world.resources[ViewEyes]`` each frame, read by the
+    light rule the next.  ``points`` is worked out only when a choice depends on them."""
+
+    views: Sequence[Any]
+    size: tuple[int, int]
+
+    @functools.cached_property
+    def points(self) -> tuple[tuple[float, float, float, float], ...]:
+        """(x, y, z, share) of each view's eye that shows at least ``MIN_VIEW_SHARE`` of the
+        screen: its rectangle's area over the screen's."""
+        screen = max(1, self.size[0] * self.size[1])
+        found = []
+        for node in self.views:
+            share = min(1.0, node.rect[2] * node.rect[3] / screen)
+            if node.level > 0 and share >= MIN_VIEW_SHARE:
+                eye = node.view.eye
+                found.append((float(eye.x), float(eye.y), float(eye.z), share))
+        return tuple(found)
 
 
 def luminance(rgb: np.ndarray) -> np.ndarray:
@@ -124,10 +160,31 @@ def point_importance(positions: np.ndarray, ranges: np.ndarray, rgb: np.ndarray,
     lum = luminance(np.asarray(rgb, np.float64).reshape(-1, 3))
     if eye is None:
         return np.zeros(len(lum), bool), lum
-    ranges = np.asarray(ranges, np.float64)
-    distance = np.linalg.norm(np.asarray(positions, np.float64).reshape(-1, 3) - np.asarray(eye, np.float64), axis=1)
+    holds, importance = _importance_at(positions, ranges, lum, np.asarray(eye, np.float64).reshape(1, 3))
+    return holds[:, 0], importance[:, 0]
+
+
+def view_importance(positions: np.ndarray, ranges: np.ndarray, rgb: np.ndarray,
+                    points: Sequence[tuple[float, float, float, float]]) -> np.ndarray:
+    """The most each point light brings to any of the views' eyes (``ViewEyes.points``:
+    x, y, z, share): ``point_importance``'s measure times the view's share of the screen;
+    zeros without views."""
+    lum = luminance(np.asarray(rgb, np.float64).reshape(-1, 3))
+    if not points:
+        return np.zeros(len(lum))
+    at = np.asarray(points, np.float64).reshape(-1, 4)
+    return (_importance_at(positions, ranges, lum, at[:, :3])[1] * at[:, 3]).max(axis=1)
+
+
+def _importance_at(positions: np.ndarray, ranges: np.ndarray, lum: np.ndarray,
+                   eyes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(holds, importance), each (lights, eyes): ``point_importance``'s rule at each eye."""
+    ranges = np.asarray(ranges, np.float64).reshape(-1, 1)
+    offsets = np.asarray(positions, np.float64).reshape(-1, 1, 3) - eyes.reshape(1, -1, 3)
+    distance = np.linalg.norm(offsets, axis=2)
     holds = distance < ranges
     gap = np.maximum(distance - ranges, 0.0)
+    lum = lum.reshape(-1, 1)
     return holds, np.where(holds, lum * falloff(distance, ranges), lum / (1.0 + gap * gap))
 
 
@@ -192,11 +249,15 @@ def choose_lights(world: World, previous: KeptLights | None, limits: LightLimits
     lamp_ids = [entity for entity, _ in lamps]
     shadowed = sum(1 for _, (light, _) in lamps if light.shadows)
     holds, importance = np.zeros(len(lamps), bool), np.zeros(len(lamps))
+    views: tuple[tuple[float, float, float, float], ...] = ()
     if len(lamps) > limits.point or shadowed > limits.point_shadows:
-        holds, importance = point_importance(
-            np.array([t.world[3].xyz for _, (_, t) in lamps], np.float64),
-            np.array([light.range for _, (light, _) in lamps], np.float64),
-            np.array([raw_field(light, "color").xyz * light.intensity for _, (light, _) in lamps], np.float64), eye)
+        positions = np.array([t.world[3].xyz for _, (_, t) in lamps], np.float64)
+        ranges = np.array([light.range for _, (light, _) in lamps], np.float64)
+        rgb = np.array([raw_field(light, "color").xyz * light.intensity for _, (light, _) in lamps], np.float64)
+        holds, importance = point_importance(positions, ranges, rgb, eye)
+        views = view_eyes(world) if eye is not None else ()
+        if views:
+            importance = np.maximum(importance, view_importance(positions, ranges, rgb, views))
     point = _keep(lamp_ids, holds, importance, previous.point, limits.point)
     kept = set(point) - {None}
     casting = [i for i, (entity, (light, _)) in enumerate(lamps) if light.shadows and entity in kept]
@@ -206,7 +267,14 @@ def choose_lights(world: World, previous: KeptLights | None, limits: LightLimits
                       cut=(len(suns) - sum(e is not None for e in directional), len(lamps) - len(kept)),
                       shadows_cut=shadowed - sum(e is not None for e in cubes),
                       by_eye=len(lamps) > limits.point or len(casting) > limits.point_shadows,
-                      camera=camera, eye=eye)
+                      camera=camera, eye=eye, views=views)
+
+
+def view_eyes(world: World) -> tuple[tuple[float, float, float, float], ...]:
+    """Last frame's mirror and portal views' eyes and shares (``ViewEyes.points``; none
+    before the reflect stage has drawn)."""
+    found = world.resources.get(ViewEyes)
+    return found.points if found is not None else ()
 
 
 class SkySun(NamedTuple):
