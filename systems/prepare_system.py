@@ -38,7 +38,16 @@ from engine.render.shadows import LIGHT_LIMITS
 from engine.render.sky import build_faces, sky_model
 from engine.render.views import MAX_DIRECTIONAL_LIGHTS, MAX_POINT_LIGHTS, lights_block
 from engine.rules.frame_rules import frame_rules
-from engine.rules.light_rules import KeptLights, SkySun, choose_lights, cube_serves, sky_sun, view_eyes
+from engine.rules.light_rules import (
+    SAME_SUN_DEGREES,
+    SAME_SUN_TINT,
+    KeptLights,
+    SkySun,
+    choose_lights,
+    cube_serves,
+    sky_sun,
+    view_eyes,
+)
 
 # A freed slot no light took yet: black (no light), its range 1 (no division by zero).
 _NO_SUN = ((0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
@@ -95,9 +104,10 @@ class PrepareSystem(esper.Processor):
     def _sky(self) -> bool:
         """The sky made anew where it changed: the Skybox came, went or changed, or the light a
         generated sky's sun follows turned or recoloured.  While that sun turns the sky pass
-        follows it every frame (a few uniforms) and the cube map and the sky's light (tens of
-        milliseconds of numpy on this machine) only once the sun is past what the cube serves
-        (``cube_serves``: a degree) or stands still again.  True when the cube was made."""
+        follows it every frame (a few uniforms) and the cube map and the sky's light (about
+        7 ms of numpy and upload on the 2-core machine) only once the sun is past what the
+        cube serves (``cube_serves``: a degree) or stands still again (not for a rounding:
+        a direction normalised again moves a little).  True when the cube was made."""
         world = self.world
         if world.changed(Skybox):
             skies = world.query_one(Skybox)
@@ -108,8 +118,8 @@ class PrepareSystem(esper.Processor):
         if not self._sun_follows or not (world.changed(DirectionalLight) or self._sun != self._cube_sun):
             return False
         sun, sky = self._sky_sun(), world.query_one(Skybox)[0][1]
-        if sun == self._cube_sun:
-            if sun != self._sun:  # back where the cube has it
+        if cube_serves(self._cube_sun, sun, SAME_SUN_DEGREES, SAME_SUN_TINT):
+            if sun != self._sun:  # (back) where the cube has it, rounding apart
                 self._sun = sun
                 self.renderer.set_sky_model(sky_model(sky, sun))
             return False

@@ -137,7 +137,8 @@ def project_faces(faces: np.ndarray) -> np.ndarray:
         for start in range(0, n, rows):
             part = slice(start, start + rows)
             basis = _weighted_basis(face, n, start, rows)  # (rows, n, 9)
-            coefficients += np.einsum("tsk,tsc->kc", basis, faces[face, part, :, :3].astype(np.float64))
+            radiance = faces[face, part, :, :3].reshape(-1, 3).astype(np.float64)
+            coefficients += basis.reshape(-1, SH_COEFFICIENTS).T @ radiance
     return coefficients * np.array(BAND_FACTORS)[:, None]
 
 

@@ -14,6 +14,7 @@ read the cube: they sample it blurred by roughness, where its resolution is enou
 """
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
@@ -22,7 +23,7 @@ import numpy as np
 
 from components.rendering import DEFAULT_SUN_DIRECTION
 from components.tracking import HALF_MAX
-from engine.core.cube_faces import face_directions
+from engine.core.cube_faces import KEPT_FACE_SIZE, face_directions
 from engine.rules.light_rules import SkySun
 
 if TYPE_CHECKING:
@@ -47,19 +48,46 @@ def sky_radiance(skybox: Skybox, directions: np.ndarray, sun: SkySun | None = No
     (``sun_of``)."""
     d = np.asarray(directions, np.float64)
     d = d / np.linalg.norm(d, axis=-1, keepdims=True)
+    return _gradient(_colours(skybox), d) + _sun_light(skybox, d, sun)
+
+
+def _colours(skybox: Skybox) -> tuple[tuple[float, ...], ...]:
+    """The zenith, horizon and ground colours (linear RGB), as a key."""
+    colours = (skybox.zenith, skybox.horizon, skybox.ground)
+    return tuple(tuple(float(c) for c in tuple(colour)[:3]) for colour in colours)
+
+
+def _gradient(colours: tuple[tuple[float, ...], ...], d: np.ndarray) -> np.ndarray:
+    """The sky without its sun along unit directions ``d`` (..., 3): horizon to zenith above,
+    horizon to ground below (a function of the height alone)."""
+    zenith, horizon, ground = (np.array(colour) for colour in colours)
     y = d[..., 1:2]
-    zenith = np.array(skybox.zenith)[:3]
-    horizon = np.array(skybox.horizon)[:3]
-    ground = np.array(skybox.ground)[:3]
     up = np.clip(y, 0.0, 1.0) ** 0.6
     down = np.clip(-y * 4.0, 0.0, 1.0)
-    color = np.where(y >= 0.0, horizon + (zenith - horizon) * up, horizon + (ground - horizon) * down)
-    # A warm band around the sun's azimuth so that left and right of the sky differ.
+    return np.where(y >= 0.0, horizon + (zenith - horizon) * up, horizon + (ground - horizon) * down)
+
+
+def _sun_light(skybox: Skybox, d: np.ndarray, sun: SkySun | None) -> np.ndarray:
+    """The sun's part of the sky along unit directions ``d`` (..., 3): a warm band around its
+    azimuth, so that left and right of the sky differ, and its disc (cos 0.9990, 2.6 degrees
+    from its centre, to 0.9995, 1.8 degrees, ramps up)."""
     towards, disc_color = sun_of(skybox, sun)
-    cos_sun = np.clip((d * towards).sum(axis=-1, keepdims=True), -1.0, 1.0)
-    glow = 0.25 * np.clip(cos_sun, 0.0, 1.0) ** 4 * np.array([1.0, 0.55, 0.25])
-    disc = np.clip((cos_sun - 0.9990) / 0.0005, 0.0, 1.0) * disc_color
-    return color + glow + disc
+    cos_sun = np.clip(d @ towards, -1.0, 1.0)[..., None]
+    facing = np.clip(cos_sun, 0.0, 1.0)
+    facing *= facing
+    glow = (0.25 * facing * facing) * np.array([1.0, 0.55, 0.25])  # 0.25 cos^4
+    glow += np.clip((cos_sun - 0.9990) / 0.0005, 0.0, 1.0) * disc_color
+    return glow
+
+
+@functools.lru_cache(maxsize=2)
+def _kept_faces(colours: tuple[tuple[float, ...], ...], n: int) -> tuple[np.ndarray, np.ndarray]:
+    """The six faces' texel directions and ``_gradient`` over them (each (6, n, n, 3)), kept
+    (read-only) for the sky made again as its sun turns: only the sun's part changes."""
+    directions = np.stack([face_directions(f, n) for f in range(6)])
+    gradient = _gradient(colours, directions)
+    directions.flags.writeable = gradient.flags.writeable = False
+    return directions, gradient
 
 
 @dataclass(frozen=True)
@@ -103,7 +131,10 @@ def build_faces(skybox: Skybox, sun: SkySun | None = None) -> np.ndarray:
             raise ValueError("Skybox.faces must hold finite linear colours >= 0")
         return faces
     n = skybox.face_size
-    return np.stack([sky_radiance(skybox, face_directions(f, n), sun) for f in range(6)]).astype(np.float32)
+    if n > KEPT_FACE_SIZE:
+        return np.stack([sky_radiance(skybox, face_directions(f, n), sun) for f in range(6)]).astype(np.float32)
+    directions, gradient = _kept_faces(_colours(skybox), n)
+    return (gradient + _sun_light(skybox, directions, sun)).astype(np.float32)
 
 
 def upload_cube(ctx: moderngl.Context, faces: np.ndarray) -> moderngl.TextureCube:

@@ -307,19 +307,25 @@ def sky_sun(world: World, skybox: Skybox) -> SkySun:
 # texels are 0.7 degrees at 128 a face, the disc's edge 1.8-2.6 degrees from its centre.
 SKY_CUBE_LAG_DEGREES = 1.0
 SKY_CUBE_TINT_LAG = 0.02  # ... and its tint, each channel
+# Closer than this, two suns are the same sun (a direction normalised again moves a bit).
+SAME_SUN_DEGREES = 1e-4
+SAME_SUN_TINT = 1e-6
 
 
-def cube_serves(made: SkySun | None, now: SkySun) -> bool:
+def cube_serves(made: SkySun | None, now: SkySun, degrees: float = SKY_CUBE_LAG_DEGREES,
+                tint: float = SKY_CUBE_TINT_LAG) -> bool:
     """Whether a sky cube map made with the sun ``made`` still serves a sky whose sun is
-    ``now`` while it turns (within ``SKY_CUBE_LAG_DEGREES`` and ``SKY_CUBE_TINT_LAG``): the sky
-    pass draws the sun where it is every frame, and reflections and the sky's light, read
-    from the cube, follow a moment later, not every frame of a day's turn."""
+    ``now`` while it turns (within ``degrees`` and ``tint`` a channel: by default
+    ``SKY_CUBE_LAG_DEGREES`` and ``SKY_CUBE_TINT_LAG``): the sky pass draws the sun where it
+    is every frame, and reflections and the sky's light, read from the cube, follow a moment
+    later, not every frame of a day's turn.  With ``SAME_SUN_DEGREES`` and ``SAME_SUN_TINT``:
+    whether it is the same sun, rounding apart."""
     if made is None:
         return False
     a, b = np.array(made.direction, np.float64), np.array(now.direction, np.float64)
     cosine = float(a @ b) / float(np.linalg.norm(a) * np.linalg.norm(b))
-    return (cosine >= np.cos(np.radians(SKY_CUBE_LAG_DEGREES))
-            and float(np.abs(np.subtract(made.tint, now.tint)).max()) <= SKY_CUBE_TINT_LAG)
+    return (cosine >= np.cos(np.radians(degrees))
+            and float(np.abs(np.subtract(made.tint, now.tint)).max()) <= tint)
 
 
 def kept_lights(world: World, limits: LightLimits) -> KeptLights:
