@@ -119,9 +119,9 @@ class PrepareSystem(esper.Processor):
             return False
         sun, sky = self._sky_sun(), world.query_one(Skybox)[0][1]
         if cube_serves(self._cube_sun, sun, SAME_SUN_DEGREES, SAME_SUN_TINT):
-            if sun != self._sun:  # (back) where the cube has it, rounding apart
-                self._sun = sun
-                self.renderer.set_sky_model(sky_model(sky, sun))
+            if self._sun != self._cube_sun:  # back where the cube has it (rounding apart)
+                self._sun = self._cube_sun
+                self.renderer.set_sky_model(sky_model(sky, self._cube_sun))
             return False
         if sun != self._sun and cube_serves(self._cube_sun, sun):  # turning: the cube a moment later
             self._sun = sun

@@ -157,7 +157,7 @@ def test_an_unpinned_sun_stands_where_the_brightest_directional_light_shines_fro
     assert np.abs(faces - build_faces(skybox)).max() > 1.0  # (the default sun's sky differs: the disc)
 
 
-def test_the_sky_follows_when_its_sun_turns_and_only_then(scene):
+def test_the_sky_follows_when_its_sun_turns_and_only_then(scene, monkeypatch):
     """Turning the brightest light moves the disc the next frame (the sky made again);
     turning a dimmer one, or the brightest one by nothing (or by a rounding), makes no sky;
     deleting the brightest hands the sun to the next."""
@@ -184,6 +184,13 @@ def test_the_sky_follows_when_its_sun_turns_and_only_then(scene):
         bright.direction = bright.direction
         runner.frame()
     assert renderer.sky is cube              # no cube made for a rounding
+    import systems.prepare_system
+
+    asked, ask = [], systems.prepare_system.sky_sun
+    monkeypatch.setattr(systems.prepare_system, "sky_sun", lambda *args: asked.append(args) or ask(*args))
+    for _ in range(3):
+        runner.frame()
+    assert not asked                         # and a still sky asks nothing after it
     sun_entity = next(e for e, light in runner.world.query_one(DirectionalLight) if light is bright)
     runner.world.delete_entity(sun_entity)
     runner.frame()
