@@ -65,6 +65,34 @@ def test_the_planners_memory_grows_with_the_surfaces_not_with_their_square():
         ctx.release()
 
 
+def test_the_cull_keeps_a_bias_row_a_class_of_view_not_a_row_a_surface_looked_out_of():
+    """The cull's bias tables (which surfaces a parent may see) keep a row for each class of
+    view (view mask and winding), the surface a view looks out of knocked out as the rows are
+    gathered: kept a row an ids number (one a surface looked out of, a class), they were
+    (surfaces x classes) x surfaces, 128 MB a table at 2000 surfaces, grown by a copy of the
+    whole table each time a new number came.  Which surfaces each parent may see is checked
+    by tests/test_view_plan_grids.py against the rule written out."""
+    from engine.render.plan_rows import CLASS_OF, IDS_OF
+    from engine.render.surface_table import PlannerSurfaces
+
+    ctx, engine, capture, output = _churn_arena()
+    try:
+        churn.spawn_wave(engine.world, 100, 1)
+        for _ in range(3):
+            engine.frame(1 / 60, output)
+        table = engine.world.resources[PlannerSurfaces].table
+        surfaces = len(table.states)
+        assert surfaces == 20 + 2 * 20 and engine.renderer.stats.reflection_views > 0
+        assert len(IDS_OF) > 2 * len(CLASS_OF)  # (numbers were many: a row each would show)
+        tables = [rows for _, rows in table._bias_tables.values()]
+        assert tables and all(rows.shape == (len(rows), surfaces + 1) for rows in tables)
+        assert max(len(rows) for rows in tables) <= len(CLASS_OF)
+    finally:
+        capture.release()
+        engine.close()
+        ctx.release()
+
+
 def test_deleting_every_mirror_and_portal_lets_the_planners_table_go():
     """The planner's table of the surfaces (tens of MB for hundreds of them) is named weakly by
     the caches that key on it (the water flows, the unlit mirrors, the end surfaces), so once

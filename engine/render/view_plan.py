@@ -199,7 +199,9 @@ class SurfaceTable:
         self.keep = visibility_code(_KINDS_BUT_DIRECT, self.layers)  # the mask bits a view through it keeps
         self._depths: dict[tuple[int, int], tuple[np.ndarray, np.ndarray, list[bool], bool]] = {}
         self._biases: dict[tuple, tuple[np.ndarray | None, list]] = {}  # _bias_rows' tables, by depth, cap, ends
-        self._bias_tables: dict[bytes, list] = {}  # [allowed, rows]: _bias_rows', by the surfaces allowed
+        self._bias_tables: dict[bytes, list] = {}  # [allowed, class rows]: _bias_rows', by the surfaces allowed
+        self._exit_columns = np.zeros(0, np.int64)  # _bias_rows' knock-out column, by ids number
+        self._row_starts: dict[tuple[int, int], np.ndarray] = {}  # _bias_rows' flat row starts, by (rows, width)
         # What plan_chain reads of each surface row as Python numbers: its views' exit row, the
         # mask bits they keep, the kind bit they gain, whether it is a mirror.
         self._chain_lists = (self.exit_rows.tolist(), self.keep.tolist(), self.kind_bit.tolist(),
@@ -332,9 +334,12 @@ class SurfaceTable:
 
     def _bias_rows(self, numbers: np.ndarray, depth: int, depth_cap: int, ends: np.ndarray | None,
                    fallback: bool) -> np.ndarray:
-        """``_pair_bias``' rows of the ids ``numbers``, gathered from the table of the surfaces
-        allowed (the depth's, with the end images' or not, or those that fall back), made
-        for more numbers when one is not in it yet."""
+        """``_pair_bias``' rows of the ids ``numbers``: their classes' rows (``plan_rows.
+        IDS_CLASS``: view mask and winding) gathered from the table of the surfaces allowed
+        (the depth's, with the end images' or not, or those that fall back), then each
+        parent's exit row knocked out (the surface its view looks out of, ``_exit_columns``).
+        A table holds a row a class, not a number: a few rows, not as many as the surfaces
+        (S rows of S were 128 MB a table at 2000 surfaces, each grown by a copy)."""
         key = (depth, depth_cap, id(ends), fallback)
         found = self._biases.get(key)
         if found is None or found[0] is not ends:
@@ -349,26 +354,47 @@ class SurfaceTable:
             if table is None:
                 if len(self._bias_tables) > 64:
                     self._bias_tables.clear()
-                table = self._bias_tables[allowed.tobytes()] = [allowed, np.zeros((0, len(self.states)))]
+                table = self._bias_tables[allowed.tobytes()] = [allowed, np.zeros((0, len(self.states) + 1))]
             if len(self._biases) > 256:
                 self._biases.clear()
             found = self._biases[key] = (ends, table)
         table = found[1]
         try:
-            return table[1].take(numbers, axis=0)
-        except IndexError:  # ids first seen since the table was made: their rows join it
+            rows = table[1].take(ids_classes().take(numbers), axis=0)
+            columns = self._exit_columns.take(numbers)
+        except IndexError:  # numbers or classes first seen since: their rows and columns join
             table[1] = self._more_bias(table[0], table[1])
-            return table[1].take(numbers, axis=0)
+            if len(self._exit_columns) < len(IDS_OF):
+                self._exit_columns = self._more_exit_columns()
+            rows = table[1].take(ids_classes().take(numbers), axis=0)
+            columns = self._exit_columns.take(numbers)
+        width = rows.shape[1]
+        starts = self._row_starts.get((len(numbers), width))
+        if starts is None:
+            if len(self._row_starts) > 256:
+                self._row_starts.clear()
+            starts = self._row_starts[(len(numbers), width)] = np.arange(0, len(numbers) * width, width)
+        rows.put(starts + columns, np.inf)
+        return rows[:, :-1]
 
     def _more_bias(self, allowed: np.ndarray, rows: np.ndarray) -> np.ndarray:
-        """``rows`` (``_bias_rows``' table of the surfaces ``allowed``) with the rows of every
-        ids number given since (the rule worked out for all of them at once), read-only."""
-        ids = np.array(IDS_OF[len(rows):], np.float64).reshape(-1, 3)
-        seen = allowed & drawn_in(self.drawn, ids[:, 1:2].astype(np.int64))  # the rule, a row a parent
-        exit_rows = ids[:, 0].astype(np.int64)
-        looks_out = np.flatnonzero((exit_rows >= 0) & (exit_rows < len(self.states)))
-        seen[looks_out, exit_rows[looks_out]] = False
-        found = np.concatenate([rows, np.where(seen, 0.0, np.inf)])
+        """``rows`` (``_bias_rows``' table of the surfaces ``allowed``: a row an ids class, the
+        last column a spare the knock-out of a parent with no exit row writes) with the rows
+        of every class given since, read-only."""
+        masks = np.array([mask for mask, _ in CLASS_OF[len(rows):]], np.int64).reshape(-1, 1)
+        seen = allowed & drawn_in(self.drawn, masks)  # the rule, a row a class
+        more = np.zeros((len(masks), len(self.states) + 1))
+        more[:, :-1] = np.where(seen, 0.0, np.inf)
+        found = np.concatenate([rows, more])
+        found.flags.writeable = False
+        return found
+
+    def _more_exit_columns(self) -> np.ndarray:
+        """Each ids number's exit row as a column of ``_bias_rows``' tables: the surface its
+        views look out of, S (the spare column) where none of this table's."""
+        exit_rows = np.array([exit_row for exit_row, _, _ in IDS_OF], np.float64).astype(np.int64)
+        surfaces = len(self.states)
+        found = np.where((exit_rows >= 0) & (exit_rows < surfaces), exit_rows, surfaces)
         found.flags.writeable = False
         return found
 
