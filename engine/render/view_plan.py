@@ -326,8 +326,8 @@ class SurfaceTable:
         and drawn by the view: the visibility rule, ``drawn_in``, a row a parent), +inf where
         not, and on the surface the view looks out of.  A function of each parent's exit row
         and mask alone, so gathered by the parents' ids numbers (``plan_rows.IDS``) from a
-        table of a row per number (``_bias_table``) in one ``take``; the numbers are kept
-        for ``_child_ids``."""
+        table of a row per class of number, the exit row knocked out (``_bias_rows``); the
+        numbers are kept for ``_child_ids``."""
         numbers = data.view(np.int64)[:, IDS]
         self._last_numbers = (data, numbers)
         return self._bias_rows(numbers, depth, depth_cap, ends, fallback)
