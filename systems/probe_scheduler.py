@@ -18,7 +18,9 @@ has a ``ProbeState``.  What is due each frame, per probe:
     directly ("moved: entity 12") or as seen in a mirror or through a portal (the boxes'
     images, up to the probe's ``depth``: ``probe_rules.images_through_surfaces``; "moved:
     entity 12, seen in mirror 5"); all six when the sun or the sky changed
-    ("DirectionalLight changed") or a point light whose range reaches what the probe sees
+    ("DirectionalLight changed": a sun turning or fading a little, as through a day, only
+    once it is a degree or 2% from where it last relit them, or stands still again:
+    ``_suns_relight``) or a point light whose range reaches what the probe sees
     changed, came, went or moved, its own Transform or a parent's ("light 7 moved");
   - ``every_frame``: all six; ``every_n``: all six every n frames; ``once``: nothing more;
     ``scripted``: all six after a request;
@@ -54,6 +56,7 @@ from engine.core.budget import spending_order
 from engine.core.world import World
 from engine.resources import RenderStats, Surfaces, ViewBudget
 from engine.rules.frame_rules import active_camera_parts
+from engine.rules.light_rules import sun_relights, sun_states
 from engine.rules.probe_rules import (
     ALL_FACES,
     LIGHTING_KINDS,
@@ -125,6 +128,8 @@ class ProbeScheduler:
         self._grown: tuple[tuple | None, float] = (None, 0.0)  # _filter_reach's level box (bytes) -> its grown diagonal
         self._mesh_boxes: dict[int, tuple] = {}  # id(mesh) -> (mesh, its box's corners): _mesh_corners
         self._watching = False  # the boxes and lights are kept: a watching probe was there last frame
+        self._suns: tuple = ()  # the directional lights as the probes were last relit by them (sun_states)
+        self._suns_behind = False  # a sun turned a little since: the probes relight once it stands still
 
     def update(self) -> ProbeSchedule:
         """This frame's schedule, published as the world's ``ProbeSchedule``."""
@@ -144,7 +149,8 @@ class ProbeScheduler:
             boxes = self._changed_boxes(looks) if primed else self._all_boxes()
             lights = self._changed_lights() if primed else self._all_lights()
             self._lights_came_or_went = any(reason.endswith((" came", " went")) for reason, _, _ in lights)
-            everything = [f"{kind.__name__} changed" for kind in LIGHTING_KINDS if world.changed(kind)]
+            everything = [f"{kind.__name__} changed" for kind in LIGHTING_KINDS
+                          if (self._suns_relight() if kind is DirectionalLight else world.changed(kind))]
             self._watching = True
         else:
             # No probe refreshes on change or periodically: what moved matters to none (a
@@ -152,6 +158,7 @@ class ProbeScheduler:
             # boxes are taken afresh then).
             self._bounds.clear()
             self._lights.clear()
+            self._suns, self._suns_behind = (), False
             self._watching = False
             boxes, lights, everything = ChangedBoxes([]), [], []
         surfaces = world.resources.get(Surfaces)
@@ -181,6 +188,25 @@ class ProbeScheduler:
             schedule.due[state.owner] = ProbeDue(state.owner, faces, reasons, first=not state.captures,
                                                  unchanged=unchanged, regions=regions)
         return schedule
+
+    def _suns_relight(self) -> bool:
+        """Whether the directional lights relight every probe this frame: one came, went or
+        changed past what a capture may lag it (``light_rules.sun_relights``: a degree of turn,
+        2% of colour; any change to its shadows or bounces), or, after a turn within that, it
+        stands still again (the captures made exact).  A sun turning a tenth of a degree a
+        frame (a day) relights the probes every tenth frame, not every frame: the sky pass and
+        the direct light follow it every frame, the captures a degree behind at most."""
+        world = self.world
+        changed = world.changed(DirectionalLight)
+        if not changed and not self._suns_behind:
+            return False
+        now = sun_states(world)
+        relight = now != self._suns if not changed else sun_relights(self._suns, now)
+        if relight:
+            self._suns, self._suns_behind = now, False
+        else:
+            self._suns_behind = now != self._suns
+        return relight
 
     def _within_budget(self, due: list[tuple[ProbeState, frozenset[int]]]) -> list[tuple[ProbeState, frozenset[int]]]:
         """The due captures in the order the budget spends on them (``spending_order``: first

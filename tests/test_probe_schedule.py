@@ -327,3 +327,45 @@ def test_an_every_frame_probes_unchanged_faces_are_those_no_change_reached(gl_fr
     world.spawn(Transform(position=(500, 0, 0)), PointLight(range=1.0))
     assert step() == frozenset()
     assert step() == ALL_FACES
+
+
+def test_a_sun_turning_a_little_relights_the_probes_a_degree_at_a_time_and_when_it_stops(gl_free_world):
+    """A sun turning 0.3 degrees a frame (a day): the probe is not relit each frame but once
+    the sun is past a degree from where it was last relit (the fourth frame, 1.2 degrees),
+    then once more the frame it stands still (its capture made exact), then not again.  A
+    turn of 5 degrees, a change of colour past 2%, or of its shadows, relights at once; a
+    sun that came relights at once too."""
+    from components import DirectionalLight
+
+    world = gl_free_world
+    start = glm.normalize(glm.vec3(-0.3, -0.8, -0.5))
+    axis = glm.normalize(glm.cross(start, glm.vec3(0, 1, 0)))  # square to it: it turns by the angle
+
+    def turned(degrees: float) -> glm.vec3:
+        return glm.vec3(glm.rotate(glm.radians(degrees), axis) * glm.vec4(start, 0.0))
+
+    probe = world.spawn(Transform(), ReflectionProbe(resolution=16, far=20.0))
+    sun = DirectionalLight(direction=start, intensity=2.0)
+    world.spawn(sun)
+    world.step(1 / 60)
+    world.step(1 / 60)
+    assert probe not in due(world)
+    relit = []
+    for step in range(1, 6):
+        sun.direction = turned(0.3 * step)
+        world.step(1 / 60)
+        relit.append(due(world).get(probe) == {"DirectionalLight changed": ALL_FACES})
+    assert relit == [False, False, False, True, False]  # 1.2 degrees from the last relight
+    world.step(1 / 60)  # standing still 0.3 degrees from it: made exact
+    assert due(world)[probe] == {"DirectionalLight changed": ALL_FACES}
+    world.step(1 / 60)
+    assert probe not in due(world)
+    for change in (lambda: setattr(sun, "direction", turned(6.5)),
+                   lambda: setattr(sun, "intensity", 2.1),              # 5% brighter
+                   lambda: setattr(sun, "shadow_softness", 2.0),
+                   lambda: world.spawn(DirectionalLight(direction=(0.0, -1.0, 0.0), intensity=0.5))):
+        change()
+        world.step(1 / 60)
+        assert due(world)[probe] == {"DirectionalLight changed": ALL_FACES}
+        world.step(1 / 60)
+        assert probe not in due(world)

@@ -54,6 +54,7 @@ GL-free: numpy only (the limits are the render side's, given by the callers).
 """
 from __future__ import annotations
 
+import dataclasses
 import functools
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -303,10 +304,11 @@ def sky_sun(world: World, skybox: Skybox) -> SkySun:
     return SkySun(tuple(-float(c) for c in best.direction), tuple(float(c) for c in raw_field(best, "color").xyz))
 
 
-# How far a generated sky's cube map may lag its sun while the sun turns: the cube's
+# How far what is made from a turning sun may lag it: the sky's cube map and light, the
+# probes' captures (the sky pass and the direct light follow every frame).  The cube's
 # texels are 0.7 degrees at 128 a face, the disc's edge 1.8-2.6 degrees from its centre.
 SKY_CUBE_LAG_DEGREES = 1.0
-SKY_CUBE_TINT_LAG = 0.02  # ... and its tint, each channel
+SKY_CUBE_TINT_LAG = 0.02  # ... and its colour, each channel, as a share of the brightest
 # Closer than this, two suns are the same sun (a direction normalised again moves a bit).
 SAME_SUN_DEGREES = 1e-4
 SAME_SUN_TINT = 1e-6
@@ -322,10 +324,49 @@ def cube_serves(made: SkySun | None, now: SkySun, degrees: float = SKY_CUBE_LAG_
     whether it is the same sun, rounding apart."""
     if made is None:
         return False
-    a, b = np.array(made.direction, np.float64), np.array(now.direction, np.float64)
+    return turned_within(made.direction, now.direction, degrees) and \
+        float(np.abs(np.subtract(made.tint, now.tint)).max()) <= tint
+
+
+def turned_within(made: Sequence[float], now: Sequence[float], degrees: float) -> bool:
+    """Whether direction ``now`` is within ``degrees`` of ``made`` (neither need be unit)."""
+    a, b = np.array(made, np.float64), np.array(now, np.float64)
     cosine = float(a @ b) / float(np.linalg.norm(a) * np.linalg.norm(b))
-    return (cosine >= np.cos(np.radians(degrees))
-            and float(np.abs(np.subtract(made.tint, now.tint)).max()) <= tint)
+    return cosine >= np.cos(np.radians(degrees))
+
+
+def sun_relights(made: Sequence[tuple], now: Sequence[tuple]) -> bool:
+    """Whether the directional lights ``now`` light things otherwise than ``made``, past
+    what a probe's capture may lag them (``SKY_CUBE_LAG_DEGREES`` of turn, ``SKY_CUBE_TINT_LAG``
+    of colour): each a ``sun_states`` row, in creation order.  A light that came or went, or
+    changed in anything but its direction, colour and intensity (its shadows, their map, its
+    bounces), relights at once."""
+    if len(made) != len(now):
+        return True
+    for (entity_a, towards_a, rgb_a, rest_a), (entity_b, towards_b, rgb_b, rest_b) in zip(made, now, strict=True):
+        if entity_a != entity_b or rest_a != rest_b or not turned_within(towards_a, towards_b, SKY_CUBE_LAG_DEGREES):
+            return True
+        scale = max(max(rgb_a), max(rgb_b), 1e-6)
+        if float(np.abs(np.subtract(rgb_a, rgb_b)).max()) > SKY_CUBE_TINT_LAG * scale:
+            return True
+    return False
+
+
+def sun_states(world: World) -> tuple[tuple, ...]:
+    """Each directional light as ``sun_relights`` compares them, in creation order: (entity,
+    direction, colour x intensity, its other fields)."""
+    rows = []
+    for entity, light in sorted(world.query_one(DirectionalLight), key=lambda pair: pair[0]):
+        rgb = raw_field(light, "color").xyz * light.intensity
+        rest = tuple(raw_field(light, name) for name in _SUN_REST)
+        rows.append((entity, tuple(light.direction), (float(rgb.x), float(rgb.y), float(rgb.z)), rest))
+    return tuple(rows)
+
+
+# A directional light's fields besides those a turning sun changes (its shadows, their map,
+# its bounces): a change to one relights at once.
+_SUN_REST = tuple(field.name for field in dataclasses.fields(DirectionalLight)
+                  if field.name not in ("direction", "color", "intensity"))
 
 
 def kept_lights(world: World, limits: LightLimits) -> KeptLights:
