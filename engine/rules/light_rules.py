@@ -317,15 +317,21 @@ SAME_SUN_TINT = 1e-6
 def cube_serves(made: SkySun | None, now: SkySun, degrees: float = SKY_CUBE_LAG_DEGREES,
                 tint: float = SKY_CUBE_TINT_LAG) -> bool:
     """Whether a sky cube map made with the sun ``made`` still serves a sky whose sun is
-    ``now`` while it turns (within ``degrees`` and ``tint`` a channel: by default
+    ``now`` while it turns (within ``degrees``, and ``tint`` of the brightest channel: by default
     ``SKY_CUBE_LAG_DEGREES`` and ``SKY_CUBE_TINT_LAG``): the sky pass draws the sun where it
     is every frame, and reflections and the sky's light, read from the cube, follow a moment
     later, not every frame of a day's turn.  With ``SAME_SUN_DEGREES`` and ``SAME_SUN_TINT``:
     whether it is the same sun, rounding apart."""
     if made is None:
         return False
-    return turned_within(made.direction, now.direction, degrees) and \
-        float(np.abs(np.subtract(made.tint, now.tint)).max()) <= tint
+    return turned_within(made.direction, now.direction, degrees) and colour_within(made.tint, now.tint, tint)
+
+
+def colour_within(made: Sequence[float], now: Sequence[float], share: float) -> bool:
+    """Whether colour ``now`` is within ``share`` of ``made``'s brightest channel (or
+    ``now``'s, if brighter), in each channel."""
+    scale = max(max(made), max(now), 1e-6)
+    return float(np.abs(np.subtract(made, now)).max()) <= share * scale
 
 
 def turned_within(made: Sequence[float], now: Sequence[float], degrees: float) -> bool:
@@ -344,10 +350,8 @@ def sun_relights(made: Sequence[tuple], now: Sequence[tuple]) -> bool:
     if len(made) != len(now):
         return True
     for (entity_a, towards_a, rgb_a, rest_a), (entity_b, towards_b, rgb_b, rest_b) in zip(made, now, strict=True):
-        if entity_a != entity_b or rest_a != rest_b or not turned_within(towards_a, towards_b, SKY_CUBE_LAG_DEGREES):
-            return True
-        scale = max(max(rgb_a), max(rgb_b), 1e-6)
-        if float(np.abs(np.subtract(rgb_a, rgb_b)).max()) > SKY_CUBE_TINT_LAG * scale:
+        if entity_a != entity_b or rest_a != rest_b or not turned_within(towards_a, towards_b, SKY_CUBE_LAG_DEGREES) \
+                or not colour_within(rgb_a, rgb_b, SKY_CUBE_TINT_LAG):
             return True
     return False
 
