@@ -56,7 +56,7 @@ from engine.core.budget import spending_order
 from engine.core.world import World
 from engine.resources import RenderStats, Surfaces, ViewBudget
 from engine.rules.frame_rules import active_camera_parts
-from engine.rules.light_rules import sun_relights, sun_states
+from engine.rules.light_rules import SAME_SUN_DEGREES, SAME_SUN_TINT, sun_relights, sun_states
 from engine.rules.probe_rules import (
     ALL_FACES,
     LIGHTING_KINDS,
@@ -201,10 +201,14 @@ class ProbeScheduler:
         if not changed and not self._suns_behind:
             return False
         now = sun_states(world)
-        relight = now != self._suns if not changed else sun_relights(self._suns, now)
+        if changed:
+            relight = sun_relights(self._suns, now)
+        else:  # standing still since a small change: exact now, unless that was a rounding
+            relight = sun_relights(self._suns, now, SAME_SUN_DEGREES, SAME_SUN_TINT)
+            self._suns_behind = False
         if relight:
             self._suns, self._suns_behind = now, False
-        else:
+        elif changed:
             self._suns_behind = now != self._suns
         return relight
 

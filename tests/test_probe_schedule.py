@@ -360,6 +360,13 @@ def test_a_sun_turning_a_little_relights_the_probes_a_degree_at_a_time_and_when_
     assert due(world)[probe] == {"DirectionalLight changed": ALL_FACES}
     world.step(1 / 60)
     assert probe not in due(world)
+    sun.direction = (0.3, -0.8, -0.5)  # a turn past a degree: at once (and this one's ...
+    world.step(1 / 60)
+    assert due(world)[probe] == {"DirectionalLight changed": ALL_FACES}
+    sun.direction = sun.direction  # ... normalising again moves it by a rounding, once)
+    for _ in range(3):  # the rounding, then standing still: no relight for it
+        world.step(1 / 60)
+        assert probe not in due(world)
     for change in (lambda: setattr(sun, "direction", turned(6.5)),
                    lambda: setattr(sun, "intensity", 2.1),              # 5% brighter
                    lambda: setattr(sun, "shadow_softness", 2.0),

@@ -341,17 +341,19 @@ def turned_within(made: Sequence[float], now: Sequence[float], degrees: float) -
     return cosine >= np.cos(np.radians(degrees))
 
 
-def sun_relights(made: Sequence[tuple], now: Sequence[tuple]) -> bool:
+def sun_relights(made: Sequence[tuple], now: Sequence[tuple], degrees: float = SKY_CUBE_LAG_DEGREES,
+                 share: float = SKY_CUBE_TINT_LAG) -> bool:
     """Whether the directional lights ``now`` light things otherwise than ``made``, past
-    what a probe's capture may lag them (``SKY_CUBE_LAG_DEGREES`` of turn, ``SKY_CUBE_TINT_LAG``
-    of colour): each a ``sun_states`` row, in creation order.  A light that came or went, or
-    changed in anything but its direction, colour and intensity (its shadows, their map, its
-    bounces), relights at once."""
+    what a probe's capture may lag them (``degrees`` of turn, ``share`` of colour: by default
+    ``SKY_CUBE_LAG_DEGREES`` and ``SKY_CUBE_TINT_LAG``; with ``SAME_SUN_DEGREES`` and
+    ``SAME_SUN_TINT``, past a rounding): each a ``sun_states`` row, in creation order.  A light
+    that came or went, or changed in anything but its direction, colour and intensity (its
+    shadows, their map, its bounces), relights at once."""
     if len(made) != len(now):
         return True
     for (entity_a, towards_a, rgb_a, rest_a), (entity_b, towards_b, rgb_b, rest_b) in zip(made, now, strict=True):
-        if entity_a != entity_b or rest_a != rest_b or not turned_within(towards_a, towards_b, SKY_CUBE_LAG_DEGREES) \
-                or not colour_within(rgb_a, rgb_b, SKY_CUBE_TINT_LAG):
+        if entity_a != entity_b or rest_a != rest_b or not turned_within(towards_a, towards_b, degrees) \
+                or not colour_within(rgb_a, rgb_b, share):
             return True
     return False
 
