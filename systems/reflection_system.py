@@ -201,7 +201,9 @@ class ReflectionSystem(esper.Processor):
         stats.reflection_views_kept = len(result.views) - 1 if kept and not refilled else 0
         stats.reflection_end_refills = refilled
         self.views = result.views
-        self.world.resources[ViewEyes] = ViewEyes(result.views, main.size)  # for next frame's lights
+        eyes = self.world.resources.get(ViewEyes)  # for next frame's lights: a kept tree's kept
+        if eyes is None or eyes.views is not result.views or eyes.size != main.size:
+            self.world.resources[ViewEyes] = ViewEyes(result.views, main.size)
         stats.reflection_views = len(result.views) - 1
         stats.reflection_views_dropped = result.dropped
         stats.reflection_depth_capped = result.capped
