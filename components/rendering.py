@@ -137,6 +137,18 @@ class Reflective(TrackedComponent):
         return value
 
 
+def reflection_mix(reflective: Reflective, material: Material | None) -> float:
+    """How much of the final colour is the reflection: ``reflective.mix``, or where it is None
+    ``automatic_mix``."""
+    return reflective.mix if reflective.mix is not None else automatic_mix(material)
+
+
+def automatic_mix(material: Material | None) -> float:
+    """A reflection's mix left to the engine: 1.0 for an untextured surface (chrome), 0.5 for
+    a textured one (a 50/50 mix of texture and reflection)."""
+    return 0.5 if material is not None and material.texture is not None else 1.0
+
+
 @dataclass(eq=False)
 class Refractive(TrackedComponent):
     """Light from behind bends through the surface (Snell's law with Schlick's Fresnel approximation).

@@ -22,13 +22,24 @@ from typing import Any
 import numpy as np
 from pyglm import glm
 
-from components import ComponentValueError
+from components import ComponentValueError, Material
+from components.rendering import automatic_mix
 from engine.assets.level_read import DERIVED_COMPONENTS, ENGINE_COMPONENTS
 from engine.assets.level_save import save_level
 from engine.core.errors import SpeculumError
 from engine.core.world import World, check_components
+from engine.rules.light_rules import followed_sun
 
 MAX_UNDO = 1000  # edits kept for undo; the oldest go first
+MAX_LISTED = 200  # entities the entity list shows at once (a filter finds the rest)
+
+# Fields whose None means "the engine decides" (what it decides: ``Editor.automatic``).  The
+# inspector shows such a field as automatic with a button that pins the value in use now, and
+# a pinned one with a button that hands it back to the engine.
+AUTOMATIC_FIELDS: dict[tuple[str, str], str] = {
+    ("Skybox", "sun_direction"): "follows the brightest directional light",
+    ("Reflective", "mix"): "1.0 untextured, 0.5 textured",
+}
 
 
 class EditError(SpeculumError, ValueError):
@@ -107,9 +118,51 @@ class Editor:
         self.message = None
         return self.selected
 
+    def select(self, entity: int | None) -> None:
+        """Select ``entity`` (from the entity list: a light, the sky or a camera has no pixel
+        to click), or nothing; an EditError for an entity that does not exist."""
+        if entity is not None and not self.world.exists(entity):
+            raise EditError(f"entity {entity} does not exist")
+        self.selected = entity
+        self.message = None
+
     def name_of(self, entity: int) -> str:
         """The entity's name in the level file, or ``entity <id>``."""
         return next((n for n, e in self.names.items() if e == entity), f"entity {entity}")
+
+    def label(self, entity: int, name: str | None = None) -> str:
+        """How the entity list shows an entity: its name and the kinds of its components
+        (Transform left out: nearly everything has one), as ``sun: DirectionalLight``."""
+        kinds = sorted(n for n, _ in self.components_of(entity) if n != "Transform")
+        return f"{name or self.name_of(entity)}: {', '.join(kinds) or 'Transform'}"
+
+    def listed(self, text: str = "", limit: int = MAX_LISTED) -> tuple[list[tuple[int, str]], bool]:
+        """The entity list: (entity, ``label``) in the order they were made, those whose label
+        holds ``text`` (any case), at most ``limit``; and whether more matched.  Without a
+        filter it stops at the limit, so a world of 100,000 entities lists its first ones at
+        once; with one, every entity's label is looked at."""
+        needle = text.strip().lower()
+        by_id = {e: n for n, e in self.names.items()}
+        found: list[tuple[int, str]] = []
+        for entity in self.world.entities():
+            label = self.label(entity, by_id.get(entity))
+            if needle and needle not in label.lower():
+                continue
+            if len(found) == limit:
+                return found, True
+            found.append((entity, label))
+        return found, False
+
+    def automatic(self, entity: int, component: str | type, field: str) -> Any:
+        """The value the engine uses for a field left to it (``AUTOMATIC_FIELDS``), as a value
+        the field takes: pinning it changes nothing on screen.  An EditError for another field."""
+        target = self.component(entity, component)
+        name = type(target).__name__
+        if (name, field) not in AUTOMATIC_FIELDS:
+            raise EditError(f"{name}.{field} is not a field the engine decides")
+        if name == "Skybox":
+            return glm.vec3(*followed_sun(self.world).direction)
+        return automatic_mix(self.world.try_get(entity, Material))
 
     # --- what an entity holds --------------------------------------------------------------
     def component(self, entity: int, component: str | type) -> Any:

@@ -3,9 +3,11 @@ draw calls, views per reflection level, probe captures), the reflection and prob
 paths in use, toggles for them, the post-processing (tone curve, exposure, bloom; toggles
 for bloom and the curve), and shader errors from hot reload; and the level editor's inspector (``shell/editor.py``): a
 click in the world selects the entity seen there (Ctrl+click: the mirror or portal it was
-seen through), outlined wherever it shows (``engine/render/outline.py``); its components'
+seen through), or the entity list (every entity by name and kinds, filtered) one that shows
+nowhere, outlined wherever it shows (``engine/render/outline.py``); its components'
 fields are drag inputs, checkboxes and colour pickers that edit it through the components'
-own checks, with undo, redo, add, remove and save.
+own checks, with undo, redo, add, remove and save; a field the engine decides while unset
+(``editor.AUTOMATIC_FIELDS``) is pinned at the value in use, or handed back.
 
 It is an immediate-mode GUI (Dear ImGui, through imgui-bundle) drawn by moderngl-window's
 moderngl renderer for it, after the present stage, over the finished frame in the output
@@ -42,7 +44,7 @@ from components.post import TONEMAP_CURVES
 from engine.assets.level_file import LevelGame
 from engine.assets.values import json_value
 from engine.render.bindings import bind_texture, invalidate
-from shell.editor import Editor
+from shell.editor import AUTOMATIC_FIELDS, EditError, Editor
 from shell.overlay_text import overlay_lines
 
 if TYPE_CHECKING:  # the app's window makes the overlay
@@ -57,6 +59,7 @@ CURVE_CHOICES = (None, *TONEMAP_CURVES)   # None: each camera's own Tonemap curv
 CURVE_WIDTH = 100                          # pixels of the curve's drop-down
 INSPECTOR_WIDTH = 320                      # pixels of the inspector, at the right edge
 DRAG_SPEED = 0.01                          # a number field's change per pixel dragged
+ENTITY_LIST_WIDTH, ENTITY_LIST_HEIGHT = INSPECTOR_WIDTH - 16, 160  # pixels of the entity list's scrolled part
 
 
 class OverlayRenderer(ModernGLRenderer):
@@ -184,6 +187,9 @@ class DebugOverlay:
         self.inspector_lines: list[str] = []  # the inspector's text last drawn (entity, components, message)
         self._outline = None
         self._removing: tuple[int, str] | None = None
+        self.show_entities = False            # the entity list is shown ("entities" ticked)
+        self.entity_filter = ""               # the entity list's filter, as typed
+        self.listed_entities: list[str] = []  # the entity list's labels last drawn (while it is open)
 
     def record(self, seconds: float | None = None) -> None:
         """Add one frame's time (``None``: the time since the last call, wall clock)."""
@@ -307,6 +313,9 @@ class DebugOverlay:
             if imgui.radio_button(f"{path}##probe", probes.path == path):
                 probes.path = path
             self._widget(f"probe {path}")
+        imgui.same_line(spacing=24)
+        _, self.show_entities = imgui.checkbox("entities", self.show_entities)
+        self._widget("entities")
         changed, fxaa = imgui.checkbox("FXAA", renderer.antialias == "fxaa")
         if changed:
             renderer.antialias = "fxaa" if fxaa else "off"
@@ -339,10 +348,50 @@ class DebugOverlay:
         width, height = self.io.display_size
         self.region = (int(x), int(y), int(min(np.ceil(w), width - x)), int(min(np.ceil(h), height - y)))
         imgui.end()
-        self._inspector(engine)
+        self._inspector(engine, self._entity_list(engine))
 
-    # --- the level editor's inspector ---------------------------------------------------------
-    def _inspector(self, engine: Engine) -> None:
+    # --- the level editor's entity list and inspector -----------------------------------------
+    def _entity_list(self, engine: Engine) -> float:
+        """Every entity by name and kinds, to select one a click cannot reach (a light, the
+        sky, a camera, post settings) or find one by name: a filter (any part of the label)
+        over a scrolled list, in a window at the top of the right edge (the inspector below
+        it).  Shown while the overlay's "entities" box is ticked, so a big world costs nothing
+        here otherwise.  Returns the window's bottom (pixels from the top; the inspector goes
+        below it)."""
+        if not self.show_entities:
+            self.listed_entities = []
+            return POSITION[1] - 4
+        width, _height = self.io.display_size
+        imgui.set_next_window_pos(imgui.ImVec2(max(width - INSPECTOR_WIDTH - POSITION[0], 0), POSITION[1]))
+        imgui.set_next_window_size(imgui.ImVec2(INSPECTOR_WIDTH, 0))
+        imgui.set_next_window_bg_alpha(0.85)
+        flags = (imgui.WindowFlags_.always_auto_resize | imgui.WindowFlags_.no_saved_settings
+                 | imgui.WindowFlags_.no_title_bar | imgui.WindowFlags_.no_move)
+        imgui.begin("Entities", None, flags)
+        imgui.text("entities")
+        try:
+            self._entities(engine)
+        finally:
+            bottom = imgui.get_window_pos().y + imgui.get_window_size().y
+            imgui.end()
+        return bottom
+
+    def _entities(self, engine: Engine) -> None:
+        editor = self.editing(engine)
+        _, self.entity_filter = imgui.input_text("filter##entities", self.entity_filter)
+        self._widget("entity filter")
+        listed, more = editor.listed(self.entity_filter)
+        self.listed_entities = [label for _, label in listed]
+        imgui.begin_child("##entity list", imgui.ImVec2(ENTITY_LIST_WIDTH, ENTITY_LIST_HEIGHT))
+        for entity, label in listed:
+            if imgui.selectable(f"{label}##entity {entity}", editor.selected == entity)[0]:
+                editor.select(entity)
+            self._widget(f"entity {entity}")
+        if more:
+            imgui.text_disabled(f"(more than {len(listed)}: filter to find the rest)")
+        imgui.end_child()
+
+    def _inspector(self, engine: Engine, top: float) -> None:
         editor = self.editing(engine)
         entity = editor.selected
         lines: list[str] = []
@@ -350,7 +399,7 @@ class DebugOverlay:
             self.inspector_lines = lines
             return
         width, _height = self.io.display_size
-        imgui.set_next_window_pos(imgui.ImVec2(max(width - INSPECTOR_WIDTH - POSITION[0], 0), POSITION[1]))
+        imgui.set_next_window_pos(imgui.ImVec2(max(width - INSPECTOR_WIDTH - POSITION[0], 0), top + 4))
         imgui.set_next_window_size_constraints(imgui.ImVec2(INSPECTOR_WIDTH, 0), imgui.ImVec2(INSPECTOR_WIDTH, 10000))
         imgui.set_next_window_bg_alpha(0.85)
         flags = (imgui.WindowFlags_.always_auto_resize | imgui.WindowFlags_.no_saved_settings
@@ -426,6 +475,20 @@ class DebugOverlay:
         except Exception:
             data, kind = None, "object"
         changed, new = False, None
+        automatic = AUTOMATIC_FIELDS.get((cls_name, field))
+        if automatic is not None and value is None:  # the engine decides: shown as such, pinned at what it uses
+            imgui.text(f"{field}: automatic")
+            imgui.set_item_tooltip(automatic)
+            self._widget(f"{cls_name}.{field}")
+            imgui.same_line()
+            if imgui.small_button(f"pin##{cls_name}.{field}"):
+                try:
+                    editor.try_set_field(entity, cls_name, field, editor.automatic(entity, cls_name, field))
+                except EditError as exc:
+                    editor.message = str(exc)
+            self._widget(f"{cls_name}.{field} pin")
+            lines.append(f"  {field} = automatic")
+            return
         if kind == "bool":
             changed, new = imgui.checkbox(label, bool(data))
         elif kind == "float":
@@ -466,6 +529,11 @@ class DebugOverlay:
             editor.try_set_field(entity, cls_name, field, new, merge=True)
         if imgui.is_item_deactivated():
             editor.end_drag()
+        if automatic is not None:  # pinned: a button hands it back to the engine
+            if imgui.small_button(f"automatic##{cls_name}.{field}"):
+                editor.try_set_field(entity, cls_name, field, None)
+            imgui.set_item_tooltip(automatic)
+            self._widget(f"{cls_name}.{field} automatic")
 
     def _widget(self, name: str) -> None:
         low, high = imgui.get_item_rect_min(), imgui.get_item_rect_max()

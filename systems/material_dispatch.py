@@ -7,6 +7,7 @@ from dataclasses import dataclass
 from pyglm import glm
 
 from components import Emissive, Material, Mirror, Portal, Reflective, Refractive
+from components.rendering import reflection_mix
 from engine.core.material_slots import EmissiveVariant, ReflectVariant, RefractVariant
 
 _REFLECT_MODES = {
@@ -42,8 +43,7 @@ def choose_material(material: Material | None, emissive: Emissive | None,
     mix = 0.0
     tint = glm.vec4(1.0)
     if reflective is not None:
-        # A textured surface mixes its texture and the reflection 50/50 unless told.
-        mix = reflective.mix if reflective.mix is not None else (0.5 if material.texture is not None else 1.0)
+        mix = reflection_mix(reflective, material)
         tint = reflective.tint
     if portal is not None:
         # Drawn flat in its closed colour; an open portal's view is composited over it.

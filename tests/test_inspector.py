@@ -4,6 +4,7 @@ editor (one undo step), and a refused value shows the component's message. Headl
 through ImGui with the mouse events a window forwards."""
 from __future__ import annotations
 
+import numpy as np
 import pytest
 from pyglm import glm
 
@@ -233,3 +234,111 @@ def test_layers_are_typed_as_whole_numbers_and_edited_through_the_component(scen
         assert tuple(runner.world.get(mirror, Mirror).hides_layers) == (3,)
     finally:
         overlay.release()
+
+
+def test_the_entity_list_reaches_the_sky_whose_sun_is_pinned_and_handed_back(scene, ctx):
+    """The sky and the lights have no pixel to click: the entity list (ticked open, filtered,
+    clicked) selects them.  The Skybox's sun_direction, left to the engine, shows as
+    automatic; "pin" writes the direction in use (the frame does not change), so turning the
+    light no longer moves the sky; "automatic" hands it back and the sky follows the light."""
+    from components import DirectionalLight, Skybox
+
+    ents = {}
+    runner = scene(lambda world: edit_scene(world, ents), SIZE)
+    world = runner.world
+    sky = next(e for e, _ in world.query_one(Skybox))
+    light = next(e for e, _ in world.query_one(DirectionalLight))
+    overlay = DebugOverlay(ctx)
+    frames = []
+    try:
+        def draw() -> None:
+            frames.append(runner.frame())
+            overlay.record(1 / 60)
+            overlay.draw(runner.engine, runner.capture.framebuffer, SIZE)
+
+        def click(widget: str) -> None:
+            x, y = overlay.widgets[widget]
+            overlay.mouse_moved(x, y)
+            draw()
+            overlay.mouse_button(1, True)
+            draw()
+            overlay.mouse_button(1, False)
+            draw()
+
+        draw()
+        assert overlay.listed_entities == []  # not listed until "entities" is ticked
+        click("entities")
+        assert f"entity {sky}: Skybox" in overlay.listed_entities
+        assert f"entity {light}: DirectionalLight" in overlay.listed_entities
+        overlay.entity_filter = "SKY"
+        draw()
+        assert overlay.listed_entities == [f"entity {sky}: Skybox"]
+        click(f"entity {sky}")
+        editor = overlay.editor
+        assert editor.selected == sky
+        assert "  sun_direction = automatic" in overlay.inspector_lines
+
+        before = runner.frame()
+        sky_pixels = runner.ids() == 0
+        for axis in (0, 1):  # two pixels in from anything else (FXAA mixes an edge's neighbours)
+            for shift in (-2, -1, 1, 2):
+                sky_pixels &= np.roll(sky_pixels, shift, axis)
+        assert sky_pixels.mean() > 0.05  # the frame shows sky
+        click("Skybox.sun_direction pin")
+        pinned = world.get(sky, Skybox).sun_direction
+        towards = -glm.normalize(glm.vec3(0.2, -1.0, -0.5))  # base_scene's light, reversed
+        assert glm.length(pinned - towards) < 1e-6, pinned
+        assert np.array_equal(runner.frame(), before)  # pinned where it stood: nothing moved
+        draw()
+        assert "  sun_direction = automatic" not in overlay.inspector_lines
+
+        world.get(light, DirectionalLight).direction = (-0.7, -0.3, 0.6)
+        turned = runner.frame()
+        assert np.array_equal(turned[sky_pixels], before[sky_pixels])  # the sky stays with its pin
+        click("Skybox.sun_direction automatic")
+        assert world.get(sky, Skybox).sun_direction is None
+        followed = runner.frame()
+        moved = np.abs(followed[sky_pixels].astype(int) - before[sky_pixels].astype(int)).max(axis=-1)
+        assert (moved > 8).mean() > 0.2, (moved > 8).mean()  # the glow went round with the light
+        assert editor.undo() and glm.length(world.get(sky, Skybox).sun_direction - towards) < 1e-6
+        assert ctx.error == "GL_NO_ERROR"
+    finally:
+        overlay.release()
+
+
+def test_automatic_values_and_the_entity_list_in_code(scene):
+    """``Editor.automatic`` is the value the engine uses (a reflection's mix by its texture;
+    the followed sun); the list stops at its limit and a filter finds the rest."""
+    from components import DirectionalLight, Reflective
+    from engine.assets.texture_data import checker_texture
+    from shell.editor import EditError, Editor
+
+    ents = {}
+    runner = scene(lambda world: edit_scene(world, ents), (64, 48))
+    world = runner.world
+    editor = Editor(world)
+    box = ents["box"]
+    world.add_component(box, Reflective())
+    assert editor.automatic(box, "Reflective", "mix") == 1.0
+    world.get(box, Material).texture = checker_texture(8, 2)
+    assert editor.automatic(box, "Reflective", "mix") == 0.5
+    world.get(box, Reflective).mix = 0.2
+    assert editor.automatic(box, "Reflective", "mix") == 0.5  # what the engine would decide
+    with pytest.raises(EditError, match="Material.roughness is not a field the engine decides"):
+        editor.automatic(box, "Material", "roughness")
+    light = next(e for e, _ in world.query_one(DirectionalLight))
+    world.get(light, DirectionalLight).intensity = 0.0  # a black light is no sun
+    from components.rendering import DEFAULT_SUN_DIRECTION, Skybox
+
+    sky = next(e for e, _ in world.query_one(Skybox))
+    assert glm.length(editor.automatic(sky, "Skybox", "sun_direction") - glm.vec3(DEFAULT_SUN_DIRECTION)) < 1e-6
+
+    made = [world.spawn(Transform(position=(float(i), 0.0, 0.0))) for i in range(250)]
+    listed, more = editor.listed()
+    assert len(listed) == 200 and more
+    listed, more = editor.listed(f"entity {made[-1]}:")
+    assert listed == [(made[-1], f"entity {made[-1]}: Transform")] and not more
+    with pytest.raises(EditError, match="does not exist"):
+        editor.select(10**6)
+    editor.select(made[3])
+    assert editor.selected == made[3]

@@ -294,6 +294,11 @@ def sky_sun(world: World, skybox: Skybox) -> SkySun:
     (luminance 0) is no sun."""
     if skybox.sun_direction is not None:
         return SkySun(tuple(float(c) for c in skybox.sun_direction))
+    return followed_sun(world)
+
+
+def followed_sun(world: World) -> SkySun:
+    """The sun of a sky that follows the lights (``sky_sun`` of an unpinned Skybox)."""
     best, brightest = None, 0.0
     for _, light in sorted(world.query_one(DirectionalLight), key=lambda pair: pair[0]):
         bright = float(luminance(raw_field(light, "color").xyz * light.intensity))
