@@ -1,5 +1,6 @@
-"""Editing a level in the window: pick an entity from the frame's id images, set its fields
-through the components' own checks, add and remove components, undo and redo, save.
+"""Editing a level in the window: pick an entity from the frame's id images or the entity
+list, set its fields through the components' own checks, add and remove components, make,
+duplicate and delete entities, undo and redo, save.
 
 GL-free: the editor works on a World and on id images already read back (numpy arrays), so
 the overlay (``shell.overlay``) calls it and tests drive it headless. An edit is a field
@@ -22,16 +23,19 @@ from typing import Any
 import numpy as np
 from pyglm import glm
 
-from components import ComponentValueError, Material
+from components import Camera, ComponentValueError, Material, Portal, Transform
 from components.rendering import automatic_mix
 from engine.assets.level_read import DERIVED_COMPONENTS, ENGINE_COMPONENTS
 from engine.assets.level_save import save_level
 from engine.core.errors import SpeculumError
+from engine.core.transforms import current_world_matrix
 from engine.core.world import World, check_components
+from engine.rules.frame_rules import active_camera
 from engine.rules.light_rules import followed_sun
 
 MAX_UNDO = 1000  # edits kept for undo; the oldest go first
 MAX_LISTED = 200  # entities the entity list shows at once (a filter finds the rest)
+NEW_DISTANCE = 3.0  # metres in front of the active camera a new entity is made
 
 # Fields whose None means "the engine decides" (what it decides: ``Editor.automatic``).  The
 # inspector shows such a field as automatic with a button that pins the value in use now, and
@@ -49,14 +53,16 @@ class EditError(SpeculumError, ValueError):
 @dataclasses.dataclass
 class Edit:
     """One undoable edit: ``action`` is "set" (``field`` from ``before`` to ``after``), "add"
-    or "remove" (``component``, the object itself, so undo puts back the very same one)."""
+    or "remove" (``component``, the object itself, so undo puts back the very same one),
+    "create" or "delete" (a whole entity: its components, the very same objects, made again
+    under a new id; the edits that name the old id are moved to it: ``Editor._moved``)."""
 
     action: str
     entity: int
-    kind: type
-    component: Any
+    kind: type | None  # None: a whole entity ("create", "delete")
+    component: Any     # "create", "delete": the entity's components; ``field`` its name
     field: str | None = None
-    before: Any = None
+    before: Any = None  # "delete": the portals whose partner it was (cleared with it)
     after: Any = None
     open: bool = True  # a drag still going on: a merging write of the same field joins it
 
@@ -271,6 +277,97 @@ class Editor:
         self._push(Edit("remove", entity, type(component), component, open=False))
         return component
 
+    # --- whole entities ----------------------------------------------------------------------
+    def create(self, *components: Any, name: str | None = None) -> int:
+        """A new entity of ``components`` (none: a Transform ``NEW_DISTANCE`` in front of the
+        active camera, where it shows), named ``name`` or ``new`` (made unique: ``new_2``), selected.
+        A save writes it at the end of the level file."""
+        if not components:
+            components = (Transform(position=self._in_view()),)
+        entity = self._spawn(components, self._free_name(name or "new"))
+        self._push(Edit("create", entity, None, list(components), self.name_of(entity), open=False))
+        self.select(entity)
+        return entity
+
+    def duplicate(self, entity: int) -> int:
+        """A copy of ``entity`` where it stands (each component made again from its fields;
+        a portal's copy has no partner: a pair is two portals), named ``<name>_copy``, selected."""
+        made = []
+        for cls_name, component in self.components_of(entity):
+            fields = {f: _copy(value) for f, value in self.fields(component)}
+            if cls_name == "Portal":
+                fields["partner"] = None
+            made.append(type(component)(**fields))
+        return self.create(*made, name=f"{self.name_of(entity)}_copy")
+
+    def delete(self, entity: int) -> None:
+        """Delete ``entity`` (undo makes it again, with its components, under a new id).  A
+        portal paired with it is left without a partner (closed); an entity that is another's
+        parent, or the only active camera, is refused (an EditError saying which)."""
+        name = self.name_of(entity)
+        if not self.world.exists(entity):
+            raise EditError(f"entity {entity} does not exist")
+        children = [self.name_of(e) for e, t in self.world.query_one(Transform) if t.parent == entity and e != entity]
+        if children:
+            self.message = f"{name} is the parent of {', '.join(children)}: delete them or clear their parent first"
+            raise EditError(self.message)
+        if self.world.has(entity, Camera) and active_camera(self.world) == entity \
+                and sum(camera.active for _, camera in self.world.query_one(Camera)) == 1:
+            self.message = f"{name} holds the only active camera: every frame would be black without it"
+            raise EditError(self.message)
+        edit = Edit("delete", entity, None, [c for _, c in self.components_of(entity)], name, open=False)
+        self._remove(edit)
+        self._push(edit)
+
+    def _in_view(self) -> glm.vec3:
+        camera = active_camera(self.world)
+        if camera is None:
+            return glm.vec3(0.0)
+        matrix = current_world_matrix(self.world, self.world.get(camera, Transform))
+        return glm.vec3(matrix * glm.vec4(0.0, 0.0, -NEW_DISTANCE, 1.0))
+
+    def _free_name(self, wanted: str) -> str:
+        """``wanted``, or ``wanted_2``, ``_3``...: a name no entity has, nor had in this editor
+        (a save removes a deleted entity by its name)."""
+        taken = set(self.names) | {e.field for e in self._everything if e.kind is None}
+        name, n = wanted, 1
+        while name in taken:
+            n += 1
+            name = f"{wanted}_{n}"
+        return name
+
+    def _spawn(self, components: Any, name: str) -> int:
+        try:
+            entity = self.world.spawn(*components)
+        except ComponentValueError as exc:
+            self.message = f"{name}: {exc}"
+            raise EditError(self.message) from exc
+        self.names[name] = entity
+        self.message = None
+        return entity
+
+    def _remove(self, edit: Edit) -> None:
+        """Delete ``edit``'s entity, clearing the partner of each portal paired with it (kept in
+        ``edit.before`` to be given back)."""
+        edit.before = [portal for e, portal in self.world.query_one(Portal)
+                       if portal.partner == edit.entity and e != edit.entity]
+        for portal in edit.before:
+            portal.partner = None
+        self.world.delete_entity(edit.entity)
+        self.names.pop(edit.field, None)
+        if self.selected == edit.entity:
+            self.selected = None
+
+    def _restore(self, edit: Edit) -> None:
+        """Make ``edit``'s entity again from its components, under a new id: every edit and
+        portal that named the old id names the new one."""
+        old, entity = edit.entity, self._spawn(edit.component, edit.field)
+        for portal in edit.before or ():
+            portal.partner = entity
+        for moved in (*self._done, *self._undone, *self._everything):
+            if moved.entity == old:
+                moved.entity = entity
+
     def _check_whole(self, entity: int, components: list[Any]) -> None:
         """Refuse an entity the frame would refuse: the registered invariants over its
         components together (a Water needs a Mirror), and a Mirror needs a MeshRef and a
@@ -317,6 +414,12 @@ class Editor:
         return True
 
     def _apply(self, edit: Edit, backwards: bool) -> None:
+        if edit.kind is None:  # a whole entity
+            if (edit.action == "create") == backwards:
+                self._remove(edit)
+            else:
+                self._restore(edit)
+            return
         if not self.world.exists(edit.entity):
             raise EditError(f"entity {edit.entity} (edited) no longer exists")
         if edit.action == "set":
@@ -337,6 +440,12 @@ class Editor:
         keep = self.level_path if self.level_path is not None and self.level_path.exists() else None
         # Only what was edited: the running game moves things too (a spinning crate, the
         # camera flown about), and that is play, not an edit of the level.
-        edited = {(self.name_of(e.entity), e.kind.__name__) for e in self._everything} if keep is not None else None
+        if keep is None:
+            return save_level(self.world, target, self.names, extra_components=self.game_components)
+        edited = {(self.name_of(e.entity), e.kind.__name__) for e in self._everything if e.kind is not None}
+        unpaired = {id(p) for e in self._everything if e.action == "delete" for p in e.before or ()}
+        edited |= {(self.name_of(e), "Portal") for e, p in self.world.query_one(Portal) if id(p) in unpaired}
+        whole = {e.field for e in self._everything if e.kind is None}  # entities made or deleted
+        added = {name for name in whole if name in self.names and self.world.exists(self.names[name])}
         return save_level(self.world, target, self.names, extra_components=self.game_components, keep=keep,
-                          only=edited)
+                          only=edited, added=added, removed=whole - added)

@@ -187,6 +187,7 @@ class DebugOverlay:
         self.inspector_lines: list[str] = []  # the inspector's text last drawn (entity, components, message)
         self._outline = None
         self._removing: tuple[int, str] | None = None
+        self._names_taken: dict[str, int] | None = None  # the game's names the editor last took (a rebuild's are new)
         self.show_entities = False            # the entity list is shown ("entities" ticked)
         self.entity_filter = ""               # the entity list's filter, as typed
         self.listed_entities: list[str] = []  # the entity list's labels last drawn (while it is open)
@@ -215,11 +216,13 @@ class DebugOverlay:
     def editing(self, engine: Engine) -> Editor:
         """The editor of ``engine``'s world (a new one when the world was rebuilt): the game's
         own components, entity names and level file, where it is a ``LevelGame``."""
+        game = engine.game if isinstance(engine.game, LevelGame) else None
         if self.editor is None or self.editor.world is not engine.world:
-            game = engine.game if isinstance(engine.game, LevelGame) else None
             self.editor = Editor(engine.world, *((game.components, game.names, game.level_path) if game else ()))
-        elif isinstance(engine.game, LevelGame):  # the same world rebuilt from the file: its names now
-            self.editor.names = dict(engine.game.names)
+            self._names_taken = game.names if game else None
+        elif game is not None and game.names is not self._names_taken:  # the world rebuilt from the file
+            self.editor.names = dict(game.names)                        # (a build makes a new dict): its names now
+            self._names_taken = game.names
         return self.editor
 
     def click(self, engine: Engine, x: float, y: float, surface: bool = False) -> bool:
@@ -378,6 +381,10 @@ class DebugOverlay:
 
     def _entities(self, engine: Engine) -> None:
         editor = self.editing(engine)
+        imgui.same_line()
+        if imgui.small_button("new entity"):  # a Transform in front of the camera, selected: add to it
+            self._try(editor, editor.create)
+        self._widget("new entity")
         _, self.entity_filter = imgui.input_text("filter##entities", self.entity_filter)
         self._widget("entity filter")
         listed, more = editor.listed(self.entity_filter)
@@ -395,7 +402,8 @@ class DebugOverlay:
         editor = self.editing(engine)
         entity = editor.selected
         lines: list[str] = []
-        if entity is None or not engine.world.exists(entity):  # shown once something is clicked
+        chosen = entity is not None and engine.world.exists(entity)
+        if not chosen and not (editor.can_undo or editor.can_redo):  # shown once something is clicked
             self.inspector_lines = lines
             return
         width, _height = self.io.display_size
@@ -411,6 +419,11 @@ class DebugOverlay:
                     do()
                 except Exception as exc:  # an edit of an entity gone since (a level reloaded): said, not raised
                     editor.message = str(exc)
+            self._widget(action)
+            imgui.same_line()
+        for action, do in (("duplicate", editor.duplicate), ("delete", editor.delete)) if chosen else ():
+            if imgui.button(action):
+                self._try(editor, do, entity)
             self._widget(action)
             imgui.same_line()
         if editor.level_path is not None:
@@ -432,6 +445,11 @@ class DebugOverlay:
             imgui.push_text_wrap_pos(imgui.get_cursor_pos_x() + INSPECTOR_WIDTH - 16)
             imgui.text_colored(imgui.ImVec4(1.0, 0.35, 0.3, 1.0), editor.message)
             imgui.pop_text_wrap_pos()
+        entity = editor.selected  # a duplicate or a deletion above chose another, or none
+        if entity is None or not engine.world.exists(entity):  # undo and redo alone (after a deletion)
+            self.inspector_lines = lines
+            imgui.end()
+            return
         imgui.push_item_width(INSPECTOR_WIDTH * 0.6)
         name = editor.name_of(entity)
         lines.append(name if name == f"entity {entity}" else f"{name} (entity {entity})")
@@ -534,6 +552,14 @@ class DebugOverlay:
                 editor.try_set_field(entity, cls_name, field, None)
             imgui.set_item_tooltip(automatic)
             self._widget(f"{cls_name}.{field} automatic")
+
+    @staticmethod
+    def _try(editor: Editor, do, *args) -> None:
+        """An editor action from a button: a refusal is shown (the editor's message), not raised."""
+        try:
+            do(*args)
+        except EditError as exc:
+            editor.message = str(exc)
 
     def _widget(self, name: str) -> None:
         low, high = imgui.get_item_rect_min(), imgui.get_item_rect_max()

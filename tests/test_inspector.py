@@ -342,3 +342,51 @@ def test_automatic_values_and_the_entity_list_in_code(scene):
         editor.select(10**6)
     editor.select(made[3])
     assert editor.selected == made[3]
+
+
+def test_new_entity_delete_and_undo_from_the_overlay(scene, ctx):
+    """"new entity" makes and selects a Transform in front of the camera, "duplicate" a copy
+    of it; "delete" takes the copy away and leaves the inspector with undo, which makes it
+    again."""
+    ents = {}
+    runner = scene(lambda world: edit_scene(world, ents), SIZE)
+    world = runner.world
+    overlay = DebugOverlay(ctx)
+    try:
+        frames = []
+
+        def draw() -> None:
+            frames.append(runner.frame())
+            overlay.record(1 / 60)
+            overlay.draw(runner.engine, runner.capture.framebuffer, SIZE)
+
+        def click(widget: str) -> None:
+            x, y = overlay.widgets[widget]
+            overlay.mouse_moved(x, y)
+            draw()
+            overlay.mouse_button(1, True)
+            draw()
+            overlay.mouse_button(1, False)
+            draw()
+            draw()
+
+        draw()
+        click("entities")
+        count = len(world.entities())
+        click("new entity")
+        editor = overlay.editor
+        made = editor.selected
+        assert made is not None and len(world.entities()) == count + 1
+        assert world.components_of(made) == (world.get(made, Transform),)
+        assert f"new (entity {made})" in overlay.inspector_lines
+        click("duplicate")
+        assert editor.name_of(editor.selected) == "new_copy" and len(world.entities()) == count + 2
+        copy = editor.selected
+        click("delete")
+        assert not world.exists(copy) and editor.selected is None and len(world.entities()) == count + 1
+        assert editor.can_undo and overlay.inspector_lines == []  # the inspector holds undo and redo alone
+        click("undo")
+        assert "new_copy" in editor.names and world.exists(editor.names["new_copy"])
+        assert ctx.error == "GL_NO_ERROR"
+    finally:
+        overlay.release()

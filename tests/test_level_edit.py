@@ -318,3 +318,78 @@ def test_undo_of_an_edit_to_an_entity_gone_since_says_so(tmp_path):
     with pytest.raises(EditError, match=f"entity {names['koi']} .* no longer exists"):
         editor.undo()
     world.close()
+
+
+def test_entities_made_copied_and_deleted_in_the_editor_are_their_tables_in_the_save(tmp_path):
+    """A new entity (a Transform 3 m before the camera, given a PointLight), a copy of a
+    crate and the deletion of the koi are, saved, exactly those tables; undo and redo make a
+    deleted entity again (a new id) with the very same components, and the edits made to it
+    before follow it there; a portal's partner comes back with it."""
+    from components import PointLight, Portal
+    from shell.editor import EditError, Editor
+
+    path = _copy_hall(tmp_path)
+    original = path.read_text()
+    world, names, _ = loaded(path, "edit_whole")
+    editor = Editor(world, EXTRA, dict(names), path)
+    camera = world.get(names["camera"], Transform)
+    assert editor.create(name="lamp") and editor.name_of(editor.selected) == "lamp_2"  # the hall has a lamp
+    assert editor.undo() and not world.exists(editor.selected or -1)
+    lamp = editor.create(name="torch")
+    assert editor.selected == lamp and editor.name_of(lamp) == "torch"
+    expected = camera.position + camera.rotation * glm.vec3(0.0, 0.0, -3.0)
+    assert glm.length(world.get(lamp, Transform).position - expected) < 1e-5
+    editor.add_component(lamp, "PointLight")
+    editor.set_field(lamp, "PointLight", "intensity", 3.0)
+    crate = names["red_crate"]
+    copy = editor.duplicate(crate)
+    assert editor.name_of(copy) == "red_crate_copy" and editor.selected == copy
+    assert world.get(copy, Material) is not world.get(crate, Material)
+    assert world.get(copy, Transform).position == world.get(crate, Transform).position
+    assert world.get(copy, Transform).position is not world.get(crate, Transform).position  # its own vectors
+    editor.set_field(copy, "Transform", "position", (0.0, 0.6, 2.5))
+    assert world.get(crate, Transform).position != glm.vec3(0.0, 0.6, 2.5)
+    koi = names["koi"]
+    editor.set_field(koi, "Material", "roughness", 0.1)
+    koi_material = world.get(koi, Material)
+    editor.delete(koi)
+    assert not world.exists(koi) and "koi" not in editor.names
+    assert editor.undo()
+    back = editor.names["koi"]
+    assert back != koi and world.get(back, Material) is koi_material and koi_material.roughness == 0.1
+    assert editor.redo() and not world.exists(back)
+
+    editor.save()
+    changed = diff(original, path.read_text())
+    again = load_level(path, EXTRA)
+    spawned = World("edit_whole_again")
+    ids = again.spawn(spawned)
+    assert "koi" not in ids and {"torch", "red_crate_copy"} <= set(ids) and "lamp_2" not in ids
+    assert spawned.get(ids["torch"], PointLight).intensity == 3.0
+    assert glm.length(spawned.get(ids["torch"], Transform).position - expected) < 1e-5
+    assert spawned.get(ids["red_crate_copy"], Transform).position == glm.vec3(0.0, 0.6, 2.5)
+    start = original.index('[[entity]]\nname = "koi"')
+    without_koi = original[:start] + original[original.index("[[entity]]", start + 1):]
+    saved = path.read_text()
+    assert saved.startswith(without_koi.rstrip("\n") + "\n")  # the koi's table out, the rest as it was
+    added = saved[len(without_koi.rstrip("\n")) + 1:]
+    assert added.count("[[entity]]") == 2 and 'name = "torch"' in added and 'name = "red_crate_copy"' in added
+    assert changed and all(line[1:] in original for line in changed if line.startswith("-"))
+    # A portal's partner: deleting one portal leaves the other closed; undo pairs them again.
+    door, far = names["door"], names["door_far"]
+    with pytest.raises(EditError, match="door is the parent of door_post_left"):
+        editor.delete(door)
+    editor.delete(far)
+    assert world.get(door, Portal).partner is None
+    assert editor.undo() and world.get(door, Portal).partner == editor.names["door_far"]
+    assert editor.redo() and world.get(door, Portal).partner is None
+    editor.save()  # the door's partner goes with door_far: the file loads, the door closed
+    door_table = path.read_text().split('name = "door"\n')[1].split("[[entity]]")[0]
+    assert "partner" not in door_table and "[entity.Portal]" in door_table
+    third = World("edit_whole_third")
+    assert "door_far" not in load_level(path, EXTRA).spawn(third)
+    third.close()
+    with pytest.raises(EditError, match="only active camera"):
+        editor.delete(names["camera"])
+    world.close()
+    spawned.close()

@@ -35,7 +35,8 @@ from engine.core.world import World
 def save_level(world: World, path: str | Path, names: Mapping[str, int] | None = None, name: str | None = None,
                game: str | None = None, rules: Mapping[str, Any] | None = None,
                extra_components: Mapping[str, type] | None = None, keep: str | Path | None = None,
-               only: Collection[tuple[str, str]] | None = None) -> Path:
+               only: Collection[tuple[str, str]] | None = None, added: Collection[str] = (),
+               removed: Collection[str] = ()) -> Path:
     """Write ``world`` as a level file: every entity (``names`` gives names by id; others are
     called ``entity_<id>``), each component's fields that differ from their defaults.
     Derived state (portal clones, slices) is left out; a mesh or texture not made by a
@@ -48,8 +49,10 @@ def save_level(world: World, path: str | Path, names: Mapping[str, int] | None =
     new entities go at the end. So saving an edit to a file makes a diff that is the edit.
     ``name``, ``game`` and ``rules`` then change the header only where given and different.
     ``only`` (with ``keep``): the (entity name, component class name) pairs whose differences
-    are written; the rest keeps the file's text, entities are neither added nor removed (an
-    editor saves its edits, not the running game's own motion or the camera flown about).
+    are written; the rest keeps the file's text, and entities are neither added nor removed
+    (an editor saves its edits, not the running game's own motion or the camera flown about)
+    but those named in ``added`` (the world's, written whole at the end) and ``removed`` (the
+    file's, taken out).
     Without ``keep`` the file is written afresh (``name`` defaults to "level")."""
     import tomli_w
 
@@ -57,7 +60,7 @@ def save_level(world: World, path: str | Path, names: Mapping[str, int] | None =
     by_id, tables = _world_tables(world, path, names, extra_components)
     if keep is not None:
         text = _kept_text(world, path, Path(keep), by_id, tables, name, game, rules, extra_components,
-                          None if only is None else set(only))
+                          None if only is None else set(only), set(added), set(removed))
         path.write_text(text, encoding="utf-8")
         return path
     budget = world.resources.get(ViewBudget)
@@ -112,7 +115,8 @@ def _entity_text(table: Mapping[str, Any]) -> str:
 
 def _kept_text(world: World, path: Path, keep: Path, by_id: Mapping[int, str], tables: Mapping[int, dict[str, Any]],
                name: str | None, game: str | None, rules: Mapping[str, Any] | None,
-               extra_components: Mapping[str, type] | None, only: set[tuple[str, str]] | None = None) -> str:
+               extra_components: Mapping[str, type] | None, only: set[tuple[str, str]] | None = None,
+               added: set[str] | None = None, removed: set[str] | None = None) -> str:
     """``keep``'s text with the world's differences from it written in (see ``save_level``).
 
     What the file says is compared with the world as both are written (``_encode_component``
@@ -142,10 +146,12 @@ def _kept_text(world: World, path: Path, keep: Path, by_id: Mapping[int, str], t
             if moved else before[spec.name]
     files = doc.get("entity")
     now = {table["name"]: table for table in tables.values()}
+    added, removed = added or set(), removed or set()
     for index in reversed(range(len(level._entities))):  # the file's entities the world no longer has
-        if level._entities[index].name not in now and only is None:
+        if level._entities[index].name not in now and (only is None or level._entities[index].name in removed):
             del files[index]
-    kept = [spec.name for spec in level._entities if spec.name in now or only is not None]
+    kept = [spec.name for spec in level._entities
+            if spec.name in now or (only is not None and spec.name not in removed)]
     for position, spec_name in enumerate(kept):
         if spec_name not in now:
             continue
@@ -177,7 +183,8 @@ def _kept_text(world: World, path: Path, keep: Path, by_id: Mapping[int, str], t
             if key not in level.rules or not _equal(value, level.rules[key]):
                 table[key] = _item(value)
     text = tomlkit.dumps(doc)
-    new = [_entity_text(table) for table in tables.values() if table["name"] not in before and only is None]
+    new = [_entity_text(table) for table in tables.values()
+           if table["name"] not in before and (only is None or table["name"] in added)]
     return text if not new else text.rstrip("\n") + "\n" + "".join(new)
 
 
