@@ -194,8 +194,8 @@ class Skybox(TrackedComponent):
     ``sun_color`` times that light's colour, as Unity's sun source and Godot's procedural
     sky do, so the disc, a chrome ball's glint of it and the shadows agree.  While that light
     turns or recolours the sky pass follows it every frame; the cube map and the sky's light
-    (about 7 ms of numpy and upload to make on the 2-core machine) follow within a degree,
-    and exactly once it stands still.
+    (drawn on the GPU and in closed form: ``engine/render/sky_bake.py``) follow within a
+    degree, and exactly once it stands still.
     With no lit ``DirectionalLight`` the sun stands at ``DEFAULT_SUN_DIRECTION``.  A vector
     pins the sun there, whatever the lights do.
     """

@@ -32,10 +32,10 @@ from components import DirectionalLight, HemisphereLight, PointLight, Reflection
 from components.ambient import DEFAULT_GROUND, DEFAULT_SKY
 from engine.core.errors import LightLimitWarning
 from engine.core.world import World
-from engine.render.irradiance import hemisphere_sh, project_faces
+from engine.render.irradiance import generated_sky_sh, hemisphere_sh, project_faces
 from engine.render.renderer import Renderer
 from engine.render.shadows import LIGHT_LIMITS
-from engine.render.sky import build_faces, sky_model
+from engine.render.sky import sky_model
 from engine.render.views import MAX_DIRECTIONAL_LIGHTS, MAX_POINT_LIGHTS, lights_block
 from engine.rules.frame_rules import frame_rules
 from engine.rules.light_rules import (
@@ -54,13 +54,17 @@ _NO_SUN = ((0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
 _NO_LAMP = ((0.0, 0.0, 0.0), 1.0, (0.0, 0.0, 0.0))
 
 
-def ambient_sh(world: World, faces: np.ndarray | None = None) -> np.ndarray:
-    """The world's sky irradiance coefficients (9, 3): the Skybox's, the one the sky pass
-    draws (``faces``: its built faces, if at hand), else the lowest entity's HemisphereLight, else the default dim
-    hemisphere (``components.ambient.DEFAULT_SKY`` and ``DEFAULT_GROUND``)."""
+def ambient_sh(world: World, sun: SkySun | None = None) -> np.ndarray:
+    """The world's sky irradiance coefficients (9, 3): the Skybox's (a generated one's in
+    closed form, with ``sun`` where its cube map has it, else ``sky_sun``; given faces
+    projected), else the lowest entity's HemisphereLight, else the default dim hemisphere
+    (``components.ambient.DEFAULT_SKY`` and ``DEFAULT_GROUND``)."""
     skies = world.query_one(Skybox)
     if skies:
-        return project_faces(build_faces(skies[0][1], sky_sun(world, skies[0][1])) if faces is None else faces)
+        sky = skies[0][1]
+        if sky.faces is not None:
+            return project_faces(sky.faces)
+        return generated_sky_sh(sky_model(sky, sun or sky_sun(world, sky)))
     hemispheres = world.query_one(HemisphereLight)
     if hemispheres:
         light = min(hemispheres, key=lambda pair: pair[0])[1]
@@ -85,7 +89,7 @@ class PrepareSystem(esper.Processor):
         renderer = self.renderer
         sky_changed = self._sky()
         if not sky_changed and (self._sky_sh is None or world.changed(HemisphereLight)):
-            self._sky_sh = ambient_sh(world)
+            self._sky_sh = ambient_sh(world, self._cube_sun)
             sky_changed = True
         renderer.upload_instances()
         self._probe_boxes()
@@ -104,9 +108,9 @@ class PrepareSystem(esper.Processor):
     def _sky(self) -> bool:
         """The sky made anew where it changed: the Skybox came, went or changed, or the light a
         generated sky's sun follows turned or recoloured.  While that sun turns the sky pass
-        follows it every frame (a few uniforms) and the cube map and the sky's light (about
-        7 ms of numpy and upload on the 2-core machine) only once the sun is past what the
-        cube serves (``cube_serves``: a degree) or stands still again (not for a rounding:
+        follows it every frame (a few uniforms) and the cube map and the sky's light (a draw
+        a face and a mip build; on llvmpipe a few ms of rasterising) only once the sun
+        is past what the cube serves (``cube_serves``: a degree) or stands still again (not for a rounding:
         a direction normalised again moves a little).  True when the cube was made."""
         world = self.world
         if world.changed(Skybox):
@@ -132,9 +136,11 @@ class PrepareSystem(esper.Processor):
 
     def _make_sky(self, sky: Skybox | None, sun: SkySun | None) -> None:
         """The sky's cube map, the sky pass's model and the sky's light, of ``sky`` with ``sun``."""
-        faces = build_faces(sky, sun) if sky is not None else None
-        self.renderer.set_sky_faces(faces, sky_model(sky, sun))
-        self._sky_sh = ambient_sh(self.world, faces)
+        if sky is not None and sky.faces is None:
+            self.renderer.set_generated_sky(sky_model(sky, sun), sky.face_size)
+        else:
+            self.renderer.set_sky_faces(None if sky is None else sky.faces)
+        self._sky_sh = ambient_sh(self.world, sun)
         self._sun = self._cube_sun = sun
 
     def _sky_sun(self) -> SkySun | None:

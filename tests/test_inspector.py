@@ -236,6 +236,27 @@ def test_layers_are_typed_as_whole_numbers_and_edited_through_the_component(scen
         overlay.release()
 
 
+def _hands(runner, overlay):
+    """``draw()``: a frame with the overlay over it; ``click(widget)``: the mouse to the
+    widget's centre, pressed and let go, a frame at each step and one after."""
+    def draw() -> None:
+        runner.frame()
+        overlay.record(1 / 60)
+        overlay.draw(runner.engine, runner.capture.framebuffer, SIZE)
+
+    def click(widget: str) -> None:
+        x, y = overlay.widgets[widget]
+        overlay.mouse_moved(x, y)
+        draw()
+        overlay.mouse_button(1, True)
+        draw()
+        overlay.mouse_button(1, False)
+        draw()
+        draw()
+
+    return draw, click
+
+
 def test_the_entity_list_reaches_the_sky_whose_sun_is_pinned_and_handed_back(scene, ctx):
     """The sky and the lights have no pixel to click: the entity list (ticked open, filtered,
     clicked) selects them.  The Skybox's sun_direction, left to the engine, shows as
@@ -249,22 +270,8 @@ def test_the_entity_list_reaches_the_sky_whose_sun_is_pinned_and_handed_back(sce
     sky = next(e for e, _ in world.query_one(Skybox))
     light = next(e for e, _ in world.query_one(DirectionalLight))
     overlay = DebugOverlay(ctx)
-    frames = []
     try:
-        def draw() -> None:
-            frames.append(runner.frame())
-            overlay.record(1 / 60)
-            overlay.draw(runner.engine, runner.capture.framebuffer, SIZE)
-
-        def click(widget: str) -> None:
-            x, y = overlay.widgets[widget]
-            overlay.mouse_moved(x, y)
-            draw()
-            overlay.mouse_button(1, True)
-            draw()
-            overlay.mouse_button(1, False)
-            draw()
-
+        draw, click = _hands(runner, overlay)
         draw()
         assert overlay.listed_entities == []  # not listed until "entities" is ticked
         click("entities")
@@ -353,23 +360,7 @@ def test_new_entity_delete_and_undo_from_the_overlay(scene, ctx):
     world = runner.world
     overlay = DebugOverlay(ctx)
     try:
-        frames = []
-
-        def draw() -> None:
-            frames.append(runner.frame())
-            overlay.record(1 / 60)
-            overlay.draw(runner.engine, runner.capture.framebuffer, SIZE)
-
-        def click(widget: str) -> None:
-            x, y = overlay.widgets[widget]
-            overlay.mouse_moved(x, y)
-            draw()
-            overlay.mouse_button(1, True)
-            draw()
-            overlay.mouse_button(1, False)
-            draw()
-            draw()
-
+        draw, click = _hands(runner, overlay)
         draw()
         click("entities")
         count = len(world.entities())

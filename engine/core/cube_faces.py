@@ -13,7 +13,6 @@ usual way, bottom row first, is the face's texture rows in order.
 """
 from __future__ import annotations
 
-import functools
 from typing import NamedTuple
 
 import numpy as np
@@ -38,28 +37,8 @@ CUBE_FACES = (
 )
 
 
-# Faces of up to this many texels a side have their directions kept (read-only, at most
-# 2.4 MB for the six faces of a size): the sky is made again as its sun turns, and its
-# directions were a third of that.
-KEPT_FACE_SIZE = 128
-
-
 def face_directions(face: int, size: int) -> np.ndarray:
-    """Unit directions of the texel centres of one face, shape (size, size, 3), row = t
-    (read-only, kept, up to ``KEPT_FACE_SIZE``)."""
-    if size <= KEPT_FACE_SIZE:
-        return _kept_directions(face, size)
-    return _directions(face, size)
-
-
-@functools.lru_cache(maxsize=6 * 4)
-def _kept_directions(face: int, size: int) -> np.ndarray:
-    directions = _directions(face, size)
-    directions.flags.writeable = False
-    return directions
-
-
-def _directions(face: int, size: int) -> np.ndarray:
+    """Unit directions of the texel centres of one face, shape (size, size, 3), row = t."""
     c = (np.arange(size, dtype=np.float64) + 0.5) / size * 2.0 - 1.0
     t, s = np.meshgrid(c, c, indexing="ij")
     forward, s_axis, t_axis = (np.array(axis, np.float64) for axis in CUBE_FACES[face])

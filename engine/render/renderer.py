@@ -32,6 +32,7 @@ from engine.render.probes import ProbeCaptures
 from engine.render.scene_pass import ScenePass
 from engine.render.shadows import ShadowMaps
 from engine.render.sky import SkyModel, flat_cube, upload_cube
+from engine.render.sky_bake import SkyBake
 from engine.render.targets import LevelStack, RenderTargets
 from engine.render.text import TextPass
 
@@ -92,6 +93,7 @@ class Renderer(Gpu):
         self.shadows = ShadowMaps(self)
         self.scene_pass = ScenePass(self, self.shadows, self.irradiance)
         self.probes = ProbeCaptures(self, self.scene_pass, self.irradiance)
+        self.sky_bake = SkyBake(self)  # a generated sky's cube map, drawn (engine/render/sky_bake.py)
         self.path_checks: PathChecks = PathChecks(self, self.probes)
 
     @property
@@ -255,11 +257,20 @@ class Renderer(Gpu):
         self.colour_maps.add(gl_texture)  # complete (mipmapped), a float format: a stand-in albedo map too
         return gl_texture
 
-    def set_sky_faces(self, faces: np.ndarray | None, model: SkyModel | None = None) -> None:
-        """The world's sky: its cube map's ``faces`` (None: the flat background), and for a
-        generated Skybox the ``model`` the sky pass draws it from per pixel (``sky_model``)."""
+    def set_sky_faces(self, faces: np.ndarray | None) -> None:
+        """The world's sky: a Skybox's given ``faces`` (None: the flat background), sampled
+        from the cube map by the sky pass too."""
+        self._replace_sky(upload_cube(self.ctx, faces) if faces is not None else flat_cube(self.ctx, BACKGROUND),
+                          None)
+
+    def set_generated_sky(self, model: SkyModel, size: int) -> None:
+        """The world's sky: a generated Skybox, drawn per pixel from ``model`` by the sky pass
+        and into a cube map of ``size`` texels a face for what samples it (``SkyBake``)."""
+        self._replace_sky(self.sky_bake.bake(model, size), model)
+
+    def _replace_sky(self, cube: moderngl.TextureCube, model: SkyModel | None) -> None:
         old = self.sky
-        self.sky = upload_cube(self.ctx, faces) if faces is not None else flat_cube(self.ctx, BACKGROUND)
+        self.sky = cube
         old.release()
         self.sky_model = model
         self.sky_version += 1
@@ -386,6 +397,7 @@ class Renderer(Gpu):
         self.probes.release()
         self.shadows.release()
         self.irradiance.release()
+        self.sky_bake.release()
         self.scene_pass.release()
         self.present_pass.release()
         if self.text_pass is not None:

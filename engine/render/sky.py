@@ -11,10 +11,14 @@ however far the view magnifies it, as in the procedural skies of Unity and Bevy.
 from the cube (a face of 128 texels spans 90 degrees: at 1280x720 a texel covers seven
 pixels) the disc was a blocky blob.  Reflections, refraction and probes' irradiance still
 read the cube: they sample it blurred by roughness, where its resolution is enough.
+
+A generated sky's cube map is drawn on the GPU from the same function
+(``engine/render/sky_bake.py``) and its light comes in closed form
+(``engine.render.irradiance.generated_sky_sh``, from the shapes below); ``build_faces`` makes
+the faces with numpy: the reference the tests hold the GPU's cube to, and given faces.
 """
 from __future__ import annotations
 
-import functools
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
@@ -23,7 +27,7 @@ import numpy as np
 
 from components.rendering import DEFAULT_SUN_DIRECTION
 from components.tracking import HALF_MAX
-from engine.core.cube_faces import KEPT_FACE_SIZE, face_directions
+from engine.core.cube_faces import face_directions
 from engine.rules.light_rules import SkySun
 
 if TYPE_CHECKING:
@@ -57,37 +61,52 @@ def _colours(skybox: Skybox) -> tuple[tuple[float, ...], ...]:
     return tuple(tuple(float(c) for c in tuple(colour)[:3]) for colour in colours)
 
 
+# The generated sky's shape (``sky_model.glsl`` writes the same numbers): each part is a
+# function of the cosine of one angle, the gradient's from straight up, the sun's from the sun.
+def zenith_share(y: np.ndarray) -> np.ndarray:
+    """Above the horizon, the share of the way from horizon to zenith at height ``y``."""
+    return np.clip(y, 0.0, 1.0) ** 0.6
+
+
+def ground_share(y: np.ndarray) -> np.ndarray:
+    """Below it, the share of the way from horizon to ground (all of it 14 degrees down)."""
+    return np.clip(-y * 4.0, 0.0, 1.0)
+
+
+GLOW_COLOR = np.array([1.0, 0.55, 0.25])
+
+
+def glow_strength(cos_sun: np.ndarray) -> np.ndarray:
+    """The warm band around the sun, times ``GLOW_COLOR``: 0.25 cos^4 on the sun's side."""
+    facing = np.clip(cos_sun, 0.0, 1.0)
+    facing = facing * facing
+    return 0.25 * facing * facing
+
+
+DISC_EDGE = 0.9990   # cos 2.6 degrees from the disc's centre: its light starts ...
+DISC_FULL = 0.9995   # ... and at cos 1.8 degrees it is whole
+
+
+def disc_strength(cos_sun: np.ndarray) -> np.ndarray:
+    """The sun's disc, times its colour."""
+    return np.clip((cos_sun - DISC_EDGE) / (DISC_FULL - DISC_EDGE), 0.0, 1.0)
+
+
 def _gradient(colours: tuple[tuple[float, ...], ...], d: np.ndarray) -> np.ndarray:
     """The sky without its sun along unit directions ``d`` (..., 3): horizon to zenith above,
     horizon to ground below (a function of the height alone)."""
     zenith, horizon, ground = (np.array(colour) for colour in colours)
     y = d[..., 1:2]
-    up = np.clip(y, 0.0, 1.0) ** 0.6
-    down = np.clip(-y * 4.0, 0.0, 1.0)
-    return np.where(y >= 0.0, horizon + (zenith - horizon) * up, horizon + (ground - horizon) * down)
+    return np.where(y >= 0.0, horizon + (zenith - horizon) * zenith_share(y),
+                    horizon + (ground - horizon) * ground_share(y))
 
 
 def _sun_light(skybox: Skybox, d: np.ndarray, sun: SkySun | None) -> np.ndarray:
     """The sun's part of the sky along unit directions ``d`` (..., 3): a warm band around its
-    azimuth, so that left and right of the sky differ, and its disc (cos 0.9990, 2.6 degrees
-    from its centre, to 0.9995, 1.8 degrees, ramps up)."""
+    azimuth, so that left and right of the sky differ, and its disc."""
     towards, disc_color = sun_of(skybox, sun)
     cos_sun = np.clip(d @ towards, -1.0, 1.0)[..., None]
-    facing = np.clip(cos_sun, 0.0, 1.0)
-    facing *= facing
-    glow = (0.25 * facing * facing) * np.array([1.0, 0.55, 0.25])  # 0.25 cos^4
-    glow += np.clip((cos_sun - 0.9990) / 0.0005, 0.0, 1.0) * disc_color
-    return glow
-
-
-@functools.lru_cache(maxsize=2)
-def _kept_faces(colours: tuple[tuple[float, ...], ...], n: int) -> tuple[np.ndarray, np.ndarray]:
-    """The six faces' texel directions and ``_gradient`` over them (each (6, n, n, 3)), kept
-    (read-only) for the sky made again as its sun turns: only the sun's part changes."""
-    directions = np.stack([face_directions(f, n) for f in range(6)])
-    gradient = _gradient(colours, directions)
-    directions.flags.writeable = gradient.flags.writeable = False
-    return directions, gradient
+    return glow_strength(cos_sun) * GLOW_COLOR + disc_strength(cos_sun) * disc_color
 
 
 @dataclass(frozen=True)
@@ -131,10 +150,7 @@ def build_faces(skybox: Skybox, sun: SkySun | None = None) -> np.ndarray:
             raise ValueError("Skybox.faces must hold finite linear colours >= 0")
         return faces
     n = skybox.face_size
-    if n > KEPT_FACE_SIZE:
-        return np.stack([sky_radiance(skybox, face_directions(f, n), sun) for f in range(6)]).astype(np.float32)
-    directions, gradient = _kept_faces(_colours(skybox), n)
-    return (gradient + _sun_light(skybox, directions, sun)).astype(np.float32)
+    return np.stack([sky_radiance(skybox, face_directions(f, n), sun) for f in range(6)]).astype(np.float32)
 
 
 def upload_cube(ctx: moderngl.Context, faces: np.ndarray) -> moderngl.TextureCube:
