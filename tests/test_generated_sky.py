@@ -108,9 +108,9 @@ def _cube_faces(runner) -> np.ndarray:
     """The sky cube map the renderer holds (what reflections, refraction and the sky's light
     read), as (6, n, n, 3) float32 in GL face order."""
     cube = runner.engine.renderer.sky
-    n = cube.size[0]
-    return np.stack([np.frombuffer(cube.read(face), np.float16).reshape(n, n, 3) for face in range(6)]
-                    ).astype(np.float32)
+    n, channels = cube.size[0], cube.components
+    return np.stack([np.frombuffer(cube.read(face), np.float16).reshape(n, n, channels)[..., :3]
+                     for face in range(6)]).astype(np.float32)
 
 
 def _following_scene(scene, lights: list[DirectionalLight], look: glm.vec3, skybox: Skybox | None = None):

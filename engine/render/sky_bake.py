@@ -32,10 +32,12 @@ class SkyBake:
         self._vao: moderngl.VertexArray | None = None
 
     def bake(self, model: SkyModel, size: int) -> moderngl.TextureCube:
-        """A new mipmapped RGB16F cube map of ``size`` texels a face holding ``model``'s sky,
-        filtered as ``engine.render.sky.upload_cube``'s (seamless, trilinear)."""
+        """A new mipmapped RGBA16F cube map of ``size`` texels a face holding ``model``'s sky,
+        filtered as ``engine.render.sky.upload_cube``'s (seamless, trilinear).  RGBA, as the
+        probes' cubes: the copy's source and destination the same colour-renderable format
+        (GL 4.1 does not require RGB16F to be one)."""
         ctx = self.ctx
-        cube = ctx.texture_cube((size, size), 3, dtype="f2")
+        cube = ctx.texture_cube((size, size), 4, dtype="f2")
         try:
             target = self._face_target(size)
             vao = self._vertex_array()
