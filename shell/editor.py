@@ -46,6 +46,65 @@ AUTOMATIC_FIELDS: dict[tuple[str, str], str] = {
 }
 
 
+GIZMO_SHARE = 0.15  # a move handle's world length: this share of its distance from the eye (a constant screen size)
+AXES = (glm.vec3(1.0, 0.0, 0.0), glm.vec3(0.0, 1.0, 0.0), glm.vec3(0.0, 0.0, 1.0))
+
+
+@dataclasses.dataclass(frozen=True)
+class MoveHandles:
+    """The move gizmo of an entity as the main view shows it: its origin and the end of each
+    world axis's handle (``GIZMO_SHARE`` of the origin's distance from the eye long), in
+    output pixels from the top left; and the world length of each handle."""
+
+    origin: tuple[float, float]
+    ends: tuple[tuple[float, float], ...]  # x, y, z
+    length: float
+
+    def nearest(self, point: tuple[float, float], reach: float) -> int | None:
+        """The axis whose handle (the segment from the origin to its end) passes within
+        ``reach`` pixels of ``point``, the nearest; None for none."""
+        best, axis = reach, None
+        o = glm.vec2(self.origin)
+        for index, end in enumerate(self.ends):
+            segment = glm.vec2(end) - o
+            along = glm.clamp(glm.dot(glm.vec2(point) - o, segment) / max(glm.dot(segment, segment), 1e-9), 0.0, 1.0)
+            gap = glm.length(glm.vec2(point) - (o + segment * along))
+            if gap <= best:
+                best, axis = gap, index
+        return axis
+
+    def distance(self, axis: int, moved: tuple[float, float]) -> float:
+        """The world distance along ``axis`` a mouse moved by ``moved`` pixels asks for: its
+        part along the handle on screen, at the handle's scale (world units a pixel)."""
+        segment = glm.vec2(self.ends[axis]) - glm.vec2(self.origin)
+        pixels = glm.length(segment)
+        if pixels < 1e-6:  # the axis points at the eye: it cannot be dragged along
+            return 0.0
+        return glm.dot(glm.vec2(moved), segment / pixels) * self.length / pixels
+
+
+def move_handles(world: World, entity: int, view_proj: glm.mat4, eye: glm.vec3,
+                 size: tuple[int, int]) -> MoveHandles | None:
+    """``entity``'s move handles in the view ``view_proj`` (from ``eye``) on an output of
+    ``size`` pixels; None when it has no Transform or its origin is behind the eye."""
+    transform = world.try_get(entity, Transform)
+    if transform is None:
+        return None
+    origin = glm.vec3(current_world_matrix(world, transform)[3])
+    length = GIZMO_SHARE * max(glm.length(origin - glm.vec3(eye)), 1e-3)
+
+    def pixel(point: glm.vec3) -> tuple[float, float] | None:
+        clip = view_proj * glm.vec4(point, 1.0)
+        if clip.w <= 1e-6:
+            return None
+        return ((clip.x / clip.w * 0.5 + 0.5) * size[0], (0.5 - clip.y / clip.w * 0.5) * size[1])
+
+    points = [pixel(origin), *(pixel(origin + axis * length) for axis in AXES)]
+    if any(point is None for point in points):
+        return None
+    return MoveHandles(points[0], tuple(points[1:]), length)
+
+
 class EditError(SpeculumError, ValueError):
     """An edit that cannot be made (no such entity, component or field): says which."""
 
@@ -227,6 +286,17 @@ class Editor:
         else:
             self._push(Edit("set", entity, type(target), target, field, before, after))
         self._done[-1].open = merge
+
+    def move(self, entity: int, start: glm.vec3, world_offset: glm.vec3) -> None:
+        """Put ``entity`` at ``world_offset`` (world units) from where it stood at the drag's
+        start (``start``: its Transform.position then), the offset carried into its parent's
+        space; one undo step for the whole drag (``end_drag`` ends it)."""
+        transform = self.component(entity, Transform)
+        offset = glm.vec3(world_offset)
+        parent = transform.parent
+        if parent is not None and self.world.exists(parent) and self.world.has(parent, Transform):
+            offset = glm.inverse(glm.mat3(current_world_matrix(self.world, self.world.get(parent, Transform)))) * offset
+        self.set_field(entity, Transform, "position", glm.vec3(start) + offset, merge=True)
 
     def try_set_field(self, entity: int, component: str | type, field: str, value: Any,
                       merge: bool = False) -> str | None:

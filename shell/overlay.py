@@ -4,7 +4,8 @@ paths in use, toggles for them, the post-processing (tone curve, exposure, bloom
 for bloom and the curve), and shader errors from hot reload; and the level editor's inspector (``shell/editor.py``): a
 click in the world selects the entity seen there (Ctrl+click: the mirror or portal it was
 seen through), or the entity list (every entity by name and kinds, filtered) one that shows
-nowhere, outlined wherever it shows (``engine/render/outline.py``); its components'
+nowhere, outlined wherever it shows (``engine/render/outline.py``), with move handles to
+drag it along a world axis (``editor.move_handles``); its components'
 fields are drag inputs, checkboxes and colour pickers that edit it through the components'
 own checks, with undo, redo, add, remove and save; a field the engine decides while unset
 (``editor.AUTOMATIC_FIELDS``) is pinned at the value in use, or handed back.
@@ -40,11 +41,12 @@ from imgui_bundle import imgui
 from moderngl_window.integrations.imgui_bundle import ModernGLRenderer
 from pyglm import glm
 
+from components import ComponentValueError, Transform
 from components.post import TONEMAP_CURVES
 from engine.assets.level_file import LevelGame
 from engine.assets.values import json_value
 from engine.render.bindings import bind_texture, invalidate
-from shell.editor import AUTOMATIC_FIELDS, EditError, Editor
+from shell.editor import AUTOMATIC_FIELDS, AXES, EditError, Editor, MoveHandles, move_handles
 from shell.overlay_text import overlay_lines
 
 if TYPE_CHECKING:  # the app's window makes the overlay
@@ -59,6 +61,7 @@ CURVE_CHOICES = (None, *TONEMAP_CURVES)   # None: each camera's own Tonemap curv
 CURVE_WIDTH = 100                          # pixels of the curve's drop-down
 INSPECTOR_WIDTH = 320                      # pixels of the inspector, at the right edge
 DRAG_SPEED = 0.01                          # a number field's change per pixel dragged
+GIZMO_REACH = 6.0                          # pixels from a move handle that still take it
 ENTITY_LIST_WIDTH, ENTITY_LIST_HEIGHT = INSPECTOR_WIDTH - 16, 160  # pixels of the entity list's scrolled part
 
 
@@ -189,6 +192,9 @@ class DebugOverlay:
         self._removing: tuple[int, str] | None = None
         self._names_taken: dict[str, int] | None = None  # the game's names the editor last took (a rebuild's are new)
         self.show_entities = False            # the entity list is shown ("entities" ticked)
+        self.handles: MoveHandles | None = None  # the selection's move gizmo, last drawn
+        self._hovered: int | None = None      # the gizmo's axis under the mouse
+        self._moving: tuple | None = None     # a drag of a handle: (entity, axis, start, pressed at, handles then)
         self.entity_filter = ""               # the entity list's filter, as typed
         self.listed_entities: list[str] = []  # the entity list's labels last drawn (while it is open)
 
@@ -238,7 +244,7 @@ class DebugOverlay:
     @property
     def wants_mouse(self) -> bool:
         """The pointer is over the overlay (its clicks and drags are the overlay's)."""
-        return self.visible and self.io.want_capture_mouse
+        return self.visible and (self.io.want_capture_mouse or self._hovered is not None or self._moving is not None)
 
     def draw(self, engine: Engine, framebuffer: moderngl.Framebuffer, size: tuple[int, int]) -> None:
         """Lay out the overlay for ``engine``'s last frame, apply its toggles, and draw it
@@ -352,6 +358,7 @@ class DebugOverlay:
         self.region = (int(x), int(y), int(min(np.ceil(w), width - x)), int(min(np.ceil(h), height - y)))
         imgui.end()
         self._inspector(engine, self._entity_list(engine))
+        self._move_gizmo(engine)
 
     # --- the level editor's entity list and inspector -----------------------------------------
     def _entity_list(self, engine: Engine) -> float:
@@ -552,6 +559,54 @@ class DebugOverlay:
                 editor.try_set_field(entity, cls_name, field, None)
             imgui.set_item_tooltip(automatic)
             self._widget(f"{cls_name}.{field} automatic")
+
+    def _move_gizmo(self, engine: Engine) -> None:
+        """The selection's move handles over the world (x red, y green, z blue; ``move_handles``):
+        a handle pressed and dragged moves it along that world axis, the mouse's motion along
+        the handle on screen at the handle's scale when pressed; one undo step a drag."""
+        editor, view = self.editor, engine.main_view
+        entity = editor.selected if editor is not None else None
+        handles = None
+        if entity is not None and view is not None and engine.world.exists(entity):
+            size = self.io.display_size
+            handles = move_handles(engine.world, entity, view.view_proj, view.eye, (size.x, size.y))
+        self.handles = handles
+        if handles is None:
+            self._end_move(editor)
+            self._hovered = None
+            return
+        point = (self.io.mouse_pos.x, self.io.mouse_pos.y)
+        if self._moving is not None:
+            moving, axis, start, pressed, scale = self._moving
+            if moving == entity and imgui.is_mouse_down(0):
+                moved = (point[0] - pressed[0], point[1] - pressed[1])
+                try:
+                    editor.move(entity, start, AXES[axis] * scale.distance(axis, moved))
+                except (ComponentValueError, EditError) as exc:
+                    editor.message = str(exc)
+            else:
+                self._end_move(editor)
+        else:
+            over_window = imgui.is_window_hovered(imgui.HoveredFlags_.any_window)
+            self._hovered = None if over_window else handles.nearest(point, GIZMO_REACH)
+            if self._hovered is not None and imgui.is_mouse_clicked(0):
+                start = glm.vec3(engine.world.get(entity, Transform).position)
+                self._moving = (entity, self._hovered, start, point, handles)
+        active = self._moving[1] if self._moving is not None else self._hovered
+        draw = imgui.get_background_draw_list()
+        origin = imgui.ImVec2(*handles.origin)
+        for axis, end in enumerate(handles.ends):
+            rgb = [0.25, 0.25, 0.25]
+            rgb[axis] = 1.0
+            colour = imgui.get_color_u32(imgui.ImVec4(*rgb, 1.0 if axis == active else 0.8))
+            width = 4.0 if axis == active else 2.5
+            draw.add_line(origin, imgui.ImVec2(*end), colour, width)
+            draw.add_circle_filled(imgui.ImVec2(*end), width + 2.0, colour)
+
+    def _end_move(self, editor: Editor | None) -> None:
+        if self._moving is not None and editor is not None:
+            editor.end_drag()
+        self._moving = None
 
     @staticmethod
     def _try(editor: Editor, do, *args) -> None:

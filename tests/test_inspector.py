@@ -236,13 +236,13 @@ def test_layers_are_typed_as_whole_numbers_and_edited_through_the_component(scen
         overlay.release()
 
 
-def _hands(runner, overlay):
+def _hands(runner, overlay, size=SIZE):
     """``draw()``: a frame with the overlay over it; ``click(widget)``: the mouse to the
     widget's centre, pressed and let go, a frame at each step and one after."""
     def draw() -> None:
         runner.frame()
         overlay.record(1 / 60)
-        overlay.draw(runner.engine, runner.capture.framebuffer, SIZE)
+        overlay.draw(runner.engine, runner.capture.framebuffer, size)
 
     def click(widget: str) -> None:
         x, y = overlay.widgets[widget]
@@ -381,3 +381,75 @@ def test_new_entity_delete_and_undo_from_the_overlay(scene, ctx):
         assert ctx.error == "GL_NO_ERROR"
     finally:
         overlay.release()
+
+
+def test_a_move_handle_dragged_moves_the_selection_along_its_axis(scene, ctx):
+    """The box selected, its x handle pressed and the mouse moved 40 pixels along it on screen:
+    the box's origin, projected by the test's own math, moved 40 pixels along that line and
+    the box only along world x; the handles take the mouse (no click through to the world)
+    while over them; one undo puts it back."""
+    ents = {}
+    size = (1280, 720)  # the box right of the overlay's window
+    runner = scene(lambda world: edit_scene(world, ents), size)
+    world = runner.world
+    box = ents["box"]
+    overlay = DebugOverlay(ctx)
+    try:
+        draw, _ = _hands(runner, overlay, size)
+        draw()
+        editor = overlay.editing(runner.engine)
+        editor.select(box)
+        draw()
+        before = glm.vec3(world.get(box, Transform).position)
+        origin = np.array(runner.project(before), float)
+        x_end = np.array(runner.project(before + glm.vec3(overlay.handles.length, 0.0, 0.0)), float)
+        along = (x_end - origin) / np.linalg.norm(x_end - origin)
+        assert np.abs(np.array(overlay.handles.origin) - origin).max() <= 1.0  # where the test's math puts it
+        grab = origin + 0.7 * (x_end - origin)
+        overlay.mouse_moved(*grab)
+        draw()
+        assert overlay.wants_mouse  # over a handle: the window does not pick through it
+        overlay.mouse_button(1, True)
+        draw()
+        for step in range(1, 5):
+            overlay.mouse_moved(*(grab + along * 10.0 * step))
+            draw()
+        overlay.mouse_button(1, False)
+        draw()
+        after = glm.vec3(world.get(box, Transform).position)
+        assert after.y == before.y and after.z == before.z and after.x > before.x
+        moved = np.array(runner.project(after), float) - origin
+        assert abs(np.dot(moved, along) - 40.0) < 4.0, moved  # the box followed the mouse (perspective: a few px)
+        assert abs(moved[0] * along[1] - moved[1] * along[0]) < 1.5, moved  # along the handle's line
+        assert editor.undo() and world.get(box, Transform).position == before
+        assert not editor.can_undo  # the whole drag was one edit
+        overlay.mouse_moved(5, size[1] - 5)  # far from the handles and every window
+        draw()
+        assert not overlay.wants_mouse
+    finally:
+        overlay.release()
+
+
+def test_a_child_moves_along_world_axes_whatever_its_parent_turned(scene):
+    """``Editor.move`` carries a world offset into the parent's space: a child of a parent
+    turned 90 degrees about y and scaled 2x, moved 1 m along world x, ends 1 m along world x
+    (its world position by the engine's own chain)."""
+    from engine.core.transforms import current_world_matrix
+    from shell.editor import Editor
+
+    ents = {}
+
+    def build(world):
+        edit_scene(world, ents)
+        ents["parent"] = world.spawn(Transform(position=(1.0, 0.0, 0.0), scale=(2.0, 2.0, 2.0),
+                                               rotation=glm.angleAxis(glm.radians(90.0), glm.vec3(0, 1, 0))))
+        ents["child"] = world.spawn(Transform(position=(0.5, 0.0, 0.0), parent=ents["parent"]))
+
+    runner = scene(build, (64, 48))
+    world, child = runner.world, ents["child"]
+    editor = Editor(world)
+    start = glm.vec3(world.get(child, Transform).position)
+    was = glm.vec3(current_world_matrix(world, world.get(child, Transform))[3])
+    editor.move(child, start, glm.vec3(1.0, 0.0, 0.0))
+    now = glm.vec3(current_world_matrix(world, world.get(child, Transform))[3])
+    assert glm.length(now - (was + glm.vec3(1.0, 0.0, 0.0))) < 1e-5, (was, now)
