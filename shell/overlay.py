@@ -61,6 +61,7 @@ CURVE_CHOICES = (None, *TONEMAP_CURVES)   # None: each camera's own Tonemap curv
 CURVE_WIDTH = 100                          # pixels of the curve's drop-down
 INSPECTOR_WIDTH = 320                      # pixels of the inspector, at the right edge
 DRAG_SPEED = 0.01                          # a number field's change per pixel dragged
+HDR_COLOUR = imgui.ColorEditFlags_.float | imgui.ColorEditFlags_.hdr  # colour fields: floats, not clamped to 0-1
 GIZMO_REACH = 6.0                          # pixels from a move handle that still take it
 ENTITY_LIST_WIDTH, ENTITY_LIST_HEIGHT = INSPECTOR_WIDTH - 16, 160  # pixels of the entity list's scrolled part
 
@@ -521,10 +522,10 @@ class DebugOverlay:
         elif kind == "int" and (cls_name, field) not in (("Transform", "parent"), ("Portal", "partner")):
             changed, new = imgui.drag_int(label, int(data))
         elif kind in ("vec2", "vec3", "vec4"):
-            if "color" in field and kind == "vec4":
-                changed, new = imgui.color_edit4(label, list(data))
+            if "color" in field and kind == "vec4":  # in floats, unclamped: a light's or the sun's colour passes 1
+                changed, new = imgui.color_edit4(label, list(data), HDR_COLOUR)
             elif "color" in field and kind == "vec3":
-                changed, new = imgui.color_edit3(label, list(data))
+                changed, new = imgui.color_edit3(label, list(data), HDR_COLOUR)
             else:
                 drag = {"vec2": imgui.drag_float2, "vec3": imgui.drag_float3, "vec4": imgui.drag_float4}[kind]
                 changed, new = drag(label, list(data), DRAG_SPEED)
@@ -547,6 +548,9 @@ class DebugOverlay:
             shown = value if kind in ("null", "int") else (getattr(value, "name", None) or kind)
             imgui.text(f"{field}: {shown}")
         self._widget(f"{cls_name}.{field}")
+        if kind in ("vec2", "vec3", "vec4", "quat"):  # where its first number is (a drag on one component)
+            self.widgets[f"{cls_name}.{field}.left"] = (imgui.get_item_rect_min().x + 8.0,
+                                                        self.widgets[f"{cls_name}.{field}"][1])
         lines.append(f"  {field} = {data if kind not in ('mesh', 'texture', 'object', 'array') else kind}")
         if changed:
             if isinstance(new, list | tuple) and not field.endswith("layers"):

@@ -453,3 +453,37 @@ def test_a_child_moves_along_world_axes_whatever_its_parent_turned(scene):
     editor.move(child, start, glm.vec3(1.0, 0.0, 0.0))
     now = glm.vec3(current_world_matrix(world, world.get(child, Transform))[3])
     assert glm.length(now - (was + glm.vec3(1.0, 0.0, 0.0))) < 1e-5, (was, now)
+
+
+def test_an_hdr_colour_dragged_in_the_inspector_stays_hdr(scene, ctx):
+    """A colour past 1 (the sky's sun_color, 6.0 red) dragged in the inspector changes by a
+    little and is not clamped into 0-1 (an HDR colour picker, in floats)."""
+    from components import Skybox
+
+    ents = {}
+    runner = scene(lambda world: edit_scene(world, ents), SIZE)
+    world = runner.world
+    sky = next(e for e, _ in world.query_one(Skybox))
+    overlay = DebugOverlay(ctx)
+    try:
+        draw, _ = _hands(runner, overlay)
+        draw()
+        overlay.editing(runner.engine).select(sky)
+        draw()
+        before = glm.vec4(world.get(sky, Skybox).sun_color)
+        x, y = overlay.widgets["Skybox.sun_color"]
+        left = overlay.widgets["Skybox.sun_color.left"]
+        overlay.mouse_moved(*left)
+        draw()
+        overlay.mouse_button(1, True)
+        draw()
+        for step in range(1, 6):
+            overlay.mouse_moved(left[0] + 8 * step, left[1])
+            draw()
+        overlay.mouse_button(1, False)
+        draw()
+        after = glm.vec4(world.get(sky, Skybox).sun_color)
+        assert after != before and min(after.x, after.y, after.z) > 1.0, (before, after)
+        assert abs(after.x - before.x) < 1.0, (before, after)  # a drag's step, not a jump to the clamp
+    finally:
+        overlay.release()
