@@ -25,7 +25,7 @@ from pyglm import glm
 
 from components import Camera, ComponentValueError, Material, Portal, Transform
 from components.rendering import automatic_mix
-from engine.assets.level_read import DERIVED_COMPONENTS, ENGINE_COMPONENTS
+from engine.assets.level_read import DERIVED_COMPONENTS, ENGINE_COMPONENTS, REFERENCE_FIELDS
 from engine.assets.level_save import save_level
 from engine.core.errors import SpeculumError
 from engine.core.transforms import current_world_matrix
@@ -217,6 +217,22 @@ class Editor:
                 return found, True
             found.append((entity, label))
         return found, False
+
+    def reference_choices(self, entity: int, component: str | type, field: str,
+                          limit: int = MAX_LISTED) -> tuple[list[tuple[int | None, str]], bool]:
+        """What a field naming another entity (``REFERENCE_FIELDS``: a Transform's parent, a
+        Portal's partner) may name, for the inspector's choice: none, then the other entities
+        holding what it names (a Transform; a Portal) by ``label``, at most ``limit``; and
+        whether there were more.  The component's own checks still judge the choice (a
+        parent that descends from the entity is a cycle, refused)."""
+        name = component if isinstance(component, str) else component.__name__
+        if (name, field) not in REFERENCE_FIELDS:
+            raise EditError(f"{name}.{field} does not name an entity")
+        by_id = {e: n for n, e in self.names.items()}
+        kind = Portal if name == "Portal" else Transform
+        others = sorted(e for e, _ in self.world.query_one(kind) if e != entity)
+        choices = [(None, "none"), *((e, self.label(e, by_id.get(e))) for e in others[:limit])]
+        return choices, len(others) > limit
 
     def automatic(self, entity: int, component: str | type, field: str) -> Any:
         """The value the engine uses for a field left to it (``AUTOMATIC_FIELDS``), as a value

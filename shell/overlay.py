@@ -44,6 +44,7 @@ from pyglm import glm
 from components import ComponentValueError, Transform
 from components.post import TONEMAP_CURVES
 from engine.assets.level_file import LevelGame
+from engine.assets.level_read import REFERENCE_FIELDS
 from engine.assets.values import json_value
 from engine.render.bindings import bind_texture, invalidate
 from shell.editor import AUTOMATIC_FIELDS, AXES, EditError, Editor, MoveHandles, move_handles
@@ -515,11 +516,13 @@ class DebugOverlay:
             self._widget(f"{cls_name}.{field} pin")
             lines.append(f"  {field} = automatic")
             return
-        if kind == "bool":
+        if (cls_name, field) in REFERENCE_FIELDS:  # another entity, chosen from those it may name
+            changed, new = self._reference(editor, entity, cls_name, field, value, label)
+        elif kind == "bool":
             changed, new = imgui.checkbox(label, bool(data))
         elif kind == "float":
             changed, new = imgui.drag_float(label, float(data), DRAG_SPEED)
-        elif kind == "int" and (cls_name, field) not in (("Transform", "parent"), ("Portal", "partner")):
+        elif kind == "int":
             changed, new = imgui.drag_int(label, int(data))
         elif kind in ("vec2", "vec3", "vec4"):
             if "color" in field and kind == "vec4":  # in floats, unclamped: a light's or the sun's colour passes 1
@@ -619,6 +622,22 @@ class DebugOverlay:
             do(*args)
         except EditError as exc:
             editor.message = str(exc)
+
+    def _reference(self, editor: Editor, entity: int, cls_name: str, field: str, value, label: str):
+        """A combo of what a reference field may name (``Editor.reference_choices``), listed
+        only while it is open."""
+        shown = "none" if value is None or not editor.world.exists(value) else editor.label(value)
+        changed, new = False, value
+        if imgui.begin_combo(label, shown):
+            choices, more = editor.reference_choices(entity, cls_name, field)
+            for choice, text in choices:
+                if imgui.selectable(f"{text}##{cls_name}.{field}.{choice}", choice == value)[0]:
+                    changed, new = choice != value, choice
+                self._widget(f"{cls_name}.{field} {choice}")
+            if more:
+                imgui.text_disabled(f"(the first {len(choices) - 1} listed)")
+            imgui.end_combo()
+        return changed, new
 
     def _widget(self, name: str) -> None:
         low, high = imgui.get_item_rect_min(), imgui.get_item_rect_max()

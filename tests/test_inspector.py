@@ -487,3 +487,52 @@ def test_an_hdr_colour_dragged_in_the_inspector_stays_hdr(scene, ctx):
         assert abs(after.x - before.x) < 1.0, (before, after)  # a drag's step, not a jump to the clamp
     finally:
         overlay.release()
+
+
+def test_a_portals_partner_is_chosen_from_the_portals_in_the_inspector(scene, ctx):
+    """Two unpaired portals: the first's partner chosen in the inspector's list of portals
+    (its own entity not offered) opens it, a view drawn through it; a Transform's parent is
+    offered every other Transform, and a parent that would make a cycle is refused."""
+    from components import MeshRef, Portal
+    from engine.assets.mesh import box
+    from engine.assets.portals import spawn_portal_pair
+    from engine.rules.frame_rules import open_portal_pairs
+    from tests.support import look_from
+
+    ents = {}
+
+    def build(world):
+        from tests.test_mirrors import base_scene
+
+        base_scene(world)
+        look_from(world, (0.0, 1.5, 6.0), target=(0.0, 1.5, 0.0))
+        ents["a"], ents["b"] = spawn_portal_pair(world, (0, 1.5, 0), None, (8, 1.5, 0), None)
+        for portal in ents.values():
+            world.get(portal, Portal).partner = None
+        ents["box"] = world.spawn(Transform(position=(8.0, 1.5, 3.0)), MeshRef(box()), Material(color=(0.1, 0.9, 0.1)))
+
+    size = (1280, 720)
+    runner = scene(build, size)
+    world = runner.world
+    overlay = DebugOverlay(ctx)
+    try:
+        draw, click = _hands(runner, overlay, size)
+        draw()
+        assert runner.stats.reflection_views == 0 and open_portal_pairs(world) == {}
+        editor = overlay.editing(runner.engine)
+        editor.select(ents["a"])
+        draw()
+        choices, more = editor.reference_choices(ents["a"], "Portal", "partner")
+        assert [c for c, _ in choices] == [None, ents["b"]] and not more
+        click("Portal.partner")
+        click(f"Portal.partner {ents['b']}")
+        assert world.get(ents["a"], Portal).partner == ents["b"]
+        draw()
+        assert open_portal_pairs(world) == {ents["a"]: ents["b"]} and runner.stats.reflection_views >= 1
+        parents, _ = editor.reference_choices(ents["box"], "Transform", "parent")
+        assert ents["box"] not in [c for c, _ in parents] and {ents["a"], ents["b"]} <= {c for c, _ in parents}
+        assert editor.try_set_field(ents["a"], "Transform", "parent", ents["box"]) is None
+        refused = editor.try_set_field(ents["box"], "Transform", "parent", ents["a"])
+        assert refused and "cycle" in refused, refused
+    finally:
+        overlay.release()
