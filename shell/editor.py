@@ -25,6 +25,7 @@ from pyglm import glm
 
 from components import Camera, ComponentValueError, Material, Portal, Transform
 from components.rendering import automatic_mix
+from engine.assets.level_assets import MESH_MAKERS
 from engine.assets.level_read import DERIVED_COMPONENTS, ENGINE_COMPONENTS, REFERENCE_FIELDS
 from engine.assets.level_save import save_level
 from engine.core.errors import SpeculumError
@@ -36,6 +37,7 @@ from engine.rules.light_rules import followed_sun
 MAX_UNDO = 1000  # edits kept for undo; the oldest go first
 MAX_LISTED = 200  # entities the entity list shows at once (a filter finds the rest)
 NEW_DISTANCE = 3.0  # metres in front of the active camera a new entity is made
+NEW_MESH = "box"    # the shape a MeshRef added in the editor starts as
 
 # Fields whose None means "the engine decides" (what it decides: ``Editor.automatic``).  The
 # inspector shows such a field as automatic with a button that pins the value in use now, and
@@ -314,6 +316,20 @@ class Editor:
             offset = glm.inverse(glm.mat3(current_world_matrix(self.world, self.world.get(parent, Transform)))) * offset
         self.set_field(entity, Transform, "position", glm.vec3(start) + offset, merge=True)
 
+    def mesh_shape(self, entity: int) -> str:
+        """The shape of the entity's mesh: a ``MESH_MAKERS`` name, or "file" or "model" for a
+        mesh loaded from one, or the mesh's name (made in code)."""
+        source = getattr(self.component(entity, "MeshRef").mesh, "source", None) or {}
+        return next((key for key in (*MESH_MAKERS, "file") if key in source),
+                    "model" if "inside" in source or "model" in source else self.component(entity, "MeshRef").mesh.name)
+
+    def set_mesh_shape(self, entity: int, shape: str) -> None:
+        """Give the entity's MeshRef a new mesh of ``shape`` (``MESH_MAKERS``: box, quad,
+        plane, sphere) at its default size (the Transform's scale sizes it); one undo step."""
+        if shape not in MESH_MAKERS:
+            raise EditError(f"no mesh shape {shape!r} (shapes: {', '.join(MESH_MAKERS)})")
+        self.set_field(entity, "MeshRef", "mesh", MESH_MAKERS[shape]())
+
     def try_set_field(self, entity: int, component: str | type, field: str, value: Any,
                       merge: bool = False) -> str | None:
         """``set_field``, answering why it was refused (the component's message) or None."""
@@ -339,6 +355,8 @@ class Editor:
             raise EditError(f"entity {entity} does not exist")
         if self.world.has(entity, cls):
             raise EditError(f"{self.name_of(entity)} already has a {name}")
+        if name == "MeshRef" and "mesh" not in fields:
+            fields = {**fields, "mesh": MESH_MAKERS[NEW_MESH]()}  # a shape to start from (``set_mesh_shape``)
         try:
             component = cls(**fields)
             self._check_whole(entity, [*self.world.components_of(entity), component])

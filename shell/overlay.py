@@ -43,6 +43,7 @@ from pyglm import glm
 
 from components import ComponentValueError, Transform
 from components.post import TONEMAP_CURVES
+from engine.assets.level_assets import MESH_MAKERS
 from engine.assets.level_file import LevelGame
 from engine.assets.level_read import REFERENCE_FIELDS
 from engine.assets.values import json_value
@@ -518,6 +519,14 @@ class DebugOverlay:
             return
         if (cls_name, field) in REFERENCE_FIELDS:  # another entity, chosen from those it may name
             changed, new = self._reference(editor, entity, cls_name, field, value, label)
+        elif (cls_name, field) == ("MeshRef", "mesh"):  # a shape to choose (its size: the Transform's scale)
+            shape = editor.mesh_shape(entity)
+            if imgui.begin_combo(label, shape):
+                for choice in MESH_MAKERS:
+                    if imgui.selectable(f"{choice}##mesh", choice == shape)[0] and choice != shape:
+                        self._try(editor, editor.set_mesh_shape, entity, choice)
+                    self._widget(f"MeshRef.mesh {choice}")
+                imgui.end_combo()
         elif kind == "bool":
             changed, new = imgui.checkbox(label, bool(data))
         elif kind == "float":
@@ -620,7 +629,7 @@ class DebugOverlay:
         """An editor action from a button: a refusal is shown (the editor's message), not raised."""
         try:
             do(*args)
-        except EditError as exc:
+        except (EditError, ComponentValueError) as exc:
             editor.message = str(exc)
 
     def _reference(self, editor: Editor, entity: int, cls_name: str, field: str, value, label: str):

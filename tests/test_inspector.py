@@ -536,3 +536,53 @@ def test_a_portals_partner_is_chosen_from_the_portals_in_the_inspector(scene, ct
         assert refused and "cycle" in refused, refused
     finally:
         overlay.release()
+
+
+def test_a_new_entity_given_a_mesh_shows_it_and_its_shape_is_chosen(scene, ctx, tmp_path):
+    """A new entity given a MeshRef starts as a unit box where the camera looks (pixels there
+    change), its shape is then chosen in the inspector (a sphere: its pixel at the box's
+    corner goes back to the background) and a save writes it as a generator the file names."""
+    from components import MeshRef
+    from engine.assets.level_file import load_level
+
+    ents = {}
+    size = (1280, 720)
+    runner = scene(lambda world: edit_scene(world, ents), size)
+    world = runner.world
+    overlay = DebugOverlay(ctx)
+    try:
+        draw, click = _hands(runner, overlay, size)
+        draw()
+        editor = overlay.editing(runner.engine)
+        empty = runner.frame()
+        made = editor.create(name="thing")
+        editor.add_component(made, "MeshRef")
+        editor.add_component(made, "Material")
+        assert editor.mesh_shape(made) == "box"
+        centre = glm.vec3(world.get(made, Transform).position)
+        corner = centre + glm.vec3(0.45, 0.45, 0.45)  # inside the unit box, outside a 0.5 sphere
+        boxed = runner.frame()
+        cx, cy = runner.project(centre)
+        kx, ky = runner.project(corner)
+        assert np.abs(boxed[cy, cx].astype(int) - empty[cy, cx]).max() > 20  # the box stands there
+        assert np.abs(boxed[ky, kx].astype(int) - empty[ky, kx]).max() > 20
+        draw()
+        click("MeshRef.mesh")
+        click("MeshRef.mesh sphere")
+        assert editor.mesh_shape(made) == "sphere"
+        round_ = runner.frame()
+        assert np.abs(round_[cy, cx].astype(int) - empty[cy, cx]).max() > 20
+        assert np.abs(round_[ky, kx].astype(int) - empty[ky, kx]).max() <= 3  # the corner is sky again
+        assert editor.undo() and editor.mesh_shape(made) == "box"
+        assert editor.redo()
+        path = editor.save(tmp_path / "made.toml")
+        assert "mesh = { sphere = 0.5 }" in path.read_text()
+        again = load_level(path)
+        from engine.core.world import World
+
+        other = World("made_again")
+        names = again.spawn(other)
+        assert other.get(names["thing"], MeshRef).mesh.source == {"sphere": 0.5}
+        other.close()
+    finally:
+        overlay.release()

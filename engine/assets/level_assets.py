@@ -31,7 +31,8 @@ from engine.assets.texture_data import (
     texture_bytes,
 )
 
-_MESH_MAKERS: dict[str, Callable[..., Mesh]] = {"box": box, "quad": quad, "plane": plane, "sphere": sphere}
+# The meshes a level file (and the editor's shape choice) makes by name, at their default sizes unless told.
+MESH_MAKERS: dict[str, Callable[..., Mesh]] = {"box": box, "quad": quad, "plane": plane, "sphere": sphere}
 LEVEL_MEMORY_BUDGET = 2 << 30  # bytes a level's meshes and textures may take together (each is held to
 #                                 engine.assets.texture_data.ASSET_MEMORY_BUDGET), counted before a generator runs
 
@@ -123,9 +124,9 @@ def level_mesh(spec: Any, where: LevelAssets) -> Mesh:
             raise ValueError(f"mesh file {str(path)!r} has no part {part!r} (parts: {names})")
         chosen.mesh.source = {"file": str(path), **({"part": part} if part is not None else {})}
         return chosen.mesh
-    kinds = [k for k in spec if k in _MESH_MAKERS]
+    kinds = [k for k in spec if k in MESH_MAKERS]
     if len(kinds) != 1:
-        raise ValueError(f"a mesh names one of {sorted(_MESH_MAKERS)} or file, got {sorted(spec)}")
+        raise ValueError(f"a mesh names one of {sorted(MESH_MAKERS)} or file, got {sorted(spec)}")
     kind = kinds[0]
     size = spec.pop(kind)
     options = {k: spec.pop(k) for k in ("uv_repeat", "segments", "rings") if k in spec}
@@ -155,7 +156,7 @@ def level_mesh(spec: Any, where: LevelAssets) -> Mesh:
     if kind == "sphere":  # the others are a few hundred bytes
         segments, rings = options.get("segments", 48), options.get("rings", 24)
         where.budget.take(key, (segments + 1) * (rings + 1) * 32 + segments * rings * 24)
-    return _cached(key, lambda: _MESH_MAKERS[kind](*args, **options))  # the generator records its source
+    return _cached(key, lambda: MESH_MAKERS[kind](*args, **options))  # the generator records its source
 
 
 def level_texture(spec: Any, where: LevelAssets, normal_map: bool = False) -> TextureData:
