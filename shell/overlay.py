@@ -63,6 +63,12 @@ CURVE_CHOICES = (None, *TONEMAP_CURVES)   # None: each camera's own Tonemap curv
 CURVE_WIDTH = 100                          # pixels of the curve's drop-down
 INSPECTOR_WIDTH = 320                      # pixels of the inspector, at the right edge
 DRAG_SPEED = 0.01                          # a number field's change per pixel dragged
+# moderngl-window's key names -> ImGui's keys: what typing in a field and editing its text need.
+IMGUI_KEYS = {"BACKSPACE": imgui.Key.backspace, "DELETE": imgui.Key.delete, "ENTER": imgui.Key.enter,
+              "ESCAPE": imgui.Key.escape, "TAB": imgui.Key.tab, "LEFT": imgui.Key.left_arrow,
+              "RIGHT": imgui.Key.right_arrow, "UP": imgui.Key.up_arrow, "DOWN": imgui.Key.down_arrow,
+              "HOME": imgui.Key.home, "END": imgui.Key.end, "A": imgui.Key.a, "C": imgui.Key.c,
+              "V": imgui.Key.v, "X": imgui.Key.x, "Y": imgui.Key.y, "Z": imgui.Key.z}
 HDR_COLOUR = imgui.ColorEditFlags_.float | imgui.ColorEditFlags_.hdr  # colour fields: floats, not clamped to 0-1
 GIZMO_REACH = 6.0                          # pixels from a move handle that still take it
 ENTITY_LIST_WIDTH, ENTITY_LIST_HEIGHT = INSPECTOR_WIDTH - 16, 160  # pixels of the entity list's scrolled part
@@ -242,6 +248,47 @@ class DebugOverlay:
         if not self.visible or self.context is None or targets is None:
             return False
         self.editing(engine).pick(targets.read_ids(), targets.read_surface_ids(), int(x), int(y), surface)
+        return True
+
+    def key(self, name: str, down: bool, ctrl: bool = False, shift: bool = False) -> None:
+        """A key (moderngl-window's name for it: "BACKSPACE", "A") pressed or let go, with the
+        modifiers held: to the field being typed in (``IMGUI_KEYS``)."""
+        self.io.add_key_event(imgui.Key.mod_ctrl, ctrl)
+        self.io.add_key_event(imgui.Key.mod_shift, shift)
+        key = IMGUI_KEYS.get(name)
+        if key is not None:
+            self.io.add_key_event(key, down)
+
+    def text(self, characters: str) -> None:
+        """Characters typed (the window's text events): into the field being typed in."""
+        for character in characters:
+            self.io.add_input_character(ord(character))
+
+    @property
+    def wants_keyboard(self) -> bool:
+        """A field is being typed in: the keys are its, not the game's or the editor's."""
+        return self.visible and self.io.want_capture_keyboard
+
+    def shortcut(self, engine: Engine, name: str, ctrl: bool = False, shift: bool = False) -> bool:
+        """The editor's keys while the overlay is shown and no field is typed in: Ctrl+Z undo,
+        Ctrl+Y or Ctrl+Shift+Z redo, Ctrl+D duplicate and Delete delete the selection, Ctrl+S
+        save.  True when ``name`` was one (the game does not get it)."""
+        if not self.visible or self.context is None:
+            return False
+        editor = self.editing(engine)
+        entity = editor.selected if editor.selected is not None and engine.world.exists(editor.selected) else None
+        if ctrl and (name == "Y" or (name == "Z" and shift)):
+            self._try(editor, editor.redo)
+        elif ctrl and name == "Z":
+            self._try(editor, editor.undo)
+        elif ctrl and name == "D" and entity is not None:
+            self._try(editor, editor.duplicate, entity)
+        elif name == "DELETE" and entity is not None:
+            self._try(editor, editor.delete, entity)
+        elif ctrl and name == "S" and editor.level_path is not None:
+            self._save(engine, editor)
+        else:
+            return False
         return True
 
     @property
@@ -438,15 +485,7 @@ class DebugOverlay:
             imgui.same_line()
         if editor.level_path is not None:
             if imgui.button("save"):
-                try:
-                    saved = editor.save()
-                    watch = engine.level_reload
-                    if watch is not None and Path(watch.path).resolve() == saved.resolve():
-                        # The world is what was written: not rebuilt from it (the undo list stays).
-                        watch.follow(saved)
-                    editor.message = f"saved {saved}"
-                except Exception as exc:  # shown in the overlay, the window keeps running
-                    editor.message = str(exc)
+                self._save(engine, editor)
             self._widget("save")
         else:
             imgui.new_line()
@@ -623,6 +662,18 @@ class DebugOverlay:
         if self._moving is not None and editor is not None:
             editor.end_drag()
         self._moving = None
+
+    @staticmethod
+    def _save(engine: Engine, editor: Editor) -> None:
+        try:
+            saved = editor.save()
+            watch = engine.level_reload
+            if watch is not None and Path(watch.path).resolve() == saved.resolve():
+                # The world is what was written: not rebuilt from it (the undo list stays).
+                watch.follow(saved)
+            editor.message = f"saved {saved}"
+        except Exception as exc:  # shown in the overlay, the window keeps running
+            editor.message = str(exc)
 
     @staticmethod
     def _try(editor: Editor, do, *args) -> None:

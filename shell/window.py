@@ -59,6 +59,15 @@ def key_names(keys: type[BaseKeys]) -> dict:
     return {code if isinstance(code, int) else attr: _NAMED_KEYS[attr] for attr, code in codes.items()}
 
 
+def key_attributes(keys: type[BaseKeys]) -> dict:
+    """moderngl-window key code -> its attribute name on the backend's keys ("BACKSPACE",
+    "A"): what the overlay's fields and the editor's shortcuts read.  The headless backend
+    has no codes: there a key is sent by its name, which maps to itself."""
+    names = [attr for attr in dir(keys) if attr.isupper() and not attr.startswith("ACTION")]
+    found = {getattr(keys, attr): attr for attr in names if isinstance(getattr(keys, attr, None), int)}
+    return {**{attr: attr for attr in names}, **found}
+
+
 class NoOverlay:
     """Stands in for the debug overlay where imgui-bundle is not installed (it is a
     dependency, but a machine may lack its native wheel): F1 says why once, nothing is drawn."""
@@ -121,6 +130,7 @@ class SpeculumWindow(mglw.WindowConfig):
         self.screenshots = Path(args.out) if args is not None and args.out else Path("screenshots")
         self.mouse_captured = False
         self.key_names = key_names(self.wnd.keys)
+        self.key_attributes = key_attributes(self.wnd.keys)
         self.overlay = make_overlay(self.ctx, visible=bool(getattr(args, "overlay", False)))
         self.shown_title = self.wnd.title = self.game.title  # build may have named the level
         from engine.assets.level_file import LevelGame
@@ -155,6 +165,14 @@ class SpeculumWindow(mglw.WindowConfig):
             return  # events queued behind Esc
         keys = self.wnd.keys
         name = self.key_names.get(key)
+        if self.overlay.visible and name != "f1":
+            ctrl, shift = bool(getattr(modifiers, "ctrl", False)), bool(getattr(modifiers, "shift", False))
+            attribute = self.key_attributes.get(key, "")
+            self.overlay.key(attribute, action == keys.ACTION_PRESS, ctrl, shift)
+            if self.overlay.wants_keyboard:  # typing in a field: the keys are its (Esc too)
+                return
+            if action == keys.ACTION_PRESS and self.overlay.shortcut(self.engine, attribute, ctrl, shift):
+                return
         if name == "f1":  # the overlay's key, not the game's
             if action == keys.ACTION_PRESS:
                 self.overlay.toggle()
@@ -177,6 +195,10 @@ class SpeculumWindow(mglw.WindowConfig):
                 self.input.held.add(modifier)
             else:
                 self.input.held.discard(modifier)
+
+    def on_unicode_char_entered(self, char: str) -> None:
+        if not self.released and self.overlay.visible:
+            self.overlay.text(char)  # a field being typed in takes it (ImGui ignores it otherwise)
 
     def on_mouse_press_event(self, x: int, y: int, button: int) -> None:
         if self.released:

@@ -586,3 +586,134 @@ def test_a_new_entity_given_a_mesh_shows_it_and_its_shape_is_chosen(scene, ctx, 
         other.close()
     finally:
         overlay.release()
+
+
+def test_typing_reaches_the_fields_and_the_editors_keys_act_when_none_is_typed_in(scene, ctx):
+    """Characters typed into the entity list's filter (the window's text events) filter it,
+    and while it is typed in the overlay wants the keyboard (the game and the shortcuts do
+    not get the keys); Backspace edits it.  Out of the field: Delete deletes the selection,
+    Ctrl+Z brings it back, Ctrl+D duplicates, Ctrl+Y redoes."""
+    ents = {}
+    size = (1280, 720)
+    runner = scene(lambda world: edit_scene(world, ents), size)
+    world = runner.world
+    overlay = DebugOverlay(ctx)
+    try:
+        draw, click = _hands(runner, overlay, size)
+        draw()
+        click("entities")
+        click("entity filter")
+        assert overlay.wants_keyboard
+        overlay.text("skyx")
+        draw()
+        assert overlay.entity_filter == "skyx" and overlay.listed_entities == []
+        overlay.key("BACKSPACE", True)
+        draw()
+        overlay.key("BACKSPACE", False)
+        draw()
+        assert overlay.entity_filter == "sky" and len(overlay.listed_entities) == 1
+        overlay.mouse_moved(5, size[1] - 5)
+        overlay.mouse_button(1, True)
+        draw()
+        overlay.mouse_button(1, False)  # a click elsewhere: the field lets go of the keyboard
+        draw()
+        assert not overlay.wants_keyboard
+        editor = overlay.editor
+        box = ents["box"]
+        editor.select(box)
+        assert overlay.shortcut(runner.engine, "DELETE") and not world.exists(box)
+        assert overlay.shortcut(runner.engine, "Z", ctrl=True)
+        assert len([e for e, _ in world.query_one(Material)]) == 2  # the box is back (with the mirror's)
+        assert overlay.shortcut(runner.engine, "Y", ctrl=True) and len([e for e, _ in world.query_one(Material)]) == 1
+        assert overlay.shortcut(runner.engine, "Z", ctrl=True, shift=False)
+        restored = max(e for e, _ in world.query_one(Material))
+        editor.select(restored)
+        assert overlay.shortcut(runner.engine, "D", ctrl=True) and len([e for e, _ in world.query_one(Material)]) == 3
+        assert not overlay.shortcut(runner.engine, "W")  # the game's key
+    finally:
+        overlay.release()
+
+
+def test_the_window_gives_typed_keys_to_the_field_and_editor_keys_to_the_editor():
+    """Through the window shell (headless moderngl-window, keys sent by name): with a field
+    typed in, a letter goes to it and not to the game; with none, Delete and Ctrl+Z act on
+    the selection and the game does not see them; other keys reach the game as before."""
+    import moderngl_window as mglw
+
+    from components import MeshRef
+    from engine.assets.mesh import box
+    from engine.core.frame_io import Input
+    from shell.window import make_window_config
+    from tests.support import FunctionGame, look_from
+
+    seen: list[set] = []
+    ents = {}
+
+    def build(world):
+        from components import Skybox
+
+        look_from(world, (0, 1, 4))
+        world.spawn(Skybox())
+        ents["box"] = world.spawn(Transform(position=(0.0, 1.0, 0.0)), MeshRef(box()), Material())
+
+    def update(world, dt):
+        seen.append(set(world.resources[Input].pressed))
+
+    config = mglw.create_window_config_instance(
+        make_window_config(FunctionGame(build, update)),
+        args=["--window", "headless", "--backend", "egl", "--size", "1280x720"])
+    try:
+        keys = config.wnd.keys
+
+        class Mods:
+            shift = False
+            ctrl = False
+
+        class Ctrl(Mods):
+            ctrl = True
+
+        def frame():
+            config.on_render(0.0, 1 / 60)
+
+        def press(name, mods=Mods):  # pressed and let go, as a hand does (the modifier let go with it)
+            config.on_key_event(name, keys.ACTION_PRESS, mods())
+            config.on_key_event(name, keys.ACTION_RELEASE, Mods())
+
+        def click(widget):
+            x, y = overlay.widgets[widget]
+            config.on_mouse_position_event(int(x), int(y), 0, 0)
+            frame()
+            config.on_mouse_press_event(int(x), int(y), 1)
+            frame()
+            config.on_mouse_release_event(int(x), int(y), 1)
+            frame()
+            frame()
+
+        overlay = config.overlay
+        if not overlay.visible:
+            overlay.toggle()
+        frame()
+        frame()
+        world = config.engine.world
+        overlay.editing(config.engine).select(ents["box"])
+        press("DELETE")
+        assert not world.exists(ents["box"])
+        press("Z", Ctrl)
+        frame()
+        assert "z" not in seen[-1] and len(world.query_one(MeshRef)) == 1  # undone, and not the game's
+        click("entities")
+        click("entity filter")
+        config.on_unicode_char_entered("k")
+        config.on_key_event("W", keys.ACTION_PRESS, Mods())
+        frame()
+        assert overlay.entity_filter == "k" and "w" not in seen[-1]  # the field's, not the game's
+        config.on_mouse_position_event(5, 715, 0, 0)
+        config.on_mouse_press_event(5, 715, 1)  # in the world, away from every window: the field lets go
+        frame()
+        config.on_mouse_release_event(5, 715, 1)
+        frame()
+        config.on_key_event("W", keys.ACTION_PRESS, Mods())
+        frame()
+        assert "w" in seen[-1]  # the game's key again
+    finally:
+        config.on_close()
