@@ -259,6 +259,10 @@ class DebugOverlay:
         if key is not None:
             self.io.add_key_event(key, down)
 
+    def scroll(self, x: float, y: float) -> None:
+        """The mouse wheel turned (the window's steps): scrolls the list or window under it."""
+        self.io.add_mouse_wheel_event(float(x), float(y))
+
     def text(self, characters: str) -> None:
         """Characters typed (the window's text events): into the field being typed in."""
         for character in characters:

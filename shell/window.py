@@ -196,6 +196,10 @@ class SpeculumWindow(mglw.WindowConfig):
             else:
                 self.input.held.discard(modifier)
 
+    def on_mouse_scroll_event(self, x_offset: float, y_offset: float) -> None:
+        if not self.released and self.overlay.visible:
+            self.overlay.scroll(x_offset, y_offset)  # the entity list, the inspector (the game takes no wheel)
+
     def on_unicode_char_entered(self, char: str) -> None:
         if not self.released and self.overlay.visible:
             self.overlay.text(char)  # a field being typed in takes it (ImGui ignores it otherwise)

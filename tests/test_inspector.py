@@ -637,7 +637,7 @@ def test_typing_reaches_the_fields_and_the_editors_keys_act_when_none_is_typed_i
 def test_the_window_gives_typed_keys_to_the_field_and_editor_keys_to_the_editor():
     """Through the window shell (headless moderngl-window, keys sent by name): with a field
     typed in, a letter goes to it and not to the game; with none, Delete and Ctrl+Z act on
-    the selection and the game does not see them; other keys reach the game as before."""
+    the selection and the game does not see them; other keys reach the game as before; the wheel scrolls the list."""
     import moderngl_window as mglw
 
     from components import MeshRef
@@ -707,6 +707,20 @@ def test_the_window_gives_typed_keys_to_the_field_and_editor_keys_to_the_editor(
         config.on_key_event("W", keys.ACTION_PRESS, Mods())
         frame()
         assert overlay.entity_filter == "k" and "w" not in seen[-1]  # the field's, not the game's
+        for n in range(300):  # enough to scroll the list
+            world.spawn(Transform(position=(float(n), 0.0, 0.0)))
+        config.on_key_event("BACKSPACE", keys.ACTION_PRESS, Mods())
+        config.on_key_event("BACKSPACE", keys.ACTION_RELEASE, Mods())
+        frame()
+        assert overlay.entity_filter == "" and len(overlay.listed_entities) == 200
+        top = overlay.widgets["entity 1"][1]
+        x, y = overlay.widgets["entity 2"]
+        config.on_mouse_position_event(int(x), int(y), 0, 0)
+        frame()
+        config.on_mouse_scroll_event(0.0, -3.0)  # the wheel turned down, over the list
+        frame()
+        frame()
+        assert overlay.widgets["entity 1"][1] < top - 20  # the list scrolled up its items
         config.on_mouse_position_event(5, 715, 0, 0)
         config.on_mouse_press_event(5, 715, 1)  # in the world, away from every window: the field lets go
         frame()
