@@ -200,6 +200,12 @@ class SpeculumWindow(mglw.WindowConfig):
         if not self.released and self.overlay.visible:
             self.overlay.scroll(x_offset, y_offset)  # the entity list, the inspector (the game takes no wheel)
 
+    def _in_pixels(self, x: float, y: float) -> tuple[float, float]:
+        """A window position (points) in the output's pixels, the overlay's units (its display
+        is the framebuffer: on a high-DPI screen pixel_ratio times the window's points)."""
+        ratio = float(getattr(self.wnd, "pixel_ratio", 1.0) or 1.0)
+        return float(x) * ratio, float(y) * ratio
+
     def on_unicode_char_entered(self, char: str) -> None:
         if not self.released and self.overlay.visible:
             self.overlay.text(char)  # a field being typed in takes it (ImGui ignores it otherwise)
@@ -208,7 +214,7 @@ class SpeculumWindow(mglw.WindowConfig):
         if self.released:
             return  # events queued behind Esc
         if self.overlay.visible:
-            self.overlay.mouse_moved(x, y)
+            self.overlay.mouse_moved(*self._in_pixels(x, y))
             self.overlay.mouse_button(button, True)
             if self.overlay.wants_mouse:
                 return
@@ -239,14 +245,14 @@ class SpeculumWindow(mglw.WindowConfig):
         if self.released:
             return  # events queued behind Esc
         if self.overlay.visible:
-            self.overlay.mouse_moved(x, y)
+            self.overlay.mouse_moved(*self._in_pixels(x, y))
             self.overlay.mouse_button(button, False)
 
     def on_mouse_position_event(self, x: int, y: int, dx: int, dy: int) -> None:
         if self.released:
             return  # events queued behind Esc
         if self.overlay.visible and not self.mouse_captured:
-            self.overlay.mouse_moved(x, y)
+            self.overlay.mouse_moved(*self._in_pixels(x, y))
         # In the output's pixels (what Output.size and the main view measure): on a
         # high-DPI screen the framebuffer has pixel_ratio times the window's pixels.
         ratio = float(getattr(self.wnd, "pixel_ratio", 1.0) or 1.0)
@@ -259,7 +265,7 @@ class SpeculumWindow(mglw.WindowConfig):
         if self.released:
             return  # events queued behind Esc
         if self.overlay.visible:
-            self.overlay.mouse_moved(x, y)
+            self.overlay.mouse_moved(*self._in_pixels(x, y))
             if self.overlay.wants_mouse:  # dragging the depth-cap slider, not looking around
                 return
         # In the output's pixels (what Output.size and the main view measure): on a

@@ -731,3 +731,40 @@ def test_the_window_gives_typed_keys_to_the_field_and_editor_keys_to_the_editor(
         assert "w" in seen[-1]  # the game's key again
     finally:
         config.on_close()
+
+
+def test_on_a_high_dpi_screen_the_overlay_is_clicked_where_it_is_drawn(monkeypatch):
+    """A window of pixel_ratio 2 sends the mouse in its points, half the framebuffer's pixels
+    the overlay is drawn in: a click at a widget's place in points ticks it."""
+    import moderngl_window as mglw
+    from moderngl_window.context.base.window import BaseWindow
+
+    from components import Skybox
+    from shell.window import make_window_config
+    from tests.support import FunctionGame, look_from
+
+    def build(world):
+        look_from(world, (0, 1, 4))
+        world.spawn(Skybox())
+
+    config = mglw.create_window_config_instance(
+        make_window_config(FunctionGame(build)),
+        args=["--window", "headless", "--backend", "egl", "--size", "1280x720"])
+    monkeypatch.setattr(BaseWindow, "pixel_ratio", property(lambda self: 2.0))
+    try:
+        overlay = config.overlay
+        if not overlay.visible:
+            overlay.toggle()
+        for _ in range(2):
+            config.on_render(0.0, 1 / 60)
+        x, y = overlay.widgets["entities"]  # framebuffer pixels
+        points = (int(x / 2), int(y / 2))
+        config.on_mouse_position_event(*points, 0, 0)
+        config.on_render(0.0, 1 / 60)
+        config.on_mouse_press_event(*points, 1)
+        config.on_render(0.0, 1 / 60)
+        config.on_mouse_release_event(*points, 1)
+        config.on_render(0.0, 1 / 60)
+        assert overlay.show_entities
+    finally:
+        config.on_close()
