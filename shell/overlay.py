@@ -232,12 +232,10 @@ class DebugOverlay:
         """The editor of ``engine``'s world (a new one when the world was rebuilt): the game's
         own components, entity names and level file, where it is a ``LevelGame``."""
         game = engine.game if isinstance(engine.game, LevelGame) else None
-        if self.editor is None or self.editor.world is not engine.world:
+        rebuilt = game is not None and game.names is not self._names_taken  # the world built again from its
+        if self.editor is None or self.editor.world is not engine.world or rebuilt:  # file (a new dict of names):
             self.editor = Editor(engine.world, *((game.components, game.names, game.level_path) if game else ()))
-            self._names_taken = game.names if game else None
-        elif game is not None and game.names is not self._names_taken:  # the world rebuilt from the file
-            self.editor.names = dict(game.names)                        # (a build makes a new dict): its names now
-            self._names_taken = game.names
+            self._names_taken = game.names if game else None                  # its edits named entities gone
         return self.editor
 
     def click(self, engine: Engine, x: float, y: float, surface: bool = False) -> bool:

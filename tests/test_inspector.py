@@ -768,3 +768,35 @@ def test_on_a_high_dpi_screen_the_overlay_is_clicked_where_it_is_drawn(monkeypat
         assert overlay.show_entities
     finally:
         config.on_close()
+
+
+def test_a_level_built_again_from_its_file_gets_a_new_editor(ctx, tmp_path):
+    """The level file reloaded (rebuilt in the same world): the overlay's editor is a new one,
+    with the new entities' names and no undo of edits to entities that are gone."""
+    from engine.assets.level_file import LevelGame
+    from engine.core.frame_io import Output
+    from engine.render.targets import CaptureTarget
+    from shell.app import Engine
+    from tests.test_level_reload import level_text
+
+    path = tmp_path / "level.toml"
+    path.write_text(level_text())
+    engine = Engine(LevelGame(path), ctx)
+    capture = CaptureTarget(ctx, (320, 240))
+    overlay = DebugOverlay(ctx)
+    try:
+        engine.watch_level()
+        engine.frame(1 / 60, Output(capture.framebuffer, (320, 240)))
+        editor = overlay.editing(engine)
+        old_box = editor.names["box"]
+        editor.set_field(old_box, "Material", "roughness", 0.9)
+        assert editor.can_undo
+        engine.level_reload.reload()
+        again = overlay.editing(engine)
+        assert again is not editor and not again.can_undo
+        assert again.names["box"] != old_box and engine.world.exists(again.names["box"])
+        assert overlay.editing(engine) is again  # the same editor while nothing is rebuilt
+    finally:
+        overlay.release()
+        capture.release()
+        engine.close()
