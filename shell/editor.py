@@ -16,16 +16,19 @@ file's diff is the edit.
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Mapping
+import json
+import os
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+import tomllib
 from pyglm import glm
 
 from components import Camera, ComponentValueError, Material, Portal, Transform
 from components.rendering import automatic_mix
-from engine.assets.level_assets import MESH_MAKERS
+from engine.assets.level_assets import MESH_MAKERS, LevelAssets, level_texture, user_asset_roots
 from engine.assets.level_read import DERIVED_COMPONENTS, ENGINE_COMPONENTS, REFERENCE_FIELDS
 from engine.assets.level_save import save_level
 from engine.core.errors import SpeculumError
@@ -38,6 +41,7 @@ MAX_UNDO = 1000  # edits kept for undo; the oldest go first
 MAX_LISTED = 200  # entities the entity list shows at once (a filter finds the rest)
 NEW_DISTANCE = 3.0  # metres in front of the active camera a new entity is made
 NEW_MESH = "box"    # the shape a MeshRef added in the editor starts as
+TEXTURE_FIELDS = ("texture", "normal_map", "emissive_map", "metallic_roughness_map")  # Material's images
 
 # Fields whose None means "the engine decides" (what it decides: ``Editor.automatic``).  The
 # inspector shows such a field as automatic with a button that pins the value in use now, and
@@ -164,8 +168,10 @@ class Editor:
     refused (the component's own words), None after one that was made."""
 
     def __init__(self, world: World, components: Mapping[str, type] | None = None,
-                 names: Mapping[str, int] | None = None, level_path: str | Path | None = None) -> None:
+                 names: Mapping[str, int] | None = None, level_path: str | Path | None = None,
+                 asset_roots: Sequence[str | Path] = ()) -> None:
         self.world = world
+        self.asset_roots = [Path(root) for root in asset_roots]  # the game's, besides the level's folder
         self.components: dict[str, type] = {**ENGINE_COMPONENTS, **(components or {})}
         self.game_components = {k: v for k, v in (components or {}).items() if k not in ENGINE_COMPONENTS}
         self.names: dict[str, int] = dict(names or {})
@@ -329,6 +335,43 @@ class Editor:
         if shape not in MESH_MAKERS:
             raise EditError(f"no mesh shape {shape!r} (shapes: {', '.join(MESH_MAKERS)})")
         self.set_field(entity, "MeshRef", "mesh", MESH_MAKERS[shape]())
+
+    def texture_text(self, entity: int, field: str) -> str:
+        """A Material texture field (``TEXTURE_FIELDS``) as a level file writes it, inside its
+        braces (``checker = [128, 4]``, ``file = "wood.png"``); "" for none, and the image's
+        name for one made in code (no level file can name it)."""
+        texture = getattr(self.component(entity, "Material"), field)
+        if texture is None:
+            return ""
+        source = dict(getattr(texture, "source", None) or {})
+        if not source:
+            return f"(made in code: {texture.name})"
+        if "file" in source and self.level_path is not None:
+            try:
+                source["file"] = os.path.relpath(source["file"], self.level_path.parent)
+            except ValueError:  # another drive
+                pass
+        return ", ".join(f"{key} = {json.dumps(value)}" for key, value in source.items())
+
+    def set_texture(self, entity: int, field: str, text: str) -> None:
+        """Give a Material texture field (``TEXTURE_FIELDS``) the texture ``text`` names as a
+        level file's table would, inside its braces: ``checker = [128, 4]`` (with ``a``, ``b``),
+        ``ripples = [256, 6]``, ``file = "wood.png"`` (beside the level, or in an asset root);
+        "" for none.  Made and checked by the level file's own reader (``level_texture``), so
+        what is refused there is refused here, with its words (an EditError)."""
+        if field not in TEXTURE_FIELDS:
+            raise EditError(f"Material.{field} is not a texture (textures: {', '.join(TEXTURE_FIELDS)})")
+        value = None
+        if text.strip():
+            try:
+                spec = tomllib.loads(f"texture = {{ {text} }}")["texture"]
+                folder = self.level_path.parent if self.level_path is not None else Path.cwd()
+                value = level_texture(spec, LevelAssets(folder, [*self.asset_roots, *user_asset_roots()]),
+                                      normal_map=field == "normal_map")
+            except (tomllib.TOMLDecodeError, ValueError, OSError) as exc:
+                self.message = f"Material.{field}: {exc}"
+                raise EditError(self.message) from exc
+        self.set_field(entity, "Material", field, value)
 
     def try_set_field(self, entity: int, component: str | type, field: str, value: Any,
                       merge: bool = False) -> str | None:

@@ -48,7 +48,15 @@ from engine.assets.level_file import LevelGame
 from engine.assets.level_read import REFERENCE_FIELDS
 from engine.assets.values import json_value
 from engine.render.bindings import bind_texture, invalidate
-from shell.editor import AUTOMATIC_FIELDS, AXES, EditError, Editor, MoveHandles, move_handles
+from shell.editor import (
+    AUTOMATIC_FIELDS,
+    AXES,
+    TEXTURE_FIELDS,
+    EditError,
+    Editor,
+    MoveHandles,
+    move_handles,
+)
 from shell.overlay_text import overlay_lines
 
 if TYPE_CHECKING:  # the app's window makes the overlay
@@ -234,7 +242,8 @@ class DebugOverlay:
         game = engine.game if isinstance(engine.game, LevelGame) else None
         rebuilt = game is not None and game.names is not self._names_taken  # the world built again from its
         if self.editor is None or self.editor.world is not engine.world or rebuilt:  # file (a new dict of names):
-            self.editor = Editor(engine.world, *((game.components, game.names, game.level_path) if game else ()))
+            self.editor = Editor(engine.world, *((game.components, game.names, game.level_path, game.asset_roots)
+                                                 if game else ()))
             self._names_taken = game.names if game else None                  # its edits named entities gone
         return self.editor
 
@@ -560,6 +569,11 @@ class DebugOverlay:
             return
         if (cls_name, field) in REFERENCE_FIELDS:  # another entity, chosen from those it may name
             changed, new = self._reference(editor, entity, cls_name, field, value, label)
+        elif cls_name == "Material" and field in TEXTURE_FIELDS:  # written as in a level file, taken on Enter
+            entered, text = imgui.input_text(label, editor.texture_text(entity, field),
+                                             imgui.InputTextFlags_.enter_returns_true)
+            if entered:
+                self._try(editor, editor.set_texture, entity, field, text)
         elif (cls_name, field) == ("MeshRef", "mesh"):  # a shape to choose (its size: the Transform's scale)
             shape = editor.mesh_shape(entity)
             if imgui.begin_combo(label, shape):

@@ -800,3 +800,57 @@ def test_a_level_built_again_from_its_file_gets_a_new_editor(ctx, tmp_path):
         overlay.release()
         capture.release()
         engine.close()
+
+
+def test_a_texture_is_typed_as_a_level_file_writes_it(scene, ctx, tmp_path):
+    """The box's Material.texture typed in the inspector as a level file's table writes it
+    ("checker = [64, 4]", Enter): the box shows a checker (two colours where it was one), the
+    field shows it back as written, a file beside the level is named relative to it, and text
+    the level reader refuses changes nothing and says why in its words."""
+    from engine.assets.texture_data import TextureData
+    from shell.capture import save_png
+    from shell.editor import EditError
+
+    ents = {}
+    size = (1280, 720)
+    runner = scene(lambda world: edit_scene(world, ents), size)
+    world = runner.world
+    box = ents["box"]
+    overlay = DebugOverlay(ctx)
+    try:
+        draw, click = _hands(runner, overlay, size)
+        draw()
+        editor = overlay.editing(runner.engine)
+        editor.select(box)
+        draw()
+        plain = runner.frame()
+        ids = runner.ids()
+        face = ids == box
+        assert face.sum() > 500
+        click("Material.texture")
+        overlay.text("checker = [64, 4]")
+        draw()
+        overlay.key("ENTER", True)
+        draw()
+        overlay.key("ENTER", False)
+        draw()
+        texture = world.get(box, Material).texture
+        assert isinstance(texture, TextureData) and texture.source == {"checker": [64, 4]}
+        assert editor.texture_text(box, "texture") == "checker = [64, 4]"
+        chequered = runner.frame()
+        spread = lambda rgb: float(rgb[face].astype(float).std(axis=0).max())  # noqa: E731
+        assert spread(chequered) > spread(plain) + 20  # dark and light squares where one red was
+        with pytest.raises(EditError, match="checker = \\[size, squares\\]"):
+            editor.set_texture(box, "texture", "checker = [64]")
+        assert world.get(box, Material).texture is texture
+        with pytest.raises(EditError, match="Material.texture"):
+            editor.set_texture(box, "texture", "checker = [64, 4")  # not TOML
+        editor.level_path = tmp_path / "level.toml"
+        save_png(np.full((4, 4, 3), 200, np.uint8), tmp_path / "wood.png")
+        editor.set_texture(box, "texture", 'file = "wood.png"')
+        assert editor.texture_text(box, "texture") == 'file = "wood.png"'
+        editor.set_texture(box, "texture", "")
+        assert world.get(box, Material).texture is None
+        assert editor.undo() and editor.texture_text(box, "texture") == 'file = "wood.png"'
+    finally:
+        overlay.release()
