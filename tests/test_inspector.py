@@ -4,6 +4,8 @@ editor (one undo step), and a refused value shows the component's message. Headl
 through ImGui with the mouse events a window forwards."""
 from __future__ import annotations
 
+from contextlib import contextmanager
+
 import numpy as np
 import pytest
 from pyglm import glm
@@ -257,6 +259,24 @@ def _hands(runner, overlay, size=SIZE):
     return draw, click
 
 
+@contextmanager
+def _box_selected(scene, ctx, size=(1280, 720)):
+    """``edit_scene`` at ``size`` (the box right of the overlay's window), the overlay drawn
+    and the box selected: yields (runner, overlay, draw, click, editor, box)."""
+    ents = {}
+    runner = scene(lambda world: edit_scene(world, ents), size)
+    overlay = DebugOverlay(ctx)
+    try:
+        draw, click = _hands(runner, overlay, size)
+        draw()
+        editor = overlay.editing(runner.engine)
+        editor.select(ents["box"])
+        draw()
+        yield runner, overlay, draw, click, editor, ents["box"]
+    finally:
+        overlay.release()
+
+
 def test_the_entity_list_reaches_the_sky_whose_sun_is_pinned_and_handed_back(scene, ctx):
     """The sky and the lights have no pixel to click: the entity list (ticked open, filtered,
     clicked) selects them.  The Skybox's sun_direction, left to the engine, shows as
@@ -388,18 +408,9 @@ def test_a_move_handle_dragged_moves_the_selection_along_its_axis(scene, ctx):
     the box's origin, projected by the test's own math, moved 40 pixels along that line and
     the box only along world x; the handles take the mouse (no click through to the world)
     while over them; one undo puts it back."""
-    ents = {}
-    size = (1280, 720)  # the box right of the overlay's window
-    runner = scene(lambda world: edit_scene(world, ents), size)
-    world = runner.world
-    box = ents["box"]
-    overlay = DebugOverlay(ctx)
-    try:
-        draw, _ = _hands(runner, overlay, size)
-        draw()
-        editor = overlay.editing(runner.engine)
-        editor.select(box)
-        draw()
+    size = (1280, 720)
+    with _box_selected(scene, ctx, size) as (runner, overlay, draw, _, editor, box):
+        world = runner.world
         before = glm.vec3(world.get(box, Transform).position)
         origin = np.array(runner.project(before), float)
         x_end = np.array(runner.project(before + glm.vec3(overlay.handles.length, 0.0, 0.0)), float)
@@ -426,8 +437,6 @@ def test_a_move_handle_dragged_moves_the_selection_along_its_axis(scene, ctx):
         overlay.mouse_moved(5, size[1] - 5)  # far from the handles and every window
         draw()
         assert not overlay.wants_mouse
-    finally:
-        overlay.release()
 
 
 def test_a_child_moves_along_world_axes_whatever_its_parent_turned(scene):
@@ -545,15 +554,8 @@ def test_a_new_entity_given_a_mesh_shows_it_and_its_shape_is_chosen(scene, ctx, 
     from components import MeshRef
     from engine.assets.level_file import load_level
 
-    ents = {}
-    size = (1280, 720)
-    runner = scene(lambda world: edit_scene(world, ents), size)
-    world = runner.world
-    overlay = DebugOverlay(ctx)
-    try:
-        draw, click = _hands(runner, overlay, size)
-        draw()
-        editor = overlay.editing(runner.engine)
+    with _box_selected(scene, ctx) as (runner, overlay, draw, click, editor, _):
+        world = runner.world
         empty = runner.frame()
         made = editor.create(name="thing")
         editor.add_component(made, "MeshRef")
@@ -584,8 +586,6 @@ def test_a_new_entity_given_a_mesh_shows_it_and_its_shape_is_chosen(scene, ctx, 
         names = again.spawn(other)
         assert other.get(names["thing"], MeshRef).mesh.source == {"sphere": 0.5}
         other.close()
-    finally:
-        overlay.release()
 
 
 def test_typing_reaches_the_fields_and_the_editors_keys_act_when_none_is_typed_in(scene, ctx):
@@ -593,14 +593,8 @@ def test_typing_reaches_the_fields_and_the_editors_keys_act_when_none_is_typed_i
     and while it is typed in the overlay wants the keyboard (the game and the shortcuts do
     not get the keys); Backspace edits it.  Out of the field: Delete deletes the selection,
     Ctrl+Z brings it back, Ctrl+D duplicates, Ctrl+Y redoes."""
-    ents = {}
-    size = (1280, 720)
-    runner = scene(lambda world: edit_scene(world, ents), size)
-    world = runner.world
-    overlay = DebugOverlay(ctx)
-    try:
-        draw, click = _hands(runner, overlay, size)
-        draw()
+    with _box_selected(scene, ctx) as (runner, overlay, draw, click, editor, box):
+        world = runner.world
         click("entities")
         click("entity filter")
         assert overlay.wants_keyboard
@@ -612,14 +606,12 @@ def test_typing_reaches_the_fields_and_the_editors_keys_act_when_none_is_typed_i
         overlay.key("BACKSPACE", False)
         draw()
         assert overlay.entity_filter == "sky" and len(overlay.listed_entities) == 1
-        overlay.mouse_moved(5, size[1] - 5)
+        overlay.mouse_moved(5, runner.size[1] - 5)
         overlay.mouse_button(1, True)
         draw()
         overlay.mouse_button(1, False)  # a click elsewhere: the field lets go of the keyboard
         draw()
         assert not overlay.wants_keyboard
-        editor = overlay.editor
-        box = ents["box"]
         editor.select(box)
         assert overlay.shortcut(runner.engine, "DELETE") and not world.exists(box)
         assert overlay.shortcut(runner.engine, "Z", ctrl=True)
@@ -630,8 +622,6 @@ def test_typing_reaches_the_fields_and_the_editors_keys_act_when_none_is_typed_i
         editor.select(restored)
         assert overlay.shortcut(runner.engine, "D", ctrl=True) and len([e for e, _ in world.query_one(Material)]) == 3
         assert not overlay.shortcut(runner.engine, "W")  # the game's key
-    finally:
-        overlay.release()
 
 
 def test_the_window_gives_typed_keys_to_the_field_and_editor_keys_to_the_editor():
@@ -811,18 +801,8 @@ def test_a_texture_is_typed_as_a_level_file_writes_it(scene, ctx, tmp_path):
     from shell.capture import save_png
     from shell.editor import EditError
 
-    ents = {}
-    size = (1280, 720)
-    runner = scene(lambda world: edit_scene(world, ents), size)
-    world = runner.world
-    box = ents["box"]
-    overlay = DebugOverlay(ctx)
-    try:
-        draw, click = _hands(runner, overlay, size)
-        draw()
-        editor = overlay.editing(runner.engine)
-        editor.select(box)
-        draw()
+    with _box_selected(scene, ctx) as (runner, overlay, draw, click, editor, box):
+        world = runner.world
         plain = runner.frame()
         ids = runner.ids()
         face = ids == box
@@ -852,5 +832,3 @@ def test_a_texture_is_typed_as_a_level_file_writes_it(scene, ctx, tmp_path):
         editor.set_texture(box, "texture", "")
         assert world.get(box, Material).texture is None
         assert editor.undo() and editor.texture_text(box, "texture") == 'file = "wood.png"'
-    finally:
-        overlay.release()
