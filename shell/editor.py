@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import math
 import os
 from collections.abc import Mapping, Sequence
 from pathlib import Path
@@ -52,63 +53,105 @@ AUTOMATIC_FIELDS: dict[tuple[str, str], str] = {
 }
 
 
-GIZMO_SHARE = 0.15  # a move handle's world length: this share of its distance from the eye (a constant screen size)
+GIZMO_SHARE = 0.15  # a handle's world length (a ring's radius): this share of its distance from the eye
+HANDLE_MODES = ("move", "turn", "scale")
 AXES = (glm.vec3(1.0, 0.0, 0.0), glm.vec3(0.0, 1.0, 0.0), glm.vec3(0.0, 0.0, 1.0))
+RING_POINTS = 48    # points on a turn handle's ring
+MIN_SCALE_FACTOR = 0.01  # a scale handle shrinks an axis to this share of its scale at the drag's start at most
+
+Pixel = tuple[float, float]
 
 
 @dataclasses.dataclass(frozen=True)
-class MoveHandles:
-    """The move gizmo of an entity as the main view shows it: its origin and the end of each
-    world axis's handle (``GIZMO_SHARE`` of the origin's distance from the eye long), in
-    output pixels from the top left; and the world length of each handle."""
+class Handles:
+    """An entity's transform handles as the main view shows them, in output pixels from the
+    top left: one a world axis (``move``, ``turn``), or one an axis of its own (``scale``: the
+    scale is the entity's own), each a line from its origin (``move``, ``scale``) or a ring
+    about it (``turn``), ``GIZMO_SHARE`` of its distance from the eye long (a constant size
+    on screen)."""
 
-    origin: tuple[float, float]
-    ends: tuple[tuple[float, float], ...]  # x, y, z
-    length: float
+    mode: str
+    origin: Pixel
+    axes: tuple[glm.vec3, ...]             # the world direction each handle stands for
+    lines: tuple[tuple[Pixel, ...], ...]   # each handle on screen: [origin, end], or its ring's points
+    length: float                          # a handle's world length (a ring's radius)
+    toward_eye: tuple[bool, ...]           # each axis points to the eye's side of the origin
 
-    def nearest(self, point: tuple[float, float], reach: float) -> int | None:
-        """The axis whose handle (the segment from the origin to its end) passes within
-        ``reach`` pixels of ``point``, the nearest; None for none."""
-        best, axis = reach, None
-        o = glm.vec2(self.origin)
-        for index, end in enumerate(self.ends):
-            segment = glm.vec2(end) - o
-            along = glm.clamp(glm.dot(glm.vec2(point) - o, segment) / max(glm.dot(segment, segment), 1e-9), 0.0, 1.0)
-            gap = glm.length(glm.vec2(point) - (o + segment * along))
-            if gap <= best:
-                best, axis = gap, index
-        return axis
+    def nearest(self, point: Pixel, reach: float) -> int | None:
+        """The handle passing within ``reach`` pixels of ``point``, the nearest; None for none."""
+        best, found = reach, None
+        p = glm.vec2(point)
+        for index, line in enumerate(self.lines):
+            ring = line + line[:1] if self.mode == "turn" else line
+            for a, b in zip(ring, ring[1:], strict=False):
+                a, b = glm.vec2(a), glm.vec2(b)
+                segment = b - a
+                along = glm.clamp(glm.dot(p - a, segment) / max(glm.dot(segment, segment), 1e-9), 0.0, 1.0)
+                gap = glm.length(p - (a + segment * along))
+                if gap <= best:
+                    best, found = gap, index
+        return found
 
-    def distance(self, axis: int, moved: tuple[float, float]) -> float:
-        """The world distance along ``axis`` a mouse moved by ``moved`` pixels asks for: its
-        part along the handle on screen, at the handle's scale (world units a pixel)."""
-        segment = glm.vec2(self.ends[axis]) - glm.vec2(self.origin)
+    def distance(self, axis: int, moved: Pixel) -> float:
+        """(``move``, ``scale``) The world distance along ``axis`` a mouse moved by ``moved``
+        pixels asks for: its part along the handle on screen, at the handle's scale."""
+        origin, end = self.lines[axis]
+        segment = glm.vec2(end) - glm.vec2(origin)
         pixels = glm.length(segment)
         if pixels < 1e-6:  # the axis points at the eye: it cannot be dragged along
             return 0.0
         return glm.dot(glm.vec2(moved), segment / pixels) * self.length / pixels
 
+    def sweep(self, axis: int, before: Pixel, now: Pixel) -> float:
+        """(``turn``) The angle about ``axis`` (radians, right-handed) that the mouse moving
+        from ``before`` to ``now`` sweeps about the origin on screen: counter-clockwise on
+        screen is positive about an axis pointing to the eye."""
+        o = glm.vec2(self.origin)
+        a, b = glm.vec2(before) - o, glm.vec2(now) - o
+        if glm.length(a) < 1e-6 or glm.length(b) < 1e-6:
+            return 0.0
+        clockwise = math.atan2(a.x * b.y - a.y * b.x, glm.dot(a, b))  # rows run down the screen
+        return -clockwise if self.toward_eye[axis] else clockwise
 
-def move_handles(world: World, entity: int, view_proj: glm.mat4, eye: glm.vec3,
-                 size: tuple[int, int]) -> MoveHandles | None:
-    """``entity``'s move handles in the view ``view_proj`` (from ``eye``) on an output of
-    ``size`` pixels; None when it has no Transform or its origin is behind the eye."""
+
+def transform_handles(world: World, entity: int, view_proj: glm.mat4, eye: glm.vec3, size: tuple[int, int],
+                      mode: str = "move") -> Handles | None:
+    """``entity``'s handles of ``mode`` (``HANDLE_MODES``) in the view ``view_proj`` (from
+    ``eye``) on an output of ``size`` pixels; None when it has no Transform or a handle is
+    behind the eye."""
+    if mode not in HANDLE_MODES:
+        raise EditError(f"no handles {mode!r} (modes: {', '.join(HANDLE_MODES)})")
     transform = world.try_get(entity, Transform)
     if transform is None:
         return None
-    origin = glm.vec3(current_world_matrix(world, transform)[3])
+    matrix = current_world_matrix(world, transform)
+    origin = glm.vec3(matrix[3])
     length = GIZMO_SHARE * max(glm.length(origin - glm.vec3(eye)), 1e-3)
+    axes = AXES
+    if mode == "scale":
+        axes = tuple(glm.normalize(glm.vec3(matrix[i])) if glm.length(glm.vec3(matrix[i])) > 1e-9 else AXES[i]
+                     for i in range(3))
 
-    def pixel(point: glm.vec3) -> tuple[float, float] | None:
+    def pixel(point: glm.vec3) -> Pixel | None:
         clip = view_proj * glm.vec4(point, 1.0)
         if clip.w <= 1e-6:
             return None
         return ((clip.x / clip.w * 0.5 + 0.5) * size[0], (0.5 - clip.y / clip.w * 0.5) * size[1])
 
-    points = [pixel(origin), *(pixel(origin + axis * length) for axis in AXES)]
-    if any(point is None for point in points):
+    if mode == "turn":
+        worlds = []
+        for i in range(3):
+            u, v = AXES[(i + 1) % 3], AXES[(i + 2) % 3]
+            worlds.append([origin + length * (math.cos(t) * u + math.sin(t) * v)
+                           for t in (2.0 * math.pi * k / RING_POINTS for k in range(RING_POINTS))])
+    else:
+        worlds = [[origin, origin + axis * length] for axis in axes]
+    centre = pixel(origin)
+    lines = [[pixel(point) for point in line] for line in worlds]
+    if centre is None or any(p is None for line in lines for p in line):
         return None
-    return MoveHandles(points[0], tuple(points[1:]), length)
+    toward = tuple(glm.dot(axis, glm.vec3(eye) - origin) > 0.0 for axis in axes)
+    return Handles(mode, centre, axes, tuple(tuple(line) for line in lines), length, toward)
 
 
 class EditError(SpeculumError, ValueError):
@@ -372,6 +415,26 @@ class Editor:
                 self.message = f"Material.{field}: {exc}"
                 raise EditError(self.message) from exc
         self.set_field(entity, "Material", field, value)
+
+    def turn(self, entity: int, start: glm.quat, world_axis: glm.vec3, angle: float) -> None:
+        """Turn ``entity`` by ``angle`` (radians) about ``world_axis`` through its origin from
+        the rotation it had at the drag's start (``start``: its Transform.rotation then), the
+        turn carried into its parent's space; one undo step for the whole drag."""
+        transform = self.component(entity, Transform)
+        turn = glm.angleAxis(angle, glm.normalize(glm.vec3(world_axis)))
+        parent = transform.parent
+        if parent is not None and self.world.exists(parent) and self.world.has(parent, Transform):
+            linear = glm.mat3(current_world_matrix(self.world, self.world.get(parent, Transform)))
+            frame = glm.quat_cast(glm.mat3(*(glm.normalize(column) for column in (linear[0], linear[1], linear[2]))))
+            turn = glm.inverse(frame) * turn * frame
+        self.set_field(entity, Transform, "rotation", glm.normalize(turn * glm.quat(start)), merge=True)
+
+    def rescale(self, entity: int, start: glm.vec3, axis: int, factor: float) -> None:
+        """Scale ``entity`` along its own ``axis`` (0-2) by ``factor`` from the scale it had at
+        the drag's start (``start``), at least ``MIN_SCALE_FACTOR`` of it; one undo step."""
+        scale = glm.vec3(start)
+        scale[axis] *= max(factor, MIN_SCALE_FACTOR)
+        self.set_field(entity, Transform, "scale", scale, merge=True)
 
     def try_set_field(self, entity: int, component: str | type, field: str, value: Any,
                       merge: bool = False) -> str | None:

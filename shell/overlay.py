@@ -4,8 +4,8 @@ paths in use, toggles for them, the post-processing (tone curve, exposure, bloom
 for bloom and the curve), and shader errors from hot reload; and the level editor's inspector (``shell/editor.py``): a
 click in the world selects the entity seen there (Ctrl+click: the mirror or portal it was
 seen through), or the entity list (every entity by name and kinds, filtered) one that shows
-nowhere, outlined wherever it shows (``engine/render/outline.py``), with move handles to
-drag it along a world axis (``editor.move_handles``); its components'
+nowhere, outlined wherever it shows (``engine/render/outline.py``), with handles to move it
+along a world axis, turn it about one or scale it along its own (``editor.transform_handles``); its components'
 fields are drag inputs, checkboxes and colour pickers that edit it through the components'
 own checks, with undo, redo, add, remove and save; a field the engine decides while unset
 (``editor.AUTOMATIC_FIELDS``) is pinned at the value in use, or handed back.
@@ -32,6 +32,7 @@ from __future__ import annotations
 import ctypes
 import time
 from collections import deque
+from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -50,12 +51,12 @@ from engine.assets.values import json_value
 from engine.render.bindings import bind_texture, invalidate
 from shell.editor import (
     AUTOMATIC_FIELDS,
-    AXES,
+    HANDLE_MODES,
     TEXTURE_FIELDS,
     EditError,
     Editor,
-    MoveHandles,
-    move_handles,
+    Handles,
+    transform_handles,
 )
 from shell.overlay_text import overlay_lines
 
@@ -80,6 +81,21 @@ IMGUI_KEYS = {"BACKSPACE": imgui.Key.backspace, "DELETE": imgui.Key.delete, "ENT
 HDR_COLOUR = imgui.ColorEditFlags_.float | imgui.ColorEditFlags_.hdr  # colour fields: floats, not clamped to 0-1
 GIZMO_REACH = 6.0                          # pixels from a move handle that still take it
 ENTITY_LIST_WIDTH, ENTITY_LIST_HEIGHT = INSPECTOR_WIDTH - 16, 160  # pixels of the entity list's scrolled part
+
+
+@dataclass
+class _Drag:
+    """A transform handle being dragged: what, which handle, the Transform field's value and
+    the mouse when it was pressed, the handles then (their scale holds for the drag), and a
+    turn's angle so far and the mouse's last place."""
+
+    entity: int
+    axis: int
+    start: object
+    pressed: tuple[float, float]
+    handles: Handles
+    last: tuple[float, float]
+    angle: float = 0.0
 
 
 class OverlayRenderer(ModernGLRenderer):
@@ -209,9 +225,10 @@ class DebugOverlay:
         self._removing: tuple[int, str] | None = None
         self._names_taken: dict[str, int] | None = None  # the game's names the editor last took (a rebuild's are new)
         self.show_entities = False            # the entity list is shown ("entities" ticked)
-        self.handles: MoveHandles | None = None  # the selection's move gizmo, last drawn
-        self._hovered: int | None = None      # the gizmo's axis under the mouse
-        self._moving: tuple | None = None     # a drag of a handle: (entity, axis, start, pressed at, handles then)
+        self.handle_mode = "move"             # the selection's handles: HANDLE_MODES, chosen in the inspector
+        self.handles: Handles | None = None   # the selection's handles, last drawn
+        self._hovered: int | None = None      # the handle under the mouse
+        self._dragging: _Drag | None = None   # a handle being dragged
         self.entity_filter = ""               # the entity list's filter, as typed
         self.listed_entities: list[str] = []  # the entity list's labels last drawn (while it is open)
 
@@ -305,7 +322,7 @@ class DebugOverlay:
     @property
     def wants_mouse(self) -> bool:
         """The pointer is over the overlay (its clicks and drags are the overlay's)."""
-        return self.visible and (self.io.want_capture_mouse or self._hovered is not None or self._moving is not None)
+        return self.visible and (self.io.want_capture_mouse or self._hovered is not None or self._dragging is not None)
 
     def draw(self, engine: Engine, framebuffer: moderngl.Framebuffer, size: tuple[int, int]) -> None:
         """Lay out the overlay for ``engine``'s last frame, apply its toggles, and draw it
@@ -419,7 +436,7 @@ class DebugOverlay:
         self.region = (int(x), int(y), int(min(np.ceil(w), width - x)), int(min(np.ceil(h), height - y)))
         imgui.end()
         self._inspector(engine, self._entity_list(engine))
-        self._move_gizmo(engine)
+        self._transform_handles(engine)
 
     # --- the level editor's entity list and inspector -----------------------------------------
     def _entity_list(self, engine: Engine) -> float:
@@ -510,6 +527,12 @@ class DebugOverlay:
             self.inspector_lines = lines
             imgui.end()
             return
+        imgui.text("handles")
+        for mode in HANDLE_MODES:
+            imgui.same_line()
+            if imgui.radio_button(f"{mode}##handles", self.handle_mode == mode):
+                self.handle_mode = mode
+            self._widget(f"handles {mode}")
         imgui.push_item_width(INSPECTOR_WIDTH * 0.6)
         name = editor.name_of(entity)
         lines.append(name if name == f"entity {entity}" else f"{name} (entity {entity})")
@@ -631,53 +654,77 @@ class DebugOverlay:
             imgui.set_item_tooltip(automatic)
             self._widget(f"{cls_name}.{field} automatic")
 
-    def _move_gizmo(self, engine: Engine) -> None:
-        """The selection's move handles over the world (x red, y green, z blue; ``move_handles``):
-        a handle pressed and dragged moves it along that world axis, the mouse's motion along
-        the handle on screen at the handle's scale when pressed; one undo step a drag."""
+    def _transform_handles(self, engine: Engine) -> None:
+        """The selection's handles over the world (x red, y green, z blue; ``transform_handles``),
+        of the inspector's mode: ``move`` along a world axis, ``turn`` about one (its ring),
+        ``scale`` along one of its own.  A handle pressed and dragged edits the Transform from
+        where it stood when pressed: the mouse's motion along the handle on screen at the
+        handle's scale, or the angle it sweeps about the origin; one undo step a drag."""
         editor, view = self.editor, engine.main_view
         entity = editor.selected if editor is not None else None
         handles = None
         if entity is not None and view is not None and engine.world.exists(entity):
             size = self.io.display_size
-            handles = move_handles(engine.world, entity, view.view_proj, view.eye, (size.x, size.y))
+            handles = transform_handles(engine.world, entity, view.view_proj, view.eye, (size.x, size.y),
+                                        self.handle_mode)
         self.handles = handles
         if handles is None:
-            self._end_move(editor)
+            self._end_drag(editor)
             self._hovered = None
             return
         point = (self.io.mouse_pos.x, self.io.mouse_pos.y)
-        if self._moving is not None:
-            moving, axis, start, pressed, scale = self._moving
-            if moving == entity and imgui.is_mouse_down(0):
-                moved = (point[0] - pressed[0], point[1] - pressed[1])
-                try:
-                    editor.move(entity, start, AXES[axis] * scale.distance(axis, moved))
-                except (ComponentValueError, EditError) as exc:
-                    editor.message = str(exc)
+        drag = self._dragging
+        if drag is not None:
+            if drag.entity == entity and drag.handles.mode == handles.mode and imgui.is_mouse_down(0):
+                self._drag_to(editor, drag, point)
             else:
-                self._end_move(editor)
+                self._end_drag(editor)
         else:
             over_window = imgui.is_window_hovered(imgui.HoveredFlags_.any_window)
             self._hovered = None if over_window else handles.nearest(point, GIZMO_REACH)
             if self._hovered is not None and imgui.is_mouse_clicked(0):
-                start = glm.vec3(engine.world.get(entity, Transform).position)
-                self._moving = (entity, self._hovered, start, point, handles)
-        active = self._moving[1] if self._moving is not None else self._hovered
+                transform = engine.world.get(entity, Transform)
+                start = {"move": transform.position, "turn": transform.rotation, "scale": transform.scale}[handles.mode]
+                self._dragging = _Drag(entity, self._hovered, type(start)(start), point, handles, point)
+        active = self._dragging.axis if self._dragging is not None else self._hovered
         draw = imgui.get_background_draw_list()
-        origin = imgui.ImVec2(*handles.origin)
-        for axis, end in enumerate(handles.ends):
+        for axis, line in enumerate(handles.lines):
             rgb = [0.25, 0.25, 0.25]
             rgb[axis] = 1.0
             colour = imgui.get_color_u32(imgui.ImVec4(*rgb, 1.0 if axis == active else 0.8))
             width = 4.0 if axis == active else 2.5
-            draw.add_line(origin, imgui.ImVec2(*end), colour, width)
-            draw.add_circle_filled(imgui.ImVec2(*end), width + 2.0, colour)
+            points = [imgui.ImVec2(*p) for p in line]
+            if handles.mode == "turn":
+                draw.add_polyline(points, colour, width, imgui.ImDrawFlags_.closed)
+                continue
+            draw.add_line(points[0], points[1], colour, width)
+            end, r = points[1], width + 2.0
+            if handles.mode == "scale":
+                draw.add_rect_filled(imgui.ImVec2(end.x - r, end.y - r), imgui.ImVec2(end.x + r, end.y + r), colour)
+            else:
+                draw.add_circle_filled(end, r, colour)
 
-    def _end_move(self, editor: Editor | None) -> None:
-        if self._moving is not None and editor is not None:
+    @staticmethod
+    def _drag_to(editor: Editor, drag: _Drag, point: tuple[float, float]) -> None:
+        """A handle's drag with the mouse at ``point``: the Transform from the drag's start."""
+        handles, axis = drag.handles, drag.axis
+        moved = (point[0] - drag.pressed[0], point[1] - drag.pressed[1])
+        try:
+            if handles.mode == "move":
+                editor.move(drag.entity, drag.start, handles.axes[axis] * handles.distance(axis, moved))
+            elif handles.mode == "scale":
+                editor.rescale(drag.entity, drag.start, axis, 1.0 + handles.distance(axis, moved) / handles.length)
+            else:  # the angle swept, added up frame by frame (a drag may go round more than half a turn)
+                drag.angle += handles.sweep(axis, drag.last, point)
+                drag.last = point
+                editor.turn(drag.entity, drag.start, handles.axes[axis], drag.angle)
+        except (ComponentValueError, EditError) as exc:
+            editor.message = str(exc)
+
+    def _end_drag(self, editor: Editor | None) -> None:
+        if self._dragging is not None and editor is not None:
             editor.end_drag()
-        self._moving = None
+        self._dragging = None
 
     @staticmethod
     def _save(engine: Engine, editor: Editor) -> None:

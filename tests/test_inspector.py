@@ -4,6 +4,7 @@ editor (one undo step), and a refused value shows the component's message. Headl
 through ImGui with the mouse events a window forwards."""
 from __future__ import annotations
 
+import math
 from contextlib import contextmanager
 
 import numpy as np
@@ -832,3 +833,97 @@ def test_a_texture_is_typed_as_a_level_file_writes_it(scene, ctx, tmp_path):
         editor.set_texture(box, "texture", "")
         assert world.get(box, Material).texture is None
         assert editor.undo() and editor.texture_text(box, "texture") == 'file = "wood.png"'
+
+
+def test_a_turn_ring_dragged_turns_the_selection_by_the_angle_swept_about_it(scene, ctx):
+    """"turn" chosen, the mouse led round the z ring (which faces the camera) from its +x
+    point to its +y point: the box turns about world z by the angle the mouse swept about
+    the box's origin on screen (the test's own projection), counter-clockwise positive as
+    z points to the camera; one undo puts it back."""
+    with _box_selected(scene, ctx) as (runner, overlay, draw, click, editor, box):
+        world = runner.world
+        click("handles turn")
+        assert overlay.handles.mode == "turn"
+        before = glm.quat(world.get(box, Transform).rotation)
+        centre = glm.vec3(world.get(box, Transform).position)
+        length = overlay.handles.length
+        x, y = glm.vec3(1, 0, 0), glm.vec3(0, 1, 0)
+        ring = [np.array(runner.project(centre + length * (math.cos(t) * x + math.sin(t) * y)), float)
+                for t in np.linspace(0.0, math.pi / 2, 13)]
+        origin = np.array(runner.project(centre), float)
+        overlay.mouse_moved(*ring[0])
+        draw()
+        assert overlay.wants_mouse
+        overlay.mouse_button(1, True)
+        draw()
+        for p in ring[1:]:
+            overlay.mouse_moved(*p)
+            draw()
+        overlay.mouse_button(1, False)
+        draw()
+        a, b = ring[0] - origin, ring[-1] - origin
+        swept = math.atan2(-(a[0] * b[1] - a[1] * b[0]), float(np.dot(a, b)))  # counter-clockwise, rows down
+        turned = world.get(box, Transform).rotation * glm.inverse(before)
+        assert abs(glm.angle(turned) - swept) < math.radians(1.5), (glm.angle(turned), swept)
+        assert glm.dot(glm.axis(turned), glm.vec3(0, 0, 1)) > 0.999, glm.axis(turned)
+        assert 60 < math.degrees(swept) < 120
+        assert editor.undo() and world.get(box, Transform).rotation == before and not editor.can_undo
+
+
+def test_a_scale_handle_dragged_scales_the_selection_along_its_own_axis(scene, ctx):
+    """"scale" chosen, the box's x handle dragged 30 pixels outwards: its x scale grows so that
+    the handle's end, scaled with it, lands under the mouse (the test's own projection); y
+    and z keep their scale; one undo puts it back."""
+    with _box_selected(scene, ctx) as (runner, overlay, draw, click, editor, box):
+        world = runner.world
+        click("handles scale")
+        handles = overlay.handles
+        assert handles.mode == "scale"
+        before = glm.vec3(world.get(box, Transform).scale)
+        centre = glm.vec3(world.get(box, Transform).position)
+        origin = np.array(runner.project(centre), float)
+        end = np.array(runner.project(centre + glm.vec3(handles.length, 0, 0)), float)
+        along = (end - origin) / np.linalg.norm(end - origin)
+        grab = end - along * 2.0
+        overlay.mouse_moved(*grab)
+        draw()
+        overlay.mouse_button(1, True)
+        draw()
+        for step in range(1, 4):
+            overlay.mouse_moved(*(grab + along * 10.0 * step))
+            draw()
+        overlay.mouse_button(1, False)
+        draw()
+        after = glm.vec3(world.get(box, Transform).scale)
+        factor = after.x / before.x
+        assert factor > 1.05 and after.y == before.y and after.z == before.z
+        landed = np.array(runner.project(centre + glm.vec3(handles.length * factor, 0, 0)), float)
+        assert np.linalg.norm(landed - (end + along * 30.0)) < 3.0, (landed, end + along * 30.0)
+        assert editor.undo() and world.get(box, Transform).scale == before
+
+
+def test_a_child_turns_about_a_world_axis_whatever_its_parent_turned(scene):
+    """``Editor.turn`` carries a world turn into the parent's space: the child's world
+    rotation becomes the turn times what it was (the engine's own chain)."""
+    from engine.core.transforms import current_world_matrix
+    from shell.editor import Editor
+
+    ents = {}
+
+    def build(world):
+        edit_scene(world, ents)
+        tilt = glm.angleAxis(glm.radians(70.0), glm.normalize(glm.vec3(1, 2, 0)))
+        ents["parent"] = world.spawn(Transform(rotation=tilt))
+        ents["child"] = world.spawn(Transform(position=(0.5, 0.0, 0.0), parent=ents["parent"],
+                                              rotation=glm.angleAxis(0.3, glm.vec3(0, 0, 1))))
+
+    runner = scene(build, (64, 48))
+    world, child = runner.world, ents["child"]
+
+    def world_rotation():
+        return glm.quat_cast(glm.mat3(current_world_matrix(world, world.get(child, Transform))))
+
+    was = world_rotation()
+    Editor(world).turn(child, glm.quat(world.get(child, Transform).rotation), glm.vec3(0, 1, 0), 0.8)
+    want = glm.angleAxis(0.8, glm.vec3(0, 1, 0)) * was
+    assert abs(abs(glm.dot(world_rotation(), want)) - 1.0) < 1e-5, (world_rotation(), want)
