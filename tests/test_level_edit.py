@@ -3,6 +3,7 @@ the edit, names, order and comments kept), and the saved file loads to the edite
 from __future__ import annotations
 
 import difflib
+import os
 import shutil
 import textwrap
 from pathlib import Path
@@ -393,3 +394,134 @@ def test_entities_made_copied_and_deleted_in_the_editor_are_their_tables_in_the_
         editor.delete(names["camera"])
     world.close()
     spawned.close()
+
+
+@pytest.mark.filterwarnings("ignore:.*no Transform")  # a Transform taken away on purpose
+@pytest.mark.parametrize("seed", [int(s) for s in os.environ.get("EDIT_FUZZ_SEEDS", "7,20261129").split(",")])
+def test_random_edits_with_undo_and_redo_save_and_load_back_as_the_world(tmp_path, seed):
+    """Hardening: 160 random editor operations on a copy of the sample level (make,
+    duplicate, delete, move, set a roughness, add and remove components, undo, redo; the
+    refused ones refused with an EditError or a ComponentValueError and nothing changed),
+    then a save over the file: the file loads to the world the editor holds, entity by
+    entity and field by field (the level file's own encoding of both, floats to float32)."""
+    import random
+
+    from engine.assets.level_save import _world_tables
+    from shell.editor import EditError, Editor
+
+    rng = random.Random(seed)
+    path = _copy_hall(tmp_path)
+    world, names, _ = loaded(path, f"edit_fuzz_{seed}")
+    editor = Editor(world, EXTRA, dict(names), path)
+    counts: dict[str, int] = {}
+
+    def alive() -> list[int]:
+        return sorted(editor.names[n] for n in editor.names if world.exists(editor.names[n]))
+
+    for _ in range(int(os.environ.get("EDIT_FUZZ_OPS", "160"))):
+        op = rng.choice(["create", "duplicate", "delete", "move", "rough", "add", "remove", "undo", "undo", "redo"])
+        entities = alive()
+        entity = rng.choice(entities)
+        try:
+            if op == "create":
+                editor.create(Transform(position=(rng.uniform(-5, 5), rng.uniform(0, 3), rng.uniform(-5, 5))))
+            elif op == "duplicate":
+                editor.duplicate(entity)
+            elif op == "delete":
+                editor.delete(entity)
+            elif op == "move" and world.has(entity, Transform):
+                editor.set_field(entity, "Transform", "position", (rng.uniform(-5, 5), 1.0, rng.uniform(-5, 5)))
+            elif op == "rough" and world.has(entity, Material):
+                editor.set_field(entity, "Material", "roughness", round(rng.random(), 3))
+            elif op == "add" and editor.addable(entity):
+                editor.add_component(entity, rng.choice(editor.addable(entity)))
+            elif op == "remove" and editor.components_of(entity):
+                editor.remove_component(entity, rng.choice(editor.components_of(entity))[0])
+            elif op == "undo":
+                editor.undo()
+            elif op == "redo":
+                editor.redo()
+            counts[op] = counts.get(op, 0) + 1
+        except (EditError, ComponentValueError):
+            counts["refused"] = counts.get("refused", 0) + 1
+    assert counts.get("refused", 0) < 80 and all(counts.get(op, 0) > 3 for op in ("create", "delete", "undo")), counts
+    try:
+        editor.save()
+    except Exception as exc:  # a value no level file can hold is refused by name; then there is nothing to load
+        pytest.fail(f"the save was refused: {exc} ({counts})")
+    again = World(f"edit_fuzz_{seed}_again")
+    spawned = load_level(path, EXTRA).spawn(again)
+    by_id_now = {e: n for n, e in editor.names.items() if world.exists(e)}
+    _, tables_now = _world_tables(world, path, {n: e for e, n in by_id_now.items()}, EXTRA)
+    _, tables_back = _world_tables(again, path, spawned, EXTRA)
+    now = {t["name"]: t for t in tables_now.values()}
+    back = {t["name"]: t for t in tables_back.values()}
+    assert sorted(now) == sorted(back), (sorted(set(now) ^ set(back)), counts)
+    different = [name for name in now if not same_floats(now[name], back[name], 1e-5)]
+    assert not different, [(name, now[name], back[name]) for name in different[:3]]
+    world.close()
+    again.close()
+
+
+@pytest.mark.filterwarnings("ignore:.*no Transform")
+def test_random_edits_while_the_sample_level_runs_draw_without_a_gl_error(ctx):
+    """Hardening: 90 random editor operations (as above) on the running sample level, a
+    frame after every third: every frame draws without a GL error, and after the level's
+    own frames go on the renderer holds no batch of an entity gone (its GPU resources came
+    back)."""
+    import random
+
+    from engine.core.frame_io import Output
+    from engine.render.targets import CaptureTarget
+    from games.hall_of_mirrors.level import HallOfMirrors
+    from shell.app import Engine
+    from shell.editor import EditError, Editor
+
+    rng = random.Random(20261129)
+    game = HallOfMirrors()
+    engine = Engine(game, ctx)
+    size = (96, 54)
+    capture = CaptureTarget(ctx, size)
+    world = engine.world
+    editor = Editor(world, game.components, dict(game.names))
+    try:
+        def frame() -> None:
+            engine.frame(1 / 60, Output(capture.framebuffer, size))
+            assert ctx.error == "GL_NO_ERROR"
+
+        frame()
+        start = engine.renderer.resource_counts()
+        for step in range(90):
+            op = rng.choice(["create", "duplicate", "delete", "delete", "move", "add", "remove", "undo", "undo",
+                             "redo"])
+            entity = rng.choice(sorted(e for e in editor.names.values() if world.exists(e)))
+            try:
+                if op == "create":
+                    editor.create(Transform(position=(rng.uniform(-5, 5), 1.0, rng.uniform(-5, 5))))
+                elif op == "duplicate":
+                    editor.duplicate(entity)
+                elif op == "delete":
+                    editor.delete(entity)
+                elif op == "move" and world.has(entity, Transform):
+                    editor.set_field(entity, "Transform", "position", (rng.uniform(-5, 5), 1.0, rng.uniform(-5, 5)))
+                elif op == "add" and editor.addable(entity):
+                    editor.add_component(entity, rng.choice(editor.addable(entity)))
+                elif op == "remove" and editor.components_of(entity):
+                    editor.remove_component(entity, rng.choice(editor.components_of(entity))[0])
+                elif op == "undo":
+                    editor.undo()
+                elif op == "redo":
+                    editor.redo()
+            except (EditError, ComponentValueError):
+                pass
+            if step % 3 == 0:
+                frame()
+        while editor.undo():  # every edit taken back: the level as it was
+            pass
+        for _ in range(3):
+            frame()
+        assert engine.renderer.resource_counts()["batches"] <= start["batches"] + 2
+        assert sorted(game.names) == sorted(n for n, e in editor.names.items() if world.exists(e))
+    finally:
+        capture.release()
+        engine.close()
