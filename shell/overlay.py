@@ -30,6 +30,7 @@ next frame is drawn as if no overlay had been (``tests/test_overlay.py`` checks 
 from __future__ import annotations
 
 import ctypes
+import math
 import time
 from collections import deque
 from dataclasses import dataclass
@@ -79,6 +80,7 @@ IMGUI_KEYS = {"BACKSPACE": imgui.Key.backspace, "DELETE": imgui.Key.delete, "ENT
               "HOME": imgui.Key.home, "END": imgui.Key.end, "A": imgui.Key.a, "C": imgui.Key.c,
               "V": imgui.Key.v, "X": imgui.Key.x, "Y": imgui.Key.y, "Z": imgui.Key.z}
 HDR_COLOUR = imgui.ColorEditFlags_.float | imgui.ColorEditFlags_.hdr  # colour fields: floats, not clamped to 0-1
+SNAP = {"move": 0.25, "turn": math.radians(15.0), "scale": 0.1}  # a handle's steps with Ctrl held
 GIZMO_REACH = 6.0                          # pixels from a move handle that still take it
 ENTITY_LIST_WIDTH, ENTITY_LIST_HEIGHT = INSPECTOR_WIDTH - 16, 160  # pixels of the entity list's scrolled part
 
@@ -704,20 +706,26 @@ class DebugOverlay:
             else:
                 draw.add_circle_filled(end, r, colour)
 
-    @staticmethod
-    def _drag_to(editor: Editor, drag: _Drag, point: tuple[float, float]) -> None:
-        """A handle's drag with the mouse at ``point``: the Transform from the drag's start."""
+    def _drag_to(self, editor: Editor, drag: _Drag, point: tuple[float, float]) -> None:
+        """A handle's drag with the mouse at ``point``: the Transform from the drag's start;
+        with Ctrl held, in steps (``SNAP``: a quarter metre, 15 degrees, a tenth of the scale)."""
         handles, axis = drag.handles, drag.axis
         moved = (point[0] - drag.pressed[0], point[1] - drag.pressed[1])
+        step = SNAP[handles.mode] if self.io.key_ctrl else 0.0
+
+        def snapped(value: float) -> float:
+            return round(value / step) * step if step else value
+
         try:
             if handles.mode == "move":
-                editor.move(drag.entity, drag.start, handles.axes[axis] * handles.distance(axis, moved))
+                editor.move(drag.entity, drag.start, handles.axes[axis] * snapped(handles.distance(axis, moved)))
             elif handles.mode == "scale":
-                editor.rescale(drag.entity, drag.start, axis, 1.0 + handles.distance(axis, moved) / handles.length)
+                factor = snapped(1.0 + handles.distance(axis, moved) / handles.length)
+                editor.rescale(drag.entity, drag.start, axis, factor)
             else:  # the angle swept, added up frame by frame (a drag may go round more than half a turn)
                 drag.angle += handles.sweep(axis, drag.last, point)
                 drag.last = point
-                editor.turn(drag.entity, drag.start, handles.axes[axis], drag.angle)
+                editor.turn(drag.entity, drag.start, handles.axes[axis], snapped(drag.angle))
         except (ComponentValueError, EditError) as exc:
             editor.message = str(exc)
 

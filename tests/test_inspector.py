@@ -927,3 +927,43 @@ def test_a_child_turns_about_a_world_axis_whatever_its_parent_turned(scene):
     Editor(world).turn(child, glm.quat(world.get(child, Transform).rotation), glm.vec3(0, 1, 0), 0.8)
     want = glm.angleAxis(0.8, glm.vec3(0, 1, 0)) * was
     assert abs(abs(glm.dot(world_rotation(), want)) - 1.0) < 1e-5, (world_rotation(), want)
+
+
+def test_with_ctrl_held_a_handle_moves_and_turns_in_steps(scene, ctx):
+    """Ctrl held through a drag: the move is a whole number of quarter metres, the turn a
+    whole number of 15 degrees (and neither is nothing)."""
+    with _box_selected(scene, ctx) as (runner, overlay, draw, click, editor, box):
+        world = runner.world
+        before = glm.vec3(world.get(box, Transform).position)
+        handles = overlay.handles
+        grab = np.array(handles.lines[0][0]) + 0.7 * (np.array(handles.lines[0][1]) - np.array(handles.lines[0][0]))
+        overlay.key("", True, ctrl=True)
+        overlay.mouse_moved(*grab)
+        draw()
+        overlay.mouse_button(1, True)
+        draw()
+        overlay.mouse_moved(*(grab + np.array([37.0, 0.0])))
+        draw()
+        overlay.mouse_button(1, False)
+        draw()
+        moved = world.get(box, Transform).position.x - before.x
+        assert moved > 0.2 and abs(moved / 0.25 - round(moved / 0.25)) < 1e-4, moved
+        click("handles turn")
+        centre = glm.vec3(world.get(box, Transform).position)
+        start = glm.quat(world.get(box, Transform).rotation)
+        length = overlay.handles.length
+        ring = [np.array(runner.project(centre + length * (math.cos(t) * glm.vec3(1, 0, 0)
+                                                          + math.sin(t) * glm.vec3(0, 1, 0))), float)
+                for t in np.linspace(0.0, math.radians(50.0), 6)]
+        overlay.mouse_moved(*ring[0])
+        draw()
+        overlay.mouse_button(1, True)
+        draw()
+        for p in ring[1:]:
+            overlay.mouse_moved(*p)
+            draw()
+        overlay.mouse_button(1, False)
+        draw()
+        overlay.key("", False)
+        angle = math.degrees(glm.angle(world.get(box, Transform).rotation * glm.inverse(start)))
+        assert angle > 10.0 and abs(angle / 15.0 - round(angle / 15.0)) < 1e-3, angle
