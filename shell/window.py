@@ -168,6 +168,12 @@ class SpeculumWindow(mglw.WindowConfig):
         if self.overlay.visible and name != "f1":
             ctrl, shift = bool(getattr(modifiers, "ctrl", False)), bool(getattr(modifiers, "shift", False))
             attribute = self.key_attributes.get(key, "")
+            # A modifier key itself: held from its press to its release, whatever the backend's
+            # modifiers say at that moment (some report the state before the event).
+            if attribute in ("LEFT_CTRL", "RIGHT_CTRL"):
+                ctrl = action == keys.ACTION_PRESS
+            elif attribute in ("LEFT_SHIFT", "RIGHT_SHIFT"):
+                shift = action == keys.ACTION_PRESS
             self.overlay.key(attribute, action == keys.ACTION_PRESS, ctrl, shift)
             if self.overlay.wants_keyboard:  # typing in a field: the keys are its (Esc too)
                 return
