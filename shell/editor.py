@@ -27,7 +27,7 @@ import numpy as np
 import tomllib
 from pyglm import glm
 
-from components import Camera, ComponentValueError, Material, Portal, Transform
+from components import Camera, ComponentValueError, Material, MeshRef, Portal, Transform
 from components.rendering import automatic_mix
 from engine.assets.level_assets import MESH_MAKERS, LevelAssets, level_texture, user_asset_roots
 from engine.assets.level_read import DERIVED_COMPONENTS, ENGINE_COMPONENTS, REFERENCE_FIELDS
@@ -37,6 +37,7 @@ from engine.core.transforms import current_world_matrix
 from engine.core.world import World, check_components
 from engine.rules.frame_rules import active_camera
 from engine.rules.light_rules import followed_sun
+from engine.rules.probe_rules import world_bounds
 
 MAX_UNDO = 1000  # edits kept for undo; the oldest go first
 MAX_LISTED = 200  # entities the entity list shows at once (a filter finds the rest)
@@ -152,6 +153,28 @@ def transform_handles(world: World, entity: int, view_proj: glm.mat4, eye: glm.v
         return None
     toward = tuple(glm.dot(axis, glm.vec3(eye) - origin) > 0.0 for axis in axes)
     return Handles(mode, centre, axes, tuple(tuple(line) for line in lines), length, toward)
+
+
+FRAME_MARGIN = 1.3  # framing a selection: its bounding sphere fills this much less than the view's height
+
+
+def framing_eye(world: World, entity: int, eye: glm.vec3, forward: glm.vec3, fov_y_degrees: float) -> glm.vec3 | None:
+    """Where an eye looking along ``forward`` (from ``eye``) stands to frame ``entity``: its
+    bounding sphere (its mesh's world box, or a metre about its origin) centred in view and
+    filling the view's height less ``FRAME_MARGIN``; None when it has no Transform.  The
+    view keeps its direction, as an editor's "frame selected" does."""
+    transform = world.try_get(entity, Transform)
+    if transform is None:
+        return None
+    matrix = current_world_matrix(world, transform)
+    centre, radius = glm.vec3(matrix[3]), 0.5
+    mesh = world.try_get(entity, MeshRef)
+    if mesh is not None:
+        lo, hi = world_bounds(mesh.mesh, matrix)
+        centre = glm.vec3(*((lo + hi) / 2.0))
+        radius = max(float(np.linalg.norm(hi - lo)) / 2.0, 1e-3)
+    distance = radius * FRAME_MARGIN / math.tan(math.radians(fov_y_degrees) / 2.0)
+    return centre - glm.normalize(glm.vec3(forward)) * distance
 
 
 class EditError(SpeculumError, ValueError):

@@ -57,6 +57,7 @@ from shell.editor import (
     EditError,
     Editor,
     Handles,
+    framing_eye,
     transform_handles,
 )
 from shell.overlay_text import overlay_lines
@@ -302,7 +303,8 @@ class DebugOverlay:
     def shortcut(self, engine: Engine, name: str, ctrl: bool = False, shift: bool = False) -> bool:
         """The editor's keys while the overlay is shown and no field is typed in: Ctrl+Z undo,
         Ctrl+Y or Ctrl+Shift+Z redo, Ctrl+D duplicate and Delete delete the selection, Ctrl+S
-        save.  True when ``name`` was one (the game does not get it)."""
+        save, F frame the selection (the camera moved to see it whole).  True when ``name``
+        was one (the game does not get it)."""
         if not self.visible or self.context is None:
             return False
         editor = self.editing(engine)
@@ -317,6 +319,8 @@ class DebugOverlay:
             self._try(editor, editor.delete, entity)
         elif ctrl and name == "S" and editor.level_path is not None:
             self._save(engine, editor)
+        elif name == "F" and not ctrl and entity is not None:
+            self._frame_selection(engine, entity)
         else:
             return False
         return True
@@ -733,6 +737,19 @@ class DebugOverlay:
         if self._dragging is not None and editor is not None:
             editor.end_drag()
         self._dragging = None
+
+    @staticmethod
+    def _frame_selection(engine: Engine, entity: int) -> None:
+        """The camera moved to frame ``entity``, looking the way it looked (``framing_eye``):
+        play, like flying there, not an edit of the level."""
+        active = engine.active_camera()
+        if active is None or active[0] == entity:
+            return
+        _, camera, transform = active
+        forward = transform.rotation * glm.vec3(0.0, 0.0, -1.0)
+        eye = framing_eye(engine.world, entity, glm.vec3(transform.position), forward, camera.fov_y)
+        if eye is not None:
+            transform.position = eye
 
     @staticmethod
     def _save(engine: Engine, editor: Editor) -> None:

@@ -967,3 +967,28 @@ def test_with_ctrl_held_a_handle_moves_and_turns_in_steps(scene, ctx):
         overlay.key("", False)
         angle = math.degrees(glm.angle(world.get(box, Transform).rotation * glm.inverse(start)))
         assert angle > 10.0 and abs(angle / 15.0 - round(angle / 15.0)) < 1e-3, angle
+
+
+def test_f_frames_the_selection_keeping_the_view_direction(scene, ctx):
+    """F (the editor's key, no field typed in) moves the camera so that the selected box is
+    centred in view and whole (its corners inside the frame, its projected size a good part
+    of it), the camera looking the way it looked; a camera selected is not moved."""
+    with _box_selected(scene, ctx) as (runner, overlay, draw, click, editor, box):
+        world = runner.world
+        camera_entity, _, camera = runner.engine.active_camera()
+        turned = glm.quat(camera.rotation)
+        assert overlay.shortcut(runner.engine, "F")
+        draw()
+        assert camera.rotation == turned
+        centre = glm.vec3(world.get(box, Transform).position)
+        cx, cy = runner.project(centre)
+        w, h = runner.size
+        assert abs(cx - w / 2) <= 2 and abs(cy - h / 2) <= 2
+        corners = [runner.project(centre + 0.3 * glm.vec3(x, y, z)) for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)]
+        rows = [r for _, r in corners]
+        assert all(0 <= c < w and 0 <= r < h for c, r in corners)
+        assert max(rows) - min(rows) > 0.3 * h  # framed, not a speck
+        editor.select(camera_entity)
+        where = glm.vec3(camera.position)
+        overlay.shortcut(runner.engine, "F")
+        assert camera.position == where
