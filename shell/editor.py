@@ -247,6 +247,7 @@ class Editor:
         self._done: list[Edit] = []
         self._undone: list[Edit] = []
         self._everything: list[Edit] = []  # every edit made, undone or not: what a save may write
+        self._applied = 0  # undos and redos made (``edit_count``)
 
     # --- selection -------------------------------------------------------------------------
     def pick(self, ids: np.ndarray, surface_ids: np.ndarray | None, x: int, y: int,
@@ -620,6 +621,11 @@ class Editor:
 
     # --- undo and redo ---------------------------------------------------------------------
     @property
+    def edit_count(self) -> int:
+        """Edits made, undone and redone so far: changes whenever an edit changes the world."""
+        return len(self._everything) + self._applied
+
+    @property
     def can_undo(self) -> bool:
         return bool(self._done)
 
@@ -647,6 +653,7 @@ class Editor:
         return True
 
     def _apply(self, edit: Edit, backwards: bool) -> None:
+        self._applied += 1
         if edit.kind is None:  # a whole entity
             if (edit.action == "create") == backwards:
                 self._remove(edit)

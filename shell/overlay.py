@@ -83,6 +83,7 @@ IMGUI_KEYS = {"BACKSPACE": imgui.Key.backspace, "DELETE": imgui.Key.delete, "ENT
 HDR_COLOUR = imgui.ColorEditFlags_.float | imgui.ColorEditFlags_.hdr  # colour fields: floats, not clamped to 0-1
 SNAP = {"move": 0.25, "turn": math.radians(15.0), "scale": 0.1}  # a handle's steps with Ctrl held
 GIZMO_REACH = 6.0                          # pixels from a move handle that still take it
+LIST_REFRESH_S = 0.5                       # the entity list is made again at most this often (else on an edit)
 ENTITY_LIST_WIDTH, ENTITY_LIST_HEIGHT = INSPECTOR_WIDTH - 16, 160  # pixels of the entity list's scrolled part
 
 
@@ -234,6 +235,7 @@ class DebugOverlay:
         self._dragging: _Drag | None = None   # a handle being dragged
         self.entity_filter = ""               # the entity list's filter, as typed
         self.listed_entities: list[str] = []  # the entity list's labels last drawn (while it is open)
+        self._listed: tuple | None = None     # (what it was made for, when, entities, more): _listing
 
     def record(self, seconds: float | None = None) -> None:
         """Add one frame's time (``None``: the time since the last call, wall clock)."""
@@ -478,7 +480,7 @@ class DebugOverlay:
         self._widget("new entity")
         _, self.entity_filter = imgui.input_text("filter##entities", self.entity_filter)
         self._widget("entity filter")
-        listed, more = editor.listed(self.entity_filter)
+        listed, more = self._listing(editor)
         self.listed_entities = [label for _, label in listed]
         imgui.begin_child("##entity list", imgui.ImVec2(ENTITY_LIST_WIDTH, ENTITY_LIST_HEIGHT))
         for entity, label in listed:
@@ -488,6 +490,18 @@ class DebugOverlay:
         if more:
             imgui.text_disabled(f"(more than {len(listed)}: filter to find the rest)")
         imgui.end_child()
+
+    def _listing(self, editor: Editor) -> tuple[list[tuple[int, str]], bool]:
+        """``Editor.listed`` for the filter, made again when the filter or the editor's edits
+        changed and otherwise at most every ``LIST_REFRESH_S`` (a filter looks at every
+        entity's label: 0.23 s for 100,000 entities, which each frame would make the window
+        crawl; what the game spawns shows a moment later)."""
+        key = (id(editor), self.entity_filter, editor.edit_count)
+        now = time.perf_counter()
+        cached = self._listed
+        if cached is None or cached[0] != key or now - cached[1] > LIST_REFRESH_S:
+            cached = self._listed = (key, now, *editor.listed(self.entity_filter))
+        return cached[2], cached[3]
 
     def _inspector(self, engine: Engine, top: float) -> None:
         editor = self.editing(engine)

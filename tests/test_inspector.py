@@ -992,3 +992,30 @@ def test_f_frames_the_selection_keeping_the_view_direction(scene, ctx):
         where = glm.vec3(camera.position)
         overlay.shortcut(runner.engine, "F")
         assert camera.position == where
+
+
+def test_the_entity_list_is_made_again_on_an_edit_or_a_moment_later_not_every_frame(scene, ctx, monkeypatch):
+    """With the list open the editor's ``listed`` runs once over frames where nothing was
+    edited and the filter stayed (a filter over 100,000 entities takes a quarter second), at
+    once after an edit, and again once ``LIST_REFRESH_S`` has passed (what the game spawned)."""
+    import shell.overlay as overlay_module
+    from shell.editor import Editor
+
+    with _box_selected(scene, ctx) as (runner, overlay, draw, click, editor, box):
+        click("entities")
+        calls = []
+        listed = Editor.listed
+        monkeypatch.setattr(Editor, "listed", lambda self, *a, **k: calls.append(1) or listed(self, *a, **k))
+        for _ in range(5):
+            draw()
+        assert len(calls) <= 1
+        before = len(overlay.listed_entities)
+        made = runner.world.spawn(Transform())  # the game's, not an edit
+        editor.duplicate(box)
+        draw()
+        assert len(overlay.listed_entities) == before + 2 and any(f"entity {made}:" in label
+                                                                  for label in overlay.listed_entities)
+        monkeypatch.setattr(overlay_module, "LIST_REFRESH_S", 0.0)
+        runner.world.spawn(Transform())
+        draw()
+        assert len(overlay.listed_entities) == before + 3
