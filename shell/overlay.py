@@ -5,7 +5,7 @@ for bloom and the curve), and shader errors from hot reload; and the level edito
 click in the world selects the entity seen there (Ctrl+click: the mirror or portal it was
 seen through), or the entity list (every entity by name and kinds, filtered) one that shows
 nowhere, outlined wherever it shows (``engine/render/outline.py``), with handles to move it
-along a world axis, turn it about one or scale it along its own (``editor.transform_handles``); its components'
+along a world axis, turn it about one or scale it along its own (``shell/handles.py``); its components'
 fields are drag inputs, checkboxes and colour pickers that edit it through the components'
 own checks, with undo, redo, add, remove and save; a field the engine decides while unset
 (``editor.AUTOMATIC_FIELDS``) is pinned at the value in use, or handed back.
@@ -50,16 +50,8 @@ from engine.assets.level_file import LevelGame
 from engine.assets.level_read import REFERENCE_FIELDS
 from engine.assets.values import json_value
 from engine.render.bindings import bind_texture, invalidate
-from shell.editor import (
-    AUTOMATIC_FIELDS,
-    HANDLE_MODES,
-    TEXTURE_FIELDS,
-    EditError,
-    Editor,
-    Handles,
-    framing_eye,
-    transform_handles,
-)
+from shell.editor import AUTOMATIC_FIELDS, TEXTURE_FIELDS, EditError, Editor
+from shell.handles import HANDLE_MODES, Handles, framing_eye, transform_handles
 from shell.overlay_text import overlay_lines
 
 if TYPE_CHECKING:  # the app's window makes the overlay
@@ -761,7 +753,7 @@ class DebugOverlay:
             return
         _, camera, transform = active
         forward = transform.rotation * glm.vec3(0.0, 0.0, -1.0)
-        eye = framing_eye(engine.world, entity, glm.vec3(transform.position), forward, camera.fov_y)
+        eye = framing_eye(engine.world, entity, forward, camera.fov_y)
         if eye is not None:
             transform.position = eye
 

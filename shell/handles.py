@@ -1,0 +1,140 @@
+"""The level editor's handles and framing, as geometry (GL-free): where an entity's move,
+turn and scale handles stand on the main view's screen (``transform_handles``), which of them
+the mouse is on, what a drag along or round one asks for (``Handles.distance``,
+``Handles.sweep``), and where a camera stands to frame an entity (``framing_eye``).  The
+overlay (``shell/overlay.py``) draws them and drags them; the edits they make are the
+editor's (``Editor.move``, ``Editor.turn``, ``Editor.rescale``: ``shell/editor.py``).
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+from pyglm import glm
+
+from components import MeshRef, Transform
+from engine.core.transforms import current_world_matrix
+from engine.core.world import World
+from engine.rules.probe_rules import world_bounds
+
+GIZMO_SHARE = 0.15  # a handle's world length (a ring's radius): this share of its distance from the eye
+HANDLE_MODES = ("move", "turn", "scale")
+AXES = (glm.vec3(1.0, 0.0, 0.0), glm.vec3(0.0, 1.0, 0.0), glm.vec3(0.0, 0.0, 1.0))
+RING_POINTS = 48    # points on a turn handle's ring
+
+Pixel = tuple[float, float]
+
+
+@dataclasses.dataclass(frozen=True)
+class Handles:
+    """An entity's transform handles as the main view shows them, in output pixels from the
+    top left: one a world axis (``move``, ``turn``), or one an axis of its own (``scale``: the
+    scale is the entity's own), each a line from its origin (``move``, ``scale``) or a ring
+    about it (``turn``), ``GIZMO_SHARE`` of its distance from the eye long (a constant size
+    on screen)."""
+
+    mode: str
+    origin: Pixel
+    axes: tuple[glm.vec3, ...]             # the world direction each handle stands for
+    lines: tuple[tuple[Pixel, ...], ...]   # each handle on screen: [origin, end], or its ring's points
+    length: float                          # a handle's world length (a ring's radius)
+    toward_eye: tuple[bool, ...]           # each axis points to the eye's side of the origin
+
+    def nearest(self, point: Pixel, reach: float) -> int | None:
+        """The handle passing within ``reach`` pixels of ``point``, the nearest; None for none."""
+        best, found = reach, None
+        p = glm.vec2(point)
+        for index, line in enumerate(self.lines):
+            ring = line + line[:1] if self.mode == "turn" else line
+            for a, b in zip(ring, ring[1:], strict=False):
+                a, b = glm.vec2(a), glm.vec2(b)
+                segment = b - a
+                along = glm.clamp(glm.dot(p - a, segment) / max(glm.dot(segment, segment), 1e-9), 0.0, 1.0)
+                gap = glm.length(p - (a + segment * along))
+                if gap <= best:
+                    best, found = gap, index
+        return found
+
+    def distance(self, axis: int, moved: Pixel) -> float:
+        """(``move``, ``scale``) The world distance along ``axis`` a mouse moved by ``moved``
+        pixels asks for: its part along the handle on screen, at the handle's scale."""
+        origin, end = self.lines[axis]
+        segment = glm.vec2(end) - glm.vec2(origin)
+        pixels = glm.length(segment)
+        if pixels < 1e-6:  # the axis points at the eye: it cannot be dragged along
+            return 0.0
+        return glm.dot(glm.vec2(moved), segment / pixels) * self.length / pixels
+
+    def sweep(self, axis: int, before: Pixel, now: Pixel) -> float:
+        """(``turn``) The angle about ``axis`` (radians, right-handed) that the mouse moving
+        from ``before`` to ``now`` sweeps about the origin on screen: counter-clockwise on
+        screen is positive about an axis pointing to the eye."""
+        o = glm.vec2(self.origin)
+        a, b = glm.vec2(before) - o, glm.vec2(now) - o
+        if glm.length(a) < 1e-6 or glm.length(b) < 1e-6:
+            return 0.0
+        clockwise = math.atan2(a.x * b.y - a.y * b.x, glm.dot(a, b))  # rows run down the screen
+        return -clockwise if self.toward_eye[axis] else clockwise
+
+
+def transform_handles(world: World, entity: int, view_proj: glm.mat4, eye: glm.vec3, size: tuple[int, int],
+                      mode: str = "move") -> Handles | None:
+    """``entity``'s handles of ``mode`` (``HANDLE_MODES``) in the view ``view_proj`` (from
+    ``eye``) on an output of ``size`` pixels; None when it has no Transform or a handle is
+    behind the eye."""
+    if mode not in HANDLE_MODES:
+        raise ValueError(f"no handles {mode!r} (modes: {', '.join(HANDLE_MODES)})")
+    transform = world.try_get(entity, Transform)
+    if transform is None:
+        return None
+    matrix = current_world_matrix(world, transform)
+    origin = glm.vec3(matrix[3])
+    length = GIZMO_SHARE * max(glm.length(origin - glm.vec3(eye)), 1e-3)
+    axes = AXES
+    if mode == "scale":
+        axes = tuple(glm.normalize(glm.vec3(matrix[i])) if glm.length(glm.vec3(matrix[i])) > 1e-9 else AXES[i]
+                     for i in range(3))
+
+    def pixel(point: glm.vec3) -> Pixel | None:
+        clip = view_proj * glm.vec4(point, 1.0)
+        if clip.w <= 1e-6:
+            return None
+        return ((clip.x / clip.w * 0.5 + 0.5) * size[0], (0.5 - clip.y / clip.w * 0.5) * size[1])
+
+    if mode == "turn":
+        worlds = []
+        for i in range(3):
+            u, v = AXES[(i + 1) % 3], AXES[(i + 2) % 3]
+            worlds.append([origin + length * (math.cos(t) * u + math.sin(t) * v)
+                           for t in (2.0 * math.pi * k / RING_POINTS for k in range(RING_POINTS))])
+    else:
+        worlds = [[origin, origin + axis * length] for axis in axes]
+    centre = pixel(origin)
+    lines = [[pixel(point) for point in line] for line in worlds]
+    if centre is None or any(p is None for line in lines for p in line):
+        return None
+    toward = tuple(glm.dot(axis, glm.vec3(eye) - origin) > 0.0 for axis in axes)
+    return Handles(mode, centre, axes, tuple(tuple(line) for line in lines), length, toward)
+
+
+FRAME_MARGIN = 1.3  # framing a selection: its bounding sphere fills this much less than the view's height
+
+
+def framing_eye(world: World, entity: int, forward: glm.vec3, fov_y_degrees: float) -> glm.vec3 | None:
+    """Where an eye looking along ``forward`` stands to frame ``entity``: its bounding sphere
+    (its mesh's world box, or a metre across about its origin) centred in view and
+    filling the view's height less ``FRAME_MARGIN``; None when it has no Transform.  The
+    view keeps its direction, as an editor's "frame selected" does."""
+    transform = world.try_get(entity, Transform)
+    if transform is None:
+        return None
+    matrix = current_world_matrix(world, transform)
+    centre, radius = glm.vec3(matrix[3]), 0.5
+    mesh = world.try_get(entity, MeshRef)
+    if mesh is not None:
+        lo, hi = world_bounds(mesh.mesh, matrix)
+        centre = glm.vec3(*((lo + hi) / 2.0))
+        radius = max(float(np.linalg.norm(hi - lo)) / 2.0, 1e-3)
+    distance = radius * FRAME_MARGIN / math.tan(math.radians(fov_y_degrees) / 2.0)
+    return centre - glm.normalize(glm.vec3(forward)) * distance
