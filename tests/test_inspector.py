@@ -217,7 +217,7 @@ def test_layers_are_typed_as_whole_numbers_and_edited_through_the_component(scen
     """A mirror's hides_layers typed in the inspector ("3" then Enter) goes through the
     editor and the component's own check; text that is not numbers changes nothing."""
     from components import Mirror
-    from shell.overlay import parse_layers
+    from shell.editor_panels import parse_layers
 
     assert parse_layers("1, 3") == [1, 3] and parse_layers("1 3") == [1, 3] and parse_layers("") == []
     assert parse_layers("one") is None
@@ -998,7 +998,7 @@ def test_the_entity_list_is_made_again_on_an_edit_or_a_moment_later_not_every_fr
     """With the list open the editor's ``listed`` runs once over frames where nothing was
     edited and the filter stayed (a filter over 100,000 entities takes a quarter second), at
     once after an edit, and again once ``LIST_REFRESH_S`` has passed (what the game spawned)."""
-    import shell.overlay as overlay_module
+    import shell.editor_panels as overlay_module
     from shell.editor import Editor
 
     with _box_selected(scene, ctx) as (runner, overlay, draw, click, editor, box):
