@@ -221,12 +221,7 @@ class EditorPanels:
             self.inspector_lines = lines
             imgui.end()
             return
-        imgui.text("handles")
-        for mode in HANDLE_MODES:
-            imgui.same_line()
-            if imgui.radio_button(f"{mode}##handles", self.handle_mode == mode):
-                self.handle_mode = mode
-            self._widget(f"handles {mode}")
+        self.handle_mode = self._radios("handles", HANDLE_MODES, self.handle_mode)
         imgui.push_item_width(INSPECTOR_WIDTH * 0.6)
         name = editor.name_of(entity)
         lines.append(name if name == f"entity {entity}" else f"{name} (entity {entity})")
@@ -450,6 +445,18 @@ class EditorPanels:
             editor.message = f"saved {saved}"
         except Exception as exc:  # shown in the overlay, the window keeps running
             editor.message = str(exc)
+
+    def _radios(self, label: str, choices, current, key: str | None = None):
+        """A row of radio buttons after ``label``: the choice made (``current`` if none);
+        each button's widget is "``key`` choice" (``key``: the label)."""
+        imgui.text(label)
+        key = key or label
+        for choice in choices:
+            imgui.same_line()
+            if imgui.radio_button(f"{choice}##{key}", current == choice):
+                current = choice
+            self._widget(f"{key} {choice}")
+        return current
 
     @staticmethod
     def _try(editor: Editor, do, *args) -> None:

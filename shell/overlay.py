@@ -289,22 +289,16 @@ class DebugOverlay(EditorPanels):
                          scale_min=0.0, graph_size=imgui.ImVec2(220, 40))
         imgui.separator()
         reflect, probes, renderer = engine.reflection_system, engine.stages["probes"], engine.renderer
-        imgui.text("reflections")
-        for path in REFLECTION_PATHS:
-            imgui.same_line()
-            if imgui.radio_button(f"{path}##reflection", reflect.path == path):
-                reflect.path = path
-            self._widget(f"reflection {path}")
+        chosen = self._radios("reflections", REFLECTION_PATHS, reflect.path, "reflection")
+        if chosen != reflect.path:  # set only when chosen: a new path is new settings
+            reflect.path = chosen
         changed, cap = imgui.slider_int("depth cap", reflect.max_depth_cap, 0, MAX_DEPTH_CAP)
         if changed:
             reflect.max_depth_cap = cap
         self._widget("depth cap")
-        imgui.text("probes")
-        for path in PROBE_PATHS:
-            imgui.same_line()
-            if imgui.radio_button(f"{path}##probe", probes.path == path):
-                probes.path = path
-            self._widget(f"probe {path}")
+        chosen = self._radios("probes", PROBE_PATHS, probes.path, "probe")
+        if chosen != probes.path:
+            probes.path = chosen
         imgui.same_line(spacing=24)
         _, self.show_entities = imgui.checkbox("entities", self.show_entities)
         self._widget("entities")

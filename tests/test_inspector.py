@@ -260,6 +260,19 @@ def _hands(runner, overlay, size=SIZE):
     return draw, click
 
 
+def _drag(overlay, draw, points) -> None:
+    """The mouse pressed at ``points[0]``, led through the rest and let go, a frame a step."""
+    overlay.mouse_moved(*points[0])
+    draw()
+    overlay.mouse_button(1, True)
+    draw()
+    for point in points[1:]:
+        overlay.mouse_moved(*point)
+        draw()
+    overlay.mouse_button(1, False)
+    draw()
+
+
 @contextmanager
 def _box_selected(scene, ctx, size=(1280, 720)):
     """``edit_scene`` at ``size`` (the box right of the overlay's window), the overlay drawn
@@ -421,13 +434,7 @@ def test_a_move_handle_dragged_moves_the_selection_along_its_axis(scene, ctx):
         overlay.mouse_moved(*grab)
         draw()
         assert overlay.wants_mouse  # over a handle: the window does not pick through it
-        overlay.mouse_button(1, True)
-        draw()
-        for step in range(1, 5):
-            overlay.mouse_moved(*(grab + along * 10.0 * step))
-            draw()
-        overlay.mouse_button(1, False)
-        draw()
+        _drag(overlay, draw, [grab + along * 10.0 * step for step in range(5)])
         after = glm.vec3(world.get(box, Transform).position)
         assert after.y == before.y and after.z == before.z and after.x > before.x
         moved = np.array(runner.project(after), float) - origin
@@ -483,15 +490,7 @@ def test_an_hdr_colour_dragged_in_the_inspector_stays_hdr(scene, ctx):
         before = glm.vec4(world.get(sky, Skybox).sun_color)
         x, y = overlay.widgets["Skybox.sun_color"]
         left = overlay.widgets["Skybox.sun_color.left"]
-        overlay.mouse_moved(*left)
-        draw()
-        overlay.mouse_button(1, True)
-        draw()
-        for step in range(1, 6):
-            overlay.mouse_moved(left[0] + 8 * step, left[1])
-            draw()
-        overlay.mouse_button(1, False)
-        draw()
+        _drag(overlay, draw, [(left[0] + 8 * step, left[1]) for step in range(6)])
         after = glm.vec4(world.get(sky, Skybox).sun_color)
         assert after != before and min(after.x, after.y, after.z) > 1.0, (before, after)
         assert abs(after.x - before.x) < 1.0, (before, after)  # a drag's step, not a jump to the clamp
@@ -854,13 +853,7 @@ def test_a_turn_ring_dragged_turns_the_selection_by_the_angle_swept_about_it(sce
         overlay.mouse_moved(*ring[0])
         draw()
         assert overlay.wants_mouse
-        overlay.mouse_button(1, True)
-        draw()
-        for p in ring[1:]:
-            overlay.mouse_moved(*p)
-            draw()
-        overlay.mouse_button(1, False)
-        draw()
+        _drag(overlay, draw, ring)
         a, b = ring[0] - origin, ring[-1] - origin
         swept = math.atan2(-(a[0] * b[1] - a[1] * b[0]), float(np.dot(a, b)))  # counter-clockwise, rows down
         turned = world.get(box, Transform).rotation * glm.inverse(before)
@@ -885,15 +878,7 @@ def test_a_scale_handle_dragged_scales_the_selection_along_its_own_axis(scene, c
         end = np.array(runner.project(centre + glm.vec3(handles.length, 0, 0)), float)
         along = (end - origin) / np.linalg.norm(end - origin)
         grab = end - along * 2.0
-        overlay.mouse_moved(*grab)
-        draw()
-        overlay.mouse_button(1, True)
-        draw()
-        for step in range(1, 4):
-            overlay.mouse_moved(*(grab + along * 10.0 * step))
-            draw()
-        overlay.mouse_button(1, False)
-        draw()
+        _drag(overlay, draw, [grab + along * 10.0 * step for step in range(4)])
         after = glm.vec3(world.get(box, Transform).scale)
         factor = after.x / before.x
         assert factor > 1.05 and after.y == before.y and after.z == before.z
@@ -938,14 +923,7 @@ def test_with_ctrl_held_a_handle_moves_and_turns_in_steps(scene, ctx):
         handles = overlay.handles
         grab = np.array(handles.lines[0][0]) + 0.7 * (np.array(handles.lines[0][1]) - np.array(handles.lines[0][0]))
         overlay.key("", True, ctrl=True)
-        overlay.mouse_moved(*grab)
-        draw()
-        overlay.mouse_button(1, True)
-        draw()
-        overlay.mouse_moved(*(grab + np.array([37.0, 0.0])))
-        draw()
-        overlay.mouse_button(1, False)
-        draw()
+        _drag(overlay, draw, [grab, grab + np.array([37.0, 0.0])])
         moved = world.get(box, Transform).position.x - before.x
         assert moved > 0.2 and abs(moved / 0.25 - round(moved / 0.25)) < 1e-4, moved
         click("handles turn")
@@ -955,15 +933,7 @@ def test_with_ctrl_held_a_handle_moves_and_turns_in_steps(scene, ctx):
         ring = [np.array(runner.project(centre + length * (math.cos(t) * glm.vec3(1, 0, 0)
                                                           + math.sin(t) * glm.vec3(0, 1, 0))), float)
                 for t in np.linspace(0.0, math.radians(50.0), 6)]
-        overlay.mouse_moved(*ring[0])
-        draw()
-        overlay.mouse_button(1, True)
-        draw()
-        for p in ring[1:]:
-            overlay.mouse_moved(*p)
-            draw()
-        overlay.mouse_button(1, False)
-        draw()
+        _drag(overlay, draw, ring)
         overlay.key("", False)
         angle = math.degrees(glm.angle(world.get(box, Transform).rotation * glm.inverse(start)))
         assert angle > 10.0 and abs(angle / 15.0 - round(angle / 15.0)) < 1e-3, angle

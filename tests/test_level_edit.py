@@ -396,6 +396,33 @@ def test_entities_made_copied_and_deleted_in_the_editor_are_their_tables_in_the_
     spawned.close()
 
 
+EDIT_OPERATIONS = ("create", "duplicate", "delete", "delete", "move", "rough", "add", "remove", "undo", "undo", "redo")
+
+
+def random_edit(editor, rng, op: str, entity: int) -> None:
+    """One editor operation of the random edit tests on ``entity`` (a refusal raises the
+    editor's or the component's error; an operation that does not apply does nothing)."""
+    world = editor.world
+    if op == "create":
+        editor.create(Transform(position=(rng.uniform(-5, 5), rng.uniform(0, 3), rng.uniform(-5, 5))))
+    elif op == "duplicate":
+        editor.duplicate(entity)
+    elif op == "delete":
+        editor.delete(entity)
+    elif op == "move" and world.has(entity, Transform):
+        editor.set_field(entity, "Transform", "position", (rng.uniform(-5, 5), 1.0, rng.uniform(-5, 5)))
+    elif op == "rough" and world.has(entity, Material):
+        editor.set_field(entity, "Material", "roughness", round(rng.random(), 3))
+    elif op == "add" and editor.addable(entity):
+        editor.add_component(entity, rng.choice(editor.addable(entity)))
+    elif op == "remove" and editor.components_of(entity):
+        editor.remove_component(entity, rng.choice(editor.components_of(entity))[0])
+    elif op == "undo":
+        editor.undo()
+    elif op == "redo":
+        editor.redo()
+
+
 @pytest.mark.filterwarnings("ignore:.*no Transform")  # a Transform taken away on purpose
 @pytest.mark.parametrize("seed", [int(s) for s in os.environ.get("EDIT_FUZZ_SEEDS", "7,20261129").split(",")])
 def test_random_edits_with_undo_and_redo_save_and_load_back_as_the_world(tmp_path, seed):
@@ -419,28 +446,10 @@ def test_random_edits_with_undo_and_redo_save_and_load_back_as_the_world(tmp_pat
         return sorted(editor.names[n] for n in editor.names if world.exists(editor.names[n]))
 
     for _ in range(int(os.environ.get("EDIT_FUZZ_OPS", "160"))):
-        op = rng.choice(["create", "duplicate", "delete", "move", "rough", "add", "remove", "undo", "undo", "redo"])
-        entities = alive()
-        entity = rng.choice(entities)
+        op = rng.choice(EDIT_OPERATIONS)
+        entity = rng.choice(alive())
         try:
-            if op == "create":
-                editor.create(Transform(position=(rng.uniform(-5, 5), rng.uniform(0, 3), rng.uniform(-5, 5))))
-            elif op == "duplicate":
-                editor.duplicate(entity)
-            elif op == "delete":
-                editor.delete(entity)
-            elif op == "move" and world.has(entity, Transform):
-                editor.set_field(entity, "Transform", "position", (rng.uniform(-5, 5), 1.0, rng.uniform(-5, 5)))
-            elif op == "rough" and world.has(entity, Material):
-                editor.set_field(entity, "Material", "roughness", round(rng.random(), 3))
-            elif op == "add" and editor.addable(entity):
-                editor.add_component(entity, rng.choice(editor.addable(entity)))
-            elif op == "remove" and editor.components_of(entity):
-                editor.remove_component(entity, rng.choice(editor.components_of(entity))[0])
-            elif op == "undo":
-                editor.undo()
-            elif op == "redo":
-                editor.redo()
+            random_edit(editor, rng, op, entity)
             counts[op] = counts.get(op, 0) + 1
         except (EditError, ComponentValueError):
             counts["refused"] = counts.get("refused", 0) + 1
@@ -492,26 +501,10 @@ def test_random_edits_while_the_sample_level_runs_draw_without_a_gl_error(ctx):
         frame()
         start = engine.renderer.resource_counts()
         for step in range(90):
-            op = rng.choice(["create", "duplicate", "delete", "delete", "move", "add", "remove", "undo", "undo",
-                             "redo"])
+            op = rng.choice(EDIT_OPERATIONS)
             entity = rng.choice(sorted(e for e in editor.names.values() if world.exists(e)))
             try:
-                if op == "create":
-                    editor.create(Transform(position=(rng.uniform(-5, 5), 1.0, rng.uniform(-5, 5))))
-                elif op == "duplicate":
-                    editor.duplicate(entity)
-                elif op == "delete":
-                    editor.delete(entity)
-                elif op == "move" and world.has(entity, Transform):
-                    editor.set_field(entity, "Transform", "position", (rng.uniform(-5, 5), 1.0, rng.uniform(-5, 5)))
-                elif op == "add" and editor.addable(entity):
-                    editor.add_component(entity, rng.choice(editor.addable(entity)))
-                elif op == "remove" and editor.components_of(entity):
-                    editor.remove_component(entity, rng.choice(editor.components_of(entity))[0])
-                elif op == "undo":
-                    editor.undo()
-                elif op == "redo":
-                    editor.redo()
+                random_edit(editor, rng, op, entity)
             except (EditError, ComponentValueError):
                 pass
             if step % 3 == 0:
