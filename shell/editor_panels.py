@@ -130,10 +130,11 @@ class EditorPanels:
         below it)."""
         if not self.show_entities:
             self.listed_entities = []
-            return POSITION[1] - 4
+            return POSITION[1] * self.scale - 4
         width, _height = self.io.display_size
-        imgui.set_next_window_pos(imgui.ImVec2(max(width - INSPECTOR_WIDTH - POSITION[0], 0), POSITION[1]))
-        imgui.set_next_window_size(imgui.ImVec2(INSPECTOR_WIDTH, 0))
+        inspector, inset = INSPECTOR_WIDTH * self.scale, POSITION[0] * self.scale
+        imgui.set_next_window_pos(imgui.ImVec2(max(width - inspector - inset, 0), POSITION[1] * self.scale))
+        imgui.set_next_window_size(imgui.ImVec2(inspector, 0))
         imgui.set_next_window_bg_alpha(0.85)
         flags = (imgui.WindowFlags_.always_auto_resize | imgui.WindowFlags_.no_saved_settings
                  | imgui.WindowFlags_.no_title_bar | imgui.WindowFlags_.no_move)
@@ -156,7 +157,8 @@ class EditorPanels:
         self._widget("entity filter")
         listed, more = self._listing(editor)
         self.listed_entities = [label for _, label in listed]
-        imgui.begin_child("##entity list", imgui.ImVec2(ENTITY_LIST_WIDTH, ENTITY_LIST_HEIGHT))
+        scale = self.scale
+        imgui.begin_child("##entity list", imgui.ImVec2(ENTITY_LIST_WIDTH * scale, ENTITY_LIST_HEIGHT * scale))
         for entity, label in listed:
             if imgui.selectable(f"{label}##entity {entity}", editor.selected == entity)[0]:
                 editor.select(entity)
@@ -186,8 +188,9 @@ class EditorPanels:
             self.inspector_lines = lines
             return
         width, _height = self.io.display_size
-        imgui.set_next_window_pos(imgui.ImVec2(max(width - INSPECTOR_WIDTH - POSITION[0], 0), top + 4))
-        imgui.set_next_window_size_constraints(imgui.ImVec2(INSPECTOR_WIDTH, 0), imgui.ImVec2(INSPECTOR_WIDTH, 10000))
+        inspector = INSPECTOR_WIDTH * self.scale
+        imgui.set_next_window_pos(imgui.ImVec2(max(width - inspector - POSITION[0] * self.scale, 0), top + 4))
+        imgui.set_next_window_size_constraints(imgui.ImVec2(inspector, 0), imgui.ImVec2(inspector, 10000))
         imgui.set_next_window_bg_alpha(0.85)
         flags = (imgui.WindowFlags_.always_auto_resize | imgui.WindowFlags_.no_saved_settings
                  | imgui.WindowFlags_.no_collapse | imgui.WindowFlags_.no_move)
@@ -213,7 +216,7 @@ class EditorPanels:
             imgui.new_line()
         if editor.message:  # why the last edit was refused (the component's words), or "saved ..."
             lines.append(editor.message)
-            imgui.push_text_wrap_pos(imgui.get_cursor_pos_x() + INSPECTOR_WIDTH - 16)
+            imgui.push_text_wrap_pos(imgui.get_cursor_pos_x() + (INSPECTOR_WIDTH - 16) * self.scale)
             imgui.text_colored(imgui.ImVec4(1.0, 0.35, 0.3, 1.0), editor.message)
             imgui.pop_text_wrap_pos()
         entity = editor.selected  # a duplicate or a deletion above chose another, or none
@@ -222,7 +225,7 @@ class EditorPanels:
             imgui.end()
             return
         self.handle_mode = self._radios("handles", HANDLE_MODES, self.handle_mode)
-        imgui.push_item_width(INSPECTOR_WIDTH * 0.6)
+        imgui.push_item_width(INSPECTOR_WIDTH * 0.6 * self.scale)
         name = editor.name_of(entity)
         lines.append(name if name == f"entity {entity}" else f"{name} (entity {entity})")
         imgui.text(lines[-1])
@@ -370,7 +373,7 @@ class EditorPanels:
                 self._end_drag(editor)
         else:
             over_window = imgui.is_window_hovered(imgui.HoveredFlags_.any_window)
-            self._hovered = None if over_window else handles.nearest(point, GIZMO_REACH)
+            self._hovered = None if over_window else handles.nearest(point, GIZMO_REACH * self.scale)
             if self._hovered is not None and imgui.is_mouse_clicked(0):
                 transform = engine.world.get(entity, Transform)
                 start = {"move": transform.position, "turn": transform.rotation, "scale": transform.scale}[handles.mode]
@@ -381,13 +384,13 @@ class EditorPanels:
             rgb = [0.25, 0.25, 0.25]
             rgb[axis] = 1.0
             colour = imgui.get_color_u32(imgui.ImVec4(*rgb, 1.0 if axis == active else 0.8))
-            width = 4.0 if axis == active else 2.5
+            width = (4.0 if axis == active else 2.5) * self.scale
             points = [imgui.ImVec2(*p) for p in line]
             if handles.mode == "turn":
                 draw.add_polyline(points, colour, width, imgui.ImDrawFlags_.closed)
                 continue
             draw.add_line(points[0], points[1], colour, width)
-            end, r = points[1], width + 2.0
+            end, r = points[1], width + 2.0 * self.scale
             if handles.mode == "scale":
                 draw.add_rect_filled(imgui.ImVec2(end.x - r, end.y - r), imgui.ImVec2(end.x + r, end.y + r), colour)
             else:

@@ -177,8 +177,22 @@ class DebugOverlay(EditorPanels):
         io.set_ini_filename("")  # no imgui.ini written next to the game
         self.renderer = OverlayRenderer(ctx, (1, 1))
         self.io = io
+        self.scale = 1.0                      # pixels an ImGui unit (set_scale)
         self._outline = None                  # the selection's outline pass (made when first drawn)
         self._init_panels()
+
+    def set_scale(self, scale: float) -> None:
+        """Draw at ``scale`` pixels an ImGui unit (a window's pixel ratio: on a high-DPI
+        screen 2, so the text and the widgets are the size they are elsewhere)."""
+        scale = float(scale) if scale and scale > 0 else 1.0
+        if scale != self.scale:
+            style = imgui.get_style() if imgui.get_current_context() == self.context else None
+            if style is None:
+                imgui.set_current_context(self.context)
+                style = imgui.get_style()
+            style.scale_all_sizes(scale / self.scale)
+            style.font_scale_dpi = scale
+            self.scale = scale
 
     def record(self, seconds: float | None = None) -> None:
         """Add one frame's time (``None``: the time since the last call, wall clock)."""
@@ -265,7 +279,7 @@ class DebugOverlay(EditorPanels):
 
     def _layout(self, engine) -> None:
         self.lines = overlay_lines(engine, self.frame_times)
-        imgui.set_next_window_pos(imgui.ImVec2(*POSITION))
+        imgui.set_next_window_pos(imgui.ImVec2(POSITION[0] * self.scale, POSITION[1] * self.scale))
         imgui.set_next_window_bg_alpha(0.85)
         flags = (imgui.WindowFlags_.always_auto_resize | imgui.WindowFlags_.no_saved_settings
                  | imgui.WindowFlags_.no_collapse | imgui.WindowFlags_.no_move)
@@ -286,7 +300,7 @@ class DebugOverlay(EditorPanels):
             imgui.text(line)
         times = np.array(self.frame_times or [0.0], np.float32) * 1000.0
         imgui.plot_lines("##frame times", times, overlay_text=f"frame ms, max {times.max():.1f}",
-                         scale_min=0.0, graph_size=imgui.ImVec2(220, 40))
+                         scale_min=0.0, graph_size=imgui.ImVec2(220 * self.scale, 40 * self.scale))
         imgui.separator()
         reflect, probes, renderer = engine.reflection_system, engine.stages["probes"], engine.renderer
         chosen = self._radios("reflections", REFLECTION_PATHS, reflect.path, "reflection")
@@ -319,7 +333,7 @@ class DebugOverlay(EditorPanels):
             present.bloom = bloom
         self._widget("bloom")
         imgui.same_line()
-        imgui.set_next_item_width(CURVE_WIDTH)
+        imgui.set_next_item_width(CURVE_WIDTH * self.scale)
         if imgui.begin_combo("curve", present.curve or "camera's"):
             self._widget("curve")
             for curve in CURVE_CHOICES:

@@ -132,6 +132,7 @@ class SpeculumWindow(mglw.WindowConfig):
         self.key_names = key_names(self.wnd.keys)
         self.key_attributes = key_attributes(self.wnd.keys)
         self.overlay = make_overlay(self.ctx, visible=bool(getattr(args, "overlay", False)))
+        self.overlay.set_scale(self.wnd.pixel_ratio)  # a high-DPI screen: the overlay at its usual size
         self.shown_title = self.wnd.title = self.game.title  # build may have named the level
         from engine.assets.level_file import LevelGame
 
@@ -158,7 +159,9 @@ class SpeculumWindow(mglw.WindowConfig):
                 self.quit()
 
     def on_resize(self, width: int, height: int) -> None:
-        pass  # the render system sizes its targets from the framebuffer each frame; 0x0 skips
+        # The render system sizes its targets from the framebuffer each frame (0x0 skips); a
+        # window moved to a screen of another pixel ratio draws the overlay at that ratio.
+        self.overlay.set_scale(self.wnd.pixel_ratio)
 
     def on_key_event(self, key: int | str, action: int | str, modifiers: KeyModifiers) -> None:
         if self.released:

@@ -724,8 +724,9 @@ def test_the_window_gives_typed_keys_to_the_field_and_editor_keys_to_the_editor(
 
 
 def test_on_a_high_dpi_screen_the_overlay_is_clicked_where_it_is_drawn(monkeypatch):
-    """A window of pixel_ratio 2 sends the mouse in its points, half the framebuffer's pixels
-    the overlay is drawn in: a click at a widget's place in points ticks it."""
+    """A window of pixel_ratio 2 draws the overlay twice as big (its text and widgets the
+    size they are on a screen of ratio 1), and sends the mouse in its points, half the
+    framebuffer's pixels the overlay is drawn in: a click at a widget's place in points ticks it."""
     import moderngl_window as mglw
     from moderngl_window.context.base.window import BaseWindow
 
@@ -737,16 +738,27 @@ def test_on_a_high_dpi_screen_the_overlay_is_clicked_where_it_is_drawn(monkeypat
         look_from(world, (0, 1, 4))
         world.spawn(Skybox())
 
+    plain = mglw.create_window_config_instance(
+        make_window_config(FunctionGame(build)),
+        args=["--window", "headless", "--backend", "egl", "--size", "1600x1100"])
+    try:
+        plain.overlay.toggle() if not plain.overlay.visible else None
+        for _ in range(2):
+            plain.on_render(0.0, 1 / 60)
+        width_at_1 = plain.overlay.region[2]
+    finally:
+        plain.on_close()
+    monkeypatch.setattr(BaseWindow, "pixel_ratio", property(lambda self: 2.0))
     config = mglw.create_window_config_instance(
         make_window_config(FunctionGame(build)),
-        args=["--window", "headless", "--backend", "egl", "--size", "1280x720"])
-    monkeypatch.setattr(BaseWindow, "pixel_ratio", property(lambda self: 2.0))
+        args=["--window", "headless", "--backend", "egl", "--size", "1600x1100"])
     try:
         overlay = config.overlay
         if not overlay.visible:
             overlay.toggle()
         for _ in range(2):
             config.on_render(0.0, 1 / 60)
+        assert overlay.scale == 2.0 and overlay.region[2] > 1.8 * width_at_1  # text and widgets twice as big
         x, y = overlay.widgets["entities"]  # framebuffer pixels
         points = (int(x / 2), int(y / 2))
         config.on_mouse_position_event(*points, 0, 0)
