@@ -18,7 +18,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import os
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -51,6 +51,9 @@ AUTOMATIC_FIELDS: dict[tuple[str, str], str] = {
     ("Skybox", "sun_direction"): "follows the brightest directional light",
     ("Reflective", "mix"): "1.0 untextured, 0.5 textured",
 }
+
+
+Needs = Callable[[World, int, "str | None"], "str | None"]  # LevelGame.needs
 
 
 class EditError(SpeculumError, ValueError):
@@ -111,8 +114,9 @@ class Editor:
 
     def __init__(self, world: World, components: Mapping[str, type] | None = None,
                  names: Mapping[str, int] | None = None, level_path: str | Path | None = None,
-                 asset_roots: Sequence[str | Path] = ()) -> None:
+                 asset_roots: Sequence[str | Path] = (), needs: Needs | None = None) -> None:
         self.world = world
+        self.needs = needs  # the game's reason it cannot do without an entity or a component of it
         self.asset_roots = [Path(root) for root in asset_roots]  # the game's, besides the level's folder
         self.components: dict[str, type] = {**ENGINE_COMPONENTS, **(components or {})}
         self.game_components = {k: v for k, v in (components or {}).items() if k not in ENGINE_COMPONENTS}
@@ -377,6 +381,7 @@ class Editor:
     def remove_component(self, entity: int, name: str) -> Any:
         """Take the entity's component of class ``name`` away (undo gives the same one back)."""
         component = self.component(entity, name)
+        self._refuse_if_needed(entity, type(component).__name__)
         try:
             self._check_whole(entity, [c for c in self.world.components_of(entity) if c is not component])
         except ComponentValueError as exc:
@@ -417,6 +422,7 @@ class Editor:
         name = self.name_of(entity)
         if not self.world.exists(entity):
             raise EditError(f"entity {entity} does not exist")
+        self._refuse_if_needed(entity, None)
         children = [self.name_of(e) for e, t in self.world.query_one(Transform) if t.parent == entity and e != entity]
         if children:
             self.message = f"{name} is the parent of {', '.join(children)}: delete them or clear their parent first"
@@ -428,6 +434,14 @@ class Editor:
         edit = Edit("delete", entity, None, [c for _, c in self.components_of(entity)], name, open=False)
         self._remove(edit)
         self._push(edit)
+
+    def _refuse_if_needed(self, entity: int, component: str | None) -> None:
+        """An EditError, in the game's words, where the game cannot do without ``entity`` or
+        that component of it (``needs``)."""
+        reason = self.needs(self.world, entity, component) if self.needs is not None else None
+        if reason:
+            self.message = f"{self.name_of(entity)}: {reason}"
+            raise EditError(self.message)
 
     def _in_view(self) -> glm.vec3:
         camera = active_camera(self.world)

@@ -81,8 +81,8 @@ class EditorPanels:
         game = engine.game if isinstance(engine.game, LevelGame) else None
         rebuilt = game is not None and game.names is not self._names_taken  # the world built again from its
         if self.editor is None or self.editor.world is not engine.world or rebuilt:  # file (a new dict of names):
-            self.editor = Editor(engine.world, *((game.components, game.names, game.level_path, game.asset_roots)
-                                                 if game else ()))
+            self.editor = Editor(engine.world, *((game.components, game.names, game.level_path, game.asset_roots,
+                                                  game.needs) if game else ()))
             self._names_taken = game.names if game else None                  # its edits named entities gone
         return self.editor
 

@@ -425,8 +425,11 @@ def random_edit(editor, rng, op: str, entity: int) -> None:
 
 @pytest.mark.filterwarnings("ignore:.*no Transform")  # a Transform taken away on purpose
 @pytest.mark.parametrize("seed", [int(s) for s in os.environ.get("EDIT_FUZZ_SEEDS", "7,20261129").split(",")])
-def test_random_edits_with_undo_and_redo_save_and_load_back_as_the_world(tmp_path, seed):
-    """Hardening: 160 random editor operations on a copy of the sample level (make,
+@pytest.mark.parametrize("level", [HALL] if "EDIT_FUZZ_LEVELS" not in os.environ
+                         else sorted(ROOT.glob("games/**/*.toml")), ids=lambda p: p.stem)
+def test_random_edits_with_undo_and_redo_save_and_load_back_as_the_world(tmp_path, seed, level):
+    """Hardening: 160 random editor operations on a copy of the sample level (every shipped
+    level with ``EDIT_FUZZ_LEVELS`` set) (make,
     duplicate, delete, move, set a roughness, add and remove components, undo, redo; the
     refused ones refused with an EditError or a ComponentValueError and nothing changed),
     then a save over the file: the file loads to the world the editor holds, entity by
@@ -437,7 +440,8 @@ def test_random_edits_with_undo_and_redo_save_and_load_back_as_the_world(tmp_pat
     from shell.editor import EditError, Editor
 
     rng = random.Random(seed)
-    path = _copy_hall(tmp_path)
+    path = tmp_path / level.name
+    shutil.copy(level, path)
     world, names, _ = loaded(path, f"edit_fuzz_{seed}")
     editor = Editor(world, EXTRA, dict(names), path)
     counts: dict[str, int] = {}
@@ -446,8 +450,10 @@ def test_random_edits_with_undo_and_redo_save_and_load_back_as_the_world(tmp_pat
         return sorted(editor.names[n] for n in editor.names if world.exists(editor.names[n]))
 
     for _ in range(int(os.environ.get("EDIT_FUZZ_OPS", "160"))):
-        op = rng.choice(EDIT_OPERATIONS)
-        entity = rng.choice(alive())
+        op, entities = rng.choice(EDIT_OPERATIONS), alive()
+        if not entities:  # every entity deleted (a level whose game makes its camera allows it)
+            op = rng.choice(["create", "undo"])
+        entity = rng.choice(entities) if entities else 0
         try:
             random_edit(editor, rng, op, entity)
             counts[op] = counts.get(op, 0) + 1
@@ -515,6 +521,84 @@ def test_random_edits_while_the_sample_level_runs_draw_without_a_gl_error(ctx):
             frame()
         assert engine.renderer.resource_counts()["batches"] <= start["batches"] + 2
         assert sorted(game.names) == sorted(n for n, e in editor.names.items() if world.exists(e))
+    finally:
+        capture.release()
+        engine.close()
+
+
+def test_a_file_whose_every_entity_is_deleted_saves_its_new_ones_as_valid_toml(tmp_path):
+    """Every entity of a level deleted and a new one made (a mirror-beam level: its game makes
+    the camera, so nothing refuses): the save loads, holding the new entity alone.  tomlkit
+    left an empty ``entity = []`` that the new ``[[entity]]`` tables clashed with (the random
+    edit test found it on this level)."""
+    from shell.editor import Editor
+
+    source = ROOT / "games/mirror_beam/levels/01_one_bounce.toml"
+    for only in (True, False):
+        path = tmp_path / f"{only}_{source.name}"
+        shutil.copy(source, path)
+        world, names, _ = loaded(path, f"edit_emptied_{only}")
+        editor = Editor(world, EXTRA, dict(names), path)
+        for entity in list(names.values()):
+            editor.delete(entity)
+        editor.create(Transform(position=(1.0, 2.0, 3.0)), name="only_one")
+        if only:
+            editor.save()
+        else:
+            save_level(world, path, editor.names, extra_components=EXTRA, keep=path)
+        level = load_level(path, EXTRA)
+        again = World(f"edit_emptied_{only}_again")
+        assert list(level.spawn(again)) == ["only_one"]
+        assert path.read_text().startswith("# One mirror turns the beam")  # the file's own text kept
+        again.close()
+        world.close()
+
+
+@pytest.mark.filterwarnings("ignore:.*no Transform")
+@pytest.mark.parametrize("game_name", ["mirror_beam", "portal_run"])
+def test_the_editor_refuses_what_a_game_cannot_do_without_and_random_edits_keep_it_running(ctx, game_name):
+    """A game's own entities (mirror beam's source, target and turning mirrors; portal run's
+    solids and exit pad) cannot be deleted, nor their meshes removed, in the editor: the
+    game's systems hold them from the build and would fail the next frame.  The refusal is in
+    the game's words.  Then 60 random editor operations with a frame after every second run
+    without an error (before the game said what it needs, deleting the target or a ledge
+    raised inside the next frame)."""
+    import random
+
+    from engine.core.frame_io import Output
+    from engine.render.targets import CaptureTarget
+    from shell.app import Engine
+    from shell.editor import EditError, Editor
+
+    if game_name == "mirror_beam":
+        from games.mirror_beam.game import MirrorBeam as GameClass
+        needed = "target"
+    else:
+        from games.portal_run.game import PortalRun as GameClass
+        needed = "floor"
+    game = GameClass()
+    engine = Engine(game, ctx)
+    size = (96, 54)
+    capture = CaptureTarget(ctx, size)
+    world = engine.world
+    editor = Editor(world, game.components, dict(game.names), needs=game.needs)
+    try:
+        engine.frame(1 / 60, Output(capture.framebuffer, size))
+        with pytest.raises(EditError, match=f"{needed}: {game_name.replace('_', ' ')} cannot do without it"):
+            editor.delete(game.names[needed])
+        with pytest.raises(EditError, match="cannot do without its MeshRef"):
+            editor.remove_component(game.names[needed], "MeshRef")
+        assert world.exists(game.names[needed]) and not editor.can_undo
+        rng = random.Random(3)
+        for step in range(60):
+            alive = sorted(e for e in editor.names.values() if world.exists(e))
+            try:
+                random_edit(editor, rng, rng.choice(EDIT_OPERATIONS), rng.choice(alive))
+            except (EditError, ComponentValueError):
+                pass
+            if step % 2 == 0:
+                engine.frame(1 / 60, Output(capture.framebuffer, size))
+                assert ctx.error == "GL_NO_ERROR"
     finally:
         capture.release()
         engine.close()

@@ -88,3 +88,10 @@ class LevelGame(Game):
     def build(self, world: World) -> None:
         self.level = self.load()
         self.names = self.level.spawn(world)
+
+    def needs(self, world: World, entity: int, component: str | None = None) -> str | None:
+        """Why the game cannot run without ``entity`` (``component`` None) or without that
+        component of it, in words the level editor shows when it refuses to delete or remove
+        it; None: the game does without it.  A game whose systems hold entities from its
+        build (its laser, its solids) says so here."""
+        return None

@@ -150,6 +150,8 @@ def _kept_text(world: World, path: Path, keep: Path, by_id: Mapping[int, str], t
     for index in reversed(range(len(level._entities))):  # the file's entities the world no longer has
         if level._entities[index].name not in now and (only is None or level._entities[index].name in removed):
             del files[index]
+    if files is not None and len(files) == 0:  # every entity of the file gone: no empty `entity = []`
+        del doc["entity"]                       # left for the new ones' [[entity]] tables to clash with
     kept = [spec.name for spec in level._entities
             if spec.name in now or (only is not None and spec.name not in removed)]
     for position, spec_name in enumerate(kept):

@@ -615,6 +615,18 @@ class MirrorBeam(LevelGame):
         self.level_path = Path(level)
         self.build(world)
 
+    def needs(self, world: World, entity: int, component: str | None = None) -> str | None:
+        """The beam's source, its target and the mirrors the player turns: the game's rules
+        name them, and its systems trace and turn them (their Transform, mesh and Mirror)."""
+        rules = self.state.rules
+        roles = {rules.source: "the beam's source", rules.target: "the beam's target",
+                 **{mirror: "a mirror the player turns" for mirror in rules.rotatable}}
+        role = roles.get(entity)
+        if role is None or component not in (None, "Transform", "MeshRef", "Mirror", "Emissive"):
+            return None
+        what = "it" if component is None else f"its {component}"
+        return f"mirror beam cannot do without {what}: it is {role} (the level's rules name it)"
+
     def systems(self) -> list[GameSystem]:
         """The beam, traced with this frame's ``Surfaces`` (so after the surfaces stage) and
         drawn this frame (so before extract)."""

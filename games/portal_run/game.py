@@ -314,6 +314,17 @@ class PortalRun(LevelGame):
         self.frame = 0
 
     # --- build / restart -----------------------------------------------------------------------
+    def needs(self, world: World, entity: int, component: str | None = None) -> str | None:
+        """The level's solids (the body stands on and portals open on them, by ray casts
+        against their meshes) and its exit pad: held from the build."""
+        if entity != self.exit and entity not in self.solids:
+            return None
+        if component not in (None, "Transform", "MeshRef"):
+            return None
+        what = "it" if component is None else f"its {component}"
+        role = "the exit pad" if entity == self.exit else "a solid the body stands on and portals open on"
+        return f"portal run cannot do without {what}: it is {role} (restart the level after changing its file)"
+
     def build(self, world: World) -> None:
         self.world = world
         where = f"level file {str(self.level_path)!r}"
