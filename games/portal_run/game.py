@@ -323,7 +323,7 @@ class PortalRun(LevelGame):
             return None
         what = "it" if component is None else f"its {component}"
         role = "the exit pad" if entity == self.exit else "a solid the body stands on and portals open on"
-        return f"portal run cannot do without {what}: it is {role} (restart the level after changing its file)"
+        return f"portal run cannot do without {what}: it is {role} (the level's physics holds it from its start)"
 
     def build(self, world: World) -> None:
         self.world = world
