@@ -177,22 +177,23 @@ class DebugOverlay(EditorPanels):
         io.set_ini_filename("")  # no imgui.ini written next to the game
         self.renderer = OverlayRenderer(ctx, (1, 1))
         self.io = io
-        self.scale = 1.0                      # pixels an ImGui unit (set_scale)
+        self.scale = 1.0                      # pixels an ImGui unit (set_scale, taken at a draw)
+        self._wanted_scale = 1.0
         self._outline = None                  # the selection's outline pass (made when first drawn)
         self._init_panels()
 
     def set_scale(self, scale: float) -> None:
         """Draw at ``scale`` pixels an ImGui unit (a window's pixel ratio: on a high-DPI
         screen 2, so the text and the widgets are the size they are elsewhere)."""
-        scale = float(scale) if scale and scale > 0 else 1.0
-        if scale != self.scale:
-            style = imgui.get_style() if imgui.get_current_context() == self.context else None
-            if style is None:
-                imgui.set_current_context(self.context)
-                style = imgui.get_style()
-            style.scale_all_sizes(scale / self.scale)
-            style.font_scale_dpi = scale
-            self.scale = scale
+        self._wanted_scale = float(scale) if scale and scale > 0 else 1.0  # taken at the next draw
+
+    def _apply_scale(self) -> None:
+        """The wanted scale made ImGui's (its context current: the draw's)."""
+        if self._wanted_scale != self.scale:
+            style = imgui.get_style()
+            style.scale_all_sizes(self._wanted_scale / self.scale)
+            style.font_scale_dpi = self._wanted_scale
+            self.scale = self._wanted_scale
 
     def record(self, seconds: float | None = None) -> None:
         """Add one frame's time (``None``: the time since the last call, wall clock)."""
@@ -249,6 +250,7 @@ class DebugOverlay(EditorPanels):
         if not self.visible or self.context is None or size[0] <= 0 or size[1] <= 0:
             return
         imgui.set_current_context(self.context)
+        self._apply_scale()
         io = self.io
         io.display_size = imgui.ImVec2(*size)
         io.display_framebuffer_scale = imgui.ImVec2(1.0, 1.0)
