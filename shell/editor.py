@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import math
 import os
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
@@ -42,6 +43,8 @@ MAX_LISTED = 200  # entities the entity list shows at once (a filter finds the r
 NEW_DISTANCE = 3.0  # metres in front of the active camera a new entity is made
 NEW_MESH = "box"    # the shape a MeshRef added in the editor starts as
 MIN_SCALE_FACTOR = 0.01  # a scale drag shrinks an axis to this share of its scale at the drag's start at most
+SAME_ANGLES_DEGREES = 0.01  # a rotation within this of the angles last shown shows them as they were
+                            # (at yaw 90 pitch and roll turn about one axis: the triple is not unique)
 TEXTURE_FIELDS = ("texture", "normal_map", "emissive_map", "metallic_roughness_map")  # Material's images
 
 # Fields whose None means "the engine decides" (what it decides: ``Editor.automatic``).  The
@@ -54,6 +57,33 @@ AUTOMATIC_FIELDS: dict[tuple[str, str], str] = {
 
 
 Needs = Callable[[World, int, "str | None"], "str | None"]  # LevelGame.needs
+
+
+def euler_degrees(rotation: glm.quat, near: glm.vec3 | None = None) -> glm.vec3:
+    """Euler angles in degrees (glm's x, y, z: pitch, yaw, roll) that make ``rotation``, the
+    triple nearest ``near``.  Every rotation has two, (x, y, z) and (x + 180, 180 - y,
+    z + 180), each angle free by whole turns; glm's own keeps yaw in [-90, 90].  Shown that
+    way, a yaw dragged past 90 came back as the other triple, so the drag turned back at 90
+    (as Unity, the inspector keeps the angles last shown and shows the triple nearest them)."""
+    first = glm.vec3(glm.degrees(glm.eulerAngles(glm.normalize(glm.dquat(rotation)))))
+    if near is None:
+        return first
+    best, best_distance = first, float("inf")
+    for triple in (first, glm.vec3(first.x + 180.0, 180.0 - first.y, first.z + 180.0)):
+        moved = glm.vec3(*(angle + 360.0 * round((hint - angle) / 360.0)
+                           for angle, hint in zip(triple, near, strict=True)))
+        distance = sum(abs(angle - hint) for angle, hint in zip(moved, near, strict=True))
+        if distance < best_distance:
+            best, best_distance = moved, distance
+    return best
+
+
+def turn_degrees(angles: glm.vec3, rotation: glm.quat) -> float:
+    """The angle in degrees between the rotation Euler ``angles`` make and ``rotation``, in
+    double precision, the stored one made unit there (a float quaternion's dot, or its length off
+    1 by a float's rounding, resolves no turn under about 0.05 degrees)."""
+    made = glm.dquat(glm.radians(glm.dvec3(angles)))
+    return math.degrees(2.0 * math.acos(min(abs(glm.dot(made, glm.normalize(glm.dquat(rotation)))), 1.0)))
 
 
 class EditError(SpeculumError, ValueError):
@@ -128,6 +158,7 @@ class Editor:
         self._undone: list[Edit] = []
         self._everything: list[Edit] = []  # every edit made, undone or not: what a save may write
         self._applied = 0  # undos and redos made (``edit_count``)
+        self._angles: dict[tuple[int, str, str], glm.vec3] = {}  # rotations' angles last shown (``angles``)
 
     # --- selection -------------------------------------------------------------------------
     def pick(self, ids: np.ndarray, surface_ids: np.ndarray | None, x: int, y: int,
@@ -339,6 +370,31 @@ class Editor:
         scale = glm.vec3(start)
         scale[axis] *= max(factor, MIN_SCALE_FACTOR)
         self.set_field(entity, Transform, "scale", scale, merge=True)
+
+    def angles(self, entity: int, component: str | type, field: str) -> glm.vec3:
+        """A rotation field's Euler angles in degrees, to show: those last shown or set where
+        they still make the rotation (to ``SAME_ANGLES_DEGREES``), else the triple that makes
+        it nearest them (``euler_degrees``), so the numbers move on smoothly under a drag past
+        90 degrees, a turn handle, an undo or the game's own writes."""
+        name = component if isinstance(component, str) else component.__name__
+        key = (entity, name, field)
+        rotation = glm.quat(getattr(self.component(entity, component), field))
+        shown = self._angles.get(key)
+        if shown is None or turn_degrees(shown, rotation) > SAME_ANGLES_DEGREES:
+            shown = euler_degrees(rotation, shown)
+        self._angles[key] = glm.vec3(shown)
+        return glm.vec3(shown)
+
+    def set_angles(self, entity: int, component: str | type, field: str, degrees: Sequence[float],
+                   merge: bool = False) -> str | None:
+        """Set a rotation field from Euler angles in degrees (glm's x, y, z), kept as the
+        angles it shows (``angles``); why it was refused, or None (``try_set_field``)."""
+        angles = glm.vec3(*(float(value) for value in degrees))
+        refused = self.try_set_field(entity, component, field, glm.quat(glm.radians(angles)), merge)
+        if refused is None:
+            name = component if isinstance(component, str) else component.__name__
+            self._angles[(entity, name, field)] = angles
+        return refused
 
     def try_set_field(self, entity: int, component: str | type, field: str, value: Any,
                       merge: bool = False) -> str | None:

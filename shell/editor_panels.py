@@ -311,11 +311,12 @@ class EditorPanels:
             else:
                 drag = {"vec2": imgui.drag_float2, "vec3": imgui.drag_float3, "vec4": imgui.drag_float4}[kind]
                 changed, new = drag(label, list(data), DRAG_SPEED)
-        elif kind == "quat":  # as Euler angles in degrees (pitch, yaw, roll: glm's x, y, z)
-            angles = glm.degrees(glm.eulerAngles(value))
-            changed, new = imgui.drag_float3(f"{field} (deg)##{cls_name}.{field}", list(angles), DRAG_SPEED * 50)
-            if changed:
-                new = glm.quat(glm.radians(glm.vec3(*new)))
+        elif kind == "quat":  # as Euler angles in degrees (pitch, yaw, roll: glm's x, y, z), kept by the editor
+            angles = editor.angles(entity, cls_name, field)
+            dragged, new_angles = imgui.drag_float3(f"{field} (deg)##{cls_name}.{field}", list(angles),
+                                                    DRAG_SPEED * 50)
+            if dragged:
+                editor.set_angles(entity, cls_name, field, new_angles, merge=True)
         elif kind == "str":  # a choice ("aces", "cube", ...): written, taken on Enter, refused with the choices
             changed, new = imgui.input_text(label, data, imgui.InputTextFlags_.enter_returns_true)
         elif field.endswith("layers") and (kind == "list" or data is None):  # reflection layers: "1, 3", taken on Enter
@@ -333,6 +334,9 @@ class EditorPanels:
         if kind in ("vec2", "vec3", "vec4", "quat"):  # where its first number is (a drag on one component)
             self.widgets[f"{cls_name}.{field}.left"] = (imgui.get_item_rect_min().x + 8.0,
                                                         self.widgets[f"{cls_name}.{field}"][1])
+            if kind in ("vec3", "quat"):  # and its second (the middle third of the numbers' width)
+                self.widgets[f"{cls_name}.{field}.middle"] = (imgui.get_item_rect_min().x + imgui.calc_item_width() / 2,
+                                                              self.widgets[f"{cls_name}.{field}"][1])
         lines.append(f"  {field} = {data if kind not in ('mesh', 'texture', 'object', 'array') else kind}")
         if changed:
             if isinstance(new, list | tuple) and not field.endswith("layers"):

@@ -875,6 +875,28 @@ def test_a_turn_ring_dragged_turns_the_selection_by_the_angle_swept_about_it(sce
         assert editor.undo() and world.get(box, Transform).rotation == before and not editor.can_undo
 
 
+def test_a_yaw_dragged_in_the_inspector_goes_on_past_ninety_degrees(scene, ctx):
+    """The rotation's middle number (yaw, degrees) dragged from 80 by 60 pixels at half a
+    degree a pixel: the box turns about y to about 110 degrees and the field shows it.
+    Shown by glm's decomposition alone, the angles flipped to the other triple at 90 and
+    the drag turned back there (it ended at 90 or less)."""
+    with _box_selected(scene, ctx) as (runner, overlay, draw, click, editor, box):
+        world = runner.world
+        assert editor.set_angles(box, Transform, "rotation", (0.0, 80.0, 0.0)) is None
+        editor.end_drag()
+        draw()
+        x, y = overlay.widgets["Transform.rotation.middle"]
+        _drag(overlay, draw, [(x + 10.0 * step, y) for step in range(7)])
+        turned = glm.quat(world.get(box, Transform).rotation)
+        angle = math.degrees(glm.angle(turned))
+        assert 100.0 < angle < 115.0, angle
+        assert abs(glm.dot(glm.axis(turned), glm.vec3(0, 1, 0))) > 0.9999, glm.axis(turned)
+        shown = editor.angles(box, Transform, "rotation")
+        assert shown.y == pytest.approx(angle, abs=0.05) and abs(shown.x) < 1e-3 and abs(shown.z) < 1e-3, shown
+        assert editor.undo()
+        assert math.degrees(glm.angle(world.get(box, Transform).rotation)) == pytest.approx(80.0, abs=1e-2)
+
+
 def test_a_scale_handle_dragged_scales_the_selection_along_its_own_axis(scene, ctx):
     """"scale" chosen, the box's x handle dragged 30 pixels outwards: its x scale grows so that
     the handle's end, scaled with it, lands under the mouse (the test's own projection); y

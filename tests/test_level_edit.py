@@ -217,6 +217,48 @@ def _copy_hall(tmp_path: Path) -> Path:
     return path
 
 
+def test_rotation_angles_go_on_past_ninety_degrees_and_follow_turns_without_a_jump():
+    """A rotation shows as Euler angles (degrees) that make it.  glm's own decomposition
+    keeps yaw within 90 degrees, so a yaw set past 90 came back as the other triple (x + 180,
+    180 - y, z + 180) and a drag turned back there; the editor shows the angles last set,
+    and after a turn from elsewhere (a handle, an undo) the triple nearest the last shown."""
+    from shell.editor import Editor, euler_degrees
+
+    world = World()
+    box_entity = world.spawn(Transform(), MeshRef(box()))
+    editor = Editor(world)
+
+    def rotation():
+        return glm.quat(world.get(box_entity, Transform).rotation)
+
+    def makes(angles, turn):  # the angles give the rotation (q and -q are one rotation)
+        return abs(abs(glm.dot(glm.quat(glm.radians(glm.vec3(angles))), turn)) - 1.0) < 1e-6
+
+    for yaw in range(0, 200, 10):  # a drag of yaw: each step set, then shown as set
+        assert editor.set_angles(box_entity, "Transform", "rotation", (10.0, yaw, 20.0), merge=True) is None
+        assert tuple(editor.angles(box_entity, Transform, "rotation")) == (10.0, yaw, 20.0)
+        assert makes((10.0, yaw, 20.0), rotation())
+    editor.end_drag()
+    # glm alone shows 190 as -170, 10, -160: the same rotation by other numbers.
+    plain = glm.degrees(glm.eulerAngles(rotation()))
+    assert abs(plain.y - 170.0) > 100.0 and makes(plain, rotation())
+
+    # Turns from elsewhere (a turn handle about world y, from no rotation): the yaw shown goes
+    # on by each turn to 240, pitch and roll stay 0, and the angles always make the rotation.
+    editor.set_angles(box_entity, Transform, "rotation", (0.0, 0.0, 0.0))
+    for step in range(1, 17):
+        editor.turn(box_entity, rotation(), glm.vec3(0, 1, 0), glm.radians(15.0))
+        now = editor.angles(box_entity, Transform, "rotation")
+        assert makes(now, rotation()), (now, rotation())
+        # (within a float rotation's rounding: at yaw 90, 0.03 degrees)
+        assert tuple(now) == pytest.approx((0.0, 15.0 * step, 0.0), abs=0.05), (step, now)
+    editor.end_drag()
+    assert editor.undo() and makes(editor.angles(box_entity, Transform, "rotation"), rotation())
+    # The nearest triple by whole turns: 370 degrees of yaw shows as 370 next to 360.
+    assert euler_degrees(glm.angleAxis(glm.radians(10.0), glm.vec3(0, 1, 0)), glm.vec3(0, 360, 0)).y \
+        == pytest.approx(370.0, abs=1e-3)
+
+
 def test_an_edit_the_frame_would_refuse_is_refused_and_changes_nothing(tmp_path):
     from shell.editor import EditError, Editor
 
