@@ -183,6 +183,7 @@ _CHECK_VS = ("#version 410 core\nvoid main() { "
 _CHECK_FS = {"float": "uniform sampler2D image;", "uint": "uniform usampler2D image;"}
 
 
+@pytest.mark.draws_illegal
 @pytest.mark.parametrize("case", ["legal", "no_mips", "linear_ids", "float_on_ids", "feedback", "unwritten_ids"])
 def test_the_check_names_each_kind_of_illegal_draw(ctx, case):
     """The checker itself, on hand-made draws: a legal one passes, each broken one is named."""
