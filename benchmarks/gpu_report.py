@@ -120,7 +120,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--isolate", action="store_true",
                         help="run each suite in a subprocess (a driver crash costs that suite, not the report)")
     parser.add_argument("--no-tests", action="store_true",
-                        help="do not run the test suite (python -m pytest, in one process: about 9.5 minutes on 2 llvmpipe cores)")
+                        help="do not run the test suite (python -m pytest in one process: about 9.5 minutes "
+                             "on 2 llvmpipe cores)")
     parser.add_argument("--report-only", action="store_true",
                         help="report the speed targets, met or not, without failing the exit status on them")
     parser.add_argument("--tests-args", type=shlex.split, default=[], metavar="ARGS",
