@@ -18,10 +18,16 @@ TextureData = Any
 
 @dataclass(eq=False)
 class MeshRef(TrackedComponent):
-    """The mesh an entity draws. Many entities may share one Mesh: they are instanced."""
+    """The mesh an entity draws. Many entities may share one Mesh: they are instanced.
+
+    ``visible`` False: drawn nowhere, and no shadow.  ``casts_shadows`` False: drawn, but in
+    no light's shadow map (the sun's, a lamp's, a light's through a mirror or portal), as
+    Unity's and Godot's per-renderer cast-shadows switch: a laser beam, a light's own bulb,
+    a decal.  It still receives shadows."""
 
     mesh: Mesh
     visible: bool = True
+    casts_shadows: bool = True
 
     def _validate(self, name: str, value: Any) -> Any:
         if name == "mesh" and getattr(type(value), "ASSET_KIND", None) != "mesh":
@@ -30,7 +36,7 @@ class MeshRef(TrackedComponent):
         if name == "mesh" and world is not None:
             for entity in self._entities:  # a mirror's new mesh must have area, as at spawn
                 world.check_invariants(entity, MeshRef, mesh=value)
-        if name == "visible":
+        if name in ("visible", "casts_shadows"):
             return boolean(self, name, value)
         return value
 

@@ -162,6 +162,7 @@ class ExtractSystem(esper.Processor):
             self._joined.add(entity)
         else:
             row = batch.row(entity)
+        casting_before = batch.shadow_fields(row) if old is batch else None
         choice = choose_material(material, world.try_get(entity, Emissive), world.try_get(entity, Reflective),
                                  world.try_get(entity, Refractive), world.try_get(entity, Mirror),
                                  world.try_get(entity, Portal), probe=bool(probe))
@@ -174,11 +175,15 @@ class ExtractSystem(esper.Processor):
         row["tint"] = choice.tint
         # Where it is drawn: the views it is hidden in and its reflection layers (the scene
         # shaders leave it out of views of a hidden kind or sharing none of its layers).
+        # And whether it casts shadows (a clone as its source).
         visibility = world.try_get(drawn_as, Visibility) if world.exists(drawn_as) else None
-        row["tint"][TINT_VISIBILITY] = entity_code(visibility)
+        source_mesh = world.try_get(drawn_as, MeshRef) if world.exists(drawn_as) else None
+        row["tint"][TINT_VISIBILITY] = entity_code(visibility, casts_shadows=(source_mesh or mesh_ref).casts_shadows)
         slice_ = world.try_get(entity, Slice)
         row["slice"] = slice_.plane if slice_ is not None else NO_SLICE
         row["slots"] = (choice.emissive, choice.refract, choice.reflect, drawn_as)
+        if casting_before is not None and batch.shadow_fields(row) != casting_before:
+            batch.note_shadow_change(entity)  # it stopped or started casting where it stands: maps drawn again
         batch.variants_changed()
 
     def _remove_instance(self, entity: int, batch: InstanceBatch) -> None:

@@ -48,9 +48,14 @@ def _floor_scene(world, eye, target, sun=True, point=None, mirror=False):
     return ids
 
 
-def _hits(origin: np.ndarray, direction: np.ndarray, grow: float, segment: np.ndarray | None = None) -> np.ndarray:
+CASTERS = ("box", "sphere")
+
+
+def _hits(origin: np.ndarray, direction: np.ndarray, grow: float, segment: np.ndarray | None = None,
+          casters: tuple[str, ...] = CASTERS) -> np.ndarray:
     """Whether rays (rows) from ``origin`` along unit ``direction`` meet the box or the sphere
-    (each grown by ``grow`` metres, negative shrinks), within ``segment`` (a length per ray) if given."""
+    (each grown by ``grow`` metres, negative shrinks; those of ``casters``), within
+    ``segment`` (a length per ray) if given."""
     limit = np.full(len(origin), np.inf) if segment is None else segment
     # The sphere: |o + t d - c|^2 = r^2.
     r = SPHERE_RADIUS + grow
@@ -60,8 +65,8 @@ def _hits(origin: np.ndarray, direction: np.ndarray, grow: float, segment: np.nd
     disc = b * b - c
     root = np.sqrt(np.maximum(disc, 0.0))
     t_far = -b + root
-    sphere = (disc > 0.0) & (t_far > 1e-6) & (-b - root < limit)
-    return sphere | box_hits(origin, direction, BOX_CENTRE, BOX_HALF + grow, limit)
+    sphere = (disc > 0.0) & (t_far > 1e-6) & (-b - root < limit) & ("sphere" in casters)
+    return sphere | (box_hits(origin, direction, BOX_CENTRE, BOX_HALF + grow, limit) & ("box" in casters))
 
 
 def _classified(lit_frame: np.ndarray, dark_frame: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -87,13 +92,15 @@ def _floor_points_seen(runner) -> np.ndarray:
     return (eye + rays * t[..., None]).reshape(-1, 3)
 
 
-def _sun_rays_agree(shadowed, lit, mask, points: np.ndarray) -> tuple[float, int, int, np.ndarray]:
+def _sun_rays_agree(shadowed, lit, mask, points: np.ndarray, casters: tuple[str, ...] = CASTERS
+                    ) -> tuple[float, int, int, np.ndarray]:
     """``mask``'s pixels, each showing the floor point of its row of ``points``, classified
-    by the frame against float64 shadow rays towards the sun (LIGHT): (agreeing share,
-    pixels counted, pixels in shadow, the umbra: pixels every ray of the band says shadowed)."""
+    by the frame against float64 shadow rays towards the sun (LIGHT) meeting ``casters``:
+    (agreeing share, pixels counted, pixels in shadow, the umbra: pixels every ray of the
+    band says shadowed)."""
     to_light = np.tile(-np.array(LIGHT, np.float64), (len(points), 1))
-    occluded_in = _hits(points, to_light, -PENUMBRA).reshape(mask.shape)
-    occluded_out = _hits(points, to_light, PENUMBRA).reshape(mask.shape)
+    occluded_in = _hits(points, to_light, -PENUMBRA, casters=casters).reshape(mask.shape)
+    occluded_out = _hits(points, to_light, PENUMBRA, casters=casters).reshape(mask.shape)
     share, counted, in_shadow = _agreement(shadowed, lit, mask, occluded_in, occluded_out)
     return share, counted, in_shadow, mask & occluded_in & occluded_out
 
@@ -194,7 +201,119 @@ def test_the_shadow_seen_through_a_portal_is_the_carried_points_shadow(scene):
     assert share >= 0.99, f"{share:.4f} of {counted} floor pixels through the portal agree with the shadow rays"
 
 
-def _lamp_rays_agree(runner, ids, without, with_shadows, lamp: np.ndarray) -> tuple[float, int, int, float]:
+def test_a_mesh_that_casts_no_shadow_is_drawn_and_leaves_the_sun_on_the_floor(scene):
+    """``MeshRef.casts_shadows = False`` on the box: it is drawn as before (its pixels, in
+    the frame and in the mirror), but the floor directly and in the mirror agrees with shadow
+    rays that meet the sphere alone, so where the box alone stood in the sun's way is lit
+    (behind the mirror's plane, z < -3, the mirror's own shadow is left out); switched on
+    again, the kept map is drawn again and the frame is the first one."""
+    def build(world):
+        world.resources["ids"] = _floor_scene(world, (0.0, 3.0, 5.0), (0.0, 1.2, -3.0), mirror=True)
+
+    runner, ids, without, with_shadows = _render_both(scene, build)
+    box_pixels = int((runner.ids() == ids["box"]).sum())
+    box_mesh = runner.world.get(ids["box"], MeshRef)
+    box_mesh.casts_shadows = False
+    no_box_shadow = runner.frame()
+    assert int((runner.ids() == ids["box"]).sum()) == box_pixels > 500
+    shadowed, lit = _classified(without, no_box_shadow)
+    floor = runner.ids() == ids["floor"]
+    in_mirror = (runner.engine.renderer.targets.read_surface_ids() == ids["mirror"]) & floor
+    points = _floor_points_seen(runner)
+    direct = floor & ~in_mirror & (points[:, 2] > -3.0).reshape(floor.shape)
+    share, counted, in_shadow, _ = _sun_rays_agree(shadowed, lit, direct, points, ("sphere",))
+    assert counted > 20000 and in_shadow > 300, (counted, in_shadow, share)
+    assert share >= 0.99, f"{share:.4f} of {counted} floor pixels agree with rays that meet the sphere alone"
+    # Where the box alone shadowed the floor (every ray of the band meets it, none the sphere) is lit now.
+    _, _, _, box_umbra = _sun_rays_agree(shadowed, lit, direct, points)
+    _, _, _, sphere_umbra = _sun_rays_agree(shadowed, lit, direct, points, ("sphere",))
+    box_alone = box_umbra & ~sphere_umbra
+    assert box_alone.sum() > 300 and lit[box_alone].mean() >= 0.95, (box_alone.sum(), lit[box_alone].mean())
+    was_shadowed, _ = _classified(without, with_shadows)
+    assert was_shadowed[box_alone].mean() >= 0.95  # it was the box's shadow
+
+    eye, rays = pixel_rays(runner.engine.main_view, runner.size)  # the floor in the mirror (z = -3)
+    t = (-3.0 - eye[2]) / rays[..., 2]
+    on_mirror = eye + rays * t[..., None]
+    turned = rays * np.array([1.0, 1.0, -1.0])
+    mirrored = (on_mirror + turned * (-on_mirror[..., 1] / turned[..., 1])[..., None]).reshape(-1, 3)
+    share, counted, _, _ = _sun_rays_agree(shadowed, lit, in_mirror, mirrored, ("sphere",))
+    assert counted > 4000 and share >= 0.99, (counted, share)
+
+    box_mesh.casts_shadows = True
+    again = runner.frame()
+    assert runner.stats.shadow_maps_drawn >= 1
+    np.testing.assert_array_equal(again, with_shadows)
+
+
+def test_a_mesh_that_casts_no_shadow_leaves_a_lamps_light_on_the_floor(scene):
+    """The same for a point light's cube map (a lamp between the box and the sphere): with
+    the box's ``casts_shadows`` off the floor agrees with shadow rays to the lamp that meet
+    the sphere alone, and no longer with rays that meet both."""
+    lamp = np.array([0.0, 2.0, 1.2])
+
+    def build(world):
+        world.resources["ids"] = _floor_scene(world, (0.0, 5.5, 6.0), (0.0, 0.0, 0.0), sun=False,
+                                              point=lamp.tolist())
+
+    runner, ids, without, with_shadows = _render_both(scene, build, light="lamp")
+    share, _, box_and_sphere, _ = _lamp_rays_agree(runner, ids, without, with_shadows, lamp)
+    assert share >= 0.99, share
+    runner.world.get(ids["box"], MeshRef).casts_shadows = False
+    no_box_shadow = runner.frame()
+    share, counted, in_shadow, umbra_dark = _lamp_rays_agree(runner, ids, without, no_box_shadow, lamp, ("sphere",))
+    assert counted > 10000 and in_shadow > 300 and umbra_dark >= 0.95, (counted, in_shadow, umbra_dark)
+    assert box_and_sphere > in_shadow + 300, (box_and_sphere, in_shadow)  # the box's shadow was there
+    assert share >= 0.99, f"{share:.4f} of {counted} floor pixels agree with rays to the lamp meeting the sphere alone"
+    share_both, _, _, _ = _lamp_rays_agree(runner, ids, without, no_box_shadow, lamp)
+    assert share_both < 0.99, share_both  # the box's shadow is gone: the rays that meet it disagree
+
+
+@pytest.mark.parametrize("change", ["casts_shadows", "hidden_everywhere", "glass"])
+def test_a_caster_that_stops_casting_where_it_stands_draws_the_kept_maps_again(scene, change):
+    """A caster whose box stays where it was but stops casting (its MeshRef's
+    ``casts_shadows`` off, hidden in every kind of view, made glass): the kept sun's map is
+    drawn again, and the frame is the one an engine given that world from the start draws.
+    (The maps were drawn again only where a box changed, so hiding the box left its shadow.)"""
+    import warnings
+
+    from components import Refractive, Visibility
+    from components.tracking import ComponentWarning
+
+    def stop(world, box_entity):
+        if change == "casts_shadows":
+            world.get(box_entity, MeshRef).casts_shadows = False
+        elif change == "hidden_everywhere":
+            world.add_component(box_entity, Visibility(direct=False, in_mirrors=False, in_portals=False,
+                                                       in_probes=False))
+        else:
+            world.add_component(box_entity, Refractive())
+
+    def build(late):
+        def make(world):
+            ids = world.resources["ids"] = _floor_scene(world, (0.0, 3.0, 5.0), (0.0, 1.2, -3.0))
+            if not late:
+                stop(world, ids["box"])
+        return make
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", ComponentWarning)  # hidden everywhere: warned, on purpose
+        late = scene(build(True), (160, 120))
+        late.engine.renderer.antialias = "off"
+        cast = late.frame()
+        stop(late.world, late.world.resources["ids"]["box"])
+        stopped = late.frame()
+        assert late.stats.shadow_maps_drawn >= 1
+        fresh = scene(build(False), (160, 120))
+        fresh.engine.renderer.antialias = "off"
+        fresh.frame()
+        expected = fresh.frame()
+    assert not np.array_equal(cast, stopped)
+    np.testing.assert_array_equal(stopped, expected)
+
+
+def _lamp_rays_agree(runner, ids, without, with_shadows, lamp: np.ndarray, casters: tuple[str, ...] = CASTERS
+                     ) -> tuple[float, int, int, float]:
     """The floor's pixels within 5 of ``lamp`` (where the lamp gives a visible share of the
     light: near the end of its range the difference is below the 8-bit output's steps),
     classified shadowed or lit from the frames ``without`` and ``with_shadows``, against
@@ -206,8 +325,8 @@ def _lamp_rays_agree(runner, ids, without, with_shadows, lamp: np.ndarray) -> tu
     distance = np.linalg.norm(to_lamp, axis=1)
     floor = (runner.ids() == ids["floor"]) & (distance < 5.0).reshape(runner.ids().shape)
     direction = to_lamp / distance[:, None]
-    occluded_in = _hits(points, direction, -PENUMBRA, distance).reshape(floor.shape)
-    occluded_out = _hits(points, direction, PENUMBRA, distance).reshape(floor.shape)
+    occluded_in = _hits(points, direction, -PENUMBRA, distance, casters).reshape(floor.shape)
+    occluded_out = _hits(points, direction, PENUMBRA, distance, casters).reshape(floor.shape)
     share, counted, in_shadow = _agreement(shadowed, lit, floor, occluded_in, occluded_out)
     umbra = floor & occluded_in & occluded_out
     return share, counted, in_shadow, float(shadowed[umbra].mean())

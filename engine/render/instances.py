@@ -472,6 +472,21 @@ class InstanceBatch:
             self._row_boxes = grown
         return self._row_boxes
 
+    def note_shadow_change(self, entity: int) -> None:
+        """``entity``'s row changed what the shadow pass draws of it (whether it casts:
+        ``shaders/shadow.vert``; its slice plane) where its box did not: its box counts as
+        changed (``take_changed_box``), so the shadow maps are drawn again there.  A row not
+        measured yet adds nothing: its first upload counts its box."""
+        lo, hi = self._boxes_for(len(self.rows))[self.row_of[entity]].tolist()
+        self._note_changed(lo, hi)
+
+    @staticmethod
+    def shadow_fields(row: np.void) -> tuple:
+        """What of a row the shadow pass reads besides its model matrix (which moves its box):
+        where it is drawn and casts (tint.w), its refract and reflect variants, its slice."""
+        return float(row["tint"][TINT_VISIBILITY]), int(row["slots"][1]), int(row["slots"][2]), \
+            tuple(row["slice"].tolist())
+
     def _note_changed(self, lo: list[float], hi: list[float]) -> None:
         """Grow the changed box by [lo, hi] (floats; one with a NaN, never measured, adds
         nothing): kept as floats, made arrays once when taken (a frame's few movers note it

@@ -14,7 +14,8 @@ One packing serves both sides, an integer of ``VIEW_KINDS`` bits of kinds of vie
 
 A view draws an entity when it is of no kind the entity is hidden in and they share a layer
 (``drawn_in``); an entity hidden in every kind of view is drawn nowhere and casts no shadow
-(``hidden_everywhere``)."""
+(``hidden_everywhere``), and one whose ``MeshRef.casts_shadows`` is off is drawn but casts
+none (``NO_SHADOW_BIT`` in its code, above the layers, which no view's mask has: ``casts_shadow``)."""
 from __future__ import annotations
 
 from typing import TypeVar
@@ -22,22 +23,22 @@ from typing import TypeVar
 import numpy as np
 
 from components import MeshRef, Visibility
-from components.limits import VIEW_KINDS
+from components.limits import NO_SHADOW_BIT, VIEW_KINDS
 from components.visibility import DRAWN_EVERYWHERE, KIND_MASK, visibility_code
 from engine.core.world import World
 
 Code = TypeVar("Code", int, np.ndarray)
 
 
-def entity_code(visibility: Visibility | None, drawn: bool = True) -> int:
+def entity_code(visibility: Visibility | None, drawn: bool = True, casts_shadows: bool = True) -> int:
     """Where an entity is drawn: its ``Visibility``'s hidden kinds and layers
-    (``DRAWN_EVERYWHERE`` without one); 0, on no layer, when it is not drawn at all
-    (``drawn`` False: an invisible mesh)."""
+    (``DRAWN_EVERYWHERE`` without one), with ``NO_SHADOW_BIT`` when it casts no shadow
+    (``casts_shadows`` False: its ``MeshRef.casts_shadows``); 0, on no layer, when it is not
+    drawn at all (``drawn`` False: an invisible mesh)."""
     if not drawn:
         return 0
-    if visibility is None:
-        return DRAWN_EVERYWHERE
-    return visibility_code(visibility.hidden_kinds, visibility.layer_mask)
+    code = DRAWN_EVERYWHERE if visibility is None else visibility_code(visibility.hidden_kinds, visibility.layer_mask)
+    return code if casts_shadows else code | NO_SHADOW_BIT
 
 
 def drawn_code(world: World, entity: int) -> int:
@@ -60,6 +61,15 @@ def hidden_everywhere(codes: Code) -> bool | np.ndarray:
     return (codes & KIND_MASK) == KIND_MASK
 
 
+def casts_shadow(codes: Code) -> bool | np.ndarray:
+    """Whether what has ``codes`` is in the lights' shadow maps: drawn somewhere
+    (``hidden_everywhere``) and not marked ``NO_SHADOW_BIT``.  ``casts_no_shadow`` in
+    ``shaders/include/visibility.glsl`` is its negation."""
+    return ~hidden_everywhere(codes) & ((codes & NO_SHADOW_BIT) == 0) if isinstance(codes, np.ndarray) \
+        else not hidden_everywhere(codes) and not codes & NO_SHADOW_BIT
+
+
 def glsl_defines() -> dict[str, str]:
-    """``VIEW_KIND_BITS``: the kinds' bit count, for ``shaders/include/visibility.glsl``."""
-    return {"VIEW_KIND_BITS": f"{VIEW_KINDS}u"}
+    """``VIEW_KIND_BITS``: the kinds' bit count, and ``NO_SHADOW_BIT``, for
+    ``shaders/include/visibility.glsl``."""
+    return {"VIEW_KIND_BITS": f"{VIEW_KINDS}u", "NO_SHADOW_BIT": f"{NO_SHADOW_BIT}u"}

@@ -20,3 +20,9 @@ bool hidden_everywhere(float instance_code) {
     uint kinds = (1u << VIEW_KIND_BITS) - 1u;
     return (uint(instance_code + 0.5) & kinds) == kinds;
 }
+
+// Left out of every light's shadow map: drawn nowhere, or drawn with MeshRef.casts_shadows
+// off (NO_SHADOW_BIT, above the layers: no view's mask has it, so no view's test reads it).
+bool casts_no_shadow(float instance_code) {
+    return hidden_everywhere(instance_code) || (uint(instance_code + 0.5) & NO_SHADOW_BIT) != 0u;
+}
