@@ -728,6 +728,13 @@ position = [0.0, 2.0, 0.0]
 range = 6.0
 shadows = true
 shadow_resolution = 256
+
+[[entity]]
+name = "beam"
+[entity.Transform]
+[entity.MeshRef]
+mesh = { box = [0.05, 0.05, 2.0] }
+casts_shadows = false
 """
 
 
@@ -747,8 +754,13 @@ def test_level_files_carry_the_shadow_fields_and_refuse_bad_ones(tmp_path):
     names_again = load_level(saved).spawn(again)
     assert again.get(names_again["lamp"], PointLight).shadow_resolution == 256
     assert again.get(names_again["sun"], DirectionalLight).shadow_softness == 2.5
+    assert world.get(names["beam"], MeshRef).casts_shadows is False
+    assert again.get(names_again["beam"], MeshRef).casts_shadows is False
     path.write_text(LEVEL.replace("shadow_resolution = 1024", "shadow_resolution = 1000"))
     with pytest.raises(LevelError, match="shadow_resolution"):
+        load_level(path)
+    path.write_text(LEVEL.replace("casts_shadows = false", "casts_shadows = 0"))
+    with pytest.raises(LevelError, match="casts_shadows"):
         load_level(path)
 
 

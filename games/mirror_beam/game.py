@@ -587,8 +587,9 @@ class MirrorBeam(LevelGame):
         look = Material(color=BEAM_COLOR, roughness=1.0)
         glow = Emissive(BEAM_POWER)
         for index in range(rules.max_bounces + 1):
-            world.spawn(Transform(scale=(BEAM_WIDTH, BEAM_WIDTH, 1.0)), MeshRef(unit, visible=False), look, glow,
-                        BeamSegment(index))
+            # Light, not a solid: the beam casts no shadow (MeshRef.casts_shadows).
+            world.spawn(Transform(scale=(BEAM_WIDTH, BEAM_WIDTH, 1.0)),
+                        MeshRef(unit, visible=False, casts_shadows=False), look, glow, BeamSegment(index))
         world.spawn(Transform(), MeshRef(box((0.3, 0.06, 0.3), name="marker")),
                     Material(color=(1.0, 0.85, 0.2, 1.0)), Emissive(2.0), SelectionMarker())
         # The level's name on the screen, over a dark panel; the beam system adds "solved".
