@@ -35,6 +35,7 @@ if TYPE_CHECKING:
 
 POSITION = (8, 8)               # the overlay's windows' inset from the output's corners, in pixels
 INSPECTOR_WIDTH = 320                      # pixels of the inspector, at the right edge
+MIN_INSPECTOR_HEIGHT = 120.0               # pixels: the inspector's height however little room is left
 DRAG_SPEED = 0.01                          # a number field's change per pixel dragged
 HDR_COLOUR = imgui.ColorEditFlags_.float | imgui.ColorEditFlags_.hdr  # colour fields: floats, not clamped to 0-1
 SNAP = {"move": 0.25, "turn": math.radians(15.0), "scale": 0.1}  # a handle's steps with Ctrl held
@@ -187,14 +188,19 @@ class EditorPanels:
         if not chosen and not (editor.can_undo or editor.can_redo):  # shown once something is clicked
             self.inspector_lines = lines
             return
-        width, _height = self.io.display_size
-        inspector = INSPECTOR_WIDTH * self.scale
-        imgui.set_next_window_pos(imgui.ImVec2(max(width - inspector - POSITION[0] * self.scale, 0), top + 4))
-        imgui.set_next_window_size_constraints(imgui.ImVec2(inspector, 0), imgui.ImVec2(inspector, 10000))
+        width, height = self.io.display_size
+        inspector, inset = INSPECTOR_WIDTH * self.scale, POSITION[0] * self.scale
+        imgui.set_next_window_pos(imgui.ImVec2(max(width - inspector - inset, 0), top + 4))
+        # As tall as its fields, down to the window's bottom at most: past that it scrolls (the
+        # wheel over it), so a small window still reaches every field.
+        tallest = max(height - top - 4 - inset, MIN_INSPECTOR_HEIGHT * self.scale)
+        imgui.set_next_window_size_constraints(imgui.ImVec2(inspector, 0), imgui.ImVec2(inspector, tallest))
         imgui.set_next_window_bg_alpha(0.85)
         flags = (imgui.WindowFlags_.always_auto_resize | imgui.WindowFlags_.no_saved_settings
                  | imgui.WindowFlags_.no_collapse | imgui.WindowFlags_.no_move)
         imgui.begin("Inspector", None, flags)
+        corner, extent = imgui.get_window_pos(), imgui.get_window_size()
+        self.windows["Inspector"] = ((corner.x, corner.y), (corner.x + extent.x, corner.y + extent.y))
         for action, can, do in (("undo", editor.can_undo, editor.undo), ("redo", editor.can_redo, editor.redo)):
             if imgui.button(action) and can:
                 try:

@@ -169,6 +169,7 @@ class DebugOverlay(EditorPanels):
         self.shown_errors: list[str] = []    # the shader errors it showed (hot reload)
         self.region: tuple[int, int, int, int] | None = None  # x, y (from the top-left), w, h last drawn
         self.widgets: dict[str, tuple[float, float]] = {}  # each toggle's centre, last drawn (pixels)
+        self.windows: dict[str, tuple[tuple[float, float], tuple[float, float]]] = {}  # a panel's corners (pixels)
         self._last = None
         self._previous = imgui.get_current_context()
         self.context = imgui.create_context()

@@ -57,8 +57,9 @@ def test_click_inspect_drag_undo_and_a_refused_value(scene, ctx):
         assert editor.undo() and runner.world.get(box, Material).roughness == pytest.approx(0.4)
         assert not editor.can_undo  # the whole drag was one edit
 
-        # A rotation drags as angles in degrees; one undo puts it back.
-        x, y = overlay.widgets["Transform.rotation"]
+        # A rotation drags as angles in degrees; one undo puts it back.  (The inspector is
+        # as tall as the window at most: the wheel over it brings the field into view.)
+        x, y = _scrolled_to(overlay, draw, "Transform.rotation", SIZE)
         overlay.mouse_moved(x, y)
         draw()
         overlay.mouse_button(1, True)
@@ -258,6 +259,34 @@ def _hands(runner, overlay, size=SIZE):
         draw()
 
     return draw, click
+
+
+def _scrolled_to(overlay, draw, widget: str, size) -> tuple[float, float]:
+    """The inspector scrolled by the wheel (the mouse over it) until ``widget`` is inside the
+    window's height; its place then."""
+    for _ in range(40):
+        x, y = overlay.widgets[widget]
+        if y < size[1] - 12:
+            return x, y
+        overlay.mouse_moved(x, size[1] - 20)
+        overlay.scroll(0.0, -1.0)
+        draw()
+        draw()
+    raise AssertionError(f"{widget} stayed below the window: {overlay.widgets[widget]}")
+
+
+def test_a_tall_inspector_fits_the_window_and_scrolls_to_its_last_field(scene, ctx):
+    """In a window too short for every field the inspector ends at the window's bottom (it
+    grew past it, so the fields below could not be reached); the wheel over it scrolls to
+    the last field, which then takes a click like any other."""
+    size = (640, 300)
+    with _box_selected(scene, ctx, size) as (runner, overlay, draw, click, editor, box):
+        draw()  # (an auto-sized window takes its size a frame after its fields change)
+        low, high = overlay.windows["Inspector"]
+        assert high[1] <= size[1] and high[1] - low[1] > 100, (low, high)
+        assert overlay.widgets["Transform.parent"][1] > size[1]  # out of sight at first
+        _scrolled_to(overlay, draw, "Transform.parent", size)
+        assert overlay.windows["Inspector"][1][1] <= size[1]
 
 
 def _drag(overlay, draw, points) -> None:
