@@ -773,6 +773,23 @@ def test_the_cpu_part_runs_in_its_own_process_with_no_rasteriser_threads(capsys,
         {name for name, target in cpu.TARGETS.items() if target.part == "cpu"}
 
 
+def test_the_sample_part_draws_the_sample_level_with_its_probes_and_views(capsys, own_contexts):
+    """``--parts sample``: one row, the sample level at 640x360 on llvmpipe (a GPU adds
+    1920x1080), a frame with reflection views, probe captures among its passes, and no target
+    of its own (every target unmeasured)."""
+    from benchmarks import cpu
+
+    parser, _ = build_parser()
+    assert cpu.main(parser.parse_args(["cpu", "--parts", "sample", "--frames", "1", "--warmup", "1", "--json",
+                                       "--report-only"])) == 0
+    rows = [json.loads(line) for line in capsys.readouterr().out.splitlines()]
+    scenes = [row for row in rows if "gl_calls" in row]
+    assert [(row["scene"], row["size"]) for row in scenes] == [("hall", "640x360")]
+    hall = scenes[0]
+    assert hall["views"] > 0 and hall["passes"] > hall["views"] + 1 and hall["draw_calls"] > 0, hall
+    assert all(row["value"] is None for row in rows if "target" in row)
+
+
 def test_ab_runs_both_trees_in_alternating_processes_and_prints_their_ratio(capsys, tmp_path):
     """``python -m benchmarks ab``: a tree against itself (A/A) gives one row a scene, each
     side's median from its own processes (old, new, then new, old for the second pair) and
