@@ -22,8 +22,8 @@ class MeshRef(TrackedComponent):
 
     ``visible`` False: drawn nowhere, and no shadow.  ``casts_shadows`` False: drawn, but in
     no light's shadow map (the sun's, a lamp's, a light's through a mirror or portal), as
-    Unity's and Godot's per-renderer cast-shadows switch: a laser beam, a light's own bulb,
-    a decal.  It still receives shadows."""
+    Unity's and Godot's per-renderer cast-shadows switch: a laser beam, a light's own bulb.
+    It still receives shadows."""
 
     mesh: Mesh
     visible: bool = True

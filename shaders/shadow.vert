@@ -2,9 +2,9 @@
 // Shadow casters seen from a light (engine/render/shadows.py): depth only, every opaque
 // batch, the light's camera in the Camera block.  What casts is what a person sees as solid:
 // not a portal's opening, not glass (a refracting instance), not something hidden in every
-// kind of view or with MeshRef.casts_shadows off; the transparent slot is not drawn at all.  Things partly through a portal are
-// cut at their slice plane, as in every view, so the part that came out of the partner casts
-// its own shadow there.
+// kind of view or with MeshRef.casts_shadows off; the transparent slot is not drawn at all.
+// Things partly through a portal are cut at their slice plane, as in every view, so the part
+// that came out of the partner casts its own shadow there.
 #include "camera.glsl"
 #include "visibility.glsl"
 
