@@ -138,8 +138,12 @@ class ExtractSystem(esper.Processor):
         # A material whose alpha is below 1 is see-through: blended in the transparent slot
         # (glass, whose alpha weighs the refracted view, stays opaque).
         transparent = material is not None and material.color.w < 1.0 and not world.has(entity, Refractive)
+        # A generated shape is drawn as its unit mesh, its size in its row; not a mirror's or a
+        # portal's, whose batch of surfaces alone the unlit-mirror pass keeps (unlit_mirrors).
+        surface = world.has(entity, Mirror) or world.has(entity, Portal)
+        drawn = mesh_ref.mesh if surface else mesh_ref.mesh.unit or mesh_ref.mesh
         try:
-            batch = self.renderer.batch_for(mesh_ref.mesh, material.texture if material else None, probe,
+            batch = self.renderer.batch_for(drawn, material.texture if material else None, probe,
                                             entity if transparent else 0, material.normal_map if material else None,
                                             material.emissive_map if material else None,
                                             material.metallic_roughness_map if material else None,
@@ -162,6 +166,8 @@ class ExtractSystem(esper.Processor):
             self._joined.add(entity)
         else:
             row = batch.row(entity)
+        if batch.set_size(entity, None if drawn is mesh_ref.mesh else mesh_ref.mesh.unit_scale):
+            self._joined.add(entity)  # its model matrix is written again below, with its size
         casting_before = batch.shadow_fields(row) if old is batch else None
         choice = choose_material(material, world.try_get(entity, Emissive), world.try_get(entity, Reflective),
                                  world.try_get(entity, Refractive), world.try_get(entity, Mirror),

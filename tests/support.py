@@ -65,6 +65,14 @@ class SceneRunner:
             self._closed = True
 
 
+def own_mesh(mesh):
+    """The same vertices as a mesh of its own (made from arrays): the renderer draws it in a
+    batch of its own, where a generated box, quad or sphere shares its shape's unit mesh."""
+    from engine.assets.mesh import Mesh
+
+    return Mesh(mesh.positions.copy(), mesh.normals.copy(), mesh.uvs.copy(), mesh.indices.copy(), name=mesh.name)
+
+
 def srgb_to_linear(values) -> np.ndarray:
     c = np.asarray(values, np.float64) / 255.0
     return np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)

@@ -27,6 +27,7 @@ from engine.core.frame_io import Output
 from engine.render.scene_pass import ScenePass
 from engine.render.targets import CaptureTarget
 from shell.app import Engine
+from tests.support import own_mesh
 
 SIZE = (96, 54)
 FRAMES = 14
@@ -40,7 +41,7 @@ class BoxPerBatch(MirrorRing):
         super().build(world)
         for entity, (ref,) in world.query(MeshRef):
             if ref.mesh.name == "bench box":
-                world.add_component(entity, MeshRef(box(name=f"box {entity}")))
+                world.add_component(entity, MeshRef(own_mesh(box(name=f"box {entity}"))))
 
 
 def _engine(ctx, case: str, cull: bool):

@@ -436,11 +436,12 @@ def test_many_movers_rows_are_gathered_and_the_buffer_holds_every_rows_matrices(
     """The ECS benchmark's scene with 6,400 entities, 64 moving (16 per batch): after the
     frame that gathers the movers' rows at the front of their batches, a moving frame uploads
     exactly the movers' rows in one span per batch, and every row, in the batch and in its GPU
-    buffer, holds its own entity's world matrix."""
+    buffer, holds its own entity's world matrix (times its size: the cube and the post are
+    the unit box's batch, each axis of the matrix scaled by the box's side)."""
     import numpy as np
 
     from benchmarks.ecs import DT, OUTPUT_SIZE, GridScene
-    from components import Transform
+    from components import MeshRef, Transform
     from engine.core.frame_io import Output
     from engine.render.instances import INSTANCE_DTYPE
     from engine.render.targets import CaptureTarget
@@ -453,7 +454,7 @@ def test_many_movers_rows_are_gathered_and_the_buffer_holds_every_rows_matrices(
         for _ in range(3):
             engine.frame(DT, output)
         batches = [b for b in engine.renderer.batches.values() if b.count]
-        assert len(batches) == 4
+        assert len(batches) == 3  # the unit box (cubes and posts), the ball, the pebble
         writes = []
         for batch in batches:
             buffer_write = batch._buffer.write
@@ -470,8 +471,11 @@ def test_many_movers_rows_are_gathered_and_the_buffer_holds_every_rows_matrices(
             assert gpu.tobytes() == batch.rows[: batch.count].tobytes()
             for row, entity in enumerate(batch.entity_at[: batch.count]):
                 assert batch.row_of[entity] == row and batch.rows["slots"][row, 3] == entity
-                model = engine.world.get(entity, Transform).world
-                assert batch.rows["model"][row].tobytes() == model.to_bytes()
+                model = np.frombuffer(engine.world.get(entity, Transform).world.to_bytes(), np.float32)
+                size = engine.world.get(entity, MeshRef).mesh.unit_scale
+                columns = model.reshape(4, 4).copy()
+                columns[:3] *= np.array(size, np.float32)[:, None]
+                assert batch.rows["model"][row].tobytes() == columns.tobytes()
     finally:
         capture.release()
         engine.close()

@@ -94,8 +94,10 @@ def test_the_same_movers_every_frame_keep_their_rows_right_when_one_changes_batc
     row filled from the last) and one more starts moving."""
     from components import Material, MeshRef, Transform
     from engine.assets.mesh import sphere
+    from tests.support import own_mesh
 
-    cube, ball, post = box((0.3, 0.3, 0.3)), sphere(0.2), box((0.1, 0.5, 0.1))
+    # Meshes of their own (a generated shape of another size shares its unit's batch).
+    cube, ball, post = own_mesh(box((0.3, 0.3, 0.3))), own_mesh(sphere(0.2)), own_mesh(box((0.1, 0.5, 0.1)))
     movers: list[int] = []
     posts: list[int] = []
     clock = [0.0]

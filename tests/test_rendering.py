@@ -302,7 +302,9 @@ def test_entities_release_their_gpu_resources(scene):
                    for i in range(12)]
         runner.frame()
         counts = renderer.resource_counts()
-        assert counts["meshes"] == 12 and counts["textures"] == 1 and counts["batches"] == 12
+        # Every box and every sphere is its shape's unit mesh scaled: two meshes, a batch for
+        # each with the texture and without.
+        assert counts["meshes"] == 2 and counts["textures"] == 1 and counts["batches"] == 4
         for e in spawned:
             runner.world.delete_entity(e)
         runner.frame()

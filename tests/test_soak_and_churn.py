@@ -9,7 +9,7 @@ from benchmarks import churn, soak
 def test_a_tour_of_the_sample_level_holds_its_resources_flat():
     rows = soak.run(frames=90, every=30, warmup=30)
     assert [row["frame"] for row in rows] == [0, 30, 60, 90]
-    assert rows[1]["gl_resources"]["probe_cubes"] == 3 and rows[1]["gl_resources"]["batches"] > 20
+    assert rows[1]["gl_resources"]["probe_cubes"] == 3 and rows[1]["gl_resources"]["batches"] > 10
     assert soak.grew(rows, warmup=30, rss_slack=20.0) == []
 
 

@@ -6,6 +6,7 @@ whose MeshRef points at it.
 from __future__ import annotations
 
 import contextlib
+import functools
 import hashlib
 import io
 import itertools
@@ -69,6 +70,16 @@ class Mesh:
     # How it was made, as a level file writes it ({"box": [w, h, d]}, {"file": path}, ...);
     # None for a mesh built from arrays, which a level file cannot name.
     source: dict | None = field(default=None, repr=False)
+    # A generated box, quad or sphere is its shape's unit mesh scaled (``unit``, made when first
+    # asked for): the renderer draws every size of a shape as instances of that one mesh, each
+    # row's model matrix carrying its size, so boxes of ten sizes are one draw a pass, not ten.
+    unit_shape: tuple | None = field(default=None, repr=False)  # (kind, segments, rings)
+    unit_scale: tuple[float, float, float] = (1.0, 1.0, 1.0)
+
+    @property
+    def unit(self) -> Mesh | None:
+        """The unit mesh this one is, scaled by ``unit_scale`` (None: drawn as it is)."""
+        return None if self.unit_shape is None else _unit_mesh(*self.unit_shape)
 
     def __post_init__(self) -> None:
         self.positions = np.ascontiguousarray(self.positions, np.float32).reshape(-1, 3)
@@ -177,6 +188,31 @@ def _name(name, kind: str) -> str:
 
 
 MAX_EXTENT = 1e18  # metres: a generated mesh's size (past float32 once scaled and multiplied out)
+# Sizes a generated mesh is drawn as its unit mesh scaled: each side in this range (a side of 0,
+# a flat box, would make the model matrix singular and its normal matrix infinite).
+UNIT_SCALES = (1e-3, 1e6)
+
+
+@functools.lru_cache(maxsize=32)
+def _unit_mesh(kind: str, segments: int = 0, rings: int = 0) -> Mesh:
+    """The one unit mesh of a shape (a 1 m box or quad, a sphere of radius 1 with these
+    divisions), shared by every generated mesh of that shape the renderer draws."""
+    if kind == "box":
+        return box(name="unit box")
+    if kind == "quad":
+        return quad(name="unit quad")
+    return sphere(1.0, segments, rings, name="unit sphere")
+
+
+def _scaled_unit(mesh: Mesh, kind: str, scale: tuple[float, float, float], segments: int = 0, rings: int = 0) -> Mesh:
+    """``mesh`` marked as its shape's unit mesh scaled by ``scale`` (``Mesh.unit``), where every
+    side is in ``UNIT_SCALES``; the unit mesh itself and other sizes are drawn as they are."""
+    low, high = UNIT_SCALES
+    if mesh.name.startswith("unit ") or not all(low <= side <= high for side in scale):
+        return mesh
+    mesh.unit_shape = (kind, segments, rings)
+    mesh.unit_scale = tuple(float(side) for side in scale)
+    return mesh
 
 
 def box(size: tuple[float, float, float] = (1.0, 1.0, 1.0), name: str = "box") -> Mesh:
@@ -201,8 +237,9 @@ def box(size: tuple[float, float, float] = (1.0, 1.0, 1.0), name: str = "box") -
             normals.append(n)
             uvs.append(((su + 1) / 2, (sv + 1) / 2))
         indices += [(base, base + 1, base + 2), (base, base + 2, base + 3)]
-    return Mesh(np.array(positions), np.array(normals), np.array(uvs), np.array(indices), name=name,
+    made = Mesh(np.array(positions), np.array(normals), np.array(uvs), np.array(indices), name=name,
                 source={"box": [float(s) for s in size], **({} if name == "box" else {"name": name})})
+    return _scaled_unit(made, "box", (2.0 * hx, 2.0 * hy, 2.0 * hz))
 
 
 def plane(width: float = 1.0, depth: float = 1.0, uv_repeat: float = 1.0, name: str = "plane") -> Mesh:
@@ -236,8 +273,9 @@ def quad(width: float = 1.0, height: float = 1.0, name: str = "quad") -> Mesh:
     positions = np.array([(-hw, -hh, 0), (hw, -hh, 0), (hw, hh, 0), (-hw, hh, 0)])
     normals = np.tile((0.0, 0.0, 1.0), (4, 1))
     uvs = np.array([(0, 0), (1, 0), (1, 1), (0, 1)])
-    return Mesh(positions, normals, uvs, np.array([(0, 1, 2), (0, 2, 3)]), name=name,
+    made = Mesh(positions, normals, uvs, np.array([(0, 1, 2), (0, 2, 3)]), name=name,
                 source={"quad": [float(width), float(height)], **({} if name == "quad" else {"name": name})})
+    return _scaled_unit(made, "quad", (width, height, 1.0))
 
 
 MAX_SPHERE_DIVISIONS = 1024  # segments or rings of a generated sphere (a million triangles at most)
@@ -275,9 +313,9 @@ def sphere(radius: float = 0.5, segments: int = 48, rings: int = 24, name: str =
     indices[1, :, 2] = a + 1
     source = {"sphere": float(radius), **({} if segments == 48 else {"segments": int(segments)}),
               **({} if rings == 24 else {"rings": int(rings)}), **({} if name == "sphere" else {"name": name})}
-    return Mesh(positions.reshape(count, 3), normals.reshape(count, 3), uvs.reshape(count, 2), indices.reshape(-1, 3),
-                name=name,
-                source=source)
+    made = Mesh(positions.reshape(count, 3), normals.reshape(count, 3), uvs.reshape(count, 2), indices.reshape(-1, 3),
+                name=name, source=source)
+    return _scaled_unit(made, "sphere", (radius, radius, radius), segments, rings)
 
 
 # --- loading files -----------------------------------------------------------------------

@@ -197,6 +197,10 @@ class InstanceBatch:
         # and the new boxes of moved, added and removed rows): what a shadow map must redraw.
         self._changed: tuple[list[float], list[float]] | None = None
         self.key: BatchKey | None = None  # set by Renderer.batch_for
+        # Each row's size, where this batch's mesh is a generated shape's unit mesh (Mesh.unit):
+        # the row's model matrix is its world matrix times the size (set_size); ``sized`` once any is.
+        self.sized = False
+        self._sizes = np.ones((capacity, 3), np.float32)
         self.probe = 0  # the entity owning the reflection probe its instances sample (0: none)
         self.mirrored = False  # its instances' model matrices mirror them (drawn with the other winding)
         # Probe blending (probe_rules.probe_blend): a second probe (0: none), and whether the
@@ -245,6 +249,27 @@ class InstanceBatch:
         self._box = None  # the union holds the new row once it is measured
         return self.rows[row]
 
+    def set_size(self, entity: int, size: tuple[float, float, float] | None) -> bool:
+        """``entity``'s size (this batch's mesh is its shape's unit mesh: ``Mesh.unit_scale``;
+        None: 1), multiplied into its model matrix from the next ``write_transforms``; whether
+        it changed (its matrices must be written again)."""
+        sizes = self._sizes_for(len(self.rows))
+        row = self.row_of[entity]
+        wanted = (1.0, 1.0, 1.0) if size is None else size
+        if tuple(sizes[row].tolist()) == tuple(np.float32(v) for v in wanted):
+            return False
+        sizes[row] = wanted
+        self.sized = self.sized or size is not None
+        return True
+
+    def _sizes_for(self, rows: int) -> np.ndarray:
+        """The rows' sizes, grown to hold at least ``rows`` rows (new rows 1)."""
+        if len(self._sizes) < rows:
+            grown = np.ones((max(rows, len(self.rows)), 3), np.float32)
+            grown[: len(self._sizes)] = self._sizes
+            self._sizes = grown
+        return self._sizes
+
     def row(self, entity: int) -> np.void:
         """The writable row of ``entity``, marked for upload."""
         index = self.row_of[entity]
@@ -271,8 +296,16 @@ class InstanceBatch:
                 rows = np.array([index[entity] for entity in entities], np.int64)
             listed = rows.tolist()
             self._rows_of = (self._layout, list(entities), rows, listed) if moving else None
+        if self.sized:  # each model matrix times its row's size: its first three columns scaled
+            sizes = self._sizes_for(len(self.rows))[rows]
+            if not (sizes == 1.0).all():
+                flat = np.frombuffer(glm.array(models).to_bytes(), np.float32).reshape(-1, 4, 4).copy()
+                flat[:, :3, :] *= sizes[:, :, None]
+                models = [glm.mat4(*m) for m in flat.reshape(-1, 16).tolist()] if len(models) < _NORMALS_ON_ARRAYS \
+                    else flat.reshape(-1, 16)
         if len(models) >= _NORMALS_ON_ARRAYS:
-            flat = np.frombuffer(glm.array(models).to_bytes(), np.float32).reshape(-1, 16)
+            flat = models if isinstance(models, np.ndarray) else \
+                np.frombuffer(glm.array(models).to_bytes(), np.float32).reshape(-1, 16)
             self.rows["model"][rows] = flat
             self.rows["normal_matrix"][rows] = normal_matrices(flat)
         else:
@@ -308,6 +341,9 @@ class InstanceBatch:
         rows[free], rows[far] = rows[far], rows[free]     # fancy indexing copies: a true exchange
         boxes = self._boxes_for(len(rows))
         boxes[free], boxes[far] = boxes[far], boxes[free]  # each row's box goes with its instance
+        if self.sized:
+            sizes = self._sizes_for(len(rows))
+            sizes[free], sizes[far] = sizes[far], sizes[free]  # and its size
         for a, b in zip(free.tolist(), far.tolist(), strict=True):
             entity_at[a], entity_at[b] = entity_at[b], entity_at[a]
             index[entity_at[a]], index[entity_at[b]] = a, b
@@ -323,6 +359,9 @@ class InstanceBatch:
         if index != last:
             moved = self.entity_at[last]
             self.rows[index] = self.rows[last]
+            if self.sized:
+                sizes = self._sizes_for(last + 1)
+                sizes[index] = sizes[last]
             self.entity_at[index] = moved
             self.row_of[moved] = index
             self._dirty.add(index)

@@ -215,6 +215,8 @@ class ScenePass:
                 bind_texture(ctx, texture, unit, True)  # the pass's albedo sampler stays (bind_sampler)
             if own is None:  # probes bound now: their lookups are read each draw
                 own = self._probe_values(batch)
+            elif variants is None:  # no probe, but a mixed build declares its sampler: the sky there
+                bind_texture(ctx, renderer.sky, PROBE_UNIT)
             if values[0] != sky_size and uniforms[0] is not None:
                 uniforms[0].value = values[0] = sky_size
             # The batch's own values: one tuple compared (by identity first), and a uniform at
