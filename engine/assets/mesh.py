@@ -197,18 +197,17 @@ UNIT_SCALES = (1e-3, 1e6)
 def _unit_mesh(kind: str, segments: int = 0, rings: int = 0) -> Mesh:
     """The one unit mesh of a shape (a 1 m box or quad, a sphere of radius 1 with these
     divisions), shared by every generated mesh of that shape the renderer draws."""
-    if kind == "box":
-        return box(name="unit box")
-    if kind == "quad":
-        return quad(name="unit quad")
-    return sphere(1.0, segments, rings, name="unit sphere")
+    unit = box(name="unit box") if kind == "box" else quad(name="unit quad") if kind == "quad" else \
+        sphere(1.0, segments, rings, name="unit sphere")
+    unit.unit_shape = None  # drawn as itself
+    return unit
 
 
 def _scaled_unit(mesh: Mesh, kind: str, scale: tuple[float, float, float], segments: int = 0, rings: int = 0) -> Mesh:
     """``mesh`` marked as its shape's unit mesh scaled by ``scale`` (``Mesh.unit``), where every
-    side is in ``UNIT_SCALES``; the unit mesh itself and other sizes are drawn as they are."""
+    side is in ``UNIT_SCALES``; other sizes are drawn as they are."""
     low, high = UNIT_SCALES
-    if mesh.name.startswith("unit ") or not all(low <= side <= high for side in scale):
+    if not all(low <= side <= high for side in scale):
         return mesh
     mesh.unit_shape = (kind, segments, rings)
     mesh.unit_scale = tuple(float(side) for side in scale)

@@ -296,16 +296,16 @@ class InstanceBatch:
                 rows = np.array([index[entity] for entity in entities], np.int64)
             listed = rows.tolist()
             self._rows_of = (self._layout, list(entities), rows, listed) if moving else None
-        if self.sized:  # each model matrix times its row's size: its first three columns scaled
+        flat = None
+        if self.sized:  # each model matrix times its row's size (its first three columns scaled): on arrays
             sizes = self._sizes_for(len(self.rows))[rows]
             if not (sizes == 1.0).all():
                 flat = np.frombuffer(glm.array(models).to_bytes(), np.float32).reshape(-1, 4, 4).copy()
                 flat[:, :3, :] *= sizes[:, :, None]
-                models = [glm.mat4(*m) for m in flat.reshape(-1, 16).tolist()] if len(models) < _NORMALS_ON_ARRAYS \
-                    else flat.reshape(-1, 16)
-        if len(models) >= _NORMALS_ON_ARRAYS:
-            flat = models if isinstance(models, np.ndarray) else \
-                np.frombuffer(glm.array(models).to_bytes(), np.float32).reshape(-1, 16)
+                flat = flat.reshape(-1, 16)
+        if flat is None and len(models) >= _NORMALS_ON_ARRAYS:
+            flat = np.frombuffer(glm.array(models).to_bytes(), np.float32).reshape(-1, 16)
+        if flat is not None:
             self.rows["model"][rows] = flat
             self.rows["normal_matrix"][rows] = normal_matrices(flat)
         else:
