@@ -297,9 +297,10 @@ def test_a_relit_face_is_drawn_whole_though_a_move_reached_a_part_of_it_first(sc
 def test_parts_take_the_six_pass_path(scene, path):
     """A capture with faces drawn in part is a capture of some faces: six-pass whatever the
     path setting (the layered pass draws all six whole).  ``auto`` times both paths on the
-    first frames; whether this host then draws parts is its timings' (``fill_bound``), so
-    they are set afterwards as a fill-bound host measures them, with ``auto`` settled on
-    the layered path: the case where the part's path differs from the chosen one."""
+    first frames; whether this host then draws parts is its timings' (``fill_bound``, read
+    into ``ProbeState.parts`` after each capture), so they are set afterwards as a
+    fill-bound host measures them, with ``auto`` settled on the layered path (the case
+    where the part's path differs from the chosen one), and a frame is drawn by them."""
     runner = scene(_floor_and_boxes(), (64, 48))
     _probe_stage(runner).path = path
     cube = _Cube(runner)
@@ -312,6 +313,7 @@ def test_parts_take_the_six_pass_path(scene, path):
         assert paths.chosen is not None  # timed and settled in the first frames
         paths._chosen = "layered"
     assert paths.fill_bound
+    runner.frame()
     parts = _parts_drawn(cube)
     runner.world.get(runner.world.resources["near"], Transform).position += glm.vec3(0.0, 0.0, 0.3)
     runner.frame()
