@@ -48,7 +48,7 @@ import numpy as np
 from pyglm import glm
 
 from components import DirectionalLight, MeshRef, PointLight, ReflectionProbe, Transform, Visibility
-from components.limits import VIEW_PROBE
+from components.limits import NO_SHADOW_BIT, VIEW_PROBE
 from components.tracking import warn_component
 from components.visibility import SEEN_BY_EVERY_VIEW, visibility_code
 from engine.assets.mesh import Mesh
@@ -81,7 +81,7 @@ from engine.rules.shadow_rules import (
     directional_shadow_hull,
     point_shadow_bounds,
 )
-from engine.rules.visibility_rules import drawn_in, entity_code
+from engine.rules.visibility_rules import casts_shadow, drawn_in, entity_casts_shadow, entity_code
 
 
 class ChangedBoxes:
@@ -89,12 +89,15 @@ class ChangedBoxes:
     ``entity`` and ``what`` (how it changed) of each; an entity has a row where it was and
     one where it is.  ``code``: for a row of an entity that only moved (its look unchanged), where it is drawn
     (``visibility_rules.entity_code`` of its ``Visibility``: a probe whose captures do not draw
-    it cannot see it move); every other row counts as seen by all (``SEEN_BY_EVERY_VIEW``: a
-    look change may be the Visibility itself, and what was seen before must go)."""
+    it cannot see it move), with ``NO_SHADOW_BIT`` where it casts no shadow
+    (``entity_casts_shadow``: no shadow of it moved); every other row counts as seen by all
+    and casting (``SEEN_BY_EVERY_VIEW``: a look change may be the Visibility itself or
+    whether it casts, and what was seen before must go)."""
 
     def __init__(self, rows: list[tuple[int, str, np.ndarray, np.ndarray, int]]) -> None:
         if not rows:  # a still frame (or only the camera moved): no list made into arrays
             self.entity, self.code = np.zeros(0, np.int64), np.zeros(0, np.int64)
+            self.casting = np.zeros(0, bool)
             self.what, self.lo, self.hi = [], np.zeros((0, 3)), np.zeros((0, 3))
             self.entities, self.codes = set(), set()
             return
@@ -104,6 +107,7 @@ class ChangedBoxes:
         self.lo = np.array([row[2] for row in rows], np.float64).reshape(-1, 3)
         self.hi = np.array([row[3] for row in rows], np.float64).reshape(-1, 3)
         self.code = np.array([row[4] for row in rows], np.int64)
+        self.casting = casts_shadow(self.code)  # the rows whose shadows moved (a row may cast none)
         self.entities = {row[0] for row in rows}
         self.codes = {row[4] for row in rows}  # one code: every row seen by a probe, or none
 
@@ -304,6 +308,8 @@ class ProbeScheduler:
                 visibility = world.try_get(entity, Visibility)
                 if visibility is not None:
                     code = entity_code(visibility)
+                if not entity_casts_shadow(world, entity):
+                    code |= NO_SHADOW_BIT  # as it was: its shadow moved nowhere (ChangedBoxes.casting)
             old = self._bounds.pop(entity, None)
             if old is not None:
                 rows.append((entity, what, *old, code))
@@ -405,25 +411,28 @@ class ProbeScheduler:
                 for reason in relit:
                     state.ask(ALL_FACES, reason)
                 return
-            if state.pending == ALL_FACES:
-                return  # every face waits already
+            if state.pending == ALL_FACES or not len(boxes.entity):
+                return  # every face waits already, or nothing changed
             # Its own object is in none of its faces; what its captures hide moves unseen.
             own = (boxes.entity != state.owner) & boxes.seen_by(settings)
-            if not own.any():
-                return
             lo, hi, entity, what = boxes.lo[own], boxes.hi[own], boxes.entity[own], \
                 [w for w, keep in zip(boxes.what, own, strict=True) if keep]
-            _ask_named(state, face_hits(state.position, settings.far, lo, hi), entity,
-                       lambda row: f"{what[row]}: entity {entity[row]}")
+            if len(entity):
+                _ask_named(state, face_hits(state.position, settings.far, lo, hi), entity,
+                           lambda row: f"{what[row]}: entity {entity[row]}")
             casters = self.world.resources.get(ShadowCasters)
             if casters is not None and (casters.directional or casters.points or casters.virtual):
-                # Where their shadows fall: a face showing that place changes even when the
-                # thing itself is outside it.
-                shadow_lo, shadow_hi, of = casters.shadow_bounds(lo, hi)
+                # Where the shadows of what casts fall: a face showing that place changes even
+                # when the thing itself is outside it, or hidden from probes (it casts in
+                # every view), or the probe's own object.
+                cast = np.flatnonzero(boxes.casting)
+                shadow_lo, shadow_hi, of = casters.shadow_bounds(boxes.lo[cast], boxes.hi[cast])
+                of = cast[of]
                 if len(of):
-                    _ask_named(state, face_hits(state.position, settings.far, shadow_lo, shadow_hi), entity[of],
-                               lambda row: f"shadow of entity {entity[of[row]]} ({what[of[row]]})")
-            if settings.depth > 0 and surfaces is not None and (surfaces.mirrors or surfaces.portals):
+                    _ask_named(state, face_hits(state.position, settings.far, shadow_lo, shadow_hi),
+                               boxes.entity[of],
+                               lambda row: f"shadow of entity {boxes.entity[of[row]]} ({boxes.what[of[row]]})")
+            if len(entity) and settings.depth > 0 and surfaces is not None and (surfaces.mirrors or surfaces.portals):
                 self._through_surfaces(state, lo, hi, entity, what, surfaces)
 
     def _mark_changes(self, state: ProbeState, boxes: ChangedBoxes, relit: list[str],
@@ -435,8 +444,9 @@ class ProbeScheduler:
         anywhere (the Lights block's order and limits and the shadow slots shift), or the
         level has mirrors or portals (their pictures follow the whole level); else the
         faces whose frustum holds a changed box the probe draws, and the faces where the
-        shadow of any changed box may fall (drawn by the probe or not: a thing hidden from
-        probes, or the probe's own object, casts in every view).
+        shadow of any changed box that casts may fall (drawn by the probe or not: a thing
+        hidden from probes, or the probe's own object, casts in every view; one that casts
+        none, ``ChangedBoxes.casting``, moved no shadow).
 
         Where a shadow may fall: every changed box grown by how far a filtered shadow edge
         reaches (``_filter_reach``), then swept along each sun to the level's walls, where a
@@ -459,7 +469,6 @@ class ProbeScheduler:
         if not len(boxes.entity):
             return
         settings = state.settings
-        count = len(boxes.lo)
         if state.owner in boxes.entities or len(boxes.codes) > 1:
             seen = (boxes.entity != state.owner) & boxes.seen_by(settings)
             near_lo, near_hi = boxes.lo[seen], boxes.hi[seen]
@@ -473,9 +482,14 @@ class ProbeScheduler:
         box_lo, box_hi, far_lo, far_hi = [near_lo], [near_hi], [near_lo], [near_hi]
         suns = 0
         casters = self.world.resources.get(ShadowCasters)
-        if casters is not None and (casters.directional or casters.points):
+        # The rows whose shadows moved (a row may cast none: ChangedBoxes.casting); ``count``
+        # of them, each sun's hull and clipped box rows in their order.
+        casting = boxes.casting
+        count = int(np.count_nonzero(casting))
+        if count and casters is not None and (casters.directional or casters.points):
             reach = self._filter_reach(casters)
-            lo, hi = boxes.lo - reach, boxes.hi + reach
+            lo, hi = (boxes.lo - reach, boxes.hi + reach) if count == len(casting) else \
+                (boxes.lo[casting] - reach, boxes.hi[casting] + reach)
             if casters.level is not None:
                 for direction in casters.directional:
                     moved_lo, moved_hi, bound_lo, bound_hi = directional_shadow_hull(lo, hi, direction, *casters.level)

@@ -49,6 +49,7 @@ from engine.rules.shadow_rules import (
     virtual_lights,
     virtual_shadow_camera,
 )
+from engine.rules.visibility_rules import entity_casts_shadow
 
 _LOOKS = (MeshRef, Material, Visibility, Refractive)  # what decides whether, and what shape, a thing casts
 
@@ -107,7 +108,9 @@ class ShadowSystem(esper.Processor):
         published = ShadowCasters(level=level)
         self._directional_maps(suns, casters_changed, changed_box, level, published)
         self._point_maps(kept, published)
-        published.virtual = self._virtual_maps(kept, casters_changed, level, carrying)
+        # A virtual light's map is drawn whole: again only when what casts changed (the
+        # changed box: a row that casts moved, came, went or started or stopped casting).
+        published.virtual = self._virtual_maps(kept, changed_box is not None, level, carrying)
         world.resources[ShadowCasters] = published
         block = maps.block.tobytes() + maps.virtual_block.tobytes()
         if block != self._uploaded:
@@ -229,32 +232,35 @@ class ShadowSystem(esper.Processor):
 
     def _changed_boxes(self) -> tuple[np.ndarray, np.ndarray]:
         """The old and new world boxes of every drawable that moved, came, went or changed
-        its look this frame (all boxes are measured the first time: every cube is new then)."""
+        its look this frame (all boxes are measured the first time: every cube is new then),
+        but for one that only moved and casts no shadow (``entity_casts_shadow``: its look as
+        before, it cast none where it was either)."""
         world = self.world
         frame = world.frame
         if not self._bounds:
             self._bounds = {entity: world_bounds(mesh_ref.mesh, transform.world)
                             for entity, (mesh_ref, transform) in world.query(MeshRef, Transform)}
             return np.zeros((0, 3)), np.zeros((0, 3))
-        entities = frame.moved | frame.added | frame.removed | world.deleted()
-        for kind in _LOOKS:
-            entities |= world.changed(kind)
+        gone = frame.removed | world.deleted()
+        looks = set().union(*(world.changed(kind) for kind in _LOOKS))
         boxes = []
-        for entity in entities:
+        for entity in frame.moved | frame.added | gone | looks:
             old = self._bounds.pop(entity, None)
-            if old is not None:
-                boxes.append(old)
+            new = None
             if world.exists(entity):
                 mesh_ref, transform = world.try_get(entity, MeshRef), world.try_get(entity, Transform)
                 if mesh_ref is not None and transform is not None:
                     new = self._bounds[entity] = world_bounds(mesh_ref.mesh, transform.world)
-                    boxes.append(new)
+            if entity not in looks and entity not in frame.added and entity not in gone and new is not None \
+                    and not entity_casts_shadow(world, entity):
+                continue  # moved alone, casting nothing here nor where it was
+            boxes.extend(box for box in (old, new) if box is not None)
         if not boxes:
             return np.zeros((0, 3)), np.zeros((0, 3))
         return np.array([lo for lo, _ in boxes]), np.array([hi for _, hi in boxes])
 
     # --- lights through mirrors and portals ---------------------------------------------------
-    def _virtual_maps(self, kept: KeptLights, casters_changed: bool, level, carrying: bool) -> list[VirtualLight]:
+    def _virtual_maps(self, kept: KeptLights, shadows_changed: bool, level, carrying: bool) -> list[VirtualLight]:
         """Each kept light's image through the mirrors and portals that carry light
         (``shadow_rules.virtual_lights``), brightest and highest priority first, at most
         ``MAX_VIRTUAL_LIGHTS``: a map each, drawn when it or a caster changed, a view of the
@@ -293,7 +299,7 @@ class ShadowSystem(esper.Processor):
                    tuple((leg.carry.to_bytes(), tuple(p.to_bytes() for p in leg.planes), leg.skip)
                          for leg in light.legs),
                    *self._level_bytes(level), maps.filter)
-            if key != self._virtual.get(slot) or casters_changed:
+            if key != self._virtual.get(slot) or shadows_changed:
                 left = stats.views_left()
                 if left is not None and left <= 0:
                     stats.virtual_lights_cut += 1

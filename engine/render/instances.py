@@ -15,6 +15,7 @@ import numpy as np
 from pyglm import glm
 
 from engine.assets.mesh import Mesh
+from engine.rules.visibility_rules import row_casts_shadow
 
 INSTANCE_DTYPE = np.dtype([
     ("model", "<f4", (16,)),          # column-major mat4
@@ -194,8 +195,12 @@ class InstanceBatch:
         self._box: tuple[np.ndarray, np.ndarray] | None = None
         self._box_floats: tuple[list[float], list[float]] = ([], [])  # the same, as floats (_measure_few)
         # Where instances were and are whose rows changed since ``take_changed_box`` (the old
-        # and the new boxes of moved, added and removed rows): what a shadow map must redraw.
+        # and the new boxes of moved, added and removed rows that cast): what a shadow map must redraw.
         self._changed: tuple[list[float], list[float]] | None = None
+        # Some row may cast no shadow (glass, casts_shadows off, hidden everywhere: the extract
+        # stage says so, ``note_row_casts``): the changed box then leaves out the rows that do
+        # not (their moves change no shadow); while False no row's fields are read for it.
+        self.may_not_cast = False
         self.key: BatchKey | None = None  # set by Renderer.batch_for
         # Each row's size, where this batch's mesh is a generated shape's unit mesh (Mesh.unit):
         # the row's model matrix is its world matrix times the size (set_size); ``sized`` once any is.
@@ -355,6 +360,7 @@ class InstanceBatch:
     def remove(self, entity: int) -> None:
         index = self.row_of.pop(entity)
         last = self.count - 1
+        cast = not self.may_not_cast or bool(self._casting(slice(index, index + 1))[0])
         self._layout += 1
         if index != last:
             moved = self.entity_at[last]
@@ -372,7 +378,8 @@ class InstanceBatch:
         self._rescale = True  # the largest instance may have gone: measure all rows again
         self._box = None      # and the union of the rows' boxes
         boxes = self._boxes_for(last + 1)
-        self._note_changed(boxes[index, 0].tolist(), boxes[index, 1].tolist())  # where it was
+        if cast:  # where its shadow was
+            self._note_changed(boxes[index, 0].tolist(), boxes[index, 1].tolist())
         if index != last:
             boxes[index] = boxes[last]  # the moved row's box moves with it
         boxes[last] = np.nan
@@ -444,6 +451,8 @@ class InstanceBatch:
         boxes = self._row_boxes
         old = boxes[rows]
         changed = (old != box).any(axis=(1, 2))  # rewritten in place: no change
+        if self.may_not_cast:
+            changed &= self._casting(rows)  # a move of what casts nothing changes no shadow
         if changed.any():
             # The old boxes (NaN: never measured, left out by fmin/fmax) and the new ones.
             both = np.concatenate((old, box) if changed.all() else (old[changed], box[changed]))
@@ -467,7 +476,10 @@ class InstanceBatch:
         union = self._box_floats if self._box is not None else None  # the rows' union, while it holds
         lx, ly, lz = lo_ends
         hx, hy, hz = hi_ends
-        for m, (old_lo, old_hi) in zip(self.rows["model"][rows].tolist(), boxes[rows].tolist(), strict=True):
+        # Which rows cast, where some may not (a move of what casts nothing changes no shadow).
+        casting = self._casting(rows).tolist() if self.may_not_cast else None
+        for n, (m, (old_lo, old_hi)) in enumerate(zip(self.rows["model"][rows].tolist(), boxes[rows].tolist(),
+                                                      strict=True)):
             # m is column-major: column c (model axis c) is m[4c:4c + 3], the translation m[12:15].
             m0, m1, m2, _, m4, m5, m6, _, m8, m9, m10, _, t0, t1, t2, _ = m
             low, high = [], []
@@ -483,6 +495,8 @@ class InstanceBatch:
             if low != old_lo or high != old_hi:  # NaN (never measured) differs from everything
                 if union is not None and not _union_holds(union, old_lo, old_hi, low, high):
                     union = None
+                if casting is not None and not casting[n]:
+                    continue
                 for lo_box, hi_box in ((old_lo, old_hi), (low, high)):
                     if lo_box[0] != lo_box[0]:
                         continue  # never measured
@@ -518,6 +532,20 @@ class InstanceBatch:
         measured yet adds nothing: its first upload counts its box."""
         lo, hi = self._boxes_for(len(self.rows))[self.row_of[entity]].tolist()
         self._note_changed(lo, hi)
+
+    def _casting(self, rows: np.ndarray | slice) -> np.ndarray:
+        """Whether each of ``rows`` is drawn into the shadow maps, by its fields as written
+        (``visibility_rules.row_casts_shadow``)."""
+        slots = self.rows["slots"][rows]
+        codes = (self.rows["tint"][rows, TINT_VISIBILITY] + 0.5).astype(np.int64)
+        return row_casts_shadow(slots[:, 1], slots[:, 2], codes)
+
+    def note_row_casts(self, row: np.void) -> None:
+        """The extract stage wrote ``row``'s fields: a row that casts no shadow makes the
+        changed box read the rows' fields from now on (``may_not_cast``)."""
+        if not self.may_not_cast:
+            code = int(row["tint"][TINT_VISIBILITY] + 0.5)
+            self.may_not_cast = not bool(row_casts_shadow(row["slots"][1], row["slots"][2], code))
 
     @staticmethod
     def shadow_fields(row: np.void) -> tuple:

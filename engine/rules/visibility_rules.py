@@ -15,16 +15,19 @@ One packing serves both sides, an integer of ``VIEW_KINDS`` bits of kinds of vie
 A view draws an entity when it is of no kind the entity is hidden in and they share a layer
 (``drawn_in``); an entity hidden in every kind of view is drawn nowhere and casts no shadow
 (``hidden_everywhere``), and one whose ``MeshRef.casts_shadows`` is off is drawn but casts
-none (``NO_SHADOW_BIT`` in its code, above the layers, which no view's mask has: ``casts_shadow``)."""
+none (``NO_SHADOW_BIT`` in its code, above the layers, which no view's mask has: ``casts_shadow``).
+Glass and a portal's surface cast none either, whatever their code (``row_casts_shadow``,
+``entity_casts_shadow``): the shadow pass's whole test, ``shaders/shadow.vert``'s ``casts``."""
 from __future__ import annotations
 
 from typing import TypeVar
 
 import numpy as np
 
-from components import MeshRef, Visibility
+from components import MeshRef, Portal, PortalClone, Refractive, Visibility
 from components.limits import NO_SHADOW_BIT, VIEW_KINDS
 from components.visibility import DRAWN_EVERYWHERE, KIND_MASK, visibility_code
+from engine.core.material_slots import ReflectVariant, RefractVariant
 from engine.core.world import World
 
 Code = TypeVar("Code", int, np.ndarray)
@@ -67,6 +70,28 @@ def casts_shadow(codes: Code) -> bool | np.ndarray:
     ``shaders/include/visibility.glsl`` is its negation."""
     return ~hidden_everywhere(codes) & ((codes & NO_SHADOW_BIT) == 0) if isinstance(codes, np.ndarray) \
         else not hidden_everywhere(codes) and not codes & NO_SHADOW_BIT
+
+
+def row_casts_shadow(refract: np.ndarray, reflect: np.ndarray, codes: np.ndarray) -> np.ndarray:
+    """Whether each instance row (its refract and reflect variants, its code) is drawn into
+    the lights' shadow maps: ``casts`` in ``shaders/shadow.vert``, on arrays.  Glass lets the
+    light through and a portal's surface is an opening: neither casts."""
+    return (reflect != ReflectVariant.PORTAL) & (refract == RefractVariant.NONE) & casts_shadow(codes)
+
+
+def entity_casts_shadow(world: World, entity: int) -> bool:
+    """Whether ``entity``, read from the world, is drawn into the lights' shadow maps (the
+    rule ``row_casts_shadow`` applies to its instance row): a visible mesh, not glass nor a
+    portal, drawn somewhere and not ``casts_shadows = False``; a portal's clone of an entity
+    by its source's Visibility and ``casts_shadows``, as the extract stage writes its row."""
+    mesh_ref = world.try_get(entity, MeshRef)
+    if mesh_ref is None or not mesh_ref.visible or world.has(entity, Refractive) or world.has(entity, Portal):
+        return False
+    clone = world.try_get(entity, PortalClone)
+    drawn_as = clone.source if clone is not None and world.exists(clone.source) else entity
+    source_mesh = world.try_get(drawn_as, MeshRef)
+    code = entity_code(world.try_get(drawn_as, Visibility), casts_shadows=(source_mesh or mesh_ref).casts_shadows)
+    return bool(casts_shadow(code))
 
 
 def glsl_defines() -> dict[str, str]:
