@@ -23,11 +23,15 @@ class MeshRef(TrackedComponent):
     ``visible`` False: drawn nowhere, and no shadow.  ``casts_shadows`` False: drawn, but in
     no light's shadow map (the sun's, a lamp's, a light's through a mirror or portal), as
     Unity's and Godot's per-renderer cast-shadows switch: a laser beam, a light's own bulb.
-    It still receives shadows."""
+    It still receives shadows.  ``receives_shadows`` False: lit by every light as though
+    nothing stood in its way (no map is looked up for it: Unity's receive-shadows switch,
+    three.js's ``receiveShadow``): a glowing sign, a sky dome, a surface whose own bumps would
+    shadow it with acne.  It still casts shadows."""
 
     mesh: Mesh
     visible: bool = True
     casts_shadows: bool = True
+    receives_shadows: bool = True
 
     def _validate(self, name: str, value: Any) -> Any:
         if name == "mesh" and getattr(type(value), "ASSET_KIND", None) != "mesh":
@@ -36,7 +40,7 @@ class MeshRef(TrackedComponent):
         if name == "mesh" and world is not None:
             for entity in self._entities:  # a mirror's new mesh must have area, as at spawn
                 world.check_invariants(entity, MeshRef, mesh=value)
-        if name in ("visible", "casts_shadows"):
+        if name in ("visible", "casts_shadows", "receives_shadows"):
             return boolean(self, name, value)
         return value
 

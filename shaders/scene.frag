@@ -2,6 +2,7 @@
 // Scene shading: lights, then the material slots in order (reflect, refract, emissive)
 // (reflect, refract, emissive). Each slot switches on the instance's variant index.
 #include "camera.glsl"
+#include "visibility.glsl"
 #include "lights.glsl"
 #include "shadows.glsl"
 #include "ggx.glsl"
@@ -91,8 +92,11 @@ float cube_lod(vec3 direction, float n) {
 vec3 direct_lighting(Surface s) {
     vec3 diffuse = s.albedo * (1.0 - s.metallic) / PI;
     vec3 total = ambient_irradiance(s.position, s.normal) * diffuse;  // E(n) x albedo x (1 - metallic) / pi
-    vec4 directional_lit = directional_shadows(s.position, s.geometric_normal);  // before the loops (shadows.glsl)
-    vec4 point_lit = point_shadows(s.position, s.geometric_normal);
+    // The maps looked up before the loops (shadows.glsl); none for an instance that receives
+    // no shadow (MeshRef.receives_shadows: its code's NO_RECEIVE_BIT, visibility.glsl).
+    bool shadowed = !receives_no_shadow(v_tint.w);
+    vec4 directional_lit = shadowed ? directional_shadows(s.position, s.geometric_normal) : vec4(1.0);
+    vec4 point_lit = shadowed ? point_shadows(s.position, s.geometric_normal) : vec4(1.0);
     for (int i = 0; i < lights.counts.x; ++i) {
         vec3 l = -lights.directional_dir[i].xyz;
         float nl = max(dot(s.normal, l), 0.0);
@@ -117,7 +121,8 @@ vec3 direct_lighting(Surface s) {
         }
     }
 #ifdef VIRTUAL_LIGHTS
-    total += virtual_lighting(s.position, s.normal, s.geometric_normal, s.to_eye, diffuse, s.f0, s.roughness);
+    total += virtual_lighting(s.position, s.normal, s.geometric_normal, s.to_eye, diffuse, s.f0, s.roughness,
+                              shadowed);
 #endif
     return total;
 }

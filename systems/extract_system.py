@@ -181,10 +181,12 @@ class ExtractSystem(esper.Processor):
         row["tint"] = choice.tint
         # Where it is drawn: the views it is hidden in and its reflection layers (the scene
         # shaders leave it out of views of a hidden kind or sharing none of its layers).
-        # And whether it casts shadows (a clone as its source).
+        # And whether it casts and receives shadows (a clone as its source).
         visibility = world.try_get(drawn_as, Visibility) if world.exists(drawn_as) else None
         source_mesh = world.try_get(drawn_as, MeshRef) if world.exists(drawn_as) else None
-        row["tint"][TINT_VISIBILITY] = entity_code(visibility, casts_shadows=(source_mesh or mesh_ref).casts_shadows)
+        shown = source_mesh or mesh_ref
+        row["tint"][TINT_VISIBILITY] = entity_code(visibility, casts_shadows=shown.casts_shadows,
+                                                   receives_shadows=shown.receives_shadows)
         slice_ = world.try_get(entity, Slice)
         row["slice"] = slice_.plane if slice_ is not None else NO_SLICE
         row["slots"] = (choice.emissive, choice.refract, choice.reflect, drawn_as)

@@ -28,7 +28,15 @@ from components import (
     Visibility,
     Water,
 )
-from components.limits import ALL_LAYERS, NO_SHADOW_BIT, VIEW_DIRECT, VIEW_MIRROR, VIEW_PORTAL, VIEW_PROBE
+from components.limits import (
+    ALL_LAYERS,
+    NO_RECEIVE_BIT,
+    NO_SHADOW_BIT,
+    VIEW_DIRECT,
+    VIEW_MIRROR,
+    VIEW_PORTAL,
+    VIEW_PROBE,
+)
 from engine.assets.mesh import box, quad
 from engine.core.cube_faces import CUBE_FACES, FACE_NAMES, face_directions
 from engine.core.transforms import current_world_matrix
@@ -53,7 +61,8 @@ OWNERS = {
                             "engine/core/cube_faces.py"),
     "the clip-distance indices": (r"_?(CLIP_(VIEW_PLANE|RECT|RECT_SIDES|SLICE|DISTANCE_COUNT)|SLICE_CLIP)",
                                   "engine/render/bindings.py"),
-    "the visibility rule": (r"_?(entity_code|drawn_code|drawn_in|hidden_everywhere|casts_shadow|VIEW_KIND_BITS)",
+    "the visibility rule": (r"_?(entity_code|drawn_code|drawn_in|hidden_everywhere|casts_shadow|receives_shadow|"
+                            r"VIEW_KIND_BITS)",
                             "engine/rules/visibility_rules.py"),
     "the visibility code's packing": (r"_?(visibility_code|DRAWN_EVERYWHERE|SEEN_BY_EVERY_VIEW|KIND_MASK)",
                                       "components/visibility.py"),
@@ -374,21 +383,26 @@ def test_every_copy_of_the_visibility_rule_answers_as_its_owner(ctx, tmp_path):
     ``SurfaceTable.drawn_in`` and the probes' ``ChangedBoxes.seen_by`` all give the answer the
     component's own words give, for every kind flag and layers at both ends, whether the
     instance casts shadows or not (``MeshRef.casts_shadows``: the shadow pass's
-    ``casts_no_shadow`` answers as ``casts_shadow``, and it changes no view's answer)."""
+    ``casts_no_shadow`` answers as ``casts_shadow``, and it changes no view's answer), and
+    whether it receives them or not (``MeshRef.receives_shadows``: the scene shader's
+    ``receives_no_shadow`` answers as ``receives_shadow``, changing no other answer)."""
     from components.limits import VIEW_KINDS
     from components.visibility import visibility_code
     from engine.core.reflection_math import reflection_matrix
     from engine.render.view_plan import SurfaceTable
     from engine.resources import SurfaceState
-    from engine.rules.visibility_rules import casts_shadow, drawn_in, entity_code, hidden_everywhere
+    from engine.rules.visibility_rules import casts_shadow, drawn_in, entity_code, hidden_everywhere, receives_shadow
     from systems.probe_scheduler import ChangedBoxes
 
     assert engine_defines()["VIEW_KIND_BITS"] == f"{VIEW_KINDS}u"
     assert engine_defines()["NO_SHADOW_BIT"] == f"{NO_SHADOW_BIT}u"
-    visibilities = _visibilities() * 2  # casting shadows, then not
-    casting = np.arange(len(visibilities)) < len(visibilities) // 2
-    codes = np.array([entity_code(v, casts_shadows=bool(c)) for v, c in zip(visibilities, casting, strict=True)],
-                     np.int64)
+    assert engine_defines()["NO_RECEIVE_BIT"] == f"{NO_RECEIVE_BIT}u"
+    visibilities = _visibilities() * 4  # casting shadows, then not; each receiving them, then not
+    quarter = len(visibilities) // 4
+    casting = np.arange(len(visibilities)) < 2 * quarter
+    receiving = np.arange(len(visibilities)) % (2 * quarter) < quarter
+    codes = np.array([entity_code(v, casts_shadows=bool(c), receives_shadows=bool(r))
+                      for v, c, r in zip(visibilities, casting, receiving, strict=True)], np.int64)
     views = _view_masks()
     masks = np.array([visibility_code(k, layers) for k, layers in views], np.int64)
     meaning = np.array([[_drawn_by_meaning(v, k, layers) for k, layers in views] for v in visibilities])
@@ -397,10 +411,11 @@ def test_every_copy_of_the_visibility_rule_answers_as_its_owner(ctx, tmp_path):
 
     pairs = np.array([(c, m) for c in codes for m in masks], np.float64)
     rows = np.zeros((len(pairs), 4))
-    rows[:, :2] = pairs  # exact: both are integers below 2^21
+    rows[:, :2] = pairs  # exact: both are integers below 2^22
     glsl = evaluate_glsl(ctx, tmp_path, ["visibility.glsl"],
                          "color = vec4(hidden_in_view(a.x, uint(a.y + 0.5)) ? 1.0 : 0.0, "
-                         "hidden_everywhere(a.x) ? 1.0 : 0.0, casts_no_shadow(a.x) ? 1.0 : 0.0, 1.0);", rows)
+                         "hidden_everywhere(a.x) ? 1.0 : 0.0, casts_no_shadow(a.x) ? 1.0 : 0.0, "
+                         "receives_no_shadow(a.x) ? 0.5 : 1.0);", rows)
     np.testing.assert_array_equal(glsl[:, 0].reshape(owner.shape) == 0.0, owner)
     np.testing.assert_array_equal(glsl[:, 1] == 1.0, np.repeat(hidden_everywhere(codes), len(masks)))
     assert hidden_everywhere(codes).any() and not hidden_everywhere(codes).all()
@@ -408,6 +423,8 @@ def test_every_copy_of_the_visibility_rule_answers_as_its_owner(ctx, tmp_path):
     np.testing.assert_array_equal(casts_shadow(codes), casts)
     assert [casts_shadow(int(code)) for code in codes] == casts.tolist()
     np.testing.assert_array_equal(glsl[:, 2] == 0.0, np.repeat(casts, len(masks)))
+    np.testing.assert_array_equal(receives_shadow(codes), receiving)
+    np.testing.assert_array_equal(glsl[:, 3] == 1.0, np.repeat(receiving, len(masks)))
 
     plane = glm.vec4(0.0, 0.0, 1.0, 0.0)
     corners = np.array([(x, y, 0.0, 1.0) for x in (-1.0, 1.0) for y in (0.0, 2.0)])

@@ -14,6 +14,7 @@ import moderngl
 import numpy as np
 from pyglm import glm
 
+from components.limits import NO_RECEIVE_BIT
 from engine.assets.mesh import Mesh
 from engine.rules.visibility_rules import row_casts_shadow
 
@@ -550,8 +551,9 @@ class InstanceBatch:
     @staticmethod
     def shadow_fields(row: np.void) -> tuple:
         """What of a row the shadow pass reads besides its model matrix (which moves its box):
-        where it is drawn and casts (tint.w), its refract and reflect variants, its slice."""
-        return float(row["tint"][TINT_VISIBILITY]), int(row["slots"][1]), int(row["slots"][2]), \
+        where it is drawn and casts (tint.w, less whether it receives shadows, which the maps
+        do not hold), its refract and reflect variants, its slice."""
+        return int(row["tint"][TINT_VISIBILITY] + 0.5) & ~NO_RECEIVE_BIT, int(row["slots"][1]), int(row["slots"][2]), \
             tuple(row["slice"].tolist())
 
     def _note_changed(self, lo: list[float], hi: list[float]) -> None:

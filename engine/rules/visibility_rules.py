@@ -15,7 +15,9 @@ One packing serves both sides, an integer of ``VIEW_KINDS`` bits of kinds of vie
 A view draws an entity when it is of no kind the entity is hidden in and they share a layer
 (``drawn_in``); an entity hidden in every kind of view is drawn nowhere and casts no shadow
 (``hidden_everywhere``), and one whose ``MeshRef.casts_shadows`` is off is drawn but casts
-none (``NO_SHADOW_BIT`` in its code, above the layers, which no view's mask has: ``casts_shadow``).
+none (``NO_SHADOW_BIT`` in its code, above the layers, which no view's mask has: ``casts_shadow``);
+one whose ``MeshRef.receives_shadows`` is off has ``NO_RECEIVE_BIT`` (``receives_shadow``):
+the scene shader looks up no map for it.
 Glass and a portal's surface cast none either, whatever their code (``row_casts_shadow``,
 ``entity_casts_shadow``): the shadow pass's whole test, ``shaders/shadow.vert``'s ``casts``."""
 from __future__ import annotations
@@ -25,7 +27,7 @@ from typing import TypeVar
 import numpy as np
 
 from components import MeshRef, Portal, PortalClone, Refractive, Visibility
-from components.limits import NO_SHADOW_BIT, VIEW_KINDS
+from components.limits import NO_RECEIVE_BIT, NO_SHADOW_BIT, VIEW_KINDS
 from components.visibility import DRAWN_EVERYWHERE, KIND_MASK, visibility_code
 from engine.core.material_slots import ReflectVariant, RefractVariant
 from engine.core.world import World
@@ -33,15 +35,17 @@ from engine.core.world import World
 Code = TypeVar("Code", int, np.ndarray)
 
 
-def entity_code(visibility: Visibility | None, drawn: bool = True, casts_shadows: bool = True) -> int:
+def entity_code(visibility: Visibility | None, drawn: bool = True, casts_shadows: bool = True,
+                receives_shadows: bool = True) -> int:
     """Where an entity is drawn: its ``Visibility``'s hidden kinds and layers
     (``DRAWN_EVERYWHERE`` without one), with ``NO_SHADOW_BIT`` when it casts no shadow
-    (``casts_shadows`` False: its ``MeshRef.casts_shadows``); 0, on no layer, when it is not
-    drawn at all (``drawn`` False: an invisible mesh)."""
+    (``casts_shadows`` False: its ``MeshRef.casts_shadows``) and ``NO_RECEIVE_BIT`` when it
+    receives none (its ``MeshRef.receives_shadows``); 0, on no layer, when it is not drawn at
+    all (``drawn`` False: an invisible mesh)."""
     if not drawn:
         return 0
     code = DRAWN_EVERYWHERE if visibility is None else visibility_code(visibility.hidden_kinds, visibility.layer_mask)
-    return code if casts_shadows else code | NO_SHADOW_BIT
+    return code | (0 if casts_shadows else NO_SHADOW_BIT) | (0 if receives_shadows else NO_RECEIVE_BIT)
 
 
 def drawn_code(world: World, entity: int) -> int:
@@ -72,6 +76,13 @@ def casts_shadow(codes: Code) -> bool | np.ndarray:
         else not hidden_everywhere(codes) and not codes & NO_SHADOW_BIT
 
 
+def receives_shadow(codes: Code) -> bool | np.ndarray:
+    """Whether what has ``codes`` is darkened by the lights' shadow maps (not marked
+    ``NO_RECEIVE_BIT``).  ``receives_no_shadow`` in ``shaders/include/visibility.glsl`` is
+    its negation."""
+    return (codes & NO_RECEIVE_BIT) == 0
+
+
 def row_casts_shadow(refract: np.ndarray, reflect: np.ndarray, codes: np.ndarray) -> np.ndarray:
     """Whether each instance row (its refract and reflect variants, its code) is drawn into
     the lights' shadow maps: ``casts`` in ``shaders/shadow.vert``, on arrays.  Glass lets the
@@ -95,6 +106,7 @@ def entity_casts_shadow(world: World, entity: int) -> bool:
 
 
 def glsl_defines() -> dict[str, str]:
-    """``VIEW_KIND_BITS``: the kinds' bit count, and ``NO_SHADOW_BIT``, for
-    ``shaders/include/visibility.glsl``."""
-    return {"VIEW_KIND_BITS": f"{VIEW_KINDS}u", "NO_SHADOW_BIT": f"{NO_SHADOW_BIT}u"}
+    """``VIEW_KIND_BITS``: the kinds' bit count, ``NO_SHADOW_BIT`` and ``NO_RECEIVE_BIT``,
+    for ``shaders/include/visibility.glsl``."""
+    return {"VIEW_KIND_BITS": f"{VIEW_KINDS}u", "NO_SHADOW_BIT": f"{NO_SHADOW_BIT}u",
+            "NO_RECEIVE_BIT": f"{NO_RECEIVE_BIT}u"}

@@ -26,3 +26,9 @@ bool hidden_everywhere(float instance_code) {
 bool casts_no_shadow(float instance_code) {
     return hidden_everywhere(instance_code) || (uint(instance_code + 0.5) & NO_SHADOW_BIT) != 0u;
 }
+
+// Lit as though nothing stood in the lights' way: MeshRef.receives_shadows off (NO_RECEIVE_BIT,
+// above NO_SHADOW_BIT): the scene shader looks up no shadow map for it.
+bool receives_no_shadow(float instance_code) {
+    return (uint(instance_code + 0.5) & NO_RECEIVE_BIT) != 0u;
+}
