@@ -139,27 +139,3 @@ def test_a_probe_face_a_non_casters_shadow_would_reach_stays_unchanged(scene, ho
     else:
         assert due[periodic].unchanged == due[periodic].faces and watching not in due, due
 
-
-def test_an_on_change_probe_follows_the_shadow_of_a_thing_hidden_from_probes(scene):
-    """A caster hidden from probes (``Visibility(in_probes=False)``) is in no capture, but
-    it casts in every view: its shadow moving on the floor the probe's -Y face shows asks
-    for that face, as a periodic probe's changes count it."""
-    def build(world):
-        look_from(world, (0, 3, 6), (0, 0, 0))
-        world.spawn(DirectionalLight(direction=(-1.0, -1.5, 0.0), intensity=2.0))
-        world.spawn(Transform(), MeshRef(plane(60, 60)), Material())
-        world.resources["probe"] = world.spawn(Transform(position=(0.0, 0.6, 0.0)),
-                                               ReflectionProbe(resolution=16, far=2.0))
-        world.resources["caster"] = world.spawn(Transform(position=(2.2, 2.6, 0.0)), MeshRef(box()), Material(),
-                                                Visibility(in_probes=False))
-
-    runner = scene(build)
-    runner.frame()
-    runner.frame()
-    probe = runner.world.resources["probe"]
-    assert probe not in runner.world.resources[ProbeSchedule].due
-    runner.world.get(runner.world.resources["caster"], Transform).position += glm.vec3(0.0, 0.0, 0.2)
-    runner.frame()
-    due = runner.world.resources[ProbeSchedule].due
-    assert probe in due and 3 in due[probe].faces, due
-    assert any(reason.startswith("shadow of entity") for reason in due[probe].reasons), due[probe].reasons

@@ -102,31 +102,7 @@ def test_a_mesh_that_receives_no_shadow_still_casts(scene):
     np.testing.assert_array_equal(after[floor], before[floor])
 
 
-def test_receives_shadows_is_checked_and_level_files_carry_it(tmp_path):
-    from engine.assets.level_file import LevelError, load_level, save_level
-    from engine.core.world import World
-
+def test_receives_shadows_is_checked():
+    """(Level files carry it: ``tests/test_shadows.py``'s level test.)"""
     with pytest.raises(ComponentValueError, match="MeshRef.receives_shadows"):
         MeshRef(box(), receives_shadows="no")
-    text = """
-[level]
-name = "a sign"
-
-[[entity]]
-name = "sign"
-[entity.Transform]
-[entity.MeshRef]
-mesh = { box = [1.0, 1.0, 0.1] }
-receives_shadows = false
-"""
-    path = tmp_path / "sign.toml"
-    path.write_text(text)
-    world = World("sign level")
-    names = load_level(path).spawn(world)
-    assert world.get(names["sign"], MeshRef).receives_shadows is False
-    again = World("again")
-    names_again = load_level(save_level(world, tmp_path / "again.toml", names)).spawn(again)
-    assert again.get(names_again["sign"], MeshRef).receives_shadows is False
-    path.write_text(text.replace("receives_shadows = false", "receives_shadows = 1"))
-    with pytest.raises(LevelError, match="receives_shadows"):
-        load_level(path)

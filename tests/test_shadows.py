@@ -17,6 +17,7 @@ from components import (
     PointLight,
     ReflectionProbe,
     Transform,
+    Visibility,
 )
 from components.limits import MAX_FAR
 from engine.assets.mesh import box, plane, quad, sphere
@@ -620,17 +621,20 @@ def test_point_lights_past_the_limit_are_counted_as_cut(scene):
     assert (runner.stats.shadow_maps_drawn, runner.stats.shadows_cut) == (2, 1)
 
 
-def test_a_probe_face_recaptures_when_a_shadow_it_shows_moves(scene):
+@pytest.mark.parametrize("hidden_from_probes", [False, True])
+def test_a_probe_face_recaptures_when_a_shadow_it_shows_moves(scene, hidden_from_probes):
     """The probe's -Y face sees the floor below it; the caster stands beside the probe, out of
     the probe's reach, but its shadow falls into that face; a thing moving far from the probe
-    (its shadow far too) asks for nothing."""
+    (its shadow far too) asks for nothing.  A caster hidden from probes
+    (``Visibility(in_probes=False)``) is in no capture but casts in every view: the same."""
     def build(world):
         look_from(world, (0, 3, 6), (0, 0, 0))
         world.spawn(DirectionalLight(direction=(-1.0, -1.5, 0.0), intensity=2.0))
         world.spawn(Transform(), MeshRef(plane(60, 60)), Material())
         world.resources["probe"] = world.spawn(Transform(position=(0.0, 0.6, 0.0)),
                                                ReflectionProbe(resolution=16, far=2.0))
-        world.resources["caster"] = world.spawn(Transform(position=(2.2, 2.6, 0.0)), MeshRef(box()), Material())
+        world.resources["caster"] = world.spawn(Transform(position=(2.2, 2.6, 0.0)), MeshRef(box()), Material(),
+                                                *([Visibility(in_probes=False)] if hidden_from_probes else []))
         world.resources["far"] = world.spawn(Transform(position=(20.0, 0.5, 20.0)), MeshRef(box()), Material())
 
     runner = scene(build)
@@ -735,6 +739,7 @@ name = "beam"
 [entity.MeshRef]
 mesh = { box = [0.05, 0.05, 2.0] }
 casts_shadows = false
+receives_shadows = false
 """
 
 
@@ -754,14 +759,15 @@ def test_level_files_carry_the_shadow_fields_and_refuse_bad_ones(tmp_path):
     names_again = load_level(saved).spawn(again)
     assert again.get(names_again["lamp"], PointLight).shadow_resolution == 256
     assert again.get(names_again["sun"], DirectionalLight).shadow_softness == 2.5
-    assert world.get(names["beam"], MeshRef).casts_shadows is False
-    assert again.get(names_again["beam"], MeshRef).casts_shadows is False
+    for loaded, beam in ((world, names["beam"]), (again, names_again["beam"])):
+        assert (loaded.get(beam, MeshRef).casts_shadows, loaded.get(beam, MeshRef).receives_shadows) == (False, False)
     path.write_text(LEVEL.replace("shadow_resolution = 1024", "shadow_resolution = 1000"))
     with pytest.raises(LevelError, match="shadow_resolution"):
         load_level(path)
-    path.write_text(LEVEL.replace("casts_shadows = false", "casts_shadows = 0"))
-    with pytest.raises(LevelError, match="casts_shadows"):
-        load_level(path)
+    for field in ("casts_shadows", "receives_shadows"):
+        path.write_text(LEVEL.replace(f"{field} = false", f"{field} = 0"))
+        with pytest.raises(LevelError, match=field):
+            load_level(path)
 
 
 def test_a_redrawn_region_holds_the_box_corners_texels_and_only_its_padding_more():
