@@ -81,7 +81,7 @@ from engine.rules.shadow_rules import (
     directional_shadow_hull,
     point_shadow_bounds,
 )
-from engine.rules.visibility_rules import casts_shadow, drawn_in, entity_casts_shadow, entity_code
+from engine.rules.visibility_rules import ShadowCasting, casts_shadow, drawn_in, entity_code
 
 
 class ChangedBoxes:
@@ -90,7 +90,7 @@ class ChangedBoxes:
     one where it is.  ``code``: for a row of an entity that only moved (its look unchanged), where it is drawn
     (``visibility_rules.entity_code`` of its ``Visibility``: a probe whose captures do not draw
     it cannot see it move), with ``NO_SHADOW_BIT`` where it casts no shadow
-    (``entity_casts_shadow``: no shadow of it moved); every other row counts as seen by all
+    (``ShadowCasting``: no shadow of it moved); every other row counts as seen by all
     and casting (``SEEN_BY_EVERY_VIEW``: a look change may be the Visibility itself or
     whether it casts, and what was seen before must go)."""
 
@@ -300,20 +300,22 @@ class ProbeScheduler:
         frame = world.frame
         removed = frame.removed | world.deleted()
         rows, placed = [], []
+        casting: ShadowCasting | None = None
         for entity in frame.moved | frame.added | removed | looks:
             what = ("removed" if entity in removed else "added" if entity in frame.added
                     else "moved" if entity in frame.moved else "look changed")
+            mesh_ref = world.try_get(entity, MeshRef) if world.exists(entity) else None
             code = SEEN_BY_EVERY_VIEW
             if what == "moved" and entity not in looks:  # a move with a look change: its old look was seen
                 visibility = world.try_get(entity, Visibility)
                 if visibility is not None:
                     code = entity_code(visibility)
-                if not entity_casts_shadow(world, entity):
+                casting = casting or ShadowCasting(world)
+                if mesh_ref is not None and not casting.casts(entity, mesh_ref, visibility):
                     code |= NO_SHADOW_BIT  # as it was: its shadow moved nowhere (ChangedBoxes.casting)
             old = self._bounds.pop(entity, None)
             if old is not None:
                 rows.append((entity, what, *old, code))
-            mesh_ref = world.try_get(entity, MeshRef) if world.exists(entity) else None
             transform = world.try_get(entity, Transform) if mesh_ref is not None else None
             if transform is not None:
                 placed.append((entity, what, code, mesh_ref.mesh, transform.world))

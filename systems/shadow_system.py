@@ -49,7 +49,7 @@ from engine.rules.shadow_rules import (
     virtual_lights,
     virtual_shadow_camera,
 )
-from engine.rules.visibility_rules import entity_casts_shadow
+from engine.rules.visibility_rules import ShadowCasting
 
 _LOOKS = (MeshRef, Material, Visibility, Refractive)  # what decides whether, and what shape, a thing casts
 
@@ -233,7 +233,7 @@ class ShadowSystem(esper.Processor):
     def _changed_boxes(self) -> tuple[np.ndarray, np.ndarray]:
         """The old and new world boxes of every drawable that moved, came, went or changed
         its look this frame (all boxes are measured the first time: every cube is new then),
-        but for one that only moved and casts no shadow (``entity_casts_shadow``: its look as
+        but for one that only moved and casts no shadow (``ShadowCasting``: its look as
         before, it cast none where it was either)."""
         world = self.world
         frame = world.frame
@@ -244,6 +244,7 @@ class ShadowSystem(esper.Processor):
         gone = frame.removed | world.deleted()
         looks = set().union(*(world.changed(kind) for kind in _LOOKS))
         boxes = []
+        casting: ShadowCasting | None = None
         for entity in frame.moved | frame.added | gone | looks:
             old = self._bounds.pop(entity, None)
             new = None
@@ -251,9 +252,10 @@ class ShadowSystem(esper.Processor):
                 mesh_ref, transform = world.try_get(entity, MeshRef), world.try_get(entity, Transform)
                 if mesh_ref is not None and transform is not None:
                     new = self._bounds[entity] = world_bounds(mesh_ref.mesh, transform.world)
-            if entity not in looks and entity not in frame.added and entity not in gone and new is not None \
-                    and not entity_casts_shadow(world, entity):
-                continue  # moved alone, casting nothing here nor where it was
+            if entity not in looks and entity not in frame.added and entity not in gone and new is not None:
+                casting = casting or ShadowCasting(world)
+                if not casting.casts(entity, mesh_ref, world.try_get(entity, Visibility)):
+                    continue  # moved alone, casting nothing here nor where it was
             boxes.extend(box for box in (old, new) if box is not None)
         if not boxes:
             return np.zeros((0, 3)), np.zeros((0, 3))

@@ -90,19 +90,28 @@ def row_casts_shadow(refract: np.ndarray, reflect: np.ndarray, codes: np.ndarray
     return (reflect != ReflectVariant.PORTAL) & (refract == RefractVariant.NONE) & casts_shadow(codes)
 
 
-def entity_casts_shadow(world: World, entity: int) -> bool:
-    """Whether ``entity``, read from the world, is drawn into the lights' shadow maps (the
-    rule ``row_casts_shadow`` applies to its instance row): a visible mesh, not glass nor a
+class ShadowCasting:
+    """Whether entities, read from the world, are drawn into the lights' shadow maps (the rule
+    ``row_casts_shadow`` applies to their instance rows): a visible mesh, not glass nor a
     portal, drawn somewhere and not ``casts_shadows = False``; a portal's clone of an entity
-    by its source's Visibility and ``casts_shadows``, as the extract stage writes its row."""
-    mesh_ref = world.try_get(entity, MeshRef)
-    if mesh_ref is None or not mesh_ref.visible or world.has(entity, Refractive) or world.has(entity, Portal):
-        return False
-    clone = world.try_get(entity, PortalClone)
-    drawn_as = clone.source if clone is not None and world.exists(clone.source) else entity
-    source_mesh = world.try_get(drawn_as, MeshRef)
-    code = entity_code(world.try_get(drawn_as, Visibility), casts_shadows=(source_mesh or mesh_ref).casts_shadows)
-    return bool(casts_shadow(code))
+    by its source's Visibility and ``casts_shadows``, as the extract stage writes its row.
+    Made once for a frame's many movers: the glass, the portals and the clones are looked up
+    once, then each mover by the MeshRef and Visibility its caller holds already."""
+
+    def __init__(self, world: World) -> None:
+        self.world = world
+        self._see_through = {entity for entity, _ in world.query_one(Refractive)} | \
+            {entity for entity, _ in world.query_one(Portal)}
+        self._clones = {entity: clone.source for entity, clone in world.query_one(PortalClone)}
+
+    def casts(self, entity: int, mesh_ref: MeshRef, visibility: Visibility | None) -> bool:
+        if not mesh_ref.visible or entity in self._see_through:
+            return False
+        source = self._clones.get(entity)
+        if source is not None and self.world.exists(source):
+            mesh_ref = self.world.try_get(source, MeshRef) or mesh_ref
+            visibility = self.world.try_get(source, Visibility)
+        return mesh_ref.casts_shadows and (visibility is None or visibility.hidden_kinds != KIND_MASK)
 
 
 def glsl_defines() -> dict[str, str]:
