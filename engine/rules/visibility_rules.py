@@ -18,8 +18,9 @@ A view draws an entity when it is of no kind the entity is hidden in and they sh
 none (``NO_SHADOW_BIT`` in its code, above the layers, which no view's mask has: ``casts_shadow``);
 one whose ``MeshRef.receives_shadows`` is off has ``NO_RECEIVE_BIT`` (``receives_shadow``):
 the scene shader looks up no map for it.
-Glass and a portal's surface cast none either, whatever their code (``row_casts_shadow``,
-``entity_casts_shadow``): the shadow pass's whole test, ``shaders/shadow.vert``'s ``casts``."""
+Glass and a portal's surface cast none either, whatever their code (``row_casts_shadow`` on
+instance rows, ``ShadowCasting`` from the world): the shadow pass's whole test,
+``shaders/shadow.vert``'s ``casts``."""
 from __future__ import annotations
 
 from typing import TypeVar
