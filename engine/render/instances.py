@@ -193,6 +193,9 @@ class InstanceBatch:
         # is sent too), and their union, worked out again after an upload that sent rows:
         # what the shadows' fit reads, exact whatever came and went before.
         self._row_boxes = np.full((capacity, 2, 3), np.nan)   # NaN: a row never measured
+        # And each row's model matrix as last measured: a row turned or flipped inside the
+        # same box (an exact half turn of a mesh centred on its origin) changes its shadow.
+        self._row_models = np.full((capacity, 16), np.nan, np.float32)
         self._box: tuple[np.ndarray, np.ndarray] | None = None
         self._box_floats: tuple[list[float], list[float]] = ([], [])  # the same, as floats (_measure_few)
         # Where instances were and are whose rows changed since ``take_changed_box`` (the old
@@ -347,6 +350,8 @@ class InstanceBatch:
         rows[free], rows[far] = rows[far], rows[free]     # fancy indexing copies: a true exchange
         boxes = self._boxes_for(len(rows))
         boxes[free], boxes[far] = boxes[far], boxes[free]  # each row's box goes with its instance
+        models = self._row_models
+        models[free], models[far] = models[far], models[free]  # and its model as measured
         if self.sized:
             sizes = self._sizes_for(len(rows))
             sizes[free], sizes[far] = sizes[far], sizes[free]  # and its size
@@ -383,7 +388,9 @@ class InstanceBatch:
             self._note_changed(boxes[index, 0].tolist(), boxes[index, 1].tolist())
         if index != last:
             boxes[index] = boxes[last]  # the moved row's box moves with it
+            self._row_models[index] = self._row_models[last]
         boxes[last] = np.nan
+        self._row_models[last] = np.nan
         self._variants_stale = True
 
     @property
@@ -441,7 +448,8 @@ class InstanceBatch:
         the highest likewise.  Lows and highs are worked out together, as the rows' boxes
         are kept ([row, lo/hi, axis])."""
         self._boxes_for(len(self.rows))
-        models = self.rows["model"][rows].astype(np.float64).reshape(-1, 4, 4)  # [instance, column, row]
+        written = self.rows["model"][rows]
+        models = written.astype(np.float64).reshape(-1, 4, 4)  # [instance, column, row]
         terms = models[:, None, :3, :3] * self.mesh.box_ends  # [instance, lo/hi corner, column, row]
         ends = np.empty_like(terms)  # each term's lower value, then its higher one
         np.minimum(terms[:, 0], terms[:, 1], out=ends[:, 0])
@@ -452,6 +460,9 @@ class InstanceBatch:
         boxes = self._row_boxes
         old = boxes[rows]
         changed = (old != box).any(axis=(1, 2))  # rewritten in place: no change
+        kept = self._row_models
+        changed |= (kept[rows] != written).any(axis=1)  # turned inside the same box
+        kept[rows] = written
         if self.may_not_cast:
             changed &= self._casting(rows)  # a move of what casts nothing changes no shadow
         if changed.any():
@@ -479,8 +490,10 @@ class InstanceBatch:
         hx, hy, hz = hi_ends
         # Which rows cast, where some may not (a move of what casts nothing changes no shadow).
         casting = self._casting(rows).tolist() if self.may_not_cast else None
-        for n, (m, (old_lo, old_hi)) in enumerate(zip(self.rows["model"][rows].tolist(), boxes[rows].tolist(),
-                                                      strict=True)):
+        written = self.rows["model"][rows]
+        kept = self._row_models
+        for n, (m, (old_lo, old_hi), was) in enumerate(zip(written.tolist(), boxes[rows].tolist(),
+                                                           kept[rows].tolist(), strict=True)):
             # m is column-major: column c (model axis c) is m[4c:4c + 3], the translation m[12:15].
             m0, m1, m2, _, m4, m5, m6, _, m8, m9, m10, _, t0, t1, t2, _ = m
             low, high = [], []
@@ -493,7 +506,9 @@ class InstanceBatch:
                 if length > longest:
                     longest = length
             measured.append((low, high))
-            if low != old_lo or high != old_hi:  # NaN (never measured) differs from everything
+            # NaN (never measured) differs from everything; a row turned inside the same box
+            # (its model changed, its box not) changes its shadow there.
+            if low != old_lo or high != old_hi or m != was:
                 if union is not None and not _union_holds(union, old_lo, old_hi, low, high):
                     union = None
                 if casting is not None and not casting[n]:
@@ -513,6 +528,7 @@ class InstanceBatch:
             return
         self._max_scale = max(self._max_scale, math.sqrt(longest))
         boxes[rows] = measured
+        kept[rows] = written
         if union is None:
             self._box = None  # worked out again when asked
         if changed_lo is not None:
@@ -524,6 +540,9 @@ class InstanceBatch:
             grown = np.full((max(rows, len(self.rows)), 2, 3), np.nan)
             grown[: len(self._row_boxes)] = self._row_boxes
             self._row_boxes = grown
+            models = np.full((len(grown), 16), np.nan, np.float32)
+            models[: len(self._row_models)] = self._row_models
+            self._row_models = models
         return self._row_boxes
 
     def note_shadow_change(self, entity: int) -> None:
