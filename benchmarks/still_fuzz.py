@@ -30,7 +30,10 @@ and then a point light casting shadows and Bloom on the camera.  The change is o
 - ``keep_toggle``: the keeping engine's ``keep_still_views`` turned off for a while, then on;
 - ``camera_off``: the camera made inactive for a frame or three (no view at all), then active;
 - ``surface``: a see-through surface (still water, a see-through mirror) or a glass pane of
-  random alpha added among the refilled frames.
+  random alpha added among the refilled frames;
+- ``turn``: the box (an L, its box centred on its origin) turned by an exact quarter or half
+  turn about y, or flipped by a scale of -1 on x and z: a half turn and the flip leave its
+  world box the same to the bit, while its shadow changes.
 
 A case passes when a refused write is refused with a ``ComponentValueError`` naming
 ``Class.field`` in both engines, and every frame of both renders with no NaN in the HDR
@@ -70,7 +73,7 @@ from components import (
     Water,
     look_rotation,
 )
-from engine.assets.mesh import box, plane, quad
+from engine.assets.mesh import plane, quad
 from engine.assets.portals import spawn_portal_pair
 from engine.core.frame_io import Output
 from engine.core.game import Game
@@ -78,7 +81,30 @@ from engine.render.targets import CaptureTarget
 from shell.app import Engine
 
 SIZE = (48, 32)
-CHANGES = ("component", "remove", "resize", "depth_cap", "keep_toggle", "surface", "camera_off")
+CHANGES = ("component", "remove", "resize", "depth_cap", "keep_toggle", "surface", "camera_off", "turn")
+# The box's turns (``turn``): exact quaternions (w, x, y, z) and scales, not angleAxis's
+# rounding, which moves the box.
+BOX_SCALE = (0.4, 1.2, 0.4)
+BOX_TURNS = {"quarter": (glm.quat(math.sqrt(0.5), 0.0, math.sqrt(0.5), 0.0), BOX_SCALE),
+             "half": (glm.quat(0.0, 0.0, 1.0, 0.0), BOX_SCALE),
+             "flip": (glm.quat(), (-BOX_SCALE[0], BOX_SCALE[1], -BOX_SCALE[2]))}
+_BOX_MESH: list = []
+
+
+def _box_mesh():
+    """An L of two boxes (made once), its box x -0.5..0.5, y -0.5..0.5, z -0.5..0.5 about
+    its origin: a tall arm at -x, a low arm to +x."""
+    if not _BOX_MESH:
+        import trimesh
+
+        from engine.assets.mesh import Mesh
+
+        tall = trimesh.creation.box((0.3, 1.0, 1.0))
+        tall.apply_translation((-0.35, 0.0, 0.0))
+        low = trimesh.creation.box((0.7, 0.4, 1.0))
+        low.apply_translation((0.15, -0.3, 0.0))
+        _BOX_MESH.append(Mesh.from_trimesh(trimesh.util.concatenate([tall, low]), name="fuzz L"))
+    return _BOX_MESH[0]
 TURN = glm.angleAxis(math.pi, glm.vec3(0, 1, 0))
 FLAT = glm.angleAxis(-math.pi / 2, glm.vec3(1, 0, 0))
 
@@ -168,6 +194,8 @@ def _random_change(rng: random.Random) -> tuple[str, dict[str, Any]]:
         detail = {"cap": rng.randint(0, 8)}
     elif change in ("keep_toggle", "camera_off"):
         detail = {"off_frames": rng.randint(1, 3)}
+    elif change == "turn":
+        detail = {"how": rng.choice(tuple(BOX_TURNS))}
     else:
         detail = {"add": rng.choice(("water", "mirror", "pane")), "pane": _pane(rng), "alpha": _alpha(rng)}
     return change, detail
@@ -259,7 +287,7 @@ def _spawn(world, case: StillCase) -> dict[str, int]:
                                                 shadow_resolution=64))
     if case.bloom:
         world.add_component(world.resources["camera"], Bloom(intensity=0.2))
-    named["box"] = world.spawn(Transform(position=(0.8, 0.6, 0.0), scale=(0.4, 1.2, 0.4)), MeshRef(box()),
+    named["box"] = world.spawn(Transform(position=(0.8, 0.6, 0.0), scale=BOX_SCALE), MeshRef(_box_mesh()),
                                Material(color=(0.9, 0.2, 0.1)), Emissive(0.6))
     for i, pane in enumerate(case.panes):
         named[f"pane{i}"] = _spawn_pane(world, pane)
@@ -416,6 +444,10 @@ class StillFuzzer:
             name = target if target != "pane" else next((n for n in side.named if n.startswith("pane")), None)
             if name in side.named:
                 world.delete_entity(side.named.pop(name))
+        elif change == "turn":
+            if "box" in side.named:
+                transform = world.get(side.named["box"], Transform)
+                transform.rotation, transform.scale = BOX_TURNS[detail["how"]]
         elif change == "surface":
             # (a name of its own: a case may add two, and remove others between)
             add, name = detail["add"], f"added{sum(1 for other in side.named if other.startswith('added'))}"

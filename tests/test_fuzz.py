@@ -212,6 +212,20 @@ def test_the_still_fuzz_catches_a_refill_that_does_not_put_a_level_back(ctx, mon
         fuzzer.close()
 
 
+@pytest.mark.parametrize("how", ["quarter", "half", "flip"])
+def test_the_box_turned_inside_its_own_box_draws_what_a_whole_drawn_engine_draws(ctx, how):
+    """The still fuzz's ``turn``: the L turned by an exact quarter or half turn, or flipped by
+    scale, mid-refill; a half turn and the flip leave its world box the same to the bit (the
+    keeping engine's sun map kept its old shadow there before ``InstanceBatch._row_models``)."""
+    from benchmarks.still_fuzz import StillFuzzer
+
+    fuzzer = StillFuzzer(ctx)
+    try:
+        assert fuzzer.run(_glass_pair_case("turn", {"how": how})) is None
+    finally:
+        fuzzer.close()
+
+
 def test_in_float32_images_the_check_finds_values_past_a_half_float(ctx, monkeypatch):
     """``--hdr32``: the colour images float32, the frame check (``fuzz_cases.hdr_problem``) also
     finds a value past 65504 (which llvmpipe saturates and a correctly rounding GPU stores as
