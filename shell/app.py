@@ -13,6 +13,8 @@ only through its own methods.
 """
 from __future__ import annotations
 
+import sys
+import traceback
 from collections.abc import Callable
 
 import esper
@@ -51,26 +53,62 @@ from systems.surface_system import SurfaceSystem
 from systems.text_system import TextSystem
 
 
+class GameGuard:
+    """Runs the game's own code in a frame (its ``update``, its systems) and, where ``contain``
+    is set (the window shell: a level being edited there must not be lost to the game's
+    error), stops it at its first exception instead of ending the program: the traceback is
+    printed, ``stopped`` says where and what, and until ``resume`` the game's code is left
+    out of the frames while the engine's stages run on (the world is drawn, the editor
+    works: undo, save).  Unset (headless runs, tests), an exception ends the frame as ever."""
+
+    def __init__(self) -> None:
+        self.contain = False
+        self.stopped: str | None = None  # "<stage>: <exception>" where the game stopped
+
+    def call(self, stage: str, run: Callable[[float], None], dt: float) -> None:
+        if self.stopped is not None:
+            return
+        if not self.contain:
+            run(dt)
+            return
+        try:
+            run(dt)
+        except Exception as exc:  # the game's code: any error it raises stops it, not the window
+            self.stopped = f"{stage}: {type(exc).__name__}: {exc}"
+            print(f"speculum: the game stopped in {stage} (F5 resumes it):", file=sys.stderr)
+            traceback.print_exc()
+
+    def resume(self) -> None:
+        """Run the game's code again from the next frame."""
+        self.stopped = None
+
+
+def _guarded(guard: GameGuard, stage: str, process: Callable[[float], None]) -> Callable[[float], None]:
+    return lambda dt: guard.call(stage, process, dt)
+
+
 class GameUpdateSystem(esper.Processor):
     """The game stage: the game's own ``update``."""
 
-    def __init__(self, game: Game, world: World) -> None:
+    def __init__(self, game: Game, world: World, guard: GameGuard) -> None:
         self.game = game
         self.world = world
+        self.guard = guard
 
     def process(self, dt: float) -> None:
-        self.game.update(self.world, dt)
+        self.guard.call("game", lambda step: self.game.update(self.world, step), dt)
 
 
 class GameSystemProcessor(esper.Processor):
     """A game system given as ``function(world, dt)``, run in its place in the schedule."""
 
-    def __init__(self, system: GameSystem, world: World) -> None:
+    def __init__(self, system: GameSystem, world: World, guard: GameGuard) -> None:
         self.system = system
         self.world = world
+        self.guard = guard
 
     def process(self, dt: float) -> None:
-        self.system.system(self.world, dt)
+        self.guard.call(self.system.name, lambda step: self.system.system(self.world, step), dt)
 
 
 class LateTransformSystem(esper.Processor):
@@ -96,7 +134,7 @@ class LateTransformSystem(esper.Processor):
 
 # (stage, what makes its system from the engine).  Order is execution order.
 FRAME_STAGES: tuple[tuple[str, Callable[[Engine], esper.Processor]], ...] = (
-    ("game", lambda e: GameUpdateSystem(e.game, e.world)),
+    ("game", lambda e: GameUpdateSystem(e.game, e.world, e.game_guard)),
     ("rules", lambda e: FrameRulesSystem(e.world)),  # open portal pairs, active camera: FrameRules
     ("input", lambda e: FlyCameraSystem(e.world)),
     ("travel", lambda e: PortalTravelSystem(e.world)),
@@ -130,6 +168,7 @@ class Engine:
         self.world = World(game.title)
         self.world.resources[Input] = Input()  # the shell fills it, systems and the game read it
         self.renderer = Renderer(ctx, caps)
+        self.game_guard = GameGuard()  # the game's code: an error ends the frame, or (contain) stops the game
         self.stages: dict[str, esper.Processor] = {}
         for name, make in FRAME_STAGES:
             self.stages[name] = make(self)
@@ -147,8 +186,11 @@ class Engine:
                 transformed = stage_names.index(item) >= stage_names.index("transform") and \
                     stage_names.index(item) < stage_names.index("extract")
                 continue
-            system = item.system if callable(getattr(item.system, "process", None)) else \
-                GameSystemProcessor(item, self.world)
+            if callable(getattr(item.system, "process", None)):  # a processor: its process guarded
+                system = item.system
+                system.process = _guarded(self.game_guard, item.name, system.process)
+            else:
+                system = GameSystemProcessor(item, self.world, self.game_guard)
             self.schedule.append((item.name, system))
             following = order[index + 1] if index + 1 < len(order) else None
             if transformed and isinstance(following, str):

@@ -27,7 +27,9 @@ def overlay_lines(engine: Engine, frame_times: Sequence[float]) -> list[str]:
     per_level = " / ".join(str(levels[level]) for level in range(max(levels) + 1)) if levels else "-"
     budget = "none" if reflect.level_budget is None else str(reflect.level_budget)
     chosen = f", chose {probes.chosen_path}" if probes.path == "auto" and probes.chosen_path else ""
+    stopped = engine.game_guard.stopped
     return [
+        *([f"game stopped in {stopped} (F5 resumes; the traceback is on the console)"] if stopped else []),
         f"{fps:.1f} fps, {seconds * 1000.0:.2f} ms a frame",
         f"passes {stats.passes}, draw calls {stats.draw_calls}",
         f"views per level {per_level}",

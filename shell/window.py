@@ -122,6 +122,9 @@ class SpeculumWindow(mglw.WindowConfig):
         self.released = False
         args = self.options
         self.engine = Engine(self.game, self.ctx)
+        # The game's error stops the game, not the window: a level being edited is not lost
+        # (the traceback printed, the title and the overlay say so, F5 resumes).
+        self.engine.game_guard.contain = True
         if args is not None:
             self.engine.renderer.antialias = args.aa
         if args is not None and args.camera:
@@ -150,8 +153,10 @@ class SpeculumWindow(mglw.WindowConfig):
                 print(f"speculum: {message}", file=sys.stderr, flush=True)
         self.overlay.record(frametime)
         self.engine.frame(min(frametime, 0.1), Output(self.wnd.fbo, size))
-        if self.game.title != self.shown_title:  # a game that changed level ('n') renames its window
-            self.shown_title = self.wnd.title = self.game.title
+        title = self.game.title if self.engine.game_guard.stopped is None else \
+            f"{self.game.title} (game stopped: F5 resumes)"
+        if title != self.shown_title:  # a game that changed level ('n') renames its window; a stopped one says so
+            self.shown_title = self.wnd.title = title
         self.overlay.draw(self.engine, self.wnd.fbo, size)
         if self.frames_left is not None:
             self.frames_left -= 1
@@ -182,6 +187,10 @@ class SpeculumWindow(mglw.WindowConfig):
                 return
             if action == keys.ACTION_PRESS and self.overlay.shortcut(self.engine, attribute, ctrl, shift):
                 return
+        if self.engine.game_guard.stopped is not None and self.key_attributes.get(key, "") == "F5":
+            if action == keys.ACTION_PRESS:
+                self.engine.game_guard.resume()  # the game's code runs again from the next frame
+            return
         if name == "f1":  # the overlay's key, not the game's
             if action == keys.ACTION_PRESS:
                 self.overlay.toggle()

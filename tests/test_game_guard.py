@@ -1,0 +1,169 @@
+"""The game's own code (its ``update``, its systems) failing: headless, the error ends the
+frame as ever; in the window shell (``GameGuard.contain``), it stops the game instead of the
+program, the engine's stages draw the world on, the overlay and the console say where, the
+level's edits can still be saved, and F5 resumes the game."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from pyglm import glm
+
+from components import DirectionalLight, Material, MeshRef, Skybox, Transform
+from engine.assets.mesh import box, plane
+from engine.core.frame_io import Output
+from engine.core.game import Game, GameSystem
+from engine.render.targets import CaptureTarget
+from shell.app import Engine
+from shell.overlay_text import overlay_lines
+from tests.support import SceneRunner, look_from
+
+
+def _room(world) -> None:
+    look_from(world, (0.0, 2.0, 5.0), (0.0, 0.5, 0.0))
+    world.spawn(Skybox())
+    world.spawn(DirectionalLight(direction=(-0.4, -1.0, -0.3)))
+    world.spawn(Transform(), MeshRef(plane(10, 10)), Material(color=(0.7, 0.7, 0.7)))
+
+
+def _failing_update(calls: list[int], on: int):
+    def update(world, dt):
+        calls.append(len(calls) + 1)
+        if len(calls) == on:
+            raise RuntimeError("boom")
+    return update
+
+
+def test_headless_the_games_error_ends_the_frame(ctx):
+    calls: list[int] = []
+    runner = SceneRunner(ctx, _room, (32, 24), update=_failing_update(calls, 2))
+    try:
+        assert runner.engine.game_guard.contain is False
+        runner.frame()
+        with pytest.raises(RuntimeError, match="boom"):
+            runner.frame()
+    finally:
+        runner.close()
+
+
+def test_a_contained_error_stops_the_games_code_and_the_world_is_drawn_on(ctx, capsys):
+    calls: list[int] = []
+    runner = SceneRunner(ctx, _room, (48, 32), update=_failing_update(calls, 2))
+    try:
+        guard = runner.engine.game_guard
+        guard.contain = True
+        first = runner.frame()
+        stopped = runner.frame()  # the update raises in this frame: the frame is drawn all the same
+        assert guard.stopped == "game: RuntimeError: boom"
+        assert "the game stopped in game (F5 resumes it)" in capsys.readouterr().err
+        later = runner.frame()
+        assert calls == [1, 2]  # left out of the frames while stopped
+        np.testing.assert_array_equal(stopped, first)  # the engine's stages drew the same world
+        np.testing.assert_array_equal(later, first)
+        assert first.max() > 0
+        assert overlay_lines(runner.engine, [0.02])[0] == \
+            "game stopped in game: RuntimeError: boom (F5 resumes; the traceback is on the console)"
+        guard.resume()
+        runner.frame()
+        assert calls == [1, 2, 3] and guard.stopped is None
+        assert not overlay_lines(runner.engine, [0.02])[0].startswith("game stopped")
+    finally:
+        runner.close()
+
+
+class _Holder(Game):
+    """A game whose system holds the lamp entity from its build (as a laser holds its source)."""
+
+    title = "holder"
+
+    def __init__(self, as_processor: bool) -> None:
+        self.as_processor = as_processor
+        self.lamp = 0
+        self.seen = 0
+
+    def build(self, world) -> None:
+        _room(world)
+        self.lamp = world.spawn(Transform(position=(1.0, 0.5, 0.0)), MeshRef(box()), Material(color=(0.9, 0.8, 0.2)))
+        self.crate = world.spawn(Transform(position=(-1.0, 0.5, 0.0)), MeshRef(box()), Material())
+
+    def follow(self, world, dt) -> None:
+        world.get(self.lamp, Transform)  # a KeyError once the lamp is gone
+        self.seen += 1
+
+    def systems(self) -> list[GameSystem]:
+        if self.as_processor:
+            game = self
+
+            class Follow:
+                def process(self, dt: float) -> None:
+                    game.follow(game.world, dt)
+
+            return [GameSystem(Follow(), before="extract", name="follow")]
+        return [GameSystem(self.follow, before="extract", name="follow")]
+
+
+@pytest.mark.parametrize("as_processor", [False, True], ids=["function", "processor"])
+def test_a_game_system_holding_a_deleted_entity_stops_and_the_edits_are_saved(ctx, tmp_path, as_processor):
+    """The editor deletes the entity the game's system holds: the next frame stops the game
+    (named by the system), the world is drawn on without it, and the level, with an edit made
+    before, saves and loads back."""
+    from engine.assets.level_file import load_level
+    from engine.core.world import World
+    from shell.editor import Editor
+
+    game = _Holder(as_processor)
+    engine = Engine(game, ctx)
+    game.world = engine.world
+    capture = CaptureTarget(ctx, (48, 32))
+    output = Output(capture.framebuffer, (48, 32))
+    try:
+        engine.game_guard.contain = True
+        engine.frame(1 / 60, output)
+        editor = Editor(engine.world, names={"lamp": game.lamp, "crate": game.crate})
+        editor.set_field(game.crate, "Transform", "position", glm.vec3(-1.5, 0.5, 0.5))
+        editor.delete(game.lamp)
+        engine.frame(1 / 60, output)
+        assert engine.game_guard.stopped is not None and engine.game_guard.stopped.startswith("follow: KeyError")
+        seen = game.seen
+        engine.frame(1 / 60, output)
+        assert game.seen == seen and capture.read_rgb().max() > 0
+        saved = editor.save(tmp_path / "holder.toml")
+        again = World("again")
+        names = load_level(saved).spawn(again)
+        assert set(names) >= {"crate"} and "lamp" not in names
+        assert tuple(again.get(names["crate"], Transform).position) == (-1.5, 0.5, 0.5)
+    finally:
+        capture.release()
+        engine.close()
+
+
+def test_the_window_shell_contains_the_games_error_and_f5_resumes_it(capsys):
+    """moderngl-window's headless window: the shell sets ``contain``; after the game's error
+    the title says so, F5 (a key no game gets while the game is stopped) resumes it."""
+    import moderngl_window as mglw
+
+    from shell.window import make_window_config
+    from tests.support import FunctionGame
+
+    calls: list[int] = []
+    config = mglw.create_window_config_instance(
+        make_window_config(FunctionGame(_room, _failing_update(calls, 2))),
+        args=["--window", "headless", "--backend", "egl", "--size", "32x24"])
+    try:
+        assert config.engine.game_guard.contain is True
+        keys = config.wnd.keys
+
+        class Mods:
+            shift = False
+            ctrl = False
+
+        for _ in range(3):
+            config.on_render(0.0, 1 / 60)
+        assert calls == [1, 2] and config.engine.game_guard.stopped == "game: RuntimeError: boom"
+        assert config.shown_title.endswith("(game stopped: F5 resumes)")
+        f5 = keys.F5
+        config.on_key_event(f5 if isinstance(f5, int) else "F5", keys.ACTION_PRESS, Mods())
+        config.on_render(0.0, 1 / 60)
+        assert calls == [1, 2, 3] and config.engine.game_guard.stopped is None
+        assert not config.shown_title.endswith("(game stopped: F5 resumes)")
+    finally:
+        config.on_close()
