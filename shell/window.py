@@ -365,7 +365,8 @@ WINDOW_REFUSES = {"gif": "--gif", "ids": "--ids"}
 def run_windowed(game: Game, args: argparse.Namespace) -> None:
     """Open the window and run until it is closed (Esc, its close button, ``--frames N``).
     ``--gif`` and ``--ids`` write headless frames: a window refuses them (a SpeculumError,
-    the runner's one error line) rather than ignoring them."""
+    the runner's one error line) rather than ignoring them; a game that stopped at an error
+    and was not resumed by the close ends the run with one too (exit status 2)."""
     given = [flag for name, flag in WINDOW_REFUSES.items() if getattr(args, name, None)]
     if given:
         raise SpeculumError(f"{' and '.join(given)} {'write' if len(given) > 1 else 'writes'} the frames of a "
@@ -390,3 +391,7 @@ def run_windowed(game: Game, args: argparse.Namespace) -> None:
         config.release()  # closed by Esc or --frames: done already; by the close button: done in on_close
     finally:
         config.wnd.close()  # after the loop, outside any event dispatch (on_close finds it released)
+    stopped = config.engine.game_guard.stopped
+    if stopped is not None:  # a run (say with --frames) whose game failed does not end as a clean one
+        raise SpeculumError(f"the game stopped in {stopped}, and was not resumed before the window closed "
+                            "(its traceback is above)")

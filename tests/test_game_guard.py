@@ -167,3 +167,49 @@ def test_the_window_shell_contains_the_games_error_and_f5_resumes_it(capsys):
         assert not config.shown_title.endswith("(game stopped: F5 resumes)")
     finally:
         config.on_close()
+
+
+FAILING_GAME = r'''
+import sys
+from components import Skybox
+from engine import Game, spawn_camera
+from shell import run
+
+
+class Failing(Game):
+    title = "failing"
+
+    def build(self, world):
+        spawn_camera(world, position=(0.0, 1.0, 4.0))
+        world.spawn(Skybox())
+        self.frames = 0
+
+    def update(self, world, dt):
+        self.frames += 1
+        if self.frames == 3:
+            raise RuntimeError("boom")
+
+
+run(Failing(), sys.argv[1:])
+'''
+
+
+def test_a_real_windows_run_whose_game_stopped_ends_with_an_error(x_display, tmp_path):
+    """``--frames`` in a real window (Xvfb): the game's error stops the game, the window runs
+    its frames to the end, and the run ends with exit status 2 and one line saying where the
+    game stopped, after its traceback (a scripted windowed run does not pass as a clean one)."""
+    import os
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1]
+    env = {**os.environ, "DISPLAY": x_display, "PYTHONPATH": str(root)}
+    result = subprocess.run([sys.executable, "-c", FAILING_GAME, "--frames", "8", "--size", "64x48"],
+                            cwd=tmp_path, env=env, capture_output=True, text=True, timeout=120)
+    assert result.returncode == 2, (result.returncode, result.stderr[-3000:])
+    assert "the game stopped in game (F5 resumes it):" in result.stderr
+    assert "RuntimeError: boom" in result.stderr
+    assert result.stderr.strip().splitlines()[-1] == ("speculum: error: the game stopped in game: RuntimeError: "
+                                                       "boom, and was not resumed before the window closed (its "
+                                                       "traceback is above)")
