@@ -208,7 +208,8 @@ class Engine:
         """Reload the game's level file when it is saved (``shell.level_reload``): the shell
         calls ``level_reload.poll()`` before each frame and says what it returns.  A game not
         built from a level file is refused (a SpeculumError)."""
-        self.level_reload = LevelReload(self.game, self.world, interval)
+        # A game stopped at an error (``GameGuard``) runs again in the world built afresh.
+        self.level_reload = LevelReload(self.game, self.world, interval, on_reload=self.game_guard.resume)
         return self.level_reload
 
     @property

@@ -24,6 +24,7 @@ from __future__ import annotations
 import copy
 import os
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -55,9 +56,10 @@ class LevelReload:
 
     ``interval``: seconds between two stats (0: every ``poll``).  ``reloads``: the saves
     loaded so far; ``error``: the message of the last save that failed (None once a save
-    loads)."""
+    loads); ``on_reload``: called after each rebuild."""
 
-    def __init__(self, game: Game, world: World, interval: float = POLL_INTERVAL) -> None:
+    def __init__(self, game: Game, world: World, interval: float = POLL_INTERVAL,
+                 on_reload: Callable[[], None] | None = None) -> None:
         from engine.assets.level_file import LevelGame
 
         if not isinstance(game, LevelGame):
@@ -69,6 +71,7 @@ class LevelReload:
         self.path = Path(game.level_path)
         self.reloads = 0
         self.error: str | None = None
+        self.on_reload = on_reload  # called after each rebuild (the engine: a stopped game runs again)
         self._next_poll = 0.0
         self.follow(self.path)
 
@@ -132,6 +135,8 @@ class LevelReload:
             place(world, pose)
         self.error = None
         self.reloads += 1
+        if self.on_reload is not None:
+            self.on_reload()
         return f"level reloaded: {self.path}"
 
     def _try_build(self) -> None:

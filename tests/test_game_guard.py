@@ -213,3 +213,38 @@ def test_a_real_windows_run_whose_game_stopped_ends_with_an_error(x_display, tmp
     assert result.stderr.strip().splitlines()[-1] == ("speculum: error: the game stopped in game: RuntimeError: "
                                                        "boom, and was not resumed before the window closed (its "
                                                        "traceback is above)")
+
+
+def test_a_level_saved_while_the_game_is_stopped_is_built_afresh_and_the_game_runs_again(ctx, tmp_path):
+    """The game stopped at an error; its level file saved (an edit that gives it what it
+    needed) reloads (``Engine.watch_level``): the world is built afresh from the file and the
+    game's code runs again from the next frame, without F5."""
+    from engine.assets.level_file import LevelGame
+    from tests.test_level_reload import level_text, save
+
+    class NeedsTheBox(LevelGame):
+        """Fails while the level has no entity named "box"."""
+
+        def update(self, world, dt) -> None:
+            world.get(self.names["box"], Transform)  # a KeyError without one
+            self.updates = getattr(self, "updates", 0) + 1
+
+    path = tmp_path / "level.toml"
+    save(path, level_text().replace('name = "box"', 'name = "crate"'))
+    game = NeedsTheBox(path)
+    engine = Engine(game, ctx)
+    capture = CaptureTarget(ctx, (48, 32))
+    output = Output(capture.framebuffer, (48, 32))
+    try:
+        engine.game_guard.contain = True
+        reload = engine.watch_level(interval=0.0)
+        engine.frame(1 / 60, output)
+        assert engine.game_guard.stopped == "game: KeyError: 'box'"
+        save(path, level_text())
+        assert reload.poll() == [] and reload.poll() == [f"level reloaded: {path}"]  # (its stat settled)
+        assert engine.game_guard.stopped is None
+        engine.frame(1 / 60, output)
+        assert game.updates == 1 and engine.game_guard.stopped is None
+    finally:
+        capture.release()
+        engine.close()
