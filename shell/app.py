@@ -188,7 +188,10 @@ class Engine:
                 continue
             if callable(getattr(item.system, "process", None)):  # a processor: its process guarded
                 system = item.system
-                system.process = _guarded(self.game_guard, item.name, system.process)
+                # (its own process: one an engine before this one guarded is guarded anew)
+                own = system.__dict__.get("_unguarded_process") or system.process
+                system._unguarded_process = own
+                system.process = _guarded(self.game_guard, item.name, own)
             else:
                 system = GameSystemProcessor(item, self.world, self.game_guard)
             self.schedule.append((item.name, system))

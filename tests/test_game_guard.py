@@ -248,3 +248,46 @@ def test_a_level_saved_while_the_game_is_stopped_is_built_afresh_and_the_game_ru
     finally:
         capture.release()
         engine.close()
+
+
+def test_a_processor_reused_by_a_second_engine_is_guarded_by_that_engine_alone(ctx):
+    """A game handing the same processor to two engines in turn: the second engine's guard
+    runs it, not the first's (stopped there, it would be left out for good)."""
+
+    class Counting:
+        def __init__(self) -> None:
+            self.runs = 0
+            self.fail = True
+
+        def process(self, dt: float) -> None:
+            self.runs += 1
+            if self.fail:
+                raise RuntimeError("first engine")
+
+    counting = Counting()
+
+    class Reusing(Game):
+        title = "reusing"
+
+        def build(self, world) -> None:
+            _room(world)
+
+        def systems(self) -> list[GameSystem]:
+            return [GameSystem(counting, name="counting")]
+
+    capture = CaptureTarget(ctx, (32, 24))
+    output = Output(capture.framebuffer, (32, 24))
+    try:
+        first = Engine(Reusing(), ctx)
+        first.game_guard.contain = True
+        first.frame(1 / 60, output)
+        assert first.game_guard.stopped == "counting: RuntimeError: first engine"
+        first.close()
+        counting.fail = False
+        second = Engine(Reusing(), ctx)
+        for _ in range(2):
+            second.frame(1 / 60, output)
+        second.close()
+        assert counting.runs == 3 and second.game_guard.stopped is None
+    finally:
+        capture.release()
