@@ -91,9 +91,10 @@ BOX_TURNS = {"quarter": (glm.quat(math.sqrt(0.5), 0.0, math.sqrt(0.5), 0.0), BOX
 _BOX_MESH: list = []
 
 
-def _box_mesh():
+def l_mesh():
     """An L of two boxes (made once), its box x -0.5..0.5, y -0.5..0.5, z -0.5..0.5 about
-    its origin: a tall arm at -x, a low arm to +x."""
+    its origin: a tall arm at -x, a low arm to +x.  A half turn about y, or a scale of -1
+    on x and z, leaves its box the same to the bit and its shadow not (tests use it too)."""
     if not _BOX_MESH:
         import trimesh
 
@@ -287,7 +288,7 @@ def _spawn(world, case: StillCase) -> dict[str, int]:
                                                 shadow_resolution=64))
     if case.bloom:
         world.add_component(world.resources["camera"], Bloom(intensity=0.2))
-    named["box"] = world.spawn(Transform(position=(0.8, 0.6, 0.0), scale=BOX_SCALE), MeshRef(_box_mesh()),
+    named["box"] = world.spawn(Transform(position=(0.8, 0.6, 0.0), scale=BOX_SCALE), MeshRef(l_mesh()),
                                Material(color=(0.9, 0.2, 0.1)), Emissive(0.6))
     for i, pane in enumerate(case.panes):
         named[f"pane{i}"] = _spawn_pane(world, pane)
