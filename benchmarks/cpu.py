@@ -13,7 +13,8 @@ almost nothing to rasterise), so the frame is the engine's CPU.  Parts (``--part
   The still pair keeps its reflection views once its end images settle (about frame 52 at
   32x18: ``ReflectionSystem.keep_still_views``), so its depth-8 frames are drawn whole
   before that and cost about depth 0's after; the swaying pair plans and draws every level
-  every frame, what a moving camera pays a level.
+  every frame, what a moving camera pays a level, over one whole sway in the default 60
+  frames (``benchmarks.portals.SWAY_PERIOD``).
 * ``frames``: 640x360 with the rasteriser in (this process's environment): the mirrors
   ring with 0 and 8 mirrors, the probes suite's sphere with no probe and with a probe
   recaptured every frame, the portal pair at depth 0 and 8.

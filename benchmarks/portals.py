@@ -45,7 +45,11 @@ from shell.app import Engine
 SIZE = (640, 360)
 DEPTHS = range(0, 9)
 SWAY_CENTRE = glm.vec3(0.3, 1.5, 3.0)  # the camera's place (FacingPortals), the centre of its sway
-SWAY_PERIOD = 2.0                      # seconds a sway takes
+# Seconds a sway takes: 60 frames at the suites' 1/60 s, the cpu suite's default window, so
+# its median is over one whole sway.  At 32x18 the deepest levels lose their last pixels for
+# part of each sway (5 to 8 views a frame), so a window over part of one reads the part: at
+# 2 s the default window held the first half, whose median frame had 6 views against 8.
+SWAY_PERIOD = 1.0
 
 
 class FacingPortals(Game):
@@ -77,8 +81,9 @@ class FacingPortals(Game):
     def update(self, world: World, dt: float) -> None:
         if not self.sway:
             return
-        # A slow sway of a degree or two and a few centimetres: every level still sees the
-        # other portal (the same views as the still camera), but no frame's cameras repeat.
+        # A slow sway of a degree or two and a few centimetres: the levels see the other
+        # portal as the still camera's do (at 32x18 the deepest ones lose their last pixels
+        # for part of it), but no frame's cameras repeat.
         self.time += dt
         phase = 2.0 * math.pi * self.time / SWAY_PERIOD
         self.camera.position = SWAY_CENTRE + glm.vec3(0.05 * math.sin(phase), 0.02 * math.cos(2.0 * phase), 0.0)
