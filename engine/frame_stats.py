@@ -34,6 +34,8 @@ class BudgetLedger:
     pixel_budget: int | None = None
     pixels_spent: int = 0               # reflection pixels drawn, at the screen's resolution
     levels_downscaled: int = 0          # levels the pixel budget drew at a lower resolution
+    min_view_pixels: int | None = None  # ViewBudget.min_pixels: a smaller view is not drawn
+    views_small: int = 0                # views with pixels under it, shown as their fallback
 
     def pixels_left(self) -> int | None:
         """Reflection pixels the frame's budget still allows (None: no limit)."""

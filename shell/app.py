@@ -254,7 +254,8 @@ class Engine:
         checks = self.renderer.path_checks
         budget = ViewBudget.of(self.world.resources) or ViewBudget()  # checked: a bad one is one error line
         stats = RenderStats(paths_verified=checks.verified(), paths_refused=checks.refused(),
-                            view_budget=budget.views, probe_ms_budget=budget.probe_ms, pixel_budget=budget.pixels)
+                            view_budget=budget.views, probe_ms_budget=budget.probe_ms, pixel_budget=budget.pixels,
+                            min_view_pixels=budget.min_pixels)
         self.world.resources[RenderStats] = self.renderer.stats = stats
         self.world.step(dt)
         self.world.resources[Input].end_frame()

@@ -1,6 +1,7 @@
 """Frames, id images and scene exports written to disk, for debugging and verification."""
 from __future__ import annotations
 
+import dataclasses
 import json
 import os
 from pathlib import Path
@@ -11,6 +12,7 @@ from pyglm import glm
 
 from components import Camera, MeshRef, Portal, Transform
 from engine.assets.values import VALUE_KINDS, json_value, public_fields
+from engine.core.budget import ViewBudget
 from engine.core.errors import SpeculumError
 from engine.core.portal_math import pair_transform
 from engine.core.world import World
@@ -41,7 +43,8 @@ def export_scene(world: World, path: str | Path, camera_entity: int, size: tuple
     beside it, a JSON of the camera, each entity's component types and their field values
     (``component_values``: enough to rebuild the scene), each mirror's world
     plane (a point on it and its unit normal, towards the reflecting side), each portal's
-    partner, each reflection probe and which probe each entity samples.  The geometry's
+    partner, each reflection probe and which probe each entity samples, and the frame's
+    ``ViewBudget`` (its fields; None: none), which decides which views are drawn.  The geometry's
     format follows the extension (``SCENE_FORMATS``); any other is refused."""
     import trimesh
 
@@ -88,6 +91,7 @@ def export_scene(world: World, path: str | Path, camera_entity: int, size: tuple
             for entity, (point, normal) in sorted((mirror_planes or {}).items())
         },
         **_probes(world),
+        "view_budget": None if (budget := ViewBudget.of(world.resources)) is None else dataclasses.asdict(budget),
     }
     path.with_suffix(".json").write_text(json.dumps(info, indent=1))
     return path

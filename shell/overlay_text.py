@@ -42,6 +42,8 @@ def overlay_lines(engine: Engine, frame_times: Sequence[float]) -> list[str]:
         f"lights through mirrors {stats.virtual_lights_cut} (shining {stats.virtual_lights})",
         f"view budget {'none' if stats.view_budget is None else stats.view_budget}: spent {stats.views_spent}, "
         f"cut {stats.views_cut}",
+        f"smallest view {'any' if stats.min_view_pixels is None else f'{stats.min_view_pixels} px'}: "
+        f"{stats.views_small} smaller shown as fallbacks",
         f"pixel budget {'none' if stats.pixel_budget is None else stats.pixel_budget}: spent {stats.pixels_spent}, "
         f"{stats.levels_downscaled} levels smaller",
         f"probe budget {'none' if stats.probe_ms_budget is None else f'{stats.probe_ms_budget:g} ms'}: "

@@ -226,7 +226,8 @@ class ReflectionSystem(esper.Processor):
         values = (renderer.scene_version, renderer.shaders.reloads, main.camera_block(), main.name, main.mirrored,
                   main.scissor, self.settings, self.tree.unlit, renderer.texture_anisotropy,
                   renderer.reflection_anisotropy, renderer.normal_map_anisotropy, renderer.scene_pass.cull_batches,
-                  stats.views_left(), stats.pixels_left(), tuple(flow.offset for flow in waves[1]))
+                  stats.views_left(), stats.pixels_left(), stats.min_view_pixels,
+                  tuple(flow.offset for flow in waves[1]))
         return values, (table, blends.by_surface, levels)
 
     def prepare(self) -> None:

@@ -308,7 +308,7 @@ class _BudgetGame(Game):
 
 @pytest.mark.parametrize("budget, expected", [
     (ViewBudget, "holds the class ViewBudget, not a budget: make one, e.g. ViewBudget(views=24)"),
-    ({"views": 4}, "must be a ViewBudget(views=..., pixels=..., probe_ms=...), got dict"),
+    ({"views": 4}, "must be a ViewBudget(views=..., pixels=..., probe_ms=..., min_pixels=...), got dict"),
     (lambda: ViewBudget(views=-2), "ViewBudget.views must be None or an int >= 0, got -2"),
     (lambda: ViewBudget(probe_ms="2"), "ViewBudget.probe_ms must be None or a finite number > 0, got '2'"),
 ], ids=["class", "dict", "negative-views", "text-probe-ms"])
@@ -692,7 +692,7 @@ def test_a_level_file_sets_the_view_budget_and_save_level_writes_it_back(tmp_pat
     path = _level(tmp_path, """\
         [level]
         name = "budgeted"
-        view_budget = { views = 12, probe_ms = 2.5 }
+        view_budget = { views = 12, probe_ms = 2.5, min_pixels = 64 }
 
         [[entity]]
         name = "floor"
@@ -701,15 +701,16 @@ def test_a_level_file_sets_the_view_budget_and_save_level_writes_it_back(tmp_pat
     level = load_level(path)
     with World("budget") as world:
         names = level.spawn(world)
-        assert world.resources[ViewBudget] == ViewBudget(views=12, probe_ms=2.5)
+        assert world.resources[ViewBudget] == ViewBudget(views=12, probe_ms=2.5, min_pixels=64)
         saved = save_level(world, tmp_path / "again.toml", names, name="budgeted")
-    assert load_level(saved).view_budget == ViewBudget(views=12, probe_ms=2.5)
+    assert load_level(saved).view_budget == ViewBudget(views=12, probe_ms=2.5, min_pixels=64)
 
 
 @pytest.mark.parametrize("value, expected", [
     ("{ views = -1 }", "ViewBudget.views must be None or an int >= 0, got -1"),
     ("{ views = 2.5 }", "ViewBudget.views must be None or an int >= 0"),
     ("{ probe_ms = 0 }", "ViewBudget.probe_ms must be None or a finite number > 0"),
+    ("{ min_pixels = 0 }", "ViewBudget.min_pixels must be None or an int >= 1, got 0"),
     ("{ view = 3 }", "view_budget has unknown keys ['view']"),
     ("12", "view_budget must be a table such as { views = 24 }"),
 ])

@@ -10,6 +10,7 @@ from pyglm import glm
 
 from components import PortalClone, Slice, Transform
 from engine.assets.values import json_value
+from engine.resources import ViewBudget
 from games.hall_of_mirrors import HallOfMirrors
 from shell.capture import export_scene
 
@@ -129,7 +130,10 @@ def test_a_scene_rebuilt_from_scene_json_renders_the_same_frame(scene, tmp_path)
     expected = original.frame(0.0)  # the exported state, drawn again (no time passes)
     expected_ids = original.ids()
 
+    assert info["view_budget"] == {"views": None, "probe_ms": None, "pixels": None, "min_pixels": 64}  # the level's
+
     def build(world):
+        world.resources[ViewBudget] = ViewBudget(**info["view_budget"])
         for entity in range(1, max(rebuilt) + 1):  # same ids, so parents and partners still point right
             kept = [c for c in rebuilt.get(entity, []) if type(c).__name__ not in SYSTEM_MADE]
             assert world.spawn(*kept) == entity

@@ -84,6 +84,7 @@ CASES = {
     "cap_0": (_cap(0), 8),
     "view_budget": (_budget(views=3), 8),                   # cut views show the fallback at weight 1
     "pixel_budget": (_budget(pixels=2000), 0),              # levels drawn smaller, decided later
+    "min_pixels": (_budget(min_pixels=100), 8),             # small views show the fallback at weight 1
 }
 
 

@@ -163,7 +163,8 @@ def test_the_overlay_reports_the_budget(scene):
 
 
 @pytest.mark.parametrize("kwargs", [{"views": -1}, {"views": 2.5}, {"views": True}, {"probe_ms": 0.0},
-                                    {"probe_ms": float("inf")}, {"probe_ms": "1"}])
+                                    {"probe_ms": float("inf")}, {"probe_ms": "1"}, {"min_pixels": 0},
+                                    {"min_pixels": 2.5}, {"min_pixels": True}])
 def test_bad_budgets_are_refused_naming_the_field(kwargs):
     with pytest.raises(ValueError, match=f"ViewBudget.{next(iter(kwargs))}"):
         ViewBudget(**kwargs)
@@ -364,3 +365,81 @@ def test_recaptures_get_a_face_a_frame_when_reflections_spend_the_whole_budget(s
     faces = set().union(*(f for frame in drawn for key, f in frame if key == ents["probe"]))
     assert faces == set(range(6)), faces
     assert runner.stats.reflection_views >= 7  # the mirrors still get the rest of the budget
+
+
+# --- the smallest view worth a pass (ViewBudget.min_pixels) -----------------------------------
+
+def _two_mirrors(ents):
+    """A large and a small mirror side by side, facing the camera, and a red wall behind
+    the camera for both to show; neither sees the other."""
+    def build(world):
+        look_from(world, (0.0, 1.5, 4.0), target=(0.0, 1.5, -3.0), fov=60.0)
+        world.spawn(DirectionalLight(direction=(0.2, -1.0, -0.5), intensity=2.0))
+        world.spawn(Transform(position=(0.0, 1.5, 8.0)), MeshRef(box((12.0, 4.0, 0.5))),
+                    Material(color=(0.9, 0.2, 0.1)))
+        ents["big"] = world.spawn(Transform(position=(-1.2, 1.5, -3.0)), MeshRef(quad(2.0, 2.0)), Mirror())
+        ents["small"] = world.spawn(Transform(position=(1.6, 1.5, -3.0)), MeshRef(quad(0.4, 0.4)), Mirror())
+    return build
+
+
+def _seen_sizes(runner, ents):
+    """Each mirror's pixels in the frame (the surface id buffer), with the frame drawn whole."""
+    runner.world.resources.pop(ViewBudget, None)
+    whole = runner.frame()
+    surface = runner.engine.renderer.targets.read_surface_ids()
+    big, small = (surface == ents["big"]), (surface == ents["small"])
+    assert 0 < small.sum() < big.sum() and runner.stats.reflection_views == 2
+    assert runner.stats.pixels_spent == big.sum() + small.sum()  # a view's claim: its surface's pixels
+    return whole, big, small
+
+
+@pytest.mark.parametrize("visibility", ["exact", "predicted"])
+def test_a_view_under_the_smallest_worth_a_pass_shows_its_fallback(scene, visibility):
+    """A view that would show fewer pixels than ``min_pixels`` is not drawn: its mirror
+    shows the fallback, pixel for pixel what a view budget that cuts it shows (the budget
+    cuts the view covering fewer pixels first), and the large mirror its reflection as
+    before.  Predicted visibility goes by last frame's count, so the view goes the frame
+    after; a view of exactly ``min_pixels`` stays."""
+    ents = {}
+    runner = scene(_two_mirrors(ents), (160, 120))
+    runner.engine.reflection_system.visibility = visibility
+    runner.frame()
+    whole, big, small = _seen_sizes(runner, ents)
+    runner.world.resources[ViewBudget] = ViewBudget(min_pixels=int(small.sum()))
+    runner.frame()
+    assert runner.stats.reflection_views == 2 and runner.stats.views_small == 0
+    runner.world.resources[ViewBudget] = ViewBudget(min_pixels=int(small.sum()) + 1)
+    frames = [runner.frame() for _ in range(2)]
+    cut = frames[-1]
+    stats = runner.stats
+    assert stats.reflection_views == 1 and stats.views_small == 1 and stats.views_cut == 0
+    assert [v.surface.entity for v in runner.engine.reflection_system.views[1:]] == [ents["big"]]
+    assert stats.pixels_spent == big.sum() and stats.reflection_fallbacks >= 1
+    assert np.array_equal(cut[big], whole[big])
+    assert np.abs(cut[small].astype(int) - whole[small].astype(int)).max() > 40  # the red wall is gone there
+    runner.world.resources[ViewBudget] = ViewBudget(views=1)
+    budgeted = runner.frame()
+    assert runner.stats.views_cut == 1 and runner.stats.reflection_views == 1
+    assert np.array_equal(cut, budgeted)
+
+
+def test_probe_faces_leave_out_their_small_views_too(scene):
+    """The budget's smallest view holds in every tree: a probe whose faces see a small
+    mirror draws no view of it (the main camera sees no mirror), and says so."""
+    def build(world):
+        look_from(world, (0.0, 1.5, 4.0), target=(0.0, 1.5, 8.0))  # away from the mirror
+        world.spawn(DirectionalLight(direction=(0.2, -1.0, -0.5), intensity=2.0))
+        world.spawn(Transform(position=(0.0, 1.5, -1.0)), MeshRef(sphere(0.3)), Material(metallic=1.0, roughness=0.0),
+                    ReflectionProbe(resolution=32, refresh="every_frame"), Reflective(mode="cube"))
+        world.spawn(Transform(position=(0.0, 1.5, -4.0)), MeshRef(quad(0.6, 0.6)), Mirror())
+        world.spawn(Transform(position=(0.0, 1.5, 1.0)), MeshRef(box((4.0, 3.0, 0.3))), Material(color=(0.2, 0.8, 0.3)))
+    runner = scene(build, (160, 120))
+    runner.frame()
+    runner.frame()
+    passes, faces, spent = runner.stats.passes, runner.stats.probe_faces, runner.stats.views_spent
+    assert faces >= 1 and runner.stats.views_small == 0 and runner.stats.reflection_views == 0
+    runner.world.resources[ViewBudget] = ViewBudget(min_pixels=32 * 32)  # more than a face holds
+    runner.frame()
+    stats = runner.stats
+    assert stats.views_small >= 1 and stats.probe_faces == faces and stats.reflection_views == 0
+    assert stats.views_spent == spent - stats.views_small and stats.passes == passes - stats.views_small

@@ -43,11 +43,19 @@ class ViewBudget:
     at the scale that fits (down to ``MIN_LEVEL_SCALE``; past that its views are skipped).
     The decision must precede the level's claims, so it is made on last frame's coverage of
     that level (Valve's Portal downgrades its views the same way).  ``RenderStats``:
-    ``pixels_spent``, ``levels_downscaled``."""
+    ``pixels_spent``, ``levels_downscaled``.
+
+    ``min_pixels`` is the smallest view worth a pass: a mirror or portal view that would
+    show fewer pixels than this (its claim, counted at the resolution of the picture its
+    tree is drawn into: the screen, or a probe's face) is not drawn, and its surface shows
+    its fallback there, as a view the budget cut (a level of detail, as engines cull a mesh
+    under a screen size: a scene pass for a sliver a few pixels across costs a whole pass's
+    CPU and shows what the fallback shows).  ``RenderStats.views_small`` counts them."""
 
     views: int | None = None
     probe_ms: float | None = None
     pixels: int | None = None
+    min_pixels: int | None = None
 
     def __post_init__(self) -> None:
         self.check()
@@ -60,6 +68,9 @@ class ViewBudget:
         if self.pixels is not None and (not isinstance(self.pixels, int) or isinstance(self.pixels, bool)
                                         or self.pixels < 0):
             raise ViewBudgetError(f"ViewBudget.pixels must be None or an int >= 0, got {self.pixels!r}")
+        if self.min_pixels is not None and (not isinstance(self.min_pixels, int) or isinstance(self.min_pixels, bool)
+                                            or self.min_pixels < 1):
+            raise ViewBudgetError(f"ViewBudget.min_pixels must be None or an int >= 1, got {self.min_pixels!r}")
         if self.probe_ms is not None and (isinstance(self.probe_ms, bool) or not isinstance(self.probe_ms, (int, float))
                                           or not 0.0 < self.probe_ms < float("inf")):
             raise ViewBudgetError(f"ViewBudget.probe_ms must be None or a finite number > 0, got {self.probe_ms!r}")
@@ -77,7 +88,7 @@ class ViewBudget:
                                   "make one, e.g. ViewBudget(views=24)")
         if not isinstance(budget, ViewBudget):
             raise ViewBudgetError(f"world.resources[ViewBudget] must be a ViewBudget(views=..., pixels=..., "
-                                  f"probe_ms=...), got {type(budget).__name__} {budget!r}")
+                                  f"probe_ms=..., min_pixels=...), got {type(budget).__name__} {budget!r}")
         return budget
 
 

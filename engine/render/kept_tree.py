@@ -31,7 +31,7 @@ from engine.render.views import PlannedView, View
 from engine.resources import SurfaceState
 
 # The frame's counts a tree's render adds, which a frame that keeps it adds again (KeptTree.spent).
-LEDGER = ("views_spent", "pixels_spent", "views_cut", "levels_downscaled", "reflection_fallbacks")
+LEDGER = ("views_spent", "pixels_spent", "views_cut", "levels_downscaled", "reflection_fallbacks", "views_small")
 
 
 @dataclass
@@ -46,7 +46,7 @@ class KeptTree:
     targets: tuple[RenderTargets, ...]
     composite: PreparedComposites | None               # level 1 into the root (None: no views)
     fallbacks: tuple[RenderTargets | None, PreparedFallbacks] | None  # the root's own, with level 1
-    spent: tuple[int, int, int, int, int]              # views, pixels, cut, downscaled, fallbacks
+    spent: tuple[int, int, int, int, int, int]         # views, pixels, cut, downscaled, fallbacks, small
     # Nothing of it depends on last frame (exact visibility, or predicted from last frame's
     # counts with no view drawn unseen: a first or cut frame's tree is not the one the next
     # frame draws; and no end view drawn, or ``history``: end views drawn from an image the

@@ -141,7 +141,8 @@ def chosen_by_prediction(candidates: Candidates, queries: list[moderngl.Query], 
                          is_end: list[bool], keys: list[tuple[int, ...]], record: RootVisibility,
                          entities: list[int], stats: BudgetLedger, coverage: dict[int, int], level: int,
                          screen: tuple[int, int]
-                         ) -> tuple[list[int], list[int], list[int], list[tuple[int, ...]], list[moderngl.Query]]:
+                         ) -> tuple[list[int], list[int], list[int], list[tuple[int, ...]], list[moderngl.Query],
+                                    list[int]]:
     """Predicted visibility: every candidate of the level becomes a view (or an end
     view), drawn on the GPU only if its claim counts pixels (conditional rendering: the
     returned conditions), except those known empty (``claim_cull``: their query in
@@ -152,7 +153,9 @@ def chosen_by_prediction(candidates: Candidates, queries: list[moderngl.Query], 
     surface ``entities``, from its parent's in ``keys``), whose count the GPU keeps in
     ``record`` for next frame (a known-empty one's counted 0: the next frame predicts it
     hidden), and the views' conditions.  The frame's spending (``stats``) and the level's
-    ``coverage`` go by last frame's counts (0 for a known-empty one: it spends nothing)."""
+    ``coverage`` go by last frame's counts (0 for a known-empty one: it spends nothing); so
+    does ``min_pixels``: a candidate last frame counted under it gets no view (its claim
+    is counted again for the next frame), and is returned last, for its fallback."""
     claim_keys = [keys[p] + (entities[s],) for p, s in
                   zip(candidates.parent.tolist(), candidates.surface.tolist(), strict=True)]
     record.pending.extend(claim_keys)
@@ -165,6 +168,13 @@ def chosen_by_prediction(candidates: Candidates, queries: list[moderngl.Query], 
     else:
         keep = [i for i, end in enumerate(is_end) if not end]
         ends = [i for i, end in enumerate(is_end) if end]
+    small = []
+    smallest = stats.min_view_pixels
+    if smallest is not None:
+        small = [i for i in keep if seen[i] and screen_coverage(seen[i], candidates.size, screen) < smallest]
+        if small:
+            stats.views_small += len(small)
+            keep = [i for i in keep if i not in small]
     # A view hidden last frame is drawn (it may show now) but its own surfaces wait for
     # a frame that counts pixels for it.
     grow = [at for at, i in enumerate(keep) if seen[i] != 0]
@@ -172,7 +182,7 @@ def chosen_by_prediction(candidates: Candidates, queries: list[moderngl.Query], 
     coverage[level] = screen_coverage(drawn, candidates.size, screen)
     stats.views_spent += len(keep)
     stats.pixels_spent += drawn
-    return keep, grow, ends, claim_keys, [queries[i] for i in keep]
+    return keep, grow, ends, claim_keys, [queries[i] for i in keep], small
 
 
 def within_budgets(surfaces: SurfaceTable, candidates: Candidates, pixels: list[int], level_budget: int | None,
@@ -181,10 +191,13 @@ def within_budgets(surfaces: SurfaceTable, candidates: Candidates, pixels: list[
     """The candidates with pixels that the level's (``level_budget``) and the frame's
     budgets keep (highest priority first, then the most pixels), in claim order, and how
     many with pixels the level's budget dropped; spends the frame's budgets and records the
-    level's ``coverage`` for the next frame's pixel budget.  Without a budget, in Python: a
-    level's claims are a list, and a few numpy calls cost more than it."""
+    level's ``coverage`` for the next frame's pixel budget.  A view with fewer pixels than
+    the budget's ``min_pixels`` at the ``screen``'s resolution is left out first, and
+    counted (``views_small``).  Without a budget, in Python: a level's claims are a list,
+    and a few numpy calls cost more than it."""
     pixel_budget = stats.pixels_left()
-    if level_budget is None and stats.view_budget is None and pixel_budget is None:
+    smallest = stats.min_view_pixels
+    if level_budget is None and stats.view_budget is None and pixel_budget is None and smallest is None:
         keep = [i for i, n in enumerate(pixels) if n]  # no budget: every view with pixels
         drawn = sum(pixels)
         coverage[level] = screen_coverage(drawn, candidates.size, screen)
@@ -192,7 +205,13 @@ def within_budgets(surfaces: SurfaceTable, candidates: Candidates, pixels: list[
         stats.pixels_spent += drawn
         return keep, 0
     pixels = np.asarray(pixels, np.int64)
-    keep = np.flatnonzero(pixels)
+    shown = pixels > 0
+    if smallest is not None:
+        (width, height), area = candidates.size, screen[0] * screen[1]
+        small = shown & (np.rint(pixels * area / (width * height)) < smallest)  # as screen_coverage rounds
+        stats.views_small += int(small.sum())
+        shown &= ~small
+    keep = np.flatnonzero(shown)
     dropped = 0
     coverage[level] = screen_coverage(pixels.sum(), candidates.size, screen)
     if len(keep) > 1:

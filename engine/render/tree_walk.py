@@ -127,6 +127,8 @@ class TreeLevel:
     chosen: Candidates | None = None
     children: list[ReflectionView] = field(default_factory=list)
     claim_keys: list[tuple[int, ...]] = field(default_factory=list)
+    small: list[int] = field(default_factory=list)  # predicted: candidates with no view for being under
+                                                    # ViewBudget.min_pixels last frame (their fallback)
     unlit: frozenset[int] = frozenset()            # mirrors its views draw unlit (shading_replaced)
     options: SceneOptions = REFLECTION_LEVEL       # what its views were drawn with (their transparent slot's)
     apart: bool = False                           # its claims' rectangles overlap no other's (view_tree._APART)

@@ -292,7 +292,7 @@ class ViewTree:
         surfaces, settings, result, root = walk.surfaces, walk.settings, walk.result, walk.root
         if walk.exact and len(candidates) == 1 and self.lean_levels and settings.level_budget is None:
             stats = self.renderer.stats
-            if stats.view_budget is None and stats.pixels_left() is None:
+            if stats.view_budget is None and stats.pixels_left() is None and stats.min_view_pixels is None:
                 return self._choose_one(walk, levels, candidates)
         level = walk.level
         if walk.scale < 1.0:
@@ -306,7 +306,7 @@ class ViewTree:
             step.keep, step.grow, end_rows = self._chosen_by_counts(surfaces, step, is_end, settings, result,
                                                                     level + 1, root.size)
         else:  # last frame's counts: nothing waits; the GPU counts this frame's for the next
-            step.keep, step.grow, end_rows, step.claim_keys, step.conditions = chosen_by_prediction(
+            step.keep, step.grow, end_rows, step.claim_keys, step.conditions, step.small = chosen_by_prediction(
                 candidates, step.queries, self.passes.no_pixels, is_end, walk.keys, walk.record,
                 surfaces.entity_list, self.renderer.stats, self.coverage, level + 1, root.size)
         keep, grow = step.keep, step.grow
@@ -531,21 +531,24 @@ class ViewTree:
                             keep: list[int] | np.ndarray, is_end: list[bool], children: list[ReflectionView],
                             level: int, exact: bool) -> None:
         """The fallbacks of a level's candidates: the views kept partly faded (the faded
-        share) and those with pixels the budgets cut (their whole reflection), as rows of its
-        candidates (whose parents are ``step.parents``)."""
+        share) and those with pixels the budgets cut or found too small (their whole
+        reflection), as rows of its candidates (whose parents are ``step.parents``)."""
         faded = [at for at, child in enumerate(children) if child.fade < 1.0]
         if faded:
             chosen, rows = step.chosen, np.asarray(faded, np.int64)
             fallbacks_at(fallbacks, level, surfaces).add(step.parents, chosen.parent.take(rows),
                                                           chosen.surface.take(rows), 1.0 - chosen.fade.take(rows))
+        cut = None
         if exact and step.pixels is not None and len(keep) < sum(1 for n in step.pixels if n):
             kept = set(np.asarray(keep).tolist())
             cut = np.array([i for i, (n, end) in enumerate(zip(step.pixels, is_end, strict=True))
                             if n and not end and i not in kept], np.int64)
-            if len(cut):
-                candidates = step.candidates
-                fallbacks_at(fallbacks, level, surfaces).add(step.parents, candidates.parent.take(cut),
-                                                              candidates.surface.take(cut))
+        elif step.small:  # predicted: those last frame counted under the smallest view worth one
+            cut = np.asarray(step.small, np.int64)
+        if cut is not None and len(cut):
+            candidates = step.candidates
+            fallbacks_at(fallbacks, level, surfaces).add(step.parents, candidates.parent.take(cut),
+                                                          candidates.surface.take(cut))
 
     def _root_rows(self, root: View) -> LevelRows:
         """``LevelRows.root(root)``, kept per root while its camera stands still (a probe
