@@ -249,7 +249,8 @@ class BudgetCase:
 def _budget_value(rng: random.Random, name: str) -> Any:
     if rng.random() < 0.85:  # plausible: a small budget that starves something
         return {"views": rng.randint(0, 12), "pixels": rng.choice((0, 1, 500, 5000, 10 ** 6)),
-                "probe_ms": rng.choice((0.001, 0.05, 1.0, 50.0))}[name]
+                "probe_ms": rng.choice((0.001, 0.05, 1.0, 50.0)),
+                "min_pixels": rng.choice((1, 16, 64, 400, 10 ** 6))}[name]
     return random_value(rng)
 
 
@@ -261,7 +262,8 @@ def _fade_value(rng: random.Random) -> Any:
 
 
 def random_budget_case(rng: random.Random) -> BudgetCase:
-    budget = {name: _budget_value(rng, name) for name in rng.sample(("views", "pixels", "probe_ms"), rng.randint(1, 3))}
+    budget = {name: _budget_value(rng, name)
+              for name in rng.sample(("views", "pixels", "probe_ms", "min_pixels"), rng.randint(1, 4))}
     mirror = {name: _fade_value(rng) for name in rng.sample(("fade_distance", "fade_angle"), rng.randint(0, 2))}
     water_fields = ("ior", "speed", "direction", "tiling", "cross", "offset")
     plausible_water = {"ior": lambda: rng.uniform(1.0, 2.0), "speed": lambda: rng.uniform(0.0, 2.0),

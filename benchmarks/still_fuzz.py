@@ -33,7 +33,9 @@ and then a point light casting shadows and Bloom on the camera.  The change is o
   random alpha added among the refilled frames;
 - ``turn``: the box (an L, its box centred on its origin) turned by an exact quarter or half
   turn about y, or flipped by a scale of -1 on x and z: a half turn and the flip leave its
-  world box the same to the bit, while its shadow changes.
+  world box the same to the bit, while its shadow changes;
+- ``min_pixels``: the frame's ``ViewBudget(min_pixels=...)`` set, 1 to 5000 pixels (the
+  views under it show their fallback).
 
 A case passes when a refused write is refused with a ``ComponentValueError`` naming
 ``Class.field`` in both engines, and every frame of both renders with no NaN in the HDR
@@ -75,13 +77,15 @@ from components import (
 )
 from engine.assets.mesh import plane, quad
 from engine.assets.portals import spawn_portal_pair
+from engine.core.budget import ViewBudget
 from engine.core.frame_io import Output
 from engine.core.game import Game
 from engine.render.targets import CaptureTarget
 from shell.app import Engine
 
 SIZE = (48, 32)
-CHANGES = ("component", "remove", "resize", "depth_cap", "keep_toggle", "surface", "camera_off", "turn")
+CHANGES = ("component", "remove", "resize", "depth_cap", "keep_toggle", "surface", "camera_off", "turn",
+           "min_pixels")
 # The box's turns (``turn``): exact quaternions (w, x, y, z) and scales, not angleAxis's
 # rounding, which moves the box.
 BOX_SCALE = (0.4, 1.2, 0.4)
@@ -197,6 +201,8 @@ def _random_change(rng: random.Random) -> tuple[str, dict[str, Any]]:
         detail = {"off_frames": rng.randint(1, 3)}
     elif change == "turn":
         detail = {"how": rng.choice(tuple(BOX_TURNS))}
+    elif change == "min_pixels":
+        detail = {"min": rng.choice((1, 8, 40, 200, 5000))}
     else:
         detail = {"add": rng.choice(("water", "mirror", "pane")), "pane": _pane(rng), "alpha": _alpha(rng)}
     return change, detail
@@ -435,6 +441,8 @@ class StillFuzzer:
             side.resize(detail["size"])
         elif change == "depth_cap":
             side.engine.reflection_system.max_depth_cap = detail["cap"]
+        elif change == "min_pixels":
+            side.world.resources[ViewBudget] = ViewBudget(min_pixels=detail["min"])
         elif change == "keep_toggle":
             if side is self.keeping:
                 side.engine.reflection_system.keep_still_views = False
@@ -517,6 +525,7 @@ class StillFuzzer:
             system = side.engine.reflection_system
             system.max_depth_cap = 8
             system.visibility = "exact"
+            side.world.resources.pop(ViewBudget, None)
             if side.size != SIZE:
                 side.resize(SIZE)
             light = side.world.get(side.game.light, DirectionalLight)
