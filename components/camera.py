@@ -6,7 +6,13 @@ from typing import Any
 
 from pyglm import glm
 
-from components.limits import MAX_FAR, MAX_LIGHT_BOUNCES, check_near_far
+from components.limits import (
+    MAX_FAR,
+    MAX_LIGHT_BOUNCES,
+    MAX_SHADOW_CASCADES,
+    MIN_SHADOW_DISTANCE,
+    check_near_far,
+)
 from components.tracking import (
     HALF_MAX,
     ComponentValueError,
@@ -103,6 +109,16 @@ class DirectionalLight(TrackedComponent):
     of two); ``shadow_softness``: how far, in texels, the edge is filtered (percentage-closer
     filtering; 0 is the hardest edge the map's texels allow).
 
+    ``shadow_cascades`` (default 1: the level's map alone): with 2 to 4, the map is joined by
+    up to three more of the same resolution, each a square about the active camera (shadow
+    cascades: a small map near the eye, where a texel covers many pixels), the largest
+    ``shadow_distance`` metres round it, each next a quarter of that.  A point takes the
+    smallest map holding it, whatever view shows it, so a mirror shows the same sharp shadow
+    as the camera does (a ring, not the camera's frustum: a mirror looks behind the camera).
+    A ring is drawn again when the camera has moved a sixth of its radius, or a caster in it
+    changed.  The maps share the shadow atlas's four tiles with the other suns: where they
+    do not fit, the light has fewer (``RenderStats.shadow_cascades_cut``).
+
     ``bounces`` (default 1): how many mirrors and portals that carry light
     (``Mirror.reflects_light``, ``Portal.carries_light``) its light goes through in a row:
     0 none, 1 one (a mirror throws it on the floor), up to ``MAX_LIGHT_BOUNCES`` = 4 (mirror
@@ -115,11 +131,17 @@ class DirectionalLight(TrackedComponent):
     shadows: bool = True
     shadow_resolution: int = 2048
     shadow_softness: float = 1.0
+    shadow_cascades: int = 1
+    shadow_distance: float = 20.0
     bounces: int = 1
 
     def _validate(self, name: str, value: Any) -> Any:
         if name == "direction":
             return glm.normalize(vec3(self, name, value, nonzero=True))
+        if name == "shadow_cascades":
+            return integer(self, name, value, low=1, high=MAX_SHADOW_CASCADES)
+        if name == "shadow_distance":
+            return finite(self, name, value, low=MIN_SHADOW_DISTANCE, high=MAX_FAR)
         if name == "color":
             return color(self, name, value)
         if name == "intensity":

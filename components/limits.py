@@ -16,6 +16,12 @@ MAX_VIEW_DEPTH = 16
 # PointLight.bounces): each bounce is one more virtual light (a shadow map and a light's
 # shading), and the shader tests one aperture a bounce (shaders/include/virtual_lights.glsl).
 MAX_LIGHT_BOUNCES = 4
+# A sun's shadow maps (DirectionalLight.shadow_cascades): the level's and up to three rings
+# about the camera, sharing the shadow atlas's four tiles (engine/render/shadows.py).
+MAX_SHADOW_CASCADES = 4
+# The smallest largest ring (metres; DirectionalLight.shadow_distance): its innermost ring is
+# a sixteenth of it, a few centimetres for a map a few hundred texels wide at the least.
+MIN_SHADOW_DISTANCE = 0.5
 
 # Reflection layers (show/hide lists): an entity belongs to some of REFLECTION_LAYERS layers
 # and a mirror, portal, probe or camera shows some of them; a view shows an entity when they

@@ -38,7 +38,8 @@ def overlay_lines(engine: Engine, frame_times: Sequence[float]) -> list[str]:
         f"fallbacks {stats.reflection_fallbacks}",
         f"probe captures {stats.probe_captures} ({stats.probe_faces} faces); shadow maps "
         f"{stats.shadow_maps_drawn} + {stats.shadow_maps_kept} kept{'' if shadows_on else ' (off)'}",
-        f"cut: lights {stats.lights_cut}, shadows {stats.shadows_cut}, "
+        f"cut: lights {stats.lights_cut}, shadows {stats.shadows_cut}"
+        f"{f', cascades {stats.shadow_cascades_cut}' if stats.shadow_cascades_cut else ''}, "
         f"lights through mirrors {stats.virtual_lights_cut} (shining {stats.virtual_lights})",
         f"view budget {'none' if stats.view_budget is None else stats.view_budget}: spent {stats.views_spent}, "
         f"cut {stats.views_cut}",

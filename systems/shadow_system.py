@@ -31,10 +31,13 @@ import numpy as np
 
 from components import DirectionalLight, Material, MeshRef, PointLight, Refractive, Transform, Visibility
 from components.tracking import raw_field
+from engine.core.transforms import current_world_matrix
 from engine.core.world import World
 from engine.render.renderer import Renderer
 from engine.render.shadows import LIGHT_LIMITS, VIRTUAL_RESOLUTION
+from engine.render.views import MAX_DIRECTIONAL_LIGHTS
 from engine.resources import RenderStats, Surfaces
+from engine.rules.frame_rules import active_camera_parts
 from engine.rules.light_rules import KeptLights, kept_lights
 from engine.rules.probe_rules import world_bounds
 from engine.rules.shadow_rules import (
@@ -46,6 +49,9 @@ from engine.rules.shadow_rules import (
     directional_fit,
     map_region,
     rank_virtual_lights,
+    ring_cell,
+    ring_fit,
+    ring_radii,
     virtual_lights,
     virtual_shadow_camera,
 )
@@ -61,6 +67,7 @@ class ShadowSystem(esper.Processor):
         self.enabled = True   # the debug overlay's toggle: off, no light casts
         self._directional: dict[int, tuple] = {}   # slot -> what its map was drawn from
         self._fits: dict[int, DirectionalFit] = {}  # slot -> its map's camera
+        self._rings: dict[int, tuple] = {}          # ring -> (what its map was drawn from, its camera)
         self._virtual: dict[int, tuple] = {}        # virtual light slot -> what its map was drawn from
         # The view tree's depth cap (a light goes no deeper through mirrors than a view does):
         # the engine ties it to the reflect stage's ``max_depth_cap``; a number or a callable.
@@ -139,11 +146,14 @@ class ShadowSystem(esper.Processor):
         # every casting light's map is kept as it was.
         lights = tuple(lights)
         still = self._still
+        eye = self._eye() if any(light is not None and light.shadow_cascades > 1 for light in lights) else None
+        cells = self._ring_cells(lights, eye)
         if (still is not None and not casters_changed and changed_box is None and still[0] is level
                 and still[1] == lights and still[2] == (maps.tile, maps.filter, self.enabled)
-                and not self.world.changed(DirectionalLight)):
+                and still[4] == cells and not self.world.changed(DirectionalLight)):
             published.directional.extend(still[3])
-            stats.shadow_maps_kept += len(still[3])
+            stats.shadow_maps_kept += len(still[3]) + len(self._rings)
+            stats.shadow_cascades_cut += still[5]
             return
         self._still = None
         kept = self._directional
@@ -154,7 +164,8 @@ class ShadowSystem(esper.Processor):
                 del kept[slot]
                 maps.clear_directional(slot)
         if not casting:
-            self._still = (level, lights, (maps.tile, maps.filter, self.enabled), ())
+            self._draw_rings([], eye, casters_changed, changed_box)
+            self._still = (level, lights, (maps.tile, maps.filter, self.enabled), (), cells, 0)
             return
         tile = max(light.shadow_resolution for _, light in casting) if len(casting) > 1 else \
             casting[0][1].shadow_resolution
@@ -186,7 +197,75 @@ class ShadowSystem(esper.Processor):
                                                                light.shadow_softness, region)
             self._directional[slot] = key
             stats.shadow_maps_drawn += 1
-        self._still = (level, lights, (maps.tile, maps.filter, self.enabled), tuple(published.directional))
+        cut = self._draw_rings(casting, eye, casters_changed, changed_box)
+        self._still = (level, lights, (maps.tile, maps.filter, self.enabled), tuple(published.directional),
+                       self._ring_cells(lights, eye), cut)
+
+    # --- cascades: rings about the camera -----------------------------------------------------
+    def _eye(self) -> tuple[float, float, float] | None:
+        """Where the active camera stands (the rings' centre), or None with no camera."""
+        parts = active_camera_parts(self.world)
+        if parts is None:
+            return None
+        m = current_world_matrix(self.world, parts[2])
+        return float(m[3].x), float(m[3].y), float(m[3].z)
+
+    def _ring_cells(self, lights: tuple, eye) -> tuple:
+        """Each casting light's rings' grid cells about ``eye`` by its present fit (what a
+        still frame compares: the camera moved into another cell, a ring is drawn again)."""
+        if eye is None:
+            return ()
+        return tuple((slot, ring_cell(self._fits[slot], eye, radius))
+                     for slot, light in enumerate(lights)
+                     if light is not None and light.shadows and light.shadow_cascades > 1 and slot in self._fits
+                     for radius in ring_radii(light.shadow_distance, light.shadow_cascades - 1))
+
+    def _draw_rings(self, casting: list, eye, casters_changed: bool, changed_box) -> int:
+        """Each casting light's rings (``DirectionalLight.shadow_cascades`` - 1 of them, about
+        the camera at ``eye``) into the atlas tiles no light's level map takes, in slot order,
+        outermost first: kept, drawn again under changed casters, or drawn whole in a new
+        cell.  The rings that find no tile are counted in ``shadow_cascades_cut`` (returned)."""
+        maps = self.renderer.shadows
+        stats: RenderStats = self.world.resources[RenderStats]
+        free = [tile for tile in range(MAX_DIRECTIONAL_LIGHTS) if tile not in {slot for slot, _ in casting}]
+        ring = cut = 0
+        for slot, light in casting:
+            if light.shadow_cascades < 2 or eye is None:
+                continue
+            level = self._fits[slot]
+            for radius in ring_radii(light.shadow_distance, light.shadow_cascades - 1):
+                if not free:
+                    cut += 1
+                    continue
+                tile = free.pop(0)
+                cell = ring_cell(level, eye, radius)
+                key = (self._directional[slot], tile, radius, cell)
+                kept = self._rings.get(ring)
+                region = None
+                if kept is not None and kept[0] == key:
+                    fit = kept[1]
+                    if not casters_changed:
+                        stats.shadow_maps_kept += 1
+                        ring += 1
+                        continue
+                    region = (0, 0, 0, 0) if changed_box is None else \
+                        map_region(fit, changed_box[0], changed_box[1], light.shadow_resolution)
+                    if region is not None and region[2] * region[3] == 0:
+                        stats.shadow_maps_kept += 1
+                        ring += 1
+                        continue
+                else:
+                    fit = ring_fit(level, cell, radius, light.shadow_resolution)
+                stats.shadow_texels_drawn += maps.draw_ring(ring, tile, slot, fit, light.shadow_resolution,
+                                                            light.shadow_softness, region)
+                self._rings[ring] = (key, fit)
+                stats.shadow_maps_drawn += 1
+                ring += 1
+        for stale in [r for r in self._rings if r >= ring]:
+            del self._rings[stale]
+        maps.clear_rings(ring)
+        stats.shadow_cascades_cut += cut
+        return cut
 
     # --- point lights -------------------------------------------------------------------------
     def _point_maps(self, kept: KeptLights, published: ShadowCasters) -> None:

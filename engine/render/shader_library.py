@@ -269,6 +269,7 @@ def limit_glsl_defines() -> dict[str, str]:
     number a build's ``TONEMAP_CURVE`` is)."""
     return {"MAX_DIRECTIONAL_LIGHTS": str(views.MAX_DIRECTIONAL_LIGHTS),
             "MAX_POINT_LIGHTS": str(views.MAX_POINT_LIGHTS), "MAX_POINT_SHADOWS": str(views.MAX_POINT_SHADOWS),
+            "MAX_SHADOW_RINGS": str(views.MAX_SHADOW_RINGS),
             "MAX_IRRADIANCE_PROBES": str(views.MAX_IRRADIANCE_PROBES),
             "MAX_VIRTUAL_LIGHTS": str(shadow_rules.MAX_VIRTUAL_LIGHTS),
             "MAX_APERTURES": str(shadow_rules.MAX_APERTURES),

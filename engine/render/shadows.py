@@ -40,7 +40,14 @@ from engine.render.bindings import (
 from engine.render.gpu import Gpu
 from engine.render.raw_gl import LayeredCubeTarget
 from engine.render.targets import release_framebuffer
-from engine.render.views import CAMERA_BLOCK_BYTES, MAX_DIRECTIONAL_LIGHTS, MAX_POINT_LIGHTS, MAX_POINT_SHADOWS, View
+from engine.render.views import (
+    CAMERA_BLOCK_BYTES,
+    MAX_DIRECTIONAL_LIGHTS,
+    MAX_POINT_LIGHTS,
+    MAX_POINT_SHADOWS,
+    MAX_SHADOW_RINGS,
+    View,
+)
 from engine.rules.light_rules import LightLimits
 from engine.rules.shadow_rules import MAX_APERTURES, MAX_VIRTUAL_LIGHTS, DirectionalFit, Leg, VirtualLight
 
@@ -56,8 +63,11 @@ VIRTUAL_FIELDS = ("position", "color", "exit", "origin", "u", "v", "params")
 VIRTUAL_MORE = MAX_APERTURES - 1
 VIRTUAL_BLOCK_BYTES = 16 + 64 * MAX_VIRTUAL_LIGHTS + 16 * MAX_VIRTUAL_LIGHTS * len(VIRTUAL_FIELDS) \
     + 16 * 4 * MAX_VIRTUAL_LIGHTS * VIRTUAL_MORE
-SHADOWS_BLOCK_BYTES = 64 * MAX_DIRECTIONAL_LIGHTS + 16 * MAX_DIRECTIONAL_LIGHTS + 4 * MAX_POINT_LIGHTS \
+# Then the shadow cascades (DirectionalLight.shadow_cascades): rings about the camera, each in
+# an atlas tile no light's level map takes; per ring a matrix, its texel, its tile, its light's slot.
+_POINTS_END = 64 * MAX_DIRECTIONAL_LIGHTS + 16 * MAX_DIRECTIONAL_LIGHTS + 4 * MAX_POINT_LIGHTS \
     + 16 * MAX_POINT_SHADOWS + 16
+SHADOWS_BLOCK_BYTES = _POINTS_END + (64 + 16 + 16) * MAX_SHADOW_RINGS + 16
 # The casters' slope-scaled depth offset (glPolygonOffset factor, units): with the normal
 # offset in the lookup, no acne on the sample level's slanted and curved surfaces.
 SLOPE_BIAS = (1.5, 2.0)
@@ -87,8 +97,12 @@ class ShadowMaps:
         self._slots[:] = -1
         # Per cube: the point light it holds, or -1 (the block's point_light; the lookups are
         # made a cube at a time, before the lights' loop).
-        self._cube_lights = self.block[SHADOWS_BLOCK_BYTES // 4 - 4:].view(np.int32)
+        self._cube_lights = self.block[_POINTS_END // 4 - 4:_POINTS_END // 4].view(np.int32)
         self._cube_lights[:] = -1
+        # Per ring: the directional slot whose ring it is, or -1 (the block's ring_slot).
+        self._ring_slots = self.block[SHADOWS_BLOCK_BYTES // 4 - 4:][:MAX_SHADOW_RINGS].view(np.int32)
+        self._ring_slots[:] = -1
+        self._rings = 0  # what upload found: the ring entries read (the last used one's index + 1)
         self.ubo = ctx.buffer(self.block.tobytes())
         self._depth_program = renderer.shaders.program("shadow.vert", "shadow.frag")
         self._distance_program = renderer.shaders.program("shadow.vert", "shadow.frag", defines={"DISTANCE": "1"})
@@ -121,7 +135,7 @@ class ShadowMaps:
         #
         # What upload found: (the directional slots read, the last casting one's index + 1;
         # the cubes read, the last used one's index + 1).
-        self._casting = (0, 0)
+        self._casting = (0, 0, 0)
         self.program_defines: tuple[tuple[str, str], ...] = ()
         self.filter = "single" if renderer.caps.software else "grid"
         # Lights through mirrors and portals: a depth atlas of 2 x 2 tiles and their block.
@@ -166,20 +180,13 @@ class ShadowMaps:
         width, height in the tile's texels) only those texels are cleared and drawn again (the
         casters' draws scissored to them: the same depths a whole redraw writes there).
         Returns the texels drawn."""
-        x, y = self.tile_origin(slot)
-        tile = (x, y, resolution, resolution)
-        rect = tile if region is None else (x + region[0], y + region[1], region[2], region[3])
-        framebuffer = self._atlas_framebuffer
-        framebuffer.use()
-        apply_pass_state(self.ctx, _CASTERS, tile, rect)
-        framebuffer.clear(depth=1.0, viewport=rect)
-        self._bind_fit(slot, fit, resolution)
-        self._draw_casters(None, self._depth_program)
+        texels = self._draw_tile(slot, slot, fit, resolution, region)
         # World -> the tile's uv and depth in [0, 1]; the block's rows written again only when
         # what they are made of changed (a frame redrawing a region under moved casters keeps them).
         width = self.atlas.size[0]
         written = (fit, resolution, softness, width, self._filter)
         if self._block_rows.get(slot) != written:
+            x, y = self.tile_origin(slot)
             scale = resolution / width
             to_tile = glm.translate(glm.vec3(x / width + 0.5 * scale, y / width + 0.5 * scale, 0.5)) \
                 * glm.scale(glm.vec3(0.5 * scale, 0.5 * scale, 0.5))
@@ -189,6 +196,60 @@ class ShadowMaps:
             self._block_rows[slot] = written
         if self.renderer.debug:
             self.renderer.checkpoint(f"shadow map of directional light {slot}")
+        return texels
+
+    def draw_ring(self, ring: int, tile: int, slot: int, fit: DirectionalFit, resolution: int, softness: float,
+                  region: tuple[int, int, int, int] | None = None) -> int:
+        """Draw ring ``ring`` (a cascade about the camera, ``DirectionalLight.shadow_cascades``)
+        of directional light ``slot`` into atlas tile ``tile`` from ``fit``, as
+        ``draw_directional`` draws a level map, and write its rows of the Shadows block: the
+        matrix to the tile's own [0, 1] square (the lookup tests a point is inside it before
+        it reads the atlas), its texel, where the tile lies and the filter's margin."""
+        texels = self._draw_tile(tile, MAX_DIRECTIONAL_LIGHTS + ring, fit, resolution, region)
+        width = self.atlas.size[0]
+        written = (fit, resolution, softness, width, tile, slot)
+        key = MAX_DIRECTIONAL_LIGHTS + ring
+        if self._block_rows.get(key) != written:
+            x, y = self.tile_origin(tile)
+            to_square = glm.translate(glm.vec3(0.5)) * glm.scale(glm.vec3(0.5))
+            base = _POINTS_END // 4
+            self.block[base + 16 * ring:base + 16 * ring + 16] = \
+                np.array((to_square * fit.view_proj).to_list(), np.float32).ravel()
+            base += 16 * MAX_SHADOW_RINGS
+            self.block[base + 4 * ring:base + 4 * ring + 4] = (fit.texel, softness, 0.0, 0.0)
+            base += 4 * MAX_SHADOW_RINGS
+            # A point nearer the square's edge than the filter reaches is left to a larger map.
+            margin = (softness + 2.0) / resolution
+            self.block[base + 4 * ring:base + 4 * ring + 4] = (x / width, y / width, resolution / width, margin)
+            self._ring_slots[ring] = slot
+            self._block_rows[key] = written
+        if self.renderer.debug:
+            self.renderer.checkpoint(f"shadow ring {ring} of directional light {slot}")
+        return texels
+
+    def clear_rings(self, used: int) -> None:
+        """Rings ``used`` and up hold no map (their light has fewer, or none)."""
+        for ring in range(used, MAX_SHADOW_RINGS):
+            if self._ring_slots[ring] >= 0:
+                self._ring_slots[ring] = -1
+                self._block_rows.pop(MAX_DIRECTIONAL_LIGHTS + ring, None)
+                kept = self._fit_blocks.pop(MAX_DIRECTIONAL_LIGHTS + ring, None)
+                if kept is not None:
+                    kept[2].release()
+
+    def _draw_tile(self, tile: int, camera: int, fit: DirectionalFit, resolution: int,
+                   region: tuple[int, int, int, int] | None) -> int:
+        """The casters' depths into atlas ``tile`` (``resolution`` texels a side) from ``fit``
+        (its Camera block kept under ``camera``), all of it or only ``region``; the texels drawn."""
+        x, y = self.tile_origin(tile)
+        square = (x, y, resolution, resolution)
+        rect = square if region is None else (x + region[0], y + region[1], region[2], region[3])
+        framebuffer = self._atlas_framebuffer
+        framebuffer.use()
+        apply_pass_state(self.ctx, _CASTERS, square, rect)
+        framebuffer.clear(depth=1.0, viewport=rect)
+        self._bind_fit(camera, fit, resolution)
+        self._draw_casters(None, self._depth_program)
         return rect[2] * rect[3]
 
     def _bind_fit(self, slot: int, fit: DirectionalFit, resolution: int) -> None:
@@ -226,10 +287,11 @@ class ShadowMaps:
         (and caches) a program per combination; a frame where nothing casts runs no lookup
         (llvmpipe runs every branch's code: a third of such a frame at 640x360 went to
         lookups that returned 1)."""
-        directional, point = self._casting
+        directional, point, rings = self._casting
         self.renderer.note_scene_change()
         self.program_defines = tuple((name, value) for name, value, on in (
             ("DIRECTIONAL_SHADOWS", str(directional), directional > 0), ("POINT_SHADOWS", str(point), point > 0),
+            ("SHADOW_RINGS", str(rings), rings > 0 and directional > 0),
             ("SHADOW_SINGLE_TAP", "1", self._filter == "single")) if on)
 
     def _taps(self, softness: float) -> float:
@@ -443,7 +505,9 @@ class ShadowMaps:
         base = 16 * MAX_DIRECTIONAL_LIGHTS
         taps = np.flatnonzero(self.block[base + 3:base + 4 * MAX_DIRECTIONAL_LIGHTS:4])  # the casting slots
         cubes = np.flatnonzero(self._cube_lights >= 0)
-        casting = (int(taps[-1]) + 1 if taps.size else 0, int(cubes[-1]) + 1 if cubes.size else 0)
+        rings = np.flatnonzero(self._ring_slots >= 0)
+        casting = (int(taps[-1]) + 1 if taps.size else 0, int(cubes[-1]) + 1 if cubes.size else 0,
+                   int(rings[-1]) + 1 if rings.size else 0)
         if casting != self._casting:
             self._casting = casting
             self._set_program_defines()

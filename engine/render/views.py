@@ -15,7 +15,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from pyglm import glm
 
-from components.limits import ALL_LAYERS, VIEW_DIRECT, VIEW_KINDS
+from components.limits import ALL_LAYERS, MAX_SHADOW_CASCADES, VIEW_DIRECT, VIEW_KINDS
 from components.visibility import KIND_MASK, visibility_code
 
 # The Camera uniform block (shaders/include/camera.glsl, std140), the one schema of every
@@ -63,6 +63,7 @@ NO_CLIP = glm.vec4(0.0, 0.0, 0.0, 1.0)
 MAX_DIRECTIONAL_LIGHTS = 4
 MAX_POINT_LIGHTS = 16
 MAX_POINT_SHADOWS = 2  # cube samplers in shaders/include/shadows.glsl
+MAX_SHADOW_RINGS = MAX_SHADOW_CASCADES - 1  # a sun's cascades about the camera besides its level map
 MAX_IRRADIANCE_PROBES = 32   # influence boxes the scene shader blends from (more: the first kept, a warning)
 SKY_SH_COEFFICIENTS = 9  # the sky's irradiance coefficients (engine/render/irradiance.py)
 LIGHTS_BLOCK_BYTES = 16 * SKY_SH_COEFFICIENTS + 16 + 2 * 16 * MAX_DIRECTIONAL_LIGHTS + 2 * 16 * MAX_POINT_LIGHTS

@@ -40,6 +40,7 @@ class DirectionalFit:
     view: glm.mat4
     proj: glm.mat4
     texel: float
+    depth: tuple[float, float] = (0.0, 1.0)  # the projection's near and far (light space, metres)
 
     @property
     def view_proj(self) -> glm.mat4:
@@ -71,7 +72,44 @@ def directional_fit(direction: glm.vec3, lo: np.ndarray, hi: np.ndarray, resolut
     # Light space looks down -z: the nearest corner has the largest z.
     proj = glm.ortho(x0, x1, y0, y1, -z1, -z0)
     texel = max(x1 - x0, y1 - y0) / resolution
-    return DirectionalFit(glm.mat4(view), glm.mat4(proj), float(texel))
+    return DirectionalFit(glm.mat4(view), glm.mat4(proj), float(texel), (float(-z1), float(-z0)))
+
+
+# A ring's (a shadow cascade's) square about the camera: its centre snaps to a grid of this
+# share of its radius in light space, so the map is drawn again only when the camera has
+# moved about that far (and stands on the same texels between: no crawling edges).
+RING_STEP_SHARE = 0.25
+# Each ring inside the next is this much smaller (DirectionalLight.shadow_distance is the largest).
+RING_SHRINK = 4.0
+
+
+def ring_radii(distance: float, rings: int) -> tuple[float, ...]:
+    """The radii of a sun's ``rings`` cascades about the camera, outermost (``distance``) first."""
+    return tuple(distance / RING_SHRINK ** k for k in range(rings))
+
+
+def ring_cell(level: DirectionalFit, eye: tuple[float, float, float], radius: float) -> tuple[int, int]:
+    """The grid cell (light space, a step of ``RING_STEP_SHARE`` x ``radius``) of the ring of
+    ``radius`` about ``eye``, for the light whose level map is fitted by ``level``."""
+    view = level.view
+    x, y, z = eye
+    step = RING_STEP_SHARE * radius
+    lx = view[0][0] * x + view[1][0] * y + view[2][0] * z + view[3][0]
+    ly = view[0][1] * x + view[1][1] * y + view[2][1] * z + view[3][1]
+    return round(lx / step), round(ly / step)
+
+
+def ring_fit(level: DirectionalFit, cell: tuple[int, int], radius: float, resolution: int) -> DirectionalFit:
+    """The orthographic camera of a ring (a shadow cascade) of ``radius`` centred on ``cell``
+    (``ring_cell``): the level map's view and depth range (every caster along the light
+    still casts into it), a square holding every point within ``radius`` of any eye in the
+    cell, for a map of ``resolution`` texels a side."""
+    step = RING_STEP_SHARE * radius
+    half = radius + 0.5 * step
+    cx, cy = cell[0] * step, cell[1] * step
+    near, far = level.depth
+    proj = glm.ortho(cx - half, cx + half, cy - half, cy + half, near, far)
+    return DirectionalFit(level.view, glm.mat4(proj), 2.0 * half / resolution, level.depth)
 
 
 # Texels around a changed caster's footprint redrawn with it: the rasteriser's rounding at

@@ -6,8 +6,10 @@
 // up is moved off the surface along its geometric normal, more at grazing light, by the
 // texel's world size: Holbein's "normal offset shadows", 2011) plus the slope-scaled depth
 // offset the caster pass draws with; nothing is offset along the light, so contact is kept.
-// MAX_POINT_SHADOWS (the cube samplers below) is engine/render/shadows.py's, defined by the
-// shader library.
+// MAX_POINT_SHADOWS (the cube samplers below) and MAX_SHADOW_RINGS are engine/render/shadows.py's,
+// defined by the shader library.  SHADOW_RINGS (the ring entries read) is compiled in while
+// a light has cascades: rings about the camera in atlas tiles of their own, whose lookup
+// takes the smallest ring holding the point (a view anywhere finds the same shadow there).
 //
 // The lookups are compiled only into the program builds that need them
 // (ShadowMaps.program_defines, engine/render/shadows.py; the scene pass builds with them):
@@ -27,6 +29,12 @@ layout(std140) uniform Shadows {
     vec4 point_params[MAX_POINT_SHADOWS];             // x: a texel's angular size (radians), y: softness
                                                       // (texels), z: range, w: taps (1 or 4)
     ivec4 point_light;                                // per cube (0, 1): the point light it is, or -1
+    // Cascades (rings about the camera, DirectionalLight.shadow_cascades), a light's outermost first:
+    mat4 ring_matrix[MAX_SHADOW_RINGS];               // world -> the ring's own square (xy) and depth (z), in [0, 1]
+    vec4 ring_params[MAX_SHADOW_RINGS];               // x: a texel's world size, y: softness (texels)
+    vec4 ring_tile[MAX_SHADOW_RINGS];                 // xy: its tile's corner in the atlas (uv), z: the
+                                                      // tile's side (uv), w: the filter's margin (square units)
+    ivec4 ring_slot;                                  // per ring: the directional slot whose it is, or -1
 } shadows;
 
 uniform sampler2DShadow shadow_atlas;
@@ -61,8 +69,19 @@ float directional_shadow(int i, vec3 position, vec3 normal, vec3 l) {
     if (params.w == 0.0) return 1.0;
     float nl = clamp(dot(normal, l), 0.0, 1.0);
     // Off the surface by about the filter's reach in texels, more as the light grazes it.
-    float offset = params.x * (1.0 + params.y) * (1.5 - nl);
-    vec4 p = shadows.directional_matrix[i] * vec4(position + normal * offset, 1.0);
+    float grazing = (1.0 + params.y) * (1.5 - nl);
+    vec4 p = shadows.directional_matrix[i] * vec4(position + normal * (params.x * grazing), 1.0);
+#ifdef SHADOW_RINGS
+    // The smallest of the light's rings that holds the point (outermost first: the last
+    // holding it wins), read instead of the level's map; the coordinates chosen, one lookup.
+    for (int k = 0; k < SHADOW_RINGS; ++k) {
+        if (shadows.ring_slot[k] != i) continue;
+        vec4 q = shadows.ring_matrix[k] * vec4(position + normal * (shadows.ring_params[k].x * grazing), 1.0);
+        vec4 tile = shadows.ring_tile[k];
+        if (all(greaterThan(q.xy, vec2(tile.w))) && all(lessThan(q.xy, vec2(1.0 - tile.w))))
+            p = vec4(tile.xy + q.xy * tile.z, q.z, 1.0);
+    }
+#endif
     if (any(lessThan(p.xyz, vec3(0.0))) || any(greaterThan(p.xyz, vec3(1.0)))) return 1.0;  // outside the map
     return filtered_shadow(shadow_atlas, p.xyz, int(params.w), params.z, params.y);
 #endif

@@ -1,0 +1,168 @@
+"""Shadow cascades (``DirectionalLight.shadow_cascades``): rings about the camera, each a map
+of its own in a free tile of the shadow atlas, read wherever a point lies inside one.
+
+On a floor 120 metres wide the level's map has texels of several centimetres; the frame is
+checked against float64 shadow rays (a second computation of which floor points the sun
+reaches) in a band a few millimetres either side of the box's outline, which only a ring's
+texels can resolve.  Then when rings are drawn (the camera crossing a cell, a caster
+moving), what happens when the atlas has no tile left, and that turning them off gives the
+frame a light without them gives."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from pyglm import glm
+
+from components import ComponentValueError, DirectionalLight, Material, MeshRef, Transform
+from engine.assets.mesh import box, plane
+from engine.rules.shadow_rules import RING_STEP_SHARE, ring_radii
+from tests.support import box_hits, look_from, pixel_rays, srgb_to_linear
+
+LIGHT = glm.normalize(glm.vec3(-1.0, -0.75, -0.5))
+BOX_CENTRE, BOX_HALF = np.array([-1.0, 0.5, 0.0]), 0.5
+EYE, TARGET = (0.3, 1.6, 2.6), (-0.6, 0.0, 0.0)
+DISTANCE = 8.0   # the largest ring's radius: rings of 8 and 2 metres with three cascades
+BAND = 0.008     # metres either side of the outline left out: a few of the inner ring's texels
+EDGE = 0.08      # ... and the floor further than this from it, which any map gets right
+
+
+def _build(cascades: int, suns: int = 1):
+    def build(world):
+        look_from(world, EYE, TARGET)
+        ids = world.resources["ids"] = {}
+        ids["sun"] = world.spawn(DirectionalLight(direction=LIGHT, intensity=2.5, shadow_cascades=cascades,
+                                                  shadow_distance=DISTANCE))
+        for k in range(1, suns):   # dim suns from straight above: their shadows fall under the box
+            world.spawn(DirectionalLight(direction=(0.0, -1.0, 0.001 * k), intensity=0.05))
+        ids["floor"] = world.spawn(Transform(), MeshRef(plane(120, 120)), Material(color=(0.8, 0.8, 0.8),
+                                                                                   roughness=1.0))
+        ids["box"] = world.spawn(Transform(position=BOX_CENTRE.tolist()), MeshRef(box()),
+                                 Material(color=(0.8, 0.3, 0.2)))
+        # Far off, so the level's box (what its map is fitted to) is wide.
+        world.spawn(Transform(position=(40.0, 0.5, 30.0)), MeshRef(box()), Material(color=(0.3, 0.5, 0.8)))
+    return build
+
+
+def _runner(scene, cascades: int, suns: int = 1, size=(480, 320)):
+    runner = scene(_build(cascades, suns), size)
+    runner.engine.renderer.antialias = "off"
+    return runner
+
+
+def _agreement(runner, with_shadows: np.ndarray, without: np.ndarray) -> tuple[float, int, int]:
+    """(share of the floor's pixels near the outline but outside the band whose shading
+    agrees with the float64 shadow rays, pixels counted, pixels the rays put in shadow)."""
+    ids = runner.world.resources["ids"]
+    eye, rays = pixel_rays(runner.engine.main_view, runner.size)
+    points = (eye + rays * (-eye[1] / rays[..., 1])[..., None]).reshape(-1, 3)
+    to_light = np.tile(-np.array(LIGHT, np.float64), (len(points), 1))
+    inside = box_hits(points, to_light, BOX_CENTRE, BOX_HALF - BAND).reshape(runner.size[::-1])
+    outside = box_hits(points, to_light, BOX_CENTRE, BOX_HALF + BAND).reshape(runner.size[::-1])
+    ratio = srgb_to_linear(with_shadows).mean(axis=-1) / np.maximum(srgb_to_linear(without).mean(axis=-1), 1e-6)
+    # Only the floor near the outline (within EDGE of it), where the maps' texels decide.
+    near = box_hits(points, to_light, BOX_CENTRE, BOX_HALF - EDGE).reshape(runner.size[::-1]) != \
+        box_hits(points, to_light, BOX_CENTRE, BOX_HALF + EDGE).reshape(runner.size[::-1])
+    sure = (runner.ids() == ids["floor"]) & (inside == outside) & near
+    frame_says = np.where(ratio < 0.7, 1, np.where(ratio > 0.95, 0, -1))[sure]
+    return float((frame_says == inside[sure]).mean()), int(sure.sum()), int(inside[sure].sum())
+
+
+def _with_and_without(runner) -> tuple[np.ndarray, np.ndarray]:
+    sun = runner.world.get(runner.world.resources["ids"]["sun"], DirectionalLight)
+    sun.shadows = False
+    without = runner.frame()
+    sun.shadows = True
+    return runner.frame(), without
+
+
+@pytest.mark.parametrize("shadow_filter", ["single", "grid"])
+def test_rings_resolve_the_shadow_the_levels_map_cannot(scene, shadow_filter):
+    """Near the camera the shadow agrees with the rays to within a few millimetres with three
+    cascades, and not with the level's map alone (its texels there are centimetres wide)."""
+    shares = {}
+    for cascades in (1, 3):
+        runner = _runner(scene, cascades)
+        runner.engine.renderer.shadows.filter = shadow_filter
+        with_shadows, without = _with_and_without(runner)
+        shares[cascades], counted, in_shadow = _agreement(runner, with_shadows, without)
+        assert counted > 1000 and in_shadow > 400, (counted, in_shadow)   # a real floor, a real shadow
+    assert ("SHADOW_RINGS", "2") in runner.engine.renderer.shadows.program_defines
+    assert shares[3] >= 0.995, shares
+    assert shares[1] < 0.95, shares   # the band is too narrow for the level's map: the rings matter
+
+
+def test_rings_are_drawn_again_only_when_the_camera_leaves_their_cell_or_a_caster_moves(scene):
+    runner = _runner(scene, 3, size=(96, 64))
+    runner.frame()
+    assert runner.stats.shadow_maps_drawn == 3   # the level's map and two rings
+    runner.frame()
+    assert (runner.stats.shadow_maps_drawn, runner.stats.shadow_maps_kept) == (0, 3)
+    inner = ring_radii(DISTANCE, 2)[1]
+    step = RING_STEP_SHARE * inner
+    eye = runner.world.get(_camera(runner), Transform)
+    start = glm.vec3(eye.position)
+    # A hundredth of the inner ring's step: the same cells (far from a cell's edge, by luck
+    # of the start, checked by the next move), nothing drawn.
+    eye.position = start + glm.vec3(0.0, 0.01 * step, 0.0)
+    runner.frame()
+    small = runner.stats.shadow_maps_drawn
+    # Three steps of the inner ring along the ground: the inner ring's cell changes, the
+    # outer ring's may, the level's map does not (it does not follow the camera).
+    eye.position = start + glm.vec3(3.0 * step, 0.0, 0.0)
+    runner.frame()
+    moved = runner.stats.shadow_maps_drawn
+    assert small == 0 and 1 <= moved <= 2, (small, moved)
+    # A caster moving redraws its footprint in every map it is in.
+    box_t = runner.world.get(runner.world.resources["ids"]["box"], Transform)
+    box_t.position = glm.vec3(box_t.position) + glm.vec3(0.1, 0.0, 0.0)
+    runner.frame()
+    assert runner.stats.shadow_maps_drawn == 3
+
+
+def _camera(runner) -> int:
+    from engine.rules.frame_rules import frame_rules
+
+    return frame_rules(runner.world).active_camera
+
+
+def test_rings_past_the_atlas_tiles_are_cut_and_counted(scene):
+    """Four tiles: two suns casting take two, so a sun asking for four cascades gets two
+    rings; the third is counted in ``shadow_cascades_cut`` (and the overlay says so)."""
+    from shell.overlay_text import overlay_lines
+
+    runner = _runner(scene, 4, suns=2, size=(96, 64))
+    runner.frame()
+    assert runner.stats.shadow_cascades_cut == 1
+    assert runner.stats.shadow_maps_drawn == 4   # two level maps, two rings
+    assert ("SHADOW_RINGS", "2") in runner.engine.renderer.shadows.program_defines
+    runner.frame()
+    assert runner.stats.shadow_cascades_cut == 1   # while it lasts, every frame
+    assert any("cascades 1" in line for line in overlay_lines(runner.engine, [1.0 / 60.0]))
+
+
+def test_turning_the_cascades_off_gives_the_frame_of_a_sun_without_them(scene):
+    with_rings = _runner(scene, 3)
+    with_rings.frame()
+    sun = with_rings.world.get(with_rings.world.resources["ids"]["sun"], DirectionalLight)
+    sun.shadow_cascades = 1
+    turned_off = with_rings.frame()
+    assert not any(name == "SHADOW_RINGS" for name, _ in with_rings.engine.renderer.shadows.program_defines)
+    plain = _runner(scene, 1)
+    plain.frame()
+    assert np.array_equal(turned_off, plain.frame())
+    # And back on: the rings drawn again, the sharp shadow back.
+    sun.shadow_cascades = 3
+    again = with_rings.frame()
+    assert with_rings.stats.shadow_maps_drawn == 2
+    assert not np.array_equal(again, turned_off)
+
+
+@pytest.mark.parametrize("field, value", [("shadow_cascades", 0), ("shadow_cascades", 5), ("shadow_cascades", True),
+                                          ("shadow_cascades", 2.0), ("shadow_distance", 0.1),
+                                          ("shadow_distance", float("nan")), ("shadow_distance", float("inf"))])
+def test_bad_cascade_values_are_refused_naming_the_field(field, value):
+    with pytest.raises(ComponentValueError, match=f"DirectionalLight.{field}"):
+        DirectionalLight(**{field: value})
+    light = DirectionalLight()
+    with pytest.raises(ComponentValueError, match=f"DirectionalLight.{field}"):
+        setattr(light, field, value)
