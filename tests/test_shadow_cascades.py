@@ -13,8 +13,8 @@ import numpy as np
 import pytest
 from pyglm import glm
 
-from components import ComponentValueError, DirectionalLight, Material, MeshRef, Transform
-from engine.assets.mesh import box, plane
+from components import ComponentValueError, DirectionalLight, Material, MeshRef, Mirror, Transform
+from engine.assets.mesh import box, plane, quad
 from engine.rules.shadow_rules import RING_STEP_SHARE, ring_radii
 from tests.support import box_hits, look_from, pixel_rays, srgb_to_linear
 
@@ -24,45 +24,59 @@ EYE, TARGET = (0.3, 1.6, 2.6), (-0.6, 0.0, 0.0)
 DISTANCE = 8.0   # the largest ring's radius: rings of 8 and 2 metres with three cascades
 BAND = 0.008     # metres either side of the outline left out: a few of the inner ring's texels
 EDGE = 0.08      # ... and the floor further than this from it, which any map gets right
+MIRROR_Z = -1.0
 
 
-def _build(cascades: int, suns: int = 1):
+def _build(cascades: int, suns: int = 1, distance: float = DISTANCE, eye=EYE, target=TARGET, box_at=BOX_CENTRE,
+           mirror=False):
     def build(world):
-        look_from(world, EYE, TARGET)
+        look_from(world, eye, target)
         ids = world.resources["ids"] = {}
         ids["sun"] = world.spawn(DirectionalLight(direction=LIGHT, intensity=2.5, shadow_cascades=cascades,
-                                                  shadow_distance=DISTANCE))
+                                                  shadow_distance=distance))
+        if mirror:   # at z = MIRROR_Z, facing +z
+            ids["mirror"] = world.spawn(Transform(position=(0.0, 1.2, MIRROR_Z)), MeshRef(quad(6.0, 2.4)), Material(),
+                                        Mirror())
         for k in range(1, suns):   # dim suns from straight above: their shadows fall under the box
             world.spawn(DirectionalLight(direction=(0.0, -1.0, 0.001 * k), intensity=0.05))
         ids["floor"] = world.spawn(Transform(), MeshRef(plane(120, 120)), Material(color=(0.8, 0.8, 0.8),
                                                                                    roughness=1.0))
-        ids["box"] = world.spawn(Transform(position=BOX_CENTRE.tolist()), MeshRef(box()),
+        ids["box"] = world.spawn(Transform(position=list(box_at)), MeshRef(box()),
                                  Material(color=(0.8, 0.3, 0.2)))
         # Far off, so the level's box (what its map is fitted to) is wide.
         world.spawn(Transform(position=(40.0, 0.5, 30.0)), MeshRef(box()), Material(color=(0.3, 0.5, 0.8)))
     return build
 
 
-def _runner(scene, cascades: int, suns: int = 1, size=(480, 320)):
-    runner = scene(_build(cascades, suns), size)
+def _runner(scene, cascades: int, suns: int = 1, size=(480, 320), **placing):
+    runner = scene(_build(cascades, suns, **placing), size)
     runner.engine.renderer.antialias = "off"
     return runner
 
 
-def _agreement(runner, with_shadows: np.ndarray, without: np.ndarray) -> tuple[float, int, int]:
-    """(share of the floor's pixels near the outline but outside the band whose shading
-    agrees with the float64 shadow rays, pixels counted, pixels the rays put in shadow)."""
-    ids = runner.world.resources["ids"]
+def _floor_points(runner) -> np.ndarray:
+    """Where each pixel's ray from the main view meets the floor (y = 0), one row a pixel."""
     eye, rays = pixel_rays(runner.engine.main_view, runner.size)
-    points = (eye + rays * (-eye[1] / rays[..., 1])[..., None]).reshape(-1, 3)
+    return (eye + rays * (-eye[1] / rays[..., 1])[..., None]).reshape(-1, 3)
+
+
+def _agreement(runner, with_shadows: np.ndarray, without: np.ndarray, points: np.ndarray | None = None,
+               mask: np.ndarray | None = None, centre=BOX_CENTRE) -> tuple[float, int, int]:
+    """(share of ``mask``'s pixels (the floor's), each showing the floor point of its row of
+    ``points``, near the box's outline but outside the band, whose shading agrees with the
+    float64 shadow rays; pixels counted; pixels the rays put in shadow)."""
+    ids = runner.world.resources["ids"]
+    points = _floor_points(runner) if points is None else points
+    mask = runner.ids() == ids["floor"] if mask is None else mask
     to_light = np.tile(-np.array(LIGHT, np.float64), (len(points), 1))
-    inside = box_hits(points, to_light, BOX_CENTRE, BOX_HALF - BAND).reshape(runner.size[::-1])
-    outside = box_hits(points, to_light, BOX_CENTRE, BOX_HALF + BAND).reshape(runner.size[::-1])
+
+    def hits(grow: float) -> np.ndarray:
+        return box_hits(points, to_light, np.asarray(centre, np.float64), BOX_HALF + grow).reshape(mask.shape)
+
+    inside, outside = hits(-BAND), hits(BAND)
     ratio = srgb_to_linear(with_shadows).mean(axis=-1) / np.maximum(srgb_to_linear(without).mean(axis=-1), 1e-6)
     # Only the floor near the outline (within EDGE of it), where the maps' texels decide.
-    near = box_hits(points, to_light, BOX_CENTRE, BOX_HALF - EDGE).reshape(runner.size[::-1]) != \
-        box_hits(points, to_light, BOX_CENTRE, BOX_HALF + EDGE).reshape(runner.size[::-1])
-    sure = (runner.ids() == ids["floor"]) & (inside == outside) & near
+    sure = mask & (inside == outside) & (hits(-EDGE) != hits(EDGE))
     frame_says = np.where(ratio < 0.7, 1, np.where(ratio > 0.95, 0, -1))[sure]
     return float((frame_says == inside[sure]).mean()), int(sure.sum()), int(inside[sure].sum())
 
@@ -89,6 +103,29 @@ def test_rings_resolve_the_shadow_the_levels_map_cannot(scene, shadow_filter):
     assert ("SHADOW_RINGS", "2") in runner.engine.renderer.shadows.program_defines
     assert shares[3] >= 0.995, shares
     assert shares[1] < 0.95, shares   # the band is too narrow for the level's map: the rings matter
+
+
+def test_a_mirror_shows_the_rings_sharp_shadow_of_what_stands_behind_the_camera(scene):
+    """Rings are about the camera, not its frustum: the box stands behind the camera, seen
+    only in the mirror ahead, and its shadow there agrees with the rays (each pixel's ray
+    turned at the mirror's plane to the floor) as sharply as a shadow seen directly."""
+    box_at = (-0.6, 0.5, 2.0)
+    shares = {}
+    for cascades in (1, 3):
+        runner = _runner(scene, cascades, distance=16.0, eye=(0.0, 1.4, 1.0), target=(-0.4, 0.0, MIRROR_Z),
+                         box_at=box_at, mirror=True)
+        with_shadows, without = _with_and_without(runner)
+        ids = runner.world.resources["ids"]
+        in_mirror = (runner.engine.renderer.targets.read_surface_ids() == ids["mirror"]) & \
+            (runner.ids() == ids["floor"])
+        eye, rays = pixel_rays(runner.engine.main_view, runner.size)
+        on_mirror = eye + rays * ((MIRROR_Z - eye[2]) / rays[..., 2])[..., None]
+        turned = rays * np.array([1.0, 1.0, -1.0])
+        points = (on_mirror + turned * (-on_mirror[..., 1] / turned[..., 1])[..., None]).reshape(-1, 3)
+        shares[cascades], counted, in_shadow = _agreement(runner, with_shadows, without, points, in_mirror, box_at)
+        assert counted > 500 and in_shadow > 200, (counted, in_shadow)
+    assert shares[3] >= 0.99, shares
+    assert shares[1] < 0.95, shares
 
 
 def test_rings_are_drawn_again_only_when_the_camera_leaves_their_cell_or_a_caster_moves(scene):

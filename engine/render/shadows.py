@@ -4,11 +4,14 @@ A directional light's map is one tile of a depth atlas (a tile a light, up to
 ``MAX_DIRECTIONAL_LIGHTS``), drawn from an orthographic camera fitted to the whole level
 (``engine/rules/shadow_rules.py``), so the main camera, each mirror and portal view and each
 probe face find their shadows in the same map, and the same shadow shows directly, in a
-mirror and through a portal.  A point light's map is a cube of distances (distance / range
-in a 32-bit float channel), drawn in one layered pass where the path self-check trusts the
-layered cube capture (``engine/render/path_checks.py``, the probes' check), else as six
-views; at most ``MAX_POINT_SHADOWS`` point lights cast shadows (two cube samplers), the
-rest light without and are counted in ``RenderStats.shadows_cut``.
+mirror and through a portal.  A sun with cascades (``DirectionalLight.shadow_cascades``) has
+rings about the camera besides, each a map in a tile no level map takes (``draw_ring``); the
+lookup reads the smallest ring holding the point, whatever the view.  A point light's map
+is a cube of distances (distance / range in a 32-bit float channel), drawn in one layered
+pass where the path self-check trusts the layered cube capture
+(``engine/render/path_checks.py``, the probes' check), else as six views; at most
+``MAX_POINT_SHADOWS`` point lights cast shadows (two cube samplers), the rest light without
+and are counted in ``RenderStats.shadows_cut``.
 
 Nothing here decides when a map is drawn again: the shadows stage does
 (``systems/shadow_system.py``, from the frame's change sets).  The Shadows uniform block
@@ -253,10 +256,10 @@ class ShadowMaps:
         return rect[2] * rect[3]
 
     def _bind_fit(self, slot: int, fit: DirectionalFit, resolution: int) -> None:
-        """Bind the Camera block of directional light ``slot``'s map, drawn from ``fit``: a
-        buffer of the slot's own, packed and written when the light's map is fitted again
-        (a new ``fit``), so a frame that redraws only the texels under moved casters packs
-        and uploads no camera."""
+        """Bind the Camera block of directional light ``slot``'s map (a ring's: past the
+        lights' slots), drawn from ``fit``: a buffer of the slot's own, packed and written
+        when the light's map is fitted again (a new ``fit``), so a frame that redraws only
+        the texels under moved casters packs and uploads no camera."""
         kept = self._fit_blocks.get(slot)
         if kept is None or kept[0] is not fit or kept[1] != resolution:
             view = View(view=fit.view, proj=fit.proj, eye=glm.vec3(0.0), size=(resolution, resolution),
@@ -282,8 +285,9 @@ class ShadowMaps:
         (``shaders/include/shadows.glsl``): ``DIRECTIONAL_SHADOWS`` while a directional light
         casts (its value the directional slots looked up: the last casting one's index + 1,
         each slot's lookup made outside the lights' loop), ``POINT_SHADOWS`` while a point
-        light does (its value the cubes looked up, likewise), ``SHADOW_SINGLE_TAP`` with the
-        "single" filter.  The scene pass builds
+        light does (its value the cubes looked up, likewise), ``SHADOW_RINGS`` while a sun has
+        cascades (the ring entries read), ``SHADOW_SINGLE_TAP`` with the "single" filter.
+        The scene pass builds
         (and caches) a program per combination; a frame where nothing casts runs no lookup
         (llvmpipe runs every branch's code: a third of such a frame at 640x360 went to
         lookups that returned 1)."""

@@ -55,7 +55,9 @@ def directional_fit(direction: glm.vec3, lo: np.ndarray, hi: np.ndarray, resolut
     frame (a mirror's looks behind the camera, a probe face anywhere) finds its shadows in the
     one map, and the map does not change when only the camera moves: it is drawn again only
     when a caster or the light changes.  The cost is resolution: a level tens of metres across
-    gets centimetre texels from a 2048 map, a kilometre-wide one would not (the README's limits)."""
+    gets centimetre texels from a 2048 map, a kilometre-wide one would not; a sun's cascades
+    (``ring_fit``: rings about the camera, in this map's light space) give the camera's
+    surroundings finer ones."""
     lo = np.asarray(lo, np.float64)
     hi = np.asarray(hi, np.float64)
     margin = max(SHADOW_MARGIN, SHADOW_MARGIN_SHARE * float(np.linalg.norm(hi - lo)))
