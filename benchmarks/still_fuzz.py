@@ -134,6 +134,7 @@ class StillCase:
     point_light: bool = False  # a point light casting shadows (a shadow cube) between the mirrors
     bloom: bool = False  # Bloom on the camera (its chain planned once a size: a resize changes it)
     visibility: str = "exact"  # the reflect stage's visibility mode, in both engines
+    cascades: int = 1  # the sun's shadow cascades (rings about the camera besides its level map)
     # Further changes, each (change, detail) after the last one's ``after`` frames (the tree
     # kept again, or refilling again, when the next comes); none after a refused one.
     then: list[tuple[str, dict[str, Any]]] = dataclasses.field(default_factory=list)
@@ -141,7 +142,8 @@ class StillCase:
     def describe(self) -> str:
         return (f"still {self.pair} depth {self.depth}, {len(self.panes)} panes {self.panes}, water {self.water}, "
                 f"see-through mirror {self.see_through_mirror}, sandwich {self.sandwich}; {self.still} still frames, "
-                f"rate {self.rate}, point light {self.point_light}, bloom {self.bloom}, {self.visibility}; then "
+                f"rate {self.rate}, point light {self.point_light}, bloom {self.bloom}, {self.visibility}, "
+                f"cascades {self.cascades}; then "
                 f"{self.change} {self.detail}, {self.after} frames" + "".join(
                     f"; then {change} {detail}, {self.after} frames" for change, detail in self.then))
 
@@ -164,7 +166,8 @@ def random_still_case(rng: random.Random) -> StillCase:
                      sandwich=_alpha(rng) if rng.random() < 0.35 else None, still=rng.randint(3, 7), change=change,
                      detail=detail, after=rng.randint(3, 6), rate=rng.choice((1.0, 1.0, 0.95, 0.7)),
                      point_light=rng.random() < 0.4, bloom=rng.random() < 0.3,
-                     visibility="predicted" if rng.random() < 0.25 else "exact", then=then)
+                     visibility="predicted" if rng.random() < 0.25 else "exact", then=then,
+                     cascades=rng.choice((1, 1, 2, 3, 4)))
 
 
 def _random_change(rng: random.Random) -> tuple[str, dict[str, Any]]:
@@ -247,7 +250,7 @@ class _Side:
         if self.redraw_shadows:  # the second path: every shadow map drawn whole, none kept
             shadows = self.engine.stages["shadows"]
             shadows._still = None
-            for kept in (shadows._directional, shadows._point, shadows._virtual):
+            for kept in (shadows._directional, shadows._point, shadows._virtual, shadows._rings):
                 kept.clear()
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
@@ -288,6 +291,9 @@ def _spawn(world, case: StillCase) -> dict[str, int]:
                                                             size=(2.0, 2.5), max_depth=case.depth)
         for name in ("first", "second"):
             world.get(named[name], Portal).end_image = True
+    if case.cascades > 1:   # rings of 3 metres and less about the camera, over the box and the pond
+        for _, light in world.query_one(DirectionalLight):
+            light.shadow_cascades, light.shadow_distance = case.cascades, 3.0
     if case.point_light:
         named["point"] = world.spawn(Transform(position=(-0.3, 2.2, 0.4)),
                                      PointLight(color=(1.0, 0.8, 0.6), intensity=3.0, range=6.0, shadows=True,
