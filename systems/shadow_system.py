@@ -217,7 +217,7 @@ class ShadowSystem(esper.Processor):
         still frame compares: the camera moved into another cell, a ring is drawn again)."""
         if eye is None:
             return ()
-        return tuple((slot, ring_cell(self._fits[slot], eye, radius))
+        return tuple((slot, ring_cell(self._fits[slot], eye, radius, light.shadow_resolution))
                      for slot, light in enumerate(lights)
                      if light is not None and light.shadows and light.shadow_cascades > 1 and slot in self._fits
                      for radius in ring_radii(light.shadow_distance, light.shadow_cascades - 1))
@@ -240,7 +240,7 @@ class ShadowSystem(esper.Processor):
                     cut += 1
                     continue
                 tile = free.pop(0)
-                cell = ring_cell(level, eye, radius)
+                cell = ring_cell(level, eye, radius, light.shadow_resolution)
                 key = (self._directional[slot], tile, radius, cell)
                 kept = self._rings.get(ring)
                 region = None

@@ -15,7 +15,7 @@ from pyglm import glm
 
 from components import ComponentValueError, DirectionalLight, Material, MeshRef, Mirror, Transform
 from engine.assets.mesh import box, plane, quad
-from engine.rules.shadow_rules import RING_STEP_SHARE, ring_radii
+from engine.rules.shadow_rules import RING_STEP_SHARE, directional_fit, ring_cell, ring_fit, ring_radii
 from tests.support import box_hits, look_from, pixel_rays, srgb_to_linear
 
 LIGHT = glm.normalize(glm.vec3(-1.0, -0.75, -0.5))
@@ -154,6 +154,34 @@ def test_rings_are_drawn_again_only_when_the_camera_leaves_their_cell_or_a_caste
     box_t.position = glm.vec3(box_t.position) + glm.vec3(0.1, 0.0, 0.0)
     runner.frame()
     assert runner.stats.shadow_maps_drawn == 3
+
+
+@pytest.mark.parametrize("radius, resolution", [(3.0, 2048), (12.0, 2048), (0.7, 512), (5.0, 64)])
+def test_a_ring_moved_a_cell_keeps_its_texel_lattice(radius, resolution):
+    """A world point lands on texel coordinates a whole number apart in the maps of two
+    neighbouring cells (the step is whole texels), so an edge does not crawl when the ring
+    follows the camera; and every point within ``radius`` of an eye anywhere in the cell is
+    inside the ring's square."""
+    level = directional_fit(LIGHT, np.array([-30.0, 0.0, -30.0]), np.array([30.0, 3.0, 30.0]), resolution)
+    eye = (1.3, 1.6, -0.4)
+    cell = ring_cell(level, eye, radius, resolution)
+    rng = np.random.default_rng(5)
+    points = rng.uniform(-radius, radius, (200, 3)) + np.array(eye)
+
+    def texels(fit, point) -> np.ndarray:
+        clip = fit.view_proj * glm.vec4(*point, 1.0)
+        return (np.array([clip.x, clip.y]) * 0.5 + 0.5) * resolution
+
+    here = ring_fit(level, cell, radius, resolution)
+    for neighbour in ((cell[0] + 1, cell[1]), (cell[0], cell[1] - 3)):
+        there = ring_fit(level, neighbour, radius, resolution)
+        for point in points[:20]:
+            shift = texels(there, point) - texels(here, point)
+            assert np.allclose(shift, np.round(shift), atol=2e-3 * max(1.0, abs(shift).max() / 100)), shift
+    near = points[np.linalg.norm(points - np.array(eye), axis=1) <= radius]
+    for point in near:
+        u = texels(here, point) / resolution
+        assert (u > -1e-6).all() and (u < 1 + 1e-6).all(), u
 
 
 def _camera(runner) -> int:

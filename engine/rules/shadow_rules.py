@@ -77,9 +77,9 @@ def directional_fit(direction: glm.vec3, lo: np.ndarray, hi: np.ndarray, resolut
     return DirectionalFit(glm.mat4(view), glm.mat4(proj), float(texel), (float(-z1), float(-z0)))
 
 
-# A ring's (a shadow cascade's) square about the camera: its centre snaps to a grid of this
-# share of its radius in light space, so the map is drawn again only when the camera has
-# moved about that far (and stands on the same texels between: no crawling edges).
+# A ring's (a shadow cascade's) square about the camera: its centre snaps to a grid of about
+# this share of its radius in light space, so the map is drawn again only when the camera has
+# moved about that far.
 RING_STEP_SHARE = 0.25
 # Each ring inside the next is this much smaller (DirectionalLight.shadow_distance is the largest).
 RING_SHRINK = 4.0
@@ -90,12 +90,24 @@ def ring_radii(distance: float, rings: int) -> tuple[float, ...]:
     return tuple(distance / RING_SHRINK ** k for k in range(rings))
 
 
-def ring_cell(level: DirectionalFit, eye: tuple[float, float, float], radius: float) -> tuple[int, int]:
-    """The grid cell (light space, a step of ``RING_STEP_SHARE`` x ``radius``) of the ring of
-    ``radius`` about ``eye``, for the light whose level map is fitted by ``level``."""
+def _ring_square(radius: float, resolution: int) -> tuple[float, float, float]:
+    """A ring's (half side, grid step, texel) in metres: the square holds the ring from any
+    eye in a grid cell (half a step off its centre), and the step is a whole number of
+    texels, so a map drawn for the next cell lies on the same texel lattice (a shadow's
+    edge does not crawl as the camera moves)."""
+    half = radius * (1.0 + 0.5 * RING_STEP_SHARE)
+    texel = 2.0 * half / resolution
+    step = max(1, round(RING_STEP_SHARE * radius / texel)) * texel
+    return half, step, texel
+
+
+def ring_cell(level: DirectionalFit, eye: tuple[float, float, float], radius: float,
+              resolution: int) -> tuple[int, int]:
+    """The grid cell (light space) of the ring of ``radius`` about ``eye``, for the light
+    whose level map is fitted by ``level`` and a map of ``resolution`` texels a side."""
     view = level.view
     x, y, z = eye
-    step = RING_STEP_SHARE * radius
+    step = _ring_square(radius, resolution)[1]
     lx = view[0][0] * x + view[1][0] * y + view[2][0] * z + view[3][0]
     ly = view[0][1] * x + view[1][1] * y + view[2][1] * z + view[3][1]
     return round(lx / step), round(ly / step)
@@ -105,13 +117,12 @@ def ring_fit(level: DirectionalFit, cell: tuple[int, int], radius: float, resolu
     """The orthographic camera of a ring (a shadow cascade) of ``radius`` centred on ``cell``
     (``ring_cell``): the level map's view and depth range (every caster along the light
     still casts into it), a square holding every point within ``radius`` of any eye in the
-    cell, for a map of ``resolution`` texels a side."""
-    step = RING_STEP_SHARE * radius
-    half = radius + 0.5 * step
+    cell (to a texel), for a map of ``resolution`` texels a side."""
+    half, step, texel = _ring_square(radius, resolution)
     cx, cy = cell[0] * step, cell[1] * step
     near, far = level.depth
     proj = glm.ortho(cx - half, cx + half, cy - half, cy + half, near, far)
-    return DirectionalFit(level.view, glm.mat4(proj), 2.0 * half / resolution, level.depth)
+    return DirectionalFit(level.view, glm.mat4(proj), texel, level.depth)
 
 
 # Texels around a changed caster's footprint redrawn with it: the rasteriser's rounding at
