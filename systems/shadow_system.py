@@ -48,8 +48,8 @@ from engine.rules.shadow_rules import (
     ShadowCasters,
     VirtualLight,
     boxes_in_reach,
+    changed_region,
     directional_fit,
-    map_region,
     rank_virtual_lights,
     ring_cell,
     ring_fit,
@@ -94,7 +94,7 @@ class ShadowSystem(esper.Processor):
         world = self.world
         casters_changed = renderer.casters_version != self._casters_seen
         self._casters_seen = renderer.casters_version
-        changed_box = renderer.take_changed_box()
+        changed_box, changed_parts = renderer.take_changes()
         # The level's box only where a map is fitted to it (a sun that casts, a surface that
         # carries light): a world of 100,000 instances and no such light pays nothing for it.
         surfaces = world.resources.get(Surfaces)
@@ -115,7 +115,7 @@ class ShadowSystem(esper.Processor):
         else:
             level = self._level
         published = ShadowCasters(level=level)
-        self._directional_maps(suns, casters_changed, changed_box, level, published)
+        self._directional_maps(suns, casters_changed, (changed_box, changed_parts), level, published)
         self._point_maps(kept, published)
         # A virtual light's map is drawn whole: again only when what casts changed (the
         # changed box: a row that casts moved, came, went or started or stopped casting).
@@ -135,14 +135,15 @@ class ShadowSystem(esper.Processor):
         return seen[1]
 
     # --- directional lights -------------------------------------------------------------------
-    def _directional_maps(self, lights: list[DirectionalLight | None], casters_changed: bool, changed_box, level,
+    def _directional_maps(self, lights: list[DirectionalLight | None], casters_changed: bool, changes, level,
                           published: ShadowCasters) -> None:
         """Each of ``lights`` (the kept ones, slot by slot as in the Lights block; None: a
-        freed slot) that casts:
+        freed slot) that casts (``changes``: the renderer's changed box and its parts):
         its map kept, drawn again where casters changed, or drawn whole for a new fit; a slot
         that stopped casting cleared."""
         maps = self.renderer.shadows
         stats: RenderStats = self.world.resources[RenderStats]
+        changed_box, changed_parts = changes
         # A still frame: no caster changed, the same level box and lights, none of them
         # written (the prepare stage's test for the Lights block), the same atlas and filter:
         # every casting light's map is kept as it was.
@@ -166,7 +167,7 @@ class ShadowSystem(esper.Processor):
                 del kept[slot]
                 maps.clear_directional(slot)
         if not casting:
-            self._draw_rings([], eye, casters_changed, changed_box)
+            self._draw_rings([], eye, casters_changed, changes)
             self._still = (level, lights, (maps.tile, maps.filter, self.enabled), (), cells, 0)
             return
         tile = max(light.shadow_resolution for _, light in casting) if len(casting) > 1 else \
@@ -188,8 +189,7 @@ class ShadowSystem(esper.Processor):
                 # Only casters changed, within the level's box (the fit is the same): only the
                 # texels under where they were and are are drawn again.
                 fit = self._fits[slot]
-                region = (0, 0, 0, 0) if changed_box is None else \
-                    map_region(fit, changed_box[0], changed_box[1], light.shadow_resolution)
+                region = changed_region(fit, changed_box, changed_parts, light.shadow_resolution)
                 if region is not None and region[2] * region[3] == 0:
                     stats.shadow_maps_kept += 1   # what changed casts nothing here (or is glass)
                     continue
@@ -199,7 +199,7 @@ class ShadowSystem(esper.Processor):
                                                                light.shadow_softness, region)
             self._directional[slot] = key
             stats.shadow_maps_drawn += 1
-        cut = self._draw_rings(casting, eye, casters_changed, changed_box)
+        cut = self._draw_rings(casting, eye, casters_changed, changes)
         self._still = (level, lights, (maps.tile, maps.filter, self.enabled), tuple(published.directional),
                        self._ring_cells(lights, eye), cut)
 
@@ -222,7 +222,7 @@ class ShadowSystem(esper.Processor):
                      if light is not None and light.shadows and light.shadow_cascades > 1 and slot in self._fits
                      for radius in ring_radii(light.shadow_distance, light.shadow_cascades - 1))
 
-    def _draw_rings(self, casting: list, eye, casters_changed: bool, changed_box) -> int:
+    def _draw_rings(self, casting: list, eye, casters_changed: bool, changes) -> int:
         """Each casting light's rings (``DirectionalLight.shadow_cascades`` - 1 of them, about
         the camera at ``eye``) into the atlas tiles no light's level map takes, in slot order,
         outermost first: kept, drawn again under changed casters, or drawn whole in a new
@@ -250,8 +250,7 @@ class ShadowSystem(esper.Processor):
                         stats.shadow_maps_kept += 1
                         ring += 1
                         continue
-                    region = (0, 0, 0, 0) if changed_box is None else \
-                        map_region(fit, changed_box[0], changed_box[1], light.shadow_resolution)
+                    region = changed_region(fit, *changes, light.shadow_resolution)
                     if region is not None and region[2] * region[3] == 0:
                         stats.shadow_maps_kept += 1
                         ring += 1

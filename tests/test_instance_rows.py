@@ -182,6 +182,8 @@ def test_a_few_movers_rows_are_the_array_paths_bits_and_a_kept_union_is_the_rows
             batch.write_transforms(entities, poses)
             batch.upload()
             assert batch.box is not None  # the union, worked out once: later frames may keep it
+        for batch in (few, arrays):
+            batch.take_changes()   # the first upload's: all twenty rows
         kept = 0
         for frame in range(300):
             movers = sorted(int(e) for e in rng.choice(entities, size=int(rng.integers(1, 6)), replace=False))
@@ -197,8 +199,16 @@ def test_a_few_movers_rows_are_the_array_paths_bits_and_a_kept_union_is_the_rows
                 batch.write_transforms(movers, models, moving=True)
                 batch.upload()
             assert np.array_equal(few._row_boxes[:20], arrays._row_boxes[:20]), frame
-            got, want = few.take_changed_box(), arrays.take_changed_box()
+            (got, parts), want = few.take_changes(), arrays.take_changed_box()
             assert np.array_equal(got[0], want[0]) and np.array_equal(got[1], want[1]), frame
+            # The box's parts (what the shadow maps redraw under): each mover's old and new
+            # box, whose union is the box to the bit.
+            assert parts is not None and len(parts) <= 2 * len(movers), (frame, len(parts))
+            assert np.array_equal(np.min([lo for lo, _ in parts], axis=0), got[0]), frame
+            assert np.array_equal(np.max([hi for _, hi in parts], axis=0), got[1]), frame
+            for entity in movers:
+                row = few._row_boxes[few.row_of[entity]]
+                assert any(np.array_equal(row[0], lo) and np.array_equal(row[1], hi) for lo, hi in parts), frame
             assert np.isclose(few.extent, arrays.extent, rtol=1e-12)
             kept += few._box is not None
             rows = few._row_boxes[:20]

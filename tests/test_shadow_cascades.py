@@ -15,7 +15,15 @@ from pyglm import glm
 
 from components import ComponentValueError, DirectionalLight, Material, MeshRef, Mirror, Transform
 from engine.assets.mesh import box, plane, quad
-from engine.rules.shadow_rules import RING_STEP_SHARE, directional_fit, ring_cell, ring_fit, ring_radii
+from engine.rules.shadow_rules import (
+    RING_STEP_SHARE,
+    changed_region,
+    directional_fit,
+    map_region,
+    ring_cell,
+    ring_fit,
+    ring_radii,
+)
 from tests.support import box_hits, look_from, pixel_rays, srgb_to_linear
 
 LIGHT = glm.normalize(glm.vec3(-1.0, -0.75, -0.5))
@@ -182,6 +190,27 @@ def test_a_ring_moved_a_cell_keeps_its_texel_lattice(radius, resolution):
     for point in near:
         u = texels(here, point) / resolution
         assert (u > -1e-6).all() and (u < 1 + 1e-6).all(), u
+
+
+def test_a_ring_redraws_under_the_changes_in_it_not_under_the_box_holding_them_all():
+    """Two crates spinning 20 metres apart: the inner ring about the camera (by the near one)
+    redraws only the near one's footprint; the box holding both covers the whole ring."""
+    level = directional_fit(LIGHT, np.array([-30.0, 0.0, -30.0]), np.array([30.0, 3.0, 30.0]), 2048)
+    eye = (0.0, 1.6, 0.0)
+    ring = ring_fit(level, ring_cell(level, eye, 2.0, 2048), 2.0, 2048)
+    near = (np.array([0.5, 0.0, -0.5]), np.array([1.1, 0.6, 0.1]))
+    far = (np.array([20.0, 0.0, 5.0]), np.array([20.6, 0.6, 5.6]))
+    union = (np.minimum(near[0], far[0]), np.maximum(near[1], far[1]))
+    assert changed_region(ring, union, [near, far], 2048) == map_region(ring, *near, 2048)
+    x, y, w, h = map_region(ring, *near, 2048)
+    whole = changed_region(ring, union, None, 2048)   # the union alone: a band across the ring, or all of it
+    assert whole is None or whole[2] * whole[3] > 5 * w * h, (whole, w * h)
+    assert changed_region(ring, far, [far], 2048) == (0, 0, 0, 0)   # outside the ring: nothing
+    assert changed_region(ring, None, [], 2048) == (0, 0, 0, 0)
+    x, y, w, h = changed_region(level, union, [near, far], 2048)   # the level's map holds both
+    for part in (near, far):
+        px, py, pw, ph = map_region(level, *part, 2048)
+        assert x <= px and y <= py and px + pw <= x + w and py + ph <= y + h
 
 
 def _camera(runner) -> int:

@@ -59,6 +59,9 @@ _GATHER_AT = 16
 # Rows an upload measures (world boxes, largest scale) in Python floats rather than arrays
 # (InstanceBatch._measure_few): below it the arrays' fixed cost a call is most of the work.
 _FEW_ROWS = 8
+# The changed boxes kept apart for the shadow maps (InstanceBatch.take_changes): a frame's few
+# movers; past this, their union alone.
+MAX_CHANGED_PARTS = 16
 
 
 # Rows from which write_transforms works the normal matrices out on arrays (normal_matrices)
@@ -201,6 +204,9 @@ class InstanceBatch:
         # Where instances were and are whose rows changed since ``take_changed_box`` (the old
         # and the new boxes of moved, added and removed rows that cast): what a shadow map must redraw.
         self._changed: tuple[list[float], list[float]] | None = None
+        # ... and the boxes it was grown by, while there are few (None: past MAX_CHANGED_PARTS,
+        # the box alone): a shadow map redraws under each, not under the box holding them all.
+        self._changed_parts: list[tuple[list[float], list[float]]] | None = []
         # Some row may cast no shadow (glass, casts_shadows off, hidden everywhere: the extract
         # stage says so, ``note_row_casts``): the changed box then leaves out the rows that do
         # not (their moves change no shadow); while False no row's fields are read for it.
@@ -490,6 +496,7 @@ class InstanceBatch:
         hx, hy, hz = hi_ends
         # Which rows cast, where some may not (a move of what casts nothing changes no shadow).
         casting = self._casting(rows).tolist() if self.may_not_cast else None
+        parts: list[tuple[list[float], list[float]]] = []   # each changed row's old and new box
         written = self.rows["model"][rows]
         kept = self._row_models
         for n, (m, (old_lo, old_hi), was) in enumerate(zip(written.tolist(), boxes[rows].tolist(),
@@ -516,6 +523,7 @@ class InstanceBatch:
                 for lo_box, hi_box in ((old_lo, old_hi), (low, high)):
                     if lo_box[0] != lo_box[0]:
                         continue  # never measured
+                    parts.append((lo_box, hi_box))
                     if changed_lo is None:
                         changed_lo, changed_hi = list(lo_box), list(hi_box)
                         continue
@@ -532,7 +540,7 @@ class InstanceBatch:
         if union is None:
             self._box = None  # worked out again when asked
         if changed_lo is not None:
-            self._note_changed(changed_lo, changed_hi)
+            self._note_changed(changed_lo, changed_hi, parts)
 
     def _boxes_for(self, rows: int) -> np.ndarray:
         """The rows' boxes, grown to hold at least ``rows`` rows."""
@@ -575,12 +583,18 @@ class InstanceBatch:
         return int(row["tint"][TINT_VISIBILITY] + 0.5) & ~NO_RECEIVE_BIT, int(row["slots"][1]), int(row["slots"][2]), \
             tuple(row["slice"].tolist())
 
-    def _note_changed(self, lo: list[float], hi: list[float]) -> None:
+    def _note_changed(self, lo: list[float], hi: list[float],
+                      parts: list[tuple[list[float], list[float]]] | None = None) -> None:
         """Grow the changed box by [lo, hi] (floats; one with a NaN, never measured, adds
-        nothing): kept as floats, made arrays once when taken (a frame's few movers note it
-        without a numpy call)."""
+        nothing), made of the boxes ``parts`` (None: [lo, hi] itself): kept as floats, made
+        arrays once when taken (a frame's few movers note it without a numpy call)."""
         if any(v != v for v in lo) or any(v != v for v in hi):
             return
+        kept = self._changed_parts
+        if kept is not None:
+            kept.extend(parts if parts is not None else ((list(lo), list(hi)),))
+            if len(kept) > MAX_CHANGED_PARTS:
+                self._changed_parts = None
         if self._changed is not None:  # numpy's minimum and maximum: a if a < b else b
             old_lo, old_hi = self._changed
             lo = [a if a < b else b for a, b in zip(lo, old_lo, strict=True)]
@@ -590,8 +604,17 @@ class InstanceBatch:
     def take_changed_box(self) -> tuple[np.ndarray, np.ndarray] | None:
         """The box holding where instances were and are whose boxes changed since the last
         call (None: none), forgotten."""
+        return self.take_changes()[0]
+
+    def take_changes(self) -> tuple[tuple[np.ndarray, np.ndarray] | None, list | None]:
+        """``take_changed_box``'s box and the boxes it holds ([lo, hi] arrays; None: too many
+        to keep, the box alone), both forgotten."""
         changed, self._changed = self._changed, None
-        return None if changed is None else (np.array(changed[0]), np.array(changed[1]))
+        parts, self._changed_parts = self._changed_parts, []
+        if changed is None:
+            return None, []
+        return (np.array(changed[0]), np.array(changed[1])), \
+            None if parts is None else [(np.array(lo), np.array(hi)) for lo, hi in parts]
 
     @property
     def row_boxes(self) -> np.ndarray:

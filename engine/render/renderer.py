@@ -328,12 +328,25 @@ class Renderer(Gpu):
         """The box holding where opaque instances were and are whose rows changed since the
         last call (moved, came, went, changed their look), forgotten; None: none.  What a
         shadow map redraws (engine/render/shadows.py)."""
-        boxes = [box for batch in self.batches.values() if (box := batch.take_changed_box()) is not None
-                 and not batch.transparent]
+        return self.take_changes()[0]
+
+    def take_changes(self) -> tuple[tuple[np.ndarray, np.ndarray] | None, list | None]:
+        """``take_changed_box``'s box and the boxes it holds (each batch's few changed rows'
+        own, [lo, hi]; None: too many to keep, the box alone), forgotten: a shadow map redraws
+        only the texels under those in it, not all under a box spanning the level."""
+        boxes, parts = [], []
+        for batch in self.batches.values():
+            box, batch_parts = batch.take_changes()
+            if box is None or batch.transparent:
+                continue
+            boxes.append(box)
+            parts = None if parts is None or batch_parts is None else parts + batch_parts
         if self._dropped_changes is not None:
             boxes.append(self._dropped_changes)
+            if parts is not None:
+                parts.append(self._dropped_changes)
             self._dropped_changes = None
-        return _union(boxes)
+        return _union(boxes), parts
 
     def level_bounds(self) -> tuple[np.ndarray, np.ndarray] | None:
         """The world box holding every opaque instance as of the last upload (None: none):

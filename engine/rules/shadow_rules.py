@@ -171,6 +171,33 @@ def map_region(fit: DirectionalFit, lo: np.ndarray, hi: np.ndarray,
     return x0, y0, x1 - x0, y1 - y0
 
 
+def changed_region(fit: DirectionalFit, box: tuple[np.ndarray, np.ndarray] | None, parts: list | None,
+                   resolution: int) -> tuple[int, int, int, int] | None:
+    """``map_region`` of what changed: the rectangle holding the regions of each of ``parts``
+    (the changed boxes, [lo, hi]) that falls in the map, or of their union ``box`` where
+    they are not known (``parts`` None); (0, 0, 0, 0) for nothing (``box`` None, or every
+    part outside the map); None: most of the map (draw it whole).  Three crates spinning
+    metres apart change a small region each, not the map under the box holding all three."""
+    if box is None:
+        return (0, 0, 0, 0)
+    if parts is None:
+        return map_region(fit, box[0], box[1], resolution)
+    x0 = y0 = resolution
+    x1 = y1 = 0
+    for lo, hi in parts:
+        region = map_region(fit, lo, hi, resolution)
+        if region is None:
+            return None
+        x, y, w, h = region
+        if w * h:
+            x0, y0, x1, y1 = min(x0, x), min(y0, y), max(x1, x + w), max(y1, y + h)
+    if x1 <= x0 or y1 <= y0:
+        return (0, 0, 0, 0)
+    if (x1 - x0) * (y1 - y0) > REGION_WHOLE_SHARE * resolution * resolution:
+        return None
+    return x0, y0, x1 - x0, y1 - y0
+
+
 def point_reach(position: np.ndarray, light_range: float) -> tuple[np.ndarray, np.ndarray]:
     """The world box a point light's shadows can change: its range's sphere."""
     position = np.asarray(position, np.float64)
