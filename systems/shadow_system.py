@@ -8,8 +8,9 @@ moved, came, went or changed its look; the map covers the whole level, so every 
 its reach); a point light's only when the light changed or moved, or a caster whose old or
 new box reaches into its range changed.  A still scene draws no shadow pass.  When the
 changed casters lie inside the level's box, a directional map is drawn again only under
-where they were and are (``shadow_rules.map_region``: the casters' draws scissored there,
-the same depths a whole redraw writes).  A sun's cascades (rings about the active camera,
+where they were and are (``shadow_rules.changed_region``: the rectangle holding each
+changed box's footprint in the map, the casters' draws scissored there, the same depths a
+whole redraw writes).  A sun's cascades (rings about the active camera,
 ``shadow_rules.ring_fit``) are kept the same way, and drawn whole again when the camera
 leaves the grid cell a ring's centre snaps to.  Virtual lights (``shadow_rules.virtual_lights``:
 lights through mirrors and portals) get their maps here too, each a view of the frame's
