@@ -199,8 +199,10 @@ def test_a_few_movers_rows_are_the_array_paths_bits_and_a_kept_union_is_the_rows
                 batch.write_transforms(movers, models, moving=True)
                 batch.upload()
             assert np.array_equal(few._row_boxes[:20], arrays._row_boxes[:20]), frame
-            (got, parts), want = few.take_changes(), arrays.take_changed_box()
+            (got, parts), (want, array_parts) = few.take_changes(), arrays.take_changes()
             assert np.array_equal(got[0], want[0]) and np.array_equal(got[1], want[1]), frame
+            assert sorted(np.concatenate(p).tolist() for p in parts) == \
+                sorted(np.concatenate(p).tolist() for p in array_parts), frame   # the same boxes either way
             # The box's parts (what the shadow maps redraw under): each mover's old and new
             # box, whose union is the box to the bit.
             assert parts is not None and len(parts) <= 2 * len(movers), (frame, len(parts))

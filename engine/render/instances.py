@@ -474,7 +474,10 @@ class InstanceBatch:
         if changed.any():
             # The old boxes (NaN: never measured, left out by fmin/fmax) and the new ones.
             both = np.concatenate((old, box) if changed.all() else (old[changed], box[changed]))
-            self._note_changed(np.fmin.reduce(both[:, 0]).tolist(), np.fmax.reduce(both[:, 1]).tolist())
+            # Kept apart while few (a few movers among many rows written), as _measure_few keeps them.
+            parts = [(lo, hi) for lo, hi in both.tolist() if lo[0] == lo[0]] \
+                if len(both) <= MAX_CHANGED_PARTS else None
+            self._note_changed(np.fmin.reduce(both[:, 0]).tolist(), np.fmax.reduce(both[:, 1]).tolist(), parts)
         boxes[rows] = box
         self._box = None
 
@@ -594,6 +597,7 @@ class InstanceBatch:
         if kept is not None:
             kept.extend(parts if parts is not None else ((list(lo), list(hi)),))
             if len(kept) > MAX_CHANGED_PARTS:
+                # Too many to keep apart: the box alone (a map redraws under all of it).
                 self._changed_parts = None
         if self._changed is not None:  # numpy's minimum and maximum: a if a < b else b
             old_lo, old_hi = self._changed
