@@ -192,7 +192,7 @@ class ExtractSystem(esper.Processor):
         row["slots"] = (choice.emissive, choice.refract, choice.reflect, drawn_as)
         if casting_before is not None and batch.shadow_fields(row) != casting_before:
             batch.note_shadow_change(entity)  # it stopped or started casting where it stands: maps drawn again
-        batch.note_row_casts(row)  # one that casts nothing: its moves change no shadow
+        batch.note_row_casts(entity, row)  # one that casts nothing: its moves change no shadow
         batch.variants_changed()
 
     def _remove_instance(self, entity: int, batch: InstanceBatch) -> None:

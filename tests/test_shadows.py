@@ -849,3 +849,31 @@ def test_a_redrawn_region_holds_the_box_corners_texels_and_only_its_padding_more
         assert rx <= max(math.floor(min(xs)), 0) and rx + rw >= min(math.ceil(max(xs)), resolution)
         assert ry <= max(math.floor(min(ys)), 0) and ry + rh >= min(math.ceil(max(ys)), resolution)
     assert 0 < wholes < 2000
+
+
+def test_a_batch_reads_its_rows_casting_only_while_one_casts_nothing(scene):
+    """``InstanceBatch.may_not_cast`` (a moved row's box counts only if it casts) holds
+    while some row of the batch casts no shadow, and goes when none does: the row turned
+    back to casting, or deleted."""
+    def build(world):
+        world.resources["ids"] = _floor_scene(world, (0.5, 5.0, 6.5), (0.0, 0.0, 0.0))
+        world.resources["ids"]["other"] = world.spawn(Transform(position=(2.0, 0.5, -1.0)), MeshRef(box()),
+                                                      Material(color=(0.2, 0.8, 0.3)))
+
+    runner = scene(build, (64, 48))
+    runner.frame()
+    ids = runner.world.resources["ids"]
+    batch = next(b for b in runner.engine.renderer.batches.values() if ids["box"] in b.row_of)
+    assert ids["other"] in batch.row_of and not batch.may_not_cast
+    runner.world.get(ids["box"], MeshRef).casts_shadows = False
+    runner.frame()
+    assert batch.may_not_cast
+    runner.world.get(ids["box"], MeshRef).casts_shadows = True
+    runner.frame()
+    assert not batch.may_not_cast
+    runner.world.get(ids["other"], MeshRef).casts_shadows = False
+    runner.frame()
+    assert batch.may_not_cast
+    runner.world.delete_entity(ids["other"])
+    runner.frame()
+    assert not batch.may_not_cast and ids["box"] in batch.row_of

@@ -211,6 +211,7 @@ class InstanceBatch:
         # stage says so, ``note_row_casts``): the changed box then leaves out the rows that do
         # not (their moves change no shadow); while False no row's fields are read for it.
         self.may_not_cast = False
+        self._non_casters: set[int] = set()  # the entities whose rows cast nothing (may_not_cast while any)
         self.key: BatchKey | None = None  # set by Renderer.batch_for
         # Each row's size, where this batch's mesh is a generated shape's unit mesh (Mesh.unit):
         # the row's model matrix is its world matrix times the size (set_size); ``sized`` once any is.
@@ -373,6 +374,9 @@ class InstanceBatch:
         index = self.row_of.pop(entity)
         last = self.count - 1
         cast = not self.may_not_cast or bool(self._casting(slice(index, index + 1))[0])
+        if self._non_casters:
+            self._non_casters.discard(entity)
+            self.may_not_cast = bool(self._non_casters)
         self._layout += 1
         if index != last:
             moved = self.entity_at[last]
@@ -571,12 +575,16 @@ class InstanceBatch:
         codes = (self.rows["tint"][rows, TINT_VISIBILITY] + 0.5).astype(np.int64)
         return row_casts_shadow(slots[:, 1], slots[:, 2], codes)
 
-    def note_row_casts(self, row: np.void) -> None:
-        """The extract stage wrote ``row``'s fields: a row that casts no shadow makes the
-        changed box read the rows' fields from now on (``may_not_cast``)."""
-        if not self.may_not_cast:
-            code = int(row["tint"][TINT_VISIBILITY] + 0.5)
-            self.may_not_cast = not bool(row_casts_shadow(row["slots"][1], row["slots"][2], code))
+    def note_row_casts(self, entity: int, row: np.void) -> None:
+        """The extract stage wrote ``entity``'s ``row``: while some row casts no shadow, the
+        changed box reads the rows' fields (``may_not_cast``); once none does (it casts again,
+        or went), it reads none."""
+        code = int(row["tint"][TINT_VISIBILITY] + 0.5)
+        if row_casts_shadow(row["slots"][1], row["slots"][2], code):
+            self._non_casters.discard(entity)
+        else:
+            self._non_casters.add(entity)
+        self.may_not_cast = bool(self._non_casters)
 
     @staticmethod
     def shadow_fields(row: np.void) -> tuple:
