@@ -25,6 +25,10 @@ Variants now (``VARIANTS``; add a row by appending a ``Variant``):
   light (``Mirror.reflects_light``: one virtual light with its own shadow map); still;
 * ``mirror_light_moving``: the same with the sliding box (at most two maps a frame: the
   sun's and the virtual light's);
+* ``cascades``: shadows, the sun with three cascades (``DirectionalLight.shadow_cascades``:
+  rings of 12 and 3 metres about the camera); the orbiting camera leaves the inner ring's
+  cell every few frames, which draws that ring again;
+* ``cascades_moving``: the same with the sliding box (its footprint redrawn in each map it is in);
 * ``post``: no shadows, the camera gets ``Tonemap(curve="agx")`` and ``Bloom()`` (six levels on a
   GPU; a software rasteriser's quarter-size start makes five, ending at the same smallest level:
   ``engine/render/bloom.py``);
@@ -188,6 +192,17 @@ def _mirror_light_moving(engine: Engine) -> None:
     _moving_caster(engine)
 
 
+def _cascades(engine: Engine) -> None:
+    _sun_shadows(engine, True)
+    for _, light in engine.world.query_one(DirectionalLight):
+        light.shadow_cascades, light.shadow_distance = 3, 12.0
+
+
+def _cascades_moving(engine: Engine) -> None:
+    _cascades(engine)
+    _moving_caster(engine)
+
+
 def _post(engine: Engine) -> None:
     _sun_shadows(engine, False)
     engine.world.add_component(camera_entity(engine), Tonemap(curve="agx"))
@@ -208,6 +223,8 @@ VARIANTS: list[Variant] = [
     Variant("mirror_light", _mirror_light, "shadows, and one mirror throws the sun (a virtual light); still"),
     Variant("mirror_light_moving", _mirror_light_moving, "the same with a box sliding under the sun",
             _slide_caster),
+    Variant("cascades", _cascades, "shadows with three cascades about the orbiting camera"),
+    Variant("cascades_moving", _cascades_moving, "the same with a box sliding under the sun", _slide_caster),
     Variant("post", _post, "Tonemap(curve='agx') and Bloom() on the camera"),
     Variant("post_auto", _post_auto, "Tonemap(curve='agx', auto_exposure=True) and Bloom()"),
 ]

@@ -67,10 +67,11 @@ VIRTUAL_MORE = MAX_APERTURES - 1
 VIRTUAL_BLOCK_BYTES = 16 + 64 * MAX_VIRTUAL_LIGHTS + 16 * MAX_VIRTUAL_LIGHTS * len(VIRTUAL_FIELDS) \
     + 16 * 4 * MAX_VIRTUAL_LIGHTS * VIRTUAL_MORE
 # Then the shadow cascades (DirectionalLight.shadow_cascades): rings about the camera, each in
-# an atlas tile no light's level map takes; per ring a matrix, its texel, its tile, its light's slot.
+# an atlas tile no light's level map takes; per ring its map from the level's uv, its texel, its
+# tile, its light's slot.
 _POINTS_END = 64 * MAX_DIRECTIONAL_LIGHTS + 16 * MAX_DIRECTIONAL_LIGHTS + 4 * MAX_POINT_LIGHTS \
     + 16 * MAX_POINT_SHADOWS + 16
-SHADOWS_BLOCK_BYTES = _POINTS_END + (64 + 16 + 16) * MAX_SHADOW_RINGS + 16
+SHADOWS_BLOCK_BYTES = _POINTS_END + (16 + 16 + 16) * MAX_SHADOW_RINGS + 16
 # The casters' slope-scaled depth offset (glPolygonOffset factor, units): with the normal
 # offset in the lookup, no acne on the sample level's slanted and curved surfaces.
 SLOPE_BIAS = (1.5, 2.0)
@@ -80,6 +81,12 @@ POINT_NEAR = 0.02   # metres: a point light's cube sees casters from here out
 _CASTERS = PassState(depth_func="<", cull=False, clips=SCENE_CLIPS)
 # A virtual light's stretch between two surfaces: kept between both planes.
 _LEG_CASTERS = PassState(depth_func="<", cull=False, clips=SCENE_CLIPS | frozenset((CLIP_LEG_PLANE,)))
+
+
+def _axes(matrix: glm.mat4) -> tuple[float, float, float, float]:
+    """An axis-aligned affine map's x scale, x offset, y scale and y offset (an orthographic
+    projection and the moves and scales after it)."""
+    return float(matrix[0][0]), float(matrix[3][0]), float(matrix[1][1]), float(matrix[3][1])
 
 
 def _over_length(edge) -> tuple[float, float, float]:
@@ -105,7 +112,8 @@ class ShadowMaps:
         # Per ring: the directional slot whose ring it is, or -1 (the block's ring_slot).
         self._ring_slots = self.block[SHADOWS_BLOCK_BYTES // 4 - 4:][:MAX_SHADOW_RINGS].view(np.int32)
         self._ring_slots[:] = -1
-        self._rings = 0  # what upload found: the ring entries read (the last used one's index + 1)
+        # Per directional slot: its level map's uv from light space (_axes), what its rings map from.
+        self._level_uv: dict[int, tuple[float, float, float, float]] = {}
         self.ubo = ctx.buffer(self.block.tobytes())
         self._depth_program = renderer.shaders.program("shadow.vert", "shadow.frag")
         self._distance_program = renderer.shaders.program("shadow.vert", "shadow.frag", defines={"DISTANCE": "1"})
@@ -194,6 +202,7 @@ class ShadowMaps:
             to_tile = glm.translate(glm.vec3(x / width + 0.5 * scale, y / width + 0.5 * scale, 0.5)) \
                 * glm.scale(glm.vec3(0.5 * scale, 0.5 * scale, 0.5))
             self.block[16 * slot:16 * slot + 16] = np.array((to_tile * fit.view_proj).to_list(), np.float32).ravel()
+            self._level_uv[slot] = _axes(to_tile * fit.proj)
             base = 16 * MAX_DIRECTIONAL_LIGHTS + 4 * slot
             self.block[base:base + 4] = (fit.texel, softness, 1.0 / width, self._taps(softness))
             self._block_rows[slot] = written
@@ -205,20 +214,26 @@ class ShadowMaps:
                   region: tuple[int, int, int, int] | None = None) -> int:
         """Draw ring ``ring`` (a cascade about the camera, ``DirectionalLight.shadow_cascades``)
         of directional light ``slot`` into atlas tile ``tile`` from ``fit``, as
-        ``draw_directional`` draws a level map, and write its rows of the Shadows block: the
-        matrix to the tile's own [0, 1] square (the lookup tests a point is inside it before
-        it reads the atlas), its texel, where the tile lies and the filter's margin."""
+        ``draw_directional`` draws a level map (the light's own, drawn first), and write its
+        rows of the Shadows block: the map from the level map's uv to the ring's own [0, 1]
+        square (the lookup tests a point is inside it before it reads the atlas), its texel,
+        where the tile lies and the filter's margin."""
         texels = self._draw_tile(tile, MAX_DIRECTIONAL_LIGHTS + ring, fit, resolution, region)
         width = self.atlas.size[0]
         written = (fit, resolution, softness, width, tile, slot)
         key = MAX_DIRECTIONAL_LIGHTS + ring
+        level = self._level_uv[slot]   # the light's level map, drawn before its rings
+        written = (*written, level)
         if self._block_rows.get(key) != written:
             x, y = self.tile_origin(tile)
-            to_square = glm.translate(glm.vec3(0.5)) * glm.scale(glm.vec3(0.5))
+            # Both maps are the same light space through an orthographic projection (scale and
+            # offset a light-space axis): the ring's square from the level map's uv, axis by axis.
+            square = _axes(glm.translate(glm.vec3(0.5)) * glm.scale(glm.vec3(0.5)) * fit.proj)
+            sx, sy = square[0] / level[0], square[2] / level[2]
             base = _POINTS_END // 4
-            self.block[base + 16 * ring:base + 16 * ring + 16] = \
-                np.array((to_square * fit.view_proj).to_list(), np.float32).ravel()
-            base += 16 * MAX_SHADOW_RINGS
+            self.block[base + 4 * ring:base + 4 * ring + 4] = (sx, sy, square[1] - sx * level[1],
+                                                               square[3] - sy * level[3])
+            base += 4 * MAX_SHADOW_RINGS
             self.block[base + 4 * ring:base + 4 * ring + 4] = (fit.texel, softness, 0.0, 0.0)
             base += 4 * MAX_SHADOW_RINGS
             # A point nearer the square's edge than the filter reaches is left to a larger map.

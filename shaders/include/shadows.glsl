@@ -29,8 +29,10 @@ layout(std140) uniform Shadows {
     vec4 point_params[MAX_POINT_SHADOWS];             // x: a texel's angular size (radians), y: softness
                                                       // (texels), z: range, w: taps (1 or 4)
     ivec4 point_light;                                // per cube (0, 1): the point light it is, or -1
-    // Cascades (rings about the camera, DirectionalLight.shadow_cascades), a light's outermost first:
-    mat4 ring_matrix[MAX_SHADOW_RINGS];               // world -> the ring's own square (xy) and depth (z), in [0, 1]
+    // Cascades (rings about the camera, DirectionalLight.shadow_cascades), a light's outermost first;
+    // a ring shares its light's space and depth with the level's map, so its square is that map's
+    // atlas uv scaled and moved:
+    vec4 ring_map[MAX_SHADOW_RINGS];                  // xy: scale, zw: offset (the level's uv -> the ring's square)
     vec4 ring_params[MAX_SHADOW_RINGS];               // x: a texel's world size, y: softness (texels)
     vec4 ring_tile[MAX_SHADOW_RINGS];                 // xy: its tile's corner in the atlas (uv), z: the
                                                       // tile's side (uv), w: the filter's margin (square units)
@@ -59,6 +61,25 @@ float filtered_shadow(sampler2DShadow atlas, vec3 p, int n, float texel, float s
 #endif
 }
 
+#ifdef SHADOW_RINGS
+#if SHADOW_RINGS > 3
+#error "directional_shadow reads three rings"
+#endif
+// Ring k's atlas coordinates of a point (``at`` and ``along``: the point and its normal in the
+// level map's coordinates, offset by the ring's own texel) where ring k is light i's and holds
+// it, else ``p`` (what a larger map gave).  Called with a constant k: no array indexed by a
+// variable, no loop (llvmpipe runs a loop's and an indexed read's code slower).
+vec3 ring_coordinates(int k, int i, vec3 at, vec3 along, float grazing, vec3 p) {
+    vec3 q = at + along * (shadows.ring_params[k].x * grazing);
+    vec4 map = shadows.ring_map[k];
+    vec2 square = q.xy * map.xy + map.zw;
+    vec4 tile = shadows.ring_tile[k];
+    bool inside = shadows.ring_slot[k] == i
+        && all(greaterThan(square, vec2(tile.w))) && all(lessThan(square, vec2(1.0 - tile.w)));
+    return inside ? vec3(tile.xy + square * tile.z, q.z) : p;
+}
+#endif
+
 // How much of directional light i reaches a point at ``position`` whose geometric normal
 // (facing the viewer) is ``normal`` and for which the light comes from ``l``: 0 (shadowed) to 1.
 float directional_shadow(int i, vec3 position, vec3 normal, vec3 l) {
@@ -70,20 +91,23 @@ float directional_shadow(int i, vec3 position, vec3 normal, vec3 l) {
     float nl = clamp(dot(normal, l), 0.0, 1.0);
     // Off the surface by about the filter's reach in texels, more as the light grazes it.
     float grazing = (1.0 + params.y) * (1.5 - nl);
-    vec4 p = shadows.directional_matrix[i] * vec4(position + normal * (params.x * grazing), 1.0);
+    mat4 to_map = shadows.directional_matrix[i];
+    vec3 at = (to_map * vec4(position, 1.0)).xyz;  // the point in the level map's coordinates
+    vec3 along = mat3(to_map) * normal;            // ... and a metre along its normal
+    vec3 p = at + along * (params.x * grazing);
 #ifdef SHADOW_RINGS
     // The smallest of the light's rings that holds the point (outermost first: the last
     // holding it wins), read instead of the level's map; the coordinates chosen, one lookup.
-    for (int k = 0; k < SHADOW_RINGS; ++k) {
-        if (shadows.ring_slot[k] != i) continue;
-        vec4 q = shadows.ring_matrix[k] * vec4(position + normal * (shadows.ring_params[k].x * grazing), 1.0);
-        vec4 tile = shadows.ring_tile[k];
-        if (all(greaterThan(q.xy, vec2(tile.w))) && all(lessThan(q.xy, vec2(1.0 - tile.w))))
-            p = vec4(tile.xy + q.xy * tile.z, q.z, 1.0);
-    }
+    p = ring_coordinates(0, i, at, along, grazing, p);
+#if SHADOW_RINGS > 1
+    p = ring_coordinates(1, i, at, along, grazing, p);
 #endif
-    if (any(lessThan(p.xyz, vec3(0.0))) || any(greaterThan(p.xyz, vec3(1.0)))) return 1.0;  // outside the map
-    return filtered_shadow(shadow_atlas, p.xyz, int(params.w), params.z, params.y);
+#if SHADOW_RINGS > 2
+    p = ring_coordinates(2, i, at, along, grazing, p);
+#endif
+#endif
+    if (any(lessThan(p, vec3(0.0))) || any(greaterThan(p, vec3(1.0)))) return 1.0;  // outside the map
+    return filtered_shadow(shadow_atlas, p, int(params.w), params.z, params.y);
 #endif
 }
 
