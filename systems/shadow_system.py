@@ -71,6 +71,7 @@ class ShadowSystem(esper.Processor):
         self._directional: dict[int, tuple] = {}   # slot -> what its map was drawn from
         self._fits: dict[int, DirectionalFit] = {}  # slot -> its map's camera
         self._rings: dict[int, tuple] = {}          # ring -> (what its map was drawn from, its camera)
+        self._ring_cells_kept: dict[tuple, tuple[int, int]] = {}  # (slot, radius) -> its cell (ring_cell's kept)
         self._virtual: dict[int, tuple] = {}        # virtual light slot -> what its map was drawn from
         # The view tree's depth cap (a light goes no deeper through mirrors than a view does):
         # the engine ties it to the reflect stage's ``max_depth_cap``; a number or a callable.
@@ -218,7 +219,8 @@ class ShadowSystem(esper.Processor):
         still frame compares: the camera moved into another cell, a ring is drawn again)."""
         if eye is None:
             return ()
-        return tuple((slot, ring_cell(self._fits[slot], eye, radius, light.shadow_resolution))
+        return tuple((slot, ring_cell(self._fits[slot], eye, radius, light.shadow_resolution,
+                                      self._ring_cells_kept.get((slot, radius))))
                      for slot, light in enumerate(lights)
                      if light is not None and light.shadows and light.shadow_cascades > 1 and slot in self._fits
                      for radius in ring_radii(light.shadow_distance, light.shadow_cascades - 1))
@@ -232,6 +234,7 @@ class ShadowSystem(esper.Processor):
         stats: RenderStats = self.world.resources[RenderStats]
         free = [tile for tile in range(MAX_DIRECTIONAL_LIGHTS) if tile not in {slot for slot, _ in casting}]
         ring = cut = 0
+        cells: dict[tuple, tuple[int, int]] = {}   # the rings' cells now (only these are kept)
         for slot, light in casting:
             if light.shadow_cascades < 2 or eye is None:
                 continue
@@ -241,7 +244,8 @@ class ShadowSystem(esper.Processor):
                     cut += 1
                     continue
                 tile = free.pop(0)
-                cell = ring_cell(level, eye, radius, light.shadow_resolution)
+                cell = cells[slot, radius] = ring_cell(level, eye, radius, light.shadow_resolution,
+                                                       self._ring_cells_kept.get((slot, radius)))
                 key = (self._directional[slot], tile, radius, cell)
                 kept = self._rings.get(ring)
                 region = None
@@ -265,6 +269,7 @@ class ShadowSystem(esper.Processor):
                 ring += 1
         for stale in [r for r in self._rings if r >= ring]:
             del self._rings[stale]
+        self._ring_cells_kept = cells
         maps.clear_rings(ring)
         stats.shadow_cascades_cut += cut
         return cut

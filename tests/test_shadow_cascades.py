@@ -192,6 +192,37 @@ def test_a_ring_moved_a_cell_keeps_its_texel_lattice(radius, resolution):
         assert (u > -1e-6).all() and (u < 1 + 1e-6).all(), u
 
 
+def test_a_ring_keeps_its_cell_while_the_camera_sways_across_a_cell_line():
+    """Hysteresis: an eye swaying a fifth of a step either side of the line between two
+    cells keeps the ring's cell (no map drawn again each frame); one a step and a half off
+    takes the nearest cell; and while a cell is kept, every point within the radius of the
+    eye is inside the ring's square."""
+    radius, resolution = 3.0, 2048
+    level = directional_fit(LIGHT, np.array([-30.0, 0.0, -30.0]), np.array([30.0, 3.0, 30.0]), resolution)
+    light_x = np.array([level.view[0][0], level.view[1][0], level.view[2][0]], np.float64)   # light space's x, in world
+    start = np.array([0.4, 1.6, -0.3])
+    cell = ring_cell(level, tuple(start), radius, resolution)
+    centre = ring_fit(level, cell, radius, resolution)
+    step = (ring_fit(level, (cell[0] + 1, cell[1]), radius, resolution).proj[3][0]
+            - centre.proj[3][0]) / -centre.proj[0][0]   # the grid step in light space, from the fits
+    # To the line between this cell and the next along light space's x, then sway across it.
+    line = start + light_x * ((cell[0] + 0.5) * step - float(np.dot(light_x, start) + level.view[3][0]))
+    kept = cell
+    rng = np.random.default_rng(2)
+    for sway in rng.uniform(-0.2, 0.2, 40):
+        eye = line + light_x * sway * step
+        kept = ring_cell(level, tuple(eye), radius, resolution, kept)
+        assert kept == cell, sway
+        square = ring_fit(level, kept, radius, resolution)
+        for point in eye + rng.normal(size=(20, 3)) * radius / 3.0:
+            if np.linalg.norm(point - eye) <= radius:
+                clip = square.view_proj * glm.vec4(*point, 1.0)
+                assert abs(clip.x) <= 1.0 and abs(clip.y) <= 1.0, (clip.x, clip.y)
+    far = line + light_x * 1.5 * step
+    assert ring_cell(level, tuple(far), radius, resolution, cell) == ring_cell(level, tuple(far), radius, resolution)
+    assert ring_cell(level, tuple(far), radius, resolution, cell) != cell
+
+
 def test_a_ring_redraws_under_the_changes_in_it_not_under_the_box_holding_them_all():
     """Two crates spinning 20 metres apart: the inner ring about the camera (by the near one)
     redraws only the near one's footprint; the box holding both covers the whole ring."""

@@ -92,32 +92,38 @@ def ring_radii(distance: float, rings: int) -> tuple[float, ...]:
 
 def _ring_square(radius: float, resolution: int) -> tuple[float, float, float]:
     """A ring's (half side, grid step, texel) in metres: the square holds the ring from any
-    eye in a grid cell (half a step off its centre), and the step is a whole number of
-    texels, so a map drawn for the next cell lies on the same texel lattice (a shadow's
-    edge does not crawl as the camera moves)."""
-    half = radius * (1.0 + 0.5 * RING_STEP_SHARE)
+    eye up to a step off its centre on each axis (``ring_cell`` keeps a cell that long), and
+    the step is a whole number of texels, so a map drawn for another cell lies on the same
+    texel lattice (a shadow's edge does not crawl as the camera moves)."""
+    half = radius * (1.0 + RING_STEP_SHARE)
     texel = 2.0 * half / resolution
     step = max(1, round(RING_STEP_SHARE * radius / texel)) * texel
     return half, step, texel
 
 
-def ring_cell(level: DirectionalFit, eye: tuple[float, float, float], radius: float,
-              resolution: int) -> tuple[int, int]:
+def ring_cell(level: DirectionalFit, eye: tuple[float, float, float], radius: float, resolution: int,
+              kept: tuple[int, int] | None = None) -> tuple[int, int]:
     """The grid cell (light space) of the ring of ``radius`` about ``eye``, for the light
-    whose level map is fitted by ``level`` and a map of ``resolution`` texels a side."""
+    whose level map is fitted by ``level`` and a map of ``resolution`` texels a side:
+    ``kept`` (the ring's cell now) while the eye is within a step of its centre on each axis,
+    else the nearest one.  The half step of slack on each side is hysteresis: a camera
+    swaying across the line between two cells does not draw the ring again every frame."""
     view = level.view
     x, y, z = eye
     step = _ring_square(radius, resolution)[1]
-    lx = view[0][0] * x + view[1][0] * y + view[2][0] * z + view[3][0]
-    ly = view[0][1] * x + view[1][1] * y + view[2][1] * z + view[3][1]
-    return round(lx / step), round(ly / step)
+    lx = (view[0][0] * x + view[1][0] * y + view[2][0] * z + view[3][0]) / step
+    ly = (view[0][1] * x + view[1][1] * y + view[2][1] * z + view[3][1]) / step
+    if kept is not None and abs(lx - kept[0]) <= 1.0 and abs(ly - kept[1]) <= 1.0:
+        return kept
+    return round(lx), round(ly)
 
 
 def ring_fit(level: DirectionalFit, cell: tuple[int, int], radius: float, resolution: int) -> DirectionalFit:
     """The orthographic camera of a ring (a shadow cascade) of ``radius`` centred on ``cell``
     (``ring_cell``): the level map's view and depth range (every caster along the light
     still casts into it), a square holding every point within ``radius`` of any eye in the
-    cell (to a texel), for a map of ``resolution`` texels a side."""
+    cell's keeping (``ring_cell``: a step either way, to a texel), for a map of
+    ``resolution`` texels a side."""
     half, step, texel = _ring_square(radius, resolution)
     cx, cy = cell[0] * step, cell[1] * step
     near, far = level.depth
