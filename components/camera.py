@@ -115,8 +115,9 @@ class DirectionalLight(TrackedComponent):
     ``shadow_distance`` metres round it, each next a quarter of that.  A point takes the
     smallest map holding it, whatever view shows it, so a mirror shows the same sharp shadow
     as the camera does (a ring, not the camera's frustum: a mirror looks behind the camera).
-    A ring is drawn again when the camera has moved a sixth of its radius, or a caster in it
-    changed.  The maps share the shadow atlas's four tiles with the other suns: where they
+    A ring is drawn again when the camera is more than a quarter of its radius from where it
+    was centred (on a grid of that step: a camera swaying on the spot keeps it), or a caster
+    in it changed.  The maps share the shadow atlas's four tiles with the other suns: where they
     do not fit, the light has fewer (``RenderStats.shadow_cascades_cut``).
 
     ``bounces`` (default 1): how many mirrors and portals that carry light

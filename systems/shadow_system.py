@@ -12,7 +12,7 @@ where they were and are (``shadow_rules.changed_region``: the rectangle holding 
 changed box's footprint in the map, the casters' draws scissored there, the same depths a
 whole redraw writes).  A sun's cascades (rings about the active camera,
 ``shadow_rules.ring_fit``) are kept the same way, and drawn whole again when the camera
-leaves the grid cell a ring's centre snaps to.  Virtual lights (``shadow_rules.virtual_lights``:
+strays a grid step from a ring's centre (``shadow_rules.ring_cell``).  Virtual lights (``shadow_rules.virtual_lights``:
 lights through mirrors and portals) get their maps here too, each a view of the frame's
 ``ViewBudget``, at most ``MAX_VIRTUAL_LIGHTS`` (the rest: ``RenderStats.virtual_lights_cut``).
 
