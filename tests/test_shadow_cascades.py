@@ -291,3 +291,38 @@ def test_bad_cascade_values_are_refused_naming_the_field(field, value):
     light = DirectionalLight()
     with pytest.raises(ComponentValueError, match=f"DirectionalLight.{field}"):
         setattr(light, field, value)
+
+
+def test_many_movers_redraw_under_their_box_and_a_few_under_each(scene, monkeypatch):
+    """The changed boxes a map redraws under are kept apart for a few movers, and past
+    ``MAX_CHANGED_PARTS`` in all (over every batch) only their union is used: a map's region
+    costs a few calls, not one a mover."""
+    import systems.shadow_system as shadow_system
+    from engine.render.instances import MAX_CHANGED_PARTS
+    from tests.support import own_mesh
+
+    seen = []
+
+    def recording(fit, box, parts, resolution):
+        seen.append(None if parts is None else len(parts))
+        return changed_region(fit, box, parts, resolution)
+
+    monkeypatch.setattr(shadow_system, "changed_region", recording)
+
+    def build(world):
+        _build(3)(world)
+        world.resources["movers"] = [world.spawn(Transform(position=(-4.0 + 0.5 * k, 0.3, -3.0)),
+                                                 MeshRef(own_mesh(box((0.2, 0.2, 0.2)))), Material())
+                                     for k in range(MAX_CHANGED_PARTS)]   # a batch each
+
+    runner = scene(build, (64, 48))
+    runner.frame()
+    runner.frame()
+    movers = runner.world.resources["movers"]
+    for count, expected in ((2, 4), (MAX_CHANGED_PARTS, None)):   # each mover's old and new box
+        seen.clear()
+        for entity in movers[:count]:
+            transform = runner.world.get(entity, Transform)
+            transform.position = glm.vec3(transform.position) + glm.vec3(0.0, 0.0, 0.05)
+        runner.frame()
+        assert seen and set(seen) == {expected}, (count, seen)

@@ -23,7 +23,7 @@ from engine.core.color import srgb_to_linear
 from engine.core.errors import GLLimitError
 from engine.render.gl_context import GLCapabilities
 from engine.render.gpu import BACKGROUND, Gpu, Shared
-from engine.render.instances import BatchKey, GpuMesh, InstanceBatch
+from engine.render.instances import MAX_CHANGED_PARTS, BatchKey, GpuMesh, InstanceBatch
 from engine.render.irradiance import IrradianceTable
 from engine.render.level_copies import LevelCopies
 from engine.render.path_checks import PathChecks
@@ -332,8 +332,9 @@ class Renderer(Gpu):
 
     def take_changes(self) -> tuple[tuple[np.ndarray, np.ndarray] | None, list | None]:
         """``take_changed_box``'s box and the boxes it holds (each batch's few changed rows'
-        own, [lo, hi]; None: too many to keep, the box alone), forgotten: a shadow map redraws
-        only the texels under those in it, not all under a box spanning the level."""
+        own, [lo, hi]; None: past ``MAX_CHANGED_PARTS`` in all, the box alone), forgotten: a
+        shadow map redraws only the texels under those in it, not all under a box spanning
+        the level."""
         boxes, parts = [], []
         for batch in self.batches.values():
             box, batch_parts = batch.take_changes()
@@ -341,6 +342,8 @@ class Renderer(Gpu):
                 continue
             boxes.append(box)
             parts = None if parts is None or batch_parts is None else parts + batch_parts
+            if parts is not None and len(parts) > MAX_CHANGED_PARTS:
+                parts = None   # many movers: a map's region from the box alone (a few calls, not one a part)
         if self._dropped_changes is not None:
             boxes.append(self._dropped_changes)
             if parts is not None:
