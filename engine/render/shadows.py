@@ -220,10 +220,9 @@ class ShadowMaps:
         where the tile lies and the filter's margin."""
         texels = self._draw_tile(tile, MAX_DIRECTIONAL_LIGHTS + ring, fit, resolution, region)
         width = self.atlas.size[0]
-        written = (fit, resolution, softness, width, tile, slot)
         key = MAX_DIRECTIONAL_LIGHTS + ring
         level = self._level_uv[slot]   # the light's level map, drawn before its rings
-        written = (*written, level)
+        written = (fit, resolution, softness, width, tile, slot, level)
         if self._block_rows.get(key) != written:
             x, y = self.tile_origin(tile)
             # Both maps are the same light space through an orthographic projection (scale and
@@ -323,6 +322,7 @@ class ShadowMaps:
         """Directional light ``slot`` casts no shadow (off, or no light there)."""
         self.block[16 * MAX_DIRECTIONAL_LIGHTS + 4 * slot + 3] = 0.0
         self._block_rows.pop(slot, None)
+        self._level_uv.pop(slot, None)
         kept = self._fit_blocks.pop(slot, None)
         if kept is not None:
             kept[2].release()
