@@ -229,8 +229,8 @@ def test_a_ring_redraws_under_the_changes_in_it_not_under_the_box_holding_them_a
     level = directional_fit(LIGHT, np.array([-30.0, 0.0, -30.0]), np.array([30.0, 3.0, 30.0]), 2048)
     eye = (0.0, 1.6, 0.0)
     ring = ring_fit(level, ring_cell(level, eye, 2.0, 2048), 2.0, 2048)
-    near = (np.array([0.5, 0.0, -0.5]), np.array([1.1, 0.6, 0.1]))
-    far = (np.array([20.0, 0.0, 5.0]), np.array([20.6, 0.6, 5.6]))
+    near = ([0.5, 0.0, -0.5], [1.1, 0.6, 0.1])   # the parts as the renderer gives them: floats
+    far = ([20.0, 0.0, 5.0], [20.6, 0.6, 5.6])
     union = (np.minimum(near[0], far[0]), np.maximum(near[1], far[1]))
     assert changed_region(ring, union, [near, far], 2048) == map_region(ring, *near, 2048)
     x, y, w, h = map_region(ring, *near, 2048)

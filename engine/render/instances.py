@@ -619,14 +619,14 @@ class InstanceBatch:
         return self.take_changes()[0]
 
     def take_changes(self) -> tuple[tuple[np.ndarray, np.ndarray] | None, list | None]:
-        """``take_changed_box``'s box and the boxes it holds ([lo, hi] arrays; None: too many
-        to keep, the box alone), both forgotten."""
+        """``take_changed_box``'s box ([lo, hi] arrays) and the boxes it holds ([lo, hi]
+        lists of floats, as ``shadow_rules.changed_region`` reads them: no array a part;
+        None: too many to keep, the box alone), both forgotten."""
         changed, self._changed = self._changed, None
         parts, self._changed_parts = self._changed_parts, []
         if changed is None:
             return None, []
-        return (np.array(changed[0]), np.array(changed[1])), \
-            None if parts is None else [(np.array(lo), np.array(hi)) for lo, hi in parts]
+        return (np.array(changed[0]), np.array(changed[1])), parts
 
     @property
     def row_boxes(self) -> np.ndarray:

@@ -332,7 +332,7 @@ class Renderer(Gpu):
 
     def take_changes(self) -> tuple[tuple[np.ndarray, np.ndarray] | None, list | None]:
         """``take_changed_box``'s box and the boxes it holds (each batch's few changed rows'
-        own, [lo, hi]; None: past ``MAX_CHANGED_PARTS`` in all, the box alone), forgotten: a
+        own, [lo, hi] lists of floats; None: past ``MAX_CHANGED_PARTS`` in all, the box alone), forgotten: a
         shadow map redraws only the texels under those in it, not all under a box spanning
         the level."""
         boxes, parts = [], []
@@ -347,7 +347,7 @@ class Renderer(Gpu):
         if self._dropped_changes is not None:
             boxes.append(self._dropped_changes)
             if parts is not None:
-                parts.append(self._dropped_changes)
+                parts.append((self._dropped_changes[0].tolist(), self._dropped_changes[1].tolist()))
             self._dropped_changes = None
         return _union(boxes), parts
 

@@ -143,24 +143,33 @@ REGION_WHOLE_SHARE = 0.5
 _REGION_ROWS: list = [None, None]
 
 
-def map_region(fit: DirectionalFit, lo: np.ndarray, hi: np.ndarray,
-               resolution: int) -> tuple[int, int, int, int] | None:
-    """The texels (x, y, width, height) of a directional light's map that the world box
-    [lo, hi] covers, seen along the light, padded; None when they are most of the map (draw
-    it whole).  A caster's shadow is in the map only where its footprint is: moving it from
-    one box to another changes only the texels under both.
+def _region_rows(fit: DirectionalFit) -> tuple:
+    """The two rows of ``fit``'s view-projection ``map_region`` reads (x and y in clip space)
+    as plain floats, kept for the last fit given (a light's fit lasts until it is fitted again)."""
+    if _REGION_ROWS[0] is not fit:
+        vp = fit.view_proj
+        _REGION_ROWS[:] = fit, tuple(tuple(float(vp[column][row]) for column in range(4)) for row in (0, 1))
+    return _REGION_ROWS[1]
+
+
+def _floats(v) -> list[float]:
+    """A box corner as Python floats (a numpy array's, or the floats themselves)."""
+    return v.tolist() if isinstance(v, np.ndarray) else v
+
+
+def _footprint(rows: tuple, lo, hi, resolution: int) -> tuple[int, int, int, int]:
+    """The padded texel rectangle (x0, y0, x1, y1), clamped to the map, that the world box
+    [lo, hi] (Python floats) covers under the view-projection ``rows`` (``_region_rows``): empty (x1 <= x0
+    or y1 <= y0) where it misses the map.
 
     The projection is orthographic (affine), so along each map axis the box's lowest corner
     takes, axis by axis, the lower of ``m * lo`` and ``m * hi``, and the highest the higher:
     the same bounds as the eight corners' (to rounding, which the padding covers), in a
     dozen float operations rather than an array product a frame."""
-    if _REGION_ROWS[0] is not fit:
-        vp = fit.view_proj
-        _REGION_ROWS[:] = fit, tuple(tuple(float(vp[column][row]) for column in range(4)) for row in (0, 1))
-    lo_x, lo_y, lo_z = lo.tolist()
-    hi_x, hi_y, hi_z = hi.tolist()
+    lo_x, lo_y, lo_z = lo
+    hi_x, hi_y, hi_z = hi
     ends = []
-    for m0, m1, m2, m3 in _REGION_ROWS[1]:
+    for m0, m1, m2, m3 in rows:
         a, b = m0 * lo_x, m0 * hi_x
         c, d = m1 * lo_y, m1 * hi_y
         e, f = m2 * lo_z, m2 * hi_z
@@ -168,8 +177,13 @@ def map_region(fit: DirectionalFit, lo: np.ndarray, hi: np.ndarray,
         high = (b if a < b else a) + (d if c < d else c) + (f if e < f else e) + m3
         ends.append(((low * 0.5 + 0.5) * resolution, (high * 0.5 + 0.5) * resolution))
     (low_x, high_x), (low_y, high_y) = ends
-    x0, y0 = max(math.floor(low_x) - REGION_PAD, 0), max(math.floor(low_y) - REGION_PAD, 0)
-    x1, y1 = min(math.ceil(high_x) + REGION_PAD, resolution), min(math.ceil(high_y) + REGION_PAD, resolution)
+    return (max(math.floor(low_x) - REGION_PAD, 0), max(math.floor(low_y) - REGION_PAD, 0),
+            min(math.ceil(high_x) + REGION_PAD, resolution), min(math.ceil(high_y) + REGION_PAD, resolution))
+
+
+def _as_region(x0: int, y0: int, x1: int, y1: int, resolution: int) -> tuple[int, int, int, int] | None:
+    """(x, y, width, height) of the texels [x0, x1) x [y0, y1): (0, 0, 0, 0) when empty, None
+    past ``REGION_WHOLE_SHARE`` of the map (draw it whole)."""
     if x1 <= x0 or y1 <= y0:
         return (0, 0, 0, 0)
     if (x1 - x0) * (y1 - y0) > REGION_WHOLE_SHARE * resolution * resolution:
@@ -177,31 +191,34 @@ def map_region(fit: DirectionalFit, lo: np.ndarray, hi: np.ndarray,
     return x0, y0, x1 - x0, y1 - y0
 
 
-def changed_region(fit: DirectionalFit, box: tuple[np.ndarray, np.ndarray] | None, parts: list | None,
+def map_region(fit: DirectionalFit, lo, hi, resolution: int) -> tuple[int, int, int, int] | None:
+    """The texels (x, y, width, height) of a directional light's map that the world box
+    [lo, hi] (arrays or floats) covers, seen along the light, padded; None when they are
+    most of the map (draw it whole).  A caster's shadow is in the map only where its
+    footprint is: moving it from one box to another changes only the texels under both."""
+    return _as_region(*_footprint(_region_rows(fit), _floats(lo), _floats(hi), resolution), resolution)
+
+
+def changed_region(fit: DirectionalFit, box: tuple | None, parts: list | None,
                    resolution: int) -> tuple[int, int, int, int] | None:
-    """``map_region`` of what changed: the rectangle holding the regions of each of ``parts``
-    (the changed boxes, [lo, hi]) that falls in the map, or of their union ``box`` where
-    they are not known (``parts`` None); (0, 0, 0, 0) for nothing (``box`` None, or every
-    part outside the map); None: most of the map (draw it whole).  Three crates spinning
-    metres apart change a small region each, not the map under the box holding all three."""
+    """``map_region`` of what changed: the rectangle holding the footprints of each of
+    ``parts`` (the changed boxes, [lo, hi] lists of floats) that fall in the map, or of
+    their union ``box`` where they are not known (``parts`` None); (0, 0, 0, 0) for nothing
+    (``box`` None, or every part outside the map); None: most of the map (draw it whole).
+    Three crates spinning metres apart change a small region each, not the map under the
+    box holding all three."""
     if box is None:
         return (0, 0, 0, 0)
     if parts is None:
         return map_region(fit, box[0], box[1], resolution)
+    rows = _region_rows(fit)
     x0 = y0 = resolution
     x1 = y1 = 0
     for lo, hi in parts:
-        region = map_region(fit, lo, hi, resolution)
-        if region is None:
-            return None
-        x, y, w, h = region
-        if w * h:
-            x0, y0, x1, y1 = min(x0, x), min(y0, y), max(x1, x + w), max(y1, y + h)
-    if x1 <= x0 or y1 <= y0:
-        return (0, 0, 0, 0)
-    if (x1 - x0) * (y1 - y0) > REGION_WHOLE_SHARE * resolution * resolution:
-        return None
-    return x0, y0, x1 - x0, y1 - y0
+        a0, b0, a1, b1 = _footprint(rows, lo, hi, resolution)
+        if a1 > a0 and b1 > b0:
+            x0, y0, x1, y1 = min(x0, a0), min(y0, b0), max(x1, a1), max(y1, b1)
+    return _as_region(x0, y0, x1, y1, resolution)
 
 
 def point_reach(position: np.ndarray, light_range: float) -> tuple[np.ndarray, np.ndarray]:
