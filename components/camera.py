@@ -11,6 +11,7 @@ from components.limits import (
     MAX_LIGHT_BOUNCES,
     MAX_SHADOW_CASCADES,
     MIN_SHADOW_DISTANCE,
+    MIN_SPOT_ANGLE,
     check_near_far,
 )
 from components.tracking import (
@@ -159,7 +160,16 @@ class PointLight(TrackedComponent):
     ``shadows`` (off by default, as in most engines: six views a light): things within its
     range cast shadows, from a cube shadow map of ``shadow_resolution`` texels a face,
     redrawn only when a caster in its range or the light changed.  ``bounces`` as
-    ``DirectionalLight.bounces`` (default 1; 0 to 4 mirrors and portals in a row)."""
+    ``DirectionalLight.bounces`` (default 1; 0 to 4 mirrors and portals in a row).
+
+    ``spot_angle`` (degrees, default 180: all round) makes it a spot light: it shines only
+    within that angle of the entity's -Z (its forward, as a camera looks; turn the Transform
+    to aim it), a cone ``2 * spot_angle`` across, like Godot's ``spot_angle`` and half of
+    Unity's ``spotAngle``.  ``spot_blend`` (0 to 1, default 0.15) is the share of that angle
+    over which its light fades out towards the edge (three.js's ``penumbra``): 0 a hard
+    edge.  Through a mirror or portal the cone is carried with the light (a flashlight aimed
+    at a mirror lights what the mirror faces, within the reflected cone); the shadow cube is
+    the point light's (``engine/rules/light_rules.py`` ``spot_cone``)."""
 
     color: Any = field(default_factory=lambda: glm.vec4(1.0))
     intensity: float = 1.0
@@ -168,6 +178,8 @@ class PointLight(TrackedComponent):
     shadow_resolution: int = 512
     shadow_softness: float = 1.0
     bounces: int = 1
+    spot_angle: float = 180.0
+    spot_blend: float = 0.15
 
     def _validate(self, name: str, value: Any) -> Any:
         if name == "color":
@@ -178,5 +190,9 @@ class PointLight(TrackedComponent):
             # At most a camera's far plane: the range is the shadow cube's far plane, whose
             # perspective overflows float32 near its top (3.4e38 cast no shadow, silently).
             return finite(self, name, value, positive=True, high=MAX_FAR)
+        if name == "spot_angle":
+            return finite(self, name, value, low=MIN_SPOT_ANGLE, high=180.0)
+        if name == "spot_blend":
+            return finite(self, name, value, low=0.0, high=1.0)
         shadow = _shadow_field(self, name, value)
         return value if shadow is None else shadow

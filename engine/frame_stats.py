@@ -84,6 +84,7 @@ class RenderStats(BudgetLedger):
     shadow_maps_drawn: int = 0           # (their draws: shadow_draw_calls, not in passes or draw_calls)
     shadow_draw_calls: int = 0
     shadow_texels_drawn: int = 0         # of directional maps: a moved caster redraws only its footprint's
+    shadow_faces_drawn: int = 0          # of point lights' cubes: a spot's cone lights only some
     shadow_maps_kept: int = 0
     shadows_cut: int = 0
     # A sun's cascades about the camera (DirectionalLight.shadow_cascades; each a map, counted

@@ -113,7 +113,7 @@ vec3 direct_lighting(Surface s) {
         vec3 l = d / max(dist, 1e-4);
         float nl = max(dot(s.normal, l), 0.0);
         float fade = clamp(1.0 - pow(dist / range, 4.0), 0.0, 1.0);
-        float falloff = fade * fade / (dist * dist + 1.0);
+        float falloff = fade * fade / (dist * dist + 1.0) * spot_factor(lights.point_spot[i], l);
         if (nl > 0.0 && falloff > 0.0) {
             total += (diffuse + ggx_specular(s.normal, l, s.to_eye, s.f0, s.roughness))
                      * lights.point_color[i].rgb * nl * falloff

@@ -39,19 +39,21 @@ from engine.render.sky import sky_model
 from engine.render.views import MAX_DIRECTIONAL_LIGHTS, MAX_POINT_LIGHTS, lights_block
 from engine.rules.frame_rules import frame_rules
 from engine.rules.light_rules import (
+    ALL_ROUND,
     SAME_SUN_DEGREES,
     SAME_SUN_TINT,
     KeptLights,
     SkySun,
     choose_lights,
     cube_serves,
+    lamp_cone,
     sky_sun,
     view_eyes,
 )
 
 # A freed slot no light took yet: black (no light), its range 1 (no division by zero).
 _NO_SUN = ((0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
-_NO_LAMP = ((0.0, 0.0, 0.0), 1.0, (0.0, 0.0, 0.0))
+_NO_LAMP = ((0.0, 0.0, 0.0), 1.0, (0.0, 0.0, 0.0), ALL_ROUND)
 
 
 def ambient_sh(world: World, sun: SkySun | None = None) -> np.ndarray:
@@ -165,7 +167,7 @@ class PrepareSystem(esper.Processor):
                 point.append(_NO_LAMP)
                 continue
             light, t = world.get(entity, PointLight), world.get(entity, Transform)
-            point.append((t.world[3].xyz, light.range, light.color.xyz * light.intensity))
+            point.append((t.world[3].xyz, light.range, light.color.xyz * light.intensity, lamp_cone(light, t.world)))
         return directional, point
 
     def _count_cut(self, kept: KeptLights) -> None:

@@ -34,6 +34,7 @@ import numpy as np
 
 from components import DirectionalLight, Material, MeshRef, PointLight, Refractive, Transform, Visibility
 from components.tracking import raw_field
+from engine.core.cube_faces import CUBE_FACES
 from engine.core.transforms import current_world_matrix
 from engine.core.world import World
 from engine.render.renderer import Renderer
@@ -41,7 +42,7 @@ from engine.render.shadows import LIGHT_LIMITS, VIRTUAL_RESOLUTION
 from engine.render.views import MAX_DIRECTIONAL_LIGHTS
 from engine.resources import RenderStats, Surfaces
 from engine.rules.frame_rules import active_camera_parts
-from engine.rules.light_rules import KeptLights, kept_lights
+from engine.rules.light_rules import KeptLights, cube_faces_lit, kept_lights, lamp_cone
 from engine.rules.probe_rules import world_bounds
 from engine.rules.shadow_rules import (
     MAX_VIRTUAL_LIGHTS,
@@ -301,14 +302,16 @@ class ShadowSystem(esper.Processor):
         for slot, index, entity, light, transform in casting:
             position = transform.world[3].xyz
             published.points.append((tuple(position), light.range))
-            key = (entity, tuple(position), light.range, light.shadow_resolution, light.shadow_softness, maps.filter)
+            faces = cube_faces_lit(lamp_cone(light, transform.world), [face.forward for face in CUBE_FACES])
+            key = (entity, tuple(position), light.range, light.shadow_resolution, light.shadow_softness, maps.filter,
+                   faces)
             reached = len(changed_lo) and boxes_in_reach(changed_lo, changed_hi, np.array(position), light.range).any()
             if key == self._point.get(slot) and not reached:
                 maps.keep_point(slot, index)
                 stats.shadow_maps_kept += 1
                 continue
             stats.shadow_path = maps.draw_point(slot, index, position, light.range, light.shadow_resolution,
-                                                light.shadow_softness, layered)
+                                                light.shadow_softness, layered, faces)
             self._point[slot] = key
             stats.shadow_maps_drawn += 1
         used = {row[0] for row in casting}
@@ -366,7 +369,8 @@ class ShadowSystem(esper.Processor):
                      for entity in kept.point if entity is not None]
             directional = [(entity, raw_field(light, "direction"), raw_field(light, "color").xyz * light.intensity)
                            for entity, light in suns]
-            points = [(entity, transform.world[3].xyz, light.range, raw_field(light, "color").xyz * light.intensity)
+            points = [(entity, transform.world[3].xyz, light.range, raw_field(light, "color").xyz * light.intensity,
+                       lamp_cone(light, transform.world))
                       for entity, (light, transform) in lamps]
             bounces = {entity: light.bounces for entity, light in suns}
             bounces.update({entity: light.bounces for entity, (light, _) in lamps})
@@ -382,7 +386,7 @@ class ShadowSystem(esper.Processor):
             if slot == MAX_VIRTUAL_LIGHTS:
                 stats.virtual_lights_cut += 1
                 continue
-            key = (light.light, light.path, light.kind, light.position, light.color, light.light_range,
+            key = (light.light, light.path, light.kind, light.position, light.color, light.light_range, light.cone,
                    light.exit_plane, light.aperture, light.apertures,
                    tuple((leg.carry.to_bytes(), tuple(p.to_bytes() for p in leg.planes), leg.skip)
                          for leg in light.legs),

@@ -59,8 +59,8 @@ SHADOW_FILTERS = ("grid", "single")
 LIGHT_LIMITS = LightLimits(MAX_DIRECTIONAL_LIGHTS, MAX_POINT_LIGHTS, MAX_POINT_SHADOWS)
 VIRTUAL_RESOLUTION = 1024   # texels a side of a virtual light's map (a tile of the virtual atlas)
 # The VirtualLights block (shaders/include/virtual_lights.glsl): a count, then per light a
-# matrix and seven vectors.
-VIRTUAL_FIELDS = ("position", "color", "exit", "origin", "u", "v", "params")
+# matrix and eight vectors.
+VIRTUAL_FIELDS = ("position", "color", "exit", "origin", "u", "v", "params", "spot")
 # ... then, for light reflected more than once, each light's further outlines (the earlier
 # surfaces as the later ones carry them): a plane, a corner and two edges each.
 VIRTUAL_MORE = MAX_APERTURES - 1
@@ -382,6 +382,7 @@ class ShadowMaps:
             "u": (*_over_length(light.aperture[1]), 0.0),
             "v": (*_over_length(light.aperture[2]), 0.0),
             "params": (1.0 / width, 1.0, self._taps(1.0), float(len(more))),
+            "spot": light.cone,
         }
         for index, name in enumerate(VIRTUAL_FIELDS):
             at = 4 + 16 * MAX_VIRTUAL_LIGHTS + 4 * (index * MAX_VIRTUAL_LIGHTS + slot)
@@ -404,16 +405,20 @@ class ShadowMaps:
 
     # --- point lights ---------------------------------------------------------------------
     def draw_point(self, slot: int, light_index: int, position: glm.vec3, light_range: float, resolution: int,
-                   softness: float, layered: bool) -> str:
+                   softness: float, layered: bool, faces: tuple[bool, ...] = (True,) * 6) -> str:
         """Draw point light ``light_index``'s distance cube into cube ``slot``: one layered
-        pass (``layered``) or six views.  Returns the path taken."""
+        pass (``layered``, every face lit) or a view a face, the faces a spot's cone does not
+        light (``faces`` False: ``light_rules.cube_faces_lit``) cleared to "nothing nearer
+        than the range" and not drawn.  Returns the path taken."""
         cube = self._cube(slot, resolution)
         views = [View(view=glm.lookAt(position, position + glm.vec3(forward), glm.vec3(up)),
                       proj=glm.perspective(glm.radians(90.0), 1.0, POINT_NEAR, max(light_range, POINT_NEAR * 2)),
                       eye=glm.vec3(position), size=(resolution, resolution), name=f"point shadow {slot} face {face}",
                       kinds=0, layers=ALL_LAYERS)
                  for face, (forward, _, up) in enumerate(CUBE_FACES)]
-        path = "layered" if layered and self._draw_layered(slot, cube, views, light_range) else "six_pass"
+        every = all(faces)
+        path = "layered" if every and layered and self._draw_layered(slot, cube, views, light_range) else "six_pass"
+        stats = self.renderer.stats
         if path == "six_pass":
             self._distance_program["light_range"].value = light_range
             for face, view in enumerate(views):
@@ -422,7 +427,11 @@ class ShadowMaps:
                 rect = (0, 0, resolution, resolution)
                 apply_pass_state(self.ctx, _CASTERS, rect)
                 framebuffer.clear(1.0, 1.0, 1.0, 1.0, depth=1.0)
-                self._draw_casters(view, self._distance_program)
+                if faces[face]:
+                    self._draw_casters(view, self._distance_program)
+                    stats.shadow_faces_drawn += 1
+        else:
+            stats.shadow_faces_drawn += 6
         self._slots[light_index] = slot
         self._cube_lights[slot] = light_index
         base = (64 + 16) * MAX_DIRECTIONAL_LIGHTS // 4 + MAX_POINT_LIGHTS + 4 * slot

@@ -66,7 +66,7 @@ MAX_POINT_SHADOWS = 2  # cube samplers in shaders/include/shadows.glsl
 MAX_SHADOW_RINGS = MAX_SHADOW_CASCADES - 1  # a sun's cascades about the camera besides its level map
 MAX_IRRADIANCE_PROBES = 32   # influence boxes the scene shader blends from (more: the first kept, a warning)
 SKY_SH_COEFFICIENTS = 9  # the sky's irradiance coefficients (engine/render/irradiance.py)
-LIGHTS_BLOCK_BYTES = 16 * SKY_SH_COEFFICIENTS + 16 + 2 * 16 * MAX_DIRECTIONAL_LIGHTS + 2 * 16 * MAX_POINT_LIGHTS
+LIGHTS_BLOCK_BYTES = 16 * SKY_SH_COEFFICIENTS + 16 + 2 * 16 * MAX_DIRECTIONAL_LIGHTS + 3 * 16 * MAX_POINT_LIGHTS
 
 
 @dataclass
@@ -189,7 +189,8 @@ def lights_block(sky_sh: Sequence[Sequence[float]] | np.ndarray, directional: li
                  point: list[tuple]) -> bytes:
     """Pack the Lights block (shaders/include/lights.glsl, std140): ``sky_sh`` the sky's nine
     irradiance coefficients (9, 3) (``engine.render.irradiance``), directional =
-    [(direction, rgb)], point = [(position, range, rgb)]."""
+    [(direction, rgb)], point = [(position, range, rgb, cone)] (``cone``: the spot cone,
+    ``light_rules.spot_cone``; ``ALL_ROUND`` for a point light)."""
     data = np.zeros(LIGHTS_BLOCK_BYTES // 4, np.float32)
     sh = np.asarray(sky_sh, np.float64)
     if sh.shape != (SKY_SH_COEFFICIENTS, 3):
@@ -204,9 +205,10 @@ def lights_block(sky_sh: Sequence[Sequence[float]] | np.ndarray, directional: li
         data[base + 4 * i: base + 4 * i + 3] = direction
         data[base + 4 * (MAX_DIRECTIONAL_LIGHTS + i): base + 4 * (MAX_DIRECTIONAL_LIGHTS + i) + 3] = rgb
     base += 8 * MAX_DIRECTIONAL_LIGHTS
-    for i, (position, light_range, rgb) in enumerate(point[:MAX_POINT_LIGHTS]):
+    for i, (position, light_range, rgb, cone) in enumerate(point[:MAX_POINT_LIGHTS]):
         data[base + 4 * i: base + 4 * i + 4] = (*position, light_range)
         data[base + 4 * (MAX_POINT_LIGHTS + i): base + 4 * (MAX_POINT_LIGHTS + i) + 3] = rgb
+        data[base + 4 * (2 * MAX_POINT_LIGHTS + i): base + 4 * (2 * MAX_POINT_LIGHTS + i) + 4] = cone
     return data.tobytes()
 
 

@@ -21,6 +21,9 @@ is and in the rooms its portals open on, not the first sixteen made.
   the room a portal opens on, far from the camera, matters as much as the portal is large.
   (A frame has one Lights block for all its views, so a view's lights compete with the
   camera's.)
+  A spot light (``PointLight.spot_angle``) counts as the point light it is, its cone left
+  out: what it brings near the camera is at most that (its cone may light the floor at the
+  camera's feet while aimed away from the camera itself).
 - **Directional lights** by luminance.
 - **Ties** by creation order (entity id): the same answer every run.
 - **The sky's sun** (``sky_sun``): a generated sky whose ``Skybox.sun_direction`` is not
@@ -56,6 +59,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any, NamedTuple
@@ -150,6 +154,104 @@ def falloff(distance: np.ndarray, light_range: np.ndarray) -> np.ndarray:
     d = np.asarray(distance, np.float64)
     fade = np.clip(1.0 - np.power(d / np.asarray(light_range, np.float64), 4), 0.0, 1.0)
     return fade * fade / (d * d + 1.0)
+
+
+# A spot light's cone as the shaders read it (``spot_cone``): all round, a point light's.
+ALL_ROUND = (0.0, 0.0, 0.0, 1.0)
+# The narrowest fade at a cone's edge, in the cosine of the angle from its axis: a hard edge
+# (``PointLight.spot_blend`` 0) fades over this, a few hundredths of a degree, not a step.
+SPOT_EDGE = 1e-4
+
+
+def spot_cone(axis: Sequence[float], angle_degrees: float, blend: float) -> tuple[float, float, float, float]:
+    """A spot light's cone (``PointLight.spot_angle`` and ``spot_blend`` about ``axis``, the
+    way it shines) as the Lights and VirtualLights blocks hold it: (axis x k, -cos(outer) x k)
+    with k = 1 / (cos(inner) - cos(outer)), outer the angle, inner ``angle x (1 - blend)``.
+    Then for ``l`` the unit vector from a lit point to the light, dot(-l, xyz) + w is 0 on
+    the cone's edge and 1 on the inner cone's, and ``spot_factor`` smoothsteps it: one dot
+    product a pixel, no trigonometry, a vector a light.  All round (180 degrees):
+    ``ALL_ROUND``, whose factor is 1 everywhere."""
+    if angle_degrees >= 180.0:
+        return ALL_ROUND
+    a = np.asarray(axis, np.float64)
+    a = a / np.linalg.norm(a)
+    outer = np.cos(np.radians(angle_degrees))
+    inner = np.cos(np.radians(angle_degrees * (1.0 - blend)))
+    k = 1.0 / max(inner - outer, SPOT_EDGE)
+    return (float(a[0] * k), float(a[1] * k), float(a[2] * k), float(-outer * k))
+
+
+def lamp_cone(light: PointLight, world: Any) -> tuple[float, float, float, float]:
+    """``spot_cone`` of point light ``light`` whose entity's world matrix is ``world`` (glm):
+    about its -Z (the way a camera there would look), ``ALL_ROUND`` at 180 degrees."""
+    if light.spot_angle >= 180.0:
+        return ALL_ROUND
+    forward = world[2].xyz
+    return spot_cone((-forward.x, -forward.y, -forward.z), light.spot_angle, light.spot_blend)
+
+
+def cone_reaches(cone: Sequence[float], apex: Sequence[float], centre: Sequence[float], radius: float) -> bool:
+    """Whether a spot light at ``apex`` with ``cone`` (``spot_cone``) can light any point of
+    the ball of ``radius`` about ``centre``: the angle from its axis to the ball's centre,
+    less the ball's angular radius, within the cone's angle.  Conservative (a surface's
+    outline is tested by the ball holding it): it only rules out."""
+    c = np.asarray(cone, np.float64)
+    k = float(np.linalg.norm(c[:3]))
+    if k == 0.0:
+        return True
+    to = np.asarray(centre, np.float64) - np.asarray(apex, np.float64)
+    d = float(np.linalg.norm(to))
+    if d <= radius:
+        return True
+    outer = math.acos(max(-1.0, min(1.0, -c[3] / k)))
+    towards = math.acos(max(-1.0, min(1.0, float(to @ c[:3]) / (d * k))))
+    return towards - math.asin(radius / d) < outer
+
+
+# The widest angle from a cube face's axis to a direction that face holds (to its corners:
+# atan(sqrt(2))), and a margin for the shadow filter's reach across a face's edge.
+_FACE_REACH_DEGREES = math.degrees(math.atan(math.sqrt(2.0)))
+_FACE_MARGIN_DEGREES = 2.0
+
+
+def cube_faces_lit(cone: Sequence[float], axes: Sequence[Sequence[float]]) -> tuple[bool, ...]:
+    """Which faces of a point light's shadow cube (``axes``: each face's forward,
+    ``CUBE_FACES`` order) a spot's ``cone`` can light through: those whose pyramid of
+    directions comes within the cone's angle of its axis (with a margin for the filter).  A
+    face left out holds no point the light reaches, so its shadow is never read: a spot
+    aimed straight down 30 degrees wide draws one face, not six.  All True all round."""
+    c = np.asarray(cone, np.float64)
+    k = float(np.linalg.norm(c[:3]))
+    if k == 0.0:
+        return (True,) * len(axes)
+    outer = math.degrees(math.acos(max(-1.0, min(1.0, -c[3] / k))))
+    reach = outer + _FACE_REACH_DEGREES + _FACE_MARGIN_DEGREES
+    axis = c[:3] / k
+    return tuple(math.degrees(math.acos(max(-1.0, min(1.0, float(np.dot(axis, face)))))) < reach for face in axes)
+
+
+def spot_factor(cone: Sequence[float], to_light: np.ndarray) -> np.ndarray:
+    """How much of a spot light's light (``spot_cone``'s ``cone``) goes along the unit
+    vectors ``to_light`` reversed (rows: from lit points to the light): 0 outside the cone,
+    1 inside the inner cone, smoothstep between (``shaders/include/lights.glsl``
+    ``spot_factor``)."""
+    c = np.asarray(cone, np.float64)
+    t = np.clip(-(np.asarray(to_light, np.float64) @ c[:3]) + c[3], 0.0, 1.0)
+    return t * t * (3.0 - 2.0 * t)
+
+
+def carried_cone(cone: Sequence[float], carry: Any) -> tuple[float, float, float, float]:
+    """``cone`` as a light's image through a mirror or portal sees it: its axis turned by
+    ``carry``'s linear part (a glm 4x4 matrix), kept at its length (the same cone about the
+    carried axis: a mirror or a portal keeps angles)."""
+    c = np.asarray(cone, np.float64)
+    length = float(np.linalg.norm(c[:3]))
+    if length == 0.0:
+        return ALL_ROUND
+    m = np.array(carry.to_list(), np.float64).T   # glm's lists are its columns
+    turned = m[:3, :3] @ c[:3]
+    turned *= length / np.linalg.norm(turned)
+    return (float(turned[0]), float(turned[1]), float(turned[2]), float(c[3]))
 
 
 def point_importance(positions: np.ndarray, ranges: np.ndarray, rgb: np.ndarray,

@@ -23,6 +23,7 @@ from pyglm import glm
 from components.limits import MAX_LIGHT_BOUNCES
 from engine.core.budget import spending_order
 from engine.resources import Surfaces
+from engine.rules.light_rules import ALL_ROUND, carried_cone, cone_reaches, spot_factor
 
 # A directional light's map covers the level's box grown by this share of its diagonal (and
 # at least SHADOW_MARGIN metres), so a caster resting on the box's edge still has texels
@@ -191,7 +192,8 @@ def _as_region(x0: int, y0: int, x1: int, y1: int, resolution: int) -> tuple[int
     return x0, y0, x1 - x0, y1 - y0
 
 
-def map_region(fit: DirectionalFit, lo, hi, resolution: int) -> tuple[int, int, int, int] | None:
+def map_region(fit: DirectionalFit, lo: np.ndarray | list[float], hi: np.ndarray | list[float],
+               resolution: int) -> tuple[int, int, int, int] | None:
     """The texels (x, y, width, height) of a directional light's map that the world box
     [lo, hi] (arrays or floats) covers, seen along the light, padded; None when they are
     most of the map (draw it whole).  A caster's shadow is in the map only where its
@@ -474,6 +476,7 @@ class VirtualLight:
     path: tuple[int, ...] = ()       # the surfaces (mirrors, entry portals) in the order the light meets them
     apertures: tuple[Aperture, ...] = ()
     legs: tuple[Leg, ...] = ()
+    cone: tuple[float, float, float, float] = ALL_ROUND   # a point image's spot cone, carried (light_rules.spot_cone)
 
 
 def _outline(surface) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
@@ -533,17 +536,19 @@ def _reach(point: np.ndarray, corners: np.ndarray) -> float:
 
 
 def virtual_lights(directional: list[tuple[int, glm.vec3, glm.vec3]],
-                   points: list[tuple[int, glm.vec3, float, glm.vec3]],
+                   points: list[tuple[int, glm.vec3, float, glm.vec3, tuple]],
                    surfaces: Surfaces | None, bounces: dict[int, int] | None = None,
                    depth_cap: int = MAX_LIGHT_BOUNCES) -> list[VirtualLight]:
     """The virtual lights of this frame's lights through the surfaces that carry light:
     ``directional`` as (entity, direction travelled, colour x intensity), ``points`` as
-    (entity, position, range, colour x intensity), ``surfaces`` the ``Surfaces`` resource,
+    (entity, position, range, colour x intensity, spot cone: ``light_rules.spot_cone``, or
+    ``ALL_ROUND``), ``surfaces`` the ``Surfaces`` resource,
     ``bounces`` each light's limit (its ``bounces`` field; 1 when not given), ``depth_cap``
     the view tree's.
 
     A light makes an image through a surface when it reaches the surface's front (a point
-    light in front of it, within range; a directional one travelling towards it); an image
+    light in front of it, within range and, a spot, its cone reaching the surface's outline:
+    ``light_rules.cone_reaches``; a directional one travelling towards it); an image
     makes an image of its own through a further surface (light reflected more than once,
     mirror to mirror) while the chain is within the light's ``bounces``, the surface's
     ``max_depth`` (its n-th bounce is at depth n, as its n-th view in the view tree) and
@@ -571,14 +576,16 @@ def virtual_lights(directional: list[tuple[int, glm.vec3, glm.vec3]],
         o, u, v = entry
         corners = np.array([o, o + u, o + u + v, o + v])
         tint = glm.vec3(surface.tint) * surface.reflect_rate if surface.kind == "mirror" else glm.vec3(1.0)
-        steps.append((surface, exit_surface, aperture, corners, tint))
+        centre = corners.mean(axis=0)
+        ball = (centre, float(np.linalg.norm(corners - centre, axis=1).max()))   # what a spot's cone must reach
+        steps.append((surface, exit_surface, aperture, corners, tint, ball))
 
     def extend(light: VirtualLight | None, entity: int, kind: str, image: glm.vec3, light_range: float,
-               rgb: glm.vec3, limit: int) -> None:
+               rgb: glm.vec3, limit: int, cone: tuple = ALL_ROUND) -> None:
         depth = 1 if light is None else light.bounces + 1
         if depth > limit:
             return
-        for surface, exit_surface, aperture, corners, tint in steps:
+        for surface, exit_surface, aperture, corners, tint, ball in steps:
             if depth > min(surface.max_depth, depth_cap):
                 continue
             if light is not None and not _reaches_through(image, kind, light.apertures[0], corners):
@@ -594,6 +601,8 @@ def virtual_lights(directional: list[tuple[int, glm.vec3, glm.vec3]],
                 height = (glm.dot(glm.vec3(entry), glm.vec3(image)) + entry.w) / glm.length(glm.vec3(entry))
                 if height <= 0.0 or _reach(np.asarray(glm.vec3(image), np.float64), corners) >= light_range:
                     continue  # behind the surface, or its range ends before its outline
+                if not cone_reaches(cone, glm.vec3(image), *ball):
+                    continue  # a spot aimed away from the surface
                 new_image = glm.vec3(carry * glm.vec4(glm.vec3(image), 1.0))
             color = glm.vec3(rgb) * tint
             way_out = Leg(glm.mat4(1.0), (glm.vec4(surface.exit_plane),), (exit_surface.entity, surface.entity))
@@ -612,15 +621,17 @@ def virtual_lights(directional: list[tuple[int, glm.vec3, glm.vec3]],
                                 tuple(float(v) for v in color), float(light_range),
                                 aperture.plane, (aperture.origin, aperture.u, aperture.v), carry, entry,
                                 exit_surface.entity, surface.priority + (0 if light is None else light.priority),
-                                depth, path, apertures, legs)
+                                depth, path, apertures, legs,
+                                ALL_ROUND if kind == "directional" else carried_cone(cone, carry))
             found.append(made)
-            extend(made, entity, kind, new_image, light_range, color, limit)
+            extend(made, entity, kind, new_image, light_range, color, limit, made.cone)
 
     for entity, direction, rgb in directional:
         extend(None, entity, "directional", glm.normalize(glm.vec3(direction)), 0.0, glm.vec3(rgb),
                bounces.get(entity, 1))
-    for entity, position, light_range, rgb in points:
-        extend(None, entity, "point", glm.vec3(position), float(light_range), glm.vec3(rgb), bounces.get(entity, 1))
+    for entity, position, light_range, rgb, cone in points:
+        extend(None, entity, "point", glm.vec3(position), float(light_range), glm.vec3(rgb), bounces.get(entity, 1),
+               cone)
     return found
 
 
@@ -639,6 +650,8 @@ def light_path(light: VirtualLight, point: np.ndarray) -> list[np.ndarray] | Non
         if dist <= 1e-9 or dist >= light.light_range:
             return None
         l = to / dist
+        if spot_factor(light.cone, l) <= 0.0:
+            return None   # outside the spot's cone, as the image sees it
     else:
         l = -p / np.linalg.norm(p)
         dist = np.inf

@@ -64,6 +64,7 @@ from engine.core.game import GameSystem, spawn_camera
 from engine.core.world import World
 from engine.render.frame_views import FrameViews
 from engine.resources import Surfaces
+from engine.rules.light_rules import lamp_cone
 from engine.rules.raycast import raycast
 from engine.rules.shadow_rules import VirtualLight, light_path, virtual_lights
 from games.mirror_beam.beam import BeamPath, FirstSolid, hit_mirror, trace_beam
@@ -428,7 +429,8 @@ def reflected_light(world: World, surfaces: Surfaces) -> list[VirtualLight]:
     found: list[VirtualLight] = []
     for entity, (light, transform, _) in world.query(PointLight, Transform, BeamLamp):
         rgb = glm.vec3(light.color) * light.intensity
-        found += virtual_lights([], [(entity, glm.vec3(transform.world[3]), light.range, rgb)], surfaces,
+        found += virtual_lights([], [(entity, glm.vec3(transform.world[3]), light.range, rgb,
+                                      lamp_cone(light, transform.world))], surfaces,
                                 {entity: light.bounces})
     return found
 

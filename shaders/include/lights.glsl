@@ -8,4 +8,7 @@ layout(std140) uniform Lights {
     vec4 directional_color[MAX_DIRECTIONAL_LIGHTS]; // rgb: colour x intensity
     vec4 point_pos[MAX_POINT_LIGHTS];               // xyz: position, w: range
     vec4 point_color[MAX_POINT_LIGHTS];             // rgb: colour x intensity
+    vec4 point_spot[MAX_POINT_LIGHTS];              // the spot cone (light_rules.spot_cone; 0, 0, 0, 1: all round)
 } lights;
+
+#include "spot_cone.glsl"

@@ -23,6 +23,7 @@ layout(std140) uniform VirtualLights {
     vec4 virtual_v[MAX_VIRTUAL_LIGHTS];             // xyz: the other edge likewise
     vec4 virtual_params[MAX_VIRTUAL_LIGHTS];        // x: an atlas texel in uv, y: softness, z: taps a side,
                                                     // w: how many further outlines (virtual_more)
+    vec4 virtual_spot[MAX_VIRTUAL_LIGHTS];          // a point image's spot cone, carried (lights.glsl spot_factor)
     vec4 virtual_more[MAX_VIRTUAL_LIGHTS * (MAX_APERTURES - 1) * 4];  // per outline: plane, corner, u, v (as above)
 } virtual_lights;
 
@@ -81,7 +82,7 @@ vec3 virtual_lighting(vec3 position, vec3 normal, vec3 geometric, vec3 to_eye, v
             l = d / max(dist, 1e-4);
             float range = virtual_lights.virtual_color[i].w;
             float fade = clamp(1.0 - pow(dist / range, 4.0), 0.0, 1.0);  // lights.glsl's falloff, along the whole path
-            falloff = fade * fade / (dist * dist + 1.0);
+            falloff = fade * fade / (dist * dist + 1.0) * spot_factor(virtual_lights.virtual_spot[i], l);
         }
         float nl = dot(normal, l);
         float towards = dot(exit_plane.xyz, l);

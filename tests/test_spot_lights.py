@@ -1,0 +1,331 @@
+"""Spot lights (``PointLight.spot_angle`` and ``spot_blend``): a point light whose light goes
+only within a cone about its entity's -Z.
+
+Real frames on llvmpipe against a second computation: each floor pixel's angle from the
+spot's axis, worked out in float64 from the pixel's ray, says where the frame must equal the
+same lamp shining all round (inside the inner cone), the frame without the lamp (outside
+the cone) or lie between them (the fading edge); through a mirror, the lamp's image and its
+axis reflected by hand say where the reflected cone lands on the floor.  The cone's GLSL
+(``shaders/include/spot_cone.glsl``) is evaluated against its owner, ``light_rules``."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from pyglm import glm
+
+from components import ComponentValueError, Material, MeshRef, Mirror, PointLight, Transform, look_rotation
+from engine.assets.level_file import LevelError, load_level
+from engine.assets.mesh import box, plane, quad
+from engine.core.cube_faces import CUBE_FACES
+from engine.core.world import World
+from engine.rules.light_rules import ALL_ROUND, cone_reaches, cube_faces_lit, lamp_cone, spot_cone, spot_factor
+from tests.support import look_from, pixel_rays, srgb_to_linear
+from tests.test_one_owner import evaluate_glsl
+
+LAMP = np.array([0.0, 3.0, 0.0])
+ANGLE, BLEND = 30.0, 0.4
+INNER = ANGLE * (1.0 - BLEND)
+MARGIN = 2.5   # degrees either side of an edge left out (a pixel's footprint and FXAA)
+
+
+def _floor(world, spot_angle: float | None, aim=(0.0, -1.0, 0.0)) -> dict:
+    """A grey floor seen from above, and a lamp 3 m over its centre aimed along ``aim``
+    (``spot_angle`` None: no lamp)."""
+    ids = {"camera": look_from(world, (0.0, 7.0, 4.0), (0.0, 0.0, 0.0))}
+    world.spawn(Transform(), MeshRef(plane(16, 16)), Material(color=(0.8, 0.8, 0.8), roughness=1.0))
+    if spot_angle is not None:
+        ids["lamp"] = world.spawn(Transform(position=LAMP.tolist(), rotation=look_rotation(aim, (0.0, 0.0, -1.0))),
+                                  PointLight(intensity=12.0, range=15.0, spot_angle=spot_angle, spot_blend=BLEND))
+    world.resources["ids"] = ids
+    return ids
+
+
+def _floor_angles(runner, apex: np.ndarray, axis) -> np.ndarray:
+    """Each pixel's floor point's angle (degrees) from ``axis`` seen from ``apex``."""
+    eye, rays = pixel_rays(runner.engine.main_view, runner.size)
+    t = -eye[1] / rays[..., 1]
+    points = eye + rays * t[..., None]
+    to = points - apex
+    to /= np.linalg.norm(to, axis=-1, keepdims=True)
+    axis = np.asarray(axis, np.float64) / np.linalg.norm(axis)
+    return np.degrees(np.arccos(np.clip(to @ axis, -1.0, 1.0)))
+
+
+def _frames(scene, aim=(0.0, -1.0, 0.0)):
+    """The spot, the same lamp all round, and no lamp: three frames of one pose."""
+    spot = scene(lambda w: _floor(w, ANGLE, aim))
+    round_ = scene(lambda w: _floor(w, 180.0, aim))
+    dark = scene(lambda w: _floor(w, None))
+    return spot, spot.frame(), round_.frame(), dark.frame()
+
+
+def _check_cone(spot_rgb, round_rgb, dark_rgb, angles) -> None:
+    inside = angles < INNER - MARGIN
+    outside = angles > ANGLE + MARGIN
+    edge = (angles > INNER + MARGIN) & (angles < ANGLE - MARGIN)
+    assert inside.sum() > 300 and outside.sum() > 3000 and edge.sum() > 100, (inside.sum(), outside.sum(), edge.sum())
+    # The lamp lights the floor (not a black frame), and the spot as the lamp all round inside.
+    assert srgb_to_linear(round_rgb[inside]).mean() > srgb_to_linear(dark_rgb[inside]).mean() + 0.2
+    np.testing.assert_array_equal(spot_rgb[inside], round_rgb[inside])
+    # Outside the cone: as though there were no lamp, though the lamp all round lights there.
+    np.testing.assert_array_equal(spot_rgb[outside], dark_rgb[outside])
+    assert (round_rgb[outside].astype(int) - dark_rgb[outside]).max() > 20
+    # The edge fades: between the two, and strictly for most of it.
+    s, r, d = (x[edge].astype(int) for x in (spot_rgb, round_rgb, dark_rgb))
+    assert (s >= d - 1).all() and (s <= r + 1).all()
+    assert ((s > d + 2) & (s < r - 2)).all(axis=-1).mean() > 0.6
+
+
+def test_a_spot_lights_its_cone_as_the_lamp_all_round_and_nothing_outside(scene):
+    """A lamp 3 m over the floor aimed straight down with a 30-degree cone, 0.2 of it a fading
+    edge: inside 24 degrees of its axis each floor pixel is the lamp-all-round frame's, past 30
+    the lamp-less frame's, and between them it fades from one to the other."""
+    spot, spot_rgb, round_rgb, dark_rgb = _frames(scene)
+    _check_cone(spot_rgb, round_rgb, dark_rgb, _floor_angles(spot, LAMP, (0.0, -1.0, 0.0)))
+
+
+def test_turning_a_spot_moves_its_light(scene):
+    """Turning the lamp's Transform (its position kept) aims the cone elsewhere, the next
+    frame: the lit disc follows the new axis, as a scene made aimed that way draws it."""
+    aim = (1.2, -3.0, 0.8)
+    spot = scene(lambda w: _floor(w, ANGLE))
+    spot.frame()
+    lamp = spot.world.get(spot.world.resources["ids"]["lamp"], Transform)
+    lamp.rotation = look_rotation(aim, (0.0, 0.0, -1.0))
+    turned = spot.frame()
+    _, _, round_rgb, dark_rgb = _frames(scene, aim)
+    _check_cone(turned, round_rgb, dark_rgb, _floor_angles(spot, LAMP, aim))
+
+
+# --- through a mirror ----------------------------------------------------------------------
+# A mirror standing at z = 0 facing +z, 3 m wide and 2 m tall from the floor; the lamp in
+# front of it at 2 m up, aimed down at the mirror so its reflected cone falls on the floor in
+# front, away from where its own cone does.
+MIRROR_HALF = np.array([1.5, 1.0])   # half width (x), half height (y)
+MIRROR_CENTRE = np.array([0.0, 1.0, 0.0])
+SPOT_LAMP = np.array([0.0, 2.0, 2.5])
+SPOT_AIM = np.array([0.0, 1.0, 0.0]) - SPOT_LAMP   # at a point low on the mirror
+MIRROR_ANGLE = 15.0
+
+
+def _mirror_room(world, reflects: bool = True) -> None:
+    look_from(world, (2.5, 4.0, 7.0), (0.0, 0.0, 2.5))
+    world.spawn(Transform(), MeshRef(plane(16, 16)), Material(color=(0.8, 0.8, 0.8), roughness=1.0))
+    world.spawn(Transform(position=MIRROR_CENTRE.tolist()), MeshRef(quad(2 * MIRROR_HALF[0], 2 * MIRROR_HALF[1])),
+                Material(), Mirror(reflects_light=reflects))
+    world.spawn(Transform(position=SPOT_LAMP.tolist(), rotation=look_rotation(SPOT_AIM.tolist())),
+                PointLight(intensity=60.0, range=15.0, spot_angle=MIRROR_ANGLE, spot_blend=BLEND))
+
+
+def test_a_spot_aimed_at_a_mirror_lights_the_floor_within_the_reflected_cone(scene):
+    """The lamp's image behind the mirror (its position and axis reflected in z = 0, by hand)
+    lights a floor point in front when the line to the image crosses the mirror and the
+    point lies within the reflected cone: there the floor is brighter than with a mirror that
+    carries no light; past the cone, or where the line misses the mirror, the same."""
+    lit = scene(_mirror_room)
+    unlit = scene(lambda w: _mirror_room(w, reflects=False))
+    lit_rgb, unlit_rgb = lit.frame(), unlit.frame()
+    eye, rays = pixel_rays(lit.engine.main_view, lit.size)
+    t_floor = -eye[1] / rays[..., 1]
+    t_mirror = -eye[2] / rays[..., 2]
+    at_mirror = eye + rays * t_mirror[..., None]
+    hides = (t_mirror > 0) & (t_mirror < t_floor) & (np.abs(at_mirror[..., 0]) < MIRROR_HALF[0] + 0.1) \
+        & (at_mirror[..., 1] < 2 * MIRROR_HALF[1] + 0.1)
+    points = eye + rays * t_floor[..., None]
+    floor = ~hides & (points[..., 2] > 0.2)   # floor seen directly, in front of the mirror
+    image = SPOT_LAMP * np.array([1.0, 1.0, -1.0])
+    axis = SPOT_AIM * np.array([1.0, 1.0, -1.0])
+    to_image = image - points
+    s = points[..., 2] / -to_image[..., 2]   # where the line to the image meets z = 0
+    crossing = points + to_image * s[..., None]
+    margin = 0.08
+    through = (np.abs(crossing[..., 0]) < MIRROR_HALF[0] - margin) & (crossing[..., 1] > margin) \
+        & (crossing[..., 1] < 2 * MIRROR_HALF[1] - margin)
+    missed = (np.abs(crossing[..., 0]) > MIRROR_HALF[0] + margin) | (crossing[..., 1] > 2 * MIRROR_HALF[1] + margin)
+    angles = _floor_angles(lit, image, axis)
+    inner = MIRROR_ANGLE * (1.0 - BLEND)
+    # The lamp's own cone (the real axis) reaches none of these floor points.
+    direct = _floor_angles(lit, SPOT_LAMP, SPOT_AIM)
+    assert (direct[floor] > MIRROR_ANGLE + MARGIN).all()
+    inside = floor & through & (angles < inner - MARGIN)
+    outside = floor & (missed | (angles > MIRROR_ANGLE + MARGIN))
+    assert inside.sum() > 150 and outside.sum() > 3000, (inside.sum(), outside.sum())
+    brighter = srgb_to_linear(lit_rgb[inside]).mean(-1) > srgb_to_linear(unlit_rgb[inside]).mean(-1) + 0.03
+    assert brighter.all(), brighter.mean()
+    assert np.abs(lit_rgb[outside].astype(int) - unlit_rgb[outside]).max() <= 1
+    assert lit.stats.virtual_lights == 1
+
+
+def test_a_spot_aimed_away_from_a_mirror_makes_no_virtual_light(scene):
+    """A spot whose cone cannot reach the mirror's outline makes no image (no map, no light),
+    though a lamp all round there would."""
+    def build(world, angle):
+        _mirror_room(world)
+        for _, (light, transform) in world.query(PointLight, Transform):
+            transform.rotation = look_rotation((0.0, -1.0, 1.0))   # down and away from the mirror
+            light.spot_angle = angle
+    away = scene(lambda w: build(w, MIRROR_ANGLE))
+    away.frame()
+    assert away.stats.virtual_lights == 0
+    round_ = scene(lambda w: build(w, 180.0))
+    round_.frame()
+    assert round_.stats.virtual_lights == 1
+
+
+# --- the shadow cube -----------------------------------------------------------------------
+def _shadowed(world, spot_angle: float | None, aim, target, crate: bool = True) -> None:
+    """``_floor`` looked at ``target``, the lamp casting shadows, a crate in its light
+    between it and the floor (``crate``)."""
+    look_from(world, (target[0], 7.0, target[2] + 4.0), target)
+    world.spawn(Transform(), MeshRef(plane(16, 16)), Material(color=(0.8, 0.8, 0.8), roughness=1.0))
+    if crate:
+        toward = np.asarray(aim, np.float64) / np.linalg.norm(aim)
+        centre = LAMP + toward * (1.6 / -toward[1])    # on the axis, 1.4 m over the floor
+        world.spawn(Transform(position=centre.tolist()), MeshRef(box((0.5, 0.5, 0.5))), Material(color=(0.6, 0.5, 0.4)))
+    world.spawn(Transform(position=LAMP.tolist(), rotation=look_rotation(aim, (0.0, 0.0, -1.0))),
+                PointLight(intensity=12.0, range=15.0, spot_angle=spot_angle, spot_blend=BLEND, shadows=True,
+                           shadow_resolution=256))
+
+
+@pytest.mark.parametrize("aim, target, faces", [((0.0, -1.0, 0.0), (0.0, 0.0, 0.0), 1),
+                                                ((1.0, -1.0, 1.0), (2.0, 0.0, 2.0), 3)],
+                         ids=["down", "corner"])
+def test_a_spots_shadow_cube_draws_only_the_faces_its_cone_lights(scene, aim, target, faces):
+    """A 30-degree spot casting shadows draws one cube face aimed straight down, three aimed
+    at a cube corner (the faces its cone meets), not six; inside its cone the frame, the
+    crate's shadow in it, is the frame of the same lamp all round, whose cube has all six."""
+    spot = scene(lambda w: _shadowed(w, ANGLE, aim, target))
+    round_ = scene(lambda w: _shadowed(w, 180.0, aim, target))
+    bare = scene(lambda w: _shadowed(w, ANGLE, aim, target, crate=False))
+    spot_rgb, round_rgb, bare_rgb = spot.frame(), round_.frame(), bare.frame()
+    assert spot.stats.shadow_faces_drawn == faces and round_.stats.shadow_faces_drawn == 6
+    inside = _floor_angles(spot, LAMP, aim) < INNER - MARGIN
+    np.testing.assert_array_equal(spot_rgb[inside], round_rgb[inside])
+    # The crate's shadow is there (darker than the floor without it) where the cone lights.
+    darker = srgb_to_linear(spot_rgb[inside]).mean(-1) < 0.5 * srgb_to_linear(bare_rgb[inside]).mean(-1)
+    assert darker.sum() > 50, darker.sum()
+    spot.frame()
+    assert spot.stats.shadow_faces_drawn == 0   # nothing moved: the cube is kept
+
+
+def test_cube_faces_lit_holds_every_face_a_direction_in_the_cone_falls_on():
+    """Directions drawn inside random cones (to their very edge): the cube face each falls on
+    (its largest component's axis, the GL's face selection) is always among the faces lit."""
+    rng = np.random.default_rng(5)
+    axes = [face.forward for face in CUBE_FACES]
+    for _ in range(300):
+        axis = rng.normal(size=3)
+        axis /= np.linalg.norm(axis)
+        angle = float(rng.uniform(0.5, 179.0))
+        lit = cube_faces_lit(spot_cone(axis, angle, 0.2), axes)
+        side = np.cross(axis, rng.normal(size=(400, 3)))
+        side /= np.linalg.norm(side, axis=1, keepdims=True)
+        theta = np.radians(angle * np.sqrt(rng.uniform(0.0, 1.0, 400)))
+        theta[:40] = math.radians(angle)   # on the edge itself
+        d = axis * np.cos(theta)[:, None] + side * np.sin(theta)[:, None]
+        major = np.abs(d).argmax(axis=1)
+        face = 2 * major + (d[np.arange(len(d)), major] < 0)
+        assert all(lit[f] for f in set(face.tolist())), (axis, angle, lit)
+    assert cube_faces_lit(spot_cone((0.0, -1.0, 0.0), 30.0, 0.2), axes) == (False, False, False, True, False, False)
+    assert cube_faces_lit(ALL_ROUND, axes) == (True,) * 6
+
+
+# --- the rule -------------------------------------------------------------------------------
+def test_the_glsl_cone_is_the_rules(ctx, tmp_path):
+    """``spot_factor`` in spot_cone.glsl gives light_rules' ``spot_factor`` for cones of
+    every width and blend, all round included, at directions all over the sphere."""
+    rng = np.random.default_rng(11)
+    cones, directions = [], []
+    for angle in (0.1, 5.0, 30.0, 89.0, 90.0, 120.0, 179.0, 180.0):
+        for blend in (0.0, 0.15, 1.0):
+            axis = rng.normal(size=3)
+            cone = spot_cone(axis, angle, blend)
+            for _ in range(24):
+                # Directions near the cone's edge as well as anywhere.
+                d = rng.normal(size=3)
+                if rng.random() < 0.5 and angle < 180.0:
+                    a = axis / np.linalg.norm(axis)
+                    side = np.cross(a, d)
+                    side /= np.linalg.norm(side)
+                    theta = math.radians(angle * rng.uniform(1.0 - blend - 0.05, 1.05))
+                    d = a * math.cos(theta) + side * math.sin(theta)
+                cones.append(cone)
+                directions.append(-d / np.linalg.norm(d))   # from the point to the light
+    cones, directions = np.array(cones), np.array(directions)
+    owner = np.array([spot_factor(c, d) for c, d in zip(cones, directions, strict=True)])
+    glsl = _evaluate_pairs(ctx, tmp_path, cones, directions)
+    np.testing.assert_allclose(glsl, owner, atol=2e-4)
+    assert spot_cone((0.0, -1.0, 0.0), 180.0, 0.5) == ALL_ROUND
+    assert (owner == 0.0).any() and (owner == 1.0).any() and ((owner > 0.01) & (owner < 0.99)).any()
+
+
+def _evaluate_pairs(ctx, tmp_path, cones: np.ndarray, directions: np.ndarray) -> np.ndarray:
+    """spot_factor(cone, l) in GLSL for each row: the cones and the directions interleaved as
+    two texels a row (the evaluator's input is a row of texels; texel 2i the cone, 2i + 1 l)."""
+    inputs = np.empty((2 * len(cones), 4))
+    inputs[0::2] = cones
+    inputs[1::2, :3] = directions
+    inputs[1::2, 3] = 0.0
+    body = ("ivec2 at = ivec2(gl_FragCoord.xy); int i = at.x - at.x % 2;"
+            " vec4 cone = texelFetch(inputs, ivec2(i, 0), 0);"
+            " vec3 l = texelFetch(inputs, ivec2(i + 1, 0), 0).xyz;"
+            " color = vec4(spot_factor(cone, l));")
+    out = evaluate_glsl(ctx, tmp_path / "pairs", ["spot_cone.glsl"], body, inputs)
+    return out[0::2, 0]
+
+
+def test_cone_reaches_rules_out_only_what_the_cone_misses():
+    """``cone_reaches``: a ball straight ahead, one just past the edge by less than its
+    radius (reached), one well outside (not), one holding the apex (reached)."""
+    cone = spot_cone((0.0, 0.0, -1.0), 20.0, 0.1)
+    assert cone_reaches(cone, (0, 0, 0), (0, 0, -5), 0.5)
+    edge = np.array([math.sin(math.radians(22.0)), 0.0, -math.cos(math.radians(22.0))]) * 5.0
+    assert cone_reaches(cone, (0, 0, 0), edge, 0.5)       # 2 degrees past, the ball 5.7 degrees wide
+    assert not cone_reaches(cone, (0, 0, 0), edge * np.array([3.0, 1.0, 1.0]), 0.5)
+    assert not cone_reaches(cone, (0, 0, 0), (0, 0, 5), 0.5)
+    assert cone_reaches(cone, (0, 0, 0), (0, 0, 0.3), 0.5)
+    assert cone_reaches(ALL_ROUND, (0, 0, 0), (0, 0, 5), 0.5)
+
+
+# --- values -------------------------------------------------------------------------------
+@pytest.mark.parametrize("field, value", [("spot_angle", 0.0), ("spot_angle", 0.05), ("spot_angle", 180.5),
+                                          ("spot_angle", float("nan")), ("spot_angle", "wide"),
+                                          ("spot_blend", -0.1), ("spot_blend", 1.5), ("spot_blend", float("inf"))])
+def test_a_cone_past_its_limits_is_refused_naming_the_field(field, value):
+    with pytest.raises(ComponentValueError, match=f"PointLight.{field}"):
+        PointLight(**{field: value})
+    light = PointLight()
+    with pytest.raises(ComponentValueError, match=f"PointLight.{field}"):
+        setattr(light, field, value)
+
+
+def test_level_files_carry_the_cone(tmp_path):
+    """A level's PointLight takes spot_angle and spot_blend, and refuses a bad one naming the
+    file, the entity and the field."""
+    text = """[level]
+name = "A torch"
+
+[[entity]]
+name = "torch"
+[entity.Transform]
+position = [0.0, 3.0, 0.0]
+rotation = { yaw = 0, pitch = -90 }
+[entity.PointLight]
+spot_angle = 40.0
+spot_blend = 0.3
+"""
+    path = tmp_path / "spot.toml"
+    path.write_text(text)
+    world = World("spot")
+    made = load_level(path).spawn(world)
+    light = world.get(made["torch"], PointLight)
+    assert (light.spot_angle, light.spot_blend) == (40.0, 0.3)
+    transform = world.get(made["torch"], Transform)
+    cone = lamp_cone(light, glm.mat4_cast(transform.rotation))   # pitched down: it shines down
+    np.testing.assert_allclose(np.array(cone[:3]) / np.linalg.norm(cone[:3]), (0.0, -1.0, 0.0), atol=1e-6)
+    path.write_text(text.replace("40.0", "200.0"))
+    with pytest.raises(LevelError, match=r"PointLight\.spot_angle") as caught:
+        load_level(path).spawn(World("refused"))
+    assert str(path) in str(caught.value) and caught.value.entity == "torch"
