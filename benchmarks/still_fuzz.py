@@ -135,6 +135,7 @@ class StillCase:
     bloom: bool = False  # Bloom on the camera (its chain planned once a size: a resize changes it)
     visibility: str = "exact"  # the reflect stage's visibility mode, in both engines
     cascades: int = 1  # the sun's shadow cascades (rings about the camera besides its level map)
+    spot_angle: float = 180.0  # the point light's cone (PointLight.spot_angle; 180: all round), aimed at the box
     # Further changes, each (change, detail) after the last one's ``after`` frames (the tree
     # kept again, or refilling again, when the next comes); none after a refused one.
     then: list[tuple[str, dict[str, Any]]] = dataclasses.field(default_factory=list)
@@ -143,7 +144,7 @@ class StillCase:
         return (f"still {self.pair} depth {self.depth}, {len(self.panes)} panes {self.panes}, water {self.water}, "
                 f"see-through mirror {self.see_through_mirror}, sandwich {self.sandwich}; {self.still} still frames, "
                 f"rate {self.rate}, point light {self.point_light}, bloom {self.bloom}, {self.visibility}, "
-                f"cascades {self.cascades}; then "
+                f"cascades {self.cascades}, spot {self.spot_angle}; then "
                 f"{self.change} {self.detail}, {self.after} frames" + "".join(
                     f"; then {change} {detail}, {self.after} frames" for change, detail in self.then))
 
@@ -167,7 +168,7 @@ def random_still_case(rng: random.Random) -> StillCase:
                      detail=detail, after=rng.randint(3, 6), rate=rng.choice((1.0, 1.0, 0.95, 0.7)),
                      point_light=rng.random() < 0.4, bloom=rng.random() < 0.3,
                      visibility="predicted" if rng.random() < 0.25 else "exact", then=then,
-                     cascades=rng.choice((1, 1, 2, 3, 4)))
+                     cascades=rng.choice((1, 1, 2, 3, 4)), spot_angle=rng.choice((180.0, 180.0, 25.0, 60.0, 110.0)))
 
 
 def _random_change(rng: random.Random) -> tuple[str, dict[str, Any]]:
@@ -185,7 +186,7 @@ def _random_change(rng: random.Random) -> tuple[str, dict[str, Any]]:
         names = [f.name for f in dataclasses.fields(cls) if f.init and not f.name.startswith("_")]
         if target in ("light_in_place", "point_in_place"):
             detail = {"target": target, "field": rng.choice(("color", "direction") if target == "light_in_place"
-                                                            else ("position",)),
+                                                            else ("position", "turn")),
                       "value": rng.choice((rng.uniform(0.0, 2.0), float("nan"), 1e39, -1.0, 0.0))}
         else:
             field = rng.choice(names)
@@ -295,9 +296,10 @@ def _spawn(world, case: StillCase) -> dict[str, int]:
         for _, light in world.query_one(DirectionalLight):
             light.shadow_cascades, light.shadow_distance = case.cascades, 3.0
     if case.point_light:
-        named["point"] = world.spawn(Transform(position=(-0.3, 2.2, 0.4)),
+        lamp = glm.vec3(-0.3, 2.2, 0.4)
+        named["point"] = world.spawn(Transform(position=lamp, rotation=look_rotation(glm.vec3(0.8, 0.6, 0.0) - lamp)),
                                      PointLight(color=(1.0, 0.8, 0.6), intensity=3.0, range=6.0, shadows=True,
-                                                shadow_resolution=64))
+                                                shadow_resolution=64, spot_angle=case.spot_angle))
     if case.bloom:
         world.add_component(world.resources["camera"], Bloom(intensity=0.2))
     named["box"] = world.spawn(Transform(position=(0.8, 0.6, 0.0), scale=BOX_SCALE), MeshRef(l_mesh()),
@@ -499,7 +501,13 @@ class StillFuzzer:
             vector.x = detail["value"]  # an in-place edit: checked at the transform stage
             return None
         if target == "point_in_place":
-            world.get(entity, Transform).position.x = detail["value"]  # the light moved, in place
+            transform = world.get(entity, Transform)
+            if detail["field"] == "turn":   # aimed elsewhere (a spot's cone turns; a lamp all round is the same)
+                value = detail["value"]
+                turn = value if value == value and abs(value) < 10.0 else 0.5
+                transform.rotation = glm.angleAxis(turn, glm.vec3(0.0, 1.0, 0.0)) * transform.rotation
+                return None
+            transform.position.x = detail["value"]  # the light moved, in place
             return None
         cls = {"Mirror": Mirror, "Material": Material, "Transform": Transform, "Water": Water,
                "DirectionalLight": DirectionalLight, "PointLight": PointLight}[detail["cls"]]
