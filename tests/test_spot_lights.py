@@ -15,10 +15,12 @@ import numpy as np
 import pytest
 from pyglm import glm
 
-from components import ComponentValueError, Material, MeshRef, Mirror, PointLight, Transform, look_rotation
+from components import ComponentValueError, Material, MeshRef, Mirror, PointLight, Portal, Transform, look_rotation
 from engine.assets.level_file import LevelError, load_level
 from engine.assets.mesh import box, plane, quad
+from engine.assets.portals import spawn_portal_pair
 from engine.core.cube_faces import CUBE_FACES
+from engine.core.portal_math import pair_transform
 from engine.core.world import World
 from engine.rules.light_rules import ALL_ROUND, cone_reaches, cube_faces_lit, lamp_cone, spot_cone, spot_factor
 from tests.support import look_from, pixel_rays, srgb_to_linear
@@ -172,6 +174,56 @@ def test_a_spot_aimed_away_from_a_mirror_makes_no_virtual_light(scene):
     round_ = scene(lambda w: build(w, 180.0))
     round_.frame()
     assert round_.stats.virtual_lights == 1
+
+
+def test_a_spot_through_a_portal_lights_within_the_cone_the_pair_carries(scene):
+    """A spot aimed into portal A (at z = 4, facing +z) shines out of portal B (at x = -6,
+    facing +x): its image and its axis carried by the pair's transform (worked out here from
+    the two portals' matrices) say which floor points beyond B it lights: brighter than with
+    a portal that carries no light inside the carried inner cone, the same outside it."""
+    lamp = np.array([0.0, 1.6, 6.0])
+    aim = np.array([0.0, 0.9, 4.0]) - lamp
+
+    def build(world):
+        look_from(world, (-2.0, 6.0, 5.0), (-3.5, 0.0, 0.0))
+        ids = world.resources["ids"] = {}
+        ids["floor"] = world.spawn(Transform(), MeshRef(plane(20, 20)), Material(color=(0.8, 0.8, 0.8), roughness=1.0))
+        world.spawn(Transform(position=lamp.tolist(), rotation=look_rotation(aim.tolist())),
+                    PointLight(intensity=40.0, range=14.0, spot_angle=MIRROR_ANGLE, spot_blend=BLEND))
+        ids["a"], ids["b"] = spawn_portal_pair(world, (0.0, 1.5, 4.0), None, (-6.0, 1.5, 0.0),
+                                               look_rotation(glm.vec3(-1, 0, 0)))
+
+    runner = scene(build, (240, 180))
+    ids = runner.world.resources["ids"]
+    portal = runner.world.get(ids["a"], Portal)
+    off = runner.frame()
+    portal.carries_light = True
+    on = runner.frame()
+    assert runner.stats.virtual_lights == 1
+    carry = np.array(glm.dmat4(pair_transform(runner.world.get(ids["a"], Transform).world,
+                                              runner.world.get(ids["b"], Transform).world)).to_list()).T
+    image = carry[:3, :3] @ lamp + carry[:3, 3]
+    axis = carry[:3, :3] @ aim
+    eye, rays = pixel_rays(runner.engine.main_view, runner.size)
+    points = eye + rays * (-eye[1] / rays[..., 1])[..., None]
+    seen = runner.ids() == ids["floor"]
+    to_image = image - points
+    t = (-6.0 - points[..., 0]) / to_image[..., 0]   # where the line to the image meets B's plane
+    crossing = points + to_image * t[..., None]
+    margin = 0.08
+    through = (points[..., 0] > -6.0) & (t > 0) & (t < 1) & (np.abs(crossing[..., 1] - 1.5) < 1.5 - margin) \
+        & (np.abs(crossing[..., 2]) < 1.0 - margin)
+    angles = _floor_angles(runner, image, axis)
+    inner = MIRROR_ANGLE * (1.0 - BLEND)
+    # The floor in front of B seen directly: the camera sees the floor behind A (x near 0)
+    # through A's opening, i.e. out of B, where these rays do not go.
+    floor = seen & (points[..., 0] > -5.8) & (points[..., 0] < -1.5)
+    inside = floor & through & (angles < inner - MARGIN)
+    outside = floor & (angles > MIRROR_ANGLE + MARGIN)
+    assert inside.sum() > 150 and outside.sum() > 2000, (inside.sum(), outside.sum())
+    brighter = srgb_to_linear(on[inside]).mean(-1) > srgb_to_linear(off[inside]).mean(-1) + 0.03
+    assert brighter.all(), brighter.mean()
+    assert np.abs(on[outside].astype(int) - off[outside]).max() <= 1
 
 
 # --- the shadow cube -----------------------------------------------------------------------
