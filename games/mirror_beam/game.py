@@ -80,8 +80,11 @@ FRAME_DEPTH = 0.04
 # its own light), red like the beam, reaching the longest shipped path (about 19 m), at the
 # back of a barrel (a square tube of four plates) that lets out only a narrow cone, as a
 # laser's light is: half-width over length, about 4 degrees; the lamp casts shadows, so
-# its light leaves only through the barrel, directly and by the mirrors.
+# its light leaves only through the barrel, directly and by the mirrors.  It is a spot a
+# little wider than that (LAMP_SPOT_ANGLE): the barrel still cuts the cone's edge, and its
+# shadow cube draws the one face its cone lights, not six, each time a mirror turns.
 LAMP_OFFSET = 0.02
+LAMP_SPOT_ANGLE = 6.0
 BARREL_LENGTH = 0.9
 BARREL_HALF = 0.037        # inner half-width (the beam, BEAM_WIDTH wide, runs inside it)
 BARREL_WALL = 0.02
@@ -402,7 +405,8 @@ def spawn_laser_light(world: World, rules: BeamRules) -> int:
                     look, LaserBarrel())
     return world.spawn(Transform(position=(0.0, 0.0, -(front + LAMP_OFFSET)), parent=rules.source),
                        PointLight(color=LAMP_COLOR, intensity=LAMP_INTENSITY, range=LAMP_RANGE, shadows=True,
-                                  bounces=min(rules.max_bounces, MAX_LIGHT_BOUNCES)), BeamLamp())
+                                  bounces=min(rules.max_bounces, MAX_LIGHT_BOUNCES), spot_angle=LAMP_SPOT_ANGLE,
+                                  spot_blend=0.2), BeamLamp())
 
 
 def target_points(world: World, target: int) -> list[glm.vec3]:
