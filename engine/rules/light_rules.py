@@ -195,17 +195,15 @@ def cone_reaches(cone: Sequence[float], apex: Sequence[float], centre: Sequence[
     the ball of ``radius`` about ``centre``: the angle from its axis to the ball's centre,
     less the ball's angular radius, within the cone's angle.  Conservative (a surface's
     outline is tested by the ball holding it): it only rules out."""
-    c = np.asarray(cone, np.float64)
-    k = float(np.linalg.norm(c[:3]))
-    if k == 0.0:
+    opened = _opened(cone)
+    if opened is None:
         return True
+    axis, outer = opened
     to = np.asarray(centre, np.float64) - np.asarray(apex, np.float64)
     d = float(np.linalg.norm(to))
     if d <= radius:
         return True
-    outer = math.acos(max(-1.0, min(1.0, -c[3] / k)))
-    towards = math.acos(max(-1.0, min(1.0, float(to @ c[:3]) / (d * k))))
-    return towards - math.asin(radius / d) < outer
+    return _angle(axis, to / d) - math.degrees(math.asin(radius / d)) < outer
 
 
 # The widest angle from a cube face's axis to a direction that face holds (to its corners:
@@ -220,21 +218,34 @@ def cube_faces_lit(cone: Sequence[float], axes: Sequence[Sequence[float]]) -> tu
     directions comes within the cone's angle of its axis (with a margin for the filter).  A
     face left out holds no point the light reaches, so its shadow is never read: a spot
     aimed straight down 30 degrees wide draws one face, not six.  All True all round."""
+    opened = _opened(cone)
+    if opened is None:
+        return (True,) * len(axes)
+    axis, outer = opened
+    reach = outer + _FACE_REACH_DEGREES + _FACE_MARGIN_DEGREES
+    return tuple(_angle(axis, np.asarray(face, np.float64)) < reach for face in axes)
+
+
+def _opened(cone: Sequence[float]) -> tuple[np.ndarray, float] | None:
+    """A packed cone (``spot_cone``) opened back into its unit axis and its angle (degrees);
+    None all round."""
     c = np.asarray(cone, np.float64)
     k = float(np.linalg.norm(c[:3]))
     if k == 0.0:
-        return (True,) * len(axes)
-    outer = math.degrees(math.acos(max(-1.0, min(1.0, -c[3] / k))))
-    reach = outer + _FACE_REACH_DEGREES + _FACE_MARGIN_DEGREES
-    axis = c[:3] / k
-    return tuple(math.degrees(math.acos(max(-1.0, min(1.0, float(np.dot(axis, face)))))) < reach for face in axes)
+        return None
+    return c[:3] / k, math.degrees(math.acos(max(-1.0, min(1.0, -c[3] / k))))
+
+
+def _angle(a: np.ndarray, b: np.ndarray) -> float:
+    """The angle (degrees) between unit vectors ``a`` and ``b``."""
+    return math.degrees(math.acos(max(-1.0, min(1.0, float(a @ b)))))
 
 
 def spot_factor(cone: Sequence[float], to_light: np.ndarray) -> np.ndarray:
     """How much of a spot light's light (``spot_cone``'s ``cone``) goes along the unit
     vectors ``to_light`` reversed (rows: from lit points to the light): 0 outside the cone,
-    1 inside the inner cone, smoothstep between (``shaders/include/lights.glsl``
-    ``spot_factor``)."""
+    1 inside the inner cone, smoothstep between (``shaders/include/spot_cone.glsl``'s
+    ``spot_factor``: the same answers)."""
     c = np.asarray(cone, np.float64)
     t = np.clip(-(np.asarray(to_light, np.float64) @ c[:3]) + c[3], 0.0, 1.0)
     return t * t * (3.0 - 2.0 * t)
