@@ -153,15 +153,15 @@ def _region_rows(fit: DirectionalFit) -> tuple:
     return _REGION_ROWS[1]
 
 
-def _floats(v) -> list[float]:
+def _floats(v: np.ndarray | list[float]) -> list[float]:
     """A box corner as Python floats (a numpy array's, or the floats themselves)."""
     return v.tolist() if isinstance(v, np.ndarray) else v
 
 
-def _footprint(rows: tuple, lo, hi, resolution: int) -> tuple[int, int, int, int]:
+def _footprint(rows: tuple, lo: list[float], hi: list[float], resolution: int) -> tuple[int, int, int, int]:
     """The padded texel rectangle (x0, y0, x1, y1), clamped to the map, that the world box
-    [lo, hi] (Python floats) covers under the view-projection ``rows`` (``_region_rows``): empty (x1 <= x0
-    or y1 <= y0) where it misses the map.
+    [lo, hi] (Python floats) covers under the view-projection ``rows`` (``_region_rows``):
+    empty (x1 <= x0 or y1 <= y0) where it misses the map.
 
     The projection is orthographic (affine), so along each map axis the box's lowest corner
     takes, axis by axis, the lower of ``m * lo`` and ``m * hi``, and the highest the higher:
