@@ -13,7 +13,7 @@ import math
 import numpy as np
 from pyglm import glm
 
-from components import MeshRef, Transform
+from components import MeshRef, PointLight, Transform
 from engine.core.transforms import current_world_matrix
 from engine.core.world import World
 from engine.rules.probe_rules import world_bounds
@@ -78,6 +78,15 @@ class Handles:
         return -clockwise if self.toward_eye[axis] else clockwise
 
 
+def screen_point(view_proj: glm.mat4, size: tuple[int, int], point: glm.vec3) -> Pixel | None:
+    """Where world ``point`` lands on an output of ``size`` seen through ``view_proj``, in
+    pixels from the top left; None behind the eye."""
+    clip = view_proj * glm.vec4(point, 1.0)
+    if clip.w <= 1e-6:
+        return None
+    return ((clip.x / clip.w * 0.5 + 0.5) * size[0], (0.5 - clip.y / clip.w * 0.5) * size[1])
+
+
 def transform_handles(world: World, entity: int, view_proj: glm.mat4, eye: glm.vec3, size: tuple[int, int],
                       mode: str = "move") -> Handles | None:
     """``entity``'s handles of ``mode`` (``HANDLE_MODES``) in the view ``view_proj`` (from
@@ -96,12 +105,6 @@ def transform_handles(world: World, entity: int, view_proj: glm.mat4, eye: glm.v
         axes = tuple(glm.normalize(glm.vec3(matrix[i])) if glm.length(glm.vec3(matrix[i])) > 1e-9 else AXES[i]
                      for i in range(3))
 
-    def pixel(point: glm.vec3) -> Pixel | None:
-        clip = view_proj * glm.vec4(point, 1.0)
-        if clip.w <= 1e-6:
-            return None
-        return ((clip.x / clip.w * 0.5 + 0.5) * size[0], (0.5 - clip.y / clip.w * 0.5) * size[1])
-
     if mode == "turn":
         worlds = []
         for i in range(3):
@@ -110,12 +113,63 @@ def transform_handles(world: World, entity: int, view_proj: glm.mat4, eye: glm.v
                            for t in (2.0 * math.pi * k / RING_POINTS for k in range(RING_POINTS))])
     else:
         worlds = [[origin, origin + axis * length] for axis in axes]
-    centre = pixel(origin)
-    lines = [[pixel(point) for point in line] for line in worlds]
+    centre = screen_point(view_proj, size, origin)
+    lines = [[screen_point(view_proj, size, point) for point in line] for line in worlds]
     if centre is None or any(p is None for line in lines for p in line):
         return None
     toward = tuple(glm.dot(axis, glm.vec3(eye) - origin) > 0.0 for axis in axes)
     return Handles(mode, centre, axes, tuple(tuple(line) for line in lines), length, toward)
+
+
+OUTLINE_POINTS = 48   # points on a light outline's circle
+CONE_EDGES = 4        # lines from a spot's apex to its cone's far circle
+
+
+@dataclasses.dataclass(frozen=True)
+class LightOutline:
+    """What a selected light reaches, as the main view shows it: a spot light's cone (its
+    apex, ``CONE_EDGES`` lines along its edge and the circle where they end, ``range``
+    metres from the apex), or a light all round's range sphere (a circle about each world
+    axis), as Unity and Godot draw them.  ``world``: each polyline's points (closed circles
+    repeat their first point); ``lines``: the same on screen, output pixels from the top left."""
+
+    world: tuple[tuple[glm.vec3, ...], ...]
+    lines: tuple[tuple[Pixel, ...], ...]
+
+
+def light_outline(world: World, entity: int, view_proj: glm.mat4, size: tuple[int, int]) -> LightOutline | None:
+    """``entity``'s ``LightOutline`` in the view ``view_proj`` on an output of ``size``; None
+    when it is no point light with a Transform.  A polyline with a point behind the eye is
+    left out (the rest still show)."""
+    light, transform = world.try_get(entity, PointLight), world.try_get(entity, Transform)
+    if light is None or transform is None:
+        return None
+    matrix = current_world_matrix(world, transform)
+    apex = glm.vec3(matrix[3])
+    reach = float(light.range)
+    steps = [2.0 * math.pi * k / OUTLINE_POINTS for k in range(OUTLINE_POINTS + 1)]
+    if light.spot_angle < 180.0:
+        forward = -glm.vec3(matrix[2])
+        axis = glm.normalize(forward) if glm.length(forward) > 1e-9 else glm.vec3(0.0, 0.0, -1.0)
+        helper = glm.vec3(0.0, 1.0, 0.0) if abs(axis.y) < 0.9 else glm.vec3(1.0, 0.0, 0.0)
+        u = glm.normalize(glm.cross(axis, helper))
+        v = glm.cross(axis, u)
+        theta = math.radians(light.spot_angle)
+        centre, radius = apex + axis * (reach * math.cos(theta)), reach * math.sin(theta)
+        circle = tuple(centre + radius * (math.cos(t) * u + math.sin(t) * v) for t in steps)
+        edges = [(apex, circle[k * OUTLINE_POINTS // CONE_EDGES]) for k in range(CONE_EDGES)]
+        worlds = [circle, *edges]
+    else:
+        worlds = [tuple(apex + reach * (math.cos(t) * AXES[(i + 1) % 3] + math.sin(t) * AXES[(i + 2) % 3])
+                        for t in steps) for i in range(3)]
+
+    kept_world, kept_lines = [], []
+    for line in worlds:
+        pixels = [screen_point(view_proj, size, point) for point in line]
+        if all(p is not None for p in pixels):
+            kept_world.append(tuple(line))
+            kept_lines.append(tuple(pixels))
+    return LightOutline(tuple(kept_world), tuple(kept_lines))
 
 
 FRAME_MARGIN = 1.3  # framing a selection: its bounding sphere fills this much less than the view's height

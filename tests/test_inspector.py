@@ -1053,3 +1053,50 @@ def test_the_entity_list_is_made_again_on_an_edit_or_a_moment_later_not_every_fr
         runner.world.spawn(Transform())
         draw()
         assert len(overlay.listed_entities) == before + 3
+
+
+def test_a_selected_spot_light_shows_its_cone(scene, ctx):
+    """A spot light (no pixel to click) selected from code as the entity list would: the
+    overlay draws its cone (``light_outline``) over the frame, in its light-yellow, where the
+    test projects the cone's circle; deselected, those pixels are the world's again."""
+    from components import PointLight, look_rotation
+    from shell.handles import screen_point
+
+    ents = {}
+
+    def build(world):
+        edit_scene(world, ents)
+        lamp = glm.vec3(2.6, 2.4, 1.0)   # right of the overlay's window
+        ents["spot"] = world.spawn(Transform(position=lamp, rotation=look_rotation(glm.vec3(0.0, -1.0, -0.3))),
+                                   PointLight(intensity=5.0, range=2.0, spot_angle=25.0))
+
+    size = (1280, 720)
+    runner = scene(build, size)
+    overlay = DebugOverlay(ctx)
+    try:
+        draw, _ = _hands(runner, overlay, size)
+        draw()
+        editor = overlay.editing(runner.engine)
+        before = runner.capture.read_rgb()
+        editor.select(ents["spot"])
+        draw()
+        outline = overlay.light_outline
+        assert outline is not None and len(outline.lines) == 5
+        shown = runner.capture.read_rgb()
+        view = runner.engine.main_view
+        circle = [screen_point(view.view_proj, size, p) for p in outline.world[0]]
+        assert all(600 < x < size[0] - 2 and 2 < y < size[1] - 2 for x, y in circle)   # in view, clear of the window
+
+        def yellow(frame) -> int:
+            count = 0
+            for x, y in circle:
+                patch = frame[int(y) - 1:int(y) + 2, int(x) - 1:int(x) + 2].reshape(-1, 3).astype(int)
+                count += bool(((patch[:, 0] > 170) & (patch[:, 1] > 140) & (patch[:, 2] < patch[:, 1] - 40)).any())
+            return count
+
+        assert yellow(shown) >= 0.8 * len(circle) and yellow(before) == 0, (yellow(shown), yellow(before))
+        editor.select(None)
+        draw()
+        assert overlay.light_outline is None and yellow(runner.capture.read_rgb()) == 0
+    finally:
+        overlay.release()

@@ -284,6 +284,38 @@ def test_cube_faces_lit_holds_every_face_a_direction_in_the_cone_falls_on():
     assert cube_faces_lit(ALL_ROUND, axes) == (True,) * 6
 
 
+# --- the editor's outline ---------------------------------------------------------------------
+def test_the_editors_outline_of_a_spot_is_its_cone_and_of_a_lamp_its_range(scene):
+    """``light_outline``: a spot's far circle lies ``range`` from the apex at ``spot_angle``
+    from its axis all round, its edges run from the apex to that circle; a light all round
+    shows three circles of its range about it; each point on screen where the view puts it."""
+    from shell.handles import CONE_EDGES, light_outline, screen_point
+
+    spot = scene(lambda w: _floor(w, ANGLE))
+    spot.frame()
+    lamp = spot.world.resources["ids"]["lamp"]
+    view, size = spot.engine.main_view, spot.size
+    outline = light_outline(spot.world, lamp, view.view_proj, size)
+    circle, *edges = outline.world
+    assert len(edges) == CONE_EDGES and len(outline.lines) == 1 + CONE_EDGES
+    to = np.array([list(p) for p in circle]) - LAMP
+    np.testing.assert_allclose(np.linalg.norm(to, axis=1), 15.0, rtol=1e-5)    # the lamp's range
+    angles = np.degrees(np.arccos(to @ np.array([0.0, -1.0, 0.0]) / np.linalg.norm(to, axis=1)))
+    np.testing.assert_allclose(angles, ANGLE, atol=1e-3)
+    assert all(np.allclose(list(a), LAMP, atol=1e-5) and any(b == c for c in circle) for a, b in edges)
+    for line, points in zip(outline.lines, outline.world, strict=True):
+        assert line == tuple(screen_point(view.view_proj, size, p) for p in points)
+    assert light_outline(spot.world, spot.world.resources["ids"]["camera"], view.view_proj, size) is None
+    light = spot.world.get(lamp, PointLight)
+    light.spot_angle, light.range = 180.0, 2.0
+    rings = light_outline(spot.world, lamp, view.view_proj, size).world
+    assert len(rings) == 3
+    for ring in rings:
+        np.testing.assert_allclose(np.linalg.norm(np.array([list(p) for p in ring]) - LAMP, axis=1), 2.0, rtol=1e-5)
+    light.range = 15.0   # a sphere reaching behind the eye: those circles are left out, not drawn wrong
+    assert len(light_outline(spot.world, lamp, view.view_proj, size).world) < 3
+
+
 # --- the rule -------------------------------------------------------------------------------
 def test_the_glsl_cone_is_the_rules(ctx, tmp_path):
     """``spot_factor`` in spot_cone.glsl gives light_rules' ``spot_factor`` for cones of
