@@ -140,6 +140,19 @@ roughness = 0.05
 mode = "cube"
 [entity.ReflectionProbe]
 resolution = 16
+
+[[entity]]
+name = "spot"
+[entity.Transform]
+position = [0.5, 2.5, 1.0]
+rotation = { look = [0.0, -1.0, -0.5] }
+[entity.PointLight]
+intensity = 4.0
+range = 6.0
+spot_angle = 30.0
+spot_blend = 0.2
+shadows = true
+shadow_resolution = 64
 """
 
 _VALUES = ["0", "1", "-1", "0.5", "1e-30", "65505.0", "1e20", "3.4e38", "1e39", "nan", "inf", "-inf",
@@ -156,7 +169,8 @@ _VALUES = ["0", "1", "-1", "0.5", "1e-30", "65505.0", "1e20", "3.4e38", "1e39", 
 _NAMES = ["Transform", "MeshRef", "Material", "Mirror", "Portal", "Camera", "Skybox", "Emissive", "Slice",
           "PortalClone", "Nope", "transform"]
 _FIELDS = ["position", "rotation", "scale", "parent", "partner", "color", "colour", "mesh", "texture", "size",
-           "enabled", "mode", "resolution", "refresh", "fov_y", "near", "far", "power", "bogus"]
+           "enabled", "mode", "resolution", "refresh", "fov_y", "near", "far", "power", "spot_angle", "spot_blend",
+           "bogus"]
 
 
 CASE_SECONDS = 30.0  # a case still loading or rendering after this long has hung
