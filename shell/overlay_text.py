@@ -37,7 +37,8 @@ def overlay_lines(engine: Engine, frame_times: Sequence[float]) -> list[str]:
         f"capped {stats.reflection_depth_capped}, faded {stats.reflection_views_faded}, "
         f"fallbacks {stats.reflection_fallbacks}",
         f"probe captures {stats.probe_captures} ({stats.probe_faces} faces); shadow maps "
-        f"{stats.shadow_maps_drawn} + {stats.shadow_maps_kept} kept{'' if shadows_on else ' (off)'}",
+        f"{stats.shadow_maps_drawn}{f' ({stats.shadow_faces_drawn} cube faces)' if stats.shadow_faces_drawn else ''}"
+        f" + {stats.shadow_maps_kept} kept{'' if shadows_on else ' (off)'}",
         f"cut: lights {stats.lights_cut}, shadows {stats.shadows_cut}"
         f"{f', cascades {stats.shadow_cascades_cut}' if stats.shadow_cascades_cut else ''}, "
         f"lights through mirrors {stats.virtual_lights_cut} (shining {stats.virtual_lights})",

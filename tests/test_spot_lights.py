@@ -23,6 +23,7 @@ from engine.core.cube_faces import CUBE_FACES
 from engine.core.portal_math import pair_transform
 from engine.core.world import World
 from engine.rules.light_rules import ALL_ROUND, cone_reaches, cube_faces_lit, lamp_cone, spot_cone, spot_factor
+from shell.overlay_text import overlay_lines
 from tests.support import look_from, pixel_rays, srgb_to_linear
 from tests.test_one_owner import evaluate_glsl
 
@@ -253,6 +254,7 @@ def test_a_spots_shadow_cube_draws_only_the_faces_its_cone_lights(scene, aim, ta
     bare = scene(lambda w: _shadowed(w, ANGLE, aim, target, crate=False))
     spot_rgb, round_rgb, bare_rgb = spot.frame(), round_.frame(), bare.frame()
     assert spot.stats.shadow_faces_drawn == faces and round_.stats.shadow_faces_drawn == 6
+    assert f"shadow maps 1 ({faces} cube faces) + " in "\n".join(overlay_lines(spot.engine, [1 / 60]))
     inside = _floor_angles(spot, LAMP, aim) < INNER - MARGIN
     np.testing.assert_array_equal(spot_rgb[inside], round_rgb[inside])
     # The crate's shadow is there (darker than the floor without it) where the cone lights.
@@ -260,6 +262,7 @@ def test_a_spots_shadow_cube_draws_only_the_faces_its_cone_lights(scene, aim, ta
     assert darker.sum() > 50, darker.sum()
     spot.frame()
     assert spot.stats.shadow_faces_drawn == 0   # nothing moved: the cube is kept
+    assert "shadow maps 0 + 1 kept" in "\n".join(overlay_lines(spot.engine, [1 / 60]))
 
 
 def test_cube_faces_lit_holds_every_face_a_direction_in_the_cone_falls_on():
