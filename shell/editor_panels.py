@@ -28,7 +28,7 @@ from engine.assets.level_file import LevelGame
 from engine.assets.level_read import REFERENCE_FIELDS
 from engine.assets.values import json_value
 from shell.editor import AUTOMATIC_FIELDS, TEXTURE_FIELDS, EditError, Editor
-from shell.handles import HANDLE_MODES, Handles, LightOutline, framing_eye, light_outline, transform_handles
+from shell.handles import HANDLE_MODES, Handles, ReachOutline, framing_eye, reach_outline, transform_handles
 
 if TYPE_CHECKING:
     from shell.app import Engine
@@ -70,7 +70,7 @@ class EditorPanels:
         self.show_entities = False            # the entity list is shown ("entities" ticked)
         self.handle_mode = "move"             # the selection's handles: HANDLE_MODES, chosen in the inspector
         self.handles: Handles | None = None   # the selection's handles, last drawn
-        self.light_outline: LightOutline | None = None   # the selected light's cone or range, last drawn
+        self.reach_outline: ReachOutline | None = None   # the selected light's or probe's reach, last drawn
         self._hovered: int | None = None      # the handle under the mouse
         self._dragging: _Drag | None = None   # a handle being dragged
         self.entity_filter = ""               # the entity list's filter, as typed
@@ -358,13 +358,13 @@ class EditorPanels:
             self._widget(f"{cls_name}.{field} automatic")
 
     def _transform_handles(self, engine: Engine) -> None:
-        """A selected light's reach (a spot's cone, a light all round's range sphere:
-        ``light_outline``) and the selection's handles over the world (x red, y green, z
-        blue; ``transform_handles``), of the inspector's mode: ``move`` along a world axis,
-        ``turn`` about one (its ring), ``scale`` along one of its own.  A handle pressed and
-        dragged edits the Transform from where it stood when pressed: the mouse's motion
-        along the handle on screen at the handle's scale, or the angle it sweeps about the
-        origin; one undo step a drag."""
+        """A selected light's or probe's reach (a spot's cone, a light all round's range
+        sphere, a probe's influence box: ``reach_outline``) and the selection's handles over
+        the world (x red, y green, z blue; ``transform_handles``), of the inspector's mode:
+        ``move`` along a world axis, ``turn`` about one (its ring), ``scale`` along one of its
+        own.  A handle pressed and dragged edits the Transform from where it stood when
+        pressed: the mouse's motion along the handle on screen at the handle's scale, or the
+        angle it sweeps about the origin; one undo step a drag."""
         editor, view = self.editor, engine.main_view
         entity = editor.selected if editor is not None else None
         handles = outline = None
@@ -372,9 +372,9 @@ class EditorPanels:
             size = self.io.display_size
             handles = transform_handles(engine.world, entity, view.view_proj, view.eye, (size.x, size.y),
                                         self.handle_mode)
-            outline = light_outline(engine.world, entity, view.view_proj, (size.x, size.y))
-        self.handles, self.light_outline = handles, outline
-        if outline is not None:   # under the handles: where the light reaches, in its own colour
+            outline = reach_outline(engine.world, entity, view.view_proj, (size.x, size.y))
+        self.handles, self.reach_outline = handles, outline
+        if outline is not None:   # under the handles: where the light or probe reaches, in its own colour
             draw = imgui.get_background_draw_list()
             colour = imgui.get_color_u32(imgui.ImVec4(1.0, 0.85, 0.3, 0.7))
             for line in outline.lines:

@@ -13,7 +13,7 @@ import math
 import numpy as np
 from pyglm import glm
 
-from components import MeshRef, PointLight, Transform
+from components import MeshRef, PointLight, ReflectionProbe, Transform
 from engine.core.transforms import current_world_matrix
 from engine.core.world import World
 from engine.rules.probe_rules import world_bounds
@@ -126,25 +126,64 @@ CONE_EDGES = 4        # lines from a spot's apex to its cone's far circle
 
 
 @dataclasses.dataclass(frozen=True)
-class LightOutline:
-    """What a selected light reaches, as the main view shows it: a spot light's cone (its
-    apex, ``CONE_EDGES`` lines along its edge and the circle where they end, ``range``
-    metres from the apex), or a light all round's range sphere (a circle about each world
-    axis), as Unity and Godot draw them.  ``world``: each polyline's points (closed circles
-    repeat their first point); ``lines``: the same on screen, output pixels from the top left."""
+class ReachOutline:
+    """What a selected light or probe reaches, as the main view shows it (as Unity and Godot
+    draw them): a spot light's cone (its apex, ``CONE_EDGES`` lines along its edge and the
+    circle where they end, ``range`` metres from the apex), a light all round's range sphere
+    (a circle about each world axis), or a reflection probe's influence box (its twelve
+    edges, and the box inside where its weight is whole when it has a ``blend_distance``).
+    ``world``: each polyline's points (closed circles repeat their first point); ``lines``:
+    the same on screen, output pixels from the top left."""
 
     world: tuple[tuple[glm.vec3, ...], ...]
     lines: tuple[tuple[Pixel, ...], ...]
 
 
-def light_outline(world: World, entity: int, view_proj: glm.mat4, size: tuple[int, int]) -> LightOutline | None:
-    """``entity``'s ``LightOutline`` in the view ``view_proj`` on an output of ``size``; None
-    when it is no point light with a Transform.  A polyline with a point behind the eye is
-    left out (the rest still show)."""
-    light, transform = world.try_get(entity, PointLight), world.try_get(entity, Transform)
-    if light is None or transform is None:
+def reach_outline(world: World, entity: int, view_proj: glm.mat4, size: tuple[int, int]) -> ReachOutline | None:
+    """``entity``'s ``ReachOutline`` in the view ``view_proj`` on an output of ``size``: its
+    point light's, else its probe's influence box; None when it has neither (or no
+    Transform, or a probe serving only its own entity).  A polyline with a point behind the
+    eye is left out (the rest still show)."""
+    transform = world.try_get(entity, Transform)
+    if transform is None:
         return None
     matrix = current_world_matrix(world, transform)
+    light = world.try_get(entity, PointLight)
+    if light is not None:
+        worlds = _light_reach(light, matrix)
+    else:
+        probe = world.try_get(entity, ReflectionProbe)
+        if probe is None or probe.influence is None:
+            return None
+        worlds = _influence_box(glm.vec3(matrix[3]), glm.vec3(probe.influence), probe.blend_distance)
+    kept_world, kept_lines = [], []
+    for line in worlds:
+        pixels = [screen_point(view_proj, size, point) for point in line]
+        if all(p is not None for p in pixels):
+            kept_world.append(tuple(line))
+            kept_lines.append(tuple(pixels))
+    return ReachOutline(tuple(kept_world), tuple(kept_lines))
+
+
+def _influence_box(centre: glm.vec3, influence: glm.vec3, blend: float) -> list[tuple[glm.vec3, ...]]:
+    """A probe's influence box about ``centre`` (world axes, ``influence`` wide: the box
+    ``probe_rules.probe_weight`` weighs), and the box ``blend`` inside it, as edges."""
+    boxes = [influence * 0.5]
+    if blend > 0.0:
+        boxes.append(influence * 0.5 - glm.vec3(blend))
+    edges = []
+    for half in boxes:
+        corners = [centre + glm.vec3(x * half.x, y * half.y, z * half.z)
+                   for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)]
+        for a in range(8):
+            for bit in (1, 2, 4):
+                if not a & bit:
+                    edges.append((corners[a], corners[a | bit]))
+    return edges
+
+
+def _light_reach(light: PointLight, matrix: glm.mat4) -> list[tuple[glm.vec3, ...]]:
+    """A point light's cone (a spot) or range sphere, as polylines."""
     apex = glm.vec3(matrix[3])
     reach = float(light.range)
     steps = [2.0 * math.pi * k / OUTLINE_POINTS for k in range(OUTLINE_POINTS + 1)]
@@ -158,18 +197,9 @@ def light_outline(world: World, entity: int, view_proj: glm.mat4, size: tuple[in
         centre, radius = apex + axis * (reach * math.cos(theta)), reach * math.sin(theta)
         circle = tuple(centre + radius * (math.cos(t) * u + math.sin(t) * v) for t in steps)
         edges = [(apex, circle[k * OUTLINE_POINTS // CONE_EDGES]) for k in range(CONE_EDGES)]
-        worlds = [circle, *edges]
-    else:
-        worlds = [tuple(apex + reach * (math.cos(t) * AXES[(i + 1) % 3] + math.sin(t) * AXES[(i + 2) % 3])
-                        for t in steps) for i in range(3)]
-
-    kept_world, kept_lines = [], []
-    for line in worlds:
-        pixels = [screen_point(view_proj, size, point) for point in line]
-        if all(p is not None for p in pixels):
-            kept_world.append(tuple(line))
-            kept_lines.append(tuple(pixels))
-    return LightOutline(tuple(kept_world), tuple(kept_lines))
+        return [circle, *edges]
+    return [tuple(apex + reach * (math.cos(t) * AXES[(i + 1) % 3] + math.sin(t) * AXES[(i + 2) % 3])
+                  for t in steps) for i in range(3)]
 
 
 FRAME_MARGIN = 1.3  # framing a selection: its bounding sphere fills this much less than the view's height

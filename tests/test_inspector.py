@@ -1057,7 +1057,7 @@ def test_the_entity_list_is_made_again_on_an_edit_or_a_moment_later_not_every_fr
 
 def test_a_selected_spot_light_shows_its_cone(scene, ctx):
     """A spot light (no pixel to click) selected from code as the entity list would: the
-    overlay draws its cone (``light_outline``) over the frame, in its light-yellow, where the
+    overlay draws its cone (``reach_outline``) over the frame, in its light-yellow, where the
     test projects the cone's circle; deselected, those pixels are the world's again."""
     from components import PointLight, look_rotation
     from shell.handles import screen_point
@@ -1080,7 +1080,7 @@ def test_a_selected_spot_light_shows_its_cone(scene, ctx):
         before = runner.capture.read_rgb()
         editor.select(ents["spot"])
         draw()
-        outline = overlay.light_outline
+        outline = overlay.reach_outline
         assert outline is not None and len(outline.lines) == 5
         shown = runner.capture.read_rgb()
         view = runner.engine.main_view
@@ -1097,6 +1097,6 @@ def test_a_selected_spot_light_shows_its_cone(scene, ctx):
         assert yellow(shown) >= 0.8 * len(circle) and yellow(before) == 0, (yellow(shown), yellow(before))
         editor.select(None)
         draw()
-        assert overlay.light_outline is None and yellow(runner.capture.read_rgb()) == 0
+        assert overlay.reach_outline is None and yellow(runner.capture.read_rgb()) == 0
     finally:
         overlay.release()

@@ -21,7 +21,7 @@ from components import (
 )
 from engine.assets.mesh import quad
 from engine.core.world import World
-from engine.rules.probe_rules import LookChanges, probe_blend, probe_for
+from engine.rules.probe_rules import LookChanges, probe_blend, probe_for, probe_weight
 from systems.transform_system import TransformSystem
 from tests.support import look_from, srgb_to_linear
 
@@ -221,3 +221,37 @@ def test_probe_blending_is_defined_in_the_probe_rules_only():
             if hits:
                 defined[path.relative_to(ROOT).as_posix()] = hits
     assert set(defined) == {"engine/rules/probe_rules.py"}, defined
+
+
+def test_the_editors_outline_of_a_probe_is_where_its_weight_falls(world):
+    """``reach_outline`` of a selected probe (shell/handles.py): the twelve edges of its
+    influence box and twelve of the box ``blend_distance`` inside it, and the rule agrees:
+    just outside each outer corner the probe weighs nothing and just inside something; just
+    inside each inner corner it weighs 1 and just outside less.  A probe with no influence
+    box (it serves its own entity) has no outline."""
+    from shell.handles import reach_outline
+
+    ents = {}
+    two_rooms(ents)(world)
+    world.step(1 / 60)
+    view_proj = glm.perspective(glm.radians(60.0), 1.0, 0.1, 100.0) * glm.lookAt(glm.vec3(-3.0, 6.0, 14.0),
+                                                                                 glm.vec3(-3.0, 0.0, 0.0),
+                                                                                 glm.vec3(0.0, 1.0, 0.0))
+    outline = reach_outline(world, ents["a"], view_proj, (640, 480))
+    assert len(outline.world) == 24 and len(outline.lines) == 24
+    centre = np.array(CENTRES["a"])
+
+    def weight(point) -> float:
+        return probe_weight(point, centre, INFLUENCE, BLEND)
+
+    outer = {tuple(map(float, p)) for edge in outline.world[:12] for p in edge}
+    inner = {tuple(map(float, p)) for edge in outline.world[12:] for p in edge}
+    assert len(outer) == len(inner) == 8
+    for corner in outer:
+        towards = (centre - np.array(corner)) * 1e-3
+        assert weight(np.array(corner) - towards) == 0.0 and weight(np.array(corner) + towards) > 0.0
+    for corner in inner:
+        towards = (centre - np.array(corner)) * 1e-3
+        assert weight(np.array(corner) + towards) == pytest.approx(1.0) and weight(np.array(corner) - towards) < 1.0
+    world.add_component(ents["quad"], ReflectionProbe())
+    assert reach_outline(world, ents["quad"], view_proj, (640, 480)) is None

@@ -289,16 +289,16 @@ def test_cube_faces_lit_holds_every_face_a_direction_in_the_cone_falls_on():
 
 # --- the editor's outline ---------------------------------------------------------------------
 def test_the_editors_outline_of_a_spot_is_its_cone_and_of_a_lamp_its_range(scene):
-    """``light_outline``: a spot's far circle lies ``range`` from the apex at ``spot_angle``
+    """``reach_outline``: a spot's far circle lies ``range`` from the apex at ``spot_angle``
     from its axis all round, its edges run from the apex to that circle; a light all round
     shows three circles of its range about it; each point on screen where the view puts it."""
-    from shell.handles import CONE_EDGES, light_outline, screen_point
+    from shell.handles import CONE_EDGES, reach_outline, screen_point
 
     spot = scene(lambda w: _floor(w, ANGLE))
     spot.frame()
     lamp = spot.world.resources["ids"]["lamp"]
     view, size = spot.engine.main_view, spot.size
-    outline = light_outline(spot.world, lamp, view.view_proj, size)
+    outline = reach_outline(spot.world, lamp, view.view_proj, size)
     circle, *edges = outline.world
     assert len(edges) == CONE_EDGES and len(outline.lines) == 1 + CONE_EDGES
     to = np.array([list(p) for p in circle]) - LAMP
@@ -308,15 +308,15 @@ def test_the_editors_outline_of_a_spot_is_its_cone_and_of_a_lamp_its_range(scene
     assert all(np.allclose(list(a), LAMP, atol=1e-5) and any(b == c for c in circle) for a, b in edges)
     for line, points in zip(outline.lines, outline.world, strict=True):
         assert line == tuple(screen_point(view.view_proj, size, p) for p in points)
-    assert light_outline(spot.world, spot.world.resources["ids"]["camera"], view.view_proj, size) is None
+    assert reach_outline(spot.world, spot.world.resources["ids"]["camera"], view.view_proj, size) is None
     light = spot.world.get(lamp, PointLight)
     light.spot_angle, light.range = 180.0, 2.0
-    rings = light_outline(spot.world, lamp, view.view_proj, size).world
+    rings = reach_outline(spot.world, lamp, view.view_proj, size).world
     assert len(rings) == 3
     for ring in rings:
         np.testing.assert_allclose(np.linalg.norm(np.array([list(p) for p in ring]) - LAMP, axis=1), 2.0, rtol=1e-5)
     light.range = 15.0   # a sphere reaching behind the eye: those circles are left out, not drawn wrong
-    assert len(light_outline(spot.world, lamp, view.view_proj, size).world) < 3
+    assert len(reach_outline(spot.world, lamp, view.view_proj, size).world) < 3
 
 
 # --- the rule -------------------------------------------------------------------------------
