@@ -38,10 +38,13 @@ ALL_LAYERS = (1 << REFLECTION_LAYERS) - 1
 VIEW_DIRECT, VIEW_MIRROR, VIEW_PORTAL, VIEW_PROBE = 1, 2, 4, 8
 VIEW_KINDS = 4         # bits 0-3 of a view mask; the layers it shows are bits 4-19
 # Bits 20 and 21 of an entity's code (never of a view's mask): it casts no shadow
-# (MeshRef.casts_shadows), it receives none (MeshRef.receives_shadows).  The code stays below
-# 2^24, exact in the float slot it rides in.
+# (MeshRef.casts_shadows), it receives none (MeshRef.receives_shadows); bit 22: a portal's
+# opening that carries light (Portal.carries_light) casts a shadow, the light it takes in
+# going out of its partner instead of on behind it.  The code stays below 2^24, exact in the
+# float slot it rides in.
 NO_SHADOW_BIT = 1 << (VIEW_KINDS + REFLECTION_LAYERS)
 NO_RECEIVE_BIT = NO_SHADOW_BIT << 1
+OPENING_CASTS_BIT = NO_RECEIVE_BIT << 1
 
 # Depth range the 24-bit depth buffer still resolves, for every view with a near and a far
 # plane (Camera, ReflectionProbe): far / near up to 1e7 keeps surfaces a few percent of their

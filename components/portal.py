@@ -34,7 +34,9 @@ class Portal(ShownLayers):
     ``priority`` and ``end_image``: as on ``Mirror`` (the view budget's order; past the
     depth limit, last frame's image instead of the fallback, "auto" for a facing pair).
     ``carries_light`` (off by default): lights in front of it shine out of its partner's
-    opening (their images carried by the pair's transform), with shadows on both sides.
+    opening (their images carried by the pair's transform), with shadows on both sides, and
+    its opening casts a shadow in their own maps: the light it takes in leaves by the
+    partner instead of going on behind it (off, the opening casts none: light passes).
     """
 
     SHAREABLE = False  # one entity's own state: see components.tracking

@@ -1,8 +1,9 @@
 #version 410 core
 // Shadow casters seen from a light (engine/render/shadows.py): depth only, every opaque
 // batch, the light's camera in the Camera block.  What casts is what a person sees as solid:
-// not a portal's opening, not glass (a refracting instance), not something hidden in every
-// kind of view or with MeshRef.casts_shadows off; the transparent slot is not drawn at all.
+// not a portal's opening (unless it carries light: what goes in leaves by its partner), not
+// glass (a refracting instance), not something hidden in every kind of view or with
+// MeshRef.casts_shadows off; the transparent slot is not drawn at all.
 // Things partly through a portal are cut at their slice plane, as in every view, so the part
 // that came out of the partner casts its own shadow there.
 #include "camera.glsl"
@@ -31,7 +32,8 @@ void main() {
     // A virtual light's map (light through a mirror or portal) leaves out the surfaces it
     // passes through (camera.skip) and what lies behind them (camera.clip_plane); a light's
     // own map has neither.
-    bool casts = in_slots.z != REFLECT_PORTAL && in_slots.y == REFRACT_NONE && !casts_no_shadow(in_tint.w)
+    bool casts = (in_slots.z != REFLECT_PORTAL || opening_casts(in_tint.w)) && in_slots.y == REFRACT_NONE
+        && !casts_no_shadow(in_tint.w)
         && in_slots.w != camera.skip.x && in_slots.w != camera.skip.y;
     float plane = dot(world, camera.clip_plane);
     gl_ClipDistance[CLIP_VIEW_PLANE] = casts ? plane : -1.0;

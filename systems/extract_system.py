@@ -185,8 +185,10 @@ class ExtractSystem(esper.Processor):
         visibility = world.try_get(drawn_as, Visibility) if world.exists(drawn_as) else None
         source_mesh = world.try_get(drawn_as, MeshRef) if world.exists(drawn_as) else None
         shown = source_mesh or mesh_ref
+        portal = world.try_get(entity, Portal)
         row["tint"][TINT_VISIBILITY] = entity_code(visibility, casts_shadows=shown.casts_shadows,
-                                                   receives_shadows=shown.receives_shadows)
+                                                   receives_shadows=shown.receives_shadows,
+                                                   opening_carries=portal is not None and portal.carries_light)
         slice_ = world.try_get(entity, Slice)
         row["slice"] = slice_.plane if slice_ is not None else NO_SLICE
         row["slots"] = (choice.emissive, choice.refract, choice.reflect, drawn_as)

@@ -32,7 +32,7 @@ from collections.abc import Callable
 import esper
 import numpy as np
 
-from components import DirectionalLight, Material, MeshRef, PointLight, Refractive, Transform, Visibility
+from components import DirectionalLight, Material, MeshRef, PointLight, Portal, Refractive, Transform, Visibility
 from components.tracking import raw_field
 from engine.core.cube_faces import CUBE_FACES
 from engine.core.transforms import current_world_matrix
@@ -61,7 +61,7 @@ from engine.rules.shadow_rules import (
 )
 from engine.rules.visibility_rules import ShadowCasting
 
-_LOOKS = (MeshRef, Material, Visibility, Refractive)  # what decides whether, and what shape, a thing casts
+_LOOKS = (MeshRef, Material, Visibility, Refractive, Portal)  # what decides whether, and what shape, a thing casts
 
 
 class ShadowSystem(esper.Processor):

@@ -385,24 +385,37 @@ def test_every_copy_of_the_visibility_rule_answers_as_its_owner(ctx, tmp_path):
     instance casts shadows or not (``MeshRef.casts_shadows``: the shadow pass's
     ``casts_no_shadow`` answers as ``casts_shadow``, and it changes no view's answer), and
     whether it receives them or not (``MeshRef.receives_shadows``: the scene shader's
-    ``receives_no_shadow`` answers as ``receives_shadow``, changing no other answer)."""
-    from components.limits import VIEW_KINDS
+    ``receives_no_shadow`` answers as ``receives_shadow``, changing no other answer), and
+    whether it is a portal's opening that carries light or not (``Portal.carries_light``:
+    ``opening_casts`` in GLSL answers as its owner, changing no other answer)."""
+    from components.limits import OPENING_CASTS_BIT, VIEW_KINDS
     from components.visibility import visibility_code
     from engine.core.reflection_math import reflection_matrix
     from engine.render.view_plan import SurfaceTable
     from engine.resources import SurfaceState
-    from engine.rules.visibility_rules import casts_shadow, drawn_in, entity_code, hidden_everywhere, receives_shadow
+    from engine.rules.visibility_rules import (
+        casts_shadow,
+        drawn_in,
+        entity_code,
+        hidden_everywhere,
+        opening_casts,
+        receives_shadow,
+    )
     from systems.probe_scheduler import ChangedBoxes
 
     assert engine_defines()["VIEW_KIND_BITS"] == f"{VIEW_KINDS}u"
     assert engine_defines()["NO_SHADOW_BIT"] == f"{NO_SHADOW_BIT}u"
     assert engine_defines()["NO_RECEIVE_BIT"] == f"{NO_RECEIVE_BIT}u"
-    visibilities = _visibilities() * 4  # casting shadows, then not; each receiving them, then not
-    quarter = len(visibilities) // 4
-    casting = np.arange(len(visibilities)) < 2 * quarter
-    receiving = np.arange(len(visibilities)) % (2 * quarter) < quarter
-    codes = np.array([entity_code(v, casts_shadows=bool(c), receives_shadows=bool(r))
-                      for v, c, r in zip(visibilities, casting, receiving, strict=True)], np.int64)
+    assert engine_defines()["OPENING_CASTS_BIT"] == f"{OPENING_CASTS_BIT}u"
+    base = _visibilities()
+    # Every visibility casting shadows or not, receiving them or not; every third an opening
+    # carrying light (a third, so it falls on each of the four alike).
+    visibilities = base * 4
+    index = np.arange(len(visibilities))
+    block = index // len(base)
+    casting, receiving, opening = block < 2, block % 2 == 0, index % 3 == 0
+    codes = np.array([entity_code(v, casts_shadows=bool(c), receives_shadows=bool(r), opening_carries=bool(o))
+                      for v, c, r, o in zip(visibilities, casting, receiving, opening, strict=True)], np.int64)
     views = _view_masks()
     masks = np.array([visibility_code(k, layers) for k, layers in views], np.int64)
     meaning = np.array([[_drawn_by_meaning(v, k, layers) for k, layers in views] for v in visibilities])
@@ -415,7 +428,7 @@ def test_every_copy_of_the_visibility_rule_answers_as_its_owner(ctx, tmp_path):
     glsl = evaluate_glsl(ctx, tmp_path, ["visibility.glsl"],
                          "color = vec4(hidden_in_view(a.x, uint(a.y + 0.5)) ? 1.0 : 0.0, "
                          "hidden_everywhere(a.x) ? 1.0 : 0.0, casts_no_shadow(a.x) ? 1.0 : 0.0, "
-                         "receives_no_shadow(a.x) ? 0.5 : 1.0);", rows)
+                         "(receives_no_shadow(a.x) ? 0.5 : 1.0) - (opening_casts(a.x) ? 0.25 : 0.0));", rows)
     np.testing.assert_array_equal(glsl[:, 0].reshape(owner.shape) == 0.0, owner)
     np.testing.assert_array_equal(glsl[:, 1] == 1.0, np.repeat(hidden_everywhere(codes), len(masks)))
     assert hidden_everywhere(codes).any() and not hidden_everywhere(codes).all()
@@ -424,7 +437,9 @@ def test_every_copy_of_the_visibility_rule_answers_as_its_owner(ctx, tmp_path):
     assert [casts_shadow(int(code)) for code in codes] == casts.tolist()
     np.testing.assert_array_equal(glsl[:, 2] == 0.0, np.repeat(casts, len(masks)))
     np.testing.assert_array_equal(receives_shadow(codes), receiving)
-    np.testing.assert_array_equal(glsl[:, 3] == 1.0, np.repeat(receiving, len(masks)))
+    np.testing.assert_array_equal(np.isin(glsl[:, 3], (1.0, 0.75)), np.repeat(receiving, len(masks)))
+    np.testing.assert_array_equal(opening_casts(codes), opening)
+    np.testing.assert_array_equal(np.isin(glsl[:, 3], (0.75, 0.25)), np.repeat(opening, len(masks)))
 
     plane = glm.vec4(0.0, 0.0, 1.0, 0.0)
     corners = np.array([(x, y, 0.0, 1.0) for x in (-1.0, 1.0) for y in (0.0, 2.0)])

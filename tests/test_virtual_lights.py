@@ -627,3 +627,47 @@ def test_a_lamp_carried_by_a_portal_then_reflected_by_a_mirror_lands_where_the_r
     # surface it crossed would light these too.
     assert (sure & lit(-EDGE, through_b=False) & ~lit(-EDGE)).sum() > 1000
     assert float((says == rays_say).mean()) >= 0.99, float((says == rays_say).mean())
+
+
+def test_a_portal_that_carries_light_shades_what_lies_behind_its_opening(scene):
+    """A lamp casting shadows in front of portal A (at z = 0, facing +z, 2 m wide and 3 m
+    tall), its partner B far off facing away: with A carrying light, the floor behind A whose
+    line to the lamp passes through A's opening gets none of the lamp's light (it went in and
+    out of B) and is the frame without the lamp there; with A carrying none, the light goes
+    on through the opening as before and lights it.  Floor behind A whose line misses the
+    opening is lit either way."""
+    lamp = np.array([0.0, 1.5, 2.5])
+
+    def build(world, with_lamp=True):
+        look_from(world, (0.0, 7.0, -7.0), (0.0, 0.0, -2.5))
+        ids = world.resources["ids"] = {}
+        ids["floor"] = world.spawn(Transform(), MeshRef(plane(20, 20)), Material(color=(0.8, 0.8, 0.8), roughness=1.0))
+        if with_lamp:
+            world.spawn(Transform(position=lamp.tolist()), PointLight(intensity=20.0, range=12.0, shadows=True))
+        ids["a"], ids["b"] = spawn_portal_pair(world, (0.0, 1.5, 0.0), None, (9.0, 1.5, 8.0),
+                                               look_rotation(glm.vec3(1, 0, 0)))
+        world.get(ids["a"], Portal).carries_light = True
+
+    runner = scene(build, (240, 180))
+    dark = scene(lambda world: build(world, with_lamp=False), (240, 180)).frame()
+    carried = runner.frame()
+    ids = runner.world.resources["ids"]
+    runner.world.get(ids["a"], Portal).carries_light = False
+    through = runner.frame()
+    points = _floor_points(runner)
+    seen = (runner.ids() == ids["floor"]).reshape(-1)
+    to_lamp = lamp - points
+    t = -points[:, 2] / to_lamp[:, 2]          # where the line to the lamp meets A's plane, z = 0
+    crossing = points + to_lamp * t[:, None]
+    behind = seen & (points[:, 2] < -0.3) & (np.linalg.norm(to_lamp, axis=1) < 6.0)   # where the lamp is bright
+    inside = behind & (np.abs(crossing[:, 0]) < 1.0 - EDGE) & (crossing[:, 1] > EDGE) & (crossing[:, 1] < 3.0 - EDGE)
+    outside = behind & ((np.abs(crossing[:, 0]) > 1.0 + EDGE) | (crossing[:, 1] > 3.0 + EDGE))
+    assert inside.sum() > 500 and outside.sum() > 500, (int(inside.sum()), int(outside.sum()))
+    flat = [frame.reshape(-1, 3).astype(int) for frame in (carried, through, dark)]
+    carried, through, dark = flat
+    assert np.abs(carried[inside] - dark[inside]).max() <= 1        # the opening's shadow: no lamp light
+    lit = srgb_to_linear(through[inside]).mean(-1) > srgb_to_linear(dark[inside]).mean(-1) + 0.02
+    assert lit.all(), lit.mean()                                     # carrying none, the light goes through
+    lit_beside = srgb_to_linear(carried[outside]).mean(-1) > srgb_to_linear(dark[outside]).mean(-1) + 0.005
+    assert lit_beside.mean() > 0.97, lit_beside.mean()
+    assert np.array_equal(carried[outside], through[outside])        # beside the opening: the same either way

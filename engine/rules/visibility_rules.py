@@ -18,9 +18,11 @@ A view draws an entity when it is of no kind the entity is hidden in and they sh
 none (``NO_SHADOW_BIT`` in its code, above the layers, which no view's mask has: ``casts_shadow``);
 one whose ``MeshRef.receives_shadows`` is off has ``NO_RECEIVE_BIT`` (``receives_shadow``):
 the scene shader looks up no map for it.
-Glass and a portal's surface cast none either, whatever their code (``row_casts_shadow`` on
-instance rows, ``ShadowCasting`` from the world): the shadow pass's whole test,
-``shaders/shadow.vert``'s ``casts``."""
+Glass casts none, whatever its code, and a portal's surface is an opening that casts none
+unless it carries light (``Portal.carries_light``: ``OPENING_CASTS_BIT`` in its code,
+``opening_casts``), when the light it takes in leaves by its partner, not on behind it
+(``row_casts_shadow`` on instance rows, ``ShadowCasting`` from the world): the shadow pass's
+whole test, ``shaders/shadow.vert``'s ``casts``."""
 from __future__ import annotations
 
 from typing import TypeVar
@@ -28,7 +30,7 @@ from typing import TypeVar
 import numpy as np
 
 from components import MeshRef, Portal, PortalClone, Refractive, Visibility
-from components.limits import NO_RECEIVE_BIT, NO_SHADOW_BIT, VIEW_KINDS
+from components.limits import NO_RECEIVE_BIT, NO_SHADOW_BIT, OPENING_CASTS_BIT, VIEW_KINDS
 from components.visibility import DRAWN_EVERYWHERE, KIND_MASK, visibility_code
 from engine.core.material_slots import ReflectVariant, RefractVariant
 from engine.core.world import World
@@ -37,16 +39,18 @@ Code = TypeVar("Code", int, np.ndarray)
 
 
 def entity_code(visibility: Visibility | None, drawn: bool = True, casts_shadows: bool = True,
-                receives_shadows: bool = True) -> int:
+                receives_shadows: bool = True, opening_carries: bool = False) -> int:
     """Where an entity is drawn: its ``Visibility``'s hidden kinds and layers
     (``DRAWN_EVERYWHERE`` without one), with ``NO_SHADOW_BIT`` when it casts no shadow
-    (``casts_shadows`` False: its ``MeshRef.casts_shadows``) and ``NO_RECEIVE_BIT`` when it
-    receives none (its ``MeshRef.receives_shadows``); 0, on no layer, when it is not drawn at
-    all (``drawn`` False: an invisible mesh)."""
+    (``casts_shadows`` False: its ``MeshRef.casts_shadows``), ``NO_RECEIVE_BIT`` when it
+    receives none (its ``MeshRef.receives_shadows``) and ``OPENING_CASTS_BIT`` when it is a
+    portal's opening that carries light (``opening_carries``: its ``Portal.carries_light``);
+    0, on no layer, when it is not drawn at all (``drawn`` False: an invisible mesh)."""
     if not drawn:
         return 0
     code = DRAWN_EVERYWHERE if visibility is None else visibility_code(visibility.hidden_kinds, visibility.layer_mask)
-    return code | (0 if casts_shadows else NO_SHADOW_BIT) | (0 if receives_shadows else NO_RECEIVE_BIT)
+    return code | (0 if casts_shadows else NO_SHADOW_BIT) | (0 if receives_shadows else NO_RECEIVE_BIT) \
+        | (OPENING_CASTS_BIT if opening_carries else 0)
 
 
 def drawn_code(world: World, entity: int) -> int:
@@ -84,17 +88,26 @@ def receives_shadow(codes: Code) -> bool | np.ndarray:
     return (codes & NO_RECEIVE_BIT) == 0
 
 
+def opening_casts(codes: Code) -> bool | np.ndarray:
+    """Whether what has ``codes`` is a portal's opening that carries light
+    (``OPENING_CASTS_BIT``), so casts a shadow: ``opening_casts`` in
+    ``shaders/include/visibility.glsl``."""
+    return (codes & OPENING_CASTS_BIT) != 0
+
+
 def row_casts_shadow(refract: np.ndarray, reflect: np.ndarray, codes: np.ndarray) -> np.ndarray:
     """Whether each instance row (its refract and reflect variants, its code) is drawn into
     the lights' shadow maps: ``casts`` in ``shaders/shadow.vert``, on arrays.  Glass lets the
-    light through and a portal's surface is an opening: neither casts."""
-    return (reflect != ReflectVariant.PORTAL) & (refract == RefractVariant.NONE) & casts_shadow(codes)
+    light through, and a portal's surface is an opening that casts only when it carries light
+    (``opening_casts``: the light goes in there and out of its partner)."""
+    return ((reflect != ReflectVariant.PORTAL) | opening_casts(codes)) & (refract == RefractVariant.NONE) \
+        & casts_shadow(codes)
 
 
 class ShadowCasting:
     """Whether entities, read from the world, are drawn into the lights' shadow maps (the rule
     ``row_casts_shadow`` applies to their instance rows): a visible mesh, not glass nor a
-    portal, drawn somewhere and not ``casts_shadows = False``; a portal's clone of an entity
+    portal that carries no light, drawn somewhere and not ``casts_shadows = False``; a portal's clone of an entity
     by its source's Visibility and ``casts_shadows``, as the extract stage writes its row.
     Made once for a frame's many movers: the glass, the portals and the clones are looked up
     once, then each mover by the MeshRef and Visibility its caller holds already."""
@@ -102,7 +115,7 @@ class ShadowCasting:
     def __init__(self, world: World) -> None:
         self.world = world
         self._see_through = {entity for entity, _ in world.query_one(Refractive)} | \
-            {entity for entity, _ in world.query_one(Portal)}
+            {entity for entity, portal in world.query_one(Portal) if not portal.carries_light}
         self._clones = {entity: clone.source for entity, clone in world.query_one(PortalClone)}
 
     def casts(self, entity: int, mesh_ref: MeshRef, visibility: Visibility | None) -> bool:
@@ -116,7 +129,7 @@ class ShadowCasting:
 
 
 def glsl_defines() -> dict[str, str]:
-    """``VIEW_KIND_BITS``: the kinds' bit count, ``NO_SHADOW_BIT`` and ``NO_RECEIVE_BIT``,
-    for ``shaders/include/visibility.glsl``."""
+    """``VIEW_KIND_BITS``: the kinds' bit count, ``NO_SHADOW_BIT``, ``NO_RECEIVE_BIT`` and
+    ``OPENING_CASTS_BIT``, for ``shaders/include/visibility.glsl``."""
     return {"VIEW_KIND_BITS": f"{VIEW_KINDS}u", "NO_SHADOW_BIT": f"{NO_SHADOW_BIT}u",
-            "NO_RECEIVE_BIT": f"{NO_RECEIVE_BIT}u"}
+            "NO_RECEIVE_BIT": f"{NO_RECEIVE_BIT}u", "OPENING_CASTS_BIT": f"{OPENING_CASTS_BIT}u"}

@@ -27,6 +27,12 @@ bool casts_no_shadow(float instance_code) {
     return hidden_everywhere(instance_code) || (uint(instance_code + 0.5) & NO_SHADOW_BIT) != 0u;
 }
 
+// A portal's opening that carries light (Portal.carries_light: OPENING_CASTS_BIT, above
+// NO_RECEIVE_BIT) casts a shadow: the light it takes in leaves by its partner.
+bool opening_casts(float instance_code) {
+    return (uint(instance_code + 0.5) & OPENING_CASTS_BIT) != 0u;
+}
+
 // Lit as though nothing stood in the lights' way: MeshRef.receives_shadows off (NO_RECEIVE_BIT,
 // above NO_SHADOW_BIT): the scene shader looks up no shadow map for it.
 bool receives_no_shadow(float instance_code) {
