@@ -23,7 +23,7 @@ layout(std140) uniform VirtualLights {
     vec4 virtual_v[MAX_VIRTUAL_LIGHTS];             // xyz: the other edge likewise
     vec4 virtual_params[MAX_VIRTUAL_LIGHTS];        // x: an atlas texel in uv, y: softness, z: taps a side,
                                                     // w: how many further outlines (virtual_more)
-    vec4 virtual_spot[MAX_VIRTUAL_LIGHTS];          // a point image's spot cone, carried (lights.glsl spot_factor)
+    vec4 virtual_spot[MAX_VIRTUAL_LIGHTS];          // a point image's spot cone, carried (spot_cone.glsl spot_factor)
     vec4 virtual_more[MAX_VIRTUAL_LIGHTS * (MAX_APERTURES - 1) * 4];  // per outline: plane, corner, u, v (as above)
 } virtual_lights;
 
