@@ -644,3 +644,67 @@ def test_the_editor_refuses_what_a_game_cannot_do_without_and_random_edits_keep_
     finally:
         capture.release()
         engine.close()
+
+
+def test_a_level_game_keeps_what_its_rules_name(tmp_path):
+    """``LevelGame.needs``' default: an entity the level's [rules] name (a value, or in a
+    list or table, nested) cannot be deleted in the editor, in words naming the rule; an
+    entity no rule names can, and so can a named entity's components (the game guards those
+    itself, as mirror beam and portal run do)."""
+    from engine.assets.level_file import LevelGame
+    from shell.editor import EditError, Editor
+
+    path = tmp_path / "rules.toml"
+    path.write_text(textwrap.dedent("""\
+        [level]
+        name = "rules"
+
+        [rules]
+        exit = "door"
+        checkpoints = [["flag_a"], { second = "flag_b" }]
+        speed = 3.0
+
+        [[entity]]
+        name = "camera"
+        [entity.Transform]
+        [entity.Camera]
+
+        [[entity]]
+        name = "door"
+        [entity.Transform]
+        [entity.MeshRef]
+        mesh = { box = [1.0, 2.0, 0.1] }
+
+        [[entity]]
+        name = "flag_a"
+        [entity.Transform]
+
+        [[entity]]
+        name = "flag_b"
+        [entity.Transform]
+
+        [[entity]]
+        name = "crate"
+        [entity.Transform]
+        """))
+
+    class Course(LevelGame):
+        game = "course"
+
+    game = Course(path)
+    world = World("course")
+    try:
+        game.build(world)
+        editor = Editor(world, game.components, dict(game.names), needs=game.needs)
+        with pytest.raises(EditError, match=r"door: course cannot do without it: the level's rules name it "
+                                            r"\(exit = 'door'\)"):
+            editor.delete(game.names["door"])
+        for flag in ("flag_a", "flag_b"):
+            with pytest.raises(EditError, match=f"rules name it \\(checkpoints = '{flag}'\\)"):
+                editor.delete(game.names[flag])
+        assert all(world.exists(game.names[n]) for n in ("door", "flag_a", "flag_b")) and not editor.can_undo
+        editor.remove_component(game.names["door"], "MeshRef")   # its components are the game's to guard
+        editor.delete(game.names["crate"])                        # no rule names it
+        assert not world.exists(game.names["crate"])
+    finally:
+        world.close()

@@ -93,5 +93,32 @@ class LevelGame(Game):
         """Why the game cannot run without ``entity`` (``component`` None) or without that
         component of it, in words the level editor shows when it refuses to delete or remove
         it; None: the game does without it.  A game whose systems hold entities from its
-        build (its laser, its solids) says so here."""
+        build (its laser, its solids) says so here, components and all.
+
+        The default keeps what the level's ``[rules]`` name: an entity whose name is a rule's
+        value (or in a rule's list or table) cannot be deleted, since a game reads its rules
+        to find the entities it holds (an exit, a source, a target), and deleting one would
+        fail inside the next frame; its components are the game's to guard."""
+        if component is not None or self.level is None:
+            return None
+        for rule, value in self.level.rules.items():
+            for name in _names_in(value):
+                if self.names.get(name) == entity:
+                    game = self.game or type(self).__name__
+                    return f"{game} cannot do without it: the level's rules name it ({rule} = {name!r})"
         return None
+
+
+def _names_in(value: object) -> list[str]:
+    """The strings in a rule's value: itself, or those in its lists and tables, however
+    deeply nested (walked with a stack, not recursion)."""
+    found, stack = [], [value]
+    while stack:
+        item = stack.pop()
+        if isinstance(item, str):
+            found.append(item)
+        elif isinstance(item, dict):
+            stack.extend(item.values())
+        elif isinstance(item, (list, tuple)):
+            stack.extend(item)
+    return found
