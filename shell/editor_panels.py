@@ -28,7 +28,18 @@ from engine.assets.level_file import LevelGame
 from engine.assets.level_read import REFERENCE_FIELDS
 from engine.assets.values import json_value
 from shell.editor import AUTOMATIC_FIELDS, TEXTURE_FIELDS, EditError, Editor
-from shell.handles import HANDLE_MODES, Handles, ReachOutline, framing_eye, reach_outline, transform_handles
+from shell.handles import (
+    HANDLE_MODES,
+    MARKER_REACH,
+    Handles,
+    Marker,
+    ReachOutline,
+    framing_eye,
+    marker_at,
+    markers,
+    reach_outline,
+    transform_handles,
+)
 
 if TYPE_CHECKING:
     from shell.app import Engine
@@ -71,6 +82,7 @@ class EditorPanels:
         self.handle_mode = "move"             # the selection's handles: HANDLE_MODES, chosen in the inspector
         self.handles: Handles | None = None   # the selection's handles, last drawn
         self.reach_outline: ReachOutline | None = None   # the selected light's or probe's reach, last drawn
+        self.markers: list[Marker] = []   # the lights' and probes' markers, last drawn
         self._hovered: int | None = None      # the handle under the mouse
         self._dragging: _Drag | None = None   # a handle being dragged
         self.entity_filter = ""               # the entity list's filter, as typed
@@ -95,7 +107,16 @@ class EditorPanels:
         targets = engine.renderer.targets
         if not self.visible or self.context is None or targets is None:
             return False
-        self.editing(engine).pick(targets.read_ids(), targets.read_surface_ids(), int(x), int(y), surface)
+        editor = self.editing(engine)
+        view = engine.main_view
+        if view is not None and not surface:   # a light's or probe's marker first: it has no pixel of its own
+            size = self.io.display_size
+            entity = marker_at(markers(engine.world, view.view_proj, (size.x, size.y)), (x, y),
+                               MARKER_REACH * self.scale)
+            if entity is not None:
+                editor.select(entity)
+                return True
+        editor.pick(targets.read_ids(), targets.read_surface_ids(), int(x), int(y), surface)
         return True
 
     def shortcut(self, engine: Engine, name: str, ctrl: bool = False, shift: bool = False) -> bool:
@@ -374,6 +395,7 @@ class EditorPanels:
                                         self.handle_mode)
             outline = reach_outline(engine.world, entity, view.view_proj, (size.x, size.y))
         self.handles, self.reach_outline = handles, outline
+        self._markers(engine, entity)
         if outline is not None:   # under the handles: where the light or probe reaches, in its own colour
             draw = imgui.get_background_draw_list()
             colour = imgui.get_color_u32(imgui.ImVec4(1.0, 0.85, 0.3, 0.7))
@@ -414,6 +436,27 @@ class EditorPanels:
                 draw.add_rect_filled(imgui.ImVec2(end.x - r, end.y - r), imgui.ImVec2(end.x + r, end.y + r), colour)
             else:
                 draw.add_circle_filled(end, r, colour)
+
+    def _markers(self, engine: Engine, selected: int | None) -> None:
+        """A marker where each light and probe with no mesh stands (``markers``: a light a
+        yellow dot, a probe a cyan ring, the selected one ringed in white): what a click
+        there selects (``click``)."""
+        view = engine.main_view
+        size = self.io.display_size
+        self.markers = markers(engine.world, view.view_proj, (size.x, size.y)) if view is not None else []
+        draw = imgui.get_background_draw_list()
+        r = 5.0 * self.scale
+        light = imgui.get_color_u32(imgui.ImVec4(1.0, 0.85, 0.3, 0.9))
+        probe = imgui.get_color_u32(imgui.ImVec4(0.3, 0.9, 1.0, 0.9))
+        white = imgui.get_color_u32(imgui.ImVec4(1.0, 1.0, 1.0, 1.0))
+        for marker in self.markers:
+            at = imgui.ImVec2(*marker.at)
+            if marker.kind == "light":
+                draw.add_circle_filled(at, r, light)
+            else:
+                draw.add_circle(at, r, probe, 0, 2.0 * self.scale)
+            if marker.entity == selected:
+                draw.add_circle(at, r + 3.0 * self.scale, white, 0, 1.5 * self.scale)
 
     def _drag_to(self, editor: Editor, drag: _Drag, point: tuple[float, float]) -> None:
         """A handle's drag with the mouse at ``point``: the Transform from the drag's start;

@@ -202,6 +202,46 @@ def _light_reach(light: PointLight, matrix: glm.mat4) -> list[tuple[glm.vec3, ..
                   for t in steps) for i in range(3)]
 
 
+MARKER_REACH = 10.0   # pixels (at scale 1) from a marker that a click selects it
+
+
+@dataclasses.dataclass(frozen=True)
+class Marker:
+    """An entity with no mesh to click (a lamp, a spot, a probe) drawn as a marker where it
+    stands: ``kind`` "light" or "probe", ``at`` its place on screen (output pixels from the
+    top left)."""
+
+    entity: int
+    kind: str
+    at: Pixel
+
+
+def markers(world: World, view_proj: glm.mat4, size: tuple[int, int]) -> list[Marker]:
+    """The markers in view (in front of the eye, inside the output): each entity with a
+    Transform and a point light or a reflection probe but no visible mesh, which the id
+    images cannot pick (an entity with a mesh is picked where it shows)."""
+    found = []
+    for kind, component in (("light", PointLight), ("probe", ReflectionProbe)):
+        for entity, _ in world.query_one(component):
+            transform, mesh_ref = world.try_get(entity, Transform), world.try_get(entity, MeshRef)
+            if transform is None or (mesh_ref is not None and mesh_ref.visible):
+                continue
+            at = screen_point(view_proj, size, glm.vec3(current_world_matrix(world, transform)[3]))
+            if at is not None and 0.0 <= at[0] < size[0] and 0.0 <= at[1] < size[1]:
+                found.append(Marker(entity, kind, at))
+    return found
+
+
+def marker_at(found: list[Marker], point: Pixel, reach: float) -> int | None:
+    """The entity of the marker nearest ``point`` within ``reach`` pixels; None for none."""
+    best, entity = reach, None
+    for marker in found:
+        gap = math.hypot(marker.at[0] - point[0], marker.at[1] - point[1])
+        if gap <= best:
+            best, entity = gap, marker.entity
+    return entity
+
+
 FRAME_MARGIN = 1.3  # framing a selection: its bounding sphere fills this much less than the view's height
 
 

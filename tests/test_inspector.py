@@ -1100,3 +1100,43 @@ def test_a_selected_spot_light_shows_its_cone(scene, ctx):
         assert overlay.reach_outline is None and yellow(runner.capture.read_rgb()) == 0
     finally:
         overlay.release()
+
+
+def test_a_light_or_probe_without_a_mesh_is_a_marker_a_click_selects(scene, ctx):
+    """A spot light and a probe with no mesh (no pixel in the id images) are drawn as markers
+    where the test projects them, a yellow dot and a cyan ring; a click on a marker selects
+    its entity, and a click away from it picks the world as before (the red box)."""
+    from components import PointLight, ReflectionProbe
+    from shell.handles import screen_point
+
+    ents = {}
+
+    def build(world):
+        edit_scene(world, ents)
+        ents["spot"] = world.spawn(Transform(position=(2.4, 2.2, 1.0)), PointLight(intensity=2.0, range=2.0,
+                                                                                     spot_angle=30.0))
+        ents["probe"] = world.spawn(Transform(position=(1.6, 0.6, 2.0)), ReflectionProbe(resolution=16))
+
+    size = (1280, 720)
+    runner = scene(build, size)
+    overlay = DebugOverlay(ctx)
+    try:
+        draw, _ = _hands(runner, overlay, size)
+        draw()
+        view = runner.engine.main_view
+        kinds = {m.entity: m.kind for m in overlay.markers}
+        assert kinds == {ents["spot"]: "light", ents["probe"]: "probe"}
+        frame = runner.capture.read_rgb()
+        for name, want in (("spot", lambda p: p[0] > 200 and p[1] > 170 and p[2] < 150),
+                           ("probe", lambda p: p[2] > 200 and p[1] > 180 and p[0] < 150)):
+            x, y = screen_point(view.view_proj, size, glm.vec3(runner.world.get(ents[name], Transform).position))
+            assert x > 700, "clear of the overlay's window"
+            patch = frame[int(y) - 6:int(y) + 7, int(x) - 6:int(x) + 7].reshape(-1, 3).astype(int)
+            assert any(want(p) for p in patch), name
+            assert overlay.click(runner.engine, x + 2.0, y - 1.0)
+            assert overlay.editor.selected == ents[name]
+        box_x, box_y = runner.project(runner.world.get(ents["box"], Transform).position)
+        assert overlay.click(runner.engine, box_x, box_y)
+        assert overlay.editor.selected == ents["box"]
+    finally:
+        overlay.release()
