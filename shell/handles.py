@@ -1,9 +1,11 @@
 """The level editor's handles and framing, as geometry (GL-free): where an entity's move,
 turn and scale handles stand on the main view's screen (``transform_handles``), which of them
 the mouse is on, what a drag along or round one asks for (``Handles.distance``,
-``Handles.sweep``), and where a camera stands to frame an entity (``framing_eye``).  The
-overlay (``shell/overlay.py``) draws them and drags them; the edits they make are the
-editor's (``Editor.move``, ``Editor.turn``, ``Editor.rescale``: ``shell/editor.py``).
+``Handles.sweep``), what a selected light or probe reaches (``reach_outline``), the markers
+of the lights and probes that have no mesh to click (``markers``, ``marker_at``), and where
+a camera stands to frame an entity (``framing_eye``).  The overlay (``shell/overlay.py``)
+draws them and drags them; the edits they make are the editor's (``Editor.move``,
+``Editor.turn``, ``Editor.rescale``: ``shell/editor.py``).
 """
 from __future__ import annotations
 
