@@ -15,7 +15,7 @@ import math
 import numpy as np
 from pyglm import glm
 
-from components import MeshRef, PointLight, ReflectionProbe, Transform
+from components import DirectionalLight, MeshRef, PointLight, ReflectionProbe, Transform
 from engine.core.transforms import current_world_matrix
 from engine.core.world import World
 from engine.rules.probe_rules import world_bounds
@@ -132,8 +132,10 @@ class ReachOutline:
     """What a selected light or probe reaches, as the main view shows it (as Unity and Godot
     draw them): a spot light's cone (its apex, ``CONE_EDGES`` lines along its edge and the
     circle where they end, ``range`` metres from the apex), a light all round's range sphere
-    (a circle about each world axis), or a reflection probe's influence box (its twelve
-    edges, and the box inside where its weight is whole when it has a ``blend_distance``).
+    (a circle about each world axis), a sun's direction (an arrow from where it stands, or,
+    with no Transform, from ``SUN_ARROW_AHEAD`` metres ahead of the eye), or a reflection
+    probe's influence box (its twelve edges, and the box inside where its weight is whole
+    when it has a ``blend_distance``).
     ``world``: each polyline's points (closed circles repeat their first point); ``lines``:
     the same on screen, output pixels from the top left."""
 
@@ -143,21 +145,25 @@ class ReachOutline:
 
 def reach_outline(world: World, entity: int, view_proj: glm.mat4, size: tuple[int, int]) -> ReachOutline | None:
     """``entity``'s ``ReachOutline`` in the view ``view_proj`` on an output of ``size``: its
-    point light's, else its probe's influence box; None when it has neither (or no
-    Transform, or a probe serving only its own entity).  A polyline with a point behind the
-    eye is left out (the rest still show)."""
+    sun's arrow, its point light's reach, else its probe's influence box; None when it has
+    none of them (or no Transform, but for a sun; or a probe serving only its own entity).
+    A polyline with a point behind the eye is left out (the rest still show)."""
     transform = world.try_get(entity, Transform)
-    if transform is None:
+    sun = world.try_get(entity, DirectionalLight)
+    if sun is not None:
+        anchor = glm.vec3(current_world_matrix(world, transform)[3]) if transform is not None \
+            else _ahead(view_proj, SUN_ARROW_AHEAD)
+        worlds = _sun_arrow(anchor, glm.vec3(sun.direction))
+    elif transform is None:
         return None
-    matrix = current_world_matrix(world, transform)
-    light = world.try_get(entity, PointLight)
-    if light is not None:
-        worlds = _light_reach(light, matrix)
+    elif (light := world.try_get(entity, PointLight)) is not None:
+        worlds = _light_reach(light, current_world_matrix(world, transform))
     else:
         probe = world.try_get(entity, ReflectionProbe)
         if probe is None or probe.influence is None:
             return None
-        worlds = _influence_box(glm.vec3(matrix[3]), glm.vec3(probe.influence), probe.blend_distance)
+        centre = glm.vec3(current_world_matrix(world, transform)[3])
+        worlds = _influence_box(centre, glm.vec3(probe.influence), probe.blend_distance)
     kept_world, kept_lines = [], []
     for line in worlds:
         pixels = [screen_point(view_proj, size, point) for point in line]
@@ -165,6 +171,32 @@ def reach_outline(world: World, entity: int, view_proj: glm.mat4, size: tuple[in
             kept_world.append(tuple(line))
             kept_lines.append(tuple(pixels))
     return ReachOutline(tuple(kept_world), tuple(kept_lines))
+
+
+SUN_ARROW_AHEAD = 5.0   # metres ahead of the eye a sun's arrow starts (a sun has no place)
+SUN_ARROW_LENGTH = 1.5  # metres
+
+
+def _ahead(view_proj: glm.mat4, distance: float) -> glm.vec3:
+    """The point ``distance`` metres ahead of the eye along the middle of the view.  The eye
+    is what a perspective view-projection sends to clip w = 0 on its axis (clip (0, 0, 1, 0)
+    brought back); the middle of the far plane gives the way."""
+    inverse = glm.inverse(glm.dmat4(view_proj))
+    at_eye, far = inverse * glm.dvec4(0.0, 0.0, 1.0, 0.0), inverse * glm.dvec4(0.0, 0.0, 1.0, 1.0)
+    eye, toward = glm.dvec3(at_eye) / at_eye.w, glm.dvec3(far) / far.w
+    return glm.vec3(eye + glm.normalize(toward - eye) * distance)
+
+
+def _sun_arrow(anchor: glm.vec3, direction: glm.vec3) -> list[tuple[glm.vec3, ...]]:
+    """An arrow from ``anchor`` the way a sun's light travels (``SUN_ARROW_LENGTH`` long,
+    four barbs at its head)."""
+    d = glm.normalize(direction)
+    tip = anchor + d * SUN_ARROW_LENGTH
+    helper = glm.vec3(0.0, 1.0, 0.0) if abs(d.y) < 0.9 else glm.vec3(1.0, 0.0, 0.0)
+    u = glm.normalize(glm.cross(d, helper))
+    v = glm.cross(d, u)
+    barb = 0.2 * SUN_ARROW_LENGTH
+    return [(anchor, tip), *((tip, tip - d * barb + side * (0.5 * barb)) for side in (u, -u, v, -v))]
 
 
 def _influence_box(centre: glm.vec3, influence: glm.vec3, blend: float) -> list[tuple[glm.vec3, ...]]:

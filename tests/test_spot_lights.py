@@ -319,6 +319,26 @@ def test_the_editors_outline_of_a_spot_is_its_cone_and_of_a_lamp_its_range(scene
     assert len(reach_outline(spot.world, lamp, view.view_proj, size).world) < 3
 
 
+def test_the_editors_outline_of_a_sun_is_an_arrow_the_way_its_light_goes(scene):
+    """A sun has no place: its outline is an arrow from the middle of the view, 5 m ahead of
+    the eye, along its direction (a shaft and four barbs at its tip)."""
+    from components import DirectionalLight
+    from shell.handles import SUN_ARROW_AHEAD, SUN_ARROW_LENGTH, reach_outline, screen_point
+
+    runner = scene(lambda w: _floor(w, None))
+    sun = runner.world.spawn(DirectionalLight(direction=(0.3, -1.0, -0.4)))
+    runner.frame()
+    view, size = runner.engine.main_view, runner.size
+    shaft, *barbs = reach_outline(runner.world, sun, view.view_proj, size).world
+    start, tip = (np.array(list(p)) for p in shaft)
+    direction = np.array([0.3, -1.0, -0.4]) / np.linalg.norm([0.3, -1.0, -0.4])
+    np.testing.assert_allclose((tip - start) / SUN_ARROW_LENGTH, direction, atol=1e-5)
+    np.testing.assert_allclose(np.linalg.norm(start - np.array(list(view.eye))), SUN_ARROW_AHEAD, rtol=1e-4)
+    np.testing.assert_allclose(screen_point(view.view_proj, size, glm.vec3(*start)), (size[0] / 2, size[1] / 2),
+                               atol=1e-3)
+    assert len(barbs) == 4 and all(np.allclose(list(b[0]), tip) for b in barbs)
+
+
 # --- the rule -------------------------------------------------------------------------------
 def test_the_glsl_cone_is_the_rules(ctx, tmp_path):
     """``spot_factor`` in spot_cone.glsl gives light_rules' ``spot_factor`` for cones of
