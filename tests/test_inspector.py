@@ -1071,11 +1071,7 @@ def test_a_selected_spot_light_shows_its_cone(scene, ctx):
                                    PointLight(intensity=5.0, range=2.0, spot_angle=25.0))
 
     size = (1280, 720)
-    runner = scene(build, size)
-    overlay = DebugOverlay(ctx)
-    try:
-        draw, _ = _hands(runner, overlay, size)
-        draw()
+    with _overlay_over(scene, ctx, build, size) as (runner, overlay, draw):
         editor = overlay.editing(runner.engine)
         before = runner.capture.read_rgb()
         editor.select(ents["spot"])
@@ -1098,8 +1094,6 @@ def test_a_selected_spot_light_shows_its_cone(scene, ctx):
         editor.select(None)
         draw()
         assert overlay.reach_outline is None and yellow(runner.capture.read_rgb()) == 0
-    finally:
-        overlay.release()
 
 
 def test_a_light_or_probe_without_a_mesh_is_a_marker_a_click_selects(scene, ctx):
@@ -1118,11 +1112,7 @@ def test_a_light_or_probe_without_a_mesh_is_a_marker_a_click_selects(scene, ctx)
         ents["probe"] = world.spawn(Transform(position=(1.6, 0.6, 2.0)), ReflectionProbe(resolution=16))
 
     size = (1280, 720)
-    runner = scene(build, size)
-    overlay = DebugOverlay(ctx)
-    try:
-        draw, _ = _hands(runner, overlay, size)
-        draw()
+    with _overlay_over(scene, ctx, build, size) as (runner, overlay, _):
         view = runner.engine.main_view
         kinds = {m.entity: m.kind for m in overlay.markers}
         assert kinds == {ents["spot"]: "light", ents["probe"]: "probe"}
@@ -1138,5 +1128,17 @@ def test_a_light_or_probe_without_a_mesh_is_a_marker_a_click_selects(scene, ctx)
         box_x, box_y = runner.project(runner.world.get(ents["box"], Transform).position)
         assert overlay.click(runner.engine, box_x, box_y)
         assert overlay.editor.selected == ents["box"]
+
+
+@contextmanager
+def _overlay_over(scene, ctx, build, size):
+    """A scene of ``build`` at ``size`` with the overlay drawn over one frame: yields
+    (runner, overlay, draw)."""
+    runner = scene(build, size)
+    overlay = DebugOverlay(ctx)
+    try:
+        draw, _ = _hands(runner, overlay, size)
+        draw()
+        yield runner, overlay, draw
     finally:
         overlay.release()
