@@ -56,7 +56,7 @@ from engine.core.budget import spending_order
 from engine.core.world import World
 from engine.resources import RenderStats, Surfaces, ViewBudget
 from engine.rules.frame_rules import active_camera_parts
-from engine.rules.light_rules import SAME_SUN_DEGREES, SAME_SUN_TINT, sun_relights, sun_states
+from engine.rules.light_rules import SAME_SUN_DEGREES, SAME_SUN_TINT, shadow_texel_tangent, sun_relights, sun_states
 from engine.rules.probe_rules import (
     ALL_FACES,
     LIGHTING_KINDS,
@@ -557,8 +557,9 @@ class ProbeScheduler:
         normal offset) and ``softness / 2`` texels plus a bilinear texel around that
         (``shaders/include/shadows.glsl``), at most ``2.5 + 2 * softness`` texels; a
         directional texel is at most the grown level box's diagonal over the map's side
-        (``shadow_rules.directional_fit``), a point light's at most ``2 / resolution`` of its
-        range.  The widest of the casting lights' (worked out once a frame: the shadows
+        (``shadow_rules.directional_fit``), a point light's at most its range times
+        ``light_rules.shadow_texel_tangent`` (a cube face's ``2 / resolution``, a spot map's
+        its half-width as much again).  The widest of the casting lights' (worked out once a frame: the shadows
         stage publishes new casters each frame)."""
         if self._reach[0] is casters:
             return self._reach[1]
@@ -576,7 +577,7 @@ class ProbeScheduler:
         if casters.points:
             for _, light in self.world.query_one(PointLight):
                 if light.shadows:
-                    reach = max(reach, 2.0 * light.range / light.shadow_resolution
+                    reach = max(reach, shadow_texel_tangent(light) * light.range
                                 * (2.5 + 2.0 * light.shadow_softness))
         self._reach = (casters, reach)
         return reach

@@ -31,6 +31,7 @@ from collections.abc import Callable
 
 import esper
 import numpy as np
+from pyglm import glm
 
 from components import DirectionalLight, Material, MeshRef, PointLight, Portal, Refractive, Transform, Visibility
 from components.tracking import raw_field
@@ -42,7 +43,7 @@ from engine.render.shadows import LIGHT_LIMITS, VIRTUAL_RESOLUTION
 from engine.render.views import MAX_DIRECTIONAL_LIGHTS
 from engine.resources import RenderStats, Surfaces
 from engine.rules.frame_rules import active_camera_parts
-from engine.rules.light_rules import KeptLights, cube_faces_lit, kept_lights, lamp_cone
+from engine.rules.light_rules import KeptLights, cube_faces_lit, kept_lights, lamp_cone, spot_map_half_width
 from engine.rules.probe_rules import world_bounds
 from engine.rules.shadow_rules import (
     MAX_VIRTUAL_LIGHTS,
@@ -293,29 +294,43 @@ class ShadowSystem(esper.Processor):
                 self._point.clear()
                 self._bounds.clear()
                 maps.drop_unused_cubes(set())
+                maps.fit_spot_atlas(0)
                 self._points_clear = True
             return
         maps.clear_points()
         self._points_clear = False
         changed_lo, changed_hi = self._changed_boxes()
         layered = self.renderer.path_checks.trusted("layered_capture")
+        spots = {slot: half_width for slot, _, _, light, _ in casting
+                 if (half_width := spot_map_half_width(light)) is not None}
+        maps.fit_spot_atlas(max((light.shadow_resolution for slot, _, _, light, _ in casting if slot in spots),
+                                default=0))
         for slot, index, entity, light, transform in casting:
-            position = transform.world[3].xyz
+            world_matrix = transform.world
+            position = world_matrix[3].xyz
             published.points.append((tuple(position), light.range))
-            faces = cube_faces_lit(lamp_cone(light, transform.world), [face.forward for face in CUBE_FACES])
+            half_width = spots.get(slot)
+            if half_width is None:   # a cube: the faces the cone (or all round, every face) meets
+                how = cube_faces_lit(lamp_cone(light, world_matrix), [face.forward for face in CUBE_FACES])
+            else:                    # a spot's map: along its axis (-Z), in its atlas
+                how = (tuple(-glm.normalize(world_matrix[2].xyz)), half_width, maps.spot_tile)
             key = (entity, tuple(position), light.range, light.shadow_resolution, light.shadow_softness, maps.filter,
-                   faces)
+                   how)
             reached = len(changed_lo) and boxes_in_reach(changed_lo, changed_hi, np.array(position), light.range).any()
             if key == self._point.get(slot) and not reached:
                 maps.keep_point(slot, index)
                 stats.shadow_maps_kept += 1
                 continue
-            stats.shadow_path = maps.draw_point(slot, index, position, light.range, light.shadow_resolution,
-                                                light.shadow_softness, layered, faces)
+            if half_width is None:
+                stats.shadow_path = maps.draw_point(slot, index, position, light.range, light.shadow_resolution,
+                                                    light.shadow_softness, layered, how)
+            else:
+                stats.shadow_path = maps.draw_spot(slot, index, position, glm.vec3(how[0]), half_width, light.range,
+                                                   light.shadow_resolution, light.shadow_softness)
             self._point[slot] = key
             stats.shadow_maps_drawn += 1
+        maps.drop_unused_cubes({row[0] for row in casting if row[0] not in spots})
         used = {row[0] for row in casting}
-        maps.drop_unused_cubes(used)
         for slot in [s for s in self._point if s not in used]:
             del self._point[slot]
 

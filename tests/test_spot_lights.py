@@ -24,7 +24,7 @@ from engine.core.portal_math import pair_transform
 from engine.core.world import World
 from engine.rules.light_rules import ALL_ROUND, cone_reaches, cube_faces_lit, lamp_cone, spot_cone, spot_factor
 from shell.overlay_text import overlay_lines
-from tests.support import look_from, pixel_rays, srgb_to_linear
+from tests.support import box_hits, look_from, pixel_rays, srgb_to_linear
 from tests.test_one_owner import evaluate_glsl
 
 LAMP = np.array([0.0, 3.0, 0.0])
@@ -242,20 +242,24 @@ def _shadowed(world, spot_angle: float | None, aim, target, crate: bool = True) 
                            shadow_resolution=256))
 
 
-@pytest.mark.parametrize("aim, target, faces", [((0.0, -1.0, 0.0), (0.0, 0.0, 0.0), 1),
+WIDE = 50.0   # degrees: past SPOT_MAP_MAX_ANGLE, a spot that casts from its cube
+
+
+@pytest.mark.parametrize("aim, target, faces", [((0.0, -1.0, 0.0), (0.0, 0.0, 0.0), 5),
                                                 ((1.0, -1.0, 1.0), (2.0, 0.0, 2.0), 3)],
                          ids=["down", "corner"])
-def test_a_spots_shadow_cube_draws_only_the_faces_its_cone_lights(scene, aim, target, faces):
-    """A 30-degree spot casting shadows draws one cube face aimed straight down, three aimed
-    at a cube corner (the faces its cone meets), not six; inside its cone the frame, the
-    crate's shadow in it, is the frame of the same lamp all round, whose cube has all six."""
-    spot = scene(lambda w: _shadowed(w, ANGLE, aim, target))
+def test_a_wide_spots_shadow_cube_draws_only_the_faces_its_cone_lights(scene, aim, target, faces):
+    """A 50-degree spot casting shadows (too wide for a map of its own) draws five cube faces
+    aimed straight down (all but the one looking up), three aimed at a cube corner (the
+    faces its cone meets), not six; inside its cone the frame, the crate's shadow in it, is
+    the frame of the same lamp all round, whose cube has all six."""
+    spot = scene(lambda w: _shadowed(w, WIDE, aim, target))
     round_ = scene(lambda w: _shadowed(w, 180.0, aim, target))
-    bare = scene(lambda w: _shadowed(w, ANGLE, aim, target, crate=False))
+    bare = scene(lambda w: _shadowed(w, WIDE, aim, target, crate=False))
     spot_rgb, round_rgb, bare_rgb = spot.frame(), round_.frame(), bare.frame()
     assert spot.stats.shadow_faces_drawn == faces and round_.stats.shadow_faces_drawn == 6
     assert f"shadow maps 1 ({faces} cube faces) + " in "\n".join(overlay_lines(spot.engine, [1 / 60]))
-    inside = _floor_angles(spot, LAMP, aim) < INNER - MARGIN
+    inside = _floor_angles(spot, LAMP, aim) < WIDE * (1.0 - BLEND) - MARGIN
     np.testing.assert_array_equal(spot_rgb[inside], round_rgb[inside])
     # The crate's shadow is there (darker than the floor without it) where the cone lights.
     darker = srgb_to_linear(spot_rgb[inside]).mean(-1) < 0.5 * srgb_to_linear(bare_rgb[inside]).mean(-1)
@@ -285,6 +289,154 @@ def test_cube_faces_lit_holds_every_face_a_direction_in_the_cone_falls_on():
         assert all(lit[f] for f in set(face.tolist())), (axis, angle, lit)
     assert cube_faces_lit(spot_cone((0.0, -1.0, 0.0), 30.0, 0.2), axes) == (False, False, False, True, False, False)
     assert cube_faces_lit(ALL_ROUND, axes) == (True,) * 6
+
+
+# --- the spot's map ---------------------------------------------------------------------------
+# A crate turned about the vertical, 1.4 m under a lamp aimed straight down: its shadow's
+# slanted edges show a map's texels as steps.
+CRATE_DROP = 1.4   # metres under the lamp
+CRATE_HALF = np.array([0.1, 0.1, 0.1])
+CRATE_TURN = 0.5   # radians about +y
+NARROW = 20.0   # degrees: the spot's cone
+RESOLUTION = 128   # its shadow map's (a cube face's) texels a side
+DOWN = (0.0, -1.0, 0.0)
+
+
+def _crates_under_spots(world, spot_angle: float, lamps=(LAMP,), resolutions=(RESOLUTION,), crates: bool = True,
+                        eye=(0.0, 3.6, 1.4)) -> None:
+    """A floor, and over it lamps aimed straight down casting shadows (``lamps``, each
+    ``spot_angle`` and a resolution of ``resolutions``), a crate under each (``crates``)."""
+    look_from(world, eye, (float(np.mean([p[0] for p in lamps])), 0.0, 0.0))
+    world.resources["floor"] = world.spawn(Transform(), MeshRef(plane(16, 16)),
+                                           Material(color=(0.8, 0.8, 0.8), roughness=1.0))
+    world.resources["lamps"] = []
+    for lamp, resolution in zip(lamps, resolutions, strict=True):
+        if crates:
+            world.spawn(Transform(position=(lamp[0], lamp[1] - CRATE_DROP, lamp[2]),
+                                  rotation=glm.angleAxis(CRATE_TURN, glm.vec3(0.0, 1.0, 0.0))),
+                        MeshRef(box(tuple(2.0 * CRATE_HALF))), Material(color=(0.6, 0.5, 0.4)))
+        world.resources["lamps"].append(world.spawn(
+            Transform(position=tuple(lamp), rotation=look_rotation(DOWN, (0.0, 0.0, -1.0))),
+            PointLight(intensity=12.0, range=15.0, spot_angle=spot_angle, spot_blend=0.2, shadows=True,
+                       shadow_resolution=resolution)))
+
+
+def _crate_under_spot(world, spot_angle: float = NARROW, crate: bool = True) -> None:
+    _crates_under_spots(world, spot_angle, crates=crate)
+
+
+def _crate_shadow(runner, lamp=LAMP) -> np.ndarray:
+    """Whether each pixel's floor point is in the shadow of the crate under ``lamp``: its
+    segment to the lamp meets the crate (ray cast in the crate's frame, float64)."""
+    eye, rays = pixel_rays(runner.engine.main_view, runner.size)
+    points = (eye + rays * (-eye[1] / rays[..., 1])[..., None]).reshape(-1, 3)
+    c, s = math.cos(CRATE_TURN), math.sin(CRATE_TURN)
+    to_crate = np.array([[c, 0.0, -s], [0.0, 1.0, 0.0], [s, 0.0, c]])   # the turn undone
+    local = (points - (lamp - (0.0, CRATE_DROP, 0.0))) @ to_crate.T
+    towards = (lamp - points) @ to_crate.T
+    return box_hits(local, towards, np.zeros(3), CRATE_HALF, limit=np.ones(len(points))).reshape(runner.size[::-1])
+
+
+def _misplaced(runner, frame, bare, lamp=LAMP) -> tuple[int, int]:
+    """(pixels shaded against the ray cast, pixels judged) inside the full light of the spot
+    at ``lamp``, a pixel either side of the cast shadow's edge left out."""
+    cast = _crate_shadow(runner, lamp)
+    near_edge = np.zeros_like(cast)
+    for dy, dx in ((0, 1), (0, -1), (1, 0), (-1, 0)):
+        near_edge |= cast != np.roll(cast, (dy, dx), axis=(0, 1))
+    judged = (_floor_angles(runner, lamp, DOWN) < NARROW * (1.0 - 0.2) - MARGIN) & ~near_edge \
+        & (runner.ids() == runner.world.resources["floor"])   # the floor itself, not the crate before it
+    dark = srgb_to_linear(frame).mean(-1) < 0.5 * srgb_to_linear(bare).mean(-1)
+    return int((dark != cast)[judged].sum()), int(judged.sum())
+
+
+def test_a_narrow_spot_casts_from_a_map_fitted_to_its_cone_sharper_than_the_cube(scene, monkeypatch):
+    """A 20-degree spot (within ``SPOT_MAP_MAX_ANGLE``) draws one perspective map, no cube
+    face, and the crate's shadow on the floor lies where a ray cast from each pixel's floor
+    point to the lamp meets the crate, to the pixel (its texels are 1.8 cm on the floor,
+    two pixels).  The same lamp made to cast from its cube (the limit set to 0) at the
+    same resolution draws one face, and its shadow's slanted edges step a cube texel (4.7 cm,
+    five pixels) across the cast one."""
+    import engine.rules.light_rules as light_rules
+
+    def misplaced():
+        spot = scene(lambda w: _crate_under_spot(w, NARROW), (640, 480))
+        bare = scene(lambda w: _crate_under_spot(w, NARROW, crate=False), (640, 480))
+        frame = spot.frame()
+        return spot, _misplaced(spot, frame, bare.frame())
+
+    spot, (wrong, judged) = misplaced()
+    assert spot.stats.shadow_path == "spot_map" and spot.stats.shadow_faces_drawn == 0
+    assert judged > 10000 and _crate_shadow(spot).sum() > 2000   # the crate's shadow is in the judged light
+    assert wrong <= 0.0005 * judged, wrong
+    monkeypatch.setattr(light_rules, "SPOT_MAP_MAX_ANGLE", 0.0)
+    cube, (cube_wrong, _) = misplaced()
+    assert cube.stats.shadow_path != "spot_map" and cube.stats.shadow_faces_drawn == 1
+    assert cube_wrong >= 40, cube_wrong
+
+
+def test_two_spots_with_maps_of_two_sizes_each_cast_their_own_crates_shadow(scene):
+    """Both shadow slots hold spot maps (128 and 256 texels: the atlas's tiles are the larger,
+    side by side): under each lamp its crate's shadow lies where the ray cast puts it."""
+    lamps = (np.array([-1.5, 3.0, 0.0]), np.array([1.5, 3.0, 0.0]))
+
+    def build(crates):
+        return lambda w: _crates_under_spots(w, NARROW, lamps, (128, 256), crates, eye=(0.0, 5.5, 2.5))
+
+    runner, bare = scene(build(True), (640, 480)), scene(build(False), (640, 480))
+    frame, bare_frame = runner.frame(), bare.frame()
+    maps = runner.engine.renderer.shadows
+    assert maps.spot_atlas.size == (512, 256) and not maps.cubes
+    assert {("SPOT_MAP0", "1"), ("SPOT_MAP1", "1")} <= set(maps.program_defines)
+    for lamp in lamps:
+        wrong, judged = _misplaced(runner, frame, bare_frame, lamp)
+        assert judged > 2000 and _crate_shadow(runner, lamp).sum() > 300
+        assert wrong <= 0.001 * judged, (lamp, wrong)
+
+
+def test_a_spot_map_is_kept_while_still_drawn_again_when_turned_and_freed_when_the_spot_goes(scene):
+    """Still: the map is kept (nothing drawn).  Turned: drawn again, the frame a fresh
+    engine's aimed that way.  Widened past the limit: the cube takes over and the atlas is
+    released, the frame a fresh engine's; narrowed again, back to a map.  Its shadows off,
+    or the lamp deleted: no atlas, no cube left."""
+    runner = scene(_crate_under_spot, (320, 240))
+    runner.frame()
+    maps = runner.engine.renderer.shadows
+    assert maps.spot_atlas is not None and runner.stats.shadow_maps_drawn == 1
+    runner.frame()
+    assert runner.stats.shadow_maps_drawn == 0 and runner.stats.shadow_maps_kept == 1
+    lamp_id = runner.world.resources["lamps"][0]
+    aim = (0.3, -1.0, 0.1)
+    runner.world.get(lamp_id, Transform).rotation = look_rotation(aim, (0.0, 0.0, -1.0))
+    turned = runner.frame()
+    assert runner.stats.shadow_maps_drawn == 1 and runner.stats.shadow_path == "spot_map"
+
+    def aimed(world):
+        _crate_under_spot(world, NARROW)
+        world.get(world.resources["lamps"][0], Transform).rotation = look_rotation(aim, (0.0, 0.0, -1.0))
+    np.testing.assert_array_equal(turned, scene(aimed, (320, 240)).frame())
+    light = runner.world.get(lamp_id, PointLight)
+    light.spot_angle = WIDE
+    wide = runner.frame()
+    assert maps.spot_atlas is None and set(maps.cubes) == {0} and runner.stats.shadow_faces_drawn > 0
+    assert not any(name.startswith("SPOT_MAP") for name, _ in maps.program_defines)
+
+    def widened(world):
+        aimed(world)
+        world.get(world.resources["lamps"][0], PointLight).spot_angle = WIDE
+    np.testing.assert_array_equal(wide, scene(widened, (320, 240)).frame())
+    light.spot_angle = NARROW
+    runner.frame()
+    assert maps.spot_atlas is not None and not maps.cubes
+    light.shadows = False
+    runner.frame()
+    assert maps.spot_atlas is None and not maps.cubes
+    light.shadows = True
+    runner.frame()
+    assert maps.spot_atlas is not None
+    runner.world.delete_entity(lamp_id)
+    runner.frame()
+    assert maps.spot_atlas is None and not maps.cubes
 
 
 # --- the editor's outline ---------------------------------------------------------------------

@@ -109,6 +109,10 @@ VIRTUAL_SHADOW_UNIT = 14  # scene: the virtual lights' shadow maps, one depth at
 # the same; the cause, inside llvmpipe, not found), and its bind is one call a frame.
 BLOOM_UNIT = 16          # bloom steps after the first, present: a level of the chain (engine/render/bloom.py)
 PRESENT_UNIT = 17        # present, bloom's first step, exposure's luminance step: the HDR image
+# The spots' shadow maps (a depth atlas, sampler2DShadow) on a unit past 16 too: the scene's
+# fragment stage reads at most 16 samplers (GL 4.1's least GL_MAX_TEXTURE_IMAGE_UNITS), and
+# with it a build holds 15, but 0-15 are each some pass's.
+SPOT_SHADOW_UNIT = 18    # scene (SPOT_MAP builds): the spot lights' perspective shadow maps
 FXAA_UNIT = 0            # FXAA: the encoded frame (engine/render/present.py)
 EXPOSURE_UNIT = 2        # present, exposure adaptation: the 1x1 adapted exposure (engine/render/post.py)
 EXPOSURE_MEAN_UNIT = 0   # exposure adaptation: the 64x64 log-luminance image it averages

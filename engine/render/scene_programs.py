@@ -39,6 +39,7 @@ from engine.render.bindings import (
     SHADOW_ATLAS_UNIT,
     SHADOWS_BINDING,
     SKY_UNIT,
+    SPOT_SHADOW_UNIT,
     VIEWS_BINDING,
     VIRTUAL_LIGHTS_BINDING,
     VIRTUAL_SHADOW_UNIT,
@@ -167,7 +168,8 @@ class ScenePrograms:
                                ("metallic_roughness_map", METALLIC_ROUGHNESS_UNIT),
                                ("shadow_atlas", SHADOW_ATLAS_UNIT), ("point_shadow0", POINT_SHADOW_UNITS[0]),
                                ("point_shadow1", POINT_SHADOW_UNITS[1]),
-                               ("irradiance_table", IRRADIANCE_UNIT), ("virtual_atlas", VIRTUAL_SHADOW_UNIT)):
+                               ("irradiance_table", IRRADIANCE_UNIT), ("virtual_atlas", VIRTUAL_SHADOW_UNIT),
+                               ("spot_atlas", SPOT_SHADOW_UNIT)):
                 if name in program:
                     program[name].value = unit
             if "Lights" in program:

@@ -9,8 +9,11 @@ rings about the camera besides, each a map in a tile no level map takes (``draw_
 lookup reads the smallest ring holding the point, whatever the view.  A point light's map
 is a cube of distances (distance / range in a 32-bit float channel), drawn in one layered
 pass where the path self-check trusts the layered cube capture
-(``engine/render/path_checks.py``, the probes' check), else as six views; at most
-``MAX_POINT_SHADOWS`` point lights cast shadows (two cube samplers), the rest light without
+(``engine/render/path_checks.py``, the probes' check), else as six views (a spot's: only the
+faces its cone meets); a spot no wider than ``light_rules.SPOT_MAP_MAX_ANGLE`` has instead one
+perspective depth map fitted to its cone, a tile of the spot atlas (``draw_spot``), several
+times sharper for a narrow cone at the same resolution.  At most ``MAX_POINT_SHADOWS`` point
+lights cast shadows (two slots, each a cube sampler or a spot tile), the rest light without
 and are counted in ``RenderStats.shadows_cut``.
 
 Nothing here decides when a map is drawn again: the shadows stage does
@@ -33,6 +36,7 @@ from engine.render.bindings import (
     SCENE_CLIPS,
     SHADOW_ATLAS_UNIT,
     SHADOWS_BINDING,
+    SPOT_SHADOW_UNIT,
     VIRTUAL_LIGHTS_BINDING,
     VIRTUAL_SHADOW_UNIT,
     PassState,
@@ -71,7 +75,10 @@ VIRTUAL_BLOCK_BYTES = 16 + 64 * MAX_VIRTUAL_LIGHTS + 16 * MAX_VIRTUAL_LIGHTS * l
 # tile, its light's slot.
 _POINTS_END = 64 * MAX_DIRECTIONAL_LIGHTS + 16 * MAX_DIRECTIONAL_LIGHTS + 4 * MAX_POINT_LIGHTS \
     + 16 * MAX_POINT_SHADOWS + 16
-SHADOWS_BLOCK_BYTES = _POINTS_END + (16 + 16 + 16) * MAX_SHADOW_RINGS + 16
+_RINGS_END = _POINTS_END + (16 + 16 + 16) * MAX_SHADOW_RINGS + 16
+# Then the spot maps (a spot within light_rules.SPOT_MAP_MAX_ANGLE): per point-shadow slot a
+# matrix (world -> the spot atlas's uv and depth) and its tile's uv corners.
+SHADOWS_BLOCK_BYTES = _RINGS_END + (64 + 16) * MAX_POINT_SHADOWS
 # The casters' slope-scaled depth offset (glPolygonOffset factor, units): with the normal
 # offset in the lookup, no acne on the sample level's slanted and curved surfaces.
 SLOPE_BIAS = (1.5, 2.0)
@@ -110,7 +117,7 @@ class ShadowMaps:
         self._cube_lights = self.block[_POINTS_END // 4 - 4:_POINTS_END // 4].view(np.int32)
         self._cube_lights[:] = -1
         # Per ring: the directional slot whose ring it is, or -1 (the block's ring_slot).
-        self._ring_slots = self.block[SHADOWS_BLOCK_BYTES // 4 - 4:][:MAX_SHADOW_RINGS].view(np.int32)
+        self._ring_slots = self.block[_RINGS_END // 4 - 4:][:MAX_SHADOW_RINGS].view(np.int32)
         self._ring_slots[:] = -1
         # Per directional slot: its level map's uv from light space (_axes), what its rings map from.
         self._level_uv: dict[int, tuple[float, float, float, float]] = {}
@@ -135,6 +142,13 @@ class ShadowMaps:
         self._face_framebuffers: dict[int, list[moderngl.Framebuffer]] = {}
         self._face_depth: dict[int, moderngl.Texture] = {}
         self._layered: dict[int, LayeredCubeTarget] = {}
+        # Spot maps: slot -> whether it holds a spot's perspective map (draw_spot) rather than a
+        # cube; the atlas holds a tile a slot, side by side, ``spot_tile`` texels a side (0: none).
+        self._spot_maps = np.zeros(MAX_POINT_SHADOWS, bool)
+        self._spot_rows = self.block[_RINGS_END // 4:].reshape(-1)
+        self.spot_atlas: moderngl.Texture | None = None
+        self._spot_framebuffer: moderngl.Framebuffer | None = None
+        self.spot_tile = 0
         # How edges are filtered: "grid" (2 x 2 taps, 3 x 3 past a softness of 1, four on a
         # cube), each a bilinear percentage-closer comparison; "single" (one such tap: a
         # one-texel edge).  On a software rasteriser every tap is CPU time for every pixel a
@@ -145,8 +159,9 @@ class ShadowMaps:
         # "single"; set "grid" for equal quality (maps are drawn again).
         #
         # What upload found: (the directional slots read, the last casting one's index + 1;
-        # the cubes read, the last used one's index + 1).
-        self._casting = (0, 0, 0)
+        # the point slots read, the last used one's index + 1; the rings read; the point
+        # slots that hold a spot's map).
+        self._casting: tuple[int, int, int, tuple[int, ...]] = (0, 0, 0, ())
         self.program_defines: tuple[tuple[str, str], ...] = ()
         self.filter = "single" if renderer.caps.software else "grid"
         # Lights through mirrors and portals: a depth atlas of 2 x 2 tiles and their block.
@@ -300,16 +315,18 @@ class ShadowMaps:
         casts (its value the directional slots looked up: the last casting one's index + 1,
         each slot's lookup made outside the lights' loop), ``POINT_SHADOWS`` while a point
         light does (its value the cubes looked up, likewise), ``SHADOW_RINGS`` while a sun has
-        cascades (the ring entries read), ``SHADOW_SINGLE_TAP`` with the "single" filter.
+        cascades (the ring entries read), ``SPOT_MAP<slot>`` where a point slot holds a spot's
+        map (its lookup instead of the cube's), ``SHADOW_SINGLE_TAP`` with the "single" filter.
         The scene pass builds
         (and caches) a program per combination; a frame where nothing casts runs no lookup
         (llvmpipe runs every branch's code: a third of such a frame at 640x360 went to
         lookups that returned 1)."""
-        directional, point, rings = self._casting
+        directional, point, rings, spots = self._casting
         self.renderer.note_scene_change()
         self.program_defines = tuple((name, value) for name, value, on in (
             ("DIRECTIONAL_SHADOWS", str(directional), directional > 0), ("POINT_SHADOWS", str(point), point > 0),
             ("SHADOW_RINGS", str(rings), rings > 0 and directional > 0),
+            *((f"SPOT_MAP{slot}", "1", True) for slot in spots),
             ("SHADOW_SINGLE_TAP", "1", self._filter == "single")) if on)
 
     def _taps(self, softness: float) -> float:
@@ -434,12 +451,66 @@ class ShadowMaps:
             stats.shadow_faces_drawn += 6
         self._slots[light_index] = slot
         self._cube_lights[slot] = light_index
+        self._spot_maps[slot] = False
         base = (64 + 16) * MAX_DIRECTIONAL_LIGHTS // 4 + MAX_POINT_LIGHTS + 4 * slot
         # A texel's angle: 90 degrees over the face's texels.
         self.block[base:base + 4] = (np.pi / 2.0 / resolution, softness, light_range,
                                      1.0 if self.filter == "single" else 4.0)
         self.renderer.checkpoint(f"shadow cube of point light {light_index}")
         return path
+
+    def fit_spot_atlas(self, tile: int) -> None:
+        """Make the spot atlas hold ``MAX_POINT_SHADOWS`` tiles of ``tile`` texels a side, side
+        by side, keeping it when it does; 0: no spot casts from a map (the atlas released).  A
+        new atlas leaves every spot map to be drawn again."""
+        if tile == self.spot_tile:
+            return
+        self.renderer.note_scene_change()
+        if self._spot_framebuffer is not None:
+            release_framebuffer(self._spot_framebuffer)
+            self.spot_atlas.release()
+            self._spot_framebuffer = self.spot_atlas = None
+        self.spot_tile = tile
+        if tile:
+            self.spot_atlas = self._make_atlas((MAX_POINT_SHADOWS * tile, tile))
+            self._spot_framebuffer = self.ctx.framebuffer(depth_attachment=self.spot_atlas)
+
+    def draw_spot(self, slot: int, light_index: int, position: glm.vec3, axis: glm.vec3, half_width: float,
+                  light_range: float, resolution: int, softness: float) -> str:
+        """Draw spot light ``light_index``'s shadow into tile ``slot`` of the spot atlas (made
+        by ``fit_spot_atlas``, at least ``resolution`` a side): one perspective depth map from
+        the light along ``axis``, ``half_width`` (the tangent of its half-angle:
+        ``light_rules.spot_map_half_width``) each side, out to the range, read by the lookup
+        in place of cube ``slot``.  Returns the path taken ("spot_map")."""
+        x = slot * self.spot_tile
+        rect = (x, 0, resolution, resolution)
+        framebuffer = self._spot_framebuffer
+        framebuffer.use()
+        apply_pass_state(self.ctx, _CASTERS, rect, rect)
+        framebuffer.clear(depth=1.0, viewport=rect)
+        up = glm.vec3(0.0, 1.0, 0.0) if abs(axis.y) < 0.9 else glm.vec3(1.0, 0.0, 0.0)
+        fov = 2.0 * float(np.arctan(half_width))
+        view = View(view=glm.lookAt(position, position + axis, up),
+                    proj=glm.perspective(fov, 1.0, POINT_NEAR, max(light_range, POINT_NEAR * 2)),
+                    eye=glm.vec3(position), size=(resolution, resolution), name=f"spot shadow {slot}",
+                    kinds=0, layers=ALL_LAYERS)
+        self._draw_casters(view, self._depth_program)
+        width, height = self.spot_atlas.size
+        sx, sy = resolution / width, resolution / height
+        to_tile = glm.translate(glm.vec3(x / width + 0.5 * sx, 0.5 * sy, 0.5)) \
+            * glm.scale(glm.vec3(0.5 * sx, 0.5 * sy, 0.5))
+        rows = self._spot_rows
+        rows[16 * slot:16 * slot + 16] = np.array((to_tile * view.view_proj).to_list(), np.float32).ravel()
+        box = 16 * MAX_POINT_SHADOWS + 4 * slot
+        rows[box:box + 4] = (x / width, 0.0, x / width + sx, sy)
+        self._slots[light_index] = slot
+        self._cube_lights[slot] = light_index
+        self._spot_maps[slot] = True
+        base = (64 + 16) * MAX_DIRECTIONAL_LIGHTS // 4 + MAX_POINT_LIGHTS + 4 * slot
+        # A texel's width over its distance on the map's axis, the filter's taps a side.
+        self.block[base:base + 4] = (2.0 * half_width / resolution, softness, light_range, self._taps(softness))
+        self.renderer.checkpoint(f"spot shadow map of point light {light_index}")
+        return "spot_map"
 
     def keep_point(self, slot: int, light_index: int) -> None:
         """Point light ``light_index`` reads cube ``slot`` as drawn before."""
@@ -535,7 +606,7 @@ class ShadowMaps:
         cubes = np.flatnonzero(self._cube_lights >= 0)
         rings = np.flatnonzero(self._ring_slots >= 0)
         casting = (int(taps[-1]) + 1 if taps.size else 0, int(cubes[-1]) + 1 if cubes.size else 0,
-                   int(rings[-1]) + 1 if rings.size else 0)
+                   int(rings[-1]) + 1 if rings.size else 0, tuple(int(c) for c in cubes if self._spot_maps[c]))
         if casting != self._casting:
             self._casting = casting
             self._set_program_defines()
@@ -549,6 +620,7 @@ class ShadowMaps:
             bind_texture(self.ctx, self.cubes.get(slot, self._empty_cube), unit)
         bind_uniform_block(self.ctx, self.ubo, SHADOWS_BINDING)
         bind_texture(self.ctx, self.virtual_atlas or self._virtual_empty, VIRTUAL_SHADOW_UNIT)
+        bind_texture(self.ctx, self.spot_atlas or self._virtual_empty, SPOT_SHADOW_UNIT)
         bind_uniform_block(self.ctx, self.virtual_ubo, VIRTUAL_LIGHTS_BINDING)
 
     def _drop_cube(self, slot: int) -> None:
@@ -570,6 +642,7 @@ class ShadowMaps:
     def release(self) -> None:
         for slot in list(self.cubes):
             self._drop_cube(slot)
+        self.fit_spot_atlas(0)
         release_framebuffer(self._atlas_framebuffer)
         if self._virtual_framebuffer is not None:
             release_framebuffer(self._virtual_framebuffer)

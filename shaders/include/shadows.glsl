@@ -2,7 +2,9 @@
 // Directional lights: one depth atlas, a tile a light, each fitted to the whole level
 // (engine/rules/shadow_rules.py), read with hardware depth comparison (sampler2DShadow:
 // bilinear percentage-closer filtering per tap) at a grid of taps.  Point lights: a cube a
-// light holding distance / range, compared by hand.  Bias is a normal offset (the point looked
+// light holding distance / range, compared by hand, or, for a spot no wider than
+// light_rules.SPOT_MAP_MAX_ANGLE, a perspective depth map fitted to its cone (a tile of the
+// spot atlas, read as the directional atlas is).  Bias is a normal offset (the point looked
 // up is moved off the surface along its geometric normal, more at grazing light, by the
 // texel's world size: Holbein's "normal offset shadows", 2011) plus the slope-scaled depth
 // offset the caster pass draws with; nothing is offset along the light, so contact is kept.
@@ -37,6 +39,11 @@ layout(std140) uniform Shadows {
     vec4 ring_tile[MAX_SHADOW_RINGS];                 // xy: its tile's corner in the atlas (uv), z: the
                                                       // tile's side (uv), w: the filter's margin (square units)
     ivec4 ring_slot;                                  // per ring: the directional slot whose it is, or -1
+    // Spot maps (a spot within light_rules.SPOT_MAP_MAX_ANGLE: a perspective map fitted to its
+    // cone, a tile of the spot atlas, read in place of its cube; point_params' x is then a
+    // texel's width over its distance on the axis, w the filter's taps a side):
+    mat4 spot_matrix[MAX_POINT_SHADOWS];              // world -> atlas uv and depth (divide by w)
+    vec4 spot_box[MAX_POINT_SHADOWS];                 // its tile's uv corners (x0, y0, x1, y1)
 } shadows;
 
 uniform sampler2DShadow shadow_atlas;
@@ -45,13 +52,14 @@ uniform samplerCube point_shadow1;
 
 // Percentage-closer filtering of a depth atlas at ``p`` (uv, depth): a grid of n x n taps
 // (engine/render/shadows.py ShadowMaps.filter), each a bilinear comparison of 2 x 2 texels,
-// ``softness`` atlas texels (``texel`` in uv) across: 2 x 2 taps half a softness apart (a
-// 3 x 3-texel tent at softness 1), 3 x 3 for wider edges; one tap on a software rasteriser.
-float filtered_shadow(sampler2DShadow atlas, vec3 p, int n, float texel, float softness) {
+// ``softness`` atlas texels (``texel``: one in uv, each way) across: 2 x 2 taps half a
+// softness apart (a 3 x 3-texel tent at softness 1), 3 x 3 for wider edges; one tap on a
+// software rasteriser.
+float filtered_shadow(sampler2DShadow atlas, vec3 p, int n, vec2 texel, float softness) {
 #ifdef SHADOW_SINGLE_TAP
     return texture(atlas, p);
 #else
-    float step = n > 1 ? texel * softness / float(n - 1) : 0.0;
+    vec2 step = n > 1 ? texel * softness / float(n - 1) : vec2(0.0);
     vec2 start = p.xy - 0.5 * step * float(n - 1);
     float lit = 0.0;
     for (int y = 0; y < n; ++y)
@@ -107,7 +115,7 @@ float directional_shadow(int i, vec3 position, vec3 normal, vec3 l) {
 #endif
 #endif
     if (any(lessThan(p, vec3(0.0))) || any(greaterThan(p, vec3(1.0)))) return 1.0;  // outside the map
-    return filtered_shadow(shadow_atlas, p, int(params.w), params.z, params.y);
+    return filtered_shadow(shadow_atlas, p, int(params.w), vec2(params.z), params.y);
 #endif
 }
 
@@ -175,18 +183,53 @@ float point_cube_light_shadow(int slot, samplerCube cube, vec3 position, vec3 no
     return point_cube_shadow(cube, shadows.point_params[slot], position - light_pos, normal, l);
 }
 
-// Every point light cube's shadow at a point (cubes 0 to POINT_SHADOWS - 1; 1 for the rest),
-// looked up before the lights' loop as directional_shadows is (one lookup a cube, not one a
-// cube for every point light the loop visits).
+#if defined(SPOT_MAP0) || defined(SPOT_MAP1)
+// Spot maps: SPOT_MAPk is compiled in while slot k holds a spot's map rather than a cube
+// (ShadowMaps.program_defines): a build reads one or the other for each slot, never both.
+uniform sampler2DShadow spot_atlas;
+
+// How much of the spot light whose map is tile ``slot`` of the spot atlas reaches
+// ``position``: the cube's normal offset (a texel's width at this distance), then a
+// perspective lookup filtered as a directional map's (1 where the slot holds no light, and
+// off the map: behind the spot, past its range or outside its cone, where it sheds no light).
+float spot_map_light_shadow(int slot, vec3 position, vec3 normal) {
+    int i = shadows.point_light[slot];
+    if (i < 0) return 1.0;
+    vec3 d = lights.point_pos[i].xyz - position;
+    float dist = length(d);
+    vec3 l = d / max(dist, 1e-4);
+    vec4 params = shadows.point_params[slot];
+    float nl = clamp(dot(normal, l), 0.0, 1.0);
+    vec3 off = position + normal * (params.x * dist * (1.0 + params.y) * (1.5 - nl));
+    vec4 p = shadows.spot_matrix[slot] * vec4(off, 1.0);
+    if (p.w <= 0.0) return 1.0;
+    p.xyz /= p.w;
+    vec4 box = shadows.spot_box[slot];
+    if (any(lessThan(p.xyz, vec3(box.xy, 0.0))) || any(greaterThan(p.xyz, vec3(box.zw, 1.0)))) return 1.0;
+    return filtered_shadow(spot_atlas, p.xyz, int(params.w), 1.0 / vec2(textureSize(spot_atlas, 0)), params.y);
+}
+#endif
+
+// Every shadowed point light's shadow at a point (slots 0 to POINT_SHADOWS - 1, each a cube or
+// a spot's map; 1 for the rest), looked up before the lights' loop as directional_shadows is
+// (one lookup a slot, not one a slot for every point light the loop visits).
 vec4 point_shadows(vec3 position, vec3 normal) {
     vec4 lit = vec4(1.0);
 #ifdef POINT_SHADOWS
 #if MAX_POINT_SHADOWS > 2
-#error "point_shadows reads two cube samplers"
+#error "point_shadows reads two slots"
 #endif
+#ifdef SPOT_MAP0
+    lit.x = spot_map_light_shadow(0, position, normal);
+#else
     lit.x = point_cube_light_shadow(0, point_shadow0, position, normal);
+#endif
 #if POINT_SHADOWS > 1
+#ifdef SPOT_MAP1
+    lit.y = spot_map_light_shadow(1, position, normal);
+#else
     lit.y = point_cube_light_shadow(1, point_shadow1, position, normal);
+#endif
 #endif
 #endif
     return lit;

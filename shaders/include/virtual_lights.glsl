@@ -59,7 +59,7 @@ float virtual_shadow(int i, vec3 position, vec3 normal, vec3 l, float dist) {
     vec4 p = virtual_lights.virtual_matrix[i] * vec4(position + normal * texel * (1.0 + params.y) * (1.5 - nl), 1.0);
     p.xyz /= p.w;
     if (any(lessThan(p.xyz, vec3(0.0))) || any(greaterThan(p.xyz, vec3(1.0)))) return 1.0;
-    return filtered_shadow(virtual_atlas, p.xyz, int(params.z), params.x, params.y);  // shadows.glsl
+    return filtered_shadow(virtual_atlas, p.xyz, int(params.z), vec2(params.x), params.y);  // shadows.glsl
 }
 
 // The light of every virtual light at a surface point: ``diffuse`` its Lambertian share,
