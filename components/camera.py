@@ -168,8 +168,11 @@ class PointLight(TrackedComponent):
     Unity's ``spotAngle``.  ``spot_blend`` (0 to 1, default 0.15) is the share of that angle
     over which its light fades out towards the edge (three.js's ``penumbra``): 0 a hard
     edge.  Through a mirror or portal the cone is carried with the light (a flashlight aimed
-    at a mirror lights what the mirror faces, within the reflected cone); the shadow cube is
-    the point light's (``engine/rules/light_rules.py`` ``spot_cone``)."""
+    at a mirror lights what the mirror faces, within the reflected cone)
+    (``engine/rules/light_rules.py`` ``spot_cone``).  A spot up to ``SPOT_MAP_MAX_ANGLE``
+    (45 degrees) casts from one perspective map fitted to its cone, ``shadow_resolution``
+    texels a side (several times sharper than a cube face for a narrow cone); a wider one
+    from the cube, only its faces the cone lights."""
 
     color: Any = field(default_factory=lambda: glm.vec4(1.0))
     intensity: float = 1.0

@@ -86,6 +86,23 @@ def _point_shadows(ctx):
     return _engine_frames(ctx, MirrorRing(3), 3, configure)
 
 
+def _spot_shadows(ctx):
+    """The mirror ring's lamp made a spot aimed down and a second spot beside it (each within
+    SPOT_MAP_MAX_ANGLE: both shadow slots perspective maps, tiles of the spot atlas, of two
+    sizes), casting, the boxes spinning."""
+    from benchmarks.mirrors import MirrorRing
+    from components import PointLight, Transform, look_rotation
+
+    def configure(engine):
+        world = engine.world
+        for entity, light in world.query_one(PointLight):
+            light.shadows, light.spot_angle = True, 30.0
+            world.get(entity, Transform).rotation = look_rotation((0.0, -1.0, 0.0), (0.0, 0.0, -1.0))
+        world.spawn(Transform(position=(3.0, 3.0, 1.0), rotation=look_rotation((-0.5, -1.0, 0.0), (0.0, 0.0, -1.0))),
+                    PointLight(intensity=6.0, range=12.0, spot_angle=20.0, shadows=True, shadow_resolution=256))
+    return _engine_frames(ctx, MirrorRing(3), 3, configure)
+
+
 def _probes(refresh: str, resolution: int = 32):
     def run(ctx):
         from benchmarks.probes import ProbeRing
@@ -135,6 +152,7 @@ SCENES: dict[str, Callable[[moderngl.Context], list[np.ndarray]]] = {
     "post_auto_gpu_passes": _lighting("post_auto", gpu=True),
     "post": _lighting("post"),
     "point_shadows": _point_shadows,
+    "spot_shadows": _spot_shadows,
     "probes_dynamic": _probes("every_frame"),
     "probes_once": _probes("once"),
     "probes_sliced_ggx": _probes_sliced_ggx,

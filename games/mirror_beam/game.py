@@ -82,7 +82,8 @@ FRAME_DEPTH = 0.04
 # laser's light is: half-width over length, about 4 degrees; the lamp casts shadows, so
 # its light leaves only through the barrel, directly and by the mirrors.  It is a spot a
 # little wider than that (LAMP_SPOT_ANGLE): the barrel still cuts the cone's edge, and its
-# shadow cube draws the one face its cone lights, not six, each time a mirror turns.
+# shadow is one perspective map fitted to the cone (light_rules.SPOT_MAP_MAX_ANGLE), not six
+# cube faces, drawn again each time a mirror turns.
 LAMP_OFFSET = 0.02
 LAMP_SPOT_ANGLE = 6.0
 BARREL_LENGTH = 0.9
