@@ -9,6 +9,7 @@ from pyglm import glm
 from components.limits import (
     MAX_FAR,
     MAX_LIGHT_BOUNCES,
+    MAX_SHADOW_CASCADE_BLEND,
     MAX_SHADOW_CASCADES,
     MIN_SHADOW_DISTANCE,
     MIN_SPOT_ANGLE,
@@ -120,6 +121,10 @@ class DirectionalLight(TrackedComponent):
     was centred (on a grid of that step: a camera swaying on the spot keeps it), or a caster
     in it changed.  The maps share the shadow atlas's four tiles with the other suns: where they
     do not fit, the light has fewer (``RenderStats.shadow_cascades_cut``).
+    ``shadow_cascade_blend`` (default 0.15, 0 to 0.5): the outer share of each ring's square
+    over which its shadow fades into the next larger map's, so the sharper shadow gives way
+    without a seam (cascade blending, as Unity's cascade border and Godot's blend splits);
+    0 switches maps at the edge.  A point in the band reads both maps.
 
     ``bounces`` (default 1): how many mirrors and portals that carry light
     (``Mirror.reflects_light``, ``Portal.carries_light``) its light goes through in a row:
@@ -135,6 +140,7 @@ class DirectionalLight(TrackedComponent):
     shadow_softness: float = 1.0
     shadow_cascades: int = 1
     shadow_distance: float = 20.0
+    shadow_cascade_blend: float = 0.15
     bounces: int = 1
 
     def _validate(self, name: str, value: Any) -> Any:
@@ -144,6 +150,8 @@ class DirectionalLight(TrackedComponent):
             return integer(self, name, value, low=1, high=MAX_SHADOW_CASCADES)
         if name == "shadow_distance":
             return finite(self, name, value, low=MIN_SHADOW_DISTANCE, high=MAX_FAR)
+        if name == "shadow_cascade_blend":
+            return finite(self, name, value, low=0.0, high=MAX_SHADOW_CASCADE_BLEND)
         if name == "color":
             return color(self, name, value)
         if name == "intensity":

@@ -22,6 +22,9 @@ MAX_SHADOW_CASCADES = 4
 # The smallest largest ring (metres; DirectionalLight.shadow_distance): its innermost ring is
 # a sixteenth of it, a few centimetres for a map a few hundred texels wide at the least.
 MIN_SHADOW_DISTANCE = 0.5
+# The widest cascade blend (DirectionalLight.shadow_cascade_blend): the outer half of a ring's
+# square, past which the next ring in would find little of its own left unblended.
+MAX_SHADOW_CASCADE_BLEND = 0.5
 # The narrowest spot light (PointLight.spot_angle, degrees from its axis to its edge): a
 # tenth of a degree is a 2 cm disk at ten metres, past which float32's cosines of the cone's
 # edge (1 - 1.5e-6) stop telling the edge from the axis.

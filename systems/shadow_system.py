@@ -246,6 +246,7 @@ class ShadowSystem(esper.Processor):
                     cut += 1
                     continue
                 tile = free.pop(0)
+                maps.set_ring_blend(ring, light.shadow_cascade_blend)
                 cell = cells[slot, radius] = ring_cell(level, eye, radius, light.shadow_resolution,
                                                        self._ring_cells_kept.get((slot, radius)))
                 key = (self._directional[slot], tile, radius, cell)

@@ -284,7 +284,9 @@ def test_turning_the_cascades_off_gives_the_frame_of_a_sun_without_them(scene):
 
 @pytest.mark.parametrize("field, value", [("shadow_cascades", 0), ("shadow_cascades", 5), ("shadow_cascades", True),
                                           ("shadow_cascades", 2.0), ("shadow_distance", 0.1),
-                                          ("shadow_distance", float("nan")), ("shadow_distance", float("inf"))])
+                                          ("shadow_distance", float("nan")), ("shadow_distance", float("inf")),
+                                          ("shadow_cascade_blend", -0.1), ("shadow_cascade_blend", 0.6),
+                                          ("shadow_cascade_blend", float("nan"))])
 def test_bad_cascade_values_are_refused_naming_the_field(field, value):
     with pytest.raises(ComponentValueError, match=f"DirectionalLight.{field}"):
         DirectionalLight(**{field: value})
@@ -326,3 +328,92 @@ def test_many_movers_redraw_under_their_box_and_a_few_under_each(scene, monkeypa
             transform.position = glm.vec3(transform.position) + glm.vec3(0.0, 0.0, 0.05)
         runner.frame()
         assert seen and set(seen) == {expected}, (count, seen)
+
+
+# --- cascade blending ----------------------------------------------------------------------------
+def _band_weights(runner, points: np.ndarray) -> np.ndarray:
+    """The shader's share of the ring's own shadow at each floor point (1 past its blend band,
+    0 at or past its square's usable edge): from the Shadows block's numbers (the level map's
+    matrix, the ring's map, texel, margin and band), the lookup's normal offset and edge
+    distance worked out again in float64."""
+    from engine.render.shadows import _POINTS_END
+    from engine.render.views import MAX_DIRECTIONAL_LIGHTS, MAX_SHADOW_RINGS
+
+    block = runner.engine.renderer.shadows.block.astype(np.float64)
+    to_map = block[:16].reshape(4, 4).T           # glm's columns, as rows of its transpose
+    texel, softness = block[16 * MAX_DIRECTIONAL_LIGHTS:16 * MAX_DIRECTIONAL_LIGHTS + 2]
+    rings = _POINTS_END // 4
+    ring_map = block[rings:rings + 4]
+    ring_texel, _, band = block[rings + 4 * MAX_SHADOW_RINGS:rings + 4 * MAX_SHADOW_RINGS + 3]
+    margin = block[rings + 8 * MAX_SHADOW_RINGS + 3]
+    normal = np.array([0.0, 1.0, 0.0])
+    grazing = (1.0 + softness) * (1.5 - max(float(normal @ -np.array(LIGHT)), 0.0))
+    at = points @ to_map[:3, :3].T + to_map[:3, 3]
+    q = at + (to_map[:3, :3] @ normal) * (ring_texel * grazing)
+    square = q[:, :2] * ring_map[:2] + ring_map[2:]
+    edge = np.minimum(square - margin, 1.0 - margin - square).min(axis=1)
+    assert band > 0.0
+    return np.clip(edge / band, 0.0, 1.0)
+
+
+def test_a_rings_blend_band_fades_its_shadow_into_the_larger_maps(scene):
+    """A sun with one ring of 1.5 metres (its square 1.9 m each way of its centre), the outer
+    half of it a blend band, over a floor whose level map's texels are half a metre: in the
+    band each floor pixel's light is the ring's frame (blend 0) and the level map's frame (no
+    ring) mixed by the share the lookup gives it there (worked out again from the point's
+    place in the ring's square), within the 8-bit frames' rounding; inside the band it is the
+    ring's frame, outside the square the level map's."""
+    def runner(cascades, blend):
+        r = _runner(scene, cascades, distance=1.5, eye=(-1.0, 2.2, 2.0), target=(-1.6, 0.0, -0.2))
+        sun = r.world.get(r.world.resources["ids"]["sun"], DirectionalLight)
+        sun.shadow_resolution, sun.shadow_cascade_blend = 256, blend
+        return r
+
+    blended_runner = runner(2, 0.5)
+    blended_rgb = blended_runner.frame()
+    assert ("SHADOW_RING_BLEND", "1") in blended_runner.engine.renderer.shadows.program_defines
+    ring_runner = runner(2, 0.0)
+    ring_rgb = ring_runner.frame()
+    assert not any(name == "SHADOW_RING_BLEND" for name, _ in ring_runner.engine.renderer.shadows.program_defines)
+    level_rgb = runner(1, 0.5).frame()
+    floor = (blended_runner.ids() == blended_runner.world.resources["ids"]["floor"]).reshape(-1)
+    w = _band_weights(blended_runner, _floor_points(blended_runner))
+    b, r, lv = (srgb_to_linear(x).reshape(-1, 3) for x in (blended_rgb, ring_rgb, level_rgb))
+    differ = np.abs(r - lv).max(axis=1) > 0.05          # where the two maps' shadows disagree
+    band = floor & (w > 0.02) & (w < 0.98) & differ
+    assert band.sum() > 1000, band.sum()
+    expected = w[:, None] * r + (1.0 - w[:, None]) * lv
+    assert np.abs(b - expected)[band].max() < 0.008     # a unit of the 8-bit sRGB frames, in linear light
+    inner, outer = floor & (w >= 0.999), floor & (w <= 0.0)
+    assert inner.sum() > 1000 and outer.sum() > 1000, (inner.sum(), outer.sum())
+    flat = (x.reshape(-1, 3) for x in (blended_rgb, ring_rgb, level_rgb))
+    b8, r8, lv8 = flat
+    np.testing.assert_array_equal(b8[inner], r8[inner])
+    np.testing.assert_array_equal(b8[outer], lv8[outer])
+
+
+def test_level_files_carry_the_cascade_blend(tmp_path):
+    """A level's DirectionalLight takes shadow_cascade_blend, and refuses one past 0.5 naming
+    the file and the field."""
+    from engine.assets.level_file import LevelError, load_level
+    from engine.core.world import World
+
+    text = """[level]
+name = "Sunset"
+
+[[entity]]
+name = "sun"
+[entity.DirectionalLight]
+direction = [-0.7, -0.4, -0.5]
+shadow_cascades = 3
+shadow_cascade_blend = 0.3
+"""
+    path = tmp_path / "sun.toml"
+    path.write_text(text)
+    world = World("sun")
+    made = load_level(path).spawn(world)
+    assert world.get(made["sun"], DirectionalLight).shadow_cascade_blend == 0.3
+    path.write_text(text.replace("0.3", "0.7"))
+    with pytest.raises(LevelError, match=r"DirectionalLight\.shadow_cascade_blend") as caught:
+        load_level(path).spawn(World("refused"))
+    assert str(path) in str(caught.value)

@@ -160,8 +160,8 @@ class ShadowMaps:
         #
         # What upload found: (the directional slots read, the last casting one's index + 1;
         # the point slots read, the last used one's index + 1; the rings read; the point
-        # slots that hold a spot's map).
-        self._casting: tuple[int, int, int, tuple[int, ...]] = (0, 0, 0, ())
+        # slots that hold a spot's map; whether a ring in use has a blend band).
+        self._casting: tuple[int, int, int, tuple[int, ...], bool] = (0, 0, 0, (), False)
         self.program_defines: tuple[tuple[str, str], ...] = ()
         self.filter = "single" if renderer.caps.software else "grid"
         # Lights through mirrors and portals: a depth atlas of 2 x 2 tiles and their block.
@@ -248,7 +248,7 @@ class ShadowMaps:
             self.block[base + 4 * ring:base + 4 * ring + 4] = (sx, sy, square[1] - sx * level[1],
                                                                square[3] - sy * level[3])
             base += 4 * MAX_SHADOW_RINGS
-            self.block[base + 4 * ring:base + 4 * ring + 4] = (fit.texel, softness, 0.0, 0.0)
+            self.block[base + 4 * ring:base + 4 * ring + 2] = (fit.texel, softness)   # z: set_ring_blend's
             base += 4 * MAX_SHADOW_RINGS
             # A point nearer the square's edge than the filter reaches is left to a larger map.
             margin = (softness + 2.0) / resolution
@@ -258,6 +258,12 @@ class ShadowMaps:
         if self.renderer.debug:
             self.renderer.checkpoint(f"shadow ring {ring} of directional light {slot}")
         return texels
+
+    def set_ring_blend(self, ring: int, blend: float) -> None:
+        """Ring ``ring`` fades into the next larger map over the outer ``blend`` share of its
+        square's half side (``DirectionalLight.shadow_cascade_blend``; 0: a hard switch)."""
+        at = _POINTS_END // 4 + 4 * MAX_SHADOW_RINGS + 4 * ring + 2
+        self.block[at] = 0.5 * blend   # the square spans 0 to 1: its half side is 0.5
 
     def clear_rings(self, used: int) -> None:
         """Rings ``used`` and up hold no map (their light has fewer, or none)."""
@@ -315,17 +321,19 @@ class ShadowMaps:
         casts (its value the directional slots looked up: the last casting one's index + 1,
         each slot's lookup made outside the lights' loop), ``POINT_SHADOWS`` while a point
         light does (its value the cubes looked up, likewise), ``SHADOW_RINGS`` while a sun has
-        cascades (the ring entries read), ``SPOT_MAP<slot>`` where a point slot holds a spot's
+        cascades (the ring entries read), ``SHADOW_RING_BLEND`` while a ring in use has a blend
+        band (a second lookup in it), ``SPOT_MAP<slot>`` where a point slot holds a spot's
         map (its lookup instead of the cube's), ``SHADOW_SINGLE_TAP`` with the "single" filter.
         The scene pass builds
         (and caches) a program per combination; a frame where nothing casts runs no lookup
         (llvmpipe runs every branch's code: a third of such a frame at 640x360 went to
         lookups that returned 1)."""
-        directional, point, rings, spots = self._casting
+        directional, point, rings, spots, blend = self._casting
         self.renderer.note_scene_change()
         self.program_defines = tuple((name, value) for name, value, on in (
             ("DIRECTIONAL_SHADOWS", str(directional), directional > 0), ("POINT_SHADOWS", str(point), point > 0),
             ("SHADOW_RINGS", str(rings), rings > 0 and directional > 0),
+            ("SHADOW_RING_BLEND", "1", blend and rings > 0 and directional > 0),
             *((f"SPOT_MAP{slot}", "1", True) for slot in spots),
             ("SHADOW_SINGLE_TAP", "1", self._filter == "single")) if on)
 
@@ -605,8 +613,10 @@ class ShadowMaps:
         taps = np.flatnonzero(self.block[base + 3:base + 4 * MAX_DIRECTIONAL_LIGHTS:4])  # the casting slots
         cubes = np.flatnonzero(self._cube_lights >= 0)
         rings = np.flatnonzero(self._ring_slots >= 0)
+        bands = self.block[_POINTS_END // 4 + 4 * MAX_SHADOW_RINGS + 2::4][:MAX_SHADOW_RINGS]
         casting = (int(taps[-1]) + 1 if taps.size else 0, int(cubes[-1]) + 1 if cubes.size else 0,
-                   int(rings[-1]) + 1 if rings.size else 0, tuple(int(c) for c in cubes if self._spot_maps[c]))
+                   int(rings[-1]) + 1 if rings.size else 0, tuple(int(c) for c in cubes if self._spot_maps[c]),
+                   bool((bands[rings] > 0.0).any()))
         if casting != self._casting:
             self._casting = casting
             self._set_program_defines()

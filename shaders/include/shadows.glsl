@@ -11,7 +11,9 @@
 // MAX_POINT_SHADOWS (the cube samplers below) and MAX_SHADOW_RINGS are engine/render/shadows.py's,
 // defined by the shader library.  SHADOW_RINGS (the ring entries read) is compiled in while
 // a light has cascades: rings about the camera in atlas tiles of their own, whose lookup
-// takes the smallest ring holding the point (a view anywhere finds the same shadow there).
+// takes the smallest ring holding the point (a view anywhere finds the same shadow there);
+// SHADOW_RING_BLEND while a ring has a blend band (DirectionalLight.shadow_cascade_blend):
+// there it fades into the next larger map's shadow, a second lookup.
 //
 // The lookups are compiled only into the program builds that need them
 // (ShadowMaps.program_defines, engine/render/shadows.py; the scene pass builds with them):
@@ -35,7 +37,8 @@ layout(std140) uniform Shadows {
     // a ring shares its light's space and depth with the level's map, so its square is that map's
     // atlas uv scaled and moved:
     vec4 ring_map[MAX_SHADOW_RINGS];                  // xy: scale, zw: offset (the level's uv -> the ring's square)
-    vec4 ring_params[MAX_SHADOW_RINGS];               // x: a texel's world size, y: softness (texels)
+    vec4 ring_params[MAX_SHADOW_RINGS];               // x: a texel's world size, y: softness (texels),
+                                                      // z: the blend band's width (square units; 0: none)
     vec4 ring_tile[MAX_SHADOW_RINGS];                 // xy: its tile's corner in the atlas (uv), z: the
                                                       // tile's side (uv), w: the filter's margin (square units)
     ivec4 ring_slot;                                  // per ring: the directional slot whose it is, or -1
@@ -75,16 +78,23 @@ float filtered_shadow(sampler2DShadow atlas, vec3 p, int n, vec2 texel, float so
 #endif
 // Ring k's atlas coordinates of a point (``at`` and ``along``: the point and its normal in the
 // level map's coordinates, offset by the ring's own texel) where ring k is light i's and holds
-// it, else ``p`` (what a larger map gave).  Called with a constant k: no array indexed by a
-// variable, no loop (llvmpipe runs a loop's and an indexed read's code slower).
-vec3 ring_coordinates(int k, int i, vec3 at, vec3 along, float grazing, vec3 p) {
+// it: then ``p`` becomes them, ``coarser`` what ``p`` was (the next larger map's) and ``fine``
+// how far in the point is across the ring's blend band (0 at the square's usable edge, 1 past
+// the band: cascade blending, SHADOW_RING_BLEND builds).  Else all three are left.  Called
+// with a constant k: no array indexed by a variable, no loop (llvmpipe runs a loop's and an
+// indexed read's code slower).
+void ring_coordinates(int k, int i, vec3 at, vec3 along, float grazing, inout vec3 p, inout vec3 coarser,
+                      inout float fine) {
     vec3 q = at + along * (shadows.ring_params[k].x * grazing);
     vec4 map = shadows.ring_map[k];
     vec2 square = q.xy * map.xy + map.zw;
     vec4 tile = shadows.ring_tile[k];
-    bool inside = shadows.ring_slot[k] == i
-        && all(greaterThan(square, vec2(tile.w))) && all(lessThan(square, vec2(1.0 - tile.w)));
-    return inside ? vec3(tile.xy + square * tile.z, q.z) : p;
+    vec2 edge = min(square - tile.w, 1.0 - tile.w - square);   // in from the usable square's sides
+    bool inside = shadows.ring_slot[k] == i && all(greaterThan(edge, vec2(0.0)));
+    float band = shadows.ring_params[k].z;
+    coarser = inside ? p : coarser;
+    fine = inside ? (band > 0.0 ? clamp(min(edge.x, edge.y) / band, 0.0, 1.0) : 1.0) : fine;
+    p = inside ? vec3(tile.xy + square * tile.z, q.z) : p;
 }
 #endif
 
@@ -103,19 +113,30 @@ float directional_shadow(int i, vec3 position, vec3 normal, vec3 l) {
     vec3 at = (to_map * vec4(position, 1.0)).xyz;  // the point in the level map's coordinates
     vec3 along = mat3(to_map) * normal;            // ... and a metre along its normal
     vec3 p = at + along * (params.x * grazing);
+    vec3 coarser = p;   // the next larger map's coordinates (the level's, or a ring's)
+    float fine = 1.0;   // the chosen ring's share, against the next larger map's (cascade blending)
 #ifdef SHADOW_RINGS
     // The smallest of the light's rings that holds the point (outermost first: the last
-    // holding it wins), read instead of the level's map; the coordinates chosen, one lookup.
-    p = ring_coordinates(0, i, at, along, grazing, p);
+    // holding it wins), read instead of the level's map; the coordinates chosen, one lookup
+    // (two in a ring's blend band).
+    ring_coordinates(0, i, at, along, grazing, p, coarser, fine);
 #if SHADOW_RINGS > 1
-    p = ring_coordinates(1, i, at, along, grazing, p);
+    ring_coordinates(1, i, at, along, grazing, p, coarser, fine);
 #endif
 #if SHADOW_RINGS > 2
-    p = ring_coordinates(2, i, at, along, grazing, p);
+    ring_coordinates(2, i, at, along, grazing, p, coarser, fine);
 #endif
 #endif
     if (any(lessThan(p, vec3(0.0))) || any(greaterThan(p, vec3(1.0)))) return 1.0;  // outside the map
-    return filtered_shadow(shadow_atlas, p, int(params.w), vec2(params.z), params.y);
+    float lit = filtered_shadow(shadow_atlas, p, int(params.w), vec2(params.z), params.y);
+#ifdef SHADOW_RING_BLEND
+    if (fine < 1.0) {   // in a ring's band: fade towards the next larger map's shadow
+        bool off = any(lessThan(coarser, vec3(0.0))) || any(greaterThan(coarser, vec3(1.0)));
+        float far_lit = off ? 1.0 : filtered_shadow(shadow_atlas, coarser, int(params.w), vec2(params.z), params.y);
+        lit = mix(far_lit, lit, fine);
+    }
+#endif
+    return lit;
 #endif
 }
 
