@@ -1,6 +1,7 @@
 """Components: plain data attached to entities. Behaviour lives in ``systems``."""
 from components.ambient import HemisphereLight
 from components.camera import Camera, DirectionalLight, FlyController, PointLight
+from components.fog import Fog
 from components.mirror import Mirror
 from components.portal import Portal, PortalClone, Slice, Traveller
 from components.post import Bloom, Tonemap
@@ -14,7 +15,7 @@ from components.water import Water
 
 __all__ = [
     "Bloom", "Camera", "ComponentValueError", "ComponentWarning", "DirectionalLight", "Emissive", "FlyController",
-    "HemisphereLight", "Material",
+    "Fog", "HemisphereLight", "Material",
     "MeshRef", "Mirror", "PointLight", "Portal", "PortalClone", "ReflectionProbe", "Reflective", "Refractive",
     "ScreenPanel", "ScreenText", "Skybox", "Slice",
     "Tonemap", "TrackedComponent", "Transform", "Traveller", "Visibility", "Water",

@@ -34,6 +34,7 @@
 #include "end_image.glsl"
 #include "probe_lookup.glsl"
 #include "hdr.glsl"
+#include "fog.glsl"
 #ifdef COMPOSITE_BUMPY
 flat in mat3 v_project_dir;
 #endif
@@ -44,6 +45,7 @@ uniform usampler2D reflection_nodes;
 uniform samplerCube sky_map;
 uniform vec2 parent_size;            // pixels of the level composited into
 uniform vec2 to_reflection;          // those pixels -> the reflection level's (resolution scales)
+uniform bool fog_from_eye;           // the parent is a root view (its rays start at its eye): the fog's
 #ifdef COMPOSITE_ROUGH
 uniform sampler2D rough_atlas;       // rough views' own blur sources (engine/render/rough_atlas.py)
 uniform vec2 atlas_size;
@@ -80,10 +82,11 @@ flat in vec4 v_weights;    // x, y: the probes' weights (the sky has the rest); 
 flat in vec4 v_place;      // x: the plane's w; yzw: a portal's offset to beyond its partner
 
 // The surface's environment along ``ray`` from ``p``: the probes by their weights and the sky
-// taking what is left of 1, each read at its level for ``roughness`` (the scene shader's
-// probe_radiance, with no pixel footprint: the composite reads its sky at level 0 too).
+// (its share of the fog out from ``p``) taking what is left of 1, each read at its level for
+// ``roughness`` (the scene shader's probe_radiance, with no pixel footprint: the composite
+// reads its sky at level 0 too).
 vec3 fallback_environment(vec3 p, vec3 ray, float roughness) {
-    vec3 sky = textureLod(sky_map, ray, roughness_lod_bias(roughness)).rgb;
+    vec3 sky = fog_sky(textureLod(sky_map, ray, roughness_lod_bias(roughness)).rgb, p, ray);
 #ifdef FALLBACK_PROBES
     vec3 first = probe_lookup(probe_map, probe_position, probe_box_min, probe_box_max, p, ray, 0.0, roughness);
     vec3 second = probe_lookup(probe2_map, probe2_position, probe2_box_min, probe2_box_max, p, ray, 0.0,
@@ -130,10 +133,12 @@ void main() {
     // the parent mirror's plane: still in front of the eye, unlike its tilted far plane).
     vec4 near = v_inv_view_proj * vec4(uv * 2.0 - 1.0, -1.0, 1.0);
     vec3 view_dir = normalize(near.xyz / near.w - v_eye.xyz);
-#ifdef COMPOSITE_FALLBACK
-    // Where the pixel's ray meets the surface (what box projection starts from).
-    vec3 at = v_eye.xyz + view_dir * (-(dot(v_normal.xyz, v_eye.xyz) + v_place.x) / dot(v_normal.xyz, view_dir));
-#else
+    // Where the pixel's ray meets the surface (what box projection starts from), and the air
+    // before it in the parent view: from where the parent's rays enter it (its eye for a root
+    // view, else the surface it looks out of: its oblique near plane) to the surface.
+    vec3 at = v_eye.xyz + view_dir * (-(dot(v_normal.xyz, v_eye.xyz) + v_params.z) / dot(v_normal.xyz, view_dir));
+    float parent_fog = fog_depth(fog_from_eye ? v_eye.xyz : near.xyz / near.w, at);
+#ifndef COMPOSITE_FALLBACK
     uint seen_id = texelFetch(reflection_seen, px, 0).r;
     if (seen_id == NO_END_IMAGE) discard;  // an end view's pixel last frame's image did not hold
     out_seen = seen_id;
@@ -141,11 +146,14 @@ void main() {
 #ifdef COMPOSITE_PORTAL
 #ifdef COMPOSITE_FALLBACK
     // What lies beyond the partner along the carried ray, from the probes there or the sky.
-    out_color = vec4(hdr_store(fallback_environment(v_carry * at + v_place.yzw, v_carry * view_dir, 0.0)), 1.0);
+    out_color = vec4(hdr_store(fogged(fallback_environment(v_carry * at + v_place.yzw, v_carry * view_dir, 0.0),
+                                      parent_fog)), 1.0);
 #else
+    // (The sky beyond the partner fogged from this side's crossing: the partner's height is
+    // not in the row, so height fog there is this side's.)
     vec4 through = textureLod(reflection, uv, 0.0);
-    vec3 beyond = textureLod(sky_map, v_carry * view_dir, 0.0).rgb;
-    out_color = vec4(hdr_store(through.rgb + beyond * (1.0 - through.a)), 1.0);
+    vec3 beyond = fog_sky(textureLod(sky_map, v_carry * view_dir, 0.0).rgb, at, v_carry * view_dir);
+    out_color = vec4(hdr_store(fogged(through.rgb + beyond * (1.0 - through.a), parent_fog)), 1.0);
 #endif
 #else
     float reflect_rate = v_params.x;
@@ -209,7 +217,7 @@ void main() {
     float lod = 0.0;
     vec4 seen = textureLod(reflection, uv, 0.0);
 #endif
-    vec3 environment = textureLod(sky_map, r, lod).rgb;
+    vec3 environment = fog_sky(textureLod(sky_map, r, lod).rgb, at, r);
     vec3 radiance = seen.rgb + environment * (1.0 - seen.a);
 #endif
 #ifdef COMPOSITE_WATER
@@ -223,10 +231,12 @@ void main() {
 #ifdef COMPOSITE_FALLBACK
     weight = fallback_alpha(weight);
 #endif
+    // The parent's air over the reflection as a whole: blended over the surface's own pixels
+    // (fogged by the same air in the parent's scene pass), the pixel is fogged all the way.
 #ifdef COMPOSITE_WATER
-    out_color = vec4(hdr_store(radiance * v_tint.rgb), weight);
+    out_color = vec4(hdr_store(fogged(radiance * v_tint.rgb, parent_fog)), weight);
 #else
-    out_color = vec4(hdr_store(reflected), weight);
+    out_color = vec4(hdr_store(fogged(reflected, parent_fog)), weight);
 #endif
 #endif
 }

@@ -9,7 +9,7 @@ in vec4 in_rect;             // the view's rectangle in its own level's pixels: 
 in mat4 in_inv_view_proj;    // the parent view's
 in vec4 in_eye;              // xyz: the parent view's eye; w: a rough view's tile, first texel x
 in vec4 in_tint;             // rgb: tint; a: a rough view's tile scale (0: no tile, read the level)
-in vec4 in_params;           // reflect_rate, roughness, is_portal (0/1), the view's index
+in vec4 in_params;           // reflect_rate, roughness, the surface plane's w (in_normal its xyz), the view's index
                              // (water: eye.w and normal.w are the waves' offset, tint.a the
                              // second layer's share, params.y F0: mirror_passes.composite_rows)
 in vec4 in_normal;           // xyz: the mirror's normal, world, facing the parent eye; w: tile y

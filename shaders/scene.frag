@@ -8,6 +8,9 @@
 #include "ggx.glsl"
 #include "ambient.glsl"
 #include "hdr.glsl"
+#ifdef FOG
+#include "fog.glsl"
+#endif
 
 uniform sampler2D albedo_map;
 uniform bool has_albedo_map;
@@ -38,9 +41,14 @@ flat in uint v_node;
 flat in vec3 v_eye;
 #define node_index v_node
 #define VIEW_EYE v_eye
+#ifdef FOG
+flat in vec4 v_clip;
+#define VIEW_CLIP v_clip
+#endif
 #else
 #define node_index camera.skip.w  // the view's index in its tree (camera.glsl)
 #define VIEW_EYE camera.eye.xyz
+#define VIEW_CLIP camera.clip_plane
 #endif
 
 // The variant of each slot: the instance's own (v_slots), or, in a program specialised for a
@@ -308,6 +316,11 @@ void main() {
     vec3 color = mapped_reflection(SLOT_REFLECT, lit, apply_reflect(SLOT_REFLECT, lit, s), metal_share);
     color = apply_refract(SLOT_REFRACT, color, s);
     color = apply_emissive(SLOT_EMISSIVE, color, s);
+#ifdef FOG
+    // The air between where this view's rays enter it (its eye, or the surface it looks out
+    // of) and the point; a composite fogs the stretch before (fog.glsl).
+    color = fog_view(color, VIEW_EYE, VIEW_CLIP, v_world_pos);
+#endif
     out_color = vec4(hdr_store(color), transparent ? s.alpha : 1.0);
     out_surface = v_slots.w;
     out_seen = v_slots.w;

@@ -62,6 +62,9 @@ flat out vec4 v_tint;
 flat out uvec4 v_slots;
 flat out uint v_node;
 flat out vec3 v_eye;
+#ifdef FOG
+flat out vec4 v_clip;  // the view's clip plane: where its rays enter it, for the fog (fog.glsl)
+#endif
 
 // All three points on the outer side of plane a.p < 0.
 bool outside(vec4 a, vec4 p0, vec4 p1, vec4 p2) {
@@ -87,6 +90,9 @@ void emit_corner(int c, vec4 position, MirrorView v) {
     v_slots = g_slots[c];
     v_node = v.node.x;
     v_eye = v.eye.xyz;
+#ifdef FOG
+    v_clip = v.clip_plane;
+#endif
 #ifdef LAYERED
     gl_Layer = int(v.node.x);  // the face (a face view's node index is its face)
 #endif

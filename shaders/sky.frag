@@ -4,6 +4,7 @@
 // Skybox: the flat background).
 #include "camera.glsl"
 #include "hdr.glsl"
+#include "fog.glsl"
 
 #ifdef GENERATED_SKY
 #include "sky_model.glsl"
@@ -13,6 +14,7 @@ uniform samplerCube sky_map;
 
 #ifdef LAYERED
 in vec3 g_direction;  // sky_layered.geom: this face's world direction
+flat in vec3 g_eye;   // ... and its eye (the probe's centre)
 #else
 in vec2 v_ndc;
 #endif
@@ -23,16 +25,21 @@ layout(location = 3) out uint out_node;
 
 void main() {
 #ifdef LAYERED
-    vec3 direction = g_direction;
+    vec3 direction = normalize(g_direction);
+    vec3 eye = g_eye;
 #else
     vec4 far_point = camera.inv_view_proj * vec4(v_ndc, 1.0, 1.0);
-    vec3 direction = far_point.xyz / far_point.w - camera.eye.xyz;
+    vec3 direction = normalize(far_point.xyz / far_point.w - camera.eye.xyz);
+    vec3 eye = camera.eye.xyz;
 #endif
 #ifdef GENERATED_SKY
-    out_color = vec4(hdr_store(generated_sky(normalize(direction))), 1.0);
+    vec3 sky = generated_sky(direction);
 #else
-    out_color = vec4(textureLod(sky_map, normalize(direction), 0.0).rgb, 1.0);
+    vec3 sky = textureLod(sky_map, direction, 0.0).rgb;
 #endif
+    // Its share of the fog along the ray, out from the eye (a root view: the main camera's
+    // or a probe face's; reflection levels leave the sky to their composites).
+    out_color = vec4(hdr_store(fog_sky(sky, eye, direction)), 1.0);
     out_surface = 0u;
     out_seen = 0u;
     out_node = 0u;

@@ -21,6 +21,7 @@ layout(std140) uniform Views {
 
 in vec2 v_ndc[];
 out vec3 g_direction;
+flat out vec3 g_eye;
 
 void main() {
     FaceView v = views[gl_InvocationID];
@@ -28,6 +29,7 @@ void main() {
     for (int c = 0; c < 3; ++c) {
         vec4 far_point = to_world * vec4(v_ndc[c], 1.0, 1.0);
         g_direction = far_point.xyz / far_point.w - v.eye.xyz;
+        g_eye = v.eye.xyz;
         gl_Position = gl_in[c].gl_Position;
         gl_Layer = gl_InvocationID;
         EmitVertex();

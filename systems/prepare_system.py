@@ -28,7 +28,7 @@ import warnings
 import esper
 import numpy as np
 
-from components import DirectionalLight, HemisphereLight, PointLight, ReflectionProbe, Skybox, Transform
+from components import DirectionalLight, Fog, HemisphereLight, PointLight, ReflectionProbe, Skybox, Transform
 from components.ambient import DEFAULT_GROUND, DEFAULT_SKY
 from engine.core.errors import LightLimitWarning
 from engine.core.world import World
@@ -106,6 +106,9 @@ class PrepareSystem(esper.Processor):
             self._count_cut(kept)
         world.resources[KeptLights] = kept   # every frame: what the shadows stage reads
         renderer.stats.lights_cut = sum(self._cut)
+        camera = frame_rules(world).active_camera
+        if renderer.fog.set(None if camera is None else world.try_get(camera, Fog)):
+            renderer.note_scene_change()   # every view's fogged pixels
 
     def _sky(self) -> bool:
         """The sky made anew where it changed: the Skybox came, went or changed, or the light a

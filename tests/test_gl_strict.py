@@ -103,6 +103,22 @@ def _spot_shadows(ctx):
     return _engine_frames(ctx, MirrorRing(3), 3, configure)
 
 
+def _fog(path: str):
+    """The mirror ring seen through height fog on the camera (the FOG builds of the scene
+    programs, the batched ones' geometry stage too; the sky's and the composites' reads of
+    the block)."""
+    def run(ctx):
+        from benchmarks.mirrors import MirrorRing
+        from components import Camera, Fog
+
+        def configure(engine):
+            engine.reflection_system.path = path
+            for entity, _ in engine.world.query_one(Camera):
+                engine.world.add_component(entity, Fog(density=0.08, height=1.0, height_falloff=0.3))
+        return _engine_frames(ctx, MirrorRing(4), 3, configure)
+    return run
+
+
 def _probes(refresh: str, resolution: int = 32):
     def run(ctx):
         from benchmarks.probes import ProbeRing
@@ -153,6 +169,8 @@ SCENES: dict[str, Callable[[moderngl.Context], list[np.ndarray]]] = {
     "post": _lighting("post"),
     "point_shadows": _point_shadows,
     "spot_shadows": _spot_shadows,
+    "fog_per_mirror": _fog("per_mirror"),
+    "fog_batched": _fog("batched"),
     "probes_dynamic": _probes("every_frame"),
     "probes_once": _probes("once"),
     "probes_sliced_ggx": _probes_sliced_ggx,
@@ -176,9 +194,10 @@ def test_every_draw_is_legal_gl_41(ctx, name):
 def test_uniform_blocks_are_the_size_the_engine_writes(ctx):
     """Every uniform block the scenes draw with has, in the GLSL (std140, as the driver lays it
     out), the size of the bytes the engine packs for it: a block the blocks of tests/
-    test_rendering.py and test_ambient_light.py do not cover (Views, Shadows, VirtualLights,
+    test_rendering.py and test_ambient_light.py do not cover (Views, Shadows, VirtualLights, Fog,
     FallbackRows) included."""
     from engine.render.batched_mirrors import VIEWS_BLOCK_BYTES
+    from engine.render.fog import FOG_BLOCK_BYTES
     from engine.render.irradiance import IRRADIANCE_BLOCK_BYTES
     from engine.render.mirror_passes import _FALLBACK_IDS_BYTES, _FALLBACK_WEIGHTS, FALLBACK_ROWS
     from engine.render.shadows import SHADOWS_BLOCK_BYTES, VIRTUAL_BLOCK_BYTES
@@ -186,6 +205,7 @@ def test_uniform_blocks_are_the_size_the_engine_writes(ctx):
 
     packed = {"Camera": CAMERA_BLOCK_BYTES, "Lights": LIGHTS_BLOCK_BYTES, "Irradiance": IRRADIANCE_BLOCK_BYTES,
               "Views": VIEWS_BLOCK_BYTES, "Shadows": SHADOWS_BLOCK_BYTES, "VirtualLights": VIRTUAL_BLOCK_BYTES,
+              "Fog": FOG_BLOCK_BYTES,
               "FallbackRows": _FALLBACK_IDS_BYTES + FALLBACK_ROWS * _FALLBACK_WEIGHTS.size}
     with strict_draws(ctx) as strict:
         for name in ("hall_start", "mirror_ring_8_batched", "mirror_light_moving"):

@@ -498,7 +498,8 @@ def test_composite_rows_hold_each_views_quad_and_parameters_where_the_shader_rea
     """composite_rows packs a row per view with struct (mirror_composite.vert's attributes,
     in order); checked here against numpy arithmetic done independently: the outline's
     corners in the parent's clip space flattened onto z = 0, a rectangle's corners in NDC,
-    the parent's inverse view-projection and eye, and the surface's and tile's numbers."""
+    the parent's inverse view-projection and eye, and the surface's and tile's numbers (its
+    plane's w in params z: where the parent's rays meet it, for the fog)."""
     from engine.render.mirror_passes import COMPOSITE_DTYPE, Composite, composite_rows, composite_surface
     from engine.render.rough_atlas import Tile
     from engine.render.views import camera_view
@@ -507,7 +508,8 @@ def test_composite_rows_hold_each_views_quad_and_parameters_where_the_shader_rea
     outline = np.array([(x, y, 0.0, 1.0) for x in (-1.0, 1.0) for y in (0.0, 1.5)])
     mirror = composite_surface(glm.vec4(0.9, 0.8, 0.7, 1.0), 0.75, 0.5, glm.vec3(0.0, 0.0, 1.0), outline)
     carry = glm.mat3(glm.rotate(0.3, glm.vec3(0, 1, 0)))
-    portal = composite_surface(glm.vec4(1.0), 1.0, 0.0, glm.vec3(1.0, 0.0, 0.0), None, portal=True, carry=carry)
+    portal = composite_surface(glm.vec4(1.0), 1.0, 0.0, glm.vec3(1.0, 0.0, 0.0), None, portal=True, carry=carry,
+                               plane_w=-2.5)
     rows = composite_rows([
         Composite(7, (10, 20, 30, 40), (11, 21, 31, 41), parent, mirror, Tile(256, 512, 0.5)),
         Composite(9, (50, 60, 20, 10), (50, 60, 20, 10), parent, portal),
@@ -532,7 +534,7 @@ def test_composite_rows_hold_each_views_quad_and_parameters_where_the_shader_rea
     assert np.allclose(eye[:, :3], (0.5, 1.0, 6.0))
     assert np.allclose(eye[:, 3], (256, 0)) and np.allclose(normal[:, 3], (512, 0))   # tile x, y
     assert np.allclose(tint, [(0.9, 0.8, 0.7, 0.5), (1.0, 1.0, 1.0, 0.0)])           # rgb, tile scale
-    assert np.allclose(params, [(0.75, 0.5, 0.0, 7.0), (1.0, 0.0, 1.0, 9.0)])        # rate, roughness, portal, index
+    assert np.allclose(params, [(0.75, 0.5, 0.0, 7.0), (1.0, 0.0, -2.5, 9.0)])        # rate, roughness, portal, index
     assert np.allclose(normal[:, :3], [(0, 0, 1), (1, 0, 0)])
     assert np.allclose(carried[0], np.eye(3).ravel()) and np.allclose(carried[1], np.array(carry.to_list()).ravel())
 

@@ -23,6 +23,7 @@ from engine.assets.texture_data import TextureData
 from engine.core.errors import GLPassError
 from engine.frame_stats import RenderStats
 from engine.render.bindings import CAMERA_BINDING, bind_uniform_range
+from engine.render.fog import FogBlock
 from engine.render.gl_context import GLCapabilities
 from engine.render.instances import GpuMesh, InstanceBatch
 from engine.render.raw_gl import RawGL
@@ -140,6 +141,7 @@ class Gpu:
         self._view_run: tuple[Sequence[View], dict[int, int]] | None = None
         self._view_base = 0
         self.lights_ubo = ctx.buffer(reserve=LIGHTS_BLOCK_BYTES)
+        self.fog = FogBlock(ctx)   # the active camera's Fog (the prepare stage sets it)
         # Textures shared by reference count (the Renderer makes and releases them), by
         # id(TextureData); ("normal", id): uploaded linear (normal and metallic-roughness maps)
         self._textures: dict[object, Shared] = {}

@@ -173,9 +173,9 @@ class StillTree:
                 self.copies.release()
             if kept.fallbacks is not None:
                 child, prepared = kept.fallbacks
-                self.passes.draw_fallbacks(levels[0], child, prepared)
+                self.passes.draw_fallbacks(levels[0], child, prepared, parent_is_root=True)
             if kept.composite is not None:
-                self.passes.composite_level(levels[0], levels[1], kept.composite)
+                self.passes.composite_level(levels[0], levels[1], kept.composite, parent_is_root=True)
             self.scene_pass.draw_transparent([root or kept.result.views[0].view], levels[0], root_options)
             if kept.fallbacks is not None or kept.composite is not None:
                 self.renderer.flush()
@@ -200,9 +200,9 @@ class StillTree:
                     self.ends.draw(*filled, targets, root)
             drawn = refill.fallbacks.get(depth)
             if drawn is not None:
-                passes.draw_fallbacks(targets, *drawn)
+                passes.draw_fallbacks(targets, *drawn, parent_is_root=depth == 0)
             if depth < len(refill.composites):
-                passes.composite_level(targets, levels[depth + 1], refill.composites[depth])
+                passes.composite_level(targets, levels[depth + 1], refill.composites[depth], parent_is_root=depth == 0)
             if refill.see_through:
                 if depth:
                     views, options, conditions = refill.transparent[depth]

@@ -49,6 +49,7 @@ from engine.render.bindings import (
     BLEND_OVER,
     FALLBACK_BINDING,
     FALLBACK_PARENT_UNITS,
+    FOG_BINDING,
     NORMAL_UNIT,
     PARENT_NODE_UNIT,
     PARENT_SURFACE_UNIT,
@@ -93,7 +94,7 @@ class CompositeSurface:
     variant: str                 # the build of mirror_composite.frag (COMPOSITE_VARIANTS)
     roughness: float
     reflect_rate: float
-    params_z: float              # 1.0 for a portal (a plain window); a bumpy mirror's plane offset
+    params_z: float              # the surface plane's w (with ``normal``: where a pixel's ray meets it)
     outline: glm.mat4 | None     # its 4 world corners as columns (a 2 x 2 grid), or None: the rect
     tint: bytes                  # 3 floats
     normal: bytes                # 3 floats: world, facing the side it is seen from
@@ -133,7 +134,7 @@ def composite_surface(tint: glm.vec4, reflect_rate: float, roughness: float, nor
     else:
         water = None
     columns = None if outline is None else glm.mat4(*(glm.vec4(*map(float, row)) for row in outline))
-    params_z = 1.0 if portal else 0.0
+    params_z = float(plane_w)   # where the parent's ray meets the surface (the fog's, a bumpy mirror's)
     if bumps is not None and not portal:
         variant += "_bumpy"
         u, v = (glm.vec4(*map(float, row)) for row in bumps.uv_rows)
@@ -284,7 +285,7 @@ COMPOSITE_DTYPE = np.dtype([
     ("tile_scale", "<f4"),            # the tile's scale; water: the second layer's share
     ("reflect_rate", "<f4"),          # times the view's fade
     ("roughness", "<f4"),             # water: F0
-    ("params_z", "<f4"),              # CompositeSurface.params_z: 1.0 for a portal, a bumpy mirror's plane offset
+    ("params_z", "<f4"),              # CompositeSurface.params_z: the surface plane's w
     ("view_index", "<f4"),            # the view's node index
     ("normal", "<f4", (3,)),
     ("tile_y", "<f4"),                # the tile's y; water: the waves' offset v
@@ -533,6 +534,7 @@ class MirrorPasses:
             for name, unit in units.items():
                 if name in program:
                     program[name].value = unit
+            program["Fog"].binding = FOG_BINDING
             self.composites[variant] = _CompositeDraw(ctx, program)
         self.fallbacks: dict[str, _CompositeDraw] = {}
         for variant, defines in FALLBACK_VARIANTS.items():
@@ -546,6 +548,7 @@ class MirrorPasses:
                     program[name].value = unit
             if "FallbackRows" in program:
                 program["FallbackRows"].binding = FALLBACK_BINDING
+            program["Fog"].binding = FOG_BINDING
             self.fallbacks[variant] = _CompositeDraw(ctx, program)
         # The fallback draws' ids and weights (FallbackRows: a chunk's, written before its draw).
         self._fallback_block = ctx.buffer(reserve=_FALLBACK_IDS_BYTES + 32 * FALLBACK_ROWS)
@@ -721,8 +724,10 @@ class MirrorPasses:
                                        view.fade, view.index, parent_size, flattened))
         return PreparedComposites([], {key: b"".join(rows) for key, rows in groups.items()})
 
-    def composite_level(self, parent: RenderTargets, level: RenderTargets, prepared: PreparedComposites) -> None:
-        """Blend every view of ``level`` into its surface's pixels of ``parent``: one instanced
+    def composite_level(self, parent: RenderTargets, level: RenderTargets, prepared: PreparedComposites,
+                        parent_is_root: bool = False) -> None:
+        """Blend every view of ``level`` into its surface's pixels of ``parent`` (``parent_is_root``:
+        a root view's level, whose rays start at its eye, for the fog): one instanced
         draw per composite variant present, a quad per view over its surface (each pixel
         belongs to one view, so the quads never blend over each other's pixels).  Rough
         views first get their own blur source (``RoughAtlas``).  Not flushed: a tree's
@@ -755,6 +760,7 @@ class MirrorPasses:
                 uniforms.set(program, "atlas_size", self.rough_atlas.texture.size)
             uniforms.set(program, "parent_size", parent.size)
             uniforms.set(program, "to_reflection", (level.size[0] / parent.size[0], level.size[1] / parent.size[1]))
+            uniforms.set(program, "fog_from_eye", parent_is_root)
             draw.draw(variant_rows, self.renderer.shaders.reloads)
         self.renderer.checkpoint("composite")
 
@@ -857,7 +863,8 @@ class MirrorPasses:
         self._fallback_table = (states, probes, found, water)
         return found, water
 
-    def draw_fallbacks(self, parent: RenderTargets, level: RenderTargets | None, prepared: PreparedFallbacks) -> None:
+    def draw_fallbacks(self, parent: RenderTargets, level: RenderTargets | None, prepared: PreparedFallbacks,
+                       parent_is_root: bool = False) -> None:
         """Blend each fallback of ``prepared`` over its surface's pixels in ``parent`` (before
         the views of ``level``, the one below, are composited there: a partly faded view's
         composite goes over its fallback).  ``level`` is read for end views' holes."""
@@ -897,6 +904,7 @@ class MirrorPasses:
                         uniforms.set(program, f"{prefix}_{name}", value)
             uniforms.set(program, "parent_size", parent.size)
             uniforms.set(program, "to_reflection", (1.0, 1.0))
+            uniforms.set(program, "fog_from_eye", parent_is_root)
             if "to_child" in program:
                 uniforms.set(program, "to_child", to_child)
             for rows, ids, weights in chunks:

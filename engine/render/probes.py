@@ -897,7 +897,7 @@ class ProbeCaptures:
         material variants (which build of the scene program draws each: one instance's
         change of variant may move its whole batch to the build that switches), the
         shadow maps' blocks (fits, slots, filter sizes), their lookups and filter, the
-        virtual lights shining, the reflection filtering, and the cubes (with how often each
+        virtual lights shining, the reflection filtering, the fog, and the cubes (with how often each
         was written) of the other probes the batches sample.  What the instances themselves
         are, where shadows fall and the lights are the scheduler's to follow
         (``ProbeDue.unchanged``)."""
@@ -909,7 +909,7 @@ class ProbeCaptures:
                           if probe and probe != key})
         return (tuple((_Same(batch), batch.layout, batch.variants) for batch in batches), shadows.block.tobytes(),
                 shadows.virtual_block.tobytes(), shadows.program_defines, shadows.filter, shadows.virtual_shining,
-                renderer.reflection_anisotropy,
+                renderer.reflection_anisotropy, renderer.fog.block,
                 tuple((probe, _Same(cubes.get(probe)), self._versions.get(probe, 0)) for probe in sampled))
 
     def _sky_record(self, view: View, direct: bool, camera: tuple | None = None) -> tuple:
@@ -920,7 +920,7 @@ class ProbeCaptures:
         renderer = self.renderer
         if camera is None:
             camera = (view.view.to_tuple(), view.proj.to_tuple(), tuple(view.eye), view.size)
-        return (*camera, direct, _Same(renderer.sky), renderer.shaders.reloads)
+        return (*camera, direct, _Same(renderer.sky), renderer.shaders.reloads, renderer.fog.block)
 
     @contextmanager
     def _drawing_into(self, key: int):

@@ -419,7 +419,7 @@ class Renderer(Gpu):
         if self.text_pass is not None:
             self.text_pass.release()
             self.text_pass = None
-        for obj in (self.sky, self.blank_color, self.blank_ids, self.cameras_ubo, self.lights_ubo):
+        for obj in (self.sky, self.blank_color, self.blank_ids, self.cameras_ubo, self.lights_ubo, self.fog):
             obj.release()
         self.shaders.release()
 

@@ -172,7 +172,8 @@ class ScenePass:
         textures, and its uniform values where no probe's lookup can change them) is looked up
         once and kept on the batch (``InstanceBatch.draw_records``, ``ScenePrograms.record``) until a shader
         reload, a virtual light starting or ending, a kind of light starting or ending to cast
-        (``ShadowMaps.program_defines``), or its variants change: a view's draws then
+        (``ShadowMaps.program_defines``), fog coming or going (``FogBlock.defines``), or its
+        variants change: a view's draws then
         cost a dictionary look-up and a comparison a batch, not a program key built and found.
         A batch whose one instance is the view's ``skip`` or ``hide`` entity (a mirror's own
         quad, a probe's own sphere) is not drawn at all: its vertices would all be clipped
@@ -187,7 +188,7 @@ class ScenePass:
             seen = programs.reloads_seen
         # What else picks a batch's program: a virtual light shining, the shadow lookups compiled.
         shadows = self.shadows
-        stamp = (seen, shadows.virtual_shining, shadows.program_defines)
+        stamp = (seen, shadows.virtual_shining, shadows.program_defines, renderer.fog.defines)
         kinds = self._kinds.get((invocations, layered, self._ambient_probes, masked))
         if kinds is None:
             kinds = self._kinds[invocations, layered, self._ambient_probes, masked] = (
@@ -389,6 +390,7 @@ class ScenePass:
     def _bind_pass_wide_now(self, options: SceneOptions) -> None:
         ctx, renderer = self.ctx, self.renderer
         bind_uniform_block(ctx, renderer.lights_ubo, LIGHTS_BINDING)
+        renderer.fog.bind()
         self.shadows.bind()
         # The irradiance table (unit 5 serves other passes between) and the boxes; a probe's
         # capture, and a world without boxes, draw the build without them (sky only).
@@ -567,6 +569,7 @@ class ScenePass:
         self._views_ubo.write(views_block(views))
         bind_uniform_block(ctx, self._views_ubo, VIEWS_BINDING)
         bind_uniform_block(self.ctx, renderer.lights_ubo, LIGHTS_BINDING)
+        renderer.fog.bind()
         self.shadows.bind()
         self._ambient_probes = self.irradiance.bind(capturing=True)  # a capture: the sky's irradiance alone
         bind_texture(self.ctx, renderer.sky, SKY_UNIT)

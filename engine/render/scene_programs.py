@@ -26,6 +26,7 @@ from engine.render.bindings import (
     ALBEDO_UNIT,
     CAMERA_BINDING,
     EMISSIVE_MAP_UNIT,
+    FOG_BINDING,
     IRRADIANCE_BINDING,
     IRRADIANCE_UNIT,
     LIGHTS_BINDING,
@@ -112,8 +113,9 @@ class ScenePrograms:
             self.forget()
         virtual = self.shadows.virtual_shining  # the shadows stage set how many shine
         shadowing = self.shadows.program_defines  # the lookups a program compiles (ShadowMaps.upload's)
+        fogging = self.renderer.fog.defines       # FOG while the active camera's fog has a density
         key = (invocations, layered, variants, normal_mapped, checker, material_maps, probe_blend, virtual,
-               ambient_probes, probe_rest, unlit, masked, shadowing)
+               ambient_probes, probe_rest, unlit, masked, shadowing, fogging)
         program = self.built.get(key)
         if program is None:
             defines = {}
@@ -140,6 +142,7 @@ class ScenePrograms:
             if masked:  # the claimed pixels only (a reflection level's views)
                 defines["MASKED"] = "1"
             defines.update(shadowing)
+            defines.update(fogging)
             geometry = None
             if invocations:
                 geometry = "scene_batched.geom"
@@ -176,6 +179,8 @@ class ScenePrograms:
                 program["Lights"].binding = LIGHTS_BINDING
             if "Shadows" in program:
                 program["Shadows"].binding = SHADOWS_BINDING
+            if "Fog" in program:
+                program["Fog"].binding = FOG_BINDING
             if "VirtualLights" in program:
                 program["VirtualLights"].binding = VIRTUAL_LIGHTS_BINDING
             if "Irradiance" in program:

@@ -13,7 +13,7 @@ from __future__ import annotations
 import moderngl
 
 from engine.render.batched_mirrors import MAX_BATCHED_VIEWS
-from engine.render.bindings import CAMERA_BINDING, SKY_UNIT, VIEWS_BINDING
+from engine.render.bindings import CAMERA_BINDING, FOG_BINDING, SKY_UNIT, VIEWS_BINDING
 from engine.render.gpu import Gpu
 
 
@@ -46,6 +46,7 @@ class SkyDraw:
                 program["Views"].binding = VIEWS_BINDING
             else:
                 program["Camera"].binding = CAMERA_BINDING
+            program["Fog"].binding = FOG_BINDING
             if model is None:
                 program["sky_map"].value = SKY_UNIT
             vao = self._skies[key] = self.ctx.vertex_array(program, [])

@@ -484,10 +484,11 @@ class ViewTree:
             if fallbacks.get(depth):
                 child = steps[depth].targets if depth < len(steps) else None
                 prepared = self.passes.prepare_fallbacks(fallbacks[depth], levels[depth].size, walk.blends)
-                self.passes.draw_fallbacks(levels[depth], child, prepared)
+                self.passes.draw_fallbacks(levels[depth], child, prepared, parent_is_root=depth == 0)
                 walk.drawn_fallbacks[depth] = (child, prepared)
             if depth < walk.level:
-                self.passes.composite_level(levels[depth], levels[depth + 1], composites[depth])
+                self.passes.composite_level(levels[depth], levels[depth + 1], composites[depth],
+                                            parent_is_root=depth == 0)
             if see_through:
                 if depth:
                     step = steps[depth - 1]

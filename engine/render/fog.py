@@ -1,0 +1,53 @@
+"""The Fog uniform block (``shaders/include/fog.glsl``): the active camera's ``Fog``
+(``components/fog.py``), written when it changes, bound for every pass that fogs (scene
+passes, the sky, the composites).
+
+The scene programs fog only in their ``FOG`` builds (``defines``: while the fog has a
+density), so a frame without fog runs none of it: llvmpipe would run the fog's exponentials
+for every pixel.  The sky and the composites always read the block: a fraction of the
+frame's pixels, and density 0 leaves their colours as they were, bit for bit.
+"""
+from __future__ import annotations
+
+import moderngl
+import numpy as np
+
+from components.fog import Fog
+from engine.render.bindings import FOG_BINDING, bind_uniform_block
+
+FOG_BLOCK_BYTES = 32   # two vec4s: colour and sky share; density, falloff, base height
+
+
+class FogBlock:
+    def __init__(self, ctx: moderngl.Context) -> None:
+        self.ctx = ctx
+        self._values = np.zeros(FOG_BLOCK_BYTES // 4, np.float32)
+        self.ubo = ctx.buffer(self._values.tobytes())
+        self.ubo.bind_to_uniform_block(FOG_BINDING)   # (no other block uses the point: it stays)
+        self.defines: tuple[tuple[str, str], ...] = ()
+        self.version = 0   # moves on each time the block's values change (what a probe face was drawn with)
+
+    def set(self, fog: Fog | None) -> bool:
+        """Write ``fog`` (None: no fog) into the block where it differs from what it holds;
+        True when it did (every view's fogged pixels change)."""
+        values = np.zeros(FOG_BLOCK_BYTES // 4, np.float32)
+        if fog is not None and fog.density > 0.0:
+            values[:8] = (fog.color.x, fog.color.y, fog.color.z, fog.sky_affect,
+                          fog.density, fog.height_falloff, fog.height, 0.0)
+        if np.array_equal(values, self._values):
+            return False
+        self._values = values
+        self.ubo.write(values.tobytes())
+        self.defines = (("FOG", "1"),) if values[4] > 0.0 else ()
+        self.version += 1
+        return True
+
+    @property
+    def block(self) -> bytes:
+        return self._values.tobytes()
+
+    def bind(self) -> None:
+        bind_uniform_block(self.ctx, self.ubo, FOG_BINDING)
+
+    def release(self) -> None:
+        self.ubo.release()

@@ -1,0 +1,281 @@
+"""Fog (``components/fog.py``): exponential height fog on the active camera, in every view.
+
+Real frames on llvmpipe against a second computation: each pixel's way from the eye is found
+by casting its ray in float64 (to the floor; for a mirror's pixels to the mirror, then the
+reflected ray on to the floor), the fog's optical depth along each straight stretch is
+integrated numerically (not the shader's closed form), and the fogged frame must be the frame
+without fog mixed towards the fog's colour by ``exp(-depth)``, in linear light, to the 8-bit
+frames' rounding."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from pyglm import glm
+
+from components import ComponentValueError, DirectionalLight, Fog, Material, MeshRef, Mirror, Transform
+from engine.assets.level_file import LevelError, load_level
+from engine.assets.mesh import box, plane, quad
+from engine.core.world import World
+from tests.support import look_from, pixel_rays, srgb_to_linear
+
+FOG_COLOR = np.array([0.55, 0.6, 0.7])
+EYE = (0.0, 2.2, 7.0)
+TOLERANCE = 0.006   # linear light: a unit of the 8-bit sRGB frames at these levels, and a little
+MIRROR_Z = -2.0     # a mirror standing across the floor at z = -2, facing +z
+
+
+def _scene(fog: Fog | None, mirror: bool = False):
+    def build(world):
+        camera = look_from(world, EYE, (0.0, 0.0, -1.0))
+        if fog is not None:
+            world.add_component(camera, fog)
+        world.spawn(DirectionalLight(direction=(-0.3, -1.0, -0.5), intensity=0.8, shadows=False))
+        ids = world.resources["ids"] = {}
+        ids["floor"] = world.spawn(Transform(), MeshRef(plane(60, 60)), Material(color=(0.5, 0.5, 0.5), roughness=1.0))
+        ids["crate"] = world.spawn(Transform(position=(-1.5, 0.5, 2.0)), MeshRef(box()),
+                                   Material(color=(0.7, 0.3, 0.2)))
+        if mirror:
+            ids["mirror"] = world.spawn(Transform(position=(0.0, 1.5, MIRROR_Z)), MeshRef(quad(6.0, 3.0)), Material(),
+                                        Mirror())
+    return build
+
+
+def _frame(scene, fog: Fog | None, mirror: bool = False, size=(320, 200)):
+    runner = scene(_scene(fog, mirror), size)
+    runner.engine.renderer.antialias = "off"
+    return runner, runner.frame()
+
+
+def _depth(a: np.ndarray, b: np.ndarray, fog: Fog, samples: int = 400) -> np.ndarray:
+    """The fog's optical depth along each straight stretch a -> b (rows), by the trapezoid
+    rule over ``samples`` points: the density d exp(-k (y - h)) integrated along the way."""
+    t = np.linspace(0.0, 1.0, samples)
+    y = a[:, None, 1] + (b - a)[:, None, 1] * t[None, :]
+    density = fog.density * np.exp(-fog.height_falloff * (y - fog.height))
+    length = np.linalg.norm(b - a, axis=1)
+    return np.trapezoid(density, t, axis=1) * length
+
+
+def _floor_hits(origin: np.ndarray, rays: np.ndarray) -> np.ndarray:
+    return origin + rays * (-origin[..., 1:2] / rays[..., 1:2])
+
+
+def _close(error: np.ndarray) -> None:
+    """Every pixel within the frames' rounding of its expected value (a few at edges, where a
+    pixel's centre and its neighbours' differ most, within three times that)."""
+    assert np.percentile(error, 99.5) < TOLERANCE and error.max() < 3 * TOLERANCE, (error.max(),
+                                                                                   np.percentile(error, 99.5))
+
+
+def _expected(clear: np.ndarray, depth: np.ndarray, fog: Fog) -> np.ndarray:
+    """The clear frame's linear colours fogged by optical depth ``depth``."""
+    keep = np.exp(-depth)[:, None]
+    return clear * keep + np.array([fog.color.x, fog.color.y, fog.color.z]) * (1.0 - keep)
+
+
+@pytest.mark.parametrize("fog", [Fog(color=tuple(FOG_COLOR), density=0.08),
+                                 Fog(color=tuple(FOG_COLOR), density=0.3, height=0.5, height_falloff=1.2)],
+                         ids=["uniform", "height"])
+def test_the_floor_is_fogged_by_the_air_between_it_and_the_eye(scene, fog):
+    """Each floor pixel is the clear frame's, fogged by the optical depth from the eye to its
+    floor point; with height fog the air thins upwards, so a far point seen from up high is
+    fogged less than the same distance along the ground would be."""
+    clear_runner, clear = _frame(scene, None)
+    runner, foggy = _frame(scene, fog)
+    assert ("FOG", "1") in runner.engine.renderer.fog.defines
+    floor = (runner.ids() == runner.world.resources["ids"]["floor"]).reshape(-1)
+    eye, rays = pixel_rays(runner.engine.main_view, runner.size)
+    points = _floor_hits(eye, rays).reshape(-1, 3)
+    depth = _depth(np.tile(eye, (len(points), 1))[floor], points[floor], fog)
+    assert depth.min() < 0.6 and depth.max() > 1.5   # near pixels keep most of their light, far ones little
+    expected = _expected(srgb_to_linear(clear).reshape(-1, 3)[floor], depth, fog)
+    got = srgb_to_linear(foggy).reshape(-1, 3)[floor]
+    assert floor.sum() > 20000
+    _close(np.abs(got - expected).max(axis=1))
+
+
+def test_the_sky_takes_its_share_of_the_fog(scene):
+    """With the same density everywhere the sky is infinitely deep in fog: its pixels are the
+    clear sky mixed ``sky_affect`` of the way to the fog's colour."""
+    fog = Fog(color=tuple(FOG_COLOR), density=0.05, sky_affect=0.4)
+    _, clear = _frame(scene, None)
+    runner, foggy = _frame(scene, fog)
+    sky = (runner.ids() == 0).reshape(-1)
+    assert sky.sum() > 2000
+    clear_sky = srgb_to_linear(clear).reshape(-1, 3)[sky]
+    expected = clear_sky * 0.6 + FOG_COLOR * 0.4
+    assert np.abs(srgb_to_linear(foggy).reshape(-1, 3)[sky] - expected).max() < TOLERANCE
+
+
+@pytest.mark.parametrize("fog", [Fog(color=tuple(FOG_COLOR), density=0.08),
+                                 Fog(color=tuple(FOG_COLOR), density=0.3, height=0.5, height_falloff=1.2)],
+                         ids=["uniform", "height"])
+def test_a_mirror_shows_the_floor_fogged_all_the_way_from_the_eye(scene, fog):
+    """In a perfect mirror, a floor point is fogged by the air from the eye to the mirror and
+    from the mirror on to the point, each stretch integrated along its real way (heights
+    and all): the mirror's view fogs its own stretch, its composite the stretch before."""
+    clear_runner, clear = _frame(scene, None, mirror=True)
+    runner, foggy = _frame(scene, fog, mirror=True)
+    ids = runner.world.resources["ids"]
+    in_mirror = ((runner.engine.renderer.targets.read_surface_ids() == ids["mirror"])
+                 & (runner.ids() == ids["floor"])).reshape(-1)
+    assert in_mirror.sum() > 3000, in_mirror.sum()
+    eye, rays = pixel_rays(runner.engine.main_view, runner.size)
+    rays = rays.reshape(-1, 3)[in_mirror]
+    on_mirror = eye + rays * ((MIRROR_Z - eye[2]) / rays[:, 2])[:, None]
+    turned = rays * np.array([1.0, 1.0, -1.0])
+    points = _floor_hits(on_mirror, turned)
+    depth = _depth(np.tile(eye, (len(rays), 1)), on_mirror, fog) + _depth(on_mirror, points, fog)
+    expected = _expected(srgb_to_linear(clear).reshape(-1, 3)[in_mirror], depth, fog)
+    error = np.abs(srgb_to_linear(foggy).reshape(-1, 3)[in_mirror] - expected).max(axis=1)
+    _close(error)
+
+
+WALL_Z = -3.75   # the wall's front face, facing +z
+
+
+def _floor_mirror(fog: Fog | None):
+    def build(world):
+        camera = look_from(world, EYE, (0.0, 0.0, -1.0))
+        if fog is not None:
+            world.add_component(camera, fog)
+        world.spawn(DirectionalLight(direction=(-0.3, -1.0, 0.5), intensity=0.8, shadows=False))
+        ids = world.resources["ids"] = {}
+        world.spawn(Transform(), MeshRef(plane(60, 60)), Material(color=(0.5, 0.5, 0.5), roughness=1.0))
+        ids["wall"] = world.spawn(Transform(position=(0.0, 3.0, WALL_Z - 0.25)), MeshRef(box((12.0, 6.0, 0.5))),
+                                  Material(color=(0.3, 0.5, 0.7), roughness=1.0))
+        ids["mirror"] = world.spawn(Transform(position=(0.0, 0.01, 0.0),
+                                              rotation=glm.angleAxis(-np.pi / 2.0, glm.vec3(1.0, 0.0, 0.0))),
+                                    MeshRef(quad(6.0, 5.0)), Material(), Mirror())
+    return build
+
+
+def test_a_floor_mirror_in_height_fog_fogs_the_reflection_along_its_real_way_up(scene):
+    """A mirror lying on the floor shows the wall beyond it: the light's real way climbs from
+    the mirror to the wall through air that thins upwards, where the mirror image's way (the
+    eye's image below the floor) would run through the thick air underground.  Each pixel
+    is the clear one fogged along the real way, eye to mirror and mirror to wall."""
+    fog = Fog(color=tuple(FOG_COLOR), density=0.3, height=0.5, height_falloff=1.2)
+    frames = []
+    for given in (None, fog):
+        runner = scene(_floor_mirror(given), (320, 200))
+        runner.engine.renderer.antialias = "off"
+        frames.append(runner.frame())
+    ids = runner.world.resources["ids"]
+    in_mirror = ((runner.engine.renderer.targets.read_surface_ids() == ids["mirror"])
+                 & (runner.ids() == ids["wall"])).reshape(-1)
+    assert in_mirror.sum() > 2000, in_mirror.sum()
+    eye, rays = pixel_rays(runner.engine.main_view, runner.size)
+    rays = rays.reshape(-1, 3)[in_mirror]
+    on_mirror = eye + rays * ((0.01 - eye[1]) / rays[:, 1])[:, None]
+    up = rays * np.array([1.0, -1.0, 1.0])
+    points = on_mirror + up * ((WALL_Z - on_mirror[:, 2]) / up[:, 2])[:, None]
+    real = _depth(np.tile(eye, (len(rays), 1)), on_mirror, fog) + _depth(on_mirror, points, fog)
+    image = _depth(np.tile(eye * np.array([1.0, -1.0, 1.0]) + (0.0, 0.02, 0.0), (len(rays), 1)), points, fog)
+    assert (image - real).min() > 0.5   # the image's way would be far foggier: the check tells them apart
+    expected = _expected(srgb_to_linear(frames[0]).reshape(-1, 3)[in_mirror], real, fog)
+    error = np.abs(srgb_to_linear(frames[1]).reshape(-1, 3)[in_mirror] - expected).max(axis=1)
+    _close(error)
+
+
+@pytest.mark.parametrize("field, value", [("density", -0.1), ("density", float("nan")), ("density", 2000.0),
+                                          ("height_falloff", -1.0), ("sky_affect", 1.5), ("height", float("inf")),
+                                          ("color", (1.0, -0.5, 0.0))])
+def test_bad_fog_values_are_refused_naming_the_field(field, value):
+    with pytest.raises(ComponentValueError, match=f"Fog.{field}"):
+        Fog(**{field: value})
+
+
+def test_level_files_carry_fog_and_a_density_of_zero_draws_the_clear_frame(scene, tmp_path):
+    """A level's camera takes a Fog table; a bad value is refused naming the file and the
+    field; and a fog of density 0 leaves every pixel as without fog (no FOG build)."""
+    text = """[level]
+name = "Misty"
+
+[[entity]]
+name = "eye"
+[entity.Transform]
+position = [0.0, 2.0, 5.0]
+[entity.Camera]
+[entity.Fog]
+color = [0.5, 0.55, 0.6]
+density = 0.04
+height_falloff = 0.2
+"""
+    path = tmp_path / "misty.toml"
+    path.write_text(text)
+    world = World("misty")
+    made = load_level(path).spawn(world)
+    fog = world.get(made["eye"], Fog)
+    assert (fog.density, fog.height_falloff) == (0.04, 0.2)
+    path.write_text(text.replace("0.04", "-1.0"))
+    with pytest.raises(LevelError, match=r"Fog\.density") as caught:
+        load_level(path).spawn(World("refused"))
+    assert str(path) in str(caught.value)
+    _, clear = _frame(scene, None, mirror=True)
+    runner, thin = _frame(scene, Fog(density=0.0), mirror=True)
+    assert runner.engine.renderer.fog.defines == ()
+    np.testing.assert_array_equal(thin, clear)
+
+
+def test_the_batched_path_fogs_as_the_per_mirror_path_does(ctx):
+    """The mirror ring in height fog drawn with every view of a level in one draw (its
+    geometry stage hands each triangle its view's clip plane) and view by view: the same
+    frame but for a rounding here and there."""
+    from benchmarks.mirrors import MirrorRing
+    from components import Camera
+    from tests.support import engine_frames
+
+    frames = {}
+    for path in ("per_mirror", "batched"):
+        def configure(engine, path=path):
+            engine.reflection_system.path = path
+            for entity, _ in engine.world.query_one(Camera):
+                engine.world.add_component(entity, Fog(density=0.08, height=1.0, height_falloff=0.3))
+        frames[path] = engine_frames(ctx, MirrorRing(8), 3, ((320, 180),), configure, None, dt=1 / 60)[0]
+    clear = engine_frames(ctx, MirrorRing(8), 3, ((320, 180),), None, None, dt=1 / 60)[0]
+    differ = np.abs(frames["per_mirror"].astype(int) - frames["batched"]).max(axis=-1) > 2
+    assert differ.sum() <= 5, differ.sum()
+    assert (np.abs(frames["batched"].astype(int) - clear).max(axis=-1) > 10).mean() > 0.5   # the fog is there
+
+
+def test_a_portal_shows_what_lies_beyond_its_partner_fogged_along_the_carried_way(scene):
+    """Through portal A (at z = 4, facing +z) the floor beyond B (at x = -6, facing +x): each
+    pixel is fogged by the air from the eye to A and from B on to the floor point, the ray
+    carried by the pair's transform (worked out here from the two portals' matrices)."""
+    from components import Portal
+    from engine.assets.portals import spawn_portal_pair
+    from engine.core.portal_math import pair_transform
+
+    fog = Fog(color=tuple(FOG_COLOR), density=0.12, height=0.5, height_falloff=0.8)
+    frames = []
+    for given in (None, fog):
+        def build(world, given=given):
+            camera = look_from(world, (0.5, 2.0, 8.5), (0.0, 1.0, 4.0))
+            if given is not None:
+                world.add_component(camera, given)
+            world.spawn(DirectionalLight(direction=(-0.3, -1.0, -0.5), intensity=0.8, shadows=False))
+            ids = world.resources["ids"] = {}
+            ids["floor"] = world.spawn(Transform(), MeshRef(plane(60, 60)),
+                                       Material(color=(0.5, 0.5, 0.5), roughness=1.0))
+            ids["a"], ids["b"] = spawn_portal_pair(world, (0.0, 1.5, 4.0), None, (-6.0, 1.5, 0.0),
+                                                   glm.angleAxis(np.pi / 2.0, glm.vec3(0.0, 1.0, 0.0)))
+        runner = scene(build, (320, 200))
+        runner.engine.renderer.antialias = "off"
+        frames.append(runner.frame())
+    ids = runner.world.resources["ids"]
+    assert runner.world.has(ids["a"], Portal)
+    through = ((runner.engine.renderer.targets.read_surface_ids() == ids["a"])
+               & (runner.ids() == ids["floor"])).reshape(-1)
+    assert through.sum() > 2000, through.sum()
+    carry = np.array(glm.dmat4(pair_transform(runner.world.get(ids["a"], Transform).world,
+                                              runner.world.get(ids["b"], Transform).world)).to_list()).T
+    eye, rays = pixel_rays(runner.engine.main_view, runner.size)
+    rays = rays.reshape(-1, 3)[through]
+    at_a = eye + rays * ((4.0 - eye[2]) / rays[:, 2])[:, None]
+    at_b = at_a @ carry[:3, :3].T + carry[:3, 3]
+    points = _floor_hits(at_b, rays @ carry[:3, :3].T)
+    assert np.abs(at_b[:, 0] + 6.0).max() < 1e-6   # carried onto B's plane
+    depth = _depth(np.tile(eye, (len(rays), 1)), at_a, fog) + _depth(at_b, points, fog)
+    expected = _expected(srgb_to_linear(frames[0]).reshape(-1, 3)[through], depth, fog)
+    _close(np.abs(srgb_to_linear(frames[1]).reshape(-1, 3)[through] - expected).max(axis=1))
