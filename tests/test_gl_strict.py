@@ -208,7 +208,7 @@ def test_uniform_blocks_are_the_size_the_engine_writes(ctx):
               "Fog": FOG_BLOCK_BYTES,
               "FallbackRows": _FALLBACK_IDS_BYTES + FALLBACK_ROWS * _FALLBACK_WEIGHTS.size}
     with strict_draws(ctx) as strict:
-        for name in ("hall_start", "mirror_ring_8_batched", "mirror_light_moving"):
+        for name in ("hall_start", "mirror_ring_8_batched", "mirror_light_moving", "fog_batched"):
             SCENES[name](ctx)
     assert set(strict.block_sizes) == set(packed), "a uniform block with no packed size here, or one not drawn"
     for name, sizes in strict.block_sizes.items():

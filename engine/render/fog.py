@@ -2,10 +2,10 @@
 (``components/fog.py``), written when it changes, bound for every pass that fogs (scene
 passes, the sky, the composites).
 
-The scene programs fog only in their ``FOG`` builds (``defines``: while the fog has a
-density), so a frame without fog runs none of it: llvmpipe would run the fog's exponentials
-for every pixel.  The sky and the composites always read the block: a fraction of the
-frame's pixels, and density 0 leaves their colours as they were, bit for bit.
+The scene, sky and composite programs fog only in their ``FOG`` builds (``defines``: while
+the fog has a density), so a frame without fog runs none of it: llvmpipe runs the fog's
+exponentials for every pixel a program draws (read on every sky pixel, they made the
+640x360 mirror ring's frame 1.03x dearer with no fog at all).
 """
 from __future__ import annotations
 

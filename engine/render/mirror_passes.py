@@ -525,31 +525,10 @@ class MirrorPasses:
         self.claim["parent_node_map"].value = PARENT_NODE_UNIT
         self.claim["parent_surface_map"].value = PARENT_SURFACE_UNIT
         self.uniforms = renderer.shaders.uniforms  # what the claim, composite and fallback programs hold
-        self.composites: dict[str, _CompositeDraw] = {}
-        units = {**dict(zip(("reflection", "reflection_seen", "reflection_nodes"), REFLECTION_UNITS, strict=True)),
-                 "sky_map": SKY_UNIT, "rough_atlas": ATLAS_UNIT, "normal_map": NORMAL_UNIT}
-        for variant, defines in COMPOSITE_VARIANTS.items():
-            program = shaders.program("mirror_composite.vert", "mirror_composite.frag",
-                                      defines={"ROUGH_TILE": f"{TILE}.0", **defines})
-            for name, unit in units.items():
-                if name in program:
-                    program[name].value = unit
-            program["Fog"].binding = FOG_BINDING
-            self.composites[variant] = _CompositeDraw(ctx, program)
-        self.fallbacks: dict[str, _CompositeDraw] = {}
-        for variant, defines in FALLBACK_VARIANTS.items():
-            program = shaders.program("mirror_composite.vert", "mirror_composite.frag",
-                                      defines={"ROUGH_TILE": f"{TILE}.0", "FALLBACK_ROWS": str(FALLBACK_ROWS),
-                                               **defines})
-            for name, unit in {**units, "probe_map": PROBE_UNIT, "probe2_map": PROBE2_UNIT,
-                               **dict(zip(("parent_nodes", "parent_surfaces"), FALLBACK_PARENT_UNITS,
-                                          strict=True))}.items():
-                if name in program:
-                    program[name].value = unit
-            if "FallbackRows" in program:
-                program["FallbackRows"].binding = FALLBACK_BINDING
-            program["Fog"].binding = FOG_BINDING
-            self.fallbacks[variant] = _CompositeDraw(ctx, program)
+        # Each composite and fallback variant's draw, by the fog's defines (FogBlock.defines):
+        # the builds without fog made now, those with it the first time a frame has fog.
+        self._draws: dict[tuple, tuple[dict[str, _CompositeDraw], dict[str, _CompositeDraw]]] = {}
+        self.composites, self.fallbacks = self._variant_draws(())
         # The fallback draws' ids and weights (FallbackRows: a chunk's, written before its draw).
         self._fallback_block = ctx.buffer(reserve=_FALLBACK_IDS_BYTES + 32 * FALLBACK_ROWS)
         self.fallback_chunk = FALLBACK_ROWS  # rows a fallback draw takes, at most FALLBACK_ROWS (fewer: more draws)
@@ -672,6 +651,43 @@ class MirrorPasses:
         self._claim_vao = self.ctx.vertex_array(self.claim, [(self._claim_buffer, "2f 3u", "in_position",
                                                               "in_claim")])
 
+    def _variant_draws(self, fogging: tuple) -> tuple[dict[str, _CompositeDraw], dict[str, _CompositeDraw]]:
+        """The composite and fallback variants' draws built with ``fogging`` (the fog's
+        defines: ``FOG`` while the active camera's fog has a density), made the first time."""
+        made = self._draws.get(fogging)
+        if made is not None:
+            return made
+        ctx, shaders = self.ctx, self.renderer.shaders
+        units = {**dict(zip(("reflection", "reflection_seen", "reflection_nodes"), REFLECTION_UNITS, strict=True)),
+                 "sky_map": SKY_UNIT, "rough_atlas": ATLAS_UNIT, "normal_map": NORMAL_UNIT}
+        composites: dict[str, _CompositeDraw] = {}
+        for variant, defines in COMPOSITE_VARIANTS.items():
+            program = shaders.program("mirror_composite.vert", "mirror_composite.frag",
+                                      defines={"ROUGH_TILE": f"{TILE}.0", **defines, **dict(fogging)})
+            for name, unit in units.items():
+                if name in program:
+                    program[name].value = unit
+            if "Fog" in program:
+                program["Fog"].binding = FOG_BINDING
+            composites[variant] = _CompositeDraw(ctx, program)
+        fallbacks: dict[str, _CompositeDraw] = {}
+        for variant, defines in FALLBACK_VARIANTS.items():
+            program = shaders.program("mirror_composite.vert", "mirror_composite.frag",
+                                      defines={"ROUGH_TILE": f"{TILE}.0", "FALLBACK_ROWS": str(FALLBACK_ROWS),
+                                               **defines, **dict(fogging)})
+            for name, unit in {**units, "probe_map": PROBE_UNIT, "probe2_map": PROBE2_UNIT,
+                               **dict(zip(("parent_nodes", "parent_surfaces"), FALLBACK_PARENT_UNITS,
+                                          strict=True))}.items():
+                if name in program:
+                    program[name].value = unit
+            if "FallbackRows" in program:
+                program["FallbackRows"].binding = FALLBACK_BINDING
+            if "Fog" in program:
+                program["Fog"].binding = FOG_BINDING
+            fallbacks[variant] = _CompositeDraw(ctx, program)
+        made = self._draws[fogging] = (composites, fallbacks)
+        return made
+
     def prepare(self) -> None:
         """The reset's and every composite variant's buffers and vertex arrays, made now
         (when a level loads: ``Renderer.prepare_programs``'s caller) rather than when the
@@ -737,6 +753,7 @@ class MirrorPasses:
         if not prepared.rows:
             return
         ctx = self.ctx
+        fogging = self.renderer.fog.defines
         if prepared.rough:
             self.rough_atlas.isolate(level, prepared.rough)
         parent.composite_framebuffer.use()
@@ -753,14 +770,15 @@ class MirrorPasses:
                     variant = variant.removesuffix("_bumpy")
                 else:
                     bind_texture(self.ctx, texture, NORMAL_UNIT)
-            draw = self.composites[variant]
+            draw = self._variant_draws(fogging)[0][variant]
             program = draw.program
             uniforms = self.uniforms
             if variant.startswith("rough"):
                 uniforms.set(program, "atlas_size", self.rough_atlas.texture.size)
             uniforms.set(program, "parent_size", parent.size)
             uniforms.set(program, "to_reflection", (level.size[0] / parent.size[0], level.size[1] / parent.size[1]))
-            uniforms.set(program, "fog_from_eye", parent_is_root)
+            if fogging:
+                uniforms.set(program, "fog_from_eye", parent_is_root)
             draw.draw(variant_rows, self.renderer.shaders.reloads)
         self.renderer.checkpoint("composite")
 
@@ -871,6 +889,7 @@ class MirrorPasses:
         if not prepared.groups:
             return
         ctx = self.ctx
+        fogging = self.renderer.fog.defines
         renderer = self.renderer
         parent.composite_framebuffer.use()
         apply_pass_state(ctx, _COMPOSITE, (0, 0, *parent.size))
@@ -893,7 +912,7 @@ class MirrorPasses:
                     variant = variant.removesuffix("_bumpy")
                 else:
                     bind_texture(self.ctx, texture, NORMAL_UNIT)
-            draw = self.fallbacks[variant]
+            draw = self._variant_draws(fogging)[1][variant]
             program = draw.program
             for prefix, probe, unit in (("probe", first, PROBE_UNIT), ("probe2", second, PROBE2_UNIT)):
                 if not first:
@@ -904,7 +923,8 @@ class MirrorPasses:
                         uniforms.set(program, f"{prefix}_{name}", value)
             uniforms.set(program, "parent_size", parent.size)
             uniforms.set(program, "to_reflection", (1.0, 1.0))
-            uniforms.set(program, "fog_from_eye", parent_is_root)
+            if fogging:
+                uniforms.set(program, "fog_from_eye", parent_is_root)
             if "to_child" in program:
                 uniforms.set(program, "to_child", to_child)
             for rows, ids, weights in chunks:
@@ -932,6 +952,7 @@ class MirrorPasses:
                 obj.release()
         give_samples_queries(self.ctx, [self.no_pixels])
         self._fallback_block.release()
-        for draw in (*self.composites.values(), *self.fallbacks.values()):
-            draw.release()
+        for composites, fallbacks in self._draws.values():
+            for draw in (*composites.values(), *fallbacks.values()):
+                draw.release()
         self.rough_atlas.release()

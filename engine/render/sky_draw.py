@@ -1,5 +1,5 @@
 """The sky a scene pass draws behind every view: one full-screen triangle at the far plane,
-its programs built once for each of (layered, generated).
+its programs built once for each of (layered, generated, fogged).
 
 A generated Skybox is evaluated per pixel (the ``GENERATED_SKY`` build of ``sky.frag``, its
 colours written to the program only when the sky changed: ``Gpu.sky_model``,
@@ -24,8 +24,8 @@ class SkyDraw:
     def __init__(self, renderer: Gpu) -> None:
         self.renderer = renderer
         self.ctx = renderer.ctx
-        self._skies: dict[tuple[bool, bool], moderngl.VertexArray] = {}
-        self._sky_written: dict[tuple[bool, bool], int] = {}
+        self._skies: dict[tuple, moderngl.VertexArray] = {}   # by (layered, generated, fog defines)
+        self._sky_written: dict[tuple, int] = {}
 
     def vertex_array(self, layered: bool) -> moderngl.VertexArray:
         """The sky's full-screen triangle for the renderer's sky now (generated or the cube
@@ -34,19 +34,22 @@ class SkyDraw:
         programs are reported with the others)."""
         renderer = self.renderer
         model = renderer.sky_model
-        key = (layered, model is not None)
+        fogging = renderer.fog.defines
+        key = (layered, model is not None, fogging)
         vao = self._skies.get(key)
         if vao is None:
             defines = {"LAYERED": "1", "MAX_LEVEL_VIEWS": str(MAX_BATCHED_VIEWS)} if layered else {}
             if model is not None:
                 defines["GENERATED_SKY"] = "1"
+            defines.update(fogging)
             program = renderer.shaders.program("sky.vert", "sky.frag", "sky_layered.geom" if layered else None,
                                                defines=defines)
             if layered:
                 program["Views"].binding = VIEWS_BINDING
             else:
                 program["Camera"].binding = CAMERA_BINDING
-            program["Fog"].binding = FOG_BINDING
+            if "Fog" in program:
+                program["Fog"].binding = FOG_BINDING
             if model is None:
                 program["sky_map"].value = SKY_UNIT
             vao = self._skies[key] = self.ctx.vertex_array(program, [])

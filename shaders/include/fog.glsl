@@ -11,8 +11,10 @@
 // from the parent's start to the surface (fog_parent), over the reflection as a whole, and
 // the sky a view leaves to its composite from the surface outwards (fog_sky).  Fog over a
 // way in pieces is the fog over the whole way: exp(-(t1 + t2)) = exp(-t1) exp(-t2), and what
-// the nearer piece adds covers what the farther one left.  Density 0 changes nothing, bit for
-// bit (mix(c, f, 0) is c).
+// the nearer piece adds covers what the farther one left.  Only FOG builds (while the active
+// camera's fog has a density: engine/render/fog.py) read the block; in the others each
+// function below is the identity and compiles away.
+#ifdef FOG
 layout(std140) uniform Fog {
     vec4 fog_color;   // rgb: the fog's linear colour; a: how much of its fog the sky takes
     vec4 fog_params;  // x: density at the base height (per metre; 0: none), y: falloff (per metre),
@@ -65,3 +67,10 @@ vec3 fog_view(vec3 color, vec3 eye, vec4 plane, vec3 p) {
 vec3 fog_sky(vec3 color, vec3 a, vec3 r) {
     return mix(color, fogged(color, fog_depth_to_sky(a, r)), fog.fog_color.a);
 }
+#else
+float fog_depth(vec3 a, vec3 b) { return 0.0; }
+float fog_depth_to_sky(vec3 a, vec3 r) { return 0.0; }
+vec3 fogged(vec3 color, float depth) { return color; }
+vec3 fog_view(vec3 color, vec3 eye, vec4 plane, vec3 p) { return color; }
+vec3 fog_sky(vec3 color, vec3 a, vec3 r) { return color; }
+#endif
