@@ -8,9 +8,7 @@
 #include "ggx.glsl"
 #include "ambient.glsl"
 #include "hdr.glsl"
-#ifdef FOG
 #include "fog.glsl"
-#endif
 
 uniform sampler2D albedo_map;
 uniform bool has_albedo_map;
@@ -43,12 +41,12 @@ flat in vec3 v_eye;
 #define VIEW_EYE v_eye
 #ifdef FOG
 flat in vec4 v_clip;
-#define VIEW_CLIP v_clip
+#define VIEW_ENTRY v_clip
 #endif
 #else
 #define node_index camera.skip.w  // the view's index in its tree (camera.glsl)
 #define VIEW_EYE camera.eye.xyz
-#define VIEW_CLIP camera.clip_plane
+#define VIEW_ENTRY camera.clip_plane
 #endif
 
 // The variant of each slot: the instance's own (v_slots), or, in a program specialised for a
@@ -319,7 +317,7 @@ void main() {
 #ifdef FOG
     // The air between where this view's rays enter it (its eye, or the surface it looks out
     // of) and the point; a composite fogs the stretch before (fog.glsl).
-    color = fog_view(color, VIEW_EYE, VIEW_CLIP, v_world_pos);
+    color = fog_view(color, VIEW_EYE, VIEW_ENTRY, v_world_pos);
 #endif
     out_color = vec4(hdr_store(color), transparent ? s.alpha : 1.0);
     out_surface = v_slots.w;

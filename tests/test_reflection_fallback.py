@@ -256,7 +256,7 @@ def test_a_drawn_mirror_is_untouched_by_the_fallback(scene, monkeypatch):
     ents = {}
     runner, image = _render(scene, _floor_mirror(ents, Mirror(color=TINT, reflect_rate=0.8, roughness=0.2)))
     assert runner.stats.reflection_views == 1 and runner.stats.reflection_fallbacks == 0
-    monkeypatch.setattr(MirrorPasses, "draw_fallbacks", lambda *args: None)
+    monkeypatch.setattr(MirrorPasses, "draw_fallbacks", lambda *args, **kwargs: None)
     _, again = _render(scene, _floor_mirror({}, Mirror(color=TINT, reflect_rate=0.8, roughness=0.2)))
     assert np.array_equal(image, again)
 
@@ -434,7 +434,7 @@ def test_an_end_views_pixels_its_image_does_not_hold_show_the_fallback(ctx, monk
     closed, _ = _frames(ctx, _facing_pair(3, end_image=False), 4, turn, fxaa=False)
     assert ends[3] >= 1 and counts[0] >= ends[3]  # each end view's holes are a fallback
     assert np.array_equal(turned[3], closed[3])
-    monkeypatch.setattr(MirrorPasses, "draw_fallbacks", lambda *args: None)
+    monkeypatch.setattr(MirrorPasses, "draw_fallbacks", lambda *args, **kwargs: None)
     bare, _ = _frames(ctx, _facing_pair(3), 4, turn, fxaa=False)
     assert (np.abs(bare[3] - turned[3]).max(axis=2) > 10).sum() >= 100
 
@@ -449,7 +449,7 @@ def test_a_mirror_inside_one_uncovered_this_frame_shows_its_fallback_in_predicte
     frames = []
     for fallback in (True, False):
         if not fallback:
-            monkeypatch.setattr(MirrorPasses, "draw_fallbacks", lambda *args: None)
+            monkeypatch.setattr(MirrorPasses, "draw_fallbacks", lambda *args, **kwargs: None)
         ents: dict = {}
         runner = scene(lambda world, ents=ents: _covered_mirrors(world, ents, True), (200, 150))
         runner.engine.reflection_system.visibility = "predicted"

@@ -16,35 +16,34 @@ from components.fog import Fog
 from engine.render.bindings import FOG_BINDING, bind_uniform_block
 
 FOG_BLOCK_BYTES = 32   # two vec4s: colour and sky share; density, falloff, base height
+_NO_FOG = (0.0,) * 8
 
 
 class FogBlock:
     def __init__(self, ctx: moderngl.Context) -> None:
         self.ctx = ctx
-        self._values = np.zeros(FOG_BLOCK_BYTES // 4, np.float32)
-        self.ubo = ctx.buffer(self._values.tobytes())
+        self._values = _NO_FOG
+        self.ubo = ctx.buffer(np.zeros(FOG_BLOCK_BYTES // 4, np.float32).tobytes())
         self.ubo.bind_to_uniform_block(FOG_BINDING)   # (no other block uses the point: it stays)
         self.defines: tuple[tuple[str, str], ...] = ()
-        self.version = 0   # moves on each time the block's values change (what a probe face was drawn with)
 
     def set(self, fog: Fog | None) -> bool:
         """Write ``fog`` (None: no fog) into the block where it differs from what it holds;
-        True when it did (every view's fogged pixels change)."""
-        values = np.zeros(FOG_BLOCK_BYTES // 4, np.float32)
-        if fog is not None and fog.density > 0.0:
-            values[:8] = (fog.color.x, fog.color.y, fog.color.z, fog.sky_affect,
-                          fog.density, fog.height_falloff, fog.height, 0.0)
-        if np.array_equal(values, self._values):
+        True when it did (every view's fogged pixels change).  Compared as plain floats: the
+        prepare stage asks every frame."""
+        values = _NO_FOG if fog is None or fog.density <= 0.0 else (
+            fog.color.x, fog.color.y, fog.color.z, fog.sky_affect, fog.density, fog.height_falloff, fog.height, 0.0)
+        if values == self._values:
             return False
         self._values = values
-        self.ubo.write(values.tobytes())
+        self.ubo.write(np.array(values, np.float32).tobytes())
         self.defines = (("FOG", "1"),) if values[4] > 0.0 else ()
-        self.version += 1
         return True
 
     @property
-    def block(self) -> bytes:
-        return self._values.tobytes()
+    def block(self) -> tuple[float, ...]:
+        """What the block holds (what a probe face drawn through it is kept for)."""
+        return self._values
 
     def bind(self) -> None:
         bind_uniform_block(self.ctx, self.ubo, FOG_BINDING)
