@@ -53,6 +53,7 @@ from components import (
     DirectionalLight,
     Emissive,
     FlyController,
+    Fog,
     Material,
     MeshRef,
     Mirror,
@@ -80,7 +81,7 @@ from shell.app import Engine
 SIZE = (48, 32)
 CLASSES: tuple[type, ...] = (Transform, MeshRef, Material, Emissive, Reflective, Refractive, Mirror, Portal,
                              Traveller, Slice, PortalClone, ReflectionProbe, Camera, FlyController,
-                             DirectionalLight, PointLight, Skybox, Tonemap, Bloom, Visibility, Water)
+                             DirectionalLight, PointLight, Skybox, Tonemap, Bloom, Fog, Visibility, Water)
 
 @dataclasses.dataclass
 class Case:
@@ -148,7 +149,7 @@ class Fuzzer:
         try:
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
-                if case.cls in (Camera, FlyController, Tonemap, Bloom):
+                if case.cls in (Camera, FlyController, Tonemap, Bloom, Fog):
                     restore = (self.game.camera, world.try_get(self.game.camera, case.cls))
                     world.add_component(self.game.camera, component)
                 elif case.cls is Skybox:

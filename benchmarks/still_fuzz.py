@@ -65,6 +65,7 @@ from components import (
     ComponentValueError,
     DirectionalLight,
     Emissive,
+    Fog,
     Material,
     MeshRef,
     Mirror,
@@ -136,6 +137,7 @@ class StillCase:
     visibility: str = "exact"  # the reflect stage's visibility mode, in both engines
     cascades: int = 1  # the sun's shadow cascades (rings about the camera besides its level map)
     spot_angle: float = 180.0  # the point light's cone (PointLight.spot_angle; 180: all round), aimed at the box
+    fog: bool = False  # height fog on the camera (each view's stretch, each composite's)
     # Further changes, each (change, detail) after the last one's ``after`` frames (the tree
     # kept again, or refilling again, when the next comes); none after a refused one.
     then: list[tuple[str, dict[str, Any]]] = dataclasses.field(default_factory=list)
@@ -144,7 +146,7 @@ class StillCase:
         return (f"still {self.pair} depth {self.depth}, {len(self.panes)} panes {self.panes}, water {self.water}, "
                 f"see-through mirror {self.see_through_mirror}, sandwich {self.sandwich}; {self.still} still frames, "
                 f"rate {self.rate}, point light {self.point_light}, bloom {self.bloom}, {self.visibility}, "
-                f"cascades {self.cascades}, spot {self.spot_angle}; then "
+                f"cascades {self.cascades}, spot {self.spot_angle}, fog {self.fog}; then "
                 f"{self.change} {self.detail}, {self.after} frames" + "".join(
                     f"; then {change} {detail}, {self.after} frames" for change, detail in self.then))
 
@@ -168,7 +170,8 @@ def random_still_case(rng: random.Random) -> StillCase:
                      detail=detail, after=rng.randint(3, 6), rate=rng.choice((1.0, 1.0, 0.95, 0.7)),
                      point_light=rng.random() < 0.4, bloom=rng.random() < 0.3,
                      visibility="predicted" if rng.random() < 0.25 else "exact", then=then,
-                     cascades=rng.choice((1, 1, 2, 3, 4)), spot_angle=rng.choice((180.0, 180.0, 25.0, 60.0, 110.0)))
+                     cascades=rng.choice((1, 1, 2, 3, 4)), spot_angle=rng.choice((180.0, 180.0, 25.0, 60.0, 110.0)),
+                     fog=rng.random() < 0.3)
 
 
 def _random_change(rng: random.Random) -> tuple[str, dict[str, Any]]:
@@ -302,6 +305,8 @@ def _spawn(world, case: StillCase) -> dict[str, int]:
                                                 shadow_resolution=64, spot_angle=case.spot_angle))
     if case.bloom:
         world.add_component(world.resources["camera"], Bloom(intensity=0.2))
+    if case.fog:
+        world.add_component(world.resources["camera"], Fog(density=0.06, height=1.0, height_falloff=0.4))
     named["box"] = world.spawn(Transform(position=(0.8, 0.6, 0.0), scale=BOX_SCALE), MeshRef(l_mesh()),
                                Material(color=(0.9, 0.2, 0.1)), Emissive(0.6))
     for i, pane in enumerate(case.panes):
