@@ -434,9 +434,11 @@ def test_a_spot_map_is_kept_while_still_drawn_again_when_turned_and_freed_when_t
     light.shadows = True
     runner.frame()
     assert maps.spot_atlas is not None
+    assert runner.engine.renderer.resource_counts()["spot_atlases"] == 1
     runner.world.delete_entity(lamp_id)
     runner.frame()
     assert maps.spot_atlas is None and not maps.cubes
+    assert runner.engine.renderer.resource_counts()["spot_atlases"] == 0
 
 
 # --- the editor's outline ---------------------------------------------------------------------

@@ -288,6 +288,7 @@ class Renderer(Gpu):
         come back to their baseline; tests that they go back to zero)."""
         return {"meshes": len(self._meshes), "textures": len(self._textures), "batches": len(self.batches),
                 "probe_cubes": len(self.probes.cubes), "shadow_cubes": len(self.shadows.cubes),
+                "spot_atlases": int(self.shadows.spot_atlas is not None),
                 "layered_targets": len(self.probes._layered),
                 "face_targets": len(self.probes._faces),
                 "levels": len(self.levels), "level_copies": len(self.level_copies),
