@@ -1,7 +1,7 @@
 """The debug overlay: frame rate and a frame-time graph, what the last frame cost (passes,
 draw calls, views per reflection level, probe captures), the reflection and probe capture
 paths in use, toggles for them, the post-processing (tone curve, exposure, bloom; toggles
-for bloom and the curve), and shader errors from hot reload; and the level editor's panels
+for bloom, fog and the curve), and shader errors from hot reload; and the level editor's panels
 (``shell/editor_panels.py``: the entity list, the inspector, the selection's handles, the
 editor's keys), whose selection it outlines wherever it shows (``engine/render/outline.py``).
 
@@ -335,6 +335,12 @@ class DebugOverlay(EditorPanels):
         if changed:
             present.bloom = bloom
         self._widget("bloom")
+        prepare = engine.stages["prepare"]
+        imgui.same_line()
+        changed, fog = imgui.checkbox("fog", prepare.fog)
+        if changed:
+            prepare.fog = fog
+        self._widget("fog")
         imgui.same_line()
         imgui.set_next_item_width(CURVE_WIDTH * self.scale)
         if imgui.begin_combo("curve", present.curve or "camera's"):

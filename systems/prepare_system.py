@@ -85,6 +85,7 @@ class PrepareSystem(esper.Processor):
         self._sun: SkySun | None = None   # where the sky pass draws the sun, and its tint (sky_sun)
         self._cube_sun: SkySun | None = None   # ... and where the sky's cube map and light have it
         self._sun_follows = False   # the generated sky's sun follows the brightest directional light
+        self.fog = True   # the debug overlay's toggle: off, no camera's Fog is drawn
 
     def process(self, dt: float) -> None:
         world = self.world
@@ -107,7 +108,7 @@ class PrepareSystem(esper.Processor):
         world.resources[KeptLights] = kept   # every frame: what the shadows stage reads
         renderer.stats.lights_cut = sum(self._cut)
         camera = frame_rules(world).active_camera
-        if renderer.fog.set(None if camera is None else world.try_get(camera, Fog)):
+        if renderer.fog.set(None if camera is None or not self.fog else world.try_get(camera, Fog)):
             renderer.note_scene_change()   # every view's fogged pixels
 
     def _sky(self) -> bool:

@@ -279,3 +279,33 @@ def test_a_portal_shows_what_lies_beyond_its_partner_fogged_along_the_carried_wa
     depth = _depth(np.tile(eye, (len(rays), 1)), at_a, fog) + _depth(at_b, points, fog)
     expected = _expected(srgb_to_linear(frames[0]).reshape(-1, 3)[through], depth, fog)
     _close(np.abs(srgb_to_linear(frames[1]).reshape(-1, 3)[through] - expected).max(axis=1))
+
+
+def test_the_overlays_toggle_turns_the_fog_off_and_on(scene, ctx):
+    """The prepare stage's ``fog`` (the debug overlay's "fog" box): off, the frame is the
+    clear one and no FOG build is asked for; on again, the fogged one."""
+    size = (640, 480)   # room for the whole overlay
+    _, clear = _frame(scene, None, size=size)
+    runner, foggy = _frame(scene, Fog(color=tuple(FOG_COLOR), density=0.08), size=size)
+    prepare = runner.engine.stages["prepare"]
+    assert not np.array_equal(foggy, clear)
+    prepare.fog = False
+    np.testing.assert_array_equal(runner.frame(), clear)
+    assert runner.engine.renderer.fog.defines == ()
+    prepare.fog = True
+    np.testing.assert_array_equal(runner.frame(), foggy)
+    pytest.importorskip("imgui_bundle", reason="the debug overlay needs imgui-bundle (not installed here)")
+    from shell.overlay import DebugOverlay
+
+    overlay = DebugOverlay(ctx)
+    try:
+        overlay.draw(runner.engine, runner.capture.framebuffer, runner.size)
+        x, y = overlay.widgets["fog"]
+        for down in (None, True, False):
+            overlay.mouse_moved(x, y)
+            if down is not None:
+                overlay.mouse_button(1, down)
+            overlay.draw(runner.engine, runner.capture.framebuffer, runner.size)
+        assert prepare.fog is False
+    finally:
+        overlay.release()
