@@ -152,8 +152,11 @@ vec3 mapped_normal(vec3 n, vec3 p, vec2 uv, float scale) {
 #endif
 
 // --- Reflect slot ---------------------------------------------------------------------
+// The sky along ``direction`` from this surface, with its share of the fog out from here
+// (fog.glsl: the same as the sky a mirror's composite fills, and the background's; the
+// stretch from the eye is fogged once the pixel's colour is made).
 vec3 sample_environment(vec3 direction, float lod, float roughness) {
-    return textureLod(sky_map, direction, lod + roughness_lod_bias(roughness)).rgb;
+    return fog_sky(textureLod(sky_map, direction, lod + roughness_lod_bias(roughness)).rgb, v_world_pos, direction);
 }
 
 vec3 reflect_skybox(vec3 color, Surface s) {

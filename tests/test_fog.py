@@ -309,3 +309,33 @@ def test_the_overlays_toggle_turns_the_fog_off_and_on(scene, ctx):
         assert prepare.fog is False
     finally:
         overlay.release()
+
+
+def test_a_chrome_ball_reflects_the_sky_as_fogged_as_the_background(scene):
+    """A ball reflecting the sky (Reflective, mix 1) in fog the same everywhere, the sky
+    taking all of it: the sky it reflects, infinitely deep in fog, is the fog's colour, and
+    so is the ball (the stretch from the eye adds only more of it); without fog it shows
+    the sky's own colours."""
+    from components import Reflective, Skybox
+    from engine.assets.mesh import sphere
+
+    def build(fog):
+        def run(world):
+            camera = look_from(world, (0.0, 1.0, 4.0), (0.0, 1.0, 0.0))
+            if fog is not None:
+                world.add_component(camera, fog)
+            world.spawn(Skybox(zenith=(0.1, 0.2, 0.6), horizon=(0.7, 0.6, 0.4), ground=(0.1, 0.3, 0.1)))
+            world.resources["ball"] = world.spawn(Transform(position=(0.0, 1.0, 0.0)), MeshRef(sphere(1.0, 32, 16)),
+                                                  Material(color=(1.0, 1.0, 1.0)), Reflective(mix=1.0))
+        return run
+
+    fog = Fog(color=tuple(FOG_COLOR), density=0.05)
+    clear_runner = scene(build(None), (160, 120))
+    clear = srgb_to_linear(clear_runner.frame())
+    runner = scene(build(fog), (160, 120))
+    runner.engine.renderer.antialias = "off"
+    foggy = srgb_to_linear(runner.frame())
+    ball = runner.ids() == runner.world.resources["ball"]
+    assert ball.sum() > 2000
+    assert np.abs(foggy[ball] - FOG_COLOR).max() < TOLERANCE
+    assert np.abs(clear[ball] - FOG_COLOR).max(axis=-1).mean() > 0.1   # the test's fog colour is not the sky's
