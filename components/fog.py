@@ -26,6 +26,8 @@ MAX_FOG_DENSITY = 1000.0
 MAX_FOG_FALLOFF = 1000.0
 # Fog's base height within this of the origin (metres), as a camera's far plane is bounded.
 MAX_FOG_HEIGHT = 1.0e6
+# The strongest sun scatter: the glow towards the sun this many times the sun's light.
+MAX_FOG_SUN_SCATTER = 100.0
 
 
 @dataclass(eq=False)
@@ -42,6 +44,11 @@ class Fog(TrackedComponent):
     - ``sky_affect`` (0 to 1, default 1): how much of its fog the sky takes.  The sky lies
       infinitely far off: with the same density everywhere it is all fog colour at 1; with
       a falloff, only as much fog as the air along its direction holds.
+    - ``sun_scatter`` (default 0): the air glows towards the sun (the brightest
+      ``DirectionalLight``): looking along a direction at angle a from it, the fog's colour
+      gains the sun's light (colour x intensity) x ``sun_scatter`` x max(cos a, 0)^8, as
+      Godot's fog sun scatter and Unreal's directional inscattering do.  In a mirror each
+      stretch of the way glows by its own direction.
     """
 
     color: Any = field(default_factory=lambda: glm.vec4(0.6, 0.65, 0.72, 1.0))
@@ -49,6 +56,7 @@ class Fog(TrackedComponent):
     height: float = 0.0
     height_falloff: float = 0.0
     sky_affect: float = 1.0
+    sun_scatter: float = 0.0
 
     def _validate(self, name: str, value: Any) -> Any:
         if name == "color":
@@ -61,5 +69,7 @@ class Fog(TrackedComponent):
             return finite(self, name, value, low=0.0, high=MAX_FOG_FALLOFF)
         if name == "sky_affect":
             return finite(self, name, value, low=0.0, high=1.0)
+        if name == "sun_scatter":
+            return finite(self, name, value, low=0.0, high=MAX_FOG_SUN_SCATTER)
         return value
 

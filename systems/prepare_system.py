@@ -44,6 +44,7 @@ from engine.rules.light_rules import (
     SAME_SUN_TINT,
     KeptLights,
     SkySun,
+    brightest_directional,
     choose_lights,
     cube_serves,
     lamp_cone,
@@ -108,7 +109,9 @@ class PrepareSystem(esper.Processor):
         world.resources[KeptLights] = kept   # every frame: what the shadows stage reads
         renderer.stats.lights_cut = sum(self._cut)
         camera = frame_rules(world).active_camera
-        if renderer.fog.set(None if camera is None or not self.fog else world.try_get(camera, Fog)):
+        fog = None if camera is None or not self.fog else world.try_get(camera, Fog)
+        sun = brightest_directional(world) if fog is not None and fog.sun_scatter > 0.0 else None
+        if renderer.fog.set(fog, sun):
             renderer.note_scene_change()   # every view's fogged pixels
 
     def _sky(self) -> bool:

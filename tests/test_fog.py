@@ -24,12 +24,17 @@ TOLERANCE = 0.006   # linear light: a unit of the 8-bit sRGB frames at these lev
 MIRROR_Z = -2.0     # a mirror standing across the floor at z = -2, facing +z
 
 
-def _scene(fog: Fog | None, mirror: bool = False):
+SUN = (-0.3, -1.0, -0.5)   # the way the light goes
+LOW_SUN = (0.0, -0.15, 1.0)  # low ahead of the eye (it looks towards -z): the fog glows that way
+SUN_LIGHT = 0.8
+
+
+def _scene(fog: Fog | None, mirror: bool = False, sun=SUN):
     def build(world):
         camera = look_from(world, EYE, (0.0, 0.0, -1.0))
         if fog is not None:
             world.add_component(camera, fog)
-        world.spawn(DirectionalLight(direction=(-0.3, -1.0, -0.5), intensity=0.8, shadows=False))
+        world.spawn(DirectionalLight(direction=sun, intensity=SUN_LIGHT, shadows=False))
         ids = world.resources["ids"] = {}
         ids["floor"] = world.spawn(Transform(), MeshRef(plane(60, 60)), Material(color=(0.5, 0.5, 0.5), roughness=1.0))
         ids["crate"] = world.spawn(Transform(position=(-1.5, 0.5, 2.0)), MeshRef(box()),
@@ -40,8 +45,8 @@ def _scene(fog: Fog | None, mirror: bool = False):
     return build
 
 
-def _frame(scene, fog: Fog | None, mirror: bool = False, size=(320, 200)):
-    runner = scene(_scene(fog, mirror), size)
+def _frame(scene, fog: Fog | None, mirror: bool = False, size=(320, 200), sun=SUN):
+    runner = scene(_scene(fog, mirror, sun), size)
     runner.engine.renderer.antialias = "off"
     return runner, runner.frame()
 
@@ -67,31 +72,51 @@ def _close(error: np.ndarray) -> None:
                                                                                    np.percentile(error, 99.5))
 
 
-def _expected(clear: np.ndarray, depth: np.ndarray, fog: Fog) -> np.ndarray:
-    """The clear frame's linear colours fogged by optical depth ``depth``."""
+def _air_light(fog: Fog, dirs: np.ndarray, sun=SUN) -> np.ndarray:
+    """The light the air scatters towards eyes looking along ``dirs`` (rows): the fog's colour
+    and, with ``sun_scatter``, the glow max(cos, 0)^8 towards the sun (white, ``SUN_LIGHT``)."""
+    to_sun = -np.asarray(sun, np.float64) / np.linalg.norm(sun)
+    dirs = dirs / np.linalg.norm(dirs, axis=1, keepdims=True)
+    glow = fog.sun_scatter * SUN_LIGHT * np.maximum(dirs @ to_sun, 0.0) ** 8
+    return np.array([fog.color.x, fog.color.y, fog.color.z]) + glow[:, None]
+
+
+def _expected(clear: np.ndarray, depth: np.ndarray, fog: Fog, dirs: np.ndarray, sun=SUN) -> np.ndarray:
+    """The clear frame's linear colours seen along ``dirs`` through optical depth ``depth``."""
     keep = np.exp(-depth)[:, None]
-    return clear * keep + np.array([fog.color.x, fog.color.y, fog.color.z]) * (1.0 - keep)
+    return clear * keep + _air_light(fog, dirs, sun) * (1.0 - keep)
 
 
-@pytest.mark.parametrize("fog", [Fog(color=tuple(FOG_COLOR), density=0.08),
-                                 Fog(color=tuple(FOG_COLOR), density=0.3, height=0.5, height_falloff=1.2)],
-                         ids=["uniform", "height"])
-def test_the_floor_is_fogged_by_the_air_between_it_and_the_eye(scene, fog):
+def _shown(linear: np.ndarray) -> np.ndarray:
+    """What a camera without a Tonemap shows of linear colours: clamped to 1 (a glow towards
+    the sun can pass it)."""
+    return np.minimum(linear, 1.0)
+
+
+FOGS = [(Fog(color=tuple(FOG_COLOR), density=0.08), SUN),
+        (Fog(color=tuple(FOG_COLOR), density=0.3, height=0.5, height_falloff=1.2), SUN),
+        (Fog(color=tuple(FOG_COLOR), density=0.08, sun_scatter=0.6), LOW_SUN)]
+FOG_IDS = ["uniform", "height", "sun_scatter"]
+
+
+@pytest.mark.parametrize("fog, sun", FOGS, ids=FOG_IDS)
+def test_the_floor_is_fogged_by_the_air_between_it_and_the_eye(scene, fog, sun):
     """Each floor pixel is the clear frame's, fogged by the optical depth from the eye to its
     floor point; with height fog the air thins upwards, so a far point seen from up high is
-    fogged less than the same distance along the ground would be."""
-    clear_runner, clear = _frame(scene, None)
-    runner, foggy = _frame(scene, fog)
+    fogged less than the same distance along the ground would be; with sun scatter the air
+    glows where the eye looks towards the sun."""
+    clear_runner, clear = _frame(scene, None, sun=sun)
+    runner, foggy = _frame(scene, fog, sun=sun)
     assert ("FOG", "1") in runner.engine.renderer.fog.defines
     floor = (runner.ids() == runner.world.resources["ids"]["floor"]).reshape(-1)
     eye, rays = pixel_rays(runner.engine.main_view, runner.size)
     points = _floor_hits(eye, rays).reshape(-1, 3)
     depth = _depth(np.tile(eye, (len(points), 1))[floor], points[floor], fog)
     assert depth.min() < 0.6 and depth.max() > 1.5   # near pixels keep most of their light, far ones little
-    expected = _expected(srgb_to_linear(clear).reshape(-1, 3)[floor], depth, fog)
+    expected = _expected(srgb_to_linear(clear).reshape(-1, 3)[floor], depth, fog, rays.reshape(-1, 3)[floor], sun)
     got = srgb_to_linear(foggy).reshape(-1, 3)[floor]
     assert floor.sum() > 20000
-    _close(np.abs(got - expected).max(axis=1))
+    _close(np.abs(got - _shown(expected)).max(axis=1))
 
 
 def test_the_sky_takes_its_share_of_the_fog(scene):
@@ -107,15 +132,15 @@ def test_the_sky_takes_its_share_of_the_fog(scene):
     assert np.abs(srgb_to_linear(foggy).reshape(-1, 3)[sky] - expected).max() < TOLERANCE
 
 
-@pytest.mark.parametrize("fog", [Fog(color=tuple(FOG_COLOR), density=0.08),
-                                 Fog(color=tuple(FOG_COLOR), density=0.3, height=0.5, height_falloff=1.2)],
-                         ids=["uniform", "height"])
-def test_a_mirror_shows_the_floor_fogged_all_the_way_from_the_eye(scene, fog):
+@pytest.mark.parametrize("fog, sun", FOGS, ids=FOG_IDS)
+def test_a_mirror_shows_the_floor_fogged_all_the_way_from_the_eye(scene, fog, sun):
     """In a perfect mirror, a floor point is fogged by the air from the eye to the mirror and
     from the mirror on to the point, each stretch integrated along its real way (heights
-    and all): the mirror's view fogs its own stretch, its composite the stretch before."""
-    clear_runner, clear = _frame(scene, None, mirror=True)
-    runner, foggy = _frame(scene, fog, mirror=True)
+    and all) and glowing by its own direction (the eye's stretch looks towards the low sun,
+    the reflected one away from it): the mirror's view fogs its own stretch, its composite
+    the stretch before."""
+    clear_runner, clear = _frame(scene, None, mirror=True, sun=sun)
+    runner, foggy = _frame(scene, fog, mirror=True, sun=sun)
     ids = runner.world.resources["ids"]
     in_mirror = ((runner.engine.renderer.targets.read_surface_ids() == ids["mirror"])
                  & (runner.ids() == ids["floor"])).reshape(-1)
@@ -125,10 +150,12 @@ def test_a_mirror_shows_the_floor_fogged_all_the_way_from_the_eye(scene, fog):
     on_mirror = eye + rays * ((MIRROR_Z - eye[2]) / rays[:, 2])[:, None]
     turned = rays * np.array([1.0, 1.0, -1.0])
     points = _floor_hits(on_mirror, turned)
-    depth = _depth(np.tile(eye, (len(rays), 1)), on_mirror, fog) + _depth(on_mirror, points, fog)
-    expected = _expected(srgb_to_linear(clear).reshape(-1, 3)[in_mirror], depth, fog)
-    error = np.abs(srgb_to_linear(foggy).reshape(-1, 3)[in_mirror] - expected).max(axis=1)
-    _close(error)
+    near = _depth(np.tile(eye, (len(rays), 1)), on_mirror, fog)
+    far = _depth(on_mirror, points, fog)
+    # The far stretch fogged, then the near one over it.
+    beyond = _expected(srgb_to_linear(clear).reshape(-1, 3)[in_mirror], far, fog, turned, sun)
+    expected = _expected(beyond, near, fog, rays, sun)
+    _close(np.abs(srgb_to_linear(foggy).reshape(-1, 3)[in_mirror] - _shown(expected)).max(axis=1))
 
 
 WALL_Z = -3.75   # the wall's front face, facing +z
@@ -173,14 +200,15 @@ def test_a_floor_mirror_in_height_fog_fogs_the_reflection_along_its_real_way_up(
     real = _depth(np.tile(eye, (len(rays), 1)), on_mirror, fog) + _depth(on_mirror, points, fog)
     image = _depth(np.tile(eye * np.array([1.0, -1.0, 1.0]) + (0.0, 0.02, 0.0), (len(rays), 1)), points, fog)
     assert (image - real).min() > 0.5   # the image's way would be far foggier: the check tells them apart
-    expected = _expected(srgb_to_linear(frames[0]).reshape(-1, 3)[in_mirror], real, fog)
+    expected = _expected(srgb_to_linear(frames[0]).reshape(-1, 3)[in_mirror], real, fog, rays)   # (no glow)
     error = np.abs(srgb_to_linear(frames[1]).reshape(-1, 3)[in_mirror] - expected).max(axis=1)
     _close(error)
 
 
 @pytest.mark.parametrize("field, value", [("density", -0.1), ("density", float("nan")), ("density", 2000.0),
                                           ("height_falloff", -1.0), ("sky_affect", 1.5), ("height", float("inf")),
-                                          ("color", (1.0, -0.5, 0.0))])
+                                          ("color", (1.0, -0.5, 0.0)), ("sun_scatter", -1.0),
+                                          ("sun_scatter", float("nan"))])
 def test_bad_fog_values_are_refused_naming_the_field(field, value):
     with pytest.raises(ComponentValueError, match=f"Fog.{field}"):
         Fog(**{field: value})
@@ -277,7 +305,7 @@ def test_a_portal_shows_what_lies_beyond_its_partner_fogged_along_the_carried_wa
     points = _floor_hits(at_b, rays @ carry[:3, :3].T)
     assert np.abs(at_b[:, 0] + 6.0).max() < 1e-6   # carried onto B's plane
     depth = _depth(np.tile(eye, (len(rays), 1)), at_a, fog) + _depth(at_b, points, fog)
-    expected = _expected(srgb_to_linear(frames[0]).reshape(-1, 3)[through], depth, fog)
+    expected = _expected(srgb_to_linear(frames[0]).reshape(-1, 3)[through], depth, fog, rays)   # (no glow)
     _close(np.abs(srgb_to_linear(frames[1]).reshape(-1, 3)[through] - expected).max(axis=1))
 
 

@@ -12,11 +12,14 @@ from __future__ import annotations
 import moderngl
 import numpy as np
 
+from components import DirectionalLight
 from components.fog import Fog
+from components.tracking import raw_field
 from engine.render.bindings import FOG_BINDING, bind_uniform_block
 
-FOG_BLOCK_BYTES = 32   # two vec4s: colour and sky share; density, falloff, base height
-_NO_FOG = (0.0,) * 8
+FOG_BLOCK_BYTES = 64   # four vec4s: colour and sky share; density, falloff, base height; the sun's
+                       # direction (towards it); its light x the sun scatter
+_NO_FOG = (0.0,) * 16
 
 
 class FogBlock:
@@ -27,12 +30,22 @@ class FogBlock:
         self.ubo.bind_to_uniform_block(FOG_BINDING)   # (no other block uses the point: it stays)
         self.defines: tuple[tuple[str, str], ...] = ()
 
-    def set(self, fog: Fog | None) -> bool:
-        """Write ``fog`` (None: no fog) into the block where it differs from what it holds;
-        True when it did (every view's fogged pixels change).  Compared as plain floats: the
-        prepare stage asks every frame."""
-        values = _NO_FOG if fog is None or fog.density <= 0.0 else (
-            fog.color.x, fog.color.y, fog.color.z, fog.sky_affect, fog.density, fog.height_falloff, fog.height, 0.0)
+    def set(self, fog: Fog | None, sun: DirectionalLight | None = None) -> bool:
+        """Write ``fog`` (None: no fog), glowing towards ``sun`` (the brightest directional
+        light: ``light_rules.brightest_directional``) by its ``sun_scatter``, into the block
+        where it differs from what it holds; True when it did (every view's fogged pixels
+        change).  Compared as plain floats: the prepare stage asks every frame."""
+        if fog is None or fog.density <= 0.0:
+            values = _NO_FOG
+        else:
+            glow = (0.0,) * 8
+            if sun is not None and fog.sun_scatter > 0.0:
+                color = raw_field(sun, "color")
+                k = sun.intensity * fog.sun_scatter
+                glow = (-sun.direction.x, -sun.direction.y, -sun.direction.z, 0.0,
+                        color.x * k, color.y * k, color.z * k, 0.0)
+            values = (fog.color.x, fog.color.y, fog.color.z, fog.sky_affect, fog.density, fog.height_falloff,
+                      fog.height, 0.0, *glow)
         if values == self._values:
             return False
         self._values = values

@@ -439,13 +439,20 @@ def sky_sun(world: World, skybox: Skybox) -> SkySun:
     return followed_sun(world)
 
 
-def followed_sun(world: World) -> SkySun:
-    """The sun of a sky that follows the lights (``sky_sun`` of an unpinned Skybox)."""
+def brightest_directional(world: World) -> DirectionalLight | None:
+    """The brightest ``DirectionalLight`` (luminance of colour x intensity; ties to the first
+    made), or None where there is none or every one is black: the scene's sun."""
     best, brightest = None, 0.0
     for _, light in sorted(world.query_one(DirectionalLight), key=lambda pair: pair[0]):
         bright = float(luminance(raw_field(light, "color").xyz * light.intensity))
         if bright > brightest:
             best, brightest = light, bright
+    return best
+
+
+def followed_sun(world: World) -> SkySun:
+    """The sun of a sky that follows the lights (``sky_sun`` of an unpinned Skybox)."""
+    best = brightest_directional(world)
     if best is None:
         return SkySun(DEFAULT_SUN_DIRECTION)
     return SkySun(tuple(-float(c) for c in best.direction), tuple(float(c) for c in raw_field(best, "color").xyz))

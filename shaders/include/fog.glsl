@@ -19,6 +19,8 @@ layout(std140) uniform Fog {
     vec4 fog_color;   // rgb: the fog's linear colour; a: how much of its fog the sky takes
     vec4 fog_params;  // x: density at the base height (per metre; 0: none), y: falloff (per metre),
                       // z: the base height, w: unused
+    vec4 fog_sun;     // xyz: towards the sun (the brightest directional light)
+    vec4 fog_glow;    // rgb: the sun's light x Fog.sun_scatter (0: no glow)
 } fog;
 
 #define FOG_MAX_EXPONENT 80.0   // exp(80) ~ 5.5e34: past that the air is opaque anyway
@@ -43,9 +45,18 @@ float fog_depth_to_sky(vec3 a, vec3 r) {
     return falloff > 0.0 && r.y > 1e-6 ? at_a / (falloff * r.y) : 1e30;
 }
 
-// ``color`` seen through the fog of optical depth ``depth``.
-vec3 fogged(vec3 color, float depth) {
-    return mix(fog.fog_color.rgb, color, exp(-depth));
+// The light the air scatters towards an eye looking along the unit direction ``dir``: the
+// fog's colour, and a glow towards the sun (max(cos, 0)^8 of the angle from it).
+vec3 fog_light(vec3 dir) {
+    float towards = max(dot(dir, fog.fog_sun.xyz), 0.0);
+    towards *= towards;
+    towards *= towards;
+    return fog.fog_color.rgb + fog.fog_glow.rgb * (towards * towards);
+}
+
+// ``color`` seen along the unit direction ``dir`` through the fog of optical depth ``depth``.
+vec3 fogged(vec3 color, float depth, vec3 dir) {
+    return mix(fog_light(dir), color, exp(-depth));
 }
 
 // Where a view's rays enter it, on the way to ``p``: its eye, or where the ray from its eye
@@ -60,17 +71,18 @@ vec3 fog_start(vec3 eye, vec4 plane, vec3 p) {
 
 // A surface at ``p`` seen in a view whose eye is ``eye`` and clip plane ``plane``.
 vec3 fog_view(vec3 color, vec3 eye, vec4 plane, vec3 p) {
-    return fogged(color, fog_depth(fog_start(eye, plane, p), p));
+    vec3 start = fog_start(eye, plane, p);
+    return fogged(color, fog_depth(start, p), normalize(p - eye));
 }
 
 // The sky seen from ``a`` along the unit direction ``r``: its share (``fog_color.a``) of the fog.
 vec3 fog_sky(vec3 color, vec3 a, vec3 r) {
-    return mix(color, fogged(color, fog_depth_to_sky(a, r)), fog.fog_color.a);
+    return mix(color, fogged(color, fog_depth_to_sky(a, r), r), fog.fog_color.a);
 }
 #else
 float fog_depth(vec3 a, vec3 b) { return 0.0; }
 float fog_depth_to_sky(vec3 a, vec3 r) { return 0.0; }
-vec3 fogged(vec3 color, float depth) { return color; }
+vec3 fogged(vec3 color, float depth, vec3 dir) { return color; }
 vec3 fog_view(vec3 color, vec3 eye, vec4 plane, vec3 p) { return color; }
 vec3 fog_sky(vec3 color, vec3 a, vec3 r) { return color; }
 #endif
