@@ -9,6 +9,7 @@ axis reflected by hand say where the reflected cone lands on the floor.  The con
 (``shaders/include/spot_cone.glsl``) is evaluated against its owner, ``light_rules``."""
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -439,6 +440,83 @@ def test_a_spot_map_is_kept_while_still_drawn_again_when_turned_and_freed_when_t
     runner.frame()
     assert maps.spot_atlas is None and not maps.cubes
     assert runner.engine.renderer.resource_counts()["spot_atlases"] == 0
+
+
+def test_a_narrow_spots_image_through_a_mirror_has_its_map_fitted_to_the_cone(scene, monkeypatch):
+    """A 6-degree spot aimed at a wide mirror: its image's shadow camera looks along the
+    carried axis and spans the cone, not the whole outline (a texel several times narrower),
+    and every direction within the cone lands inside the map; a 42-degree one (its cone wider
+    than the outline seen from the image) keeps the outline's camera.  In the frame, the
+    crate's shadow in the reflected light lies where a ray cast from each floor point to the
+    lamp's image, through the mirror, meets the crate."""
+    from engine.render.shadows import VIRTUAL_RESOLUTION
+    from engine.rules import shadow_rules
+
+    lamp, aim_at = np.array([0.0, 2.6, 3.0]), np.array([0.0, 1.3, 0.0])
+    crate = np.array([0.0, 0.45, 2.1])
+
+    def build(angle):
+        def run(world):
+            look_from(world, (1.0, 2.0, 4.2), (0.0, 0.0, 2.6))
+            world.resources["floor"] = world.spawn(Transform(), MeshRef(plane(16, 16)),
+                                                   Material(color=(0.8, 0.8, 0.8), roughness=1.0))
+            world.spawn(Transform(position=(0.0, 1.5, 0.0)), MeshRef(quad(4.0, 3.0)), Material(),
+                        Mirror(reflects_light=True))
+            world.spawn(Transform(position=crate.tolist()), MeshRef(box((0.1, 0.1, 0.1))),
+                        Material(color=(0.6, 0.5, 0.4)))
+            world.spawn(Transform(position=lamp.tolist(), rotation=look_rotation((aim_at - lamp).tolist())),
+                        PointLight(intensity=30.0, range=12.0, spot_angle=angle, spot_blend=0.1, shadows=True))
+        return run
+
+    fits = []
+    original = shadow_rules.virtual_shadow_camera
+
+    def spy(light, lo, hi, resolution):
+        fit = original(light, lo, hi, resolution)
+        fits.append((light, fit))
+        return fit
+    monkeypatch.setattr("systems.shadow_system.virtual_shadow_camera", spy)
+    narrow = scene(build(6.0), (480, 360))
+    frame = narrow.frame()
+    light, fit = fits[-1]
+    assert light.cone != ALL_ROUND
+    axis, _ = shadow_rules.opened_cone(light.cone)
+    image = np.array(light.position)
+    assert fit.texel == pytest.approx(2.0 * np.tan(np.radians(6.0)) / (1.0 - 8.0 / VIRTUAL_RESOLUTION)
+                                      / VIRTUAL_RESOLUTION, rel=1e-6)
+    # Directions within the cone (to its edge) land inside the map's square.
+    rng = np.random.default_rng(3)
+    side = np.cross(axis, rng.normal(size=(300, 3)))
+    side /= np.linalg.norm(side, axis=1, keepdims=True)
+    theta = np.radians(6.0 * np.sqrt(rng.uniform(0.0, 1.0, 300)))
+    theta[:30] = np.radians(6.0)
+    points = image + 5.0 * (axis * np.cos(theta)[:, None] + side * np.sin(theta)[:, None])
+    clip = np.column_stack([points, np.ones(len(points))]) @ np.array(glm.dmat4(fit.view_proj).to_list())
+    ndc = clip[:, :2] / clip[:, 3:]
+    assert (np.abs(ndc) < 1.0).all(), np.abs(ndc).max()
+    outline_fit = original(dataclasses.replace(light, cone=ALL_ROUND), np.zeros(3), np.ones(3), VIRTUAL_RESOLUTION)
+    assert outline_fit.texel > 3.0 * fit.texel
+    # The frame: the crate's shadow where the ray cast through the mirror puts it.
+    eye, rays = pixel_rays(narrow.engine.main_view, narrow.size)
+    floor_points = (eye + rays * (-eye[1] / rays[..., 1])[..., None]).reshape(-1, 3)
+    to_image = image - floor_points
+    t = -floor_points[:, 2] / to_image[:, 2]   # where the line to the image meets the mirror (z = 0)
+    cast = box_hits(floor_points, to_image, crate, np.full(3, 0.05), limit=t).reshape(narrow.size[::-1])
+    lit_share = shadow_rules.spot_factor(light.cone, to_image / np.linalg.norm(to_image, axis=1, keepdims=True))
+    near_edge = np.zeros_like(cast)
+    for dy, dx in ((0, 1), (0, -1), (1, 0), (-1, 0), (1, 1), (-1, -1), (1, -1), (-1, 1)):
+        near_edge |= cast != np.roll(cast, (dy, dx), axis=(0, 1))
+    judged = (lit_share.reshape(cast.shape) > 0.99) & ~near_edge & (narrow.ids() == narrow.world.resources["floor"])
+    bare = scene(lambda w: (build(6.0)(w), w.delete_entity(w.query_one(MeshRef)[2][0])), (480, 360))
+    assert judged.sum() > 1500 and cast[judged].sum() > 100, (judged.sum(), cast[judged].sum())
+    dark = srgb_to_linear(frame).mean(-1) < 0.6 * srgb_to_linear(bare.frame()).mean(-1)
+    wrong = (dark != cast)[judged].sum()
+    assert wrong <= 0.002 * judged.sum(), wrong
+    fits.clear()
+    scene(build(42.0), (160, 120)).frame()
+    wide_light, wide_fit = fits[-1]
+    assert wide_fit.texel == pytest.approx(
+        original(dataclasses.replace(wide_light, cone=ALL_ROUND), np.zeros(3), np.ones(3), VIRTUAL_RESOLUTION).texel)
 
 
 # --- the editor's outline ---------------------------------------------------------------------

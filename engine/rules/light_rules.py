@@ -195,7 +195,7 @@ def cone_reaches(cone: Sequence[float], apex: Sequence[float], centre: Sequence[
     the ball of ``radius`` about ``centre``: the angle from its axis to the ball's centre,
     less the ball's angular radius, within the cone's angle.  Conservative (a surface's
     outline is tested by the ball holding it): it only rules out."""
-    opened = _opened(cone)
+    opened = opened_cone(cone)
     if opened is None:
         return True
     axis, outer = opened
@@ -218,7 +218,7 @@ def cube_faces_lit(cone: Sequence[float], axes: Sequence[Sequence[float]]) -> tu
     directions comes within the cone's angle of its axis (with a margin for the filter).  A
     face left out holds no point the light reaches, so its shadow is never read: a spot
     aimed straight down 30 degrees wide draws one face, not six.  All True all round."""
-    opened = _opened(cone)
+    opened = opened_cone(cone)
     if opened is None:
         return (True,) * len(axes)
     axis, outer = opened
@@ -244,7 +244,14 @@ def spot_map_half_width(light: PointLight) -> float | None:
     light casts from a cube (all round, or wider than ``SPOT_MAP_MAX_ANGLE``)."""
     if light.spot_angle > SPOT_MAP_MAX_ANGLE:
         return None
-    return math.tan(math.radians(light.spot_angle)) / (1.0 - 2.0 * SPOT_MAP_MARGIN_TEXELS / light.shadow_resolution)
+    return cone_half_width(light.spot_angle, light.shadow_resolution)
+
+
+def cone_half_width(angle_degrees: float, resolution: int) -> float:
+    """The half-width (tangent of the half-angle) of a perspective map of ``resolution`` texels
+    a side holding a cone ``angle_degrees`` from its axis with ``SPOT_MAP_MARGIN_TEXELS`` to spare
+    (a spot's own map, or its image's through a mirror: ``shadow_rules.virtual_shadow_camera``)."""
+    return math.tan(math.radians(angle_degrees)) / (1.0 - 2.0 * SPOT_MAP_MARGIN_TEXELS / resolution)
 
 
 def shadow_texel_tangent(light: PointLight) -> float:
@@ -255,7 +262,7 @@ def shadow_texel_tangent(light: PointLight) -> float:
     return 2.0 * (1.0 if half_width is None else half_width) / light.shadow_resolution
 
 
-def _opened(cone: Sequence[float]) -> tuple[np.ndarray, float] | None:
+def opened_cone(cone: Sequence[float]) -> tuple[np.ndarray, float] | None:
     """A packed cone (``spot_cone``) opened back into its unit axis and its angle (degrees);
     None all round."""
     c = np.asarray(cone, np.float64)

@@ -23,7 +23,15 @@ from pyglm import glm
 from components.limits import MAX_LIGHT_BOUNCES
 from engine.core.budget import spending_order
 from engine.resources import Surfaces
-from engine.rules.light_rules import ALL_ROUND, carried_cone, cone_reaches, spot_factor
+from engine.rules.light_rules import (
+    ALL_ROUND,
+    SPOT_MAP_MAX_ANGLE,
+    carried_cone,
+    cone_half_width,
+    cone_reaches,
+    opened_cone,
+    spot_factor,
+)
 
 # A directional light's map covers the level's box grown by this share of its diagonal (and
 # at least SHADOW_MARGIN metres), so a caster resting on the box's edge still has texels
@@ -718,7 +726,9 @@ def virtual_shadow_camera(light: VirtualLight, level_lo: np.ndarray, level_hi: n
     """The shadow camera of a virtual light: for a directional image, the level's box seen
     along it (as a real sun's); for a point image, a perspective camera at the image looking
     at the exit outline's centre, wide enough for the whole outline (the light reaches
-    nothing else)."""
+    nothing else), or, for a spot's image whose carried cone is narrower than that, along
+    the cone's axis fitted to the cone (as the spot's own map: ``light_rules.cone_half_width``),
+    so a narrow flashlight on a wide mirror keeps its texels where its light goes."""
     if light.kind == "directional":
         return directional_fit(glm.vec3(light.position), level_lo, level_hi, resolution)
     eye = glm.dvec3(*light.position)
@@ -735,6 +745,15 @@ def virtual_shadow_camera(light: VirtualLight, level_lo: np.ndarray, level_hi: n
         depth = max(-local.z, 1e-6)
         half = max(half, abs(local.x) / depth, abs(local.y) / depth)
     fov = 2.0 * np.degrees(np.arctan(half * (1.0 + 4.0 / resolution))) + 0.5
+    opened = opened_cone(light.cone)
+    if opened is not None and opened[1] <= SPOT_MAP_MAX_ANGLE:
+        narrow = cone_half_width(opened[1], resolution)
+        if 2.0 * np.degrees(np.arctan(narrow)) < fov:
+            axis = glm.dvec3(*opened[0])
+            up = glm.dvec3(0.0, 1.0, 0.0) if abs(axis.y) < 0.99 else glm.dvec3(1.0, 0.0, 0.0)
+            view = glm.lookAt(eye, eye + axis, up)
+            half = narrow
+            fov = 2.0 * np.degrees(np.arctan(narrow))
     fov = float(min(fov, 170.0))
     proj = glm.perspective(glm.radians(fov), 1.0, VIRTUAL_NEAR, max(light.light_range * 1.5, VIRTUAL_NEAR * 4))
     texel = 2.0 * half / resolution   # a texel's angle (radians, small): the lookup scales it by distance
