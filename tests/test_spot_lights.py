@@ -377,8 +377,11 @@ def test_a_narrow_spot_casts_from_a_map_fitted_to_its_cone_sharper_than_the_cube
 
 
 def test_two_spots_with_maps_of_two_sizes_each_cast_their_own_crates_shadow(scene):
-    """Both shadow slots hold spot maps (128 and 256 texels: the atlas's tiles are the larger,
-    side by side): under each lamp its crate's shadow lies where the ray cast puts it."""
+    """Both shadow slots hold spot maps (128 and 256 texels: the atlas's tiles are the larger
+    and a border, side by side): under each lamp its crate's shadow lies where the ray cast
+    puts it."""
+    from engine.render.shadows import SPOT_GUTTER
+
     lamps = (np.array([-1.5, 3.0, 0.0]), np.array([1.5, 3.0, 0.0]))
 
     def build(crates):
@@ -387,7 +390,8 @@ def test_two_spots_with_maps_of_two_sizes_each_cast_their_own_crates_shadow(scen
     runner, bare = scene(build(True), (640, 480)), scene(build(False), (640, 480))
     frame, bare_frame = runner.frame(), bare.frame()
     maps = runner.engine.renderer.shadows
-    assert maps.spot_atlas.size == (512, 256) and not maps.cubes
+    side = 256 + 2 * SPOT_GUTTER
+    assert maps.spot_atlas.size == (2 * side, side) and not maps.cubes
     assert {("SPOT_MAP0", "1"), ("SPOT_MAP1", "1")} <= set(maps.program_defines)
     for lamp in lamps:
         wrong, judged = _misplaced(runner, frame, bare_frame, lamp)

@@ -83,6 +83,10 @@ SHADOWS_BLOCK_BYTES = _RINGS_END + (64 + 16) * MAX_POINT_SHADOWS
 # offset in the lookup, no acne on the sample level's slanted and curved surfaces.
 SLOPE_BIAS = (1.5, 2.0)
 POINT_NEAR = 0.02   # metres: a point light's cube sees casters from here out
+# Texels of far depth round each spot map in its atlas tile: the lookup's normal offset (at
+# most (1 + softness) x 1.5 texels) and the filter's spread (softness / 2 + 1) from a point
+# just inside the cone stay in its own tile (MAX_SHADOW_SOFTNESS 8: 13.5 + 5).
+SPOT_GUTTER = 20
 # Depth only, both faces: a quad (a mirror, a wall of one face) casts whichever side the
 # light reaches; the normal offset keeps a closed mesh's lit side off its own back.
 _CASTERS = PassState(depth_func="<", cull=False, clips=SCENE_CLIPS)
@@ -468,9 +472,10 @@ class ShadowMaps:
         return path
 
     def fit_spot_atlas(self, tile: int) -> None:
-        """Make the spot atlas hold ``MAX_POINT_SHADOWS`` tiles of ``tile`` texels a side, side
-        by side, keeping it when it does; 0: no spot casts from a map (the atlas released).  A
-        new atlas leaves every spot map to be drawn again."""
+        """Make the spot atlas hold ``MAX_POINT_SHADOWS`` maps of up to ``tile`` texels a side,
+        side by side, each in a tile with a border of ``SPOT_GUTTER`` texels; keep it when it
+        does; 0: no spot casts from a map (the atlas released).  A new atlas leaves every spot
+        map to be drawn again."""
         if tile == self.spot_tile:
             return
         self.renderer.note_scene_change()
@@ -480,7 +485,8 @@ class ShadowMaps:
             self._spot_framebuffer = self.spot_atlas = None
         self.spot_tile = tile
         if tile:
-            self.spot_atlas = self._make_atlas((MAX_POINT_SHADOWS * tile, tile))
+            side = tile + 2 * SPOT_GUTTER
+            self.spot_atlas = self._make_atlas((MAX_POINT_SHADOWS * side, side))
             self._spot_framebuffer = self.ctx.framebuffer(depth_attachment=self.spot_atlas)
 
     def draw_spot(self, slot: int, light_index: int, position: glm.vec3, axis: glm.vec3, half_width: float,
@@ -489,13 +495,19 @@ class ShadowMaps:
         by ``fit_spot_atlas``, at least ``resolution`` a side): one perspective depth map from
         the light along ``axis``, ``half_width`` (the tangent of its half-angle:
         ``light_rules.spot_map_half_width``) each side, out to the range, read by the lookup
-        in place of cube ``slot``.  Returns the path taken ("spot_map")."""
-        x = slot * self.spot_tile
-        rect = (x, 0, resolution, resolution)
+        in place of cube ``slot``.  The whole tile is cleared to the far depth first: a lookup
+        near the map's edge, moved off the surface and spread by the filter, reads its border
+        (lit), never texels no pass wrote or the other slot's map.  Returns the path taken
+        ("spot_map")."""
+        side = self.spot_tile + 2 * SPOT_GUTTER
+        tile = (slot * side, 0, side, side)
+        x, y = slot * side + SPOT_GUTTER, SPOT_GUTTER
+        rect = (x, y, resolution, resolution)
         framebuffer = self._spot_framebuffer
         framebuffer.use()
+        apply_pass_state(self.ctx, _CASTERS, tile, tile)
+        framebuffer.clear(depth=1.0, viewport=tile)
         apply_pass_state(self.ctx, _CASTERS, rect, rect)
-        framebuffer.clear(depth=1.0, viewport=rect)
         up = glm.vec3(0.0, 1.0, 0.0) if abs(axis.y) < 0.9 else glm.vec3(1.0, 0.0, 0.0)
         fov = 2.0 * float(np.arctan(half_width))
         view = View(view=glm.lookAt(position, position + axis, up),
@@ -505,12 +517,12 @@ class ShadowMaps:
         self._draw_casters(view, self._depth_program)
         width, height = self.spot_atlas.size
         sx, sy = resolution / width, resolution / height
-        to_tile = glm.translate(glm.vec3(x / width + 0.5 * sx, 0.5 * sy, 0.5)) \
+        to_tile = glm.translate(glm.vec3(x / width + 0.5 * sx, y / height + 0.5 * sy, 0.5)) \
             * glm.scale(glm.vec3(0.5 * sx, 0.5 * sy, 0.5))
         rows = self._spot_rows
         rows[16 * slot:16 * slot + 16] = np.array((to_tile * view.view_proj).to_list(), np.float32).ravel()
         box = 16 * MAX_POINT_SHADOWS + 4 * slot
-        rows[box:box + 4] = (x / width, 0.0, x / width + sx, sy)
+        rows[box:box + 4] = (x / width, y / height, x / width + sx, y / height + sy)
         self._slots[light_index] = slot
         self._cube_lights[slot] = light_index
         self._spot_maps[slot] = True
