@@ -29,6 +29,11 @@ Variants now (``VARIANTS``; add a row by appending a ``Variant``):
   rings of 12 and 3 metres about the camera); the orbiting camera leaves the inner ring's
   cell every few frames, which draws that ring again;
 * ``cascades_moving``: the same with the sliding box (its footprint redrawn in each map it is in);
+* ``spot_shadows``: no sun shadows; the ring's lamp a 30-degree spot aimed down, casting
+  from one perspective map fitted to its cone; still (the map kept);
+* ``spot_moving``: the same with the sliding box (the map drawn again each frame);
+* ``fog``: no shadows; height fog with sun scatter on the camera (``Fog``: every view, the
+  sky and the composites fogged);
 * ``post``: no shadows, the camera gets ``Tonemap(curve="agx")`` and ``Bloom()`` (six levels on a
   GPU; a software rasteriser's quarter-size start makes five, ending at the same smallest level:
   ``engine/render/bloom.py``);
@@ -116,7 +121,19 @@ from benchmarks import (
     rows_without_rasteriser,
 )
 from benchmarks.mirrors import DT, OUTPUT_SIZE, MirrorRing
-from components import Bloom, Camera, DirectionalLight, Material, MeshRef, Mirror, Tonemap, Transform
+from components import (
+    Bloom,
+    Camera,
+    DirectionalLight,
+    Fog,
+    Material,
+    MeshRef,
+    Mirror,
+    PointLight,
+    Tonemap,
+    Transform,
+    look_rotation,
+)
 from engine.assets.mesh import box
 from engine.core.frame_io import Output
 from engine.render.bloom import level_sizes
@@ -203,6 +220,28 @@ def _cascades_moving(engine: Engine) -> None:
     _moving_caster(engine)
 
 
+def _spot(engine: Engine) -> None:
+    """No sun shadows; the ring's lamp made a 30-degree spot aimed down that casts (one
+    perspective map fitted to its cone: ``light_rules.SPOT_MAP_MAX_ANGLE``)."""
+    _sun_shadows(engine, False)
+    for entity, light in engine.world.query_one(PointLight):
+        light.shadows, light.spot_angle = True, 30.0
+        engine.world.get(entity, Transform).rotation = look_rotation((0.0, -1.0, 0.0), (0.0, 0.0, -1.0))
+
+
+def _spot_moving(engine: Engine) -> None:
+    _spot(engine)
+    _moving_caster(engine)
+
+
+def _fog(engine: Engine) -> None:
+    """No shadows; height fog on the camera (its FOG builds: each view, the sky and the
+    composites)."""
+    _sun_shadows(engine, False)
+    engine.world.add_component(camera_entity(engine), Fog(density=0.04, height=0.0, height_falloff=0.2,
+                                                          sun_scatter=0.5))
+
+
 def _post(engine: Engine) -> None:
     _sun_shadows(engine, False)
     engine.world.add_component(camera_entity(engine), Tonemap(curve="agx"))
@@ -225,6 +264,9 @@ VARIANTS: list[Variant] = [
             _slide_caster),
     Variant("cascades", _cascades, "shadows with three cascades about the orbiting camera"),
     Variant("cascades_moving", _cascades_moving, "the same with a box sliding under the sun", _slide_caster),
+    Variant("spot_shadows", _spot, "the lamp a 30-degree spot casting from its map; still"),
+    Variant("spot_moving", _spot_moving, "the same with a box sliding under it", _slide_caster),
+    Variant("fog", _fog, "height fog with sun scatter on the camera"),
     Variant("post", _post, "Tonemap(curve='agx') and Bloom() on the camera"),
     Variant("post_auto", _post_auto, "Tonemap(curve='agx', auto_exposure=True) and Bloom()"),
 ]
