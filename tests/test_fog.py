@@ -107,7 +107,9 @@ def test_the_floor_is_fogged_by_the_air_between_it_and_the_eye(scene, fog, sun):
     glows where the eye looks towards the sun."""
     clear_runner, clear = _frame(scene, None, sun=sun)
     runner, foggy = _frame(scene, fog, sun=sun)
-    assert ("FOG", "1") in runner.engine.renderer.fog.defines
+    defines = runner.engine.renderer.fog.defines   # each term built in only where the fog has it
+    assert ("FOG", "1") in defines and (("FOG_FALLOFF", "1") in defines) == (fog.height_falloff > 0.0) \
+        and (("FOG_GLOW", "1") in defines) == (fog.sun_scatter > 0.0), defines
     floor = (runner.ids() == runner.world.resources["ids"]["floor"]).reshape(-1)
     eye, rays = pixel_rays(runner.engine.main_view, runner.size)
     points = _floor_hits(eye, rays).reshape(-1, 3)

@@ -3,7 +3,8 @@
 passes, the sky, the composites).
 
 The scene, sky and composite programs fog only in their ``FOG`` builds (``defines``: while
-the fog has a density), so a frame without fog runs none of it: llvmpipe runs the fog's
+the fog has a density; ``FOG_FALLOFF`` and ``FOG_GLOW`` add the height falloff's and the sun
+glow's terms where it has them), so a frame without fog runs none of it: llvmpipe runs the fog's
 exponentials for every pixel a program draws (read on every sky pixel, they made the
 640x360 mirror ring's frame 1.03x dearer with no fog at all).
 """
@@ -50,7 +51,8 @@ class FogBlock:
             return False
         self._values = values
         self.ubo.write(np.array(values, np.float32).tobytes())
-        self.defines = (("FOG", "1"),) if values[4] > 0.0 else ()
+        self.defines = () if values[4] <= 0.0 else tuple((name, "1") for name, on in (
+            ("FOG", True), ("FOG_FALLOFF", values[5] > 0.0), ("FOG_GLOW", any(values[12:15]))) if on)
         return True
 
     @property

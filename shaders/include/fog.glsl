@@ -13,7 +13,9 @@
 // way in pieces is the fog over the whole way: exp(-(t1 + t2)) = exp(-t1) exp(-t2), and what
 // the nearer piece adds covers what the farther one left.  Only FOG builds (while the active
 // camera's fog has a density: engine/render/fog.py) read the block; in the others each
-// function below is the identity and compiles away.
+// function below is the identity and compiles away.  FOG_FALLOFF (a height falloff) and
+// FOG_GLOW (sun scatter with a sun) add their terms only where the fog has them: llvmpipe
+// runs every exponential for every pixel.
 #ifdef FOG
 layout(std140) uniform Fog {
     vec4 fog_color;   // rgb: the fog's linear colour; a: how much of its fog the sky takes
@@ -25,33 +27,46 @@ layout(std140) uniform Fog {
 
 #define FOG_MAX_EXPONENT 80.0   // exp(80) ~ 5.5e34: past that the air is opaque anyway
 
-// The fog's optical depth along the straight stretch from a to b.
+// The fog's optical depth along the straight stretch from a to b (FOG_FALLOFF builds: the
+// density changes with height; the others: the same everywhere, density x length).
 float fog_depth(vec3 a, vec3 b) {
     float density = fog.fog_params.x;
+#ifdef FOG_FALLOFF
     float falloff = fog.fog_params.y;
     float at_a = density * exp(min(-falloff * (a.y - fog.fog_params.z), FOG_MAX_EXPONENT));
     float x = falloff * (b.y - a.y);
     float spread = abs(x) > 1e-4 ? (1.0 - exp(min(-x, FOG_MAX_EXPONENT))) / x : 1.0 - 0.5 * x;
     return at_a * length(b - a) * spread;
+#else
+    return density * length(b - a);
+#endif
 }
 
 // The fog's optical depth from a along the unit direction r to infinity (the sky): finite only
 // where the air thins upwards and r climbs.
 float fog_depth_to_sky(vec3 a, vec3 r) {
     float density = fog.fog_params.x;
-    float falloff = fog.fog_params.y;
     if (density <= 0.0) return 0.0;
+#ifdef FOG_FALLOFF
+    float falloff = fog.fog_params.y;
     float at_a = density * exp(min(-falloff * (a.y - fog.fog_params.z), FOG_MAX_EXPONENT));
     return falloff > 0.0 && r.y > 1e-6 ? at_a / (falloff * r.y) : 1e30;
+#else
+    return 1e30;
+#endif
 }
 
 // The light the air scatters towards an eye looking along the unit direction ``dir``: the
 // fog's colour, and a glow towards the sun (max(cos, 0)^8 of the angle from it).
 vec3 fog_light(vec3 dir) {
+#ifdef FOG_GLOW
     float towards = max(dot(dir, fog.fog_sun.xyz), 0.0);
     towards *= towards;
     towards *= towards;
     return fog.fog_color.rgb + fog.fog_glow.rgb * (towards * towards);
+#else
+    return fog.fog_color.rgb;
+#endif
 }
 
 // ``color`` seen along the unit direction ``dir`` through the fog of optical depth ``depth``.
