@@ -8,8 +8,9 @@
 // Each stretch of a light's way is fogged where it is drawn: a view fogs from where its rays
 // enter it (its eye, or for a mirror or portal view the surface it looks out of: its clip
 // plane) to each surface it shows (fog_view); a composite fogs the stretch of its parent view
-// from the parent's start to the surface (fog_parent), over the reflection as a whole, and
-// the sky a view leaves to its composite from the surface outwards (fog_sky).  Fog over a
+// from the parent's start to the surface (fog_depth, fogged: mirror_composite.frag), over the
+// reflection as a whole, and the sky a view leaves to its composite from the surface
+// outwards (fog_sky).  Fog over a
 // way in pieces is the fog over the whole way: exp(-(t1 + t2)) = exp(-t1) exp(-t2), and what
 // the nearer piece adds covers what the farther one left.  Only FOG builds (while the active
 // camera's fog has a density: engine/render/fog.py) read the block; in the others each

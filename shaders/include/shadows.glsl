@@ -46,7 +46,7 @@ layout(std140) uniform Shadows {
     // cone, a tile of the spot atlas, read in place of its cube; point_params' x is then a
     // texel's width over its distance on the axis, w the filter's taps a side):
     mat4 spot_matrix[MAX_POINT_SHADOWS];              // world -> atlas uv and depth (divide by w)
-    vec4 spot_box[MAX_POINT_SHADOWS];                 // its tile's uv corners (x0, y0, x1, y1)
+    vec4 spot_box[MAX_POINT_SHADOWS];                 // its map's uv corners in the atlas (x0, y0, x1, y1)
 } shadows;
 
 uniform sampler2DShadow shadow_atlas;
