@@ -34,6 +34,7 @@ Variants now (``VARIANTS``; add a row by appending a ``Variant``):
 * ``spot_moving``: the same with the sliding box (the map drawn again each frame);
 * ``fog``: no shadows; height fog with sun scatter on the camera (``Fog``: every view, the
   sky and the composites fogged);
+* ``fog_uniform``: the same with fog the same everywhere and no glow (the cheapest fog build);
 * ``post``: no shadows, the camera gets ``Tonemap(curve="agx")`` and ``Bloom()`` (six levels on a
   GPU; a software rasteriser's quarter-size start makes five, ending at the same smallest level:
   ``engine/render/bloom.py``);
@@ -242,6 +243,12 @@ def _fog(engine: Engine) -> None:
                                                           sun_scatter=0.5))
 
 
+def _fog_uniform(engine: Engine) -> None:
+    """No shadows; fog the same everywhere (its build has no falloff or glow term)."""
+    _sun_shadows(engine, False)
+    engine.world.add_component(camera_entity(engine), Fog(density=0.04))
+
+
 def _post(engine: Engine) -> None:
     _sun_shadows(engine, False)
     engine.world.add_component(camera_entity(engine), Tonemap(curve="agx"))
@@ -267,6 +274,7 @@ VARIANTS: list[Variant] = [
     Variant("spot_shadows", _spot, "the lamp a 30-degree spot casting from its map; still"),
     Variant("spot_moving", _spot_moving, "the same with a box sliding under it", _slide_caster),
     Variant("fog", _fog, "height fog with sun scatter on the camera"),
+    Variant("fog_uniform", _fog_uniform, "fog the same everywhere on the camera"),
     Variant("post", _post, "Tonemap(curve='agx') and Bloom() on the camera"),
     Variant("post_auto", _post_auto, "Tonemap(curve='agx', auto_exposure=True) and Bloom()"),
 ]
