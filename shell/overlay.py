@@ -323,24 +323,14 @@ class DebugOverlay(EditorPanels):
         if changed:
             renderer.antialias = "fxaa" if fxaa else "off"
         self._widget("fxaa")
-        shadows = engine.stages["shadows"]
-        imgui.same_line()
-        changed, on = imgui.checkbox("shadows", shadows.enabled)
-        if changed:
-            shadows.enabled = on
-        self._widget("shadows")
         present = engine.stages["present"]
-        imgui.same_line()
-        changed, bloom = imgui.checkbox("bloom", present.bloom)
-        if changed:
-            present.bloom = bloom
-        self._widget("bloom")
-        prepare = engine.stages["prepare"]
-        imgui.same_line()
-        changed, fog = imgui.checkbox("fog", prepare.fog)
-        if changed:
-            prepare.fog = fog
-        self._widget("fog")
+        for label, stage, switch in (("shadows", engine.stages["shadows"], "enabled"), ("bloom", present, "bloom"),
+                                     ("fog", engine.stages["prepare"], "fog")):
+            imgui.same_line()
+            changed, on = imgui.checkbox(label, getattr(stage, switch))
+            if changed:
+                setattr(stage, switch, on)   # (the stages' own switches: set only when clicked)
+            self._widget(label)
         imgui.same_line()
         imgui.set_next_item_width(CURVE_WIDTH * self.scale)
         if imgui.begin_combo("curve", present.curve or "camera's"):
