@@ -80,6 +80,15 @@ class Material(TrackedComponent):
     ``emissiveFactor x emissiveTexture``, the factor being ``power``); without one it emits
     nothing, as a glTF emissive texture with a zero factor.  A map left out costs nothing:
     each is sampled only by a build of the scene shader for batches that have it.
+
+    ``alpha_cutoff`` (None: off) makes the material a cutout, as glTF's ``alphaMode: MASK``
+    with its ``alphaCutoff``, three.js's ``alphaTest``, Unity's alpha clipping and Godot's
+    alpha scissor: where the alpha (``color``'s times ``texture``'s) is below it, nothing
+    is drawn, in every view and in every light's shadow map (leaves, a fence, a grate);
+    elsewhere the surface is opaque whatever its alpha, so it is not blended and needs no
+    sorting.  Each distinct value is a build of the scene and shadow shaders of its own
+    (the value is compiled in).  Not on a Mirror or Portal (refused: a surface's claim of
+    its pixels is drawn whole; put the cutout on an entity in front of it).
     """
 
     color: Any = field(default_factory=lambda: glm.vec4(0.8, 0.8, 0.8, 1.0))
@@ -90,8 +99,18 @@ class Material(TrackedComponent):
     normal_scale: float = 1.0
     emissive_map: TextureData | None = None
     metallic_roughness_map: TextureData | None = None
+    alpha_cutoff: float | None = None
 
     def _validate(self, name: str, value: Any) -> Any:
+        if name == "alpha_cutoff":
+            if value is None:
+                return None
+            value = finite(self, name, value, low=0.0, high=1.0)
+            world = getattr(self, "_world_ref", None)
+            if world is not None:
+                for entity in self._entities:  # not on a mirror or a portal, as at spawn
+                    world.check_invariants(entity, Material, alpha_cutoff=value)
+            return value
         if name == "color":
             return color(self, name, value)
         if name in ("metallic", "roughness"):

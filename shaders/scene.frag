@@ -294,6 +294,11 @@ void main() {
 #else
     if (has_albedo_map) base *= texture(albedo_map, v_uv);
 #endif
+#ifdef ALPHA_CUTOFF
+    // A cutout (Material.alpha_cutoff, the value compiled in): nothing where the alpha falls
+    // below it; the shadow maps leave the same texels out (shadow.frag).
+    if (base.a < ALPHA_CUTOFF) discard;
+#endif
     s.albedo = base.rgb;
     s.alpha = base.a;
     s.metallic = v_surface.x;

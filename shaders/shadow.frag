@@ -3,6 +3,20 @@
 // light's cube), the distance from the light over its range, in a colour channel, so one
 // comparison per tap works in every face and any direction (the depth of a perspective
 // face is not comparable across faces).
+#ifdef ALPHA_CUTOFF
+// A cutout's holes cast nothing: the alpha scene.frag discards below, the colour's times
+// the albedo map's (a batch without one binds the blank white image).
+uniform sampler2D albedo_map;
+#ifdef LAYERED
+in vec2 g_uv;
+in float g_alpha;
+#define v_uv g_uv
+#define v_alpha g_alpha
+#else
+in vec2 v_uv;
+in float v_alpha;
+#endif
+#endif
 #ifdef DISTANCE
 #include "camera.glsl"
 #ifdef LAYERED
@@ -16,6 +30,9 @@ layout(location = 0) out float out_distance;
 #endif
 
 void main() {
+#ifdef ALPHA_CUTOFF
+    if (v_alpha * texture(albedo_map, v_uv).a < ALPHA_CUTOFF) discard;
+#endif
 #ifdef DISTANCE
     out_distance = length(v_world_pos - camera.eye.xyz) / light_range;
 #endif

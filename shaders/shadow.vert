@@ -5,7 +5,9 @@
 // glass (a refracting instance), not something hidden in every kind of view or with
 // MeshRef.casts_shadows off; the transparent slot is not drawn at all.
 // Things partly through a portal are cut at their slice plane, as in every view, so the part
-// that came out of the partner casts its own shadow there.
+// that came out of the partner casts its own shadow there.  A cutout (ALPHA_CUTOFF, a
+// batch's Material.alpha_cutoff compiled in) casts only where it is drawn: shadow.frag
+// reads its alpha as scene.frag does.
 #include "camera.glsl"
 #include "visibility.glsl"
 
@@ -15,6 +17,12 @@ in vec4 in_tint;    // w: where it is drawn (visibility.glsl)
 in vec4 in_slice;
 in uvec4 in_slots;  // emissive, refract, reflect variants, entity id
 
+#ifdef ALPHA_CUTOFF
+in vec2 in_uv;
+in vec4 in_color;   // alpha: the colour's share of the cutout's alpha
+out vec2 v_uv;
+out float v_alpha;
+#endif
 #ifdef LEG
 // A middle stretch of a virtual light's way (between two surfaces): its second plane, world.
 uniform vec4 leg_plane;
@@ -43,6 +51,10 @@ void main() {
 #endif
 #ifdef DISTANCE
     v_world_pos = world.xyz;
+#endif
+#ifdef ALPHA_CUTOFF
+    v_uv = in_uv;
+    v_alpha = in_color.a;
 #endif
 #ifdef LAYERED
     v_clip = vec2(casts ? plane : -1.0, dot(world, in_slice));

@@ -137,7 +137,9 @@ class ExtractSystem(esper.Processor):
         second = blend.probes[1] if len(blend.probes) > 1 else 0
         # A material whose alpha is below 1 is see-through: blended in the transparent slot
         # (glass, whose alpha weighs the refracted view, stays opaque).
-        transparent = material is not None and material.color.w < 1.0 and not world.has(entity, Refractive)
+        # A cutout (Material.alpha_cutoff) is opaque where it is drawn at all.
+        transparent = material is not None and material.color.w < 1.0 and material.alpha_cutoff is None \
+            and not world.has(entity, Refractive)
         # A generated shape is drawn as its unit mesh, its size in its row; not a mirror's or a
         # portal's, whose batch of surfaces alone the unlit-mirror pass keeps (unlit_mirrors).
         surface = world.has(entity, Mirror) or world.has(entity, Portal)
@@ -148,7 +150,8 @@ class ExtractSystem(esper.Processor):
                                             material.emissive_map if material else None,
                                             material.metallic_roughness_map if material else None,
                                             second_probe=second, probe_blend=blend.blended, rest_probe=blend.rest,
-                                            mirrored=mirroring_seen() and _mirrors(transform.world))
+                                            mirrored=mirroring_seen() and _mirrors(transform.world),
+                                            alpha_cutoff=material.alpha_cutoff if material else None)
         except GLLimitError as exc:
             raise GLLimitError(f"entity {entity}: {exc}") from None
         if transparent:  # a see-through mirror or portal (water): drawn before the view trees' claims

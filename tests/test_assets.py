@@ -192,8 +192,9 @@ def write_glb(path: Path, *, base=(0.5, 0.25, 0.125, 0.75), metallic=0.8, roughn
 def test_glb_pbr_material_normals_uvs_texture(tmp_path, world):
     source, normals = write_glb(tmp_path / "pbr.glb")
     (part,) = load_model(tmp_path / "pbr.glb")
-    # trimesh keeps glTF's base colour as uint8, so compare to 1/255.
-    assert part.color == pytest.approx((0.5, 0.25, 0.125, 0.75), abs=1 / 255)
+    # trimesh keeps glTF's base colour as uint8, so compare to 1/255.  The file gives no
+    # alphaMode: OPAQUE, whose alpha (0.75 here) glTF ignores.
+    assert part.color == pytest.approx((0.5, 0.25, 0.125, 1.0), abs=1 / 255)
     assert part.metallic == pytest.approx(0.8) and part.roughness == pytest.approx(0.3)
     assert part.reflectivity == pytest.approx(0.8)
     assert part.emissive_factor == pytest.approx(2.0, rel=1e-2)
@@ -208,7 +209,7 @@ def test_glb_pbr_material_normals_uvs_texture(tmp_path, world):
     assert world.get(root, Transform).position == glm.vec3(0.0, 1.0, 0.0)
     assert world.get(child, Emissive).power == pytest.approx(2.0, rel=1e-2)
     assert world.get(child, Reflective).mix == pytest.approx(0.8)
-    assert world.get(child, Material).color.w == pytest.approx(0.75, abs=1 / 255)
+    assert world.get(child, Material).color.w == 1.0   # OPAQUE: the alpha ignored
     assert world.get(child, Material).texture is not None
 
 

@@ -106,6 +106,27 @@ def _spot_shadows(ctx):
     return _engine_frames(ctx, MirrorRing(3), 3, configure)
 
 
+def _cutouts(ctx):
+    """The mirror ring with two cutout grates (two cutoffs: two builds) over its boxes, the
+    lamp casting (the layered cube's cutout build) and a mirror throwing the sun (the
+    virtual light's caster passes), reflected in the batched levels."""
+    from benchmarks.lighting import _mirror_light
+    from benchmarks.mirrors import MirrorRing
+    from components import Material, MeshRef, PointLight, Transform
+    from engine.assets.mesh import plane
+    from tests.test_alpha_cutout import SLAT_TEXTURE
+
+    def configure(engine):
+        _mirror_light(engine)
+        world = engine.world
+        for _, light in world.query_one(PointLight):
+            light.shadows = True
+        for x, cutoff in ((-1.0, 0.5), (1.0, 0.3)):
+            world.spawn(Transform(position=(x, 1.6, 0.0)), MeshRef(plane(1.6, 1.6)),
+                        Material(texture=SLAT_TEXTURE, alpha_cutoff=cutoff))
+    return _engine_frames(ctx, MirrorRing(4), 3, configure)
+
+
 def _fog(path: str):
     """The mirror ring seen through height fog on the camera (the FOG builds of the scene
     programs, the batched ones' geometry stage too; the sky's and the composites' reads of
@@ -172,6 +193,7 @@ SCENES: dict[str, Callable[[moderngl.Context], list[np.ndarray]]] = {
     "post": _lighting("post"),
     "point_shadows": _point_shadows,
     "spot_shadows": _spot_shadows,
+    "cutouts": _cutouts,
     "fog_per_mirror": _fog("per_mirror"),
     "fog_batched": _fog("batched"),
     "probes_dynamic": _probes("every_frame"),

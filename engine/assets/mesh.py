@@ -344,6 +344,7 @@ class ModelPart:
     normal_scale: float = 1.0
     emissive_map: TextureData | None = None
     metallic_roughness_map: TextureData | None = None
+    alpha_cutoff: float | None = None  # glTF's alphaMode MASK: its alphaCutoff (Material.alpha_cutoff)
     name: str = ""  # "file:part", as a level file's part = "..." names it (parts may share one mesh)
 
     def __post_init__(self) -> None:
@@ -580,10 +581,38 @@ def _read_material(tm, part: ModelPart, path: Path, maps: _MaterialMaps) -> None
             part.emissive_factor = float(np.clip(emissive[min(channel, len(emissive) - 1)] / diffuse, 0.0, 1e4))
     if image is not None:
         part.texture = maps.image(image, image_what, "colour")
+    if hasattr(material, "baseColorFactor"):
+        _gltf_alpha(material, part, maps.gltf_label(material))
     for name in ("metallic", "roughness", "reflectivity"):
         value = getattr(part, name)
         if not (np.isfinite(value) and 0.0 <= value <= 1.0):
             raise AssetError(f"material {name} {value} is outside 0..1")
+
+
+BLENDED_ALPHA = 0.999  # a glTF BLEND material's alpha where its factor's is 1: the transparent slot's
+
+
+def _gltf_alpha(material, part: ModelPart, what: str) -> None:
+    """What glTF's ``alphaMode`` makes of a material's alpha (the colour's times the
+    texture's): OPAQUE (the default) ignores it, so the part is opaque whatever its alpha;
+    MASK cuts it at ``alphaCutoff`` (default 0.5: ``Material.alpha_cutoff``); BLEND blends
+    it, so a part whose factor's alpha is 1 but whose texture has see-through texels goes
+    to the transparent slot too (its colour's alpha just under 1, as world text's)."""
+    mode = getattr(material, "alphaMode", None) or "OPAQUE"
+    if mode not in ("OPAQUE", "MASK", "BLEND"):
+        raise AssetError(f"{what}: alphaMode must be OPAQUE, MASK or BLEND, got {mode!r}")
+    if mode == "OPAQUE":
+        part.color = (*part.color[:3], 1.0)
+    elif mode == "MASK":
+        cutoff = getattr(material, "alphaCutoff", None)
+        cutoff = 0.5 if cutoff is None else cutoff
+        if isinstance(cutoff, (bool, str)) or not isinstance(cutoff, numbers.Real) or \
+                not (np.isfinite(cutoff) and 0.0 <= cutoff <= 1.0):
+            raise AssetError(f"{what}: alphaCutoff must be a number in [0, 1] (at 1 or more nothing is drawn), "
+                             f"got {cutoff!r}")
+        part.alpha_cutoff = float(cutoff)
+    elif part.color[3] >= 1.0 and part.texture is not None and part.texture.has_alpha:
+        part.color = (*part.color[:3], BLENDED_ALPHA)
 
 
 # --- material maps -----------------------------------------------------------------------

@@ -26,9 +26,9 @@ def spawn_model(world: World, path: str | Path, position: glm.vec3 | Sequence[fl
     roughness, normal, emissive and metallic-roughness maps make the Material; an emissive
     colour gives Emissive(emissive / diffuse), or with an emissive map Emissive(its
     strength) (``ModelPart``); reflectivity > 0 (a metallic glTF material, an MTL's
-    ``refl`` or ``Pm``) gives a Mirror on a flat mesh and, on any other,
-    ``Reflective("cube")``: the probes stage gives such a part a cube-map probe of its own
-    at its bounding box's centre (engine/rules/probe_rules.py's automatic probe, the seed's
+    ``refl`` or ``Pm``) gives a Mirror on a flat mesh and, on any other (or a flat cutout:
+    a mirror is drawn whole), ``Reflective("cube")``: the probes stage gives such a part a
+    cube-map probe of its own at its bounding box's centre (engine/rules/probe_rules.py's automatic probe, the seed's
     detection: flat is a planar mirror, curved a cube map), so a chrome teapot reflects the
     room around it, not only the sky.  A probe is six views a capture, so a model gets at
     most ``max_probes`` of them (MAX_MODEL_PROBES): its largest curved reflective parts (by
@@ -43,7 +43,7 @@ def spawn_model(world: World, path: str | Path, position: glm.vec3 | Sequence[fl
     root_transform = Transform(position=position, rotation=rotation if rotation is not None else glm.quat(),
                                scale=scale)
     parts = load_model(path, roots=roots)
-    curved = [i for i, part in enumerate(parts) if part.reflectivity > 0.0 and flat_plane(part.mesh) is None]
+    curved = [i for i, part in enumerate(parts) if part.reflectivity > 0.0 and not _planar_mirror(part)]
     probed = set(sorted(curved, key=lambda i: -_placed_size(parts[i]))[:max_probes])
     _name_sources(path, parts)
     part_components = []
@@ -57,14 +57,14 @@ def spawn_model(world: World, path: str | Path, position: glm.vec3 | Sequence[fl
                 MeshRef(part.mesh),
                 Material(color=part.color, texture=part.texture, metallic=part.metallic, roughness=part.roughness,
                          normal_map=part.normal_map, normal_scale=part.normal_scale, emissive_map=part.emissive_map,
-                         metallic_roughness_map=part.metallic_roughness_map),
+                         metallic_roughness_map=part.metallic_roughness_map, alpha_cutoff=part.alpha_cutoff),
             ]
             if part.emissive_factor > 0.0:
                 components.append(Emissive(part.emissive_factor))
             if part.reflectivity > 0.0:
                 # A flat reflective surface is a planar mirror; anything else samples a cube-map
                 # probe (its own, made by the probes stage at its box's centre).
-                if flat_plane(part.mesh) is not None:
+                if _planar_mirror(part):
                     components.append(Mirror(reflect_rate=part.reflectivity, roughness=part.roughness))
                 else:
                     mode = "cube" if index in probed else "skybox"
@@ -90,6 +90,12 @@ def spawn_model(world: World, path: str | Path, position: glm.vec3 | Sequence[fl
             world.delete_entity(entity)
         raise
     return root
+
+
+def _planar_mirror(part) -> bool:
+    """Whether a reflective part is a planar mirror: flat, and not a cutout (a mirror is
+    drawn whole; a flat metal grate reflects a probe or the sky as a curved part does)."""
+    return flat_plane(part.mesh) is not None and part.alpha_cutoff is None
 
 
 def _placed_size(part) -> float:

@@ -161,6 +161,7 @@ class BatchKey(NamedTuple):
     emissive_map: int
     metallic_roughness_map: int
     mirrored: bool                  # a negative determinant: the other winding
+    alpha_cutoff: float | None = None  # a cutout's (Material.alpha_cutoff), compiled into its builds
 
 
 class InstanceBatch:
@@ -248,6 +249,9 @@ class InstanceBatch:
         # batch's key like its texture (Renderer.batch_for); None: the build without them.
         self.emissive_map: moderngl.Texture | None = None
         self.metallic_roughness_map: moderngl.Texture | None = None
+        # A cutout's alpha threshold (Material.alpha_cutoff; None: drawn whole): the scene and
+        # shadow builds that draw it discard below it, reading its texture's alpha.
+        self.alpha_cutoff: float | None = None
 
     # --- rows ----------------------------------------------------------------------------
     def add(self, entity: int) -> np.void:
@@ -586,13 +590,13 @@ class InstanceBatch:
             self._non_casters.add(entity)
         self.may_not_cast = bool(self._non_casters)
 
-    @staticmethod
-    def shadow_fields(row: np.void) -> tuple:
+    def shadow_fields(self, row: np.void) -> tuple:
         """What of a row the shadow pass reads besides its model matrix (which moves its box):
         where it is drawn and casts (tint.w, less whether it receives shadows, which the maps
-        do not hold), its refract and reflect variants, its slice."""
+        do not hold), its refract and reflect variants, its slice, and a cutout's alpha (its
+        holes are where the colour's alpha times the texture's falls below the cutoff)."""
         return int(row["tint"][TINT_VISIBILITY] + 0.5) & ~NO_RECEIVE_BIT, int(row["slots"][1]), int(row["slots"][2]), \
-            tuple(row["slice"].tolist())
+            tuple(row["slice"].tolist()), float(row["color"][3]) if self.alpha_cutoff is not None else None
 
     def _note_changed(self, lo: list[float], hi: list[float],
                       parts: list[tuple[list[float], list[float]]] | None = None) -> None:

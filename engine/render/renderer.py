@@ -129,7 +129,7 @@ class Renderer(Gpu):
                   emissive_map: TextureData | None = None,
                   metallic_roughness_map: TextureData | None = None, second_probe: int = 0,
                   probe_blend: bool = False, rest_probe: int = 0,
-                  mirrored: bool = False) -> InstanceBatch:
+                  mirrored: bool = False, alpha_cutoff: float | None = None) -> InstanceBatch:
         """The batch of (mesh, albedo texture, normal map, emissive map, metallic-roughness
         map, the probe its instances sample; 0: none).  A transparent entity gets a batch of
         its own (``transparent_entity``): transparent things are drawn one by one, farthest
@@ -140,12 +140,14 @@ class Renderer(Gpu):
         # the sky, by per-instance weights (probe_rules.probe_blend; the PROBE_BLEND build);
         # ``rest_probe``: a probe, not the sky, takes what the weights leave (PROBE_REST).
         # ``mirrored``: instances whose model matrix has a negative determinant, drawn with the
-        # other winding (ScenePass), so they get batches of their own.
+        # other winding (ScenePass), so they get batches of their own.  ``alpha_cutoff``: a
+        # cutout's threshold (Material.alpha_cutoff), compiled into the builds that draw it.
         key = BatchKey(mesh.id, id(texture) if texture is not None else 0,
                        (probe, second_probe, probe_blend, rest_probe), transparent_entity,
                        id(normal_map) if normal_map is not None else 0,
                        id(emissive_map) if emissive_map is not None else 0,
-                       id(metallic_roughness_map) if metallic_roughness_map is not None else 0, mirrored)
+                       id(metallic_roughness_map) if metallic_roughness_map is not None else 0, mirrored,
+                       alpha_cutoff)
         batch = self.batches.get(key)
         if batch is None:
             for name, image in (("Material.texture", texture), ("Material.normal_map", normal_map),
@@ -170,6 +172,7 @@ class Renderer(Gpu):
                     lambda: self._upload_texture(metallic_roughness_map, linear=True))
             batch.key = key
             batch.mirrored = mirrored
+            batch.alpha_cutoff = alpha_cutoff
             batch.probe = probe
             batch.second_probe, batch.probe_blend, batch.rest_probe = second_probe, probe_blend, rest_probe
             batch.checker = checker_look(texture)

@@ -46,6 +46,7 @@ from engine.render.bindings import (
     VIRTUAL_SHADOW_UNIT,
 )
 from engine.render.gpu import Gpu
+from engine.render.shader_library import float_literal
 from engine.render.shadows import ShadowMaps
 from engine.render.unlit_mirrors import may_be_unlit
 
@@ -87,7 +88,7 @@ class ScenePrograms:
 
     def program(self, variants: tuple[int, int, int] | None = None, invocations: int = 0,
                 layered: str = "", normal_mapped: bool = False, checker: bool = False,
-                material_maps: tuple[bool, bool] = (False, False), probe_blend: bool = False,
+                material: tuple[bool, bool, float | None] = (False, False, None), probe_blend: bool = False,
                 ambient_probes: bool = False, probe_rest: bool = False, unlit: bool = False,
                 masked: bool = False) -> moderngl.Program:
         """The scene program for a batch of ``variants`` (None: mixed, switched per
@@ -96,9 +97,12 @@ class ScenePrograms:
         (a build of its own: llvmpipe would run the map's derivatives and fetch for every
         pixel behind a uniform branch), and with or without the analytic checker (``CHECKER``:
         a generated checker texture drawn from its cells, filtered by the pixel's footprint,
-        instead of sampled), and with or without each of the material maps ``material_maps``
-        (emissive, metallic-roughness: ``EMISSIVE_MAP`` and ``METALLIC_ROUGHNESS_MAP`` builds,
-        shaders/include/material_maps.glsl; a batch without them samples nothing for them),
+        instead of sampled), and with or without each of the material maps ``material``
+        names (emissive, metallic-roughness: ``EMISSIVE_MAP`` and ``METALLIC_ROUGHNESS_MAP``
+        builds, shaders/include/material_maps.glsl; a batch without them samples nothing for
+        them) and its alpha cutoff (``ALPHA_CUTOFF``, the value compiled in: a cutout
+        discards where its alpha falls below; only its builds may discard, so every other
+        keeps its early depth test on llvmpipe),
         blending probes (``probe_blend``: ``PROBE_BLEND``) with a probe instead of the sky
         taking the rest (``probe_rest``: ``PROBE_REST``, a curved object's own), or unlit
         (``unlit``: ``UNLIT_SURFACE``, a mirror batch ``shading_replaced`` names), and
@@ -114,7 +118,7 @@ class ScenePrograms:
         virtual = self.shadows.virtual_shining  # the shadows stage set how many shine
         shadowing = self.shadows.program_defines  # the lookups a program compiles (ShadowMaps.upload's)
         fogging = self.renderer.fog.defines       # FOG while the active camera's fog has a density
-        key = (invocations, layered, variants, normal_mapped, checker, material_maps, probe_blend, virtual,
+        key = (invocations, layered, variants, normal_mapped, checker, material, probe_blend, virtual,
                ambient_probes, probe_rest, unlit, masked, shadowing, fogging)
         program = self.built.get(key)
         if program is None:
@@ -125,10 +129,12 @@ class ScenePrograms:
                 defines["NORMAL_MAP"] = "1"
             if checker:
                 defines["CHECKER"] = "1"
-            if material_maps[0]:
+            if material[0]:
                 defines["EMISSIVE_MAP"] = "1"
-            if material_maps[1]:
+            if material[1]:
                 defines["METALLIC_ROUGHNESS_MAP"] = "1"
+            if material[2] is not None:
+                defines["ALPHA_CUTOFF"] = float_literal(material[2])
             if probe_blend:  # two probes and the sky by the instances' weights (shaders/include/probe.glsl)
                 defines["PROBE_BLEND"] = "1"
                 if probe_rest:  # a probe, not the sky, takes what the weights leave
@@ -221,7 +227,7 @@ class ScenePrograms:
                     for probes in ambient:
                         for dark in unlit:
                             batch.vao(self.program(batch.variants, invocations, "", batch.normal_map is not None,
-                                                   batch.checker is not None, _material_maps(batch),
+                                                   batch.checker is not None, _material_build(batch),
                                                    batch.probe_blend, probes, bool(batch.rest_probe), dark, masked))
         return len(self.built) - before
 
@@ -233,7 +239,7 @@ class ScenePrograms:
         or None where probes give them per draw, its mesh's vertex count)."""
         invocations, layered, ambient, unlit, masked = kind
         program = self.program(variants, invocations, layered, batch.normal_map is not None,
-                               batch.checker is not None, _material_maps(batch), batch.probe_blend,
+                               batch.checker is not None, _material_build(batch), batch.probe_blend,
                                ambient, bool(batch.rest_probe), unlit, masked)
         glo = program.glo
         values = self.written.get(glo)
@@ -269,6 +275,8 @@ def geometry_invocations(view_count: int) -> int:
 BATCHED_INVOCATIONS = tuple(sorted({geometry_invocations(n) for n in range(1, MAX_BATCHED_VIEWS + 1)}))
 
 
-def _material_maps(batch: InstanceBatch) -> tuple[bool, bool]:
-    """Which material maps a batch's program samples: (emissive, metallic-roughness)."""
-    return batch.emissive_map is not None, batch.metallic_roughness_map is not None
+def _material_build(batch: InstanceBatch) -> tuple[bool, bool, float | None]:
+    """What of a batch's material picks its build: whether it samples an emissive and a
+    metallic-roughness map, and its alpha cutoff (None: drawn whole)."""
+    return batch.emissive_map is not None, batch.metallic_roughness_map is not None, batch.alpha_cutoff
+

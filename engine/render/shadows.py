@@ -30,6 +30,7 @@ from pyglm import glm
 from components.limits import ALL_LAYERS
 from engine.core.cube_faces import CUBE_FACES
 from engine.render.bindings import (
+    ALBEDO_UNIT,
     CAMERA_BINDING,
     CLIP_LEG_PLANE,
     POINT_SHADOW_UNITS,
@@ -46,6 +47,7 @@ from engine.render.bindings import (
 )
 from engine.render.gpu import Gpu
 from engine.render.raw_gl import LayeredCubeTarget
+from engine.render.shader_library import float_literal
 from engine.render.targets import release_framebuffer
 from engine.render.views import (
     CAMERA_BLOCK_BYTES,
@@ -89,6 +91,13 @@ POINT_NEAR = 0.02   # metres: a point light's cube sees casters from here out
 SPOT_GUTTER = 20
 # Depth only, both faces: a quad (a mirror, a wall of one face) casts whichever side the
 # light reaches; the normal offset keeps a closed mesh's lit side off its own back.
+# The caster builds (shadow.vert/frag's defines): a depth map's; a point light's cube face
+# (distance over range); its six faces in one layered pass; a middle stretch of a virtual
+# light's way (a second clip plane).
+_DEPTH: tuple[tuple[str, str], ...] = ()
+_DISTANCE = (("DISTANCE", "1"),)
+_LAYERED = (("DISTANCE", "1"), ("LAYERED", "1"))
+_LEG = (("LEG", "1"),)
 _CASTERS = PassState(depth_func="<", cull=False, clips=SCENE_CLIPS)
 # A virtual light's stretch between two surfaces: kept between both planes.
 _LEG_CASTERS = PassState(depth_func="<", cull=False, clips=SCENE_CLIPS | frozenset((CLIP_LEG_PLANE,)))
@@ -126,12 +135,11 @@ class ShadowMaps:
         # Per directional slot: its level map's uv from light space (_axes), what its rings map from.
         self._level_uv: dict[int, tuple[float, float, float, float]] = {}
         self.ubo = ctx.buffer(self.block.tobytes())
-        self._depth_program = renderer.shaders.program("shadow.vert", "shadow.frag")
-        self._distance_program = renderer.shaders.program("shadow.vert", "shadow.frag", defines={"DISTANCE": "1"})
-        self._layered_program: moderngl.Program | None = None
-        self._leg_program: moderngl.Program | None = None   # made when light first bounces twice
-        for program in (self._depth_program, self._distance_program):
-            program["Camera"].binding = CAMERA_BINDING
+        # The caster programs by (build: _DEPTH, _DISTANCE, _LAYERED or _LEG; a cutout's alpha
+        # cutoff or None): _caster_program.
+        self._casters: dict[tuple[tuple[tuple[str, str], ...], float | None], moderngl.Program] = {}
+        for build in (_DEPTH, _DISTANCE):
+            self._caster_program(build, None)
         # Until a light casts: a 1x1 atlas at the far depth and 1x1 cubes at the range's end
         # (every lookup lit), so the scene programs always have something defined to read.
         self.atlas = self._make_atlas((1, 1))
@@ -291,7 +299,7 @@ class ShadowMaps:
         apply_pass_state(self.ctx, _CASTERS, square, rect)
         framebuffer.clear(depth=1.0, viewport=rect)
         self._bind_fit(camera, fit, resolution)
-        self._draw_casters(None, self._depth_program)
+        self._draw_casters(None, _DEPTH)
         return rect[2] * rect[3]
 
     def _bind_fit(self, slot: int, fit: DirectionalFit, resolution: int) -> None:
@@ -383,16 +391,10 @@ class ShadowMaps:
                         name=f"virtual light {slot} (stretch {index})", clip_plane=glm.vec4(leg.planes[0]),
                         skip=leg.skip[0], hide=leg.skip[1], kinds=0, layers=ALL_LAYERS)
             if len(leg.planes) == 1:
-                self._draw_casters(view, self._depth_program)
+                self._draw_casters(view, _DEPTH)
                 continue
-            program = self._leg_program
-            if program is None:
-                program = self._leg_program = self.renderer.shaders.program("shadow.vert", "shadow.frag",
-                                                                            defines={"LEG": "1"})
-                program["Camera"].binding = CAMERA_BINDING
-            program["leg_plane"].value = tuple(glm.vec4(leg.planes[1]))
             apply_pass_state(self.ctx, _LEG_CASTERS, rect, rect)
-            self._draw_casters(view, program)
+            self._draw_casters(view, _LEG, {"leg_plane": tuple(glm.vec4(leg.planes[1]))})
             apply_pass_state(self.ctx, _CASTERS, rect, rect)
         width = 2 * VIRTUAL_RESOLUTION
         scale = VIRTUAL_RESOLUTION / width
@@ -449,7 +451,6 @@ class ShadowMaps:
         path = "layered" if every and layered and self._draw_layered(slot, cube, views, light_range) else "six_pass"
         stats = self.renderer.stats
         if path == "six_pass":
-            self._distance_program["light_range"].value = light_range
             for face, view in enumerate(views):
                 framebuffer = self._face_framebuffers[slot][face]
                 framebuffer.use()
@@ -457,7 +458,7 @@ class ShadowMaps:
                 apply_pass_state(self.ctx, _CASTERS, rect)
                 framebuffer.clear(1.0, 1.0, 1.0, 1.0, depth=1.0)
                 if faces[face]:
-                    self._draw_casters(view, self._distance_program)
+                    self._draw_casters(view, _DISTANCE, {"light_range": light_range})
                     stats.shadow_faces_drawn += 1
         else:
             stats.shadow_faces_drawn += 6
@@ -514,7 +515,7 @@ class ShadowMaps:
                     proj=glm.perspective(fov, 1.0, POINT_NEAR, max(light_range, POINT_NEAR * 2)),
                     eye=glm.vec3(position), size=(resolution, resolution), name=f"spot shadow {slot}",
                     kinds=0, layers=ALL_LAYERS)
-        self._draw_casters(view, self._depth_program)
+        self._draw_casters(view, _DEPTH)
         width, height = self.spot_atlas.size
         sx, sy = resolution / width, resolution / height
         to_tile = glm.translate(glm.vec3(x / width + 0.5 * sx, y / height + 0.5 * sy, 0.5)) \
@@ -584,37 +585,64 @@ class ShadowMaps:
                 target = self._layered[slot] = LayeredCubeTarget(self.ctx, cube)
             except RuntimeError:
                 return False
-        program = self._layered_program
-        if program is None:
-            program = self._layered_program = self.renderer.shaders.program(
-                "shadow.vert", "shadow.frag", "shadow_layered.geom", defines={"DISTANCE": "1", "LAYERED": "1"})
-            program["Camera"].binding = CAMERA_BINDING
-        program["light_range"].value = light_range
-        program["face_view_proj"].write(b"".join(v.view_proj.to_bytes() for v in views))
+        faces = b"".join(v.view_proj.to_bytes() for v in views)
         size = (0, 0, target.size, target.size)
         apply_pass_state(self.ctx, _CASTERS, size)
         target.bind()
         try:
             target.clear((1.0, 1.0, 1.0, 1.0))  # distance / range: nothing nearer than the range
-            self._draw_casters(views[0], program)
+            self._draw_casters(views[0], _LAYERED, {"light_range": light_range, "face_view_proj": faces})
         finally:
             target.unbind()
         return True
 
     # --- drawing --------------------------------------------------------------------------
-    def _draw_casters(self, view: View | None, program: moderngl.Program) -> None:
-        """Every opaque batch into the bound map, from ``view`` (None: the Camera block bound already)."""
+    def _caster_program(self, build: tuple[tuple[str, str], ...], cutoff: float | None) -> moderngl.Program:
+        """The caster program of ``build`` (its defines), for a cutout of alpha ``cutoff``
+        (the ``ALPHA_CUTOFF`` build: its albedo map read for its holes) or whole casters (None)."""
+        program = self._casters.get((build, cutoff))
+        if program is None:
+            defines = dict(build)
+            if cutoff is not None:
+                defines["ALPHA_CUTOFF"] = float_literal(cutoff)
+            geometry = "shadow_layered.geom" if "LAYERED" in defines else None
+            program = self._casters[(build, cutoff)] = self.renderer.shaders.program(
+                "shadow.vert", "shadow.frag", geometry, defines=defines)
+            program["Camera"].binding = CAMERA_BINDING
+            if "albedo_map" in program:
+                program["albedo_map"].value = ALBEDO_UNIT
+        return program
+
+    def _draw_casters(self, view: View | None, build: tuple[tuple[str, str], ...],
+                      uniforms: dict[str, object] | None = None) -> None:
+        """Every opaque batch into the bound map, from ``view`` (None: the Camera block bound
+        already), with the caster programs of ``build`` given ``uniforms`` (bytes: an array,
+        written whole); a cutout with its own build, its albedo map bound."""
         renderer = self.renderer
         ctx = self.ctx
         renderer.note_scene_change()  # a map drawn again: what the views' shadows read
         if view is not None:
             renderer.bind_view(view)
         ctx.polygon_offset = SLOPE_BIAS
+        ready: dict[float | None, moderngl.Program] = {}  # the programs given ``uniforms`` this time
         try:
             for batch in renderer.opaque_batches():
-                if batch.count:
-                    batch.draw(program)
-                    renderer.stats.shadow_draw_calls += 1
+                if not batch.count:
+                    continue
+                cutoff = batch.alpha_cutoff
+                program = ready.get(cutoff)
+                if program is None:
+                    program = ready[cutoff] = self._caster_program(build, cutoff)
+                    for name, value in (uniforms or {}).items():
+                        if isinstance(value, bytes):
+                            program[name].write(value)
+                        else:
+                            program[name].value = value
+                if cutoff is not None:
+                    bind_texture(ctx, batch.texture if batch.texture is not None else renderer.blank_color,
+                                 ALBEDO_UNIT)
+                batch.draw(program)
+                renderer.stats.shadow_draw_calls += 1
         finally:
             ctx.polygon_offset = (0.0, 0.0)
 

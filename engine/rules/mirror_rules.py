@@ -10,6 +10,9 @@ its ``Material.normal_map`` is set.  The surfaces stage (``systems/surface_syste
 takes the mirror's plane and UV map from the same function, so what the world accepted is
 what is drawn, and a mesh changed behind the world's back is refused there with the same
 reason.
+
+A mirror or portal is drawn whole: its claim of its pixels has no holes, so a cutout
+material (``Material.alpha_cutoff``) is refused on one (``check_surface_cutout``).
 """
 from __future__ import annotations
 
@@ -18,7 +21,7 @@ from typing import Any
 
 import numpy as np
 
-from components import ComponentValueError, Material, MeshRef, Mirror
+from components import ComponentValueError, Material, MeshRef, Mirror, Portal
 from engine.assets.mesh import Mesh, flat_plane, planar_uv_map
 from engine.core.world import World, world_invariant
 
@@ -80,3 +83,21 @@ def check_mirror_mesh(world: World, entity: int, joining: Any = None, mesh: Mesh
         mirror_mesh(mirror, mesh, (normal_map or getattr(material, "normal_map", None)) is not None)
     except MirrorMeshError as exc:
         raise ComponentValueError(f"Mirror on entity {entity}: {exc}") from None
+
+
+@world_invariant(Mirror, Portal, Material)
+def check_surface_cutout(world: World, entity: int, joining: Any = None, alpha_cutoff: Any = None,
+                         **_other: Any) -> None:
+    """Refuse a cutout material (``alpha_cutoff``: one about to be set) on a mirror or a
+    portal: its claim pass and its composite draw the whole surface, so a hole would show
+    the reflection, not what is behind."""
+    held = {kind: world.try_get(entity, kind) if world.exists(entity) else None for kind in (Mirror, Portal, Material)}
+    if joining is not None:
+        held[type(joining)] = joining
+    material = held[Material]
+    cutoff = alpha_cutoff if alpha_cutoff is not None else getattr(material, "alpha_cutoff", None)
+    surface = "Mirror" if held[Mirror] is not None else "Portal" if held[Portal] is not None else None
+    if cutoff is not None and surface is not None:
+        raise ComponentValueError(f"entity {entity}: Material.alpha_cutoff {cutoff} on a {surface}: a mirror or "
+                                  "portal is drawn whole (its claim of its pixels has no holes); put the cutout "
+                                  "on an entity in front of it")
