@@ -55,6 +55,12 @@ AUTOMATIC_FIELDS: dict[tuple[str, str], str] = {
     ("Reflective", "mix"): "1.0 untextured, 0.5 textured",
 }
 
+# Fields whose None means "off": the inspector shows such a field as off with a button that
+# switches it on at the value given here, and a set one with a button that switches it off.
+OFF_FIELDS: dict[tuple[str, str], tuple[Any, str]] = {
+    ("Material", "alpha_cutoff"): (0.5, "a cutout: nothing is drawn where the alpha is below it"),
+}
+
 
 Needs = Callable[[World, int, "str | None"], "str | None"]  # LevelGame.needs
 
@@ -219,6 +225,14 @@ class Editor:
         others = sorted(e for e, _ in self.world.query_one(kind) if e != entity)
         choices = [(None, "none"), *((e, self.label(e, by_id.get(e))) for e in others[:limit])]
         return choices, len(others) > limit
+
+    def switched_on(self, entity: int, component: str | type, field: str) -> Any:
+        """The value a field whose None has a meaning takes when given one: the value in use
+        for a field the engine decides (``automatic``), the ``OFF_FIELDS`` value for one that
+        is off.  An EditError for another field."""
+        name = type(self.component(entity, component)).__name__
+        off = OFF_FIELDS.get((name, field))
+        return off[0] if off is not None else self.automatic(entity, component, field)
 
     def automatic(self, entity: int, component: str | type, field: str) -> Any:
         """The value the engine uses for a field left to it (``AUTOMATIC_FIELDS``), as a value

@@ -4,7 +4,8 @@ mirror or portal it was seen through), the entity list (every entity by name and
 filtered) one that shows nowhere; the inspector shows its components' fields as drag
 inputs, checkboxes, colour pickers (in floats, unclamped), choices and typed text, with
 undo, redo, duplicate, delete, add, remove and save; a field the engine decides while unset
-(``editor.AUTOMATIC_FIELDS``) is pinned at the value in use, or handed back.  The
+(``editor.AUTOMATIC_FIELDS``) is pinned at the value in use, or handed back, and one that
+is off while unset (``editor.OFF_FIELDS``: a cutout's alpha cutoff) switched on or off.  The
 selection's handles (their geometry: ``shell/handles.py``) move, turn and scale it; the
 editor's keys (``shortcut``) undo, redo, duplicate, delete, save and frame it.
 
@@ -27,7 +28,7 @@ from engine.assets.level_assets import MESH_MAKERS
 from engine.assets.level_file import LevelGame
 from engine.assets.level_read import REFERENCE_FIELDS
 from engine.assets.values import json_value
-from shell.editor import AUTOMATIC_FIELDS, TEXTURE_FIELDS, EditError, Editor
+from shell.editor import AUTOMATIC_FIELDS, OFF_FIELDS, TEXTURE_FIELDS, EditError, Editor
 from shell.handles import (
     HANDLE_MODES,
     MARKER_REACH,
@@ -296,19 +297,20 @@ class EditorPanels:
         except Exception:
             data, kind = None, "object"
         changed, new = False, None
-        automatic = AUTOMATIC_FIELDS.get((cls_name, field))
-        if automatic is not None and value is None:  # the engine decides: shown as such, pinned at what it uses
-            imgui.text(f"{field}: automatic")
-            imgui.set_item_tooltip(automatic)
+        unset = _unset_words(cls_name, field)
+        if unset is not None and value is None:  # automatic or off: shown as such, a button gives it a value
+            word, give, _, hint = unset
+            imgui.text(f"{field}: {word}")
+            imgui.set_item_tooltip(hint)
             self._widget(f"{cls_name}.{field}")
             imgui.same_line()
-            if imgui.small_button(f"pin##{cls_name}.{field}"):
+            if imgui.small_button(f"{give}##{cls_name}.{field}"):
                 try:
-                    editor.try_set_field(entity, cls_name, field, editor.automatic(entity, cls_name, field))
+                    editor.try_set_field(entity, cls_name, field, editor.switched_on(entity, cls_name, field))
                 except EditError as exc:
                     editor.message = str(exc)
-            self._widget(f"{cls_name}.{field} pin")
-            lines.append(f"  {field} = automatic")
+            self._widget(f"{cls_name}.{field} {give}")
+            lines.append(f"  {field} = {word}")
             return
         if (cls_name, field) in REFERENCE_FIELDS:  # another entity, chosen from those it may name
             changed, new = self._reference(editor, entity, cls_name, field, value, label)
@@ -372,11 +374,12 @@ class EditorPanels:
             editor.try_set_field(entity, cls_name, field, new, merge=True)
         if imgui.is_item_deactivated():
             editor.end_drag()
-        if automatic is not None:  # pinned: a button hands it back to the engine
-            if imgui.small_button(f"automatic##{cls_name}.{field}"):
+        if unset is not None:  # pinned or on: a button hands it back to the engine or switches it off
+            _, _, back, hint = unset
+            if imgui.small_button(f"{back}##{cls_name}.{field}"):
                 editor.try_set_field(entity, cls_name, field, None)
-            imgui.set_item_tooltip(automatic)
-            self._widget(f"{cls_name}.{field} automatic")
+            imgui.set_item_tooltip(hint)
+            self._widget(f"{cls_name}.{field} {back}")
 
     def _transform_handles(self, engine: Engine) -> None:
         """A selected light's or probe's reach (a spot's cone, a light all round's range
@@ -556,3 +559,16 @@ def parse_layers(text: str) -> list[int] | None:
         return [int(part) for part in parts]
     except ValueError:
         return None
+
+
+def _unset_words(cls_name: str, field: str) -> tuple[str, str, str, str] | None:
+    """How the inspector shows a field whose None has a meaning: (what None is shown as, the
+    button that gives it a value, the button that takes it back, the tooltip); None for
+    any other field."""
+    automatic = AUTOMATIC_FIELDS.get((cls_name, field))
+    if automatic is not None:
+        return "automatic", "pin", "automatic", automatic
+    off = OFF_FIELDS.get((cls_name, field))
+    if off is not None:
+        return "off", "on", "off", off[1]
+    return None

@@ -1142,3 +1142,31 @@ def _overlay_over(scene, ctx, build, size):
         yield runner, overlay, draw
     finally:
         overlay.release()
+
+
+def test_a_cutoff_shows_off_and_is_switched_on_and_off(scene, ctx):
+    """``Material.alpha_cutoff`` unset is shown as off; "on" makes the material a cutout at
+    0.5 (the box, given a slatted texture, then shows the wall through its gaps), "off"
+    takes it back, and undo puts it on again."""
+    from tests.test_alpha_cutout import SLAT_TEXTURE
+
+    size = (1280, 720)
+    with _box_selected(scene, ctx, size) as (runner, overlay, draw, click, editor, box):
+        world = runner.world
+        world.get(box, Material).texture = SLAT_TEXTURE
+        draw()
+        assert "  alpha_cutoff = off" in overlay.inspector_lines
+        whole = (runner.ids() == box).sum()
+        assert whole > 2000
+        _scrolled_to(overlay, draw, "Material.alpha_cutoff on", size)
+        click("Material.alpha_cutoff on")
+        assert world.get(box, Material).alpha_cutoff == 0.5
+        assert "  alpha_cutoff = 0.5" in overlay.inspector_lines
+        cut = (runner.ids() == box).sum()
+        assert 0.3 * whole < cut < 0.8 * whole, (cut, whole)   # the gaps show what is behind
+        _scrolled_to(overlay, draw, "Material.alpha_cutoff off", size)
+        click("Material.alpha_cutoff off")
+        assert world.get(box, Material).alpha_cutoff is None
+        assert (runner.ids() == box).sum() == whole
+        assert editor.undo() and world.get(box, Material).alpha_cutoff == 0.5
+        assert ctx.error == "GL_NO_ERROR"
