@@ -86,8 +86,7 @@ class Material(TrackedComponent):
     alpha scissor: where the alpha (``color``'s times ``texture``'s) is below it, nothing
     is drawn, in every view and in every light's shadow map (leaves, a fence, a grate);
     elsewhere the surface is opaque whatever its alpha, so it is not blended and needs no
-    sorting.  Each distinct value is a build of the scene and shadow shaders of its own
-    (the value is compiled in).  Not on a Mirror or Portal (refused: a surface's claim of
+    sorting.  Not on a Mirror or Portal (refused: a surface's claim of
     its pixels is drawn whole; put the cutout on an entity in front of it).
     """
 

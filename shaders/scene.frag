@@ -15,6 +15,9 @@ uniform bool has_albedo_map;
 uniform samplerCube sky_map;
 uniform float sky_face_size;   // texels across one face of sky_map
 uniform bool transparent;       // the transparent slot: alpha is the material's, for blending
+#ifdef ALPHA_CUTOFF
+uniform float alpha_cutoff;     // a cutout's (its batch's Material.alpha_cutoff)
+#endif
 
 in vec3 v_world_pos;
 in vec3 v_normal;
@@ -295,9 +298,9 @@ void main() {
     if (has_albedo_map) base *= texture(albedo_map, v_uv);
 #endif
 #ifdef ALPHA_CUTOFF
-    // A cutout (Material.alpha_cutoff, the value compiled in): nothing where the alpha falls
-    // below it; the shadow maps leave the same texels out (shadow.frag).
-    if (base.a < ALPHA_CUTOFF) discard;
+    // A cutout (Material.alpha_cutoff): nothing where the alpha falls below it; the shadow
+    // maps leave the same texels out (shadow.frag).
+    if (base.a < alpha_cutoff) discard;
 #endif
     s.albedo = base.rgb;
     s.alpha = base.a;

@@ -7,6 +7,7 @@
 // A cutout's holes cast nothing: the alpha scene.frag discards below, the colour's times
 // the albedo map's (a batch without one binds the blank white image).
 uniform sampler2D albedo_map;
+uniform float alpha_cutoff;
 #ifdef LAYERED
 in vec2 g_uv;
 in float g_alpha;
@@ -31,7 +32,7 @@ layout(location = 0) out float out_distance;
 
 void main() {
 #ifdef ALPHA_CUTOFF
-    if (v_alpha * texture(albedo_map, v_uv).a < ALPHA_CUTOFF) discard;
+    if (v_alpha * texture(albedo_map, v_uv).a < alpha_cutoff) discard;
 #endif
 #ifdef DISTANCE
     out_distance = length(v_world_pos - camera.eye.xyz) / light_range;

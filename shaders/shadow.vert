@@ -5,9 +5,9 @@
 // glass (a refracting instance), not something hidden in every kind of view or with
 // MeshRef.casts_shadows off; the transparent slot is not drawn at all.
 // Things partly through a portal are cut at their slice plane, as in every view, so the part
-// that came out of the partner casts its own shadow there.  A cutout (ALPHA_CUTOFF, a
-// batch's Material.alpha_cutoff compiled in) casts only where it is drawn: shadow.frag
-// reads its alpha as scene.frag does.
+// that came out of the partner casts its own shadow there.  A cutout (the ALPHA_CUTOFF
+// build, a batch's Material.alpha_cutoff its uniform) casts only where it is drawn:
+// shadow.frag reads its alpha as scene.frag does.
 #include "camera.glsl"
 #include "visibility.glsl"
 

@@ -161,7 +161,7 @@ class BatchKey(NamedTuple):
     emissive_map: int
     metallic_roughness_map: int
     mirrored: bool                  # a negative determinant: the other winding
-    alpha_cutoff: float | None = None  # a cutout's (Material.alpha_cutoff), compiled into its builds
+    alpha_cutoff: float | None = None  # a cutout's (Material.alpha_cutoff): its draws' uniform
 
 
 class InstanceBatch:

@@ -141,7 +141,7 @@ class Renderer(Gpu):
         # ``rest_probe``: a probe, not the sky, takes what the weights leave (PROBE_REST).
         # ``mirrored``: instances whose model matrix has a negative determinant, drawn with the
         # other winding (ScenePass), so they get batches of their own.  ``alpha_cutoff``: a
-        # cutout's threshold (Material.alpha_cutoff), compiled into the builds that draw it.
+        # cutout's threshold (Material.alpha_cutoff): a batch of its own, its builds' uniform.
         key = BatchKey(mesh.id, id(texture) if texture is not None else 0,
                        (probe, second_probe, probe_blend, rest_probe), transparent_entity,
                        id(normal_map) if normal_map is not None else 0,

@@ -46,7 +46,6 @@ from engine.render.bindings import (
     VIRTUAL_SHADOW_UNIT,
 )
 from engine.render.gpu import Gpu
-from engine.render.shader_library import float_literal
 from engine.render.shadows import ShadowMaps
 from engine.render.unlit_mirrors import may_be_unlit
 
@@ -58,7 +57,7 @@ PER_DRAW_UNIFORMS = ("sky_face_size", "has_albedo_map", "transparent",
                      "probe_face_size", "probe_position", "probe_box_min", "probe_box_max",
                      "probe2_face_size", "probe2_position", "probe2_box_min", "probe2_box_max",
                      "probe_rest_face_size", "probe_rest_position", "probe_rest_box_min", "probe_rest_box_max",
-                     "checker_cells", "checker_even", "checker_odd")
+                     "checker_cells", "checker_even", "checker_odd", "alpha_cutoff")
 PER_PASS_UNIFORMS = 1  # the first changes with the pass; the rest with the batch (a view's node
 # index is its Camera block's: nothing is written per view)
 NO_PROBE_LOOKUP = ((0.0, 0.0, 0.0, 0.0),) * 3  # a probe's lookup uniforms where the sky stands in for it
@@ -88,7 +87,7 @@ class ScenePrograms:
 
     def program(self, variants: tuple[int, int, int] | None = None, invocations: int = 0,
                 layered: str = "", normal_mapped: bool = False, checker: bool = False,
-                material: tuple[bool, bool, float | None] = (False, False, None), probe_blend: bool = False,
+                material: tuple[bool, bool, bool] = (False, False, False), probe_blend: bool = False,
                 ambient_probes: bool = False, probe_rest: bool = False, unlit: bool = False,
                 masked: bool = False) -> moderngl.Program:
         """The scene program for a batch of ``variants`` (None: mixed, switched per
@@ -100,9 +99,9 @@ class ScenePrograms:
         instead of sampled), and with or without each of the material maps ``material``
         names (emissive, metallic-roughness: ``EMISSIVE_MAP`` and ``METALLIC_ROUGHNESS_MAP``
         builds, shaders/include/material_maps.glsl; a batch without them samples nothing for
-        them) and its alpha cutoff (``ALPHA_CUTOFF``, the value compiled in: a cutout
-        discards where its alpha falls below; only its builds may discard, so every other
-        keeps its early depth test on llvmpipe),
+        them) and whether it is a cutout (``ALPHA_CUTOFF``: it discards where its alpha falls
+        below its ``alpha_cutoff`` uniform; only its builds may discard, so every other keeps
+        its early depth test on llvmpipe),
         blending probes (``probe_blend``: ``PROBE_BLEND``) with a probe instead of the sky
         taking the rest (``probe_rest``: ``PROBE_REST``, a curved object's own), or unlit
         (``unlit``: ``UNLIT_SURFACE``, a mirror batch ``shading_replaced`` names), and
@@ -133,8 +132,8 @@ class ScenePrograms:
                 defines["EMISSIVE_MAP"] = "1"
             if material[1]:
                 defines["METALLIC_ROUGHNESS_MAP"] = "1"
-            if material[2] is not None:
-                defines["ALPHA_CUTOFF"] = float_literal(material[2])
+            if material[2]:
+                defines["ALPHA_CUTOFF"] = "1"
             if probe_blend:  # two probes and the sky by the instances' weights (shaders/include/probe.glsl)
                 defines["PROBE_BLEND"] = "1"
                 if probe_rest:  # a probe, not the sky, takes what the weights leave
@@ -254,7 +253,7 @@ class ScenePrograms:
         own = None
         if not batch.probe and not batch.probe_blend and not batch.rest_probe:
             own = (batch.texture is not None, batch.transparent, 0, *NO_PROBE_LOOKUP, 0, *NO_PROBE_LOOKUP,
-                   0, *NO_PROBE_LOOKUP, *(batch.checker or NO_CHECKER))
+                   0, *NO_PROBE_LOOKUP, *(batch.checker or NO_CHECKER), batch.alpha_cutoff or 0.0)
         return (stamp, variants, glo, batch.vao(program), self.uniforms[glo], values, textures, own,
                 batch.mesh.index_count)
 
@@ -275,8 +274,8 @@ def geometry_invocations(view_count: int) -> int:
 BATCHED_INVOCATIONS = tuple(sorted({geometry_invocations(n) for n in range(1, MAX_BATCHED_VIEWS + 1)}))
 
 
-def _material_build(batch: InstanceBatch) -> tuple[bool, bool, float | None]:
+def _material_build(batch: InstanceBatch) -> tuple[bool, bool, bool]:
     """What of a batch's material picks its build: whether it samples an emissive and a
-    metallic-roughness map, and its alpha cutoff (None: drawn whole)."""
-    return batch.emissive_map is not None, batch.metallic_roughness_map is not None, batch.alpha_cutoff
+    metallic-roughness map, and whether it is a cutout."""
+    return batch.emissive_map is not None, batch.metallic_roughness_map is not None, batch.alpha_cutoff is not None
 

@@ -61,7 +61,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import moderngl
-import numpy as np
 
 import shaders
 from components.post import TONEMAP_CURVES
@@ -728,9 +727,3 @@ class _RelinkGL:
 
     def attribute_location(self, program: int, name: str) -> int:
         return self.gl["glGetAttribLocation"](program, name.encode())
-
-
-def float_literal(value: float) -> str:
-    """``value`` as a GLSL float literal (a define's text) that reads back as the same
-    32-bit float: a value compiled into a build, as a cutout's alpha threshold."""
-    return f"{float(np.float32(value)):.9e}"

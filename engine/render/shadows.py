@@ -47,7 +47,6 @@ from engine.render.bindings import (
 )
 from engine.render.gpu import Gpu
 from engine.render.raw_gl import LayeredCubeTarget
-from engine.render.shader_library import float_literal
 from engine.render.targets import release_framebuffer
 from engine.render.views import (
     CAMERA_BLOCK_BYTES,
@@ -135,11 +134,11 @@ class ShadowMaps:
         # Per directional slot: its level map's uv from light space (_axes), what its rings map from.
         self._level_uv: dict[int, tuple[float, float, float, float]] = {}
         self.ubo = ctx.buffer(self.block.tobytes())
-        # The caster programs by (build: _DEPTH, _DISTANCE, _LAYERED or _LEG; a cutout's alpha
-        # cutoff or None): _caster_program.
-        self._casters: dict[tuple[tuple[tuple[str, str], ...], float | None], moderngl.Program] = {}
+        # The caster programs by (build: _DEPTH, _DISTANCE, _LAYERED or _LEG; whether for
+        # cutouts): _caster_program.
+        self._casters: dict[tuple[tuple[tuple[str, str], ...], bool], moderngl.Program] = {}
         for build in (_DEPTH, _DISTANCE):
-            self._caster_program(build, None)
+            self._caster_program(build, False)
         # Until a light casts: a 1x1 atlas at the far depth and 1x1 cubes at the range's end
         # (every lookup lit), so the scene programs always have something defined to read.
         self.atlas = self._make_atlas((1, 1))
@@ -597,16 +596,16 @@ class ShadowMaps:
         return True
 
     # --- drawing --------------------------------------------------------------------------
-    def _caster_program(self, build: tuple[tuple[str, str], ...], cutoff: float | None) -> moderngl.Program:
-        """The caster program of ``build`` (its defines), for a cutout of alpha ``cutoff``
-        (the ``ALPHA_CUTOFF`` build: its albedo map read for its holes) or whole casters (None)."""
-        program = self._casters.get((build, cutoff))
+    def _caster_program(self, build: tuple[tuple[str, str], ...], cutout: bool) -> moderngl.Program:
+        """The caster program of ``build`` (its defines), for cutouts (``cutout``: the
+        ``ALPHA_CUTOFF`` build, its albedo map read for its holes) or whole casters."""
+        program = self._casters.get((build, cutout))
         if program is None:
             defines = dict(build)
-            if cutoff is not None:
-                defines["ALPHA_CUTOFF"] = float_literal(cutoff)
+            if cutout:
+                defines["ALPHA_CUTOFF"] = "1"
             geometry = "shadow_layered.geom" if "LAYERED" in defines else None
-            program = self._casters[(build, cutoff)] = self.renderer.shaders.program(
+            program = self._casters[(build, cutout)] = self.renderer.shaders.program(
                 "shadow.vert", "shadow.frag", geometry, defines=defines)
             program["Camera"].binding = CAMERA_BINDING
             if "albedo_map" in program:
@@ -617,30 +616,32 @@ class ShadowMaps:
                       uniforms: dict[str, object] | None = None) -> None:
         """Every opaque batch into the bound map, from ``view`` (None: the Camera block bound
         already), with the caster programs of ``build`` given ``uniforms`` (bytes: an array,
-        written whole); a cutout with its own build, its albedo map bound."""
+        written whole); a cutout with the cutout build, its albedo map bound and its cutoff set."""
         renderer = self.renderer
         ctx = self.ctx
         renderer.note_scene_change()  # a map drawn again: what the views' shadows read
         if view is not None:
             renderer.bind_view(view)
         ctx.polygon_offset = SLOPE_BIAS
-        ready: dict[float | None, moderngl.Program] = {}  # the programs given ``uniforms`` this time
+        ready: dict[bool, moderngl.Program] = {}  # the programs given ``uniforms`` this time
         try:
             for batch in renderer.opaque_batches():
                 if not batch.count:
                     continue
                 cutoff = batch.alpha_cutoff
-                program = ready.get(cutoff)
+                cutout = cutoff is not None
+                program = ready.get(cutout)
                 if program is None:
-                    program = ready[cutoff] = self._caster_program(build, cutoff)
+                    program = ready[cutout] = self._caster_program(build, cutout)
                     for name, value in (uniforms or {}).items():
                         if isinstance(value, bytes):
                             program[name].write(value)
                         else:
                             program[name].value = value
-                if cutoff is not None:
+                if cutout:
                     bind_texture(ctx, batch.texture if batch.texture is not None else renderer.blank_color,
                                  ALBEDO_UNIT)
+                    program["alpha_cutoff"].value = cutoff
                 batch.draw(program)
                 renderer.stats.shadow_draw_calls += 1
         finally:
