@@ -48,6 +48,9 @@ class MeshRef(TrackedComponent):
 MAX_NORMAL_SCALE = 16.0  # beyond this a normal map's bumps are all edge-on: a mistake, not a look
 
 
+MATERIAL_IMAGES = ("texture", "normal_map", "emissive_map", "metallic_roughness_map", "occlusion_map")
+
+
 @dataclass(eq=False)
 class Material(TrackedComponent):
     """Surface parameters, linear colour space.
@@ -78,8 +81,13 @@ class Material(TrackedComponent):
     ``emissiveTexture``, sRGB colour): with an ``Emissive`` component, the surface emits
     ``Emissive.power`` x the map's colour instead of ``power`` x its diffuse colour (glTF's
     ``emissiveFactor x emissiveTexture``, the factor being ``power``); without one it emits
-    nothing, as a glTF emissive texture with a zero factor.  A map left out costs nothing:
-    each is sampled only by a build of the scene shader for batches that have it.
+    nothing, as a glTF emissive texture with a zero factor.  ``occlusion_map`` (glTF's
+    ``occlusionTexture``, read linearly: its red channel) darkens the light that comes from
+    all round (the sky's or a probe's ambient light, and a sky or probe reflection) in the
+    creases a model's artist baked, by ``1 + occlusion_strength x (red - 1)``
+    (``occlusionTexture.strength``: 0 leaves it out, 1 is the map as it is); the lights'
+    own light is not darkened, as glTF says.  A map left out costs nothing: each is sampled
+    only by a build of the scene shader for batches that have it.
 
     ``alpha_cutoff`` (None: off) makes the material a cutout, as glTF's ``alphaMode: MASK``
     with its ``alphaCutoff``, three.js's ``alphaTest``, Unity's alpha clipping and Godot's
@@ -98,6 +106,8 @@ class Material(TrackedComponent):
     normal_scale: float = 1.0
     emissive_map: TextureData | None = None
     metallic_roughness_map: TextureData | None = None
+    occlusion_map: TextureData | None = None
+    occlusion_strength: float = 1.0
     alpha_cutoff: float | None = None
 
     def _validate(self, name: str, value: Any) -> Any:
@@ -116,7 +126,9 @@ class Material(TrackedComponent):
             return finite(self, name, value, low=0.0, high=1.0)
         if name == "normal_scale":
             return finite(self, name, value, low=0.0, high=MAX_NORMAL_SCALE)
-        if name in ("texture", "normal_map", "emissive_map", "metallic_roughness_map") and value is not None:
+        if name == "occlusion_strength":
+            return finite(self, name, value, low=0.0, high=1.0)
+        if name in MATERIAL_IMAGES and value is not None:
             if getattr(type(value), "ASSET_KIND", None) != "texture":
                 raise ComponentValueError(
                     f"Material.{name} must be an engine.assets.texture_data.TextureData, got {type(value).__name__}")

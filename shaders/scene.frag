@@ -80,6 +80,7 @@ struct Surface {
     float alpha;
     float metallic;
     float roughness;
+    float occlusion;  // the share of the light from all round that reaches it (material_occlusion)
     vec3 f0;
     vec3 reflect_dir;   // unit, eye ray reflected about the normal
     float reflect_lod;  // sky mip level that matches the pixel footprint of reflect_dir
@@ -100,7 +101,7 @@ float cube_lod(vec3 direction, float n) {
 
 vec3 direct_lighting(Surface s) {
     vec3 diffuse = s.albedo * (1.0 - s.metallic) / PI;
-    vec3 total = ambient_irradiance(s.position, s.normal) * diffuse;  // E(n) x albedo x (1 - metallic) / pi
+    vec3 total = ambient_irradiance(s.position, s.normal) * diffuse * s.occlusion;  // E(n) x albedo x (1 - metallic) / pi
     // The maps looked up before the loops (shadows.glsl); none for an instance that receives
     // no shadow (MeshRef.receives_shadows: its code's NO_RECEIVE_BIT, visibility.glsl).
     bool shadowed = !receives_no_shadow(v_tint.w);
@@ -164,7 +165,7 @@ vec3 sample_environment(vec3 direction, float lod, float roughness) {
 
 vec3 reflect_skybox(vec3 color, Surface s) {
     // Sample the sky along reflect(view, normal); mix by the instance's amount.
-    vec3 env = sample_environment(s.reflect_dir, s.reflect_lod, s.roughness) * v_tint.rgb;
+    vec3 env = sample_environment(s.reflect_dir, s.reflect_lod, s.roughness) * v_tint.rgb * s.occlusion;
     return mix(color, env, v_reflect.x);
 }
 
@@ -175,7 +176,7 @@ vec3 reflect_probe(vec3 color, Surface s) {
     // A cube map captured around the object (engine/render/probes.py), blurred by roughness
     // and weighted by GGXReflect with the material's F0: a metal tints what it reflects
     // (brass is golden), a dielectric reflects most at grazing angles.
-    vec3 env = probe_radiance(s.position, s.reflect_dir, s.reflect_lod, s.roughness);
+    vec3 env = probe_radiance(s.position, s.reflect_dir, s.reflect_lod, s.roughness) * s.occlusion;
     vec3 reflected = ggx_reflect(s.normal, s.reflect_dir, s.to_eye, env, s.f0, s.roughness);
     return mix(color, reflected * v_tint.rgb, v_reflect.x);
 }
@@ -307,6 +308,7 @@ void main() {
     s.metallic = v_surface.x;
     s.roughness = v_surface.y;
     float metal_share = apply_metallic_roughness(s);  // x the metallic-roughness map
+    s.occlusion = material_occlusion();
     s.f0 = mix(vec3(0.04), s.albedo, s.metallic);
     s.reflect_dir = reflect(-s.to_eye, s.normal);
     s.refract_dir = refract(-s.to_eye, s.normal, 1.0 / max(v_reflect.y, 1.0));

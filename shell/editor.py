@@ -28,7 +28,7 @@ import tomllib
 from pyglm import glm
 
 from components import Camera, ComponentValueError, Material, Portal, Transform
-from components.rendering import automatic_mix
+from components.rendering import MATERIAL_IMAGES, automatic_mix
 from engine.assets.level_assets import MESH_MAKERS, LevelAssets, level_texture, user_asset_roots
 from engine.assets.level_read import DERIVED_COMPONENTS, ENGINE_COMPONENTS, REFERENCE_FIELDS
 from engine.assets.level_save import save_level
@@ -45,7 +45,7 @@ NEW_MESH = "box"    # the shape a MeshRef added in the editor starts as
 MIN_SCALE_FACTOR = 0.01  # a scale drag shrinks an axis to this share of its scale at the drag's start at most
 SAME_ANGLES_DEGREES = 0.01  # a rotation within this of the angles last shown shows them as they were
                             # (at yaw 90 pitch and roll turn about one axis: the triple is not unique)
-TEXTURE_FIELDS = ("texture", "normal_map", "emissive_map", "metallic_roughness_map")  # Material's images
+TEXTURE_FIELDS = MATERIAL_IMAGES  # Material's images
 
 # Fields whose None means "the engine decides" (what it decides: ``Editor.automatic``).  The
 # inspector shows such a field as automatic with a button that pins the value in use now, and

@@ -151,7 +151,9 @@ class ExtractSystem(esper.Processor):
                                             material.metallic_roughness_map if material else None,
                                             second_probe=second, probe_blend=blend.blended, rest_probe=blend.rest,
                                             mirrored=mirroring_seen() and _mirrors(transform.world),
-                                            alpha_cutoff=material.alpha_cutoff if material else None)
+                                            alpha_cutoff=material.alpha_cutoff if material else None,
+                                            occlusion_map=material.occlusion_map if material else None,
+                                            occlusion_strength=material.occlusion_strength if material else 1.0)
         except GLLimitError as exc:
             raise GLLimitError(f"entity {entity}: {exc}") from None
         if transparent:  # a see-through mirror or portal (water): drawn before the view trees' claims

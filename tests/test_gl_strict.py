@@ -107,23 +107,24 @@ def _spot_shadows(ctx):
 
 
 def _cutouts(ctx):
-    """The mirror ring with two cutout grates (two cutoffs: two builds) over its boxes, the
-    lamp casting (the layered cube's cutout build) and a mirror throwing the sun (the
-    virtual light's caster passes), reflected in the batched levels."""
+    """The mirror ring with two cutout grates (two cutoffs, one with an occlusion map) over
+    its boxes, the lamp casting (the layered cube's cutout build) and a mirror throwing the
+    sun (the virtual light's caster passes), reflected in the batched levels."""
     from benchmarks.lighting import _mirror_light
     from benchmarks.mirrors import MirrorRing
     from components import Material, MeshRef, PointLight, Transform
     from engine.assets.mesh import plane
     from tests.test_alpha_cutout import SLAT_TEXTURE
+    from tests.test_occlusion_maps import OCCLUSION
 
     def configure(engine):
         _mirror_light(engine)
         world = engine.world
         for _, light in world.query_one(PointLight):
             light.shadows = True
-        for x, cutoff in ((-1.0, 0.5), (1.0, 0.3)):
+        for x, cutoff, occlusion in ((-1.0, 0.5, None), (1.0, 0.3, OCCLUSION)):
             world.spawn(Transform(position=(x, 1.6, 0.0)), MeshRef(plane(1.6, 1.6)),
-                        Material(texture=SLAT_TEXTURE, alpha_cutoff=cutoff))
+                        Material(texture=SLAT_TEXTURE, alpha_cutoff=cutoff, occlusion_map=occlusion))
     return _engine_frames(ctx, MirrorRing(4), 3, configure)
 
 
@@ -193,7 +194,7 @@ SCENES: dict[str, Callable[[moderngl.Context], list[np.ndarray]]] = {
     "post": _lighting("post"),
     "point_shadows": _point_shadows,
     "spot_shadows": _spot_shadows,
-    "cutouts": _cutouts,
+    "cutouts_occlusion": _cutouts,
     "fog_per_mirror": _fog("per_mirror"),
     "fog_batched": _fog("batched"),
     "probes_dynamic": _probes("every_frame"),

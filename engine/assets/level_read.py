@@ -357,7 +357,9 @@ def _check_mirror(path: Path, index: int, name: str, parts: list[tuple[type, dic
         raise LevelError(path, str(exc).replace("Mirror on entity 0: its ", ""), line, name, "Mirror") from None
 
 
-_MATERIAL_MAPS = {("Material", name) for name in ("normal_map", "emissive_map", "metallic_roughness_map")}
+_MATERIAL_MAPS = {("Material", name) for name in ("normal_map", "emissive_map", "metallic_roughness_map",
+                                                  "occlusion_map")}
+_LINEAR_MAPS = ("normal_map", "metallic_roughness_map", "occlusion_map")  # data, not colour: 16 bits kept
 
 
 def _annotation_problem(cls: type, field: str, value: Any) -> str | None:
@@ -429,7 +431,7 @@ def _decode(cls_name: str, field: str, value: Any, where: LevelAssets) -> Any:
         return level_mesh(value, where)
     if field == "texture" or (cls_name, field) in _MATERIAL_MAPS:
         # A linear map (normal, metallic-roughness) keeps a 16-bit PNG's 16 bits; colour is 8 bits.
-        return level_texture(value, where, normal_map=field in ("normal_map", "metallic_roughness_map"))
+        return level_texture(value, where, normal_map=field in _LINEAR_MAPS)
     if cls_name == "Transform" and field == "rotation":
         return _rotation(value)
     if cls_name == "Skybox" and field == "faces":

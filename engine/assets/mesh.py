@@ -344,6 +344,8 @@ class ModelPart:
     normal_scale: float = 1.0
     emissive_map: TextureData | None = None
     metallic_roughness_map: TextureData | None = None
+    occlusion_map: TextureData | None = None   # glTF's occlusionTexture (Material.occlusion_map)
+    occlusion_strength: float = 1.0            # its strength
     alpha_cutoff: float | None = None  # glTF's alphaMode MASK: its alphaCutoff (Material.alpha_cutoff)
     name: str = ""  # "file:part", as a level file's part = "..." names it (parts may share one mesh)
 
@@ -488,7 +490,8 @@ def model_bytes(parts: Sequence[ModelPart]) -> int:
         if id(mesh) not in seen:
             seen.add(id(mesh))
             total += mesh.positions.nbytes + mesh.normals.nbytes + mesh.uvs.nbytes + mesh.indices.nbytes
-        for texture in (part.texture, part.normal_map, part.emissive_map, part.metallic_roughness_map):
+        for texture in (part.texture, part.normal_map, part.emissive_map, part.metallic_roughness_map,
+                        part.occlusion_map):
             if texture is not None and id(texture) not in seen:
                 seen.add(id(texture))
                 total += texture.pixels.nbytes
@@ -695,6 +698,11 @@ class _MaterialMaps:
             # Reflective where any texel is metal; the map's blue weighs the reflection per pixel.
             metal = part.metallic_roughness_map.pixels[..., 2].max() > 0
             part.reflectivity = part.metallic if metal else 0.0
+        image = getattr(material, "occlusionTexture", None)
+        self.check_gltf_slot(material, "occlusionTexture", image)
+        if image is not None:
+            part.occlusion_map = self.image(image, f"{what}: occlusionTexture", "linear")
+            part.occlusion_strength = self._occlusion_strength(doc_material, what)
         image = getattr(material, "emissiveTexture", None)
         self.check_gltf_slot(material, "emissiveTexture", image)
         factor = _floats(material.emissiveFactor)
@@ -727,6 +735,15 @@ class _MaterialMaps:
             raise AssetError(f"{what}: normalTexture.scale must be a number in [0, {MAX_MTL_BUMP_SCALE:g}], "
                              f"got {scale!r}")
         return float(scale)
+
+    @staticmethod
+    def _occlusion_strength(doc_material: dict, what: str) -> float:
+        """The file's ``occlusionTexture.strength`` of this material (glTF: 0 to 1, default 1)."""
+        info = doc_material.get("occlusionTexture") if isinstance(doc_material, dict) else None
+        strength = info.get("strength", 1.0) if isinstance(info, dict) else 1.0
+        if isinstance(strength, bool) or not isinstance(strength, numbers.Real) or not 0.0 <= float(strength) <= 1.0:
+            raise AssetError(f"{what}: occlusionTexture.strength must be a number in [0, 1], got {strength!r}")
+        return float(strength)
 
     def _emissive(self, part: ModelPart, texture: TextureData, factor: list[float], what: str) -> None:
         """An emissive map emitted at the factor's largest channel (``Emissive.power``); a

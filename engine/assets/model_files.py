@@ -350,7 +350,8 @@ def _mtl_libraries(obj: Path, names: list[str], used: set[str], roots, textures:
 
 # --- glTF --------------------------------------------------------------------------------------
 
-GLTF_TEXTURE_SLOTS = ("baseColorTexture", "metallicRoughnessTexture", "normalTexture", "emissiveTexture")
+GLTF_TEXTURE_SLOTS = ("baseColorTexture", "metallicRoughnessTexture", "normalTexture", "emissiveTexture",
+                      "occlusionTexture")
 MATERIAL_TAG = "speculum-material-"  # + index: the name trimesh is given for each material
 
 

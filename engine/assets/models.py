@@ -57,7 +57,8 @@ def spawn_model(world: World, path: str | Path, position: glm.vec3 | Sequence[fl
                 MeshRef(part.mesh),
                 Material(color=part.color, texture=part.texture, metallic=part.metallic, roughness=part.roughness,
                          normal_map=part.normal_map, normal_scale=part.normal_scale, emissive_map=part.emissive_map,
-                         metallic_roughness_map=part.metallic_roughness_map, alpha_cutoff=part.alpha_cutoff),
+                         metallic_roughness_map=part.metallic_roughness_map, occlusion_map=part.occlusion_map,
+                         occlusion_strength=part.occlusion_strength, alpha_cutoff=part.alpha_cutoff),
             ]
             if part.emissive_factor > 0.0:
                 components.append(Emissive(part.emissive_factor))
@@ -117,6 +118,7 @@ def _name_sources(path: str | Path, parts: list) -> None:
         if part.mesh.source is None:
             name = part.mesh.name.split(":", 1)[-1]
             part.mesh.source = {"file": file, **({"part": name} if len(parts) > 1 else {})}
-        for texture in (part.texture, part.normal_map, part.emissive_map, part.metallic_roughness_map):
+        for texture in (part.texture, part.normal_map, part.emissive_map, part.metallic_roughness_map,
+                        part.occlusion_map):
             if texture is not None and texture.source is None:
                 texture.source = {"inside": file}

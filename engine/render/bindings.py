@@ -113,6 +113,8 @@ PRESENT_UNIT = 17        # present, bloom's first step, exposure's luminance ste
 # fragment stage reads at most 16 samplers (GL 4.1's least GL_MAX_TEXTURE_IMAGE_UNITS), and
 # with it a build holds 15, but 0-15 are each some pass's.
 SPOT_SHADOW_UNIT = 18    # scene (SPOT_MAP builds): the spot lights' perspective shadow maps
+# A batch's occlusion map past 16 as well: with it the fullest build reads 16 samplers.
+OCCLUSION_UNIT = 19      # scene (OCCLUSION_MAP builds): the batch's occlusion map (Material.occlusion_map)
 FXAA_UNIT = 0            # FXAA: the encoded frame (engine/render/present.py)
 EXPOSURE_UNIT = 2        # present, exposure adaptation: the 1x1 adapted exposure (engine/render/post.py)
 EXPOSURE_MEAN_UNIT = 0   # exposure adaptation: the 64x64 log-luminance image it averages

@@ -145,7 +145,7 @@ class Gpu:
         # Textures shared by reference count (the Renderer makes and releases them), by
         # id(TextureData); ("normal", id): uploaded linear (normal and metallic-roughness maps)
         self._textures: dict[object, Shared] = {}
-        # (mesh, texture, probe, transparent entity, normal map, emissive map, metallic-roughness map) -> batch
+        # BatchKey (mesh, texture, probes, transparent entity, the material's maps, ...) -> batch
         self.batches: dict[tuple[int, int, int, int, int, int, int], InstanceBatch] = {}
         self._draw_order: list[InstanceBatch] = []   # non-empty batches, smallest extent first
         self._transparent: list[InstanceBatch] = []  # the non-empty transparent ones (found with it)

@@ -162,6 +162,8 @@ class BatchKey(NamedTuple):
     metallic_roughness_map: int
     mirrored: bool                  # a negative determinant: the other winding
     alpha_cutoff: float | None = None  # a cutout's (Material.alpha_cutoff): its draws' uniform
+    occlusion_map: int = 0              # its image's id (0: none)
+    occlusion_strength: float = 1.0     # Material.occlusion_strength: its draws' uniform
 
 
 class InstanceBatch:
@@ -252,6 +254,10 @@ class InstanceBatch:
         # A cutout's alpha threshold (Material.alpha_cutoff; None: drawn whole): the scene and
         # shadow builds that draw it discard below it, reading its texture's alpha.
         self.alpha_cutoff: float | None = None
+        # The material's occlusion map (linear; None: the build without it) and its strength,
+        # part of the batch's key (Renderer.batch_for), the strength its draws' uniform.
+        self.occlusion_map: moderngl.Texture | None = None
+        self.occlusion_strength = 1.0
 
     # --- rows ----------------------------------------------------------------------------
     def add(self, entity: int) -> np.void:

@@ -129,30 +129,35 @@ class Renderer(Gpu):
                   emissive_map: TextureData | None = None,
                   metallic_roughness_map: TextureData | None = None, second_probe: int = 0,
                   probe_blend: bool = False, rest_probe: int = 0,
-                  mirrored: bool = False, alpha_cutoff: float | None = None) -> InstanceBatch:
+                  mirrored: bool = False, alpha_cutoff: float | None = None,
+                  occlusion_map: TextureData | None = None, occlusion_strength: float = 1.0) -> InstanceBatch:
         """The batch of (mesh, albedo texture, normal map, emissive map, metallic-roughness
-        map, the probe its instances sample; 0: none).  A transparent entity gets a batch of
-        its own (``transparent_entity``): transparent things are drawn one by one, farthest
-        first.  Textures are shared by every batch that uses them; a normal map and a
-        metallic-roughness map are uploaded linear (their texels are vectors and factors,
+        map, the probe its instances sample; 0: none, a cutout's cutoff, an occlusion map and
+        its strength).  A transparent entity gets a batch of its own
+        (``transparent_entity``): transparent things are drawn one by one, farthest first.
+        Textures are shared by every batch that uses them; a normal, metallic-roughness or
+        occlusion map is uploaded linear (their texels are vectors and factors,
         not colours), so one image used both ways is two GPU textures."""
         # ``second_probe`` and ``probe_blend``: the instances blend two probes, or a probe and
         # the sky, by per-instance weights (probe_rules.probe_blend; the PROBE_BLEND build);
         # ``rest_probe``: a probe, not the sky, takes what the weights leave (PROBE_REST).
         # ``mirrored``: instances whose model matrix has a negative determinant, drawn with the
         # other winding (ScenePass), so they get batches of their own.  ``alpha_cutoff``: a
-        # cutout's threshold (Material.alpha_cutoff): a batch of its own, its builds' uniform.
+        # cutout's threshold (Material.alpha_cutoff): a batch of its own, its builds' uniform;
+        # so is an occlusion map's strength.
         key = BatchKey(mesh.id, id(texture) if texture is not None else 0,
                        (probe, second_probe, probe_blend, rest_probe), transparent_entity,
                        id(normal_map) if normal_map is not None else 0,
                        id(emissive_map) if emissive_map is not None else 0,
                        id(metallic_roughness_map) if metallic_roughness_map is not None else 0, mirrored,
-                       alpha_cutoff)
+                       alpha_cutoff, id(occlusion_map) if occlusion_map is not None else 0,
+                       occlusion_strength if occlusion_map is not None else 1.0)
         batch = self.batches.get(key)
         if batch is None:
             for name, image in (("Material.texture", texture), ("Material.normal_map", normal_map),
                                 ("Material.emissive_map", emissive_map),
-                                ("Material.metallic_roughness_map", metallic_roughness_map)):
+                                ("Material.metallic_roughness_map", metallic_roughness_map),
+                                ("Material.occlusion_map", occlusion_map)):
                 if image is not None:
                     self.check_texture(image, name)  # before anything is made: nothing half-built
             gpu_mesh = self._acquire(self._meshes, mesh.id, lambda: GpuMesh(self.ctx, mesh))
@@ -170,6 +175,10 @@ class Renderer(Gpu):
                 batch.metallic_roughness_map = self._acquire(
                     self._textures, ("normal", id(metallic_roughness_map)),
                     lambda: self._upload_texture(metallic_roughness_map, linear=True))
+            if occlusion_map is not None:  # linear, shared with the same image as a normal or metallic map
+                batch.occlusion_map = self._acquire(self._textures, ("normal", id(occlusion_map)),
+                                                    lambda: self._upload_texture(occlusion_map, linear=True))
+                batch.occlusion_strength = key.occlusion_strength
             batch.key = key
             batch.mirrored = mirrored
             batch.alpha_cutoff = alpha_cutoff
@@ -219,6 +228,8 @@ class Renderer(Gpu):
             self._release(self._textures, key.emissive_map)
         if key.metallic_roughness_map:
             self._release(self._textures, ("normal", key.metallic_roughness_map))
+        if key.occlusion_map:
+            self._release(self._textures, ("normal", key.occlusion_map))
 
     @staticmethod
     def _acquire(table: dict[int, Shared], key: int, make):

@@ -33,6 +33,7 @@ from engine.render.bindings import (
     METALLIC_ROUGHNESS_UNIT,
     NODE_UNIT,
     NORMAL_UNIT,
+    OCCLUSION_UNIT,
     POINT_SHADOW_UNITS,
     PROBE2_UNIT,
     PROBE_REST_UNIT,
@@ -57,7 +58,8 @@ PER_DRAW_UNIFORMS = ("sky_face_size", "has_albedo_map", "transparent",
                      "probe_face_size", "probe_position", "probe_box_min", "probe_box_max",
                      "probe2_face_size", "probe2_position", "probe2_box_min", "probe2_box_max",
                      "probe_rest_face_size", "probe_rest_position", "probe_rest_box_min", "probe_rest_box_max",
-                     "checker_cells", "checker_even", "checker_odd", "alpha_cutoff")
+                     "checker_cells", "checker_even", "checker_odd", "alpha_cutoff",
+                     "occlusion_strength")
 PER_PASS_UNIFORMS = 1  # the first changes with the pass; the rest with the batch (a view's node
 # index is its Camera block's: nothing is written per view)
 NO_PROBE_LOOKUP = ((0.0, 0.0, 0.0, 0.0),) * 3  # a probe's lookup uniforms where the sky stands in for it
@@ -87,7 +89,7 @@ class ScenePrograms:
 
     def program(self, variants: tuple[int, int, int] | None = None, invocations: int = 0,
                 layered: str = "", normal_mapped: bool = False, checker: bool = False,
-                material: tuple[bool, bool, bool] = (False, False, False), probe_blend: bool = False,
+                material: tuple[bool, bool, bool, bool] = (False, False, False, False), probe_blend: bool = False,
                 ambient_probes: bool = False, probe_rest: bool = False, unlit: bool = False,
                 masked: bool = False) -> moderngl.Program:
         """The scene program for a batch of ``variants`` (None: mixed, switched per
@@ -97,9 +99,10 @@ class ScenePrograms:
         pixel behind a uniform branch), and with or without the analytic checker (``CHECKER``:
         a generated checker texture drawn from its cells, filtered by the pixel's footprint,
         instead of sampled), and with or without each of the material maps ``material``
-        names (emissive, metallic-roughness: ``EMISSIVE_MAP`` and ``METALLIC_ROUGHNESS_MAP``
-        builds, shaders/include/material_maps.glsl; a batch without them samples nothing for
-        them) and whether it is a cutout (``ALPHA_CUTOFF``: it discards where its alpha falls
+        names (emissive, metallic-roughness, occlusion: ``EMISSIVE_MAP``,
+        ``METALLIC_ROUGHNESS_MAP`` and ``OCCLUSION_MAP`` builds,
+        shaders/include/material_maps.glsl; a batch without them samples nothing for them)
+        and whether it is a cutout (``ALPHA_CUTOFF``: it discards where its alpha falls
         below its ``alpha_cutoff`` uniform; only its builds may discard, so every other keeps
         its early depth test on llvmpipe),
         blending probes (``probe_blend``: ``PROBE_BLEND``) with a probe instead of the sky
@@ -134,6 +137,8 @@ class ScenePrograms:
                 defines["METALLIC_ROUGHNESS_MAP"] = "1"
             if material[2]:
                 defines["ALPHA_CUTOFF"] = "1"
+            if material[3]:
+                defines["OCCLUSION_MAP"] = "1"
             if probe_blend:  # two probes and the sky by the instances' weights (shaders/include/probe.glsl)
                 defines["PROBE_BLEND"] = "1"
                 if probe_rest:  # a probe, not the sky, takes what the weights leave
@@ -177,7 +182,7 @@ class ScenePrograms:
                                ("shadow_atlas", SHADOW_ATLAS_UNIT), ("point_shadow0", POINT_SHADOW_UNITS[0]),
                                ("point_shadow1", POINT_SHADOW_UNITS[1]),
                                ("irradiance_table", IRRADIANCE_UNIT), ("virtual_atlas", VIRTUAL_SHADOW_UNIT),
-                               ("spot_atlas", SPOT_SHADOW_UNIT)):
+                               ("spot_atlas", SPOT_SHADOW_UNIT), ("occlusion_map", OCCLUSION_UNIT)):
                 if name in program:
                     program[name].value = unit
             if "Lights" in program:
@@ -249,11 +254,13 @@ class ScenePrograms:
         albedo = batch.texture if batch.texture is not None else self.renderer.blank_color
         textures = tuple((unit, texture) for unit, texture in (
             (ALBEDO_UNIT, albedo), (NORMAL_UNIT, batch.normal_map), (EMISSIVE_MAP_UNIT, batch.emissive_map),
-            (METALLIC_ROUGHNESS_UNIT, batch.metallic_roughness_map)) if texture is not None)
+            (METALLIC_ROUGHNESS_UNIT, batch.metallic_roughness_map), (OCCLUSION_UNIT, batch.occlusion_map))
+            if texture is not None)
         own = None
         if not batch.probe and not batch.probe_blend and not batch.rest_probe:
             own = (batch.texture is not None, batch.transparent, 0, *NO_PROBE_LOOKUP, 0, *NO_PROBE_LOOKUP,
-                   0, *NO_PROBE_LOOKUP, *(batch.checker or NO_CHECKER), batch.alpha_cutoff or 0.0)
+                   0, *NO_PROBE_LOOKUP, *(batch.checker or NO_CHECKER), batch.alpha_cutoff or 0.0,
+                   batch.occlusion_strength)
         return (stamp, variants, glo, batch.vao(program), self.uniforms[glo], values, textures, own,
                 batch.mesh.index_count)
 
@@ -274,8 +281,9 @@ def geometry_invocations(view_count: int) -> int:
 BATCHED_INVOCATIONS = tuple(sorted({geometry_invocations(n) for n in range(1, MAX_BATCHED_VIEWS + 1)}))
 
 
-def _material_build(batch: InstanceBatch) -> tuple[bool, bool, bool]:
+def _material_build(batch: InstanceBatch) -> tuple[bool, bool, bool, bool]:
     """What of a batch's material picks its build: whether it samples an emissive and a
-    metallic-roughness map, and whether it is a cutout."""
-    return batch.emissive_map is not None, batch.metallic_roughness_map is not None, batch.alpha_cutoff is not None
+    metallic-roughness map, whether it is a cutout, and whether it samples an occlusion map."""
+    return (batch.emissive_map is not None, batch.metallic_roughness_map is not None, batch.alpha_cutoff is not None,
+            batch.occlusion_map is not None)
 

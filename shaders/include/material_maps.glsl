@@ -1,8 +1,9 @@
-// Material maps beside the albedo and normal maps: Material.metallic_roughness_map and
-// Material.emissive_map, as glTF 2.0 defines its metallicRoughnessTexture and emissiveTexture.
-// Each is sampled only in a build of scene.frag for batches that have it
-// (METALLIC_ROUGHNESS_MAP, EMISSIVE_MAP, engine/render/scene_pass.py); without the define
-// these functions are the plain material's, and a map left out costs nothing.
+// Material maps beside the albedo and normal maps: Material.metallic_roughness_map,
+// Material.emissive_map and Material.occlusion_map, as glTF 2.0 defines its
+// metallicRoughnessTexture, emissiveTexture and occlusionTexture.  Each is sampled only in a
+// build of scene.frag for batches that have it (METALLIC_ROUGHNESS_MAP, EMISSIVE_MAP,
+// OCCLUSION_MAP: engine/render/scene_programs.py); without the define these functions are
+// the plain material's, and a map left out costs nothing.
 // Included by scene.frag after its Surface struct; reads its v_uv.
 
 #ifdef METALLIC_ROUGHNESS_MAP
@@ -11,6 +12,21 @@ uniform sampler2D metallic_roughness_map;  // linear: green = roughness, blue = 
 #ifdef EMISSIVE_MAP
 uniform sampler2D emissive_map;            // sRGB colour, decoded to linear by the texture unit
 #endif
+#ifdef OCCLUSION_MAP
+uniform sampler2D occlusion_map;           // linear: red = how much light from all round reaches
+uniform float occlusion_strength;          // Material.occlusion_strength (glTF's strength)
+#endif
+
+// The share of the light from all round (ambient light, sky and probe reflections) that
+// reaches the surface: glTF's 1 + strength x (occlusion - 1); 1 without a map.  A light's
+// own light is not scaled (glTF: occlusion is of indirect light only).
+float material_occlusion() {
+#ifdef OCCLUSION_MAP
+    return 1.0 + occlusion_strength * (texture(occlusion_map, v_uv).r - 1.0);
+#else
+    return 1.0;
+#endif
+}
 
 // Scale the surface's metallic and roughness factors by the map (glTF: the factors multiply
 // the texture's B and G channels).  Returns the texel's metallic share (1 without a map),
