@@ -34,7 +34,7 @@ from engine.assets.texture_data import TextureData
 from engine.core.errors import AssetError
 from engine.core.world import World
 from tests.support import look_from, pixel_rays, srgb_to_linear
-from tests.test_materials_from_files import write_glb
+from tests.test_materials_from_files import write_glb, write_obj
 
 GRATE_Y, GRATE_HALF, SLATS = 1.2, 1.2, 8
 SUN = np.array([-1.0, -1.0, -0.2]) / np.linalg.norm([-1.0, -1.0, -0.2])
@@ -364,3 +364,27 @@ def test_a_flat_metal_cutout_from_a_file_reflects_without_becoming_a_mirror(tmp_
     (part,) = [e for e, (t,) in plain.query(Transform) if t.parent == root]
     assert plain.has(part, Mirror)
     assert math.isclose(plain.get(part, Material).color.w, 1.0)
+
+
+def test_an_obj_dissolve_map_makes_an_opaque_material_a_cutout(scene, tmp_path):
+    """An MTL with ``map_Kd`` (the slats' colour, opaque) and ``map_d`` (a grey image: the
+    slats white, the gaps black) is the slatted texture's cutout at 0.5: the model draws the
+    frame the grate made in code draws; ``d`` below 1 keeps it blended instead."""
+    colour = slat_pixels()
+    grey = colour[..., 3].copy()
+    colour[..., 3] = 255
+    path = write_obj(tmp_path, plane(2 * GRATE_HALF, 2 * GRATE_HALF), "Kd 1 1 1\nmap_Kd colour.png\nmap_d mask.png",
+                     {"colour.png": colour[..., :3].copy(), "mask.png": grey})
+    (part,) = load_model(path)
+    assert part.alpha_cutoff == 0.5
+    np.testing.assert_array_equal(part.texture.pixels, slat_pixels())
+
+    def build(world):
+        _grate(world, grate=False)
+        world.resources["ids"]["grate"] = spawn_model(world, path, position=(0.0, GRATE_Y, 0.0))
+    from_file = scene(build, SIZE)
+    in_code = scene(_grate, SIZE)
+    assert np.abs(from_file.frame().astype(int) - in_code.frame()).max() <= 1
+    (tmp_path / "model.mtl").write_text("newmtl m\nKd 1 1 1\nd 0.8\nmap_Kd colour.png\nmap_d mask.png\n")
+    (part,) = load_model(path)
+    assert part.alpha_cutoff is None and part.color[3] == pytest.approx(0.8)

@@ -330,7 +330,9 @@ class ModelPart:
     ``metallicRoughnessTexture``).  With an emissive map, ``emissive_factor`` is the
     strength the map is emitted at (the largest channel of glTF's ``emissiveFactor`` or the
     MTL's ``Ke``; a factor that is not grey has its hue multiplied into the map's texels),
-    not the ratio of emissive to diffuse colour it is without one."""
+    not the ratio of emissive to diffuse colour it is without one.  An MTL's ``map_d`` (its
+    dissolve map) is multiplied into the texture's alpha, making an opaque material a
+    cutout (``alpha_cutoff``; glTF's ``alphaMode`` MASK gives one too)."""
 
     mesh: Mesh
     local: glm.mat4
@@ -593,6 +595,7 @@ def _read_material(tm, part: ModelPart, path: Path, maps: _MaterialMaps) -> None
 
 
 BLENDED_ALPHA = 0.999  # a glTF BLEND material's alpha where its factor's is 1: the transparent slot's
+MTL_DISSOLVE_CUTOFF = 0.5  # an opaque OBJ material with a map_d: a cutout at this alpha
 
 
 def _gltf_alpha(material, part: ModelPart, what: str) -> None:
@@ -774,12 +777,41 @@ class _MaterialMaps:
                 texture = self._made[key]
             part.normal_map = texture
             part.normal_scale = 1.0 if entry.bump_scale is None else entry.bump_scale
+        entry = found.get("map_d")
+        if entry is not None:
+            self._dissolve(part, self._file(entry, False), entry)
         entry = found.get("map_ke")
         if entry is not None:
             ke = _floats(extra.get("ke"))
             factor = [1.0, 1.0, 1.0] if ke is None else (ke * 3 if len(ke) == 1 else ke[:3])
             if max(factor) > 0.0:
                 self._emissive(part, self._file(entry, False), factor, entry.where)
+
+    def _dissolve(self, part: ModelPart, mask: TextureData, entry: MtlMap) -> None:
+        """An MTL ``map_d`` (the dissolve map: a grey image, or one with alpha, whose alpha
+        is used) multiplied into the albedo texture's alpha (a white one where the material
+        has none), the mask resampled to the texture's size (nearest texel).  A material
+        that is otherwise opaque (``d`` 1) becomes a cutout at ``MTL_DISSOLVE_CUTOFF``, as
+        foliage and chains are drawn from such files (Sponza's leaves); with ``d`` below 1
+        it stays blended, the map scaling its alpha."""
+        key = ("dissolved", id(part.texture), str(entry.path))
+        texture = self._made.get(key)
+        if texture is None:
+            masked = mask.as_8_bits()
+            alpha = masked[..., 3] if mask.has_alpha else masked[..., 0]
+            base = part.texture.as_8_bits().copy() if part.texture is not None else \
+                np.full(alpha.shape + (4,), 255, np.uint8)
+            height, width = base.shape[:2]
+            if alpha.shape != (height, width):
+                rows = np.arange(height) * alpha.shape[0] // height
+                columns = np.arange(width) * alpha.shape[1] // width
+                alpha = alpha[rows[:, None], columns[None, :]]
+            base[..., 3] = (base[..., 3].astype(np.uint16) * alpha // 255).astype(np.uint8)
+            name = f"{part.texture.name if part.texture is not None else 'white'} x {mask.name}"
+            texture = self._made[key] = TextureData(base, name=name)
+        part.texture = texture
+        if part.color[3] >= 1.0:
+            part.alpha_cutoff = MTL_DISSOLVE_CUTOFF
 
     def _file(self, entry: MtlMap, linear: bool) -> TextureData:
         key = ("file", str(entry.path), linear)

@@ -111,7 +111,7 @@ def side_file(owner: Path, name: str, roots: Sequence[Path], kind: str, owner_ki
 # the file name is what follows them (it may hold spaces).
 MTL_OPTION_VALUES = {"-blendu": 1, "-blendv": 1, "-bm": 1, "-boost": 1, "-cc": 1, "-clamp": 1, "-imfchan": 1,
                      "-texres": 1, "-type": 1, "-mm": 2, "-o": 3, "-s": 3, "-t": 3}
-MTL_MAP_KEYS = ("map_kd", "norm", "map_bump", "bump", "map_ke")  # the maps the engine draws
+MTL_MAP_KEYS = ("map_kd", "norm", "map_bump", "bump", "map_ke", "map_d")  # the maps the engine draws
 MTL_FILE_KEYS = ("map_ka", "map_kd", "map_ks", "map_ke", "map_ns", "map_d", "map_bump", "bump", "disp", "decal",
                  "norm", "map_pr", "map_pm", "map_ps", "map_aat", "map_refl")
 MTL_NUMBER_KEYS = ("kd", "ka", "ks", "ke", "ns", "d", "tr", "ni")
@@ -178,7 +178,7 @@ def mtl_map_statement(words: list[str], library: Path, number: int, roots: Seque
 @dataclass
 class ObjFiles:
     """What ``prepare_obj`` found: the bytes trimesh parses, its resolver, and each used
-    material's map statements by key (``map_kd``, ``norm``, ``bump``, ``map_ke``)."""
+    material's map statements by key (``map_kd``, ``norm``, ``bump``, ``map_ke``, ``map_d``)."""
 
     text: bytes
     resolver: CheckedFiles
