@@ -96,6 +96,12 @@ class Material(TrackedComponent):
     elsewhere the surface is opaque whatever its alpha, so it is not blended and needs no
     sorting.  Not on a Mirror or Portal (refused: a surface's claim of
     its pixels is drawn whole; put the cutout on an entity in front of it).
+
+    ``double_sided`` draws both faces of each triangle (glTF's ``doubleSided``, three.js's
+    ``side: DoubleSide``, Unity's render face "Both"): a leaf, a fence or a sheet of paper
+    seen from behind, lit as its back (the normal turned towards the eye).  Otherwise the
+    back faces are culled, as a closed mesh wants.  Shadows are cast by both faces either
+    way.  Not on a Mirror or Portal (refused: a surface is seen from its front).
     """
 
     color: Any = field(default_factory=lambda: glm.vec4(0.8, 0.8, 0.8, 1.0))
@@ -109,6 +115,7 @@ class Material(TrackedComponent):
     occlusion_map: TextureData | None = None
     occlusion_strength: float = 1.0
     alpha_cutoff: float | None = None
+    double_sided: bool = False
 
     def _validate(self, name: str, value: Any) -> Any:
         if name == "alpha_cutoff":
@@ -128,6 +135,13 @@ class Material(TrackedComponent):
             return finite(self, name, value, low=0.0, high=MAX_NORMAL_SCALE)
         if name == "occlusion_strength":
             return finite(self, name, value, low=0.0, high=1.0)
+        if name == "double_sided":
+            value = boolean(self, name, value)
+            world = getattr(self, "_world_ref", None)
+            if world is not None and value:
+                for entity in self._entities:  # not on a mirror or a portal, as at spawn
+                    world.check_invariants(entity, Material, double_sided=value)
+            return value
         if name in MATERIAL_IMAGES and value is not None:
             if getattr(type(value), "ASSET_KIND", None) != "texture":
                 raise ComponentValueError(

@@ -107,7 +107,7 @@ def _spot_shadows(ctx):
 
 
 def _cutouts(ctx):
-    """The mirror ring with two cutout grates (two cutoffs, one with an occlusion map) over
+    """The mirror ring with two cutout grates (two cutoffs, one double-sided, one with an occlusion map) over
     its boxes, the lamp casting (the layered cube's cutout build) and a mirror throwing the
     sun (the virtual light's caster passes), reflected in the batched levels."""
     from benchmarks.lighting import _mirror_light
@@ -124,7 +124,8 @@ def _cutouts(ctx):
             light.shadows = True
         for x, cutoff, occlusion in ((-1.0, 0.5, None), (1.0, 0.3, OCCLUSION)):
             world.spawn(Transform(position=(x, 1.6, 0.0)), MeshRef(plane(1.6, 1.6)),
-                        Material(texture=SLAT_TEXTURE, alpha_cutoff=cutoff, occlusion_map=occlusion))
+                        Material(texture=SLAT_TEXTURE, alpha_cutoff=cutoff, occlusion_map=occlusion,
+                                 double_sided=occlusion is None))
     return _engine_frames(ctx, MirrorRing(4), 3, configure)
 
 

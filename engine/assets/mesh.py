@@ -348,6 +348,7 @@ class ModelPart:
     metallic_roughness_map: TextureData | None = None
     occlusion_map: TextureData | None = None   # glTF's occlusionTexture (Material.occlusion_map)
     occlusion_strength: float = 1.0            # its strength
+    double_sided: bool = False         # glTF's doubleSided (Material.double_sided)
     alpha_cutoff: float | None = None  # glTF's alphaMode MASK: its alphaCutoff (Material.alpha_cutoff)
     name: str = ""  # "file:part", as a level file's part = "..." names it (parts may share one mesh)
 
@@ -588,6 +589,7 @@ def _read_material(tm, part: ModelPart, path: Path, maps: _MaterialMaps) -> None
         part.texture = maps.image(image, image_what, "colour")
     if hasattr(material, "baseColorFactor"):
         _gltf_alpha(material, part, maps.gltf_label(material))
+        part.double_sided = bool(getattr(material, "doubleSided", False))
     for name in ("metallic", "roughness", "reflectivity"):
         value = getattr(part, name)
         if not (np.isfinite(value) and 0.0 <= value <= 1.0):

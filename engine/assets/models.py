@@ -58,7 +58,8 @@ def spawn_model(world: World, path: str | Path, position: glm.vec3 | Sequence[fl
                 Material(color=part.color, texture=part.texture, metallic=part.metallic, roughness=part.roughness,
                          normal_map=part.normal_map, normal_scale=part.normal_scale, emissive_map=part.emissive_map,
                          metallic_roughness_map=part.metallic_roughness_map, occlusion_map=part.occlusion_map,
-                         occlusion_strength=part.occlusion_strength, alpha_cutoff=part.alpha_cutoff),
+                         occlusion_strength=part.occlusion_strength, alpha_cutoff=part.alpha_cutoff,
+                         double_sided=part.double_sided and not _planar_mirror(part)),
             ]
             if part.emissive_factor > 0.0:
                 components.append(Emissive(part.emissive_factor))
@@ -95,8 +96,9 @@ def spawn_model(world: World, path: str | Path, position: glm.vec3 | Sequence[fl
 
 def _planar_mirror(part) -> bool:
     """Whether a reflective part is a planar mirror: flat, and not a cutout (a mirror is
-    drawn whole; a flat metal grate reflects a probe or the sky as a curved part does)."""
-    return flat_plane(part.mesh) is not None and part.alpha_cutoff is None
+    drawn whole; a flat metal grate reflects a probe or the sky as a curved part does).  A
+    double-sided mirror is made single-sided: a mirror is seen from its front."""
+    return part.reflectivity > 0.0 and flat_plane(part.mesh) is not None and part.alpha_cutoff is None
 
 
 def _placed_size(part) -> float:

@@ -463,6 +463,33 @@ def set_front_face(ctx: moderngl.Context, front_face: str) -> None:
         ctx.front_face = cache.front_face = front_face
 
 
+def set_face_culling(ctx: moderngl.Context, on: bool) -> bool:
+    """Face culling on or off within a pass (a double-sided material's draw turns it off
+    and back), keeping the record ``apply_pass_state`` compares against; returns whether it
+    was on."""
+    cache = _cache(ctx)
+    known = cache.fixed
+    if known == _UNKNOWN or not CACHE_STATE:  # nothing known: set, and keep knowing nothing
+        if on:
+            ctx.enable(moderngl.CULL_FACE)
+        else:
+            ctx.disable(moderngl.CULL_FACE)
+        cache.fixed = _UNKNOWN
+        return not on
+    flags, depth_func, blend, clips = _FIXED_STATES[known]
+    was = bool(flags & moderngl.CULL_FACE)
+    if was != on:
+        key = (flags | moderngl.CULL_FACE if on else flags & ~moderngl.CULL_FACE, depth_func, blend, clips)
+        cache.fixed = _FIXED_IDS.setdefault(key, len(_FIXED_IDS))
+        if len(_FIXED_STATES) < len(_FIXED_IDS):
+            _FIXED_STATES.append(key)
+        if on:
+            ctx.enable(moderngl.CULL_FACE)
+        else:
+            ctx.disable(moderngl.CULL_FACE)
+    return was
+
+
 def flip_front_face(ctx: moderngl.Context) -> str:
     """Turn the winding to the other one (for instances whose model matrix mirrors them:
     their front faces wind the other way on screen); returns the one to put back."""

@@ -164,6 +164,7 @@ class BatchKey(NamedTuple):
     alpha_cutoff: float | None = None  # a cutout's (Material.alpha_cutoff): its draws' uniform
     occlusion_map: int = 0              # its image's id (0: none)
     occlusion_strength: float = 1.0     # Material.occlusion_strength: its draws' uniform
+    double_sided: bool = False          # Material.double_sided: drawn with face culling off
 
 
 class InstanceBatch:
@@ -258,6 +259,7 @@ class InstanceBatch:
         # part of the batch's key (Renderer.batch_for), the strength its draws' uniform.
         self.occlusion_map: moderngl.Texture | None = None
         self.occlusion_strength = 1.0
+        self.double_sided = False  # Material.double_sided: its draws turn face culling off
 
     # --- rows ----------------------------------------------------------------------------
     def add(self, entity: int) -> np.void:

@@ -130,7 +130,8 @@ class Renderer(Gpu):
                   metallic_roughness_map: TextureData | None = None, second_probe: int = 0,
                   probe_blend: bool = False, rest_probe: int = 0,
                   mirrored: bool = False, alpha_cutoff: float | None = None,
-                  occlusion_map: TextureData | None = None, occlusion_strength: float = 1.0) -> InstanceBatch:
+                  occlusion_map: TextureData | None = None, occlusion_strength: float = 1.0,
+                  double_sided: bool = False) -> InstanceBatch:
         """The batch of (mesh, albedo texture, normal map, emissive map, metallic-roughness
         map, the probe its instances sample; 0: none, a cutout's cutoff, an occlusion map and
         its strength).  A transparent entity gets a batch of its own
@@ -144,14 +145,14 @@ class Renderer(Gpu):
         # ``mirrored``: instances whose model matrix has a negative determinant, drawn with the
         # other winding (ScenePass), so they get batches of their own.  ``alpha_cutoff``: a
         # cutout's threshold (Material.alpha_cutoff): a batch of its own, its builds' uniform;
-        # so is an occlusion map's strength.
+        # so is an occlusion map's strength.  ``double_sided``: drawn with face culling off.
         key = BatchKey(mesh.id, id(texture) if texture is not None else 0,
                        (probe, second_probe, probe_blend, rest_probe), transparent_entity,
                        id(normal_map) if normal_map is not None else 0,
                        id(emissive_map) if emissive_map is not None else 0,
                        id(metallic_roughness_map) if metallic_roughness_map is not None else 0, mirrored,
                        alpha_cutoff, id(occlusion_map) if occlusion_map is not None else 0,
-                       occlusion_strength if occlusion_map is not None else 1.0)
+                       occlusion_strength if occlusion_map is not None else 1.0, double_sided)
         batch = self.batches.get(key)
         if batch is None:
             for name, image in (("Material.texture", texture), ("Material.normal_map", normal_map),
@@ -182,6 +183,7 @@ class Renderer(Gpu):
             batch.key = key
             batch.mirrored = mirrored
             batch.alpha_cutoff = alpha_cutoff
+            batch.double_sided = double_sided
             batch.probe = probe
             batch.second_probe, batch.probe_blend, batch.rest_probe = second_probe, probe_blend, rest_probe
             batch.checker = checker_look(texture)

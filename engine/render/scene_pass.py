@@ -70,6 +70,7 @@ from engine.render.bindings import (
     bindings_epoch,
     flip_front_face,
     forget_sampler,
+    set_face_culling,
     set_front_face,
     set_scissor,
     texture_record,
@@ -230,7 +231,11 @@ class ScenePass:
                 last_own[glo] = own
             if before_draw is not None:
                 before_draw()
-            if batch.mirrored:
+            if batch.double_sided:  # both faces (Material.double_sided): culling off for its draw
+                culled = set_face_culling(ctx, False)
+                vao.render(moderngl.TRIANGLES, vertices=vertices, instances=count)
+                set_face_culling(ctx, culled)
+            elif batch.mirrored:
                 # A negative determinant (a negative Transform.scale, or a mirrored parent):
                 # its front faces wind the other way on screen, so the view's winding is
                 # turned for its draw (its own batch: extract keys batches by it).

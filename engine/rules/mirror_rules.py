@@ -11,8 +11,9 @@ takes the mirror's plane and UV map from the same function, so what the world ac
 what is drawn, and a mesh changed behind the world's back is refused there with the same
 reason.
 
-A mirror or portal is drawn whole: its claim of its pixels has no holes, so a cutout
-material (``Material.alpha_cutoff``) is refused on one (``check_surface_cutout``).
+A mirror or portal is drawn whole and from its front: its claim of its pixels has no holes,
+so a cutout material (``Material.alpha_cutoff``) or a double-sided one
+(``Material.double_sided``) is refused on one (``check_surface_material``).
 """
 from __future__ import annotations
 
@@ -86,11 +87,12 @@ def check_mirror_mesh(world: World, entity: int, joining: Any = None, mesh: Mesh
 
 
 @world_invariant(Mirror, Portal, Material)
-def check_surface_cutout(world: World, entity: int, joining: Any = None, alpha_cutoff: Any = None,
-                         **_other: Any) -> None:
+def check_surface_material(world: World, entity: int, joining: Any = None, alpha_cutoff: Any = None,
+                           double_sided: Any = None, **_other: Any) -> None:
     """Refuse a cutout material (``alpha_cutoff``: one about to be set) on a mirror or a
     portal: its claim pass and its composite draw the whole surface, so a hole would show
-    the reflection, not what is behind."""
+    the reflection, not what is behind; and a double-sided one (``double_sided``): a
+    surface is seen from its front, its view drawn only there."""
     held = {kind: world.try_get(entity, kind) if world.exists(entity) else None for kind in (Mirror, Portal, Material)}
     if joining is not None:
         held[type(joining)] = joining
@@ -101,3 +103,7 @@ def check_surface_cutout(world: World, entity: int, joining: Any = None, alpha_c
         raise ComponentValueError(f"entity {entity}: Material.alpha_cutoff {cutoff} on a {surface}: a mirror or "
                                   "portal is drawn whole (its claim of its pixels has no holes); put the cutout "
                                   "on an entity in front of it")
+    sides = double_sided if double_sided is not None else getattr(material, "double_sided", False)
+    if sides and surface is not None:
+        raise ComponentValueError(f"entity {entity}: Material.double_sided on a {surface}: a mirror or portal is "
+                                  "seen from its front only (give its back an entity of its own)")
