@@ -107,9 +107,10 @@ def _spot_shadows(ctx):
 
 
 def _cutouts(ctx):
-    """The mirror ring with two cutout grates (two cutoffs, one double-sided, one with an occlusion map) over
-    its boxes, the lamp casting (the layered cube's cutout build) and a mirror throwing the
-    sun (the virtual light's caster passes), reflected in the batched levels."""
+    """The mirror ring with two cutout grates (two cutoffs, one double-sided, one with an
+    occlusion map) over its boxes, the lamp casting (the layered cube's cutout build) and a
+    mirror throwing the sun (the virtual light's caster passes), reflected in the batched
+    levels."""
     from benchmarks.lighting import _mirror_light
     from benchmarks.mirrors import MirrorRing
     from components import Material, MeshRef, PointLight, Transform
