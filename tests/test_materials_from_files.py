@@ -45,9 +45,10 @@ def png_bytes(pixels: np.ndarray) -> bytes:
     return out.getvalue()
 
 
-def write_glb(path: Path, mesh: Mesh, material: dict, images: list[np.ndarray]) -> Path:
+def write_glb(path: Path, mesh: Mesh, material: dict, images: list[np.ndarray], extra: dict | None = None) -> Path:
     """One node, one mesh, one primitive, one material (``material``, the glTF JSON object;
-    texture i is ``images[i]``, stored as PNG in the binary chunk).  glTF's UVs start at the
+    texture i is ``images[i]``, stored as PNG in the binary chunk; ``extra``: more top-level
+    members, as ``extensionsRequired``).  glTF's UVs start at the
     image's top-left: v is flipped from the engine's (bottom-up) UVs."""
     blob = bytearray()
     views, accessors = [], []
@@ -78,6 +79,7 @@ def write_glb(path: Path, mesh: Mesh, material: dict, images: list[np.ndarray]) 
            "meshes": [{"primitives": [{"attributes": attributes, "indices": indices, "material": 0}]}],
            "materials": [material], "accessors": accessors, "bufferViews": views,
            "buffers": [{"byteLength": len(blob)}]}
+    doc.update(extra or {})
     if images:
         doc["images"] = image_entries
         doc["textures"] = [{"source": i} for i in range(len(images))]

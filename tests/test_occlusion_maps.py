@@ -199,3 +199,29 @@ def test_a_gltf_occlusion_texture_reaches_the_material(tmp_path, strength):
 def test_a_gltf_strength_out_of_range_is_refused_naming_the_material(tmp_path):
     with pytest.raises(AssetError, match=r"walled.*occlusionTexture\.strength must be a number in \[0, 1\], got 2"):
         load_model(_glb(tmp_path, 2))
+
+
+@pytest.mark.parametrize("info, reason", [({"index": 0, "texCoord": 1}, "it reads TEXCOORD_1"),
+                                          ({"index": 0, "extensions": {"KHR_texture_transform": {"scale": [2, 2]}}},
+                                           "KHR_texture_transform")])
+def test_a_map_on_uvs_the_engine_does_not_read_is_left_out_with_a_warning(tmp_path, info, reason):
+    """A slot reading the second UV set (an occlusion map on lightmap UVs) or moving its UVs
+    would be drawn in the wrong place: the map is left out, and a warning names the
+    material, the slot and why; the rest of the material is read."""
+    material = {"name": "walled", "pbrMetallicRoughness": {"baseColorFactor": [0.8, 0.5, 0.3, 1.0]},
+                "occlusionTexture": info}
+    path = write_glb(tmp_path / "ao.glb", quad(2.0, 2.0), material, [occlusion_pixels()[..., :3].copy()])
+    with pytest.warns(UserWarning, match=rf"walled.*occlusionTexture: .*{reason}.*the map is left out"):
+        (part,) = load_model(path)
+    assert part.occlusion_map is None
+    assert part.color[:3] == pytest.approx((0.8, 0.5, 0.3), abs=1 / 255)   # (trimesh keeps it as bytes)
+
+
+def test_a_file_requiring_an_extension_the_engine_does_not_read_is_refused(tmp_path):
+    material = {"name": "walled", "pbrMetallicRoughness": {"baseColorFactor": [0.8, 0.5, 0.3, 1.0]}}
+    path = write_glb(tmp_path / "draco.glb", quad(2.0, 2.0), material, [],
+                     {"extensionsUsed": ["KHR_draco_mesh_compression"],
+                      "extensionsRequired": ["KHR_draco_mesh_compression"]})
+    with pytest.raises(AssetError, match=r"draco\.glb.*requires the glTF extension KHR_draco_mesh_compression, "
+                                         r"which the engine does not read"):
+        load_model(path)

@@ -543,7 +543,7 @@ def _read_material(tm, part: ModelPart, path: Path, maps: _MaterialMaps) -> None
         base = material.baseColorFactor
         if base is not None:
             part.color = tuple(float(c) for c in _unit_color(base))
-        image = material.baseColorTexture
+        image = maps.gltf_image(material, "baseColorTexture")
         maps.check_gltf_slot(material, "baseColorTexture", image)
         image_what = f"{maps.gltf_label(material)}: baseColorTexture"
         # glTF's defaults are 1.0; trimesh reports an absent factor as None.  The engine
@@ -665,6 +665,15 @@ class _MaterialMaps:
         index, _ = self.gltf.material(material.name)
         return self.gltf.label(index) if index is not None else f"material {material.name!r}"
 
+    def gltf_image(self, material, slot: str):
+        """The image trimesh read for a glTF material's ``slot``, or None where the file's
+        slot is one the engine leaves out (``GltfFiles.unread``: warned of when read)."""
+        if self.gltf is not None:
+            index, _ = self.gltf.material(material.name)
+            if (index, slot) in self.gltf.unread:
+                return None
+        return getattr(material, slot, None)
+
     def check_gltf_slot(self, material, slot: str, image) -> None:
         """A slot the file fills whose image trimesh could not open is an error (it would be
         drawn without it: an emissive part glowing whole), named with the material."""
@@ -684,12 +693,12 @@ class _MaterialMaps:
     def _gltf(self, material, part: ModelPart) -> None:
         what = self.gltf_label(material)
         _, doc_material = self.gltf.material(material.name) if self.gltf else (None, {})
-        image = getattr(material, "normalTexture", None)
+        image = self.gltf_image(material, "normalTexture")
         self.check_gltf_slot(material, "normalTexture", image)
         if image is not None:
             part.normal_map = self.image(image, f"{what}: normalTexture", "normal")
             part.normal_scale = self._normal_scale(doc_material, what)
-        image = getattr(material, "metallicRoughnessTexture", None)
+        image = self.gltf_image(material, "metallicRoughnessTexture")
         self.check_gltf_slot(material, "metallicRoughnessTexture", image)
         if image is not None:
             # glTF: the factors multiply the texture (roughness G, metallic B); absent, they are 1.
@@ -703,12 +712,12 @@ class _MaterialMaps:
             # Reflective where any texel is metal; the map's blue weighs the reflection per pixel.
             metal = part.metallic_roughness_map.pixels[..., 2].max() > 0
             part.reflectivity = part.metallic if metal else 0.0
-        image = getattr(material, "occlusionTexture", None)
+        image = self.gltf_image(material, "occlusionTexture")
         self.check_gltf_slot(material, "occlusionTexture", image)
         if image is not None:
             part.occlusion_map = self.image(image, f"{what}: occlusionTexture", "linear")
             part.occlusion_strength = self._occlusion_strength(doc_material, what)
-        image = getattr(material, "emissiveTexture", None)
+        image = self.gltf_image(material, "emissiveTexture")
         self.check_gltf_slot(material, "emissiveTexture", image)
         factor = _floats(material.emissiveFactor)
         if image is not None and factor is not None and len(factor) >= 3 and max(factor[:3]) > 0.0:

@@ -365,6 +365,9 @@ class GltfFiles:
     doc: dict | None
     names: list = field(default_factory=list)
     slots: dict[int, dict[str, int]] = field(default_factory=dict)
+    # (material index, slot) -> why its map is left out (it reads a UV set or a transform the
+    # engine does not: drawn with the first UVs it would land in the wrong place)
+    unread: dict[tuple[int, str], str] = field(default_factory=dict)
 
     def material(self, trimesh_name: object) -> tuple[int | None, dict]:
         """The index and the file's JSON of the material trimesh calls ``trimesh_name``."""
@@ -412,6 +415,24 @@ def _json(path: Path, data: bytes, quiet: bool = False) -> dict | None:
     return doc if isinstance(doc, dict) else None
 
 
+GLTF_READ_EXTENSIONS: frozenset[str] = frozenset()  # glTF extensions the engine reads (none yet)
+
+
+def _unread_texture(info: object) -> str | None:
+    """Why a material slot's texture (its ``textureInfo``) cannot be drawn as the file
+    means it, or None: it reads a second UV set (``texCoord`` > 0: the engine's meshes carry
+    the first), or moves its UVs by ``KHR_texture_transform``."""
+    if not isinstance(info, dict):
+        return None
+    coord = info.get("texCoord", 0)
+    if coord != 0:
+        return f"it reads TEXCOORD_{coord}" if isinstance(coord, int) else f"its texCoord is {coord!r}"
+    extensions = info.get("extensions")
+    if isinstance(extensions, dict) and "KHR_texture_transform" in extensions:
+        return "it moves its UVs by KHR_texture_transform"
+    return None
+
+
 def prepare_gltf(path: Path, data: bytes, roots: Sequence[Path], textures: bool) -> GltfFiles:
     """Check a glTF's (or GLB's) JSON and resolve the buffers and images it names; the
     images its used materials draw are read (with ``textures``), the others blanked, so
@@ -428,6 +449,13 @@ def prepare_gltf(path: Path, data: bytes, roots: Sequence[Path], textures: bool)
         doc = _json(path, data)
         if doc is None or "asset" not in doc:
             raise AssetError(f"{what}: is not a glTF document (no 'asset' object)")
+    required = doc.get("extensionsRequired")
+    missing = sorted(str(name) for name in required if name not in GLTF_READ_EXTENSIONS) \
+        if isinstance(required, list) else []
+    if missing:
+        raise AssetError(f"{what}: requires the glTF extension{'s' if len(missing) > 1 else ''} "
+                         f"{', '.join(missing)}, which the engine does not read (glTF: a file a loader cannot "
+                         "draw as it means is refused)")
     buffers = doc.get("buffers")
     for number, buffer in enumerate(buffers if isinstance(buffers, list) else ()):
         uri = buffer.get("uri") if isinstance(buffer, dict) else None
@@ -455,6 +483,12 @@ def prepare_gltf(path: Path, data: bytes, roots: Sequence[Path], textures: bool)
             if info is None:
                 continue
             label = f"{what}: {result.label(index)}: {slot}"
+            unread = _unread_texture(info)
+            if unread is not None:
+                result.unread[(index, slot)] = unread
+                warnings.warn(f"{label}: {unread}, which the engine does not read: the map is left out",
+                              stacklevel=4)
+                continue
             texture_index = info.get("index") if isinstance(info, dict) else None
             if not _index_in(texture_index, textures_list) or not isinstance(textures_list[texture_index], dict):
                 raise AssetError(f"{label}: names texture {texture_index!r}, which the file does not have")
