@@ -15,6 +15,10 @@ rebuilt only when its entity's world matrix or mesh changed:
   components as they are now (the parent chain's local matrices), so a ray cast in the game stage sees
   a wall moved a moment ago where it now is.
 
+A cutout's holes (``Material.alpha_cutoff``) are hit like the rest of its triangles, as a
+physics collider is in Unity or Godot: the cast is of geometry, not of what its texture shows
+(make the gaps geometry, or leave the cutout out with ``where``, to shoot through them).
+
 ``raycast(world, origin, direction)`` uses one ``RayCaster`` kept in
 ``world.resources[RayCaster]``; make your own ``RayCaster(world)`` to hold a separate cache.
 """
