@@ -102,6 +102,14 @@ _CASTERS = PassState(depth_func="<", cull=False, clips=SCENE_CLIPS)
 _LEG_CASTERS = PassState(depth_func="<", cull=False, clips=SCENE_CLIPS | frozenset((CLIP_LEG_PLANE,)))
 
 
+def _set_uniform(program: moderngl.Program, name: str, value: object) -> None:
+    """A caster program's uniform: bytes are an array, written whole."""
+    if isinstance(value, bytes):
+        program[name].write(value)
+    else:
+        program[name].value = value
+
+
 def _axes(matrix: glm.mat4) -> tuple[float, float, float, float]:
     """An axis-aligned affine map's x scale, x offset, y scale and y offset (an orthographic
     projection and the moves and scales after it)."""
@@ -623,27 +631,28 @@ class ShadowMaps:
         if view is not None:
             renderer.bind_view(view)
         ctx.polygon_offset = SLOPE_BIAS
-        ready: dict[bool, moderngl.Program] = {}  # the programs given ``uniforms`` this time
+        whole = self._caster_program(build, False)
+        cutouts: moderngl.Program | None = None  # made and given ``uniforms`` at the first cutout
+        for name, value in (uniforms or {}).items():
+            _set_uniform(whole, name, value)
+        stats = renderer.stats
         try:
             for batch in renderer.opaque_batches():
                 if not batch.count:
                     continue
                 cutoff = batch.alpha_cutoff
-                cutout = cutoff is not None
-                program = ready.get(cutout)
-                if program is None:
-                    program = ready[cutout] = self._caster_program(build, cutout)
-                    for name, value in (uniforms or {}).items():
-                        if isinstance(value, bytes):
-                            program[name].write(value)
-                        else:
-                            program[name].value = value
-                if cutout:
+                if cutoff is None:
+                    batch.draw(whole)
+                else:
+                    if cutouts is None:
+                        cutouts = self._caster_program(build, True)
+                        for name, value in (uniforms or {}).items():
+                            _set_uniform(cutouts, name, value)
                     bind_texture(ctx, batch.texture if batch.texture is not None else renderer.blank_color,
                                  ALBEDO_UNIT)
-                    program["alpha_cutoff"].value = cutoff
-                batch.draw(program)
-                renderer.stats.shadow_draw_calls += 1
+                    cutouts["alpha_cutoff"].value = cutoff
+                    batch.draw(cutouts)
+                stats.shadow_draw_calls += 1
         finally:
             ctx.polygon_offset = (0.0, 0.0)
 
