@@ -188,12 +188,23 @@ def random_glb(rng: random.Random) -> ModelCase:
     material: dict = {"name": "fuzzed", "pbrMetallicRoughness": {
         "baseColorFactor": [rng.random(), rng.random(), rng.random(), 1.0],
         "metallicFactor": rng.choice([0.0, 1.0, 1.0, 2.0]), "roughnessFactor": rng.choice([0.0, 0.3, 1.0])}}
-    for slot in rng.sample(["baseColorTexture", "metallicRoughnessTexture", "normalTexture", "emissiveTexture"],
-                           rng.randint(0, 3)):
+    for slot in rng.sample(["baseColorTexture", "metallicRoughnessTexture", "normalTexture", "emissiveTexture",
+                            "occlusionTexture"], rng.randint(0, 3)):
         texture = {"index": rng.choice([0, 0, 0, 1, 2, 7])}
+        if slot == "occlusionTexture" and rng.random() < 0.5:
+            texture["strength"] = rng.choice([0.0, 0.5, 1.0, 2.0, -1.0, "full"])
+        if rng.random() < 0.1:  # a second UV set or a transform: the map left out, with a warning
+            texture.update(rng.choice([{"texCoord": 1}, {"extensions": {"KHR_texture_transform": {}}}]))
         (material["pbrMetallicRoughness"] if slot in ("baseColorTexture", "metallicRoughnessTexture")
          else material)[slot] = texture
-        mutations.append(f"{slot} -> texture {texture['index']}")
+        mutations.append(f"{slot} -> {texture}")
+    if rng.random() < 0.4:  # glTF's alpha modes and double-sided faces
+        material["alphaMode"] = rng.choice(["MASK", "MASK", "BLEND", "OPAQUE", "CLIP"])
+        if rng.random() < 0.5:
+            material["alphaCutoff"] = rng.choice([0.0, 0.5, 0.9, 1.0, 1.5, -0.2])
+        material["doubleSided"] = rng.random() < 0.5
+        mutations.append(f"alphaMode {material['alphaMode']} cutoff {material.get('alphaCutoff')} "
+                         f"doubleSided {material['doubleSided']}")
     if rng.random() < 0.5:
         material["emissiveFactor"] = rng.choice([[1, 1, 1], [0.8, 0.4, 0.2], [0, 0, 0], [-1, 0, 0]])
     nodes = rng.choice([1, 1, 2, 12, 40])

@@ -616,7 +616,7 @@ def _gltf_alpha(material, part: ModelPart, what: str) -> None:
         cutoff = 0.5 if cutoff is None else cutoff
         if isinstance(cutoff, (bool, str)) or not isinstance(cutoff, numbers.Real) or \
                 not (np.isfinite(cutoff) and 0.0 <= cutoff <= 1.0):
-            raise AssetError(f"{what}: alphaCutoff must be a number in [0, 1] (at 1 or more nothing is drawn), "
+            raise AssetError(f"{what}: alphaCutoff must be a number in [0, 1] (above 1 nothing would be drawn), "
                              f"got {cutoff!r}")
         part.alpha_cutoff = float(cutoff)
     elif part.color[3] >= 1.0 and part.texture is not None and part.texture.has_alpha:
