@@ -27,6 +27,9 @@ flat in vec4 v_surface;
 flat in vec4 v_reflect;
 flat in vec4 v_tint;
 flat in uvec4 v_slots;
+#ifdef VERTEX_COLOR
+in vec3 v_vertex_color;  // the mesh's colour here (Mesh.colors), multiplied into the material's
+#endif
 
 // Reflection levels draw only the pixels of their own view (the node image mirror_claim.frag
 // wrote): the MASKED build (engine/render/scene_pass.py), so a root view's program has neither
@@ -297,6 +300,9 @@ void main() {
     base.rgb *= checker_colour(v_uv);
 #else
     if (has_albedo_map) base *= texture(albedo_map, v_uv);
+#endif
+#ifdef VERTEX_COLOR
+    base.rgb *= v_vertex_color;
 #endif
 #ifdef ALPHA_CUTOFF
     // A cutout (Material.alpha_cutoff): nothing where the alpha falls below it; the shadow

@@ -19,6 +19,7 @@
 #define v_reflect g_reflect
 #define v_tint g_tint
 #define v_slots g_slots
+#define v_vertex_color g_vertex_color
 #endif
 
 in vec3 in_position;
@@ -26,13 +27,22 @@ in vec3 in_normal;
 in vec2 in_uv;
 
 in mat4 in_model;          // model -> world
+#ifndef VERTEX_COLOR
 in mat3 in_normal_matrix;  // inverse-transpose of the model's upper 3x3
+#endif
 in vec4 in_color;          // linear base colour, alpha
 in vec4 in_surface;        // metallic, roughness, emissive power, normal-map scale
 in vec4 in_reflect;        // reflection mix, refraction ior, -, -
 in vec4 in_tint;           // reflection tint; w: where it is drawn (visibility.glsl)
 in vec4 in_slice;          // world plane: only its front is drawn (things partly through a portal)
 in uvec4 in_slots;         // emissive variant, refract variant, reflect variant, entity id
+#ifdef VERTEX_COLOR
+// The mesh's colour a vertex (Mesh.colors), linear.  The sixteen vertex inputs GL 4.1
+// promises are all taken, so this build works the normal matrix out here instead of
+// reading the instance's (three inputs freed for one).
+in vec3 in_vertex_color;
+out vec3 v_vertex_color;
+#endif
 
 #ifdef BATCHED_VIEWS
 out float g_slice_distance;  // the geometry shader re-emits it as gl_ClipDistance[CLIP_SLICE]
@@ -49,13 +59,20 @@ flat out uvec4 v_slots;
 void main() {
     vec4 world = in_model * vec4(in_position, 1.0);
     v_world_pos = world.xyz;
+#ifdef VERTEX_COLOR
+    v_normal = transpose(inverse(mat3(in_model))) * in_normal;
+#else
     v_normal = in_normal_matrix * in_normal;
+#endif
     v_uv = in_uv;
     v_color = in_color;
     v_surface = in_surface;
     v_reflect = in_reflect;
     v_tint = in_tint;
     v_slots = in_slots;
+#ifdef VERTEX_COLOR
+    v_vertex_color = in_vertex_color;
+#endif
     gl_ClipDistance[CLIP_SLICE] = dot(world, in_slice);
 #ifdef BATCHED_VIEWS
     g_slice_distance = dot(world, in_slice);

@@ -50,6 +50,10 @@ flat in vec4 g_tint[];
 flat in uvec4 g_slots[];
 
 in float g_slice_distance[];
+#ifdef VERTEX_COLOR
+in vec3 g_vertex_color[];
+out vec3 v_vertex_color;
+#endif
 
 out float gl_ClipDistance[CLIP_DISTANCE_COUNT];  // indices: engine/render/bindings.py
 out vec3 v_world_pos;
@@ -88,6 +92,9 @@ void emit_corner(int c, vec4 position, MirrorView v) {
     v_reflect = g_reflect[c];
     v_tint = g_tint[c];
     v_slots = g_slots[c];
+#ifdef VERTEX_COLOR
+    v_vertex_color = g_vertex_color[c];
+#endif
     v_node = v.node.x;
     v_eye = v.eye.xyz;
 #ifdef FOG

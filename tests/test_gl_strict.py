@@ -108,13 +108,13 @@ def _spot_shadows(ctx):
 
 def _cutouts(ctx):
     """The mirror ring with two cutout grates (two cutoffs, one double-sided, one with an
-    occlusion map) over its boxes, the lamp casting (the layered cube's cutout build) and a
+    occlusion map) and a vertex-coloured quad over its boxes, the lamp casting (the layered cube's cutout build) and a
     mirror throwing the sun (the virtual light's caster passes), reflected in the batched
     levels."""
     from benchmarks.lighting import _mirror_light
     from benchmarks.mirrors import MirrorRing
     from components import Material, MeshRef, PointLight, Transform
-    from engine.assets.mesh import plane
+    from engine.assets.mesh import Mesh, plane, quad
     from tests.test_alpha_cutout import SLAT_TEXTURE
     from tests.test_occlusion_maps import OCCLUSION
 
@@ -123,6 +123,10 @@ def _cutouts(ctx):
         world = engine.world
         for _, light in world.query_one(PointLight):
             light.shadows = True
+        colours = quad(1.0, 1.0)   # a mesh with a colour a vertex (the VERTEX_COLOR builds, batched too)
+        world.spawn(Transform(position=(0.0, 2.4, 0.0)), MeshRef(Mesh(
+            colours.positions, colours.normals, colours.uvs, colours.indices, name="coloured",
+            colors=np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0], [1.0, 1.0, 0.0]]))), Material())
         for x, cutoff, occlusion in ((-1.0, 0.5, None), (1.0, 0.3, OCCLUSION)):
             world.spawn(Transform(position=(x, 1.6, 0.0)), MeshRef(plane(1.6, 1.6)),
                         Material(texture=SLAT_TEXTURE, alpha_cutoff=cutoff, occlusion_map=occlusion,

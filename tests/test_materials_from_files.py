@@ -45,10 +45,12 @@ def png_bytes(pixels: np.ndarray) -> bytes:
     return out.getvalue()
 
 
-def write_glb(path: Path, mesh: Mesh, material: dict, images: list[np.ndarray], extra: dict | None = None) -> Path:
+def write_glb(path: Path, mesh: Mesh, material: dict | None, images: list[np.ndarray], extra: dict | None = None,
+              colors: np.ndarray | None = None) -> Path:
     """One node, one mesh, one primitive, one material (``material``, the glTF JSON object;
     texture i is ``images[i]``, stored as PNG in the binary chunk; ``extra``: more top-level
-    members, as ``extensionsRequired``).  glTF's UVs start at the
+    members, as ``extensionsRequired``; ``colors``: a COLOR_0 attribute, float RGBA a vertex;
+    ``material`` None: none).  glTF's UVs start at the
     image's top-left: v is flipped from the engine's (bottom-up) UVs."""
     blob = bytearray()
     views, accessors = [], []
@@ -73,11 +75,14 @@ def write_glb(path: Path, mesh: Mesh, material: dict, images: list[np.ndarray], 
         "NORMAL": accessor(mesh.normals.astype(np.float32), "VEC3", 5126),
         "TEXCOORD_0": accessor(uv, "VEC2", 5126),
     }
+    if colors is not None:
+        attributes["COLOR_0"] = accessor(np.asarray(colors, np.float32), "VEC4", 5126)
     indices = accessor(mesh.indices.astype(np.uint32).ravel(), "SCALAR", 5125)
     image_entries = [{"bufferView": view(png_bytes(pixels)), "mimeType": "image/png"} for pixels in images]
     doc = {"asset": {"version": "2.0"}, "scene": 0, "scenes": [{"nodes": [0]}], "nodes": [{"mesh": 0}],
-           "meshes": [{"primitives": [{"attributes": attributes, "indices": indices, "material": 0}]}],
-           "materials": [material], "accessors": accessors, "bufferViews": views,
+           "meshes": [{"primitives": [{"attributes": attributes, "indices": indices,
+                                       **({"material": 0} if material is not None else {})}]}],
+           "materials": [material] if material is not None else [], "accessors": accessors, "bufferViews": views,
            "buffers": [{"byteLength": len(blob)}]}
     doc.update(extra or {})
     if images:

@@ -57,7 +57,9 @@ _mesh_ids = itertools.count(1)
 
 @dataclass(eq=False)
 class Mesh:
-    """Indexed triangles: positions, normals (unit), uvs, and int32 triangle indices."""
+    """Indexed triangles: positions, normals (unit), uvs, and int32 triangle indices; and
+    optionally a colour a vertex (``colors``: linear RGB, interpolated across each triangle
+    and multiplied into the material's colour, as glTF's ``COLOR_0``; None: none)."""
 
     ASSET_KIND = "mesh"  # what MeshRef.mesh checks for (components do not import the engine)
 
@@ -75,6 +77,7 @@ class Mesh:
     # row's model matrix carrying its size, so boxes of ten sizes are one draw a pass, not ten.
     unit_shape: tuple | None = field(default=None, repr=False)  # (kind, segments, rings)
     unit_scale: tuple[float, float, float] = (1.0, 1.0, 1.0)
+    colors: np.ndarray | None = field(default=None, repr=False)
 
     @property
     def unit(self) -> Mesh | None:
@@ -97,6 +100,15 @@ class Mesh:
             raise AssetError(f"mesh {self.name!r}: has NaN or infinite vertex data")
         if self.indices.min() < 0 or self.indices.max() >= n:
             raise AssetError(f"mesh {self.name!r}: triangle index out of range 0..{n - 1}")
+        if self.colors is not None:
+            colors = np.asarray(self.colors)
+            if colors.shape != (n, 3) or not np.issubdtype(colors.dtype, np.number):
+                raise AssetError(f"mesh {self.name!r}: colors must be one linear RGB triple a vertex, shape ({n}, 3), "
+                                 f"got shape {colors.shape}")
+            colors = np.ascontiguousarray(colors, np.float32)
+            if not (np.isfinite(colors).all() and colors.min() >= 0.0 and colors.max() <= 65504.0):
+                raise AssetError(f"mesh {self.name!r}: colors must be finite, in [0, 65504] (half floats)")
+            self.colors = colors
 
     @property
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:
@@ -108,8 +120,13 @@ class Mesh:
         return np.hstack([self.positions, self.normals, self.uvs]).astype(np.float32)
 
     @classmethod
-    def from_trimesh(cls, tm: trimesh.Trimesh, name: str = "mesh") -> Mesh:
-        """Convert a trimesh.Trimesh (its UVs are used when it has them)."""
+    def from_trimesh(cls, tm: trimesh.Trimesh, name: str = "mesh", srgb_colors: bool = True) -> Mesh:
+        """Convert a trimesh.Trimesh (its UVs are used when it has them, and its vertex or
+        face colours: ``srgb_colors`` says they are sRGB-encoded, as PLY, OFF and OBJ files
+        keep them; glTF's are linear).  Face colours make each triangle's corners vertices of
+        their own, so the colour does not bleed across edges."""
+        if getattr(getattr(tm, "visual", None), "kind", None) == "face":
+            return _face_coloured(tm, name, srgb_colors)
         uv = getattr(getattr(tm, "visual", None), "uv", None)
         positions = np.asarray(tm.vertices, np.float32)
         if len(positions) == 0 or len(tm.faces) == 0:
@@ -125,7 +142,53 @@ class Mesh:
         if low < 0 or high >= len(positions):  # before normals are worked out from them
             raise AssetError(f"mesh {name!r}: face index {low if low < 0 else high} is out of range "
                              f"({len(positions)} vertices)")
-        return cls(positions, _unit_normals(tm), uv, faces, name=name)
+        return cls(positions, _unit_normals(tm), uv, faces, name=name,
+                   colors=_vertex_colors(tm, len(positions), srgb_colors, name))
+
+
+def _vertex_colors(tm, count: int, srgb: bool, name: str) -> np.ndarray | None:
+    """A trimesh's colour a vertex as linear RGB (None: none, or all white): a vertex-coloured
+    visual's, or a textured one's ``color`` attribute (glTF's COLOR_0 beside a material).  The
+    alpha is not used (the material's alpha says what is see-through)."""
+    visual = getattr(tm, "visual", None)
+    colors = None
+    if getattr(visual, "kind", None) == "vertex":
+        colors = np.asarray(visual.vertex_colors)
+    else:
+        attributes = getattr(visual, "vertex_attributes", None)
+        if attributes is not None and "color" in attributes:
+            colors = np.asarray(attributes["color"])
+    if colors is None:
+        return None
+    if colors.ndim != 2 or len(colors) != count or colors.shape[1] not in (3, 4):
+        raise AssetError(f"mesh {name!r}: vertex colours of shape {colors.shape} for {count} vertices")
+    rgb = colors[:, :3].astype(np.float64)
+    if colors.dtype.kind in "ui":
+        rgb /= float(np.iinfo(colors.dtype).max)
+    if not np.isfinite(rgb).all():
+        raise AssetError(f"mesh {name!r}: has NaN or infinite vertex colours")
+    rgb = np.clip(rgb, 0.0, 1.0)
+    if (rgb == 1.0).all():
+        return None
+    return (srgb_to_linear(rgb) if srgb else rgb).astype(np.float32)
+
+
+def _face_coloured(tm, name: str, srgb: bool) -> Mesh:
+    """A face-coloured trimesh as a mesh whose triangles have corners of their own, each
+    corner its face's colour and normal."""
+    faces = np.asarray(tm.faces)
+    positions = np.asarray(tm.vertices, np.float32)
+    if faces.ndim != 2 or faces.shape[1] != 3 or len(faces) == 0 or not np.issubdtype(faces.dtype, np.integer):
+        raise AssetError(f"mesh {name!r}: faces are not triangles of vertex indices (shape {faces.shape})")
+    if faces.min() < 0 or faces.max() >= len(positions):
+        raise AssetError(f"mesh {name!r}: face index out of range ({len(positions)} vertices)")
+    corners = positions[faces].reshape(-1, 3)
+    normals = np.repeat(np.asarray(tm.face_normals, np.float32), 3, axis=0)
+    colors = np.asarray(tm.visual.face_colors)
+    rgb = np.clip(colors[:, :3].astype(np.float64) / (255.0 if colors.dtype.kind in "ui" else 1.0), 0.0, 1.0)
+    rgb = np.repeat(srgb_to_linear(rgb) if srgb else rgb, 3, axis=0).astype(np.float32)
+    return Mesh(corners, normals, np.zeros((len(corners), 2), np.float32),
+                np.arange(len(corners), dtype=np.int32).reshape(-1, 3), name=name, colors=rgb)
 
 
 def _unit_normals(tm) -> np.ndarray:
@@ -455,7 +518,7 @@ def _load_model(path: Path, data: bytes, what: str, roots, materials: bool, trim
             name = f"{path.name}:{geom_name}"
             mesh = meshes.get(("geometry", geom_name))
             if mesh is None:
-                mesh = Mesh.from_trimesh(tm, name=name)
+                mesh = Mesh.from_trimesh(tm, name=name, srgb_colors=suffix not in (".gltf", ".glb"))
                 mesh = meshes.setdefault(("content", _digest(mesh)), mesh)
                 meshes[("geometry", geom_name)] = mesh
             part = ModelPart(mesh=mesh, local=glm.mat4(*matrix.astype(np.float32).T.ravel()), name=name)
@@ -477,7 +540,8 @@ def _load_model(path: Path, data: bytes, what: str, roots, materials: bool, trim
 def _digest(mesh: Mesh) -> bytes:
     """What makes two meshes the same geometry: their arrays, byte for byte."""
     digest = hashlib.blake2b(digest_size=20)
-    for array in (mesh.positions, mesh.normals, mesh.uvs, mesh.indices):
+    for array in (mesh.positions, mesh.normals, mesh.uvs, mesh.indices,
+                  mesh.colors if mesh.colors is not None else np.zeros(0, np.float32)):
         digest.update(np.asarray(array.shape, np.int64).tobytes())
         digest.update(memoryview(array).cast("B"))
     return digest.digest()
@@ -493,6 +557,7 @@ def model_bytes(parts: Sequence[ModelPart]) -> int:
         if id(mesh) not in seen:
             seen.add(id(mesh))
             total += mesh.positions.nbytes + mesh.normals.nbytes + mesh.uvs.nbytes + mesh.indices.nbytes
+            total += mesh.colors.nbytes if mesh.colors is not None else 0
         for texture in (part.texture, part.normal_map, part.emissive_map, part.metallic_roughness_map,
                         part.occlusion_map):
             if texture is not None and id(texture) not in seen:
@@ -536,8 +601,7 @@ def _read_material(tm, part: ModelPart, path: Path, maps: _MaterialMaps) -> None
         material = None
     if material is None:
         if getattr(visual, "kind", None) in ("vertex", "face"):
-            mean = np.asarray(visual.vertex_colors, np.float64).mean(axis=0) / 255.0
-            part.color = tuple(float(c) for c in srgb_to_linear(mean[:3])) + (float(mean[3]),)
+            part.color = (1.0, 1.0, 1.0, 1.0)  # the mesh's own colours, a vertex or a face (Mesh.colors)
         return
     if hasattr(material, "baseColorFactor"):  # glTF PBR
         base = material.baseColorFactor

@@ -131,6 +131,9 @@ class GpuMesh:
     def __init__(self, ctx: moderngl.Context, mesh: Mesh) -> None:
         self.vertices = ctx.buffer(mesh.interleaved().tobytes())
         self.indices = ctx.buffer(mesh.indices.astype(np.uint32).tobytes())
+        # Its colour a vertex (Mesh.colors, linear RGB), a buffer of its own (None: none): the
+        # VERTEX_COLOR builds read it.
+        self.colors = ctx.buffer(mesh.colors.tobytes()) if mesh.colors is not None else None
         self.index_count = mesh.indices.size
         # Model-space radius about the origin (what an instance's scale stretches).
         self.radius = float(np.linalg.norm(mesh.positions, axis=1).max()) if len(mesh.positions) else 0.0
@@ -146,6 +149,8 @@ class GpuMesh:
     def release(self) -> None:
         self.vertices.release()
         self.indices.release()
+        if self.colors is not None:
+            self.colors.release()
 
 
 class BatchKey(NamedTuple):
@@ -707,10 +712,13 @@ class InstanceBatch:
         key = program.glo
         vao = self._vaos.get(key)
         if vao is None:
+            buffers = [(self.mesh.vertices, VERTEX_FORMAT, *VERTEX_ATTRIBUTES),
+                       (self._buffer, INSTANCE_FORMAT, *INSTANCE_ATTRIBUTES)]
+            if self.mesh.colors is not None:
+                buffers.append((self.mesh.colors, "3f", "in_vertex_color"))
             vao = self.ctx.vertex_array(
                 program,
-                [(self.mesh.vertices, VERTEX_FORMAT, *VERTEX_ATTRIBUTES),
-                 (self._buffer, INSTANCE_FORMAT, *INSTANCE_ATTRIBUTES)],
+                buffers,
                 index_buffer=self.mesh.indices,
                 index_element_size=4,
                 skip_errors=True,

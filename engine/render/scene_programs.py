@@ -89,7 +89,7 @@ class ScenePrograms:
 
     def program(self, variants: tuple[int, int, int] | None = None, invocations: int = 0,
                 layered: str = "", normal_mapped: bool = False, checker: bool = False,
-                material: tuple[bool, bool, bool, bool] = (False, False, False, False), probe_blend: bool = False,
+                material: tuple[bool, bool, bool, bool, bool] = (False,) * 5, probe_blend: bool = False,
                 ambient_probes: bool = False, probe_rest: bool = False, unlit: bool = False,
                 masked: bool = False) -> moderngl.Program:
         """The scene program for a batch of ``variants`` (None: mixed, switched per
@@ -104,7 +104,7 @@ class ScenePrograms:
         shaders/include/material_maps.glsl; a batch without them samples nothing for them)
         and whether it is a cutout (``ALPHA_CUTOFF``: it discards where its alpha falls
         below its ``alpha_cutoff`` uniform; only its builds may discard, so every other keeps
-        its early depth test on llvmpipe),
+        its early depth test on llvmpipe) and its mesh has vertex colours (``VERTEX_COLOR``),
         blending probes (``probe_blend``: ``PROBE_BLEND``) with a probe instead of the sky
         taking the rest (``probe_rest``: ``PROBE_REST``, a curved object's own), or unlit
         (``unlit``: ``UNLIT_SURFACE``, a mirror batch ``shading_replaced`` names), and
@@ -139,6 +139,8 @@ class ScenePrograms:
                 defines["ALPHA_CUTOFF"] = "1"
             if material[3]:
                 defines["OCCLUSION_MAP"] = "1"
+            if material[4]:  # its mesh's colour a vertex (Mesh.colors)
+                defines["VERTEX_COLOR"] = "1"
             if probe_blend:  # two probes and the sky by the instances' weights (shaders/include/probe.glsl)
                 defines["PROBE_BLEND"] = "1"
                 if probe_rest:  # a probe, not the sky, takes what the weights leave
@@ -281,9 +283,10 @@ def geometry_invocations(view_count: int) -> int:
 BATCHED_INVOCATIONS = tuple(sorted({geometry_invocations(n) for n in range(1, MAX_BATCHED_VIEWS + 1)}))
 
 
-def _material_build(batch: InstanceBatch) -> tuple[bool, bool, bool, bool]:
+def _material_build(batch: InstanceBatch) -> tuple[bool, bool, bool, bool, bool]:
     """What of a batch's material picks its build: whether it samples an emissive and a
-    metallic-roughness map, whether it is a cutout, and whether it samples an occlusion map."""
+    metallic-roughness map, whether it is a cutout, whether it samples an occlusion map, and
+    whether its mesh has a colour a vertex."""
     return (batch.emissive_map is not None, batch.metallic_roughness_map is not None, batch.alpha_cutoff is not None,
-            batch.occlusion_map is not None)
+            batch.occlusion_map is not None, batch.mesh.colors is not None)
 
