@@ -251,7 +251,9 @@ def test_ply_vertex_colours_and_normals(tmp_path):
     mesh.visual.vertex_colors = np.tile([255, 0, 0, 255], (len(mesh.vertices), 1))
     mesh.export(tmp_path / "red.ply")
     (part,) = load_model(tmp_path / "red.ply")
-    assert part.color == pytest.approx((1.0, 0.0, 0.0, 1.0))
+    # The colours are the mesh's, a vertex each (sRGB decoded); the material's colour is white.
+    assert part.color == pytest.approx((1.0, 1.0, 1.0, 1.0))
+    np.testing.assert_allclose(part.mesh.colors, np.tile([1.0, 0.0, 0.0], (len(mesh.vertices), 1)))
     normals = part.mesh.normals
     np.testing.assert_allclose(np.linalg.norm(normals, axis=1), 1.0, atol=1e-5)
     assert (np.einsum("ij,ij->i", normals, part.mesh.positions) > 0.8).all()  # smooth, outward
