@@ -252,6 +252,8 @@ MODEL_FILE_CASES: tuple[FileCase, ...] = (
              texel=(32768, 32768, 65535, 65535)),
     FileCase("an image of random bytes (metallic-roughness map)", "metallic_roughness_map",
              _file("assets/noise.png"), "cannot be read as an image"),
+    FileCase("a 16-bit occlusion map", "occlusion_map", _file("assets/flat16.png"), texel=(32768, 32768, 65535, 65535)),
+    FileCase("a FIFO (occlusion map)", "occlusion_map", _file("assets/fifo.png"), "is a FIFO"),
 )
 FILE_CASES += MODEL_FILE_CASES
 
@@ -339,7 +341,8 @@ def _png(path: Path, pixels, colour_type: int, depth: int, declared: tuple[int, 
 
 _SLOTS = {"mesh": "mesh = { box = [1.0, 1.0, 1.0] }", "texture": "texture = { checker = [32, 4] }",
           "normal_map": "texture = { checker = [32, 4] }", "emissive_map": "texture = { checker = [32, 4] }",
-          "metallic_roughness_map": "texture = { checker = [32, 4] }"}
+          "metallic_roughness_map": "texture = { checker = [32, 4] }",
+          "occlusion_map": "texture = { checker = [32, 4] }"}
 
 
 def file_level_case(case: FileCase) -> LevelCase:
@@ -520,7 +523,7 @@ class LevelFuzzer:
 
         material = self.world.try_get(names.get("floor", -1), Material)
         texture = material and (material.normal_map or material.emissive_map or material.metallic_roughness_map
-                                or material.texture)
+                                or material.occlusion_map or material.texture)
         if texture is None:
             return "the floor has no texture or normal map"
         got = tuple(int(v) for v in texture.pixels[0, 0])
