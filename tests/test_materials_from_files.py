@@ -480,3 +480,33 @@ def test_the_maps_gpu_textures_go_with_their_entity(scene, tmp_path):
     runner.world.delete_entity(found["ball"])
     runner.frame()
     assert renderer.resource_counts()["textures"] == 0 and renderer.resource_counts()["batches"] == 0
+
+
+@pytest.mark.parametrize("strength, expected", [(None, 2.0), (5.0, 10.0)])
+def test_gltf_emissive_strength_raises_the_glow_past_the_factor(tmp_path, strength, expected):
+    """KHR_materials_emissive_strength (Blender writes it for a lamp brighter than 1)
+    multiplies the emissive factor: with a grey 0.5 base, a white emissive factor is
+    Emissive(2) alone and Emissive(10) at strength 5; with an emissive map, the map's
+    strength is the factor's times it."""
+    material = {"name": "lamp", "pbrMetallicRoughness": {"baseColorFactor": [0.5, 0.5, 0.5, 1.0]},
+                "emissiveFactor": [1.0, 1.0, 1.0]}
+    extra = {}
+    if strength is not None:
+        material["extensions"] = {"KHR_materials_emissive_strength": {"emissiveStrength": strength}}
+        extra = {"extensionsUsed": ["KHR_materials_emissive_strength"],
+                 "extensionsRequired": ["KHR_materials_emissive_strength"]}   # read: not refused
+    world = World()
+    root = spawn_model(world, write_glb(tmp_path / "lamp.glb", quad(1.0, 1.0), material, [], extra))
+    (part,) = [e for e, (t,) in world.query(Transform) if t.parent == root]
+    assert world.get(part, Emissive).power == pytest.approx(expected, rel=1e-2)   # (the base kept as bytes)
+    mapped = dict(material, emissiveTexture={"index": 0})
+    (mapped_part,) = load_model(write_glb(tmp_path / "mapped.glb", quad(1.0, 1.0), mapped, [EMISSIVE], extra))
+    assert mapped_part.emissive_factor == pytest.approx(1.0 if strength is None else strength)
+
+
+def test_a_bad_gltf_emissive_strength_is_refused_naming_the_material(tmp_path):
+    material = {"name": "lamp", "pbrMetallicRoughness": {"baseColorFactor": [0.5, 0.5, 0.5, 1.0]},
+                "emissiveFactor": [1.0, 1.0, 1.0],
+                "extensions": {"KHR_materials_emissive_strength": {"emissiveStrength": -2}}}
+    with pytest.raises(AssetError, match=r"lamp.*emissiveStrength must be a number in \[0, 10000\], got -2"):
+        load_model(write_glb(tmp_path / "lamp.glb", quad(1.0, 1.0), material, []))

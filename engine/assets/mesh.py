@@ -615,6 +615,8 @@ def _read_material(tm, part: ModelPart, path: Path, maps: _MaterialMaps) -> None
         part.metallic = float(material.metallicFactor if material.metallicFactor is not None else 0.0)
         part.roughness = float(material.roughnessFactor if material.roughnessFactor is not None else 0.5)
         emissive = _floats(material.emissiveFactor)
+        if emissive is not None:  # KHR_materials_emissive_strength: how far past 1 it glows
+            emissive = [e * maps.gltf_emissive_strength(material) for e in emissive]
         part.reflectivity = part.metallic
     else:  # OBJ/MTL SimpleMaterial
         extra = {str(k).lower(): v for k, v in (getattr(material, "kwargs", {}) or {}).items()}
@@ -729,6 +731,19 @@ class _MaterialMaps:
         index, _ = self.gltf.material(material.name)
         return self.gltf.label(index) if index is not None else f"material {material.name!r}"
 
+    def gltf_emissive_strength(self, material) -> float:
+        """The file's ``KHR_materials_emissive_strength`` of this material (1 without it):
+        Blender writes it for a lamp brighter than its emissive colour's 1."""
+        _, doc_material = self.gltf.material(material.name) if self.gltf else (None, {})
+        extensions = doc_material.get("extensions") if isinstance(doc_material, dict) else None
+        info = extensions.get("KHR_materials_emissive_strength") if isinstance(extensions, dict) else None
+        strength = info.get("emissiveStrength", 1.0) if isinstance(info, dict) else 1.0
+        if isinstance(strength, bool) or not isinstance(strength, numbers.Real) or \
+                not (math.isfinite(strength) and 0.0 <= strength <= 1e4):
+            raise AssetError(f"{self.gltf_label(material)}: KHR_materials_emissive_strength.emissiveStrength must be "
+                             f"a number in [0, 10000], got {strength!r}")
+        return float(strength)
+
     def gltf_image(self, material, slot: str):
         """The image trimesh read for a glTF material's ``slot``, or None where the file's
         slot is one the engine leaves out (``GltfFiles.unread``: warned of when read)."""
@@ -784,6 +799,8 @@ class _MaterialMaps:
         image = self.gltf_image(material, "emissiveTexture")
         self.check_gltf_slot(material, "emissiveTexture", image)
         factor = _floats(material.emissiveFactor)
+        if factor is not None:
+            factor = [f * self.gltf_emissive_strength(material) for f in factor]
         if image is not None and factor is not None and len(factor) >= 3 and max(factor[:3]) > 0.0:
             self._emissive(part, self.image(image, f"{what}: emissiveTexture", "colour"), factor[:3], what)
 

@@ -415,7 +415,7 @@ def _json(path: Path, data: bytes, quiet: bool = False) -> dict | None:
     return doc if isinstance(doc, dict) else None
 
 
-GLTF_READ_EXTENSIONS: frozenset[str] = frozenset()  # glTF extensions the engine reads (none yet)
+GLTF_READ_EXTENSIONS = frozenset({"KHR_materials_emissive_strength"})  # glTF extensions the engine reads
 
 
 def _unread_texture(info: object) -> str | None:
