@@ -94,8 +94,10 @@ class Material(TrackedComponent):
     alpha scissor: where the alpha (``color``'s times ``texture``'s) is below it, nothing
     is drawn, in every view and in every light's shadow map (leaves, a fence, a grate);
     elsewhere the surface is opaque whatever its alpha, so it is not blended and needs no
-    sorting.  Not on a Mirror or Portal (refused: a surface's claim of
-    its pixels is drawn whole; put the cutout on an entity in front of it).
+    sorting.  Its texture's mip levels keep its coverage at the cutoff
+    (``engine/render/cutout_mips.py``), so a far tree keeps its leaves.  Not on a Mirror or
+    Portal (refused: a surface's claim of its pixels is drawn whole; put the cutout on an
+    entity in front of it).
 
     ``double_sided`` draws both faces of each triangle (glTF's ``doubleSided``, three.js's
     ``side: DoubleSide``, Unity's render face "Both"): a leaf, a fence or a sheet of paper

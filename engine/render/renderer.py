@@ -21,6 +21,7 @@ from engine.assets.mesh import Mesh
 from engine.assets.texture_data import TextureData
 from engine.core.color import srgb_to_linear
 from engine.core.errors import GLLimitError
+from engine.render.cutout_mips import FILTERED_TEXELS, coverage, keep_coverage
 from engine.render.gl_context import GLCapabilities
 from engine.render.gpu import BACKGROUND, Gpu, Shared
 from engine.render.instances import MAX_CHANGED_PARTS, BatchKey, GpuMesh, InstanceBatch
@@ -163,7 +164,10 @@ class Renderer(Gpu):
                     self.check_texture(image, name)  # before anything is made: nothing half-built
             gpu_mesh = self._acquire(self._meshes, mesh.id, lambda: GpuMesh(self.ctx, mesh))
             gpu_texture = gpu_normal_map = None
-            if texture is not None:
+            if texture is not None and alpha_cutoff is not None:  # its mips keep its coverage at the cutoff
+                gpu_texture = self._acquire(self._textures, ("cutout", id(texture), alpha_cutoff),
+                                            lambda: self._upload_cutout_texture(texture, alpha_cutoff))
+            elif texture is not None:
                 gpu_texture = self._acquire(self._textures, id(texture), lambda: self._upload_texture(texture))
             if normal_map is not None:
                 gpu_normal_map = self._acquire(self._textures, ("normal", id(normal_map)),
@@ -223,7 +227,8 @@ class Renderer(Gpu):
         key = batch.key
         self._release(self._meshes, key.mesh)
         if key.texture:
-            self._release(self._textures, key.texture)
+            self._release(self._textures, key.texture if key.alpha_cutoff is None
+                          else ("cutout", key.texture, key.alpha_cutoff))
         if key.normal_map:
             self._release(self._textures, ("normal", key.normal_map))
         if key.emissive_map:
@@ -271,6 +276,22 @@ class Renderer(Gpu):
         gl_texture.filter = (moderngl.LINEAR_MIPMAP_LINEAR, moderngl.LINEAR)
         gl_texture.anisotropy = self.normal_map_anisotropy if linear else self.texture_anisotropy
         self.colour_maps.add(gl_texture)  # complete (mipmapped), a float format: a stand-in albedo map too
+        return gl_texture
+
+    def _upload_cutout_texture(self, texture: TextureData, cutoff: float) -> moderngl.Texture:
+        """A cutout's albedo texture whose mip levels keep level 0's coverage at ``cutoff``
+        (``engine/render/cutout_mips.py``): the driver's mip chain, each level's alpha rescaled."""
+        gl_texture = self._upload_texture(texture)
+        alpha = texture.as_8_bits()[..., 3]
+        target = coverage(alpha, cutoff, filtered=alpha.size <= FILTERED_TEXELS)
+        width, height = gl_texture.size
+        level = 1
+        while max(width, height) > 1:
+            width, height = max(1, width // 2), max(1, height // 2)
+            texels = np.frombuffer(gl_texture.read(level=level), np.uint8).reshape(height, width, 4).copy()
+            texels[..., 3] = keep_coverage(texels[..., 3], cutoff, target)
+            gl_texture.write(texels.tobytes(), level=level)
+            level += 1
         return gl_texture
 
     def set_sky_faces(self, faces: np.ndarray | None) -> None:
