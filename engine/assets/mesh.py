@@ -662,6 +662,16 @@ def _read_material(tm, part: ModelPart, path: Path, maps: _MaterialMaps) -> None
             raise AssetError(f"material {name} {value} is outside 0..1")
 
 
+def _texture_number(doc_material: dict, slot: str, key: str, high: float, what: str) -> float:
+    """A number of a material's texture slot as the file writes it (``normalTexture.scale``,
+    ``occlusionTexture.strength``: trimesh drops them), in [0, ``high``]; 1 when absent."""
+    info = doc_material.get(slot) if isinstance(doc_material, dict) else None
+    value = info.get(key, 1.0) if isinstance(info, dict) else 1.0
+    if isinstance(value, bool) or not isinstance(value, numbers.Real) or not 0.0 <= float(value) <= high:
+        raise AssetError(f"{what}: {slot}.{key} must be a number in [0, {high:g}], got {value!r}")
+    return float(value)
+
+
 BLENDED_ALPHA = 0.999  # a glTF BLEND material's alpha where its factor's is 1: the transparent slot's
 MTL_DISSOLVE_CUTOFF = 0.5  # an opaque OBJ material with a map_d: a cutout at this alpha
 
@@ -772,16 +782,12 @@ class _MaterialMaps:
     def _gltf(self, material, part: ModelPart) -> None:
         what = self.gltf_label(material)
         _, doc_material = self.gltf.material(material.name) if self.gltf else (None, {})
-        image = self.gltf_image(material, "normalTexture")
-        self.check_gltf_slot(material, "normalTexture", image)
-        if image is not None:
-            part.normal_map = self.image(image, f"{what}: normalTexture", "normal")
-            part.normal_scale = self._normal_scale(doc_material, what)
-        image = self.gltf_image(material, "metallicRoughnessTexture")
-        self.check_gltf_slot(material, "metallicRoughnessTexture", image)
-        if image is not None:
+        part.normal_map = self._slot_map(material, "normalTexture", what, "normal")
+        if part.normal_map is not None:
+            part.normal_scale = _texture_number(doc_material, "normalTexture", "scale", MAX_MTL_BUMP_SCALE, what)
+        part.metallic_roughness_map = self._slot_map(material, "metallicRoughnessTexture", what, "linear")
+        if part.metallic_roughness_map is not None:
             # glTF: the factors multiply the texture (roughness G, metallic B); absent, they are 1.
-            part.metallic_roughness_map = self.image(image, f"{what}: metallicRoughnessTexture", "linear")
             part.metallic = 1.0 if material.metallicFactor is None else float(material.metallicFactor)
             part.roughness = 1.0 if material.roughnessFactor is None else float(material.roughnessFactor)
             for name in ("metallic", "roughness"):
@@ -791,11 +797,9 @@ class _MaterialMaps:
             # Reflective where any texel is metal; the map's blue weighs the reflection per pixel.
             metal = part.metallic_roughness_map.pixels[..., 2].max() > 0
             part.reflectivity = part.metallic if metal else 0.0
-        image = self.gltf_image(material, "occlusionTexture")
-        self.check_gltf_slot(material, "occlusionTexture", image)
-        if image is not None:
-            part.occlusion_map = self.image(image, f"{what}: occlusionTexture", "linear")
-            part.occlusion_strength = self._occlusion_strength(doc_material, what)
+        part.occlusion_map = self._slot_map(material, "occlusionTexture", what, "linear")
+        if part.occlusion_map is not None:
+            part.occlusion_strength = _texture_number(doc_material, "occlusionTexture", "strength", 1.0, what)
         image = self.gltf_image(material, "emissiveTexture")
         self.check_gltf_slot(material, "emissiveTexture", image)
         factor = _floats(material.emissiveFactor)
@@ -820,25 +824,13 @@ class _MaterialMaps:
             texture = self._made[key] = TextureData(pixels, name=f"{self.path.name}:{what.split(': ')[-1]}")
         return texture
 
-    @staticmethod
-    def _normal_scale(doc_material: dict, what: str) -> float:
-        """The file's ``normalTexture.scale`` of this material (glTF default 1)."""
-        info = doc_material.get("normalTexture") if isinstance(doc_material, dict) else None
-        scale = info.get("scale", 1.0) if isinstance(info, dict) else 1.0
-        if isinstance(scale, bool) or not isinstance(scale, numbers.Real) or \
-                not 0.0 <= float(scale) <= MAX_MTL_BUMP_SCALE:
-            raise AssetError(f"{what}: normalTexture.scale must be a number in [0, {MAX_MTL_BUMP_SCALE:g}], "
-                             f"got {scale!r}")
-        return float(scale)
-
-    @staticmethod
-    def _occlusion_strength(doc_material: dict, what: str) -> float:
-        """The file's ``occlusionTexture.strength`` of this material (glTF: 0 to 1, default 1)."""
-        info = doc_material.get("occlusionTexture") if isinstance(doc_material, dict) else None
-        strength = info.get("strength", 1.0) if isinstance(info, dict) else 1.0
-        if isinstance(strength, bool) or not isinstance(strength, numbers.Real) or not 0.0 <= float(strength) <= 1.0:
-            raise AssetError(f"{what}: occlusionTexture.strength must be a number in [0, 1], got {strength!r}")
-        return float(strength)
+    def _slot_map(self, material, slot: str, what: str, kind: str) -> TextureData | None:
+        """The image of a glTF material's ``slot`` as a TextureData read as ``kind`` (None:
+        the slot is empty, or left out: ``gltf_image``); a slot whose image could not be
+        read is an error (``check_gltf_slot``)."""
+        image = self.gltf_image(material, slot)
+        self.check_gltf_slot(material, slot, image)
+        return self.image(image, f"{what}: {slot}", kind) if image is not None else None
 
     def _emissive(self, part: ModelPart, texture: TextureData, factor: list[float], what: str) -> None:
         """An emissive map emitted at the factor's largest channel (``Emissive.power``); a
