@@ -405,22 +405,22 @@ def test_every_mip_level_of_a_cutouts_texture_keeps_its_coverage(scene):
     level 3 (the driver's own chain, uploaded for an ordinary texture); a cutout's texture
     has each level's alpha rescaled so as much of it stays over the cutoff as of level 0,
     measured as the sampler blends it (engine/render/cutout_mips.py)."""
-    from engine.render.cutout_mips import coverage
+    from engine.render.cutout_mips import alpha_share
 
     runner = scene(lambda w: look_from(w, (0.0, 1.0, 3.0)), (32, 32))
     runner.frame()
     renderer = runner.engine.renderer
     texture = TextureData(dots_pixels(), name="dots")
     plain, kept = renderer._upload_texture(texture), renderer._upload_cutout_texture(texture, 0.5)
-    target = coverage(texture.pixels[..., 3], 0.5, filtered=True)   # as the sampler sees level 0
+    target = alpha_share(texture.pixels[..., 3], 0.5, filtered=True)   # as the sampler sees level 0
     assert 0.15 < target < 0.32
     try:
         for level, side in enumerate((128, 64, 32, 16, 8)):
             kept_alpha, plain_alpha = (np.frombuffer(t.read(level=level), np.uint8).reshape(side, side, 4)[..., 3]
                                        for t in (kept, plain))
-            assert abs(coverage(kept_alpha, 0.5, filtered=True) - target) <= 0.05, level
+            assert abs(alpha_share(kept_alpha, 0.5, filtered=True) - target) <= 0.05, level
             if level >= 3:
-                assert coverage(plain_alpha, 0.5, filtered=True) < 0.05, level
+                assert alpha_share(plain_alpha, 0.5, filtered=True) < 0.05, level
     finally:
         plain.release()
         kept.release()
@@ -450,7 +450,7 @@ def test_a_far_cutout_keeps_its_leaves(scene, monkeypatch):
         return float((runner.ids()[inside] == runner.world.resources["ids"]["leaves"]).mean())
 
     kept = share(scene(build, (320, 240)))
-    monkeypatch.setattr(renderer_module, "keep_coverage", lambda alpha, cutoff, target: alpha)
+    monkeypatch.setattr(renderer_module, "keep_alpha_share", lambda alpha, cutoff, target: alpha)
     plain = share(scene(build, (320, 240)))
     # Level 0, as the sampler sees it, covers 28%; a far pixel reads two small levels blended
     # (trilinear), which thins any pattern, so the far share is under that, but not gone.

@@ -31,7 +31,7 @@ def filtered_samples(alpha: np.ndarray) -> np.ndarray:
     return np.stack(points)
 
 
-def coverage(alpha: np.ndarray, cutoff: float, filtered: bool = False) -> float:
+def alpha_share(alpha: np.ndarray, cutoff: float, filtered: bool = False) -> float:
     """The share of ``alpha`` (uint8) at or over ``cutoff`` (the shader discards below it):
     texel by texel, or (``filtered``) as the sampler blends it."""
     values = alpha.astype(np.float32) / 255.0
@@ -40,7 +40,7 @@ def coverage(alpha: np.ndarray, cutoff: float, filtered: bool = False) -> float:
     return float((values >= cutoff).mean())
 
 
-def keep_coverage(alpha: np.ndarray, cutoff: float, target: float) -> np.ndarray:
+def keep_alpha_share(alpha: np.ndarray, cutoff: float, target: float) -> np.ndarray:
     """``alpha`` (uint8, one mip level) scaled so its coverage at ``cutoff`` is as near
     ``target`` as a scale can make it (uint8 again); left as it is where it is near already."""
     values = alpha.astype(np.float32) / 255.0

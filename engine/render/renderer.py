@@ -21,7 +21,7 @@ from engine.assets.mesh import Mesh
 from engine.assets.texture_data import TextureData
 from engine.core.color import srgb_to_linear
 from engine.core.errors import GLLimitError
-from engine.render.cutout_mips import FILTERED_TEXELS, coverage, keep_coverage
+from engine.render.cutout_mips import FILTERED_TEXELS, alpha_share, keep_alpha_share
 from engine.render.gl_context import GLCapabilities
 from engine.render.gpu import BACKGROUND, Gpu, Shared
 from engine.render.instances import MAX_CHANGED_PARTS, BatchKey, GpuMesh, InstanceBatch
@@ -283,13 +283,13 @@ class Renderer(Gpu):
         (``engine/render/cutout_mips.py``): the driver's mip chain, each level's alpha rescaled."""
         gl_texture = self._upload_texture(texture)
         alpha = texture.as_8_bits()[..., 3]
-        target = coverage(alpha, cutoff, filtered=alpha.size <= FILTERED_TEXELS)
+        target = alpha_share(alpha, cutoff, filtered=alpha.size <= FILTERED_TEXELS)
         width, height = gl_texture.size
         level = 1
         while max(width, height) > 1:
             width, height = max(1, width // 2), max(1, height // 2)
             texels = np.frombuffer(gl_texture.read(level=level), np.uint8).reshape(height, width, 4).copy()
-            texels[..., 3] = keep_coverage(texels[..., 3], cutoff, target)
+            texels[..., 3] = keep_alpha_share(texels[..., 3], cutoff, target)
             gl_texture.write(texels.tobytes(), level=level)
             level += 1
         return gl_texture
