@@ -510,3 +510,40 @@ def test_a_bad_gltf_emissive_strength_is_refused_naming_the_material(tmp_path):
                 "extensions": {"KHR_materials_emissive_strength": {"emissiveStrength": -2}}}
     with pytest.raises(AssetError, match=r"lamp.*emissiveStrength must be a number in \[0, 10000\], got -2"):
         load_model(write_glb(tmp_path / "lamp.glb", quad(1.0, 1.0), material, []))
+
+
+
+@pytest.mark.parametrize("transform, seen", [({"scale": [0.5, 1.0]}, (255, 0, 0)),
+                                             ({"offset": [0.5, 0.0], "scale": [0.5, 0.5]}, (0, 0, 255)),
+                                             ({"offset": [0.5, 0.5], "scale": [0.5, 0.5]}, (0, 255, 0))])
+def test_gltf_texture_transform_shared_by_a_materials_maps_is_baked_into_its_uvs(scene, tmp_path, transform, seen):
+    """KHR_texture_transform's offset and scale (an atlas's region), the same on every map
+    of a material, move the UVs.  On an atlas red on its left half, blue on its right
+    half's top and green on its bottom (glTF's v runs down the image), a quad showing the
+    left half is red all over, the top right quarter blue and the bottom right green."""
+    pixels = np.zeros((8, 8, 3), np.uint8)
+    pixels[:, :4] = (255, 0, 0)
+    pixels[:4, 4:] = (0, 0, 255)
+    pixels[4:, 4:] = (0, 255, 0)
+    material = {"name": "atlas", "pbrMetallicRoughness": {
+        "baseColorFactor": [1.0, 1.0, 1.0, 1.0],
+        "baseColorTexture": {"index": 0, "extensions": {"KHR_texture_transform": transform}}}}
+    path = write_glb(tmp_path / "atlas.glb", quad(2.0, 2.0), material, [pixels],
+                     {"extensionsUsed": ["KHR_texture_transform"]})
+    (part,) = load_model(path)
+    uv = part.mesh.uvs   # the quad's corners: u from the scale and offset; v the same, flipped (engine: up)
+    np.testing.assert_allclose(uv[:, 0], quad(2.0, 2.0).uvs[:, 0] * transform["scale"][0]
+                               + transform.get("offset", [0.0, 0.0])[0])
+
+    def build(world):
+        look_from(world, (0.0, 1.0, 2.0), (0.0, 1.0, 0.0))
+        spawn_model(world, path, position=(0.0, 1.0, 0.0))
+        for entity, _ in list(world.query_one(Material)):   # no light: it shows its texture's colour
+            if not world.has(entity, Emissive):
+                world.add_component(entity, Emissive(1.0))
+    runner = scene(build, (64, 48))
+    frame = runner.frame()
+    middle = frame[18:30, 26:38].reshape(-1, 3).astype(int)   # well inside the quad
+    expected = np.array(seen)
+    assert (np.abs(middle - expected * (middle.max(axis=1, keepdims=True) / 255.0)).max(axis=1) < 40).all(), \
+        middle[:4]

@@ -201,15 +201,24 @@ def test_a_gltf_strength_out_of_range_is_refused_naming_the_material(tmp_path):
         load_model(_glb(tmp_path, 2))
 
 
-@pytest.mark.parametrize("info, reason", [({"index": 0, "texCoord": 1}, "it reads TEXCOORD_1"),
-                                          ({"index": 0, "extensions": {"KHR_texture_transform": {"scale": [2, 2]}}},
-                                           "KHR_texture_transform")])
-def test_a_map_on_uvs_the_engine_does_not_read_is_left_out_with_a_warning(tmp_path, info, reason):
-    """A slot reading the second UV set (an occlusion map on lightmap UVs) or moving its UVs
-    would be drawn in the wrong place: the map is left out, and a warning names the
-    material, the slot and why; the rest of the material is read."""
+def _moved(**transform) -> dict:
+    return {"index": 0, "extensions": {"KHR_texture_transform": transform}}
+
+
+@pytest.mark.parametrize("info, colour_map, reason", [
+    ({"index": 0, "texCoord": 1}, None, "it reads TEXCOORD_1"),
+    (_moved(texCoord=1), None, "it reads TEXCOORD_1"),
+    (_moved(scale=[2, 2]), {"index": 0}, "its KHR_texture_transform differs from its material's other maps'"),
+    (_moved(rotation=0.4), None, "its KHR_texture_transform rotates its UVs")])
+def test_a_map_on_uvs_the_engine_does_not_read_is_left_out_with_a_warning(tmp_path, info, colour_map, reason):
+    """A slot reading the second UV set (an occlusion map on lightmap UVs), moving its UVs
+    unlike the material's other maps, or rotating them would be drawn in the wrong place:
+    the map is left out, and a warning names the material, the slot and why; the rest of
+    the material is read."""
     material = {"name": "walled", "pbrMetallicRoughness": {"baseColorFactor": [0.8, 0.5, 0.3, 1.0]},
                 "occlusionTexture": info}
+    if colour_map is not None:
+        material["pbrMetallicRoughness"]["baseColorTexture"] = colour_map
     path = write_glb(tmp_path / "ao.glb", quad(2.0, 2.0), material, [occlusion_pixels()[..., :3].copy()])
     with pytest.warns(UserWarning, match=rf"walled.*occlusionTexture: .*{reason}.*the map is left out"):
         (part,) = load_model(path)

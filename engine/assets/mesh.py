@@ -723,11 +723,31 @@ class _MaterialMaps:
             return
         if hasattr(material, "baseColorFactor"):
             self._gltf(material, part)
+            index, _ = self.gltf.material(material.name) if self.gltf else (None, {})
+            transform = self.gltf.uv_transforms.get(index) if self.gltf else None
+            if transform is not None:
+                part.mesh = self._uv_transformed(part.mesh, transform)
         elif isinstance(material, SimpleMaterial):
             found = self.obj.maps.get(getattr(material, "_name", None) or "") if self.obj else None
             if found:
                 extra = {str(k).lower(): v for k, v in (getattr(material, "kwargs", {}) or {}).items()}
                 self._obj(found, extra, part)
+
+    def _uv_transformed(self, mesh: Mesh, transform: tuple[float, float, float, float, float]) -> Mesh:
+        """``mesh`` with its UVs moved by a glTF ``KHR_texture_transform`` (offset x, offset
+        y, rotation, scale x, scale y; the rotation 0: a rotating one is left out when the
+        file is read) every map of its material shares: ``offset + scale x uv`` in glTF's UV
+        space (v down from the image's top; the engine's v is 1 - that), baked once a mesh
+        and transform."""
+        key = ("uv transform", id(mesh), transform)
+        made = self._made.get(key)
+        if made is None:
+            ox, oy, _, sx, sy = transform
+            moved_u = mesh.uvs[:, 0].astype(np.float64) * sx + ox
+            moved_v = (1.0 - mesh.uvs[:, 1].astype(np.float64)) * sy + oy
+            made = self._made[key] = Mesh(mesh.positions, mesh.normals, np.stack([moved_u, 1.0 - moved_v], axis=1),
+                                          mesh.indices, name=mesh.name, colors=mesh.colors)
+        return made
 
     def mtl_map(self, material, key: str) -> MtlMap | None:
         """The ``key`` map statement of the OBJ material trimesh calls ``material``."""

@@ -368,6 +368,9 @@ class GltfFiles:
     # (material index, slot) -> why its map is left out (it reads a UV set or a transform the
     # engine does not: drawn with the first UVs it would land in the wrong place)
     unread: dict[tuple[int, str], str] = field(default_factory=dict)
+    # material index -> the KHR_texture_transform all its maps share (offset x, offset y,
+    # rotation, scale x, scale y): baked into its meshes' UVs when they are read
+    uv_transforms: dict[int, tuple[float, float, float, float, float]] = field(default_factory=dict)
 
     def material(self, trimesh_name: object) -> tuple[int | None, dict]:
         """The index and the file's JSON of the material trimesh calls ``trimesh_name``."""
@@ -415,22 +418,50 @@ def _json(path: Path, data: bytes, quiet: bool = False) -> dict | None:
     return doc if isinstance(doc, dict) else None
 
 
-GLTF_READ_EXTENSIONS = frozenset({"KHR_materials_emissive_strength"})  # glTF extensions the engine reads
+# glTF extensions the engine reads (a texture transform: offset and scale, shared by a material's maps)
+GLTF_READ_EXTENSIONS = frozenset({"KHR_materials_emissive_strength", "KHR_texture_transform"})
 
 
 def _unread_texture(info: object) -> str | None:
     """Why a material slot's texture (its ``textureInfo``) cannot be drawn as the file
-    means it, or None: it reads a second UV set (``texCoord`` > 0: the engine's meshes carry
-    the first), or moves its UVs by ``KHR_texture_transform``."""
+    means it, or None: it reads a second UV set (``texCoord`` > 0, or its transform's: the
+    engine's meshes carry the first)."""
     if not isinstance(info, dict):
         return None
-    coord = info.get("texCoord", 0)
+    transform = (info.get("extensions") or {}).get("KHR_texture_transform") \
+        if isinstance(info.get("extensions"), dict) else None
+    coord = transform.get("texCoord", info.get("texCoord", 0)) if isinstance(transform, dict) \
+        else info.get("texCoord", 0)
     if coord != 0:
-        return f"it reads TEXCOORD_{coord}" if isinstance(coord, int) else f"its texCoord is {coord!r}"
-    extensions = info.get("extensions")
-    if isinstance(extensions, dict) and "KHR_texture_transform" in extensions:
-        return "it moves its UVs by KHR_texture_transform"
+        return (f"it reads TEXCOORD_{coord}" if isinstance(coord, int) else f"its texCoord is {coord!r}") \
+            + ", which the engine's meshes do not carry"
     return None
+
+
+def _uv_transform(info: object, label: str) -> tuple[float, float, float, float, float] | None:
+    """A slot's ``KHR_texture_transform`` as (offset x, offset y, rotation, scale x,
+    scale y), checked (None: none, or one that changes nothing)."""
+    extensions = info.get("extensions") if isinstance(info, dict) else None
+    transform = extensions.get("KHR_texture_transform") if isinstance(extensions, dict) else None
+    if transform is None:
+        return None
+    if not isinstance(transform, dict):
+        raise AssetError(f"{label}: KHR_texture_transform must be an object, got {transform!r}")
+
+    def numbers_of(key: str, default: list[float]) -> list[float]:
+        value = transform.get(key, default)
+        values = value if isinstance(value, list) else [value]
+        if len(values) != len(default) or not all(
+                isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) and abs(v) <= 1e6
+                for v in values):
+            raise AssetError(f"{label}: KHR_texture_transform.{key} must be {len(default)} finite number"
+                             f"{'s' if len(default) > 1 else ''}, got {value!r}")
+        return [float(v) for v in values]
+
+    (ox, oy), (rotation,), (sx, sy) = numbers_of("offset", [0.0, 0.0]), numbers_of("rotation", [0.0]), \
+        numbers_of("scale", [1.0, 1.0])
+    found = (ox, oy, rotation, sx, sy)
+    return None if found == (0.0, 0.0, 0.0, 1.0, 1.0) else found
 
 
 def prepare_gltf(path: Path, data: bytes, roots: Sequence[Path], textures: bool) -> GltfFiles:
@@ -478,16 +509,28 @@ def prepare_gltf(path: Path, data: bytes, roots: Sequence[Path], textures: bool)
                 isinstance(e, (int, float)) and not isinstance(e, bool) and 0.0 <= e <= 65504.0 for e in emissive)):
             raise AssetError(f"{what}: {result.label(index)}: emissiveFactor must be three numbers in [0, 65504], "
                              f"got {emissive!r}")
+        transforms = {slot: _uv_transform(info, f"{what}: {result.label(index)}: {slot}")
+                      for slot in GLTF_TEXTURE_SLOTS if (info := pbr.get(slot, material.get(slot))) is not None}
+        shared = set(transforms.values())
+        if len(shared) == 1 and None not in shared and next(iter(shared))[2] == 0.0:
+            # one offset and scale for every map: baked into the UVs
+            result.uv_transforms[index] = shared.pop()
         for slot in GLTF_TEXTURE_SLOTS:
             info = pbr.get(slot, material.get(slot))
             if info is None:
                 continue
             label = f"{what}: {result.label(index)}: {slot}"
             unread = _unread_texture(info)
+            if unread is None and transforms[slot] is not None and transforms[slot][2] != 0.0:
+                # The extension's text and its reference GLSL turn the image opposite ways, and
+                # viewers differ: a rotation is left out rather than drawn one way at a guess.
+                unread = "its KHR_texture_transform rotates its UVs, which the engine does not read"
+            elif unread is None and len(shared) > 1 and transforms[slot] is not None:
+                unread = ("its KHR_texture_transform differs from its material's other maps' (one transform a "
+                          "material is baked into the UVs)")
             if unread is not None:
                 result.unread[(index, slot)] = unread
-                warnings.warn(f"{label}: {unread}, which the engine does not read: the map is left out",
-                              stacklevel=4)
+                warnings.warn(f"{label}: {unread}: the map is left out", stacklevel=4)
                 continue
             texture_index = info.get("index") if isinstance(info, dict) else None
             if not _index_in(texture_index, textures_list) or not isinstance(textures_list[texture_index], dict):
