@@ -16,9 +16,11 @@ from pyglm import glm
 from components import (
     ComponentValueError,
     DirectionalLight,
+    Emissive,
     HemisphereLight,
     Material,
     MeshRef,
+    ReflectionProbe,
     Reflective,
     Skybox,
     Transform,
@@ -47,7 +49,7 @@ OCCLUSION = TextureData(occlusion_pixels(), name="occlusion")
 
 
 def _wall(world, occlusion: bool = True, strength: float = 1.0, ambient: float = 1.0, sun: bool = False,
-          chrome: bool = False) -> None:
+          chrome: str | None = None) -> None:
     look_from(world, (0.0, 1.0, 2.2), (0.0, 1.0, 0.0))
     if chrome:   # reflects the sky: no diffuse light, all of it from all round
         world.spawn(Skybox())
@@ -58,9 +60,14 @@ def _wall(world, occlusion: bool = True, strength: float = 1.0, ambient: float =
     material = Material(color=(0.8, 0.8, 0.8), metallic=1.0 if chrome else 0.0, roughness=0.05 if chrome else 1.0,
                         occlusion_map=OCCLUSION if occlusion else None, occlusion_strength=strength)
     parts = [Transform(position=(0.0, 1.0, 0.0)), MeshRef(quad(2 * WALL_HALF, 2 * WALL_HALF)), material]
-    if chrome:
-        parts.append(Reflective("skybox", mix=1.0))
+    if chrome:   # the sky's reflection, or a probe's (the wall's own)
+        parts.append(Reflective(chrome, mix=1.0))
+    if chrome == "cube":
+        parts.append(ReflectionProbe(resolution=32, refresh="once"))
     world.spawn(*parts)
+    if chrome == "cube":   # something for the probe to show, behind the camera
+        world.spawn(Transform(position=(0.0, 1.0, 3.0)), MeshRef(quad(4.0, 4.0)),
+                    Material(color=(0.9, 0.6, 0.2), double_sided=True), Emissive(1.0))
 
 
 def _halves(runner) -> tuple[np.ndarray, np.ndarray]:
@@ -117,13 +124,17 @@ def test_a_lights_own_light_is_not_occluded(scene):
     np.testing.assert_array_equal(mapped_rgb[open_], both_rgb[open_])
 
 
-def test_a_sky_reflection_is_occluded_too(scene):
-    """A chrome wall reflecting the sky: the occluded half reflects nothing, the open half
-    as the wall without a map."""
-    mapped = scene(lambda w: _wall(w, chrome=True), SIZE)
-    plain = scene(lambda w: _wall(w, occlusion=False, chrome=True), SIZE)
+@pytest.mark.parametrize("mode", ["skybox", "cube"])
+def test_a_sky_or_probe_reflection_is_occluded_too(scene, mode):
+    """A chrome wall reflecting the sky, or its own probe's capture (an orange panel behind
+    the camera): the occluded half reflects nothing, the open half as the wall without a
+    map."""
+    mapped = scene(lambda w: _wall(w, chrome=mode), SIZE)
+    plain = scene(lambda w: _wall(w, occlusion=False, chrome=mode), SIZE)
     mapped_rgb, plain_rgb = mapped.frame(), plain.frame()
     occluded, open_ = _halves(mapped)
+    seen = _linear(plain_rgb[open_]).mean(axis=0)
+    assert (seen[0] > seen[2] + 0.1) == (mode == "cube"), seen   # the probe shows the orange panel
     assert _linear(plain_rgb[occluded]).mean() > 0.2
     assert mapped_rgb[occluded].max() <= 1
     np.testing.assert_array_equal(mapped_rgb[open_], plain_rgb[open_])
