@@ -134,8 +134,8 @@ class Renderer(Gpu):
                   occlusion_map: TextureData | None = None, occlusion_strength: float = 1.0,
                   double_sided: bool = False) -> InstanceBatch:
         """The batch of (mesh, albedo texture, normal map, emissive map, metallic-roughness
-        map, the probe its instances sample; 0: none, a cutout's cutoff, an occlusion map and
-        its strength).  A transparent entity gets a batch of its own
+        map, the probe its instances sample (0: none), a cutout's cutoff, an occlusion map and
+        its strength, double-sidedness).  A transparent entity gets a batch of its own
         (``transparent_entity``): transparent things are drawn one by one, farthest first.
         Textures are shared by every batch that uses them; a normal, metallic-roughness or
         occlusion map is uploaded linear (their texels are vectors and factors,

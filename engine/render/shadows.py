@@ -88,15 +88,15 @@ POINT_NEAR = 0.02   # metres: a point light's cube sees casters from here out
 # most (1 + softness) x 1.5 texels) and the filter's spread (softness / 2 + 1) from a point
 # just inside the cone stay in its own tile (MAX_SHADOW_SOFTNESS 8: 13.5 + 5).
 SPOT_GUTTER = 20
-# Depth only, both faces: a quad (a mirror, a wall of one face) casts whichever side the
-# light reaches; the normal offset keeps a closed mesh's lit side off its own back.
 # The caster builds (shadow.vert/frag's defines): a depth map's; a point light's cube face
 # (distance over range); its six faces in one layered pass; a middle stretch of a virtual
-# light's way (a second clip plane).
+# light's way (a second clip plane).  Each has a cutout build too (ALPHA_CUTOFF).
 _DEPTH: tuple[tuple[str, str], ...] = ()
 _DISTANCE = (("DISTANCE", "1"),)
 _LAYERED = (("DISTANCE", "1"), ("LAYERED", "1"))
 _LEG = (("LEG", "1"),)
+# Depth only, both faces: a quad (a mirror, a wall of one face) casts whichever side the
+# light reaches; the normal offset keeps a closed mesh's lit side off its own back.
 _CASTERS = PassState(depth_func="<", cull=False, clips=SCENE_CLIPS)
 # A virtual light's stretch between two surfaces: kept between both planes.
 _LEG_CASTERS = PassState(depth_func="<", cull=False, clips=SCENE_CLIPS | frozenset((CLIP_LEG_PLANE,)))
