@@ -245,3 +245,34 @@ def test_a_file_requiring_an_extension_the_engine_does_not_read_is_refused(tmp_p
     with pytest.raises(AssetError, match=r"draco\.glb.*requires the glTF extension KHR_draco_mesh_compression, "
                                          r"which the engine does not read"):
         load_model(path)
+
+
+def test_occlusion_packed_with_metallic_roughness_is_read_from_that_one_map(scene, tmp_path):
+    """glTF's packed occlusion-roughness-metallic image (both slots naming one texture): the
+    material's two maps are one image, drawn from one GPU texture and one sampler (the
+    occlusion from its red); the frame equals the same material given the occlusion as an
+    image of its own (a copy), which takes a second texture."""
+    orm = occlusion_pixels()
+    orm[..., 1], orm[..., 2] = 255, 0   # roughness 1, metallic 0; red: occluded left, open right
+    material = {"name": "packed", "pbrMetallicRoughness": {"baseColorFactor": [0.8, 0.8, 0.8, 1.0],
+                                                            "metallicRoughnessTexture": {"index": 0}},
+                "occlusionTexture": {"index": 0}}
+    path = write_glb(tmp_path / "orm.glb", quad(2.0, 2.0), material, [orm[..., :3].copy()])
+    (part,) = load_model(path)
+    assert part.occlusion_map is part.metallic_roughness_map
+
+    def build(world, packed):
+        look_from(world, (0.0, 1.0, 2.2), (0.0, 1.0, 0.0))
+        world.spawn(HemisphereLight(sky=(0.6, 0.7, 0.9), ground=(0.6, 0.7, 0.9), intensity=1.0))
+        root = spawn_model(world, path, position=(0.0, 1.0, 0.0))
+        if not packed:
+            (entity,) = [e for e, (t,) in world.query(Transform) if t.parent == root]
+            own = world.get(entity, Material)
+            own.occlusion_map = TextureData(own.occlusion_map.pixels.copy(), name="a copy")
+    packed, separate = scene(lambda w: build(w, True), SIZE), scene(lambda w: build(w, False), SIZE)
+    packed_rgb, separate_rgb = packed.frame(), separate.frame()
+    occluded, open_ = _halves(packed)
+    assert packed_rgb[occluded].max() <= 1 and srgb_to_linear(packed_rgb[open_]).mean() > 0.2
+    np.testing.assert_array_equal(packed_rgb, separate_rgb)
+    counts = [runner.engine.renderer.resource_counts()["textures"] for runner in (packed, separate)]
+    assert counts[1] == counts[0] + 1, counts

@@ -264,6 +264,9 @@ class InstanceBatch:
         # part of the batch's key (Renderer.batch_for), the strength its draws' uniform.
         self.occlusion_map: moderngl.Texture | None = None
         self.occlusion_strength = 1.0
+        # The occlusion is its metallic-roughness map's red channel (the same image: glTF's
+        # packed occlusion-roughness-metallic texture): no map, nor sampler, of its own.
+        self.occlusion_packed = False
         self.double_sided = False  # Material.double_sided: its draws turn face culling off
 
     # --- rows ----------------------------------------------------------------------------

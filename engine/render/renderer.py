@@ -180,10 +180,12 @@ class Renderer(Gpu):
                 batch.metallic_roughness_map = self._acquire(
                     self._textures, ("normal", id(metallic_roughness_map)),
                     lambda: self._upload_texture(metallic_roughness_map, linear=True))
-            if occlusion_map is not None:  # linear, shared with the same image as a normal or metallic map
+            if occlusion_map is not None and occlusion_map is metallic_roughness_map:
+                batch.occlusion_packed = True  # glTF's ORM: read from the metallic-roughness map's red
+            elif occlusion_map is not None:  # linear, shared with the same image as a normal map
                 batch.occlusion_map = self._acquire(self._textures, ("normal", id(occlusion_map)),
                                                     lambda: self._upload_texture(occlusion_map, linear=True))
-                batch.occlusion_strength = key.occlusion_strength
+            batch.occlusion_strength = key.occlusion_strength
             batch.key = key
             batch.mirrored = mirrored
             batch.alpha_cutoff = alpha_cutoff
@@ -235,7 +237,7 @@ class Renderer(Gpu):
             self._release(self._textures, key.emissive_map)
         if key.metallic_roughness_map:
             self._release(self._textures, ("normal", key.metallic_roughness_map))
-        if key.occlusion_map:
+        if key.occlusion_map and key.occlusion_map != key.metallic_roughness_map:  # (packed: nothing of its own)
             self._release(self._textures, ("normal", key.occlusion_map))
 
     @staticmethod

@@ -64,6 +64,7 @@ PER_PASS_UNIFORMS = 1  # the first changes with the pass; the rest with the batc
 # index is its Camera block's: nothing is written per view)
 NO_PROBE_LOOKUP = ((0.0, 0.0, 0.0, 0.0),) * 3  # a probe's lookup uniforms where the sky stands in for it
 NO_CHECKER = (0.0, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
+NO_MATERIAL_MAPS = (False, False, False, "", False)  # a batch's build with none of _material_build's
 
 
 class ScenePrograms:
@@ -89,7 +90,7 @@ class ScenePrograms:
 
     def program(self, variants: tuple[int, int, int] | None = None, invocations: int = 0,
                 layered: str = "", normal_mapped: bool = False, checker: bool = False,
-                material: tuple[bool, bool, bool, bool, bool] = (False,) * 5, probe_blend: bool = False,
+                material: tuple[bool, bool, bool, str, bool] = NO_MATERIAL_MAPS, probe_blend: bool = False,
                 ambient_probes: bool = False, probe_rest: bool = False, unlit: bool = False,
                 masked: bool = False) -> moderngl.Program:
         """The scene program for a batch of ``variants`` (None: mixed, switched per
@@ -100,7 +101,8 @@ class ScenePrograms:
         a generated checker texture drawn from its cells, filtered by the pixel's footprint,
         instead of sampled), and with or without each of the material maps ``material``
         names (emissive, metallic-roughness, occlusion: ``EMISSIVE_MAP``,
-        ``METALLIC_ROUGHNESS_MAP`` and ``OCCLUSION_MAP`` builds,
+        ``METALLIC_ROUGHNESS_MAP`` and ``OCCLUSION_MAP`` builds, or ``OCCLUSION_PACKED``: the
+        occlusion in the metallic-roughness map's red, glTF's packed ORM image,
         shaders/include/material_maps.glsl; a batch without them samples nothing for them)
         and whether it is a cutout (``ALPHA_CUTOFF``: it discards where its alpha falls
         below its ``alpha_cutoff`` uniform; only its builds may discard, so every other keeps
@@ -137,8 +139,8 @@ class ScenePrograms:
                 defines["METALLIC_ROUGHNESS_MAP"] = "1"
             if material[2]:
                 defines["ALPHA_CUTOFF"] = "1"
-            if material[3]:
-                defines["OCCLUSION_MAP"] = "1"
+            if material[3]:  # its own occlusion map, or (packed) the metallic-roughness map's red
+                defines["OCCLUSION_PACKED" if material[3] == "packed" else "OCCLUSION_MAP"] = "1"
             if material[4]:  # its mesh's colour a vertex (Mesh.colors)
                 defines["VERTEX_COLOR"] = "1"
             if probe_blend:  # two probes and the sky by the instances' weights (shaders/include/probe.glsl)
@@ -283,10 +285,12 @@ def geometry_invocations(view_count: int) -> int:
 BATCHED_INVOCATIONS = tuple(sorted({geometry_invocations(n) for n in range(1, MAX_BATCHED_VIEWS + 1)}))
 
 
-def _material_build(batch: InstanceBatch) -> tuple[bool, bool, bool, bool, bool]:
+def _material_build(batch: InstanceBatch) -> tuple[bool, bool, bool, str, bool]:
     """What of a batch's material picks its build: whether it samples an emissive and a
-    metallic-roughness map, whether it is a cutout, whether it samples an occlusion map, and
-    whether its mesh has a colour a vertex."""
+    metallic-roughness map, whether it is a cutout, where its occlusion is read ("map": a
+    map of its own, "packed": the metallic-roughness map's red, "": none), and whether its
+    mesh has a colour a vertex."""
+    occlusion = "packed" if batch.occlusion_packed else "map" if batch.occlusion_map is not None else ""
     return (batch.emissive_map is not None, batch.metallic_roughness_map is not None, batch.alpha_cutoff is not None,
-            batch.occlusion_map is not None, batch.mesh.colors is not None)
+            occlusion, batch.mesh.colors is not None)
 

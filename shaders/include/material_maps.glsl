@@ -7,13 +7,15 @@
 // Included by scene.frag after its Surface struct; reads its v_uv.
 
 #ifdef METALLIC_ROUGHNESS_MAP
-uniform sampler2D metallic_roughness_map;  // linear: green = roughness, blue = metallic (red unused)
+uniform sampler2D metallic_roughness_map;  // linear: green = roughness, blue = metallic (red: a packed occlusion)
 #endif
 #ifdef EMISSIVE_MAP
 uniform sampler2D emissive_map;            // sRGB colour, decoded to linear by the texture unit
 #endif
 #ifdef OCCLUSION_MAP
 uniform sampler2D occlusion_map;           // linear: red = how much light from all round reaches
+#endif
+#if defined(OCCLUSION_MAP) || defined(OCCLUSION_PACKED)
 uniform float occlusion_strength;          // Material.occlusion_strength (glTF's strength)
 #endif
 
@@ -21,8 +23,11 @@ uniform float occlusion_strength;          // Material.occlusion_strength (glTF'
 // reaches the surface: glTF's 1 + strength x (occlusion - 1); 1 without a map.  A light's
 // own light is not scaled (glTF: occlusion is of indirect light only).
 float material_occlusion() {
-#ifdef OCCLUSION_MAP
+#if defined(OCCLUSION_MAP)
     return 1.0 + occlusion_strength * (texture(occlusion_map, v_uv).r - 1.0);
+#elif defined(OCCLUSION_PACKED)
+    // glTF's packed occlusion-roughness-metallic image: the occlusion in its red (one sampler)
+    return 1.0 + occlusion_strength * (texture(metallic_roughness_map, v_uv).r - 1.0);
 #else
     return 1.0;
 #endif
