@@ -1,5 +1,5 @@
 """Components: plain data attached to entities. Behaviour lives in ``systems``."""
-from components.ambient import HemisphereLight
+from components.ambient import AmbientOcclusion, HemisphereLight
 from components.camera import Camera, DirectionalLight, FlyController, PointLight
 from components.fog import Fog
 from components.mirror import Mirror
@@ -14,8 +14,8 @@ from components.visibility import Visibility
 from components.water import Water
 
 __all__ = [
-    "Bloom", "Camera", "ComponentValueError", "ComponentWarning", "DirectionalLight", "Emissive", "FlyController",
-    "Fog", "HemisphereLight", "Material",
+    "AmbientOcclusion", "Bloom", "Camera", "ComponentValueError", "ComponentWarning", "DirectionalLight", "Emissive",
+    "FlyController", "Fog", "HemisphereLight", "Material",
     "MeshRef", "Mirror", "PointLight", "Portal", "PortalClone", "ReflectionProbe", "Reflective", "Refractive",
     "ScreenPanel", "ScreenText", "Skybox", "Slice",
     "Tonemap", "TrackedComponent", "Transform", "Traveller", "Visibility", "Water",

@@ -1,4 +1,5 @@
-"""Ambient light where there is no sky: a sky/ground hemisphere."""
+"""Ambient light: a sky/ground hemisphere where there is no sky, and the camera's
+screen-space ambient occlusion."""
 from __future__ import annotations
 
 from dataclasses import dataclass, field
@@ -6,12 +7,16 @@ from typing import Any
 
 from pyglm import glm
 
-from components.tracking import HALF_MAX, TrackedComponent, color, finite
+from components.tracking import HALF_MAX, TrackedComponent, boolean, color, finite
 
 # The hemisphere a world with neither a Skybox nor a HemisphereLight is lit by: dim, a
 # little bluer above than below (a wall facing sideways gets their mean, 0.03 0.03 0.035).
 DEFAULT_SKY = (0.04, 0.04, 0.045)
 DEFAULT_GROUND = (0.02, 0.02, 0.025)
+# Ambient occlusion's reach: at most this many metres (a room's corner, not a valley), and
+# its intensity's largest exponent (visibility ** 8 is black wherever anything occludes).
+MAX_OCCLUSION_RADIUS = 100.0
+MAX_OCCLUSION_INTENSITY = 8.0
 
 
 @dataclass(eq=False)
@@ -36,4 +41,50 @@ class HemisphereLight(TrackedComponent):
             return color(self, name, value)
         if name == "intensity":
             return finite(self, name, value, low=0.0, high=HALF_MAX)
+        return value
+
+
+@dataclass(eq=False)
+class AmbientOcclusion(TrackedComponent):
+    """Screen-space ambient occlusion for the camera whose entity holds it (the active
+    camera's is used): the light from all round (the sky's or a probe's irradiance, and
+    the sky's and probes' reflections) is dimmed where nearby geometry hides part of the
+    sky from a point, in corners, creases and under things, as every engine ships it (Unity's
+    and Godot's SSAO, three.js's GTAOPass, Panda3D's ambient occlusion filter).
+
+    Ground-truth ambient occlusion (Jimenez et al., "Practical Real-Time Strategies for
+    Accurate Indirect Occlusion", 2016): the share of the cosine-weighted hemisphere over
+    each pixel's surface that no geometry within ``radius`` hides, found from the camera's
+    depth by the horizons of a few slices through the view direction
+    (``engine/render/screen_occlusion.py``).  It multiplies what a material's own
+    ``occlusion_map`` gives.
+
+    - ``radius``: metres; geometry farther than this from a point does not occlude it.
+    - ``intensity``: the visibility ``v`` is applied as ``v ** intensity``: 1 is the
+      measured share (a point at the foot of a tall wall keeps half its light from all
+      round), more darkens, 0 turns it off.
+    - ``direct_light``: the share of the occlusion applied to the lights' direct light too
+      (0: none, as is physically right; Unity's "direct lighting strength", Godot's
+      "light affect"), a look for scenes that have little light from all round.
+    - ``half_resolution``: found at half the screen's size in each direction (a quarter of
+      the work) and brought to full size by a depth-aware filter; False: at full size.
+
+    Only the camera's own view is occluded: mirror, portal and probe views are not (Unity's
+    planar reflections have the same limit), and neither is glass (the transparent slot).
+    """
+
+    radius: float = 1.0
+    intensity: float = 1.0
+    direct_light: float = 0.0
+    half_resolution: bool = True
+
+    def _validate(self, name: str, value: Any) -> Any:
+        if name == "radius":
+            return finite(self, name, value, positive=True, high=MAX_OCCLUSION_RADIUS)
+        if name == "intensity":
+            return finite(self, name, value, low=0.0, high=MAX_OCCLUSION_INTENSITY)
+        if name == "direct_light":
+            return finite(self, name, value, low=0.0, high=1.0)
+        if name == "half_resolution":
+            return boolean(self, name, value)
         return value

@@ -30,6 +30,11 @@ flat in uvec4 v_slots;
 #ifdef VERTEX_COLOR
 in vec3 v_vertex_color;  // the mesh's colour here (Mesh.colors), multiplied into the material's
 #endif
+#ifdef SCREEN_OCCLUSION
+// The camera's screen-space ambient occlusion, a texel a pixel (engine/render/screen_occlusion.py,
+// a root view's opaque draws only): r the light from all round's share, g the direct light's.
+uniform sampler2D screen_occlusion;
+#endif
 
 // Reflection levels draw only the pixels of their own view (the node image mirror_claim.frag
 // wrote): the MASKED build (engine/render/scene_pass.py), so a root view's program has neither
@@ -83,7 +88,8 @@ struct Surface {
     float alpha;
     float metallic;
     float roughness;
-    float occlusion;  // the share of the light from all round that reaches it (material_occlusion)
+    float occlusion;  // the share of the light from all round that reaches it (material_occlusion; x screen AO)
+    float direct_occlusion;  // the share of the lights' direct light (1 but with AmbientOcclusion.direct_light)
     vec3 f0;
     vec3 reflect_dir;   // unit, eye ray reflected about the normal
     float reflect_lod;  // sky mip level that matches the pixel footprint of reflect_dir
@@ -105,6 +111,10 @@ float cube_lod(vec3 direction, float n) {
 vec3 direct_lighting(Surface s) {
     vec3 diffuse = s.albedo * (1.0 - s.metallic) / PI;
     vec3 total = ambient_irradiance(s.position, s.normal) * diffuse * s.occlusion;  // E(n) x albedo x (1 - metallic) / pi
+#ifdef SCREEN_OCCLUSION
+    vec3 ambient = total;  // the direct light, summed apart, takes its own share of the occlusion
+    total = vec3(0.0);
+#endif
     // The maps looked up before the loops (shadows.glsl); none for an instance that receives
     // no shadow (MeshRef.receives_shadows: its code's NO_RECEIVE_BIT, visibility.glsl).
     bool shadowed = !receives_no_shadow(v_tint.w);
@@ -136,6 +146,9 @@ vec3 direct_lighting(Surface s) {
 #ifdef VIRTUAL_LIGHTS
     total += virtual_lighting(s.position, s.normal, s.geometric_normal, s.to_eye, diffuse, s.f0, s.roughness,
                               shadowed);
+#endif
+#ifdef SCREEN_OCCLUSION
+    total = ambient + total * s.direct_occlusion;
 #endif
     return total;
 }
@@ -309,12 +322,24 @@ void main() {
     // maps leave the same texels out (shadow.frag).
     if (base.a < alpha_cutoff) discard;
 #endif
+#ifdef DEPTH_NORMALS
+    // The depth and normals pass of screen-space ambient occlusion (engine/render/screen_occlusion.py):
+    // the surface's own normal (a normal map's bumps would find occluders in flat ground).
+    out_color = vec4(s.geometric_normal * 0.5 + 0.5, 1.0);
+    return;
+#endif
     s.albedo = base.rgb;
     s.alpha = base.a;
     s.metallic = v_surface.x;
     s.roughness = v_surface.y;
     float metal_share = apply_metallic_roughness(s);  // x the metallic-roughness map
     s.occlusion = material_occlusion();
+    s.direct_occlusion = 1.0;
+#ifdef SCREEN_OCCLUSION
+    vec2 screen_shares = texelFetch(screen_occlusion, ivec2(gl_FragCoord.xy), 0).rg;
+    s.occlusion *= screen_shares.r;
+    s.direct_occlusion = screen_shares.g;
+#endif
     s.f0 = mix(vec3(0.04), s.albedo, s.metallic);
     s.reflect_dir = reflect(-s.to_eye, s.normal);
     s.refract_dir = refract(-s.to_eye, s.normal, 1.0 / max(v_reflect.y, 1.0));

@@ -1,5 +1,7 @@
 """Main: the active camera's view, drawn by the scene pass into the main view tree's level 0
-(all but its transparent slot, which the reflect stage's tree draws over the reflections).
+(all but its transparent slot, which the reflect stage's tree draws over the reflections),
+after its ambient occlusion where the camera has an ``AmbientOcclusion``
+(``engine/render/screen_occlusion.py``).
 
 It publishes the view and the targets it drew into as ``world.resources[FrameViews]``
 (``main`` None when there is no active camera or the output has no pixels, a minimised
@@ -10,9 +12,11 @@ from __future__ import annotations
 import operator
 import warnings
 from collections.abc import Callable
+from dataclasses import replace
 
 import esper
 
+from components.ambient import AmbientOcclusion
 from engine.core.errors import NoCameraWarning
 from engine.core.frame_io import Output
 from engine.core.world import World
@@ -58,6 +62,12 @@ class MainViewSystem(esper.Processor):
         views.main = camera_view(cam_t.world, cam.fov_y, cam.near, cam.far, output.size)
         views.main.layers = cam.layer_mask  # its culling mask (Camera.shows_layers / hides_layers)
         views.options = self._root_options()
+        occlusion = self.world.try_get(camera[0], AmbientOcclusion)
+        if occlusion is not None:  # found before the view is drawn: its shading reads it
+            self.renderer.occlusion.draw(views.main, occlusion)
+            views.options = replace(views.options, occlusion=True)
+        elif self.renderer.screen_occlusion is not None:
+            self.renderer.occlusion.release_targets()  # no camera asks for it now
         self.renderer.scene_pass.draw([views.main], targets, views.options)
 
     def _root_options(self) -> SceneOptions:

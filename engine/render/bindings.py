@@ -115,6 +115,12 @@ PRESENT_UNIT = 17        # present, bloom's first step, exposure's luminance ste
 SPOT_SHADOW_UNIT = 18    # scene (SPOT_MAP builds): the spot lights' perspective shadow maps
 # A batch's occlusion map past 16 as well: with it the fullest build reads 16 samplers.
 OCCLUSION_UNIT = 19      # scene (OCCLUSION_MAP builds): the batch's occlusion map (Material.occlusion_map)
+# Screen-space ambient occlusion (engine/render/screen_occlusion.py): the root view's builds
+# that read it are never MASKED, so its sampler takes the node image's place in the count.
+SCREEN_OCCLUSION_UNIT = 20  # scene (SCREEN_OCCLUSION builds): the camera's occlusion image, a texel a pixel
+OCCLUSION_DEPTH_UNIT = 21   # occlusion passes: the depth and normals pass's depth
+OCCLUSION_NORMAL_UNIT = 22  # occlusion pass: its normals
+OCCLUSION_IMAGE_UNIT = 23   # occlusion filter: the occlusion found (and each texel's distance)
 FXAA_UNIT = 0            # FXAA: the encoded frame (engine/render/present.py)
 EXPOSURE_UNIT = 2        # present, exposure adaptation: the 1x1 adapted exposure (engine/render/post.py)
 EXPOSURE_MEAN_UNIT = 0   # exposure adaptation: the 64x64 log-luminance image it averages

@@ -142,6 +142,9 @@ class Gpu:
         self._view_base = 0
         self.lights_ubo = ctx.buffer(reserve=LIGHTS_BLOCK_BYTES)
         self.fog = FogBlock(ctx)   # the active camera's Fog (the prepare stage sets it)
+        # The active camera's ambient occlusion this frame, a texel a pixel of the main view
+        # (engine/render/screen_occlusion.py; None: none): its SCREEN_OCCLUSION builds read it.
+        self.screen_occlusion: moderngl.Texture | None = None
         # Textures shared by reference count (the Renderer makes and releases them), by
         # id(TextureData); ("normal", id): uploaded linear (normal and metallic-roughness maps)
         self._textures: dict[object, Shared] = {}

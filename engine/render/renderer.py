@@ -31,6 +31,7 @@ from engine.render.path_checks import PathChecks
 from engine.render.present import ANTIALIAS_MODES, PresentPass
 from engine.render.probes import ProbeCaptures
 from engine.render.scene_pass import ScenePass
+from engine.render.screen_occlusion import ScreenOcclusion
 from engine.render.shadows import ShadowMaps
 from engine.render.sky import SkyModel, flat_cube, upload_cube
 from engine.render.sky_bake import SkyBake
@@ -94,6 +95,7 @@ class Renderer(Gpu):
         self.shadows = ShadowMaps(self)
         self.scene_pass = ScenePass(self, self.shadows, self.irradiance)
         self.probes = ProbeCaptures(self, self.scene_pass, self.irradiance)
+        self.occlusion = ScreenOcclusion(self, self.scene_pass)  # the camera's AmbientOcclusion
         self.sky_bake = SkyBake(self)  # a generated sky's cube map, drawn (engine/render/sky_bake.py)
         self.path_checks: PathChecks = PathChecks(self, self.probes)
 
@@ -454,6 +456,7 @@ class Renderer(Gpu):
         self.shadows.release()
         self.irradiance.release()
         self.sky_bake.release()
+        self.occlusion.release()
         self.scene_pass.release()
         self.present_pass.release()
         if self.text_pass is not None:

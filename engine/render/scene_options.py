@@ -22,6 +22,9 @@ class SceneOptions:
     # Draw the transparent slot now; False: a view tree's root or level view, whose slot the
     # tree draws (draw_transparent) after the levels below are composited into its pixels.
     transparent: bool = True
+    # Multiply the active camera's ambient occlusion (Gpu.screen_occlusion, found for this
+    # view by engine/render/screen_occlusion.py) into the opaque draws' light from all round.
+    occlusion: bool = False
 
 
 ROOT_VIEW = SceneOptions()

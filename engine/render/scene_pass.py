@@ -60,6 +60,7 @@ from engine.render.bindings import (
     PROBE_REST_UNIT,
     PROBE_UNIT,
     SCENE_CLIPS,
+    SCREEN_OCCLUSION_UNIT,
     SKY_UNIT,
     VIEWS_BINDING,
     PassState,
@@ -164,7 +165,7 @@ class ScenePass:
 
     def _draw_batches(self, batches, invocations: int, masked: bool, layered: str = "",
                       skip: int = 0, before_draw: Callable[[], None] | None = None, hide: int = 0,
-                      unlit: frozenset | set = frozenset()) -> None:
+                      unlit: frozenset | set = frozenset(), screen: str = "") -> None:
         """One instanced draw per batch, each with the program of its variants.  A program's
         uniforms are written only when their value changes (``ScenePrograms.written``, kept for the
         program's life): each write is a moderngl call of a few microseconds on a view's
@@ -179,7 +180,9 @@ class ScenePass:
         A batch whose one instance is the view's ``skip`` or ``hide`` entity (a mirror's own
         quad, a probe's own sphere) is not drawn at all: its vertices would all be clipped
         away (0: none; entities start at 1).  A batch in ``unlit`` (``unlit_batches``: its
-        mirrors all ``shading_replaced``) draws with its ``UNLIT_SURFACE`` build."""
+        mirrors all ``shading_replaced``) draws with its ``UNLIT_SURFACE`` build.  ``screen``
+        "occluded" draws the builds that read the screen's ambient occlusion, "depth_normals"
+        the build that writes only depth and normals (``ScenePrograms.program``)."""
         ctx = self.ctx
         renderer = self.renderer
         programs = self.programs
@@ -190,11 +193,11 @@ class ScenePass:
         # What else picks a batch's program: a virtual light shining, the shadow lookups compiled.
         shadows = self.shadows
         stamp = (seen, shadows.virtual_shining, shadows.program_defines, renderer.fog.defines)
-        kinds = self._kinds.get((invocations, layered, self._ambient_probes, masked))
+        kinds = self._kinds.get((invocations, layered, self._ambient_probes, masked, screen))
         if kinds is None:
-            kinds = self._kinds[invocations, layered, self._ambient_probes, masked] = (
-                (invocations, layered, self._ambient_probes, False, masked),
-                (invocations, layered, self._ambient_probes, True, masked))
+            kinds = self._kinds[invocations, layered, self._ambient_probes, masked, screen] = (
+                (invocations, layered, self._ambient_probes, False, masked, screen),
+                (invocations, layered, self._ambient_probes, True, masked, screen))
         kind, unlit_kind = kinds
         sky_size = self._sky_size
         last_own = programs.last_own
@@ -317,6 +320,27 @@ class ScenePass:
             self._draw_each(views, targets, viewport, options, conditions)
         if renderer.debug:  # the name is made only where it is checked
             renderer.checkpoint(f"scene ({views[0].name}{' and others' if len(views) > 1 else ''})")
+
+    def draw_depth_normals(self, view: View, framebuffer: moderngl.Framebuffer, size: tuple[int, int]) -> None:
+        """The depth and geometric normals of ``view``'s opaque batches into ``framebuffer``
+        (a normals image and a depth image of ``size``), cleared first: the first pass of
+        screen-space ambient occlusion (``engine/render/screen_occlusion.py``).  The same
+        draws as the view's (its visibility, layers and skipped entities, a cutout's holes)
+        with the ``DEPTH_NORMALS`` build, which shades nothing; no sky, no transparent slot."""
+        ctx, renderer = self.ctx, self.renderer
+        framebuffer.use()
+        apply_pass_state(ctx, _SCENE, (0, 0, *size))
+        renderer.raw_gl.clear_level(framebuffer)
+        set_scissor(ctx, view.scissor)
+        set_front_face(ctx, "cw" if view.mirrored else "ccw")
+        bind_sampler(ctx, None, ALBEDO_UNIT)  # a cutout's alpha as the view reads it
+        renderer.upload_views([view])
+        renderer.bind_view_at(0)
+        self._draw_batches(renderer.opaque_batches(), 0, False, skip=view.skip, hide=view.hide,
+                           screen="depth_normals")
+        renderer.stats.passes += 1
+        if renderer.debug:
+            renderer.checkpoint(f"depth and normals ({view.name})")
 
     def draw_transparent(self, views: Sequence[View], targets: RenderTargets, options: SceneOptions,
                          conditions: Sequence[moderngl.Query] | None = None) -> None:
@@ -458,6 +482,10 @@ class ScenePass:
             renderer.stats.passes += len(views)
             return
         sky_draw = self.sky_draw
+        screen = ""
+        if options.occlusion and renderer.screen_occlusion is not None:
+            screen = "occluded"  # (a root view's one: the image is its pixels')
+            bind_texture(ctx, renderer.screen_occlusion, SCREEN_OCCLUSION_UNIT)
         for index, view in enumerate(views):
             if now:  # the slot, or (a tree's view) its part up to its see-through surfaces
                 if options.transparent:
@@ -471,7 +499,7 @@ class ScenePass:
                 set_front_face(ctx, "cw" if view.mirrored else "ccw")
                 renderer.bind_view_at(index)
                 self._draw_batches(opaque if reach is None else self._reaching(opaque, reach[index], view),
-                                   0, masked, skip=view.skip, hide=view.hide, unlit=view_unlit)
+                                   0, masked, skip=view.skip, hide=view.hide, unlit=view_unlit, screen=screen)
                 if options.sky:
                     # Into the view's own framebuffer: the sky writes id 0 (nothing) to the
                     # surface and seen images, the very values the clear put where no surface

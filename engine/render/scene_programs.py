@@ -38,6 +38,7 @@ from engine.render.bindings import (
     PROBE2_UNIT,
     PROBE_REST_UNIT,
     PROBE_UNIT,
+    SCREEN_OCCLUSION_UNIT,
     SHADOW_ATLAS_UNIT,
     SHADOWS_BINDING,
     SKY_UNIT,
@@ -87,12 +88,15 @@ class ScenePrograms:
         # ScenePass._draw_batches writes these, so a value is written only when it changes.
         self.written: dict[int, list] = {}
         self.last_own: dict[int, tuple] = {}  # program -> the batch values it last drew with
+        # The ``screen`` builds drawn so far ("" and, once a camera has ambient occlusion,
+        # "occluded" and "depth_normals"): ``prepare`` builds a batch's in each of them.
+        self.screens: set[str] = {""}
 
     def program(self, variants: tuple[int, int, int] | None = None, invocations: int = 0,
                 layered: str = "", normal_mapped: bool = False, checker: bool = False,
                 material: tuple[bool, bool, bool, str, bool] = NO_MATERIAL_MAPS, probe_blend: bool = False,
                 ambient_probes: bool = False, probe_rest: bool = False, unlit: bool = False,
-                masked: bool = False) -> moderngl.Program:
+                masked: bool = False, screen: str = "") -> moderngl.Program:
         """The scene program for a batch of ``variants`` (None: mixed, switched per
         instance): plain, batched (``invocations`` > 0: the geometry shader's) or a one-pass
         cube-map capture (``layered`` "culled" or "naive"), with or without a normal map
@@ -116,14 +120,29 @@ class ScenePrograms:
         shader, as a discarding program makes it), built once.  After a shader hot
         reload the set-up is done again and the batches' vertex arrays are made again (the
         relinked program may read uniforms, samplers and vertex inputs the first build
-        dropped)."""
+        dropped).
+
+        ``screen``: "" the plain builds; "occluded" (a root view with ambient occlusion)
+        ``SCREEN_OCCLUSION``: it multiplies the screen's occlusion image
+        (``Gpu.screen_occlusion``) into its light from all round (an unlit mirror, which
+        shades nothing, keeps its plain build); "depth_normals" ``DEPTH_NORMALS``: depth and
+        the surface's normal only (occlusion's first pass), one build a cutout or not, whatever
+        else the batch has."""
         if self.renderer.shaders.reloads != self.reloads_seen:
             self.forget()
         virtual = self.shadows.virtual_shining  # the shadows stage set how many shine
         shadowing = self.shadows.program_defines  # the lookups a program compiles (ShadowMaps.upload's)
         fogging = self.renderer.fog.defines       # FOG while the active camera's fog has a density
+        if screen == "depth_normals":  # nothing shaded: only a cutout's discard picks the build
+            variants, normal_mapped, checker, probe_blend, ambient_probes, probe_rest = None, False, False, False, \
+                False, False
+            material = (False, False, material[2], "", False)
+            virtual, unlit, masked, shadowing, fogging = False, False, False, (), ()
+        elif unlit:
+            screen = ""
+        self.screens.add(screen)
         key = (invocations, layered, variants, normal_mapped, checker, material, probe_blend, virtual,
-               ambient_probes, probe_rest, unlit, masked, shadowing, fogging)
+               ambient_probes, probe_rest, unlit, masked, shadowing, fogging, screen)
         program = self.built.get(key)
         if program is None:
             defines = {}
@@ -155,6 +174,10 @@ class ScenePrograms:
                 defines["UNLIT_SURFACE"] = "1"
             if masked:  # the claimed pixels only (a reflection level's views)
                 defines["MASKED"] = "1"
+            if screen == "occluded":  # the screen's ambient occlusion (a root view's)
+                defines["SCREEN_OCCLUSION"] = "1"
+            elif screen == "depth_normals":
+                defines["DEPTH_NORMALS"] = "1"
             defines.update(shadowing)
             defines.update(fogging)
             geometry = None
@@ -186,7 +209,8 @@ class ScenePrograms:
                                ("shadow_atlas", SHADOW_ATLAS_UNIT), ("point_shadow0", POINT_SHADOW_UNITS[0]),
                                ("point_shadow1", POINT_SHADOW_UNITS[1]),
                                ("irradiance_table", IRRADIANCE_UNIT), ("virtual_atlas", VIRTUAL_SHADOW_UNIT),
-                               ("spot_atlas", SPOT_SHADOW_UNIT), ("occlusion_map", OCCLUSION_UNIT)):
+                               ("spot_atlas", SPOT_SHADOW_UNIT), ("occlusion_map", OCCLUSION_UNIT),
+                               ("screen_occlusion", SCREEN_OCCLUSION_UNIT)):
                 if name in program:
                     program[name].value = unit
             if "Lights" in program:
@@ -237,18 +261,23 @@ class ScenePrograms:
                             batch.vao(self.program(batch.variants, invocations, "", batch.normal_map is not None,
                                                    batch.checker is not None, _material_build(batch),
                                                    batch.probe_blend, probes, bool(batch.rest_probe), dark, masked))
+            for screen in self.screens - {""}:  # a root view's (not masked, one view a draw)
+                for probes in ambient:
+                    batch.vao(self.program(batch.variants, 0, "", batch.normal_map is not None,
+                                           batch.checker is not None, _material_build(batch), batch.probe_blend,
+                                           probes, bool(batch.rest_probe), False, False, screen))
         return len(self.built) - before
 
-    def record(self, batch: InstanceBatch, kind: tuple[int, str, bool, bool, bool], stamp: tuple,
+    def record(self, batch: InstanceBatch, kind: tuple[int, str, bool, bool, bool, str], stamp: tuple,
                variants: tuple[int, int, int] | None) -> tuple:
         """What ``batch`` draws with in passes of ``kind`` (invocations, layered, ambient
-        probes, unlit, masked): (stamp, variants, program name, vertex array, per-draw uniforms, the
+        probes, unlit, masked, screen): (stamp, variants, program name, vertex array, per-draw uniforms, the
         program's written values, the (unit, texture) pairs to bind, its own uniform values
         or None where probes give them per draw, its mesh's vertex count)."""
-        invocations, layered, ambient, unlit, masked = kind
+        invocations, layered, ambient, unlit, masked, screen = kind
         program = self.program(variants, invocations, layered, batch.normal_map is not None,
                                batch.checker is not None, _material_build(batch), batch.probe_blend,
-                               ambient, bool(batch.rest_probe), unlit, masked)
+                               ambient, bool(batch.rest_probe), unlit, masked, screen)
         glo = program.glo
         values = self.written.get(glo)
         if values is None:

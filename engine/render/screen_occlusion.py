@@ -1,0 +1,197 @@
+"""Screen-space ambient occlusion of the active camera's view (``AmbientOcclusion`` on the
+camera): the share of the light from all round that reaches each pixel's surface, which
+the main view's scene pass multiplies into its ambient light and its sky and probe
+reflections.
+
+Three passes before the main view is drawn, all at the view's size or below it:
+
+1. **Depth and normals**: the scene pass draws the view's opaque batches with the
+   ``DEPTH_NORMALS`` build of the scene shader (``ScenePass.draw_depth_normals``: the
+   same draws, visibility and cutouts as the view, shading nothing), writing the depth and
+   each surface's own normal, as Unity's depth-normals prepass and Godot's depth prepass do.
+   The main view cannot give them: it needs the occlusion while it shades.
+2. **Find** (``shaders/screen_occlusion.frag``): ground-truth ambient occlusion (Jimenez
+   et al. 2016, as Unreal's GTAO and Intel's XeGTAO): ``SLICES`` planes through the view
+   direction a pixel, each searched ``STEPS`` depth samples each way for its horizons
+   within the radius, the visible arc integrated against the cosine to the normal in closed
+   form.  A 4 x 4 tile of pixels takes 16 rotations of the slices, so the tile samples
+   ``16 x SLICES`` directions.  At half the view's size by default (a quarter of the pixels).
+3. **Filter** (``shaders/screen_occlusion_filter.frag``): each pixel takes the mean of the
+   4 x 4 found texels about it (one tile: every rotation once), each weighed by how near it
+   lies to the plane of the pixel's surface, so a foreground edge keeps its own occlusion.
+   It writes the two shares the scene pass reads at its pixel (``SCREEN_OCCLUSION`` builds):
+   ``visibility ** intensity`` for the light from all round, and that mixed by
+   ``direct_light`` for the lights' direct light.
+
+Only the root view is occluded; mirror, portal and probe views and the transparent slot are
+drawn without it.  The targets are made at the first occluded frame of a size and released
+when no camera asks for occlusion (``release_targets``)."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import moderngl
+from pyglm import glm
+
+from components.ambient import AmbientOcclusion
+from engine.render.bindings import (
+    OCCLUSION_DEPTH_UNIT,
+    OCCLUSION_IMAGE_UNIT,
+    OCCLUSION_NORMAL_UNIT,
+    PassState,
+    apply_pass_state,
+    bind_texture,
+)
+from engine.render.gpu import Gpu
+from engine.render.scene_pass import ScenePass
+from engine.render.targets import check_target_size, release_framebuffer
+from engine.render.views import View
+
+SLICES = 3  # slice planes a pixel (shaders/screen_occlusion.frag)
+STEPS = 8   # depth samples each way along a slice
+# The reach on screen, at most this share of the view's height: a radius that spans more
+# (the camera up against a wall) samples as far as this, so what occludes is looked for
+# nearer than ``radius`` there.
+MAX_REACH_SHARE = 0.25
+_PASS = PassState()
+
+
+@dataclass
+class _Targets:
+    """One view size's images: the depth and normals pass's, the occlusion found (half or
+    full size) and the shares the scene pass reads (full size)."""
+
+    size: tuple[int, int]
+    step: int                      # view pixels a found texel covers (2 at half resolution)
+    depth: moderngl.Texture
+    normals: moderngl.Texture
+    prepass: moderngl.Framebuffer
+    found: moderngl.Texture
+    found_framebuffer: moderngl.Framebuffer
+    shares: moderngl.Texture
+    shares_framebuffer: moderngl.Framebuffer
+
+    def release(self) -> None:
+        for framebuffer in (self.prepass, self.found_framebuffer, self.shares_framebuffer):
+            release_framebuffer(framebuffer)
+        for texture in (self.depth, self.normals, self.found, self.shares):
+            texture.release()
+
+
+class ScreenOcclusion:
+    """The active camera's ambient occlusion: ``draw`` a view's, which returns the image the
+    main view's ``SCREEN_OCCLUSION`` builds read (and leaves it as ``Gpu.screen_occlusion``)."""
+
+    def __init__(self, gpu: Gpu, scene_pass: ScenePass) -> None:
+        self.gpu = gpu
+        self.ctx = gpu.ctx
+        self.scene_pass = scene_pass
+        self._targets: _Targets | None = None
+        self._find: moderngl.VertexArray | None = None
+        self._filter: moderngl.VertexArray | None = None
+        self._programs_of = -1  # the shader library's reloads when the two were made
+
+    def _programs(self) -> tuple[moderngl.VertexArray, moderngl.VertexArray]:
+        shaders = self.gpu.shaders
+        if self._find is None or self._programs_of != shaders.reloads:
+            self._release_programs()
+            find = shaders.program("fullscreen.vert", "screen_occlusion.frag",
+                                   defines={"SLICES": str(SLICES), "STEPS": str(STEPS)})
+            find["depth_map"].value = OCCLUSION_DEPTH_UNIT
+            find["normal_map"].value = OCCLUSION_NORMAL_UNIT
+            smooth = shaders.program("fullscreen.vert", "screen_occlusion_filter.frag")
+            smooth["depth_map"].value = OCCLUSION_DEPTH_UNIT
+            smooth["normal_map"].value = OCCLUSION_NORMAL_UNIT
+            smooth["occlusion_map"].value = OCCLUSION_IMAGE_UNIT
+            self._find = self.ctx.vertex_array(find, [])
+            self._filter = self.ctx.vertex_array(smooth, [])
+            self._programs_of = shaders.reloads
+        return self._find, self._filter
+
+    def _targets_for(self, size: tuple[int, int], half: bool) -> _Targets:
+        step = 2 if half else 1
+        kept = self._targets
+        if kept is not None and kept.size == size and kept.step == step:
+            return kept
+        self.release_targets()
+        ctx = self.ctx
+        check_target_size(ctx, size, "ambient occlusion's images")
+        found_size = (max(1, -(-size[0] // step)), max(1, -(-size[1] // step)))
+        depth = ctx.depth_texture(size)
+        depth.compare_func = ""  # read as distances, not compared
+        normals = ctx.texture(size, 4)
+        found = ctx.texture(found_size, 2, dtype="f2")
+        shares = ctx.texture(size, 2)
+        for texture in (depth, normals, found, shares):
+            texture.filter = (moderngl.NEAREST, moderngl.NEAREST)
+            texture.repeat_x = texture.repeat_y = False
+        self._targets = _Targets(size, step, depth, normals, ctx.framebuffer([normals], depth), found,
+                                 ctx.framebuffer([found]), shares, ctx.framebuffer([shares]))
+        return self._targets
+
+    def draw(self, view: View, settings: AmbientOcclusion) -> moderngl.Texture:
+        """Find ``view``'s occlusion as ``settings`` say; returns the shares image (rg8, the
+        view's size), bound for the main view's draw."""
+        gpu, ctx = self.gpu, self.ctx
+        targets = self._targets_for(view.size, settings.half_resolution)
+        find, smooth = self._programs()
+        width, height = view.size
+        # 1. Depth and normals.
+        self.scene_pass.draw_depth_normals(view, targets.prepass, view.size)
+        proj = view.proj
+        unproject = (float(proj[0][0]), float(proj[1][1]), float(proj[2][0]), float(proj[2][1]))
+        unproject_z = (float(proj[2][2]), float(proj[3][2]))
+        rotation = glm.mat3(view.view).to_bytes()
+        # 2. The occlusion found.
+        found_size = targets.found.size
+        targets.found_framebuffer.use()
+        apply_pass_state(ctx, _PASS, (0, 0, *found_size))
+        bind_texture(ctx, targets.depth, OCCLUSION_DEPTH_UNIT)
+        bind_texture(ctx, targets.normals, OCCLUSION_NORMAL_UNIT)
+        program = find.program
+        program["unproject"].value = unproject
+        program["unproject_z"].value = unproject_z
+        program["depth_size"].value = (float(width), float(height))
+        program["view_rotation"].write(rotation)
+        program["radius"].value = settings.radius
+        program["pixels_per_metre"].value = float(view.proj[1][1]) * 0.5 * height
+        program["max_radius_pixels"].value = max(MAX_REACH_SHARE * height, float(STEPS))
+        program["texel_step"].value = targets.step
+        find.render(moderngl.TRIANGLES, vertices=3)
+        # 3. Filtered to every pixel, as the scene pass's shares.
+        targets.shares_framebuffer.use()
+        apply_pass_state(ctx, _PASS, (0, 0, width, height))
+        bind_texture(ctx, targets.found, OCCLUSION_IMAGE_UNIT)
+        program = smooth.program
+        program["unproject"].value = unproject
+        program["unproject_z"].value = unproject_z
+        program["depth_size"].value = (float(width), float(height))
+        program["view_rotation"].write(rotation)
+        program["texel_step"].value = targets.step
+        program["intensity"].value = settings.intensity
+        program["direct_light"].value = settings.direct_light
+        smooth.render(moderngl.TRIANGLES, vertices=3)
+        stats = gpu.stats
+        stats.passes += 2
+        stats.draw_calls += 2
+        gpu.screen_occlusion = targets.shares
+        if gpu.debug:
+            gpu.checkpoint("ambient occlusion")
+        return targets.shares
+
+    def release_targets(self) -> None:
+        """Let the images go (no camera asks for occlusion, or another size)."""
+        if self._targets is not None:
+            self._targets.release()
+            self._targets = None
+        self.gpu.screen_occlusion = None
+
+    def _release_programs(self) -> None:
+        for vao in (self._find, self._filter):
+            if vao is not None:
+                vao.release()
+        self._find = self._filter = None
+
+    def release(self) -> None:
+        self.release_targets()
+        self._release_programs()

@@ -1,0 +1,17 @@
+// A pixel's view-space position from a depth image drawn with a perspective projection
+// (screen-space ambient occlusion: engine/render/screen_occlusion.py), in closed form, not a
+// matrix product a sample: with P the projection, a point at view depth z lands at
+// ndc.z = -(P[2][2] z + P[3][2]) / z, ndc.xy = -(P[0][0] x + P[2][0] z, P[1][1] y + P[2][1] z) / z.
+uniform vec4 unproject;   // P[0][0], P[1][1], P[2][0], P[2][1]
+uniform vec2 unproject_z; // P[2][2], P[3][2]
+uniform vec2 depth_size;  // the depth image's size in pixels
+
+// The view-space point along `pixel_centre`'s ray at view depth `z` (< 0).
+vec3 view_at(vec2 pixel_centre, float z) {
+    vec2 ndc = pixel_centre / depth_size * 2.0 - 1.0;
+    return vec3(-z * (ndc + unproject.zw) / unproject.xy, z);
+}
+
+vec3 view_position(vec2 pixel_centre, float depth) {
+    return view_at(pixel_centre, -unproject_z.y / (depth * 2.0 - 1.0 + unproject_z.x));
+}

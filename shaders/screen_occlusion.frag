@@ -1,0 +1,95 @@
+#version 410 core
+// Ground-truth ambient occlusion (Jimenez, Wu, Pesce, Jarabo, "Practical Real-Time Strategies
+// for Accurate Indirect Occlusion", 2016): the share of the cosine-weighted hemisphere over a
+// pixel's surface that no geometry within `radius` hides.  Each of SLICES planes through the
+// view direction, turned by a 4 x 4 tile's rotation (the filter after it averages the tile),
+// is searched both ways along the screen for its two horizons; the visible arc between them,
+// weighted by the cosine to the normal projected into the slice, is integrated in closed form.
+// Writes the visibility and the pixel's distance along the view axis (the filter's depth
+// test).  engine/render/screen_occlusion.py runs it.
+#include "view_depth.glsl"
+
+#define PI 3.14159265358979
+#define HALF_PI 1.57079632679490
+
+uniform sampler2D depth_map;    // the depth and normals pass's depth (no comparison)
+uniform sampler2D normal_map;   // its geometric normals, world space, as n * 0.5 + 0.5
+uniform mat3 view_rotation;     // world -> view directions
+uniform float radius;           // metres (AmbientOcclusion.radius)
+uniform float pixels_per_metre; // at a distance of 1 m along the view axis
+uniform float max_radius_pixels;
+uniform int texel_step;         // depth pixels an occlusion texel steps (2 at half resolution)
+
+out vec2 out_occlusion;
+
+// A 4 x 4 ordered-dither (Bayer) matrix, 0..15: the tile's slice rotations and step offsets.
+const float BAYER[16] = float[16](0.0, 8.0, 2.0, 10.0, 12.0, 4.0, 14.0, 6.0,
+                                  3.0, 11.0, 1.0, 9.0, 15.0, 7.0, 13.0, 5.0);
+
+vec3 position_at(vec2 pixel) {
+    ivec2 texel = ivec2(pixel);
+    return view_position(vec2(texel) + 0.5, texelFetch(depth_map, texel, 0).r);
+}
+
+// The largest cosine, to the view direction v, of the directions from p to the surface
+// along the screen direction `omega` (pixels), down to `lowest` where nothing occludes.
+float horizon_cos(vec3 p, vec3 v, vec2 pixel, vec2 omega, float reach, float jitter, float lowest) {
+    float best = lowest;
+    for (int i = 0; i < STEPS; ++i) {
+        float t = (float(i) + jitter) / float(STEPS);
+        vec2 at = pixel + omega * (1.0 + t * sqrt(t) * reach);  // nearer samples closer together (t ** 1.5)
+        if (any(lessThan(at, vec2(0.0))) || any(greaterThanEqual(at, depth_size))) break;
+        vec3 delta = position_at(at) - p;
+        float gap = length(delta);
+        if (gap < 1e-6) continue;
+        // Full weight to 95% of the radius, none past 105%, linear between: a sample crossing
+        // the radius fades in, and on the whole what lies within the radius occludes.
+        float weight = clamp((1.05 * radius - gap) / (0.1 * radius), 0.0, 1.0);
+        best = max(best, mix(lowest, dot(delta / gap, v), weight));
+    }
+    return best;
+}
+
+void main() {
+    ivec2 texel = ivec2(gl_FragCoord.xy);
+    ivec2 pixel = texel * texel_step;
+    float depth = texelFetch(depth_map, pixel, 0).r;
+    if (depth >= 1.0) {  // nothing drawn: the sky
+        out_occlusion = vec2(1.0, -1.0);
+        return;
+    }
+    vec2 centre = vec2(pixel) + 0.5;
+    vec3 p = view_position(centre, depth);
+    vec3 v = normalize(-p);
+    vec3 n = normalize(view_rotation * (texelFetch(normal_map, pixel, 0).xyz * 2.0 - 1.0));
+    float reach = min(radius * pixels_per_metre / max(-p.z, 1e-4), max_radius_pixels);
+    if (reach < 1.0) {  // the radius spans under a pixel: nothing to find
+        out_occlusion = vec2(1.0, -p.z);
+        return;
+    }
+    int tile = (texel.x & 3) + 4 * (texel.y & 3);
+    float rotation = (BAYER[tile] + 0.5) / 16.0;
+    float jitter = (BAYER[15 - tile] + 0.5) / 16.0;
+    float visibility = 0.0;
+    for (int s = 0; s < SLICES; ++s) {
+        float phi = (float(s) + rotation) * PI / float(SLICES);
+        vec2 omega = vec2(cos(phi), sin(phi));
+        vec3 direction = vec3(omega, 0.0);  // the slice's screen direction in view space
+        vec3 ortho = direction - dot(direction, v) * v;
+        vec3 axis = normalize(cross(ortho, v));
+        vec3 projected = n - axis * dot(n, axis);  // the normal in the slice's plane
+        float projected_length = length(projected);
+        if (projected_length < 1e-4) continue;
+        float cos_n = clamp(dot(projected, v) / projected_length, 0.0, 1.0);
+        float angle_n = sign(dot(ortho, projected)) * acos(cos_n);
+        float cos_h1 = horizon_cos(p, v, centre, omega, reach - 1.0, jitter, cos(angle_n + HALF_PI));
+        float cos_h0 = horizon_cos(p, v, centre, -omega, reach - 1.0, jitter, cos(angle_n - HALF_PI));
+        float h0 = angle_n + max(-acos(clamp(cos_h0, -1.0, 1.0)) - angle_n, -HALF_PI);
+        float h1 = angle_n + min(acos(clamp(cos_h1, -1.0, 1.0)) - angle_n, HALF_PI);
+        float sin_n = sin(angle_n);
+        float arc0 = cos_n + 2.0 * h0 * sin_n - cos(2.0 * h0 - angle_n);
+        float arc1 = cos_n + 2.0 * h1 * sin_n - cos(2.0 * h1 - angle_n);
+        visibility += projected_length * 0.25 * (arc0 + arc1);
+    }
+    out_occlusion = vec2(clamp(visibility / float(SLICES), 0.0, 1.0), -p.z);
+}
