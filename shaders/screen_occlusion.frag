@@ -32,20 +32,38 @@ vec3 position_at(vec2 pixel) {
 }
 
 // The largest cosine, to the view direction v, of the directions from p to the surface
-// along the screen direction `omega` (pixels), down to `lowest` where nothing occludes.
+// within `radius` along the screen direction `omega` (pixels), down to `lowest` where nothing
+// occludes.  Where the samples cross the radius, the surface between the last sample inside
+// and the first outside is taken as straight and the point on it at the radius counts too:
+// the horizon is then found at the radius itself, not short of it by up to a step (which
+// left creases too light), and it moves smoothly as the geometry does.  Two samples farther
+// apart than half the radius lie on different surfaces: nothing is assumed between them.
 float horizon_cos(vec3 p, vec3 v, vec2 pixel, vec2 omega, float reach, float jitter, float lowest) {
     float best = lowest;
+    vec3 inside = vec3(0.0);  // the last sample within the radius, from p (p itself at first)
+    bool crossed = false;
+    float radius2 = radius * radius;
     for (int i = 0; i < STEPS; ++i) {
         float t = (float(i) + jitter) / float(STEPS);
         vec2 at = pixel + omega * (1.0 + t * sqrt(t) * reach);  // nearer samples closer together (t ** 1.5)
         if (any(lessThan(at, vec2(0.0))) || any(greaterThanEqual(at, depth_size))) break;
         vec3 delta = position_at(at) - p;
-        float gap = length(delta);
-        if (gap < 1e-6) continue;
-        // Full weight to 95% of the radius, none past 105%, linear between: a sample crossing
-        // the radius fades in, and on the whole what lies within the radius occludes.
-        float weight = clamp((1.05 * radius - gap) / (0.1 * radius), 0.0, 1.0);
-        best = max(best, mix(lowest, dot(delta / gap, v), weight));
+        float gap2 = dot(delta, delta);
+        if (gap2 < 1e-12) continue;
+        if (gap2 <= radius2) {
+            best = max(best, dot(delta, v) * inversesqrt(gap2));
+            inside = delta;
+        } else if (!crossed) {
+            crossed = true;
+            vec3 step_ = delta - inside;
+            float a = dot(step_, step_);
+            if (a <= 0.25 * radius2) {
+                // |inside + u step_| = radius for u in [0, 1] (inside is within it, delta past it)
+                float b = dot(inside, step_);
+                float u = (-b + sqrt(max(b * b - a * (dot(inside, inside) - radius2), 0.0))) / a;
+                best = max(best, dot(normalize(inside + u * step_), v));
+            }
+        }
     }
     return best;
 }

@@ -1,0 +1,318 @@
+"""Screen-space ambient occlusion (``AmbientOcclusion`` on the camera): the light from all
+round is scaled by the share of the cosine-weighted hemisphere over each point that no
+geometry within the radius hides; the lights' direct light is not (unless ``direct_light``).
+
+The scene is a floor and a tall, long wall, lit only by a hemisphere light of one radiance
+above and below, so every surface's unoccluded colour is the same and a pixel's colour with
+occlusion over its colour without it (in linear light) is the share the engine applied.
+That share is compared with the ground truth, computed here apart from the engine: for a
+point on the floor at distance d from the wall (or on the wall at height d over the floor),
+the wall (the floor) within the radius R hides the directions whose component towards it
+is over d / R, and the share kept is the cosine-weighted measure of the others, found by
+quadrature over the hemisphere.  Each pixel's point is found by casting its ray in float64
+and its surface from the id image."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from pyglm import glm
+
+from components import (
+    AmbientOcclusion,
+    ComponentValueError,
+    DirectionalLight,
+    HemisphereLight,
+    Material,
+    MeshRef,
+    Mirror,
+    Transform,
+    Visibility,
+)
+from engine.assets.level_file import LevelError, load_level, save_level
+from engine.assets.mesh import box, quad
+from engine.assets.texture_data import TextureData
+from engine.core.world import World
+from tests.support import look_from, pixel_rays, srgb_to_linear
+
+SIZE = (200, 150)
+WALL_FACE = 0.25   # the wall's face is the plane x = 0.25, facing -x; the floor is y = 0
+RADIUS = 1.0
+GREY = (0.8, 0.8, 0.8)
+
+
+def open_share(t: np.ndarray) -> np.ndarray:
+    """The cosine-weighted share of the hemisphere over a plane whose directions' component
+    along one tangent is at most ``t`` (0: half of it; 1 and more: all of it): what a point
+    at distance t x R from an endless perpendicular wall keeps of the light from all round,
+    with occluders counted within R.  Midpoint quadrature in (polar angle, azimuth)."""
+    n = 240
+    theta = (np.arange(n) + 0.5) / n * (np.pi / 2)
+    phi = (np.arange(2 * n) + 0.5) / (2 * n) * (2 * np.pi)
+    theta, phi = np.meshgrid(theta, phi, indexing="ij")
+    weight = np.cos(theta) * np.sin(theta) * (np.pi / 2 / n) * (np.pi / n) / np.pi  # sums to 1
+    along = (np.sin(theta) * np.cos(phi)).ravel()
+    order = np.argsort(along)
+    cumulative = np.concatenate([[0.0], np.cumsum(weight.ravel()[order])])
+    # share of directions with along <= t
+    return cumulative[np.searchsorted(along[order], np.asarray(t, np.float64), side="right")]
+
+
+def _room(world, occlusion: AmbientOcclusion | None, ambient: float = 1.0, sun: float = 0.0,
+          wall: bool = True, wall_parts: tuple = ()) -> dict:
+    camera = look_from(world, (-2.5, 2.5, -1.5), (0.0, 0.3, -0.5))
+    if occlusion is not None:
+        world.add_component(camera, occlusion)
+    world.spawn(HemisphereLight(sky=(0.6, 0.6, 0.6), ground=(0.6, 0.6, 0.6), intensity=ambient))
+    if sun:
+        world.spawn(DirectionalLight(direction=glm.vec3(0.6, -1.0, 0.3), intensity=sun))
+    names = {"camera": camera}
+    names["floor"] = world.spawn(Transform(position=(0.0, -0.05, 0.0)), MeshRef(box((12.0, 0.1, 12.0))),
+                                 Material(color=GREY, roughness=1.0))
+    if wall:
+        names["wall"] = world.spawn(Transform(position=(WALL_FACE + 0.25, 1.5, 0.0)), MeshRef(box((0.5, 3.0, 8.0))),
+                                    Material(color=GREY, roughness=1.0), *wall_parts)
+    return names
+
+
+def _frame(scene, build) -> tuple[np.ndarray, object, dict]:
+    """A frame of ``build`` (which returns its entities' names) in linear light, its runner
+    and the names."""
+    names: dict = {}
+    runner = scene(lambda world: names.update(build(world)), SIZE)
+    runner.engine.renderer.antialias = "off"
+    runner.frame()
+    return srgb_to_linear(runner.frame()), runner, names
+
+
+def _shares(scene, occlusion: AmbientOcclusion, **room) -> tuple[np.ndarray, object, dict]:
+    """The share of its colour each pixel kept with ``occlusion`` (linear, per pixel: the
+    mean of the three channels' ratios), the runner with it and the room's names."""
+    lit, runner, names = _frame(scene, lambda world: _room(world, occlusion, **room))
+    plain, _, _ = _frame(scene, lambda world: _room(world, None, **room))
+    return (lit / np.maximum(plain, 1e-6)).mean(axis=-1), runner, names
+
+
+def _surfaces(runner, names) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Per pixel: floor mask, its distance from the wall's face; wall-face mask, its height.
+    Pixels within an eighth of the width of the screen's sides are left out: what occludes
+    them may lie off the screen, where no screen-space method sees it (the documented limit)."""
+    eye, rays = pixel_rays(runner.engine.main_view, SIZE)
+    ids = runner.ids()
+    t_floor = -eye[1] / rays[..., 1]
+    floor_points = eye + rays * t_floor[..., None]
+    floor = (ids == names["floor"]) & (floor_points[..., 0] < WALL_FACE)
+    t_wall = (WALL_FACE - eye[0]) / rays[..., 0]
+    wall_points = eye + rays * t_wall[..., None]
+    wall = (ids == names.get("wall", -1)) & (t_wall > 0) & (t_wall < t_floor)
+    inner = np.zeros(ids.shape, bool)
+    margin = SIZE[0] // 8
+    inner[margin:-margin, margin:-margin] = True
+    return floor & inner, WALL_FACE - floor_points[..., 0], wall & inner, wall_points[..., 1]
+
+
+@pytest.mark.parametrize("half", [True, False], ids=["half", "full"])
+def test_the_floor_and_wall_keep_the_ground_truth_share(scene, half):
+    shares, runner, names = _shares(scene, AmbientOcclusion(radius=RADIUS, half_resolution=half))
+    floor, distance, wall, height = _surfaces(runner, names)
+    for low, high in ((0.0, 0.1), (0.1, 0.25), (0.25, 0.45), (0.45, 0.65), (0.65, 0.85)):
+        band = floor & (distance > low) & (distance <= high)
+        assert band.sum() > 30, (low, high)
+        expected = open_share(distance[band] / RADIUS).mean()
+        assert shares[band].mean() == pytest.approx(expected, abs=0.03), f"floor {low}-{high} m from the wall"
+    for low, high in ((0.05, 0.3), (0.3, 0.6)):
+        band = wall & (height > low) & (height <= high)
+        assert band.sum() > 30, (low, high)
+        expected = open_share(height[band] / RADIUS).mean()
+        assert shares[band].mean() == pytest.approx(expected, abs=0.04), f"wall {low}-{high} m over the floor"
+    # Past the radius nothing occludes, and a flat floor does not occlude itself.
+    far = floor & (distance > 1.3 * RADIUS)
+    assert far.sum() > 500
+    assert shares[far].mean() > 0.985 and shares[far].min() > 0.95
+    # The crease is near half: the wall hides half the hemisphere at its foot.
+    foot = floor & (distance < 0.05)
+    assert shares[foot].mean() == pytest.approx(0.5, abs=0.05)
+
+
+def test_without_the_wall_nothing_is_occluded(scene):
+    shares, runner, names = _shares(scene, AmbientOcclusion(radius=RADIUS), wall=False)
+    ids = runner.ids()
+    floor = ids == names["floor"]
+    assert floor.sum() > 10000
+    assert shares[floor].mean() > 0.985 and shares[floor].min() > 0.95
+
+
+def test_the_radius_bounds_the_occlusion(scene):
+    small, runner, names = _shares(scene, AmbientOcclusion(radius=0.3))
+    floor, distance, _, _ = _surfaces(runner, names)
+    band = floor & (distance > 0.1) & (distance < 0.2)
+    assert shares_near(small, band) == pytest.approx(open_share(distance[band] / 0.3).mean(), abs=0.05)
+    beyond = floor & (distance > 0.45) & (distance < 1.0)   # occluded with radius 1, not 0.3
+    assert small[beyond].mean() > 0.985
+
+
+def shares_near(shares: np.ndarray, band: np.ndarray) -> float:
+    assert band.sum() > 30
+    return float(shares[band].mean())
+
+
+def test_intensity_is_an_exponent(scene):
+    one, runner, names = _shares(scene, AmbientOcclusion(radius=RADIUS, intensity=1.0))
+    two, _, _ = _shares(scene, AmbientOcclusion(radius=RADIUS, intensity=2.0))
+    zero, _, _ = _shares(scene, AmbientOcclusion(radius=RADIUS, intensity=0.0))
+    floor, distance, _, _ = _surfaces(runner, names)
+    near = floor & (distance < 0.6)
+    np.testing.assert_allclose(two[near], one[near] ** 2, atol=0.025)
+    np.testing.assert_allclose(zero[floor], 1.0, atol=0.01)
+
+
+def test_the_lights_direct_light_is_not_occluded_unless_asked(scene):
+    # No light from all round: a sun alone lights the room; occlusion changes nothing.
+    lit, runner, names = _frame(scene, lambda world: _room(world, AmbientOcclusion(radius=RADIUS), ambient=0.0, sun=2.0))
+    plain, _, _ = _frame(scene, lambda world: _room(world, None, ambient=0.0, sun=2.0))
+    assert plain.max() > 0.2  # the sun lights the floor
+    np.testing.assert_allclose(lit, plain, atol=2e-3)
+    # direct_light=1: the sun's light takes the same share as the light from all round did.
+    direct, _, _ = _frame(scene, lambda world: _room(world, AmbientOcclusion(radius=RADIUS, direct_light=1.0),
+                                                    ambient=0.0, sun=2.0))
+    ambient_shares, _, _ = _shares(scene, AmbientOcclusion(radius=RADIUS))
+    floor, distance, _, _ = _surfaces(runner, names)
+    sunlit = floor & (distance < 0.8) & (plain.mean(axis=-1) > 0.05)
+    assert sunlit.sum() > 100
+    direct_shares = (direct / np.maximum(plain, 1e-6)).mean(axis=-1)
+    np.testing.assert_allclose(direct_shares[sunlit], ambient_shares[sunlit], atol=0.03)
+    half, _, _ = _frame(scene, lambda world: _room(world, AmbientOcclusion(radius=RADIUS, direct_light=0.5),
+                                                  ambient=0.0, sun=2.0))
+    half_shares = (half / np.maximum(plain, 1e-6)).mean(axis=-1)
+    np.testing.assert_allclose(half_shares[sunlit], 0.5 + 0.5 * ambient_shares[sunlit], atol=0.03)
+
+
+def test_a_foreground_edge_keeps_its_own_light(scene):
+    """A box floating in the open, in front of the dark crease: its pixels, its silhouette's
+    too, keep their light (the filter does not carry the crease's occlusion across the edge)."""
+    floating = {}
+
+    def build(world, occlusion):
+        names = _room(world, occlusion)
+        floating["box"] = world.spawn(Transform(position=(-0.85, 1.0, -0.9)), MeshRef(box((0.3, 0.3, 0.3))),
+                                      Material(color=GREY, roughness=1.0))
+        return names
+
+    lit, runner, names = _frame(scene, lambda world: build(world, AmbientOcclusion(radius=0.6)))
+    plain, _, _ = _frame(scene, lambda world: build(world, None))
+    shares = (lit / np.maximum(plain, 1e-6)).mean(axis=-1)
+    ids = runner.ids()
+    own = ids == floating["box"]
+    assert own.sum() > 100
+    # Its pixels beside a pixel of something else: the silhouette.
+    edge = own & ~(np.roll(own, 1, 0) & np.roll(own, -1, 0) & np.roll(own, 1, 1) & np.roll(own, -1, 1))
+    behind = (~own) & (np.roll(own, 2, 0) | np.roll(own, -2, 0) | np.roll(own, 2, 1) | np.roll(own, -2, 1))
+    assert shares[behind].min() < 0.75   # what lies about the edge, the crease, is occluded
+    assert shares[edge].min() > 0.95
+    assert shares[own].mean() > 0.985
+
+
+def test_what_the_camera_does_not_draw_does_not_occlude(scene):
+    """A wall hidden from the camera's own view (Visibility(direct=False)) and a wall that is
+    all holes (a cutout whose texture is clear) hide nothing; the same wall solid does."""
+    solid, runner, names = _shares(scene, AmbientOcclusion(radius=RADIUS))
+    floor = runner.ids() == names["floor"]
+    assert solid[floor].min() < 0.7
+    hidden, runner, names = _shares(scene, AmbientOcclusion(radius=RADIUS), wall_parts=(Visibility(direct=False),))
+    floor = runner.ids() == names["floor"]
+    assert floor.sum() > 10000
+    assert hidden[floor].min() > 0.95
+    clear = TextureData(np.zeros((4, 4, 4), np.uint8), name="clear")
+    cut = Material(color=GREY, roughness=1.0, texture=clear, alpha_cutoff=0.5)
+
+    def build(world, occlusion):
+        names = _room(world, occlusion)
+        world.add_component(names["wall"], cut)
+        return names
+
+    lit, runner, names = _frame(scene, lambda world: build(world, AmbientOcclusion(radius=RADIUS)))
+    plain, _, _ = _frame(scene, lambda world: build(world, None))
+    shares = (lit / np.maximum(plain, 1e-6)).mean(axis=-1)
+    floor = runner.ids() == names["floor"]
+    assert floor.sum() > 10000
+    assert shares[floor].min() > 0.95
+
+
+def test_a_mirror_shows_the_room_without_occlusion(scene):
+    """Reflection views are drawn without occlusion (the documented limit): a mirror's pixels
+    are the same with and without it, while the room seen directly changes."""
+    def build(world, occlusion):
+        names = _room(world, occlusion)
+        # A mirror on the floor's far side, facing the wall and the camera's way.
+        world.spawn(Transform(position=(-1.5, 0.8, 1.5), rotation=glm.angleAxis(glm.radians(200.0),
+                                                                                 glm.vec3(0, 1, 0))),
+                    MeshRef(quad(1.6, 1.6)), Mirror(), Material(color=GREY))
+        return names
+
+    lit, runner, names = _frame(scene, lambda world: build(world, AmbientOcclusion(radius=RADIUS)))
+    plain, _, _ = _frame(scene, lambda world: build(world, None))
+    surface = runner.engine.renderer.targets.read_surface_ids()
+    mirror = next(entity for entity, _ in runner.world.query_one(Mirror))
+    mirror_pixels = surface == mirror
+    assert mirror_pixels.sum() > 200
+    assert runner.stats.reflection_views >= 1   # its view was drawn
+    np.testing.assert_allclose(lit[mirror_pixels], plain[mirror_pixels], atol=2e-3)
+    assert np.abs(lit - plain)[~mirror_pixels].max() > 0.05
+
+
+def test_the_passes_and_their_images(scene):
+    """Three passes a frame (depth and normals, find, filter), images of the view's size (the
+    found one half of it, or all with ``half_resolution`` False), let go when the camera
+    loses the component."""
+    occlusion = AmbientOcclusion(radius=RADIUS)
+    names = {}
+    runner = scene(lambda world: names.update(_room(world, occlusion)), SIZE)
+    runner.frame()
+    renderer = runner.engine.renderer
+    with_it = runner.stats.passes
+    assert renderer.screen_occlusion is not None and renderer.screen_occlusion.size == SIZE
+    assert renderer.occlusion._targets.found.size == (SIZE[0] // 2, SIZE[1] // 2)
+    occlusion.half_resolution = False
+    runner.frame()
+    assert renderer.occlusion._targets.found.size == SIZE
+    runner.world.remove_component(names["camera"], AmbientOcclusion)
+    runner.frame()
+    assert renderer.screen_occlusion is None and renderer.occlusion._targets is None
+    assert runner.stats.passes == with_it - 3
+
+
+@pytest.mark.parametrize("field, value", [
+    ("radius", 0.0), ("radius", -1.0), ("radius", float("nan")), ("radius", 1000.0),
+    ("intensity", -0.1), ("intensity", 9.0), ("direct_light", 1.5), ("direct_light", -0.5),
+    ("half_resolution", "yes"),
+])
+def test_bad_values_are_refused_naming_the_field(field, value):
+    with pytest.raises(ComponentValueError, match=f"AmbientOcclusion.{field}"):
+        AmbientOcclusion(**{field: value})
+    occlusion = AmbientOcclusion()
+    with pytest.raises(ComponentValueError, match=f"AmbientOcclusion.{field}"):
+        setattr(occlusion, field, value)
+
+
+def test_a_level_file_keeps_it(tmp_path):
+    (tmp_path / "room.toml").write_text("""[level]
+name = "room"
+
+[[entity]]
+name = "camera"
+Transform = { position = [0.0, 1.0, 3.0] }
+Camera = {}
+AmbientOcclusion = { radius = 0.8, intensity = 1.5, direct_light = 0.25, half_resolution = false }
+""")
+    world = World()
+    names = load_level(tmp_path / "room.toml").spawn(world)
+    occlusion = world.get(names["camera"], AmbientOcclusion)
+    assert (occlusion.radius, occlusion.intensity, occlusion.direct_light, occlusion.half_resolution) == \
+        (pytest.approx(0.8), pytest.approx(1.5), pytest.approx(0.25), False)
+    saved = save_level(world, tmp_path / "again.toml", names, name="room")
+    again = World()
+    names = load_level(saved).spawn(again)
+    assert again.get(names["camera"], AmbientOcclusion).radius == pytest.approx(0.8)
+    (tmp_path / "bad.toml").write_text(
+        '[level]\nname = "bad"\n\n[[entity]]\nname = "camera"\nCamera = {}\nAmbientOcclusion = { radius = -2.0 }\n')
+    with pytest.raises(LevelError, match="radius"):
+        load_level(tmp_path / "bad.toml")
