@@ -167,7 +167,8 @@ def test_intensity_is_an_exponent(scene):
 
 def test_the_lights_direct_light_is_not_occluded_unless_asked(scene):
     # No light from all round: a sun alone lights the room; occlusion changes nothing.
-    lit, runner, names = _frame(scene, lambda world: _room(world, AmbientOcclusion(radius=RADIUS), ambient=0.0, sun=2.0))
+    lit, runner, names = _frame(scene, lambda world: _room(world, AmbientOcclusion(radius=RADIUS), ambient=0.0,
+                                                            sun=2.0))
     plain, _, _ = _frame(scene, lambda world: _room(world, None, ambient=0.0, sun=2.0))
     assert plain.max() > 0.2  # the sun lights the floor
     np.testing.assert_allclose(lit, plain, atol=2e-3)

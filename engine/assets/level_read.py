@@ -47,8 +47,8 @@ except ImportError:  # Python 3.10
 # made by the slice stage each frame (derived state), never written by hand.
 ENGINE_COMPONENTS: dict[str, type] = {
     name: getattr(_components, name) for name in (
-        "AmbientOcclusion", "Bloom", "Camera", "DirectionalLight", "Emissive", "FlyController", "Fog", "HemisphereLight", "Material",
-        "MeshRef",
+        "AmbientOcclusion", "Bloom", "Camera", "DirectionalLight", "Emissive", "FlyController", "Fog",
+        "HemisphereLight", "Material", "MeshRef",
         "Mirror", "PointLight", "Portal", "ReflectionProbe", "Reflective", "Refractive", "ScreenPanel", "ScreenText",
         "Skybox", "Tonemap",
         "Transform", "Traveller", "Visibility", "Water")}
