@@ -110,10 +110,12 @@ def _cutouts(ctx):
     """The mirror ring with two cutout grates (two cutoffs, one double-sided, one with an
     occlusion map) and a vertex-coloured quad over its boxes, the lamp casting (the layered cube's cutout build) and a
     mirror throwing the sun (the virtual light's caster passes), reflected in the batched
-    levels."""
+    levels; the camera with ambient occlusion (its depth and normals pass, the find and
+    filter passes, the root's SCREEN_OCCLUSION builds: the cutout with an occlusion map
+    there is the fullest build of all)."""
     from benchmarks.lighting import _mirror_light
     from benchmarks.mirrors import MirrorRing
-    from components import Material, MeshRef, PointLight, Transform
+    from components import AmbientOcclusion, Camera, Material, MeshRef, PointLight, Transform
     from engine.assets.mesh import Mesh, plane, quad
     from tests.test_alpha_cutout import SLAT_TEXTURE
     from tests.test_occlusion_maps import OCCLUSION
@@ -127,6 +129,8 @@ def _cutouts(ctx):
         world.spawn(Transform(position=(0.0, 2.4, 0.0)), MeshRef(Mesh(
             colours.positions, colours.normals, colours.uvs, colours.indices, name="coloured",
             colors=np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0], [1.0, 1.0, 0.0]]))), Material())
+        for camera, _ in world.query_one(Camera):
+            world.add_component(camera, AmbientOcclusion(radius=0.8))
         for x, cutoff, occlusion in ((-1.0, 0.5, None), (1.0, 0.3, OCCLUSION)):
             world.spawn(Transform(position=(x, 1.6, 0.0)), MeshRef(plane(1.6, 1.6)),
                         Material(texture=SLAT_TEXTURE, alpha_cutoff=cutoff, occlusion_map=occlusion,

@@ -333,7 +333,9 @@ class ScenePass:
         renderer.raw_gl.clear_level(framebuffer)
         set_scissor(ctx, view.scissor)
         set_front_face(ctx, "cw" if view.mirrored else "ccw")
-        bind_sampler(ctx, None, ALBEDO_UNIT)  # a cutout's alpha as the view reads it
+        # What every scene build may declare (a driver may keep a block the build's early
+        # return leaves unread), and the albedo's plain filter: a cutout's alpha as the view reads it.
+        self._bind_pass_wide(ROOT_VIEW, None)
         renderer.upload_views([view])
         renderer.bind_view_at(0)
         self._draw_batches(renderer.opaque_batches(), 0, False, skip=view.skip, hide=view.hide,
