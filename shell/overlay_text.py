@@ -64,7 +64,8 @@ def overlay_lines(engine: Engine, frame_times: Sequence[float]) -> list[str]:
 
 def post_lines(engine: Engine) -> list[str]:
     """The present stage's post-processing in the last frame, one line: the tone curve (and
-    whose it is), the exposure, the bloom (intensity, levels) and the post passes drawn.  The
+    whose it is), the exposure, the bloom (intensity, levels) and the post passes drawn, and
+    the main stage's ambient occlusion (radius, intensity).  The
     automatic exposure's adapted value is read back from the GPU (a wait, only while the
     overlay shows it)."""
     present, renderer = engine.stages["present"], engine.renderer
@@ -83,4 +84,11 @@ def post_lines(engine: Engine) -> list[str]:
         glow = f"bloom {bloom.intensity:g} x{renderer.present_pass.bloom.levels}"
     else:
         glow = "bloom off" + (" (set)" if not present.bloom else "")
-    return [f"post: {curve} ({whose}), {exposure}; {glow}, {renderer.present_pass.post_passes} passes"]
+    main = engine.stages["main"]
+    occluded = main.occluded
+    if occluded is not None:
+        occlusion = (f"AO r {occluded.radius:g} x{occluded.intensity:g}"
+                     f"{'' if occluded.half_resolution else ' full'}")
+    else:
+        occlusion = "AO off" + (" (set)" if not main.occlusion else "")
+    return [f"post: {curve} ({whose}), {exposure}; {glow}, {renderer.present_pass.post_passes} passes; {occlusion}"]

@@ -41,10 +41,13 @@ class MainViewSystem(esper.Processor):
         # or fallback at weight 1 too); None: every mirror is shaded.
         self.depth_cap: Callable[[], int] | None = None
         self._options: tuple[tuple, SceneOptions] = (((), ()), TREE_ROOT)  # (what it was made from, the options)
+        self.occlusion = True  # the debug overlay's toggle: off, no camera's AmbientOcclusion is drawn
+        self.occluded: AmbientOcclusion | None = None  # the one drawn this frame (the overlay's line)
 
     def process(self, dt: float) -> None:
         world = self.world
         views = world.resources[FrameViews] = FrameViews()
+        self.occluded = None
         output: Output | None = world.resources.get(Output)
         camera = active_camera_parts(world)
         if camera is None and output is not None and not self._said_no_camera:
@@ -62,7 +65,8 @@ class MainViewSystem(esper.Processor):
         views.main = camera_view(cam_t.world, cam.fov_y, cam.near, cam.far, output.size)
         views.main.layers = cam.layer_mask  # its culling mask (Camera.shows_layers / hides_layers)
         views.options = self._root_options()
-        occlusion = self.world.try_get(camera[0], AmbientOcclusion)
+        occlusion = self.world.try_get(camera[0], AmbientOcclusion) if self.occlusion else None
+        self.occluded = occlusion
         if occlusion is not None:  # found before the view is drawn: its shading reads it
             self.renderer.occlusion.draw(views.main, occlusion)
             views.options = replace(views.options, occlusion=True)

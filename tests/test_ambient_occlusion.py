@@ -271,13 +271,14 @@ def test_the_passes_and_their_images(scene):
     renderer = runner.engine.renderer
     with_it = runner.stats.passes
     assert renderer.screen_occlusion is not None and renderer.screen_occlusion.size == SIZE
+    assert renderer.resource_counts()["occlusion_targets"] == 4
     assert renderer.occlusion._targets.found.size == (SIZE[0] // 2, SIZE[1] // 2)
     occlusion.half_resolution = False
     runner.frame()
     assert renderer.occlusion._targets.found.size == SIZE
     runner.world.remove_component(names["camera"], AmbientOcclusion)
     runner.frame()
-    assert renderer.screen_occlusion is None and renderer.occlusion._targets is None
+    assert renderer.screen_occlusion is None and renderer.resource_counts()["occlusion_targets"] == 0
     assert runner.stats.passes == with_it - 3
 
 

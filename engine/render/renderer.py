@@ -335,7 +335,8 @@ class Renderer(Gpu):
                 "levels": len(self.levels), "level_copies": len(self.level_copies),
                 "probe_levels": sum(len(s) for s in self.probes._stacks.values()),
                 "programs": len(self.shaders._programs), "post_targets": self.present_pass.post_target_count(),
-                "irradiance_rows": len(self.irradiance.rows)}
+                "irradiance_rows": len(self.irradiance.rows),
+                "occlusion_targets": self.occlusion.target_count()}
 
     # --- frame -----------------------------------------------------------------------------
     @property

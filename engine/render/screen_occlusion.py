@@ -187,6 +187,10 @@ class ScreenOcclusion:
             gpu.checkpoint("ambient occlusion")
         return targets.shares
 
+    def target_count(self) -> int:
+        """Images held now (4 while a camera asks for occlusion, else 0)."""
+        return 0 if self._targets is None else 4
+
     def release_targets(self) -> None:
         """Let the images go (no camera asks for occlusion, or another size)."""
         if self._targets is not None:
