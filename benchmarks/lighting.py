@@ -38,7 +38,10 @@ Variants now (``VARIANTS``; add a row by appending a ``Variant``):
 * ``post``: no shadows, the camera gets ``Tonemap(curve="agx")`` and ``Bloom()`` (six levels on a
   GPU; a software rasteriser's quarter-size start makes five, ending at the same smallest level:
   ``engine/render/bloom.py``);
-* ``post_auto``: the same with ``Tonemap(auto_exposure=True)``.
+* ``post_auto``: the same with ``Tonemap(auto_exposure=True)``;
+* ``occlusion``: no shadows; ``AmbientOcclusion()`` on the camera (its depth and normals
+  pass, the occlusion found at half size, the filter to every pixel);
+* ``occlusion_full``: the same found at full size (``half_resolution=False``).
 
 **Targets** (``TARGETS``), each a ratio of two variants' medians at a mirror count against
 its limit, printed as value, limit, met, and judged on the kind of machine it is set for
@@ -123,6 +126,7 @@ from benchmarks import (
 )
 from benchmarks.mirrors import DT, OUTPUT_SIZE, MirrorRing
 from components import (
+    AmbientOcclusion,
     Bloom,
     Camera,
     DirectionalLight,
@@ -255,6 +259,15 @@ def _post(engine: Engine) -> None:
     engine.world.add_component(camera_entity(engine), Bloom())
 
 
+def _occlusion(engine: Engine, half: bool = True) -> None:
+    _sun_shadows(engine, False)
+    engine.world.add_component(camera_entity(engine), AmbientOcclusion(half_resolution=half))
+
+
+def _occlusion_full(engine: Engine) -> None:
+    _occlusion(engine, half=False)
+
+
 def _post_auto(engine: Engine) -> None:
     _sun_shadows(engine, False)
     engine.world.add_component(camera_entity(engine), Tonemap(curve="agx", auto_exposure=True))
@@ -277,6 +290,8 @@ VARIANTS: list[Variant] = [
     Variant("fog_uniform", _fog_uniform, "fog the same everywhere on the camera"),
     Variant("post", _post, "Tonemap(curve='agx') and Bloom() on the camera"),
     Variant("post_auto", _post_auto, "Tonemap(curve='agx', auto_exposure=True) and Bloom()"),
+    Variant("occlusion", _occlusion, "AmbientOcclusion() on the camera (found at half size)"),
+    Variant("occlusion_full", _occlusion_full, "AmbientOcclusion(half_resolution=False) on the camera"),
 ]
 BASELINE = "off"
 
