@@ -31,9 +31,44 @@ flat in uvec4 v_slots;
 in vec3 v_vertex_color;  // the mesh's colour here (Mesh.colors), multiplied into the material's
 #endif
 #ifdef SCREEN_OCCLUSION
-// The camera's screen-space ambient occlusion, a texel a pixel (engine/render/screen_occlusion.py,
-// a root view's opaque draws only): r the light from all round's share, g the direct light's.
+// The camera's screen-space ambient occlusion (engine/render/screen_occlusion.py; a root
+// view's opaque draws only), at half the view's size or all of it: r the light from all
+// round's share, g the direct light's, b the texel's distance along the view axis (-1: sky).
 uniform sampler2D screen_occlusion;
+
+// The shares at this pixel: the four texels about it, by their bilinear weights each times
+// how near its distance lies to this pixel's (a joint bilateral upsample: across a silhouette
+// the other side's texels drop out; at full size the pixel's own texel alone).
+vec2 screen_occlusion_shares(vec3 position) {
+    float here = -(camera.view * vec4(position, 1.0)).z;
+    vec2 size = vec2(textureSize(screen_occlusion, 0));
+    vec2 scale = size / camera.viewport.zw;
+    vec2 at = gl_FragCoord.xy * scale - 0.5;
+    vec2 cell = floor(at);
+    vec2 f = at - cell;
+    // Off by 2% of the distance, or by what a texel's step across this surface spans: another surface.
+    float tolerance = 0.02 * here + 2.0 * fwidth(here) / min(scale.x, scale.y);
+    ivec2 last = ivec2(size) - 1;
+    vec2 total = vec2(0.0);
+    float weights = 0.0;
+    vec2 nearest = vec2(1.0);
+    float nearest_gap = 1e30;
+    for (int i = 0; i < 4; ++i) {
+        ivec2 offset = ivec2(i & 1, i >> 1);
+        vec4 texel = texelFetch(screen_occlusion, clamp(ivec2(cell) + offset, ivec2(0), last), 0);
+        if (texel.b < 0.0) continue;  // the sky's
+        vec2 bilinear = mix(1.0 - f, f, vec2(offset));
+        float gap = abs(texel.b - here);
+        float weight = bilinear.x * bilinear.y * max(0.0, 1.0 - gap / tolerance);
+        total += weight * texel.rg;
+        weights += weight;
+        if (gap < nearest_gap) {
+            nearest_gap = gap;
+            nearest = texel.rg;
+        }
+    }
+    return weights > 1e-4 ? total / weights : nearest;
+}
 #endif
 
 // Reflection levels draw only the pixels of their own view (the node image mirror_claim.frag
@@ -336,7 +371,7 @@ void main() {
     s.occlusion = material_occlusion();
     s.direct_occlusion = 1.0;
 #ifdef SCREEN_OCCLUSION
-    vec2 screen_shares = texelFetch(screen_occlusion, ivec2(gl_FragCoord.xy), 0).rg;
+    vec2 screen_shares = screen_occlusion_shares(v_world_pos);
     s.occlusion *= screen_shares.r;
     s.direct_occlusion = screen_shares.g;
 #endif

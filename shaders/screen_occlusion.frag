@@ -6,19 +6,19 @@
 // is searched both ways along the screen for its two horizons; the visible arc between them,
 // weighted by the cosine to the normal projected into the slice, is integrated in closed form.
 // Writes the visibility and the pixel's distance along the view axis (the filter's depth
-// test).  engine/render/screen_occlusion.py runs it.
+// test), a texel a pixel of the depth image (half the view's size, or all of it).
+// engine/render/screen_occlusion.py runs it.
 #include "view_depth.glsl"
 
 #define PI 3.14159265358979
 #define HALF_PI 1.57079632679490
 
-uniform sampler2D depth_map;    // the depth and normals pass's depth (no comparison)
+uniform sampler2D depth_map;    // the depth and normals pass's depth (no comparison; bilinear)
 uniform sampler2D normal_map;   // its geometric normals, world space, as n * 0.5 + 0.5
 uniform mat3 view_rotation;     // world -> view directions
 uniform float radius;           // metres (AmbientOcclusion.radius)
 uniform float pixels_per_metre; // at a distance of 1 m along the view axis
 uniform float max_radius_pixels;
-uniform int texel_step;         // depth pixels an occlusion texel steps (2 at half resolution)
 
 out vec2 out_occlusion;
 
@@ -26,9 +26,13 @@ out vec2 out_occlusion;
 const float BAYER[16] = float[16](0.0, 8.0, 2.0, 10.0, 12.0, 4.0, 14.0, 6.0,
                                   3.0, 11.0, 1.0, 9.0, 15.0, 7.0, 13.0, 5.0);
 
+// The surface's view-space point at `pixel` (a position, not a texel): the depth image read
+// bilinearly, which on a flat surface gives its depth there exactly (a plane's depth is
+// affine in the screen).  A texel's own centre would lie off the slice, which made a flat
+// floor seen at a grazing angle occlude itself by up to 6% (its in-plane directions rising
+// above the slice's own tangent).
 vec3 position_at(vec2 pixel) {
-    ivec2 texel = ivec2(pixel);
-    return view_position(vec2(texel) + 0.5, texelFetch(depth_map, texel, 0).r);
+    return view_position(pixel, texture(depth_map, pixel / depth_size).r);
 }
 
 // The largest cosine, to the view direction v, of the directions from p to the surface
@@ -69,8 +73,7 @@ float horizon_cos(vec3 p, vec3 v, vec2 pixel, vec2 omega, float reach, float jit
 }
 
 void main() {
-    ivec2 texel = ivec2(gl_FragCoord.xy);
-    ivec2 pixel = texel * texel_step;
+    ivec2 pixel = ivec2(gl_FragCoord.xy);
     float depth = texelFetch(depth_map, pixel, 0).r;
     if (depth >= 1.0) {  // nothing drawn: the sky
         out_occlusion = vec2(1.0, -1.0);
@@ -80,12 +83,16 @@ void main() {
     vec3 p = view_position(centre, depth);
     vec3 v = normalize(-p);
     vec3 n = normalize(view_rotation * (texelFetch(normal_map, pixel, 0).xyz * 2.0 - 1.0));
-    float reach = min(radius * pixels_per_metre / max(-p.z, 1e-4), max_radius_pixels);
+    // The reach on the screen: the radius as seen half way from the point's depth to the
+    // nearest its sphere comes to the eye.  Occluders nearer the eye than the point (the floor
+    // in front of a wall) lie farther out on the screen than the radius at the point's own
+    // depth: seen there, a wall's foot kept 0.035 too much of its light.
+    float reach = min(radius * pixels_per_metre / max(-p.z - 0.5 * radius, 0.5 * -p.z), max_radius_pixels);
     if (reach < 1.0) {  // the radius spans under a pixel: nothing to find
         out_occlusion = vec2(1.0, -p.z);
         return;
     }
-    int tile = (texel.x & 3) + 4 * (texel.y & 3);
+    int tile = (pixel.x & 3) + 4 * (pixel.y & 3);
     float rotation = (BAYER[tile] + 0.5) / 16.0;
     float jitter = (BAYER[15 - tile] + 0.5) / 16.0;
     float visibility = 0.0;

@@ -1,33 +1,33 @@
 #version 410 core
-// The occlusion found (screen_occlusion.frag, maybe at half size) brought to every pixel: the
-// mean of the 4 x 4 occlusion texels about the pixel (one of each of the tile's rotations),
-// each weighed by how near it lies to the plane of the pixel's own surface (a joint bilateral
-// filter: what lies off that plane, across a silhouette, does not bleed over), then turned
-// into the shares the scene pass multiplies: the light from all round's and the direct light's.
+// The occlusion found (screen_occlusion.frag) smoothed: each texel takes the mean of the
+// 4 x 4 found texels about it (one of each of the tile's slice rotations), each weighed by
+// how near it lies to the plane of the texel's own surface (a joint bilateral filter: what
+// lies off that plane, across a silhouette, does not bleed over), turned into the shares the
+// scene pass multiplies (the light from all round's and the direct light's), with the
+// texel's distance, which the scene pass's upsampling weighs by (scene.frag).
 #include "view_depth.glsl"
 
-uniform sampler2D depth_map;       // full size, the depth and normals pass's
+uniform sampler2D depth_map;       // the depth and normals pass's (this image's size)
 uniform sampler2D normal_map;      // its geometric normals, world space, as n * 0.5 + 0.5
 uniform sampler2D occlusion_map;   // rg: visibility, distance along the view axis (-1: the sky)
 uniform mat3 view_rotation;        // world -> view directions
-uniform int texel_step;            // depth pixels an occlusion texel covers (1 or 2)
 uniform float intensity;           // AmbientOcclusion.intensity: visibility ** intensity
 uniform float direct_light;        // AmbientOcclusion.direct_light
 
-out vec2 out_shares;  // r: the light from all round's share, g: the direct light's
+out vec4 out_shares;  // r: the light from all round's share, g: the direct light's, b: the distance (-1: sky)
 
 void main() {
     ivec2 pixel = ivec2(gl_FragCoord.xy);
     float depth = texelFetch(depth_map, pixel, 0).r;
     if (depth >= 1.0) {
-        out_shares = vec2(1.0);
+        out_shares = vec4(1.0, 1.0, -1.0, 1.0);
         return;
     }
     vec3 p = view_position(vec2(pixel) + 0.5, depth);
     vec3 n = normalize(view_rotation * (texelFetch(normal_map, pixel, 0).xyz * 2.0 - 1.0));
     float tolerance = 0.02 * -p.z;  // off the plane by 2% of the distance: another surface
     ivec2 size = textureSize(occlusion_map, 0);
-    ivec2 base = pixel / texel_step - 1;  // 4 x 4 texels, the one under the pixel the 2nd of its row
+    ivec2 base = pixel - 1;  // 4 x 4 texels, this one the 2nd of its row
     float total = 0.0;
     float weights = 0.0;
     float nearest = 1.0;
@@ -37,8 +37,7 @@ void main() {
             ivec2 texel = clamp(base + ivec2(x, y), ivec2(0), size - 1);
             vec2 found = texelFetch(occlusion_map, texel, 0).rg;
             if (found.y < 0.0) continue;  // the sky's
-            // Its point: along its pixel's ray, at its distance.
-            vec3 q = view_at(vec2(texel * texel_step) + 0.5, -found.y);
+            vec3 q = view_at(vec2(texel) + 0.5, -found.y);  // its point: along its ray, at its distance
             float gap = abs(dot(q - p, n));
             float weight = max(0.0, 1.0 - gap / tolerance);
             total += weight * found.x;
@@ -51,5 +50,5 @@ void main() {
     }
     float visibility = weights > 1e-3 ? total / weights : nearest;
     float ambient = intensity > 0.0 ? pow(max(visibility, 1e-6), intensity) : 1.0;  // (pow(0, y): undefined)
-    out_shares = vec2(ambient, mix(1.0, ambient, direct_light));
+    out_shares = vec4(ambient, mix(1.0, ambient, direct_light), -p.z, 1.0);
 }

@@ -3,7 +3,8 @@ camera): the share of the light from all round that reaches each pixel's surface
 the main view's scene pass multiplies into its ambient light and its sky and probe
 reflections.
 
-Three passes before the main view is drawn, all at the view's size or below it:
+Three passes before the main view is drawn, at half the view's size in each direction (a
+quarter of its pixels; ``half_resolution``) or at its size:
 
 1. **Depth and normals**: the scene pass draws the view's opaque batches with the
    ``DEPTH_NORMALS`` build of the scene shader (``ScenePass.draw_depth_normals``: the
@@ -15,20 +16,29 @@ Three passes before the main view is drawn, all at the view's size or below it:
    direction a pixel, each searched ``STEPS`` depth samples each way for its horizons
    within the radius, the visible arc integrated against the cosine to the normal in closed
    form.  A 4 x 4 tile of pixels takes 16 rotations of the slices, so the tile samples
-   ``16 x SLICES`` directions.  At half the view's size by default (a quarter of the pixels).
+   ``16 x SLICES`` directions.
    Where a slice's samples cross the radius, the point at the radius on the surface between
    the two counts too: the last sample inside falls short of the radius by up to a step,
    which left a crease's occlusion lighter than the ground truth by about 0.04 (and would
    jump as a sample crossed the radius).  Measured against the ground truth in
-   ``tests/test_ambient_occlusion.py``: within 0.03 on a floor beside a wall, away from the
+   ``tests/test_ambient_occlusion.py``: within 0.02 on a floor beside a wall and on the wall, away from the
    screen's sides (what occludes a pixel near them may lie off the screen, where no
    screen-space method sees it).
-3. **Filter** (``shaders/screen_occlusion_filter.frag``): each pixel takes the mean of the
+3. **Filter** (``shaders/screen_occlusion_filter.frag``): each texel takes the mean of the
    4 x 4 found texels about it (one tile: every rotation once), each weighed by how near it
-   lies to the plane of the pixel's surface, so a foreground edge keeps its own occlusion.
-   It writes the two shares the scene pass reads at its pixel (``SCREEN_OCCLUSION`` builds):
+   lies to the plane of the texel's surface, so a foreground edge keeps its own occlusion.
+   It writes the two shares the scene pass multiplies (``SCREEN_OCCLUSION`` builds):
    ``visibility ** intensity`` for the light from all round, and that mixed by
-   ``direct_light`` for the lights' direct light.
+   ``direct_light`` for the lights' direct light, with each texel's distance.
+
+The scene pass brings the shares to its pixels (``scene.frag``'s
+``screen_occlusion_shares``): the four texels about a pixel by their bilinear weights, each
+also by how near its distance lies to the pixel's own (a joint bilateral upsample), so a
+half-size image leaves no halo along silhouettes.  An earlier form filtered to every pixel
+in a full-size pass and found the occlusion from full-size depth; at 640x360 on llvmpipe
+(``python -m benchmarks lighting --variants off,occlusion``, interleaved) the occlusion then
+cost 1.9x the rest of a plain frame (the filter's 16 taps at every pixel nearly half of
+it), now 1.4x.
 
 Only the root view is occluded; mirror, portal and probe views and the transparent slot are
 drawn without it.  The targets are made at the first occluded frame of a size and released
@@ -66,11 +76,11 @@ _PASS = PassState()
 
 @dataclass
 class _Targets:
-    """One view size's images: the depth and normals pass's, the occlusion found (half or
-    full size) and the shares the scene pass reads (full size)."""
+    """One size's images (half the view's, or all of it): the depth and normals pass's, the
+    occlusion found and the shares the scene pass reads."""
 
-    size: tuple[int, int]
-    step: int                      # view pixels a found texel covers (2 at half resolution)
+    size: tuple[int, int]          # the images' (half the view's, or the view's)
+    view_size: tuple[int, int]
     depth: moderngl.Texture
     normals: moderngl.Texture
     prepass: moderngl.Framebuffer
@@ -116,44 +126,43 @@ class ScreenOcclusion:
             self._programs_of = shaders.reloads
         return self._find, self._filter
 
-    def _targets_for(self, size: tuple[int, int], half: bool) -> _Targets:
-        step = 2 if half else 1
+    def _targets_for(self, view_size: tuple[int, int], half: bool) -> _Targets:
+        size = (max(1, view_size[0] // 2), max(1, view_size[1] // 2)) if half else view_size
         kept = self._targets
-        if kept is not None and kept.size == size and kept.step == step:
+        if kept is not None and kept.size == size and kept.view_size == view_size:
             return kept
         self.release_targets()
         ctx = self.ctx
         check_target_size(ctx, size, "ambient occlusion's images")
-        found_size = (max(1, -(-size[0] // step)), max(1, -(-size[1] // step)))
         depth = ctx.depth_texture(size)
         depth.compare_func = ""  # read as distances, not compared
         normals = ctx.texture(size, 4)
-        found = ctx.texture(found_size, 2, dtype="f2")
-        shares = ctx.texture(size, 2)
+        found = ctx.texture(size, 2, dtype="f2")
+        shares = ctx.texture(size, 4, dtype="f2")
         for texture in (depth, normals, found, shares):
             texture.filter = (moderngl.NEAREST, moderngl.NEAREST)
             texture.repeat_x = texture.repeat_y = False
-        self._targets = _Targets(size, step, depth, normals, ctx.framebuffer([normals], depth), found,
+        depth.filter = (moderngl.LINEAR, moderngl.LINEAR)  # the find reads it between texels (texelFetch elsewhere)
+        self._targets = _Targets(size, view_size, depth, normals, ctx.framebuffer([normals], depth), found,
                                  ctx.framebuffer([found]), shares, ctx.framebuffer([shares]))
         return self._targets
 
     def draw(self, view: View, settings: AmbientOcclusion) -> moderngl.Texture:
-        """Find ``view``'s occlusion as ``settings`` say; returns the shares image (rg8, the
-        view's size), bound for the main view's draw."""
+        """Find ``view``'s occlusion as ``settings`` say; returns the shares image (half the
+        view's size, or all of it), bound for the main view's draw."""
         gpu, ctx = self.gpu, self.ctx
         targets = self._targets_for(view.size, settings.half_resolution)
         find, smooth = self._programs()
-        width, height = view.size
-        # 1. Depth and normals.
-        self.scene_pass.draw_depth_normals(view, targets.prepass, view.size)
+        width, height = targets.size
+        # 1. Depth and normals, at the images' size (the view's projection, fewer pixels).
+        self.scene_pass.draw_depth_normals(view, targets.prepass, targets.size)
         proj = view.proj
         unproject = (float(proj[0][0]), float(proj[1][1]), float(proj[2][0]), float(proj[2][1]))
         unproject_z = (float(proj[2][2]), float(proj[3][2]))
         rotation = glm.mat3(view.view).to_bytes()
         # 2. The occlusion found.
-        found_size = targets.found.size
         targets.found_framebuffer.use()
-        apply_pass_state(ctx, _PASS, (0, 0, *found_size))
+        apply_pass_state(ctx, _PASS, (0, 0, width, height))
         bind_texture(ctx, targets.depth, OCCLUSION_DEPTH_UNIT)
         bind_texture(ctx, targets.normals, OCCLUSION_NORMAL_UNIT)
         program = find.program
@@ -162,11 +171,10 @@ class ScreenOcclusion:
         program["depth_size"].value = (float(width), float(height))
         program["view_rotation"].write(rotation)
         program["radius"].value = settings.radius
-        program["pixels_per_metre"].value = float(view.proj[1][1]) * 0.5 * height
+        program["pixels_per_metre"].value = float(proj[1][1]) * 0.5 * height
         program["max_radius_pixels"].value = max(MAX_REACH_SHARE * height, float(STEPS))
-        program["texel_step"].value = targets.step
         find.render(moderngl.TRIANGLES, vertices=3)
-        # 3. Filtered to every pixel, as the scene pass's shares.
+        # 3. Filtered into the shares.
         targets.shares_framebuffer.use()
         apply_pass_state(ctx, _PASS, (0, 0, width, height))
         bind_texture(ctx, targets.found, OCCLUSION_IMAGE_UNIT)
@@ -175,7 +183,6 @@ class ScreenOcclusion:
         program["unproject_z"].value = unproject_z
         program["depth_size"].value = (float(width), float(height))
         program["view_rotation"].write(rotation)
-        program["texel_step"].value = targets.step
         program["intensity"].value = settings.intensity
         program["direct_light"].value = settings.direct_light
         smooth.render(moderngl.TRIANGLES, vertices=3)
