@@ -1,14 +1,15 @@
 """Fuzz: every component's fields given adversarial values, several frames a case.
 
-Each case builds one component (Visibility and Water among them) with one to three fields drawn from a pool of awkward
-values (NaN, infinities, numbers past float32 and float16, huge ints, wrong kinds, zero
-vectors, Euler-looking tuples), attaches it to an entity of a small lit scene (a box, a
-quad for surfaces, the camera entity for Camera, FlyController, Tonemap, Bloom, Fog and
-AmbientOcclusion, the sky entity for the Skybox) and renders ``FRAMES`` 48 x 32 frames
-(``benchmarks/fuzz_cases.py``: what a first frame leaves to later ones, probes captured a
-face a frame, is run too).  A case passes when either the component is refused with a ``ComponentValueError`` that names ``Class.field`` (or the
-entity, for checks on the whole entity), or every frame renders with no NaN in the HDR colour
-target and ``ctx.error`` clean.  Any other exception, above all one raised from inside a system, is a failure.
+Each case builds one component (Visibility and Water among them) with one to three fields
+drawn from a pool of awkward values (NaN, infinities, numbers past float32 and float16, huge
+ints, wrong kinds, zero vectors, Euler-looking tuples), attaches it to an entity of a small
+lit scene (a box, a quad for surfaces, the camera entity for Camera, FlyController, Tonemap,
+Bloom, Fog and AmbientOcclusion, the sky entity for the Skybox) and renders ``FRAMES`` 48 x
+32 frames (``benchmarks/fuzz_cases.py``: what a first frame leaves to later ones, probes
+captured a face a frame, is run too). A case passes when either the component is refused
+with a ``ComponentValueError`` that names ``Class.field`` (or the entity, for checks on the
+whole entity), or every frame renders with no NaN in the HDR colour target and ``ctx.error``
+clean. Any other exception, above all one raised from inside a system, is a failure.
 
     python -m benchmarks fuzz --cases 5000 --level-cases 2000 --model-cases 500
 
