@@ -113,8 +113,8 @@ def test_a_culled_batch_draws_no_sample(ctx, case, monkeypatch):
         return kept
 
     def draw_batches(self, batches, invocations, masked, layered="", skip=0, before_draw=None, hide=0,
-                     unlit=frozenset()):
-        original_draw(self, batches, invocations, masked, layered, skip, before_draw, hide, unlit)
+                     unlit=frozenset(), screen=""):
+        original_draw(self, batches, invocations, masked, layered, skip, before_draw, hide, unlit, screen)
         left, left_out[:] = list(left_out), []
         if not left:
             return
