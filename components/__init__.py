@@ -4,7 +4,7 @@ from components.camera import Camera, DirectionalLight, FlyController, PointLigh
 from components.fog import Fog
 from components.mirror import Mirror
 from components.portal import Portal, PortalClone, Slice, Traveller
-from components.post import Bloom, Tonemap
+from components.post import Bloom, ColorGrading, Tonemap
 from components.probe import ReflectionProbe
 from components.rendering import Emissive, Material, MeshRef, Reflective, Refractive, Skybox
 from components.screen import ScreenPanel, ScreenText
@@ -14,8 +14,8 @@ from components.visibility import Visibility
 from components.water import Water
 
 __all__ = [
-    "AmbientOcclusion", "Bloom", "Camera", "ComponentValueError", "ComponentWarning", "DirectionalLight", "Emissive",
-    "FlyController", "Fog", "HemisphereLight", "Material",
+    "AmbientOcclusion", "Bloom", "Camera", "ColorGrading", "ComponentValueError", "ComponentWarning",
+    "DirectionalLight", "Emissive", "FlyController", "Fog", "HemisphereLight", "Material",
     "MeshRef", "Mirror", "PointLight", "Portal", "PortalClone", "ReflectionProbe", "Reflective", "Refractive",
     "ScreenPanel", "ScreenText", "Skybox", "Slice",
     "Tonemap", "TrackedComponent", "Transform", "Traveller", "Visibility", "Water",

@@ -1,20 +1,31 @@
-"""How the active camera's image is exposed, tone mapped and bloomed: components on the
-camera entity, as Bevy puts ``Tonemapping``, ``Exposure`` and ``Bloom`` on its camera.
+"""How the active camera's image is exposed, graded, tone mapped and bloomed: components on
+the camera entity, as Bevy puts ``Tonemapping``, ``ColorGrading`` and ``Bloom`` on its camera.
 
 The frame is drawn in linear HDR (half floats: a lamp may be 20 times brighter than white
 paper); the present stage turns it into the picture.  Its order (``engine/render/present.py``):
 every mirror and portal view is composited into the main image first, then **bloom** (on
 that finished HDR image, so a lamp glows directly and in every reflection, for the same
-cost whatever the number of mirrors), then **exposure** and the **tone curve**, then the sRGB
-encoding, then FXAA.  A camera with neither component keeps the plain look: no curve, the
-renderer's linear ``Renderer.exposure``.
+cost whatever the number of mirrors), then **exposure**, the **grade** (``ColorGrading``)
+and the **tone curve**, then the sRGB encoding and the grade's colour table, then FXAA.  A
+camera with none of these components keeps the plain look: no curve, the renderer's linear
+``Renderer.exposure``.
 """
 from __future__ import annotations
 
 from dataclasses import dataclass
 from typing import Any
 
-from components.tracking import HALF_MAX, ComponentValueError, TrackedComponent, boolean, choice, finite, integer
+from components.tracking import (
+    HALF_MAX,
+    ComponentValueError,
+    TrackedComponent,
+    _items,
+    boolean,
+    choice,
+    finite,
+    integer,
+    vec3,
+)
 
 # "none": clamp to [0, 1] (today's look); "aces": Stephen Hill's fit of the ACES RRT + sRGB
 # ODT (BakingLab's ACES.hlsl, with three.js's input scale of 1 / 0.6); "agx": Troy
@@ -28,6 +39,13 @@ MAX_ADAPT_SPEED = 100.0     # per second: faster is a jump, not an adaptation
 MAX_BLOOM_LEVELS = 8        # half-size steps below the screen: 8 spread a glow over ~1/2 of a 1080p frame
 MAX_BLOOM_RADIUS = 4.0      # the upsample tent's reach in texels of the smaller level
 _DEFAULT_MAX_EV = 8.0
+MAX_GRADE_CONTRAST = 4.0    # ColorGrading.contrast and saturation: 4x is past any look
+MAX_GRADE_SLOPE = 16.0      # ColorGrading.slope: four stops up
+MAX_GRADE_POWER = 8.0
+
+# The engine's colour table (engine.assets.color_lut.ColorLut); components import none of the
+# engine: ColorGrading.lut is checked by the class's ASSET_KIND ("lut").
+ColorLut = Any
 
 
 @dataclass(eq=False)
@@ -124,3 +142,70 @@ class Bloom(TrackedComponent):
         if name == "composite":
             return choice(self, name, value, BLOOM_COMPOSITES)
         return value
+
+
+@dataclass(eq=False)
+class ColorGrading(TrackedComponent):
+    """The grade of a camera's image (on the camera's entity), as a colourist's controls and
+    Bevy's, Unity's and Godot's colour grading give it: in the linear HDR image after
+    exposure and before the tone curve, in this order,
+
+    - **white balance**: ``temperature`` (-1 to 1; more is warmer) and ``tint`` (-1 to 1;
+      more is magenta, less green).  The image is adapted (von Kries, in CAT02's cone
+      space) from a white of ``6504 K x 2 ** temperature`` on the CIE daylight locus,
+      moved by ``0.05 x tint`` in y, to D65: the white of a bluer light (temperature > 0)
+      is made neutral, so everything looks warmer.  0 and 0 change nothing;
+    - **contrast** about middle grey (0.18): each channel ``0.18 x (c / 0.18) ** contrast``
+      (a power in log space: 1 changes nothing, more spreads the tones apart);
+    - the ASC Color Decision List: ``(c x slope + offset) ** power`` a channel (RGB
+      triples: ``slope`` scales, ``offset`` adds, ``power`` bends the tones; 1, 0, 1
+      change nothing), then **saturation** about Rec. 709 luma (0: grey, 1: unchanged);
+
+    then the tone curve and the sRGB encoding, and last the **colour table** ``lut`` (an
+    ``engine.assets.color_lut.ColorLut``, ``load_cube_lut("grade.cube")``: a ``.cube``
+    3D LUT exported from a grading application, applied to the encoded sRGB picture, as
+    such tables are made), mixed in by ``lut_strength`` (0 to 1).
+    """
+
+    temperature: float = 0.0
+    tint: float = 0.0
+    contrast: float = 1.0
+    slope: Any = (1.0, 1.0, 1.0)
+    offset: Any = (0.0, 0.0, 0.0)
+    power: Any = (1.0, 1.0, 1.0)
+    saturation: float = 1.0
+    lut: ColorLut | None = None
+    lut_strength: float = 1.0
+
+    def _validate(self, name: str, value: Any) -> Any:
+        if name in ("temperature", "tint"):
+            return finite(self, name, value, low=-1.0, high=1.0)
+        if name in ("contrast", "saturation"):
+            return finite(self, name, value, low=0.0, high=MAX_GRADE_CONTRAST)
+        if name == "slope":
+            return _triple(self, name, value, 0.0, MAX_GRADE_SLOPE)
+        if name == "offset":
+            return _triple(self, name, value, -1.0, 1.0)
+        if name == "power":
+            value = _triple(self, name, value, 0.0, MAX_GRADE_POWER)
+            if min(value) <= 0.0:
+                raise ComponentValueError(f"ColorGrading.power must be > 0 a channel, got {value}")
+            return value
+        if name == "lut" and value is not None and getattr(type(value), "ASSET_KIND", None) != "lut":
+            raise ComponentValueError(f"ColorGrading.lut must be an engine.assets.color_lut.ColorLut "
+                                      f"(load_cube_lut), got {type(value).__name__}")
+        if name == "lut_strength":
+            return finite(self, name, value, low=0.0, high=1.0)
+        return value
+
+
+def _triple(owner: object, name: str, value: Any, low: float, high: float) -> tuple[float, float, float]:
+    """Three finite numbers in [low, high] (one number: the same for each channel), as a plain
+    tuple (the grade's triples are values, not edited in place)."""
+    checked = vec3(owner, name, value, low=low)  # three finite numbers, each >= low (one number: all three)
+    items = [float(c) for c in _items(value)]
+    parts = items if len(items) == 3 else [float(c) for c in checked]
+    if max(parts) > high:
+        raise ComponentValueError(f"{type(owner).__name__}.{name} must have every component <= {high}, "
+                                  f"got {tuple(parts)}")
+    return parts[0], parts[1], parts[2]

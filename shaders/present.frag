@@ -7,7 +7,9 @@
 // exposure (a linear scale; AUTO_EXPOSURE: times 2^EV from the adapted 1x1 exposure
 // texture, engine/render/post.py, read on the GPU by present.vert), the tone curve
 // (TONEMAP_CURVE, include/tonemap.glsl), then the sRGB encoding.  Without POST the
-// code is the plain look's, unchanged.
+// code is the plain look's, unchanged.  With GRADE (components/post.py ColorGrading) the
+// exposed image is graded before the curve (grade()); with LUT the encoded picture is looked
+// up in the grade's colour table last.
 #include "color.glsl"
 #include "tonemap.glsl"
 
@@ -21,6 +23,30 @@ uniform vec2 bloom_mix;   // (weight of the image, weight of the bloom image's s
 #endif
 #ifdef AUTO_EXPOSURE
 flat in float v_scale;   // exposure * 2^EV of the adapted 1x1 exposure texture (present.vert)
+#endif
+#ifdef GRADE
+uniform mat3 white_balance;   // linear sRGB, adapted (engine/render/grading.py)
+uniform float contrast;       // about middle grey, in log space
+uniform vec3 slope;           // the ASC Color Decision List's
+uniform vec3 offset;
+uniform vec3 power;
+uniform float saturation;     // about Rec. 709 luma
+
+// ColorGrading's order: white balance, contrast, slope-offset-power, saturation.  Each step
+// keeps values >= 0 (pow of a negative number is undefined in GLSL).
+vec3 grade(vec3 c) {
+    c = max(white_balance * c, 0.0);
+    c = 0.18 * pow(max(c, 1e-10) / 0.18, vec3(contrast));
+    c = pow(max(c * slope + offset, 0.0), power);
+    float luma = dot(c, vec3(0.2126, 0.7152, 0.0722));
+    return max(luma + saturation * (c - luma), 0.0);
+}
+#endif
+#ifdef LUT
+uniform sampler3D lut_map;    // ColorGrading.lut (engine/assets/color_lut.py), trilinear
+uniform vec3 lut_scale;       // encoded colour -> its texture coordinates (grading.lut_lookup)
+uniform vec3 lut_bias;
+uniform float lut_strength;
 #endif
 #endif
 
@@ -41,7 +67,14 @@ void main() {
 #else
     float scale = exposure;
 #endif
-    vec3 srgb = linear_to_srgb(tone_map(hdr * scale));
+    vec3 exposed = hdr * scale;
+#ifdef GRADE
+    exposed = grade(exposed);
+#endif
+    vec3 srgb = linear_to_srgb(tone_map(exposed));
+#ifdef LUT
+    srgb = mix(srgb, textureLod(lut_map, srgb * lut_scale + lut_bias, 0.0).rgb, lut_strength);
+#endif
 #else
     vec3 srgb = linear_to_srgb(texture(hdr_image, v_uv).rgb * exposure);
 #endif

@@ -1,9 +1,10 @@
-"""The debug overlay: frame rate and a frame-time graph, what the last frame cost (passes,
-draw calls, views per reflection level, probe captures), the reflection and probe capture
-paths in use, toggles for them, the post-processing (tone curve, exposure, bloom; toggles
-for bloom, fog, ambient occlusion and the curve), and shader errors from hot reload; and the level editor's panels
-(``shell/editor_panels.py``: the entity list, the inspector, the selection's handles, the
-editor's keys), whose selection it outlines wherever it shows (``engine/render/outline.py``).
+"""The debug overlay: frame rate and a frame-time graph, what the last frame cost (passes, draw
+calls, views per reflection level, probe captures), the reflection and probe capture paths
+in use, toggles for them, the post-processing (tone curve, exposure, bloom; toggles for
+bloom, fog, the grade, ambient occlusion and the curve), and shader errors from hot reload;
+and the level editor's panels (``shell/editor_panels.py``: the entity list, the inspector,
+the selection's handles, the editor's keys), whose selection it outlines wherever it shows
+(``engine/render/outline.py``).
 
 It is an immediate-mode GUI (Dear ImGui, through imgui-bundle) drawn by moderngl-window's
 moderngl renderer for it, after the present stage, over the finished frame in the output
@@ -325,7 +326,7 @@ class DebugOverlay(EditorPanels):
         self._widget("fxaa")
         present = engine.stages["present"]
         for label, stage, switch in (("shadows", engine.stages["shadows"], "enabled"), ("bloom", present, "bloom"),
-                                     ("fog", engine.stages["prepare"], "fog"),
+                                     ("fog", engine.stages["prepare"], "fog"), ("grade", present, "grade"),
                                      ("AO", engine.stages["main"], "occlusion")):
             imgui.same_line()
             changed, on = imgui.checkbox(label, getattr(stage, switch))

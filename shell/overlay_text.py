@@ -64,10 +64,10 @@ def overlay_lines(engine: Engine, frame_times: Sequence[float]) -> list[str]:
 
 def post_lines(engine: Engine) -> list[str]:
     """The present stage's post-processing in the last frame, one line: the tone curve (and
-    whose it is), the exposure, the bloom (intensity, levels) and the post passes drawn, and
-    the main stage's ambient occlusion (radius, intensity).  The
-    automatic exposure's adapted value is read back from the GPU (a wait, only while the
-    overlay shows it)."""
+    whose it is), the exposure, the bloom (intensity, levels), the grade (and its colour
+    table's name), the post passes drawn, and the main stage's ambient occlusion (radius,
+    intensity).  The automatic exposure's adapted value is read back from the GPU (a wait,
+    only while the overlay shows it)."""
     present, renderer = engine.stages["present"], engine.renderer
     tonemap, bloom = present.tonemap, present.bloomed
     camera_curve = tonemap.curve if tonemap is not None else "none"
@@ -84,6 +84,11 @@ def post_lines(engine: Engine) -> list[str]:
         glow = f"bloom {bloom.intensity:g} x{renderer.present_pass.bloom.levels}"
     else:
         glow = "bloom off" + (" (set)" if not present.bloom else "")
+    graded, grade = present.graded, ""
+    if graded is not None:
+        grade = "; graded" + (f", table {graded.lut.name!r}" if graded.lut is not None else "")
+    elif not present.grade:
+        grade = "; grade off (set)"
     main = engine.stages["main"]
     occluded = main.occluded
     if occluded is not None:
@@ -91,4 +96,5 @@ def post_lines(engine: Engine) -> list[str]:
                      f"{'' if occluded.half_resolution else ' full'}")
     else:
         occlusion = "AO off" + (" (set)" if not main.occlusion else "")
-    return [f"post: {curve} ({whose}), {exposure}; {glow}, {renderer.present_pass.post_passes} passes; {occlusion}"]
+    passes = renderer.present_pass.post_passes
+    return [f"post: {curve} ({whose}), {exposure}; {glow}, {passes} passes{grade}; {occlusion}"]

@@ -1,12 +1,12 @@
 """Present: the finished level-0 image (reflections composited in) goes to the output,
-bloomed, exposed and tone mapped as the active camera's ``Bloom`` and ``Tonemap`` say
-(``components/post.py``; a camera with neither keeps the plain look)."""
+bloomed, exposed, graded and tone mapped as the active camera's ``Bloom``, ``Tonemap`` and
+``ColorGrading`` say (``components/post.py``; a camera with none of them keeps the plain look)."""
 from __future__ import annotations
 
 import esper
 import moderngl
 
-from components.post import TONEMAP_CURVES, Bloom, Tonemap
+from components.post import TONEMAP_CURVES, Bloom, ColorGrading, Tonemap
 from engine.core.frame_io import Output
 from engine.core.world import World
 from engine.render.frame_views import FrameViews
@@ -16,16 +16,19 @@ from engine.rules.frame_rules import active_camera_parts
 
 class PresentSystem(esper.Processor):
     """Settings the debug overlay writes (a developer's switches over every camera):
-    ``bloom`` (False: no camera's Bloom is drawn) and ``curve`` (None: each camera's own;
-    else one of ``TONEMAP_CURVES`` for every camera, with or without a Tonemap)."""
+    ``bloom`` (False: no camera's Bloom is drawn), ``grade`` (False: no camera's
+    ColorGrading) and ``curve`` (None: each camera's own; else one of ``TONEMAP_CURVES`` for
+    every camera, with or without a Tonemap)."""
 
     def __init__(self, world: World, renderer: Renderer) -> None:
         self.world = world
         self.renderer = renderer
         self.bloom = True
+        self.grade = True
         self._curve: str | None = None
         self.tonemap: Tonemap | None = None   # what the last frame presented with (the overlay shows it)
         self.bloomed: Bloom | None = None
+        self.graded: ColorGrading | None = None
 
     @property
     def curve(self) -> str | None:
@@ -47,15 +50,16 @@ class PresentSystem(esper.Processor):
     def present_into(self, framebuffer: moderngl.Framebuffer, size: tuple[int, int], dt: float = 0.0) -> None:
         """Present the last finished frame (the main stage's ``FrameViews.image``, with the
         reflections composited in) into ``framebuffer`` as this stage does, with the active
-        camera's Bloom and Tonemap: the frame and a screenshot of it (``dt`` 0: an automatic
+        camera's Bloom, Tonemap and ColorGrading: the frame and a screenshot of it (``dt`` 0: an automatic
         exposure does not move on for a second presentation)."""
         parts = active_camera_parts(self.world)
         camera = parts[0] if parts is not None else None
-        tonemap = bloom = None
+        tonemap = bloom = grading = None
         if camera is not None:
             tonemap = self.world.try_get(camera, Tonemap)
             bloom = self.world.try_get(camera, Bloom) if self.bloom else None
-        self.tonemap, self.bloomed = tonemap, bloom
+            grading = self.world.try_get(camera, ColorGrading) if self.grade else None
+        self.tonemap, self.bloomed, self.graded = tonemap, bloom, grading
         views: FrameViews | None = self.world.resources.get(FrameViews)
         self.renderer.present(framebuffer, size, tonemap, bloom, self._curve, camera, dt,
-                              views.image if views is not None else None)
+                              views.image if views is not None else None, grading)

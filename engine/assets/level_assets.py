@@ -19,6 +19,7 @@ from collections.abc import Callable, Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
+from engine.assets.color_lut import MAX_LUT_FILE_BYTES, ColorLut, load_cube_lut
 from engine.assets.mesh import Mesh, box, load_model, model_bytes, plane, quad, sphere
 from engine.assets.texture_data import (
     MAX_TEXTURE_SIDE,
@@ -194,6 +195,21 @@ def level_texture(spec: Any, where: LevelAssets, normal_map: bool = False) -> Te
     if 1 <= size <= MAX_TEXTURE_SIDE:  # else checker_texture says what is wrong
         where.budget.take(key, texture_bytes(size, size))
     return _cached(key, lambda: checker_texture(size, squares, **colours))
+
+
+def level_lut(spec: Any, where: LevelAssets) -> ColorLut:
+    """The colour table ``ColorGrading.lut`` names: ``{ file = "grade.cube" }``, a ``.cube``
+    3D table (engine/assets/color_lut.py)."""
+    spec, _ = _asset_table(spec, "lut", '{ file = "grade.cube" }')
+    if "file" not in spec:
+        raise ValueError(f"a colour table names a .cube file: {{ file = \"grade.cube\" }}, got {sorted(spec)}")
+    path = _asset_path(spec.pop("file"), where)
+    _no_more(spec, "colour table")
+    info = check_asset_file(path, f"colour table {str(path)!r}", MAX_LUT_FILE_BYTES)
+    key = ("lut", str(path), info.st_mtime_ns, info.st_size, info.st_ino)
+    lut = _cached(key, lambda: load_cube_lut(path))
+    where.budget.take(key, lut.table.nbytes)
+    return lut
 
 
 def _ripples(spec: dict, name: Any, where: LevelAssets) -> TextureData:

@@ -31,7 +31,7 @@ from pyglm import glm
 
 import components as _components
 from components import ComponentValueError, look_rotation, yaw_pitch_rotation
-from engine.assets.level_assets import LevelAssets, level_mesh, level_texture, user_asset_roots
+from engine.assets.level_assets import LevelAssets, level_lut, level_mesh, level_texture, user_asset_roots
 from engine.assets.level_lines import MAX_NESTING, deep_line, line_map, nesting_depth
 from engine.assets.texture_data import file_problem
 from engine.core.budget import ViewBudget, ViewBudgetError
@@ -47,7 +47,7 @@ except ImportError:  # Python 3.10
 # made by the slice stage each frame (derived state), never written by hand.
 ENGINE_COMPONENTS: dict[str, type] = {
     name: getattr(_components, name) for name in (
-        "AmbientOcclusion", "Bloom", "Camera", "DirectionalLight", "Emissive", "FlyController", "Fog",
+        "AmbientOcclusion", "Bloom", "Camera", "ColorGrading", "DirectionalLight", "Emissive", "FlyController", "Fog",
         "HemisphereLight", "Material", "MeshRef",
         "Mirror", "PointLight", "Portal", "ReflectionProbe", "Reflective", "Refractive", "ScreenPanel", "ScreenText",
         "Skybox", "Tonemap",
@@ -432,6 +432,8 @@ def _decode(cls_name: str, field: str, value: Any, where: LevelAssets) -> Any:
     if field == "texture" or (cls_name, field) in _MATERIAL_MAPS:
         # A linear map (normal, metallic-roughness) keeps a 16-bit PNG's 16 bits; colour is 8 bits.
         return level_texture(value, where, normal_map=field in _LINEAR_MAPS)
+    if cls_name == "ColorGrading" and field == "lut":
+        return level_lut(value, where)
     if cls_name == "Transform" and field == "rotation":
         return _rotation(value)
     if cls_name == "Skybox" and field == "faces":

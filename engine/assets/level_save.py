@@ -23,6 +23,7 @@ from typing import Any
 import numpy as np
 
 from components import ComponentValueError
+from engine.assets.color_lut import ColorLut
 from engine.assets.level_assets import is_number
 from engine.assets.level_read import DERIVED_COMPONENTS, ENGINE_COMPONENTS, REFERENCE_FIELDS, LevelError, load_level
 from engine.assets.mesh import Mesh
@@ -321,7 +322,7 @@ def _encode_component(path: Path, component: Any, by_id: Mapping[int, str], enti
             raise LevelError(path, f"is None where the default is {default!r}: TOML has no None", None, entity, where)
         if (cls.__name__, f.name) in REFERENCE_FIELDS:
             out[f.name] = by_id.get(value, f"entity_{value}")
-        elif isinstance(value, (Mesh, TextureData)):
+        elif isinstance(value, (Mesh, TextureData, ColorLut)):
             source = getattr(value, "source", None)
             if source is not None and "inside" in source:
                 raise LevelError(path, f"{type(value).__name__} {value.name!r} is an image inside the model file "

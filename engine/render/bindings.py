@@ -109,6 +109,7 @@ VIRTUAL_SHADOW_UNIT = 14  # scene: the virtual lights' shadow maps, one depth at
 # the same; the cause, inside llvmpipe, not found), and its bind is one call a frame.
 BLOOM_UNIT = 16          # bloom steps after the first, present: a level of the chain (engine/render/bloom.py)
 PRESENT_UNIT = 17        # present, bloom's first step, exposure's luminance step: the HDR image
+LUT_UNIT = 24            # present (LUT builds): the grade's colour table, a 3D texture (ColorGrading.lut)
 # The spots' shadow maps (a depth atlas, sampler2DShadow) on a unit past 16 too: the scene's
 # fragment stage reads at most 16 samplers (GL 4.1's least GL_MAX_TEXTURE_IMAGE_UNITS), and
 # with it a build holds 15, but 0-15 are each some pass's.

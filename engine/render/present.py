@@ -31,17 +31,20 @@ from __future__ import annotations
 
 import moderngl
 
-from components.post import TONEMAP_CURVES, Bloom, Tonemap
+from components.post import TONEMAP_CURVES, Bloom, ColorGrading, Tonemap
+from engine.assets.color_lut import ColorLut
 from engine.render.bindings import (
     BLOOM_UNIT,
     EXPOSURE_UNIT,
     FXAA_UNIT,
+    LUT_UNIT,
     PRESENT_UNIT,
     PassState,
     apply_pass_state,
     bind_texture,
 )
 from engine.render.bloom import BloomPass
+from engine.render.grading import grades, lut_lookup, upload_lut, white_balance
 from engine.render.post import AutoExposure
 from engine.render.shader_library import ShaderLibrary
 from engine.render.targets import CaptureTarget
@@ -68,6 +71,7 @@ class PresentPass:
         self.bloom = BloomPass(ctx, shaders, software)
         self.auto_exposure = AutoExposure(ctx, shaders)
         self.post_passes = 0   # bloom and exposure draws in the last frame (the tone map is the present draw)
+        self._lut: tuple[ColorLut, moderngl.Texture3D] | None = None  # the grade's table, uploaded
 
     @property
     def search_steps(self) -> int:
@@ -88,8 +92,9 @@ class PresentPass:
         program = self.shaders.program("present.vert", fragment, defines=defines or None)
         return self.ctx.vertex_array(program, [])
 
-    def _post_build(self, curve: str, bloom: bool, auto: bool, luma: bool) -> moderngl.VertexArray:
-        key = (curve, bloom, auto, luma)
+    def _post_build(self, curve: str, bloom: bool, auto: bool, luma: bool, grade: bool = False,
+                    lut: bool = False) -> moderngl.VertexArray:
+        key = (curve, bloom, auto, luma, grade, lut)
         vao = self._post.get(key)
         if vao is None:
             defines = {"POST": "1", "TONEMAP_CURVE": str(TONEMAP_CURVES.index(curve))}
@@ -99,19 +104,26 @@ class PresentPass:
                 defines["AUTO_EXPOSURE"] = "1"
             if luma:
                 defines["LUMA_IN_ALPHA"] = "1"
+            if grade:
+                defines["GRADE"] = "1"
+            if lut:
+                defines["LUT"] = "1"
             vao = self._post[key] = self._fullscreen("present.frag", **defines)
             vao.program["hdr_image"].value = PRESENT_UNIT
             if bloom:
                 vao.program["bloom_image"].value = BLOOM_UNIT
             if auto:
                 vao.program["exposure_state"].value = EXPOSURE_UNIT
+            if lut:
+                vao.program["lut_map"].value = LUT_UNIT
         return vao
 
     def draw(self, hdr: moderngl.Texture, exposure: float, antialias: str, output: moderngl.Framebuffer,
              size: tuple[int, int], tonemap: Tonemap | None = None, bloom: Bloom | None = None,
-             curve: str | None = None, camera: int | None = None, dt: float = 0.0) -> None:
-        """Present ``hdr`` into ``output``.  ``tonemap`` and ``bloom``: the active camera's
-        components (None: none); ``curve`` overrides the tone curve (the debug overlay's
+             curve: str | None = None, camera: int | None = None, dt: float = 0.0,
+             grading: ColorGrading | None = None) -> None:
+        """Present ``hdr`` into ``output``.  ``tonemap``, ``bloom`` and ``grading``: the active
+        camera's components (None: none); ``curve`` overrides the tone curve (the debug overlay's
         choice; None: the Tonemap's, or "none"); ``camera`` is whose image it is (automatic
         exposure starts over when it changes) and ``dt`` the frame's time step (adaptation)."""
         fxaa = antialias == "fxaa"
@@ -120,7 +132,9 @@ class PresentPass:
                 self._encoded.release()
             self._encoded = CaptureTarget(self.ctx, size)
         self.post_passes = 0
-        if tonemap is None and bloom is None and curve is None:
+        if grading is not None and not grades(grading) and (grading.lut is None or grading.lut_strength == 0.0):
+            grading = None  # (nothing to grade: the same picture without it)
+        if tonemap is None and bloom is None and curve is None and grading is None:
             self._release_post_targets()
             encode = self._encode_luma if fxaa else self._encode
             (self._encoded.framebuffer if fxaa else output).use()
@@ -128,7 +142,7 @@ class PresentPass:
             bind_texture(self.ctx, hdr, PRESENT_UNIT)
             encode.program["exposure"].value = exposure
         else:
-            encode = self._post_encode(hdr, exposure, tonemap, bloom, curve, camera, dt, fxaa)
+            encode = self._post_encode(hdr, exposure, tonemap, bloom, curve, camera, dt, fxaa, grading)
             (self._encoded.framebuffer if fxaa else output).use()
             apply_pass_state(self.ctx, _PRESENT, (0, 0, *size))
         encode.render(moderngl.TRIANGLES, vertices=3)
@@ -141,7 +155,8 @@ class PresentPass:
             self._fxaa.render(moderngl.TRIANGLES, vertices=3)
 
     def _post_encode(self, hdr: moderngl.Texture, exposure: float, tonemap: Tonemap | None, bloom: Bloom | None,
-                     curve: str | None, camera: int | None, dt: float, luma: bool) -> moderngl.VertexArray:
+                     curve: str | None, camera: int | None, dt: float, luma: bool,
+                     grading: ColorGrading | None = None) -> moderngl.VertexArray:
         """Run bloom and automatic exposure; the present build to draw, its inputs bound."""
         bloomed = None
         if bloom is not None and bloom.intensity > 0.0:
@@ -157,8 +172,18 @@ class PresentPass:
         else:
             self.auto_exposure.release_targets()
         curve = curve if curve is not None else (tonemap.curve if tonemap is not None else "none")
-        encode = self._post_build(curve, bloomed is not None, auto, luma)
+        lut = self._lut_texture(grading.lut if grading is not None and grading.lut_strength > 0.0 else None)
+        graded = grades(grading)
+        encode = self._post_build(curve, bloomed is not None, auto, luma, graded, lut is not None)
         self._set(encode, "exposure", 2.0 ** tonemap.exposure if tonemap is not None else exposure)
+        if graded:
+            self._set_grade(encode, grading)
+        if lut is not None:
+            bind_texture(self.ctx, lut, LUT_UNIT)
+            scale, bias = lut_lookup(grading.lut)
+            self._set(encode, "lut_scale", scale)
+            self._set(encode, "lut_bias", bias)
+            self._set(encode, "lut_strength", grading.lut_strength)
         bind_texture(self.ctx, hdr, PRESENT_UNIT)
         if bloomed is not None:
             bind_texture(self.ctx, bloomed, BLOOM_UNIT)
@@ -169,6 +194,32 @@ class PresentPass:
             bind_texture(self.ctx, state, EXPOSURE_UNIT)
         return encode
 
+    def _set_grade(self, encode: moderngl.VertexArray, grading: ColorGrading) -> None:
+        """The GRADE build's uniforms from ``grading`` (the white balance's matrix worked out
+        again only when its two fields change)."""
+        balance = (grading.temperature, grading.tint)
+        if self._written.get((id(encode), "white_balance_of")) != balance:
+            # Row-major numpy to GLSL's column-major mat3: the transpose's bytes.
+            encode.program["white_balance"].write(white_balance(*balance).T.astype("f4").tobytes())
+            self._written[(id(encode), "white_balance_of")] = balance
+        self._set(encode, "contrast", grading.contrast)
+        self._set(encode, "slope", grading.slope)
+        self._set(encode, "offset", grading.offset)
+        self._set(encode, "power", grading.power)
+        self._set(encode, "saturation", grading.saturation)
+
+    def _lut_texture(self, lut: ColorLut | None) -> moderngl.Texture3D | None:
+        """``lut`` uploaded (once while it is the camera's), or None; a table no camera uses
+        now is let go."""
+        if self._lut is not None and self._lut[0] is not lut:
+            self._lut[1].release()
+            self._lut = None
+        if lut is None:
+            return None
+        if self._lut is None:
+            self._lut = (lut, upload_lut(self.ctx, lut))
+        return self._lut[1]
+
     def _set(self, vao: moderngl.VertexArray, name: str, value) -> None:
         """Write a uniform of a POST build only when its value changes (each write is a GL call)."""
         key = (id(vao), name)
@@ -177,6 +228,7 @@ class PresentPass:
             self._written[key] = value
 
     def _release_post_targets(self) -> None:
+        self._lut_texture(None)
         if self.bloom.textures:
             self.bloom.release_targets()
         if self.auto_exposure.current is not None:
@@ -185,9 +237,11 @@ class PresentPass:
     def post_target_count(self) -> int:
         """Textures the bloom chain and automatic exposure hold now (0 without a camera
         that asks for them)."""
-        return self.bloom.target_count() + len(self.auto_exposure._targets) + len(self.auto_exposure._state)
+        return (self.bloom.target_count() + len(self.auto_exposure._targets) + len(self.auto_exposure._state)
+                + (self._lut is not None))
 
     def release(self) -> None:
+        self._lut_texture(None)
         if self._encoded is not None:
             self._encoded.release()
             self._encoded = None

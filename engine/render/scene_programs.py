@@ -142,7 +142,7 @@ class ScenePrograms:
             screen = ""
         self.screens.add(screen)
         key = (invocations, layered, variants, normal_mapped, checker, material, probe_blend, virtual,
-               ambient_probes, probe_rest, unlit, masked, shadowing, fogging, screen)
+               ambient_probes, probe_rest, unlit, masked, screen, shadowing, fogging)
         program = self.built.get(key)
         if program is None:
             defines = {}

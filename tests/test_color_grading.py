@@ -1,0 +1,227 @@
+"""Colour grading on the camera (``ColorGrading``): white balance, contrast, the ASC CDL's
+slope, offset and power, saturation, and a ``.cube`` colour table, through the real present
+stage on known HDR images (``tests/test_post_processing.py``'s ``KnownImage``), each against
+its formula written here in numpy; the white balance against the CIE's tabulated daylight
+whites; the table against its own trilinear lookup on the CPU; the ``.cube`` reader's
+refusals; level files."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from components import ColorGrading, ComponentValueError, Tonemap
+from engine.assets.color_lut import ColorLut, identity_lut, load_cube_lut
+from engine.assets.level_file import LevelError, load_level, save_level
+from engine.core.errors import AssetError
+from engine.core.world import World
+from tests import test_post_processing as post_tests
+from tests.support import linear_to_srgb8, srgb_to_linear
+from tests.test_post_processing import CURVES, expected_srgb8, ramp
+
+known = post_tests.known  # the fixture: a camera's known HDR image through the present stage
+
+LUMA = np.array([0.2126, 0.7152, 0.0722])
+# Linear sRGB -> XYZ (IEC 61966-2-1), for the white balance's check.
+SRGB_TO_XYZ = np.array([[0.4124564, 0.3575761, 0.1804375],
+                        [0.2126729, 0.7151522, 0.0721750],
+                        [0.0193339, 0.1191920, 0.9503041]])
+
+
+def grade(c: np.ndarray, contrast=1.0, slope=(1, 1, 1), offset=(0, 0, 0), power=(1, 1, 1), saturation=1.0):
+    """ColorGrading's steps after the white balance, as its docstring gives them."""
+    c = np.maximum(c, 0.0)
+    c = 0.18 * (np.maximum(c, 1e-10) / 0.18) ** contrast
+    c = np.maximum(c * np.array(slope) + np.array(offset), 0.0) ** np.array(power)
+    luma = (c * LUMA).sum(axis=-1, keepdims=True)
+    return np.maximum(luma + saturation * (c - luma), 0.0)
+
+
+def _present(known, image, *components) -> np.ndarray:
+    return known(image, *components).frame().astype(np.int16)
+
+
+@pytest.mark.parametrize("settings", [
+    dict(contrast=1.5), dict(contrast=0.6), dict(saturation=0.0), dict(saturation=1.8),
+    dict(slope=(1.3, 1.0, 0.7)), dict(offset=(0.02, -0.01, 0.0)), dict(power=(1.0, 0.7, 1.4)),
+    dict(contrast=1.2, slope=(0.9, 1.1, 1.0), offset=(0.01, 0.0, 0.02), power=(1.1, 1.0, 0.9), saturation=0.7),
+], ids=lambda s: ",".join(s))
+@pytest.mark.parametrize("curve", ["none", "agx"])
+def test_each_control_matches_its_formula(known, settings, curve):
+    image = ramp(low=-7.0, high=3.0)
+    hdr = image[..., :3].astype(np.float64)
+    got = _present(known, image, Tonemap(curve=curve), ColorGrading(**settings))
+    want = expected_srgb8(CURVES[curve](grade(hdr, **settings)))
+    diff = np.abs(got - want)
+    assert diff.max() <= 1, (settings, diff.max(), np.argwhere(diff > 1)[:5])
+    plain = expected_srgb8(CURVES[curve](hdr))
+    assert np.abs(plain - want).max() > 8, "the setting changes the picture (else the test could not fail)"
+
+
+def test_the_neutral_grade_changes_nothing(known):
+    image = ramp()
+    assert np.array_equal(_present(known, image, Tonemap(curve="agx"), ColorGrading()),
+                          _present(known, image, Tonemap(curve="agx")))
+    # Alone (no Tonemap): the plain curve, the renderer's exposure.
+    assert np.array_equal(_present(known, image, ColorGrading()), _present(known, image))
+
+
+@pytest.mark.parametrize("kelvin, xy", [
+    (5003.0, (0.34567, 0.35850)),   # D50
+    (5503.0, (0.33242, 0.34743)),   # D55
+    (7504.0, (0.29902, 0.31485)),   # D75
+])
+def test_white_balance_makes_the_daylight_of_its_temperature_neutral(known, kelvin, xy):
+    """A grey lit by CIE daylight of a temperature (its white from the CIE's tables, not the
+    engine's locus formula) comes out neutral at temperature log2(T / 6504); with the
+    temperature at 0 it keeps its cast."""
+    x, y = xy
+    white = np.linalg.solve(SRGB_TO_XYZ, np.array([x / y, 1.0, (1.0 - x - y) / y]))
+    image = np.zeros((8, 16, 4), np.float16)
+    image[..., :3] = (0.18 * white / white[1]).astype(np.float16)
+    image[..., 3] = 1.0
+    temperature = float(np.log2(kelvin / 6504.0))
+    balanced = srgb_to_linear(_present(known, image, ColorGrading(temperature=temperature))[2:6, 4:12])
+    cast = srgb_to_linear(_present(known, image, ColorGrading())[2:6, 4:12])
+    spread = lambda rgb: float((rgb.max(axis=-1) - rgb.min(axis=-1)).max())  # noqa: E731
+    assert spread(cast) > 0.01
+    assert spread(balanced) < 0.004
+    # Warmer and cooler: a bluer light's white balanced makes a neutral grey warmer (red up, blue down).
+    grey = np.full((8, 16, 4), 0.18, np.float16)
+    grey[..., 3] = 1.0
+    warm = srgb_to_linear(_present(known, grey, ColorGrading(temperature=0.5))[4, 8])
+    assert warm[0] > warm[1] > warm[2]
+    magenta = srgb_to_linear(_present(known, grey, ColorGrading(tint=0.5))[4, 8])
+    assert magenta[1] < magenta[0] and magenta[1] < magenta[2]
+
+
+def _function_lut(size: int) -> ColorLut:
+    """A table of a curved function of the input (not linear, so the interpolation shows)."""
+    lut = identity_lut(size, name="curved")
+    r, g, b = lut.table[..., 0], lut.table[..., 1], lut.table[..., 2]
+    lut.table[:] = np.stack([0.25 + 0.5 * b * b, (r + g) * 0.5, 1.0 - 0.8 * g * g], axis=-1)
+    return lut
+
+
+@pytest.mark.parametrize("size", [2, 9, 33])
+def test_a_colour_table_is_looked_up_trilinearly_in_the_encoded_picture(known, size):
+    image = ramp(low=-7.0, high=0.5)
+    lut = _function_lut(size)
+    got = _present(known, image, ColorGrading(lut=lut))
+    encoded = linear_to_srgb8(np.clip(image[..., :3].astype(np.float64), 0, 1)) / 255.0  # (before rounding)
+    want = np.rint(np.clip(lut.apply(encoded), 0, 1) * 255.0)
+    assert np.abs(got - want).max() <= 1
+    half = _present(known, image, ColorGrading(lut=lut, lut_strength=0.5))
+    want_half = np.rint(np.clip(0.5 * lut.apply(encoded) + 0.5 * encoded, 0, 1) * 255.0)
+    assert np.abs(half - want_half).max() <= 1
+    assert np.abs(want - want_half).max() > 20
+
+
+def test_an_identity_table_changes_nothing_and_its_texture_goes_with_it(known):
+    image = ramp(low=-7.0, high=0.5)
+    runner = known(image, ColorGrading(lut=identity_lut(17)))
+    got = runner.frame().astype(np.int16)
+    assert np.abs(got - _present(known, image)).max() <= 1
+    renderer = runner.engine.renderer
+    with_table = renderer.resource_counts()["post_targets"]
+    grading = runner.world.get(runner.game.camera, ColorGrading)
+    grading.lut = None
+    runner.frame()
+    assert renderer.resource_counts()["post_targets"] == with_table - 1
+
+
+def _cube(path, size: int = 2, rows=None, header: str = "") -> str:
+    axis = np.linspace(0.0, 1.0, size)
+    lines = [f"{r:.4f} {g:.4f} {b:.4f}" for b in axis for g in axis for r in axis] if rows is None else rows
+    path.write_text(f"TITLE \"t\"\n{header}LUT_3D_SIZE {size}\n" + "\n".join(lines) + "\n")
+    return str(path)
+
+
+def test_a_cube_file_is_read_red_fastest_with_its_domain(tmp_path):
+    axis = np.linspace(0.0, 1.0, 3)
+    rows = [f"{b} {g} {r}" for b in axis for g in axis for r in axis]  # red and blue swapped
+    lut = load_cube_lut(_cube(tmp_path / "swap.cube", 3, rows, header="# a comment\nDOMAIN_MIN 0 0 0\n"
+                                                                    "DOMAIN_MAX 2 2 2\n"))
+    assert lut.size == 3 and lut.name == "t" and lut.domain_max == (2.0, 2.0, 2.0)
+    np.testing.assert_allclose(lut.table[0, 1, 2], [0.0, 0.5, 1.0])   # [b][g][r]: r=1, g=0.5, b=0
+    np.testing.assert_allclose(lut.apply(np.array([2.0, 1.0, 0.0])), [0.0, 0.5, 1.0])
+
+
+@pytest.mark.parametrize("text, message", [
+    ("LUT_1D_SIZE 4\n0 0 0\n", "1D table"),
+    ("LUT_3D_SIZE 1\n0 0 0\n", "LUT_3D_SIZE must be an integer from 2"),
+    ("LUT_3D_SIZE 2\n" + "0 0 0\n" * 7, "needs 8 rows"),
+    ("LUT_3D_SIZE 2\n" + "0 0 0\n" * 6 + "0 0 x\n0 0 0\n", "line 8"),
+    ("LUT_3D_SIZE 2\n" + "0 0 0\n" * 6 + "0 0\n0 0 0 0\n", "line 8"),
+    ("LUT_3D_SIZE 2\n" + "0 0 0\n" * 7 + "nan 0 0\n", "not finite"),
+    ("LUT_3D_SIZE 2\n" + "0 0 0\n" * 7 + "1e6 0 0\n", "half float"),
+    ("LUT_3D_SIZE 2\nDOMAIN_MIN 1 0 0\n" + "0 0 0\n" * 8, "min < max"),
+    ("LUT_3D_SIZE 2\nSHAPE round\n" + "0 0 0\n" * 8, "unknown keyword 'SHAPE'"),
+    ("0 0 0\n", "no LUT_3D_SIZE"),
+    ("LUT_3D_SIZE 2\n" + "0 0 0\n" * 4 + "LUT_3D_SIZE 2\n" + "0 0 0\n" * 4, "after the table's first row"),
+])
+def test_a_bad_cube_file_is_refused_naming_the_file_and_line(tmp_path, text, message):
+    path = tmp_path / "bad.cube"
+    path.write_text(text)
+    with pytest.raises(AssetError, match="bad.cube") as caught:
+        load_cube_lut(path)
+    assert message in str(caught.value)
+
+
+def test_a_missing_or_binary_cube_file_is_refused(tmp_path):
+    with pytest.raises(AssetError, match="no.cube"):
+        load_cube_lut(tmp_path / "no.cube")
+    (tmp_path / "binary.cube").write_bytes(b"\xff\xfe\x00LUT")
+    with pytest.raises(AssetError, match="not a text file"):
+        load_cube_lut(tmp_path / "binary.cube")
+
+
+@pytest.mark.parametrize("field, value", [
+    ("temperature", 1.5), ("tint", -2.0), ("contrast", -0.1), ("contrast", float("nan")), ("saturation", 5.0),
+    ("slope", (1.0, -1.0, 1.0)), ("slope", (20.0, 1.0, 1.0)), ("offset", (2.0, 0.0, 0.0)),
+    ("power", (1.0, 0.0, 1.0)), ("power", "bright"), ("lut", "grade.cube"), ("lut_strength", 1.5),
+])
+def test_bad_values_are_refused_naming_the_field(field, value):
+    with pytest.raises(ComponentValueError, match=f"ColorGrading.{field}"):
+        ColorGrading(**{field: value})
+
+
+def test_a_level_file_keeps_it(tmp_path):
+    _cube(tmp_path / "grade.cube", 3)
+    (tmp_path / "room.toml").write_text("""[level]
+name = "room"
+
+[[entity]]
+name = "camera"
+Transform = { position = [0.0, 1.0, 3.0] }
+Camera = {}
+ColorGrading = { temperature = 0.3, slope = [1.1, 1.0, 0.9], lut = { file = "grade.cube" }, lut_strength = 0.5 }
+""")
+    world = World()
+    names = load_level(tmp_path / "room.toml").spawn(world)
+    grading = world.get(names["camera"], ColorGrading)
+    assert grading.slope == (1.1, 1.0, 0.9) and grading.lut.size == 3 and grading.lut_strength == 0.5
+    saved = save_level(world, tmp_path / "again.toml", names, name="room")
+    assert 'lut = { file = "grade.cube" }' in saved.read_text()
+    again = World()
+    names = load_level(saved).spawn(again)
+    assert again.get(names["camera"], ColorGrading).temperature == pytest.approx(0.3)
+    (tmp_path / "bad.toml").write_text('[level]\nname = "bad"\n\n[[entity]]\nname = "camera"\nCamera = {}\n'
+                                       'ColorGrading = { lut = { file = "missing.cube" } }\n')
+    with pytest.raises(LevelError, match="missing.cube"):
+        load_level(tmp_path / "bad.toml")
+
+
+def test_the_overlay_line_and_the_present_stages_switch(known):
+    """The overlay's post line names the grade and its table; ``PresentSystem.grade = False``
+    presents every camera ungraded (the debug overlay's "grade" switch)."""
+    from shell.overlay_text import post_lines
+
+    image = ramp(low=-7.0, high=0.5)
+    lut = _function_lut(5)
+    runner = known(image, ColorGrading(saturation=0.2, lut=lut))
+    graded = runner.frame()
+    assert "; graded, table 'curved'; AO off" in post_lines(runner.engine)[0]
+    runner.engine.stages["present"].grade = False
+    assert np.array_equal(runner.frame(), _present(known, image))
+    assert "grade off (set)" in post_lines(runner.engine)[0]
+    assert not np.array_equal(graded, _present(known, image))
