@@ -202,9 +202,12 @@ class ColorGrading(TrackedComponent):
 def _triple(owner: object, name: str, value: Any, low: float, high: float) -> tuple[float, float, float]:
     """Three finite numbers in [low, high] (one number: the same for each channel), as a plain
     tuple (the grade's triples are values, not edited in place)."""
-    checked = vec3(owner, name, value, low=low)  # three finite numbers, each >= low (one number: all three)
-    items = [float(c) for c in _items(value)]
-    parts = items if len(items) == 3 else [float(c) for c in checked]
+    items = _items(value)
+    if items and len(items) != 3:
+        raise ComponentValueError(f"{type(owner).__name__}.{name} must be three numbers (or one for all three), "
+                                  f"got {len(items)}")
+    checked = vec3(owner, name, value, low=low)  # finite numbers, each >= low
+    parts = [float(c) for c in items] if items else [float(c) for c in checked]
     if max(parts) > high:
         raise ComponentValueError(f"{type(owner).__name__}.{name} must have every component <= {high}, "
                                   f"got {tuple(parts)}")

@@ -178,7 +178,8 @@ def test_a_missing_or_binary_cube_file_is_refused(tmp_path):
 @pytest.mark.parametrize("field, value", [
     ("temperature", 1.5), ("tint", -2.0), ("contrast", -0.1), ("contrast", float("nan")), ("saturation", 5.0),
     ("slope", (1.0, -1.0, 1.0)), ("slope", (20.0, 1.0, 1.0)), ("offset", (2.0, 0.0, 0.0)),
-    ("power", (1.0, 0.0, 1.0)), ("power", "bright"), ("lut", "grade.cube"), ("lut_strength", 1.5),
+    ("power", (1.0, 0.0, 1.0)), ("power", "bright"), ("offset", (0.0, 0.0, 0.0, 0.0)), ("slope", (1.0, 2.0, 10 ** 400)),
+    ("lut", "grade.cube"), ("lut_strength", 1.5),
 ])
 def test_bad_values_are_refused_naming_the_field(field, value):
     with pytest.raises(ComponentValueError, match=f"ColorGrading.{field}"):
