@@ -39,6 +39,8 @@ Variants now (``VARIANTS``; add a row by appending a ``Variant``):
   GPU; a software rasteriser's quarter-size start makes five, ending at the same smallest level:
   ``engine/render/bloom.py``);
 * ``post_auto``: the same with ``Tonemap(auto_exposure=True)``;
+* ``graded``: no shadows; ``Tonemap(curve="agx")`` and a ``ColorGrading`` with every control
+  moved and a 33-point colour table (the present draw's GRADE and LUT build);
 * ``occlusion``: no shadows; ``AmbientOcclusion()`` on the camera (its depth and normals
   pass, the occlusion found at half size, the filter to every pixel);
 * ``occlusion_full``: the same found at full size (``half_resolution=False``).
@@ -129,6 +131,7 @@ from components import (
     AmbientOcclusion,
     Bloom,
     Camera,
+    ColorGrading,
     DirectionalLight,
     Fog,
     Material,
@@ -139,6 +142,7 @@ from components import (
     Transform,
     look_rotation,
 )
+from engine.assets.color_lut import identity_lut
 from engine.assets.mesh import box
 from engine.core.frame_io import Output
 from engine.render.bloom import level_sizes
@@ -259,6 +263,17 @@ def _post(engine: Engine) -> None:
     engine.world.add_component(camera_entity(engine), Bloom())
 
 
+def _graded(engine: Engine) -> None:
+    _sun_shadows(engine, False)
+    lut = identity_lut(33, name="warm")
+    lut.table[..., 0] = lut.table[..., 0] ** 0.9   # a little warmer: red lifted, blue lowered
+    lut.table[..., 2] = lut.table[..., 2] ** 1.1
+    engine.world.add_component(camera_entity(engine), Tonemap(curve="agx"))
+    engine.world.add_component(camera_entity(engine), ColorGrading(
+        temperature=0.2, tint=-0.1, contrast=1.1, slope=(1.05, 1.0, 0.95), offset=(0.0, 0.0, 0.01),
+        power=(1.0, 1.0, 1.05), saturation=1.2, lut=lut))
+
+
 def _occlusion(engine: Engine, half: bool = True) -> None:
     _sun_shadows(engine, False)
     engine.world.add_component(camera_entity(engine), AmbientOcclusion(half_resolution=half))
@@ -290,6 +305,7 @@ VARIANTS: list[Variant] = [
     Variant("fog_uniform", _fog_uniform, "fog the same everywhere on the camera"),
     Variant("post", _post, "Tonemap(curve='agx') and Bloom() on the camera"),
     Variant("post_auto", _post_auto, "Tonemap(curve='agx', auto_exposure=True) and Bloom()"),
+    Variant("graded", _graded, "Tonemap(curve='agx') and a ColorGrading with a colour table"),
     Variant("occlusion", _occlusion, "AmbientOcclusion() on the camera (found at half size)"),
     Variant("occlusion_full", _occlusion_full, "AmbientOcclusion(half_resolution=False) on the camera"),
 ]

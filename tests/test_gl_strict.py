@@ -202,6 +202,7 @@ SCENES: dict[str, Callable[[moderngl.Context], list[np.ndarray]]] = {
     "mirror_light_moving": _lighting("mirror_light_moving"),
     "post_auto_gpu_passes": _lighting("post_auto", gpu=True),
     "post": _lighting("post"),
+    "graded": _lighting("graded"),
     "point_shadows": _point_shadows,
     "spot_shadows": _spot_shadows,
     "cutouts_occlusion": _cutouts,
