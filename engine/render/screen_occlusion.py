@@ -157,8 +157,10 @@ class ScreenOcclusion:
         # 1. Depth and normals, at the images' size (the view's projection, fewer pixels).
         self.scene_pass.draw_depth_normals(view, targets.prepass, targets.size)
         proj = view.proj
-        unproject = (float(proj[0][0]), float(proj[1][1]), float(proj[2][0]), float(proj[2][1]))
-        unproject_z = (float(proj[2][2]), float(proj[3][2]))
+        # What both passes read to put a depth texel back in the view's space (view_depth.glsl).
+        unproject = {"unproject": (float(proj[0][0]), float(proj[1][1]), float(proj[2][0]), float(proj[2][1])),
+                     "unproject_z": (float(proj[2][2]), float(proj[3][2])),
+                     "depth_size": (float(width), float(height))}
         rotation = glm.mat3(view.view).to_bytes()
         # 2. The occlusion found.
         targets.found_framebuffer.use()
@@ -166,9 +168,8 @@ class ScreenOcclusion:
         bind_texture(ctx, targets.depth, OCCLUSION_DEPTH_UNIT)
         bind_texture(ctx, targets.normals, OCCLUSION_NORMAL_UNIT)
         program = find.program
-        program["unproject"].value = unproject
-        program["unproject_z"].value = unproject_z
-        program["depth_size"].value = (float(width), float(height))
+        for name, value in unproject.items():
+            program[name].value = value
         program["view_rotation"].write(rotation)
         program["radius"].value = settings.radius
         program["pixels_per_metre"].value = float(proj[1][1]) * 0.5 * height
@@ -179,9 +180,8 @@ class ScreenOcclusion:
         apply_pass_state(ctx, _PASS, (0, 0, width, height))
         bind_texture(ctx, targets.found, OCCLUSION_IMAGE_UNIT)
         program = smooth.program
-        program["unproject"].value = unproject
-        program["unproject_z"].value = unproject_z
-        program["depth_size"].value = (float(width), float(height))
+        for name, value in unproject.items():
+            program[name].value = value
         program["view_rotation"].write(rotation)
         program["intensity"].value = settings.intensity
         program["direct_light"].value = settings.direct_light
