@@ -328,7 +328,8 @@ class DebugOverlay(EditorPanels):
         for label, stage, switch in (("shadows", engine.stages["shadows"], "enabled"), ("bloom", present, "bloom"),
                                      ("fog", engine.stages["prepare"], "fog"), ("grade", present, "grade"),
                                      ("AO", engine.stages["main"], "occlusion")):
-            imgui.same_line()
+            if label != "grade":  # (the grade, AO and the curve on a row of their own: the window stays narrow)
+                imgui.same_line()
             changed, on = imgui.checkbox(label, getattr(stage, switch))
             if changed:
                 setattr(stage, switch, on)   # (the stages' own switches: set only when clicked)

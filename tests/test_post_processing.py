@@ -714,7 +714,7 @@ def test_the_present_stages_switches_turn_bloom_off_and_override_the_curve(known
     assert post_line(bare.engine) == "post: none (camera), x1; bloom off, 0 passes; AO off"
 
 
-def test_the_overlay_toggles_bloom_and_picks_the_curve(known, ctx):
+def test_the_overlay_toggles_bloom_the_grade_and_occlusion_and_picks_the_curve(known, ctx):
     pytest.importorskip("imgui_bundle", reason="the debug overlay needs imgui-bundle (not installed here)")
     from shell.overlay import DebugOverlay
 
@@ -737,6 +737,10 @@ def test_the_overlay_toggles_bloom_and_picks_the_curve(known, ctx):
         assert overlay.region[3] < runner.size[1] - 8, overlay.region
         click("bloom")
         assert present.bloom is False, overlay.widgets
+        click("grade")            # the second row: the grade, ambient occlusion and the curve
+        assert present.grade is False
+        click("AO")
+        assert runner.engine.stages["main"].occlusion is False
         click("curve")            # opens the drop-down
         click("curve aces")
         assert present.curve == "aces"
