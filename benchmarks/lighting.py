@@ -43,7 +43,8 @@ Variants now (``VARIANTS``; add a row by appending a ``Variant``):
   moved and a 33-point colour table (the present draw's GRADE and LUT build);
 * ``occlusion``: no shadows; ``AmbientOcclusion()`` on the camera (its depth and normals
   pass, the occlusion found at half size, the filter to every pixel);
-* ``occlusion_full``: the same found at full size (``half_resolution=False``).
+* ``occlusion_full``: the same found at full size (``half_resolution=False``);
+* ``occlusion_low``: the same at half size with ``quality="low"`` (half the find pass's samples).
 
 **Targets** (``TARGETS``), each a ratio of two variants' medians at a mirror count against
 its limit, printed as value, limit, met, and judged on the kind of machine it is set for
@@ -274,13 +275,17 @@ def _graded(engine: Engine) -> None:
         power=(1.0, 1.0, 1.05), saturation=1.2, lut=lut))
 
 
-def _occlusion(engine: Engine, half: bool = True) -> None:
+def _occlusion(engine: Engine, half: bool = True, quality: str = "medium") -> None:
     _sun_shadows(engine, False)
-    engine.world.add_component(camera_entity(engine), AmbientOcclusion(half_resolution=half))
+    engine.world.add_component(camera_entity(engine), AmbientOcclusion(half_resolution=half, quality=quality))
 
 
 def _occlusion_full(engine: Engine) -> None:
     _occlusion(engine, half=False)
+
+
+def _occlusion_low(engine: Engine) -> None:
+    _occlusion(engine, quality="low")
 
 
 def _post_auto(engine: Engine) -> None:
@@ -308,6 +313,7 @@ VARIANTS: list[Variant] = [
     Variant("graded", _graded, "Tonemap(curve='agx') and a ColorGrading with a colour table"),
     Variant("occlusion", _occlusion, "AmbientOcclusion() on the camera (found at half size)"),
     Variant("occlusion_full", _occlusion_full, "AmbientOcclusion(half_resolution=False) on the camera"),
+    Variant("occlusion_low", _occlusion_low, "AmbientOcclusion(quality='low') on the camera"),
 ]
 BASELINE = "off"
 

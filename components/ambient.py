@@ -7,7 +7,7 @@ from typing import Any
 
 from pyglm import glm
 
-from components.tracking import HALF_MAX, TrackedComponent, boolean, color, finite
+from components.tracking import HALF_MAX, TrackedComponent, boolean, choice, color, finite
 
 # The hemisphere a world with neither a Skybox nor a HemisphereLight is lit by: dim, a
 # little bluer above than below (a wall facing sideways gets their mean, 0.03 0.03 0.035).
@@ -17,6 +17,9 @@ DEFAULT_GROUND = (0.02, 0.02, 0.025)
 # its intensity's largest exponent (visibility ** 8 is black wherever anything occludes).
 MAX_OCCLUSION_RADIUS = 100.0
 MAX_OCCLUSION_INTENSITY = 8.0
+# AmbientOcclusion.quality: how many directions and samples a pixel looks along
+# (engine/render/screen_occlusion.py QUALITY_SAMPLES).
+OCCLUSION_QUALITIES = ("low", "medium", "high")
 
 
 @dataclass(eq=False)
@@ -68,6 +71,10 @@ class AmbientOcclusion(TrackedComponent):
       "light affect"), a look for scenes that have little light from all round.
     - ``half_resolution``: found at half the screen's size in each direction (a quarter of
       the work) and brought to full size by a depth-aware filter; False: at full size.
+    - ``quality``: "low", "medium" (the default) or "high": 2, 3 or 4 directions a pixel and
+      6, 8 or 12 depth samples each way along each (the low one half the medium's work, the
+      high one twice it; all three within 0.02 of the ground truth on a floor and wall, the
+      higher smoother where small things occlude).
 
     Only the camera's own view is occluded: mirror, portal and probe views are not (Unity's
     planar reflections have the same limit), and neither is glass (the transparent slot).
@@ -77,6 +84,7 @@ class AmbientOcclusion(TrackedComponent):
     intensity: float = 1.0
     direct_light: float = 0.0
     half_resolution: bool = True
+    quality: str = "medium"
 
     def _validate(self, name: str, value: Any) -> Any:
         if name == "radius":
@@ -87,4 +95,6 @@ class AmbientOcclusion(TrackedComponent):
             return finite(self, name, value, low=0.0, high=1.0)
         if name == "half_resolution":
             return boolean(self, name, value)
+        if name == "quality":
+            return choice(self, name, value, OCCLUSION_QUALITIES)
         return value

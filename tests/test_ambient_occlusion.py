@@ -110,9 +110,10 @@ def _surfaces(runner, names) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.nda
     return floor & inner, WALL_FACE - floor_points[..., 0], wall & inner, wall_points[..., 1]
 
 
-@pytest.mark.parametrize("half", [True, False], ids=["half", "full"])
-def test_the_floor_and_wall_keep_the_ground_truth_share(scene, half):
-    shares, runner, names = _shares(scene, AmbientOcclusion(radius=RADIUS, half_resolution=half))
+@pytest.mark.parametrize("half, quality", [(True, "medium"), (False, "medium"), (True, "low"), (True, "high")],
+                         ids=["half", "full", "low", "high"])
+def test_the_floor_and_wall_keep_the_ground_truth_share(scene, half, quality):
+    shares, runner, names = _shares(scene, AmbientOcclusion(radius=RADIUS, half_resolution=half, quality=quality))
     floor, distance, wall, height = _surfaces(runner, names)
     for low, high in ((0.0, 0.1), (0.1, 0.25), (0.25, 0.45), (0.45, 0.65), (0.65, 0.85)):
         band = floor & (distance > low) & (distance <= high)
@@ -276,6 +277,13 @@ def test_the_passes_and_their_images(scene):
     occlusion.half_resolution = False
     runner.frame()
     assert renderer.screen_occlusion.size == renderer.occlusion._targets.depth.size == SIZE
+    # Each quality its own build of the find pass (2, 3 or 4 directions): other images.
+    shares = {}
+    for quality in ("low", "high"):
+        occlusion.quality = quality
+        runner.frame()
+        shares[quality] = np.frombuffer(renderer.screen_occlusion.read(), np.float16)
+    assert not np.array_equal(shares["low"], shares["high"])
     runner.world.remove_component(names["camera"], AmbientOcclusion)
     runner.frame()
     assert renderer.screen_occlusion is None and renderer.resource_counts()["occlusion_targets"] == 0
@@ -285,7 +293,7 @@ def test_the_passes_and_their_images(scene):
 @pytest.mark.parametrize("field, value", [
     ("radius", 0.0), ("radius", -1.0), ("radius", float("nan")), ("radius", 1000.0),
     ("intensity", -0.1), ("intensity", 9.0), ("direct_light", 1.5), ("direct_light", -0.5),
-    ("half_resolution", "yes"),
+    ("half_resolution", "yes"), ("quality", "ultra"), ("quality", 3),
 ])
 def test_bad_values_are_refused_naming_the_field(field, value):
     with pytest.raises(ComponentValueError, match=f"AmbientOcclusion.{field}"):
@@ -303,13 +311,13 @@ name = "room"
 name = "camera"
 Transform = { position = [0.0, 1.0, 3.0] }
 Camera = {}
-AmbientOcclusion = { radius = 0.8, intensity = 1.5, direct_light = 0.25, half_resolution = false }
+AmbientOcclusion = { radius = 0.8, intensity = 1.5, direct_light = 0.25, half_resolution = false, quality = "high" }
 """)
     world = World()
     names = load_level(tmp_path / "room.toml").spawn(world)
     occlusion = world.get(names["camera"], AmbientOcclusion)
-    assert (occlusion.radius, occlusion.intensity, occlusion.direct_light, occlusion.half_resolution) == \
-        (pytest.approx(0.8), pytest.approx(1.5), pytest.approx(0.25), False)
+    assert (occlusion.radius, occlusion.intensity, occlusion.direct_light, occlusion.half_resolution,
+            occlusion.quality) == (pytest.approx(0.8), pytest.approx(1.5), pytest.approx(0.25), False, "high")
     saved = save_level(world, tmp_path / "again.toml", names, name="room")
     again = World()
     names = load_level(saved).spawn(again)

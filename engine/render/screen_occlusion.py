@@ -14,6 +14,7 @@ quarter of its pixels; ``half_resolution``) or at its size:
 2. **Find** (``shaders/screen_occlusion.frag``): ground-truth ambient occlusion (Jimenez
    et al. 2016, as Unreal's GTAO and Intel's XeGTAO): ``SLICES`` planes through the view
    direction a pixel, each searched ``STEPS`` depth samples each way for its horizons
+   (``QUALITY_SAMPLES``: 3 and 8 at the default "medium")
    within the radius, the visible arc integrated against the cosine to the normal in closed
    form.  A 4 x 4 tile of pixels takes 16 rotations of the slices, so the tile samples
    ``16 x SLICES`` directions.
@@ -50,7 +51,7 @@ from dataclasses import dataclass
 import moderngl
 from pyglm import glm
 
-from components.ambient import AmbientOcclusion
+from components.ambient import OCCLUSION_QUALITIES, AmbientOcclusion
 from engine.render.bindings import (
     OCCLUSION_DEPTH_UNIT,
     OCCLUSION_IMAGE_UNIT,
@@ -64,8 +65,12 @@ from engine.render.scene_pass import ScenePass
 from engine.render.targets import check_target_size, release_framebuffer
 from engine.render.views import View
 
-SLICES = 3  # slice planes a pixel (shaders/screen_occlusion.frag)
-STEPS = 8   # depth samples each way along a slice
+# AmbientOcclusion.quality -> (slice planes a pixel, depth samples each way along a slice):
+# shaders/screen_occlusion.frag's SLICES and STEPS.  Against the ground truth of
+# tests/test_ambient_occlusion.py's floor and wall (band means, 200 x 150, half size) each is
+# within 0.02 (the 4 x 4 tile's rotations make 16 x SLICES directions); more samples make a
+# smoother image where small things occlude.  "low" is half the find pass's samples.
+QUALITY_SAMPLES = dict(zip(OCCLUSION_QUALITIES, ((2, 6), (3, 8), (4, 12)), strict=True))
 # The reach on screen, at most this share of the view's height: a radius that spans more
 # (the camera up against a wall) samples as far as this, so what occludes is looked for
 # nearer than ``radius`` there.  (A quarter cut the horizons short at a 1 m radius 3.5 m
@@ -105,26 +110,30 @@ class ScreenOcclusion:
         self.ctx = gpu.ctx
         self.scene_pass = scene_pass
         self._targets: _Targets | None = None
-        self._find: moderngl.VertexArray | None = None
+        self._finds: dict[str, moderngl.VertexArray] = {}  # by quality
         self._filter: moderngl.VertexArray | None = None
-        self._programs_of = -1  # the shader library's reloads when the two were made
+        self._programs_of = -1  # the shader library's reloads when they were made
 
-    def _programs(self) -> tuple[moderngl.VertexArray, moderngl.VertexArray]:
+    def _programs(self, quality: str) -> tuple[moderngl.VertexArray, moderngl.VertexArray]:
         shaders = self.gpu.shaders
-        if self._find is None or self._programs_of != shaders.reloads:
+        if self._programs_of != shaders.reloads:
             self._release_programs()
-            find = shaders.program("fullscreen.vert", "screen_occlusion.frag",
-                                   defines={"SLICES": str(SLICES), "STEPS": str(STEPS)})
-            find["depth_map"].value = OCCLUSION_DEPTH_UNIT
-            find["normal_map"].value = OCCLUSION_NORMAL_UNIT
+            self._programs_of = shaders.reloads
+        find = self._finds.get(quality)
+        if find is None:
+            slices, steps = QUALITY_SAMPLES[quality]
+            program = shaders.program("fullscreen.vert", "screen_occlusion.frag",
+                                      defines={"SLICES": str(slices), "STEPS": str(steps)})
+            program["depth_map"].value = OCCLUSION_DEPTH_UNIT
+            program["normal_map"].value = OCCLUSION_NORMAL_UNIT
+            find = self._finds[quality] = self.ctx.vertex_array(program, [])
+        if self._filter is None:
             smooth = shaders.program("fullscreen.vert", "screen_occlusion_filter.frag")
             smooth["depth_map"].value = OCCLUSION_DEPTH_UNIT
             smooth["normal_map"].value = OCCLUSION_NORMAL_UNIT
             smooth["occlusion_map"].value = OCCLUSION_IMAGE_UNIT
-            self._find = self.ctx.vertex_array(find, [])
             self._filter = self.ctx.vertex_array(smooth, [])
-            self._programs_of = shaders.reloads
-        return self._find, self._filter
+        return find, self._filter
 
     def _targets_for(self, view_size: tuple[int, int], half: bool) -> _Targets:
         size = (max(1, view_size[0] // 2), max(1, view_size[1] // 2)) if half else view_size
@@ -152,7 +161,7 @@ class ScreenOcclusion:
         view's size, or all of it), bound for the main view's draw."""
         gpu, ctx = self.gpu, self.ctx
         targets = self._targets_for(view.size, settings.half_resolution)
-        find, smooth = self._programs()
+        find, smooth = self._programs(settings.quality)
         width, height = targets.size
         # 1. Depth and normals, at the images' size (the view's projection, fewer pixels).
         self.scene_pass.draw_depth_normals(view, targets.prepass, targets.size)
@@ -173,7 +182,7 @@ class ScreenOcclusion:
         program["view_rotation"].write(rotation)
         program["radius"].value = settings.radius
         program["pixels_per_metre"].value = float(proj[1][1]) * 0.5 * height
-        program["max_radius_pixels"].value = max(MAX_REACH_SHARE * height, float(STEPS))
+        program["max_radius_pixels"].value = max(MAX_REACH_SHARE * height, float(QUALITY_SAMPLES[settings.quality][1]))
         find.render(moderngl.TRIANGLES, vertices=3)
         # 3. Filtered into the shares.
         targets.shares_framebuffer.use()
@@ -206,10 +215,11 @@ class ScreenOcclusion:
         self.gpu.screen_occlusion = None
 
     def _release_programs(self) -> None:
-        for vao in (self._find, self._filter):
+        for vao in (*self._finds.values(), self._filter):
             if vao is not None:
                 vao.release()
-        self._find = self._filter = None
+        self._finds.clear()
+        self._filter = None
 
     def release(self) -> None:
         self.release_targets()
