@@ -44,7 +44,9 @@ vec3 position_at(vec2 pixel) {
 // apart than half the radius lie on different surfaces: nothing is assumed between them.
 float horizon_cos(vec3 p, vec3 v, vec2 pixel, vec2 omega, float reach, float jitter, float lowest) {
     float best = lowest;
-    vec3 inside = vec3(0.0);  // the last sample within the radius, from p (p itself at first)
+    vec3 inside = vec3(0.0);    // the last sample within the radius, from p (p itself at first)
+    vec3 before = vec3(0.0);    // that sample when the radius was first crossed
+    vec3 outside = vec3(0.0);   // the first sample past it
     bool crossed = false;
     float radius2 = radius * radius;
     for (int i = 0; i < STEPS; ++i) {
@@ -53,21 +55,23 @@ float horizon_cos(vec3 p, vec3 v, vec2 pixel, vec2 omega, float reach, float jit
         if (any(lessThan(at, vec2(0.0))) || any(greaterThanEqual(at, depth_size))) break;
         vec3 delta = position_at(at) - p;
         float gap2 = dot(delta, delta);
-        if (gap2 < 1e-12) continue;
-        if (gap2 <= radius2) {
-            best = max(best, dot(delta, v) * inversesqrt(gap2));
-            inside = delta;
-        } else if (!crossed) {
-            crossed = true;
-            vec3 step_ = delta - inside;
-            float a = dot(step_, step_);
-            if (a <= 0.25 * radius2) {
-                // |inside + u step_| = radius for u in [0, 1] (inside is within it, delta past it)
-                float b = dot(inside, step_);
-                float u = (-b + sqrt(max(b * b - a * (dot(inside, inside) - radius2), 0.0))) / a;
-                best = max(best, dot(normalize(inside + u * step_), v));
-            }
-        }
+        // Selects, not branches: llvmpipe runs both sides of a branch, and the crossing's
+        // arithmetic is done once, after the loop.
+        bool within = gap2 <= radius2 && gap2 > 1e-12;
+        best = within ? max(best, dot(delta, v) * inversesqrt(gap2)) : best;
+        bool first_out = !within && !crossed && gap2 > 1e-12;
+        before = first_out ? inside : before;
+        outside = first_out ? delta : outside;
+        crossed = crossed || first_out;
+        inside = within ? delta : inside;
+    }
+    vec3 step_ = outside - before;
+    float a = dot(step_, step_);
+    if (crossed && a <= 0.25 * radius2) {
+        // |before + u step_| = radius for u in [0, 1] (before is within it, outside past it)
+        float b = dot(before, step_);
+        float u = (-b + sqrt(max(b * b - a * (dot(before, before) - radius2), 0.0))) / a;
+        best = max(best, dot(normalize(before + u * step_), v));
     }
     return best;
 }
