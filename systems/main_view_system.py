@@ -57,6 +57,8 @@ class MainViewSystem(esper.Processor):
                 "active=True; engine.spawn_camera makes one): frames show nothing until there is one"), stacklevel=2)
         self._said_no_camera = camera is None
         if output is None or camera is None or output.size[0] <= 0 or output.size[1] <= 0:
+            if camera is None and self.renderer.screen_occlusion is not None:
+                self.renderer.occlusion.release_targets()  # its camera went: its images go too
             return  # minimised window or nothing to look through
         _, cam, cam_t = camera
         levels = self.renderer.levels  # the main view tree's targets (the renderer owns them)

@@ -44,6 +44,9 @@ class PresentSystem(esper.Processor):
         output: Output | None = self.world.resources.get(Output)
         views: FrameViews | None = self.world.resources.get(FrameViews)
         if output is None or views is None or views.main is None:
+            if views is not None and views.main is None and active_camera_parts(self.world) is None:
+                # No camera (not a minimised window): its bloom, exposure and colour table go.
+                self.renderer.present_pass.release_post_targets()
             return
         self.present_into(output.framebuffer, output.size, dt)
 

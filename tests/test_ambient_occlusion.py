@@ -326,3 +326,21 @@ AmbientOcclusion = { radius = 0.8, intensity = 1.5, direct_light = 0.25, half_re
         '[level]\nname = "bad"\n\n[[entity]]\nname = "camera"\nCamera = {}\nAmbientOcclusion = { radius = -2.0 }\n')
     with pytest.raises(LevelError, match="radius"):
         load_level(tmp_path / "bad.toml")
+
+
+def test_the_images_go_with_the_camera(scene):
+    """Deleting the camera entity lets its occlusion images, and its grade's colour table, go."""
+    from components import ColorGrading
+    from engine.assets.color_lut import identity_lut
+
+    names = {}
+    runner = scene(lambda world: names.update(_room(world, AmbientOcclusion())), SIZE)
+    runner.world.add_component(names["camera"], ColorGrading(lut=identity_lut(5)))
+    runner.frame()
+    counts = runner.engine.renderer.resource_counts()
+    assert counts["occlusion_targets"] == 4 and counts["post_targets"] == 1
+    runner.world.delete_entity(names["camera"])
+    with pytest.warns(UserWarning, match="no active camera"):
+        runner.frame()
+    counts = runner.engine.renderer.resource_counts()
+    assert counts["occlusion_targets"] == 0 and counts["post_targets"] == 0

@@ -227,6 +227,11 @@ class PresentPass:
             vao.program[name].value = value
             self._written[key] = value
 
+    def release_post_targets(self) -> None:
+        """Let the bloom chain, the automatic exposure and the grade's table go (no camera
+        asks for them now)."""
+        self._release_post_targets()
+
     def _release_post_targets(self) -> None:
         self._lut_texture(None)
         if self.bloom.textures:
