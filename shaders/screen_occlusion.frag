@@ -12,6 +12,7 @@
 
 #define PI 3.14159265358979
 #define HALF_PI 1.57079632679490
+#define HALF_MAX 65504.0  // the distance is kept in a half float: a farther one is kept as this
 
 uniform sampler2D depth_map;    // the depth and normals pass's depth (no comparison; bilinear)
 uniform sampler2D normal_map;   // its geometric normals, world space, as n * 0.5 + 0.5
@@ -32,7 +33,7 @@ const float BAYER[16] = float[16](0.0, 8.0, 2.0, 10.0, 12.0, 4.0, 14.0, 6.0,
 // floor seen at a grazing angle occlude itself by up to 6% (its in-plane directions rising
 // above the slice's own tangent).
 vec3 position_at(vec2 pixel) {
-    return view_position(pixel, texture(depth_map, pixel / depth_size).r);
+    return view_position(pixel, textureLod(depth_map, pixel / depth_size, 0.0).r);  // (no derivatives in the loop)
 }
 
 // The largest cosine, to the view direction v, of the directions from p to the surface
@@ -93,7 +94,7 @@ void main() {
     // depth: seen there, a wall's foot kept 0.035 too much of its light.
     float reach = min(radius * pixels_per_metre / max(-p.z - 0.5 * radius, 0.5 * -p.z), max_radius_pixels);
     if (reach < 1.0) {  // the radius spans under a pixel: nothing to find
-        out_occlusion = vec2(1.0, -p.z);
+        out_occlusion = vec2(1.0, min(-p.z, HALF_MAX));
         return;
     }
     int tile = (pixel.x & 3) + 4 * (pixel.y & 3);
@@ -120,5 +121,5 @@ void main() {
         float arc1 = cos_n + 2.0 * h1 * sin_n - cos(2.0 * h1 - angle_n);
         visibility += projected_length * 0.25 * (arc0 + arc1);
     }
-    out_occlusion = vec2(clamp(visibility / float(SLICES), 0.0, 1.0), -p.z);
+    out_occlusion = vec2(clamp(visibility / float(SLICES), 0.0, 1.0), min(-p.z, HALF_MAX));
 }

@@ -50,5 +50,5 @@ void main() {
     }
     float visibility = weights > 1e-3 ? total / weights : nearest;
     float ambient = intensity > 0.0 ? pow(max(visibility, 1e-6), intensity) : 1.0;  // (pow(0, y): undefined)
-    out_shares = vec4(ambient, mix(1.0, ambient, direct_light), -p.z, 1.0);
+    out_shares = vec4(ambient, mix(1.0, ambient, direct_light), min(-p.z, 65504.0), 1.0);  // (a half float)
 }
