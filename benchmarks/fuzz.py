@@ -4,12 +4,13 @@ Each case builds one component (Visibility and Water among them) with one to thr
 drawn from a pool of awkward values (NaN, infinities, numbers past float32 and float16, huge
 ints, wrong kinds, zero vectors, Euler-looking tuples), attaches it to an entity of a small
 lit scene (a box, a quad for surfaces, the camera entity for Camera, FlyController, Tonemap,
-Bloom, ColorGrading, Fog and AmbientOcclusion, the sky entity for the Skybox) and renders ``FRAMES`` 48 x
-32 frames (``benchmarks/fuzz_cases.py``: what a first frame leaves to later ones, probes
-captured a face a frame, is run too). A case passes when either the component is refused
-with a ``ComponentValueError`` that names ``Class.field`` (or the entity, for checks on the
-whole entity), or every frame renders with no NaN in the HDR colour target and ``ctx.error``
-clean. Any other exception, above all one raised from inside a system, is a failure.
+Bloom, ColorGrading, Vignette, Fog and AmbientOcclusion, the sky entity for the Skybox) and
+renders ``FRAMES`` 48 x 32 frames (``benchmarks/fuzz_cases.py``: what a first frame leaves
+to later ones, probes captured a face a frame, is run too). A case passes when either the
+component is refused with a ``ComponentValueError`` that names ``Class.field`` (or the
+entity, for checks on the whole entity), or every frame renders with no NaN in the HDR
+colour target and ``ctx.error`` clean. Any other exception, above all one raised from inside
+a system, is a failure.
 
     python -m benchmarks fuzz --cases 5000 --level-cases 2000 --model-cases 500
 
@@ -71,6 +72,7 @@ from components import (
     Tonemap,
     Transform,
     Traveller,
+    Vignette,
     Visibility,
     Water,
     look_rotation,
@@ -84,8 +86,8 @@ from shell.app import Engine
 SIZE = (48, 32)
 CLASSES: tuple[type, ...] = (Transform, MeshRef, Material, Emissive, Reflective, Refractive, Mirror, Portal,
                              Traveller, Slice, PortalClone, ReflectionProbe, Camera, FlyController,
-                             DirectionalLight, PointLight, Skybox, Tonemap, Bloom, ColorGrading, Fog, AmbientOcclusion,
-                             Visibility, Water)
+                             DirectionalLight, PointLight, Skybox, Tonemap, Bloom, ColorGrading, Vignette, Fog,
+                             AmbientOcclusion, Visibility, Water)
 
 @dataclasses.dataclass
 class Case:
@@ -153,7 +155,7 @@ class Fuzzer:
         try:
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
-                if case.cls in (Camera, FlyController, Tonemap, Bloom, ColorGrading, Fog, AmbientOcclusion):
+                if case.cls in (Camera, FlyController, Tonemap, Bloom, ColorGrading, Vignette, Fog, AmbientOcclusion):
                     restore = (self.game.camera, world.try_get(self.game.camera, case.cls))
                     world.add_component(self.game.camera, component)
                 elif case.cls is Skybox:

@@ -39,8 +39,9 @@ Variants now (``VARIANTS``; add a row by appending a ``Variant``):
   GPU; a software rasteriser's quarter-size start makes five, ending at the same smallest level:
   ``engine/render/bloom.py``);
 * ``post_auto``: the same with ``Tonemap(auto_exposure=True)``;
-* ``graded``: no shadows; ``Tonemap(curve="agx")`` and a ``ColorGrading`` with every control
-  moved and a 33-point colour table (the present draw's GRADE and LUT build);
+* ``graded``: no shadows; ``Tonemap(curve="agx")``, a ``ColorGrading`` with every control
+  moved and a 33-point colour table, and a ``Vignette`` (the present draw's GRADE, LUT and
+  VIGNETTE build);
 * ``occlusion``: no shadows; ``AmbientOcclusion()`` on the camera (its depth and normals
   pass, the occlusion found at half size, the filter to every pixel);
 * ``occlusion_full``: the same found at full size (``half_resolution=False``);
@@ -141,6 +142,7 @@ from components import (
     PointLight,
     Tonemap,
     Transform,
+    Vignette,
     look_rotation,
 )
 from engine.assets.color_lut import identity_lut
@@ -273,6 +275,7 @@ def _graded(engine: Engine) -> None:
     engine.world.add_component(camera_entity(engine), ColorGrading(
         temperature=0.2, tint=-0.1, contrast=1.1, slope=(1.05, 1.0, 0.95), offset=(0.0, 0.0, 0.01),
         power=(1.0, 1.0, 1.05), saturation=1.2, lut=lut))
+    engine.world.add_component(camera_entity(engine), Vignette(intensity=0.4))
 
 
 def _occlusion(engine: Engine, half: bool = True, quality: str = "medium") -> None:

@@ -4,7 +4,7 @@ from components.camera import Camera, DirectionalLight, FlyController, PointLigh
 from components.fog import Fog
 from components.mirror import Mirror
 from components.portal import Portal, PortalClone, Slice, Traveller
-from components.post import Bloom, ColorGrading, Tonemap
+from components.post import Bloom, ColorGrading, Tonemap, Vignette
 from components.probe import ReflectionProbe
 from components.rendering import Emissive, Material, MeshRef, Reflective, Refractive, Skybox
 from components.screen import ScreenPanel, ScreenText
@@ -18,6 +18,6 @@ __all__ = [
     "DirectionalLight", "Emissive", "FlyController", "Fog", "HemisphereLight", "Material",
     "MeshRef", "Mirror", "PointLight", "Portal", "PortalClone", "ReflectionProbe", "Reflective", "Refractive",
     "ScreenPanel", "ScreenText", "Skybox", "Slice",
-    "Tonemap", "TrackedComponent", "Transform", "Traveller", "Visibility", "Water",
+    "Tonemap", "TrackedComponent", "Transform", "Traveller", "Vignette", "Visibility", "Water",
     "euler_rotation", "look_rotation", "yaw_pitch_of", "yaw_pitch_rotation",
 ]

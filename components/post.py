@@ -42,6 +42,7 @@ _DEFAULT_MAX_EV = 8.0
 MAX_GRADE_CONTRAST = 4.0    # ColorGrading.contrast and saturation: 4x is past any look
 MAX_GRADE_SLOPE = 16.0      # ColorGrading.slope: four stops up
 MAX_GRADE_POWER = 8.0
+MAX_VIGNETTE_FALLOFF = 16.0  # Vignette.falloff: cos^16 is black a third of the way out at 90 degrees
 
 # The engine's colour table (engine.assets.color_lut.ColorLut); components import none of the
 # engine: ColorGrading.lut is checked by the class's ASSET_KIND ("lut").
@@ -212,3 +213,28 @@ def _triple(owner: object, name: str, value: Any, low: float, high: float) -> tu
         raise ComponentValueError(f"{type(owner).__name__}.{name} must have every component <= {high}, "
                                   f"got {tuple(parts)}")
     return parts[0], parts[1], parts[2]
+
+
+@dataclass(eq=False)
+class Vignette(TrackedComponent):
+    """The picture darkened towards its edges (on the camera's entity) as a lens darkens it:
+    its natural vignetting, the cos^4 law (light reaching the film at an angle theta from the
+    optical axis falls as cos^4 theta), in the linear image before the grade and the tone
+    curve.  Each pixel is multiplied by ``1 - intensity + intensity x cos(theta) ** falloff``,
+    theta the angle of its ray from the camera's view axis, so a wider lens darkens more, as a
+    real one does (Unity's and three.js's vignettes are the same darkening drawn on the screen).
+
+    - ``intensity`` (0..1): 0 none, 1 the whole falloff;
+    - ``falloff`` (0..16): the power of the cosine; 4 is a lens's natural vignetting, more
+      darkens nearer the middle.
+    """
+
+    intensity: float = 0.5
+    falloff: float = 4.0
+
+    def _validate(self, name: str, value: Any) -> Any:
+        if name == "intensity":
+            return finite(self, name, value, low=0.0, high=1.0)
+        if name == "falloff":
+            return finite(self, name, value, low=0.0, high=MAX_VIGNETTE_FALLOFF)
+        return value

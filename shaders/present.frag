@@ -7,7 +7,8 @@
 // exposure (a linear scale; AUTO_EXPOSURE: times 2^EV from the adapted 1x1 exposure
 // texture, engine/render/post.py, read on the GPU by present.vert), the tone curve
 // (TONEMAP_CURVE, include/tonemap.glsl), then the sRGB encoding.  Without POST the
-// code is the plain look's, unchanged.  With GRADE (components/post.py ColorGrading) the
+// code is the plain look's, unchanged.  With VIGNETTE the exposed image is darkened towards
+// its edges (Vignette).  With GRADE (components/post.py ColorGrading) the
 // exposed image is graded before the curve (grade()); with LUT the encoded picture is looked
 // up in the grade's colour table last.
 #include "color.glsl"
@@ -23,6 +24,18 @@ uniform vec2 bloom_mix;   // (weight of the image, weight of the bloom image's s
 #endif
 #ifdef AUTO_EXPOSURE
 flat in float v_scale;   // exposure * 2^EV of the adapted 1x1 exposure texture (present.vert)
+#endif
+#ifdef VIGNETTE
+uniform vec4 vignette_ray;    // ndc -> the ray's tangents from the view axis: xy scale, zw bias
+uniform vec2 vignette;        // Vignette.intensity, Vignette.falloff
+
+// A lens's natural vignetting (components/post.py Vignette): cos(theta) ** falloff, theta the
+// angle of the pixel's ray from the view axis, mixed in by the intensity.
+float vignette_factor(vec2 uv) {
+    vec2 tangent = (uv * 2.0 - 1.0) * vignette_ray.xy + vignette_ray.zw;
+    float cos_theta = inversesqrt(1.0 + dot(tangent, tangent));
+    return 1.0 - vignette.x + vignette.x * pow(cos_theta, vignette.y);
+}
 #endif
 #ifdef GRADE
 uniform mat3 white_balance;   // linear sRGB, adapted (engine/render/grading.py)
@@ -68,6 +81,9 @@ void main() {
     float scale = exposure;
 #endif
     vec3 exposed = hdr * scale;
+#ifdef VIGNETTE
+    exposed *= vignette_factor(v_uv);
+#endif
 #ifdef GRADE
     exposed = grade(exposed);
 #endif

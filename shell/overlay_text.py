@@ -89,6 +89,8 @@ def post_lines(engine: Engine) -> list[str]:
         grade = "; graded" + (f", table {graded.lut.name!r}" if graded.lut is not None else "")
     elif not present.grade:
         grade = "; grade off (set)"
+    if present.vignetted is not None:
+        grade += f"; vignette {present.vignetted.intensity:g}"
     main = engine.stages["main"]
     occluded = main.occluded
     if occluded is not None:

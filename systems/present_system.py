@@ -6,7 +6,7 @@ from __future__ import annotations
 import esper
 import moderngl
 
-from components.post import TONEMAP_CURVES, Bloom, ColorGrading, Tonemap
+from components.post import TONEMAP_CURVES, Bloom, ColorGrading, Tonemap, Vignette
 from engine.core.frame_io import Output
 from engine.core.world import World
 from engine.render.frame_views import FrameViews
@@ -17,7 +17,7 @@ from engine.rules.frame_rules import active_camera_parts
 class PresentSystem(esper.Processor):
     """Settings the debug overlay writes (a developer's switches over every camera):
     ``bloom`` (False: no camera's Bloom is drawn), ``grade`` (False: no camera's
-    ColorGrading) and ``curve`` (None: each camera's own; else one of ``TONEMAP_CURVES`` for
+    ColorGrading or Vignette) and ``curve`` (None: each camera's own; else one of ``TONEMAP_CURVES`` for
     every camera, with or without a Tonemap)."""
 
     def __init__(self, world: World, renderer: Renderer) -> None:
@@ -29,6 +29,7 @@ class PresentSystem(esper.Processor):
         self.tonemap: Tonemap | None = None   # what the last frame presented with (the overlay shows it)
         self.bloomed: Bloom | None = None
         self.graded: ColorGrading | None = None
+        self.vignetted: Vignette | None = None
 
     @property
     def curve(self) -> str | None:
@@ -57,12 +58,15 @@ class PresentSystem(esper.Processor):
         exposure does not move on for a second presentation)."""
         parts = active_camera_parts(self.world)
         camera = parts[0] if parts is not None else None
-        tonemap = bloom = grading = None
+        tonemap = bloom = grading = vignette = None
         if camera is not None:
             tonemap = self.world.try_get(camera, Tonemap)
             bloom = self.world.try_get(camera, Bloom) if self.bloom else None
             grading = self.world.try_get(camera, ColorGrading) if self.grade else None
-        self.tonemap, self.bloomed, self.graded = tonemap, bloom, grading
+            vignette = self.world.try_get(camera, Vignette) if self.grade else None
+        self.tonemap, self.bloomed, self.graded, self.vignetted = tonemap, bloom, grading, vignette
         views: FrameViews | None = self.world.resources.get(FrameViews)
+        main = views.main if views is not None else None
         self.renderer.present(framebuffer, size, tonemap, bloom, self._curve, camera, dt,
-                              views.image if views is not None else None, grading)
+                              views.image if views is not None else None, grading, vignette,
+                              main.proj if main is not None else None)

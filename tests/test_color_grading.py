@@ -196,6 +196,7 @@ name = "camera"
 Transform = { position = [0.0, 1.0, 3.0] }
 Camera = {}
 ColorGrading = { temperature = 0.3, slope = [1.1, 1.0, 0.9], lut = { file = "grade.cube" }, lut_strength = 0.5 }
+Vignette = { intensity = 0.3, falloff = 6.0 }
 """)
     world = World()
     names = load_level(tmp_path / "room.toml").spawn(world)
@@ -206,6 +207,8 @@ ColorGrading = { temperature = 0.3, slope = [1.1, 1.0, 0.9], lut = { file = "gra
     again = World()
     names = load_level(saved).spawn(again)
     assert again.get(names["camera"], ColorGrading).temperature == pytest.approx(0.3)
+    from components import Vignette
+    assert (again.get(names["camera"], Vignette).intensity, again.get(names["camera"], Vignette).falloff) == (0.3, 6.0)
     (tmp_path / "bad.toml").write_text('[level]\nname = "bad"\n\n[[entity]]\nname = "camera"\nCamera = {}\n'
                                        'ColorGrading = { lut = { file = "missing.cube" } }\n')
     with pytest.raises(LevelError, match="missing.cube"):
@@ -226,3 +229,47 @@ def test_the_overlay_line_and_the_present_stages_switch(known):
     assert np.array_equal(runner.frame(), _present(known, image))
     assert "grade off (set)" in post_lines(runner.engine)[0]
     assert not np.array_equal(graded, _present(known, image))
+
+
+# --- vignette -------------------------------------------------------------------------------
+
+@pytest.mark.parametrize("intensity, falloff", [(1.0, 4.0), (0.5, 4.0), (0.8, 8.0)])
+def test_the_vignette_darkens_each_pixel_by_cos_theta_to_the_falloff(known, intensity, falloff):
+    """A grey frame through a camera with a Vignette: each pixel's linear value is the grey
+    times 1 - intensity + intensity cos(theta) ** falloff, theta the angle between the
+    pixel's ray (cast here from the view's matrices) and the view axis."""
+    from components import Vignette
+    from tests.support import pixel_rays
+
+    image = np.full((72, 128, 4), 0.5, np.float16)
+    image[..., 3] = 1.0
+    runner = known(image, Vignette(intensity=intensity, falloff=falloff))
+    got = srgb_to_linear(runner.frame()).mean(axis=-1)
+    view = runner.engine.main_view
+    _, rays = pixel_rays(view, runner.size)
+    forward = -np.array(view.view.to_list(), np.float64)[:3, 2]   # the view axis, world space
+    cos_theta = np.flipud(rays @ (forward / np.linalg.norm(forward)))   # (GL row order, as the frame)
+    want = 0.5 * (1.0 - intensity + intensity * cos_theta ** falloff)
+    np.testing.assert_allclose(got, want, atol=0.004)
+    assert want.min() < 0.45   # the corners are darker than the middle by far more than the tolerance
+    assert got[36, 64] == pytest.approx(0.5, abs=0.004)
+
+
+def test_a_vignette_of_no_intensity_or_switched_off_changes_nothing(known):
+    from components import Vignette
+
+    image = ramp()
+    plain = _present(known, image)
+    assert np.array_equal(_present(known, image, Vignette(intensity=0.0)), plain)
+    runner = known(image, Vignette())
+    runner.engine.stages["present"].grade = False   # the overlay's grade switch turns it off too
+    assert np.array_equal(runner.frame().astype(np.int16), plain)
+
+
+@pytest.mark.parametrize("field, value", [("intensity", 1.5), ("intensity", -0.1), ("falloff", 20.0),
+                                          ("falloff", float("inf"))])
+def test_bad_vignette_values_are_refused_naming_the_field(field, value):
+    from components import Vignette
+
+    with pytest.raises(ComponentValueError, match=f"Vignette.{field}"):
+        Vignette(**{field: value})

@@ -51,7 +51,7 @@ ENGINE_COMPONENTS: dict[str, type] = {
         "HemisphereLight", "Material", "MeshRef",
         "Mirror", "PointLight", "Portal", "ReflectionProbe", "Reflective", "Refractive", "ScreenPanel", "ScreenText",
         "Skybox", "Tonemap",
-        "Transform", "Traveller", "Visibility", "Water")}
+        "Transform", "Traveller", "Vignette", "Visibility", "Water")}
 DERIVED_COMPONENTS = ("PortalClone", "Slice")
 # Fields holding another entity: a name in the file, an id in the world.
 REFERENCE_FIELDS = {("Transform", "parent"), ("Portal", "partner")}

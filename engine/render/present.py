@@ -31,7 +31,7 @@ from __future__ import annotations
 
 import moderngl
 
-from components.post import TONEMAP_CURVES, Bloom, ColorGrading, Tonemap
+from components.post import TONEMAP_CURVES, Bloom, ColorGrading, Tonemap, Vignette
 from engine.assets.color_lut import ColorLut
 from engine.render.bindings import (
     BLOOM_UNIT,
@@ -53,6 +53,15 @@ ANTIALIAS_MODES = ("fxaa", "off")
 MAX_SEARCH_STEPS = 8   # the length of fxaa.frag's SEARCH table
 GPU_SEARCH_STEPS = 8
 _PRESENT = PassState()
+
+
+def _vignette_ray(projection) -> tuple[float, float, float, float]:
+    """The VIGNETTE build's ``vignette_ray``: normalised device x, y -> the tangents of the
+    pixel's ray from the view axis (x / -z, y / -z in view space), for a perspective
+    ``projection`` P: (ndc + (P[2][0], P[2][1])) / (P[0][0], P[1][1])."""
+    p = projection
+    return (1.0 / float(p[0][0]), 1.0 / float(p[1][1]), float(p[2][0]) / float(p[0][0]),
+            float(p[2][1]) / float(p[1][1]))
 
 
 class PresentPass:
@@ -93,8 +102,8 @@ class PresentPass:
         return self.ctx.vertex_array(program, [])
 
     def _post_build(self, curve: str, bloom: bool, auto: bool, luma: bool, grade: bool = False,
-                    lut: bool = False) -> moderngl.VertexArray:
-        key = (curve, bloom, auto, luma, grade, lut)
+                    lut: bool = False, vignette: bool = False) -> moderngl.VertexArray:
+        key = (curve, bloom, auto, luma, grade, lut, vignette)
         vao = self._post.get(key)
         if vao is None:
             defines = {"POST": "1", "TONEMAP_CURVE": str(TONEMAP_CURVES.index(curve))}
@@ -108,6 +117,8 @@ class PresentPass:
                 defines["GRADE"] = "1"
             if lut:
                 defines["LUT"] = "1"
+            if vignette:
+                defines["VIGNETTE"] = "1"
             vao = self._post[key] = self._fullscreen("present.frag", **defines)
             vao.program["hdr_image"].value = PRESENT_UNIT
             if bloom:
@@ -121,9 +132,11 @@ class PresentPass:
     def draw(self, hdr: moderngl.Texture, exposure: float, antialias: str, output: moderngl.Framebuffer,
              size: tuple[int, int], tonemap: Tonemap | None = None, bloom: Bloom | None = None,
              curve: str | None = None, camera: int | None = None, dt: float = 0.0,
-             grading: ColorGrading | None = None) -> None:
-        """Present ``hdr`` into ``output``.  ``tonemap``, ``bloom`` and ``grading``: the active
-        camera's components (None: none); ``curve`` overrides the tone curve (the debug overlay's
+             grading: ColorGrading | None = None, vignette: Vignette | None = None,
+             projection: object | None = None) -> None:
+        """Present ``hdr`` into ``output``.  ``tonemap``, ``bloom``, ``grading`` and
+        ``vignette``: the active camera's components (None: none), ``projection`` its view's
+        (the vignette's rays); ``curve`` overrides the tone curve (the debug overlay's
         choice; None: the Tonemap's, or "none"); ``camera`` is whose image it is (automatic
         exposure starts over when it changes) and ``dt`` the frame's time step (adaptation)."""
         fxaa = antialias == "fxaa"
@@ -134,7 +147,9 @@ class PresentPass:
         self.post_passes = 0
         if grading is not None and not grades(grading) and (grading.lut is None or grading.lut_strength == 0.0):
             grading = None  # (nothing to grade: the same picture without it)
-        if tonemap is None and bloom is None and curve is None and grading is None:
+        if vignette is not None and (vignette.intensity == 0.0 or projection is None):
+            vignette = None  # (no darkening: the same picture without it)
+        if tonemap is None and bloom is None and curve is None and grading is None and vignette is None:
             self._release_post_targets()
             encode = self._encode_luma if fxaa else self._encode
             (self._encoded.framebuffer if fxaa else output).use()
@@ -142,7 +157,11 @@ class PresentPass:
             bind_texture(self.ctx, hdr, PRESENT_UNIT)
             encode.program["exposure"].value = exposure
         else:
-            encode = self._post_encode(hdr, exposure, tonemap, bloom, curve, camera, dt, fxaa, grading)
+            encode = self._post_encode(hdr, exposure, tonemap, bloom, curve, camera, dt, fxaa, grading,
+                                       vignette is not None)
+            if vignette is not None:
+                self._set(encode, "vignette_ray", _vignette_ray(projection))
+                self._set(encode, "vignette", (vignette.intensity, vignette.falloff))
             (self._encoded.framebuffer if fxaa else output).use()
             apply_pass_state(self.ctx, _PRESENT, (0, 0, *size))
         encode.render(moderngl.TRIANGLES, vertices=3)
@@ -156,7 +175,7 @@ class PresentPass:
 
     def _post_encode(self, hdr: moderngl.Texture, exposure: float, tonemap: Tonemap | None, bloom: Bloom | None,
                      curve: str | None, camera: int | None, dt: float, luma: bool,
-                     grading: ColorGrading | None = None) -> moderngl.VertexArray:
+                     grading: ColorGrading | None = None, vignette: bool = False) -> moderngl.VertexArray:
         """Run bloom and automatic exposure; the present build to draw, its inputs bound."""
         bloomed = None
         if bloom is not None and bloom.intensity > 0.0:
@@ -174,7 +193,7 @@ class PresentPass:
         curve = curve if curve is not None else (tonemap.curve if tonemap is not None else "none")
         lut = self._lut_texture(grading.lut if grading is not None and grading.lut_strength > 0.0 else None)
         graded = grades(grading)
-        encode = self._post_build(curve, bloomed is not None, auto, luma, graded, lut is not None)
+        encode = self._post_build(curve, bloomed is not None, auto, luma, graded, lut is not None, vignette)
         self._set(encode, "exposure", 2.0 ** tonemap.exposure if tonemap is not None else exposure)
         if graded:
             self._set_grade(encode, grading)
