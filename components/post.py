@@ -12,8 +12,10 @@ camera with none of these components keeps the plain look: no curve, the rendere
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
+
+from pyglm import glm
 
 from components.tracking import (
     HALF_MAX,
@@ -171,9 +173,9 @@ class ColorGrading(TrackedComponent):
     temperature: float = 0.0
     tint: float = 0.0
     contrast: float = 1.0
-    slope: Any = (1.0, 1.0, 1.0)
-    offset: Any = (0.0, 0.0, 0.0)
-    power: Any = (1.0, 1.0, 1.0)
+    slope: Any = field(default_factory=lambda: glm.vec3(1.0))
+    offset: Any = field(default_factory=lambda: glm.vec3(0.0))
+    power: Any = field(default_factory=lambda: glm.vec3(1.0))
     saturation: float = 1.0
     lut: ColorLut | None = None
     lut_strength: float = 1.0
@@ -200,19 +202,18 @@ class ColorGrading(TrackedComponent):
         return value
 
 
-def _triple(owner: object, name: str, value: Any, low: float, high: float) -> tuple[float, float, float]:
-    """Three finite numbers in [low, high] (one number: the same for each channel), as a plain
-    tuple (the grade's triples are values, not edited in place)."""
+def _triple(owner: object, name: str, value: Any, low: float, high: float) -> glm.vec3:
+    """Three finite numbers in [low, high] (one number: the same for each channel), as a
+    glm.vec3 (the inspector drags it, a level file writes it as float32 at its shortest)."""
     items = _items(value)
     if items and len(items) != 3:
         raise ComponentValueError(f"{type(owner).__name__}.{name} must be three numbers (or one for all three), "
                                   f"got {len(items)}")
-    checked = vec3(owner, name, value, low=low)  # finite numbers, each >= low
-    parts = [float(c) for c in items] if items else [float(c) for c in checked]
-    if max(parts) > high:
+    v = vec3(owner, name, value, low=low)  # finite numbers, each >= low
+    if max(v) > high:
         raise ComponentValueError(f"{type(owner).__name__}.{name} must have every component <= {high}, "
-                                  f"got {tuple(parts)}")
-    return parts[0], parts[1], parts[2]
+                                  f"got {tuple(v)}")
+    return v
 
 
 @dataclass(eq=False)

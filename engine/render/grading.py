@@ -34,8 +34,8 @@ def grades(grading: ColorGrading | None) -> bool:
     draws the build without them: the same picture, to the bit)."""
     return grading is not None and (
         grading.temperature != 0.0 or grading.tint != 0.0 or grading.contrast != 1.0
-        or grading.slope != (1.0, 1.0, 1.0) or grading.offset != (0.0, 0.0, 0.0)
-        or grading.power != (1.0, 1.0, 1.0) or grading.saturation != 1.0)
+        or tuple(grading.slope) != (1.0, 1.0, 1.0) or tuple(grading.offset) != (0.0, 0.0, 0.0)
+        or tuple(grading.power) != (1.0, 1.0, 1.0) or grading.saturation != 1.0)
 
 
 def daylight_xy(kelvin: float) -> tuple[float, float]:

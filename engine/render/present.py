@@ -222,9 +222,9 @@ class PresentPass:
             encode.program["white_balance"].write(white_balance(*balance).T.astype("f4").tobytes())
             self._written[(id(encode), "white_balance_of")] = balance
         self._set(encode, "contrast", grading.contrast)
-        self._set(encode, "slope", grading.slope)
-        self._set(encode, "offset", grading.offset)
-        self._set(encode, "power", grading.power)
+        self._set(encode, "slope", tuple(grading.slope))
+        self._set(encode, "offset", tuple(grading.offset))
+        self._set(encode, "power", tuple(grading.power))
         self._set(encode, "saturation", grading.saturation)
 
     def _lut_texture(self, lut: ColorLut | None) -> moderngl.Texture3D | None:
