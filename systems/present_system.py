@@ -25,6 +25,9 @@ class PresentSystem(esper.Processor):
         self.renderer = renderer
         self.bloom = True
         self.grade = True
+        # The debug overlay's "AO only": the camera's ambient occlusion as grey in place of the
+        # picture (when the camera has one this frame).
+        self.show_occlusion = False
         self._curve: str | None = None
         self.tonemap: Tonemap | None = None   # what the last frame presented with (the overlay shows it)
         self.bloomed: Bloom | None = None
@@ -70,3 +73,6 @@ class PresentSystem(esper.Processor):
         self.renderer.present(framebuffer, size, tonemap, bloom, self._curve, camera, dt,
                               views.image if views is not None else None, grading, vignette,
                               main.proj if main is not None else None)
+        shares = self.renderer.screen_occlusion
+        if self.show_occlusion and shares is not None:
+            self.renderer.present_pass.draw_occlusion(shares, framebuffer, size)

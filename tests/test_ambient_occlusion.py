@@ -344,3 +344,19 @@ def test_the_images_go_with_the_camera(scene):
         runner.frame()
     counts = runner.engine.renderer.resource_counts()
     assert counts["occlusion_targets"] == 0 and counts["post_targets"] == 0
+
+
+def test_the_debug_view_shows_the_occlusion_alone(scene):
+    """``PresentSystem.show_occlusion`` (the overlay's "AO only") presents the share each
+    pixel keeps as grey, 255 for all of it: the occlusion image's own values."""
+    names = {}
+    runner = scene(lambda world: names.update(_room(world, AmbientOcclusion(half_resolution=False))), SIZE)
+    runner.engine.renderer.antialias = "off"
+    picture = runner.frame()
+    runner.engine.stages["present"].show_occlusion = True
+    shown = runner.frame().astype(np.int16)
+    shares = np.frombuffer(runner.engine.renderer.screen_occlusion.read(), np.float16).reshape(SIZE[1], SIZE[0], 4)
+    want = np.rint(np.flipud(shares[..., 0]).astype(np.float64) * 255.0)
+    assert np.abs(shown - want[..., None]).max() <= 1
+    assert shown.min() < 150 and shown.max() == 255   # the crease, and the open floor and sky
+    assert not np.array_equal(shown, picture)

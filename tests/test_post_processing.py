@@ -741,6 +741,8 @@ def test_the_overlay_toggles_bloom_the_grade_and_occlusion_and_picks_the_curve(k
         assert present.grade is False
         click("AO")
         assert runner.engine.stages["main"].occlusion is False
+        click("AO only")
+        assert present.show_occlusion is True
         click("curve")            # opens the drop-down
         click("curve aces")
         assert present.curve == "aces"

@@ -38,6 +38,7 @@ from engine.render.bindings import (
     EXPOSURE_UNIT,
     FXAA_UNIT,
     LUT_UNIT,
+    OCCLUSION_IMAGE_UNIT,
     PRESENT_UNIT,
     PassState,
     apply_pass_state,
@@ -81,6 +82,7 @@ class PresentPass:
         self.auto_exposure = AutoExposure(ctx, shaders)
         self.post_passes = 0   # bloom and exposure draws in the last frame (the tone map is the present draw)
         self._lut: tuple[ColorLut, moderngl.Texture3D] | None = None  # the grade's table, uploaded
+        self._occlusion_view: moderngl.VertexArray | None = None  # the overlay's "AO only" view, made on first use
 
     @property
     def search_steps(self) -> int:
@@ -213,6 +215,20 @@ class PresentPass:
             bind_texture(self.ctx, state, EXPOSURE_UNIT)
         return encode
 
+    def draw_occlusion(self, shares: moderngl.Texture, output: moderngl.Framebuffer, size: tuple[int, int]) -> None:
+        """The debug view of ambient occlusion: ``shares`` (the camera's occlusion image,
+        ``Gpu.screen_occlusion``) as grey into ``output``, in place of the picture."""
+        if self._occlusion_view is None:
+            self._occlusion_view = self._fullscreen("occlusion_view.frag")
+            self._occlusion_view.program["occlusion_image"].value = OCCLUSION_IMAGE_UNIT
+        output.use()
+        apply_pass_state(self.ctx, _PRESENT, (0, 0, *size))
+        filtered = shares.filter
+        shares.filter = (moderngl.LINEAR, moderngl.LINEAR)
+        bind_texture(self.ctx, shares, OCCLUSION_IMAGE_UNIT)
+        self._occlusion_view.render(moderngl.TRIANGLES, vertices=3)
+        shares.filter = filtered
+
     def _set_grade(self, encode: moderngl.VertexArray, grading: ColorGrading) -> None:
         """The GRADE build's uniforms from ``grading`` (the white balance's matrix worked out
         again only when its two fields change)."""
@@ -271,6 +287,9 @@ class PresentPass:
             self._encoded = None
         for vao in (self._encode, self._encode_luma, self._fxaa, *self._post.values()):
             vao.release()
+        if self._occlusion_view is not None:
+            self._occlusion_view.release()
+            self._occlusion_view = None
         self._post.clear()
         self.bloom.release()
         self.auto_exposure.release()
