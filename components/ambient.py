@@ -76,8 +76,8 @@ class AmbientOcclusion(TrackedComponent):
       high one twice it; all three within 0.02 of the ground truth on a floor and wall, the
       higher smoother where small things occlude).
 
-    Only the camera's own view is occluded: mirror, portal and probe views are not (Unity's
-    planar reflections have the same limit), and neither is glass (the transparent slot).
+    Only the camera's own view is occluded: mirror, portal and probe views are not, and
+    neither is glass (the transparent slot).
     """
 
     radius: float = 1.0
