@@ -20,6 +20,7 @@ uniform mat3 view_rotation;     // world -> view directions
 uniform float radius;           // metres (AmbientOcclusion.radius)
 uniform float pixels_per_metre; // at a distance of 1 m along the view axis
 uniform float max_radius_pixels;
+uniform ivec2 margin;           // the guard band: where the view's pixels start in the depth image
 
 out vec2 out_occlusion;
 
@@ -78,7 +79,8 @@ float horizon_cos(vec3 p, vec3 v, vec2 pixel, vec2 omega, float reach, float jit
 }
 
 void main() {
-    ivec2 pixel = ivec2(gl_FragCoord.xy);
+    ivec2 texel = ivec2(gl_FragCoord.xy);  // this image's (the view's pixels)
+    ivec2 pixel = texel + margin;          // the depth image's (the guard band about them)
     float depth = texelFetch(depth_map, pixel, 0).r;
     if (depth >= 1.0) {  // nothing drawn: the sky
         out_occlusion = vec2(1.0, -1.0);
@@ -97,7 +99,7 @@ void main() {
         out_occlusion = vec2(1.0, min(-p.z, HALF_MAX));
         return;
     }
-    int tile = (pixel.x & 3) + 4 * (pixel.y & 3);
+    int tile = (texel.x & 3) + 4 * (texel.y & 3);
     float rotation = (BAYER[tile] + 0.5) / 16.0;
     float jitter = (BAYER[15 - tile] + 0.5) / 16.0;
     float visibility = 0.0;

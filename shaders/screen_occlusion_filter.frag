@@ -13,11 +13,13 @@ uniform sampler2D occlusion_map;   // rg: visibility, distance along the view ax
 uniform mat3 view_rotation;        // world -> view directions
 uniform float intensity;           // AmbientOcclusion.intensity: visibility ** intensity
 uniform float direct_light;        // AmbientOcclusion.direct_light
+uniform ivec2 margin;              // the guard band: where this image's texels start in the depth image
 
 out vec4 out_shares;  // r: the light from all round's share, g: the direct light's, b: the distance (-1: sky)
 
 void main() {
-    ivec2 pixel = ivec2(gl_FragCoord.xy);
+    ivec2 here = ivec2(gl_FragCoord.xy);  // this image's texel (the occlusion found is the same size)
+    ivec2 pixel = here + margin;          // the depth and normals images' (a guard band about them)
     float depth = texelFetch(depth_map, pixel, 0).r;
     if (depth >= 1.0) {
         out_shares = vec4(1.0, 1.0, -1.0, 1.0);
@@ -27,7 +29,7 @@ void main() {
     vec3 n = normalize(view_rotation * (texelFetch(normal_map, pixel, 0).xyz * 2.0 - 1.0));
     float tolerance = 0.02 * -p.z;  // off the plane by 2% of the distance: another surface
     ivec2 size = textureSize(occlusion_map, 0);
-    ivec2 base = pixel - 1;  // 4 x 4 texels, this one the 2nd of its row
+    ivec2 base = here - 1;  // 4 x 4 texels, this one the 2nd of its row
     float total = 0.0;
     float weights = 0.0;
     float nearest = 1.0;
@@ -37,7 +39,7 @@ void main() {
             ivec2 texel = clamp(base + ivec2(x, y), ivec2(0), size - 1);
             vec2 found = texelFetch(occlusion_map, texel, 0).rg;
             if (found.y < 0.0) continue;  // the sky's
-            vec3 q = view_at(vec2(texel) + 0.5, -found.y);  // its point: along its ray, at its distance
+            vec3 q = view_at(vec2(texel + margin) + 0.5, -found.y);  // its point: along its ray, at its distance
             float gap = abs(dot(q - p, n));
             float weight = max(0.0, 1.0 - gap / tolerance);
             total += weight * found.x;

@@ -6,7 +6,8 @@ reflections.
 Three passes before the main view is drawn, at half the view's size in each direction (a
 quarter of its pixels; ``half_resolution``) or at its size:
 
-1. **Depth and normals**: the scene pass draws the view's opaque batches with the
+1. **Depth and normals**: the scene pass draws the view's opaque batches, and a guard band
+   a tenth of the image wide about them, with the
    ``DEPTH_NORMALS`` build of the scene shader (``ScenePass.draw_depth_normals``: the
    same draws, visibility and cutouts as the view, shading nothing), writing the depth and
    each surface's own normal, as Unity's depth-normals prepass and Godot's depth prepass do.
@@ -22,9 +23,11 @@ quarter of its pixels; ``half_resolution``) or at its size:
    the two counts too: the last sample inside falls short of the radius by up to a step,
    which left a crease's occlusion lighter than the ground truth by about 0.04 (and would
    jump as a sample crossed the radius).  Measured against the ground truth in
-   ``tests/test_ambient_occlusion.py``: within 0.02 on a floor beside a wall and on the wall, away from the
-   screen's sides (what occludes a pixel near them may lie off the screen, where no
-   screen-space method sees it).
+   ``tests/test_ambient_occlusion.py``: within 0.02 on a floor beside a wall and on the wall
+   (band means), and within 0.065 at every pixel, the screen's sides too: the depth and
+   normals pass draws a guard band (``GUARD_SHARE``) about the view, so what occludes a
+   pixel near the edge a little way off the screen is found (without it the crease at the
+   screen's edge was 0.25 too light).
 3. **Filter** (``shaders/screen_occlusion_filter.frag``): each texel takes the mean of the
    4 x 4 found texels about it (one tile: every rotation once), each weighed by how near it
    lies to the plane of the texel's surface, so a foreground edge keeps its own occlusion.
@@ -76,6 +79,11 @@ QUALITY_SAMPLES = dict(zip(OCCLUSION_QUALITIES, ((2, 6), (3, 8), (4, 12)), stric
 # nearer than ``radius`` there.  (A quarter cut the horizons short at a 1 m radius 3.5 m
 # off, 150 pixels high: 0.01 lighter creases.)
 MAX_REACH_SHARE = 0.5
+# The guard band: the depth and normals pass draws this share of the images' size beyond each
+# side of the view (the same pixels' size, a wider frustum), so what occludes a pixel near
+# the edge of the screen is there to be found.  Only that pass is wider (its pixels cost
+# least); the find and filter passes run over the view's own pixels.
+GUARD_SHARE = 0.1
 _PASS = PassState()
 
 
@@ -84,8 +92,9 @@ class _Targets:
     """One size's images (half the view's, or all of it): the depth and normals pass's, the
     occlusion found and the shares the scene pass reads."""
 
-    size: tuple[int, int]          # the images' (half the view's, or the view's)
+    size: tuple[int, int]          # the found and shares images' (half the view's, or the view's)
     view_size: tuple[int, int]
+    margin: tuple[int, int]        # the guard band, each side: the depth and normals are size + 2 margin
     depth: moderngl.Texture
     normals: moderngl.Texture
     prepass: moderngl.Framebuffer
@@ -99,6 +108,20 @@ class _Targets:
             release_framebuffer(framebuffer)
         for texture in (self.depth, self.normals, self.found, self.shares):
             texture.release()
+
+
+def _guarded(view: View, size: tuple[int, int], margin: tuple[int, int]) -> View:
+    """``view`` widened by ``margin`` pixels of an image of ``size`` on each side: the same
+    eye and pixel size, the frustum scaled out (x and y of the projection's clip space by
+    size / (size + 2 margin), an off-centre shift with them)."""
+    wide = (size[0] + 2 * margin[0], size[1] + 2 * margin[1])
+    sx, sy = size[0] / wide[0], size[1] / wide[1]
+    proj = glm.mat4(view.proj)
+    proj[0, 0], proj[2, 0] = proj[0, 0] * sx, proj[2, 0] * sx
+    proj[1, 1], proj[2, 1] = proj[1, 1] * sy, proj[2, 1] * sy
+    return View(view=view.view, proj=proj, eye=view.eye, size=wide, name=f"{view.name} (occlusion)",
+                clip_plane=view.clip_plane, mirrored=view.mirrored, skip=view.skip, hide=view.hide,
+                kinds=view.kinds, layers=view.layers)
 
 
 class ScreenOcclusion:
@@ -142,17 +165,19 @@ class ScreenOcclusion:
             return kept
         self.release_targets()
         ctx = self.ctx
-        check_target_size(ctx, size, "ambient occlusion's images")
-        depth = ctx.depth_texture(size)
+        margin = (round(GUARD_SHARE * size[0]), round(GUARD_SHARE * size[1]))
+        guarded = (size[0] + 2 * margin[0], size[1] + 2 * margin[1])
+        check_target_size(ctx, guarded, "ambient occlusion's images")
+        depth = ctx.depth_texture(guarded)
         depth.compare_func = ""  # read as distances, not compared
-        normals = ctx.texture(size, 4)
+        normals = ctx.texture(guarded, 4)
         found = ctx.texture(size, 2, dtype="f2")
         shares = ctx.texture(size, 4, dtype="f2")
         for texture in (depth, normals, found, shares):
             texture.filter = (moderngl.NEAREST, moderngl.NEAREST)
             texture.repeat_x = texture.repeat_y = False
         depth.filter = (moderngl.LINEAR, moderngl.LINEAR)  # the find reads it between texels (texelFetch elsewhere)
-        self._targets = _Targets(size, view_size, depth, normals, ctx.framebuffer([normals], depth), found,
+        self._targets = _Targets(size, view_size, margin, depth, normals, ctx.framebuffer([normals], depth), found,
                                  ctx.framebuffer([found]), shares, ctx.framebuffer([shares]))
         return self._targets
 
@@ -163,13 +188,15 @@ class ScreenOcclusion:
         targets = self._targets_for(view.size, settings.half_resolution)
         find, smooth = self._programs(settings.quality)
         width, height = targets.size
-        # 1. Depth and normals, at the images' size (the view's projection, fewer pixels).
-        self.scene_pass.draw_depth_normals(view, targets.prepass, targets.size)
-        proj = view.proj
-        # What both passes read to put a depth texel back in the view's space (view_depth.glsl).
+        # 1. Depth and normals, at the images' size, with the guard band about them.
+        guard = _guarded(view, targets.size, targets.margin)
+        self.scene_pass.draw_depth_normals(guard, targets.prepass, guard.size)
+        proj = guard.proj
+        # What both passes read to put a depth texel back in the view's space (view_depth.glsl),
+        # and where the view's pixels start in the guarded images.
         unproject = {"unproject": (float(proj[0][0]), float(proj[1][1]), float(proj[2][0]), float(proj[2][1])),
                      "unproject_z": (float(proj[2][2]), float(proj[3][2])),
-                     "depth_size": (float(width), float(height))}
+                     "depth_size": (float(guard.size[0]), float(guard.size[1])), "margin": targets.margin}
         rotation = glm.mat3(view.view).to_bytes()
         # 2. The occlusion found.
         targets.found_framebuffer.use()
@@ -181,7 +208,7 @@ class ScreenOcclusion:
             program[name].value = value
         program["view_rotation"].write(rotation)
         program["radius"].value = settings.radius
-        program["pixels_per_metre"].value = float(proj[1][1]) * 0.5 * height
+        program["pixels_per_metre"].value = float(proj[1][1]) * 0.5 * guard.size[1]
         program["max_radius_pixels"].value = max(MAX_REACH_SHARE * height, float(QUALITY_SAMPLES[settings.quality][1]))
         find.render(moderngl.TRIANGLES, vertices=3)
         # 3. Filtered into the shares.
