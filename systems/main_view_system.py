@@ -43,6 +43,7 @@ class MainViewSystem(esper.Processor):
         self._options: tuple[tuple, SceneOptions] = (((), ()), TREE_ROOT)  # (what it was made from, the options)
         self.occlusion = True  # the debug overlay's toggle: off, no camera's AmbientOcclusion is drawn
         self.occluded: AmbientOcclusion | None = None  # the one drawn this frame (the overlay's line)
+        self._occluded_options: tuple[SceneOptions | None, SceneOptions] = (None, TREE_ROOT)  # (root's, with AO)
 
     def process(self, dt: float) -> None:
         world = self.world
@@ -71,7 +72,11 @@ class MainViewSystem(esper.Processor):
         self.occluded = occlusion
         if occlusion is not None:  # found before the view is drawn: its shading reads it
             self.renderer.occlusion.draw(views.main, occlusion)
-            views.options = replace(views.options, occlusion=True)
+            base, occluded = self._occluded_options
+            if base is not views.options:  # (made again only when the root's own options are)
+                occluded = replace(views.options, occlusion=True)
+                self._occluded_options = (views.options, occluded)
+            views.options = occluded
         elif self.renderer.screen_occlusion is not None:
             self.renderer.occlusion.release_targets()  # no camera asks for it now
         self.renderer.scene_pass.draw([views.main], targets, views.options)

@@ -363,3 +363,30 @@ def test_the_debug_view_shows_the_occlusion_alone(scene):
     assert np.abs(shown - want[..., None]).max() <= 1
     assert shown.min() < 150 and shown.max() == 255   # the crease, and the open floor and sky
     assert not np.array_equal(shown, picture)
+
+
+def test_a_still_scene_finds_its_occlusion_once(scene):
+    """While neither the camera nor what it sees moves, the three passes are not run again
+    (the image stands); a box moved, the occlusion follows it: the frame is a fresh engine's
+    of the box where it now is."""
+    names = {}
+
+    def build(world, at):
+        names.update(_room(world, AmbientOcclusion()))
+        names["box"] = world.spawn(Transform(position=at), MeshRef(box((0.4, 0.4, 0.4))),
+                                   Material(color=GREY, roughness=1.0))
+
+    runner = scene(lambda world: build(world, (-0.4, 0.2, -0.5)), SIZE)
+    runner.engine.renderer.antialias = "off"
+    runner.frame()
+    first = runner.stats.passes
+    still = runner.frame()
+    assert runner.stats.passes == first - 3   # depth and normals, find, filter: not drawn again
+    runner.world.get(names["box"], Transform).position = glm.vec3(-1.2, 0.2, -0.5)
+    moved = runner.frame()
+    assert runner.stats.passes == first
+    fresh = scene(lambda world: build(world, (-1.2, 0.2, -0.5)), SIZE)
+    fresh.engine.renderer.antialias = "off"
+    fresh.frame()
+    assert np.abs(moved.astype(np.int16) - fresh.frame().astype(np.int16)).max() <= 1
+    assert np.abs(moved.astype(np.int16) - still.astype(np.int16)).max() > 10

@@ -109,18 +109,9 @@ class PresentPass:
         vao = self._post.get(key)
         if vao is None:
             defines = {"POST": "1", "TONEMAP_CURVE": str(TONEMAP_CURVES.index(curve))}
-            if bloom:
-                defines["BLOOM"] = "1"
-            if auto:
-                defines["AUTO_EXPOSURE"] = "1"
-            if luma:
-                defines["LUMA_IN_ALPHA"] = "1"
-            if grade:
-                defines["GRADE"] = "1"
-            if lut:
-                defines["LUT"] = "1"
-            if vignette:
-                defines["VIGNETTE"] = "1"
+            defines.update((name, "1") for name, on in (("BLOOM", bloom), ("AUTO_EXPOSURE", auto),
+                                                        ("LUMA_IN_ALPHA", luma), ("GRADE", grade), ("LUT", lut),
+                                                        ("VIGNETTE", vignette)) if on)
             vao = self._post[key] = self._fullscreen("present.frag", **defines)
             vao.program["hdr_image"].value = PRESENT_UNIT
             if bloom:

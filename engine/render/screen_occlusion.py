@@ -136,6 +136,9 @@ class ScreenOcclusion:
         self._finds: dict[str, moderngl.VertexArray] = {}  # by quality
         self._filter: moderngl.VertexArray | None = None
         self._programs_of = -1  # the shader library's reloads when they were made
+        # What the shares image was last found from (``_still_key``): equal, the passes are
+        # not run again and the image stands.
+        self._found_from: tuple | None = None
 
     def _programs(self, quality: str) -> tuple[moderngl.VertexArray, moderngl.VertexArray]:
         shaders = self.gpu.shaders
@@ -186,6 +189,11 @@ class ScreenOcclusion:
         view's size, or all of it), bound for the main view's draw."""
         gpu, ctx = self.gpu, self.ctx
         targets = self._targets_for(view.size, settings.half_resolution)
+        key = self._still_key(view, settings)
+        if key == self._found_from:  # nothing it is found from changed: the image stands
+            gpu.screen_occlusion = targets.shares
+            return targets.shares
+        self._found_from = key
         find, smooth = self._programs(settings.quality)
         width, height = targets.size
         # 1. Depth and normals, at the images' size, with the guard band about them.
@@ -234,11 +242,22 @@ class ScreenOcclusion:
         """Images held now (4 while a camera asks for occlusion, else 0)."""
         return 0 if self._targets is None else 4
 
+    def _still_key(self, view: View, settings: AmbientOcclusion) -> tuple:
+        """What the occlusion is found from: every instance row, batch and texture the depth
+        pass draws (``Gpu.scene_version``, moved on by each upload of them), the shaders, the
+        view's Camera block (pose, projection, layers, the entities it leaves out) and size,
+        and the settings.  A still scene (the camera and what it sees not moving) finds it
+        once."""
+        return (self.gpu.scene_version, self.gpu.shaders.reloads, view.camera_block(), view.size,
+                settings.radius, settings.intensity, settings.direct_light, settings.half_resolution,
+                settings.quality)
+
     def release_targets(self) -> None:
         """Let the images go (no camera asks for occlusion, or another size)."""
         if self._targets is not None:
             self._targets.release()
             self._targets = None
+        self._found_from = None
         self.gpu.screen_occlusion = None
 
     def _release_programs(self) -> None:
