@@ -9,7 +9,8 @@ Each case is run in two engines of the same level, in lockstep (as
 (``keep_still_views = False``) draws its whole tree every frame, and draws every shadow map
 whole every frame too (its shadow stage's record of what each map was drawn from wiped before
 each frame), so a map kept on a still frame, or drawn again only where casters moved, must
-equal one drawn from scratch; and it plans each reflection level after its parent's claims
+equal one drawn from scratch (its ambient occlusion found every frame too:
+``ScreenOcclusion.keep_still``); and it plans each reflection level after its parent's claims
 (``ViewTree.plan_ahead = False``), so levels the keeping engine planned ahead
 (``plan_ahead.plan_ahead``) must come out the same.  A case runs exact or predicted
 visibility (``ReflectionSystem.visibility``) in both.  The level, around the pair,
@@ -360,6 +361,7 @@ class StillFuzzer:
         self.drawing = _Side(ctx)
         self.drawing.engine.reflection_system.keep_still_views = False
         self.drawing.redraw_shadows = True
+        self.drawing.engine.renderer.occlusion.keep_still = False  # its ambient occlusion found every frame
         self.drawing.engine.reflection_system.tree.plan_ahead = False  # each level planned after its parent's claims
         for _ in range(2):
             self.keeping.frame()

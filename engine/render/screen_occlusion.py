@@ -139,6 +139,7 @@ class ScreenOcclusion:
         # What the shares image was last found from (``_still_key``): equal, the passes are
         # not run again and the image stands.
         self._found_from: tuple | None = None
+        self.keep_still = True  # False: found every frame (what the still fuzz compares with)
 
     def _programs(self, quality: str) -> tuple[moderngl.VertexArray, moderngl.VertexArray]:
         shaders = self.gpu.shaders
@@ -190,7 +191,7 @@ class ScreenOcclusion:
         gpu, ctx = self.gpu, self.ctx
         targets = self._targets_for(view.size, settings.half_resolution)
         key = self._still_key(view, settings)
-        if key == self._found_from:  # nothing it is found from changed: the image stands
+        if self.keep_still and key == self._found_from:  # nothing it is found from changed: the image stands
             gpu.screen_occlusion = targets.shares
             return targets.shares
         self._found_from = key
