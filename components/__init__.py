@@ -8,6 +8,7 @@ from components.post import Bloom, ColorGrading, Tonemap, Vignette
 from components.probe import ReflectionProbe
 from components.rendering import Emissive, Material, MeshRef, Reflective, Refractive, Skybox
 from components.screen import ScreenPanel, ScreenText
+from components.screen_reflections import ScreenReflections
 from components.tracking import ComponentValueError, ComponentWarning, TrackedComponent
 from components.transform import Transform, euler_rotation, look_rotation, yaw_pitch_of, yaw_pitch_rotation
 from components.visibility import Visibility
@@ -17,7 +18,7 @@ __all__ = [
     "AmbientOcclusion", "Bloom", "Camera", "ColorGrading", "ComponentValueError", "ComponentWarning",
     "DirectionalLight", "Emissive", "FlyController", "Fog", "HemisphereLight", "Material",
     "MeshRef", "Mirror", "PointLight", "Portal", "PortalClone", "ReflectionProbe", "Reflective", "Refractive",
-    "ScreenPanel", "ScreenText", "Skybox", "Slice",
+    "ScreenPanel", "ScreenReflections", "ScreenText", "Skybox", "Slice",
     "Tonemap", "TrackedComponent", "Transform", "Traveller", "Vignette", "Visibility", "Water",
     "euler_rotation", "look_rotation", "yaw_pitch_of", "yaw_pitch_rotation",
 ]

@@ -113,6 +113,17 @@ layout(location = 0) out vec4 out_color;
 layout(location = 1) out uint out_surface;  // the entity drawn here
 layout(location = 2) out uint out_seen;     // the entity finally seen here (reflections overwrite)
 layout(location = 3) out uint out_node;
+#ifdef SCREEN_REFLECTION
+// A root view drawn for screen-space reflections (engine/render/screen_reflections.py): what
+// its composite needs to put the screen's reflection in place of the sky's or probe's.  The
+// colour is linear in the radiance the reflect slot reflects, colour = rest + W x radiance,
+// so with W the composite takes W x radiance out and puts W x what the screen shows in.
+layout(location = 4) out vec4 out_reflect_weight;  // rgb: W (0: nothing reflected); a: the roughness
+layout(location = 5) out vec4 out_reflect_added;   // rgb: W x the sky's or probe's radiance; a: the entity's bits 0-10
+layout(location = 6) out vec4 out_reflect_normal;  // rgb: the shading normal (world); a: the entity's bits 11-21
+vec3 reflect_weight = vec3(0.0);    // W so far: set by the reflect slot, scaled by what follows it
+vec3 reflect_radiance = vec3(0.0);  // the sky's or probe's radiance along the reflected ray
+#endif
 
 struct Surface {
     vec3 position;
@@ -216,8 +227,12 @@ vec3 sample_environment(vec3 direction, float lod, float roughness) {
 
 vec3 reflect_skybox(vec3 color, Surface s) {
     // Sample the sky along reflect(view, normal); mix by the instance's amount.
-    vec3 env = sample_environment(s.reflect_dir, s.reflect_lod, s.roughness) * v_tint.rgb * s.occlusion;
-    return mix(color, env, v_reflect.x);
+    vec3 radiance = sample_environment(s.reflect_dir, s.reflect_lod, s.roughness);
+#ifdef SCREEN_REFLECTION
+    reflect_weight = v_tint.rgb * s.occlusion * v_reflect.x;
+    reflect_radiance = radiance;
+#endif
+    return mix(color, radiance * v_tint.rgb * s.occlusion, v_reflect.x);
 }
 
 // The probe uniforms, box projection, the level a roughness reads and probe blending.
@@ -227,8 +242,14 @@ vec3 reflect_probe(vec3 color, Surface s) {
     // A cube map captured around the object (engine/render/probes.py), blurred by roughness
     // and weighted by GGXReflect with the material's F0: a metal tints what it reflects
     // (brass is golden), a dielectric reflects most at grazing angles.
-    vec3 env = probe_radiance(s.position, s.reflect_dir, s.reflect_lod, s.roughness) * s.occlusion;
-    vec3 reflected = ggx_reflect(s.normal, s.reflect_dir, s.to_eye, env, s.f0, s.roughness);
+    vec3 radiance = probe_radiance(s.position, s.reflect_dir, s.reflect_lod, s.roughness);
+    vec3 reflected = ggx_reflect(s.normal, s.reflect_dir, s.to_eye, radiance * s.occlusion, s.f0, s.roughness);
+#ifdef SCREEN_REFLECTION
+    // (ggx_reflect is the radiance times a factor: that factor, of a radiance of 1.)
+    reflect_weight = ggx_reflect(s.normal, s.reflect_dir, s.to_eye, vec3(s.occlusion), s.f0, s.roughness)
+                     * v_tint.rgb * v_reflect.x;
+    reflect_radiance = radiance;
+#endif
     return mix(color, reflected * v_tint.rgb, v_reflect.x);
 }
 
@@ -322,6 +343,12 @@ void main() {
 #ifdef MASKED
     if (texelFetch(node_map, ivec2(gl_FragCoord.xy), 0).r != node_index) discard;  // (the level's own size)
 #endif
+#ifdef SCREEN_REFLECTION
+    // Nothing reflected, for the early returns (an unlit mirror: its composite paints it).
+    out_reflect_weight = vec4(0.0);
+    out_reflect_added = vec4(0.0);
+    out_reflect_normal = vec4(0.0);
+#endif
 #ifdef UNLIT_SURFACE
     // A mirror the view tree's composites paint over at weight 1 (unlit_mirrors.shading_replaced):
     // its colour is never seen, so only its depth and ids count (the claims below read them).
@@ -393,6 +420,21 @@ void main() {
     vec3 color = mapped_reflection(SLOT_REFLECT, lit, apply_reflect(SLOT_REFLECT, lit, s), metal_share);
     color = apply_refract(SLOT_REFRACT, color, s);
     color = apply_emissive(SLOT_EMISSIVE, color, s);
+#ifdef SCREEN_REFLECTION
+    // W through what follows the reflect slot: the map's metal share (mapped_reflection mixes
+    // by it), the surface's own alpha where it refracts (refract_environment mixes by it), the
+    // fog's transmittance (fogged mixes by it); emission adds and leaves W as it is.
+#ifdef METALLIC_ROUGHNESS_MAP
+    reflect_weight *= metal_share;
+#endif
+    if (SLOT_REFRACT == REFRACT_ENVIRONMENT || SLOT_REFRACT == REFRACT_SOLID) reflect_weight *= s.alpha;
+#ifdef FOG
+    reflect_weight *= exp(-fog_depth(fog_start(VIEW_EYE, VIEW_ENTRY, v_world_pos), v_world_pos));
+#endif
+    out_reflect_weight = vec4(reflect_weight, s.roughness);
+    out_reflect_added = vec4(hdr_store(reflect_weight * reflect_radiance), float(v_slots.w & 2047u));
+    out_reflect_normal = vec4(s.normal, float((v_slots.w >> 11u) & 2047u));
+#endif
 #ifdef FOG
     // The air between where this view's rays enter it (its eye, or the surface it looks out
     // of) and the point; a composite fogs the stretch before (fog.glsl).

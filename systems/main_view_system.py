@@ -1,7 +1,9 @@
 """Main: the active camera's view, drawn by the scene pass into the main view tree's level 0
 (all but its transparent slot, which the reflect stage's tree draws over the reflections),
 after its ambient occlusion where the camera has an ``AmbientOcclusion``
-(``engine/render/screen_occlusion.py``).
+(``engine/render/screen_occlusion.py``), and with what its screen-space reflections need where
+it has ``ScreenReflections`` (``engine/render/screen_reflections.py``: the reflect stage's
+tree composites them before the view's glass).
 
 It publishes the view and the targets it drew into as ``world.resources[FrameViews]``
 (``main`` None when there is no active camera or the output has no pixels, a minimised
@@ -17,6 +19,7 @@ from dataclasses import replace
 import esper
 
 from components.ambient import AmbientOcclusion
+from components.screen_reflections import ScreenReflections
 from engine.core.errors import NoCameraWarning
 from engine.core.frame_io import Output
 from engine.core.world import World
@@ -43,12 +46,15 @@ class MainViewSystem(esper.Processor):
         self._options: tuple[tuple, SceneOptions] = (((), ()), TREE_ROOT)  # (what it was made from, the options)
         self.occlusion = True  # the debug overlay's toggle: off, no camera's AmbientOcclusion is drawn
         self.occluded: AmbientOcclusion | None = None  # the one drawn this frame (the overlay's line)
-        self._occluded_options: tuple[SceneOptions | None, SceneOptions] = (None, TREE_ROOT)  # (root's, with AO)
+        # (the root's options, occlusion, reflections, the options drawn with): the last made
+        self._screen_options: tuple[SceneOptions | None, bool, bool, SceneOptions] = (None, False, False, TREE_ROOT)
+        self.reflections = True  # the debug overlay's toggle: off, no camera's ScreenReflections is drawn
+        self.reflected: ScreenReflections | None = None  # the one drawn this frame (the overlay's line)
 
     def process(self, dt: float) -> None:
         world = self.world
         views = world.resources[FrameViews] = FrameViews()
-        self.occluded = None
+        self.occluded = self.reflected = None
         output: Output | None = world.resources.get(Output)
         camera = active_camera_parts(world)
         if camera is None and output is not None and not self._said_no_camera:
@@ -58,8 +64,10 @@ class MainViewSystem(esper.Processor):
                 "active=True; engine.spawn_camera makes one): frames show nothing until there is one"), stacklevel=2)
         self._said_no_camera = camera is None
         if output is None or camera is None or output.size[0] <= 0 or output.size[1] <= 0:
-            if camera is None and self.renderer.screen_occlusion is not None:
-                self.renderer.occlusion.release_targets()  # its camera went: its images go too
+            if camera is None:  # its camera went: its images go too
+                if self.renderer.screen_occlusion is not None:
+                    self.renderer.occlusion.release_targets()
+                self.renderer.screen_reflections.release_targets()
             return  # minimised window or nothing to look through
         _, cam, cam_t = camera
         levels = self.renderer.levels  # the main view tree's targets (the renderer owns them)
@@ -72,14 +80,26 @@ class MainViewSystem(esper.Processor):
         self.occluded = occlusion
         if occlusion is not None:  # found before the view is drawn: its shading reads it
             self.renderer.occlusion.draw(views.main, occlusion)
-            base, occluded = self._occluded_options
-            if base is not views.options:  # (made again only when the root's own options are)
-                occluded = replace(views.options, occlusion=True)
-                self._occluded_options = (views.options, occluded)
-            views.options = occluded
         elif self.renderer.screen_occlusion is not None:
             self.renderer.occlusion.release_targets()  # no camera asks for it now
+        reflections = self.world.try_get(camera[0], ScreenReflections) if self.reflections else None
+        self.reflected = reflections
+        if reflections is not None:  # the view draws what their composite reads (the reflect stage's)
+            self.renderer.screen_reflections.begin(views.main, targets, reflections)
+        else:
+            self.renderer.screen_reflections.release_targets()  # no camera asks for them now
+        if occlusion is not None or reflections is not None:
+            views.options = self._screen(views.options, occlusion is not None, reflections is not None)
         self.renderer.scene_pass.draw([views.main], targets, views.options)
+
+    def _screen(self, options: SceneOptions, occlusion: bool, reflections: bool) -> SceneOptions:
+        """The root's ``options`` with ambient occlusion and screen reflections as asked:
+        made again only when one of them changes (a frame's options are compared by identity downstream)."""
+        base, occluded, reflected, made = self._screen_options
+        if base is not options or occluded != occlusion or reflected != reflections:
+            made = replace(options, occlusion=occlusion, reflections=reflections)
+            self._screen_options = (options, occlusion, reflections, made)
+        return made
 
     def _root_options(self) -> SceneOptions:
         """The main view's scene options: the root of the reflect stage's tree, which draws

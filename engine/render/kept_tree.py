@@ -176,7 +176,7 @@ class StillTree:
                 self.passes.draw_fallbacks(levels[0], child, prepared, parent_is_root=True)
             if kept.composite is not None:
                 self.passes.composite_level(levels[0], levels[1], kept.composite, parent_is_root=True)
-            self.scene_pass.draw_transparent([root or kept.result.views[0].view], levels[0], root_options)
+            self.scene_pass.finish_root(root or kept.result.views[0].view, levels[0], root_options)
             if kept.fallbacks is not None or kept.composite is not None:
                 self.renderer.flush()
         # The render's counts (fallbacks too: those drawn now are of the render's, the rest kept).
@@ -203,12 +203,11 @@ class StillTree:
                 passes.draw_fallbacks(targets, *drawn, parent_is_root=depth == 0)
             if depth < len(refill.composites):
                 passes.composite_level(targets, levels[depth + 1], refill.composites[depth], parent_is_root=depth == 0)
-            if refill.see_through:
-                if depth:
-                    views, options, conditions = refill.transparent[depth]
-                    self.scene_pass.draw_transparent(views, targets, options, conditions)
-                else:
-                    self.scene_pass.draw_transparent([root], targets, root_options)
+            if not depth:  # the screen's reflections, then the glass (none: nothing drawn)
+                self.scene_pass.finish_root(root, targets, root_options)
+            elif refill.see_through:
+                views, options, conditions = refill.transparent[depth]
+                self.scene_pass.draw_transparent(views, targets, options, conditions)
         self.renderer.flush()
         ends_before = self.ends_state(levels[0].size)
         self.ends.keep(levels[0], root, refill.seen, compare=True)

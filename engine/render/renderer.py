@@ -32,6 +32,7 @@ from engine.render.present import ANTIALIAS_MODES, PresentPass
 from engine.render.probes import ProbeCaptures
 from engine.render.scene_pass import ScenePass
 from engine.render.screen_occlusion import ScreenOcclusion
+from engine.render.screen_reflections import ScreenReflectionPass
 from engine.render.shadows import ShadowMaps
 from engine.render.sky import SkyModel, flat_cube, upload_cube
 from engine.render.sky_bake import SkyBake
@@ -93,7 +94,8 @@ class Renderer(Gpu):
         self._antialias = "fxaa"
         self.irradiance = IrradianceTable(self)  # the probes' diffuse light (engine/render/irradiance.py)
         self.shadows = ShadowMaps(self)
-        self.scene_pass = ScenePass(self, self.shadows, self.irradiance)
+        self.screen_reflections = ScreenReflectionPass(self)  # the camera's ScreenReflections
+        self.scene_pass = ScenePass(self, self.shadows, self.irradiance, self.screen_reflections)
         self.probes = ProbeCaptures(self, self.scene_pass, self.irradiance)
         self.occlusion = ScreenOcclusion(self, self.scene_pass)  # the camera's AmbientOcclusion
         self.sky_bake = SkyBake(self)  # a generated sky's cube map, drawn (engine/render/sky_bake.py)
@@ -336,7 +338,8 @@ class Renderer(Gpu):
                 "probe_levels": sum(len(s) for s in self.probes._stacks.values()),
                 "programs": len(self.shaders._programs), "post_targets": self.present_pass.post_target_count(),
                 "irradiance_rows": len(self.irradiance.rows),
-                "occlusion_targets": self.occlusion.target_count()}
+                "occlusion_targets": self.occlusion.target_count(),
+                "reflection_targets": self.screen_reflections.target_count()}
 
     # --- frame -----------------------------------------------------------------------------
     @property
@@ -460,6 +463,7 @@ class Renderer(Gpu):
         self.irradiance.release()
         self.sky_bake.release()
         self.occlusion.release()
+        self.screen_reflections.release()
         self.scene_pass.release()
         self.present_pass.release()
         if self.text_pass is not None:

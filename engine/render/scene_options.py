@@ -25,6 +25,9 @@ class SceneOptions:
     # Multiply the active camera's ambient occlusion (Gpu.screen_occlusion, found for this
     # view by engine/render/screen_occlusion.py) into the opaque draws' light from all round.
     occlusion: bool = False
+    # Draw into the screen reflections' framebuffer with the builds that write what their
+    # composite reads (engine/render/screen_reflections.py: the main view's opaque draws).
+    reflections: bool = False
 
 
 ROOT_VIEW = SceneOptions()

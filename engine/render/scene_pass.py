@@ -103,6 +103,7 @@ from engine.render.views import View, union_rect
 
 if TYPE_CHECKING:
     from engine.render.instances import InstanceBatch
+    from engine.render.screen_reflections import ScreenReflectionPass
 
 _ALWAYS = nullcontext()  # a view drawn whatever its claim counted
 _SCENE = PassState(depth_func="<", cull=True, clips=SCENE_CLIPS)
@@ -125,10 +126,14 @@ class ScenePass:
     sky's (``sky_draw``).  Every pass binds the shadow maps (``shadows``) and the probes'
     irradiance (``irradiance``) it shades with."""
 
-    def __init__(self, renderer: Gpu, shadows: ShadowMaps, irradiance: IrradianceTable) -> None:
+    def __init__(self, renderer: Gpu, shadows: ShadowMaps, irradiance: IrradianceTable,
+                 screen_reflections: ScreenReflectionPass | None = None) -> None:
         self.renderer = renderer
         self.shadows = shadows
         self.irradiance = irradiance
+        # The active camera's screen-space reflections: the main view draws into its
+        # framebuffer (SceneOptions.reflections), its composite runs in finish_root.
+        self.screen_reflections = screen_reflections
         self.ctx = renderer.ctx
         self.sky_draw = SkyDraw(renderer)  # the sky's triangle behind every view
         self.programs = ScenePrograms(renderer, shadows)  # the builds and their per-draw uniforms
@@ -308,9 +313,11 @@ class ScenePass:
             # Every image: colour and alpha 0, ids 0, the node image 0 (a root is view 0 of
             # its tree), depth far.  The views then write colour and ids, never the node image.
             # Each image with the clear of its kind: glClear leaves integer images undefined.
-            targets.framebuffer.use()
+            # (The main view drawn for screen reflections: its framebuffer, their images too.)
+            framebuffer = self._view_framebuffer(targets, options, targets.framebuffer)
+            framebuffer.use()
             apply_pass_state(self.ctx, _SCENE, viewport)
-            renderer.raw_gl.clear_level(targets.framebuffer)
+            renderer.raw_gl.clear_level(framebuffer)
         # Per-view draws start with the first view's scissor (set once, not reset then set).
         self._begin(views, targets, options, _BATCHED_SCENE if options.batched else _SCENE, run)
         if options.batched:
@@ -343,6 +350,15 @@ class ScenePass:
         renderer.stats.passes += 1
         if renderer.debug:
             renderer.checkpoint(f"depth and normals ({view.name})")
+
+    def finish_root(self, root: View, targets: RenderTargets, options: SceneOptions) -> None:
+        """What a view tree does last in its root ``root`` (drawn into ``targets`` with
+        ``options``), once the levels below are composited into it: the screen-space
+        reflections, where the main view was drawn for them (``ScreenReflectionPass``), then
+        the transparent slot (``draw_transparent``), so glass goes over both."""
+        if self.screen_reflections is not None:
+            self.screen_reflections.composite(targets)
+        self.draw_transparent([root], targets, options)
 
     def draw_transparent(self, views: Sequence[View], targets: RenderTargets, options: SceneOptions,
                          conditions: Sequence[moderngl.Query] | None = None) -> None:
@@ -393,11 +409,22 @@ class ScenePass:
         colour, surface and seen ids and depth bound with ``state`` (per-view passes at the
         first view's scissor), the node image where masked, the lights, shadows, irradiance,
         sky and the albedo's sampler (once a ``run``: ``_bind_pass_wide``)."""
-        targets.view_framebuffer.use()  # colour, surface and seen ids, depth
+        self._view_framebuffer(targets, options, targets.view_framebuffer).use()  # colour, surface and seen ids, depth
         apply_pass_state(self.ctx, state, (0, 0, *targets.size), None if options.batched else views[0].scissor)
         if options.masked:
             bind_texture(self.ctx, targets.node, NODE_UNIT)
         self._bind_pass_wide(options, run)
+
+    def _view_framebuffer(self, targets: RenderTargets, options: SceneOptions,
+                          plain: moderngl.Framebuffer) -> moderngl.Framebuffer:
+        """``plain``, or for the main view drawn for screen reflections the framebuffer of
+        the level's images and theirs (``ScreenReflectionPass.framebuffer``: its node image
+        too, which a root writes 0 to, as its clear did)."""
+        if options.reflections and self.screen_reflections is not None:
+            framebuffer = self.screen_reflections.framebuffer
+            if framebuffer is not None:
+                return framebuffer
+        return plain
 
     def _bind_pass_wide(self, options: SceneOptions, run: object | None) -> None:
         """The bindings every scene pass draws with: the Lights block, the shadow maps and
@@ -488,6 +515,9 @@ class ScenePass:
         if options.occlusion and renderer.screen_occlusion is not None:
             screen = "occluded"  # (a root view's one: the image is its pixels')
             bind_texture(ctx, renderer.screen_occlusion, SCREEN_OCCLUSION_UNIT)
+        if options.reflections and self.screen_reflections is not None \
+                and self.screen_reflections.framebuffer is not None:
+            screen = f"{screen} reflected".lstrip()  # (into _view_framebuffer's: the weights too)
         for index, view in enumerate(views):
             if now:  # the slot, or (a tree's view) its part up to its see-through surfaces
                 if options.transparent:

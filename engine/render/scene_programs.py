@@ -89,7 +89,8 @@ class ScenePrograms:
         self.written: dict[int, list] = {}
         self.last_own: dict[int, tuple] = {}  # program -> the batch values it last drew with
         # The ``screen`` builds drawn so far ("" and, once a camera has ambient occlusion,
-        # "occluded" and "depth_normals"): ``prepare`` builds a batch's in each of them.
+        # "occluded" and "depth_normals", or screen reflections, "reflected"): ``prepare``
+        # builds a batch's in each of them.
         self.screens: set[str] = {""}
 
     def program(self, variants: tuple[int, int, int] | None = None, invocations: int = 0,
@@ -125,7 +126,10 @@ class ScenePrograms:
         ``screen``: "" the plain builds; "occluded" (a root view with ambient occlusion)
         ``SCREEN_OCCLUSION``: it multiplies the screen's occlusion image
         (``Gpu.screen_occlusion``) into its light from all round (an unlit mirror, which
-        shades nothing, keeps its plain build); "depth_normals" ``DEPTH_NORMALS``: depth and
+        shades nothing, keeps its plain build); "reflected" (a root view with screen
+        reflections) ``SCREEN_REFLECTION``: it writes the reflection's weight, what the sky
+        or probe added and the normal for the composite (``ScreenReflectionPass``), and
+        "occluded reflected" both; "depth_normals" ``DEPTH_NORMALS``: depth and
         the surface's normal only (occlusion's first pass), one build a cutout or not, whatever
         else the batch has."""
         if self.renderer.shaders.reloads != self.reloads_seen:
@@ -138,8 +142,8 @@ class ScenePrograms:
                 False, False
             material = (False, False, material[2], "", False)
             virtual, unlit, masked, shadowing, fogging = False, False, False, (), ()
-        elif unlit:
-            screen = ""
+        elif unlit:  # shades nothing: no occlusion read (it still writes "nothing reflected")
+            screen = "reflected" if "reflected" in screen else ""
         self.screens.add(screen)
         key = (invocations, layered, variants, normal_mapped, checker, material, probe_blend, virtual,
                ambient_probes, probe_rest, unlit, masked, screen, shadowing, fogging)
@@ -174,10 +178,14 @@ class ScenePrograms:
                 defines["UNLIT_SURFACE"] = "1"
             if masked:  # the claimed pixels only (a reflection level's views)
                 defines["MASKED"] = "1"
-            if screen == "occluded":  # the screen's ambient occlusion (a root view's)
-                defines["SCREEN_OCCLUSION"] = "1"
-            elif screen == "depth_normals":
+            if screen == "depth_normals":
                 defines["DEPTH_NORMALS"] = "1"
+            else:
+                words = screen.split()
+                if "occluded" in words:  # the screen's ambient occlusion (a root view's)
+                    defines["SCREEN_OCCLUSION"] = "1"
+                if "reflected" in words:  # what the screen reflections' composite reads (a root view's)
+                    defines["SCREEN_REFLECTION"] = "1"
             defines.update(shadowing)
             defines.update(fogging)
             geometry = None
@@ -263,9 +271,10 @@ class ScenePrograms:
                                                    batch.probe_blend, probes, bool(batch.rest_probe), dark, masked))
             for screen in self.screens - {""}:  # a root view's (not masked, one view a draw)
                 for probes in ambient:
-                    batch.vao(self.program(batch.variants, 0, "", batch.normal_map is not None,
-                                           batch.checker is not None, _material_build(batch), batch.probe_blend,
-                                           probes, bool(batch.rest_probe), False, False, screen))
+                    for dark in unlit if "reflected" in screen.split() else (False,):  # (unlit: its own build)
+                        batch.vao(self.program(batch.variants, 0, "", batch.normal_map is not None,
+                                               batch.checker is not None, _material_build(batch), batch.probe_blend,
+                                               probes, bool(batch.rest_probe), dark, False, screen))
         return len(self.built) - before
 
     def record(self, batch: InstanceBatch, kind: tuple[int, str, bool, bool, bool, str], stamp: tuple,

@@ -193,7 +193,7 @@ class ViewTree:
                 self.ends.forget()
             if len(self.still.copies):  # (the pair whose levels were copied went mid-refill: let the copies go)
                 self.still.copies.release()
-            self.scene_pass.draw_transparent([root], levels[0], root_options)
+            self.scene_pass.finish_root(root, levels[0], root_options)
             return result
         before = self.still.before(root.size) if self.remember else None  # (what a kept frame adds again)
         walk = self._start(root, root_node, surfaces, settings, result)
@@ -489,12 +489,11 @@ class ViewTree:
             if depth < walk.level:
                 self.passes.composite_level(levels[depth], levels[depth + 1], composites[depth],
                                             parent_is_root=depth == 0)
-            if see_through:
-                if depth:
-                    step = steps[depth - 1]
-                    self.scene_pass.draw_transparent(step.views, step.targets, step.options, step.conditions)
-                else:
-                    self.scene_pass.draw_transparent([walk.root], levels[0], root_options)
+            if not depth:  # the screen's reflections, then the glass (none: nothing drawn)
+                self.scene_pass.finish_root(walk.root, levels[0], root_options)
+            elif see_through:
+                step = steps[depth - 1]
+                self.scene_pass.draw_transparent(step.views, step.targets, step.options, step.conditions)
         if walk.level:
             self.renderer.flush()  # the composites, level after level, to the GPU at once
 

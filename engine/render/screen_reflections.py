@@ -1,0 +1,236 @@
+"""Screen-space reflections of the active camera's view (``ScreenReflections`` on the camera):
+a surface that reflects the sky or a probe shows what the view itself drew along its
+reflected ray, where the ray finds it.
+
+Speculum draws forward, so the reflection is put in after shading, where the rest of the
+pixel's colour is known, by what the scene pass wrote beside it:
+
+1. **The main view's draw** (``begin``): its opaque batches draw with the
+   ``SCREEN_REFLECTION`` builds of ``scene.frag`` into the level's images and three more
+   (``framebuffer``): ``W``, the share of a radiance along the reflected ray that reaches
+   the pixel (the reflect slot's mix, tint, Fresnel and occlusion, scaled by what follows
+   it: a metallic map's share, a refracting surface's alpha, the fog), with the roughness;
+   ``W`` x the sky's or probe's radiance it reflected; and the shading normal.  A pixel's
+   colour is its other light plus ``W`` x that radiance, so the composite can take the one
+   reflection out and put another in.  The entity's id (22 bits, in the two spare channels)
+   says whose surface the three were written for.
+2. **The composite** (``composite``), once the view tree has composited the mirrors and
+   portals into the view and before it draws the glass (``ScenePass.draw_transparent``):
+   the view's colour is copied (with a mip chain, for rough surfaces) and each pixel with a
+   ``W`` marches its reflected ray across the view's depth image
+   (``shaders/screen_reflection.frag``: McGuire and Mara's perspective-correct screen-space
+   march, at most ``QUALITY_STEPS`` steps a ray, then the hit refined by halving); where it
+   hits, the pixel becomes ``colour + c (W x found - W x radiance)``, with ``c`` the
+   confidence (faded at the screen's edges, at the end of ``max_distance`` and towards
+   ``max_roughness``).  A polished floor so reflects what a mirror beside it shows; glass
+   drawn after keeps its own look over it.
+
+A pixel is left as it was where the ray leaves the screen, passes behind what is drawn by
+more than ``thickness``, meets a surface from behind, or reaches the sky; where glass or a
+see-through surface was drawn over it after its weights (the surface id there is another
+entity's); and in every view but the camera's own: mirror, portal and probe views show the
+probes' and the sky's reflections as before.
+
+The images are made at the first frame a camera asks for reflections, for the level's size,
+and released when no camera does (``release_targets``)."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import moderngl
+from pyglm import glm
+
+from components.screen_reflections import REFLECTION_QUALITIES, ScreenReflections
+from engine.render.bindings import (
+    REFLECTION_ADDED_UNIT,
+    REFLECTION_COLOR_UNIT,
+    REFLECTION_DEPTH_UNIT,
+    REFLECTION_NORMAL_UNIT,
+    REFLECTION_SURFACE_UNIT,
+    REFLECTION_WEIGHT_UNIT,
+    PassState,
+    apply_pass_state,
+    bind_sampler,
+    bind_texture,
+    forget_sampler,
+)
+from engine.render.targets import HDR_FORMAT, RenderTargets, release_framebuffer
+from engine.render.views import View
+
+if TYPE_CHECKING:
+    from engine.render.gpu import Gpu
+
+# ScreenReflections.quality -> (steps a ray across the screen at most, halvings of the hit
+# step): shaders/screen_reflection.frag's STEPS and REFINE.
+QUALITY_STEPS = dict(zip(REFLECTION_QUALITIES, ((16, 4), (32, 5), (64, 6)), strict=True))
+# A step that crosses a silhouette (the drawn depth jumps) is walked again in at most this
+# many parts (a pixel each, where the step is that long): the strip of a surface's edge
+# the ray meets only between two steps' ends (a box's top edge) is found.
+SILHOUETTE_STEPS = 8
+# The colour's mip chain for rough surfaces: at most this many levels above the image (a
+# cone 64 pixels wide; a surface rough enough to spread wider keeps the probe's reflection
+# by max_roughness long before).
+MAX_COLOR_LOD = 6
+_PASS = PassState()
+
+
+@dataclass
+class _Targets:
+    """The images that go with one set of the main view's level targets."""
+
+    level: RenderTargets
+    weight: moderngl.Texture
+    added: moderngl.Texture
+    normal: moderngl.Texture
+    framebuffer: moderngl.Framebuffer      # the level's images and the three: the main view's draw
+    color: moderngl.Texture                # the view's colour, copied for the composite, with mips
+    color_framebuffer: moderngl.Framebuffer
+    output: moderngl.Framebuffer           # the level's colour alone: the composite's target
+
+    def release(self) -> None:
+        for framebuffer in (self.framebuffer, self.color_framebuffer, self.output):
+            release_framebuffer(framebuffer)
+        for texture in (self.weight, self.added, self.normal, self.color):
+            texture.release()
+
+
+class ScreenReflectionPass:
+    """The active camera's screen-space reflections: ``begin`` before its view is drawn (the
+    draw then goes into ``framebuffer``), ``composite`` before its glass is."""
+
+    def __init__(self, gpu: Gpu) -> None:
+        self.gpu = gpu
+        self.ctx = gpu.ctx
+        self._targets: _Targets | None = None
+        self._programs: dict[str, moderngl.VertexArray] = {}  # by quality
+        self._programs_of = -1  # the shader library's reloads when they were made
+        self._depth_sampler: moderngl.Sampler | None = None
+        # This frame's: (the view, its settings), from begin until composite (None: nothing to do).
+        self._pending: tuple[View, ScreenReflections] | None = None
+        self.composites = 0  # composites drawn so far (tests count them)
+
+    @property
+    def framebuffer(self) -> moderngl.Framebuffer | None:
+        """The framebuffer the main view draws into this frame (``SceneOptions.reflections``)."""
+        return None if self._pending is None or self._targets is None else self._targets.framebuffer
+
+    def begin(self, view: View, targets: RenderTargets, settings: ScreenReflections) -> None:
+        """The main view, about to be drawn into ``targets`` (the main tree's level 0), will
+        be reflected as ``settings`` say: its images are made (once for the targets) and the
+        framebuffer it draws into is ``framebuffer``; the scene pass clears them all."""
+        kept = self._targets
+        if kept is None or kept.level is not targets:
+            self.release_targets()
+            self._targets = self._make(targets)
+        self._pending = (view, settings)
+
+    def _make(self, level: RenderTargets) -> _Targets:
+        ctx = self.ctx
+        size = level.size
+        weight = ctx.texture(size, 4, dtype=HDR_FORMAT)
+        added = ctx.texture(size, 4, dtype=HDR_FORMAT)
+        normal = ctx.texture(size, 4, dtype=HDR_FORMAT)
+        color = ctx.texture(size, 4, dtype=HDR_FORMAT)
+        for texture in (weight, added, normal):
+            texture.filter = (moderngl.NEAREST, moderngl.NEAREST)
+        color.repeat_x = color.repeat_y = False
+        color.build_mipmaps(0, self._top_lod(size))  # (the chain's storage; rebuilt each composite)
+        color.filter = (moderngl.LINEAR_MIPMAP_LINEAR, moderngl.LINEAR)
+        framebuffer = ctx.framebuffer([level.color, level.surface, level.seen, level.node, weight, added, normal],
+                                      level.depth)
+        return _Targets(level, weight, added, normal, framebuffer, color, ctx.framebuffer([color]),
+                        ctx.framebuffer([level.color]))
+
+    @staticmethod
+    def _top_lod(size: tuple[int, int]) -> int:
+        return max(0, min(MAX_COLOR_LOD, max(size).bit_length() - 1))
+
+    def _program(self, quality: str) -> moderngl.VertexArray:
+        shaders = self.gpu.shaders
+        if self._programs_of != shaders.reloads:
+            self._release_programs()
+            self._programs_of = shaders.reloads
+        vao = self._programs.get(quality)
+        if vao is None:
+            steps, refine = QUALITY_STEPS[quality]
+            program = shaders.program("fullscreen.vert", "screen_reflection.frag",
+                                      defines={"STEPS": str(steps), "REFINE": str(refine),
+                                               "SUBSTEPS": str(SILHOUETTE_STEPS)})
+            for name, unit in (("scene_color", REFLECTION_COLOR_UNIT), ("depth_map", REFLECTION_DEPTH_UNIT),
+                               ("weight_map", REFLECTION_WEIGHT_UNIT), ("added_map", REFLECTION_ADDED_UNIT),
+                               ("normal_map", REFLECTION_NORMAL_UNIT), ("surface_map", REFLECTION_SURFACE_UNIT)):
+                program[name].value = unit
+            vao = self._programs[quality] = self.ctx.vertex_array(program, [])
+        return vao
+
+    def composite(self, level: RenderTargets) -> None:
+        """Put the screen's reflections into ``level`` (the main tree's level 0, its mirrors
+        and portals composited, its glass not yet drawn), if the main view was drawn for
+        them this frame (``begin``); nothing otherwise."""
+        targets, pending = self._targets, self._pending
+        if pending is None or targets is None or targets.level is not level:
+            return  # (another tree's root: a probe face's)
+        self._pending = None
+        view, settings = pending
+        gpu, ctx = self.gpu, self.ctx
+        size = level.size
+        viewport = (0, 0, *size)
+        # The colour as it stands, with its mip chain (a blit obeys the scissor: none).
+        apply_pass_state(ctx, _PASS, viewport)
+        ctx.copy_framebuffer(targets.color_framebuffer, level.color_framebuffer)
+        top = self._top_lod(size)
+        targets.color.build_mipmaps(0, top)
+        vao = self._program(settings.quality)
+        program = vao.program
+        proj = view.proj
+        program["projection"].write(proj.to_bytes())
+        program["view_rotation"].write(glm.mat3(view.view).to_bytes())
+        program["unproject"].value = (float(proj[0][0]), float(proj[1][1]), float(proj[2][0]), float(proj[2][1]))
+        program["unproject_z"].value = (float(proj[2][2]), float(proj[3][2]))
+        program["depth_size"].value = (float(size[0]), float(size[1]))
+        program["near_plane"].value = float(proj[3][2]) / (float(proj[2][2]) - 1.0)
+        program["max_distance"].value = settings.max_distance
+        program["thickness"].value = settings.thickness
+        program["max_roughness"].value = settings.max_roughness
+        program["edge_fade"].value = settings.edge_fade
+        program["top_lod"].value = float(top)
+        if self._depth_sampler is None:  # the level's depth as distances, compared with nothing
+            self._depth_sampler = ctx.sampler(filter=(moderngl.NEAREST, moderngl.NEAREST), compare_func="")
+        for texture, unit in ((targets.color, REFLECTION_COLOR_UNIT), (level.depth, REFLECTION_DEPTH_UNIT),
+                              (targets.weight, REFLECTION_WEIGHT_UNIT), (targets.added, REFLECTION_ADDED_UNIT),
+                              (targets.normal, REFLECTION_NORMAL_UNIT), (level.surface, REFLECTION_SURFACE_UNIT)):
+            bind_texture(ctx, texture, unit)
+        bind_sampler(ctx, self._depth_sampler, REFLECTION_DEPTH_UNIT)
+        targets.output.use()
+        apply_pass_state(ctx, _PASS, viewport)
+        vao.render(moderngl.TRIANGLES, vertices=3)
+        gpu.stats.passes += 1
+        gpu.stats.draw_calls += 1
+        self.composites += 1
+        if gpu.debug:
+            gpu.checkpoint("screen reflections")
+
+    def target_count(self) -> int:
+        """Images held now (4 while a camera asks for reflections, else 0)."""
+        return 0 if self._targets is None else 4
+
+    def release_targets(self) -> None:
+        """Let the images go (no camera asks for reflections, or the level was made again)."""
+        if self._targets is not None:
+            self._targets.release()
+            self._targets = None
+        self._pending = None
+
+    def _release_programs(self) -> None:
+        for vao in self._programs.values():
+            vao.release()
+        self._programs.clear()
+
+    def release(self) -> None:
+        self.release_targets()
+        self._release_programs()
+        if self._depth_sampler is not None:
+            forget_sampler(self.ctx, self._depth_sampler)
+            self._depth_sampler.release()
+            self._depth_sampler = None

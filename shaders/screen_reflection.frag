@@ -1,0 +1,187 @@
+#version 410 core
+// Screen-space reflections (engine/render/screen_reflections.py): each pixel whose surface
+// reflects the sky or a probe follows its reflected ray across the main view's depth image
+// and, where the ray meets what the view drew, puts what the view shows there in place of
+// the sky's or probe's reflection: colour + confidence x (W x found - W x radiance), with W
+// and W x radiance as the scene pass wrote them (scene.frag, SCREEN_REFLECTION).
+//
+// The ray is stepped in screen space with perspective-correct depth, a stride of pixels a
+// step (McGuire and Mara, "Efficient GPU Screen-Space Ray Tracing", JCGT 2014): each step
+// takes the ray's depth range across it and hits where that range reaches behind the
+// drawn surface, by no more than ``thickness``; the step is then halved REFINE times.
+#include "view_depth.glsl"
+
+uniform sampler2D scene_color;     // the main view's colour (a copy), with its mip chain
+uniform sampler2D depth_map;       // the main view's depth
+uniform sampler2D weight_map;      // rgb: W, a: roughness
+uniform sampler2D added_map;       // rgb: W x the sky's or probe's radiance, a: entity bits 0-10
+uniform sampler2D normal_map;      // rgb: the shading normal (world), a: entity bits 11-21
+uniform usampler2D surface_map;    // the entity drawn at each pixel (last drawn: glass over it too)
+uniform mat4 projection;           // the view's
+uniform mat3 view_rotation;        // world -> view directions
+uniform float near_plane;          // view depth of the near plane (> 0)
+uniform float max_distance;        // ScreenReflections.max_distance
+uniform float thickness;           // ScreenReflections.thickness
+uniform float max_roughness;       // ScreenReflections.max_roughness
+uniform float edge_fade;           // ScreenReflections.edge_fade
+uniform float top_lod;             // the colour's last mip level
+
+out vec4 out_color;
+
+// The view depth (> 0) drawn at a pixel; the sky's is far beyond any ray.
+float drawn_depth(vec2 pixel) {
+    float depth = texelFetch(depth_map, ivec2(pixel), 0).r;
+    return depth >= 1.0 ? 1e30 : unproject_z.y / (depth * 2.0 - 1.0 + unproject_z.x);
+}
+
+// The screen position (pixels) of the view-space point p.
+vec2 on_screen(vec3 p, out float k) {
+    vec4 h = projection * vec4(p, 1.0);
+    k = 1.0 / h.w;
+    return (h.xy * k * 0.5 + 0.5) * depth_size;
+}
+
+// The ray's segment on the screen, from p0 to p1 (pixels), with q / k its view depth along
+// it (q and k, as 1 / depth, are linear in screen space): main's, for the functions below.
+vec2 p0, p1;
+float q0, q1, k0, k1;
+
+// The ray's view depth at parameter t of its segment.
+float depth_along(float t) {
+    return -mix(q0, q1, t) / mix(k0, k1, t);
+}
+
+// Where between lo (the ray in front of what is drawn) and hi (behind it) the ray goes
+// behind, halved REFINE times into [lo, hi]; true if it lies there within the thickness
+// behind the surface drawn (else it passed behind something: no hit there).
+bool crossing(inout float lo, inout float hi) {
+    for (int i = 0; i < REFINE; ++i) {
+        float mid = 0.5 * (lo + hi);
+        if (depth_along(mid) >= drawn_depth(mix(p0, p1, mid))) hi = mid; else lo = mid;
+    }
+    return depth_along(hi) - drawn_depth(mix(p0, p1, hi)) <= thickness;
+}
+
+// Whether the surface drawn at a pixel faces against the direction d (view space); an
+// unlit mirror's (no normal written) is taken to.
+bool faces(vec2 pixel, vec3 d) {
+    vec3 n = texelFetch(normal_map, ivec2(pixel), 0).xyz;
+    return dot(n, n) == 0.0 || dot(view_rotation * n, d) <= 0.0;
+}
+
+void main() {
+    ivec2 pixel = ivec2(gl_FragCoord.xy);
+    vec4 base = texelFetch(scene_color, pixel, 0);
+    out_color = base;
+    vec4 weight = texelFetch(weight_map, pixel, 0);
+    float roughness = weight.a;
+    float rough_fade = max_roughness > 0.0 ? 1.0 - smoothstep(0.75 * max_roughness, max_roughness, roughness)
+                                           : (roughness > 0.0 ? 0.0 : 1.0);
+    if (max(weight.r, max(weight.g, weight.b)) <= 0.0 || rough_fade <= 0.0) return;
+    float depth = texelFetch(depth_map, pixel, 0).r;
+    if (depth >= 1.0) return;  // the sky (what it wrote to the weights is undefined)
+    vec4 added = texelFetch(added_map, pixel, 0);
+    vec4 normal = texelFetch(normal_map, pixel, 0);
+    // Still the surface the weights were written for: nothing see-through drawn over it since.
+    uint drawn = texelFetch(surface_map, pixel, 0).r;
+    if (float(drawn & 2047u) != added.a || float((drawn >> 11u) & 2047u) != normal.a) return;
+
+    vec3 origin = view_position(gl_FragCoord.xy, depth);
+    vec3 n = normalize(view_rotation * normal.xyz);
+    vec3 r = normalize(reflect(normalize(origin), n));
+    origin += n * (0.0002 * -origin.z);  // off the surface, as far as its depth's precision
+    // The ray's far end: max_distance along it, or where it would cross the near plane.
+    float length_ = (origin.z + r.z * max_distance > -near_plane) ? (-near_plane - origin.z) / r.z : max_distance;
+    vec3 end = origin + r * length_;
+    p0 = on_screen(origin, k0);
+    p1 = on_screen(end, k1);
+    // Cut the segment at the screen's edges (its parameter along the screen line).
+    vec2 delta = p1 - p0;
+    float cut = 1.0;
+    for (int axis = 0; axis < 2; ++axis) {
+        float d = delta[axis];
+        if (abs(d) > 1e-6) {
+            float limit = d > 0.0 ? depth_size[axis] - 0.5 : 0.5;
+            cut = min(cut, max((limit - p0[axis]) / d, 0.0));
+        }
+    }
+    // q / k is the view depth along the segment, linear in screen space (perspective-correct).
+    q0 = origin.z * k0;
+    q1 = end.z * k1;
+    p1 = p0 + delta * cut;
+    q1 = mix(q0, q1, cut);
+    k1 = mix(k0, k1, cut);
+    delta = p1 - p0;
+    float span = max(abs(delta.x), abs(delta.y));
+    if (span < 1.0) return;
+    float stride = max(1.0, span / float(STEPS));
+    float steps = min(float(STEPS), ceil(span / stride));
+    float dt = stride / span;  // the segment's parameter a step
+
+    float t = 0.0;               // where the ray is last known in front of what is drawn
+    float previous = -origin.z;  // the ray's view depth there
+    float drawn_before = previous;  // the drawn depth at its pixel (the surface itself at 0)
+    float lo = 0.0, hi = -1.0;   // the crossing's bounds, once found (hi -1: none)
+    bool near = false;           // the last step ended within a step's depth of what is drawn
+    float sub_steps = min(float(SUBSTEPS), ceil(stride));
+    for (int i = 0; i < STEPS; ++i) {
+        if (float(i) >= steps) break;
+        float next = min(t + dt, 1.0);
+        float ray_depth = depth_along(next);
+        float drawn_here = drawn_depth(mix(p0, p1, next));
+        if (ray_depth >= drawn_here) {  // behind what is drawn at the step's end: where did it go behind?
+            float a = t, b = next;
+            if (crossing(a, b)) {
+                lo = a;
+                hi = b;
+                break;
+            }
+        } else if (near || abs(drawn_here - drawn_before) > thickness + abs(ray_depth - previous)) {
+            // In front at both ends, but the step began within a step's depth of what was
+            // drawn there, or crosses a silhouette (the drawn depth jumps by more than the ray
+            // moved): the ray may meet a surface only between the ends (the corner of a box
+            // it skims past the top edge of).  Walk the step in parts.
+            for (int j = 1; j < SUBSTEPS; ++j) {
+                if (float(j) >= sub_steps) break;
+                float at = t + dt * float(j) / sub_steps;
+                if (depth_along(at) >= drawn_depth(mix(p0, p1, at))) {
+                    float a = at - dt / sub_steps, b = at;
+                    if (crossing(a, b)) {
+                        lo = a;
+                        hi = b;
+                    }
+                    break;
+                }
+            }
+            if (hi >= 0.0) break;
+        }
+        near = drawn_here - ray_depth < abs(ray_depth - previous);
+        previous = ray_depth;
+        drawn_before = drawn_here;
+        t = next;
+    }
+    if (hi < 0.0) return;
+    vec2 found = mix(p0, p1, hi);
+    float found_depth = drawn_depth(found);
+    if (found_depth > 1e29) return;
+    // A surface the ray meets from behind (a table's top, over its underside) is not what it
+    // would see there.  The pixel a step back along the ray counts too: at a silhouette the
+    // hit pixel may show the face beyond the edge the ray met (a box's top over its front).
+    vec2 back = found - normalize(p1 - p0);
+    if (!faces(found, r) && !faces(back, r)) return;
+    vec3 found_point = view_at(found, -found_depth);
+    float travelled = length(found_point - origin);
+
+    vec2 uv = (floor(found) + 0.5) / depth_size;  // the found pixel's own colour (no blend across its edge)
+    vec2 edge = min(uv, 1.0 - uv);
+    float confidence = rough_fade
+        * (edge_fade > 0.0 ? smoothstep(0.0, edge_fade, min(edge.x, edge.y)) : 1.0)
+        * (1.0 - smoothstep(0.75 * max_distance, max_distance, travelled));
+    // A rough surface spreads its reflection over a cone about r: the level of the image as
+    // wide as the cone where it meets what it reflects (GGX's alpha, roughness squared, taken
+    // as the cone's half-width a unit of distance; the distance in pixels across the screen).
+    float spread = roughness * roughness * 2.0 * length(found - p0);
+    float lod = clamp(log2(max(spread, 1.0)), 0.0, top_lod);
+    vec3 radiance = textureLod(scene_color, uv, lod).rgb;
+    out_color.rgb = max(base.rgb + confidence * (weight.rgb * radiance - added.rgb), vec3(0.0));
+}
