@@ -118,9 +118,11 @@ void main() {
     float steps = min(float(STEPS), ceil(span / stride));
     float dt = stride / span;  // the segment's parameter a step
 
-    float t = 0.0;               // where the ray is last known in front of what is drawn
-    float previous = -origin.z;  // the ray's view depth there
-    float drawn_before = previous;  // the drawn depth at its pixel (the surface itself at 0)
+    // Where the ray is last known in front of what is drawn: a pixel out from its own (at
+    // its own, a halving could settle on the surface it leaves, as depth's rounding goes).
+    float t = 1.0 / span;
+    float previous = depth_along(t);  // the ray's view depth there
+    float drawn_before = -origin.z;   // the drawn depth at its pixel (taken as the surface's own)
     float lo = 0.0, hi = -1.0;   // the crossing's bounds, once found (hi -1: none)
     bool near = false;           // the last step ended within a step's depth of what is drawn
     float sub_steps = min(float(SUBSTEPS), ceil(stride));

@@ -49,7 +49,8 @@ ENGINE_COMPONENTS: dict[str, type] = {
     name: getattr(_components, name) for name in (
         "AmbientOcclusion", "Bloom", "Camera", "ColorGrading", "DirectionalLight", "Emissive", "FlyController", "Fog",
         "HemisphereLight", "Material", "MeshRef",
-        "Mirror", "PointLight", "Portal", "ReflectionProbe", "Reflective", "Refractive", "ScreenPanel", "ScreenText",
+        "Mirror", "PointLight", "Portal", "ReflectionProbe", "Reflective", "Refractive", "ScreenPanel",
+        "ScreenReflections", "ScreenText",
         "Skybox", "Tonemap",
         "Transform", "Traveller", "Vignette", "Visibility", "Water")}
 DERIVED_COMPONENTS = ("PortalClone", "Slice")
