@@ -20,7 +20,9 @@ import pytest
 from pyglm import glm
 
 from components import (
+    Camera,
     ComponentValueError,
+    Fog,
     Material,
     MeshRef,
     Mirror,
@@ -286,6 +288,35 @@ def test_water_drawn_over_the_floor_keeps_its_own_look(scene):
     below = water & (np.abs(without - plain).max(axis=-1) > 40)  # the floor there reflects a box
     assert below.sum() > 50
     assert np.abs(with_pond[water] - plain_pond[water]).max() <= 1
+
+
+def test_in_fog_the_floor_shows_what_it_reflects_fogged_over_the_stretch_to_the_eye(scene):
+    """The weight carries the fog's transmittance from the eye to the floor, T = exp(-density
+    x distance) in uniform fog: a floor pixel that shows a box becomes T x the box's colour
+    (as the camera sees it, fogged itself) + (1 - T) x the fog's colour, in linear light."""
+    density, fog_color = 0.3, np.array([0.6, 0.65, 0.72])
+
+    def foggy(world):
+        world.add_component(world.query_one(Camera)[0][0], Fog(color=(*fog_color, 1.0), density=density))
+        return {}
+
+    image, runner, names = _frame(scene, reflections=ScreenReflections(edge_fade=0.0), extra=foggy)
+    plain, _, _ = _frame(scene, extra=foggy)
+    _, which, screen, _ = _cast(runner)
+    eye, rays = pixel_rays(runner.engine.main_view, SIZE)
+    distance = -eye[1] / rays[..., 1]  # from the eye to the floor
+    columns = np.clip(np.round(screen[..., 0] - 0.5).astype(int), 0, SIZE[0] - 1)
+    rows = np.clip(np.round(screen[..., 1] - 0.5).astype(int), 0, SIZE[1] - 1)
+    seen = runner.ids()
+    for index, entity in enumerate(names["boxes"]):
+        mask = _eroded((seen == names["floor"]) & (which == index)) & (seen[rows, columns] == entity)
+        assert mask.sum() > 150
+        t = np.exp(-density * distance[mask])[:, None]
+        found = srgb_to_linear(image[rows[mask], columns[mask]])
+        expected = t * found + (1.0 - t) * fog_color
+        got = srgb_to_linear(image[mask])
+        assert np.abs(got - expected).max(axis=-1).mean() < 0.01, index
+        assert np.abs(srgb_to_linear(plain[mask]) - expected).max(axis=-1).mean() > 0.025  # (the sky's reflection)
 
 
 def test_one_composite_a_frame_and_its_images_go_with_the_component(scene):
