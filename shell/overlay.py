@@ -1,7 +1,8 @@
 """The debug overlay: frame rate and a frame-time graph, what the last frame cost (passes, draw
 calls, views per reflection level, probe captures), the reflection and probe capture paths
 in use, toggles for them, the post-processing (tone curve, exposure, bloom; toggles for
-bloom, fog, the grade, ambient occlusion (and a view of it alone) and the curve), and shader errors from hot reload;
+bloom, fog, the grade, ambient occlusion (and a view of it alone), screen reflections and
+the curve), and shader errors from hot reload;
 and the level editor's panels (``shell/editor_panels.py``: the entity list, the inspector,
 the selection's handles, the editor's keys), whose selection it outlines wherever it shows
 (``engine/render/outline.py``).
@@ -328,7 +329,8 @@ class DebugOverlay(EditorPanels):
         for label, stage, switch in (("shadows", engine.stages["shadows"], "enabled"), ("bloom", present, "bloom"),
                                      ("fog", engine.stages["prepare"], "fog"), ("grade", present, "grade"),
                                      ("AO", engine.stages["main"], "occlusion"),
-                                     ("AO only", present, "show_occlusion")):
+                                     ("AO only", present, "show_occlusion"),
+                                     ("SSR", engine.stages["main"], "reflections")):
             if label != "grade":  # (the grade, AO and the curve on a row of their own: the window stays narrow)
                 imgui.same_line()
             changed, on = imgui.checkbox(label, getattr(stage, switch))

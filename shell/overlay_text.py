@@ -66,8 +66,8 @@ def post_lines(engine: Engine) -> list[str]:
     """The present stage's post-processing in the last frame, one line: the tone curve (and
     whose it is), the exposure, the bloom (intensity, levels), the grade (and its colour
     table's name), the post passes drawn, and the main stage's ambient occlusion (radius,
-    intensity).  The automatic exposure's adapted value is read back from the GPU (a wait,
-    only while the overlay shows it)."""
+    intensity) and screen-space reflections (reach, quality).  The automatic exposure's
+    adapted value is read back from the GPU (a wait, only while the overlay shows it)."""
     present, renderer = engine.stages["present"], engine.renderer
     tonemap, bloom = present.tonemap, present.bloomed
     camera_curve = tonemap.curve if tonemap is not None else "none"
@@ -98,5 +98,10 @@ def post_lines(engine: Engine) -> list[str]:
                      f"{'' if occluded.half_resolution else ' full'}")
     else:
         occlusion = "AO off" + (" (set)" if not main.occlusion else "")
+    reflected = main.reflected
+    if reflected is not None:
+        occlusion += f"; SSR {reflected.max_distance:g} m {reflected.quality}"
+    else:
+        occlusion += "; SSR off" + (" (set)" if not main.reflections else "")
     passes = renderer.present_pass.post_passes
     return [f"post: {curve} ({whose}), {exposure}; {glow}, {passes} passes{grade}; {occlusion}"]

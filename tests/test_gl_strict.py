@@ -112,10 +112,11 @@ def _cutouts(ctx):
     mirror throwing the sun (the virtual light's caster passes), reflected in the batched
     levels; the camera with ambient occlusion (its depth and normals pass, the find and
     filter passes, the root's SCREEN_OCCLUSION builds: the cutout with an occlusion map
-    there is the fullest build of all)."""
+    there is the fullest build of all) and screen reflections (the root's builds with both,
+    the unlit mirrors' reflected builds, the colour copy and composite)."""
     from benchmarks.lighting import _mirror_light
     from benchmarks.mirrors import MirrorRing
-    from components import AmbientOcclusion, Camera, Material, MeshRef, PointLight, Transform
+    from components import AmbientOcclusion, Camera, Material, MeshRef, PointLight, ScreenReflections, Transform
     from engine.assets.mesh import Mesh, plane, quad
     from tests.test_alpha_cutout import SLAT_TEXTURE
     from tests.test_occlusion_maps import OCCLUSION
@@ -131,6 +132,7 @@ def _cutouts(ctx):
             colors=np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0], [1.0, 1.0, 0.0]]))), Material())
         for camera, _ in world.query_one(Camera):
             world.add_component(camera, AmbientOcclusion(radius=0.8))
+            world.add_component(camera, ScreenReflections())
         for x, cutoff, occlusion in ((-1.0, 0.5, None), (1.0, 0.3, OCCLUSION)):
             world.spawn(Transform(position=(x, 1.6, 0.0)), MeshRef(plane(1.6, 1.6)),
                         Material(texture=SLAT_TEXTURE, alpha_cutoff=cutoff, occlusion_map=occlusion,
@@ -141,15 +143,20 @@ def _cutouts(ctx):
 def _fog(path: str):
     """The mirror ring seen through height fog on the camera (the FOG builds of the scene
     programs, the batched ones' geometry stage too; the sky's and the composites' reads of
-    the block)."""
+    the block), a chrome ball reflecting the sky and screen reflections on the camera (their
+    FOG builds)."""
     def run(ctx):
         from benchmarks.mirrors import MirrorRing
-        from components import Camera, Fog
+        from components import Camera, Fog, Material, MeshRef, Reflective, ScreenReflections, Transform
+        from engine.assets.mesh import sphere
 
         def configure(engine):
             engine.reflection_system.path = path
             for entity, _ in engine.world.query_one(Camera):
                 engine.world.add_component(entity, Fog(density=0.08, height=1.0, height_falloff=0.3))
+                engine.world.add_component(entity, ScreenReflections())
+            engine.world.spawn(Transform(position=(0.0, 0.6, 0.0)), MeshRef(sphere(0.5)),
+                               Material(color=(0.9, 0.9, 0.9), metallic=1.0, roughness=0.1), Reflective())
         return _engine_frames(ctx, MirrorRing(4), 3, configure)
     return run
 

@@ -36,6 +36,7 @@ from components import (
 from engine.assets.level_file import LevelError, load_level, save_level
 from engine.assets.mesh import box, plane, quad
 from engine.core.world import World
+from shell.overlay_text import post_lines
 from tests.support import look_from, pixel_rays, srgb_to_linear
 
 SIZE = (200, 150)
@@ -340,10 +341,12 @@ def test_one_composite_a_frame_and_its_images_go_with_the_component(scene):
 def test_the_overlay_switch_turns_them_off(scene):
     image, runner, _ = _frame(scene, reflections=ScreenReflections())
     plain, _, _ = _frame(scene)
+    assert post_lines(runner.engine)[0].endswith("; SSR 30 m medium")
     runner.engine.stages["main"].reflections = False
     off = runner.frame().astype(np.int32)
     assert np.abs(off - plain).max() <= 1
     assert np.abs(image - plain).max() > 100
+    assert post_lines(runner.engine)[0].endswith("; SSR off (set)")
 
 
 @pytest.mark.parametrize("field, value", [("max_distance", 0.0), ("max_distance", float("nan")), ("thickness", -1.0),

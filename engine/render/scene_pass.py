@@ -538,7 +538,11 @@ class ScenePass:
                     # drew (it draws only where depth is still the cleared far plane).  One
                     # framebuffer for the draws and the sky: two binds fewer a view.  (The flush
                     # llvmpipe did at the switch was its rasterising of the queued draws, which
-                    # the next flush now does: measured, no faster a frame; issue 40.)
+                    # the next flush now does: measured, no faster a frame; issue 40.)  Drawn for
+                    # screen reflections, the view's own without their images: the sky writes
+                    # none of them (an output a fragment shader does not write is undefined).
+                    if "reflected" in screen:
+                        targets.view_framebuffer.use()
                     apply_pass_state(ctx, _SKY, viewport, view.scissor)
                     sky_draw.vertex_array(layered=False).render(moderngl.TRIANGLES, vertices=3)
                     renderer.stats.draw_calls += 1
