@@ -45,7 +45,12 @@ Variants now (``VARIANTS``; add a row by appending a ``Variant``):
 * ``occlusion``: no shadows; ``AmbientOcclusion()`` on the camera (its depth and normals
   pass, the occlusion found at half size, the filter to every pixel);
 * ``occlusion_full``: the same found at full size (``half_resolution=False``);
-* ``occlusion_low``: the same at half size with ``quality="low"`` (half the find pass's samples).
+* ``occlusion_low``: the same at half size with ``quality="low"`` (half the find pass's samples);
+* ``polished``: no shadows; the checker floor reflects the sky (``Reflective(mix=0.35)``);
+* ``reflections``: the same with ``ScreenReflections()`` on the camera (the root's draw
+  writes their images, the colour is copied with its mips and the composite marches the
+  floor's rays): its cost is its ratio to ``polished``;
+* ``reflections_low``: the same with ``quality="low"`` (16 steps a ray, not 32).
 
 **Targets** (``TARGETS``), each a ratio of two variants' medians at a mirror count against
 its limit, printed as value, limit, met, and judged on the kind of machine it is set for
@@ -140,6 +145,8 @@ from components import (
     MeshRef,
     Mirror,
     PointLight,
+    Reflective,
+    ScreenReflections,
     Tonemap,
     Transform,
     Vignette,
@@ -291,6 +298,22 @@ def _occlusion_low(engine: Engine) -> None:
     _occlusion(engine, quality="low")
 
 
+def _polished(engine: Engine) -> None:
+    _sun_shadows(engine, False)
+    for entity, mesh in engine.world.query_one(MeshRef):
+        if mesh.mesh.name == "plane":  # the scene's floor
+            engine.world.add_component(entity, Reflective(mode="skybox", mix=0.35))
+
+
+def _reflections(engine: Engine, quality: str = "medium") -> None:
+    _polished(engine)
+    engine.world.add_component(camera_entity(engine), ScreenReflections(quality=quality))
+
+
+def _reflections_low(engine: Engine) -> None:
+    _reflections(engine, "low")
+
+
 def _post_auto(engine: Engine) -> None:
     _sun_shadows(engine, False)
     engine.world.add_component(camera_entity(engine), Tonemap(curve="agx", auto_exposure=True))
@@ -317,6 +340,9 @@ VARIANTS: list[Variant] = [
     Variant("occlusion", _occlusion, "AmbientOcclusion() on the camera (found at half size)"),
     Variant("occlusion_full", _occlusion_full, "AmbientOcclusion(half_resolution=False) on the camera"),
     Variant("occlusion_low", _occlusion_low, "AmbientOcclusion(quality='low') on the camera"),
+    Variant("polished", _polished, "the floor reflects the sky (Reflective(mix=0.35))"),
+    Variant("reflections", _reflections, "the polished floor and ScreenReflections() on the camera"),
+    Variant("reflections_low", _reflections_low, "the same with ScreenReflections(quality='low')"),
 ]
 BASELINE = "off"
 

@@ -51,13 +51,24 @@ float depth_along(float t) {
     return -mix(q0, q1, t) / mix(k0, k1, t);
 }
 
+// The ray's window depth at parameter t (what the depth image holds for a point there:
+// 0.5 + 0.5 (P[3][2] k - P[2][2]), k = 1 / view depth, linear along the screen): the march
+// compares it with the image's texels as they are, no division a sample.
+float window_along(float t) {
+    return 0.5 + 0.5 * (unproject_z.y * mix(k0, k1, t) - unproject_z.x);
+}
+
+float drawn_window(vec2 pixel) {
+    return texelFetch(depth_map, ivec2(pixel), 0).r;
+}
+
 // Where between lo (the ray in front of what is drawn) and hi (behind it) the ray goes
 // behind, halved REFINE times into [lo, hi]; true if it lies there within the thickness
 // behind the surface drawn (else it passed behind something: no hit there).
 bool crossing(inout float lo, inout float hi) {
     for (int i = 0; i < REFINE; ++i) {
         float mid = 0.5 * (lo + hi);
-        if (depth_along(mid) >= drawn_depth(mix(p0, p1, mid))) hi = mid; else lo = mid;
+        if (window_along(mid) >= drawn_window(mix(p0, p1, mid))) hi = mid; else lo = mid;
     }
     return depth_along(hi) - drawn_depth(mix(p0, p1, hi)) <= thickness;
 }
@@ -69,22 +80,15 @@ bool faces(vec2 pixel, vec3 d) {
     return dot(n, n) == 0.0 || dot(view_rotation * n, d) <= 0.0;
 }
 
-void main() {
-    ivec2 pixel = ivec2(gl_FragCoord.xy);
-    vec4 base = texelFetch(scene_color, pixel, 0);
-    out_color = base;
-    vec4 weight = texelFetch(weight_map, pixel, 0);
+// The colour of the pixel at ``pixel`` (``base`` now) with the screen's reflection in place of
+// the sky's or probe's, where its ray finds one (``base`` where it does not).
+vec3 reflected(ivec2 pixel, vec3 base, vec4 weight, float rough_fade, float depth) {
     float roughness = weight.a;
-    float rough_fade = max_roughness > 0.0 ? 1.0 - smoothstep(0.75 * max_roughness, max_roughness, roughness)
-                                           : (roughness > 0.0 ? 0.0 : 1.0);
-    if (max(weight.r, max(weight.g, weight.b)) <= 0.0 || rough_fade <= 0.0) return;
-    float depth = texelFetch(depth_map, pixel, 0).r;
-    if (depth >= 1.0) return;  // the sky (what it wrote to the weights is undefined)
     vec4 added = texelFetch(added_map, pixel, 0);
     vec4 normal = texelFetch(normal_map, pixel, 0);
     // Still the surface the weights were written for: nothing see-through drawn over it since.
     uint drawn = texelFetch(surface_map, pixel, 0).r;
-    if (float(drawn & 2047u) != added.a || float((drawn >> 11u) & 2047u) != normal.a) return;
+    if (float(drawn & 2047u) != added.a || float((drawn >> 11u) & 2047u) != normal.a) return base;
 
     vec3 origin = view_position(gl_FragCoord.xy, depth);
     vec3 n = normalize(view_rotation * normal.xyz);
@@ -113,7 +117,7 @@ void main() {
     k1 = mix(k0, k1, cut);
     delta = p1 - p0;
     float span = max(abs(delta.x), abs(delta.y));
-    if (span < 1.0) return;
+    if (span < 1.0) return base;
     float stride = max(1.0, span / float(STEPS));
     float steps = min(float(STEPS), ceil(span / stride));
     float dt = stride / span;  // the segment's parameter a step
@@ -121,32 +125,32 @@ void main() {
     // Where the ray is last known in front of what is drawn: a pixel out from its own (at
     // its own, a halving could settle on the surface it leaves, as depth's rounding goes).
     float t = 1.0 / span;
-    float previous = depth_along(t);  // the ray's view depth there
-    float drawn_before = -origin.z;   // the drawn depth at its pixel (taken as the surface's own)
     float lo = 0.0, hi = -1.0;   // the crossing's bounds, once found (hi -1: none)
-    bool near = false;           // the last step ended within a step's depth of what is drawn
+    // What was drawn at the last two steps' ends (window depths, affine in 1 / depth): a
+    // plane's is linear along the screen, so were the surface there to go on, this step's
+    // end would show it at twice the last less the one before.  (At first: the pixel's own.)
+    float drawn_before = depth, drawn_two_before = depth;
     float sub_steps = min(float(SUBSTEPS), ceil(stride));
     for (int i = 0; i < STEPS; ++i) {
         if (float(i) >= steps) break;
         float next = min(t + dt, 1.0);
-        float ray_depth = depth_along(next);
-        float drawn_here = drawn_depth(mix(p0, p1, next));
-        if (ray_depth >= drawn_here) {  // behind what is drawn at the step's end: where did it go behind?
+        float ray = window_along(next);
+        float drawn_here = drawn_window(mix(p0, p1, next));
+        if (ray >= drawn_here) {  // behind what is drawn at the step's end: where did it go behind?
             float a = t, b = next;
             if (crossing(a, b)) {
                 lo = a;
                 hi = b;
                 break;
             }
-        } else if (near || abs(drawn_here - drawn_before) > thickness + abs(ray_depth - previous)) {
-            // In front at both ends, but the step began within a step's depth of what was
-            // drawn there, or crosses a silhouette (the drawn depth jumps by more than the ray
-            // moved): the ray may meet a surface only between the ends (the corner of a box
-            // it skims past the top edge of).  Walk the step in parts.
+        } else if (i > 0 && ray > 2.0 * drawn_before - drawn_two_before) {
+            // In front of what this end shows, but behind the surface the last two showed,
+            // carried on to here: that surface ended within the step, maybe after the ray
+            // met it (the corner of a box it skims past the top edge of).  Walk the step in parts.
             for (int j = 1; j < SUBSTEPS; ++j) {
                 if (float(j) >= sub_steps) break;
                 float at = t + dt * float(j) / sub_steps;
-                if (depth_along(at) >= drawn_depth(mix(p0, p1, at))) {
+                if (window_along(at) >= drawn_window(mix(p0, p1, at))) {
                     float a = at - dt / sub_steps, b = at;
                     if (crossing(a, b)) {
                         lo = a;
@@ -157,20 +161,19 @@ void main() {
             }
             if (hi >= 0.0) break;
         }
-        near = drawn_here - ray_depth < abs(ray_depth - previous);
-        previous = ray_depth;
+        drawn_two_before = drawn_before;
         drawn_before = drawn_here;
         t = next;
     }
-    if (hi < 0.0) return;
+    if (hi < 0.0) return base;
     vec2 found = mix(p0, p1, hi);
     float found_depth = drawn_depth(found);
-    if (found_depth > 1e29) return;
+    if (found_depth > 1e29) return base;
     // A surface the ray meets from behind (a table's top, over its underside) is not what it
     // would see there.  The pixel a step back along the ray counts too: at a silhouette the
     // hit pixel may show the face beyond the edge the ray met (a box's top over its front).
     vec2 back = found - normalize(p1 - p0);
-    if (!faces(found, r) && !faces(back, r)) return;
+    if (!faces(found, r) && !faces(back, r)) return base;
     vec3 found_point = view_at(found, -found_depth);
     float travelled = length(found_point - origin);
 
@@ -185,5 +188,21 @@ void main() {
     float spread = roughness * roughness * 2.0 * length(found - p0);
     float lod = clamp(log2(max(spread, 1.0)), 0.0, top_lod);
     vec3 radiance = textureLod(scene_color, uv, lod).rgb;
-    out_color.rgb = max(base.rgb + confidence * (weight.rgb * radiance - added.rgb), vec3(0.0));
+    return max(base + confidence * (weight.rgb * radiance - added.rgb), vec3(0.0));
+}
+
+void main() {
+    ivec2 pixel = ivec2(gl_FragCoord.xy);
+    vec4 base = texelFetch(scene_color, pixel, 0);
+    out_color = base;
+    vec4 weight = texelFetch(weight_map, pixel, 0);
+    float rough_fade = max_roughness > 0.0 ? 1.0 - smoothstep(0.75 * max_roughness, max_roughness, weight.a)
+                                           : (weight.a > 0.0 ? 0.0 : 1.0);
+    float depth = texelFetch(depth_map, pixel, 0).r;
+    // Where nothing reflects, rougher than max_roughness, or the sky.  llvmpipe runs every
+    // instruction of a branch for a group of pixels where one of them takes it, but skips a
+    // loop's body where none of them has a turn left: the trace is a loop run once or not
+    // at all (run as a branch, the pixels without a reflection cost half the trace's time).
+    int todo = max(weight.r, max(weight.g, weight.b)) > 0.0 && rough_fade > 0.0 && depth < 1.0 ? 1 : 0;
+    for (int once = 0; once < todo; ++once) out_color.rgb = reflected(pixel, base.rgb, weight, rough_fade, depth);
 }

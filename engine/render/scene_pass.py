@@ -47,6 +47,7 @@ from typing import TYPE_CHECKING
 import moderngl
 
 from engine.core.errors import GLPassError
+from engine.core.material_slots import ReflectVariant
 from engine.render import bindings
 from engine.render.batch_cull import CULL_MIN_BATCHES, CULL_MIN_DRAWS, batch_reach
 from engine.render.batched_mirrors import MAX_BATCHED_VIEWS, VIEWS_BLOCK_BYTES, views_block
@@ -106,6 +107,14 @@ if TYPE_CHECKING:
     from engine.render.screen_reflections import ScreenReflectionPass
 
 _ALWAYS = nullcontext()  # a view drawn whatever its claim counted
+_REFLECTING = (int(ReflectVariant.SKYBOX), int(ReflectVariant.CUBE))  # the reflect slots screen reflections replace
+
+
+def reflects_environment(batch: InstanceBatch) -> bool:
+    """Whether ``batch`` may reflect the sky or a probe (its instances' reflect slot, or
+    variants that differ between them): what screen reflections put the screen's in place of."""
+    variants = batch.variants
+    return variants is None or variants[2] in _REFLECTING
 _SCENE = PassState(depth_func="<", cull=True, clips=SCENE_CLIPS)
 _BATCHED_SCENE = PassState(depth_func="<", cull=True, clips=BATCHED_SCENE_CLIPS)
 # The sky's shaders write no gl_ClipDistance: a clip distance left on with no value written
@@ -314,7 +323,7 @@ class ScenePass:
             # its tree), depth far.  The views then write colour and ids, never the node image.
             # Each image with the clear of its kind: glClear leaves integer images undefined.
             # (The main view drawn for screen reflections: its framebuffer, their images too.)
-            framebuffer = self._view_framebuffer(targets, options, targets.framebuffer)
+            framebuffer = self._reflecting_framebuffer(options) or targets.framebuffer
             framebuffer.use()
             apply_pass_state(self.ctx, _SCENE, viewport)
             renderer.raw_gl.clear_level(framebuffer)
@@ -409,22 +418,19 @@ class ScenePass:
         colour, surface and seen ids and depth bound with ``state`` (per-view passes at the
         first view's scissor), the node image where masked, the lights, shadows, irradiance,
         sky and the albedo's sampler (once a ``run``: ``_bind_pass_wide``)."""
-        self._view_framebuffer(targets, options, targets.view_framebuffer).use()  # colour, surface and seen ids, depth
+        targets.view_framebuffer.use()  # colour, surface and seen ids, depth
         apply_pass_state(self.ctx, state, (0, 0, *targets.size), None if options.batched else views[0].scissor)
         if options.masked:
             bind_texture(self.ctx, targets.node, NODE_UNIT)
         self._bind_pass_wide(options, run)
 
-    def _view_framebuffer(self, targets: RenderTargets, options: SceneOptions,
-                          plain: moderngl.Framebuffer) -> moderngl.Framebuffer:
-        """``plain``, or for the main view drawn for screen reflections the framebuffer of
-        the level's images and theirs (``ScreenReflectionPass.framebuffer``: its node image
-        too, which a root writes 0 to, as its clear did)."""
+    def _reflecting_framebuffer(self, options: SceneOptions) -> moderngl.Framebuffer | None:
+        """For the main view drawn for screen reflections, the framebuffer of the level's
+        images and theirs (``ScreenReflectionPass.framebuffer``: its node image too, which a
+        root writes 0 to, as its clear did); None otherwise."""
         if options.reflections and self.screen_reflections is not None:
-            framebuffer = self.screen_reflections.framebuffer
-            if framebuffer is not None:
-                return framebuffer
-        return plain
+            return self.screen_reflections.framebuffer
+        return None
 
     def _bind_pass_wide(self, options: SceneOptions, run: object | None) -> None:
         """The bindings every scene pass draws with: the Lights block, the shadow maps and
@@ -515,9 +521,7 @@ class ScenePass:
         if options.occlusion and renderer.screen_occlusion is not None:
             screen = "occluded"  # (a root view's one: the image is its pixels')
             bind_texture(ctx, renderer.screen_occlusion, SCREEN_OCCLUSION_UNIT)
-        if options.reflections and self.screen_reflections is not None \
-                and self.screen_reflections.framebuffer is not None:
-            screen = f"{screen} reflected".lstrip()  # (into _view_framebuffer's: the weights too)
+        reflecting = self._reflecting_framebuffer(options)
         for index, view in enumerate(views):
             if now:  # the slot, or (a tree's view) its part up to its see-through surfaces
                 if options.transparent:
@@ -530,19 +534,19 @@ class ScenePass:
                 set_scissor(ctx, view.scissor)  # unless in place (moderngl's own record: the cache reads it)
                 set_front_face(ctx, "cw" if view.mirrored else "ccw")
                 renderer.bind_view_at(index)
-                self._draw_batches(opaque if reach is None else self._reaching(opaque, reach[index], view),
-                                   0, masked, skip=view.skip, hide=view.hide, unlit=view_unlit, screen=screen)
+                drawn = opaque if reach is None else self._reaching(opaque, reach[index], view)
+                if reflecting is None:
+                    self._draw_batches(drawn, 0, masked, skip=view.skip, hide=view.hide, unlit=view_unlit,
+                                       screen=screen)
+                else:
+                    self._draw_reflecting(drawn, view, targets, reflecting, viewport, view_unlit, screen)
                 if options.sky:
                     # Into the view's own framebuffer: the sky writes id 0 (nothing) to the
                     # surface and seen images, the very values the clear put where no surface
                     # drew (it draws only where depth is still the cleared far plane).  One
                     # framebuffer for the draws and the sky: two binds fewer a view.  (The flush
                     # llvmpipe did at the switch was its rasterising of the queued draws, which
-                    # the next flush now does: measured, no faster a frame; issue 40.)  Drawn for
-                    # screen reflections, the view's own without their images: the sky writes
-                    # none of them (an output a fragment shader does not write is undefined).
-                    if "reflected" in screen:
-                        targets.view_framebuffer.use()
+                    # the next flush now does: measured, no faster a frame; issue 40.)
                     apply_pass_state(ctx, _SKY, viewport, view.scissor)
                     sky_draw.vertex_array(layered=False).render(moderngl.TRIANGLES, vertices=3)
                     renderer.stats.draw_calls += 1
@@ -557,6 +561,28 @@ class ScenePass:
                     # The next view's state (the pass after the last applies its own).
                     apply_pass_state(ctx, _SCENE, viewport, views[index + 1].scissor)
                 renderer.stats.passes += 1
+
+    def _draw_reflecting(self, batches: list[InstanceBatch], view: View, targets: RenderTargets,
+                         reflecting: moderngl.Framebuffer, viewport: tuple[int, int, int, int], unlit: frozenset | set,
+                         screen: str) -> None:
+        """The main view's opaque ``batches`` drawn for screen reflections: those that reflect
+        no sky or probe first, as ever (their pixels keep the cleared "nothing reflected"),
+        then those that may (``reflects_environment``) into ``reflecting``, the framebuffer
+        with the reflections' images, with the builds that write them.  Only the surfaces
+        that reflect pay for the three images' writes (on llvmpipe writing them at every pixel
+        of a 640 x 360 frame cost about as much again as the frame).  The view's own
+        framebuffer is bound again after."""
+        ctx = self.ctx
+        others = [batch for batch in batches if not reflects_environment(batch)]
+        mirrored = [batch for batch in batches if reflects_environment(batch)]
+        self._draw_batches(others, 0, False, skip=view.skip, hide=view.hide, unlit=unlit, screen=screen)
+        if mirrored:
+            reflecting.use()
+            apply_pass_state(ctx, _SCENE, viewport, view.scissor)
+            self._draw_batches(mirrored, 0, False, skip=view.skip, hide=view.hide, unlit=unlit,
+                               screen=f"{screen} reflected".lstrip())
+            targets.view_framebuffer.use()
+            apply_pass_state(ctx, _SCENE, viewport, view.scissor)
 
     def _reaching(self, batches: list[InstanceBatch], reach: list[bool], view: View) -> list[InstanceBatch]:
         """The batches whose ``reach`` (batch_cull.batch_reach) in ``view`` is True; those
