@@ -179,9 +179,15 @@ vec3 reflected(ivec2 pixel, vec3 base, vec4 weight, float rough_fade, float dept
 
     vec2 uv = (floor(found) + 0.5) / depth_size;  // the found pixel's own colour (no blend across its edge)
     vec2 edge = min(uv, 1.0 - uv);
+    // How far behind the drawn surface the ray is where it was found: about 0 where it
+    // meets it, up to the thickness where it passes behind something (the underside of a
+    // ball the view sees only the top of): those fade out over its last three quarters,
+    // so what the view cannot show is not a hard-edged guess.
+    float gap = depth_along(hi) - found_depth;
     float confidence = rough_fade
         * (edge_fade > 0.0 ? smoothstep(0.0, edge_fade, min(edge.x, edge.y)) : 1.0)
-        * (1.0 - smoothstep(0.75 * max_distance, max_distance, travelled));
+        * (1.0 - smoothstep(0.75 * max_distance, max_distance, travelled))
+        * (1.0 - smoothstep(0.25 * thickness, thickness, gap));
     // A rough surface spreads its reflection over a cone about r: the level of the image as
     // wide as the cone where it meets what it reflects (GGX's alpha, roughness squared, taken
     // as the cone's half-width a unit of distance; the distance in pixels across the screen).
