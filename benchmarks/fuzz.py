@@ -4,7 +4,8 @@ Each case builds one component (Visibility and Water among them) with one to thr
 drawn from a pool of awkward values (NaN, infinities, numbers past float32 and float16, huge
 ints, wrong kinds, zero vectors, Euler-looking tuples), attaches it to an entity of a small
 lit scene (a box, a quad for surfaces, the camera entity for Camera, FlyController, Tonemap,
-Bloom, ColorGrading, Vignette, Fog and AmbientOcclusion, the sky entity for the Skybox) and
+Bloom, ColorGrading, Vignette, Fog, AmbientOcclusion and ScreenReflections, the sky entity
+for the Skybox) and
 renders ``FRAMES`` 48 x 32 frames (``benchmarks/fuzz_cases.py``: what a first frame leaves
 to later ones, probes captured a face a frame, is run too). A case passes when either the
 component is refused with a ``ComponentValueError`` that names ``Class.field`` (or the
@@ -67,6 +68,7 @@ from components import (
     ReflectionProbe,
     Reflective,
     Refractive,
+    ScreenReflections,
     Skybox,
     Slice,
     Tonemap,
@@ -87,7 +89,7 @@ SIZE = (48, 32)
 CLASSES: tuple[type, ...] = (Transform, MeshRef, Material, Emissive, Reflective, Refractive, Mirror, Portal,
                              Traveller, Slice, PortalClone, ReflectionProbe, Camera, FlyController,
                              DirectionalLight, PointLight, Skybox, Tonemap, Bloom, ColorGrading, Vignette, Fog,
-                             AmbientOcclusion, Visibility, Water)
+                             AmbientOcclusion, ScreenReflections, Visibility, Water)
 
 @dataclasses.dataclass
 class Case:
@@ -155,7 +157,8 @@ class Fuzzer:
         try:
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
-                if case.cls in (Camera, FlyController, Tonemap, Bloom, ColorGrading, Vignette, Fog, AmbientOcclusion):
+                if case.cls in (Camera, FlyController, Tonemap, Bloom, ColorGrading, Vignette, Fog, AmbientOcclusion,
+                                ScreenReflections):
                     restore = (self.game.camera, world.try_get(self.game.camera, case.cls))
                     world.add_component(self.game.camera, component)
                 elif case.cls is Skybox:

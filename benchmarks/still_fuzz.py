@@ -18,7 +18,8 @@ has glass panes of random alpha (the transparent slot ordered by the planes of s
 surfaces, ``slot_order.back_to_front``), now and then still water (a see-through mirror:
 ``InstanceBatch.plane``) or a see-through mirror, or a pane of random alpha between a raised
 pond and a far see-through mirror (``RenderStats.glass_between_surfaces``), a lit box, now
-and then a point light casting shadows, Bloom and ambient occlusion on the camera.  The change is one of:
+and then a point light casting shadows, Bloom, ambient occlusion and screen reflections on
+the camera (the box then reflecting the sky).  The change is one of:
 
 - ``component``: a field of the pair, a pane, the water, a light or the box written with a
   value from the component fuzz's pool (``benchmarks.fuzz_cases.random_value``), or a light's colour
@@ -73,6 +74,8 @@ from components import (
     Mirror,
     PointLight,
     Portal,
+    Reflective,
+    ScreenReflections,
     Skybox,
     Transform,
     Water,
@@ -141,6 +144,7 @@ class StillCase:
     spot_angle: float = 180.0  # the point light's cone (PointLight.spot_angle; 180: all round), aimed at the box
     fog: bool = False  # height fog on the camera (each view's stretch, each composite's)
     occlusion: bool = False  # ambient occlusion on the camera (the root's passes before its draw)
+    reflections: bool = False  # screen reflections on the camera, the box reflecting the sky (its composite)
     # Further changes, each (change, detail) after the last one's ``after`` frames (the tree
     # kept again, or refilling again, when the next comes); none after a refused one.
     then: list[tuple[str, dict[str, Any]]] = dataclasses.field(default_factory=list)
@@ -149,7 +153,8 @@ class StillCase:
         return (f"still {self.pair} depth {self.depth}, {len(self.panes)} panes {self.panes}, water {self.water}, "
                 f"see-through mirror {self.see_through_mirror}, sandwich {self.sandwich}; {self.still} still frames, "
                 f"rate {self.rate}, point light {self.point_light}, bloom {self.bloom}, {self.visibility}, "
-                f"cascades {self.cascades}, spot {self.spot_angle}, fog {self.fog}, occlusion {self.occlusion}; then "
+                f"cascades {self.cascades}, spot {self.spot_angle}, fog {self.fog}, occlusion {self.occlusion}, "
+                f"reflections {self.reflections}; then "
                 f"{self.change} {self.detail}, {self.after} frames" + "".join(
                     f"; then {change} {detail}, {self.after} frames" for change, detail in self.then))
 
@@ -174,7 +179,7 @@ def random_still_case(rng: random.Random) -> StillCase:
                      point_light=rng.random() < 0.4, bloom=rng.random() < 0.3,
                      visibility="predicted" if rng.random() < 0.25 else "exact", then=then,
                      cascades=rng.choice((1, 1, 2, 3, 4)), spot_angle=rng.choice((180.0, 180.0, 25.0, 60.0, 110.0)),
-                     fog=rng.random() < 0.3, occlusion=rng.random() < 0.3)
+                     fog=rng.random() < 0.3, occlusion=rng.random() < 0.3, reflections=rng.random() < 0.3)
 
 
 def _random_change(rng: random.Random) -> tuple[str, dict[str, Any]]:
@@ -314,6 +319,9 @@ def _spawn(world, case: StillCase) -> dict[str, int]:
         world.add_component(world.resources["camera"], AmbientOcclusion(radius=0.8))
     named["box"] = world.spawn(Transform(position=(0.8, 0.6, 0.0), scale=BOX_SCALE), MeshRef(l_mesh()),
                                Material(color=(0.9, 0.2, 0.1)), Emissive(0.6))
+    if case.reflections:  # the box reflects the sky, the screen's in its place where its rays find it
+        world.add_component(named["box"], Reflective(mix=0.5))
+        world.add_component(world.resources["camera"], ScreenReflections(thickness=0.5))
     for i, pane in enumerate(case.panes):
         named[f"pane{i}"] = _spawn_pane(world, pane)
     if case.water:
@@ -556,7 +564,7 @@ class StillFuzzer:
             light = side.world.get(side.game.light, DirectionalLight)
             side.world.add_component(side.game.light, DirectionalLight(direction=(0.2, -1.0, -0.5), intensity=1.5,
                                                                         shadow_resolution=512))
-            for post in (Bloom, Fog, AmbientOcclusion):
+            for post in (Bloom, Fog, AmbientOcclusion, ScreenReflections):
                 side.world.remove_component(side.game.camera, post)
             del light
         self.keeping.engine.reflection_system.keep_still_views = True
