@@ -50,7 +50,8 @@ Variants now (``VARIANTS``; add a row by appending a ``Variant``):
 * ``reflections``: the same with ``ScreenReflections()`` on the camera (the root's draw
   writes their images, the colour is copied with its mips and the composite marches the
   floor's rays): its cost is its ratio to ``polished``;
-* ``reflections_low``: the same with ``quality="low"`` (16 steps a ray, not 32).
+* ``reflections_low``: the same with ``quality="low"`` (16 steps a ray, not 32);
+* ``reflections_half``: the same with ``half_resolution=True`` (a ray a 2 x 2 block).
 
 **Targets** (``TARGETS``), each a ratio of two variants' medians at a mirror count against
 its limit, printed as value, limit, met, and judged on the kind of machine it is set for
@@ -305,13 +306,17 @@ def _polished(engine: Engine) -> None:
             engine.world.add_component(entity, Reflective(mode="skybox", mix=0.35))
 
 
-def _reflections(engine: Engine, quality: str = "medium") -> None:
+def _reflections(engine: Engine, quality: str = "medium", half: bool = False) -> None:
     _polished(engine)
-    engine.world.add_component(camera_entity(engine), ScreenReflections(quality=quality))
+    engine.world.add_component(camera_entity(engine), ScreenReflections(quality=quality, half_resolution=half))
 
 
 def _reflections_low(engine: Engine) -> None:
     _reflections(engine, "low")
+
+
+def _reflections_half(engine: Engine) -> None:
+    _reflections(engine, half=True)
 
 
 def _post_auto(engine: Engine) -> None:
@@ -343,6 +348,7 @@ VARIANTS: list[Variant] = [
     Variant("polished", _polished, "the floor reflects the sky (Reflective(mix=0.35))"),
     Variant("reflections", _reflections, "the polished floor and ScreenReflections() on the camera"),
     Variant("reflections_low", _reflections_low, "the same with ScreenReflections(quality='low')"),
+    Variant("reflections_half", _reflections_half, "the same with ScreenReflections(half_resolution=True)"),
 ]
 BASELINE = "off"
 

@@ -1,200 +1,87 @@
 #version 410 core
-// Screen-space reflections (engine/render/screen_reflections.py): each pixel whose surface
-// reflects the sky or a probe follows its reflected ray across the main view's depth image
-// and, where the ray meets what the view drew, puts what the view shows there in place of
-// the sky's or probe's reflection: colour + confidence x (W x found - W x radiance), with W
-// and W x radiance as the scene pass wrote them (scene.frag, SCREEN_REFLECTION).
-//
-// The ray is stepped in screen space with perspective-correct depth, a stride of pixels a
-// step (McGuire and Mara, "Efficient GPU Screen-Space Ray Tracing", JCGT 2014): each step
-// takes the ray's depth range across it and hits where that range reaches behind the
-// drawn surface, by no more than ``thickness``; the step is then halved REFINE times.
-#include "view_depth.glsl"
+// Screen-space reflections' composite (engine/render/screen_reflections.py): each pixel
+// whose surface reflects the sky or a probe, where its reflected ray meets what the view drew
+// (screen_march.glsl), has what the view shows there put in place of the sky's or probe's
+// reflection: colour + confidence x (W x found - W x radiance), with W and W x radiance as
+// the scene pass wrote them (scene.frag, SCREEN_REFLECTION).  The HALF_RESOLUTION build reads
+// the rays marched at half size (screen_reflection_trace.frag) instead of marching its own:
+// the four about the pixel, by bilinear weight times how near their surface's depth is.
+#include "screen_march.glsl"
 
 uniform sampler2D scene_color;     // the main view's colour (a copy), with its mip chain
-uniform sampler2D depth_map;       // the main view's depth
 uniform sampler2D weight_map;      // rgb: W, a: roughness
 uniform sampler2D added_map;       // rgb: W x the sky's or probe's radiance, a: entity bits 0-10
-uniform sampler2D normal_map;      // rgb: the shading normal (world), a: entity bits 11-21
 uniform usampler2D surface_map;    // the entity drawn at each pixel (last drawn: glass over it too)
-uniform mat4 projection;           // the view's
-uniform mat3 view_rotation;        // world -> view directions
-uniform float near_plane;          // view depth of the near plane (> 0)
-uniform float max_distance;        // ScreenReflections.max_distance
-uniform float thickness;           // ScreenReflections.thickness
 uniform float max_roughness;       // ScreenReflections.max_roughness
-uniform float edge_fade;           // ScreenReflections.edge_fade
 uniform float top_lod;             // the colour's last mip level
+#ifdef HALF_RESOLUTION
+uniform sampler2D hits_map;        // xy: the pixel found, z: the confidence, w: the traced pixel's window depth (-1: none)
+#endif
 
 out vec4 out_color;
 
-// The view depth (> 0) drawn at a pixel; the sky's is far beyond any ray.
-float drawn_depth(vec2 pixel) {
-    float depth = texelFetch(depth_map, ivec2(pixel), 0).r;
-    return depth >= 1.0 ? 1e30 : unproject_z.y / (depth * 2.0 - 1.0 + unproject_z.x);
+// The share of the screen's reflection a surface of this roughness takes: all of it up to
+// three quarters of max_roughness, none past it.
+float rough_share(float roughness) {
+    return max_roughness > 0.0 ? 1.0 - smoothstep(0.75 * max_roughness, max_roughness, roughness)
+                               : (roughness > 0.0 ? 0.0 : 1.0);
 }
 
-// The screen position (pixels) of the view-space point p.
-vec2 on_screen(vec3 p, out float k) {
-    vec4 h = projection * vec4(p, 1.0);
-    k = 1.0 / h.w;
-    return (h.xy * k * 0.5 + 0.5) * depth_size;
-}
-
-// The ray's segment on the screen, from p0 to p1 (pixels), with q / k its view depth along
-// it (q and k, as 1 / depth, are linear in screen space): main's, for the functions below.
-vec2 p0, p1;
-float q0, q1, k0, k1;
-
-// The ray's view depth at parameter t of its segment.
-float depth_along(float t) {
-    return -mix(q0, q1, t) / mix(k0, k1, t);
-}
-
-// The ray's window depth at parameter t (what the depth image holds for a point there:
-// 0.5 + 0.5 (P[3][2] k - P[2][2]), k = 1 / view depth, linear along the screen): the march
-// compares it with the image's texels as they are, no division a sample.
-float window_along(float t) {
-    return 0.5 + 0.5 * (unproject_z.y * mix(k0, k1, t) - unproject_z.x);
-}
-
-float drawn_window(vec2 pixel) {
-    return texelFetch(depth_map, ivec2(pixel), 0).r;
-}
-
-// Where between lo (the ray in front of what is drawn) and hi (behind it) the ray goes
-// behind, halved REFINE times into [lo, hi]; true if it lies there within the thickness
-// behind the surface drawn (else it passed behind something: no hit there).
-bool crossing(inout float lo, inout float hi) {
-    for (int i = 0; i < REFINE; ++i) {
-        float mid = 0.5 * (lo + hi);
-        if (window_along(mid) >= drawn_window(mix(p0, p1, mid))) hi = mid; else lo = mid;
-    }
-    return depth_along(hi) - drawn_depth(mix(p0, p1, hi)) <= thickness;
-}
-
-// Whether the surface drawn at a pixel faces against the direction d (view space); an
-// unlit mirror's (no normal written) is taken to.
-bool faces(vec2 pixel, vec3 d) {
-    vec3 n = texelFetch(normal_map, ivec2(pixel), 0).xyz;
-    return dot(n, n) == 0.0 || dot(view_rotation * n, d) <= 0.0;
+// What the view shows at ``found``, for a surface of ``roughness`` whose ray went from the
+// pixel at ``from`` there.  A rough surface spreads its reflection over a cone about its
+// ray: the level of the image as wide as the cone where it meets what it reflects (GGX's
+// alpha, roughness squared, taken as the cone's half-width a unit of distance; the distance
+// in pixels across the screen).  At the base level, the found pixel's own colour (no blend
+// across its edge).
+vec3 seen_at(vec2 found, vec2 from, float roughness) {
+    float spread = roughness * roughness * 2.0 * length(found - from);
+    float lod = clamp(log2(max(spread, 1.0)), 0.0, top_lod);
+    vec2 at = lod > 0.0 ? found : floor(found) + 0.5;
+    return textureLod(scene_color, at / depth_size, lod).rgb;
 }
 
 // The colour of the pixel at ``pixel`` (``base`` now) with the screen's reflection in place of
 // the sky's or probe's, where its ray finds one (``base`` where it does not).
-vec3 reflected(ivec2 pixel, vec3 base, vec4 weight, float rough_fade, float depth) {
-    float roughness = weight.a;
+vec3 reflected(ivec2 pixel, vec3 base, vec4 weight, float share, float depth) {
     vec4 added = texelFetch(added_map, pixel, 0);
     vec4 normal = texelFetch(normal_map, pixel, 0);
     // Still the surface the weights were written for: nothing see-through drawn over it since.
     uint drawn = texelFetch(surface_map, pixel, 0).r;
     if (float(drawn & 2047u) != added.a || float((drawn >> 11u) & 2047u) != normal.a) return base;
-
-    vec3 origin = view_position(gl_FragCoord.xy, depth);
-    vec3 n = normalize(view_rotation * normal.xyz);
-    vec3 r = normalize(reflect(normalize(origin), n));
-    origin += n * (0.0002 * -origin.z);  // off the surface, as far as its depth's precision
-    // The ray's far end: max_distance along it, or where it would cross the near plane.
-    float length_ = (origin.z + r.z * max_distance > -near_plane) ? (-near_plane - origin.z) / r.z : max_distance;
-    vec3 end = origin + r * length_;
-    p0 = on_screen(origin, k0);
-    p1 = on_screen(end, k1);
-    // Cut the segment at the screen's edges (its parameter along the screen line).
-    vec2 delta = p1 - p0;
-    float cut = 1.0;
-    for (int axis = 0; axis < 2; ++axis) {
-        float d = delta[axis];
-        if (abs(d) > 1e-6) {
-            float limit = d > 0.0 ? depth_size[axis] - 0.5 : 0.5;
-            cut = min(cut, max((limit - p0[axis]) / d, 0.0));
+#ifdef HALF_RESOLUTION
+    // The four traced texels about the pixel, each by its bilinear weight times how near its
+    // surface lies to this one (2% of the distance: another surface past it), and the
+    // found ones' colours by their confidence too.
+    float here = drawn_depth(gl_FragCoord.xy);
+    vec2 at = gl_FragCoord.xy * 0.5 - 0.5;
+    vec2 cell = floor(at);
+    vec2 f = at - cell;
+    ivec2 last = textureSize(hits_map, 0) - 1;
+    float weights = 0.0, trusted = 0.0;
+    vec3 radiance = vec3(0.0);
+    for (int i = 0; i < 4; ++i) {
+        ivec2 offset = ivec2(i & 1, i >> 1);
+        vec4 hit = texelFetch(hits_map, clamp(ivec2(cell) + offset, ivec2(0), last), 0);
+        if (hit.w < 0.0) continue;
+        vec2 bilinear = mix(1.0 - f, f, vec2(offset));
+        float there = unproject_z.y / (hit.w * 2.0 - 1.0 + unproject_z.x);
+        float w = bilinear.x * bilinear.y * max(0.0, 1.0 - abs(there - here) / (0.02 * here));
+        weights += w;
+        if (hit.z > 0.0) {
+            trusted += w * hit.z;
+            radiance += w * hit.z * seen_at(hit.xy, gl_FragCoord.xy, weight.a);
         }
     }
-    // q / k is the view depth along the segment, linear in screen space (perspective-correct).
-    q0 = origin.z * k0;
-    q1 = end.z * k1;
-    p1 = p0 + delta * cut;
-    q1 = mix(q0, q1, cut);
-    k1 = mix(k0, k1, cut);
-    delta = p1 - p0;
-    float span = max(abs(delta.x), abs(delta.y));
-    if (span < 1.0) return base;
-    float stride = max(1.0, span / float(STEPS));
-    float steps = min(float(STEPS), ceil(span / stride));
-    float dt = stride / span;  // the segment's parameter a step
-
-    // Where the ray is last known in front of what is drawn: a pixel out from its own (at
-    // its own, a halving could settle on the surface it leaves, as depth's rounding goes).
-    float t = 1.0 / span;
-    float lo = 0.0, hi = -1.0;   // the crossing's bounds, once found (hi -1: none)
-    // What was drawn at the last two steps' ends (window depths, affine in 1 / depth): a
-    // plane's is linear along the screen, so were the surface there to go on, this step's
-    // end would show it at twice the last less the one before.  (At first: the pixel's own.)
-    float drawn_before = depth, drawn_two_before = depth;
-    float sub_steps = min(float(SUBSTEPS), ceil(stride));
-    for (int i = 0; i < STEPS; ++i) {
-        if (float(i) >= steps) break;
-        float next = min(t + dt, 1.0);
-        float ray = window_along(next);
-        float drawn_here = drawn_window(mix(p0, p1, next));
-        if (ray >= drawn_here) {  // behind what is drawn at the step's end: where did it go behind?
-            float a = t, b = next;
-            if (crossing(a, b)) {
-                lo = a;
-                hi = b;
-                break;
-            }
-        } else if (i > 0 && ray > 2.0 * drawn_before - drawn_two_before) {
-            // In front of what this end shows, but behind the surface the last two showed,
-            // carried on to here: that surface ended within the step, maybe after the ray
-            // met it (the corner of a box it skims past the top edge of).  Walk the step in parts.
-            for (int j = 1; j < SUBSTEPS; ++j) {
-                if (float(j) >= sub_steps) break;
-                float at = t + dt * float(j) / sub_steps;
-                if (window_along(at) >= drawn_window(mix(p0, p1, at))) {
-                    float a = at - dt / sub_steps, b = at;
-                    if (crossing(a, b)) {
-                        lo = a;
-                        hi = b;
-                    }
-                    break;
-                }
-            }
-            if (hi >= 0.0) break;
-        }
-        drawn_two_before = drawn_before;
-        drawn_before = drawn_here;
-        t = next;
-    }
-    if (hi < 0.0) return base;
-    vec2 found = mix(p0, p1, hi);
-    float found_depth = drawn_depth(found);
-    if (found_depth > 1e29) return base;
-    // A surface the ray meets from behind (a table's top, over its underside) is not what it
-    // would see there.  The pixel a step back along the ray counts too: at a silhouette the
-    // hit pixel may show the face beyond the edge the ray met (a box's top over its front).
-    vec2 back = found - normalize(p1 - p0);
-    if (!faces(found, r) && !faces(back, r)) return base;
-    vec3 found_point = view_at(found, -found_depth);
-    float travelled = length(found_point - origin);
-
-    vec2 uv = (floor(found) + 0.5) / depth_size;  // the found pixel's own colour (no blend across its edge)
-    vec2 edge = min(uv, 1.0 - uv);
-    // How far behind the drawn surface the ray is where it was found: about 0 where it
-    // meets it, up to the thickness where it passes behind something (the underside of a
-    // ball the view sees only the top of): those fade out over its last three quarters,
-    // so what the view cannot show is not a hard-edged guess.
-    float gap = depth_along(hi) - found_depth;
-    float confidence = rough_fade
-        * (edge_fade > 0.0 ? smoothstep(0.0, edge_fade, min(edge.x, edge.y)) : 1.0)
-        * (1.0 - smoothstep(0.75 * max_distance, max_distance, travelled))
-        * (1.0 - smoothstep(0.25 * thickness, thickness, gap));
-    // A rough surface spreads its reflection over a cone about r: the level of the image as
-    // wide as the cone where it meets what it reflects (GGX's alpha, roughness squared, taken
-    // as the cone's half-width a unit of distance; the distance in pixels across the screen).
-    float spread = roughness * roughness * 2.0 * length(found - p0);
-    float lod = clamp(log2(max(spread, 1.0)), 0.0, top_lod);
-    vec3 radiance = textureLod(scene_color, uv, lod).rgb;
-    return max(base + confidence * (weight.rgb * radiance - added.rgb), vec3(0.0));
+    if (trusted <= 0.0) return base;
+    radiance /= trusted;
+    float confidence = share * trusted / weights;
+#else
+    vec2 found;
+    float confidence = share * march(gl_FragCoord.xy, depth, normal.xyz, found);
+    if (confidence <= 0.0) return base;
+    vec3 radiance = seen_at(found, gl_FragCoord.xy, weight.a);
+#endif
+    return clamp(base + confidence * (weight.rgb * radiance - added.rgb), vec3(0.0), vec3(65504.0));
 }
 
 void main() {
@@ -202,13 +89,12 @@ void main() {
     vec4 base = texelFetch(scene_color, pixel, 0);
     out_color = base;
     vec4 weight = texelFetch(weight_map, pixel, 0);
-    float rough_fade = max_roughness > 0.0 ? 1.0 - smoothstep(0.75 * max_roughness, max_roughness, weight.a)
-                                           : (weight.a > 0.0 ? 0.0 : 1.0);
+    float share = rough_share(weight.a);
     float depth = texelFetch(depth_map, pixel, 0).r;
     // Where nothing reflects, rougher than max_roughness, or the sky.  llvmpipe runs every
     // instruction of a branch for a group of pixels where one of them takes it, but skips a
-    // loop's body where none of them has a turn left: the trace is a loop run once or not
-    // at all (run as a branch, the pixels without a reflection cost half the trace's time).
-    int todo = max(weight.r, max(weight.g, weight.b)) > 0.0 && rough_fade > 0.0 && depth < 1.0 ? 1 : 0;
-    for (int once = 0; once < todo; ++once) out_color.rgb = reflected(pixel, base.rgb, weight, rough_fade, depth);
+    // loop's body where none of them has a turn left: the work is a loop run once or not
+    // at all (run as a branch, the pixels without a reflection cost half the march's time).
+    int todo = max(weight.r, max(weight.g, weight.b)) > 0.0 && share > 0.0 && depth < 1.0 ? 1 : 0;
+    for (int once = 0; once < todo; ++once) out_color.rgb = reflected(pixel, base.rgb, weight, share, depth);
 }

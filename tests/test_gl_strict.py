@@ -154,7 +154,8 @@ def _fog(path: str):
             engine.reflection_system.path = path
             for entity, _ in engine.world.query_one(Camera):
                 engine.world.add_component(entity, Fog(density=0.08, height=1.0, height_falloff=0.3))
-                engine.world.add_component(entity, ScreenReflections())
+                # (batched: the rays marched at half size, their pass and the composite's build)
+                engine.world.add_component(entity, ScreenReflections(half_resolution=path == "batched"))
             engine.world.spawn(Transform(position=(0.0, 0.6, 0.0)), MeshRef(sphere(0.5)),
                                Material(color=(0.9, 0.9, 0.9), metallic=1.0, roughness=0.1), Reflective())
         return _engine_frames(ctx, MirrorRing(4), 3, configure)

@@ -342,3 +342,19 @@ def test_a_run_binds_its_pass_wide_state_once_and_again_after_another_pass_rebin
         other.release()
         capture.release()
         engine.close()
+
+
+def test_no_pass_keeps_a_texture_on_modernGLs_own_unit(ctx):
+    """moderngl binds a texture it makes, or builds the mips of, on its ``default_texture_unit``
+    (GL_MAX_TEXTURE_IMAGE_UNITS - 1) without telling the record: a texture a pass kept there
+    would be displaced behind its back (the screen reflections' half-size rays on 31 read the
+    colour copy whose mips were built there, and nothing was reflected).  Only the raw-GL copies'
+    scratch unit, which no program reads, may be it (on a 16-unit driver)."""
+    units = {name: value for name, value in vars(bindings).items() if name.endswith("_UNIT") and isinstance(value, int)}
+    for name, value in vars(bindings).items():
+        if name.endswith("_UNITS") and isinstance(value, tuple):
+            units.update({f"{name}[{index}]": unit for index, unit in enumerate(value)})
+    assert len(units) > 30
+    for default in {ctx.default_texture_unit, 15, 31}:  # (this driver's, a 16-unit driver's, a 32-unit one's)
+        clashing = sorted(name for name, unit in units.items() if unit == default and name != "SCRATCH_UNIT")
+        assert not clashing, f"units on moderngl's own unit {default}: {clashing}"

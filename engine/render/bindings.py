@@ -122,13 +122,18 @@ SCREEN_OCCLUSION_UNIT = 20  # scene (SCREEN_OCCLUSION builds): the camera's occl
 OCCLUSION_DEPTH_UNIT = 21   # occlusion passes: the depth and normals pass's depth
 OCCLUSION_NORMAL_UNIT = 22  # occlusion pass: its normals
 OCCLUSION_IMAGE_UNIT = 23   # occlusion filter: the occlusion found (and each texel's distance)
-# Screen-space reflections' composite (engine/render/screen_reflections.py): units no other pass reads.
-REFLECTION_COLOR_UNIT = 25    # the main view's colour, copied, with its mip chain
-REFLECTION_DEPTH_UNIT = 26    # the main view's depth (read through a sampler that compares nothing)
-REFLECTION_WEIGHT_UNIT = 27   # the scene pass's reflection weights and roughness
-REFLECTION_ADDED_UNIT = 28    # the sky's or probe's reflection the scene pass added
-REFLECTION_NORMAL_UNIT = 29   # the shading normals
-REFLECTION_SURFACE_UNIT = 30  # the main view's surface ids
+# Screen-space reflections' composite (engine/render/screen_reflections.py): units no other pass
+# reads, past 31: moderngl binds a texture it makes or builds mips of on its
+# ``default_texture_unit`` (GL_MAX_TEXTURE_IMAGE_UNITS - 1: 31 on llvmpipe and NVIDIA, 15 on a
+# 16-unit driver), behind the record's back, so no pass keeps a texture on 15 or 31 (the
+# half-size rays on 31 read the colour copy whose mips were just built there).
+REFLECTION_COLOR_UNIT = 32    # the main view's colour, copied, with its mip chain
+REFLECTION_DEPTH_UNIT = 33    # the main view's depth (read through a sampler that compares nothing)
+REFLECTION_WEIGHT_UNIT = 34   # the scene pass's reflection weights and roughness
+REFLECTION_ADDED_UNIT = 35    # the sky's or probe's reflection the scene pass added
+REFLECTION_NORMAL_UNIT = 36   # the shading normals
+REFLECTION_SURFACE_UNIT = 37  # the main view's surface ids
+REFLECTION_HITS_UNIT = 38     # the rays marched at half size (ScreenReflections.half_resolution)
 FXAA_UNIT = 0            # FXAA: the encoded frame (engine/render/present.py)
 EXPOSURE_UNIT = 2        # present, exposure adaptation: the 1x1 adapted exposure (engine/render/post.py)
 EXPOSURE_MEAN_UNIT = 0   # exposure adaptation: the 64x64 log-luminance image it averages

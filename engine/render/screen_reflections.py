@@ -18,12 +18,18 @@ pixel's colour is known, by what the scene pass wrote beside it:
    portals into the view and before it draws the glass (``ScenePass.draw_transparent``):
    the view's colour is copied (with a mip chain, for rough surfaces) and each pixel with a
    ``W`` marches its reflected ray across the view's depth image
-   (``shaders/screen_reflection.frag``: McGuire and Mara's perspective-correct screen-space
-   march, at most ``QUALITY_STEPS`` steps a ray, then the hit refined by halving); where it
+   (``shaders/include/screen_march.glsl``: McGuire and Mara's perspective-correct screen-space
+   march, at most ``QUALITY_STEPS`` steps a ray, then the hit refined by halving;
+   ``shaders/screen_reflection.frag`` the composite); where it
    hits, the pixel becomes ``colour + c (W x found - W x radiance)``, with ``c`` the
    confidence (faded at the screen's edges, at the end of ``max_distance`` and towards
    ``max_roughness``).  A polished floor so reflects what a mirror beside it shows; glass
    drawn after keeps its own look over it.
+
+With ``half_resolution`` the rays are marched in a pass of their own at half the view's size
+(``shaders/screen_reflection_trace.frag``: a ray a 2 x 2 block, the first of its pixels that
+reflects), and the composite takes, at each pixel, the four found about it by bilinear weight
+times how near their surfaces' depths are to its own: a quarter of the march.
 
 A pixel is left as it was where the ray leaves the screen, passes behind what is drawn by
 more than ``thickness``, meets a surface from behind, or reaches the sky; where glass or a
@@ -46,6 +52,7 @@ from engine.render.bindings import (
     REFLECTION_ADDED_UNIT,
     REFLECTION_COLOR_UNIT,
     REFLECTION_DEPTH_UNIT,
+    REFLECTION_HITS_UNIT,
     REFLECTION_NORMAL_UNIT,
     REFLECTION_SURFACE_UNIT,
     REFLECTION_WEIGHT_UNIT,
@@ -87,12 +94,19 @@ class _Targets:
     color: moderngl.Texture                # the view's colour, copied for the composite, with mips
     color_framebuffer: moderngl.Framebuffer
     output: moderngl.Framebuffer           # the level's colour alone: the composite's target
+    hits: moderngl.Texture | None = None   # the rays marched at half size (made on first use)
+    hits_framebuffer: moderngl.Framebuffer | None = None
 
     def release(self) -> None:
-        for framebuffer in (self.framebuffer, self.color_framebuffer, self.output):
-            release_framebuffer(framebuffer)
-        for texture in (self.weight, self.added, self.normal, self.color):
-            texture.release()
+        for framebuffer in (self.framebuffer, self.color_framebuffer, self.output, self.hits_framebuffer):
+            if framebuffer is not None:
+                release_framebuffer(framebuffer)
+        for texture in (self.weight, self.added, self.normal, self.color, self.hits):
+            if texture is not None:
+                texture.release()
+
+    def count(self) -> int:
+        return 4 + (self.hits is not None)
 
 
 class ScreenReflectionPass:
@@ -103,7 +117,8 @@ class ScreenReflectionPass:
         self.gpu = gpu
         self.ctx = gpu.ctx
         self._targets: _Targets | None = None
-        self._programs: dict[str, moderngl.VertexArray] = {}  # by quality
+        # By (shader, quality, half): the composite's builds and the half-size march's.
+        self._programs: dict[tuple[str, str, bool], moderngl.VertexArray] = {}
         self._programs_of = -1  # the shader library's reloads when they were made
         self._depth_sampler: moderngl.Sampler | None = None
         # This frame's: (the view, its settings), from begin until composite (None: nothing to do).
@@ -112,17 +127,28 @@ class ScreenReflectionPass:
 
     @property
     def framebuffer(self) -> moderngl.Framebuffer | None:
-        """The framebuffer the main view draws into this frame (``SceneOptions.reflections``)."""
+        """The framebuffer the main view's reflecting surfaces draw into this frame
+        (``SceneOptions.reflections``; None: none)."""
         return None if self._pending is None or self._targets is None else self._targets.framebuffer
 
     def begin(self, view: View, targets: RenderTargets, settings: ScreenReflections) -> None:
         """The main view, about to be drawn into ``targets`` (the main tree's level 0), will
         be reflected as ``settings`` say: its images are made (once for the targets) and the
-        framebuffer it draws into is ``framebuffer``; the scene pass clears them all."""
+        framebuffer its reflecting surfaces draw into is ``framebuffer``; the scene pass
+        clears them all."""
         kept = self._targets
         if kept is None or kept.level is not targets:
             self.release_targets()
-            self._targets = self._make(targets)
+            kept = self._targets = self._make(targets)
+        if settings.half_resolution and kept.hits is None:
+            size = ((targets.size[0] + 1) // 2, (targets.size[1] + 1) // 2)
+            kept.hits = self.ctx.texture(size, 4, dtype="f4")  # (found pixels past 2048 need more than half floats)
+            kept.hits.filter = (moderngl.NEAREST, moderngl.NEAREST)
+            kept.hits_framebuffer = self.ctx.framebuffer([kept.hits])
+        elif not settings.half_resolution and kept.hits is not None:
+            release_framebuffer(kept.hits_framebuffer)
+            kept.hits.release()
+            kept.hits, kept.hits_framebuffer = None, None
         self._pending = (view, settings)
 
     def _make(self, level: RenderTargets) -> _Targets:
@@ -146,22 +172,26 @@ class ScreenReflectionPass:
     def _top_lod(size: tuple[int, int]) -> int:
         return max(0, min(MAX_COLOR_LOD, max(size).bit_length() - 1))
 
-    def _program(self, quality: str) -> moderngl.VertexArray:
+    def _program(self, shader: str, quality: str, half: bool) -> moderngl.VertexArray:
         shaders = self.gpu.shaders
         if self._programs_of != shaders.reloads:
             self._release_programs()
             self._programs_of = shaders.reloads
-        vao = self._programs.get(quality)
+        key = (shader, quality, half)
+        vao = self._programs.get(key)
         if vao is None:
             steps, refine = QUALITY_STEPS[quality]
-            program = shaders.program("fullscreen.vert", "screen_reflection.frag",
-                                      defines={"STEPS": str(steps), "REFINE": str(refine),
-                                               "SUBSTEPS": str(SILHOUETTE_STEPS)})
+            defines = {"STEPS": str(steps), "REFINE": str(refine), "SUBSTEPS": str(SILHOUETTE_STEPS)}
+            if half:
+                defines["HALF_RESOLUTION"] = "1"
+            program = shaders.program("fullscreen.vert", shader, defines=defines)
             for name, unit in (("scene_color", REFLECTION_COLOR_UNIT), ("depth_map", REFLECTION_DEPTH_UNIT),
                                ("weight_map", REFLECTION_WEIGHT_UNIT), ("added_map", REFLECTION_ADDED_UNIT),
-                               ("normal_map", REFLECTION_NORMAL_UNIT), ("surface_map", REFLECTION_SURFACE_UNIT)):
-                program[name].value = unit
-            vao = self._programs[quality] = self.ctx.vertex_array(program, [])
+                               ("normal_map", REFLECTION_NORMAL_UNIT), ("surface_map", REFLECTION_SURFACE_UNIT),
+                               ("hits_map", REFLECTION_HITS_UNIT)):
+                if name in program:
+                    program[name].value = unit
+            vao = self._programs[key] = self.ctx.vertex_array(program, [])
         return vao
 
     def composite(self, level: RenderTargets) -> None:
@@ -181,20 +211,14 @@ class ScreenReflectionPass:
         ctx.copy_framebuffer(targets.color_framebuffer, level.color_framebuffer)
         top = self._top_lod(size)
         targets.color.build_mipmaps(0, top)
-        vao = self._program(settings.quality)
-        program = vao.program
         proj = view.proj
-        program["projection"].write(proj.to_bytes())
-        program["view_rotation"].write(glm.mat3(view.view).to_bytes())
-        program["unproject"].value = (float(proj[0][0]), float(proj[1][1]), float(proj[2][0]), float(proj[2][1]))
-        program["unproject_z"].value = (float(proj[2][2]), float(proj[3][2]))
-        program["depth_size"].value = (float(size[0]), float(size[1]))
-        program["near_plane"].value = float(proj[3][2]) / (float(proj[2][2]) - 1.0)
-        program["max_distance"].value = settings.max_distance
-        program["thickness"].value = settings.thickness
-        program["max_roughness"].value = settings.max_roughness
-        program["edge_fade"].value = settings.edge_fade
-        program["top_lod"].value = float(top)
+        values = {
+            "projection": proj.to_bytes(), "view_rotation": glm.mat3(view.view).to_bytes(),
+            "unproject": (float(proj[0][0]), float(proj[1][1]), float(proj[2][0]), float(proj[2][1])),
+            "unproject_z": (float(proj[2][2]), float(proj[3][2])), "depth_size": (float(size[0]), float(size[1])),
+            "near_plane": float(proj[3][2]) / (float(proj[2][2]) - 1.0), "max_distance": settings.max_distance,
+            "thickness": settings.thickness, "max_roughness": settings.max_roughness,
+            "edge_fade": settings.edge_fade, "top_lod": float(top)}
         if self._depth_sampler is None:  # the level's depth as distances, compared with nothing
             self._depth_sampler = ctx.sampler(filter=(moderngl.NEAREST, moderngl.NEAREST), compare_func="")
         for texture, unit in ((targets.color, REFLECTION_COLOR_UNIT), (level.depth, REFLECTION_DEPTH_UNIT),
@@ -202,6 +226,18 @@ class ScreenReflectionPass:
                               (targets.normal, REFLECTION_NORMAL_UNIT), (level.surface, REFLECTION_SURFACE_UNIT)):
             bind_texture(ctx, texture, unit)
         bind_sampler(ctx, self._depth_sampler, REFLECTION_DEPTH_UNIT)
+        half = settings.half_resolution and targets.hits is not None
+        if half:  # the rays marched at half size first
+            trace = self._program("screen_reflection_trace.frag", settings.quality, False)
+            _write(trace.program, values)
+            targets.hits_framebuffer.use()
+            apply_pass_state(ctx, _PASS, (0, 0, *targets.hits.size))
+            trace.render(moderngl.TRIANGLES, vertices=3)
+            bind_texture(ctx, targets.hits, REFLECTION_HITS_UNIT)
+            gpu.stats.passes += 1
+            gpu.stats.draw_calls += 1
+        vao = self._program("screen_reflection.frag", settings.quality, half)
+        _write(vao.program, values)
         targets.output.use()
         apply_pass_state(ctx, _PASS, viewport)
         vao.render(moderngl.TRIANGLES, vertices=3)
@@ -212,8 +248,8 @@ class ScreenReflectionPass:
             gpu.checkpoint("screen reflections")
 
     def target_count(self) -> int:
-        """Images held now (4 while a camera asks for reflections, else 0)."""
-        return 0 if self._targets is None else 4
+        """Images held now (4 while a camera asks for reflections, 5 at half resolution, else 0)."""
+        return 0 if self._targets is None else self._targets.count()
 
     def release_targets(self) -> None:
         """Let the images go (no camera asks for reflections, or the level was made again)."""
@@ -234,3 +270,14 @@ class ScreenReflectionPass:
             forget_sampler(self.ctx, self._depth_sampler)
             self._depth_sampler.release()
             self._depth_sampler = None
+
+
+def _write(program: moderngl.Program, values: dict) -> None:
+    """``values`` into ``program``'s uniforms of those names it has (a build drops what it
+    does not read)."""
+    for name, value in values.items():
+        if name in program:
+            if isinstance(value, bytes):
+                program[name].write(value)
+            else:
+                program[name].value = value
