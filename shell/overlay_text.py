@@ -63,11 +63,13 @@ def overlay_lines(engine: Engine, frame_times: Sequence[float]) -> list[str]:
 
 
 def post_lines(engine: Engine) -> list[str]:
-    """The present stage's post-processing in the last frame, one line: the tone curve (and
+    """The present stage's post-processing in the last frame, a line: the tone curve (and
     whose it is), the exposure, the bloom (intensity, levels), the grade (and its colour
-    table's name), the post passes drawn, and the main stage's ambient occlusion (radius,
-    intensity) and screen-space reflections (reach, quality).  The automatic exposure's
-    adapted value is read back from the GPU (a wait, only while the overlay shows it)."""
+    table's name), the post passes drawn; and a line of the main stage's screen-space
+    passes: ambient occlusion (radius, intensity) and reflections (reach, quality).  (One
+    line grew the overlay's window over the view it is clicked through.)  The automatic
+    exposure's adapted value is read back from the GPU (a wait, only while the overlay
+    shows it)."""
     present, renderer = engine.stages["present"], engine.renderer
     tonemap, bloom = present.tonemap, present.bloomed
     camera_curve = tonemap.curve if tonemap is not None else "none"
@@ -100,8 +102,10 @@ def post_lines(engine: Engine) -> list[str]:
         occlusion = "AO off" + (" (set)" if not main.occlusion else "")
     reflected = main.reflected
     if reflected is not None:
-        occlusion += f"; SSR {reflected.max_distance:g} m {reflected.quality}"
+        reflections = (f"SSR {reflected.max_distance:g} m {reflected.quality}"
+                       f"{' half' if reflected.half_resolution else ''}")
     else:
-        occlusion += "; SSR off" + (" (set)" if not main.reflections else "")
+        reflections = "SSR off" + (" (set)" if not main.reflections else "")
     passes = renderer.present_pass.post_passes
-    return [f"post: {curve} ({whose}), {exposure}; {glow}, {passes} passes{grade}; {occlusion}"]
+    return [f"post: {curve} ({whose}), {exposure}; {glow}, {passes} passes{grade}",
+            f"screen: {occlusion}; {reflections}"]

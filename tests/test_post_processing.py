@@ -696,7 +696,7 @@ def test_the_present_stages_switches_turn_bloom_off_and_override_the_curve(known
     line = post_line(runner.engine)
     assert line.startswith(f"post: agx (camera), +0.00 EV, auto {adapted:+.2f}; "), line
     # 12 rows: levels 6x128 and 3x64 (3 passes), and 2 exposure passes
-    assert line.endswith("; bloom 0.3 x2, 5 passes; AO off; SSR off"), line
+    assert line.endswith("; bloom 0.3 x2, 5 passes; screen: AO off; SSR off"), line
     present.bloom = False
     plain = runner.frame()
     assert not np.array_equal(plain, bloomed)
@@ -707,12 +707,12 @@ def test_the_present_stages_switches_turn_bloom_off_and_override_the_curve(known
     got = runner.frame().astype(np.int16)
     assert np.abs(got - expected_srgb8(CURVES["none"](image[..., :3].astype(np.float64)))).max() <= 1
     assert post_line(runner.engine) == \
-        "post: none (set; camera agx), +0.00 EV; bloom off (set), 0 passes; AO off; SSR off"
+        "post: none (set; camera agx), +0.00 EV; bloom off (set), 0 passes; screen: AO off; SSR off"
     with pytest.raises(ValueError, match="PresentSystem.curve"):
         present.curve = "filmic"
     bare = known(image)
     bare.frame()
-    assert post_line(bare.engine) == "post: none (camera), x1; bloom off, 0 passes; AO off; SSR off"
+    assert post_line(bare.engine) == "post: none (camera), x1; bloom off, 0 passes; screen: AO off; SSR off"
 
 
 def test_the_overlay_toggles_bloom_the_grade_and_occlusion_and_picks_the_curve(known, ctx):

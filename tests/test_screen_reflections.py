@@ -35,6 +35,7 @@ from components import (
 )
 from engine.assets.level_file import LevelError, load_level, save_level
 from engine.assets.mesh import box, plane, quad
+from engine.core.errors import NoCameraWarning
 from engine.core.world import World
 from shell.overlay_text import post_lines
 from tests.support import look_from, pixel_rays, srgb_to_linear
@@ -298,6 +299,7 @@ def test_glass_over_the_floor_blends_over_its_reflection(scene):
     assert ratio == pytest.approx(1.0 - alpha, abs=0.08)
 
 
+@pytest.mark.filterwarnings("ignore:Water on entity")  # (a still pond: no normal map, no waves)
 def test_water_drawn_over_the_floor_keeps_its_own_look(scene):
     """A see-through surface the main view draws over the floor (a pond: its blend goes in
     with the view's opaque draws) leaves the floor's weights under it, but not its id: the
@@ -364,17 +366,24 @@ def test_one_composite_a_frame_and_its_images_go_with_the_component(scene):
     assert renderer.resource_counts()["reflection_targets"] == 0
     assert renderer.screen_reflections.composites == before + 1
     assert runner.stats.passes == passes
+    runner.world.add_component(names["camera"], ScreenReflections(half_resolution=True))
+    runner.frame()
+    assert renderer.resource_counts()["reflection_targets"] == 5
+    with pytest.warns(NoCameraWarning):
+        runner.world.delete_entity(names["camera"])  # its images go with it
+        runner.frame()
+    assert renderer.resource_counts()["reflection_targets"] == 0
 
 
 def test_the_overlay_switch_turns_them_off(scene):
     image, runner, _ = _frame(scene, reflections=ScreenReflections())
     plain, _, _ = _frame(scene)
-    assert post_lines(runner.engine)[0].endswith("; SSR 30 m medium")
+    assert post_lines(runner.engine)[1] == "screen: AO off; SSR 30 m medium"
     runner.engine.stages["main"].reflections = False
     off = runner.frame().astype(np.int32)
     assert np.abs(off - plain).max() <= 1
     assert np.abs(image - plain).max() > 100
-    assert post_lines(runner.engine)[0].endswith("; SSR off (set)")
+    assert post_lines(runner.engine)[1] == "screen: AO off; SSR off (set)"
 
 
 @pytest.mark.parametrize("field, value", [("max_distance", 0.0), ("max_distance", float("nan")), ("thickness", -1.0),

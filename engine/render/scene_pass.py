@@ -107,14 +107,6 @@ if TYPE_CHECKING:
     from engine.render.screen_reflections import ScreenReflectionPass
 
 _ALWAYS = nullcontext()  # a view drawn whatever its claim counted
-_REFLECTING = (int(ReflectVariant.SKYBOX), int(ReflectVariant.CUBE))  # the reflect slots screen reflections replace
-
-
-def reflects_environment(batch: InstanceBatch) -> bool:
-    """Whether ``batch`` may reflect the sky or a probe (its instances' reflect slot, or
-    variants that differ between them): what screen reflections put the screen's in place of."""
-    variants = batch.variants
-    return variants is None or variants[2] in _REFLECTING
 _SCENE = PassState(depth_func="<", cull=True, clips=SCENE_CLIPS)
 _BATCHED_SCENE = PassState(depth_func="<", cull=True, clips=BATCHED_SCENE_CLIPS)
 # The sky's shaders write no gl_ClipDistance: a clip distance left on with no value written
@@ -127,6 +119,14 @@ _LAYERED_SKY = PassState(depth_func="<=")
 _BATCHED_TRANSPARENT = PassState(depth_func="<", cull=True, clips=BATCHED_SCENE_CLIPS, blend=BLEND_OVER)
 _LAYERED_TRANSPARENT = _BATCHED_TRANSPARENT
 _TRANSPARENT = PassState(depth_func="<", cull=True, clips=SCENE_CLIPS, blend=BLEND_OVER)
+_REFLECTING = (int(ReflectVariant.SKYBOX), int(ReflectVariant.CUBE))  # the reflect slots screen reflections replace
+
+
+def reflects_environment(batch: InstanceBatch) -> bool:
+    """Whether ``batch`` may reflect the sky or a probe (its instances' reflect slot, or
+    variants that differ between them): what screen reflections put the screen's in place of."""
+    variants = batch.variants
+    return variants is None or variants[2] in _REFLECTING
 
 
 class ScenePass:
@@ -568,10 +568,9 @@ class ScenePass:
         """The main view's opaque ``batches`` drawn for screen reflections: those that reflect
         no sky or probe first, as ever (their pixels keep the cleared "nothing reflected"),
         then those that may (``reflects_environment``) into ``reflecting``, the framebuffer
-        with the reflections' images, with the builds that write them.  Only the surfaces
-        that reflect pay for the three images' writes (on llvmpipe writing them at every pixel
-        of a 640 x 360 frame cost about as much again as the frame).  The view's own
-        framebuffer is bound again after."""
+        with the reflections' images, with the builds that write them: only the surfaces
+        that reflect pay for the three images' writes.  The view's own framebuffer is bound
+        again after."""
         ctx = self.ctx
         others = [batch for batch in batches if not reflects_environment(batch)]
         mirrored = [batch for batch in batches if reflects_environment(batch)]
