@@ -111,6 +111,13 @@ def _cast(runner) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     return on_floor, np.where(on_floor, which, -1), screen, np.where(on_floor, best, np.inf)
 
 
+def _pixels(screen: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The (column, row) of the pixel each of ``_cast``'s screen points lands in."""
+    columns = np.clip(np.round(screen[..., 0] - 0.5).astype(int), 0, SIZE[0] - 1)
+    rows = np.clip(np.round(screen[..., 1] - 0.5).astype(int), 0, SIZE[1] - 1)
+    return columns, rows
+
+
 def _eroded(mask: np.ndarray, steps: int = 1) -> np.ndarray:
     """``mask`` less its pixels within ``steps`` of one outside it (away from every edge)."""
     out = mask.copy()
@@ -124,21 +131,28 @@ def _eroded(mask: np.ndarray, steps: int = 1) -> np.ndarray:
     return out
 
 
+def _reflected_boxes(runner, names: dict, seen: np.ndarray, steps: int = 1):
+    """For each box (index): the floor pixels whose reflected ray meets it at a point the
+    camera sees (``seen``: an id image of the camera's view), ``steps`` pixels and more from
+    the reflection's edges (where a pixel's ray and the rasteriser's coverage part), and the
+    pixels (rows, columns) those points land in."""
+    _, which, screen, _ = _cast(runner)
+    floor = runner.ids() == names["floor"]
+    columns, rows = _pixels(screen)
+    for index, entity in enumerate(names["boxes"]):
+        mask = _eroded(floor & (which == index), steps) & (seen[rows, columns] == entity)
+        yield index, mask, (rows[mask], columns[mask])
+
+
 def test_a_polished_floor_shows_the_boxes_where_a_ray_caster_finds_them(scene):
     image, runner, names = _frame(scene, reflections=ScreenReflections())
     plain, plain_runner, _ = _frame(scene)
-    on_floor, which, screen, _ = _cast(runner)
+    _, which, _, _ = _cast(runner)
     floor = runner.ids() == names["floor"]
-    columns = np.clip(np.round(screen[..., 0] - 0.5).astype(int), 0, SIZE[0] - 1)
-    rows = np.clip(np.round(screen[..., 1] - 0.5).astype(int), 0, SIZE[1] - 1)
-    seen = plain_runner.ids()
-    for index, entity in enumerate(names["boxes"]):
-        # Floor pixels whose reflected ray meets this box at a point the camera sees, away
-        # from the reflection's edges (where a pixel's ray and the rasteriser's coverage part).
-        mask = _eroded(floor & (which == index)) & (seen[rows, columns] == entity)
+    for index, mask, hit in _reflected_boxes(runner, names, plain_runner.ids()):
         assert mask.sum() > 150, index
         # The colour the camera sees at the point the ray meets (the plain frame's pixel there).
-        expected = plain[rows[mask], columns[mask]]
+        expected = plain[hit]
         difference = np.abs(image[mask] - expected).max(axis=-1)
         assert np.mean(difference <= 3) > 0.97, (index, np.percentile(difference, [50, 90, 99]))
         # Without the reflections those pixels show the sky's reflection: far from the box's colour.
@@ -155,15 +169,11 @@ def test_at_half_resolution_a_ray_a_block_brought_to_every_pixel(scene):
     depth: the boxes where the ray caster finds them still, their edges a pixel softer."""
     image, runner, names = _frame(scene, reflections=ScreenReflections(half_resolution=True))
     plain, plain_runner, _ = _frame(scene)
-    on_floor, which, screen, _ = _cast(runner)
+    _, which, _, _ = _cast(runner)
     floor = runner.ids() == names["floor"]
-    columns = np.clip(np.round(screen[..., 0] - 0.5).astype(int), 0, SIZE[0] - 1)
-    rows = np.clip(np.round(screen[..., 1] - 0.5).astype(int), 0, SIZE[1] - 1)
-    seen = plain_runner.ids()
-    for index, entity in enumerate(names["boxes"]):
-        mask = _eroded(floor & (which == index), 2) & (seen[rows, columns] == entity)
+    for index, mask, hit in _reflected_boxes(runner, names, plain_runner.ids(), steps=2):
         assert mask.sum() > 100, index
-        difference = np.abs(image[mask] - plain[rows[mask], columns[mask]]).max(axis=-1)
+        difference = np.abs(image[mask] - plain[hit]).max(axis=-1)
         # (A reflection's last row or two at a box's top edge is missed: two rows of pixels
         # share a ray.  Measured: 82% of the green box's reflection, 95% of the red's.)
         assert np.mean(difference <= 6) > 0.75 and np.median(difference) <= 2, \
@@ -196,15 +206,9 @@ def test_a_probe_reflecting_metal_floor_takes_the_screen_in_its_fresnel_weight(s
     probe's irradiance)."""
     image, runner, names = _frame(scene, floor="cube", reflections=ScreenReflections())
     plain, _, _ = _frame(scene, floor="cube")
-    _, which, screen, _ = _cast(runner)
-    floor = runner.ids() == names["floor"]
-    columns = np.clip(np.round(screen[..., 0] - 0.5).astype(int), 0, SIZE[0] - 1)
-    rows = np.clip(np.round(screen[..., 1] - 0.5).astype(int), 0, SIZE[1] - 1)
-    seen = runner.ids()
-    for index, entity in enumerate(names["boxes"]):
-        mask = _eroded(floor & (which == index)) & (seen[rows, columns] == entity)
+    for _, mask, hit in _reflected_boxes(runner, names, runner.ids()):
         assert mask.sum() > 150
-        expected = image[rows[mask], columns[mask]]  # (a box has no reflection: the same with or without)
+        expected = image[hit]  # (a box has no reflection: the same with or without)
         assert np.mean(np.abs(image[mask] - expected).max(axis=-1) <= 3) > 0.95
         assert np.mean(np.abs(plain[mask] - expected).max(axis=-1) > 20) > 0.9  # the probe's capture is not it
 
@@ -333,17 +337,12 @@ def test_in_fog_the_floor_shows_what_it_reflects_fogged_over_the_stretch_to_the_
 
     image, runner, names = _frame(scene, reflections=ScreenReflections(edge_fade=0.0), extra=foggy)
     plain, _, _ = _frame(scene, extra=foggy)
-    _, which, screen, _ = _cast(runner)
     eye, rays = pixel_rays(runner.engine.main_view, SIZE)
     distance = -eye[1] / rays[..., 1]  # from the eye to the floor
-    columns = np.clip(np.round(screen[..., 0] - 0.5).astype(int), 0, SIZE[0] - 1)
-    rows = np.clip(np.round(screen[..., 1] - 0.5).astype(int), 0, SIZE[1] - 1)
-    seen = runner.ids()
-    for index, entity in enumerate(names["boxes"]):
-        mask = _eroded((seen == names["floor"]) & (which == index)) & (seen[rows, columns] == entity)
+    for index, mask, hit in _reflected_boxes(runner, names, runner.ids()):
         assert mask.sum() > 150
         t = np.exp(-density * distance[mask])[:, None]
-        found = srgb_to_linear(image[rows[mask], columns[mask]])
+        found = srgb_to_linear(image[hit])
         expected = t * found + (1.0 - t) * fog_color
         got = srgb_to_linear(image[mask])
         assert np.abs(got - expected).max(axis=-1).mean() < 0.01, index
