@@ -6,6 +6,8 @@
 // the scene pass wrote them (scene.frag, SCREEN_REFLECTION).  The HALF_RESOLUTION build reads
 // the rays marched at half size (screen_reflection_trace.frag) instead of marching its own:
 // the four about the pixel, by bilinear weight times how near their surface's depth is.
+// The SHOW_FOUND build (the overlay's "SSR only") writes what the screen gave in place of the
+// picture: the colour found times the confidence, black where nothing was found.
 #include "screen_march.glsl"
 
 uniform sampler2D scene_color;     // the main view's colour (a copy), with its mip chain
@@ -81,13 +83,22 @@ vec3 reflected(ivec2 pixel, vec3 base, vec4 weight, float share, float depth) {
     if (confidence <= 0.0) return base;
     vec3 radiance = seen_at(found, gl_FragCoord.xy, weight.a);
 #endif
+#ifdef SHOW_FOUND
+    return min(confidence * radiance, vec3(65504.0));
+#else
     return clamp(base + confidence * (weight.rgb * radiance - added.rgb), vec3(0.0), vec3(65504.0));
+#endif
 }
 
 void main() {
     ivec2 pixel = ivec2(gl_FragCoord.xy);
     vec4 base = texelFetch(scene_color, pixel, 0);
+#ifdef SHOW_FOUND
+    out_color = vec4(0.0, 0.0, 0.0, base.a);
+    base.rgb = vec3(0.0);
+#else
     out_color = base;
+#endif
     vec4 weight = texelFetch(weight_map, pixel, 0);
     float share = rough_share(weight.a);
     float depth = texelFetch(depth_map, pixel, 0).r;

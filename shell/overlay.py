@@ -329,14 +329,10 @@ class DebugOverlay(EditorPanels):
         for label, stage, switch in (("shadows", engine.stages["shadows"], "enabled"), ("bloom", present, "bloom"),
                                      ("fog", engine.stages["prepare"], "fog"), ("grade", present, "grade"),
                                      ("AO", engine.stages["main"], "occlusion"),
-                                     ("AO only", present, "show_occlusion"),
-                                     ("SSR", engine.stages["main"], "reflections")):
+                                     ("AO only", present, "show_occlusion")):
             if label != "grade":  # (the grade, AO and the curve on a row of their own: the window stays narrow)
                 imgui.same_line()
-            changed, on = imgui.checkbox(label, getattr(stage, switch))
-            if changed:
-                setattr(stage, switch, on)   # (the stages' own switches: set only when clicked)
-            self._widget(label)
+            self._switch(label, stage, switch)
         imgui.same_line()
         imgui.set_next_item_width(CURVE_WIDTH * self.scale)
         if imgui.begin_combo("curve", present.curve or "camera's"):
@@ -348,6 +344,9 @@ class DebugOverlay(EditorPanels):
             imgui.end_combo()
         else:
             self._widget("curve")
+        self._switch("SSR", engine.stages["main"], "reflections")  # (the screen reflections on a row of their own)
+        imgui.same_line()
+        self._switch("SSR only", engine.renderer.screen_reflections, "show_found")
         x, y = imgui.get_window_pos()
         w, h = imgui.get_window_size()
         width, height = self.io.display_size
@@ -355,6 +354,13 @@ class DebugOverlay(EditorPanels):
         imgui.end()
         self._inspector(engine, self._entity_list(engine))
         self._transform_handles(engine)
+
+    def _switch(self, label: str, owner: object, switch: str) -> None:
+        """A checkbox for ``owner``'s boolean ``switch`` (a stage's own: set only when clicked)."""
+        changed, on = imgui.checkbox(label, getattr(owner, switch))
+        if changed:
+            setattr(owner, switch, on)
+        self._widget(label)
 
     def _widget(self, name: str) -> None:
         low, high = imgui.get_item_rect_min(), imgui.get_item_rect_max()

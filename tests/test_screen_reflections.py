@@ -164,6 +164,27 @@ def test_a_polished_floor_shows_the_boxes_where_a_ray_caster_finds_them(scene):
     assert np.abs(image[misses] - plain[misses]).max() <= 1
 
 
+def test_the_debug_view_shows_what_the_screen_gave_and_black_elsewhere(scene):
+    """``ScreenReflectionPass.show_found`` (the overlay's "SSR only"): the colour found times
+    the confidence in place of the picture, black where nothing was found."""
+    plain, plain_runner, _ = _frame(scene)
+    names: dict = {}
+    runner = scene(lambda world: names.update(_scene(world, reflections=ScreenReflections())), SIZE)
+    runner.engine.renderer.antialias = "off"
+    runner.engine.renderer.screen_reflections.show_found = True
+    runner.frame()
+    image = runner.frame().astype(np.int32)
+    _, which, _, _ = _cast(runner)
+    floor = runner.ids() == names["floor"]
+    for index, mask, hit in _reflected_boxes(runner, names, plain_runner.ids()):
+        assert mask.sum() > 150, index
+        assert np.mean(np.abs(image[mask] - plain[hit]).max(axis=-1) <= 3) > 0.97
+    # The floor where its rays find nothing, the boxes and the sky (which reflect nothing).
+    nothing = _eroded(floor & (which < 0), 2) | (runner.ids() != names["floor"])
+    assert nothing.sum() > 10000
+    assert image[nothing].max() == 0
+
+
 def test_at_half_resolution_a_ray_a_block_brought_to_every_pixel(scene):
     """``half_resolution``: a quarter of the rays, each pixel taking the four about it by
     depth: the boxes where the ray caster finds them still, their edges a pixel softer."""

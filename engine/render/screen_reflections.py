@@ -117,13 +117,17 @@ class ScreenReflectionPass:
         self.gpu = gpu
         self.ctx = gpu.ctx
         self._targets: _Targets | None = None
-        # By (shader, quality, half): the composite's builds and the half-size march's.
-        self._programs: dict[tuple[str, str, bool], moderngl.VertexArray] = {}
+        # By (shader, quality, half, found only): the composite's builds and the half-size march's.
+        self._programs: dict[tuple[str, str, bool, bool], moderngl.VertexArray] = {}
         self._programs_of = -1  # the shader library's reloads when they were made
         self._depth_sampler: moderngl.Sampler | None = None
         # This frame's: (the view, its settings), from begin until composite (None: nothing to do).
         self._pending: tuple[View, ScreenReflections] | None = None
         self.composites = 0  # composites drawn so far (tests count them)
+        # The debug overlay's "SSR only": the composite writes what the screen gave (the colour
+        # found times the confidence, black where nothing was) in place of the picture; the
+        # glass is drawn over it as ever.
+        self.show_found = False
 
     @property
     def framebuffer(self) -> moderngl.Framebuffer | None:
@@ -172,18 +176,20 @@ class ScreenReflectionPass:
     def _top_lod(size: tuple[int, int]) -> int:
         return max(0, min(MAX_COLOR_LOD, max(size).bit_length() - 1))
 
-    def _program(self, shader: str, quality: str, half: bool) -> moderngl.VertexArray:
+    def _program(self, shader: str, quality: str, half: bool, found_only: bool = False) -> moderngl.VertexArray:
         shaders = self.gpu.shaders
         if self._programs_of != shaders.reloads:
             self._release_programs()
             self._programs_of = shaders.reloads
-        key = (shader, quality, half)
+        key = (shader, quality, half, found_only)
         vao = self._programs.get(key)
         if vao is None:
             steps, refine = QUALITY_STEPS[quality]
             defines = {"STEPS": str(steps), "REFINE": str(refine), "SUBSTEPS": str(SILHOUETTE_STEPS)}
             if half:
                 defines["HALF_RESOLUTION"] = "1"
+            if found_only:
+                defines["SHOW_FOUND"] = "1"
             program = shaders.program("fullscreen.vert", shader, defines=defines)
             for name, unit in (("scene_color", REFLECTION_COLOR_UNIT), ("depth_map", REFLECTION_DEPTH_UNIT),
                                ("weight_map", REFLECTION_WEIGHT_UNIT), ("added_map", REFLECTION_ADDED_UNIT),
@@ -236,7 +242,7 @@ class ScreenReflectionPass:
             bind_texture(ctx, targets.hits, REFLECTION_HITS_UNIT)
             gpu.stats.passes += 1
             gpu.stats.draw_calls += 1
-        vao = self._program("screen_reflection.frag", settings.quality, half)
+        vao = self._program("screen_reflection.frag", settings.quality, half, self.show_found)
         _write(vao.program, values)
         targets.output.use()
         apply_pass_state(ctx, _PASS, viewport)
