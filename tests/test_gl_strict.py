@@ -198,9 +198,13 @@ def _portal_run(ctx):
 
 
 def _resized(ctx):
+    """The mirror ring resized twice, its floor polished and screen reflections at half size on
+    the camera (their images made again with the level's, an odd size's half-size rays)."""
+    from benchmarks.lighting import _reflections
     from benchmarks.mirrors import MirrorRing
 
-    return _engine_frames(ctx, MirrorRing(4), 2, sizes=((160, 90), (96, 120), (160, 90)))
+    return _engine_frames(ctx, MirrorRing(4), 2, lambda engine: _reflections(engine, half=True),
+                          sizes=((160, 90), (95, 121), (160, 90)))
 
 
 SCENES: dict[str, Callable[[moderngl.Context], list[np.ndarray]]] = {
