@@ -48,7 +48,9 @@ class ScreenReflections(TrackedComponent):
       softer (a reflection's detail at half the screen's).  False (the default): a ray a pixel.
 
     Only the camera's own view reflects its image: mirror, portal and probe views show the
-    probes' and sky's reflections as before, and so do glass and what is off the screen.
+    probes' and sky's reflections as before, and so do glass and what is off the screen.  A
+    camera with it in a world where nothing reflects the sky or a probe is told so once (a
+    ``ComponentWarning`` from the main stage).
     """
 
     max_distance: float = 30.0

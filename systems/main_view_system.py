@@ -20,12 +20,14 @@ import esper
 
 from components.ambient import AmbientOcclusion
 from components.screen_reflections import ScreenReflections
+from components.tracking import ComponentWarning
 from engine.core.errors import NoCameraWarning
 from engine.core.frame_io import Output
 from engine.core.world import World
 from engine.render.frame_views import FrameViews
 from engine.render.renderer import Renderer
 from engine.render.scene_options import TREE_ROOT, SceneOptions
+from engine.render.scene_pass import reflects_environment
 from engine.render.unlit_mirrors import shading_replaced
 from engine.render.views import camera_view
 from engine.resources import Surfaces, ViewBudget
@@ -50,6 +52,7 @@ class MainViewSystem(esper.Processor):
         self._screen_options: tuple[SceneOptions | None, bool, bool, SceneOptions] = (None, False, False, TREE_ROOT)
         self.reflections = True  # the debug overlay's toggle: off, no camera's ScreenReflections is drawn
         self.reflected: ScreenReflections | None = None  # the one drawn this frame (the overlay's line)
+        self._said_nothing_reflects: ScreenReflections | None = None  # the one warned about (once)
 
     def process(self, dt: float) -> None:
         world = self.world
@@ -86,11 +89,27 @@ class MainViewSystem(esper.Processor):
         self.reflected = reflections
         if reflections is not None:  # the view draws what their composite reads (the reflect stage's)
             self.renderer.screen_reflections.begin(views.main, targets, reflections)
+            self._check_reflecting(camera[0], reflections)
         else:
             self.renderer.screen_reflections.release_targets()  # no camera asks for them now
         if occlusion is not None or reflections is not None:
             views.options = self._screen(views.options, occlusion is not None, reflections is not None)
         self.renderer.scene_pass.draw([views.main], targets, views.options)
+
+    def _check_reflecting(self, camera: int, reflections: ScreenReflections) -> None:
+        """Say once, for a camera's ``ScreenReflections``, when nothing the world draws reflects
+        the sky or a probe (no ``Reflective`` of mode "skybox" or "cube"): screen reflections
+        replace only those, so they would show nothing, and a floor meant to be polished needs
+        one."""
+        if self._said_nothing_reflects is reflections:
+            return
+        batches = self.renderer.opaque_batches()
+        if batches and not any(map(reflects_environment, batches)):
+            self._said_nothing_reflects = reflections
+            warnings.warn(ComponentWarning(
+                f"ScreenReflections on entity {camera}: nothing in the world reflects the sky or a probe "
+                "(Reflective with mode 'skybox' or 'cube'), and screen reflections replace only those "
+                "reflections, so they show nothing; give the surfaces that should reflect a Reflective"), stacklevel=2)
 
     def _screen(self, options: SceneOptions, occlusion: bool, reflections: bool) -> SceneOptions:
         """The root's ``options`` with ambient occlusion and screen reflections as asked:

@@ -116,7 +116,16 @@ def _cutouts(ctx):
     the unlit mirrors' reflected builds, the colour copy and composite)."""
     from benchmarks.lighting import _mirror_light
     from benchmarks.mirrors import MirrorRing
-    from components import AmbientOcclusion, Camera, Material, MeshRef, PointLight, ScreenReflections, Transform
+    from components import (
+        AmbientOcclusion,
+        Camera,
+        Material,
+        MeshRef,
+        PointLight,
+        Reflective,
+        ScreenReflections,
+        Transform,
+    )
     from engine.assets.mesh import Mesh, plane, quad
     from tests.test_alpha_cutout import SLAT_TEXTURE
     from tests.test_occlusion_maps import OCCLUSION
@@ -133,6 +142,9 @@ def _cutouts(ctx):
         for camera, _ in world.query_one(Camera):
             world.add_component(camera, AmbientOcclusion(radius=0.8))
             world.add_component(camera, ScreenReflections())
+        for entity, mesh in world.query_one(MeshRef):
+            if mesh.mesh.name == "plane":  # the floor reflects the sky: the reflecting draws and their images
+                world.add_component(entity, Reflective(mix=0.35))
         for x, cutoff, occlusion in ((-1.0, 0.5, None), (1.0, 0.3, OCCLUSION)):
             world.spawn(Transform(position=(x, 1.6, 0.0)), MeshRef(plane(1.6, 1.6)),
                         Material(texture=SLAT_TEXTURE, alpha_cutoff=cutoff, occlusion_map=occlusion,

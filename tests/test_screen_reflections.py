@@ -15,6 +15,8 @@ march say what each floor pixel must show:
 Where the ray meets nothing, the sky's reflection must stay as it was drawn without."""
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 import pytest
 from pyglm import glm
@@ -22,6 +24,7 @@ from pyglm import glm
 from components import (
     Camera,
     ComponentValueError,
+    ComponentWarning,
     Fog,
     Material,
     MeshRef,
@@ -404,6 +407,24 @@ def test_the_overlay_switch_turns_them_off(scene):
     assert np.abs(off - plain).max() <= 1
     assert np.abs(image - plain).max() > 100
     assert post_lines(runner.engine)[1] == "screen: AO off; SSR off (set)"
+
+
+def test_a_world_where_nothing_reflects_the_sky_says_so_once(scene):
+    """Screen reflections replace only sky and probe reflections: a camera with them in a world
+    with no such surface is told, once, rather than left to wonder at an unchanged picture."""
+    def dull(world):
+        camera = look_from(world, EYE, TARGET)
+        world.add_component(camera, ScreenReflections())
+        world.spawn(Skybox())
+        world.spawn(Transform(), MeshRef(plane(8.0, 8.0)), Material(color=(0.9, 0.9, 0.9), roughness=0.0))
+
+    runner = scene(dull, SIZE)
+    with pytest.warns(ComponentWarning, match=r"ScreenReflections on entity \d+: nothing in the world reflects"):
+        runner.frame()
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        runner.frame()  # (once)
+        _frame(scene, reflections=ScreenReflections())  # a floor that reflects: nothing said
 
 
 @pytest.mark.parametrize("field, value", [("max_distance", 0.0), ("max_distance", float("nan")), ("thickness", -1.0),
