@@ -5,9 +5,10 @@ reflected ray, where the ray finds it.
 Speculum draws forward, so the reflection is put in after shading, where the rest of the
 pixel's colour is known, by what the scene pass wrote beside it:
 
-1. **The main view's draw** (``begin``): its opaque batches draw with the
-   ``SCREEN_REFLECTION`` builds of ``scene.frag`` into the level's images and three more
-   (``framebuffer``): ``W``, the share of a radiance along the reflected ray that reaches
+1. **The main view's draw** (``begin``): its opaque batches that reflect the sky or a probe
+   (``scene_pass.reflects_environment``; the others first, into the view's own framebuffer)
+   draw with the ``SCREEN_REFLECTION`` builds of ``scene.frag`` into the level's images and
+   three more (``framebuffer``): ``W``, the share of a radiance along the reflected ray that reaches
    the pixel (the reflect slot's mix, tint, Fresnel and occlusion, scaled by what follows
    it: a metallic map's share, a refracting surface's alpha, the fog), with the roughness;
    ``W`` x the sky's or probe's radiance it reflected; and the shading normal.  A pixel's
@@ -15,16 +16,16 @@ pixel's colour is known, by what the scene pass wrote beside it:
    reflection out and put another in.  The entity's id (22 bits, in the two spare channels)
    says whose surface the three were written for.
 2. **The composite** (``composite``), once the view tree has composited the mirrors and
-   portals into the view and before it draws the glass (``ScenePass.draw_transparent``):
+   portals into the view and before it draws the glass (``ScenePass.finish_root``):
    the view's colour is copied (with a mip chain, for rough surfaces) and each pixel with a
    ``W`` marches its reflected ray across the view's depth image
    (``shaders/include/screen_march.glsl``: McGuire and Mara's perspective-correct screen-space
    march, at most ``QUALITY_STEPS`` steps a ray, then the hit refined by halving;
-   ``shaders/screen_reflection.frag`` the composite); where it
-   hits, the pixel becomes ``colour + c (W x found - W x radiance)``, with ``c`` the
-   confidence (faded at the screen's edges, at the end of ``max_distance`` and towards
-   ``max_roughness``).  A polished floor so reflects what a mirror beside it shows; glass
-   drawn after keeps its own look over it.
+   ``shaders/screen_reflection.frag`` the composite); where it hits, the pixel becomes
+   ``colour + c (W x found - W x radiance)``, with ``c`` the confidence (faded at the
+   screen's edges, at the end of ``max_distance``, by how far behind the drawn surface the
+   ray was found and towards ``max_roughness``).  A polished floor so reflects what a
+   mirror beside it shows; glass drawn after keeps its own look over it.
 
 With ``half_resolution`` the rays are marched in a pass of their own at half the view's size
 (``shaders/screen_reflection_trace.frag``: a ray a 2 x 2 block, the first of its pixels that
@@ -69,11 +70,12 @@ if TYPE_CHECKING:
     from engine.render.gpu import Gpu
 
 # ScreenReflections.quality -> (steps a ray across the screen at most, halvings of the hit
-# step): shaders/screen_reflection.frag's STEPS and REFINE.
+# step): shaders/include/screen_march.glsl's STEPS and REFINE.
 QUALITY_STEPS = dict(zip(REFLECTION_QUALITIES, ((16, 4), (32, 5), (64, 6)), strict=True))
-# A step that crosses a silhouette (the drawn depth jumps) is walked again in at most this
-# many parts (a pixel each, where the step is that long): the strip of a surface's edge
-# the ray meets only between two steps' ends (a box's top edge) is found.
+# A step where the ray went behind the plane the last two steps' ends showed, yet is in
+# front at its end (that surface ended within the step), is walked again in at most this
+# many parts (a pixel each, where the step is that long): the corner of a surface the ray
+# meets only between two steps' ends (a box's top edge) is found (SUBSTEPS).
 SILHOUETTE_STEPS = 8
 # The colour's mip chain for rough surfaces: at most this many levels above the image (a
 # cone 64 pixels wide; a surface rough enough to spread wider keeps the probe's reflection
