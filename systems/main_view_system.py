@@ -27,7 +27,7 @@ from engine.core.world import World
 from engine.render.frame_views import FrameViews
 from engine.render.renderer import Renderer
 from engine.render.scene_options import TREE_ROOT, SceneOptions
-from engine.render.scene_pass import reflects_environment
+from engine.render.scene_programs import reflects_environment
 from engine.render.unlit_mirrors import shading_replaced
 from engine.render.views import camera_view
 from engine.resources import Surfaces, ViewBudget

@@ -47,7 +47,6 @@ from typing import TYPE_CHECKING
 import moderngl
 
 from engine.core.errors import GLPassError
-from engine.core.material_slots import ReflectVariant
 from engine.render import bindings
 from engine.render.batch_cull import CULL_MIN_BATCHES, CULL_MIN_DRAWS, batch_reach
 from engine.render.batched_mirrors import MAX_BATCHED_VIEWS, VIEWS_BLOCK_BYTES, views_block
@@ -88,6 +87,7 @@ from engine.render.scene_programs import (
     PER_PASS_UNIFORMS,
     ScenePrograms,
     geometry_invocations,
+    reflects_environment,
 )
 from engine.render.shadows import ShadowMaps
 from engine.render.sky_draw import SkyDraw
@@ -119,14 +119,6 @@ _LAYERED_SKY = PassState(depth_func="<=")
 _BATCHED_TRANSPARENT = PassState(depth_func="<", cull=True, clips=BATCHED_SCENE_CLIPS, blend=BLEND_OVER)
 _LAYERED_TRANSPARENT = _BATCHED_TRANSPARENT
 _TRANSPARENT = PassState(depth_func="<", cull=True, clips=SCENE_CLIPS, blend=BLEND_OVER)
-_REFLECTING = (int(ReflectVariant.SKYBOX), int(ReflectVariant.CUBE))  # the reflect slots screen reflections replace
-
-
-def reflects_environment(batch: InstanceBatch) -> bool:
-    """Whether ``batch`` may reflect the sky or a probe (its instances' reflect slot, or
-    variants that differ between them): what screen reflections put the screen's in place of."""
-    variants = batch.variants
-    return variants is None or variants[2] in _REFLECTING
 
 
 class ScenePass:

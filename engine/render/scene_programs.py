@@ -20,7 +20,7 @@ from typing import TYPE_CHECKING
 
 import moderngl
 
-from engine.core.material_slots import SLOTS
+from engine.core.material_slots import SLOTS, ReflectVariant
 from engine.render.batched_mirrors import MAX_BATCHED_VIEWS, VIEWS_PER_INVOCATION
 from engine.render.bindings import (
     ALBEDO_UNIT,
@@ -67,6 +67,17 @@ NO_PROBE_LOOKUP = ((0.0, 0.0, 0.0, 0.0),) * 3  # a probe's lookup uniforms where
 NO_CHECKER = (0.0, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
 NO_MATERIAL_MAPS = (False, False, False, "", False)  # a batch's build with none of _material_build's
 
+
+
+_REFLECTING = (int(ReflectVariant.SKYBOX), int(ReflectVariant.CUBE))  # the reflect slots screen reflections replace
+
+
+def reflects_environment(batch: InstanceBatch) -> bool:
+    """Whether ``batch`` may reflect the sky or a probe (its instances' reflect slot, or
+    variants that differ between them): what screen reflections put the screen's in place of,
+    the batches the main view draws with their ``reflected`` builds."""
+    variants = batch.variants
+    return variants is None or variants[2] in _REFLECTING
 
 class ScenePrograms:
     """The scene programs by what picks a build, each one's per-draw uniforms (``uniforms``)
@@ -270,6 +281,8 @@ class ScenePrograms:
                                                    batch.checker is not None, _material_build(batch),
                                                    batch.probe_blend, probes, bool(batch.rest_probe), dark, masked))
             for screen in self.screens - {""}:  # a root view's (not masked, one view a draw)
+                if "reflected" in screen.split() and not reflects_environment(batch):
+                    continue  # (drawn with the builds without: ScenePass._draw_reflecting)
                 for probes in ambient:
                     for dark in unlit if "reflected" in screen.split() else (False,):  # (unlit: its own build)
                         batch.vao(self.program(batch.variants, 0, "", batch.normal_map is not None,

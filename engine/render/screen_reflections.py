@@ -6,7 +6,7 @@ Speculum draws forward, so the reflection is put in after shading, where the res
 pixel's colour is known, by what the scene pass wrote beside it:
 
 1. **The main view's draw** (``begin``): its opaque batches that reflect the sky or a probe
-   (``scene_pass.reflects_environment``; the others first, into the view's own framebuffer)
+   (``scene_programs.reflects_environment``; the others first, into the view's own framebuffer)
    draw with the ``SCREEN_REFLECTION`` builds of ``scene.frag`` into the level's images and
    three more (``framebuffer``): ``W``, the share of a radiance along the reflected ray that reaches
    the pixel (the reflect slot's mix, tint, Fresnel and occlusion, scaled by what follows
