@@ -39,6 +39,7 @@ from components import (
 from engine.assets.level_file import LevelError, load_level, save_level
 from engine.assets.mesh import box, plane, quad
 from engine.core.errors import NoCameraWarning
+from engine.core.material_slots import ReflectVariant
 from engine.core.world import World
 from shell.overlay_text import post_lines
 from tests.support import look_from, pixel_rays, srgb_to_linear
@@ -396,6 +397,20 @@ def test_one_composite_a_frame_and_its_images_go_with_the_component(scene):
         runner.world.delete_entity(names["camera"])  # its images go with it
         runner.frame()
     assert renderer.resource_counts()["reflection_targets"] == 0
+
+
+def test_only_the_batches_that_reflect_get_the_reflected_builds(scene):
+    """The main view draws its other batches with their plain builds (into its own
+    framebuffer), so the reflected builds are made, and prepared, for the reflecting ones
+    alone: a box's build with SCREEN_REFLECTION would be compiled for nothing."""
+    _, runner, _ = _frame(scene, reflections=ScreenReflections())
+    built = runner.engine.renderer.scene_pass.programs.built
+    reflected = [key for key in built if "reflected" in key[12].split()]
+    assert reflected
+    for key in reflected:
+        variants = key[2]
+        assert variants is None or variants[2] in (int(ReflectVariant.SKYBOX), int(ReflectVariant.CUBE)), key
+    assert any(key[2] is not None and key[2][2] == int(ReflectVariant.NONE) for key in built)  # (the boxes': plain)
 
 
 def test_the_overlay_switch_turns_them_off(scene):
