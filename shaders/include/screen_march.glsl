@@ -113,7 +113,7 @@ float march(vec2 pixel_centre, float depth, vec3 normal, out vec2 found) {
     // Where the ray is last known in front of what is drawn: a pixel out from its own (at
     // its own, a halving could settle on the surface it leaves, as depth's rounding goes).
     float t = 1.0 / span;
-    float lo = 0.0, hi = -1.0;   // the crossing's bounds, once found (hi -1: none)
+    float hi = -1.0;  // where the ray is first found behind what it meets (-1: nowhere)
     // What was drawn at the last two steps' ends (window depths, affine in 1 / depth): a
     // plane's is linear along the screen, so were the surface there to go on, this step's
     // end would show it at twice the last less the one before.  (At first: the pixel's own.)
@@ -127,7 +127,6 @@ float march(vec2 pixel_centre, float depth, vec3 normal, out vec2 found) {
         if (ray >= drawn_here) {  // behind what is drawn at the step's end: where did it go behind?
             float a = t, b = next;
             if (crossing(a, b)) {
-                lo = a;
                 hi = b;
                 break;
             }
@@ -140,10 +139,7 @@ float march(vec2 pixel_centre, float depth, vec3 normal, out vec2 found) {
                 float at = t + dt * float(j) / sub_steps;
                 if (window_along(at) >= drawn_window(mix(p0, p1, at))) {
                     float a = at - dt / sub_steps, b = at;
-                    if (crossing(a, b)) {
-                        lo = a;
-                        hi = b;
-                    }
+                    if (crossing(a, b)) hi = b;
                     break;
                 }
             }
