@@ -20,8 +20,17 @@ from collections.abc import Callable
 import esper
 import moderngl
 
-from components import Camera, FlyController, Mirror, Portal, Transform, yaw_pitch_rotation
-from engine.core.errors import GLPassError
+from components import (
+    AmbientOcclusion,
+    Camera,
+    FlyController,
+    Mirror,
+    Portal,
+    ScreenReflections,
+    Transform,
+    yaw_pitch_rotation,
+)
+from engine.core.errors import GLPassError, StartOptionError
 from engine.core.frame_io import Input, Output
 from engine.core.game import Game, GameSystem, schedule_order
 from engine.core.world import FrameEvents, World
@@ -280,13 +289,32 @@ class Engine:
         """Move the active camera (``--camera``); yaw 0 looks down -Z, degrees."""
         active = self.active_camera()
         if active is None:
-            raise ValueError("--camera given but the level has no active Camera")
+            raise StartOptionError("--camera given but the level has no active Camera")
         entity, _, transform = active
         transform.position = (x, y, z)
         transform.rotation = yaw_pitch_rotation(yaw, pitch)
         fly = self.world.try_get(entity, FlyController)
         if fly is not None:
             fly.yaw, fly.pitch = yaw, pitch
+
+    def start(self, antialias: str = "fxaa", camera: tuple[float, float, float, float, float] | None = None,
+              occlusion: bool = False, reflections: bool = False) -> None:
+        """The command line's start options (``shell/runner.py``), after the game is built: the
+        anti-aliasing, the camera's pose (``--camera``: ``place_camera``), and screen-space
+        ambient occlusion and reflections (``--ao``, ``--ssr``: an ``AmbientOcclusion()`` and a
+        ``ScreenReflections()`` on the active camera, where it has none of its own), to see any
+        game or level with them without editing it."""
+        self.renderer.antialias = antialias
+        if camera:
+            self.place_camera(*camera)
+        for asked, kind, flag in ((occlusion, AmbientOcclusion, "--ao"), (reflections, ScreenReflections, "--ssr")):
+            if not asked:
+                continue
+            active = self.active_camera()
+            if active is None:
+                raise StartOptionError(f"{flag} given but the level has no active Camera")
+            if not self.world.has(active[0], kind):
+                self.world.add_component(active[0], kind())
 
     def close(self) -> None:
         """Delete every entity, release every GL resource, drop the world."""

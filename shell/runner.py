@@ -57,6 +57,10 @@ def build_parser(game: Game | type[Game]) -> argparse.ArgumentParser:
                         help=f"seconds of game time per headless frame (default {HEADLESS_DT:.4f}: 60 a second)")
     parser.add_argument("--gif", type=_gif_path, default=None, metavar="FILE",
                         help="headless: also write the frames as an animated GIF (one frame per --dt)")
+    parser.add_argument("--ao", action="store_true",
+                        help="ambient occlusion on the active camera (an AmbientOcclusion(), if it has none)")
+    parser.add_argument("--ssr", action="store_true",
+                        help="screen-space reflections on the active camera (a ScreenReflections(), if it has none)")
     parser.add_argument("--aa", choices=ANTIALIAS_MODES, default="fxaa",
                         help="anti-aliasing of the final image (default fxaa; ids are never affected)")
     parser.add_argument("--asset-root", type=_folder, action="append", default=[], metavar="DIR",
@@ -255,9 +259,7 @@ def run_headless(game: Game, args: argparse.Namespace) -> list[Path]:
     overlay = None
     try:
         engine = Engine(game, ctx)
-        engine.renderer.antialias = args.aa
-        if args.camera:
-            engine.place_camera(*args.camera)
+        engine.start(args.aa, args.camera, getattr(args, "ao", False), getattr(args, "ssr", False))
         capture = CaptureTarget(ctx, args.size)
         output = Output(capture.framebuffer, args.size)
         if args.overlay:

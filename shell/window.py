@@ -126,9 +126,7 @@ class SpeculumWindow(mglw.WindowConfig):
         # (the traceback printed, the title and the overlay say so, F5 resumes).
         self.engine.game_guard.contain = True
         if args is not None:
-            self.engine.renderer.antialias = args.aa
-        if args is not None and args.camera:
-            self.engine.place_camera(*args.camera)
+            self.engine.start(args.aa, args.camera, getattr(args, "ao", False), getattr(args, "ssr", False))
         self.input: Input = self.engine.world.resources[Input]
         self.screenshots = Path(args.out) if args is not None and args.out else Path("screenshots")
         self.mouse_captured = False

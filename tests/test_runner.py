@@ -234,3 +234,38 @@ def test_the_runner_says_no_camera_in_one_line(tmp_path):
     assert result.stderr.strip().splitlines() == [
         "speculum: warning: frame 1: the world has no active camera (a Camera with a Transform and active=True; "
         "engine.spawn_camera makes one): frames show nothing until there is one"]
+
+
+def test_ao_and_ssr_flags_put_the_screen_effects_on_the_active_camera(tmp_path):
+    """``--ao`` and ``--ssr`` give the sample level's camera an AmbientOcclusion() and a
+    ScreenReflections() (its chrome ball and crates reflect the room where their rays find
+    it; corners darken): the frame changes, the scene export lists them on the camera, and a
+    game without a camera is told why the flag cannot be kept."""
+    frames = {}
+    for name, flags in (("plain", ()), ("effects", ("--ao", "--ssr"))):
+        out = tmp_path / name
+        result = run_level("--headless", "--frames", "2", "--size", "160x90", "--aa", "off", "--out", str(out),
+                           "--export-scene", str(tmp_path / f"{name}.gltf"), *flags)
+        assert result.returncode == 0, result.stderr
+        frames[name] = np.asarray(Image.open(out / "frame_0001.png")).astype(int)
+        info = json.loads((tmp_path / f"{name}.json").read_text())
+        camera = next(kinds for kinds in info["entities"].values() if "Camera" in kinds)
+        assert ("AmbientOcclusion" in camera and "ScreenReflections" in camera) == bool(flags), sorted(camera)
+    changed = np.abs(frames["effects"] - frames["plain"]).max(axis=-1) > 8
+    assert 0.01 < changed.mean() < 0.9  # (the picture, not a different one)
+
+    level = tmp_path / "no_camera.py"
+    level.write_text(
+        "from components import Material, MeshRef, Transform\n"
+        "from engine import Game\nfrom shell import run\n"
+        "from engine.assets.mesh import box\n"
+        "class NoCamera(Game):\n"
+        "    def build(self, world):\n"
+        "        world.spawn(Transform(), MeshRef(box()), Material())\n"
+        "run(NoCamera())\n")
+    for flag in (["--ssr"], ["--ao"], ["--camera", "0,1,2,0,0"]):  # (--camera: one line too, no traceback)
+        result = subprocess.run([sys.executable, str(level), "--headless", "--frames", "1", "--size", "32x32",
+                                 "--out", str(tmp_path / "none"), *flag], cwd=ROOT,
+                                env={**os.environ, "PYTHONPATH": str(ROOT)}, capture_output=True, text=True,
+                                timeout=120)
+        assert f"{flag[0]} given but the level has no active Camera" in one_error_line(result)

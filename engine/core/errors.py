@@ -29,6 +29,11 @@ class ShaderError(SpeculumError):
     """A shader failed to load, include, compile or link."""
 
 
+class StartOptionError(SpeculumError, ValueError):
+    """A start option (``--camera``, ``--ao``, ``--ssr``) the game's world cannot take: it has
+    no active camera to place or give the effect to."""
+
+
 class NoCameraWarning(UserWarning):
     """Frames are drawn with no active camera: they show nothing (said once until one comes)."""
 
