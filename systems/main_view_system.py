@@ -53,6 +53,7 @@ class MainViewSystem(esper.Processor):
         self.reflections = True  # the debug overlay's toggle: off, no camera's ScreenReflections is drawn
         self.reflected: ScreenReflections | None = None  # the one drawn this frame (the overlay's line)
         self._said_nothing_reflects: ScreenReflections | None = None  # the one warned about (once)
+        self._looked_at: list | None = None  # the batch list last looked through for a reflecting one
 
     def process(self, dt: float) -> None:
         world = self.world
@@ -101,9 +102,10 @@ class MainViewSystem(esper.Processor):
         the sky or a probe (no ``Reflective`` of mode "skybox" or "cube"): screen reflections
         replace only those, so they would show nothing, and a floor meant to be polished needs
         one."""
-        if self._said_nothing_reflects is reflections:
+        batches = self.renderer.opaque_batches()  # (a new list whenever the batches change)
+        if self._said_nothing_reflects is reflections or self._looked_at is batches:
             return
-        batches = self.renderer.opaque_batches()
+        self._looked_at = batches  # (not each frame: only when the batches changed)
         if batches and not any(map(reflects_environment, batches)):
             self._said_nothing_reflects = reflections
             warnings.warn(ComponentWarning(

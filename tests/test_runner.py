@@ -171,8 +171,9 @@ def test_export_scene_writes_the_format_its_extension_says_and_the_closing_line_
                        f"{tmp_path / 'scene.gltf'}, {tmp_path / 'scene.json'}")
 
 
-def test_export_scene_without_a_camera_is_an_error_not_silence(tmp_path):
-    level = tmp_path / "no_camera.py"
+def _no_camera_level(folder: Path) -> Path:
+    """A game script whose world has a box and no camera."""
+    level = folder / "no_camera.py"
     level.write_text(
         "from components import Material, MeshRef, Transform\n"
         "from engine import Game\nfrom shell import run\n"
@@ -181,6 +182,11 @@ def test_export_scene_without_a_camera_is_an_error_not_silence(tmp_path):
         "    def build(self, world):\n"
         "        world.spawn(Transform(), MeshRef(box()), Material())\n"
         "run(NoCamera())\n")
+    return level
+
+
+def test_export_scene_without_a_camera_is_an_error_not_silence(tmp_path):
+    level = _no_camera_level(tmp_path)
     scene_file = tmp_path / "scene.glb"
     result = subprocess.run([sys.executable, str(level), "--headless", "--frames", "1", "--size", "32x32",
                              "--out", str(tmp_path / "frames"), "--export-scene", str(scene_file)],
@@ -254,15 +260,7 @@ def test_ao_and_ssr_flags_put_the_screen_effects_on_the_active_camera(tmp_path):
     changed = np.abs(frames["effects"] - frames["plain"]).max(axis=-1) > 8
     assert 0.01 < changed.mean() < 0.9  # (the picture, not a different one)
 
-    level = tmp_path / "no_camera.py"
-    level.write_text(
-        "from components import Material, MeshRef, Transform\n"
-        "from engine import Game\nfrom shell import run\n"
-        "from engine.assets.mesh import box\n"
-        "class NoCamera(Game):\n"
-        "    def build(self, world):\n"
-        "        world.spawn(Transform(), MeshRef(box()), Material())\n"
-        "run(NoCamera())\n")
+    level = _no_camera_level(tmp_path)
     for flag in (["--ssr"], ["--ao"], ["--camera", "0,1,2,0,0"]):  # (--camera: one line too, no traceback)
         result = subprocess.run([sys.executable, str(level), "--headless", "--frames", "1", "--size", "32x32",
                                  "--out", str(tmp_path / "none"), *flag], cwd=ROOT,

@@ -260,7 +260,7 @@ def test_rougher_than_max_roughness_keeps_the_sky_and_a_rough_floor_blurs(scene)
 
 def test_max_distance_and_edge_fade_bound_what_is_reflected(scene):
     plain, runner, names = _frame(scene)
-    short, _, _ = _frame(scene, reflections=ScreenReflections(max_distance=0.2))
+    short, short_runner, short_names = _frame(scene, reflections=ScreenReflections(max_distance=0.2))
     floor = runner.ids() == names["floor"]
     _, which, screen, distance = _cast(runner)
     # Boxes farther along the ray than max_distance are not reflected; nearer ones are (the
@@ -271,6 +271,11 @@ def test_max_distance_and_edge_fade_bound_what_is_reflected(scene):
     assert near.sum() > 20
     assert np.mean(np.abs(short[near] - plain[near]).max(axis=-1) > 40) > 0.8
     full, _, _ = _frame(scene, reflections=ScreenReflections(edge_fade=0.0))
+    # The same engine with its settings changed draws as one made with them (the composite
+    # writes a uniform only when its value changes).
+    settings = short_runner.world.get(short_names["camera"], ScreenReflections)
+    settings.max_distance, settings.edge_fade = 30.0, 0.0
+    assert np.abs(short_runner.frame().astype(np.int32) - full).max() <= 1
     faded, _, _ = _frame(scene, reflections=ScreenReflections(edge_fade=0.5))
     # Faded by where on the screen the ray met the box: smoothstep(0, edge_fade, the found
     # point's distance to the nearest edge, as a share of the screen), in linear light.

@@ -122,6 +122,9 @@ class ScreenReflectionPass:
         # By (shader, quality, half, found only): the composite's builds and the half-size march's.
         self._programs: dict[tuple[str, str, bool, bool], moderngl.VertexArray] = {}
         self._programs_of = -1  # the shader library's reloads when they were made
+        # program -> the uniform values last written to it (GL keeps them: a still camera's
+        # frame writes none)
+        self._written: dict[int, dict[str, object]] = {}
         self._depth_sampler: moderngl.Sampler | None = None
         # This frame's: (the view, its settings), from begin until composite (None: nothing to do).
         self._pending: tuple[View, ScreenReflections] | None = None
@@ -237,7 +240,7 @@ class ScreenReflectionPass:
         half = settings.half_resolution and targets.hits is not None
         if half:  # the rays marched at half size first
             trace = self._program("screen_reflection_trace.frag", settings.quality, False)
-            _write(trace.program, values)
+            self._write(trace.program, values)
             targets.hits_framebuffer.use()
             apply_pass_state(ctx, _PASS, (0, 0, *targets.hits.size))
             trace.render(moderngl.TRIANGLES, vertices=3)
@@ -245,7 +248,7 @@ class ScreenReflectionPass:
             gpu.stats.passes += 1
             gpu.stats.draw_calls += 1
         vao = self._program("screen_reflection.frag", settings.quality, half, self.show_found)
-        _write(vao.program, values)
+        self._write(vao.program, values)
         targets.output.use()
         apply_pass_state(ctx, _PASS, viewport)
         vao.render(moderngl.TRIANGLES, vertices=3)
@@ -254,6 +257,18 @@ class ScreenReflectionPass:
         self.composites += 1
         if gpu.debug:
             gpu.checkpoint("screen reflections")
+
+    def _write(self, program: moderngl.Program, values: dict) -> None:
+        """``values`` into ``program``'s uniforms of those names it has (a build drops what
+        it does not read), each only when it differs from what was last written there."""
+        written = self._written.setdefault(program.glo, {})
+        for name, value in values.items():
+            if written.get(name) != value and name in program:
+                if isinstance(value, bytes):
+                    program[name].write(value)
+                else:
+                    program[name].value = value
+                written[name] = value
 
     def target_count(self) -> int:
         """Images held now (4 while a camera asks for reflections, 5 at half resolution, else 0)."""
@@ -270,6 +285,7 @@ class ScreenReflectionPass:
         for vao in self._programs.values():
             vao.release()
         self._programs.clear()
+        self._written.clear()
 
     def release(self) -> None:
         self.release_targets()
@@ -279,13 +295,3 @@ class ScreenReflectionPass:
             self._depth_sampler.release()
             self._depth_sampler = None
 
-
-def _write(program: moderngl.Program, values: dict) -> None:
-    """``values`` into ``program``'s uniforms of those names it has (a build drops what it
-    does not read)."""
-    for name, value in values.items():
-        if name in program:
-            if isinstance(value, bytes):
-                program[name].write(value)
-            else:
-                program[name].value = value
