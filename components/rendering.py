@@ -99,6 +99,14 @@ class Material(TrackedComponent):
     Portal (refused: a surface's claim of its pixels is drawn whole; put the cutout on an
     entity in front of it).
 
+    ``environment_reflection`` scales what the surface reflects of the light from all round
+    (the sky, normalised by reflection probes' light inside their influence boxes), as every
+    engine's default material reflects it: 1 (the default) is the physical amount for its
+    ``metallic``, ``roughness`` and the angle it is seen at (the split-sum GGX reflection:
+    a dielectric reflects 4% head on and most at grazing angles, a metal its colour
+    everywhere), 0 none (Unity's "Environment Reflections" off), a share between.  Not read
+    where a ``Reflective``, a ``Mirror`` or a ``Portal`` decides what the surface reflects.
+
     ``double_sided`` draws both faces of each triangle (glTF's ``doubleSided``, three.js's
     ``side: DoubleSide``, Unity's render face "Both"): a leaf, a fence or a sheet of paper
     seen from behind, lit as its back (the normal turned towards the eye).  Otherwise the
@@ -116,6 +124,7 @@ class Material(TrackedComponent):
     metallic_roughness_map: TextureData | None = None
     occlusion_map: TextureData | None = None
     occlusion_strength: float = 1.0
+    environment_reflection: float = 1.0
     alpha_cutoff: float | None = None
     double_sided: bool = False
 
@@ -135,7 +144,7 @@ class Material(TrackedComponent):
             return finite(self, name, value, low=0.0, high=1.0)
         if name == "normal_scale":
             return finite(self, name, value, low=0.0, high=MAX_NORMAL_SCALE)
-        if name == "occlusion_strength":
+        if name in ("occlusion_strength", "environment_reflection"):
             return finite(self, name, value, low=0.0, high=1.0)
         if name == "double_sided":
             value = boolean(self, name, value)

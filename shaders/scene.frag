@@ -139,6 +139,7 @@ struct Surface {
     vec3 f0;
     vec3 reflect_dir;   // unit, eye ray reflected about the normal
     float reflect_lod;  // sky mip level that matches the pixel footprint of reflect_dir
+    vec3 environment_weight;  // the share of the environment's radiance along reflect_dir it reflects (0: a reflect slot does)
     vec3 refract_dir;
     float refract_lod;
 };
@@ -151,12 +152,57 @@ float cube_lod(vec3 direction, float n) {
     return log2(max(footprint, 1e-6));
 }
 
+// --- Environment specular --------------------------------------------------------------
+// What a surface without a reflect slot (no Reflective, not a mirror or portal) reflects of
+// the light from all round, as every engine's default material does (Unity's and Godot's sky
+// and probe reflections, three.js's envMap): the radiance along the reflected ray, blurred by
+// the roughness (the sky cube's mips), times the split-sum's f0 A + B (environment_brdf),
+// times the material's environment_reflection (v_reflect.x of such an instance).  The ambient
+// diffuse takes 1 - that share (the energy the reflection took, as Filament and three.js do).
+//
+// The radiance is the sky's; inside reflection probes' influence boxes it is normalised by the
+// light there (Lazarov, "Getting More Physical in Call of Duty: Black Ops II", 2013: a probe
+// scaled by the local diffuse light over its own): the sky's share of the boxes' blend keeps
+// the sky, each box's share is the sky times that box's irradiance over the sky's along the
+// ray, so a dim room's floor reflects a dim sky, not the daylight.  (Sharp reflections of a
+// probe's capture: Reflective("cube").)  A world with no Skybox has a flat background, not
+// its hemisphere, in the cube: there the radiance is E(r) / pi, the hemisphere and the boxes
+// blurred to their harmonics (lights.counts.z, views.lights_block).
+vec3 environment_radiance(Surface s, AmbientBoxes boxes) {
+    vec3 r = s.reflect_dir;
+    vec3 sky = textureLod(sky_map, r, s.reflect_lod + roughness_lod_bias(s.roughness)).rgb;
+    vec3 sky_e = sky_irradiance(r);
+    vec3 boxes_e = boxes_irradiance(boxes, r);
+    // A floor under the sky's irradiance along the ray: a quarter of its mean (where the sky
+    // is black below, a box's light is not divided by nothing).
+    vec3 floor_e = max(0.25 * 0.2820948 * lights.sky_sh[0].rgb, vec3(1e-4));
+    vec3 radiance = lights.counts.z != 0 ? (sky_e * boxes.sky + boxes_e) / PI
+                                         : sky * (boxes.sky + boxes_e / max(sky_e, floor_e));
+    return fog_sky(max(radiance, vec3(0.0)), s.position, r);
+}
+
+// The environment's specular light at the surface (0 where a reflect slot reflects instead).
+// Occluded as the diffuse light from all round is, and faded where a normal map turns the
+// reflected ray below the mesh's own surface (Marmoset's horizon fade).
+vec3 environment_specular(Surface s, AmbientBoxes boxes) {
+    float horizon = clamp(1.0 + dot(s.reflect_dir, s.geometric_normal), 0.0, 1.0);
+    vec3 weight = s.environment_weight * (s.occlusion * horizon * horizon);
+    vec3 radiance = environment_radiance(s, boxes);
+#ifdef SCREEN_REFLECTION
+    reflect_weight = weight;
+    reflect_radiance = radiance;
+#endif
+    return weight * radiance;
+}
+
 // Light through mirrors and portals (its loop only in the VIRTUAL_LIGHTS builds).
 #include "virtual_lights.glsl"
 
-vec3 direct_lighting(Surface s) {
+vec3 direct_lighting(Surface s, AmbientBoxes boxes) {
     vec3 diffuse = s.albedo * (1.0 - s.metallic) / PI;
-    vec3 total = ambient_irradiance(s.position, s.normal) * diffuse * s.occlusion;  // E(n) x albedo x (1 - metallic) / pi
+    // E(n) x albedo x (1 - metallic) / pi, less what the environment's reflection took, and that reflection
+    vec3 total = ambient_irradiance(boxes, s.normal) * diffuse * s.occlusion * (1.0 - s.environment_weight);
+    if (SLOT_REFLECT == REFLECT_NONE) total += environment_specular(s, boxes);
 #ifdef SCREEN_OCCLUSION
     vec3 ambient = total;  // the direct light, summed apart, takes its own share of the occlusion
     total = vec3(0.0);
@@ -410,13 +456,20 @@ void main() {
     // llvmpipe otherwise. The variants are flat per instance, so every pixel of a 2 x 2 quad
     // (one primitive) takes the same branch and the derivatives stay defined.
     s.reflect_lod = 0.0;
+    s.environment_weight = vec3(0.0);
+    if (SLOT_REFLECT == REFLECT_NONE) {
+        // v_reflect.x: the material's environment_reflection (material_dispatch.choose_material)
+        vec2 ab = environment_brdf(s.roughness, max(dot(s.normal, s.to_eye), 0.0));
+        s.environment_weight = (s.f0 * ab.x + ab.y) * v_reflect.x;
+        s.reflect_lod = cube_lod(s.reflect_dir, sky_face_size);
+    }
     if (SLOT_REFLECT == REFLECT_SKYBOX) s.reflect_lod = cube_lod(s.reflect_dir, sky_face_size);
     if (SLOT_REFLECT == REFLECT_CUBE) s.reflect_lod = cube_lod(s.reflect_dir, probe_face_size);
     s.refract_lod = 0.0;
     if (SLOT_REFRACT == REFRACT_ENVIRONMENT || SLOT_REFRACT == REFRACT_SOLID)
         s.refract_lod = cube_lod(s.refract_dir, probe_face_size > 0.0 ? probe_face_size : sky_face_size);
 
-    vec3 lit = direct_lighting(s);
+    vec3 lit = direct_lighting(s, ambient_boxes(s.position));
     vec3 color = mapped_reflection(SLOT_REFLECT, lit, apply_reflect(SLOT_REFLECT, lit, s), metal_share);
     color = apply_refract(SLOT_REFRACT, color, s);
     color = apply_emissive(SLOT_EMISSIVE, color, s);
@@ -425,7 +478,7 @@ void main() {
     // by it), the surface's own alpha where it refracts (refract_environment mixes by it), the
     // fog's transmittance (fogged mixes by it); emission adds and leaves W as it is.
 #ifdef METALLIC_ROUGHNESS_MAP
-    reflect_weight *= metal_share;
+    if (SLOT_REFLECT != REFLECT_NONE) reflect_weight *= metal_share;  // (the environment's: the map set f0)
 #endif
     if (SLOT_REFRACT == REFRACT_ENVIRONMENT || SLOT_REFRACT == REFRACT_SOLID) reflect_weight *= s.alpha;
 #ifdef FOG

@@ -26,7 +26,7 @@ class MaterialChoice:
     reflect: ReflectVariant
     color: glm.vec4
     surface: tuple[float, float, float, float]  # metallic, roughness, emissive power, normal-map scale
-    reflect_params: tuple[float, float, float, float]  # reflection mix, ior, -, -
+    reflect_params: tuple[float, float, float, float]  # mix (no reflect slot: the environment's share), ior, -, -
     tint: glm.vec4
 
 
@@ -56,6 +56,8 @@ def choose_material(material: Material | None, emissive: Emissive | None,
         reflect_variant = ReflectVariant.SKYBOX  # planar needs a Mirror; the sky is the fallback
     elif reflect_variant == ReflectVariant.CUBE and not probe:
         reflect_variant = ReflectVariant.SKYBOX
+    if reflect_variant == ReflectVariant.NONE:
+        mix = material.environment_reflection  # the environment's reflection (scene.frag environment_specular)
     return MaterialChoice(
         emissive=emissive_variant,
         refract=(RefractVariant.NONE if refractive is None else

@@ -81,6 +81,7 @@ class PrepareSystem(esper.Processor):
         self.renderer = renderer
         self._lights = b""
         self._sky_sh: np.ndarray | None = None
+        self._flat_sky = True   # no Skybox: the sky cube is the flat background (lights_block's flat_sky)
         self._cut = (0, 0)   # (directional, point) lights the last block left out
         self._kept: KeptLights | None = None   # the last choice of lights (light_rules)
         self._sun: SkySun | None = None   # where the sky pass draws the sun, and its tint (sky_sun)
@@ -101,7 +102,7 @@ class PrepareSystem(esper.Processor):
         if not (self._lights and not sky_changed and self._lights_stand_still()
                 and not (kept.by_eye and self._camera_moved(kept))):
             kept = self._kept = choose_lights(world, kept, LIGHT_LIMITS)
-            block = lights_block(self._sky_sh, *self._rows(kept))
+            block = lights_block(self._sky_sh, *self._rows(kept), flat_sky=self._flat_sky)
             if block != self._lights:
                 renderer.set_lights(block)
                 self._lights = block
@@ -150,6 +151,7 @@ class PrepareSystem(esper.Processor):
         else:
             self.renderer.set_sky_faces(None if sky is None else sky.faces)
         self._sky_sh = ambient_sh(self.world, sun)
+        self._flat_sky = sky is None
         self._sun = self._cube_sun = sun
 
     def _sky_sun(self) -> SkySun | None:

@@ -41,15 +41,22 @@ float box_weight(int i, vec3 p) {
     return inside < 0.0 ? 0.0 : (blend <= 0.0 ? 1.0 : min(1.0, inside / blend));
 }
 
-// E(n) at p: the two boxes weighing most (ties: the nearest centre), weights normalised only
-// when they sum past 1, the sky (lights.sky_sh) taking what is left of 1: the rule of
-// probe_rules.probe_blend, at the shaded point.  Written for llvmpipe, which runs every
-// branch: scalars, not arrays (an array indexed by a variable is kept in memory), selects,
-// not ifs, in the loop over the boxes.
-vec3 ambient_irradiance(vec3 p, vec3 n) {
-    vec3 e = sh_irradiance(lights.sky_sh[0].rgb, lights.sky_sh[1].rgb, lights.sky_sh[2].rgb, lights.sky_sh[3].rgb,
-                           lights.sky_sh[4].rgb, lights.sky_sh[5].rgb, lights.sky_sh[6].rgb, lights.sky_sh[7].rgb,
-                           lights.sky_sh[8].rgb, n);
+// The boxes lighting a point p: the two weighing most (ties: the nearest centre), weights
+// normalised only when they sum past 1, the sky (lights.sky_sh) taking what is left of 1: the
+// rule of probe_rules.probe_blend, at the shaded point.  Found once a pixel and read for the
+// diffuse light (at the normal) and the environment's reflection (at the reflected ray).
+// Written for llvmpipe, which runs every branch: scalars, not arrays (an array indexed by a
+// variable is kept in memory), selects, not ifs, in the loop over the boxes.
+struct AmbientBoxes {
+    int found;        // boxes holding p: 0, 1 or 2
+    int best0, best1; // their indices in the block
+    float w0, w1;     // their weights, normalised
+    float sky;        // the sky's share: 1 - w0 - w1
+};
+
+AmbientBoxes ambient_boxes(vec3 p) {
+    AmbientBoxes b;
+    b.found = 0; b.best0 = 0; b.best1 = 0; b.w0 = 0.0; b.w1 = 0.0; b.sky = 1.0;
 #ifdef AMBIENT_PROBES
     int best0 = 0, best1 = 0;
     float w0 = 0.0, w1 = 0.0, d0 = 0.0, d1 = 0.0;  // a weight of 0: no box yet
@@ -66,16 +73,37 @@ vec3 ambient_irradiance(vec3 p, vec3 n) {
         w0 = first ? w : w0;
         d0 = first ? d : d0;
     }
-    int found = w1 > 0.0 ? 2 : (w0 > 0.0 ? 1 : 0);
     float scale = 1.0 / max(1.0, w0 + w1);
-    vec3 probes = vec3(0.0);
+    b.found = w1 > 0.0 ? 2 : (w0 > 0.0 ? 1 : 0);
+    b.best0 = best0; b.best1 = best1;
+    b.w0 = w0 * scale; b.w1 = w1 * scale;
+    b.sky = max(1.0 - (w0 + w1) * scale, 0.0);
+#endif
+    return b;
+}
+
+// The sky's irradiance E(n) (lights.sky_sh).
+vec3 sky_irradiance(vec3 n) {
+    return sh_irradiance(lights.sky_sh[0].rgb, lights.sky_sh[1].rgb, lights.sky_sh[2].rgb, lights.sky_sh[3].rgb,
+                         lights.sky_sh[4].rgb, lights.sky_sh[5].rgb, lights.sky_sh[6].rgb, lights.sky_sh[7].rgb,
+                         lights.sky_sh[8].rgb, n);
+}
+
+// The boxes' part of E(n): each box's irradiance times its weight (0 outside every box).
+vec3 boxes_irradiance(AmbientBoxes b, vec3 n) {
+    vec3 e = vec3(0.0);
+#ifdef AMBIENT_PROBES
     // A loop as long as the boxes found: a quad outside every box reads no texel of the table.
     // (A box's row is one IrradianceTable._row_for gave, below MAX_IRRADIANCE_PROBES: inside.)
-    for (int k = 0; k < found; ++k) {
-        int box = k == 0 ? best0 : best1;
-        probes += table_irradiance(int(irradiance.half_size[box].w), n) * ((k == 0 ? w0 : w1) * scale);
+    for (int k = 0; k < b.found; ++k) {
+        int box = k == 0 ? b.best0 : b.best1;
+        e += table_irradiance(int(irradiance.half_size[box].w), n) * (k == 0 ? b.w0 : b.w1);
     }
-    e = probes + e * max(1.0 - (w0 + w1) * scale, 0.0);
 #endif
-    return max(e, vec3(0.0));
+    return e;
+}
+
+// E(n) at the boxes' point: each box's irradiance by its weight, the sky's by its share.
+vec3 ambient_irradiance(AmbientBoxes b, vec3 n) {
+    return max(boxes_irradiance(b, n) + sky_irradiance(n) * b.sky, vec3(0.0));
 }
