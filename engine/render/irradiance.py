@@ -81,6 +81,7 @@ from engine.render.bindings import (
     bind_texture,
     bind_uniform_block,
 )
+from engine.render.environment_brdf import ENVIRONMENT_BRDF_SIZE, environment_brdf_table
 from engine.render.gpu import Gpu, ProbeCube
 from engine.render.sky import (
     DISC_EDGE,
@@ -229,7 +230,8 @@ def irradiance_block(boxes: Iterable[tuple[Iterable[float], Iterable[float], flo
 
 class IrradianceTable:
     """The probes' irradiance on the GPU: a texture of ``MAX_IRRADIANCE_PROBES`` rows of nine
-    RGBA32F texels (row r, texel i: coefficient E_i of the probe given row r), written by
+    RGBA32F texels (row r, texel i: coefficient E_i of the probe given row r; below them the
+    environment BRDF's rows, ``engine/render/environment_brdf.py``), written by
     ``project`` after each capture, and the Irradiance uniform block of the influence boxes
     whose rows hold a capture (``set_boxes``).  The scene pass binds both at the start of
     each of its passes (``bind``): units 3-5 serve other images in the passes between."""
@@ -239,8 +241,17 @@ class IrradianceTable:
     def __init__(self, renderer: Gpu) -> None:
         self.renderer = renderer
         self.ctx = ctx = renderer.ctx
-        self.table = ctx.texture((SH_COEFFICIENTS, MAX_IRRADIANCE_PROBES), 4, dtype="f4")
-        self.table.filter = (moderngl.NEAREST, moderngl.NEAREST)
+        # The probes' rows, then the split-sum's environment BRDF table (environment_brdf.py:
+        # no sampler of its own for the scene shader), read by bilinear filtering (the rows
+        # by texelFetch, which filters nothing).
+        width = max(SH_COEFFICIENTS, ENVIRONMENT_BRDF_SIZE)
+        self.table = ctx.texture((width, MAX_IRRADIANCE_PROBES + ENVIRONMENT_BRDF_SIZE), 4, dtype="f4")
+        self.table.filter = (moderngl.LINEAR, moderngl.LINEAR)
+        self.table.repeat_x = self.table.repeat_y = False
+        brdf = np.zeros((ENVIRONMENT_BRDF_SIZE, ENVIRONMENT_BRDF_SIZE, 4), np.float32)
+        brdf[..., :2] = environment_brdf_table()
+        self.table.write(brdf.tobytes(), viewport=(0, MAX_IRRADIANCE_PROBES, ENVIRONMENT_BRDF_SIZE,
+                                                   ENVIRONMENT_BRDF_SIZE))
         self.framebuffer = ctx.framebuffer(color_attachments=[self.table])
         # Bound on the table's unit while the table is drawn into: no texture is bound for
         # sampling where it is also the target (a feedback loop is undefined on a GPU).
@@ -321,8 +332,15 @@ class IrradianceTable:
     def read_row(self, owner: int) -> np.ndarray:
         """Probe ``owner``'s coefficients (9, 3) as the GPU wrote them (tests; reads back)."""
         row = self.rows[owner]
-        data = np.frombuffer(self.table.read(), np.float32).reshape(MAX_IRRADIANCE_PROBES, SH_COEFFICIENTS, 4)
-        return data[row, :, :3].astype(np.float64)
+        width, height = self.table.size
+        data = np.frombuffer(self.table.read(), np.float32).reshape(height, width, 4)
+        return data[row, :SH_COEFFICIENTS, :3].astype(np.float64)
+
+    def read_environment_brdf(self) -> np.ndarray:
+        """The environment BRDF rows as the GPU holds them (size, size, 2) (tests; reads back)."""
+        width, height = self.table.size
+        data = np.frombuffer(self.table.read(), np.float32).reshape(height, width, 4)
+        return data[MAX_IRRADIANCE_PROBES:, :ENVIRONMENT_BRDF_SIZE, :2].astype(np.float64)
 
     # --- binding -------------------------------------------------------------------------------
     def has_boxes(self) -> bool:

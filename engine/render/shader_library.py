@@ -68,6 +68,7 @@ from engine.core import cube_faces, material_slots
 from engine.core.errors import ShaderError
 from engine.render import views
 from engine.render.bindings import clip_glsl_defines
+from engine.render.environment_brdf import ENVIRONMENT_BRDF_SIZE
 from engine.render.raw_gl import _load as load_gl_function
 from engine.rules import shadow_rules, visibility_rules
 
@@ -264,13 +265,15 @@ def engine_defines() -> dict[str, str]:
 def limit_glsl_defines() -> dict[str, str]:
     """The sizes of the arrays a uniform block or a shader's samplers hold, from the Python
     that packs them (the Lights block: ``views``; the point lights' shadow cubes:
-    ``shadows``; the irradiance boxes: ``irradiance``; the virtual lights and the outlines
+    ``shadows``; the irradiance boxes: ``irradiance``; the environment BRDF's rows:
+    ``environment_brdf``; the virtual lights and the outlines
     each one's line crosses: ``shadow_rules``), and each tone curve's number (its index in ``TONEMAP_CURVES``, the
     number a build's ``TONEMAP_CURVE`` is)."""
     return {"MAX_DIRECTIONAL_LIGHTS": str(views.MAX_DIRECTIONAL_LIGHTS),
             "MAX_POINT_LIGHTS": str(views.MAX_POINT_LIGHTS), "MAX_POINT_SHADOWS": str(views.MAX_POINT_SHADOWS),
             "MAX_SHADOW_RINGS": str(views.MAX_SHADOW_RINGS),
             "MAX_IRRADIANCE_PROBES": str(views.MAX_IRRADIANCE_PROBES),
+            "ENVIRONMENT_BRDF_SIZE": str(ENVIRONMENT_BRDF_SIZE),
             "MAX_VIRTUAL_LIGHTS": str(shadow_rules.MAX_VIRTUAL_LIGHTS),
             "MAX_APERTURES": str(shadow_rules.MAX_APERTURES),
             **{f"TONEMAP_{curve.upper()}": str(index) for index, curve in enumerate(TONEMAP_CURVES)}}

@@ -13,6 +13,15 @@ layout(std140) uniform Irradiance {
 } irradiance;
 uniform sampler2D irradiance_table;           // row r, texel i: coefficient i of the probe of row r
 
+// The split-sum's environment BRDF (engine/render/environment_brdf.py): (A, B) at a roughness
+// and n.v, so a surface of reflectance f0 reflects f0 A + B of light of 1 from all round.
+// Its rows are the table's below the probes' (no sampler of its own: the fullest scene build
+// holds 16), read between its entries by bilinear filtering.
+vec2 environment_brdf(float roughness, float nv) {
+    vec2 texel = vec2(nv, roughness) * float(ENVIRONMENT_BRDF_SIZE - 1) + vec2(0.5, 0.5 + float(MAX_IRRADIANCE_PROBES));
+    return textureLod(irradiance_table, texel / vec2(textureSize(irradiance_table, 0)), 0.0).rg;
+}
+
 // E(n) = sum of E_lm Y_lm(n), the basis written out (an array and a loop cost llvmpipe a
 // fifth of a frame of diffuse boxes; this costs next to nothing).
 vec3 sh_irradiance(vec3 c0, vec3 c1, vec3 c2, vec3 c3, vec3 c4, vec3 c5, vec3 c6, vec3 c7, vec3 c8, vec3 n) {

@@ -59,16 +59,3 @@ float roughness_lod_bias(float m) {
     float gloss = max(1.0 - m, 0.05);
     return 2.0 / (gloss * gloss) - 2.0 + smoothstep(0.0, 0.25, m);
 }
-
-// The split-sum's second factor (Karis, "Real Shading in Unreal Engine 4", 2013): the GGX
-// BRDF with Schlick's Fresnel, integrated over the hemisphere against light of 1 from every
-// direction, is f0 x A + B for a roughness and n.v.  Karis's analytic fit ("Physically Based
-// Shading on Mobile", 2014; three.js's DFGApprox) stands in for the lookup table: no texture
-// unit, and within about 0.03 of the integral (tests/test_environment_specular.py integrates it).
-vec2 environment_brdf(float roughness, float nv) {
-    const vec4 c0 = vec4(-1.0, -0.0275, -0.572, 0.022);
-    const vec4 c1 = vec4(1.0, 0.0425, 1.04, -0.04);
-    vec4 r = roughness * c0 + c1;
-    float a004 = min(r.x * r.x, exp2(-9.28 * nv)) * r.x + r.y;
-    return vec2(-1.04, 1.04) * a004 + r.zw;
-}
