@@ -255,7 +255,8 @@ def test_the_irradiance_block_is_as_big_in_glsl_as_in_python(ctx):
     from engine.render.shader_library import load_source
 
     source = ('#version 410 core\n#include "lights.glsl"\n#include "ambient.glsl"\nout vec4 value;\n'
-              "void main() { value = vec4(ambient_irradiance(gl_FragCoord.xyz, vec3(0.0, 1.0, 0.0)), 1.0); }\n")
+              "void main() { value = vec4(ambient_irradiance(ambient_boxes(gl_FragCoord.xyz), vec3(0.0, 1.0, 0.0)), "
+              "1.0); }\n")
     with tempfile.TemporaryDirectory() as folder:
         path = pathlib.Path(folder) / "reader.frag"
         path.write_text(source)

@@ -22,11 +22,16 @@ FOG_COLOR = np.array([0.55, 0.6, 0.7])
 EYE = (0.0, 2.2, 7.0)
 TOLERANCE = 0.006   # linear light: a unit of the 8-bit sRGB frames at these levels, and a little
 MIRROR_Z = -2.0     # a mirror standing across the floor at z = -2, facing +z
-
-
 SUN = (-0.3, -1.0, -0.5)   # the way the light goes
 LOW_SUN = (0.0, -0.15, 1.0)  # low ahead of the eye (it looks towards -z): the fog glows that way
 SUN_LIGHT = 0.8
+
+
+def floor_material() -> Material:
+    """A grey floor that reflects nothing of the light from all round (environment_reflection
+    0): its colour is then the same from every direction, so a fogged frame is the clear one
+    fogged along each pixel's way from the eye (a reflection is fogged along its ray too)."""
+    return Material(color=(0.5, 0.5, 0.5), roughness=1.0, environment_reflection=0.0)
 
 
 def _scene(fog: Fog | None, mirror: bool = False, sun=SUN):
@@ -36,7 +41,7 @@ def _scene(fog: Fog | None, mirror: bool = False, sun=SUN):
             world.add_component(camera, fog)
         world.spawn(DirectionalLight(direction=sun, intensity=SUN_LIGHT, shadows=False))
         ids = world.resources["ids"] = {}
-        ids["floor"] = world.spawn(Transform(), MeshRef(plane(60, 60)), Material(color=(0.5, 0.5, 0.5), roughness=1.0))
+        ids["floor"] = world.spawn(Transform(), MeshRef(plane(60, 60)), floor_material())
         ids["crate"] = world.spawn(Transform(position=(-1.5, 0.5, 2.0)), MeshRef(box()),
                                    Material(color=(0.7, 0.3, 0.2)))
         if mirror:
@@ -170,9 +175,9 @@ def _floor_mirror(fog: Fog | None):
             world.add_component(camera, fog)
         world.spawn(DirectionalLight(direction=(-0.3, -1.0, 0.5), intensity=0.8, shadows=False))
         ids = world.resources["ids"] = {}
-        world.spawn(Transform(), MeshRef(plane(60, 60)), Material(color=(0.5, 0.5, 0.5), roughness=1.0))
+        world.spawn(Transform(), MeshRef(plane(60, 60)), floor_material())
         ids["wall"] = world.spawn(Transform(position=(0.0, 3.0, WALL_Z - 0.25)), MeshRef(box((12.0, 6.0, 0.5))),
-                                  Material(color=(0.3, 0.5, 0.7), roughness=1.0))
+                                  Material(color=(0.3, 0.5, 0.7), roughness=1.0, environment_reflection=0.0))
         ids["mirror"] = world.spawn(Transform(position=(0.0, 0.01, 0.0),
                                               rotation=glm.angleAxis(-np.pi / 2.0, glm.vec3(1.0, 0.0, 0.0))),
                                     MeshRef(quad(6.0, 5.0)), Material(), Mirror())
@@ -287,7 +292,7 @@ def test_a_portal_shows_what_lies_beyond_its_partner_fogged_along_the_carried_wa
             world.spawn(DirectionalLight(direction=(-0.3, -1.0, -0.5), intensity=0.8, shadows=False))
             ids = world.resources["ids"] = {}
             ids["floor"] = world.spawn(Transform(), MeshRef(plane(60, 60)),
-                                       Material(color=(0.5, 0.5, 0.5), roughness=1.0))
+                                       floor_material())
             ids["a"], ids["b"] = spawn_portal_pair(world, (0.0, 1.5, 4.0), None, (-6.0, 1.5, 0.0),
                                                    glm.angleAxis(np.pi / 2.0, glm.vec3(0.0, 1.0, 0.0)))
         runner = scene(build, (320, 200))

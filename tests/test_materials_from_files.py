@@ -278,7 +278,11 @@ def test_a_metallic_roughness_map_shades_each_half_as_its_texels_say(scene, tmp_
 
     colour = (0.3, 0.3, 0.3, 1.0)
     frames = {}
-    for name, material in (("map", None), ("rough", Material(color=colour, metallic=0.0, roughness=230 / 255)),
+    # With Reflective the map's whole quad reflects by its slot, whose reflection stands in for
+    # the environment's (Material.environment_reflection): the dielectric reference has none.
+    rough_reflection = 0.0 if reflective else 1.0
+    for name, material in (("map", None), ("rough", Material(color=colour, metallic=0.0, roughness=230 / 255,
+                                                             environment_reflection=rough_reflection)),
                            ("metal", Material(color=colour, metallic=1.0, roughness=51 / 255))):
         runner = scene(build(material), (96, 96))
         frames[name] = linear_frame(runner)

@@ -33,8 +33,9 @@ def _lit_evenly(world) -> None:
 
 
 def test_a_gltf_quad_coloured_red_to_blue_shades_by_where_each_pixel_lies(scene, tmp_path):
-    """Lit evenly from all round, a pixel's red share of red + blue is 1 - u, u its place
-    across the quad (glTF's COLOR_0 is linear, interpolated across the triangle)."""
+    """Lit evenly from all round, a pixel's red share of red + blue (each less the white
+    reflection of the light from all round) is 1 - u, u its place across the quad (glTF's
+    COLOR_0 is linear, interpolated across the triangle)."""
     path = _gradient_glb(tmp_path)
     (part,) = load_model(path)
     np.testing.assert_allclose(part.mesh.colors, RED_TO_BLUE[:, :3])
@@ -53,9 +54,12 @@ def test_a_gltf_quad_coloured_red_to_blue_shades_by_where_each_pixel_lies(scene,
     assert inside.sum() > 5000
     u = (points[..., 0] + 1.0) / 2.0
     red, green, blue = linear[..., 0], linear[..., 1], linear[..., 2]
+    # The environment's white reflection adds the same to each channel: green alone (the
+    # colours have none), taken out of red and blue.
+    red, blue = red - green, blue - green
     share = red[inside] / (red[inside] + blue[inside])
     np.testing.assert_allclose(share, 1.0 - u[inside], atol=0.03)
-    assert green[inside].max() < 0.01 and (red[inside] + blue[inside]).min() > 0.2
+    assert green[inside].max() < 0.05 and (red[inside] + blue[inside]).min() > 0.2
 
 
 def test_a_face_coloured_ply_box_draws_as_the_engines_box_in_that_colour(scene, tmp_path):
