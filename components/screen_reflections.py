@@ -18,8 +18,9 @@ REFLECTION_QUALITIES = ("low", "medium", "high")
 @dataclass(eq=False)
 class ScreenReflections(TrackedComponent):
     """Screen-space reflections for the camera whose entity holds it (the active camera's is
-    used): a surface that reflects the sky or a probe (``Reflective`` with mode "skybox" or
-    "cube") shows what the camera's own image holds along its reflected ray, where the ray
+    used): a surface that reflects the sky or a probe (every material's environment
+    reflection, ``Material.environment_reflection``, and a ``Reflective`` with mode "skybox"
+    or "cube") shows what the camera's own image holds along its reflected ray, where the ray
     finds it, in place of the sky's or probe's reflection there: the box standing on a
     polished floor, the wall beside a chrome ball, at the place and size a ray trace would
     put them, as Unity's, Unreal's and Godot's SSR and three.js's SSRPass do.  Where the ray
@@ -49,8 +50,8 @@ class ScreenReflections(TrackedComponent):
 
     Only the camera's own view reflects its image: mirror, portal and probe views show the
     probes' and sky's reflections as before, and so do glass and what is off the screen.  A
-    camera with it in a world where nothing reflects the sky or a probe is told so once (a
-    ``ComponentWarning`` from the main stage).
+    camera with it in a world where nothing reflects the sky or a probe (only mirrors and
+    portals are drawn) is told so once (a ``ComponentWarning`` from the main stage).
     """
 
     max_distance: float = 30.0

@@ -99,9 +99,8 @@ class MainViewSystem(esper.Processor):
 
     def _check_reflecting(self, camera: int, reflections: ScreenReflections) -> None:
         """Say once, for a camera's ``ScreenReflections``, when nothing the world draws reflects
-        the sky or a probe (no ``Reflective`` of mode "skybox" or "cube"): screen reflections
-        replace only those, so they would show nothing, and a floor meant to be polished needs
-        one."""
+        the sky or a probe (every surface a mirror or a portal, whose views are exact): screen
+        reflections replace only those reflections, so they would show nothing."""
         batches = self.renderer.opaque_batches()  # (a new list whenever the batches change)
         if self._said_nothing_reflects is reflections or self._looked_at is batches:
             return
@@ -110,8 +109,8 @@ class MainViewSystem(esper.Processor):
             self._said_nothing_reflects = reflections
             warnings.warn(ComponentWarning(
                 f"ScreenReflections on entity {camera}: nothing in the world reflects the sky or a probe "
-                "(Reflective with mode 'skybox' or 'cube'), and screen reflections replace only those "
-                "reflections, so they show nothing; give the surfaces that should reflect a Reflective"), stacklevel=2)
+                "(every surface drawn is a mirror or a portal, whose reflections are exact views), and screen "
+                "reflections replace only those reflections, so they show nothing"), stacklevel=2)
 
     def _screen(self, options: SceneOptions, occlusion: bool, reflections: bool) -> SceneOptions:
         """The root's ``options`` with ambient occlusion and screen reflections as asked:

@@ -64,12 +64,16 @@ def _scene(world, floor: str = "skybox", reflections: ScreenReflections | None =
         parts += [Material(color=(1.0, 1.0, 1.0)), Mirror()]
     elif floor == "cube":
         parts += [Material(color=(1.0, 1.0, 1.0), metallic=1.0, roughness=roughness), Reflective(mode="cube", mix=1.0)]
+    elif floor == "environment":  # no Reflective: a white metal's environment reflection (f0 A + B: 1 when smooth)
+        parts += [Material(color=(1.0, 1.0, 1.0), metallic=1.0, roughness=roughness)]
     else:
         parts += [Material(color=(0.9, 0.9, 0.9), roughness=roughness), Reflective(mode=floor, mix=1.0)]
     names["floor"] = world.spawn(*parts)
     if floor == "cube":
         world.spawn(Transform(position=(0.0, 1.0, 0.0)), ReflectionProbe(influence=(8.0, 4.0, 8.0), resolution=64))
-    names["boxes"] = [world.spawn(Transform(position=centre), MeshRef(box(size)), Material(color=colour, roughness=1.0))
+    # (Reflecting nothing of the light from all round: a face's colour is the same from any direction.)
+    names["boxes"] = [world.spawn(Transform(position=centre), MeshRef(box(size)),
+                                  Material(color=colour, roughness=1.0, environment_reflection=0.0))
                       for centre, size, colour in BOXES]
     if extra is not None:
         names.update(extra(world))
@@ -148,9 +152,12 @@ def _reflected_boxes(runner, names: dict, seen: np.ndarray, steps: int = 1):
         yield index, mask, (rows[mask], columns[mask])
 
 
-def test_a_polished_floor_shows_the_boxes_where_a_ray_caster_finds_them(scene):
-    image, runner, names = _frame(scene, reflections=ScreenReflections())
-    plain, plain_runner, _ = _frame(scene)
+@pytest.mark.parametrize("floor", ["skybox", "environment"])
+def test_a_polished_floor_shows_the_boxes_where_a_ray_caster_finds_them(scene, floor):
+    """A floor reflecting the sky by its Reflective, or by its material's own environment
+    reflection (a smooth white metal, no Reflective): the same reflections."""
+    image, runner, names = _frame(scene, floor=floor, reflections=ScreenReflections())
+    plain, plain_runner, _ = _frame(scene, floor=floor)
     _, which, _, _ = _cast(runner)
     floor = runner.ids() == names["floor"]
     for index, mask, hit in _reflected_boxes(runner, names, plain_runner.ids()):
@@ -407,15 +414,20 @@ def test_one_composite_a_frame_and_its_images_go_with_the_component(scene):
 def test_only_the_batches_that_reflect_get_the_reflected_builds(scene):
     """The main view draws its other batches with their plain builds (into its own
     framebuffer), so the reflected builds are made, and prepared, for the reflecting ones
-    alone: a box's build with SCREEN_REFLECTION would be compiled for nothing."""
-    _, runner, _ = _frame(scene, reflections=ScreenReflections())
+    alone: a mirror's build with SCREEN_REFLECTION would be compiled for nothing."""
+    def mirror(world):
+        return {"mirror": world.spawn(Transform(position=(2.5, 1.0, -2.0)), MeshRef(quad(1.5, 2.0)), Material(),
+                                      Mirror())}
+
+    _, runner, _ = _frame(scene, reflections=ScreenReflections(), extra=mirror)
     built = runner.engine.renderer.scene_pass.programs.built
     reflected = [key for key in built if "reflected" in key[12].split()]
     assert reflected
+    reflecting = (int(ReflectVariant.NONE), int(ReflectVariant.SKYBOX), int(ReflectVariant.CUBE))
     for key in reflected:
         variants = key[2]
-        assert variants is None or variants[2] in (int(ReflectVariant.SKYBOX), int(ReflectVariant.CUBE)), key
-    assert any(key[2] is not None and key[2][2] == int(ReflectVariant.NONE) for key in built)  # (the boxes': plain)
+        assert variants is None or variants[2] in reflecting, key
+    assert any(key[2] is not None and key[2][2] == int(ReflectVariant.PLANAR) for key in built)  # (the mirror's: plain)
 
 
 def test_the_overlay_switch_turns_them_off(scene):
@@ -431,12 +443,13 @@ def test_the_overlay_switch_turns_them_off(scene):
 
 def test_a_world_where_nothing_reflects_the_sky_says_so_once(scene):
     """Screen reflections replace only sky and probe reflections: a camera with them in a world
-    with no such surface is told, once, rather than left to wonder at an unchanged picture."""
+    with no such surface (a mirror alone) is told, once, rather than left to wonder at an
+    unchanged picture."""
     def dull(world):
         camera = look_from(world, EYE, TARGET)
         world.add_component(camera, ScreenReflections())
         world.spawn(Skybox())
-        world.spawn(Transform(), MeshRef(plane(8.0, 8.0)), Material(color=(0.9, 0.9, 0.9), roughness=0.0))
+        world.spawn(Transform(position=(0.0, 1.0, -1.0)), MeshRef(quad(3.0, 2.0)), Material(), Mirror())
 
     runner = scene(dull, SIZE)
     with pytest.warns(ComponentWarning, match=r"ScreenReflections on entity \d+: nothing in the world reflects"):

@@ -69,7 +69,10 @@ NO_MATERIAL_MAPS = (False, False, False, "", False)  # a batch's build with none
 
 
 
-_REFLECTING = (int(ReflectVariant.SKYBOX), int(ReflectVariant.CUBE))  # the reflect slots screen reflections replace
+# The reflect slots whose reflection is the sky's or a probe's, which screen reflections
+# replace: none (the material's environment reflection, scene.frag environment_specular) and a
+# Reflective's "skybox" and "cube"; not a mirror's or a portal's (their views are exact).
+_REFLECTING = (int(ReflectVariant.NONE), int(ReflectVariant.SKYBOX), int(ReflectVariant.CUBE))
 
 
 def reflects_environment(batch: InstanceBatch) -> bool:

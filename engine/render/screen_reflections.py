@@ -9,8 +9,9 @@ pixel's colour is known, by what the scene pass wrote beside it:
    (``scene_programs.reflects_environment``; the others first, into the view's own framebuffer)
    draw with the ``SCREEN_REFLECTION`` builds of ``scene.frag`` into the level's images and
    three more (``framebuffer``): ``W``, the share of a radiance along the reflected ray that reaches
-   the pixel (the reflect slot's mix, tint, Fresnel and occlusion, scaled by what follows
-   it: a metallic map's share, a refracting surface's alpha, the fog), with the roughness;
+   the pixel (the reflect slot's mix, tint, Fresnel and occlusion, or with no reflect slot
+   the environment reflection's split-sum share, scaled by what follows it: a metallic map's
+   share, a refracting surface's alpha, the fog), with the roughness;
    ``W`` x the sky's or probe's radiance it reflected; and the shading normal.  A pixel's
    colour is its other light plus ``W`` x that radiance, so the composite can take the one
    reflection out and put another in.  The entity's id (22 bits, in the two spare channels)
