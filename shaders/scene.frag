@@ -156,8 +156,9 @@ float cube_lod(vec3 direction, float n) {
 // What a surface without a reflect slot (no Reflective, not a mirror or portal) reflects of
 // the light from all round, as every engine's default material does (Unity's and Godot's sky
 // and probe reflections, three.js's envMap): the radiance along the reflected ray, blurred by
-// the roughness (the sky cube's mips), times the split-sum's f0 A + B (environment_brdf),
-// times the material's environment_reflection (v_reflect.x of such an instance).  The ambient
+// the roughness (the sky cube's mips), times the split-sum's share (environment_share: f0 A + B
+// and multiple scattering), times the material's environment_reflection (v_reflect.x of such
+// an instance).  The ambient
 // diffuse takes 1 - that share (the energy the reflection took, as Filament and three.js do).
 //
 // The radiance is the sky's; inside reflection probes' influence boxes it is normalised by the
@@ -179,6 +180,18 @@ vec3 environment_radiance(Surface s, AmbientBoxes boxes) {
     vec3 radiance = lights.counts.z != 0 ? (sky_e * boxes.sky + boxes_e) / PI
                                          : sky * (boxes.sky + boxes_e / max(sky_e, floor_e));
     return fog_sky(max(radiance, vec3(0.0)), s.position, r);
+}
+
+// The share of the light from all round a surface of reflectance f0 reflects, from the split
+// sum's (A, B): single scattering, f0 A + B, and the light rough GGX loses to its microfacets'
+// shadowing (1 - A - B) given back as multiple scattering would (Fdez-Aguera, "A Multiple-
+// Scattering Microfacet Model for Real-Time Image-based Lighting", 2019; three.js's
+// computeMultiscattering): a white metal under an even sky shows the sky at any roughness.
+vec3 environment_share(vec3 f0, vec2 ab) {
+    vec3 single = f0 * ab.x + ab.y;
+    float lost = 1.0 - ab.x - ab.y;
+    vec3 average = f0 + (1.0 - f0) / 21.0;  // Schlick's Fresnel averaged over the hemisphere
+    return single + single * average / (1.0 - lost * average) * lost;
 }
 
 // The environment's specular light at the surface (0 where a reflect slot reflects instead).
@@ -459,8 +472,8 @@ void main() {
     s.environment_weight = vec3(0.0);
     if (SLOT_REFLECT == REFLECT_NONE) {
         // v_reflect.x: the material's environment_reflection (material_dispatch.choose_material)
-        vec2 ab = environment_brdf(s.roughness, max(dot(s.normal, s.to_eye), 0.0));
-        s.environment_weight = (s.f0 * ab.x + ab.y) * v_reflect.x;
+        s.environment_weight = environment_share(s.f0, environment_brdf(s.roughness, max(dot(s.normal, s.to_eye), 0.0)))
+                               * v_reflect.x;
         s.reflect_lod = cube_lod(s.reflect_dir, sky_face_size);
     }
     if (SLOT_REFLECT == REFLECT_SKYBOX) s.reflect_lod = cube_lod(s.reflect_dir, sky_face_size);
