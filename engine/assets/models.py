@@ -32,8 +32,9 @@ def spawn_model(world: World, path: str | Path, position: glm.vec3 | Sequence[fl
     detection: flat is a planar mirror, curved a cube map), so a chrome teapot reflects the
     room around it, not only the sky.  A probe is six views a capture, so a model gets at
     most ``max_probes`` of them (MAX_MODEL_PROBES): its largest curved reflective parts (by
-    their box's diagonal once placed); the others reflect the sky (``Reflective("skybox")``)
-    and a warning says how many.  Parts of the same geometry share one Mesh (drawn
+    their box's diagonal once placed); the others reflect the sky (a metal by its own
+    material's environment reflection, an MTL's non-metal reflection by
+    ``Reflective("skybox")``) and a warning says how many.  Parts of the same geometry share one Mesh (drawn
     instanced).  ``roots``: the folders the files the model names may be in (None: its own
     folder; ``load_model``).  The file is fully loaded and every component built (so
     validated) before anything is spawned, so a bad file leaves the world untouched.
@@ -68,9 +69,12 @@ def spawn_model(world: World, path: str | Path, position: glm.vec3 | Sequence[fl
                 # probe (its own, made by the probes stage at its box's centre).
                 if _planar_mirror(part):
                     components.append(Mirror(reflect_rate=part.reflectivity, roughness=part.roughness))
-                else:
-                    mode = "cube" if index in probed else "skybox"
-                    components.append(Reflective(mode=mode, mix=part.reflectivity))
+                elif index in probed:
+                    components.append(Reflective(mode="cube", mix=part.reflectivity))
+                elif part.metallic == 0.0:  # (an MTL's reflection: no metal to reflect by)
+                    components.append(Reflective(mode="skybox", mix=part.reflectivity))
+                # else a metal past the probes' budget reflects the sky by its material (its
+                # environment reflection, tinted by its colour as a metal's is)
             part_components.append(components)
     except ComponentValueError as exc:
         raise AssetError(f"mesh file {str(path)!r}: {exc}") from exc
