@@ -473,7 +473,7 @@ void main() {
     if (SLOT_REFLECT == REFLECT_NONE) {
         // v_reflect.x: the material's environment_reflection (material_dispatch.choose_material)
         s.environment_weight = environment_share(s.f0, environment_brdf(s.roughness, max(dot(s.normal, s.to_eye), 0.0)))
-                               * v_reflect.x;
+                               * (v_reflect.x * float(lights.counts.w));
         s.reflect_lod = cube_lod(s.reflect_dir, sky_face_size);
     }
     if (SLOT_REFLECT == REFLECT_SKYBOX) s.reflect_lod = cube_lod(s.reflect_dir, sky_face_size);

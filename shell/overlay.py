@@ -1,8 +1,8 @@
 """The debug overlay: frame rate and a frame-time graph, what the last frame cost (passes, draw
 calls, views per reflection level, probe captures), the reflection and probe capture paths
 in use, toggles for them, the post-processing (tone curve, exposure, bloom; toggles for
-bloom, fog, the grade, ambient occlusion (and a view of it alone), screen reflections and
-the curve), and shader errors from hot reload;
+bloom, fog, the grade, ambient occlusion (and a view of it alone), screen reflections, the
+materials' reflections of the sky and the curve), and shader errors from hot reload;
 and the level editor's panels (``shell/editor_panels.py``: the entity list, the inspector,
 the selection's handles, the editor's keys), whose selection it outlines wherever it shows
 (``engine/render/outline.py``).
@@ -347,6 +347,8 @@ class DebugOverlay(EditorPanels):
         self._switch("SSR", engine.stages["main"], "reflections")  # (the screen reflections on a row of their own)
         imgui.same_line()
         self._switch("SSR only", engine.renderer.screen_reflections, "show_found")
+        imgui.same_line()
+        self._switch("sky refl", engine.stages["prepare"], "environment_reflections")
         x, y = imgui.get_window_pos()
         w, h = imgui.get_window_size()
         width, height = self.io.display_size

@@ -66,7 +66,8 @@ def post_lines(engine: Engine) -> list[str]:
     """The present stage's post-processing in the last frame, a line: the tone curve (and
     whose it is), the exposure, the bloom (intensity, levels), the grade (and its colour
     table's name), the post passes drawn; and a line of the main stage's screen-space
-    passes: ambient occlusion (radius, intensity) and reflections (reach, quality).  (One
+    passes: ambient occlusion (radius, intensity) and reflections (reach, quality), and the
+    materials' sky reflections where the overlay turned them off.  (One
     line grew the overlay's window over the view it is clicked through.)  The automatic
     exposure's adapted value is read back from the GPU (a wait, only while the overlay
     shows it)."""
@@ -106,6 +107,8 @@ def post_lines(engine: Engine) -> list[str]:
                        f"{' half' if reflected.half_resolution else ''}")
     else:
         reflections = "SSR off" + (" (set)" if not main.reflections else "")
+    if not engine.stages["prepare"].environment_reflections:
+        reflections += "; sky reflections off (set)"
     passes = renderer.present_pass.post_passes
     return [f"post: {curve} ({whose}), {exposure}; {glow}, {passes} passes{grade}",
             f"screen: {occlusion}; {reflections}"]

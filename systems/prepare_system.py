@@ -88,6 +88,10 @@ class PrepareSystem(esper.Processor):
         self._cube_sun: SkySun | None = None   # ... and where the sky's cube map and light have it
         self._sun_follows = False   # the generated sky's sun follows the brightest directional light
         self.fog = True   # the debug overlay's toggle: off, no camera's Fog is drawn
+        # The debug overlay's toggle: off, no surface reflects the light from all round by its
+        # material (its environment reflection; a Reflective's reflection stays).
+        self.environment_reflections = True
+        self._environment_packed = True   # the toggle as the lights block has it
 
     def process(self, dt: float) -> None:
         world = self.world
@@ -100,9 +104,12 @@ class PrepareSystem(esper.Processor):
         self._probe_boxes()
         kept = self._kept
         if not (self._lights and not sky_changed and self._lights_stand_still()
-                and not (kept.by_eye and self._camera_moved(kept))):
+                and not (kept.by_eye and self._camera_moved(kept))
+                and self._environment_packed == self.environment_reflections):
             kept = self._kept = choose_lights(world, kept, LIGHT_LIMITS)
-            block = lights_block(self._sky_sh, *self._rows(kept), flat_sky=self._flat_sky)
+            self._environment_packed = self.environment_reflections
+            block = lights_block(self._sky_sh, *self._rows(kept), flat_sky=self._flat_sky,
+                                 environment=self.environment_reflections)
             if block != self._lights:
                 renderer.set_lights(block)
                 self._lights = block

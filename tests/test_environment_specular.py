@@ -230,6 +230,26 @@ def test_environment_reflection_scales_the_reflection_and_is_read_live(scene):
     np.testing.assert_allclose(srgb_to_linear(runner.frame())[mask], frames[0.0][mask], atol=1e-6)
 
 
+def test_the_overlay_switch_turns_them_off_and_on(scene):
+    """The prepare stage's ``environment_reflections`` (the overlay's "sky refl"): off, every
+    material draws as with environment_reflection 0; the screen line says so; on again, as before."""
+    from shell.overlay_text import post_lines
+
+    def materials(share):
+        return [(Material(color=(0.9, 0.6, 0.3, 1.0), metallic=1.0, roughness=0.3, environment_reflection=share),),
+                (Material(color=(0.2, 0.3, 0.8, 1.0), roughness=0.2, environment_reflection=share),)]
+
+    plain, _ = linear_frame(scene, spheres_scene(materials(0.0), sky=Skybox())[0])
+    shown, runner = linear_frame(scene, spheres_scene(materials(1.0), sky=Skybox())[0])
+    assert np.abs(shown - plain).max() > 0.1
+    runner.engine.stages["prepare"].environment_reflections = False
+    np.testing.assert_allclose(srgb_to_linear(runner.frame()), plain, atol=1e-6)
+    assert post_lines(runner.engine)[1].endswith("; sky reflections off (set)")
+    runner.engine.stages["prepare"].environment_reflections = True
+    np.testing.assert_allclose(srgb_to_linear(runner.frame()), shown, atol=1e-6)
+    assert "sky reflections" not in post_lines(runner.engine)[1]
+
+
 def test_a_reflect_slot_decides_alone(scene):
     """A Reflective sphere reflects what its slot says: environment_reflection is not read."""
     frames = []

@@ -186,13 +186,15 @@ def camera_view(world_matrix: glm.mat4, fov_y_deg: float, near: float, far: floa
 
 
 def lights_block(sky_sh: Sequence[Sequence[float]] | np.ndarray, directional: list[tuple],
-                 point: list[tuple], flat_sky: bool = False) -> bytes:
+                 point: list[tuple], flat_sky: bool = False, environment: bool = True) -> bytes:
     """Pack the Lights block (shaders/include/lights.glsl, std140): ``sky_sh`` the sky's nine
     irradiance coefficients (9, 3) (``engine.render.irradiance``), directional =
     [(direction, rgb)], point = [(position, range, rgb, cone)] (``cone``: the spot cone,
     ``light_rules.spot_cone``; ``ALL_ROUND`` for a point light).  ``flat_sky``: the sky cube
     is the flat background of a world with no Skybox, not the light ``sky_sh`` holds (the
-    environment's reflection then reads the harmonics: scene.frag environment_radiance)."""
+    environment's reflection then reads the harmonics: scene.frag environment_radiance).
+    ``environment`` False: no surface reflects the light from all round by its material (the
+    debug overlay's switch)."""
     data = np.zeros(LIGHTS_BLOCK_BYTES // 4, np.float32)
     sh = np.asarray(sky_sh, np.float64)
     if sh.shape != (SKY_SH_COEFFICIENTS, 3):
@@ -200,7 +202,7 @@ def lights_block(sky_sh: Sequence[Sequence[float]] | np.ndarray, directional: li
     data[0:4 * SKY_SH_COEFFICIENTS].reshape(SKY_SH_COEFFICIENTS, 4)[:, :3] = sh
     base = 4 * SKY_SH_COEFFICIENTS
     counts = np.array([min(len(directional), MAX_DIRECTIONAL_LIGHTS), min(len(point), MAX_POINT_LIGHTS),
-                       int(flat_sky), 0], np.int32)
+                       int(flat_sky), int(environment)], np.int32)
     data[base:base + 4] = counts.view(np.float32)
     base += 4
     for i, (direction, rgb) in enumerate(directional[:MAX_DIRECTIONAL_LIGHTS]):

@@ -3,7 +3,8 @@
 // MAX_DIRECTIONAL_LIGHTS and MAX_POINT_LIGHTS, are views.py's, defined by the shader library.
 layout(std140) uniform Lights {
     vec4 sky_sh[9];                                 // rgb: the sky's irradiance coefficients E_lm (engine/render/irradiance.py)
-    ivec4 counts;                                   // x: directional, y: point; z: 1 where the sky cube is a flat background
+    ivec4 counts;                                   // x: directional, y: point; z: 1 where the sky cube is a flat
+                                                    // background; w: 1 where materials reflect the light from all round
     vec4 directional_dir[MAX_DIRECTIONAL_LIGHTS];   // xyz: direction the light travels
     vec4 directional_color[MAX_DIRECTIONAL_LIGHTS]; // rgb: colour x intensity
     vec4 point_pos[MAX_POINT_LIGHTS];               // xyz: position, w: range
