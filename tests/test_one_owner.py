@@ -281,7 +281,10 @@ FORMULAS = {
     "sRGB's transfer functions": (r"0\.04045|0\.0031308", {"engine/core/color.py", "shaders/include/color.glsl"}),
     "the visibility code's packing": (r"<<\s*VIEW_KINDS|\(1\s*<<\s*VIEW_KINDS\)\s*-\s*1|define\s+VIEW_KIND_BITS",
                                       {"components/visibility.py"}),
-    "Schlick's Fresnel": (r"pow\(\s*1(\.0)?\s*-[^,]*,\s*5(\.0)?\s*\)|\*\*\s*5\b", {"shaders/include/ggx.glsl"}),
+    # (The split sum's table integrates Schlick's (1 - v.h)^5 in Python: its A and B are that
+    # term's split, so it is the Fresnel's second owner, on the CPU.)
+    "Schlick's Fresnel": (r"pow\(\s*1(\.0)?\s*-[^,]*,\s*5(\.0)?\s*\)|\*\*\s*5\b",
+                          {"shaders/include/ggx.glsl", "engine/render/environment_brdf.py"}),
     "F0 from an index": (r"\(\s*(self\.)?ior\s*-\s*1(\.0)?\s*\)\s*/\s*\(\s*(self\.)?ior\s*\+\s*1(\.0)?\s*\)",
                          {"components/water.py", "shaders/include/ggx.glsl"}),
     "yaw from a direction": (r"atan2?\(\s*-", {"components/transform.py"}),

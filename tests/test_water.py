@@ -33,7 +33,8 @@ FLAT = glm.angleAxis(-math.pi / 2, glm.vec3(1, 0, 0))
 SKY = 0.8      # the uniform sky's linear radiance: all the water reflects
 FLOOR = 0.05   # the pool floor's emitted colour (linear), under the surface
 # What the floor shows: its emission plus the uniform sky's ambient light (a white surface
-# under a sky of radiance SKY shows SKY: engine/render/irradiance.py), both times its colour.
+# under a sky of radiance SKY shows SKY: engine/render/irradiance.py), both times its colour
+# (it reflects none of the sky: the same colour from every direction).
 FLOOR_SEEN = FLOOR * (1.0 + SKY)
 
 
@@ -54,7 +55,7 @@ def pool(world, water: bool, eye, target, *, water_colour=(1.0, 1.0, 1.0, 0.0), 
     world.spawn(Transform(position=eye, rotation=look_rotation(glm.vec3(target) - eye)), Camera(fov_y=60.0))
     world.spawn(uniform_sky(SKY))
     world.spawn(Transform(position=(0.0, -1.0, 0.0), rotation=FLAT), MeshRef(quad(200.0, 200.0)),
-                Material(color=(FLOOR, FLOOR, FLOOR, 1.0), roughness=1.0), Emissive(1.0))
+                Material(color=(FLOOR, FLOOR, FLOOR, 1.0), roughness=1.0, environment_reflection=0.0), Emissive(1.0))
     if water:
         world.spawn(Transform(rotation=FLAT), MeshRef(quad(200.0, 200.0)), Material(color=water_colour),
                     Mirror(reflect_rate=reflect_rate), Water(ior=ior))
