@@ -17,9 +17,6 @@ Variants now (``VARIANTS``; add a row by appending a ``Variant``):
 * ``off``: the scene lit as before shadows and post-processing (the sun's shadows off, no
   Tonemap, no Bloom); in every variant the scene's spinning boxes stand still (only the
   camera moves), so what a variant moves is all that moves;
-* ``no_environment``: as ``off`` with every material's ``environment_reflection`` 0 (no
-  surface reflects the sky unless its Reflective says so): ``off`` over it is what the
-  environment reflections cost;
 * ``shadows``: the sun casts shadows; nothing but the camera moves, so its map is drawn
   once and kept (the still scene);
 * ``shadows_moving``: the same with a box sliding to and fro under the sun every frame
@@ -201,12 +198,6 @@ def _plain(engine: Engine) -> None:
     _sun_shadows(engine, False)
 
 
-def _no_environment(engine: Engine) -> None:
-    _sun_shadows(engine, False)
-    for _, material in engine.world.query_one(Material):
-        material.environment_reflection = 0.0
-
-
 def _shadows(engine: Engine) -> None:
     _sun_shadows(engine, True)
 
@@ -336,7 +327,6 @@ def _post_auto(engine: Engine) -> None:
 
 VARIANTS: list[Variant] = [
     Variant("off", _plain, "no shadows, no Tonemap, no Bloom (the plain look)"),
-    Variant("no_environment", _no_environment, "as off, every Material's environment_reflection 0"),
     Variant("shadows", _shadows, "the sun casts shadows; a still scene (its map kept)"),
     Variant("shadows_moving", _moving_caster, "the sun casts shadows; a box slides under it every frame",
             _slide_caster),
