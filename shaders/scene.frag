@@ -195,11 +195,21 @@ vec3 environment_share(vec3 f0, vec2 ab) {
 }
 
 // The environment's specular light at the surface (0 where a reflect slot reflects instead).
-// Occluded as the diffuse light from all round is, and faded where a normal map turns the
-// reflected ray below the mesh's own surface (Marmoset's horizon fade).
+// Where something hides part of the sky from the point (the occlusion map, screen-space
+// AO), the reflection is occluded by Lagarde and de Rousiers' specular occlusion ("Moving
+// Frostbite to Physically Based Rendering", 2014; Filament's computeSpecularAO): a narrow
+// lobe seen head on leaves the occluders aside and keeps more than the diffuse light's share,
+// a grazing or rough one as little; it is 1 where nothing occludes.  Faded where a normal map
+// turns the reflected ray below the mesh's own surface (Marmoset's horizon fade).
+float specular_occlusion(float nv, float occlusion, float roughness) {
+    float alpha = roughness * roughness;
+    return clamp(pow(nv + occlusion, exp2(-16.0 * alpha - 1.0)) - 1.0 + occlusion, 0.0, 1.0);
+}
+
 vec3 environment_specular(Surface s, AmbientBoxes boxes) {
     float horizon = clamp(1.0 + dot(s.reflect_dir, s.geometric_normal), 0.0, 1.0);
-    vec3 weight = s.environment_weight * (s.occlusion * horizon * horizon);
+    float occlusion = specular_occlusion(max(dot(s.normal, s.to_eye), 0.0), s.occlusion, s.roughness);
+    vec3 weight = s.environment_weight * (occlusion * horizon * horizon);
     vec3 radiance = environment_radiance(s, boxes);
 #ifdef SCREEN_REFLECTION
     reflect_weight = weight;

@@ -26,7 +26,7 @@ from components import (
     Visibility,
 )
 from engine.assets.level_file import LevelError, load_level, save_level
-from engine.assets.mesh import box, sphere
+from engine.assets.mesh import box, quad, sphere
 from engine.render.environment_brdf import ENVIRONMENT_BRDF_SIZE, environment_brdf_table
 from tests.support import linear_to_srgb8, look_from, pixel_rays, srgb_to_linear
 
@@ -228,6 +228,44 @@ def test_environment_reflection_scales_the_reflection_and_is_read_live(scene):
     assert np.abs(frames[0.5][mask] - halfway).max() <= srgb_step(halfway).max() + 0.002
     runner.world.get(names["spheres"][0], Material).environment_reflection = 0.0
     np.testing.assert_allclose(srgb_to_linear(runner.frame())[mask], frames[0.0][mask], atol=1e-6)
+
+
+def test_an_occluded_reflection_keeps_lagardes_specular_occlusion(scene):
+    """A smooth white metal wall (roughness 0.1) under a uniform sky, half of it occluded to
+    0.5 by its occlusion map (strength 0.5): each pixel there over the same pixel of the wall
+    without a map is clamp((n.v + ao)^(2^(-16 alpha - 1)) - 1 + ao), alpha = roughness^2
+    (Lagarde and de Rousiers 2014): more than the diffuse light's 0.5 for a narrow lobe seen
+    nearly head on, and the open half the same as the wall without a map."""
+    from tests.test_occlusion_maps import OCCLUSION
+    roughness, ao = 0.1, 0.5
+
+    def wall(occluded: bool):
+        def build(world):
+            look_from(world, (0.0, 1.0, 2.2), (0.0, 1.0, 0.0))
+            world.spawn(uniform_sky())
+            world.spawn(Transform(position=(0.0, 1.0, 0.0)), MeshRef(quad(2.0, 2.0)),
+                        Material(color=(1.0, 1.0, 1.0, 1.0), metallic=1.0, roughness=roughness,
+                                 occlusion_map=OCCLUSION if occluded else None, occlusion_strength=0.5))
+        return build
+
+    frames, runner = {}, None
+    for occluded in (True, False):
+        runner = scene(wall(occluded), SIZE)
+        runner.engine.renderer.antialias = "off"
+        frames[occluded] = srgb_to_linear(runner.frame()).mean(axis=-1)
+    eye, rays = pixel_rays(runner.engine.main_view, SIZE)
+    t = -eye[2] / rays[..., 2]
+    points = eye + rays * t[..., None]
+    inside = (np.abs(points[..., 0]) < 0.95) & (np.abs(points[..., 1] - 1.0) < 0.95)
+    u = (points[..., 0] + 1.0) / 2.0
+    left, right = inside & (u > 1 / 8) & (u < 3 / 8), inside & (u > 5 / 8) & (u < 7 / 8)
+    nv = -rays[..., 2]
+    alpha = roughness ** 2
+    expected = np.clip((nv + ao) ** (2.0 ** (-16 * alpha - 1)) - 1 + ao, 0.0, 1.0)
+    ratio = frames[True][left] / frames[False][left]
+    assert left.sum() > 500 and expected[left].min() > 0.6  # (the diffuse light's share would be 0.5)
+    np.testing.assert_allclose(ratio, expected[left], atol=0.02)
+    np.testing.assert_allclose(frames[True][right], frames[False][right], atol=1e-6)
 
 
 def test_the_overlay_switch_turns_them_off_and_on(scene):
