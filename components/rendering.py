@@ -77,7 +77,8 @@ class Material(TrackedComponent):
     ``metallic_roughness_map`` (glTF's ``metallicRoughnessTexture``, read linearly): its
     green channel multiplies ``roughness`` and its blue channel ``metallic`` per pixel; the
     blue channel also scales a sky or probe reflection's mix (``Reflective.mix``), so the
-    parts the map says are not metal keep their own shading.  ``emissive_map`` (glTF's
+    parts the map says are not metal keep their own shading (their environment reflection
+    with it, whole).  ``emissive_map`` (glTF's
     ``emissiveTexture``, sRGB colour): with an ``Emissive`` component, the surface emits
     ``Emissive.power`` x the map's colour instead of ``power`` x its diffuse colour (glTF's
     ``emissiveFactor x emissiveTexture``, the factor being ``power``); without one it emits
@@ -105,7 +106,9 @@ class Material(TrackedComponent):
     ``metallic``, ``roughness`` and the angle it is seen at (the split-sum GGX reflection:
     a dielectric reflects 4% head on and most at grazing angles, a metal its colour
     everywhere), 0 none (Unity's "Environment Reflections" off), a share between.  Not read
-    where a ``Reflective``, a ``Mirror`` or a ``Portal`` decides what the surface reflects.
+    where a ``Reflective``, a ``Mirror`` or a ``Portal`` decides what the surface reflects
+    (with a metallic-roughness map, the parts it says are not metal reflect the environment
+    whole under a Reflective).
 
     ``double_sided`` draws both faces of each triangle (glTF's ``doubleSided``, three.js's
     ``side: DoubleSide``, Unity's render face "Both"): a leaf, a fence or a sheet of paper

@@ -116,13 +116,21 @@ layout(location = 3) out uint out_node;
 #ifdef SCREEN_REFLECTION
 // A root view drawn for screen-space reflections (engine/render/screen_reflections.py): what
 // its composite needs to put the screen's reflection in place of the sky's or probe's.  The
-// colour is linear in the radiance the reflect slot reflects, colour = rest + W x radiance,
-// so with W the composite takes W x radiance out and puts W x what the screen shows in.
+// colour is linear in the radiances reflected along the reflected ray (the environment
+// reflection's, the reflect slot's), colour = rest + sum of W_i x radiance_i, so with
+// W = sum of W_i the composite takes that sum out and puts W x what the screen shows in.
 layout(location = 4) out vec4 out_reflect_weight;  // rgb: W (0: nothing reflected); a: the roughness
 layout(location = 5) out vec4 out_reflect_added;   // rgb: W x the sky's or probe's radiance; a: the entity's bits 0-10
 layout(location = 6) out vec4 out_reflect_normal;  // rgb: the shading normal (world); a: the entity's bits 11-21
-vec3 reflect_weight = vec3(0.0);    // W so far: set by the reflect slot, scaled by what follows it
-vec3 reflect_radiance = vec3(0.0);  // the sky's or probe's radiance along the reflected ray
+vec3 reflect_weight = vec3(0.0);  // W so far: the reflections' weights in the colour, as each step mixes or scales it
+vec3 reflect_added = vec3(0.0);   // the sum of each W_i x its radiance, alike
+
+// The colour mixed towards a reflection (weight x radiance) by m, as mix(colour, reflection, m):
+// the reflections already in the colour keep 1 - m of their weight.
+void mix_reflection(vec3 weight, vec3 radiance, float m) {
+    reflect_weight = mix(reflect_weight, weight, m);
+    reflect_added = mix(reflect_added, weight * radiance, m);
+}
 #endif
 
 struct Surface {
@@ -194,6 +202,19 @@ vec3 environment_share(vec3 f0, vec2 ab) {
     return single + single * average / (1.0 - lost * average) * lost;
 }
 
+// Whether the surface's light holds the environment reflection: a surface without a reflect
+// slot's, by its material's share (v_reflect.x: environment_reflection,
+// material_dispatch.choose_material); and with a metallic-roughness map a sky or probe
+// Reflective's too, whole, in the light its slot's reflection mixes with, so the parts the
+// map says are not metal keep the light a plain material of theirs has (mapped_reflection).
+bool environment_reflected() {
+    bool reflected = SLOT_REFLECT == REFLECT_NONE;
+#ifdef METALLIC_ROUGHNESS_MAP
+    reflected = reflected || SLOT_REFLECT == REFLECT_SKYBOX || SLOT_REFLECT == REFLECT_CUBE;
+#endif
+    return reflected;
+}
+
 // The environment's specular light at the surface (0 where a reflect slot reflects instead).
 // Where something hides part of the sky from the point (the occlusion map, screen-space
 // AO), the reflection is occluded by Lagarde and de Rousiers' specular occlusion ("Moving
@@ -212,8 +233,8 @@ vec3 environment_specular(Surface s, AmbientBoxes boxes) {
     vec3 weight = s.environment_weight * (occlusion * horizon * horizon);
     vec3 radiance = environment_radiance(s, boxes);
 #ifdef SCREEN_REFLECTION
-    reflect_weight = weight;
-    reflect_radiance = radiance;
+    reflect_weight += weight;  // (added to the colour)
+    reflect_added += weight * radiance;
 #endif
     return weight * radiance;
 }
@@ -225,7 +246,7 @@ vec3 direct_lighting(Surface s, AmbientBoxes boxes) {
     vec3 diffuse = s.albedo * (1.0 - s.metallic) / PI;
     // E(n) x albedo x (1 - metallic) / pi, less what the environment's reflection took, and that reflection
     vec3 total = ambient_irradiance(boxes, s.normal) * diffuse * s.occlusion * (1.0 - s.environment_weight);
-    if (SLOT_REFLECT == REFLECT_NONE) total += environment_specular(s, boxes);
+    if (environment_reflected()) total += environment_specular(s, boxes);
 #ifdef SCREEN_OCCLUSION
     vec3 ambient = total;  // the direct light, summed apart, takes its own share of the occlusion
     total = vec3(0.0);
@@ -298,8 +319,7 @@ vec3 reflect_skybox(vec3 color, Surface s) {
     // Sample the sky along reflect(view, normal); mix by the instance's amount.
     vec3 radiance = sample_environment(s.reflect_dir, s.reflect_lod, s.roughness);
 #ifdef SCREEN_REFLECTION
-    reflect_weight = v_tint.rgb * s.occlusion * v_reflect.x;
-    reflect_radiance = radiance;
+    mix_reflection(v_tint.rgb * s.occlusion, radiance, v_reflect.x);
 #endif
     return mix(color, radiance * v_tint.rgb * s.occlusion, v_reflect.x);
 }
@@ -315,9 +335,8 @@ vec3 reflect_probe(vec3 color, Surface s) {
     vec3 reflected = ggx_reflect(s.normal, s.reflect_dir, s.to_eye, radiance * s.occlusion, s.f0, s.roughness);
 #ifdef SCREEN_REFLECTION
     // (ggx_reflect is the radiance times a factor: that factor, of a radiance of 1.)
-    reflect_weight = ggx_reflect(s.normal, s.reflect_dir, s.to_eye, vec3(s.occlusion), s.f0, s.roughness)
-                     * v_tint.rgb * v_reflect.x;
-    reflect_radiance = radiance;
+    mix_reflection(ggx_reflect(s.normal, s.reflect_dir, s.to_eye, vec3(s.occlusion), s.f0, s.roughness) * v_tint.rgb,
+                   radiance, v_reflect.x);
 #endif
     return mix(color, reflected * v_tint.rgb, v_reflect.x);
 }
@@ -480,10 +499,10 @@ void main() {
     // (one primitive) takes the same branch and the derivatives stay defined.
     s.reflect_lod = 0.0;
     s.environment_weight = vec3(0.0);
-    if (SLOT_REFLECT == REFLECT_NONE) {
-        // v_reflect.x: the material's environment_reflection (material_dispatch.choose_material)
+    if (environment_reflected()) {
+        float share = SLOT_REFLECT == REFLECT_NONE ? v_reflect.x : 1.0;
         s.environment_weight = environment_share(s.f0, environment_brdf(s.roughness, max(dot(s.normal, s.to_eye), 0.0)))
-                               * (v_reflect.x * float(lights.counts.w));
+                               * (share * float(lights.counts.w));
         s.reflect_lod = cube_lod(s.reflect_dir, sky_face_size);
     }
     if (SLOT_REFLECT == REFLECT_SKYBOX) s.reflect_lod = cube_lod(s.reflect_dir, sky_face_size);
@@ -493,22 +512,30 @@ void main() {
         s.refract_lod = cube_lod(s.refract_dir, probe_face_size > 0.0 ? probe_face_size : sky_face_size);
 
     vec3 lit = direct_lighting(s, ambient_boxes(s.position));
+#if defined(SCREEN_REFLECTION) && defined(METALLIC_ROUGHNESS_MAP)
+    vec3 lit_weight = reflect_weight, lit_added = reflect_added;  // (the environment reflection's, in lit)
+#endif
     vec3 color = mapped_reflection(SLOT_REFLECT, lit, apply_reflect(SLOT_REFLECT, lit, s), metal_share);
     color = apply_refract(SLOT_REFRACT, color, s);
     color = apply_emissive(SLOT_EMISSIVE, color, s);
 #ifdef SCREEN_REFLECTION
-    // W through what follows the reflect slot: the map's metal share (mapped_reflection mixes
-    // by it), the surface's own alpha where it refracts (refract_environment mixes by it), the
-    // fog's transmittance (fogged mixes by it); emission adds and leaves W as it is.
+    // The reflections through what follows the reflect slot: the map's metal share
+    // (mapped_reflection mixes lit and the slot's by it), the surface's own alpha where it
+    // refracts (refract_environment mixes by it), the fog's transmittance (fogged mixes by
+    // it); emission adds and leaves them as they are.
 #ifdef METALLIC_ROUGHNESS_MAP
-    if (SLOT_REFLECT != REFLECT_NONE) reflect_weight *= metal_share;  // (the environment's: the map set f0)
+    if (SLOT_REFLECT == REFLECT_SKYBOX || SLOT_REFLECT == REFLECT_CUBE) {
+        reflect_weight = mix(lit_weight, reflect_weight, metal_share);
+        reflect_added = mix(lit_added, reflect_added, metal_share);
+    }
 #endif
-    if (SLOT_REFRACT == REFRACT_ENVIRONMENT || SLOT_REFRACT == REFRACT_SOLID) reflect_weight *= s.alpha;
+    float kept = 1.0;
+    if (SLOT_REFRACT == REFRACT_ENVIRONMENT || SLOT_REFRACT == REFRACT_SOLID) kept = s.alpha;
 #ifdef FOG
-    reflect_weight *= exp(-fog_depth(fog_start(VIEW_EYE, VIEW_ENTRY, v_world_pos), v_world_pos));
+    kept *= exp(-fog_depth(fog_start(VIEW_EYE, VIEW_ENTRY, v_world_pos), v_world_pos));
 #endif
-    out_reflect_weight = vec4(reflect_weight, s.roughness);
-    out_reflect_added = vec4(hdr_store(reflect_weight * reflect_radiance), float(v_slots.w & 2047u));
+    out_reflect_weight = vec4(reflect_weight * kept, s.roughness);
+    out_reflect_added = vec4(hdr_store(reflect_added * kept), float(v_slots.w & 2047u));
     out_reflect_normal = vec4(s.normal, float((v_slots.w >> 11u) & 2047u));
 #endif
 #ifdef FOG

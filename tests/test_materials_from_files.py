@@ -258,8 +258,8 @@ def test_a_metallic_roughness_map_shades_each_half_as_its_texels_say(scene, tmp_
     """The map's left half is rough dielectric, its right glossy metal: each half of the quad
     equals a quad with no map whose metallic and roughness are the factors times those texels
     (the highlight of a light behind the camera), and with Reflective("skybox") the metal
-    half reflects the sky while the dielectric half, which the map's blue says is not metal,
-    does not."""
+    half reflects the sky by the slot while the dielectric half, which the map's blue says is
+    not metal, keeps the plain material's light, its environment reflection with it."""
     (part,) = load_model(pbr_glb(tmp_path / "trim.glb", quad(), metallicFactor=1.0, roughnessFactor=1.0,
                                  normalTexture=None, emissiveTexture=None))
 
@@ -278,11 +278,7 @@ def test_a_metallic_roughness_map_shades_each_half_as_its_texels_say(scene, tmp_
 
     colour = (0.3, 0.3, 0.3, 1.0)
     frames = {}
-    # With Reflective the map's whole quad reflects by its slot, whose reflection stands in for
-    # the environment's (Material.environment_reflection): the dielectric reference has none.
-    rough_reflection = 0.0 if reflective else 1.0
-    for name, material in (("map", None), ("rough", Material(color=colour, metallic=0.0, roughness=230 / 255,
-                                                             environment_reflection=rough_reflection)),
+    for name, material in (("map", None), ("rough", Material(color=colour, metallic=0.0, roughness=230 / 255)),
                            ("metal", Material(color=colour, metallic=1.0, roughness=51 / 255))):
         runner = scene(build(material), (96, 96))
         frames[name] = linear_frame(runner)
