@@ -160,6 +160,16 @@ float cube_lod(vec3 direction, float n) {
     return log2(max(footprint, 1e-6));
 }
 
+// The sky along ``direction`` from this surface, with its share of the fog out from here
+// (fog.glsl: the same as the sky a mirror's composite fills, and the background's; the
+// stretch from the eye is fogged once the pixel's colour is made).
+vec3 sample_environment(vec3 direction, float lod, float roughness) {
+    return fog_sky(textureLod(sky_map, direction, lod + roughness_lod_bias(roughness)).rgb, v_world_pos, direction);
+}
+
+// The probe uniforms, box projection, the level a roughness reads and probe blending.
+#include "probe.glsl"
+
 // --- Environment specular --------------------------------------------------------------
 // What a surface without a reflect slot (no Reflective, not a mirror or portal) reflects of
 // the light from all round, as every engine's default material does (Unity's and Godot's sky
@@ -176,9 +186,12 @@ float cube_lod(vec3 direction, float n) {
 // ray, so a dim room's floor reflects a dim sky, not the daylight.  (Sharp reflections of a
 // probe's capture: Reflective("cube").)  A world with no Skybox has a flat background, not
 // its hemisphere, in the cube: there the radiance is E(r) / pi, the hemisphere and the boxes
-// blurred to their harmonics (lights.counts.z, views.lights_block).
+// blurred to their harmonics (lights.counts.z, views.lights_block).  Glass with a probe (a
+// refracting object samples one, probe_rules) reflects the capture its refraction reads.
 vec3 environment_radiance(Surface s, AmbientBoxes boxes) {
     vec3 r = s.reflect_dir;
+    if (SLOT_REFRACT != REFRACT_NONE && probe_face_size > 0.0)
+        return probe_radiance(s.position, r, s.reflect_lod + log2(probe_face_size / sky_face_size), s.roughness);
     vec3 sky = textureLod(sky_map, r, s.reflect_lod + roughness_lod_bias(s.roughness)).rgb;
     vec3 sky_e = sky_irradiance(r);
     vec3 boxes_e = boxes_irradiance(boxes, r);
@@ -227,16 +240,25 @@ float specular_occlusion(float nv, float occlusion, float roughness) {
     return clamp(pow(nv + occlusion, exp2(-16.0 * alpha - 1.0)) - 1.0 + occlusion, 0.0, 1.0);
 }
 
+vec3 environment_light = vec3(0.0);  // what environment_specular added: a refraction keeps it whole
+#ifdef SCREEN_REFLECTION
+vec3 environment_reflect_weight = vec3(0.0);  // ... and its part of reflect_weight and reflect_added
+vec3 environment_reflect_added = vec3(0.0);
+#endif
+
 vec3 environment_specular(Surface s, AmbientBoxes boxes) {
     float horizon = clamp(1.0 + dot(s.reflect_dir, s.geometric_normal), 0.0, 1.0);
     float occlusion = specular_occlusion(max(dot(s.normal, s.to_eye), 0.0), s.occlusion, s.roughness);
     vec3 weight = s.environment_weight * (occlusion * horizon * horizon);
     vec3 radiance = environment_radiance(s, boxes);
+    environment_light = weight * radiance;
 #ifdef SCREEN_REFLECTION
+    environment_reflect_weight = weight;
+    environment_reflect_added = environment_light;
     reflect_weight += weight;  // (added to the colour)
-    reflect_added += weight * radiance;
+    reflect_added += environment_light;
 #endif
-    return weight * radiance;
+    return environment_light;
 }
 
 // Light through mirrors and portals (its loop only in the VIRTUAL_LIGHTS builds).
@@ -308,13 +330,6 @@ vec3 mapped_normal(vec3 n, vec3 p, vec2 uv, float scale) {
 #endif
 
 // --- Reflect slot ---------------------------------------------------------------------
-// The sky along ``direction`` from this surface, with its share of the fog out from here
-// (fog.glsl: the same as the sky a mirror's composite fills, and the background's; the
-// stretch from the eye is fogged once the pixel's colour is made).
-vec3 sample_environment(vec3 direction, float lod, float roughness) {
-    return fog_sky(textureLod(sky_map, direction, lod + roughness_lod_bias(roughness)).rgb, v_world_pos, direction);
-}
-
 vec3 reflect_skybox(vec3 color, Surface s) {
     // Sample the sky along reflect(view, normal); mix by the instance's amount.
     vec3 radiance = sample_environment(s.reflect_dir, s.reflect_lod, s.roughness);
@@ -323,9 +338,6 @@ vec3 reflect_skybox(vec3 color, Surface s) {
 #endif
     return mix(color, radiance * v_tint.rgb * s.occlusion, v_reflect.x);
 }
-
-// The probe uniforms, box projection, the level a roughness reads and probe blending.
-#include "probe.glsl"
 
 vec3 reflect_probe(vec3 color, Surface s) {
     // A cube map captured around the object (engine/render/probes.py), blurred by roughness
@@ -386,7 +398,13 @@ vec3 refract_environment(vec3 color, Surface s, bool solid) {
     vec3 behind = probe_face_size > 0.0
         ? probe_radiance(s.position, s.refract_dir, s.refract_lod, s.roughness)
         : sample_environment(s.refract_dir, s.refract_lod, s.roughness);
-    vec3 transmitted = transmittance * s.albedo * behind;
+    // The surface's own reflection of the environment lies over what it lets through, whatever
+    // its alpha (Fresnel: 1 - F passes, F is reflected).
+    vec3 transmitted = transmittance * s.albedo * behind + environment_light;
+#ifdef SCREEN_REFLECTION
+    reflect_weight = mix(environment_reflect_weight, reflect_weight, s.alpha);
+    reflect_added = mix(environment_reflect_added, reflect_added, s.alpha);
+#endif
     return mix(transmitted, color, s.alpha);
 }
 
@@ -520,9 +538,9 @@ void main() {
     color = apply_emissive(SLOT_EMISSIVE, color, s);
 #ifdef SCREEN_REFLECTION
     // The reflections through what follows the reflect slot: the map's metal share
-    // (mapped_reflection mixes lit and the slot's by it), the surface's own alpha where it
-    // refracts (refract_environment mixes by it), the fog's transmittance (fogged mixes by
-    // it); emission adds and leaves them as they are.
+    // (mapped_reflection mixes lit and the slot's by it), the fog's transmittance (fogged
+    // mixes by it); a refraction mixed them by the surface's alpha (refract_environment);
+    // emission adds and leaves them as they are.
 #ifdef METALLIC_ROUGHNESS_MAP
     if (SLOT_REFLECT == REFLECT_SKYBOX || SLOT_REFLECT == REFLECT_CUBE) {
         reflect_weight = mix(lit_weight, reflect_weight, metal_share);
@@ -530,7 +548,6 @@ void main() {
     }
 #endif
     float kept = 1.0;
-    if (SLOT_REFRACT == REFRACT_ENVIRONMENT || SLOT_REFRACT == REFRACT_SOLID) kept = s.alpha;
 #ifdef FOG
     kept *= exp(-fog_depth(fog_start(VIEW_EYE, VIEW_ENTRY, v_world_pos), v_world_pos));
 #endif

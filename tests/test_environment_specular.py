@@ -14,13 +14,16 @@ import math
 
 import numpy as np
 import pytest
+from pyglm import glm
 
 from components import (
     ComponentValueError,
+    Emissive,
     Material,
     MeshRef,
     ReflectionProbe,
     Reflective,
+    Refractive,
     Skybox,
     Transform,
     Visibility,
@@ -84,14 +87,14 @@ def uniform_sky(radiance: float = SKY) -> Skybox:
     return Skybox(faces=np.full((6, 8, 8, 3), radiance, np.float32))
 
 
-def spheres_scene(materials, sky=None, extra=None):
-    """Spheres of ``materials`` in a row along x, seen head on, under ``sky`` (uniform)."""
+def spheres_scene(materials, sky=None, extra=None, eye=EYE):
+    """Spheres of ``materials`` in a row along x, seen head on from ``eye``, under ``sky`` (uniform)."""
     names: dict = {}
     half = 0.8 * (len(materials) - 1)  # 1.6 apart: no sphere hides another's pixels
     xs = np.linspace(-half, half, len(materials))
 
     def build(world):
-        look_from(world, EYE, (0.0, 0.0, 0.0), fov=60.0)
+        look_from(world, eye, (0.0, 0.0, 0.0), fov=60.0)
         world.spawn(sky if sky is not None else uniform_sky())
         names["spheres"] = [world.spawn(Transform(position=(float(x), 0.0, 0.0)), MeshRef(sphere(RADIUS)), *parts)
                             for x, parts in zip(xs, materials, strict=True)]
@@ -167,6 +170,44 @@ def expected_share(f0: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
     lost = (1.0 - a - b)[:, None]
     average = f0 + (1.0 - f0) / 21.0
     return single + single * average / (1.0 - lost * average) * lost
+
+
+def test_clear_glass_in_a_white_furnace_shows_the_sky(scene):
+    """A clear white glass ball (Refractive, alpha 0) under a uniform sky L lets through
+    1 - F of what is behind it (the sky) and reflects F of the sky along its reflected ray:
+    L everywhere on it.  Its reflection is over what it lets through whatever its alpha; were
+    it mixed by the alpha as the rest of its light is, its rims (F large) would darken to
+    (1 - F) L."""
+    build, names = spheres_scene([(Material(color=(1.0, 1.0, 1.0, 0.0), roughness=0.0), Refractive(ior=1.5))],
+                                 eye=(0.0, 0.0, 2.2))
+    linear, runner = linear_frame(scene, build)
+    mask, nv, _ = sphere_pixels(runner, names["centres"][0])
+    assert runner.engine.renderer.resource_counts()["probe_cubes"] == 1  # (its own probe: it reflects that)
+    keep = nv < 0.5  # the rims, where F is 0.07 and more
+    assert keep.sum() > 300
+    assert np.abs(linear[mask][keep] - SKY).max() <= srgb_step(np.array(SKY)) + 0.02
+
+
+def test_glass_reflects_the_capture_its_refraction_reads(scene):
+    """The glass ball's own probe sees a red lamp panel behind the camera, which the camera
+    does not: its middle, where the reflected rays go back towards the camera, shows F x the
+    panel over (1 - F) x the sky behind it: red over green by about F0 (0.04 for glass) x
+    the panel's red less its green (not the sky's reflection, grey)."""
+    panel = np.array([5.0, 1.0, 1.0])
+
+    def lamp(world):
+        facing_ball = glm.angleAxis(glm.pi(), glm.vec3(0, 1, 0))
+        return {"panel": world.spawn(Transform(position=(0.0, 0.0, 4.0), rotation=facing_ball),
+                                     MeshRef(quad(6.0, 6.0)), Material(color=(1.0, 0.2, 0.2, 1.0)), Emissive(5.0))}
+
+    build, names = spheres_scene([(Material(color=(1.0, 1.0, 1.0, 0.0), roughness=0.0), Refractive(ior=1.5))],
+                                 eye=(0.0, 0.0, 2.2), extra=lamp)
+    linear, runner = linear_frame(scene, build)
+    mask, nv, _ = sphere_pixels(runner, names["centres"][0])
+    middle = linear[mask][nv > 0.97]
+    excess = np.median(middle[:, 0] - middle[:, 1])
+    assert len(middle) > 30
+    assert abs(excess - 0.04 * (panel[0] - panel[1])) < 0.05, excess
 
 
 def test_a_gold_metal_reflects_the_split_sum_of_its_reflectance(scene):
