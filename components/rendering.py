@@ -222,7 +222,10 @@ class Refractive(TrackedComponent):
     """Light from behind bends through the surface (Snell's law with Schlick's Fresnel approximation).
 
     The environment seen along the refracted ray is weighted by Fresnel transmittance and
-    blended with the surface colour by the material's alpha (alpha 0 = clear glass).
+    blended with the surface colour by the material's alpha (alpha 0 = clear glass); the
+    surface's reflection of the environment (``Material.environment_reflection``: the
+    reflected share, Fresnel's F, of the probe its refraction reads, or of the sky) lies over
+    both whatever the alpha, so clear glass shows bright rims where it reflects most.
     ``solid`` False (the default): a thin surface, the ray refracted once where it enters (a
     bubble or a window's pane seen as one surface).  True: a solid glass ball, the ray
     refracted in, carried along its chord through the sphere and refracted out (a ball lens,
