@@ -38,6 +38,7 @@ from components import (
 )
 from engine.assets.level_file import LevelError, load_level, save_level
 from engine.assets.mesh import box, plane, quad
+from engine.assets.texture_data import TextureData
 from engine.core.errors import NoCameraWarning
 from engine.core.material_slots import ReflectVariant
 from engine.core.world import World
@@ -66,6 +67,17 @@ def _scene(world, floor: str = "skybox", reflections: ScreenReflections | None =
         parts += [Material(color=(1.0, 1.0, 1.0), metallic=1.0, roughness=roughness), Reflective(mode="cube", mix=1.0)]
     elif floor == "environment":  # no Reflective: a white metal's environment reflection (f0 A + B: 1 when smooth)
         parts += [Material(color=(1.0, 1.0, 1.0), metallic=1.0, roughness=roughness)]
+    elif floor == "plain":  # a white dielectric's environment reflection (Fresnel's share)
+        parts += [Material(color=(1.0, 1.0, 1.0), roughness=roughness)]
+    elif floor == "metal":
+        parts += [Material(color=(1.0, 1.0, 1.0), metallic=1.0, roughness=roughness),
+                  Reflective(mode="skybox", mix=1.0)]
+    elif floor == "mapped":  # the map's blue: metal where x < 0 (u < 0.5), not where x > 0
+        texels = np.full((8, 8, 4), 255, np.uint8)
+        texels[:, 4:, 2] = 0
+        parts += [Material(color=(1.0, 1.0, 1.0), metallic=1.0, roughness=roughness,
+                           metallic_roughness_map=TextureData(texels, name="halves")),
+                  Reflective(mode="skybox", mix=1.0)]
     else:
         parts += [Material(color=(0.9, 0.9, 0.9), roughness=roughness), Reflective(mode=floor, mix=1.0)]
     names["floor"] = world.spawn(*parts)
@@ -173,6 +185,26 @@ def test_a_polished_floor_shows_the_boxes_where_a_ray_caster_finds_them(scene, f
     misses = _eroded(floor & (which < 0), 2)
     assert misses.sum() > 5000
     assert np.abs(image[misses] - plain[misses]).max() <= 1
+
+
+def test_a_metallic_mapped_floor_reflects_each_half_as_a_floor_of_its_kind(scene):
+    """A sky-reflecting floor whose metallic-roughness map makes its left half metal and its
+    right half not ("mapped"): with screen reflections, the left half as a metal Reflective
+    floor shows ("metal": its slot's reflection), the right as a plain dielectric floor
+    ("plain": its environment reflection), both with the boxes the screen gives: each
+    pixel's reflections are tracked through the map's mix (the composite's weights)."""
+    frames = {}
+    for floor in ("mapped", "metal", "plain"):
+        frames[floor], runner, names = _frame(scene, floor=floor, reflections=ScreenReflections())
+    floor_ids = runner.ids() == names["floor"]
+    eye, rays = pixel_rays(runner.engine.main_view, SIZE)
+    x = eye[0] + rays[..., 0] * (-eye[1] / rays[..., 1])
+    left, right = floor_ids & (x > -3.0) & (x < -0.5), floor_ids & (x > 0.5) & (x < 3.0)
+    assert left.sum() > 1000 and right.sum() > 1000
+    assert np.abs(frames["metal"][left] - frames["plain"][left]).max() > 40  # the two kinds differ there
+    for half, kind in ((left, "metal"), (right, "plain")):
+        difference = np.abs(frames["mapped"][half] - frames[kind][half]).max(axis=-1)
+        assert np.mean(difference <= 2) > 0.99, (kind, np.percentile(difference, [50, 99, 100]))
 
 
 def test_the_debug_view_shows_what_the_screen_gave_and_black_elsewhere(scene):
