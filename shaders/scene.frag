@@ -176,14 +176,14 @@ vec3 sample_environment(vec3 direction, float lod, float roughness) {
 // and probe reflections, three.js's envMap): the radiance along the reflected ray, blurred by
 // the roughness (the sky cube's mips), times the split-sum's share (environment_share: f0 A + B
 // and multiple scattering), times the material's environment_reflection (v_reflect.x of such
-// an instance).  The ambient
-// diffuse takes 1 - that share (the energy the reflection took, as Filament and three.js do).
+// an instance).  The ambient diffuse takes 1 - that share (the energy the reflection took, as
+// Filament and three.js do).
 //
 // The radiance is the sky's; inside reflection probes' influence boxes it is normalised by the
-// light there (Lazarov, "Getting More Physical in Call of Duty: Black Ops II", 2013: a probe
-// scaled by the local diffuse light over its own): the sky's share of the boxes' blend keeps
-// the sky, each box's share is the sky times that box's irradiance over the sky's along the
-// ray, so a dim room's floor reflects a dim sky, not the daylight.  (Sharp reflections of a
+// light there (a cube map scaled by the diffuse light at the point over its own, as Blender's
+// EEVEE normalises its sphere probes by its volume probes' harmonics): the sky's share of the
+// boxes' blend keeps the sky, each box's share is the sky times that box's irradiance over
+// the sky's along the ray, so a dim room's floor reflects a dim sky, not the daylight.  (Sharp reflections of a
 // probe's capture: Reflective("cube").)  A world with no Skybox has a flat background, not
 // its hemisphere, in the cube: there the radiance is E(r) / pi, the hemisphere and the boxes
 // blurred to their harmonics (lights.counts.z, views.lights_block).  Glass with a probe (a
