@@ -208,8 +208,10 @@ def ball_view(scene, solid: bool) -> tuple[np.ndarray, np.ndarray, list]:
     def build(world):
         world.spawn(up_down_sky())
         look_from(world, (0.0, 0.0, 4.0), target=(0.0, 0.0, 0.0), fov=40.0)
+        # (Reflecting nothing of the sky: each pixel's colour is its refracted ray's alone.)
         ents["ball"] = world.spawn(Transform(), MeshRef(sphere(RADIUS, 64, 32)),
-                                   Material(color=(1, 1, 1, 0), roughness=0.0), Refractive(ior=IOR, solid=solid))
+                                   Material(color=(1, 1, 1, 0), roughness=0.0, environment_reflection=0.0),
+                                   Refractive(ior=IOR, solid=solid))
 
     runner = scene(build, (160, 120))
     runner.engine.renderer.antialias = "off"
