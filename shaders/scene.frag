@@ -186,12 +186,18 @@ vec3 sample_environment(vec3 direction, float lod, float roughness) {
 // the sky's along the ray, so a dim room's floor reflects a dim sky, not the daylight.  (Sharp reflections of a
 // probe's capture: Reflective("cube").)  A world with no Skybox has a flat background, not
 // its hemisphere, in the cube: there the radiance is E(r) / pi, the hemisphere and the boxes
-// blurred to their harmonics (lights.counts.z, views.lights_block).  Glass with a probe (a
-// refracting object samples one, probe_rules) reflects the capture its refraction reads.
+// blurred to their harmonics (lights.counts.z, views.lights_block).
+//
+// An object that samples probes (the ENVIRONMENT_PROBE builds: probe_rules.probe_blend, the
+// influence boxes holding its position blended, the sky taking the rest, as Unity's and
+// HDRP's probes serve every renderer in their volumes; glass and a cube Reflective their own)
+// reflects their captures, sharp and box-projected, instead: the sky's normalisation above is
+// for what samples none (a floor whose middle no box holds, a probe with no capture yet).
 vec3 environment_radiance(Surface s, AmbientBoxes boxes) {
     vec3 r = s.reflect_dir;
-    if (SLOT_REFRACT != REFRACT_NONE && probe_face_size > 0.0)
-        return probe_radiance(s.position, r, s.reflect_lod + log2(probe_face_size / sky_face_size), s.roughness);
+#ifdef ENVIRONMENT_PROBE
+    return probe_radiance(s.position, r, s.reflect_lod + log2(probe_face_size / sky_face_size), s.roughness);
+#else
     vec3 sky = textureLod(sky_map, r, s.reflect_lod + roughness_lod_bias(s.roughness)).rgb;
     vec3 sky_e = sky_irradiance(r);
     vec3 boxes_e = boxes_irradiance(boxes, r);
@@ -201,6 +207,7 @@ vec3 environment_radiance(Surface s, AmbientBoxes boxes) {
     vec3 radiance = lights.counts.z != 0 ? (sky_e * boxes.sky + boxes_e) / PI
                                          : sky * (boxes.sky + boxes_e / max(sky_e, floor_e));
     return fog_sky(max(radiance, vec3(0.0)), s.position, r);
+#endif
 }
 
 // The share of the light from all round a surface of reflectance f0 reflects, from the split

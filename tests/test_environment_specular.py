@@ -372,6 +372,35 @@ def test_inside_a_probes_box_the_sky_is_scaled_by_the_boxs_light(scene):
     assert np.median(np.abs(inside - 0.1 * SKY)) <= srgb_step(np.array(0.1 * SKY)) + 0.005
 
 
+@pytest.mark.parametrize("held", [True, False])
+def test_a_plain_metal_in_a_probes_box_reflects_its_capture(scene, held):
+    """A smooth white metal ball with no Reflective, its middle reflecting straight back
+    towards the camera, and a red lamp panel behind the camera that only the probe's capture
+    shows: held by the probe's influence box, the ball samples the probe (probe_rules: a plain
+    mesh samples the boxes that hold it) and its middle shows the panel's red, sharp; with the
+    box elsewhere it reflects the grey sky."""
+    colour = np.array([0.5, 0.1, 0.1])
+    panel = colour * (1.0 + SKY)  # what the probe sees of it: its emission, and the sky's light on it
+
+    def room(world):
+        facing_ball = glm.angleAxis(glm.pi(), glm.vec3(0, 1, 0))
+        world.spawn(Transform(position=(0.0, 0.0, 4.0), rotation=facing_ball), MeshRef(quad(6.0, 6.0)),
+                    Material(color=(*colour, 1.0), environment_reflection=0.0), Emissive(1.0))
+        centre = (0.0, 0.0, 0.0) if held else (0.0, 0.0, -20.0)
+        return {"probe": world.spawn(Transform(position=centre),
+                                     ReflectionProbe(resolution=32, refresh="once", influence=(3.0, 3.0, 3.0)))}
+
+    smooth = (Material(color=(1.0, 1.0, 1.0, 1.0), metallic=1.0, roughness=0.0), Visibility(in_probes=False))
+    build, names = spheres_scene([smooth], eye=(0.0, 0.0, 2.2), extra=room)
+    linear, runner = linear_frame(scene, build)
+    mask, nv, _ = sphere_pixels(runner, names["centres"][0])
+    middle = np.median(linear[mask][nv > 0.97], axis=0)
+    if held:
+        np.testing.assert_allclose(middle, panel, atol=0.03)
+    else:
+        np.testing.assert_allclose(middle, SKY, atol=0.01)
+
+
 def test_a_world_without_a_sky_reflects_its_hemisphere(scene):
     """No Skybox: the cube is the flat background, so the reflection is the hemisphere's light
     along the ray over pi: a smooth white metal's top reflects nearly the sky colour, its

@@ -65,7 +65,7 @@ PER_PASS_UNIFORMS = 1  # the first changes with the pass; the rest with the batc
 # index is its Camera block's: nothing is written per view)
 NO_PROBE_LOOKUP = ((0.0, 0.0, 0.0, 0.0),) * 3  # a probe's lookup uniforms where the sky stands in for it
 NO_CHECKER = (0.0, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
-NO_MATERIAL_MAPS = (False, False, False, "", False)  # a batch's build with none of _material_build's
+NO_MATERIAL_MAPS = (False, False, False, "", False, False)  # a batch's build with none of _material_build's
 
 
 
@@ -109,7 +109,7 @@ class ScenePrograms:
 
     def program(self, variants: tuple[int, int, int] | None = None, invocations: int = 0,
                 layered: str = "", normal_mapped: bool = False, checker: bool = False,
-                material: tuple[bool, bool, bool, str, bool] = NO_MATERIAL_MAPS, probe_blend: bool = False,
+                material: tuple[bool, bool, bool, str, bool, bool] = NO_MATERIAL_MAPS, probe_blend: bool = False,
                 ambient_probes: bool = False, probe_rest: bool = False, unlit: bool = False,
                 masked: bool = False, screen: str = "") -> moderngl.Program:
         """The scene program for a batch of ``variants`` (None: mixed, switched per
@@ -154,7 +154,7 @@ class ScenePrograms:
         if screen == "depth_normals":  # nothing shaded: only a cutout's discard picks the build
             variants, normal_mapped, checker, probe_blend, ambient_probes, probe_rest = None, False, False, False, \
                 False, False
-            material = (False, False, material[2], "", False)
+            material = (False, False, material[2], "", False, False)
             virtual, unlit, masked, shadowing, fogging = False, False, False, (), ()
         elif unlit:  # shades nothing: no occlusion read (it still writes "nothing reflected")
             screen = "reflected" if "reflected" in screen else ""
@@ -178,6 +178,8 @@ class ScenePrograms:
                 defines["ALPHA_CUTOFF"] = "1"
             if material[3]:  # its own occlusion map, or (packed) the metallic-roughness map's red
                 defines["OCCLUSION_PACKED" if material[3] == "packed" else "OCCLUSION_MAP"] = "1"
+            if material[5]:  # its environment reflection reads the probes it samples (scene.frag)
+                defines["ENVIRONMENT_PROBE"] = "1"
             if material[4]:  # its mesh's colour a vertex (Mesh.colors)
                 defines["VERTEX_COLOR"] = "1"
             if probe_blend:  # two probes and the sky by the instances' weights (shaders/include/probe.glsl)
@@ -339,12 +341,13 @@ def geometry_invocations(view_count: int) -> int:
 BATCHED_INVOCATIONS = tuple(sorted({geometry_invocations(n) for n in range(1, MAX_BATCHED_VIEWS + 1)}))
 
 
-def _material_build(batch: InstanceBatch) -> tuple[bool, bool, bool, str, bool]:
+def _material_build(batch: InstanceBatch) -> tuple[bool, bool, bool, str, bool, bool]:
     """What of a batch's material picks its build: whether it samples an emissive and a
     metallic-roughness map, whether it is a cutout, where its occlusion is read ("map": a
-    map of its own, "packed": the metallic-roughness map's red, "": none), and whether its
-    mesh has a colour a vertex."""
+    map of its own, "packed": the metallic-roughness map's red, "": none), whether its
+    mesh has a colour a vertex, and whether it samples a probe (its environment reflection
+    reads the probe, ``ENVIRONMENT_PROBE``: only such batches pay for the lookup)."""
     occlusion = "packed" if batch.occlusion_packed else "map" if batch.occlusion_map is not None else ""
     return (batch.emissive_map is not None, batch.metallic_roughness_map is not None, batch.alpha_cutoff is not None,
-            occlusion, batch.mesh.colors is not None)
+            occlusion, batch.mesh.colors is not None, batch.probe != 0)
 

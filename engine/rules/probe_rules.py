@@ -4,15 +4,19 @@ the extract stage (which builds instance rows), the probes scheduler (which pick
 to capture) and the captures agree.
 
 Sampling.  An object samples a probe when it is ``Reflective("cube")`` or ``Refractive``
-(glass refracts what the probe saw behind it): ``samples_a_probe``, the one definition
-(``probe_samplers`` finds them all).  It samples:
+(glass refracts what the probe saw behind it), or when it is a plain lit mesh (no
+``Reflective``, ``Mirror`` or ``Portal``: its material's environment reflection reads the
+probes whose boxes hold it, as Unity's and HDRP's probes serve every renderer in their
+volumes): ``samples_a_probe``, the one definition (``probe_samplers`` finds them all).  It
+samples:
   - its own probe, when it has a ``ReflectionProbe`` component;
   - else the probes whose influence boxes hold its position, blended by weight
     (``probe_blend``: each box's weight falls off to 0 over its ``blend_distance`` inside its
     walls; the MAX_BLENDED_PROBES strongest are sampled, their weights normalised only when
     they add up to more than 1, and what is left of 1 is the sky's); when its mesh is not
     flat, what is left is its own probe's instead (below);
-  - else, when its mesh is not flat, a probe of its own at its bounding box's centre (made
+  - else, when its mesh is not flat and it is cube-reflective or refractive (not a plain
+    mesh: ``has_own_probe``), a probe of its own at its bounding box's centre (made
     by the probes stage; the chrome-sphere case: material detection as in the OpenGL 4
     course chapter "Texture Effects": a flat reflective mesh is a planar mirror, any other
     a cube map);
@@ -79,26 +83,41 @@ def _samples(reflective: Reflective | None, refractive: bool) -> bool:
     return (reflective is not None and reflective.mode == "cube") or refractive
 
 
+def _plain(world: World, entity: int) -> bool:
+    """A plain lit mesh: no Reflective, Mirror or Portal decides what it reflects."""
+    return (world.has(entity, MeshRef) and not world.has(entity, Reflective) and not world.has(entity, Mirror)
+            and not world.has(entity, Portal))
+
+
 def samples_a_probe(world: World, entity: int) -> bool:
-    """Cube-reflective or refractive: what looks up a probe when one serves it."""
-    return _samples(world.try_get(entity, Reflective), world.has(entity, Refractive))
+    """Cube-reflective, refractive or a plain lit mesh: what looks up a probe when one serves it."""
+    return _samples(world.try_get(entity, Reflective), world.has(entity, Refractive)) or _plain(world, entity)
+
+
+def has_boxes(world: World) -> bool:
+    """Whether any ReflectionProbe has an influence box (plain meshes sample only those)."""
+    return any(probe.influence is not None for _, probe in world.query_one(ReflectionProbe))
 
 
 def probe_samplers(world: World) -> set[int]:
-    """Every entity that samples a probe (the rule of ``samples_a_probe``), found through the
-    few that have a component of ``SAMPLER_KINDS``: a 10,000-entity world does not pay for a
-    look at each."""
+    """Every entity that samples a probe (the rule of ``samples_a_probe``): the few with a
+    component of ``SAMPLER_KINDS``, and the plain meshes only where an influence box could
+    hold them (a 10,000-entity world with no box does not pay for a look at each)."""
     found: dict[int, list] = {entity: [reflective, False] for entity, reflective in world.query_one(Reflective)}
     for entity, _ in world.query_one(Refractive):
         found.setdefault(entity, [None, False])[1] = True
-    return {entity for entity, (reflective, refractive) in found.items() if _samples(reflective, refractive)}
+    samplers = {entity for entity, (reflective, refractive) in found.items() if _samples(reflective, refractive)}
+    if has_boxes(world):
+        samplers.update(entity for entity, _ in world.query_one(MeshRef) if _plain(world, entity))
+    return samplers
 
 
 def has_own_probe(world: World, entity: int) -> bool:
-    """An automatic probe: a non-flat mesh that samples a probe and has no ReflectionProbe."""
+    """An automatic probe: a non-flat cube-reflective or refractive mesh with no ReflectionProbe
+    (a plain mesh samples the boxes' probes only)."""
     mesh_ref = world.try_get(entity, MeshRef)
-    return (mesh_ref is not None and samples_a_probe(world, entity) and not world.has(entity, ReflectionProbe)
-            and not is_flat(mesh_ref.mesh))
+    return (mesh_ref is not None and _samples(world.try_get(entity, Reflective), world.has(entity, Refractive))
+            and not world.has(entity, ReflectionProbe) and not is_flat(mesh_ref.mesh))
 
 
 def world_bounds(mesh: Mesh, model: glm.mat4) -> tuple[np.ndarray, np.ndarray]:
@@ -323,6 +342,9 @@ class LookChanges:
             for kind in SAMPLER_KINDS:
                 kinds.update(entity for entity, _ in world.query_one(kind))
             candidates = changed & kinds
+            if has_boxes(world):  # plain meshes sample the boxes' probes (none without a box)
+                candidates |= {entity for entity in changed - candidates
+                               if world.exists(entity) and _plain(world, entity)}
         resampled = set()
         for entity in candidates:
             probe = probe_blend(world, entity) if world.exists(entity) else NO_PROBE
