@@ -30,7 +30,9 @@ class ReflectionProbe(ShownLayers):
     is kept rather than drawn again: it is the picture a capture would draw.
     ``time_slicing`` spreads a capture over six frames (one face each) instead of one.
     ``influence`` is the size of a box around the probe: objects inside it that reflect a
-    cube map sample this probe (None: the probe serves only its own entity).
+    cube map, refract, or reflect the light from all round by their material (every plain
+    mesh: ``Material.environment_reflection``) sample this probe (None: the probe serves
+    only its own entity).
     ``blend_distance`` is how far inside the box's walls its weight falls off to nothing
     (Unity HDRP's blend distance): an object blends the probes whose boxes hold it by their
     weights (normalised only where they add up to more than 1; the sky, or a curved object's
