@@ -262,7 +262,7 @@ class ProbeScheduler:
             found[owner] = (probe, glm.vec3(transform.world[3]), False)
         # Automatic probes: only what samples a probe can have one (a few, not every
         # drawable: a 10,000-entity world must not pay for them).
-        for owner in probe_samplers(world):
+        for owner in probe_samplers(world, plain=False):  # (a plain mesh has none of its own)
             if has_own_probe(world, owner) and world.has(owner, Transform):
                 mesh_ref, transform = world.get(owner, MeshRef), world.get(owner, Transform)
                 lo, hi = world_bounds(mesh_ref.mesh, transform.world)

@@ -107,6 +107,30 @@ def test_the_rules_weigh_the_boxes_by_their_falloff(world):
     assert probe_blend(world, tile).probes == (tile,) and probe_blend(world, tile).weights == (1.0,)
 
 
+def test_the_boxes_blends_at_once_are_each_ones_blend(world):
+    """box_blends (numpy, every plain mesh at once: a moving box asks again of all of them)
+    against box_blend (one position, the rule written out there) at 400 random places among
+    four overlapping boxes, with and without falloffs, and two boxes at one centre (a tie:
+    the lower owner first); and a plain mesh's probe_blend is its box_blend."""
+    from engine.rules.probe_rules import box_blend, box_blends
+    rng = np.random.default_rng(5)
+    for centre, size, blend in (((0.0, 0.0, 0.0), (6.0, 4.0, 6.0), 1.0), ((3.0, 0.5, 1.0), (5.0, 5.0, 5.0), 0.0),
+                                ((-2.0, 0.0, 2.0), (4.0, 3.0, 4.0), 1.5), ((-2.0, 0.0, 2.0), (4.0, 3.0, 4.0), 0.5)):
+        world.spawn(Transform(position=centre), ReflectionProbe(influence=size, blend_distance=blend))
+    meshes = [world.spawn(Transform(position=tuple(rng.uniform(-5.0, 5.0, 3))), MeshRef(quad(0.2, 0.2)), Material())
+              for _ in range(400)]
+    world.step(1 / 60)
+    at_once = box_blends(world, meshes)
+    held = 0
+    for entity in meshes:
+        one = box_blend(world, world.get(entity, Transform).world[3].xyz)
+        assert at_once[entity].probes == one.probes, entity
+        np.testing.assert_allclose(at_once[entity].weights, one.weights, rtol=1e-9, atol=1e-12)
+        assert probe_blend(world, entity) == one  # (a plain mesh samples the boxes that hold it)
+        held += bool(one.probes)
+    assert 50 < held < 400  # (places in boxes, in their overlaps and outside all of them)
+
+
 def test_a_move_inside_the_falloff_changes_the_look_and_one_inside_full_weight_does_not(world):
     """``LookChanges`` (what the extract stage rewrites rows for and the probes scheduler
     recaptures for) has an object whose weights changed: a step within the overlap, or a

@@ -89,6 +89,15 @@ def _plain(world: World, entity: int) -> bool:
             and not world.has(entity, Portal))
 
 
+def plain_meshes(world: World) -> set[int]:
+    """Every plain lit mesh (``_plain``), by sets of the components' holders: one pass over
+    each kind, not a look at each mesh's components."""
+    meshes = {entity for entity, _ in world.query_one(MeshRef)}
+    for kind in (Reflective, Mirror, Portal):
+        meshes.difference_update(entity for entity, _ in world.query_one(kind))
+    return meshes
+
+
 def samples_a_probe(world: World, entity: int) -> bool:
     """Cube-reflective, refractive or a plain lit mesh: what looks up a probe when one serves it."""
     return _samples(world.try_get(entity, Reflective), world.has(entity, Refractive)) or _plain(world, entity)
@@ -99,16 +108,17 @@ def has_boxes(world: World) -> bool:
     return any(probe.influence is not None for _, probe in world.query_one(ReflectionProbe))
 
 
-def probe_samplers(world: World) -> set[int]:
+def probe_samplers(world: World, plain: bool = True) -> set[int]:
     """Every entity that samples a probe (the rule of ``samples_a_probe``): the few with a
-    component of ``SAMPLER_KINDS``, and the plain meshes only where an influence box could
-    hold them (a 10,000-entity world with no box does not pay for a look at each)."""
+    component of ``SAMPLER_KINDS``, and with ``plain`` the plain meshes, only where an
+    influence box could hold them (a 10,000-entity world with no box does not pay for a look
+    at each; the automatic probes' owners are among the few: ``plain`` False)."""
     found: dict[int, list] = {entity: [reflective, False] for entity, reflective in world.query_one(Reflective)}
     for entity, _ in world.query_one(Refractive):
         found.setdefault(entity, [None, False])[1] = True
     samplers = {entity for entity, (reflective, refractive) in found.items() if _samples(reflective, refractive)}
-    if has_boxes(world):
-        samplers.update(entity for entity, _ in world.query_one(MeshRef) if _plain(world, entity))
+    if plain and has_boxes(world):
+        samplers |= plain_meshes(world)
     return samplers
 
 
@@ -225,6 +235,49 @@ def box_blend(world: World, position: glm.vec3 | Sequence[float] | np.ndarray) -
     return ProbeBlend(tuple(owner for _, _, owner, _ in kept), tuple(weight * scale for *_, weight in kept))
 
 
+def box_blends(world: World, entities: Iterable[int]) -> dict[int, ProbeBlend]:
+    """``box_blend`` at each of ``entities``' positions (those with a Transform), worked out
+    for all of them at once in numpy: the same rule, so a probe box that moves, which asks
+    again of every plain mesh it could hold, costs a few array operations, not a Python
+    loop over the probes for each mesh."""
+    boxes = [(owner, np.array(probe_t.world[3].xyz), np.asarray(probe.influence, np.float64) / 2.0,
+              probe.blend_distance) for owner, (probe, probe_t) in world.query(ReflectionProbe, Transform)
+             if probe.influence is not None]
+    placed = [(entity, world.try_get(entity, Transform)) for entity in entities]
+    placed = [(entity, transform) for entity, transform in placed if transform is not None]
+    if not boxes or not placed:
+        return {entity: NO_PROBE for entity, _ in placed}
+    positions = np.array([tuple(transform.world[3].xyz) for _, transform in placed], np.float64)  # (N, 3)
+    centres = np.stack([centre for _, centre, _, _ in boxes])                                      # (P, 3)
+    halves = np.stack([half for _, _, half, _ in boxes])
+    blends = np.array([blend for *_, blend in boxes], np.float64)
+    owners = np.array([owner for owner, *_ in boxes])
+    offsets = positions[:, None, :] - centres[None, :, :]                                          # (N, P, 3)
+    inside = np.min(halves[None, :, :] - np.abs(offsets), axis=2)                                  # (N, P)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        weights = np.where(inside < 0.0, 0.0,
+                           np.where(blends[None, :] <= 0.0, 1.0, np.minimum(1.0, inside / blends[None, :])))
+    distances = np.linalg.norm(offsets, axis=2)
+    # Strongest first; ties: the nearest centre, then the lower owner (box_blend's sort).
+    order = np.lexsort((np.broadcast_to(owners, weights.shape), distances, -weights), axis=1)[:, :MAX_BLENDED_PROBES]
+    strongest = np.take_along_axis(weights, order, axis=1)
+    held = strongest > 0.0
+    scale = 1.0 / np.maximum(1.0, np.where(held, strongest, 0.0).sum(axis=1, keepdims=True))
+    # The blends as plain lists, each distinct one made once (a box's whole room shares one).
+    made: dict[tuple, ProbeBlend] = {}
+    result: dict[int, ProbeBlend] = {}
+    for (entity, _), row_owners, row_weights, row_held in zip(
+            placed, owners[order].tolist(), (strongest * scale).tolist(), held.tolist(), strict=True):
+        key = tuple((owner, weight) for owner, weight, kept in zip(row_owners, row_weights, row_held, strict=True)
+                    if kept)
+        blend = made.get(key)
+        if blend is None:
+            blend = made[key] = ProbeBlend(tuple(owner for owner, _ in key), tuple(weight for _, weight in key)) \
+                if key else NO_PROBE
+        result[entity] = blend
+    return result
+
+
 def surface_point(state: SurfaceState) -> np.ndarray:
     """Where a mirror's or portal's fallback reflection is looked up from (its probes'
     weights, ``surface_blend``): a mirror's centre; for a portal, its centre carried through
@@ -332,22 +385,27 @@ class LookChanges:
         probes_changed = influences != self._influences or any(
             influences[entity] is not None for entity in frame.moved & influences.keys())
         self._influences = influences
-        if probes_changed:
-            candidates = probe_samplers(world) | self._sampled.keys()
-        else:
-            changed = looks | frame.moved | frame.added
-            if not changed:
-                return set()  # a still frame costs a look at each probe
+        boxes = any(influence is not None for influence in influences.values())
+        changed = looks | frame.moved | frame.added
+        if not probes_changed and not changed:
+            return set()  # a still frame costs a look at each probe
+        # Plain meshes sample only boxes' probes: with none, none of them is asked.
+        if probes_changed:  # every sampler asked again
+            plain = plain_meshes(world) if boxes else set()
+            candidates = probe_samplers(world, plain=False) | plain | self._sampled.keys()
+        else:  # only what changed (a look, a move, a new entity)
+            plain = {entity for entity in changed if world.exists(entity) and _plain(world, entity)} if boxes else set()
             kinds: set[int] = set(self._sampled)
             for kind in SAMPLER_KINDS:
                 kinds.update(entity for entity, _ in world.query_one(kind))
-            candidates = changed & kinds
-            if has_boxes(world):  # plain meshes sample the boxes' probes (none without a box)
-                candidates |= {entity for entity in changed - candidates
-                               if world.exists(entity) and _plain(world, entity)}
+            candidates = (changed & kinds) | plain
         resampled = set()
+        # Plain meshes hold no probe of their own (but one owning a ReflectionProbe): their
+        # blends are the boxes', all at once.
+        blends = box_blends(world, (candidates & plain) - influences.keys()) if plain else {}
         for entity in candidates:
-            probe = probe_blend(world, entity) if world.exists(entity) else NO_PROBE
+            probe = blends[entity] if entity in blends else probe_blend(world, entity) if world.exists(entity) \
+                else NO_PROBE
             if probe != self._sampled.get(entity, NO_PROBE):
                 resampled.add(entity)
             if probe.probes:
