@@ -258,8 +258,13 @@ def box_blends(world: World, entities: Iterable[int]) -> dict[int, ProbeBlend]:
         weights = np.where(inside < 0.0, 0.0,
                            np.where(blends[None, :] <= 0.0, 1.0, np.minimum(1.0, inside / blends[None, :])))
     distances = np.linalg.norm(offsets, axis=2)
-    # Strongest first; ties: the nearest centre, then the lower owner (box_blend's sort).
-    order = np.lexsort((np.broadcast_to(owners, weights.shape), distances, -weights), axis=1)[:, :MAX_BLENDED_PROBES]
+    # Strongest first; ties: the nearest centre, then the lower owner (box_blend's sort): stable
+    # sorts by each key in turn, the last the first key.
+    order = np.argsort(np.broadcast_to(owners, weights.shape), axis=1, kind="stable")
+    for key in (distances, -weights):
+        order = np.take_along_axis(order, np.argsort(np.take_along_axis(key, order, axis=1), axis=1, kind="stable"),
+                                   axis=1)
+    order = order[:, :MAX_BLENDED_PROBES]
     strongest = np.take_along_axis(weights, order, axis=1)
     held = strongest > 0.0
     scale = 1.0 / np.maximum(1.0, np.where(held, strongest, 0.0).sum(axis=1, keepdims=True))
