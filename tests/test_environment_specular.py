@@ -401,6 +401,29 @@ def test_a_plain_metal_in_a_probes_box_reflects_its_capture(scene, held):
         np.testing.assert_allclose(middle, SKY, atol=0.01)
 
 
+def test_a_still_view_with_a_mirror_keeps_the_probe_reflections_drawn_whole(scene):
+    """A mirror, and plain metal and plastic balls in a probe's box reflecting its capture:
+    a still camera's kept reflection levels give the frames a whole-drawn engine gives, bit
+    for bit (the still tree keeps levels only where nothing they show changed)."""
+    from components import Mirror
+    from tests.support import kept_frames_equal_drawn
+
+    def build(world):
+        look_from(world, (0.0, 0.5, 4.0), (0.0, 0.3, 0.0), fov=60.0)
+        world.spawn(Skybox())
+        world.spawn(Transform(position=(0.0, 1.0, -2.0)), MeshRef(quad(4.0, 2.0)), Material(), Mirror())
+        world.spawn(Transform(position=(0.0, 0.5, 0.0)),
+                    ReflectionProbe(resolution=16, refresh="once", influence=(6.0, 4.0, 6.0)))
+        world.spawn(Transform(position=(-0.7, 0.3, 0.0)), MeshRef(sphere(0.35)),
+                    Material(color=(0.9, 0.7, 0.3, 1.0), metallic=1.0, roughness=0.1))
+        world.spawn(Transform(position=(0.7, 0.3, 0.3)), MeshRef(box((0.5, 0.5, 0.5))),
+                    Material(color=(0.2, 0.4, 0.8, 1.0), roughness=0.2))
+
+    keeping, drawing = scene(build, (96, 64)), scene(build, (96, 64))
+    assert kept_frames_equal_drawn(keeping, drawing, frames=5) >= 2
+    assert any(batch.probe for batch in keeping.engine.renderer.batches.values())  # (they sample the probe)
+
+
 def test_a_world_without_a_sky_reflects_its_hemisphere(scene):
     """No Skybox: the cube is the flat background, so the reflection is the hemisphere's light
     along the ray over pi: a smooth white metal's top reflects nearly the sky colour, its
