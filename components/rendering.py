@@ -102,8 +102,8 @@ class Material(TrackedComponent):
 
     ``environment_reflection`` scales what the surface reflects of the light from all round
     (the captures of the reflection probes whose influence boxes hold its position, blended,
-    and the sky, as every engine's probes serve what stands in them), as every
-    engine's default material reflects it: 1 (the default) is the physical amount for its
+    and the sky), as every engine's default material reflects it: 1 (the default) is the
+    physical amount for its
     ``metallic``, ``roughness`` and the angle it is seen at (the split-sum GGX reflection:
     a dielectric reflects 4% head on and most at grazing angles, a metal its colour
     everywhere), 0 none (Unity's "Environment Reflections" off), a share between.  Not read
