@@ -148,6 +148,7 @@ struct Surface {
     vec3 reflect_dir;   // unit, eye ray reflected about the normal
     float reflect_lod;  // sky mip level that matches the pixel footprint of reflect_dir
     vec3 environment_weight;  // the share of the environment's radiance along reflect_dir it reflects (0: a reflect slot does)
+    vec3 energy_compensation;  // the lights' GGX highlights x this: the multiple scattering single scattering loses
     vec3 refract_dir;
     float refract_lod;
 };
@@ -222,6 +223,16 @@ vec3 environment_share(vec3 f0, vec2 ab) {
     return single + single * average / (1.0 - lost * average) * lost;
 }
 
+// What the lights' own GGX highlights are multiplied by to give back the light single
+// scattering loses (Kulla and Conty, "Revisiting Physically Based Shading at Imageworks",
+// 2017, in Filament's form: 1 + f0 (1 / (A + B) - 1), A + B the split sum's share of a white
+// metal): a rough metal's highlight is as bright as the environment_share its reflection of
+// the sky has, instead of losing up to a third of its light at roughness 1.  A dielectric's
+// (f0 0.04) grows by at most a few percent.
+vec3 energy_compensation(vec3 f0, vec2 ab) {
+    return 1.0 + f0 * (1.0 / max(ab.x + ab.y, 1e-3) - 1.0);
+}
+
 // Whether the surface's light holds the environment reflection: a surface without a reflect
 // slot's, by its material's share (v_reflect.x: environment_reflection,
 // material_dispatch.choose_material); and with a metallic-roughness map a sky or probe
@@ -289,7 +300,7 @@ vec3 direct_lighting(Surface s, AmbientBoxes boxes) {
         vec3 l = -lights.directional_dir[i].xyz;
         float nl = max(dot(s.normal, l), 0.0);
         if (nl > 0.0) {
-            total += (diffuse + ggx_specular(s.normal, l, s.to_eye, s.f0, s.roughness))
+            total += (diffuse + ggx_specular(s.normal, l, s.to_eye, s.f0, s.roughness) * s.energy_compensation)
                      * lights.directional_color[i].rgb * nl
                      * directional_lit[i];
         }
@@ -303,14 +314,14 @@ vec3 direct_lighting(Surface s, AmbientBoxes boxes) {
         float fade = clamp(1.0 - pow(dist / range, 4.0), 0.0, 1.0);
         float falloff = fade * fade / (dist * dist + 1.0) * spot_factor(lights.point_spot[i], l);
         if (nl > 0.0 && falloff > 0.0) {
-            total += (diffuse + ggx_specular(s.normal, l, s.to_eye, s.f0, s.roughness))
+            total += (diffuse + ggx_specular(s.normal, l, s.to_eye, s.f0, s.roughness) * s.energy_compensation)
                      * lights.point_color[i].rgb * nl * falloff
                      * point_shadow(i, point_lit);
         }
     }
 #ifdef VIRTUAL_LIGHTS
     total += virtual_lighting(s.position, s.normal, s.geometric_normal, s.to_eye, diffuse, s.f0, s.roughness,
-                              shadowed);
+                              s.energy_compensation, shadowed);
 #endif
 #ifdef SCREEN_OCCLUSION
     total = ambient + total * s.direct_occlusion;
@@ -524,10 +535,11 @@ void main() {
     // (one primitive) takes the same branch and the derivatives stay defined.
     s.reflect_lod = 0.0;
     s.environment_weight = vec3(0.0);
+    vec2 split_sum = environment_brdf(s.roughness, max(dot(s.normal, s.to_eye), 0.0));
+    s.energy_compensation = energy_compensation(s.f0, split_sum);
     if (environment_reflected()) {
         float share = SLOT_REFLECT == REFLECT_NONE ? v_reflect.x : 1.0;
-        s.environment_weight = environment_share(s.f0, environment_brdf(s.roughness, max(dot(s.normal, s.to_eye), 0.0)))
-                               * (share * float(lights.counts.w));
+        s.environment_weight = environment_share(s.f0, split_sum) * (share * float(lights.counts.w));
         s.reflect_lod = cube_lod(s.reflect_dir, sky_face_size);
     }
     if (SLOT_REFLECT == REFLECT_SKYBOX) s.reflect_lod = cube_lod(s.reflect_dir, sky_face_size);

@@ -63,10 +63,11 @@ float virtual_shadow(int i, vec3 position, vec3 normal, vec3 l, float dist) {
 }
 
 // The light of every virtual light at a surface point: ``diffuse`` its Lambertian share,
-// ``normal`` the shading normal, ``geometric`` the mesh's (for the shadow lookup); ``shadowed``
+// ``normal`` the shading normal, ``geometric`` the mesh's (for the shadow lookup),
+// ``energy_compensation`` the highlight's (scene.frag's); ``shadowed``
 // false: no map looked up (MeshRef.receives_shadows off), the light's way in still its opening's.
 vec3 virtual_lighting(vec3 position, vec3 normal, vec3 geometric, vec3 to_eye, vec3 diffuse, vec3 f0,
-                      float roughness, bool shadowed) {
+                      float roughness, vec3 energy_compensation, bool shadowed) {
     vec3 total = vec3(0.0);
     for (int i = 0; i < virtual_lights.virtual_count.x; ++i) {
         vec4 exit_plane = virtual_lights.virtual_exit[i];
@@ -93,7 +94,7 @@ vec3 virtual_lighting(vec3 position, vec3 normal, vec3 geometric, vec3 to_eye, v
         float b = dot(x, virtual_lights.virtual_v[i].xyz);
         if (a < 0.0 || a > 1.0 || b < 0.0 || b > 1.0 || height / -towards > dist) continue;
         if (!virtual_through(i, position, l, height / -towards, dist)) continue;
-        total += (diffuse + ggx_specular(normal, l, to_eye, f0, roughness)) * virtual_lights.virtual_color[i].rgb
+        total += (diffuse + ggx_specular(normal, l, to_eye, f0, roughness) * energy_compensation) * virtual_lights.virtual_color[i].rgb
                  * nl * falloff * (shadowed ? virtual_shadow(i, position, geometric, l, dist) : 1.0);
     }
     return total;
