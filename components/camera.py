@@ -7,6 +7,7 @@ from typing import Any
 from pyglm import glm
 
 from components.limits import (
+    MAX_COOKIE_SPOT_ANGLE,
     MAX_FAR,
     MAX_LIGHT_BOUNCES,
     MAX_SHADOW_CASCADE_BLEND,
@@ -28,6 +29,10 @@ from components.tracking import (
 from components.visibility import LAYER_FIELDS, ShownLayers
 
 _DEFAULT_FAR = 200.0
+
+# An image (engine.assets.texture_data.TextureData): components import none of the engine
+# (rendering.py's note), a cookie is checked by its class's ASSET_KIND.
+TextureData = Any
 
 
 @dataclass(eq=False)
@@ -180,7 +185,18 @@ class PointLight(TrackedComponent):
     (``engine/rules/light_rules.py`` ``spot_cone``).  A spot up to ``SPOT_MAP_MAX_ANGLE``
     (45 degrees) casts from one perspective map fitted to its cone, ``shadow_resolution``
     texels a side (several times sharper than a cube face for a narrow cone); a wider one
-    from the cube, only its faces the cone lights."""
+    from the cube, only its faces the cone lights.
+
+    ``cookie`` (a TextureData, sRGB colour as ``Material.texture``; None: none) is an image
+    the spot projects, as a slide projector or a gobo does (Unity's and Godot's light cookies,
+    Unreal's light functions): its light at each point is times the image's colour where the
+    line from the light meets it, the image filling the square that holds the cone's circle
+    (its top towards the entity's +Y, its right towards +X, seen from behind the light).  Black
+    where it should not shine, coloured for stained glass.  Only a spot light up to
+    ``MAX_COOKIE_SPOT_ANGLE`` (80 degrees) takes one.  Through a mirror or portal the image is
+    carried with the light: a mirror shows it the other way round, as a real one does.  The
+    renderer draws it from a ``COOKIE_SIZE`` (512) square copy with mipmaps
+    (``engine/render/spot_cookies.py``)."""
 
     color: Any = field(default_factory=lambda: glm.vec4(1.0))
     intensity: float = 1.0
@@ -191,10 +207,20 @@ class PointLight(TrackedComponent):
     bounces: int = 1
     spot_angle: float = 180.0
     spot_blend: float = 0.15
+    cookie: TextureData | None = None
 
     def _validate(self, name: str, value: Any) -> Any:
         if name == "color":
             return color(self, name, value)
+        if name == "cookie" and value is not None:
+            if getattr(type(value), "ASSET_KIND", None) != "texture":
+                raise ComponentValueError(
+                    f"PointLight.cookie must be an engine.assets.texture_data.TextureData, got {type(value).__name__}")
+            if self.spot_angle > MAX_COOKIE_SPOT_ANGLE:
+                raise ComponentValueError(
+                    f"PointLight.cookie: a cookie is projected by a spot light up to {MAX_COOKIE_SPOT_ANGLE:g} degrees "
+                    f"(spot_angle), and this light's spot_angle is {self.spot_angle:g}: narrow the spot first")
+            return value
         if name == "intensity":
             return finite(self, name, value, low=0.0, high=HALF_MAX)  # lit colour lands in half floats
         if name == "range":
@@ -202,7 +228,12 @@ class PointLight(TrackedComponent):
             # perspective overflows float32 near its top (3.4e38 cast no shadow, silently).
             return finite(self, name, value, positive=True, high=MAX_FAR)
         if name == "spot_angle":
-            return finite(self, name, value, low=MIN_SPOT_ANGLE, high=180.0)
+            value = finite(self, name, value, low=MIN_SPOT_ANGLE, high=180.0)
+            if value > MAX_COOKIE_SPOT_ANGLE and getattr(self, "cookie", None) is not None:
+                raise ComponentValueError(
+                    f"PointLight.spot_angle = {value:g}: this light has a cookie, which a spot light up to "
+                    f"{MAX_COOKIE_SPOT_ANGLE:g} degrees projects: take the cookie off (cookie = None) first")
+            return value
         if name == "spot_blend":
             return finite(self, name, value, low=0.0, high=1.0)
         shadow = _shadow_field(self, name, value)

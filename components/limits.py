@@ -29,6 +29,11 @@ MAX_SHADOW_CASCADE_BLEND = 0.5
 # tenth of a degree is a 2 cm disk at ten metres, past which float32's cosines of the cone's
 # edge (1 - 1.5e-6) stop telling the edge from the axis.
 MIN_SPOT_ANGLE = 0.1
+# The widest spot light a cookie may ride on (PointLight.cookie, degrees from its axis to its
+# edge): the cookie is a perspective projection whose square's half-width is tan(angle), so
+# at 80 degrees a texel at the edge is stretched 33 times a middle one's (1 / cos^2), and at
+# 90 the projection has no square at all.
+MAX_COOKIE_SPOT_ANGLE = 80.0
 
 # Reflection layers (show/hide lists): an entity belongs to some of REFLECTION_LAYERS layers
 # and a mirror, portal, probe or camera shows some of them; a view shows an entity when they

@@ -313,9 +313,14 @@ vec3 direct_lighting(Surface s, AmbientBoxes boxes) {
         float nl = max(dot(s.normal, l), 0.0);
         float fade = clamp(1.0 - pow(dist / range, 4.0), 0.0, 1.0);
         float falloff = fade * fade / (dist * dist + 1.0) * spot_factor(lights.point_spot[i], l);
+#ifdef SPOT_COOKIES
+        vec3 cookie = cookie_light(lights.point_cookie_u[i], lights.point_cookie_v[i], lights.point_spot[i], l);
+#else
+        const vec3 cookie = vec3(1.0);
+#endif
         if (nl > 0.0 && falloff > 0.0) {
             total += (diffuse + ggx_specular(s.normal, l, s.to_eye, s.f0, s.roughness) * s.energy_compensation)
-                     * lights.point_color[i].rgb * nl * falloff
+                     * lights.point_color[i].rgb * cookie * nl * falloff
                      * point_shadow(i, point_lit);
         }
     }

@@ -46,6 +46,8 @@ MIN_SCALE_FACTOR = 0.01  # a scale drag shrinks an axis to this share of its sca
 SAME_ANGLES_DEGREES = 0.01  # a rotation within this of the angles last shown shows them as they were
                             # (at yaw 90 pitch and roll turn about one axis: the triple is not unique)
 TEXTURE_FIELDS = MATERIAL_IMAGES  # Material's images
+# Every image field, (component, field): typed as a level file's texture table names it.
+IMAGE_FIELDS = frozenset({("Material", name) for name in TEXTURE_FIELDS} | {("PointLight", "cookie")})
 
 # Fields whose None means "the engine decides" (what it decides: ``Editor.automatic``).  The
 # inspector shows such a field as automatic with a button that pins the value in use now, and
@@ -328,11 +330,11 @@ class Editor:
             raise EditError(f"no mesh shape {shape!r} (shapes: {', '.join(MESH_MAKERS)})")
         self.set_field(entity, "MeshRef", "mesh", MESH_MAKERS[shape]())
 
-    def texture_text(self, entity: int, field: str) -> str:
-        """A Material texture field (``TEXTURE_FIELDS``) as a level file writes it, inside its
-        braces (``checker = [128, 4]``, ``file = "wood.png"``); "" for none, and the image's
-        name for one made in code (no level file can name it)."""
-        texture = getattr(self.component(entity, "Material"), field)
+    def texture_text(self, entity: int, field: str, component: str = "Material") -> str:
+        """An image field (``IMAGE_FIELDS``: a Material texture, a PointLight's cookie) as a
+        level file writes it, inside its braces (``checker = [128, 4]``, ``file = "wood.png"``);
+        "" for none, and the image's name for one made in code (no level file can name it)."""
+        texture = getattr(self.component(entity, component), field)
         if texture is None:
             return ""
         source = dict(getattr(texture, "source", None) or {})
@@ -345,14 +347,15 @@ class Editor:
                 pass
         return ", ".join(f"{key} = {json.dumps(value)}" for key, value in source.items())
 
-    def set_texture(self, entity: int, field: str, text: str) -> None:
-        """Give a Material texture field (``TEXTURE_FIELDS``) the texture ``text`` names as a
-        level file's table would, inside its braces: ``checker = [128, 4]`` (with ``a``, ``b``),
+    def set_texture(self, entity: int, field: str, text: str, component: str = "Material") -> None:
+        """Give an image field (``IMAGE_FIELDS``) the texture ``text`` names as a level file's
+        table would, inside its braces: ``checker = [128, 4]`` (with ``a``, ``b``),
         ``ripples = [256, 6]``, ``file = "wood.png"`` (beside the level, or in an asset root);
         "" for none.  Made and checked by the level file's own reader (``level_texture``), so
         what is refused there is refused here, with its words (an EditError)."""
-        if field not in TEXTURE_FIELDS:
-            raise EditError(f"Material.{field} is not a texture (textures: {', '.join(TEXTURE_FIELDS)})")
+        if (component, field) not in IMAGE_FIELDS:
+            raise EditError(f"{component}.{field} is not an image (images: "
+                            f"{', '.join(sorted(f'{c}.{f}' for c, f in IMAGE_FIELDS))})")
         value = None
         if text.strip():
             try:
@@ -361,9 +364,9 @@ class Editor:
                 value = level_texture(spec, LevelAssets(folder, [*self.asset_roots, *user_asset_roots()]),
                                       normal_map=field == "normal_map")
             except (tomllib.TOMLDecodeError, ValueError, OSError) as exc:
-                self.message = f"Material.{field}: {exc}"
+                self.message = f"{component}.{field}: {exc}"
                 raise EditError(self.message) from exc
-        self.set_field(entity, "Material", field, value)
+        self.set_field(entity, component, field, value)
 
     def turn(self, entity: int, start: glm.quat, world_axis: glm.vec3, angle: float) -> None:
         """Turn ``entity`` by ``angle`` (radians) about ``world_axis`` through its origin from

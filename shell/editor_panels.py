@@ -28,7 +28,7 @@ from engine.assets.level_assets import MESH_MAKERS
 from engine.assets.level_file import LevelGame
 from engine.assets.level_read import REFERENCE_FIELDS
 from engine.assets.values import json_value
-from shell.editor import AUTOMATIC_FIELDS, OFF_FIELDS, TEXTURE_FIELDS, EditError, Editor
+from shell.editor import AUTOMATIC_FIELDS, IMAGE_FIELDS, OFF_FIELDS, EditError, Editor
 from shell.handles import (
     HANDLE_MODES,
     MARKER_REACH,
@@ -314,11 +314,11 @@ class EditorPanels:
             return
         if (cls_name, field) in REFERENCE_FIELDS:  # another entity, chosen from those it may name
             changed, new = self._reference(editor, entity, cls_name, field, value, label)
-        elif cls_name == "Material" and field in TEXTURE_FIELDS:  # written as in a level file, taken on Enter
-            entered, text = imgui.input_text(label, editor.texture_text(entity, field),
+        elif (cls_name, field) in IMAGE_FIELDS:  # written as in a level file, taken on Enter
+            entered, text = imgui.input_text(label, editor.texture_text(entity, field, cls_name),
                                              imgui.InputTextFlags_.enter_returns_true)
             if entered:
-                self._try(editor, editor.set_texture, entity, field, text)
+                self._try(editor, editor.set_texture, entity, field, text, cls_name)
         elif (cls_name, field) == ("MeshRef", "mesh"):  # a shape to choose (its size: the Transform's scale)
             shape = editor.mesh_shape(entity)
             if imgui.begin_combo(label, shape):

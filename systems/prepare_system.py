@@ -40,6 +40,7 @@ from engine.render.views import MAX_DIRECTIONAL_LIGHTS, MAX_POINT_LIGHTS, lights
 from engine.rules.frame_rules import frame_rules
 from engine.rules.light_rules import (
     ALL_ROUND,
+    NO_COOKIE,
     SAME_SUN_DEGREES,
     SAME_SUN_TINT,
     KeptLights,
@@ -48,13 +49,14 @@ from engine.rules.light_rules import (
     choose_lights,
     cube_serves,
     lamp_cone,
+    lamp_cookie,
     sky_sun,
     view_eyes,
 )
 
 # A freed slot no light took yet: black (no light), its range 1 (no division by zero).
 _NO_SUN = ((0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
-_NO_LAMP = ((0.0, 0.0, 0.0), 1.0, (0.0, 0.0, 0.0), ALL_ROUND)
+_NO_LAMP = ((0.0, 0.0, 0.0), 1.0, (0.0, 0.0, 0.0), ALL_ROUND, NO_COOKIE)
 
 
 def ambient_sh(world: World, sun: SkySun | None = None) -> np.ndarray:
@@ -108,6 +110,8 @@ class PrepareSystem(esper.Processor):
                 and self._environment_packed == self.environment_reflections):
             kept = self._kept = choose_lights(world, kept, LIGHT_LIMITS)
             self._environment_packed = self.environment_reflections
+            if self._cookies(kept):
+                renderer.note_scene_change()   # an image in the cookie array changed, or its build
             block = lights_block(self._sky_sh, *self._rows(kept), flat_sky=self._flat_sky,
                                  environment=self.environment_reflections)
             if block != self._lights:
@@ -183,8 +187,16 @@ class PrepareSystem(esper.Processor):
                 point.append(_NO_LAMP)
                 continue
             light, t = world.get(entity, PointLight), world.get(entity, Transform)
-            point.append((t.world[3].xyz, light.range, light.color.xyz * light.intensity, lamp_cone(light, t.world)))
+            point.append((t.world[3].xyz, light.range, light.color.xyz * light.intensity, lamp_cone(light, t.world),
+                          lamp_cookie(light, t.world, self.renderer.spot_cookies.layer(light.cookie))))
         return directional, point
+
+    def _cookies(self, kept: KeptLights) -> bool:
+        """The kept spot lights' cookies into the cookie array (``SpotCookies.set``); True
+        when its contents changed."""
+        lamps = [entity for entity in kept.point if entity is not None]
+        cookies = [self.world.get(entity, PointLight).cookie for entity in lamps]
+        return self.renderer.spot_cookies.set(cookies, [f"the PointLight of entity {entity}" for entity in lamps])
 
     def _count_cut(self, kept: KeptLights) -> None:
         """Keep how many lights of each kind the block left out; warn when either grows."""

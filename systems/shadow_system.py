@@ -43,7 +43,14 @@ from engine.render.shadows import LIGHT_LIMITS, VIRTUAL_RESOLUTION
 from engine.render.views import MAX_DIRECTIONAL_LIGHTS
 from engine.resources import RenderStats, Surfaces
 from engine.rules.frame_rules import active_camera_parts
-from engine.rules.light_rules import KeptLights, cube_faces_lit, kept_lights, lamp_cone, spot_map_half_width
+from engine.rules.light_rules import (
+    KeptLights,
+    cube_faces_lit,
+    kept_lights,
+    lamp_cone,
+    lamp_cookie,
+    spot_map_half_width,
+)
 from engine.rules.probe_rules import world_bounds
 from engine.rules.shadow_rules import (
     MAX_VIRTUAL_LIGHTS,
@@ -385,8 +392,10 @@ class ShadowSystem(esper.Processor):
                      for entity in kept.point if entity is not None]
             directional = [(entity, raw_field(light, "direction"), raw_field(light, "color").xyz * light.intensity)
                            for entity, light in suns]
+            cookies = renderer.spot_cookies
             points = [(entity, transform.world[3].xyz, light.range, raw_field(light, "color").xyz * light.intensity,
-                       lamp_cone(light, transform.world))
+                       lamp_cone(light, transform.world),
+                       lamp_cookie(light, transform.world, cookies.layer(light.cookie)))
                       for entity, (light, transform) in lamps]
             bounces = {entity: light.bounces for entity, light in suns}
             bounces.update({entity: light.bounces for entity, (light, _) in lamps})
@@ -403,6 +412,7 @@ class ShadowSystem(esper.Processor):
                 stats.virtual_lights_cut += 1
                 continue
             key = (light.light, light.path, light.kind, light.position, light.color, light.light_range, light.cone,
+                   light.cookie,
                    light.exit_plane, light.aperture, light.apertures,
                    tuple((leg.carry.to_bytes(), tuple(p.to_bytes() for p in leg.planes), leg.skip)
                          for leg in light.legs),

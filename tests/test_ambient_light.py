@@ -182,7 +182,11 @@ void main() {
         value = lights.point_pos[i - 10 - 2 * MAX_DIRECTIONAL_LIGHTS];
     else if (i < 10 + 2 * MAX_DIRECTIONAL_LIGHTS + 2 * MAX_POINT_LIGHTS)
         value = lights.point_color[i - 10 - 2 * MAX_DIRECTIONAL_LIGHTS - MAX_POINT_LIGHTS];
-    else value = lights.point_spot[i - 10 - 2 * MAX_DIRECTIONAL_LIGHTS - 2 * MAX_POINT_LIGHTS];
+    else if (i < 10 + 2 * MAX_DIRECTIONAL_LIGHTS + 3 * MAX_POINT_LIGHTS)
+        value = lights.point_spot[i - 10 - 2 * MAX_DIRECTIONAL_LIGHTS - 2 * MAX_POINT_LIGHTS];
+    else if (i < 10 + 2 * MAX_DIRECTIONAL_LIGHTS + 4 * MAX_POINT_LIGHTS)
+        value = lights.point_cookie_u[i - 10 - 2 * MAX_DIRECTIONAL_LIGHTS - 3 * MAX_POINT_LIGHTS];
+    else value = lights.point_cookie_v[i - 10 - 2 * MAX_DIRECTIONAL_LIGHTS - 4 * MAX_POINT_LIGHTS];
 }
 """
 
@@ -197,7 +201,8 @@ def test_the_lights_packer_and_the_glsl_block_agree(ctx):
     sh = rng.uniform(-1, 1, (9, 3))
     directional = [(tuple(rng.uniform(-1, 1, 3)), tuple(rng.uniform(0, 4, 3))) for _ in range(MAX_DIRECTIONAL_LIGHTS)]
     point = [(tuple(rng.uniform(-9, 9, 3)), float(rng.uniform(1, 20)), tuple(rng.uniform(0, 4, 3)),
-              tuple(rng.uniform(-5, 5, 4))) for _ in range(MAX_POINT_LIGHTS)]
+              tuple(rng.uniform(-5, 5, 4)), (tuple(rng.uniform(-5, 5, 4)), tuple(rng.uniform(-5, 5, 4))))
+             for _ in range(MAX_POINT_LIGHTS)]
     block = lights_block(sh, directional, point)
     assert len(block) == LIGHTS_BLOCK_BYTES
     import pathlib
@@ -211,7 +216,7 @@ def test_the_lights_packer_and_the_glsl_block_agree(ctx):
              "vec2(-1,3))[gl_VertexID], 0.0, 1.0); }"
     program = ctx.program(vertex_shader=vertex, fragment_shader=fragment)
     assert program["Lights"].size == LIGHTS_BLOCK_BYTES
-    width = 10 + 2 * MAX_DIRECTIONAL_LIGHTS + 3 * MAX_POINT_LIGHTS
+    width = 10 + 2 * MAX_DIRECTIONAL_LIGHTS + 5 * MAX_POINT_LIGHTS
     target = ctx.texture((width, 1), 4, dtype="f4")
     framebuffer = ctx.framebuffer([target])
     ubo = ctx.buffer(block)
@@ -239,10 +244,12 @@ def test_the_lights_packer_and_the_glsl_block_agree(ctx):
         np.testing.assert_allclose(read[rows + i, :3], direction, rtol=1e-6)
         np.testing.assert_allclose(read[rows + MAX_DIRECTIONAL_LIGHTS + i, :3], rgb, rtol=1e-6)
     rows += 2 * MAX_DIRECTIONAL_LIGHTS
-    for i, (position, reach, rgb, cone) in enumerate(point):
+    for i, (position, reach, rgb, cone, (right, up)) in enumerate(point):
         np.testing.assert_allclose(read[rows + i], (*position, reach), rtol=1e-6)
         np.testing.assert_allclose(read[rows + MAX_POINT_LIGHTS + i, :3], rgb, rtol=1e-6)
         np.testing.assert_allclose(read[rows + 2 * MAX_POINT_LIGHTS + i], cone, rtol=1e-6)
+        np.testing.assert_allclose(read[rows + 3 * MAX_POINT_LIGHTS + i], right, rtol=1e-6)
+        np.testing.assert_allclose(read[rows + 4 * MAX_POINT_LIGHTS + i], up, rtol=1e-6)
 
 
 def test_the_irradiance_block_is_as_big_in_glsl_as_in_python(ctx):

@@ -467,8 +467,8 @@ def test_a_still_suns_map_is_drawn_again_when_the_sun_changes_and_kept_otherwise
 def _scene_programs(runner) -> list:
     """The scene programs built for the shadow lookups the maps now ask for."""
     scene_pass = runner.engine.renderer.scene_pass
-    wanted = runner.engine.renderer.shadows.program_defines   # (a key's next to last: the fog's last)
-    return [program for key, program in scene_pass.programs.built.items() if key[-2] == wanted]
+    wanted = runner.engine.renderer.shadows.program_defines   # (a key's third from last: the fog's, the cookies' after)
+    return [program for key, program in scene_pass.programs.built.items() if key[-3] == wanted]
 
 
 def test_the_scene_programs_read_a_kind_of_map_only_while_a_light_of_that_kind_casts(scene):

@@ -430,7 +430,7 @@ def _type_name(expected: Any) -> str:
 def _decode(cls_name: str, field: str, value: Any, where: LevelAssets) -> Any:
     if cls_name == "MeshRef" and field == "mesh":
         return level_mesh(value, where)
-    if field == "texture" or (cls_name, field) in _MATERIAL_MAPS:
+    if field == "texture" or (cls_name, field) in _MATERIAL_MAPS or (cls_name, field) == ("PointLight", "cookie"):
         # A linear map (normal, metallic-roughness) keeps a 16-bit PNG's 16 bits; colour is 8 bits.
         return level_texture(value, where, normal_map=field in _LINEAR_MAPS)
     if cls_name == "ColorGrading" and field == "lut":

@@ -43,3 +43,8 @@ class LightLimitWarning(UserWarning):
     nothing (``engine/rules/light_rules.py``: point lights by their importance to the active
     camera, directional ones by luminance; said when the count grows, counted every frame in
     ``RenderStats.lights_cut``)."""
+
+
+class GLLimitWarning(UserWarning):
+    """A feature this context cannot draw (a limit below what it needs, named with the
+    limit): what is drawn goes on without it, said once."""

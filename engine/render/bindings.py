@@ -116,6 +116,9 @@ LUT_UNIT = 24            # present (LUT builds): the grade's colour table, a 3D 
 SPOT_SHADOW_UNIT = 18    # scene (SPOT_MAP builds): the spot lights' perspective shadow maps
 # A batch's occlusion map past 16 as well: with it the fullest build reads 16 samplers.
 OCCLUSION_UNIT = 19      # scene (OCCLUSION_MAP builds): the batch's occlusion map (Material.occlusion_map)
+# The spot lights' cookies (engine/render/spot_cookies.py), a texture array: the 17th sampler of
+# the fullest build, only where the context has one (SpotCookies.supported).
+COOKIE_UNIT = 25         # scene (SPOT_COOKIES builds): the kept spot lights' cookie images
 # Screen-space ambient occlusion (engine/render/screen_occlusion.py): the root view's builds
 # that read it are never MASKED, so its sampler takes the node image's place in the count.
 SCREEN_OCCLUSION_UNIT = 20  # scene (SCREEN_OCCLUSION builds): the camera's occlusion image, a texel a pixel

@@ -33,6 +33,7 @@ class GLCapabilities:
     max_geometry_output_vertices: int
     max_clip_distances: int
     extensions: frozenset[str]
+    max_texture_image_units: int = 16   # a fragment stage's samplers (GL 4.1's least: 16)
 
     @property
     def software(self) -> bool:
@@ -55,6 +56,7 @@ class GLCapabilities:
             max_geometry_output_vertices=int(info.get("GL_MAX_GEOMETRY_OUTPUT_VERTICES", 0)),
             max_clip_distances=int(info.get("GL_MAX_CLIP_DISTANCES", 0)),
             extensions=frozenset(ctx.extensions),
+            max_texture_image_units=int(info.get("GL_MAX_TEXTURE_IMAGE_UNITS", 0)),
         )
 
 
@@ -69,6 +71,7 @@ REQUIREMENTS: tuple[tuple[str, int, str], ...] = (
     ("max_vertex_attribs", 16, "per-instance model matrix and material record"),
     ("max_geometry_output_vertices", 256, "batched mirror and layered cube-map passes"),
     ("max_clip_distances", 6, "clip planes: view plane, batched mirror rectangles, portal slices"),
+    ("max_texture_image_units", 16, "the scene shader's samplers (spot light cookies take a 17th where there is one)"),
 )
 
 

@@ -29,6 +29,7 @@ from engine.render.instances import GpuMesh, InstanceBatch
 from engine.render.raw_gl import RawGL
 from engine.render.shader_library import ShaderLibrary
 from engine.render.sky import SkyModel, flat_cube
+from engine.render.spot_cookies import SpotCookies
 from engine.render.views import CAMERA_BLOCK_BYTES, LIGHTS_BLOCK_BYTES, View
 
 __all__ = ["BACKGROUND", "Gpu", "PathTrust", "ProbeCube", "Shared"]
@@ -192,6 +193,9 @@ class Gpu:
         # ground cost +36-41% of the frame, trilinear +4-5% (benchmarks/normal_maps.py).  Set
         # before the first normal map is uploaded.
         self.normal_map_anisotropy = 1.0 if caps.software else self.texture_anisotropy
+        # The kept spot lights' cookies (PointLight.cookie; the prepare stage sets them), filtered
+        # as normal maps are (anisotropy on a GPU).
+        self.spot_cookies = SpotCookies(ctx, caps.max_texture_image_units, self.normal_map_anisotropy)
         # Debug mode: every pass checks for an OpenGL error when it ends and names itself
         # (checkpoint); glGetError is cheap on the CPU but makes no sense to pay in a game.
         self.debug = os.environ.get("SPECULUM_DEBUG", "") not in ("", "0")

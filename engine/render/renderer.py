@@ -332,6 +332,7 @@ class Renderer(Gpu):
         return {"meshes": len(self._meshes), "textures": len(self._textures), "batches": len(self.batches),
                 "probe_cubes": len(self.probes.cubes), "shadow_cubes": len(self.shadows.cubes),
                 "spot_atlases": int(self.shadows.spot_atlas is not None),
+                "spot_cookies": self.spot_cookies.count(),
                 "layered_targets": len(self.probes._layered),
                 "face_targets": len(self.probes._faces),
                 "levels": len(self.levels), "level_copies": len(self.level_copies),
@@ -469,7 +470,8 @@ class Renderer(Gpu):
         if self.text_pass is not None:
             self.text_pass.release()
             self.text_pass = None
-        for obj in (self.sky, self.blank_color, self.blank_ids, self.cameras_ubo, self.lights_ubo, self.fog):
+        for obj in (self.sky, self.blank_color, self.blank_ids, self.cameras_ubo, self.lights_ubo, self.fog,
+                    self.spot_cookies):
             obj.release()
         self.shaders.release()
 

@@ -448,6 +448,7 @@ class ScenePass:
         bind_uniform_block(ctx, renderer.lights_ubo, LIGHTS_BINDING)
         renderer.fog.bind()
         self.shadows.bind()
+        renderer.spot_cookies.bind()
         # The irradiance table (unit 5 serves other passes between) and the boxes; a probe's
         # capture, and a world without boxes, draw the build without them (sky only).
         self._ambient_probes = self.irradiance.bind(capturing=renderer.capturing != 0)
@@ -657,6 +658,7 @@ class ScenePass:
         bind_uniform_block(self.ctx, renderer.lights_ubo, LIGHTS_BINDING)
         renderer.fog.bind()
         self.shadows.bind()
+        renderer.spot_cookies.bind()
         self._ambient_probes = self.irradiance.bind(capturing=True)  # a capture: the sky's irradiance alone
         bind_texture(self.ctx, renderer.sky, SKY_UNIT)
         renderer.bind_view(views[0])  # the shared eye, for what reads the Camera block

@@ -25,6 +25,7 @@ from engine.render.batched_mirrors import MAX_BATCHED_VIEWS, VIEWS_PER_INVOCATIO
 from engine.render.bindings import (
     ALBEDO_UNIT,
     CAMERA_BINDING,
+    COOKIE_UNIT,
     EMISSIVE_MAP_UNIT,
     FOG_BINDING,
     IRRADIANCE_BINDING,
@@ -151,16 +152,17 @@ class ScenePrograms:
         virtual = self.shadows.virtual_shining  # the shadows stage set how many shine
         shadowing = self.shadows.program_defines  # the lookups a program compiles (ShadowMaps.upload's)
         fogging = self.renderer.fog.defines       # FOG while the active camera's fog has a density
+        cookies = self.renderer.spot_cookies.defines  # SPOT_COOKIES while a kept spot light has a cookie
         if screen == "depth_normals":  # nothing shaded: only a cutout's discard picks the build
             variants, normal_mapped, checker, probe_blend, ambient_probes, probe_rest = None, False, False, False, \
                 False, False
             material = (False, False, material[2], "", False, False)
-            virtual, unlit, masked, shadowing, fogging = False, False, False, (), ()
+            virtual, unlit, masked, shadowing, fogging, cookies = False, False, False, (), (), ()
         elif unlit:  # shades nothing: no occlusion read (it still writes "nothing reflected")
             screen = "reflected" if "reflected" in screen else ""
         self.screens.add(screen)
         key = (invocations, layered, variants, normal_mapped, checker, material, probe_blend, virtual,
-               ambient_probes, probe_rest, unlit, masked, screen, shadowing, fogging)
+               ambient_probes, probe_rest, unlit, masked, screen, shadowing, fogging, cookies)
         program = self.built.get(key)
         if program is None:
             defines = {}
@@ -204,6 +206,7 @@ class ScenePrograms:
                     defines["SCREEN_REFLECTION"] = "1"
             defines.update(shadowing)
             defines.update(fogging)
+            defines.update(cookies)
             geometry = None
             if invocations:
                 geometry = "scene_batched.geom"
@@ -234,7 +237,7 @@ class ScenePrograms:
                                ("point_shadow1", POINT_SHADOW_UNITS[1]),
                                ("irradiance_table", IRRADIANCE_UNIT), ("virtual_atlas", VIRTUAL_SHADOW_UNIT),
                                ("spot_atlas", SPOT_SHADOW_UNIT), ("occlusion_map", OCCLUSION_UNIT),
-                               ("screen_occlusion", SCREEN_OCCLUSION_UNIT)):
+                               ("screen_occlusion", SCREEN_OCCLUSION_UNIT), ("spot_cookies", COOKIE_UNIT)):
                 if name in program:
                     program[name].value = unit
             if "Lights" in program:

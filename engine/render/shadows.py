@@ -64,8 +64,8 @@ SHADOW_FILTERS = ("grid", "single")
 LIGHT_LIMITS = LightLimits(MAX_DIRECTIONAL_LIGHTS, MAX_POINT_LIGHTS, MAX_POINT_SHADOWS)
 VIRTUAL_RESOLUTION = 1024   # texels a side of a virtual light's map (a tile of the virtual atlas)
 # The VirtualLights block (shaders/include/virtual_lights.glsl): a count, then per light a
-# matrix and eight vectors.
-VIRTUAL_FIELDS = ("position", "color", "exit", "origin", "u", "v", "params", "spot")
+# matrix and ten vectors.
+VIRTUAL_FIELDS = ("position", "color", "exit", "origin", "u", "v", "params", "spot", "cookie_u", "cookie_v")
 # ... then, for light reflected more than once, each light's further outlines (the earlier
 # surfaces as the later ones carry them): a plane, a corner and two edges each.
 VIRTUAL_MORE = MAX_APERTURES - 1
@@ -421,6 +421,8 @@ class ShadowMaps:
             "v": (*_over_length(light.aperture[2]), 0.0),
             "params": (1.0 / width, 1.0, self._taps(1.0), float(len(more))),
             "spot": light.cone,
+            "cookie_u": light.cookie[0],
+            "cookie_v": light.cookie[1],
         }
         for index, name in enumerate(VIRTUAL_FIELDS):
             at = 4 + 16 * MAX_VIRTUAL_LIGHTS + 4 * (index * MAX_VIRTUAL_LIGHTS + slot)

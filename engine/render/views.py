@@ -17,6 +17,7 @@ from pyglm import glm
 
 from components.limits import ALL_LAYERS, MAX_SHADOW_CASCADES, VIEW_DIRECT, VIEW_KINDS
 from components.visibility import KIND_MASK, visibility_code
+from engine.rules.light_rules import NO_COOKIE
 
 # The Camera uniform block (shaders/include/camera.glsl, std140), the one schema of every
 # writer (View.camera_block, the planner's packed blocks) and reader (PlannedView, the
@@ -66,7 +67,7 @@ MAX_POINT_SHADOWS = 2  # cube samplers in shaders/include/shadows.glsl
 MAX_SHADOW_RINGS = MAX_SHADOW_CASCADES - 1  # a sun's cascades about the camera besides its level map
 MAX_IRRADIANCE_PROBES = 32   # influence boxes the scene shader blends from (more: the first kept, a warning)
 SKY_SH_COEFFICIENTS = 9  # the sky's irradiance coefficients (engine/render/irradiance.py)
-LIGHTS_BLOCK_BYTES = 16 * SKY_SH_COEFFICIENTS + 16 + 2 * 16 * MAX_DIRECTIONAL_LIGHTS + 3 * 16 * MAX_POINT_LIGHTS
+LIGHTS_BLOCK_BYTES = 16 * SKY_SH_COEFFICIENTS + 16 + 2 * 16 * MAX_DIRECTIONAL_LIGHTS + 5 * 16 * MAX_POINT_LIGHTS
 
 
 @dataclass
@@ -189,8 +190,9 @@ def lights_block(sky_sh: Sequence[Sequence[float]] | np.ndarray, directional: li
                  point: list[tuple], flat_sky: bool = False, environment: bool = True) -> bytes:
     """Pack the Lights block (shaders/include/lights.glsl, std140): ``sky_sh`` the sky's nine
     irradiance coefficients (9, 3) (``engine.render.irradiance``), directional =
-    [(direction, rgb)], point = [(position, range, rgb, cone)] (``cone``: the spot cone,
-    ``light_rules.spot_cone``; ``ALL_ROUND`` for a point light).  ``flat_sky``: the sky cube
+    [(direction, rgb)], point = [(position, range, rgb, cone[, cookie])] (``cone``: the spot
+    cone, ``light_rules.spot_cone``; ``ALL_ROUND`` for a point light; ``cookie``: its two
+    cookie rows, ``light_rules.lamp_cookie``, ``NO_COOKIE`` when left out).  ``flat_sky``: the sky cube
     is the flat background of a world with no Skybox, not the light ``sky_sh`` holds (the
     environment's reflection then reads the harmonics: scene.frag environment_radiance).
     ``environment`` False: no surface reflects the light from all round by its material (the
@@ -209,10 +211,13 @@ def lights_block(sky_sh: Sequence[Sequence[float]] | np.ndarray, directional: li
         data[base + 4 * i: base + 4 * i + 3] = direction
         data[base + 4 * (MAX_DIRECTIONAL_LIGHTS + i): base + 4 * (MAX_DIRECTIONAL_LIGHTS + i) + 3] = rgb
     base += 8 * MAX_DIRECTIONAL_LIGHTS
-    for i, (position, light_range, rgb, cone) in enumerate(point[:MAX_POINT_LIGHTS]):
+    for i, (position, light_range, rgb, cone, *cookie) in enumerate(point[:MAX_POINT_LIGHTS]):
         data[base + 4 * i: base + 4 * i + 4] = (*position, light_range)
         data[base + 4 * (MAX_POINT_LIGHTS + i): base + 4 * (MAX_POINT_LIGHTS + i) + 3] = rgb
         data[base + 4 * (2 * MAX_POINT_LIGHTS + i): base + 4 * (2 * MAX_POINT_LIGHTS + i) + 4] = cone
+        right, up = cookie[0] if cookie else NO_COOKIE
+        data[base + 4 * (3 * MAX_POINT_LIGHTS + i): base + 4 * (3 * MAX_POINT_LIGHTS + i) + 4] = right
+        data[base + 4 * (4 * MAX_POINT_LIGHTS + i): base + 4 * (4 * MAX_POINT_LIGHTS + i) + 4] = up
     return data.tobytes()
 
 

@@ -65,6 +65,7 @@ from dataclasses import dataclass
 from typing import Any, NamedTuple
 
 import numpy as np
+from pyglm import glm
 
 from components import DirectionalLight, PointLight, Skybox, Transform
 from components.rendering import DEFAULT_SUN_DIRECTION
@@ -190,6 +191,26 @@ def lamp_cone(light: PointLight, world: Any) -> tuple[float, float, float, float
     return spot_cone((-forward.x, -forward.y, -forward.z), light.spot_angle, light.spot_blend)
 
 
+# A light without a cookie, as the Lights and VirtualLights blocks' cookie rows hold it
+# (``lamp_cookie``): its layer -1.
+NO_COOKIE = ((0.0, 0.0, 0.0, -1.0), (0.0, 0.0, 0.0, 0.0))
+
+
+def lamp_cookie(light: PointLight, world: Any, layer: int) -> tuple[tuple[float, ...], tuple[float, ...]]:
+    """The cookie rows of spot ``light`` (``PointLight.cookie``) whose entity's world matrix
+    is ``world`` (glm), its image in layer ``layer`` of the cookie array: (X / t, layer) and
+    (Y / t, 0), X and Y the entity's unit +X and +Y (the image's right and top), t the tangent
+    of its ``spot_angle``.  For ``d`` the unit vector from the light to a point and F the
+    cone's axis, the point's place in the image is 0.5 + 0.5 (d.X/t, d.Y/t) / d.F
+    (``shaders/include/spot_cookie.glsl``): the image fills the square about the cone's circle,
+    a slide projector's.  ``NO_COOKIE`` without a cookie."""
+    if light.cookie is None:
+        return NO_COOKIE
+    t = math.tan(math.radians(light.spot_angle))
+    right, up = glm.normalize(world[0].xyz) / t, glm.normalize(world[1].xyz) / t
+    return (float(right.x), float(right.y), float(right.z), float(layer)), (float(up.x), float(up.y), float(up.z), 0.0)
+
+
 def cone_reaches(cone: Sequence[float], apex: Sequence[float], centre: Sequence[float], radius: float) -> bool:
     """Whether a spot light at ``apex`` with ``cone`` (``spot_cone``) can light any point of
     the ball of ``radius`` about ``centre``: the angle from its axis to the ball's centre,
@@ -299,6 +320,24 @@ def carried_cone(cone: Sequence[float], carry: Any) -> tuple[float, float, float
     turned = m[:3, :3] @ c[:3]
     turned *= length / np.linalg.norm(turned)
     return (float(turned[0]), float(turned[1]), float(turned[2]), float(c[3]))
+
+
+def carried_cookie(rows: tuple[Sequence[float], Sequence[float]], carry: Any) -> tuple[tuple[float, ...], ...]:
+    """A light's cookie rows (``lamp_cookie``) as its image through a mirror or portal sees
+    them: the image's right and top turned by ``carry``'s linear part (a glm 4x4 matrix), each
+    kept at its length, the layer kept.  Turned, not worked out again from the carried axis: a
+    mirror turns the frame's handedness, so its image of the light projects the picture the
+    other way round, as a real mirror shows it."""
+    if rows[0][3] < 0.0:
+        return NO_COOKIE
+    m = np.array(carry.to_list(), np.float64).T[:3, :3]   # glm's lists are its columns
+    carried = []
+    for row in rows:
+        v = np.asarray(row[:3], np.float64)
+        turned = m @ v
+        turned *= np.linalg.norm(v) / np.linalg.norm(turned)
+        carried.append((float(turned[0]), float(turned[1]), float(turned[2]), float(row[3])))
+    return tuple(carried)
 
 
 def point_importance(positions: np.ndarray, ranges: np.ndarray, rgb: np.ndarray,

@@ -25,8 +25,10 @@ from engine.core.budget import spending_order
 from engine.resources import Surfaces
 from engine.rules.light_rules import (
     ALL_ROUND,
+    NO_COOKIE,
     SPOT_MAP_MAX_ANGLE,
     carried_cone,
+    carried_cookie,
     cone_half_width,
     cone_reaches,
     opened_cone,
@@ -485,6 +487,7 @@ class VirtualLight:
     apertures: tuple[Aperture, ...] = ()
     legs: tuple[Leg, ...] = ()
     cone: tuple[float, float, float, float] = ALL_ROUND   # a point image's spot cone, carried (light_rules.spot_cone)
+    cookie: tuple[tuple[float, ...], ...] = NO_COOKIE   # its cookie rows, carried (light_rules.lamp_cookie)
 
 
 def _outline(surface) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
@@ -550,7 +553,7 @@ def virtual_lights(directional: list[tuple[int, glm.vec3, glm.vec3]],
     """The virtual lights of this frame's lights through the surfaces that carry light:
     ``directional`` as (entity, direction travelled, colour x intensity), ``points`` as
     (entity, position, range, colour x intensity, spot cone: ``light_rules.spot_cone``, or
-    ``ALL_ROUND``), ``surfaces`` the ``Surfaces`` resource,
+    ``ALL_ROUND``[, cookie rows: ``light_rules.lamp_cookie``]), ``surfaces`` the ``Surfaces`` resource,
     ``bounces`` each light's limit (its ``bounces`` field; 1 when not given), ``depth_cap``
     the view tree's.
 
@@ -589,7 +592,7 @@ def virtual_lights(directional: list[tuple[int, glm.vec3, glm.vec3]],
         steps.append((surface, exit_surface, aperture, corners, tint, ball))
 
     def extend(light: VirtualLight | None, entity: int, kind: str, image: glm.vec3, light_range: float,
-               rgb: glm.vec3, limit: int, cone: tuple = ALL_ROUND) -> None:
+               rgb: glm.vec3, limit: int, cone: tuple = ALL_ROUND, cookie: tuple = NO_COOKIE) -> None:
         depth = 1 if light is None else light.bounces + 1
         if depth > limit:
             return
@@ -630,16 +633,17 @@ def virtual_lights(directional: list[tuple[int, glm.vec3, glm.vec3]],
                                 aperture.plane, (aperture.origin, aperture.u, aperture.v), carry, entry,
                                 exit_surface.entity, surface.priority + (0 if light is None else light.priority),
                                 depth, path, apertures, legs,
-                                ALL_ROUND if kind == "directional" else carried_cone(cone, carry))
+                                ALL_ROUND if kind == "directional" else carried_cone(cone, carry),
+                                NO_COOKIE if kind == "directional" else carried_cookie(cookie, carry))
             found.append(made)
-            extend(made, entity, kind, new_image, light_range, color, limit, made.cone)
+            extend(made, entity, kind, new_image, light_range, color, limit, made.cone, made.cookie)
 
     for entity, direction, rgb in directional:
         extend(None, entity, "directional", glm.normalize(glm.vec3(direction)), 0.0, glm.vec3(rgb),
                bounces.get(entity, 1))
-    for entity, position, light_range, rgb, cone in points:
+    for entity, position, light_range, rgb, cone, *cookie in points:
         extend(None, entity, "point", glm.vec3(position), float(light_range), glm.vec3(rgb), bounces.get(entity, 1),
-               cone)
+               cone, cookie[0] if cookie else NO_COOKIE)
     return found
 
 

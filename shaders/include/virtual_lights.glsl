@@ -24,6 +24,8 @@ layout(std140) uniform VirtualLights {
     vec4 virtual_params[MAX_VIRTUAL_LIGHTS];        // x: an atlas texel in uv, y: softness, z: taps a side,
                                                     // w: how many further outlines (virtual_more)
     vec4 virtual_spot[MAX_VIRTUAL_LIGHTS];          // a point image's spot cone, carried (spot_cone.glsl spot_factor)
+    vec4 virtual_cookie_u[MAX_VIRTUAL_LIGHTS];      // its cookie's right / tan(angle), carried; w: layer (-1: none)
+    vec4 virtual_cookie_v[MAX_VIRTUAL_LIGHTS];      // its cookie's top / tan(angle), carried (spot_cookie.glsl)
     vec4 virtual_more[MAX_VIRTUAL_LIGHTS * (MAX_APERTURES - 1) * 4];  // per outline: plane, corner, u, v (as above)
 } virtual_lights;
 
@@ -72,7 +74,6 @@ vec3 virtual_lighting(vec3 position, vec3 normal, vec3 geometric, vec3 to_eye, v
     for (int i = 0; i < virtual_lights.virtual_count.x; ++i) {
         vec4 exit_plane = virtual_lights.virtual_exit[i];
         float height = dot(exit_plane.xyz, position) + exit_plane.w;
-        if (height <= 0.0) continue;  // behind the exit: the light never comes out there
         vec4 image = virtual_lights.virtual_position[i];
         vec3 l = -image.xyz;
         float dist = 1e30;
@@ -85,6 +86,15 @@ vec3 virtual_lighting(vec3 position, vec3 normal, vec3 geometric, vec3 to_eye, v
             float fade = clamp(1.0 - pow(dist / range, 4.0), 0.0, 1.0);  // lights.glsl's falloff, along the whole path
             falloff = fade * fade / (dist * dist + 1.0) * spot_factor(virtual_lights.virtual_spot[i], l);
         }
+#ifdef SPOT_COOKIES
+        // (before any branch a pixel's neighbours may not take: the image's mip level comes
+        // from the uv's derivatives across the quad)
+        vec3 cookie = cookie_light(virtual_lights.virtual_cookie_u[i], virtual_lights.virtual_cookie_v[i],
+                                   virtual_lights.virtual_spot[i], l);
+#else
+        const vec3 cookie = vec3(1.0);
+#endif
+        if (height <= 0.0) continue;  // behind the exit: the light never comes out there
         float nl = dot(normal, l);
         float towards = dot(exit_plane.xyz, l);
         if (nl <= 0.0 || falloff <= 0.0 || towards >= 0.0) continue;
@@ -94,7 +104,8 @@ vec3 virtual_lighting(vec3 position, vec3 normal, vec3 geometric, vec3 to_eye, v
         float b = dot(x, virtual_lights.virtual_v[i].xyz);
         if (a < 0.0 || a > 1.0 || b < 0.0 || b > 1.0 || height / -towards > dist) continue;
         if (!virtual_through(i, position, l, height / -towards, dist)) continue;
-        total += (diffuse + ggx_specular(normal, l, to_eye, f0, roughness) * energy_compensation) * virtual_lights.virtual_color[i].rgb
+        total += (diffuse + ggx_specular(normal, l, to_eye, f0, roughness) * energy_compensation) * cookie
+                 * virtual_lights.virtual_color[i].rgb
                  * nl * falloff * (shadowed ? virtual_shadow(i, position, geometric, l, dist) : 1.0);
     }
     return total;
