@@ -200,6 +200,50 @@ def test_a_mirror_throws_the_image_the_other_way_round(scene):
     assert (quadrant_of(swapped[keep]) != quadrant_of(uv[keep])).all()
 
 
+def test_a_portal_carries_the_image_turned_not_mirrored(scene):
+    """A spot aimed into portal A (facing +z) comes out of portal B (facing +x) onto a wall
+    beyond B.  Each lit pixel shows the texel the real light sent: its line to the light's
+    image crosses B's opening at a point the pair carries back to A's, and the ray from the
+    light to that point says the quadrant; a portal turns the image, it does not mirror it."""
+    from components import Portal, look_rotation
+    from engine.assets.portals import spawn_portal_pair
+    from engine.core.portal_math import pair_transform
+
+    lamp = np.array([0.0, 1.5, 5.5])
+    angle = 18.0
+    names = {}
+
+    def build(world):
+        look_from(world, (-5.0, 1.5, 3.0), (-2.0, 1.5, 0.0), fov=70.0)
+        world.spawn(dark_sky())
+        world.spawn(Transform(position=(-2.0, 1.5, 0.0), rotation=glm.angleAxis(glm.radians(-90.0), glm.vec3(0, 1, 0))),
+                    MeshRef(quad(8.0, 6.0)), matte())
+        world.spawn(Transform(position=tuple(lamp)),
+                    PointLight(intensity=30.0, range=30.0, spot_angle=angle, spot_blend=0.0, cookie=quadrant_cookie()))
+        names["a"], names["b"] = spawn_portal_pair(world, (0.0, 1.5, 4.0), None, (-6.0, 1.5, 0.0),
+                                                   look_rotation(glm.vec3(-1, 0, 0)))
+        world.get(names["a"], Portal).carries_light = True
+    linear, runner = render(scene, build)
+    assert runner.engine.renderer.stats.virtual_lights == 1
+    _save("portal", linear)
+    world = runner.engine.world
+    carry = np.array(glm.dmat4(pair_transform(world.get(names["a"], Transform).world,
+                                              world.get(names["b"], Transform).world)).to_list(), np.float64).T
+    image = carry[:3, :3] @ lamp + carry[:3, 3]
+    eye, rays = pixel_rays(runner.engine.main_view, SIZE)
+    t = (-2.0 - eye[0]) / rays[..., 0]
+    wall = (eye + rays * t[..., None]).reshape(-1, 3)
+    towards = image - wall
+    s = (-6.0 - wall[:, 0]) / towards[:, 0]
+    crossing = wall + towards * s[:, None]   # where the line to the image crosses B's plane
+    through = (t.reshape(-1) > 0) & (np.abs(crossing[:, 1] - 1.5) < 1.4) & (np.abs(crossing[:, 2]) < 0.9) \
+        & (np.abs(wall[:, 1] - 1.5) < 2.9) & (np.abs(wall[:, 2]) < 3.9)
+    back = np.linalg.inv(carry)
+    at_a = crossing @ back[:3, :3].T + back[:3, 3]
+    uv, ahead = image_place(at_a, lamp, glm.translate(glm.vec3(*lamp)), angle)
+    assert check_quadrants(linear.reshape(-1, 3), uv, through & ahead) > 1000
+
+
 def test_a_cookie_is_refused_where_a_spot_cannot_project_it():
     """A cookie on an all-round light or a spot wider than 80 degrees, a spot widened past it
     while it has one, and a cookie that is not an image: each refused when given, naming the
