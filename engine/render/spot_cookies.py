@@ -24,15 +24,14 @@ import moderngl
 import numpy as np
 
 from engine.assets.texture_data import TextureData, pillow_image_module
+from engine.core.color import srgb_to_linear
 from engine.core.errors import GLLimitWarning
 from engine.render.bindings import COOKIE_UNIT, bind_texture
 from engine.render.views import MAX_POINT_LIGHTS
 
 COOKIE_SIZE = 512   # texels a side of each cookie's copy
 SCENE_SAMPLERS = 16  # the scene programs' fullest build without cookies (engine/render/bindings.py)
-# sRGB 8-bit code -> linear (IEC 61966-2-1)
-_SRGB_TO_LINEAR = np.where(np.arange(256) / 255.0 <= 0.04045, np.arange(256) / 255.0 / 12.92,
-                           ((np.arange(256) / 255.0 + 0.055) / 1.055) ** 2.4).astype(np.float32)
+_SRGB_TO_LINEAR = srgb_to_linear(np.arange(256) / 255.0).astype(np.float32)   # an 8-bit code's linear value
 
 
 def cookie_texels(texture: TextureData, size: int = COOKIE_SIZE) -> np.ndarray:
