@@ -46,6 +46,18 @@ def matte(color=(1.0, 1.0, 1.0, 1.0)) -> Material:
     return Material(color=color, roughness=1.0, environment_reflection=0.0)
 
 
+def lit_wall(cookie: TextureData | None, position=(0.0, 0.0, 3.0), rotation=None, **light):
+    """A world-builder: a white matte wall at z = 0 seen head on from z = 6 under a black sky,
+    lit by a spot at ``position`` (turned by ``rotation``) with ``cookie`` and ``light``'s fields."""
+    def build(world):
+        look_from(world, (0.0, 0.0, 6.0), (0.0, 0.0, 0.0))
+        world.spawn(dark_sky())
+        world.spawn(Transform(), MeshRef(quad(9.0, 7.0)), matte())
+        world.spawn(Transform(position=tuple(position), rotation=rotation if rotation is not None else glm.quat()),
+                    PointLight(range=30.0, cookie=cookie, **light))
+    return build
+
+
 def image_place(points: np.ndarray, light: np.ndarray, frame: glm.mat4, angle: float) -> tuple[np.ndarray, np.ndarray]:
     """Where the lines from ``light`` to ``points`` meet a projector's image: the light's unit
     right, top and forward (its frame's +X, +Y, -Z), the image filling the square about the
@@ -115,13 +127,8 @@ def test_a_cookie_projects_its_image_as_a_slide_projector_does(scene):
     angle = 28.0
     frames = {}
     for name, cookie in (("cookie", quadrant_cookie()), ("none", None)):
-        def build(world, cookie=cookie):
-            look_from(world, (0.0, 0.0, 6.0), (0.0, 0.0, 0.0))
-            world.spawn(dark_sky())
-            world.spawn(Transform(), MeshRef(quad(9.0, 7.0)), matte())
-            world.spawn(Transform(position=tuple(position), rotation=rotation),
-                        PointLight(intensity=12.0, range=30.0, spot_angle=angle, spot_blend=0.0, cookie=cookie))
-        frames[name], runner = render(scene, build)
+        frames[name], runner = render(scene, lit_wall(cookie, position, rotation, intensity=12.0, spot_angle=angle,
+                                                      spot_blend=0.0))
     points, hits = wall_points(runner)
     frame = glm.translate(glm.vec3(*position)) * glm.mat4_cast(rotation)
     uv, ahead = image_place(points.reshape(-1, 3), position, frame, angle)
@@ -145,13 +152,7 @@ def test_a_cookies_colour_is_its_linear_light(scene):
     pixels[..., :3], pixels[..., 3] = srgb, 255
     frames = {}
     for name, cookie in (("cookie", TextureData(pixels, name="amber")), ("none", None)):
-        def build(world, cookie=cookie):
-            look_from(world, (0.0, 0.0, 6.0), (0.0, 0.0, 0.0))
-            world.spawn(dark_sky())
-            world.spawn(Transform(), MeshRef(quad(9.0, 7.0)), matte())
-            world.spawn(Transform(position=(0.0, 0.0, 3.0)),
-                        PointLight(intensity=12.0, range=30.0, spot_angle=30.0, spot_blend=0.0, cookie=cookie))
-        frames[name], _ = render(scene, build)
+        frames[name], _ = render(scene, lit_wall(cookie, intensity=12.0, spot_angle=30.0, spot_blend=0.0))
     lit = frames["none"].max(axis=-1) > 0.15
     assert lit.sum() > 3000
     expected = srgb_to_linear(srgb.astype(np.uint8)[None])[0]
@@ -299,13 +300,7 @@ def test_on_a_context_of_16_texture_units_lights_shine_without_their_cookies(sce
     cookie, and a GLLimitWarning names the light and the limit, once."""
     frames = {}
     for name, cookie in (("cookie", quadrant_cookie()), ("none", None)):
-        def build(world, cookie=cookie):
-            look_from(world, (0.0, 0.0, 6.0), (0.0, 0.0, 0.0))
-            world.spawn(dark_sky())
-            world.spawn(Transform(), MeshRef(quad(9.0, 7.0)), matte())
-            world.spawn(Transform(position=(0.0, 0.0, 3.0)),
-                        PointLight(intensity=3.0, range=30.0, spot_angle=30.0, cookie=cookie))
-        runner = scene(build, SIZE)
+        runner = scene(lit_wall(cookie, intensity=3.0, spot_angle=30.0), SIZE)
         runner.engine.renderer.spot_cookies.release()
         runner.engine.renderer.spot_cookies = SpotCookies(ctx, texture_units=16)
         with warnings.catch_warnings(record=True) as caught:
