@@ -48,6 +48,7 @@ class MeshRef(TrackedComponent):
 MAX_NORMAL_SCALE = 16.0  # beyond this a normal map's bumps are all edge-on: a mistake, not a look
 
 
+MATERIAL_BLENDS = ("fade", "transparent")  # Material.blend: what a see-through material's alpha fades
 MATERIAL_IMAGES = ("texture", "normal_map", "emissive_map", "metallic_roughness_map", "occlusion_map")
 
 
@@ -116,6 +117,15 @@ class Material(TrackedComponent):
     seen from behind, lit as its back (the normal turned towards the eye).  Otherwise the
     back faces are culled, as a closed mesh wants.  Shadows are cast by both faces either
     way.  Not on a Mirror or Portal (refused: a surface is seen from its front).
+
+    ``blend`` says what a see-through material's alpha (``color``'s, times ``texture``'s,
+    below 1: the transparent slot) fades.  ``"fade"`` (the default, glTF's BLEND, Unity's
+    Fade mode): everything, its highlights and reflections too, so at alpha 0 it is gone.
+    ``"transparent"`` (Unity's Transparent mode, Filament's transparent blending): only the
+    light it scatters, its diffuse colour; the lights' highlights and its reflection of the
+    light from all round stay whole over what shows through, as on a window pane or clear
+    plastic, whose alpha is how much of its colour covers what is behind.  (Refraction, what
+    lies behind bent and tinted: ``Refractive``.)
     """
 
     color: Any = field(default_factory=lambda: glm.vec4(0.8, 0.8, 0.8, 1.0))
@@ -131,8 +141,11 @@ class Material(TrackedComponent):
     environment_reflection: float = 1.0
     alpha_cutoff: float | None = None
     double_sided: bool = False
+    blend: str = "fade"
 
     def _validate(self, name: str, value: Any) -> Any:
+        if name == "blend":
+            return choice(self, name, value, MATERIAL_BLENDS)
         if name == "alpha_cutoff":
             if value is None:
                 return None

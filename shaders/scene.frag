@@ -14,7 +14,8 @@ uniform sampler2D albedo_map;
 uniform bool has_albedo_map;
 uniform samplerCube sky_map;
 uniform float sky_face_size;   // texels across one face of sky_map
-uniform bool transparent;       // the transparent slot: alpha is the material's, for blending
+uniform int transparent;        // the transparent slot (instances.blend_code): 0 opaque; its colour
+                                // premultiplied by its alpha: 1 all of it, 2 its diffuse light only
 #ifdef ALPHA_CUTOFF
 uniform float alpha_cutoff;     // a cutout's (its batch's Material.alpha_cutoff)
 #endif
@@ -303,6 +304,10 @@ vec3 environment_specular(Surface s, AmbientBoxes boxes) {
     return environment_light;
 }
 
+// The lights' highlights (their GGX specular light), summed apart from their diffuse light:
+// what a see-through material with Material.blend "transparent" keeps whole (main).
+vec3 highlight_light = vec3(0.0);
+
 // Light through mirrors and portals (its loop only in the VIRTUAL_LIGHTS builds).
 #include "virtual_lights.glsl"
 
@@ -324,9 +329,10 @@ vec3 direct_lighting(Surface s, AmbientBoxes boxes) {
         vec3 l = -lights.directional_dir[i].xyz;
         float nl = max(dot(s.normal, l), 0.0);
         if (nl > 0.0) {
-            total += (diffuse + ggx_specular(s.normal, l, s.to_eye, s.f0, s.highlight_roughness) * s.energy_compensation)
-                     * lights.directional_color[i].rgb * nl
-                     * directional_lit[i];
+            vec3 arriving = lights.directional_color[i].rgb * nl * directional_lit[i];
+            vec3 highlight = ggx_specular(s.normal, l, s.to_eye, s.f0, s.highlight_roughness) * s.energy_compensation;
+            total += (diffuse + highlight) * arriving;
+            highlight_light += highlight * arriving;
         }
     }
     for (int i = 0; i < lights.counts.y; ++i) {
@@ -343,9 +349,10 @@ vec3 direct_lighting(Surface s, AmbientBoxes boxes) {
         const vec3 cookie = vec3(1.0);
 #endif
         if (nl > 0.0 && falloff > 0.0) {
-            total += (diffuse + ggx_specular(s.normal, l, s.to_eye, s.f0, s.highlight_roughness) * s.energy_compensation)
-                     * lights.point_color[i].rgb * cookie * nl * falloff
-                     * point_shadow(i, point_lit);
+            vec3 arriving = lights.point_color[i].rgb * cookie * nl * falloff * point_shadow(i, point_lit);
+            vec3 highlight = ggx_specular(s.normal, l, s.to_eye, s.f0, s.highlight_roughness) * s.energy_compensation;
+            total += (diffuse + highlight) * arriving;
+            highlight_light += highlight * arriving;
         }
     }
 #ifdef VIRTUAL_LIGHTS
@@ -604,12 +611,25 @@ void main() {
     out_reflect_added = vec4(hdr_store(reflect_added * kept), float(v_slots.w & 2047u));
     out_reflect_normal = vec4(s.normal, float((v_slots.w >> 11u) & 2047u));
 #endif
+    float alpha = 1.0;
+    if (transparent != 0) {
+        // Premultiplied by the alpha (the transparent slot blends ONE, ONE_MINUS_SRC_ALPHA):
+        // all of the colour (fade), or all but the highlights and the environment's reflection,
+        // which lie whole over what shows through (Material.blend "transparent").
+        vec3 kept = transparent == 2 ? highlight_light * s.direct_occlusion + environment_light : vec3(0.0);
+        color = (color - kept) * s.alpha + kept;
+        alpha = s.alpha;
+    }
 #ifdef FOG
     // The air between where this view's rays enter it (its eye, or the surface it looks out
-    // of) and the point; a composite fogs the stretch before (fog.glsl).
-    color = fog_view(color, VIEW_EYE, VIEW_ENTRY, v_world_pos);
+    // of) and the point; a composite fogs the stretch before (fog.glsl).  fog_view is the
+    // colour x the transmittance plus the fog's own light: of that light a see-through
+    // surface gives its alpha's share (what shows through was fogged on its own way).
+    vec3 fogged_color = fog_view(color, VIEW_EYE, VIEW_ENTRY, v_world_pos);
+    if (transparent != 0) fogged_color -= (1.0 - alpha) * fog_view(vec3(0.0), VIEW_EYE, VIEW_ENTRY, v_world_pos);
+    color = fogged_color;
 #endif
-    out_color = vec4(hdr_store(color), transparent ? s.alpha : 1.0);
+    out_color = vec4(hdr_store(color), alpha);
     out_surface = v_slots.w;
     out_seen = v_slots.w;
     out_node = node_index;

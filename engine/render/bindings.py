@@ -187,6 +187,9 @@ def clip_glsl_defines() -> dict[str, str]:
 # composite above fills with the sky), and over it too: a + dst x (1 - a), so the sky shows
 # behind something see-through in a reflection by 1 - a, not in full.
 BLEND_OVER = (moderngl.SRC_ALPHA, moderngl.ONE_MINUS_SRC_ALPHA, moderngl.ONE, moderngl.ONE_MINUS_SRC_ALPHA)
+# "Over" for a colour the shader already multiplied by its alpha (the scene's transparent slot:
+# Material.blend "transparent" keeps part of it whole, which SRC_ALPHA would fade).
+BLEND_PREMULTIPLIED = (moderngl.ONE, moderngl.ONE_MINUS_SRC_ALPHA, moderngl.ONE, moderngl.ONE_MINUS_SRC_ALPHA)
 
 
 @dataclass(frozen=True)

@@ -170,6 +170,13 @@ class BatchKey(NamedTuple):
     occlusion_map: int = 0              # its image's id (0: none)
     occlusion_strength: float = 1.0     # Material.occlusion_strength: its draws' uniform
     double_sided: bool = False          # Material.double_sided: drawn with face culling off
+    keeps_specular: bool = False        # a transparent one's Material.blend "transparent"
+
+
+def blend_code(batch: InstanceBatch) -> int:
+    """The scene shader's ``transparent`` uniform for ``batch``: 0 opaque, 1 faded by its
+    alpha whole, 2 its diffuse light alone faded (``keeps_specular``)."""
+    return (2 if batch.keeps_specular else 1) if batch.transparent else 0
 
 
 class InstanceBatch:
@@ -238,6 +245,9 @@ class InstanceBatch:
         # Drawn in the scene pass's transparent slot (blended, farthest first) instead of
         # with the opaque batches: a material whose alpha is below 1 (Renderer.batch_for).
         self.transparent = False
+        # ... and its highlights and environment reflection kept whole over what shows through,
+        # only its diffuse light faded by its alpha (Material.blend "transparent").
+        self.keeps_specular = False
         # A transparent batch whose entity is a mirror or portal, switched off or not (water):
         # a view tree's surface, drawn before its claims and fallbacks, which find its pixels
         # by its id (slot_order.see_through_surface; the extract stage sets it).

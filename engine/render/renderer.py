@@ -136,7 +136,7 @@ class Renderer(Gpu):
                   probe_blend: bool = False, rest_probe: int = 0,
                   mirrored: bool = False, alpha_cutoff: float | None = None,
                   occlusion_map: TextureData | None = None, occlusion_strength: float = 1.0,
-                  double_sided: bool = False) -> InstanceBatch:
+                  double_sided: bool = False, keeps_specular: bool = False) -> InstanceBatch:
         """The batch of (mesh, albedo texture, normal map, emissive map, metallic-roughness
         map, the probe its instances sample (0: none), a cutout's cutoff, an occlusion map and
         its strength, double-sidedness).  A transparent entity gets a batch of its own
@@ -151,13 +151,15 @@ class Renderer(Gpu):
         # other winding (ScenePass), so they get batches of their own.  ``alpha_cutoff``: a
         # cutout's threshold (Material.alpha_cutoff): a batch of its own, its builds' uniform;
         # so is an occlusion map's strength.  ``double_sided``: drawn with face culling off.
+        # ``keeps_specular``: a transparent entity's Material.blend "transparent".
         key = BatchKey(mesh.id, id(texture) if texture is not None else 0,
                        (probe, second_probe, probe_blend, rest_probe), transparent_entity,
                        id(normal_map) if normal_map is not None else 0,
                        id(emissive_map) if emissive_map is not None else 0,
                        id(metallic_roughness_map) if metallic_roughness_map is not None else 0, mirrored,
                        alpha_cutoff, id(occlusion_map) if occlusion_map is not None else 0,
-                       occlusion_strength if occlusion_map is not None else 1.0, double_sided)
+                       occlusion_strength if occlusion_map is not None else 1.0, double_sided,
+                       bool(keeps_specular and transparent_entity))
         batch = self.batches.get(key)
         if batch is None:
             for name, image in (("Material.texture", texture), ("Material.normal_map", normal_map),
@@ -198,6 +200,7 @@ class Renderer(Gpu):
             batch.second_probe, batch.probe_blend, batch.rest_probe = second_probe, probe_blend, rest_probe
             batch.checker = checker_look(texture)
             batch.transparent = bool(transparent_entity)
+            batch.keeps_specular = key.keeps_specular
             self._order_stale = True
             self.needs_preparing = True
             self.note_scene_change()

@@ -53,7 +53,7 @@ from engine.render.batched_mirrors import MAX_BATCHED_VIEWS, VIEWS_BLOCK_BYTES, 
 from engine.render.bindings import (
     ALBEDO_UNIT,
     BATCHED_SCENE_CLIPS,
-    BLEND_OVER,
+    BLEND_PREMULTIPLIED,
     LIGHTS_BINDING,
     NODE_UNIT,
     PROBE2_UNIT,
@@ -78,6 +78,7 @@ from engine.render.bindings import (
     watching,
 )
 from engine.render.gpu import Gpu
+from engine.render.instances import blend_code
 from engine.render.irradiance import IrradianceTable
 from engine.render.raw_gl import LayeredArrayTarget, LayeredCubeTarget, inspect_bound_target
 from engine.render.scene_options import ROOT_VIEW, SceneOptions
@@ -116,9 +117,9 @@ _SKY = PassState(depth_func="<=")
 _ALBEDO_KEY = (ALBEDO_UNIT, moderngl.Texture)  # the albedo unit's 2D binding in the texture record
 _LAYERED_SCENE = PassState(depth_func="<", cull=True, clips=BATCHED_SCENE_CLIPS)
 _LAYERED_SKY = PassState(depth_func="<=")
-_BATCHED_TRANSPARENT = PassState(depth_func="<", cull=True, clips=BATCHED_SCENE_CLIPS, blend=BLEND_OVER)
+_BATCHED_TRANSPARENT = PassState(depth_func="<", cull=True, clips=BATCHED_SCENE_CLIPS, blend=BLEND_PREMULTIPLIED)
 _LAYERED_TRANSPARENT = _BATCHED_TRANSPARENT
-_TRANSPARENT = PassState(depth_func="<", cull=True, clips=SCENE_CLIPS, blend=BLEND_OVER)
+_TRANSPARENT = PassState(depth_func="<", cull=True, clips=SCENE_CLIPS, blend=BLEND_PREMULTIPLIED)
 
 
 class ScenePass:
@@ -270,7 +271,7 @@ class ScenePass:
         rest_size, lookup_rest = 0, NO_PROBE_LOOKUP
         if batch.rest_probe:  # the probe taking what the weights leave (a curved object's own)
             rest_size, lookup_rest = self._bind_probe(batch.rest_probe, PROBE_REST_UNIT, cubes)
-        return (batch.texture is not None, batch.transparent, probe_size, *lookup, probe2_size, *lookup2, rest_size,
+        return (batch.texture is not None, blend_code(batch), probe_size, *lookup, probe2_size, *lookup2, rest_size,
                 *lookup_rest, *(batch.checker or NO_CHECKER), batch.alpha_cutoff or 0.0, batch.occlusion_strength)
 
     def _bind_probe(self, probe: int, unit: int, cubes) -> tuple[int, tuple]:

@@ -49,6 +49,7 @@ from engine.render.bindings import (
     VIRTUAL_SHADOW_UNIT,
 )
 from engine.render.gpu import Gpu
+from engine.render.instances import blend_code
 from engine.render.shadows import ShadowMaps
 from engine.render.unlit_mirrors import may_be_unlit
 
@@ -321,7 +322,7 @@ class ScenePrograms:
             if texture is not None)
         own = None
         if not batch.probe and not batch.probe_blend and not batch.rest_probe:
-            own = (batch.texture is not None, batch.transparent, 0, *NO_PROBE_LOOKUP, 0, *NO_PROBE_LOOKUP,
+            own = (batch.texture is not None, blend_code(batch), 0, *NO_PROBE_LOOKUP, 0, *NO_PROBE_LOOKUP,
                    0, *NO_PROBE_LOOKUP, *(batch.checker or NO_CHECKER), batch.alpha_cutoff or 0.0,
                    batch.occlusion_strength)
         return (stamp, variants, glo, batch.vao(program), self.uniforms[glo], values, textures, own,

@@ -104,9 +104,11 @@ vec3 virtual_lighting(vec3 position, vec3 normal, vec3 geometric, vec3 to_eye, v
         float b = dot(x, virtual_lights.virtual_v[i].xyz);
         if (a < 0.0 || a > 1.0 || b < 0.0 || b > 1.0 || height / -towards > dist) continue;
         if (!virtual_through(i, position, l, height / -towards, dist)) continue;
-        total += (diffuse + ggx_specular(normal, l, to_eye, f0, roughness) * energy_compensation) * cookie
-                 * virtual_lights.virtual_color[i].rgb
-                 * nl * falloff * (shadowed ? virtual_shadow(i, position, geometric, l, dist) : 1.0);
+        vec3 arriving = virtual_lights.virtual_color[i].rgb * cookie * nl * falloff
+                        * (shadowed ? virtual_shadow(i, position, geometric, l, dist) : 1.0);
+        vec3 highlight = ggx_specular(normal, l, to_eye, f0, roughness) * energy_compensation;
+        total += (diffuse + highlight) * arriving;
+        highlight_light += highlight * arriving;  // (scene.frag's: the highlights summed apart)
     }
     return total;
 }

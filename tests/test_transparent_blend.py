@@ -1,0 +1,68 @@
+"""What a see-through material's alpha fades (``Material.blend``): "fade" all of its light,
+"transparent" only its diffuse light, its highlights and its reflection of the sky lying
+whole over what shows through.  Checked against frames drawn without the pane and with it
+opaque: a black pane's light is all highlight and reflection, so over a blue wall the pane
+at alpha a shows that light (fade: a x it) plus (1 - a) x the wall, channel by channel."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from components import ComponentValueError, DirectionalLight, Emissive, Material, MeshRef, Skybox, Transform
+from engine.assets.mesh import quad
+from tests.support import look_from, srgb_to_linear
+
+SIZE = (120, 90)
+ALPHA = 0.3
+
+
+def scene_with(pane: Material | None):
+    def build(world):
+        look_from(world, (0.0, 0.0, 6.0), (0.0, 0.0, 0.0), fov=40.0)
+        world.spawn(Skybox(faces=np.full((6, 4, 4, 3), 0.5, np.float32)))
+        world.spawn(DirectionalLight(direction=(0.0, -0.15, -1.0), intensity=0.6, shadows=False))
+        world.spawn(Transform(position=(0.0, 0.0, -2.0)), MeshRef(quad(12.0, 9.0)),
+                    Material(color=(0.0, 0.0, 0.4, 1.0), environment_reflection=0.0), Emissive(power=1.0))  # blue
+        if pane is not None:
+            world.spawn(Transform(), MeshRef(quad(3.0, 3.0)), pane)
+    return build
+
+
+def linear(scene, pane: Material | None) -> np.ndarray:
+    runner = scene(scene_with(pane), SIZE)
+    runner.engine.renderer.antialias = "off"
+    runner.frame()
+    return srgb_to_linear(runner.frame())
+
+
+def test_transparent_keeps_the_highlights_and_reflections_whole_and_fade_fades_them(scene):
+    wall = linear(scene, None)
+    opaque = linear(scene, Material(color=(0.0, 0.0, 0.0, 1.0), roughness=0.3))
+    kept = linear(scene, Material(color=(0.0, 0.0, 0.0, ALPHA), roughness=0.3, blend="transparent"))
+    faded = linear(scene, Material(color=(0.0, 0.0, 0.0, ALPHA), roughness=0.3))
+    # The pane's middle (it covers 3 m of the 4.4 m the view spans at its distance).
+    h, w = SIZE[1], SIZE[0]
+    middle = (slice(h // 2 - 25, h // 2 + 25), slice(w // 2 - 30, w // 2 + 30))
+    light = opaque[middle]
+    assert light[..., 0].max() > 0.15 and light[..., 0].min() > 0.015   # a highlight over the sky's reflection
+    assert wall[middle][..., 2].min() > 0.4
+    step = 0.012   # about 1.5 sRGB levels where these values lie
+    np.testing.assert_allclose(kept[middle], light + (1.0 - ALPHA) * wall[middle], atol=step, rtol=0.02)
+    np.testing.assert_allclose(faded[middle], ALPHA * light + (1.0 - ALPHA) * wall[middle], atol=step, rtol=0.02)
+    # (and the two differ where the highlight is: by (1 - alpha) of it)
+    assert (kept[middle][..., 0] - faded[middle][..., 0]).max() > 0.1
+
+
+def test_blend_is_checked_and_written_in_level_files(tmp_path):
+    with pytest.raises(ComponentValueError, match=r"Material.blend must be one of \('fade', 'transparent'\)"):
+        Material(blend="glass")
+    from engine.assets.level_file import load_level, save_level
+    from engine.core.world import World
+
+    world = World("pane")
+    pane = world.spawn(Transform(), MeshRef(quad(1.0, 1.0)), Material(color=(1, 1, 1, 0.2), blend="transparent"))
+    saved = save_level(world, tmp_path / "pane.toml", {"pane": pane}, name="pane")
+    assert 'blend = "transparent"' in saved.read_text()
+    again = World("again")
+    names = load_level(saved).spawn(again)
+    assert again.get(names["pane"], Material).blend == "transparent"
