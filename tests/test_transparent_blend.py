@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from components import ComponentValueError, DirectionalLight, Emissive, Material, MeshRef, Skybox, Transform
+from components import ComponentValueError, DirectionalLight, Emissive, Fog, Material, MeshRef, Skybox, Transform
 from engine.assets.mesh import quad
 from tests.support import look_from, srgb_to_linear
 
@@ -16,11 +16,14 @@ SIZE = (120, 90)
 ALPHA = 0.3
 
 
-def scene_with(pane: Material | None):
+def scene_with(pane: Material | None, fog: bool = False):
     def build(world):
-        look_from(world, (0.0, 0.0, 6.0), (0.0, 0.0, 0.0), fov=40.0)
+        camera = look_from(world, (0.0, 0.0, 6.0), (0.0, 0.0, 0.0), fov=40.0)
+        if fog:
+            world.add_component(camera, Fog(color=(0.6, 0.3, 0.1), density=0.12))
         world.spawn(Skybox(faces=np.full((6, 4, 4, 3), 0.5, np.float32)))
-        world.spawn(DirectionalLight(direction=(0.0, -0.15, -1.0), intensity=0.6, shadows=False))
+        if not fog:
+            world.spawn(DirectionalLight(direction=(0.0, -0.15, -1.0), intensity=0.6, shadows=False))
         world.spawn(Transform(position=(0.0, 0.0, -2.0)), MeshRef(quad(12.0, 9.0)),
                     Material(color=(0.0, 0.0, 0.4, 1.0), environment_reflection=0.0), Emissive(power=1.0))  # blue
         if pane is not None:
@@ -28,8 +31,8 @@ def scene_with(pane: Material | None):
     return build
 
 
-def linear(scene, pane: Material | None) -> np.ndarray:
-    runner = scene(scene_with(pane), SIZE)
+def linear(scene, pane: Material | None, fog: bool = False) -> np.ndarray:
+    runner = scene(scene_with(pane, fog), SIZE)
     runner.engine.renderer.antialias = "off"
     runner.frame()
     return srgb_to_linear(runner.frame())
@@ -51,6 +54,26 @@ def test_transparent_keeps_the_highlights_and_reflections_whole_and_fade_fades_t
     np.testing.assert_allclose(faded[middle], ALPHA * light + (1.0 - ALPHA) * wall[middle], atol=step, rtol=0.02)
     # (and the two differ where the highlight is: by (1 - alpha) of it)
     assert (kept[middle][..., 0] - faded[middle][..., 0]).max() > 0.1
+
+
+def test_in_fog_a_see_through_pane_gives_its_alphas_share_of_the_fogs_light(scene):
+    """Fog between the eye and a grey metal pane: the fog's own light F (the frame of a pane
+    that sends nothing, black and reflecting nothing) is added once over the pane's pixels whatever
+    shows through.  A fading pane is then alpha x the opaque pane's fogged frame O plus
+    (1 - alpha) x the fogged wall W; a transparent one O - (1 - alpha) F + (1 - alpha) W (its
+    reflection whole, the fog in front of it once)."""
+    wall = linear(scene, None, fog=True)
+    grey = (0.5, 0.5, 0.5)   # a grey metal: its light is all reflection, half the sky's
+    opaque = linear(scene, Material(color=(*grey, 1.0), metallic=1.0, roughness=0.2), fog=True)
+    fog_light = linear(scene, Material(color=(0.0, 0.0, 0.0, 1.0), environment_reflection=0.0), fog=True)
+    kept = linear(scene, Material(color=(*grey, ALPHA), metallic=1.0, roughness=0.2, blend="transparent"), fog=True)
+    faded = linear(scene, Material(color=(*grey, ALPHA), metallic=1.0, roughness=0.2), fog=True)
+    h, w = SIZE[1], SIZE[0]
+    middle = (slice(h // 2 - 25, h // 2 + 25), slice(w // 2 - 30, w // 2 + 30))
+    o, f, b = opaque[middle], fog_light[middle], wall[middle]
+    assert f[..., 0].min() > 0.2 and (o - f)[..., 0].min() > 0.01   # fog, and a reflection through it
+    np.testing.assert_allclose(faded[middle], ALPHA * o + (1.0 - ALPHA) * b, atol=0.012, rtol=0.02)
+    np.testing.assert_allclose(kept[middle], o - (1.0 - ALPHA) * f + (1.0 - ALPHA) * b, atol=0.012, rtol=0.02)
 
 
 def test_blend_is_checked_and_written_in_level_files(tmp_path):
