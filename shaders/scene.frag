@@ -344,11 +344,15 @@ vec3 direct_lighting(Surface s, AmbientBoxes boxes) {
         float fade = clamp(1.0 - pow(dist / range, 4.0), 0.0, 1.0);
         float falloff = fade * fade / (dist * dist + 1.0) * spot_factor(lights.point_spot[i], l);
 #ifdef SPOT_COOKIES
-        vec3 cookie = cookie_light(lights.point_cookie_u[i], lights.point_cookie_v[i], lights.point_spot[i], l);
-#else
-        const vec3 cookie = vec3(1.0);
+        vec3 cookie_at = cookie_place(lights.point_cookie_u[i], lights.point_cookie_v[i], lights.point_spot[i], l);
+        vec2 cookie_dx = dFdx(cookie_at.xy), cookie_dy = dFdy(cookie_at.xy);
 #endif
         if (nl > 0.0 && falloff > 0.0) {
+#ifdef SPOT_COOKIES
+            vec3 cookie = cookie_light(cookie_at, cookie_dx, cookie_dy);
+#else
+            const vec3 cookie = vec3(1.0);
+#endif
             vec3 arriving = lights.point_color[i].rgb * cookie * nl * falloff * point_shadow(i, point_lit);
             vec3 highlight = ggx_specular(s.normal, l, s.to_eye, s.f0, s.highlight_roughness) * s.energy_compensation;
             total += (diffuse + highlight) * arriving;

@@ -193,6 +193,10 @@ def render_case(ctx: moderngl.Context, case: GoldenCase) -> Frame:
     # before the first frame uploads a normal map; on llvmpipe this changes nothing.
     engine.renderer.reflection_anisotropy = SOFTWARE_ANISOTROPY
     engine.renderer.normal_map_anisotropy = SOFTWARE_ANISOTROPY
+    # So are spot cookies: a software rasteriser reads their nearer mip level, a GPU blends two
+    # (engine/render/spot_cookies.py SpotCookies.filter).
+    engine.renderer.spot_cookies.filter = (moderngl.LINEAR_MIPMAP_NEAREST, moderngl.LINEAR)
+    engine.renderer.spot_cookies.anisotropy = SOFTWARE_ANISOTROPY
     capture = CaptureTarget(ctx, SIZE)
     try:
         if case.camera is not None:

@@ -7,16 +7,22 @@
 // d = -l, a slide projector's perspective.  White where the light has no cookie.  Only the
 // SPOT_COOKIES builds hold it: frames where a kept light has one.
 //
-// The caller samples it before any branch a pixel's neighbours may not take (its mip level
-// comes from the uv's derivatives across the 2 x 2 quad).
+// Its place is worked out before any branch a pixel's neighbours may not take (its screen
+// derivatives choose the image's mip level), the image read only where the light reaches
+// (textureGrad in the branch): on llvmpipe a block of pixels outside every cone skips the read.
 #ifdef SPOT_COOKIES
 uniform sampler2DArray spot_cookies;
 
-vec3 cookie_light(vec4 right, vec4 up, vec4 cone, vec3 l) {
+// (u, v, layer) of the image the line along ``l`` meets; a layer below 0: no cookie.
+vec3 cookie_place(vec4 right, vec4 up, vec4 cone, vec3 l) {
     vec3 d = -l;
     float along = max(dot(d, normalize(cone.xyz)), 1e-3);
-    vec2 uv = 0.5 + 0.5 * vec2(dot(d, right.xyz), dot(d, up.xyz)) / along;
-    vec3 image = texture(spot_cookies, vec3(uv, max(right.w, 0.0))).rgb;
-    return right.w < 0.0 ? vec3(1.0) : image;
+    return vec3(0.5 + 0.5 * vec2(dot(d, right.xyz), dot(d, up.xyz)) / along, right.w);
+}
+
+// The image's colour at ``place`` (cookie_place), its uv's screen derivatives ``dx``, ``dy``.
+vec3 cookie_light(vec3 place, vec2 dx, vec2 dy) {
+    if (place.z < 0.0) return vec3(1.0);
+    return textureGrad(spot_cookies, place, dx, dy).rgb;
 }
 #endif

@@ -87,12 +87,10 @@ vec3 virtual_lighting(vec3 position, vec3 normal, vec3 geometric, vec3 to_eye, v
             falloff = fade * fade / (dist * dist + 1.0) * spot_factor(virtual_lights.virtual_spot[i], l);
         }
 #ifdef SPOT_COOKIES
-        // (before any branch a pixel's neighbours may not take: the image's mip level comes
-        // from the uv's derivatives across the quad)
-        vec3 cookie = cookie_light(virtual_lights.virtual_cookie_u[i], virtual_lights.virtual_cookie_v[i],
-                                   virtual_lights.virtual_spot[i], l);
-#else
-        const vec3 cookie = vec3(1.0);
+        // (before any branch a pixel's neighbours may not take: spot_cookie.glsl)
+        vec3 cookie_at = cookie_place(virtual_lights.virtual_cookie_u[i], virtual_lights.virtual_cookie_v[i],
+                                      virtual_lights.virtual_spot[i], l);
+        vec2 cookie_dx = dFdx(cookie_at.xy), cookie_dy = dFdy(cookie_at.xy);
 #endif
         if (height <= 0.0) continue;  // behind the exit: the light never comes out there
         float nl = dot(normal, l);
@@ -104,6 +102,11 @@ vec3 virtual_lighting(vec3 position, vec3 normal, vec3 geometric, vec3 to_eye, v
         float b = dot(x, virtual_lights.virtual_v[i].xyz);
         if (a < 0.0 || a > 1.0 || b < 0.0 || b > 1.0 || height / -towards > dist) continue;
         if (!virtual_through(i, position, l, height / -towards, dist)) continue;
+#ifdef SPOT_COOKIES
+        vec3 cookie = cookie_light(cookie_at, cookie_dx, cookie_dy);
+#else
+        const vec3 cookie = vec3(1.0);
+#endif
         vec3 arriving = virtual_lights.virtual_color[i].rgb * cookie * nl * falloff
                         * (shadowed ? virtual_shadow(i, position, geometric, l, dist) : 1.0);
         vec3 highlight = ggx_specular(normal, l, to_eye, f0, roughness) * energy_compensation;
