@@ -10,6 +10,7 @@ from components.limits import (
     MAX_COOKIE_SPOT_ANGLE,
     MAX_FAR,
     MAX_LIGHT_BOUNCES,
+    MAX_LIGHT_RADIUS,
     MAX_SHADOW_CASCADE_BLEND,
     MAX_SHADOW_CASCADES,
     MIN_SHADOW_DISTANCE,
@@ -196,7 +197,15 @@ class PointLight(TrackedComponent):
     ``MAX_COOKIE_SPOT_ANGLE`` (80 degrees) takes one.  Through a mirror or portal the image is
     carried with the light: a mirror shows it the other way round, as a real one does.  The
     renderer draws it from a ``COOKIE_SIZE`` (512) square copy with mipmaps
-    (``engine/render/spot_cookies.py``)."""
+    (``engine/render/spot_cookies.py``).
+
+    ``radius`` (metres, default 0: a point) makes it a sphere of light, as a bulb is (Unreal's
+    source radius, Unity's and Godot's light size): its highlights on smooth surfaces are the
+    sphere's reflection, a disc as wide as the bulb a chrome ball shows in a mirror, not a
+    pin-point, and wider and dimmer on rough ones, the light's energy kept (the representative
+    point of the sphere nearest each reflected ray, ``shaders/include/ggx.glsl``
+    ``sphere_highlight``).  Its diffuse light and its shadows are a point's.  At most
+    ``MAX_LIGHT_RADIUS`` (10 m)."""
 
     color: Any = field(default_factory=lambda: glm.vec4(1.0))
     intensity: float = 1.0
@@ -208,6 +217,7 @@ class PointLight(TrackedComponent):
     spot_angle: float = 180.0
     spot_blend: float = 0.15
     cookie: TextureData | None = None
+    radius: float = 0.0
 
     def _validate(self, name: str, value: Any) -> Any:
         if name == "color":
@@ -236,5 +246,7 @@ class PointLight(TrackedComponent):
             return value
         if name == "spot_blend":
             return finite(self, name, value, low=0.0, high=1.0)
+        if name == "radius":
+            return finite(self, name, value, low=0.0, high=MAX_LIGHT_RADIUS)
         shadow = _shadow_field(self, name, value)
         return value if shadow is None else shadow

@@ -34,6 +34,8 @@ MIN_SPOT_ANGLE = 0.1
 # at 80 degrees a texel at the edge is stretched 33 times a middle one's (1 / cos^2), and at
 # 90 the projection has no square at all.
 MAX_COOKIE_SPOT_ANGLE = 80.0
+# The largest sphere a point light may be (PointLight.radius, metres): a light's size, not a room's.
+MAX_LIGHT_RADIUS = 10.0
 
 # Reflection layers (show/hide lists): an entity belongs to some of REFLECTION_LAYERS layers
 # and a mirror, portal, probe or camera shows some of them; a view shows an entity when they

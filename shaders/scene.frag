@@ -353,9 +353,10 @@ vec3 direct_lighting(Surface s, AmbientBoxes boxes) {
 #else
             const vec3 cookie = vec3(1.0);
 #endif
-            vec3 arriving = lights.point_color[i].rgb * cookie * nl * falloff * point_shadow(i, point_lit);
-            vec3 highlight = ggx_specular(s.normal, l, s.to_eye, s.f0, s.highlight_roughness) * s.energy_compensation;
-            total += (diffuse + highlight) * arriving;
+            vec3 arriving = lights.point_color[i].rgb * cookie * falloff * point_shadow(i, point_lit);
+            vec3 highlight = sphere_highlight(s.normal, s.to_eye, s.reflect_dir, d, lights.point_color[i].w, s.f0,
+                                              s.highlight_roughness) * s.energy_compensation;
+            total += (diffuse * nl + highlight) * arriving;
             highlight_light += highlight * arriving;
         }
     }

@@ -56,7 +56,7 @@ from engine.rules.light_rules import (
 
 # A freed slot no light took yet: black (no light), its range 1 (no division by zero).
 _NO_SUN = ((0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
-_NO_LAMP = ((0.0, 0.0, 0.0), 1.0, (0.0, 0.0, 0.0), ALL_ROUND, NO_COOKIE)
+_NO_LAMP = ((0.0, 0.0, 0.0), 1.0, (0.0, 0.0, 0.0), ALL_ROUND, NO_COOKIE, 0.0)
 
 
 def ambient_sh(world: World, sun: SkySun | None = None) -> np.ndarray:
@@ -188,7 +188,7 @@ class PrepareSystem(esper.Processor):
                 continue
             light, t = world.get(entity, PointLight), world.get(entity, Transform)
             point.append((t.world[3].xyz, light.range, light.color.xyz * light.intensity, lamp_cone(light, t.world),
-                          lamp_cookie(light, t.world, self.renderer.spot_cookies.layer(light.cookie))))
+                          lamp_cookie(light, t.world, self.renderer.spot_cookies.layer(light.cookie)), light.radius))
         return directional, point
 
     def _cookies(self, kept: KeptLights) -> bool:

@@ -395,7 +395,7 @@ class ShadowSystem(esper.Processor):
             cookies = renderer.spot_cookies
             points = [(entity, transform.world[3].xyz, light.range, raw_field(light, "color").xyz * light.intensity,
                        lamp_cone(light, transform.world),
-                       lamp_cookie(light, transform.world, cookies.layer(light.cookie)))
+                       lamp_cookie(light, transform.world, cookies.layer(light.cookie)), light.radius)
                       for entity, (light, transform) in lamps]
             bounces = {entity: light.bounces for entity, light in suns}
             bounces.update({entity: light.bounces for entity, (light, _) in lamps})
@@ -412,7 +412,7 @@ class ShadowSystem(esper.Processor):
                 stats.virtual_lights_cut += 1
                 continue
             key = (light.light, light.path, light.kind, light.position, light.color, light.light_range, light.cone,
-                   light.cookie,
+                   light.cookie, light.radius,
                    light.exit_plane, light.aperture, light.apertures,
                    tuple((leg.carry.to_bytes(), tuple(p.to_bytes() for p in leg.planes), leg.skip)
                          for leg in light.legs),

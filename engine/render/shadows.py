@@ -422,7 +422,7 @@ class ShadowMaps:
             "params": (1.0 / width, 1.0, self._taps(1.0), float(len(more))),
             "spot": light.cone,
             "cookie_u": light.cookie[0],
-            "cookie_v": light.cookie[1],
+            "cookie_v": (*light.cookie[1][:3], light.radius),
         }
         for index, name in enumerate(VIRTUAL_FIELDS):
             at = 4 + 16 * MAX_VIRTUAL_LIGHTS + 4 * (index * MAX_VIRTUAL_LIGHTS + slot)

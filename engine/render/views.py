@@ -190,9 +190,10 @@ def lights_block(sky_sh: Sequence[Sequence[float]] | np.ndarray, directional: li
                  point: list[tuple], flat_sky: bool = False, environment: bool = True) -> bytes:
     """Pack the Lights block (shaders/include/lights.glsl, std140): ``sky_sh`` the sky's nine
     irradiance coefficients (9, 3) (``engine.render.irradiance``), directional =
-    [(direction, rgb)], point = [(position, range, rgb, cone[, cookie])] (``cone``: the spot
-    cone, ``light_rules.spot_cone``; ``ALL_ROUND`` for a point light; ``cookie``: its two
-    cookie rows, ``light_rules.lamp_cookie``, ``NO_COOKIE`` when left out).  ``flat_sky``: the sky cube
+    [(direction, rgb)], point = [(position, range, rgb, cone[, cookie[, radius]])] (``cone``: the
+    spot cone, ``light_rules.spot_cone``; ``ALL_ROUND`` for a point light; ``cookie``: its two
+    cookie rows, ``light_rules.lamp_cookie``, ``NO_COOKIE`` when left out; ``radius``: its
+    sphere's, ``PointLight.radius``, 0 when left out).  ``flat_sky``: the sky cube
     is the flat background of a world with no Skybox, not the light ``sky_sh`` holds (the
     environment's reflection then reads the harmonics: scene.frag environment_radiance).
     ``environment`` False: no surface reflects the light from all round by its material (the
@@ -211,9 +212,11 @@ def lights_block(sky_sh: Sequence[Sequence[float]] | np.ndarray, directional: li
         data[base + 4 * i: base + 4 * i + 3] = direction
         data[base + 4 * (MAX_DIRECTIONAL_LIGHTS + i): base + 4 * (MAX_DIRECTIONAL_LIGHTS + i) + 3] = rgb
     base += 8 * MAX_DIRECTIONAL_LIGHTS
-    for i, (position, light_range, rgb, cone, *cookie) in enumerate(point[:MAX_POINT_LIGHTS]):
+    for i, (position, light_range, rgb, cone, *more) in enumerate(point[:MAX_POINT_LIGHTS]):
+        cookie = more[:1]
         data[base + 4 * i: base + 4 * i + 4] = (*position, light_range)
-        data[base + 4 * (MAX_POINT_LIGHTS + i): base + 4 * (MAX_POINT_LIGHTS + i) + 3] = rgb
+        data[base + 4 * (MAX_POINT_LIGHTS + i): base + 4 * (MAX_POINT_LIGHTS + i) + 4] = \
+            (*rgb, more[1] if len(more) > 1 else 0.0)
         data[base + 4 * (2 * MAX_POINT_LIGHTS + i): base + 4 * (2 * MAX_POINT_LIGHTS + i) + 4] = cone
         right, up = cookie[0] if cookie else NO_COOKIE
         data[base + 4 * (3 * MAX_POINT_LIGHTS + i): base + 4 * (3 * MAX_POINT_LIGHTS + i) + 4] = right

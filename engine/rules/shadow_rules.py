@@ -488,6 +488,7 @@ class VirtualLight:
     legs: tuple[Leg, ...] = ()
     cone: tuple[float, float, float, float] = ALL_ROUND   # a point image's spot cone, carried (light_rules.spot_cone)
     cookie: tuple[tuple[float, ...], ...] = NO_COOKIE   # its cookie rows, carried (light_rules.lamp_cookie)
+    radius: float = 0.0              # a point light's sphere (PointLight.radius), scaled as the carry scales
 
 
 def _outline(surface) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
@@ -496,6 +497,12 @@ def _outline(surface) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
         return None
     c = np.asarray(surface.outline, np.float64)[:, :3]
     return c[0], c[2] - c[0], c[1] - c[0]
+
+
+def _carry_scale(carry: glm.mat4) -> float:
+    """How much ``carry`` scales lengths (a mirror 1; a portal pair of unequal sizes the
+    cube root of its linear part's determinant)."""
+    return abs(float(glm.determinant(glm.mat3(carry)))) ** (1.0 / 3.0)
 
 
 def _carry_plane(plane: glm.vec4, carry: glm.mat4) -> glm.vec4:
@@ -553,7 +560,8 @@ def virtual_lights(directional: list[tuple[int, glm.vec3, glm.vec3]],
     """The virtual lights of this frame's lights through the surfaces that carry light:
     ``directional`` as (entity, direction travelled, colour x intensity), ``points`` as
     (entity, position, range, colour x intensity, spot cone: ``light_rules.spot_cone``, or
-    ``ALL_ROUND``[, cookie rows: ``light_rules.lamp_cookie``]), ``surfaces`` the ``Surfaces`` resource,
+    ``ALL_ROUND``[, cookie rows: ``light_rules.lamp_cookie``[, sphere radius]]), ``surfaces`` the
+    ``Surfaces`` resource,
     ``bounces`` each light's limit (its ``bounces`` field; 1 when not given), ``depth_cap``
     the view tree's.
 
@@ -592,7 +600,8 @@ def virtual_lights(directional: list[tuple[int, glm.vec3, glm.vec3]],
         steps.append((surface, exit_surface, aperture, corners, tint, ball))
 
     def extend(light: VirtualLight | None, entity: int, kind: str, image: glm.vec3, light_range: float,
-               rgb: glm.vec3, limit: int, cone: tuple = ALL_ROUND, cookie: tuple = NO_COOKIE) -> None:
+               rgb: glm.vec3, limit: int, cone: tuple = ALL_ROUND, cookie: tuple = NO_COOKIE,
+               radius: float = 0.0) -> None:
         depth = 1 if light is None else light.bounces + 1
         if depth > limit:
             return
@@ -634,16 +643,17 @@ def virtual_lights(directional: list[tuple[int, glm.vec3, glm.vec3]],
                                 exit_surface.entity, surface.priority + (0 if light is None else light.priority),
                                 depth, path, apertures, legs,
                                 ALL_ROUND if kind == "directional" else carried_cone(cone, carry),
-                                NO_COOKIE if kind == "directional" else carried_cookie(cookie, carry))
+                                NO_COOKIE if kind == "directional" else carried_cookie(cookie, carry),
+                                0.0 if kind == "directional" else radius * _carry_scale(carry))
             found.append(made)
-            extend(made, entity, kind, new_image, light_range, color, limit, made.cone, made.cookie)
+            extend(made, entity, kind, new_image, light_range, color, limit, made.cone, made.cookie, made.radius)
 
     for entity, direction, rgb in directional:
         extend(None, entity, "directional", glm.normalize(glm.vec3(direction)), 0.0, glm.vec3(rgb),
                bounces.get(entity, 1))
-    for entity, position, light_range, rgb, cone, *cookie in points:
+    for entity, position, light_range, rgb, cone, *more in points:
         extend(None, entity, "point", glm.vec3(position), float(light_range), glm.vec3(rgb), bounces.get(entity, 1),
-               cone, cookie[0] if cookie else NO_COOKIE)
+               cone, more[0] if more else NO_COOKIE, float(more[1]) if len(more) > 1 else 0.0)
     return found
 
 

@@ -41,6 +41,31 @@ vec3 ggx_specular(vec3 n, vec3 l, vec3 v, vec3 f0, float roughness) {
     return schlick_fresnel(l, h, f0) * ggx_distribution(n, h, roughness) * ggx_visibility(n, l, v, roughness);
 }
 
+// The highlight of a sphere light (PointLight.radius): GGX times n.l towards its
+// representative point, the point of the sphere nearest the reflected ray ``r`` (Karis, "Real
+// Shading in Unreal Engine 4", 2013), the lobe's peak scaled by alpha^2 / alpha'^2 so the
+// wider highlight keeps the light's energy.  alpha'^2 = alpha^2 + s (3 alpha + s) / (4 v.h),
+// s the sine of the sphere's angular radius: the sphere's spread folded into the lobe as its
+// half vectors see it (Unreal's later form of the normalisation), which makes a mirror show
+// the sphere's own radiance at any angle; Karis's first alpha' = alpha + s / 2 is 1.6-2.5 x
+// too bright on smooth surfaces (measured against the sphere's light integrated by importance
+// sampling: tests/test_sphere_lights.py).  ``to_light``: from the point to the sphere's centre
+// (not unit); radius 0: a point light's highlight, GGX times n.l along ``to_light``.
+vec3 sphere_highlight(vec3 n, vec3 v, vec3 r, vec3 to_light, float radius, vec3 f0, float roughness) {
+    float dist = max(length(to_light), 1e-4);
+    vec3 l = to_light / dist;
+    float energy = 1.0;
+    if (radius > 0.0) {
+        vec3 centre_to_ray = dot(to_light, r) * r - to_light;
+        l = normalize(to_light + centre_to_ray * clamp(radius / max(length(centre_to_ray), 1e-6), 0.0, 1.0));
+        float alpha = max(roughness * roughness, 1e-4);
+        float s = min(radius / dist, 1.0);
+        float vh = max(dot(v, normalize(l + v)), 0.0);
+        energy = alpha * alpha / min(alpha * alpha + s * (2.0 * alpha + s) / (4.0 * vh + 1e-3), 1.0);
+    }
+    return ggx_specular(n, l, v, f0, roughness) * (energy * max(dot(n, l), 0.0));
+}
+
 // GGX reflection of one pre-filtered sample: radiance arriving along the reflection direction r, weighted by
 // Fresnel and visibility (the distribution term is folded into the pre-filtered sample).
 vec3 ggx_reflect(vec3 n, vec3 r, vec3 v, vec3 radiance, vec3 f0, float roughness) {

@@ -8,7 +8,7 @@ layout(std140) uniform Lights {
     vec4 directional_dir[MAX_DIRECTIONAL_LIGHTS];   // xyz: direction the light travels
     vec4 directional_color[MAX_DIRECTIONAL_LIGHTS]; // rgb: colour x intensity
     vec4 point_pos[MAX_POINT_LIGHTS];               // xyz: position, w: range
-    vec4 point_color[MAX_POINT_LIGHTS];             // rgb: colour x intensity
+    vec4 point_color[MAX_POINT_LIGHTS];             // rgb: colour x intensity, w: its sphere's radius (0: a point)
     vec4 point_spot[MAX_POINT_LIGHTS];              // the spot cone (light_rules.spot_cone; 0, 0, 0, 1: all round)
     vec4 point_cookie_u[MAX_POINT_LIGHTS];          // xyz: the cookie's right / tan(angle), w: its layer (-1: none)
     vec4 point_cookie_v[MAX_POINT_LIGHTS];          // xyz: its top / tan(angle) (light_rules.lamp_cookie)

@@ -25,7 +25,8 @@ layout(std140) uniform VirtualLights {
                                                     // w: how many further outlines (virtual_more)
     vec4 virtual_spot[MAX_VIRTUAL_LIGHTS];          // a point image's spot cone, carried (spot_cone.glsl spot_factor)
     vec4 virtual_cookie_u[MAX_VIRTUAL_LIGHTS];      // its cookie's right / tan(angle), carried; w: layer (-1: none)
-    vec4 virtual_cookie_v[MAX_VIRTUAL_LIGHTS];      // its cookie's top / tan(angle), carried (spot_cookie.glsl)
+    vec4 virtual_cookie_v[MAX_VIRTUAL_LIGHTS];      // xyz: its cookie's top / tan(angle), carried (spot_cookie.glsl);
+                                                    // w: a point image's sphere radius (PointLight.radius)
     vec4 virtual_more[MAX_VIRTUAL_LIGHTS * (MAX_APERTURES - 1) * 4];  // per outline: plane, corner, u, v (as above)
 } virtual_lights;
 
@@ -107,10 +108,13 @@ vec3 virtual_lighting(vec3 position, vec3 normal, vec3 geometric, vec3 to_eye, v
 #else
         const vec3 cookie = vec3(1.0);
 #endif
-        vec3 arriving = virtual_lights.virtual_color[i].rgb * cookie * nl * falloff
+        vec3 arriving = virtual_lights.virtual_color[i].rgb * cookie * falloff
                         * (shadowed ? virtual_shadow(i, position, geometric, l, dist) : 1.0);
-        vec3 highlight = ggx_specular(normal, l, to_eye, f0, roughness) * energy_compensation;
-        total += (diffuse + highlight) * arriving;
+        // A point image's sphere (its light's radius, in the cookie row's w; ggx.glsl sphere_highlight)
+        vec3 highlight = (image.w > 0.5 ? sphere_highlight(normal, to_eye, reflect(-to_eye, normal), image.xyz - position,
+                                                           virtual_lights.virtual_cookie_v[i].w, f0, roughness)
+                                        : ggx_specular(normal, l, to_eye, f0, roughness) * nl) * energy_compensation;
+        total += (diffuse * nl + highlight) * arriving;
         highlight_light += highlight * arriving;  // (scene.frag's: the highlights summed apart)
     }
     return total;
