@@ -44,13 +44,15 @@ vec3 ggx_specular(vec3 n, vec3 l, vec3 v, vec3 f0, float roughness) {
 // The highlight of a sphere light (PointLight.radius): GGX times n.l towards its
 // representative point, the point of the sphere nearest the reflected ray ``r`` (Karis, "Real
 // Shading in Unreal Engine 4", 2013), the lobe's peak scaled by alpha^2 / alpha'^2 so the
-// wider highlight keeps the light's energy.  alpha'^2 = alpha^2 + s (3 alpha + s) / (4 v.h),
-// s the sine of the sphere's angular radius: the sphere's spread folded into the lobe as its
-// half vectors see it (Unreal's later form of the normalisation), which makes a mirror show
-// the sphere's own radiance at any angle; Karis's first alpha' = alpha + s / 2 is 1.6-2.5 x
-// too bright on smooth surfaces (measured against the sphere's light integrated by importance
-// sampling: tests/test_sphere_lights.py).  ``to_light``: from the point to the sphere's centre
-// (not unit); radius 0: a point light's highlight, GGX times n.l along ``to_light``.
+// wider highlight keeps the light's energy: alpha'^2 = alpha^2 + s (2 alpha + s) / (4 v.h),
+// s the sine of the sphere's angular radius, its spread as the lobe's half vectors see it.
+// Its s^2 / (4 v.h) makes a mirror show the sphere's own radiance at any angle (as Unreal's
+// later normalisation, a2 + s (3 alpha + s) / (4 v.h), does); its cross term was chosen by
+// measurement against the sphere's light integrated over the lobe by importance sampling
+// (tests/test_sphere_lights.py): within 10% of it from roughness 0.05 to 0.7, where 3 alpha
+// lost 17% on rough surfaces and Karis's first alpha' = alpha + s / 2 was 1.8 x too bright
+// on smooth ones.  ``to_light``: from the point to the sphere's centre (not unit); radius 0:
+// a point light's highlight, GGX times n.l along ``to_light``.
 vec3 sphere_highlight(vec3 n, vec3 v, vec3 r, vec3 to_light, float radius, vec3 f0, float roughness) {
     float dist = max(length(to_light), 1e-4);
     vec3 l = to_light / dist;
