@@ -112,6 +112,10 @@ class PrepareSystem(esper.Processor):
             self._environment_packed = self.environment_reflections
             if self._cookies(kept):
                 renderer.note_scene_change()   # an image in the cookie array changed, or its build
+            spheres = any(world.get(entity, PointLight).radius > 0.0 for entity in kept.point if entity is not None)
+            if spheres != renderer.sphere_lights:
+                renderer.sphere_lights = spheres   # the SPHERE_LIGHTS builds, or not
+                renderer.note_scene_change()
             block = lights_block(self._sky_sh, *self._rows(kept), flat_sky=self._flat_sky,
                                  environment=self.environment_reflections)
             if block != self._lights:

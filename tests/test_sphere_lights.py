@@ -147,3 +147,9 @@ def test_a_sphere_lights_image_in_a_mirror_keeps_its_radius(scene):
     block = runner.engine.renderer.shadows.virtual_block
     at = 4 + 16 * MAX_VIRTUAL_LIGHTS + 4 * (VIRTUAL_FIELDS.index("cookie_v") * MAX_VIRTUAL_LIGHTS + 0)
     assert block[at + 3] == pytest.approx(0.25, rel=1e-6)
+    # The sphere's builds only while a kept light is one.
+    renderer = runner.engine.renderer
+    assert renderer.sphere_lights
+    runner.world.get(runner.world.query_one(PointLight)[0][0], PointLight).radius = 0.0
+    runner.frame()
+    assert not renderer.sphere_lights and block[at + 3] == 0.0

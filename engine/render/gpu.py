@@ -195,6 +195,9 @@ class Gpu:
         self.normal_map_anisotropy = 1.0 if caps.software else self.texture_anisotropy
         # The kept spot lights' cookies (PointLight.cookie; the prepare stage sets them), filtered
         # as normal maps are (anisotropy on a GPU).
+        # Whether a kept point light is a sphere (PointLight.radius; the prepare stage sets it):
+        # the scene programs' SPHERE_LIGHTS builds.
+        self.sphere_lights = False
         self.spot_cookies = SpotCookies(ctx, caps.max_texture_image_units, self.normal_map_anisotropy, caps.software)
         # Debug mode: every pass checks for an OpenGL error when it ends and names itself
         # (checkpoint); glGetError is cheap on the CPU but makes no sense to pay in a game.

@@ -154,6 +154,8 @@ class ScenePrograms:
         shadowing = self.shadows.program_defines  # the lookups a program compiles (ShadowMaps.upload's)
         fogging = self.renderer.fog.defines       # FOG while the active camera's fog has a density
         cookies = self.renderer.spot_cookies.defines  # SPOT_COOKIES while a kept spot light has a cookie
+        if self.renderer.sphere_lights:  # SPHERE_LIGHTS while a kept point light has a radius
+            cookies = (*cookies, ("SPHERE_LIGHTS", "1"))
         if screen == "depth_normals":  # nothing shaded: only a cutout's discard picks the build
             variants, normal_mapped, checker, probe_blend, ambient_probes, probe_rest = None, False, False, False, \
                 False, False
