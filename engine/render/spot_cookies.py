@@ -47,6 +47,9 @@ def cookie_texels(texture: TextureData, size: int = COOKIE_SIZE) -> np.ndarray:
 
 
 class SpotCookies:
+    """The cookie array and which image is in which layer.  Images are known by ``id``; each
+    one with a layer is held (``_images``) so no other image can take its id meanwhile."""
+
     def __init__(self, ctx: moderngl.Context, texture_units: int, anisotropy: float = 1.0,
                  software: bool = False) -> None:
         self.ctx = ctx
