@@ -122,9 +122,9 @@ class Material(TrackedComponent):
     below 1: the transparent slot) fades.  ``"fade"`` (the default, glTF's BLEND, Unity's
     Fade mode): everything, its highlights and reflections too, so at alpha 0 it is gone.
     ``"transparent"`` (Unity's Transparent mode, Filament's transparent blending): only the
-    light it scatters, its diffuse colour; the lights' highlights and its reflection of the
-    light from all round stay whole over what shows through, as on a window pane or clear
-    plastic, whose alpha is how much of its colour covers what is behind.  (Refraction, what
+    light it scatters, its diffuse colour; the lights' highlights, its reflection of the light
+    from all round and a ``Reflective``'s reflection stay whole over what shows through, as on
+    a window pane or clear plastic, whose alpha is how much of its colour covers what is behind.  (Refraction, what
     lies behind bent and tinted: ``Refractive``.)
     """
 

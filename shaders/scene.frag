@@ -389,12 +389,18 @@ vec3 mapped_normal(vec3 n, vec3 p, vec2 uv, float scale) {
 #endif
 
 // --- Reflect slot ---------------------------------------------------------------------
+// The part of the colour that is reflected light (the lights' highlights, the environment's
+// reflection, a reflect slot's): what a see-through Material.blend "transparent" keeps whole
+// (main).  A slot mixes it as it mixes the colour.
+vec3 kept_light = vec3(0.0);
+
 vec3 reflect_skybox(vec3 color, Surface s) {
     // Sample the sky along reflect(view, normal); mix by the instance's amount.
     vec3 radiance = sample_environment(s.reflect_dir, s.reflect_lod, s.roughness);
 #ifdef SCREEN_REFLECTION
     mix_reflection(v_tint.rgb * s.occlusion, radiance, v_reflect.x);
 #endif
+    kept_light = mix(kept_light, radiance * v_tint.rgb * s.occlusion, v_reflect.x);
     return mix(color, radiance * v_tint.rgb * s.occlusion, v_reflect.x);
 }
 
@@ -409,6 +415,7 @@ vec3 reflect_probe(vec3 color, Surface s) {
     mix_reflection(ggx_reflect(s.normal, s.reflect_dir, s.to_eye, vec3(s.occlusion), s.f0, s.roughness) * v_tint.rgb,
                    radiance, v_reflect.x);
 #endif
+    kept_light = mix(kept_light, reflected * v_tint.rgb, v_reflect.x);
     return mix(color, reflected * v_tint.rgb, v_reflect.x);
 }
 
@@ -594,7 +601,10 @@ void main() {
 #if defined(SCREEN_REFLECTION) && defined(METALLIC_ROUGHNESS_MAP)
     vec3 lit_weight = reflect_weight, lit_added = reflect_added;  // (the environment reflection's, in lit)
 #endif
+    kept_light = highlight_light * s.direct_occlusion + environment_light;
+    vec3 lit_kept = kept_light;
     vec3 color = mapped_reflection(SLOT_REFLECT, lit, apply_reflect(SLOT_REFLECT, lit, s), metal_share);
+    kept_light = mapped_reflection(SLOT_REFLECT, lit_kept, kept_light, metal_share);
     color = apply_refract(SLOT_REFRACT, color, s);
     color = apply_emissive(SLOT_EMISSIVE, color, s);
 #ifdef SCREEN_REFLECTION
@@ -619,9 +629,10 @@ void main() {
     float alpha = 1.0;
     if (transparent != 0) {
         // Premultiplied by the alpha (the transparent slot blends ONE, ONE_MINUS_SRC_ALPHA):
-        // all of the colour (fade), or all but the highlights and the environment's reflection,
-        // which lie whole over what shows through (Material.blend "transparent").
-        vec3 kept = transparent == 2 ? highlight_light * s.direct_occlusion + environment_light : vec3(0.0);
+        // all of the colour (fade), or all but its reflected light (kept_light: highlights, the
+        // environment's and a slot's reflection), whole over what shows through
+        // (Material.blend "transparent").
+        vec3 kept = transparent == 2 ? kept_light : vec3(0.0);
         color = (color - kept) * s.alpha + kept;
         alpha = s.alpha;
     }

@@ -8,7 +8,17 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from components import ComponentValueError, DirectionalLight, Emissive, Fog, Material, MeshRef, Skybox, Transform
+from components import (
+    ComponentValueError,
+    DirectionalLight,
+    Emissive,
+    Fog,
+    Material,
+    MeshRef,
+    Reflective,
+    Skybox,
+    Transform,
+)
 from engine.assets.mesh import quad
 from tests.support import look_from, srgb_to_linear
 
@@ -16,7 +26,7 @@ SIZE = (120, 90)
 ALPHA = 0.3
 
 
-def scene_with(pane: Material | None, fog: bool = False):
+def scene_with(pane: Material | tuple | None, fog: bool = False):
     def build(world):
         camera = look_from(world, (0.0, 0.0, 6.0), (0.0, 0.0, 0.0), fov=40.0)
         if fog:
@@ -27,11 +37,11 @@ def scene_with(pane: Material | None, fog: bool = False):
         world.spawn(Transform(position=(0.0, 0.0, -2.0)), MeshRef(quad(12.0, 9.0)),
                     Material(color=(0.0, 0.0, 0.4, 1.0), environment_reflection=0.0), Emissive(power=1.0))  # blue
         if pane is not None:
-            world.spawn(Transform(), MeshRef(quad(3.0, 3.0)), pane)
+            world.spawn(Transform(), MeshRef(quad(3.0, 3.0)), *(pane if isinstance(pane, tuple) else (pane,)))
     return build
 
 
-def linear(scene, pane: Material | None, fog: bool = False) -> np.ndarray:
+def linear(scene, pane: Material | tuple | None, fog: bool = False) -> np.ndarray:
     runner = scene(scene_with(pane, fog), SIZE)
     runner.engine.renderer.antialias = "off"
     runner.frame()
@@ -54,6 +64,24 @@ def test_transparent_keeps_the_highlights_and_reflections_whole_and_fade_fades_t
     np.testing.assert_allclose(faded[middle], ALPHA * light + (1.0 - ALPHA) * wall[middle], atol=step, rtol=0.02)
     # (and the two differ where the highlight is: by (1 - alpha) of it)
     assert (kept[middle][..., 0] - faded[middle][..., 0]).max() > 0.1
+
+
+def test_a_see_through_reflective_keeps_its_slots_reflection_whole(scene):
+    """A black pane with Reflective("skybox", mix=0.6): its light is the slot's reflection of
+    the sky (and what the mix leaves of the sun's highlight), all of it kept whole by
+    "transparent" over (1 - alpha) x the wall, faded to alpha x it by "fade"."""
+    def pane(alpha: float, blend: str = "fade") -> tuple:
+        return (Material(color=(0.0, 0.0, 0.0, alpha), roughness=0.3, blend=blend), Reflective(mode="skybox", mix=0.6))
+
+    wall = linear(scene, None)
+    opaque, kept, faded = linear(scene, pane(1.0)), linear(scene, pane(ALPHA, "transparent")), \
+        linear(scene, pane(ALPHA))
+    h, w = SIZE[1], SIZE[0]
+    middle = (slice(h // 2 - 25, h // 2 + 25), slice(w // 2 - 30, w // 2 + 30))
+    light = opaque[middle]
+    assert light[..., 0].min() > 0.2   # the sky's reflection: 0.6 x 0.5
+    np.testing.assert_allclose(kept[middle], light + (1.0 - ALPHA) * wall[middle], atol=0.012, rtol=0.02)
+    np.testing.assert_allclose(faded[middle], ALPHA * light + (1.0 - ALPHA) * wall[middle], atol=0.012, rtol=0.02)
 
 
 def test_in_fog_a_see_through_pane_gives_its_alphas_share_of_the_fogs_light(scene):
