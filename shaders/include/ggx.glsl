@@ -16,11 +16,16 @@ float f0_from_ior(float ior) {
     return pow((ior - 1.0) / (ior + 1.0), 2.0);
 }
 
+// The GGX distribution, its denominator n.h^2 alpha^2 + (1 - n.h^2) with 1 - n.h^2 taken as
+// |n x h|^2 (Filament's form): written as n.h^2 (alpha^2 - 1) + 1 it cancels in float32 near
+// the peak, where a polished surface (alpha^2 1.6e-7 at roughness 0.02) lost two thirds of
+// its highlight to one unit in the last place of n.h.
 float ggx_distribution(vec3 n, vec3 h, float roughness) {
     float a2 = max(roughness * roughness, 1e-4);
     a2 *= a2;
     float nh = max(dot(n, h), 0.0);
-    float d = nh * nh * (a2 - 1.0) + 1.0;
+    vec3 nxh = cross(n, h);
+    float d = nh * nh * a2 + dot(nxh, nxh);
     return a2 / (PI * d * d);
 }
 
