@@ -178,3 +178,15 @@ def engine_frames(ctx, game, frames: int, sizes, configure=None, step=None, afte
     finally:
         engine.close()
     return out
+
+
+def green_and_rays(scene, build, size) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``build``'s second frame at ``size`` (FXAA off) as linear green, a value a pixel, rows
+    from the top, with the eye and each pixel's unit ray (``pixel_rays``): what a test that
+    casts the pixels' rays at a surface compares."""
+    runner = scene(build, size)
+    runner.engine.renderer.antialias = "off"
+    runner.frame()
+    shown = srgb_to_linear(runner.frame())[..., 1].reshape(-1)
+    eye, rays = pixel_rays(runner.engine.main_view, size)
+    return shown, eye, rays.reshape(-1, 3)

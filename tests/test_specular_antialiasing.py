@@ -10,7 +10,7 @@ import numpy as np
 
 from components import DirectionalLight, Material, MeshRef, Skybox, Transform
 from engine.assets.mesh import plane, sphere
-from tests.support import linear_to_srgb8, look_from, pixel_rays, srgb_to_linear
+from tests.support import green_and_rays, linear_to_srgb8, look_from, srgb_to_linear
 
 SIZE = (64, 48)
 SUPER = 8
@@ -76,12 +76,7 @@ def test_a_flat_surface_keeps_its_highlight(scene):
         world.spawn(DirectionalLight(direction=tuple(sun), intensity=intensity, shadows=False))
         world.spawn(Transform(), MeshRef(plane(40.0, 40.0)),
                     Material(color=(0.0, 0.0, 0.0, 1.0), roughness=roughness, environment_reflection=0.0))
-    runner = scene(build, SIZE)
-    runner.engine.renderer.antialias = "off"
-    runner.frame()
-    shown = srgb_to_linear(runner.frame())[..., 1].reshape(-1)
-    eye, rays = pixel_rays(runner.engine.main_view, SIZE)
-    rays = rays.reshape(-1, 3)
+    shown, _, rays = green_and_rays(scene, build, SIZE)
     floor = rays[:, 1] < -0.05
     view = -rays[floor]
     normal = np.tile([0.0, 1.0, 0.0], (len(view), 1))

@@ -14,7 +14,7 @@ import pytest
 from components import ComponentValueError, Material, MeshRef, PointLight, Skybox, Transform
 from engine.assets.mesh import plane, quad
 from engine.render.environment_brdf import environment_brdf
-from tests.support import look_from, pixel_rays, srgb_to_linear
+from tests.support import green_and_rays, look_from
 
 SIZE = (96, 72)
 LIGHT = np.array([0.0, 1.2, -1.0])
@@ -67,12 +67,7 @@ def floor_frame(scene, roughness: float, radius: float, intensity: float):
         world.spawn(Transform(), MeshRef(plane(30.0, 30.0)),
                     Material(color=(1.0, 1.0, 1.0, 1.0), metallic=1.0, roughness=roughness, environment_reflection=0.0))
         world.spawn(Transform(position=tuple(LIGHT)), PointLight(intensity=intensity, range=RANGE, radius=radius))
-    runner = scene(build, SIZE)
-    runner.engine.renderer.antialias = "off"
-    runner.frame()
-    shown = srgb_to_linear(runner.frame())[..., 1].reshape(-1)
-    eye, rays = pixel_rays(runner.engine.main_view, SIZE)
-    rays = rays.reshape(-1, 3)
+    shown, eye, rays = green_and_rays(scene, build, SIZE)
     t = -eye[1] / rays[:, 1]
     on_floor = (t > 0) & (t < 12.0)
     return shown[on_floor], (eye + rays * t[:, None])[on_floor], -rays[on_floor]

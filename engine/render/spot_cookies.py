@@ -142,7 +142,4 @@ class SpotCookies:
 def _capacity(need: int) -> int:
     """Layers to make for ``need`` images: the power of two at or above it, at most
     ``MAX_POINT_LIGHTS`` (every kept light its own image)."""
-    capacity = 1
-    while capacity < need:
-        capacity *= 2
-    return min(capacity, MAX_POINT_LIGHTS)
+    return min(1 << max(0, need - 1).bit_length(), MAX_POINT_LIGHTS)
