@@ -124,8 +124,10 @@ class Material(TrackedComponent):
     ``"transparent"`` (Unity's Transparent mode, Filament's transparent blending): only the
     light it scatters, its diffuse colour; the lights' highlights, its reflection of the light
     from all round and a ``Reflective``'s reflection stay whole over what shows through, as on
-    a window pane or clear plastic, whose alpha is how much of its colour covers what is behind.  (Refraction, what
-    lies behind bent and tinted: ``Refractive``.)
+    a window pane or clear plastic, whose alpha is how much of its colour covers what is behind,
+    and so does an ``Emissive``'s light (a lit sign on glass, a neon tube: Unity's Standard
+    shader adds emission after its premultiply).  (Refraction, what lies behind bent and
+    tinted: ``Refractive``.)
     """
 
     color: Any = field(default_factory=lambda: glm.vec4(0.8, 0.8, 0.8, 1.0))

@@ -606,7 +606,8 @@ void main() {
     vec3 color = mapped_reflection(SLOT_REFLECT, lit, apply_reflect(SLOT_REFLECT, lit, s), metal_share);
     kept_light = mapped_reflection(SLOT_REFLECT, lit_kept, kept_light, metal_share);
     color = apply_refract(SLOT_REFRACT, color, s);
-    color = apply_emissive(SLOT_EMISSIVE, color, s);
+    vec3 emitted = apply_emissive(SLOT_EMISSIVE, vec3(0.0), s);
+    color += emitted;
 #ifdef SCREEN_REFLECTION
     // The reflections through what follows the reflect slot: the map's metal share
     // (mapped_reflection mixes lit and the slot's by it), the fog's transmittance (fogged
@@ -629,10 +630,11 @@ void main() {
     float alpha = 1.0;
     if (transparent != 0) {
         // Premultiplied by the alpha (the transparent slot blends ONE, ONE_MINUS_SRC_ALPHA):
-        // all of the colour (fade), or all but its reflected light (kept_light: highlights, the
-        // environment's and a slot's reflection), whole over what shows through
+        // all of the colour (fade), or all but its reflected and emitted light (kept_light:
+        // highlights, the environment's and a slot's reflection; emission, as Unity's Standard
+        // shader adds it after its premultiply), whole over what shows through
         // (Material.blend "transparent").
-        vec3 kept = transparent == 2 ? kept_light : vec3(0.0);
+        vec3 kept = transparent == 2 ? kept_light + emitted : vec3(0.0);
         color = (color - kept) * s.alpha + kept;
         alpha = s.alpha;
     }

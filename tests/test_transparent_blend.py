@@ -20,6 +20,7 @@ from components import (
     Transform,
 )
 from engine.assets.mesh import quad
+from engine.assets.texture_data import TextureData
 from tests.support import look_from, srgb_to_linear
 
 SIZE = (120, 90)
@@ -117,3 +118,25 @@ def test_blend_is_checked_and_written_in_level_files(tmp_path):
     again = World("again")
     names = load_level(saved).spawn(again)
     assert again.get(names["pane"], Material).blend == "transparent"
+
+
+def test_transparent_keeps_an_emissive_panes_light_whole(scene):
+    """A black, unreflecting pane that glows (Emissive power 0.5 times an orange emissive
+    map): "transparent" keeps the glow whole over (1 - alpha) x the wall, as a lit sign on
+    glass is; "fade" fades it with the rest.  The glow alone is the opaque pane's frame (its
+    highlight is under a level: black, roughness 1)."""
+    orange = TextureData(np.full((4, 4, 3), (240, 150, 20), np.uint8), name="orange")
+
+    def pane(alpha: float, blend: str = "fade") -> tuple:
+        return (Material(color=(0.0, 0.0, 0.0, alpha), roughness=1.0, environment_reflection=0.0, blend=blend,
+                         emissive_map=orange), Emissive(power=0.5))
+
+    wall = linear(scene, None)
+    glow, kept, faded = linear(scene, pane(1.0)), linear(scene, pane(ALPHA, "transparent")), \
+        linear(scene, pane(ALPHA))
+    h, w = SIZE[1], SIZE[0]
+    middle = (slice(h // 2 - 25, h // 2 + 25), slice(w // 2 - 30, w // 2 + 30))
+    light = glow[middle]
+    assert light[..., 0].min() > 0.3 and light[..., 1].min() > 0.08   # the glow
+    np.testing.assert_allclose(kept[middle], light + (1.0 - ALPHA) * wall[middle], atol=0.012, rtol=0.02)
+    np.testing.assert_allclose(faded[middle], ALPHA * light + (1.0 - ALPHA) * wall[middle], atol=0.012, rtol=0.02)
