@@ -547,3 +547,64 @@ def test_gltf_texture_transform_shared_by_a_materials_maps_is_baked_into_its_uvs
     expected = np.array(seen)
     assert (np.abs(middle - expected * (middle.max(axis=1, keepdims=True) / 255.0)).max(axis=1) < 40).all(), \
         middle[:4]
+
+
+def test_gltf_texture_transform_rotation_turns_the_image_as_the_extensions_example_says(scene, tmp_path):
+    """KHR_texture_transform's own example: offset (0, 1), rotation a quarter turn and scale
+    0.5 "utilize only the lower left quadrant of the source image, rotated clockwise 90
+    degrees".  That quadrant holds four colours (red top left, green top right, blue
+    bottom left, white bottom right); turned clockwise, the quad shows blue top left, red
+    top right, white bottom left and green bottom right.  The rest of the image is grey,
+    so the wrong quadrant (or the turn the other way) shows grey or the colours swapped."""
+    pixels = np.full((8, 8, 3), 128, np.uint8)
+    pixels[4:6, 0:2], pixels[4:6, 2:4] = (255, 0, 0), (0, 255, 0)
+    pixels[6:8, 0:2], pixels[6:8, 2:4] = (0, 0, 255), (255, 255, 255)
+    transform = {"offset": [0.0, 1.0], "rotation": math.pi / 2, "scale": [0.5, 0.5]}
+    material = {"name": "turned", "pbrMetallicRoughness": {
+        "baseColorFactor": [1.0, 1.0, 1.0, 1.0],
+        "baseColorTexture": {"index": 0, "extensions": {"KHR_texture_transform": transform}}}}
+    path = write_glb(tmp_path / "turned.glb", quad(2.0, 2.0), material, [pixels],
+                     {"extensionsUsed": ["KHR_texture_transform"]})
+
+    def build(world):
+        look_from(world, (0.0, 1.0, 2.0), (0.0, 1.0, 0.0))
+        spawn_model(world, path, position=(0.0, 1.0, 0.0))
+        for entity, _ in list(world.query_one(Material)):   # no light: it shows its texture's colour
+            if not world.has(entity, Emissive):
+                world.add_component(entity, Emissive(1.0))
+    runner = scene(build, (64, 48))
+    runner.engine.renderer.antialias = "off"
+    frame = runner.frame().astype(int)
+    # the quad spans about 0.58 of the view (2 m at 2 m, 60 degrees): its quarters' middles
+    h, w = frame.shape[:2]
+    quarter = round(0.58 * h / 4)
+    for (dy, dx), colour in {(-1, -1): (0, 0, 255), (-1, 1): (255, 0, 0), (1, -1): (255, 255, 255),
+                             (1, 1): (0, 255, 0)}.items():
+        y, x = h // 2 + dy * quarter, w // 2 + dx * quarter
+        seen = frame[y - 1:y + 2, x - 1:x + 2].reshape(-1, 3)
+        expected = np.array(colour) * (seen.max() / 255.0)
+        assert np.abs(seen - expected).max() < 40, ((dy, dx), seen[:2])
+
+
+def test_gltf_texture_transform_rotation_turns_the_uvs_counter_clockwise_with_v_down(tmp_path):
+    """"Rotate the UVs by this many radians counter-clockwise around the origin" in glTF's
+    UV space, v running down the image: the quad's u edge, (1, 0) untransformed, becomes
+    scale x (cos r, -sin r) there (turned towards the image's top), its v edge scale x
+    (sin r, cos r), and the corner at the origin moves by the offset alone."""
+    r, scale, offset = 0.4, 0.7, (0.2, 0.1)
+    material = {"name": "turned", "pbrMetallicRoughness": {"baseColorTexture": {"index": 0, "extensions": {
+        "KHR_texture_transform": {"offset": list(offset), "rotation": r, "scale": [scale, scale]}}}}}
+    flat = quad(2.0, 2.0)
+    path = write_glb(tmp_path / "turned.glb", flat, material, [np.full((4, 4, 3), 200, np.uint8)])
+    (part,) = load_model(path)
+
+    def gltf_uv(uvs: np.ndarray) -> np.ndarray:
+        return np.stack([uvs[:, 0], 1.0 - uvs[:, 1]], axis=1)   # the engine's v runs up
+
+    before, after = gltf_uv(flat.uvs), gltf_uv(part.mesh.uvs)
+    origin = int(np.argmin(np.abs(before).sum(axis=1)))
+    along_u = int(np.argmin(np.abs(before - (1.0, 0.0)).sum(axis=1)))
+    along_v = int(np.argmin(np.abs(before - (0.0, 1.0)).sum(axis=1)))
+    np.testing.assert_allclose(after[origin], offset, atol=1e-6)
+    np.testing.assert_allclose(after[along_u] - after[origin], scale * np.array([math.cos(r), -math.sin(r)]), atol=1e-6)
+    np.testing.assert_allclose(after[along_v] - after[origin], scale * np.array([math.sin(r), math.cos(r)]), atol=1e-6)

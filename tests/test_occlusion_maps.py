@@ -220,10 +220,10 @@ def _moved(**transform) -> dict:
     ({"index": 0, "texCoord": 1}, None, "it reads TEXCOORD_1"),
     (_moved(texCoord=1), None, "it reads TEXCOORD_1"),
     (_moved(scale=[2, 2]), {"index": 0}, "its KHR_texture_transform differs from its material's other maps'"),
-    (_moved(rotation=0.4), None, "its KHR_texture_transform rotates its UVs")])
+    (_moved(rotation=0.4), {"index": 0}, "its KHR_texture_transform differs from its material's other maps'")])
 def test_a_map_on_uvs_the_engine_does_not_read_is_left_out_with_a_warning(tmp_path, info, colour_map, reason):
-    """A slot reading the second UV set (an occlusion map on lightmap UVs), moving its UVs
-    unlike the material's other maps, or rotating them would be drawn in the wrong place:
+    """A slot reading the second UV set (an occlusion map on lightmap UVs), or moving or
+    turning its UVs unlike the material's other maps, would be drawn in the wrong place:
     the map is left out, and a warning names the material, the slot and why; the rest of
     the material is read."""
     material = {"name": "walled", "pbrMetallicRoughness": {"baseColorFactor": [0.8, 0.5, 0.3, 1.0]},

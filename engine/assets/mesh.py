@@ -735,16 +735,22 @@ class _MaterialMaps:
 
     def _uv_transformed(self, mesh: Mesh, transform: tuple[float, float, float, float, float]) -> Mesh:
         """``mesh`` with its UVs moved by a glTF ``KHR_texture_transform`` (offset x, offset
-        y, rotation, scale x, scale y; the rotation 0: a rotating one is left out when the
-        file is read) every map of its material shares: ``offset + scale x uv`` in glTF's UV
-        space (v down from the image's top; the engine's v is 1 - that), baked once a mesh
-        and transform."""
+        y, rotation, scale x, scale y) every map of its material shares, baked once a mesh and
+        transform: ``offset + R(rotation) (scale x uv)`` in glTF's UV space (v down from the
+        image's top; the engine's v is 1 - that), R turning u towards -v: counter-clockwise as
+        the UV square is drawn with v down, the image clockwise on the surface.  That is the
+        direction of the extension's text and its example (offset (0, 1), a quarter turn and
+        scale 0.5 show the image's lower left quarter turned clockwise) and of three.js's
+        GLTFLoader (``Matrix3.setUvTransform``); the matrix in its GLSL listing, written as
+        for v up, turns the other way (KhronosGroup/glTF issue 1563)."""
         key = ("uv transform", id(mesh), transform)
         made = self._made.get(key)
         if made is None:
-            ox, oy, _, sx, sy = transform
-            moved_u = mesh.uvs[:, 0].astype(np.float64) * sx + ox
-            moved_v = (1.0 - mesh.uvs[:, 1].astype(np.float64)) * sy + oy
+            ox, oy, rotation, sx, sy = transform
+            c, s = math.cos(rotation), math.sin(rotation)
+            u = mesh.uvs[:, 0].astype(np.float64) * sx
+            v = (1.0 - mesh.uvs[:, 1].astype(np.float64)) * sy
+            moved_u, moved_v = ox + c * u + s * v, oy - s * u + c * v
             made = self._made[key] = Mesh(mesh.positions, mesh.normals, np.stack([moved_u, 1.0 - moved_v], axis=1),
                                           mesh.indices, name=mesh.name, colors=mesh.colors)
         return made

@@ -418,7 +418,7 @@ def _json(path: Path, data: bytes, quiet: bool = False) -> dict | None:
     return doc if isinstance(doc, dict) else None
 
 
-# glTF extensions the engine reads (a texture transform: offset and scale, shared by a material's maps)
+# glTF extensions the engine reads (a texture transform: offset, rotation and scale, shared by a material's maps)
 GLTF_READ_EXTENSIONS = frozenset({"KHR_materials_emissive_strength", "KHR_texture_transform"})
 
 
@@ -512,8 +512,8 @@ def prepare_gltf(path: Path, data: bytes, roots: Sequence[Path], textures: bool)
         transforms = {slot: _uv_transform(info, f"{what}: {result.label(index)}: {slot}")
                       for slot in GLTF_TEXTURE_SLOTS if (info := pbr.get(slot, material.get(slot))) is not None}
         shared = set(transforms.values())
-        if len(shared) == 1 and None not in shared and next(iter(shared))[2] == 0.0:
-            # one offset and scale for every map: baked into the UVs
+        if len(shared) == 1 and None not in shared:
+            # one offset, rotation and scale for every map: baked into the UVs
             result.uv_transforms[index] = shared.pop()
         for slot in GLTF_TEXTURE_SLOTS:
             info = pbr.get(slot, material.get(slot))
@@ -521,11 +521,7 @@ def prepare_gltf(path: Path, data: bytes, roots: Sequence[Path], textures: bool)
                 continue
             label = f"{what}: {result.label(index)}: {slot}"
             unread = _unread_texture(info)
-            if unread is None and transforms[slot] is not None and transforms[slot][2] != 0.0:
-                # The extension's text and its reference GLSL turn the image opposite ways, and
-                # viewers differ: a rotation is left out rather than drawn one way at a guess.
-                unread = "its KHR_texture_transform rotates its UVs, which the engine does not read"
-            elif unread is None and len(shared) > 1 and transforms[slot] is not None:
+            if unread is None and len(shared) > 1 and transforms[slot] is not None:
                 unread = ("its KHR_texture_transform differs from its material's other maps' (one transform a "
                           "material is baked into the UVs)")
             if unread is not None:
