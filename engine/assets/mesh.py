@@ -33,6 +33,7 @@ from engine.assets.model_files import (
     prepare_gltf,
     prepare_obj,
 )
+from engine.assets.model_lights import ModelLight, read_gltf_lights
 from engine.assets.texture_data import (
     MAX_TEXTURE_SIDE,
     WORK_BLOCK,
@@ -424,9 +425,25 @@ SUPPORTED_SUFFIXES = (".obj", ".glb", ".gltf", ".ply", ".stl", ".off")
 MAX_MESH_FILE_BYTES = 256 << 20  # a mesh file's size: trimesh holds several times it while parsing
 
 
+@dataclass
+class LoadedModel:
+    """A model file's parts and the lights its nodes carry (a glTF's ``KHR_lights_punctual``,
+    ``engine/assets/model_lights.py``; other formats have none)."""
+
+    parts: list[ModelPart]
+    lights: list[ModelLight]
+
+
 def load_model(path: str | Path, roots: Sequence[str | Path] | None = None,
                materials: bool = True) -> list[ModelPart]:
-    """Load every mesh of a file with trimesh; errors name the file and the reason.
+    """The parts of ``load_model_file``: every mesh of a file, with its material."""
+    return load_model_file(path, roots, materials).parts
+
+
+def load_model_file(path: str | Path, roots: Sequence[str | Path] | None = None,
+                    materials: bool = True) -> LoadedModel:
+    """Load every mesh of a file with trimesh, and the lights it carries; errors name the
+    file and the reason.
 
     The file, and every file it names (an OBJ's material libraries and their maps, a glTF's
     buffers and images), is resolved and read by the engine (engine/assets/model_files.py):
@@ -471,7 +488,7 @@ def load_model(path: str | Path, roots: Sequence[str | Path] | None = None,
                          f"({MAX_TEXTURE_SIDE}x{MAX_TEXTURE_SIDE})") from None
 
 
-def _load_model(path: Path, data: bytes, what: str, roots, materials: bool, trimesh) -> list[ModelPart]:
+def _load_model(path: Path, data: bytes, what: str, roots, materials: bool, trimesh) -> LoadedModel:
     suffix = path.suffix.lower()
     gltf = obj = None
     try:
@@ -534,7 +551,11 @@ def _load_model(path: Path, data: bytes, what: str, roots, materials: bool, trim
         raise AssetError(f"{what}: holds malformed mesh data ({type(exc).__name__}: {exc})") from exc
     if not parts:
         raise AssetError(f"{what}: contains no triangle meshes")
-    return parts
+    try:
+        lights = read_gltf_lights(gltf.doc) if gltf is not None else []
+    except AssetError as exc:
+        raise AssetError(f"{what}: {exc}") from exc
+    return LoadedModel(parts, lights)
 
 
 def _digest(mesh: Mesh) -> bytes:

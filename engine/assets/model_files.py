@@ -418,8 +418,9 @@ def _json(path: Path, data: bytes, quiet: bool = False) -> dict | None:
     return doc if isinstance(doc, dict) else None
 
 
-# glTF extensions the engine reads (a texture transform: offset, rotation and scale, shared by a material's maps)
-GLTF_READ_EXTENSIONS = frozenset({"KHR_materials_emissive_strength", "KHR_texture_transform"})
+# glTF extensions the engine reads (a texture transform: offset, rotation and scale, shared by a
+# material's maps; lights: engine/assets/model_lights.py)
+GLTF_READ_EXTENSIONS = frozenset({"KHR_lights_punctual", "KHR_materials_emissive_strength", "KHR_texture_transform"})
 
 
 def _unread_texture(info: object) -> str | None:

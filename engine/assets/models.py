@@ -1,6 +1,7 @@
 """Spawning entities from mesh files: one entity per mesh part, under one root entity."""
 from __future__ import annotations
 
+import math
 import warnings
 from collections.abc import Sequence
 from pathlib import Path
@@ -8,8 +9,19 @@ from pathlib import Path
 import numpy as np
 from pyglm import glm
 
-from components import ComponentValueError, Emissive, Material, MeshRef, Mirror, Reflective, Transform
-from engine.assets.mesh import flat_plane, load_model
+from components import (
+    ComponentValueError,
+    DirectionalLight,
+    Emissive,
+    Material,
+    MeshRef,
+    Mirror,
+    PointLight,
+    Reflective,
+    Transform,
+)
+from engine.assets.mesh import flat_plane, load_model_file
+from engine.assets.model_lights import ModelLight, check_light_intensity
 from engine.core.errors import AssetError
 from engine.core.world import World
 
@@ -19,7 +31,8 @@ MAX_MODEL_PROBES = 4  # curved reflective parts of one model that get a cube-map
 def spawn_model(world: World, path: str | Path, position: glm.vec3 | Sequence[float] = (0.0, 0.0, 0.0),
                 rotation: glm.quat | Sequence[float] | None = None,
                 scale: glm.vec3 | Sequence[float] = (1.0, 1.0, 1.0),
-                roots: Sequence[str | Path] | None = None, max_probes: int = MAX_MODEL_PROBES) -> int:
+                roots: Sequence[str | Path] | None = None, max_probes: int = MAX_MODEL_PROBES,
+                light_scale: float = 1.0) -> int:
     """Load ``path`` and spawn it; returns the root entity.
 
     The file's material decides the components: its colour, texture, metallic and
@@ -38,23 +51,36 @@ def spawn_model(world: World, path: str | Path, position: glm.vec3 | Sequence[fl
     instanced).  ``roots``: the folders the files the model names may be in (None: its own
     folder; ``load_model``).  The file is fully loaded and every component built (so
     validated) before anything is spawned, so a bad file leaves the world untouched.
+
+    The lights a glTF file's nodes carry (``KHR_lights_punctual``: Blender's lamps, spots
+    and suns) come with it, each an entity under the root placed by its node
+    (``engine/assets/model_lights.py``): a point light a ``PointLight`` of the file's
+    candela, colour and range (without one, as far as its light stays above
+    ``RANGE_CUTOFF_LUX``), a spot light one with ``spot_angle`` its outer cone and
+    ``spot_blend`` the share of it outside the inner cone, aimed along its node's -Z, and a
+    directional light a ``DirectionalLight`` of the file's lux along its node's -Z as the
+    model is placed when spawned.  ``light_scale`` multiplies their intensities (a file's
+    physical units to the scene's exposure; an intensity past the engine's half floats is
+    refused, saying the scale that fits).  Shadows are the engine's defaults (a sun casts, a
+    lamp does not): the extension says nothing of them.
     """
     if isinstance(max_probes, bool) or not isinstance(max_probes, int) or max_probes < 0:
         raise AssetError(f"spawn_model: max_probes must be an int >= 0, got {max_probes!r}")
+    if isinstance(light_scale, bool) or not isinstance(light_scale, (int, float)) or \
+            not (math.isfinite(light_scale) and light_scale >= 0.0):
+        raise AssetError(f"spawn_model: light_scale must be a finite number >= 0, got {light_scale!r}")
     root_transform = Transform(position=position, rotation=rotation if rotation is not None else glm.quat(),
                                scale=scale)
-    parts = load_model(path, roots=roots)
+    loaded = load_model_file(path, roots=roots)
+    parts = loaded.parts
     curved = [i for i, part in enumerate(parts) if part.reflectivity > 0.0 and not _planar_mirror(part)]
     probed = set(sorted(curved, key=lambda i: -_placed_size(parts[i]))[:max_probes])
     _name_sources(path, parts)
     part_components = []
     try:
         for index, part in enumerate(parts):
-            scale_v, rotation_q, translation = glm.vec3(), glm.quat(), glm.vec3()
-            if not glm.decompose(part.local, scale_v, rotation_q, translation, glm.vec3(), glm.vec4()):
-                raise ComponentValueError(f"node transform of {part.mesh.name!r} cannot be decomposed")
             components = [
-                Transform(position=translation, rotation=rotation_q, scale=scale_v),  # parent set below
+                _node_transform(part.local, part.mesh.name),  # parent set below
                 MeshRef(part.mesh),
                 Material(color=part.color, texture=part.texture, metallic=part.metallic, roughness=part.roughness,
                          normal_map=part.normal_map, normal_scale=part.normal_scale, emissive_map=part.emissive_map,
@@ -76,7 +102,9 @@ def spawn_model(world: World, path: str | Path, position: glm.vec3 | Sequence[fl
                 # else a metal past the probes' budget reflects the sky by its material (its
                 # environment reflection, tinted by its colour as a metal's is)
             part_components.append(components)
-    except ComponentValueError as exc:
+        for light in loaded.lights:
+            part_components.append(_light_components(light, root_transform, light_scale))
+    except (ComponentValueError, AssetError) as exc:
         raise AssetError(f"mesh file {str(path)!r}: {exc}") from exc
     if len(curved) > len(probed):
         warnings.warn(f"mesh file {str(path)!r}: {len(curved)} curved reflective parts: {len(probed)} of them (the "
@@ -96,6 +124,31 @@ def spawn_model(world: World, path: str | Path, position: glm.vec3 | Sequence[fl
             world.delete_entity(entity)
         raise
     return root
+
+
+def _light_components(light: ModelLight, root: Transform, scale: float) -> list:
+    """A file's light as the engine's: its Transform under the root, and its light."""
+    placed = _node_transform(light.local, light.name)
+    intensity = check_light_intensity(light, scale)
+    colour = glm.vec4(*light.color, 1.0)
+    if light.kind == "directional":
+        # along the node's -Z as the root places the model now (a DirectionalLight has a
+        # direction, not a place)
+        model = glm.translate(glm.vec3(root.position)) * glm.mat4_cast(root.rotation) * glm.scale(glm.vec3(root.scale))
+        travel = glm.vec3((model * light.local) * glm.vec4(0.0, 0.0, -1.0, 0.0))
+        if glm.length(travel) == 0.0:
+            raise ComponentValueError(f"light {light.name!r}: its node's transform has no -Z direction")
+        return [placed, DirectionalLight(direction=travel, color=colour, intensity=intensity)]
+    return [placed, PointLight(color=colour, intensity=intensity, range=light.reach(scale),
+                               spot_angle=light.spot_angle(), spot_blend=light.spot_blend())]
+
+
+def _node_transform(local: glm.mat4, name: str) -> Transform:
+    """A node's transform in the model as the Transform of an entity under the root."""
+    scale_v, rotation_q, translation = glm.vec3(), glm.quat(), glm.vec3()
+    if not glm.decompose(local, scale_v, rotation_q, translation, glm.vec3(), glm.vec4()):
+        raise ComponentValueError(f"node transform of {name!r} cannot be decomposed")
+    return Transform(position=translation, rotation=rotation_q, scale=scale_v)
 
 
 def _planar_mirror(part) -> bool:
