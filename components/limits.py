@@ -36,6 +36,9 @@ MIN_SPOT_ANGLE = 0.1
 MAX_COOKIE_SPOT_ANGLE = 80.0
 # The largest sphere a point light may be (PointLight.radius, metres): a light's size, not a room's.
 MAX_LIGHT_RADIUS = 10.0
+# The largest index of refraction (Refractive.ior): diamond is 2.42, germanium 4.0; past it
+# almost all light is reflected (Schlick's f0 over 0.36) and the refracted ray barely bends more.
+MAX_IOR = 4.0
 
 # Reflection layers (show/hide lists): an entity belongs to some of REFLECTION_LAYERS layers
 # and a mirror, portal, probe or camera shows some of them; a view shows an entity when they

@@ -7,6 +7,7 @@ from typing import Any
 import numpy as np
 from pyglm import glm
 
+from components.limits import MAX_IOR
 from components.tracking import HALF_MAX, ComponentValueError, TrackedComponent, boolean, choice, color, finite, integer
 
 # Assets are the engine's types (engine.assets.mesh.Mesh, engine.assets.texture_data.TextureData);
@@ -255,7 +256,7 @@ class Refractive(TrackedComponent):
 
     def _validate(self, name: str, value: Any) -> Any:
         if name == "ior":
-            return finite(self, name, value, low=1.0, high=4.0)
+            return finite(self, name, value, low=1.0, high=MAX_IOR)
         if name == "solid":
             return boolean(self, name, value)
         return value

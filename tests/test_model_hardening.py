@@ -403,7 +403,7 @@ def test_many_chrome_nodes_share_one_mesh_and_get_a_bounded_number_of_probes(sce
     runner.frame()
     # (The rest reflect the sky by their metal material's environment reflection: no Reflective.)
     assert found["modes"].count("cube") == MAX_MODEL_PROBES and found["modes"].count(None) == 200 - 4
-    assert any("200 curved reflective parts" in w and "max_probes" in w for w in found["warnings"]), found
+    assert any("200 curved reflective or glass parts" in w and "max_probes" in w for w in found["warnings"]), found
     assert runner.stats.probe_captures == MAX_MODEL_PROBES
     assert runner.engine.renderer.resource_counts()["meshes"] == 1
 
@@ -412,7 +412,7 @@ def test_max_probes_is_the_callers_to_set(tmp_path):
     path = glb(tmp_path / "pair.glb", CHROME, [], nodes=2)
     world = World("probes")
     try:
-        with pytest.warns(UserWarning, match="2 curved reflective parts: 0 of them"):
+        with pytest.warns(UserWarning, match="2 curved reflective or glass parts: 0 of them"):
             root = spawn_model(world, path, max_probes=0)
         modes = [getattr(world.try_get(e, Reflective), "mode", None) for e, (t,) in world.query(Transform)
                  if t.parent == root]

@@ -23,6 +23,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 from pyglm import glm
 
+from components.limits import MAX_IOR
 from engine.assets.model_files import (
     MAX_JSON_NESTING,  # noqa: F401 - the loader's limits are read from here too
     MAX_MTL_BUMP_SCALE,
@@ -414,6 +415,9 @@ class ModelPart:
     occlusion_strength: float = 1.0            # its strength
     double_sided: bool = False         # glTF's doubleSided (Material.double_sided)
     alpha_cutoff: float | None = None  # glTF's alphaMode MASK: its alphaCutoff (Material.alpha_cutoff)
+    transmission: float = 0.0  # KHR_materials_transmission's factor: the light that passes through (glass)
+    ior: float = 1.5           # KHR_materials_ior's index of refraction (Refractive.ior)
+    thick: bool = False        # KHR_materials_volume's thickness > 0: a solid, not a thin wall (Refractive.solid)
     name: str = ""  # "file:part", as a level file's part = "..." names it (parts may share one mesh)
 
     def __post_init__(self) -> None:
@@ -720,6 +724,41 @@ def _gltf_alpha(material, part: ModelPart, what: str) -> None:
         part.color = (*part.color[:3], BLENDED_ALPHA)
 
 
+def _gltf_transmission(doc_material: dict, part: ModelPart, what: str) -> None:
+    """Glass from a glTF material: ``KHR_materials_transmission``'s factor (the share of the
+    light that passes through, tinted by the base colour), ``KHR_materials_ior``'s index
+    and whether ``KHR_materials_volume`` gives it a thickness (a solid; without it glTF's
+    transmission is a thin wall).  A factor, index or thickness out of range is an error
+    naming the material; their textures are left out with a warning (one factor a part)."""
+    extensions = doc_material.get("extensions") if isinstance(doc_material, dict) else None
+    if not isinstance(extensions, dict):
+        return
+    found = {name: extensions.get(name) for name in ("KHR_materials_transmission", "KHR_materials_ior",
+                                                     "KHR_materials_volume")}
+    for name, info in found.items():
+        if info is not None and not isinstance(info, dict):
+            raise AssetError(f"{what}: {name} must be an object, got {info!r}")
+    transmission = found["KHR_materials_transmission"] or {}
+    factor = transmission.get("transmissionFactor", 0.0)
+    if isinstance(factor, bool) or not isinstance(factor, numbers.Real) or not 0.0 <= float(factor) <= 1.0:
+        raise AssetError(f"{what}: KHR_materials_transmission.transmissionFactor must be a number in [0, 1], "
+                         f"got {factor!r}")
+    ior = (found["KHR_materials_ior"] or {}).get("ior", 1.5)
+    if isinstance(ior, bool) or not isinstance(ior, numbers.Real) or not 1.0 <= float(ior) <= MAX_IOR:
+        raise AssetError(f"{what}: KHR_materials_ior.ior must be a number in [1, {MAX_IOR:g}] (Refractive.ior), "
+                         f"got {ior!r}")
+    thickness = (found["KHR_materials_volume"] or {}).get("thicknessFactor", 0.0)
+    if isinstance(thickness, bool) or not isinstance(thickness, numbers.Real) or \
+            not (math.isfinite(thickness) and thickness >= 0.0):
+        raise AssetError(f"{what}: KHR_materials_volume.thicknessFactor must be a number >= 0, got {thickness!r}")
+    for name, slot in (("KHR_materials_transmission", "transmissionTexture"),
+                       ("KHR_materials_volume", "thicknessTexture")):
+        if slot in (found[name] or {}) and factor > 0.0:
+            warnings.warn(f"{what}: {name}.{slot} is left out: the part lets through its factor's share "
+                          "everywhere", stacklevel=6)
+    part.transmission, part.ior, part.thick = float(factor), float(ior), thickness > 0.0
+
+
 # --- material maps -----------------------------------------------------------------------
 
 class _MaterialMaps:
@@ -854,6 +893,7 @@ class _MaterialMaps:
             factor = [f * self.gltf_emissive_strength(material) for f in factor]
         if image is not None and factor is not None and len(factor) >= 3 and max(factor[:3]) > 0.0:
             self._emissive(part, self.image(image, f"{what}: emissiveTexture", "colour"), factor[:3], what)
+        _gltf_transmission(doc_material, part, what)
 
     def image(self, image, what: str, kind: str) -> TextureData:
         """A decoded image of the file as a TextureData (once per image and kind), its size

@@ -18,6 +18,7 @@ from components import (
     Mirror,
     PointLight,
     Reflective,
+    Refractive,
     Transform,
 )
 from engine.assets.mesh import flat_plane, load_model_file
@@ -25,7 +26,7 @@ from engine.assets.model_lights import ModelLight, check_light_intensity
 from engine.core.errors import AssetError
 from engine.core.world import World
 
-MAX_MODEL_PROBES = 4  # curved reflective parts of one model that get a cube-map probe each (see spawn_model)
+MAX_MODEL_PROBES = 4  # curved reflective or glass parts of one model that get a cube-map probe each (see spawn_model)
 
 
 def spawn_model(world: World, path: str | Path, position: glm.vec3 | Sequence[float] = (0.0, 0.0, 0.0),
@@ -52,6 +53,15 @@ def spawn_model(world: World, path: str | Path, position: glm.vec3 | Sequence[fl
     folder; ``load_model``).  The file is fully loaded and every component built (so
     validated) before anything is spawned, so a bad file leaves the world untouched.
 
+    Glass (glTF's ``KHR_materials_transmission``, with ``KHR_materials_ior`` and
+    ``KHR_materials_volume``, as Blender writes a Principled BSDF's transmission): a curved
+    part, counted in the probes' budget with the reflective ones, is ``Refractive`` (the
+    file's index; ``solid`` where the volume gives it a thickness, else a thin wall, as glTF
+    says) with the colour's alpha 1 - the transmission, so its probe's capture shows
+    through it, bent and tinted by its colour; a flat pane (or a curved part past the
+    budget) is see-through with ``Material.blend`` "transparent", its alpha 1 - the
+    transmission, its reflections whole, showing what lies behind it unbent.
+
     The lights a glTF file's nodes carry (``KHR_lights_punctual``: Blender's lamps, spots
     and suns) come with it, each an entity under the root placed by its node
     (``engine/assets/model_lights.py``): a point light a ``PointLight`` of the file's
@@ -73,24 +83,40 @@ def spawn_model(world: World, path: str | Path, position: glm.vec3 | Sequence[fl
                                scale=scale)
     loaded = load_model_file(path, roots=roots)
     parts = loaded.parts
-    curved = [i for i, part in enumerate(parts) if part.reflectivity > 0.0 and not _planar_mirror(part)]
+    for part in parts:
+        if part.transmission > 0.0 and part.alpha_cutoff is not None:
+            warnings.warn(f"mesh file {str(path)!r}: part {part.name!r}: KHR_materials_transmission on an alphaMode "
+                          "MASK material is left out (a cutout is opaque where it is drawn)", stacklevel=2)
+            part.transmission = 0.0
+    curved = [i for i, part in enumerate(parts)
+              if (part.reflectivity > 0.0 and not _planar_mirror(part)) or (_glass(part) and not _flat(part))]
     probed = set(sorted(curved, key=lambda i: -_placed_size(parts[i]))[:max_probes])
     _name_sources(path, parts)
     part_components = []
     try:
         for index, part in enumerate(parts):
+            # Glass (KHR_materials_transmission): a curved part within the probes' budget
+            # refracts its own probe's capture (Refractive, its alpha weighing what passes);
+            # a flat pane, or a curved part past the budget, shows what lies behind it as it
+            # is, its alpha what the glass lets through and its reflections whole
+            # (Material.blend "transparent", as a window pane).
+            refracts = _glass(part) and index in probed
+            color = (*part.color[:3], 1.0 - part.transmission) if _glass(part) else part.color
             components = [
                 _node_transform(part.local, part.mesh.name),  # parent set below
                 MeshRef(part.mesh),
-                Material(color=part.color, texture=part.texture, metallic=part.metallic, roughness=part.roughness,
+                Material(color=color, texture=part.texture, metallic=part.metallic, roughness=part.roughness,
                          normal_map=part.normal_map, normal_scale=part.normal_scale, emissive_map=part.emissive_map,
                          metallic_roughness_map=part.metallic_roughness_map, occlusion_map=part.occlusion_map,
                          occlusion_strength=part.occlusion_strength, alpha_cutoff=part.alpha_cutoff,
-                         double_sided=part.double_sided and not _planar_mirror(part)),
+                         double_sided=part.double_sided and not _planar_mirror(part),
+                         blend="transparent" if _glass(part) and not refracts else "fade"),
             ]
             if part.emissive_factor > 0.0:
                 components.append(Emissive(part.emissive_factor))
-            if part.reflectivity > 0.0:
+            if refracts:
+                components.append(Refractive(ior=part.ior, solid=part.thick))
+            elif part.reflectivity > 0.0 and not _glass(part):
                 # A flat reflective surface is a planar mirror; anything else samples a cube-map
                 # probe (its own, made by the probes stage at its box's centre).
                 if _planar_mirror(part):
@@ -107,8 +133,9 @@ def spawn_model(world: World, path: str | Path, position: glm.vec3 | Sequence[fl
     except (ComponentValueError, AssetError) as exc:
         raise AssetError(f"mesh file {str(path)!r}: {exc}") from exc
     if len(curved) > len(probed):
-        warnings.warn(f"mesh file {str(path)!r}: {len(curved)} curved reflective parts: {len(probed)} of them (the "
-                      f"largest) get a cube-map probe each, the other {len(curved) - len(probed)} reflect the sky "
+        warnings.warn(f"mesh file {str(path)!r}: {len(curved)} curved reflective or glass parts: {len(probed)} of "
+                      f"them (the largest) get a cube-map probe each, the other {len(curved) - len(probed)} reflect "
+                      "the sky (glass: see-through, without refraction) "
                       f"(spawn_model's max_probes = {max_probes}, MAX_MODEL_PROBES by default; or give the model "
                       "ReflectionProbe entities with an influence box)", stacklevel=2)
 
@@ -152,10 +179,19 @@ def _node_transform(local: glm.mat4, name: str) -> Transform:
 
 
 def _planar_mirror(part) -> bool:
-    """Whether a reflective part is a planar mirror: flat, and not a cutout (a mirror is
-    drawn whole; a flat metal grate reflects a probe or the sky as a curved part does).  A
-    double-sided mirror is made single-sided: a mirror is seen from its front."""
-    return part.reflectivity > 0.0 and flat_plane(part.mesh) is not None and part.alpha_cutoff is None
+    """Whether a reflective part is a planar mirror: flat, not a cutout (a mirror is drawn
+    whole; a flat metal grate reflects a probe or the sky as a curved part does) and not
+    glass.  A double-sided mirror is made single-sided: a mirror is seen from its front."""
+    return part.reflectivity > 0.0 and _flat(part) and part.alpha_cutoff is None and not _glass(part)
+
+
+def _glass(part) -> bool:
+    """Whether a part lets light through (glTF's KHR_materials_transmission)."""
+    return part.transmission > 0.0
+
+
+def _flat(part) -> bool:
+    return flat_plane(part.mesh) is not None
 
 
 def _placed_size(part) -> float:
