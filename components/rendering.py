@@ -129,6 +129,15 @@ class Material(TrackedComponent):
     and so does an ``Emissive``'s light (a lit sign on glass, a neon tube: Unity's Standard
     shader adds emission after its premultiply).  (Refraction, what lies behind bent and
     tinted: ``Refractive``.)
+
+    ``clearcoat`` (0 to 1, default 0: none) lays a clear varnish over the material, as on car
+    paint, lacquered wood or a glazed tile (glTF's ``KHR_materials_clearcoat``, Filament's,
+    three.js's and Unreal's clear coat): a colourless layer of index 1.5 (4% head on) with a
+    GGX lobe of its own, ``clearcoat_roughness`` (default 0: polished), reflecting the
+    lights and the light from all round sharply over a rough or coloured base, which keeps
+    what the coat's Fresnel reflection leaves (1 - clearcoat x F at the angle it is seen).
+    The coat follows the mesh's own surface, not a normal map's bumps (a smooth varnish
+    over a textured base).
     """
 
     color: Any = field(default_factory=lambda: glm.vec4(0.8, 0.8, 0.8, 1.0))
@@ -145,6 +154,8 @@ class Material(TrackedComponent):
     alpha_cutoff: float | None = None
     double_sided: bool = False
     blend: str = "fade"
+    clearcoat: float = 0.0
+    clearcoat_roughness: float = 0.0
 
     def _validate(self, name: str, value: Any) -> Any:
         if name == "blend":
@@ -164,7 +175,7 @@ class Material(TrackedComponent):
             return finite(self, name, value, low=0.0, high=1.0)
         if name == "normal_scale":
             return finite(self, name, value, low=0.0, high=MAX_NORMAL_SCALE)
-        if name in ("occlusion_strength", "environment_reflection"):
+        if name in ("occlusion_strength", "environment_reflection", "clearcoat", "clearcoat_roughness"):
             return finite(self, name, value, low=0.0, high=1.0)
         if name == "double_sided":
             value = boolean(self, name, value)

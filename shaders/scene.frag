@@ -308,8 +308,38 @@ vec3 environment_specular(Surface s, AmbientBoxes boxes) {
 // what a see-through material with Material.blend "transparent" keeps whole (main).
 vec3 highlight_light = vec3(0.0);
 
+#ifdef CLEARCOAT
+// The clear coat (Material.clearcoat, glTF's KHR_materials_clearcoat, as Filament's and
+// three.js's): a colourless layer of index 1.5 (f0 0.04) over the material, GGX with a
+// roughness of its own, on the mesh's own normal (a normal map's bumps stay under the
+// varnish).  The lights' loops sum its highlights here; main adds its reflection of the light
+// from all round (coat_environment) and lays both over the material, which keeps
+// 1 - clearcoat x F(n.v) of its light (glTF's layering).  Only in the CLEARCOAT builds (its
+// batch's material has a coat): llvmpipe would run it for every pixel otherwise.
+uniform vec2 clearcoat;       // x: its batch's Material.clearcoat, y: clearcoat_roughness
+vec3 coat_light = vec3(0.0);  // the coat's highlights of the lights, summed
+vec3 coat_normal;             // unit, facing the viewer (main sets it before the lights)
+float coat_roughness;         // clearcoat.y widened where the normal turns (filtered_roughness)
+#endif
+
 // Light through mirrors and portals (its loop only in the VIRTUAL_LIGHTS builds).
 #include "virtual_lights.glsl"
+
+#ifdef CLEARCOAT
+// The coat's reflection of the light from all round, as environment_specular's (the sky or
+// the probes, by the split sum's share for f0 0.04, occluded as it is) along the ray the
+// coat's own normal reflects, blurred by the coat's roughness.
+vec3 coat_environment(Surface s, AmbientBoxes boxes, float nv) {
+    Surface coat = s;
+    coat.normal = coat_normal;
+    coat.roughness = clearcoat.y;
+    coat.reflect_dir = reflect(-s.to_eye, coat_normal);
+    coat.reflect_lod = cube_lod(coat.reflect_dir, sky_face_size);
+    float occlusion = specular_occlusion(nv, s.occlusion, clearcoat.y);
+    vec3 share = environment_share(vec3(0.04), environment_brdf(clearcoat.y, nv));
+    return environment_radiance(coat, boxes) * share * (occlusion * float(lights.counts.w));
+}
+#endif
 
 vec3 direct_lighting(Surface s, AmbientBoxes boxes) {
     vec3 diffuse = s.albedo * (1.0 - s.metallic) / PI;
@@ -333,6 +363,10 @@ vec3 direct_lighting(Surface s, AmbientBoxes boxes) {
             vec3 highlight = ggx_specular(s.normal, l, s.to_eye, s.f0, s.highlight_roughness) * s.energy_compensation;
             total += (diffuse + highlight) * arriving;
             highlight_light += highlight * arriving;
+#ifdef CLEARCOAT
+            coat_light += ggx_specular(coat_normal, l, s.to_eye, vec3(0.04), coat_roughness)
+                          * (max(dot(coat_normal, l), 0.0) * directional_lit[i]) * lights.directional_color[i].rgb;
+#endif
         }
     }
     for (int i = 0; i < lights.counts.y; ++i) {
@@ -358,6 +392,10 @@ vec3 direct_lighting(Surface s, AmbientBoxes boxes) {
                                               s.highlight_roughness) * s.energy_compensation;
             total += (diffuse * nl + highlight) * arriving;
             highlight_light += highlight * arriving;
+#ifdef CLEARCOAT
+            coat_light += sphere_highlight(coat_normal, s.to_eye, reflect(-s.to_eye, coat_normal), d,
+                                           lights.point_color[i].w, vec3(0.04), coat_roughness) * arriving;
+#endif
         }
     }
 #ifdef VIRTUAL_LIGHTS
@@ -568,6 +606,10 @@ void main() {
     s.roughness = v_surface.y;
     float metal_share = apply_metallic_roughness(s);  // x the metallic-roughness map
     s.highlight_roughness = filtered_roughness(s.roughness, s.normal);
+#ifdef CLEARCOAT
+    coat_normal = s.geometric_normal;
+    coat_roughness = filtered_roughness(clearcoat.y, coat_normal);
+#endif
     s.occlusion = material_occlusion();
     s.direct_occlusion = 1.0;
 #ifdef SCREEN_OCCLUSION
@@ -597,7 +639,8 @@ void main() {
     if (SLOT_REFRACT == REFRACT_ENVIRONMENT || SLOT_REFRACT == REFRACT_SOLID)
         s.refract_lod = cube_lod(s.refract_dir, probe_face_size > 0.0 ? probe_face_size : sky_face_size);
 
-    vec3 lit = direct_lighting(s, ambient_boxes(s.position));
+    AmbientBoxes boxes = ambient_boxes(s.position);
+    vec3 lit = direct_lighting(s, boxes);
 #if defined(SCREEN_REFLECTION) && defined(METALLIC_ROUGHNESS_MAP)
     vec3 lit_weight = reflect_weight, lit_added = reflect_added;  // (the environment reflection's, in lit)
 #endif
@@ -608,6 +651,17 @@ void main() {
     color = apply_refract(SLOT_REFRACT, color, s);
     vec3 emitted = apply_emissive(SLOT_EMISSIVE, vec3(0.0), s);
     color += emitted;
+#ifdef CLEARCOAT
+    // The coat over it all: the material, its emission too, keeps what the coat's Fresnel
+    // reflection leaves; the coat's highlights and reflection lie on top (and a see-through
+    // material keeps them whole, as it does its reflections: kept_light).
+    float coat_nv = max(dot(coat_normal, s.to_eye), 0.0);
+    float coat_loss = 1.0 - clearcoat.x * (0.04 + 0.96 * pow(1.0 - coat_nv, 5.0));
+    vec3 coat = clearcoat.x * (coat_light + coat_environment(s, boxes, coat_nv));
+    color = color * coat_loss + coat;
+    kept_light = kept_light * coat_loss + coat;
+    emitted *= coat_loss;
+#endif
 #ifdef SCREEN_REFLECTION
     // The reflections through what follows the reflect slot: the map's metal share
     // (mapped_reflection mixes lit and the slot's by it), the fog's transmittance (fogged

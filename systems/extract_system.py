@@ -155,7 +155,9 @@ class ExtractSystem(esper.Processor):
                                             occlusion_map=material.occlusion_map if material else None,
                                             occlusion_strength=material.occlusion_strength if material else 1.0,
                                             double_sided=material.double_sided if material else False,
-                                            keeps_specular=material is not None and material.blend == "transparent")
+                                            keeps_specular=material is not None and material.blend == "transparent",
+                                            clearcoat=(material.clearcoat, material.clearcoat_roughness)
+                                            if material is not None and material.clearcoat > 0.0 else None)
         except GLLimitError as exc:
             raise GLLimitError(f"entity {entity}: {exc}") from None
         if transparent:  # a see-through mirror or portal (water): drawn before the view trees' claims

@@ -418,6 +418,8 @@ class ModelPart:
     transmission: float = 0.0  # KHR_materials_transmission's factor: the light that passes through (glass)
     ior: float = 1.5           # KHR_materials_ior's index of refraction (Refractive.ior)
     thick: bool = False        # KHR_materials_volume's thickness > 0: a solid, not a thin wall (Refractive.solid)
+    clearcoat: float = 0.0            # KHR_materials_clearcoat's factor (Material.clearcoat)
+    clearcoat_roughness: float = 0.0  # its roughness factor (Material.clearcoat_roughness)
     name: str = ""  # "file:part", as a level file's part = "..." names it (parts may share one mesh)
 
     def __post_init__(self) -> None:
@@ -759,6 +761,31 @@ def _gltf_transmission(doc_material: dict, part: ModelPart, what: str) -> None:
     part.transmission, part.ior, part.thick = float(factor), float(ior), thickness > 0.0
 
 
+def _gltf_clearcoat(doc_material: dict, part: ModelPart, what: str) -> None:
+    """A glTF material's clear coat (``KHR_materials_clearcoat``): its factor and roughness
+    factor (``Material.clearcoat``, ``clearcoat_roughness``); a factor out of [0, 1] is an
+    error naming the material; its textures are left out with a warning (one coat a part, on
+    the mesh's own normal)."""
+    extensions = doc_material.get("extensions") if isinstance(doc_material, dict) else None
+    info = extensions.get("KHR_materials_clearcoat") if isinstance(extensions, dict) else None
+    if info is None:
+        return
+    if not isinstance(info, dict):
+        raise AssetError(f"{what}: KHR_materials_clearcoat must be an object, got {info!r}")
+    values = []
+    for key in ("clearcoatFactor", "clearcoatRoughnessFactor"):
+        value = info.get(key, 0.0)
+        if isinstance(value, bool) or not isinstance(value, numbers.Real) or not 0.0 <= float(value) <= 1.0:
+            raise AssetError(f"{what}: KHR_materials_clearcoat.{key} must be a number in [0, 1], got {value!r}")
+        values.append(float(value))
+    left = [slot for slot in ("clearcoatTexture", "clearcoatRoughnessTexture", "clearcoatNormalTexture")
+            if slot in info]
+    if left and values[0] > 0.0:
+        warnings.warn(f"{what}: KHR_materials_clearcoat's {', '.join(left)} left out: the coat is its factors' "
+                      "everywhere, on the mesh's own normal", stacklevel=6)
+    part.clearcoat, part.clearcoat_roughness = values
+
+
 # --- material maps -----------------------------------------------------------------------
 
 class _MaterialMaps:
@@ -894,6 +921,7 @@ class _MaterialMaps:
         if image is not None and factor is not None and len(factor) >= 3 and max(factor[:3]) > 0.0:
             self._emissive(part, self.image(image, f"{what}: emissiveTexture", "colour"), factor[:3], what)
         _gltf_transmission(doc_material, part, what)
+        _gltf_clearcoat(doc_material, part, what)
 
     def image(self, image, what: str, kind: str) -> TextureData:
         """A decoded image of the file as a TextureData (once per image and kind), its size

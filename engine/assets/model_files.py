@@ -419,9 +419,11 @@ def _json(path: Path, data: bytes, quiet: bool = False) -> dict | None:
 
 
 # glTF extensions the engine reads (a texture transform: offset, rotation and scale, shared by a
-# material's maps; lights: engine/assets/model_lights.py; glass: transmission, ior, volume)
-GLTF_READ_EXTENSIONS = frozenset({"KHR_lights_punctual", "KHR_materials_emissive_strength", "KHR_materials_ior",
-                                  "KHR_materials_transmission", "KHR_materials_volume", "KHR_texture_transform"})
+# material's maps; lights: engine/assets/model_lights.py; glass: transmission, ior, volume;
+# a clear coat)
+GLTF_READ_EXTENSIONS = frozenset({"KHR_lights_punctual", "KHR_materials_clearcoat", "KHR_materials_emissive_strength",
+                                  "KHR_materials_ior", "KHR_materials_transmission", "KHR_materials_volume",
+                                  "KHR_texture_transform"})
 
 
 def _unread_texture(info: object) -> str | None:

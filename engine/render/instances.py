@@ -171,6 +171,7 @@ class BatchKey(NamedTuple):
     occlusion_strength: float = 1.0     # Material.occlusion_strength: its draws' uniform
     double_sided: bool = False          # Material.double_sided: drawn with face culling off
     keeps_specular: bool = False        # a transparent one's Material.blend "transparent"
+    clearcoat: tuple[float, float] | None = None  # Material.clearcoat and its roughness (None: none)
 
 
 def blend_code(batch: InstanceBatch) -> int:
@@ -278,6 +279,9 @@ class InstanceBatch:
         # packed occlusion-roughness-metallic texture): no map, nor sampler, of its own.
         self.occlusion_packed = False
         self.double_sided = False  # Material.double_sided: its draws turn face culling off
+        # A clear-coated material's coat (Material.clearcoat, clearcoat_roughness; None:
+        # none): its CLEARCOAT build's uniform, part of the batch's key.
+        self.clearcoat: tuple[float, float] | None = None
 
     # --- rows ----------------------------------------------------------------------------
     def add(self, entity: int) -> np.void:

@@ -84,6 +84,7 @@ from engine.render.raw_gl import LayeredArrayTarget, LayeredCubeTarget, inspect_
 from engine.render.scene_options import ROOT_VIEW, SceneOptions
 from engine.render.scene_programs import (
     NO_CHECKER,
+    NO_CLEARCOAT,
     NO_PROBE_LOOKUP,
     PER_PASS_UNIFORMS,
     ScenePrograms,
@@ -272,7 +273,8 @@ class ScenePass:
         if batch.rest_probe:  # the probe taking what the weights leave (a curved object's own)
             rest_size, lookup_rest = self._bind_probe(batch.rest_probe, PROBE_REST_UNIT, cubes)
         return (batch.texture is not None, blend_code(batch), probe_size, *lookup, probe2_size, *lookup2, rest_size,
-                *lookup_rest, *(batch.checker or NO_CHECKER), batch.alpha_cutoff or 0.0, batch.occlusion_strength)
+                *lookup_rest, *(batch.checker or NO_CHECKER), batch.alpha_cutoff or 0.0, batch.occlusion_strength,
+                batch.clearcoat or NO_CLEARCOAT)
 
     def _bind_probe(self, probe: int, unit: int, cubes) -> tuple[int, tuple]:
         """Bind the cube map of ``probe`` to ``unit``: its face size and lookup uniforms.  The

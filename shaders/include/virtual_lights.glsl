@@ -116,6 +116,12 @@ vec3 virtual_lighting(vec3 position, vec3 normal, vec3 geometric, vec3 to_eye, v
                                         : ggx_specular(normal, l, to_eye, f0, roughness) * nl) * energy_compensation;
         total += (diffuse * nl + highlight) * arriving;
         highlight_light += highlight * arriving;  // (scene.frag's: the highlights summed apart)
+#ifdef CLEARCOAT
+        coat_light += arriving * (image.w > 0.5  // (scene.frag's clear coat, as the highlight above)
+            ? sphere_highlight(coat_normal, to_eye, reflect(-to_eye, coat_normal), image.xyz - position,
+                               virtual_lights.virtual_cookie_v[i].w, vec3(0.04), coat_roughness)
+            : ggx_specular(coat_normal, l, to_eye, vec3(0.04), coat_roughness) * max(dot(coat_normal, l), 0.0));
+#endif
     }
     return total;
 }

@@ -1,0 +1,150 @@
+"""The clear coat (``Material.clearcoat``, glTF's ``KHR_materials_clearcoat``): a colourless
+GGX layer of f0 0.04 over the material.  Checked against two other paths: a coat over a
+black, unreflecting base shows exactly what a plain black dielectric of the coat's
+roughness reflects (the same f0, the same split sum), and the base under the coat keeps
+1 - F(n.v) of its light, F Schlick's for 0.04 at each pixel's angle, worked out here from
+the pixels' rays and the sphere."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from pyglm import glm
+
+from components import (
+    ComponentValueError,
+    DirectionalLight,
+    Material,
+    MeshRef,
+    Mirror,
+    PointLight,
+    Skybox,
+    Transform,
+    look_rotation,
+)
+from engine.assets.mesh import quad, sphere
+from tests.support import look_from, pixel_rays, srgb_to_linear
+
+SIZE = (96, 72)
+EYE = np.array([0.0, 0.0, 3.0])
+RADIUS = 1.0
+SKY = np.stack([np.full((8, 8, 3), v, np.float32) for v in (0.9, 0.2, 0.6, 0.3, 0.5, 0.7)])  # a sky with some shape
+
+
+def ball(material: Material, sun: bool, lamp: bool = False):
+    """The ball under the sky, with a sun, or with a lamp whose light also comes back off a
+    mirror out of view on the left (a virtual light: light through mirrors)."""
+    def build(world):
+        look_from(world, tuple(EYE), (0.0, 0.0, 0.0), fov=50.0)
+        world.spawn(Skybox(faces=SKY))
+        if sun:
+            world.spawn(DirectionalLight(direction=(-0.4, -0.5, -1.0), intensity=0.8, shadows=False))
+        if lamp:
+            world.spawn(Transform(position=(1.5, 1.0, 2.0)), PointLight(intensity=4.0, range=30.0))
+            world.spawn(Transform(position=(-3.0, 0.0, 0.0), rotation=look_rotation(glm.vec3(-1.0, 0.0, 0.0))),
+                        MeshRef(quad(4.0, 4.0)), Material(), Mirror(reflects_light=True))
+        world.spawn(Transform(), MeshRef(sphere(RADIUS, 64, 32)), material)
+    return build
+
+
+def render(scene, material: Material, sun: bool = False, lamp: bool = False) -> tuple[np.ndarray, object]:
+    runner = scene(ball(material, sun, lamp), SIZE)
+    runner.engine.renderer.antialias = "off"
+    runner.frame()
+    return srgb_to_linear(runner.frame()), runner.engine.main_view
+
+
+def sphere_pixels(view, rim: float = 0.15) -> tuple[np.ndarray, np.ndarray]:
+    """Which pixels' rays meet the ball inside its outline (by ``rim`` of the radius squared
+    in the ray's closest approach: the facets' normals differ most there), and n.v there."""
+    eye, rays = pixel_rays(view, SIZE)
+    b = (rays * (eye - 0.0)).sum(-1)
+    c = float(np.dot(eye, eye)) - RADIUS ** 2
+    disc = b * b - c
+    inside = disc > rim * RADIUS ** 2
+    t = -b - np.sqrt(np.maximum(disc, 0.0))
+    normal = (eye + t[..., None] * rays) / RADIUS
+    return inside, np.clip((normal * -rays).sum(-1), 0.0, 1.0)
+
+
+BLACK_BASE = dict(color=(0.0, 0.0, 0.0, 1.0), roughness=1.0, environment_reflection=0.0)
+
+
+@pytest.mark.parametrize("roughness", [0.05, 0.4])
+def test_a_coat_over_black_reflects_the_sky_as_a_black_dielectric_of_its_roughness(scene, roughness):
+    coated, view = render(scene, Material(**BLACK_BASE, clearcoat=1.0, clearcoat_roughness=roughness))
+    plain, _ = render(scene, Material(color=(0.0, 0.0, 0.0, 1.0), roughness=roughness))
+    inside, _ = sphere_pixels(view)
+    assert plain[inside].max() > 0.05   # the sky's reflection, brightest at the rim
+    np.testing.assert_allclose(coated[inside], plain[inside], atol=0.004, rtol=0.01)
+    half, _ = render(scene, Material(**BLACK_BASE, clearcoat=0.5, clearcoat_roughness=roughness))
+    np.testing.assert_allclose(half[inside], 0.5 * plain[inside], atol=0.004, rtol=0.02)
+
+
+@pytest.mark.parametrize("light", ["sun", "lamp"])
+def test_a_coats_highlight_is_a_black_dielectrics(scene, light):
+    """With a sun, or a lamp and its image in a mirror: the coat's highlights too (the plain
+    one's energy compensation, a few percent for f0 0.04 at this roughness, aside)."""
+    lights = {"sun": light == "sun", "lamp": light == "lamp"}
+    coated, view = render(scene, Material(**BLACK_BASE, clearcoat=1.0, clearcoat_roughness=0.3), **lights)
+    plain, _ = render(scene, Material(color=(0.0, 0.0, 0.0, 1.0), roughness=0.3), **lights)
+    sky_only, _ = render(scene, Material(color=(0.0, 0.0, 0.0, 1.0), roughness=0.3))
+    inside, _ = sphere_pixels(view)
+    highlight = inside & ((plain - sky_only)[..., 0] > 0.02)
+    assert highlight.sum() > 10
+    if light == "lamp":   # the lamp's own highlight on the right, its image's on the left
+        columns = np.nonzero(highlight)[1]
+        assert columns.min() < SIZE[0] // 2 - 5 and columns.max() > SIZE[0] // 2 + 5
+    np.testing.assert_allclose(coated[highlight], plain[highlight], atol=0.004, rtol=0.04)
+
+
+def test_the_base_under_a_coat_keeps_what_the_coats_fresnel_leaves(scene):
+    """A rough red base, lit: coated less the coat over black is the base's light times
+    1 - F(n.v), F = 0.04 + 0.96 (1 - n.v)^5 at each pixel."""
+    red = dict(color=(0.7, 0.1, 0.05, 1.0), roughness=0.9, environment_reflection=0.0)
+    coat = dict(clearcoat=1.0, clearcoat_roughness=0.1)
+    coated_red, view = render(scene, Material(**red, **coat), sun=True)
+    coated_black, _ = render(scene, Material(**BLACK_BASE, **coat), sun=True)
+    bare_red, _ = render(scene, Material(**red), sun=True)
+    bare_black, _ = render(scene, Material(**BLACK_BASE), sun=True)
+    inside, nv = sphere_pixels(view, rim=0.06)
+    base = (bare_red - bare_black)[..., 0]
+    lit = inside & (base > 0.05) & (coated_red[..., 0] < 0.98)
+    assert lit.sum() > 200
+    fresnel = 0.04 + 0.96 * (1.0 - nv) ** 5
+    np.testing.assert_allclose((coated_red - coated_black)[..., 0][lit], (base * (1.0 - fresnel))[lit],
+                               atol=0.006, rtol=0.02)
+    assert fresnel[lit].max() > 2.5 * fresnel[lit].min()   # angles from head on to near grazing
+
+
+def test_clearcoat_values_are_checked():
+    with pytest.raises(ComponentValueError, match=r"Material.clearcoat"):
+        Material(clearcoat=1.5)
+    with pytest.raises(ComponentValueError, match=r"Material.clearcoat_roughness"):
+        Material(clearcoat_roughness=-0.1)
+
+
+def test_a_gltf_clear_coat_reaches_the_material(tmp_path):
+    from engine.assets.mesh import load_model
+    from engine.assets.models import spawn_model
+    from engine.core.errors import AssetError
+    from engine.core.world import World
+    from tests.test_materials_from_files import write_glb
+
+    def material(coat: object) -> dict:
+        return {"name": "paint", "pbrMetallicRoughness": {"baseColorFactor": [0.6, 0.0, 0.0, 1.0]},
+                "extensions": {"KHR_materials_clearcoat": coat}}
+    path = write_glb(tmp_path / "car.glb", sphere(0.5), material({"clearcoatFactor": 0.8,
+                                                                  "clearcoatRoughnessFactor": 0.1}), [],
+                     {"extensionsUsed": ["KHR_materials_clearcoat"], "extensionsRequired": ["KHR_materials_clearcoat"]})
+    world = World("car")
+    spawn_model(world, path)
+    ((_, paint),) = list(world.query_one(Material))
+    assert paint.clearcoat == pytest.approx(0.8) and paint.clearcoat_roughness == pytest.approx(0.1)
+    bad = write_glb(tmp_path / "bad.glb", sphere(0.5), material({"clearcoatFactor": 3}), [])
+    with pytest.raises(AssetError, match=r"bad\.glb.*'paint'.*clearcoatFactor must be a number in \[0, 1\], got 3"):
+        load_model(bad)
+    textured = write_glb(tmp_path / "textured.glb", sphere(0.5),
+                         material({"clearcoatFactor": 1, "clearcoatNormalTexture": {"index": 0}}), [])
+    with pytest.warns(UserWarning, match=r"'paint'.*clearcoatNormalTexture left out"):
+        (part,) = load_model(textured)
+    assert part.clearcoat == 1.0
