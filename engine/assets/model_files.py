@@ -19,6 +19,7 @@ not read or decoded.
 """
 from __future__ import annotations
 
+import base64
 import io
 import json
 import math
@@ -30,6 +31,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from urllib.parse import unquote
 
+from engine.assets.gltf_accessors import float_normalized_accessors
 from engine.assets.texture_data import contained_path, file_problem, read_asset_file
 from engine.core.errors import AssetError
 
@@ -51,6 +53,10 @@ class CheckedFiles:
         self.file_name = file_name  # trimesh names an unnamed OBJ part after it
         self._data: dict[str, bytes] = {}
         self.total = 0
+
+    def bytes_of(self, name: str) -> bytes | None:
+        """The bytes read for ``name`` (None: none were)."""
+        return self._data.get(name)
 
     def add(self, name: str, data: bytes, what: str) -> None:
         self.total += len(data)
@@ -420,10 +426,10 @@ def _json(path: Path, data: bytes, quiet: bool = False) -> dict | None:
 
 # glTF extensions the engine reads (a texture transform: offset, rotation and scale, shared by a
 # material's maps; lights: engine/assets/model_lights.py; glass: transmission, ior, volume;
-# a clear coat)
+# a clear coat; packed vertex data: engine/assets/gltf_accessors.py)
 GLTF_READ_EXTENSIONS = frozenset({"KHR_lights_punctual", "KHR_materials_clearcoat", "KHR_materials_emissive_strength",
                                   "KHR_materials_ior", "KHR_materials_transmission", "KHR_materials_volume",
-                                  "KHR_texture_transform"})
+                                  "KHR_mesh_quantization", "KHR_texture_transform"})
 
 
 def _unread_texture(info: object) -> str | None:
@@ -468,6 +474,27 @@ def _uv_transform(info: object, label: str) -> tuple[float, float, float, float,
     return None if found == (0.0, 0.0, 0.0, 1.0, 1.0) else found
 
 
+def _buffer_bytes(doc: dict, number: int, resolver: CheckedFiles, chunks: bytes) -> bytes | None:
+    """Buffer ``number``'s bytes as read: a file's (``resolver``), base64 data's, or a GLB's
+    binary chunk (``chunks``: what follows its JSON chunk) for the buffer without a URI; None
+    where the file has no such buffer."""
+    buffers = doc.get("buffers") if isinstance(doc.get("buffers"), list) else []
+    buffer = buffers[number] if 0 <= number < len(buffers) else None
+    if not isinstance(buffer, dict):
+        return None
+    uri = buffer.get("uri")
+    if isinstance(uri, str) and uri.startswith("data:"):
+        try:
+            return base64.b64decode(uri.split(",", 1)[1], validate=False)
+        except (ValueError, IndexError):
+            return None
+    if isinstance(uri, str):
+        return resolver.bytes_of(uri)
+    if len(chunks) >= 8 and chunks[4:8] == b"BIN\0":
+        return chunks[8:8 + int.from_bytes(chunks[0:4], "little")]
+    return None
+
+
 def prepare_gltf(path: Path, data: bytes, roots: Sequence[Path], textures: bool) -> GltfFiles:
     """Check a glTF's (or GLB's) JSON and resolve the buffers and images it names; the
     images its used materials draw are read (with ``textures``), the others blanked, so
@@ -496,6 +523,8 @@ def prepare_gltf(path: Path, data: bytes, roots: Sequence[Path], textures: bool)
         uri = buffer.get("uri") if isinstance(buffer, dict) else None
         if isinstance(uri, str):
             _uri(path, uri, roots, f"buffer {number}", resolver, True, what)
+    float_normalized_accessors(doc, lambda number: _buffer_bytes(doc, number, resolver,
+                                                                 data[chunk_end:] if glb else b""), what)
     materials = doc.get("materials") if isinstance(doc.get("materials"), list) else []
     textures_list = doc.get("textures") if isinstance(doc.get("textures"), list) else []
     images = doc.get("images") if isinstance(doc.get("images"), list) else []

@@ -1,0 +1,114 @@
+"""glTF accessors of normalised integers (``"normalized": true``) made floats before trimesh
+reads them.
+
+glTF stores texture coordinates and vertex colours as normalised bytes or shorts where an
+exporter packs them (core glTF allows it for ``TEXCOORD_n`` and ``COLOR_n``), and
+``KHR_mesh_quantization`` (gltfpack's and glTF-Transform's output) does so for normals,
+tangents and coordinates too: 65535 in an unsigned short means 1.0, -127 in a signed byte
+-1.0.  trimesh reads the integers as they are (a UV of 65535, then flipped in place as an
+integer, so every UV comes out wrong without a word).  Here each such accessor is decoded
+(its view's stride and offsets checked against its buffer) into float32 values in a buffer
+of the engine's making, a ``data:`` URI, and the accessor is pointed at it, so trimesh reads
+what the file means.  Integers that are not normalised (a quantized position, moved into
+place by its node's scale) are left alone: trimesh reads them as the numbers they are.
+"""
+from __future__ import annotations
+
+import base64
+from collections.abc import Callable
+
+import numpy as np
+
+from engine.core.errors import AssetError
+
+# componentType -> (numpy type, the integer that means 1.0); glTF's rule for signed ones:
+# max(c / max, -1.0)
+NORMALIZED_TYPES = {5120: (np.int8, 127.0), 5121: (np.uint8, 255.0), 5122: (np.int16, 32767.0),
+                    5123: (np.uint16, 65535.0)}
+COMPONENTS = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4}
+FLOAT = 5126
+
+
+def float_normalized_accessors(doc: dict, buffer_bytes: Callable[[int], bytes], what: str) -> int:
+    """Rewrite ``doc``'s normalised integer accessors as float32 ones reading a new buffer
+    (appended to ``doc["buffers"]`` as base64 data); ``buffer_bytes(i)`` is buffer i's
+    bytes as read.  How many were rewritten.  An accessor that cannot be read as it says (a
+    normalised float, a sparse one, a view or buffer it does not have, values past the end of
+    its view) is an AssetError naming it."""
+    accessors = doc.get("accessors")
+    if not isinstance(accessors, list):
+        return 0
+    views = doc.get("bufferViews") if isinstance(doc.get("bufferViews"), list) else []
+    decoded = bytearray()
+    new_views: list[dict] = []
+    rewritten: list[tuple[dict, int]] = []
+    for index, accessor in enumerate(accessors):
+        if not isinstance(accessor, dict) or accessor.get("normalized") is not True:
+            continue
+        label = f"{what}: accessor {index}"
+        values = _decode(accessor, views, buffer_bytes, label)
+        while len(decoded) % 4:
+            decoded.append(0)
+        new_views.append({"byteOffset": len(decoded), "byteLength": values.nbytes})
+        decoded.extend(values.tobytes())
+        rewritten.append((accessor, len(new_views) - 1))
+    if not rewritten:
+        return 0
+    buffers = doc.setdefault("buffers", [])
+    buffer_index = len(buffers)
+    buffers.append({"byteLength": len(decoded),
+                    "uri": "data:application/octet-stream;base64," + base64.b64encode(bytes(decoded)).decode("ascii")})
+    first_view = len(views)
+    for view in new_views:
+        views.append({"buffer": buffer_index, **view})
+    doc["bufferViews"] = views
+    for accessor, view in rewritten:
+        ctype = accessor["componentType"]
+        _, one = NORMALIZED_TYPES[ctype]
+        for key in ("min", "max"):  # in the component type's integers: as the values, in floats
+            if isinstance(accessor.get(key), list):
+                accessor[key] = [max(float(v) / one, -1.0) for v in accessor[key]]
+        accessor.update(bufferView=first_view + view, byteOffset=0, componentType=FLOAT)
+        del accessor["normalized"]
+    return len(rewritten)
+
+
+def _decode(accessor: dict, views: list, buffer_bytes: Callable[[int], bytes], label: str) -> np.ndarray:
+    """A normalised accessor's values as float32, one row an element."""
+    ctype, kind, count = accessor.get("componentType"), accessor.get("type"), accessor.get("count")
+    if ctype not in NORMALIZED_TYPES:
+        raise AssetError(f"{label}: normalized is only for byte and short components (glTF), got componentType "
+                         f"{ctype!r}")
+    if kind not in COMPONENTS:
+        raise AssetError(f"{label}: a normalized accessor of type {kind!r} is not read (SCALAR or VEC2-4)")
+    if isinstance(count, bool) or not isinstance(count, int) or count < 1:
+        raise AssetError(f"{label}: count must be an integer >= 1, got {count!r}")
+    if "sparse" in accessor:
+        raise AssetError(f"{label}: a sparse normalized accessor is not read")
+    view_index = accessor.get("bufferView")
+    if isinstance(view_index, bool) or not isinstance(view_index, int) or not 0 <= view_index < len(views) \
+            or not isinstance(views[view_index], dict):
+        raise AssetError(f"{label}: names bufferView {view_index!r}, which the file does not have")
+    view = views[view_index]
+    buffer_index = view.get("buffer")
+    data = buffer_bytes(buffer_index) if isinstance(buffer_index, int) and not isinstance(buffer_index, bool) else None
+    if data is None:
+        raise AssetError(f"{label}: its bufferView {view_index} names buffer {buffer_index!r}, which the file does "
+                         "not have")
+    dtype, one = NORMALIZED_TYPES[ctype]
+    size = np.dtype(dtype).itemsize
+    components = COMPONENTS[kind]
+    element = size * components
+    stride = view.get("byteStride", element)
+    view_offset, view_length = view.get("byteOffset", 0), view.get("byteLength")
+    offset = accessor.get("byteOffset", 0)
+    numbers = (stride, view_offset, view_length, offset)
+    if not all(isinstance(n, int) and not isinstance(n, bool) and n >= 0 for n in numbers) or stride < element \
+            or offset % size or (view_offset + offset) % size or stride % size:
+        raise AssetError(f"{label}: its offsets and stride ({offset!r}, {view_offset!r}, {stride!r}) do not fit "
+                         f"its {np.dtype(dtype).name} elements")
+    end = offset + stride * (count - 1) + element
+    if end > view_length or view_offset + view_length > len(data):
+        raise AssetError(f"{label}: its {count} elements run past the end of bufferView {view_index}")
+    raw = np.ndarray((count, components), dtype, buffer=data, offset=view_offset + offset, strides=(stride, size))
+    return np.maximum(raw.astype(np.float32) / np.float32(one), np.float32(-1.0))

@@ -1,0 +1,157 @@
+"""glTF's normalised integer accessors (core glTF's packed UVs and colours, and
+``KHR_mesh_quantization``'s packed normals and coordinates) are read as the numbers they
+stand for: each file here stores a quad's known float values as bytes or shorts, and the
+loaded mesh must hold the floats back (to the integers' step), including an interleaved
+view and a quantized mesh moved into place by its node's scale, as gltfpack writes one."""
+from __future__ import annotations
+
+import json
+import struct
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from engine.assets.mesh import load_model, quad
+from engine.core.errors import AssetError
+from tests.test_materials_from_files import png_bytes
+
+MATERIAL = {"name": "m", "pbrMetallicRoughness": {"baseColorFactor": [1.0, 1.0, 1.0, 1.0]}}
+
+
+class GlbWriter:
+    """A GLB of one node and one primitive from accessors given as raw arrays."""
+
+    def __init__(self) -> None:
+        self.blob = bytearray()
+        self.views: list[dict] = []
+        self.accessors: list[dict] = []
+
+    def view(self, data: bytes, stride: int | None = None) -> int:
+        while len(self.blob) % 4:
+            self.blob.append(0)
+        self.views.append({"buffer": 0, "byteOffset": len(self.blob), "byteLength": len(data),
+                           **({"byteStride": stride} if stride else {})})
+        self.blob.extend(data)
+        return len(self.views) - 1
+
+    def accessor(self, array: np.ndarray, kind: str, component: int, view: int | None = None, offset: int = 0,
+                 **extra) -> int:
+        self.accessors.append({"bufferView": self.view(array.tobytes()) if view is None else view,
+                               "byteOffset": offset, "componentType": component, "count": len(array), "type": kind,
+                               **extra})
+        return len(self.accessors) - 1
+
+    def write(self, path: Path, attributes: dict, indices: np.ndarray, node: dict | None = None,
+              extra: dict | None = None, material: dict | None = None) -> Path:
+        doc = {"asset": {"version": "2.0"}, "scene": 0, "scenes": [{"nodes": [0]}],
+               "nodes": [{"mesh": 0, **(node or {})}],
+               "meshes": [{"primitives": [{"attributes": attributes, "material": 0,
+                                           "indices": self.accessor(indices.astype(np.uint32).ravel(), "SCALAR",
+                                                                    5125)}]}],
+               "materials": [material or MATERIAL], "accessors": self.accessors, "bufferViews": self.views,
+               "buffers": [{"byteLength": len(self.blob)}], **(extra or {})}
+        text = json.dumps(doc).encode()
+        text += b" " * (-len(text) % 4)
+        while len(self.blob) % 4:
+            self.blob.append(0)
+        body = struct.pack("<I4s", len(text), b"JSON") + text + struct.pack("<I4s", len(self.blob), b"BIN\0") \
+            + bytes(self.blob)
+        path.write_bytes(struct.pack("<4sII", b"glTF", 2, 12 + len(body)) + body)
+        return path
+
+
+def gltf_uvs(mesh) -> np.ndarray:
+    uv = mesh.uvs.astype(np.float64).copy()
+    uv[:, 1] = 1.0 - uv[:, 1]   # glTF's v runs down
+    return uv
+
+
+FLAT = quad(2.0, 2.0)
+UVS = np.array([[0.1, 0.9], [0.6, 0.9], [0.6, 0.4], [0.1, 0.4]])   # glTF's (v down)
+COLOURS = np.array([[1.0, 0.0, 0.0, 1.0], [0.0, 1.0, 0.0, 0.5], [0.0, 0.0, 1.0, 1.0], [0.5, 0.5, 0.5, 1.0]])
+
+
+def float_positions(writer: GlbWriter) -> int:
+    positions = FLAT.positions.astype(np.float32)
+    return writer.accessor(positions, "VEC3", 5126, min=positions.min(0).tolist(), max=positions.max(0).tolist())
+
+
+def test_normalized_short_uvs_and_byte_colours_are_read_as_the_floats_they_stand_for(tmp_path):
+    writer = GlbWriter()
+    attributes = {"POSITION": float_positions(writer),
+                  "TEXCOORD_0": writer.accessor(np.round(UVS * 65535).astype(np.uint16), "VEC2", 5123,
+                                                normalized=True),
+                  "COLOR_0": writer.accessor(np.round(COLOURS * 255).astype(np.uint8), "VEC4", 5121,
+                                             normalized=True)}
+    (part,) = load_model(writer.write(tmp_path / "packed.glb", attributes, FLAT.indices))
+    np.testing.assert_allclose(gltf_uvs(part.mesh), UVS, atol=1.0 / 65535 + 1e-6)
+    np.testing.assert_allclose(part.mesh.colors, COLOURS[:, :3], atol=1.0 / 255 + 1e-6)
+
+
+def test_an_interleaved_view_of_normalized_values_is_read_by_its_stride(tmp_path):
+    """UVs as unsigned bytes and normals as signed bytes in one view, eight bytes a vertex."""
+    writer = GlbWriter()
+    packed = np.zeros((4, 8), np.uint8)
+    packed[:, 0:2] = np.round(UVS * 255).astype(np.uint8)
+    normals = np.tile(np.array([0, 0, 127], np.int8), (4, 1))
+    packed[:, 4:7] = normals.view(np.uint8)
+    view = writer.view(packed.tobytes(), stride=8)
+    attributes = {"POSITION": float_positions(writer),
+                  "TEXCOORD_0": writer.accessor(packed[:, :2], "VEC2", 5121, view=view, normalized=True),
+                  "NORMAL": writer.accessor(normals, "VEC3", 5120, view=view, offset=4, normalized=True)}
+    path = writer.write(tmp_path / "interleaved.glb", attributes, FLAT.indices,
+                        extra={"extensionsUsed": ["KHR_mesh_quantization"],
+                               "extensionsRequired": ["KHR_mesh_quantization"]})
+    (part,) = load_model(path)
+    np.testing.assert_allclose(gltf_uvs(part.mesh), UVS, atol=1.0 / 255 + 1e-6)
+    np.testing.assert_allclose(part.mesh.normals, np.tile([0.0, 0.0, 1.0], (4, 1)), atol=1e-6)
+
+
+def test_a_quantized_mesh_as_gltfpack_writes_it(tmp_path):
+    """Positions as plain shorts placed by the node's scale and offset, normals as normalised
+    bytes, UVs as normalised shorts brought back by KHR_texture_transform."""
+    writer = GlbWriter()
+    lo, hi = FLAT.positions.min(0), FLAT.positions.max(0)
+    step = float((hi - lo).max()) / 1023.0
+    shorts = np.round((FLAT.positions - lo) / step).astype(np.int16)
+    shorts4 = np.zeros((4, 4), np.int16)   # (glTF: a vertex attribute's elements start on 4 bytes)
+    shorts4[:, :3] = shorts
+    position_view = writer.view(shorts4.tobytes(), stride=8)
+    uv_lo, uv_size = UVS.min(0), UVS.max(0) - UVS.min(0)
+    uv_shorts = np.round((UVS - uv_lo) / uv_size * 65535).astype(np.uint16)
+    attributes = {"POSITION": writer.accessor(shorts, "VEC3", 5122, view=position_view,
+                                              min=shorts.min(0).tolist(), max=shorts.max(0).tolist()),
+                  "NORMAL": writer.accessor(np.tile(np.array([0, 0, 127, 0], np.int8), (4, 1))[:, :3].copy(),
+                                            "VEC3", 5120, normalized=True),
+                  "TEXCOORD_0": writer.accessor(uv_shorts, "VEC2", 5123, normalized=True)}
+    material = {"name": "m", "pbrMetallicRoughness": {"baseColorFactor": [1.0, 1.0, 1.0, 1.0], "baseColorTexture": {
+        "index": 0, "extensions": {"KHR_texture_transform": {"offset": uv_lo.tolist(), "scale": uv_size.tolist()}}}}}
+    image_view = writer.view(png_bytes(np.full((4, 4, 3), 200, np.uint8)))
+    path = writer.write(tmp_path / "quantized.glb", attributes, FLAT.indices,
+                        node={"translation": lo.tolist(), "scale": [step] * 3}, material=material,
+                        extra={"images": [{"bufferView": image_view, "mimeType": "image/png"}],
+                               "textures": [{"source": 0}],
+                               "extensionsUsed": ["KHR_mesh_quantization", "KHR_texture_transform"],
+                               "extensionsRequired": ["KHR_mesh_quantization"]})
+    (part,) = load_model(path)
+    matrix = np.array(part.local, np.float64)   # (numpy reads a glm.mat4 as the matrix: points are columns)
+    placed = part.mesh.positions @ matrix[:3, :3].T + matrix[:3, 3]
+    np.testing.assert_allclose(placed, FLAT.positions, atol=step)
+    np.testing.assert_allclose(part.mesh.normals, np.tile([0.0, 0.0, 1.0], (4, 1)), atol=1e-6)
+    np.testing.assert_allclose(gltf_uvs(part.mesh), UVS, atol=1e-4)
+
+
+@pytest.mark.parametrize("change, message", [
+    ({"componentType": 5126}, r"accessor 1: normalized is only for byte and short components"),
+    ({"count": 40}, r"accessor 1: its 40 elements run past the end of bufferView 1"),
+    ({"bufferView": 9}, r"accessor 1: names bufferView 9, which the file does not have"),
+])
+def test_a_normalized_accessor_that_cannot_be_read_is_refused_naming_it(tmp_path, change, message):
+    writer = GlbWriter()
+    attributes = {"POSITION": float_positions(writer),
+                  "TEXCOORD_0": writer.accessor(np.round(UVS * 65535).astype(np.uint16), "VEC2", 5123,
+                                                normalized=True)}
+    writer.accessors[1].update(change)
+    with pytest.raises(AssetError, match=rf"bad\.glb.*{message}"):
+        load_model(writer.write(tmp_path / "bad.glb", attributes, FLAT.indices))
