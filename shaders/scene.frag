@@ -29,7 +29,7 @@ flat in vec4 v_reflect;
 flat in vec4 v_tint;
 flat in uvec4 v_slots;
 #ifdef VERTEX_COLOR
-in vec3 v_vertex_color;  // the mesh's colour here (Mesh.colors), multiplied into the material's
+in vec4 v_vertex_color;  // the mesh's colour here (Mesh.colors, RGBA), multiplied into the material's
 #endif
 #ifdef SCREEN_OCCLUSION
 // The camera's screen-space ambient occlusion (engine/render/screen_occlusion.py; a root
@@ -587,7 +587,7 @@ void main() {
     if (has_albedo_map) base *= texture(albedo_map, v_uv);
 #endif
 #ifdef VERTEX_COLOR
-    base.rgb *= v_vertex_color;
+    base *= v_vertex_color;
 #endif
 #ifdef ALPHA_CUTOFF
     // A cutout (Material.alpha_cutoff): nothing where the alpha falls below it; the shadow

@@ -40,8 +40,8 @@ in uvec4 in_slots;         // emissive variant, refract variant, reflect variant
 // The mesh's colour a vertex (Mesh.colors), linear.  The sixteen vertex inputs GL 4.1
 // promises are all taken, so this build works the normal matrix out here instead of
 // reading the instance's (three inputs freed for one).
-in vec3 in_vertex_color;
-out vec3 v_vertex_color;
+in vec4 in_vertex_color;
+out vec4 v_vertex_color;
 #endif
 
 #ifdef BATCHED_VIEWS

@@ -51,8 +51,8 @@ flat in uvec4 g_slots[];
 
 in float g_slice_distance[];
 #ifdef VERTEX_COLOR
-in vec3 g_vertex_color[];
-out vec3 v_vertex_color;
+in vec4 g_vertex_color[];
+out vec4 v_vertex_color;
 #endif
 
 out float gl_ClipDistance[CLIP_DISTANCE_COUNT];  // indices: engine/render/bindings.py

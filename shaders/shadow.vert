@@ -23,6 +23,9 @@ in vec4 in_color;   // alpha: the colour's share of the cutout's alpha
 out vec2 v_uv;
 out float v_alpha;
 #endif
+#ifdef VERTEX_ALPHA
+in vec4 in_vertex_color;  // a. the mesh's share a vertex (Mesh.colors), as scene.frag multiplies it in
+#endif
 #ifdef LEG
 // A middle stretch of a virtual light's way (between two surfaces): its second plane, world.
 uniform vec4 leg_plane;
@@ -55,6 +58,9 @@ void main() {
 #ifdef ALPHA_CUTOFF
     v_uv = in_uv;
     v_alpha = in_color.a;
+#endif
+#ifdef VERTEX_ALPHA
+    v_alpha *= in_vertex_color.a;
 #endif
 #ifdef LAYERED
     v_clip = vec2(casts ? plane : -1.0, dot(world, in_slice));

@@ -86,7 +86,7 @@ def test_normalized_short_uvs_and_byte_colours_are_read_as_the_floats_they_stand
                                              normalized=True)}
     (part,) = load_model(writer.write(tmp_path / "packed.glb", attributes, FLAT.indices))
     np.testing.assert_allclose(gltf_uvs(part.mesh), UVS, atol=1.0 / 65535 + 1e-6)
-    np.testing.assert_allclose(part.mesh.colors, COLOURS[:, :3], atol=1.0 / 255 + 1e-6)
+    np.testing.assert_allclose(part.mesh.colors, COLOURS, atol=1.0 / 255 + 1e-6)   # (an alpha below 1: RGBA)
 
 
 def test_an_interleaved_view_of_normalized_values_is_read_by_its_stride(tmp_path):

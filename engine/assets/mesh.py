@@ -60,8 +60,11 @@ _mesh_ids = itertools.count(1)
 @dataclass(eq=False)
 class Mesh:
     """Indexed triangles: positions, normals (unit), uvs, and int32 triangle indices; and
-    optionally a colour a vertex (``colors``: linear RGB, interpolated across each triangle
-    and multiplied into the material's colour, as glTF's ``COLOR_0``; None: none)."""
+    optionally a colour a vertex (``colors``: linear RGB, or RGBA with an alpha in [0, 1],
+    interpolated across each triangle and multiplied into the material's colour, as glTF's
+    ``COLOR_0``; None: none).  A vertex's alpha, like a texture's, is drawn where the material
+    is see-through (its colour's alpha below 1: blended) or a cutout (cut at its
+    ``alpha_cutoff``, in every view and shadow map); an opaque material ignores it."""
 
     ASSET_KIND = "mesh"  # what MeshRef.mesh checks for (components do not import the engine)
 
@@ -104,13 +107,28 @@ class Mesh:
             raise AssetError(f"mesh {self.name!r}: triangle index out of range 0..{n - 1}")
         if self.colors is not None:
             colors = np.asarray(self.colors)
-            if colors.shape != (n, 3) or not np.issubdtype(colors.dtype, np.number):
-                raise AssetError(f"mesh {self.name!r}: colors must be one linear RGB triple a vertex, shape ({n}, 3), "
-                                 f"got shape {colors.shape}")
+            if colors.ndim != 2 or colors.shape[0] != n or colors.shape[1] not in (3, 4) or \
+                    not np.issubdtype(colors.dtype, np.number):
+                raise AssetError(f"mesh {self.name!r}: colors must be one linear RGB or RGBA colour a vertex, shape "
+                                 f"({n}, 3) or ({n}, 4), got shape {colors.shape}")
             colors = np.ascontiguousarray(colors, np.float32)
             if not (np.isfinite(colors).all() and colors.min() >= 0.0 and colors.max() <= 65504.0):
                 raise AssetError(f"mesh {self.name!r}: colors must be finite, in [0, 65504] (half floats)")
+            if colors.shape[1] == 4 and colors[:, 3].max() > 1.0:
+                raise AssetError(f"mesh {self.name!r}: a colour's alpha must be in [0, 1], got up to "
+                                 f"{float(colors[:, 3].max()):g}")
             self.colors = colors
+
+    @property
+    def has_alpha(self) -> bool:
+        """Whether some vertex's colour has an alpha below 1."""
+        return self.colors is not None and self.colors.shape[1] == 4 and bool((self.colors[:, 3] < 1.0).any())
+
+    def rgba_colors(self) -> np.ndarray | None:
+        """The colours a vertex as RGBA (alpha 1 where they are RGB), what the GPU reads."""
+        if self.colors is None or self.colors.shape[1] == 4:
+            return self.colors
+        return np.ascontiguousarray(np.hstack([self.colors, np.ones((len(self.colors), 1), np.float32)]))
 
     @property
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:
@@ -149,9 +167,9 @@ class Mesh:
 
 
 def _vertex_colors(tm, count: int, srgb: bool, name: str) -> np.ndarray | None:
-    """A trimesh's colour a vertex as linear RGB (None: none, or all white): a vertex-coloured
-    visual's, or a textured one's ``color`` attribute (glTF's COLOR_0 beside a material).  The
-    alpha is not used (the material's alpha says what is see-through)."""
+    """A trimesh's colour a vertex as linear RGB, or RGBA where some alpha is below 1 (None:
+    none, or all opaque white): a vertex-coloured visual's, or a textured one's ``color``
+    attribute (glTF's COLOR_0 beside a material).  The alpha is linear in every format."""
     visual = getattr(tm, "visual", None)
     colors = None
     if getattr(visual, "kind", None) == "vertex":
@@ -164,15 +182,18 @@ def _vertex_colors(tm, count: int, srgb: bool, name: str) -> np.ndarray | None:
         return None
     if colors.ndim != 2 or len(colors) != count or colors.shape[1] not in (3, 4):
         raise AssetError(f"mesh {name!r}: vertex colours of shape {colors.shape} for {count} vertices")
-    rgb = colors[:, :3].astype(np.float64)
+    values = colors.astype(np.float64)
     if colors.dtype.kind in "ui":
-        rgb /= float(np.iinfo(colors.dtype).max)
-    if not np.isfinite(rgb).all():
+        values /= float(np.iinfo(colors.dtype).max)
+    if not np.isfinite(values).all():
         raise AssetError(f"mesh {name!r}: has NaN or infinite vertex colours")
-    rgb = np.clip(rgb, 0.0, 1.0)
-    if (rgb == 1.0).all():
+    values = np.clip(values, 0.0, 1.0)
+    rgb = values[:, :3]
+    alpha = values[:, 3:] if values.shape[1] == 4 and (values[:, 3] < 1.0).any() else None
+    if (rgb == 1.0).all() and alpha is None:
         return None
-    return (srgb_to_linear(rgb) if srgb else rgb).astype(np.float32)
+    rgb = srgb_to_linear(rgb) if srgb else rgb
+    return (rgb if alpha is None else np.hstack([rgb, alpha])).astype(np.float32)
 
 
 def _face_coloured(tm, name: str, srgb: bool) -> Mesh:
@@ -707,8 +728,9 @@ def _gltf_alpha(material, part: ModelPart, what: str) -> None:
     """What glTF's ``alphaMode`` makes of a material's alpha (the colour's times the
     texture's): OPAQUE (the default) ignores it, so the part is opaque whatever its alpha;
     MASK cuts it at ``alphaCutoff`` (default 0.5: ``Material.alpha_cutoff``); BLEND blends
-    it, so a part whose factor's alpha is 1 but whose texture has see-through texels goes
-    to the transparent slot too (its colour's alpha just under 1, as world text's)."""
+    it, so a part whose factor's alpha is 1 but whose texture has see-through texels, or
+    whose COLOR_0 a see-through vertex, goes to the transparent slot too (its colour's alpha
+    just under 1, as world text's)."""
     mode = getattr(material, "alphaMode", None) or "OPAQUE"
     if mode not in ("OPAQUE", "MASK", "BLEND"):
         raise AssetError(f"{what}: alphaMode must be OPAQUE, MASK or BLEND, got {mode!r}")
@@ -722,7 +744,7 @@ def _gltf_alpha(material, part: ModelPart, what: str) -> None:
             raise AssetError(f"{what}: alphaCutoff must be a number in [0, 1] (above 1 nothing would be drawn), "
                              f"got {cutoff!r}")
         part.alpha_cutoff = float(cutoff)
-    elif part.color[3] >= 1.0 and part.texture is not None and part.texture.has_alpha:
+    elif part.color[3] >= 1.0 and ((part.texture is not None and part.texture.has_alpha) or part.mesh.has_alpha):
         part.color = (*part.color[:3], BLENDED_ALPHA)
 
 

@@ -131,9 +131,10 @@ class GpuMesh:
     def __init__(self, ctx: moderngl.Context, mesh: Mesh) -> None:
         self.vertices = ctx.buffer(mesh.interleaved().tobytes())
         self.indices = ctx.buffer(mesh.indices.astype(np.uint32).tobytes())
-        # Its colour a vertex (Mesh.colors, linear RGB), a buffer of its own (None: none): the
-        # VERTEX_COLOR builds read it.
-        self.colors = ctx.buffer(mesh.colors.tobytes()) if mesh.colors is not None else None
+        # Its colour a vertex (Mesh.colors, linear RGBA), a buffer of its own (None: none): the
+        # VERTEX_COLOR builds read it (and a cutout's VERTEX_ALPHA shadow build its alpha).
+        self.colors = ctx.buffer(mesh.rgba_colors().tobytes()) if mesh.colors is not None else None
+        self.has_alpha = mesh.has_alpha  # some vertex's alpha below 1 (Mesh.has_alpha)
         self.index_count = mesh.indices.size
         # Model-space radius about the origin (what an instance's scale stretches).
         self.radius = float(np.linalg.norm(mesh.positions, axis=1).max()) if len(mesh.positions) else 0.0
@@ -732,7 +733,7 @@ class InstanceBatch:
             buffers = [(self.mesh.vertices, VERTEX_FORMAT, *VERTEX_ATTRIBUTES),
                        (self._buffer, INSTANCE_FORMAT, *INSTANCE_ATTRIBUTES)]
             if self.mesh.colors is not None:
-                buffers.append((self.mesh.colors, "3f", "in_vertex_color"))
+                buffers.append((self.mesh.colors, "4f", "in_vertex_color"))
             vao = self.ctx.vertex_array(
                 program,
                 buffers,

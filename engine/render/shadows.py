@@ -144,7 +144,7 @@ class ShadowMaps:
         self.ubo = ctx.buffer(self.block.tobytes())
         # The caster programs by (build: _DEPTH, _DISTANCE, _LAYERED or _LEG; whether for
         # cutouts): _caster_program.
-        self._casters: dict[tuple[tuple[tuple[str, str], ...], bool], moderngl.Program] = {}
+        self._casters: dict[tuple[tuple[tuple[str, str], ...], bool | str], moderngl.Program] = {}
         for build in (_DEPTH, _DISTANCE):
             self._caster_program(build, False)
         # Until a light casts: a 1x1 atlas at the far depth and 1x1 cubes at the range's end
@@ -606,14 +606,17 @@ class ShadowMaps:
         return True
 
     # --- drawing --------------------------------------------------------------------------
-    def _caster_program(self, build: tuple[tuple[str, str], ...], cutout: bool) -> moderngl.Program:
+    def _caster_program(self, build: tuple[tuple[str, str], ...], cutout: bool | str) -> moderngl.Program:
         """The caster program of ``build`` (its defines), for cutouts (``cutout``: the
-        ``ALPHA_CUTOFF`` build, its albedo map read for its holes) or whole casters."""
+        ``ALPHA_CUTOFF`` build, its albedo map read for its holes; "vertex alpha": and its
+        mesh's alpha a vertex, ``VERTEX_ALPHA``) or whole casters."""
         program = self._casters.get((build, cutout))
         if program is None:
             defines = dict(build)
             if cutout:
                 defines["ALPHA_CUTOFF"] = "1"
+            if cutout == "vertex alpha":
+                defines["VERTEX_ALPHA"] = "1"
             geometry = "shadow_layered.geom" if "LAYERED" in defines else None
             program = self._casters[(build, cutout)] = self.renderer.shaders.program(
                 "shadow.vert", "shadow.frag", geometry, defines=defines)
@@ -634,7 +637,7 @@ class ShadowMaps:
             renderer.bind_view(view)
         ctx.polygon_offset = SLOPE_BIAS
         whole = self._caster_program(build, False)
-        cutouts: moderngl.Program | None = None  # made and given ``uniforms`` at the first cutout
+        cutouts: dict[bool | str, moderngl.Program] = {}  # made and given ``uniforms`` at the first cutout
         for name, value in (uniforms or {}).items():
             _set_uniform(whole, name, value)
         stats = renderer.stats
@@ -646,14 +649,16 @@ class ShadowMaps:
                 if cutoff is None:
                     batch.draw(whole)
                 else:
-                    if cutouts is None:
-                        cutouts = self._caster_program(build, True)
+                    kind = "vertex alpha" if batch.mesh.has_alpha else True
+                    program = cutouts.get(kind)
+                    if program is None:
+                        program = cutouts[kind] = self._caster_program(build, kind)
                         for name, value in (uniforms or {}).items():
-                            _set_uniform(cutouts, name, value)
+                            _set_uniform(program, name, value)
                     bind_texture(ctx, batch.texture if batch.texture is not None else renderer.blank_color,
                                  ALBEDO_UNIT)
-                    cutouts["alpha_cutoff"].value = cutoff
-                    batch.draw(cutouts)
+                    program["alpha_cutoff"].value = cutoff
+                    batch.draw(program)
                 stats.shadow_draw_calls += 1
         finally:
             ctx.polygon_offset = (0.0, 0.0)
