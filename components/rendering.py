@@ -138,6 +138,14 @@ class Material(TrackedComponent):
     what the coat's Fresnel reflection leaves (1 - clearcoat x F at the angle it is seen).
     The coat follows the mesh's own surface, not a normal map's bumps (a smooth varnish
     over a textured base).
+
+    ``unlit`` (default False) draws the material's colour as it is, lit by nothing (glTF's
+    ``KHR_materials_unlit``, Unity's Unlit shaders, three.js's ``MeshBasicMaterial``,
+    Godot's unshaded mode): a sign, a backdrop, a baked or stylised asset whose texture
+    already holds its light.  Its colour, texture and vertex colours, alpha, cutout and an
+    ``Emissive``'s glow still apply, and so do a ``Reflective``'s or ``Refractive``'s slots and
+    fog; no light, shadow, ambient or environment reflection reaches it.  It casts shadows
+    as any other thing does.
     """
 
     color: Any = field(default_factory=lambda: glm.vec4(0.8, 0.8, 0.8, 1.0))
@@ -156,6 +164,7 @@ class Material(TrackedComponent):
     blend: str = "fade"
     clearcoat: float = 0.0
     clearcoat_roughness: float = 0.0
+    unlit: bool = False
 
     def _validate(self, name: str, value: Any) -> Any:
         if name == "blend":
@@ -177,6 +186,8 @@ class Material(TrackedComponent):
             return finite(self, name, value, low=0.0, high=MAX_NORMAL_SCALE)
         if name in ("occlusion_strength", "environment_reflection", "clearcoat", "clearcoat_roughness"):
             return finite(self, name, value, low=0.0, high=1.0)
+        if name == "unlit":
+            return boolean(self, name, value)
         if name == "double_sided":
             value = boolean(self, name, value)
             world = getattr(self, "_world_ref", None)

@@ -640,7 +640,11 @@ void main() {
         s.refract_lod = cube_lod(s.refract_dir, probe_face_size > 0.0 ? probe_face_size : sky_face_size);
 
     AmbientBoxes boxes = ambient_boxes(s.position);
+#ifdef UNLIT_MATERIAL
+    vec3 lit = s.albedo;  // Material.unlit: its colour as it is, no light, shadow or reflection on it
+#else
     vec3 lit = direct_lighting(s, boxes);
+#endif
 #if defined(SCREEN_REFLECTION) && defined(METALLIC_ROUGHNESS_MAP)
     vec3 lit_weight = reflect_weight, lit_added = reflect_added;  // (the environment reflection's, in lit)
 #endif

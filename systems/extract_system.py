@@ -157,7 +157,8 @@ class ExtractSystem(esper.Processor):
                                             double_sided=material.double_sided if material else False,
                                             keeps_specular=material is not None and material.blend == "transparent",
                                             clearcoat=(material.clearcoat, material.clearcoat_roughness)
-                                            if material is not None and material.clearcoat > 0.0 else None)
+                                            if material is not None and material.clearcoat > 0.0 else None,
+                                            unlit=material is not None and material.unlit)
         except GLLimitError as exc:
             raise GLLimitError(f"entity {entity}: {exc}") from None
         if transparent:  # a see-through mirror or portal (water): drawn before the view trees' claims

@@ -73,14 +73,34 @@ def float_normalized_accessors(doc: dict, buffer_bytes: Callable[[int], bytes], 
     return len(rewritten)
 
 
-def _decode(accessor: dict, views: list, buffer_bytes: Callable[[int], bytes], label: str) -> np.ndarray:
-    """A normalised accessor's values as float32, one row an element."""
+def read_float_accessor(doc: dict, index: object, buffer_bytes: Callable[[int], bytes], label: str) -> np.ndarray:
+    """Accessor ``index`` of ``doc`` as float32 rows, one an element: a float accessor's values
+    or a normalised one's (run ``float_normalized_accessors`` first, or not); anything else is
+    an AssetError naming it."""
+    accessors = doc.get("accessors") if isinstance(doc.get("accessors"), list) else []
+    if isinstance(index, bool) or not isinstance(index, int) or not 0 <= index < len(accessors) \
+            or not isinstance(accessors[index], dict):
+        raise AssetError(f"{label}: names accessor {index!r}, which the file does not have")
+    accessor = accessors[index]
+    views = doc.get("bufferViews") if isinstance(doc.get("bufferViews"), list) else []
+    if accessor.get("normalized") is True:
+        return _decode(accessor, views, buffer_bytes, f"{label}: accessor {index}")
+    if accessor.get("componentType") != FLOAT:
+        raise AssetError(f"{label}: accessor {index} must hold floats (or normalised integers), got componentType "
+                         f"{accessor.get('componentType')!r}")
+    return _decode(accessor, views, buffer_bytes, f"{label}: accessor {index}", (np.float32, 1.0))
+
+
+def _decode(accessor: dict, views: list, buffer_bytes: Callable[[int], bytes], label: str,
+            float_type: tuple | None = None) -> np.ndarray:
+    """A normalised accessor's values as float32, one row an element (``float_type``: a
+    float accessor's, read as they are)."""
     ctype, kind, count = accessor.get("componentType"), accessor.get("type"), accessor.get("count")
-    if ctype not in NORMALIZED_TYPES:
+    if float_type is None and ctype not in NORMALIZED_TYPES:
         raise AssetError(f"{label}: normalized is only for byte and short components (glTF), got componentType "
                          f"{ctype!r}")
     if kind not in COMPONENTS:
-        raise AssetError(f"{label}: a normalized accessor of type {kind!r} is not read (SCALAR or VEC2-4)")
+        raise AssetError(f"{label}: an accessor of type {kind!r} is not read here (SCALAR or VEC2-4)")
     if isinstance(count, bool) or not isinstance(count, int) or count < 1:
         raise AssetError(f"{label}: count must be an integer >= 1, got {count!r}")
     if "sparse" in accessor:
@@ -95,7 +115,7 @@ def _decode(accessor: dict, views: list, buffer_bytes: Callable[[int], bytes], l
     if data is None:
         raise AssetError(f"{label}: its bufferView {view_index} names buffer {buffer_index!r}, which the file does "
                          "not have")
-    dtype, one = NORMALIZED_TYPES[ctype]
+    dtype, one = float_type or NORMALIZED_TYPES[ctype]
     size = np.dtype(dtype).itemsize
     components = COMPONENTS[kind]
     element = size * components
@@ -111,4 +131,9 @@ def _decode(accessor: dict, views: list, buffer_bytes: Callable[[int], bytes], l
     if end > view_length or view_offset + view_length > len(data):
         raise AssetError(f"{label}: its {count} elements run past the end of bufferView {view_index}")
     raw = np.ndarray((count, components), dtype, buffer=data, offset=view_offset + offset, strides=(stride, size))
+    if float_type is not None:
+        values = raw.astype(np.float32)
+        if not np.isfinite(values).all():
+            raise AssetError(f"{label}: holds NaN or infinite values")
+        return values
     return np.maximum(raw.astype(np.float32) / np.float32(one), np.float32(-1.0))

@@ -441,6 +441,7 @@ class ModelPart:
     thick: bool = False        # KHR_materials_volume's thickness > 0: a solid, not a thin wall (Refractive.solid)
     clearcoat: float = 0.0            # KHR_materials_clearcoat's factor (Material.clearcoat)
     clearcoat_roughness: float = 0.0  # its roughness factor (Material.clearcoat_roughness)
+    unlit: bool = False               # KHR_materials_unlit (Material.unlit)
     name: str = ""  # "file:part", as a level file's part = "..." names it (parts may share one mesh)
 
     def __post_init__(self) -> None:
@@ -944,6 +945,12 @@ class _MaterialMaps:
             self._emissive(part, self.image(image, f"{what}: emissiveTexture", "colour"), factor[:3], what)
         _gltf_transmission(doc_material, part, what)
         _gltf_clearcoat(doc_material, part, what)
+        extensions = doc_material.get("extensions") if isinstance(doc_material, dict) else None
+        if isinstance(extensions, dict) and "KHR_materials_unlit" in extensions:
+            # its base colour as it is (glTF: the other properties are a fallback's, for a
+            # viewer without the extension): no reflection, glass or coat of theirs
+            part.unlit = True
+            part.metallic = part.reflectivity = part.transmission = part.clearcoat = 0.0
 
     def image(self, image, what: str, kind: str) -> TextureData:
         """A decoded image of the file as a TextureData (once per image and kind), its size

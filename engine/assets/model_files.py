@@ -32,6 +32,7 @@ from pathlib import Path
 from urllib.parse import unquote
 
 from engine.assets.gltf_accessors import float_normalized_accessors
+from engine.assets.gltf_instancing import expand_gpu_instancing
 from engine.assets.texture_data import contained_path, file_problem, read_asset_file
 from engine.core.errors import AssetError
 
@@ -426,10 +427,12 @@ def _json(path: Path, data: bytes, quiet: bool = False) -> dict | None:
 
 # glTF extensions the engine reads (a texture transform: offset, rotation and scale, shared by a
 # material's maps; lights: engine/assets/model_lights.py; glass: transmission, ior, volume;
-# a clear coat; packed vertex data: engine/assets/gltf_accessors.py)
-GLTF_READ_EXTENSIONS = frozenset({"KHR_lights_punctual", "KHR_materials_clearcoat", "KHR_materials_emissive_strength",
-                                  "KHR_materials_ior", "KHR_materials_transmission", "KHR_materials_volume",
-                                  "KHR_mesh_quantization", "KHR_texture_transform"})
+# a clear coat; unlit; packed vertex data: engine/assets/gltf_accessors.py; instancing:
+# engine/assets/gltf_instancing.py)
+GLTF_READ_EXTENSIONS = frozenset({
+    "EXT_mesh_gpu_instancing", "KHR_lights_punctual", "KHR_materials_clearcoat", "KHR_materials_emissive_strength",
+    "KHR_materials_ior", "KHR_materials_transmission", "KHR_materials_unlit", "KHR_materials_volume",
+    "KHR_mesh_quantization", "KHR_texture_transform"})
 
 
 def _unread_texture(info: object) -> str | None:
@@ -523,8 +526,9 @@ def prepare_gltf(path: Path, data: bytes, roots: Sequence[Path], textures: bool)
         uri = buffer.get("uri") if isinstance(buffer, dict) else None
         if isinstance(uri, str):
             _uri(path, uri, roots, f"buffer {number}", resolver, True, what)
-    float_normalized_accessors(doc, lambda number: _buffer_bytes(doc, number, resolver,
-                                                                 data[chunk_end:] if glb else b""), what)
+    buffer_bytes = lambda number: _buffer_bytes(doc, number, resolver, data[chunk_end:] if glb else b"")  # noqa: E731
+    float_normalized_accessors(doc, buffer_bytes, what)
+    expand_gpu_instancing(doc, buffer_bytes, what)
     materials = doc.get("materials") if isinstance(doc.get("materials"), list) else []
     textures_list = doc.get("textures") if isinstance(doc.get("textures"), list) else []
     images = doc.get("images") if isinstance(doc.get("images"), list) else []

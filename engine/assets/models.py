@@ -111,7 +111,8 @@ def spawn_model(world: World, path: str | Path, position: glm.vec3 | Sequence[fl
                          occlusion_strength=part.occlusion_strength, alpha_cutoff=part.alpha_cutoff,
                          double_sided=part.double_sided and not _planar_mirror(part),
                          blend="transparent" if _glass(part) and not refracts else "fade",
-                         clearcoat=part.clearcoat, clearcoat_roughness=part.clearcoat_roughness),
+                         clearcoat=part.clearcoat, clearcoat_roughness=part.clearcoat_roughness,
+                         unlit=part.unlit),
             ]
             if part.emissive_factor > 0.0:
                 components.append(Emissive(part.emissive_factor))

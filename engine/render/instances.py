@@ -173,6 +173,7 @@ class BatchKey(NamedTuple):
     double_sided: bool = False          # Material.double_sided: drawn with face culling off
     keeps_specular: bool = False        # a transparent one's Material.blend "transparent"
     clearcoat: tuple[float, float] | None = None  # Material.clearcoat and its roughness (None: none)
+    unlit: bool = False                 # Material.unlit: its colour as it is (the UNLIT_MATERIAL build)
 
 
 def blend_code(batch: InstanceBatch) -> int:
@@ -283,6 +284,7 @@ class InstanceBatch:
         # A clear-coated material's coat (Material.clearcoat, clearcoat_roughness; None:
         # none): its CLEARCOAT build's uniform, part of the batch's key.
         self.clearcoat: tuple[float, float] | None = None
+        self.unlit = False  # Material.unlit: drawn with the UNLIT_MATERIAL build, lit by nothing
 
     # --- rows ----------------------------------------------------------------------------
     def add(self, entity: int) -> np.void:

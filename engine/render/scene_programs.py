@@ -68,7 +68,8 @@ PER_PASS_UNIFORMS = 1  # the first changes with the pass; the rest with the batc
 NO_PROBE_LOOKUP = ((0.0, 0.0, 0.0, 0.0),) * 3  # a probe's lookup uniforms where the sky stands in for it
 NO_CHECKER = (0.0, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
 NO_CLEARCOAT = (0.0, 0.0)  # the coat uniform of a batch without one (its builds do not read it)
-NO_MATERIAL_MAPS = (False, False, False, "", False, False, False)  # a batch's build with none of _material_build's
+# a batch's build with none of _material_build's
+NO_MATERIAL_MAPS = (False, False, False, "", False, False, False, False)
 
 
 
@@ -112,7 +113,8 @@ class ScenePrograms:
 
     def program(self, variants: tuple[int, int, int] | None = None, invocations: int = 0,
                 layered: str = "", normal_mapped: bool = False, checker: bool = False,
-                material: tuple[bool, bool, bool, str, bool, bool, bool] = NO_MATERIAL_MAPS, probe_blend: bool = False,
+                material: tuple[bool, bool, bool, str, bool, bool, bool, bool] = NO_MATERIAL_MAPS,
+                probe_blend: bool = False,
                 ambient_probes: bool = False, probe_rest: bool = False, unlit: bool = False,
                 masked: bool = False, screen: str = "") -> moderngl.Program:
         """The scene program for a batch of ``variants`` (None: mixed, switched per
@@ -160,7 +162,7 @@ class ScenePrograms:
         if screen == "depth_normals":  # nothing shaded: only a cutout's discard picks the build
             variants, normal_mapped, checker, probe_blend, ambient_probes, probe_rest = None, False, False, False, \
                 False, False
-            material = (False, False, material[2], "", False, False, False)
+            material = (False, False, material[2], "", False, False, False, False)
             virtual, unlit, masked, shadowing, fogging, cookies = False, False, False, (), (), ()
         elif unlit:  # shades nothing: no occlusion read (it still writes "nothing reflected")
             screen = "reflected" if "reflected" in screen else ""
@@ -190,6 +192,8 @@ class ScenePrograms:
                 defines["VERTEX_COLOR"] = "1"
             if material[6]:  # a clear coat over it (Material.clearcoat: scene.frag's coat layer)
                 defines["CLEARCOAT"] = "1"
+            if material[7]:  # its colour as it is, lit by nothing (Material.unlit)
+                defines["UNLIT_MATERIAL"] = "1"
             if probe_blend:  # two probes and the sky by the instances' weights (shaders/include/probe.glsl)
                 defines["PROBE_BLEND"] = "1"
                 if probe_rest:  # a probe, not the sky, takes what the weights leave
@@ -350,14 +354,14 @@ def geometry_invocations(view_count: int) -> int:
 BATCHED_INVOCATIONS = tuple(sorted({geometry_invocations(n) for n in range(1, MAX_BATCHED_VIEWS + 1)}))
 
 
-def _material_build(batch: InstanceBatch) -> tuple[bool, bool, bool, str, bool, bool, bool]:
+def _material_build(batch: InstanceBatch) -> tuple[bool, bool, bool, str, bool, bool, bool, bool]:
     """What of a batch's material picks its build: whether it samples an emissive and a
     metallic-roughness map, whether it is a cutout, where its occlusion is read ("map": a
     map of its own, "packed": the metallic-roughness map's red, "": none), whether its
     mesh has a colour a vertex, whether it samples a probe (its environment reflection
     reads the probe, ``ENVIRONMENT_PROBE``: only such batches pay for the lookup), and
-    whether it is clear-coated (``CLEARCOAT``)."""
+    whether it is clear-coated (``CLEARCOAT``) and whether it is unlit (``UNLIT_MATERIAL``)."""
     occlusion = "packed" if batch.occlusion_packed else "map" if batch.occlusion_map is not None else ""
     return (batch.emissive_map is not None, batch.metallic_roughness_map is not None, batch.alpha_cutoff is not None,
-            occlusion, batch.mesh.colors is not None, batch.probe != 0, batch.clearcoat is not None)
+            occlusion, batch.mesh.colors is not None, batch.probe != 0, batch.clearcoat is not None, batch.unlit)
 
