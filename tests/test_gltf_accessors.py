@@ -155,3 +155,35 @@ def test_a_normalized_accessor_that_cannot_be_read_is_refused_naming_it(tmp_path
     writer.accessors[1].update(change)
     with pytest.raises(AssetError, match=rf"bad\.glb.*{message}"):
         load_model(writer.write(tmp_path / "bad.glb", attributes, FLAT.indices))
+
+
+def test_a_webp_texture_is_read_in_place_of_its_fallback(tmp_path):
+    """EXT_texture_webp: the texture's WebP image (lossless here) is the one read, its PNG
+    "source" only a fallback; a texture with the WebP alone reads it too."""
+    import io
+
+    from PIL import Image
+
+    webp_pixels = np.zeros((4, 4, 3), np.uint8)
+    webp_pixels[:, :2] = (200, 30, 30)
+    webp_pixels[:, 2:] = (30, 30, 200)
+    out = io.BytesIO()
+    Image.fromarray(webp_pixels).save(out, format="WEBP", lossless=True)
+    for fallback in (True, False):
+        writer = GlbWriter()
+        webp_view = writer.view(out.getvalue())
+        images = [{"bufferView": webp_view, "mimeType": "image/webp"}]
+        texture: dict = {"extensions": {"EXT_texture_webp": {"source": 0}}}
+        if fallback:
+            images.append({"bufferView": writer.view(png_bytes(np.full((4, 4, 3), 90, np.uint8))),
+                           "mimeType": "image/png"})
+            texture["source"] = 1
+        material = {"name": "m", "pbrMetallicRoughness": {"baseColorFactor": [1.0, 1.0, 1.0, 1.0],
+                                                          "baseColorTexture": {"index": 0}}}
+        path = writer.write(tmp_path / "webp.glb",
+                            {"POSITION": float_positions(writer), "TEXCOORD_0": writer.accessor(
+                                gltf_uvs(FLAT).astype(np.float32), "VEC2", 5126)}, FLAT.indices, material=material,
+                            extra={"images": images, "textures": [texture], "extensionsUsed": ["EXT_texture_webp"],
+                                   "extensionsRequired": [] if fallback else ["EXT_texture_webp"]})
+        (part,) = load_model(path)
+        np.testing.assert_array_equal(part.texture.pixels[..., :3], webp_pixels)

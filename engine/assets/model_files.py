@@ -428,11 +428,11 @@ def _json(path: Path, data: bytes, quiet: bool = False) -> dict | None:
 # glTF extensions the engine reads (a texture transform: offset, rotation and scale, shared by a
 # material's maps; lights: engine/assets/model_lights.py; glass: transmission, ior, volume;
 # a clear coat; unlit; packed vertex data: engine/assets/gltf_accessors.py; instancing:
-# engine/assets/gltf_instancing.py)
+# engine/assets/gltf_instancing.py; WebP images)
 GLTF_READ_EXTENSIONS = frozenset({
-    "EXT_mesh_gpu_instancing", "KHR_lights_punctual", "KHR_materials_clearcoat", "KHR_materials_emissive_strength",
-    "KHR_materials_ior", "KHR_materials_transmission", "KHR_materials_unlit", "KHR_materials_volume",
-    "KHR_mesh_quantization", "KHR_texture_transform"})
+    "EXT_mesh_gpu_instancing", "EXT_texture_webp", "KHR_lights_punctual", "KHR_materials_clearcoat",
+    "KHR_materials_emissive_strength", "KHR_materials_ior", "KHR_materials_transmission", "KHR_materials_unlit",
+    "KHR_materials_volume", "KHR_mesh_quantization", "KHR_texture_transform"})
 
 
 def _unread_texture(info: object) -> str | None:
@@ -531,6 +531,12 @@ def prepare_gltf(path: Path, data: bytes, roots: Sequence[Path], textures: bool)
     expand_gpu_instancing(doc, buffer_bytes, what)
     materials = doc.get("materials") if isinstance(doc.get("materials"), list) else []
     textures_list = doc.get("textures") if isinstance(doc.get("textures"), list) else []
+    for texture in textures_list:
+        # EXT_texture_webp: a WebP image (Pillow decodes it) in place of the fallback "source"
+        extensions = texture.get("extensions") if isinstance(texture, dict) else None
+        webp = extensions.get("EXT_texture_webp") if isinstance(extensions, dict) else None
+        if isinstance(webp, dict) and "source" in webp:
+            texture["source"] = webp["source"]
     images = doc.get("images") if isinstance(doc.get("images"), list) else []
     used_materials = {primitive.get("material") for mesh in (doc.get("meshes") or [])
                       if isinstance(mesh, dict) for primitive in (mesh.get("primitives") or [])
