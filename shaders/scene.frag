@@ -660,7 +660,7 @@ void main() {
     // reflection leaves; the coat's highlights and reflection lie on top (and a see-through
     // material keeps them whole, as it does its reflections: kept_light).
     float coat_nv = max(dot(coat_normal, s.to_eye), 0.0);
-    float coat_loss = 1.0 - clearcoat.x * (0.04 + 0.96 * pow(1.0 - coat_nv, 5.0));
+    float coat_loss = 1.0 - clearcoat.x * schlick_fresnel(s.to_eye, coat_normal, vec3(0.04)).x;
     vec3 coat = clearcoat.x * (coat_light + coat_environment(s, boxes, coat_nv));
     color = color * coat_loss + coat;
     kept_light = kept_light * coat_loss + coat;
