@@ -139,6 +139,13 @@ class Material(TrackedComponent):
     The coat follows the mesh's own surface, not a normal map's bumps (a smooth varnish
     over a textured base).
 
+    ``reflectance`` (0 to 1, default 0.5) is how much a non-metal reflects head on, as
+    Filament's and Godot's ``specular``/``reflectance`` knob: f0 = 0.16 x reflectance^2, so
+    0.5 is the 4% of glass, plastic and most things (index 1.5), 0.35 water's 2%, 1 the 16% of
+    a gem; the Fresnel effect raises it towards grazing angles whatever it is.  A metal
+    reflects its colour instead.  glTF's ``KHR_materials_ior`` and ``KHR_materials_specular``
+    set it.
+
     ``unlit`` (default False) draws the material's colour as it is, lit by nothing (glTF's
     ``KHR_materials_unlit``, Unity's Unlit shaders, three.js's ``MeshBasicMaterial``,
     Godot's unshaded mode): a sign, a backdrop, a baked or stylised asset whose texture
@@ -165,6 +172,7 @@ class Material(TrackedComponent):
     clearcoat: float = 0.0
     clearcoat_roughness: float = 0.0
     unlit: bool = False
+    reflectance: float = 0.5
 
     def _validate(self, name: str, value: Any) -> Any:
         if name == "blend":
@@ -184,7 +192,7 @@ class Material(TrackedComponent):
             return finite(self, name, value, low=0.0, high=1.0)
         if name == "normal_scale":
             return finite(self, name, value, low=0.0, high=MAX_NORMAL_SCALE)
-        if name in ("occlusion_strength", "environment_reflection", "clearcoat", "clearcoat_roughness"):
+        if name in ("occlusion_strength", "environment_reflection", "clearcoat", "clearcoat_roughness", "reflectance"):
             return finite(self, name, value, low=0.0, high=1.0)
         if name == "unlit":
             return boolean(self, name, value)

@@ -16,6 +16,7 @@ uniform samplerCube sky_map;
 uniform float sky_face_size;   // texels across one face of sky_map
 uniform int transparent;        // the transparent slot (instances.blend_code): 0 opaque; its colour
                                 // premultiplied by its alpha: 1 all of it, 2 its diffuse light only
+uniform float dielectric_f0;    // what a non-metal reflects head on: 0.16 x its batch's Material.reflectance^2
 #ifdef ALPHA_CUTOFF
 uniform float alpha_cutoff;     // a cutout's (its batch's Material.alpha_cutoff)
 #endif
@@ -617,7 +618,7 @@ void main() {
     s.occlusion *= screen_shares.r;
     s.direct_occlusion = screen_shares.g;
 #endif
-    s.f0 = mix(vec3(0.04), s.albedo, s.metallic);
+    s.f0 = mix(vec3(dielectric_f0), s.albedo, s.metallic);
     s.reflect_dir = reflect(-s.to_eye, s.normal);
     s.refract_dir = refract(-s.to_eye, s.normal, 1.0 / max(v_reflect.y, 1.0));
     if (SLOT_REFRACT == REFRACT_SOLID) s.refract_dir = solid_sphere_exit(-s.to_eye, s.normal, max(v_reflect.y, 1.0));

@@ -36,7 +36,7 @@ from engine.render.surface_table import SurfaceBlends
 from engine.resources import Surfaces
 from engine.rules.probe_rules import LookChanges, SurfaceProbes, probe_blend
 from engine.rules.visibility_rules import entity_code
-from systems.material_dispatch import choose_material
+from systems.material_dispatch import choose_material, dielectric_f0
 
 NO_SLICE = (0.0, 0.0, 0.0, 1.0)
 
@@ -158,7 +158,8 @@ class ExtractSystem(esper.Processor):
                                             keeps_specular=material is not None and material.blend == "transparent",
                                             clearcoat=(material.clearcoat, material.clearcoat_roughness)
                                             if material is not None and material.clearcoat > 0.0 else None,
-                                            unlit=material is not None and material.unlit)
+                                            unlit=material is not None and material.unlit,
+                                            dielectric_f0=dielectric_f0(material))
         except GLLimitError as exc:
             raise GLLimitError(f"entity {entity}: {exc}") from None
         if transparent:  # a see-through mirror or portal (water): drawn before the view trees' claims

@@ -68,3 +68,9 @@ def choose_material(material: Material | None, emissive: Emissive | None,
         reflect_params=(mix, refractive.ior if refractive else 1.0, 0.0, 0.0),
         tint=tint,
     )
+
+
+def dielectric_f0(material: Material | None) -> float:
+    """What a non-metal reflects head on, its batch's uniform: Filament's 0.16 x reflectance^2
+    (``Material.reflectance``; 0.04, glass's and most things', at the default 0.5)."""
+    return 0.16 * (material or DEFAULT_MATERIAL).reflectance ** 2

@@ -6,6 +6,8 @@ roughness reflects (the same f0, the same split sum), and the base under the coa
 the pixels' rays and the sphere."""
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 from pyglm import glm
@@ -148,3 +150,34 @@ def test_a_gltf_clear_coat_reaches_the_material(tmp_path):
     with pytest.warns(UserWarning, match=r"'paint'.*clearcoatNormalTexture left out"):
         (part,) = load_model(textured)
     assert part.clearcoat == 1.0
+
+
+@pytest.mark.parametrize("reflectance", [0.2, 1.0])
+def test_a_dielectrics_reflectance_is_a_grey_metals_f0(scene, reflectance):
+    """``Material.reflectance``: a black non-metal of reflectance r reflects head on as much as
+    a metal of colour 0.16 r^2 (its f0): the two frames agree, sky, sun and all."""
+    f0 = 0.16 * reflectance ** 2
+    dielectric, view = render(scene, Material(color=(0.0, 0.0, 0.0, 1.0), roughness=0.3, reflectance=reflectance),
+                              sun=True)
+    metal, _ = render(scene, Material(color=(f0, f0, f0, 1.0), metallic=1.0, roughness=0.3), sun=True)
+    default, _ = render(scene, Material(color=(0.0, 0.0, 0.0, 1.0), roughness=0.3), sun=True)
+    inside, _ = sphere_pixels(view)
+    np.testing.assert_allclose(dielectric[inside], metal[inside], atol=0.004, rtol=0.01)
+    assert abs(float(np.median(dielectric[inside] - default[inside]))) > 0.004   # (not the default 0.04's)
+
+
+@pytest.mark.parametrize("extensions, reflectance", [
+    ({}, 0.5),
+    ({"KHR_materials_ior": {"ior": 2.0}}, math.sqrt(((1.0 / 3.0) ** 2) / 0.16)),
+    ({"KHR_materials_specular": {"specularFactor": 0.5}}, math.sqrt(0.02 / 0.16)),
+    ({"KHR_materials_ior": {"ior": 1.33}, "KHR_materials_specular": {"specularColorFactor": [1.0, 1.0, 1.0]}},
+     math.sqrt(((0.33 / 2.33) ** 2) / 0.16)),
+])
+def test_a_gltf_ior_and_specular_set_the_reflectance(tmp_path, extensions, reflectance):
+    from engine.assets.mesh import load_model
+    from tests.test_materials_from_files import write_glb
+
+    material = {"name": "m", "pbrMetallicRoughness": {"baseColorFactor": [0.5, 0.5, 0.5, 1.0]},
+                "extensions": extensions}
+    (part,) = load_model(write_glb(tmp_path / "m.glb", sphere(0.5), material, []))
+    assert part.reflectance == pytest.approx(reflectance, rel=1e-6)

@@ -442,6 +442,7 @@ class ModelPart:
     clearcoat: float = 0.0            # KHR_materials_clearcoat's factor (Material.clearcoat)
     clearcoat_roughness: float = 0.0  # its roughness factor (Material.clearcoat_roughness)
     unlit: bool = False               # KHR_materials_unlit (Material.unlit)
+    reflectance: float = 0.5          # from KHR_materials_ior and _specular (Material.reflectance)
     name: str = ""  # "file:part", as a level file's part = "..." names it (parts may share one mesh)
 
     def __post_init__(self) -> None:
@@ -784,6 +785,38 @@ def _gltf_transmission(doc_material: dict, part: ModelPart, what: str) -> None:
     part.transmission, part.ior, part.thick = float(factor), float(ior), thickness > 0.0
 
 
+def _gltf_reflectance(doc_material: dict, part: ModelPart, what: str) -> None:
+    """What a glTF material's non-metal reflects head on, as ``Material.reflectance``
+    (f0 = 0.16 r^2): ``KHR_materials_ior``'s ((ior - 1) / (ior + 1))^2 (part.ior, read with
+    the glass), times ``KHR_materials_specular``'s factor and its colour's mean (the engine's
+    f0 is grey: a tint is left out with a warning, as are its textures); past the engine's
+    16% (reflectance 1) it is held there, with a warning."""
+    extensions = doc_material.get("extensions") if isinstance(doc_material, dict) else None
+    specular = extensions.get("KHR_materials_specular") if isinstance(extensions, dict) else None
+    if specular is not None and not isinstance(specular, dict):
+        raise AssetError(f"{what}: KHR_materials_specular must be an object, got {specular!r}")
+    specular = specular or {}
+    factor = specular.get("specularFactor", 1.0)
+    if isinstance(factor, bool) or not isinstance(factor, numbers.Real) or not 0.0 <= float(factor) <= 1.0:
+        raise AssetError(f"{what}: KHR_materials_specular.specularFactor must be a number in [0, 1], got {factor!r}")
+    colour = specular.get("specularColorFactor", [1.0, 1.0, 1.0])
+    if not (isinstance(colour, list) and len(colour) == 3 and all(
+            isinstance(c, numbers.Real) and not isinstance(c, bool) and math.isfinite(c) and c >= 0.0 for c in colour)):
+        raise AssetError(f"{what}: KHR_materials_specular.specularColorFactor must be three numbers >= 0, "
+                         f"got {colour!r}")
+    f0_ior = ((part.ior - 1.0) / (part.ior + 1.0)) ** 2
+    f0 = float(np.mean([min(f0_ior * c, 1.0) for c in colour])) * float(factor)
+    left = [slot for slot in ("specularTexture", "specularColorTexture") if slot in specular]
+    if max(colour) - min(colour) > 1e-6:
+        left.append("specularColorFactor's tint (its mean kept)")
+    if left:
+        warnings.warn(f"{what}: KHR_materials_specular's {', '.join(left)} left out", stacklevel=6)
+    if f0 > 0.16 + 1e-9:
+        warnings.warn(f"{what}: reflects {f0:.3f} head on (ior {part.ior:g}), past the engine's 0.16 "
+                      "(Material.reflectance 1): held there", stacklevel=6)
+    part.reflectance = min(math.sqrt(f0 / 0.16), 1.0)
+
+
 def _gltf_clearcoat(doc_material: dict, part: ModelPart, what: str) -> None:
     """A glTF material's clear coat (``KHR_materials_clearcoat``): its factor and roughness
     factor (``Material.clearcoat``, ``clearcoat_roughness``); a factor out of [0, 1] is an
@@ -945,6 +978,7 @@ class _MaterialMaps:
             self._emissive(part, self.image(image, f"{what}: emissiveTexture", "colour"), factor[:3], what)
         _gltf_transmission(doc_material, part, what)
         _gltf_clearcoat(doc_material, part, what)
+        _gltf_reflectance(doc_material, part, what)
         extensions = doc_material.get("extensions") if isinstance(doc_material, dict) else None
         if isinstance(extensions, dict) and "KHR_materials_unlit" in extensions:
             # its base colour as it is (glTF: the other properties are a fallback's, for a

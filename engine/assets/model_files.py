@@ -431,8 +431,8 @@ def _json(path: Path, data: bytes, quiet: bool = False) -> dict | None:
 # engine/assets/gltf_instancing.py; WebP images)
 GLTF_READ_EXTENSIONS = frozenset({
     "EXT_mesh_gpu_instancing", "EXT_texture_webp", "KHR_lights_punctual", "KHR_materials_clearcoat",
-    "KHR_materials_emissive_strength", "KHR_materials_ior", "KHR_materials_transmission", "KHR_materials_unlit",
-    "KHR_materials_volume", "KHR_mesh_quantization", "KHR_texture_transform"})
+    "KHR_materials_emissive_strength", "KHR_materials_ior", "KHR_materials_specular", "KHR_materials_transmission",
+    "KHR_materials_unlit", "KHR_materials_volume", "KHR_mesh_quantization", "KHR_texture_transform"})
 
 
 def _unread_texture(info: object) -> str | None:

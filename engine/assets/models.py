@@ -112,7 +112,7 @@ def spawn_model(world: World, path: str | Path, position: glm.vec3 | Sequence[fl
                          double_sided=part.double_sided and not _planar_mirror(part),
                          blend="transparent" if _glass(part) and not refracts else "fade",
                          clearcoat=part.clearcoat, clearcoat_roughness=part.clearcoat_roughness,
-                         unlit=part.unlit),
+                         unlit=part.unlit, reflectance=part.reflectance),
             ]
             if part.emissive_factor > 0.0:
                 components.append(Emissive(part.emissive_factor))

@@ -174,6 +174,7 @@ class BatchKey(NamedTuple):
     keeps_specular: bool = False        # a transparent one's Material.blend "transparent"
     clearcoat: tuple[float, float] | None = None  # Material.clearcoat and its roughness (None: none)
     unlit: bool = False                 # Material.unlit: its colour as it is (the UNLIT_MATERIAL build)
+    dielectric_f0: float = 0.04         # 0.16 x Material.reflectance^2: its draws' uniform
 
 
 def blend_code(batch: InstanceBatch) -> int:
@@ -285,6 +286,7 @@ class InstanceBatch:
         # none): its CLEARCOAT build's uniform, part of the batch's key.
         self.clearcoat: tuple[float, float] | None = None
         self.unlit = False  # Material.unlit: drawn with the UNLIT_MATERIAL build, lit by nothing
+        self.dielectric_f0 = 0.04  # what its non-metal reflects head on (Material.reflectance), a uniform
 
     # --- rows ----------------------------------------------------------------------------
     def add(self, entity: int) -> np.void:

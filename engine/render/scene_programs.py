@@ -62,7 +62,7 @@ PER_DRAW_UNIFORMS = ("sky_face_size", "has_albedo_map", "transparent",
                      "probe2_face_size", "probe2_position", "probe2_box_min", "probe2_box_max",
                      "probe_rest_face_size", "probe_rest_position", "probe_rest_box_min", "probe_rest_box_max",
                      "checker_cells", "checker_even", "checker_odd", "alpha_cutoff",
-                     "occlusion_strength", "clearcoat")
+                     "occlusion_strength", "clearcoat", "dielectric_f0")
 PER_PASS_UNIFORMS = 1  # the first changes with the pass; the rest with the batch (a view's node
 # index is its Camera block's: nothing is written per view)
 NO_PROBE_LOOKUP = ((0.0, 0.0, 0.0, 0.0),) * 3  # a probe's lookup uniforms where the sky stands in for it
@@ -333,7 +333,7 @@ class ScenePrograms:
         if not batch.probe and not batch.probe_blend and not batch.rest_probe:
             own = (batch.texture is not None, blend_code(batch), 0, *NO_PROBE_LOOKUP, 0, *NO_PROBE_LOOKUP,
                    0, *NO_PROBE_LOOKUP, *(batch.checker or NO_CHECKER), batch.alpha_cutoff or 0.0,
-                   batch.occlusion_strength, batch.clearcoat or NO_CLEARCOAT)
+                   batch.occlusion_strength, batch.clearcoat or NO_CLEARCOAT, batch.dielectric_f0)
         return (stamp, variants, glo, batch.vao(program), self.uniforms[glo], values, textures, own,
                 batch.mesh.index_count)
 
