@@ -259,13 +259,15 @@ class Editor:
         return found
 
     def components_of(self, entity: int) -> list[tuple[str, Any]]:
-        """(class name, component) of the entity's editable components, in a stable order
-        (derived state, PortalClone and Slice, is the engine's and not shown)."""
+        """(class name, component) of the entity's editable components, in a stable order:
+        its Transform first (where it is, what a designer moves most, as Unity's inspector has
+        it), the rest by name (derived state, PortalClone and Slice, is the engine's and not
+        shown)."""
         if not self.world.exists(entity):
             return []
         found = [(type(c).__name__, c) for c in self.world.components_of(entity)
                  if type(c).__name__ not in DERIVED_COMPONENTS]
-        return sorted(found, key=lambda item: item[0])
+        return sorted(found, key=lambda item: (item[0] != "Transform", item[0]))
 
     @staticmethod
     def fields(component: Any) -> list[tuple[str, Any]]:
