@@ -193,8 +193,12 @@ class PointLight(TrackedComponent):
     Unreal's light functions): its light at each point is times the image's colour where the
     line from the light meets it, the image filling the square that holds the cone's circle
     (its top towards the entity's +Y, its right towards +X, seen from behind the light).  Black
-    where it should not shine, coloured for stained glass.  Only a spot light up to
-    ``MAX_COOKIE_SPOT_ANGLE`` (80 degrees) takes one.  Through a mirror or portal the image is
+    where it should not shine, coloured for stained glass.  A spot light up to
+    ``MAX_COOKIE_SPOT_ANGLE`` (80 degrees) takes one, and so does an all-round light
+    (``spot_angle`` 180, Unity's point-light cookie): its image is wrapped about it as a
+    panorama (equirectangular: longitude across, latitude up), its middle ahead of the light
+    (the entity's -Z), its right towards +X and its top row straight up (+Y), as a lamp
+    shade with holes, a caged bulb or a disco ball throws light all round.  Through a mirror or portal the image is
     carried with the light: a mirror shows it the other way round, as a real one does.  The
     renderer draws it from a ``COOKIE_SIZE`` (512) square copy with mipmaps
     (``engine/render/spot_cookies.py``).
@@ -226,10 +230,11 @@ class PointLight(TrackedComponent):
             if getattr(type(value), "ASSET_KIND", None) != "texture":
                 raise ComponentValueError(
                     f"PointLight.cookie must be an engine.assets.texture_data.TextureData, got {type(value).__name__}")
-            if self.spot_angle > MAX_COOKIE_SPOT_ANGLE:
+            if MAX_COOKIE_SPOT_ANGLE < self.spot_angle < 180.0:
                 raise ComponentValueError(
                     f"PointLight.cookie: a cookie is projected by a spot light up to {MAX_COOKIE_SPOT_ANGLE:g} degrees "
-                    f"(spot_angle), and this light's spot_angle is {self.spot_angle:g}: narrow the spot first")
+                    f"(spot_angle) or wrapped about an all-round light (180), and this light's spot_angle is "
+                    f"{self.spot_angle:g}: narrow the spot first, or make it all round")
             return value
         if name == "intensity":
             return finite(self, name, value, low=0.0, high=HALF_MAX)  # lit colour lands in half floats
@@ -239,10 +244,11 @@ class PointLight(TrackedComponent):
             return finite(self, name, value, positive=True, high=MAX_FAR)
         if name == "spot_angle":
             value = finite(self, name, value, low=MIN_SPOT_ANGLE, high=180.0)
-            if value > MAX_COOKIE_SPOT_ANGLE and getattr(self, "cookie", None) is not None:
+            if MAX_COOKIE_SPOT_ANGLE < value < 180.0 and getattr(self, "cookie", None) is not None:
                 raise ComponentValueError(
                     f"PointLight.spot_angle = {value:g}: this light has a cookie, which a spot light up to "
-                    f"{MAX_COOKIE_SPOT_ANGLE:g} degrees projects: take the cookie off (cookie = None) first")
+                    f"{MAX_COOKIE_SPOT_ANGLE:g} degrees projects or an all-round light (180) wraps about it: take "
+                    "the cookie off (cookie = None) first")
             return value
         if name == "spot_blend":
             return finite(self, name, value, low=0.0, high=1.0)

@@ -380,7 +380,7 @@ vec3 direct_lighting(Surface s, AmbientBoxes boxes) {
         float falloff = fade * fade / (dist * dist + 1.0) * spot_factor(lights.point_spot[i], l);
 #ifdef SPOT_COOKIES
         vec3 cookie_at = cookie_place(lights.point_cookie_u[i], lights.point_cookie_v[i], lights.point_spot[i], l);
-        vec2 cookie_dx = dFdx(cookie_at.xy), cookie_dy = dFdy(cookie_at.xy);
+        vec2 cookie_dx = cookie_derivative(dFdx(cookie_at.xy)), cookie_dy = cookie_derivative(dFdy(cookie_at.xy));
 #endif
         if (nl > 0.0 && falloff > 0.0) {
 #ifdef SPOT_COOKIES

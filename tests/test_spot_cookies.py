@@ -246,18 +246,19 @@ def test_a_portal_carries_the_image_turned_not_mirrored(scene):
 
 
 def test_a_cookie_is_refused_where_a_spot_cannot_project_it():
-    """A cookie on an all-round light or a spot wider than 80 degrees, a spot widened past it
+    """A cookie on a spot wider than 80 degrees (but not all round), a spot widened past it
     while it has one, and a cookie that is not an image: each refused when given, naming the
-    field and the reason."""
+    field and the reason.  An all-round light takes one (wrapped about it)."""
     cookie = quadrant_cookie(8)
-    with pytest.raises(ComponentValueError, match=r"PointLight.cookie: .*up to 80 degrees.*spot_angle is 180"):
-        PointLight(cookie=cookie)
-    with pytest.raises(ComponentValueError, match=r"PointLight.cookie: .*spot_angle is 85"):
+    assert PointLight(cookie=cookie).cookie is cookie   # all round: wrapped (test_point_cookies.py)
+    with pytest.raises(ComponentValueError, match=r"PointLight.cookie: .*up to 80 degrees.*spot_angle is 85"):
         PointLight(spot_angle=85.0, cookie=cookie)
     light = PointLight(spot_angle=80.0, cookie=cookie)
     with pytest.raises(ComponentValueError, match=r"PointLight.spot_angle = 81: this light has a cookie"):
         light.spot_angle = 81.0
     assert light.spot_angle == 80.0
+    light.spot_angle = 180.0   # all round: the image wrapped about it
+    assert light.spot_angle == 180.0
     light.cookie = None
     light.spot_angle = 120.0
     with pytest.raises(ComponentValueError, match=r"PointLight.cookie must be an engine.assets.texture_data"):
@@ -357,7 +358,7 @@ def test_the_editor_sets_a_cookie_as_a_level_file_names_it(tmp_path):
     Image.fromarray(quadrant_cookie(16).pixels[..., :3]).save(tmp_path / "gobo.png")
     world = World("lamps")
     spot = world.spawn(Transform(), PointLight(spot_angle=30.0))
-    lamp = world.spawn(Transform(), PointLight())
+    lamp = world.spawn(Transform(), PointLight(spot_angle=120.0))   # too wide to project, not all round
     editor = Editor(world, level_path=tmp_path / "level.toml")
     editor.set_texture(spot, "cookie", 'file = "gobo.png"', "PointLight")
     assert editor.texture_text(spot, "cookie", "PointLight") == 'file = "gobo.png"'

@@ -115,7 +115,9 @@ class SpotCookies:
             self.array.build_mipmaps()
             self.array.filter = self.filter
             self.array.anisotropy = self.anisotropy
-            self.array.repeat_x = self.array.repeat_y = False
+            # u wraps (an all-round light's image goes round it); a spot's square is never left
+            # inside its cone
+            self.array.repeat_x, self.array.repeat_y = True, False
         self._layers = layers
         return True
 

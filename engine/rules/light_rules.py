@@ -194,6 +194,11 @@ def lamp_cone(light: PointLight, world: Any) -> tuple[float, float, float, float
 # A light without a cookie, as the Lights and VirtualLights blocks' cookie rows hold it
 # (``lamp_cookie``): its layer -1.
 NO_COOKIE = ((0.0, 0.0, 0.0, -1.0), (0.0, 0.0, 0.0, 0.0))
+# An all-round light's cookie (wrapped about it) has -2 - layer in its first row's w, and half
+# more where the rows' frame is mirrored (``carried_cookie``): its forward is then
+# -cross(top, right), not cross(top, right).
+WRAPPED_COOKIE = -2.0
+MIRRORED_FRAME = 0.5
 
 
 def lamp_cookie(light: PointLight, world: Any, layer: int) -> tuple[tuple[float, ...], tuple[float, ...]]:
@@ -203,9 +208,18 @@ def lamp_cookie(light: PointLight, world: Any, layer: int) -> tuple[tuple[float,
     of its ``spot_angle``.  For ``d`` the unit vector from the light to a point and F the
     cone's axis, the point's place in the image is 0.5 + 0.5 (d.X/t, d.Y/t) / d.F
     (``shaders/include/spot_cookie.glsl``): the image fills the square about the cone's circle,
-    a slide projector's.  ``NO_COOKIE`` without a cookie."""
+    a slide projector's.  ``NO_COOKIE`` without a cookie.
+
+    An all-round light's (``spot_angle`` 180) is wrapped about it instead, an equirectangular
+    image (longitude, latitude): rows (X, -2 - layer) and (Y, 0), X and Y unit, its forward
+    F = Y x X (the entity's -Z); a direction d lands at u = 0.5 + atan2(d.X, d.F) / 2 pi,
+    v = 0.5 + asin(d.Y) / pi, the image's middle ahead of the light."""
     if light.cookie is None:
         return NO_COOKIE
+    if light.spot_angle >= 180.0:
+        right, up = glm.normalize(world[0].xyz), glm.normalize(world[1].xyz)
+        return (float(right.x), float(right.y), float(right.z), WRAPPED_COOKIE - layer), \
+            (float(up.x), float(up.y), float(up.z), 0.0)
     t = math.tan(math.radians(light.spot_angle))
     right, up = glm.normalize(world[0].xyz) / t, glm.normalize(world[1].xyz) / t
     return (float(right.x), float(right.y), float(right.z), float(layer)), (float(up.x), float(up.y), float(up.z), 0.0)
@@ -327,8 +341,10 @@ def carried_cookie(rows: tuple[Sequence[float], Sequence[float]], carry: Any) ->
     them: the image's right and top turned by ``carry``'s linear part (a glm 4x4 matrix), each
     kept at its length, the layer kept.  Turned, not worked out again from the carried axis: a
     mirror turns the frame's handedness, so its image of the light projects the picture the
-    other way round, as a real mirror shows it."""
-    if rows[0][3] < 0.0:
+    other way round, as a real mirror shows it.  A wrapped cookie's forward (their cross
+    product) is turned too: where ``carry`` mirrors (a negative determinant), its w's
+    ``MIRRORED_FRAME`` half flips, so the forward stays the light's own, carried."""
+    if rows[0][3] == NO_COOKIE[0][3]:
         return NO_COOKIE
     m = np.array(carry.to_list(), np.float64).T[:3, :3]   # glm's lists are its columns
     carried = []
@@ -336,8 +352,12 @@ def carried_cookie(rows: tuple[Sequence[float], Sequence[float]], carry: Any) ->
         v = np.asarray(row[:3], np.float64)
         turned = m @ v
         turned *= np.linalg.norm(v) / np.linalg.norm(turned)
-        carried.append((float(turned[0]), float(turned[1]), float(turned[2]), float(row[3])))
-    return tuple(carried)
+        carried.append([float(turned[0]), float(turned[1]), float(turned[2]), float(row[3])])
+    if rows[0][3] <= WRAPPED_COOKIE and np.linalg.det(m) < 0.0:
+        code = WRAPPED_COOKIE - rows[0][3]   # layer, and a half where mirrored
+        layer = math.floor(code + 0.25)
+        carried[0][3] = WRAPPED_COOKIE - (layer + (0.0 if code - layer > 0.25 else MIRRORED_FRAME))
+    return tuple(tuple(row) for row in carried)
 
 
 def point_importance(positions: np.ndarray, ranges: np.ndarray, rgb: np.ndarray,

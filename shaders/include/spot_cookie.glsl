@@ -13,11 +13,27 @@
 #ifdef SPOT_COOKIES
 uniform sampler2DArray spot_cookies;
 
-// (u, v, layer) of the image the line along ``l`` meets; a layer below 0: no cookie.
+// (u, v, layer) of the image the line along ``l`` meets; a layer below 0: no cookie.  An
+// all-round light's (right.w -2 - layer, a half more where its frame is mirrored:
+// light_rules.lamp_cookie, carried_cookie) is wrapped about it: longitude and latitude in its
+// frame, the image's middle ahead of it (its forward cross(up, right), turned back where mirrored).
 vec3 cookie_place(vec4 right, vec4 up, vec4 cone, vec3 l) {
     vec3 d = -l;
+    if (right.w < -1.5) {
+        float code = -right.w - 2.0;
+        float layer = floor(code + 0.25);
+        vec3 forward = cross(up.xyz, right.xyz) * (code - layer > 0.25 ? -1.0 : 1.0);
+        float x = dot(d, right.xyz), y = dot(d, up.xyz), z = dot(d, forward);
+        return vec3(0.5 + atan(x, z) * 0.15915494, 0.5 + asin(clamp(y, -1.0, 1.0)) * 0.31830989, layer);  // 1/2pi, 1/pi
+    }
     float along = max(dot(d, normalize(cone.xyz)), 1e-3);
     return vec3(0.5 + 0.5 * vec2(dot(d, right.xyz), dot(d, up.xyz)) / along, right.w);
+}
+
+// A cookie place's screen derivative (dFdx or dFdy of cookie_place's uv) across a wrapped
+// image's seam, where u jumps by 1 between neighbours: the short way round.
+vec2 cookie_derivative(vec2 change) {
+    return vec2(change.x - round(change.x), change.y);
 }
 
 // The image's colour at ``place`` (cookie_place), its uv's screen derivatives ``dx``, ``dy``.

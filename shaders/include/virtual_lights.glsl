@@ -91,7 +91,7 @@ vec3 virtual_lighting(vec3 position, vec3 normal, vec3 geometric, vec3 to_eye, v
         // (before any branch a pixel's neighbours may not take: spot_cookie.glsl)
         vec3 cookie_at = cookie_place(virtual_lights.virtual_cookie_u[i], virtual_lights.virtual_cookie_v[i],
                                       virtual_lights.virtual_spot[i], l);
-        vec2 cookie_dx = dFdx(cookie_at.xy), cookie_dy = dFdy(cookie_at.xy);
+        vec2 cookie_dx = cookie_derivative(dFdx(cookie_at.xy)), cookie_dy = cookie_derivative(dFdy(cookie_at.xy));
 #endif
         if (height <= 0.0) continue;  // behind the exit: the light never comes out there
         float nl = dot(normal, l);

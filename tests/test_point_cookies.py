@@ -1,0 +1,118 @@
+"""Cookies on all-round lights (``PointLight(spot_angle=180, cookie=...)``): the image wrapped
+about the light as a panorama (longitude across, latitude up, its middle ahead of the light).
+A lamp in front of a white wall, turned or not, lights each pixel of the wall with the colour
+of the cell its direction from the lamp falls in, worked out here with numpy (the rays cast
+at the wall, the direction put in the lamp's frame, longitude and latitude taken); and the
+same through a mirror that reflects light, whose image of the lamp wraps the picture the
+other way round."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from pyglm import glm
+
+from components import Material, MeshRef, Mirror, PointLight, Transform, look_rotation
+from engine.assets.mesh import quad
+from engine.assets.texture_data import TextureData
+from tests.support import look_from, pixel_rays, srgb_to_linear
+from tests.test_spot_cookies import dark_sky, matte
+
+SIZE = (200, 150)
+# 8 columns of longitude x 2 rows of latitude, the colours the lit wall shows
+CELLS = np.array([[(255, 0, 0), (0, 255, 0), (0, 0, 255), (255, 255, 255)] * 2,
+                  [(0, 0, 255), (255, 255, 255), (255, 0, 0), (0, 255, 0)] * 2], np.uint8)
+COLOURS = np.array([(1, 0, 0), (0, 1, 0), (0, 0, 1), (1, 1, 1)], np.float64) / np.sqrt([1, 1, 1, 3])[:, None]
+
+
+def panorama(scale: int = 16) -> TextureData:
+    pixels = np.repeat(np.repeat(CELLS, scale, axis=0), scale, axis=1)
+    return TextureData(np.ascontiguousarray(pixels), name="panorama")
+
+
+def expected_cells(points: np.ndarray, lamp: np.ndarray, frame: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The cell each point's direction from the lamp falls in (its colour's index in COLOURS)
+    and whether it is clear of the cells' edges; ``frame``: the lamp's right, top, forward."""
+    d = points - lamp
+    d /= np.linalg.norm(d, axis=-1, keepdims=True)
+    right, up, forward = frame
+    u = 0.5 + np.arctan2(d @ right, d @ forward) / (2.0 * math.pi)
+    v = 0.5 + np.arcsin(np.clip(d @ up, -1.0, 1.0)) / math.pi   # up from the image's bottom
+    column = np.floor(u * 8).astype(int) % 8
+    row = np.where(v >= 0.5, 0, 1)   # row 0 of the image is its top
+    colours = {tuple(c): i for i, c in enumerate([(255, 0, 0), (0, 255, 0), (0, 0, 255), (255, 255, 255)])}
+    index = np.array([colours[tuple(CELLS[r, c])] for r, c in zip(row, column, strict=True)])
+    clear = (np.abs(u * 8 - np.round(u * 8)) > 0.08) & (np.abs(v - 0.5) > 0.03)
+    return index, clear
+
+
+def seen_cells(frame: np.ndarray) -> np.ndarray:
+    rgb = frame.reshape(-1, 3).astype(np.float64)
+    rgb /= np.maximum(np.linalg.norm(rgb, axis=1, keepdims=True), 1e-9)
+    return np.argmax(rgb @ COLOURS.T, axis=1)
+
+
+@pytest.mark.parametrize("yaw", [0.0, 30.0, 180.0])
+def test_an_all_round_lights_cookie_is_wrapped_about_it(scene, yaw):
+    lamp = np.array([0.3, 0.2, 2.0])
+    turn = glm.angleAxis(math.radians(yaw), glm.vec3(0.0, 1.0, 0.0))
+
+    def build(world):
+        look_from(world, (0.0, 0.0, 6.0), (0.0, 0.0, 0.0))
+        world.spawn(dark_sky())
+        world.spawn(Transform(), MeshRef(quad(9.0, 7.0)), matte())
+        world.spawn(Transform(position=tuple(lamp), rotation=turn),
+                    PointLight(intensity=8.0, range=30.0, cookie=panorama()))
+    runner = scene(build, SIZE)
+    runner.engine.renderer.antialias = "off"
+    runner.frame()
+    frame = srgb_to_linear(runner.frame())
+    eye, rays = pixel_rays(runner.engine.main_view, SIZE)
+    rays = rays.reshape(-1, 3)
+    t = -eye[2] / rays[:, 2]
+    points = eye + t[:, None] * rays
+    on_wall = (np.abs(points[:, 0]) < 4.4) & (np.abs(points[:, 1]) < 3.4)
+    m = np.array(glm.mat3_cast(turn).to_list(), np.float64).T   # its columns: right, top, back
+    index, clear = expected_cells(points, lamp, (m[:, 0], m[:, 1], -m[:, 2]))
+    bright = frame.reshape(-1, 3).max(axis=1) > 0.02
+    judged = on_wall & clear & bright
+    assert judged.sum() > 5000
+    assert len(set(index[judged].tolist())) == 4   # every colour lands somewhere on the wall
+    agree = seen_cells(frame)[judged] == index[judged]
+    assert agree.mean() > 0.98, agree.mean()
+
+
+def test_a_mirror_carries_an_all_round_cookie_the_other_way_round(scene):
+    """A lamp behind the wall's plane and left of it (its light never reaches the wall's
+    front, and passes the wall on its way to the mirror) faces a mirror across the room that
+    reflects light: the wall is lit by the lamp's image behind the mirror, whose frame the
+    mirror turned inside out (its forward +z where the lamp's is -z, its right and top as the
+    lamp's).  Each pixel shows the cell of the lamp's own picture the ray from the image,
+    mirrored back, falls in (the panorama's back: with the forward left unturned it would be
+    its front, other colours)."""
+    lamp = np.array([-6.0, 0.2, -1.0])
+
+    def build(world):
+        look_from(world, (0.0, 0.0, 3.5), (0.0, 0.0, 0.0))
+        world.spawn(dark_sky())
+        world.spawn(Transform(), MeshRef(quad(9.0, 7.0)), matte())
+        world.spawn(Transform(position=(0.0, 0.0, 4.0), rotation=look_rotation(glm.vec3(0.0, 0.0, 1.0))),
+                    MeshRef(quad(14.0, 12.0)), Material(), Mirror(reflects_light=True))   # its front to -z
+        world.spawn(Transform(position=tuple(lamp)), PointLight(intensity=150.0, range=40.0, cookie=panorama()))
+    runner = scene(build, SIZE)
+    runner.engine.renderer.antialias = "off"
+    runner.frame()
+    frame = srgb_to_linear(runner.frame())
+    eye, rays = pixel_rays(runner.engine.main_view, SIZE)
+    rays = rays.reshape(-1, 3)
+    points = eye + (-eye[2] / rays[:, 2])[:, None] * rays
+    on_wall = (np.abs(points[:, 0]) < 4.4) & (np.abs(points[:, 1]) < 3.4)
+    image = np.array([lamp[0], lamp[1], 8.0 - lamp[2]])
+    index, clear = expected_cells(points, image, (np.array([1.0, 0.0, 0.0]), np.array([0.0, 1.0, 0.0]),
+                                                  np.array([0.0, 0.0, 1.0])))
+    bright = frame.reshape(-1, 3).max(axis=1) > 0.02
+    judged = on_wall & clear & bright
+    assert judged.sum() > 5000 and len(set(index[judged].tolist())) >= 2
+    agree = seen_cells(frame)[judged] == index[judged]
+    assert agree.mean() > 0.97, agree.mean()
