@@ -513,6 +513,18 @@ def test_a_bad_gltf_emissive_strength_is_refused_naming_the_material(tmp_path):
 
 
 
+def glowing_model(path: Path):
+    """A world-builder: the model at ``path`` 2 m ahead of the camera, every part glowing its
+    own colour (no light: each shows its texture's colour)."""
+    def build(world):
+        look_from(world, (0.0, 1.0, 2.0), (0.0, 1.0, 0.0))
+        spawn_model(world, path, position=(0.0, 1.0, 0.0))
+        for entity, _ in list(world.query_one(Material)):
+            if not world.has(entity, Emissive):
+                world.add_component(entity, Emissive(1.0))
+    return build
+
+
 @pytest.mark.parametrize("transform, seen", [({"scale": [0.5, 1.0]}, (255, 0, 0)),
                                              ({"offset": [0.5, 0.0], "scale": [0.5, 0.5]}, (0, 0, 255)),
                                              ({"offset": [0.5, 0.5], "scale": [0.5, 0.5]}, (0, 255, 0))])
@@ -535,13 +547,7 @@ def test_gltf_texture_transform_shared_by_a_materials_maps_is_baked_into_its_uvs
     np.testing.assert_allclose(uv[:, 0], quad(2.0, 2.0).uvs[:, 0] * transform["scale"][0]
                                + transform.get("offset", [0.0, 0.0])[0])
 
-    def build(world):
-        look_from(world, (0.0, 1.0, 2.0), (0.0, 1.0, 0.0))
-        spawn_model(world, path, position=(0.0, 1.0, 0.0))
-        for entity, _ in list(world.query_one(Material)):   # no light: it shows its texture's colour
-            if not world.has(entity, Emissive):
-                world.add_component(entity, Emissive(1.0))
-    runner = scene(build, (64, 48))
+    runner = scene(glowing_model(path), (64, 48))
     frame = runner.frame()
     middle = frame[18:30, 26:38].reshape(-1, 3).astype(int)   # well inside the quad
     expected = np.array(seen)
@@ -566,13 +572,7 @@ def test_gltf_texture_transform_rotation_turns_the_image_as_the_extensions_examp
     path = write_glb(tmp_path / "turned.glb", quad(2.0, 2.0), material, [pixels],
                      {"extensionsUsed": ["KHR_texture_transform"]})
 
-    def build(world):
-        look_from(world, (0.0, 1.0, 2.0), (0.0, 1.0, 0.0))
-        spawn_model(world, path, position=(0.0, 1.0, 0.0))
-        for entity, _ in list(world.query_one(Material)):   # no light: it shows its texture's colour
-            if not world.has(entity, Emissive):
-                world.add_component(entity, Emissive(1.0))
-    runner = scene(build, (64, 48))
+    runner = scene(glowing_model(path), (64, 48))
     runner.engine.renderer.antialias = "off"
     frame = runner.frame().astype(int)
     # the quad spans about 0.58 of the view (2 m at 2 m, 60 degrees): its quarters' middles
