@@ -53,6 +53,19 @@ def seen_cells(frame: np.ndarray) -> np.ndarray:
     return np.argmax(rgb @ COLOURS.T, axis=1)
 
 
+def wall_frame(scene, build) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``build``'s second frame (FXAA off) as linear RGB a pixel, where each pixel's ray meets
+    the wall's plane (z = 0), and whether that is on the wall."""
+    runner = scene(build, SIZE)
+    runner.engine.renderer.antialias = "off"
+    runner.frame()
+    frame = srgb_to_linear(runner.frame())
+    eye, rays = pixel_rays(runner.engine.main_view, SIZE)
+    rays = rays.reshape(-1, 3)
+    points = eye + (-eye[2] / rays[:, 2])[:, None] * rays
+    return frame, points, (np.abs(points[:, 0]) < 4.4) & (np.abs(points[:, 1]) < 3.4)
+
+
 @pytest.mark.parametrize("yaw", [0.0, 30.0, 180.0])
 def test_an_all_round_lights_cookie_is_wrapped_about_it(scene, yaw):
     lamp = np.array([0.3, 0.2, 2.0])
@@ -64,15 +77,7 @@ def test_an_all_round_lights_cookie_is_wrapped_about_it(scene, yaw):
         world.spawn(Transform(), MeshRef(quad(9.0, 7.0)), matte())
         world.spawn(Transform(position=tuple(lamp), rotation=turn),
                     PointLight(intensity=8.0, range=30.0, cookie=panorama()))
-    runner = scene(build, SIZE)
-    runner.engine.renderer.antialias = "off"
-    runner.frame()
-    frame = srgb_to_linear(runner.frame())
-    eye, rays = pixel_rays(runner.engine.main_view, SIZE)
-    rays = rays.reshape(-1, 3)
-    t = -eye[2] / rays[:, 2]
-    points = eye + t[:, None] * rays
-    on_wall = (np.abs(points[:, 0]) < 4.4) & (np.abs(points[:, 1]) < 3.4)
+    frame, points, on_wall = wall_frame(scene, build)
     m = np.array(glm.mat3_cast(turn).to_list(), np.float64).T   # its columns: right, top, back
     index, clear = expected_cells(points, lamp, (m[:, 0], m[:, 1], -m[:, 2]))
     bright = frame.reshape(-1, 3).max(axis=1) > 0.02
@@ -100,14 +105,7 @@ def test_a_mirror_carries_an_all_round_cookie_the_other_way_round(scene):
         world.spawn(Transform(position=(0.0, 0.0, 4.0), rotation=look_rotation(glm.vec3(0.0, 0.0, 1.0))),
                     MeshRef(quad(14.0, 12.0)), Material(), Mirror(reflects_light=True))   # its front to -z
         world.spawn(Transform(position=tuple(lamp)), PointLight(intensity=150.0, range=40.0, cookie=panorama()))
-    runner = scene(build, SIZE)
-    runner.engine.renderer.antialias = "off"
-    runner.frame()
-    frame = srgb_to_linear(runner.frame())
-    eye, rays = pixel_rays(runner.engine.main_view, SIZE)
-    rays = rays.reshape(-1, 3)
-    points = eye + (-eye[2] / rays[:, 2])[:, None] * rays
-    on_wall = (np.abs(points[:, 0]) < 4.4) & (np.abs(points[:, 1]) < 3.4)
+    frame, points, on_wall = wall_frame(scene, build)
     image = np.array([lamp[0], lamp[1], 8.0 - lamp[2]])
     index, clear = expected_cells(points, image, (np.array([1.0, 0.0, 0.0]), np.array([0.0, 1.0, 0.0]),
                                                   np.array([0.0, 0.0, 1.0])))
