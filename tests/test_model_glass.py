@@ -5,10 +5,13 @@ frame is checked against the same scene built by hand from the components the ma
 and against what lies behind it (a red wall seen through clear glass is red)."""
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 
 from components import DirectionalLight, Emissive, Material, MeshRef, Refractive, Skybox, Transform
+from components.water import f0_from_ior
 from engine.assets.mesh import load_model, quad, sphere
 from engine.assets.models import spawn_model
 from engine.core.errors import AssetError
@@ -64,8 +67,10 @@ def test_a_curved_glass_part_refracts_as_the_same_refractive_built_by_hand(scene
 
     def by_hand(world):
         room(world)
+        reflectance = math.sqrt(f0_from_ior(1.33) / 0.16)   # (glass of index 1.33 reflects 2% head on)
         world.spawn(Transform(), MeshRef(sphere(0.8)),
-                    Material(color=(0.8, 1.0, 0.8, 0.0), roughness=0.05), Refractive(ior=1.33, solid=True))
+                    Material(color=(0.8, 1.0, 0.8, 0.0), roughness=0.05, reflectance=reflectance),
+                    Refractive(ior=1.33, solid=True))
     seen, hand = frame(scene, from_file), frame(scene, by_hand)
     np.testing.assert_allclose(seen, hand, atol=0.004)
     h, w = SIZE[1], SIZE[0]

@@ -24,6 +24,7 @@ import numpy as np
 from pyglm import glm
 
 from components.limits import MAX_IOR
+from components.water import f0_from_ior
 from engine.assets.model_files import (
     MAX_JSON_NESTING,  # noqa: F401 - the loader's limits are read from here too
     MAX_MTL_BUMP_SCALE,
@@ -787,7 +788,7 @@ def _gltf_transmission(doc_material: dict, part: ModelPart, what: str) -> None:
 
 def _gltf_reflectance(doc_material: dict, part: ModelPart, what: str) -> None:
     """What a glTF material's non-metal reflects head on, as ``Material.reflectance``
-    (f0 = 0.16 r^2): ``KHR_materials_ior``'s ((ior - 1) / (ior + 1))^2 (part.ior, read with
+    (f0 = 0.16 r^2): ``KHR_materials_ior``'s index as Schlick's f0 (``f0_from_ior``; part.ior, read with
     the glass), times ``KHR_materials_specular``'s factor and its colour's mean (the engine's
     f0 is grey: a tint is left out with a warning, as are its textures); past the engine's
     16% (reflectance 1) it is held there, with a warning."""
@@ -804,7 +805,7 @@ def _gltf_reflectance(doc_material: dict, part: ModelPart, what: str) -> None:
             isinstance(c, numbers.Real) and not isinstance(c, bool) and math.isfinite(c) and c >= 0.0 for c in colour)):
         raise AssetError(f"{what}: KHR_materials_specular.specularColorFactor must be three numbers >= 0, "
                          f"got {colour!r}")
-    f0_ior = ((part.ior - 1.0) / (part.ior + 1.0)) ** 2
+    f0_ior = f0_from_ior(part.ior)
     f0 = float(np.mean([min(f0_ior * c, 1.0) for c in colour])) * float(factor)
     left = [slot for slot in ("specularTexture", "specularColorTexture") if slot in specular]
     if max(colour) - min(colour) > 1e-6:
