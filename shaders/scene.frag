@@ -666,6 +666,10 @@ void main() {
     color = color * coat_loss + coat;
     kept_light = kept_light * coat_loss + coat;
     emitted *= coat_loss;
+#ifdef SCREEN_REFLECTION
+    reflect_weight *= coat_loss;  // the reflections under the coat, scaled as the colour is
+    reflect_added *= coat_loss;   // (the coat's own is the sky's or probes', not the screen's)
+#endif
 #endif
 #ifdef SCREEN_REFLECTION
     // The reflections through what follows the reflect slot: the map's metal share
