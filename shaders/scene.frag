@@ -319,8 +319,8 @@ vec3 highlight_light = vec3(0.0);
 // batch's material has a coat): llvmpipe would run it for every pixel otherwise.
 uniform vec2 clearcoat;       // x: its batch's Material.clearcoat, y: clearcoat_roughness
 vec3 coat_light = vec3(0.0);  // the coat's highlights of the lights, summed
-vec3 coat_normal;             // unit, facing the viewer (main sets it before the lights)
-float coat_roughness;         // clearcoat.y widened where the normal turns (filtered_roughness)
+vec3 coat_normal = vec3(0.0, 0.0, 1.0);  // unit, facing the viewer (main sets it before the lights)
+float coat_roughness = 0.0;   // clearcoat.y widened where the normal turns (filtered_roughness)
 #endif
 
 // Light through mirrors and portals (its loop only in the VIRTUAL_LIGHTS builds).

@@ -27,9 +27,11 @@ NORMALIZED_TYPES = {5120: (np.int8, 127.0), 5121: (np.uint8, 255.0), 5122: (np.i
                     5123: (np.uint16, 65535.0)}
 COMPONENTS = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4}
 FLOAT = 5126
+# A file's buffer by index: its bytes as read (a view of a GLB's binary chunk), None where it has none
+BufferBytes = Callable[[int], "bytes | memoryview | None"]
 
 
-def float_normalized_accessors(doc: dict, buffer_bytes: Callable[[int], bytes], what: str) -> int:
+def float_normalized_accessors(doc: dict, buffer_bytes: BufferBytes, what: str) -> int:
     """Rewrite ``doc``'s normalised integer accessors as float32 ones reading a new buffer
     (appended to ``doc["buffers"]`` as base64 data); ``buffer_bytes(i)`` is buffer i's
     bytes as read.  How many were rewritten.  An accessor that cannot be read as it says (a
@@ -73,7 +75,7 @@ def float_normalized_accessors(doc: dict, buffer_bytes: Callable[[int], bytes], 
     return len(rewritten)
 
 
-def read_float_accessor(doc: dict, index: object, buffer_bytes: Callable[[int], bytes], label: str) -> np.ndarray:
+def read_float_accessor(doc: dict, index: object, buffer_bytes: BufferBytes, label: str) -> np.ndarray:
     """Accessor ``index`` of ``doc`` as float32 rows, one an element: a float accessor's values
     or a normalised one's (run ``float_normalized_accessors`` first, or not); anything else is
     an AssetError naming it."""
@@ -91,7 +93,7 @@ def read_float_accessor(doc: dict, index: object, buffer_bytes: Callable[[int], 
     return _decode(accessor, views, buffer_bytes, f"{label}: accessor {index}", (np.float32, 1.0))
 
 
-def _decode(accessor: dict, views: list, buffer_bytes: Callable[[int], bytes], label: str,
+def _decode(accessor: dict, views: list, buffer_bytes: BufferBytes, label: str,
             float_type: tuple | None = None) -> np.ndarray:
     """A normalised accessor's values as float32, one row an element (``float_type``: a
     float accessor's, read as they are)."""

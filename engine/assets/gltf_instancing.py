@@ -10,17 +10,15 @@ uploads it once and draws the copies instanced, as it does any shared mesh.
 """
 from __future__ import annotations
 
-from collections.abc import Callable
-
 import numpy as np
 
-from engine.assets.gltf_accessors import read_float_accessor
+from engine.assets.gltf_accessors import BufferBytes, read_float_accessor
 from engine.core.errors import AssetError
 
 MAX_GLTF_INSTANCES = 1 << 16  # instances a file may expand to (each is an entity once spawned)
 
 
-def expand_gpu_instancing(doc: dict, buffer_bytes: Callable[[int], bytes], what: str) -> int:
+def expand_gpu_instancing(doc: dict, buffer_bytes: BufferBytes, what: str) -> int:
     """Replace each ``EXT_mesh_gpu_instancing`` node's mesh by one child node a instance;
     how many instances were made.  A malformed one (no mesh, accessors of unequal counts or
     the wrong type, too many instances) is an AssetError naming the node."""

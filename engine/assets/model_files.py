@@ -477,7 +477,7 @@ def _uv_transform(info: object, label: str) -> tuple[float, float, float, float,
     return None if found == (0.0, 0.0, 0.0, 1.0, 1.0) else found
 
 
-def _buffer_bytes(doc: dict, number: int, resolver: CheckedFiles, chunks: bytes) -> bytes | None:
+def _buffer_bytes(doc: dict, number: int, resolver: CheckedFiles, chunks: memoryview) -> bytes | memoryview | None:
     """Buffer ``number``'s bytes as read: a file's (``resolver``), base64 data's, or a GLB's
     binary chunk (``chunks``: what follows its JSON chunk) for the buffer without a URI; None
     where the file has no such buffer."""
@@ -493,7 +493,7 @@ def _buffer_bytes(doc: dict, number: int, resolver: CheckedFiles, chunks: bytes)
             return None
     if isinstance(uri, str):
         return resolver.bytes_of(uri)
-    if len(chunks) >= 8 and chunks[4:8] == b"BIN\0":
+    if len(chunks) >= 8 and bytes(chunks[4:8]) == b"BIN\0":
         return chunks[8:8 + int.from_bytes(chunks[0:4], "little")]
     return None
 
@@ -526,7 +526,15 @@ def prepare_gltf(path: Path, data: bytes, roots: Sequence[Path], textures: bool)
         uri = buffer.get("uri") if isinstance(buffer, dict) else None
         if isinstance(uri, str):
             _uri(path, uri, roots, f"buffer {number}", resolver, True, what)
-    buffer_bytes = lambda number: _buffer_bytes(doc, number, resolver, data[chunk_end:] if glb else b"")  # noqa: E731
+    chunks = memoryview(data)[chunk_end:] if glb else memoryview(b"")  # (a view: the binary chunk is not copied)
+    read_buffers: dict[int, bytes | memoryview | None] = {}
+
+    def buffer_bytes(number: int) -> bytes | memoryview | None:
+        """Buffer ``number``'s bytes, found (a data URI decoded) once however many accessors read it."""
+        if number not in read_buffers:
+            read_buffers[number] = _buffer_bytes(doc, number, resolver, chunks)
+        return read_buffers[number]
+
     float_normalized_accessors(doc, buffer_bytes, what)
     expand_gpu_instancing(doc, buffer_bytes, what)
     materials = doc.get("materials") if isinstance(doc.get("materials"), list) else []
