@@ -3,6 +3,7 @@ from components.ambient import AmbientOcclusion, HemisphereLight
 from components.camera import Camera, DirectionalLight, FlyController, PointLight
 from components.fog import Fog
 from components.mirror import Mirror
+from components.model import FromModel, Model
 from components.portal import Portal, PortalClone, Slice, Traveller
 from components.post import Bloom, ColorGrading, Tonemap, Vignette
 from components.probe import ReflectionProbe
@@ -16,8 +17,8 @@ from components.water import Water
 
 __all__ = [
     "AmbientOcclusion", "Bloom", "Camera", "ColorGrading", "ComponentValueError", "ComponentWarning",
-    "DirectionalLight", "Emissive", "FlyController", "Fog", "HemisphereLight", "Material",
-    "MeshRef", "Mirror", "PointLight", "Portal", "PortalClone", "ReflectionProbe", "Reflective", "Refractive",
+    "DirectionalLight", "Emissive", "FlyController", "Fog", "FromModel", "HemisphereLight", "Material",
+    "MeshRef", "Mirror", "Model", "PointLight", "Portal", "PortalClone", "ReflectionProbe", "Reflective", "Refractive",
     "ScreenPanel", "ScreenReflections", "ScreenText", "Skybox", "Slice",
     "Tonemap", "TrackedComponent", "Transform", "Traveller", "Vignette", "Visibility", "Water",
     "euler_rotation", "look_rotation", "yaw_pitch_of", "yaw_pitch_rotation",

@@ -55,6 +55,7 @@ from systems import (
     TransformSystem,
 )
 from systems.frame_rules_system import FrameRulesSystem
+from systems.model_system import ModelSystem
 from systems.portal_slice_system import PortalSliceSystem
 from systems.probe_system import ProbeAfterPresentSystem, ProbeSystem
 from systems.shadow_system import ShadowSystem
@@ -144,6 +145,7 @@ class LateTransformSystem(esper.Processor):
 # (stage, what makes its system from the engine).  Order is execution order.
 FRAME_STAGES: tuple[tuple[str, Callable[[Engine], esper.Processor]], ...] = (
     ("game", lambda e: GameUpdateSystem(e.game, e.world, e.game_guard)),
+    ("models", lambda e: ModelSystem(e.world)),  # the parts of each Model placed, changed or deleted
     ("rules", lambda e: FrameRulesSystem(e.world)),  # open portal pairs, active camera: FrameRules
     ("input", lambda e: FlyCameraSystem(e.world)),
     ("travel", lambda e: PortalTravelSystem(e.world)),

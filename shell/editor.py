@@ -27,9 +27,9 @@ import numpy as np
 import tomllib
 from pyglm import glm
 
-from components import Camera, ComponentValueError, Material, Portal, Transform
+from components import Camera, ComponentValueError, FromModel, Material, Portal, Transform
 from components.rendering import MATERIAL_IMAGES, automatic_mix
-from engine.assets.level_assets import MESH_MAKERS, LevelAssets, level_texture, user_asset_roots
+from engine.assets.level_assets import MESH_MAKERS, LevelAssets, level_model, level_texture, user_asset_roots
 from engine.assets.level_read import DERIVED_COMPONENTS, ENGINE_COMPONENTS, REFERENCE_FIELDS
 from engine.assets.level_save import save_level
 from engine.core.errors import SpeculumError
@@ -173,7 +173,11 @@ class Editor:
              surface: bool = False) -> int | None:
         """Select the entity at a pixel (``pick``); the sky selects nothing. A new selection
         clears the message of the last refused edit."""
-        self.selected = pick(ids, surface_ids, x, y, surface)
+        picked = pick(ids, surface_ids, x, y, surface)
+        part = self.world.try_get(picked, FromModel) if picked is not None and self.world.exists(picked) else None
+        # A model's part is the file's: the click selects the model (its root), what a level
+        # file holds and a designer moves, as Unity's and Godot's editors pick a placed scene.
+        self.selected = part.model if part is not None and self.world.exists(part.model) else picked
         self.message = None
         return self.selected
 
@@ -287,6 +291,7 @@ class Editor:
         """Write ``value`` into a field as code would (``setattr``): the component's checks
         and the world's invariants refuse a bad value with their own ComponentValueError,
         and nothing changes. ``merge``: part of a drag (one undo step for the whole drag)."""
+        self._refuse_model_part(entity)
         target = self.component(entity, component)
         if dataclasses.is_dataclass(target) and field not in {f.name for f in dataclasses.fields(target)}:
             raise EditError(f"{type(target).__name__} has no field {field!r} "
@@ -370,6 +375,32 @@ class Editor:
                 raise EditError(self.message) from exc
         self.set_field(entity, component, field, value)
 
+    def model_file_text(self, entity: int) -> str:
+        """A Model's file as a level file writes it: relative to the level's folder."""
+        file = self.component(entity, "Model").file
+        if not file:
+            return ""
+        folder = self.level_path.parent if self.level_path is not None else Path.cwd()
+        return Path(os.path.relpath(os.path.abspath(file), folder)).as_posix()
+
+    def set_model_file(self, entity: int, text: str) -> None:
+        """Place the model file ``text`` names (beside the level, or in an asset root; "" for
+        none) with the entity's Model: loaded and checked now by the level file's own reader
+        (``level_model``), so a file that cannot be placed is refused here, in its words (an
+        EditError); the models stage makes its parts in the next frame."""
+        value = ""
+        if text.strip():
+            if not self.world.has(entity, Transform):
+                self.message = f"Model.file: {self.name_of(entity)} has no Transform (where the model would stand)"
+                raise EditError(self.message)
+            try:
+                folder = self.level_path.parent if self.level_path is not None else Path.cwd()
+                value = level_model(text.strip(), LevelAssets(folder, [*self.asset_roots, *user_asset_roots()]))
+            except (ValueError, OSError, SpeculumError) as exc:
+                self.message = f"Model.file: {exc}"
+                raise EditError(self.message) from exc
+        self.set_field(entity, "Model", "file", value)
+
     def turn(self, entity: int, start: glm.quat, world_axis: glm.vec3, angle: float) -> None:
         """Turn ``entity`` by ``angle`` (radians) about ``world_axis`` through its origin from
         the rotation it had at the drag's start (``start``: its Transform.rotation then), the
@@ -438,6 +469,7 @@ class Editor:
             raise EditError(f"no component {name!r} to add (components: {', '.join(sorted(self.components))})")
         if not self.world.exists(entity):
             raise EditError(f"entity {entity} does not exist")
+        self._refuse_model_part(entity)
         if self.world.has(entity, cls):
             raise EditError(f"{self.name_of(entity)} already has a {name}")
         if name == "MeshRef" and "mesh" not in fields:
@@ -455,6 +487,7 @@ class Editor:
 
     def remove_component(self, entity: int, name: str) -> Any:
         """Take the entity's component of class ``name`` away (undo gives the same one back)."""
+        self._refuse_model_part(entity)
         component = self.component(entity, name)
         self._refuse_if_needed(entity, type(component).__name__)
         try:
@@ -482,6 +515,7 @@ class Editor:
     def duplicate(self, entity: int) -> int:
         """A copy of ``entity`` where it stands (each component made again from its fields;
         a portal's copy has no partner: a pair is two portals), named ``<name>_copy``, selected."""
+        self._refuse_model_part(entity)
         made = []
         for cls_name, component in self.components_of(entity):
             fields = {f: _copy(value) for f, value in self.fields(component)}
@@ -497,8 +531,11 @@ class Editor:
         name = self.name_of(entity)
         if not self.world.exists(entity):
             raise EditError(f"entity {entity} does not exist")
+        self._refuse_model_part(entity)
         self._refuse_if_needed(entity, None)
-        children = [self.name_of(e) for e, t in self.world.query_one(Transform) if t.parent == entity and e != entity]
+        # (a model's parts go with its root: the models stage deletes them)
+        children = [self.name_of(e) for e, t in self.world.query_one(Transform) if t.parent == entity and e != entity
+                    and getattr(self.world.try_get(e, FromModel), "model", None) != entity]
         if children:
             self.message = f"{name} is the parent of {', '.join(children)}: delete them or clear their parent first"
             raise EditError(self.message)
@@ -509,6 +546,17 @@ class Editor:
         edit = Edit("delete", entity, None, [c for _, c in self.components_of(entity)], name, open=False)
         self._remove(edit)
         self._push(edit)
+
+    def _refuse_model_part(self, entity: int) -> None:
+        """An EditError for an edit of a model's part: it is made from the model's file each
+        time the level loads, so a level file could keep no edit of it (edit the file, or the
+        model's own entity: its place, its Model)."""
+        part = self.world.try_get(entity, FromModel) if self.world.exists(entity) else None
+        if part is not None:
+            self.message = (f"{self.name_of(entity)} is a part of the model {self.name_of(part.model)}, made from its "
+                            "file each time the level loads: edit the model's entity (its Transform, its Model) or "
+                            "the file")
+            raise EditError(self.message)
 
     def _refuse_if_needed(self, entity: int, component: str | None) -> None:
         """An EditError, in the game's words, where the game cannot do without ``entity`` or

@@ -319,6 +319,11 @@ class EditorPanels:
                                              imgui.InputTextFlags_.enter_returns_true)
             if entered:
                 self._try(editor, editor.set_texture, entity, field, text, cls_name)
+        elif (cls_name, field) == ("Model", "file"):  # a path beside the level, taken on Enter
+            entered, text = imgui.input_text(label, editor.model_file_text(entity),
+                                             imgui.InputTextFlags_.enter_returns_true)
+            if entered:
+                self._try(editor, editor.set_model_file, entity, text)
         elif (cls_name, field) == ("MeshRef", "mesh"):  # a shape to choose (its size: the Transform's scale)
             shape = editor.mesh_shape(entity)
             if imgui.begin_combo(label, shape):

@@ -444,7 +444,7 @@ def test_mirror_beams_title_names_the_level_it_plays_after_n(world):
     assert game.level.name != first and game.title == f"Speculum: mirror beam: {game.level.name}"
 
 
-# --- item 6: save_level writes spawn_model's parts, or says plainly why not ------------------
+# --- item 6: save_level writes spawn_model's model, or says plainly why not ------------------
 
 def _two_part_glb(path: Path, textured: bool = False) -> Path:
     import trimesh
@@ -460,7 +460,9 @@ def _two_part_glb(path: Path, textured: bool = False) -> Path:
     return path
 
 
-def test_a_spawned_models_parts_are_saved_as_file_and_part_and_load_back_the_same(tmp_path):
+def test_a_spawned_model_is_saved_as_its_file_and_loads_back_the_same(tmp_path):
+    """spawn_model's root holds the file's Model: a level file writes it (not its parts) and
+    makes the same parts, placed the same, when it loads."""
     from engine.assets.level_file import save_level
     from engine.assets.models import spawn_model
     model = _two_part_glb(tmp_path / "two.glb")
@@ -468,7 +470,7 @@ def test_a_spawned_models_parts_are_saved_as_file_and_part_and_load_back_the_sam
         root = spawn_model(first, model, position=(1.0, 0.0, -2.0))
         saved = save_level(first, tmp_path / "saved.toml", {"model": root})
         text = saved.read_text()
-        assert 'file = "two.glb"' in text and "part = " in text, text
+        assert 'file = "two.glb"' in text and "part = " not in text and text.count("[[entity]]") == 1, text
         before = sorted((len(mesh_ref.mesh.positions), tuple(np.round(transform.position, 5)))
                         for _, (mesh_ref, transform) in first.query(MeshRef, Transform))
     with World("again") as second:
@@ -484,13 +486,18 @@ def first_position():
     return glm.vec3(1.0, 0.0, -2.0)
 
 
-def test_a_models_embedded_image_is_refused_plainly_by_save_level(tmp_path):
+def test_a_models_embedded_image_given_to_another_entity_is_refused_plainly_by_save_level(tmp_path):
+    """A model's parts are saved as its file; an image decoded from inside the file, given to
+    an entity of the level's own, has no file a level could name: refused, saying so."""
     from engine.assets.level_file import save_level
+    from engine.assets.mesh import box
     from engine.assets.models import spawn_model
     model = _two_part_glb(tmp_path / "painted.glb", textured=True)
     with World("painted") as world:
-        spawn_model(world, model)
-        assert any(m.texture is not None for _, m in world.query_one(Material))
+        root = spawn_model(world, model)
+        painted = next(m.texture for _, m in world.query_one(Material) if m.texture is not None)
+        save_level(world, tmp_path / "model_only.toml", {"model": root})   # the model alone: its file
+        world.spawn(Transform(), MeshRef(box()), Material(texture=painted))
         with pytest.raises(LevelError, match=r"Material.texture.*is an image inside the model file .*painted.glb"):
             save_level(world, tmp_path / "painted.toml")
 

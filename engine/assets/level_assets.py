@@ -20,7 +20,7 @@ from pathlib import Path
 from typing import Any
 
 from engine.assets.color_lut import MAX_LUT_FILE_BYTES, ColorLut, load_cube_lut
-from engine.assets.mesh import Mesh, box, load_model, model_bytes, plane, quad, sphere
+from engine.assets.mesh import LoadedModel, Mesh, box, load_model, load_model_file, model_bytes, plane, quad, sphere
 from engine.assets.texture_data import (
     MAX_TEXTURE_SIDE,
     TextureData,
@@ -78,6 +78,7 @@ class LevelAssets:
         self.folder = folder
         self.roots = [folder, *roots]
         self.budget = _Budget()
+        self.models: dict[str, LoadedModel] = {}  # the whole model files its Models place, by path
 
 
 def is_number(value: Any) -> bool:
@@ -99,6 +100,22 @@ def _asset_table(spec: Any, what: str, examples: str) -> tuple[dict, Any]:
     if name is not None and not isinstance(name, str):
         raise ValueError(f"a {what}'s name must be a string, got {name!r}")
     return spec, name
+
+
+def level_model(value: Any, where: LevelAssets) -> str:
+    """A ``Model.file``: the model file's path (inside the level's folder or an asset root),
+    made absolute, the file loaded whole (its materials' images decoded, its lights read:
+    what its parts will be) and counted in the level's budget; ``where.models`` keeps it for
+    the spawn.  "" is no file (a Model placing nothing yet)."""
+    if value == "":
+        return ""
+    path = _asset_path(value, where)
+    info = check_asset_file(path, f"model file {str(path)!r}")
+    key = ("model file", str(path), info.st_mtime_ns, info.st_size, info.st_ino, tuple(map(str, where.roots)))
+    loaded = _cached(key, lambda: load_model_file(path, roots=where.roots))
+    where.budget.take(key, model_bytes(loaded.parts))
+    where.models[str(path)] = loaded
+    return str(path)
 
 
 def level_mesh(spec: Any, where: LevelAssets) -> Mesh:

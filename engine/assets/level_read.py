@@ -31,8 +31,9 @@ from pyglm import glm
 
 import components as _components
 from components import ComponentValueError, look_rotation, yaw_pitch_rotation
-from engine.assets.level_assets import LevelAssets, level_lut, level_mesh, level_texture, user_asset_roots
+from engine.assets.level_assets import LevelAssets, level_lut, level_mesh, level_model, level_texture, user_asset_roots
 from engine.assets.level_lines import MAX_NESTING, deep_line, line_map, nesting_depth
+from engine.assets.models import remove_parts, respawn_parts
 from engine.assets.texture_data import file_problem
 from engine.core.budget import ViewBudget, ViewBudgetError
 from engine.core.errors import AssetError, SpeculumError
@@ -44,18 +45,21 @@ except ImportError:  # Python 3.10
     import tomli as tomllib
 
 # The engine's components a level file may hold, by table name. PortalClone and Slice are
-# made by the slice stage each frame (derived state), never written by hand.
+# made by the slice stage each frame, FromModel on the parts a Model makes (derived state),
+# never written by hand.
 ENGINE_COMPONENTS: dict[str, type] = {
     name: getattr(_components, name) for name in (
         "AmbientOcclusion", "Bloom", "Camera", "ColorGrading", "DirectionalLight", "Emissive", "FlyController", "Fog",
         "HemisphereLight", "Material", "MeshRef",
-        "Mirror", "PointLight", "Portal", "ReflectionProbe", "Reflective", "Refractive", "ScreenPanel",
+        "Mirror", "Model", "PointLight", "Portal", "ReflectionProbe", "Reflective", "Refractive", "ScreenPanel",
         "ScreenReflections", "ScreenText",
         "Skybox", "Tonemap",
         "Transform", "Traveller", "Vignette", "Visibility", "Water")}
-DERIVED_COMPONENTS = ("PortalClone", "Slice")
+DERIVED_COMPONENTS = ("PortalClone", "Slice", "FromModel")
 # Fields holding another entity: a name in the file, an id in the world.
 REFERENCE_FIELDS = {("Transform", "parent"), ("Portal", "partner")}
+# Fields holding a file's path: relative to the level's folder in the file, absolute in the world.
+FILE_FIELDS = {("Model", "file")}
 MAX_LEVEL_BYTES = 4 << 20  # a level file's size (the shipped ones are a few KB)
 
 
@@ -102,7 +106,8 @@ class Level:
     """A checked level file: ``name``, ``game``, ``rules`` and the entities to spawn."""
 
     def __init__(self, path: Path, name: str, game: str | None, rules: dict[str, Any],
-                 entities: list[_EntitySpec], lines: dict[tuple, int], view_budget: ViewBudget | None = None) -> None:
+                 entities: list[_EntitySpec], lines: dict[tuple, int], view_budget: ViewBudget | None = None,
+                 assets: LevelAssets | None = None) -> None:
         self.path = path
         self.name = name
         self.game = game
@@ -110,6 +115,7 @@ class Level:
         self.view_budget = view_budget  # [level] view_budget: spawn makes it the world's
         self._entities = entities
         self._lines = lines
+        self._assets = assets if assets is not None else LevelAssets(path.parent, [])
 
     @property
     def entity_names(self) -> list[str]:
@@ -124,7 +130,9 @@ class Level:
                    and any(cls.__name__ == "Transform" for cls, _ in spec.components) for spec in self._entities)
 
     def spawn(self, world: World) -> dict[str, int]:
-        """Create every entity (fresh components each call); returns ids by name. All or
+        """Create every entity (fresh components each call), and the parts of each Model
+        (``engine.assets.models.respawn_parts``, from the file the reader loaded); returns
+        ids by name (the entities the file names: a model's parts are its root's). All or
         nothing: a failure deletes what this call made and raises a LevelError."""
         made: dict[str, int] = {}
         spec: _EntitySpec | None = None
@@ -136,8 +144,14 @@ class Level:
                     component = next(c for c in world.components_of(made[spec.name])
                                      if type(c).__name__ == cls_name)
                     setattr(component, field, made[target])
+            for spec in self._entities:
+                model = next((fields for cls, fields in spec.components if cls.__name__ == "Model"), None)
+                if model is not None and model.get("file"):
+                    respawn_parts(world, made[spec.name], roots=self._assets.roots,
+                                  loaded=self._assets.models.get(model["file"]))
         except (ComponentValueError, SpeculumError, ValueError) as exc:
             for entity in made.values():
+                remove_parts(world, entity)
                 if world.exists(entity):
                     world.delete_entity(entity)
             line = self._lines.get((spec.index,)) if spec is not None else None
@@ -231,7 +245,7 @@ def load_level(path: str | Path, extra_components: Mapping[str, type] | None = N
                 raise LevelError(path, "names the entity itself", lines.get((spec.index, cls_name, field)), spec.name,
                                  f"{cls_name}.{field}")
     _check_parent_cycles(path, entities, lines)
-    return Level(path, header["name"], game, rules, entities, lines, budget)
+    return Level(path, header["name"], game, rules, entities, lines, budget, where)
 
 
 def _view_budget(path: Path, table: Any, line: int | None) -> ViewBudget | None:
@@ -318,6 +332,7 @@ def _entity(path: Path, assets: LevelAssets, index: int, name: str, table: dict[
         parts.append((cls, decoded))
     _check_mirror(path, index, name, parts, lines)
     _check_water(path, index, name, parts, lines)
+    _check_model(path, index, name, parts, lines)
     return _EntitySpec(name, index, parts, references)
 
 
@@ -336,6 +351,19 @@ def _check_water(path: Path, index: int, name: str, parts: list[tuple[type, dict
         raise LevelError(path, f"a water surface is sharp: its Mirror.roughness must be 0, got {roughness}",
                          lines.get((index, "Mirror", "roughness"), lines.get((index, "Mirror"))), name,
                          "Mirror.roughness")
+
+
+def _check_model(path: Path, index: int, name: str, parts: list[tuple[type, dict[str, Any]]],
+                 lines: dict[tuple, int]) -> None:
+    """A Model with a file needs a Transform (where the model stands, its parts under it);
+    its file was loaded (and checked) as the field was read.  One without (the editor's
+    newly added Model, before its file is chosen) places nothing."""
+    fields = {cls.__name__: decoded for cls, decoded in parts}
+    if not fields.get("Model", {}).get("file"):
+        return
+    if "Transform" not in fields:
+        raise LevelError(path, "a Model needs a Transform on the same entity (where the model stands)",
+                         lines.get((index, "Model")), name, "Model")
 
 
 def _check_mirror(path: Path, index: int, name: str, parts: list[tuple[type, dict[str, Any]]],
@@ -435,6 +463,8 @@ def _decode(cls_name: str, field: str, value: Any, where: LevelAssets) -> Any:
         return level_texture(value, where, normal_map=field in _LINEAR_MAPS)
     if cls_name == "ColorGrading" and field == "lut":
         return level_lut(value, where)
+    if (cls_name, field) in FILE_FIELDS:
+        return level_model(value, where)
     if cls_name == "Transform" and field == "rotation":
         return _rotation(value)
     if cls_name == "Skybox" and field == "faces":

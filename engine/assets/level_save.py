@@ -22,10 +22,17 @@ from typing import Any
 
 import numpy as np
 
-from components import ComponentValueError
+from components import ComponentValueError, FromModel
 from engine.assets.color_lut import ColorLut
 from engine.assets.level_assets import is_number
-from engine.assets.level_read import DERIVED_COMPONENTS, ENGINE_COMPONENTS, REFERENCE_FIELDS, LevelError, load_level
+from engine.assets.level_read import (
+    DERIVED_COMPONENTS,
+    ENGINE_COMPONENTS,
+    FILE_FIELDS,
+    REFERENCE_FIELDS,
+    LevelError,
+    load_level,
+)
 from engine.assets.mesh import Mesh
 from engine.assets.texture_data import TextureData
 from engine.assets.values import VALUE_KINDS, json_value
@@ -40,8 +47,9 @@ def save_level(world: World, path: str | Path, names: Mapping[str, int] | None =
                removed: Collection[str] = ()) -> Path:
     """Write ``world`` as a level file: every entity (``names`` gives names by id; others are
     called ``entity_<id>``), each component's fields that differ from their defaults.
-    Derived state (portal clones, slices) is left out; a mesh or texture not made by a
-    generator or loaded from a file cannot be written and raises a LevelError.
+    Derived state (portal clones, slices, a model's parts: its root's ``Model`` names the
+    file they are made from) is left out; a mesh or texture not made by a generator or
+    loaded from a file cannot be written and raises a LevelError.
 
     ``keep``: the level file the world was loaded from (it may be ``path`` itself). Its text
     is kept and only what differs is written into it (a round trip through tomlkit, which
@@ -83,8 +91,11 @@ def _world_tables(world: World, path: Path, names: Mapping[str, int] | None,
     holds it (``name`` and one dict of written fields per component), by id in id order."""
     known = {**ENGINE_COMPONENTS, **(extra_components or {})}
     by_id = {entity: n for n, entity in (names or {}).items()}
-    entities = [e for e in sorted(world.entities())
-                if not any(type(c).__name__ == "PortalClone" for c in world.components_of(e))]
+    # A portal's clone and a model's parts are made again from what the file holds (the
+    # portal, the Model on the parts' root): neither is written.
+    made_again = {e for e in world.entities()
+                  if any(type(c).__name__ in ("PortalClone", "FromModel") for c in world.components_of(e))}
+    entities = [e for e in sorted(world.entities()) if e not in made_again]
     for entity in entities:
         by_id.setdefault(entity, f"entity_{entity}")
     tables: dict[int, dict[str, Any]] = {}
@@ -97,6 +108,15 @@ def _world_tables(world: World, path: Path, names: Mapping[str, int] | None,
                     continue
                 raise LevelError(path, f"component {cls_name} is not one a level file holds (pass the game's own "
                                        "with extra_components)", entity=by_id[entity])
+            for field in (f for c, f in REFERENCE_FIELDS if c == cls_name):
+                target = getattr(component, field, None)
+                if target in made_again and world.has(target, FromModel):
+                    root = world.get(target, FromModel).model
+                    raise LevelError(path, f"names entity {target}, a part of the model on "
+                                           f"{by_id.get(root, f'entity_{root}')!r}: a level file holds the model's "
+                                           "file, not its parts (they are made again as it loads), so it cannot name "
+                                           "one; name the model's entity instead", None, by_id[entity],
+                                     f"{cls_name}.{field}")
             table[cls_name] = _encode_component(path, component, by_id, by_id[entity])
         tables[entity] = table
     return by_id, tables
@@ -322,6 +342,8 @@ def _encode_component(path: Path, component: Any, by_id: Mapping[int, str], enti
             raise LevelError(path, f"is None where the default is {default!r}: TOML has no None", None, entity, where)
         if (cls.__name__, f.name) in REFERENCE_FIELDS:
             out[f.name] = by_id.get(value, f"entity_{value}")
+        elif (cls.__name__, f.name) in FILE_FIELDS:
+            out[f.name] = Path(os.path.relpath(os.path.abspath(value), path.parent)).as_posix()
         elif isinstance(value, (Mesh, TextureData, ColorLut)):
             source = getattr(value, "source", None)
             if source is not None and "inside" in source:

@@ -1,9 +1,19 @@
-"""Spawning entities from mesh files: one entity per mesh part, under one root entity."""
+"""Spawning entities from model files: one entity per mesh part (and per light the file
+carries), under one root entity that holds the file's ``Model``.
+
+``spawn_model`` loads a file and spawns it now; a ``Model`` component placed otherwise (a
+level file, the editor, a game's code) is spawned by the models stage
+(``systems/model_system.py``) with the same ``spawn_parts``.  What was spawned under each
+root, and from which ``Model`` values, is the world's ``SpawnedModels`` resource, so a
+part set is made once per change, whoever made it.
+"""
 from __future__ import annotations
 
 import math
+import os
 import warnings
 from collections.abc import Sequence
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -21,12 +31,31 @@ from components import (
     Refractive,
     Transform,
 )
-from engine.assets.mesh import flat_plane, load_model_file
+from components.model import MAX_MODEL_PROBES, FromModel, Model
+from engine.assets.mesh import LoadedModel, flat_plane, load_model_file
 from engine.assets.model_lights import ModelLight, check_light_intensity
 from engine.core.errors import AssetError
 from engine.core.world import World
 
-MAX_MODEL_PROBES = 4  # curved reflective or glass parts of one model that get a cube-map probe each (see spawn_model)
+__all__ = ["MAX_MODEL_PROBES", "SpawnedModel", "SpawnedModels", "model_components", "model_key",
+           "remove_parts", "respawn_parts", "spawn_model", "spawn_parts"]
+
+@dataclass
+class SpawnedModel:
+    """What the models stage (or ``spawn_model``) made under one root: from which ``Model``
+    values (``model_key``) and the entities."""
+
+    key: tuple
+    parts: list[int] = field(default_factory=list)
+
+
+class SpawnedModels(dict):
+    """The world's resource: root entity -> ``SpawnedModel``."""
+
+
+def model_key(model: Model) -> tuple:
+    """The values a model's parts are made from: a change to any of them makes them again."""
+    return (os.path.abspath(model.file), model.light_scale, model.max_probes)
 
 
 def spawn_model(world: World, path: str | Path, position: glm.vec3 | Sequence[float] = (0.0, 0.0, 0.0),
@@ -73,6 +102,10 @@ def spawn_model(world: World, path: str | Path, position: glm.vec3 | Sequence[fl
     physical units to the scene's exposure; an intensity past the engine's half floats is
     refused, saying the scale that fits).  Shadows are the engine's defaults (a sun casts, a
     lamp does not): the extension says nothing of them.
+
+    The root holds the file's ``Model`` (its path, ``light_scale`` and ``max_probes``) and
+    each part a ``FromModel`` naming the root: a level file saves the root alone and makes
+    the parts again when it is loaded; deleting the root deletes them (the models stage).
     """
     if isinstance(max_probes, bool) or not isinstance(max_probes, int) or max_probes < 0:
         raise AssetError(f"spawn_model: max_probes must be an int >= 0, got {max_probes!r}")
@@ -81,12 +114,32 @@ def spawn_model(world: World, path: str | Path, position: glm.vec3 | Sequence[fl
         raise AssetError(f"spawn_model: light_scale must be a finite number >= 0, got {light_scale!r}")
     root_transform = Transform(position=position, rotation=rotation if rotation is not None else glm.quat(),
                                scale=scale)
-    loaded = load_model_file(path, roots=roots)
+    loaded = load_model_file(path, roots=roots)  # (a bad path is refused here, naming it)
+    try:
+        model = Model(file=os.fspath(path), light_scale=light_scale, max_probes=max_probes)
+    except ComponentValueError as exc:
+        raise AssetError(f"spawn_model: {exc}") from None
+    part_components = model_components(loaded, path, root_transform, max_probes, light_scale)
+    root = world.spawn(root_transform, model)
+    try:
+        spawn_parts(world, root, model, part_components)
+    except BaseException:
+        world.delete_entity(root)
+        raise
+    return root
+
+
+def model_components(loaded: LoadedModel, path: str | Path, root: Transform, max_probes: int,
+                     light_scale: float) -> list[list]:
+    """Each part's and light's components (a Transform first, its parent left for
+    ``spawn_parts``), every one built, so checked, before anything is spawned: see
+    ``spawn_model`` for what a file's materials and lights become.  ``root``: where the model
+    stands (a directional light's direction is turned by it)."""
     parts = loaded.parts
     for part in parts:
         if part.transmission > 0.0 and part.alpha_cutoff is not None:
             warnings.warn(f"mesh file {str(path)!r}: part {part.name!r}: KHR_materials_transmission on an alphaMode "
-                          "MASK material is left out (a cutout is opaque where it is drawn)", stacklevel=2)
+                          "MASK material is left out (a cutout is opaque where it is drawn)", stacklevel=3)
             part.transmission = 0.0
     curved = [i for i, part in enumerate(parts)
               if (part.reflectivity > 0.0 and not _planar_mirror(part)) or (_glass(part) and not _flat(part))]
@@ -95,64 +148,111 @@ def spawn_model(world: World, path: str | Path, position: glm.vec3 | Sequence[fl
     part_components = []
     try:
         for index, part in enumerate(parts):
-            # Glass (KHR_materials_transmission): a curved part within the probes' budget
-            # refracts its own probe's capture (Refractive, its alpha weighing what passes);
-            # a flat pane, or a curved part past the budget, shows what lies behind it as it
-            # is, its alpha what the glass lets through and its reflections whole
-            # (Material.blend "transparent", as a window pane).
-            refracts = _glass(part) and index in probed
-            color = (*part.color[:3], 1.0 - part.transmission) if _glass(part) else part.color
-            components = [
-                _node_transform(part.local, part.mesh.name),  # parent set below
-                MeshRef(part.mesh),
-                Material(color=color, texture=part.texture, metallic=part.metallic, roughness=part.roughness,
-                         normal_map=part.normal_map, normal_scale=part.normal_scale, emissive_map=part.emissive_map,
-                         metallic_roughness_map=part.metallic_roughness_map, occlusion_map=part.occlusion_map,
-                         occlusion_strength=part.occlusion_strength, alpha_cutoff=part.alpha_cutoff,
-                         double_sided=part.double_sided and not _planar_mirror(part),
-                         blend="transparent" if _glass(part) and not refracts else "fade",
-                         clearcoat=part.clearcoat, clearcoat_roughness=part.clearcoat_roughness,
-                         unlit=part.unlit, reflectance=part.reflectance),
-            ]
-            if part.emissive_factor > 0.0:
-                components.append(Emissive(part.emissive_factor))
-            if refracts:
-                components.append(Refractive(ior=part.ior, solid=part.thick))
-            elif part.reflectivity > 0.0 and not _glass(part):
-                # A flat reflective surface is a planar mirror; anything else samples a cube-map
-                # probe (its own, made by the probes stage at its box's centre).
-                if _planar_mirror(part):
-                    components.append(Mirror(reflect_rate=part.reflectivity, roughness=part.roughness))
-                elif index in probed:
-                    components.append(Reflective(mode="cube", mix=part.reflectivity))
-                elif part.metallic == 0.0:  # (an MTL's reflection: no metal to reflect by)
-                    components.append(Reflective(mode="skybox", mix=part.reflectivity))
-                # else a metal past the probes' budget reflects the sky by its material (its
-                # environment reflection, tinted by its colour as a metal's is)
-            part_components.append(components)
+            part_components.append(_part_components(part, index in probed))
         for light in loaded.lights:
-            part_components.append(_light_components(light, root_transform, light_scale))
+            part_components.append(_light_components(light, root, light_scale))
     except (ComponentValueError, AssetError) as exc:
         raise AssetError(f"mesh file {str(path)!r}: {exc}") from exc
     if len(curved) > len(probed):
         warnings.warn(f"mesh file {str(path)!r}: {len(curved)} curved reflective or glass parts: {len(probed)} of "
                       f"them (the largest) get a cube-map probe each, the other {len(curved) - len(probed)} reflect "
                       "the sky (glass: see-through, without refraction) "
-                      f"(spawn_model's max_probes = {max_probes}, MAX_MODEL_PROBES by default; or give the model "
-                      "ReflectionProbe entities with an influence box)", stacklevel=2)
+                      f"(max_probes = {max_probes}, MAX_MODEL_PROBES by default; or give the model "
+                      "ReflectionProbe entities with an influence box)", stacklevel=3)
+    return part_components
 
+
+def _part_components(part, probed: bool) -> list:
+    """One mesh part's components: ``probed`` whether it is among the curved reflective or
+    glass parts given a probe."""
+    # Glass (KHR_materials_transmission): a curved part within the probes' budget refracts
+    # its own probe's capture (Refractive, its alpha weighing what passes); a flat pane, or a
+    # curved part past the budget, shows what lies behind it as it is, its alpha what the
+    # glass lets through and its reflections whole (Material.blend "transparent", as a
+    # window pane).
+    refracts = _glass(part) and probed
+    color = (*part.color[:3], 1.0 - part.transmission) if _glass(part) else part.color
+    components = [
+        _node_transform(part.local, part.mesh.name),  # parent set by spawn_parts
+        MeshRef(part.mesh),
+        Material(color=color, texture=part.texture, metallic=part.metallic, roughness=part.roughness,
+                 normal_map=part.normal_map, normal_scale=part.normal_scale, emissive_map=part.emissive_map,
+                 metallic_roughness_map=part.metallic_roughness_map, occlusion_map=part.occlusion_map,
+                 occlusion_strength=part.occlusion_strength, alpha_cutoff=part.alpha_cutoff,
+                 double_sided=part.double_sided and not _planar_mirror(part),
+                 blend="transparent" if _glass(part) and not refracts else "fade",
+                 clearcoat=part.clearcoat, clearcoat_roughness=part.clearcoat_roughness,
+                 unlit=part.unlit, reflectance=part.reflectance),
+    ]
+    if part.emissive_factor > 0.0:
+        components.append(Emissive(part.emissive_factor))
+    if refracts:
+        components.append(Refractive(ior=part.ior, solid=part.thick))
+    elif part.reflectivity > 0.0 and not _glass(part):
+        # A flat reflective surface is a planar mirror; anything else samples a cube-map
+        # probe (its own, made by the probes stage at its box's centre).
+        if _planar_mirror(part):
+            components.append(Mirror(reflect_rate=part.reflectivity, roughness=part.roughness))
+        elif probed:
+            components.append(Reflective(mode="cube", mix=part.reflectivity))
+        elif part.metallic == 0.0:  # (an MTL's reflection: no metal to reflect by)
+            components.append(Reflective(mode="skybox", mix=part.reflectivity))
+        # else a metal past the probes' budget reflects the sky by its material (its
+        # environment reflection, tinted by its colour as a metal's is)
+    return components
+
+
+def spawn_parts(world: World, root: int, model: Model | None, part_components: Sequence[list]) -> list[int]:
+    """Spawn ``part_components`` (``model_components``) under ``root``, each with a
+    ``FromModel``, and record them in the world's ``SpawnedModels`` (with ``model``'s key:
+    None for a model spawned without one); all or nothing."""
     spawned: list[int] = []
     try:
-        root = world.spawn(root_transform)
-        spawned.append(root)
         for components in part_components:
             components[0].parent = root
-            spawned.append(world.spawn(*components))
+            spawned.append(world.spawn(*components, FromModel(model=root)))
     except BaseException:
         for entity in reversed(spawned):
             world.delete_entity(entity)
         raise
-    return root
+    record = world.resources.get(SpawnedModels)
+    if record is None:
+        record = world.resources[SpawnedModels] = SpawnedModels()
+    record[root] = SpawnedModel(None if model is None else model_key(model), spawned)
+    return spawned
+
+
+def remove_parts(world: World, root: int) -> int:
+    """Delete what was spawned under ``root`` from its model (the parts still there);
+    returns how many."""
+    record = world.resources.get(SpawnedModels, {}).pop(root, None)
+    if record is None:
+        return 0
+    gone = [entity for entity in record.parts if world.exists(entity)]
+    for entity in gone:
+        world.delete_entity(entity)
+    return len(gone)
+
+
+def respawn_parts(world: World, root: int, roots: Sequence[str | Path] | None = None,
+                  loaded: LoadedModel | None = None) -> list[int]:
+    """Make ``root``'s parts from its ``Model`` (and Transform) again: the old ones deleted,
+    the file loaded (``roots``: the folders the files it names may be in; None: its own
+    folder), unless ``loaded`` is it already (a level file's reader loaded it), and every
+    part built before the old ones go, so a file that cannot be loaded leaves the world as
+    it was and raises an AssetError naming the entity."""
+    model = world.get(root, Model)
+    transform = world.try_get(root, Transform)
+    if transform is None:
+        raise AssetError(f"entity {root}: a Model needs a Transform on the same entity (where the model stands)")
+    try:
+        if loaded is None:
+            loaded = load_model_file(model.file, roots=roots)
+        part_components = model_components(loaded, model.file, transform, model.max_probes, model.light_scale)
+    except AssetError as exc:
+        raise AssetError(f"entity {root}'s Model: {exc}") from exc
+    remove_parts(world, root)
+    return spawn_parts(world, root, model, part_components)
 
 
 def _light_components(light: ModelLight, root: Transform, scale: float) -> list:

@@ -1,0 +1,66 @@
+"""A model file placed whole: the entity it is on is the model's root.
+
+A level file (or the editor, or a game's code) places a glTF, OBJ, PLY or STL model as one
+entity: ``Model(file="car.glb")`` with a Transform.  Its parts (one entity a mesh part,
+with the file's materials, and its lights) are made under that entity by the models stage
+(``systems/model_system.py``; ``engine.assets.models.spawn_model`` makes them at once) and
+each carries a ``FromModel`` naming the root: they are what the file says, made again
+whenever the file is loaded, so a level file holds the root alone (as Godot's instanced
+scenes and Unity's prefabs keep a reference, not a copy).  Changing a ``Model`` field makes
+the parts again; deleting the root deletes them.
+"""
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+from typing import Any
+
+from components.tracking import ComponentValueError, TrackedComponent, finite, integer
+
+MAX_MODEL_PROBES = 4  # curved reflective or glass parts of one model that get a cube-map probe each (by default)
+MAX_MODEL_PROBES_LIMIT = 64  # the most Model.max_probes may ask for (each probe is six views a capture)
+
+
+@dataclass(eq=False)
+class Model(TrackedComponent):
+    """The model file ``file`` (a path: relative to where the program runs, or, in a level
+    file, to the level's folder; "" for none yet, as the editor adds one) spawned under
+    this entity.  ``light_scale`` multiplies the
+    intensities of the lights the file carries (glTF's ``KHR_lights_punctual``: physical
+    units to the scene's exposure); ``max_probes`` is how many of its curved reflective or
+    glass parts get a cube-map probe of their own (the largest; the others reflect the sky).
+    What the file holds is checked when it is loaded: by ``spawn_model`` and a level file's
+    reader at once, by the models stage for a Model added or changed otherwise (naming the
+    entity and the file)."""
+
+    SHAREABLE = False  # one root's own: its parts are made under it
+    file: str = ""
+    light_scale: float = 1.0
+    max_probes: int = MAX_MODEL_PROBES
+
+    def _validate(self, name: str, value: Any) -> Any:
+        if name == "file":
+            if isinstance(value, os.PathLike):
+                value = os.fspath(value)
+            if not isinstance(value, str) or "\0" in value:
+                raise ComponentValueError(f"Model.file must be a model file's path (a str), got {value!r}")
+            return value
+        if name == "light_scale":
+            return finite(self, name, value, low=0.0)
+        if name == "max_probes":
+            return integer(self, name, value, low=0, high=MAX_MODEL_PROBES_LIMIT)
+        return value
+
+
+@dataclass(eq=False)
+class FromModel(TrackedComponent):
+    """Made by the models stage on each entity it spawns from a ``Model`` (derived: a level
+    file never holds one, nor the entities carrying it): ``model`` is the root entity."""
+
+    SHAREABLE = False
+    model: int = 0
+
+    def _validate(self, name: str, value: Any) -> Any:
+        if name == "model" and (isinstance(value, bool) or not isinstance(value, int) or value <= 0):
+            raise ComponentValueError(f"FromModel.model must be an entity id, got {value!r}")
+        return value
