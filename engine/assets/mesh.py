@@ -25,6 +25,7 @@ from pyglm import glm
 
 from components.limits import MAX_IOR
 from components.water import f0_from_ior
+from engine.assets.model_cameras import ModelCamera, read_gltf_cameras
 from engine.assets.model_files import (
     MAX_JSON_NESTING,  # noqa: F401 - the loader's limits are read from here too
     MAX_MTL_BUMP_SCALE,
@@ -457,11 +458,13 @@ MAX_MESH_FILE_BYTES = 256 << 20  # a mesh file's size: trimesh holds several tim
 
 @dataclass
 class LoadedModel:
-    """A model file's parts and the lights its nodes carry (a glTF's ``KHR_lights_punctual``,
-    ``engine/assets/model_lights.py``; other formats have none)."""
+    """A model file's parts, the lights its nodes carry (a glTF's ``KHR_lights_punctual``,
+    ``engine/assets/model_lights.py``) and its cameras (``engine/assets/model_cameras.py``);
+    other formats have neither."""
 
     parts: list[ModelPart]
     lights: list[ModelLight]
+    cameras: list[ModelCamera] = field(default_factory=list)
 
 
 def load_model(path: str | Path, roots: Sequence[str | Path] | None = None,
@@ -535,6 +538,11 @@ def _load_model(path: Path, data: bytes, what: str, roots, materials: bool, trim
     if gltf is None and obj is None:  # PLY, STL, OFF: a PLY's TextureFile is not served (never drawn)
         body, resolver = data, CheckedFiles(path.name)
     del data
+    try:  # before trimesh parses the file: a node naming a camera it lacks would be its IndexError
+        lights = read_gltf_lights(gltf.doc) if gltf is not None else []
+        cameras = read_gltf_cameras(gltf.doc) if gltf is not None else []
+    except AssetError as exc:
+        raise AssetError(f"{what}: {exc}") from exc
     try:
         loaded = trimesh.load(io.BytesIO(body), file_type=suffix[1:], resolver=resolver, force="scene",
                               process=False)
@@ -581,11 +589,7 @@ def _load_model(path: Path, data: bytes, what: str, roots, materials: bool, trim
         raise AssetError(f"{what}: holds malformed mesh data ({type(exc).__name__}: {exc})") from exc
     if not parts:
         raise AssetError(f"{what}: contains no triangle meshes")
-    try:
-        lights = read_gltf_lights(gltf.doc) if gltf is not None else []
-    except AssetError as exc:
-        raise AssetError(f"{what}: {exc}") from exc
-    return LoadedModel(parts, lights)
+    return LoadedModel(parts, lights, cameras)
 
 
 def _digest(mesh: Mesh) -> bytes:

@@ -88,7 +88,7 @@ def read_gltf_lights(doc: dict | None) -> list[ModelLight]:
                          "(extensions.KHR_lights_punctual.lights)")
     lights = [_light(defined, i) for i in range(len(defined))]
     found: list[ModelLight] = []
-    for index, matrix in _placed_nodes(doc, nodes):
+    for index, matrix in placed_nodes(doc, nodes):
         light_index = _light_index(nodes[index])
         if light_index is None:
             continue
@@ -107,7 +107,7 @@ def _light_index(node: dict) -> object:
     return extension.get("light") if isinstance(extension, dict) else None
 
 
-def _number(value: object) -> bool:
+def finite_number(value: object) -> bool:
     return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
 
 
@@ -122,13 +122,13 @@ def _light(defined: list, index: int) -> ModelLight:
     if kind not in LIGHT_KINDS:
         raise AssetError(f"{what}: type must be one of {LIGHT_KINDS}, got {kind!r}")
     color = entry.get("color", [1.0, 1.0, 1.0])
-    if not (isinstance(color, list) and len(color) == 3 and all(_number(c) and 0.0 <= c <= 1.0 for c in color)):
+    if not (isinstance(color, list) and len(color) == 3 and all(finite_number(c) and 0.0 <= c <= 1.0 for c in color)):
         raise AssetError(f"{what}: color must be three numbers in [0, 1] (linear RGB), got {color!r}")
     intensity = entry.get("intensity", 1.0)
-    if not (_number(intensity) and 0.0 <= intensity):
+    if not (finite_number(intensity) and 0.0 <= intensity):
         raise AssetError(f"{what}: intensity must be a number >= 0, got {intensity!r}")
     reach = entry.get("range")
-    if reach is not None and not (_number(reach) and reach > 0.0):
+    if reach is not None and not (finite_number(reach) and reach > 0.0):
         raise AssetError(f"{what}: range must be a number > 0, got {reach!r}")
     inner, outer = 0.0, math.pi / 4.0
     if kind == "spot":
@@ -137,7 +137,7 @@ def _light(defined: list, index: int) -> ModelLight:
             raise AssetError(f"{what}: a spot light needs its spot object (innerConeAngle, outerConeAngle), "
                              f"got {spot!r}")
         inner, outer = spot.get("innerConeAngle", 0.0), spot.get("outerConeAngle", math.pi / 4.0)
-        if not (_number(inner) and _number(outer) and 0.0 <= inner < outer <= math.pi / 2.0 + 1e-6):
+        if not (finite_number(inner) and finite_number(outer) and 0.0 <= inner < outer <= math.pi / 2.0 + 1e-6):
             raise AssetError(f"{what}: its cone angles must satisfy 0 <= innerConeAngle < outerConeAngle <= pi/2 "
                              f"(radians), got {inner!r} and {outer!r}")
         if math.degrees(outer) < MIN_SPOT_ANGLE:
@@ -166,14 +166,14 @@ def _node_matrix(node: dict, index: int) -> np.ndarray:
     """A node's local transform: its ``matrix`` (column-major) or translation x rotation x scale."""
     if "matrix" in node:
         values = node["matrix"]
-        if not (isinstance(values, list) and len(values) == 16 and all(_number(v) for v in values)):
+        if not (isinstance(values, list) and len(values) == 16 and all(finite_number(v) for v in values)):
             raise AssetError(f"node {index}: matrix must be 16 finite numbers, got {values!r}")
         return np.array(values, np.float64).reshape(4, 4).T
     t = node.get("translation", [0.0, 0.0, 0.0])
     r = node.get("rotation", [0.0, 0.0, 0.0, 1.0])
     s = node.get("scale", [1.0, 1.0, 1.0])
     for key, value, size in (("translation", t, 3), ("rotation", r, 4), ("scale", s, 3)):
-        if not (isinstance(value, list) and len(value) == size and all(_number(v) for v in value)):
+        if not (isinstance(value, list) and len(value) == size and all(finite_number(v) for v in value)):
             raise AssetError(f"node {index}: {key} must be {size} finite numbers, got {value!r}")
     x, y, z, w = r
     if x * x + y * y + z * z + w * w == 0.0:
@@ -185,7 +185,7 @@ def _node_matrix(node: dict, index: int) -> np.ndarray:
     return matrix
 
 
-def _placed_nodes(doc: dict, nodes: list) -> list[tuple[int, np.ndarray]]:
+def placed_nodes(doc: dict, nodes: list) -> list[tuple[int, np.ndarray]]:
     """Every node of the document's scene with its transform in the model (its ancestors'
     times its own), parents before children; a node reached twice (a cycle, or a child of
     two parents, which glTF forbids) is an AssetError."""

@@ -20,6 +20,7 @@ import numpy as np
 from pyglm import glm
 
 from components import (
+    Camera,
     ComponentValueError,
     DirectionalLight,
     Emissive,
@@ -33,6 +34,7 @@ from components import (
 )
 from components.model import MAX_MODEL_PROBES, FromModel, Model
 from engine.assets.mesh import LoadedModel, flat_plane, load_model_file
+from engine.assets.model_cameras import ModelCamera
 from engine.assets.model_lights import ModelLight, check_light_intensity
 from engine.core.errors import AssetError
 from engine.core.world import World
@@ -103,6 +105,10 @@ def spawn_model(world: World, path: str | Path, position: glm.vec3 | Sequence[fl
     refused, saying the scale that fits).  Shadows are the engine's defaults (a sun casts, a
     lamp does not): the extension says nothing of them.
 
+    A glTF file's perspective cameras (``engine/assets/model_cameras.py``) come as Camera
+    entities under the root, placed by their nodes, not active: a game shows one by making
+    it active (``camera.active = True``; the active camera with the lowest id renders).
+
     The root holds the file's ``Model`` (its path, ``light_scale`` and ``max_probes``) and
     each part a ``FromModel`` naming the root: a level file saves the root alone and makes
     the parts again when it is loaded; deleting the root deletes them (the models stage).
@@ -151,6 +157,8 @@ def model_components(loaded: LoadedModel, path: str | Path, root: Transform, max
             part_components.append(_part_components(part, index in probed))
         for light in loaded.lights:
             part_components.append(_light_components(light, root, light_scale))
+        for camera in loaded.cameras:
+            part_components.append(_camera_components(camera))
     except (ComponentValueError, AssetError) as exc:
         raise AssetError(f"mesh file {str(path)!r}: {exc}") from exc
     if len(curved) > len(probed):
@@ -270,6 +278,16 @@ def _light_components(light: ModelLight, root: Transform, scale: float) -> list:
         return [placed, DirectionalLight(direction=travel, color=colour, intensity=intensity)]
     return [placed, PointLight(color=colour, intensity=intensity, range=light.reach(scale),
                                spot_angle=light.spot_angle(), spot_blend=light.spot_blend())]
+
+
+def _camera_components(camera: ModelCamera) -> list:
+    """A file's camera as the engine's, not active (the level's own camera keeps the view
+    until a game makes one of the model's active): its node's place and turn (a scale in
+    the node is left out: a camera's picture is not stretched by it)."""
+    placed = _node_transform(camera.local, camera.name)
+    placed.scale = glm.vec3(1.0)
+    lens = {"fov_y": camera.fov_y, "near": camera.near, **({"far": camera.far} if camera.far is not None else {})}
+    return [placed, Camera(active=False, **lens)]
 
 
 def _node_transform(local: glm.mat4, name: str) -> Transform:
