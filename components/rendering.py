@@ -8,7 +8,17 @@ import numpy as np
 from pyglm import glm
 
 from components.limits import MAX_IOR
-from components.tracking import HALF_MAX, ComponentValueError, TrackedComponent, boolean, choice, color, finite, integer
+from components.tracking import (
+    HALF_MAX,
+    ComponentValueError,
+    TrackedComponent,
+    boolean,
+    choice,
+    color,
+    finite,
+    integer,
+    vec3,
+)
 
 # Assets are the engine's types (engine.assets.mesh.Mesh, engine.assets.texture_data.TextureData);
 # components are the floor below it and import none of it: a field holding one is checked by
@@ -139,6 +149,15 @@ class Material(TrackedComponent):
     The coat follows the mesh's own surface, not a normal map's bumps (a smooth varnish
     over a textured base).
 
+    ``sheen_color`` (linear RGB, each 0 to 1; default black: none) and ``sheen_roughness``
+    (0 to 1, default 0) give the material the soft sheen of cloth, velvet or dust seen at
+    grazing angles (glTF's ``KHR_materials_sheen``, Filament's and three.js's sheen): a
+    layer whose microfibres scatter light back at the rims (the "Charlie" distribution of
+    Estevez and Kulla, 2017, with Neubelt's visibility, as Filament draws it), over the
+    material, which keeps what the sheen's own albedo at that angle takes
+    (1 - max(sheen_color) x E(n.v)).  Lit by every light, through mirrors and portals too,
+    and by the light from all round.
+
     ``reflectance`` (0 to 1, default 0.5) is how much a non-metal reflects head on, as
     Filament's and Godot's ``specular``/``reflectance`` knob: f0 = 0.16 x reflectance^2, so
     0.5 is the 4% of glass, plastic and most things (index 1.5), 0.35 water's 2%, 1 the 16% of
@@ -173,6 +192,8 @@ class Material(TrackedComponent):
     clearcoat_roughness: float = 0.0
     unlit: bool = False
     reflectance: float = 0.5
+    sheen_color: Any = field(default_factory=lambda: glm.vec3(0.0))
+    sheen_roughness: float = 0.0
 
     def _validate(self, name: str, value: Any) -> Any:
         if name == "blend":
@@ -192,8 +213,14 @@ class Material(TrackedComponent):
             return finite(self, name, value, low=0.0, high=1.0)
         if name == "normal_scale":
             return finite(self, name, value, low=0.0, high=MAX_NORMAL_SCALE)
-        if name in ("occlusion_strength", "environment_reflection", "clearcoat", "clearcoat_roughness", "reflectance"):
+        if name in ("occlusion_strength", "environment_reflection", "clearcoat", "clearcoat_roughness", "reflectance",
+                    "sheen_roughness"):
             return finite(self, name, value, low=0.0, high=1.0)
+        if name == "sheen_color":
+            sheen = vec3(self, name, value, low=0.0)
+            if max(sheen) > 1.0:  # a layer's albedo: more than 1 would reflect more light than arrives
+                raise ComponentValueError(f"Material.sheen_color must have components in [0, 1], got {value!r}")
+            return sheen
         if name == "unlit":
             return boolean(self, name, value)
         if name == "double_sided":

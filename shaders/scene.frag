@@ -323,6 +323,29 @@ vec3 coat_normal = vec3(0.0, 0.0, 1.0);  // unit, facing the viewer (main sets i
 float coat_roughness = 0.0;   // clearcoat.y widened where the normal turns (filtered_roughness)
 #endif
 
+#ifdef SHEEN
+// The sheen (Material.sheen_color, sheen_roughness; glTF's KHR_materials_sheen, as Filament
+// and three.js draw it): cloth's or velvet's microfibres scattering light back at the rims,
+// the "Charlie" distribution (Estevez and Kulla 2017) with Neubelt's visibility: the
+// formulas and their albedo E(n.v), the share the layer takes from the material under it,
+// are engine/render/environment_brdf.py's (its table in the blue of the BRDF rows).  The
+// lights' loops sum its light here; main lays it, and its reflection of the light from all
+// round (sheen_environment), over the material.  Only in the SHEEN builds.
+uniform vec4 sheen;            // rgb: its batch's Material.sheen_color, a: sheen_roughness
+vec3 sheen_light = vec3(0.0);  // the lights' sheen (D V n.l x arriving), summed
+const float SHEEN_MIN_ALPHA = 0.002;  // environment_brdf.py's
+
+// D(h) V(l, v) n.l for unit n, l and v: the sheen lobe's share of light arriving along l.
+float sheen_lobe(vec3 n, vec3 l, vec3 v) {
+    float nl = max(dot(n, l), 0.0), nv = max(dot(n, v), 1e-4);
+    vec3 h = normalize(l + v);
+    float alpha = max(sheen.a * sheen.a, SHEEN_MIN_ALPHA);
+    float sin2 = max(1.0 - dot(n, h) * dot(n, h), 0.0);
+    float d = (2.0 + 1.0 / alpha) * pow(sin2, 0.5 / alpha) / (2.0 * PI);
+    return d * nl / max(4.0 * (nl + nv - nl * nv), 1e-6);
+}
+#endif
+
 // Light through mirrors and portals (its loop only in the VIRTUAL_LIGHTS builds).
 #include "virtual_lights.glsl"
 
@@ -339,6 +362,17 @@ vec3 coat_environment(Surface s, AmbientBoxes boxes, float nv) {
     float occlusion = specular_occlusion(nv, s.occlusion, clearcoat.y);
     vec3 share = environment_share(vec3(0.04), environment_brdf(clearcoat.y, nv));
     return environment_radiance(coat, boxes) * share * (occlusion * float(lights.counts.w));
+}
+#endif
+
+#ifdef SHEEN
+// The sheen's reflection of the light from all round: the sky's or probes' radiance along the
+// reflected ray blurred by the sheen's roughness (Filament's approximation of the sheen's
+// own prefiltered light) x its albedo at this angle, occluded as the light from all round is.
+vec3 sheen_environment(Surface s, AmbientBoxes boxes, float albedo) {
+    Surface layer = s;
+    layer.roughness = sheen.a;
+    return environment_radiance(layer, boxes) * (albedo * s.occlusion * float(lights.counts.w));
 }
 #endif
 
@@ -368,6 +402,9 @@ vec3 direct_lighting(Surface s, AmbientBoxes boxes) {
             coat_light += ggx_specular(coat_normal, l, s.to_eye, vec3(0.04), coat_roughness)
                           * (max(dot(coat_normal, l), 0.0) * directional_lit[i]) * lights.directional_color[i].rgb;
 #endif
+#ifdef SHEEN
+            sheen_light += sheen_lobe(s.normal, l, s.to_eye) * directional_lit[i] * lights.directional_color[i].rgb;
+#endif
         }
     }
     for (int i = 0; i < lights.counts.y; ++i) {
@@ -396,6 +433,9 @@ vec3 direct_lighting(Surface s, AmbientBoxes boxes) {
 #ifdef CLEARCOAT
             coat_light += sphere_highlight(coat_normal, s.to_eye, reflect(-s.to_eye, coat_normal), d,
                                            lights.point_color[i].w, vec3(0.04), coat_roughness) * arriving;
+#endif
+#ifdef SHEEN
+            sheen_light += sheen_lobe(s.normal, l, s.to_eye) * arriving;
 #endif
         }
     }
@@ -645,6 +685,22 @@ void main() {
     vec3 lit = s.albedo;  // Material.unlit: its colour as it is, no light, shadow or reflection on it
 #else
     vec3 lit = direct_lighting(s, boxes);
+#ifdef SHEEN
+    // The sheen over the material (glTF's layering): the material keeps 1 - max(sheen) x E(n.v)
+    // of its light, the sheen's light and reflection lie on top (a see-through material keeps
+    // them whole, as its highlights and reflections: highlight_light, environment_light).
+    float sheen_albedo = environment_brdf_rows(sheen.a, max(dot(s.normal, s.to_eye), 0.0)).b;
+    float sheen_loss = 1.0 - max(max(sheen.r, sheen.g), sheen.b) * sheen_albedo;
+    vec3 sheen_direct = sheen.rgb * sheen_light;
+    vec3 sheen_ambient = sheen.rgb * sheen_environment(s, boxes, sheen_albedo);
+    lit = lit * sheen_loss + sheen_direct * s.direct_occlusion + sheen_ambient;
+    highlight_light = highlight_light * sheen_loss + sheen_direct;
+    environment_light = environment_light * sheen_loss + sheen_ambient;
+#ifdef SCREEN_REFLECTION
+    reflect_weight *= sheen_loss;  // the reflections under the sheen, scaled as its light is
+    reflect_added *= sheen_loss;
+#endif
+#endif
 #endif
 #if defined(SCREEN_REFLECTION) && defined(METALLIC_ROUGHNESS_MAP)
     vec3 lit_weight = reflect_weight, lit_added = reflect_added;  // (the environment reflection's, in lit)

@@ -159,7 +159,9 @@ class ExtractSystem(esper.Processor):
                                             clearcoat=(material.clearcoat, material.clearcoat_roughness)
                                             if material is not None and material.clearcoat > 0.0 else None,
                                             unlit=material is not None and material.unlit,
-                                            dielectric_f0=dielectric_f0(material))
+                                            dielectric_f0=dielectric_f0(material),
+                                            sheen=(*material.sheen_color, material.sheen_roughness)
+                                            if material is not None and max(material.sheen_color) > 0.0 else None)
         except GLLimitError as exc:
             raise GLLimitError(f"entity {entity}: {exc}") from None
         if transparent:  # a see-through mirror or portal (water): drawn before the view trees' claims

@@ -600,6 +600,7 @@ def test_a_new_entity_given_a_mesh_shows_it_and_its_shape_is_chosen(scene, ctx, 
         assert np.abs(boxed[cy, cx].astype(int) - empty[cy, cx]).max() > 20  # the box stands there
         assert np.abs(boxed[ky, kx].astype(int) - empty[ky, kx]).max() > 20
         draw()
+        click("Material")   # its fields folded away, so the MeshRef's are in the window, not scrolled past
         click("MeshRef.mesh")
         click("MeshRef.mesh sphere")
         assert editor.mesh_shape(made) == "sphere"

@@ -445,6 +445,8 @@ class ModelPart:
     clearcoat_roughness: float = 0.0  # its roughness factor (Material.clearcoat_roughness)
     unlit: bool = False               # KHR_materials_unlit (Material.unlit)
     reflectance: float = 0.5          # from KHR_materials_ior and _specular (Material.reflectance)
+    sheen_color: tuple[float, float, float] = (0.0, 0.0, 0.0)  # KHR_materials_sheen's (Material.sheen_color)
+    sheen_roughness: float = 0.0      # its roughness factor (Material.sheen_roughness)
     name: str = ""  # "file:part", as a level file's part = "..." names it (parts may share one mesh)
 
     def __post_init__(self) -> None:
@@ -847,6 +849,33 @@ def _gltf_clearcoat(doc_material: dict, part: ModelPart, what: str) -> None:
     part.clearcoat, part.clearcoat_roughness = values
 
 
+def _gltf_sheen(doc_material: dict, part: ModelPart, what: str) -> None:
+    """A glTF material's sheen (``KHR_materials_sheen``): its colour and roughness factors
+    (``Material.sheen_color``, ``sheen_roughness``); a factor out of [0, 1] is an error
+    naming the material; its textures are left out with a warning (one sheen a part)."""
+    extensions = doc_material.get("extensions") if isinstance(doc_material, dict) else None
+    info = extensions.get("KHR_materials_sheen") if isinstance(extensions, dict) else None
+    if info is None:
+        return
+    if not isinstance(info, dict):
+        raise AssetError(f"{what}: KHR_materials_sheen must be an object, got {info!r}")
+    colour = info.get("sheenColorFactor", [0.0, 0.0, 0.0])
+    if not (isinstance(colour, list) and len(colour) == 3 and all(
+            not isinstance(c, bool) and isinstance(c, numbers.Real) and 0.0 <= float(c) <= 1.0 for c in colour)):
+        raise AssetError(f"{what}: KHR_materials_sheen.sheenColorFactor must be three numbers in [0, 1], "
+                         f"got {colour!r}")
+    roughness = info.get("sheenRoughnessFactor", 0.0)
+    if isinstance(roughness, bool) or not isinstance(roughness, numbers.Real) or not 0.0 <= float(roughness) <= 1.0:
+        raise AssetError(f"{what}: KHR_materials_sheen.sheenRoughnessFactor must be a number in [0, 1], "
+                         f"got {roughness!r}")
+    left = [slot for slot in ("sheenColorTexture", "sheenRoughnessTexture") if slot in info]
+    if left and max(colour) > 0.0:
+        warnings.warn(f"{what}: KHR_materials_sheen's {', '.join(left)} left out: the sheen is its factors' "
+                      "everywhere", stacklevel=6)
+    part.sheen_color = tuple(float(c) for c in colour)
+    part.sheen_roughness = float(roughness)
+
+
 # --- material maps -----------------------------------------------------------------------
 
 class _MaterialMaps:
@@ -983,6 +1012,7 @@ class _MaterialMaps:
             self._emissive(part, self.image(image, f"{what}: emissiveTexture", "colour"), factor[:3], what)
         _gltf_transmission(doc_material, part, what)
         _gltf_clearcoat(doc_material, part, what)
+        _gltf_sheen(doc_material, part, what)
         _gltf_reflectance(doc_material, part, what)
         extensions = doc_material.get("extensions") if isinstance(doc_material, dict) else None
         if isinstance(extensions, dict) and "KHR_materials_unlit" in extensions:
@@ -990,6 +1020,7 @@ class _MaterialMaps:
             # viewer without the extension): no reflection, glass or coat of theirs
             part.unlit = True
             part.metallic = part.reflectivity = part.transmission = part.clearcoat = 0.0
+            part.sheen_color = (0.0, 0.0, 0.0)
 
     def image(self, image, what: str, kind: str) -> TextureData:
         """A decoded image of the file as a TextureData (once per image and kind), its size

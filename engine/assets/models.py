@@ -190,7 +190,8 @@ def _part_components(part, probed: bool) -> list:
                  double_sided=part.double_sided and not _planar_mirror(part),
                  blend="transparent" if _glass(part) and not refracts else "fade",
                  clearcoat=part.clearcoat, clearcoat_roughness=part.clearcoat_roughness,
-                 unlit=part.unlit, reflectance=part.reflectance),
+                 unlit=part.unlit, reflectance=part.reflectance, sheen_color=part.sheen_color,
+                 sheen_roughness=part.sheen_roughness),
     ]
     if part.emissive_factor > 0.0:
         components.append(Emissive(part.emissive_factor))

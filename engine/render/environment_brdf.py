@@ -65,6 +65,61 @@ def environment_brdf(roughness: np.ndarray | float, nv: np.ndarray | float,
     return np.stack([((1.0 - fresnel) * weight).mean(axis=-1), (fresnel * weight).mean(axis=-1)], axis=-1)
 
 
+# The sheen layer (Material.sheen_color, glTF's KHR_materials_sheen): the "Charlie"
+# distribution of Estevez and Kulla ("Production Friendly Microfacet Sheen BRDF", 2017),
+# D(h) = (2 + 1/alpha) sin(theta_h)^(1/alpha) / (2 pi), alpha = sheen_roughness^2 (floored:
+# SHEEN_MIN_ALPHA), with Neubelt and Pettineo's visibility V = 1 / (4 (n.l + n.v - n.l n.v))
+# ("Crafting a Next-Gen Material Pipeline for The Order: 1886", 2013), as Filament draws it
+# (shaders/scene.frag sheen_brdf).  Its directional albedo E(n.v) = integral of D V n.l over
+# the hemisphere is the share of light the sheen takes at that angle: the material under it
+# keeps 1 - max(sheen_color) E(n.v), and E(n.v) x the sky's or probes' radiance is the
+# sheen's reflection of the light from all round (Filament's "DFG" for sheen).
+SHEEN_MIN_ALPHA = 0.002
+SHEEN_GRID = 64  # midpoints of cos(theta_l) and of phi the albedo is summed over
+
+
+def charlie_distribution(alpha: np.ndarray | float, cos_h: np.ndarray | float) -> np.ndarray:
+    """The Charlie sheen distribution D(h) at the cosine of h's angle to the normal."""
+    alpha = np.maximum(np.asarray(alpha, np.float64), SHEEN_MIN_ALPHA)
+    sin2 = np.maximum(1.0 - np.asarray(cos_h, np.float64) ** 2, 0.0)
+    return (2.0 + 1.0 / alpha) * sin2 ** (0.5 / alpha) / (2.0 * np.pi)
+
+
+def neubelt_visibility(nl: np.ndarray | float, nv: np.ndarray | float) -> np.ndarray:
+    """Neubelt and Pettineo's visibility for the sheen (bounded: V n.l <= 1/4)."""
+    nl, nv = np.asarray(nl, np.float64), np.asarray(nv, np.float64)
+    return 1.0 / np.maximum(4.0 * (nl + nv - nl * nv), 1e-6)
+
+
+def sheen_albedo(roughness: np.ndarray | float, nv: np.ndarray | float, grid: int = SHEEN_GRID) -> np.ndarray:
+    """E(n.v): the integral of D V n.l over the hemisphere, for each pair of sheen
+    ``roughness`` and n.v (broadcast together), by the midpoint rule in cos(theta_l) and phi."""
+    r, cos_v = np.broadcast_arrays(np.asarray(roughness, np.float64), np.asarray(nv, np.float64))
+    alpha = (r * r)[..., None, None]
+    cos_v = np.clip(cos_v, 1e-4, 1.0)[..., None, None]
+    cos_l = ((np.arange(grid) + 0.5) / grid)[:, None]
+    phi = (np.arange(grid) + 0.5) / grid * np.pi
+    sin_l = np.sqrt(1.0 - cos_l * cos_l)
+    sin_v = np.sqrt(1.0 - cos_v * cos_v)
+    # v = (sin_v, 0, cos_v), l = (sin_l cos phi, sin_l sin phi, cos_l), n = z: h = (l + v) / |l + v|
+    # (phi over [0, pi]: the integrand is symmetric about the plane of n and v)
+    hx, hy, hz = sin_l * np.cos(phi) + sin_v, sin_l * np.sin(phi) + 0.0 * sin_v, cos_l + cos_v
+    cos_h = hz / np.sqrt(hx * hx + hy * hy + hz * hz)
+    f = charlie_distribution(alpha, cos_h) * neubelt_visibility(cos_l, cos_v) * cos_l
+    return f.mean(axis=(-2, -1)) * 2.0 * np.pi  # d(omega) = d(cos theta) d(phi) over [0, 1] x [0, 2 pi]
+
+
+@functools.cache
+def sheen_albedo_table(size: int = ENVIRONMENT_BRDF_SIZE) -> np.ndarray:
+    """(size, size) float32: row j sheen roughness j / (size - 1), column i n.v i / (size - 1),
+    held to 1: Neubelt's visibility is not energy-conserving towards grazing angles (a smooth
+    sheen's albedo passes 1 below n.v of about 0.1), and a layer cannot take more than all
+    of the light from the material under it.  Made when a sheen is first drawn (about a
+    second of numpy): a scene without one pays nothing."""
+    steps = np.linspace(0.0, 1.0, size)
+    return np.minimum(sheen_albedo(steps[:, None], steps[None, :]), 1.0).astype(np.float32)
+
+
 @functools.cache
 def environment_brdf_table(size: int = ENVIRONMENT_BRDF_SIZE) -> np.ndarray:
     """(size, size, 2) float32: row j roughness j / (size - 1), column i n.v i / (size - 1)

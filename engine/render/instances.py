@@ -175,6 +175,7 @@ class BatchKey(NamedTuple):
     clearcoat: tuple[float, float] | None = None  # Material.clearcoat and its roughness (None: none)
     unlit: bool = False                 # Material.unlit: its colour as it is (the UNLIT_MATERIAL build)
     dielectric_f0: float = 0.04         # 0.16 x Material.reflectance^2: its draws' uniform
+    sheen: tuple[float, float, float, float] | None = None  # Material.sheen_color and roughness (None: none)
 
 
 def blend_code(batch: InstanceBatch) -> int:
@@ -287,6 +288,8 @@ class InstanceBatch:
         self.clearcoat: tuple[float, float] | None = None
         self.unlit = False  # Material.unlit: drawn with the UNLIT_MATERIAL build, lit by nothing
         self.dielectric_f0 = 0.04  # what its non-metal reflects head on (Material.reflectance), a uniform
+        # A sheen (Material.sheen_color, sheen_roughness; None: none): its SHEEN build's uniform.
+        self.sheen: tuple[float, float, float, float] | None = None
 
     # --- rows ----------------------------------------------------------------------------
     def add(self, entity: int) -> np.void:

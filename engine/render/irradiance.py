@@ -81,7 +81,7 @@ from engine.render.bindings import (
     bind_texture,
     bind_uniform_block,
 )
-from engine.render.environment_brdf import ENVIRONMENT_BRDF_SIZE, environment_brdf_table
+from engine.render.environment_brdf import ENVIRONMENT_BRDF_SIZE, environment_brdf_table, sheen_albedo_table
 from engine.render.gpu import Gpu, ProbeCube
 from engine.render.sky import (
     DISC_EDGE,
@@ -248,11 +248,13 @@ class IrradianceTable:
         self.table = ctx.texture((width, MAX_IRRADIANCE_PROBES + ENVIRONMENT_BRDF_SIZE), 4, dtype="f4")
         self.table.filter = (moderngl.LINEAR, moderngl.LINEAR)
         self.table.repeat_x = self.table.repeat_y = False
-        brdf = np.zeros((ENVIRONMENT_BRDF_SIZE, ENVIRONMENT_BRDF_SIZE, 4), np.float32)
-        brdf[..., :2] = environment_brdf_table()
-        self.table.write(brdf.tobytes(), viewport=(0, MAX_IRRADIANCE_PROBES, ENVIRONMENT_BRDF_SIZE,
-                                                   ENVIRONMENT_BRDF_SIZE))
+        self._brdf = np.zeros((ENVIRONMENT_BRDF_SIZE, ENVIRONMENT_BRDF_SIZE, 4), np.float32)
+        self._brdf[..., :2] = environment_brdf_table()
+        self.has_sheen_albedo = False  # blue: the sheen's albedo (write_sheen_albedo), once a sheen is drawn
+        self.table.write(self._brdf.tobytes(), viewport=(0, MAX_IRRADIANCE_PROBES, ENVIRONMENT_BRDF_SIZE,
+                                                         ENVIRONMENT_BRDF_SIZE))
         self.framebuffer = ctx.framebuffer(color_attachments=[self.table])
+
         # Bound on the table's unit while the table is drawn into: no texture is bound for
         # sampling where it is also the target (a feedback loop is undefined on a GPU).
         self._placeholder = ctx.texture((1, 1), 4, np.zeros(4, np.float32).tobytes(), dtype="f4")
@@ -267,7 +269,18 @@ class IrradianceTable:
         self._vao: moderngl.VertexArray | None = None
         self.projections = 0  # rows written since made (tests and the overlay read it)
 
+    def write_sheen_albedo(self) -> None:
+        """The sheen's albedo E(n.v) (``environment_brdf.sheen_albedo_table``) into the blue
+        of the BRDF rows, once: a batch with a sheen (Material.sheen_color) asks for it when
+        it is made, so a world without one never computes it."""
+        if not self.has_sheen_albedo:
+            self._brdf[..., 2] = sheen_albedo_table()
+            self.table.write(self._brdf.tobytes(), viewport=(0, MAX_IRRADIANCE_PROBES, ENVIRONMENT_BRDF_SIZE,
+                                                             ENVIRONMENT_BRDF_SIZE))
+            self.has_sheen_albedo = True
+
     # --- the boxes -----------------------------------------------------------------------------
+
     def set_boxes(self, boxes: Iterable[tuple[int, Iterable[float], Iterable[float], float]]) -> None:
         """The influence boxes probes serve: (owner, centre, size, blend distance) each.  Only
         those whose probe has a projected capture reach the shader (a row not written holds

@@ -138,7 +138,8 @@ class Renderer(Gpu):
                   occlusion_map: TextureData | None = None, occlusion_strength: float = 1.0,
                   double_sided: bool = False, keeps_specular: bool = False,
                   clearcoat: tuple[float, float] | None = None, unlit: bool = False,
-                  dielectric_f0: float = 0.04) -> InstanceBatch:
+                  dielectric_f0: float = 0.04,
+                  sheen: tuple[float, float, float, float] | None = None) -> InstanceBatch:
         """The batch of (mesh, albedo texture, normal map, emissive map, metallic-roughness
         map, the probe its instances sample (0: none), a cutout's cutoff, an occlusion map and
         its strength, double-sidedness).  A transparent entity gets a batch of its own
@@ -156,7 +157,8 @@ class Renderer(Gpu):
         # ``keeps_specular``: a transparent entity's Material.blend "transparent".
         # ``clearcoat``: a clear-coated material's (clearcoat, clearcoat_roughness), its
         # CLEARCOAT build's uniform (None: none).  ``unlit``: Material.unlit (UNLIT_MATERIAL).
-        # ``dielectric_f0``: 0.16 x Material.reflectance^2, its draws' uniform.
+        # ``dielectric_f0``: 0.16 x Material.reflectance^2, its draws' uniform.  ``sheen``: a
+        # sheen's (red, green, blue, roughness), its SHEEN build's uniform (None: none).
         key = BatchKey(mesh.id, id(texture) if texture is not None else 0,
                        (probe, second_probe, probe_blend, rest_probe), transparent_entity,
                        id(normal_map) if normal_map is not None else 0,
@@ -164,7 +166,7 @@ class Renderer(Gpu):
                        id(metallic_roughness_map) if metallic_roughness_map is not None else 0, mirrored,
                        alpha_cutoff, id(occlusion_map) if occlusion_map is not None else 0,
                        occlusion_strength if occlusion_map is not None else 1.0, double_sided,
-                       bool(keeps_specular and transparent_entity), clearcoat, unlit, dielectric_f0)
+                       bool(keeps_specular and transparent_entity), clearcoat, unlit, dielectric_f0, sheen)
         batch = self.batches.get(key)
         if batch is None:
             for name, image in (("Material.texture", texture), ("Material.normal_map", normal_map),
@@ -209,6 +211,9 @@ class Renderer(Gpu):
             batch.clearcoat = clearcoat
             batch.unlit = unlit
             batch.dielectric_f0 = dielectric_f0
+            batch.sheen = sheen
+            if sheen is not None:  # the sheen's albedo table, made once a sheen is drawn
+                self.irradiance.write_sheen_albedo()
             self._order_stale = True
             self.needs_preparing = True
             self.note_scene_change()

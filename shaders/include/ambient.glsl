@@ -17,9 +17,14 @@ uniform sampler2D irradiance_table;           // row r, texel i: coefficient i o
 // and n.v, so a surface of reflectance f0 reflects f0 A + B of light of 1 from all round.
 // Its rows are the table's below the probes' (no sampler of its own: the fullest scene build
 // holds 16), read between its entries by bilinear filtering.
-vec2 environment_brdf(float roughness, float nv) {
+// Blue: the sheen's albedo E(n.v) at the sheen's roughness (written once a sheen is drawn).
+vec4 environment_brdf_rows(float roughness, float nv) {
     vec2 texel = vec2(nv, roughness) * float(ENVIRONMENT_BRDF_SIZE - 1) + vec2(0.5, 0.5 + float(MAX_IRRADIANCE_PROBES));
-    return textureLod(irradiance_table, texel / vec2(textureSize(irradiance_table, 0)), 0.0).rg;
+    return textureLod(irradiance_table, texel / vec2(textureSize(irradiance_table, 0)), 0.0);
+}
+
+vec2 environment_brdf(float roughness, float nv) {
+    return environment_brdf_rows(roughness, nv).rg;
 }
 
 // E(n) = sum of E_lm Y_lm(n), the basis written out (an array and a loop cost llvmpipe a

@@ -122,6 +122,9 @@ vec3 virtual_lighting(vec3 position, vec3 normal, vec3 geometric, vec3 to_eye, v
                                virtual_lights.virtual_cookie_v[i].w, vec3(0.04), coat_roughness)
             : ggx_specular(coat_normal, l, to_eye, vec3(0.04), coat_roughness) * max(dot(coat_normal, l), 0.0));
 #endif
+#ifdef SHEEN
+        sheen_light += sheen_lobe(normal, l, to_eye) * arriving;  // (scene.frag's sheen)
+#endif
     }
     return total;
 }
