@@ -39,6 +39,9 @@ MAX_LIGHT_RADIUS = 10.0
 # The largest index of refraction (Refractive.ior): diamond is 2.42, germanium 4.0; past it
 # almost all light is reflected (Schlick's f0 over 0.36) and the refracted ray barely bends more.
 MAX_IOR = 4.0
+# Refractive.dispersion (glTF's KHR_materials_dispersion, 20 / the Abbe number): 10 is an
+# Abbe number of 2, past any glass or gem (diamond's is 55, dense flint's about 20).
+MAX_DISPERSION = 10.0
 
 # Reflection layers (show/hide lists): an entity belongs to some of REFLECTION_LAYERS layers
 # and a mirror, portal, probe or camera shows some of them; a view shows an entity when they

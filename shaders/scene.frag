@@ -532,17 +532,43 @@ vec3 solid_sphere_exit(vec3 incident, vec3 n, float ior) {
     return refract(inside, -exit_normal, ior);
 }
 
+#ifdef DISPERSION
+uniform float dispersion;  // its batch's Refractive.dispersion (glTF's KHR_materials_dispersion: 20 / Abbe number)
+#endif
+
+// What lies behind along a refracted ray: the probe's capture when one serves the object,
+// else the sky.
+vec3 refracted_light(Surface s, vec3 direction, float lod) {
+    return probe_face_size > 0.0 ? probe_radiance(s.position, direction, lod, s.roughness)
+                                 : sample_environment(direction, lod, s.roughness);
+}
+
 vec3 refract_environment(vec3 color, Surface s, bool solid) {
     // Refraction: environment seen along the refracted ray, weighted by Fresnel
     // transmittance (twice, in and out, through a solid ball), blended with the surface
     // colour by alpha (alpha 0 = clear).
     float ior = v_reflect.y;
+#ifdef DISPERSION
+    // Each channel bent by its own index (a prism's colours): red and blue (ior - 1) x 0.025 x
+    // dispersion either side of green's ior (three.js's spread of KHR_materials_dispersion),
+    // each with its own ray and its own Fresnel transmittance.
+    float half_spread = (ior - 1.0) * 0.025 * dispersion;
+    vec3 iors = max(vec3(ior - half_spread, ior, ior + half_spread), vec3(1.0));
+    vec3 transmittance, behind;
+    for (int c = 0; c < 3; ++c) {
+        vec3 direction = solid ? solid_sphere_exit(-s.to_eye, s.normal, iors[c])
+                               : refract(-s.to_eye, s.normal, 1.0 / iors[c]);
+        float passed = 1.0 - schlick_fresnel(s.to_eye, s.normal, vec3(f0_from_ior(iors[c]))).x;
+        transmittance[c] = solid ? passed * passed : passed;
+        // (its own footprint: the channels' rays spread apart)
+        float lod = cube_lod(direction, probe_face_size > 0.0 ? probe_face_size : sky_face_size);
+        behind[c] = refracted_light(s, direction, lod)[c];
+    }
+#else
     vec3 transmittance = vec3(1.0) - schlick_fresnel(s.to_eye, s.normal, vec3(f0_from_ior(ior)));
     if (solid) transmittance *= transmittance;  // the exit's angle is the entry's
-    // What lies behind: the probe's capture when one serves the object, else the sky.
-    vec3 behind = probe_face_size > 0.0
-        ? probe_radiance(s.position, s.refract_dir, s.refract_lod, s.roughness)
-        : sample_environment(s.refract_dir, s.refract_lod, s.roughness);
+    vec3 behind = refracted_light(s, s.refract_dir, s.refract_lod);
+#endif
     // The surface's own reflection of the environment lies over what it lets through, whatever
     // its alpha (Fresnel: 1 - F passes, F is reflected).
     vec3 transmitted = transmittance * s.albedo * behind + environment_light;

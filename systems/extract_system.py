@@ -138,8 +138,9 @@ class ExtractSystem(esper.Processor):
         # A material whose alpha is below 1 is see-through: blended in the transparent slot
         # (glass, whose alpha weighs the refracted view, stays opaque).
         # A cutout (Material.alpha_cutoff) is opaque where it is drawn at all.
+        refractive = world.try_get(entity, Refractive)
         transparent = material is not None and material.color.w < 1.0 and material.alpha_cutoff is None \
-            and not world.has(entity, Refractive)
+            and refractive is None
         # A generated shape is drawn as its unit mesh, its size in its row; not a mirror's or a
         # portal's, whose batch of surfaces alone the unlit-mirror pass keeps (unlit_mirrors).
         surface = world.has(entity, Mirror) or world.has(entity, Portal)
@@ -161,7 +162,8 @@ class ExtractSystem(esper.Processor):
                                             unlit=material is not None and material.unlit,
                                             dielectric_f0=dielectric_f0(material),
                                             sheen=(*material.sheen_color, material.sheen_roughness)
-                                            if material is not None and max(material.sheen_color) > 0.0 else None)
+                                            if material is not None and max(material.sheen_color) > 0.0 else None,
+                                            dispersion=refractive.dispersion if refractive is not None else 0.0)
         except GLLimitError as exc:
             raise GLLimitError(f"entity {entity}: {exc}") from None
         if transparent:  # a see-through mirror or portal (water): drawn before the view trees' claims

@@ -23,7 +23,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 from pyglm import glm
 
-from components.limits import MAX_IOR
+from components.limits import MAX_DISPERSION, MAX_IOR
 from components.water import f0_from_ior
 from engine.assets.model_cameras import ModelCamera, read_gltf_cameras
 from engine.assets.model_files import (
@@ -441,6 +441,7 @@ class ModelPart:
     transmission: float = 0.0  # KHR_materials_transmission's factor: the light that passes through (glass)
     ior: float = 1.5           # KHR_materials_ior's index of refraction (Refractive.ior)
     thick: bool = False        # KHR_materials_volume's thickness > 0: a solid, not a thin wall (Refractive.solid)
+    dispersion: float = 0.0    # KHR_materials_dispersion's (Refractive.dispersion)
     clearcoat: float = 0.0            # KHR_materials_clearcoat's factor (Material.clearcoat)
     clearcoat_roughness: float = 0.0  # its roughness factor (Material.clearcoat_roughness)
     unlit: bool = False               # KHR_materials_unlit (Material.unlit)
@@ -759,15 +760,16 @@ def _gltf_alpha(material, part: ModelPart, what: str) -> None:
 
 def _gltf_transmission(doc_material: dict, part: ModelPart, what: str) -> None:
     """Glass from a glTF material: ``KHR_materials_transmission``'s factor (the share of the
-    light that passes through, tinted by the base colour), ``KHR_materials_ior``'s index
-    and whether ``KHR_materials_volume`` gives it a thickness (a solid; without it glTF's
-    transmission is a thin wall).  A factor, index or thickness out of range is an error
-    naming the material; their textures are left out with a warning (one factor a part)."""
+    light that passes through, tinted by the base colour), ``KHR_materials_ior``'s index,
+    whether ``KHR_materials_volume`` gives it a thickness (a solid; without it glTF's
+    transmission is a thin wall) and ``KHR_materials_dispersion``'s spread of the colours.
+    A factor, index, thickness or dispersion out of range is an error naming the material;
+    their textures are left out with a warning (one factor a part)."""
     extensions = doc_material.get("extensions") if isinstance(doc_material, dict) else None
     if not isinstance(extensions, dict):
         return
     found = {name: extensions.get(name) for name in ("KHR_materials_transmission", "KHR_materials_ior",
-                                                     "KHR_materials_volume")}
+                                                     "KHR_materials_volume", "KHR_materials_dispersion")}
     for name, info in found.items():
         if info is not None and not isinstance(info, dict):
             raise AssetError(f"{what}: {name} must be an object, got {info!r}")
@@ -784,12 +786,18 @@ def _gltf_transmission(doc_material: dict, part: ModelPart, what: str) -> None:
     if isinstance(thickness, bool) or not isinstance(thickness, numbers.Real) or \
             not (math.isfinite(thickness) and thickness >= 0.0):
         raise AssetError(f"{what}: KHR_materials_volume.thicknessFactor must be a number >= 0, got {thickness!r}")
+    dispersion = (found["KHR_materials_dispersion"] or {}).get("dispersion", 0.0)
+    if isinstance(dispersion, bool) or not isinstance(dispersion, numbers.Real) or \
+            not 0.0 <= float(dispersion) <= MAX_DISPERSION:
+        raise AssetError(f"{what}: KHR_materials_dispersion.dispersion must be a number in [0, {MAX_DISPERSION:g}] "
+                         f"(Refractive.dispersion), got {dispersion!r}")
     for name, slot in (("KHR_materials_transmission", "transmissionTexture"),
                        ("KHR_materials_volume", "thicknessTexture")):
         if slot in (found[name] or {}) and factor > 0.0:
             warnings.warn(f"{what}: {name}.{slot} is left out: the part lets through its factor's share "
                           "everywhere", stacklevel=6)
     part.transmission, part.ior, part.thick = float(factor), float(ior), thickness > 0.0
+    part.dispersion = float(dispersion)
 
 
 def _gltf_reflectance(doc_material: dict, part: ModelPart, what: str) -> None:

@@ -196,7 +196,7 @@ def _part_components(part, probed: bool) -> list:
     if part.emissive_factor > 0.0:
         components.append(Emissive(part.emissive_factor))
     if refracts:
-        components.append(Refractive(ior=part.ior, solid=part.thick))
+        components.append(Refractive(ior=part.ior, solid=part.thick, dispersion=part.dispersion))
     elif part.reflectivity > 0.0 and not _glass(part):
         # A flat reflective surface is a planar mirror; anything else samples a cube-map
         # probe (its own, made by the probes stage at its box's centre).

@@ -176,6 +176,7 @@ class BatchKey(NamedTuple):
     unlit: bool = False                 # Material.unlit: its colour as it is (the UNLIT_MATERIAL build)
     dielectric_f0: float = 0.04         # 0.16 x Material.reflectance^2: its draws' uniform
     sheen: tuple[float, float, float, float] | None = None  # Material.sheen_color and roughness (None: none)
+    dispersion: float = 0.0             # Refractive.dispersion: its DISPERSION build's uniform (0: none)
 
 
 def blend_code(batch: InstanceBatch) -> int:
@@ -290,6 +291,7 @@ class InstanceBatch:
         self.dielectric_f0 = 0.04  # what its non-metal reflects head on (Material.reflectance), a uniform
         # A sheen (Material.sheen_color, sheen_roughness; None: none): its SHEEN build's uniform.
         self.sheen: tuple[float, float, float, float] | None = None
+        self.dispersion = 0.0  # Refractive.dispersion (0: none): its DISPERSION build's uniform
 
     # --- rows ----------------------------------------------------------------------------
     def add(self, entity: int) -> np.void:

@@ -275,7 +275,7 @@ class ScenePass:
             rest_size, lookup_rest = self._bind_probe(batch.rest_probe, PROBE_REST_UNIT, cubes)
         return (batch.texture is not None, blend_code(batch), probe_size, *lookup, probe2_size, *lookup2, rest_size,
                 *lookup_rest, *(batch.checker or NO_CHECKER), batch.alpha_cutoff or 0.0, batch.occlusion_strength,
-                batch.clearcoat or NO_CLEARCOAT, batch.dielectric_f0, batch.sheen or NO_SHEEN)
+                batch.clearcoat or NO_CLEARCOAT, batch.dielectric_f0, batch.sheen or NO_SHEEN, batch.dispersion)
 
     def _bind_probe(self, probe: int, unit: int, cubes) -> tuple[int, tuple]:
         """Bind the cube map of ``probe`` to ``unit``: its face size and lookup uniforms.  The
