@@ -158,6 +158,14 @@ class Material(TrackedComponent):
     (1 - max(sheen_color) x E(n.v)).  Lit by every light, through mirrors and portals too,
     and by the light from all round.
 
+    ``anisotropy`` (0 to 1, default 0: none) stretches the lights' highlights and the
+    reflection along one direction of the surface, as on brushed metal, a vinyl record or
+    hair (glTF's ``KHR_materials_anisotropy``, Filament's and three.js's anisotropy): the
+    roughness along that direction is mix(roughness^2, 1, anisotropy^2) in GGX's alpha, across
+    it roughness^2.  ``anisotropy_direction`` (degrees, default 0) is that direction, turned
+    from the texture's u axis (the UVs' +u on the surface) counter-clockwise towards +v: a
+    mesh without varying UVs takes some direction in its surface.
+
     ``reflectance`` (0 to 1, default 0.5) is how much a non-metal reflects head on, as
     Filament's and Godot's ``specular``/``reflectance`` knob: f0 = 0.16 x reflectance^2, so
     0.5 is the 4% of glass, plastic and most things (index 1.5), 0.35 water's 2%, 1 the 16% of
@@ -194,6 +202,8 @@ class Material(TrackedComponent):
     reflectance: float = 0.5
     sheen_color: Any = field(default_factory=lambda: glm.vec3(0.0))
     sheen_roughness: float = 0.0
+    anisotropy: float = 0.0
+    anisotropy_direction: float = 0.0
 
     def _validate(self, name: str, value: Any) -> Any:
         if name == "blend":
@@ -214,8 +224,10 @@ class Material(TrackedComponent):
         if name == "normal_scale":
             return finite(self, name, value, low=0.0, high=MAX_NORMAL_SCALE)
         if name in ("occlusion_strength", "environment_reflection", "clearcoat", "clearcoat_roughness", "reflectance",
-                    "sheen_roughness"):
+                    "sheen_roughness", "anisotropy"):
             return finite(self, name, value, low=0.0, high=1.0)
+        if name == "anisotropy_direction":
+            return finite(self, name, value, low=-360.0, high=360.0)
         if name == "sheen_color":
             sheen = vec3(self, name, value, low=0.0)
             if max(sheen) > 1.0:  # a layer's albedo: more than 1 would reflect more light than arrives

@@ -346,6 +346,10 @@ float sheen_lobe(vec3 n, vec3 l, vec3 v) {
 }
 #endif
 
+#ifdef ANISOTROPY
+#include "anisotropic_ggx.glsl"
+#endif
+
 // Light through mirrors and portals (its loop only in the VIRTUAL_LIGHTS builds).
 #include "virtual_lights.glsl"
 
@@ -395,7 +399,11 @@ vec3 direct_lighting(Surface s, AmbientBoxes boxes) {
         float nl = max(dot(s.normal, l), 0.0);
         if (nl > 0.0) {
             vec3 arriving = lights.directional_color[i].rgb * nl * directional_lit[i];
+#ifdef ANISOTROPY
+            vec3 highlight = anisotropic_specular(s.normal, l, s.to_eye, s.f0) * s.energy_compensation;
+#else
             vec3 highlight = ggx_specular(s.normal, l, s.to_eye, s.f0, s.highlight_roughness) * s.energy_compensation;
+#endif
             total += (diffuse + highlight) * arriving;
             highlight_light += highlight * arriving;
 #ifdef CLEARCOAT
@@ -426,8 +434,12 @@ vec3 direct_lighting(Surface s, AmbientBoxes boxes) {
             const vec3 cookie = vec3(1.0);
 #endif
             vec3 arriving = lights.point_color[i].rgb * cookie * falloff * point_shadow(i, point_lit);
+#ifdef ANISOTROPY
+            vec3 highlight = anisotropic_specular(s.normal, l, s.to_eye, s.f0) * (nl * s.energy_compensation);
+#else
             vec3 highlight = sphere_highlight(s.normal, s.to_eye, s.reflect_dir, d, lights.point_color[i].w, s.f0,
                                               s.highlight_roughness) * s.energy_compensation;
+#endif
             total += (diffuse * nl + highlight) * arriving;
             highlight_light += highlight * arriving;
 #ifdef CLEARCOAT
@@ -673,6 +685,9 @@ void main() {
     s.roughness = v_surface.y;
     float metal_share = apply_metallic_roughness(s);  // x the metallic-roughness map
     s.highlight_roughness = filtered_roughness(s.roughness, s.normal);
+#ifdef ANISOTROPY
+    anisotropic_frame(s.normal, v_world_pos, v_uv, anisotropy.y, s.highlight_roughness * s.highlight_roughness);
+#endif
 #ifdef CLEARCOAT
     coat_normal = s.geometric_normal;
     coat_roughness = filtered_roughness(clearcoat.y, coat_normal);
@@ -686,6 +701,9 @@ void main() {
 #endif
     s.f0 = mix(vec3(dielectric_f0), s.albedo, s.metallic);
     s.reflect_dir = reflect(-s.to_eye, s.normal);
+#ifdef ANISOTROPY
+    s.reflect_dir = anisotropic_reflect_dir(s.normal, s.to_eye, s.roughness);
+#endif
     s.refract_dir = refract(-s.to_eye, s.normal, 1.0 / max(v_reflect.y, 1.0));
     if (SLOT_REFRACT == REFRACT_SOLID) s.refract_dir = solid_sphere_exit(-s.to_eye, s.normal, max(v_reflect.y, 1.0));
     // The sky LODs only where a slot samples the sky: about a sixth of a frame's shading on

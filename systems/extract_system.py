@@ -36,7 +36,7 @@ from engine.render.surface_table import SurfaceBlends
 from engine.resources import Surfaces
 from engine.rules.probe_rules import LookChanges, SurfaceProbes, probe_blend
 from engine.rules.visibility_rules import entity_code
-from systems.material_dispatch import choose_material, dielectric_f0
+from systems.material_dispatch import choose_material, layer_uniforms
 
 NO_SLICE = (0.0, 0.0, 0.0, 1.0)
 
@@ -157,13 +157,8 @@ class ExtractSystem(esper.Processor):
                                             occlusion_strength=material.occlusion_strength if material else 1.0,
                                             double_sided=material.double_sided if material else False,
                                             keeps_specular=material is not None and material.blend == "transparent",
-                                            clearcoat=(material.clearcoat, material.clearcoat_roughness)
-                                            if material is not None and material.clearcoat > 0.0 else None,
                                             unlit=material is not None and material.unlit,
-                                            dielectric_f0=dielectric_f0(material),
-                                            sheen=(*material.sheen_color, material.sheen_roughness)
-                                            if material is not None and max(material.sheen_color) > 0.0 else None,
-                                            dispersion=refractive.dispersion if refractive is not None else 0.0)
+                                            **layer_uniforms(material, refractive))
         except GLLimitError as exc:
             raise GLLimitError(f"entity {entity}: {exc}") from None
         if transparent:  # a see-through mirror or portal (water): drawn before the view trees' claims

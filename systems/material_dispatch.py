@@ -2,7 +2,9 @@
 selection would do, done on the CPU once per change instead of once per draw)."""
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
+from typing import Any
 
 from pyglm import glm
 
@@ -74,3 +76,16 @@ def dielectric_f0(material: Material | None) -> float:
     """What a non-metal reflects head on, its batch's uniform: Filament's 0.16 x reflectance^2
     (``Material.reflectance``; 0.04, glass's and most things', at the default 0.5)."""
     return 0.16 * (material or DEFAULT_MATERIAL).reflectance ** 2
+
+
+def layer_uniforms(material: Material | None, refractive: Refractive | None) -> dict[str, Any]:
+    """The batch arguments (``Renderer.batch_for``) of the material's optional layers, each its
+    build's uniform and None (or 0) where the material has none, so it pays nothing for it: a
+    clear coat (clearcoat, its roughness), a sheen (colour, roughness), anisotropy (strength,
+    direction in radians), what non-metals reflect head on and a refraction's dispersion."""
+    m = material or DEFAULT_MATERIAL
+    return {"clearcoat": (m.clearcoat, m.clearcoat_roughness) if m.clearcoat > 0.0 else None,
+            "sheen": (*m.sheen_color, m.sheen_roughness) if max(m.sheen_color) > 0.0 else None,
+            "anisotropy": (m.anisotropy, math.radians(m.anisotropy_direction)) if m.anisotropy > 0.0 else None,
+            "dielectric_f0": dielectric_f0(material),
+            "dispersion": refractive.dispersion if refractive is not None else 0.0}

@@ -448,6 +448,8 @@ class ModelPart:
     reflectance: float = 0.5          # from KHR_materials_ior and _specular (Material.reflectance)
     sheen_color: tuple[float, float, float] = (0.0, 0.0, 0.0)  # KHR_materials_sheen's (Material.sheen_color)
     sheen_roughness: float = 0.0      # its roughness factor (Material.sheen_roughness)
+    anisotropy: float = 0.0           # KHR_materials_anisotropy's strength (Material.anisotropy)
+    anisotropy_direction: float = 0.0  # its rotation, in degrees (Material.anisotropy_direction)
     name: str = ""  # "file:part", as a level file's part = "..." names it (parts may share one mesh)
 
     def __post_init__(self) -> None:
@@ -884,6 +886,31 @@ def _gltf_sheen(doc_material: dict, part: ModelPart, what: str) -> None:
     part.sheen_roughness = float(roughness)
 
 
+def _gltf_anisotropy(doc_material: dict, part: ModelPart, what: str) -> None:
+    """A glTF material's anisotropy (``KHR_materials_anisotropy``): its strength and rotation
+    (radians, counter-clockwise from the UVs' u: ``Material.anisotropy``,
+    ``anisotropy_direction`` in degrees); a strength out of [0, 1] or a rotation that is not a
+    finite number is an error naming the material; its texture is left out with a warning."""
+    extensions = doc_material.get("extensions") if isinstance(doc_material, dict) else None
+    info = extensions.get("KHR_materials_anisotropy") if isinstance(extensions, dict) else None
+    if info is None:
+        return
+    if not isinstance(info, dict):
+        raise AssetError(f"{what}: KHR_materials_anisotropy must be an object, got {info!r}")
+    strength, rotation = info.get("anisotropyStrength", 0.0), info.get("anisotropyRotation", 0.0)
+    if isinstance(strength, bool) or not isinstance(strength, numbers.Real) or not 0.0 <= float(strength) <= 1.0:
+        raise AssetError(f"{what}: KHR_materials_anisotropy.anisotropyStrength must be a number in [0, 1], "
+                         f"got {strength!r}")
+    if isinstance(rotation, bool) or not isinstance(rotation, numbers.Real) or not math.isfinite(rotation):
+        raise AssetError(f"{what}: KHR_materials_anisotropy.anisotropyRotation must be a finite number (radians), "
+                         f"got {rotation!r}")
+    if "anisotropyTexture" in info and strength > 0.0:
+        warnings.warn(f"{what}: KHR_materials_anisotropy's anisotropyTexture left out: the anisotropy is its "
+                      "strength and rotation everywhere", stacklevel=6)
+    part.anisotropy = float(strength)
+    part.anisotropy_direction = math.degrees(math.remainder(float(rotation), 2.0 * math.pi))
+
+
 # --- material maps -----------------------------------------------------------------------
 
 class _MaterialMaps:
@@ -1021,6 +1048,7 @@ class _MaterialMaps:
         _gltf_transmission(doc_material, part, what)
         _gltf_clearcoat(doc_material, part, what)
         _gltf_sheen(doc_material, part, what)
+        _gltf_anisotropy(doc_material, part, what)
         _gltf_reflectance(doc_material, part, what)
         extensions = doc_material.get("extensions") if isinstance(doc_material, dict) else None
         if isinstance(extensions, dict) and "KHR_materials_unlit" in extensions:

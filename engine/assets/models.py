@@ -191,7 +191,8 @@ def _part_components(part, probed: bool) -> list:
                  blend="transparent" if _glass(part) and not refracts else "fade",
                  clearcoat=part.clearcoat, clearcoat_roughness=part.clearcoat_roughness,
                  unlit=part.unlit, reflectance=part.reflectance, sheen_color=part.sheen_color,
-                 sheen_roughness=part.sheen_roughness),
+                 sheen_roughness=part.sheen_roughness, anisotropy=part.anisotropy,
+                 anisotropy_direction=part.anisotropy_direction),
     ]
     if part.emissive_factor > 0.0:
         components.append(Emissive(part.emissive_factor))

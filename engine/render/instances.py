@@ -177,6 +177,7 @@ class BatchKey(NamedTuple):
     dielectric_f0: float = 0.04         # 0.16 x Material.reflectance^2: its draws' uniform
     sheen: tuple[float, float, float, float] | None = None  # Material.sheen_color and roughness (None: none)
     dispersion: float = 0.0             # Refractive.dispersion: its DISPERSION build's uniform (0: none)
+    anisotropy: tuple[float, float] | None = None  # Material.anisotropy and its direction in radians (None: none)
 
 
 def blend_code(batch: InstanceBatch) -> int:
@@ -292,6 +293,8 @@ class InstanceBatch:
         # A sheen (Material.sheen_color, sheen_roughness; None: none): its SHEEN build's uniform.
         self.sheen: tuple[float, float, float, float] | None = None
         self.dispersion = 0.0  # Refractive.dispersion (0: none): its DISPERSION build's uniform
+        # Anisotropy (Material.anisotropy; its direction in radians; None: none): its ANISOTROPY build's uniform.
+        self.anisotropy: tuple[float, float] | None = None
 
     # --- rows ----------------------------------------------------------------------------
     def add(self, entity: int) -> np.void:

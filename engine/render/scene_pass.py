@@ -83,6 +83,7 @@ from engine.render.irradiance import IrradianceTable
 from engine.render.raw_gl import LayeredArrayTarget, LayeredCubeTarget, inspect_bound_target
 from engine.render.scene_options import ROOT_VIEW, SceneOptions
 from engine.render.scene_programs import (
+    NO_ANISOTROPY,
     NO_CHECKER,
     NO_CLEARCOAT,
     NO_PROBE_LOOKUP,
@@ -275,7 +276,8 @@ class ScenePass:
             rest_size, lookup_rest = self._bind_probe(batch.rest_probe, PROBE_REST_UNIT, cubes)
         return (batch.texture is not None, blend_code(batch), probe_size, *lookup, probe2_size, *lookup2, rest_size,
                 *lookup_rest, *(batch.checker or NO_CHECKER), batch.alpha_cutoff or 0.0, batch.occlusion_strength,
-                batch.clearcoat or NO_CLEARCOAT, batch.dielectric_f0, batch.sheen or NO_SHEEN, batch.dispersion)
+                batch.clearcoat or NO_CLEARCOAT, batch.dielectric_f0, batch.sheen or NO_SHEEN, batch.dispersion,
+                batch.anisotropy or NO_ANISOTROPY)
 
     def _bind_probe(self, probe: int, unit: int, cubes) -> tuple[int, tuple]:
         """Bind the cube map of ``probe`` to ``unit``: its face size and lookup uniforms.  The

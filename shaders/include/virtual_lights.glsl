@@ -111,9 +111,13 @@ vec3 virtual_lighting(vec3 position, vec3 normal, vec3 geometric, vec3 to_eye, v
         vec3 arriving = virtual_lights.virtual_color[i].rgb * cookie * falloff
                         * (shadowed ? virtual_shadow(i, position, geometric, l, dist) : 1.0);
         // A point image's sphere (its light's radius, in the cookie row's w; ggx.glsl sphere_highlight)
+#ifdef ANISOTROPY
+        vec3 highlight = anisotropic_specular(normal, l, to_eye, f0) * (nl * energy_compensation);  // (scene.frag's)
+#else
         vec3 highlight = (image.w > 0.5 ? sphere_highlight(normal, to_eye, reflect(-to_eye, normal), image.xyz - position,
                                                            virtual_lights.virtual_cookie_v[i].w, f0, roughness)
                                         : ggx_specular(normal, l, to_eye, f0, roughness) * nl) * energy_compensation;
+#endif
         total += (diffuse * nl + highlight) * arriving;
         highlight_light += highlight * arriving;  // (scene.frag's: the highlights summed apart)
 #ifdef CLEARCOAT
