@@ -18,6 +18,10 @@ deleted entity.  A file that fails keeps the old world running; its error (the
 prints it) and held in ``error`` until a save loads (the overlay shows it, as it shows
 shader errors).  A save the run makes itself (an editor in the window writing its world back)
 calls ``follow`` after writing: the file as written counts as loaded, and nothing is rebuilt.
+
+The model files its ``Model`` entities place are watched the same way (their stat, settled
+over two polls): a model exported again from Blender rebuilds the level, so its new meshes,
+materials and lights show in the running game.
 """
 from __future__ import annotations
 
@@ -30,7 +34,7 @@ from pathlib import Path
 
 from pyglm import glm
 
-from components import ComponentValueError, FlyController, Transform
+from components import ComponentValueError, FlyController, Model, Transform
 from engine.core.errors import SpeculumError
 from engine.core.frame_io import Input
 from engine.core.game import Game
@@ -80,13 +84,16 @@ class LevelReload:
         self.path = Path(path)
         self._loaded_stat = self._last_stat = self._stat()
         self._loaded_bytes = self._read()
+        self._follow_models()
+
+    def _follow_models(self) -> None:
+        """Watch the model files the world's Models place, as they are now."""
+        files = {Path(model.file) for _, model in self.world.query_one(Model) if model.file}
+        self._models = {path: _file_stat(path) for path in sorted(files)}  # as loaded
+        self._models_last = dict(self._models)                              # as last seen
 
     def _stat(self) -> tuple[int, int] | None:
-        try:
-            info = os.stat(self.path)
-        except OSError:
-            return None  # mid-save by rename, or removed: looked at again next poll
-        return info.st_mtime_ns, info.st_size
+        return _file_stat(self.path)
 
     def _read(self) -> bytes | None:
         try:
@@ -108,6 +115,8 @@ class LevelReload:
             return []
         stat, last = self._stat(), self._last_stat
         self._last_stat = stat
+        if stat == self._loaded_stat and self._models_saved():
+            return [self.reload()]  # a model file it places was saved (the level's own is as loaded)
         if stat == self._loaded_stat or stat != last:
             return []  # unchanged, or changed since the last look (maybe mid-write): wait
         self._loaded_stat = stat
@@ -117,6 +126,16 @@ class LevelReload:
         self._loaded_bytes = contents
         return [self.reload()]
 
+    def _models_saved(self) -> bool:
+        """Whether a watched model file changed and has held still since the last poll."""
+        saved = False
+        for path, loaded in self._models.items():
+            stat, last = _file_stat(path), self._models_last[path]
+            self._models_last[path] = stat
+            if stat != loaded and stat == last:
+                saved = True
+        return saved
+
     def reload(self) -> str:
         """Build the level from the file now: the world rebuilt with the camera's pose kept,
         or (a file that fails) the old world kept and the error returned and held in ``error``."""
@@ -124,6 +143,7 @@ class LevelReload:
             self._try_build()
         except (SpeculumError, ComponentValueError, ValueError) as exc:
             self.error = f"level reload failed, previous level kept: {exc}"
+            self._models = dict(self._models_last)  # that save of a model is said once
             return self.error
         world = self.world
         pose = camera_pose(world)
@@ -133,6 +153,7 @@ class LevelReload:
         self.game.build(world)
         if pose is not None:
             place(world, pose)
+        self._follow_models()
         self.error = None
         self.reloads += 1
         if self.on_reload is not None:
@@ -149,6 +170,16 @@ class LevelReload:
             trial.build(scratch)
         finally:
             scratch.close()
+
+
+def _file_stat(path: Path) -> tuple[int, int] | None:
+    """A file's modification time (ns) and size; None while it cannot be read (mid-save by
+    rename, or removed: looked at again next poll)."""
+    try:
+        info = os.stat(path)
+    except OSError:
+        return None
+    return info.st_mtime_ns, info.st_size
 
 
 def camera_pose(world: World) -> CameraPose | None:

@@ -318,3 +318,45 @@ def test_a_save_made_by_the_run_itself_is_not_reloaded_after_follow(ctx, tmp_pat
         assert box_entity(run.engine) == entity and run.engine.world.exists(entity) and reload.reloads == 0
     finally:
         run.close()
+
+
+def test_a_model_file_the_level_places_reloads_the_level_when_saved(ctx, tmp_path):
+    """A level placing a model (``Model``) reloads when the model file is exported again:
+    its new colour shows; a broken export keeps the old world and says so once."""
+    from components import FromModel, Material
+    from engine.assets.mesh import box
+    from tests.test_materials_from_files import write_glb
+
+    def export(color: list[float]) -> None:
+        write_glb(tmp_path / "crate.glb", box((1.0, 1.0, 1.0)),
+                  {"name": "paint", "pbrMetallicRoughness": {"baseColorFactor": color, "metallicFactor": 0.0}}, [])
+        _clock[0] += 10**9
+        os.utime(tmp_path / "crate.glb", ns=(_clock[0], _clock[0]))
+
+    def part_color(engine: Engine) -> list[float]:
+        (entity,) = [e for e, _ in engine.world.query_one(FromModel)]
+        return list(engine.world.get(entity, Material).color)
+
+    export([0.9, 0.1, 0.1, 1.0])
+    path = tmp_path / "level.toml"
+    save(path, level_text() + '\n[[entity]]\nname = "crate"\n[entity.Transform]\nposition = [1.5, 0.5, 0.0]\n'
+                              '[entity.Model]\nfile = "crate.glb"\n')
+    run = Run(ctx, path)
+    try:
+        reload = run.engine.watch_level(interval=0.0)
+        red = run.frame()
+        assert part_color(run.engine) == pytest.approx([0.9, 0.1, 0.1, 1.0], abs=0.01)
+        export([0.1, 0.2, 0.9, 1.0])
+        assert reload.poll() == []                               # changed since the last look: wait
+        assert reload.poll() == [f"level reloaded: {path}"]
+        assert part_color(run.engine) == pytest.approx([0.1, 0.2, 0.9, 1.0], abs=0.01)
+        assert not np.array_equal(run.frame(), red)
+        (tmp_path / "crate.glb").write_bytes(b"glTF broken")
+        _clock[0] += 10**9
+        os.utime(tmp_path / "crate.glb", ns=(_clock[0], _clock[0]))
+        reload.poll()
+        said = reload.poll()
+        assert len(said) == 1 and "level reload failed, previous level kept" in said[0] and "crate.glb" in said[0]
+        assert reload.poll() == [] and part_color(run.engine) == pytest.approx([0.1, 0.2, 0.9, 1.0], abs=0.01)
+    finally:
+        run.close()
