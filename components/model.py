@@ -29,6 +29,8 @@ class Model(TrackedComponent):
     intensities of the lights the file carries (glTF's ``KHR_lights_punctual``: physical
     units to the scene's exposure); ``max_probes`` is how many of its curved reflective or
     glass parts get a cube-map probe of their own (the largest; the others reflect the sky).
+    ``variant`` is the glTF material variant its parts wear (``KHR_materials_variants``: a
+    shoe's colourway, a car's paint; "" the file's default look).
     What the file holds is checked when it is loaded: by ``spawn_model`` and a level file's
     reader at once, by the models stage for a Model added or changed otherwise (naming the
     entity and the file)."""
@@ -37,6 +39,7 @@ class Model(TrackedComponent):
     file: str = ""
     light_scale: float = 1.0
     max_probes: int = MAX_MODEL_PROBES
+    variant: str = ""
 
     def _validate(self, name: str, value: Any) -> Any:
         if name == "file":
@@ -49,6 +52,8 @@ class Model(TrackedComponent):
             return finite(self, name, value, low=0.0)
         if name == "max_probes":
             return integer(self, name, value, low=0, high=MAX_MODEL_PROBES_LIMIT)
+        if name == "variant" and not isinstance(value, str):
+            raise ComponentValueError(f"Model.variant must be a variant's name (a str; \"\": none), got {value!r}")
         return value
 
 

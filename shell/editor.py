@@ -293,6 +293,8 @@ class Editor:
         and nothing changes. ``merge``: part of a drag (one undo step for the whole drag)."""
         self._refuse_model_part(entity)
         target = self.component(entity, component)
+        if type(target).__name__ == "Model" and field == "variant" and target.file and isinstance(value, str):
+            self._check_variant(target.file, value)
         if dataclasses.is_dataclass(target) and field not in {f.name for f in dataclasses.fields(target)}:
             raise EditError(f"{type(target).__name__} has no field {field!r} "
                             f"(fields: {', '.join(n for n, _ in self.fields(target))})")
@@ -395,11 +397,23 @@ class Editor:
                 raise EditError(self.message)
             try:
                 folder = self.level_path.parent if self.level_path is not None else Path.cwd()
-                value = level_model(text.strip(), LevelAssets(folder, [*self.asset_roots, *user_asset_roots()]))
+                value = level_model(text.strip(), LevelAssets(folder, [*self.asset_roots, *user_asset_roots()]),
+                                    self.component(entity, "Model").variant)
             except (ValueError, OSError, SpeculumError) as exc:
                 self.message = f"Model.file: {exc}"
                 raise EditError(self.message) from exc
         self.set_field(entity, "Model", "file", value)
+
+    def _check_variant(self, file: str, variant: str) -> None:
+        """An EditError, in the loader's words, where the model file has no such material
+        variant (``KHR_materials_variants``): the models stage would fail to make its parts."""
+        folder = self.level_path.parent if self.level_path is not None else Path.cwd()
+        try:
+            level_model(file, LevelAssets(folder, [*self.asset_roots, *user_asset_roots(), Path(file).parent]),
+                        variant)
+        except (ValueError, OSError, SpeculumError) as exc:
+            self.message = f"Model.variant: {exc}"
+            raise EditError(self.message) from exc
 
     def turn(self, entity: int, start: glm.quat, world_axis: glm.vec3, angle: float) -> None:
         """Turn ``entity`` by ``angle`` (radians) about ``world_axis`` through its origin from

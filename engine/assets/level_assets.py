@@ -78,7 +78,7 @@ class LevelAssets:
         self.folder = folder
         self.roots = [folder, *roots]
         self.budget = _Budget()
-        self.models: dict[str, LoadedModel] = {}  # the whole model files its Models place, by path
+        self.models: dict[tuple[str, str], LoadedModel] = {}  # the model files its Models place, by (path, variant)
 
 
 def is_number(value: Any) -> bool:
@@ -102,20 +102,27 @@ def _asset_table(spec: Any, what: str, examples: str) -> tuple[dict, Any]:
     return spec, name
 
 
-def level_model(value: Any, where: LevelAssets) -> str:
+def level_model_path(value: Any, where: LevelAssets) -> str:
     """A ``Model.file``: the model file's path (inside the level's folder or an asset root),
-    made absolute, the file loaded whole (its materials' images decoded, its lights read:
-    what its parts will be) and counted in the level's budget; ``where.models`` keeps it for
-    the spawn.  "" is no file (a Model placing nothing yet)."""
+    made absolute.  "" is no file (a Model placing nothing yet)."""
     if value == "":
         return ""
-    path = _asset_path(value, where)
-    info = check_asset_file(path, f"model file {str(path)!r}")
-    key = ("model file", str(path), info.st_mtime_ns, info.st_size, info.st_ino, tuple(map(str, where.roots)))
-    loaded = _cached(key, lambda: load_model_file(path, roots=where.roots))
+    return str(_asset_path(value, where))
+
+
+def level_model(value: Any, where: LevelAssets, variant: str = "") -> str:
+    """A ``Model.file`` (``level_model_path``) with the file loaded whole in its material
+    ``variant`` (its materials' images decoded, its lights read: what its parts will be) and
+    counted in the level's budget; ``where.models`` keeps it for the spawn."""
+    path = level_model_path(value, where)
+    if not path:
+        return ""
+    info = check_asset_file(Path(path), f"model file {path!r}")
+    key = ("model file", path, variant, info.st_mtime_ns, info.st_size, info.st_ino, tuple(map(str, where.roots)))
+    loaded = _cached(key, lambda: load_model_file(path, roots=where.roots, variant=variant))
     where.budget.take(key, model_bytes(loaded.parts))
-    where.models[str(path)] = loaded
-    return str(path)
+    where.models[(path, variant)] = loaded
+    return path
 
 
 def level_mesh(spec: Any, where: LevelAssets) -> Mesh:

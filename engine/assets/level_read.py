@@ -31,7 +31,15 @@ from pyglm import glm
 
 import components as _components
 from components import ComponentValueError, look_rotation, yaw_pitch_rotation
-from engine.assets.level_assets import LevelAssets, level_lut, level_mesh, level_model, level_texture, user_asset_roots
+from engine.assets.level_assets import (
+    LevelAssets,
+    level_lut,
+    level_mesh,
+    level_model,
+    level_model_path,
+    level_texture,
+    user_asset_roots,
+)
 from engine.assets.level_lines import MAX_NESTING, deep_line, line_map, nesting_depth
 from engine.assets.models import remove_parts, respawn_parts
 from engine.assets.texture_data import file_problem
@@ -148,7 +156,7 @@ class Level:
                 model = next((fields for cls, fields in spec.components if cls.__name__ == "Model"), None)
                 if model is not None and model.get("file"):
                     respawn_parts(world, made[spec.name], roots=self._assets.roots,
-                                  loaded=self._assets.models.get(model["file"]))
+                                  loaded=self._assets.models.get((model["file"], model.get("variant", ""))))
         except (ComponentValueError, SpeculumError, ValueError) as exc:
             for entity in made.values():
                 remove_parts(world, entity)
@@ -332,7 +340,7 @@ def _entity(path: Path, assets: LevelAssets, index: int, name: str, table: dict[
         parts.append((cls, decoded))
     _check_mirror(path, index, name, parts, lines)
     _check_water(path, index, name, parts, lines)
-    _check_model(path, index, name, parts, lines)
+    _check_model(path, index, name, parts, lines, assets)
     return _EntitySpec(name, index, parts, references)
 
 
@@ -354,16 +362,34 @@ def _check_water(path: Path, index: int, name: str, parts: list[tuple[type, dict
 
 
 def _check_model(path: Path, index: int, name: str, parts: list[tuple[type, dict[str, Any]]],
-                 lines: dict[tuple, int]) -> None:
-    """A Model with a file needs a Transform (where the model stands, its parts under it);
-    its file was loaded (and checked) as the field was read.  One without (the editor's
-    newly added Model, before its file is chosen) places nothing."""
+                 lines: dict[tuple, int], assets: LevelAssets) -> None:
+    """A Model with a file needs a Transform (where the model stands, its parts under it),
+    and its file is loaded (and so checked) now, in its variant, for the spawn.  One without
+    (the editor's newly added Model, before its file is chosen) places nothing."""
     fields = {cls.__name__: decoded for cls, decoded in parts}
-    if not fields.get("Model", {}).get("file"):
+    model = fields.get("Model", {})
+    if not model.get("file"):
         return
     if "Transform" not in fields:
         raise LevelError(path, "a Model needs a Transform on the same entity (where the model stands)",
                          lines.get((index, "Model")), name, "Model")
+    variant = model.get("variant", "")
+    problem = _model_problem(model["file"], variant, assets)
+    if problem is not None:
+        field = "variant" if variant and "has no material variant" in problem else "file"
+        raise LevelError(path, problem, lines.get((index, "Model", field), lines.get((index, "Model"))), name,
+                         f"Model.{field}")
+
+
+def _model_problem(file: str, variant: str, assets: LevelAssets) -> str | None:
+    """Why the model file cannot be loaded in ``variant`` (None: it is, and kept for the spawn)."""
+    try:
+        level_model(file, assets, variant)
+    except (ValueError, AssetError) as exc:
+        return str(exc)
+    except MemoryError:
+        return "does not fit in memory"
+    return None
 
 
 def _check_mirror(path: Path, index: int, name: str, parts: list[tuple[type, dict[str, Any]]],
@@ -464,7 +490,7 @@ def _decode(cls_name: str, field: str, value: Any, where: LevelAssets) -> Any:
     if cls_name == "ColorGrading" and field == "lut":
         return level_lut(value, where)
     if (cls_name, field) in FILE_FIELDS:
-        return level_model(value, where)
+        return level_model_path(value, where)  # (loaded with its variant: _check_model)
     if cls_name == "Transform" and field == "rotation":
         return _rotation(value)
     if cls_name == "Skybox" and field == "faces":

@@ -25,6 +25,7 @@ from pyglm import glm
 
 from components.limits import MAX_DISPERSION, MAX_IOR
 from components.water import f0_from_ior
+from engine.assets.gltf_variants import variant_names
 from engine.assets.model_cameras import ModelCamera, read_gltf_cameras
 from engine.assets.model_files import (
     MAX_JSON_NESTING,  # noqa: F401 - the loader's limits are read from here too
@@ -470,6 +471,7 @@ class LoadedModel:
     parts: list[ModelPart]
     lights: list[ModelLight]
     cameras: list[ModelCamera] = field(default_factory=list)
+    variants: list[str] = field(default_factory=list)  # its material variants' names (KHR_materials_variants)
 
 
 def load_model(path: str | Path, roots: Sequence[str | Path] | None = None,
@@ -479,7 +481,7 @@ def load_model(path: str | Path, roots: Sequence[str | Path] | None = None,
 
 
 def load_model_file(path: str | Path, roots: Sequence[str | Path] | None = None,
-                    materials: bool = True) -> LoadedModel:
+                    materials: bool = True, variant: str | None = None) -> LoadedModel:
     """Load every mesh of a file with trimesh, and the lights it carries; errors name the
     file and the reason.
 
@@ -496,7 +498,9 @@ def load_model_file(path: str | Path, roots: Sequence[str | Path] | None = None,
     MeshRef): the images the materials name are checked by name but neither read nor
     decoded, and the parts keep the default material. Parts with the same geometry (glTF
     nodes sharing a mesh, or identical arrays) share one Mesh, so it is uploaded once and
-    drawn instanced."""
+    drawn instanced.  ``variant``: a glTF's material variant (``KHR_materials_variants``,
+    engine/assets/gltf_variants.py) its parts wear; None or "": its default look; a variant
+    it does not have is an AssetError listing those it has."""
     import trimesh
 
     if isinstance(path, bytes) or not isinstance(path, (str, os.PathLike)):
@@ -518,7 +522,7 @@ def load_model_file(path: str | Path, roots: Sequence[str | Path] | None = None,
         with _quiet_trimesh(), warnings.catch_warnings():
             warnings.simplefilter("error", Image.DecompressionBombWarning)
             data = read_asset_file(path, what, MAX_MESH_FILE_BYTES)
-            return _load_model(path, data, what, roots, materials, trimesh)
+            return _load_model(path, data, what, roots, materials, trimesh, variant)
     except MemoryError:
         raise AssetError(f"{what}: does not fit in memory") from None
     except (Image.DecompressionBombError, Image.DecompressionBombWarning):
@@ -526,12 +530,13 @@ def load_model_file(path: str | Path, roots: Sequence[str | Path] | None = None,
                          f"({MAX_TEXTURE_SIDE}x{MAX_TEXTURE_SIDE})") from None
 
 
-def _load_model(path: Path, data: bytes, what: str, roots, materials: bool, trimesh) -> LoadedModel:
+def _load_model(path: Path, data: bytes, what: str, roots, materials: bool, trimesh,
+                variant: str | None = None) -> LoadedModel:
     suffix = path.suffix.lower()
     gltf = obj = None
     try:
         if suffix in (".gltf", ".glb"):
-            gltf = prepare_gltf(path, data, roots, materials)
+            gltf = prepare_gltf(path, data, roots, materials, variant)
             body, resolver = gltf.data, gltf.resolver
         elif suffix == ".obj":
             obj = prepare_obj(path, data, roots, materials)
@@ -546,6 +551,7 @@ def _load_model(path: Path, data: bytes, what: str, roots, materials: bool, trim
     try:  # before trimesh parses the file: a node naming a camera it lacks would be its IndexError
         lights = read_gltf_lights(gltf.doc) if gltf is not None else []
         cameras = read_gltf_cameras(gltf.doc) if gltf is not None else []
+        variants = variant_names(gltf.doc) if gltf is not None else []
     except AssetError as exc:
         raise AssetError(f"{what}: {exc}") from exc
     try:
@@ -594,7 +600,9 @@ def _load_model(path: Path, data: bytes, what: str, roots, materials: bool, trim
         raise AssetError(f"{what}: holds malformed mesh data ({type(exc).__name__}: {exc})") from exc
     if not parts:
         raise AssetError(f"{what}: contains no triangle meshes")
-    return LoadedModel(parts, lights, cameras)
+    if variant and gltf is None:
+        raise AssetError(f"{what}: has no material variant {variant!r} (only a glTF file has variants)")
+    return LoadedModel(parts, lights, cameras, variants)
 
 
 def _digest(mesh: Mesh) -> bytes:

@@ -33,6 +33,7 @@ from urllib.parse import unquote
 
 from engine.assets.gltf_accessors import float_normalized_accessors
 from engine.assets.gltf_instancing import expand_gpu_instancing
+from engine.assets.gltf_variants import apply_variant
 from engine.assets.texture_data import contained_path, file_problem, read_asset_file
 from engine.core.errors import AssetError
 
@@ -433,7 +434,7 @@ GLTF_READ_EXTENSIONS = frozenset({
     "EXT_mesh_gpu_instancing", "EXT_texture_webp", "KHR_lights_punctual", "KHR_materials_anisotropy",
     "KHR_materials_clearcoat", "KHR_materials_dispersion",
     "KHR_materials_emissive_strength", "KHR_materials_ior", "KHR_materials_sheen", "KHR_materials_specular",
-    "KHR_materials_transmission",
+    "KHR_materials_transmission", "KHR_materials_variants",
     "KHR_materials_unlit", "KHR_materials_volume", "KHR_mesh_quantization", "KHR_texture_transform"})
 
 
@@ -500,11 +501,14 @@ def _buffer_bytes(doc: dict, number: int, resolver: CheckedFiles, chunks: memory
     return None
 
 
-def prepare_gltf(path: Path, data: bytes, roots: Sequence[Path], textures: bool) -> GltfFiles:
+def prepare_gltf(path: Path, data: bytes, roots: Sequence[Path], textures: bool,
+                 variant: str | None = None) -> GltfFiles:
     """Check a glTF's (or GLB's) JSON and resolve the buffers and images it names; the
     images its used materials draw are read (with ``textures``), the others blanked, so
     trimesh opens nothing; a missing image, a texture or image index out of range, or a
-    ``data:`` URI that is not base64 is an error naming the material and the slot."""
+    ``data:`` URI that is not base64 is an error naming the material and the slot.
+    ``variant``: the material variant its primitives wear (``gltf_variants``; None: the
+    default look)."""
     what = f"mesh file {str(path)!r}"
     resolver = CheckedFiles(path.name)
     glb = path.suffix.lower() == ".glb"
@@ -539,6 +543,10 @@ def prepare_gltf(path: Path, data: bytes, roots: Sequence[Path], textures: bool)
 
     float_normalized_accessors(doc, buffer_bytes, what)
     expand_gpu_instancing(doc, buffer_bytes, what)
+    try:
+        apply_variant(doc, variant)
+    except AssetError as exc:
+        raise AssetError(f"{what}: {exc}") from None
     materials = doc.get("materials") if isinstance(doc.get("materials"), list) else []
     textures_list = doc.get("textures") if isinstance(doc.get("textures"), list) else []
     for texture in textures_list:

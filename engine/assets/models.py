@@ -57,14 +57,14 @@ class SpawnedModels(dict):
 
 def model_key(model: Model) -> tuple:
     """The values a model's parts are made from: a change to any of them makes them again."""
-    return (os.path.abspath(model.file), model.light_scale, model.max_probes)
+    return (os.path.abspath(model.file), model.light_scale, model.max_probes, model.variant)
 
 
 def spawn_model(world: World, path: str | Path, position: glm.vec3 | Sequence[float] = (0.0, 0.0, 0.0),
                 rotation: glm.quat | Sequence[float] | None = None,
                 scale: glm.vec3 | Sequence[float] = (1.0, 1.0, 1.0),
                 roots: Sequence[str | Path] | None = None, max_probes: int = MAX_MODEL_PROBES,
-                light_scale: float = 1.0) -> int:
+                light_scale: float = 1.0, variant: str = "") -> int:
     """Load ``path`` and spawn it; returns the root entity.
 
     The file's material decides the components: its colour, texture, metallic and
@@ -109,7 +109,10 @@ def spawn_model(world: World, path: str | Path, position: glm.vec3 | Sequence[fl
     entities under the root, placed by their nodes, not active: a game shows one by making
     it active (``camera.active = True``; the active camera with the lowest id renders).
 
-    The root holds the file's ``Model`` (its path, ``light_scale`` and ``max_probes``) and
+    ``variant``: the glTF material variant the parts wear (``KHR_materials_variants``,
+    engine/assets/gltf_variants.py; "": the file's default look).
+
+    The root holds the file's ``Model`` (its path, ``light_scale``, ``max_probes`` and ``variant``) and
     each part a ``FromModel`` naming the root: a level file saves the root alone and makes
     the parts again when it is loaded; deleting the root deletes them (the models stage).
     """
@@ -120,9 +123,9 @@ def spawn_model(world: World, path: str | Path, position: glm.vec3 | Sequence[fl
         raise AssetError(f"spawn_model: light_scale must be a finite number >= 0, got {light_scale!r}")
     root_transform = Transform(position=position, rotation=rotation if rotation is not None else glm.quat(),
                                scale=scale)
-    loaded = load_model_file(path, roots=roots)  # (a bad path is refused here, naming it)
+    loaded = load_model_file(path, roots=roots, variant=variant)  # (a bad path is refused here, naming it)
     try:
-        model = Model(file=os.fspath(path), light_scale=light_scale, max_probes=max_probes)
+        model = Model(file=os.fspath(path), light_scale=light_scale, max_probes=max_probes, variant=variant)
     except ComponentValueError as exc:
         raise AssetError(f"spawn_model: {exc}") from None
     part_components = model_components(loaded, path, root_transform, max_probes, light_scale)
@@ -257,7 +260,7 @@ def respawn_parts(world: World, root: int, roots: Sequence[str | Path] | None = 
         raise AssetError(f"entity {root}: a Model needs a Transform on the same entity (where the model stands)")
     try:
         if loaded is None:
-            loaded = load_model_file(model.file, roots=roots)
+            loaded = load_model_file(model.file, roots=roots, variant=model.variant)
         part_components = model_components(loaded, model.file, transform, model.max_probes, model.light_scale)
     except AssetError as exc:
         raise AssetError(f"entity {root}'s Model: {exc}") from exc
