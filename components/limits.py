@@ -42,6 +42,9 @@ MAX_IOR = 4.0
 # Refractive.dispersion (glTF's KHR_materials_dispersion, 20 / the Abbe number): 10 is an
 # Abbe number of 2, past any glass or gem (diamond's is 55, dense flint's about 20).
 MAX_DISPERSION = 10.0
+# Material.iridescence_thickness, nanometres: past a few thousand a film's fringes are finer
+# than the eye's colour bands and it shows white (the thin-film model's two orders say nothing more).
+MAX_FILM_THICKNESS = 5000.0
 
 # Reflection layers (show/hide lists): an entity belongs to some of REFLECTION_LAYERS layers
 # and a mirror, portal, probe or camera shows some of them; a view shows an entity when they

@@ -7,7 +7,7 @@ from typing import Any
 import numpy as np
 from pyglm import glm
 
-from components.limits import MAX_DISPERSION, MAX_IOR
+from components.limits import MAX_DISPERSION, MAX_FILM_THICKNESS, MAX_IOR
 from components.tracking import (
     HALF_MAX,
     ComponentValueError,
@@ -166,6 +166,13 @@ class Material(TrackedComponent):
     from the texture's u axis (the UVs' +u on the surface) counter-clockwise towards +v: a
     mesh without varying UVs takes some direction in its surface.
 
+    ``iridescence`` (0 to 1, default 0: none) lays a thin film over the material whose
+    colours shift with the angle it is seen at, as a soap bubble, an oil slick, a beetle's
+    shell or heat-tinted titanium (glTF's ``KHR_materials_iridescence``, Belcour and Barla's
+    thin-film model, as Filament's and three.js's): ``iridescence_ior`` is the film's index
+    (default 1.3), ``iridescence_thickness`` its thickness in nanometres (default 400; the
+    colours cycle every few hundred nm, none below about 50).
+
     ``reflectance`` (0 to 1, default 0.5) is how much a non-metal reflects head on, as
     Filament's and Godot's ``specular``/``reflectance`` knob: f0 = 0.16 x reflectance^2, so
     0.5 is the 4% of glass, plastic and most things (index 1.5), 0.35 water's 2%, 1 the 16% of
@@ -204,6 +211,9 @@ class Material(TrackedComponent):
     sheen_roughness: float = 0.0
     anisotropy: float = 0.0
     anisotropy_direction: float = 0.0
+    iridescence: float = 0.0
+    iridescence_ior: float = 1.3
+    iridescence_thickness: float = 400.0
 
     def _validate(self, name: str, value: Any) -> Any:
         if name == "blend":
@@ -224,8 +234,12 @@ class Material(TrackedComponent):
         if name == "normal_scale":
             return finite(self, name, value, low=0.0, high=MAX_NORMAL_SCALE)
         if name in ("occlusion_strength", "environment_reflection", "clearcoat", "clearcoat_roughness", "reflectance",
-                    "sheen_roughness", "anisotropy"):
+                    "sheen_roughness", "anisotropy", "iridescence"):
             return finite(self, name, value, low=0.0, high=1.0)
+        if name == "iridescence_ior":
+            return finite(self, name, value, low=1.0, high=MAX_IOR)
+        if name == "iridescence_thickness":
+            return finite(self, name, value, low=0.0, high=MAX_FILM_THICKNESS)
         if name == "anisotropy_direction":
             return finite(self, name, value, low=-360.0, high=360.0)
         if name == "sheen_color":

@@ -349,6 +349,9 @@ float sheen_lobe(vec3 n, vec3 l, vec3 v) {
 #ifdef ANISOTROPY
 #include "anisotropic_ggx.glsl"
 #endif
+#ifdef IRIDESCENCE
+#include "thin_film.glsl"
+#endif
 
 // Light through mirrors and portals (its loop only in the VIRTUAL_LIGHTS builds).
 #include "virtual_lights.glsl"
@@ -700,6 +703,9 @@ void main() {
     s.direct_occlusion = screen_shares.g;
 #endif
     s.f0 = mix(vec3(dielectric_f0), s.albedo, s.metallic);
+#ifdef IRIDESCENCE
+    s.f0 = iridescent_f0(s.f0, max(dot(s.normal, s.to_eye), 1e-4));
+#endif
     s.reflect_dir = reflect(-s.to_eye, s.normal);
 #ifdef ANISOTROPY
     s.reflect_dir = anisotropic_reflect_dir(s.normal, s.to_eye, s.roughness);

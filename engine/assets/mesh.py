@@ -23,7 +23,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 from pyglm import glm
 
-from components.limits import MAX_DISPERSION, MAX_IOR
+from components.limits import MAX_DISPERSION, MAX_FILM_THICKNESS, MAX_IOR
 from components.water import f0_from_ior
 from engine.assets.gltf_variants import variant_names
 from engine.assets.model_cameras import ModelCamera, read_gltf_cameras
@@ -451,6 +451,9 @@ class ModelPart:
     sheen_roughness: float = 0.0      # its roughness factor (Material.sheen_roughness)
     anisotropy: float = 0.0           # KHR_materials_anisotropy's strength (Material.anisotropy)
     anisotropy_direction: float = 0.0  # its rotation, in degrees (Material.anisotropy_direction)
+    iridescence: float = 0.0          # KHR_materials_iridescence's factor (Material.iridescence)
+    iridescence_ior: float = 1.3      # its film's index (Material.iridescence_ior)
+    iridescence_thickness: float = 400.0  # its film's thickness in nm (Material.iridescence_thickness)
     name: str = ""  # "file:part", as a level file's part = "..." names it (parts may share one mesh)
 
     def __post_init__(self) -> None:
@@ -919,6 +922,33 @@ def _gltf_anisotropy(doc_material: dict, part: ModelPart, what: str) -> None:
     part.anisotropy_direction = math.degrees(math.remainder(float(rotation), 2.0 * math.pi))
 
 
+def _gltf_iridescence(doc_material: dict, part: ModelPart, what: str) -> None:
+    """A glTF material's thin film (``KHR_materials_iridescence``): its factor, index and
+    thickness (the maximum: without its thickness texture glTF's film is that thick
+    everywhere); a value out of range is an error naming the material; the textures are left
+    out with a warning."""
+    extensions = doc_material.get("extensions") if isinstance(doc_material, dict) else None
+    info = extensions.get("KHR_materials_iridescence") if isinstance(extensions, dict) else None
+    if info is None:
+        return
+    if not isinstance(info, dict):
+        raise AssetError(f"{what}: KHR_materials_iridescence must be an object, got {info!r}")
+    checks = (("iridescenceFactor", 0.0, 0.0, 1.0), ("iridescenceIor", 1.3, 1.0, MAX_IOR),
+              ("iridescenceThicknessMaximum", 400.0, 0.0, MAX_FILM_THICKNESS))
+    values = []
+    for key, default, low, high in checks:
+        value = info.get(key, default)
+        if isinstance(value, bool) or not isinstance(value, numbers.Real) or not low <= float(value) <= high:
+            raise AssetError(f"{what}: KHR_materials_iridescence.{key} must be a number in [{low:g}, {high:g}], "
+                             f"got {value!r}")
+        values.append(float(value))
+    left = [slot for slot in ("iridescenceTexture", "iridescenceThicknessTexture") if slot in info]
+    if left and values[0] > 0.0:
+        warnings.warn(f"{what}: KHR_materials_iridescence's {', '.join(left)} left out: the film is its factor's, "
+                      "its index's and its maximum thickness's everywhere", stacklevel=6)
+    part.iridescence, part.iridescence_ior, part.iridescence_thickness = values
+
+
 # --- material maps -----------------------------------------------------------------------
 
 class _MaterialMaps:
@@ -1057,6 +1087,7 @@ class _MaterialMaps:
         _gltf_clearcoat(doc_material, part, what)
         _gltf_sheen(doc_material, part, what)
         _gltf_anisotropy(doc_material, part, what)
+        _gltf_iridescence(doc_material, part, what)
         _gltf_reflectance(doc_material, part, what)
         extensions = doc_material.get("extensions") if isinstance(doc_material, dict) else None
         if isinstance(extensions, dict) and "KHR_materials_unlit" in extensions:

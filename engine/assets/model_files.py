@@ -427,12 +427,13 @@ def _json(path: Path, data: bytes, quiet: bool = False) -> dict | None:
 
 
 # glTF extensions the engine reads (a texture transform: offset, rotation and scale, shared by a
-# material's maps; lights: engine/assets/model_lights.py; glass: transmission, ior, volume, dispersion;
-# a clear coat; a sheen; anisotropy; unlit; packed vertex data: engine/assets/gltf_accessors.py; instancing:
-# engine/assets/gltf_instancing.py; WebP images)
+# material's maps; lights: engine/assets/model_lights.py; glass: transmission, ior, volume,
+# dispersion; a clear coat; a sheen; anisotropy; a thin film; unlit; material variants:
+# engine/assets/gltf_variants.py; packed vertex data: engine/assets/gltf_accessors.py;
+# instancing: engine/assets/gltf_instancing.py; WebP images)
 GLTF_READ_EXTENSIONS = frozenset({
     "EXT_mesh_gpu_instancing", "EXT_texture_webp", "KHR_lights_punctual", "KHR_materials_anisotropy",
-    "KHR_materials_clearcoat", "KHR_materials_dispersion",
+    "KHR_materials_clearcoat", "KHR_materials_dispersion", "KHR_materials_iridescence",
     "KHR_materials_emissive_strength", "KHR_materials_ior", "KHR_materials_sheen", "KHR_materials_specular",
     "KHR_materials_transmission", "KHR_materials_variants",
     "KHR_materials_unlit", "KHR_materials_volume", "KHR_mesh_quantization", "KHR_texture_transform"})

@@ -195,7 +195,8 @@ def _part_components(part, probed: bool) -> list:
                  clearcoat=part.clearcoat, clearcoat_roughness=part.clearcoat_roughness,
                  unlit=part.unlit, reflectance=part.reflectance, sheen_color=part.sheen_color,
                  sheen_roughness=part.sheen_roughness, anisotropy=part.anisotropy,
-                 anisotropy_direction=part.anisotropy_direction),
+                 anisotropy_direction=part.anisotropy_direction, iridescence=part.iridescence,
+                 iridescence_ior=part.iridescence_ior, iridescence_thickness=part.iridescence_thickness),
     ]
     if part.emissive_factor > 0.0:
         components.append(Emissive(part.emissive_factor))

@@ -178,6 +178,7 @@ class BatchKey(NamedTuple):
     sheen: tuple[float, float, float, float] | None = None  # Material.sheen_color and roughness (None: none)
     dispersion: float = 0.0             # Refractive.dispersion: its DISPERSION build's uniform (0: none)
     anisotropy: tuple[float, float] | None = None  # Material.anisotropy and its direction in radians (None: none)
+    iridescence: tuple[float, float, float] | None = None  # Material.iridescence, its film's index and nm
 
 
 def blend_code(batch: InstanceBatch) -> int:
@@ -295,6 +296,8 @@ class InstanceBatch:
         self.dispersion = 0.0  # Refractive.dispersion (0: none): its DISPERSION build's uniform
         # Anisotropy (Material.anisotropy; its direction in radians; None: none): its ANISOTROPY build's uniform.
         self.anisotropy: tuple[float, float] | None = None
+        # A thin film (Material.iridescence, its index, thickness; None: none): IRIDESCENCE's uniform.
+        self.iridescence: tuple[float, float, float] | None = None
 
     # --- rows ----------------------------------------------------------------------------
     def add(self, entity: int) -> np.void:

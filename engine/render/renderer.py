@@ -140,7 +140,8 @@ class Renderer(Gpu):
                   clearcoat: tuple[float, float] | None = None, unlit: bool = False,
                   dielectric_f0: float = 0.04,
                   sheen: tuple[float, float, float, float] | None = None,
-                  dispersion: float = 0.0, anisotropy: tuple[float, float] | None = None) -> InstanceBatch:
+                  dispersion: float = 0.0, anisotropy: tuple[float, float] | None = None,
+                  iridescence: tuple[float, float, float] | None = None) -> InstanceBatch:
         """The batch of (mesh, albedo texture, normal map, emissive map, metallic-roughness
         map, the probe its instances sample (0: none), a cutout's cutoff, an occlusion map and
         its strength, double-sidedness).  A transparent entity gets a batch of its own
@@ -162,6 +163,7 @@ class Renderer(Gpu):
         # sheen's (red, green, blue, roughness), its SHEEN build's uniform (None: none).
         # ``dispersion``: a refraction's Refractive.dispersion, its DISPERSION build's (0: none).
         # ``anisotropy``: (Material.anisotropy, its direction in radians), ANISOTROPY's (None: none).
+        # ``iridescence``: (Material.iridescence, the film's index, its nm), IRIDESCENCE's (None: none).
         key = BatchKey(mesh.id, id(texture) if texture is not None else 0,
                        (probe, second_probe, probe_blend, rest_probe), transparent_entity,
                        id(normal_map) if normal_map is not None else 0,
@@ -170,7 +172,7 @@ class Renderer(Gpu):
                        alpha_cutoff, id(occlusion_map) if occlusion_map is not None else 0,
                        occlusion_strength if occlusion_map is not None else 1.0, double_sided,
                        bool(keeps_specular and transparent_entity), clearcoat, unlit, dielectric_f0, sheen,
-                       dispersion, anisotropy)
+                       dispersion, anisotropy, iridescence)
         batch = self.batches.get(key)
         if batch is None:
             for name, image in (("Material.texture", texture), ("Material.normal_map", normal_map),
@@ -218,6 +220,7 @@ class Renderer(Gpu):
             batch.sheen = sheen
             batch.dispersion = dispersion
             batch.anisotropy = anisotropy
+            batch.iridescence = iridescence
             if sheen is not None:  # the sheen's albedo table, made once a sheen is drawn
                 self.irradiance.write_sheen_albedo()
             self._order_stale = True

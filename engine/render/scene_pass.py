@@ -86,6 +86,7 @@ from engine.render.scene_programs import (
     NO_ANISOTROPY,
     NO_CHECKER,
     NO_CLEARCOAT,
+    NO_IRIDESCENCE,
     NO_PROBE_LOOKUP,
     NO_SHEEN,
     PER_PASS_UNIFORMS,
@@ -277,7 +278,7 @@ class ScenePass:
         return (batch.texture is not None, blend_code(batch), probe_size, *lookup, probe2_size, *lookup2, rest_size,
                 *lookup_rest, *(batch.checker or NO_CHECKER), batch.alpha_cutoff or 0.0, batch.occlusion_strength,
                 batch.clearcoat or NO_CLEARCOAT, batch.dielectric_f0, batch.sheen or NO_SHEEN, batch.dispersion,
-                batch.anisotropy or NO_ANISOTROPY)
+                batch.anisotropy or NO_ANISOTROPY, batch.iridescence or NO_IRIDESCENCE)
 
     def _bind_probe(self, probe: int, unit: int, cubes) -> tuple[int, tuple]:
         """Bind the cube map of ``probe`` to ``unit``: its face size and lookup uniforms.  The

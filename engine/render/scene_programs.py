@@ -63,7 +63,7 @@ PER_DRAW_UNIFORMS = ("sky_face_size", "has_albedo_map", "transparent",
                      "probe_rest_face_size", "probe_rest_position", "probe_rest_box_min", "probe_rest_box_max",
                      "checker_cells", "checker_even", "checker_odd", "alpha_cutoff",
                      "occlusion_strength", "clearcoat", "dielectric_f0", "sheen", "dispersion",
-                     "anisotropy")
+                     "anisotropy", "iridescence")
 PER_PASS_UNIFORMS = 1  # the first changes with the pass; the rest with the batch (a view's node
 # index is its Camera block's: nothing is written per view)
 NO_PROBE_LOOKUP = ((0.0, 0.0, 0.0, 0.0),) * 3  # a probe's lookup uniforms where the sky stands in for it
@@ -71,6 +71,7 @@ NO_CHECKER = (0.0, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
 NO_CLEARCOAT = (0.0, 0.0)  # the coat uniform of a batch without one (its builds do not read it)
 NO_SHEEN = (0.0, 0.0, 0.0, 0.0)  # the sheen uniform of a batch without one (likewise)
 NO_ANISOTROPY = (0.0, 0.0)  # the anisotropy uniform of a batch without one (likewise)
+NO_IRIDESCENCE = (0.0, 1.0, 0.0)  # the thin film's uniform of a batch without one (likewise)
 # a batch's build with none of _material_build's
 NO_MATERIAL_MAPS = (False, False, False, "", False, False, False, False)
 
@@ -165,7 +166,7 @@ class ScenePrograms:
         if screen == "depth_normals":  # nothing shaded: only a cutout's discard picks the build
             variants, normal_mapped, checker, probe_blend, ambient_probes, probe_rest = None, False, False, False, \
                 False, False
-            material = (False, False, material[2], "", False, False, False, False, False, False, False)
+            material = (False, False, material[2], "", False, False, False, False, False, False, False, False)
             virtual, unlit, masked, shadowing, fogging, cookies = False, False, False, (), (), ()
         elif unlit:  # shades nothing: no occlusion read (it still writes "nothing reflected")
             screen = "reflected" if "reflected" in screen else ""
@@ -203,6 +204,8 @@ class ScenePrograms:
                 defines["DISPERSION"] = "1"
             if material[10]:  # highlights stretched along a direction (Material.anisotropy)
                 defines["ANISOTROPY"] = "1"
+            if material[11]:  # a thin film's colours over it (Material.iridescence)
+                defines["IRIDESCENCE"] = "1"
             if probe_blend:  # two probes and the sky by the instances' weights (shaders/include/probe.glsl)
                 defines["PROBE_BLEND"] = "1"
                 if probe_rest:  # a probe, not the sky, takes what the weights leave
@@ -343,7 +346,8 @@ class ScenePrograms:
             own = (batch.texture is not None, blend_code(batch), 0, *NO_PROBE_LOOKUP, 0, *NO_PROBE_LOOKUP,
                    0, *NO_PROBE_LOOKUP, *(batch.checker or NO_CHECKER), batch.alpha_cutoff or 0.0,
                    batch.occlusion_strength, batch.clearcoat or NO_CLEARCOAT, batch.dielectric_f0,
-                   batch.sheen or NO_SHEEN, batch.dispersion, batch.anisotropy or NO_ANISOTROPY)
+                   batch.sheen or NO_SHEEN, batch.dispersion, batch.anisotropy or NO_ANISOTROPY,
+                   batch.iridescence or NO_IRIDESCENCE)
         return (stamp, variants, glo, batch.vao(program), self.uniforms[glo], values, textures, own,
                 batch.mesh.index_count)
 
@@ -364,7 +368,7 @@ def geometry_invocations(view_count: int) -> int:
 BATCHED_INVOCATIONS = tuple(sorted({geometry_invocations(n) for n in range(1, MAX_BATCHED_VIEWS + 1)}))
 
 
-def _material_build(batch: InstanceBatch) -> tuple[bool, bool, bool, str, bool, bool, bool, bool, bool, bool, bool]:
+def _material_build(batch: InstanceBatch) -> tuple:
     """What of a batch's material picks its build: whether it samples an emissive and a
     metallic-roughness map, whether it is a cutout, where its occlusion is read ("map": a
     map of its own, "packed": the metallic-roughness map's red, "": none), whether its
@@ -372,9 +376,11 @@ def _material_build(batch: InstanceBatch) -> tuple[bool, bool, bool, str, bool, 
     reads the probe, ``ENVIRONMENT_PROBE``: only such batches pay for the lookup), and
     whether it is clear-coated (``CLEARCOAT``), whether it is unlit (``UNLIT_MATERIAL``) and
     whether it has a sheen (``SHEEN``) and whether its refraction splits the colours
-    (``DISPERSION``) and whether its highlights are anisotropic (``ANISOTROPY``)."""
+    (``DISPERSION``), whether its highlights are anisotropic (``ANISOTROPY``) and whether a
+    thin film colours its reflections (``IRIDESCENCE``)."""
     occlusion = "packed" if batch.occlusion_packed else "map" if batch.occlusion_map is not None else ""
     return (batch.emissive_map is not None, batch.metallic_roughness_map is not None, batch.alpha_cutoff is not None,
             occlusion, batch.mesh.colors is not None, batch.probe != 0, batch.clearcoat is not None, batch.unlit,
-            batch.sheen is not None, batch.dispersion > 0.0, batch.anisotropy is not None)
+            batch.sheen is not None, batch.dispersion > 0.0, batch.anisotropy is not None,
+            batch.iridescence is not None)
 
