@@ -346,12 +346,9 @@ float sheen_lobe(vec3 n, vec3 l, vec3 v) {
 }
 #endif
 
-#ifdef ANISOTROPY
+// Anisotropic highlights and a thin film (their code only in the ANISOTROPY and IRIDESCENCE builds).
 #include "anisotropic_ggx.glsl"
-#endif
-#ifdef IRIDESCENCE
 #include "thin_film.glsl"
-#endif
 
 // Light through mirrors and portals (its loop only in the VIRTUAL_LIGHTS builds).
 #include "virtual_lights.glsl"

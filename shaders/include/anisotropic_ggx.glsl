@@ -6,6 +6,7 @@
 // visibility the separable Smith term ggx.glsl's is, with each direction's alpha projected
 // onto it (so at anisotropy 0 both are ggx.glsl's exactly).  main sets the frame: t and b
 // unit and in the surface, and the two alphas.  Needs ggx.glsl (schlick_fresnel, PI).
+#ifdef ANISOTROPY
 uniform vec2 anisotropy;            // x: its batch's Material.anisotropy, y: its direction (radians from u)
 vec3 aniso_t = vec3(1.0, 0.0, 0.0);  // the direction of stretch, unit, in the surface
 vec3 aniso_b = vec3(0.0, 0.0, 1.0);  // n x t
@@ -59,3 +60,4 @@ vec3 anisotropic_reflect_dir(vec3 n, vec3 v, float roughness) {
     bend *= bend;
     return reflect(-v, normalize(mix(seen, n, bend * bend)));
 }
+#endif  // ANISOTROPY

@@ -9,6 +9,7 @@
 // orders, then XYZ to linear Rec.709.  The film's reflectance at the eye's angle is turned
 // back into the F0 Schlick's form gives it there, so the lights' highlights and the split sum
 // read it as any F0 (the glTF sample viewer's way).  Needs PI.
+#ifdef IRIDESCENCE
 uniform vec3 iridescence;  // x: its batch's Material.iridescence, y: the film's index, z: its thickness (nm)
 
 float film_schlick(float f0, float c) {
@@ -73,3 +74,4 @@ vec3 iridescent_f0(vec3 f0, float nv) {
     vec3 film_f0 = clamp((film_reflectance(nv, f0) - grazing) / max(1.0 - grazing, 1e-4), 0.0, 1.0);
     return mix(f0, film_f0, iridescence.x * smoothstep(0.0, 0.03, iridescence.z));
 }
+#endif  // IRIDESCENCE
