@@ -845,56 +845,63 @@ def _gltf_reflectance(doc_material: dict, part: ModelPart, what: str) -> None:
     part.reflectance = min(math.sqrt(f0 / 0.16), 1.0)
 
 
+def _gltf_extension(doc_material: dict, name: str, what: str) -> dict | None:
+    """A glTF material's extension object ``name`` (None: it has none); not an object is an
+    error naming the material."""
+    extensions = doc_material.get("extensions") if isinstance(doc_material, dict) else None
+    info = extensions.get(name) if isinstance(extensions, dict) else None
+    if info is not None and not isinstance(info, dict):
+        raise AssetError(f"{what}: {name} must be an object, got {info!r}")
+    return info
+
+
+def _gltf_number(info: dict, name: str, key: str, default: float, low: float, high: float, what: str) -> float:
+    """An extension's number ``key`` (``default`` where left out) in [low, high], or an error
+    naming the material, the extension and the key."""
+    value = info.get(key, default)
+    if isinstance(value, bool) or not isinstance(value, numbers.Real) or not low <= float(value) <= high:
+        raise AssetError(f"{what}: {name}.{key} must be a number in [{low:g}, {high:g}], got {value!r}")
+    return float(value)
+
+
+def _gltf_textures_left_out(info: dict, name: str, slots: tuple[str, ...], used: bool, what: str, why: str) -> None:
+    """Warn that an extension's textures (``slots`` it has) are left out, where it is ``used``."""
+    left = [slot for slot in slots if slot in info]
+    if left and used:
+        warnings.warn(f"{what}: {name}'s {', '.join(left)} left out: {why}", stacklevel=7)
+
+
 def _gltf_clearcoat(doc_material: dict, part: ModelPart, what: str) -> None:
     """A glTF material's clear coat (``KHR_materials_clearcoat``): its factor and roughness
     factor (``Material.clearcoat``, ``clearcoat_roughness``); a factor out of [0, 1] is an
     error naming the material; its textures are left out with a warning (one coat a part, on
     the mesh's own normal)."""
-    extensions = doc_material.get("extensions") if isinstance(doc_material, dict) else None
-    info = extensions.get("KHR_materials_clearcoat") if isinstance(extensions, dict) else None
+    name = "KHR_materials_clearcoat"
+    info = _gltf_extension(doc_material, name, what)
     if info is None:
         return
-    if not isinstance(info, dict):
-        raise AssetError(f"{what}: KHR_materials_clearcoat must be an object, got {info!r}")
-    values = []
-    for key in ("clearcoatFactor", "clearcoatRoughnessFactor"):
-        value = info.get(key, 0.0)
-        if isinstance(value, bool) or not isinstance(value, numbers.Real) or not 0.0 <= float(value) <= 1.0:
-            raise AssetError(f"{what}: KHR_materials_clearcoat.{key} must be a number in [0, 1], got {value!r}")
-        values.append(float(value))
-    left = [slot for slot in ("clearcoatTexture", "clearcoatRoughnessTexture", "clearcoatNormalTexture")
-            if slot in info]
-    if left and values[0] > 0.0:
-        warnings.warn(f"{what}: KHR_materials_clearcoat's {', '.join(left)} left out: the coat is its factors' "
-                      "everywhere, on the mesh's own normal", stacklevel=6)
-    part.clearcoat, part.clearcoat_roughness = values
+    part.clearcoat = _gltf_number(info, name, "clearcoatFactor", 0.0, 0.0, 1.0, what)
+    part.clearcoat_roughness = _gltf_number(info, name, "clearcoatRoughnessFactor", 0.0, 0.0, 1.0, what)
+    _gltf_textures_left_out(info, name, ("clearcoatTexture", "clearcoatRoughnessTexture", "clearcoatNormalTexture"),
+                            part.clearcoat > 0.0, what, "the coat is its factors' everywhere, on the mesh's own normal")
 
 
 def _gltf_sheen(doc_material: dict, part: ModelPart, what: str) -> None:
     """A glTF material's sheen (``KHR_materials_sheen``): its colour and roughness factors
     (``Material.sheen_color``, ``sheen_roughness``); a factor out of [0, 1] is an error
     naming the material; its textures are left out with a warning (one sheen a part)."""
-    extensions = doc_material.get("extensions") if isinstance(doc_material, dict) else None
-    info = extensions.get("KHR_materials_sheen") if isinstance(extensions, dict) else None
+    name = "KHR_materials_sheen"
+    info = _gltf_extension(doc_material, name, what)
     if info is None:
         return
-    if not isinstance(info, dict):
-        raise AssetError(f"{what}: KHR_materials_sheen must be an object, got {info!r}")
     colour = info.get("sheenColorFactor", [0.0, 0.0, 0.0])
     if not (isinstance(colour, list) and len(colour) == 3 and all(
             not isinstance(c, bool) and isinstance(c, numbers.Real) and 0.0 <= float(c) <= 1.0 for c in colour)):
-        raise AssetError(f"{what}: KHR_materials_sheen.sheenColorFactor must be three numbers in [0, 1], "
-                         f"got {colour!r}")
-    roughness = info.get("sheenRoughnessFactor", 0.0)
-    if isinstance(roughness, bool) or not isinstance(roughness, numbers.Real) or not 0.0 <= float(roughness) <= 1.0:
-        raise AssetError(f"{what}: KHR_materials_sheen.sheenRoughnessFactor must be a number in [0, 1], "
-                         f"got {roughness!r}")
-    left = [slot for slot in ("sheenColorTexture", "sheenRoughnessTexture") if slot in info]
-    if left and max(colour) > 0.0:
-        warnings.warn(f"{what}: KHR_materials_sheen's {', '.join(left)} left out: the sheen is its factors' "
-                      "everywhere", stacklevel=6)
+        raise AssetError(f"{what}: {name}.sheenColorFactor must be three numbers in [0, 1], got {colour!r}")
     part.sheen_color = tuple(float(c) for c in colour)
-    part.sheen_roughness = float(roughness)
+    part.sheen_roughness = _gltf_number(info, name, "sheenRoughnessFactor", 0.0, 0.0, 1.0, what)
+    _gltf_textures_left_out(info, name, ("sheenColorTexture", "sheenRoughnessTexture"), max(colour) > 0.0, what,
+                            "the sheen is its factors' everywhere")
 
 
 def _gltf_anisotropy(doc_material: dict, part: ModelPart, what: str) -> None:
@@ -902,24 +909,17 @@ def _gltf_anisotropy(doc_material: dict, part: ModelPart, what: str) -> None:
     (radians, counter-clockwise from the UVs' u: ``Material.anisotropy``,
     ``anisotropy_direction`` in degrees); a strength out of [0, 1] or a rotation that is not a
     finite number is an error naming the material; its texture is left out with a warning."""
-    extensions = doc_material.get("extensions") if isinstance(doc_material, dict) else None
-    info = extensions.get("KHR_materials_anisotropy") if isinstance(extensions, dict) else None
+    name = "KHR_materials_anisotropy"
+    info = _gltf_extension(doc_material, name, what)
     if info is None:
         return
-    if not isinstance(info, dict):
-        raise AssetError(f"{what}: KHR_materials_anisotropy must be an object, got {info!r}")
-    strength, rotation = info.get("anisotropyStrength", 0.0), info.get("anisotropyRotation", 0.0)
-    if isinstance(strength, bool) or not isinstance(strength, numbers.Real) or not 0.0 <= float(strength) <= 1.0:
-        raise AssetError(f"{what}: KHR_materials_anisotropy.anisotropyStrength must be a number in [0, 1], "
-                         f"got {strength!r}")
+    part.anisotropy = _gltf_number(info, name, "anisotropyStrength", 0.0, 0.0, 1.0, what)
+    rotation = info.get("anisotropyRotation", 0.0)
     if isinstance(rotation, bool) or not isinstance(rotation, numbers.Real) or not math.isfinite(rotation):
-        raise AssetError(f"{what}: KHR_materials_anisotropy.anisotropyRotation must be a finite number (radians), "
-                         f"got {rotation!r}")
-    if "anisotropyTexture" in info and strength > 0.0:
-        warnings.warn(f"{what}: KHR_materials_anisotropy's anisotropyTexture left out: the anisotropy is its "
-                      "strength and rotation everywhere", stacklevel=6)
-    part.anisotropy = float(strength)
+        raise AssetError(f"{what}: {name}.anisotropyRotation must be a finite number (radians), got {rotation!r}")
     part.anisotropy_direction = math.degrees(math.remainder(float(rotation), 2.0 * math.pi))
+    _gltf_textures_left_out(info, name, ("anisotropyTexture",), part.anisotropy > 0.0, what,
+                            "the anisotropy is its strength and rotation everywhere")
 
 
 def _gltf_iridescence(doc_material: dict, part: ModelPart, what: str) -> None:
@@ -927,26 +927,16 @@ def _gltf_iridescence(doc_material: dict, part: ModelPart, what: str) -> None:
     thickness (the maximum: without its thickness texture glTF's film is that thick
     everywhere); a value out of range is an error naming the material; the textures are left
     out with a warning."""
-    extensions = doc_material.get("extensions") if isinstance(doc_material, dict) else None
-    info = extensions.get("KHR_materials_iridescence") if isinstance(extensions, dict) else None
+    name = "KHR_materials_iridescence"
+    info = _gltf_extension(doc_material, name, what)
     if info is None:
         return
-    if not isinstance(info, dict):
-        raise AssetError(f"{what}: KHR_materials_iridescence must be an object, got {info!r}")
-    checks = (("iridescenceFactor", 0.0, 0.0, 1.0), ("iridescenceIor", 1.3, 1.0, MAX_IOR),
-              ("iridescenceThicknessMaximum", 400.0, 0.0, MAX_FILM_THICKNESS))
-    values = []
-    for key, default, low, high in checks:
-        value = info.get(key, default)
-        if isinstance(value, bool) or not isinstance(value, numbers.Real) or not low <= float(value) <= high:
-            raise AssetError(f"{what}: KHR_materials_iridescence.{key} must be a number in [{low:g}, {high:g}], "
-                             f"got {value!r}")
-        values.append(float(value))
-    left = [slot for slot in ("iridescenceTexture", "iridescenceThicknessTexture") if slot in info]
-    if left and values[0] > 0.0:
-        warnings.warn(f"{what}: KHR_materials_iridescence's {', '.join(left)} left out: the film is its factor's, "
-                      "its index's and its maximum thickness's everywhere", stacklevel=6)
-    part.iridescence, part.iridescence_ior, part.iridescence_thickness = values
+    part.iridescence = _gltf_number(info, name, "iridescenceFactor", 0.0, 0.0, 1.0, what)
+    part.iridescence_ior = _gltf_number(info, name, "iridescenceIor", 1.3, 1.0, MAX_IOR, what)
+    part.iridescence_thickness = _gltf_number(info, name, "iridescenceThicknessMaximum", 400.0, 0.0,
+                                              MAX_FILM_THICKNESS, what)
+    _gltf_textures_left_out(info, name, ("iridescenceTexture", "iridescenceThicknessTexture"), part.iridescence > 0.0,
+                            what, "the film is its factor's, its index's and its maximum thickness's everywhere")
 
 
 # --- material maps -----------------------------------------------------------------------
