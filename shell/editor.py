@@ -32,6 +32,7 @@ from components.rendering import MATERIAL_IMAGES, automatic_mix
 from engine.assets.level_assets import MESH_MAKERS, LevelAssets, level_model, level_texture, user_asset_roots
 from engine.assets.level_read import DERIVED_COMPONENTS, ENGINE_COMPONENTS, REFERENCE_FIELDS
 from engine.assets.level_save import save_level
+from engine.assets.mesh import load_model_file
 from engine.core.errors import SpeculumError
 from engine.core.transforms import current_world_matrix
 from engine.core.world import World, check_components
@@ -167,6 +168,7 @@ class Editor:
         self._everything: list[Edit] = []  # every edit made, undone or not: what a save may write
         self._applied = 0  # undos and redos made (``edit_count``)
         self._angles: dict[tuple[int, str, str], glm.vec3] = {}  # rotations' angles last shown (``angles``)
+        self._variants: dict[tuple[str, int], list[str]] = {}  # a model file's variants (``model_variants``)
 
     # --- selection -------------------------------------------------------------------------
     def pick(self, ids: np.ndarray, surface_ids: np.ndarray | None, x: int, y: int,
@@ -403,6 +405,26 @@ class Editor:
                 self.message = f"Model.file: {exc}"
                 raise EditError(self.message) from exc
         self.set_field(entity, "Model", "file", value)
+
+    def model_variants(self, entity: int) -> list[str]:
+        """The material variants of the entity's Model's file (``KHR_materials_variants``; []
+        without a file or any), read once a file and modification time (the inspector asks
+        every frame it shows them)."""
+        file = self.component(entity, "Model").file
+        if not file:
+            return []
+        try:
+            stamp = os.stat(file).st_mtime_ns
+        except OSError:
+            return []
+        key = (file, stamp)
+        if key not in self._variants:
+            try:
+                self._variants[key] = load_model_file(file, roots=[Path(file).parent, *self.asset_roots,
+                                                                   *user_asset_roots()], materials=False).variants
+            except (SpeculumError, OSError, ValueError):
+                self._variants[key] = []
+        return self._variants[key]
 
     def _check_variant(self, file: str, variant: str) -> None:
         """An EditError, in the loader's words, where the model file has no such material

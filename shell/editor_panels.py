@@ -324,6 +324,15 @@ class EditorPanels:
                                              imgui.InputTextFlags_.enter_returns_true)
             if entered:
                 self._try(editor, editor.set_model_file, entity, text)
+        elif (cls_name, field) == ("Model", "variant"):  # one of the file's material variants, or its own look
+            chosen = value or "(the file's own)"
+            if imgui.begin_combo(label, chosen):
+                for choice in ("", *editor.model_variants(entity)):
+                    shown = choice or "(the file's own)"
+                    if imgui.selectable(f"{shown}##variant", choice == value)[0] and choice != value:
+                        self._try(editor, editor.set_field, entity, "Model", "variant", choice)
+                    self._widget(f"Model.variant {choice}")
+                imgui.end_combo()
         elif (cls_name, field) == ("MeshRef", "mesh"):  # a shape to choose (its size: the Transform's scale)
             shape = editor.mesh_shape(entity)
             if imgui.begin_combo(label, shape):

@@ -1173,3 +1173,26 @@ def test_a_cutoff_shows_off_and_is_switched_on_and_off(scene, ctx):
         assert (runner.ids() == box).sum() == whole
         assert editor.undo() and world.get(box, Material).alpha_cutoff == 0.5
         assert ctx.error == "GL_NO_ERROR"
+
+
+def test_a_models_variant_is_chosen_from_its_files_variants(scene, ctx, tmp_path):
+    """The inspector offers a Model's material variants (the file's own look first); the one
+    clicked is the Model's, and the next frame its parts wear it."""
+    from components import FromModel, Model
+    from tests.test_model_variants import BLUE, shoe
+
+    path = shoe(tmp_path / "shoe.glb")
+    with _box_selected(scene, ctx) as (runner, overlay, draw, click, editor, _):
+        world = runner.world
+        root = editor.create(Transform(position=(0.0, 0.5, 0.0)), Model(file=str(path)), name="shoe")
+        runner.frame()
+        assert editor.model_variants(root) == ["midnight", "forest"]
+        draw()
+        click("Model.variant")
+        assert {"Model.variant ", "Model.variant midnight", "Model.variant forest"} <= set(overlay.widgets)
+        click("Model.variant midnight")
+        assert world.get(root, Model).variant == "midnight"
+        runner.frame()
+        ((part, _),) = list(world.query_one(FromModel))
+        assert list(world.get(part, Material).color) == pytest.approx(BLUE, abs=0.01)
+        assert editor.undo() and world.get(root, Model).variant == ""
