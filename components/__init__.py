@@ -3,7 +3,7 @@ from components.ambient import AmbientOcclusion, HemisphereLight
 from components.camera import Camera, DirectionalLight, FlyController, PointLight
 from components.fog import Fog
 from components.mirror import Mirror
-from components.model import FromModel, Model
+from components.model import Animation, FromModel, Model
 from components.portal import Portal, PortalClone, Slice, Traveller
 from components.post import Bloom, ColorGrading, Tonemap, Vignette
 from components.probe import ReflectionProbe
@@ -16,7 +16,8 @@ from components.visibility import Visibility
 from components.water import Water
 
 __all__ = [
-    "AmbientOcclusion", "Bloom", "Camera", "ColorGrading", "ComponentValueError", "ComponentWarning",
+    "AmbientOcclusion", "Animation", "Bloom", "Camera", "ColorGrading", "ComponentValueError",
+    "ComponentWarning",
     "DirectionalLight", "Emissive", "FlyController", "Fog", "FromModel", "HemisphereLight", "Material",
     "MeshRef", "Mirror", "Model", "PointLight", "Portal", "PortalClone", "ReflectionProbe", "Reflective", "Refractive",
     "ScreenPanel", "ScreenReflections", "ScreenText", "Skybox", "Slice",

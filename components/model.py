@@ -15,7 +15,7 @@ import os
 from dataclasses import dataclass
 from typing import Any
 
-from components.tracking import ComponentValueError, TrackedComponent, finite, integer
+from components.tracking import ComponentValueError, TrackedComponent, boolean, finite, integer
 
 MAX_MODEL_PROBES = 4  # curved reflective or glass parts of one model that get a cube-map probe each (by default)
 MAX_MODEL_PROBES_LIMIT = 64  # the most Model.max_probes may ask for (each probe is six views a capture)
@@ -68,4 +68,32 @@ class FromModel(TrackedComponent):
     def _validate(self, name: str, value: Any) -> Any:
         if name == "model" and (isinstance(value, bool) or not isinstance(value, int) or value <= 0):
             raise ComponentValueError(f"FromModel.model must be an entity id, got {value!r}")
+        return value
+
+
+@dataclass(eq=False)
+class Animation(TrackedComponent):
+    """Plays one of a model's animation clips (glTF's ``animations``: a door opening, a fan
+    turning, a lid lifting) on the entity whose ``Model`` made the parts: ``clip`` its name
+    ("" for none: the parts at rest), ``time`` where it is (seconds, moved on by the models
+    stage by the frame's time x ``speed`` while ``playing``), ``loop`` starting it again at
+    its end (else it stops there).  The parts' Transforms are the clip's pose each frame
+    (engine/assets/gltf_animations.py); a clip the file lacks is an error naming those it has."""
+
+    SHAREABLE = False
+    clip: str = ""
+    time: float = 0.0
+    speed: float = 1.0
+    playing: bool = True
+    loop: bool = True
+
+    def _validate(self, name: str, value: Any) -> Any:
+        if name == "clip" and not isinstance(value, str):
+            raise ComponentValueError(f"Animation.clip must be a clip's name (a str; \"\": none), got {value!r}")
+        if name == "time":
+            return finite(self, name, value, low=0.0)
+        if name == "speed":
+            return finite(self, name, value, low=-1000.0, high=1000.0)
+        if name in ("playing", "loop"):
+            return boolean(self, name, value)
         return value

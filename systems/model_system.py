@@ -10,6 +10,10 @@ parts with it, their GPU resources released as any entity's.  A Model that
 ``spawn_model`` or a level file's spawn already made parts for, from the same values, is
 left alone (the world's ``SpawnedModels`` says what was made from what).
 
+Then each ``Animation`` on a model's root moves on by the frame's time and puts the parts
+where its clip puts their nodes (``engine.assets.models.pose_parts``): before the transform
+stage, so the pose is drawn in this frame.
+
 The file is looked for as given (relative to where the program runs) and the files it
 names in its own folder and the asset roots (``--asset-root``); one that cannot be loaded
 raises an AssetError naming the entity and the file, and leaves its old parts standing.
@@ -20,9 +24,9 @@ from pathlib import Path
 
 import esper
 
-from components.model import Model
+from components.model import Animation, Model
 from engine.assets.level_assets import user_asset_roots
-from engine.assets.models import SpawnedModels, model_key, remove_parts, respawn_parts
+from engine.assets.models import SpawnedModels, model_key, pose_parts, remove_parts, respawn_parts
 from engine.core.world import World
 
 
@@ -33,8 +37,32 @@ class ModelSystem(esper.Processor):
     def process(self, dt: float) -> None:
         world = self.world
         changed = world.changed(Model)
-        if not changed:
-            return
+        if changed:
+            self._place(changed)
+        self._animate(dt, changed)
+
+    def _animate(self, dt: float, remade: set[int]) -> None:
+        """Move each playing ``Animation`` on by ``dt`` x its speed (wrapped at the clip's end
+        when it loops, held there when not) and pose its model's parts; a changed Animation,
+        or a model whose parts were just made, is posed even when paused."""
+        world = self.world
+        changed = world.changed(Animation)
+        for root, animation in world.query_one(Animation):
+            record = world.resources.get(SpawnedModels, {}).get(root)
+            moving = animation.playing and animation.clip and dt and animation.speed
+            if not (moving or root in changed or root in remade):
+                continue
+            if moving and record is not None and record.loaded is not None:
+                clip = next((c for c in record.loaded.animations if c.name == animation.clip), None)
+                duration = clip.duration if clip is not None else 0.0
+                time = animation.time + dt * animation.speed
+                if duration > 0.0:
+                    time = time % duration if animation.loop else min(max(time, 0.0), duration)
+                animation.time = max(time, 0.0)
+            pose_parts(world, root, animation.clip, animation.time)
+
+    def _place(self, changed: set[int]) -> None:
+        world = self.world
         spawned = world.resources.get(SpawnedModels, {})
         for root in sorted(changed):
             model = world.try_get(root, Model) if world.exists(root) else None

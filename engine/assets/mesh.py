@@ -455,6 +455,7 @@ class ModelPart:
     iridescence_ior: float = 1.3      # its film's index (Material.iridescence_ior)
     iridescence_thickness: float = 400.0  # its film's thickness in nm (Material.iridescence_thickness)
     name: str = ""  # "file:part", as a level file's part = "..." names it (parts may share one mesh)
+    node: int | None = None  # its glTF node's index (what an animation moves; None: not a glTF's)
 
     def __post_init__(self) -> None:
         if not self.name:
@@ -475,6 +476,8 @@ class LoadedModel:
     lights: list[ModelLight]
     cameras: list[ModelCamera] = field(default_factory=list)
     variants: list[str] = field(default_factory=list)  # its material variants' names (KHR_materials_variants)
+    animations: list = field(default_factory=list)     # its clips (engine/assets/gltf_animations.py Clip)
+    node_tree: object = None                           # its nodes (gltf_animations.NodeTree), with clips
 
 
 def load_model(path: str | Path, roots: Sequence[str | Path] | None = None,
@@ -575,14 +578,15 @@ def _load_model(path: Path, data: bytes, what: str, roots, materials: bool, trim
             if not isinstance(tm, trimesh.Trimesh) or len(tm.faces) == 0:
                 continue
             matrix = np.asarray(matrix, np.float64)
+            shown = gltf.node_name(node) if gltf is not None else node
             if not np.isfinite(matrix).all():
-                raise AssetError(f"node {node!r} has a NaN or infinite transform")
+                raise AssetError(f"node {shown!r} has a NaN or infinite transform")
             singular = np.linalg.svd(matrix[:3, :3], compute_uv=False)
             if singular[-1] <= 1e-9 * singular[0] or singular[0] == 0.0:
                 continue  # scaled to nothing (files hide nodes this way): it would draw nothing
             if np.abs(matrix).max() > 1e18:
                 # Past float32 once multiplied out (vertex x scale x parents): refuse here, by node.
-                raise AssetError(f"node {node!r} has a transform too large for float32 rendering "
+                raise AssetError(f"node {shown!r} has a transform too large for float32 rendering "
                                  f"(largest entry {np.abs(matrix).max():.3g}, limit 1e18)")
             name = f"{path.name}:{geom_name}"
             mesh = meshes.get(("geometry", geom_name))
@@ -590,7 +594,8 @@ def _load_model(path: Path, data: bytes, what: str, roots, materials: bool, trim
                 mesh = Mesh.from_trimesh(tm, name=name, srgb_colors=suffix not in (".gltf", ".glb"))
                 mesh = meshes.setdefault(("content", _digest(mesh)), mesh)
                 meshes[("geometry", geom_name)] = mesh
-            part = ModelPart(mesh=mesh, local=glm.mat4(*matrix.astype(np.float32).T.ravel()), name=name)
+            part = ModelPart(mesh=mesh, local=glm.mat4(*matrix.astype(np.float32).T.ravel()), name=name,
+                             node=gltf.node(node) if gltf is not None else None)
             if materials:
                 _read_material(tm, part, path, maps)
                 maps.read(tm, part)
@@ -605,7 +610,8 @@ def _load_model(path: Path, data: bytes, what: str, roots, materials: bool, trim
         raise AssetError(f"{what}: contains no triangle meshes")
     if variant and gltf is None:
         raise AssetError(f"{what}: has no material variant {variant!r} (only a glTF file has variants)")
-    return LoadedModel(parts, lights, cameras, variants)
+    clips = gltf.animations if gltf is not None else []
+    return LoadedModel(parts, lights, cameras, variants, clips, gltf.node_tree if clips else None)
 
 
 def _digest(mesh: Mesh) -> bytes:

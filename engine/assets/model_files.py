@@ -32,6 +32,7 @@ from pathlib import Path
 from urllib.parse import unquote
 
 from engine.assets.gltf_accessors import float_normalized_accessors
+from engine.assets.gltf_animations import read_animations, read_node_tree
 from engine.assets.gltf_instancing import expand_gpu_instancing
 from engine.assets.gltf_variants import apply_variant
 from engine.assets.texture_data import contained_path, file_problem, read_asset_file
@@ -361,6 +362,7 @@ def _mtl_libraries(obj: Path, names: list[str], used: set[str], roots, textures:
 GLTF_TEXTURE_SLOTS = ("baseColorTexture", "metallicRoughnessTexture", "normalTexture", "emissiveTexture",
                       "occlusionTexture")
 MATERIAL_TAG = "speculum-material-"  # + index: the name trimesh is given for each material
+NODE_TAG = "speculum-node-"  # + index: the name trimesh is given for each node (a part's node: its animation)
 
 
 @dataclass
@@ -379,6 +381,23 @@ class GltfFiles:
     # material index -> the KHR_texture_transform all its maps share (offset x, offset y,
     # rotation, scale x, scale y): baked into its meshes' UVs when they are read
     uv_transforms: dict[int, tuple[float, float, float, float, float]] = field(default_factory=dict)
+    animations: list = field(default_factory=list)  # its clips (engine/assets/gltf_animations.py)
+    node_tree: object = None                         # its nodes' parents and rest transforms (NodeTree)
+
+    def node(self, trimesh_name: object) -> int | None:
+        """The index of the node trimesh calls ``trimesh_name`` (None: not one of the file's)."""
+        if isinstance(trimesh_name, str) and trimesh_name.startswith(NODE_TAG):
+            digits = re.match(r"\d+", trimesh_name[len(NODE_TAG):])
+            return int(digits.group()) if digits else None
+        return None
+
+    def node_name(self, trimesh_name: object) -> object:
+        """The name the file gives the node trimesh calls ``trimesh_name`` (for messages)."""
+        index = self.node(trimesh_name)
+        nodes = self.doc.get("nodes") if self.doc else None
+        if index is None or not isinstance(nodes, list) or index >= len(nodes) or not isinstance(nodes[index], dict):
+            return trimesh_name
+        return nodes[index].get("name", f"node {index}")
 
     def material(self, trimesh_name: object) -> tuple[int | None, dict]:
         """The index and the file's JSON of the material trimesh calls ``trimesh_name``."""
@@ -548,6 +567,7 @@ def prepare_gltf(path: Path, data: bytes, roots: Sequence[Path], textures: bool,
         apply_variant(doc, variant)
     except AssetError as exc:
         raise AssetError(f"{what}: {exc}") from None
+    animations = read_animations(doc, buffer_bytes, what)
     materials = doc.get("materials") if isinstance(doc.get("materials"), list) else []
     textures_list = doc.get("textures") if isinstance(doc.get("textures"), list) else []
     for texture in textures_list:
@@ -561,6 +581,7 @@ def prepare_gltf(path: Path, data: bytes, roots: Sequence[Path], textures: bool,
                       if isinstance(mesh, dict) for primitive in (mesh.get("primitives") or [])
                       if isinstance(primitive, dict)}
     result = GltfFiles(b"", resolver, doc, [m.get("name") if isinstance(m, dict) else None for m in materials])
+    result.animations = animations
     wanted: dict[int, tuple[str, str]] = {}  # image index -> (material label, slot)
     for index, material in enumerate(materials):
         if not isinstance(material, dict) or index not in used_materials:
@@ -609,6 +630,11 @@ def prepare_gltf(path: Path, data: bytes, roots: Sequence[Path], textures: bool,
     for index, material in enumerate(materials):
         if isinstance(material, dict):
             material["name"] = f"{MATERIAL_TAG}{index}"
+    nodes = doc.get("nodes") if isinstance(doc.get("nodes"), list) else []
+    node_names = [node.get("name") if isinstance(node, dict) else None for node in nodes]
+    for index, node in enumerate(nodes):
+        if isinstance(node, dict):
+            node["name"] = f"{NODE_TAG}{index}"
     text = json.dumps(doc).encode("utf-8")
     if glb:
         text += b" " * (-len(text) % 4)
@@ -620,6 +646,13 @@ def prepare_gltf(path: Path, data: bytes, roots: Sequence[Path], textures: bool,
     for index, material in enumerate(materials):  # as the file wrote them (trimesh parses its own copy)
         if isinstance(material, dict):
             material["name"] = result.names[index]
+    for node, name in zip(nodes, node_names, strict=True):
+        if isinstance(node, dict):
+            if name is None:
+                del node["name"]
+            else:
+                node["name"] = name
+    result.node_tree = read_node_tree(doc)
     return result
 
 

@@ -33,13 +33,14 @@ from components import (
     Transform,
 )
 from components.model import MAX_MODEL_PROBES, FromModel, Model
+from engine.assets.gltf_animations import pose
 from engine.assets.mesh import LoadedModel, flat_plane, load_model_file
 from engine.assets.model_cameras import ModelCamera
 from engine.assets.model_lights import ModelLight, check_light_intensity
 from engine.core.errors import AssetError
 from engine.core.world import World
 
-__all__ = ["MAX_MODEL_PROBES", "SpawnedModel", "SpawnedModels", "model_components", "model_key",
+__all__ = ["MAX_MODEL_PROBES", "SpawnedModel", "SpawnedModels", "model_components", "model_key", "pose_parts",
            "remove_parts", "respawn_parts", "spawn_model", "spawn_parts"]
 
 @dataclass
@@ -49,6 +50,8 @@ class SpawnedModel:
 
     key: tuple
     parts: list[int] = field(default_factory=list)
+    nodes: list[int | None] = field(default_factory=list)  # each part's glTF node (None: not animated)
+    loaded: LoadedModel | None = None                        # its clips and node tree
 
 
 class SpawnedModels(dict):
@@ -131,7 +134,7 @@ def spawn_model(world: World, path: str | Path, position: glm.vec3 | Sequence[fl
     part_components = model_components(loaded, path, root_transform, max_probes, light_scale)
     root = world.spawn(root_transform, model)
     try:
-        spawn_parts(world, root, model, part_components)
+        spawn_parts(world, root, model, part_components, loaded)
     except BaseException:
         world.delete_entity(root)
         raise
@@ -216,10 +219,12 @@ def _part_components(part, probed: bool) -> list:
     return components
 
 
-def spawn_parts(world: World, root: int, model: Model | None, part_components: Sequence[list]) -> list[int]:
-    """Spawn ``part_components`` (``model_components``) under ``root``, each with a
-    ``FromModel``, and record them in the world's ``SpawnedModels`` (with ``model``'s key:
-    None for a model spawned without one); all or nothing."""
+def spawn_parts(world: World, root: int, model: Model | None, part_components: Sequence[list],
+                loaded: LoadedModel | None = None) -> list[int]:
+    """Spawn ``part_components`` (``model_components`` of ``loaded``) under ``root``, each
+    with a ``FromModel``, and record them in the world's ``SpawnedModels`` (with ``model``'s
+    key: None for a model spawned without one, and the parts' nodes, which an ``Animation``
+    moves); all or nothing."""
     spawned: list[int] = []
     try:
         for components in part_components:
@@ -232,7 +237,9 @@ def spawn_parts(world: World, root: int, model: Model | None, part_components: S
     record = world.resources.get(SpawnedModels)
     if record is None:
         record = world.resources[SpawnedModels] = SpawnedModels()
-    record[root] = SpawnedModel(None if model is None else model_key(model), spawned)
+    nodes = [part.node for part in loaded.parts] if loaded is not None else []
+    nodes += [None] * (len(spawned) - len(nodes))  # its lights and cameras: where their nodes put them
+    record[root] = SpawnedModel(None if model is None else model_key(model), spawned, nodes, loaded)
     return spawned
 
 
@@ -266,7 +273,7 @@ def respawn_parts(world: World, root: int, roots: Sequence[str | Path] | None = 
     except AssetError as exc:
         raise AssetError(f"entity {root}'s Model: {exc}") from exc
     remove_parts(world, root)
-    return spawn_parts(world, root, model, part_components)
+    return spawn_parts(world, root, model, part_components, loaded)
 
 
 def _light_components(light: ModelLight, root: Transform, scale: float) -> list:
@@ -284,6 +291,35 @@ def _light_components(light: ModelLight, root: Transform, scale: float) -> list:
         return [placed, DirectionalLight(direction=travel, color=colour, intensity=intensity)]
     return [placed, PointLight(color=colour, intensity=intensity, range=light.reach(scale),
                                spot_angle=light.spot_angle(), spot_blend=light.spot_blend())]
+
+
+def pose_parts(world: World, root: int, clip_name: str, time: float) -> None:
+    """Put ``root``'s parts where clip ``clip_name`` of its model puts their nodes at
+    ``time`` (seconds); "" puts them at rest.  A clip the model lacks is an AssetError naming
+    the entity and the clips it has."""
+    record = world.resources.get(SpawnedModels, {}).get(root)
+    if record is None or record.loaded is None:
+        if clip_name:
+            raise AssetError(f"entity {root}'s Animation: its model has no animations (clip {clip_name!r})")
+        return
+    clips = record.loaded.animations
+    if not clip_name:
+        matrices = {}
+    else:
+        clip = next((c for c in clips if c.name == clip_name), None)
+        if clip is None:
+            names = ", ".join(repr(c.name) for c in clips)
+            raise AssetError(f"entity {root}'s Animation: its model has no clip {clip_name!r} (its clips: {names})")
+        matrices = pose(record.loaded.node_tree, clip, time, [n for n in record.nodes if n is not None])
+    for entity, node in zip(record.parts, record.nodes, strict=True):
+        if node is None or not world.exists(entity):
+            continue
+        placed = matrices.get(node)
+        local = glm.mat4(*placed.astype(np.float32).T.ravel()) if placed is not None else \
+            next(p.local for p in record.loaded.parts if p.node == node)
+        at = _node_transform(local, f"node {node}")
+        transform = world.get(entity, Transform)
+        transform.position, transform.rotation, transform.scale = at.position, at.rotation, at.scale
 
 
 def _camera_components(camera: ModelCamera) -> list:

@@ -1,0 +1,226 @@
+"""glTF animations: a file's clips (``animations``: each channel a node's translation,
+rotation or scale sampled at key times, with linear, step or cubic-spline interpolation),
+read before trimesh parses the file (which ignores them), and the poses they give.
+
+A model's parts are placed by their nodes (``ModelPart.node``); the node tree
+(``NodeTree``: each node's parent and its own transform at rest) lets ``pose`` put every
+part where a clip puts its node at a time: the animated nodes' sampled translation, rotation
+and scale, the others at rest, multiplied down from the scene's roots.  ``Animation`` on a
+model's root plays one (``systems/model_system.py``).  Morph-target weights are left out (with
+a warning: the engine's meshes have no morph targets), as is skinning.
+"""
+from __future__ import annotations
+
+import math
+import warnings
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from engine.assets.gltf_accessors import BufferBytes, read_float_accessor
+from engine.core.errors import AssetError
+
+PATHS = {"translation": 3, "rotation": 4, "scale": 3}  # what a channel may animate, and its width
+INTERPOLATIONS = ("LINEAR", "STEP", "CUBICSPLINE")
+MAX_KEYS = 1 << 20  # key times one channel may have
+
+
+@dataclass
+class Channel:
+    """One node's translation, rotation (x, y, z, w) or scale over ``times`` (seconds,
+    increasing); ``values`` (keys, width), or (keys, 3, width) for a cubic spline: in-tangent,
+    value, out-tangent."""
+
+    node: int
+    path: str
+    times: np.ndarray
+    values: np.ndarray
+    interpolation: str
+
+    def sample(self, t: float) -> np.ndarray:
+        """The value at time ``t`` (held at the ends)."""
+        times = self.times
+        cubic = self.interpolation == "CUBICSPLINE"
+        if t <= times[0] or len(times) == 1:
+            value = self.values[0, 1] if cubic else self.values[0]
+        elif t >= times[-1]:
+            value = self.values[-1, 1] if cubic else self.values[-1]
+        else:
+            k = int(np.searchsorted(times, t, side="right")) - 1
+            span = times[k + 1] - times[k]
+            s = (t - times[k]) / span
+            if self.interpolation == "STEP":
+                value = self.values[k]
+            elif cubic:  # glTF's Hermite spline: the tangents scaled by the span
+                s2, s3 = s * s, s * s * s
+                value = ((2 * s3 - 3 * s2 + 1) * self.values[k, 1] + (s3 - 2 * s2 + s) * span * self.values[k, 2]
+                         + (-2 * s3 + 3 * s2) * self.values[k + 1, 1] + (s3 - s2) * span * self.values[k + 1, 0])
+            elif self.path == "rotation":
+                value = _slerp(self.values[k], self.values[k + 1], s)
+            else:
+                value = (1.0 - s) * self.values[k] + s * self.values[k + 1]
+        if self.path == "rotation":
+            length = float(np.linalg.norm(value))
+            value = value / length if length > 0.0 else np.array([0.0, 0.0, 0.0, 1.0])
+        return np.asarray(value, np.float64)
+
+
+@dataclass
+class Clip:
+    """A file's animation: its ``name`` and channels; ``duration`` its last key's time."""
+
+    name: str
+    channels: list[Channel]
+    duration: float
+
+
+@dataclass
+class NodeTree:
+    """A glTF scene's nodes: each one's parent (None: a root) and its own transform at rest,
+    as (translation, rotation x y z w, scale), or a matrix (``matrices``: nodes given one)."""
+
+    parents: list[int | None] = field(default_factory=list)
+    rest: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = field(default_factory=list)
+    matrices: dict[int, np.ndarray] = field(default_factory=dict)
+
+
+def read_node_tree(doc: dict) -> NodeTree:
+    """Every node's parent and rest transform (the node tree has been checked by the lights'
+    reader: ``model_lights.placed_nodes``)."""
+    nodes = doc.get("nodes") if isinstance(doc.get("nodes"), list) else []
+    tree = NodeTree(parents=[None] * len(nodes))
+    for index, node in enumerate(nodes):
+        for child in (node.get("children") or []) if isinstance(node, dict) else []:
+            if isinstance(child, int) and not isinstance(child, bool) and 0 <= child < len(nodes):
+                tree.parents[child] = index
+    for index, node in enumerate(nodes):
+        node = node if isinstance(node, dict) else {}
+        if "matrix" in node:
+            tree.matrices[index] = np.array(node["matrix"], np.float64).reshape(4, 4).T
+        tree.rest.append((np.array(node.get("translation", [0.0, 0.0, 0.0]), np.float64),
+                          np.array(node.get("rotation", [0.0, 0.0, 0.0, 1.0]), np.float64),
+                          np.array(node.get("scale", [1.0, 1.0, 1.0]), np.float64)))
+    return tree
+
+
+def read_animations(doc: dict, buffer_bytes: BufferBytes, what: str) -> list[Clip]:
+    """The document's clips; a malformed one (a channel naming a node, sampler or accessor
+    the file lacks, an unknown path or interpolation, key times that are not increasing
+    finite numbers, values that do not match them, an animated node that has a matrix) is an
+    AssetError naming the animation and channel."""
+    animations = doc.get("animations")
+    if animations is None:
+        return []
+    if not isinstance(animations, list):
+        raise AssetError(f"{what}: animations must be a list, got {animations!r}")
+    nodes = doc.get("nodes") if isinstance(doc.get("nodes"), list) else []
+    clips: list[Clip] = []
+    morphs = 0
+    for a, animation in enumerate(animations):
+        name = animation.get("name") if isinstance(animation, dict) else None
+        label = f"{what}: animation {a}" + (f" ({name!r})" if isinstance(name, str) and name else "")
+        if not isinstance(animation, dict):
+            raise AssetError(f"{label}: must be an object, got {animation!r}")
+        samplers = animation.get("samplers") if isinstance(animation.get("samplers"), list) else []
+        channels: list[Channel] = []
+        for c, channel in enumerate(animation.get("channels") or []):
+            where = f"{label}: channel {c}"
+            target = channel.get("target") if isinstance(channel, dict) else None
+            if not isinstance(target, dict):
+                raise AssetError(f"{where}: needs a target object, got {channel!r}")
+            path = target.get("path")
+            if path == "weights":
+                morphs += 1
+                continue
+            if path not in PATHS:
+                raise AssetError(f"{where}: target.path must be one of {sorted(PATHS)} or 'weights', got {path!r}")
+            node = target.get("node")
+            if isinstance(node, bool) or not isinstance(node, int) or not 0 <= node < len(nodes):
+                raise AssetError(f"{where}: target.node names node {node!r}, which the file does not have")
+            if isinstance(nodes[node], dict) and "matrix" in nodes[node]:
+                raise AssetError(f"{where}: animates node {node}, which has a matrix (glTF animates only "
+                                 "translation, rotation and scale nodes)")
+            s = channel.get("sampler")
+            if isinstance(s, bool) or not isinstance(s, int) or not 0 <= s < len(samplers) \
+                    or not isinstance(samplers[s], dict):
+                raise AssetError(f"{where}: names sampler {s!r}, which the animation does not have")
+            channels.append(_channel(samplers[s], node, path, buffer_bytes, doc, f"{where}: sampler {s}"))
+        duration = max((float(ch.times[-1]) for ch in channels), default=0.0)
+        clips.append(Clip(name if isinstance(name, str) and name else f"animation {a}", channels, duration))
+    if morphs:
+        warnings.warn(f"{what}: {morphs} animation channel(s) of morph-target weights left out (the engine's "
+                      "meshes have no morph targets)", stacklevel=5)
+    return clips
+
+
+def _channel(sampler: dict, node: int, path: str, buffer_bytes: BufferBytes, doc: dict, where: str) -> Channel:
+    interpolation = sampler.get("interpolation", "LINEAR")
+    if interpolation not in INTERPOLATIONS:
+        raise AssetError(f"{where}: interpolation must be one of {INTERPOLATIONS}, got {interpolation!r}")
+    times = read_float_accessor(doc, sampler.get("input"), buffer_bytes, f"{where}: input").reshape(-1)
+    values = read_float_accessor(doc, sampler.get("output"), buffer_bytes, f"{where}: output")
+    width = PATHS[path]
+    if len(times) == 0 or len(times) > MAX_KEYS:
+        raise AssetError(f"{where}: has {len(times)} key times (1 to {MAX_KEYS})")
+    if not np.isfinite(times).all() or (np.diff(times) <= 0.0).any():
+        raise AssetError(f"{where}: its key times must be finite and increasing")
+    per_key = 3 if interpolation == "CUBICSPLINE" else 1
+    if values.ndim != 2 or values.shape != (len(times) * per_key, width) or not np.isfinite(values).all():
+        raise AssetError(f"{where}: its output must be {len(times) * per_key} finite {path} values of {width} "
+                         f"({len(times)} keys{' x 3 for a cubic spline' if per_key == 3 else ''}), "
+                         f"got shape {values.shape}")
+    values = values.astype(np.float64)
+    if per_key == 3:
+        values = values.reshape(len(times), 3, width)
+    return Channel(node, path, times.astype(np.float64), values, interpolation)
+
+
+def _slerp(a: np.ndarray, b: np.ndarray, s: float) -> np.ndarray:
+    """Spherical interpolation of unit quaternions (x, y, z, w) along the shorter arc."""
+    d = float(np.dot(a, b))
+    if d < 0.0:
+        b, d = -b, -d
+    if d > 0.9995:
+        return (1.0 - s) * a + s * b
+    angle = math.acos(min(d, 1.0))
+    return (math.sin((1.0 - s) * angle) * a + math.sin(s * angle) * b) / math.sin(angle)
+
+
+def trs_matrix(translation: np.ndarray, rotation: np.ndarray, scale: np.ndarray) -> np.ndarray:
+    """T x R x S as a 4 x 4 float64 matrix; rotation (x, y, z, w), unit."""
+    x, y, z, w = rotation
+    r = np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+                  [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+                  [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]])
+    m = np.eye(4)
+    m[:3, :3] = r * scale
+    m[:3, 3] = translation
+    return m
+
+
+def pose(tree: NodeTree, clip: Clip, t: float, wanted: list[int]) -> dict[int, np.ndarray]:
+    """The model-space matrix at time ``t`` of each node in ``wanted`` (and of their
+    ancestors): its own transform (the clip's channels where it animates it, else at rest)
+    times its parent's."""
+    animated: dict[int, dict[str, np.ndarray]] = {}
+    for channel in clip.channels:
+        animated.setdefault(channel.node, {})[channel.path] = channel.sample(t)
+    placed: dict[int, np.ndarray] = {}
+
+    def matrix(node: int) -> np.ndarray:
+        found = placed.get(node)
+        if found is None:
+            if node in tree.matrices:
+                local = tree.matrices[node]
+            else:
+                rest_t, rest_r, rest_s = tree.rest[node]
+                own = animated.get(node, {})
+                local = trs_matrix(own.get("translation", rest_t), own.get("rotation", rest_r),
+                                   own.get("scale", rest_s))
+            parent = tree.parents[node]
+            found = placed[node] = local if parent is None else matrix(parent) @ local
+        return found
+
+    for node in wanted:
+        matrix(node)
+    return placed

@@ -1,0 +1,192 @@
+"""glTF animations (``Animation`` on a model's root): a clip moves the model's parts as
+its channels say.  A door on a hinge node (rotation, linear), a knob on it (translation,
+cubic spline) and a lamp shade (scale, step): each part's place at a time against the
+matrices glm multiplies out from the clip's keys (slerp, Hermite, step), and the frame of
+the posed model against the same box placed by hand there (a second path); playing, speed,
+looping and holding at the end; a clip the file lacks, and malformed channels, refused."""
+from __future__ import annotations
+
+import base64
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+from pyglm import glm
+
+from components import Animation, ComponentValueError, DirectionalLight, FromModel, Material, MeshRef, Model, Transform
+from engine.assets.mesh import box, load_model_file
+from engine.assets.models import spawn_model
+from engine.core.errors import AssetError
+from engine.core.world import World
+from tests.support import look_from
+from tests.test_materials_from_files import write_glb
+from tests.test_model_variants import edit_glb
+
+QUARTER = glm.angleAxis(math.pi / 2, glm.vec3(0.0, 1.0, 0.0))
+
+
+def door(path: Path, channels: list[dict] | None = None) -> Path:
+    """Nodes: 0 the hinge at (1, 0, 0) (no mesh), 1 the door box under it at (0.5, 0, 0);
+    clip "Open" turns the hinge a quarter about +Y over 2 s; clip "Slide" moves the door along
+    a cubic spline; clip "Blink" steps its scale."""
+    write_glb(path, box((1.0, 1.0, 0.1)), {"name": "wood", "pbrMetallicRoughness": {"baseColorFactor":
+                                                                                   [0.7, 0.4, 0.2, 1.0]}}, [])
+    q = [QUARTER.x, QUARTER.y, QUARTER.z, QUARTER.w]
+    arrays = [np.array([0.0, 2.0], np.float32), np.array([[0, 0, 0, 1], q], np.float32),
+              np.array([0.0, 1.0], np.float32),
+              # cubic: (in-tangent, value, out-tangent) a key
+              np.array([[0, 0, 0], [0.5, 0, 0], [1, 0, 0], [1, 0, 0], [0.5, 1, 0], [0, 0, 0]], np.float32),
+              np.array([0.0, 1.0, 2.0], np.float32), np.array([[1, 1, 1], [2, 2, 2], [1, 1, 1]], np.float32)]
+
+    def change(doc: dict) -> None:
+        blob = b"".join(a.tobytes() for a in arrays)
+        doc["buffers"].append({"byteLength": len(blob),
+                               "uri": "data:application/octet-stream;base64," + base64.b64encode(blob).decode()})
+        offset = 0
+        first = len(doc["accessors"])
+        for array in arrays:
+            doc["bufferViews"].append({"buffer": len(doc["buffers"]) - 1, "byteOffset": offset,
+                                       "byteLength": array.nbytes})
+            kind = {1: "SCALAR", 3: "VEC3", 4: "VEC4"}[1 if array.ndim == 1 else array.shape[1]]
+            doc["accessors"].append({"bufferView": len(doc["bufferViews"]) - 1, "componentType": 5126,
+                                     "count": len(array), "type": kind,
+                                     **({"min": [float(array.min())], "max": [float(array.max())]}
+                                        if array.ndim == 1 else {})})
+            offset += array.nbytes
+        doc["nodes"] = [{"name": "hinge", "translation": [1.0, 0.0, 0.0], "children": [1]},
+                        {"name": "door", "mesh": 0, "translation": [0.5, 0.0, 0.0]}]
+        doc["scenes"] = [{"nodes": [0]}]
+        a = first
+        doc["animations"] = [
+            {"name": "Open", "samplers": [{"input": a, "output": a + 1}],
+             "channels": channels or [{"sampler": 0, "target": {"node": 0, "path": "rotation"}}]},
+            {"name": "Slide", "samplers": [{"input": a + 2, "output": a + 3, "interpolation": "CUBICSPLINE"}],
+             "channels": [{"sampler": 0, "target": {"node": 1, "path": "translation"}}]},
+            {"name": "Blink", "samplers": [{"input": a + 4, "output": a + 5, "interpolation": "STEP"}],
+             "channels": [{"sampler": 0, "target": {"node": 1, "path": "scale"}}]}]
+    return edit_glb(path, change)
+
+
+def door_matrix(world: World) -> glm.mat4:
+    ((entity, _),) = list(world.query_one(FromModel))
+    t = world.get(entity, Transform)
+    return glm.translate(t.position) * glm.mat4_cast(t.rotation) * glm.scale(t.scale)
+
+
+def played(path: Path, clip: str, seconds: list[float], **fields) -> tuple[World, list[glm.mat4]]:
+    """The model under a root at the origin with an Animation, stepped by ``seconds``."""
+    from systems.model_system import ModelSystem
+
+    world = World(f"playing {clip}")
+    root = spawn_model(world, path)
+    world.add_component(root, Animation(clip=clip, **fields))
+    stage = ModelSystem(world)
+    placed = []
+    for dt in seconds:
+        stage.process(dt)
+        placed.append(door_matrix(world))
+    return world, placed
+
+
+def close(a: glm.mat4, b: glm.mat4) -> bool:
+    return all(abs(a[c][r] - b[c][r]) < 1e-4 for c in range(4) for r in range(4))
+
+
+def test_a_clips_channels_place_the_parts_at_each_time(tmp_path):
+    path = door(tmp_path / "door.glb")
+    loaded = load_model_file(path)
+    assert [(c.name, c.duration) for c in loaded.animations] == [("Open", 2.0), ("Slide", 1.0), ("Blink", 2.0)]
+    hinge, offset = glm.translate(glm.vec3(1, 0, 0)), glm.translate(glm.vec3(0.5, 0, 0))
+    _, open_ = played(path, "Open", [0.0, 0.5, 0.5, 0.9, 1.0])
+    for placed, t in zip(open_, (0.0, 0.5, 1.0, 1.9, 0.9), strict=True):   # looped: 2.9 s is 0.9 s in
+        turn = glm.slerp(glm.quat(), QUARTER, t / 2.0)
+        assert close(placed, hinge * glm.mat4_cast(turn) * offset), t
+    _, slide = played(path, "Slide", [0.5])
+    s = 0.5   # Hermite between (0.5, 0, 0) with out-tangent (1, 0, 0) and (0.5, 1, 0) with in-tangent (1, 0, 0)
+    p = (2 * s ** 3 - 3 * s ** 2 + 1) * glm.vec3(0.5, 0, 0) + (s ** 3 - 2 * s ** 2 + s) * glm.vec3(1, 0, 0) \
+        + (-2 * s ** 3 + 3 * s ** 2) * glm.vec3(0.5, 1, 0) + (s ** 3 - s ** 2) * glm.vec3(1, 0, 0)
+    assert close(slide[0], hinge * glm.translate(p))
+    _, blink = played(path, "Blink", [0.5, 0.6, 1.0], loop=False)   # steps: 1 until 1 s, 2 until 2 s, held
+    assert [round(m[0][0], 4) for m in blink] == [1.0, 2.0, 1.0]
+
+
+def test_paused_reversed_and_held_at_the_end(tmp_path):
+    path = door(tmp_path / "door.glb")
+    world, paused = played(path, "Open", [0.5, 0.5], playing=False, time=1.0)
+    half = glm.translate(glm.vec3(1, 0, 0)) * glm.mat4_cast(glm.slerp(glm.quat(), QUARTER, 0.5)) \
+        * glm.translate(glm.vec3(0.5, 0, 0))
+    assert close(paused[0], half) and close(paused[1], half)
+    _, held = played(path, "Open", [5.0], loop=False)
+    hinge, offset = glm.translate(glm.vec3(1, 0, 0)), glm.translate(glm.vec3(0.5, 0, 0))
+    assert close(held[0], hinge * glm.mat4_cast(QUARTER) * offset)
+    world, back = played(path, "Open", [0.5], speed=-1.0, time=1.0, loop=False)
+    assert close(back[0], hinge * glm.mat4_cast(glm.slerp(glm.quat(), QUARTER, 0.25)) * offset)
+    ((_, animation),) = list(world.query_one(Animation))
+    assert animation.time == pytest.approx(0.5)
+
+
+def test_a_posed_model_draws_as_the_box_placed_there_by_hand(scene, tmp_path):
+    path = door(tmp_path / "door.glb")
+
+    def lit(build):
+        def made(world):
+            look_from(world, (0.5, 2.5, 4.0), (1.0, 0.0, 0.0), fov=50.0)
+            world.spawn(DirectionalLight(direction=(-0.3, -1.0, -0.5), intensity=2.0))
+            build(world)
+        return made
+
+    def animated(world):
+        root = world.spawn(Transform(), Model(file=str(path)))
+        world.add_component(root, Animation(clip="Open", time=1.0, playing=False))
+
+    def by_hand(world):
+        turn = glm.slerp(glm.quat(), QUARTER, 0.5)
+        world.spawn(Transform(position=glm.vec3(1, 0, 0) + turn * glm.vec3(0.5, 0, 0), rotation=turn),
+                    MeshRef(load_model_file(path).parts[0].mesh), Material(color=(0.7, 0.4, 0.2, 1.0)))
+
+    frames = []
+    for build in (animated, by_hand):
+        runner = scene(lit(build), (96, 72))
+        runner.frame()
+        frames.append(runner.frame().astype(int))
+    assert np.abs(frames[0] - frames[1]).max() <= 2
+    assert (np.abs(frames[0] - frames[0][0, 0]).sum(-1) > 30).sum() > 80   # the door is there
+
+
+def test_a_missing_clip_and_malformed_channels_are_refused(tmp_path):
+    path = door(tmp_path / "door.glb")
+    with pytest.raises(AssetError, match=r"its model has no clip 'Close' \(its clips: 'Open', 'Slide', 'Blink'\)"):
+        played(path, "Close", [0.1])
+    bad = door(tmp_path / "bad.glb", [{"sampler": 0, "target": {"node": 7, "path": "rotation"}}])
+    with pytest.raises(AssetError, match=r"bad\.glb': animation 0 \('Open'\): channel 0: target.node names node 7"):
+        load_model_file(bad)
+    odd = door(tmp_path / "odd.glb", [{"sampler": 0, "target": {"node": 0, "path": "skew"}}])
+    with pytest.raises(AssetError, match=r"target.path must be one of"):
+        load_model_file(odd)
+    wide = door(tmp_path / "wide.glb", [{"sampler": 0, "target": {"node": 0, "path": "translation"}}])
+    with pytest.raises(AssetError, match=r"its output must be 2 finite translation values of 3"):
+        load_model_file(wide)
+    for field, value in (("clip", 3), ("time", -1.0), ("speed", float("nan")), ("loop", 1)):
+        with pytest.raises(ComponentValueError, match=f"Animation.{field}"):
+            Animation(**{field: value})
+
+
+def test_a_level_plays_a_clip_and_a_missing_one_is_refused_by_its_line(tmp_path):
+    from engine.assets.level_file import LevelError, load_level
+
+    door(tmp_path / "door.glb")
+    text = ('[level]\nname = "hall"\n\n[[entity]]\nname = "door"\n[entity.Transform]\n[entity.Model]\n'
+            'file = "door.glb"\n[entity.Animation]\nclip = "CLIP"\ntime = 1.0\nplaying = false\n')
+    (tmp_path / "hall.toml").write_text(text.replace("CLIP", "Open"))
+    world = World("hall")
+    load_level(tmp_path / "hall.toml").spawn(world)
+    from systems.model_system import ModelSystem
+    ModelSystem(world).process(1 / 60)
+    half = glm.translate(glm.vec3(1, 0, 0)) * glm.mat4_cast(glm.slerp(glm.quat(), QUARTER, 0.5)) \
+        * glm.translate(glm.vec3(0.5, 0, 0))
+    assert close(door_matrix(world), half)
+    (tmp_path / "hall.toml").write_text(text.replace("CLIP", "Close"))
+    with pytest.raises(LevelError, match=r"no animation clip 'Close' \(its clips: 'Open', 'Slide', 'Blink'") as caught:
+        load_level(tmp_path / "hall.toml")
+    assert (caught.value.entity, caught.value.field, caught.value.line) == ("door", "Animation.clip", 10)
