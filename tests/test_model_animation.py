@@ -167,6 +167,15 @@ def test_a_missing_clip_and_malformed_channels_are_refused(tmp_path):
     wide = door(tmp_path / "wide.glb", [{"sampler": 0, "target": {"node": 0, "path": "translation"}}])
     with pytest.raises(AssetError, match=r"its output must be 2 finite translation values of 3"):
         load_model_file(wide)
+    def spoil(change):
+        return edit_glb(door(tmp_path / "spoilt.glb"), change)
+    with pytest.raises(AssetError, match=r"animation 0 \('Open'\): channels must be a list, got 5"):
+        load_model_file(spoil(lambda doc: doc["animations"][0].update(channels=5)))
+    def bad_matrix(doc: dict) -> None:   # on the door, animated now only by "Open" on its hinge
+        doc["nodes"][1]["matrix"] = [1, 2, 3]
+        del doc["animations"][1:]
+    with pytest.raises(AssetError, match=r"node 1: matrix must be 16 finite numbers"):
+        load_model_file(spoil(bad_matrix))
     for field, value in (("clip", 3), ("time", -1.0), ("speed", float("nan")), ("loop", 1)):
         with pytest.raises(ComponentValueError, match=f"Animation.{field}"):
             Animation(**{field: value})

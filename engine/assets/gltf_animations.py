@@ -18,6 +18,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from engine.assets.gltf_accessors import BufferBytes, read_float_accessor
+from engine.assets.model_lights import node_matrix, placed_nodes
 from engine.core.errors import AssetError
 
 PATHS = {"translation": 3, "rotation": 4, "scale": 3}  # what a channel may animate, and its width
@@ -84,22 +85,27 @@ class NodeTree:
     matrices: dict[int, np.ndarray] = field(default_factory=dict)
 
 
-def read_node_tree(doc: dict) -> NodeTree:
-    """Every node's parent and rest transform (the node tree has been checked by the lights'
-    reader: ``model_lights.placed_nodes``)."""
+def read_node_tree(doc: dict, what: str) -> NodeTree:
+    """Every node's parent and rest transform; a node tree that is not one (a node reached
+    twice, a child the file lacks) or a transform that is not finite numbers of the right
+    count is an AssetError naming the node (``model_lights``' checks)."""
     nodes = doc.get("nodes") if isinstance(doc.get("nodes"), list) else []
-    tree = NodeTree(parents=[None] * len(nodes))
-    for index, node in enumerate(nodes):
-        for child in (node.get("children") or []) if isinstance(node, dict) else []:
-            if isinstance(child, int) and not isinstance(child, bool) and 0 <= child < len(nodes):
+    try:
+        placed_nodes(doc, nodes)
+        tree = NodeTree(parents=[None] * len(nodes))
+        for index, node in enumerate(nodes):
+            for child in (node.get("children") or []) if isinstance(node, dict) else []:
                 tree.parents[child] = index
-    for index, node in enumerate(nodes):
-        node = node if isinstance(node, dict) else {}
-        if "matrix" in node:
-            tree.matrices[index] = np.array(node["matrix"], np.float64).reshape(4, 4).T
-        tree.rest.append((np.array(node.get("translation", [0.0, 0.0, 0.0]), np.float64),
-                          np.array(node.get("rotation", [0.0, 0.0, 0.0, 1.0]), np.float64),
-                          np.array(node.get("scale", [1.0, 1.0, 1.0]), np.float64)))
+        for index, node in enumerate(nodes):
+            node = node if isinstance(node, dict) else {}
+            matrix = node_matrix(node, index)  # (checked)
+            if "matrix" in node:
+                tree.matrices[index] = matrix
+            tree.rest.append((np.array(node.get("translation", [0.0, 0.0, 0.0]), np.float64),
+                              np.array(node.get("rotation", [0.0, 0.0, 0.0, 1.0]), np.float64),
+                              np.array(node.get("scale", [1.0, 1.0, 1.0]), np.float64)))
+    except AssetError as exc:
+        raise AssetError(f"{what}: {exc}") from None
     return tree
 
 
@@ -122,8 +128,11 @@ def read_animations(doc: dict, buffer_bytes: BufferBytes, what: str) -> list[Cli
         if not isinstance(animation, dict):
             raise AssetError(f"{label}: must be an object, got {animation!r}")
         samplers = animation.get("samplers") if isinstance(animation.get("samplers"), list) else []
+        listed = animation.get("channels", [])
+        if not isinstance(listed, list):
+            raise AssetError(f"{label}: channels must be a list, got {listed!r}")
         channels: list[Channel] = []
-        for c, channel in enumerate(animation.get("channels") or []):
+        for c, channel in enumerate(listed):
             where = f"{label}: channel {c}"
             target = channel.get("target") if isinstance(channel, dict) else None
             if not isinstance(target, dict):

@@ -652,7 +652,8 @@ def prepare_gltf(path: Path, data: bytes, roots: Sequence[Path], textures: bool,
                 del node["name"]
             else:
                 node["name"] = name
-    result.node_tree = read_node_tree(doc)
+    if animations:  # (its nodes' rest transforms: what the clips' poses start from)
+        result.node_tree = read_node_tree(doc, what)
     return result
 
 

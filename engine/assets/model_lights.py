@@ -162,7 +162,7 @@ def check_light_intensity(light: ModelLight, scale: float) -> float:
     return intensity
 
 
-def _node_matrix(node: dict, index: int) -> np.ndarray:
+def node_matrix(node: dict, index: int) -> np.ndarray:
     """A node's local transform: its ``matrix`` (column-major) or translation x rotation x scale."""
     if "matrix" in node:
         values = node["matrix"]
@@ -208,7 +208,7 @@ def placed_nodes(doc: dict, nodes: list) -> list[tuple[int, np.ndarray]]:
         if index in seen:
             raise AssetError(f"node {index} is reached twice in the node tree (glTF's nodes form a tree)")
         seen.add(index)
-        matrix = parent @ _node_matrix(nodes[index], index)
+        matrix = parent @ node_matrix(nodes[index], index)
         if not np.isfinite(matrix).all():
             raise AssetError(f"node {index}: its transform in the model is not finite")
         placed.append((index, matrix))
