@@ -51,7 +51,7 @@ NOISE = {
     "threads4": {"LP_NUM_THREADS": "4"},
 }
 CHANGES = {
-    "fresnel_exponent_4": "shader:pow(1.0 - lh, 5.0)=>pow(1.0 - lh, 4.0)",
+    "fresnel_exponent_4": "shader:pow(1.0 - cosine, 5.0)=>pow(1.0 - cosine, 4.0)",
     "ggx_reflect_5pc_darker": "shader:return f * vis * (4.0 *=>return f * vis * (3.8 *",
     "mirror_tint_5pc_darker": "mirror_tint",
     "sun_5pc_weaker": "sun",

@@ -4,10 +4,15 @@
 const float PI = 3.14159265358979;
 
 // Schlick's approximation of the reflectance with reflectance f0 at normal incidence, at the
-// angle between unit vectors l and h.
+// cosine ``c`` of the angle of incidence (to the half vector, or the normal): f0 + (1 - f0) (1 - c)^5.
+vec3 schlick_at(vec3 f0, float c) {
+    float cosine = clamp(c, 0.0, 1.0);
+    return f0 + (1.0 - f0) * pow(1.0 - cosine, 5.0);
+}
+
+// The same at the angle between unit vectors l and h.
 vec3 schlick_fresnel(vec3 l, vec3 h, vec3 f0) {
-    float lh = clamp(dot(l, h), 0.0, 1.0);
-    return f0 + (1.0 - f0) * pow(1.0 - lh, 5.0);
+    return schlick_at(f0, dot(l, h));
 }
 
 // Schlick's F0 of a dielectric of index ior against air: ((ior - 1) / (ior + 1))^2, as

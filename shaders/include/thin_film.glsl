@@ -8,17 +8,9 @@
 // form, their Gaussian fit in Fourier space (the paper's constants), keeping the first two
 // orders, then XYZ to linear Rec.709.  The film's reflectance at the eye's angle is turned
 // back into the F0 Schlick's form gives it there, so the lights' highlights and the split sum
-// read it as any F0 (the glTF sample viewer's way).  Needs PI.
+// read it as any F0 (the glTF sample viewer's way).  Needs ggx.glsl (PI, schlick_at, f0_from_ior).
 #ifdef IRIDESCENCE
 uniform vec3 iridescence;  // x: its batch's Material.iridescence, y: the film's index, z: its thickness (nm)
-
-float film_schlick(float f0, float c) {
-    return f0 + (1.0 - f0) * pow(1.0 - c, 5.0);
-}
-
-vec3 film_schlick3(vec3 f0, float c) {
-    return f0 + (1.0 - f0) * pow(1.0 - c, 5.0);
-}
 
 // The XYZ colour of the cosine fringe of optical path difference ``opd`` (nm) and phase shift
 // ``shift``, as linear Rec.709.
@@ -44,13 +36,14 @@ vec3 film_reflectance(float cos1, vec3 base_f0) {
     if (sin2_squared >= 1.0) return vec3(1.0);  // total internal reflection inside the film
     float cos2 = sqrt(1.0 - sin2_squared);
     // Air to film: its reflectance, what it lets through both ways, and the phases.
-    float r12 = film_schlick(pow((film - 1.0) / (film + 1.0), 2.0), cos1);
+    float r12 = schlick_at(vec3(f0_from_ior(film)), cos1).x;
     float t121 = 1.0 - r12;
     float phase21 = film < 1.0 ? 0.0 : PI;  // (the top's phase inside the film, on the way back out)
     // Film to surface: the surface's index from its F0 (air's Schlick inverted), its reflectance inside.
     vec3 root = sqrt(clamp(base_f0, 0.0, 0.9999));
     vec3 surface = (1.0 + root) / (1.0 - root);
-    vec3 r23 = film_schlick3(pow((surface - film) / (surface + film), vec3(2.0)), cos2);
+    vec3 relative = surface / film;  // the surface's index against the film's
+    vec3 r23 = schlick_at(vec3(f0_from_ior(relative.r), f0_from_ior(relative.g), f0_from_ior(relative.b)), cos2);
     vec3 phase23 = mix(vec3(0.0), vec3(PI), lessThan(surface, vec3(film)));
     float opd = 2.0 * film * iridescence.z * cos2;
     vec3 phase = phase21 + phase23;
@@ -70,7 +63,7 @@ vec3 film_reflectance(float cos1, vec3 base_f0) {
 // film's reflectance there, mixed in by iridescence.x (and gone with the film's thickness:
 // near grazing the inversion magnifies the sum's small terms, which a vanished film must not show).
 vec3 iridescent_f0(vec3 f0, float nv) {
-    float grazing = pow(1.0 - nv, 5.0);
+    float grazing = schlick_at(vec3(0.0), nv).x;  // (1 - n.v)^5
     vec3 film_f0 = clamp((film_reflectance(nv, f0) - grazing) / max(1.0 - grazing, 1e-4), 0.0, 1.0);
     return mix(f0, film_f0, iridescence.x * smoothstep(0.0, 0.03, iridescence.z));
 }
