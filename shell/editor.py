@@ -27,7 +27,7 @@ import numpy as np
 import tomllib
 from pyglm import glm
 
-from components import Camera, ComponentValueError, FromModel, Material, Portal, Transform
+from components import Camera, ComponentValueError, FromModel, Material, Model, Portal, Transform
 from components.rendering import MATERIAL_IMAGES, automatic_mix
 from engine.assets.level_assets import MESH_MAKERS, LevelAssets, level_model, level_texture, user_asset_roots
 from engine.assets.level_read import DERIVED_COMPONENTS, ENGINE_COMPONENTS, REFERENCE_FIELDS
@@ -168,7 +168,7 @@ class Editor:
         self._everything: list[Edit] = []  # every edit made, undone or not: what a save may write
         self._applied = 0  # undos and redos made (``edit_count``)
         self._angles: dict[tuple[int, str, str], glm.vec3] = {}  # rotations' angles last shown (``angles``)
-        self._variants: dict[tuple[str, int], list[str]] = {}  # a model file's variants (``model_variants``)
+        self._files: dict[tuple[str, int], Any] = {}  # model files as loaded (``model_variants``, ``model_clips``)
 
     # --- selection -------------------------------------------------------------------------
     def pick(self, ids: np.ndarray, surface_ids: np.ndarray | None, x: int, y: int,
@@ -297,6 +297,11 @@ class Editor:
         target = self.component(entity, component)
         if type(target).__name__ == "Model" and field == "variant" and target.file and isinstance(value, str):
             self._check_variant(target.file, value)
+        if type(target).__name__ == "Animation" and field == "clip" and value and isinstance(value, str) \
+                and self.world.has(entity, Model) and value not in self.model_clips(entity):
+            clips = ", ".join(repr(c) for c in self.model_clips(entity)) or "none"
+            self.message = f"Animation.clip: the model file has no clip {value!r} (its clips: {clips})"
+            raise EditError(self.message)
         if dataclasses.is_dataclass(target) and field not in {f.name for f in dataclasses.fields(target)}:
             raise EditError(f"{type(target).__name__} has no field {field!r} "
                             f"(fields: {', '.join(n for n, _ in self.fields(target))})")
@@ -408,23 +413,34 @@ class Editor:
 
     def model_variants(self, entity: int) -> list[str]:
         """The material variants of the entity's Model's file (``KHR_materials_variants``; []
-        without a file or any), read once a file and modification time (the inspector asks
-        every frame it shows them)."""
+        without a file or any)."""
+        loaded = self._model_file(entity)
+        return loaded.variants if loaded is not None else []
+
+    def model_clips(self, entity: int) -> list[str]:
+        """The animation clips of the entity's Model's file ([] without a Model, a file or any)."""
+        loaded = self._model_file(entity) if self.world.has(entity, Model) else None
+        return [clip.name for clip in loaded.animations] if loaded is not None else []
+
+    def _model_file(self, entity: int):
+        """The entity's Model's file as loaded (its meshes only), once a file and modification
+        time (the inspector asks every frame it shows its variants or clips); None without one
+        or where it cannot be loaded."""
         file = self.component(entity, "Model").file
         if not file:
-            return []
+            return None
         try:
             stamp = os.stat(file).st_mtime_ns
         except OSError:
-            return []
+            return None
         key = (file, stamp)
-        if key not in self._variants:
+        if key not in self._files:
             try:
-                self._variants[key] = load_model_file(file, roots=[Path(file).parent, *self.asset_roots,
-                                                                   *user_asset_roots()], materials=False).variants
+                self._files[key] = load_model_file(file, roots=[Path(file).parent, *self.asset_roots,
+                                                                *user_asset_roots()], materials=False)
             except (SpeculumError, OSError, ValueError):
-                self._variants[key] = []
-        return self._variants[key]
+                self._files[key] = None
+        return self._files[key]
 
     def _check_variant(self, file: str, variant: str) -> None:
         """An EditError, in the loader's words, where the model file has no such material

@@ -333,6 +333,13 @@ class EditorPanels:
                         self._try(editor, editor.set_field, entity, "Model", "variant", choice)
                     self._widget(f"Model.variant {choice}")
                 imgui.end_combo()
+        elif (cls_name, field) == ("Animation", "clip") and editor.model_clips(entity):  # one of its model's clips
+            if imgui.begin_combo(label, value or "(none: at rest)"):
+                for choice in ("", *editor.model_clips(entity)):
+                    if imgui.selectable(f"{choice or '(none: at rest)'}##clip", choice == value)[0] and choice != value:
+                        self._try(editor, editor.set_field, entity, "Animation", "clip", choice)
+                    self._widget(f"Animation.clip {choice}")
+                imgui.end_combo()
         elif (cls_name, field) == ("MeshRef", "mesh"):  # a shape to choose (its size: the Transform's scale)
             shape = editor.mesh_shape(entity)
             if imgui.begin_combo(label, shape):

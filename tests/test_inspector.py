@@ -1196,3 +1196,29 @@ def test_a_models_variant_is_chosen_from_its_files_variants(scene, ctx, tmp_path
         ((part, _),) = list(world.query_one(FromModel))
         assert list(world.get(part, Material).color) == pytest.approx(BLUE, abs=0.01)
         assert editor.undo() and world.get(root, Model).variant == ""
+
+
+def test_an_animations_clip_is_chosen_from_its_models_clips(scene, ctx, tmp_path):
+    """The inspector offers the model's animation clips; the one clicked plays, and a clip the
+    file lacks is refused saying which it has."""
+    from components import Animation, FromModel, Model
+    from shell.editor import EditError
+    from tests.test_model_animation import door
+
+    path = door(tmp_path / "door.glb")
+    with _box_selected(scene, ctx) as (runner, overlay, draw, click, editor, _):
+        world = runner.world
+        root = editor.create(Transform(position=(0.0, 0.5, 0.0)), Model(file=str(path)),
+                             Animation(time=1.0, playing=False), name="door")
+        runner.frame()
+        assert editor.model_clips(root) == ["Open", "Slide", "Blink"]
+        ((part, _),) = list(world.query_one(FromModel))
+        rest = glm.quat(world.get(part, Transform).rotation)
+        draw()
+        click("Animation.clip")
+        click("Animation.clip Open")
+        assert world.get(root, Animation).clip == "Open"
+        runner.frame()
+        assert abs(glm.dot(glm.quat(world.get(part, Transform).rotation), rest)) < 0.99   # turned by the clip
+        with pytest.raises(EditError, match=r"no clip 'Close' \(its clips: 'Open', 'Slide', 'Blink'\)"):
+            editor.set_field(root, "Animation", "clip", "Close")
