@@ -295,8 +295,11 @@ class Editor:
         and nothing changes. ``merge``: part of a drag (one undo step for the whole drag)."""
         self._refuse_model_part(entity)
         target = self.component(entity, component)
-        if type(target).__name__ == "Model" and field == "variant" and target.file and isinstance(value, str):
-            self._check_variant(target.file, value)
+        if type(target).__name__ == "Model" and field == "variant" and value and isinstance(value, str) \
+                and target.file and value not in self.model_variants(entity):
+            variants = ", ".join(repr(v) for v in self.model_variants(entity)) or "none"
+            self.message = f"Model.variant: the model file has no material variant {value!r} (its variants: {variants})"
+            raise EditError(self.message)
         if type(target).__name__ == "Animation" and field == "clip" and value and isinstance(value, str) \
                 and self.world.has(entity, Model) and value not in self.model_clips(entity):
             clips = ", ".join(repr(c) for c in self.model_clips(entity)) or "none"
@@ -441,17 +444,6 @@ class Editor:
             except (SpeculumError, OSError, ValueError):
                 self._files[key] = None
         return self._files[key]
-
-    def _check_variant(self, file: str, variant: str) -> None:
-        """An EditError, in the loader's words, where the model file has no such material
-        variant (``KHR_materials_variants``): the models stage would fail to make its parts."""
-        folder = self.level_path.parent if self.level_path is not None else Path.cwd()
-        try:
-            level_model(file, LevelAssets(folder, [*self.asset_roots, *user_asset_roots(), Path(file).parent]),
-                        variant)
-        except (ValueError, OSError, SpeculumError) as exc:
-            self.message = f"Model.variant: {exc}"
-            raise EditError(self.message) from exc
 
     def turn(self, entity: int, start: glm.quat, world_axis: glm.vec3, angle: float) -> None:
         """Turn ``entity`` by ``angle`` (radians) about ``world_axis`` through its origin from

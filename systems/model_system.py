@@ -33,6 +33,7 @@ from engine.core.world import World
 class ModelSystem(esper.Processor):
     def __init__(self, world: World) -> None:
         self.world = world
+        self._posed: dict[int, str] = {}  # root -> the clip its parts were last posed by
 
     def process(self, dt: float) -> None:
         world = self.world
@@ -59,7 +60,10 @@ class ModelSystem(esper.Processor):
                 if duration > 0.0:
                     time = time % duration if animation.loop else min(max(time, 0.0), duration)
                 animation.time = max(time, 0.0)
-            pose_parts(world, root, animation.clip, animation.time)
+            # (a clip only moved on rewrites only the parts it moves; another clip or new parts, all)
+            every = root in remade or self._posed.get(root) != animation.clip
+            pose_parts(world, root, animation.clip, animation.time, every)
+            self._posed[root] = animation.clip
 
     def _place(self, changed: set[int]) -> None:
         world = self.world
@@ -68,6 +72,7 @@ class ModelSystem(esper.Processor):
             model = world.try_get(root, Model) if world.exists(root) else None
             if model is None or not model.file:
                 remove_parts(world, root)
+                self._posed.pop(root, None)
                 continue
             record = spawned.get(root)
             if record is not None and record.key == model_key(model):

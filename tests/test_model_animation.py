@@ -199,3 +199,31 @@ def test_a_level_plays_a_clip_and_a_missing_one_is_refused_by_its_line(tmp_path)
     with pytest.raises(LevelError, match=r"no animation clip 'Close' \(its clips: 'Open', 'Slide', 'Blink'") as caught:
         load_level(tmp_path / "hall.toml")
     assert (caught.value.entity, caught.value.field, caught.value.line) == ("door", "Animation.clip", 10)
+
+
+def test_a_playing_clip_leaves_the_parts_it_does_not_move_unwritten(tmp_path):
+    """A frame beside the door (a node of its own, not under the hinge): once the clip plays
+    on, only the door's Transform is written each frame (the frame's rows are not uploaded
+    again, nor its shadow drawn again); switching clips writes every part once."""
+    from engine.assets.models import SpawnedModels
+    from systems.model_system import ModelSystem
+
+    def frame(doc: dict) -> None:
+        doc["nodes"].append({"name": "frame", "mesh": 0, "translation": [-1.0, 0.0, 0.0]})
+        doc["scenes"][0]["nodes"].append(2)
+    path = edit_glb(door(tmp_path / "door.glb"), frame)
+    world = World("beside")
+    root = spawn_model(world, path)
+    world.add_component(root, Animation(clip="Open"))
+    stage = ModelSystem(world)
+    record = world.resources[SpawnedModels][root]
+    door_part, frame_part = (record.parts[record.nodes.index(n)] for n in (1, 2))
+    stage.process(0.1)
+    world.step(0.0)                      # (the step forgets this frame's changes)
+    stage.process(0.1)
+    assert door_part in world.changed(Transform) and frame_part not in world.changed(Transform)
+    world.step(0.0)
+    world.get(root, Animation).clip = "Slide"
+    stage.process(0.1)
+    assert {door_part, frame_part} <= world.changed(Transform)
+    assert list(world.get(frame_part, Transform).position) == pytest.approx([-1.0, 0.0, 0.0])

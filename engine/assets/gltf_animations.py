@@ -207,6 +207,19 @@ def trs_matrix(translation: np.ndarray, rotation: np.ndarray, scale: np.ndarray)
     return m
 
 
+def moved_nodes(tree: NodeTree, clip: Clip) -> set[int]:
+    """The nodes ``clip`` moves: those it animates and every node under them."""
+    animated = {channel.node for channel in clip.channels}
+    moved = set()
+    for node in range(len(tree.parents)):
+        walk: int | None = node
+        while walk is not None and walk not in animated:
+            walk = tree.parents[walk]
+        if walk is not None:
+            moved.add(node)
+    return moved
+
+
 def pose(tree: NodeTree, clip: Clip, t: float, wanted: list[int]) -> dict[int, np.ndarray]:
     """The model-space matrix at time ``t`` of each node in ``wanted`` (and of their
     ancestors): its own transform (the clip's channels where it animates it, else at rest)

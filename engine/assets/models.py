@@ -33,7 +33,7 @@ from components import (
     Transform,
 )
 from components.model import MAX_MODEL_PROBES, FromModel, Model
-from engine.assets.gltf_animations import pose
+from engine.assets.gltf_animations import moved_nodes, pose
 from engine.assets.mesh import LoadedModel, flat_plane, load_model_file
 from engine.assets.model_cameras import ModelCamera
 from engine.assets.model_lights import ModelLight, check_light_intensity
@@ -293,10 +293,12 @@ def _light_components(light: ModelLight, root: Transform, scale: float) -> list:
                                spot_angle=light.spot_angle(), spot_blend=light.spot_blend())]
 
 
-def pose_parts(world: World, root: int, clip_name: str, time: float) -> None:
+def pose_parts(world: World, root: int, clip_name: str, time: float, every: bool = True) -> None:
     """Put ``root``'s parts where clip ``clip_name`` of its model puts their nodes at
-    ``time`` (seconds); "" puts them at rest.  A clip the model lacks is an AssetError naming
-    the entity and the clips it has."""
+    ``time`` (seconds); "" puts them at rest.  ``every`` False (the clip only moved on): only
+    the parts the clip moves (their node or an ancestor animated) are written, so the others
+    stay unchanged for the stages after (no rows uploaded, no shadow drawn again).  A clip the
+    model lacks is an AssetError naming the entity and the clips it has."""
     record = world.resources.get(SpawnedModels, {}).get(root)
     if record is None or record.loaded is None:
         if clip_name:
@@ -311,12 +313,15 @@ def pose_parts(world: World, root: int, clip_name: str, time: float) -> None:
             names = ", ".join(repr(c.name) for c in clips)
             raise AssetError(f"entity {root}'s Animation: its model has no clip {clip_name!r} (its clips: {names})")
         matrices = pose(record.loaded.node_tree, clip, time, [n for n in record.nodes if n is not None])
+        if not every:
+            moved = moved_nodes(record.loaded.node_tree, clip)
+            matrices = {node: m for node, m in matrices.items() if node in moved}
+    rest = {part.node: part.local for part in record.loaded.parts}
     for entity, node in zip(record.parts, record.nodes, strict=True):
-        if node is None or not world.exists(entity):
+        if node is None or not world.exists(entity) or (not every and node not in matrices):
             continue
         placed = matrices.get(node)
-        local = glm.mat4(*placed.astype(np.float32).T.ravel()) if placed is not None else \
-            next(p.local for p in record.loaded.parts if p.node == node)
+        local = glm.mat4(*placed.astype(np.float32).T.ravel()) if placed is not None else rest[node]
         at = _node_transform(local, f"node {node}")
         transform = world.get(entity, Transform)
         transform.position, transform.rotation, transform.scale = at.position, at.rotation, at.scale
